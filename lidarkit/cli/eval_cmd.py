@@ -1,0 +1,1 @@
+"""``lidarkit eval``: placeholder until the evaluation layer lands."""

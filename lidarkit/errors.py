@@ -1,0 +1,41 @@
+"""One exception family for lidarkit; the CLI catches it once and prints a single line."""
+
+from __future__ import annotations
+
+import os
+
+
+class LidarKitError(Exception):
+    """Base of every error lidarkit raises on purpose.
+
+    ``source`` names the input (a file, an argument, a method name) and ``location`` where in it
+    (``"line 12"``, ``"frame 3"``); ``str(err)`` reads ``source (location): reason``.
+    """
+
+    def __init__(self, reason: str, *, source: str | os.PathLike | None = None, location: str | None = None):
+        self.reason = reason
+        self.source = None if source is None else str(source)
+        self.location = location
+        super().__init__(self._format())
+
+    def _format(self) -> str:
+        where = self.source or ""
+        if self.location:
+            where = f"{where} ({self.location})" if where else self.location
+        return f"{where}: {self.reason}" if where else self.reason
+
+
+class DataError(LidarKitError):
+    """Input data is missing, malformed, truncated, non-finite or inconsistent."""
+
+
+class ConfigError(LidarKitError):
+    """A method name, parameter or configuration value is unknown or invalid."""
+
+
+class RegistrationError(LidarKitError):
+    """A registration could not be computed (too few points or correspondences)."""
+
+
+class EvaluationError(LidarKitError):
+    """Two trajectories cannot be compared as asked (lengths, timestamps, too short for a metric)."""

@@ -1,0 +1,223 @@
+"""SE(3)/SO(3) helpers and closed-form (SVD) point-set alignment.
+
+Poses are 4x4 homogeneous matrices named ``T_a_b``: they map points from frame ``b`` to frame ``a``.
+Arrays of poses have shape ``(N, 4, 4)``; point sets ``(N, 3)``; everything is float64.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from lidarkit.errors import DataError
+
+ORTHONORMAL_TOL = 1e-4
+
+
+def as_points(points_xyz: np.ndarray, name: str = "points", min_points: int = 0) -> np.ndarray:
+    """Validate an ``(N, 3)`` finite point array and return it as float64."""
+    arr = np.asarray(points_xyz)
+    if arr.ndim != 2 or arr.shape[1] != 3:
+        raise DataError(f"expected an (N, 3) point array, got shape {arr.shape}", source=name)
+    if not np.issubdtype(arr.dtype, np.number):
+        raise DataError(f"expected a numeric point array, got dtype {arr.dtype}", source=name)
+    arr = arr.astype(np.float64, copy=False)
+    if len(arr) < min_points:
+        raise DataError(f"needs at least {min_points} points, got {len(arr)}", source=name)
+    if not np.isfinite(arr).all():
+        bad = int((~np.isfinite(arr).all(axis=1)).sum())
+        raise DataError(f"{bad} of {len(arr)} points are NaN or infinite", source=name)
+    return arr
+
+
+def make_se3(rotation: np.ndarray | None = None, translation: np.ndarray | None = None) -> np.ndarray:
+    """Build a 4x4 pose from a 3x3 rotation and a 3-vector translation (identity where omitted)."""
+    T = np.eye(4)
+    if rotation is not None:
+        T[:3, :3] = rotation
+    if translation is not None:
+        T[:3, 3] = np.asarray(translation, dtype=np.float64).reshape(3)
+    return T
+
+
+def se3_inverse(T: np.ndarray) -> np.ndarray:
+    """Inverse of one pose ``(4, 4)`` or a stack ``(N, 4, 4)`` using R^T, without a general inverse."""
+    T = np.asarray(T, dtype=np.float64)
+    R = T[..., :3, :3]
+    t = T[..., :3, 3]
+    Rt = np.swapaxes(R, -1, -2)
+    out = np.zeros_like(T)
+    out[..., :3, :3] = Rt
+    out[..., :3, 3] = -np.einsum("...ij,...j->...i", Rt, t)
+    out[..., 3, 3] = 1.0
+    return out
+
+
+def transform_points(T: np.ndarray, points_xyz: np.ndarray) -> np.ndarray:
+    """Apply a 4x4 pose to ``(N, 3)`` points."""
+    T = np.asarray(T, dtype=np.float64)
+    return np.asarray(points_xyz, dtype=np.float64) @ T[:3, :3].T + T[:3, 3]
+
+
+def skew(v: np.ndarray) -> np.ndarray:
+    """The 3x3 cross-product matrix of a 3-vector."""
+    x, y, z = np.asarray(v, dtype=np.float64).reshape(3)
+    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+
+
+def so3_exp(rotvec: np.ndarray) -> np.ndarray:
+    """Rotation matrix from an axis-angle vector (rad); works on ``(3,)`` or ``(N, 3)``."""
+    return Rotation.from_rotvec(np.asarray(rotvec, dtype=np.float64)).as_matrix()
+
+
+def so3_log(R: np.ndarray) -> np.ndarray:
+    """Axis-angle vector (rad) of a rotation matrix; works on ``(3, 3)`` or ``(N, 3, 3)``."""
+    return Rotation.from_matrix(np.asarray(R, dtype=np.float64)).as_rotvec()
+
+
+def se3_exp(xi: np.ndarray) -> np.ndarray:
+    """Pose from a twist ``(rho, phi)`` (translation part first), the exact SE(3) exponential."""
+    xi = np.asarray(xi, dtype=np.float64).reshape(6)
+    rho, phi = xi[:3], xi[3:]
+    theta = np.linalg.norm(phi)
+    K = skew(phi)
+    if theta < 1e-10:
+        V = np.eye(3) + 0.5 * K
+    else:
+        V = (
+            np.eye(3)
+            + (1 - np.cos(theta)) / theta**2 * K
+            + (theta - np.sin(theta)) / theta**3 * (K @ K)
+        )
+    return make_se3(so3_exp(phi), V @ rho)
+
+
+def se3_log(T: np.ndarray) -> np.ndarray:
+    """Twist ``(rho, phi)`` of a pose, the inverse of :func:`se3_exp`."""
+    T = np.asarray(T, dtype=np.float64)
+    phi = so3_log(T[:3, :3])
+    theta = np.linalg.norm(phi)
+    K = skew(phi)
+    if theta < 1e-10:
+        V_inv = np.eye(3) - 0.5 * K
+    else:
+        half = theta / 2
+        V_inv = np.eye(3) - 0.5 * K + (1 - half / np.tan(half)) / theta**2 * (K @ K)
+    return np.concatenate([V_inv @ T[:3, 3], phi])
+
+
+def rotation_angle_rad(R: np.ndarray) -> np.ndarray | float:
+    """Rotation angle in [0, pi] of ``(3, 3)`` or ``(N, 3, 3)`` matrices, robust near 0 and pi."""
+    R = np.asarray(R, dtype=np.float64)
+    cos = (np.trace(R, axis1=-2, axis2=-1) - 1.0) / 2.0
+    return np.arccos(np.clip(cos, -1.0, 1.0))
+
+
+def rotation_angle_deg(R: np.ndarray) -> np.ndarray | float:
+    """Rotation angle in degrees, see :func:`rotation_angle_rad`."""
+    return np.degrees(rotation_angle_rad(R))
+
+
+def pose_error(T_est: np.ndarray, T_ref: np.ndarray) -> tuple[float, float]:
+    """Translation (m) and rotation (deg) of ``T_ref^-1 T_est``, the error of one pose."""
+    E = se3_inverse(T_ref) @ np.asarray(T_est, dtype=np.float64)
+    return float(np.linalg.norm(E[:3, 3])), float(rotation_angle_deg(E[:3, :3]))
+
+
+def orthonormalize(R: np.ndarray) -> np.ndarray:
+    """Nearest rotation matrix (Frobenius norm) to ``R``, via SVD; accepts ``(3, 3)`` or ``(N, 3, 3)``."""
+    U, _, Vt = np.linalg.svd(np.asarray(R, dtype=np.float64))
+    D = np.ones(U.shape[:-1])
+    D[..., -1] = np.sign(np.linalg.det(U @ Vt))
+    return (U * D[..., None, :]) @ Vt
+
+
+def orthonormalize_se3(T: np.ndarray) -> np.ndarray:
+    """Copy of a pose (or stack) whose rotation block is exactly orthonormal."""
+    out = np.array(T, dtype=np.float64, copy=True)
+    out[..., :3, :3] = orthonormalize(out[..., :3, :3])
+    out[..., 3, :] = (0.0, 0.0, 0.0, 1.0)
+    return out
+
+
+def is_rotation(R: np.ndarray, tol: float = ORTHONORMAL_TOL) -> bool:
+    """True if every matrix in ``R`` is orthonormal with determinant +1 within ``tol``."""
+    R = np.asarray(R, dtype=np.float64)
+    eye_err = np.abs(np.swapaxes(R, -1, -2) @ R - np.eye(3)).max(initial=0.0)
+    return bool(eye_err <= tol and np.all(np.linalg.det(R) > 0))
+
+
+@dataclass(frozen=True)
+class Alignment:
+    """Result of a closed-form alignment ``dst ~= scale * R @ src + t``."""
+
+    rotation: np.ndarray
+    translation: np.ndarray
+    scale: float = 1.0
+
+    @property
+    def T(self) -> np.ndarray:
+        """The rigid part as a 4x4 pose (scale not included)."""
+        return make_se3(self.rotation, self.translation)
+
+    @property
+    def sim3(self) -> np.ndarray:
+        """The similarity as a 4x4 matrix with ``scale * R`` in its upper-left block."""
+        return make_se3(self.scale * self.rotation, self.translation)
+
+    def apply(self, points_xyz: np.ndarray) -> np.ndarray:
+        """Map ``(N, 3)`` points with the similarity."""
+        return self.scale * np.asarray(points_xyz, dtype=np.float64) @ self.rotation.T + self.translation
+
+
+def kabsch_umeyama(
+    source_xyz: np.ndarray,
+    target_xyz: np.ndarray,
+    *,
+    with_scale: bool = False,
+    weights: np.ndarray | None = None,
+) -> Alignment:
+    """Least-squares rigid (or similarity, ``with_scale``) transform taking ``source`` onto ``target``.
+
+    Closed form by SVD of the cross-covariance (Kabsch; Umeyama 1991 for the scale); a reflection in
+    the SVD is corrected so the result is always a proper rotation. Needs >= 3 non-collinear pairs.
+    """
+    src = as_points(source_xyz, "source", min_points=3)
+    dst = as_points(target_xyz, "target", min_points=3)
+    if src.shape != dst.shape:
+        raise DataError(f"source and target differ in shape: {src.shape} vs {dst.shape}", source="kabsch_umeyama")
+    if weights is None:
+        w = np.full(len(src), 1.0 / len(src))
+    else:
+        w = np.asarray(weights, dtype=np.float64).reshape(-1)
+        if w.shape[0] != len(src) or not np.isfinite(w).all() or (w < 0).any() or w.sum() <= 0:
+            raise DataError("weights must be finite, non-negative, one per point and not all zero", source="weights")
+        w = w / w.sum()
+    mu_src = w @ src
+    mu_dst = w @ dst
+    src_c = src - mu_src
+    dst_c = dst - mu_dst
+    cov = (dst_c * w[:, None]).T @ src_c
+    U, S, Vt = np.linalg.svd(cov)
+    d = np.sign(np.linalg.det(U) * np.linalg.det(Vt))
+    D = np.array([1.0, 1.0, d if d != 0 else 1.0])
+    R = (U * D) @ Vt
+    scale = 1.0
+    if with_scale:
+        var_src = float(w @ (src_c**2).sum(axis=1))
+        if var_src <= 0:
+            raise DataError("source points are all identical; scale is undefined", source="kabsch_umeyama")
+        scale = float((S * D).sum() / var_src)
+    t = mu_dst - scale * R @ mu_src
+    return Alignment(rotation=R, translation=t, scale=scale)
+
+
+def random_se3(rng: np.random.Generator, max_translation: float = 1.0, max_angle_rad: float = np.pi) -> np.ndarray:
+    """A random pose: uniform axis, angle uniform in [0, max_angle], translation uniform in a cube."""
+    axis = rng.normal(size=3)
+    axis /= np.linalg.norm(axis)
+    angle = rng.uniform(0.0, max_angle_rad)
+    t = rng.uniform(-max_translation, max_translation, size=3)
+    return make_se3(so3_exp(axis * angle), t)

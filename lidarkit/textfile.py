@@ -1,0 +1,70 @@
+"""Numeric text tables (KITTI poses, TUM trajectories, calib files) read with line-numbered errors."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from lidarkit.errors import DataError
+
+
+def read_lines(path: str | os.PathLike) -> list[str]:
+    """All lines of a text file; a missing or unreadable file is a DataError naming it."""
+    path = Path(path)
+    if not path.is_file():
+        raise DataError("file not found" if not path.exists() else "not a regular file", source=path)
+    try:
+        return path.read_text(encoding="utf-8").splitlines()
+    except (OSError, UnicodeDecodeError) as err:
+        raise DataError(f"cannot read as text ({err.__class__.__name__}: {err})", source=path) from err
+
+
+def read_numeric_table(
+    path: str | os.PathLike,
+    ncols: int | tuple[int, ...],
+    *,
+    comment: str = "#",
+    allow_nonfinite: bool = False,
+) -> np.ndarray:
+    """Rows of ``ncols`` numbers (space- or comma-separated) as an ``(N, ncols)`` float64 array.
+
+    Blank lines and lines starting with ``comment`` are skipped. A row with another number of
+    fields, a non-number or (unless allowed) NaN/inf raises DataError naming file and line.
+    ``ncols`` may be a tuple of accepted widths; the first row decides and all rows must agree.
+    """
+    accepted = (ncols,) if isinstance(ncols, int) else tuple(ncols)
+    rows: list[list[float]] = []
+    width: int | None = None
+    for lineno, raw in enumerate(read_lines(path), start=1):
+        line = raw.strip()
+        if not line or line.startswith(comment):
+            continue
+        fields = line.replace(",", " ").split()
+        if width is None:
+            if len(fields) not in accepted:
+                want = " or ".join(str(n) for n in accepted)
+                raise DataError(f"expected {want} numbers, found {len(fields)}", source=path, location=f"line {lineno}")
+            width = len(fields)
+        elif len(fields) != width:
+            raise DataError(f"expected {width} numbers, found {len(fields)}", source=path, location=f"line {lineno}")
+        try:
+            values = [float(f) for f in fields]
+        except ValueError:
+            bad = next(f for f in fields if not _is_float(f))
+            raise DataError(f"not a number: {bad!r}", source=path, location=f"line {lineno}") from None
+        if not allow_nonfinite and not all(np.isfinite(values)):
+            raise DataError("NaN or infinite value", source=path, location=f"line {lineno}")
+        rows.append(values)
+    if not rows:
+        raise DataError("no data rows", source=path)
+    return np.asarray(rows, dtype=np.float64)
+
+
+def _is_float(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True

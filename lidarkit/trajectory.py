@@ -1,0 +1,233 @@
+"""The Trajectory type every lidarkit module produces, with KITTI/TUM I/O and evo conversion."""
+
+from __future__ import annotations
+
+import copy
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from lidarkit import atomic
+from lidarkit.errors import DataError
+from lidarkit.geometry import ORTHONORMAL_TOL, orthonormalize_se3, se3_inverse
+from lidarkit.textfile import read_numeric_table
+
+FORMATS = ("kitti", "tum")
+
+
+@dataclass(frozen=True, eq=False)
+class Trajectory:
+    """A sequence of poses ``T_world_body`` with optional timestamps.
+
+    ``poses_se3``: ``(N, 4, 4)`` float64; ``timestamps_s``: ``(N,)`` float64, strictly increasing, or None.
+    """
+
+    poses_se3: np.ndarray
+    timestamps_s: np.ndarray | None = None
+    name: str = ""
+    meta: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        poses = np.array(self.poses_se3, dtype=np.float64)
+        source = self.name or "trajectory"
+        if poses.ndim != 3 or poses.shape[1:] != (4, 4):
+            raise DataError(f"poses must have shape (N, 4, 4), got {poses.shape}", source=source)
+        if not np.isfinite(poses).all():
+            frame = int(np.argmax(~np.isfinite(poses).all(axis=(1, 2))))
+            raise DataError("pose is NaN or infinite", source=source, location=f"frame {frame}")
+        if len(poses) and not np.allclose(poses[:, 3, :], [0.0, 0.0, 0.0, 1.0]):
+            frame = int(np.argmax(~np.isclose(poses[:, 3, :], [0.0, 0.0, 0.0, 1.0]).all(axis=1)))
+            raise DataError("last row of the pose is not [0, 0, 0, 1]", source=source, location=f"frame {frame}")
+        R = poses[:, :3, :3]
+        err = np.abs(np.swapaxes(R, 1, 2) @ R - np.eye(3)).max(axis=(1, 2)) if len(poses) else np.zeros(0)
+        bad = np.flatnonzero((err > ORTHONORMAL_TOL) | (np.linalg.det(R) <= 0)) if len(poses) else []
+        if len(bad):
+            raise DataError(
+                f"rotation is not orthonormal (max |R^T R - I| = {err[bad[0]]:.2e}); "
+                "use geometry.orthonormalize_se3 if this is rounding",
+                source=source,
+                location=f"frame {int(bad[0])}",
+            )
+        object.__setattr__(self, "poses_se3", poses)
+        if self.timestamps_s is not None:
+            ts = np.array(self.timestamps_s, dtype=np.float64).reshape(-1)
+            if ts.shape[0] != poses.shape[0]:
+                raise DataError(f"{ts.shape[0]} timestamps for {poses.shape[0]} poses", source=source)
+            if not np.isfinite(ts).all():
+                raise DataError("timestamp is NaN or infinite", source=source)
+            if len(ts) > 1 and not (np.diff(ts) > 0).all():
+                frame = int(np.argmax(~(np.diff(ts) > 0))) + 1
+                raise DataError("timestamps are not strictly increasing", source=source, location=f"frame {frame}")
+            object.__setattr__(self, "timestamps_s", ts)
+
+    # ---- basic views -------------------------------------------------------------------------
+    def __len__(self) -> int:
+        return int(self.poses_se3.shape[0])
+
+    def __getitem__(self, index: slice | np.ndarray | list[int]) -> Trajectory:
+        """Sub-trajectory by slice or index array (an int index is not supported: use ``poses_se3[i]``)."""
+        if isinstance(index, (int, np.integer)):
+            raise TypeError("index a Trajectory with a slice or an index array; use poses_se3[i] for one pose")
+        ts = None if self.timestamps_s is None else self.timestamps_s[index]
+        return Trajectory(self.poses_se3[index], ts, self.name, dict(self.meta))
+
+    @property
+    def positions_xyz(self) -> np.ndarray:
+        """``(N, 3)`` positions."""
+        return self.poses_se3[:, :3, 3].copy()
+
+    @property
+    def rotations(self) -> np.ndarray:
+        """``(N, 3, 3)`` rotation matrices."""
+        return self.poses_se3[:, :3, :3].copy()
+
+    @property
+    def distances_m(self) -> np.ndarray:
+        """``(N,)`` cumulative path length from the first pose."""
+        steps = np.linalg.norm(np.diff(self.poses_se3[:, :3, 3], axis=0), axis=1)
+        return np.concatenate([[0.0], np.cumsum(steps)])
+
+    @property
+    def length_m(self) -> float:
+        """Total path length."""
+        return float(self.distances_m[-1]) if len(self) else 0.0
+
+    def with_name(self, name: str) -> Trajectory:
+        return Trajectory(self.poses_se3, self.timestamps_s, name, dict(self.meta))
+
+    def with_timestamps(self, timestamps_s: np.ndarray | None) -> Trajectory:
+        return Trajectory(self.poses_se3, timestamps_s, self.name, dict(self.meta))
+
+    # ---- frame changes ---------------------------------------------------------------------------
+    def transformed(self, T_left: np.ndarray | None = None, T_right: np.ndarray | None = None) -> Trajectory:
+        """New trajectory with poses ``T_left @ P_i @ T_right``.
+
+        E.g. KITTI camera-frame poses to the LiDAR frame: ``T_left = Tr^-1``, ``T_right = Tr``.
+        """
+        poses = self.poses_se3
+        if T_left is not None:
+            poses = np.asarray(T_left, dtype=np.float64) @ poses
+        if T_right is not None:
+            poses = poses @ np.asarray(T_right, dtype=np.float64)
+        return Trajectory(poses, self.timestamps_s, self.name, dict(self.meta))
+
+    def relative_to_first(self) -> Trajectory:
+        """Same motion expressed so that the first pose is the identity."""
+        if not len(self):
+            return self
+        return self.transformed(T_left=se3_inverse(self.poses_se3[0]))
+
+    def relative_motions(self) -> np.ndarray:
+        """``(N-1, 4, 4)`` frame-to-frame motions ``T_{i-1}^-1 T_i``."""
+        return se3_inverse(self.poses_se3[:-1]) @ self.poses_se3[1:]
+
+    @classmethod
+    def from_relative_motions(
+        cls, motions: np.ndarray, T_first: np.ndarray | None = None, timestamps_s: np.ndarray | None = None, name: str = ""
+    ) -> Trajectory:
+        """Chain ``(N-1, 4, 4)`` motions from ``T_first`` (identity by default) into N poses."""
+        motions = np.asarray(motions, dtype=np.float64).reshape(-1, 4, 4)
+        poses = np.empty((len(motions) + 1, 4, 4))
+        poses[0] = np.eye(4) if T_first is None else T_first
+        for i, M in enumerate(motions):
+            poses[i + 1] = poses[i] @ M
+        return cls(poses, timestamps_s, name)
+
+    def orthonormalized(self) -> Trajectory:
+        """Copy whose rotations are exactly orthonormal (text files round them)."""
+        return Trajectory(orthonormalize_se3(self.poses_se3), self.timestamps_s, self.name, dict(self.meta))
+
+    # ---- KITTI / TUM files -----------------------------------------------------------------------
+    @classmethod
+    def from_kitti(
+        cls, path: str | os.PathLike, timestamps_s: np.ndarray | str | os.PathLike | None = None, name: str | None = None
+    ) -> Trajectory:
+        """Read a KITTI pose file: one row of 12 numbers (a row-major 3x4 ``[R|t]``) per pose.
+
+        ``timestamps_s`` may be an array or a ``times.txt`` path (one number per line).
+        """
+        rows = read_numeric_table(path, 12)
+        poses = np.tile(np.eye(4), (len(rows), 1, 1))
+        poses[:, :3, :4] = rows.reshape(-1, 3, 4)
+        if timestamps_s is not None and not isinstance(timestamps_s, np.ndarray):
+            times_path = timestamps_s
+            timestamps_s = read_numeric_table(times_path, 1)[:, 0]
+            if len(timestamps_s) != len(poses):
+                raise DataError(f"{len(timestamps_s)} timestamps for {len(poses)} poses in {path}", source=times_path)
+        return cls(poses, timestamps_s, Path(path).stem if name is None else name)
+
+    @classmethod
+    def from_tum(cls, path: str | os.PathLike, name: str | None = None) -> Trajectory:
+        """Read a TUM trajectory: ``timestamp tx ty tz qx qy qz qw`` per line, ``#`` comments."""
+        rows = read_numeric_table(path, 8)
+        quat_xyzw = rows[:, 4:8]
+        norms = np.linalg.norm(quat_xyzw, axis=1)
+        if (np.abs(norms - 1.0) > 1e-2).any():
+            i = int(np.argmax(np.abs(norms - 1.0) > 1e-2))
+            raise DataError(f"quaternion norm {norms[i]:.4f} is not 1", source=path, location=f"pose {i}")
+        poses = np.tile(np.eye(4), (len(rows), 1, 1))
+        poses[:, :3, :3] = Rotation.from_quat(quat_xyzw).as_matrix()
+        poses[:, :3, 3] = rows[:, 1:4]
+        return cls(poses, rows[:, 0], Path(path).stem if name is None else name)
+
+    @classmethod
+    def read(cls, path: str | os.PathLike, fmt: str = "kitti", **kwargs) -> Trajectory:
+        """Read ``path`` in ``fmt`` (``kitti`` or ``tum``)."""
+        if fmt == "kitti":
+            return cls.from_kitti(path, **kwargs)
+        if fmt == "tum":
+            return cls.from_tum(path, **kwargs)
+        from lidarkit.errors import ConfigError
+
+        raise ConfigError(f"unknown trajectory format {fmt!r}; known: {', '.join(FORMATS)}", source="format")
+
+    def to_kitti(self, path: str | os.PathLike) -> Path:
+        """Write the KITTI pose format atomically."""
+        rows = self.poses_se3[:, :3, :4].reshape(-1, 12)
+        text = "\n".join(" ".join(f"{v:.9e}" for v in row) for row in rows) + "\n"
+        return atomic.write_text(path, text)
+
+    def to_tum(self, path: str | os.PathLike) -> Path:
+        """Write the TUM format atomically (frame index as time when there are no timestamps)."""
+        ts = self.timestamps_s if self.timestamps_s is not None else np.arange(len(self), dtype=np.float64)
+        quat = Rotation.from_matrix(self.poses_se3[:, :3, :3]).as_quat()
+        data = np.column_stack([ts, self.poses_se3[:, :3, 3], quat])
+        text = "# timestamp tx ty tz qx qy qz qw\n" + "\n".join(
+            f"{row[0]:.6f} " + " ".join(f"{v:.9f}" for v in row[1:]) for row in data
+        ) + "\n"
+        return atomic.write_text(path, text)
+
+    def write(self, path: str | os.PathLike, fmt: str = "kitti") -> Path:
+        if fmt == "kitti":
+            return self.to_kitti(path)
+        if fmt == "tum":
+            return self.to_tum(path)
+        from lidarkit.errors import ConfigError
+
+        raise ConfigError(f"unknown trajectory format {fmt!r}; known: {', '.join(FORMATS)}", source="format")
+
+    # ---- evo -------------------------------------------------------------------------------------
+    def to_evo(self):
+        """A fresh evo trajectory (``PoseTrajectory3D`` with timestamps, else ``PosePath3D``).
+
+        evo's align/transform/scale work in place; this returns a new object every call.
+        """
+        from evo.core.trajectory import PosePath3D, PoseTrajectory3D
+
+        poses = [p.copy() for p in self.poses_se3]
+        if self.timestamps_s is None:
+            return PosePath3D(poses_se3=poses)
+        return PoseTrajectory3D(poses_se3=poses, timestamps=self.timestamps_s.copy())
+
+    @classmethod
+    def from_evo(cls, traj, name: str = "") -> Trajectory:
+        """Copy an evo ``PosePath3D``/``PoseTrajectory3D`` into a Trajectory."""
+        poses = np.array(traj.poses_se3, dtype=np.float64)
+        ts = getattr(traj, "timestamps", None)
+        return cls(poses, None if ts is None else np.array(ts, dtype=np.float64), name)
+
+    def copy(self) -> Trajectory:
+        return copy.deepcopy(self)
