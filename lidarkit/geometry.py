@@ -112,7 +112,9 @@ def rotation_angle_rad(R: np.ndarray) -> np.ndarray | float:
     """Rotation angle in [0, pi] of ``(3, 3)`` or ``(N, 3, 3)`` matrices, robust near 0 and pi."""
     R = np.asarray(R, dtype=np.float64)
     cos = (np.trace(R, axis1=-2, axis2=-1) - 1.0) / 2.0
-    return np.arccos(np.clip(cos, -1.0, 1.0))
+    axis = np.stack([R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]], axis=-1)
+    sin = 0.5 * np.linalg.norm(axis, axis=-1)
+    return np.arctan2(sin, cos)
 
 
 def rotation_angle_deg(R: np.ndarray) -> np.ndarray | float:

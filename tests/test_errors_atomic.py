@@ -1,0 +1,47 @@
+"""The error family's message format, atomic writes, and the CLI's one-line error handling."""
+
+from __future__ import annotations
+
+import os
+
+import pytest
+
+from lidarkit import atomic
+from lidarkit.cli import main
+from lidarkit.errors import ConfigError, DataError, LidarKitError
+
+
+def test_error_message_names_source_location_and_reason():
+    err = DataError("truncated scan", source="seq/000001.bin", location="frame 1")
+    assert str(err) == "seq/000001.bin (frame 1): truncated scan"
+    assert isinstance(err, LidarKitError)
+    assert str(ConfigError("unknown method 'foo'")) == "unknown method 'foo'"
+
+
+def test_atomic_write_replaces_whole_file(tmp_path):
+    target = tmp_path / "out" / "result.json"
+    atomic.write_text(target, "first")
+    assert target.read_text() == "first"
+    atomic.write_text(target, "second")
+    assert target.read_text() == "second"
+    assert [p.name for p in target.parent.iterdir()] == ["result.json"]
+
+
+def test_atomic_failure_keeps_previous_content(tmp_path):
+    target = tmp_path / "result.txt"
+    target.write_text("good")
+    with pytest.raises(RuntimeError):
+        with atomic.atomic_path(target) as tmp:
+            tmp.write_text("half")
+            raise RuntimeError("crash mid-write")
+    assert target.read_text() == "good"
+    assert os.listdir(tmp_path) == ["result.txt"]
+
+
+def test_cli_prints_one_line_and_exits_1_on_lidarkit_error(tmp_path, capsys):
+    missing = tmp_path / "nope.txt"
+    with pytest.raises(SystemExit) as exc:
+        main(["eval", str(missing), str(missing)])
+    assert exc.value.code == 1
+    err = capsys.readouterr().err
+    assert "error:" in err and "nope.txt" in err and "Traceback" not in err

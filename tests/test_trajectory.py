@@ -1,0 +1,112 @@
+"""Trajectory validation, KITTI/TUM round trips on real files, and evo conversion."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import shared_path
+
+from lidarkit.errors import ConfigError, DataError
+from lidarkit.geometry import make_se3, random_se3, se3_inverse, so3_exp
+from lidarkit.trajectory import Trajectory
+
+
+def _random_trajectory(rng, n=20, with_time=True) -> Trajectory:
+    poses = np.stack([random_se3(rng, 10.0) for _ in range(n)])
+    ts = np.cumsum(rng.uniform(0.05, 0.15, size=n)) if with_time else None
+    return Trajectory(poses, ts, name="random")
+
+
+def test_kitti_real_file_and_round_trip(tmp_path):
+    path = shared_path("evo_testdata", "KITTI_00_gt.txt")
+    times = shared_path("evo_testdata", "KITTI_00_gt_times.txt")
+    traj = Trajectory.from_kitti(path, timestamps_s=times)
+    assert len(traj) == 4541
+    np.testing.assert_allclose(traj.poses_se3[0], np.eye(4), atol=1e-6)
+    assert traj.length_m == pytest.approx(3724.19, abs=0.5)  # KITTI 00 is ~3.7 km
+    back = Trajectory.from_kitti(traj.to_kitti(tmp_path / "poses.txt"))
+    np.testing.assert_allclose(back.poses_se3, traj.poses_se3, atol=1e-8)
+
+
+def test_tum_real_file_and_round_trip(tmp_path):
+    traj = Trajectory.from_tum(shared_path("evo_testdata", "freiburg1_xyz-groundtruth.txt"))
+    assert len(traj) == 3000
+    assert traj.timestamps_s[0] == pytest.approx(1305031098.6659, abs=1e-3)
+    back = Trajectory.from_tum(traj.to_tum(tmp_path / "t.tum"))
+    np.testing.assert_allclose(back.poses_se3, traj.poses_se3, atol=1e-8)
+    np.testing.assert_allclose(back.timestamps_s, traj.timestamps_s, atol=1e-6)
+
+
+def test_evo_round_trip_is_a_copy(rng):
+    traj = _random_trajectory(rng)
+    evo_traj = traj.to_evo()
+    evo_traj.transform(make_se3(translation=[100.0, 0, 0]))  # evo works in place
+    np.testing.assert_allclose(traj.positions_xyz, Trajectory.from_evo(traj.to_evo()).positions_xyz)
+    assert not np.allclose(Trajectory.from_evo(evo_traj).positions_xyz, traj.positions_xyz)
+    path_only = _random_trajectory(rng, with_time=False).to_evo()
+    assert type(path_only).__name__ == "PosePath3D"
+
+
+def test_relative_motions_chain_back(rng):
+    traj = _random_trajectory(rng)
+    rebuilt = Trajectory.from_relative_motions(traj.relative_motions(), traj.poses_se3[0], traj.timestamps_s)
+    np.testing.assert_allclose(rebuilt.poses_se3, traj.poses_se3, atol=1e-9)
+    rel = traj.relative_to_first()
+    np.testing.assert_allclose(rel.poses_se3[0], np.eye(4), atol=1e-12)
+
+
+def test_transformed_changes_frame(rng):
+    traj = _random_trajectory(rng, n=5)
+    Tr = random_se3(rng, 1.0)
+    moved = traj.transformed(se3_inverse(Tr), Tr)
+    np.testing.assert_allclose(moved.poses_se3, se3_inverse(Tr) @ traj.poses_se3 @ Tr, atol=1e-12)
+
+
+def test_rounded_rotations_accepted_and_bad_ones_refused():
+    R = so3_exp([0.1, 0.2, 0.3])
+    ok = make_se3(np.round(R, 7))
+    Trajectory(np.stack([ok, ok]))
+    bad = make_se3(R * 1.01)
+    with pytest.raises(DataError, match="frame 1.*not orthonormal"):
+        Trajectory(np.stack([ok, bad]), name="est")
+
+
+@pytest.mark.parametrize(
+    "poses, ts, match",
+    [
+        (np.zeros((3, 3, 3)), None, r"shape \(N, 4, 4\)"),
+        (np.stack([np.eye(4), np.full((4, 4), np.nan)]), None, "frame 1.*NaN"),
+        (np.stack([np.eye(4)] * 3), [0.0, 1.0], "2 timestamps for 3 poses"),
+        (np.stack([np.eye(4)] * 3), [0.0, 2.0, 1.0], "frame 2.*not strictly increasing"),
+    ],
+)
+def test_invalid_trajectories(poses, ts, match):
+    with pytest.raises(DataError, match=match):
+        Trajectory(poses, ts)
+
+
+def test_malformed_files_name_file_and_line(tmp_path):
+    kitti = tmp_path / "bad.txt"
+    kitti.write_text("1 0 0 0 0 1 0 0 0 0 1 0\n1 0 0 0 0 1 0 0 0 0 1\n")
+    with pytest.raises(DataError, match=r"bad.txt \(line 2\): expected 12 numbers, found 11"):
+        Trajectory.from_kitti(kitti)
+    kitti.write_text("1 0 0 0 0 1 0 0 0 0 1 x\n")
+    with pytest.raises(DataError, match=r"line 1\): not a number: 'x'"):
+        Trajectory.from_kitti(kitti)
+    tum = tmp_path / "bad.tum"
+    tum.write_text("# c\n0 0 0 0 0 0 0 1\n1 0 0 0 0 0 0 5\n")
+    with pytest.raises(DataError, match="pose 1.*quaternion norm"):
+        Trajectory.from_tum(tum)
+    with pytest.raises(DataError, match="file not found"):
+        Trajectory.from_kitti(tmp_path / "missing.txt")
+    with pytest.raises(ConfigError, match="unknown trajectory format 'csv'"):
+        Trajectory.read(kitti, fmt="csv")
+
+
+def test_times_count_mismatch(tmp_path):
+    poses = tmp_path / "p.txt"
+    Trajectory(np.stack([np.eye(4)] * 3)).to_kitti(poses)
+    times = tmp_path / "times.txt"
+    times.write_text("0.0\n0.1\n")
+    with pytest.raises(DataError, match="2 timestamps for 3 poses"):
+        Trajectory.from_kitti(poses, timestamps_s=times)
