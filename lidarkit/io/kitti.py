@@ -1,0 +1,401 @@
+"""KITTI odometry reader: Velodyne scans, grayscale images, calibration, times and ground-truth poses.
+
+Layout (``root`` is the odometry root, or a sequence folder itself)::
+
+    root/sequences/NN/velodyne/000000.bin   float32 x, y, z, intensity
+    root/sequences/NN/image_0/000000.png    8-bit grayscale (left camera)
+    root/sequences/NN/calib.txt             "P0: 12 numbers" ... "Tr: 12 numbers" (or bare lines P0, P1, ...)
+    root/sequences/NN/times.txt             one time stamp [s] per frame
+    root/poses/NN.txt                       3x4 row-major T_world_cam0 per frame (or sequences/NN/poses.txt)
+
+Frame numbers come from the file names, so a folder holding only some scans (``000094.bin``,
+``000095.bin``) reads poses row 94 and 95. Ground truth is given in the camera frame as stored
+(``ground_truth_camera``) and in the LiDAR frame (``ground_truth``): ``T_lidar_i = Tr^-1 P_i Tr``
+with ``Tr = T_cam0_velo`` from calib.txt.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import re
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+
+from lidarkit.errors import DataError
+from lidarkit.geometry import se3_inverse
+from lidarkit.io.base import Scan
+from lidarkit.io.pointfile import read_kitti_bin
+from lidarkit.textfile import read_lines, read_numeric_table
+from lidarkit.trajectory import Trajectory
+
+log = logging.getLogger(__name__)
+
+CALIB_KEYS_IN_ORDER = ("P0", "P1", "P2", "P3", "Tr")  # meaning of bare (prefix-less) calib lines
+_TR_ALIASES = ("Tr", "Tr_velo_to_cam", "Tr_velo_cam")
+
+
+def read_kitti_calib(path: str | os.PathLike) -> dict[str, np.ndarray]:
+    """Parse a KITTI odometry ``calib.txt`` into ``{"P0".."P3": (3, 4), "Tr": (4, 4) T_cam0_velo}``.
+
+    Accepts ``KEY: 12 numbers`` lines and the prefix-less variant (bare rows of 12 numbers taken as
+    P0, P1, P2, P3, Tr in order). Other ``KEY:`` lines are kept as flat float arrays.
+    A line that is not 12 numbers for P0..P3/Tr raises DataError naming file and line.
+    """
+    calib: dict[str, np.ndarray] = {}
+    n_bare = 0
+    for lineno, raw in enumerate(read_lines(path), start=1):
+        line = raw.strip()
+        if not line or line.startswith("#"):
+            continue
+        key, sep, rest = line.partition(":")
+        if sep and not _is_number(key.strip()):
+            key = key.strip()
+            fields = rest.split()
+        else:
+            if n_bare >= len(CALIB_KEYS_IN_ORDER):
+                raise DataError(
+                    f"more than {len(CALIB_KEYS_IN_ORDER)} unlabelled calibration rows", source=path, location=f"line {lineno}"
+                )
+            key, fields = CALIB_KEYS_IN_ORDER[n_bare], line.split()
+            n_bare += 1
+        try:
+            values = np.array([float(f) for f in fields], dtype=np.float64)
+        except ValueError:
+            raise DataError(f"{key}: not a number in {rest.strip() if sep else line!r}", source=path, location=f"line {lineno}") from None
+        if not np.isfinite(values).all():
+            raise DataError(f"{key}: NaN or infinite value", source=path, location=f"line {lineno}")
+        if key in _TR_ALIASES:
+            key = "Tr"
+        if key in CALIB_KEYS_IN_ORDER:
+            if values.size != 12:
+                raise DataError(f"{key}: expected 12 numbers (3x4 matrix), found {values.size}", source=path, location=f"line {lineno}")
+            if key == "Tr":
+                T = np.eye(4)
+                T[:3, :4] = values.reshape(3, 4)
+                calib[key] = T
+            else:
+                calib[key] = values.reshape(3, 4)
+        else:
+            calib[key] = values
+    if "P0" not in calib:
+        raise DataError("no P0 projection matrix", source=path)
+    return calib
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+_FRAME_NAME = re.compile(r"^(\d+)$")
+
+
+def indexed_files(folder: Path, suffix: str) -> tuple[list[Path], np.ndarray]:
+    """Files ``<digits><suffix>`` in ``folder`` sorted by frame number; ``(paths, frames (N,) int)``.
+
+    A file with this suffix whose stem is not a number raises DataError (frames must be known).
+    """
+    paths: list[tuple[int, Path]] = []
+    for p in folder.iterdir():
+        if p.suffix.lower() != suffix or not p.is_file():
+            continue
+        m = _FRAME_NAME.match(p.stem)
+        if m is None:
+            raise DataError(f"file name is not a frame number (expected e.g. 000042{suffix})", source=p)
+        paths.append((int(m.group(1)), p))
+    paths.sort()
+    frames = np.array([f for f, _ in paths], dtype=np.int64)
+    dup = np.flatnonzero(np.diff(frames) == 0)
+    if len(dup):
+        raise DataError(f"two files for frame {frames[dup[0]]}", source=folder)
+    return [p for _, p in paths], frames
+
+
+class KittiOdometry:
+    """One KITTI odometry sequence (``ScanSequence``; ``as_image_sequence()`` gives the ``ImageSequence``).
+
+    ``len(ds)`` is the number of scans, or the number of images for an image-only sequence
+    (``n_scans`` / ``n_images`` give both). ``read_scan(i)`` / ``read_image(i)`` take the position
+    in the sorted file list; ``read_scan_by_frame(f)`` the KITTI frame number. ``timestamps_s``,
+    ``ground_truth`` (LiDAR frame) and ``ground_truth_camera`` have one entry per item of ``frames``
+    (the scans, or the images for an image-only sequence).
+
+    Options: ``velodyne_dir`` / ``image_dir`` replace ``sequences/NN/velodyne`` / ``image_0`` (e.g. a
+    folder of extra frames used with this sequence's calib and poses), ``poses_file`` another pose
+    file (e.g. ``poses_semantickitti.txt``), ``calib_file`` / ``times_file`` likewise;
+    ``drop_nonfinite`` drops NaN/inf points with a warning instead of raising.
+    """
+
+    def __init__(
+        self,
+        root: str | os.PathLike,
+        sequence: str | int = "00",
+        *,
+        drop_nonfinite: bool = False,
+        velodyne_dir: str | os.PathLike | None = None,
+        image_dir: str | os.PathLike | None = None,
+        poses_file: str | os.PathLike | None = None,
+        calib_file: str | os.PathLike | None = None,
+        times_file: str | os.PathLike | None = None,
+    ):
+        self.sequence = f"{int(sequence):02d}" if str(sequence).isdigit() else str(sequence)
+        self.drop_nonfinite = drop_nonfinite
+        root = Path(root)
+        if not root.is_dir():
+            raise DataError("dataset folder not found" if not root.exists() else "not a folder", source=root)
+        self.root = root
+        self.sequence_dir, odometry_root = self._locate_sequence(root)
+        self.name = f"kitti_{self.sequence}"
+
+        self.velodyne_dir = Path(velodyne_dir) if velodyne_dir is not None else self.sequence_dir / "velodyne"
+        self.image_dir = Path(image_dir) if image_dir is not None else self.sequence_dir / "image_0"
+        for given, folder in ((velodyne_dir, self.velodyne_dir), (image_dir, self.image_dir)):
+            if given is not None and not folder.is_dir():
+                raise DataError("folder not found", source=folder)
+        self.scan_paths, self.scan_frames = (
+            indexed_files(self.velodyne_dir, ".bin") if self.velodyne_dir.is_dir() else ([], np.zeros(0, np.int64))
+        )
+        self.image_paths, self.image_frames = (
+            indexed_files(self.image_dir, ".png") if self.image_dir.is_dir() else ([], np.zeros(0, np.int64))
+        )
+        if not self.scan_paths and not self.image_paths:
+            raise DataError(
+                f"no scans ({self.velodyne_dir.name}/*.bin) and no images ({self.image_dir.name}/*.png)",
+                source=self.sequence_dir,
+            )
+
+        self.calib_path = Path(calib_file) if calib_file is not None else self.sequence_dir / "calib.txt"
+        self.times_path = Path(times_file) if times_file is not None else self.sequence_dir / "times.txt"
+        if times_file is not None and not self.times_path.is_file():
+            raise DataError("times file not found", source=self.times_path)
+        self.poses_path = self._locate_poses(poses_file, odometry_root)
+        self._check_counts()
+
+    # ---- layout ------------------------------------------------------------------------------------
+    def _locate_sequence(self, root: Path) -> tuple[Path, Path | None]:
+        """(sequence folder, odometry root or None when ``root`` is the sequence folder itself)."""
+        candidate = root / "sequences" / self.sequence
+        if candidate.is_dir():
+            return candidate, root
+        if (root / "velodyne").is_dir() or (root / "image_0").is_dir() or (root / "calib.txt").is_file():
+            if root.name.isdigit():
+                self.sequence = root.name
+            parent = root.parent.parent if root.parent.name == "sequences" else None
+            return root, parent
+        raise DataError(
+            f"sequence {self.sequence} not found (expected sequences/{self.sequence}/ or a folder with velodyne/, image_0/, calib.txt)",
+            source=root,
+        )
+
+    def _locate_poses(self, poses_file: str | os.PathLike | None, odometry_root: Path | None) -> Path | None:
+        if poses_file is not None:
+            path = Path(poses_file)
+            if not path.is_file():
+                raise DataError("poses file not found", source=path)
+            return path
+        candidates = [self.sequence_dir / "poses.txt"]
+        if odometry_root is not None:
+            candidates.insert(0, odometry_root / "poses" / f"{self.sequence}.txt")
+        return next((p for p in candidates if p.is_file()), None)
+
+    def _check_counts(self) -> None:
+        """Pose and time files must agree with each other and cover every frame present."""
+        n_poses = len(self._poses_camera_all) if self.poses_path is not None else None
+        n_times = len(self._times_all) if self._times_all is not None else None
+        if n_poses is not None and n_times is not None and n_poses != n_times:
+            raise DataError(f"{n_poses} poses in {self.poses_path} but {n_times} time stamps", source=self.times_path)
+        for kind, paths, frames in (("scan", self.scan_paths, self.scan_frames), ("image", self.image_paths, self.image_frames)):
+            if not len(frames):
+                continue
+            for what, count, src in (("poses", n_poses, self.poses_path), ("time stamps", n_times, self.times_path)):
+                if count is not None and frames[-1] >= count:
+                    raise DataError(
+                        f"{count} {what} but {kind} {paths[-1].name} is frame {frames[-1]}",
+                        source=src,
+                    )
+
+    # ---- sizes and frames ----------------------------------------------------------------------------
+    @property
+    def n_scans(self) -> int:
+        return len(self.scan_paths)
+
+    @property
+    def n_images(self) -> int:
+        return len(self.image_paths)
+
+    @property
+    def frames(self) -> np.ndarray:
+        """``(len,)`` KITTI frame numbers of the scans (of the images for an image-only sequence)."""
+        return self.scan_frames if self.scan_paths else self.image_frames
+
+    def __len__(self) -> int:
+        return self.n_scans if self.scan_paths else self.n_images
+
+    def __repr__(self) -> str:
+        return f"KittiOdometry({str(self.sequence_dir)!r}, scans={self.n_scans}, images={self.n_images})"
+
+    # ---- calibration ---------------------------------------------------------------------------------
+    @cached_property
+    def calib(self) -> dict[str, np.ndarray]:
+        """``P0..P3`` (3, 4) projection matrices and ``Tr`` (4, 4) = ``T_cam0_velo`` when present."""
+        return read_kitti_calib(self.calib_path)
+
+    @property
+    def K(self) -> np.ndarray:
+        """(3, 3) intrinsics of the left grayscale camera (from P0)."""
+        return self.calib["P0"][:, :3].copy()
+
+    @property
+    def T_cam0_velo(self) -> np.ndarray:
+        """(4, 4) LiDAR-to-camera transform ``Tr``; DataError when calib.txt has none."""
+        if "Tr" not in self.calib:
+            raise DataError("no Tr (velodyne-to-camera) line: LiDAR-frame poses need it", source=self.calib_path)
+        return self.calib["Tr"].copy()
+
+    # ---- times and poses ---------------------------------------------------------------------------
+    @cached_property
+    def _times_all(self) -> np.ndarray | None:
+        if not self.times_path.is_file():
+            return None
+        times = read_numeric_table(self.times_path, 1)[:, 0]
+        bad = np.flatnonzero(np.diff(times) <= 0)
+        if len(bad):
+            raise DataError("time stamps are not strictly increasing", source=self.times_path, location=f"line {bad[0] + 2}")
+        return times
+
+    @cached_property
+    def _poses_camera_all(self) -> Trajectory:
+        return Trajectory.from_kitti(self.poses_path, name=f"{self.name}_gt")
+
+    @property
+    def sequence_timestamps_s(self) -> np.ndarray | None:
+        """Every time stamp in times.txt (one per frame of the full sequence), or None."""
+        return None if self._times_all is None else self._times_all.copy()
+
+    @property
+    def timestamps_s(self) -> np.ndarray | None:
+        """``(len,)`` time stamps [s] of ``frames`` from times.txt, or None without times.txt."""
+        return None if self._times_all is None else self._times_all[self.frames]
+
+    def ground_truth_at(self, frames: np.ndarray | list[int] | None = None, *, frame: str = "lidar") -> Trajectory | None:
+        """GT poses of the given KITTI frame numbers (all rows when None) in the ``"lidar"`` or ``"camera"`` frame.
+
+        Returns None when the sequence has no pose file.
+        """
+        if self.poses_path is None:
+            return None
+        gt = self._poses_camera_all
+        if frames is not None:
+            frames = np.asarray(frames, dtype=np.int64)
+            if len(frames) and (frames.min() < 0 or frames.max() >= len(gt)):
+                raise DataError(f"frame {int(frames.max())} outside the {len(gt)} poses", source=self.poses_path)
+            ts = None if self._times_all is None else self._times_all[frames]
+            gt = Trajectory(gt.poses_se3[frames], ts, gt.name)
+        elif self._times_all is not None:
+            gt = gt.with_timestamps(self._times_all)
+        if frame == "camera":
+            return gt
+        if frame != "lidar":
+            from lidarkit.errors import ConfigError
+
+            raise ConfigError(f"unknown pose frame {frame!r}; known: lidar, camera", source="frame")
+        Tr = self.T_cam0_velo
+        return gt.transformed(T_left=se3_inverse(Tr), T_right=Tr).with_name(f"{self.name}_gt_lidar")
+
+    @property
+    def ground_truth_camera(self) -> Trajectory | None:
+        """GT ``T_cam0start_cam0`` of ``frames`` as stored in the pose file (camera frame), or None."""
+        return self.ground_truth_at(self.frames, frame="camera")
+
+    @property
+    def ground_truth(self) -> Trajectory | None:
+        """GT of ``frames`` in the LiDAR frame ``T_lidar0_lidar_i = Tr^-1 P_i Tr``, or None without poses."""
+        return self.ground_truth_at(self.frames, frame="lidar")
+
+    # ---- data ------------------------------------------------------------------------------------------
+    def read_scan(self, index: int) -> Scan:
+        """The ``index``-th scan (position in ``scan_paths``) with its KITTI frame number and time stamp."""
+        if not self.scan_paths:
+            raise DataError("sequence has no scans", source=self.velodyne_dir)
+        if not -len(self.scan_paths) <= index < len(self.scan_paths):
+            raise IndexError(f"scan index {index} out of range for {len(self.scan_paths)} scans")
+        frame = int(self.scan_frames[index])
+        ts = None if self._times_all is None else float(self._times_all[frame])
+        return read_kitti_bin(self.scan_paths[index], frame=frame, timestamp_s=ts, drop_nonfinite=self.drop_nonfinite)
+
+    def read_scan_by_frame(self, frame: int) -> Scan:
+        """The scan of KITTI frame number ``frame`` (file ``{frame:06d}.bin``)."""
+        hits = np.flatnonzero(self.scan_frames == frame)
+        if not len(hits):
+            raise DataError(f"no scan for frame {frame}", source=self.velodyne_dir)
+        return self.read_scan(int(hits[0]))
+
+    def read_image(self, index: int) -> np.ndarray:
+        """The ``index``-th image of ``image_paths`` as ``(H, W)`` uint8 grayscale."""
+        if not self.image_paths:
+            raise DataError("sequence has no images", source=self.image_dir)
+        return read_gray_image(self.image_paths[index], frame=int(self.image_frames[index]))
+
+    def as_image_sequence(self) -> KittiImages:
+        """The images of this sequence as an ``ImageSequence`` (ground truth in the camera frame)."""
+        return KittiImages(self)
+
+
+class KittiImages:
+    """``ImageSequence`` view of a :class:`KittiOdometry`: one item per image, GT in the camera frame."""
+
+    def __init__(self, odometry: KittiOdometry):
+        if not odometry.image_paths:
+            raise DataError("sequence has no images", source=odometry.image_dir)
+        self.odometry = odometry
+        self.name = f"{odometry.name}_image_0"
+
+    def __len__(self) -> int:
+        return self.odometry.n_images
+
+    @property
+    def frames(self) -> np.ndarray:
+        return self.odometry.image_frames
+
+    @property
+    def image_paths(self) -> list[Path]:
+        return self.odometry.image_paths
+
+    def read_image(self, index: int) -> np.ndarray:
+        return self.odometry.read_image(index)
+
+    @property
+    def K(self) -> np.ndarray:
+        return self.odometry.K
+
+    @property
+    def timestamps_s(self) -> np.ndarray | None:
+        times = self.odometry._times_all
+        return None if times is None else times[self.frames]
+
+    @property
+    def ground_truth(self) -> Trajectory | None:
+        return self.odometry.ground_truth_at(self.frames, frame="camera")
+
+
+def read_gray_image(path: str | os.PathLike, *, frame: int | None = None) -> np.ndarray:
+    """Read an image file as ``(H, W)`` uint8 grayscale with OpenCV; unreadable files raise DataError."""
+    import cv2
+
+    path = Path(path)
+    where = None if frame is None else f"frame {frame}"
+    if not path.is_file():
+        raise DataError("image file not found", source=path, location=where)
+    image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+    if image is None or image.size == 0:
+        raise DataError("cannot decode image (corrupt or unsupported format)", source=path, location=where)
+    return image
+
+
+__all__ = ["KittiImages", "KittiOdometry", "indexed_files", "read_gray_image", "read_kitti_bin", "read_kitti_calib"]

@@ -1,0 +1,170 @@
+"""Single point-cloud files (KITTI ``.bin``, ``.npy``, ``.pcd``, ``.ply``) read into a validated :class:`Scan`.
+
+Every reader checks what it reads: a missing, empty or truncated file, or NaN/inf points raise
+``DataError`` naming the file, the frame and the reason; with ``drop_nonfinite=True`` non-finite
+points are dropped instead and a warning is logged.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from pathlib import Path
+
+import numpy as np
+
+from lidarkit.errors import DataError
+from lidarkit.io.base import Scan
+
+log = logging.getLogger(__name__)
+
+KITTI_BIN_RECORD_BYTES = 16  # float32 x, y, z, intensity
+POINT_FILE_SUFFIXES = (".bin", ".npy", ".pcd", ".ply")
+
+
+def _require_file(path: Path, frame: int | None) -> int:
+    """Size in bytes of an existing, non-empty regular file."""
+    where = None if frame is None else f"frame {frame}"
+    if not path.exists():
+        raise DataError("scan file not found", source=path, location=where)
+    if not path.is_file():
+        raise DataError("not a regular file", source=path, location=where)
+    size = path.stat().st_size
+    if size == 0:
+        raise DataError("empty scan file (0 bytes)", source=path, location=where)
+    return size
+
+
+def finite_points(
+    points_xyz: np.ndarray,
+    intensity: np.ndarray | None,
+    *,
+    source: str | os.PathLike,
+    frame: int | None = None,
+    drop_nonfinite: bool = False,
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Check ``(N, 3)`` points (and ``(N,)`` intensity) for NaN/inf; raise DataError or drop them with a warning."""
+    where = None if frame is None else f"frame {frame}"
+    ok = np.isfinite(points_xyz).all(axis=1)
+    if intensity is not None:
+        ok &= np.isfinite(intensity)
+    n_bad = int(len(ok) - np.count_nonzero(ok))
+    if n_bad:
+        first = int(np.argmin(ok))
+        if not drop_nonfinite:
+            raise DataError(
+                f"{n_bad} of {len(ok)} points are NaN or infinite (first at point {first}); "
+                "pass drop_nonfinite=True to drop them",
+                source=source,
+                location=where,
+            )
+        log.warning("%s (%s): dropped %d of %d NaN/infinite points", source, where or "scan", n_bad, len(ok))
+        points_xyz = points_xyz[ok]
+        intensity = None if intensity is None else intensity[ok]
+    if len(points_xyz) == 0:
+        raise DataError("scan has no finite points", source=source, location=where)
+    return points_xyz, intensity
+
+
+def read_kitti_bin(
+    path: str | os.PathLike,
+    *,
+    frame: int = 0,
+    timestamp_s: float | None = None,
+    drop_nonfinite: bool = False,
+) -> Scan:
+    """Read a KITTI Velodyne ``.bin`` (little-endian float32 ``x y z intensity`` records).
+
+    A size that is not a multiple of 16 bytes is a truncated file (DataError), as is an empty one.
+    Points are returned as ``(N, 3)`` float64, intensity as ``(N,)`` float32.
+    """
+    path = Path(path)
+    size = _require_file(path, frame)
+    if size % KITTI_BIN_RECORD_BYTES:
+        raise DataError(
+            f"truncated: {size} bytes is not a multiple of {KITTI_BIN_RECORD_BYTES} "
+            f"(float32 x, y, z, intensity per point); {size % KITTI_BIN_RECORD_BYTES} trailing bytes",
+            source=path,
+            location=f"frame {frame}",
+        )
+    data = np.fromfile(path, dtype="<f4").reshape(-1, 4)
+    points, intensity = finite_points(
+        data[:, :3], data[:, 3], source=path, frame=frame, drop_nonfinite=drop_nonfinite
+    )
+    return Scan(points.astype(np.float64), np.ascontiguousarray(intensity), None, timestamp_s, frame, str(path))
+
+
+def read_npy_scan(
+    path: str | os.PathLike, *, frame: int = 0, timestamp_s: float | None = None, drop_nonfinite: bool = False
+) -> Scan:
+    """Read a ``.npy`` array of shape ``(N, 3)`` (x, y, z) or ``(N, 4)`` (x, y, z, intensity)."""
+    path = Path(path)
+    _require_file(path, frame)
+    try:
+        data = np.load(path, allow_pickle=False)
+    except (OSError, ValueError) as err:
+        raise DataError(f"not a readable .npy array ({err})", source=path, location=f"frame {frame}") from err
+    if data.ndim != 2 or data.shape[1] not in (3, 4) or not np.issubdtype(data.dtype, np.number):
+        raise DataError(
+            f"expected a numeric (N, 3) or (N, 4) array, got shape {data.shape} dtype {data.dtype}",
+            source=path,
+            location=f"frame {frame}",
+        )
+    intensity = data[:, 3].astype(np.float32) if data.shape[1] == 4 else None
+    points, intensity = finite_points(
+        data[:, :3].astype(np.float64), intensity, source=path, frame=frame, drop_nonfinite=drop_nonfinite
+    )
+    return Scan(points, intensity, None, timestamp_s, frame, str(path))
+
+
+def read_open3d_scan(
+    path: str | os.PathLike, *, frame: int = 0, timestamp_s: float | None = None, drop_nonfinite: bool = False
+) -> Scan:
+    """Read a ``.pcd`` or ``.ply`` with Open3D's tensor reader, keeping an ``intensity`` field if present.
+
+    Open3D is asked not to drop NaN points itself so that they are reported (or dropped) here.
+    """
+    path = Path(path)
+    _require_file(path, frame)
+    import open3d as o3d  # slow import: only when a pcd/ply is read
+
+    try:
+        cloud = o3d.t.io.read_point_cloud(str(path), remove_nan_points=False, remove_infinite_points=False)
+    except RuntimeError as err:
+        raise DataError(f"Open3D cannot read it ({err})", source=path, location=f"frame {frame}") from err
+    if "positions" not in cloud.point or len(cloud.point.positions) == 0:
+        raise DataError("no points read (unreadable, corrupt or empty point cloud)", source=path, location=f"frame {frame}")
+    points = cloud.point.positions.numpy().astype(np.float64)
+    intensity = None
+    for key in ("intensity", "intensities", "reflectance"):
+        if key in cloud.point:
+            intensity = cloud.point[key].numpy().reshape(len(points), -1)[:, 0].astype(np.float32)
+            break
+    points, intensity = finite_points(points, intensity, source=path, frame=frame, drop_nonfinite=drop_nonfinite)
+    return Scan(points, intensity, None, timestamp_s, frame, str(path))
+
+
+def read_point_file(
+    path: str | os.PathLike, *, frame: int = 0, timestamp_s: float | None = None, drop_nonfinite: bool = False
+) -> Scan:
+    """Read any supported point file, chosen by suffix (``.bin``, ``.npy``, ``.pcd``, ``.ply``)."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    readers = {".bin": read_kitti_bin, ".npy": read_npy_scan, ".pcd": read_open3d_scan, ".ply": read_open3d_scan}
+    if suffix not in readers:
+        raise DataError(
+            f"unsupported point file type {suffix!r}; supported: {', '.join(POINT_FILE_SUFFIXES)}",
+            source=path,
+            location=f"frame {frame}",
+        )
+    return readers[suffix](path, frame=frame, timestamp_s=timestamp_s, drop_nonfinite=drop_nonfinite)
+
+
+__all__ = [
+    "POINT_FILE_SUFFIXES",
+    "finite_points",
+    "read_kitti_bin",
+    "read_npy_scan",
+    "read_open3d_scan",
+    "read_point_file",
+]

@@ -1,0 +1,286 @@
+"""KITTI odometry reader on the real sequence-00 excerpt and image sequences 06/01, plus corrupted copies."""
+
+from __future__ import annotations
+
+import logging
+import shutil
+
+import numpy as np
+import pytest
+from conftest import shared_path
+
+from lidarkit.errors import ConfigError, DataError
+from lidarkit.geometry import pose_error, se3_inverse
+from lidarkit.io import available_datasets, open_dataset
+from lidarkit.io.base import ImageSequence, ScanSequence
+from lidarkit.io.kitti import KittiOdometry, read_kitti_calib
+from lidarkit.io.pointfile import read_kitti_bin
+
+
+@pytest.fixture
+def odo_root():
+    return shared_path("kitti_odometry")
+
+
+@pytest.fixture
+def extra(odo_root):
+    """Sequence 00 calib/poses/times with the non-contiguous scans 94, 95, 198, 199."""
+    return KittiOdometry(odo_root, "00", velodyne_dir=odo_root / "extra_frames" / "00" / "velodyne")
+
+
+def _scan_copy(tmp_path, odo_root, name="000000.bin"):
+    """A writable folder holding a copy of one real scan."""
+    folder = tmp_path / "velodyne"
+    folder.mkdir()
+    shutil.copy2(odo_root / "sequences" / "00" / "velodyne" / name, folder / name)
+    return folder / name
+
+
+# ---- real data ------------------------------------------------------------------------------------------
+def test_scan_000000_matches_raw_file(odo_root):
+    ds = open_dataset("kitti", odo_root, sequence="00")
+    assert isinstance(ds, ScanSequence)
+    assert len(ds) == ds.n_scans == 10 and ds.n_images == 0
+    assert list(ds.frames) == list(range(10))
+    scan = ds.read_scan(0)
+    raw = np.fromfile(odo_root / "sequences" / "00" / "velodyne" / "000000.bin", dtype=np.float32).reshape(-1, 4)
+    assert scan.points_xyz.shape == (124668, 3) and scan.points_xyz.dtype == np.float64
+    np.testing.assert_array_equal(scan.points_xyz, raw[:, :3].astype(np.float64))
+    np.testing.assert_array_equal(scan.intensity, raw[:, 3])
+    assert scan.frame == 0 and scan.timestamp_s == 0.0
+    ranges = np.linalg.norm(scan.points_xyz, axis=1)
+    assert 1.0 < ranges.min() and 75.0 < ranges.max() < 85.0  # HDL-64 range, per SOURCES.md 1.3-80.4 m
+    assert ds.read_scan(-1).frame == 9
+    assert ds.timestamps_s[1] == pytest.approx(0.1037359)
+
+
+def test_calib_and_intrinsics(odo_root):
+    ds = KittiOdometry(odo_root, 0)
+    calib = ds.calib
+    assert {"P0", "P1", "P2", "P3", "Tr"} <= set(calib)
+    assert calib["P0"].shape == (3, 4) and calib["Tr"].shape == (4, 4)
+    np.testing.assert_allclose(ds.K, [[718.856, 0, 607.1928], [0, 718.856, 185.2157], [0, 0, 1]])
+    baseline_m = -calib["P1"][0, 3] / calib["P1"][0, 0]
+    assert baseline_m == pytest.approx(0.5372, abs=1e-4)
+    Tr = calib["Tr"]
+    np.testing.assert_allclose(Tr[:3, :3] @ Tr[:3, :3].T, np.eye(3), atol=1e-5)
+    # Tr maps LiDAR to camera: LiDAR forward (+x) becomes camera forward (+z), LiDAR up (+z) camera -y
+    np.testing.assert_allclose(Tr[:3, :3] @ [1, 0, 0], [0, 0, 1], atol=0.02)
+    np.testing.assert_allclose(Tr[:3, :3] @ [0, 0, 1], [0, -1, 0], atol=0.02)
+
+
+def test_first_lidar_pose_is_identity_and_motion_is_along_lidar_x(odo_root):
+    ds = KittiOdometry(odo_root, "00")
+    gt = ds.ground_truth
+    assert len(gt) == 10 and gt.timestamps_s is not None
+    np.testing.assert_allclose(gt.relative_to_first().poses_se3[0], np.eye(4), atol=1e-6)
+    np.testing.assert_allclose(gt.poses_se3[0], np.eye(4), atol=1e-6)  # P_0 is the identity in 00.txt
+    step_lidar = gt.relative_motions()[0][:3, 3]
+    step_camera = ds.ground_truth_camera.relative_motions()[0][:3, 3]
+    assert 0.8 < step_lidar[0] < 0.92 and abs(step_lidar[1]) < 0.1 and abs(step_lidar[2]) < 0.1
+    assert 0.8 < step_camera[2] < 0.92 and abs(step_camera[0]) < 0.1  # camera frame: forward is +z
+    assert len(ds.ground_truth_at(None, frame="camera")) == 4541
+
+
+def test_noncontiguous_frames_index_gt_rows(odo_root, extra):
+    assert list(extra.frames) == [94, 95, 198, 199]
+    np.testing.assert_allclose(extra.timestamps_s, [9.745342, 9.849229, 20.52747, 20.63096])
+    assert extra.read_scan_by_frame(95).frame == 95 and extra.read_scan(1).frame == 95
+    rows = np.loadtxt(odo_root / "poses" / "00.txt")
+    np.testing.assert_allclose(extra.ground_truth_camera.poses_se3[:, :3, :4].reshape(-1, 12), rows[[94, 95, 198, 199]])
+    gt = extra.ground_truth
+    for a, b, forward_m in ((0, 1, 0.474), (2, 3, 0.514)):  # measured from poses/00.txt + calib Tr
+        T_a_b = se3_inverse(gt.poses_se3[a]) @ gt.poses_se3[b]
+        t = T_a_b[:3, 3]
+        assert t[0] == pytest.approx(forward_m, abs=0.01)
+        assert abs(t[1]) < 0.05 and abs(t[2]) < 0.03  # a wrong Tr direction would put the motion off +x
+    with pytest.raises(DataError, match=r"no scan for frame 96"):
+        extra.read_scan_by_frame(96)
+
+
+def test_gt_lidar_motion_agrees_with_icp_on_the_scans(extra):
+    """Independent check of the Tr direction: Open3D ICP on scans 94/95 reproduces the LiDAR-frame GT."""
+    import open3d as o3d
+
+    def cloud(i):
+        pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(extra.read_scan(i).points_xyz))
+        pcd = pcd.voxel_down_sample(0.4)
+        pcd.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=1.2, max_nn=20))
+        return pcd
+
+    gt = extra.ground_truth
+    T_94_95_gt = se3_inverse(gt.poses_se3[0]) @ gt.poses_se3[1]
+    result = o3d.pipelines.registration.registration_icp(
+        cloud(1), cloud(0), 1.0, np.eye(4), o3d.pipelines.registration.TransformationEstimationPointToPlane(),
+        o3d.pipelines.registration.ICPConvergenceCriteria(max_iteration=50),
+    )
+    trans_m, rot_deg = pose_error(result.transformation, T_94_95_gt)
+    assert trans_m < 0.06 and rot_deg < 0.2  # SOURCES.md: ICP vs GT 0.022 m / 0.03 deg
+
+
+def test_semantickitti_poses_option(odo_root):
+    official = KittiOdometry(odo_root, "00").ground_truth.relative_motions()[0][:3, 3]
+    suma = KittiOdometry(odo_root, "00", poses_file=odo_root / "sequences" / "00" / "poses_semantickitti.txt")
+    step = suma.ground_truth.relative_motions()[0][:3, 3]
+    assert 0.6 < step[0] < 0.75 < 0.8 < official[0]  # SOURCES.md: SuMa 0.67-0.74 m vs GT 0.86 m at the start
+
+
+def test_image_only_sequence_with_bare_calib():
+    root = shared_path("kitti_images")
+    ds = KittiOdometry(root, "06")
+    assert len(ds) == ds.n_images == 51 and ds.n_scans == 0
+    assert set(ds.calib) == {"P0", "P1"}
+    assert ds.K[0, 0] == pytest.approx(707.0912) and ds.K[1, 2] == pytest.approx(183.1104)
+    image = ds.read_image(12)
+    assert image.dtype == np.uint8 and image.shape == (370, 1226)
+    assert 20 < image.mean() < 235
+    assert len(ds.timestamps_s) == 51 and len(ds.ground_truth_camera) == 51
+    with pytest.raises(DataError, match=r"calib\.txt: no Tr"):
+        ds.ground_truth
+    with pytest.raises(DataError, match="sequence has no scans"):
+        ds.read_scan(0)
+    images = ds.as_image_sequence()
+    assert isinstance(images, ImageSequence)
+    np.testing.assert_allclose(images.ground_truth.poses_se3[0], np.eye(4), atol=1e-6)
+    step = images.ground_truth.relative_motions()[0][:3, 3]
+    assert step[2] > 0.9 and abs(step[0]) < 0.1
+
+
+def test_root_may_be_the_sequence_folder():
+    seq06 = KittiOdometry(shared_path("kitti_images", "sequences", "06"))
+    assert seq06.name == "kitti_06" and seq06.poses_path.name == "06.txt"  # ../../poses/06.txt preferred
+    seq01 = KittiOdometry(shared_path("kitti_images", "sequences", "01"))
+    assert seq01.poses_path.name == "poses.txt" and len(seq01.ground_truth_camera) == 51
+    assert seq01.timestamps_s is None and seq01.K[0, 0] == pytest.approx(718.856)
+
+
+# ---- corrupted copies -------------------------------------------------------------------------------------
+def test_truncated_bin(tmp_path, odo_root):
+    path = _scan_copy(tmp_path, odo_root)
+    data = path.read_bytes()
+    path.write_bytes(data[:-5])
+    with pytest.raises(DataError, match=r"000000\.bin \(frame 0\): truncated: .* not a multiple of 16"):
+        read_kitti_bin(path)
+    ds = KittiOdometry(odo_root, "00", velodyne_dir=path.parent)
+    with pytest.raises(DataError, match="truncated"):
+        ds.read_scan(0)
+
+
+def test_empty_and_missing_bin(tmp_path, odo_root):
+    path = tmp_path / "000003.bin"
+    path.write_bytes(b"")
+    with pytest.raises(DataError, match=r"000003\.bin \(frame 3\): empty"):
+        read_kitti_bin(path, frame=3)
+    with pytest.raises(DataError, match="not found"):
+        read_kitti_bin(tmp_path / "nope.bin")
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_nonfinite_points_raise_or_drop(tmp_path, odo_root, caplog, bad):
+    path = _scan_copy(tmp_path, odo_root)
+    data = np.fromfile(path, dtype=np.float32).reshape(-1, 4)
+    data[[10, 500, 9000], [0, 2, 3]] = bad
+    data.tofile(path)
+    ds = KittiOdometry(odo_root, "00", velodyne_dir=path.parent)
+    with pytest.raises(DataError, match=r"000000\.bin \(frame 0\): 3 of 124668 points are NaN or infinite"):
+        ds.read_scan(0)
+    dropping = KittiOdometry(odo_root, "00", velodyne_dir=path.parent, drop_nonfinite=True)
+    with caplog.at_level(logging.WARNING, logger="lidarkit.io.pointfile"):
+        scan = dropping.read_scan(0)
+    assert scan.points_xyz.shape == (124665, 3) and np.isfinite(scan.points_xyz).all()
+    assert len(scan.intensity) == 124665
+    assert "dropped 3 of 124668" in caplog.text and "frame 0" in caplog.text
+
+
+def test_all_nonfinite_is_an_error_even_when_dropping(tmp_path):
+    path = tmp_path / "000000.bin"
+    np.full((5, 4), np.nan, dtype=np.float32).tofile(path)
+    with pytest.raises(DataError, match="no finite points"):
+        read_kitti_bin(path, drop_nonfinite=True)
+
+
+def test_malformed_calib_lines(tmp_path, copy_of, odo_root):
+    calib = copy_of(odo_root / "sequences" / "00" / "calib.txt")
+    lines = calib.read_text().splitlines()
+    lines[2] = " ".join(lines[2].split()[:-1])  # P2 with 11 numbers
+    calib.write_text("\n".join(lines) + "\n")
+    with pytest.raises(DataError, match=r"calib\.txt \(line 3\): P2: expected 12 numbers .*found 11"):
+        read_kitti_calib(calib)
+    lines[2] = "P2: 1 2 3 4 5 6 7 8 9 10 eleven 12"
+    calib.write_text("\n".join(lines) + "\n")
+    with pytest.raises(DataError, match=r"\(line 3\): P2: not a number"):
+        KittiOdometry(odo_root, "00", calib_file=calib).calib
+    bare = copy_of(shared_path("kitti_images", "sequences", "06", "calib.txt"))
+    bare.write_text(bare.read_text() + "\n1 2 3\n")
+    with pytest.raises(DataError, match=r"\(line 3\): P2: expected 12 numbers"):
+        read_kitti_calib(bare)
+
+
+def test_malformed_poses_and_times(tmp_path, copy_of, odo_root):
+    poses = copy_of(odo_root / "poses" / "00.txt")
+    lines = poses.read_text().splitlines()
+    lines[41] = lines[41] + " 7"
+    poses.write_text("\n".join(lines) + "\n")
+    with pytest.raises(DataError, match=r"00\.txt \(line 42\): expected 12 numbers, found 13"):
+        KittiOdometry(odo_root, "00", poses_file=poses)
+    times = copy_of(odo_root / "sequences" / "00" / "times.txt")
+    lines = times.read_text().splitlines()
+    lines[6] = "0.6x"
+    times.write_text("\n".join(lines) + "\n")
+    with pytest.raises(DataError, match=r"times\.txt \(line 7\): not a number"):
+        KittiOdometry(odo_root, "00", times_file=times)
+
+
+def test_times_and_poses_count_mismatch(tmp_path, copy_of, odo_root):
+    times = copy_of(odo_root / "sequences" / "00" / "times.txt")
+    times.write_text("\n".join(times.read_text().splitlines()[:4000]) + "\n")
+    with pytest.raises(DataError, match=r"4541 poses in .*00\.txt but 4000 time stamps"):
+        KittiOdometry(odo_root, "00", times_file=times)
+
+
+def test_poses_must_cover_every_frame(tmp_path, copy_of, odo_root):
+    seq = tmp_path / "seq"
+    seq.mkdir()
+    shutil.copy2(odo_root / "sequences" / "00" / "calib.txt", seq / "calib.txt")
+    short = tmp_path / "short.txt"
+    short.write_text("\n".join((odo_root / "poses" / "00.txt").read_text().splitlines()[:150]) + "\n")
+    with pytest.raises(DataError, match=r"short\.txt: 150 poses but scan 000199\.bin is frame 199"):
+        KittiOdometry(seq, velodyne_dir=odo_root / "extra_frames" / "00" / "velodyne", poses_file=short)
+
+
+def test_missing_paths(tmp_path, odo_root):
+    with pytest.raises(DataError, match="dataset folder not found"):
+        KittiOdometry(tmp_path / "nowhere")
+    with pytest.raises(DataError, match="sequence 05 not found"):
+        KittiOdometry(odo_root, "05")
+    with pytest.raises(DataError, match="folder not found"):
+        KittiOdometry(odo_root, "00", velodyne_dir=tmp_path / "no_velodyne")
+    with pytest.raises(DataError, match="poses file not found"):
+        KittiOdometry(odo_root, "00", poses_file=tmp_path / "no.txt")
+    empty = tmp_path / "empty_seq"
+    (empty / "velodyne").mkdir(parents=True)
+    with pytest.raises(DataError, match="no scans"):
+        KittiOdometry(empty)
+    nocalib = KittiOdometry(odo_root, "00", calib_file=tmp_path / "calib.txt")
+    with pytest.raises(DataError, match=r"calib\.txt: file not found"):
+        nocalib.ground_truth
+
+
+def test_bad_file_names_and_images(tmp_path, odo_root):
+    folder = tmp_path / "velodyne"
+    folder.mkdir()
+    (folder / "scan_a.bin").write_bytes(b"\0" * 16)
+    with pytest.raises(DataError, match=r"scan_a\.bin: file name is not a frame number"):
+        KittiOdometry(odo_root, "00", velodyne_dir=folder)
+    images = tmp_path / "image_0"
+    images.mkdir()
+    (images / "000000.png").write_bytes(b"not a png")
+    ds = KittiOdometry(odo_root, "00", image_dir=images)
+    with pytest.raises(DataError, match=r"000000\.png \(frame 0\): cannot decode image"):
+        ds.read_image(0)
+
+
+def test_unknown_dataset_kind_lists_known_kinds():
+    with pytest.raises(ConfigError, match=r"unknown dataset kind 'kitty'; known: .*kitti, kitti_raw") as err:
+        open_dataset("kitty", ".")
+    assert all(kind in str(err.value) for kind in available_datasets())
