@@ -1,0 +1,135 @@
+"""A folder of scan files (``.bin``, ``.pcd``, ``.ply``, ``.npy``) as a ``ScanSequence``.
+
+Files are ordered by natural sort of their names (``scan2`` before ``scan10``). An optional poses
+file (KITTI or TUM format, poses of the LiDAR in a world frame) must have exactly one pose per
+scan; optional timestamps (array or a text file with one number per line) likewise.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+
+from lidarkit.errors import ConfigError, DataError
+from lidarkit.io.base import Scan
+from lidarkit.io.pointfile import POINT_FILE_SUFFIXES, read_point_file
+from lidarkit.textfile import read_numeric_table
+from lidarkit.trajectory import Trajectory
+
+POSE_FORMATS = ("kitti", "tum")
+
+
+def natural_key(name: str) -> tuple:
+    """Sort key treating digit runs as numbers: ``frame2`` < ``frame10``."""
+    return tuple((0, int(part), "") if part.isdigit() else (1, 0, part.lower()) for part in re.split(r"(\d+)", name) if part)
+
+
+class ScanFolder:
+    """Scans in one folder, naturally sorted; ``ground_truth`` from ``poses`` (LiDAR frame) if given.
+
+    ``poses_format`` is ``"kitti"`` (12 numbers per row) or ``"tum"`` (``t x y z qx qy qz qw``; its
+    time stamps become ``timestamps_s`` unless ``timestamps`` is given). ``suffixes`` restricts the
+    file types read; a folder mixing several types is read as one sequence in name order.
+    ``drop_nonfinite`` drops NaN/inf points with a logged warning instead of raising DataError.
+    """
+
+    def __init__(
+        self,
+        path: str | os.PathLike,
+        *,
+        poses: str | os.PathLike | None = None,
+        poses_format: str = "kitti",
+        timestamps: str | os.PathLike | np.ndarray | list[float] | None = None,
+        drop_nonfinite: bool = False,
+        suffixes: tuple[str, ...] = POINT_FILE_SUFFIXES,
+        name: str | None = None,
+    ):
+        folder = Path(path)
+        if not folder.is_dir():
+            raise DataError("scan folder not found" if not folder.exists() else "not a folder", source=folder)
+        if poses_format not in POSE_FORMATS:
+            raise ConfigError(f"unknown poses format {poses_format!r}; known: {', '.join(POSE_FORMATS)}", source="poses_format")
+        unknown = [s for s in suffixes if s.lower() not in POINT_FILE_SUFFIXES]
+        if unknown:
+            raise ConfigError(f"unsupported scan suffix {unknown[0]!r}; supported: {', '.join(POINT_FILE_SUFFIXES)}", source="suffixes")
+        wanted = {s.lower() for s in suffixes}
+        self.path = folder
+        self.name = name or folder.name
+        self.drop_nonfinite = drop_nonfinite
+        self.scan_paths = sorted(
+            (p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in wanted), key=lambda p: natural_key(p.name)
+        )
+        if not self.scan_paths:
+            raise DataError(f"no scan files ({', '.join(sorted(wanted))})", source=folder)
+        self.poses_path = None if poses is None else Path(poses)
+        self.poses_format = poses_format
+        self._timestamps_s = self._load_timestamps(timestamps)
+        self._ground_truth = self._load_poses()
+
+    def _load_timestamps(self, timestamps) -> np.ndarray | None:
+        if timestamps is None:
+            return None
+        if isinstance(timestamps, (str, os.PathLike)):
+            source = Path(timestamps)
+            values = read_numeric_table(source, 1)[:, 0]
+        else:
+            source = "timestamps"
+            values = np.asarray(timestamps, dtype=np.float64).reshape(-1)
+        if len(values) != len(self.scan_paths):
+            raise DataError(f"{len(values)} time stamps for {len(self.scan_paths)} scans in {self.path}", source=source)
+        if not np.isfinite(values).all():
+            raise DataError("NaN or infinite time stamp", source=source)
+        bad = np.flatnonzero(np.diff(values) <= 0)
+        if len(bad):
+            raise DataError("time stamps are not strictly increasing", source=source, location=f"frame {bad[0] + 1}")
+        return values
+
+    def _load_poses(self) -> Trajectory | None:
+        if self.poses_path is None:
+            return None
+        if self.poses_format == "kitti":
+            gt = Trajectory.from_kitti(self.poses_path)
+        else:
+            gt = Trajectory.from_tum(self.poses_path)
+        if len(gt) != len(self.scan_paths):
+            raise DataError(f"{len(gt)} poses for {len(self.scan_paths)} scans in {self.path}", source=self.poses_path)
+        if self._timestamps_s is not None:
+            gt = gt.with_timestamps(self._timestamps_s)
+        elif gt.timestamps_s is not None:
+            self._timestamps_s = gt.timestamps_s.copy()
+        return gt.with_name(f"{self.name}_gt")
+
+    def __len__(self) -> int:
+        return len(self.scan_paths)
+
+    def __repr__(self) -> str:
+        return f"ScanFolder({str(self.path)!r}, scans={len(self)})"
+
+    @cached_property
+    def frames(self) -> np.ndarray:
+        """``(N,)`` frame indices ``0..N-1`` (position in the sorted file list)."""
+        return np.arange(len(self.scan_paths))
+
+    @property
+    def timestamps_s(self) -> np.ndarray | None:
+        return None if self._timestamps_s is None else self._timestamps_s.copy()
+
+    @property
+    def ground_truth(self) -> Trajectory | None:
+        """Poses from the ``poses`` file, one per scan, taken to be LiDAR poses in a world frame."""
+        return self._ground_truth
+
+    def read_scan(self, index: int) -> Scan:
+        """The ``index``-th scan in name order (``Scan.frame`` = ``index``)."""
+        if not -len(self) <= index < len(self):
+            raise IndexError(f"scan index {index} out of range for {len(self)} scans")
+        index = index % len(self)
+        ts = None if self._timestamps_s is None else float(self._timestamps_s[index])
+        return read_point_file(self.scan_paths[index], frame=index, timestamp_s=ts, drop_nonfinite=self.drop_nonfinite)
+
+
+__all__ = ["ScanFolder", "natural_key"]

@@ -1,0 +1,155 @@
+"""ScanFolder on the real PCD pair and KITTI bins, synthetic npy/ply folders, and corrupted copies."""
+
+from __future__ import annotations
+
+import logging
+import shutil
+
+import numpy as np
+import pytest
+from conftest import shared_path
+
+from lidarkit.errors import ConfigError, DataError
+from lidarkit.io import open_dataset
+from lidarkit.io.base import ScanSequence
+from lidarkit.io.folder import ScanFolder, natural_key
+from lidarkit.trajectory import Trajectory
+
+
+def _npy_folder(tmp_path, rng, names=("scan1.npy", "scan10.npy", "scan2.npy"), ncols=4):
+    folder = tmp_path / "scans"
+    folder.mkdir(parents=True)
+    arrays = {}
+    for k, name in enumerate(names):
+        arr = rng.normal(size=(50 + k, ncols)).astype(np.float32)
+        np.save(folder / name, arr)
+        arrays[name] = arr
+    return folder, arrays
+
+
+def test_real_pcd_pair_with_intensity():
+    folder = shared_path("lidar_pairs")
+    ds = open_dataset("folder", folder)
+    assert isinstance(ds, ScanSequence)
+    assert [p.name for p in ds.scan_paths] == ["251370668.pcd", "251371071.pcd"]
+    target, source = ds.read_scan(0), ds.read_scan(1)
+    assert target.points_xyz.shape == (69088, 3) and source.points_xyz.shape == (69792, 3)  # SOURCES.md counts
+    assert target.intensity is not None and target.intensity.shape == (69088,)
+    assert np.linalg.norm(target.points_xyz, axis=1).max() == pytest.approx(77.6, abs=0.1)
+    assert target.frame == 0 and source.frame == 1 and ds.ground_truth is None and ds.timestamps_s is None
+
+
+def test_kitti_bins_and_poses(tmp_path):
+    root = shared_path("kitti_odometry")
+    folder = root / "extra_frames" / "00" / "velodyne"
+    rows = np.loadtxt(root / "poses" / "00.txt")[[94, 95, 198, 199]]
+    poses = tmp_path / "poses.txt"
+    np.savetxt(poses, rows)
+    ds = ScanFolder(folder, poses=poses, timestamps=[9.745342, 9.849229, 20.52747, 20.63096])
+    assert len(ds) == 4 and ds.read_scan(2).points_xyz.shape[0] == 1968544 // 16
+    np.testing.assert_allclose(ds.ground_truth.poses_se3[:, :3, :4].reshape(-1, 12), rows)
+    assert ds.read_scan(3).timestamp_s == pytest.approx(20.63096)
+
+
+def test_natural_sort_and_npy_columns(tmp_path, rng):
+    folder, arrays = _npy_folder(tmp_path, rng)
+    ds = ScanFolder(folder)
+    assert [p.name for p in ds.scan_paths] == ["scan1.npy", "scan2.npy", "scan10.npy"]
+    scan = ds.read_scan(2)
+    np.testing.assert_array_equal(scan.points_xyz, arrays["scan10.npy"][:, :3].astype(np.float64))
+    np.testing.assert_array_equal(scan.intensity, arrays["scan10.npy"][:, 3])
+    assert sorted(["f10", "f9", "F1", "f1a"], key=natural_key) == ["F1", "f1a", "f9", "f10"]
+    folder3, _ = _npy_folder(tmp_path / "xyz", rng, names=("a.npy",), ncols=3)
+    assert ScanFolder(folder3).read_scan(0).intensity is None
+
+
+def test_ply_round_trip_keeps_intensity(tmp_path, rng):
+    import open3d as o3d
+
+    folder = tmp_path / "ply"
+    folder.mkdir()
+    xyz = rng.uniform(-20, 20, size=(200, 3)).astype(np.float32)
+    intensity = rng.uniform(0, 1, size=(200, 1)).astype(np.float32)
+    cloud = o3d.t.geometry.PointCloud(o3d.core.Tensor(xyz))
+    cloud.point["intensity"] = o3d.core.Tensor(intensity)
+    assert o3d.t.io.write_point_cloud(str(folder / "0.ply"), cloud)
+    scan = ScanFolder(folder).read_scan(0)
+    np.testing.assert_allclose(scan.points_xyz, xyz, atol=1e-6)
+    np.testing.assert_allclose(scan.intensity, intensity[:, 0], atol=1e-6)
+
+
+def test_tum_poses_give_timestamps(tmp_path, rng):
+    folder, _ = _npy_folder(tmp_path, rng)
+    traj = Trajectory(np.tile(np.eye(4), (3, 1, 1)), np.array([10.0, 10.1, 10.2]))
+    traj.to_tum(tmp_path / "poses.tum")
+    ds = ScanFolder(folder, poses=tmp_path / "poses.tum", poses_format="tum")
+    np.testing.assert_allclose(ds.timestamps_s, [10.0, 10.1, 10.2])
+    assert ds.read_scan(1).timestamp_s == pytest.approx(10.1)
+
+
+# ---- errors -----------------------------------------------------------------------------------------------
+def test_poses_count_must_match_scans(tmp_path, rng):
+    folder, _ = _npy_folder(tmp_path, rng)
+    poses = tmp_path / "poses.txt"
+    np.savetxt(poses, np.tile(np.eye(4)[:3].reshape(1, 12), (5, 1)))
+    with pytest.raises(DataError, match=r"poses\.txt: 5 poses for 3 scans in .*scans"):
+        ScanFolder(folder, poses=poses)
+    with pytest.raises(DataError, match=r"2 time stamps for 3 scans"):
+        ScanFolder(folder, timestamps=[0.0, 0.1])
+    times = tmp_path / "times.txt"
+    times.write_text("0.0\n0.2\n0.1\n")
+    with pytest.raises(DataError, match=r"times\.txt \(frame 2\): time stamps are not strictly increasing"):
+        ScanFolder(folder, timestamps=times)
+
+
+def test_malformed_poses_line(tmp_path, rng):
+    folder, _ = _npy_folder(tmp_path, rng)
+    poses = tmp_path / "poses.txt"
+    poses.write_text("1 0 0 0 0 1 0 0 0 0 1 0\n1 0 0 0 0 1 0 0 0 0 1\n1 0 0 0 0 1 0 0 0 0 1 0\n")
+    with pytest.raises(DataError, match=r"poses\.txt \(line 2\): expected 12 numbers, found 11"):
+        ScanFolder(folder, poses=poses)
+
+
+def test_nonfinite_pcd_points(tmp_path, caplog):
+    folder = tmp_path / "pcd"
+    folder.mkdir()
+    header = "VERSION 0.7\nFIELDS x y z intensity\nSIZE 4 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 1\n"
+    body = "1 2 3 0.5\nnan 2 3 0.1\n4 inf 6 0.2\n7 8 9 0.3\n"
+    (folder / "000.pcd").write_text(header + "WIDTH 4\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 4\nDATA ascii\n" + body)
+    with pytest.raises(DataError, match=r"000\.pcd \(frame 0\): 2 of 4 points are NaN or infinite \(first at point 1\)"):
+        ScanFolder(folder).read_scan(0)
+    with caplog.at_level(logging.WARNING):
+        scan = ScanFolder(folder, drop_nonfinite=True).read_scan(0)
+    np.testing.assert_allclose(scan.points_xyz, [[1, 2, 3], [7, 8, 9]])
+    np.testing.assert_allclose(scan.intensity, [0.5, 0.3])
+    assert "dropped 2 of 4" in caplog.text
+
+
+def test_corrupt_files(tmp_path, copy_of):
+    pcd = copy_of(shared_path("lidar_pairs", "251370668.pcd"))
+    data = pcd.read_bytes()
+    pcd.write_bytes(data[: len(data) // 2])
+    with pytest.raises(DataError, match=r"251370668\.pcd \(frame 0\): no points read"):
+        ScanFolder(pcd.parent, suffixes=(".pcd",)).read_scan(0)
+    folder = tmp_path / "bins"
+    folder.mkdir()
+    shutil.copy2(shared_path("kitti_odometry", "sequences", "00", "velodyne", "000001.bin"), folder / "a.bin")
+    with open(folder / "a.bin", "ab") as f:
+        f.write(b"\0" * 7)
+    with pytest.raises(DataError, match=r"a\.bin \(frame 0\): truncated"):
+        ScanFolder(folder).read_scan(0)
+    np.save(folder / "b.npy", np.zeros((10, 5)))
+    with pytest.raises(DataError, match=r"b\.npy \(frame 1\): expected a numeric \(N, 3\) or \(N, 4\) array"):
+        ScanFolder(folder).read_scan(1)
+
+
+def test_missing_or_empty_folder_and_bad_options(tmp_path):
+    with pytest.raises(DataError, match="scan folder not found"):
+        ScanFolder(tmp_path / "nope")
+    (tmp_path / "notes.txt").write_text("x")
+    with pytest.raises(DataError, match=r"no scan files \(\.bin, \.npy, \.pcd, \.ply\)"):
+        ScanFolder(tmp_path)
+    with pytest.raises(ConfigError, match="unknown poses format 'g2o'; known: kitti, tum"):
+        ScanFolder(tmp_path, poses_format="g2o")
+    with pytest.raises(ConfigError, match="unsupported scan suffix '.las'"):
+        ScanFolder(tmp_path, suffixes=(".las",))
