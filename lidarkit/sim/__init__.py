@@ -1,0 +1,7 @@
+"""Ground-truth generators.
+
+* :mod:`lidarkit.sim.lidar` — spinning multi-beam LiDAR on Open3D's RaycastingScene (street / open / ground-only
+  scenes, per-point times, motion distortion, range noise, ground truth at sweep start, middle or end).
+
+Submodules are imported on demand (Open3D is slow to import): ``from lidarkit.sim.lidar import SimulatedLidarSequence``.
+"""

@@ -1,0 +1,478 @@
+"""Simulated spinning LiDAR on Open3D's RaycastingScene: procedural scenes, a smooth drive, exact ground truth.
+
+Frames, units and instants (the contract users score against):
+
+* World frame: x/y horizontal, z up, origin at the sensor at the start of sweep 0 (so the ground is the plane
+  ``z = -sensor_height_m``). Sensor frame: x forward, y left, z up (KITTI Velodyne convention).
+* Sweep ``i`` covers ``[i / frame_rate_hz, (i + 1) / frame_rate_hz)``. Column ``k`` of ``n_azimuths`` fires at
+  ``t_k = k / (n_azimuths * frame_rate_hz)`` after the sweep start, at azimuth ``pi - 2 pi k / n_azimuths`` (the
+  sweep starts and ends behind the vehicle and turns clockwise seen from above, like a Velodyne).
+* ``Scan.point_times_s`` are those column times (relative to the sweep start, non-decreasing in point order).
+* Ground-truth poses ``T_world_lidar`` refer to ONE instant of each sweep, chosen by ``pose_instant``:
+  ``"start"`` (``t = i T``), ``"mid"`` (``t = (i + 0.5) T``) or ``"end"`` (``t = (i + 1) T``), with ``T`` the sweep
+  period. The default is ``"end"`` because kiss-icp 1.x deskews every sweep to its last point (the sweep end);
+  :meth:`SimulatedLidarSequence.ground_truth_at` gives the other instants. ``timestamps_s`` refer to the same
+  instant as ``ground_truth``.
+* With ``motion_distortion=True`` every column is cast from the pose at its own firing time and its points are
+  expressed in the sensor frame of that time (what a real spinning sensor reports). With ``False`` the whole sweep
+  is cast from the ground-truth pose (an ideal snapshot at ``pose_instant``).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from lidarkit.errors import ConfigError, DataError
+from lidarkit.io.base import Scan
+from lidarkit.trajectory import Trajectory
+
+log = logging.getLogger(__name__)
+
+SCENES = ("street", "open", "ground")
+POSE_INSTANTS = ("start", "mid", "end")
+PoseInstant = Literal["start", "mid", "end"]
+_INSTANT_FRACTION = {"start": 0.0, "mid": 0.5, "end": 1.0}
+
+
+class LidarSimConfig(BaseModel):
+    """Everything that defines a simulated sequence; equal configs give bit-identical scans."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    scene: Literal["street", "open", "ground"] = "street"
+    n_frames: int = Field(300, ge=1, description="number of sweeps")
+    seed: int = Field(0, ge=0, description="seeds the scene, the path and the range noise")
+    # sensor (KITTI HDL-64-like)
+    n_beams: int = Field(64, ge=1)
+    n_azimuths: int = Field(2000, ge=8, description="columns per sweep")
+    elevation_max_deg: float = Field(2.0, ge=-89.0, le=89.0)
+    elevation_min_deg: float = Field(-24.8, ge=-89.0, le=89.0)
+    max_range_m: float = Field(80.0, gt=0.0)
+    min_range_m: float = Field(1.0, ge=0.0)
+    sensor_height_m: float = Field(1.73, gt=0.0, description="sensor above the ground plane")
+    range_noise_std_m: float = Field(0.0, ge=0.0, description="Gaussian noise along each ray")
+    # motion
+    frame_rate_hz: float = Field(10.0, gt=0.0)
+    speed_mps: float = Field(10.0, ge=0.0)
+    max_curvature_per_m: float = Field(1.0 / 150.0, ge=0.0, description="bound of the path curvature (gentle curves)")
+    motion_distortion: bool = True
+    point_times: bool = Field(True, description="attach per-point times to each Scan")
+    pose_instant: PoseInstant = "end"
+
+    @model_validator(mode="after")
+    def _check(self) -> LidarSimConfig:
+        if self.elevation_min_deg > self.elevation_max_deg:
+            raise ValueError("elevation_min_deg must not exceed elevation_max_deg")
+        if self.min_range_m >= self.max_range_m:
+            raise ValueError("min_range_m must be below max_range_m")
+        return self
+
+    @property
+    def sweep_period_s(self) -> float:
+        return 1.0 / self.frame_rate_hz
+
+
+def make_config(**params: object) -> LidarSimConfig:
+    """Validated :class:`LidarSimConfig`; bad or unknown parameters raise ConfigError listing the valid ones."""
+    try:
+        return LidarSimConfig(**params)
+    except ValidationError as err:
+        problems = "; ".join(f"{'.'.join(map(str, e['loc'])) or 'config'}: {e['msg']}" for e in err.errors())
+        raise ConfigError(f"{problems} (valid: {', '.join(LidarSimConfig.model_fields)})", source="lidar simulator") from None
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Path: a planar curve parametrised by arc length, curvature a smooth seeded sum of sinusoids.
+# ---------------------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class PlanarPath:
+    """Samples of a smooth planar path: arc length ``s_m`` (K,), ``xy_m`` (K, 2), ``heading_rad`` (K,)."""
+
+    s_m: np.ndarray
+    xy_m: np.ndarray
+    heading_rad: np.ndarray
+
+    def at(self, s_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Position ``(M, 2)`` and heading ``(M,)`` at arc lengths ``s_m`` (linear interpolation)."""
+        s = np.asarray(s_m, dtype=np.float64)
+        x = np.interp(s, self.s_m, self.xy_m[:, 0])
+        y = np.interp(s, self.s_m, self.xy_m[:, 1])
+        return np.stack([x, y], axis=-1), np.interp(s, self.s_m, self.heading_rad)
+
+
+def make_path(rng: np.random.Generator, s_begin_m: float, s_end_m: float, max_curvature_per_m: float, step_m: float = 0.1) -> PlanarPath:
+    """A gentle curve through the origin heading along +x at ``s = 0``: |curvature| <= ``max_curvature_per_m``."""
+    s = np.arange(s_begin_m, s_end_m + step_m, step_m)
+    wavelengths = rng.uniform(120.0, 400.0, size=3)
+    phases = rng.uniform(0.0, 2.0 * np.pi, size=3)
+    weights = rng.uniform(0.5, 1.0, size=3)
+    weights *= max_curvature_per_m / weights.sum()
+    curvature = (weights[:, None] * np.sin(2.0 * np.pi * s[None, :] / wavelengths[:, None] + phases[:, None])).sum(axis=0)
+    heading = _cumtrapz(curvature, step_m)
+    heading -= np.interp(0.0, s, heading)
+    xy = np.stack([_cumtrapz(np.cos(heading), step_m), _cumtrapz(np.sin(heading), step_m)], axis=1)
+    xy -= np.array([np.interp(0.0, s, xy[:, 0]), np.interp(0.0, s, xy[:, 1])])
+    return PlanarPath(s, xy, heading)
+
+
+def _cumtrapz(values: np.ndarray, step: float) -> np.ndarray:
+    out = np.zeros_like(values)
+    out[1:] = np.cumsum(0.5 * (values[1:] + values[:-1]) * step)
+    return out
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Scene: triangle soup from numpy primitives (boxes, prisms, crowns) placed along the path.
+# ---------------------------------------------------------------------------------------------------------------
+_BOX_CORNERS = np.array([[x, y, z] for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (0.0, 1.0)])
+_BOX_FACES = np.array(
+    [[0, 2, 3], [0, 3, 1], [4, 5, 7], [4, 7, 6], [0, 1, 5], [0, 5, 4], [2, 6, 7], [2, 7, 3], [0, 4, 6], [0, 6, 2], [1, 3, 7], [1, 7, 5]]
+)
+
+
+def _prism(sides: int) -> tuple[np.ndarray, np.ndarray]:
+    """Unit-radius, unit-height prism (a cylinder with ``sides`` faces) standing on z = 0."""
+    ang = 2.0 * np.pi * np.arange(sides) / sides
+    ring = np.stack([np.cos(ang), np.sin(ang)], axis=1)
+    verts = np.concatenate([np.c_[ring, np.zeros(sides)], np.c_[ring, np.ones(sides)], [[0, 0, 0], [0, 0, 1]]])
+    i = np.arange(sides)
+    j = (i + 1) % sides
+    side = np.concatenate([np.stack([i, j, j + sides], 1), np.stack([i, j + sides, i + sides], 1)])
+    caps = np.concatenate([np.stack([np.full(sides, 2 * sides), j, i], 1), np.stack([np.full(sides, 2 * sides + 1), i + sides, j + sides], 1)])
+    return verts, np.concatenate([side, caps])
+
+
+def _crown() -> tuple[np.ndarray, np.ndarray]:
+    """Unit octahedron-like crown (a double cone of 8 sides), centred at the origin."""
+    sides = 8
+    ang = 2.0 * np.pi * np.arange(sides) / sides
+    verts = np.concatenate([np.c_[np.cos(ang), np.sin(ang), np.zeros(sides)], [[0, 0, -1], [0, 0, 1]]])
+    i = np.arange(sides)
+    j = (i + 1) % sides
+    faces = np.concatenate([np.stack([np.full(sides, sides), j, i], 1), np.stack([np.full(sides, sides + 1), i, j], 1)])
+    return verts, faces
+
+
+_PRISM = _prism(8)
+_CROWN = _crown()
+
+
+class _SceneBuilder:
+    """Collects instances of unit primitives (scaled, yawed, translated) into one vertex/triangle array."""
+
+    def __init__(self) -> None:
+        self._verts: list[np.ndarray] = []
+        self._faces: list[np.ndarray] = []
+        self._reflectivity: list[np.ndarray] = []
+        self._n_verts = 0
+
+    def add(self, prim: tuple[np.ndarray, np.ndarray], scale_xyz: np.ndarray, yaw_rad: np.ndarray, origin_xyz: np.ndarray, reflectivity: float) -> None:
+        """Add M instances: ``scale_xyz`` (M, 3), ``yaw_rad`` (M,), ``origin_xyz`` (M, 3)."""
+        unit_verts, unit_faces = prim
+        m = len(origin_xyz)
+        if m == 0:
+            return
+        c, s = np.cos(yaw_rad), np.sin(yaw_rad)
+        local = unit_verts[None, :, :] * scale_xyz[:, None, :]
+        world = np.empty_like(local)
+        world[..., 0] = c[:, None] * local[..., 0] - s[:, None] * local[..., 1]
+        world[..., 1] = s[:, None] * local[..., 0] + c[:, None] * local[..., 1]
+        world[..., 2] = local[..., 2]
+        world += origin_xyz[:, None, :]
+        offsets = self._n_verts + len(unit_verts) * np.arange(m)
+        self._verts.append(world.reshape(-1, 3))
+        self._faces.append((unit_faces[None, :, :] + offsets[:, None, None]).reshape(-1, 3))
+        self._reflectivity.append(np.full(m * len(unit_faces), reflectivity))
+        self._n_verts += m * len(unit_verts)
+
+    def build(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return np.concatenate(self._verts), np.concatenate(self._faces), np.concatenate(self._reflectivity)
+
+
+def _place_along(path: PlanarPath, s_m: np.ndarray, lateral_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """World xy ``(M, 2)`` and path heading ``(M,)`` of points at arc length ``s_m``, ``lateral_m`` left of the path."""
+    xy, heading = path.at(s_m)
+    normal = np.stack([-np.sin(heading), np.cos(heading)], axis=1)
+    return xy + lateral_m[:, None] * normal, heading
+
+
+def build_scene_mesh(config: LidarSimConfig, path: PlanarPath, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Vertices ``(V, 3)``, triangles ``(F, 3)`` and per-triangle reflectivity ``(F,)`` of the scene (world frame)."""
+    ground_z = -config.sensor_height_m
+    s0, s1 = float(path.s_m[0]), float(path.s_m[-1])
+    builder = _SceneBuilder()
+    # ground: one large quad covering the path plus the sensor range
+    lo = path.xy_m.min(axis=0) - config.max_range_m - 20.0
+    hi = path.xy_m.max(axis=0) + config.max_range_m + 20.0
+    centre = np.r_[(lo + hi) / 2.0, ground_z - 1.0]
+    builder.add((_BOX_CORNERS, _BOX_FACES), np.array([[hi[0] - lo[0], hi[1] - lo[1], 1.0]]), np.zeros(1), centre[None], 0.25)
+
+    def objects_along(spacing_m: float, lateral_lo: float, lateral_hi: float, jitter_m: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        s = np.arange(s0 + 5.0, s1 - 5.0, spacing_m)
+        s = s + rng.uniform(-jitter_m, jitter_m, size=len(s))
+        side = rng.choice([-1.0, 1.0], size=len(s))
+        lateral = side * rng.uniform(lateral_lo, lateral_hi, size=len(s))
+        xy, heading = _place_along(path, s, lateral)
+        return xy, heading, side
+
+    def ground_origin(xy: np.ndarray) -> np.ndarray:
+        return np.c_[xy, np.full(len(xy), ground_z)]
+
+    if config.scene == "street":
+        # buildings: a row on each side, facades 9..13 m from the path, gaps between them
+        for side in (-1.0, 1.0):
+            s = s0
+            while s < s1:
+                length = rng.uniform(8.0, 28.0)
+                depth = rng.uniform(8.0, 16.0)
+                height = rng.uniform(6.0, 20.0)
+                setback = rng.uniform(9.0, 13.0)
+                centre_s = s + length / 2.0
+                xy, heading = _place_along(path, np.array([centre_s]), np.array([side * (setback + depth / 2.0)]))
+                builder.add((_BOX_CORNERS, _BOX_FACES), np.array([[length, depth, height]]), heading, ground_origin(xy), 0.5)
+                s += length + rng.uniform(2.0, 9.0)
+        xy, _, _ = objects_along(22.0, 5.5, 7.0, 3.0)  # poles
+        builder.add(_PRISM, np.tile([0.15, 0.15, 6.0], (len(xy), 1)), np.zeros(len(xy)), ground_origin(xy), 0.7)
+        xy, _, _ = objects_along(17.0, 5.0, 7.5, 5.0)  # trees: trunk + crown
+        crown_r = rng.uniform(1.2, 2.2, size=len(xy))
+        builder.add(_PRISM, np.tile([0.2, 0.2, 3.0], (len(xy), 1)), np.zeros(len(xy)), ground_origin(xy), 0.4)
+        builder.add(_CROWN, np.c_[crown_r, crown_r, 1.3 * crown_r], rng.uniform(0, np.pi, len(xy)), np.c_[xy, ground_z + 3.0 + 1.1 * crown_r], 0.3)
+        xy, heading, _ = objects_along(13.0, 4.2, 5.0, 4.0)  # parked cars
+        builder.add((_BOX_CORNERS, _BOX_FACES), np.tile([4.4, 1.8, 1.5], (len(xy), 1)), heading, ground_origin(xy), 0.6)
+    elif config.scene == "open":
+        # ground dominates: a few sparse objects 8..40 m from the path
+        xy, _, _ = objects_along(25.0, 8.0, 40.0, 10.0)
+        builder.add(_PRISM, np.tile([0.2, 0.2, 6.0], (len(xy), 1)), np.zeros(len(xy)), ground_origin(xy), 0.7)
+        xy, heading, _ = objects_along(35.0, 10.0, 40.0, 15.0)
+        builder.add((_BOX_CORNERS, _BOX_FACES), np.c_[rng.uniform(2, 6, len(xy)), rng.uniform(2, 6, len(xy)), rng.uniform(1.5, 4, len(xy))], heading + rng.uniform(0, np.pi, len(xy)), ground_origin(xy), 0.5)
+        xy, _, _ = objects_along(40.0, 8.0, 35.0, 15.0)
+        crown_r = rng.uniform(1.5, 3.0, size=len(xy))
+        builder.add(_PRISM, np.tile([0.25, 0.25, 3.0], (len(xy), 1)), np.zeros(len(xy)), ground_origin(xy), 0.4)
+        builder.add(_CROWN, np.c_[crown_r, crown_r, 1.3 * crown_r], np.zeros(len(xy)), np.c_[xy, ground_z + 3.0 + 1.1 * crown_r], 0.3)
+    return builder.build()
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# The sequence
+# ---------------------------------------------------------------------------------------------------------------
+class SimulatedLidarSequence:
+    """A :class:`~lidarkit.io.base.ScanSequence` of simulated sweeps, deterministic per config (seed included).
+
+    ``read_scan(i)`` casts all rays of sweep ``i`` in one ``RaycastingScene.cast_rays`` call. See the module
+    docstring for frames and the instant ``ground_truth`` refers to.
+    """
+
+    def __init__(self, config: LidarSimConfig | None = None, **params: object):
+        if config is not None and params:
+            raise ConfigError("pass either a LidarSimConfig or keyword parameters, not both", source="lidar simulator")
+        self.config = config if config is not None else make_config(**params)
+        cfg = self.config
+        self.name = f"sim:{cfg.scene}?seed={cfg.seed}"
+        rng = np.random.default_rng([cfg.seed, 0])
+        period = cfg.sweep_period_s
+        s_end = cfg.speed_mps * period * (cfg.n_frames + 1) + cfg.max_range_m + 40.0
+        self.path = make_path(rng, -(cfg.max_range_m + 40.0), s_end, cfg.max_curvature_per_m)
+        self.vertices_xyz, self.triangles, self.reflectivity = build_scene_mesh(cfg, self.path, rng)
+        self._scene = None
+        # sensor ray directions in the sensor frame, column-major: (n_azimuths, n_beams, 3)
+        elevation = np.deg2rad(np.linspace(cfg.elevation_max_deg, cfg.elevation_min_deg, cfg.n_beams))
+        self.elevation_rad = elevation
+        self.azimuth_rad = np.pi - 2.0 * np.pi * np.arange(cfg.n_azimuths) / cfg.n_azimuths
+        ce, se = np.cos(elevation), np.sin(elevation)
+        ca, sa = np.cos(self.azimuth_rad), np.sin(self.azimuth_rad)
+        self.directions_sensor = np.stack(
+            [ca[:, None] * ce[None, :], sa[:, None] * ce[None, :], np.broadcast_to(se[None, :], (cfg.n_azimuths, cfg.n_beams))], axis=-1
+        )
+        self.column_times_s = np.arange(cfg.n_azimuths) * (period / cfg.n_azimuths)
+
+    # ---- geometry of the drive ------------------------------------------------------------------
+    @property
+    def scene(self):
+        """The Open3D RaycastingScene (built on first use)."""
+        if self._scene is None:
+            import open3d as o3d
+
+            scene = o3d.t.geometry.RaycastingScene()
+            scene.add_triangles(
+                o3d.core.Tensor(self.vertices_xyz.astype(np.float32)), o3d.core.Tensor(self.triangles.astype(np.uint32))
+            )
+            self._scene = scene
+        return self._scene
+
+    def poses_at(self, times_s: np.ndarray) -> np.ndarray:
+        """``(M, 4, 4)`` poses ``T_world_lidar`` at absolute times ``times_s`` (M,) (t = 0: start of sweep 0)."""
+        t = np.atleast_1d(np.asarray(times_s, dtype=np.float64))
+        xy, heading = self.path.at(self.config.speed_mps * t)
+        c, s = np.cos(heading), np.sin(heading)
+        T = np.zeros((len(t), 4, 4))
+        T[:, 0, 0], T[:, 0, 1], T[:, 1, 0], T[:, 1, 1] = c, -s, s, c
+        T[:, 2, 2] = T[:, 3, 3] = 1.0
+        T[:, :2, 3] = xy
+        return T
+
+    def frame_times_s(self, instant: PoseInstant | None = None) -> np.ndarray:
+        """``(n_frames,)`` absolute time of ``instant`` (default: ``pose_instant``) in every sweep."""
+        instant = self._instant(instant)
+        return (np.arange(self.config.n_frames) + _INSTANT_FRACTION[instant]) * self.config.sweep_period_s
+
+    def ground_truth_at(self, instant: PoseInstant | None = None) -> Trajectory:
+        """Ground truth ``T_world_lidar`` at ``instant`` of every sweep, with matching timestamps."""
+        instant = self._instant(instant)
+        times = self.frame_times_s(instant)
+        return Trajectory(self.poses_at(times), times, name=f"{self.name} ground truth ({instant})", meta={"pose_instant": instant})
+
+    @property
+    def ground_truth(self) -> Trajectory:
+        return self.ground_truth_at(self.config.pose_instant)
+
+    @property
+    def timestamps_s(self) -> np.ndarray:
+        return self.frame_times_s(self.config.pose_instant)
+
+    def _instant(self, instant: str | None) -> str:
+        instant = self.config.pose_instant if instant is None else instant
+        if instant not in POSE_INSTANTS:
+            raise ConfigError(f"unknown pose instant {instant!r}; valid: {', '.join(POSE_INSTANTS)}", source="lidar simulator")
+        return instant
+
+    # ---- ScanSequence ---------------------------------------------------------------------------
+    def __len__(self) -> int:
+        return self.config.n_frames
+
+    def read_scan(self, index: int) -> Scan:
+        """Cast sweep ``index``; points ``(N, 3)`` in the sensor frame, ordered by firing time."""
+        cfg = self.config
+        if not 0 <= int(index) < cfg.n_frames:
+            raise DataError(f"frame {index} out of range 0..{cfg.n_frames - 1}", source=self.name)
+        index = int(index)
+        n_az, n_beams = cfg.n_azimuths, cfg.n_beams
+        sweep_start = index * cfg.sweep_period_s
+        if cfg.motion_distortion:
+            poses = self.poses_at(sweep_start + self.column_times_s)  # (n_az, 4, 4): one pose per column
+        else:
+            pose = self.poses_at(np.array([self.frame_times_s()[index]]))
+            poses = np.broadcast_to(pose, (n_az, 4, 4))
+        dirs_world = np.einsum("aij,abj->abi", poses[:, :3, :3], self.directions_sensor)
+        origins = np.broadcast_to(poses[:, None, :3, 3], (n_az, n_beams, 3))
+        rays = np.concatenate([origins, dirs_world], axis=-1).reshape(-1, 6).astype(np.float32)
+        import open3d as o3d
+
+        hits = self.scene.cast_rays(o3d.core.Tensor(rays))
+        range_m = hits["t_hit"].numpy().astype(np.float64)
+        if cfg.range_noise_std_m > 0.0:
+            noise_rng = np.random.default_rng([cfg.seed, 1, index])
+            range_m = range_m + noise_rng.normal(0.0, cfg.range_noise_std_m, size=range_m.shape)
+        keep = np.isfinite(range_m) & (range_m >= cfg.min_range_m) & (range_m <= cfg.max_range_m)
+        dirs = self.directions_sensor.reshape(-1, 3)[keep]
+        points = dirs * range_m[keep, None]
+        # intensity: reflectivity of the hit triangle times the cosine of the incidence angle
+        normals = hits["primitive_normals"].numpy()[keep].astype(np.float64)
+        cos_inc = np.abs(np.einsum("ij,ij->i", normals, dirs_world.reshape(-1, 3)[keep]))
+        intensity = (self.reflectivity[hits["primitive_ids"].numpy()[keep].astype(np.int64)] * cos_inc).astype(np.float32)
+        times = np.repeat(self.column_times_s, n_beams)[keep] if cfg.point_times else None
+        return Scan(
+            points_xyz=points,
+            intensity=intensity,
+            point_times_s=times,
+            timestamp_s=float(self.timestamps_s[index]),
+            frame=index,
+            source=f"{self.name} frame {index}",
+        )
+
+
+def open_sim(spec: str) -> SimulatedLidarSequence:
+    """Sequence from a spec string ``sim:SCENE[?key=value&...]``, e.g. ``sim:street?frames=300&seed=0``.
+
+    Keys are :class:`LidarSimConfig` fields; short aliases: ``frames`` (n_frames), ``beams`` (n_beams),
+    ``azimuths`` (n_azimuths), ``noise`` (range_noise_std_m), ``distortion`` (motion_distortion),
+    ``instant`` (pose_instant), ``speed`` (speed_mps).
+    """
+    from urllib.parse import parse_qsl
+
+    if not spec.startswith("sim:"):
+        raise ConfigError("a simulator spec starts with 'sim:'", source=spec)
+    body = spec[len("sim:") :]
+    scene, _, query = body.partition("?")
+    params: dict[str, object] = {"scene": scene or "street"}
+    aliases = {
+        "frames": "n_frames",
+        "beams": "n_beams",
+        "azimuths": "n_azimuths",
+        "noise": "range_noise_std_m",
+        "distortion": "motion_distortion",
+        "instant": "pose_instant",
+        "speed": "speed_mps",
+    }
+    for key, value in parse_qsl(query, keep_blank_values=True, strict_parsing=False):
+        params[aliases.get(key, key)] = value
+    try:
+        return SimulatedLidarSequence(**params)
+    except ConfigError as err:
+        raise ConfigError(err.reason, source=spec) from None
+
+
+def export_kitti(
+    sequence: SimulatedLidarSequence,
+    out_dir: str | os.PathLike,
+    on_frame: Callable[[int], None] | None = None,
+) -> Path:
+    """Write the sequence as a KITTI-style folder and return it.
+
+    ``velodyne/NNNNNN.bin`` (float32 x, y, z, intensity), ``point_times/NNNNNN.npy`` (float32 per-point time from
+    the sweep start, s), ``times.txt`` (stamps at ``pose_instant``), ``poses.txt`` (KITTI format, LiDAR frame, at
+    ``pose_instant``), ``poses_start.txt`` / ``poses_mid.txt`` / ``poses_end.txt``, ``calib.txt`` (``Tr`` = identity:
+    poses are already in the LiDAR frame) and ``sim.yaml`` (the resolved config). Every file is written atomically.
+    """
+    import yaml
+
+    from lidarkit import atomic
+
+    out = Path(out_dir)
+    (out / "velodyne").mkdir(parents=True, exist_ok=True)
+    if sequence.config.point_times:
+        (out / "point_times").mkdir(exist_ok=True)
+    for i in range(len(sequence)):
+        scan = sequence.read_scan(i)
+        data = np.empty((len(scan.points_xyz), 4), dtype=np.float32)
+        data[:, :3] = scan.points_xyz
+        data[:, 3] = scan.intensity
+        atomic.write_bytes(out / "velodyne" / f"{i:06d}.bin", data.tobytes())
+        if scan.point_times_s is not None:
+            with atomic.atomic_path(out / "point_times" / f"{i:06d}.npy") as tmp:
+                np.save(tmp, scan.point_times_s.astype(np.float32))
+        if on_frame is not None:
+            on_frame(i)
+    atomic.write_text(out / "times.txt", "".join(f"{t:.6e}\n" for t in sequence.timestamps_s))
+    sequence.ground_truth.to_kitti(out / "poses.txt")
+    for instant in POSE_INSTANTS:
+        sequence.ground_truth_at(instant).to_kitti(out / f"poses_{instant}.txt")
+    identity = " ".join(f"{v:.12e}" for v in np.eye(4)[:3].ravel())
+    p0 = " ".join(f"{v:.12e}" for v in np.array([[500.0, 0, 500.0, 0], [0, 500.0, 200.0, 0], [0, 0, 1.0, 0]]).ravel())
+    atomic.write_text(out / "calib.txt", "".join(f"P{k}: {p0}\n" for k in range(4)) + f"Tr: {identity}\n")
+    cfg = sequence.config.model_dump()
+    cfg["note"] = "poses are T_world_lidar at pose_instant of each sweep; point_times are seconds from the sweep start"
+    atomic.write_text(out / "sim.yaml", yaml.safe_dump(cfg, sort_keys=False))
+    return out
+
+
+__all__ = [
+    "POSE_INSTANTS",
+    "SCENES",
+    "LidarSimConfig",
+    "PlanarPath",
+    "SimulatedLidarSequence",
+    "build_scene_mesh",
+    "export_kitti",
+    "make_config",
+    "make_path",
+    "open_sim",
+]
