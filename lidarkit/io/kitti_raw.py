@@ -1,0 +1,228 @@
+"""KITTI raw reader (through pykitti): Velodyne scans, OXTS GPS/IMU poses and the rig calibration.
+
+Layout::
+
+    base_dir/DATE/calib_cam_to_cam.txt, calib_velo_to_cam.txt, calib_imu_to_velo.txt
+    base_dir/DATE/DATE_drive_NNNN_sync/velodyne_points/data/0000000000.bin  (+ timestamps.txt)
+    base_dir/DATE/DATE_drive_NNNN_sync/oxts/data/0000000000.txt             (+ timestamps.txt)
+    base_dir/DATE/DATE_drive_NNNN_sync/image_00/data/0000000000.png
+
+OXTS packets become poses ``T_enu_imu`` with pykitti's Mercator projection (scale from the first
+latitude, origin at the first GPS position, x east, y north, z up). ``ground_truth`` gives the
+LiDAR poses ``T_enu_velo = T_enu_imu @ T_velo_imu^-1`` of the scanned frames.
+Everything pykitti raises is turned into a DataError naming the file.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+
+from lidarkit.errors import DataError
+from lidarkit.geometry import se3_inverse
+from lidarkit.io.base import Scan
+from lidarkit.io.kitti import indexed_files, read_gray_image
+from lidarkit.io.pointfile import read_kitti_bin
+from lidarkit.textfile import read_lines, read_numeric_table
+from lidarkit.trajectory import Trajectory
+
+CALIB_FILES = ("calib_cam_to_cam.txt", "calib_velo_to_cam.txt", "calib_imu_to_velo.txt")
+OXTS_FIELDS = 30
+_DRIVE_DIR = re.compile(r"^(\d{4}_\d{2}_\d{2})_drive_(\d{4})_(\w+)$")
+
+
+def read_kitti_raw_timestamps(path: str | os.PathLike) -> np.ndarray:
+    """``YYYY-MM-DD hh:mm:ss.fffffffff`` lines as float seconds since the Unix epoch (nanosecond parse)."""
+    stamps = []
+    for lineno, raw in enumerate(read_lines(path), start=1):
+        line = raw.strip()
+        if not line:
+            continue
+        try:
+            stamps.append(np.datetime64(line.replace(" ", "T"), "ns"))
+        except ValueError:
+            raise DataError(f"not a time stamp: {line!r}", source=path, location=f"line {lineno}") from None
+    if not stamps:
+        raise DataError("no time stamps", source=path)
+    ns = np.array(stamps, dtype="datetime64[ns]").astype(np.int64)
+    return ns.astype(np.float64) * 1e-9
+
+
+class KittiRaw:
+    """One KITTI raw drive (``ScanSequence``): ``KittiRaw(base_dir, date="2011_09_26", drive="0001")``.
+
+    ``base_dir`` may also be the drive folder itself (``.../2011_09_26_drive_0001_sync``), in which
+    case date, drive and dataset are taken from its name. ``len`` is the number of Velodyne scans
+    (0 when the drive has none: calibration and OXTS poses are still available, ``read_scan``
+    raises DataError). Frame numbers come from file names, as in :class:`KittiOdometry`.
+    """
+
+    def __init__(
+        self,
+        base_dir: str | os.PathLike,
+        date: str | None = None,
+        drive: str | int | None = None,
+        *,
+        dataset: str = "sync",
+        drop_nonfinite: bool = False,
+    ):
+        base = Path(base_dir)
+        m = _DRIVE_DIR.match(base.name)
+        if m and date is None and drive is None:
+            date, drive, dataset = m.group(1), m.group(2), m.group(3)
+            base = base.parent.parent
+        if date is None or drive is None:
+            raise DataError("give date= and drive= (e.g. '2011_09_26', '0001') or the drive folder itself", source=base)
+        drive = f"{int(drive):04d}" if str(drive).isdigit() else str(drive)
+        self.date, self.drive, self.dataset = str(date), drive, dataset
+        self.calib_dir = base / self.date
+        self.drive_dir = self.calib_dir / f"{self.date}_drive_{self.drive}_{self.dataset}"
+        self.name = f"kitti_raw_{self.date}_{self.drive}"
+        self.drop_nonfinite = drop_nonfinite
+        for folder in (base, self.calib_dir, self.drive_dir):
+            if not folder.is_dir():
+                raise DataError("folder not found", source=folder)
+        for name in CALIB_FILES:
+            if not (self.calib_dir / name).is_file():
+                raise DataError("calibration file not found", source=self.calib_dir / name)
+        oxts_stamps = self.drive_dir / "oxts" / "timestamps.txt"
+        if not oxts_stamps.is_file():
+            raise DataError("OXTS time stamps not found (pykitti needs them)", source=oxts_stamps)
+        self._oxts_times_all = read_kitti_raw_timestamps(oxts_stamps)
+
+        velo_dir = self.drive_dir / "velodyne_points" / "data"
+        self.velodyne_dir = velo_dir
+        self.scan_paths, self.scan_frames = indexed_files(velo_dir, ".bin") if velo_dir.is_dir() else ([], np.zeros(0, np.int64))
+        image_dir = self.drive_dir / "image_00" / "data"
+        self.image_paths, self.image_frames = indexed_files(image_dir, ".png") if image_dir.is_dir() else ([], np.zeros(0, np.int64))
+        oxts_dir = self.drive_dir / "oxts" / "data"
+        self.oxts_paths, self.oxts_frames = indexed_files(oxts_dir, ".txt") if oxts_dir.is_dir() else ([], np.zeros(0, np.int64))
+        for path in self.oxts_paths:  # line-numbered errors before pykitti parses them
+            read_numeric_table(path, OXTS_FIELDS)
+        if len(self.oxts_frames) and self.oxts_frames[-1] >= len(self._oxts_times_all):
+            raise DataError(
+                f"{len(self._oxts_times_all)} time stamps but OXTS file {self.oxts_paths[-1].name} is frame {self.oxts_frames[-1]}",
+                source=oxts_stamps,
+            )
+        self._raw = self._open_pykitti(base)
+
+    def _open_pykitti(self, base: Path):
+        import pykitti
+
+        try:
+            raw = pykitti.raw(str(base), self.date, self.drive, dataset=self.dataset)
+        except FileNotFoundError as err:
+            raise DataError("file not found (pykitti)", source=err.filename or self.drive_dir) from err
+        except (OSError, ValueError, KeyError, IndexError, TypeError, AttributeError) as err:
+            raise DataError(f"pykitti cannot load the drive ({err.__class__.__name__}: {err})", source=self.drive_dir) from err
+        if len(raw.oxts_files) != len(self.oxts_paths):
+            raise DataError(f"pykitti found {len(raw.oxts_files)} OXTS files, expected {len(self.oxts_paths)}", source=self.drive_dir)
+        return raw
+
+    def __len__(self) -> int:
+        return len(self.scan_paths)
+
+    def __repr__(self) -> str:
+        return f"KittiRaw({str(self.drive_dir)!r}, scans={len(self)}, oxts={len(self.oxts_paths)})"
+
+    @property
+    def frames(self) -> np.ndarray:
+        """``(len,)`` frame numbers of the scans."""
+        return self.scan_frames
+
+    # ---- calibration -----------------------------------------------------------------------------------
+    @property
+    def calib(self):
+        """pykitti's calibration namedtuple (``T_velo_imu``, ``T_cam0_velo``, ``K_cam0``, ``P_rect_00``, ``b_gray``...)."""
+        return self._raw.calib
+
+    @property
+    def T_velo_imu(self) -> np.ndarray:
+        """(4, 4) IMU-to-Velodyne transform."""
+        return np.array(self._raw.calib.T_velo_imu, dtype=np.float64)
+
+    @property
+    def T_cam0_velo(self) -> np.ndarray:
+        """(4, 4) Velodyne to rectified camera 0."""
+        return np.array(self._raw.calib.T_cam0_velo, dtype=np.float64)
+
+    @property
+    def K(self) -> np.ndarray:
+        """(3, 3) rectified intrinsics of camera 0 (gray left)."""
+        return np.array(self._raw.calib.K_cam0, dtype=np.float64)
+
+    # ---- time and poses --------------------------------------------------------------------------------
+    @cached_property
+    def _velo_times_all(self) -> np.ndarray | None:
+        path = self.drive_dir / "velodyne_points" / "timestamps.txt"
+        return read_kitti_raw_timestamps(path) if path.is_file() else None
+
+    @property
+    def timestamps_s(self) -> np.ndarray | None:
+        """``(len,)`` Velodyne time stamps [s since epoch] of the scans, or None."""
+        times = self._velo_times_all
+        if times is None:
+            return None
+        if len(self.scan_frames) and self.scan_frames[-1] >= len(times):
+            raise DataError(f"{len(times)} Velodyne time stamps but scan frame {self.scan_frames[-1]}", source=self.velodyne_dir)
+        return times[self.scan_frames]
+
+    @cached_property
+    def oxts_packets(self) -> list:
+        """pykitti ``OxtsPacket`` namedtuples (lat, lon, alt, roll, pitch, yaw, ...) per OXTS file."""
+        return [o.packet for o in self._raw.oxts]
+
+    @cached_property
+    def oxts_poses(self) -> Trajectory:
+        """``T_enu_imu`` per OXTS file (pykitti Mercator projection), time stamps from oxts/timestamps.txt."""
+        if not self._raw.oxts:
+            raise DataError("no OXTS packets (oxts/data/*.txt)", source=self.drive_dir / "oxts")
+        poses = np.array([o.T_w_imu for o in self._raw.oxts], dtype=np.float64)
+        return Trajectory(poses, self._oxts_times_all[self.oxts_frames], f"{self.name}_oxts").orthonormalized()
+
+    def ground_truth_at(self, frames: np.ndarray | list[int]) -> Trajectory:
+        """LiDAR poses ``T_enu_velo`` of the given frame numbers (DataError if a frame has no OXTS packet)."""
+        frames = np.asarray(frames, dtype=np.int64)
+        lookup = {int(f): i for i, f in enumerate(self.oxts_frames)}
+        missing = [int(f) for f in frames if int(f) not in lookup]
+        if missing:
+            raise DataError(
+                f"no OXTS packet for frame {missing[0]} ({len(missing)} frames missing, {len(self.oxts_paths)} OXTS files)",
+                source=self.drive_dir / "oxts" / "data",
+            )
+        oxts = self.oxts_poses
+        rows = [lookup[int(f)] for f in frames]
+        poses = oxts.poses_se3[rows] @ se3_inverse(self.T_velo_imu)
+        return Trajectory(poses, oxts.timestamps_s[rows], f"{self.name}_gt_lidar")
+
+    @property
+    def ground_truth(self) -> Trajectory | None:
+        """LiDAR poses of the scans in the ENU frame of the first GPS fix, or None when there are no scans."""
+        if not self.scan_paths:
+            return None
+        return self.ground_truth_at(self.scan_frames).with_timestamps(self.timestamps_s)
+
+    # ---- data -------------------------------------------------------------------------------------------
+    def read_scan(self, index: int) -> Scan:
+        """The ``index``-th Velodyne scan (float32 x, y, z, reflectance)."""
+        if not self.scan_paths:
+            raise DataError("no Velodyne scans (velodyne_points/data/*.bin) in this drive", source=self.velodyne_dir)
+        if not -len(self) <= index < len(self):
+            raise IndexError(f"scan index {index} out of range for {len(self)} scans")
+        frame = int(self.scan_frames[index])
+        times = self._velo_times_all
+        ts = float(times[frame]) if times is not None and frame < len(times) else None
+        return read_kitti_bin(self.scan_paths[index], frame=frame, timestamp_s=ts, drop_nonfinite=self.drop_nonfinite)
+
+    def read_image(self, index: int) -> np.ndarray:
+        """The ``index``-th image of camera 0 (gray left) as uint8."""
+        if not self.image_paths:
+            raise DataError("no images (image_00/data/*.png) in this drive", source=self.drive_dir / "image_00")
+        return read_gray_image(self.image_paths[index], frame=int(self.image_frames[index]))
+
+
+__all__ = ["KittiRaw", "read_kitti_raw_timestamps"]

@@ -1,0 +1,149 @@
+"""KittiRaw (pykitti) on the real 2011_09_26 calibration + drive_0001 OXTS frame, and on modified copies."""
+
+from __future__ import annotations
+
+import shutil
+from datetime import datetime, timezone
+
+import numpy as np
+import pytest
+from conftest import shared_path
+from scipy.spatial.transform import Rotation
+
+from lidarkit.errors import DataError
+from lidarkit.io import open_dataset
+from lidarkit.io.kitti_raw import KittiRaw
+
+DATE, DRIVE = "2011_09_26", "0001"
+EARTH_RADIUS_M = 6378137.0
+
+
+@pytest.fixture
+def raw_root():
+    return shared_path("kitti_raw")
+
+
+@pytest.fixture
+def raw_copy(tmp_path, raw_root):
+    """Writable copy of kitti_raw/2011_09_26 (calib + drive metadata, < 0.1 MB)."""
+    shutil.copytree(raw_root / DATE, tmp_path / DATE)
+    return tmp_path
+
+
+def _drive(base):
+    return base / DATE / f"{DATE}_drive_{DRIVE}_sync"
+
+
+def _calib_rows(path):
+    return {k.strip(): np.array(v.split(), float) for k, v in (line.split(":", 1) for line in path.read_text().splitlines()) if k != "calib_time"}
+
+
+def test_calibration(raw_root):
+    ds = open_dataset("kitti_raw", raw_root, date=DATE, drive=DRIVE)
+    np.testing.assert_allclose(ds.T_velo_imu[:3, 3], [-8.086759e-01, 3.195559e-01, -7.997231e-01])
+    velo_to_cam = _calib_rows(raw_root / DATE / "calib_velo_to_cam.txt")
+    cam = _calib_rows(raw_root / DATE / "calib_cam_to_cam.txt")
+    T_cam0unrect_velo = np.eye(4)
+    T_cam0unrect_velo[:3, :3] = velo_to_cam["R"].reshape(3, 3)
+    T_cam0unrect_velo[:3, 3] = velo_to_cam["T"]
+    R_rect = np.eye(4)
+    R_rect[:3, :3] = cam["R_rect_00"].reshape(3, 3)
+    np.testing.assert_allclose(ds.T_cam0_velo, R_rect @ T_cam0unrect_velo, atol=1e-12)
+    np.testing.assert_allclose(ds.K, cam["P_rect_00"].reshape(3, 4)[:, :3])
+    assert ds.calib.b_gray == pytest.approx(0.5372, abs=2e-3)  # KITTI gray stereo baseline ~0.54 m
+    assert len(ds) == 0 and ds.ground_truth is None and ds.name == "kitti_raw_2011_09_26_0001"
+
+
+def test_oxts_frame_zero_pose(raw_root):
+    ds = KittiRaw(_drive(raw_root))  # the drive folder itself: date/drive from its name
+    packet = np.loadtxt(_drive(raw_root) / "oxts" / "data" / "0000000000.txt")
+    lat, lon, alt, roll, pitch, yaw = packet[:6]
+    assert ds.oxts_packets[0].lat == lat
+    pose = ds.oxts_poses.poses_se3[0]
+    R_expected = Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_matrix()  # R = Rz(yaw) Ry(pitch) Rx(roll)
+    np.testing.assert_allclose(pose[:3, :3], R_expected, atol=1e-9)
+    np.testing.assert_allclose(pose[:3, 3], 0.0, atol=1e-9)  # origin = first GPS fix
+    stamp = datetime(2011, 9, 26, 13, 2, 25, tzinfo=timezone.utc).timestamp() + 0.964389445
+    assert ds.oxts_poses.timestamps_s[0] == pytest.approx(stamp, abs=1e-6)
+    # LiDAR pose: the Velodyne sits ~0.80 m above and ~0.81 m ahead of the IMU (T_velo_imu t = (-0.81, 0.32, -0.80))
+    lidar = ds.ground_truth_at([0]).poses_se3[0]
+    offset_imu = pose[:3, :3].T @ lidar[:3, 3]
+    np.testing.assert_allclose(offset_imu, [0.81, -0.32, 0.80], atol=0.03)
+    # the calib file's rotation is rounded to 7 digits, so R^T differs from R^-1 by ~5e-9
+    np.testing.assert_allclose(lidar[:3, :3] @ ds.T_velo_imu[:3, :3], pose[:3, :3], atol=1e-7)
+
+
+def test_mercator_translation_of_a_second_packet(raw_copy):
+    """A packet 1e-4 deg north-east and 1 m up lands where a local spherical approximation puts it."""
+    oxts = _drive(raw_copy) / "oxts" / "data"
+    fields = (oxts / "0000000000.txt").read_text().split()
+    lat0, lon0, alt0 = (float(f) for f in fields[:3])
+    fields[:3] = [repr(lat0 + 1e-4), repr(lon0 + 1e-4), repr(alt0 + 1.0)]
+    (oxts / "0000000001.txt").write_text(" ".join(fields) + "\n")
+    ds = KittiRaw(raw_copy, DATE, DRIVE)
+    t = ds.oxts_poses.poses_se3[1][:3, 3]
+    east = EARTH_RADIUS_M * np.cos(np.radians(lat0)) * np.radians(1e-4)
+    north = EARTH_RADIUS_M * np.radians(1e-4)
+    np.testing.assert_allclose(t, [east, north, 1.0], atol=1e-3)
+    assert east == pytest.approx(7.30, abs=0.01) and north == pytest.approx(11.13, abs=0.01)
+
+
+def test_scans_read_when_present(raw_copy):
+    velo = _drive(raw_copy) / "velodyne_points" / "data"
+    velo.mkdir()
+    shutil.copy2(shared_path("kitti_odometry", "sequences", "00", "velodyne", "000000.bin"), velo / "0000000000.bin")
+    ds = KittiRaw(raw_copy, DATE, int(DRIVE))
+    assert len(ds) == 1
+    scan = ds.read_scan(0)
+    assert scan.points_xyz.shape == (124668, 3) and scan.frame == 0
+    stamp = datetime(2011, 9, 26, 13, 2, 25, tzinfo=timezone.utc).timestamp() + 0.951199337
+    assert scan.timestamp_s == pytest.approx(stamp, abs=1e-6)
+    assert len(ds.ground_truth) == 1 and ds.ground_truth.timestamps_s[0] == pytest.approx(stamp, abs=1e-6)
+    with open(velo / "0000000000.bin", "ab") as f:
+        f.write(b"\0\0\0")
+    with pytest.raises(DataError, match=r"0000000000\.bin \(frame 0\): truncated"):
+        ds.read_scan(0)
+    shutil.copy2(velo / "0000000000.bin", velo / "0000000002.bin")
+    with pytest.raises(DataError, match=r"no OXTS packet for frame 2"):
+        KittiRaw(raw_copy, DATE, DRIVE).ground_truth
+
+
+# ---- errors -----------------------------------------------------------------------------------------------
+def test_missing_velodyne_is_a_clear_error(raw_root):
+    ds = KittiRaw(raw_root, DATE, DRIVE)
+    with pytest.raises(DataError, match=r"velodyne_points/data: no Velodyne scans"):
+        ds.read_scan(0)
+    with pytest.raises(DataError, match=r"image_00: no images"):
+        ds.read_image(0)
+
+
+def test_missing_inputs(raw_copy):
+    with pytest.raises(DataError, match=r"2011_09_26_drive_0002_sync: folder not found"):
+        KittiRaw(raw_copy, DATE, "0002")
+    with pytest.raises(DataError, match="give date= and drive="):
+        KittiRaw(raw_copy)
+    (raw_copy / DATE / "calib_imu_to_velo.txt").unlink()
+    with pytest.raises(DataError, match=r"calib_imu_to_velo\.txt: calibration file not found"):
+        KittiRaw(raw_copy, DATE, DRIVE)
+
+
+def test_malformed_oxts_and_timestamps(raw_copy):
+    packet = _drive(raw_copy) / "oxts" / "data" / "0000000000.txt"
+    original = packet.read_text()
+    packet.write_text(" ".join(original.split()[:29]) + "\n")
+    with pytest.raises(DataError, match=r"0000000000\.txt \(line 1\): expected 30 numbers, found 29"):
+        KittiRaw(raw_copy, DATE, DRIVE)
+    packet.write_text(original)
+    stamps = _drive(raw_copy) / "oxts" / "timestamps.txt"
+    lines = stamps.read_text().splitlines()
+    lines[3] = "2011-09-26 13:xx:26.4"
+    stamps.write_text("\n".join(lines) + "\n")
+    with pytest.raises(DataError, match=r"oxts/timestamps\.txt \(line 4\): not a time stamp"):
+        KittiRaw(raw_copy, DATE, DRIVE)
+
+
+def test_pykitti_errors_are_wrapped(raw_copy):
+    calib = raw_copy / DATE / "calib_velo_to_cam.txt"
+    calib.write_text(calib.read_text().replace("R: 7.533745e-03 ", "R: "))  # 8 numbers: pykitti reshape fails
+    with pytest.raises(DataError, match=r"pykitti cannot load the drive \(ValueError"):
+        KittiRaw(raw_copy, DATE, DRIVE)
