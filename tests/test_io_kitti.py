@@ -72,6 +72,10 @@ def test_calib_and_intrinsics(odo_root):
 def test_first_lidar_pose_is_identity_and_motion_is_along_lidar_x(odo_root):
     ds = KittiOdometry(odo_root, "00")
     gt = ds.ground_truth
+    assert ds.ground_truth_frame == "lidar"
+    np.testing.assert_array_equal(gt.poses_se3, ds.ground_truth_lidar.poses_se3)
+    camera_gt = KittiOdometry(odo_root, "00", ground_truth_frame="camera").ground_truth
+    np.testing.assert_array_equal(camera_gt.poses_se3, ds.ground_truth_camera.poses_se3)
     assert len(gt) == 10 and gt.timestamps_s is not None
     np.testing.assert_allclose(gt.relative_to_first().poses_se3[0], np.eye(4), atol=1e-6)
     np.testing.assert_allclose(gt.poses_se3[0], np.eye(4), atol=1e-6)  # P_0 is the identity in 00.txt
@@ -135,8 +139,14 @@ def test_image_only_sequence_with_bare_calib():
     assert image.dtype == np.uint8 and image.shape == (370, 1226)
     assert 20 < image.mean() < 235
     assert len(ds.timestamps_s) == 51 and len(ds.ground_truth_camera) == 51
+    assert isinstance(ds, ImageSequence) and ds.ground_truth_frame == "camera"  # image-only: GT in camera frame
+    np.testing.assert_array_equal(ds.ground_truth.poses_se3, ds.ground_truth_camera.poses_se3)
     with pytest.raises(DataError, match=r"calib\.txt: no Tr"):
-        ds.ground_truth
+        ds.ground_truth_lidar
+    with pytest.raises(DataError, match=r"calib\.txt: no Tr"):
+        KittiOdometry(root, "06", ground_truth_frame="lidar").ground_truth
+    with pytest.raises(ConfigError, match="unknown ground_truth_frame 'world'"):
+        KittiOdometry(root, "06", ground_truth_frame="world")
     with pytest.raises(DataError, match="sequence has no scans"):
         ds.read_scan(0)
     images = ds.as_image_sequence()

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lidarkit.errors import DataError
+from lidarkit.errors import ConfigError, DataError
 from lidarkit.geometry import se3_inverse
 from lidarkit.io.base import Scan
 from lidarkit.io.pointfile import read_kitti_bin
@@ -123,8 +123,13 @@ class KittiOdometry:
     ``len(ds)`` is the number of scans, or the number of images for an image-only sequence
     (``n_scans`` / ``n_images`` give both). ``read_scan(i)`` / ``read_image(i)`` take the position
     in the sorted file list; ``read_scan_by_frame(f)`` the KITTI frame number. ``timestamps_s``,
-    ``ground_truth`` (LiDAR frame) and ``ground_truth_camera`` have one entry per item of ``frames``
-    (the scans, or the images for an image-only sequence).
+    ``ground_truth`` and ``ground_truth_camera`` have one entry per item of ``frames`` (the scans,
+    or the images for an image-only sequence).
+
+    ``ground_truth`` is in the LiDAR frame for a sequence with scans (``ScanSequence``) and in the
+    camera frame for an image-only one (``ImageSequence``, whose calib often has no Tr);
+    ``ground_truth_frame="lidar"|"camera"`` forces one. ``ground_truth_lidar`` and
+    ``ground_truth_camera`` are always available explicitly.
 
     Options: ``velodyne_dir`` / ``image_dir`` replace ``sequences/NN/velodyne`` / ``image_0`` (e.g. a
     folder of extra frames used with this sequence's calib and poses), ``poses_file`` another pose
@@ -143,7 +148,12 @@ class KittiOdometry:
         poses_file: str | os.PathLike | None = None,
         calib_file: str | os.PathLike | None = None,
         times_file: str | os.PathLike | None = None,
+        ground_truth_frame: str = "auto",
     ):
+        if ground_truth_frame not in ("auto", "lidar", "camera"):
+            raise ConfigError(
+                f"unknown ground_truth_frame {ground_truth_frame!r}; known: auto, lidar, camera", source="ground_truth_frame"
+            )
         self.sequence = f"{int(sequence):02d}" if str(sequence).isdigit() else str(sequence)
         self.drop_nonfinite = drop_nonfinite
         root = Path(root)
@@ -176,6 +186,9 @@ class KittiOdometry:
             raise DataError("times file not found", source=self.times_path)
         self.poses_path = self._locate_poses(poses_file, odometry_root)
         self._check_counts()
+        if ground_truth_frame == "auto":
+            ground_truth_frame = "lidar" if self.scan_paths else "camera"
+        self.ground_truth_frame = ground_truth_frame
 
     # ---- layout ------------------------------------------------------------------------------------
     def _locate_sequence(self, root: Path) -> tuple[Path, Path | None]:
@@ -302,8 +315,6 @@ class KittiOdometry:
         if frame == "camera":
             return gt
         if frame != "lidar":
-            from lidarkit.errors import ConfigError
-
             raise ConfigError(f"unknown pose frame {frame!r}; known: lidar, camera", source="frame")
         Tr = self.T_cam0_velo
         return gt.transformed(T_left=se3_inverse(Tr), T_right=Tr).with_name(f"{self.name}_gt_lidar")
@@ -314,9 +325,14 @@ class KittiOdometry:
         return self.ground_truth_at(self.frames, frame="camera")
 
     @property
-    def ground_truth(self) -> Trajectory | None:
+    def ground_truth_lidar(self) -> Trajectory | None:
         """GT of ``frames`` in the LiDAR frame ``T_lidar0_lidar_i = Tr^-1 P_i Tr``, or None without poses."""
         return self.ground_truth_at(self.frames, frame="lidar")
+
+    @property
+    def ground_truth(self) -> Trajectory | None:
+        """GT of ``frames`` in ``ground_truth_frame`` (LiDAR for scan sequences, camera for image-only ones)."""
+        return self.ground_truth_at(self.frames, frame=self.ground_truth_frame)
 
     # ---- data ------------------------------------------------------------------------------------------
     def read_scan(self, index: int) -> Scan:
