@@ -114,6 +114,7 @@ def test_gt_lidar_motion_agrees_with_icp_on_the_scans(extra):
 
     gt = extra.ground_truth
     T_94_95_gt = se3_inverse(gt.poses_se3[0]) @ gt.poses_se3[1]
+    np.testing.assert_allclose(extra.relative_pose(94, 95), T_94_95_gt, atol=1e-12)
     result = o3d.pipelines.registration.registration_icp(
         cloud(1), cloud(0), 1.0, np.eye(4), o3d.pipelines.registration.TransformationEstimationPointToPlane(),
         o3d.pipelines.registration.ICPConvergenceCriteria(max_iteration=50),

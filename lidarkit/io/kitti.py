@@ -16,7 +16,6 @@ with ``Tr = T_cam0_velo`` from calib.txt.
 
 from __future__ import annotations
 
-import logging
 import os
 import re
 from functools import cached_property
@@ -30,8 +29,6 @@ from lidarkit.io.base import Scan
 from lidarkit.io.pointfile import read_kitti_bin
 from lidarkit.textfile import read_lines, read_numeric_table
 from lidarkit.trajectory import Trajectory
-
-log = logging.getLogger(__name__)
 
 CALIB_KEYS_IN_ORDER = ("P0", "P1", "P2", "P3", "Tr")  # meaning of bare (prefix-less) calib lines
 _TR_ALIASES = ("Tr", "Tr_velo_to_cam", "Tr_velo_cam")
@@ -318,6 +315,16 @@ class KittiOdometry:
             raise ConfigError(f"unknown pose frame {frame!r}; known: lidar, camera", source="frame")
         Tr = self.T_cam0_velo
         return gt.transformed(T_left=se3_inverse(Tr), T_right=Tr).with_name(f"{self.name}_gt_lidar")
+
+    def relative_pose(self, frame_a: int, frame_b: int, *, frame: str = "lidar") -> np.ndarray:
+        """(4, 4) ground-truth motion ``T_a_b`` from KITTI frame ``frame_b`` to ``frame_a`` (e.g. 94 -> 95).
+
+        This is the ``T_target_source`` a registration of scan b (source) onto scan a (target) should find.
+        """
+        gt = self.ground_truth_at([frame_a, frame_b], frame=frame)
+        if gt is None:
+            raise DataError("no ground-truth pose file for this sequence", source=self.sequence_dir)
+        return se3_inverse(gt.poses_se3[0]) @ gt.poses_se3[1]
 
     @property
     def ground_truth_camera(self) -> Trajectory | None:
