@@ -1,0 +1,86 @@
+"""Dataset specs of a suite: resolve paths (relative to the suite file, ``sample:NAME`` bundled samples).
+
+A spec is a plain dict ``{"kind": ..., "path": ..., "name": ..., **options}``. Kinds with a path are
+the reader kinds of :mod:`lidarkit.io` (``kitti``, ``folder``, ``tum``, ``landmarks``, ...); simulator
+kinds (``sim_lidar``, ``sim_camera``) and ``synthetic`` have none. Sample paths stay ``sample:NAME``
+in the job spec (so job keys do not depend on where the package is installed) and are resolved in the
+worker by :func:`dataset_path`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from lidarkit.errors import ConfigError, DataError
+
+SAMPLE_PREFIX = "sample:"
+#: kinds generated in the job itself: no path
+PATHLESS_KINDS = frozenset({"synthetic", "sim_lidar", "sim_camera", "sim_landmarks"})
+
+
+def sample_path(name: str) -> Path:
+    """Folder/file of the bundled sample ``name`` (through ``lidarkit.samples.sample_path`` when it exists)."""
+    import lidarkit.samples as samples
+
+    accessor = getattr(samples, "sample_path", None)
+    if accessor is not None:
+        return Path(accessor(name))
+    path = Path(samples.__file__).resolve().parent / name
+    if not path.exists():
+        raise DataError(f"no bundled sample {name!r}", source=f"{SAMPLE_PREFIX}{name}")
+    return path
+
+
+def resolve_dataset(spec: dict[str, Any], base_dir: Path) -> dict[str, Any]:
+    """Return ``spec`` with its path checked and made absolute against ``base_dir`` (DataError if missing)."""
+    kind = spec.get("kind")
+    if not isinstance(kind, str) or not kind:
+        raise ConfigError("dataset needs a 'kind'", source="dataset")
+    path = spec.get("path")
+    resolved = dict(spec)
+    if kind in PATHLESS_KINDS:
+        if path is not None:
+            raise ConfigError(f"dataset kind {kind!r} is generated and takes no 'path'", source="dataset")
+        return resolved
+    if not path:
+        raise ConfigError(f"dataset kind {kind!r} needs a 'path'", source="dataset")
+    path = str(path)
+    if path.startswith(SAMPLE_PREFIX):
+        sample_path(path[len(SAMPLE_PREFIX):])  # raises DataError if absent
+        resolved["path"] = path
+        return resolved
+    full = (base_dir / Path(path).expanduser()).resolve()
+    if not full.exists():
+        raise DataError(f"dataset path does not exist: {full}", source="dataset")
+    resolved["path"] = str(full)
+    return resolved
+
+
+def dataset_path(spec: dict[str, Any]) -> Path:
+    """The filesystem path of a resolved dataset spec (bundled samples resolved here)."""
+    path = spec.get("path")
+    if path is None:
+        raise ConfigError(f"dataset kind {spec.get('kind')!r} has no path", source="dataset")
+    if str(path).startswith(SAMPLE_PREFIX):
+        return sample_path(str(path)[len(SAMPLE_PREFIX):])
+    return Path(path)
+
+
+def dataset_options(spec: dict[str, Any]) -> dict[str, Any]:
+    """The spec without ``kind``, ``path`` and ``name``: options for the reader / simulator."""
+    return {k: v for k, v in spec.items() if k not in ("kind", "path", "name")}
+
+
+def dataset_label(spec: dict[str, Any]) -> str:
+    """Report label: the spec's ``name`` or ``kind:basename[/sequence]``."""
+    if spec.get("name"):
+        return str(spec["name"])
+    label = spec["kind"]
+    if spec.get("path"):
+        path = str(spec["path"])
+        base = path[len(SAMPLE_PREFIX):] if path.startswith(SAMPLE_PREFIX) else Path(path).name
+        label = f"{label}:{base}"
+    if spec.get("sequence") is not None:
+        label = f"{label}/{spec['sequence']}"
+    return label

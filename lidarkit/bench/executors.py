@@ -1,0 +1,190 @@
+"""Executors: run job functions serially, on a local process pool, or on a Dask cluster; yield results as they finish.
+
+All three take ``(key, spec)`` items and a picklable function ``fn(spec) -> dict``; the parent process
+consumes ``(key, outcome)`` pairs in completion order and writes the result files. No scheduling of our
+own: ``concurrent.futures.ProcessPoolExecutor`` and ``distributed`` do it.
+"""
+
+from __future__ import annotations
+
+import logging
+import multiprocessing
+import os
+from collections.abc import Callable, Iterator
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from typing import Any
+
+from lidarkit.errors import ConfigError
+
+log = logging.getLogger(__name__)
+
+JobFn = Callable[[dict[str, Any]], dict[str, Any]]
+Item = tuple[str, dict[str, Any]]
+
+EXECUTORS = ("serial", "process", "dask")
+
+
+def crash_outcome(error_type: str, message: str) -> dict[str, Any]:
+    """Outcome for a job whose worker died or whose framework raised (the job function itself never raises)."""
+    return {
+        "status": "failed",
+        "metrics": {},
+        "series": {},
+        "info": {},
+        "error": {"type": error_type, "message": message, "traceback": ""},
+        "runtime_s": None,
+    }
+
+
+def default_workers() -> int:
+    """Worker count sized to the machine: the CPUs this process may use."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+class SerialExecutor:
+    """Runs jobs one after another in this process (debugging, overhead baseline)."""
+
+    name = "serial"
+
+    def run(self, fn: JobFn, items: list[Item]) -> Iterator[tuple[str, dict[str, Any]]]:
+        for key, spec in items:
+            yield key, fn(spec)
+
+    def close(self) -> None:
+        pass
+
+
+class ProcessExecutor:
+    """A ``ProcessPoolExecutor`` (forkserver on Linux, spawn elsewhere) sized to the machine.
+
+    A worker that dies (segfault, abort in a C extension) breaks the pool; the jobs it took down are
+    re-run one at a time in a fresh single-worker pool so that only the job that really crashes is
+    recorded as failed.
+    """
+
+    name = "process"
+
+    def __init__(self, workers: int | None = None, start_method: str | None = None):
+        self.workers = workers or default_workers()
+        if start_method is None:
+            start_method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
+        self.context = multiprocessing.get_context(start_method)
+        if start_method == "forkserver":
+            self.context.set_forkserver_preload(["lidarkit.bench.worker", "lidarkit.bench.tasks", "numpy"])
+
+    def run(self, fn: JobFn, items: list[Item]) -> Iterator[tuple[str, dict[str, Any]]]:
+        if not items:
+            return
+        broken: list[Item] = []
+        pool = ProcessPoolExecutor(max_workers=min(self.workers, len(items)), mp_context=self.context)
+        try:
+            futures = {pool.submit(fn, spec): (key, spec) for key, spec in items}
+            pending = set(futures)
+            while pending:
+                done, pending = wait(pending, return_when=FIRST_COMPLETED)
+                for fut in done:
+                    key, spec = futures[fut]
+                    try:
+                        yield key, fut.result()
+                    except BrokenProcessPool:
+                        broken.append((key, spec))
+        finally:
+            _shutdown(pool)
+        if broken:
+            log.warning("a worker process died; re-running %d job(s) one at a time to find the culprit", len(broken))
+            yield from self._run_isolated(fn, broken)
+
+    def _run_isolated(self, fn: JobFn, items: list[Item]) -> Iterator[tuple[str, dict[str, Any]]]:
+        pool = ProcessPoolExecutor(max_workers=1, mp_context=self.context)
+        try:
+            for key, spec in items:
+                try:
+                    outcome = pool.submit(fn, spec).result()
+                except BrokenProcessPool as err:
+                    outcome = crash_outcome("WorkerCrashed", f"the worker process died while running this job ({err})")
+                    _shutdown(pool)
+                    pool = ProcessPoolExecutor(max_workers=1, mp_context=self.context)
+                yield key, outcome
+        finally:
+            _shutdown(pool)
+
+    def close(self) -> None:
+        pass
+
+
+def _shutdown(pool: ProcessPoolExecutor) -> None:
+    """Cancel queued jobs and stop the workers now (an interrupted run loses only the jobs in flight)."""
+    processes = list(getattr(pool, "_processes", {}).values() or [])
+    pool.shutdown(wait=False, cancel_futures=True)
+    for proc in processes:
+        if proc.is_alive():
+            proc.terminate()
+    for proc in processes:
+        proc.join(timeout=5)
+
+
+class DaskExecutor:
+    """Jobs as ``distributed`` futures: on the cluster at ``address`` or on a LocalCluster started (and closed) here."""
+
+    name = "dask"
+
+    def __init__(self, address: str | None = None, workers: int | None = None):
+        try:
+            import distributed
+        except ImportError as err:  # pragma: no cover - dependency of lidarkit
+            raise ConfigError(f"the dask executor needs dask[distributed] ({err})", source="--executor") from err
+        self._distributed = distributed
+        self.address = address
+        self.cluster = None
+        if address:
+            try:
+                self.client = distributed.Client(address, timeout="20s")
+            except (OSError, TimeoutError) as err:
+                raise ConfigError(f"cannot connect to the Dask scheduler: {err}", source=address) from None
+        else:
+            n = workers or min(2, default_workers())
+            self.cluster = distributed.LocalCluster(
+                n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=logging.ERROR
+            )
+            self.client = distributed.Client(self.cluster)
+
+    def run(self, fn: JobFn, items: list[Item]) -> Iterator[tuple[str, dict[str, Any]]]:
+        if not items:
+            return
+        futures = {}
+        for key, spec in items:
+            futures[self.client.submit(fn, spec, pure=False)] = key
+        try:
+            for fut in self._distributed.as_completed(list(futures)):
+                key = futures[fut]
+                try:
+                    outcome = fut.result()
+                except Exception as err:  # KilledWorker, lost connection, ...
+                    outcome = crash_outcome(type(err).__name__, str(err))
+                yield key, outcome
+        finally:
+            self.client.cancel([f for f in futures if not f.done()])
+
+    def close(self) -> None:
+        self.client.close()
+        if self.cluster is not None:
+            self.cluster.close()
+
+
+def make_executor(name: str, *, workers: int | None = None, address: str | None = None):
+    """``serial`` | ``process`` | ``dask``; unknown names raise ConfigError."""
+    if address and name != "dask":
+        raise ConfigError("--address only applies to the dask executor", source="--address")
+    if workers is not None and workers < 1:
+        raise ConfigError(f"workers must be >= 1, got {workers}", source="--workers")
+    if name == "serial":
+        return SerialExecutor()
+    if name == "process":
+        return ProcessExecutor(workers)
+    if name == "dask":
+        return DaskExecutor(address, workers)
+    raise ConfigError(f"unknown executor {name!r}; known: {', '.join(EXECUTORS)}", source="--executor")

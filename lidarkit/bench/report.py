@@ -1,0 +1,401 @@
+"""Aggregate a results folder into tables (Markdown, CSV) and one self-contained HTML page with embedded plots.
+
+Per task: rows = (dataset, method with params), columns = the task's metrics as mean ± std over seeds,
+plus runtime. Plots come from the records' ``series`` (trajectories, error over time, ICP RMSE per
+iteration) and from parameter sweeps declared by the task (e.g. PF MSE vs particle count).
+"""
+
+from __future__ import annotations
+
+import base64
+import csv
+import html
+import io
+import json
+import logging
+import math
+import re
+from collections import defaultdict
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lidarkit import atomic
+from lidarkit.bench.jobs import Job
+from lidarkit.bench.results import load_results
+from lidarkit.errors import DataError
+
+log = logging.getLogger(__name__)
+
+MAX_LINES_PER_PLOT = 8
+
+
+@dataclass
+class MetricInfo:
+    name: str
+    label: str
+    kind: str = "accuracy"
+
+
+@dataclass
+class Row:
+    """One table row: a (experiment, dataset, method) cell aggregated over seeds."""
+
+    task: str
+    experiment: str
+    dataset: str
+    method: str
+    n_ok: int
+    n_failed: int
+    stats: dict[str, tuple[float, float, int]]  # metric -> (mean, std, n)
+
+
+@dataclass
+class TaskTable:
+    task: str
+    metrics: list[MetricInfo]
+    rows: list[Row]
+
+
+@dataclass
+class Plot:
+    title: str
+    filename: str
+    png: bytes
+
+
+@dataclass
+class Report:
+    """What ``build_report`` computed and wrote."""
+
+    out_dir: Path
+    tables: list[TaskTable]
+    plots: list[Plot] = field(default_factory=list)
+    failures: list[dict[str, Any]] = field(default_factory=list)
+    n_records: int = 0
+    html_path: Path | None = None
+    markdown_path: Path | None = None
+    csv_path: Path | None = None
+
+
+def _task_meta(task: str) -> tuple[list[MetricInfo], tuple[tuple[str, str], ...]]:
+    try:
+        from lidarkit.bench.tasks import get_task
+
+        t = get_task(task)
+        return [MetricInfo(m.name, m.label, m.kind) for m in t.metrics], tuple(t.sweep_plots)
+    except Exception as err:  # the report must work on results whose task module is absent here
+        log.info("no task metadata for %s (%s); using metric names", task, err)
+        return [], ()
+
+
+def _stats(values: list[float]) -> tuple[float, float, int]:
+    arr = np.asarray([v for v in values if v is not None and math.isfinite(v)], dtype=float)
+    if arr.size == 0:
+        return (math.nan, math.nan, 0)
+    std = float(arr.std(ddof=1)) if arr.size > 1 else 0.0
+    return (float(arr.mean()), std, int(arr.size))
+
+
+def aggregate(records: list[dict[str, Any]]) -> list[TaskTable]:
+    """Group records per task and (experiment, dataset, method label); mean ± std (sample std) over seeds."""
+    by_task: dict[str, list[dict[str, Any]]] = defaultdict(list)
+    for r in records:
+        by_task[r["job"]["task"]].append(r)
+    tables = []
+    for task in sorted(by_task):
+        declared, _ = _task_meta(task)
+        recs = by_task[task]
+        present = set()
+        for r in recs:
+            present.update(k for k, v in r.get("metrics", {}).items() if isinstance(v, (int, float)) or v is None)
+        metrics = [m for m in declared if m.name in present]
+        metrics += [MetricInfo(name, name) for name in sorted(present - {m.name for m in metrics})]
+        metrics.append(MetricInfo("runtime_s", "runtime [s]", "speed"))
+        groups: dict[tuple[str, str, str], list[dict[str, Any]]] = defaultdict(list)
+        for r in recs:
+            job = Job.from_spec(r["job"])
+            groups[(job.experiment, job.dataset_name, job.method_label)].append(r)
+        rows = []
+        for (experiment, dataset, method), items in groups.items():
+            ok = [r for r in items if r.get("status") == "ok"]
+            stats = {}
+            for m in metrics:
+                if m.name == "runtime_s":
+                    stats[m.name] = _stats([r.get("runtime_s") for r in ok])
+                else:
+                    stats[m.name] = _stats([r["metrics"].get(m.name) for r in ok])
+            rows.append(Row(task, experiment, dataset, method, len(ok), len(items) - len(ok), stats))
+        tables.append(TaskTable(task, metrics, rows))
+    return tables
+
+
+def format_stat(stat: tuple[float, float, int]) -> str:
+    mean, std, n = stat
+    if n == 0:
+        return "–"
+    if n == 1:
+        return _fmt(mean)
+    return f"{_fmt(mean)} ± {_fmt(std)}"
+
+
+def _fmt(x: float) -> str:
+    if x == 0 or not math.isfinite(x):
+        return f"{x:g}"
+    if abs(x) >= 1000 or abs(x) < 1e-3:
+        return f"{x:.3e}"
+    return f"{x:.4g}"
+
+
+# ---------------------------------------------------------------- plots
+
+
+def _png(fig) -> bytes:
+    import matplotlib.pyplot as plt
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
+    plt.close(fig)
+    return buf.getvalue()
+
+
+def _slug(text: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", text).strip("_")[:80] or "plot"
+
+
+def _first_ok_per_method(items: list[dict[str, Any]], series: str) -> dict[str, dict[str, Any]]:
+    out: dict[str, dict[str, Any]] = {}
+    for r in sorted(items, key=lambda r: r["job"]["seed"]):
+        if r.get("status") != "ok" or not r.get("series", {}).get(series):
+            continue
+        label = Job.from_spec(r["job"]).method_label
+        out.setdefault(label, r)
+    return dict(list(out.items())[:MAX_LINES_PER_PLOT])
+
+
+def make_plots(records: list[dict[str, Any]]) -> list[Plot]:
+    """Trajectory, error-over-time and RMSE-per-iteration plots per (task, experiment, dataset); sweep plots per task."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    plots: list[Plot] = []
+    groups: dict[tuple[str, str, str], list[dict[str, Any]]] = defaultdict(list)
+    for r in records:
+        j = r["job"]
+        groups[(j["task"], j["experiment"], j["dataset_name"])].append(r)
+    for (task, experiment, dataset), items in sorted(groups.items()):
+        where = f"{task} · {experiment} · {dataset}"
+        chosen = _first_ok_per_method(items, "trajectory_xy")
+        if chosen:
+            fig, ax = plt.subplots(figsize=(6, 4.5))
+            ref = np.asarray(next(iter(chosen.values()))["series"]["trajectory_xy"]["ref"], dtype=float)
+            if ref.size:
+                ax.plot(ref[:, 0], ref[:, 1], "k--", lw=2, label="reference")
+            for label, r in chosen.items():
+                est = np.asarray(r["series"]["trajectory_xy"]["est"], dtype=float)
+                ax.plot(est[:, 0], est[:, 1], lw=1.2, label=f"{label} (seed {r['job']['seed']})")
+            ax.set_xlabel("x [m]")
+            ax.set_ylabel("y [m]")
+            ax.set_aspect("equal", adjustable="datalim")
+            ax.legend(fontsize=7)
+            ax.set_title(f"trajectories: {where}", fontsize=9)
+            plots.append(Plot(f"Trajectories — {where}", f"traj_{_slug(where)}.png", _png(fig)))
+        chosen = _first_ok_per_method(items, "error_over_time")
+        if chosen:
+            fig, ax = plt.subplots(figsize=(6, 3.2))
+            ylabel = "error"
+            for label, r in chosen.items():
+                s = r["series"]["error_over_time"]
+                ax.plot(s["t"], s["error"], lw=1.2, label=label)
+                ylabel = s.get("label", ylabel)
+            ax.set_xlabel("time [s]")
+            ax.set_ylabel(ylabel)
+            ax.legend(fontsize=7)
+            ax.set_title(f"error over time: {where}", fontsize=9)
+            plots.append(Plot(f"Error over time — {where}", f"err_{_slug(where)}.png", _png(fig)))
+        chosen = _first_ok_per_method(items, "rmse_history")
+        if chosen:
+            fig, ax = plt.subplots(figsize=(6, 3.2))
+            for label, r in chosen.items():
+                hist = r["series"]["rmse_history"]
+                if hist and isinstance(hist[0], list):  # one history per pair: plot the first
+                    hist = hist[0]
+                ax.plot(np.arange(1, len(hist) + 1), hist, marker=".", lw=1.2, label=label)
+            ax.set_xlabel("iteration")
+            ax.set_ylabel("RMSE [m]")
+            ax.set_yscale("log")
+            ax.legend(fontsize=7)
+            ax.set_title(f"ICP RMSE vs iteration: {where}", fontsize=9)
+            plots.append(Plot(f"RMSE vs iteration — {where}", f"rmse_{_slug(where)}.png", _png(fig)))
+    plots.extend(_sweep_plots(records))
+    return plots
+
+
+def _sweep_plots(records: list[dict[str, Any]]) -> list[Plot]:
+    import matplotlib.pyplot as plt
+
+    plots = []
+    by_task: dict[str, list[dict[str, Any]]] = defaultdict(list)
+    for r in records:
+        by_task[r["job"]["task"]].append(r)
+    for task, recs in sorted(by_task.items()):
+        _, sweeps = _task_meta(task)
+        for param, metric in sweeps:
+            lines: dict[str, dict[float, list[float]]] = defaultdict(lambda: defaultdict(list))
+            for r in recs:
+                p = r["job"]["params"]
+                value = r.get("metrics", {}).get(metric)
+                if r.get("status") != "ok" or param not in p or value is None:
+                    continue
+                others = {k: v for k, v in p.items() if k != param}
+                label = f"{r['job']['dataset_name']}: " + Job(task, "", "", {}, r["job"]["method"], others).method_label
+                lines[label][float(p[param])].append(float(value))
+            lines = {k: v for k, v in lines.items() if len(v) >= 2}
+            if not lines:
+                continue
+            fig, ax = plt.subplots(figsize=(6, 3.6))
+            for label, points in list(lines.items())[:MAX_LINES_PER_PLOT]:
+                xs = sorted(points)
+                means = [float(np.mean(points[x])) for x in xs]
+                stds = [float(np.std(points[x], ddof=1)) if len(points[x]) > 1 else 0.0 for x in xs]
+                ax.errorbar(xs, means, yerr=stds, marker="o", capsize=3, lw=1.2, label=label)
+            ax.set_xlabel(param)
+            ax.set_ylabel(metric)
+            ax.set_xscale("log" if max(max(p) for p in lines.values()) / max(min(min(p) for p in lines.values()), 1e-12) > 20 else "linear")
+            ax.legend(fontsize=7)
+            ax.set_title(f"{task}: {metric} vs {param} (mean ± std over seeds)", fontsize=9)
+            plots.append(Plot(f"{metric} vs {param} — {task}", f"sweep_{_slug(task + '_' + metric + '_' + param)}.png", _png(fig)))
+    return plots
+
+
+# ---------------------------------------------------------------- writers
+
+
+def _table_rows(table: TaskTable) -> tuple[list[str], list[list[str]]]:
+    header = ["experiment", "dataset", "method", "ok/failed"] + [m.label for m in table.metrics]
+    rows = [
+        [r.experiment, r.dataset, r.method, f"{r.n_ok}/{r.n_failed}"] + [format_stat(r.stats[m.name]) for m in table.metrics]
+        for r in table.rows
+    ]
+    return header, rows
+
+
+def _markdown(report: Report, title: str) -> str:
+    out = [f"# {title}", "", f"Generated {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC from {report.n_records} job results "
+           f"in `{report.out_dir}`. Cells: mean ± std over seeds (sample std).", ""]
+    for table in report.tables:
+        header, rows = _table_rows(table)
+        out += [f"## {table.task}", "", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+        out += ["| " + " | ".join(c.replace("|", "\\|") for c in row) + " |" for row in rows]
+        out.append("")
+    if report.plots:
+        out += ["## Plots", ""] + [f"![{p.title}](plots/{p.filename})" for p in report.plots] + [""]
+    if report.failures:
+        out += ["## Failed jobs", ""] + [f"- `{f['key']}` {f['label']}: {f['error']}" for f in report.failures] + [""]
+    return "\n".join(out)
+
+
+def _csv(report: Report) -> str:
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(["task", "experiment", "dataset", "method", "metric", "mean", "std", "n", "n_ok", "n_failed"])
+    for table in report.tables:
+        for r in table.rows:
+            for m in table.metrics:
+                mean, std, n = r.stats[m.name]
+                writer.writerow([r.task, r.experiment, r.dataset, r.method, m.name, repr(mean), repr(std), n, r.n_ok, r.n_failed])
+    return buf.getvalue()
+
+
+_CSS = """
+body{font-family:system-ui,sans-serif;margin:2em;max-width:1200px;color:#222}
+table{border-collapse:collapse;margin:1em 0;font-size:0.9em}
+th,td{border:1px solid #ccc;padding:3px 8px;text-align:right}
+th{background:#f0f0f0} td.l,th.l{text-align:left}
+figure{display:inline-block;margin:0.5em;vertical-align:top}
+figcaption{font-size:0.85em;color:#555}
+.failed{color:#a00}
+"""
+
+
+def _html(report: Report, title: str) -> str:
+    e = html.escape
+    parts = [
+        "<!DOCTYPE html>",
+        '<html lang="en">',
+        "<head>",
+        '<meta charset="utf-8">',
+        f"<title>{e(title)}</title>",
+        f"<style>{_CSS}</style>",
+        "</head>",
+        "<body>",
+        f"<h1>{e(title)}</h1>",
+        f"<p>Generated {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC from {report.n_records} job results. "
+        "Cells: mean ± std over seeds (sample std).</p>",
+    ]
+    for table in report.tables:
+        header, rows = _table_rows(table)
+        parts.append(f"<h2>{e(table.task)}</h2>")
+        parts.append("<table>")
+        parts.append("<thead><tr>" + "".join(f'<th class="l">{e(h)}</th>' if i < 4 else f"<th>{e(h)}</th>" for i, h in enumerate(header)) + "</tr></thead>")
+        parts.append("<tbody>")
+        for row in rows:
+            parts.append("<tr>" + "".join(f'<td class="l">{e(c)}</td>' if i < 4 else f"<td>{e(c)}</td>" for i, c in enumerate(row)) + "</tr>")
+        parts.append("</tbody>")
+        parts.append("</table>")
+    if report.plots:
+        parts.append("<h2>Plots</h2>")
+        for p in report.plots:
+            data = base64.b64encode(p.png).decode("ascii")
+            parts.append(f'<figure><img src="data:image/png;base64,{data}" alt="{e(p.title)}" width="540"><figcaption>{e(p.title)}</figcaption></figure>')
+    if report.failures:
+        parts.append("<h2>Failed jobs</h2>")
+        parts.append("<ul>")
+        for f in report.failures:
+            parts.append(f'<li class="failed"><code>{e(f["key"])}</code> {e(f["label"])}: {e(f["error"])}</li>')
+        parts.append("</ul>")
+    parts += ["</body>", "</html>", ""]
+    return "\n".join(parts)
+
+
+def build_report(out_dir: str | Path, *, title: str | None = None, plots: bool = True) -> Report:
+    """Read ``out_dir/jobs/*.json`` and write ``report.md``, ``report.csv``, ``report.html`` and ``plots/*.png`` there."""
+    out_dir = Path(out_dir)
+    if not (out_dir / "jobs").is_dir():
+        raise DataError("not a bench results folder (no jobs/ inside)", source=out_dir)
+    records = load_results(out_dir)
+    if not records:
+        raise DataError("no readable job results in jobs/", source=out_dir)
+    if title is None:
+        title = _suite_title(out_dir)
+    report = Report(out_dir=out_dir, tables=aggregate(records), n_records=len(records))
+    for r in records:
+        if r.get("status") != "ok":
+            err = r.get("error") or {}
+            report.failures.append({"key": r["key"], "label": _label(r), "error": f"{err.get('type')}: {err.get('message')}"})
+    if plots:
+        report.plots = make_plots(records)
+        for p in report.plots:
+            atomic.write_bytes(out_dir / "plots" / p.filename, p.png)
+    report.markdown_path = atomic.write_text(out_dir / "report.md", _markdown(report, title))
+    report.csv_path = atomic.write_text(out_dir / "report.csv", _csv(report))
+    report.html_path = atomic.write_text(out_dir / "report.html", _html(report, title))
+    return report
+
+
+def _label(record: dict[str, Any]) -> str:
+    job = Job.from_spec(record["job"])
+    return f"{job.task} | {job.experiment} | {job.dataset_name} | {job.method_label} | seed {job.seed}"
+
+
+def _suite_title(out_dir: Path) -> str:
+    try:
+        name = json.loads((out_dir / "suite.json").read_text(encoding="utf-8"))["suite"]
+        return f"lidarkit benchmark report: {name}"
+    except (OSError, ValueError, KeyError):
+        return "lidarkit benchmark report"

@@ -1,0 +1,80 @@
+"""Result files: one JSON per job under ``OUT/jobs/<key>.json``, written atomically by the parent process."""
+
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+from typing import Any
+
+from lidarkit import atomic
+from lidarkit.bench.jobs import Job
+
+log = logging.getLogger(__name__)
+
+SCHEMA_VERSION = 1
+JOBS_DIR = "jobs"
+
+
+def result_path(out_dir: Path, key: str) -> Path:
+    return Path(out_dir) / JOBS_DIR / f"{key}.json"
+
+
+def make_record(job: Job, key: str, version: str, outcome: dict[str, Any]) -> dict[str, Any]:
+    """The full result record: schema, key, version, the job's resolved spec, then the worker's outcome."""
+    return {"schema": SCHEMA_VERSION, "key": key, "lidarkit_version": version, "job": job.spec(), **outcome}
+
+
+def write_result(out_dir: Path, record: dict[str, Any]) -> Path:
+    """Write one record atomically (temp file + fsync + rename): a crash leaves it complete or absent."""
+    text = json.dumps(record, indent=1, sort_keys=True, allow_nan=False)
+    return atomic.write_text(result_path(out_dir, record["key"]), text + "\n")
+
+
+def read_result(path: Path) -> dict[str, Any] | None:
+    """A record, or None if the file is unreadable / not a result (logged)."""
+    try:
+        record = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, ValueError) as err:
+        log.warning("ignoring unreadable result %s: %s", path, err)
+        return None
+    if not isinstance(record, dict) or record.get("schema") != SCHEMA_VERSION or "job" not in record:
+        log.warning("ignoring %s: not a lidarkit bench result", path)
+        return None
+    return record
+
+
+def is_finished(out_dir: Path, key: str) -> bool:
+    """True when a readable, successful result exists for ``key`` (failed jobs are retried on resume)."""
+    path = result_path(out_dir, key)
+    if not path.exists():
+        return False
+    record = read_result(path)
+    return record is not None and record.get("status") == "ok"
+
+
+def load_results(out_dir: Path) -> list[dict[str, Any]]:
+    """Every readable record under ``out_dir`` sorted by (task, experiment, dataset, method, params, seed)."""
+    files = sorted(p for p in (Path(out_dir) / JOBS_DIR).glob("*.json") if not p.name.startswith("."))
+    records = [r for r in (read_result(p) for p in files) if r is not None]
+
+    def order(r: dict[str, Any]) -> tuple:
+        j = r["job"]
+        return (j["task"], j["experiment"], j["dataset_name"], j["method"], json.dumps(j["params"], sort_keys=True), j["seed"])
+
+    return sorted(records, key=order)
+
+
+def remove_stale_temp_files(out_dir: Path, older_than_s: float = 600.0) -> int:
+    """Delete temp files a killed run left in ``jobs/`` (``.<key>.*.json``, never read as results); return the count."""
+    import time
+
+    removed = 0
+    for path in (Path(out_dir) / JOBS_DIR).glob(".*.json"):
+        try:
+            if time.time() - path.stat().st_mtime > older_than_s:
+                path.unlink()
+                removed += 1
+        except OSError:
+            pass
+    return removed

@@ -1,0 +1,102 @@
+"""Run a suite: skip finished jobs, execute the rest on an executor, write each result as it arrives."""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from lidarkit import atomic
+from lidarkit.bench.executors import make_executor
+from lidarkit.bench.jobs import Job
+from lidarkit.bench.results import is_finished, make_record, remove_stale_temp_files, write_result
+from lidarkit.bench.suite import Suite
+from lidarkit.bench.worker import execute_job
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class RunSummary:
+    """Counts of one run; ``ran`` = jobs executed now, ``skipped`` = already finished before."""
+
+    out_dir: Path
+    total: int
+    skipped: int = 0
+    ran: int = 0
+    ok: int = 0
+    failed: int = 0
+    wall_s: float = 0.0
+    failures: list[tuple[str, str, str]] = field(default_factory=list)  # (key, label, "Type: message")
+
+
+def job_label(job: Job) -> str:
+    return f"{job.experiment} | {job.dataset_name} | {job.method_label} | seed {job.seed}"
+
+
+def run_suite(
+    suite: Suite,
+    out_dir: str | Path,
+    *,
+    executor: str = "process",
+    workers: int | None = None,
+    address: str | None = None,
+    force: bool = False,
+    on_start: Callable[[int, int], None] | None = None,
+    on_result: Callable[[Job, dict[str, Any]], None] | None = None,
+    job_fn: Callable[[dict[str, Any]], dict[str, Any]] = execute_job,
+) -> RunSummary:
+    """Run every unfinished job of ``suite`` and write ``out_dir/jobs/<key>.json`` for each, atomically.
+
+    ``on_start(n_to_run, n_skipped)`` and ``on_result(job, record)`` let a CLI drive a progress bar.
+    Failed jobs are recorded (status "failed", error type and message) and retried on the next run.
+    """
+    from lidarkit import __version__
+
+    out_dir = Path(out_dir)
+    t0 = time.perf_counter()
+    keyed = [(job.key(__version__), job) for job in suite.jobs]
+    by_key = dict(keyed)
+    todo = [(key, job) for key, job in keyed if force or not is_finished(out_dir, key)]
+    summary = RunSummary(out_dir=out_dir, total=len(keyed), skipped=len(keyed) - len(todo))
+    _write_manifest(suite, out_dir, keyed, __version__)
+    remove_stale_temp_files(out_dir)
+    if on_start is not None:
+        on_start(len(todo), summary.skipped)
+    if todo:
+        runner = make_executor(executor, workers=workers, address=address)
+        try:
+            for key, outcome in runner.run(job_fn, [(key, job.spec()) for key, job in todo]):
+                job = by_key[key]
+                record = make_record(job, key, __version__, outcome)
+                write_result(out_dir, record)
+                summary.ran += 1
+                if record["status"] == "ok":
+                    summary.ok += 1
+                else:
+                    summary.failed += 1
+                    err = record.get("error") or {}
+                    summary.failures.append((key, job_label(job), f"{err.get('type')}: {err.get('message')}"))
+                if on_result is not None:
+                    on_result(job, record)
+        finally:
+            runner.close()
+    summary.wall_s = time.perf_counter() - t0
+    return summary
+
+
+def _write_manifest(suite: Suite, out_dir: Path, keyed: list[tuple[str, Job]], version: str) -> None:
+    """``suite.json`` beside the results: the resolved, expanded suite (what was asked, job by job)."""
+    manifest = {
+        "suite": suite.name,
+        "description": suite.description,
+        "suite_file": str(suite.path) if suite.path else None,
+        "lidarkit_version": version,
+        "skipped_experiments": [{"experiment": e, "reason": r} for e, r in suite.skipped],
+        "jobs": [{"key": key, **job.spec()} for key, job in keyed],
+    }
+    atomic.write_text(out_dir / "suite.json", json.dumps(manifest, indent=1, sort_keys=True) + "\n")

@@ -1,0 +1,294 @@
+"""Benchmark suites: a YAML file of experiments, validated (pydantic + each task's own validators) and expanded into jobs.
+
+Everything that can be wrong with a suite (bad YAML, unknown key, task, method or param, missing
+dataset) is reported here as a ConfigError / DataError naming the file, the key and the reason,
+before any job runs.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+
+from lidarkit.bench.datasets import dataset_label, resolve_dataset
+from lidarkit.bench.jobs import Job
+from lidarkit.bench.tasks import get_task
+from lidarkit.errors import ConfigError, DataError, LidarKitError
+
+log = logging.getLogger(__name__)
+
+
+class MethodSpec(BaseModel):
+    """A method with fixed ``params`` and a ``grid`` (param -> list of values, expanded as a cartesian product)."""
+
+    model_config = ConfigDict(extra="forbid")
+    name: str = Field(min_length=1)
+    params: dict[str, Any] = Field(default_factory=dict)
+    grid: dict[str, list[Any]] = Field(default_factory=dict)
+
+    @field_validator("grid")
+    @classmethod
+    def _grid_nonempty(cls, grid: dict[str, list[Any]]) -> dict[str, list[Any]]:
+        for key, values in grid.items():
+            if not values:
+                raise ValueError(f"grid values of {key!r} are empty")
+        return grid
+
+
+class DatasetSpec(BaseModel):
+    """``kind`` (reader or simulator), ``path`` (absent for simulators), ``name`` (report label), reader options."""
+
+    model_config = ConfigDict(extra="allow")
+    kind: str = Field(min_length=1)
+    path: str | None = None
+    name: str | None = None
+
+
+class Experiment(BaseModel):
+    """One task run over its datasets x methods (x grid) x seeds."""
+
+    model_config = ConfigDict(extra="forbid")
+    name: str | None = None
+    task: str
+    dataset: DatasetSpec | str | None = None
+    datasets: list[DatasetSpec | str] | None = None
+    methods: list[MethodSpec | str] = Field(min_length=1)
+    seeds: list[int] | int | None = None
+    options: dict[str, Any] = Field(default_factory=dict)
+
+
+class SuiteModel(BaseModel):
+    """The whole YAML file."""
+
+    model_config = ConfigDict(extra="forbid")
+    name: str = "suite"
+    description: str = ""
+    seeds: list[int] | int = Field(default_factory=lambda: [0])
+    datasets: dict[str, DatasetSpec] = Field(default_factory=dict)
+    experiments: list[Experiment] = Field(min_length=1)
+
+
+@dataclass
+class Suite:
+    """A validated suite: its jobs in a stable order, plus experiments skipped because their task is unavailable."""
+
+    name: str
+    path: Path | None
+    jobs: list[Job]
+    description: str = ""
+    skipped: list[tuple[str, str]] = field(default_factory=list)
+
+
+def _seeds(value: list[int] | int) -> list[int]:
+    return list(range(value)) if isinstance(value, int) else list(value)
+
+
+def _loc_text(loc: tuple[Any, ...]) -> str:
+    out = ""
+    for part in loc:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        elif part in ("DatasetSpec", "MethodSpec", "str", "list[int]", "int") or "[" in str(part):
+            continue  # pydantic union branch names
+        else:
+            out += f".{part}" if out else str(part)
+    return out or "(top level)"
+
+
+def _line_of(root: yaml.Node | None, loc: tuple[Any, ...]) -> int | None:
+    """1-based line of the YAML node at ``loc`` (walks the composed node tree; None if not found)."""
+    node, line = root, None
+    for part in loc:
+        if isinstance(node, yaml.MappingNode) and isinstance(part, str):
+            for key_node, value_node in node.value:
+                if key_node.value == part:
+                    line, node = key_node.start_mark.line + 1, value_node
+                    break
+            else:
+                continue  # e.g. a pydantic union branch name
+        elif isinstance(node, yaml.SequenceNode) and isinstance(part, int) and part < len(node.value):
+            node = node.value[part]
+            line = node.start_mark.line + 1
+    return line
+
+
+class _Locator:
+    """Builds ``file (key, line N)`` errors for one suite file."""
+
+    def __init__(self, path: Path, root: yaml.Node | None):
+        self.path, self.root = path, root
+
+    def location(self, loc: tuple[Any, ...]) -> str:
+        text = _loc_text(loc)
+        line = _line_of(self.root, loc)
+        return f"{text}, line {line}" if line else text
+
+    def error(self, err: LidarKitError, loc: tuple[Any, ...]) -> LidarKitError:
+        reason = err.reason if err.source in (None, "task", "dataset", "method", "options") else str(err)
+        return type(err)(reason, source=self.path, location=self.location(loc))
+
+
+def read_suite_file(path: str | Path) -> tuple[SuiteModel, _Locator]:
+    """Parse and schema-check a suite file (no task validation yet)."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise DataError("suite file not found", source=path) from None
+    except (OSError, UnicodeDecodeError) as err:
+        raise DataError(f"cannot read suite file: {err}", source=path) from None
+    try:
+        root = yaml.compose(text)
+        raw = yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        mark = getattr(err, "problem_mark", None)
+        where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else None
+        problem = getattr(err, "problem", None) or str(err).splitlines()[0]
+        raise ConfigError(f"malformed YAML: {problem}", source=path, location=where) from None
+    locator = _Locator(path, root)
+    if not isinstance(raw, dict):
+        raise ConfigError("a suite is a YAML mapping with an 'experiments' list", source=path)
+    try:
+        model = SuiteModel.model_validate(raw)
+    except ValidationError as err:
+        errors = sorted(err.errors(), key=lambda e: e["type"] != "extra_forbidden")  # a typo explains a "missing"
+        first = errors[0]
+        messages = []
+        for e in errors[:3]:
+            if e["type"] == "extra_forbidden":
+                msg = f"unknown key {e['loc'][-1]!r}"
+            elif e["type"] == "missing":
+                msg = f"missing key {e['loc'][-1]!r}"
+            else:
+                msg = f"{_loc_text(tuple(e['loc']))}: {e['msg']}"
+            messages.append(msg)
+        more = f" (+{len(errors) - 3} more)" if len(errors) > 3 else ""
+        raise ConfigError("; ".join(messages) + more, source=path, location=locator.location(tuple(first["loc"]))) from None
+    return model, locator
+
+
+def load_suite(path: str | Path, *, skip_unavailable: bool = False, only_tasks: set[str] | None = None) -> Suite:
+    """Read, validate and expand a suite file into jobs; raise on the first problem, before anything runs.
+
+    ``skip_unavailable``: experiments whose task module has not been installed are skipped (listed in
+    ``Suite.skipped``) instead of refused — what ``lidarkit demo`` does. ``only_tasks`` keeps only those tasks.
+    """
+    path = Path(path).resolve() if not str(path).startswith("sample:") else Path(path)
+    model, locator = read_suite_file(path)
+    base_dir = path.parent
+    jobs: list[Job] = []
+    seen: set[str] = set()
+    skipped: list[tuple[str, str]] = []
+    validated: set[str] = set()
+    for i, exp in enumerate(model.experiments):
+        exp_loc: tuple[Any, ...] = ("experiments", i)
+        exp_name = exp.name or f"{exp.task}_{i}"
+        if only_tasks is not None and exp.task not in only_tasks:
+            skipped.append((exp_name, f"task {exp.task} not selected"))
+            continue
+        try:
+            task = get_task(exp.task)
+            task.require()
+        except ConfigError as err:
+            if skip_unavailable and exp.task in _known_tasks():
+                skipped.append((exp_name, err.reason))
+                log.warning("skipping experiment %s: %s", exp_name, err.reason)
+                continue
+            raise locator.error(err, (*exp_loc, "task")) from None
+
+        datasets = _experiment_datasets(exp, model, locator, exp_loc)
+        resolved: list[dict[str, Any]] = []
+        for loc, spec in datasets:
+            try:
+                spec = resolve_dataset(spec, base_dir)
+                if task.dataset_kinds and spec["kind"] not in task.dataset_kinds:
+                    raise ConfigError(
+                        f"task {exp.task!r} does not take dataset kind {spec['kind']!r}; it takes: {', '.join(task.dataset_kinds)}",
+                        source="dataset",
+                    )
+            except LidarKitError as err:
+                raise locator.error(err, loc) from None
+            resolved.append(spec)
+
+        seeds = _seeds(exp.seeds if exp.seeds is not None else model.seeds)
+        if not seeds:
+            raise ConfigError("no seeds", source=path, location=locator.location((*exp_loc, "seeds")))
+        for j, method in enumerate(exp.methods):
+            method = MethodSpec(name=method) if isinstance(method, str) else method
+            m_loc = (*exp_loc, "methods", j)
+            overlap = set(method.params) & set(method.grid)
+            if overlap:
+                raise ConfigError(f"{', '.join(sorted(overlap))} given both in params and grid", source=path, location=locator.location(m_loc))
+            for params in _grid(method):
+                for spec in resolved:
+                    check_key = repr((exp.task, method.name, sorted(params.items()), sorted(spec.items()), sorted(exp.options.items())))
+                    if check_key not in validated:
+                        try:
+                            task.validate(method.name, params, spec, dict(exp.options))
+                        except LidarKitError as err:
+                            raise locator.error(err, m_loc) from None
+                        except Exception as err:  # a validator bug must still name the place
+                            raise ConfigError(f"{type(err).__name__}: {err}", source=path, location=locator.location(m_loc)) from None
+                        validated.add(check_key)
+                    for seed in seeds:
+                        job = Job(
+                            task=exp.task,
+                            experiment=exp_name,
+                            dataset_name=dataset_label(spec),
+                            dataset=spec,
+                            method=method.name,
+                            params=params,
+                            seed=int(seed),
+                            options=dict(exp.options),
+                        )
+                        key = job.key()
+                        if key in seen:
+                            continue
+                        seen.add(key)
+                        jobs.append(job)
+    return Suite(name=model.name, path=path, jobs=jobs, description=model.description, skipped=skipped)
+
+
+def _known_tasks() -> set[str]:
+    from lidarkit.bench.tasks import available_tasks
+
+    return set(available_tasks())
+
+
+def _experiment_datasets(exp: Experiment, model: SuiteModel, locator: _Locator, exp_loc: tuple[Any, ...]) -> list[tuple[tuple[Any, ...], dict[str, Any]]]:
+    if exp.dataset is not None and exp.datasets is not None:
+        raise ConfigError("give either 'dataset' or 'datasets', not both", source=locator.path, location=locator.location(exp_loc))
+    if exp.dataset is not None:
+        entries = [((*exp_loc, "dataset"), exp.dataset)]
+    elif exp.datasets:
+        entries = [((*exp_loc, "datasets", k), d) for k, d in enumerate(exp.datasets)]
+    else:
+        raise ConfigError("experiment has no 'dataset'", source=locator.path, location=locator.location(exp_loc))
+    out = []
+    for loc, entry in entries:
+        if isinstance(entry, str):
+            if entry not in model.datasets:
+                known = ", ".join(sorted(model.datasets)) or "none defined"
+                raise ConfigError(f"unknown dataset {entry!r}; suite datasets: {known}", source=locator.path, location=locator.location(loc))
+            spec = model.datasets[entry].model_dump(exclude_none=True)
+            spec.setdefault("name", entry)
+        else:
+            spec = entry.model_dump(exclude_none=True)
+        out.append((loc, spec))
+    return out
+
+
+def _grid(method: MethodSpec) -> list[dict[str, Any]]:
+    if not method.grid:
+        return [dict(method.params)]
+    keys = list(method.grid)
+    return [{**method.params, **dict(zip(keys, combo))} for combo in itertools.product(*(method.grid[k] for k in keys))]
+
+
+__all__ = ["DatasetSpec", "Experiment", "MethodSpec", "Suite", "SuiteModel", "load_suite", "read_suite_file"]

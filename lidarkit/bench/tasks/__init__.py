@@ -1,0 +1,118 @@
+"""Benchmark tasks: what one job computes. A registry maps task names to ``Task`` classes.
+
+Built-in tasks are imported lazily (their modules pull in Open3D, OpenCV, ...); third-party tasks
+register with :func:`register_task`. Each task validates a job through the owning module's own
+validators (e.g. ``lidarkit.registration.get_icp``) so the suite is refused before anything runs.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+from lidarkit.bench.jobs import Job
+from lidarkit.errors import ConfigError
+
+_BUILTIN: dict[str, str] = {
+    "selftest": "lidarkit.bench.tasks.selftest:SelfTestTask",
+    "icp_pair": "lidarkit.bench.tasks.icp_pair:IcpPairTask",
+    "odometry": "lidarkit.bench.tasks.odometry:OdometryTask",
+    "pf": "lidarkit.bench.tasks.pf:ParticleFilterTask",
+    "vo": "lidarkit.bench.tasks.vo:VisualOdometryTask",
+}
+_REGISTERED: dict[str, type[Task]] = {}
+_INSTANCES: dict[str, Task] = {}
+
+
+@dataclass(frozen=True)
+class Metric:
+    """A scalar a task reports; ``better`` is ``"lower"`` or ``"higher"``; ``kind`` is accuracy or speed."""
+
+    name: str
+    label: str
+    kind: str = "accuracy"
+    better: str = "lower"
+
+
+@dataclass
+class TaskOutput:
+    """What a task returns for one job.
+
+    ``metrics``: scalar floats (names from ``Task.metrics``, extra ones allowed);
+    ``series``: small JSON-ready arrays for plots, by convention
+    ``trajectory_xy`` = ``{"ref": [[x, y], ...], "est": [[x, y], ...]}`` (metres),
+    ``error_over_time`` = ``{"t": [...], "error": [...], "label": str}``,
+    ``rmse_history`` = ``[...]`` (one value per ICP iteration);
+    ``info``: anything else worth recording (resolved config, counts).
+    """
+
+    metrics: dict[str, float] = field(default_factory=dict)
+    series: dict[str, Any] = field(default_factory=dict)
+    info: dict[str, Any] = field(default_factory=dict)
+
+
+class Task:
+    """Base class of a benchmark task. Subclasses set the class attributes and implement ``run``."""
+
+    name: ClassVar[str] = ""
+    description: ClassVar[str] = ""
+    #: dataset kinds this task accepts (``kind`` in the suite's dataset spec)
+    dataset_kinds: ClassVar[tuple[str, ...]] = ()
+    #: metrics shown in report tables, in order
+    metrics: ClassVar[tuple[Metric, ...]] = ()
+    #: (param, metric) pairs plotted as metric vs param across a method's grid (e.g. PF MSE vs particles)
+    sweep_plots: ClassVar[tuple[tuple[str, str], ...]] = ()
+
+    def require(self) -> None:
+        """Raise ConfigError when the modules this task needs are not installed / not there yet."""
+
+    def validate(self, method: str, params: dict[str, Any], dataset: dict[str, Any], options: dict[str, Any]) -> None:
+        """Raise ConfigError / DataError if this job could not run; called for every job before the run."""
+
+    def run(self, job: Job) -> TaskOutput:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+
+def register_task(name: str) -> Callable[[type[Task]], type[Task]]:
+    """Class decorator registering a ``Task`` subclass under ``name``."""
+
+    def decorator(cls: type[Task]) -> type[Task]:
+        cls.name = name
+        _REGISTERED[name] = cls
+        _INSTANCES.pop(name, None)
+        return cls
+
+    return decorator
+
+
+def available_tasks() -> list[str]:
+    """Names of every task a suite may use (whether or not its module has landed)."""
+    return sorted(set(_BUILTIN) | set(_REGISTERED))
+
+
+def get_task(name: str) -> Task:
+    """The task instance for ``name``; unknown names raise ConfigError listing the known ones."""
+    if name in _INSTANCES:
+        return _INSTANCES[name]
+    if name in _REGISTERED:
+        cls = _REGISTERED[name]
+    elif name in _BUILTIN:
+        module_name, attr = _BUILTIN[name].split(":")
+        cls = getattr(importlib.import_module(module_name), attr)
+    else:
+        raise ConfigError(f"unknown task {name!r}; known: {', '.join(available_tasks())}", source="task")
+    _INSTANCES[name] = cls()
+    return _INSTANCES[name]
+
+
+def import_module_for_task(task: str, module: str) -> Any:
+    """Import ``module`` for ``task``; a missing module becomes a ConfigError saying which task needs it."""
+    try:
+        return importlib.import_module(module)
+    except ImportError as err:
+        raise ConfigError(f"task {task!r} needs {module}, which is not available ({err})", source="task") from err
+
+
+__all__ = ["Metric", "Task", "TaskOutput", "available_tasks", "get_task", "import_module_for_task", "register_task"]

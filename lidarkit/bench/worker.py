@@ -1,0 +1,64 @@
+"""The function every executor runs: one job spec in, one JSON-ready record out (never raises for job errors)."""
+
+from __future__ import annotations
+
+import math
+import os
+import socket
+import time
+import traceback
+from datetime import datetime, timezone
+from typing import Any
+
+from lidarkit.bench.jobs import Job
+
+
+def _utc_now() -> str:
+    return datetime.now(timezone.utc).isoformat(timespec="milliseconds")
+
+
+def _json_safe(value: Any) -> Any:
+    """Convert numpy scalars/arrays and non-finite floats into plain JSON (NaN/inf -> None)."""
+    if isinstance(value, dict):
+        return {str(k): _json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_safe(v) for v in value]
+    if hasattr(value, "tolist") and not isinstance(value, (str, bytes)):
+        return _json_safe(value.tolist())
+    if isinstance(value, bool) or value is None or isinstance(value, (int, str)):
+        return value
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    try:
+        f = float(value)
+    except (TypeError, ValueError):
+        return str(value)
+    return f if math.isfinite(f) else None
+
+
+def execute_job(spec: dict[str, Any]) -> dict[str, Any]:
+    """Run the job described by ``spec`` (``Job.spec()``); a raising job gives ``status="failed"`` with its error."""
+    from lidarkit.bench.tasks import get_task
+
+    started = _utc_now()
+    t0 = time.perf_counter()
+    record: dict[str, Any] = {"status": "ok", "metrics": {}, "series": {}, "info": {}, "error": None}
+    try:
+        job = Job.from_spec(spec)
+        output = get_task(job.task).run(job)
+        record["metrics"] = _json_safe(output.metrics)
+        record["series"] = _json_safe(output.series)
+        record["info"] = _json_safe(output.info)
+    except Exception as err:  # a job's failure is data, not a crash of the suite
+        record["status"] = "failed"
+        record["error"] = {
+            "type": type(err).__name__,
+            "message": str(err),
+            "traceback": traceback.format_exc(limit=8),
+        }
+    record["runtime_s"] = time.perf_counter() - t0
+    record["started_utc"] = started
+    record["finished_utc"] = _utc_now()
+    record["host"] = socket.gethostname()
+    record["pid"] = os.getpid()
+    return record

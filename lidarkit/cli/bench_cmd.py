@@ -1,0 +1,141 @@
+"""``lidarkit bench SUITE.yaml`` (run a benchmark suite) and ``lidarkit report DIR`` (tables + HTML from results)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+from rich.table import Table
+
+from lidarkit.cli.app import app, stderr, stdout
+
+EXECUTOR_HELP = "serial | process (local process pool sized to the machine) | dask (--address, or a local Dask cluster)"
+
+
+def progress_bar() -> Progress:
+    """Rich progress bar with ETA on stderr (results go to stdout)."""
+    return Progress(
+        TextColumn("[bold]{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("{task.fields[failed]} failed"),
+        TimeElapsedColumn(),
+        TextColumn("ETA"),
+        TimeRemainingColumn(),
+        console=stderr(),
+        transient=False,
+    )
+
+
+def run_with_progress(suite, out: Path, *, executor: str, workers: int | None, address: str | None, force: bool):
+    """Run ``suite`` into ``out`` showing a progress bar; KeyboardInterrupt says how to resume and exits 130."""
+    from lidarkit.bench.runner import run_suite
+
+    err = stderr()
+    with progress_bar() as progress:
+        bar = progress.add_task(suite.name, total=None, failed=0)
+        failed = 0
+
+        def on_start(n_todo: int, n_skipped: int) -> None:
+            progress.update(bar, total=n_todo)
+            if n_skipped:
+                progress.console.print(f"{n_skipped} job(s) already finished in {out}: skipped (use --force to rerun)")
+
+        def on_result(job, record) -> None:
+            nonlocal failed
+            if record["status"] != "ok":
+                failed += 1
+                error = record.get("error") or {}
+                progress.console.print(f"[red]failed[/red] {job.method_label} on {job.dataset_name} (seed {job.seed}): "
+                                       f"{error.get('type')}: {error.get('message')}", markup=True, soft_wrap=True)
+            progress.update(bar, advance=1, failed=failed)
+
+        try:
+            return run_suite(suite, out, executor=executor, workers=workers, address=address, force=force,
+                             on_start=on_start, on_result=on_result)
+        except KeyboardInterrupt:
+            progress.stop()
+            err.print(f"interrupted: finished results are kept in {out}/jobs; run the same command again to resume")
+            raise typer.Exit(130) from None
+
+
+def print_run_summary(summary) -> None:
+    out = stdout()
+    out.print(f"{summary.total} jobs: {summary.skipped} already done, {summary.ran} run now "
+              f"({summary.ok} ok, {summary.failed} failed) in {summary.wall_s:.1f} s")
+    for key, label, error in summary.failures[:20]:
+        out.print(f"  failed {key}: {label}: {error}", soft_wrap=True)
+
+
+def summary_table(report, max_metrics: int = 3) -> list[Table]:
+    """Short rich tables (first accuracy metrics + runtime) of a built report, one per task."""
+    from lidarkit.bench.report import format_stat
+
+    tables = []
+    for task_table in report.tables:
+        accuracy = [m for m in task_table.metrics if m.kind == "accuracy"][:max_metrics]
+        speed = [m for m in task_table.metrics if m.kind == "speed"][:2]
+        metrics = accuracy + speed
+        table = Table(title=f"{task_table.task} (mean ± std over seeds)", title_justify="left")
+        for col in ("dataset", "method", "ok/failed"):
+            table.add_column(col, overflow="fold")
+        for m in metrics:
+            table.add_column(m.label, justify="right")
+        for row in task_table.rows:
+            table.add_row(row.dataset, row.method, f"{row.n_ok}/{row.n_failed}", *[format_stat(row.stats[m.name]) for m in metrics])
+        tables.append(table)
+    return tables
+
+
+@app.command()
+def bench(
+    suite_file: Path = typer.Argument(..., help="Suite YAML file (see docs/benchmarks.md)."),
+    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Results folder (default: results/<suite file stem>)."),
+    executor: str = typer.Option("process", "--executor", "-e", help=EXECUTOR_HELP),
+    workers: Optional[int] = typer.Option(None, "--workers", "-j", help="Worker processes (default: CPUs available)."),
+    address: Optional[str] = typer.Option(None, "--address", help="Dask scheduler address, e.g. tcp://HOST:8786."),
+    force: bool = typer.Option(False, "--force", help="Rerun jobs that already have a result."),
+    report: bool = typer.Option(True, "--report/--no-report", help="Write the report when the run ends."),
+    dry_run: bool = typer.Option(False, "--dry-run", help="Validate and list the jobs, run nothing."),
+) -> None:
+    """Run a benchmark suite: validate it, expand it into jobs, run the unfinished ones, write one JSON per job."""
+    from lidarkit.bench.report import build_report
+    from lidarkit.bench.suite import load_suite
+
+    suite = load_suite(suite_file)
+    out = out or Path("results") / suite_file.stem
+    if dry_run:
+        from lidarkit.bench.results import is_finished
+
+        table = Table(title=f"{suite.name}: {len(suite.jobs)} jobs")
+        for col in ("key", "task", "dataset", "method", "seed", "done"):
+            table.add_column(col)
+        for job in suite.jobs:
+            key = job.key()
+            table.add_row(key, job.task, job.dataset_name, job.method_label, str(job.seed), "yes" if is_finished(out, key) else "")
+        stdout().print(table)
+        return
+    summary = run_with_progress(suite, out, executor=executor, workers=workers, address=address, force=force)
+    print_run_summary(summary)
+    if report:
+        built = build_report(out)
+        stdout().print(f"report: {built.html_path}")
+
+
+@app.command("report")
+def report_cmd(
+    results_dir: Path = typer.Argument(..., help="Folder written by `lidarkit bench`."),
+    title: Optional[str] = typer.Option(None, help="Page title (default: from the suite name)."),
+    plots: bool = typer.Option(True, "--plots/--no-plots", help="Draw and embed plots."),
+) -> None:
+    """Aggregate a results folder into report.md, report.csv and a self-contained report.html."""
+    from lidarkit.bench.report import build_report
+
+    built = build_report(results_dir, title=title, plots=plots)
+    out = stdout()
+    for table in summary_table(built):
+        out.print(table)
+    out.print(f"{built.n_records} results, {len(built.failures)} failed; {len(built.plots)} plots")
+    out.print(f"markdown: {built.markdown_path}\ncsv: {built.csv_path}\nhtml: {built.html_path}")

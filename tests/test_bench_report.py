@@ -1,0 +1,146 @@
+"""Reports: aggregated numbers, CSV/Markdown, and a well-formed self-contained HTML page whose images all exist."""
+
+from __future__ import annotations
+
+import base64
+import csv
+import math
+import textwrap
+from html.parser import HTMLParser
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from lidarkit.bench.report import build_report
+from lidarkit.bench.results import load_results
+from lidarkit.bench.runner import run_suite
+from lidarkit.bench.suite import load_suite
+from lidarkit.cli import main
+from lidarkit.errors import DataError
+
+SUITE = """
+name: report-test
+seeds: [0, 1, 2]
+experiments:
+  - name: walk
+    task: selftest
+    dataset: {kind: synthetic, name: synth}
+    methods:
+      - name: random_walk
+        params: {steps: 40}
+        grid: {noise_m: [0.01, 0.03, 0.1]}
+      - name: fail
+"""
+
+VOID = {"area", "base", "br", "col", "embed", "hr", "img", "input", "link", "meta", "source", "track", "wbr"}
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+class WellFormed(HTMLParser):
+    """Checks that every non-void element is closed in order; collects image sources."""
+
+    def __init__(self):
+        super().__init__()
+        self.stack: list[str] = []
+        self.errors: list[str] = []
+        self.images: list[str] = []
+        self.saw_doctype = False
+
+    def handle_decl(self, decl):
+        self.saw_doctype = decl.lower() == "doctype html"
+
+    def handle_starttag(self, tag, attrs):
+        if tag == "img":
+            self.images.append(dict(attrs).get("src", ""))
+        if tag not in VOID:
+            self.stack.append(tag)
+
+    def handle_endtag(self, tag):
+        if not self.stack or self.stack[-1] != tag:
+            self.errors.append(f"unexpected </{tag}> with open {self.stack[-3:]}")
+        else:
+            self.stack.pop()
+
+
+def check_html(path: Path) -> list[str]:
+    """Parse the page; assert well formed; return image sources after checking each one resolves to a PNG."""
+    parser = WellFormed()
+    parser.feed(path.read_text(encoding="utf-8"))
+    parser.close()
+    assert parser.saw_doctype
+    assert parser.errors == [] and parser.stack == []
+    for src in parser.images:
+        if src.startswith("data:image/png;base64,"):
+            data = base64.b64decode(src.split(",", 1)[1], validate=True)
+        else:
+            target = path.parent / src
+            assert target.is_file(), src
+            data = target.read_bytes()
+        assert data.startswith(PNG_MAGIC) and len(data) > 1000
+    return parser.images
+
+
+@pytest.fixture(scope="module")
+def results_dir(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("report")
+    (tmp / "suite.yaml").write_text(textwrap.dedent(SUITE))
+    run_suite(load_suite(tmp / "suite.yaml"), tmp / "out", executor="serial")
+    return tmp / "out"
+
+
+def test_report_tables_are_mean_and_sample_std_over_seeds(results_dir):
+    report = build_report(results_dir, plots=False)
+    (table,) = report.tables
+    assert table.task == "selftest"
+    rows = {r.method: r for r in table.rows}
+    assert set(rows) == {"random_walk(noise_m=0.01, steps=40)", "random_walk(noise_m=0.03, steps=40)",
+                         "random_walk(noise_m=0.1, steps=40)", "fail"}
+    values = [r["metrics"]["ape_rmse_m"] for r in load_results(results_dir)
+              if r["job"]["params"].get("noise_m") == 0.03]
+    mean, std, n = rows["random_walk(noise_m=0.03, steps=40)"].stats["ape_rmse_m"]
+    assert n == 3
+    assert mean == pytest.approx(np.mean(values), rel=1e-12)
+    assert std == pytest.approx(np.std(values, ddof=1), rel=1e-12)
+    assert (rows["fail"].n_ok, rows["fail"].n_failed) == (0, 3)
+    assert math.isnan(rows["fail"].stats["ape_rmse_m"][0])
+    assert len(report.failures) == 3
+
+    with open(report.csv_path, newline="") as fh:
+        lines = list(csv.DictReader(fh))
+    row = next(r for r in lines if r["method"] == "random_walk(noise_m=0.03, steps=40)" and r["metric"] == "ape_rmse_m")
+    assert float(row["mean"]) == pytest.approx(mean, rel=1e-12) and row["n"] == "3"
+    md = report.markdown_path.read_text()
+    assert "| walk | synth | random_walk(noise_m=0.03, steps=40) | 3/0 |" in md
+    assert "Failed jobs" in md
+
+
+def test_html_is_well_formed_self_contained_and_every_image_exists(results_dir):
+    report = build_report(results_dir)
+    titles = [p.title for p in report.plots]
+    assert any(t.startswith("Trajectories") for t in titles)
+    assert any(t.startswith("Error over time") for t in titles)
+    assert any(t.startswith("RMSE vs iteration") for t in titles)
+    assert any(t.startswith("ape_rmse_m vs noise_m") for t in titles)
+    images = check_html(report.html_path)
+    assert len(images) == len(report.plots)
+    assert all(src.startswith("data:image/png;base64,") for src in images)
+    for p in report.plots:  # the Markdown's image files exist too
+        assert (results_dir / "plots" / p.filename).read_bytes().startswith(PNG_MAGIC)
+
+
+def test_report_cli(results_dir, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["report", str(results_dir), "--no-plots"])
+    assert exc.value.code == 0
+    out = capsys.readouterr().out
+    assert "report.html" in out and "12 results, 3 failed" in out
+
+
+def test_report_on_a_folder_without_results(tmp_path):
+    with pytest.raises(DataError, match="not a bench results folder"):
+        build_report(tmp_path)
+    (tmp_path / "jobs").mkdir()
+    (tmp_path / "jobs" / "broken.json").write_text("{not json")
+    with pytest.raises(DataError, match="no readable job results"):
+        build_report(tmp_path)

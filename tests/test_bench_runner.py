@@ -1,0 +1,182 @@
+"""Runner and executors: identical results on serial/process/dask, failures recorded, kill + resume safe."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+from lidarkit.bench.results import load_results, result_path
+from lidarkit.bench.runner import run_suite
+from lidarkit.bench.suite import load_suite
+from lidarkit.bench.tasks.selftest import run_selftest
+
+TINY = """
+name: tiny
+seeds: [0, 1]
+experiments:
+  - task: selftest
+    dataset: {kind: synthetic, name: synth}
+    methods:
+      - name: random_walk
+        params: {steps: 30}
+        grid: {noise_m: [0.01, 0.1]}
+      - name: fail
+        params: {message: "deliberate failure 42"}
+      - name: burn
+        params: {size: 30, repeats: 3}
+"""
+
+TIMING_FIELDS = {"runtime_s", "started_utc", "finished_utc", "host", "pid"}
+
+
+def suite_file(tmp_path: Path, text: str) -> Path:
+    path = tmp_path / "suite.yaml"
+    path.write_text(textwrap.dedent(text))
+    return path
+
+
+def comparable(out_dir: Path) -> dict[str, dict]:
+    return {r["key"]: {k: v for k, v in r.items() if k not in TIMING_FIELDS or k == "error"} for r in load_results(out_dir)}
+
+
+def test_identical_results_on_serial_process_and_dask(tmp_path):
+    suite = load_suite(suite_file(tmp_path, TINY))
+    assert len(suite.jobs) == 8
+    runs = {}
+    for executor in ("serial", "process", "dask"):
+        summary = run_suite(suite, tmp_path / executor, executor=executor, workers=2 if executor == "process" else 1)
+        assert (summary.total, summary.ran, summary.ok, summary.failed) == (8, 8, 6, 2)
+        runs[executor] = comparable(tmp_path / executor)
+    assert len(runs["serial"]) == 8
+    for record in runs["serial"].values():
+        record.get("error", {}) and record["error"].pop("traceback", None)
+    for executor in ("process", "dask"):
+        for record in runs[executor].values():
+            record.get("error", {}) and record["error"].pop("traceback", None)
+        assert runs[executor] == runs["serial"], executor
+    # and the harness gives what the plain job function gives
+    walk = next(r for r in load_results(tmp_path / "dask") if r["job"]["method"] == "random_walk")
+    direct = run_selftest("random_walk", walk["job"]["params"], walk["job"]["seed"])
+    assert walk["metrics"]["ape_rmse_m"] == pytest.approx(direct.metrics["ape_rmse_m"], rel=0, abs=0)
+
+
+def test_failing_job_is_recorded_and_the_suite_completes(tmp_path):
+    suite = load_suite(suite_file(tmp_path, TINY))
+    summary = run_suite(suite, tmp_path / "out", executor="serial")
+    records = load_results(tmp_path / "out")
+    failed = [r for r in records if r["status"] == "failed"]
+    assert len(records) == 8 and len(failed) == 2
+    for r in failed:
+        assert r["job"]["method"] == "fail"
+        assert r["error"]["type"] == "RuntimeError"
+        assert r["error"]["message"] == "deliberate failure 42"
+        assert "run_selftest" in r["error"]["traceback"]
+    assert all(r["status"] == "ok" and r["metrics"] for r in records if r["job"]["method"] != "fail")
+    assert len(summary.failures) == 2 and "deliberate failure 42" in summary.failures[0][2]
+    # a rerun skips the successful jobs and retries only the failed ones
+    again = run_suite(suite, tmp_path / "out", executor="serial")
+    assert (again.skipped, again.ran, again.failed) == (6, 2, 2)
+    forced = run_suite(suite, tmp_path / "out", executor="serial", force=True)
+    assert (forced.skipped, forced.ran) == (0, 8)
+
+
+def test_result_file_records_key_version_and_resolved_job(tmp_path):
+    from lidarkit import __version__
+
+    suite = load_suite(suite_file(tmp_path, TINY))
+    run_suite(suite, tmp_path / "out", executor="serial")
+    job = suite.jobs[0]
+    record = json.loads(result_path(tmp_path / "out", job.key()).read_text())
+    assert record["key"] == job.key() and record["lidarkit_version"] == __version__
+    assert record["job"] == job.spec()
+    manifest = json.loads((tmp_path / "out" / "suite.json").read_text())
+    assert [j["key"] for j in manifest["jobs"]] == [j.key() for j in suite.jobs]
+
+
+SLEEPS = """
+name: sleeps
+seeds: 12
+experiments:
+  - task: selftest
+    dataset: {kind: synthetic}
+    methods: [{name: sleep, params: {seconds: 0.4}}]
+"""
+
+
+def test_killed_run_resumes_without_redoing_finished_jobs(tmp_path):
+    path = suite_file(tmp_path, SLEEPS)
+    out = tmp_path / "out"
+    jobs_dir = out / "jobs"
+    cmd = [sys.executable, "-m", "lidarkit.cli", "bench", str(path), "--out", str(out),
+           "--executor", "process", "--workers", "2", "--no-report"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            done = list(jobs_dir.glob("[!.]*.json")) if jobs_dir.exists() else []
+            if len(done) >= 3 or proc.poll() is not None:
+                break
+            time.sleep(0.05)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)  # the whole process group: parent and workers, no cleanup
+        proc.wait(timeout=30)
+    assert proc.returncode == -signal.SIGKILL, proc.stderr.read().decode()[-2000:]
+    before = {p.name: p.stat().st_mtime_ns for p in jobs_dir.glob("[!.]*.json")}
+    assert 3 <= len(before) < 12
+    for p in jobs_dir.iterdir():  # every file a reader sees parses; temp files are hidden and ignored
+        if not p.name.startswith("."):
+            assert json.loads(p.read_text())["status"] == "ok"
+
+    summary = run_suite(load_suite(path), out, executor="serial")
+    assert summary.skipped == len(before)
+    assert summary.ran == 12 - len(before)
+    after = {p.name: p.stat().st_mtime_ns for p in jobs_dir.glob("[!.]*.json")}
+    assert len(after) == 12
+    assert {name: after[name] for name in before} == before  # finished jobs were not rewritten
+    assert len(load_results(out)) == 12
+    visible = [p for p in jobs_dir.iterdir() if not p.name.startswith(".")]
+    assert len(visible) == 12 and all(json.loads(p.read_text())["status"] == "ok" for p in visible)
+
+
+def test_worker_crash_is_isolated_to_its_job(tmp_path):
+    """A job that kills its worker process is recorded as failed; the other jobs still succeed."""
+    from lidarkit.bench import executors
+
+    suite = load_suite(suite_file(tmp_path, """
+        seeds: [0, 1, 2]
+        experiments:
+          - task: selftest
+            dataset: {kind: synthetic}
+            methods: [{name: random_walk, params: {steps: 5}}]
+        """))
+    crash_seed = 1
+    records = []
+    runner = executors.ProcessExecutor(workers=2)
+    items = [(job.key(), job.spec()) for job in suite.jobs]
+    items = [(k, {**s, "method": "crash"} if s["seed"] == crash_seed else s) for k, s in items]
+    for key, outcome in runner.run(_crash_or_run, items):
+        records.append((key, outcome))
+    by_key = dict(records)
+    assert len(by_key) == 3
+    for key, spec in items:
+        if spec["method"] == "crash":
+            assert by_key[key]["status"] == "failed" and by_key[key]["error"]["type"] == "WorkerCrashed"
+        else:
+            assert by_key[key]["status"] == "ok"
+
+
+def _crash_or_run(spec):
+    if spec["method"] == "crash":
+        os._exit(3)  # like a C extension aborting the process
+    from lidarkit.bench.worker import execute_job
+
+    return execute_job(spec)

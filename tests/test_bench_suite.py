@@ -1,0 +1,222 @@
+"""Suite parsing and validation: bad suites are refused before anything runs, naming file, key and reason."""
+
+from __future__ import annotations
+
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from lidarkit.bench.datasets import resolve_dataset
+from lidarkit.bench.suite import load_suite
+from lidarkit.cli import main
+from lidarkit.errors import ConfigError, DataError
+
+GOOD = """
+name: tiny
+seeds: 2
+datasets:
+  synth: {kind: synthetic}
+experiments:
+  - name: walk
+    task: selftest
+    dataset: synth
+    methods:
+      - name: random_walk
+        params: {steps: 20}
+        grid: {noise_m: [0.01, 0.02, 0.05]}
+      - sleep
+    seeds: [3, 4, 5]
+  - task: selftest
+    datasets: [synth, {kind: synthetic, name: other}]
+    methods: [{name: burn, grid: {size: [10, 20]}}]
+"""
+
+
+def write(tmp_path: Path, text: str, name: str = "suite.yaml") -> Path:
+    path = tmp_path / name
+    path.write_text(textwrap.dedent(text))
+    return path
+
+
+def test_good_suite_expands_grid_datasets_and_seeds(tmp_path):
+    suite = load_suite(write(tmp_path, GOOD))
+    assert suite.name == "tiny"
+    walk = [j for j in suite.jobs if j.experiment == "walk"]
+    # (3 grid points + 1 sleep) x 3 seeds
+    assert len(walk) == 12
+    assert {j.params["noise_m"] for j in walk if j.method == "random_walk"} == {0.01, 0.02, 0.05}
+    assert all(j.params["steps"] == 20 for j in walk if j.method == "random_walk")
+    assert {j.seed for j in walk} == {3, 4, 5}
+    burn = [j for j in suite.jobs if j.method == "burn"]
+    # 2 grid points x 2 datasets x suite default seeds 0, 1
+    assert len(burn) == 8
+    assert {j.dataset_name for j in burn} == {"synth", "other"}
+    assert {j.seed for j in burn} == {0, 1}
+    keys = [j.key() for j in suite.jobs]
+    assert len(set(keys)) == len(keys)
+
+
+def test_job_key_depends_on_spec_and_version(tmp_path):
+    job = load_suite(write(tmp_path, GOOD)).jobs[0]
+    assert job.key("0.1.0") == job.key("0.1.0")
+    assert job.key("0.1.0") != job.key("0.2.0")
+    other = type(job)(**{**job.spec(), "seed": job.seed + 100})
+    assert other.key("0.1.0") != job.key("0.1.0")
+
+
+BAD = {
+    "unknown_task": (
+        """
+        experiments:
+          - task: icp_magic
+            dataset: {kind: synthetic}
+            methods: [sleep]
+        """,
+        ConfigError,
+        ["unknown task 'icp_magic'", "experiments[0].task", "line 3", "selftest"],
+    ),
+    "unknown_method": (
+        """
+        experiments:
+          - task: selftest
+            dataset: {kind: synthetic}
+            methods: [sleep, {name: teleport}]
+        """,
+        ConfigError,
+        ["unknown selftest method 'teleport'", "experiments[0].methods[1]", "random_walk"],
+    ),
+    "unknown_param": (
+        """
+        experiments:
+          - task: selftest
+            dataset: {kind: synthetic}
+            methods:
+              - name: random_walk
+                grid: {noise_m: [0.1], warp_factor: [9]}
+        """,
+        ConfigError,
+        ["warp_factor", "experiments[0].methods[0]", "line 6", "noise_m"],
+    ),
+    "bad_param_value": (
+        """
+        experiments:
+          - task: selftest
+            dataset: {kind: synthetic}
+            methods: [{name: sleep, params: {seconds: -1}}]
+        """,
+        ConfigError,
+        ["seconds", "greater than or equal to 0"],
+    ),
+    "missing_dataset": (
+        """
+        experiments:
+          - task: selftest
+            dataset: {kind: kitti, path: data/nowhere}
+            methods: [sleep]
+        """,
+        DataError,
+        ["dataset path does not exist", "nowhere", "experiments[0].dataset", "line 4"],
+    ),
+    "undefined_dataset_name": (
+        """
+        experiments:
+          - task: selftest
+            dataset: synth
+            methods: [sleep]
+        """,
+        ConfigError,
+        ["unknown dataset 'synth'"],
+    ),
+    "unknown_key": (
+        """
+        experiments:
+          - task: selftest
+            dataset: {kind: synthetic}
+            method: [sleep]
+        """,
+        ConfigError,
+        ["unknown key 'method'", "experiments[0]"],
+    ),
+    "malformed_yaml": (
+        """
+        experiments:
+          - task: selftest
+            dataset: {kind: synthetic
+            methods: [sleep]
+        """,
+        ConfigError,
+        ["malformed YAML", "line 5"],
+    ),
+    "not_a_mapping": ("- just\n- a list\n", ConfigError, ["YAML mapping"]),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD))
+def test_bad_suite_is_refused_with_file_key_and_reason(tmp_path, case):
+    text, error, fragments = BAD[case]
+    path = write(tmp_path, text, f"{case}.yaml")
+    with pytest.raises(error) as info:
+        load_suite(path)
+    message = str(info.value)
+    assert f"{case}.yaml" in message
+    for fragment in fragments:
+        assert fragment in message, (fragment, message)
+
+
+@pytest.mark.parametrize("case", ["unknown_task", "unknown_param", "missing_dataset", "malformed_yaml"])
+def test_cli_refuses_bad_suite_before_running_anything(tmp_path, capsys, case):
+    text, _, fragments = BAD[case]
+    path = write(tmp_path, text, f"{case}.yaml")
+    out = tmp_path / "out"
+    with pytest.raises(SystemExit) as exc:
+        main(["bench", str(path), "--out", str(out), "--executor", "serial"])
+    assert exc.value.code == 1
+    err = capsys.readouterr().err
+    assert "error:" in err and f"{case}.yaml" in err and fragments[0] in err
+    assert "Traceback" not in err
+    assert not out.exists()  # nothing ran, nothing written
+
+
+def test_missing_suite_file(tmp_path):
+    with pytest.raises(DataError, match="suite file not found"):
+        load_suite(tmp_path / "absent.yaml")
+
+
+def test_relative_dataset_paths_resolve_against_suite_folder(tmp_path, monkeypatch):
+    (tmp_path / "suites" / "data" / "seq").mkdir(parents=True)
+    spec = resolve_dataset({"kind": "folder", "path": "data/seq"}, tmp_path / "suites")
+    assert spec["path"] == str((tmp_path / "suites" / "data" / "seq").resolve())
+    monkeypatch.chdir(tmp_path)  # the working directory does not matter
+    with pytest.raises(DataError, match="does not exist"):
+        resolve_dataset({"kind": "folder", "path": "data/seq"}, tmp_path)
+
+
+def test_generated_dataset_kinds_take_no_path(tmp_path):
+    with pytest.raises(ConfigError, match="takes no 'path'"):
+        resolve_dataset({"kind": "synthetic", "path": "x"}, tmp_path)
+    with pytest.raises(ConfigError, match="needs a 'path'"):
+        resolve_dataset({"kind": "kitti"}, tmp_path)
+
+
+def test_unavailable_task_is_skipped_only_when_asked(tmp_path, monkeypatch):
+    from lidarkit.bench import tasks
+
+    class Missing(tasks.Task):
+        dataset_kinds = ("synthetic",)
+
+        def require(self) -> None:
+            raise ConfigError("needs lidarkit.nothing", source="task")
+
+    monkeypatch.setitem(tasks._REGISTERED, "later", Missing)
+    monkeypatch.delitem(tasks._INSTANCES, "later", raising=False)
+    path = write(tmp_path, """
+        experiments:
+          - {task: later, dataset: {kind: synthetic}, methods: [x]}
+          - {task: selftest, dataset: {kind: synthetic}, methods: [sleep]}
+        """)
+    with pytest.raises(ConfigError, match="needs lidarkit.nothing"):
+        load_suite(path)
+    suite = load_suite(path, skip_unavailable=True)
+    assert [j.task for j in suite.jobs] == ["selftest"]
+    assert suite.skipped == [("later_0", "needs lidarkit.nothing")]
