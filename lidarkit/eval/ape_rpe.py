@@ -1,0 +1,428 @@
+"""Absolute and relative pose error (APE, RPE) computed by evo, returned as frozen result objects.
+
+evo aligns, transforms and scales its trajectories in place, so every call works on fresh copies
+(``Trajectory.to_evo()``); the caller's trajectories are never modified.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from lidarkit.errors import ConfigError, EvaluationError
+from lidarkit.eval.pairing import pair_name, paired
+from lidarkit.trajectory import Trajectory
+
+logger = logging.getLogger(__name__)
+
+ALIGNMENTS = ("none", "se3", "sim3", "scale")
+"""``none``: compare as given; ``se3``: rigid Umeyama; ``sim3``: Umeyama with scale; ``scale``: scale only."""
+
+# lidarkit name -> evo PoseRelation member name
+RELATIONS = {
+    "translation": "translation_part",
+    "rotation": "rotation_part",
+    "rotation_angle_deg": "rotation_angle_deg",
+    "rotation_angle_rad": "rotation_angle_rad",
+    "full": "full_transformation",
+    "point_distance": "point_distance",
+    "point_distance_error_ratio": "point_distance_error_ratio",
+}
+APE_RELATIONS = tuple(r for r in RELATIONS if r != "point_distance_error_ratio")
+RPE_RELATIONS = tuple(RELATIONS)
+
+# lidarkit delta unit -> evo Unit member name
+DELTA_UNITS = {
+    "frames": "frames",
+    "meters": "meters",
+    "m": "meters",
+    "degrees": "degrees",
+    "deg": "degrees",
+    "radians": "radians",
+    "rad": "radians",
+}
+
+STAT_NAMES = ("rmse", "mean", "median", "std", "min", "max", "sse")
+
+
+@dataclass(frozen=True, eq=False)
+class AlignmentTransform:
+    """The similarity applied to the estimate: ``p_aligned = scale * rotation @ p + translation``."""
+
+    method: str
+    rotation: np.ndarray
+    translation: np.ndarray
+    scale: float = 1.0
+    n_poses_used: int = 0
+
+    @property
+    def sim3(self) -> np.ndarray:
+        """``(4, 4)`` matrix with ``scale * rotation`` in the upper-left block."""
+        T = np.eye(4)
+        T[:3, :3] = self.scale * self.rotation
+        T[:3, 3] = self.translation
+        return T
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "method": self.method,
+            "rotation": self.rotation.tolist(),
+            "translation": self.translation.tolist(),
+            "scale": float(self.scale),
+            "n_poses_used": int(self.n_poses_used),
+        }
+
+
+@dataclass(frozen=True, eq=False)
+class _ErrorResult:
+    """Fields shared by APE and RPE: evo's statistics of the per-pose (per-pair) error array."""
+
+    relation: str
+    unit: str
+    align: str
+    align_origin: bool
+    n_to_align: int | None
+    rmse: float
+    mean: float
+    median: float
+    std: float
+    min: float
+    max: float
+    sse: float
+    errors: np.ndarray = field(repr=False)
+    alignment: AlignmentTransform | None
+    ref_name: str
+    est_name: str
+    associated: bool
+    title: str
+    ref: Trajectory = field(repr=False)
+    """Reference as compared (after association)."""
+    est_aligned: Trajectory = field(repr=False)
+    """Estimate as compared (after association and alignment)."""
+
+    @property
+    def stats(self) -> dict[str, float]:
+        return {name: float(getattr(self, name)) for name in STAT_NAMES}
+
+    @property
+    def n_errors(self) -> int:
+        return int(len(self.errors))
+
+    def _base_dict(self, include_errors: bool) -> dict[str, Any]:
+        out: dict[str, Any] = {
+            "title": self.title,
+            "relation": self.relation,
+            "unit": self.unit,
+            "align": self.align,
+            "align_origin": self.align_origin,
+            "n_to_align": self.n_to_align,
+            "ref_name": self.ref_name,
+            "est_name": self.est_name,
+            "associated": self.associated,
+            "n_errors": self.n_errors,
+            "stats": self.stats,
+            "alignment": None if self.alignment is None else self.alignment.to_dict(),
+        }
+        if include_errors:
+            out["errors"] = self.errors.tolist()
+        return out
+
+
+@dataclass(frozen=True, eq=False)
+class APEResult(_ErrorResult):
+    """Absolute pose error: one error per pose pair ``(ref_i, est_i)`` after alignment."""
+
+    def to_dict(self, include_errors: bool = True) -> dict[str, Any]:
+        """JSON-safe dict (plain floats, lists)."""
+        return {"metric": "ape", **self._base_dict(include_errors)}
+
+
+@dataclass(frozen=True, eq=False)
+class RPEResult(_ErrorResult):
+    """Relative pose error: one error per pose pair ``(i, j)`` selected by ``delta`` in ``delta_unit``."""
+
+    delta: float = 1.0
+    delta_unit: str = "frames"
+    all_pairs: bool = False
+    pairs_from_reference: bool = False
+    legacy_pairs: bool = False
+    pairs: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), dtype=np.int64), repr=False)
+    """``(M, 2)`` int: indices ``(i, j)`` (into ``ref``/``est_aligned``) of each compared pair."""
+
+    def to_dict(self, include_errors: bool = True) -> dict[str, Any]:
+        """JSON-safe dict (plain floats, lists)."""
+        out = {"metric": "rpe", **self._base_dict(include_errors)}
+        out.update(
+            delta=self.delta,
+            delta_unit=self.delta_unit,
+            all_pairs=self.all_pairs,
+            pairs_from_reference=self.pairs_from_reference,
+            legacy_pairs=self.legacy_pairs,
+        )
+        if include_errors:
+            out["pairs"] = self.pairs.tolist()
+        return out
+
+
+# ---- helpers -------------------------------------------------------------------------------------
+def _relation(name: str, allowed: tuple[str, ...]):
+    from evo.core.metrics import PoseRelation
+
+    if name not in allowed:
+        raise ConfigError(f"unknown pose relation {name!r}; known: {', '.join(allowed)}", source="relation")
+    return PoseRelation[RELATIONS[name]]
+
+
+def _check_align(align: str, align_origin: bool, n_to_align: int | None, n_poses: int, source: str) -> int:
+    """Validate the alignment settings; return evo's ``n`` (-1 = all poses)."""
+    if align not in ALIGNMENTS:
+        raise ConfigError(f"unknown alignment {align!r}; known: {', '.join(ALIGNMENTS)}", source="align")
+    if align_origin and align != "none":
+        raise ConfigError("align_origin cannot be combined with align != 'none'", source="align_origin")
+    if n_to_align is None:
+        return -1
+    if align == "none":
+        raise ConfigError("n_to_align needs align = se3, sim3 or scale", source="n_to_align")
+    n = int(n_to_align)
+    if n != n_to_align or not 1 <= n <= n_poses:
+        raise EvaluationError(f"n_to_align must be an integer in [1, {n_poses}], got {n_to_align}", source=source)
+    return n
+
+
+def _aligned_copies(ref: Trajectory, est: Trajectory, align: str, align_origin: bool, n: int, source: str):
+    """Fresh evo copies of ``ref`` and ``est``, the estimate aligned as asked; plus the applied transform."""
+    from evo import EvoException
+
+    ref_evo, est_evo = ref.to_evo(), est.to_evo()
+    transform = None
+    try:
+        if align != "none":
+            if align in ("se3", "sim3") and (len(ref) if n == -1 else n) < 3:
+                raise EvaluationError(f"{align} alignment needs at least 3 poses", source=source)
+            R, t, s = est_evo.align(
+                ref_evo, correct_scale=(align == "sim3"), correct_only_scale=(align == "scale"), n=n
+            )
+            if align == "scale":
+                R, t = np.eye(3), np.zeros(3)
+            elif align == "se3":
+                s = 1.0
+            transform = AlignmentTransform(
+                align, np.asarray(R, float), np.asarray(t, float), float(s), len(ref) if n == -1 else n
+            )
+        elif align_origin:
+            T = np.asarray(est_evo.align_origin(ref_evo), float)
+            transform = AlignmentTransform("origin", T[:3, :3], T[:3, 3], 1.0, 1)
+    except EvoException as err:
+        raise EvaluationError(f"alignment failed: {err}", source=source) from err
+    if transform is not None and not (np.isfinite(transform.sim3).all() and transform.scale > 0):
+        raise EvaluationError(f"degenerate {transform.method} alignment (non-finite or zero scale)", source=source)
+    return ref_evo, est_evo, transform
+
+
+def _title(metric, align: str, align_origin: bool, n: int) -> str:
+    suffix = {
+        "none": "not aligned",
+        "se3": "with SE(3) Umeyama alignment",
+        "sim3": "with Sim(3) Umeyama alignment",
+        "scale": "scale corrected",
+    }[align]
+    if align_origin:
+        suffix = "with origin alignment"
+    if align != "none" and n != -1:
+        suffix += f", aligned poses: {n}"
+    return f"{str(metric).replace(chr(10), ' ')} ({suffix})"
+
+
+def _stats(metric, source: str) -> dict[str, float]:
+    errors = np.asarray(metric.error, dtype=float)
+    if errors.size == 0:
+        raise EvaluationError("no errors were computed (empty comparison)", source=source)
+    stats = metric.get_all_statistics()
+    return {name: float(stats[name]) for name in STAT_NAMES}
+
+
+# ---- public API ------------------------------------------------------------------------------------
+def align_trajectory(
+    ref: Trajectory, est: Trajectory, align: str = "se3", *, n_to_align: int | None = None
+) -> tuple[Trajectory, AlignmentTransform | None]:
+    """Copy of ``est`` aligned onto ``ref`` (equal length) with evo's Umeyama alignment, and the transform."""
+    source = pair_name(ref, est)
+    ref, est = paired(ref, est)
+    n = _check_align(align, False, n_to_align, len(ref), source)
+    _, est_evo, transform = _aligned_copies(ref, est, align, False, n, source)
+    return Trajectory.from_evo(est_evo, name=est.name), transform
+
+
+def ape(
+    ref: Trajectory,
+    est: Trajectory,
+    align: str = "none",
+    relation: str = "translation",
+    *,
+    align_origin: bool = False,
+    n_to_align: int | None = None,
+    associate: bool = False,
+    max_diff_s: float = 0.01,
+) -> APEResult:
+    """Absolute pose error of ``est`` against ``ref`` (evo ``APE``).
+
+    ``align``: one of ``ALIGNMENTS`` (Umeyama on positions, using the first ``n_to_align`` poses or all);
+    ``align_origin``: instead move the estimate so its first pose equals the reference's first pose.
+    ``relation``: one of ``APE_RELATIONS``; units: translation/point_distance m, rotation_angle_* deg/rad,
+    rotation/full unit-less (Frobenius norm of ``R - I`` / ``E - I``).
+    Trajectories must have equal length unless ``associate`` (timestamps, within ``max_diff_s``).
+    """
+    from evo import EvoException
+    from evo.core import metrics
+
+    source = pair_name(ref, est)
+    pose_relation = _relation(relation, APE_RELATIONS)
+    ref, est = paired(ref, est, associate=associate, max_diff_s=max_diff_s)
+    n = _check_align(align, align_origin, n_to_align, len(ref), source)
+    ref_evo, est_evo, transform = _aligned_copies(ref, est, align, align_origin, n, source)
+    metric = metrics.APE(pose_relation)
+    try:
+        metric.process_data((ref_evo, est_evo))
+    except EvoException as err:
+        raise EvaluationError(f"APE failed: {err}", source=source) from err
+    stats = _stats(metric, source)
+    return APEResult(
+        relation=relation,
+        unit=metric.unit.value,
+        align=align,
+        align_origin=align_origin,
+        n_to_align=n_to_align,
+        **stats,
+        errors=np.array(metric.error, dtype=float),
+        alignment=transform,
+        ref_name=ref.name,
+        est_name=est.name,
+        associated=associate,
+        title=_title(metric, align, align_origin, n),
+        ref=ref,
+        est_aligned=Trajectory.from_evo(est_evo, name=est.name),
+    )
+
+
+def rpe(
+    ref: Trajectory,
+    est: Trajectory,
+    delta: float = 1,
+    delta_unit: str = "frames",
+    *,
+    all_pairs: bool = False,
+    align: str = "none",
+    relation: str = "translation",
+    align_origin: bool = False,
+    n_to_align: int | None = None,
+    rel_delta_tol: float = 0.1,
+    pairs_from_reference: bool = False,
+    legacy_pairs: bool = False,
+    associate: bool = False,
+    max_diff_s: float = 0.01,
+) -> RPEResult:
+    """Relative pose error over pose pairs ``delta`` apart (evo ``RPE``).
+
+    ``delta_unit``: frames (integer delta), meters / degrees / radians of travelled path or rotation
+    (pairs are chosen on the estimate unless ``pairs_from_reference``; ``all_pairs`` uses every start pose,
+    accepting pairs within ``rel_delta_tol * delta``). Error per pair: ``E = (Q_i^-1 Q_j)^-1 (P_i^-1 P_j)``.
+    ``legacy_pairs``: path/angle deltas only, consecutive pairs: reproduce evo releases before 1.30-ish
+    (e.g. evo's stored reference results), whose first pair began at the first pose reaching ``delta``
+    instead of at pose 0; i.e. the first pair of today's selection is dropped.
+    """
+    from evo import EvoException
+    from evo.core import metrics
+    from evo.core.units import Unit
+
+    source = pair_name(ref, est)
+    pose_relation = _relation(relation, RPE_RELATIONS)
+    if delta_unit not in DELTA_UNITS:
+        raise ConfigError(f"unknown delta unit {delta_unit!r}; known: {', '.join(DELTA_UNITS)}", source="delta_unit")
+    unit = Unit[DELTA_UNITS[delta_unit]]
+    delta_unit = DELTA_UNITS[delta_unit]
+    try:
+        delta = float(delta)
+    except (TypeError, ValueError):
+        raise ConfigError(f"delta must be a number, got {delta!r}", source="delta") from None
+    if not np.isfinite(delta) or delta <= 0:
+        raise ConfigError(f"delta must be > 0, got {delta}", source="delta")
+    if unit is Unit.frames and not delta.is_integer():
+        raise ConfigError(f"delta in frames must be an integer, got {delta}", source="delta")
+    if legacy_pairs and (unit is Unit.frames or all_pairs):
+        raise ConfigError("legacy_pairs applies to consecutive pairs with a path or angle delta", source="legacy_pairs")
+    if not 0 <= rel_delta_tol < 1:
+        raise ConfigError(f"rel_delta_tol must be in [0, 1), got {rel_delta_tol}", source="rel_delta_tol")
+    ref, est = paired(ref, est, associate=associate, max_diff_s=max_diff_s)
+    n = _check_align(align, align_origin, n_to_align, len(ref), source)
+    if unit is Unit.frames and int(delta) >= len(ref):
+        raise EvaluationError(f"delta of {int(delta)} frames needs more than {len(ref)} poses", source=source)
+    ref_evo, est_evo, transform = _aligned_copies(ref, est, align, align_origin, n, source)
+
+    evo_delta: float = int(delta) if unit is Unit.frames else delta
+    try:
+        pair_poses = ref_evo.poses_se3 if pairs_from_reference else est_evo.poses_se3
+        pairs = np.array(
+            metrics.id_pairs_from_delta(pair_poses, evo_delta, unit, rel_delta_tol, all_pairs=all_pairs), dtype=np.int64
+        ).reshape(-1, 2)
+        if legacy_pairs:
+            # Consecutive pairs form a chain; reduce both copies to the chain without its first pair and
+            # let evo compare consecutive poses of the reduced copies.
+            pairs = pairs[1:]
+            if len(pairs) == 0:
+                raise EvaluationError(
+                    f"delta = {delta:g} ({delta_unit}) leaves no pair after dropping the first one", source=source
+                )
+            chain = np.concatenate([pairs[:1, 0], pairs[:, 1]])
+            ref_evo.reduce_to_ids(chain)
+            est_evo.reduce_to_ids(chain)
+            metric = metrics.RPE(pose_relation, 1, Unit.frames, rel_delta_tol, False, pairs_from_reference)
+        else:
+            metric = metrics.RPE(pose_relation, evo_delta, unit, rel_delta_tol, all_pairs, pairs_from_reference)
+        metric.process_data((ref_evo, est_evo))
+    except EvoException as err:
+        raise EvaluationError(f"RPE failed: {err}", source=source) from err
+    stats = _stats(metric, source)
+    if relation == "point_distance_error_ratio" and len(metric.error) != len(pairs):
+        keep = np.isin(pairs[:, 1], np.asarray(metric.delta_ids)) if not legacy_pairs else slice(None)
+        pairs = pairs[keep]
+    title = _title(metric, align, align_origin, n)
+    if legacy_pairs:
+        title = title.replace("delta = 1 (frames)", f"delta = {delta:g} ({Unit[delta_unit].value}), legacy pairs")
+    return RPEResult(
+        relation=relation,
+        unit=metric.unit.value,
+        align=align,
+        align_origin=align_origin,
+        n_to_align=n_to_align,
+        **stats,
+        errors=np.array(metric.error, dtype=float),
+        alignment=transform,
+        ref_name=ref.name,
+        est_name=est.name,
+        associated=associate,
+        title=title,
+        ref=ref,
+        est_aligned=_est_from_evo_unreduced(est, transform, align_origin),
+        delta=int(delta) if unit is Unit.frames else delta,
+        delta_unit=delta_unit,
+        all_pairs=all_pairs,
+        pairs_from_reference=pairs_from_reference,
+        legacy_pairs=legacy_pairs,
+        pairs=pairs,
+    )
+
+
+def _est_from_evo_unreduced(est: Trajectory, transform: AlignmentTransform | None, align_origin: bool) -> Trajectory:
+    """The full estimate with the applied alignment (the evo copy may have been reduced to pair ids)."""
+    if transform is None:
+        return est
+    poses = est.poses_se3.copy()
+    if transform.method == "origin":
+        return est.transformed(T_left=transform.sim3)
+    poses[:, :3, 3] = transform.scale * poses[:, :3, 3]
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = transform.rotation, transform.translation
+    return Trajectory(T @ poses, est.timestamps_s, est.name, dict(est.meta))

@@ -1,0 +1,117 @@
+"""One call that scores an estimate every standard way: APE and RPE (translation and rotation), KITTI drift."""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import asdict, dataclass
+from typing import Any
+
+from lidarkit.errors import ConfigError
+from lidarkit.eval.ape_rpe import APEResult, RPEResult, ape, rpe
+from lidarkit.eval.kitti_drift import KITTI_LENGTHS_M, KITTI_STEP_FRAMES, DriftResult, drift_segments_possible, kitti_drift
+from lidarkit.eval.pairing import paired
+from lidarkit.trajectory import Trajectory
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class EvaluationSettings:
+    """Settings of :func:`evaluate` with their defaults (the CLI's defaults come from here).
+
+    ``align`` applies to APE and RPE (a rigid alignment does not change RPE; ``sim3`` rescales it).
+    ``drift``: compute the KITTI drift when the reference path is longer than the shortest segment length.
+    """
+
+    align: str = "se3"
+    delta: float = 1
+    delta_unit: str = "frames"
+    all_pairs: bool = False
+    pairs_from_reference: bool = False
+    legacy_pairs: bool = False
+    associate: bool = False
+    max_diff_s: float = 0.01
+    drift: bool = True
+    drift_lengths_m: tuple[float, ...] = KITTI_LENGTHS_M
+    drift_step_frames: int = KITTI_STEP_FRAMES
+
+    def to_dict(self) -> dict[str, Any]:
+        out = asdict(self)
+        out["drift_lengths_m"] = [float(x) for x in self.drift_lengths_m]
+        return out
+
+
+@dataclass(frozen=True, eq=False)
+class Evaluation:
+    """APE/RPE in translation (m) and rotation (deg), and KITTI drift (None with ``drift_note`` if skipped)."""
+
+    ref_name: str
+    est_name: str
+    n_poses: int
+    ref_length_m: float
+    settings: EvaluationSettings
+    ape: APEResult
+    ape_rotation: APEResult
+    rpe: RPEResult
+    rpe_rotation: RPEResult
+    drift: DriftResult | None
+    drift_note: str = ""
+
+    def to_dict(self, include_errors: bool = False) -> dict[str, Any]:
+        """JSON-safe dict; per-pose error arrays only with ``include_errors``."""
+        return {
+            "ref_name": self.ref_name,
+            "est_name": self.est_name,
+            "n_poses": self.n_poses,
+            "ref_length_m": self.ref_length_m,
+            "settings": self.settings.to_dict(),
+            "ape": self.ape.to_dict(include_errors),
+            "ape_rotation": self.ape_rotation.to_dict(include_errors),
+            "rpe": self.rpe.to_dict(include_errors),
+            "rpe_rotation": self.rpe_rotation.to_dict(include_errors),
+            "kitti_drift": None if self.drift is None else self.drift.to_dict(),
+            "kitti_drift_note": self.drift_note,
+        }
+
+
+def evaluate(ref: Trajectory, est: Trajectory, settings: EvaluationSettings | None = None, **overrides) -> Evaluation:
+    """Score ``est`` against ``ref`` with ``settings`` (or ``EvaluationSettings(**overrides)``)."""
+    if settings is None:
+        try:
+            settings = EvaluationSettings(**overrides)
+        except TypeError as err:
+            raise ConfigError(f"unknown evaluation setting: {err}", source="evaluate") from None
+    elif overrides:
+        raise ConfigError("pass either settings or keyword overrides, not both", source="evaluate")
+    s = settings
+    ref, est = paired(ref, est, associate=s.associate, max_diff_s=s.max_diff_s)
+    rpe_kw = dict(
+        delta=s.delta,
+        delta_unit=s.delta_unit,
+        all_pairs=s.all_pairs,
+        align=s.align,
+        pairs_from_reference=s.pairs_from_reference,
+        legacy_pairs=s.legacy_pairs,
+    )
+    drift, note = None, ""
+    if not s.drift:
+        note = "not requested"
+    elif drift_segments_possible(ref, s.drift_lengths_m):
+        drift = kitti_drift(ref, est, s.drift_lengths_m, s.drift_step_frames)
+    else:
+        note = f"reference path {ref.length_m:.1f} m is not longer than {min(s.drift_lengths_m):g} m"
+    if note:
+        logger.info("KITTI drift skipped: %s", note)
+    return Evaluation(
+        ref_name=ref.name,
+        est_name=est.name,
+        n_poses=len(ref),
+        ref_length_m=ref.length_m,
+        settings=s,
+        ape=ape(ref, est, s.align, "translation"),
+        ape_rotation=ape(ref, est, s.align, "rotation_angle_deg"),
+        rpe=rpe(ref, est, relation="translation", **rpe_kw),
+        rpe_rotation=rpe(ref, est, relation="rotation_angle_deg", **rpe_kw),
+        drift=drift,
+        drift_note=note,
+    )

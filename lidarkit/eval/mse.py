@@ -1,0 +1,25 @@
+"""Position mean squared error, the particle-filter report's score (``MSE from the 10th frame``)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from lidarkit.errors import ConfigError, EvaluationError
+from lidarkit.eval.pairing import pair_name, paired
+from lidarkit.trajectory import Trajectory
+
+
+def position_mse(ref: Trajectory, est: Trajectory, start: int = 0, *, dims: int = 3) -> float:
+    """Mean over frames ``i >= start`` of the squared position error ``|p_est_i - p_ref_i|^2`` (m^2).
+
+    No alignment. ``dims=3`` uses x, y, z; ``dims=2`` only x, y (planar filters; identical to 3 when z is 0).
+    Trajectories must have equal length; ``start`` skips the filter's convergence phase.
+    """
+    source = pair_name(ref, est)
+    if dims not in (2, 3):
+        raise ConfigError(f"dims must be 2 or 3, got {dims}", source="dims")
+    ref, est = paired(ref, est)
+    if int(start) != start or not 0 <= start < len(ref):
+        raise EvaluationError(f"start must be a frame index in [0, {len(ref) - 1}], got {start}", source=source)
+    diff = est.poses_se3[int(start):, :dims, 3] - ref.poses_se3[int(start):, :dims, 3]
+    return float(np.mean(np.sum(diff * diff, axis=1)))

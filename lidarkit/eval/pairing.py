@@ -1,0 +1,59 @@
+"""Pair a reference and an estimate pose by pose: equal length (frame-aligned) or associated by timestamps (evo)."""
+
+from __future__ import annotations
+
+import logging
+
+from lidarkit.errors import EvaluationError
+from lidarkit.trajectory import Trajectory
+
+logger = logging.getLogger(__name__)
+
+
+def pair_name(ref: Trajectory, est: Trajectory) -> str:
+    """``"est vs ref"`` label used as the source of evaluation errors."""
+    return f"{getattr(est, 'name', '') or 'estimate'} vs {getattr(ref, 'name', '') or 'reference'}"
+
+
+def paired(
+    ref: Trajectory, est: Trajectory, *, associate: bool = False, max_diff_s: float = 0.01
+) -> tuple[Trajectory, Trajectory]:
+    """Return ``(ref, est)`` with one pose each per comparison.
+
+    Without ``associate`` both must already have the same number of poses (pose i of one is pose i of the
+    other). With ``associate`` both need timestamps and are matched by nearest timestamp within
+    ``max_diff_s`` seconds (``evo.core.sync.associate_trajectories``); unmatched poses are dropped.
+    """
+    if not isinstance(ref, Trajectory) or not isinstance(est, Trajectory):
+        raise EvaluationError("reference and estimate must be lidarkit Trajectory objects", source="evaluation")
+    source = pair_name(ref, est)
+    if not associate:
+        if len(ref) != len(est):
+            hint = (
+                "; both have timestamps: pass associate=True (--associate) to match them by time"
+                if ref.timestamps_s is not None and est.timestamps_s is not None
+                else ""
+            )
+            raise EvaluationError(
+                f"trajectories differ in length ({len(ref)} reference vs {len(est)} estimated poses){hint}",
+                source=source,
+            )
+        if len(ref) == 0:
+            raise EvaluationError("trajectories are empty", source=source)
+        return ref, est
+    if ref.timestamps_s is None or est.timestamps_s is None:
+        missing = "reference" if ref.timestamps_s is None else "estimate"
+        raise EvaluationError(f"cannot associate by time: the {missing} has no timestamps", source=source)
+    if not max_diff_s > 0:
+        raise EvaluationError(f"max_diff_s must be > 0, got {max_diff_s}", source=source)
+    from evo import EvoException
+    from evo.core import sync
+
+    try:
+        ref_evo, est_evo = sync.associate_trajectories(ref.to_evo(), est.to_evo(), max_diff=float(max_diff_s))
+    except EvoException as err:
+        raise EvaluationError(f"timestamp association failed: {err}", source=source) from err
+    ref_out = Trajectory.from_evo(ref_evo, name=ref.name)
+    est_out = Trajectory.from_evo(est_evo, name=est.name)
+    logger.info("associated %d of %d/%d poses (max diff %.3g s)", len(ref_out), len(ref), len(est), max_diff_s)
+    return ref_out, est_out

@@ -1,0 +1,142 @@
+"""PNG plots of evaluation results (matplotlib, Agg canvas; no global backend change, nothing shown).
+
+Only this module imports matplotlib; every file is written atomically.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from lidarkit.atomic import atomic_path
+from lidarkit.errors import ConfigError
+from lidarkit.eval.ape_rpe import APEResult, RPEResult
+from lidarkit.eval.evaluate import Evaluation
+from lidarkit.trajectory import Trajectory
+
+PLANES = ("auto", "xy", "xz", "yz")
+_AXIS = {"x": 0, "y": 1, "z": 2}
+
+
+def _figure(width_in: float, height_in: float):
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(width_in, height_in), dpi=100, layout="constrained")
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def _save(fig, path: str | os.PathLike) -> Path:
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format=Path(path).suffix.lstrip(".") or "png")
+    return Path(path)
+
+
+def choose_plane(ref: Trajectory, plane: str = "auto") -> str:
+    """The two axes to draw: as given, or (``auto``) the two along which the reference spreads most.
+
+    ``auto`` gives ``xy`` for usual world/LiDAR frames (z up) and ``xz`` for KITTI camera-frame poses (y down).
+    """
+    if plane not in PLANES:
+        raise ConfigError(f"unknown plot plane {plane!r}; known: {', '.join(PLANES)}", source="plane")
+    if plane != "auto":
+        return plane
+    spread = np.ptp(ref.positions_xyz, axis=0) if len(ref) else np.ones(3)
+    keep = sorted(np.argsort(spread)[1:])
+    return "".join("xyz"[i] for i in keep)
+
+
+def _draw_trajectories(ax, ref: Trajectory, est: Trajectory, plane: str, est_label: str) -> None:
+    i, j = _AXIS[plane[0]], _AXIS[plane[1]]
+    p_ref, p_est = ref.positions_xyz, est.positions_xyz
+    ax.plot(p_ref[:, i], p_ref[:, j], "--", color="0.3", lw=1.2, label=ref.name or "reference")
+    ax.plot(p_est[:, i], p_est[:, j], "-", color="tab:blue", lw=1.0, label=est_label)
+    ax.plot(p_ref[:1, i], p_ref[:1, j], "ko", ms=4, label="start")
+    ax.set_xlabel(f"{plane[0]} (m)")
+    ax.set_ylabel(f"{plane[1]} (m)")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.grid(True, lw=0.3)
+    ax.legend(fontsize=8, loc="best")
+
+
+def _error_axis(result: APEResult | RPEResult) -> tuple[np.ndarray, str]:
+    """x values of each error: seconds from start when timestamps exist, else frame index."""
+    frames = result.pairs[:, 1] if isinstance(result, RPEResult) else np.arange(result.n_errors)
+    ts = result.ref.timestamps_s
+    if ts is not None and len(frames):
+        return ts[frames] - ts[0], "time from start (s)"
+    return frames.astype(float), "frame"
+
+
+def _draw_errors(ax, result: APEResult | RPEResult) -> None:
+    x, xlabel = _error_axis(result)
+    ax.plot(x, result.errors, lw=0.8, color="tab:red")
+    ax.axhline(result.rmse, color="k", lw=0.8, ls="--", label=f"rmse {result.rmse:.4g}")
+    ax.axhline(result.mean, color="tab:green", lw=0.8, ls=":", label=f"mean {result.mean:.4g}")
+    kind = "APE" if isinstance(result, APEResult) else "RPE"
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(f"{kind} {result.relation} ({result.unit})")
+    ax.set_title(result.title, fontsize=8)
+    ax.grid(True, lw=0.3)
+    ax.legend(fontsize=8, loc="upper left")
+
+
+def plot_trajectories(
+    ref: Trajectory, est: Trajectory, path: str | os.PathLike, *, plane: str = "auto", title: str = ""
+) -> Path:
+    """Top view of both trajectories (pass the aligned estimate, e.g. ``APEResult.est_aligned``) as a PNG."""
+    plane = choose_plane(ref, plane)
+    fig = _figure(6.5, 6.0)
+    ax = fig.add_subplot(1, 1, 1)
+    _draw_trajectories(ax, ref, est, plane, est.name or "estimate")
+    if title:
+        ax.set_title(title, fontsize=9)
+    return _save(fig, path)
+
+
+def plot_errors(result: APEResult | RPEResult, path: str | os.PathLike) -> Path:
+    """Error over time (or frames) of an APE/RPE result, with its rmse and mean, as a PNG."""
+    fig = _figure(8.0, 3.5)
+    _draw_errors(fig.add_subplot(1, 1, 1), result)
+    return _save(fig, path)
+
+
+def plot_evaluation(evaluation: Evaluation, path: str | os.PathLike, *, plane: str = "auto") -> Path:
+    """Four panels: trajectories after alignment, APE and RPE over time, KITTI drift per segment length."""
+    ape_res = evaluation.ape
+    plane = choose_plane(ape_res.ref, plane)
+    fig = _figure(12.0, 9.0)
+    axes = fig.subplots(2, 2)
+    align = {"none": "not aligned", "se3": "SE(3) aligned", "sim3": "Sim(3) aligned", "scale": "scale corrected"}
+    est_label = f"{evaluation.est_name or 'estimate'} ({align[ape_res.align]})"
+    _draw_trajectories(axes[0, 0], ape_res.ref, ape_res.est_aligned, plane, est_label)
+    axes[0, 0].set_title(f"{evaluation.est_name} vs {evaluation.ref_name}", fontsize=9)
+    _draw_errors(axes[0, 1], ape_res)
+    _draw_errors(axes[1, 0], evaluation.rpe)
+    ax = axes[1, 1]
+    drift = evaluation.drift
+    if drift is None or not drift.valid:
+        ax.text(0.5, 0.5, f"KITTI drift not computed:\n{evaluation.drift_note}", ha="center", va="center", fontsize=9)
+        ax.set_axis_off()
+    else:
+        rows = [r for r in drift.per_length if r.n_segments]
+        lengths = np.array([r.length_m for r in rows])
+        width = 0.4 * (lengths[1] - lengths[0] if len(lengths) > 1 else 100.0)
+        ax.bar(lengths - width / 2, [r.translation_pct for r in rows], width, color="tab:blue", label="translation (%)")
+        ax2 = ax.twinx()
+        ax2.bar(lengths + width / 2, [r.rotation_deg_per_100m for r in rows], width, color="tab:orange",
+                label="rotation (deg/100 m)")
+        ax.set_xlabel("segment length (m)")
+        ax.set_ylabel("translational error (%)")
+        ax2.set_ylabel("rotational error (deg/100 m)")
+        ax.set_title(
+            f"KITTI drift: {drift.translation_pct:.3f} %, {drift.rotation_deg_per_100m:.3f} deg/100 m "
+            f"({drift.n_segments} segments)",
+            fontsize=9,
+        )
+        handles = ax.get_legend_handles_labels()[0] + ax2.get_legend_handles_labels()[0]
+        ax.legend(handles, [h.get_label() for h in handles], fontsize=8, loc="upper right")
+    return _save(fig, path)

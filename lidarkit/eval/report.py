@@ -1,0 +1,119 @@
+"""Evaluation results as tables (rich, Markdown) and JSON files (written atomically)."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from lidarkit import atomic
+from lidarkit.eval.evaluate import Evaluation
+
+STAT_COLUMNS = ("rmse", "mean", "median", "std", "min", "max")
+
+
+def _fmt(value: float | None, digits: int = 5) -> str:
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "–"
+    return f"{value:.{digits}g}" if abs(value) < 1e4 else f"{value:.1f}"
+
+
+def metric_rows(evaluation: Evaluation) -> tuple[list[str], list[list[str]]]:
+    """Header and rows of the APE/RPE table: one column per metric, one row per statistic."""
+    results = (evaluation.ape, evaluation.ape_rotation, evaluation.rpe, evaluation.rpe_rotation)
+    header = ["", *(f"{name} ({res.unit})" for name, res in zip(("APE transl.", "APE rot.", "RPE transl.", "RPE rot."), results))]
+    rows = [[stat, *(_fmt(getattr(res, stat)) for res in results)] for stat in STAT_COLUMNS]
+    rows.append(["n", *(str(res.n_errors) for res in results)])
+    return header, rows
+
+
+def drift_rows(evaluation: Evaluation) -> tuple[list[str], list[list[str]]]:
+    """Header and rows of the KITTI drift table: one row per segment length, then all segments pooled."""
+    header = ["length (m)", "segments", "t_err (%)", "r_err (deg/100m)"]
+    drift = evaluation.drift
+    if drift is None:
+        return header, []
+    rows = [
+        [f"{r.length_m:g}", str(r.n_segments), _fmt(r.translation_pct), _fmt(r.rotation_deg_per_100m)]
+        for r in drift.per_length
+    ]
+    rows.append(["all", str(drift.n_segments), _fmt(drift.translation_pct), _fmt(drift.rotation_deg_per_100m)])
+    return header, rows
+
+
+def _settings_line(evaluation: Evaluation) -> str:
+    s = evaluation.settings
+    pairs = "all pairs" if s.all_pairs else ("legacy pairs" if s.legacy_pairs else "consecutive pairs")
+    return f"align={s.align}, RPE delta={s.delta:g} {s.delta_unit} ({pairs})" + (", associated" if s.associate else "")
+
+
+def summary_rows(evaluations: Sequence[Evaluation]) -> tuple[list[str], list[list[str]]]:
+    """One row per evaluation: headline numbers for comparing several estimates."""
+    header = ["estimate", "reference", "poses", "APE rmse (m)", "APE rot rmse (deg)", "RPE rmse (m)",
+              "RPE rot rmse (deg)", "drift t (%)", "drift r (deg/100m)"]
+    rows = []
+    for ev in evaluations:
+        d = ev.drift if ev.drift is not None and ev.drift.valid else None
+        rows.append([
+            ev.est_name, ev.ref_name, str(ev.n_poses), _fmt(ev.ape.rmse), _fmt(ev.ape_rotation.rmse),
+            _fmt(ev.rpe.rmse), _fmt(ev.rpe_rotation.rmse),
+            _fmt(None if d is None else d.translation_pct), _fmt(None if d is None else d.rotation_deg_per_100m),
+        ])
+    return header, rows
+
+
+def _rich(title: str, header: list[str], rows: list[list[str]]):
+    from rich.table import Table
+
+    table = Table(title=title, title_style="bold", header_style="bold")
+    for i, name in enumerate(header):
+        table.add_column(name, justify="left" if i == 0 else "right")
+    for row in rows:
+        table.add_row(*row)
+    return table
+
+
+def evaluation_table(evaluation: Evaluation):
+    """rich Table of one evaluation's metrics."""
+    title = (f"{evaluation.est_name} vs {evaluation.ref_name}: {evaluation.n_poses} poses, "
+             f"{evaluation.ref_length_m:.1f} m\n{_settings_line(evaluation)}")
+    return _rich(title, *metric_rows(evaluation))
+
+
+def drift_table(evaluation: Evaluation):
+    """rich Table of the KITTI drift per segment length."""
+    return _rich("KITTI drift (devkit metric)", *drift_rows(evaluation))
+
+
+def summary_table(evaluations: Sequence[Evaluation], title: str = "Evaluation summary"):
+    """rich Table comparing several evaluations."""
+    return _rich(title, *summary_rows(evaluations))
+
+
+def markdown_table(header: list[str], rows: list[list[str]]) -> str:
+    """GitHub-flavoured Markdown table."""
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+    lines += ["| " + " | ".join(row) + " |" for row in rows]
+    return "\n".join(lines) + "\n"
+
+
+def evaluation_markdown(evaluation: Evaluation) -> str:
+    """Markdown report of one evaluation: metric table plus KITTI per-length table."""
+    parts = [
+        f"### {evaluation.est_name} vs {evaluation.ref_name}\n",
+        f"{evaluation.n_poses} poses, reference path {evaluation.ref_length_m:.1f} m; {_settings_line(evaluation)}.\n",
+        markdown_table(*metric_rows(evaluation)),
+    ]
+    if evaluation.drift is not None:
+        parts += ["\nKITTI drift (devkit metric) per segment length:\n", markdown_table(*drift_rows(evaluation))]
+    elif evaluation.drift_note:
+        parts.append(f"\nKITTI drift not computed: {evaluation.drift_note}.\n")
+    return "\n".join(parts)
+
+
+def write_json(data: dict[str, Any] | list[Any], path: str | os.PathLike) -> Path:
+    """Write ``data`` (e.g. ``evaluation.to_dict()``) as indented JSON, atomically; NaN is refused."""
+    return atomic.write_text(path, json.dumps(data, indent=2, allow_nan=False) + "\n")

@@ -1,0 +1,261 @@
+"""APE / RPE / position MSE: evo's stored reference results, invariances, and bad input."""
+
+from __future__ import annotations
+
+import io
+import json
+import zipfile
+
+import numpy as np
+import pytest
+from conftest import shared_path
+
+from lidarkit.errors import ConfigError, EvaluationError
+from lidarkit.eval import align_trajectory, ape, position_mse, rpe
+from lidarkit.geometry import make_se3, random_se3
+from lidarkit.trajectory import Trajectory
+
+STATS = ("rmse", "mean", "median", "std", "min", "max", "sse")
+
+
+def load_evo_result(name: str) -> tuple[dict, dict, np.ndarray]:
+    """info.json, stats.json and the error array of one of evo's stored result archives."""
+    with zipfile.ZipFile(shared_path("evo_testdata", "res_files", f"{name}.zip")) as z:
+        info = json.loads(z.read("info.json"))
+        stats = json.loads(z.read("stats.json"))
+        errors = np.load(io.BytesIO(z.read("error_array.npz")), allow_pickle=False)
+    return info, stats, np.asarray(errors, dtype=float)
+
+
+def kitti(name: str) -> Trajectory:
+    return Trajectory.from_kitti(shared_path("evo_testdata", f"KITTI_00_{name}.txt"))
+
+
+@pytest.fixture(scope="module")
+def kitti_gt() -> Trajectory:
+    return kitti("gt")
+
+
+def synthetic(rng: np.random.Generator, n: int = 60, name: str = "") -> Trajectory:
+    """A smooth random 3D trajectory: yaw/pitch random walk, ~1 m steps."""
+    yaw = np.cumsum(rng.normal(0, 0.05, n))
+    pitch = 0.1 * np.sin(np.linspace(0, 3, n))
+    poses = np.tile(np.eye(4), (n, 1, 1))
+    pos = np.zeros(3)
+    for i in range(n):
+        cy, sy, cp, sp = np.cos(yaw[i]), np.sin(yaw[i]), np.cos(pitch[i]), np.sin(pitch[i])
+        R = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]]) @ np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
+        pos = pos + R @ np.array([1.0, 0.0, 0.0])
+        poses[i] = make_se3(R, pos)
+    return Trajectory(poses, np.arange(n) * 0.1, name)
+
+
+# ---- evo's stored reference results -----------------------------------------------------------------
+@pytest.mark.parametrize("est_name,archive", [("ORB", "orb_ape"), ("SPTAM", "sptam_ape")])
+def test_ape_reproduces_evo_stored_result(kitti_gt, est_name, archive):
+    info, stats, errors = load_evo_result(archive)
+    assert info["title"] == "APE w.r.t. translation part (m)\n(with SE(3) Umeyama alignment)"
+    assert info["est_name"].endswith(f"KITTI_00_{est_name}.txt") and info["ref_name"].endswith("KITTI_00_gt.txt")
+    result = ape(kitti_gt, kitti(est_name), align="se3", relation="translation")
+    for stat in STATS:
+        assert getattr(result, stat) == pytest.approx(stats[stat], rel=1e-4), stat
+    np.testing.assert_allclose(result.errors, errors, rtol=1e-6, atol=1e-9)
+    assert result.unit == "m" and result.alignment is not None and result.alignment.scale == 1.0
+    assert result.to_dict()["stats"]["rmse"] == pytest.approx(stats["rmse"], rel=1e-4)
+
+
+@pytest.mark.parametrize("est_name,archive", [("ORB", "orb_rpe"), ("SPTAM", "sptam_rpe")])
+def test_rpe_reproduces_evo_stored_result_with_legacy_pairs(kitti_gt, est_name, archive):
+    info, stats, errors = load_evo_result(archive)
+    assert info["title"] == "RPE w.r.t. translation part (m)\nfor delta = 10.0 (m) using consecutive pairs\n(not aligned)"
+    result = rpe(kitti_gt, kitti(est_name), delta=10, delta_unit="meters", align="none", legacy_pairs=True)
+    assert result.n_errors == len(errors)
+    for stat in STATS:
+        assert getattr(result, stat) == pytest.approx(stats[stat], rel=1e-4), stat
+    np.testing.assert_allclose(result.errors, errors, rtol=1e-6, atol=1e-9)
+
+
+def test_rpe_default_pairs_match_current_evo_and_differ_from_stored(kitti_gt):
+    """Today's evo starts the first 10 m pair at pose 0: one pair more than the stored 2018 result."""
+    from evo.core.metrics import PoseRelation
+    from evo.core.units import Unit
+    from evo.main_rpe import rpe as evo_rpe
+
+    est = kitti("ORB")
+    ours = rpe(kitti_gt, est, delta=10, delta_unit="m")
+    theirs = evo_rpe(kitti_gt.to_evo(), est.to_evo(), PoseRelation.translation_part, delta=10, delta_unit=Unit.meters)
+    assert ours.rmse == pytest.approx(theirs.stats["rmse"], rel=1e-12)
+    np.testing.assert_allclose(ours.errors, theirs.np_arrays["error_array"], rtol=1e-12)
+    _, stats, errors = load_evo_result("orb_rpe")
+    assert ours.n_errors == len(errors) + 1
+    assert abs(ours.rmse - stats["rmse"]) > 5e-3  # 0.2368 vs 0.2263
+    assert ours.pairs[0, 0] == 0 and (ours.pairs[1:, 0] == ours.pairs[:-1, 1]).all()
+
+
+def test_ape_matches_evo_main_ape_for_every_alignment_and_relation(kitti_gt):
+    from evo.core.metrics import PoseRelation
+    from evo.main_ape import ape as evo_ape
+
+    est = kitti("SPTAM")[:800]
+    ref = kitti_gt[:800]
+    for align, kw in [("none", {}), ("se3", {"align": True}), ("sim3", {"align": True, "correct_scale": True})]:
+        for relation, evo_rel in [("translation", "translation_part"), ("rotation_angle_deg", "rotation_angle_deg"),
+                                  ("full", "full_transformation")]:
+            ours = ape(ref, est, align=align, relation=relation)
+            theirs = evo_ape(ref.to_evo(), est.to_evo(), PoseRelation[evo_rel], **kw)
+            for stat in STATS:
+                assert getattr(ours, stat) == pytest.approx(theirs.stats[stat], rel=1e-9, abs=1e-12), (align, relation)
+
+
+# ---- invariances -----------------------------------------------------------------------------------------
+def test_sim3_alignment_recovers_scaled_and_moved_copy(rng):
+    ref = synthetic(rng, 80, "ref")
+    S = random_se3(rng, max_translation=20.0)
+    scaled = ref.poses_se3.copy()
+    scaled[:, :3, 3] *= 0.37
+    est = Trajectory(S @ scaled, ref.timestamps_s, "est")
+    result = ape(ref, est, align="sim3")
+    assert result.rmse < 1e-9
+    assert result.alignment.scale == pytest.approx(1 / 0.37, rel=1e-9)
+    assert ape(ref, est, align="se3").rmse > 1.0  # rigid alignment cannot undo the scale
+    rot = ape(ref, est, align="sim3", relation="rotation_angle_deg")
+    assert rot.max < 1e-6
+    aligned, transform = align_trajectory(ref, est, "sim3")
+    np.testing.assert_allclose(aligned.positions_xyz, ref.positions_xyz, atol=1e-9)
+    assert transform.method == "sim3"
+
+
+def test_se3_alignment_and_origin_alignment_of_moved_copy(rng):
+    ref = synthetic(rng, 50)
+    S = random_se3(rng, max_translation=5.0)
+    est = ref.transformed(T_left=S)
+    assert ape(ref, est).rmse > 0.1
+    assert ape(ref, est, align="se3").rmse < 1e-9
+    assert ape(ref, est, align_origin=True).rmse < 1e-9
+    assert ape(ref, est, align_origin=True).alignment.method == "origin"
+    assert rpe(ref, est).rmse < 1e-9  # relative motions do not see a global transform
+
+
+def test_identical_trajectories_give_zero_errors(rng):
+    ref = synthetic(rng, 40)
+    for relation in ("translation", "rotation_angle_deg", "full"):
+        assert rpe(ref, ref, relation=relation).max < 1e-9
+        assert rpe(ref, ref, delta=3, delta_unit="meters", relation=relation, all_pairs=True).max < 1e-9
+        assert ape(ref, ref, relation=relation).max < 1e-9
+    assert ape(ref, ref).max == 0.0  # translation: plain position differences
+
+
+def test_rpe_of_constant_step_error_is_known(rng):
+    """Estimate whose every step is 10 cm too long in x: RPE over 1 frame is exactly 0.1 m."""
+    n = 30
+    ref = Trajectory.from_relative_motions(np.tile(make_se3(translation=[1.0, 0, 0]), (n - 1, 1, 1)))
+    est = Trajectory.from_relative_motions(np.tile(make_se3(translation=[1.1, 0, 0]), (n - 1, 1, 1)))
+    res = rpe(ref, est, delta=1)
+    np.testing.assert_allclose(res.errors, 0.1, atol=1e-12)
+    assert res.n_errors == n - 1
+    res5 = rpe(ref, est, delta=5)
+    np.testing.assert_allclose(res5.errors, 0.5, atol=1e-12)
+    assert res5.pairs.tolist()[:2] == [[0, 5], [5, 10]]
+    ape_res = ape(ref, est)
+    np.testing.assert_allclose(ape_res.errors, 0.1 * np.arange(n), atol=1e-12)
+    assert ape_res.rmse == pytest.approx(np.sqrt(np.mean((0.1 * np.arange(n)) ** 2)))
+
+
+def test_inputs_are_not_modified_by_alignment(rng):
+    ref = synthetic(rng, 30)
+    est = ref.transformed(T_left=random_se3(rng))
+    before = est.poses_se3.copy()
+    ape(ref, est, align="sim3")
+    rpe(ref, est, align="se3")
+    np.testing.assert_array_equal(est.poses_se3, before)
+
+
+def test_associate_by_timestamps(rng):
+    ref = synthetic(rng, 60)
+    keep = np.arange(0, 60, 3)
+    est = Trajectory(ref.poses_se3[keep], ref.timestamps_s[keep] + 0.004, "est")
+    with pytest.raises(EvaluationError, match="differ in length.*associate"):
+        ape(ref, est)
+    res = ape(ref, est, associate=True, max_diff_s=0.01)
+    assert res.n_errors == len(keep) and res.rmse == 0.0 and res.associated
+    with pytest.raises(EvaluationError, match="association failed"):
+        ape(ref, est, associate=True, max_diff_s=0.001)
+
+
+def test_n_to_align_uses_first_poses_only(rng):
+    ref = synthetic(rng, 40)
+    est_poses = ref.poses_se3.copy()
+    est_poses[20:, :3, 3] += [0.0, 3.0, 0.0]  # second half is off
+    est = Trajectory(est_poses)
+    res = ape(ref, est, align="se3", n_to_align=15)
+    assert res.errors[:20].max() < 1e-9 and res.errors[20:].min() == pytest.approx(3.0)
+    assert res.alignment.n_poses_used == 15
+
+
+# ---- bad input ------------------------------------------------------------------------------------------------
+def test_bad_input_raises_named_errors(rng):
+    ref = synthetic(rng, 20, "ref")
+    with pytest.raises(EvaluationError, match=r"est vs ref.*differ in length \(20 reference vs 10"):
+        ape(ref, synthetic(rng, 10, "est"))
+    with pytest.raises(ConfigError, match="unknown alignment 'affine'"):
+        ape(ref, ref, align="affine")
+    with pytest.raises(ConfigError, match="unknown pose relation 'speed'"):
+        rpe(ref, ref, relation="speed")
+    with pytest.raises(ConfigError, match="unknown pose relation 'point_distance_error_ratio'"):
+        ape(ref, ref, relation="point_distance_error_ratio")
+    with pytest.raises(ConfigError, match="unknown delta unit 'seconds'"):
+        rpe(ref, ref, delta=1, delta_unit="seconds")
+    with pytest.raises(ConfigError, match="integer"):
+        rpe(ref, ref, delta=1.5)
+    with pytest.raises(ConfigError, match="delta must be > 0"):
+        rpe(ref, ref, delta=0)
+    with pytest.raises(EvaluationError, match="delta of 20 frames needs more than 20 poses"):
+        rpe(ref, ref, delta=20)
+    with pytest.raises(EvaluationError, match="empty index list"):
+        rpe(ref, ref, delta=500, delta_unit="meters")
+    with pytest.raises(ConfigError, match="align_origin"):
+        ape(ref, ref, align="se3", align_origin=True)
+    with pytest.raises(ConfigError, match="legacy_pairs"):
+        rpe(ref, ref, delta=2, legacy_pairs=True)
+    with pytest.raises(EvaluationError, match="n_to_align"):
+        ape(ref, ref, align="se3", n_to_align=99)
+    with pytest.raises(EvaluationError, match="at least 3 poses"):
+        ape(ref[:2], ref[:2], align="se3")
+    with pytest.raises(EvaluationError, match="no timestamps"):
+        ape(ref, Trajectory(ref.poses_se3), associate=True)
+    with pytest.raises(EvaluationError, match="Trajectory"):
+        ape(ref.poses_se3, ref)
+
+
+def test_degenerate_alignment_is_an_error():
+    still = Trajectory(np.tile(np.eye(4), (10, 1, 1)), name="still")
+    with pytest.raises(EvaluationError, match="still vs still"):
+        ape(still, still, align="sim3")
+
+
+# ---- position MSE --------------------------------------------------------------------------------------------
+def test_position_mse_hand_computed():
+    ref = Trajectory(np.tile(np.eye(4), (4, 1, 1)), name="ref")
+    est_poses = np.tile(np.eye(4), (4, 1, 1))
+    est_poses[:, :3, 3] = [[3.0, 4.0, 0.0], [1.0, 0.0, 0.0], [0.0, 2.0, 0.0], [0.0, 0.0, 2.0]]
+    est = Trajectory(est_poses, name="est")
+    assert position_mse(ref, est) == pytest.approx((25 + 1 + 4 + 4) / 4)
+    assert position_mse(ref, est, start=1) == pytest.approx((1 + 4 + 4) / 3)
+    assert position_mse(ref, est, start=1, dims=2) == pytest.approx((1 + 4 + 0) / 3)
+    assert position_mse(ref, ref) == 0.0
+    with pytest.raises(EvaluationError, match="start must be a frame index in \\[0, 3\\]"):
+        position_mse(ref, est, start=4)
+    with pytest.raises(ConfigError, match="dims"):
+        position_mse(ref, est, dims=1)
+    with pytest.raises(EvaluationError, match="differ in length"):
+        position_mse(ref, est[:2])
+
+
+def test_results_to_dict_is_json_safe(rng):
+    ref = synthetic(rng, 30, "ref")
+    est = ref.transformed(T_left=random_se3(rng, max_translation=1.0))
+    for res in (ape(ref, est, align="sim3"), rpe(ref, est, delta=2, delta_unit="m", all_pairs=True)):
+        data = json.loads(json.dumps(res.to_dict(), allow_nan=False))
+        assert data["stats"]["rmse"] == pytest.approx(res.rmse)
+        assert len(data["errors"]) == res.n_errors
+    assert json.loads(json.dumps(rpe(ref, est).to_dict()))["pairs"][0] == [0, 1]
