@@ -1,0 +1,313 @@
+"""lidarkit.odometry.run: chaining, constant-velocity guess, stateful variants, run folder, bad input, CLI."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+import yaml
+
+from lidarkit.errors import ConfigError, DataError, EvaluationError, LidarKitError
+from lidarkit.geometry import make_se3, random_se3, se3_inverse, so3_exp
+from lidarkit.io.base import Scan
+from lidarkit.odometry import open_sequence, parse_frames, run
+from lidarkit.trajectory import Trajectory
+
+
+# ---- stand-ins ----------------------------------------------------------------------------------------------
+def _drive(n: int, step_m: float = 0.8, yaw_rate_rad: float = 0.02) -> np.ndarray:
+    """(n, 4, 4) poses of a smooth planar drive starting at the identity."""
+    motion = make_se3(so3_exp(np.array([0.0, 0.0, yaw_rate_rad])), np.array([step_m, 0.05, 0.0]))
+    poses = [np.eye(4)]
+    for _ in range(n - 1):
+        poses.append(poses[-1] @ motion)
+    return np.stack(poses)
+
+
+def _room_points(rng: np.random.Generator, n: int = 4000) -> np.ndarray:
+    """World points on the walls, floor and a few boxes of a 60 x 16 m corridor (enough structure for ICP)."""
+    k = n // 5
+    x = rng.uniform(-10, 50, size=(4, k))
+    walls = [
+        np.c_[x[0], np.full(k, -8.0), rng.uniform(-1.7, 3, k)],
+        np.c_[x[1], np.full(k, 8.0) + 0.3 * np.sin(x[1]), rng.uniform(-1.7, 3, k)],
+        np.c_[x[2], rng.uniform(-8, 8, k), np.full(k, -1.7)],
+    ]
+    boxes = rng.uniform([-10, -6, -1.7], [50, 6, 1.0], size=(2 * k, 3))
+    boxes[:, 1] = np.where(np.abs(boxes[:, 1]) < 2.5, np.sign(boxes[:, 1]) * 2.5 + boxes[:, 1], boxes[:, 1])
+    pillars = np.round(boxes / 4.0) * 4.0 + rng.normal(0, 0.15, boxes.shape)
+    pillars[:, 2] = boxes[:, 2]
+    return np.concatenate(walls + [pillars])
+
+
+class MemorySequence:
+    """A ScanSequence over in-memory scans: every frame sees the same world points from its pose."""
+
+    def __init__(self, poses: np.ndarray, world_xyz: np.ndarray, *, bad: dict[int, Exception | np.ndarray] | None = None,
+                 timestamps: bool = True):
+        self.name = "memory"
+        self._poses = poses
+        self._world = world_xyz
+        self._bad = bad or {}
+        self._timestamps = np.arange(len(poses)) * 0.1 + 100.0 if timestamps else None
+        self.reads: list[int] = []
+
+    def __len__(self) -> int:
+        return len(self._poses)
+
+    def read_scan(self, index: int) -> Scan:
+        self.reads.append(index)
+        bad = self._bad.get(index)
+        if isinstance(bad, Exception):
+            raise bad
+        T = se3_inverse(self._poses[index])
+        points = self._world @ T[:3, :3].T + T[:3, 3] if bad is None else bad
+        return Scan(points_xyz=points, point_times_s=np.linspace(0, 0.1, len(points)), frame=index)
+
+    @property
+    def timestamps_s(self):
+        return self._timestamps
+
+    @property
+    def ground_truth(self) -> Trajectory:
+        return Trajectory(self._poses, self._timestamps, name="memory gt")
+
+
+@dataclass
+class _Result:
+    T_target_source: np.ndarray
+    converged: bool = True
+    iterations: int = 3
+    rmse_history: tuple = (0.1, 0.01)
+    n_correspondences: int = 100
+    reason: str = ""
+
+
+class OracleICP:
+    """Stateless stand-in returning given motions; records what the runner passed."""
+
+    name = "oracle"
+    stateful = False
+    config = {"kind": "oracle"}
+
+    def __init__(self, motions: np.ndarray):
+        self.motions = list(motions)
+        self.calls: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+
+    def align(self, source_xyz, target_xyz, init_T=None):
+        self.calls.append((source_xyz, target_xyz, np.array(init_T)))
+        return _Result(self.motions[len(self.calls) - 1], converged=len(self.calls) != 2, reason="test flag" if len(self.calls) == 2 else "")
+
+
+class MapStandIn:
+    """Stateful stand-in: returns preset poses, records resets and the point times it was handed."""
+
+    name = "map_stand_in"
+    stateful = True
+    config = None
+
+    def __init__(self, poses: np.ndarray):
+        self.poses = poses
+        self.resets = 0
+        self.got_times: list[np.ndarray | None] = []
+
+    def reset(self):
+        self.resets += 1
+        self.got_times = []
+
+    def register_frame(self, points_xyz, point_times_s=None):
+        self.got_times.append(point_times_s)
+        return self.poses[len(self.got_times) - 1]
+
+
+# ---- chaining and the initial guess ----------------------------------------------------------------------------
+def test_stateless_chain_with_constant_velocity_guess(rng):
+    poses = _drive(6)
+    seq = MemorySequence(poses, _room_points(rng, 500))
+    motions = se3_inverse(poses[:-1]) @ poses[1:]
+    oracle = OracleICP(motions)
+    result = run(seq, oracle)
+    np.testing.assert_allclose(result.trajectory.poses_se3, poses, atol=1e-12)
+    np.testing.assert_allclose(result.trajectory.timestamps_s, seq.timestamps_s)
+    # source = current scan, target = previous scan; init = previous relative motion (identity first)
+    assert len(oracle.calls) == 5
+    np.testing.assert_allclose(oracle.calls[0][2], np.eye(4))
+    for k in range(1, 5):
+        np.testing.assert_allclose(oracle.calls[k][2], motions[k - 1], atol=1e-12)
+        assert oracle.calls[k][1] is oracle.calls[k - 1][0]  # no copies between frames
+    # per-frame diagnostics: the non-converged frame is flagged, not hidden
+    assert result.stats.converged.tolist() == [True, True, False, True, True, True]
+    assert result.stats.reason[2] == "test flag" and result.n_not_converged == 1
+    assert result.metrics["n_not_converged"] == 1
+    assert result.metrics["final_error"]["translation_m"] < 1e-9
+
+
+def test_real_vanilla_recovers_a_synthetic_drive(rng):
+    pytest.importorskip("lidarkit.registration")
+    poses = _drive(8, step_m=0.6)
+    seq = MemorySequence(poses, _room_points(rng, 6000))
+    result = run(seq, "vanilla", params={"max_correspondence_distance_m": 2.0})
+    err = result.metrics["final_error"]
+    assert err["translation_m"] < 0.01 and err["rotation_deg"] < 0.05
+    assert result.config["method"] == "vanilla"
+    assert result.config["method_config"]["max_correspondence_distance_m"] == 2.0
+    assert (result.stats.iterations[1:] > 0).all() and (result.stats.n_correspondences[1:] > 100).all()
+
+
+def test_stateful_variant_gets_every_frame_and_its_point_times(rng):
+    poses = _drive(5)
+    seq = MemorySequence(poses, _room_points(rng, 300))
+    stand_in = MapStandIn(poses + 0.0)
+    result = run(seq, stand_in, frames="1:5")
+    assert stand_in.resets == 1
+    assert len(stand_in.got_times) == 4 and all(t is not None and len(t) == 300 for t in stand_in.got_times)
+    np.testing.assert_allclose(result.trajectory.poses_se3, poses[:4])  # as returned by register_frame
+    assert result.frames.tolist() == [1, 2, 3, 4]
+    # scored against the ground truth of frames 1..4, relative to frame 1
+    np.testing.assert_allclose(result.ground_truth.poses_se3, se3_inverse(poses[1]) @ poses[1:], atol=1e-12)
+    assert result.config["run"]["initial_guess"].startswith("register_frame")
+
+
+def test_frame_selection():
+    assert parse_frames(None, 5).tolist() == [0, 1, 2, 3, 4]
+    assert parse_frames("2:8:2", 10).tolist() == [2, 4, 6]
+    assert parse_frames(":3", 10).tolist() == [0, 1, 2]
+    assert parse_frames(slice(-2, None), 10).tolist() == [8, 9]
+    assert parse_frames([1, 4], 10).tolist() == [1, 4]
+    for bad in ("3", "a:b", [4, 1], [0, 10], [[1]]):
+        with pytest.raises(ConfigError):
+            parse_frames(bad, 10)
+
+
+# ---- run folder ---------------------------------------------------------------------------------------------------
+def test_run_folder(tmp_path, rng):
+    poses = _drive(130, step_m=1.0, yaw_rate_rad=0.01)  # 129 m: long enough for one devkit segment
+    seq = MemorySequence(poses, _room_points(rng, 50))
+    noisy = se3_inverse(poses[:-1]) @ poses[1:]
+    noisy[:, 0, 3] *= 1.01  # 1 % too long
+    result = run(seq, OracleICP(noisy), out_dir=tmp_path / "run")
+    out = tmp_path / "run"
+    for name in ("poses_kitti.txt", "poses_tum.txt", "config.yaml", "metrics.json", "timing.csv", "trajectory.png", "ape.png", "ground_truth_kitti.txt"):
+        assert (out / name).is_file(), name
+    assert result.out_dir == out
+    np.testing.assert_allclose(Trajectory.from_kitti(out / "poses_kitti.txt").poses_se3, result.trajectory.poses_se3, atol=1e-6)
+    tum = Trajectory.from_tum(out / "poses_tum.txt")
+    np.testing.assert_allclose(tum.timestamps_s, seq.timestamps_s, atol=1e-6)
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["kitti_drift"]["translation_pct"] == pytest.approx(1.0, abs=0.1)
+    expected_end = Trajectory.from_relative_motions(noisy).positions_xyz[-1]
+    assert metrics["final_error"]["translation_m"] == pytest.approx(np.linalg.norm(expected_end - poses[-1, :3, 3]), rel=1e-9)
+    assert metrics["ape_translation_m"]["stats"]["rmse"] > 0.3
+    config = yaml.safe_load((out / "config.yaml").read_text())
+    assert config["method"] == "oracle" and config["run"]["n_frames"] == 130 and "machine" in config
+    rows = (out / "timing.csv").read_text().splitlines()
+    assert rows[0].startswith("frame,read_s,register_s") and len(rows) == 131
+
+
+def test_short_path_reports_no_drift(rng):
+    poses = _drive(4)
+    result = run(MemorySequence(poses, _room_points(rng, 50)), OracleICP(se3_inverse(poses[:-1]) @ poses[1:]))
+    assert result.metrics["kitti_drift"] is None and "shorter" in result.metrics["kitti_drift_note"]
+
+
+def test_ground_truth_override_and_mismatch(rng):
+    poses = _drive(5)
+    seq = MemorySequence(poses, _room_points(rng, 50))
+    other = Trajectory(_drive(5, step_m=1.0))
+    result = run(seq, OracleICP(se3_inverse(poses[:-1]) @ poses[1:]), ground_truth=other)
+    assert result.metrics["final_error"]["translation_m"] == pytest.approx(0.8, abs=0.01)  # 4 x 0.2 m shorter steps
+    with pytest.raises(EvaluationError, match="3 poses"):
+        run(seq, OracleICP(se3_inverse(poses[:-1]) @ poses[1:]), ground_truth=Trajectory(_drive(3)))
+
+
+# ---- bad input -----------------------------------------------------------------------------------------------------
+def test_unknown_method_lists_the_known_ones(rng):
+    seq = MemorySequence(_drive(3), _room_points(rng, 50))
+    with pytest.raises(ConfigError, match="unknown ICP method 'nope'.*vanilla"):
+        run(seq, "nope")
+    with pytest.raises(ConfigError, match="params only apply"):
+        run(seq, OracleICP([]), params={"a": 1})
+    with pytest.raises(ConfigError):
+        run(seq, object())
+
+
+def test_empty_dataset_and_empty_selection(rng):
+    with pytest.raises(DataError, match="no scans"):
+        run(MemorySequence(np.zeros((0, 4, 4)), _room_points(rng, 50)), OracleICP([]))
+    with pytest.raises(DataError, match="selects no scan"):
+        run(MemorySequence(_drive(3), _room_points(rng, 50)), OracleICP([]), frames="5:9")
+
+
+@pytest.mark.parametrize(
+    "bad, match",
+    [
+        (np.zeros((0, 3)), r"memory \(frame 2\): empty scan"),
+        (DataError("truncated scan", source="000002.bin"), r"memory \(frame 2\): 000002.bin: truncated scan"),
+        (ValueError("boom"), r"memory \(frame 2\): ValueError: boom"),
+    ],
+)
+def test_error_in_a_frame_names_the_frame(rng, bad, match):
+    poses = _drive(4)
+    seq = MemorySequence(poses, _room_points(rng, 50), bad={2: bad})
+    with pytest.raises(LidarKitError, match=match):
+        run(seq, OracleICP(se3_inverse(poses[:-1]) @ poses[1:]))
+    with pytest.raises(LidarKitError, match=match):
+        run(seq, MapStandIn(poses))
+
+
+def test_nan_points_in_a_frame_name_the_frame(rng):
+    pytest.importorskip("lidarkit.registration")
+    poses = _drive(4)
+    cloud = _room_points(rng, 500)
+    cloud[7] = np.nan
+    seq = MemorySequence(poses, _room_points(rng, 500), bad={3: cloud})
+    with pytest.raises(DataError, match=r"memory \(frame 3\).*NaN"):
+        run(seq, "vanilla")
+
+
+# ---- dataset specs and the CLI -------------------------------------------------------------------------------------
+def test_open_sequence_specs(tmp_path):
+    from lidarkit.sim.lidar import SimulatedLidarSequence, export_kitti
+
+    sim = open_sequence("sim:open?frames=3&beams=8&azimuths=90")
+    assert isinstance(sim, SimulatedLidarSequence) and len(sim) == 3
+    folder = export_kitti(SimulatedLidarSequence(scene="street", n_frames=3, n_beams=8, n_azimuths=180), tmp_path / "seq")
+    kitti = open_sequence(folder)
+    assert type(kitti).__name__ == "KittiOdometry" and len(kitti) == 3
+    # Tr is the identity: the reader's LiDAR-frame ground truth is the simulator's
+    np.testing.assert_allclose(kitti.ground_truth.poses_se3, Trajectory.from_kitti(folder / "poses.txt").poses_se3, atol=1e-9)
+    scans = open_sequence(folder / "velodyne")
+    assert type(scans).__name__ == "ScanFolder" and len(scans) == 3
+    assert len(open_sequence(f"folder:{folder / 'velodyne'}?name=x")) == 3
+    with pytest.raises(DataError, match="not found"):
+        open_sequence(tmp_path / "missing")
+    with pytest.raises(ConfigError):
+        open_sequence(42)
+
+
+def _cli(argv: list[str]) -> int:
+    from lidarkit.cli import main
+
+    try:
+        main(argv)
+    except SystemExit as done:
+        return int(done.code or 0)
+    return 0
+
+
+def test_cli_odometry_and_sim(tmp_path, capsys):
+    code = _cli(["sim", "lidar", "--frames", "4", "--scene", "street", "--out", str(tmp_path / "sim"), "-p", "n_beams=16",
+                 "-p", "n_azimuths=360", "--no-progress"])
+    assert code == 0 and len(list((tmp_path / "sim" / "velodyne").glob("*.bin"))) == 4
+    assert "poses at the sweep end" in " ".join(capsys.readouterr().out.split())
+    code = _cli(["odometry", str(tmp_path / "sim"), "-m", "vanilla", "-p", "voxel_size_m=0.5", "--frames", "0:3", "--out",
+                 str(tmp_path / "run"), "--no-progress"])
+    out = capsys.readouterr().out
+    assert code == 0 and "final error" in out and "frame rate" in out
+    assert len(Trajectory.from_kitti(tmp_path / "run" / "poses_kitti.txt")) == 3
+    assert _cli(["odometry", "sim:street?frames=2&beams=8&azimuths=90", "-m", "nope", "--no-progress"]) == 1
+    assert "unknown ICP method 'nope'" in " ".join(capsys.readouterr().err.split())
+    assert _cli(["odometry", "sim:street?frames=2", "-m", "vanilla", "-p", "novalue", "--no-progress"]) == 1
+    assert "KEY=VALUE" in capsys.readouterr().err
