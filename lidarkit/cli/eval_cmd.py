@@ -1,1 +1,84 @@
-"""``lidarkit eval``: placeholder until the evaluation layer lands."""
+"""``lidarkit eval REF EST``: APE, RPE and KITTI drift of an estimated trajectory against a reference."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from lidarkit.cli.app import app, stdout
+from lidarkit.eval.ape_rpe import ALIGNMENTS, DELTA_UNITS
+from lidarkit.eval.evaluate import EvaluationSettings
+from lidarkit.trajectory import FORMATS
+
+_D = EvaluationSettings()
+
+
+@app.command("eval")
+def eval_command(
+    ref: Path = typer.Argument(..., help="Reference (ground-truth) trajectory file."),
+    est: Path = typer.Argument(..., help="Estimated trajectory file."),
+    fmt: str = typer.Option("kitti", "--format", "-f", help=f"Format of both files: {' | '.join(FORMATS)}."),
+    ref_format: Optional[str] = typer.Option(None, help="Format of REF if it differs from --format."),
+    est_format: Optional[str] = typer.Option(None, help="Format of EST if it differs from --format."),
+    ref_times: Optional[Path] = typer.Option(None, help="times.txt for a KITTI-format REF (one time per pose)."),
+    est_times: Optional[Path] = typer.Option(None, help="times.txt for a KITTI-format EST."),
+    align: str = typer.Option(_D.align, help=f"Alignment of EST onto REF: {' | '.join(ALIGNMENTS)}."),
+    delta: float = typer.Option(_D.delta, help="RPE pair distance, in --delta-unit."),
+    delta_unit: str = typer.Option(_D.delta_unit, help=f"RPE delta unit: {' | '.join(dict.fromkeys(DELTA_UNITS))}."),
+    all_pairs: bool = typer.Option(_D.all_pairs, help="RPE over all pairs instead of consecutive ones."),
+    legacy_pairs: bool = typer.Option(
+        _D.legacy_pairs, help="RPE path/angle pairs as evo releases before 1.30 chose them (evo's stored results)."
+    ),
+    associate: bool = typer.Option(_D.associate, help="Match poses by timestamp (both need times) instead of by index."),
+    max_diff: float = typer.Option(_D.max_diff_s, help="Max. timestamp difference (s) for --associate."),
+    drift: bool = typer.Option(_D.drift, help="KITTI drift (when the reference path is longer than 100 m)."),
+    json_out: Optional[Path] = typer.Option(None, "--json", help="Write all results as JSON here."),
+    plot: Optional[Path] = typer.Option(None, "--plot", help="Write a PNG: trajectories, APE/RPE over time, drift."),
+    markdown: Optional[Path] = typer.Option(None, "--markdown", help="Write a Markdown report here."),
+) -> None:
+    """Score EST against REF: APE and RPE (evo) in translation and rotation, and KITTI drift; print a table."""
+    from lidarkit import atomic
+    from lidarkit.eval import evaluate, report
+    from lidarkit.trajectory import Trajectory
+
+    def load(path: Path, kind: str | None, times: Path | None) -> Trajectory:
+        kind = kind or fmt
+        kwargs = {"timestamps_s": times} if times is not None and kind == "kitti" else {}
+        if times is not None and kind != "kitti":
+            raise typer.BadParameter("times files apply to KITTI-format trajectories only")
+        return Trajectory.read(path, kind, **kwargs)
+
+    ref_traj = load(ref, ref_format, ref_times)
+    est_traj = load(est, est_format, est_times)
+    settings = EvaluationSettings(
+        align=align,
+        delta=delta,
+        delta_unit=delta_unit,
+        all_pairs=all_pairs,
+        legacy_pairs=legacy_pairs,
+        associate=associate,
+        max_diff_s=max_diff,
+        drift=drift,
+    )
+    evaluation = evaluate(ref_traj, est_traj, settings)
+    console = stdout()
+    console.print(report.evaluation_table(evaluation))
+    if evaluation.drift is not None:
+        console.print(report.drift_table(evaluation))
+    elif evaluation.drift_note:
+        console.print(f"KITTI drift not computed: {evaluation.drift_note}")
+    if json_out is not None:
+        data = evaluation.to_dict()
+        data.update(ref_path=str(ref), est_path=str(est))
+        report.write_json(data, json_out)
+        console.print(f"wrote {json_out}")
+    if markdown is not None:
+        atomic.write_text(markdown, report.evaluation_markdown(evaluation))
+        console.print(f"wrote {markdown}")
+    if plot is not None:
+        from lidarkit.eval import plots
+
+        plots.plot_evaluation(evaluation, plot)
+        console.print(f"wrote {plot}")

@@ -84,8 +84,10 @@ def evaluate(ref: Trajectory, est: Trajectory, settings: EvaluationSettings | No
     elif overrides:
         raise ConfigError("pass either settings or keyword overrides, not both", source="evaluate")
     s = settings
-    ref, est = paired(ref, est, associate=s.associate, max_diff_s=s.max_diff_s)
+    ref_paired, _ = paired(ref, est, associate=s.associate, max_diff_s=s.max_diff_s)
+    pairing = dict(associate=s.associate, max_diff_s=s.max_diff_s)
     rpe_kw = dict(
+        **pairing,
         delta=s.delta,
         delta_unit=s.delta_unit,
         all_pairs=s.all_pairs,
@@ -96,20 +98,20 @@ def evaluate(ref: Trajectory, est: Trajectory, settings: EvaluationSettings | No
     drift, note = None, ""
     if not s.drift:
         note = "not requested"
-    elif drift_segments_possible(ref, s.drift_lengths_m):
-        drift = kitti_drift(ref, est, s.drift_lengths_m, s.drift_step_frames)
+    elif drift_segments_possible(ref_paired, s.drift_lengths_m):
+        drift = kitti_drift(ref, est, s.drift_lengths_m, s.drift_step_frames, **pairing)
     else:
-        note = f"reference path {ref.length_m:.1f} m is not longer than {min(s.drift_lengths_m):g} m"
+        note = f"reference path {ref_paired.length_m:.1f} m is not longer than {min(s.drift_lengths_m):g} m"
     if note:
         logger.info("KITTI drift skipped: %s", note)
     return Evaluation(
         ref_name=ref.name,
         est_name=est.name,
-        n_poses=len(ref),
-        ref_length_m=ref.length_m,
+        n_poses=len(ref_paired),
+        ref_length_m=ref_paired.length_m,
         settings=s,
-        ape=ape(ref, est, s.align, "translation"),
-        ape_rotation=ape(ref, est, s.align, "rotation_angle_deg"),
+        ape=ape(ref, est, s.align, "translation", **pairing),
+        ape_rotation=ape(ref, est, s.align, "rotation_angle_deg", **pairing),
         rpe=rpe(ref, est, relation="translation", **rpe_kw),
         rpe_rotation=rpe(ref, est, relation="rotation_angle_deg", **rpe_kw),
         drift=drift,

@@ -1,0 +1,141 @@
+"""``lidarkit eval`` and ``lidarkit demo``: evo's stored numbers through the CLI, files written, bad input."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from conftest import shared_path
+from test_eval_metrics import STATS, load_evo_result
+
+from lidarkit import samples
+from lidarkit.cli import main
+from lidarkit.errors import DataError
+from lidarkit.eval import evaluate, report
+from lidarkit.eval.demo import run_eval_demo
+from lidarkit.trajectory import Trajectory
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+def run_cli(argv: list[str], capsys) -> tuple[int, str, str]:
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    out, err = capsys.readouterr()
+    return int(exc.value.code or 0), out, err
+
+
+@pytest.mark.parametrize("est_name,prefix", [("ORB", "orb"), ("SPTAM", "sptam")])
+def test_cli_reproduces_evo_stored_ape_and_rpe(tmp_path, capsys, est_name, prefix):
+    gt = shared_path("evo_testdata", "KITTI_00_gt.txt")
+    est = shared_path("evo_testdata", f"KITTI_00_{est_name}.txt")
+    out_json = tmp_path / "metrics.json"
+    code, out, _ = run_cli(
+        ["eval", str(gt), str(est), "--format", "kitti", "--align", "se3", "--delta", "10", "--delta-unit", "meters",
+         "--legacy-pairs", "--json", str(out_json)],
+        capsys,
+    )
+    assert code == 0
+    data = json.loads(out_json.read_text())
+    _, ape_stats, _ = load_evo_result(f"{prefix}_ape")
+    _, rpe_stats, rpe_errors = load_evo_result(f"{prefix}_rpe")
+    for stat in STATS:
+        assert data["ape"]["stats"][stat] == pytest.approx(ape_stats[stat], rel=1e-4), stat
+        # the stored RPE was not aligned; a rigid alignment leaves relative motions unchanged
+        assert data["rpe"]["stats"][stat] == pytest.approx(rpe_stats[stat], rel=1e-4), stat
+    assert data["rpe"]["n_errors"] == len(rpe_errors)
+    assert data["kitti_drift"]["n_segments"] == 3283
+    assert f"{ape_stats['rmse']:.5g}" in out  # printed table shows the rmse (5 significant digits)
+    assert "KITTI drift" in out
+
+
+def test_cli_tum_associate_plot_markdown_and_format_override(tmp_path, capsys):
+    ref = shared_path("evo_testdata", "freiburg1_xyz-groundtruth.txt")
+    est = shared_path("evo_testdata", "freiburg1_xyz-rgbdslam.txt")
+    code, _, err = run_cli(["eval", str(ref), str(est), "--format", "tum"], capsys)
+    assert code == 1 and "differ in length (3000 reference vs 788" in err and "associate" in err
+    assert err.count("\n") == 1  # one line, no traceback
+
+    # an estimate written in KITTI format (frames of the associated reference) via --est-format
+    ref_traj = Trajectory.from_tum(ref)
+    est_kitti = tmp_path / "est_kitti.txt"
+    Trajectory.from_tum(est).to_kitti(est_kitti)
+    code, _, err = run_cli(["eval", str(ref), str(est_kitti), "--format", "tum", "--est-format", "kitti"], capsys)
+    assert code == 1 and "differ in length" in err
+
+    plot, md, js = tmp_path / "p.png", tmp_path / "r.md", tmp_path / "r.json"
+    code, out, _ = run_cli(
+        ["eval", str(ref), str(est), "--format", "tum", "--associate", "--max-diff", "0.01", "--align", "sim3",
+         "--plot", str(plot), "--markdown", str(md), "--json", str(js)],
+        capsys,
+    )
+    assert code == 0
+    assert "KITTI drift not computed" in out  # fr1/xyz moves a few metres only
+    assert plot.read_bytes()[:8] == PNG_MAGIC and plot.stat().st_size < 300_000
+    assert "| rmse |" in md.read_text()
+    data = json.loads(js.read_text())
+    assert data["kitti_drift"] is None and data["ape"]["align"] == "sim3" and data["ape"]["associated"]
+    assert data["n_poses"] <= 788 and len(ref_traj) == 3000
+    assert not list(tmp_path.glob(".*"))  # no temporary files left behind
+
+
+def test_cli_bad_files_are_one_line_errors(tmp_path, capsys, copy_of):
+    gt = shared_path("evo_testdata", "KITTI_00_gt.txt")
+    code, _, err = run_cli(["eval", str(gt), str(tmp_path / "missing.txt")], capsys)
+    assert code == 1 and "missing.txt: file not found" in err and "Traceback" not in err
+
+    broken = copy_of(shared_path("evo_testdata", "KITTI_00_ORB.txt"))
+    lines = broken.read_text().splitlines()
+    lines[6] = " ".join(lines[6].split()[:11])
+    broken.write_text("\n".join(lines) + "\n")
+    code, _, err = run_cli(["eval", str(gt), str(broken)], capsys)
+    assert code == 1 and "KITTI_00_ORB.txt (line 7): expected 12 numbers, found 11" in err
+
+    code, _, err = run_cli(["eval", str(gt), str(gt), "--format", "g2o"], capsys)
+    assert code == 1 and "unknown trajectory format 'g2o'" in err
+    code, _, err = run_cli(["eval", str(gt), str(gt), "--delta-unit", "parsecs"], capsys)
+    assert code == 1 and "unknown delta unit 'parsecs'" in err
+
+
+def test_sample_accessor(tmp_path):
+    gz = samples.sample_path("evo_kitti00", "KITTI_00_gt.txt.gz")
+    assert gz.is_file() and samples.path("evo_kitti00/KITTI_00_gt.txt.gz") == gz
+    assert "evo_kitti00" in samples.available_samples()
+    plain = samples.extract_sample("evo_kitti00", "KITTI_00_gt.txt", dest_dir=tmp_path)
+    assert plain.read_bytes() == shared_path("evo_testdata", "KITTI_00_gt.txt").read_bytes()
+    with pytest.raises(DataError, match="nothing/here.txt: bundled sample not found"):
+        samples.sample_path("nothing", "here.txt")
+    with pytest.raises(DataError, match="relative"):
+        samples.sample_path("../errors.py")
+    sizes = sum(p.stat().st_size for p in samples.sample_path("evo_kitti00").iterdir())
+    assert sizes < 1_200_000
+
+
+def test_eval_demo_library_and_cli(tmp_path, capsys):
+    result = run_eval_demo(tmp_path / "demo")
+    (ev,) = result.evaluations
+    assert ev.n_poses == 4541 and ev.ape.rmse == pytest.approx(1.3034497, rel=1e-6)
+    assert ev.drift is not None and ev.drift.translation_pct == pytest.approx(0.69973, abs=5e-5)
+    assert set(result.files) == {"metrics", "report", "plot"}
+    assert json.loads(result.files["metrics"].read_text())["evaluations"][0]["ape"]["stats"]["rmse"] == ev.ape.rmse
+    assert result.files["plot"].read_bytes()[:8] == PNG_MAGIC
+
+    code, out, _ = run_cli(["demo"], capsys)
+    assert code == 0 and "1.3034" in out and "APE transl." in out and "KITTI drift" in out
+
+
+def test_summary_table_of_several_evaluations(rng):
+    n = 50
+    motions = np.tile(np.eye(4), (n - 1, 1, 1))
+    motions[:, 0, 3] = 1.0
+    ref = Trajectory.from_relative_motions(motions, name="ref")
+    noisy = ref.positions_xyz + rng.normal(0, 0.1, (n, 3))
+    poses = ref.poses_se3.copy()
+    poses[:, :3, 3] = noisy
+    est = Trajectory(poses, name="noisy")
+    evs = [evaluate(ref, est, align="none"), evaluate(ref, ref.with_name("perfect"), align="none")]
+    header, rows = report.summary_rows(evs)
+    assert rows[1][0] == "perfect" and rows[1][3] == "0" and rows[0][-1] == "–"
+    md = report.markdown_table(header, rows)
+    assert md.count("\n") == 4 and md.startswith("| estimate |")
