@@ -329,9 +329,9 @@ def rpe(
     ``delta_unit``: frames (integer delta), meters / degrees / radians of travelled path or rotation
     (pairs are chosen on the estimate unless ``pairs_from_reference``; ``all_pairs`` uses every start pose,
     accepting pairs within ``rel_delta_tol * delta``). Error per pair: ``E = (Q_i^-1 Q_j)^-1 (P_i^-1 P_j)``.
-    ``legacy_pairs``: path/angle deltas only, consecutive pairs: reproduce evo releases before 1.30-ish
-    (e.g. evo's stored reference results), whose first pair began at the first pose reaching ``delta``
-    instead of at pose 0; i.e. the first pair of today's selection is dropped.
+    ``legacy_pairs``: path/angle deltas only, consecutive pairs: reproduce the 2018 evo releases that made
+    evo's stored reference results, whose first pair began at the first pose reaching ``delta`` instead
+    of at pose 0; i.e. the first pair of today's selection is dropped.
     """
     from evo import EvoException
     from evo.core import metrics
