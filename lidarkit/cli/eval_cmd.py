@@ -29,7 +29,8 @@ def eval_command(
     delta_unit: str = typer.Option(_D.delta_unit, help=f"RPE delta unit: {' | '.join(dict.fromkeys(DELTA_UNITS))}."),
     all_pairs: bool = typer.Option(_D.all_pairs, help="RPE over all pairs instead of consecutive ones."),
     legacy_pairs: bool = typer.Option(
-        _D.legacy_pairs, help="RPE path/angle pairs as the 2018 evo releases chose them (reproduces evo's stored results)."
+        _D.legacy_pairs,
+        help="RPE path/angle pairs as the 2018 evo releases chose them (reproduces evo's stored results).",
     ),
     associate: bool = typer.Option(_D.associate, help="Match poses by timestamp (both need times) instead of by index."),
     max_diff: float = typer.Option(_D.max_diff_s, help="Max. timestamp difference (s) for --associate."),

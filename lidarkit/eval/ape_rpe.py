@@ -216,7 +216,11 @@ def _aligned_copies(ref: Trajectory, est: Trajectory, align: str, align_origin: 
             T = np.asarray(est_evo.align_origin(ref_evo), float)
             transform = AlignmentTransform("origin", T[:3, :3], T[:3, 3], 1.0, 1)
     except EvoException as err:
-        raise EvaluationError(f"alignment failed: {err}", source=source) from err
+        raise EvaluationError(
+            f"{align if align != 'none' else 'origin'} alignment failed: {err} "
+            "(positions collinear or constant? use align='none')",
+            source=source,
+        ) from err
     if transform is not None and not (np.isfinite(transform.sim3).all() and transform.scale > 0):
         raise EvaluationError(f"degenerate {transform.method} alignment (non-finite or zero scale)", source=source)
     return ref_evo, est_evo, transform
