@@ -67,7 +67,9 @@ def test_ape_reproduces_evo_stored_result(kitti_gt, est_name, archive):
 @pytest.mark.parametrize("est_name,archive", [("ORB", "orb_rpe"), ("SPTAM", "sptam_rpe")])
 def test_rpe_reproduces_evo_stored_result_with_legacy_pairs(kitti_gt, est_name, archive):
     info, stats, errors = load_evo_result(archive)
-    assert info["title"] == "RPE w.r.t. translation part (m)\nfor delta = 10.0 (m) using consecutive pairs\n(not aligned)"
+    assert info["title"] == (
+        "RPE w.r.t. translation part (m)\nfor delta = 10.0 (m) using consecutive pairs\n(not aligned)"
+    )
     result = rpe(kitti_gt, kitti(est_name), delta=10, delta_unit="meters", align="none", legacy_pairs=True)
     assert result.n_errors == len(errors)
     for stat in STATS:

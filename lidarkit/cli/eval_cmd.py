@@ -32,7 +32,9 @@ def eval_command(
         _D.legacy_pairs,
         help="RPE path/angle pairs as the 2018 evo releases chose them (reproduces evo's stored results).",
     ),
-    associate: bool = typer.Option(_D.associate, help="Match poses by timestamp (both need times) instead of by index."),
+    associate: bool = typer.Option(
+        _D.associate, help="Match poses by timestamp (both need times) instead of by index."
+    ),
     max_diff: float = typer.Option(_D.max_diff_s, help="Max. timestamp difference (s) for --associate."),
     drift: bool = typer.Option(_D.drift, help="KITTI drift (when the reference path is longer than 100 m)."),
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write all results as JSON here."),

@@ -40,7 +40,9 @@ def load_sample_pair(work_dir: str | os.PathLike) -> tuple[Trajectory, Trajector
     return ref, est
 
 
-def run_eval_demo(out_dir: str | os.PathLike | None = None, settings: EvaluationSettings = DEMO_SETTINGS) -> EvalDemoResult:
+def run_eval_demo(
+    out_dir: str | os.PathLike | None = None, settings: EvaluationSettings = DEMO_SETTINGS
+) -> EvalDemoResult:
     """Evaluate the bundled KITTI 00 ORB-SLAM2 estimate; with ``out_dir`` also write JSON, Markdown and a PNG.
 
     Files in ``out_dir``: ``inputs/`` (the extracted trajectories), ``metrics.json``, ``report.md``,

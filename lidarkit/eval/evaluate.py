@@ -8,7 +8,13 @@ from typing import Any
 
 from lidarkit.errors import ConfigError
 from lidarkit.eval.ape_rpe import APEResult, RPEResult, ape, rpe
-from lidarkit.eval.kitti_drift import KITTI_LENGTHS_M, KITTI_STEP_FRAMES, DriftResult, drift_segments_possible, kitti_drift
+from lidarkit.eval.kitti_drift import (
+    KITTI_LENGTHS_M,
+    KITTI_STEP_FRAMES,
+    DriftResult,
+    drift_segments_possible,
+    kitti_drift,
+)
 from lidarkit.eval.pairing import paired
 from lidarkit.trajectory import Trajectory
 

@@ -24,7 +24,8 @@ def _fmt(value: float | None, digits: int = 5) -> str:
 def metric_rows(evaluation: Evaluation) -> tuple[list[str], list[list[str]]]:
     """Header and rows of the APE/RPE table: one column per metric, one row per statistic."""
     results = (evaluation.ape, evaluation.ape_rotation, evaluation.rpe, evaluation.rpe_rotation)
-    header = ["", *(f"{name} ({res.unit})" for name, res in zip(("APE transl.", "APE rot.", "RPE transl.", "RPE rot."), results))]
+    names = ("APE transl.", "APE rot.", "RPE transl.", "RPE rot.")
+    header = ["", *(f"{name} ({res.unit})" for name, res in zip(names, results))]
     rows = [[stat, *(_fmt(getattr(res, stat)) for res in results)] for stat in STAT_COLUMNS]
     rows.append(["n", *(str(res.n_errors) for res in results)])
     return header, rows

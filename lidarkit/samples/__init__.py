@@ -34,7 +34,8 @@ def sample_path(*parts: str) -> Path:
         raise DataError("sample names are relative paths inside lidarkit/samples", source=str(rel))
     full = _root() / rel
     if not full.exists():
-        raise DataError(f"bundled sample not found (known: {', '.join(available_samples()) or 'none'})", source=str(rel))
+        known = ", ".join(available_samples()) or "none"
+        raise DataError(f"bundled sample not found (known: {known})", source=str(rel))
     return full
 
 
