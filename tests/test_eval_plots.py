@@ -1,0 +1,43 @@
+"""PNG plots: written atomically, readable, right projection plane; bad plane name is a ConfigError."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lidarkit.errors import ConfigError
+from lidarkit.eval import ape, rpe
+from lidarkit.eval.plots import choose_plane, plot_errors, plot_trajectories
+from lidarkit.geometry import make_se3
+from lidarkit.trajectory import Trajectory
+
+
+def circle(n: int = 60, axes: tuple[int, int] = (0, 1), name: str = "") -> Trajectory:
+    poses = np.tile(np.eye(4), (n, 1, 1))
+    angle = np.linspace(0, 1.5 * np.pi, n)
+    poses[:, axes[0], 3] = 20 * np.cos(angle)
+    poses[:, axes[1], 3] = 10 * np.sin(angle)
+    return Trajectory(poses, np.arange(n) * 0.1, name)
+
+
+def test_choose_plane_follows_the_spread():
+    assert choose_plane(circle(axes=(0, 1))) == "xy"
+    assert choose_plane(circle(axes=(0, 2))) == "xz"  # KITTI camera frame: x right, z forward
+    assert choose_plane(circle(axes=(0, 2)), "yz") == "yz"
+    with pytest.raises(ConfigError, match="unknown plot plane 'top'"):
+        choose_plane(circle(), "top")
+
+
+def test_plots_are_png_files_without_leftovers(tmp_path):
+    import matplotlib.image
+
+    ref = circle(name="ref")
+    est = ref.transformed(T_left=make_se3(translation=[0.5, 0.0, 0.0])).with_name("est")
+    result = ape(ref, est, align="none")
+    traj_png = plot_trajectories(ref, result.est_aligned, tmp_path / "traj.png", title="demo")
+    err_png = plot_errors(result, tmp_path / "sub" / "ape.png")
+    rpe_png = plot_errors(rpe(ref, est, delta=5), tmp_path / "rpe.png")
+    for png in (traj_png, err_png, rpe_png):
+        image = matplotlib.image.imread(png)
+        assert image.ndim == 3 and image.shape[0] > 200 and image.shape[1] > 400
+    assert sorted(p.name for p in tmp_path.rglob("*") if p.is_file()) == ["ape.png", "rpe.png", "traj.png"]
