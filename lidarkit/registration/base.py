@@ -1,0 +1,183 @@
+"""The registration interface: every ICP variant returns a :class:`RegistrationResult`.
+
+Convention: ``align(source_xyz, target_xyz, init_T)`` estimates ``T_target_source``, the pose that maps
+points of the source cloud into the target cloud's frame (``target ~= T_target_source @ source``).
+For two consecutive scans with LiDAR poses ``T_world_a`` (target) and ``T_world_b`` (source) the
+ground truth is ``inv(T_world_a) @ T_world_b``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict
+
+from lidarkit.errors import DataError
+from lidarkit.geometry import as_points, orthonormalize_se3
+
+#: A result is flagged ``degenerate`` when min/max eigenvalue of the normalised normal matrix is below this.
+DEGENERACY_RATIO_THRESHOLD = 1e-3
+
+#: Order of the 6 parameters of the normal matrix and of ``weakest_direction``.
+TWIST_ORDER = ("tx", "ty", "tz", "rx", "ry", "rz")
+
+
+class RegistrationConfig(BaseModel):
+    """Base of every variant's typed config: frozen, unknown keys rejected."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+
+@dataclass(frozen=True)
+class Degeneracy:
+    """How well the final alignment constrains the 6 degrees of freedom.
+
+    ``eigenvalues``: ascending eigenvalues of the normalised 6x6 normal matrix ``J^T M J / n``
+    (rotation columns scaled by the RMS radius of the matched points, so all six are in m^2 / m^2);
+    ``condition_number``: max/min eigenvalue (inf if min is 0); ``degenerate``: min/max below
+    ``threshold``; ``weakest_direction``: unit eigenvector of the smallest eigenvalue in
+    ``TWIST_ORDER`` (tx, ty, tz, rx, ry, rz); ``kind``: which residual the normal matrix models.
+    """
+
+    eigenvalues: tuple[float, ...]
+    condition_number: float
+    degenerate: bool
+    weakest_direction: tuple[float, ...]
+    threshold: float = DEGENERACY_RATIO_THRESHOLD
+    kind: str = "point_to_surface"
+
+    @property
+    def ratio(self) -> float:
+        """min/max eigenvalue (0 for a fully degenerate problem)."""
+        top = self.eigenvalues[-1]
+        return float(self.eigenvalues[0] / top) if top > 0 else 0.0
+
+    def to_dict(self) -> dict[str, Any]:
+        out = dataclasses.asdict(self)
+        out["ratio"] = self.ratio
+        out["twist_order"] = list(TWIST_ORDER)
+        return out
+
+    @staticmethod
+    def unknown(reason: str = "not computed") -> "Degeneracy":
+        """A placeholder for results where no correspondences exist: flagged degenerate."""
+        return Degeneracy(
+            eigenvalues=(0.0,) * 6,
+            condition_number=float("inf"),
+            degenerate=True,
+            weakest_direction=(0.0,) * 6,
+            kind=f"unknown ({reason})",
+        )
+
+
+@dataclass(frozen=True)
+class RegistrationResult:
+    """Outcome of one pairwise registration.
+
+    ``T_target_source``: ``(4, 4)`` float64; ``rmse_history``: RMSE (m) of the correspondences at
+    each iteration; ``fitness``: fraction of source points with a correspondence within the inlier
+    distance at the solution; ``reason``: why it did not converge or was flagged ("" if all is well).
+    """
+
+    T_target_source: np.ndarray
+    converged: bool
+    iterations: int
+    rmse_history: tuple[float, ...]
+    n_correspondences: int
+    runtime_s: float
+    fitness: float
+    degeneracy: Degeneracy
+    reason: str = ""
+    method: str = ""
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def rmse(self) -> float:
+        """Final RMSE (m) of the correspondences, NaN if there was none."""
+        return float(self.rmse_history[-1]) if self.rmse_history else float("nan")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "method": self.method,
+            "T_target_source": np.asarray(self.T_target_source).tolist(),
+            "converged": bool(self.converged),
+            "iterations": int(self.iterations),
+            "rmse_m": self.rmse,
+            "rmse_history": [float(x) for x in self.rmse_history],
+            "n_correspondences": int(self.n_correspondences),
+            "runtime_s": float(self.runtime_s),
+            "fitness": float(self.fitness),
+            "degeneracy": self.degeneracy.to_dict(),
+            "reason": self.reason,
+            "extra": self.extra,
+        }
+
+
+def check_pair(
+    source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray | None, min_points: int = 3
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Validate a registration input: two ``(N, 3)`` finite clouds of >= ``min_points`` and a 4x4 guess.
+
+    Returns float64 copies-or-views and the initial guess with an exactly orthonormal rotation.
+    """
+    src = as_points(source_xyz, "source cloud", min_points=min_points)
+    dst = as_points(target_xyz, "target cloud", min_points=min_points)
+    if init_T is None:
+        T0 = np.eye(4)
+    else:
+        T0 = np.asarray(init_T, dtype=np.float64)
+        if T0.shape != (4, 4) or not np.isfinite(T0).all():
+            raise DataError(f"expected a finite 4x4 matrix, got shape {T0.shape}", source="init_T")
+        T0 = orthonormalize_se3(T0)
+    return src, dst, T0
+
+
+class Registration:
+    """Base of every ICP variant: subclasses set ``name``, ``Config`` and implement :meth:`_align`.
+
+    Stateful variants (``stateful = True``) also implement :meth:`reset` and :meth:`register_frame`
+    and keep their own map between frames.
+    """
+
+    name: ClassVar[str] = ""
+    Config: ClassVar[type[RegistrationConfig]] = RegistrationConfig
+    stateful: ClassVar[bool] = False
+
+    def __init__(self, config: RegistrationConfig | None = None, **params: Any):
+        if config is not None and params:
+            raise TypeError("pass either a config object or keyword parameters, not both")
+        self._config = config if config is not None else self.Config(**params)
+
+    @property
+    def config(self) -> RegistrationConfig:
+        """The resolved configuration (all defaults filled in)."""
+        return self._config
+
+    def align(
+        self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray | None = None
+    ) -> RegistrationResult:
+        """Estimate ``T_target_source`` for ``(N, 3)`` source and ``(M, 3)`` target clouds."""
+        src, dst, T0 = check_pair(source_xyz, target_xyz, init_T)
+        start = time.perf_counter()
+        result = self._align(src, dst, T0)
+        runtime = time.perf_counter() - start
+        return dataclasses.replace(result, runtime_s=runtime, method=self.name)
+
+    def _align(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray) -> RegistrationResult:
+        raise NotImplementedError
+
+    # stateful API (kiss); stateless variants refuse it so the odometry runner can tell them apart
+    def reset(self) -> None:
+        """Forget the map and motion history (stateful variants only)."""
+        raise NotImplementedError(f"{self.name} is stateless")
+
+    def register_frame(self, points_xyz: np.ndarray, point_times_s: np.ndarray | None = None) -> np.ndarray:
+        """Register one frame into the variant's own map; return ``T_world_lidar`` (stateful only)."""
+        raise NotImplementedError(f"{self.name} is stateless")
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self._config!r})"

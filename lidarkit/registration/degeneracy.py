@@ -1,0 +1,104 @@
+"""Degeneracy of a final alignment: eigen-analysis of the 6x6 normal matrix of the matched points.
+
+The point-to-point normal matrix ``sum J_i^T J_i`` is full rank for any three non-collinear pairs, so
+it cannot reveal that a flat patch lets the source slide. We therefore weight each residual by the
+directions in which the target surface around its match is *thin*: ``M_i = n n^T`` on a plane,
+the two normals of a line, ``I`` in volumetric clutter (local PCA of the target's k nearest
+neighbours). With ``J_i = [I, -[p_i]x / r]`` (points centred on their centroid, rotations scaled by
+the RMS radius ``r`` so that all six columns are in metres) the normal matrix is
+``H = (1/n) sum J_i^T M_i J_i``. A plane leaves 3 zero eigenvalues, a line 2; the result is
+flagged ``degenerate`` when ``min(eig) / max(eig) < DEGENERACY_RATIO_THRESHOLD``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from lidarkit.registration.base import DEGENERACY_RATIO_THRESHOLD, Degeneracy
+
+#: An eigen-direction of the local covariance is "thin" (constrained) below this fraction of the largest.
+THIN_RATIO = 0.1
+
+
+def surface_constraints(neighborhoods_xyz: np.ndarray) -> np.ndarray:
+    """``(n, 3, 3)`` constraint projectors ``M_i`` from ``(n, k, 3)`` neighbourhoods of target points."""
+    centred = neighborhoods_xyz - neighborhoods_xyz.mean(axis=1, keepdims=True)
+    cov = np.einsum("nki,nkj->nij", centred, centred) / neighborhoods_xyz.shape[1]
+    evals, evecs = np.linalg.eigh(cov)  # ascending
+    top = evals[:, 2:3]
+    thin = evals <= THIN_RATIO * top
+    volumetric = evals[:, 0] > THIN_RATIO * evals[:, 2]
+    thin[volumetric] = True
+    thin[top[:, 0] <= 0] = True  # all neighbours identical: no surface, plain point-to-point
+    return np.einsum("nij,nj,nkj->nik", evecs, thin.astype(np.float64), evecs)
+
+
+def normal_matrix(points_xyz: np.ndarray, constraints: np.ndarray) -> np.ndarray:
+    """Normalised 6x6 ``H`` for ``(n, 3)`` aligned source points and ``(n, 3, 3)`` projectors."""
+    p = points_xyz - points_xyz.mean(axis=0)
+    radius = float(np.sqrt((p * p).sum(axis=1).mean()))
+    scale = 1.0 / radius if radius > 0 else 0.0
+    n = len(p)
+    J = np.zeros((n, 3, 6))
+    J[:, 0, 0] = J[:, 1, 1] = J[:, 2, 2] = 1.0
+    # -[p]x / r : rotation columns in metres per radian-at-radius
+    J[:, 0, 4], J[:, 0, 5] = p[:, 2] * scale, -p[:, 1] * scale
+    J[:, 1, 3], J[:, 1, 5] = -p[:, 2] * scale, p[:, 0] * scale
+    J[:, 2, 3], J[:, 2, 4] = p[:, 1] * scale, -p[:, 0] * scale
+    return np.einsum("nki,nkl,nlj->ij", J, constraints, J) / max(n, 1)
+
+
+def summarize(H: np.ndarray, threshold: float = DEGENERACY_RATIO_THRESHOLD, kind: str = "point_to_surface") -> Degeneracy:
+    """Eigen-summary of a symmetric 6x6 normal matrix."""
+    evals, evecs = np.linalg.eigh(0.5 * (H + H.T))
+    evals = np.clip(evals, 0.0, None)
+    top = evals[-1]
+    ratio = evals[0] / top if top > 0 else 0.0
+    weakest = evecs[:, 0]
+    weakest = weakest * (1.0 if weakest[np.argmax(np.abs(weakest))] >= 0 else -1.0)
+    return Degeneracy(
+        eigenvalues=tuple(float(x) for x in evals),
+        condition_number=float(top / evals[0]) if evals[0] > 0 else float("inf"),
+        degenerate=bool(ratio < threshold),
+        weakest_direction=tuple(float(x) for x in weakest),
+        threshold=threshold,
+        kind=kind,
+    )
+
+
+def assess_degeneracy(
+    source_aligned_xyz: np.ndarray,
+    target_xyz: np.ndarray,
+    matched_target_index: np.ndarray,
+    target_query=None,
+    k: int = 20,
+    max_points: int = 2000,
+    seed: int = 0,
+    threshold: float = DEGENERACY_RATIO_THRESHOLD,
+) -> Degeneracy:
+    """Degeneracy of matched pairs (``source_aligned_xyz[i]`` <-> ``target_xyz[matched_target_index[i]]``).
+
+    ``target_query(points, k) -> (n, k) indices`` finds target neighbourhoods (a cKDTree is built when
+    None). At most ``max_points`` pairs are used (a seeded random subset) to keep this cheap.
+    """
+    n = len(source_aligned_xyz)
+    if n < 3:
+        return Degeneracy.unknown(f"{n} correspondences")
+    if n > max_points:
+        pick = np.random.default_rng(seed).choice(n, size=max_points, replace=False)
+        source_aligned_xyz = source_aligned_xyz[pick]
+        matched_target_index = matched_target_index[pick]
+    k = int(min(k, len(target_xyz)))
+    anchors = target_xyz[matched_target_index]
+    if target_query is None:
+        from scipy.spatial import cKDTree
+
+        _, nbr = cKDTree(target_xyz).query(anchors, k=k)
+    else:
+        nbr = target_query(anchors, k)
+    nbr = np.asarray(nbr).reshape(len(anchors), k)
+    constraints = surface_constraints(target_xyz[nbr])
+    return summarize(normal_matrix(source_aligned_xyz, constraints), threshold)
+
+
+__all__ = ["THIN_RATIO", "assess_degeneracy", "normal_matrix", "summarize", "surface_constraints"]

@@ -1,0 +1,177 @@
+"""``kiss``: the KISS-ICP reference (Vizzo et al., RA-L 2023) through the ``kiss_icp`` package.
+
+Sequence mode (:meth:`KissRegistration.register_frame`) drives ``kiss_icp.kiss_icp.KissICP`` with the
+``KISSConfig`` built by :meth:`KissConfig.to_kiss_config`, so poses are bit-identical to calling
+KissICP directly: adaptive threshold, constant-velocity deskew (when per-point times are given,
+to the END of the sweep, as kiss-icp 1.3 does) and the voxel-hash local map.
+Pairwise mode (:meth:`align`) builds the local map from the target alone and registers the
+voxelized source with ``init_T`` and the initial (or fixed) threshold.
+
+kiss-icp aborts the whole process ("R is not orthogonal", Sophus) when handed a rotation that is not
+orthonormal to ~1e-10, e.g. one read back from a text file: every pose lidarkit passes to it goes
+through :func:`kiss_safe_pose`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pydantic import Field, model_validator
+
+from lidarkit.errors import ConfigError, DataError
+from lidarkit.geometry import as_points, is_rotation, orthonormalize_se3
+from lidarkit.registration.assessment import assess_alignment
+from lidarkit.registration.base import Registration, RegistrationConfig, RegistrationResult
+from lidarkit.registration.registry import register_icp
+
+#: Rotations passed to kiss-icp must be orthonormal to this (Sophus checks ~1e-10).
+KISS_ORTHONORMAL_TOL = 1e-12
+
+
+def kiss_safe_pose(T: np.ndarray, name: str = "pose") -> np.ndarray:
+    """A float64 4x4 pose kiss-icp accepts: re-orthonormalized unless already exact (then returned as is)."""
+    T = np.asarray(T, dtype=np.float64)
+    if T.shape != (4, 4) or not np.isfinite(T).all():
+        raise DataError(f"expected a finite 4x4 pose, got shape {T.shape}", source=name)
+    if is_rotation(T[:3, :3], tol=KISS_ORTHONORMAL_TOL) and np.array_equal(T[3], [0.0, 0.0, 0.0, 1.0]):
+        return T
+    return orthonormalize_se3(T)
+
+
+class KissConfig(RegistrationConfig):
+    """KISS-ICP parameters (flattened ``KISSConfig``; defaults are kiss-icp 1.3's)."""
+
+    max_range_m: float = Field(100.0, gt=0, description="drop points farther than this (m)")
+    min_range_m: float = Field(0.0, ge=0, description="drop points closer than this (m)")
+    deskew: bool = Field(True, description="constant-velocity motion compensation when per-point times exist")
+    voxel_size_m: float | None = Field(None, gt=0, description="map voxel size (m); None: max_range_m / 100")
+    max_points_per_voxel: int = Field(20, ge=1, description="points kept per map voxel")
+    max_num_iterations: int = Field(500, ge=1, description="ICP iterations per frame")
+    convergence_criterion: float = Field(1e-4, gt=0, description="stop when the update norm is below this")
+    max_num_threads: int = Field(0, ge=0, description="threads (0: automatic)")
+    fixed_threshold_m: float | None = Field(None, gt=0, description="fixed correspondence threshold sigma (m); None: adaptive")
+    initial_threshold_m: float = Field(2.0, gt=0, description="adaptive threshold before enough motion (m)")
+    min_motion_th_m: float = Field(0.1, ge=0, description="motion below this does not update the adaptive threshold (m)")
+
+    @model_validator(mode="after")
+    def _ranges(self) -> "KissConfig":
+        if self.max_range_m <= self.min_range_m:
+            raise ValueError(f"max_range_m ({self.max_range_m}) must exceed min_range_m ({self.min_range_m})")
+        return self
+
+    @property
+    def resolved_voxel_size_m(self) -> float:
+        return self.voxel_size_m if self.voxel_size_m is not None else self.max_range_m / 100.0
+
+    def to_kiss_config(self):
+        """The equivalent ``kiss_icp.config.KISSConfig`` (voxel size resolved as kiss-icp's load_config does)."""
+        from kiss_icp.config.config import AdaptiveThresholdConfig, DataConfig, MappingConfig
+        from kiss_icp.config.config import RegistrationConfig as KissRegistrationConfig
+        from kiss_icp.config.parser import KISSConfig
+
+        return KISSConfig(
+            data=DataConfig(max_range=self.max_range_m, min_range=self.min_range_m, deskew=self.deskew),
+            mapping=MappingConfig(voxel_size=self.resolved_voxel_size_m, max_points_per_voxel=self.max_points_per_voxel),
+            registration=KissRegistrationConfig(
+                max_num_iterations=self.max_num_iterations,
+                convergence_criterion=self.convergence_criterion,
+                max_num_threads=self.max_num_threads,
+            ),
+            adaptive_threshold=AdaptiveThresholdConfig(
+                fixed_threshold=self.fixed_threshold_m,
+                initial_threshold=self.initial_threshold_m,
+                min_motion_th=self.min_motion_th_m,
+            ),
+        )
+
+
+@register_icp("kiss")
+class KissRegistration(Registration):
+    """KISS-ICP: stateful odometry (``register_frame``) or pairwise scan-to-map alignment (``align``)."""
+
+    Config = KissConfig
+    stateful = True
+
+    def __init__(self, config: KissConfig | None = None, **params):
+        super().__init__(config, **params)
+        self._kiss = None
+
+    @property
+    def kiss_config(self):
+        """The ``kiss_icp`` KISSConfig this wrapper runs with (a fresh object each call)."""
+        return self.config.to_kiss_config()
+
+    @property
+    def pipeline(self):
+        """The underlying ``kiss_icp.kiss_icp.KissICP`` (created on first use)."""
+        if self._kiss is None:
+            self.reset()
+        return self._kiss
+
+    def reset(self, T_world_lidar_initial: np.ndarray | None = None) -> None:
+        """Start a new sequence: empty map, zero velocity, first pose ``T_world_lidar_initial`` (identity)."""
+        from kiss_icp.kiss_icp import KissICP
+
+        self._kiss = KissICP(self.kiss_config)
+        if T_world_lidar_initial is not None:
+            self._kiss.last_pose = kiss_safe_pose(T_world_lidar_initial, "T_world_lidar_initial")
+
+    def register_frame(self, points_xyz: np.ndarray, point_times_s: np.ndarray | None = None) -> np.ndarray:
+        """Register one sweep; returns ``T_world_lidar`` (4x4) of this frame (at the end of the sweep when deskewed)."""
+        kiss = self.pipeline
+        frame = np.ascontiguousarray(as_points(points_xyz, "frame", min_points=1))
+        if point_times_s is None:
+            times = np.array([])
+        else:
+            times = np.asarray(point_times_s, dtype=np.float64).ravel()
+            if len(times) != len(frame) or not np.isfinite(times).all():
+                raise DataError(f"need {len(frame)} finite per-point times, got {len(times)}", source="point_times_s")
+        kiss.last_pose = kiss_safe_pose(kiss.last_pose, "last_pose")
+        kiss.last_delta = kiss_safe_pose(kiss.last_delta, "last_delta")
+        kiss.register_frame(frame, times)
+        return np.array(kiss.last_pose, dtype=np.float64)
+
+    def _align(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray) -> RegistrationResult:
+        from kiss_icp.mapping import get_voxel_hash_map
+        from kiss_icp.preprocess import Preprocessor
+        from kiss_icp.registration import get_registration
+        from kiss_icp.voxelization import voxel_down_sample
+
+        c = self.config
+        kcfg = self.kiss_config
+        crop = Preprocessor(c.max_range_m, c.min_range_m, False, c.max_num_threads)
+        no_times, identity = np.array([]), np.eye(4)
+        target = crop.preprocess(np.ascontiguousarray(target_xyz), no_times, identity)
+        source = crop.preprocess(np.ascontiguousarray(source_xyz), no_times, identity)
+        if len(target) < 3 or len(source) < 3:
+            raise ConfigError(f"fewer than 3 points within [{c.min_range_m}, {c.max_range_m}] m", source="kiss range crop")
+        voxel = c.resolved_voxel_size_m
+        local_map = get_voxel_hash_map(kcfg)
+        local_map.update(voxel_down_sample(target, voxel * 0.5), identity)
+        source_down = voxel_down_sample(voxel_down_sample(source, voxel * 0.5), voxel * 1.5)
+        sigma = c.fixed_threshold_m if c.fixed_threshold_m is not None else c.initial_threshold_m
+        T = get_registration(kcfg).align_points_to_map(
+            points=source_down,
+            voxel_map=local_map,
+            initial_guess=kiss_safe_pose(init_T, "init_T"),
+            max_correspondance_distance=3.0 * sigma,
+            kernel=sigma,
+        )
+        T = np.array(T, dtype=np.float64)
+        map_points = local_map.point_cloud()
+        assessment = assess_alignment(source_down, map_points, T, 3.0 * sigma)
+        converged = assessment.n_correspondences >= 3
+        reason = "" if converged else f"only {assessment.n_correspondences} correspondences within {3 * sigma} m"
+        if converged and assessment.degeneracy.degenerate:
+            reason = f"degenerate geometry: min/max eigenvalue {assessment.degeneracy.ratio:.2e}"
+        return RegistrationResult(
+            T_target_source=T,
+            converged=converged,
+            iterations=0,
+            rmse_history=(assessment.rmse_m,),
+            n_correspondences=assessment.n_correspondences,
+            runtime_s=0.0,
+            fitness=assessment.fitness,
+            degeneracy=assessment.degeneracy,
+            reason=reason,
+            extra={"iterations_reported": False, "threshold_sigma_m": sigma, "source_keypoints": len(source_down)},
+        )

@@ -1,0 +1,80 @@
+"""Nearest-neighbour search on a fixed target cloud, built once and queried every ICP iteration.
+
+Backends:
+- ``"scipy"``: :class:`scipy.spatial.cKDTree` (float64, exact), ``leafsize`` and ``workers`` settable.
+- ``"open3d"``: Open3D tensor ``NearestNeighborSearch.knn_search`` (float32 on coordinates centred on
+  the target centroid; the returned squared distances are recomputed in float64 from the indices).
+- ``"brute"``: exact brute force in blocks (O(N M)); for small clouds and for checking the trees.
+- ``"auto"``: ``"open3d"`` (measured fastest on KITTI scans, see benchmarks/README.md), else ``"scipy"``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from lidarkit.errors import ConfigError
+
+BACKENDS = ("auto", "scipy", "open3d", "brute")
+
+
+class NearestNeighbors:
+    """Index over ``(M, 3)`` target points; :meth:`query` returns squared distances and indices."""
+
+    def __init__(self, target_xyz: np.ndarray, backend: str = "auto", leafsize: int = 16, workers: int = -1):
+        if backend not in BACKENDS:
+            raise ConfigError(f"unknown nearest-neighbour backend {backend!r}; available: {', '.join(BACKENDS)}", source="nn_backend")
+        self.target_xyz = np.asarray(target_xyz, dtype=np.float64)
+        self.workers = workers
+        if backend == "auto":
+            backend = "open3d" if _open3d_nns_available() else "scipy"
+        self.backend = backend
+        if backend == "scipy":
+            from scipy.spatial import cKDTree
+
+            self._tree = cKDTree(self.target_xyz, leafsize=int(leafsize))
+        elif backend == "open3d":
+            import open3d.core as o3c
+
+            self._center = self.target_xyz.mean(axis=0)
+            self._nns = o3c.nns.NearestNeighborSearch(o3c.Tensor((self.target_xyz - self._center).astype(np.float32)))
+            self._nns.knn_index()
+        else:
+            self._sq_norms = np.einsum("ij,ij->i", self.target_xyz, self.target_xyz)
+
+    def query(self, points_xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Nearest target point of each ``(N, 3)`` query: ``(dist2 (N,) float64 m^2, index (N,) int64)``."""
+        pts = np.asarray(points_xyz, dtype=np.float64)
+        if len(pts) == 0:
+            return np.zeros(0), np.zeros(0, dtype=np.int64)
+        if self.backend == "scipy":
+            dist, idx = self._tree.query(pts, k=1, workers=self.workers)
+            return dist * dist, idx.astype(np.int64, copy=False)
+        if self.backend == "open3d":
+            import open3d.core as o3c
+
+            idx_t, _ = self._nns.knn_search(o3c.Tensor((pts - self._center).astype(np.float32)), 1)
+            idx = idx_t.numpy().reshape(-1).astype(np.int64, copy=False)
+        else:
+            idx = self._brute_indices(pts)
+        diff = pts - self.target_xyz[idx]
+        return np.einsum("ij,ij->i", diff, diff), idx
+
+    def _brute_indices(self, pts: np.ndarray, block_bytes: int = 64 << 20) -> np.ndarray:
+        rows = max(1, block_bytes // (8 * len(self.target_xyz)))
+        out = np.empty(len(pts), dtype=np.int64)
+        for start in range(0, len(pts), rows):  # loop over blocks of queries, each fully vectorized
+            block = pts[start : start + rows]
+            d2 = self._sq_norms[None, :] - 2.0 * (block @ self.target_xyz.T)
+            out[start : start + rows] = np.argmin(d2, axis=1)
+        return out
+
+
+def _open3d_nns_available() -> bool:
+    try:
+        import open3d.core  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+__all__ = ["BACKENDS", "NearestNeighbors"]

@@ -1,0 +1,113 @@
+"""Registry of ICP variants: ``@register_icp(name)``, ``get_icp(name, **params)``, ``available_icp()``.
+
+Built-in variants register when :mod:`lidarkit.registration` imports their modules; third-party
+packages declare an entry point in the group ``lidarkit.icp`` (``name = "pkg.module:VariantClass"``),
+loaded lazily the first time the registry is asked for names or for that variant.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from importlib.metadata import entry_points
+from typing import Any
+
+import pydantic
+
+from lidarkit.errors import ConfigError
+from lidarkit.registration.base import Registration
+
+log = logging.getLogger(__name__)
+
+ENTRY_POINT_GROUP = "lidarkit.icp"
+
+_VARIANTS: dict[str, type[Registration]] = {}
+_PLUGINS_LOADED = False
+
+
+def register_icp(name: str) -> Callable[[type[Registration]], type[Registration]]:
+    """Class decorator: register a :class:`Registration` subclass under ``name`` (sets ``cls.name``)."""
+
+    def decorator(cls: type[Registration]) -> type[Registration]:
+        if not (isinstance(cls, type) and issubclass(cls, Registration)):
+            raise ConfigError(f"{cls!r} is not a Registration subclass", source=f"register_icp({name!r})")
+        existing = _VARIANTS.get(name)
+        if existing is not None and existing is not cls:
+            raise ConfigError(f"name already taken by {existing.__module__}.{existing.__qualname__}", source=f"register_icp({name!r})")
+        cls.name = name
+        _VARIANTS[name] = cls
+        return cls
+
+    return decorator
+
+
+def _load_plugins() -> None:
+    """Import every ``lidarkit.icp`` entry point once; a broken plugin raises ConfigError naming it."""
+    global _PLUGINS_LOADED
+    if _PLUGINS_LOADED:
+        return
+    _PLUGINS_LOADED = True
+    for ep in entry_points(group=ENTRY_POINT_GROUP):
+        if ep.name in _VARIANTS:
+            continue
+        try:
+            obj = ep.load()
+        except Exception as err:  # a plugin may fail in any way while importing
+            _PLUGINS_LOADED = False
+            raise ConfigError(f"failed to load plugin {ep.value!r}: {type(err).__name__}: {err}", source=f"ICP plugin {ep.name!r}") from err
+        if ep.name not in _VARIANTS:
+            if not (isinstance(obj, type) and issubclass(obj, Registration)):
+                _PLUGINS_LOADED = False
+                raise ConfigError(f"entry point {ep.value!r} is not a Registration subclass", source=f"ICP plugin {ep.name!r}")
+            register_icp(ep.name)(obj)
+        log.info("loaded ICP plugin %s from %s", ep.name, ep.value)
+
+
+def reload_plugins() -> None:
+    """Forget which entry points were loaded and scan the group again (after installing a plugin)."""
+    global _PLUGINS_LOADED
+    _PLUGINS_LOADED = False
+    _load_plugins()
+
+
+def available_icp() -> list[str]:
+    """Sorted names of every registered variant, plugins included."""
+    _load_plugins()
+    return sorted(_VARIANTS)
+
+
+def get_icp_class(name: str) -> type[Registration]:
+    """The class registered as ``name``; unknown names raise ConfigError listing the known ones."""
+    if name not in _VARIANTS:
+        _load_plugins()
+    if name not in _VARIANTS:
+        raise ConfigError(f"unknown ICP method {name!r}; available: {', '.join(available_icp())}", source="method")
+    return _VARIANTS[name]
+
+
+def config_fields(name: str) -> dict[str, tuple[str, Any, str]]:
+    """``{param: (type, default, description)}`` of a variant's config, generated from the model."""
+    cls = get_icp_class(name)
+    out = {}
+    for key, info in cls.Config.model_fields.items():
+        ann = info.annotation
+        type_name = getattr(ann, "__name__", None) or str(ann).replace("typing.", "")
+        out[key] = (type_name, info.get_default(call_default_factory=True), info.description or "")
+    return out
+
+
+def get_icp(name: str, **params: Any) -> Registration:
+    """A configured instance of variant ``name``; bad or unknown params raise ConfigError listing valid ones."""
+    cls = get_icp_class(name)
+    valid = ", ".join(f"{k}={v[1]!r}" for k, v in config_fields(name).items()) or "(none)"
+    try:
+        config = cls.Config(**params)
+    except pydantic.ValidationError as err:
+        problems = "; ".join(f"{'.'.join(str(p) for p in e['loc']) or '?'}: {e['msg']}" for e in err.errors())
+        raise ConfigError(f"invalid parameters ({problems}); valid parameters: {valid}", source=f"method {name!r}") from None
+    except ValueError as err:
+        raise ConfigError(f"invalid parameters ({err}); valid parameters: {valid}", source=f"method {name!r}") from None
+    return cls(config=config)
+
+
+__all__ = ["ENTRY_POINT_GROUP", "available_icp", "config_fields", "get_icp", "get_icp_class", "register_icp", "reload_plugins"]

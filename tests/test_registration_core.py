@@ -1,0 +1,393 @@
+"""Registry, result contract, synthetic accuracy, bad input and degeneracy of the ICP variants."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+from registration_helpers import structured_cloud
+
+from lidarkit.errors import ConfigError, DataError, RegistrationError
+from lidarkit.geometry import make_se3, pose_error, random_se3, so3_exp, transform_points
+from lidarkit.registration import (
+    ENTRY_POINT_GROUP,
+    Registration,
+    RegistrationResult,
+    available_icp,
+    config_fields,
+    get_icp,
+    register_icp,
+    reload_plugins,
+)
+from lidarkit.registration import registry as registry_module
+from lidarkit.registration.kiss import kiss_safe_pose
+from lidarkit.registration.preprocess import (
+    crop_range,
+    ground_mask_by_height,
+    ground_mask_by_plane,
+    voxel_downsample,
+)
+
+BUILTIN = {"vanilla", "ground_filtered", "knn", "kiss", "open3d_point_to_point", "open3d_point_to_plane", "open3d_gicp"}
+
+# per-variant params for small synthetic clouds (defaults are tuned for KITTI-sized scans)
+SYNTH_PARAMS = {
+    "vanilla": {"max_correspondence_distance_m": 1.0},
+    "ground_filtered": {"max_correspondence_distance_m": 1.0, "ground_method": "ransac"},
+    "knn": {"max_correspondence_distance_m": 1.0, "leafsize": 1},
+    "kiss": {"voxel_size_m": 0.25, "initial_threshold_m": 0.5},
+    "open3d_point_to_point": {"max_correspondence_distance_m": 1.0},
+    "open3d_point_to_plane": {"voxel_size_m": 0.1, "normal_radius_m": 0.5},
+    "open3d_gicp": {"voxel_size_m": 0.1, "normal_radius_m": 0.5},
+    "small_gicp": {"downsampling_resolution_m": 0.1},
+}
+
+
+# ---------------------------------------------------------------- registry
+
+
+def test_registry_lists_builtins_and_small_gicp_when_installed():
+    names = set(available_icp())
+    assert BUILTIN <= names
+    try:
+        import small_gicp  # noqa: F401
+    except ImportError:
+        assert "small_gicp" not in names
+    else:
+        assert "small_gicp" in names
+
+
+def test_unknown_method_lists_available_names():
+    with pytest.raises(ConfigError) as err:
+        get_icp("no_such_icp")
+    msg = str(err.value)
+    assert "no_such_icp" in msg and "vanilla" in msg and "kiss" in msg
+
+
+@pytest.mark.parametrize(
+    "params, fragment",
+    [({"max_iterationz": 3}, "max_iterationz"), ({"max_iterations": 0}, "max_iterations"), ({"nn_backend": "gpu"}, "nn_backend")],
+)
+def test_bad_params_raise_config_error_listing_valid_params(params, fragment):
+    with pytest.raises(ConfigError) as err:
+        get_icp("vanilla", **params)
+    msg = str(err.value)
+    assert fragment in msg and "epsilon_m2=" in msg and "max_correspondence_distance_m=" in msg
+
+
+def test_config_is_resolved_frozen_and_described():
+    icp = get_icp("vanilla", max_iterations=7)
+    assert icp.config.max_iterations == 7 and icp.config.epsilon_m2 == 1e-6
+    with pytest.raises(Exception):
+        icp.config.max_iterations = 3
+    fields = config_fields("kiss")
+    assert fields["max_range_m"][1] == 100.0 and fields["deskew"][1] is True
+    assert all(desc for _, _, desc in fields.values())
+
+
+def test_register_icp_rejects_non_registration_and_name_clash():
+    with pytest.raises(ConfigError):
+        register_icp("bogus")(object)
+
+    class Other(Registration):
+        pass
+
+    with pytest.raises(ConfigError, match="already taken"):
+        register_icp("vanilla")(Other)
+
+
+PLUGIN_SOURCE = textwrap.dedent(
+    '''
+    import numpy as np
+    from lidarkit.registration import Registration, RegistrationConfig, RegistrationResult
+    from lidarkit.registration.base import Degeneracy
+
+    class IdentityConfig(RegistrationConfig):
+        offset_m: float = 0.0
+
+    class IdentityICP(Registration):
+        Config = IdentityConfig
+        def _align(self, source_xyz, target_xyz, init_T):
+            T = init_T.copy(); T[0, 3] += self.config.offset_m
+            return RegistrationResult(T, False, 0, (), 0, 0.0, 0.0, Degeneracy.unknown("plugin"), reason="identity plugin")
+    '''
+)
+
+
+def _install_dist_info(site, monkeypatch, name, target):
+    dist = site / f"{name}-0.1.dist-info"
+    dist.mkdir(parents=True)
+    (dist / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {name}\nVersion: 0.1\n")
+    (dist / "entry_points.txt").write_text(f"[{ENTRY_POINT_GROUP}]\n{name.replace('-', '_')} = {target}\n")
+    monkeypatch.syspath_prepend(str(site))
+
+
+def test_entry_point_plugin_is_discovered_and_configurable(tmp_path, monkeypatch):
+    site = tmp_path / "site"
+    site.mkdir()
+    (site / "lk_identity_plugin.py").write_text(PLUGIN_SOURCE)
+    _install_dist_info(site, monkeypatch, "lk-identity-plugin", "lk_identity_plugin:IdentityICP")
+    try:
+        reload_plugins()
+        assert "lk_identity_plugin" in available_icp()
+        icp = get_icp("lk_identity_plugin", offset_m=0.5)
+        res = icp.align(np.eye(3) * 2 + 1, np.eye(3) * 3)
+        assert res.method == "lk_identity_plugin" and res.T_target_source[0, 3] == 0.5 and not res.converged
+        with pytest.raises(ConfigError, match="offset_m"):
+            get_icp("lk_identity_plugin", offset=1)
+    finally:
+        registry_module._VARIANTS.pop("lk_identity_plugin", None)
+
+
+def test_broken_plugin_raises_config_error_naming_it(tmp_path, monkeypatch):
+    site = tmp_path / "site"
+    site.mkdir()
+    (site / "lk_broken_plugin.py").write_text("raise RuntimeError('boom at import')\n")
+    _install_dist_info(site, monkeypatch, "lk-broken-plugin", "lk_broken_plugin:Nope")
+    try:
+        with pytest.raises(ConfigError) as err:
+            reload_plugins()
+        assert "lk_broken_plugin" in str(err.value) and "boom at import" in str(err.value)
+    finally:
+        monkeypatch.undo()
+        reload_plugins()
+
+
+# ---------------------------------------------------------------- result contract and synthetic accuracy
+
+
+@pytest.fixture(scope="module")
+def synthetic_pair():
+    rng = np.random.default_rng(7)
+    target = structured_cloud(rng, n=12000)
+    T_gt = make_se3(so3_exp(np.radians([0.3, -0.4, 4.0])), [0.6, -0.25, 0.05])  # vehicle-like: small roll/pitch
+    # source = the scene seen from the moved sensor, independently sampled (no exact point pairs)
+    source = transform_points(np.linalg.inv(T_gt), structured_cloud(np.random.default_rng(8), n=12000))
+    return source, target, T_gt
+
+
+@pytest.mark.parametrize("name", sorted(SYNTH_PARAMS))
+def test_every_variant_recovers_a_known_motion_on_a_structured_scene(name, synthetic_pair):
+    if name not in available_icp():
+        pytest.skip(f"{name} not installed")
+    source, target, T_gt = synthetic_pair
+    res = get_icp(name, **SYNTH_PARAMS[name]).align(source, target)
+    assert isinstance(res, RegistrationResult) and res.method == name
+    dt, dr = pose_error(res.T_target_source, T_gt)
+    # independent samplings of the same surfaces: a few cm / a few hundredths of a degree
+    assert dt < 0.05 and dr < 0.15, (name, dt, dr)
+    assert res.converged and not res.degeneracy.degenerate, res.reason
+    assert res.runtime_s > 0 and res.n_correspondences > 1000 and 0.5 < res.fitness <= 1.0
+    assert len(res.degeneracy.eigenvalues) == 6 and res.degeneracy.condition_number < 1e3
+    d = json.loads(json.dumps(res.to_dict()))
+    assert d["method"] == name and np.allclose(d["T_target_source"], res.T_target_source)
+
+
+def test_vanilla_exact_pairs_random_se3_tight(rng):
+    """Source = rigidly moved copy of the target: point-to-point ICP must recover T to ~1e-6."""
+    target = structured_cloud(rng, n=6000)
+    icp = get_icp("vanilla", epsilon_m2=1e-14, max_iterations=200, coarse_stride=1)
+    for _ in range(3):
+        T_gt = random_se3(rng, max_translation=0.3, max_angle_rad=np.radians(3))
+        source = transform_points(np.linalg.inv(T_gt), target)
+        res = icp.align(source, target)
+        dt, dr = pose_error(res.T_target_source, T_gt)
+        assert dt < 1e-6 and dr < 1e-5
+        assert res.rmse_history[-1] < 1e-6 and res.rmse_history[0] > res.rmse_history[-1]
+
+
+def test_vanilla_rmse_history_and_stop_rule(synthetic_pair):
+    source, target, _ = synthetic_pair
+    res = get_icp("vanilla", epsilon_m2=1e-6, coarse_stride=1).align(source, target)
+    h = np.asarray(res.rmse_history)
+    assert len(h) == res.iterations + 1  # one RMSE per correspondence step, the last one triggers the stop
+    assert abs(h[-1] ** 2 - h[-2] ** 2) < 1e-6 and abs(h[-2] ** 2 - h[-3] ** 2) >= 1e-6
+    capped = get_icp("vanilla", max_iterations=2, epsilon_m2=0.0, coarse_stride=1).align(source, target)
+    assert capped.iterations == 2 and not capped.converged and "max_iterations" in capped.reason
+
+
+def test_nn_backends_agree(rng):
+    target = structured_cloud(rng, n=4000)
+    source = transform_points(make_se3(so3_exp([0, 0, 0.03]), [0.3, 0.1, 0]), structured_cloud(rng, n=4000))
+    poses = [
+        get_icp("knn", nn_backend=b, leafsize=leaf, voxel_size_m=0.5).align(source, target).T_target_source
+        for b, leaf in (("scipy", 1), ("scipy", 16), ("scipy", 200), ("open3d", 16), ("brute", 16))
+    ]
+    for T in poses[1:]:
+        assert np.allclose(T, poses[0], atol=1e-6)
+
+
+def test_init_guess_is_used_and_orthonormalized(synthetic_pair):
+    source, target, T_gt = synthetic_pair
+    sloppy = T_gt.copy()
+    sloppy[:3, :3] = np.round(sloppy[:3, :3], 3)  # as read back from a short text file
+    res = get_icp("vanilla", max_iterations=1, coarse_stride=1).align(source, target, init_T=sloppy)
+    assert pose_error(res.T_target_source, T_gt)[0] < 0.05
+    with pytest.raises(DataError, match="init_T"):
+        get_icp("vanilla").align(source, target, init_T=np.eye(3))
+
+
+# ---------------------------------------------------------------- bad input
+
+
+@pytest.mark.parametrize("name", ["vanilla", "kiss", "open3d_gicp"])
+def test_bad_clouds_name_the_cloud(name, rng):
+    good = structured_cloud(rng, n=600)
+    icp = get_icp(name)
+    with pytest.raises(DataError, match="source cloud"):
+        icp.align(np.zeros((0, 3)), good)
+    with pytest.raises(DataError, match="target cloud"):
+        icp.align(good, good[:2])
+    nan = good.copy()
+    nan[5, 1] = np.nan
+    with pytest.raises(DataError, match="target cloud.*NaN"):
+        icp.align(good, nan)
+    with pytest.raises(DataError, match="source cloud.*shape"):
+        icp.align(good[:, :2], good)
+    with pytest.raises(DataError, match="source cloud.*numeric"):
+        icp.align(good.astype(str), good)
+
+
+def test_float32_input_is_accepted(synthetic_pair):
+    source, target, T_gt = synthetic_pair
+    res = get_icp("vanilla", max_correspondence_distance_m=1.0).align(source.astype(np.float32), target.astype(np.float32))
+    assert pose_error(res.T_target_source, T_gt)[0] < 0.05
+
+
+def test_too_few_correspondences_is_not_converged_with_reason(rng):
+    target = structured_cloud(rng, n=2000)
+    far = target + [500.0, 0.0, 0.0]
+    res = get_icp("vanilla", max_correspondence_distance_m=1.0).align(far, target)
+    assert not res.converged and "correspondences" in res.reason and res.n_correspondences == 0
+    assert res.degeneracy.degenerate
+
+
+def test_ground_filter_with_nothing_left_raises(rng):
+    flat = np.c_[rng.uniform(-10, 10, (500, 2)), np.full(500, -1.73)]
+    with pytest.raises(RegistrationError, match="ground removal"):
+        get_icp("ground_filtered").align(flat, flat)
+
+
+# ---------------------------------------------------------------- degeneracy
+
+
+@pytest.mark.parametrize("name", ["vanilla", "open3d_point_to_plane", "small_gicp", "kiss"])
+def test_flat_ground_patch_is_flagged_degenerate(name, rng):
+    if name not in available_icp():
+        pytest.skip(f"{name} not installed")
+    plane = np.c_[rng.uniform(-15, 15, (8000, 2)), rng.normal(-1.73, 0.01, 8000)]
+    moved = transform_points(make_se3(so3_exp([0, 0, 0.02]), [0.3, 0.1, 0.0]), plane)
+    params = {"voxel_size_m": 0.3, "initial_threshold_m": 0.5} if name == "kiss" else {}
+    res = get_icp(name, **params).align(moved, plane)
+    assert res.degeneracy.degenerate, res.degeneracy
+    assert "degenerate" in res.reason or not res.converged
+    # the unconstrained directions are in-plane translation and yaw: weakest direction lives there
+    w = np.abs(np.asarray(res.degeneracy.weakest_direction))
+    assert w[[0, 1, 5]].sum() > 0.95 * w.sum()
+    assert sum(e < 1e-3 * res.degeneracy.eigenvalues[-1] for e in res.degeneracy.eigenvalues) == 3
+
+
+def test_points_on_a_line_are_flagged_degenerate(rng):
+    line = np.c_[rng.uniform(-10, 10, 3000), np.zeros(3000), np.zeros(3000)] + rng.normal(0, 1e-3, (3000, 3))
+    res = get_icp("vanilla").align(line + [0.05, 0.02, 0.0], line)
+    assert res.degeneracy.degenerate and "degenerate" in res.reason
+    # translation along the line (x) and rotation about it (rx) are unconstrained
+    assert sum(e < 1e-3 * res.degeneracy.eigenvalues[-1] for e in res.degeneracy.eigenvalues) == 2
+
+
+# ---------------------------------------------------------------- kiss orthonormalization guard
+
+
+NON_ORTHONORMAL_SCRIPT = textwrap.dedent(
+    """
+    import numpy as np, sys
+    from kiss_icp.kiss_icp import KissICP
+    from lidarkit.registration import get_icp
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(-20, 20, (4000, 3))
+    bad = np.eye(4); bad[:3, :3] = [[1.00002, 0, 0], [0, 1.00002, 0], [0, 0, 1]]  # R not orthogonal
+    if sys.argv[1] == "direct":
+        k = KissICP(get_icp("kiss").kiss_config)
+        k.register_frame(pts, np.array([])); k.last_delta = bad
+        k.register_frame(pts, np.array([]))
+    else:
+        icp = get_icp("kiss")
+        icp.register_frame(pts); icp.pipeline.last_delta = bad
+        icp.register_frame(pts)
+        icp.reset(bad)
+        icp.register_frame(pts)
+        r = icp.align(pts, pts, init_T=bad)
+        assert np.allclose(r.T_target_source, np.eye(4), atol=1e-3), r.T_target_source
+    print("survived")
+    """
+)
+
+
+@pytest.mark.slow
+def test_kiss_non_orthonormal_pose_aborts_kiss_but_not_lidarkit(tmp_path):
+    script = tmp_path / "kiss_abort.py"
+    script.write_text(NON_ORTHONORMAL_SCRIPT)
+    direct = subprocess.run([sys.executable, str(script), "direct"], capture_output=True, text=True, timeout=120)
+    assert direct.returncode != 0 and "not orthogonal" in direct.stderr + direct.stdout
+    wrapped = subprocess.run([sys.executable, str(script), "lidarkit"], capture_output=True, text=True, timeout=120)
+    assert wrapped.returncode == 0 and "survived" in wrapped.stdout, wrapped.stderr
+
+
+def test_kiss_safe_pose_leaves_exact_poses_bitwise_and_fixes_sloppy_ones():
+    T = make_se3(so3_exp([0.1, -0.2, 0.3]), [1, 2, 3])
+    assert kiss_safe_pose(T) is not None and np.array_equal(kiss_safe_pose(T), T)
+    sloppy = T.copy()
+    sloppy[:3, :3] = np.round(sloppy[:3, :3], 4)
+    fixed = kiss_safe_pose(sloppy)
+    assert np.abs(fixed[:3, :3].T @ fixed[:3, :3] - np.eye(3)).max() < 1e-12
+    assert np.abs(fixed - sloppy).max() < 1e-3
+
+
+def test_kiss_sequence_mode_matches_kiss_icp_directly(rng):
+    from kiss_icp.kiss_icp import KissICP
+
+    scene = structured_cloud(rng, n=20000)
+    frames = [transform_points(np.linalg.inv(make_se3(so3_exp([0, 0, 0.01 * k]), [0.5 * k, 0, 0])), scene) for k in range(4)]
+    icp = get_icp("kiss", voxel_size_m=0.5)
+    direct = KissICP(icp.kiss_config)
+    icp.reset()
+    twin = KissICP(icp.kiss_config)
+    for f in frames:
+        ours = icp.register_frame(f)
+        direct.register_frame(f, np.array([]))
+        twin.register_frame(f, np.array([]))
+        # kiss-icp itself is not bit-reproducible (parallel reductions): two KissICP instances differ by
+        # ~1e-16; lidarkit must add nothing beyond that jitter
+        jitter = np.abs(direct.last_pose - twin.last_pose).max()
+        assert np.abs(ours - direct.last_pose).max() <= max(1e-12, 10 * jitter)
+    assert pose_error(ours, make_se3(so3_exp([0, 0, 0.03]), [1.5, 0, 0]))[0] < 0.05
+
+
+# ---------------------------------------------------------------- preprocessing
+
+
+def test_voxel_downsample_centroids(rng):
+    pts = np.array([[0.1, 0.1, 0.1], [0.3, 0.3, 0.3], [1.5, 0.2, 0.2]])
+    out = voxel_downsample(pts, 1.0)
+    assert out.shape == (2, 3) and np.allclose(out[0], [0.2, 0.2, 0.2]) and np.allclose(out[1], [1.5, 0.2, 0.2])
+    big = rng.uniform(-50, 50, (50000, 3))
+    assert len(voxel_downsample(big, 10.0)) == 1000
+    with pytest.raises(ConfigError):
+        voxel_downsample(pts, 0.0)
+
+
+def test_crop_and_ground_masks(rng):
+    scene = structured_cloud(rng, n=6000)
+    by_height = ground_mask_by_height(scene)  # z < -1.73 + 0.73 = -1 m
+    assert np.array_equal(by_height, scene[:, 2] < -1.0)
+    by_plane = ground_mask_by_plane(scene, seed=3)
+    near_ground = np.abs(scene[:, 2] + 1.7) <= 0.2  # the ground itself and the feet of walls / boxes
+    assert (by_plane == near_ground).mean() > 0.99 and by_plane[np.isclose(scene[:, 2], -1.7)].all()
+    wall_only = scene[np.isclose(scene[:, 1], 8.0)]
+    assert not ground_mask_by_plane(wall_only + [0, 0, -3.0]).any()  # vertical plane is never ground
+    r = np.linalg.norm(crop_range(scene, 5.0, 15.0), axis=1)
+    assert r.min() >= 5.0 and r.max() <= 15.0
