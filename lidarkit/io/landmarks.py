@@ -1,0 +1,224 @@
+"""Freiburg landmark data: ``world.dat`` (``id x y``) and ``sensor_data.dat`` (odometry + range-bearing).
+
+``sensor_data.dat`` is a sequence of records ``ODOMETRY r1 t r2`` (rad, m, rad), each followed by
+zero or more ``SENSOR id range bearing`` (landmark id, m, rad) readings taken after that motion.
+Everything is parsed into flat arrays: per-step odometry ``(T, 3)`` and the readings as parallel
+``(K,)`` arrays plus their step index, with CSR offsets ``step_offsets`` so that the readings of
+step ``t`` are ``slice(step_offsets[t], step_offsets[t + 1])``.
+
+Negative ranges: a range-bearing sensor with additive Gaussian range noise produces negative
+readings when the robot stands (almost) on a landmark; the Stachniss copy holds one (-0.035 m to
+landmark 7, last step, robot within ~0.05 m of it). Policy ``negative_range``:
+``"keep"`` (default: keep the value, it is a legal sample of the Gaussian model; flagged in
+``negative_range_mask`` and logged), ``"drop"`` (remove the reading, logged) or ``"error"`` (DataError).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from lidarkit.errors import ConfigError, DataError
+from lidarkit.textfile import read_lines
+
+log = logging.getLogger(__name__)
+
+NEGATIVE_RANGE_POLICIES = ("keep", "drop", "error")
+WORLD_FILE = "world.dat"
+SENSOR_FILE = "sensor_data.dat"
+
+
+@dataclass(frozen=True)
+class LandmarkMap:
+    """Landmark ids ``(L,)`` int64 and positions ``(L, 2)`` float64 (m, world frame)."""
+
+    ids: np.ndarray
+    positions_xy: np.ndarray
+
+    def index_of(self, ids: np.ndarray) -> np.ndarray:
+        """Row index of each id in ``ids`` (all ids must exist)."""
+        order = np.argsort(self.ids)
+        return order[np.searchsorted(self.ids, ids, sorter=order)]
+
+
+def read_world(path: str | os.PathLike) -> LandmarkMap:
+    """Parse ``world.dat``: one ``id x y`` per line, integer unique ids, finite coordinates."""
+    ids: list[int] = []
+    xy: list[tuple[float, float]] = []
+    seen: dict[int, int] = {}
+    for lineno, raw in enumerate(read_lines(path), start=1):
+        line = raw.strip()
+        if not line or line.startswith("#"):
+            continue
+        fields = line.split()
+        where = f"line {lineno}"
+        if len(fields) != 3:
+            raise DataError(f"expected 'id x y' (3 fields), found {len(fields)}", source=path, location=where)
+        lid = _parse_int(fields[0], path, where)
+        x, y = (_parse_float(f, path, where) for f in fields[1:])
+        if lid in seen:
+            raise DataError(f"duplicate landmark id {lid} (first on line {seen[lid]})", source=path, location=where)
+        seen[lid] = lineno
+        ids.append(lid)
+        xy.append((x, y))
+    if not ids:
+        raise DataError("no landmarks (empty file)", source=path)
+    return LandmarkMap(np.asarray(ids, dtype=np.int64), np.asarray(xy, dtype=np.float64).reshape(-1, 2))
+
+
+class LandmarkData:
+    """A Freiburg landmark dataset (``world.dat`` + ``sensor_data.dat``) parsed into arrays.
+
+    ``path_or_dir``: a folder holding both files, or the ``sensor_data.dat`` file itself (the world
+    file is then looked up beside it). ``world`` / ``sensor`` override either file (relative paths are
+    taken relative to the folder).
+
+    Attributes: ``landmarks`` (LandmarkMap), ``odometry`` ``(T, 3)`` float64 ``[r1_rad, t_m, r2_rad]``,
+    ``meas_step`` ``(K,)`` int64 (0-based step each reading follows), ``meas_landmark_id`` ``(K,)``,
+    ``meas_landmark_index`` ``(K,)`` (row in ``landmarks``), ``meas_range_m``, ``meas_bearing_rad``
+    ``(K,)`` float64, ``meas_line`` ``(K,)`` (1-based line in the sensor file), ``step_offsets`` ``(T+1,)``,
+    ``negative_range_mask`` ``(K,)`` bool, ``n_dropped`` (readings removed by the policy).
+    """
+
+    def __init__(
+        self,
+        path_or_dir: str | os.PathLike,
+        *,
+        world: str | os.PathLike | None = None,
+        sensor: str | os.PathLike | None = None,
+        negative_range: str = "keep",
+    ) -> None:
+        if negative_range not in NEGATIVE_RANGE_POLICIES:
+            raise ConfigError(
+                f"unknown negative_range policy {negative_range!r}; known: {', '.join(NEGATIVE_RANGE_POLICIES)}",
+                source="negative_range",
+            )
+        base = Path(path_or_dir)
+        if not base.exists():
+            raise DataError("landmark dataset not found", source=base)
+        folder = base if base.is_dir() else base.parent
+        sensor_path = Path(sensor) if sensor is not None else (base if base.is_file() else folder / SENSOR_FILE)
+        world_path = Path(world) if world is not None else folder / WORLD_FILE
+        if not sensor_path.is_absolute() and sensor is not None:
+            sensor_path = folder / sensor_path
+        if not world_path.is_absolute() and world is not None:
+            world_path = folder / world_path
+        self.root = folder
+        self.world_path = world_path
+        self.sensor_path = sensor_path
+        self.negative_range_policy = negative_range
+        self.landmarks = read_world(world_path)
+        self._read_sensor(sensor_path, negative_range)
+
+    # ---- parsing ---------------------------------------------------------------------------------
+    def _read_sensor(self, path: Path, negative_range: str) -> None:
+        known = {int(i): k for k, i in enumerate(self.landmarks.ids)}
+        odometry: list[tuple[float, float, float]] = []
+        m_step: list[int] = []
+        m_id: list[int] = []
+        m_range: list[float] = []
+        m_bearing: list[float] = []
+        m_line: list[int] = []
+        n_dropped = 0
+        for lineno, raw in enumerate(read_lines(path), start=1):
+            line = raw.strip()
+            if not line or line.startswith("#"):
+                continue
+            fields = line.split()
+            kind = fields[0].upper()
+            where = f"line {lineno}"
+            if kind == "ODOMETRY":
+                if len(fields) != 4:
+                    raise DataError(f"ODOMETRY needs 3 values (r1 t r2), found {len(fields) - 1}", source=path, location=where)
+                odometry.append(tuple(_parse_float(f, path, where) for f in fields[1:]))  # type: ignore[arg-type]
+            elif kind == "SENSOR":
+                if len(fields) != 4:
+                    raise DataError(f"SENSOR needs 3 values (id range bearing), found {len(fields) - 1}", source=path, location=where)
+                if not odometry:
+                    raise DataError("SENSOR reading before any ODOMETRY record", source=path, location=where)
+                lid = _parse_int(fields[1], path, where)
+                if lid not in known:
+                    raise DataError(
+                        f"unknown landmark id {lid} (world file {self.world_path.name} has ids "
+                        f"{int(self.landmarks.ids.min())}..{int(self.landmarks.ids.max())})",
+                        source=path,
+                        location=where,
+                    )
+                rng_m = _parse_float(fields[2], path, where)
+                bearing = _parse_float(fields[3], path, where)
+                if rng_m < 0.0:
+                    if negative_range == "error":
+                        raise DataError(f"negative range {rng_m} to landmark {lid}", source=path, location=where)
+                    if negative_range == "drop":
+                        log.warning("%s line %d: dropped negative range %g to landmark %d", path, lineno, rng_m, lid)
+                        n_dropped += 1
+                        continue
+                    log.warning("%s line %d: kept negative range %g to landmark %d (Gaussian range noise)", path, lineno, rng_m, lid)
+                m_step.append(len(odometry) - 1)
+                m_id.append(lid)
+                m_range.append(rng_m)
+                m_bearing.append(bearing)
+                m_line.append(lineno)
+            else:
+                raise DataError(f"unknown record type {fields[0]!r} (expected ODOMETRY or SENSOR)", source=path, location=where)
+        if not odometry:
+            raise DataError("no ODOMETRY records (empty file)", source=path)
+        self.odometry = np.asarray(odometry, dtype=np.float64).reshape(-1, 3)
+        self.meas_step = np.asarray(m_step, dtype=np.int64)
+        self.meas_landmark_id = np.asarray(m_id, dtype=np.int64)
+        self.meas_landmark_index = np.asarray([known[i] for i in m_id], dtype=np.int64)
+        self.meas_range_m = np.asarray(m_range, dtype=np.float64)
+        self.meas_bearing_rad = np.asarray(m_bearing, dtype=np.float64)
+        self.meas_line = np.asarray(m_line, dtype=np.int64)
+        self.negative_range_mask = self.meas_range_m < 0.0
+        self.n_dropped = n_dropped
+        counts = np.bincount(self.meas_step, minlength=len(self.odometry))
+        self.step_offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+
+    # ---- views -----------------------------------------------------------------------------------
+    def __len__(self) -> int:
+        """Number of odometry steps T."""
+        return int(self.odometry.shape[0])
+
+    @property
+    def n_readings(self) -> int:
+        return int(self.meas_range_m.shape[0])
+
+    def readings(self, step: int) -> slice:
+        """Slice of the flat reading arrays belonging to ``step``."""
+        return slice(int(self.step_offsets[step]), int(self.step_offsets[step + 1]))
+
+    def __repr__(self) -> str:
+        return (
+            f"LandmarkData({str(self.root)!r}, steps={len(self)}, readings={self.n_readings}, "
+            f"landmarks={len(self.landmarks.ids)})"
+        )
+
+
+def _parse_float(text: str, path: Path | str | os.PathLike, where: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise DataError(f"not a number: {text!r}", source=path, location=where) from None
+    if not math.isfinite(value):
+        raise DataError(f"non-finite value {text!r}", source=path, location=where)
+    return value
+
+
+def _parse_int(text: str, path: Path | str | os.PathLike, where: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        pass
+    value = _parse_float(text, path, where)
+    if not value.is_integer():
+        raise DataError(f"landmark id is not an integer: {text!r}", source=path, location=where)
+    return int(value)
+
+
+__all__ = ["LandmarkData", "LandmarkMap", "NEGATIVE_RANGE_POLICIES", "read_world"]
