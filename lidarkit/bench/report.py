@@ -116,11 +116,14 @@ def aggregate(records: list[dict[str, Any]]) -> list[TaskTable]:
         metrics += [MetricInfo(name, name) for name in sorted(present - {m.name for m in metrics})]
         metrics.append(MetricInfo("runtime_s", "runtime [s]", "speed"))
         groups: dict[tuple[str, str, str], list[dict[str, Any]]] = defaultdict(list)
+        order: dict[tuple[str, str, str], tuple] = {}
         for r in recs:
             job = Job.from_spec(r["job"])
-            groups[(job.experiment, job.dataset_name, job.method_label)].append(r)
+            key = (job.experiment, job.dataset_name, job.method_label)
+            groups[key].append(r)
+            order[key] = (job.experiment, job.dataset_name, job.method, _natural(job.params))
         rows = []
-        for (experiment, dataset, method), items in groups.items():
+        for (experiment, dataset, method), items in sorted(groups.items(), key=lambda kv: order[kv[0]]):
             ok = [r for r in items if r.get("status") == "ok"]
             stats = {}
             for m in metrics:
@@ -131,6 +134,12 @@ def aggregate(records: list[dict[str, Any]]) -> list[TaskTable]:
             rows.append(Row(task, experiment, dataset, method, len(ok), len(items) - len(ok), stats))
         tables.append(TaskTable(task, metrics, rows))
     return tables
+
+
+def _natural(params: dict[str, Any]) -> tuple:
+    """Sort key of a param dict: numbers by value (50 < 100 < 1000), then everything else as text."""
+    return tuple((k, (0, float(v), "") if isinstance(v, (int, float)) and not isinstance(v, bool) else (1, 0.0, str(v)))
+                 for k, v in sorted(params.items()))
 
 
 def format_stat(stat: tuple[float, float, int]) -> str:
@@ -145,7 +154,7 @@ def format_stat(stat: tuple[float, float, int]) -> str:
 def _fmt(x: float) -> str:
     if x == 0 or not math.isfinite(x):
         return f"{x:g}"
-    if abs(x) >= 1000 or abs(x) < 1e-3:
+    if abs(x) >= 1e5 or abs(x) < 1e-3:
         return f"{x:.3e}"
     return f"{x:.4g}"
 
@@ -266,7 +275,7 @@ def _sweep_plots(records: list[dict[str, Any]]) -> list[Plot]:
                 ax.errorbar(xs, means, yerr=stds, marker="o", capsize=3, lw=1.2, label=label)
             ax.set_xlabel(param)
             ax.set_ylabel(metric)
-            ax.set_xscale("log" if max(max(p) for p in lines.values()) / max(min(min(p) for p in lines.values()), 1e-12) > 20 else "linear")
+            ax.set_xscale("log" if max(max(p) for p in lines.values()) / max(min(min(p) for p in lines.values()), 1e-12) >= 10 else "linear")
             ax.legend(fontsize=7)
             ax.set_title(f"{task}: {metric} vs {param} (mean ± std over seeds)", fontsize=9)
             plots.append(Plot(f"{metric} vs {param} — {task}", f"sweep_{_slug(task + '_' + metric + '_' + param)}.png", _png(fig)))
@@ -363,12 +372,17 @@ def _html(report: Report, title: str) -> str:
     return "\n".join(parts)
 
 
-def build_report(out_dir: str | Path, *, title: str | None = None, plots: bool = True) -> Report:
-    """Read ``out_dir/jobs/*.json`` and write ``report.md``, ``report.csv``, ``report.html`` and ``plots/*.png`` there."""
+def build_report(out_dir: str | Path, *, title: str | None = None, plots: bool = True, only_keys: set[str] | None = None) -> Report:
+    """Read ``out_dir/jobs/*.json`` and write ``report.md``, ``report.csv``, ``report.html`` and ``plots/*.png`` there.
+
+    ``only_keys``: restrict to these job keys (e.g. the suite just run; default: every result in the folder).
+    """
     out_dir = Path(out_dir)
     if not (out_dir / "jobs").is_dir():
         raise DataError("not a bench results folder (no jobs/ inside)", source=out_dir)
     records = load_results(out_dir)
+    if only_keys is not None:
+        records = [r for r in records if r["key"] in only_keys]
     if not records:
         raise DataError("no readable job results in jobs/", source=out_dir)
     if title is None:

@@ -16,7 +16,7 @@ from typing import Any
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
-from lidarkit.bench.datasets import dataset_label, resolve_dataset
+from lidarkit.bench.datasets import SAMPLE_PREFIX, dataset_label, resolve_dataset
 from lidarkit.bench.jobs import Job
 from lidarkit.bench.tasks import get_task
 from lidarkit.errors import ConfigError, DataError, LidarKitError
@@ -176,10 +176,10 @@ def read_suite_file(path: str | Path) -> tuple[SuiteModel, _Locator]:
 def load_suite(path: str | Path, *, skip_unavailable: bool = False, only_tasks: set[str] | None = None) -> Suite:
     """Read, validate and expand a suite file into jobs; raise on the first problem, before anything runs.
 
-    ``skip_unavailable``: experiments whose task module has not been installed are skipped (listed in
-    ``Suite.skipped``) instead of refused — what ``lidarkit demo`` does. ``only_tasks`` keeps only those tasks.
+    ``skip_unavailable``: experiments whose task module or bundled ``sample:`` dataset is not installed are
+    skipped (listed in ``Suite.skipped``) instead of refused — what ``lidarkit demo`` does. ``only_tasks`` keeps only those tasks.
     """
-    path = Path(path).resolve() if not str(path).startswith("sample:") else Path(path)
+    path = Path(path).resolve()
     model, locator = read_suite_file(path)
     base_dir = path.parent
     jobs: list[Job] = []
@@ -198,12 +198,13 @@ def load_suite(path: str | Path, *, skip_unavailable: bool = False, only_tasks: 
         except ConfigError as err:
             if skip_unavailable and exp.task in _known_tasks():
                 skipped.append((exp_name, err.reason))
-                log.warning("skipping experiment %s: %s", exp_name, err.reason)
+                log.info("skipping experiment %s: %s", exp_name, err.reason)
                 continue
             raise locator.error(err, (*exp_loc, "task")) from None
 
         datasets = _experiment_datasets(exp, model, locator, exp_loc)
         resolved: list[dict[str, Any]] = []
+        missing_sample = None
         for loc, spec in datasets:
             try:
                 spec = resolve_dataset(spec, base_dir)
@@ -212,9 +213,18 @@ def load_suite(path: str | Path, *, skip_unavailable: bool = False, only_tasks: 
                         f"task {exp.task!r} does not take dataset kind {spec['kind']!r}; it takes: {', '.join(task.dataset_kinds)}",
                         source="dataset",
                     )
+            except DataError as err:
+                if skip_unavailable and str(spec.get("path", "")).startswith(SAMPLE_PREFIX):
+                    missing_sample = f"bundled sample {spec['path']} is not installed ({err.reason})"
+                    break
+                raise locator.error(err, loc) from None
             except LidarKitError as err:
                 raise locator.error(err, loc) from None
             resolved.append(spec)
+        if missing_sample is not None:
+            skipped.append((exp_name, missing_sample))
+            log.info("skipping experiment %s: %s", exp_name, missing_sample)
+            continue
 
         seeds = _seeds(exp.seeds if exp.seeds is not None else model.seeds)
         if not seeds:

@@ -7,6 +7,7 @@ from typing import Optional
 
 import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+from rich.markup import escape
 from rich.table import Table
 
 from lidarkit.cli.app import app, stderr, stdout
@@ -48,8 +49,8 @@ def run_with_progress(suite, out: Path, *, executor: str, workers: int | None, a
             if record["status"] != "ok":
                 failed += 1
                 error = record.get("error") or {}
-                progress.console.print(f"[red]failed[/red] {job.method_label} on {job.dataset_name} (seed {job.seed}): "
-                                       f"{error.get('type')}: {error.get('message')}", markup=True, soft_wrap=True)
+                text = f"{job.method_label} on {job.dataset_name} (seed {job.seed}): {error.get('type')}: {error.get('message')}"
+                progress.console.print(f"[red]failed[/red] {escape(text)}", markup=True, soft_wrap=True)
             progress.update(bar, advance=1, failed=failed)
 
         try:
@@ -64,19 +65,19 @@ def run_with_progress(suite, out: Path, *, executor: str, workers: int | None, a
 def print_run_summary(summary) -> None:
     out = stdout()
     out.print(f"{summary.total} jobs: {summary.skipped} already done, {summary.ran} run now "
-              f"({summary.ok} ok, {summary.failed} failed) in {summary.wall_s:.1f} s")
+              f"({summary.ok} ok, {summary.failed} failed) in {summary.wall_s:.1f} s", soft_wrap=True)
     for key, label, error in summary.failures[:20]:
         out.print(f"  failed {key}: {label}: {error}", soft_wrap=True)
 
 
-def summary_table(report, max_metrics: int = 3) -> list[Table]:
-    """Short rich tables (first accuracy metrics + runtime) of a built report, one per task."""
+def summary_table(report, max_metrics: int = 2) -> list[Table]:
+    """Short rich tables (the first accuracy metrics + one speed figure) of a built report, one per task."""
     from lidarkit.bench.report import format_stat
 
     tables = []
     for task_table in report.tables:
         accuracy = [m for m in task_table.metrics if m.kind == "accuracy"][:max_metrics]
-        speed = [m for m in task_table.metrics if m.kind == "speed"][:2]
+        speed = [m for m in task_table.metrics if m.kind == "speed"][:1]
         metrics = accuracy + speed
         table = Table(title=f"{task_table.task} (mean ± std over seeds)", title_justify="left")
         for col in ("dataset", "method", "ok/failed"):
@@ -120,8 +121,8 @@ def bench(
     summary = run_with_progress(suite, out, executor=executor, workers=workers, address=address, force=force)
     print_run_summary(summary)
     if report:
-        built = build_report(out)
-        stdout().print(f"report: {built.html_path}")
+        built = build_report(out, only_keys={job.key() for job in suite.jobs})
+        stdout().print(f"report: {built.html_path}", soft_wrap=True)
 
 
 @app.command("report")
@@ -138,4 +139,4 @@ def report_cmd(
     for table in summary_table(built):
         out.print(table)
     out.print(f"{built.n_records} results, {len(built.failures)} failed; {len(built.plots)} plots")
-    out.print(f"markdown: {built.markdown_path}\ncsv: {built.csv_path}\nhtml: {built.html_path}")
+    out.print(f"markdown: {built.markdown_path}\ncsv: {built.csv_path}\nhtml: {built.html_path}", soft_wrap=True)

@@ -1,4 +1,5 @@
-"""``lidarkit demo``: run what lidarkit bundles and print the results (for now: the evaluation sample)."""
+"""``lidarkit demo`` (what ``make demo`` runs): the bundled benchmark suite on the bundled samples and the
+simulators, the evaluation of the bundled KITTI 00 trajectories, then the report's path and a summary table."""
 
 from __future__ import annotations
 
@@ -7,28 +8,47 @@ from typing import Optional
 
 import typer
 
-from lidarkit.cli.app import app, stdout
+from lidarkit.cli.app import app, stderr, stdout
+from lidarkit.cli.bench_cmd import EXECUTOR_HELP, print_run_summary, run_with_progress, summary_table
 
 
 @app.command("demo")
 def demo_command(
-    out_dir: Optional[Path] = typer.Option(
-        None, "--out", "-o", help="Also write metrics.json, report.md and evaluation.png here."
-    ),
+    out_dir: Path = typer.Option(Path("results/demo"), "--out", "-o", help="Results folder (resumable: finished jobs are kept)."),
+    quick: bool = typer.Option(False, "--quick", help="The reduced suite (seconds instead of minutes)."),
+    executor: str = typer.Option("process", "--executor", "-e", help=EXECUTOR_HELP),
+    workers: Optional[int] = typer.Option(None, "--workers", "-j", help="Worker processes (default: CPUs available)."),
+    force: bool = typer.Option(False, "--force", help="Rerun jobs that already have a result."),
+    suite: Optional[Path] = typer.Option(None, "--suite", help="Run this suite instead of the bundled demo suite."),
 ) -> None:
-    """Evaluate the bundled KITTI 00 ORB-SLAM2 trajectory against ground truth and print the tables."""
-    from lidarkit.eval import report
+    """Run the bundled demo: ICP variants (real KITTI pair, simulated sequence), particle filter MSE vs particles,
+    visual odometry on the sample frames, and the evaluation of bundled trajectories; print where the report is."""
+    from lidarkit.bench.demo import run_demo
+    from lidarkit.eval import report as eval_report
     from lidarkit.eval.demo import EVO_REFERENCE_APE_RMSE_M, run_eval_demo
 
-    console = stdout()
-    result = run_eval_demo(out_dir)
-    for evaluation in result.evaluations:
-        console.print(report.evaluation_table(evaluation))
+    console, err = stdout(), stderr()
+
+    def runner(suite_obj, out, *, executor, workers, force):
+        return run_with_progress(suite_obj, out, executor=executor, workers=workers, address=None, force=force)
+
+    result = run_demo(out_dir, quick=quick, suite_path=suite, executor=executor, workers=workers, force=force, runner=runner)
+    for experiment, reason in result.skipped:
+        err.print(f"skipped {experiment}: {reason}", soft_wrap=True)
+    print_run_summary(result.summary)
+
+    evaluation_result = run_eval_demo(out_dir / "eval")
+    for evaluation in evaluation_result.evaluations:
+        console.print(eval_report.evaluation_table(evaluation))
         if evaluation.drift is not None:
-            console.print(report.drift_table(evaluation))
+            console.print(eval_report.drift_table(evaluation))
         console.print(
-            f"APE translation rmse {evaluation.ape.rmse:.4f} m; evo's stored reference result: "
-            f"{EVO_REFERENCE_APE_RMSE_M:.4f} m"
+            f"APE translation rmse {evaluation.ape.rmse:.4f} m; evo's stored reference result: {EVO_REFERENCE_APE_RMSE_M:.4f} m"
         )
-    for name, path in result.files.items():
-        console.print(f"wrote {name}: {path}")
+
+    if result.report is not None:
+        for table in summary_table(result.report):
+            console.print(table)
+        console.print(f"report: {result.report.html_path}  (also report.md, report.csv)", soft_wrap=True)
+    else:
+        console.print("no benchmark experiment could run (see the skipped list above)")

@@ -1,0 +1,101 @@
+"""``odometry``: any registered ICP variant over a scan sequence through ``lidarkit.odometry.run``, scored vs ground truth.
+
+Options: ``frames`` — a frame selection as ``lidarkit.odometry.run`` takes it (``"0:50"``, or a list of indices).
+Metrics come from the odometry run's own scoring (APE / RPE / KITTI drift through ``lidarkit.eval``).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict
+
+from lidarkit.bench.jobs import Job
+from lidarkit.bench.tasks import Metric, Task, TaskOutput, import_module_for_task
+from lidarkit.bench.tasks._datasets import check_reader_options, open_dataset_spec, options_model
+from lidarkit.errors import ConfigError
+
+MAX_SERIES_POINTS = 2000
+
+
+class OdometryOptions(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    frames: str | list[int] | None = None
+
+
+def _get(d: dict[str, Any] | None, *keys: str) -> float | None:
+    for key in keys:
+        if not isinstance(d, dict):
+            return None
+        d = d.get(key)
+    return None if d is None else float(d)
+
+
+def trajectory_series(ref_xyz: np.ndarray | None, est_xyz: np.ndarray, times_s: np.ndarray) -> dict[str, Any]:
+    """``trajectory_xy`` and ``error_over_time`` series (decimated to at most MAX_SERIES_POINTS)."""
+    step = max(1, int(np.ceil(len(est_xyz) / MAX_SERIES_POINTS)))
+    sel = slice(None, None, step)
+    series: dict[str, Any] = {
+        "trajectory_xy": {"ref": [] if ref_xyz is None else ref_xyz[sel, :2].round(4).tolist(), "est": est_xyz[sel, :2].round(4).tolist()}
+    }
+    if ref_xyz is not None and len(ref_xyz) == len(est_xyz):
+        errors = np.linalg.norm(est_xyz - ref_xyz, axis=1)
+        series["error_over_time"] = {
+            "t": (times_s[sel] - times_s[0]).round(4).tolist(),
+            "error": errors[sel].round(6).tolist(),
+            "label": "position error (no alignment) [m]",
+        }
+    return series
+
+
+class OdometryTask(Task):
+    description = "sequence odometry with an ICP variant (APE, RPE, KITTI drift, frame rate)"
+    dataset_kinds = ("kitti", "folder", "sim_lidar", "kitti_raw")
+    metrics = (
+        Metric("ape_rmse_m", "APE RMSE [m]"),
+        Metric("rpe_trans_rmse_m", "RPE trans. [m/frame]"),
+        Metric("rpe_rot_rmse_deg", "RPE rot. [deg/frame]"),
+        Metric("drift_translation_pct", "KITTI drift [%]"),
+        Metric("drift_rotation_deg_per_100m", "KITTI rot. [deg/100m]"),
+        Metric("final_error_m", "final error [m]"),
+        Metric("hz", "frames/s", kind="speed", better="higher"),
+    )
+
+    def require(self) -> None:
+        import_module_for_task("odometry", "lidarkit.registration")
+        odometry = import_module_for_task("odometry", "lidarkit.odometry")
+        if not hasattr(odometry, "run"):
+            raise ConfigError("lidarkit.odometry has no run()", source="task")
+
+    def validate(self, method: str, params: dict[str, Any], dataset: dict[str, Any], options: dict[str, Any]) -> None:
+        from lidarkit.registration import get_icp
+
+        get_icp(method, **params)
+        options_model(OdometryOptions, options, "odometry")
+        check_reader_options(dataset)
+
+    def run(self, job: Job) -> TaskOutput:
+        from lidarkit.odometry import run
+
+        options = OdometryOptions(**job.options)
+        sequence = open_dataset_spec(job.dataset)
+        result = run(sequence, job.method, params=dict(job.params), frames=options.frames)
+        m = result.metrics
+        metrics = {
+            "ape_rmse_m": _get(m, "ape_translation_m", "stats", "rmse"),
+            "rpe_trans_rmse_m": _get(m, "rpe_translation_m", "stats", "rmse"),
+            "rpe_rot_rmse_deg": _get(m, "rpe_rotation_deg", "stats", "rmse"),
+            "drift_translation_pct": _get(m, "kitti_drift", "translation_pct"),
+            "drift_rotation_deg_per_100m": _get(m, "kitti_drift", "rotation_deg_per_100m"),
+            "final_error_m": _get(m, "final_error", "translation_m"),
+            "hz": float(result.fps),
+            "n_frames": float(len(result.frames)),
+            "n_not_converged": float(result.n_not_converged),
+        }
+        metrics = {k: v for k, v in metrics.items() if v is not None}
+        est = result.trajectory
+        times = est.timestamps_s if est.timestamps_s is not None else np.arange(len(est)) * 0.1
+        ref_xyz = None if result.ground_truth is None else result.ground_truth.positions_xyz
+        series = trajectory_series(ref_xyz, est.positions_xyz, np.asarray(times, dtype=float))
+        return TaskOutput(metrics=metrics, series=series, info={"odometry_metrics": m, "config": result.config})

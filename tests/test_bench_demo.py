@@ -1,0 +1,60 @@
+"""``lidarkit demo``: the bundled suites are valid; a reduced demo writes a well-formed report with all images."""
+
+from __future__ import annotations
+
+import json
+import re
+
+import pytest
+from test_bench_report import check_html
+
+from lidarkit.bench.demo import DEMO_QUICK_SUITE, DEMO_SUITE
+from lidarkit.bench.results import load_results
+from lidarkit.bench.suite import load_suite, read_suite_file
+from lidarkit.cli import main
+
+
+@pytest.mark.parametrize("suite_path", [DEMO_SUITE, DEMO_QUICK_SUITE], ids=["demo", "quick"])
+def test_bundled_demo_suites_validate_and_run_or_explain_every_experiment(suite_path):
+    model, _ = read_suite_file(suite_path)
+    suite = load_suite(suite_path, skip_unavailable=True)
+    ran = {job.experiment for job in suite.jobs}
+    skipped = dict(suite.skipped)
+    for experiment in model.experiments:
+        assert (experiment.name in ran) != (experiment.name in skipped), experiment.name
+    assert all(reason for reason in skipped.values())
+    assert "icp_sim_street" in ran  # the simulator needs no bundled data: always part of the demo
+    tasks = {job.task for job in suite.jobs}
+    assert tasks <= {"icp_pair", "odometry", "pf", "vo"}
+
+
+def test_quick_demo_writes_a_complete_report(tmp_path, capsys):
+    out = tmp_path / "demo"
+    with pytest.raises(SystemExit) as exc:
+        main(["demo", "--quick", "--out", str(out), "--executor", "serial"])
+    assert exc.value.code == 0
+    captured = capsys.readouterr()
+    stdout = captured.out
+    match = re.search(r"report: (\S+report\.html)", stdout)
+    assert match, stdout[-2000:]
+    html_path = out / "report.html"
+    assert match.group(1) == str(html_path)
+    assert "1.3034" in stdout  # the bundled trajectory evaluation (evo's reference APE)
+    records = load_results(out)
+    suite = load_suite(DEMO_QUICK_SUITE, skip_unavailable=True)
+    assert {r["key"] for r in records} == {j.key() for j in suite.jobs}
+    failed = [(r["job"]["method"], r["error"]) for r in records if r["status"] != "ok"]
+    assert not failed
+    images = check_html(html_path)
+    # at least one trajectory + error-over-time plot per odometry dataset, and the tables
+    assert len(images) >= 2
+    text = html_path.read_text()
+    assert "<h2>odometry</h2>" in text
+    for experiment, reason in suite.skipped:
+        assert f"skipped {experiment}" in captured.err
+    manifest = json.loads((out / "suite.json").read_text())
+    assert manifest["suite"] == "demo-quick"
+    # rerunning resumes: nothing is recomputed
+    with pytest.raises(SystemExit):
+        main(["demo", "--quick", "--out", str(out), "--executor", "serial"])
+    assert f"{len(records)} already done, 0 run now" in capsys.readouterr().out

@@ -1,0 +1,143 @@
+"""Real tasks through the harness: validation by the modules' own validators, numbers equal to direct calls."""
+
+from __future__ import annotations
+
+import textwrap
+
+import numpy as np
+import pytest
+from conftest import shared_path
+
+from lidarkit.bench.jobs import Job
+from lidarkit.bench.suite import load_suite
+from lidarkit.bench.tasks import get_task
+from lidarkit.bench.worker import execute_job
+from lidarkit.errors import ConfigError
+
+registration = pytest.importorskip("lidarkit.registration")
+if not hasattr(registration, "get_icp"):
+    pytest.skip("ICP registry not available", allow_module_level=True)
+
+SIM = {"kind": "sim_lidar", "scene": "street", "n_frames": 4, "n_beams": 16, "n_azimuths": 360, "seed": 3}
+
+
+def write(tmp_path, text):
+    path = tmp_path / "suite.yaml"
+    path.write_text(textwrap.dedent(text))
+    return path
+
+
+def test_unknown_icp_method_and_param_are_refused_by_the_registry(tmp_path):
+    path = write(tmp_path, """
+        experiments:
+          - task: odometry
+            dataset: {kind: sim_lidar, n_frames: 3}
+            methods: [vanilla, {name: teleport_icp}]
+        """)
+    with pytest.raises(ConfigError) as info:
+        load_suite(path)
+    message = str(info.value)
+    assert "experiments[0].methods[1]" in message and "teleport_icp" in message
+    for name in registration.available_icp():  # the registry's own list of names
+        assert name in message
+    path = write(tmp_path, """
+        experiments:
+          - task: icp_pair
+            dataset: {kind: sim_lidar, n_frames: 3}
+            methods: [{name: vanilla, grid: {max_iterations: [10], leaf_colour: [1]}}]
+        """)
+    with pytest.raises(ConfigError, match="leaf_colour") as info:
+        load_suite(path)
+    assert "max_correspondence_distance_m" in str(info.value)  # the valid params are listed
+
+
+def test_bad_simulator_and_reader_options_are_refused(tmp_path):
+    path = write(tmp_path, """
+        experiments:
+          - task: odometry
+            dataset: {kind: sim_lidar, n_frames: 3, n_beems: 8}
+            methods: [vanilla]
+        """)
+    with pytest.raises(ConfigError, match="n_beems") as info:
+        load_suite(path)
+    assert "experiments[0].methods[0]" in str(info.value)
+    (tmp_path / "scans").mkdir()
+    path = write(tmp_path, """
+        experiments:
+          - task: odometry
+            dataset: {kind: folder, path: scans, posses: poses.txt}
+            methods: [vanilla]
+        """)
+    with pytest.raises(ConfigError, match="unknown option.*posses.*it takes: .*poses"):
+        load_suite(path)
+    path = write(tmp_path, """
+        experiments:
+          - task: icp_pair
+            dataset: {kind: landmarks, path: scans}
+            methods: [vanilla]
+        """)
+    with pytest.raises(ConfigError, match="does not take dataset kind 'landmarks'"):
+        load_suite(path)
+
+
+def test_odometry_job_equals_a_direct_odometry_run():
+    from lidarkit.odometry import run
+    from lidarkit.sim.lidar import SimulatedLidarSequence
+
+    params = {"voxel_size_m": 0.5}
+    job = Job("odometry", "exp", "sim", SIM, "ground_filtered", params, seed=0)
+    record = execute_job(job.spec())
+    assert record["status"] == "ok", record["error"]
+    options = {k: v for k, v in SIM.items() if k != "kind"}
+    direct = run(SimulatedLidarSequence(**options), "ground_filtered", params=params)
+    ape = direct.metrics["ape_translation_m"]["stats"]["rmse"]
+    assert record["metrics"]["ape_rmse_m"] == pytest.approx(ape, rel=1e-9)
+    assert record["metrics"]["n_frames"] == 4
+    est = np.asarray(record["series"]["trajectory_xy"]["est"])
+    assert est.shape == (4, 2)
+    np.testing.assert_allclose(est, direct.trajectory.positions_xyz[:, :2], atol=1e-4)
+    errors = record["series"]["error_over_time"]["error"]
+    assert np.sqrt(np.mean(np.square(errors))) == pytest.approx(ape, rel=1e-4)
+
+
+def test_icp_pair_job_on_the_real_kitti_pair_matches_ground_truth_scoring():
+    from lidarkit.geometry import pose_error
+    from lidarkit.io import open_dataset
+
+    root = shared_path("kitti_odometry")
+    velodyne = shared_path("kitti_odometry", "extra_frames", "00", "velodyne")
+    spec = {"kind": "kitti", "path": str(root), "sequence": "00", "velodyne_dir": str(velodyne)}
+    params = {"voxel_size_m": 0.5, "max_correspondence_distance_m": 1.0}
+    job = Job("icp_pair", "exp", "kitti", spec, "open3d_point_to_plane", params, seed=0, options={"pairs": [[94, 95]]})
+    record = execute_job(job.spec())
+    assert record["status"] == "ok", record["error"]
+    ds = open_dataset("kitti", root, sequence="00", velodyne_dir=velodyne)
+    T_gt = ds.relative_pose(94, 95)
+    result = registration.get_icp("open3d_point_to_plane", **params).align(
+        ds.read_scan_by_frame(95).points_xyz, ds.read_scan_by_frame(94).points_xyz)
+    trans_m, rot_deg = pose_error(result.T_target_source, T_gt)
+    assert record["metrics"]["translation_error_m"] == pytest.approx(trans_m, abs=1e-9)
+    assert record["metrics"]["rotation_error_deg"] == pytest.approx(rot_deg, abs=1e-9)
+    assert record["metrics"]["translation_error_m"] < 0.1  # a working registration, not just a number
+    assert record["series"]["rmse_history"][0] and record["info"]["pairs"][0]["source"] == 95
+
+
+def test_pf_job_validates_with_the_filter_config_and_sweeps_particles(tmp_path):
+    pytest.importorskip("lidarkit.pf.protocol")
+    data = shared_path("pf", "burgard_particle_filter")
+    path = write(tmp_path, f"""
+        experiments:
+          - task: pf
+            dataset: {{kind: landmarks, path: "{data}"}}
+            methods: [{{name: particle_filter, params: {{n_particles: 0}}}}]
+        """)
+    with pytest.raises(ConfigError, match="n_particles"):
+        load_suite(path)
+    task = get_task("pf")
+    assert ("n_particles", "mse_m2") in task.sweep_plots
+    spec = {"kind": "landmarks", "path": str(data)}
+    a = execute_job(Job("pf", "e", "fr", spec, "particle_filter", {"n_particles": 200}, seed=1).spec())
+    b = execute_job(Job("pf", "e", "fr", spec, "particle_filter", {"n_particles": 200}, seed=1).spec())
+    assert a["status"] == "ok", a["error"]
+    assert a["metrics"]["mse_m2"] == b["metrics"]["mse_m2"]  # seeded
+    assert a["metrics"]["mse_m2"] < 0.2 * a["metrics"]["mse_dead_reckoning_m2"]
