@@ -10,7 +10,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable
 from importlib.metadata import entry_points
-from typing import Any
+from typing import Any, Literal, get_args, get_origin
 
 import pydantic
 
@@ -85,13 +85,22 @@ def get_icp_class(name: str) -> type[Registration]:
     return _VARIANTS[name]
 
 
+def _type_name(annotation: Any) -> str:
+    """Readable type of a config field: ``float``, ``float | None``, ``'a' | 'b'`` for Literal choices."""
+    if get_origin(annotation) is Literal:
+        return " | ".join(repr(a) for a in get_args(annotation))
+    args = get_args(annotation)
+    if args:
+        return " | ".join(_type_name(a) for a in args)
+    return "None" if annotation is type(None) else getattr(annotation, "__name__", str(annotation))
+
+
 def config_fields(name: str) -> dict[str, tuple[str, Any, str]]:
     """``{param: (type, default, description)}`` of a variant's config, generated from the model."""
     cls = get_icp_class(name)
     out = {}
     for key, info in cls.Config.model_fields.items():
-        ann = info.annotation
-        type_name = getattr(ann, "__name__", None) or str(ann).replace("typing.", "")
+        type_name = _type_name(info.annotation)
         out[key] = (type_name, info.get_default(call_default_factory=True), info.description or "")
     return out
 

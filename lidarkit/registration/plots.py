@@ -1,0 +1,91 @@
+"""Figures for registration results: bird's-eye view before/after, RMSE per iteration.
+
+Kept apart from the algorithms (matplotlib is imported only here, lazily, with the Agg backend);
+every figure is written atomically.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from lidarkit.atomic import atomic_path
+from lidarkit.geometry import transform_points
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _thin(points_xyz: np.ndarray, max_points: int, seed: int = 0) -> np.ndarray:
+    if len(points_xyz) <= max_points:
+        return points_xyz
+    return points_xyz[np.random.default_rng(seed).choice(len(points_xyz), max_points, replace=False)]
+
+
+def save_bev_before_after(
+    path: str | os.PathLike,
+    source_xyz: np.ndarray,
+    target_xyz: np.ndarray,
+    T_target_source: np.ndarray,
+    init_T: np.ndarray | None = None,
+    title: str = "",
+    extent_m: float = 40.0,
+    max_points: int = 60000,
+) -> Path:
+    """Two BEV panels (x forward, y left, target frame): source at ``init_T`` and at the estimate."""
+    plt = _pyplot()
+    src = _thin(np.asarray(source_xyz, dtype=np.float64), max_points, 1)
+    dst = _thin(np.asarray(target_xyz, dtype=np.float64), max_points, 2)
+    before = transform_points(np.eye(4) if init_T is None else init_T, src)
+    after = transform_points(T_target_source, src)
+    fig, axes = plt.subplots(1, 2, figsize=(12, 6), sharex=True, sharey=True)
+    for ax, moved, label in ((axes[0], before, "before"), (axes[1], after, "after")):
+        ax.scatter(dst[:, 0], dst[:, 1], s=0.2, c="tab:blue", alpha=0.5, linewidths=0, label="target")
+        ax.scatter(moved[:, 0], moved[:, 1], s=0.2, c="tab:red", alpha=0.5, linewidths=0, label="source")
+        ax.set_title(f"{label} registration")
+        ax.set_xlim(-extent_m, extent_m)
+        ax.set_ylim(-extent_m, extent_m)
+        ax.set_aspect("equal")
+        ax.set_xlabel("x (m)")
+        ax.legend(loc="upper right", markerscale=20)
+    axes[0].set_ylabel("y (m)")
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=90)
+    plt.close(fig)
+    return Path(path)
+
+
+def save_rmse_history(path: str | os.PathLike, histories: dict[str, Sequence[float]], title: str = "") -> Path:
+    """RMSE of the correspondences (m) against iteration, one line per labelled run."""
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for label, hist in histories.items():
+        hist = np.asarray(hist, dtype=float)
+        if len(hist) > 1:
+            ax.plot(np.arange(len(hist)), hist, marker=".", label=f"{label} ({len(hist) - 1} it)")
+    ax.set_xlabel("iteration")
+    ax.set_ylabel("correspondence RMSE (m)")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    if title:
+        ax.set_title(title)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=90)
+    plt.close(fig)
+    return Path(path)
+
+
+__all__ = ["save_bev_before_after", "save_rmse_history"]

@@ -1,0 +1,98 @@
+"""``lidarkit icp``: every registered method through the CLI on the bundled KITTI sample pair."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from lidarkit.cli import main
+from lidarkit.geometry import pose_error
+from lidarkit.registration import available_icp, config_fields
+from lidarkit.samples import sample_path
+
+SOURCE = sample_path("kitti_pair", "000095.npy")
+TARGET = sample_path("kitti_pair", "000094.npy")
+T_GT = np.loadtxt(sample_path("kitti_pair", "T_target_source.txt"))
+
+
+def run_cli(capsys, *args: str) -> tuple[int, str, str]:
+    code = 0
+    try:
+        main(["icp", *args])
+    except SystemExit as exc:
+        code = int(exc.code or 0)
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_sample_pair_is_small_and_consistent():
+    total = sum(p.stat().st_size for p in sample_path("kitti_pair").iterdir())
+    assert total < 2.5e6
+    src, dst = np.load(SOURCE), np.load(TARGET)
+    assert src.dtype == np.float32 and src.shape[1] == 3 and len(src) > 50_000 and len(dst) > 50_000
+    assert pose_error(np.eye(4), T_GT)[0] > 0.4  # the identity is clearly wrong: registration has work to do
+
+
+@pytest.mark.parametrize("method", available_icp())
+def test_every_method_through_the_cli(method, capsys, tmp_path):
+    code, out, err = run_cli(capsys, str(SOURCE), str(TARGET), "--method", method, "--out", str(tmp_path))
+    assert code == 0, err
+    assert "T_target_source" in out and "degeneracy" in out
+    result = json.loads((tmp_path / "result.json").read_text())
+    assert result["method"] == method and result["converged"] and not result["degeneracy"]["degenerate"]
+    dt, dr = pose_error(np.asarray(result["T_target_source"]), T_GT)
+    assert dt < 0.06 and dr < 0.15, (method, dt, dr)
+    config = json.loads((tmp_path / "config.json").read_text())
+    assert config["method"] == method and set(config["params"]) == set(config_fields(method))
+    png = (tmp_path / "bev.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
+
+
+def test_params_and_init_file(capsys, tmp_path):
+    init = tmp_path / "init.txt"
+    np.savetxt(init, np.round(T_GT, 4))  # rounded rotation: re-orthonormalized on the way in
+    code, _, err = run_cli(
+        capsys, str(SOURCE), str(TARGET), "-m", "vanilla", "-p", "max_iterations=1", "-p", "coarse_stride=1",
+        "--init", str(init), "--out", str(tmp_path),
+    )
+    assert code == 0, err
+    result = json.loads((tmp_path / "result.json").read_text())
+    assert result["iterations"] <= 1 and pose_error(np.asarray(result["T_target_source"]), T_GT)[0] < 0.03
+    kitti_row = tmp_path / "row.txt"
+    kitti_row.write_text(" ".join(f"{v:.9f}" for v in T_GT[:3].ravel()) + "\n")
+    assert run_cli(capsys, str(SOURCE), str(TARGET), "-m", "open3d_gicp", "--init", str(kitti_row))[0] == 0
+
+
+def test_list_shows_every_method_and_its_defaults(capsys):
+    code, out, _ = run_cli(capsys, "--list")
+    assert code == 0
+    flat = " ".join(out.split())
+    for name in available_icp():
+        assert name in flat
+    assert "epsilon_m2" in flat and "1e-06" in flat and "max_range_m" in flat
+
+
+@pytest.mark.parametrize(
+    "args, fragment",
+    [
+        (["--method", "nope"], "unknown ICP method 'nope'"),
+        (["-p", "max_iterationz=3"], "max_iterationz"),
+        (["-p", "novalue"], "KEY=VALUE"),
+    ],
+)
+def test_cli_errors_are_one_line(capsys, args, fragment):
+    code, _, err = run_cli(capsys, str(SOURCE), str(TARGET), *args)
+    assert code == 1 and fragment in " ".join(err.split()) and "Traceback" not in err
+
+
+def test_cli_bad_files(capsys, tmp_path):
+    code, _, err = run_cli(capsys, str(tmp_path / "missing.bin"), str(TARGET))
+    assert code == 1 and "missing.bin" in err
+    bad_init = tmp_path / "init.txt"
+    bad_init.write_text("1 2 3\n")
+    code, _, err = run_cli(capsys, str(SOURCE), str(TARGET), "--init", str(bad_init))
+    assert code == 1 and "init.txt" in err
+    code, _, err = run_cli(capsys, str(SOURCE))
+    assert code == 1 and "SOURCE and TARGET" in err
