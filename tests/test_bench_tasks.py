@@ -141,3 +141,38 @@ def test_pf_job_validates_with_the_filter_config_and_sweeps_particles(tmp_path):
     assert a["status"] == "ok", a["error"]
     assert a["metrics"]["mse_m2"] == b["metrics"]["mse_m2"]  # seeded
     assert a["metrics"]["mse_m2"] < 0.2 * a["metrics"]["mse_dead_reckoning_m2"]
+
+
+def test_vo_job_validates_presets_and_matches_a_direct_run(tmp_path):
+    vo = pytest.importorskip("lidarkit.vo")
+    if not hasattr(vo, "run_vo"):
+        pytest.skip("VO pipeline not available")
+    from lidarkit import eval as leval
+    from lidarkit.io import open_dataset
+
+    seq_dir = shared_path("kitti_images", "sequences", "06")
+    path = write(tmp_path, f"""
+        experiments:
+          - task: vo
+            dataset: {{kind: kitti, path: "{seq_dir}"}}
+            methods: [lidarkit, {{name: lidarkit, params: {{features.detectr: orb}}}}]
+        """)
+    with pytest.raises(ConfigError, match="detectr") as info:
+        load_suite(path)
+    assert "experiments[0].methods[1]" in str(info.value)
+    path.write_text(path.read_text().replace("features.detectr: orb", "scale.mode: gt").replace("[lidarkit, ", "[magic_vo, "))
+    with pytest.raises(ConfigError, match="unknown VO method 'magic_vo'.*report_orb"):
+        load_suite(path)
+
+    spec = {"kind": "kitti", "path": str(seq_dir)}
+    job = Job("vo", "e", "kitti06", spec, "lidarkit", {"scale.mode": "gt"}, seed=0, options={"max_frames": 6})
+    record = execute_job(job.spec())
+    assert record["status"] == "ok", record["error"]
+    images = open_dataset("kitti", seq_dir).as_image_sequence()
+    gt = images.ground_truth[:6]
+    direct = vo.run_vo(vo.images_in_memory(images)[:6], images.K, vo.preset("lidarkit", **{"scale.mode": "gt", "seed": 0}),
+                       ground_truth=gt, timestamps_s=images.timestamps_s[:6])
+    ape = leval.ape(*leval.paired(gt, direct.trajectory), align="se3")
+    assert record["info"]["align"] == "se3"
+    assert record["metrics"]["ape_rmse_m"] == pytest.approx(ape.rmse, rel=1e-9)
+    assert record["metrics"]["ape_rmse_m"] < 0.1 and record["metrics"]["n_frames"] == 6

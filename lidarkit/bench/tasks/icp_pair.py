@@ -3,11 +3,14 @@
 Options (per experiment): ``pairs`` — ``[[target, source], ...]`` (KITTI: frame numbers, e.g.
 ``[[94, 95]]``; other datasets: scan indices); default: the first ``max_pairs`` consecutive pairs.
 ``init_noise_m`` / ``init_noise_deg`` — start from the ground-truth motion perturbed by a seeded random
-motion of that size (0 = start from identity, the default).
+motion of that size (0 = start from identity, the default). ``ground_truth_file`` — a 4x4 ``T_target_source``
+text file (relative to the dataset folder) for a dataset without poses holding one pair, e.g. the bundled
+``sample:kitti_pair`` folder with ``pairs: [[0, 1]]``.
 """
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -16,19 +19,36 @@ from pydantic import BaseModel, ConfigDict, Field
 from lidarkit.bench.jobs import Job
 from lidarkit.bench.tasks import Metric, Task, TaskOutput, import_module_for_task
 from lidarkit.bench.tasks._datasets import check_reader_options, open_dataset_spec, options_model
-from lidarkit.errors import DataError
+from lidarkit.bench.datasets import dataset_path
+from lidarkit.errors import ConfigError, DataError
 
 
 class IcpPairOptions(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
     pairs: list[tuple[int, int]] | None = None
+    ground_truth_file: str | None = None
     max_pairs: int = Field(1, ge=1)
     init_noise_m: float = Field(0.0, ge=0.0)
     init_noise_deg: float = Field(0.0, ge=0.0)
 
 
-def _pair_data(dataset: Any, target: int, source: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def read_T_target_source(path: Path) -> np.ndarray:
+    """A 4x4 (or 3x4) transform from a text file (``#`` comments allowed); DataError if it is not one."""
+    from lidarkit.geometry import is_rotation
+    from lidarkit.textfile import read_numeric_table
+
+    table = np.asarray(read_numeric_table(path, ncols=4), dtype=np.float64)
+    if table.shape == (3, 4):
+        table = np.vstack([table, [0.0, 0.0, 0.0, 1.0]])
+    if table.shape != (4, 4) or not np.allclose(table[3], [0, 0, 0, 1]) or not is_rotation(table[:3, :3], tol=1e-6):
+        raise DataError(f"expected a 4x4 rigid transform, found a {table.shape[0]}x4 table that is not one", source=path)
+    return table
+
+
+def _pair_data(dataset: Any, target: int, source: int, T_gt_file: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(source_xyz, target_xyz, T_target_source ground truth) of one pair."""
+    if T_gt_file is not None:
+        return dataset.read_scan(source).points_xyz, dataset.read_scan(target).points_xyz, T_gt_file
     if hasattr(dataset, "relative_pose") and hasattr(dataset, "read_scan_by_frame"):  # KITTI: frame numbers
         T_gt = np.asarray(dataset.relative_pose(target, source), dtype=np.float64)
         return dataset.read_scan_by_frame(source).points_xyz, dataset.read_scan_by_frame(target).points_xyz, T_gt
@@ -75,8 +95,12 @@ class IcpPairTask(Task):
         from lidarkit.registration import get_icp
 
         get_icp(method, **params)
-        options_model(IcpPairOptions, options, "icp_pair")
+        opts = options_model(IcpPairOptions, options, "icp_pair")
         check_reader_options(dataset)
+        if opts.ground_truth_file is not None:
+            if not opts.pairs or len(opts.pairs) != 1:
+                raise ConfigError("ground_truth_file gives one pair's motion: set exactly one pair in 'pairs'", source="options")
+            read_T_target_source(dataset_path(dataset) / opts.ground_truth_file)
 
     def run(self, job: Job) -> TaskOutput:
         from lidarkit.geometry import pose_error, se3_exp
@@ -86,9 +110,12 @@ class IcpPairTask(Task):
         dataset = open_dataset_spec(job.dataset)
         registration = get_icp(job.method, **job.params)
         rng = np.random.default_rng(job.seed)
+        T_gt_file = None
+        if options.ground_truth_file is not None:
+            T_gt_file = read_T_target_source(dataset_path(job.dataset) / options.ground_truth_file)
         rows, histories = [], []
         for target, source in _pairs(options, dataset):
-            source_xyz, target_xyz, T_gt = _pair_data(dataset, target, source)
+            source_xyz, target_xyz, T_gt = _pair_data(dataset, target, source, T_gt_file)
             init_T = None
             if options.init_noise_m > 0 or options.init_noise_deg > 0:
                 twist = np.concatenate([rng.normal(0, options.init_noise_m, 3), np.deg2rad(rng.normal(0, options.init_noise_deg, 3))])

@@ -1,15 +1,46 @@
 """``vo``: monocular visual odometry (``lidarkit.vo``) on an image sequence, scored with ``lidarkit.eval``.
 
-Not wired yet: the VO pipeline's public entry point has not landed; ``require`` says so and the demo skips it.
+Methods are the VO presets (``lidarkit.vo.available_presets()``: ``lidarkit``, ``report_sift``, ``report_orb``);
+params are dotted-path changes to the preset (``scale.mode: relative``, ``features.detector: orb``), validated
+by ``lidarkit.vo.preset``. The job seed becomes the config's ``seed``. Options: ``max_frames`` (first N
+images), ``align`` (``auto``: SE(3) for ground-truth scale, Sim(3) otherwise; or ``none``/``se3``/``sim3``),
+``smoothed`` (score the Savitzky-Golay smoothed trajectory). Images are read into memory before the run, so
+frames/s is the pipeline's speed.
 """
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
 
 from lidarkit.bench.jobs import Job
-from lidarkit.bench.tasks import Metric, Task, TaskOutput
+from lidarkit.bench.tasks import Metric, Task, TaskOutput, import_module_for_task
+from lidarkit.bench.tasks._datasets import check_reader_options, open_dataset_spec, options_model
 from lidarkit.errors import ConfigError
+
+
+class VOOptions(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    max_frames: int | None = Field(None, ge=2)
+    align: Literal["auto", "none", "se3", "sim3"] = "auto"
+    smoothed: bool = False
+
+
+def _vo_api() -> Any:
+    vo = import_module_for_task("vo", "lidarkit.vo")
+    for name in ("preset", "available_presets", "run_vo", "images_in_memory"):
+        if not hasattr(vo, name):
+            raise ConfigError(f"lidarkit.vo has no {name}() yet", source="task")
+    return vo
+
+
+def _config(vo: Any, method: str, params: dict[str, Any], seed: int | None = None) -> Any:
+    changes = dict(params)
+    if seed is not None and "seed" not in changes:
+        changes["seed"] = seed
+    return vo.preset(method, **changes)
 
 
 class VisualOdometryTask(Task):
@@ -17,16 +48,67 @@ class VisualOdometryTask(Task):
     dataset_kinds = ("kitti", "tum")
     metrics = (
         Metric("ape_rmse_m", "APE RMSE [m]"),
+        Metric("rpe_trans_rmse_m", "RPE trans. [m/frame]"),
         Metric("final_error_m", "final error [m]"),
+        Metric("rejected_frames", "rejected frames"),
         Metric("hz", "frames/s", kind="speed", better="higher"),
     )
 
     def require(self) -> None:
-        raise ConfigError("the lidarkit.vo pipeline is not available yet", source="task")
+        _vo_api()
 
     def validate(self, method: str, params: dict[str, Any], dataset: dict[str, Any], options: dict[str, Any]) -> None:
-        self.require()
+        vo = _vo_api()
+        if method not in vo.available_presets():
+            raise ConfigError(f"unknown VO method {method!r}; known presets: {', '.join(vo.available_presets())}", source="method")
+        _config(vo, method, params)
+        options_model(VOOptions, options, "vo")
+        check_reader_options(dataset)
 
     def run(self, job: Job) -> TaskOutput:
-        self.require()
-        raise AssertionError("unreachable")
+        from lidarkit import eval as leval
+
+        vo = _vo_api()
+        options = VOOptions(**job.options)
+        config = _config(vo, job.method, job.params, job.seed)
+        sequence = open_dataset_spec(job.dataset)
+        if hasattr(sequence, "as_image_sequence"):
+            sequence = sequence.as_image_sequence()
+        images = vo.images_in_memory(sequence)
+        n = len(images) if options.max_frames is None else min(options.max_frames, len(images))
+        images = images[:n]
+        gt = sequence.ground_truth
+        gt = None if gt is None else gt[:n]
+        timestamps = sequence.timestamps_s
+        timestamps = None if timestamps is None else np.asarray(timestamps, dtype=float)[:n]
+        result = vo.run_vo(images, sequence.K, config, ground_truth=gt, timestamps_s=timestamps)
+        est = result.smoothed() if options.smoothed else result.trajectory
+        summary = result.summary()
+        metrics: dict[str, Any] = {
+            "hz": float(result.frames_per_s),
+            "rejected_frames": float(summary["rejected"]),
+            "n_frames": float(result.n_frames),
+        }
+        series: dict[str, Any] = {}
+        if gt is not None:
+            align = options.align
+            if align == "auto":
+                align = "se3" if config.scale.mode == "gt" else "sim3"
+            ref, est_p = leval.paired(gt, est)
+            ape = leval.ape(ref, est_p, align=align)
+            rpe = leval.rpe(ref, est_p, delta=1, delta_unit="frames", align=align)
+            metrics.update(ape_rmse_m=float(ape.rmse), rpe_trans_rmse_m=float(rpe.rmse), final_error_m=float(ape.errors[-1]))
+            # camera frame: x right, z forward -> the ground plane is x-z
+            ref_xz = np.asarray(ape.ref.positions_xyz)[:, [0, 2]]
+            est_xz = np.asarray(ape.est_aligned.positions_xyz)[:, [0, 2]]
+            t = np.arange(len(ape.errors), dtype=float) if timestamps is None else timestamps[: len(ape.errors)] - timestamps[0]
+            series = {
+                "trajectory_xy": {"ref": ref_xz.round(4).tolist(), "est": est_xz.round(4).tolist()},
+                "error_over_time": {"t": np.round(t, 4).tolist(), "error": np.round(ape.errors, 6).tolist(),
+                                    "label": f"APE ({align} aligned) [m]"},
+            }
+            info_align = align
+        else:
+            info_align = None
+        return TaskOutput(metrics=metrics, series=series,
+                          info={"summary": summary, "align": info_align, "config": config.model_dump(mode="json")})
