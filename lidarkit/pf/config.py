@@ -1,0 +1,115 @@
+"""Typed configuration of the particle filter; defaults live here and nowhere else."""
+
+from __future__ import annotations
+
+import math
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, ValidationError, field_validator
+
+from lidarkit.errors import ConfigError
+
+LIKELIHOODS = ("all", "nearest")
+ESTIMATORS = ("mean", "best")
+INITS = ("gaussian", "uniform")
+
+
+class PFConfig(BaseModel):
+    """Particle-filter settings.
+
+    ``q`` is the measurement noise [range, bearing] read as variances (``q_as="variance"``, default:
+    Q is a covariance matrix) or standard deviations (``q_as="std"``). ``init_std`` are standard
+    deviations: ``likelihood="nearest"`` uses one reading per step (the closest landmark) with its known
+    landmark id (``nearest_association="known"``) or, as the report did, compared with each particle's
+    own nearest landmark (``"per_particle"``: ambiguous, diverges with few particles). ``init_std`` are standard
+    deviations: the report's ``x, y ~ N(0, 2)``, ``theta ~ N(0.1, 0.1)`` read as N(mean, variance),
+    i.e. std sqrt(2) m and sqrt(0.1) rad. ``ess_threshold``: resample when ESS < threshold * N;
+    ``>= 1`` resamples after every update (the report). ``roughening``: Gordon's constant K, jitter std
+    K * spread_d * N^(-1/3) per state dimension after resampling (0 = off). ``regularization``: Liu-West
+    kernel move with bandwidth h after resampling (keeps mean and covariance). ``moment_matching``:
+    restore the pre-resampling weighted mean (and covariance) after resampling. ``antithetic``: motion
+    noise in +/- pairs. ``kernel="kalman"``: each particle is a Gaussian kernel with its own EKF
+    (:mod:`lidarkit.pf.kalman_kernel`), ``kernel_split`` = a (children get covariance a P).
+    ``recovery="reinit"``: when even the best particle fails the chi-square(2) 99.9% gate on a step
+    (the filter is lost), spread all particles uniformly over the map and reweight them by that step's
+    readings (global relocalization); otherwise lost steps are only counted and logged.
+    """
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    n_particles: int = 1000
+    kernel: Literal["point", "kalman"] = "point"
+    kernel_split: float = 0.5
+    likelihood: Literal["all", "nearest"] = "all"
+    nearest_association: Literal["known", "per_particle"] = "known"
+    estimator: Literal["mean", "best"] = "mean"
+    resampler: Literal["multinomial", "systematic", "stratified", "residual"] = "systematic"
+    ess_threshold: float = 1.0
+    roughening: float = 0.0
+    antithetic: bool = False
+    moment_matching: Literal["none", "mean", "mean_cov"] = "none"
+    regularization: float = 0.0
+    motion_noise_std: tuple[float, float, float] = (0.01, 0.1, 0.01)
+    q: tuple[float, float] = (1.0, 0.1)
+    q_as: Literal["variance", "std"] = "variance"
+    init: Literal["gaussian", "uniform"] = "gaussian"
+    init_mean: tuple[float, float, float] = (0.0, 0.0, 0.1)
+    init_std: tuple[float, float, float] = (math.sqrt(2.0), math.sqrt(2.0), math.sqrt(0.1))
+    uniform_margin_m: float = 2.0
+    recovery: Literal["none", "reinit"] = "none"
+    dtype: Literal["float32", "float64"] = "float32"
+    noise_block_elements: int = 1 << 21
+
+    @field_validator("n_particles")
+    @classmethod
+    def _positive_n(cls, v: int) -> int:
+        if v < 1:
+            raise ValueError(f"n_particles must be >= 1, got {v}")
+        return v
+
+    @field_validator("kernel_split")
+    @classmethod
+    def _split_range(cls, v: float) -> float:
+        if not 0.0 < v <= 1.0:
+            raise ValueError(f"kernel_split must be in (0, 1], got {v}")
+        return v
+
+    @field_validator("regularization")
+    @classmethod
+    def _bandwidth(cls, v: float) -> float:
+        if not 0.0 <= v < 1.0:
+            raise ValueError(f"regularization bandwidth must be in [0, 1), got {v}")
+        return v
+
+    @field_validator("ess_threshold", "roughening", "uniform_margin_m")
+    @classmethod
+    def _non_negative(cls, v: float) -> float:
+        if not math.isfinite(v) or v < 0:
+            raise ValueError(f"must be finite and >= 0, got {v}")
+        return v
+
+    @field_validator("q", "motion_noise_std", "init_std")
+    @classmethod
+    def _finite_non_negative(cls, v: tuple[float, ...]) -> tuple[float, ...]:
+        if not all(math.isfinite(x) and x >= 0 for x in v):
+            raise ValueError(f"values must be finite and >= 0, got {v}")
+        return v
+
+    @classmethod
+    def make(cls, **values) -> PFConfig:
+        """Validated config; invalid values raise ConfigError (not pydantic's ValidationError)."""
+        try:
+            return cls(**values)
+        except ValidationError as err:
+            first = err.errors()[0]
+            field = ".".join(str(p) for p in first.get("loc", ())) or "config"
+            msg = str(first.get("msg", "invalid value")).removeprefix("Value error, ")
+            if "got" not in msg:
+                msg = f"{msg} (got {first.get('input')!r})"
+            raise ConfigError(msg, source=f"pf config {field}") from None
+
+    def replace(self, **changes) -> PFConfig:
+        return PFConfig.make(**{**self.model_dump(), **changes})
+
+
+__all__ = ["ESTIMATORS", "INITS", "LIKELIHOODS", "PFConfig"]

@@ -1,0 +1,304 @@
+"""ParticleFilter: predict / update / resample / estimate over all particles at once."""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from lidarkit.errors import ConfigError, DataError
+from lidarkit.pf.config import PFConfig
+from lidarkit.pf.models import OdometryMotionModel, RangeBearingModel, resolve_q, standard_normal, wrap_angle
+from lidarkit.pf.resampling import effective_sample_size, get_resampler
+
+log = logging.getLogger(__name__)
+
+
+class ParticleFilter:
+    """Landmark-based Monte-Carlo localization in 2D (pose x_m, y_m, theta_rad).
+
+    ``landmarks_xy``: ``(L, 2)`` map. Particles are ``(3, N)`` (``.states``; ``.particles`` gives
+    an ``(N, 3)`` view) with normalized weights ``(N,)`` float64 and their logs. Counters:
+    ``n_updates``, ``n_resamples``, ``n_weight_resets`` (updates whose log-likelihoods were all
+    non-finite: weights reset to uniform, logged).
+    """
+
+    def __init__(self, landmarks_xy: np.ndarray, config: PFConfig | None = None, rng: np.random.Generator | int | None = 0) -> None:
+        self.config = config if config is not None else PFConfig()
+        lm = np.asarray(landmarks_xy, dtype=np.float64)
+        if lm.ndim != 2 or lm.shape[1] != 2 or len(lm) == 0 or not np.isfinite(lm).all():
+            raise DataError(f"landmarks must be a finite (L, 2) array with L >= 1, got shape {lm.shape}", source="landmarks")
+        self.landmarks_xy = lm
+        self.rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
+        self.dtype = np.dtype(self.config.dtype)
+        self.n = int(self.config.n_particles)
+        self.motion = OdometryMotionModel(self.config.motion_noise_std)
+        self.sensor = RangeBearingModel(resolve_q(self.config.q, self.config.q_as))
+        self.resampler = get_resampler(self.config.resampler)
+        self._landmarks_typed = lm.astype(self.dtype)
+        self._noise_block: np.ndarray | None = None
+        self._noise_pos = 0
+        self._work = np.empty(self.n, dtype=self.dtype)
+        self.n_updates = 0
+        self.n_resamples = 0
+        self.n_weight_resets = 0
+        self.last_max_loglik = 0.0
+        if self.config.init == "uniform":
+            self.initialize_uniform()
+        else:
+            self.initialize_gaussian()
+
+    # ---- initialization -------------------------------------------------------------------------
+    def initialize_gaussian(self, mean: np.ndarray | None = None, std: np.ndarray | None = None) -> None:
+        """Particles ~ N(mean, diag(std^2)) (defaults from the config); weights uniform."""
+        mean = np.asarray(self.config.init_mean if mean is None else mean, dtype=np.float64).reshape(3)
+        std = np.asarray(self.config.init_std if std is None else std, dtype=np.float64).reshape(3)
+        eps = standard_normal(self.rng, (3, self.n), self.dtype)
+        self.states = (eps * std.astype(self.dtype)[:, None] + mean.astype(self.dtype)[:, None]).astype(self.dtype)
+        self._reset_weights()
+
+    def initialize_uniform(self, bounds_xy: tuple[float, float, float, float] | None = None) -> None:
+        """Global localization: x, y uniform over ``(xmin, xmax, ymin, ymax)`` (default: landmarks +- margin), theta uniform."""
+        if bounds_xy is None:
+            m = self.config.uniform_margin_m
+            lo, hi = self.landmarks_xy.min(axis=0) - m, self.landmarks_xy.max(axis=0) + m
+            bounds_xy = (lo[0], hi[0], lo[1], hi[1])
+        x0, x1, y0, y1 = (float(b) for b in bounds_xy)
+        if not (x1 > x0 and y1 > y0):
+            raise ConfigError(f"empty bounds {bounds_xy!r}", source="initialize_uniform")
+        u = self.rng.random((3, self.n))
+        lo = np.array([x0, y0, -np.pi])[:, None]
+        span = np.array([x1 - x0, y1 - y0, 2 * np.pi])[:, None]
+        self.states = (lo + u * span).astype(self.dtype)
+        self._reset_weights()
+
+    def set_particles(self, particles: np.ndarray, weights: np.ndarray | None = None) -> None:
+        """Replace the particle set with ``(N, 3)`` poses (and optional weights, normalized here)."""
+        p = np.asarray(particles, dtype=np.float64)
+        if p.shape != (self.n, 3) or not np.isfinite(p).all():
+            raise DataError(f"particles must be finite ({self.n}, 3), got {p.shape}", source="set_particles")
+        self.states = np.ascontiguousarray(p.T, dtype=self.dtype)
+        self._reset_weights()
+        if weights is not None:
+            w = np.asarray(weights, dtype=np.float64)
+            if w.shape != (self.n,) or not np.isfinite(w).all() or (w < 0).any() or w.sum() <= 0:
+                raise DataError("weights must be finite, >= 0, not all zero, shape (N,)", source="set_particles")
+            self.weights = w / w.sum()
+            with np.errstate(divide="ignore"):
+                self.log_weights = np.log(self.weights)
+            self._uniform = False
+
+    def _reset_weights(self) -> None:
+        # shared read-only arrays: every update creates new weight arrays
+        if getattr(self, "_uniform_w", None) is None:
+            self._uniform_w = np.full(self.n, 1.0 / self.n)
+            self._uniform_lw = np.full(self.n, -np.log(self.n))
+            self._uniform_w.flags.writeable = False
+            self._uniform_lw.flags.writeable = False
+        self.weights = self._uniform_w
+        self.log_weights = self._uniform_lw
+        self._uniform = True
+
+    # ---- views ------------------------------------------------------------------------------------
+    @property
+    def particles(self) -> np.ndarray:
+        """``(N, 3)`` view of the particle poses."""
+        return self.states.T
+
+    @property
+    def ess(self) -> float:
+        return effective_sample_size(self.weights)
+
+    # ---- predict ----------------------------------------------------------------------------------
+    def _next_noise(self) -> np.ndarray:
+        if self._noise_block is None or self._noise_pos >= self._noise_block.shape[0]:
+            steps = max(1, self.config.noise_block_elements // (3 * self.n))
+            self._noise_block = self.motion.sample_noise(self.rng, steps, self.n, self.dtype, self.config.antithetic)
+            self._noise_pos = 0
+        noise = self._noise_block[self._noise_pos]
+        self._noise_pos += 1
+        return noise
+
+    def predict(self, odometry: np.ndarray) -> None:
+        """Move every particle by the odometry ``[r1_rad, t_m, r2_rad]`` with sampled motion noise."""
+        u = np.asarray(odometry, dtype=np.float64).reshape(-1)
+        if u.shape != (3,):
+            raise DataError(f"odometry must be [r1, t, r2], got shape {u.shape}", source="predict")
+        if not np.isfinite(u).all():
+            raise DataError(f"non-finite odometry {u.tolist()}", source="predict")
+        noise = self._next_noise() if self.motion.noise_std.any() else None
+        self.motion.apply(self.states, u, noise, self._work)
+
+    # ---- update -----------------------------------------------------------------------------------
+    def log_likelihood(self, landmark_index: np.ndarray, z: np.ndarray) -> np.ndarray:
+        """Per-particle log-likelihood ``(N,)`` of the readings ``z`` ``(M, 2)`` of landmarks ``landmark_index`` ``(M,)``.
+
+        ``likelihood="nearest"`` uses only the closest reading (smallest range; the protocol passes the
+        truly nearest one), with its known landmark or each particle's nearest landmark (config
+        ``nearest_association``); ``"all"`` sums every reading with its known landmark.
+        """
+        if self.config.likelihood == "nearest":
+            k = int(np.argmin(z[:, 0])) if len(z) > 1 else 0
+            if self.config.nearest_association == "per_particle":
+                return self.sensor.log_likelihood_nearest(self.states, self._landmarks_typed, z[k])
+            return self.sensor.log_likelihood_all(self.states, self._landmarks_typed[landmark_index[k : k + 1]], z[k : k + 1])
+        return self.sensor.log_likelihood_all(self.states, self._landmarks_typed[landmark_index], z)
+
+    def update(self, landmark_index: np.ndarray, z: np.ndarray) -> bool:
+        """Reweight by the readings; an empty set of readings leaves the weights unchanged (returns False)."""
+        z = np.asarray(z, dtype=np.float64).reshape(-1, 2)
+        if len(z) == 0:
+            return False
+        if not np.isfinite(z).all():
+            raise DataError("non-finite measurement", source="update")
+        ll = self.log_likelihood(np.asarray(landmark_index, dtype=np.int64).reshape(-1), z)
+        self.apply_log_likelihood(ll)
+        return True
+
+    def apply_log_likelihood(self, ll: np.ndarray) -> None:
+        """Add ``ll`` ``(N,)`` to the log-weights and renormalize with log-sum-exp (never underflows to all zero)."""
+        lw = ll.astype(np.float64) if self._uniform else ll + self.log_weights
+        m = lw.max()
+        if not np.isfinite(m):  # NaN / inf somewhere, or every particle impossible
+            lw = np.where(np.isfinite(lw), lw, -np.inf)
+            m = lw.max()
+            if not np.isfinite(m):
+                self.n_weight_resets += 1
+                log.warning("no particle has a finite log-likelihood at update %d: weights reset to uniform", self.n_updates)
+                self._reset_weights()
+                self.n_updates += 1
+                return
+        self.last_max_loglik = float(ll.max())
+        lw -= m
+        w = np.exp(lw)
+        s = w.sum()
+        w /= s
+        lw -= np.log(s)
+        self.weights, self.log_weights, self._uniform = w, lw, False
+        self.n_updates += 1
+
+    # ---- resample ---------------------------------------------------------------------------------
+    def needs_resampling(self) -> bool:
+        if self._uniform:
+            return False
+        thr = self.config.ess_threshold
+        return thr >= 1.0 or effective_sample_size(self.weights) < thr * self.n
+
+    def resample(self, force: bool = False) -> bool:
+        """Resample (always if ``force``, else per the ESS threshold); returns whether it happened."""
+        if not force and not self.needs_resampling():
+            return False
+        idx = self.resampler(self.weights, self.rng, self.n)
+        matching = self.config.moment_matching
+        before = self._moments(self.weights, matching == "mean_cov") if matching != "none" else None
+        self.states = np.take(self.states, idx, axis=1)
+        if before is not None:
+            self._match_moments(before)
+        if self.config.regularization > 0:
+            self._regularize(self.config.regularization)
+        if self.config.roughening > 0:
+            self._roughen()
+        self._reset_weights()
+        self.n_resamples += 1
+        return True
+
+    def _moments(self, weights: np.ndarray, with_cov: bool) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+        """Weighted mean (circular for theta), deviations ``(3, N)`` float64 and covariance (or None)."""
+        w = weights
+        st = self.states.astype(np.float64)
+        mean = np.array([st[0] @ w, st[1] @ w, np.arctan2(np.sin(st[2]) @ w, np.cos(st[2]) @ w)])  # noqa: small N path
+        dev = st - mean[:, None]
+        dev[2] = wrap_angle(dev[2])
+        cov = (dev * w) @ dev.T if with_cov else None
+        return mean, cov, dev
+
+    def _match_moments(self, before: tuple[np.ndarray, np.ndarray | None, np.ndarray]) -> None:
+        """After resampling, restore the pre-resampling weighted mean (and covariance): an affine map of the cloud."""
+        mean_b, cov_b, _ = before
+        uniform = np.full(self.n, 1.0 / self.n)
+        mean_a, cov_a, dev_a = self._moments(uniform, cov_b is not None)
+        if cov_b is not None and self.n > 3:
+            try:
+                L_b = np.linalg.cholesky(cov_b + 1e-12 * np.eye(3))
+                L_a = np.linalg.cholesky(cov_a + 1e-12 * np.eye(3))
+                A = L_b @ np.linalg.inv(L_a)
+                dev_a = A @ (dev_a - (dev_a.mean(axis=1, keepdims=True)))
+            except np.linalg.LinAlgError:
+                log.debug("moment matching skipped: degenerate particle covariance")
+                dev_a = dev_a - dev_a.mean(axis=1, keepdims=True)
+        else:
+            dev_a = dev_a - dev_a.mean(axis=1, keepdims=True)
+        self.states = (mean_b[:, None] + dev_a).astype(self.dtype)
+
+    def _regularize(self, h: float) -> None:
+        """Liu-West kernel move: shrink toward the mean by sqrt(1 - h^2), add N(0, h^2 Cov): keeps mean and covariance."""
+        uniform = np.full(self.n, 1.0 / self.n)
+        mean, cov, dev = self._moments(uniform, True)
+        try:
+            L = np.linalg.cholesky(cov + 1e-12 * np.eye(3))
+        except np.linalg.LinAlgError:
+            return
+        eps = self.rng.standard_normal((3, self.n))
+        new = mean[:, None] + np.sqrt(1.0 - h * h) * dev + h * (L @ eps)
+        self.states = new.astype(self.dtype)
+
+    def _roughen(self) -> None:
+        spread = self.states.max(axis=1) - self.states.min(axis=1)
+        spread[2] = min(float(spread[2]), np.pi)
+        sigma = (self.config.roughening * self.n ** (-1.0 / 3.0)) * spread
+        eps = standard_normal(self.rng, (3, self.n), self.dtype)
+        eps *= sigma.astype(self.dtype)[:, None]
+        self.states += eps
+
+    # ---- estimate ---------------------------------------------------------------------------------
+    def estimate(self, kind: str | None = None) -> np.ndarray:
+        """Pose ``(3,)`` float64: weighted mean (circular mean for theta) or the highest-weight particle."""
+        kind = kind or self.config.estimator
+        if kind == "best":
+            return self.states[:, int(np.argmax(self.weights))].astype(np.float64)
+        if kind != "mean":
+            raise ConfigError(f"unknown estimator {kind!r}; known: mean, best", source="estimator")
+        w = self.weights.astype(self.dtype)
+        theta = self.states[2]
+        # multiply + sum instead of BLAS matmul: no thread start-up cost, same result on every machine
+        x = np.add.reduce(self.states[0] * w)
+        y = np.add.reduce(self.states[1] * w)
+        c = np.add.reduce(np.cos(theta) * w)
+        s = np.add.reduce(np.sin(theta) * w)
+        return np.array([x, y, np.arctan2(s, c)], dtype=np.float64)
+
+    # ---- consistency ------------------------------------------------------------------------------
+    def innovation_nis(self, landmark_index: np.ndarray, z: np.ndarray) -> np.ndarray:
+        """Normalized innovation squared ``(M,)`` of each reading against the current (predicted) particle set.
+
+        Innovation = weighted mean of the per-particle residuals; S = their weighted covariance + Q.
+        For a consistent filter each value is chi-square distributed with 2 degrees of freedom.
+        """
+        z = np.asarray(z, dtype=np.float64).reshape(-1, 2)
+        if len(z) == 0:
+            return np.zeros(0)
+        lm = self.landmarks_xy[np.asarray(landmark_index, dtype=np.int64)]
+        e_r, e_b = self.sensor.residuals(self.states.astype(np.float64), lm, z)
+        w = self.weights
+        nu = np.stack([e_r @ w, e_b @ w], axis=1)  # (M, 2)
+        dr, db = e_r - nu[:, :1], e_b - nu[:, 1:]
+        s_rr, s_bb, s_rb = (dr * dr) @ w, (db * db) @ w, (dr * db) @ w
+        q = self.sensor.q_cov
+        S = np.empty((len(z), 2, 2))
+        S[:, 0, 0] = s_rr + q[0, 0]
+        S[:, 1, 1] = s_bb + q[1, 1]
+        S[:, 0, 1] = S[:, 1, 0] = s_rb + q[0, 1]
+        return np.einsum("mi,mij,mj->m", nu, np.linalg.inv(S), nu)
+
+
+def make_filter(landmarks_xy: np.ndarray, config: PFConfig | None = None, rng: np.random.Generator | int | None = 0):
+    """The filter the config asks for: point particles (:class:`ParticleFilter`) or Kalman kernels."""
+    config = config if config is not None else PFConfig()
+    if config.kernel == "kalman":
+        from lidarkit.pf.kalman_kernel import KalmanParticleFilter
+
+        return KalmanParticleFilter(landmarks_xy, config, rng)
+    return ParticleFilter(landmarks_xy, config, rng)
+
+
+__all__ = ["ParticleFilter", "make_filter"]

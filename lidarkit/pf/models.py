@@ -1,0 +1,236 @@
+"""Odometry motion model and range-bearing sensor model, vectorized over particles.
+
+Particle states are stored as a ``(3, N)`` array (rows x_m, y_m, theta_rad) so that each row is
+contiguous; every function here works on all particles at once.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from lidarkit.errors import ConfigError, DataError
+
+TWO_PI = 2.0 * np.pi
+
+
+def wrap_angle(angle_rad: np.ndarray | float) -> np.ndarray | float:
+    """Wrap angles to [-pi, pi) (vectorized; keeps dtype)."""
+    a = np.asarray(angle_rad)
+    return a - TWO_PI * np.floor((a + np.pi) / TWO_PI)
+
+
+def integrate_odometry(odometry: np.ndarray, start_pose: np.ndarray | tuple = (0.0, 0.0, 0.0)) -> np.ndarray:
+    """Compose ``(T, 3)`` odometry ``[r1, t, r2]`` from ``start_pose`` -> ``(T+1, 3)`` poses ``[x, y, theta]``.
+
+    The report's model: x += t cos(theta + r1), y += t sin(theta + r1), theta += r1 + r2.
+    """
+    u = np.asarray(odometry, dtype=np.float64).reshape(-1, 3)
+    start = np.asarray(start_pose, dtype=np.float64).reshape(3)
+    heading_after = start[2] + np.concatenate([[0.0], np.cumsum(u[:, 0] + u[:, 2])])
+    travel_heading = heading_after[:-1] + u[:, 0]
+    poses = np.empty((len(u) + 1, 3))
+    poses[0] = start
+    poses[1:, 0] = start[0] + np.cumsum(u[:, 1] * np.cos(travel_heading))
+    poses[1:, 1] = start[1] + np.cumsum(u[:, 1] * np.sin(travel_heading))
+    poses[:, 2] = wrap_angle(heading_after)
+    return poses
+
+
+def standard_normal(rng: np.random.Generator, shape: tuple[int, ...], dtype: np.dtype | type = np.float32) -> np.ndarray:
+    """Standard normal samples; float32 uses Box-Muller on float32 uniforms (about 3x faster than ziggurat).
+
+    Generated in cache-sized chunks. Float32 uniforms have 24-bit resolution, which truncates the
+    tails at 5.8 sigma (probability 8e-9).
+    """
+    dtype = np.dtype(dtype)
+    if dtype != np.float32:
+        return rng.standard_normal(shape, dtype=dtype)
+    n = int(np.prod(shape))
+    out = np.empty(n + (n & 1), dtype=np.float32)
+    two_pi = np.float32(TWO_PI)
+    minus_two = np.float32(-2.0)
+    for start in range(0, out.shape[0], 2 * _CHUNK_PAIRS):
+        pairs = min(_CHUNK_PAIRS, (out.shape[0] - start) // 2)
+        u = rng.random((2, pairs), dtype=np.float32)
+        radius = np.log1p(-u[0])
+        radius *= minus_two
+        np.sqrt(radius, out=radius)
+        angle = u[1]
+        angle *= two_pi
+        lo, mid, hi = start, start + pairs, start + 2 * pairs
+        np.cos(angle, out=out[lo:mid])
+        out[lo:mid] *= radius
+        np.sin(angle, out=out[mid:hi])
+        out[mid:hi] *= radius
+    return out[:n].reshape(shape)
+
+
+_CHUNK_PAIRS = 1 << 14
+
+
+class OdometryMotionModel:
+    """Odometry motion model with additive Gaussian noise on (r1, t, r2), std ``noise_std``."""
+
+    def __init__(self, noise_std: tuple[float, float, float] = (0.01, 0.1, 0.01)) -> None:
+        std = np.asarray(noise_std, dtype=np.float64).reshape(-1)
+        if std.shape != (3,) or not np.isfinite(std).all() or (std < 0).any():
+            raise ConfigError(f"motion noise std must be 3 finite values >= 0, got {noise_std!r}", source="motion_noise_std")
+        self.noise_std = std
+
+    def sample_noise(
+        self, rng: np.random.Generator, n_steps: int, n_particles: int, dtype=np.float32, antithetic: bool = False
+    ) -> np.ndarray:
+        """Scaled noise for ``n_steps`` steps in one draw: ``(n_steps, 3, N)``.
+
+        ``antithetic``: particles 2k and 2k+1 get opposite noise (an exactly zero-mean sample set per step).
+        """
+        if antithetic and n_particles > 1:
+            half = standard_normal(rng, (n_steps, 3, (n_particles + 1) // 2), dtype)
+            eps = np.concatenate([half, -half], axis=2)[:, :, :n_particles]
+        else:
+            eps = standard_normal(rng, (n_steps, 3, n_particles), dtype)
+        eps *= self.noise_std.astype(eps.dtype)[None, :, None]
+        return eps
+
+    @staticmethod
+    def apply(states: np.ndarray, odometry: np.ndarray, noise: np.ndarray | None, work: np.ndarray | None = None) -> None:
+        """Move ``states`` ``(3, N)`` in place by ``odometry`` ``[r1, t, r2]`` plus per-particle ``noise`` ``(3, N)``."""
+        r1, t, r2 = (float(v) for v in odometry)
+        if not (np.isfinite(r1) and np.isfinite(t) and np.isfinite(r2)):
+            raise DataError(f"non-finite odometry {tuple(odometry)!r}", source="odometry")
+        x, y, theta = states
+        dtype = states.dtype.type
+        if noise is None:
+            heading = theta + dtype(r1)
+            x += dtype(t) * np.cos(heading)
+            y += dtype(t) * np.sin(heading)
+            theta += dtype(r1 + r2)
+            return
+        heading = work if work is not None else np.empty_like(theta)
+        np.add(theta, noise[0], out=heading)
+        heading += dtype(r1)
+        travel = noise[1] + dtype(t)
+        x += travel * np.cos(heading)
+        y += travel * np.sin(heading)
+        theta += noise[0]
+        theta += noise[2]
+        theta += dtype(r1 + r2)
+
+
+def resolve_q(q: np.ndarray | tuple, q_as: str = "variance") -> np.ndarray:
+    """Measurement covariance ``(2, 2)`` from ``q`` read as variances (covariance) or standard deviations.
+
+    ``q`` may be a (2, 2) matrix or its diagonal (2,). ``q_as="std"`` squares the diagonal
+    (off-diagonal terms are then not allowed).
+    """
+    arr = np.asarray(q, dtype=np.float64)
+    if arr.shape == (2,):
+        arr = np.diag(arr)
+    if arr.shape != (2, 2) or not np.isfinite(arr).all():
+        raise ConfigError(f"Q must be a finite 2x2 matrix or its diagonal, got {q!r}", source="Q")
+    if q_as == "std":
+        if arr[0, 1] != 0 or arr[1, 0] != 0:
+            raise ConfigError("Q read as standard deviations must be diagonal", source="Q")
+        arr = np.diag(np.diag(arr) ** 2)
+    elif q_as != "variance":
+        raise ConfigError(f"q_as must be 'variance' or 'std', got {q_as!r}", source="q_as")
+    if not np.allclose(arr, arr.T) or np.linalg.eigvalsh(arr).min() <= 0:
+        raise ConfigError(f"Q must be symmetric positive definite, got {arr.tolist()}", source="Q")
+    return arr
+
+
+class RangeBearingModel:
+    """Range-bearing sensor: ``z = (|l - p|, atan2(l - p) - theta) + v``, ``v ~ N(0, Q)``; bearing residuals wrapped."""
+
+    def __init__(self, q_cov: np.ndarray) -> None:
+        self.q_cov = resolve_q(q_cov, "variance")
+        info = np.linalg.inv(self.q_cov)
+        self._a, self._b, self._c = float(info[0, 0]), float(info[0, 1]), float(info[1, 1])
+        self._log_norm = -0.5 * float(np.log(np.linalg.det(TWO_PI * self.q_cov)))
+
+    @staticmethod
+    def expected(pose: np.ndarray, landmarks_xy: np.ndarray) -> np.ndarray:
+        """Noise-free ``(M, 2)`` [range_m, bearing_rad] from one pose ``(3,)`` to ``(M, 2)`` landmarks."""
+        d = np.asarray(landmarks_xy, dtype=np.float64) - np.asarray(pose[:2], dtype=np.float64)
+        return np.stack([np.hypot(d[:, 0], d[:, 1]), wrap_angle(np.arctan2(d[:, 1], d[:, 0]) - pose[2])], axis=1)
+
+    def residuals(self, states: np.ndarray, landmarks_xy: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Range and wrapped bearing residuals ``z - h(state)``, each ``(M, N)`` (M readings x N particles)."""
+        dtype = states.dtype
+        lm = np.asarray(landmarks_xy, dtype=dtype)
+        zz = np.asarray(z, dtype=dtype)
+        x, y, theta = states
+        dx = lm[:, 0:1] - x
+        dy = lm[:, 1:2] - y
+        e_r = np.multiply(dx, dx)
+        e_r += dy * dy
+        np.sqrt(e_r, out=e_r)
+        np.subtract(zz[:, 0:1], e_r, out=e_r)
+        e_b = np.arctan2(dy, dx, out=dx)
+        np.subtract(theta + zz[:, 1:2], e_b, out=e_b)  # z_b - (atan2 - theta)
+        _wrap_inplace(e_b, dy)
+        return e_r, e_b
+
+    def mahalanobis_sq(self, e_r: np.ndarray, e_b: np.ndarray) -> np.ndarray:
+        """``e^T Q^-1 e`` elementwise; overwrites ``e_r`` as scratch."""
+        dtype = e_r.dtype.type
+        d2 = e_b * e_b
+        d2 *= dtype(self._c)
+        if self._b != 0.0:
+            d2 += dtype(2.0 * self._b) * e_r * e_b
+        np.multiply(e_r, e_r, out=e_r)
+        e_r *= dtype(self._a)
+        d2 += e_r
+        return d2
+
+    def log_likelihood_all(self, states: np.ndarray, landmarks_xy: np.ndarray, z: np.ndarray) -> np.ndarray:
+        """Sum over the M readings (known landmark association) of the Gaussian log-likelihood, ``(N,)``.
+
+        The constant normalization term is dropped (it cancels in the weights).
+        """
+        e_r, e_b = self.residuals(states, landmarks_xy, z)
+        d2 = self.mahalanobis_sq(e_r, e_b)
+        ll = d2.sum(axis=0) if d2.shape[0] > 1 else d2[0]
+        ll *= d2.dtype.type(-0.5)
+        return ll
+
+    def log_likelihood_nearest(self, states: np.ndarray, all_landmarks_xy: np.ndarray, z: np.ndarray) -> np.ndarray:
+        """The report's likelihood: one reading ``z`` (2,) compared with each particle's own nearest landmark, ``(N,)``."""
+        dtype = states.dtype
+        lm = np.asarray(all_landmarks_xy, dtype=dtype)
+        x, y, _ = states
+        dx = lm[:, 0:1] - x
+        dy = lm[:, 1:2] - y
+        dist2 = dx * dx
+        dist2 += dy * dy
+        nearest = np.argmin(dist2, axis=0)
+        cols = np.arange(states.shape[1])
+        ndx = dx[nearest, cols]
+        ndy = dy[nearest, cols]
+        e_r = np.sqrt(dist2[nearest, cols])
+        np.subtract(dtype.type(z[0]), e_r, out=e_r)
+        e_b = np.arctan2(ndy, ndx)
+        np.subtract(states[2] + dtype.type(z[1]), e_b, out=e_b)
+        _wrap_inplace(e_b, ndx)
+        d2 = self.mahalanobis_sq(e_r, e_b)
+        d2 *= dtype.type(-0.5)
+        return d2
+
+
+def _wrap_inplace(a: np.ndarray, scratch: np.ndarray) -> None:
+    """Wrap ``a`` to [-pi, pi) in place using ``scratch`` (same shape/dtype)."""
+    dtype = a.dtype.type
+    np.multiply(a, dtype(1.0 / TWO_PI), out=scratch)
+    np.rint(scratch, out=scratch)
+    scratch *= dtype(TWO_PI)
+    a -= scratch
+
+
+__all__ = [
+    "OdometryMotionModel",
+    "RangeBearingModel",
+    "integrate_odometry",
+    "resolve_q",
+    "standard_normal",
+    "wrap_angle",
+]

@@ -1,0 +1,429 @@
+"""The particle-filter report's evaluation protocol as one call, plus a run on the recorded readings.
+
+Protocol (``run_protocol``): ground truth = the data's clean odometry integrated from (0, 0, 0);
+the filter receives that odometry with added noise (std 0.01 rad, 0.1 m, 0.01 rad on r1, t, r2) and
+range-bearing readings simulated from the ground truth with noise Q (the landmarks the data set
+recorded at each step; ``visible="all"`` simulates every landmark every step). ``likelihood="nearest"``
+gives the filter a single reading per step, of the landmark truly nearest the robot (the report).
+Score: position MSE from step 10 on, plus APE/RPE through ``lidarkit.eval``.
+
+Recorded mode (``run_recorded``): the data's own odometry and SENSOR readings, no ground truth;
+consistency is reported as normalized innovation squared (NIS) statistics against chi-square(2)
+and the distance between the estimate and dead reckoning.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from lidarkit.errors import ConfigError, DataError
+from lidarkit.pf.config import PFConfig
+from lidarkit.pf.filter import ParticleFilter, make_filter
+from lidarkit.pf.models import integrate_odometry, resolve_q, standard_normal, wrap_angle
+from lidarkit.trajectory import Trajectory
+
+log = logging.getLogger(__name__)
+
+ODOMETRY_NOISE_STD = (0.01, 0.1, 0.01)
+MSE_START_STEP = 10
+VISIBILITY = ("recorded", "all")
+CHI2_2DOF_95 = 5.991464547107979  # chi-square(2) 95% quantile
+CHI2_2DOF_999 = 13.815510557964274  # chi-square(2) 99.9% quantile: "lost" threshold per reading
+
+
+@dataclass(frozen=True, eq=False)
+class StepReadings:
+    """Readings as flat arrays: ``step`` ``(K,)``, ``landmark_index`` ``(K,)``, ``z`` ``(K, 2)`` [range_m, bearing_rad],
+    CSR ``offsets`` ``(T+1,)``."""
+
+    landmark_index: np.ndarray
+    z: np.ndarray
+    offsets: np.ndarray
+
+    def at(self, t: int) -> tuple[np.ndarray, np.ndarray]:
+        a, b = int(self.offsets[t]), int(self.offsets[t + 1])
+        return self.landmark_index[a:b], self.z[a:b]
+
+    @classmethod
+    def from_flat(cls, step: np.ndarray, landmark_index: np.ndarray, z: np.ndarray, n_steps: int) -> StepReadings:
+        order = np.argsort(step, kind="stable")
+        counts = np.bincount(step, minlength=n_steps)
+        offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        return cls(np.asarray(landmark_index)[order], np.asarray(z, dtype=np.float64)[order], offsets)
+
+
+@dataclass(frozen=True, eq=False)
+class SimulatedData:
+    """The protocol's inputs for one seed: ``ground_truth`` ``(T+1, 3)``, ``odometry_noisy`` ``(T, 3)``,
+    ``dead_reckoning`` ``(T+1, 3)``, all-readings and nearest-reading sets."""
+
+    ground_truth: np.ndarray
+    odometry_noisy: np.ndarray
+    dead_reckoning: np.ndarray
+    readings: StepReadings
+    nearest: StepReadings
+
+
+def simulate(
+    data,
+    rng: np.random.Generator,
+    q_cov: np.ndarray,
+    *,
+    odometry_noise_std: tuple[float, float, float] = ODOMETRY_NOISE_STD,
+    visible: str = "recorded",
+) -> SimulatedData:
+    """Ground truth, noisy odometry and simulated readings (range, bearing) + N(0, Q) for one data set."""
+    if visible not in VISIBILITY:
+        raise ConfigError(f"visible must be one of {VISIBILITY}, got {visible!r}", source="visible")
+    odo = np.asarray(data.odometry, dtype=np.float64)
+    T = len(odo)
+    gt = integrate_odometry(odo)
+    noisy = odo + rng.standard_normal((T, 3)) * np.asarray(odometry_noise_std, dtype=np.float64)
+    lm = np.asarray(data.landmarks.positions_xy, dtype=np.float64)
+    if visible == "recorded":
+        step = np.asarray(data.meas_step, dtype=np.int64)
+        idx = np.asarray(data.meas_landmark_index, dtype=np.int64)
+    else:
+        step = np.repeat(np.arange(T), len(lm))
+        idx = np.tile(np.arange(len(lm)), T)
+    pose = gt[step + 1]
+    d = lm[idx] - pose[:, :2]
+    true_z = np.stack([np.hypot(d[:, 0], d[:, 1]), wrap_angle(np.arctan2(d[:, 1], d[:, 0]) - pose[:, 2])], axis=1)
+    chol = np.linalg.cholesky(q_cov)
+    z = true_z + rng.standard_normal(true_z.shape) @ chol.T
+    z[:, 1] = wrap_angle(z[:, 1])
+    readings = StepReadings.from_flat(step, idx, z, T)
+    # nearest: per step, the reading whose landmark is truly closest to the robot
+    true_range = np.where(np.bincount(step, minlength=T)[step] > 0, true_z[:, 0], np.inf)
+    order = np.lexsort((true_range, step))
+    first = np.ones(len(order), dtype=bool)
+    first[1:] = step[order][1:] != step[order][:-1]
+    keep = order[first]
+    nearest = StepReadings.from_flat(step[keep], idx[keep], z[keep], T)
+    return SimulatedData(gt, noisy, integrate_odometry(noisy), readings, nearest)
+
+
+@dataclass(eq=False)
+class PFRunResult:
+    """One filter run: estimates ``(T+1, 3)`` per estimator, ground truth / dead reckoning, scores, diagnostics."""
+
+    config: PFConfig
+    settings: dict[str, Any]
+    landmarks_xy: np.ndarray
+    estimates: dict[str, np.ndarray]
+    dead_reckoning: np.ndarray
+    ground_truth: np.ndarray | None
+    runtime_s: float
+    ess: np.ndarray
+    resampled: np.ndarray
+    max_loglik: np.ndarray
+    n_weight_resets: int
+    lost_steps: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    n_recoveries: int = 0
+    odometry_used: np.ndarray | None = field(default=None, repr=False)
+    snapshots: dict[int, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict, repr=False)
+    metrics: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def estimate(self) -> np.ndarray:
+        return self.estimates[self.config.estimator] if self.config.estimator in self.estimates else next(iter(self.estimates.values()))
+
+    @property
+    def n_steps(self) -> int:
+        return len(self.dead_reckoning) - 1
+
+    def trajectory(self, which: str = "estimate") -> Trajectory:
+        """``estimate`` / ``mean`` / ``best`` / ``ground_truth`` / ``dead_reckoning`` as an SE(3) Trajectory (z = 0)."""
+        poses = {"estimate": self.estimate, "ground_truth": self.ground_truth, "dead_reckoning": self.dead_reckoning, **self.estimates}.get(which)
+        if poses is None:
+            raise ConfigError(f"no trajectory {which!r} in this run", source="trajectory")
+        return poses_to_trajectory(poses, name=which)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "config": self.config.model_dump(),
+            "settings": self.settings,
+            "runtime_s": self.runtime_s,
+            "n_steps": self.n_steps,
+            "n_resamples": int(self.resampled.sum()),
+            "mean_ess": float(self.ess.mean()) if len(self.ess) else None,
+            "n_weight_resets": self.n_weight_resets,
+            "n_lost_steps": int(len(self.lost_steps)),
+            "n_recoveries": self.n_recoveries,
+            "first_lost_step": int(self.lost_steps[0]) + 1 if len(self.lost_steps) else None,
+            "metrics": self.metrics,
+        }
+
+
+def poses_to_trajectory(poses_xytheta: np.ndarray, name: str = "") -> Trajectory:
+    """``(T, 3)`` planar poses -> Trajectory of SE(3) poses (rotation about z, z = 0); timestamps = step index."""
+    p = np.asarray(poses_xytheta, dtype=np.float64)
+    c, s = np.cos(p[:, 2]), np.sin(p[:, 2])
+    T = np.zeros((len(p), 4, 4))
+    T[:, 0, 0], T[:, 0, 1], T[:, 1, 0], T[:, 1, 1] = c, -s, s, c
+    T[:, 2, 2] = T[:, 3, 3] = 1.0
+    T[:, 0, 3], T[:, 1, 3] = p[:, 0], p[:, 1]
+    return Trajectory(T, np.arange(len(p), dtype=np.float64), name=name)
+
+
+def run_filter(
+    pf: ParticleFilter | Any,
+    odometry: np.ndarray,
+    readings: StepReadings,
+    *,
+    estimators: tuple[str, ...] = ("mean",),
+    snapshot_steps: tuple[int, ...] = (),
+    nis: bool = False,
+) -> dict[str, Any]:
+    """The filter loop over ``odometry`` ``(T, 3)``: predict, update (if readings), estimate, resample.
+
+    Returns estimates ``(T+1, 3)`` per estimator (row 0 = the initial particle set), ESS before
+    resampling, resample flags, best log-likelihood per step, snapshots and (optionally) NIS values.
+    """
+    odometry = np.asarray(odometry, dtype=np.float64)
+    bad = ~np.isfinite(odometry).all(axis=1)
+    if bad.any():
+        raise DataError(f"non-finite odometry at step {int(np.argmax(bad))}", source="odometry")
+    T = len(odometry)
+    est = {k: np.empty((T + 1, 3)) for k in estimators}
+    for k in estimators:
+        est[k][0] = pf.estimate(k)
+    ess = np.full(T, float(pf.n))
+    resampled = np.zeros(T, dtype=bool)
+    max_ll = np.full(T, np.nan)
+    snaps: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    snapshot_set = set(int(s) for s in snapshot_steps)
+    if 0 in snapshot_set:
+        snaps[0] = (pf.particles.astype(np.float64), pf.weights.copy())
+    nis_values: list[np.ndarray] = []
+    offsets = readings.offsets
+    recover = pf.config.recovery == "reinit"
+    nearest = pf.config.likelihood == "nearest"
+    n_recoveries = 0
+    t0 = time.perf_counter()
+    for t in range(T):
+        pf.predict(odometry[t])
+        a, b = offsets[t], offsets[t + 1]
+        if b > a:
+            idx, z = readings.landmark_index[a:b], readings.z[a:b]
+            if nis:
+                nis_values.append(pf.innovation_nis(idx, z))
+            pf.update(idx, z)
+            max_ll[t] = pf.last_max_loglik
+            if recover and _is_lost(pf.last_max_loglik, 1 if nearest else b - a):
+                pf.initialize_uniform()
+                pf.update(idx, z)
+                n_recoveries += 1
+        for k in estimators:
+            est[k][t + 1] = pf.estimate(k)
+        if t + 1 in snapshot_set:
+            snaps[t + 1] = (pf.particles.astype(np.float64), pf.weights.copy())
+        ess[t] = pf.ess
+        resampled[t] = pf.resample()
+    runtime = time.perf_counter() - t0
+    n_readings = np.ones(T) if nearest else np.diff(offsets)
+    lost = np.flatnonzero(_is_lost(max_ll, n_readings))
+    return {
+        "n_recoveries": n_recoveries,
+        "lost_steps": lost,
+        "estimates": est,
+        "ess": ess,
+        "resampled": resampled,
+        "max_loglik": max_ll,
+        "snapshots": snaps,
+        "runtime_s": runtime,
+        "nis": np.concatenate(nis_values) if nis_values else np.zeros(0),
+    }
+
+
+def _is_lost(max_loglik, n_readings):
+    """True where even the best particle's mean Mahalanobis^2 per reading is beyond the chi-square(2) 99.9% gate."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.asarray(-2.0 * np.asarray(max_loglik) / np.maximum(n_readings, 1) > CHI2_2DOF_999)
+
+
+def run_protocol(
+    data,
+    n_particles: int = 1000,
+    seed: int = 0,
+    *,
+    config: PFConfig | None = None,
+    likelihood: str | None = None,
+    estimator: str | None = None,
+    resampler: str | None = None,
+    q_as: str | None = None,
+    estimators: tuple[str, ...] | None = None,
+    visible: str = "recorded",
+    snapshot_steps: tuple[int, ...] = (),
+    mse_start: int = MSE_START_STEP,
+    with_ape_rpe: bool = True,
+    **config_overrides: Any,
+) -> PFRunResult:
+    """Simulate the report's protocol on ``data`` (a LandmarkData) and run the filter once.
+
+    ``seed`` derives two independent streams: the simulated data (noisy odometry, readings) and the
+    filter; so runs with the same seed and different N see the same data. Readings are simulated with
+    the same Q the filter uses (``q``/``q_as`` of the config). ``estimators`` (default: the config's)
+    are all recorded; MSE uses ``lidarkit.eval.position_mse`` from step ``mse_start`` on.
+    """
+    overrides = {k: v for k, v in dict(likelihood=likelihood, estimator=estimator, resampler=resampler, q_as=q_as).items() if v is not None}
+    base = config if config is not None else PFConfig.make(n_particles=n_particles)
+    cfg = base.replace(n_particles=n_particles, **overrides, **config_overrides)
+    data_seq, filter_seq = np.random.SeedSequence(seed).spawn(2)
+    q_cov = resolve_q(cfg.q, cfg.q_as)
+    sim = simulate(data, np.random.default_rng(data_seq), q_cov, visible=visible)
+    pf = make_filter(data.landmarks.positions_xy, cfg, np.random.default_rng(filter_seq))
+    estimators = tuple(estimators) if estimators else (cfg.estimator,)
+    readings = sim.nearest if cfg.likelihood == "nearest" else sim.readings
+    out = run_filter(pf, sim.odometry_noisy, readings, estimators=estimators, snapshot_steps=snapshot_steps)
+    result = PFRunResult(
+        config=cfg,
+        settings={
+            "mode": "protocol",
+            "seed": seed,
+            "visible": visible,
+            "mse_start": mse_start,
+            "odometry_noise_std": list(ODOMETRY_NOISE_STD),
+            "q_cov": q_cov.tolist(),
+            "data": str(getattr(data, "root", "")),
+        },
+        landmarks_xy=np.asarray(data.landmarks.positions_xy, dtype=np.float64),
+        estimates=out["estimates"],
+        dead_reckoning=sim.dead_reckoning,
+        ground_truth=sim.ground_truth,
+        runtime_s=out["runtime_s"],
+        ess=out["ess"],
+        resampled=out["resampled"],
+        max_loglik=out["max_loglik"],
+        n_weight_resets=pf.n_weight_resets,
+        lost_steps=out["lost_steps"],
+        n_recoveries=out["n_recoveries"],
+        odometry_used=sim.odometry_noisy,
+        snapshots=out["snapshots"],
+    )
+    result.metrics = score_against_ground_truth(result, mse_start=mse_start, with_ape_rpe=with_ape_rpe)
+    _warn_lost(result)
+    return result
+
+
+def _warn_lost(result: PFRunResult) -> None:
+    if len(result.lost_steps):
+        log.warning(
+            "filter lost on %d of %d steps (first at step %d): even the best particle is beyond the chi-square 99.9%% gate",
+            len(result.lost_steps), result.n_steps, int(result.lost_steps[0]) + 1,
+        )
+
+
+def score_against_ground_truth(result: PFRunResult, *, mse_start: int = MSE_START_STEP, with_ape_rpe: bool = True) -> dict[str, Any]:
+    """Position MSE (from ``mse_start``) for every estimate and dead reckoning; APE / RPE (translation, no alignment)."""
+    from lidarkit.eval import ape, position_mse, rpe
+
+    gt = result.trajectory("ground_truth")
+    metrics: dict[str, Any] = {"mse_m2": {}, "mse_start": mse_start}
+    dr = result.trajectory("dead_reckoning")
+    metrics["mse_dead_reckoning_m2"] = position_mse(gt, dr, start=mse_start)
+    for name in result.estimates:
+        metrics["mse_m2"][name] = position_mse(gt, result.trajectory(name), start=mse_start)
+    if with_ape_rpe:
+        for name, traj in [(result.config.estimator, result.trajectory("estimate")), ("dead_reckoning", dr)]:
+            metrics.setdefault("ape_translation_m", {})[name] = ape(gt, traj).to_dict()["stats"]
+            metrics.setdefault("rpe_translation_m", {})[name] = rpe(gt, traj, delta=1).to_dict()["stats"]
+    return metrics
+
+
+def run_recorded(
+    data,
+    n_particles: int = 1000,
+    seed: int = 0,
+    *,
+    config: PFConfig | None = None,
+    snapshot_steps: tuple[int, ...] = (),
+    **config_overrides: Any,
+) -> PFRunResult:
+    """Run on the data's own odometry and SENSOR readings; report NIS consistency and distance to dead reckoning."""
+    base = config if config is not None else PFConfig.make(n_particles=n_particles)
+    cfg = base.replace(n_particles=n_particles, **config_overrides)
+    pf = make_filter(data.landmarks.positions_xy, cfg, np.random.default_rng(seed))
+    odo = np.asarray(data.odometry, dtype=np.float64)
+    readings = StepReadings(
+        np.asarray(data.meas_landmark_index, dtype=np.int64),
+        np.stack([data.meas_range_m, data.meas_bearing_rad], axis=1).astype(np.float64),
+        np.asarray(data.step_offsets, dtype=np.int64),
+    )
+    estimators = tuple(dict.fromkeys((cfg.estimator, "mean", "best")))
+    out = run_filter(pf, odo, readings, estimators=estimators, snapshot_steps=snapshot_steps, nis=True)
+    dr = integrate_odometry(odo)
+    result = PFRunResult(
+        config=cfg,
+        settings={"mode": "recorded", "seed": seed, "q_cov": resolve_q(cfg.q, cfg.q_as).tolist(), "data": str(getattr(data, "root", ""))},
+        landmarks_xy=np.asarray(data.landmarks.positions_xy, dtype=np.float64),
+        estimates=out["estimates"],
+        dead_reckoning=dr,
+        ground_truth=None,
+        runtime_s=out["runtime_s"],
+        ess=out["ess"],
+        resampled=out["resampled"],
+        max_loglik=out["max_loglik"],
+        n_weight_resets=pf.n_weight_resets,
+        lost_steps=out["lost_steps"],
+        n_recoveries=out["n_recoveries"],
+        odometry_used=odo,
+        snapshots=out["snapshots"],
+    )
+    result.metrics = consistency_metrics(out["nis"], result.estimate, dr, data, resolve_q(cfg.q, cfg.q_as))
+    _warn_lost(result)
+    return result
+
+
+def consistency_metrics(nis: np.ndarray, estimate: np.ndarray, dead_reckoning: np.ndarray, data, q_cov: np.ndarray) -> dict[str, Any]:
+    """NIS statistics vs chi-square(2) (mean 2, 95% inside 5.99), the same for dead reckoning with S = Q,
+    the empirical residual std of the readings at the estimate, and estimate-vs-dead-reckoning distance."""
+    lm = np.asarray(data.landmarks.positions_xy)[data.meas_landmark_index]
+    pose = estimate[np.asarray(data.meas_step) + 1]
+    pose_dr = dead_reckoning[np.asarray(data.meas_step) + 1]
+    z = np.stack([data.meas_range_m, data.meas_bearing_rad], axis=1)
+    info = np.linalg.inv(q_cov)
+
+    def residual(p: np.ndarray) -> np.ndarray:
+        d = lm - p[:, :2]
+        h = np.stack([np.hypot(d[:, 0], d[:, 1]), np.arctan2(d[:, 1], d[:, 0]) - p[:, 2]], axis=1)
+        e = z - h
+        e[:, 1] = wrap_angle(e[:, 1])
+        return e
+
+    e_est, e_dr = residual(pose), residual(pose_dr)
+    nis_dr = np.einsum("ki,ij,kj->k", e_dr, info, e_dr)
+    dist = np.hypot(*(estimate[:, :2] - dead_reckoning[:, :2]).T)
+    return {
+        "nis_mean": float(nis.mean()) if len(nis) else None,
+        "nis_median": float(np.median(nis)) if len(nis) else None,
+        "nis_fraction_below_chi2_95": float((nis < CHI2_2DOF_95).mean()) if len(nis) else None,
+        "nis_expected_mean": 2.0,
+        "nis_expected_fraction": 0.95,
+        "n_readings": int(len(nis)),
+        "dead_reckoning_nis_mean": float(nis_dr.mean()),
+        "dead_reckoning_nis_fraction_below_chi2_95": float((nis_dr < CHI2_2DOF_95).mean()),
+        "residual_std_at_estimate": {"range_m": float(e_est[:, 0].std()), "bearing_rad": float(e_est[:, 1].std())},
+        "residual_std_at_dead_reckoning": {"range_m": float(e_dr[:, 0].std()), "bearing_rad": float(e_dr[:, 1].std())},
+        "estimate_vs_dead_reckoning_m": {"mean": float(dist.mean()), "max": float(dist.max()), "final": float(dist[-1])},
+    }
+
+
+__all__ = [
+    "MSE_START_STEP",
+    "ODOMETRY_NOISE_STD",
+    "PFRunResult",
+    "SimulatedData",
+    "StepReadings",
+    "consistency_metrics",
+    "poses_to_trajectory",
+    "run_filter",
+    "run_protocol",
+    "run_recorded",
+    "simulate",
+]

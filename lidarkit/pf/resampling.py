@@ -1,0 +1,125 @@
+"""Resampling schemes: each maps normalized weights ``(N,)`` to ``n`` ancestor indices ``(n,)`` int64.
+
+All are unbiased (E[count_i] = n w_i). Variance of the counts: multinomial n w_i (1 - w_i); residual and
+stratified are never worse; systematic keeps every count at floor or ceil of n w_i.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from lidarkit.errors import ConfigError
+
+Resampler = Callable[[np.ndarray, np.random.Generator, "int | None"], np.ndarray]
+
+
+def effective_sample_size(weights: np.ndarray) -> float:
+    """Kish ESS ``1 / sum(w^2)`` of normalized weights (N for uniform, 1 for a single particle)."""
+    # multiply + sum, not np.dot: BLAS thread start-up dominates for large N on a busy machine
+    return float(1.0 / np.add.reduce(weights * weights))
+
+
+def _scaled_cdf(weights: np.ndarray, n: int) -> np.ndarray:
+    cdf = np.cumsum(weights, dtype=np.float64)
+    cdf *= n / cdf[-1]
+    cdf[-1] = n  # exact, whatever the rounding
+    return cdf
+
+
+_ARANGE_CACHE: dict[int, np.ndarray] = {}
+
+
+def _arange(n: int) -> np.ndarray:
+    a = _ARANGE_CACHE.get(n)
+    if a is None:
+        if len(_ARANGE_CACHE) > 16:
+            _ARANGE_CACHE.clear()
+        a = _ARANGE_CACHE[n] = np.arange(n)
+        a.flags.writeable = False
+    return a
+
+
+def _indices_from_counts(counts: np.ndarray) -> np.ndarray:
+    return np.repeat(_arange(counts.shape[0]), counts)
+
+
+def multinomial(weights: np.ndarray, rng: np.random.Generator, n: int | None = None) -> np.ndarray:
+    """n independent draws from the categorical distribution ``weights``."""
+    n = weights.shape[0] if n is None else n
+    cdf = _scaled_cdf(weights, n)
+    idx = np.searchsorted(cdf, rng.random(n) * n, side="right")
+    return np.minimum(idx, weights.shape[0] - 1)
+
+
+def systematic(weights: np.ndarray, rng: np.random.Generator, n: int | None = None) -> np.ndarray:
+    """One uniform offset, n evenly spaced pointers; counts computed from the scaled CDF (no search)."""
+    n = weights.shape[0] if n is None else n
+    cdf = _scaled_cdf(weights, n)
+    u0 = rng.random()
+    # number of pointers u0 + k (k = 0..n-1) below each cdf value
+    cdf -= u0
+    np.floor(cdf, out=cdf)
+    cdf += 1.0
+    np.clip(cdf, 0, n, out=cdf)
+    below = cdf.astype(np.int64)
+    counts = np.empty_like(below)
+    counts[0] = below[0]
+    np.subtract(below[1:], below[:-1], out=counts[1:])
+    return _indices_from_counts(counts)
+
+
+def stratified(weights: np.ndarray, rng: np.random.Generator, n: int | None = None) -> np.ndarray:
+    """One independent uniform pointer in each of the n strata [k, k+1)."""
+    n = weights.shape[0] if n is None else n
+    cdf = _scaled_cdf(weights, n)
+    pointers = rng.random(n)
+    pointers += np.arange(n)
+    idx = np.searchsorted(cdf, pointers, side="right")
+    return np.minimum(idx, weights.shape[0] - 1)
+
+
+def residual(weights: np.ndarray, rng: np.random.Generator, n: int | None = None) -> np.ndarray:
+    """floor(n w_i) deterministic copies, the remainder drawn multinomially from the residual weights."""
+    n = weights.shape[0] if n is None else n
+    scaled = weights * (n / weights.sum())
+    counts = np.floor(scaled).astype(np.int64)
+    remainder = n - int(counts.sum())
+    if remainder > 0:
+        resid = scaled - counts
+        resid /= resid.sum()
+        counts += np.bincount(multinomial(resid, rng, remainder), minlength=weights.shape[0])
+    return _indices_from_counts(counts)
+
+
+_RESAMPLERS: dict[str, Resampler] = {
+    "multinomial": multinomial,
+    "systematic": systematic,
+    "stratified": stratified,
+    "residual": residual,
+}
+
+
+def available_resamplers() -> list[str]:
+    """Names accepted by :func:`get_resampler`."""
+    return list(_RESAMPLERS)
+
+
+def get_resampler(name: str) -> Resampler:
+    """The resampling function registered as ``name``; unknown names list the known ones."""
+    try:
+        return _RESAMPLERS[name]
+    except KeyError:
+        raise ConfigError(f"unknown resampler {name!r}; known: {', '.join(_RESAMPLERS)}", source="resampler") from None
+
+
+__all__ = [
+    "available_resamplers",
+    "effective_sample_size",
+    "get_resampler",
+    "multinomial",
+    "residual",
+    "stratified",
+    "systematic",
+]

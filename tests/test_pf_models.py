@@ -1,0 +1,239 @@
+"""Particle-filter building blocks: models, log-weight normalization, resamplers, the filter's steps."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lidarkit.errors import ConfigError, DataError
+from lidarkit.pf import PFConfig, ParticleFilter, get_resampler, integrate_odometry, make_filter, resolve_q, wrap_angle
+from lidarkit.pf.kalman_kernel import KalmanParticleFilter
+from lidarkit.pf.models import OdometryMotionModel, RangeBearingModel, standard_normal
+from lidarkit.pf.resampling import available_resamplers, effective_sample_size
+
+LANDMARKS = np.array([[2.0, 1.0], [0.0, 4.0], [2.0, 7.0], [9.0, 2.0], [5.0, 5.0]])
+
+
+# ---- models -------------------------------------------------------------------------------------------
+def test_wrap_angle_range_and_identity():
+    a = np.linspace(-20, 20, 4001)
+    w = wrap_angle(a)
+    assert (w >= -np.pi).all() and (w < np.pi).all()
+    np.testing.assert_allclose(np.sin(w), np.sin(a), atol=1e-12)
+    np.testing.assert_allclose(np.cos(w), np.cos(a), atol=1e-12)
+
+
+def test_integrate_odometry_square():
+    # four times: turn 90 deg, drive 1 m -> back at the start, heading back to 0 (after 4 turns)
+    odo = np.array([[np.pi / 2, 1.0, 0.0]] * 4)
+    poses = integrate_odometry(odo)
+    np.testing.assert_allclose(poses[1], [0.0, 1.0, np.pi / 2], atol=1e-12)
+    np.testing.assert_allclose(poses[2], [-1.0, 1.0, -np.pi], atol=1e-12)
+    np.testing.assert_allclose(poses[4, :2], [0.0, 0.0], atol=1e-12)
+    assert abs(wrap_angle(poses[4, 2])) < 1e-12
+
+
+def test_motion_model_matches_integration_without_noise_and_has_the_stated_spread(rng):
+    odo = np.array([0.3, 0.5, -0.1])
+    states = np.zeros((3, 20000), dtype=np.float64)
+    OdometryMotionModel.apply(states, odo, None)
+    np.testing.assert_allclose(states[:, 0], integrate_odometry(odo[None])[1], atol=1e-12)
+    model = OdometryMotionModel((0.01, 0.1, 0.02))
+    states = np.zeros((3, 20000), dtype=np.float32)
+    noise = model.sample_noise(rng, 1, 20000, np.float32)[0]
+    model.apply(states, odo, noise)
+    travel = np.hypot(states[0], states[1])
+    assert np.std(travel) == pytest.approx(0.1, rel=0.05)
+    assert np.std(states[2]) == pytest.approx(np.hypot(0.01, 0.02), rel=0.05)
+    assert np.mean(states[2]) == pytest.approx(0.2, abs=0.001)
+
+
+def test_box_muller_float32_is_standard_normal(rng):
+    x = standard_normal(rng, (200001,), np.float32)
+    assert x.dtype == np.float32 and x.shape == (200001,)
+    assert abs(x.mean()) < 0.01 and x.std() == pytest.approx(1.0, abs=0.01)
+    # tail probability P(|x| > 2) = 0.0455
+    assert (np.abs(x) > 2).mean() == pytest.approx(0.0455, abs=0.003)
+
+
+def test_resolve_q_variance_vs_std():
+    np.testing.assert_allclose(resolve_q((1.0, 0.1), "variance"), np.diag([1.0, 0.1]))
+    np.testing.assert_allclose(resolve_q((1.0, 0.1), "std"), np.diag([1.0, 0.01]))
+    with pytest.raises(ConfigError, match="q_as"):
+        resolve_q((1.0, 0.1), "sigma")
+    with pytest.raises(ConfigError, match="positive definite"):
+        resolve_q((1.0, -0.1))
+
+
+def test_sensor_loglik_matches_direct_gaussian_and_wraps_bearing():
+    model = RangeBearingModel(np.array([[0.5, 0.1], [0.1, 0.2]]))
+    states = np.array([[0.0, 1.0, 3.0], [0.0, -1.0, 2.0], [0.1, 3.0, -3.1]])
+    z = np.array([[2.0, 3.1], [4.0, -3.0]])  # bearings near +-pi: residuals must wrap
+    lm = LANDMARKS[[0, 1]]
+    ll = model.log_likelihood_all(states, lm, z)
+    info = np.linalg.inv(model.q_cov)
+    for i in range(3):
+        total = 0.0
+        for m in range(2):
+            h = RangeBearingModel.expected(states[:, i], lm[m : m + 1])[0]
+            e = z[m] - h
+            e[1] = (e[1] + np.pi) % (2 * np.pi) - np.pi
+            assert abs(e[1]) <= np.pi
+            total += -0.5 * e @ info @ e
+        assert ll[i] == pytest.approx(total, rel=1e-9)
+
+
+def test_nearest_per_particle_association_uses_each_particles_closest_landmark():
+    model = RangeBearingModel(np.diag([0.1, 0.1]))
+    # particle 0 next to landmark 0, particle 1 next to landmark 4
+    states = np.array([[2.0, 5.0], [0.0, 4.0], [0.0, 0.0]])
+    z = np.array([1.0, np.pi / 2])  # 1 m straight to the left
+    ll = model.log_likelihood_nearest(states, LANDMARKS, z)
+    np.testing.assert_allclose(ll, [0.0, 0.0], atol=1e-12)
+
+
+# ---- weights ------------------------------------------------------------------------------------------
+def test_far_away_particles_do_not_underflow_and_closest_wins():
+    cfg = PFConfig.make(n_particles=5, dtype="float64", q=(0.01, 0.001))
+    pf = ParticleFilter(LANDMARKS, cfg, 0)
+    far = np.array([[1e4, 1e4, 0.0], [2e4, 1e4, 0.0], [1e4, 3e4, 0.0], [5e4, 5e4, 1.0], [1e5, 0.0, 0.0]])
+    pf.set_particles(far)
+    naive = np.exp(pf.log_likelihood(np.array([0, 1]), np.array([[1.0, 0.0], [2.0, 0.5]])))
+    assert (naive == 0).all()  # what a plain exp would give
+    assert pf.update(np.array([0, 1]), np.array([[1.0, 0.0], [2.0, 0.5]]))
+    assert np.isfinite(pf.weights).all() and pf.weights.sum() == pytest.approx(1.0)
+    assert int(np.argmax(pf.weights)) == 0
+    assert np.isfinite(pf.estimate("mean")).all() and pf.n_weight_resets == 0
+    assert pf.resample() and np.isfinite(pf.particles).all()
+
+
+def test_all_non_finite_likelihoods_reset_to_uniform_and_are_counted():
+    pf = ParticleFilter(LANDMARKS, PFConfig.make(n_particles=4), 0)
+    pf.apply_log_likelihood(np.full(4, np.nan))
+    assert pf.n_weight_resets == 1
+    np.testing.assert_allclose(pf.weights, 0.25)
+    pf.apply_log_likelihood(np.array([np.nan, -np.inf, 0.0, -1.0]))  # partly broken: use the finite ones
+    assert pf.weights[0] == 0 and pf.weights[1] == 0 and pf.weights[2] > pf.weights[3] > 0
+    assert pf.n_weight_resets == 1
+
+
+def test_ess():
+    assert effective_sample_size(np.full(10, 0.1)) == pytest.approx(10)
+    assert effective_sample_size(np.eye(10)[3]) == pytest.approx(1)
+
+
+# ---- resamplers ---------------------------------------------------------------------------------------
+WEIGHTS = np.array([0.31, 0.005, 0.2, 0.075, 0.13, 0.01, 0.27])
+
+
+@pytest.mark.parametrize("name", ["multinomial", "systematic", "stratified", "residual"])
+def test_resampler_counts_are_unbiased_with_bounded_variance(name):
+    rng = np.random.default_rng(2024)
+    n, reps = len(WEIGHTS) * 10, 4000
+    resample = get_resampler(name)
+    counts = np.stack([np.bincount(resample(WEIGHTS, rng, n), minlength=len(WEIGHTS)) for _ in range(reps)])
+    assert (counts.sum(axis=1) == n).all()
+    expected = n * WEIGHTS
+    var_multinomial = n * WEIGHTS * (1 - WEIGHTS)
+    # E[count_i] = n w_i: within 4 standard errors of the multinomial bound
+    np.testing.assert_array_less(np.abs(counts.mean(axis=0) - expected), 4 * np.sqrt(var_multinomial / reps) + 1e-9)
+    var = counts.var(axis=0)
+    if name == "multinomial":
+        np.testing.assert_allclose(var, var_multinomial, rtol=0.12)
+    else:
+        assert (var <= var_multinomial * 1.05).all()
+    if name == "systematic":  # every count is floor or ceil of n w_i
+        assert ((counts == np.floor(expected)) | (counts == np.ceil(expected))).all()
+        assert (var <= 0.25 + 1e-9).all()
+    if name == "residual":
+        assert (counts >= np.floor(expected)).all()
+    if name == "stratified":
+        assert ((counts >= np.floor(expected) - 1) & (counts <= np.ceil(expected) + 1)).all()
+
+
+def test_resampler_factory_and_edge_cases(rng):
+    assert available_resamplers() == ["multinomial", "systematic", "stratified", "residual"]
+    with pytest.raises(ConfigError, match="known: multinomial"):
+        get_resampler("roulette")
+    one_hot = np.zeros(50)
+    one_hot[17] = 1.0
+    for name in available_resamplers():
+        idx = get_resampler(name)(one_hot, rng)
+        assert idx.shape == (50,) and (idx == 17).all()
+        assert get_resampler(name)(np.ones(1), rng).tolist() == [0]
+
+
+# ---- filter -------------------------------------------------------------------------------------------
+def test_config_validation():
+    with pytest.raises(ConfigError, match="n_particles"):
+        PFConfig.make(n_particles=0)
+    with pytest.raises(ConfigError, match="resampler"):
+        PFConfig.make(resampler="roulette")
+    with pytest.raises(ConfigError, match="ess_threshold"):
+        PFConfig.make(ess_threshold=-1)
+
+
+def test_predict_rejects_non_finite_odometry_and_empty_update_is_predict_only():
+    pf = ParticleFilter(LANDMARKS, PFConfig.make(n_particles=100), 1)
+    with pytest.raises(DataError, match="non-finite odometry"):
+        pf.predict(np.array([0.0, np.nan, 0.0]))
+    pf.predict(np.array([0.0, 0.1, 0.0]))
+    assert pf.update(np.zeros(0, dtype=int), np.zeros((0, 2))) is False
+    assert not pf.resample() and pf.n_resamples == 0  # uniform weights: nothing to resample
+
+
+def test_filter_localizes_a_simulated_robot_with_every_kernel_and_estimator():
+    rng = np.random.default_rng(7)
+    odo = np.tile([0.05, 0.1, 0.0], (60, 1))
+    truth = integrate_odometry(odo, (1.0, 1.0, 0.0))
+    model = RangeBearingModel(np.diag([0.05, 0.01]))
+    for kernel, n in (("point", 500), ("kalman", 20)):
+        cfg = PFConfig.make(n_particles=n, kernel=kernel, q=(0.05, 0.01), init_mean=(1.0, 1.0, 0.0), init_std=(0.3, 0.3, 0.1))
+        pf = make_filter(LANDMARKS, cfg, 3)
+        assert isinstance(pf, KalmanParticleFilter if kernel == "kalman" else ParticleFilter)
+        errors = []
+        for t in range(60):
+            pf.predict(odo[t])
+            z = model.expected(truth[t + 1], LANDMARKS) + rng.normal(0, [np.sqrt(0.05), 0.1], (5, 2))
+            pf.update(np.arange(5), z)
+            errors.append(np.hypot(*(pf.estimate("mean")[:2] - truth[t + 1, :2])))
+            assert np.hypot(*(pf.estimate("best")[:2] - truth[t + 1, :2])) < 1.0
+            pf.resample()
+        assert np.mean(errors[10:]) < 0.15, kernel
+
+
+def test_identical_seeds_identical_results_and_different_seeds_differ():
+    def run(seed: int, **kw) -> np.ndarray:
+        pf = ParticleFilter(LANDMARKS, PFConfig.make(n_particles=300, **kw), seed)
+        for _ in range(5):
+            pf.predict([0.1, 0.2, 0.0])
+            pf.update(np.array([0, 4]), np.array([[2.0, 0.3], [5.0, 0.8]]))
+            pf.resample()
+        return pf.particles.copy()
+
+    for kw in ({}, {"resampler": "residual", "roughening": 0.1, "antithetic": True}, {"moment_matching": "mean_cov"}):
+        np.testing.assert_array_equal(run(5, **kw), run(5, **kw))
+    assert not np.array_equal(run(5), run(6))
+
+
+def test_uniform_init_covers_the_map_and_ess_threshold_skips_resampling():
+    pf = ParticleFilter(LANDMARKS, PFConfig.make(n_particles=4000, ess_threshold=0.5), 0)
+    pf.initialize_uniform()
+    p = pf.particles
+    assert p[:, 0].min() >= -2 and p[:, 0].max() <= 11 and p[:, 1].min() >= -1 and p[:, 1].max() <= 9
+    assert np.ptp(p[:, 2]) > 6.0
+    pf.apply_log_likelihood(np.full(4000, -3.0) + 1e-3 * np.arange(4000) / 4000)  # nearly flat: ESS ~ N
+    assert not pf.resample() and pf.n_resamples == 0
+    pf.apply_log_likelihood(-0.5 * ((pf.states[0] - 5.0) / 0.5) ** 2)  # peaked: ESS << N/2
+    assert pf.ess < 2000 and pf.resample() and pf.n_resamples == 1
+
+
+def test_moment_matching_preserves_weighted_mean_and_covariance():
+    pf = ParticleFilter(LANDMARKS, PFConfig.make(n_particles=2000, moment_matching="mean_cov", dtype="float64"), 0)
+    pf.apply_log_likelihood(-0.5 * ((pf.states[0] - 1.0) / 0.7) ** 2)
+    mean_b, cov_b, _ = pf._moments(pf.weights, True)
+    pf.resample()
+    mean_a, cov_a, _ = pf._moments(pf.weights, True)
+    np.testing.assert_allclose(mean_a[:2], mean_b[:2], atol=1e-9)
+    assert mean_a[2] == pytest.approx(mean_b[2], abs=1e-4)  # circular mean: matched to first order
+    np.testing.assert_allclose(cov_a, cov_b, atol=1e-6)

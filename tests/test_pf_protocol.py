@@ -1,0 +1,186 @@
+"""The report's protocol on the real Freiburg data, the recorded-readings mode, bad input, and the CLI."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from conftest import shared_path
+
+from lidarkit.cli import main
+from lidarkit.errors import DataError
+from lidarkit.io.landmarks import LandmarkData
+from lidarkit.pf import PFConfig, make_filter
+from lidarkit.pf.protocol import StepReadings, run_filter, run_protocol, run_recorded, simulate
+
+VARIANTS = ["burgard_ekf", "burgard_particle_filter", "robot_mapping_stachniss"]
+# Reference (issue 4): same protocol, Q as covariance, systematic resampling every step, 10 seeds,
+# weighted mean, `all` likelihood, N=1000: 0.051 m^2. Other noise realizations than ours; the
+# seed-to-seed std of the MSE is ~0.007 m^2, so the 10-seed mean is compared with a 0.01 m^2 tolerance.
+REFERENCE_MSE_N1000_ALL_MEAN = 0.051
+REFERENCE_TOLERANCE = 0.010
+
+
+@pytest.fixture(scope="module")
+def stachniss() -> LandmarkData:
+    return LandmarkData(shared_path("pf", "robot_mapping_stachniss"))
+
+
+@pytest.mark.parametrize("variant", VARIANTS)
+def test_filter_beats_dead_reckoning_by_a_wide_margin(variant):
+    data = LandmarkData(shared_path("pf", variant))
+    result = run_protocol(data, 300, seed=1, estimators=("mean", "best"))
+    m = result.metrics
+    assert m["mse_m2"]["mean"] < m["mse_dead_reckoning_m2"] / 10
+    assert m["mse_m2"]["mean"] < 0.1 and m["mse_m2"]["best"] < 0.3
+    assert m["ape_translation_m"]["mean"]["rmse"] < m["ape_translation_m"]["dead_reckoning"]["rmse"] / 3
+    assert result.estimate.shape == (332, 3) and result.ground_truth.shape == (332, 3)
+    assert result.to_dict()["n_lost_steps"] == 0 and result.n_weight_resets == 0
+
+
+def test_protocol_mse_at_n1000_matches_the_reference(stachniss):
+    mse = [run_protocol(stachniss, 1000, seed=s, with_ape_rpe=False).metrics["mse_m2"]["mean"] for s in range(10)]
+    assert abs(np.mean(mse) - REFERENCE_MSE_N1000_ALL_MEAN) <= REFERENCE_TOLERANCE, mse
+
+
+def test_protocol_ground_truth_and_simulation(stachniss):
+    sim = simulate(stachniss, np.random.default_rng(0), np.diag([1.0, 0.1]))
+    np.testing.assert_allclose(sim.ground_truth[0], 0.0)
+    # ground truth ends near landmark 7 (5, 5), like the dead-reckoned recorded odometry
+    assert np.hypot(*(sim.ground_truth[-1, :2] - [5.0, 5.0])) < 0.2
+    assert sim.readings.offsets[-1] == 1212 and sim.nearest.offsets[-1] == 331
+    # simulated readings carry N(0, Q) noise: range residual std ~ 1 m
+    d = stachniss.landmarks.positions_xy[sim.readings.landmark_index] - sim.ground_truth[np.repeat(np.arange(331), np.diff(sim.readings.offsets)) + 1, :2]
+    assert np.std(sim.readings.z[:, 0] - np.hypot(*d.T)) == pytest.approx(1.0, rel=0.08)
+    # the nearest reading of each step is of the landmark truly closest to the robot among the step's readings
+    t = 100
+    idx_all, _ = sim.readings.at(t)
+    idx_near, _ = sim.nearest.at(t)
+    dist = np.hypot(*(stachniss.landmarks.positions_xy[idx_all] - sim.ground_truth[t + 1, :2]).T)
+    assert idx_near[0] == idx_all[np.argmin(dist)]
+
+
+def test_identical_seeds_give_identical_runs_and_data_is_shared_across_n(stachniss):
+    a = run_protocol(stachniss, 200, seed=3, with_ape_rpe=False)
+    b = run_protocol(stachniss, 200, seed=3, with_ape_rpe=False)
+    np.testing.assert_array_equal(a.estimate, b.estimate)
+    c = run_protocol(stachniss, 400, seed=3, with_ape_rpe=False)
+    np.testing.assert_array_equal(a.odometry_used, c.odometry_used)  # same simulated data, other N
+    assert not np.array_equal(a.estimate, c.estimate)
+    d = run_protocol(stachniss, 200, seed=4, with_ape_rpe=False)
+    assert not np.array_equal(a.odometry_used, d.odometry_used)
+
+
+def test_highest_weight_estimator_is_worse_than_weighted_mean(stachniss):
+    mean, best = [], []
+    for s in range(4):
+        m = run_protocol(stachniss, 500, seed=s, estimators=("mean", "best"), with_ape_rpe=False).metrics["mse_m2"]
+        mean.append(m["mean"])
+        best.append(m["best"])
+    assert np.mean(best) > 1.8 * np.mean(mean)
+
+
+def test_nearest_likelihood_and_kalman_kernels_run_on_real_data(stachniss):
+    near = run_protocol(stachniss, 500, seed=0, likelihood="nearest", with_ape_rpe=False)
+    assert near.metrics["mse_m2"]["mean"] < 0.3
+    kpkf = run_protocol(stachniss, 30, seed=0, kernel="kalman", ess_threshold=0.5, with_ape_rpe=False)
+    assert kpkf.metrics["mse_m2"]["mean"] < 0.08
+
+
+def test_q_read_as_std_gives_lower_error(stachniss):
+    var = run_protocol(stachniss, 300, seed=0, q_as="variance", with_ape_rpe=False)
+    std = run_protocol(stachniss, 300, seed=0, q_as="std", with_ape_rpe=False)
+    assert var.settings["q_cov"] == [[1.0, 0.0], [0.0, 0.1]]
+    assert std.settings["q_cov"][1][1] == pytest.approx(0.01)
+    assert std.metrics["mse_m2"]["mean"] < var.metrics["mse_m2"]["mean"]
+
+
+def test_lost_filter_is_reported_and_recovers_with_reinit(stachniss):
+    far = dict(init_mean=(6.0, 6.0, 2.0), init_std=(0.1, 0.1, 0.05), with_ape_rpe=False)
+    lost = run_protocol(stachniss, 1000, seed=0, **far)
+    assert np.isfinite(lost.estimate).all() and lost.n_weight_resets == 0
+    assert lost.to_dict()["n_lost_steps"] > 100 and lost.metrics["mse_m2"]["mean"] > 1.0
+    recovered = run_protocol(stachniss, 1000, seed=0, recovery="reinit", **far)
+    assert recovered.n_recoveries >= 1 and recovered.metrics["mse_m2"]["mean"] < 0.1
+
+
+def test_recorded_mode_consistency(stachniss):
+    # Q = diag(1, 0.1) is far larger than the recorded noise: NIS far below chi-square(2)'s mean of 2
+    loose = run_recorded(stachniss, 500, seed=0)
+    assert loose.ground_truth is None and loose.metrics["nis_mean"] < 0.2
+    assert loose.metrics["n_readings"] == 1212
+    # with Q matching the recorded residuals (std 0.1 m, 0.05 rad) the NIS is close to chi-square(2)
+    tight = run_recorded(stachniss, 500, seed=0, q=(0.1, 0.05), q_as="std")
+    assert 1.0 < tight.metrics["nis_mean"] < 3.0
+    assert 0.9 < tight.metrics["nis_fraction_below_chi2_95"] <= 1.0
+    assert tight.metrics["residual_std_at_estimate"]["range_m"] < tight.metrics["residual_std_at_dead_reckoning"]["range_m"]
+    assert tight.metrics["estimate_vs_dead_reckoning_m"]["mean"] < 0.5
+
+
+def test_empty_steps_predict_only_and_non_finite_odometry_is_rejected(tmp_path):
+    (tmp_path / "world.dat").write_text("1 2 1\n2 0 4\n3 5 5\n")
+    lines = []
+    for t in range(30):
+        lines.append("ODOMETRY 0.0 0.1 0.0")
+        if t % 3 == 0:  # two of three steps have no reading
+            lines += ["SENSOR 1 2.0 0.5", "SENSOR 3 5.0 0.8"]
+    (tmp_path / "sensor_data.dat").write_text("\n".join(lines) + "\n")
+    data = LandmarkData(tmp_path)
+    result = run_protocol(data, 200, seed=0, with_ape_rpe=False)
+    assert np.isfinite(result.estimate).all()
+    assert result.resampled.sum() == 10  # resampled only after the 10 updates
+    pf = make_filter(data.landmarks.positions_xy, PFConfig.make(n_particles=10), 0)
+    odo = np.zeros((3, 3))
+    odo[1, 1] = np.inf
+    readings = StepReadings(np.zeros(0, dtype=int), np.zeros((0, 2)), np.zeros(4, dtype=int))
+    with pytest.raises(DataError, match="non-finite odometry at step 1"):
+        run_filter(pf, odo, readings)
+
+
+def test_cli_pf_writes_results(tmp_path, capsys):
+    out = tmp_path / "run"
+    with pytest.raises(SystemExit) as exc:
+        main(["pf", str(shared_path("pf", "burgard_particle_filter")), "--particles", "200", "--seed", "2", "--out", str(out)])
+    assert exc.value.code in (0, None)
+    printed = capsys.readouterr().out
+    assert "position MSE from step 10 (mean)" in printed
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["config"]["n_particles"] == 200 and metrics["settings"]["seed"] == 2
+    assert metrics["metrics"]["mse_m2"]["mean"] < metrics["metrics"]["mse_dead_reckoning_m2"] / 10
+    for name in ("config.yaml", "poses_kitti.txt", "poses_tum.txt", "ground_truth_tum.txt", "trajectory.png", "particles.png"):
+        assert (out / name).stat().st_size > 0, name
+    assert len((out / "poses_kitti.txt").read_text().splitlines()) == 332
+
+
+def test_cli_pf_bad_input_is_one_line_error(tmp_path, capsys):
+    data = shared_path("pf", "burgard_particle_filter")
+    for args, pattern in (
+        (["--particles", "0"], "n_particles must be >= 1"),
+        (["--resampler", "roulette"], "resampler"),
+        (["--gif"], "--gif needs --out"),
+    ):
+        with pytest.raises(SystemExit) as exc:
+            main(["pf", str(data), *args])
+        assert exc.value.code == 1
+        err = capsys.readouterr().err
+        assert "error:" in err and pattern in err and "Traceback" not in err
+    with pytest.raises(SystemExit) as exc:
+        main(["pf", str(tmp_path)])
+    assert exc.value.code == 1 and "world.dat: file not found" in capsys.readouterr().err
+
+
+def test_plots_and_animation(stachniss, tmp_path):
+    from PIL import Image
+
+    from lidarkit.pf import plots
+
+    result = run_protocol(stachniss, 100, seed=0, estimators=("mean", "best"), snapshot_steps=(0, 5, 10), with_ape_rpe=False)
+    plots.plot_trajectory(result, tmp_path / "t.png")
+    plots.plot_snapshots(result, tmp_path / "s.png", [0, 10])
+    plots.animate(result, tmp_path / "a.gif", fps=5)
+    gif = Image.open(tmp_path / "a.gif")
+    assert gif.n_frames == 3
+    assert Image.open(tmp_path / "t.png").size[0] > 300
+    plots.plot_mse_vs_n({"x": ([50, 100], [0.1, 0.05], [0.01, 0.01])}, tmp_path / "m.png", reference={"ref": 0.05})
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.gif", "m.png", "s.png", "t.png"]  # no temp files left
