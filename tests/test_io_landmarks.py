@@ -107,3 +107,11 @@ def test_empty_step_is_allowed(tmp_path):
     assert len(data) == 2 and data.n_readings == 1
     assert data.readings(0) == slice(0, 0) and data.readings(1) == slice(0, 1)
     assert data.meas_landmark_index.tolist() == [1]
+
+
+def test_bundled_sample_opens_without_shared_data():
+    from lidarkit.samples import sample_path
+
+    data = open_dataset("landmarks", sample_path("freiburg_pf"))
+    assert len(data) == 331 and data.n_readings == 1212 and not data.negative_range_mask.any()
+    assert data.odometry[0].tolist() == [0.100068080139, 0.100249642432, -0.000326992241362]
