@@ -180,3 +180,31 @@ def _crash_or_run(spec):
     from lidarkit.bench.worker import execute_job
 
     return execute_job(spec)
+
+
+def test_dask_executor_on_an_existing_cluster_address(tmp_path):
+    """``--address``: jobs go to a running scheduler (here a LocalCluster the test starts) and results match."""
+    distributed = pytest.importorskip("distributed")
+    import logging
+
+    suite = load_suite(suite_file(tmp_path, TINY))
+    run_suite(suite, tmp_path / "serial", executor="serial")
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None,
+                                  silence_logs=logging.ERROR) as cluster:
+        summary = run_suite(suite, tmp_path / "remote", executor="dask", address=cluster.scheduler_address)
+        assert (summary.ran, summary.ok, summary.failed) == (8, 6, 2)
+        again = run_suite(suite, tmp_path / "remote", executor="dask", address=cluster.scheduler_address)
+        assert (again.skipped, again.ran) == (6, 2)  # resume works the same on a cluster
+    strip = lambda recs: {k: {**v, "error": v["error"] and {**v["error"], "traceback": ""}} for k, v in recs.items()}  # noqa: E731
+    assert strip(comparable(tmp_path / "remote")) == strip(comparable(tmp_path / "serial"))
+
+
+def test_unknown_executor_and_misplaced_address_are_config_errors(tmp_path):
+    from lidarkit.errors import ConfigError
+
+    suite = load_suite(suite_file(tmp_path, TINY))
+    with pytest.raises(ConfigError, match="unknown executor 'threads'"):
+        run_suite(suite, tmp_path / "a", executor="threads")
+    with pytest.raises(ConfigError, match="--address only applies to the dask executor"):
+        run_suite(suite, tmp_path / "b", executor="process", address="tcp://127.0.0.1:8786")
+    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()  # refused before writing anything

@@ -175,12 +175,19 @@ class DaskExecutor:
             self.cluster.close()
 
 
-def make_executor(name: str, *, workers: int | None = None, address: str | None = None):
-    """``serial`` | ``process`` | ``dask``; unknown names raise ConfigError."""
+def check_executor_args(name: str, workers: int | None = None, address: str | None = None) -> None:
+    """ConfigError for an unknown executor, a worker count < 1, or an address without the dask executor."""
+    if name not in EXECUTORS:
+        raise ConfigError(f"unknown executor {name!r}; known: {', '.join(EXECUTORS)}", source="--executor")
     if address and name != "dask":
         raise ConfigError("--address only applies to the dask executor", source="--address")
     if workers is not None and workers < 1:
         raise ConfigError(f"workers must be >= 1, got {workers}", source="--workers")
+
+
+def make_executor(name: str, *, workers: int | None = None, address: str | None = None):
+    """``serial`` | ``process`` | ``dask``; unknown names raise ConfigError."""
+    check_executor_args(name, workers, address)
     if name == "serial":
         return SerialExecutor()
     if name == "process":

@@ -75,6 +75,7 @@ class Report:
     tables: list[TaskTable]
     plots: list[Plot] = field(default_factory=list)
     failures: list[dict[str, Any]] = field(default_factory=list)
+    warnings: list[tuple[str, str]] = field(default_factory=list)  # (job label, message)
     n_records: int = 0
     html_path: Path | None = None
     markdown_path: Path | None = None
@@ -304,6 +305,8 @@ def _markdown(report: Report, title: str) -> str:
         out.append("")
     if report.plots:
         out += ["## Plots", ""] + [f"![{p.title}](plots/{p.filename})" for p in report.plots] + [""]
+    if report.warnings:
+        out += ["## Warnings logged by jobs", ""] + [f"- {label}: {message}" for label, message in report.warnings] + [""]
     if report.failures:
         out += ["## Failed jobs", ""] + [f"- `{f['key']}` {f['label']}: {f['error']}" for f in report.failures] + [""]
     return "\n".join(out)
@@ -362,6 +365,12 @@ def _html(report: Report, title: str) -> str:
         for p in report.plots:
             data = base64.b64encode(p.png).decode("ascii")
             parts.append(f'<figure><img src="data:image/png;base64,{data}" alt="{e(p.title)}" width="540"><figcaption>{e(p.title)}</figcaption></figure>')
+    if report.warnings:
+        parts.append("<h2>Warnings logged by jobs</h2>")
+        parts.append("<ul>")
+        for label, message in report.warnings:
+            parts.append(f"<li>{e(label)}: {e(message)}</li>")
+        parts.append("</ul>")
     if report.failures:
         parts.append("<h2>Failed jobs</h2>")
         parts.append("<ul>")
@@ -389,6 +398,9 @@ def build_report(out_dir: str | Path, *, title: str | None = None, plots: bool =
         title = _suite_title(out_dir)
     report = Report(out_dir=out_dir, tables=aggregate(records), n_records=len(records))
     for r in records:
+        for message in r.get("warnings") or []:
+            if len(report.warnings) < 100:
+                report.warnings.append((_label(r), message))
         if r.get("status") != "ok":
             err = r.get("error") or {}
             report.failures.append({"key": r["key"], "label": _label(r), "error": f"{err.get('type')}: {err.get('message')}"})

@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from lidarkit import atomic
-from lidarkit.bench.executors import make_executor
+from lidarkit.bench.executors import check_executor_args, make_executor
 from lidarkit.bench.jobs import Job
 from lidarkit.bench.results import is_finished, make_record, remove_stale_temp_files, write_result
 from lidarkit.bench.suite import Suite
@@ -57,6 +57,7 @@ def run_suite(
     """
     from lidarkit import __version__
 
+    check_executor_args(executor, workers, address)
     out_dir = Path(out_dir)
     t0 = time.perf_counter()
     keyed = [(job.key(__version__), job) for job in suite.jobs]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import math
 import os
 import socket
@@ -36,6 +37,18 @@ def _json_safe(value: Any) -> Any:
     return f if math.isfinite(f) else None
 
 
+class _WarningCapture(logging.Handler):
+    """Collects the WARNING+ log messages a job emits (at most 50)."""
+
+    def __init__(self) -> None:
+        super().__init__(level=logging.WARNING)
+        self.messages: list[str] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if len(self.messages) < 50:
+            self.messages.append(f"{record.levelname} {record.name}: {record.getMessage()}")
+
+
 def execute_job(spec: dict[str, Any]) -> dict[str, Any]:
     """Run the job described by ``spec`` (``Job.spec()``); a raising job gives ``status="failed"`` with its error."""
     from lidarkit.bench.tasks import get_task
@@ -43,6 +56,11 @@ def execute_job(spec: dict[str, Any]) -> dict[str, Any]:
     started = _utc_now()
     t0 = time.perf_counter()
     record: dict[str, Any] = {"status": "ok", "metrics": {}, "series": {}, "info": {}, "error": None}
+    capture = _WarningCapture()
+    package_logger = logging.getLogger("lidarkit")
+    propagate = package_logger.propagate
+    package_logger.addHandler(capture)
+    package_logger.propagate = False  # a job's warnings go into its result, not over the progress bar
     try:
         job = Job.from_spec(spec)
         output = get_task(job.task).run(job)
@@ -56,6 +74,10 @@ def execute_job(spec: dict[str, Any]) -> dict[str, Any]:
             "message": str(err),
             "traceback": traceback.format_exc(limit=8),
         }
+    finally:
+        package_logger.removeHandler(capture)
+        package_logger.propagate = propagate
+    record["warnings"] = capture.messages
     record["runtime_s"] = time.perf_counter() - t0
     record["started_utc"] = started
     record["finished_utc"] = _utc_now()
