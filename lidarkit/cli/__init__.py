@@ -11,6 +11,7 @@ from lidarkit.errors import LidarKitError
 # Each module registers its commands on ``app`` when imported; listed here explicitly.
 from lidarkit.cli import eval_cmd  # noqa: E402,F401
 from lidarkit.cli import pf_cmd  # noqa: E402,F401
+from lidarkit.cli import vo_cmd  # noqa: E402,F401
 from lidarkit.cli import demo_cmd  # noqa: E402,F401
 from lidarkit.cli import odometry_cmd  # noqa: E402,F401
 from lidarkit.cli import sim_cmd  # noqa: E402,F401

@@ -1,0 +1,100 @@
+"""``lidarkit vo DATA``: monocular visual odometry on a KITTI sequence, a TUM folder or a plain image folder."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from lidarkit.cli.app import app, stderr, stdout
+from lidarkit.vo.config import VOConfig, available_presets
+from lidarkit.vo.intrinsics import DEFAULT_FOCAL_FACTOR
+
+_D = VOConfig()
+
+
+@app.command("vo")
+def vo_command(
+    data: Path = typer.Argument(..., help="KITTI sequence folder (image_0/, calib.txt), TUM folder (rgb.txt) or image folder."),
+    preset: str = typer.Option("lidarkit", help=f"Starting configuration: {' | '.join(available_presets())}."),
+    detector: Optional[str] = typer.Option(None, help=f"gftt | fast | orb | sift | akaze (lidarkit: {_D.features.detector})."),
+    matcher: Optional[str] = typer.Option(None, help=f"klt | bf_cross | knn_ratio (lidarkit: {_D.matching.method})."),
+    estimator: Optional[list[str]] = typer.Option(None, help="Essential-matrix estimator, repeatable (best kept): "
+                                                  f"ransac | magsac | lmeds (lidarkit: {', '.join(_D.geometry.estimators)})."),
+    preprocess: Optional[str] = typer.Option(None, help="none | clahe | gaussian | bilateral (lidarkit: "
+                                             f"{_D.preprocess.method})."),
+    features: Optional[int] = typer.Option(None, help=f"Feature budget (lidarkit: {_D.features.max_features})."),
+    scale: Optional[str] = typer.Option(None, help=f"gt | none | relative (lidarkit: {_D.scale.mode})."),
+    sanity: Optional[bool] = typer.Option(None, "--sanity/--no-sanity", help="Pose sanity checks (lidarkit: on)."),
+    refine: Optional[bool] = typer.Option(None, "--refine/--no-refine", help="Sampson refinement (lidarkit: on)."),
+    calib: Optional[Path] = typer.Option(None, help="Intrinsics file: 9 numbers (K), 4 (fx fy cx cy) or KITTI calib."),
+    timestamps: Optional[Path] = typer.Option(None, help="Time stamps file (one per image)."),
+    poses: Optional[Path] = typer.Option(None, help="Ground-truth camera poses for an image folder (or other KITTI poses)."),
+    poses_format: str = typer.Option("kitti", help="Format of --poses: kitti | tum."),
+    focal_factor: float = typer.Option(DEFAULT_FOCAL_FACTOR, help="Without intrinsics: fx = fy = factor * max(w, h)."),
+    kind: str = typer.Option("auto", help="Input kind: auto | kitti | tum | images."),
+    start: int = typer.Option(0, help="First frame."),
+    max_frames: Optional[int] = typer.Option(None, help="Number of frames to process (default: all)."),
+    seed: int = typer.Option(_D.seed, help="RANSAC seed."),
+    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Run folder for poses, diagnostics, config, plot."),
+    gif: bool = typer.Option(False, help="Also write features.gif (tracked inliers) into --out."),
+) -> None:
+    """Estimate the camera trajectory; print frames, rejected frames, speed and APE/RPE when ground truth exists."""
+    from rich.markup import escape
+    from rich.table import Table
+
+    from lidarkit.vo.config import preset as make_preset
+    from lidarkit.vo.evaluation import evaluate_vo
+    from lidarkit.vo.inputs import frame_range, open_vo_input
+    from lidarkit.vo.pipeline import MonoVO
+
+    changes = {
+        "features.detector": detector, "matching.method": matcher,
+        "geometry.estimators": tuple(estimator) if estimator else None, "preprocess.method": preprocess,
+        "features.max_features": features, "scale.mode": scale, "sanity.enabled": sanity, "geometry.refine": refine,
+        "seed": seed,
+    }
+    if matcher in ("bf_cross", "knn_ratio") and detector is None:
+        changes["features.detector"] = "orb"
+    cfg = make_preset(preset, **{k: v for k, v in changes.items() if v is not None})
+    vo_input = open_vo_input(data, kind=kind, calib=calib, timestamps=timestamps, poses=poses,
+                             poses_format=poses_format, focal_factor=focal_factor)
+    vo_input = frame_range(vo_input, start, max_frames)
+    gt = vo_input.ground_truth
+    if "guess" in vo_input.K_source:
+        stderr().print(f"warning: no intrinsics given; {vo_input.K_source}")
+    result = MonoVO(cfg, vo_input.K, gt if cfg.scale.mode == "gt" else None).run(vo_input.images, keep_tracks=gif)
+    if gt is not None and cfg.scale.mode != "gt":
+        result.trajectory = result.trajectory.transformed(T_left=gt.poses_se3[0])
+
+    metrics = {}
+    if gt is not None and len(gt) >= 3:
+        metrics = {"raw": evaluate_vo(result.trajectory, gt, cfg.scale.mode),
+                   "smoothed": evaluate_vo(result.smoothed(), gt, cfg.scale.mode)}
+    console = stdout()
+    summary = result.summary()
+    table = Table(title=f"lidarkit vo: {data} ({vo_input.kind}, {cfg.features.detector} + {cfg.matching.method}, "
+                        f"scale {cfg.scale.mode})")
+    table.add_column("quantity")
+    table.add_column("value", justify="right")
+    table.add_row("frames", str(summary["frames"]))
+    table.add_row("rejected", str(summary["rejected"]))
+    table.add_row("frames/s (pipeline)", f"{summary['frames_per_s']:.1f}")
+    table.add_row("intrinsics", escape(vo_input.K_source))
+    for variant, m in metrics.items():
+        table.add_row(escape(f"APE {variant} ({m['align']}) [m]"), f"{m['ape_rmse_m']:.4f}")
+        table.add_row(escape(f"RPE {variant} 1 frame [m / deg]"),
+                      f"{m['rpe_trans_rmse_m']:.4f} / {m['rpe_rot_rmse_deg']:.4f}")
+        table.add_row(escape(f"final error {variant} [m]"), f"{m['final_error_m']:.3f}")
+    console.print(table)
+    for d in result.rejected:
+        console.print(escape(f"frame {d.frame} rejected: {d.reason}"), soft_wrap=True)
+    if out is not None:
+        from lidarkit.vo.output import write_run
+
+        paths = write_run(result, out, ground_truth=gt, metrics=metrics,
+                          extra_config={"input": str(data), "kind": vo_input.kind, "K_source": vo_input.K_source,
+                                        "start": start, "max_frames": max_frames},
+                          gif_images=vo_input.images if gif else None)
+        console.print(f"wrote {len(paths)} files to {out}")

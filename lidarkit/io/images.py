@@ -1,0 +1,134 @@
+"""A plain folder of images (``.png``, ``.jpg``, ...) as an ``ImageSequence``, and intrinsics files.
+
+Images are ordered by natural sort of their names; optional timestamps (one number per line, or TUM-style
+``stamp name`` lines), intrinsics (see :func:`read_intrinsics`) and ground-truth camera poses (KITTI or TUM format)
+must match the number of images. Registered as dataset kind ``"images"``.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from lidarkit.errors import ConfigError, DataError
+from lidarkit.io import register_dataset
+from lidarkit.io.folder import natural_key
+from lidarkit.io.kitti import read_gray_image, read_kitti_calib
+from lidarkit.textfile import read_lines
+from lidarkit.trajectory import Trajectory
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm")
+
+
+def read_intrinsics(path: str | os.PathLike) -> np.ndarray:
+    """``(3, 3)`` K from a text file holding 9 numbers (K row-major), 4 numbers (``fx fy cx cy``), or a KITTI
+    ``calib.txt`` (``P0: ...`` or bare rows of 12 numbers: K is the left 3x3 of P0)."""
+    tokens: list[str] = []
+    labelled = False
+    for raw in read_lines(path):
+        line = raw.split("#")[0].strip()
+        if not line:
+            continue
+        labelled |= ":" in line
+        tokens.extend(line.replace(",", " ").split())
+    if labelled or len(tokens) % 12 == 0 and len(tokens) >= 12:
+        return read_kitti_calib(path)["P0"][:, :3].copy()
+    try:
+        values = np.array([float(t) for t in tokens])
+    except ValueError:
+        raise DataError("intrinsics must be numbers (9 for K, 4 for fx fy cx cy, or KITTI P0)", source=path) from None
+    if values.size == 9:
+        K = values.reshape(3, 3)
+    elif values.size == 4:
+        fx, fy, cx, cy = values
+        K = np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1.0]])
+    else:
+        raise DataError(f"expected 9 numbers (K), 4 (fx fy cx cy) or KITTI P rows; found {values.size}", source=path)
+    if not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0 or not np.allclose(K[2], [0, 0, 1]):
+        raise DataError("not a valid intrinsics matrix [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]", source=path)
+    return K
+
+
+def read_image_timestamps(path: str | os.PathLike) -> np.ndarray:
+    """Timestamps in seconds: one number per line, or ``stamp name`` lines (TUM ``rgb.txt``); first column used."""
+    stamps = []
+    for lineno, raw in enumerate(read_lines(path), start=1):
+        line = raw.strip()
+        if not line or line.startswith("#"):
+            continue
+        try:
+            stamps.append(float(line.replace(",", " ").split()[0]))
+        except ValueError:
+            raise DataError(f"not a time stamp: {line.split()[0]!r}", source=path, location=f"line {lineno}") from None
+    if not stamps:
+        raise DataError("no time stamps", source=path)
+    return np.asarray(stamps, dtype=np.float64)
+
+
+@register_dataset("images")
+class ImageFolder:
+    """Images of one folder as an ``ImageSequence``.
+
+    ``timestamps``: file or array (else None); ``calib``: intrinsics file (:func:`read_intrinsics`) or a (3, 3)
+    array (else ``K`` is None and the caller must guess it); ``poses``: ground-truth camera poses file in
+    ``poses_format`` (``kitti`` or ``tum``).
+    """
+
+    def __init__(self, path: str | os.PathLike, *, timestamps: str | os.PathLike | np.ndarray | None = None,
+                 calib: str | os.PathLike | np.ndarray | None = None, poses: str | os.PathLike | None = None,
+                 poses_format: str = "kitti", name: str | None = None):
+        folder = Path(path)
+        if not folder.is_dir():
+            raise DataError("image folder not found" if not folder.exists() else "not a folder", source=folder)
+        self.path = folder
+        self.name = name or folder.name
+        self.image_paths = sorted((p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file()),
+                                  key=lambda p: natural_key(p.name))
+        if not self.image_paths:
+            raise DataError(f"no images ({', '.join(IMAGE_SUFFIXES)})", source=folder)
+        n = len(self.image_paths)
+        self._timestamps = None
+        if timestamps is not None:
+            stamps = (read_image_timestamps(timestamps) if isinstance(timestamps, (str, os.PathLike))
+                      else np.asarray(timestamps, dtype=np.float64))
+            if len(stamps) != n:
+                raise DataError(f"{len(stamps)} time stamps for {n} images", source=str(timestamps)[:200])
+            self._timestamps = stamps
+        self._K = None
+        if calib is not None:
+            self._K = read_intrinsics(calib) if isinstance(calib, (str, os.PathLike)) else np.asarray(calib, float)
+        self._gt = None
+        if poses is not None:
+            if poses_format not in ("kitti", "tum"):
+                raise ConfigError(f"unknown poses format {poses_format!r}; known: kitti, tum", source="poses_format")
+            gt = Trajectory.read(poses, poses_format)
+            if len(gt) != n:
+                raise DataError(f"{len(gt)} poses for {n} images", source=poses)
+            if self._timestamps is not None and poses_format == "kitti":
+                gt = gt.with_timestamps(self._timestamps)
+            self._gt = gt
+
+    def __len__(self) -> int:
+        return len(self.image_paths)
+
+    def __repr__(self) -> str:
+        return f"ImageFolder({str(self.path)!r}, {len(self)} images)"
+
+    def read_image(self, index: int) -> np.ndarray:
+        """The ``index``-th image as ``(H, W)`` uint8 grayscale; unreadable files raise DataError."""
+        return read_gray_image(self.image_paths[index], frame=index)
+
+    @property
+    def K(self) -> np.ndarray | None:
+        return None if self._K is None else self._K.copy()
+
+    @property
+    def timestamps_s(self) -> np.ndarray | None:
+        return self._timestamps
+
+    @property
+    def ground_truth(self) -> Trajectory | None:
+        return self._gt
+

@@ -1,0 +1,45 @@
+"""Score a VO trajectory against ground truth with ``lidarkit.eval`` (evo): APE, RPE and final-frame error.
+
+Alignment follows the scale mode: SE(3) when the scale came from the ground truth (``gt``), Sim(3) otherwise
+(unit steps or relative scale leave one unknown global scale).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from lidarkit.trajectory import Trajectory
+
+
+def alignment_for(scale_mode: str) -> str:
+    """``se3`` for ground-truth scale, ``sim3`` for ``none`` / ``relative``."""
+    return "se3" if scale_mode == "gt" else "sim3"
+
+
+def evaluate_vo(est: Trajectory, ref: Trajectory, scale_mode: str) -> dict[str, Any]:
+    """APE (translation, m), RPE over 1 frame (translation m, rotation deg) and final-frame errors.
+
+    ``final_error_m`` is the raw distance of the last positions for ``gt`` scale (both start at the same pose) and
+    the distance after alignment otherwise; both variants are also reported separately.
+    """
+    from lidarkit.eval import ape, rpe
+
+    align = alignment_for(scale_mode)
+    a = ape(ref, est, align=align)
+    r_t = rpe(ref, est, delta=1, delta_unit="frames", align=align)
+    r_r = rpe(ref, est, delta=1, delta_unit="frames", align=align, relation="rotation_angle_deg")
+    final_raw = float(np.linalg.norm(est.positions_xyz[-1] - ref.positions_xyz[-1]))
+    final_aligned = float(np.linalg.norm(a.est_aligned.positions_xyz[-1] - ref.positions_xyz[-1]))
+    return {
+        "align": align,
+        "ape_rmse_m": float(a.rmse),
+        "ape_max_m": float(a.max),
+        "rpe_trans_rmse_m": float(r_t.rmse),
+        "rpe_rot_rmse_deg": float(r_r.rmse),
+        "final_error_m": final_raw if scale_mode == "gt" else final_aligned,
+        "final_error_raw_m": final_raw,
+        "final_error_aligned_m": final_aligned,
+        "alignment_scale": float(a.alignment.scale) if a.alignment is not None else 1.0,
+    }

@@ -1,0 +1,131 @@
+"""Open what the user points ``lidarkit vo`` at: a KITTI sequence folder, a TUM RGB-D folder or a plain image folder,
+and resolve the intrinsics (user file > dataset calibration > guess from the image size)."""
+
+from __future__ import annotations
+
+import logging
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lidarkit.errors import DataError
+from lidarkit.trajectory import Trajectory
+from lidarkit.vo.intrinsics import DEFAULT_FOCAL_FACTOR, K_from_image_size, validate_K
+
+log = logging.getLogger(__name__)
+
+INPUT_KINDS = ("auto", "kitti", "tum", "images")
+
+
+@dataclass
+class VOInput:
+    """An image sequence with resolved intrinsics; ``K_source`` says where K came from."""
+
+    images: Any
+    K: np.ndarray
+    K_source: str
+    ground_truth: Trajectory | None
+    kind: str
+
+
+def detect_kind(path: Path) -> str:
+    """``kitti`` (folder with image_0/ or an image_0 folder beside calib.txt), ``tum`` (rgb.txt) or ``images``."""
+    if (path / "image_0").is_dir():
+        return "kitti"
+    if path.name == "image_0" and (path.parent / "calib.txt").is_file():
+        return "kitti"
+    if (path / "rgb.txt").is_file():
+        return "tum"
+    return "images"
+
+
+def open_vo_input(path: str | os.PathLike, *, kind: str = "auto", calib: str | os.PathLike | None = None,
+                  timestamps: str | os.PathLike | None = None, poses: str | os.PathLike | None = None,
+                  poses_format: str = "kitti", focal_factor: float = DEFAULT_FOCAL_FACTOR) -> VOInput:
+    """Open ``path`` as an image sequence for VO. ``calib`` overrides the dataset's intrinsics; without either,
+    K is guessed as ``fx = fy = focal_factor * max(w, h)``, principal point at the centre (logged as a warning)."""
+    from lidarkit.errors import ConfigError
+
+    path = Path(path)
+    if not path.exists():
+        raise DataError("input not found", source=path)
+    if kind not in INPUT_KINDS:
+        raise ConfigError(f"unknown input kind {kind!r}; known: {', '.join(INPUT_KINDS)}", source="vo input kind")
+    kind = detect_kind(path) if kind == "auto" else kind
+    if kind == "kitti":
+        from lidarkit.io.kitti import KittiOdometry
+
+        root = path.parent if path.name == "image_0" else path
+        options = {} if timestamps is None else {"times_file": timestamps}
+        if poses is not None:
+            options["poses_file"] = poses
+        images = KittiOdometry(root, **options).as_image_sequence()
+        ground_truth = images.ground_truth
+    elif kind == "tum":
+        from lidarkit.io.tum import TumRGBD
+
+        images = TumRGBD(path)
+        ground_truth = images.ground_truth
+    else:
+        from lidarkit.io.images import ImageFolder
+
+        images = ImageFolder(path, timestamps=timestamps, poses=poses, poses_format=poses_format)
+        ground_truth = images.ground_truth
+    if calib is not None:
+        from lidarkit.io.images import read_intrinsics
+
+        K, source = read_intrinsics(calib), f"file {calib}"
+    elif images.K is not None:
+        K, source = images.K, f"{kind} calibration"
+    else:
+        first = images.read_image(0)
+        h, w = first.shape[:2]
+        K = K_from_image_size(w, h, focal_factor)
+        source = f"guess: fx = fy = {focal_factor:g} * max({w}, {h}) = {K[0, 0]:.1f} px, principal point at centre"
+        log.warning("no intrinsics given; %s", source)
+    return VOInput(images, validate_K(K, source=str(calib or path)), source, ground_truth, kind)
+
+
+class FrameRange:
+    """The first ``count`` images of an ``ImageSequence`` starting at ``start`` (same interface)."""
+
+    def __init__(self, images: Any, start: int = 0, count: int | None = None):
+        n = len(images)
+        if not 0 <= start < n:
+            raise DataError(f"start frame {start} outside 0..{n - 1}", source=getattr(images, "name", "images"))
+        stop = n if count is None else min(n, start + count)
+        self.images, self.start, self.stop = images, start, stop
+        self.name = getattr(images, "name", "images")
+
+    def __len__(self) -> int:
+        return self.stop - self.start
+
+    def read_image(self, index: int) -> np.ndarray:
+        if not 0 <= index < len(self):
+            raise IndexError(index)
+        return self.images.read_image(self.start + index)
+
+    @property
+    def K(self) -> np.ndarray | None:
+        return self.images.K
+
+    @property
+    def timestamps_s(self) -> np.ndarray | None:
+        ts = self.images.timestamps_s
+        return None if ts is None else np.asarray(ts)[self.start:self.stop]
+
+    @property
+    def ground_truth(self) -> Trajectory | None:
+        gt = self.images.ground_truth
+        return None if gt is None else gt[self.start:self.stop]
+
+
+def frame_range(vo_input: VOInput, start: int = 0, count: int | None = None) -> VOInput:
+    """``vo_input`` restricted to frames ``start .. start + count - 1``."""
+    if start == 0 and (count is None or count >= len(vo_input.images)):
+        return vo_input
+    images = FrameRange(vo_input.images, start, count)
+    return VOInput(images, vo_input.K, vo_input.K_source, images.ground_truth, vo_input.kind)

@@ -1,0 +1,119 @@
+"""Run folder of a VO run: poses (raw + smoothed, KITTI + TUM), diagnostics CSV, resolved config, metrics, plot, GIF.
+
+Everything is written atomically. matplotlib and Pillow are imported only by the plot / GIF writers.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import yaml
+
+from lidarkit import atomic
+from lidarkit.trajectory import Trajectory
+from lidarkit.vo.pipeline import FrameDiagnostics, VOResult
+
+
+def diagnostics_csv(rows: list[FrameDiagnostics]) -> str:
+    """CSV text with one row per frame (features, matches, inliers, method, scale, accepted, reason, runtime)."""
+    buf = io.StringIO()
+    fields = list(FrameDiagnostics.__dataclass_fields__)
+    writer = csv.DictWriter(buf, fieldnames=fields, lineterminator="\n")
+    writer.writeheader()
+    for d in rows:
+        writer.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in d.__dict__.items()})
+    return buf.getvalue()
+
+
+def plot_vo_trajectories(path: str | os.PathLike, trajectories: dict[str, Trajectory], title: str = "") -> Path:
+    """Top view (x-z plane of the first camera) of several trajectories, e.g. ground truth, raw and smoothed."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(6.5, 5.0), dpi=100, layout="constrained")
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot(1, 1, 1)
+    styles = ["k-", "C0-", "C1--", "C2-", "C3-.", "C4:"]
+    for (label, traj), style in zip(trajectories.items(), styles * 3):
+        xyz = traj.positions_xyz
+        ax.plot(xyz[:, 0], xyz[:, 2], style, lw=1.4, label=label)
+        ax.plot(xyz[-1, 0], xyz[-1, 2], style[:2].replace("-", "o"), ms=4)
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("z (forward) [m]")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    if title:
+        ax.set_title(title, fontsize=9)
+    with atomic.atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png")
+    return Path(path)
+
+
+def write_feature_gif(path: str | os.PathLike, images: Any, tracks: list[tuple[int, np.ndarray, np.ndarray]],
+                      max_frames: int = 60, width_px: int = 640, fps: float = 8.0) -> Path:
+    """Animated GIF of the inlier tracks (reference -> current position) drawn on each accepted frame."""
+    from PIL import Image
+
+    read = images.read_image if hasattr(images, "read_image") else (lambda i: images[i])
+    frames = []
+    for frame, pts_ref, pts_cur in tracks[:max_frames]:
+        image = cv2.cvtColor(read(frame), cv2.COLOR_GRAY2BGR)
+        for (x0, y0), (x1, y1) in zip(pts_ref.astype(int), pts_cur.astype(int)):
+            cv2.line(image, (x0, y0), (x1, y1), (0, 200, 0), 1)
+            cv2.circle(image, (x1, y1), 2, (0, 0, 255), -1)
+        scale = width_px / image.shape[1]
+        image = cv2.resize(image, (width_px, int(round(image.shape[0] * scale))), interpolation=cv2.INTER_AREA)
+        frames.append(Image.fromarray(cv2.cvtColor(image, cv2.COLOR_BGR2RGB)).convert("P", palette=Image.ADAPTIVE))
+    with atomic.atomic_path(path) as tmp:
+        if frames:
+            frames[0].save(tmp, format="GIF", save_all=True, append_images=frames[1:], duration=int(1000 / fps), loop=0)
+        else:
+            Image.new("P", (8, 8)).save(tmp, format="GIF")
+    return Path(path)
+
+
+def write_run(result: VOResult, out_dir: str | os.PathLike, *, ground_truth: Trajectory | None = None,
+              metrics: dict[str, Any] | None = None, extra_config: dict[str, Any] | None = None,
+              plot: bool = True, gif_images: Any = None) -> dict[str, Path]:
+    """Write the run folder and return ``{name: path}``.
+
+    Files: ``poses_kitti.txt``, ``poses_tum.txt``, ``poses_smoothed_kitti.txt``, ``poses_smoothed_tum.txt``,
+    ``diagnostics.csv``, ``config.yaml`` (resolved config + intrinsics + ``extra_config``), ``metrics.json``
+    (summary + ``metrics``), ``trajectory.png`` (if ``plot``), ``features.gif`` (if ``gif_images`` and tracks).
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    smoothed = result.smoothed()
+    paths = {
+        "poses_kitti": result.trajectory.to_kitti(out / "poses_kitti.txt"),
+        "poses_tum": result.trajectory.to_tum(out / "poses_tum.txt"),
+        "poses_smoothed_kitti": smoothed.to_kitti(out / "poses_smoothed_kitti.txt"),
+        "poses_smoothed_tum": smoothed.to_tum(out / "poses_smoothed_tum.txt"),
+        "diagnostics": atomic.write_text(out / "diagnostics.csv", diagnostics_csv(result.diagnostics)),
+    }
+    config = {"vo": result.config.model_dump(mode="json"), "K": np.asarray(result.K).tolist(), **(extra_config or {})}
+    paths["config"] = atomic.write_text(out / "config.yaml", yaml.safe_dump(config, sort_keys=False))
+    summary = {**result.summary(), **(metrics or {})}
+    paths["metrics"] = atomic.write_text(out / "metrics.json", json.dumps(summary, indent=2, default=float) + "\n")
+    if plot:
+        trajs = {"ground truth": ground_truth} if ground_truth is not None else {}
+        trajs.update({"VO raw": result.trajectory, "VO smoothed": smoothed})
+        if ground_truth is not None and result.config.scale.mode != "gt":
+            from lidarkit.eval import align_trajectory
+
+            trajs = {"ground truth": ground_truth,
+                     "VO raw (Sim3-aligned)": align_trajectory(ground_truth, result.trajectory, "sim3")[0],
+                     "VO smoothed (Sim3-aligned)": align_trajectory(ground_truth, smoothed, "sim3")[0]}
+        paths["plot"] = plot_vo_trajectories(out / "trajectory.png", {k: v for k, v in trajs.items() if v is not None},
+                                             title=result.trajectory.name)
+    if gif_images is not None and result.tracks:
+        paths["gif"] = write_feature_gif(out / "features.gif", gif_images, result.tracks)
+    return paths

@@ -1,0 +1,357 @@
+"""The monocular VO pipeline: preprocessing -> features -> correspondences -> two-view pose -> sanity -> scale -> chain.
+
+``MonoVO(config, K, ground_truth).run(images)`` returns a :class:`VOResult`: the raw trajectory (one pose per
+input frame, camera frame, first pose = identity or the ground truth's first pose), per-frame diagnostics with
+the reason for every rejected frame, and the smoothed trajectory on demand. A rejected frame never yields a NaN
+pose: it gets a constant-velocity (or identity) motion and the next frame is matched against the last accepted one.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import cv2
+import numpy as np
+
+from lidarkit.errors import ConfigError, DataError
+from lidarkit.geometry import rotation_angle_deg, se3_exp, se3_inverse, se3_log
+from lidarkit.trajectory import Trajectory
+from lidarkit.vo.config import VOConfig
+from lidarkit.vo.features import get_detector, get_preprocessor
+from lidarkit.vo.intrinsics import validate_K
+from lidarkit.vo.matching import get_matcher, track_klt
+from lidarkit.vo.sanity import check_pose
+from lidarkit.vo.scale import relative_scale
+from lidarkit.vo.smoothing import smooth_translations
+from lidarkit.vo.two_view import estimate_two_view, normalize_points, triangulate
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class FrameDiagnostics:
+    """What happened at one frame (frame 0 is the start and always accepted)."""
+
+    frame: int
+    ref_frame: int
+    n_features: int = 0
+    n_matches: int = 0
+    n_inliers: int = 0
+    method: str = ""
+    rotation_deg: float = float("nan")
+    parallax_px: float = float("nan")
+    scale: float = float("nan")
+    n_scale_points: int = 0
+    accepted: bool = False
+    reason: str = ""
+    note: str = ""
+    runtime_ms: float = 0.0
+
+
+@dataclass
+class Features:
+    """Features of one frame: ``points_px (M, 2) float32``, ``descriptors (M, D)`` or None, ``depth (M,)`` in the
+    trajectory's scale (NaN where unknown)."""
+
+    points_px: np.ndarray
+    descriptors: np.ndarray | None
+    depth: np.ndarray
+
+    @classmethod
+    def fresh(cls, points_px: np.ndarray, descriptors: np.ndarray | None) -> Features:
+        return cls(points_px, descriptors, np.full(len(points_px), np.nan))
+
+
+@dataclass
+class VOResult:
+    """Output of :meth:`MonoVO.run`."""
+
+    trajectory: Trajectory
+    diagnostics: list[FrameDiagnostics]
+    config: VOConfig
+    K: np.ndarray
+    runtime_s: float
+    tracks: list[tuple[int, np.ndarray, np.ndarray]] | None = None
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def n_frames(self) -> int:
+        return len(self.trajectory)
+
+    @property
+    def rejected(self) -> list[FrameDiagnostics]:
+        return [d for d in self.diagnostics if not d.accepted]
+
+    @property
+    def frames_per_s(self) -> float:
+        """Processed frames per second of pipeline time (image reading excluded)."""
+        return self.n_frames / self.runtime_s if self.runtime_s > 0 else float("inf")
+
+    def smoothed(self) -> Trajectory:
+        """Translations smoothed with the configured Savitzky-Golay filter; rotations unchanged."""
+        s = self.config.smoothing
+        return smooth_translations(self.trajectory, s.window, s.polyorder)
+
+    def diagnostics_rows(self) -> list[dict[str, Any]]:
+        return [asdict(d) for d in self.diagnostics]
+
+    def summary(self) -> dict[str, Any]:
+        reasons: dict[str, int] = {}
+        for d in self.rejected:
+            key = d.reason.split(" (")[0]
+            reasons[key] = reasons.get(key, 0) + 1
+        return {
+            "frames": self.n_frames,
+            "rejected": len(self.rejected),
+            "rejection_reasons": reasons,
+            "runtime_s": self.runtime_s,
+            "frames_per_s": self.frames_per_s,
+            "scale_mode": self.config.scale.mode,
+        }
+
+
+class MonoVO:
+    """Frame-to-frame monocular VO configured by a :class:`VOConfig`.
+
+    ``K``: ``(3, 3)`` intrinsics of the (undistorted) images; ``ground_truth``: camera-frame trajectory with one
+    pose per frame, required for ``scale.mode == "gt"`` (per-step norms) and used to anchor the first pose.
+    """
+
+    def __init__(self, config: VOConfig | None = None, K: np.ndarray | None = None,
+                 ground_truth: Trajectory | None = None):
+        self.config = config or VOConfig()
+        if K is None:
+            raise ConfigError("intrinsics K are required (use lidarkit.vo.intrinsics.K_from_image_size to guess them)",
+                              source="MonoVO")
+        self.K = validate_K(K)
+        self.ground_truth = ground_truth
+        if self.config.scale.mode == "gt" and ground_truth is None:
+            raise ConfigError("scale mode 'gt' needs a ground-truth trajectory", source="vo scale.mode")
+        self.preprocess = get_preprocessor(self.config.preprocess)
+        self.detector = get_detector(self.config.features)
+        self.matcher = None if self.config.matching.method == "klt" else get_matcher(self.config.matching,
+                                                                                      self.detector.norm)
+
+    # ---- public ----------------------------------------------------------------------------------------------
+    def run(self, images: Any, keep_tracks: bool = False, timestamps_s: np.ndarray | None = None) -> VOResult:
+        """Estimate one camera pose per image.
+
+        ``images``: an ``ImageSequence`` (``len`` + ``read_image(i)``; a DataError from it rejects that frame) or a
+        sequence of ``(H, W)`` uint8 arrays (None marks an unreadable frame). ``keep_tracks`` stores the inlier
+        correspondences of every accepted frame (for the feature GIF).
+        """
+        n = len(images)
+        if n < 1:
+            raise DataError("no images to process", source=getattr(images, "name", "images"))
+        if self.ground_truth is not None and len(self.ground_truth) != n:
+            raise DataError(f"ground truth has {len(self.ground_truth)} poses for {n} images",
+                            source="vo ground_truth")
+        if timestamps_s is None:
+            timestamps_s = getattr(images, "timestamps_s", None)
+        read = images.read_image if hasattr(images, "read_image") else (lambda i: images[i])
+
+        cfg = self.config
+        poses = np.zeros((n, 4, 4))
+        poses[0] = self.ground_truth.poses_se3[0] if self.ground_truth is not None else np.eye(4)
+        diags: list[FrameDiagnostics] = []
+        tracks: list[tuple[int, np.ndarray, np.ndarray]] | None = [] if keep_tracks else None
+        step_motion = np.eye(4)  # T_prev_cur of the last accepted step, per frame (for constant velocity)
+        last_scale = 1.0
+        total_s = 0.0
+
+        first, first_reason = self._load(read, 0, None)
+        if first is None:
+            raise DataError(f"the first frame cannot be used: {first_reason}", source=getattr(images, "name", "images"),
+                            location="frame 0")
+        image_shape = first.shape
+        start = time.perf_counter()
+        ref_index, ref_image = 0, self.preprocess(first)
+        ref_feats = self._reference_features(ref_image, None)
+        total_s += time.perf_counter() - start
+        diags.append(FrameDiagnostics(frame=0, ref_frame=0, n_features=len(ref_feats.points_px), accepted=True,
+                                      note="start"))
+
+        for j in range(1, n):
+            image, reason = self._load(read, j, image_shape)
+            start = time.perf_counter()
+            cv2.setRNGSeed(int(cfg.seed) * 1_000_003 + j)
+            diag = FrameDiagnostics(frame=j, ref_frame=ref_index, n_features=len(ref_feats.points_px))
+            result = None
+            cur_image = None
+            if image is not None:
+                cur_image = self.preprocess(image)
+                result, reason = self._estimate(ref_index, ref_image, ref_feats, j, cur_image, diag, last_scale)
+            if result is not None:
+                T_ref_cur, cur_feats, scale, pts = result
+                poses[j] = poses[ref_index] @ T_ref_cur
+                gap = j - ref_index
+                step_motion = _per_frame_motion(T_ref_cur, gap)
+                last_scale = scale / gap
+                diag.accepted = True
+                if tracks is not None:
+                    tracks.append((j, *pts))
+                ref_index, ref_image = j, cur_image
+                ref_feats = self._reference_features(cur_image, cur_feats)
+            else:
+                diag.reason = reason or "rejected"
+                poses[j] = poses[j - 1] @ self._predicted_motion(step_motion, j)
+                log.info("frame %d rejected: %s", j, diag.reason)
+                # move the reference forward when it cannot serve (too few features) or after a long gap
+                stale = j - ref_index >= 5 or len(ref_feats.points_px) < cfg.sanity.min_features
+                if cur_image is not None and stale:
+                    ref_index, ref_image = j, cur_image
+                    ref_feats = self._reference_features(cur_image, None)
+                    diag.note = "reference moved to this frame"
+            elapsed = time.perf_counter() - start
+            total_s += elapsed
+            diag.runtime_ms = 1000.0 * elapsed
+            diags.append(diag)
+
+        if not np.all(np.isfinite(poses)):  # defensive: must never happen
+            raise DataError("non-finite pose produced", source="MonoVO")
+        traj = Trajectory(poses, None if timestamps_s is None else np.asarray(timestamps_s, dtype=float),
+                          name=f"vo_{cfg.features.detector}_{cfg.matching.method}_{cfg.scale.mode}")
+        return VOResult(traj, diags, cfg, self.K, total_s, tracks,
+                        meta={"image_size_wh": [int(image_shape[1]), int(image_shape[0])]})
+
+    # ---- steps -----------------------------------------------------------------------------------------------
+    @staticmethod
+    def _load(read, index: int, expected_shape: tuple[int, ...] | None) -> tuple[np.ndarray | None, str]:
+        """The image as uint8 (H, W) or (None, reason)."""
+        try:
+            image = read(index)
+        except DataError as err:
+            return None, f"unreadable image: {err}"
+        if image is None:
+            return None, "unreadable image (missing)"
+        image = np.asarray(image)
+        if image.ndim == 3 and image.shape[2] in (3, 4):
+            image = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY if image.shape[2] == 3 else cv2.COLOR_BGRA2GRAY)
+        if image.ndim != 2 or image.size == 0:
+            return None, f"not a grayscale image (shape {image.shape})"
+        if image.dtype != np.uint8:
+            return None, f"image dtype {image.dtype} is not uint8"
+        if expected_shape is not None and image.shape != expected_shape:
+            return None, (f"image size {image.shape[1]}x{image.shape[0]} differs from the sequence's "
+                          f"{expected_shape[1]}x{expected_shape[0]}")
+        return image, ""
+
+    def _reference_features(self, image: np.ndarray, carried: Features | None) -> Features:
+        """Features of the new reference frame: KLT adds fresh corners to the carried tracks; descriptor pipelines
+        reuse the detections made when the frame was the current one."""
+        if self.matcher is not None:
+            if carried is not None:
+                return carried
+            return Features.fresh(*self.detector.detect(image))
+        fresh = Features.fresh(*self.detector.detect(image))
+        if carried is None or len(carried.points_px) == 0:
+            return fresh
+        keep = np.flatnonzero(np.isfinite(carried.depth))[: self.config.scale.max_carried_points]
+        return Features(np.concatenate([carried.points_px[keep], fresh.points_px]).astype(np.float32), None,
+                        np.concatenate([carried.depth[keep], fresh.depth]))
+
+    def _estimate(self, ref_index: int, ref_image: np.ndarray, ref: Features, j: int, cur_image: np.ndarray,
+                  diag: FrameDiagnostics, last_scale: float):
+        """Relative pose of frame j w.r.t. the reference; ``(T_ref_cur, cur_features, scale, (pts_ref, pts_cur))``
+        or ``(None, reason)``."""
+        cfg = self.config
+        if len(ref.points_px) < cfg.sanity.min_features:
+            return None, f"too few features in reference frame {ref_index} ({len(ref.points_px)} < {cfg.sanity.min_features})"
+        if self.matcher is None:
+            pts_cur_all, ok = track_klt(ref_image, cur_image, ref.points_px, cfg.matching)
+            idx_ref = np.flatnonzero(ok)
+            cur = Features.fresh(pts_cur_all[idx_ref], None)
+            idx_cur = np.arange(len(idx_ref))
+        else:
+            cur = Features.fresh(*self.detector.detect(cur_image))
+            if len(cur.points_px) < cfg.sanity.min_features:
+                return None, f"too few features ({len(cur.points_px)} < {cfg.sanity.min_features})"
+            idx_ref, idx_cur = self.matcher(ref.descriptors, cur.descriptors)
+        diag.n_matches = len(idx_ref)
+        if len(idx_ref) < cfg.sanity.min_matches:
+            return None, f"too few matches ({len(idx_ref)} < {cfg.sanity.min_matches})"
+        pts_ref = ref.points_px[idx_ref]
+        pts_cur = cur.points_px[idx_cur]
+        est = estimate_two_view(pts_ref, pts_cur, self.K, cfg.geometry, min_inliers=cfg.sanity.min_inliers)
+        diag.method = est.method
+        diag.n_inliers = est.n_inliers
+        if est.ok:
+            diag.rotation_deg = float(rotation_angle_deg(est.R_cur_ref))
+            diag.parallax_px = est.parallax_px
+        reason = check_pose(est, cfg.sanity)
+        if reason is not None:
+            return None, reason
+
+        gap = j - ref_index
+        R, t = est.R_cur_ref, est.t_cur_ref
+        inl = est.inliers
+        X_ref = X_cur = angle = None
+        if cfg.scale.mode == "gt":
+            gt = self.ground_truth.poses_se3
+            scale = float(np.linalg.norm(gt[j, :3, 3] - gt[ref_index, :3, 3]))
+        elif cfg.scale.mode == "none":
+            scale = float(gap)
+        else:
+            X_ref, X_cur, angle = triangulate(R, t, normalize_points(pts_ref, self.K), normalize_points(pts_cur, self.K))
+            found, n_common = relative_scale(ref.depth[idx_ref], X_ref, angle, inl, cfg.scale)
+            diag.n_scale_points = n_common
+            if found is None:
+                scale = last_scale * gap
+                if ref_index > 0:
+                    diag.note = f"scale kept from the previous step ({n_common} common points < {cfg.scale.min_common_points})"
+            else:
+                scale = found
+        diag.scale = scale
+        if not np.isfinite(scale) or scale < 0:
+            return None, f"invalid scale {scale}"
+
+        T_cur_ref = np.eye(4)
+        T_cur_ref[:3, :3] = R
+        T_cur_ref[:3, 3] = t * scale
+        if cfg.scale.mode == "relative":
+            good = inl & (X_cur[:, 2] > 0) & (X_ref[:, 2] > 0) & (angle >= cfg.scale.min_triangulation_angle_deg)
+            cur.depth[idx_cur[good]] = X_cur[good, 2] * scale
+        return (se3_inverse(T_cur_ref), cur, scale, (pts_ref[inl], pts_cur[inl])), ""
+
+    def _predicted_motion(self, step_motion: np.ndarray, j: int) -> np.ndarray:
+        """Motion given to a rejected frame: the last accepted per-frame motion (GT step length in ``gt`` mode)."""
+        if self.config.on_reject == "identity":
+            return np.eye(4)
+        T = step_motion.copy()
+        if self.config.scale.mode == "gt":
+            gt = self.ground_truth.poses_se3
+            norm = np.linalg.norm(T[:3, 3])
+            step = float(np.linalg.norm(gt[j, :3, 3] - gt[j - 1, :3, 3]))
+            T[:3, 3] = T[:3, 3] / norm * step if norm > 0 else 0.0
+        return T
+
+
+def _per_frame_motion(T_ref_cur: np.ndarray, gap: int) -> np.ndarray:
+    """``T_ref_cur`` spread evenly over ``gap`` frames (geodesic fraction)."""
+    if gap == 1:
+        return T_ref_cur.copy()
+    return se3_exp(se3_log(T_ref_cur) / gap)
+
+
+def run_vo(images: Any, K: np.ndarray, config: VOConfig | None = None, ground_truth: Trajectory | None = None,
+           **kwargs: Any) -> VOResult:
+    """Convenience: ``MonoVO(config, K, ground_truth).run(images, **kwargs)``."""
+    return MonoVO(config, K, ground_truth).run(images, **kwargs)
+
+
+def images_in_memory(sequence: Any) -> list[np.ndarray | None]:
+    """Read every image of an ``ImageSequence`` (None for unreadable ones) - for timing without disk I/O."""
+    out: list[np.ndarray | None] = []
+    for i in range(len(sequence)):
+        try:
+            out.append(sequence.read_image(i))
+        except DataError:
+            out.append(None)
+    return out
+
+
+__all__: Sequence[str] = ["FrameDiagnostics", "MonoVO", "VOResult", "images_in_memory", "run_vo"]

@@ -1,0 +1,233 @@
+"""Two-view geometry: essential matrix (RANSAC / USAC_MAGSAC / LMedS), recoverPose, Sampson refinement, F fallback.
+
+Convention: ``X_cur = R_cur_ref @ X_ref + t_cur_ref`` (OpenCV ``recoverPose``); ``t`` has unit norm.
+The estimate never raises for bad correspondences: it returns ``failure`` with the reason instead.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+from scipy.optimize import least_squares
+
+from lidarkit.geometry import skew, so3_exp, so3_log
+from lidarkit.vo.config import GeometryConfig
+
+_METHODS = {"ransac": cv2.RANSAC, "magsac": cv2.USAC_MAGSAC, "lmeds": cv2.LMEDS}
+
+
+@dataclass(frozen=True)
+class TwoViewEstimate:
+    """Relative pose of the current frame w.r.t. the reference frame, with its support.
+
+    ``inliers``: ``(N,) bool`` over the input correspondences (RANSAC and cheirality inliers);
+    ``parallax_px``: median rotation-compensated image motion of the inliers (0 for a pure rotation);
+    ``rotation_only_px``: median residual of the best pure-rotation fit (small: the pair shows no translation);
+    ``attempts``: one line per estimator tried (inliers or why it failed).
+    """
+
+    R_cur_ref: np.ndarray
+    t_cur_ref: np.ndarray
+    inliers: np.ndarray
+    method: str
+    n_inliers: int
+    parallax_px: float
+    failure: str | None = None
+    attempts: tuple[str, ...] = field(default_factory=tuple)
+    rotation_only_px: float = float("inf")
+
+    @property
+    def ok(self) -> bool:
+        return self.failure is None
+
+    @property
+    def T_cur_ref(self) -> np.ndarray:
+        """``(4, 4)`` pose of the reference camera in the current camera frame (unit translation)."""
+        T = np.eye(4)
+        T[:3, :3] = self.R_cur_ref
+        T[:3, 3] = self.t_cur_ref
+        return T
+
+
+def _failed(n: int, reason: str, attempts: list[str], rotation_only_px: float = float("inf")) -> TwoViewEstimate:
+    return TwoViewEstimate(np.eye(3), np.zeros(3), np.zeros(n, bool), "none", 0, 0.0, reason, tuple(attempts),
+                           rotation_only_px)
+
+
+def rotation_only_residual_px(norm_ref: np.ndarray, norm_cur: np.ndarray, focal_px: float) -> float:
+    """Median image residual (px) of the best pure rotation mapping the reference rays onto the current ones
+    (least squares on bearings, refit once on the better half); ~0 when the camera only rotated."""
+    if len(norm_ref) < 3:
+        return float("inf")
+    b0 = np.column_stack([norm_ref, np.ones(len(norm_ref))])
+    b1 = np.column_stack([norm_cur, np.ones(len(norm_cur))])
+    b0 /= np.linalg.norm(b0, axis=1, keepdims=True)
+    b1 /= np.linalg.norm(b1, axis=1, keepdims=True)
+    use = np.ones(len(b0), bool)
+    residual = np.zeros(len(b0))
+    for _ in range(2):
+        U, _, Vt = np.linalg.svd(b0[use].T @ b1[use])
+        D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
+        R = Vt.T @ D @ U.T
+        rays = b0 @ R.T
+        with np.errstate(divide="ignore", invalid="ignore"):
+            residual = np.linalg.norm(rays[:, :2] / rays[:, 2:3] - norm_cur, axis=1) * focal_px
+        residual = np.where(np.isfinite(residual), residual, np.inf)
+        use = residual <= np.median(residual)
+    return float(np.median(residual))
+
+
+def normalize_points(points_px: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """Pixel points ``(N, 2)`` -> normalized image coordinates ``(N, 2)`` float64 (``K^-1 [u v 1]``)."""
+    pts = np.asarray(points_px, dtype=np.float64)
+    homog = np.column_stack([pts, np.ones(len(pts))]) @ np.linalg.inv(K).T
+    return homog[:, :2] / homog[:, 2:3]
+
+
+def sampson_residuals(E: np.ndarray, norm_ref: np.ndarray, norm_cur: np.ndarray) -> np.ndarray:
+    """First-order geometric (Sampson) epipolar error of each correspondence, in normalized units ``(N,)``."""
+    a = np.column_stack([norm_ref, np.ones(len(norm_ref))])
+    b = np.column_stack([norm_cur, np.ones(len(norm_cur))])
+    Ea = a @ E.T
+    Etb = b @ E
+    num = np.sum(b * Ea, axis=1)
+    den = np.sqrt(Ea[:, 0] ** 2 + Ea[:, 1] ** 2 + Etb[:, 0] ** 2 + Etb[:, 1] ** 2) + 1e-15
+    return num / den
+
+
+def refine_pose(R: np.ndarray, t: np.ndarray, norm_ref: np.ndarray, norm_cur: np.ndarray,
+                focal_px: float) -> tuple[np.ndarray, np.ndarray]:
+    """Minimize the robust (Huber, 1 px) Sampson error over rotation and unit translation (5 DOF)."""
+    t = t / np.linalg.norm(t)
+    basis = np.linalg.svd(t.reshape(1, 3))[2][1:]  # two unit vectors orthogonal to t
+
+    def unpack(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        Rx = so3_exp(x[:3]) @ R
+        tx = t + basis.T @ x[3:]
+        return Rx, tx / np.linalg.norm(tx)
+
+    def residuals(x: np.ndarray) -> np.ndarray:
+        Rx, tx = unpack(x)
+        return sampson_residuals(skew(tx) @ Rx, norm_ref, norm_cur) * focal_px
+
+    result = least_squares(residuals, np.zeros(5), loss="huber", f_scale=1.0, method="trf", x_scale=1e-3)
+    if not result.success or not np.all(np.isfinite(result.x)):
+        return R, t
+    return unpack(result.x)
+
+
+def parallax_px(R: np.ndarray, norm_ref: np.ndarray, norm_cur: np.ndarray, focal_px: float) -> float:
+    """Median image motion left after removing the rotation ``R`` (px); ~0 for pure rotation or standstill."""
+    if len(norm_ref) == 0:
+        return 0.0
+    rays = np.column_stack([norm_ref, np.ones(len(norm_ref))]) @ R.T
+    front = rays[:, 2] > 1e-9
+    if not front.any():
+        return 0.0
+    rotated = rays[front, :2] / rays[front, 2:3]
+    return float(np.median(np.linalg.norm(rotated - norm_cur[front], axis=1)) * focal_px)
+
+
+def _recover(E_stack: np.ndarray, a: np.ndarray, b: np.ndarray, K_est: np.ndarray, mask: np.ndarray,
+             inlier_set: str = "cheirality"):
+    """Best (most cheirality inliers) decomposition among the 3x3 blocks of ``E_stack``."""
+    best = None
+    for i in range(0, E_stack.shape[0] - 2, 3):
+        E = E_stack[i:i + 3]
+        if not np.all(np.isfinite(E)):
+            continue
+        n_good, R, t, pose_mask = cv2.recoverPose(E, a, b, K_est, mask=mask.copy())
+        if best is None or n_good > best[0]:
+            # recoverPose counts only points nearer than 50 baselines in front of both cameras (cheirality);
+            # "epipolar" keeps every RANSAC inlier, including the far points it drops
+            inliers = (mask.ravel() > 0) if inlier_set == "epipolar" else (pose_mask.ravel() > 0)
+            best = (int(n_good), R, t.ravel(), inliers)
+    return best
+
+
+def estimate_two_view(points_ref_px: np.ndarray, points_cur_px: np.ndarray, K: np.ndarray,
+                      cfg: GeometryConfig | None = None, min_inliers: int = 8) -> TwoViewEstimate:
+    """Relative pose from ``(N, 2)`` pixel correspondences and intrinsics ``K (3, 3)``.
+
+    Tries every estimator in ``cfg.estimators`` and keeps the decomposition with most inliers; falls back to the
+    fundamental matrix (E = K^T F K) when no essential matrix gives ``min_inliers``. Call ``cv2.setRNGSeed``
+    beforehand for reproducible RANSAC.
+    """
+    cfg = cfg or GeometryConfig()
+    p0 = np.asarray(points_ref_px, dtype=np.float64).reshape(-1, 2)
+    p1 = np.asarray(points_cur_px, dtype=np.float64).reshape(-1, 2)
+    n = len(p0)
+    attempts: list[str] = []
+    if n < 5:
+        return _failed(n, f"too few correspondences for the essential matrix ({n} < 5)", attempts)
+    focal = float(K[0, 0])
+    n0, n1 = normalize_points(p0, K), normalize_points(p1, K)
+    rot_px = rotation_only_residual_px(n0, n1, focal)
+    if cfg.normalize:
+        a, b, K_est, thr = n0, n1, np.eye(3), cfg.threshold_px / focal
+    else:
+        a, b, K_est, thr = p0, p1, np.asarray(K, np.float64), cfg.threshold_px
+
+    best = None  # (n_good, R, t, inliers, method)
+    for name in cfg.estimators:
+        E, mask = cv2.findEssentialMat(a, b, K_est, method=_METHODS[name], prob=cfg.confidence, threshold=thr)
+        if E is None or mask is None or E.ndim != 2 or E.shape[1] != 3 or E.shape[0] < 3:
+            attempts.append(f"E-{name}: no solution")
+            continue
+        rec = _recover(E, a, b, K_est, mask, cfg.inliers)
+        if rec is None:
+            attempts.append(f"E-{name}: non-finite E")
+            continue
+        attempts.append(f"E-{name}: {rec[0]} inliers")
+        if best is None or rec[0] > best[0]:
+            best = (*rec, f"E-{name}")
+
+    if cfg.fundamental_fallback and (best is None or best[0] < min_inliers) and n >= 8:
+        F, mask = cv2.findFundamentalMat(p0, p1, cv2.FM_RANSAC, cfg.threshold_px, cfg.confidence)
+        if F is None or F.shape[0] < 3:
+            attempts.append("F-fallback: no solution")
+        else:
+            E = K.T @ F[:3] @ K
+            rec = _recover(E, n0, n1, np.eye(3), mask, cfg.inliers)
+            if rec is None:
+                attempts.append("F-fallback: non-finite E")
+            else:
+                attempts.append(f"F-fallback: {rec[0]} inliers")
+                if best is None or rec[0] > best[0]:
+                    best = (*rec, "F-fallback")
+
+    if best is None:
+        return _failed(n, "no essential/fundamental matrix found (" + "; ".join(attempts) + ")", attempts, rot_px)
+    n_good, R, t, inliers, method = best
+    if n_good < 5:
+        return _failed(n, f"too few pose inliers ({n_good}) from {method}", attempts, rot_px)
+    if cfg.refine and n_good >= 8:
+        R, t = refine_pose(R, t, n0[inliers], n1[inliers], focal)
+    par = parallax_px(R, n0[inliers], n1[inliers], focal)
+    return TwoViewEstimate(R, t / max(np.linalg.norm(t), 1e-300), inliers, method, n_good, par, None, tuple(attempts),
+                           rot_px)
+
+
+def triangulate(R_cur_ref: np.ndarray, t_cur_ref: np.ndarray, norm_ref: np.ndarray,
+                norm_cur: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Triangulate normalized correspondences; returns the points in the reference and in the current frame
+    (``(N, 3)`` each, in units of ``|t|``) and the angle between the two viewing rays ``(N,)`` in degrees."""
+    P0 = np.eye(3, 4)
+    P1 = np.column_stack([R_cur_ref, t_cur_ref])
+    X = cv2.triangulatePoints(P0, P1, norm_ref.T.astype(np.float64), norm_cur.T.astype(np.float64))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        X_ref = (X[:3] / X[3]).T
+    X_cur = X_ref @ R_cur_ref.T + t_cur_ref
+    center_cur_in_ref = -R_cur_ref.T @ t_cur_ref
+    ray0 = X_ref / np.linalg.norm(X_ref, axis=1, keepdims=True)
+    ray1 = X_ref - center_cur_in_ref
+    ray1 /= np.linalg.norm(ray1, axis=1, keepdims=True)
+    angle = np.degrees(np.arccos(np.clip(np.sum(ray0 * ray1, axis=1), -1.0, 1.0)))
+    return X_ref, X_cur, np.where(np.isfinite(angle), angle, 0.0)
+
+
+def rotation_error_deg(R_est: np.ndarray, R_ref: np.ndarray) -> float:
+    """Angle of ``R_est R_ref^T`` in degrees."""
+    return float(np.degrees(np.linalg.norm(so3_log(R_est @ R_ref.T))))

@@ -1,0 +1,97 @@
+"""``lidarkit vo`` on the bundled KITTI sample and on plain image folders: summary, run folder, errors."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import cv2
+import numpy as np
+import pytest
+import yaml
+
+from lidarkit.cli import main
+from lidarkit.errors import DataError
+from lidarkit.samples import sample_path
+from lidarkit.trajectory import Trajectory
+from lidarkit.vo.inputs import detect_kind, open_vo_input
+
+
+def _run(argv, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    out = capsys.readouterr()
+    return exc.value.code, out.out, out.err
+
+
+def test_vo_on_bundled_kitti_sample_writes_run_folder(tmp_path, capsys):
+    seq = sample_path("kitti_vo", "06")
+    out = tmp_path / "run"
+    code, stdout, _ = _run(["vo", str(seq), "--scale", "gt", "--out", str(out), "--gif"], capsys)
+    assert code in (0, None)
+    assert "frames" in stdout and "APE raw (se3)" in stdout
+    for name in ("poses_kitti.txt", "poses_tum.txt", "poses_smoothed_kitti.txt", "poses_smoothed_tum.txt",
+                 "diagnostics.csv", "config.yaml", "metrics.json", "trajectory.png", "features.gif"):
+        assert (out / name).is_file(), name
+    est = Trajectory.from_kitti(out / "poses_kitti.txt")
+    gt = Trajectory.from_kitti(seq / "poses.txt")
+    assert len(est) == len(gt) == 8
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["rejected"] == 0 and metrics["raw"]["ape_rmse_m"] < 0.03
+    config = yaml.safe_load((out / "config.yaml").read_text())
+    assert config["vo"]["scale"]["mode"] == "gt" and config["K_source"] == "kitti calibration"
+    csv = (out / "diagnostics.csv").read_text().splitlines()
+    assert csv[0].startswith("frame,ref_frame,n_features,n_matches,n_inliers") and len(csv) == 9
+
+
+def test_vo_on_plain_image_folder_guesses_intrinsics(tmp_path, capsys):
+    src = sample_path("kitti_vo", "06", "image_0")
+    folder = tmp_path / "imgs"
+    shutil.copytree(src, folder)
+    assert detect_kind(folder) == "images"
+    vo_input = open_vo_input(folder)
+    assert "guess" in vo_input.K_source and vo_input.K[0, 0] == pytest.approx(0.9 * 1226)
+    code, stdout, err = _run(["vo", str(folder), "--scale", "none", "--preset", "report_orb"], capsys)
+    assert code in (0, None) and "guess" in err and "frames" in stdout
+    # with the calibration file, K is read from it
+    calib = sample_path("kitti_vo", "06", "calib.txt")
+    assert open_vo_input(folder, calib=calib).K[0, 0] == pytest.approx(707.0912)
+
+
+def test_vo_rejects_corrupt_frame_in_folder_and_reports_it(tmp_path, capsys):
+    folder = tmp_path / "imgs"
+    shutil.copytree(sample_path("kitti_vo", "06", "image_0"), folder)
+    (folder / "000003.png").write_bytes(b"\x89PNG truncated")
+    calib = sample_path("kitti_vo", "06", "calib.txt")
+    code, stdout, _ = _run(["vo", str(folder), "--calib", str(calib)], capsys)
+    assert code in (0, None)
+    assert "frame 3 rejected: unreadable image" in stdout
+
+
+def test_vo_cli_errors_are_one_line(tmp_path, capsys):
+    code, _, err = _run(["vo", str(tmp_path / "nope")], capsys)
+    assert code == 1 and "input not found" in err
+    code, _, err = _run(["vo", str(sample_path("kitti_vo", "06")), "--detector", "surf"], capsys)
+    assert code == 1 and "features.detector" in err
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    code, _, err = _run(["vo", str(empty), "--scale", "none"], capsys)
+    assert code == 1 and "no images" in err
+    code, _, err = _run(["vo", str(sample_path("kitti_vo", "06", "image_0")), "--kind", "images", "--scale", "gt"],
+                        capsys)
+    assert code == 1 and "needs a ground-truth" in err
+
+
+def test_image_folder_checks_counts(tmp_path):
+    from lidarkit.io import open_dataset
+    from lidarkit.io.images import ImageFolder  # noqa: F401  (registers kind "images")
+
+    folder = tmp_path / "imgs"
+    folder.mkdir()
+    for i in range(3):
+        cv2.imwrite(str(folder / f"f{i}.png"), np.full((10, 12), i * 50, np.uint8))
+    (tmp_path / "t.txt").write_text("0\n0.1\n")
+    with pytest.raises(DataError, match="2 time stamps for 3 images"):
+        open_dataset("images", folder, timestamps=tmp_path / "t.txt")
+    ds = open_dataset("images", folder)
+    assert len(ds) == 3 and ds.read_image(2)[0, 0] == 100 and ds.K is None
