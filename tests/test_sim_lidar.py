@@ -31,7 +31,7 @@ def test_ground_plane_ranges_match_closed_form():
     h = 1.73
     seq = SimulatedLidarSequence(
         scene="ground", n_beams=8, elevation_max_deg=-5.0, elevation_min_deg=-24.0, n_azimuths=90,
-        n_frames=2, sensor_height_m=h, motion_distortion=False,
+        n_frames=2, sensor_height_m=h, motion_distortion=False, sway_deg=0.0, heave_m=0.0,
     )
     scan = seq.read_scan(1)
     assert len(scan.points_xyz) == 8 * 90  # every downward beam hits the plane within 80 m
@@ -45,7 +45,7 @@ def test_ground_plane_ranges_match_closed_form():
 
 
 def test_beams_above_horizon_and_max_range_return_nothing():
-    seq = SimulatedLidarSequence(scene="ground", n_beams=4, elevation_max_deg=1.0, elevation_min_deg=-2.0, n_azimuths=36, n_frames=1, max_range_m=60.0)
+    seq = SimulatedLidarSequence(scene="ground", n_beams=4, elevation_max_deg=1.0, elevation_min_deg=-2.0, n_azimuths=36, n_frames=1, max_range_m=60.0, sway_deg=0.0, heave_m=0.0)
     scan = seq.read_scan(0)
     # -1 deg hits at 99 m (> 60 m max range), +1 and 0 never hit: only the -2 deg beam (49.5 m) returns
     assert len(scan.points_xyz) == 36
@@ -54,7 +54,7 @@ def test_beams_above_horizon_and_max_range_return_nothing():
 
 def test_range_noise_has_the_configured_std():
     sigma = 0.05
-    seq = SimulatedLidarSequence(scene="ground", n_beams=16, elevation_max_deg=-6.0, n_azimuths=400, n_frames=1, range_noise_std_m=sigma)
+    seq = SimulatedLidarSequence(scene="ground", n_beams=16, elevation_max_deg=-6.0, n_azimuths=400, n_frames=1, range_noise_std_m=sigma, sway_deg=0.0, heave_m=0.0)
     scan = seq.read_scan(0)
     range_m = np.linalg.norm(scan.points_xyz, axis=1)
     direction = scan.points_xyz / range_m[:, None]
@@ -72,8 +72,12 @@ def test_deterministic_per_seed():
     c_seq = SimulatedLidarSequence(scene="street", seed=4, **cfg)
     c = c_seq.read_scan(4)
     assert len(c.points_xyz) != len(a.points_xyz) or not np.allclose(c.points_xyz, a.points_xyz)
-    gt_a = SimulatedLidarSequence(scene="street", seed=3, **cfg).ground_truth.positions_xyz
-    assert np.abs(gt_a - c_seq.ground_truth.positions_xyz).max() > 1e-3  # the path depends on the seed too
+    gt_a = SimulatedLidarSequence(scene="street", seed=3, **cfg).ground_truth.poses_se3
+    assert np.abs(gt_a - c_seq.ground_truth.poses_se3).max() > 1e-4  # the drive depends on the seed too
+    # a longer sequence with the same seed starts with the same sweeps (scene and path are prefix-stable)
+    longer = SimulatedLidarSequence(scene="street", seed=3, **dict(cfg, n_frames=40))
+    assert np.array_equal(longer.read_scan(4).points_xyz, a.points_xyz)
+    np.testing.assert_array_equal(longer.ground_truth.poses_se3[:6], gt_a)
 
 
 def test_point_times_follow_azimuth():
@@ -91,7 +95,7 @@ def test_point_times_follow_azimuth():
 
 
 def test_motion_distortion_follows_the_per_column_poses():
-    distorted = SimulatedLidarSequence(scene="street", **SMALL)
+    distorted = SimulatedLidarSequence(scene="street", accel_time_s=0.0, **SMALL)
     scan = distorted.read_scan(3)
     sweep_start = 3 * distorted.config.sweep_period_s
     column_poses = distorted.poses_at(sweep_start + scan.point_times_s)
@@ -107,7 +111,7 @@ def test_motion_distortion_follows_the_per_column_poses():
     early = scan.point_times_s[above_ground] < 0.05 * distorted.config.sweep_period_s
     assert np.percentile(naive[early], 99) < 0.06  # the first columns moved by at most 5 cm
     # an undistorted sweep is consistent with the single ground-truth pose
-    undistorted = SimulatedLidarSequence(scene="street", motion_distortion=False, **SMALL)
+    undistorted = SimulatedLidarSequence(scene="street", accel_time_s=0.0, motion_distortion=False, **SMALL)
     snap = undistorted.read_scan(3)
     keep = snap.points_xyz[:, 2] > -1.5
     d = _mesh_distance_m(undistorted, _to_world(undistorted.ground_truth.poses_se3[3], snap.points_xyz[keep]))
@@ -116,7 +120,7 @@ def test_motion_distortion_follows_the_per_column_poses():
 
 
 def test_mid_and_end_poses_differ_by_half_a_frame():
-    seq = SimulatedLidarSequence(scene="street", speed_mps=12.0, **SMALL)
+    seq = SimulatedLidarSequence(scene="street", speed_mps=12.0, accel_time_s=0.0, sway_deg=0.0, heave_m=0.0, **SMALL)
     start, mid, end = (seq.ground_truth_at(k) for k in ("start", "mid", "end"))
     assert seq.ground_truth.meta["pose_instant"] == "end"  # the default: kiss-icp deskews to the sweep end
     np.testing.assert_allclose(seq.timestamps_s, end.timestamps_s)
@@ -133,6 +137,27 @@ def test_mid_and_end_poses_differ_by_half_a_frame():
     np.testing.assert_allclose(first_half + second_half, full, atol=1e-6)  # planar: yaw angles add up
     np.testing.assert_allclose(second_half, full / 2, rtol=0.05)  # (the curvature varies a little in a frame)
     assert np.allclose(start.poses_se3[0], np.eye(4))  # world origin = sensor at the start of sweep 0
+
+
+def test_drive_starts_at_rest_and_reaches_cruise_speed():
+    seq = SimulatedLidarSequence(scene="ground", speed_mps=10.0, accel_time_s=2.0, n_beams=4, n_azimuths=36, n_frames=40, heave_m=0.0)
+    step_m = np.linalg.norm(np.diff(seq.ground_truth_at("start").positions_xyz, axis=0), axis=1)
+    assert step_m[0] < 0.01  # at rest at t = 0 (0.1 s of a smoothstep ramp: 0.0049 m)
+    assert np.all(np.diff(step_m[:20]) > 0)  # accelerating
+    np.testing.assert_allclose(step_m[20:], 1.0, rtol=1e-3)  # 10 m/s x 0.1 s once the ramp is over
+    assert seq.distance_at(np.array([2.0]))[0] == pytest.approx(10.0)  # half the cruise distance during the ramp
+
+
+def test_body_sways_around_the_planar_drive():
+    seq = SimulatedLidarSequence(scene="ground", sway_deg=0.5, heave_m=0.03, n_beams=4, n_azimuths=36, n_frames=100)
+    T = seq.ground_truth.poses_se3
+    pitch = np.degrees(np.arcsin(-T[:, 2, 0]))
+    roll = np.degrees(np.arctan2(T[:, 2, 1], T[:, 2, 2]))
+    assert 0.3 < np.abs(pitch).max() <= 1.0 + 1e-9 and 0.3 < np.abs(roll).max() <= 1.0 + 1e-9  # amplitude 0.5 deg around a start at 0
+    assert 0.01 < np.abs(T[:, 2, 3]).max() <= 0.06 + 1e-9
+    np.testing.assert_allclose(np.swapaxes(T[:, :3, :3], 1, 2) @ T[:, :3, :3], np.broadcast_to(np.eye(3), (100, 3, 3)), atol=1e-12)
+    flat = SimulatedLidarSequence(scene="ground", sway_deg=0.0, heave_m=0.0, n_beams=4, n_azimuths=36, n_frames=100)
+    np.testing.assert_array_equal(flat.ground_truth.poses_se3[:, 2], np.broadcast_to([0.0, 0.0, 1.0, 0.0], (100, 4)))
 
 
 def test_is_a_scan_sequence_and_checks_input():

@@ -13,6 +13,10 @@ Frames, units and instants (the contract users score against):
   period. The default is ``"end"`` because kiss-icp 1.x deskews every sweep to its last point (the sweep end);
   :meth:`SimulatedLidarSequence.ground_truth_at` gives the other instants. ``timestamps_s`` refer to the same
   instant as ``ground_truth``.
+* The vehicle starts at rest and accelerates smoothly to ``speed_mps`` within ``accel_time_s`` (a car pulling
+  away; a constant-velocity tracker such as kiss-icp cannot pick up a 10 m/s motion from a cold start on a flat
+  ground plane), then drives at constant speed along gentle seeded curves on flat ground, its body pitching,
+  rolling (``sway_deg``) and heaving (``heave_m``) gently as on a suspension (set both to 0 for planar motion).
 * With ``motion_distortion=True`` every column is cast from the pose at its own firing time and its points are
   expressed in the sensor frame of that time (what a real spinning sensor reports). With ``False`` the whole sweep
   is cast from the ground-truth pose (an ideal snapshot at ``pose_instant``).
@@ -62,8 +66,13 @@ class LidarSimConfig(BaseModel):
     range_noise_std_m: float = Field(0.0, ge=0.0, description="Gaussian noise along each ray")
     # motion
     frame_rate_hz: float = Field(10.0, gt=0.0)
-    speed_mps: float = Field(10.0, ge=0.0)
+    speed_mps: float = Field(10.0, ge=0.0, description="cruise speed")
+    accel_time_s: float = Field(
+        2.0, ge=0.0, description="the drive starts at rest and reaches speed_mps after this (smooth ramp); 0: moving from t = 0"
+    )
     max_curvature_per_m: float = Field(1.0 / 150.0, ge=0.0, description="bound of the path curvature (gentle curves)")
+    sway_deg: float = Field(0.3, ge=0.0, le=10.0, description="amplitude of the body's pitch and roll oscillation (suspension)")
+    heave_m: float = Field(0.02, ge=0.0, le=1.0, description="amplitude of the body's vertical oscillation")
     motion_distortion: bool = True
     point_times: bool = Field(True, description="attach per-point times to each Scan")
     pose_instant: PoseInstant = "end"
@@ -175,14 +184,20 @@ class _SceneBuilder:
         self._reflectivity: list[np.ndarray] = []
         self._n_verts = 0
 
-    def add(self, prim: tuple[np.ndarray, np.ndarray], scale_xyz: np.ndarray, yaw_rad: np.ndarray, origin_xyz: np.ndarray, reflectivity: float) -> None:
-        """Add M instances: ``scale_xyz`` (M, 3), ``yaw_rad`` (M,), ``origin_xyz`` (M, 3)."""
+    def add(
+        self, prim: tuple[np.ndarray, np.ndarray], scale_xyz: np.ndarray, yaw_rad: np.ndarray, origin_xyz: np.ndarray,
+        reflectivity: float, vertex_scale: np.ndarray | None = None,
+    ) -> None:
+        """Add M instances: ``scale_xyz`` (M, 3), ``yaw_rad`` (M,), ``origin_xyz`` (M, 3); ``vertex_scale``
+        (M, V, 1) optionally scales each unit vertex (irregular shapes such as tree crowns)."""
         unit_verts, unit_faces = prim
         m = len(origin_xyz)
         if m == 0:
             return
         c, s = np.cos(yaw_rad), np.sin(yaw_rad)
         local = unit_verts[None, :, :] * scale_xyz[:, None, :]
+        if vertex_scale is not None:
+            local = local * vertex_scale
         world = np.empty_like(local)
         world[..., 0] = c[:, None] * local[..., 0] - s[:, None] * local[..., 1]
         world[..., 1] = s[:, None] * local[..., 0] + c[:, None] * local[..., 1]
@@ -205,59 +220,80 @@ def _place_along(path: PlanarPath, s_m: np.ndarray, lateral_m: np.ndarray) -> tu
     return xy + lateral_m[:, None] * normal, heading
 
 
-def build_scene_mesh(config: LidarSimConfig, path: PlanarPath, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Vertices ``(V, 3)``, triangles ``(F, 3)`` and per-triangle reflectivity ``(F,)`` of the scene (world frame)."""
+def _add_trees(builder: _SceneBuilder, xy: np.ndarray, ground_z: float, crown_r: np.ndarray, yaw: np.ndarray, vertex_scale: np.ndarray) -> None:
+    """Trunks (3 m prisms) with irregular crowns of radius ``crown_r`` (M,) on top."""
+    builder.add(_PRISM, np.tile([0.2, 0.2, 3.0], (len(xy), 1)), np.zeros(len(xy)), np.c_[xy, np.full(len(xy), ground_z)], 0.4)
+    top = np.c_[xy, ground_z + 3.0 + 1.1 * crown_r]
+    builder.add(_CROWN, np.c_[crown_r, crown_r, 1.3 * crown_r], yaw, top, 0.3, vertex_scale=vertex_scale)
+
+
+def build_scene_mesh(config: LidarSimConfig, path: PlanarPath) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Vertices ``(V, 3)``, triangles ``(F, 3)`` and per-triangle reflectivity ``(F,)`` of the scene (world frame).
+
+    Every object class draws from its own seeded stream, object by object along the path, so a longer
+    sequence contains the scene of a shorter one with the same seed.
+    """
     ground_z = -config.sensor_height_m
     s0, s1 = float(path.s_m[0]), float(path.s_m[-1])
     builder = _SceneBuilder()
-    # ground: one large quad covering the path plus the sensor range
-    lo = path.xy_m.min(axis=0) - config.max_range_m - 20.0
-    hi = path.xy_m.max(axis=0) + config.max_range_m + 20.0
+    # ground: one large quad covering the path plus the sensor range (extent rounded to 500 m)
+    lo = np.floor((path.xy_m.min(axis=0) - config.max_range_m - 20.0) / 500.0) * 500.0
+    hi = np.ceil((path.xy_m.max(axis=0) + config.max_range_m + 20.0) / 500.0) * 500.0
     centre = np.r_[(lo + hi) / 2.0, ground_z - 1.0]
     builder.add((_BOX_CORNERS, _BOX_FACES), np.array([[hi[0] - lo[0], hi[1] - lo[1], 1.0]]), np.zeros(1), centre[None], 0.25)
 
-    def objects_along(spacing_m: float, lateral_lo: float, lateral_hi: float, jitter_m: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def stream(k: int) -> np.random.Generator:
+        return np.random.default_rng([config.seed, 100 + k])
+
+    def objects_along(k: int, spacing_m: float, lateral_lo: float, lateral_hi: float, jitter_m: float, n_extra: int = 0):
+        """Objects every ``spacing_m`` (jittered) on a random side: world xy (M, 2), heading (M,), extra uniforms (M, n_extra)."""
         s = np.arange(s0 + 5.0, s1 - 5.0, spacing_m)
-        s = s + rng.uniform(-jitter_m, jitter_m, size=len(s))
-        side = rng.choice([-1.0, 1.0], size=len(s))
-        lateral = side * rng.uniform(lateral_lo, lateral_hi, size=len(s))
+        u = stream(k).uniform(size=(len(s), 3 + n_extra))  # one row per object: prefix-stable
+        s = s + jitter_m * (2.0 * u[:, 0] - 1.0)
+        side = np.where(u[:, 1] < 0.5, -1.0, 1.0)
+        lateral = side * (lateral_lo + (lateral_hi - lateral_lo) * u[:, 2])
         xy, heading = _place_along(path, s, lateral)
-        return xy, heading, side
+        return xy, heading, u[:, 3:]
 
     def ground_origin(xy: np.ndarray) -> np.ndarray:
         return np.c_[xy, np.full(len(xy), ground_z)]
 
+    n_crown = len(_CROWN[0])
     if config.scene == "street":
-        # buildings: a row on each side, facades 9..13 m from the path, gaps between them
-        for side in (-1.0, 1.0):
+        # buildings: a row on each side, facades 9..13 m from the path, gaps between them, a cross street every
+        # 90..130 m; pilasters/bays on the facades give the along-street structure real facades have
+        for k, side in enumerate((-1.0, 1.0)):
+            rng = stream(k)
             s = s0
+            next_cross = s0 + rng.uniform(40.0, 130.0)
             while s < s1:
-                length = rng.uniform(8.0, 28.0)
-                depth = rng.uniform(8.0, 16.0)
-                height = rng.uniform(6.0, 20.0)
-                setback = rng.uniform(9.0, 13.0)
-                centre_s = s + length / 2.0
-                xy, heading = _place_along(path, np.array([centre_s]), np.array([side * (setback + depth / 2.0)]))
+                if s > next_cross:
+                    s += rng.uniform(14.0, 20.0)
+                    next_cross = s + rng.uniform(90.0, 130.0)
+                length, depth, height, setback, gap, bay_height = rng.uniform([8, 8, 6, 9, 2, 0.3], [28, 16, 20, 13, 9, 1.0])
+                xy, heading = _place_along(path, np.array([s + length / 2.0]), np.array([side * (setback + depth / 2.0)]))
                 builder.add((_BOX_CORNERS, _BOX_FACES), np.array([[length, depth, height]]), heading, ground_origin(xy), 0.5)
-                s += length + rng.uniform(2.0, 9.0)
-        xy, _, _ = objects_along(22.0, 5.5, 7.0, 3.0)  # poles
-        builder.add(_PRISM, np.tile([0.15, 0.15, 6.0], (len(xy), 1)), np.zeros(len(xy)), ground_origin(xy), 0.7)
-        xy, _, _ = objects_along(17.0, 5.0, 7.5, 5.0)  # trees: trunk + crown
-        crown_r = rng.uniform(1.2, 2.2, size=len(xy))
-        builder.add(_PRISM, np.tile([0.2, 0.2, 3.0], (len(xy), 1)), np.zeros(len(xy)), ground_origin(xy), 0.4)
-        builder.add(_CROWN, np.c_[crown_r, crown_r, 1.3 * crown_r], rng.uniform(0, np.pi, len(xy)), np.c_[xy, ground_z + 3.0 + 1.1 * crown_r], 0.3)
-        xy, heading, _ = objects_along(13.0, 4.2, 5.0, 4.0)  # parked cars
+                bay = rng.uniform([2.5, 0.3, 0.4], [6.0, 0.9, 1.2], size=(int(length / 2.5) + 1, 3))  # spacing, protrusion, width
+                at = s + np.cumsum(bay[:, 0])
+                bay = bay[at < s + length - 0.5]
+                at = at[at < s + length - 0.5]
+                xy, heading = _place_along(path, at, side * (setback - bay[:, 1] / 2.0))
+                builder.add((_BOX_CORNERS, _BOX_FACES), np.c_[bay[:, 2], bay[:, 1], np.full(len(at), height * bay_height)], heading, ground_origin(xy), 0.55)
+                s += length + gap
+        xy, _, u = objects_along(2, 12.0, 5.5, 7.0, 3.0, 1)  # poles and signs
+        builder.add(_PRISM, np.c_[np.full(len(xy), 0.15), np.full(len(xy), 0.15), 2.5 + 4.5 * u[:, 0]], np.zeros(len(xy)), ground_origin(xy), 0.7)
+        xy, _, u = objects_along(3, 15.0, 5.0, 7.5, 5.0, 2 + n_crown)  # trees: trunk + irregular crown
+        _add_trees(builder, xy, ground_z, 1.2 + 1.0 * u[:, 0], np.pi * u[:, 1], 0.6 + 0.7 * u[:, 2:, None])
+        xy, heading, _ = objects_along(4, 13.0, 4.2, 5.0, 4.0)  # parked cars
         builder.add((_BOX_CORNERS, _BOX_FACES), np.tile([4.4, 1.8, 1.5], (len(xy), 1)), heading, ground_origin(xy), 0.6)
     elif config.scene == "open":
         # ground dominates: a few sparse objects 8..40 m from the path
-        xy, _, _ = objects_along(25.0, 8.0, 40.0, 10.0)
+        xy, _, _ = objects_along(5, 25.0, 8.0, 40.0, 10.0)
         builder.add(_PRISM, np.tile([0.2, 0.2, 6.0], (len(xy), 1)), np.zeros(len(xy)), ground_origin(xy), 0.7)
-        xy, heading, _ = objects_along(35.0, 10.0, 40.0, 15.0)
-        builder.add((_BOX_CORNERS, _BOX_FACES), np.c_[rng.uniform(2, 6, len(xy)), rng.uniform(2, 6, len(xy)), rng.uniform(1.5, 4, len(xy))], heading + rng.uniform(0, np.pi, len(xy)), ground_origin(xy), 0.5)
-        xy, _, _ = objects_along(40.0, 8.0, 35.0, 15.0)
-        crown_r = rng.uniform(1.5, 3.0, size=len(xy))
-        builder.add(_PRISM, np.tile([0.25, 0.25, 3.0], (len(xy), 1)), np.zeros(len(xy)), ground_origin(xy), 0.4)
-        builder.add(_CROWN, np.c_[crown_r, crown_r, 1.3 * crown_r], np.zeros(len(xy)), np.c_[xy, ground_z + 3.0 + 1.1 * crown_r], 0.3)
+        xy, heading, u = objects_along(6, 35.0, 10.0, 40.0, 15.0, 4)
+        builder.add((_BOX_CORNERS, _BOX_FACES), np.c_[2 + 4 * u[:, 0], 2 + 4 * u[:, 1], 1.5 + 2.5 * u[:, 2]], heading + np.pi * u[:, 3], ground_origin(xy), 0.5)
+        xy, _, u = objects_along(7, 40.0, 8.0, 35.0, 15.0, 2 + n_crown)
+        _add_trees(builder, xy, ground_z, 1.5 + 1.5 * u[:, 0], np.pi * u[:, 1], 0.6 + 0.7 * u[:, 2:, None])
     return builder.build()
 
 
@@ -277,11 +313,13 @@ class SimulatedLidarSequence:
         self.config = config if config is not None else make_config(**params)
         cfg = self.config
         self.name = f"sim:{cfg.scene}?seed={cfg.seed}"
-        rng = np.random.default_rng([cfg.seed, 0])
         period = cfg.sweep_period_s
         s_end = cfg.speed_mps * period * (cfg.n_frames + 1) + cfg.max_range_m + 40.0
-        self.path = make_path(rng, -(cfg.max_range_m + 40.0), s_end, cfg.max_curvature_per_m)
-        self.vertices_xyz, self.triangles, self.reflectivity = build_scene_mesh(cfg, self.path, rng)
+        self.path = make_path(np.random.default_rng([cfg.seed, 0]), -(cfg.max_range_m + 40.0), s_end, cfg.max_curvature_per_m)
+        self.vertices_xyz, self.triangles, self.reflectivity = build_scene_mesh(cfg, self.path)
+        sway = np.random.default_rng([cfg.seed, 2]).uniform(size=(3, 2))  # frequencies and phases of pitch, roll, heave
+        self._sway_freq_hz = 0.4 + 0.8 * sway[:, 0]
+        self._sway_phase = 2.0 * np.pi * sway[:, 1]
         self._scene = None
         # sensor ray directions in the sensor frame, column-major: (n_azimuths, n_beams, 3)
         elevation = np.deg2rad(np.linspace(cfg.elevation_max_deg, cfg.elevation_min_deg, cfg.n_beams))
@@ -308,15 +346,34 @@ class SimulatedLidarSequence:
             self._scene = scene
         return self._scene
 
+    def distance_at(self, times_s: np.ndarray) -> np.ndarray:
+        """Arc length (m) driven at absolute times ``times_s``: a smoothstep speed ramp from rest over
+        ``accel_time_s`` (speed ``v (3u^2 - 2u^3)``, ``u = t / accel_time_s``), then constant ``speed_mps``."""
+        t = np.asarray(times_s, dtype=np.float64)
+        v, ramp = self.config.speed_mps, self.config.accel_time_s
+        if ramp <= 0.0:
+            return v * t
+        u = np.clip(t / ramp, 0.0, 1.0)
+        return np.where(t < ramp, v * ramp * (u**3 - 0.5 * u**4), v * ramp * 0.5 + v * (t - ramp))
+
     def poses_at(self, times_s: np.ndarray) -> np.ndarray:
         """``(M, 4, 4)`` poses ``T_world_lidar`` at absolute times ``times_s`` (M,) (t = 0: start of sweep 0)."""
         t = np.atleast_1d(np.asarray(times_s, dtype=np.float64))
-        xy, heading = self.path.at(self.config.speed_mps * t)
-        c, s = np.cos(heading), np.sin(heading)
+        xy, heading = self.path.at(self.distance_at(t))
+        cfg = self.config
+        # suspension: pitch, roll and heave oscillate (0.4..1.2 Hz, seeded) around the planar drive
+        wave = np.sin(2.0 * np.pi * self._sway_freq_hz[:, None] * t[None, :] + self._sway_phase[:, None])
+        wave -= np.sin(self._sway_phase)[:, None]  # zero at t = 0: the world origin is the sensor at the start
+        pitch, roll = np.deg2rad(cfg.sway_deg) * wave[0], np.deg2rad(cfg.sway_deg) * wave[1]
+        cy, sy, cp, sp, cr, sr = np.cos(heading), np.sin(heading), np.cos(pitch), np.sin(pitch), np.cos(roll), np.sin(roll)
         T = np.zeros((len(t), 4, 4))
-        T[:, 0, 0], T[:, 0, 1], T[:, 1, 0], T[:, 1, 1] = c, -s, s, c
-        T[:, 2, 2] = T[:, 3, 3] = 1.0
+        # R = Rz(heading) Ry(pitch) Rx(roll)
+        T[:, 0, 0], T[:, 0, 1], T[:, 0, 2] = cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr
+        T[:, 1, 0], T[:, 1, 1], T[:, 1, 2] = sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr
+        T[:, 2, 0], T[:, 2, 1], T[:, 2, 2] = -sp, cp * sr, cp * cr
+        T[:, 3, 3] = 1.0
         T[:, :2, 3] = xy
+        T[:, 2, 3] = cfg.heave_m * wave[2]
         return T
 
     def frame_times_s(self, instant: PoseInstant | None = None) -> np.ndarray:
