@@ -30,10 +30,10 @@ class FeatureConfig(_Stage):
     """Detector/descriptor, feature budget and grid bucketing (features spread over ``grid_rows x grid_cols`` cells)."""
 
     detector: Literal["gftt", "fast", "orb", "sift", "akaze"] = "gftt"
-    max_features: int = Field(2000, ge=8)
+    max_features: int = Field(1200, ge=8)
     grid_rows: int = Field(4, ge=1)
     grid_cols: int = Field(8, ge=1)
-    subpixel: bool = True
+    subpixel: bool = False
     gftt_quality: float = Field(0.01, gt=0, lt=1)
     min_distance_px: float = Field(7.0, ge=0)
     fast_threshold: int = Field(20, ge=1)
@@ -44,7 +44,7 @@ class MatchConfig(_Stage):
 
     method: Literal["klt", "bf_cross", "knn_ratio"] = "klt"
     ratio: float = Field(0.75, gt=0, le=1)
-    klt_window_px: int = Field(21, ge=5)
+    klt_window_px: int = Field(15, ge=5)
     klt_levels: int = Field(3, ge=0)
     klt_fb_max_px: float = Field(0.5, gt=0)
 
