@@ -184,3 +184,11 @@ def test_plots_and_animation(stachniss, tmp_path):
     assert Image.open(tmp_path / "t.png").size[0] > 300
     plots.plot_mse_vs_n({"x": ([50, 100], [0.1, 0.05], [0.01, 0.01])}, tmp_path / "m.png", reference={"ref": 0.05})
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.gif", "m.png", "s.png", "t.png"]  # no temp files left
+
+
+@pytest.mark.slow
+def test_few_kalman_kernels_reach_the_large_n_limit(stachniss):
+    """Acceptance: N=100 within 10% of N=10000 (mean MSE over 10 seeds, same simulated data per seed)."""
+    few = [run_protocol(stachniss, 100, s, kernel="kalman", ess_threshold=0.5, with_ape_rpe=False).metrics["mse_m2"]["mean"] for s in range(10)]
+    many = [run_protocol(stachniss, 10000, s, with_ape_rpe=False).metrics["mse_m2"]["mean"] for s in range(10)]
+    assert np.mean(few) <= 1.10 * np.mean(many), (np.mean(few), np.mean(many))

@@ -39,6 +39,7 @@ class ParticleFilter:
         self._noise_block: np.ndarray | None = None
         self._noise_pos = 0
         self._work = np.empty(self.n, dtype=self.dtype)
+        self._has_motion_noise = bool(self.motion.noise_std.any())
         self.n_updates = 0
         self.n_resamples = 0
         self.n_weight_resets = 0
@@ -119,15 +120,17 @@ class ParticleFilter:
         self._noise_pos += 1
         return noise
 
-    def predict(self, odometry: np.ndarray) -> None:
+    def predict(self, odometry: np.ndarray, *, check: bool = True) -> None:
         """Move every particle by the odometry ``[r1_rad, t_m, r2_rad]`` with sampled motion noise."""
-        u = np.asarray(odometry, dtype=np.float64).reshape(-1)
-        if u.shape != (3,):
-            raise DataError(f"odometry must be [r1, t, r2], got shape {u.shape}", source="predict")
-        if not np.isfinite(u).all():
-            raise DataError(f"non-finite odometry {u.tolist()}", source="predict")
-        noise = self._next_noise() if self.motion.noise_std.any() else None
-        self.motion.apply(self.states, u, noise, self._work)
+        if check:
+            u = np.asarray(odometry, dtype=np.float64).reshape(-1)
+            if u.shape != (3,):
+                raise DataError(f"odometry must be [r1, t, r2], got shape {u.shape}", source="predict")
+            if not np.isfinite(u).all():
+                raise DataError(f"non-finite odometry {u.tolist()}", source="predict")
+            odometry = u
+        noise = self._next_noise() if self._has_motion_noise else None
+        self.motion.apply(self.states, odometry, noise, self._work)
 
     # ---- update -----------------------------------------------------------------------------------
     def log_likelihood(self, landmark_index: np.ndarray, z: np.ndarray) -> np.ndarray:
@@ -144,20 +147,24 @@ class ParticleFilter:
             return self.sensor.log_likelihood_all(self.states, self._landmarks_typed[landmark_index[k : k + 1]], z[k : k + 1])
         return self.sensor.log_likelihood_all(self.states, self._landmarks_typed[landmark_index], z)
 
-    def update(self, landmark_index: np.ndarray, z: np.ndarray) -> bool:
+    def update(self, landmark_index: np.ndarray, z: np.ndarray, *, check: bool = True) -> bool:
         """Reweight by the readings; an empty set of readings leaves the weights unchanged (returns False)."""
-        z = np.asarray(z, dtype=np.float64).reshape(-1, 2)
+        if check:
+            z = np.asarray(z, dtype=np.float64).reshape(-1, 2)
+            landmark_index = np.asarray(landmark_index, dtype=np.int64).reshape(-1)
+            if not np.isfinite(z).all():
+                raise DataError("non-finite measurement", source="update")
+            if len(landmark_index) != len(z):
+                raise DataError(f"{len(landmark_index)} landmark indices for {len(z)} readings", source="update")
         if len(z) == 0:
             return False
-        if not np.isfinite(z).all():
-            raise DataError("non-finite measurement", source="update")
-        ll = self.log_likelihood(np.asarray(landmark_index, dtype=np.int64).reshape(-1), z)
-        self.apply_log_likelihood(ll)
+        self.apply_log_likelihood(self.log_likelihood(landmark_index, z))
         return True
 
     def apply_log_likelihood(self, ll: np.ndarray) -> None:
         """Add ``ll`` ``(N,)`` to the log-weights and renormalize with log-sum-exp (never underflows to all zero)."""
-        lw = ll.astype(np.float64) if self._uniform else ll + self.log_weights
+        was_uniform = self._uniform
+        lw = ll.astype(np.float64) if was_uniform else ll + self.log_weights
         m = lw.max()
         if not np.isfinite(m):  # NaN / inf somewhere, or every particle impossible
             lw = np.where(np.isfinite(lw), lw, -np.inf)
@@ -168,7 +175,7 @@ class ParticleFilter:
                 self._reset_weights()
                 self.n_updates += 1
                 return
-        self.last_max_loglik = float(ll.max())
+        self.last_max_loglik = float(m) if was_uniform else float(ll.max())
         lw -= m
         w = np.exp(lw)
         s = w.sum()

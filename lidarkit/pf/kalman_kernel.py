@@ -89,7 +89,7 @@ class KalmanParticleFilter:
         return effective_sample_size(self.weights)
 
     # ---- predict ------------------------------------------------------------------------------------
-    def predict(self, odometry: np.ndarray) -> None:
+    def predict(self, odometry: np.ndarray, *, check: bool = True) -> None:
         """EKF prediction of every kernel through the odometry model (noise std on r1, t, r2 from the config)."""
         u = np.asarray(odometry, dtype=np.float64).reshape(-1)
         if u.shape != (3,) or not np.isfinite(u).all():
@@ -124,7 +124,7 @@ class KalmanParticleFilter:
         H[:, 1, 0], H[:, 1, 1], H[:, 1, 2] = dy / q, -dx / q, -1.0
         return e, H
 
-    def update(self, landmark_index: np.ndarray, z: np.ndarray) -> bool:
+    def update(self, landmark_index: np.ndarray, z: np.ndarray, *, check: bool = True) -> bool:
         """Sequential EKF update of every kernel with each reading; weights times the predictive likelihoods."""
         z = np.asarray(z, dtype=np.float64).reshape(-1, 2)
         if len(z) == 0:

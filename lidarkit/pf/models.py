@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lidarkit.errors import ConfigError, DataError
+from lidarkit.errors import ConfigError
 
 TWO_PI = 2.0 * np.pi
 
@@ -95,9 +95,7 @@ class OdometryMotionModel:
     @staticmethod
     def apply(states: np.ndarray, odometry: np.ndarray, noise: np.ndarray | None, work: np.ndarray | None = None) -> None:
         """Move ``states`` ``(3, N)`` in place by ``odometry`` ``[r1, t, r2]`` plus per-particle ``noise`` ``(3, N)``."""
-        r1, t, r2 = (float(v) for v in odometry)
-        if not (np.isfinite(r1) and np.isfinite(t) and np.isfinite(r2)):
-            raise DataError(f"non-finite odometry {tuple(odometry)!r}", source="odometry")
+        r1, t, r2 = odometry
         x, y, theta = states
         dtype = states.dtype.type
         if noise is None:

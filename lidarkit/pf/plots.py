@@ -112,7 +112,7 @@ def plot_mse_vs_n(
     for label, (ns, mean, std) in series.items():
         ns, mean, std = np.asarray(ns), np.asarray(mean), np.asarray(std)
         ax.plot(ns, mean, marker="o", ms=3, label=label)
-        ax.fill_between(ns, np.maximum(mean - std, 1e-4), mean + std, alpha=0.12)
+        ax.fill_between(ns, np.maximum(mean - std, mean / 3), mean + std, alpha=0.12)
     for label, value in (reference or {}).items():
         ax.axhline(value, ls=":", c="k", lw=1)
         ax.text(ax.get_xlim()[1], value, f" {label}", va="center", fontsize=7)

@@ -24,7 +24,7 @@ import numpy as np
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.pf.config import PFConfig
 from lidarkit.pf.filter import ParticleFilter, make_filter
-from lidarkit.pf.models import integrate_odometry, resolve_q, standard_normal, wrap_angle
+from lidarkit.pf.models import integrate_odometry, resolve_q, wrap_angle
 from lidarkit.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
@@ -185,10 +185,18 @@ def run_filter(
     Returns estimates ``(T+1, 3)`` per estimator (row 0 = the initial particle set), ESS before
     resampling, resample flags, best log-likelihood per step, snapshots and (optionally) NIS values.
     """
-    odometry = np.asarray(odometry, dtype=np.float64)
+    odometry = np.asarray(odometry, dtype=np.float64).reshape(-1, 3)
     bad = ~np.isfinite(odometry).all(axis=1)
     if bad.any():
         raise DataError(f"non-finite odometry at step {int(np.argmax(bad))}", source="odometry")
+    bad = ~np.isfinite(readings.z).all(axis=1)
+    if bad.any():
+        raise DataError(f"non-finite reading {int(np.argmax(bad))}", source="readings")
+    if len(readings.offsets) != len(odometry) + 1:
+        raise DataError(f"{len(readings.offsets) - 1} reading steps for {len(odometry)} odometry steps", source="readings")
+    odometry_rows = [tuple(float(v) for v in row) for row in odometry]
+    lm_index = readings.landmark_index.astype(np.int64)
+    z_all = readings.z.astype(pf.states.dtype)
     T = len(odometry)
     est = {k: np.empty((T + 1, 3)) for k in estimators}
     for k in estimators:
@@ -201,23 +209,23 @@ def run_filter(
     if 0 in snapshot_set:
         snaps[0] = (pf.particles.astype(np.float64), pf.weights.copy())
     nis_values: list[np.ndarray] = []
-    offsets = readings.offsets
+    offsets = readings.offsets.tolist()
     recover = pf.config.recovery == "reinit"
     nearest = pf.config.likelihood == "nearest"
     n_recoveries = 0
     t0 = time.perf_counter()
     for t in range(T):
-        pf.predict(odometry[t])
+        pf.predict(odometry_rows[t], check=False)
         a, b = offsets[t], offsets[t + 1]
         if b > a:
-            idx, z = readings.landmark_index[a:b], readings.z[a:b]
+            idx, z = lm_index[a:b], z_all[a:b]
             if nis:
-                nis_values.append(pf.innovation_nis(idx, z))
-            pf.update(idx, z)
+                nis_values.append(pf.innovation_nis(idx, readings.z[a:b]))
+            pf.update(idx, z, check=False)
             max_ll[t] = pf.last_max_loglik
             if recover and _is_lost(pf.last_max_loglik, 1 if nearest else b - a):
                 pf.initialize_uniform()
-                pf.update(idx, z)
+                pf.update(idx, z, check=False)
                 n_recoveries += 1
         for k in estimators:
             est[k][t + 1] = pf.estimate(k)
@@ -226,7 +234,7 @@ def run_filter(
         ess[t] = pf.ess
         resampled[t] = pf.resample()
     runtime = time.perf_counter() - t0
-    n_readings = np.ones(T) if nearest else np.diff(offsets)
+    n_readings = np.ones(T) if nearest else np.diff(readings.offsets)
     lost = np.flatnonzero(_is_lost(max_ll, n_readings))
     return {
         "n_recoveries": n_recoveries,

@@ -17,6 +17,8 @@ Resampler = Callable[[np.ndarray, np.random.Generator, "int | None"], np.ndarray
 
 def effective_sample_size(weights: np.ndarray) -> float:
     """Kish ESS ``1 / sum(w^2)`` of normalized weights (N for uniform, 1 for a single particle)."""
+    if weights.shape[0] <= 16384:  # single-threaded BLAS dot is fastest here
+        return float(1.0 / np.dot(weights, weights))
     # multiply + sum, not np.dot: BLAS thread start-up dominates for large N on a busy machine
     return float(1.0 / np.add.reduce(weights * weights))
 

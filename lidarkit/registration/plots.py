@@ -74,7 +74,7 @@ def save_rmse_history(path: str | os.PathLike, histories: dict[str, Sequence[flo
     for label, hist in histories.items():
         hist = np.asarray(hist, dtype=float)
         if len(hist) > 1:
-            ax.plot(np.arange(len(hist)), hist, marker=".", label=f"{label} ({len(hist) - 1} it)")
+            ax.plot(np.arange(len(hist)), hist, marker=".", label=label)
     ax.set_xlabel("iteration")
     ax.set_ylabel("correspondence RMSE (m)")
     ax.grid(True, alpha=0.3)
