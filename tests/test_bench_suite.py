@@ -149,6 +149,27 @@ BAD = {
         ["malformed YAML", "line 5"],
     ),
     "not_a_mapping": ("- just\n- a list\n", ConfigError, ["YAML mapping"]),
+    "options_for_optionless_task": (
+        """
+        experiments:
+          - task: selftest
+            dataset: {kind: synthetic}
+            options: {speed: 3}
+            methods: [sleep]
+        """,
+        ConfigError,
+        ["takes no options, got speed", "experiments[0].options, line 5"],
+    ),
+    "not_plain_json": (
+        """
+        experiments:
+          - task: selftest
+            dataset: {kind: synthetic, recorded: 2024-01-01}
+            methods: [fail]
+        """,
+        ConfigError,
+        ["values must be plain numbers", "date", "experiments[0].methods[0]"],
+    ),
 }
 
 

@@ -60,7 +60,7 @@ def test_bad_simulator_and_reader_options_are_refused(tmp_path):
         """)
     with pytest.raises(ConfigError, match="n_beems") as info:
         load_suite(path)
-    assert "experiments[0].methods[0]" in str(info.value)
+    assert "experiments[0].dataset, line 4" in str(info.value)
     (tmp_path / "scans").mkdir()
     path = write(tmp_path, """
         experiments:
@@ -68,8 +68,19 @@ def test_bad_simulator_and_reader_options_are_refused(tmp_path):
             dataset: {kind: folder, path: scans, posses: poses.txt}
             methods: [vanilla]
         """)
-    with pytest.raises(ConfigError, match="unknown option.*posses.*it takes: .*poses"):
+    with pytest.raises(ConfigError, match="unknown option.*posses.*it takes: .*poses") as info:
         load_suite(path)
+    assert "experiments[0].dataset" in str(info.value)
+    path = write(tmp_path, """
+        experiments:
+          - task: odometry
+            dataset: {kind: sim_lidar, n_frames: 3}
+            options: {frame: "0:2"}
+            methods: [vanilla]
+        """)
+    with pytest.raises(ConfigError, match="frame.*options of task 'odometry': frames") as info:
+        load_suite(path)
+    assert "experiments[0].options, line 5" in str(info.value)
     path = write(tmp_path, """
         experiments:
           - task: icp_pair

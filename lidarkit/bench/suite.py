@@ -130,6 +130,8 @@ class _Locator:
         return f"{text}, line {line}" if line else text
 
     def error(self, err: LidarKitError, loc: tuple[Any, ...]) -> LidarKitError:
+        if err.source == str(self.path):  # already located
+            return err
         reason = err.reason if err.source in (None, "task", "dataset", "method", "options") else str(err)
         return type(err)(reason, source=self.path, location=self.location(loc))
 
@@ -202,6 +204,8 @@ def load_suite(path: str | Path, *, skip_unavailable: bool = False, only_tasks: 
                 continue
             raise locator.error(err, (*exp_loc, "task")) from None
 
+        options = dict(exp.options)
+        _check(locator, (*exp_loc, "options"), task.validate_options, options)
         datasets = _experiment_datasets(exp, model, locator, exp_loc)
         resolved: list[dict[str, Any]] = []
         missing_sample = None
@@ -213,6 +217,7 @@ def load_suite(path: str | Path, *, skip_unavailable: bool = False, only_tasks: 
                         f"task {exp.task!r} does not take dataset kind {spec['kind']!r}; it takes: {', '.join(task.dataset_kinds)}",
                         source="dataset",
                     )
+                _check(locator, loc, task.validate_dataset, spec, options)
             except DataError as err:
                 if skip_unavailable and str(spec.get("path", "")).startswith(SAMPLE_PREFIX):
                     missing_sample = f"bundled sample {spec['path']} is not installed ({err.reason})"
@@ -237,14 +242,9 @@ def load_suite(path: str | Path, *, skip_unavailable: bool = False, only_tasks: 
                 raise ConfigError(f"{', '.join(sorted(overlap))} given both in params and grid", source=path, location=locator.location(m_loc))
             for params in _grid(method):
                 for spec in resolved:
-                    check_key = repr((exp.task, method.name, sorted(params.items()), sorted(spec.items()), sorted(exp.options.items())))
+                    check_key = repr((exp.task, method.name, sorted(params.items()), sorted(spec.items()), sorted(options.items())))
                     if check_key not in validated:
-                        try:
-                            task.validate(method.name, params, spec, dict(exp.options))
-                        except LidarKitError as err:
-                            raise locator.error(err, m_loc) from None
-                        except Exception as err:  # a validator bug must still name the place
-                            raise ConfigError(f"{type(err).__name__}: {err}", source=path, location=locator.location(m_loc)) from None
+                        _check(locator, m_loc, task.validate, method.name, params, spec, options)
                         validated.add(check_key)
                     for seed in seeds:
                         job = Job(
@@ -255,14 +255,28 @@ def load_suite(path: str | Path, *, skip_unavailable: bool = False, only_tasks: 
                             method=method.name,
                             params=params,
                             seed=int(seed),
-                            options=dict(exp.options),
+                            options=options,
                         )
-                        key = job.key()
+                        try:
+                            key = job.key()
+                        except (TypeError, ValueError) as err:  # a YAML date, .nan, ...: not plain JSON
+                            raise ConfigError(f"values must be plain numbers, strings, lists and mappings ({err})",
+                                              source=path, location=locator.location(m_loc)) from None
                         if key in seen:
                             continue
                         seen.add(key)
                         jobs.append(job)
     return Suite(name=model.name, path=path, jobs=jobs, description=model.description, skipped=skipped)
+
+
+def _check(locator: _Locator, loc: tuple[Any, ...], fn: Any, *args: Any) -> None:
+    """Call a task validator; its errors (and a validator bug) become errors naming file, key and line."""
+    try:
+        fn(*args)
+    except LidarKitError as err:
+        raise locator.error(err, loc) from None
+    except Exception as err:  # noqa: BLE001 - a validator bug must still name the place
+        raise ConfigError(f"{type(err).__name__}: {err}", source=locator.path, location=locator.location(loc)) from None
 
 
 def _known_tasks() -> set[str]:

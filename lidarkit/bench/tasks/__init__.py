@@ -68,8 +68,16 @@ class Task:
     def require(self) -> None:
         """Raise ConfigError when the modules this task needs are not installed / not there yet."""
 
+    def validate_options(self, options: dict[str, Any]) -> None:
+        """Raise ConfigError for bad experiment ``options``; called once per experiment before the run."""
+        if options:
+            raise ConfigError(f"task {self.name!r} takes no options, got {', '.join(sorted(options))}", source="options")
+
+    def validate_dataset(self, dataset: dict[str, Any], options: dict[str, Any]) -> None:
+        """Raise ConfigError / DataError for a dataset spec this task cannot use; called once per dataset."""
+
     def validate(self, method: str, params: dict[str, Any], dataset: dict[str, Any], options: dict[str, Any]) -> None:
-        """Raise ConfigError / DataError if this job could not run; called for every job before the run."""
+        """Raise ConfigError / DataError if this method + params could not run; called for every combination."""
 
     def run(self, job: Job) -> TaskOutput:  # pragma: no cover - abstract
         raise NotImplementedError

@@ -91,16 +91,21 @@ class IcpPairTask(Task):
     def require(self) -> None:
         import_module_for_task("icp_pair", "lidarkit.registration")
 
+    def validate_options(self, options: dict[str, Any]) -> None:
+        opts = options_model(IcpPairOptions, options, "icp_pair")
+        if opts.ground_truth_file is not None and (not opts.pairs or len(opts.pairs) != 1):
+            raise ConfigError("ground_truth_file gives one pair's motion: set exactly one pair in 'pairs'", source="options")
+
+    def validate_dataset(self, dataset: dict[str, Any], options: dict[str, Any]) -> None:
+        check_reader_options(dataset)
+        opts = IcpPairOptions(**options)
+        if opts.ground_truth_file is not None:
+            read_T_target_source(dataset_path(dataset) / opts.ground_truth_file)
+
     def validate(self, method: str, params: dict[str, Any], dataset: dict[str, Any], options: dict[str, Any]) -> None:
         from lidarkit.registration import get_icp
 
         get_icp(method, **params)
-        opts = options_model(IcpPairOptions, options, "icp_pair")
-        check_reader_options(dataset)
-        if opts.ground_truth_file is not None:
-            if not opts.pairs or len(opts.pairs) != 1:
-                raise ConfigError("ground_truth_file gives one pair's motion: set exactly one pair in 'pairs'", source="options")
-            read_T_target_source(dataset_path(dataset) / opts.ground_truth_file)
 
     def run(self, job: Job) -> TaskOutput:
         from lidarkit.geometry import pose_error, se3_exp

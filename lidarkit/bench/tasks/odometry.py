@@ -68,12 +68,16 @@ class OdometryTask(Task):
         if not hasattr(odometry, "run"):
             raise ConfigError("lidarkit.odometry has no run()", source="task")
 
+    def validate_options(self, options: dict[str, Any]) -> None:
+        options_model(OdometryOptions, options, "odometry")
+
+    def validate_dataset(self, dataset: dict[str, Any], options: dict[str, Any]) -> None:
+        check_reader_options(dataset)
+
     def validate(self, method: str, params: dict[str, Any], dataset: dict[str, Any], options: dict[str, Any]) -> None:
         from lidarkit.registration import get_icp
 
         get_icp(method, **params)
-        options_model(OdometryOptions, options, "odometry")
-        check_reader_options(dataset)
 
     def run(self, job: Job) -> TaskOutput:
         from lidarkit.odometry import run

@@ -52,17 +52,21 @@ class ParticleFilterTask(Task):
     def require(self) -> None:
         _pf_api()
 
-    def validate(self, method: str, params: dict[str, Any], dataset: dict[str, Any], options: dict[str, Any]) -> None:
-        if method not in METHODS:
-            raise ConfigError(f"unknown pf method {method!r}; known: {', '.join(METHODS)}", source="method")
-        config_cls, _ = _pf_api()
-        config_cls.make(**params)
+    def validate_options(self, options: dict[str, Any]) -> None:
         opts = options_model(PFOptions, options, "pf")
         from lidarkit.pf.protocol import VISIBILITY
 
         if opts.visible not in VISIBILITY:
             raise ConfigError(f"visible must be one of {', '.join(VISIBILITY)}, got {opts.visible!r}", source="options")
+
+    def validate_dataset(self, dataset: dict[str, Any], options: dict[str, Any]) -> None:
         check_reader_options(dataset)
+
+    def validate(self, method: str, params: dict[str, Any], dataset: dict[str, Any], options: dict[str, Any]) -> None:
+        if method not in METHODS:
+            raise ConfigError(f"unknown pf method {method!r}; known: {', '.join(METHODS)}", source="method")
+        config_cls, _ = _pf_api()
+        config_cls.make(**params)
 
     def run(self, job: Job) -> TaskOutput:
         config_cls, run_protocol = _pf_api()

@@ -62,7 +62,11 @@ class VisualOdometryTask(Task):
         if method not in vo.available_presets():
             raise ConfigError(f"unknown VO method {method!r}; known presets: {', '.join(vo.available_presets())}", source="method")
         _config(vo, method, params)
+
+    def validate_options(self, options: dict[str, Any]) -> None:
         options_model(VOOptions, options, "vo")
+
+    def validate_dataset(self, dataset: dict[str, Any], options: dict[str, Any]) -> None:
         check_reader_options(dataset)
 
     def run(self, job: Job) -> TaskOutput:
