@@ -192,3 +192,15 @@ def test_few_kalman_kernels_reach_the_large_n_limit(stachniss):
     few = [run_protocol(stachniss, 100, s, kernel="kalman", ess_threshold=0.5, with_ape_rpe=False).metrics["mse_m2"]["mean"] for s in range(10)]
     many = [run_protocol(stachniss, 10000, s, with_ape_rpe=False).metrics["mse_m2"]["mean"] for s in range(10)]
     assert np.mean(few) <= 1.10 * np.mean(many), (np.mean(few), np.mean(many))
+
+
+def test_cli_on_the_bundled_sample_without_shared_data(capsys):
+    from lidarkit.samples import sample_path
+
+    with pytest.raises(SystemExit) as exc:
+        main(["pf", str(sample_path("freiburg_pf")), "--particles", "100", "--kernel", "kalman", "--ess-threshold", "0.5"])
+    assert exc.value.code in (0, None)
+    out = capsys.readouterr().out
+    mse = float(out.split("position MSE from step 10 (mean) [m²]")[1].split("│")[1])
+    dr = float(out.split("position MSE dead reckoning [m²]")[1].split("│")[1])
+    assert mse < dr / 10

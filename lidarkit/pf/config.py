@@ -58,7 +58,7 @@ class PFConfig(BaseModel):
     uniform_margin_m: float = 2.0
     recovery: Literal["none", "reinit"] = "none"
     dtype: Literal["float32", "float64"] = "float32"
-    noise_block_elements: int = 1 << 21
+    noise_block_elements: int = 1 << 17  # motion noise drawn for this many numbers at once (cache-sized)
 
     @field_validator("n_particles")
     @classmethod

@@ -59,12 +59,12 @@ def systematic(weights: np.ndarray, rng: np.random.Generator, n: int | None = No
     """One uniform offset, n evenly spaced pointers; counts computed from the scaled CDF (no search)."""
     n = weights.shape[0] if n is None else n
     cdf = _scaled_cdf(weights, n)
-    u0 = rng.random()
-    # number of pointers u0 + k (k = 0..n-1) below each cdf value
+    u0 = rng.random() or 0.5 / n  # u0 in (0, 1)
+    # number of pointers u0 + k (k = 0..n-1) at or below each cdf value: floor(cdf - u0) + 1, in [0, n]
     cdf -= u0
     np.floor(cdf, out=cdf)
     cdf += 1.0
-    np.clip(cdf, 0, n, out=cdf)
+    np.minimum(cdf, n, out=cdf)
     below = cdf.astype(np.int64)
     counts = np.empty_like(below)
     counts[0] = below[0]
