@@ -6,7 +6,7 @@ the harness: expansion, keys, resume checks, atomic JSON writes with fsync, proc
 serial executor, the process pool with 1 worker (pure overhead incl. start-up) and with the default worker
 count (the speed-up a user gets). Acceptance: harness wall time < 1.05 x the plain loop.
 
-    .venv/bin/python benchmarks/harness_overhead.py [--jobs 32] [--sleep-s 0.5] [--burn-size 500] [--dask]
+    .venv/bin/python benchmarks/harness_overhead.py [--jobs 32] [--sleep-s 0.5] [--burn-size 400] [--burn-repeats 100] [--dask]
 
 Writes ``benchmarks/results/bench/harness_overhead.{md,json}``.
 """
@@ -111,7 +111,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--jobs", type=int, default=32, help="jobs per workload")
     parser.add_argument("--sleep-s", type=float, default=0.5, help="seconds per sleep job")
     parser.add_argument("--burn-size", type=int, default=400, help="matrix size of a burn job")
-    parser.add_argument("--burn-repeats", type=int, default=20)
+    parser.add_argument("--burn-repeats", type=int, default=100)
     parser.add_argument("--repeats", type=int, default=2, help="interleaved repetitions (minimum reported)")
     parser.add_argument("--dask", action="store_true", help="also time a local Dask cluster (1 worker)")
     parser.add_argument("--out", type=Path, default=RESULTS)

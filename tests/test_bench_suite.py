@@ -241,3 +241,10 @@ def test_unavailable_task_is_skipped_only_when_asked(tmp_path, monkeypatch):
     suite = load_suite(path, skip_unavailable=True)
     assert [j.task for j in suite.jobs] == ["selftest"]
     assert suite.skipped == [("later_0", "needs lidarkit.nothing")]
+    from lidarkit.bench.report import build_report
+    from lidarkit.bench.runner import run_suite
+
+    run_suite(suite, tmp_path / "out", executor="serial")
+    report = build_report(tmp_path / "out", plots=False)
+    assert report.skipped == [("later_0", "needs lidarkit.nothing")]
+    assert "<li>later_0: needs lidarkit.nothing</li>" in report.html_path.read_text()

@@ -76,6 +76,7 @@ class Report:
     plots: list[Plot] = field(default_factory=list)
     failures: list[dict[str, Any]] = field(default_factory=list)
     warnings: list[tuple[str, str]] = field(default_factory=list)  # (job label, message)
+    skipped: list[tuple[str, str]] = field(default_factory=list)  # experiments the last run skipped (name, reason)
     n_records: int = 0
     html_path: Path | None = None
     markdown_path: Path | None = None
@@ -305,6 +306,8 @@ def _markdown(report: Report, title: str) -> str:
         out.append("")
     if report.plots:
         out += ["## Plots", ""] + [f"![{p.title}](plots/{p.filename})" for p in report.plots] + [""]
+    if report.skipped:
+        out += ["## Experiments not run", ""] + [f"- {name}: {reason}" for name, reason in report.skipped] + [""]
     if report.warnings:
         out += ["## Warnings logged by jobs", ""] + [f"- {label}: {message}" for label, message in report.warnings] + [""]
     if report.failures:
@@ -365,6 +368,12 @@ def _html(report: Report, title: str) -> str:
         for p in report.plots:
             data = base64.b64encode(p.png).decode("ascii")
             parts.append(f'<figure><img src="data:image/png;base64,{data}" alt="{e(p.title)}" width="540"><figcaption>{e(p.title)}</figcaption></figure>')
+    if report.skipped:
+        parts.append("<h2>Experiments not run</h2>")
+        parts.append("<ul>")
+        for name, reason in report.skipped:
+            parts.append(f"<li>{e(name)}: {e(reason)}</li>")
+        parts.append("</ul>")
     if report.warnings:
         parts.append("<h2>Warnings logged by jobs</h2>")
         parts.append("<ul>")
@@ -396,7 +405,7 @@ def build_report(out_dir: str | Path, *, title: str | None = None, plots: bool =
         raise DataError("no readable job results in jobs/", source=out_dir)
     if title is None:
         title = _suite_title(out_dir)
-    report = Report(out_dir=out_dir, tables=aggregate(records), n_records=len(records))
+    report = Report(out_dir=out_dir, tables=aggregate(records), n_records=len(records), skipped=_skipped(out_dir))
     for r in records:
         for message in r.get("warnings") or []:
             if len(report.warnings) < 100:
@@ -417,6 +426,14 @@ def build_report(out_dir: str | Path, *, title: str | None = None, plots: bool =
 def _label(record: dict[str, Any]) -> str:
     job = Job.from_spec(record["job"])
     return f"{job.task} | {job.experiment} | {job.dataset_name} | {job.method_label} | seed {job.seed}"
+
+
+def _skipped(out_dir: Path) -> list[tuple[str, str]]:
+    try:
+        manifest = json.loads((out_dir / "suite.json").read_text(encoding="utf-8"))
+        return [(str(s["experiment"]), str(s["reason"])) for s in manifest.get("skipped_experiments", [])]
+    except (OSError, ValueError, KeyError, TypeError):
+        return []
 
 
 def _suite_title(out_dir: Path) -> str:
