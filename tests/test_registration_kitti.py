@@ -103,3 +103,20 @@ def test_fast_gicp_pair_against_reference(lidar_pair, name, params):
     res = get_icp(name, **params).align(source, target)
     dt, dr = pose_error(res.T_target_source, T_ref)
     assert dt < 0.05 and dr < 0.5, (name, dt, dr)
+
+
+@pytest.mark.parametrize("name", ["vanilla", "open3d_gicp"])
+@pytest.mark.parametrize("pair", PAIRS)
+def test_road_only_patch_is_flagged_degenerate_full_scan_is_not(pairs, pair, name):
+    """Only the road (z < -1.5 m within 20 m): in-plane motion is unobservable -> flagged, never a silent result."""
+    src, dst, T_gt = pairs[pair]
+
+    def road(p):
+        return p[(p[:, 2] < -1.5) & (np.linalg.norm(p[:, :2], axis=1) < 20.0)]
+
+    res = get_icp(name).align(road(src), road(dst))
+    assert res.degeneracy.degenerate and "degenerate" in res.reason, res.degeneracy
+    w = np.abs(np.asarray(res.degeneracy.weakest_direction))
+    assert w[[0, 1, 5]].sum() > 0.9 * w.sum()  # x, y translation and yaw: the in-plane motions
+    full = get_icp("open3d_gicp").align(src, dst)
+    assert not full.degeneracy.degenerate and full.degeneracy.ratio > 0.1

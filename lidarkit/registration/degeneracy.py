@@ -7,7 +7,8 @@ the two normals of a line, ``I`` in volumetric clutter (local PCA of the target'
 neighbours). With ``J_i = [I, -[p_i]x / r]`` (points centred on their centroid, rotations scaled by
 the RMS radius ``r`` so that all six columns are in metres) the normal matrix is
 ``H = (1/n) sum J_i^T M_i J_i``. A plane leaves 3 zero eigenvalues, a line 2; the result is
-flagged ``degenerate`` when ``min(eig) / max(eig) < DEGENERACY_RATIO_THRESHOLD``.
+flagged ``degenerate`` when ``min(eig) / max(eig) < DEGENERACY_RATIO_THRESHOLD`` (1e-2). Measured on
+KITTI seq 00: full scans ~0.3, road-only patches (z < -1.5 m, 8-40 m around the car) 5e-4 to 6e-3.
 """
 
 from __future__ import annotations
@@ -18,6 +19,11 @@ from lidarkit.registration.base import DEGENERACY_RATIO_THRESHOLD, Degeneracy
 
 #: An eigen-direction of the local covariance is "thin" (constrained) below this fraction of the largest.
 THIN_RATIO = 0.1
+
+#: Local surfaces are estimated on the target voxelized at min(this, RMS radius / 10) so that the
+#: anisotropic sampling of a spinning LiDAR (dense along a ring, sparse across rings) does not make a
+#: flat road look like a set of lines.
+SURFACE_VOXEL_M = 0.5
 
 
 def surface_constraints(neighborhoods_xyz: np.ndarray) -> np.ndarray:
@@ -72,14 +78,17 @@ def assess_degeneracy(
     matched_target_index: np.ndarray,
     target_query=None,
     k: int = 20,
+    surface_voxel_m: float | None = SURFACE_VOXEL_M,
     max_points: int = 2000,
     seed: int = 0,
     threshold: float = DEGENERACY_RATIO_THRESHOLD,
 ) -> Degeneracy:
     """Degeneracy of matched pairs (``source_aligned_xyz[i]`` <-> ``target_xyz[matched_target_index[i]]``).
 
-    ``target_query(points, k) -> (n, k) indices`` finds target neighbourhoods (a cKDTree is built when
-    None). At most ``max_points`` pairs are used (a seeded random subset) to keep this cheap.
+    Local surfaces come from the ``k`` nearest neighbours in the target voxelized at
+    ``min(surface_voxel_m, RMS radius / 10)`` (``surface_voxel_m=None``: the raw target, searched with
+    ``target_query(points, k) -> (n, k) indices`` if given). At most ``max_points`` pairs are used (a
+    seeded random subset) to keep this cheap.
     """
     n = len(source_aligned_xyz)
     if n < 3:
@@ -88,16 +97,26 @@ def assess_degeneracy(
         pick = np.random.default_rng(seed).choice(n, size=max_points, replace=False)
         source_aligned_xyz = source_aligned_xyz[pick]
         matched_target_index = matched_target_index[pick]
-    k = int(min(k, len(target_xyz)))
     anchors = target_xyz[matched_target_index]
+    surface = target_xyz
+    if surface_voxel_m is not None:
+        from lidarkit.registration.preprocess import voxel_downsample
+
+        centred = target_xyz - target_xyz.mean(axis=0)
+        rms_radius = float(np.sqrt((centred * centred).sum(axis=1).mean()))
+        voxel = min(surface_voxel_m, rms_radius / 10.0)
+        if voxel > 0:
+            surface = voxel_downsample(target_xyz, voxel)
+        target_query = None
+    k = int(min(k, len(surface)))
     if target_query is None:
         from scipy.spatial import cKDTree
 
-        _, nbr = cKDTree(target_xyz).query(anchors, k=k)
+        _, nbr = cKDTree(surface).query(anchors, k=k)
     else:
         nbr = target_query(anchors, k)
     nbr = np.asarray(nbr).reshape(len(anchors), k)
-    constraints = surface_constraints(target_xyz[nbr])
+    constraints = surface_constraints(surface[nbr])
     return summarize(normal_matrix(source_aligned_xyz, constraints), threshold)
 
 
