@@ -407,3 +407,9 @@ def test_crop_and_ground_masks(rng):
     assert not ground_mask_by_plane(wall_only + [0, 0, -3.0]).any()  # vertical plane is never ground
     r = np.linalg.norm(crop_range(scene, 5.0, 15.0), axis=1)
     assert r.min() >= 5.0 and r.max() <= 15.0
+
+
+def test_kiss_range_crop_leaving_nothing_names_the_cloud(rng):
+    near = structured_cloud(rng, n=600) * 0.01  # everything within 0.3 m of the sensor
+    with pytest.raises(RegistrationError, match="source cloud.*within"):
+        get_icp("kiss", min_range_m=1.0).align(near, structured_cloud(rng, n=600))

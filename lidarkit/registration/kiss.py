@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 from pydantic import Field, model_validator
 
-from lidarkit.errors import ConfigError, DataError
+from lidarkit.errors import DataError, RegistrationError
 from lidarkit.geometry import as_points, is_rotation, orthonormalize_se3
 from lidarkit.registration.assessment import assess_alignment
 from lidarkit.registration.base import Registration, RegistrationConfig, RegistrationResult
@@ -142,8 +142,9 @@ class KissRegistration(Registration):
         no_times, identity = np.array([]), np.eye(4)
         target = crop.preprocess(np.ascontiguousarray(target_xyz), no_times, identity)
         source = crop.preprocess(np.ascontiguousarray(source_xyz), no_times, identity)
-        if len(target) < 3 or len(source) < 3:
-            raise ConfigError(f"fewer than 3 points within [{c.min_range_m}, {c.max_range_m}] m", source="kiss range crop")
+        for name, cloud in (("source cloud", source), ("target cloud", target)):
+            if len(cloud) < 3:
+                raise RegistrationError(f"only {len(cloud)} points within [{c.min_range_m}, {c.max_range_m}] m of the sensor", source=name)
         voxel = c.resolved_voxel_size_m
         local_map = get_voxel_hash_map(kcfg)
         local_map.update(voxel_down_sample(target, voxel * 0.5), identity)
