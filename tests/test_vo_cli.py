@@ -95,3 +95,30 @@ def test_image_folder_checks_counts(tmp_path):
         open_dataset("images", folder, timestamps=tmp_path / "t.txt")
     ds = open_dataset("images", folder)
     assert len(ds) == 3 and ds.read_image(2)[0, 0] == 100 and ds.K is None
+
+
+def test_vo_on_synthetic_tum_folder_with_calib_file(tmp_path, capsys):
+    """A TUM-layout folder (rgb.txt, rgb/*.png, groundtruth.txt) rendered by the synthetic camera."""
+    from lidarkit.sim.camera import default_K, forward_trajectory, make_plane_scene, render_sequence
+
+    traj = forward_trajectory(6)
+    K = default_K()
+    images = render_sequence(make_plane_scene(np.random.default_rng(3)), traj, K)
+    folder = tmp_path / "synthetic_tum"
+    (folder / "rgb").mkdir(parents=True)
+    lines = []
+    for i, (stamp, image) in enumerate(zip(traj.timestamps_s + 100.0, images)):
+        cv2.imwrite(str(folder / "rgb" / f"{stamp:.6f}.png"), cv2.cvtColor(image, cv2.COLOR_GRAY2BGR))
+        lines.append(f"{stamp:.6f} rgb/{stamp:.6f}.png")
+    (folder / "rgb.txt").write_text("# timestamp filename\n" + "\n".join(lines) + "\n")
+    Trajectory(traj.poses_se3, traj.timestamps_s + 100.0).to_tum(folder / "groundtruth.txt")
+    (tmp_path / "K.txt").write_text(" ".join(f"{v:.6f}" for v in K.ravel()) + "\n")
+    assert detect_kind(folder) == "tum"
+    out = tmp_path / "run"
+    code, stdout, _ = _run(["vo", str(folder), "--calib", str(tmp_path / "K.txt"), "--scale", "gt", "--out", str(out)],
+                           capsys)
+    assert code in (0, None) and "(tum," in stdout.replace("\n", "")
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["rejected"] == 0 and metrics["raw"]["ape_rmse_m"] < 0.01
+    est = Trajectory.from_tum(out / "poses_tum.txt")
+    np.testing.assert_allclose(est.timestamps_s, traj.timestamps_s + 100.0, atol=1e-6)
