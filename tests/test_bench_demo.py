@@ -28,6 +28,7 @@ def test_bundled_demo_suites_validate_and_run_or_explain_every_experiment(suite_
     assert tasks <= {"icp_pair", "odometry", "pf", "vo"}
 
 
+@pytest.mark.slow
 def test_quick_demo_writes_a_complete_report(tmp_path, capsys):
     out = tmp_path / "demo"
     with pytest.raises(SystemExit) as exc:

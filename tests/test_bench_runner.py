@@ -111,6 +111,7 @@ experiments:
 """
 
 
+@pytest.mark.slow
 def test_killed_run_resumes_without_redoing_finished_jobs(tmp_path):
     path = suite_file(tmp_path, SLEEPS)
     out = tmp_path / "out"
@@ -208,3 +209,34 @@ def test_unknown_executor_and_misplaced_address_are_config_errors(tmp_path):
     with pytest.raises(ConfigError, match="--address only applies to the dask executor"):
         run_suite(suite, tmp_path / "b", executor="process", address="tcp://127.0.0.1:8786")
     assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()  # refused before writing anything
+
+
+def test_job_warnings_go_into_the_result_and_the_report(tmp_path, capsys):
+    from lidarkit.bench.report import build_report
+
+    suite = load_suite(suite_file(tmp_path, """
+        experiments:
+          - task: selftest
+            dataset: {kind: synthetic}
+            methods: [{name: sleep, params: {seconds: 0, log_warning: "odd input, continuing"}}]
+        """))
+    run_suite(suite, tmp_path / "out", executor="serial")
+    (record,) = load_results(tmp_path / "out")
+    assert record["status"] == "ok"
+    assert record["warnings"] == ["WARNING lidarkit.bench.tasks.selftest: odd input, continuing"]
+    assert "odd input" not in capsys.readouterr().err  # captured, not printed over the progress bar
+    report = build_report(tmp_path / "out", plots=False)
+    assert "odd input, continuing" in report.html_path.read_text()
+
+
+def test_bench_dry_run_lists_jobs_and_runs_nothing(tmp_path, capsys):
+    from lidarkit.cli import main
+
+    path = suite_file(tmp_path, TINY)
+    with pytest.raises(SystemExit) as exc:
+        main(["bench", str(path), "--out", str(tmp_path / "out"), "--dry-run"])
+    assert exc.value.code == 0
+    out = capsys.readouterr().out
+    suite = load_suite(path)
+    assert all(job.key() in out for job in suite.jobs)
+    assert not (tmp_path / "out").exists()

@@ -111,8 +111,9 @@ def bench(
         from lidarkit.bench.results import is_finished
 
         table = Table(title=f"{suite.name}: {len(suite.jobs)} jobs")
-        for col in ("key", "task", "dataset", "method", "seed", "done"):
-            table.add_column(col)
+        table.add_column("key", no_wrap=True, min_width=20)
+        for col in ("task", "dataset", "method", "seed", "done"):
+            table.add_column(col, overflow="fold")
         for job in suite.jobs:
             key = job.key()
             table.add_row(key, job.task, job.dataset_name, job.method_label, str(job.seed), "yes" if is_finished(out, key) else "")

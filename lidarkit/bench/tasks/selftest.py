@@ -7,6 +7,7 @@ trajectory, an error curve and a fake RMSE history), ``sleep`` (waits), ``fail``
 
 from __future__ import annotations
 
+import logging
 import time
 from typing import Any
 
@@ -16,6 +17,8 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from lidarkit.bench.jobs import Job
 from lidarkit.bench.tasks import Metric, Task, TaskOutput
 from lidarkit.errors import ConfigError
+
+log = logging.getLogger(__name__)
 
 
 class _Params(BaseModel):
@@ -29,6 +32,7 @@ class RandomWalkParams(_Params):
 
 class SleepParams(_Params):
     seconds: float = Field(0.1, ge=0.0, le=3600.0)
+    log_warning: str | None = Field(None, description="log this as a WARNING (tests warning capture)")
 
 
 class FailParams(_Params):
@@ -65,6 +69,8 @@ def run_selftest(method: str, params: dict[str, Any], seed: int) -> TaskOutput:
     """The job function of every selftest method (module level, so it is callable without the harness)."""
     config = selftest_config(method, **params)
     if isinstance(config, SleepParams):
+        if config.log_warning:
+            log.warning("%s", config.log_warning)
         time.sleep(config.seconds)
         return TaskOutput(metrics={"slept_s": config.seconds})
     if isinstance(config, FailParams):
