@@ -248,3 +248,20 @@ def test_unavailable_task_is_skipped_only_when_asked(tmp_path, monkeypatch):
     report = build_report(tmp_path / "out", plots=False)
     assert report.skipped == [("later_0", "needs lidarkit.nothing")]
     assert "<li>later_0: needs lidarkit.nothing</li>" in report.html_path.read_text()
+
+
+def test_reader_path_options_resolve_against_dataset_then_suite_folder(tmp_path):
+    from lidarkit.bench.datasets import resolve_option_paths
+
+    (tmp_path / "data" / "scans").mkdir(parents=True)
+    (tmp_path / "data" / "scans" / "poses.txt").write_text("")
+    (tmp_path / "suites").mkdir()
+    (tmp_path / "suites" / "times.txt").write_text("")
+    spec = {"kind": "folder", "path": str(tmp_path / "data" / "scans"), "poses": "poses.txt",
+            "timestamps": "times.txt", "poses_format": "kitti"}
+    out = resolve_option_paths(spec, tmp_path / "suites")
+    assert out["poses"] == str(tmp_path / "data" / "scans" / "poses.txt")  # inside the dataset folder
+    assert out["timestamps"] == str(tmp_path / "suites" / "times.txt")  # beside the suite file
+    assert out["poses_format"] == "kitti"  # not a path option: untouched
+    sample = {"kind": "folder", "path": "sample:kitti_pair", "poses": "poses.txt"}
+    assert resolve_option_paths(sample, tmp_path) == sample

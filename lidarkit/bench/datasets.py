@@ -57,6 +57,39 @@ def resolve_dataset(spec: dict[str, Any], base_dir: Path) -> dict[str, Any]:
     return resolved
 
 
+def resolve_option_paths(spec: dict[str, Any], base_dir: Path) -> dict[str, Any]:
+    """Make relative path options of a reader absolute (e.g. ``velodyne_dir``, ``poses``).
+
+    Options the reader's signature types as ``os.PathLike`` are looked up first inside the dataset folder,
+    then beside the suite file; the first that exists becomes an absolute path (anything else is left to
+    the reader). Bundled samples and generated kinds are left alone.
+    """
+    kind, path = spec.get("kind"), spec.get("path")
+    if kind in PATHLESS_KINDS or not path or str(path).startswith(SAMPLE_PREFIX):
+        return spec
+    import inspect
+
+    from lidarkit.io import get_reader
+
+    try:
+        params = inspect.signature(get_reader(kind)).parameters
+    except (ConfigError, TypeError, ValueError):
+        return spec
+    data_dir = Path(path) if Path(path).is_dir() else Path(path).parent
+    out = dict(spec)
+    for key, value in dataset_options(spec).items():
+        if key not in params or not isinstance(value, str) or Path(value).is_absolute():
+            continue
+        if "PathLike" not in str(params[key].annotation):
+            continue
+        for root in (data_dir, base_dir):
+            candidate = (root / value).resolve()
+            if candidate.exists():
+                out[key] = str(candidate)
+                break
+    return out
+
+
 def dataset_path(spec: dict[str, Any]) -> Path:
     """The filesystem path of a resolved dataset spec (bundled samples resolved here)."""
     path = spec.get("path")

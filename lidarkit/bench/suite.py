@@ -16,7 +16,7 @@ from typing import Any
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
-from lidarkit.bench.datasets import SAMPLE_PREFIX, dataset_label, resolve_dataset
+from lidarkit.bench.datasets import SAMPLE_PREFIX, dataset_label, resolve_dataset, resolve_option_paths
 from lidarkit.bench.jobs import Job
 from lidarkit.bench.tasks import get_task
 from lidarkit.errors import ConfigError, DataError, LidarKitError
@@ -211,7 +211,7 @@ def load_suite(path: str | Path, *, skip_unavailable: bool = False, only_tasks: 
         missing_sample = None
         for loc, spec in datasets:
             try:
-                spec = resolve_dataset(spec, base_dir)
+                spec = resolve_option_paths(resolve_dataset(spec, base_dir), base_dir)
                 if task.dataset_kinds and spec["kind"] not in task.dataset_kinds:
                     raise ConfigError(
                         f"task {exp.task!r} does not take dataset kind {spec['kind']!r}; it takes: {', '.join(task.dataset_kinds)}",
