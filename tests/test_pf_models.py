@@ -40,8 +40,9 @@ def test_motion_model_matches_integration_without_noise_and_has_the_stated_sprea
     np.testing.assert_allclose(states[:, 0], integrate_odometry(odo[None])[1], atol=1e-12)
     model = OdometryMotionModel((0.01, 0.1, 0.02))
     states = np.zeros((3, 20000), dtype=np.float32)
-    noise = model.sample_noise(rng, 1, 20000, np.float32)[0]
-    model.apply(states, odo, noise)
+    controls = model.controls_block(rng, odo[None], 4, 20000, np.float32)
+    assert controls.shape == (1, 3, 20000)  # noise drawn for 4 steps, 1 step of odometry left
+    model.apply_controls(states, controls[0])
     travel = np.hypot(states[0], states[1])
     assert np.std(travel) == pytest.approx(0.1, rel=0.05)
     assert np.std(states[2]) == pytest.approx(np.hypot(0.01, 0.02), rel=0.05)
@@ -237,3 +238,28 @@ def test_moment_matching_preserves_weighted_mean_and_covariance():
     np.testing.assert_allclose(mean_a[:2], mean_b[:2], atol=1e-9)
     assert mean_a[2] == pytest.approx(mean_b[2], abs=1e-4)  # circular mean: matched to first order
     np.testing.assert_allclose(cov_a, cov_b, atol=1e-6)
+
+
+def test_systematic_count_path_matches_search_path():
+    rng = np.random.default_rng(11)
+    w = rng.random(30000) ** 4
+    w /= w.sum()
+    idx = get_resampler("systematic")(w, np.random.default_rng(5))  # counts + repeat, no search
+    u0 = np.random.default_rng(5).random()
+    cdf = np.cumsum(w) * 30000 / w.sum()
+    cdf[-1] = 30000
+    expected = np.minimum(np.searchsorted(cdf, np.arange(30000) + u0, side="left"), 29999)
+    np.testing.assert_array_equal(idx, expected)
+
+
+def test_sequence_prediction_equals_step_by_step_prediction():
+    odo = np.array([[0.1, 0.2, -0.05], [0.0, 0.1, 0.02], [-0.2, 0.3, 0.0]] * 5)
+    cfg = PFConfig.make(n_particles=500, dtype="float64", noise_block_elements=3 * 500 * 4)
+    a, b = ParticleFilter(LANDMARKS, cfg, 9), ParticleFilter(LANDMARKS, cfg, 9)
+    b.begin_odometry(odo)
+    for u in odo:
+        a.predict(u)
+        b.predict_next()
+    np.testing.assert_allclose(a.particles, b.particles, atol=1e-12)
+    with pytest.raises(DataError, match="no odometry left"):
+        b.predict_next()

@@ -38,8 +38,15 @@ class ParticleFilter:
         self._landmarks_typed = lm.astype(self.dtype)
         self._noise_block: np.ndarray | None = None
         self._noise_pos = 0
-        self._work = np.empty(self.n, dtype=self.dtype)
+        self._scratch = (np.empty(self.n, dtype=self.dtype), np.empty(self.n, dtype=self.dtype))
+        self._controls = np.empty((3, self.n), dtype=self.dtype)
+        self._estimate_buf = np.empty((4, self.n), dtype=self.dtype)
         self._has_motion_noise = bool(self.motion.noise_std.any())
+        self._odometry: np.ndarray | None = None
+        self._odometry_pos = 0
+        self._control_block: np.ndarray | None = None
+        self._control_pos = 0
+        self._uniform_w: np.ndarray | None = None
         self.n_updates = 0
         self.n_resamples = 0
         self.n_weight_resets = 0
@@ -84,21 +91,34 @@ class ParticleFilter:
             w = np.asarray(weights, dtype=np.float64)
             if w.shape != (self.n,) or not np.isfinite(w).all() or (w < 0).any() or w.sum() <= 0:
                 raise DataError("weights must be finite, >= 0, not all zero, shape (N,)", source="set_particles")
-            self.weights = w / w.sum()
+            self.weights = (w / w.sum()).astype(self.dtype)
             with np.errstate(divide="ignore"):
                 self.log_weights = np.log(self.weights)
             self._uniform = False
 
     def _reset_weights(self) -> None:
         # shared read-only arrays: every update creates new weight arrays
-        if getattr(self, "_uniform_w", None) is None:
-            self._uniform_w = np.full(self.n, 1.0 / self.n)
-            self._uniform_lw = np.full(self.n, -np.log(self.n))
+        if self._uniform_w is None:
+            self._uniform_w = np.full(self.n, 1.0 / self.n, dtype=self.dtype)
+            self._uniform_lw = np.full(self.n, -np.log(self.n), dtype=self.dtype)
             self._uniform_w.flags.writeable = False
             self._uniform_lw.flags.writeable = False
         self.weights = self._uniform_w
-        self.log_weights = self._uniform_lw
+        self._lw_shifted = None
+        self._log_weights = self._uniform_lw
         self._uniform = True
+
+    @property
+    def log_weights(self) -> np.ndarray:
+        """Normalized log-weights ``(N,)`` (computed on demand after an update)."""
+        if self._log_weights is None:
+            self._log_weights = self._lw_shifted - self._log_sum
+        return self._log_weights
+
+    @log_weights.setter
+    def log_weights(self, value: np.ndarray) -> None:
+        self._log_weights = value
+        self._lw_shifted = None
 
     # ---- views ------------------------------------------------------------------------------------
     @property
@@ -129,8 +149,37 @@ class ParticleFilter:
             if not np.isfinite(u).all():
                 raise DataError(f"non-finite odometry {u.tolist()}", source="predict")
             odometry = u
-        noise = self._next_noise() if self._has_motion_noise else None
-        self.motion.apply(self.states, odometry, noise, self._work)
+        r1, t, r2 = (self.dtype.type(v) for v in odometry)
+        c = self._controls
+        if self._has_motion_noise:
+            noise = self._next_noise()
+            np.add(noise[0], r1, out=c[0])
+            np.add(noise[1], t, out=c[1])
+            np.add(noise[2], r2, out=c[2])
+            c[2] += c[0]
+        else:
+            c[0], c[1], c[2] = r1, t, r1 + r2
+        self.motion.apply_controls(self.states, c, self._scratch)
+
+    def begin_odometry(self, odometry: np.ndarray) -> None:
+        """Announce a whole ``(T, 3)`` odometry sequence for :meth:`predict_next` (validated by the caller)."""
+        self._odometry = np.asarray(odometry, dtype=np.float64).reshape(-1, 3)
+        self._odometry_pos = 0
+        self._control_block = None
+
+    def predict_next(self) -> None:
+        """Predict with the next step of the announced odometry; noisy controls are formed per block of steps."""
+        if self._odometry is None or self._odometry_pos >= len(self._odometry):
+            raise DataError("no odometry left: call begin_odometry(odometry) first", source="predict_next")
+        if self._control_block is None or self._control_pos >= self._control_block.shape[0]:
+            steps = max(1, self.config.noise_block_elements // (3 * self.n))
+            self._control_block = self.motion.controls_block(
+                self.rng, self._odometry[self._odometry_pos :], steps, self.n, self.dtype, self.config.antithetic
+            )
+            self._control_pos = 0
+        self.motion.apply_controls(self.states, self._control_block[self._control_pos], self._scratch)
+        self._control_pos += 1
+        self._odometry_pos += 1
 
     # ---- update -----------------------------------------------------------------------------------
     def log_likelihood(self, landmark_index: np.ndarray, z: np.ndarray) -> np.ndarray:
@@ -164,10 +213,10 @@ class ParticleFilter:
     def apply_log_likelihood(self, ll: np.ndarray) -> None:
         """Add ``ll`` ``(N,)`` to the log-weights and renormalize with log-sum-exp (never underflows to all zero)."""
         was_uniform = self._uniform
-        lw = ll.astype(np.float64) if was_uniform else ll + self.log_weights
+        lw = ll.astype(self.dtype) if was_uniform else ll + self.log_weights
         m = lw.max()
         if not np.isfinite(m):  # NaN / inf somewhere, or every particle impossible
-            lw = np.where(np.isfinite(lw), lw, -np.inf)
+            lw = np.where(np.isfinite(lw), lw, -np.inf).astype(self.dtype)
             m = lw.max()
             if not np.isfinite(m):
                 self.n_weight_resets += 1
@@ -178,10 +227,10 @@ class ParticleFilter:
         self.last_max_loglik = float(m) if was_uniform else float(ll.max())
         lw -= m
         w = np.exp(lw)
-        s = w.sum()
-        w /= s
-        lw -= np.log(s)
-        self.weights, self.log_weights, self._uniform = w, lw, False
+        s = w.sum(dtype=np.float64)
+        w /= self.dtype.type(s)
+        self.weights, self._uniform = w, False
+        self._lw_shifted, self._log_sum, self._log_weights = lw, self.dtype.type(np.log(s)), None
         self.n_updates += 1
 
     # ---- resample ---------------------------------------------------------------------------------
@@ -265,13 +314,15 @@ class ParticleFilter:
             return self.states[:, int(np.argmax(self.weights))].astype(np.float64)
         if kind != "mean":
             raise ConfigError(f"unknown estimator {kind!r}; known: mean, best", source="estimator")
-        w = self.weights.astype(self.dtype)
-        theta = self.states[2]
-        # multiply + sum instead of BLAS matmul: no thread start-up cost, same result on every machine
-        x = np.add.reduce(self.states[0] * w)
-        y = np.add.reduce(self.states[1] * w)
-        c = np.add.reduce(np.cos(theta) * w)
-        s = np.add.reduce(np.sin(theta) * w)
+        buf = self._estimate_buf  # rows x, y, cos(theta), sin(theta)
+        np.copyto(buf[:2], self.states[:2])
+        np.cos(self.states[2], out=buf[2])
+        np.sin(self.states[2], out=buf[3])
+        w = self.weights
+        if self.n <= 16384:  # single-threaded BLAS matrix-vector product
+            x, y, c, s = buf @ w
+        else:  # multiply + sum: BLAS threads would spin against other jobs for large N
+            x, y, c, s = np.add.reduce(buf * w, axis=1)
         return np.array([x, y, np.arctan2(s, c)], dtype=np.float64)
 
     # ---- consistency ------------------------------------------------------------------------------

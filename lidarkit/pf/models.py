@@ -92,27 +92,56 @@ class OdometryMotionModel:
         eps *= self.noise_std.astype(eps.dtype)[None, :, None]
         return eps
 
+    def controls_block(
+        self, rng: np.random.Generator, odometry_ahead: np.ndarray, n_steps: int, n_particles: int, dtype=np.float32,
+        antithetic: bool = False,
+    ) -> np.ndarray:
+        """Noisy controls for the next ``k = min(n_steps, len(odometry_ahead))`` steps in one draw: ``(k, 3, N)``.
+
+        Rows: heading increment before travel ``r1 + e1``, travel ``t + e2``, total turn ``r1 + e1 + r2 + e3``.
+        The noise is always drawn for ``n_steps`` steps, so the random stream does not depend on where a
+        sequence ends.
+        """
+        u = np.asarray(odometry_ahead[:n_steps], dtype=np.float64).reshape(-1, 3).astype(dtype)
+        k = len(u)
+        if self.noise_std.any():
+            c = self.sample_noise(rng, n_steps, n_particles, dtype, antithetic)[:k]
+        else:
+            c = np.zeros((k, 3, n_particles), dtype=dtype)
+        c[:, 0] += u[:, 0, None]
+        c[:, 1] += u[:, 1, None]
+        c[:, 2] += u[:, 2, None]
+        c[:, 2] += c[:, 0]
+        return c
+
     @staticmethod
-    def apply(states: np.ndarray, odometry: np.ndarray, noise: np.ndarray | None, work: np.ndarray | None = None) -> None:
-        """Move ``states`` ``(3, N)`` in place by ``odometry`` ``[r1, t, r2]`` plus per-particle ``noise`` ``(3, N)``."""
-        r1, t, r2 = odometry
+    def apply_controls(states: np.ndarray, controls: np.ndarray, scratch: tuple[np.ndarray, np.ndarray] | None = None) -> None:
+        """Move ``states`` ``(3, N)`` in place by per-particle noisy ``controls`` ``(3, N)`` (or ``(3, 1)``), rows as above."""
         x, y, theta = states
-        dtype = states.dtype.type
+        s1, s2 = scratch if scratch is not None else (np.empty_like(theta), np.empty_like(theta))
+        heading = np.add(theta, controls[0], out=s1)
+        step = np.cos(heading, out=s2)
+        step *= controls[1]
+        x += step
+        np.sin(heading, out=s2)
+        s2 *= controls[1]
+        y += s2
+        theta += controls[2]
+
+    @staticmethod
+    def apply(states: np.ndarray, odometry: np.ndarray, noise: np.ndarray | None = None) -> None:
+        """Move ``states`` ``(3, N)`` in place by ``odometry`` ``[r1, t, r2]`` plus optional scaled noise ``(3, N)``."""
+        r1, t, r2 = (float(v) for v in odometry)
+        dtype = states.dtype
         if noise is None:
-            heading = theta + dtype(r1)
-            x += dtype(t) * np.cos(heading)
-            y += dtype(t) * np.sin(heading)
-            theta += dtype(r1 + r2)
-            return
-        heading = work if work is not None else np.empty_like(theta)
-        np.add(theta, noise[0], out=heading)
-        heading += dtype(r1)
-        travel = noise[1] + dtype(t)
-        x += travel * np.cos(heading)
-        y += travel * np.sin(heading)
-        theta += noise[0]
-        theta += noise[2]
-        theta += dtype(r1 + r2)
+            controls = np.array([[r1], [t], [r1 + r2]], dtype=dtype)
+        else:
+            controls = np.empty((3, states.shape[1]), dtype=dtype)
+            np.add(noise[0], dtype.type(r1), out=controls[0])
+            np.add(noise[1], dtype.type(t), out=controls[1])
+            np.add(noise[2], dtype.type(r2), out=controls[2])
+            controls[2] += controls[0]
+        OdometryMotionModel.apply_controls(states, controls)
 
 
 def resolve_q(q: np.ndarray | tuple, q_as: str = "variance") -> np.ndarray:

@@ -210,12 +210,18 @@ def run_filter(
         snaps[0] = (pf.particles.astype(np.float64), pf.weights.copy())
     nis_values: list[np.ndarray] = []
     offsets = readings.offsets.tolist()
+    sequence = hasattr(pf, "begin_odometry")
+    if sequence:
+        pf.begin_odometry(odometry)
     recover = pf.config.recovery == "reinit"
     nearest = pf.config.likelihood == "nearest"
     n_recoveries = 0
     t0 = time.perf_counter()
     for t in range(T):
-        pf.predict(odometry_rows[t], check=False)
+        if sequence:
+            pf.predict_next()
+        else:
+            pf.predict(odometry_rows[t], check=False)
         a, b = offsets[t], offsets[t + 1]
         if b > a:
             idx, z = lm_index[a:b], z_all[a:b]

@@ -84,6 +84,7 @@ def stratified(weights: np.ndarray, rng: np.random.Generator, n: int | None = No
 
 def residual(weights: np.ndarray, rng: np.random.Generator, n: int | None = None) -> np.ndarray:
     """floor(n w_i) deterministic copies, the remainder drawn multinomially from the residual weights."""
+    weights = np.asarray(weights, dtype=np.float64)
     n = weights.shape[0] if n is None else n
     scaled = weights * (n / weights.sum())
     counts = np.floor(scaled).astype(np.int64)
