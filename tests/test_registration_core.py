@@ -413,3 +413,23 @@ def test_kiss_range_crop_leaving_nothing_names_the_cloud(rng):
     near = structured_cloud(rng, n=600) * 0.01  # everything within 0.3 m of the sensor
     with pytest.raises(RegistrationError, match="source cloud.*within"):
         get_icp("kiss", min_range_m=1.0).align(near, structured_cloud(rng, n=600))
+
+
+def test_small_gicp_missing_is_unlisted_with_a_logged_note():
+    code = textwrap.dedent(
+        """
+        import logging, sys
+        logging.basicConfig(level=logging.INFO, format="%(name)s %(message)s")
+        sys.modules["small_gicp"] = None  # import fails as if not installed
+        from lidarkit.registration import available_icp, get_icp
+        from lidarkit.errors import ConfigError
+        assert "small_gicp" not in available_icp() and "vanilla" in available_icp()
+        try:
+            get_icp("small_gicp")
+        except ConfigError as err:
+            print("config error:", err)
+        """
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert "small_gicp not installed" in out.stderr and "unknown ICP method 'small_gicp'" in out.stdout
