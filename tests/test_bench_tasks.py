@@ -12,7 +12,7 @@ from lidarkit.bench.jobs import Job
 from lidarkit.bench.suite import load_suite
 from lidarkit.bench.tasks import get_task
 from lidarkit.bench.worker import execute_job
-from lidarkit.errors import ConfigError
+from lidarkit.errors import ConfigError, DataError
 
 registration = pytest.importorskip("lidarkit.registration")
 if not hasattr(registration, "get_icp"):
@@ -187,3 +187,35 @@ def test_vo_job_validates_presets_and_matches_a_direct_run(tmp_path):
     assert record["info"]["align"] == "se3"
     assert record["metrics"]["ape_rmse_m"] == pytest.approx(ape.rmse, rel=1e-9)
     assert record["metrics"]["ape_rmse_m"] < 0.1 and record["metrics"]["n_frames"] == 6
+
+
+def test_icp_pair_on_the_bundled_pair_with_seeded_initial_perturbation(tmp_path):
+    from lidarkit.samples import sample_path
+
+    sample_path("kitti_pair")  # DataError (a failure) if the sample is not bundled
+    path = write(tmp_path, """
+        seeds: [0, 1]
+        experiments:
+          - task: icp_pair
+            dataset: {kind: folder, path: "sample:kitti_pair"}
+            options: {pairs: [[0, 1]], ground_truth_file: T_target_source.txt, init_noise_m: 0.3, init_noise_deg: 2.0}
+            methods: [{name: open3d_point_to_plane, params: {voxel_size_m: 0.5}}]
+        """)
+    suite = load_suite(path)
+    assert [j.dataset["path"] for j in suite.jobs] == ["sample:kitti_pair"] * 2  # install-independent keys
+    a, b = (execute_job(j.spec()) for j in suite.jobs)
+    again = execute_job(suite.jobs[0].spec())
+    assert a["status"] == b["status"] == "ok", (a["error"], b["error"])
+    assert again["metrics"]["translation_error_m"] == a["metrics"]["translation_error_m"]  # seeded start
+    assert a["metrics"]["translation_error_m"] != b["metrics"]["translation_error_m"]  # different seeds, starts
+    assert max(a["metrics"]["translation_error_m"], b["metrics"]["translation_error_m"]) < 0.05
+    bad = write(tmp_path, """
+        experiments:
+          - task: icp_pair
+            dataset: {kind: folder, path: "sample:kitti_pair"}
+            options: {pairs: [[0, 1]], ground_truth_file: missing.txt}
+            methods: [vanilla]
+        """)
+    with pytest.raises(DataError, match="missing.txt") as info:
+        load_suite(bad)
+    assert "experiments[0].dataset" in str(info.value)
