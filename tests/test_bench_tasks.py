@@ -206,7 +206,8 @@ def test_icp_pair_on_the_bundled_pair_with_seeded_initial_perturbation(tmp_path)
     a, b = (execute_job(j.spec()) for j in suite.jobs)
     again = execute_job(suite.jobs[0].spec())
     assert a["status"] == b["status"] == "ok", (a["error"], b["error"])
-    assert again["metrics"]["translation_error_m"] == a["metrics"]["translation_error_m"]  # seeded start
+    # seeded start; Open3D's multi-threaded reductions may differ in the last bits between runs
+    assert again["metrics"]["translation_error_m"] == pytest.approx(a["metrics"]["translation_error_m"], rel=1e-9)
     assert a["metrics"]["translation_error_m"] != b["metrics"]["translation_error_m"]  # different seeds, starts
     assert max(a["metrics"]["translation_error_m"], b["metrics"]["translation_error_m"]) < 0.05
     bad = write(tmp_path, """
