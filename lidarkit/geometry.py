@@ -58,7 +58,8 @@ def se3_inverse(T: np.ndarray) -> np.ndarray:
 def transform_points(T: np.ndarray, points_xyz: np.ndarray) -> np.ndarray:
     """Apply a 4x4 pose to ``(N, 3)`` points."""
     T = np.asarray(T, dtype=np.float64)
-    return np.asarray(points_xyz, dtype=np.float64) @ T[:3, :3].T + T[:3, 3]
+    # einsum, not a tall matmul: multi-threaded BLAS on (N, 3) x (3, 3) is ~10x slower on a loaded machine
+    return np.einsum("ij,nj->ni", T[:3, :3], np.asarray(points_xyz, dtype=np.float64)) + T[:3, 3]
 
 
 def skew(v: np.ndarray) -> np.ndarray:
