@@ -265,3 +265,17 @@ def test_reader_path_options_resolve_against_dataset_then_suite_folder(tmp_path)
     assert out["poses_format"] == "kitti"  # not a path option: untouched
     sample = {"kind": "folder", "path": "sample:kitti_pair", "poses": "poses.txt"}
     assert resolve_option_paths(sample, tmp_path) == sample
+
+
+def test_uninstalled_methods_are_skipped_only_when_asked(tmp_path, monkeypatch):
+    from lidarkit.bench.tasks.selftest import SelfTestTask
+
+    monkeypatch.setattr(SelfTestTask, "available_methods", lambda self: ["sleep"])  # as if 'burn' were an absent extra
+    path = write(tmp_path, """
+        experiments:
+          - {name: e, task: selftest, dataset: {kind: synthetic}, methods: [sleep, burn]}
+        """)
+    assert {j.method for j in load_suite(path).jobs} == {"sleep", "burn"}  # a plain run validates, never skips
+    suite = load_suite(path, skip_unavailable=True)
+    assert [j.method for j in suite.jobs] == ["sleep"]
+    assert suite.skipped == [("e: burn", "method 'burn' is not installed (available: sleep)")]

@@ -178,8 +178,9 @@ def read_suite_file(path: str | Path) -> tuple[SuiteModel, _Locator]:
 def load_suite(path: str | Path, *, skip_unavailable: bool = False, only_tasks: set[str] | None = None) -> Suite:
     """Read, validate and expand a suite file into jobs; raise on the first problem, before anything runs.
 
-    ``skip_unavailable``: experiments whose task module or bundled ``sample:`` dataset is not installed are
-    skipped (listed in ``Suite.skipped``) instead of refused — what ``lidarkit demo`` does. ``only_tasks`` keeps only those tasks.
+    ``skip_unavailable``: experiments whose task module or bundled ``sample:`` dataset is not installed, and
+    methods the task does not have here (an optional extra such as ``small_gicp``), are skipped (listed in
+    ``Suite.skipped``) instead of refused — what ``lidarkit demo`` does. ``only_tasks`` keeps only those tasks.
     """
     path = Path(path).resolve()
     model, locator = read_suite_file(path)
@@ -234,9 +235,15 @@ def load_suite(path: str | Path, *, skip_unavailable: bool = False, only_tasks: 
         seeds = _seeds(exp.seeds if exp.seeds is not None else model.seeds)
         if not seeds:
             raise ConfigError("no seeds", source=path, location=locator.location((*exp_loc, "seeds")))
+        installed = task.available_methods() if skip_unavailable else None
         for j, method in enumerate(exp.methods):
             method = MethodSpec(name=method) if isinstance(method, str) else method
             m_loc = (*exp_loc, "methods", j)
+            if installed is not None and method.name not in installed:
+                reason = f"method {method.name!r} is not installed (available: {', '.join(installed)})"
+                skipped.append((f"{exp_name}: {method.name}", reason))
+                log.info("skipping %s in %s: %s", method.name, exp_name, reason)
+                continue
             overlap = set(method.params) & set(method.grid)
             if overlap:
                 raise ConfigError(f"{', '.join(sorted(overlap))} given both in params and grid", source=path, location=locator.location(m_loc))

@@ -68,6 +68,10 @@ class Task:
     def require(self) -> None:
         """Raise ConfigError when the modules this task needs are not installed / not there yet."""
 
+    def available_methods(self) -> list[str] | None:
+        """Method names usable here (e.g. registered ICP variants; optional extras may be absent), None if open."""
+        return None
+
     def validate_options(self, options: dict[str, Any]) -> None:
         """Raise ConfigError for bad experiment ``options``; called once per experiment before the run."""
         if options:

@@ -91,6 +91,11 @@ class IcpPairTask(Task):
     def require(self) -> None:
         import_module_for_task("icp_pair", "lidarkit.registration")
 
+    def available_methods(self) -> list[str] | None:
+        from lidarkit.registration import available_icp
+
+        return available_icp()
+
     def validate_options(self, options: dict[str, Any]) -> None:
         opts = options_model(IcpPairOptions, options, "icp_pair")
         if opts.ground_truth_file is not None and (not opts.pairs or len(opts.pairs) != 1):

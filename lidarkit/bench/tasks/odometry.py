@@ -68,6 +68,11 @@ class OdometryTask(Task):
         if not hasattr(odometry, "run"):
             raise ConfigError("lidarkit.odometry has no run()", source="task")
 
+    def available_methods(self) -> list[str] | None:
+        from lidarkit.registration import available_icp
+
+        return available_icp()
+
     def validate_options(self, options: dict[str, Any]) -> None:
         options_model(OdometryOptions, options, "odometry")
 

@@ -52,6 +52,9 @@ class ParticleFilterTask(Task):
     def require(self) -> None:
         _pf_api()
 
+    def available_methods(self) -> list[str] | None:
+        return list(METHODS)
+
     def validate_options(self, options: dict[str, Any]) -> None:
         opts = options_model(PFOptions, options, "pf")
         from lidarkit.pf.protocol import VISIBILITY

@@ -120,6 +120,9 @@ class SelfTestTask(Task):
     )
     sweep_plots = (("noise_m", "ape_rmse_m"),)
 
+    def available_methods(self) -> list[str] | None:
+        return sorted(METHODS)
+
     def validate(self, method: str, params: dict[str, Any], dataset: dict[str, Any], options: dict[str, Any]) -> None:
         selftest_config(method, **params)
 

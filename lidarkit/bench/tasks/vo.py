@@ -63,6 +63,9 @@ class VisualOdometryTask(Task):
             raise ConfigError(f"unknown VO method {method!r}; known presets: {', '.join(vo.available_presets())}", source="method")
         _config(vo, method, params)
 
+    def available_methods(self) -> list[str] | None:
+        return list(_vo_api().available_presets())
+
     def validate_options(self, options: dict[str, Any]) -> None:
         options_model(VOOptions, options, "vo")
 
