@@ -110,7 +110,13 @@ def test_report_tables_are_mean_and_sample_std_over_seeds(results_dir):
         lines = list(csv.DictReader(fh))
     row = next(r for r in lines if r["method"] == "random_walk(noise_m=0.03, steps=40)" and r["metric"] == "ape_rmse_m")
     assert float(row["mean"]) == pytest.approx(mean, rel=1e-12) and row["n"] == "3"
+    from lidarkit.bench.report import format_stat, pivot
+
+    header, prow = pivot(table, "ape_rmse_m")
+    assert header == ["method", "synth"]
+    assert ["walk: random_walk(noise_m=0.03, steps=40)", format_stat((mean, std, n))] in prow
     md = report.markdown_path.read_text()
+    assert "APE RMSE [m], methods x datasets:" in md
     assert "| walk | synth | random_walk(noise_m=0.03, steps=40) | 3/0 |" in md
     assert "Failed jobs" in md
 

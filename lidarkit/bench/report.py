@@ -296,12 +296,35 @@ def _table_rows(table: TaskTable) -> tuple[list[str], list[list[str]]]:
     return header, rows
 
 
+def pivot(table: TaskTable, metric: str) -> tuple[list[str], list[list[str]]]:
+    """Methods x datasets for one metric (``experiment: method`` rows, dataset columns, mean ± std cells)."""
+    datasets = sorted({r.dataset for r in table.rows})
+    cells: dict[str, dict[str, str]] = {}
+    for r in table.rows:
+        cells.setdefault(f"{r.experiment}: {r.method}", {})[r.dataset] = format_stat(r.stats[metric])
+    header = ["method"] + datasets
+    return header, [[label] + [row.get(d, "") for d in datasets] for label, row in cells.items()]
+
+
+def _pivot_metrics(table: TaskTable) -> list[MetricInfo]:
+    """The first accuracy metric and the first speed metric: the methods x datasets views."""
+    first = [m for m in table.metrics if m.kind == "accuracy"][:1]
+    speed = [m for m in table.metrics if m.kind == "speed" and m.name != "runtime_s"][:1]
+    return first + (speed or [m for m in table.metrics if m.name == "runtime_s"])
+
+
 def _markdown(report: Report, title: str) -> str:
     out = [f"# {title}", "", f"Generated {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC from {report.n_records} job results "
            f"in `{report.out_dir}`. Cells: mean ± std over seeds (sample std).", ""]
     for table in report.tables:
+        out += [f"## {table.task}", ""]
+        for m in _pivot_metrics(table):
+            header, rows = pivot(table, m.name)
+            out += [f"{m.label}, methods x datasets:", "", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+            out += ["| " + " | ".join(c.replace("|", "\\|") for c in row) + " |" for row in rows]
+            out.append("")
         header, rows = _table_rows(table)
-        out += [f"## {table.task}", "", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+        out += ["All metrics:", "", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
         out += ["| " + " | ".join(c.replace("|", "\\|") for c in row) + " |" for row in rows]
         out.append("")
     if report.plots:
@@ -354,8 +377,19 @@ def _html(report: Report, title: str) -> str:
         "Cells: mean ± std over seeds (sample std).</p>",
     ]
     for table in report.tables:
-        header, rows = _table_rows(table)
         parts.append(f"<h2>{e(table.task)}</h2>")
+        for m in _pivot_metrics(table):
+            header, rows = pivot(table, m.name)
+            parts.append(f"<h3>{e(m.label)}: methods x datasets</h3>")
+            parts.append("<table>")
+            parts.append("<thead><tr>" + "".join(f'<th class="l">{e(h)}</th>' if i == 0 else f"<th>{e(h)}</th>" for i, h in enumerate(header)) + "</tr></thead>")
+            parts.append("<tbody>")
+            for row in rows:
+                parts.append("<tr>" + "".join(f'<td class="l">{e(c)}</td>' if i == 0 else f"<td>{e(c)}</td>" for i, c in enumerate(row)) + "</tr>")
+            parts.append("</tbody>")
+            parts.append("</table>")
+        header, rows = _table_rows(table)
+        parts.append("<h3>All metrics</h3>")
         parts.append("<table>")
         parts.append("<thead><tr>" + "".join(f'<th class="l">{e(h)}</th>' if i < 4 else f"<th>{e(h)}</th>" for i, h in enumerate(header)) + "</tr></thead>")
         parts.append("<tbody>")
