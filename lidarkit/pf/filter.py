@@ -41,10 +41,12 @@ class ParticleFilter:
         self._scratch = (np.empty(self.n, dtype=self.dtype), np.empty(self.n, dtype=self.dtype))
         self._controls = np.empty((3, self.n), dtype=self.dtype)
         self._estimate_buf = np.empty((4, self.n), dtype=self.dtype)
+        self._work: np.ndarray | None = None  # (3, M, N) likelihood workspace, grown on demand
         self._has_motion_noise = bool(self.motion.noise_std.any())
         self._odometry: np.ndarray | None = None
         self._odometry_pos = 0
         self._control_block: np.ndarray | None = None
+        self._control_buf: np.ndarray | None = None
         self._control_pos = 0
         self._uniform_w: np.ndarray | None = None
         self.n_updates = 0
@@ -173,8 +175,11 @@ class ParticleFilter:
             raise DataError("no odometry left: call begin_odometry(odometry) first", source="predict_next")
         if self._control_block is None or self._control_pos >= self._control_block.shape[0]:
             steps = max(1, self.config.noise_block_elements // (3 * self.n))
+            if self._control_buf is None:  # reused: no fresh large allocation per block
+                self._control_buf = np.empty(steps * 3 * self.n + ((steps * 3 * self.n) & 1), dtype=self.dtype)
             self._control_block = self.motion.controls_block(
-                self.rng, self._odometry[self._odometry_pos :], steps, self.n, self.dtype, self.config.antithetic
+                self.rng, self._odometry[self._odometry_pos :], steps, self.n, self.dtype, self.config.antithetic,
+                out=self._control_buf,
             )
             self._control_pos = 0
         self.motion.apply_controls(self.states, self._control_block[self._control_pos], self._scratch)
@@ -194,7 +199,10 @@ class ParticleFilter:
             if self.config.nearest_association == "per_particle":
                 return self.sensor.log_likelihood_nearest(self.states, self._landmarks_typed, z[k])
             return self.sensor.log_likelihood_all(self.states, self._landmarks_typed[landmark_index[k : k + 1]], z[k : k + 1])
-        return self.sensor.log_likelihood_all(self.states, self._landmarks_typed[landmark_index], z)
+        m = len(landmark_index)
+        if self._work is None or self._work.shape[1] < m:
+            self._work = np.empty((3, max(m, 8), self.n), dtype=self.dtype)
+        return self.sensor.log_likelihood_all(self.states, self._landmarks_typed[landmark_index], z, self._work)
 
     def update(self, landmark_index: np.ndarray, z: np.ndarray, *, check: bool = True) -> bool:
         """Reweight by the readings; an empty set of readings leaves the weights unchanged (returns False)."""
@@ -322,7 +330,8 @@ class ParticleFilter:
         if self.n <= 16384:  # single-threaded BLAS matrix-vector product
             x, y, c, s = buf @ w
         else:  # multiply + sum: BLAS threads would spin against other jobs for large N
-            x, y, c, s = np.add.reduce(buf * w, axis=1)
+            buf *= w
+            x, y, c, s = np.add.reduce(buf, axis=1)
         return np.array([x, y, np.arctan2(s, c)], dtype=np.float64)
 
     # ---- consistency ------------------------------------------------------------------------------

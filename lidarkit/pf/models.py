@@ -36,17 +36,20 @@ def integrate_odometry(odometry: np.ndarray, start_pose: np.ndarray | tuple = (0
     return poses
 
 
-def standard_normal(rng: np.random.Generator, shape: tuple[int, ...], dtype: np.dtype | type = np.float32) -> np.ndarray:
+def standard_normal(
+    rng: np.random.Generator, shape: tuple[int, ...], dtype: np.dtype | type = np.float32, out: np.ndarray | None = None
+) -> np.ndarray:
     """Standard normal samples; float32 uses Box-Muller on float32 uniforms (about 3x faster than ziggurat).
 
-    Generated in cache-sized chunks. Float32 uniforms have 24-bit resolution, which truncates the
+    Generated in cache-sized chunks, into ``out`` (a float32 buffer of the padded size) if given. Float32 uniforms have 24-bit resolution, which truncates the
     tails at 5.8 sigma (probability 8e-9).
     """
     dtype = np.dtype(dtype)
     if dtype != np.float32:
         return rng.standard_normal(shape, dtype=dtype)
     n = int(np.prod(shape))
-    out = np.empty(n + (n & 1), dtype=np.float32)
+    flat = out.reshape(-1) if out is not None and out.size == n + (n & 1) and out.dtype == np.float32 else None
+    out = flat if flat is not None else np.empty(n + (n & 1), dtype=np.float32)
     two_pi = np.float32(TWO_PI)
     minus_two = np.float32(-2.0)
     for start in range(0, out.shape[0], 2 * _CHUNK_PAIRS):
@@ -78,7 +81,8 @@ class OdometryMotionModel:
         self.noise_std = std
 
     def sample_noise(
-        self, rng: np.random.Generator, n_steps: int, n_particles: int, dtype=np.float32, antithetic: bool = False
+        self, rng: np.random.Generator, n_steps: int, n_particles: int, dtype=np.float32, antithetic: bool = False,
+        out: np.ndarray | None = None,
     ) -> np.ndarray:
         """Scaled noise for ``n_steps`` steps in one draw: ``(n_steps, 3, N)``.
 
@@ -88,13 +92,13 @@ class OdometryMotionModel:
             half = standard_normal(rng, (n_steps, 3, (n_particles + 1) // 2), dtype)
             eps = np.concatenate([half, -half], axis=2)[:, :, :n_particles]
         else:
-            eps = standard_normal(rng, (n_steps, 3, n_particles), dtype)
+            eps = standard_normal(rng, (n_steps, 3, n_particles), dtype, out=out)
         eps *= self.noise_std.astype(eps.dtype)[None, :, None]
         return eps
 
     def controls_block(
         self, rng: np.random.Generator, odometry_ahead: np.ndarray, n_steps: int, n_particles: int, dtype=np.float32,
-        antithetic: bool = False,
+        antithetic: bool = False, out: np.ndarray | None = None,
     ) -> np.ndarray:
         """Noisy controls for the next ``k = min(n_steps, len(odometry_ahead))`` steps in one draw: ``(k, 3, N)``.
 
@@ -105,7 +109,7 @@ class OdometryMotionModel:
         u = np.asarray(odometry_ahead[:n_steps], dtype=np.float64).reshape(-1, 3).astype(dtype)
         k = len(u)
         if self.noise_std.any():
-            c = self.sample_noise(rng, n_steps, n_particles, dtype, antithetic)[:k]
+            c = self.sample_noise(rng, n_steps, n_particles, dtype, antithetic, out=out)[:k]
         else:
             c = np.zeros((k, 3, n_particles), dtype=dtype)
         c[:, 0] += u[:, 0, None]
@@ -181,27 +185,39 @@ class RangeBearingModel:
         d = np.asarray(landmarks_xy, dtype=np.float64) - np.asarray(pose[:2], dtype=np.float64)
         return np.stack([np.hypot(d[:, 0], d[:, 1]), wrap_angle(np.arctan2(d[:, 1], d[:, 0]) - pose[2])], axis=1)
 
-    def residuals(self, states: np.ndarray, landmarks_xy: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Range and wrapped bearing residuals ``z - h(state)``, each ``(M, N)`` (M readings x N particles)."""
+    def residuals(
+        self, states: np.ndarray, landmarks_xy: np.ndarray, z: np.ndarray, work: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Range and wrapped bearing residuals ``z - h(state)``, each ``(M, N)`` (M readings x N particles).
+
+        ``work``: optional ``(3, >=M, N)`` buffer of the states' dtype reused across calls (no allocation
+        of large temporaries); the returned arrays are views into it.
+        """
         dtype = states.dtype
         lm = np.asarray(landmarks_xy, dtype=dtype)
         zz = np.asarray(z, dtype=dtype)
+        m, n = len(zz), states.shape[1]
+        if work is None:
+            work = np.empty((3, m, n), dtype=dtype)
+        A, B, C = work[0, :m], work[1, :m], work[2, :m]
         x, y, theta = states
-        dx = lm[:, 0:1] - x
-        dy = lm[:, 1:2] - y
-        e_r = np.multiply(dx, dx)
-        e_r += dy * dy
-        np.sqrt(e_r, out=e_r)
-        np.subtract(zz[:, 0:1], e_r, out=e_r)
-        e_b = np.arctan2(dy, dx, out=dx)
-        np.subtract(theta + zz[:, 1:2], e_b, out=e_b)  # z_b - (atan2 - theta)
-        _wrap_inplace(e_b, dy)
-        return e_r, e_b
+        np.subtract(lm[:, 0:1], x, out=A)  # dx
+        np.subtract(lm[:, 1:2], y, out=B)  # dy
+        np.multiply(A, A, out=C)
+        np.arctan2(B, A, out=A)  # bearing to the landmark in the world frame
+        np.multiply(B, B, out=B)
+        C += B
+        np.sqrt(C, out=C)
+        np.subtract(zz[:, 0:1], C, out=C)  # range residual
+        np.subtract(theta, A, out=A)
+        A += zz[:, 1:2]  # z_b - (atan2 - theta)
+        _wrap_inplace(A, B)
+        return C, A
 
-    def mahalanobis_sq(self, e_r: np.ndarray, e_b: np.ndarray) -> np.ndarray:
-        """``e^T Q^-1 e`` elementwise; overwrites ``e_r`` as scratch."""
+    def mahalanobis_sq(self, e_r: np.ndarray, e_b: np.ndarray, scratch: np.ndarray | None = None) -> np.ndarray:
+        """``e^T Q^-1 e`` elementwise; overwrites ``e_r`` (and ``scratch``, the result, if given)."""
         dtype = e_r.dtype.type
-        d2 = e_b * e_b
+        d2 = np.multiply(e_b, e_b, out=scratch)
         d2 *= dtype(self._c)
         if self._b != 0.0:
             d2 += dtype(2.0 * self._b) * e_r * e_b
@@ -210,14 +226,14 @@ class RangeBearingModel:
         d2 += e_r
         return d2
 
-    def log_likelihood_all(self, states: np.ndarray, landmarks_xy: np.ndarray, z: np.ndarray) -> np.ndarray:
+    def log_likelihood_all(self, states: np.ndarray, landmarks_xy: np.ndarray, z: np.ndarray, work: np.ndarray | None = None) -> np.ndarray:
         """Sum over the M readings (known landmark association) of the Gaussian log-likelihood, ``(N,)``.
 
-        The constant normalization term is dropped (it cancels in the weights).
+        The constant normalization term is dropped (it cancels in the weights). ``work``: see :meth:`residuals`.
         """
-        e_r, e_b = self.residuals(states, landmarks_xy, z)
-        d2 = self.mahalanobis_sq(e_r, e_b)
-        ll = d2.sum(axis=0) if d2.shape[0] > 1 else d2[0]
+        e_r, e_b = self.residuals(states, landmarks_xy, z, work)
+        d2 = self.mahalanobis_sq(e_r, e_b, None if work is None else work[1, : len(e_r)])
+        ll = d2.sum(axis=0) if d2.shape[0] > 1 else d2[0].copy()
         ll *= d2.dtype.type(-0.5)
         return ll
 
