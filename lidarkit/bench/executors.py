@@ -89,9 +89,13 @@ class ProcessExecutor:
                 for fut in done:
                     key, spec = futures[fut]
                     try:
-                        yield key, fut.result()
+                        outcome = fut.result()
                     except BrokenProcessPool:
                         broken.append((key, spec))
+                        continue
+                    except Exception as err:  # e.g. a result that cannot be pickled back
+                        outcome = crash_outcome(type(err).__name__, str(err))
+                    yield key, outcome
         finally:
             _shutdown(pool)
         if broken:
@@ -108,6 +112,8 @@ class ProcessExecutor:
                     outcome = crash_outcome("WorkerCrashed", f"the worker process died while running this job ({err})")
                     _shutdown(pool)
                     pool = ProcessPoolExecutor(max_workers=1, mp_context=self.context)
+                except Exception as err:
+                    outcome = crash_outcome(type(err).__name__, str(err))
                 yield key, outcome
         finally:
             _shutdown(pool)
