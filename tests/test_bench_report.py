@@ -150,3 +150,18 @@ def test_report_on_a_folder_without_results(tmp_path):
     (tmp_path / "jobs" / "broken.json").write_text("{not json")
     with pytest.raises(DataError, match="no readable job results"):
         build_report(tmp_path)
+
+
+def test_results_of_an_older_version_do_not_count_twice(tmp_path):
+    from lidarkit.bench.jobs import Job
+    from lidarkit.bench.results import make_record, write_result
+
+    job = Job("selftest", "e", "synth", {"kind": "synthetic"}, "random_walk", {"steps": 10}, seed=0)
+    outcome = {"status": "ok", "metrics": {"ape_rmse_m": 1.0}, "series": {}, "info": {}, "error": None,
+               "runtime_s": 0.1, "finished_utc": "2026-01-01T00:00:00.000+00:00"}
+    write_result(tmp_path, make_record(job, job.key("0.0.9"), "0.0.9", outcome))
+    newer = {**outcome, "metrics": {"ape_rmse_m": 2.0}, "finished_utc": "2026-02-01T00:00:00.000+00:00"}
+    write_result(tmp_path, make_record(job, job.key("0.1.0"), "0.1.0", newer))
+    report = build_report(tmp_path, plots=False)
+    (row,) = report.tables[0].rows
+    assert row.stats["ape_rmse_m"] == (2.0, 0.0, 1)

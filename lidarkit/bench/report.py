@@ -424,6 +424,20 @@ def _html(report: Report, title: str) -> str:
     return "\n".join(parts)
 
 
+def latest_per_job(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """One record per job spec: results of the same job from other lidarkit versions are superseded by the
+    most recently finished one (so a folder reused across versions does not count a seed twice)."""
+    from lidarkit.bench.jobs import canonical_json
+
+    latest: dict[str, dict[str, Any]] = {}
+    for r in records:
+        spec = canonical_json(r["job"])
+        if spec not in latest or str(r.get("finished_utc", "")) > str(latest[spec].get("finished_utc", "")):
+            latest[spec] = r
+    kept = {id(r) for r in latest.values()}
+    return [r for r in records if id(r) in kept]
+
+
 def build_report(out_dir: str | Path, *, title: str | None = None, plots: bool = True, only_keys: set[str] | None = None) -> Report:
     """Read ``out_dir/jobs/*.json`` and write ``report.md``, ``report.csv``, ``report.html`` and ``plots/*.png`` there.
 
@@ -435,6 +449,7 @@ def build_report(out_dir: str | Path, *, title: str | None = None, plots: bool =
     records = load_results(out_dir)
     if only_keys is not None:
         records = [r for r in records if r["key"] in only_keys]
+    records = latest_per_job(records)
     if not records:
         raise DataError("no readable job results in jobs/", source=out_dir)
     if title is None:
