@@ -6,7 +6,7 @@ Sections (all through ``lidarkit.odometry.run``):
      interleaved repeats, reported as a frame-rate ratio (target >= 0.95);
   C. simulated street and open sequences (motion distortion, range noise): kiss with vs without deskew, each
      scored against the sweep-END and the MID-sweep ground truth (kiss-icp deskews to the sweep end);
-  D. vanilla vs ground_filtered (same voxel size) on the street and open sequences;
+  D. vanilla vs ground_filtered (full clouds, reduced resolution: full-cloud vanilla is slow) on street and open;
   E. simulated pairs fed to the ICP engineer's pairwise benchmark through ``icp_variants.run_pairs``.
 
     .venv/bin/python benchmarks/odometry_sim.py                 # full size: 300 sweeps of 64 x 2000 rays
@@ -152,13 +152,15 @@ def section_deskew(sequences: dict) -> list[dict]:
     return rows
 
 
-def section_ground(sequences: dict, voxel_m: float) -> list[dict]:
+def section_ground(sequences: dict, voxel_m: float | None) -> list[dict]:
     rows = []
+    params = {} if voxel_m is None else {"voxel_size_m": voxel_m}
     for scene, seq in sequences.items():
         for name in ("vanilla", "ground_filtered"):
-            log(f"D. {scene}: {name} (voxel {voxel_m} m)")
-            result = run(seq, name, params={"voxel_size_m": voxel_m})
-            rows.append(summary(result, {"scene": scene, "voxel_size_m": voxel_m}))
+            log(f"D. {scene}: {name} ({params or 'defaults: full clouds'})")
+            result = run(seq, name, params=params)
+            rows.append(summary(result, {"scene": scene, "voxel_size_m": voxel_m, "beams": seq.config.n_beams,
+                                         "azimuths": seq.config.n_azimuths}))
     return rows
 
 
@@ -233,7 +235,9 @@ def markdown(report: dict) -> str:
     for r in report["deskew"]:
         lines.append(f"| {r['scene']} | {r['deskew']} | {r['scored_at']} | {r['drift_pct']:.3f} | {r['drift_deg_per_100m']:.4f} | "
                      f"{r['ape_rmse_m']:.3f} | {r['fps']:.1f} |")
-    lines += ["", f"## D. vanilla vs ground_filtered (both voxel {report['settings']['voxel_m']} m), street vs open", "",
+    voxel = report["settings"]["voxel_m"]
+    lines += ["", f"## D. vanilla vs ground_filtered ({'full clouds' if voxel is None else f'both voxel {voxel} m'}), street vs open, "
+              f"{s['frames']} sweeps of {s['d_beams']} x {s['d_azimuths']} rays", "",
               "| scene | method | KITTI drift % | deg/100 m | est. path m | GT path m | end error m | not converged | frame rate Hz |",
               "|---|---|---:|---:|---:|---:|---:|---:|---:|"]
     for r in report["ground"]:
@@ -259,8 +263,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--azimuths", type=int, default=2000)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--noise", type=float, default=0.02, help="range noise std (m)")
-    parser.add_argument("--voxel", type=float, default=0.5, help="voxel size (m) of vanilla and ground_filtered in section D")
-    parser.add_argument("--repeats", type=int, default=3, help="interleaved repeats of the overhead measurement")
+    parser.add_argument("--voxel", type=float, default=None, help="voxel size (m) of vanilla and ground_filtered in section D (default: none)")
+    parser.add_argument("--d-beams", type=int, default=32, help="beams of the section-D sequences (full-cloud vanilla is slow)")
+    parser.add_argument("--d-azimuths", type=int, default=720, help="azimuths of the section-D sequences")
+    parser.add_argument("--repeats", type=int, default=5, help="interleaved repeats of the overhead measurement")
     parser.add_argument("--quick", action="store_true", help="120 sweeps of 32 x 720 rays")
     parser.add_argument("--sections", default="ABCDE")
     args = parser.parse_args(argv)
@@ -278,7 +284,7 @@ def main(argv: list[str] | None = None) -> int:
         "machine": machine(),
         "command": "python benchmarks/odometry_sim.py " + " ".join(argv if argv is not None else sys.argv[1:]),
         "settings": {"frames": args.frames, "beams": args.beams, "azimuths": args.azimuths, "seed": args.seed, "noise_m": args.noise,
-                     "voxel_m": args.voxel},
+                     "voxel_m": args.voxel, "d_beams": args.d_beams, "d_azimuths": args.d_azimuths},
         "kitti": [], "overhead": [], "deskew": [], "ground": [], "pairs": [],
     }
     args.out.mkdir(parents=True, exist_ok=True)
@@ -302,7 +308,12 @@ def main(argv: list[str] | None = None) -> int:
         plots.plot_trajectories(result.ground_truth.with_name("ground truth (sweep end)"), result.trajectory,
                                 args.out / "kiss_street_deskew.png", title="kiss (deskew) on the simulated street")
     if "D" in args.sections:
-        report["ground"] = section_ground(sims, args.voxel)
+        d_sims = {
+            scene: SimulatedLidarSequence(scene=scene, n_frames=args.frames, n_beams=args.d_beams, n_azimuths=args.d_azimuths,
+                                          range_noise_std_m=args.noise, seed=args.seed)
+            for scene in ("street", "open")
+        }
+        report["ground"] = section_ground(d_sims, args.voxel)
         save()
     if "E" in args.sections:
         report["pairs"] = section_pairs(sims)

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import pytest
 
-from lidarkit import eval as leval
 from lidarkit.odometry import run
 from lidarkit.sim.lidar import SimulatedLidarSequence
 
@@ -24,7 +23,3 @@ def test_kiss_with_deskew_beats_kiss_without_on_a_distorted_street():
     assert with_deskew.ground_truth.length_m > 280.0  # long enough for the 100 and 200 m devkit segments
     assert drift_with < drift_without
     assert drift_with < 1.0  # and kiss tracks the street well (measured 0.37 % vs 0.51 % without deskew)
-    # the same deskewed estimate scored against mid-sweep poses is not the matching instant
-    mid = seq.ground_truth_at("mid").relative_to_first().with_timestamps(with_deskew.trajectory.timestamps_s)
-    drift_mid = leval.kitti_drift(mid, with_deskew.trajectory).translation_pct
-    assert drift_mid > drift_with
