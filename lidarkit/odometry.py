@@ -207,7 +207,10 @@ def config_dict(config: Any) -> dict[str, Any]:
 def _frame_error(err: Exception, dataset_name: str, frame: int) -> LidarKitError:
     """Re-raise an error of frame ``frame`` so that its message names the frame."""
     if isinstance(err, LidarKitError):
-        return type(err)(str(err), source=dataset_name, location=f"frame {frame}")
+        try:
+            return type(err)(str(err), source=dataset_name, location=f"frame {frame}")
+        except TypeError:  # a subclass with another constructor
+            return LidarKitError(str(err), source=dataset_name, location=f"frame {frame}")
     return RegistrationError(f"{type(err).__name__}: {err}", source=dataset_name, location=f"frame {frame}")
 
 
