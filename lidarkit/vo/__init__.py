@@ -18,6 +18,7 @@ from lidarkit.vo.config import (
     make_config,
     preset,
 )
+from lidarkit.vo.evaluation import evaluate_vo
 from lidarkit.vo.features import get_detector, get_preprocessor
 from lidarkit.vo.intrinsics import K_from_image_size, K_matrix
 from lidarkit.vo.matching import get_matcher, track_klt
@@ -29,6 +30,6 @@ from lidarkit.vo.two_view import TwoViewEstimate, estimate_two_view
 __all__ = [
     "FeatureConfig", "FrameDiagnostics", "GeometryConfig", "K_from_image_size", "K_matrix", "MatchConfig", "MonoVO",
     "PreprocessConfig", "SanityConfig", "ScaleConfig", "SmoothingConfig", "TwoViewEstimate", "VOConfig", "VOResult",
-    "available_presets", "check_pose", "estimate_two_view", "get_detector", "get_matcher", "get_preprocessor",
+    "available_presets", "check_pose", "estimate_two_view", "evaluate_vo", "get_detector", "get_matcher", "get_preprocessor",
     "images_in_memory", "make_config", "preset", "run_vo", "smooth_translations", "track_klt",
 ]
