@@ -27,7 +27,8 @@ def _run(argv, capsys):
 def test_vo_on_bundled_kitti_sample_writes_run_folder(tmp_path, capsys):
     seq = sample_path("kitti_vo", "06")
     out = tmp_path / "run"
-    code, stdout, _ = _run(["vo", str(seq), "--scale", "gt", "--out", str(out), "--gif"], capsys)
+    code, stdout, _ = _run(["vo", str(seq), "--scale", "gt", "--out", str(out), "--gif",
+                            "--set", "matching.klt_window_px=17"], capsys)
     assert code in (0, None)
     assert "frames" in stdout and "APE raw (se3)" in stdout
     for name in ("poses_kitti.txt", "poses_tum.txt", "poses_smoothed_kitti.txt", "poses_smoothed_tum.txt",
@@ -40,6 +41,7 @@ def test_vo_on_bundled_kitti_sample_writes_run_folder(tmp_path, capsys):
     assert metrics["rejected"] == 0 and metrics["raw"]["ape_rmse_m"] < 0.03
     config = yaml.safe_load((out / "config.yaml").read_text())
     assert config["vo"]["scale"]["mode"] == "gt" and config["K_source"] == "kitti calibration"
+    assert config["vo"]["matching"]["klt_window_px"] == 17
     csv = (out / "diagnostics.csv").read_text().splitlines()
     assert csv[0].startswith("frame,ref_frame,n_features,n_matches,n_inliers") and len(csv) == 9
 
@@ -73,6 +75,8 @@ def test_vo_cli_errors_are_one_line(tmp_path, capsys):
     assert code == 1 and "input not found" in err
     code, _, err = _run(["vo", str(sample_path("kitti_vo", "06")), "--detector", "surf"], capsys)
     assert code == 1 and "features.detector" in err
+    code, _, err = _run(["vo", str(sample_path("kitti_vo", "06")), "--set", "matching.window=3"], capsys)
+    assert code == 1 and "unknown config field 'window'" in err
     empty = tmp_path / "empty"
     empty.mkdir()
     code, _, err = _run(["vo", str(empty), "--scale", "none"], capsys)

@@ -155,3 +155,14 @@ def test_two_runs_are_identical(sim, name):
     b = MonoVO(cfg, K).run(images)
     assert np.array_equal(a.trajectory.poses_se3, b.trajectory.poses_se3)
     assert [d.n_inliers for d in a.diagnostics] == [d.n_inliers for d in b.diagnostics]
+
+
+def test_lost_tracking_moves_the_reference_instead_of_cascading(sim):
+    """After 'too few matches' on a frame that has features of its own, the next frame is matched against it."""
+    traj, K, images = sim
+    bad = list(images)
+    bad[3] = np.ascontiguousarray(np.flipud(images[3]))  # textured, but unrelated to its neighbours
+    result = MonoVO(_cfg("none"), K).run(bad)
+    d3 = result.diagnostics[3]
+    assert not d3.accepted and d3.note == "reference moved to this frame"
+    assert result.diagnostics[4].ref_frame == 3 and _finite(result)

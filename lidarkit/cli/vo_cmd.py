@@ -37,6 +37,8 @@ def vo_command(
     start: int = typer.Option(0, help="First frame."),
     max_frames: Optional[int] = typer.Option(None, help="Number of frames to process (default: all)."),
     seed: int = typer.Option(_D.seed, help="RANSAC seed."),
+    set_: Optional[list[str]] = typer.Option(None, "--set", help="Any config field, repeatable: "
+                                             "--set matching.klt_levels=4 --set scale.min_common_points=20."),
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="Run folder for poses, diagnostics, config, plot."),
     gif: bool = typer.Option(False, help="Also write features.gif (tracked inliers) into --out."),
 ) -> None:
@@ -55,6 +57,13 @@ def vo_command(
         "features.max_features": features, "scale.mode": scale, "sanity.enabled": sanity, "geometry.refine": refine,
         "seed": seed,
     }
+    for item in set_ or []:
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise typer.BadParameter(f"--set expects key=value, got {item!r}")
+        import yaml
+
+        changes[key.strip()] = yaml.safe_load(value)
     if matcher in ("bf_cross", "knn_ratio") and detector is None:
         changes["features.detector"] = "orb"
     cfg = make_preset(preset, **{k: v for k, v in changes.items() if v is not None})

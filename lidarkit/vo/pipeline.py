@@ -31,6 +31,9 @@ from lidarkit.vo.two_view import estimate_two_view, normalize_points, triangulat
 
 log = logging.getLogger(__name__)
 
+# rejection reasons after which the reference frame moves on (a farther frame would match it even worse)
+_TRACKING_LOST = ("too few matches", "too few inliers", "too few pose inliers", "no essential")
+
 
 @dataclass
 class FrameDiagnostics:
@@ -200,12 +203,16 @@ class MonoVO:
                 diag.reason = reason or "rejected"
                 poses[j] = poses[j - 1] @ self._predicted_motion(step_motion, j)
                 log.info("frame %d rejected: %s", j, diag.reason)
-                # move the reference forward when it cannot serve (too few features) or after a long gap
+                # move the reference to this frame when the reference cannot serve (too few features), after a long
+                # gap, or when tracking was lost (a later frame would be even farther from the reference); a frame
+                # without features of its own (black, blank) never becomes the reference
                 stale = j - ref_index >= 5 or len(ref_feats.points_px) < cfg.sanity.min_features
-                if cur_image is not None and stale:
-                    ref_index, ref_image = j, cur_image
-                    ref_feats = self._reference_features(cur_image, None)
-                    diag.note = "reference moved to this frame"
+                lost = diag.reason.startswith(_TRACKING_LOST)
+                if cur_image is not None and (stale or lost):
+                    candidate = self._reference_features(cur_image, None)
+                    if len(candidate.points_px) >= cfg.sanity.min_features:
+                        ref_index, ref_image, ref_feats = j, cur_image, candidate
+                        diag.note = "reference moved to this frame"
             elapsed = time.perf_counter() - start
             total_s += elapsed
             diag.runtime_ms = 1000.0 * elapsed
