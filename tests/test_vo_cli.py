@@ -99,6 +99,9 @@ def test_image_folder_checks_counts(tmp_path):
         open_dataset("images", folder, timestamps=tmp_path / "t.txt")
     ds = open_dataset("images", folder)
     assert len(ds) == 3 and ds.read_image(2)[0, 0] == 100 and ds.K is None
+    from lidarkit.io.base import ImageSequence
+
+    assert isinstance(ds, ImageSequence)
 
 
 def test_vo_on_synthetic_tum_folder_with_calib_file(tmp_path, capsys):

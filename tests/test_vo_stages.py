@@ -83,6 +83,8 @@ def test_unknown_names_list_the_known_ones():
         get_detector("surf")
     with pytest.raises(ConfigError, match="known: klt"):
         get_matcher("flann")
+    with pytest.raises(ConfigError, match="known: none, clahe"):
+        get_preprocessor("sharpen")
     with pytest.raises(ConfigError, match="unknown config field"):
         VOConfig().updated(**{"features.budget": 3})
 
@@ -94,6 +96,9 @@ def test_clahe_raises_local_contrast():
     out = get_preprocessor("clahe")(low)
     assert out.shape == low.shape and out.dtype == np.uint8 and out.std() > 2 * low.std()
     assert get_preprocessor("none")(low) is low
+    for name in ("gaussian", "bilateral"):  # the report found blurring lowers inliers: it stays available, off
+        blurred = get_preprocessor(name)(low)
+        assert blurred.shape == low.shape and blurred.std() < low.std()
 
 
 def test_bucket_indices_keeps_best_per_cell():

@@ -20,10 +20,15 @@ _SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 0.01
 Preprocessor = Callable[[np.ndarray], np.ndarray]
 
 
+PREPROCESSORS = ("none", "clahe", "gaussian", "bilateral")
+
+
 def get_preprocessor(cfg: PreprocessConfig | str = "none") -> Preprocessor:
     """Image filter for ``cfg.method`` (none, clahe, gaussian, bilateral): uint8 (H, W) -> uint8 (H, W)."""
     if isinstance(cfg, str):
-        cfg = PreprocessConfig(method=cfg) if cfg in ("none", "clahe", "gaussian", "bilateral") else _unknown_pre(cfg)
+        if cfg not in PREPROCESSORS:
+            raise ConfigError(f"unknown preprocessing {cfg!r}; known: {', '.join(PREPROCESSORS)}", source="preprocess")
+        cfg = PreprocessConfig(method=cfg)
     if cfg.method == "none":
         return lambda image: image
     if cfg.method == "clahe":
@@ -33,10 +38,6 @@ def get_preprocessor(cfg: PreprocessConfig | str = "none") -> Preprocessor:
     if cfg.method == "gaussian":
         return lambda image: cv2.GaussianBlur(image, (k, k), 0)
     return lambda image: cv2.bilateralFilter(image, k, 50, 50)
-
-
-def _unknown_pre(name: str) -> PreprocessConfig:
-    raise ConfigError(f"unknown preprocessing {name!r}; known: none, clahe, gaussian, bilateral", source="preprocess")
 
 
 def bucket_indices(points_px: np.ndarray, scores: np.ndarray, image_shape: tuple[int, int], rows: int, cols: int,
