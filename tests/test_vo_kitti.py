@@ -35,10 +35,11 @@ def test_seq06_gt_scale_beats_sift_reference(seq06):
     m = evaluate_vo(result.trajectory, gt, "gt")
     assert m["align"] == "se3"
     assert m["ape_rmse_m"] <= 0.03
-    # after the SE(3) alignment used for APE the last pose is within a few cm; unaligned it is ~0.55 m, a constant
-    # ~0.6 deg heading offset against the GT (see docs/visual_odometry.md), the brief's 0.25 m is not reached
+    # after the SE(3) alignment used for APE the last pose is within a few cm; unaligned it is 0.56 m: the GT's
+    # rotation over frames 0-11 is a constant-rate fill the images contradict (docs/visual_odometry.md, checked in
+    # tests/test_vo_consistency.py, where the run from frame 11 meets the 0.25 m target)
     assert m["final_error_aligned_m"] <= 0.05
-    assert m["final_error_raw_m"] <= 0.7
+    assert m["final_error_raw_m"] <= 0.6
 
 
 @pytest.mark.slow
