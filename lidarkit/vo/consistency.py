@@ -65,7 +65,8 @@ def ground_truth_consistency(result: VOResult, ground_truth: Trajectory) -> list
     (camera frame, one pose per frame). The estimate is re-fitted (Sampson refinement) on the even-indexed inliers
     and both poses are scored on the odd-indexed ones."""
     if result.tracks is None:
-        raise ConfigError("the VO result has no tracks; run it with keep_tracks=True", source="ground_truth_consistency")
+        raise ConfigError("the VO result has no tracks; run it with keep_tracks=True",
+                          source="ground_truth_consistency")
     if len(ground_truth) != result.n_frames:
         raise DataError(f"ground truth has {len(ground_truth)} poses for {result.n_frames} frames",
                         source="ground_truth_consistency")
