@@ -144,21 +144,22 @@ def _natural(params: dict[str, Any]) -> tuple:
                  for k, v in sorted(params.items()))
 
 
-def format_stat(stat: tuple[float, float, int]) -> str:
+def format_stat(stat: tuple[float, float, int], digits: int = 4) -> str:
+    """``mean ± std`` with ``digits`` significant digits (the mean alone for one run, a dash for none)."""
     mean, std, n = stat
     if n == 0:
         return "–"
     if n == 1:
-        return _fmt(mean)
-    return f"{_fmt(mean)} ± {_fmt(std)}"
+        return _fmt(mean, digits)
+    return f"{_fmt(mean, digits)} ± {_fmt(std, min(digits, 2))}"
 
 
-def _fmt(x: float) -> str:
+def _fmt(x: float, digits: int = 4) -> str:
     if x == 0 or not math.isfinite(x):
         return f"{x:g}"
     if abs(x) >= 1e5 or abs(x) < 1e-3:
-        return f"{x:.3e}"
-    return f"{x:.4g}"
+        return f"{x:.{digits - 1}e}"
+    return f"{x:.{digits}g}"
 
 
 # ---------------------------------------------------------------- plots

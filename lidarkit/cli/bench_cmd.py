@@ -80,12 +80,17 @@ def summary_table(report, max_metrics: int = 2) -> list[Table]:
         speed = [m for m in task_table.metrics if m.kind == "speed"][:1]
         metrics = accuracy + speed
         table = Table(title=f"{task_table.task} (mean ± std over seeds)", title_justify="left")
-        for col in ("dataset", "method", "ok/failed"):
-            table.add_column(col, overflow="fold")
+        show_failed = any(row.n_failed for row in task_table.rows)  # the run summary line already counts them
+        table.add_column("dataset", overflow="fold", max_width=14)
+        table.add_column("method", overflow="fold", ratio=1)
+        if show_failed:
+            table.add_column("ok/failed", no_wrap=True)
         for m in metrics:
             table.add_column(m.label, justify="right")
         for row in task_table.rows:
-            table.add_row(row.dataset, row.method, f"{row.n_ok}/{row.n_failed}", *[format_stat(row.stats[m.name]) for m in metrics])
+            cells = [format_stat(row.stats[m.name], digits=3) for m in metrics]
+            counts = [f"{row.n_ok}/{row.n_failed}"] if show_failed else []
+            table.add_row(row.dataset, row.method, *counts, *cells)
         tables.append(table)
     return tables
 
