@@ -23,7 +23,6 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 import argparse  # noqa: E402
 import datetime as dt  # noqa: E402
 import json  # noqa: E402
-import platform  # noqa: E402
 import shlex  # noqa: E402
 import sys  # noqa: E402
 import tempfile  # noqa: E402
@@ -34,6 +33,7 @@ from pathlib import Path  # noqa: E402
 from lidarkit import atomic  # noqa: E402
 from lidarkit.bench.executors import ProcessExecutor, default_workers  # noqa: E402
 from lidarkit.bench.jobs import Job  # noqa: E402
+from lidarkit.bench.machine import describe_machine, machine_info  # noqa: E402
 from lidarkit.bench.runner import run_suite  # noqa: E402
 from lidarkit.bench.suite import Suite  # noqa: E402
 from lidarkit.bench.tasks.selftest import run_selftest  # noqa: E402
@@ -143,9 +143,7 @@ def main(argv: list[str] | None = None) -> int:
     meta = {
         "command": "python benchmarks/harness_overhead.py " + " ".join(shlex.quote(a) for a in (argv if argv is not None else sys.argv[1:])),
         "date_utc": dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M"),
-        "machine": f"{platform.node()} {platform.machine()} {platform.system()} {platform.release()}, "
-                   f"{os.cpu_count()} CPUs, python {platform.python_version()}",
-        "load_average_1_5_15": list(os.getloadavg()),
+        "machine": machine_info(),
         "jobs_per_workload": args.jobs,
         "repeats": args.repeats,
         "pool_cold_start_s": cold_start,
@@ -158,8 +156,7 @@ def main(argv: list[str] | None = None) -> int:
         "",
         f"- command: `{meta['command']}`",
         f"- date: {meta['date_utc']} UTC",
-        f"- machine: {meta['machine']}; load average {', '.join(f'{x:.1f}' for x in meta['load_average_1_5_15'])} "
-        "(shared machine: other processes were running)",
+        f"- machine: {describe_machine(meta['machine'])}",
         f"- {args.jobs} jobs per workload, {args.repeats} interleaved repeats, minimum wall time reported; "
         f"BLAS threads = {meta['blas_threads']}; ratio = wall time / plain loop (acceptance: < 1.05)",
         f"- process pool cold start (fresh interpreter: forkserver + preload imports + one empty job): {cold_start:.2f} s, "

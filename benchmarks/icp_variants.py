@@ -12,10 +12,8 @@ list of ``(source_xyz, target_xyz, T_target_source_gt, label)`` tuples.
 from __future__ import annotations
 
 import argparse
-import datetime as dt
 import json
 import os
-import platform
 import sys
 import time
 from collections.abc import Iterable, Sequence
@@ -24,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from lidarkit.atomic import write_text
+from lidarkit.bench.machine import describe_machine, machine_info
 from lidarkit.geometry import pose_error
 from lidarkit.registration import available_icp, get_icp
 from lidarkit.registration.plots import save_bev_before_after, save_rmse_history
@@ -240,38 +239,12 @@ def leaf_size_timing(pairs: Iterable[Pair], repeats: int) -> list[dict]:
 # ------------------------------------------------------------------ report
 
 
-def machine_info() -> dict:
-    model = "unknown"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                model = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    import open3d
-    import scipy
-
-    return {
-        "date_utc": dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
-        "cpu_model": model,
-        "cores": os.cpu_count(),
-        "load_average_start": os.getloadavg(),
-        "python": platform.python_version(),
-        "numpy": np.__version__,
-        "scipy": scipy.__version__,
-        "open3d": open3d.__version__,
-    }
-
-
 def markdown(report: dict) -> str:
     m = report["machine"]
     lines = [
         "# ICP variants on KITTI seq 00",
         "",
-        f"Date: {m['date_utc']}; machine: {m['cpu_model']}, {m['cores']} cores (shared; load average at start "
-        f"{m['load_average_start'][0]:.1f}, at end {report['load_average_end'][0]:.1f}); "
-        f"numpy {m['numpy']}, scipy {m['scipy']}, Open3D {m['open3d']}.",
+        f"Date: {m['date_utc']}; machine: {describe_machine(m)}; load average at end {report['load_average_end'][0]:.1f}.",
         "",
         f"Command: `{report['command']}`",
         "",

@@ -21,8 +21,6 @@ import argparse
 import datetime as dt
 import importlib.util
 import json
-import os
-import platform
 import sys
 import time
 from pathlib import Path
@@ -30,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from lidarkit.atomic import write_text
+from lidarkit.bench.machine import describe_machine, machine_info
 from lidarkit.io.base import Scan
 from lidarkit.odometry import run
 from lidarkit.registration import available_icp, get_icp
@@ -185,18 +184,6 @@ def section_pairs(sequences: dict) -> list[dict]:
     return rows
 
 
-def machine() -> str:
-    cpu = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return f"{platform.node()}: {cpu}, {os.cpu_count()} logical CPUs (shared with other jobs), Python {platform.python_version()}"
-
-
 def _f(x, spec=".3f") -> str:
     return "-" if x is None else format(x, spec)
 
@@ -314,7 +301,7 @@ def main(argv: list[str] | None = None) -> int:
     }
     report: dict = {
         "date": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
-        "machine": machine(),
+        "machine": describe_machine(machine_info()),
         "command": "python benchmarks/odometry_sim.py " + " ".join(argv if argv is not None else sys.argv[1:]),
         "settings": {"frames": args.frames, "beams": args.beams, "azimuths": args.azimuths, "seed": args.seed, "noise_m": args.noise,
                      "voxel_m": args.voxel, "d_beams": args.d_beams, "d_azimuths": args.d_azimuths},

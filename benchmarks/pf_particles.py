@@ -19,7 +19,6 @@ import argparse
 import datetime as dt
 import json
 import os
-import platform
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -31,6 +30,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
+
+from lidarkit.bench.machine import describe_machine, machine_info  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT_DATA = REPO.parent / "shared" / "data"
@@ -160,25 +161,6 @@ def speed(data, seeds: list[int], n: int, repeats: int) -> dict:
     }
 
 
-def machine() -> dict:
-    cpu = platform.processor()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return {
-        "cpu": cpu,
-        "cores": os.cpu_count(),
-        "python": platform.python_version(),
-        "numpy": np.__version__,
-        "platform": platform.platform(),
-        "loadavg_at_start": os.getloadavg() if hasattr(os, "getloadavg") else None,
-    }
-
-
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", type=Path, default=DEFAULT_DATA)
@@ -199,7 +181,7 @@ def main(argv: list[str] | None = None) -> int:
     seeds = list(range(3 if args.quick else args.seeds))
     n_values = [50, 100, 1000] if args.quick else N_VALUES
     info = {"command": " ".join([Path(sys.executable).name, *sys.argv]), "date_utc": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
-            "machine": machine(), "data": f"pf/{args.variant}", "seeds": seeds}
+            "machine": machine_info(), "data": f"pf/{args.variant}", "seeds": seeds}
     t_start = time.perf_counter()
     if args.speed_only:
         payload = json.loads((args.out / "pf_particles.json").read_text())
@@ -287,8 +269,7 @@ def markdown(p: dict, n_values: list[int]) -> str:
         "",
         f"- command: `{p['command']}`",
         f"- date (UTC): {p['date_utc']}; wall time {p['wall_time_s']:.0f} s",
-        f"- machine: {m['cpu']}, {m['cores']} cores (shared, load average at start {m['loadavg_at_start']}), "
-        f"Python {m['python']}, numpy {m['numpy']}",
+        f"- machine: {describe_machine(m)}",
         f"- data: `{p['data']}`; protocol: ground truth = clean odometry from (0,0,0), odometry noise std (0.01, 0.1, 0.01), "
         "readings of the recorded landmarks simulated with Q = diag(1, 0.1) read as a covariance (unless noted), "
         f"position MSE from step 10; seeds {p['seeds'][0]}..{p['seeds'][-1]} (each seed: its own noisy odometry and readings, shared by every N)",
@@ -319,7 +300,7 @@ def markdown(p: dict, n_values: list[int]) -> str:
         lines.append(f"| {label}{suffix} | {e['mse_mean']:.4f} | {e['ratio_to_n10000']:.3f} | "
                      f"{e['paired_excess_std'] / ref['mse_mean']:.3f} | {e['runtime_s']:.3f} |")
     sm = p.get("speed_measured")
-    when = f" (re-measured {sm['date_utc']}, load average {sm['machine']['loadavg_at_start']}: `{sm['command']}`)" if sm else ""
+    when = f" (re-measured {sm['date_utc']} on {describe_machine(sm['machine'])}: `{sm['command']}`)" if sm else ""
     lines += ["", f"## Speed: full 331-step run (`all` likelihood, weighted mean, systematic every step), same data, same process{when}", "",
               "| N | lidarkit min / median [s] | plain numpy reference min / median [s] | speed-up (min, median) | MSE lidarkit / plain [m²] |",
               "|---|---|---|---|---|"]

@@ -15,16 +15,13 @@ from __future__ import annotations
 import argparse
 import datetime as dt
 import json
-import os
-import platform
 import sys
-import time
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from lidarkit import atomic
+from lidarkit.bench.machine import describe_machine, machine_info
 from lidarkit.io.kitti import KittiOdometry
 from lidarkit.vo import MonoVO, images_in_memory, preset
 from lidarkit.vo.evaluation import evaluate_vo
@@ -96,9 +93,7 @@ def main(argv=None) -> int:
     started = dt.datetime.now(dt.timezone.utc)
     results = {"command": " ".join(["python", "benchmarks/vo_kitti.py", *(argv if argv is not None else sys.argv[1:])]),
                "date_utc": started.strftime("%Y-%m-%d %H:%M UTC"),
-               "machine": {"platform": platform.platform(), "python": platform.python_version(),
-                           "cpu_count": os.cpu_count(), "opencv": cv2.__version__,
-                           "note": "2-core machine shared with other jobs; compare frames/s as ratios"},
+               "machine": machine_info(),
                "pipelines": [], "intrinsics": []}
     trajectories = {}
     for seq in args.sequences:
@@ -159,9 +154,7 @@ def _scale_focal(K: np.ndarray, factor: float) -> np.ndarray:
 def markdown(results: dict) -> str:
     lines = ["# Monocular VO on KITTI 06 and 01 (frames 0-50)", "",
              f"Command: `{results['command']}`  ", f"Date: {results['date_utc']}  ",
-             f"Machine: {results['machine']['platform']}, {results['machine']['cpu_count']} CPUs, "
-             f"Python {results['machine']['python']}, OpenCV {results['machine']['opencv']} "
-             f"({results['machine']['note']})", "",
+             f"Machine: {describe_machine(results['machine'])}; compare frames/s as ratios", "",
              "APE: translation RMSE after SE(3) alignment for ground-truth scale, Sim(3) otherwise (evo via "
              "`lidarkit.eval`). RPE: 1 frame, same alignment. Final error: distance of the last positions, raw for "
              "gt scale (both start at the same pose), after alignment otherwise; `final al.` is always after "

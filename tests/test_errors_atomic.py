@@ -45,3 +45,17 @@ def test_cli_prints_one_line_and_exits_1_on_lidarkit_error(tmp_path, capsys):
     assert exc.value.code == 1
     err = capsys.readouterr().err
     assert "error:" in err and "nope.txt" in err and "Traceback" not in err
+
+
+def test_cli_params_are_yaml_scalars_and_bad_ones_name_the_option():
+    from lidarkit.cli.app import parse_params
+
+    assert parse_params(["max_iterations=30", "voxel_size_m=0.5", "deskew=false", "name=abc", "x="]) == {
+        "max_iterations": 30,
+        "voxel_size_m": 0.5,
+        "deskew": False,
+        "name": "abc",
+        "x": None,
+    }
+    with pytest.raises(ConfigError, match=r"--set 'novalue'.*expected KEY=VALUE"):
+        parse_params(["novalue"], option="--set")

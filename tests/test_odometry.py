@@ -10,7 +10,7 @@ import pytest
 import yaml
 
 from lidarkit.errors import ConfigError, DataError, EvaluationError, LidarKitError
-from lidarkit.geometry import make_se3, random_se3, se3_inverse, so3_exp
+from lidarkit.geometry import make_se3, se3_inverse, so3_exp
 from lidarkit.io.base import Scan
 from lidarkit.odometry import open_sequence, parse_frames, run
 from lidarkit.trajectory import Trajectory

@@ -5,6 +5,8 @@ from __future__ import annotations
 import typer
 from rich.console import Console
 
+from lidarkit.errors import ConfigError
+
 app = typer.Typer(
     name="lidarkit",
     help="LiDAR registration, particle-filter localization and monocular VO, scored by one evaluation layer.",
@@ -12,6 +14,22 @@ app = typer.Typer(
     add_completion=False,
     pretty_exceptions_show_locals=False,
 )
+
+
+def parse_params(items: list[str], option: str = "--param") -> dict:
+    """``["k=v", ...]`` from a repeatable ``option`` -> dict; values are read as YAML scalars (numbers, booleans, null, strings)."""
+    import yaml
+
+    params: dict = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise ConfigError("expected KEY=VALUE", source=f"{option} {item!r}")
+        try:
+            params[key.strip()] = yaml.safe_load(value) if value.strip() else None
+        except yaml.YAMLError:
+            params[key.strip()] = value
+    return params
 
 
 def stdout() -> Console:

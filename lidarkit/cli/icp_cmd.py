@@ -82,7 +82,7 @@ def icp(
     if source is None or target is None:
         raise ConfigError("give SOURCE and TARGET scan files (or --list)", source="lidarkit icp")
     from lidarkit.atomic import write_text
-    from lidarkit.cli.odometry_cmd import parse_params
+    from lidarkit.cli.app import parse_params
     from lidarkit.io.pointfile import read_point_file
     from lidarkit.registration import get_icp
 

@@ -8,8 +8,7 @@ from typing import Optional
 import typer
 from rich.table import Table
 
-from lidarkit.cli.app import app, stdout
-from lidarkit.errors import ConfigError
+from lidarkit.cli.app import app, parse_params, stdout
 
 DATA_HELP = (
     "A KITTI sequence folder (or odometry root), a folder of scans, KIND:PATH[?opt=v&...] for any dataset reader "
@@ -17,22 +16,6 @@ DATA_HELP = (
     "(scenes street|open|ground; keys: frames, seed, beams, azimuths, noise, distortion, instant, speed or any "
     "simulator config field)."
 )
-
-
-def parse_params(items: list[str]) -> dict:
-    """``["k=v", ...]`` -> dict; values are read as YAML scalars (numbers, true/false, null, strings)."""
-    import yaml
-
-    params: dict = {}
-    for item in items:
-        key, sep, value = item.partition("=")
-        if not sep or not key.strip():
-            raise ConfigError("expected KEY=VALUE", source=f"--param {item!r}")
-        try:
-            params[key.strip()] = yaml.safe_load(value) if value.strip() else None
-        except yaml.YAMLError:
-            params[key.strip()] = value
-    return params
 
 
 def _fmt(value: object, spec: str = ".3f") -> str:

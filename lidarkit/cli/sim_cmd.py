@@ -6,7 +6,6 @@ The ``sim`` command group is ``sim_app``; other simulators attach their own sub-
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional
 
 import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
@@ -27,7 +26,7 @@ def sim_lidar(
     progress: bool = typer.Option(True, "--progress/--no-progress", help="Progress bar on stderr."),
 ) -> None:
     """Simulate a spinning LiDAR driving through a procedural scene; poses are T_world_lidar at the sweep end by default."""
-    from lidarkit.cli.odometry_cmd import parse_params
+    from lidarkit.cli.app import parse_params
     from lidarkit.sim.lidar import SimulatedLidarSequence, export_kitti, make_config
 
     config = make_config(scene=scene, n_frames=frames, seed=seed, **parse_params(param))

@@ -7,7 +7,7 @@ from typing import Optional
 
 import typer
 
-from lidarkit.cli.app import app, stderr, stdout
+from lidarkit.cli.app import app, parse_params, stderr, stdout
 from lidarkit.vo.config import VOConfig, available_presets
 from lidarkit.vo.intrinsics import DEFAULT_FOCAL_FACTOR
 
@@ -57,13 +57,7 @@ def vo_command(
         "features.max_features": features, "scale.mode": scale, "sanity.enabled": sanity, "geometry.refine": refine,
         "seed": seed,
     }
-    for item in set_ or []:
-        key, sep, value = item.partition("=")
-        if not sep:
-            raise typer.BadParameter(f"--set expects key=value, got {item!r}")
-        import yaml
-
-        changes[key.strip()] = yaml.safe_load(value)
+    changes.update(parse_params(set_ or [], option="--set"))
     if matcher in ("bf_cross", "knn_ratio") and detector is None:
         changes["features.detector"] = "orb"
     cfg = make_preset(preset, **{k: v for k, v in changes.items() if v is not None})

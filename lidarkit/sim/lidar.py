@@ -25,7 +25,6 @@ Frames, units and instants (the contract users score against):
 from __future__ import annotations
 
 import logging
-import math
 import os
 from collections.abc import Callable
 from dataclasses import dataclass

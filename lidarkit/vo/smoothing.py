@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import numpy as np
 from scipy.signal import savgol_filter
 
 from lidarkit.trajectory import Trajectory
