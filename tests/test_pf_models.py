@@ -263,3 +263,33 @@ def test_sequence_prediction_equals_step_by_step_prediction():
     np.testing.assert_allclose(a.particles, b.particles, atol=1e-12)
     with pytest.raises(DataError, match="no odometry left"):
         b.predict_next()
+
+
+def test_update_rejects_landmark_indices_outside_the_map_with_every_kernel():
+    z = np.array([[1.0, 0.1]])
+    for kernel in ("point", "kalman"):
+        pf = make_filter(LANDMARKS, PFConfig.make(n_particles=50, kernel=kernel), 1)
+        for bad in (-1, len(LANDMARKS)):
+            with pytest.raises(DataError, match=rf"landmark index {bad} outside 0\.\.4"):
+                pf.update(np.array([bad]), z)
+        assert pf.update(np.array([len(LANDMARKS) - 1]), z) is True
+
+
+@pytest.mark.parametrize("sequence", [False, True])
+def test_headings_stay_wrapped_and_precise_over_many_turning_steps(sequence):
+    # 4000 steps of 0.6 rad turn: unwrapped, float32 theta reaches 2400 rad (resolution 2.4e-4 rad) and drifts
+    odo = np.tile([0.3, 0.05, 0.3], (4000, 1))
+    cfg = PFConfig.make(n_particles=20, motion_noise_std=(0.0, 0.0, 0.0), estimator="best")
+    pf = ParticleFilter(LANDMARKS, cfg, 3)
+    pf.initialize_gaussian(mean=np.zeros(3), std=np.zeros(3))
+    truth = integrate_odometry(odo)
+    if sequence:
+        pf.begin_odometry(odo)
+    for u in odo:
+        pf.predict_next() if sequence else pf.predict(u)
+    theta = pf.particles[:, 2]
+    assert (np.abs(theta) <= np.float32(np.pi)).all()
+    best = pf.estimate("best")
+    assert -np.pi <= best[2] < np.pi
+    assert abs(wrap_angle(best[2] - truth[-1, 2])) < 1e-3
+    np.testing.assert_allclose(best[:2], truth[-1, :2], atol=1e-3)

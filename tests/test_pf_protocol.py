@@ -204,3 +204,11 @@ def test_cli_on_the_bundled_sample_without_shared_data(capsys):
     mse = float(out.split("position MSE from step 10 (mean) [m²]")[1].split("│")[1])
     dr = float(out.split("position MSE dead reckoning [m²]")[1].split("│")[1])
     assert mse < dr / 10
+
+
+def test_config_particle_count_is_used_unless_n_particles_is_given(stachniss):
+    cfg = PFConfig.make(n_particles=30)
+    assert run_protocol(stachniss, config=cfg, with_ape_rpe=False).config.n_particles == 30
+    assert run_protocol(stachniss, 40, config=cfg, with_ape_rpe=False).config.n_particles == 40
+    assert run_protocol(stachniss, with_ape_rpe=False).config.n_particles == PFConfig().n_particles
+    assert run_recorded(stachniss, config=cfg).config.n_particles == 30

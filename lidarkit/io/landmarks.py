@@ -40,11 +40,6 @@ class LandmarkMap:
     ids: np.ndarray
     positions_xy: np.ndarray
 
-    def index_of(self, ids: np.ndarray) -> np.ndarray:
-        """Row index of each id in ``ids`` (all ids must exist)."""
-        order = np.argsort(self.ids)
-        return order[np.searchsorted(self.ids, ids, sorter=order)]
-
 
 def read_world(path: str | os.PathLike) -> LandmarkMap:
     """Parse ``world.dat``: one ``id x y`` per line, integer unique ids, finite coordinates."""

@@ -18,12 +18,12 @@ class PFConfig(BaseModel):
     """Particle-filter settings.
 
     ``q`` is the measurement noise [range, bearing] read as variances (``q_as="variance"``, default:
-    Q is a covariance matrix) or standard deviations (``q_as="std"``). ``init_std`` are standard
-    deviations: ``likelihood="nearest"`` uses one reading per step (the closest landmark) with its known
-    landmark id (``nearest_association="known"``) or, as the report did, compared with each particle's
-    own nearest landmark (``"per_particle"``: ambiguous, diverges with few particles). ``init_std`` are standard
-    deviations: the report's ``x, y ~ N(0, 2)``, ``theta ~ N(0.1, 0.1)`` read as N(mean, variance),
-    i.e. std sqrt(2) m and sqrt(0.1) rad. ``ess_threshold``: resample when ESS < threshold * N;
+    Q is a covariance matrix) or standard deviations (``q_as="std"``). ``likelihood="nearest"`` uses one
+    reading per step (the closest landmark) with its known landmark id (``nearest_association="known"``)
+    or, as the report did, compared with each particle's own nearest landmark (``"per_particle"``:
+    ambiguous, diverges with few particles). ``init_std`` are standard deviations: the report's
+    ``x, y ~ N(0, 2)``, ``theta ~ N(0.1, 0.1)`` read as N(mean, variance), i.e. std sqrt(2) m and
+    sqrt(0.1) rad. ``ess_threshold``: resample when ESS < threshold * N;
     ``>= 1`` resamples after every update (the report). ``roughening``: Gordon's constant K, jitter std
     K * spread_d * N^(-1/3) per state dimension after resampling (0 = off). ``regularization``: Liu-West
     kernel move with bandwidth h after resampling (keeps mean and covariance). ``moment_matching``:

@@ -8,17 +8,30 @@ import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.pf.config import PFConfig
-from lidarkit.pf.models import OdometryMotionModel, RangeBearingModel, resolve_q, standard_normal, wrap_angle
+from lidarkit.pf.models import OdometryMotionModel, RangeBearingModel, _wrap_inplace, resolve_q, standard_normal, wrap_angle
 from lidarkit.pf.resampling import effective_sample_size, get_resampler
 
 log = logging.getLogger(__name__)
+
+THETA_WRAP_EVERY = 32  # predictions between wraps of the particle headings (keeps float32 theta precise)
+
+
+def check_landmark_index(landmark_index: np.ndarray, n_landmarks: int, source: str = "update") -> None:
+    """DataError naming the first index of ``landmark_index`` ``(M,)`` outside ``0 .. n_landmarks - 1``."""
+    bad = (landmark_index < 0) | (landmark_index >= n_landmarks)
+    if bad.any():
+        raise DataError(
+            f"landmark index {int(landmark_index[np.argmax(bad)])} outside 0..{n_landmarks - 1} (reading {int(np.argmax(bad))})",
+            source=source,
+        )
 
 
 class ParticleFilter:
     """Landmark-based Monte-Carlo localization in 2D (pose x_m, y_m, theta_rad).
 
     ``landmarks_xy``: ``(L, 2)`` map. Particles are ``(3, N)`` (``.states``; ``.particles`` gives
-    an ``(N, 3)`` view) with normalized weights ``(N,)`` float64 and their logs. Counters:
+    an ``(N, 3)`` view) with normalized weights ``(N,)`` (both of ``config.dtype``, float32 by default) and
+    their logs. Headings are wrapped to [-pi, pi] every ``THETA_WRAP_EVERY`` predictions. Counters:
     ``n_updates``, ``n_resamples``, ``n_weight_resets`` (updates whose log-likelihoods were all
     non-finite: weights reset to uniform, logged).
     """
@@ -49,6 +62,7 @@ class ParticleFilter:
         self._control_buf: np.ndarray | None = None
         self._control_pos = 0
         self._uniform_w: np.ndarray | None = None
+        self._predicts_since_wrap = 0
         self.n_updates = 0
         self.n_resamples = 0
         self.n_weight_resets = 0
@@ -162,6 +176,7 @@ class ParticleFilter:
         else:
             c[0], c[1], c[2] = r1, t, r1 + r2
         self.motion.apply_controls(self.states, c, self._scratch)
+        self._count_predict()
 
     def begin_odometry(self, odometry: np.ndarray) -> None:
         """Announce a whole ``(T, 3)`` odometry sequence for :meth:`predict_next` (validated by the caller)."""
@@ -185,6 +200,18 @@ class ParticleFilter:
         self.motion.apply_controls(self.states, self._control_block[self._control_pos], self._scratch)
         self._control_pos += 1
         self._odometry_pos += 1
+        self._count_predict()
+
+    def _count_predict(self) -> None:
+        """Wrap the headings every ``THETA_WRAP_EVERY`` predictions (one vector op, amortized)."""
+        self._predicts_since_wrap += 1
+        if self._predicts_since_wrap >= THETA_WRAP_EVERY:
+            self.wrap_headings()
+
+    def wrap_headings(self) -> None:
+        """Wrap every particle's theta to [-pi, pi] in place."""
+        _wrap_inplace(self.states[2], self._scratch[0])
+        self._predicts_since_wrap = 0
 
     # ---- update -----------------------------------------------------------------------------------
     def log_likelihood(self, landmark_index: np.ndarray, z: np.ndarray) -> np.ndarray:
@@ -213,6 +240,7 @@ class ParticleFilter:
                 raise DataError("non-finite measurement", source="update")
             if len(landmark_index) != len(z):
                 raise DataError(f"{len(landmark_index)} landmark indices for {len(z)} readings", source="update")
+            check_landmark_index(landmark_index, len(self.landmarks_xy))
         if len(z) == 0:
             return False
         self.apply_log_likelihood(self.log_likelihood(landmark_index, z))
@@ -316,10 +344,12 @@ class ParticleFilter:
 
     # ---- estimate ---------------------------------------------------------------------------------
     def estimate(self, kind: str | None = None) -> np.ndarray:
-        """Pose ``(3,)`` float64: weighted mean (circular mean for theta) or the highest-weight particle."""
+        """Pose ``(3,)`` float64 (theta in [-pi, pi)): weighted mean (circular mean for theta) or the highest-weight particle."""
         kind = kind or self.config.estimator
         if kind == "best":
-            return self.states[:, int(np.argmax(self.weights))].astype(np.float64)
+            pose = self.states[:, int(np.argmax(self.weights))].astype(np.float64)
+            pose[2] = wrap_angle(pose[2])
+            return pose
         if kind != "mean":
             raise ConfigError(f"unknown estimator {kind!r}; known: mean, best", source="estimator")
         buf = self._estimate_buf  # rows x, y, cos(theta), sin(theta)

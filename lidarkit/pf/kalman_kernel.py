@@ -17,6 +17,7 @@ import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.pf.config import PFConfig
+from lidarkit.pf.filter import check_landmark_index
 from lidarkit.pf.models import resolve_q, wrap_angle
 from lidarkit.pf.resampling import effective_sample_size, get_resampler
 
@@ -132,6 +133,10 @@ class KalmanParticleFilter:
         if not np.isfinite(z).all():
             raise DataError("non-finite measurement", source="update")
         idx = np.asarray(landmark_index, dtype=np.int64).reshape(-1)
+        if check:
+            if len(idx) != len(z):
+                raise DataError(f"{len(idx)} landmark indices for {len(z)} readings", source="update")
+            check_landmark_index(idx, len(self.landmarks_xy))
         if self.config.likelihood == "nearest":
             k = int(np.argmin(z[:, 0])) if len(z) > 1 else 0
             z, idx = z[k : k + 1], idx[k : k + 1]

@@ -177,7 +177,6 @@ class RangeBearingModel:
         self.q_cov = resolve_q(q_cov, "variance")
         info = np.linalg.inv(self.q_cov)
         self._a, self._b, self._c = float(info[0, 0]), float(info[0, 1]), float(info[1, 1])
-        self._log_norm = -0.5 * float(np.log(np.linalg.det(TWO_PI * self.q_cov)))
 
     @staticmethod
     def expected(pose: np.ndarray, landmarks_xy: np.ndarray) -> np.ndarray:
@@ -261,7 +260,7 @@ class RangeBearingModel:
 
 
 def _wrap_inplace(a: np.ndarray, scratch: np.ndarray) -> None:
-    """Wrap ``a`` to [-pi, pi) in place using ``scratch`` (same shape/dtype)."""
+    """Wrap ``a`` to [-pi, pi] in place using ``scratch`` (same shape/dtype); rounds to nearest turn, so +-pi stay."""
     dtype = a.dtype.type
     np.multiply(a, dtype(1.0 / TWO_PI), out=scratch)
     np.rint(scratch, out=scratch)

@@ -38,8 +38,8 @@ CHI2_2DOF_999 = 13.815510557964274  # chi-square(2) 99.9% quantile: "lost" thres
 
 @dataclass(frozen=True, eq=False)
 class StepReadings:
-    """Readings as flat arrays: ``step`` ``(K,)``, ``landmark_index`` ``(K,)``, ``z`` ``(K, 2)`` [range_m, bearing_rad],
-    CSR ``offsets`` ``(T+1,)``."""
+    """Readings grouped by step (CSR): ``landmark_index`` ``(K,)``, ``z`` ``(K, 2)`` [range_m, bearing_rad];
+    step t's readings are rows ``offsets[t]:offsets[t+1]`` (``offsets`` ``(T+1,)``)."""
 
     landmark_index: np.ndarray
     z: np.ndarray
@@ -99,8 +99,7 @@ def simulate(
     z[:, 1] = wrap_angle(z[:, 1])
     readings = StepReadings.from_flat(step, idx, z, T)
     # nearest: per step, the reading whose landmark is truly closest to the robot
-    true_range = np.where(np.bincount(step, minlength=T)[step] > 0, true_z[:, 0], np.inf)
-    order = np.lexsort((true_range, step))
+    order = np.lexsort((true_z[:, 0], step))
     first = np.ones(len(order), dtype=bool)
     first[1:] = step[order][1:] != step[order][:-1]
     keep = order[first]
@@ -261,9 +260,17 @@ def _is_lost(max_loglik, n_readings):
         return np.asarray(-2.0 * np.asarray(max_loglik) / np.maximum(n_readings, 1) > CHI2_2DOF_999)
 
 
+def _resolve_config(config: PFConfig | None, n_particles: int | None, changes: dict[str, Any]) -> PFConfig:
+    """``config`` (default ``PFConfig()``) with ``changes``; ``n_particles`` overrides the config's only when given."""
+    if n_particles is not None:
+        changes = {**changes, "n_particles": n_particles}
+    base = config if config is not None else PFConfig.make()
+    return base.replace(**changes) if changes else base
+
+
 def run_protocol(
     data,
-    n_particles: int = 1000,
+    n_particles: int | None = None,
     seed: int = 0,
     *,
     config: PFConfig | None = None,
@@ -282,12 +289,12 @@ def run_protocol(
 
     ``seed`` derives two independent streams: the simulated data (noisy odometry, readings) and the
     filter; so runs with the same seed and different N see the same data. Readings are simulated with
-    the same Q the filter uses (``q``/``q_as`` of the config). ``estimators`` (default: the config's)
+    the same Q the filter uses (``q``/``q_as`` of the config). ``n_particles`` (if given) overrides the
+    config's. ``estimators`` (default: the config's)
     are all recorded; MSE uses ``lidarkit.eval.position_mse`` from step ``mse_start`` on.
     """
     overrides = {k: v for k, v in dict(likelihood=likelihood, estimator=estimator, resampler=resampler, q_as=q_as).items() if v is not None}
-    base = config if config is not None else PFConfig.make(n_particles=n_particles)
-    cfg = base.replace(n_particles=n_particles, **overrides, **config_overrides)
+    cfg = _resolve_config(config, n_particles, {**overrides, **config_overrides})
     data_seq, filter_seq = np.random.SeedSequence(seed).spawn(2)
     q_cov = resolve_q(cfg.q, cfg.q_as)
     sim = simulate(data, np.random.default_rng(data_seq), q_cov, visible=visible)
@@ -352,7 +359,7 @@ def score_against_ground_truth(result: PFRunResult, *, mse_start: int = MSE_STAR
 
 def run_recorded(
     data,
-    n_particles: int = 1000,
+    n_particles: int | None = None,
     seed: int = 0,
     *,
     config: PFConfig | None = None,
@@ -360,8 +367,7 @@ def run_recorded(
     **config_overrides: Any,
 ) -> PFRunResult:
     """Run on the data's own odometry and SENSOR readings; report NIS consistency and distance to dead reckoning."""
-    base = config if config is not None else PFConfig.make(n_particles=n_particles)
-    cfg = base.replace(n_particles=n_particles, **config_overrides)
+    cfg = _resolve_config(config, n_particles, config_overrides)
     pf = make_filter(data.landmarks.positions_xy, cfg, np.random.default_rng(seed))
     odo = np.asarray(data.odometry, dtype=np.float64)
     readings = StepReadings(
