@@ -26,7 +26,9 @@ def read_init_pose(path: Path) -> np.ndarray:
         T[: table.shape[1] // 4] = table.reshape(-1, 4)
     else:
         raise DataError(f"expected a 4x4 / 3x4 matrix or one row of 12 or 16 numbers, got {table.shape}", source=path)
-    return T
+    from lidarkit.registration.base import check_init_T
+
+    return check_init_T(T, source=str(path))
 
 
 def _list_methods() -> None:
@@ -97,8 +99,8 @@ def icp(
 
         out.mkdir(parents=True, exist_ok=True)
         payload = {"source": str(source), "target": str(target), "init": None if init is None else str(init), **result.to_dict()}
-        write_text(out / "result.json", json.dumps(payload, indent=2) + "\n")
-        write_text(out / "config.json", json.dumps({"method": method, "params": registration.config.model_dump()}, indent=2) + "\n")
+        write_text(out / "result.json", json.dumps(payload, indent=2, allow_nan=False) + "\n")
+        write_text(out / "config.json", json.dumps({"method": method, "params": registration.config.model_dump(mode="json")}, indent=2, allow_nan=False) + "\n")
         save_bev_before_after(
             out / "bev.png", source_xyz, target_xyz, result.T_target_source, init_T, title=f"{method}: {source.name} -> {target.name}"
         )

@@ -14,10 +14,10 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict
+from pydantic import BaseModel, ConfigDict, Field
 
 from lidarkit.errors import DataError
-from lidarkit.geometry import as_points, orthonormalize_se3
+from lidarkit.geometry import as_points, is_rotation, orthonormalize_se3
 
 #: A result is flagged ``degenerate`` when min/max eigenvalue of the normalised normal matrix is below this
 #: (KITTI full scans: ~0.3; road-only patches: 5e-4 to 6e-3; see degeneracy.py).
@@ -27,10 +27,50 @@ DEGENERACY_RATIO_THRESHOLD = 1e-2
 TWIST_ORDER = ("tx", "ty", "tz", "rx", "ry", "rz")
 
 
+#: Default acceptance gate on the final fitness (fraction of source points with a correspondence within the
+#: variant's inlier distance). Good pairs score far above it (KITTI consecutive scans > 0.94, the fast_gicp
+#: sample pair ~0.8), while a start 30 m off that "converges" onto a wrong local minimum scores 0.02-0.22.
+DEFAULT_MIN_FITNESS = 0.3
+
+#: An initial guess's rotation block must be orthonormal to this (rounding to 3-4 decimals passes; 2*I does not).
+INIT_ROTATION_TOL = 1e-3
+
+#: Default minimum number of final correspondences for a result to count as converged.
+DEFAULT_MIN_CORRESPONDENCES = 10
+
+
 class RegistrationConfig(BaseModel):
-    """Base of every variant's typed config: frozen, unknown keys rejected."""
+    """Base of every variant's typed config: frozen, unknown keys rejected.
+
+    ``min_fitness`` / ``min_correspondences`` are the acceptance gate every variant applies to its final
+    alignment (see :meth:`Registration.align`): below either, the result is reported ``converged=False``.
+    """
 
     model_config = ConfigDict(frozen=True, extra="forbid")
+
+    min_fitness: float = Field(
+        DEFAULT_MIN_FITNESS, ge=0, le=1, description="final fitness below this -> not converged (good pairs: > 0.8)"
+    )
+    min_correspondences: int = Field(
+        DEFAULT_MIN_CORRESPONDENCES, ge=3, description="fewer final correspondences than this -> not converged"
+    )
+
+
+def json_safe(value: Any) -> Any:
+    """``value`` with numpy scalars/arrays turned into Python data and NaN / +-inf into None (strict JSON)."""
+    if isinstance(value, dict):
+        return {str(k): json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return json_safe(value.tolist())
+    if isinstance(value, (np.bool_, bool)):
+        return bool(value)
+    if isinstance(value, (np.integer, int)):
+        return int(value)
+    if isinstance(value, (np.floating, float)):
+        return float(value) if np.isfinite(value) else None
+    return value
 
 
 @dataclass(frozen=True)
@@ -58,10 +98,11 @@ class Degeneracy:
         return float(self.eigenvalues[0] / top) if top > 0 else 0.0
 
     def to_dict(self) -> dict[str, Any]:
+        """Plain JSON-ready data; an infinite condition number becomes None."""
         out = dataclasses.asdict(self)
         out["ratio"] = self.ratio
         out["twist_order"] = list(TWIST_ORDER)
-        return out
+        return json_safe(out)
 
     @staticmethod
     def unknown(reason: str = "not computed") -> "Degeneracy":
@@ -102,7 +143,8 @@ class RegistrationResult:
         return float(self.rmse_history[-1]) if self.rmse_history else float("nan")
 
     def to_dict(self) -> dict[str, Any]:
-        return {
+        """Plain JSON-ready data; non-finite numbers (NaN RMSE, infinite condition number) become None."""
+        return json_safe({
             "method": self.method,
             "T_target_source": np.asarray(self.T_target_source).tolist(),
             "converged": bool(self.converged),
@@ -115,7 +157,19 @@ class RegistrationResult:
             "degeneracy": self.degeneracy.to_dict(),
             "reason": self.reason,
             "extra": self.extra,
-        }
+        })
+
+
+def check_init_T(init_T: np.ndarray, source: str = "init_T") -> np.ndarray:
+    """A validated initial guess with an exactly orthonormal rotation (see :func:`check_pair`)."""
+    T0 = np.asarray(init_T, dtype=np.float64)
+    if T0.shape != (4, 4) or not np.isfinite(T0).all():
+        raise DataError(f"expected a finite 4x4 matrix, got shape {T0.shape}", source=source)
+    if not np.array_equal(T0[3], [0.0, 0.0, 0.0, 1.0]):
+        raise DataError(f"last row must be [0, 0, 0, 1], got {T0[3].tolist()}", source=source)
+    if not is_rotation(T0[:3, :3], tol=INIT_ROTATION_TOL):
+        raise DataError(f"the 3x3 block is not a rotation (R^T R = I within {INIT_ROTATION_TOL:g}, det > 0)", source=source)
+    return orthonormalize_se3(T0)
 
 
 def check_pair(
@@ -123,18 +177,29 @@ def check_pair(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Validate a registration input: two ``(N, 3)`` finite clouds of >= ``min_points`` and a 4x4 guess.
 
-    Returns float64 copies-or-views and the initial guess with an exactly orthonormal rotation.
+    Returns float64 copies-or-views and the initial guess with an exactly orthonormal rotation. The guess
+    must already be a rigid transform up to rounding (``R^T R = I`` within ``INIT_ROTATION_TOL``,
+    ``det R > 0``, last row ``[0, 0, 0, 1]``); anything else (a scaled matrix, a projective row) is refused
+    rather than silently projected onto SE(3).
     """
     src = as_points(source_xyz, "source cloud", min_points=min_points)
     dst = as_points(target_xyz, "target cloud", min_points=min_points)
-    if init_T is None:
-        T0 = np.eye(4)
-    else:
-        T0 = np.asarray(init_T, dtype=np.float64)
-        if T0.shape != (4, 4) or not np.isfinite(T0).all():
-            raise DataError(f"expected a finite 4x4 matrix, got shape {T0.shape}", source="init_T")
-        T0 = orthonormalize_se3(T0)
+    T0 = np.eye(4) if init_T is None else check_init_T(init_T)
     return src, dst, T0
+
+
+def accept(result: RegistrationResult, config: RegistrationConfig) -> RegistrationResult:
+    """Apply the config's acceptance gate: too few correspondences or too low a fitness -> not converged."""
+    if not result.converged:
+        return result
+    problems = []
+    if result.n_correspondences < config.min_correspondences:
+        problems.append(f"only {result.n_correspondences} correspondences (min_correspondences={config.min_correspondences})")
+    if not np.isfinite(result.fitness) or result.fitness < config.min_fitness:
+        problems.append(f"fitness {result.fitness:.3f} below min_fitness={config.min_fitness:g}")
+    if not problems:
+        return result
+    return dataclasses.replace(result, converged=False, reason="; ".join([result.reason, *problems] if result.reason else problems))
 
 
 class Registration:
@@ -166,7 +231,7 @@ class Registration:
         start = time.perf_counter()
         result = self._align(src, dst, T0)
         runtime = time.perf_counter() - start
-        return dataclasses.replace(result, runtime_s=runtime, method=self.name)
+        return dataclasses.replace(accept(result, self._config), runtime_s=runtime, method=self.name)
 
     def _align(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray) -> RegistrationResult:
         raise NotImplementedError

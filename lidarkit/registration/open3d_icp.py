@@ -70,8 +70,10 @@ class _Open3DBase(Registration):
         src_pts, dst_pts = np.asarray(src.points), np.asarray(dst.points)
         assessment = assess_alignment(src_pts, dst_pts, T, c.max_correspondence_distance_m)
         reason = ""
-        converged = assessment.n_correspondences >= 3
-        if not converged:
+        converged = assessment.n_correspondences >= 3 and float(out.fitness) > 0
+        if float(out.fitness) <= 0:
+            reason = f"Open3D fitness 0: no correspondence within {c.max_correspondence_distance_m} m"
+        elif not converged:
             reason = f"only {assessment.n_correspondences} correspondences within {c.max_correspondence_distance_m} m"
         elif assessment.degeneracy.degenerate:
             reason = f"degenerate geometry: min/max eigenvalue {assessment.degeneracy.ratio:.2e}"
@@ -79,7 +81,7 @@ class _Open3DBase(Registration):
             T_target_source=T,
             converged=converged,
             iterations=0,
-            rmse_history=(float(out.inlier_rmse),),
+            rmse_history=(float(out.inlier_rmse) if out.fitness > 0 else float("nan"),),  # Open3D reports 0 for "no pairs"
             n_correspondences=assessment.n_correspondences,
             runtime_s=0.0,
             fitness=assessment.fitness,

@@ -33,7 +33,6 @@ class VanillaConfig(RegistrationConfig):
     nn_backend: Literal["auto", "scipy", "open3d", "brute"] = Field("auto", description="nearest-neighbour search backend")
     leafsize: int = Field(16, ge=1, description="KD-tree leaf size (scipy backend)")
     workers: int = Field(-1, description="threads for the scipy KD-tree query (-1: all cores)")
-    min_correspondences: int = Field(10, ge=3, description="fewer pairs within the max distance -> not converged")
     coarse_stride: int = Field(
         8, ge=1, description="first converge with every k-th source point, then refine with all (1: single stage)"
     )
