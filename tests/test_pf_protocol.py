@@ -212,3 +212,23 @@ def test_config_particle_count_is_used_unless_n_particles_is_given(stachniss):
     assert run_protocol(stachniss, 40, config=cfg, with_ape_rpe=False).config.n_particles == 40
     assert run_protocol(stachniss, with_ape_rpe=False).config.n_particles == PFConfig().n_particles
     assert run_recorded(stachniss, config=cfg).config.n_particles == 30
+
+
+def _strict_json(text: str):
+    def refuse(name):
+        raise ValueError(f"invalid JSON constant {name}")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+def test_cli_metrics_json_is_strict_json_with_non_finite_values_as_null(tmp_path):
+    from lidarkit.cli.pf_cmd import _write
+    from lidarkit.samples import sample_path
+
+    result = run_protocol(LandmarkData(sample_path("freiburg_pf")), 50, seed=0, with_ape_rpe=False)
+    result.metrics["not_a_number"] = float("nan")
+    result.metrics["per_step"] = np.array([1.5, np.inf, -np.inf])
+    _write(result, tmp_path, snap_steps=(), gif=False)
+    metrics = _strict_json((tmp_path / "metrics.json").read_text())
+    assert metrics["metrics"]["not_a_number"] is None and metrics["metrics"]["per_step"] == [1.5, None, None]
+    assert metrics["config"]["n_particles"] == 50

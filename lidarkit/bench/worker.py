@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import logging
-import math
 import os
 import socket
 import time
@@ -16,25 +15,6 @@ from lidarkit.bench.jobs import Job
 
 def _utc_now() -> str:
     return datetime.now(timezone.utc).isoformat(timespec="milliseconds")
-
-
-def _json_safe(value: Any) -> Any:
-    """Convert numpy scalars/arrays and non-finite floats into plain JSON (NaN/inf -> None)."""
-    if isinstance(value, dict):
-        return {str(k): _json_safe(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_json_safe(v) for v in value]
-    if hasattr(value, "tolist") and not isinstance(value, (str, bytes)):
-        return _json_safe(value.tolist())
-    if isinstance(value, bool) or value is None or isinstance(value, (int, str)):
-        return value
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    try:
-        f = float(value)
-    except (TypeError, ValueError):
-        return str(value)
-    return f if math.isfinite(f) else None
 
 
 class _WarningCapture(logging.Handler):
@@ -52,6 +32,7 @@ class _WarningCapture(logging.Handler):
 def execute_job(spec: dict[str, Any]) -> dict[str, Any]:
     """Run the job described by ``spec`` (``Job.spec()``); a raising job gives ``status="failed"`` with its error."""
     from lidarkit.bench.tasks import get_task
+    from lidarkit.eval.report import json_safe
 
     started = _utc_now()
     t0 = time.perf_counter()
@@ -64,9 +45,9 @@ def execute_job(spec: dict[str, Any]) -> dict[str, Any]:
     try:
         job = Job.from_spec(spec)
         output = get_task(job.task).run(job)
-        record["metrics"] = _json_safe(output.metrics)
-        record["series"] = _json_safe(output.series)
-        record["info"] = _json_safe(output.info)
+        record["metrics"] = json_safe(output.metrics)
+        record["series"] = json_safe(output.series)
+        record["info"] = json_safe(output.info)
     except Exception as err:  # a job's failure is data, not a crash of the suite
         record["status"] = "failed"
         record["error"] = {

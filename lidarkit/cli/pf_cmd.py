@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import typer
@@ -111,11 +110,12 @@ def _print(result) -> None:
 
 def _write(result, out: Path, *, snap_steps: tuple[int, ...], gif: bool) -> None:
     from lidarkit import atomic
+    from lidarkit.eval.report import write_json
     from lidarkit.pf import plots
 
     out.mkdir(parents=True, exist_ok=True)
     atomic.write_text(out / "config.yaml", yaml.safe_dump({"pf": result.config.model_dump(mode="json"), "run": result.settings}, sort_keys=False))
-    atomic.write_text(out / "metrics.json", json.dumps(result.to_dict(), indent=2))
+    write_json(result.to_dict(), out / "metrics.json")
     est = result.trajectory("estimate")
     est.to_kitti(out / "poses_kitti.txt")
     est.to_tum(out / "poses_tum.txt")

@@ -115,6 +115,26 @@ def evaluation_markdown(evaluation: Evaluation) -> str:
     return "\n".join(parts)
 
 
+def json_safe(value: Any) -> Any:
+    """``value`` as plain JSON data: numpy scalars/arrays to Python, non-finite floats (NaN, inf) to None."""
+    if isinstance(value, dict):
+        return {str(k): json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(v) for v in value]
+    if hasattr(value, "tolist") and not isinstance(value, (str, bytes)):
+        return json_safe(value.tolist())
+    if isinstance(value, bool) or value is None or isinstance(value, (int, str)):
+        return value
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    try:
+        f = float(value)
+    except (TypeError, ValueError):
+        return str(value)
+    return f if math.isfinite(f) else None
+
+
 def write_json(data: dict[str, Any] | list[Any], path: str | os.PathLike) -> Path:
-    """Write ``data`` (e.g. ``evaluation.to_dict()``) as indented JSON, atomically; NaN is refused."""
-    return atomic.write_text(path, json.dumps(data, indent=2, allow_nan=False) + "\n")
+    """Write ``data`` (e.g. ``evaluation.to_dict()``) as indented, strictly valid JSON, atomically
+    (through :func:`json_safe`: NaN / infinity become null)."""
+    return atomic.write_text(path, json.dumps(json_safe(data), indent=2, allow_nan=False) + "\n")

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import csv
 import io
-import json
 import os
 from pathlib import Path
 from typing import Any
@@ -102,7 +101,9 @@ def write_run(result: VOResult, out_dir: str | os.PathLike, *, ground_truth: Tra
     config = {"vo": result.config.model_dump(mode="json"), "K": np.asarray(result.K).tolist(), **(extra_config or {})}
     paths["config"] = atomic.write_text(out / "config.yaml", yaml.safe_dump(config, sort_keys=False))
     summary = {**result.summary(), **(metrics or {})}
-    paths["metrics"] = atomic.write_text(out / "metrics.json", json.dumps(summary, indent=2, default=float) + "\n")
+    from lidarkit.eval.report import write_json
+
+    paths["metrics"] = write_json(summary, out / "metrics.json")
     if plot:
         trajs = {"ground truth": ground_truth} if ground_truth is not None else {}
         trajs.update({"VO raw": result.trajectory, "VO smoothed": smoothed})
