@@ -129,3 +129,34 @@ def test_vo_on_synthetic_tum_folder_with_calib_file(tmp_path, capsys):
     assert metrics["rejected"] == 0 and metrics["raw"]["ape_rmse_m"] < 0.01
     est = Trajectory.from_tum(out / "poses_tum.txt")
     np.testing.assert_allclose(est.timestamps_s, traj.timestamps_s + 100.0, atol=1e-6)
+
+
+def test_frame_count_below_one_is_a_config_error(capsys):
+    from lidarkit.errors import ConfigError
+    from lidarkit.vo.inputs import FrameRange, frame_range
+
+    vo_input = open_vo_input(sample_path("kitti_vo", "06"))
+    for count in (0, -3):
+        with pytest.raises(ConfigError, match=rf"max_frames.*>= 1, got {count}"):
+            frame_range(vo_input, 0, count)
+        with pytest.raises(ConfigError, match="max_frames"):
+            FrameRange(vo_input.images, 2, count)
+    assert len(frame_range(vo_input, 1, 3).images) == 3
+    code, _, err = _run(["vo", str(sample_path("kitti_vo", "06")), "--max-frames", "0"], capsys)
+    assert code == 1 and "--max-frames" in err and ">= 1, got 0" in err and len(err.strip().splitlines()) == 1
+
+
+def test_metrics_json_is_strict_json_with_non_finite_values_as_null(tmp_path):
+    from lidarkit.vo import preset, run_vo
+    from lidarkit.vo.output import write_run
+
+    vo_input = open_vo_input(sample_path("kitti_vo", "06"))
+    images = [vo_input.images.read_image(i) for i in range(4)]
+    result = run_vo(images, vo_input.K, preset("lidarkit", **{"scale.mode": "gt"}), ground_truth=vo_input.ground_truth[:4])
+    paths = write_run(result, tmp_path, metrics={"final_error_m": float("nan"), "ape": np.array([0.5, np.inf])}, plot=False)
+
+    def refuse(name):
+        raise ValueError(f"invalid JSON constant {name}")
+
+    metrics = json.loads(paths["metrics"].read_text(), parse_constant=refuse)
+    assert metrics["final_error_m"] is None and metrics["ape"] == [0.5, None] and metrics["frames"] == 4

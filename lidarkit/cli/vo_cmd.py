@@ -8,6 +8,7 @@ from typing import Optional
 import typer
 
 from lidarkit.cli.app import app, parse_params, stderr, stdout
+from lidarkit.errors import ConfigError
 from lidarkit.vo.config import VOConfig, available_presets
 from lidarkit.vo.intrinsics import DEFAULT_FOCAL_FACTOR
 
@@ -51,6 +52,8 @@ def vo_command(
     from lidarkit.vo.inputs import frame_range, open_vo_input
     from lidarkit.vo.pipeline import MonoVO
 
+    if max_frames is not None and max_frames < 1:
+        raise ConfigError(f"must be >= 1, got {max_frames}", source="--max-frames")
     changes = {
         "features.detector": detector, "matching.method": matcher,
         "geometry.estimators": tuple(estimator) if estimator else None, "preprocess.method": preprocess,

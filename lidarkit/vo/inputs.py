@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from lidarkit.errors import DataError
+from lidarkit.errors import ConfigError, DataError
 from lidarkit.trajectory import Trajectory
 from lidarkit.vo.intrinsics import DEFAULT_FOCAL_FACTOR, K_from_image_size, validate_K
 
@@ -93,6 +93,8 @@ class FrameRange:
     """The first ``count`` images of an ``ImageSequence`` starting at ``start`` (same interface)."""
 
     def __init__(self, images: Any, start: int = 0, count: int | None = None):
+        if count is not None and count < 1:
+            raise ConfigError(f"frame count must be >= 1, got {count}", source="max_frames")
         n = len(images)
         if not 0 <= start < n:
             raise DataError(f"start frame {start} outside 0..{n - 1}", source=getattr(images, "name", "images"))
