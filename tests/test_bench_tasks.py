@@ -186,6 +186,9 @@ def test_vo_job_validates_presets_and_matches_a_direct_run(tmp_path):
     ape = leval.ape(*leval.paired(gt, direct.trajectory), align="se3")
     assert record["info"]["align"] == "se3"
     assert record["metrics"]["ape_rmse_m"] == pytest.approx(ape.rmse, rel=1e-9)
+    # one definition with the `lidarkit vo` CLI: ground-truth scale -> raw final-position distance
+    cli_metrics = vo.evaluate_vo(direct.trajectory, gt, "gt")
+    assert record["metrics"]["final_error_m"] == pytest.approx(cli_metrics["final_error_raw_m"], rel=1e-9)
     assert record["metrics"]["ape_rmse_m"] < 0.1 and record["metrics"]["n_frames"] == 6
 
 

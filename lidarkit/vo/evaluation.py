@@ -6,6 +6,7 @@ Alignment follows the scale mode: SE(3) when the scale came from the ground trut
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -18,21 +19,26 @@ def alignment_for(scale_mode: str) -> str:
     return "se3" if scale_mode == "gt" else "sim3"
 
 
-def evaluate_vo(est: Trajectory, ref: Trajectory, scale_mode: str) -> dict[str, Any]:
-    """APE (translation, m), RPE over 1 frame (translation m, rotation deg) and final-frame errors.
+@dataclass(frozen=True, eq=False)
+class VOScores:
+    """:func:`evaluate_vo`'s ``metrics`` dict plus the translation APE result behind it (errors, aligned estimate)."""
 
-    ``final_error_m`` is the raw distance of the last positions for ``gt`` scale (both start at the same pose) and
-    the distance after alignment otherwise; both variants are also reported separately.
-    """
+    metrics: dict[str, Any]
+    ape: Any
+
+
+def score_vo(est: Trajectory, ref: Trajectory, scale_mode: str, align: str | None = None) -> VOScores:
+    """:func:`evaluate_vo` keeping the APE result; ``align`` (``none``/``se3``/``sim3``) overrides
+    :func:`alignment_for` for APE and RPE. ``final_error_m`` keeps its definition (it depends on the scale mode only)."""
     from lidarkit.eval import ape, rpe
 
-    align = alignment_for(scale_mode)
+    align = alignment_for(scale_mode) if align is None else align
     a = ape(ref, est, align=align)
     r_t = rpe(ref, est, delta=1, delta_unit="frames", align=align)
     r_r = rpe(ref, est, delta=1, delta_unit="frames", align=align, relation="rotation_angle_deg")
     final_raw = float(np.linalg.norm(est.positions_xyz[-1] - ref.positions_xyz[-1]))
     final_aligned = float(np.linalg.norm(a.est_aligned.positions_xyz[-1] - ref.positions_xyz[-1]))
-    return {
+    metrics = {
         "align": align,
         "ape_rmse_m": float(a.rmse),
         "ape_max_m": float(a.max),
@@ -43,3 +49,14 @@ def evaluate_vo(est: Trajectory, ref: Trajectory, scale_mode: str) -> dict[str, 
         "final_error_aligned_m": final_aligned,
         "alignment_scale": float(a.alignment.scale) if a.alignment is not None else 1.0,
     }
+    return VOScores(metrics, a)
+
+
+def evaluate_vo(est: Trajectory, ref: Trajectory, scale_mode: str, align: str | None = None) -> dict[str, Any]:
+    """APE (translation, m), RPE over 1 frame (translation m, rotation deg) and final-frame errors.
+
+    ``final_error_m`` is the raw distance of the last positions for ``gt`` scale (both start at the same pose) and
+    the distance after alignment otherwise; both variants are also reported separately. ``align``: see
+    :func:`score_vo`.
+    """
+    return score_vo(est, ref, scale_mode, align).metrics

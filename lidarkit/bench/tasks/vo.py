@@ -4,8 +4,9 @@ Methods are the VO presets (``lidarkit.vo.available_presets()``: ``lidarkit``, `
 params are dotted-path changes to the preset (``scale.mode: relative``, ``features.detector: orb``), validated
 by ``lidarkit.vo.preset``. The job seed becomes the config's ``seed``. Options: ``max_frames`` (first N
 images), ``align`` (``auto``: SE(3) for ground-truth scale, Sim(3) otherwise; or ``none``/``se3``/``sim3``),
-``smoothed`` (score the Savitzky-Golay smoothed trajectory). Images are read into memory before the run, so
-frames/s is the pipeline's speed.
+``smoothed`` (score the Savitzky-Golay smoothed trajectory). Metrics come from ``lidarkit.vo.evaluation`` (the
+``lidarkit vo`` CLI's definitions: ``final_error_m`` is raw for ground-truth scale, aligned otherwise). Images
+are read into memory before the run, so frames/s is the pipeline's speed.
 """
 
 from __future__ import annotations
@@ -44,7 +45,7 @@ def _config(vo: Any, method: str, params: dict[str, Any], seed: int | None = Non
 
 
 class VisualOdometryTask(Task):
-    description = "monocular visual odometry (APE, RPE, final error, frames/s)"
+    description = "monocular visual odometry (APE, RPE, final error: raw for gt scale else aligned, frames/s)"
     dataset_kinds = ("kitti", "tum")
     metrics = (
         Metric("ape_rmse_m", "APE RMSE [m]"),
@@ -73,21 +74,20 @@ class VisualOdometryTask(Task):
         check_reader_options(dataset)
 
     def run(self, job: Job) -> TaskOutput:
-        from lidarkit import eval as leval
-
         vo = _vo_api()
         options = VOOptions(**job.options)
         config = _config(vo, job.method, job.params, job.seed)
         sequence = open_dataset_spec(job.dataset)
         if hasattr(sequence, "as_image_sequence"):
             sequence = sequence.as_image_sequence()
+        if options.max_frames is not None:
+            from lidarkit.vo.inputs import FrameRange
+
+            sequence = FrameRange(sequence, 0, options.max_frames)  # read only the frames used
         images = vo.images_in_memory(sequence)
-        n = len(images) if options.max_frames is None else min(options.max_frames, len(images))
-        images = images[:n]
         gt = sequence.ground_truth
-        gt = None if gt is None else gt[:n]
         timestamps = sequence.timestamps_s
-        timestamps = None if timestamps is None else np.asarray(timestamps, dtype=float)[:n]
+        timestamps = None if timestamps is None else np.asarray(timestamps, dtype=float)
         result = vo.run_vo(images, sequence.K, config, ground_truth=gt, timestamps_s=timestamps)
         est = result.smoothed() if options.smoothed else result.trajectory
         summary = result.summary()
@@ -98,13 +98,11 @@ class VisualOdometryTask(Task):
         }
         series: dict[str, Any] = {}
         if gt is not None:
-            align = options.align
-            if align == "auto":
-                align = "se3" if config.scale.mode == "gt" else "sim3"
-            ref, est_p = leval.paired(gt, est)
-            ape = leval.ape(ref, est_p, align=align)
-            rpe = leval.rpe(ref, est_p, delta=1, delta_unit="frames", align=align)
-            metrics.update(ape_rmse_m=float(ape.rmse), rpe_trans_rmse_m=float(rpe.rmse), final_error_m=float(ape.errors[-1]))
+            from lidarkit.vo.evaluation import score_vo
+
+            scores = score_vo(est, gt, config.scale.mode, None if options.align == "auto" else options.align)
+            align, ape = scores.metrics["align"], scores.ape
+            metrics.update({k: scores.metrics[k] for k in ("ape_rmse_m", "rpe_trans_rmse_m", "final_error_m")})
             # camera frame: x right, z forward -> the ground plane is x-z
             ref_xz = np.asarray(ape.ref.positions_xyz)[:, [0, 2]]
             est_xz = np.asarray(ape.est_aligned.positions_xyz)[:, [0, 2]]
