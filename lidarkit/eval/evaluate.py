@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import logging
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from typing import Any
 
 from lidarkit.errors import ConfigError
@@ -90,10 +90,9 @@ def evaluate(ref: Trajectory, est: Trajectory, settings: EvaluationSettings | No
     elif overrides:
         raise ConfigError("pass either settings or keyword overrides, not both", source="evaluate")
     s = settings
-    ref_paired, _ = paired(ref, est, associate=s.associate, max_diff_s=s.max_diff_s)
-    pairing = dict(associate=s.associate, max_diff_s=s.max_diff_s)
+    # pair (and, with ``associate``, match timestamps) once; the metrics then get equal-length trajectories
+    ref_paired, est_paired = paired(ref, est, associate=s.associate, max_diff_s=s.max_diff_s)
     rpe_kw = dict(
-        **pairing,
         delta=s.delta,
         delta_unit=s.delta_unit,
         all_pairs=s.all_pairs,
@@ -105,7 +104,7 @@ def evaluate(ref: Trajectory, est: Trajectory, settings: EvaluationSettings | No
     if not s.drift:
         note = "not requested"
     elif drift_segments_possible(ref_paired, s.drift_lengths_m):
-        drift = kitti_drift(ref, est, s.drift_lengths_m, s.drift_step_frames, **pairing)
+        drift = kitti_drift(ref_paired, est_paired, s.drift_lengths_m, s.drift_step_frames)
     else:
         note = f"reference path {ref_paired.length_m:.1f} m is not longer than {min(s.drift_lengths_m):g} m"
     if note:
@@ -116,10 +115,15 @@ def evaluate(ref: Trajectory, est: Trajectory, settings: EvaluationSettings | No
         n_poses=len(ref_paired),
         ref_length_m=ref_paired.length_m,
         settings=s,
-        ape=ape(ref, est, s.align, "translation", **pairing),
-        ape_rotation=ape(ref, est, s.align, "rotation_angle_deg", **pairing),
-        rpe=rpe(ref, est, relation="translation", **rpe_kw),
-        rpe_rotation=rpe(ref, est, relation="rotation_angle_deg", **rpe_kw),
+        ape=_marked(ape(ref_paired, est_paired, s.align, "translation"), s.associate),
+        ape_rotation=_marked(ape(ref_paired, est_paired, s.align, "rotation_angle_deg"), s.associate),
+        rpe=_marked(rpe(ref_paired, est_paired, relation="translation", **rpe_kw), s.associate),
+        rpe_rotation=_marked(rpe(ref_paired, est_paired, relation="rotation_angle_deg", **rpe_kw), s.associate),
         drift=drift,
         drift_note=note,
     )
+
+
+def _marked(result, associated: bool):
+    """``result`` of a metric run on already-associated trajectories, flagged as associated like a direct call."""
+    return replace(result, associated=True) if associated else result
