@@ -45,8 +45,11 @@ class FrameStats:
 
     ``read_s`` / ``register_s``: wall time reading the scan and registering it; ``n_points``: points in
     the scan; for stateless variants ``converged``, ``iterations``, ``rmse_m``, ``n_correspondences``,
-    ``degenerate`` and ``reason`` of the scan-to-scan alignment that produced the frame's pose (frame 0
-    and stateful variants: converged True, iterations -1, rmse NaN).
+    ``degenerate`` and ``reason`` of the scan-to-scan alignment that produced the frame's pose;
+    ``measured``: False where the runner has no convergence verdict (frame 0 of a stateless chain, every
+    frame of a stateful variant such as kiss, which reports none): there ``converged`` is True only as a
+    placeholder, iterations -1, rmse NaN, and the CSV / CLI show "n/a"; ``fallback``: the registration was
+    rejected (not converged) and the frame's pose uses the previous relative motion (constant velocity).
     """
 
     frame: np.ndarray
@@ -59,16 +62,23 @@ class FrameStats:
     n_correspondences: np.ndarray
     degenerate: np.ndarray
     reason: tuple[str, ...]
+    measured: np.ndarray
+    fallback: np.ndarray
 
     def to_csv(self) -> str:
         buf = io.StringIO()
         writer = csv.writer(buf, lineterminator="\n")
-        writer.writerow(["frame", "read_s", "register_s", "n_points", "converged", "iterations", "rmse_m", "n_correspondences", "degenerate", "reason"])
+        writer.writerow([
+            "frame", "read_s", "register_s", "n_points", "converged", "iterations", "rmse_m", "n_correspondences", "degenerate",
+            "constant_velocity_fallback", "reason",
+        ])
         for k in range(len(self.frame)):
+            measured = bool(self.measured[k])
             writer.writerow([
                 int(self.frame[k]), f"{self.read_s[k]:.6f}", f"{self.register_s[k]:.6f}", int(self.n_points[k]),
-                int(self.converged[k]), int(self.iterations[k]), f"{self.rmse_m[k]:.6g}", int(self.n_correspondences[k]),
-                int(self.degenerate[k]), self.reason[k],
+                int(self.converged[k]) if measured else "n/a", int(self.iterations[k]) if measured else "n/a",
+                f"{self.rmse_m[k]:.6g}" if measured else "n/a", int(self.n_correspondences[k]) if measured else "n/a",
+                int(self.degenerate[k]) if measured else "n/a", int(self.fallback[k]), self.reason[k],
             ])
         return buf.getvalue()
 
@@ -99,7 +109,18 @@ class OdometryResult:
 
     @property
     def n_not_converged(self) -> int:
-        return int((~self.stats.converged).sum())
+        """Frames whose registration was measured and rejected (0 for stateful variants: not measured)."""
+        return int((self.stats.measured & ~self.stats.converged).sum())
+
+    @property
+    def n_fallback(self) -> int:
+        """Frames whose pose came from the constant-velocity motion because registration was rejected."""
+        return int(self.stats.fallback.sum())
+
+    @property
+    def convergence_measured(self) -> bool:
+        """False for stateful variants (kiss): they report no per-frame convergence verdict."""
+        return not self.config.get("run", {}).get("stateful", False)
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -164,6 +185,8 @@ def parse_frames(frames: FrameSelection, n_frames: int) -> np.ndarray:
         except ValueError:
             raise ConfigError("frame bounds must be integers", source=f"frames {frames!r}") from None
     if isinstance(frames, slice):
+        if frames.step == 0:
+            raise ConfigError("the step of a frame slice must not be zero", source=f"frames {_frames_repr(frames, np.arange(0))!r}")
         return np.arange(n_frames)[frames]
     idx = np.asarray(list(frames) if isinstance(frames, range) else frames)
     if idx.ndim != 1 or (idx.size and not np.issubdtype(idx.dtype, np.integer)):
@@ -204,6 +227,16 @@ def config_dict(config: Any) -> dict[str, Any]:
 # ---------------------------------------------------------------------------------------------------------------
 # The loop
 # ---------------------------------------------------------------------------------------------------------------
+#: Errors re-raised naming the frame: lidarkit's own and the RuntimeErrors that backends (Open3D, kiss-icp,
+#: small_gicp) raise for bad input. Programming errors (AttributeError, TypeError, NotImplementedError, ...)
+#: propagate unchanged.
+_FRAME_ERRORS = (LidarKitError, RuntimeError)
+
+
+def _is_frame_error(err: BaseException) -> bool:
+    return isinstance(err, _FRAME_ERRORS) and not isinstance(err, (NotImplementedError, RecursionError))
+
+
 def _frame_error(err: Exception, dataset_name: str, frame: int) -> LidarKitError:
     """Re-raise an error of frame ``frame`` so that its message names the frame."""
     if isinstance(err, LidarKitError):
@@ -223,13 +256,18 @@ def run(
     out_dir: str | os.PathLike | None = None,
     progress: bool = False,
     ground_truth: Trajectory | None = None,
+    strict: bool = False,
 ) -> OdometryResult:
     """Odometry of ``method`` (a registered name or a configured variant) over ``dataset``.
 
     ``frames`` selects dataset indices (default all); ``ground_truth`` overrides the dataset's own
     (either one pose per dataset frame or one per selected frame); ``out_dir`` writes the run folder
     (:func:`write_run`); ``progress`` shows a rich progress bar on stderr (the CLI sets it).
-    An error in a frame is re-raised as a LidarKitError naming the frame.
+    An error in a frame is re-raised as a LidarKitError naming the frame. A stateless registration that
+    does not converge is logged (warning naming the frame and the reason) and replaced by the
+    constant-velocity motion (previous relative motion) for the frame's pose and the next guess; the
+    frames are counted in ``metrics["n_not_converged"]`` / ``["n_constant_velocity_fallback"]``. With
+    ``strict=True`` such a frame raises :class:`RegistrationError` naming it instead.
     """
     sequence = open_sequence(dataset)
     registration = _resolve_method(method, params)
@@ -248,6 +286,8 @@ def run(
     register_s = np.zeros(n)
     n_points = np.zeros(n, dtype=np.int64)
     converged = np.ones(n, dtype=bool)
+    measured = np.zeros(n, dtype=bool)
+    fallback = np.zeros(n, dtype=bool)
     iterations = np.full(n, -1, dtype=np.int64)
     rmse_m = np.full(n, np.nan)
     n_corr = np.full(n, -1, dtype=np.int64)
@@ -269,7 +309,9 @@ def run(
                         raise DataError("empty scan (0 points)")
                     t1 = clock()
                     poses[k] = registration.register_frame(points, scan.point_times_s)
-                except Exception as err:  # noqa: BLE001 - any failure becomes an error naming the frame
+                except Exception as err:
+                    if not _is_frame_error(err):
+                        raise
                     raise _frame_error(err, dataset_name, int(idx)) from err
                 t2 = clock()
                 read_s[k], register_s[k], n_points[k] = t1 - t0, t2 - t1, len(points)
@@ -290,8 +332,7 @@ def run(
                         poses[k] = np.eye(4)
                     else:
                         result = registration.align(points, previous, init_T=motion)
-                        motion = orthonormalize_se3(np.asarray(result.T_target_source, dtype=np.float64))
-                        poses[k] = poses[k - 1] @ motion
+                        measured[k] = True
                         converged[k] = bool(result.converged)
                         iterations[k] = int(result.iterations)
                         history = result.rmse_history
@@ -300,10 +341,24 @@ def run(
                         deg = getattr(result, "degeneracy", None)
                         degenerate[k] = bool(getattr(deg, "degenerate", False))
                         reasons[k] = str(getattr(result, "reason", "") or "")
-                        if not result.converged:
-                            log.warning("%s frame %d: registration did not converge (%s)", dataset_name, int(idx), reasons[k])
-                except Exception as err:  # noqa: BLE001 - any failure becomes an error naming the frame
+                        if converged[k]:
+                            motion = orthonormalize_se3(np.asarray(result.T_target_source, dtype=np.float64))
+                        poses[k] = poses[k - 1] @ motion
+                except Exception as err:
+                    if not _is_frame_error(err):
+                        raise
                     raise _frame_error(err, dataset_name, int(idx)) from err
+                if measured[k] and not converged[k]:
+                    why = reasons[k] or "no reason given"
+                    if strict:
+                        raise RegistrationError(f"registration did not converge ({why})", source=dataset_name, location=f"frame {int(idx)}")
+                    fallback[k] = True
+                    log.warning(
+                        "%s frame %d: %s did not converge (%s); using the constant-velocity motion instead",
+                        dataset_name, int(idx), name, why,
+                    )
+                elif degenerate[k]:
+                    log.warning("%s frame %d: %s flagged degenerate geometry (%s)", dataset_name, int(idx), name, reasons[k] or "degenerate")
                 t2 = clock()
                 previous = points
                 read_s[k], register_s[k], n_points[k] = t1 - t0, t2 - t1, len(points)
@@ -318,7 +373,9 @@ def run(
     timestamps = None if timestamps is None else np.asarray(timestamps, dtype=np.float64)[indices]
     trajectory = Trajectory(poses, timestamps, name=f"{name} on {dataset_name}", meta={"method": name, "dataset": dataset_name})
     reference = _reference(sequence, ground_truth, indices, dataset_name)
-    stats = FrameStats(indices.copy(), read_s, register_s, n_points, converged, iterations, rmse_m, n_corr, degenerate, tuple(reasons))
+    stats = FrameStats(
+        indices.copy(), read_s, register_s, n_points, converged, iterations, rmse_m, n_corr, degenerate, tuple(reasons), measured, fallback
+    )
     config = {
         "method": name,
         "method_config": config_dict(getattr(registration, "config", None)),
@@ -328,6 +385,7 @@ def run(
             "frames": _frames_repr(frames, indices),
             "n_frames": n,
             "stateful": stateful,
+            "strict": strict,
             "initial_guess": "register_frame (own map and motion model)" if stateful else "constant velocity (previous relative motion)",
             "ground_truth": None if reference is None else reference.name,
             "ground_truth_meta": None if reference is None else _plain(reference.meta),
@@ -396,8 +454,10 @@ def odometry_metrics(result: OdometryResult) -> dict[str, Any]:
         "total_time_s": result.total_time_s,
         "register_time_s": {"mean": float(stats.register_s.mean()), "median": float(np.median(stats.register_s)), "max": float(stats.register_s.max())},
         "read_time_s_mean": float(stats.read_s.mean()),
-        "n_not_converged": result.n_not_converged,
-        "n_degenerate": int(stats.degenerate.sum()),
+        "convergence_measured": result.convergence_measured,
+        "n_not_converged": result.n_not_converged if result.convergence_measured else None,
+        "n_constant_velocity_fallback": result.n_fallback,
+        "n_degenerate": int(stats.degenerate.sum()) if result.convergence_measured else None,
         "estimated_length_m": result.trajectory.length_m,
     }
     ref = result.ground_truth

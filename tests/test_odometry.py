@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import yaml
 
-from lidarkit.errors import ConfigError, DataError, EvaluationError, LidarKitError
+from lidarkit.errors import ConfigError, DataError, EvaluationError, LidarKitError, RegistrationError
 from lidarkit.geometry import make_se3, se3_inverse, so3_exp
 from lidarkit.io.base import Scan
 from lidarkit.odometry import open_sequence, parse_frames, run
@@ -123,25 +123,64 @@ class MapStandIn:
 
 
 # ---- chaining and the initial guess ----------------------------------------------------------------------------
-def test_stateless_chain_with_constant_velocity_guess(rng):
+def test_stateless_chain_with_constant_velocity_guess(rng, caplog):
     poses = _drive(6)
     seq = MemorySequence(poses, _room_points(rng, 500))
     motions = se3_inverse(poses[:-1]) @ poses[1:]
     oracle = OracleICP(motions)
-    result = run(seq, oracle)
-    np.testing.assert_allclose(result.trajectory.poses_se3, poses, atol=1e-12)
+    with caplog.at_level("WARNING", logger="lidarkit.odometry"):
+        result = run(seq, oracle)
+    # frame 2's registration is rejected: its pose and the next guess use the previous motion (constant velocity)
+    expected = poses.copy()
+    expected[2] = poses[1] @ motions[0]
+    for k in range(3, 6):
+        expected[k] = expected[k - 1] @ motions[k - 1]
+    np.testing.assert_allclose(result.trajectory.poses_se3, expected, atol=1e-12)
     np.testing.assert_allclose(result.trajectory.timestamps_s, seq.timestamps_s)
-    # source = current scan, target = previous scan; init = previous relative motion (identity first)
+    # source = current scan, target = previous scan; init = previous accepted relative motion (identity first)
     assert len(oracle.calls) == 5
     np.testing.assert_allclose(oracle.calls[0][2], np.eye(4))
-    for k in range(1, 5):
+    np.testing.assert_allclose(oracle.calls[1][2], motions[0], atol=1e-12)
+    np.testing.assert_allclose(oracle.calls[2][2], motions[0], atol=1e-12)  # frame 2 rejected: still motions[0]
+    for k in range(3, 5):
         np.testing.assert_allclose(oracle.calls[k][2], motions[k - 1], atol=1e-12)
+    for k in range(1, 5):
         assert oracle.calls[k][1] is oracle.calls[k - 1][0]  # no copies between frames
-    # per-frame diagnostics: the non-converged frame is flagged, not hidden
+    # per-frame diagnostics: the non-converged frame is flagged, logged and counted, not hidden
     assert result.stats.converged.tolist() == [True, True, False, True, True, True]
-    assert result.stats.reason[2] == "test flag" and result.n_not_converged == 1
-    assert result.metrics["n_not_converged"] == 1
-    assert result.metrics["final_error"]["translation_m"] < 1e-9
+    assert result.stats.fallback.tolist() == [False, False, True, False, False, False]
+    assert result.stats.reason[2] == "test flag" and result.n_not_converged == 1 and result.n_fallback == 1
+    assert result.metrics["n_not_converged"] == 1 and result.metrics["n_constant_velocity_fallback"] == 1
+    warnings = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
+    assert any("frame 2" in w and "test flag" in w and "constant-velocity" in w for w in warnings), warnings
+
+
+def test_strict_run_raises_on_the_non_converged_frame(rng):
+    poses = _drive(6)
+    seq = MemorySequence(poses, _room_points(rng, 500))
+    with pytest.raises(RegistrationError, match=r"memory \(frame 2\): registration did not converge \(test flag\)"):
+        run(seq, OracleICP(se3_inverse(poses[:-1]) @ poses[1:]), strict=True)
+
+
+def test_stateful_convergence_is_not_measured(rng, tmp_path):
+    poses = _drive(4)
+    result = run(MemorySequence(poses, _room_points(rng, 100)), MapStandIn(poses + 0.0), out_dir=tmp_path / "run")
+    assert not result.stats.measured.any() and result.n_not_converged == 0
+    assert result.metrics["convergence_measured"] is False and result.metrics["n_not_converged"] is None
+    rows = (tmp_path / "run" / "timing.csv").read_text().splitlines()
+    header = rows[0].split(",")
+    assert all(row.split(",")[header.index("converged")] == "n/a" for row in rows[1:])
+
+
+def test_programming_errors_propagate_unwrapped(rng):
+    poses = _drive(4)
+
+    class Broken(OracleICP):
+        def align(self, source_xyz, target_xyz, init_T=None):
+            raise AttributeError("typo in a variant")
+
+    with pytest.raises(AttributeError, match="typo"):
+        run(MemorySequence(poses, _room_points(rng, 50)), Broken([]))
 
 
 def test_real_vanilla_recovers_a_synthetic_drive(rng):
@@ -245,7 +284,7 @@ def test_empty_dataset_and_empty_selection(rng):
     [
         (np.zeros((0, 3)), r"memory \(frame 2\): empty scan"),
         (DataError("truncated scan", source="000002.bin"), r"memory \(frame 2\): 000002.bin: truncated scan"),
-        (ValueError("boom"), r"memory \(frame 2\): ValueError: boom"),
+        (RuntimeError("boom"), r"memory \(frame 2\): RuntimeError: boom"),
     ],
 )
 def test_error_in_a_frame_names_the_frame(rng, bad, match):

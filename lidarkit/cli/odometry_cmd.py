@@ -30,11 +30,12 @@ def odometry(
     frames: Optional[str] = typer.Option(None, "--frames", help="Frames START:STOP[:STEP] (Python slice, dataset indices)."),
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="Run folder: poses (KITTI, TUM), config.yaml, metrics.json, timing.csv, plot."),
     progress: bool = typer.Option(True, "--progress/--no-progress", help="Progress bar on stderr."),
+    strict: bool = typer.Option(False, "--strict", help="Fail on the first frame whose registration does not converge (default: warn, use constant velocity)."),
 ) -> None:
     """Odometry of one ICP variant over a scan sequence, scored against its ground truth when it has one."""
     from lidarkit.odometry import run
 
-    result = run(data, method, params=parse_params(param), frames=frames, out_dir=out, progress=progress)
+    result = run(data, method, params=parse_params(param), frames=frames, out_dir=out, progress=progress, strict=strict)
     m = result.metrics
     table = Table(title=result.trajectory.name, show_header=True)
     table.add_column("metric")
@@ -42,7 +43,11 @@ def odometry(
     table.add_row("frames", str(m["n_frames"]))
     table.add_row("frame rate (Hz)", f"{m['fps']:.2f}")
     table.add_row("registration time mean (ms)", f"{1e3 * m['register_time_s']['mean']:.1f}")
-    table.add_row("not converged / degenerate", f"{m['n_not_converged']} / {m['n_degenerate']}")
+    if m.get("convergence_measured", True):
+        table.add_row("not converged / degenerate", f"{m['n_not_converged']} / {m['n_degenerate']}")
+        table.add_row("constant-velocity fallbacks", str(m.get("n_constant_velocity_fallback", 0)))
+    else:
+        table.add_row("not converged / degenerate", "n/a (not measured by a stateful method)")
     table.add_row("estimated path (m)", f"{m['estimated_length_m']:.2f}")
     if "final_error" in m:
         table.add_row("ground truth", str(m["ground_truth"]))

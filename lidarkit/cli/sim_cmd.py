@@ -27,9 +27,14 @@ def sim_lidar(
 ) -> None:
     """Simulate a spinning LiDAR driving through a procedural scene; poses are T_world_lidar at the sweep end by default."""
     from lidarkit.cli.app import parse_params
+    from lidarkit.errors import ConfigError
     from lidarkit.sim.lidar import SimulatedLidarSequence, export_kitti, make_config
 
-    config = make_config(scene=scene, n_frames=frames, seed=seed, **parse_params(param))
+    params = parse_params(param)
+    own = {"scene": "--scene", "n_frames": "--frames", "seed": "--seed"}
+    for key in sorted(own.keys() & params.keys()):
+        raise ConfigError(f"{key} has its own option: use {own[key]} instead of --param {key}=...", source=f"--param {key}")
+    config = make_config(scene=scene, n_frames=frames, seed=seed, **params)
     sequence = SimulatedLidarSequence(config)
     if progress:
         with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(), console=stderr(), transient=True) as bar:

@@ -7,6 +7,7 @@ third-party readers register themselves with :func:`register_dataset`.
 from __future__ import annotations
 
 import importlib
+import inspect
 import os
 from collections.abc import Callable
 from typing import Any
@@ -50,8 +51,25 @@ def get_reader(kind: str) -> Callable[..., Any]:
 
 
 def open_dataset(kind: str, path: str | os.PathLike, **options: Any) -> Any:
-    """Open the dataset at ``path`` with the reader registered as ``kind``."""
-    return get_reader(kind)(path, **options)
+    """Open the dataset at ``path`` with the reader registered as ``kind``.
+
+    Options the reader does not take (or a missing required one) raise ConfigError listing the valid ones.
+    """
+    reader = get_reader(kind)
+    try:
+        signature = inspect.signature(reader)
+    except (TypeError, ValueError):  # some builtins / C types have no signature: let the call decide
+        signature = None
+    if signature is not None:
+        try:
+            signature.bind(path, **options)
+        except TypeError as err:
+            params = list(signature.parameters.values())[1:]
+            valid = [p.name for p in params if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)]
+            raise ConfigError(
+                f"{err}; valid options: {', '.join(valid) or 'none'}", source=f"{kind} dataset options"
+            ) from None
+    return reader(path, **options)
 
 
 __all__ = ["available_datasets", "get_reader", "open_dataset", "register_dataset"]
