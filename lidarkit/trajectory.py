@@ -143,20 +143,26 @@ class Trajectory:
     # ---- KITTI / TUM files -----------------------------------------------------------------------
     @classmethod
     def from_kitti(
-        cls, path: str | os.PathLike, timestamps_s: np.ndarray | str | os.PathLike | None = None, name: str | None = None
+        cls, path: str | os.PathLike, timestamps_s: np.ndarray | list[float] | str | os.PathLike | None = None, name: str | None = None
     ) -> Trajectory:
         """Read a KITTI pose file: one row of 12 numbers (a row-major 3x4 ``[R|t]``) per pose.
 
-        ``timestamps_s`` may be an array or a ``times.txt`` path (one number per line).
+        ``timestamps_s`` may be a ``times.txt`` path (``str`` / ``os.PathLike``, one number per line) or
+        anything ``np.asarray`` turns into ``(N,)`` seconds (array, list, tuple).
         """
         rows = read_numeric_table(path, 12)
         poses = np.tile(np.eye(4), (len(rows), 1, 1))
         poses[:, :3, :4] = rows.reshape(-1, 3, 4)
-        if timestamps_s is not None and not isinstance(timestamps_s, np.ndarray):
+        if isinstance(timestamps_s, (str, os.PathLike)):
             times_path = timestamps_s
             timestamps_s = read_numeric_table(times_path, 1)[:, 0]
             if len(timestamps_s) != len(poses):
                 raise DataError(f"{len(timestamps_s)} timestamps for {len(poses)} poses in {path}", source=times_path)
+        elif timestamps_s is not None:
+            try:
+                timestamps_s = np.asarray(timestamps_s, dtype=np.float64)
+            except (TypeError, ValueError) as err:
+                raise DataError(f"timestamps are not numbers ({err})", source="timestamps_s") from None
         return cls(poses, timestamps_s, Path(path).stem if name is None else name)
 
     @classmethod

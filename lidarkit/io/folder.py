@@ -126,7 +126,7 @@ class ScanFolder:
     def read_scan(self, index: int) -> Scan:
         """The ``index``-th scan in name order (``Scan.frame`` = ``index``)."""
         if not -len(self) <= index < len(self):
-            raise IndexError(f"scan index {index} out of range for {len(self)} scans")
+            raise DataError(f"scan index {index} out of range for {len(self)} scans", source=f"{self.name} ({self.path})")
         index = index % len(self)
         ts = None if self._timestamps_s is None else float(self._timestamps_s[index])
         return read_point_file(self.scan_paths[index], frame=index, timestamp_s=ts, drop_nonfinite=self.drop_nonfinite)

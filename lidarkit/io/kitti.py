@@ -16,6 +16,7 @@ with ``Tr = T_cam0_velo`` from calib.txt.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import re
 from functools import cached_property
@@ -343,14 +344,44 @@ class KittiOdometry:
 
     # ---- data ------------------------------------------------------------------------------------------
     def read_scan(self, index: int) -> Scan:
-        """The ``index``-th scan (position in ``scan_paths``) with its KITTI frame number and time stamp."""
+        """The ``index``-th scan (position in ``scan_paths``) with its KITTI frame number and time stamp.
+
+        When the sequence folder holds ``point_times/{frame:06d}.npy`` (as written by
+        :func:`lidarkit.sim.lidar.export_kitti`: one time per point, seconds from the sweep start) it becomes
+        ``Scan.point_times_s`` (float64); a length that does not match the scan is a DataError.
+        """
         if not self.scan_paths:
             raise DataError("sequence has no scans", source=self.velodyne_dir)
         if not -len(self.scan_paths) <= index < len(self.scan_paths):
-            raise IndexError(f"scan index {index} out of range for {len(self.scan_paths)} scans")
+            raise DataError(f"scan index {index} out of range for {len(self.scan_paths)} scans", source=f"{self.name} ({self.sequence_dir})")
         frame = int(self.scan_frames[index])
         ts = None if self._times_all is None else float(self._times_all[frame])
-        return read_kitti_bin(self.scan_paths[index], frame=frame, timestamp_s=ts, drop_nonfinite=self.drop_nonfinite)
+        scan = read_kitti_bin(self.scan_paths[index], frame=frame, timestamp_s=ts, drop_nonfinite=self.drop_nonfinite)
+        times_path = self.sequence_dir / "point_times" / f"{frame:06d}.npy"
+        if not times_path.is_file():
+            return scan
+        return dataclasses.replace(scan, point_times_s=self._read_point_times(times_path, self.scan_paths[index], scan, frame))
+
+    @staticmethod
+    def _read_point_times(times_path: Path, scan_path: Path, scan: Scan, frame: int) -> np.ndarray:
+        """Per-point times of ``scan`` from ``times_path``, with the points dropped as non-finite dropped too."""
+        try:
+            times = np.load(times_path, allow_pickle=False)
+        except (OSError, ValueError) as err:
+            raise DataError(f"not a readable .npy array ({err})", source=times_path, location=f"frame {frame}") from err
+        if times.ndim != 1 or not np.issubdtype(times.dtype, np.number):
+            raise DataError(f"expected a 1-D numeric array, got shape {times.shape} dtype {times.dtype}", source=times_path, location=f"frame {frame}")
+        times = times.astype(np.float64)
+        n_points = len(scan.points_xyz)
+        if len(times) != n_points:
+            raw = np.fromfile(scan_path, dtype="<f4").reshape(-1, 4)
+            if len(times) == len(raw) and n_points < len(raw):  # points were dropped as non-finite: drop their times
+                times = times[np.isfinite(raw).all(axis=1)]
+            else:
+                raise DataError(f"{len(times)} point times for {n_points} points of {scan_path.name}", source=times_path, location=f"frame {frame}")
+        if not np.isfinite(times).all():
+            raise DataError("point times contain NaN or infinite values", source=times_path, location=f"frame {frame}")
+        return times
 
     def read_scan_by_frame(self, frame: int) -> Scan:
         """The scan of KITTI frame number ``frame`` (file ``{frame:06d}.bin``)."""

@@ -212,7 +212,7 @@ class KittiRaw:
         if not self.scan_paths:
             raise DataError("no Velodyne scans (velodyne_points/data/*.bin) in this drive", source=self.velodyne_dir)
         if not -len(self) <= index < len(self):
-            raise IndexError(f"scan index {index} out of range for {len(self)} scans")
+            raise DataError(f"scan index {index} out of range for {len(self)} scans", source=f"{self.name} ({self.drive_dir})")
         frame = int(self.scan_frames[index])
         times = self._velo_times_all
         ts = float(times[frame]) if times is not None and frame < len(times) else None
