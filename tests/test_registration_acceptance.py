@@ -143,3 +143,20 @@ def test_cli_result_json_is_strict_when_registration_fails(tmp_path, capsys):
     text = (out / "result.json").read_text()
     result = json.loads(text, parse_constant=lambda c: pytest.fail(f"non-standard JSON constant {c}"))
     assert result["converged"] is False and result["rmse_m"] is None
+
+
+# ---------------------------------------------------------------- staged ICP bookkeeping
+
+
+def test_staged_icp_assesses_only_the_final_stage(monkeypatch):
+    from lidarkit.registration import vanilla
+
+    calls = []
+    real = vanilla.assess_alignment
+    monkeypatch.setattr(vanilla, "assess_alignment", lambda *a, **k: calls.append(len(a[0])) or real(*a, **k))
+    rng = np.random.default_rng(11)
+    target = structured_cloud(rng, n=12000)
+    T = make_se3(so3_exp([0, 0, 0.02]), [0.3, 0.1, 0.0])
+    res = get_icp("vanilla", coarse_stride=8).align(transform_points(np.linalg.inv(T), target), target)
+    assert res.extra["coarse_iterations"] > 0 and res.converged
+    assert calls == [len(target)]  # once, on the full-resolution stage

@@ -76,7 +76,6 @@ def assess_degeneracy(
     source_aligned_xyz: np.ndarray,
     target_xyz: np.ndarray,
     matched_target_index: np.ndarray,
-    target_query=None,
     k: int = 20,
     surface_voxel_m: float | None = SURFACE_VOXEL_M,
     max_points: int = 2000,
@@ -86,9 +85,8 @@ def assess_degeneracy(
     """Degeneracy of matched pairs (``source_aligned_xyz[i]`` <-> ``target_xyz[matched_target_index[i]]``).
 
     Local surfaces come from the ``k`` nearest neighbours in the target voxelized at
-    ``min(surface_voxel_m, RMS radius / 10)`` (``surface_voxel_m=None``: the raw target, searched with
-    ``target_query(points, k) -> (n, k) indices`` if given). At most ``max_points`` pairs are used (a
-    seeded random subset) to keep this cheap.
+    ``min(surface_voxel_m, RMS radius / 10)`` (``surface_voxel_m=None``: the raw target), searched with a
+    scipy KD-tree. At most ``max_points`` pairs are used (a seeded random subset) to keep this cheap.
     """
     n = len(source_aligned_xyz)
     if n < 3:
@@ -107,14 +105,10 @@ def assess_degeneracy(
         voxel = min(surface_voxel_m, rms_radius / 10.0)
         if voxel > 0:
             surface = voxel_downsample(target_xyz, voxel)
-        target_query = None
     k = int(min(k, len(surface)))
-    if target_query is None:
-        from scipy.spatial import cKDTree
+    from scipy.spatial import cKDTree
 
-        _, nbr = cKDTree(surface).query(anchors, k=k)
-    else:
-        nbr = target_query(anchors, k)
+    _, nbr = cKDTree(surface).query(anchors, k=k)
     nbr = np.asarray(nbr).reshape(len(anchors), k)
     constraints = surface_constraints(surface[nbr])
     return summarize(normal_matrix(source_aligned_xyz, constraints), threshold)

@@ -48,8 +48,13 @@ def point_to_point_icp(
     epsilon_m2: float,
     max_correspondence_distance_m: float | None,
     min_correspondences: int,
+    assess: bool = True,
 ) -> RegistrationResult:
-    """The ICP loop on prepared clouds with a prebuilt index over ``target_xyz``."""
+    """The ICP loop on prepared clouds with a prebuilt index over ``target_xyz``.
+
+    ``assess=False`` skips the final fitness / degeneracy assessment (for an intermediate stage whose result
+    only seeds the next one): fitness is then the loop's last inlier fraction and the degeneracy unknown.
+    """
     T = init_T.copy()
     history: list[float] = []
     prev_mse = None
@@ -78,6 +83,18 @@ def point_to_point_icp(
         step = kabsch_umeyama(moved[inlier], target_xyz[index[inlier]])
         T = make_se3(step.rotation, step.translation) @ T
         iterations += 1
+    if not assess:
+        return RegistrationResult(
+            T_target_source=T,
+            converged=converged,
+            iterations=iterations,
+            rmse_history=tuple(history),
+            n_correspondences=n,
+            runtime_s=0.0,
+            fitness=n / max(len(source_xyz), 1),
+            degeneracy=Degeneracy.unknown("not assessed (intermediate stage)"),
+            reason=reason,
+        )
     inlier_distance = max_correspondence_distance_m or DEFAULT_INLIER_DISTANCE_M
     assessment = assess_alignment(source_xyz, target_xyz, T, inlier_distance, dist2=dist2, index=index)
     degeneracy = assessment.degeneracy
@@ -126,7 +143,7 @@ def staged_icp(
     stride = config.coarse_stride
     if stride <= 1 or len(source_xyz) < stride * 4 * config.min_correspondences:
         return point_to_point_icp(source_xyz, target_xyz, init_T, neighbors, **kwargs)
-    coarse = point_to_point_icp(source_xyz[::stride], target_xyz, init_T, neighbors, **kwargs)
+    coarse = point_to_point_icp(source_xyz[::stride], target_xyz, init_T, neighbors, assess=False, **kwargs)
     start = coarse.T_target_source if coarse.converged or coarse.iterations > 0 else init_T
     fine = point_to_point_icp(source_xyz, target_xyz, start, neighbors, **kwargs)
     return dataclasses.replace(
