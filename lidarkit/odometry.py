@@ -148,28 +148,15 @@ def open_sequence(spec: str | os.PathLike | ScanSequence) -> ScanSequence:
     kind, sep, rest = text.partition(":")
     if sep and kind in lio.available_datasets() and len(kind) > 1:
         path, _, query = rest.partition("?")
-        return lio.open_dataset(kind, path, **_parse_query(query))
+        from lidarkit.params import parse_kv
+
+        return lio.open_dataset(kind, path, **parse_kv(query, option=f"{kind} dataset option"))
     path = Path(text)
     if not path.exists():
         raise DataError("dataset not found (a folder, KIND:PATH or sim:SCENE?...)", source=text)
     if (path / "velodyne").is_dir() or (path / "sequences").is_dir():
         return lio.open_dataset("kitti", path)
     return lio.open_dataset("folder", path)
-
-
-def _parse_query(query: str) -> dict[str, Any]:
-    """``a=1&b=x`` -> ``{"a": 1, "b": "x"}`` (values read as YAML scalars)."""
-    from urllib.parse import parse_qsl
-
-    import yaml
-
-    out: dict[str, Any] = {}
-    for key, value in parse_qsl(query, keep_blank_values=True):
-        try:
-            out[key] = yaml.safe_load(value) if value else None
-        except yaml.YAMLError:
-            out[key] = value
-    return out
 
 
 def parse_frames(frames: FrameSelection, n_frames: int) -> np.ndarray:

@@ -5,7 +5,6 @@ from __future__ import annotations
 import typer
 from rich.console import Console
 
-from lidarkit.errors import ConfigError
 
 app = typer.Typer(
     name="lidarkit",
@@ -17,19 +16,10 @@ app = typer.Typer(
 
 
 def parse_params(items: list[str], option: str = "--param") -> dict:
-    """``["k=v", ...]`` from a repeatable ``option`` -> dict; values are read as YAML scalars (numbers, booleans, null, strings)."""
-    import yaml
+    """``["k=v", ...]`` from a repeatable ``option`` -> dict (see :func:`lidarkit.params.parse_kv`)."""
+    from lidarkit.params import parse_kv
 
-    params: dict = {}
-    for item in items:
-        key, sep, value = item.partition("=")
-        if not sep or not key.strip():
-            raise ConfigError("expected KEY=VALUE", source=f"{option} {item!r}")
-        try:
-            params[key.strip()] = yaml.safe_load(value) if value.strip() else None
-        except yaml.YAMLError:
-            params[key.strip()] = value
-    return params
+    return parse_kv(items, option=option)
 
 
 def stdout() -> Console:

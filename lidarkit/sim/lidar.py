@@ -452,7 +452,7 @@ def open_sim(spec: str) -> SimulatedLidarSequence:
     ``azimuths`` (n_azimuths), ``noise`` (range_noise_std_m), ``distortion`` (motion_distortion),
     ``instant`` (pose_instant), ``speed`` (speed_mps).
     """
-    from urllib.parse import parse_qsl
+    from lidarkit.params import parse_kv
 
     if not spec.startswith("sim:"):
         raise ConfigError("a simulator spec starts with 'sim:'", source=spec)
@@ -468,8 +468,11 @@ def open_sim(spec: str) -> SimulatedLidarSequence:
         "instant": "pose_instant",
         "speed": "speed_mps",
     }
-    for key, value in parse_qsl(query, keep_blank_values=True, strict_parsing=False):
-        params[aliases.get(key, key)] = value
+    for key, value in parse_kv(query, option="simulator option").items():
+        name = aliases.get(key, key)
+        if name in params:
+            raise ConfigError(f"{name} is given twice (as {key})", source=spec)
+        params[name] = value
     try:
         return SimulatedLidarSequence(**params)
     except ConfigError as err:

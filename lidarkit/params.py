@@ -1,0 +1,70 @@
+"""One ``KEY=VALUE`` parser for every place users pass options as text.
+
+Used by the CLI's repeatable ``--param`` / ``--set`` options (:func:`lidarkit.cli.app.parse_params`),
+dataset specs ``KIND:PATH?key=value&...`` (:func:`lidarkit.odometry.open_sequence`) and simulator specs
+``sim:SCENE?key=value&...`` (:func:`lidarkit.sim.lidar.open_sim`).
+
+Values are read as YAML scalars (``1`` -> int, ``0.5`` -> float, ``true``/``false`` -> bool,
+``null`` or empty -> None, anything else a string), except text YAML 1.1 would mangle: numbers with a
+leading zero or underscores (``05``, ``2011_09_26``) and dates stay strings.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import re
+from collections.abc import Iterable
+from typing import Any
+from urllib.parse import unquote
+
+from lidarkit.errors import ConfigError
+
+_KEEP_AS_TEXT = re.compile(r"^[-+]?(0\d|\d*_)")
+_EXPONENT_FLOAT = re.compile(r"^[-+]?(\d+\.?\d*|\.\d+)[eE][-+]?\d+$")  # 1e-3: a string to YAML 1.1
+
+
+def parse_value(text: str) -> Any:
+    """One value: a YAML scalar, or the text itself when YAML would change its meaning or fails."""
+    import yaml
+
+    stripped = text.strip()
+    if not stripped:
+        return None
+    if _KEEP_AS_TEXT.match(stripped):
+        return stripped
+    if _EXPONENT_FLOAT.match(stripped):
+        return float(stripped)
+    try:
+        value = yaml.safe_load(stripped)
+    except yaml.YAMLError:
+        return stripped
+    if isinstance(value, (_dt.date, _dt.datetime)):
+        return stripped
+    return value
+
+
+def parse_kv(items: Iterable[str] | str, option: str = "option") -> dict[str, Any]:
+    """``["k=v", ...]`` or a query string ``"k=v&k2=v2"`` (URL-encoded) -> ``{key: value}``.
+
+    A missing ``=``, an empty key or a key given twice raises ConfigError naming ``option`` and the item.
+    """
+    if isinstance(items, str):
+        pairs = []
+        for part in items.split("&"):
+            if part:
+                key, sep, value = part.partition("=")
+                pairs.append((unquote(key), sep, unquote(value), part))
+    else:
+        pairs = [(*str(item).partition("="), str(item)) for item in items]
+    out: dict[str, Any] = {}
+    for key, sep, value, raw in pairs:
+        key = key.strip()
+        if not sep or not key:
+            raise ConfigError("expected KEY=VALUE", source=f"{option} {raw!r}")
+        if key in out:
+            raise ConfigError(f"{key!r} is given twice", source=f"{option} {raw!r}")
+        out[key] = parse_value(value)
+    return out
+
+
+__all__ = ["parse_kv", "parse_value"]

@@ -1,0 +1,44 @@
+"""lidarkit.params.parse_kv: the one KEY=VALUE parser behind --param/--set, dataset specs and simulator specs."""
+
+from __future__ import annotations
+
+import pytest
+
+from lidarkit.cli.app import parse_params
+from lidarkit.errors import ConfigError
+from lidarkit.params import parse_kv
+
+
+def test_values_are_yaml_scalars_with_safe_exceptions():
+    got = parse_kv("a=1&b=x&c=true&d=&e=null&f=0.5&g=1e-3&seq=05&date=2011_09_26&day=2011-09-26&amp=a%26b&plus=1+2")
+    assert got == {
+        "a": 1, "b": "x", "c": True, "d": None, "e": None, "f": 0.5, "g": 0.001,
+        "seq": "05", "date": "2011_09_26", "day": "2011-09-26", "amp": "a&b", "plus": "1+2",
+    }
+    assert parse_kv(["n_beams=32", "pose_instant=mid", "flag=false"]) == {"n_beams": 32, "pose_instant": "mid", "flag": False}
+
+
+@pytest.mark.parametrize("bad", [["novalue"], ["=3"], ["a=1", "a=2"], "a=1&novalue", "a=1&a=2"])
+def test_bad_items_name_the_option(bad):
+    with pytest.raises(ConfigError, match="my-option"):
+        parse_kv(bad, option="my-option")
+
+
+def test_cli_parse_params_is_the_same_parser():
+    assert parse_params(["a=05", "b=1e-3"]) == {"a": "05", "b": 0.001}
+    with pytest.raises(ConfigError, match=r"--set 'x'"):
+        parse_params(["x"], option="--set")
+
+
+def test_dataset_and_simulator_specs_use_it(tmp_path):
+    from lidarkit.odometry import open_sequence
+    from lidarkit.sim.lidar import open_sim
+
+    with pytest.raises(ConfigError, match="expected KEY=VALUE"):
+        open_sequence(f"kitti:{tmp_path}?sequence")  # used to be read as sequence=None
+    with pytest.raises(ConfigError, match="expected KEY=VALUE"):
+        open_sim("sim:street?frames=2&beams")
+    sim = open_sim("sim:street?frames=2&beams=8&azimuths=90&distortion=false&noise=0")
+    assert sim.config.n_beams == 8 and sim.config.motion_distortion is False and sim.config.range_noise_std_m == 0
+    with pytest.raises(ConfigError, match="given twice"):
+        open_sim("sim:street?frames=2&n_frames=3")
