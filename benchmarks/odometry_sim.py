@@ -83,7 +83,7 @@ def summary(result, extra: dict | None = None) -> dict:
         "ape_rmse_m": m.get("ape_translation_m", {}).get("stats", {}).get("rmse"),
         "drift_pct": None if not drift else drift["translation_pct"],
         "drift_deg_per_100m": None if not drift else drift["rotation_deg_per_100m"],
-        "n_not_converged": m["n_not_converged"],
+        "n_not_converged": "n/a" if m["n_not_converged"] is None else m["n_not_converged"],  # None: stateful (kiss), not measured
     }
     row.update(extra or {})
     return row

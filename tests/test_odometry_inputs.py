@@ -51,3 +51,9 @@ def test_zero_frame_step_is_a_config_error(frames):
 def test_cli_odometry_zero_step(capsys):
     assert _cli(["odometry", "sim:street?frames=2&beams=8&azimuths=90", "-m", "vanilla", "--frames", "0:10:0", "--no-progress"]) == 1
     assert "step" in capsys.readouterr().err
+
+
+def test_cli_odometry_prints_n_a_for_stateful_convergence(capsys):
+    assert _cli(["odometry", "sim:street?frames=3&beams=8&azimuths=90", "-m", "kiss", "--no-progress"]) == 0
+    out = " ".join(capsys.readouterr().out.split())
+    assert "not converged / degenerate │ n/a" in out
