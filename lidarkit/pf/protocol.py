@@ -268,6 +268,12 @@ def _resolve_config(config: PFConfig | None, n_particles: int | None, changes: d
     return base.replace(**changes) if changes else base
 
 
+def _filter_outputs(out: dict, pf) -> dict:
+    """The PFRunResult fields that come straight from a ``run_filter`` output and the filter."""
+    keys = ("estimates", "runtime_s", "ess", "resampled", "max_loglik", "lost_steps", "n_recoveries", "snapshots")
+    return {**{key: out[key] for key in keys}, "n_weight_resets": pf.n_weight_resets}
+
+
 def run_protocol(
     data,
     n_particles: int | None = None,
@@ -314,18 +320,10 @@ def run_protocol(
             "data": str(getattr(data, "root", "")),
         },
         landmarks_xy=np.asarray(data.landmarks.positions_xy, dtype=np.float64),
-        estimates=out["estimates"],
         dead_reckoning=sim.dead_reckoning,
         ground_truth=sim.ground_truth,
-        runtime_s=out["runtime_s"],
-        ess=out["ess"],
-        resampled=out["resampled"],
-        max_loglik=out["max_loglik"],
-        n_weight_resets=pf.n_weight_resets,
-        lost_steps=out["lost_steps"],
-        n_recoveries=out["n_recoveries"],
         odometry_used=sim.odometry_noisy,
-        snapshots=out["snapshots"],
+        **_filter_outputs(out, pf),
     )
     result.metrics = score_against_ground_truth(result, mse_start=mse_start, with_ape_rpe=with_ape_rpe)
     _warn_lost(result)
@@ -382,18 +380,10 @@ def run_recorded(
         config=cfg,
         settings={"mode": "recorded", "seed": seed, "q_cov": resolve_q(cfg.q, cfg.q_as).tolist(), "data": str(getattr(data, "root", ""))},
         landmarks_xy=np.asarray(data.landmarks.positions_xy, dtype=np.float64),
-        estimates=out["estimates"],
         dead_reckoning=dr,
         ground_truth=None,
-        runtime_s=out["runtime_s"],
-        ess=out["ess"],
-        resampled=out["resampled"],
-        max_loglik=out["max_loglik"],
-        n_weight_resets=pf.n_weight_resets,
-        lost_steps=out["lost_steps"],
-        n_recoveries=out["n_recoveries"],
         odometry_used=odo,
-        snapshots=out["snapshots"],
+        **_filter_outputs(out, pf),
     )
     result.metrics = consistency_metrics(out["nis"], result.estimate, dr, data, resolve_q(cfg.q, cfg.q_as))
     _warn_lost(result)
