@@ -31,7 +31,7 @@ import numpy as np
 from lidarkit import atomic
 from lidarkit.errors import ConfigError, DataError, EvaluationError, LidarKitError, RegistrationError
 from lidarkit.geometry import orthonormalize_se3, pose_error
-from lidarkit.io.base import ScanSequence
+from lidarkit.io.base import Scan, ScanSequence
 from lidarkit.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
@@ -220,6 +220,14 @@ def config_dict(config: Any) -> dict[str, Any]:
 _FRAME_ERRORS = (LidarKitError, RuntimeError)
 
 
+def _read_nonempty_scan(sequence: ScanSequence, index: int) -> Scan:
+    """Frame ``index`` of the sequence; a scan without points is a DataError (named by the caller)."""
+    scan = sequence.read_scan(index)
+    if len(scan.points_xyz) == 0:
+        raise DataError("empty scan (0 points)")
+    return scan
+
+
 def _is_frame_error(err: BaseException) -> bool:
     return isinstance(err, _FRAME_ERRORS) and not isinstance(err, (NotImplementedError, RecursionError))
 
@@ -290,10 +298,8 @@ def run(
             for k, idx in enumerate(indices):
                 t0 = clock()
                 try:
-                    scan = sequence.read_scan(int(idx))
+                    scan = _read_nonempty_scan(sequence, int(idx))
                     points = scan.points_xyz
-                    if len(points) == 0:
-                        raise DataError("empty scan (0 points)")
                     t1 = clock()
                     poses[k] = registration.register_frame(points, scan.point_times_s)
                 except Exception as err:
@@ -310,10 +316,8 @@ def run(
             for k, idx in enumerate(indices):
                 t0 = clock()
                 try:
-                    scan = sequence.read_scan(int(idx))
+                    scan = _read_nonempty_scan(sequence, int(idx))
                     points = scan.points_xyz
-                    if len(points) == 0:
-                        raise DataError("empty scan (0 points)")
                     t1 = clock()
                     if previous is None:
                         poses[k] = np.eye(4)
