@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from lidarkit.geometry import transform_points
-from lidarkit.registration.base import Degeneracy
+from lidarkit.registration.base import Degeneracy, RegistrationResult
 from lidarkit.registration.degeneracy import assess_degeneracy
 from lidarkit.registration.neighbors import NearestNeighbors
 
@@ -20,6 +20,37 @@ class Assessment:
     fitness: float
     rmse_m: float
     degeneracy: Degeneracy
+    inlier_distance_m: float = float("nan")
+
+    def to_result(
+        self,
+        T_target_source: np.ndarray,
+        *,
+        converged: bool = True,
+        reason: str = "",
+        iterations: int = 0,
+        rmse_history: tuple[float, ...] | None = None,
+        extra: dict | None = None,
+    ) -> RegistrationResult:
+        """The variant's result for this pose: not converged below 3 correspondences, the reason naming why;
+        a converged result on degenerate geometry keeps ``converged`` but says so in ``reason``."""
+        if converged and self.n_correspondences < 3:
+            converged = False
+            reason = f"only {self.n_correspondences} correspondences within {self.inlier_distance_m:g} m"
+        elif converged and self.degeneracy.degenerate:
+            reason = f"degenerate geometry: min/max eigenvalue {self.degeneracy.ratio:.2e} < {self.degeneracy.threshold:g}"
+        return RegistrationResult(
+            T_target_source=T_target_source,
+            converged=converged,
+            iterations=iterations,
+            rmse_history=(self.rmse_m,) if rmse_history is None else rmse_history,
+            n_correspondences=self.n_correspondences,
+            runtime_s=0.0,
+            fitness=self.fitness,
+            degeneracy=self.degeneracy,
+            reason=reason,
+            extra=extra or {},
+        )
 
 
 def assess_alignment(
@@ -41,7 +72,9 @@ def assess_alignment(
     n = int(inlier.sum())
     rmse = float(np.sqrt(dist2[inlier].mean())) if n else float("nan")
     degeneracy = assess_degeneracy(aligned[inlier], target_xyz, index[inlier])
-    return Assessment(n_correspondences=n, fitness=n / max(len(source_xyz), 1), rmse_m=rmse, degeneracy=degeneracy)
+    return Assessment(
+        n_correspondences=n, fitness=n / max(len(source_xyz), 1), rmse_m=rmse, degeneracy=degeneracy, inlier_distance_m=inlier_distance_m
+    )
 
 
 __all__ = ["Assessment", "assess_alignment"]

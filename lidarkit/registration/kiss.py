@@ -160,19 +160,6 @@ class KissRegistration(Registration):
         T = np.array(T, dtype=np.float64)
         map_points = local_map.point_cloud()
         assessment = assess_alignment(source_down, map_points, T, 3.0 * sigma)
-        converged = assessment.n_correspondences >= 3
-        reason = "" if converged else f"only {assessment.n_correspondences} correspondences within {3 * sigma} m"
-        if converged and assessment.degeneracy.degenerate:
-            reason = f"degenerate geometry: min/max eigenvalue {assessment.degeneracy.ratio:.2e}"
-        return RegistrationResult(
-            T_target_source=T,
-            converged=converged,
-            iterations=0,
-            rmse_history=(assessment.rmse_m,),
-            n_correspondences=assessment.n_correspondences,
-            runtime_s=0.0,
-            fitness=assessment.fitness,
-            degeneracy=assessment.degeneracy,
-            reason=reason,
-            extra={"iterations_reported": False, "threshold_sigma_m": sigma, "source_keypoints": len(source_down)},
+        return assessment.to_result(
+            T, extra={"iterations_reported": False, "threshold_sigma_m": sigma, "source_keypoints": len(source_down)}
         )

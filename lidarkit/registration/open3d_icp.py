@@ -69,24 +69,12 @@ class _Open3DBase(Registration):
         T = np.array(out.transformation, dtype=np.float64)
         src_pts, dst_pts = np.asarray(src.points), np.asarray(dst.points)
         assessment = assess_alignment(src_pts, dst_pts, T, c.max_correspondence_distance_m)
-        reason = ""
-        converged = assessment.n_correspondences >= 3 and float(out.fitness) > 0
-        if float(out.fitness) <= 0:
-            reason = f"Open3D fitness 0: no correspondence within {c.max_correspondence_distance_m} m"
-        elif not converged:
-            reason = f"only {assessment.n_correspondences} correspondences within {c.max_correspondence_distance_m} m"
-        elif assessment.degeneracy.degenerate:
-            reason = f"degenerate geometry: min/max eigenvalue {assessment.degeneracy.ratio:.2e}"
-        return RegistrationResult(
-            T_target_source=T,
-            converged=converged,
-            iterations=0,
-            rmse_history=(float(out.inlier_rmse) if out.fitness > 0 else float("nan"),),  # Open3D reports 0 for "no pairs"
-            n_correspondences=assessment.n_correspondences,
-            runtime_s=0.0,
-            fitness=assessment.fitness,
-            degeneracy=assessment.degeneracy,
-            reason=reason,
+        no_pairs = float(out.fitness) <= 0
+        return assessment.to_result(
+            T,
+            converged=not no_pairs,
+            reason=f"Open3D fitness 0: no correspondence within {c.max_correspondence_distance_m} m" if no_pairs else "",
+            rmse_history=(float("nan") if no_pairs else float(out.inlier_rmse),),  # Open3D reports 0 for "no pairs"
             extra={"iterations_reported": False, "open3d_fitness": float(out.fitness)},
         )
 

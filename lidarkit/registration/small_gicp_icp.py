@@ -61,24 +61,11 @@ if _small_gicp is not None:
             src = voxel_downsample(source_xyz, c.downsampling_resolution_m)
             dst = voxel_downsample(target_xyz, c.downsampling_resolution_m)
             assessment = assess_alignment(src, dst, T, c.max_correspondence_distance_m)
-            converged = bool(out.converged) and assessment.n_correspondences >= 3
-            reason = ""
-            if not out.converged:
-                reason = f"small_gicp did not converge in {out.iterations} iterations"
-            elif assessment.n_correspondences < 3:
-                reason = f"only {assessment.n_correspondences} correspondences within {c.max_correspondence_distance_m} m"
-            elif assessment.degeneracy.degenerate:
-                reason = f"degenerate geometry: min/max eigenvalue {assessment.degeneracy.ratio:.2e}"
             native = np.linalg.eigvalsh(0.5 * (np.asarray(out.H) + np.asarray(out.H).T))
-            return RegistrationResult(
-                T_target_source=T,
-                converged=converged,
+            return assessment.to_result(
+                T,
+                converged=bool(out.converged),
+                reason="" if out.converged else f"small_gicp did not converge in {out.iterations} iterations",
                 iterations=int(out.iterations),
-                rmse_history=(assessment.rmse_m,),
-                n_correspondences=assessment.n_correspondences,
-                runtime_s=0.0,
-                fitness=assessment.fitness,
-                degeneracy=assessment.degeneracy,
-                reason=reason,
                 extra={"native_hessian_eigenvalues": [float(x) for x in native], "num_inliers": int(out.num_inliers)},
             )
