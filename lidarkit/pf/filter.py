@@ -6,27 +6,17 @@ import logging
 
 import numpy as np
 
-from lidarkit.errors import ConfigError, DataError
+from lidarkit.errors import DataError
+from lidarkit.pf.base import LandmarkFilterBase
 from lidarkit.pf.config import PFConfig
 from lidarkit.pf.models import OdometryMotionModel, RangeBearingModel, _wrap_inplace, resolve_q, standard_normal, wrap_angle
-from lidarkit.pf.resampling import effective_sample_size, get_resampler
 
 log = logging.getLogger(__name__)
 
 THETA_WRAP_EVERY = 32  # predictions between wraps of the particle headings (keeps float32 theta precise)
 
 
-def check_landmark_index(landmark_index: np.ndarray, n_landmarks: int, source: str = "update") -> None:
-    """DataError naming the first index of ``landmark_index`` ``(M,)`` outside ``0 .. n_landmarks - 1``."""
-    bad = (landmark_index < 0) | (landmark_index >= n_landmarks)
-    if bad.any():
-        raise DataError(
-            f"landmark index {int(landmark_index[np.argmax(bad)])} outside 0..{n_landmarks - 1} (reading {int(np.argmax(bad))})",
-            source=source,
-        )
-
-
-class ParticleFilter:
+class ParticleFilter(LandmarkFilterBase):
     """Landmark-based Monte-Carlo localization in 2D (pose x_m, y_m, theta_rad).
 
     ``landmarks_xy``: ``(L, 2)`` map. Particles are ``(3, N)`` (``.states``; ``.particles`` gives
@@ -36,19 +26,11 @@ class ParticleFilter:
     non-finite: weights reset to uniform, logged).
     """
 
-    def __init__(self, landmarks_xy: np.ndarray, config: PFConfig | None = None, rng: np.random.Generator | int | None = 0) -> None:
-        self.config = config if config is not None else PFConfig()
-        lm = np.asarray(landmarks_xy, dtype=np.float64)
-        if lm.ndim != 2 or lm.shape[1] != 2 or len(lm) == 0 or not np.isfinite(lm).all():
-            raise DataError(f"landmarks must be a finite (L, 2) array with L >= 1, got shape {lm.shape}", source="landmarks")
-        self.landmarks_xy = lm
-        self.rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
+    def _setup(self) -> None:
         self.dtype = np.dtype(self.config.dtype)
-        self.n = int(self.config.n_particles)
         self.motion = OdometryMotionModel(self.config.motion_noise_std)
         self.sensor = RangeBearingModel(resolve_q(self.config.q, self.config.q_as))
-        self.resampler = get_resampler(self.config.resampler)
-        self._landmarks_typed = lm.astype(self.dtype)
+        self._landmarks_typed = self.landmarks_xy.astype(self.dtype)
         self._noise_block: np.ndarray | None = None
         self._noise_pos = 0
         self._scratch = (np.empty(self.n, dtype=self.dtype), np.empty(self.n, dtype=self.dtype))
@@ -61,40 +43,18 @@ class ParticleFilter:
         self._control_block: np.ndarray | None = None
         self._control_buf: np.ndarray | None = None
         self._control_pos = 0
-        self._uniform_w: np.ndarray | None = None
         self._predicts_since_wrap = 0
-        self.n_updates = 0
-        self.n_resamples = 0
-        self.n_weight_resets = 0
-        self.last_max_loglik = 0.0
-        if self.config.init == "uniform":
-            self.initialize_uniform()
-        else:
-            self.initialize_gaussian()
 
     # ---- initialization -------------------------------------------------------------------------
     def initialize_gaussian(self, mean: np.ndarray | None = None, std: np.ndarray | None = None) -> None:
         """Particles ~ N(mean, diag(std^2)) (defaults from the config); weights uniform."""
-        mean = np.asarray(self.config.init_mean if mean is None else mean, dtype=np.float64).reshape(3)
-        std = np.asarray(self.config.init_std if std is None else std, dtype=np.float64).reshape(3)
+        mean, std = self._gaussian_prior(mean, std)
         eps = standard_normal(self.rng, (3, self.n), self.dtype)
         self.states = (eps * std.astype(self.dtype)[:, None] + mean.astype(self.dtype)[:, None]).astype(self.dtype)
         self._reset_weights()
 
-    def initialize_uniform(self, bounds_xy: tuple[float, float, float, float] | None = None) -> None:
-        """Global localization: x, y uniform over ``(xmin, xmax, ymin, ymax)`` (default: landmarks +- margin), theta uniform."""
-        if bounds_xy is None:
-            m = self.config.uniform_margin_m
-            lo, hi = self.landmarks_xy.min(axis=0) - m, self.landmarks_xy.max(axis=0) + m
-            bounds_xy = (lo[0], hi[0], lo[1], hi[1])
-        x0, x1, y0, y1 = (float(b) for b in bounds_xy)
-        if not (x1 > x0 and y1 > y0):
-            raise ConfigError(f"empty bounds {bounds_xy!r}", source="initialize_uniform")
-        u = self.rng.random((3, self.n))
-        lo = np.array([x0, y0, -np.pi])[:, None]
-        span = np.array([x1 - x0, y1 - y0, 2 * np.pi])[:, None]
-        self.states = (lo + u * span).astype(self.dtype)
-        self._reset_weights()
+    def _set_uniform_states(self, states: np.ndarray, span: np.ndarray) -> None:
+        self.states = states.astype(self.dtype)
 
     def set_particles(self, particles: np.ndarray, weights: np.ndarray | None = None) -> None:
         """Replace the particle set with ``(N, 3)`` poses (and optional weights, normalized here)."""
@@ -111,40 +71,6 @@ class ParticleFilter:
             with np.errstate(divide="ignore"):
                 self.log_weights = np.log(self.weights)
             self._uniform = False
-
-    def _reset_weights(self) -> None:
-        # shared read-only arrays: every update creates new weight arrays
-        if self._uniform_w is None:
-            self._uniform_w = np.full(self.n, 1.0 / self.n, dtype=self.dtype)
-            self._uniform_lw = np.full(self.n, -np.log(self.n), dtype=self.dtype)
-            self._uniform_w.flags.writeable = False
-            self._uniform_lw.flags.writeable = False
-        self.weights = self._uniform_w
-        self._lw_shifted = None
-        self._log_weights = self._uniform_lw
-        self._uniform = True
-
-    @property
-    def log_weights(self) -> np.ndarray:
-        """Normalized log-weights ``(N,)`` (computed on demand after an update)."""
-        if self._log_weights is None:
-            self._log_weights = self._lw_shifted - self._log_sum
-        return self._log_weights
-
-    @log_weights.setter
-    def log_weights(self, value: np.ndarray) -> None:
-        self._log_weights = value
-        self._lw_shifted = None
-
-    # ---- views ------------------------------------------------------------------------------------
-    @property
-    def particles(self) -> np.ndarray:
-        """``(N, 3)`` view of the particle poses."""
-        return self.states.T
-
-    @property
-    def ess(self) -> float:
-        return effective_sample_size(self.weights)
 
     # ---- predict ----------------------------------------------------------------------------------
     def _next_noise(self) -> np.ndarray:
@@ -234,53 +160,15 @@ class ParticleFilter:
     def update(self, landmark_index: np.ndarray, z: np.ndarray, *, check: bool = True) -> bool:
         """Reweight by the readings; an empty set of readings leaves the weights unchanged (returns False)."""
         if check:
-            z = np.asarray(z, dtype=np.float64).reshape(-1, 2)
-            landmark_index = np.asarray(landmark_index, dtype=np.int64).reshape(-1)
-            if not np.isfinite(z).all():
-                raise DataError("non-finite measurement", source="update")
-            if len(landmark_index) != len(z):
-                raise DataError(f"{len(landmark_index)} landmark indices for {len(z)} readings", source="update")
-            check_landmark_index(landmark_index, len(self.landmarks_xy))
+            landmark_index, z = self._checked_readings(landmark_index, z)
         if len(z) == 0:
             return False
         self.apply_log_likelihood(self.log_likelihood(landmark_index, z))
         return True
 
-    def apply_log_likelihood(self, ll: np.ndarray) -> None:
-        """Add ``ll`` ``(N,)`` to the log-weights and renormalize with log-sum-exp (never underflows to all zero)."""
-        was_uniform = self._uniform
-        lw = ll.astype(self.dtype) if was_uniform else ll + self.log_weights
-        m = lw.max()
-        if not np.isfinite(m):  # NaN / inf somewhere, or every particle impossible
-            lw = np.where(np.isfinite(lw), lw, -np.inf).astype(self.dtype)
-            m = lw.max()
-            if not np.isfinite(m):
-                self.n_weight_resets += 1
-                log.warning("no particle has a finite log-likelihood at update %d: weights reset to uniform", self.n_updates)
-                self._reset_weights()
-                self.n_updates += 1
-                return
-        self.last_max_loglik = float(m) if was_uniform else float(ll.max())
-        lw -= m
-        w = np.exp(lw)
-        s = w.sum(dtype=np.float64)
-        w /= self.dtype.type(s)
-        self.weights, self._uniform = w, False
-        self._lw_shifted, self._log_sum, self._log_weights = lw, self.dtype.type(np.log(s)), None
-        self.n_updates += 1
-
     # ---- resample ---------------------------------------------------------------------------------
-    def needs_resampling(self) -> bool:
-        if self._uniform:
-            return False
-        thr = self.config.ess_threshold
-        return thr >= 1.0 or effective_sample_size(self.weights) < thr * self.n
-
-    def resample(self, force: bool = False) -> bool:
-        """Resample (always if ``force``, else per the ESS threshold); returns whether it happened."""
-        if not force and not self.needs_resampling():
-            return False
-        idx = self.resampler(self.weights, self.rng, self.n)
+    def _resample_states(self, idx: np.ndarray) -> None:
+        """Take the particles ``idx``, then moment matching / regularization / roughening per the config."""
         matching = self.config.moment_matching
         before = self._moments(self.weights, matching == "mean_cov") if matching != "none" else None
         self.states = np.take(self.states, idx, axis=1)
@@ -290,9 +178,6 @@ class ParticleFilter:
             self._regularize(self.config.regularization)
         if self.config.roughening > 0:
             self._roughen()
-        self._reset_weights()
-        self.n_resamples += 1
-        return True
 
     def _moments(self, weights: np.ndarray, with_cov: bool) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
         """Weighted mean (circular for theta), deviations ``(3, N)`` float64 and covariance (or None)."""
@@ -343,15 +228,14 @@ class ParticleFilter:
         self.states += eps
 
     # ---- estimate ---------------------------------------------------------------------------------
-    def estimate(self, kind: str | None = None) -> np.ndarray:
-        """Pose ``(3,)`` float64 (theta in [-pi, pi)): weighted mean (circular mean for theta) or the highest-weight particle."""
-        kind = kind or self.config.estimator
-        if kind == "best":
-            pose = self.states[:, int(np.argmax(self.weights))].astype(np.float64)
-            pose[2] = wrap_angle(pose[2])
-            return pose
-        if kind != "mean":
-            raise ConfigError(f"unknown estimator {kind!r}; known: mean, best", source="estimator")
+    def _best_pose(self, i: int) -> np.ndarray:
+        """Particle ``i`` as float64, theta in [-pi, pi)."""
+        pose = self.states[:, i].astype(np.float64)
+        pose[2] = wrap_angle(pose[2])
+        return pose
+
+    def _mean_pose(self) -> np.ndarray:
+        """Weighted mean, circular for theta (one pass over a cos/sin buffer)."""
         buf = self._estimate_buf  # rows x, y, cos(theta), sin(theta)
         np.copyto(buf[:2], self.states[:2])
         np.cos(self.states[2], out=buf[2])

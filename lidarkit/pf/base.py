@@ -1,0 +1,210 @@
+"""What point-particle and Kalman-kernel localization filters share: map, weights, resampling decision, estimators.
+
+:class:`LandmarkFilterBase` holds the landmark map, the normalized weights ``(N,)`` and their logs
+(log-sum-exp normalization, reset to uniform when every log-likelihood is non-finite), the ESS test,
+the resampling bookkeeping, the reading validation and the estimator dispatch. A subclass supplies only
+its own state and math: :meth:`_setup`, :meth:`initialize_gaussian`, :meth:`_set_uniform_states`,
+``predict``, ``update``, :meth:`_resample_states`, :meth:`_best_pose` and :meth:`_mean_pose`.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from lidarkit.errors import ConfigError, DataError
+from lidarkit.pf.config import PFConfig
+from lidarkit.pf.resampling import effective_sample_size, get_resampler
+
+
+def check_landmark_index(landmark_index: np.ndarray, n_landmarks: int, source: str = "update") -> None:
+    """DataError naming the first index of ``landmark_index`` ``(M,)`` outside ``0 .. n_landmarks - 1``."""
+    bad = (landmark_index < 0) | (landmark_index >= n_landmarks)
+    if bad.any():
+        raise DataError(
+            f"landmark index {int(landmark_index[np.argmax(bad)])} outside 0..{n_landmarks - 1} (reading {int(np.argmax(bad))})",
+            source=source,
+        )
+
+
+class LandmarkFilterBase:
+    """Weighted set of ``N`` pose hypotheses ``(3, N)`` (``.states``; x_m, y_m, theta_rad) against an ``(L, 2)`` landmark map.
+
+    Weights and log-weights are of ``self.dtype`` (set by :meth:`_setup`). Counters: ``n_updates``,
+    ``n_resamples``, ``n_weight_resets`` (updates whose log-likelihoods were all non-finite: weights
+    reset to uniform, logged).
+    """
+
+    unit_name = "particle"  # what one hypothesis is called in log messages
+    skip_uniform_prior = True  # uniform weights: take ll as the new log-weights without adding the constant -log N
+
+    def __init__(self, landmarks_xy: np.ndarray, config: PFConfig | None = None, rng: np.random.Generator | int | None = 0) -> None:
+        self.config = config if config is not None else self._default_config()
+        lm = np.asarray(landmarks_xy, dtype=np.float64)
+        if lm.ndim != 2 or lm.shape[1] != 2 or len(lm) == 0 or not np.isfinite(lm).all():
+            raise DataError(f"landmarks must be a finite (L, 2) array with L >= 1, got shape {lm.shape}", source="landmarks")
+        self.landmarks_xy = lm
+        self.rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
+        self.n = int(self.config.n_particles)
+        self.resampler = get_resampler(self.config.resampler)
+        self._uniform_w: np.ndarray | None = None
+        self._setup()
+        self.n_updates = 0
+        self.n_resamples = 0
+        self.n_weight_resets = 0
+        self.last_max_loglik = 0.0
+        if self.config.init == "uniform":
+            self.initialize_uniform()
+        else:
+            self.initialize_gaussian()
+
+    def _default_config(self) -> PFConfig:
+        return PFConfig()
+
+    def _setup(self) -> None:
+        """Filter-specific members (must set ``self.dtype``); called before the initialization."""
+        raise NotImplementedError
+
+    # ---- initialization -------------------------------------------------------------------------
+    def initialize_gaussian(self, mean: np.ndarray | None = None, std: np.ndarray | None = None) -> None:
+        raise NotImplementedError
+
+    def _gaussian_prior(self, mean: np.ndarray | None, std: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """Mean ``(3,)`` and standard deviations ``(3,)`` float64 (defaults from the config)."""
+        mean = np.asarray(self.config.init_mean if mean is None else mean, dtype=np.float64).reshape(3)
+        std = np.asarray(self.config.init_std if std is None else std, dtype=np.float64).reshape(3)
+        return mean, std
+
+    def initialize_uniform(self, bounds_xy: tuple[float, float, float, float] | None = None) -> None:
+        """Global localization: x, y uniform over ``(xmin, xmax, ymin, ymax)`` (default: landmarks +- margin), theta uniform."""
+        if bounds_xy is None:
+            m = self.config.uniform_margin_m
+            lo, hi = self.landmarks_xy.min(axis=0) - m, self.landmarks_xy.max(axis=0) + m
+            bounds_xy = (lo[0], hi[0], lo[1], hi[1])
+        x0, x1, y0, y1 = (float(b) for b in bounds_xy)
+        if not (x1 > x0 and y1 > y0):
+            raise ConfigError(f"empty bounds {bounds_xy!r}", source="initialize_uniform")
+        u = self.rng.random((3, self.n))
+        lo = np.array([x0, y0, -np.pi])[:, None]
+        span = np.array([x1 - x0, y1 - y0, 2 * np.pi])
+        self._set_uniform_states(lo + u * span[:, None], span)
+        self._reset_weights()
+
+    def _set_uniform_states(self, states: np.ndarray, span: np.ndarray) -> None:
+        """Take the uniformly drawn float64 ``states`` ``(3, N)`` over the box of size ``span`` ``(3,)``."""
+        raise NotImplementedError
+
+    # ---- weights ------------------------------------------------------------------------------------
+    def _reset_weights(self) -> None:
+        # shared read-only arrays: every update creates new weight arrays
+        if self._uniform_w is None:
+            self._uniform_w = np.full(self.n, 1.0 / self.n, dtype=self.dtype)
+            self._uniform_lw = np.full(self.n, -np.log(self.n), dtype=self.dtype)
+            self._uniform_w.flags.writeable = False
+            self._uniform_lw.flags.writeable = False
+        self.weights = self._uniform_w
+        self._lw_shifted = None
+        self._log_weights = self._uniform_lw
+        self._uniform = True
+
+    @property
+    def log_weights(self) -> np.ndarray:
+        """Normalized log-weights ``(N,)`` (computed on demand after an update)."""
+        if self._log_weights is None:
+            self._log_weights = self._lw_shifted - self._log_sum
+        return self._log_weights
+
+    @log_weights.setter
+    def log_weights(self, value: np.ndarray) -> None:
+        self._log_weights = value
+        self._lw_shifted = None
+
+    @property
+    def particles(self) -> np.ndarray:
+        """``(N, 3)`` view of the poses (kernel means)."""
+        return self.states.T
+
+    @property
+    def ess(self) -> float:
+        return effective_sample_size(self.weights)
+
+    def apply_log_likelihood(self, ll: np.ndarray) -> None:
+        """Add ``ll`` ``(N,)`` to the log-weights and renormalize with log-sum-exp (never underflows to all zero).
+
+        Non-finite entries count as impossible; if none is finite the weights are reset to uniform (counted, logged).
+        """
+        prior_skipped = self._uniform and self.skip_uniform_prior
+        lw = ll.astype(self.dtype) if prior_skipped else ll + self.log_weights
+        m = lw.max()
+        if not np.isfinite(m):  # NaN / inf somewhere, or every hypothesis impossible
+            lw = np.where(np.isfinite(lw), lw, -np.inf).astype(self.dtype)
+            m = lw.max()
+            if not np.isfinite(m):
+                self.n_weight_resets += 1
+                logging.getLogger(type(self).__module__).warning(  # the concrete filter's logger
+                    "no %s has a finite log-likelihood at update %d: weights reset to uniform", self.unit_name, self.n_updates
+                )
+                self._reset_weights()
+                self.n_updates += 1
+                return
+        self.last_max_loglik = float(m) if prior_skipped else float(ll.max())
+        lw -= m
+        w = np.exp(lw)
+        s = w.sum(dtype=np.float64)
+        w /= self.dtype.type(s)
+        self.weights, self._uniform = w, False
+        self._lw_shifted, self._log_sum, self._log_weights = lw, self.dtype.type(np.log(s)), None
+        self.n_updates += 1
+
+    # ---- update -------------------------------------------------------------------------------------
+    def _checked_readings(self, landmark_index: np.ndarray, z: np.ndarray, check_index: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """``(M,)`` int64 landmark indices and ``(M, 2)`` float64 finite readings; with ``check_index`` also counts and index range."""
+        z = np.asarray(z, dtype=np.float64).reshape(-1, 2)
+        idx = np.asarray(landmark_index, dtype=np.int64).reshape(-1)
+        if not np.isfinite(z).all():
+            raise DataError("non-finite measurement", source="update")
+        if check_index:
+            if len(idx) != len(z):
+                raise DataError(f"{len(idx)} landmark indices for {len(z)} readings", source="update")
+            check_landmark_index(idx, len(self.landmarks_xy))
+        return idx, z
+
+    # ---- resample -----------------------------------------------------------------------------------
+    def needs_resampling(self) -> bool:
+        if self._uniform:
+            return False
+        thr = self.config.ess_threshold
+        return thr >= 1.0 or effective_sample_size(self.weights) < thr * self.n
+
+    def resample(self, force: bool = False) -> bool:
+        """Resample (always if ``force``, else per the ESS threshold); returns whether it happened."""
+        if not force and not self.needs_resampling():
+            return False
+        self._resample_states(self.resampler(self.weights, self.rng, self.n))
+        self._reset_weights()
+        self.n_resamples += 1
+        return True
+
+    def _resample_states(self, idx: np.ndarray) -> None:
+        """Replace the state by the hypotheses ``idx`` ``(N,)`` (weights are still the pre-resampling ones here)."""
+        raise NotImplementedError
+
+    # ---- estimate -----------------------------------------------------------------------------------
+    def estimate(self, kind: str | None = None) -> np.ndarray:
+        """Pose ``(3,)`` float64: weighted mean (circular mean for theta) or the highest-weight hypothesis."""
+        kind = kind or self.config.estimator
+        if kind == "best":
+            return self._best_pose(int(np.argmax(self.weights)))
+        if kind != "mean":
+            raise ConfigError(f"unknown estimator {kind!r}; known: mean, best", source="estimator")
+        return self._mean_pose()
+
+    def _best_pose(self, i: int) -> np.ndarray:
+        raise NotImplementedError
+
+    def _mean_pose(self) -> np.ndarray:
+        raise NotImplementedError
+
+
+__all__ = ["LandmarkFilterBase", "check_landmark_index"]
