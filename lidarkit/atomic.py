@@ -43,6 +43,14 @@ def write_text(path: str | os.PathLike, text: str) -> Path:
     return Path(path)
 
 
+def save_figure(fig, path: str | os.PathLike, *, dpi: float | None = None) -> Path:
+    """Save a matplotlib figure atomically, in the format its suffix names (PNG when there is none)."""
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format=path.suffix.lstrip(".") or "png", dpi=dpi)
+    return path
+
+
 def write_bytes(path: str | os.PathLike, data: bytes) -> Path:
     """Write ``data`` to ``path`` atomically; return the path."""
     with atomic_path(path) as tmp:

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lidarkit.atomic import atomic_path
+from lidarkit.atomic import save_figure
 from lidarkit.errors import ConfigError
 from lidarkit.eval.ape_rpe import APEResult, RPEResult
 from lidarkit.eval.evaluate import Evaluation
@@ -27,12 +27,6 @@ def _figure(width_in: float, height_in: float):
     fig = Figure(figsize=(width_in, height_in), dpi=100, layout="constrained")
     FigureCanvasAgg(fig)
     return fig
-
-
-def _save(fig, path: str | os.PathLike) -> Path:
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format=Path(path).suffix.lstrip(".") or "png")
-    return Path(path)
 
 
 def choose_plane(ref: Trajectory, plane: str = "auto") -> str:
@@ -94,14 +88,14 @@ def plot_trajectories(
     _draw_trajectories(ax, ref, est, plane, est.name or "estimate")
     if title:
         ax.set_title(title, fontsize=9)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_errors(result: APEResult | RPEResult, path: str | os.PathLike) -> Path:
     """Error over time (or frames) of an APE/RPE result, with its rmse and mean, as a PNG."""
     fig = _figure(8.0, 3.5)
     _draw_errors(fig.add_subplot(1, 1, 1), result)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_evaluation(evaluation: Evaluation, path: str | os.PathLike, *, plane: str = "auto") -> Path:
@@ -139,4 +133,4 @@ def plot_evaluation(evaluation: Evaluation, path: str | os.PathLike, *, plane: s
         )
         handles = ax.get_legend_handles_labels()[0] + ax2.get_legend_handles_labels()[0]
         ax.legend(handles, [h.get_label() for h in handles], fontsize=8, loc="upper right")
-    return _save(fig, path)
+    return save_figure(fig, path)

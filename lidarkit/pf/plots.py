@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lidarkit.atomic import atomic_path
+from lidarkit.atomic import atomic_path, save_figure
 
 
 def _pyplot():
@@ -128,8 +128,7 @@ def plot_mse_vs_n(
 def _save(fig, path: str | os.PathLike) -> Path:
     plt = _pyplot()
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
     return Path(path)
 

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lidarkit.atomic import atomic_path
+from lidarkit.atomic import save_figure
 from lidarkit.geometry import transform_points
 
 
@@ -60,11 +60,7 @@ def save_bev_before_after(
     axes[0].set_ylabel("y (m)")
     if title:
         fig.suptitle(title)
-    fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=90)
-    plt.close(fig)
-    return Path(path)
+    return _save(plt, fig, path)
 
 
 def save_rmse_history(path: str | os.PathLike, histories: dict[str, Sequence[float]], title: str = "") -> Path:
@@ -81,9 +77,12 @@ def save_rmse_history(path: str | os.PathLike, histories: dict[str, Sequence[flo
     ax.legend(fontsize=8)
     if title:
         ax.set_title(title)
+    return _save(plt, fig, path)
+
+
+def _save(plt, fig, path: str | os.PathLike) -> Path:
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=90)
+    save_figure(fig, path, dpi=90)
     plt.close(fig)
     return Path(path)
 

@@ -51,9 +51,7 @@ def plot_vo_trajectories(path: str | os.PathLike, trajectories: dict[str, Trajec
     ax.legend(fontsize=8)
     if title:
         ax.set_title(title, fontsize=9)
-    with atomic.atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png")
-    return Path(path)
+    return atomic.save_figure(fig, path)
 
 
 def write_feature_gif(path: str | os.PathLike, images: Any, tracks: list[tuple[int, np.ndarray, np.ndarray]],
