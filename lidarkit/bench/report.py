@@ -403,24 +403,16 @@ def _html(report: Report, title: str) -> str:
         for p in report.plots:
             data = base64.b64encode(p.png).decode("ascii")
             parts.append(f'<figure><img src="data:image/png;base64,{data}" alt="{e(p.title)}" width="540"><figcaption>{e(p.title)}</figcaption></figure>')
-    if report.skipped:
-        parts.append("<h2>Experiments not run</h2>")
-        parts.append("<ul>")
-        for name, reason in report.skipped:
-            parts.append(f"<li>{e(name)}: {e(reason)}</li>")
-        parts.append("</ul>")
-    if report.warnings:
-        parts.append("<h2>Warnings logged by jobs</h2>")
-        parts.append("<ul>")
-        for label, message in report.warnings:
-            parts.append(f"<li>{e(label)}: {e(message)}</li>")
-        parts.append("</ul>")
-    if report.failures:
-        parts.append("<h2>Failed jobs</h2>")
-        parts.append("<ul>")
-        for f in report.failures:
-            parts.append(f'<li class="failed"><code>{e(f["key"])}</code> {e(f["label"])}: {e(f["error"])}</li>')
-        parts.append("</ul>")
+    sections = (
+        ("Experiments not run", [f"<li>{e(name)}: {e(reason)}</li>" for name, reason in report.skipped]),
+        ("Warnings logged by jobs", [f"<li>{e(label)}: {e(message)}</li>" for label, message in report.warnings]),
+        ("Failed jobs", [
+            f'<li class="failed"><code>{e(f["key"])}</code> {e(f["label"])}: {e(f["error"])}</li>' for f in report.failures
+        ]),
+    )
+    for heading, items in sections:
+        if items:
+            parts += [f"<h2>{heading}</h2>", "<ul>", *items, "</ul>"]
     parts += ["</body>", "</html>", ""]
     return "\n".join(parts)
 
