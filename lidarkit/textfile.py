@@ -52,7 +52,7 @@ def read_numeric_table(
         try:
             values = [float(f) for f in fields]
         except ValueError:
-            bad = next(f for f in fields if not _is_float(f))
+            bad = next(f for f in fields if not is_number(f))
             raise DataError(f"not a number: {bad!r}", source=path, location=f"line {lineno}") from None
         if not allow_nonfinite and not all(np.isfinite(values)):
             raise DataError("NaN or infinite value", source=path, location=f"line {lineno}")
@@ -62,7 +62,8 @@ def read_numeric_table(
     return np.asarray(rows, dtype=np.float64)
 
 
-def _is_float(text: str) -> bool:
+def is_number(text: str) -> bool:
+    """True if ``text`` parses as a float."""
     try:
         float(text)
     except ValueError:

@@ -28,7 +28,7 @@ from lidarkit.errors import ConfigError, DataError
 from lidarkit.geometry import se3_inverse
 from lidarkit.io.base import Scan
 from lidarkit.io.pointfile import read_kitti_bin
-from lidarkit.textfile import read_lines, read_numeric_table
+from lidarkit.textfile import is_number, read_lines, read_numeric_table
 from lidarkit.trajectory import Trajectory
 
 CALIB_KEYS_IN_ORDER = ("P0", "P1", "P2", "P3", "Tr")  # meaning of bare (prefix-less) calib lines
@@ -49,7 +49,7 @@ def read_kitti_calib(path: str | os.PathLike) -> dict[str, np.ndarray]:
         if not line or line.startswith("#"):
             continue
         key, sep, rest = line.partition(":")
-        if sep and not _is_number(key.strip()):
+        if sep and not is_number(key.strip()):
             key = key.strip()
             fields = rest.split()
         else:
@@ -81,14 +81,6 @@ def read_kitti_calib(path: str | os.PathLike) -> dict[str, np.ndarray]:
     if "P0" not in calib:
         raise DataError("no P0 projection matrix", source=path)
     return calib
-
-
-def _is_number(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
 
 
 _FRAME_NAME = re.compile(r"^(\d+)$")
