@@ -23,6 +23,17 @@ def shared_path(*parts: str) -> Path:
     return path
 
 
+def cli_exit_code(argv: list[str]) -> int:
+    """Run ``lidarkit ARGV`` in-process; its exit code (0 when it returns normally)."""
+    from lidarkit.cli import main
+
+    try:
+        main(argv)
+    except SystemExit as done:
+        return int(done.code or 0)
+    return 0
+
+
 @pytest.fixture
 def shared_data() -> Path:
     return shared_path()

@@ -9,6 +9,8 @@ import numpy as np
 import pytest
 import yaml
 
+from conftest import cli_exit_code
+
 from lidarkit.errors import ConfigError, DataError, EvaluationError, LidarKitError, RegistrationError
 from lidarkit.geometry import make_se3, se3_inverse, so3_exp
 from lidarkit.io.base import Scan
@@ -326,14 +328,7 @@ def test_open_sequence_specs(tmp_path):
         open_sequence(42)
 
 
-def _cli(argv: list[str]) -> int:
-    from lidarkit.cli import main
-
-    try:
-        main(argv)
-    except SystemExit as done:
-        return int(done.code or 0)
-    return 0
+_cli = cli_exit_code
 
 
 def test_cli_odometry_and_sim(tmp_path, capsys):

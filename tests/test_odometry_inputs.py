@@ -5,18 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lidarkit.cli import main
+from conftest import cli_exit_code
+
 from lidarkit.errors import ConfigError
 from lidarkit.io import open_dataset
 from lidarkit.odometry import open_sequence, parse_frames
 
 
-def _cli(argv: list[str]) -> int:
-    try:
-        main(argv)
-    except SystemExit as done:
-        return int(done.code or 0)
-    return 0
+_cli = cli_exit_code
 
 
 def test_open_dataset_unknown_option_lists_the_valid_ones(tmp_path):

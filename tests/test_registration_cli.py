@@ -7,7 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from lidarkit.cli import main
+from conftest import cli_exit_code
+
 from lidarkit.geometry import pose_error
 from lidarkit.registration import available_icp, config_fields
 from lidarkit.samples import sample_path
@@ -18,11 +19,7 @@ T_GT = np.loadtxt(sample_path("kitti_pair", "T_target_source.txt"))
 
 
 def run_cli(capsys, *args: str) -> tuple[int, str, str]:
-    code = 0
-    try:
-        main(["icp", *args])
-    except SystemExit as exc:
-        code = int(exc.code or 0)
+    code = cli_exit_code(["icp", *args])
     out = capsys.readouterr()
     return code, out.out, out.err
 
