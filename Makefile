@@ -24,6 +24,8 @@ $(STAMP): pyproject.toml
 	@$(PYTHON) -c 'import sys; sys.exit(0 if sys.version_info >= (3, 10) else "lidarkit needs Python >= 3.10, found " + sys.version.split()[0])'
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
+	@# opencv-python(-headless) and opencv-contrib-python-headless install the same cv2 package: keep only contrib
+	@$(PY) -m pip uninstall -q -y opencv-python-headless opencv-python 2>/dev/null || true
 	$(PY) -m pip install -q -e ".[test,gicp]" || $(PY) -m pip install -q -e ".[test]"
 	@touch $(STAMP)
 

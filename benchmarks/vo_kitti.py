@@ -42,6 +42,9 @@ PIPELINES = [
     ("lidarkit ORB variant: ORB 3000 grid + ratio, MAGSAC+RANSAC best, gt scale", "lidarkit",
      {"scale.mode": "gt", "features.detector": "orb", "features.max_features": 3000, "matching.method": "knn_ratio",
       "geometry.estimators": ("magsac", "ransac")}),
+    ("lidarkit AKAZE variant: AKAZE 3000 + ratio, MAGSAC+RANSAC best, gt scale", "lidarkit",
+     {"scale.mode": "gt", "features.detector": "akaze", "features.max_features": 3000, "features.grid_rows": 1,
+      "features.grid_cols": 1, "matching.method": "knn_ratio", "geometry.estimators": ("magsac", "ransac")}),
 ]
 PLOTTED = {PIPELINES[i][0] for i in (0, 1, 3, 4)}
 FOCAL_FACTORS = (0.8, 0.9, 0.95, 1.0, 1.05, 1.1, 1.25)

@@ -8,7 +8,7 @@ import platform
 from importlib import metadata
 from pathlib import Path
 
-PACKAGES = ("numpy", "scipy", "open3d", "kiss-icp", "small_gicp", "opencv-python-headless", "evo")
+PACKAGES = ("numpy", "scipy", "open3d", "kiss-icp", "small_gicp", "opencv-contrib-python-headless", "evo")
 
 
 def cpu_model() -> str:

@@ -37,6 +37,7 @@ class FeatureConfig(_Stage):
     gftt_quality: float = Field(0.01, gt=0, lt=1)
     min_distance_px: float = Field(7.0, ge=0)
     fast_threshold: int = Field(20, ge=1)
+    akaze_threshold: float = Field(1e-3, gt=0)
 
 
 class MatchConfig(_Stage):

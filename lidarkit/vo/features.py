@@ -56,6 +56,16 @@ def bucket_indices(points_px: np.ndarray, scores: np.ndarray, image_shape: tuple
     return np.sort(order[rank < per_cell])
 
 
+def _akaze_factory():
+    """``cv2.AKAZE_create`` (OpenCV 4) or ``cv2.xfeatures2d.AKAZE_create`` (OpenCV 5 with opencv-contrib)."""
+    factory = getattr(cv2, "AKAZE_create", None) or getattr(getattr(cv2, "xfeatures2d", None), "AKAZE_create", None)
+    if factory is None:
+        raise ConfigError(f"AKAZE is not in this OpenCV build ({cv2.__version__}); OpenCV 5 has it only in "
+                          "opencv-contrib (pip install opencv-contrib-python-headless); use orb or sift",
+                          source="detector")
+    return factory
+
+
 @dataclass
 class Detector:
     """A configured detector; ``has_descriptors`` tells whether descriptor matching is possible."""
@@ -76,10 +86,7 @@ class Detector:
             self._cv = cv2.SIFT_create(nfeatures=0 if c.max_features >= 100000 else n)
             self.norm = cv2.NORM_L2
         elif c.detector == "akaze":
-            if not hasattr(cv2, "AKAZE_create"):
-                raise ConfigError(f"AKAZE is not in this OpenCV build ({cv2.__version__}; OpenCV 5 moved it to "
-                                  "opencv-contrib); use orb or sift", source="detector")
-            self._cv = cv2.AKAZE_create()
+            self._cv = _akaze_factory()(threshold=c.akaze_threshold)
             self.norm = cv2.NORM_HAMMING
         elif c.detector == "fast":
             self._cv = cv2.FastFeatureDetector_create(threshold=c.fast_threshold, nonmaxSuppression=True)
