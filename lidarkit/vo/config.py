@@ -88,12 +88,22 @@ class SanityConfig(_Stage):
 
 class ScaleConfig(_Stage):
     """Translation scale: ``gt`` (per-step norm of the ground truth), ``none`` (unit steps) or ``relative`` (one global
-    unknown scale propagated through depths of points triangulated in consecutive pairs)."""
+    unknown scale propagated through depths of points triangulated in consecutive pairs).
+
+    ``relative``: points with a triangulation angle >= ``min_triangulation_angle_deg`` carry depth to the next
+    pair (at most ``max_carried_points``); a step needs ``min_common_points`` of them. ``points``: which points carry
+    depth: ``features`` (the pipeline's own correspondences) or ``corners`` (a dedicated bucketed corner set
+    followed by KLT, used by every pipeline except KLT on corners, which is the same thing already: ORB keypoints
+    cluster on few objects and descriptor re-matching keeps only a few depth points). A per-frame scale changing by
+    more than the factor ``max_step_change`` from the previous step is not accepted: the previous scale is kept
+    with a note (``VOResult.n_scale_kept`` counts those frames)."""
 
     mode: Literal["gt", "none", "relative"] = "relative"
-    min_triangulation_angle_deg: float = Field(1.0, gt=0)
+    min_triangulation_angle_deg: float = Field(0.5, gt=0)
     min_common_points: int = Field(15, ge=3)
     max_carried_points: int = Field(1500, ge=10)
+    max_step_change: float = Field(1.5, gt=1)
+    points: Literal["corners", "features"] = "corners"
 
 
 class SmoothingConfig(_Stage):

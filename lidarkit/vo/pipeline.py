@@ -12,22 +12,22 @@ import logging
 import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
-from typing import Any
+from typing import Any, NamedTuple
 
 import cv2
 import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
-from lidarkit.geometry import rotation_angle_deg, se3_exp, se3_inverse, se3_log
+from lidarkit.geometry import rotation_angle_deg, se3_exp, se3_inverse, se3_log, skew
 from lidarkit.trajectory import Trajectory
-from lidarkit.vo.config import VOConfig
+from lidarkit.vo.config import FeatureConfig, VOConfig
 from lidarkit.vo.features import get_detector, get_preprocessor
 from lidarkit.vo.intrinsics import validate_K
 from lidarkit.vo.matching import get_matcher, track_klt
 from lidarkit.vo.sanity import check_pose
-from lidarkit.vo.scale import relative_scale
+from lidarkit.vo.scale import SCALE_KEPT_NOTE, guarded_scale, relative_scale
 from lidarkit.vo.smoothing import smooth_translations
-from lidarkit.vo.two_view import estimate_two_view, normalize_points, triangulate
+from lidarkit.vo.two_view import estimate_two_view, normalize_points, sampson_residuals, triangulate
 
 log = logging.getLogger(__name__)
 
@@ -63,10 +63,25 @@ class Features:
     points_px: np.ndarray
     descriptors: np.ndarray | None
     depth: np.ndarray
+    # relative scale with ``scale.points == "corners"``: the corners carrying depth, ``(K, 2)`` px and ``(K,)`` depth
+    scale_points_px: np.ndarray | None = None
+    scale_points_depth: np.ndarray | None = None
 
     @classmethod
     def fresh(cls, points_px: np.ndarray, descriptors: np.ndarray | None) -> Features:
         return cls(points_px, descriptors, np.full(len(points_px), np.nan))
+
+
+class TrackedScalePoints(NamedTuple):
+    """Scale points of one pair: reference depth ``(K,)`` (NaN for fresh corners), tracked positions ``(K, 2)`` px,
+    unit-baseline triangulations in both frames ``(K, 3)``, triangulation angles ``(K,)`` deg, usable mask ``(K,)``."""
+
+    depth_ref: np.ndarray
+    points_cur_px: np.ndarray
+    X_ref: np.ndarray
+    X_cur: np.ndarray
+    angle_deg: np.ndarray
+    usable: np.ndarray
 
 
 @dataclass
@@ -94,6 +109,12 @@ class VOResult:
         """Processed frames per second of pipeline time (image reading excluded)."""
         return self.n_frames / self.runtime_s if self.runtime_s > 0 else float("inf")
 
+    @property
+    def n_scale_kept(self) -> int:
+        """Frames whose relative scale was kept from the previous step (too few common points, or a change beyond
+        ``scale.max_step_change``); 0 for the other scale modes."""
+        return sum(1 for d in self.diagnostics if d.note.startswith(SCALE_KEPT_NOTE))
+
     def smoothed(self) -> Trajectory:
         """Translations smoothed with the configured Savitzky-Golay filter; rotations unchanged."""
         s = self.config.smoothing
@@ -114,6 +135,7 @@ class VOResult:
             "runtime_s": self.runtime_s,
             "frames_per_s": self.frames_per_s,
             "scale_mode": self.config.scale.mode,
+            "scale_kept_frames": self.n_scale_kept,
         }
 
 
@@ -138,6 +160,9 @@ class MonoVO:
         self.detector = get_detector(self.config.features)
         self.matcher = None if self.config.matching.method == "klt" else get_matcher(self.config.matching,
                                                                                       self.detector.norm)
+        own = self.matcher is None and self.config.features.detector == "gftt"
+        self._scale_detector = (get_detector(FeatureConfig()) if self.config.scale.mode == "relative"
+                                and self.config.scale.points == "corners" and not own else None)
 
     # ---- public ----------------------------------------------------------------------------------------------
     def run(self, images: Any, keep_tracks: bool = False, timestamps_s: np.ndarray | None = None) -> VOResult:
@@ -259,7 +284,8 @@ class MonoVO:
             return fresh
         keep = np.flatnonzero(np.isfinite(carried.depth))[: self.config.scale.max_carried_points]
         return Features(np.concatenate([carried.points_px[keep], fresh.points_px]).astype(np.float32), None,
-                        np.concatenate([carried.depth[keep], fresh.depth]))
+                        np.concatenate([carried.depth[keep], fresh.depth]), carried.scale_points_px,
+                        carried.scale_points_depth)
 
     def _estimate(self, ref_index: int, ref_image: np.ndarray, ref: Features, j: int, cur_image: np.ndarray,
                   diag: FrameDiagnostics, last_scale: float):
@@ -304,14 +330,19 @@ class MonoVO:
             scale = float(gap)
         else:
             X_ref, X_cur, angle = triangulate(R, t, normalize_points(pts_ref, self.K), normalize_points(pts_cur, self.K))
-            found, n_common = relative_scale(ref.depth[idx_ref], X_ref, angle, inl, cfg.scale)
-            diag.n_scale_points = n_common
-            if found is None:
-                scale = last_scale * gap
-                if ref_index > 0:
-                    diag.note = f"scale kept from the previous step ({n_common} common points < {cfg.scale.min_common_points})"
+            tracked = self._track_scale_points(ref, ref_image, cur_image, R, t)
+            if tracked is None:
+                found, n_common = relative_scale(ref.depth[idx_ref], X_ref, angle, inl, cfg.scale)
             else:
-                scale = found
+                found, n_common = relative_scale(tracked.depth_ref, tracked.X_ref, tracked.angle_deg, tracked.usable,
+                                                 cfg.scale)
+            diag.n_scale_points = n_common
+            has_depths = bool(np.isfinite(ref.depth if tracked is None else tracked.depth_ref).any())
+            decision = guarded_scale(None if found is None else found / gap, last_scale, n_common,
+                                     not has_depths, cfg.scale)
+            scale = decision.scale * gap
+            if decision.note:
+                diag.note = decision.note
         diag.scale = scale
         if not np.isfinite(scale) or scale < 0:
             return None, f"invalid scale {scale}"
@@ -322,7 +353,37 @@ class MonoVO:
         if cfg.scale.mode == "relative":
             good = inl & (X_cur[:, 2] > 0) & (X_ref[:, 2] > 0) & (angle >= cfg.scale.min_triangulation_angle_deg)
             cur.depth[idx_cur[good]] = X_cur[good, 2] * scale
+            if tracked is not None:
+                keep = tracked.usable & (tracked.X_cur[:, 2] > 0) & (tracked.X_ref[:, 2] > 0)
+                keep &= tracked.angle_deg >= cfg.scale.min_triangulation_angle_deg
+                keep = np.flatnonzero(keep)[: cfg.scale.max_carried_points]
+                cur.scale_points_px = tracked.points_cur_px[keep]
+                cur.scale_points_depth = tracked.X_cur[keep, 2] * scale
         return (se3_inverse(T_cur_ref), cur, scale, (pts_ref[inl], pts_cur[inl])), ""
+
+    def _track_scale_points(self, ref: Features, ref_image: np.ndarray, cur_image: np.ndarray, R: np.ndarray,
+                            t: np.ndarray) -> TrackedScalePoints | None:
+        """Scale points (``scale.points == "corners"``, pipelines other than KLT on corners): the reference's carried
+        scale points plus fresh bucketed corners, followed into the current frame by KLT and triangulated with the
+        pair's pose (``usable``: tracked and within the epipolar threshold). None when the pipeline's own
+        correspondences carry the depths."""
+        cfg = self.config
+        if self._scale_detector is None:
+            return None
+        fresh = self._scale_detector.detect(ref_image)[0]
+        if ref.scale_points_px is not None and len(ref.scale_points_px):
+            pts_ref = np.concatenate([ref.scale_points_px, fresh]).astype(np.float32)
+            depth_ref = np.concatenate([ref.scale_points_depth, np.full(len(fresh), np.nan)])
+        else:
+            pts_ref, depth_ref = fresh.astype(np.float32), np.full(len(fresh), np.nan)
+        if len(pts_ref) == 0:
+            return None
+        pts_cur, ok = track_klt(ref_image, cur_image, pts_ref, cfg.matching)
+        n_ref, n_cur = normalize_points(pts_ref, self.K), normalize_points(pts_cur, self.K)
+        X_ref, X_cur, angle = triangulate(R, t, n_ref, n_cur)
+        residual_px = np.abs(sampson_residuals(skew(t) @ R, n_ref, n_cur)) * float(self.K[0, 0])
+        usable = ok & (residual_px < cfg.geometry.threshold_px)
+        return TrackedScalePoints(depth_ref, pts_cur, X_ref, X_cur, angle, usable)
 
     def _predicted_motion(self, step_motion: np.ndarray, j: int) -> np.ndarray:
         """Motion given to a rejected frame: the last accepted per-frame motion (GT step length in ``gt`` mode)."""
