@@ -113,23 +113,26 @@ def _run(seq, name, mode="relative"):
     return result, evaluate_vo(result.trajectory, gt, mode)["ape_rmse_m"]
 
 
-# Sim(3) APE measured on frames 0-50 (before this change: 0.114 / 2.59 / 0.656 / 0.194 m on 01); bounds = measured
-# plus ~15 %. ORB + ratio test stays above the 0.3 m target on 01 (its unrefined MAGSAC poses bias the
-# triangulation); its bound records the current figure.
+# Sim(3) APE on frames 0-50, measured: relative 0.074 / 0.138 / 0.093 / 0.876 m on 01 (before this change 0.114 /
+# 2.59 / 0.194 / 0.656 m), unit steps 0.524 / 0.624 / 0.530 / 0.922 m. Bounds: measured plus ~15 %. ORB + ratio test
+# (the second report's pipeline: unrefined MAGSAC poses) misses the 0.3 m target on 01; its bound records the figure.
 @pytest.mark.slow
-@pytest.mark.parametrize("name,ape_max_m,kept_max", [("default", 0.114, 0), ("orb_klt", 0.30, 1),
-                                                      ("sift_bf_cross", 0.30, 1), ("orb_knn_ratio", 1.35, 2)])
-def test_seq01_relative_scale_per_pipeline(seq01, name, ape_max_m, kept_max):
+@pytest.mark.parametrize("name,ape_max_m", [("default", 0.085), ("orb_klt", 0.16), ("sift_bf_cross", 0.11),
+                                            ("orb_knn_ratio", 0.90)])
+def test_seq01_relative_scale_per_pipeline_beats_unit_steps(seq01, name, ape_max_m):
     result, ape_m = _run(seq01, name)
-    assert not result.rejected
+    assert not result.rejected and result.n_scale_kept == 0
     assert ape_m <= ape_max_m
-    assert result.n_scale_kept <= kept_max
+    _, unit_ape_m = _run(seq01, name, "none")
+    assert ape_m < unit_ape_m  # the car speeds up 0.95 -> 1.27 m/frame: unit steps cannot follow
 
 
+# 06 drives at a nearly constant speed, so unit steps are the better guess there (0.031 / 0.033 / 0.080 / 0.054 m);
+# relative scale measured 0.066 / 0.131 / 0.133 / 0.116 m
 @pytest.mark.slow
-@pytest.mark.parametrize("name,ape_max_m", [("default", 0.075), ("orb_klt", 0.17), ("orb_knn_ratio", 0.21),
-                                            ("sift_bf_cross", 0.27)])
+@pytest.mark.parametrize("name,ape_max_m", [("default", 0.075), ("orb_klt", 0.15), ("orb_knn_ratio", 0.155),
+                                            ("sift_bf_cross", 0.135)])
 def test_seq06_relative_scale_per_pipeline(seq06, name, ape_max_m):
     result, ape_m = _run(seq06, name)
-    assert not result.rejected and result.n_scale_kept <= 1
+    assert not result.rejected and result.n_scale_kept == 0
     assert ape_m <= ape_max_m

@@ -94,7 +94,8 @@ class ScaleConfig(_Stage):
     pair (at most ``max_carried_points``); a step needs ``min_common_points`` of them. ``points``: which points carry
     depth: ``features`` (the pipeline's own correspondences) or ``corners`` (a dedicated bucketed corner set
     followed by KLT, used by every pipeline except KLT on corners, which is the same thing already: ORB keypoints
-    cluster on few objects and descriptor re-matching keeps only a few depth points). A per-frame scale changing by
+    cluster on few objects and descriptor re-matching keeps only a few depth points); a corner's depth is the
+    running (log) mean over up to ``max_depth_views`` pairs (1 = last pair only). A per-frame scale changing by
     more than the factor ``max_step_change`` from the previous step is not accepted: the previous scale is kept
     with a note (``VOResult.n_scale_kept`` counts those frames)."""
 
@@ -104,6 +105,7 @@ class ScaleConfig(_Stage):
     max_carried_points: int = Field(1500, ge=10)
     max_step_change: float = Field(1.5, gt=1)
     points: Literal["corners", "features"] = "corners"
+    max_depth_views: int = Field(10, ge=1)
 
 
 class SmoothingConfig(_Stage):

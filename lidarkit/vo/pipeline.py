@@ -63,9 +63,11 @@ class Features:
     points_px: np.ndarray
     descriptors: np.ndarray | None
     depth: np.ndarray
-    # relative scale with ``scale.points == "corners"``: the corners carrying depth, ``(K, 2)`` px and ``(K,)`` depth
+    # relative scale with ``scale.points == "corners"``: the corners carrying depth, ``(K, 2)`` px, ``(K,)`` depth
+    # and ``(K,)`` number of pair views averaged into it
     scale_points_px: np.ndarray | None = None
     scale_points_depth: np.ndarray | None = None
+    scale_points_views: np.ndarray | None = None
 
     @classmethod
     def fresh(cls, points_px: np.ndarray, descriptors: np.ndarray | None) -> Features:
@@ -73,10 +75,13 @@ class Features:
 
 
 class TrackedScalePoints(NamedTuple):
-    """Scale points of one pair: reference depth ``(K,)`` (NaN for fresh corners), tracked positions ``(K, 2)`` px,
-    unit-baseline triangulations in both frames ``(K, 3)``, triangulation angles ``(K,)`` deg, usable mask ``(K,)``."""
+    """Scale points of one pair: reference depth ``(K,)`` (NaN for fresh corners) and the views behind it ``(K,)``,
+    positions in both frames ``(K, 2)`` px, unit-baseline triangulations in both frames ``(K, 3)``, triangulation
+    angles ``(K,)`` deg, usable mask ``(K,)``."""
 
     depth_ref: np.ndarray
+    views_ref: np.ndarray
+    points_ref_px: np.ndarray
     points_cur_px: np.ndarray
     X_ref: np.ndarray
     X_cur: np.ndarray
@@ -285,7 +290,7 @@ class MonoVO:
         keep = np.flatnonzero(np.isfinite(carried.depth))[: self.config.scale.max_carried_points]
         return Features(np.concatenate([carried.points_px[keep], fresh.points_px]).astype(np.float32), None,
                         np.concatenate([carried.depth[keep], fresh.depth]), carried.scale_points_px,
-                        carried.scale_points_depth)
+                        carried.scale_points_depth, carried.scale_points_views)
 
     def _estimate(self, ref_index: int, ref_image: np.ndarray, ref: Features, j: int, cur_image: np.ndarray,
                   diag: FrameDiagnostics, last_scale: float):
@@ -358,8 +363,30 @@ class MonoVO:
                 keep &= tracked.angle_deg >= cfg.scale.min_triangulation_angle_deg
                 keep = np.flatnonzero(keep)[: cfg.scale.max_carried_points]
                 cur.scale_points_px = tracked.points_cur_px[keep]
-                cur.scale_points_depth = tracked.X_cur[keep, 2] * scale
+                cur.scale_points_depth, cur.scale_points_views = self._fused_depths(tracked, keep, R, t, scale)
         return (se3_inverse(T_cur_ref), cur, scale, (pts_ref[inl], pts_cur[inl])), ""
+
+    def _fused_depths(self, tracked: TrackedScalePoints, keep: np.ndarray, R: np.ndarray, t: np.ndarray,
+                      scale: float) -> tuple[np.ndarray, np.ndarray]:
+        """Depths ``(K,)`` in the current frame of the kept scale points and their view counts ``(K,)``: the new
+        triangulation averaged (in log) with the depth predicted from the reference depth and the scaled motion,
+        weighted by the views behind it (at most ``scale.max_depth_views``): one pair's depth noise would otherwise
+        pass straight into the next step's scale."""
+        depth = tracked.X_cur[keep, 2] * scale
+        views = np.ones(len(keep))
+        depth_ref = tracked.depth_ref[keep]
+        known = np.flatnonzero(np.isfinite(depth_ref))
+        if len(known) == 0 or self.config.scale.max_depth_views <= 1:
+            return depth, views
+        ray = normalize_points(tracked.points_ref_px[keep][known], self.K)
+        z_pred = np.column_stack([ray, np.ones(len(ray))]) @ R[2] * depth_ref[known] + t[2] * scale
+        ahead = z_pred > 0
+        idx = known[ahead]
+        prior_views = np.minimum(tracked.views_ref[keep][idx], self.config.scale.max_depth_views - 1)
+        w = prior_views / (prior_views + 1.0)
+        depth[idx] = np.exp(w * np.log(z_pred[ahead]) + (1.0 - w) * np.log(depth[idx]))
+        views[idx] = prior_views + 1.0
+        return depth, views
 
     def _track_scale_points(self, ref: Features, ref_image: np.ndarray, cur_image: np.ndarray, R: np.ndarray,
                             t: np.ndarray) -> TrackedScalePoints | None:
@@ -374,8 +401,10 @@ class MonoVO:
         if ref.scale_points_px is not None and len(ref.scale_points_px):
             pts_ref = np.concatenate([ref.scale_points_px, fresh]).astype(np.float32)
             depth_ref = np.concatenate([ref.scale_points_depth, np.full(len(fresh), np.nan)])
+            views_ref = np.concatenate([ref.scale_points_views, np.zeros(len(fresh))])
         else:
             pts_ref, depth_ref = fresh.astype(np.float32), np.full(len(fresh), np.nan)
+            views_ref = np.zeros(len(fresh))
         if len(pts_ref) == 0:
             return None
         pts_cur, ok = track_klt(ref_image, cur_image, pts_ref, cfg.matching)
@@ -383,7 +412,7 @@ class MonoVO:
         X_ref, X_cur, angle = triangulate(R, t, n_ref, n_cur)
         residual_px = np.abs(sampson_residuals(skew(t) @ R, n_ref, n_cur)) * float(self.K[0, 0])
         usable = ok & (residual_px < cfg.geometry.threshold_px)
-        return TrackedScalePoints(depth_ref, pts_cur, X_ref, X_cur, angle, usable)
+        return TrackedScalePoints(depth_ref, views_ref, pts_ref, pts_cur, X_ref, X_cur, angle, usable)
 
     def _predicted_motion(self, step_motion: np.ndarray, j: int) -> np.ndarray:
         """Motion given to a rejected frame: the last accepted per-frame motion (GT step length in ``gt`` mode)."""
