@@ -39,6 +39,13 @@ class FeatureConfig(_Stage):
     fast_threshold: int = Field(20, ge=1)
     akaze_threshold: float = Field(1e-3, gt=0)
 
+    @model_validator(mode="after")
+    def _subpixel_for_corners(self) -> FeatureConfig:
+        if self.subpixel and self.detector in ("sift", "akaze"):
+            raise ValueError(f"subpixel (cornerSubPix) refines corners (gftt, fast, orb); {self.detector} keypoints are "
+                             "scale-space blobs already interpolated to sub-pixel: set subpixel to false")
+        return self
+
 
 class MatchConfig(_Stage):
     """Correspondences: KLT tracking (forward-backward checked) or descriptor matching (BF cross-check, KNN + ratio)."""
