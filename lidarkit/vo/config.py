@@ -91,7 +91,7 @@ class SanityConfig(_Stage):
     min_parallax_px: float = Field(0.5, ge=0)
     # pure rotation / no parallax without trusting K: rejected when the homography explains at least this share of
     # the fundamental-matrix inliers AND is a pure rotation (self-calibrated focal) within max_rotation_homography_px
-    max_homography_share: float = Field(0.9, gt=0, le=1)
+    max_homography_share: float = Field(0.9, ge=0.5, le=1)
     max_rotation_homography_px: float = Field(1.0, ge=0)
 
 

@@ -39,7 +39,8 @@ class TwoViewEstimate:
     RANSAC homography explains, both within ``degeneracy_threshold_px``; K-free;
     ``rotation_homography_px``: largest distance (px, over the inliers' bounding box) between that homography and the
     closest pure rotation ``K' R K'^-1`` (K' = K with focal self-calibrated, ``rotation_focal_px``, within
-    ``rotation_focal_ratio``, principal point within 10 % of the box): ~0 for a pure rotation or standstill.
+    ``rotation_focal_ratio``, principal point within 10 % of the box): ~0 for a pure rotation or standstill; inf when
+    the homography explains less than ``MIN_SHARE_FOR_ROTATION_FIT`` (not computed).
     """
 
     R_cur_ref: np.ndarray
@@ -141,18 +142,27 @@ def rotation_homography_residual_px(H: np.ndarray, K: np.ndarray, points_px: np.
     return worst, float(f0 * np.exp(candidates[p][0]))
 
 
+#: the rotation fit runs only when the homography explains at least this share (below it the pair has parallax
+#: whatever the fit says; SanityConfig.max_homography_share cannot be set lower)
+MIN_SHARE_FOR_ROTATION_FIT = 0.5
+#: homography RANSAC samples: finds a homography explaining >= 50 % with probability 1 - (1 - 0.5^4)^200 > 0.9999
+#: while bounding the cost on pairs with parallax (where no homography explains much)
+_HOMOGRAPHY_MAX_ITERS = 200
+
+
 def degeneracy_measures(p0: np.ndarray, p1: np.ndarray, K: np.ndarray, cfg: GeometryConfig) -> Degeneracy:
     """Homography vs fundamental matrix on the pixel correspondences ``(N, 2)`` (RANSAC, ``degeneracy_threshold_px``)
-    and the homography's distance from a pure rotation; K only bounds the self-calibrated focal length."""
+    and, when the homography explains at least half of them, its distance from a pure rotation; K only bounds the
+    self-calibrated focal length."""
     if len(p0) < 8:
         return Degeneracy()
     thr = cfg.degeneracy_threshold_px
-    H, mask_h = cv2.findHomography(p0, p1, cv2.RANSAC, thr, maxIters=2000, confidence=cfg.confidence)
+    H, mask_h = cv2.findHomography(p0, p1, cv2.RANSAC, thr, maxIters=_HOMOGRAPHY_MAX_ITERS, confidence=cfg.confidence)
     F, mask_f = cv2.findFundamentalMat(p0, p1, cv2.FM_RANSAC, thr, cfg.confidence)
     n_h = int(mask_h.sum()) if H is not None and mask_h is not None else 0
     n_f = int(mask_f.sum()) if F is not None and mask_f is not None else 0
     share = n_h / max(n_f, n_h, 1)
-    if n_h < 4 or not np.all(np.isfinite(H)):
+    if n_h < 4 or share < MIN_SHARE_FOR_ROTATION_FIT or not np.all(np.isfinite(H)):
         return Degeneracy(share, n_f)
     residual, focal = rotation_homography_residual_px(H, K, p0[mask_h.ravel() > 0], cfg.rotation_focal_ratio)
     return Degeneracy(share, n_f, residual, focal)
