@@ -51,6 +51,6 @@ def rotation_homography_reason(estimate: TwoViewEstimate, cfg: SanityConfig) -> 
     if not estimate.rotation_homography_px <= cfg.max_rotation_homography_px:
         return None
     return (f"insufficient parallax (pure rotation / no parallax: homography explains "
-            f"{100 * estimate.homography_share:.1f}% of {estimate.fundamental_inliers} fundamental-matrix inliers and is "
-            f"a pure rotation within {estimate.rotation_homography_px:.2f} px, self-calibrated f = "
+            f"{100 * estimate.homography_share:.1f}% of {estimate.fundamental_inliers} fundamental-matrix inliers "
+            f"and is a pure rotation within {estimate.rotation_homography_px:.2f} px, self-calibrated f = "
             f"{estimate.rotation_focal_px:.0f} px): translation direction undefined")
