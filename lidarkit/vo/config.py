@@ -74,6 +74,11 @@ class GeometryConfig(_Stage):
     inliers: Literal["cheirality", "epipolar"] = "cheirality"
     refine: bool = True
     fundamental_fallback: bool = True
+    # K-free degeneracy measure (pure rotation / standstill): homography and fundamental matrix fitted by RANSAC on
+    # the pixel correspondences with this threshold; the homography is compared with a pure rotation K' R K'^-1 whose
+    # focal length may differ from K's by up to ``rotation_focal_ratio`` (either way) - K may be a guess
+    degeneracy_threshold_px: float = Field(1.0, gt=0)
+    rotation_focal_ratio: float = Field(2.0, ge=1)
 
     @model_validator(mode="after")
     def _non_empty(self) -> GeometryConfig:
@@ -91,6 +96,10 @@ class SanityConfig(_Stage):
     min_inliers: int = Field(30, ge=5)
     max_rotation_deg: float = Field(30.0, gt=0, le=180)
     min_parallax_px: float = Field(0.5, ge=0)
+    # pure rotation / no parallax without trusting K: rejected when the homography explains at least this share of
+    # the fundamental-matrix inliers AND is a pure rotation (self-calibrated focal) within max_rotation_homography_px
+    max_homography_share: float = Field(0.9, ge=0.5, le=1)
+    max_rotation_homography_px: float = Field(1.0, ge=0)
 
 
 class ScaleConfig(_Stage):
@@ -127,7 +136,9 @@ class VOConfig(_Stage):
     scale: ScaleConfig = ScaleConfig()
     smoothing: SmoothingConfig = SmoothingConfig()
     on_reject: Literal["constant_velocity", "identity"] = "constant_velocity"
-    seed: int = 0
+    # seeds the order in which correspondences reach OpenCV's RANSAC/MAGSAC/LMedS (their own RNG ignores
+    # cv2.setRNGSeed): same seed -> identical poses, another seed -> other (equally valid) samples
+    seed: int = Field(0, ge=0)
 
     @model_validator(mode="after")
     def _descriptor_for_matching(self) -> VOConfig:
