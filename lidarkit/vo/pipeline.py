@@ -32,7 +32,7 @@ from lidarkit.vo.matching import get_matcher, track_klt
 from lidarkit.vo.sanity import check_pose
 from lidarkit.vo.scale import relative_scale
 from lidarkit.vo.smoothing import smooth_translations
-from lidarkit.vo.two_view import estimate_two_view, normalize_points, triangulate
+from lidarkit.vo.two_view import correspondence_rng, estimate_two_view, normalize_points, triangulate
 
 log = logging.getLogger(__name__)
 
@@ -235,7 +235,7 @@ class MonoVO:
         for j in range(s + 1, n):
             image, reason = load(j)
             start = time.perf_counter()
-            cv2.setRNGSeed(int(cfg.seed) * 1_000_003 + j)
+            cv2.setRNGSeed(int(cfg.seed) * 1_000_003 + j)  # for OpenCV calls that do use its RNG
             diag = FrameDiagnostics(frame=j, ref_frame=ref_index, n_features=len(ref_feats.points_px))
             result = None
             cur_image = None
@@ -342,7 +342,8 @@ class MonoVO:
             return None, f"too few matches ({len(idx_ref)} < {cfg.sanity.min_matches})"
         pts_ref = ref.points_px[idx_ref]
         pts_cur = cur.points_px[idx_cur]
-        est = estimate_two_view(pts_ref, pts_cur, self.K, cfg.geometry, min_inliers=cfg.sanity.min_inliers)
+        est = estimate_two_view(pts_ref, pts_cur, self.K, cfg.geometry, min_inliers=cfg.sanity.min_inliers,
+                                rng=correspondence_rng(cfg.seed, j))
         diag.method = est.method
         diag.n_inliers = est.n_inliers
         if est.ok:
