@@ -249,6 +249,21 @@ def test_times_and_poses_count_mismatch(tmp_path, copy_of, odo_root):
         KittiOdometry(odo_root, "00", times_file=times)
 
 
+def test_copied_sequence_folder_with_trimmed_poses_and_full_times(tmp_path):
+    """A sequence folder copied on its own (51 images, poses.txt trimmed to them, the full 1101-line times.txt)."""
+    seq = tmp_path / "06"
+    shutil.copytree(shared_path("kitti_images", "sequences", "06"), seq)
+    ds = KittiOdometry(seq)
+    assert len(ds) == 51 and len(ds.ground_truth_camera) == 51
+    full = np.loadtxt(shared_path("kitti_images", "sequences", "06", "times.txt"))
+    np.testing.assert_array_equal(ds.timestamps_s, full[:51])
+    # files of different lengths where the shorter does not end at the last frame present: still an error
+    poses = shared_path("kitti_images", "poses", "06.txt").read_text().splitlines()
+    (seq / "poses.txt").write_text("\n".join(poses[:60]) + "\n")
+    with pytest.raises(DataError, match=r"60 poses in .*poses\.txt but 1101 time stamps"):
+        KittiOdometry(seq)
+
+
 def test_poses_must_cover_every_frame(tmp_path, copy_of, odo_root):
     seq = tmp_path / "seq"
     seq.mkdir()

@@ -46,15 +46,30 @@ def test_vo_on_bundled_kitti_sample_writes_run_folder(tmp_path, capsys):
     assert csv[0].startswith("frame,ref_frame,n_features,n_matches,n_inliers") and len(csv) == 9
 
 
-def test_vo_on_plain_image_folder_guesses_intrinsics(tmp_path, capsys):
+def test_vo_on_plain_image_folder_guesses_intrinsics(tmp_path, capsys, caplog):
     src = sample_path("kitti_vo", "06", "image_0")
     folder = tmp_path / "imgs"
     shutil.copytree(src, folder)
     assert detect_kind(folder) == "images"
     vo_input = open_vo_input(folder)
     assert "guess" in vo_input.K_source and vo_input.K[0, 0] == pytest.approx(0.9 * 1226)
-    code, stdout, err = _run(["vo", str(folder), "--scale", "none", "--preset", "report_orb"], capsys)
-    assert code in (0, None) and "guess" in err and "frames" in stdout
+    caplog.clear()
+    out = tmp_path / "run"
+    code, stdout, err = _run(["vo", str(folder), "--scale", "none", "--preset", "report_orb", "--out", str(out)], capsys)
+    assert code in (0, None) and "frames" in stdout
+    # each assumption is said once (a log warning), not also printed by the command
+    said = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"] + err.splitlines()
+    assert sum("no intrinsics given" in line for line in said) == 1
+    assert sum("frame indices as seconds" in line for line in said) == 1
+    note = "no time stamps given: poses_tum.txt and poses_smoothed_tum.txt use frame indices as seconds"
+    assert json.loads((out / "metrics.json").read_text())["timestamps"] == note
+    assert yaml.safe_load((out / "config.yaml").read_text())["timestamps"] == note
+    # an odd-sized first image neither rejects the others nor sets the guessed intrinsics
+    cv2.imwrite(str(folder / "000000.png"), cv2.resize(cv2.imread(str(src / "000000.png"), 0), (640, 200)))
+    assert open_vo_input(folder).K[0, 0] == pytest.approx(0.9 * 1226)  # not 0.9 * 640
+    code, stdout, _ = _run(["vo", str(folder), "--scale", "none"], capsys)
+    assert code in (0, None) and "accepted pairs" in stdout and "6 of 7" in stdout
+    assert "frame 0 rejected: image size 640x200 differs from the sequence's 1226x370" in stdout
     # with the calibration file, K is read from it
     calib = sample_path("kitti_vo", "06", "calib.txt")
     assert open_vo_input(folder, calib=calib).K[0, 0] == pytest.approx(707.0912)
@@ -68,6 +83,24 @@ def test_vo_rejects_corrupt_frame_in_folder_and_reports_it(tmp_path, capsys):
     code, stdout, _ = _run(["vo", str(folder), "--calib", str(calib)], capsys)
     assert code in (0, None)
     assert "frame 3 rejected: unreadable image" in stdout
+    assert "6 of 7" in stdout and "top rejection reasons" in stdout and "unreadable image (1)" in stdout
+
+
+def test_vo_without_any_accepted_pair_writes_diagnostics_and_fails(tmp_path, capsys):
+    folder = tmp_path / "black"
+    folder.mkdir()
+    for i in range(5):
+        cv2.imwrite(str(folder / f"{i}.png"), np.zeros((120, 160), np.uint8))
+    out = tmp_path / "run"
+    code, stdout, err = _run(["vo", str(folder), "--out", str(out)], capsys)
+    assert code == 1 and len(err.strip().splitlines()) == 1, err
+    assert err.startswith("error:") and "no frame pair accepted (4 of 5 frames rejected)" in err
+    assert "too few features in reference frame" in err and "diagnostics.csv" in err
+    rows = (out / "diagnostics.csv").read_text().splitlines()
+    assert len(rows) == 6 and sum(",False," in row for row in rows) == 4
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["accepted_pairs"] == 0 and metrics["rejection_reasons"] == {"too few features in reference frame": 4}
+    assert not list(out.glob("*.tmp*"))  # written atomically, no leftovers
 
 
 def test_vo_cli_errors_are_one_line(tmp_path, capsys):

@@ -94,10 +94,38 @@ def test_unreadable_and_missing_images_are_rejected_with_reason(sim):
     assert ape(traj, MonoVO(_cfg(), K, traj).run(missing).trajectory, align="se3").rmse < 0.05
 
 
-def test_first_frame_unreadable_is_a_clear_error(sim):
+def test_unreadable_first_frame_is_rejected_and_no_usable_frame_is_a_clear_error(sim):
     traj, K, images = sim
-    with pytest.raises(DataError, match="first frame cannot be used"):
-        MonoVO(_cfg("none"), K).run(_Failing(images, {0}))
+    result = MonoVO(_cfg("none"), K).run(_Failing(images, {0}))
+    assert not result.diagnostics[0].accepted and "unreadable image" in result.diagnostics[0].reason
+    assert result.meta["start_frame"] == 1 and result.accepted_pairs == len(images) - 2 and _finite(result)
+    with pytest.raises(DataError, match="none of the first 7 frames can be used"):
+        MonoVO(_cfg("none"), K).run(_Failing(images, range(len(images))))
+
+
+def test_odd_sized_first_frame_is_the_one_rejected(sim):
+    """The sequence size is the majority of the first frames: an odd first frame cannot reject the others."""
+    traj, K, images = sim
+    bad = list(images)
+    bad[0] = cv2.resize(images[0], (320, 240))
+    result = MonoVO(_cfg(), K, traj).run(bad)
+    d0 = result.diagnostics[0]
+    assert not d0.accepted and "image size 320x240 differs from the sequence's 640x480" in d0.reason
+    assert all(d.accepted for d in result.diagnostics[1:]) and result.meta["start_frame"] == 1
+    assert result.meta["image_size_wh"] == [640, 480]
+    # the start frame is anchored at its ground-truth pose; frames 1.. match the truth (gt scale, no alignment)
+    assert ape(traj[1:], result.trajectory[1:], align="none").rmse < 0.01
+    np.testing.assert_allclose(result.trajectory.poses_se3[0], traj.poses_se3[1])
+
+
+def test_sequence_image_shape_is_the_majority_of_the_first_readable_frames():
+    from lidarkit.vo.pipeline import sequence_image_shape
+
+    a, b = np.zeros((4, 6), np.uint8), np.zeros((5, 7), np.uint8)
+    assert sequence_image_shape([b, a, a, None, b, a]) == (4, 6)
+    assert sequence_image_shape([None, b, a]) == (5, 7)  # tie: the earliest
+    loaded = {}
+    assert sequence_image_shape([a] * 20, loaded) == (4, 6) and sorted(loaded) == [0, 1, 2, 3, 4]
 
 
 def test_image_of_different_size_is_rejected(sim):
@@ -139,6 +167,53 @@ def test_pure_rotation_pair_is_rejected(scene):
     assert _finite(result)
 
 
+def test_pure_rotation_frame_turns_in_place_while_other_rejections_keep_constant_velocity(scene):
+    """A parallax rejection (pure rotation) gets zero translation and the rotation of the matches; an unreadable
+    frame still gets the constant-velocity step, or none with on_reject='identity'."""
+    from lidarkit.vo.two_view import rotation_error_deg
+
+    K = default_K()
+    R = so3_exp(np.radians([1.0, -2.0, 0.5]))
+    poses = [make_se3(np.eye(3), [0, 0, 0.0]), make_se3(np.eye(3), [0, 0, 0.5]), make_se3(R, [0, 0, 0.5]),
+             make_se3(R, [0, 0, 1.0]), make_se3(R, [0, 0, 1.5]), make_se3(R, [0, 0, 2.0])]
+    traj = Trajectory(np.array(poses))
+    images = render_sequence(scene, traj, K)
+    images[4] = None
+    for on_reject, step4 in (("constant_velocity", 0.5), ("identity", 0.0)):
+        result = MonoVO(_cfg("gt", on_reject=on_reject), K, traj).run(images)
+        P = result.trajectory.poses_se3
+        assert result.diagnostics[2].reason.startswith("insufficient parallax")
+        assert np.linalg.norm(P[2, :3, 3] - P[1, :3, 3]) < 1e-9  # no translation (was 0.5 m: constant velocity)
+        assert rotation_error_deg(P[2, :3, :3], R) < 0.1  # the pure rotation is kept (identity would be 2.3 deg)
+        assert "unreadable" in result.diagnostics[4].reason
+        assert np.linalg.norm(P[4, :3, 3] - P[3, :3, 3]) == pytest.approx(step4, abs=0.01)
+        assert result.diagnostics[5].accepted and np.abs(P[5] - poses[5]).max() < 0.01
+
+
+def test_all_rejected_pairs_are_visible_in_the_result(sim):
+    from lidarkit.vo.pipeline import TrackingFailedError, rejection_key
+
+    traj, K, images = sim
+    black = [np.zeros_like(images[0])] * 4
+    result = MonoVO(_cfg("none"), K).run(black)
+    assert result.accepted_pairs == 0 and result.summary()["accepted_pairs"] == 0
+    assert result.rejection_counts() == {"too few features in reference frame": 3}
+    with pytest.raises(TrackingFailedError, match=r"no frame pair accepted \(3 of 4 frames rejected\); most common "
+                                                  r"reason \(3x\): too few features in reference frame 0"):
+        result.check_tracking()
+    partial = list(images)
+    partial[2] = None
+    partial[4] = np.zeros_like(images[4])
+    partial[5] = None
+    result = MonoVO(_cfg("none"), K).run(partial)
+    result.check_tracking()  # some pairs accepted: no error
+    assert result.accepted_pairs == 3 and list(result.rejection_counts().items()) == [("unreadable image", 2),
+                                                                                      ("too few matches", 1)]
+    assert MonoVO(_cfg("none"), K).run(images[:1]).accepted_pairs == 0  # one frame: no pair, not a failure
+    MonoVO(_cfg("none"), K).run(images[:1]).check_tracking()
+    assert rejection_key("image size 640x200 differs from the sequence's 1226x370") == "image size"
+
+
 def test_without_sanity_checks_failures_still_never_give_nan(sim):
     traj, K, images = sim
     bad = list(images)
@@ -166,3 +241,63 @@ def test_lost_tracking_moves_the_reference_instead_of_cascading(sim):
     d3 = result.diagnostics[3]
     assert not d3.accepted and d3.note == "reference moved to this frame"
     assert result.diagnostics[4].ref_frame == 3 and _finite(result)
+
+
+@pytest.mark.parametrize("mode", ["relative", "none"])
+def test_stopped_camera_on_kitti_stays_put(mode):
+    """KITTI 06 frames 0-15 with frame 8 shown three times (the car stops): the copies get zero steps and the other
+    frames the same poses as without the stop (measured: identical to the last bit; tolerance 1 mm APE)."""
+    from conftest import shared_path
+
+    from lidarkit.vo.inputs import open_vo_input
+
+    vo_input = open_vo_input(shared_path("kitti_images", "sequences", "06"))
+    images = [vo_input.images.read_image(i) for i in range(16)]
+    gt = vo_input.ground_truth[:16]
+    order = list(range(9)) + [8, 8] + list(range(9, 16))
+    cfg = preset("lidarkit", **{"scale.mode": mode})
+    moving = MonoVO(cfg, vo_input.K).run(images)
+    stopped = MonoVO(cfg, vo_input.K).run([images[i] for i in order])
+    assert [d.frame for d in stopped.rejected] == [9, 10]
+    assert all(d.reason.startswith("insufficient parallax") for d in stopped.rejected)
+    steps = np.linalg.norm(np.diff(stopped.trajectory.positions_xyz, axis=0), axis=1)
+    assert np.all(steps[8:10] < 1e-9)  # were ~1 (constant velocity) before standstill handling
+    assert steps[10] == pytest.approx(steps[7], rel=0.05)  # unit steps count moving frames only (was 3)
+    others = stopped.trajectory[[k for k in range(len(order)) if k not in (9, 10)]]
+    ape_moving = ape(gt, moving.trajectory, align="sim3").rmse
+    assert ape_moving < 0.03
+    assert abs(ape(gt, others, align="sim3").rmse - ape_moving) < 1e-3
+
+
+def test_subpixel_refines_orb_corners_and_is_refused_for_blob_detectors():
+    """Rectangles drawn at 8x and area-downsampled have corners at known fractional positions: cornerSubPix moves
+    ORB keypoints onto them (measured median error 1.6 px -> 0.2 px). SIFT/AKAZE keypoints are already sub-pixel
+    blobs: asking for subpixel there is a ConfigError instead of being silently ignored."""
+    from scipy.spatial import cKDTree
+
+    from lidarkit.vo import FeatureConfig, get_detector
+
+    rng = np.random.default_rng(5)
+    up, h, w = 8, 240, 320
+    big = np.full((h * up, w * up), 60, np.uint8)
+    corners = []
+    for _ in range(40):
+        x0, y0, dx, dy = rng.uniform(10, w - 50), rng.uniform(10, h - 50), rng.uniform(12, 30), rng.uniform(12, 30)
+        X0, Y0, X1, Y1 = (int(round(v * up)) for v in (x0, y0, x0 + dx, y0 + dy))
+        cv2.rectangle(big, (X0, Y0), (X1 - 1, Y1 - 1), int(rng.integers(150, 250)), -1)
+        corners += [(X0, Y0), (X1, Y0), (X0, Y1), (X1, Y1)]
+    image = cv2.GaussianBlur(cv2.resize(big, (w, h), interpolation=cv2.INTER_AREA), (3, 3), 0.8)
+    true_px = np.array(corners, float) / up - 0.5  # pixel-centre convention
+    median_error = {}
+    for subpixel in (False, True):
+        cfg = FeatureConfig(detector="orb", max_features=500, grid_rows=1, grid_cols=1, subpixel=subpixel)
+        points, desc = get_detector(cfg).detect(image)
+        assert len(points) == len(desc) > 100
+        dist, _ = cKDTree(true_px).query(points)
+        median_error[subpixel] = np.median(dist[dist < 2.0])
+    assert median_error[False] > 1.0 and median_error[True] < 0.4
+    for detector in ("sift", "akaze"):
+        with pytest.raises(ConfigError, match="subpixel"):
+            VOConfig().updated(**{"features.detector": detector, "features.subpixel": True})
+        with pytest.raises(ConfigError, match="subpixel"):
+            get_detector(detector, subpixel=True)

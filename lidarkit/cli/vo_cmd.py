@@ -7,12 +7,14 @@ from typing import Optional
 
 import typer
 
-from lidarkit.cli.app import app, parse_params, stderr, stdout
+from lidarkit.cli.app import app, parse_params, stdout
 from lidarkit.errors import ConfigError
 from lidarkit.vo.config import VOConfig, available_presets
 from lidarkit.vo.intrinsics import DEFAULT_FOCAL_FACTOR
 
 _D = VOConfig()
+_TOP_REASONS = 3  # rejection kinds shown in the summary table
+_LISTED_REJECTIONS = 10  # rejected frames listed one per line
 
 
 @app.command("vo")
@@ -37,7 +39,7 @@ def vo_command(
     kind: str = typer.Option("auto", help="Input kind: auto | kitti | tum | images."),
     start: int = typer.Option(0, help="First frame."),
     max_frames: Optional[int] = typer.Option(None, help="Number of frames to process (default: all)."),
-    seed: int = typer.Option(_D.seed, help="RANSAC seed."),
+    seed: int = typer.Option(_D.seed, help="Seed of the order in which correspondences reach RANSAC/MAGSAC/LMedS (same seed, same poses)."),
     set_: Optional[list[str]] = typer.Option(None, "--set", help="Any config field, repeatable: "
                                              "--set matching.klt_levels=4 --set scale.min_common_points=20."),
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="Run folder for poses, diagnostics, config, plot."),
@@ -67,10 +69,12 @@ def vo_command(
     vo_input = open_vo_input(data, kind=kind, calib=calib, timestamps=timestamps, poses=poses,
                              poses_format=poses_format, focal_factor=focal_factor)
     vo_input = frame_range(vo_input, start, max_frames)
-    gt = vo_input.ground_truth
-    if "guess" in vo_input.K_source:
-        stderr().print(f"warning: no intrinsics given; {vo_input.K_source}")
+    gt = vo_input.ground_truth  # (a guessed K is logged as a warning by open_vo_input)
     result = MonoVO(cfg, vo_input.K, gt if cfg.scale.mode == "gt" else None).run(vo_input.images, keep_tracks=gif)
+    extra_config = {"input": str(data), "kind": vo_input.kind, "K_source": vo_input.K_source, "start": start,
+                    "max_frames": max_frames}
+    if result.n_frames > 1 and result.accepted_pairs == 0:
+        _fail_without_pairs(result, out, extra_config)
     if gt is not None and cfg.scale.mode != "gt":
         result.trajectory = result.trajectory.transformed(T_left=gt.poses_se3[0])
 
@@ -85,7 +89,11 @@ def vo_command(
     table.add_column("quantity")
     table.add_column("value", justify="right")
     table.add_row("frames", str(summary["frames"]))
-    table.add_row("rejected", str(summary["rejected"]))
+    table.add_row("accepted pairs", f"{summary['accepted_pairs']} of {summary['frames'] - 1}")
+    table.add_row("rejected frames", str(summary["rejected"]))
+    if summary["rejection_reasons"]:
+        top = list(summary["rejection_reasons"].items())[:_TOP_REASONS]
+        table.add_row("top rejection reasons", escape("; ".join(f"{kind} ({count})" for kind, count in top)))
     table.add_row("frames/s (pipeline)", f"{summary['frames_per_s']:.1f}")
     table.add_row("intrinsics", escape(vo_input.K_source))
     for variant, m in metrics.items():
@@ -94,13 +102,30 @@ def vo_command(
                       f"{m['rpe_trans_rmse_m']:.4f} / {m['rpe_rot_rmse_deg']:.4f}")
         table.add_row(escape(f"final error {variant} [m]"), f"{m['final_error_m']:.3f}")
     console.print(table)
-    for d in result.rejected:
+    for d in result.rejected[:_LISTED_REJECTIONS]:
         console.print(escape(f"frame {d.frame} rejected: {d.reason}"), soft_wrap=True)
+    if len(result.rejected) > _LISTED_REJECTIONS:
+        console.print(f"... and {len(result.rejected) - _LISTED_REJECTIONS} more rejected frames (see diagnostics.csv "
+                      "with --out)")
     if out is not None:
         from lidarkit.vo.output import write_run
 
-        paths = write_run(result, out, ground_truth=gt, metrics=metrics,
-                          extra_config={"input": str(data), "kind": vo_input.kind, "K_source": vo_input.K_source,
-                                        "start": start, "max_frames": max_frames},
+        paths = write_run(result, out, ground_truth=gt, metrics=metrics, extra_config=extra_config,
                           gif_images=vo_input.images if gif else None)
         console.print(f"wrote {len(paths)} files to {out}")
+
+
+def _fail_without_pairs(result, out: Optional[Path], extra_config: dict) -> None:
+    """No frame pair accepted: write the run folder (diagnostics) when asked, then raise one clear error."""
+    from lidarkit.vo.pipeline import TrackingFailedError
+
+    where = ""
+    if out is not None:
+        from lidarkit.vo.output import write_run
+
+        write_run(result, out, extra_config=extra_config, plot=False)
+        where = f"; per-frame reasons in {out / 'diagnostics.csv'}"
+    try:
+        result.check_tracking()
+    except TrackingFailedError as err:
+        raise TrackingFailedError(err.reason + where, source=err.source) from None

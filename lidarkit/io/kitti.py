@@ -17,6 +17,7 @@ with ``Tr = T_cam0_velo`` from calib.txt.
 from __future__ import annotations
 
 import dataclasses
+import logging
 import os
 import re
 from functools import cached_property
@@ -30,6 +31,8 @@ from lidarkit.io.base import Scan
 from lidarkit.io.pointfile import read_kitti_bin
 from lidarkit.textfile import is_number, read_lines, read_numeric_table
 from lidarkit.trajectory import Trajectory
+
+log = logging.getLogger(__name__)
 
 CALIB_KEYS_IN_ORDER = ("P0", "P1", "P2", "P3", "Tr")  # meaning of bare (prefix-less) calib lines
 _TR_ALIASES = ("Tr", "Tr_velo_to_cam", "Tr_velo_cam")
@@ -208,11 +211,18 @@ class KittiOdometry:
         return next((p for p in candidates if p.is_file()), None)
 
     def _check_counts(self) -> None:
-        """Pose and time files must agree with each other and cover every frame present."""
+        """Pose and time files must agree with each other and cover every frame present. Their lengths may differ
+        only for an excerpt: the shorter file ends exactly at the last frame present (e.g. a copied sequence folder
+        with a trimmed poses.txt beside the full times.txt); otherwise they are taken to be from different runs."""
         n_poses = len(self._poses_camera_all) if self.poses_path is not None else None
         n_times = len(self._times_all) if self._times_all is not None else None
         if n_poses is not None and n_times is not None and n_poses != n_times:
-            raise DataError(f"{n_poses} poses in {self.poses_path} but {n_times} time stamps", source=self.times_path)
+            last = max((int(f[-1]) for f in (self.scan_frames, self.image_frames) if len(f)), default=-1)
+            if min(n_poses, n_times) != last + 1:
+                raise DataError(f"{n_poses} poses in {self.poses_path} but {n_times} time stamps (and the shorter "
+                                f"file does not end at the last frame present, {last})", source=self.times_path)
+            log.info("%s: %d poses and %d time stamps; using the first %d frames", self.sequence_dir, n_poses,
+                     n_times, last + 1)
         for kind, paths, frames in (("scan", self.scan_paths, self.scan_frames), ("image", self.image_paths, self.image_frames)):
             if not len(frames):
                 continue

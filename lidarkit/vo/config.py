@@ -39,6 +39,13 @@ class FeatureConfig(_Stage):
     fast_threshold: int = Field(20, ge=1)
     akaze_threshold: float = Field(1e-3, gt=0)
 
+    @model_validator(mode="after")
+    def _subpixel_for_corners(self) -> FeatureConfig:
+        if self.subpixel and self.detector in ("sift", "akaze"):
+            raise ValueError(f"subpixel (cornerSubPix) refines corners (gftt, fast, orb); {self.detector} keypoints are "
+                             "scale-space blobs already interpolated to sub-pixel: set subpixel to false")
+        return self
+
 
 class MatchConfig(_Stage):
     """Correspondences: KLT tracking (forward-backward checked) or descriptor matching (BF cross-check, KNN + ratio)."""
@@ -67,6 +74,11 @@ class GeometryConfig(_Stage):
     inliers: Literal["cheirality", "epipolar"] = "cheirality"
     refine: bool = True
     fundamental_fallback: bool = True
+    # K-free degeneracy measure (pure rotation / standstill): homography and fundamental matrix fitted by RANSAC on
+    # the pixel correspondences with this threshold; the homography is compared with a pure rotation K' R K'^-1 whose
+    # focal length may differ from K's by up to ``rotation_focal_ratio`` (either way) - K may be a guess
+    degeneracy_threshold_px: float = Field(1.0, gt=0)
+    rotation_focal_ratio: float = Field(2.0, ge=1)
 
     @model_validator(mode="after")
     def _non_empty(self) -> GeometryConfig:
@@ -84,6 +96,10 @@ class SanityConfig(_Stage):
     min_inliers: int = Field(30, ge=5)
     max_rotation_deg: float = Field(30.0, gt=0, le=180)
     min_parallax_px: float = Field(0.5, ge=0)
+    # pure rotation / no parallax without trusting K: rejected when the homography explains at least this share of
+    # the fundamental-matrix inliers AND is a pure rotation (self-calibrated focal) within max_rotation_homography_px
+    max_homography_share: float = Field(0.9, ge=0.5, le=1)
+    max_rotation_homography_px: float = Field(1.0, ge=0)
 
 
 class ScaleConfig(_Stage):
@@ -95,17 +111,19 @@ class ScaleConfig(_Stage):
     depth: ``features`` (the pipeline's own correspondences) or ``corners`` (a dedicated bucketed corner set
     followed by KLT, used by every pipeline except KLT on corners, which is the same thing already: ORB keypoints
     cluster on few objects and descriptor re-matching keeps only a few depth points); a corner's depth is the
-    running (log) mean over up to ``max_depth_views`` pairs (1 = last pair only). A per-frame scale changing by
+    running (log) mean over up to ``max_depth_views`` pairs (1 = last pair only), less noisy than one pair's, so
+    corners need only ``corner_min_angle_deg`` (more, farther static points vote). A per-frame scale changing by
     more than the factor ``max_step_change`` from the previous step is not accepted: the previous scale is kept
     with a note (``VOResult.n_scale_kept`` counts those frames)."""
 
     mode: Literal["gt", "none", "relative"] = "relative"
-    min_triangulation_angle_deg: float = Field(0.5, gt=0)
+    min_triangulation_angle_deg: float = Field(1.0, gt=0)
     min_common_points: int = Field(15, ge=3)
     max_carried_points: int = Field(1500, ge=10)
     max_step_change: float = Field(1.5, gt=1)
     points: Literal["corners", "features"] = "corners"
     max_depth_views: int = Field(10, ge=1)
+    corner_min_angle_deg: float = Field(0.5, gt=0)
 
 
 class SmoothingConfig(_Stage):
@@ -132,7 +150,9 @@ class VOConfig(_Stage):
     scale: ScaleConfig = ScaleConfig()
     smoothing: SmoothingConfig = SmoothingConfig()
     on_reject: Literal["constant_velocity", "identity"] = "constant_velocity"
-    seed: int = 0
+    # seeds the order in which correspondences reach OpenCV's RANSAC/MAGSAC/LMedS (their own RNG ignores
+    # cv2.setRNGSeed): same seed -> identical poses, another seed -> other (equally valid) samples
+    seed: int = Field(0, ge=0)
 
     @model_validator(mode="after")
     def _descriptor_for_matching(self) -> VOConfig:

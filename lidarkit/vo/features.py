@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+from pydantic import ValidationError
 
 from lidarkit.errors import ConfigError
 from lidarkit.vo.config import FeatureConfig, PreprocessConfig
@@ -108,7 +109,7 @@ class Detector:
                 keep = np.argsort([-k.response for k in keypoints], kind="stable")[: c.max_features]
                 keypoints = [keypoints[i] for i in keep]
                 desc = desc[keep]
-            return self._points(keypoints), desc
+            return self._subpixel(image, self._points(keypoints)), desc
         keypoints = self._cv.detect(image, None)
         if keypoints:
             pts = self._points(keypoints)
@@ -120,7 +121,7 @@ class Detector:
         if not keypoints:
             return np.zeros((0, 2), np.float32), None
         keypoints, desc = self._cv.compute(image, keypoints)
-        return self._points(keypoints), desc
+        return self._subpixel(image, self._points(keypoints)), desc
 
     @staticmethod
     def _points(keypoints) -> np.ndarray:
@@ -142,6 +143,8 @@ class Detector:
         return np.concatenate(found).astype(np.float32) if found else np.zeros((0, 2), np.float32)
 
     def _subpixel(self, image: np.ndarray, points: np.ndarray) -> np.ndarray:
+        """Corner positions refined by ``cv2.cornerSubPix`` when ``cfg.subpixel`` (gftt, fast, orb corners; the
+        descriptors stay those computed at the detected position). SIFT/AKAZE are refused by FeatureConfig."""
         if not self.cfg.subpixel or len(points) == 0:
             return points
         refined = cv2.cornerSubPix(image, points.reshape(-1, 1, 2).copy(), (5, 5), (-1, -1), _SUBPIX_CRITERIA)
@@ -156,5 +159,9 @@ def get_detector(cfg: FeatureConfig | str, **params) -> Detector:
     if isinstance(cfg, str):
         if cfg not in DETECTORS:
             raise ConfigError(f"unknown detector {cfg!r}; known: {', '.join(DETECTORS)}", source="detector")
-        cfg = FeatureConfig(detector=cfg, **params)
+        try:
+            cfg = FeatureConfig(detector=cfg, **params)
+        except ValidationError as err:
+            first = err.errors()[0]
+            raise ConfigError(first["msg"], source=f"detector {cfg} {'.'.join(map(str, first['loc']))}".strip()) from err
     return Detector(cfg)

@@ -81,8 +81,9 @@ def open_vo_input(path: str | os.PathLike, *, kind: str = "auto", calib: str | o
     elif images.K is not None:
         K, source = images.K, f"{kind} calibration"
     else:
-        first = images.read_image(0)
-        h, w = first.shape[:2]
+        from lidarkit.vo.pipeline import sequence_image_shape
+
+        h, w = sequence_image_shape(images)[:2]
         K = K_from_image_size(w, h, focal_factor)
         source = f"guess: fx = fy = {focal_factor:g} * max({w}, {h}) = {K[0, 0]:.1f} px, principal point at centre"
         log.warning("no intrinsics given; %s", source)

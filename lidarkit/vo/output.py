@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import csv
 import io
+import logging
 import os
 from pathlib import Path
 from typing import Any
@@ -18,6 +19,10 @@ import yaml
 from lidarkit import atomic
 from lidarkit.trajectory import Trajectory
 from lidarkit.vo.pipeline import FrameDiagnostics, VOResult
+
+log = logging.getLogger(__name__)
+
+NO_TIMESTAMPS_NOTE = "no time stamps given: poses_tum.txt and poses_smoothed_tum.txt use frame indices as seconds"
 
 
 def diagnostics_csv(rows: list[FrameDiagnostics]) -> str:
@@ -85,8 +90,13 @@ def write_run(result: VOResult, out_dir: str | os.PathLike, *, ground_truth: Tra
     Files: ``poses_kitti.txt``, ``poses_tum.txt``, ``poses_smoothed_kitti.txt``, ``poses_smoothed_tum.txt``,
     ``diagnostics.csv``, ``config.yaml`` (resolved config + intrinsics + ``extra_config``), ``metrics.json``
     (summary + ``metrics``), ``trajectory.png`` (if ``plot``), ``features.gif`` (if ``gif_images`` and tracks).
+    Without time stamps the TUM files count frames as seconds: logged once and noted in config and metrics.
     """
     out = Path(out_dir)
+    notes = {}
+    if result.trajectory.timestamps_s is None:
+        log.warning(NO_TIMESTAMPS_NOTE)
+        notes["timestamps"] = NO_TIMESTAMPS_NOTE
     out.mkdir(parents=True, exist_ok=True)
     smoothed = result.smoothed()
     paths = {
@@ -96,9 +106,10 @@ def write_run(result: VOResult, out_dir: str | os.PathLike, *, ground_truth: Tra
         "poses_smoothed_tum": smoothed.to_tum(out / "poses_smoothed_tum.txt"),
         "diagnostics": atomic.write_text(out / "diagnostics.csv", diagnostics_csv(result.diagnostics)),
     }
-    config = {"vo": result.config.model_dump(mode="json"), "K": np.asarray(result.K).tolist(), **(extra_config or {})}
+    config = {"vo": result.config.model_dump(mode="json"), "K": np.asarray(result.K).tolist(), **(extra_config or {}),
+              **notes}
     paths["config"] = atomic.write_text(out / "config.yaml", yaml.safe_dump(config, sort_keys=False))
-    summary = {**result.summary(), **(metrics or {})}
+    summary = {**result.summary(), **(metrics or {}), **notes}
     from lidarkit.eval.report import write_json
 
     paths["metrics"] = write_json(summary, out / "metrics.json")

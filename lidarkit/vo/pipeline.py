@@ -1,15 +1,20 @@
 """The monocular VO pipeline: preprocessing -> features -> correspondences -> two-view pose -> sanity -> scale -> chain.
 
 ``MonoVO(config, K, ground_truth).run(images)`` returns a :class:`VOResult`: the raw trajectory (one pose per
-input frame, camera frame, first pose = identity or the ground truth's first pose), per-frame diagnostics with
+input frame, camera frame, start pose = identity or its ground-truth pose), per-frame diagnostics with
 the reason for every rejected frame, and the smoothed trajectory on demand. A rejected frame never yields a NaN
-pose: it gets a constant-velocity (or identity) motion and the next frame is matched against the last accepted one.
+pose: a frame without parallax w.r.t. the reference (standstill, pure rotation) stays at the reference position
+(with the estimated rotation when there is one); any other rejected frame gets a constant-velocity (or identity)
+motion. The next frame is matched against the last accepted one. The image size of the sequence is the majority
+size of its first readable frames, so an odd-sized first frame is rejected like any other odd frame.
 """
 
 from __future__ import annotations
 
 import logging
+import re
 import time
+from collections import Counter
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any, NamedTuple
@@ -18,7 +23,7 @@ import cv2
 import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
-from lidarkit.geometry import rotation_angle_deg, se3_exp, se3_inverse, se3_log, skew
+from lidarkit.geometry import kabsch_umeyama, rotation_angle_deg, se3_exp, se3_inverse, se3_log, skew
 from lidarkit.trajectory import Trajectory
 from lidarkit.vo.config import FeatureConfig, VOConfig
 from lidarkit.vo.features import get_detector, get_preprocessor
@@ -27,12 +32,27 @@ from lidarkit.vo.matching import get_matcher, track_klt
 from lidarkit.vo.sanity import check_pose
 from lidarkit.vo.scale import SCALE_KEPT_NOTE, guarded_scale, relative_scale
 from lidarkit.vo.smoothing import smooth_translations
-from lidarkit.vo.two_view import estimate_two_view, normalize_points, sampson_residuals, triangulate
+from lidarkit.vo.two_view import (correspondence_rng, estimate_two_view, normalize_points, sampson_residuals,
+                                  triangulate)
 
 log = logging.getLogger(__name__)
 
 # rejection reasons after which the reference frame moves on (a farther frame would match it even worse)
 _TRACKING_LOST = ("too few matches", "too few inliers", "too few pose inliers", "no essential")
+# rejection reason (lidarkit.vo.sanity.check_pose) of a pair without parallax: standstill or pure rotation
+_NO_PARALLAX = "insufficient parallax"
+# the sequence's image size is the majority size of the first _SIZE_VOTES readable frames among the first _SIZE_PROBE
+_SIZE_VOTES, _SIZE_PROBE = 5, 10
+
+
+class TrackingFailedError(DataError):
+    """No frame pair of a sequence could be estimated: the trajectory holds no measurement."""
+
+
+def rejection_key(reason: str) -> str:
+    """The kind of a rejection reason without its numbers and details, e.g. ``"too few matches"`` for
+    ``"too few matches (3 < 30)"`` or ``"image size"`` for ``"image size 640x200 differs from ..."``."""
+    return re.split(r" \(|:|\d", reason, maxsplit=1)[0].strip() or reason
 
 
 @dataclass
@@ -128,15 +148,32 @@ class VOResult:
     def diagnostics_rows(self) -> list[dict[str, Any]]:
         return [asdict(d) for d in self.diagnostics]
 
+    @property
+    def accepted_pairs(self) -> int:
+        """Frames whose pose was estimated from a frame pair (the start frame is not counted)."""
+        return sum(d.accepted for d in self.diagnostics) - 1
+
+    def rejection_counts(self) -> dict[str, int]:
+        """``{rejection kind: frames}``, most frequent first (see :func:`rejection_key`)."""
+        return dict(Counter(rejection_key(d.reason) for d in self.rejected).most_common())
+
+    def check_tracking(self) -> None:
+        """Raise :class:`TrackingFailedError` naming the most common rejection when the sequence has frame pairs but
+        none was accepted (the trajectory is then pure prediction)."""
+        pairs = self.n_frames - 1
+        if pairs >= 1 and self.accepted_pairs == 0:
+            kind, count = next(iter(self.rejection_counts().items()))
+            example = next(d.reason for d in self.rejected if rejection_key(d.reason) == kind)
+            raise TrackingFailedError(f"no frame pair accepted ({len(self.rejected)} of {self.n_frames} frames "
+                                      f"rejected); most common reason ({count}x): {example}",
+                                      source=self.trajectory.name or "vo")
+
     def summary(self) -> dict[str, Any]:
-        reasons: dict[str, int] = {}
-        for d in self.rejected:
-            key = d.reason.split(" (")[0]
-            reasons[key] = reasons.get(key, 0) + 1
         return {
             "frames": self.n_frames,
+            "accepted_pairs": self.accepted_pairs,
             "rejected": len(self.rejected),
-            "rejection_reasons": reasons,
+            "rejection_reasons": self.rejection_counts(),
             "runtime_s": self.runtime_s,
             "frames_per_s": self.frames_per_s,
             "scale_mode": self.config.scale.mode,
@@ -168,6 +205,7 @@ class MonoVO:
         own = self.matcher is None and self.config.features.detector == "gftt"
         self._scale_detector = (get_detector(FeatureConfig()) if self.config.scale.mode == "relative"
                                 and self.config.scale.points == "corners" and not own else None)
+        self._rejected_R_cur_ref: np.ndarray | None = None  # set by _estimate on a rejection
 
     # ---- public ----------------------------------------------------------------------------------------------
     def run(self, images: Any, keep_tracks: bool = False, timestamps_s: np.ndarray | None = None) -> VOResult:
@@ -196,42 +234,65 @@ class MonoVO:
         last_scale = 1.0
         total_s = 0.0
 
-        first, first_reason = self._load(read, 0, None)
-        if first is None:
-            raise DataError(f"the first frame cannot be used: {first_reason}", source=getattr(images, "name", "images"),
-                            location="frame 0")
-        image_shape = first.shape
+        loaded: dict[int, tuple[np.ndarray | None, str]] = {}
+        image_shape = sequence_image_shape(images, loaded)
+
+        def load(index: int) -> tuple[np.ndarray | None, str]:
+            image, reason = loaded.pop(index) if index in loaded else self._load(read, index)
+            if image is not None and image.shape != image_shape:
+                return None, (f"image size {image.shape[1]}x{image.shape[0]} differs from the sequence's "
+                              f"{image_shape[1]}x{image_shape[0]}")
+            return image, reason
+
+        # the start is the first frame of the sequence's size; unusable frames before it stay at the start pose
+        s, (first, first_reason) = 0, load(0)
+        while first is None:
+            diags.append(FrameDiagnostics(frame=s, ref_frame=s, reason=first_reason, note="before the start frame"))
+            log.info("frame %d rejected: %s", s, first_reason)
+            s += 1
+            first, first_reason = load(s)
+        if self.ground_truth is not None:
+            poses[: s + 1] = self.ground_truth.poses_se3[s]
+        else:
+            poses[: s + 1] = poses[0]
         start = time.perf_counter()
-        ref_index, ref_image = 0, self.preprocess(first)
+        ref_index, ref_image = s, self.preprocess(first)
         ref_feats = self._reference_features(ref_image, None)
+        n_still = 0  # frames since the reference rejected for lack of parallax (the camera stood still)
         total_s += time.perf_counter() - start
-        diags.append(FrameDiagnostics(frame=0, ref_frame=0, n_features=len(ref_feats.points_px), accepted=True,
+        diags.append(FrameDiagnostics(frame=s, ref_frame=s, n_features=len(ref_feats.points_px), accepted=True,
                                       note="start"))
 
-        for j in range(1, n):
-            image, reason = self._load(read, j, image_shape)
+        for j in range(s + 1, n):
+            image, reason = load(j)
             start = time.perf_counter()
-            cv2.setRNGSeed(int(cfg.seed) * 1_000_003 + j)
+            cv2.setRNGSeed(int(cfg.seed) * 1_000_003 + j)  # for OpenCV calls that do use its RNG
             diag = FrameDiagnostics(frame=j, ref_frame=ref_index, n_features=len(ref_feats.points_px))
             result = None
             cur_image = None
             if image is not None:
                 cur_image = self.preprocess(image)
-                result, reason = self._estimate(ref_index, ref_image, ref_feats, j, cur_image, diag, last_scale)
+                result, reason = self._estimate(ref_index, ref_image, ref_feats, j, cur_image, diag, last_scale,
+                                                n_still)
             if result is not None:
                 T_ref_cur, cur_feats, scale, pts = result
                 poses[j] = poses[ref_index] @ T_ref_cur
-                gap = j - ref_index
-                step_motion = _per_frame_motion(T_ref_cur, gap)
-                last_scale = scale / gap
+                moving = j - ref_index - n_still  # frame steps with motion (standstill frames excluded)
+                step_motion = _per_frame_motion(T_ref_cur, moving)
+                last_scale = scale / moving
                 diag.accepted = True
                 if tracks is not None:
                     tracks.append((j, *pts))
-                ref_index, ref_image = j, cur_image
+                ref_index, ref_image, n_still = j, cur_image, 0
                 ref_feats = self._reference_features(cur_image, cur_feats)
             else:
                 diag.reason = reason or "rejected"
-                poses[j] = poses[j - 1] @ self._predicted_motion(step_motion, j)
+                if diag.reason.startswith(_NO_PARALLAX):
+                    # no translation w.r.t. the reference: stay there, turned by the estimated rotation if any
+                    poses[j] = poses[ref_index] @ self._standstill_motion()
+                    n_still += 1
+                else:
+                    poses[j] = poses[j - 1] @ self._predicted_motion(step_motion, j)
                 log.info("frame %d rejected: %s", j, diag.reason)
                 # move the reference to this frame when the reference cannot serve (too few features), after a long
                 # gap, or when tracking was lost (a later frame would be even farther from the reference); a frame
@@ -241,7 +302,7 @@ class MonoVO:
                 if cur_image is not None and (stale or lost):
                     candidate = self._reference_features(cur_image, None)
                     if len(candidate.points_px) >= cfg.sanity.min_features:
-                        ref_index, ref_image, ref_feats = j, cur_image, candidate
+                        ref_index, ref_image, ref_feats, n_still = j, cur_image, candidate, 0
                         diag.note = "reference moved to this frame"
             elapsed = time.perf_counter() - start
             total_s += elapsed
@@ -253,11 +314,11 @@ class MonoVO:
         traj = Trajectory(poses, None if timestamps_s is None else np.asarray(timestamps_s, dtype=float),
                           name=f"vo_{cfg.features.detector}_{cfg.matching.method}_{cfg.scale.mode}")
         return VOResult(traj, diags, cfg, self.K, total_s, tracks,
-                        meta={"image_size_wh": [int(image_shape[1]), int(image_shape[0])]})
+                        meta={"image_size_wh": [int(image_shape[1]), int(image_shape[0])], "start_frame": s})
 
     # ---- steps -----------------------------------------------------------------------------------------------
     @staticmethod
-    def _load(read, index: int, expected_shape: tuple[int, ...] | None) -> tuple[np.ndarray | None, str]:
+    def _load(read, index: int) -> tuple[np.ndarray | None, str]:
         """The image as uint8 (H, W) or (None, reason)."""
         try:
             image = read(index)
@@ -272,9 +333,6 @@ class MonoVO:
             return None, f"not a grayscale image (shape {image.shape})"
         if image.dtype != np.uint8:
             return None, f"image dtype {image.dtype} is not uint8"
-        if expected_shape is not None and image.shape != expected_shape:
-            return None, (f"image size {image.shape[1]}x{image.shape[0]} differs from the sequence's "
-                          f"{expected_shape[1]}x{expected_shape[0]}")
         return image, ""
 
     def _reference_features(self, image: np.ndarray, carried: Features | None) -> Features:
@@ -293,10 +351,12 @@ class MonoVO:
                         carried.scale_points_depth, carried.scale_points_views)
 
     def _estimate(self, ref_index: int, ref_image: np.ndarray, ref: Features, j: int, cur_image: np.ndarray,
-                  diag: FrameDiagnostics, last_scale: float):
+                  diag: FrameDiagnostics, last_scale: float, n_still: int = 0):
         """Relative pose of frame j w.r.t. the reference; ``(T_ref_cur, cur_features, scale, (pts_ref, pts_cur))``
-        or ``(None, reason)``."""
+        or ``(None, reason)``. ``n_still``: frames since the reference rejected as standstill (not counted as
+        motion by unit steps). A rejected pose's valid rotation is kept in ``self._rejected_R_cur_ref``."""
         cfg = self.config
+        self._rejected_R_cur_ref = None
         if len(ref.points_px) < cfg.sanity.min_features:
             return None, f"too few features in reference frame {ref_index} ({len(ref.points_px)} < {cfg.sanity.min_features})"
         if self.matcher is None:
@@ -314,7 +374,8 @@ class MonoVO:
             return None, f"too few matches ({len(idx_ref)} < {cfg.sanity.min_matches})"
         pts_ref = ref.points_px[idx_ref]
         pts_cur = cur.points_px[idx_cur]
-        est = estimate_two_view(pts_ref, pts_cur, self.K, cfg.geometry, min_inliers=cfg.sanity.min_inliers)
+        est = estimate_two_view(pts_ref, pts_cur, self.K, cfg.geometry, min_inliers=cfg.sanity.min_inliers,
+                                rng=correspondence_rng(cfg.seed, j))
         diag.method = est.method
         diag.n_inliers = est.n_inliers
         if est.ok:
@@ -322,6 +383,13 @@ class MonoVO:
             diag.parallax_px = est.parallax_px
         reason = check_pose(est, cfg.sanity)
         if reason is not None:
+            if est.ok and _is_valid_rotation(est.R_cur_ref, cfg.sanity.max_rotation_deg):
+                self._rejected_R_cur_ref = est.R_cur_ref
+            elif reason.startswith(_NO_PARALLAX) and est.rotation_only_px < cfg.sanity.min_parallax_px:
+                # no essential matrix (typical of a pure rotation) but a pure rotation explains the matches
+                R = _rotation_only_fit(normalize_points(pts_ref, self.K), normalize_points(pts_cur, self.K))
+                if _is_valid_rotation(R, cfg.sanity.max_rotation_deg):
+                    self._rejected_R_cur_ref = R
             return None, reason
 
         gap = j - ref_index
@@ -332,7 +400,7 @@ class MonoVO:
             gt = self.ground_truth.poses_se3
             scale = float(np.linalg.norm(gt[j, :3, 3] - gt[ref_index, :3, 3]))
         elif cfg.scale.mode == "none":
-            scale = float(gap)
+            scale = float(max(gap - n_still, 1))
         else:
             X_ref, X_cur, angle = triangulate(R, t, normalize_points(pts_ref, self.K), normalize_points(pts_cur, self.K))
             tracked = self._track_scale_points(ref, ref_image, cur_image, R, t)
@@ -340,12 +408,13 @@ class MonoVO:
                 found, n_common = relative_scale(ref.depth[idx_ref], X_ref, angle, inl, cfg.scale)
             else:
                 found, n_common = relative_scale(tracked.depth_ref, tracked.X_ref, tracked.angle_deg, tracked.usable,
-                                                 cfg.scale)
+                                                 cfg.scale, cfg.scale.corner_min_angle_deg)
             diag.n_scale_points = n_common
             has_depths = bool(np.isfinite(ref.depth if tracked is None else tracked.depth_ref).any())
-            decision = guarded_scale(None if found is None else found / gap, last_scale, n_common,
+            moving = max(gap - n_still, 1)  # frame steps with motion, as run() counts them
+            decision = guarded_scale(None if found is None else found / moving, last_scale, n_common,
                                      not has_depths, cfg.scale)
-            scale = decision.scale * gap
+            scale = decision.scale * moving
             if decision.note:
                 diag.note = decision.note
         diag.scale = scale
@@ -356,11 +425,13 @@ class MonoVO:
         T_cur_ref[:3, :3] = R
         T_cur_ref[:3, 3] = t * scale
         if cfg.scale.mode == "relative":
-            good = inl & (X_cur[:, 2] > 0) & (X_ref[:, 2] > 0) & (angle >= cfg.scale.min_triangulation_angle_deg)
+            # with scale corners the features' depths only select the KLT tracks carried on: the corners' angle
+            min_angle_deg = cfg.scale.min_triangulation_angle_deg if tracked is None else cfg.scale.corner_min_angle_deg
+            good = inl & (X_cur[:, 2] > 0) & (X_ref[:, 2] > 0) & (angle >= min_angle_deg)
             cur.depth[idx_cur[good]] = X_cur[good, 2] * scale
             if tracked is not None:
                 keep = tracked.usable & (tracked.X_cur[:, 2] > 0) & (tracked.X_ref[:, 2] > 0)
-                keep &= tracked.angle_deg >= cfg.scale.min_triangulation_angle_deg
+                keep &= tracked.angle_deg >= cfg.scale.corner_min_angle_deg
                 keep = np.flatnonzero(keep)[: cfg.scale.max_carried_points]
                 cur.scale_points_px = tracked.points_cur_px[keep]
                 cur.scale_points_depth, cur.scale_points_views = self._fused_depths(tracked, keep, R, t, scale)
@@ -414,8 +485,17 @@ class MonoVO:
         usable = ok & (residual_px < cfg.geometry.threshold_px)
         return TrackedScalePoints(depth_ref, views_ref, pts_ref, pts_cur, X_ref, X_cur, angle, usable)
 
+    def _standstill_motion(self) -> np.ndarray:
+        """``T_ref_cur`` of a frame rejected for lack of parallax: no translation; the two-view rotation when it was
+        valid, else the pure-rotation fit of the matches when it explains them, else identity."""
+        T = np.eye(4)
+        if self._rejected_R_cur_ref is not None:
+            T[:3, :3] = self._rejected_R_cur_ref.T
+        return T
+
     def _predicted_motion(self, step_motion: np.ndarray, j: int) -> np.ndarray:
-        """Motion given to a rejected frame: the last accepted per-frame motion (GT step length in ``gt`` mode)."""
+        """Motion given to a frame rejected for any reason but lack of parallax: the last accepted per-frame motion
+        (GT step length in ``gt`` mode), or identity with ``on_reject = "identity"``."""
         if self.config.on_reject == "identity":
             return np.eye(4)
         T = step_motion.copy()
@@ -427,11 +507,56 @@ class MonoVO:
         return T
 
 
+def sequence_image_shape(images: Any, loaded: dict[int, tuple[np.ndarray | None, str]] | None = None
+                         ) -> tuple[int, ...]:
+    """Image shape of a sequence: the majority shape of its first readable frames (ties: the earliest), so one odd
+    frame, even the first, cannot impose its size. ``loaded`` receives the frames read (``{index: (image | None,
+    reason)}``). DataError when none of the first frames can be read."""
+    read = images.read_image if hasattr(images, "read_image") else (lambda i: images[i])
+    loaded = {} if loaded is None else loaded
+    shapes: list[tuple[int, ...]] = []
+    for i in range(min(len(images), _SIZE_PROBE)):
+        loaded[i] = MonoVO._load(read, i)
+        if loaded[i][0] is not None:
+            shapes.append(loaded[i][0].shape)
+            if len(shapes) == _SIZE_VOTES:
+                break
+    if not shapes:
+        reasons = "; ".join(f"frame {i}: {r}" for i, (_, r) in sorted(loaded.items()))
+        raise DataError(f"none of the first {len(loaded)} frames can be used ({reasons})",
+                        source=getattr(images, "name", "images"))
+    counts = Counter(shapes)
+    return max(counts, key=lambda shape: (counts[shape], -shapes.index(shape)))
+
+
 def _per_frame_motion(T_ref_cur: np.ndarray, gap: int) -> np.ndarray:
     """``T_ref_cur`` spread evenly over ``gap`` frames (geodesic fraction)."""
-    if gap == 1:
+    if gap <= 1:
         return T_ref_cur.copy()
     return se3_exp(se3_log(T_ref_cur) / gap)
+
+
+def _rotation_only_fit(norm_ref: np.ndarray, norm_cur: np.ndarray) -> np.ndarray:
+    """``R_cur_ref`` of the pure rotation that best maps the reference bearings onto the current ones (Kabsch on the
+    bearings and their negatives, so no translation is fitted), refit once on the better half."""
+    b0 = np.column_stack([norm_ref, np.ones(len(norm_ref))])
+    b1 = np.column_stack([norm_cur, np.ones(len(norm_cur))])
+    b0 /= np.linalg.norm(b0, axis=1, keepdims=True)
+    b1 /= np.linalg.norm(b1, axis=1, keepdims=True)
+    use = np.ones(len(b0), bool)
+    R = np.eye(3)
+    for _ in range(2):
+        R = kabsch_umeyama(np.vstack([b0[use], -b0[use]]), np.vstack([b1[use], -b1[use]])).rotation
+        residual = np.linalg.norm(b0 @ R.T - b1, axis=1)
+        use = residual <= np.median(residual)
+    return R
+
+
+def _is_valid_rotation(R: np.ndarray, max_deg: float) -> bool:
+    """Finite, orthonormal with det +1 and turning at most ``max_deg``."""
+    if not np.all(np.isfinite(R)) or abs(float(np.linalg.det(R)) - 1.0) > 1e-6:
+        return False
+    return bool(np.allclose(R @ R.T, np.eye(3), atol=1e-6)) and float(rotation_angle_deg(R)) <= max_deg
 
 
 def run_vo(images: Any, K: np.ndarray, config: VOConfig | None = None, ground_truth: Trajectory | None = None,
@@ -451,4 +576,5 @@ def images_in_memory(sequence: Any) -> list[np.ndarray | None]:
     return out
 
 
-__all__: Sequence[str] = ["FrameDiagnostics", "MonoVO", "VOResult", "images_in_memory", "run_vo"]
+__all__: Sequence[str] = ["FrameDiagnostics", "MonoVO", "TrackingFailedError", "VOResult", "images_in_memory",
+                         "rejection_key", "run_vo", "sequence_image_shape"]

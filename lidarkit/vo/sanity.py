@@ -11,8 +11,13 @@ from lidarkit.vo.two_view import TwoViewEstimate
 
 def check_pose(estimate: TwoViewEstimate, cfg: SanityConfig | None = None) -> str | None:
     """Why ``estimate`` must be rejected, or None. Finite values and det(R) = 1 are always checked; inlier count,
-    rotation flip guard and parallax (pure rotation / standstill) only when ``cfg.enabled``."""
+    rotation flip guard and parallax (pure rotation / standstill) only when ``cfg.enabled``.
+
+    Pure rotation / standstill is caught twice: by the K-free homography test (:func:`rotation_homography_reason`),
+    which holds with guessed or wrong intrinsics, and by the parallax left after removing the rotation with K."""
     cfg = cfg or SanityConfig()
+    if cfg.enabled and (reason := rotation_homography_reason(estimate, cfg)) is not None:
+        return reason
     if cfg.enabled and min(estimate.rotation_only_px, estimate.parallax_px if estimate.ok else np.inf) < cfg.min_parallax_px:
         par = min(estimate.rotation_only_px, estimate.parallax_px if estimate.ok else np.inf)
         return (f"insufficient parallax ({par:.2f} px < {cfg.min_parallax_px:g} px): pure rotation "
@@ -35,3 +40,17 @@ def check_pose(estimate: TwoViewEstimate, cfg: SanityConfig | None = None) -> st
     if angle > cfg.max_rotation_deg:
         return f"rotation flip guard ({angle:.1f} deg > {cfg.max_rotation_deg:g} deg)"
     return None
+
+
+def rotation_homography_reason(estimate: TwoViewEstimate, cfg: SanityConfig) -> str | None:
+    """The K-free pure-rotation / no-parallax verdict: the homography explains at least ``max_homography_share`` of
+    the fundamental-matrix inliers and is within ``max_rotation_homography_px`` of a pure rotation (focal length
+    self-calibrated). A plane seen under translation passes: its homography is not rotation-conjugate."""
+    if estimate.fundamental_inliers == 0 or estimate.homography_share < cfg.max_homography_share:
+        return None
+    if not estimate.rotation_homography_px <= cfg.max_rotation_homography_px:
+        return None
+    return (f"insufficient parallax (pure rotation / no parallax: homography explains "
+            f"{100 * estimate.homography_share:.1f}% of {estimate.fundamental_inliers} fundamental-matrix inliers "
+            f"and is a pure rotation within {estimate.rotation_homography_px:.2f} px, self-calibrated f = "
+            f"{estimate.rotation_focal_px:.0f} px): translation direction undefined")

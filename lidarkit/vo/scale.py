@@ -18,21 +18,24 @@ SCALE_KEPT_NOTE = "scale kept from the previous step"
 
 
 def relative_scale(depth_ref_known: np.ndarray, points_ref_unit: np.ndarray, angle_deg: np.ndarray,
-                   usable: np.ndarray, cfg: ScaleConfig | None = None) -> tuple[float | None, int]:
+                   usable: np.ndarray, cfg: ScaleConfig | None = None,
+                   min_angle_deg: float | None = None) -> tuple[float | None, int]:
     """Scale of the current pair's unit translation so its depths agree with the previous pair's.
 
     ``depth_ref_known (N,)``: depth of each correspondence in the reference frame from the previous pair (in the
     trajectory's global scale; NaN if unknown); ``points_ref_unit (N, 3)``: the same points triangulated by the
     current pair with ``|t| = 1``; ``angle_deg (N,)``: their triangulation angles; ``usable (N,)``: inlier mask.
-    Returns ``(scale, n_common)``; scale is None when fewer than ``cfg.min_common_points`` points qualify.
+    Returns ``(scale, n_common)``; scale is None when fewer than ``cfg.min_common_points`` points qualify (angle at
+    least ``min_angle_deg``, default ``cfg.min_triangulation_angle_deg``).
     The estimate is the median of log depth ratios: unbiased for symmetric relative depth noise and robust to a
     minority of wrong depths (a mean of ratios is pulled by every far or mistracked point).
     """
     cfg = cfg or ScaleConfig()
+    min_angle_deg = cfg.min_triangulation_angle_deg if min_angle_deg is None else min_angle_deg
     z = points_ref_unit[:, 2]
     with np.errstate(invalid="ignore"):
         common = (usable & np.isfinite(depth_ref_known) & (depth_ref_known > 0) & np.isfinite(z) & (z > 0)
-                  & (angle_deg >= cfg.min_triangulation_angle_deg))
+                  & (angle_deg >= min_angle_deg))
     n = int(common.sum())
     if n < cfg.min_common_points:
         return None, n

@@ -2,11 +2,20 @@
 
 Convention: ``X_cur = R_cur_ref @ X_ref + t_cur_ref`` (OpenCV ``recoverPose``); ``t`` has unit norm.
 The estimate never raises for bad correspondences: it returns ``failure`` with the reason instead.
+
+Degeneracy (pure rotation / standstill) is measured twice: with K (``parallax_px``, ``rotation_only_px``) and without
+trusting K (``homography_share``, ``rotation_homography_px``): a homography fitted to the pixel correspondences that
+explains (nearly) all fundamental-matrix inliers and equals a pure rotation ``K' R K'^-1`` for some focal length near
+K's. A plane seen under translation is also explained by a homography, but not by a rotation-conjugate one.
+
+Reproducibility: OpenCV 5's ``findEssentialMat`` / ``findHomography`` / ``findFundamentalMat`` sample with an internal
+RNG that ``cv2.setRNGSeed`` does not reach (the same input order always gives the same result). ``rng`` permutes the
+correspondences before they reach OpenCV, so the seed selects the samples; see :func:`correspondence_rng`.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import cv2
 import numpy as np
@@ -24,8 +33,14 @@ class TwoViewEstimate:
 
     ``inliers``: ``(N,) bool`` over the input correspondences (RANSAC and cheirality inliers);
     ``parallax_px``: median rotation-compensated image motion of the inliers (0 for a pure rotation);
-    ``rotation_only_px``: median residual of the best pure-rotation fit (small: the pair shows no translation);
-    ``attempts``: one line per estimator tried (inliers or why it failed).
+    ``rotation_only_px``: median residual of the best pure-rotation fit with K (small: no translation; needs K right);
+    ``attempts``: one line per estimator tried (inliers or why it failed);
+    ``homography_share``: share of the fundamental-matrix inliers (``fundamental_inliers``, pixel RANSAC) that the
+    RANSAC homography explains, both within ``degeneracy_threshold_px``; K-free;
+    ``rotation_homography_px``: largest distance (px, over the inliers' bounding box) between that homography and the
+    closest pure rotation ``K' R K'^-1`` (K' = K with focal self-calibrated, ``rotation_focal_px``, within
+    ``rotation_focal_ratio``, principal point within 10 % of the box): ~0 for a pure rotation or standstill; inf when
+    the homography explains less than ``MIN_SHARE_FOR_ROTATION_FIT`` (not computed).
     """
 
     R_cur_ref: np.ndarray
@@ -37,6 +52,10 @@ class TwoViewEstimate:
     failure: str | None = None
     attempts: tuple[str, ...] = field(default_factory=tuple)
     rotation_only_px: float = float("inf")
+    homography_share: float = 0.0
+    fundamental_inliers: int = 0
+    rotation_homography_px: float = float("inf")
+    rotation_focal_px: float = float("nan")
 
     @property
     def ok(self) -> bool:
@@ -51,9 +70,102 @@ class TwoViewEstimate:
         return T
 
 
-def _failed(n: int, reason: str, attempts: list[str], rotation_only_px: float = float("inf")) -> TwoViewEstimate:
+@dataclass(frozen=True)
+class Degeneracy:
+    """K-free degeneracy measures of one pair (see :class:`TwoViewEstimate`)."""
+
+    homography_share: float = 0.0
+    fundamental_inliers: int = 0
+    rotation_homography_px: float = float("inf")
+    rotation_focal_px: float = float("nan")
+
+
+def _failed(n: int, reason: str, attempts: list[str], rotation_only_px: float = float("inf"),
+            degeneracy: Degeneracy | None = None) -> TwoViewEstimate:
     return TwoViewEstimate(np.eye(3), np.zeros(3), np.zeros(n, bool), "none", 0, 0.0, reason, tuple(attempts),
-                           rotation_only_px)
+                           rotation_only_px, **asdict(degeneracy or Degeneracy()))
+
+
+def correspondence_rng(seed: int, frame: int) -> np.random.Generator:
+    """The generator that orders frame ``frame``'s correspondences for the robust estimators under ``seed``."""
+    return np.random.default_rng([int(seed), int(frame)])
+
+
+def rotation_homography_residual_px(H: np.ndarray, K: np.ndarray, points_px: np.ndarray,
+                                    focal_ratio: float = 2.0) -> tuple[float, float]:
+    """How far the pixel homography ``H (3, 3)`` is from a pure rotation, without trusting ``K``.
+
+    Fits ``K' R K'^-1`` (``K'``: square pixels, focal ``fx * s`` with ``s`` in ``[1/focal_ratio, focal_ratio]``,
+    principal point within 10 % of the box) to ``H`` on a 6 x 4 grid spanning the bounding box of ``points_px
+    (N, 2)``; returns (largest grid distance in px, fitted focal in px). Closed-form rotations at five focal scales
+    seed a bounded least-squares refinement of (log s, principal point, rotation vector).
+    """
+    lo, hi = points_px.min(axis=0), points_px.max(axis=0)
+    gx, gy = np.meshgrid(np.linspace(lo[0], hi[0], 6), np.linspace(lo[1], hi[1], 4))
+    grid = np.column_stack([gx.ravel(), gy.ravel(), np.ones(gx.size)])
+    target = grid @ H.T
+    if np.any(np.abs(target[:, 2]) < 1e-12):
+        return float("inf"), float("nan")
+    target = target[:, :2] / target[:, 2:3]
+    f0, cx0, cy0 = float(K[0, 0]), float(K[0, 2]), float(K[1, 2])
+
+    def conjugate(p: np.ndarray) -> np.ndarray:
+        f = f0 * np.exp(p[0])
+        Kp = np.array([[f, 0.0, cx0 + p[1]], [0.0, f, cy0 + p[2]], [0.0, 0.0, 1.0]])
+        return Kp @ so3_exp(p[3:]) @ np.linalg.inv(Kp)
+
+    def residuals(p: np.ndarray) -> np.ndarray:
+        mapped = grid @ conjugate(p).T
+        with np.errstate(divide="ignore", invalid="ignore"):
+            diff = mapped[:, :2] / mapped[:, 2:3] - target
+        return np.where(np.isfinite(diff), diff, 1e6).ravel()
+
+    log_ratio = float(np.log(focal_ratio))
+    best = None
+    for log_s in np.linspace(-log_ratio, log_ratio, 5):
+        f = f0 * np.exp(log_s)
+        Kp = np.array([[f, 0.0, cx0], [0.0, f, cy0], [0.0, 0.0, 1.0]])
+        U, _, Vt = np.linalg.svd(np.linalg.inv(Kp) @ H @ Kp)
+        R = U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))]) @ Vt
+        p0 = np.concatenate([[log_s, 0.0, 0.0], so3_log(R)])
+        cost = float(np.max(np.abs(residuals(p0))))
+        if best is None or cost < best[0]:
+            best = (cost, p0)
+    margin = 0.1 * float(max(hi - lo)) + 1e-6
+    lower = np.array([-log_ratio - 1e-9, -margin, -margin, -np.inf, -np.inf, -np.inf])
+    upper = np.array([log_ratio + 1e-9, margin, margin, np.inf, np.inf, np.inf])
+    result = least_squares(residuals, np.clip(best[1], lower, upper), bounds=(lower, upper), method="trf",
+                           max_nfev=100)
+    candidates = [best[1]] + ([result.x] if np.all(np.isfinite(result.x)) else [])
+    worst, p = min((float(np.max(np.linalg.norm(residuals(c).reshape(-1, 2), axis=1))), i) for i, c in
+                   enumerate(candidates))
+    return worst, float(f0 * np.exp(candidates[p][0]))
+
+
+#: the rotation fit runs only when the homography explains at least this share (below it the pair has parallax
+#: whatever the fit says; SanityConfig.max_homography_share cannot be set lower)
+MIN_SHARE_FOR_ROTATION_FIT = 0.5
+#: homography RANSAC samples: finds a homography explaining >= 50 % with probability 1 - (1 - 0.5^4)^200 > 0.9999
+#: while bounding the cost on pairs with parallax (where no homography explains much)
+_HOMOGRAPHY_MAX_ITERS = 200
+
+
+def degeneracy_measures(p0: np.ndarray, p1: np.ndarray, K: np.ndarray, cfg: GeometryConfig) -> Degeneracy:
+    """Homography vs fundamental matrix on the pixel correspondences ``(N, 2)`` (RANSAC, ``degeneracy_threshold_px``)
+    and, when the homography explains at least half of them, its distance from a pure rotation; K only bounds the
+    self-calibrated focal length."""
+    if len(p0) < 8:
+        return Degeneracy()
+    thr = cfg.degeneracy_threshold_px
+    H, mask_h = cv2.findHomography(p0, p1, cv2.RANSAC, thr, maxIters=_HOMOGRAPHY_MAX_ITERS, confidence=cfg.confidence)
+    F, mask_f = cv2.findFundamentalMat(p0, p1, cv2.FM_RANSAC, thr, cfg.confidence)
+    n_h = int(mask_h.sum()) if H is not None and mask_h is not None else 0
+    n_f = int(mask_f.sum()) if F is not None and mask_f is not None else 0
+    share = n_h / max(n_f, n_h, 1)
+    if n_h < 4 or share < MIN_SHARE_FOR_ROTATION_FIT or not np.all(np.isfinite(H)):
+        return Degeneracy(share, n_f)
+    residual, focal = rotation_homography_residual_px(H, K, p0[mask_h.ravel() > 0], cfg.rotation_focal_ratio)
+    return Degeneracy(share, n_f, residual, focal)
 
 
 def rotation_only_residual_px(norm_ref: np.ndarray, norm_cur: np.ndarray, focal_px: float) -> float:
@@ -148,16 +260,30 @@ def _recover(E_stack: np.ndarray, a: np.ndarray, b: np.ndarray, K_est: np.ndarra
 
 
 def estimate_two_view(points_ref_px: np.ndarray, points_cur_px: np.ndarray, K: np.ndarray,
-                      cfg: GeometryConfig | None = None, min_inliers: int = 8) -> TwoViewEstimate:
+                      cfg: GeometryConfig | None = None, min_inliers: int = 8,
+                      rng: np.random.Generator | None = None) -> TwoViewEstimate:
     """Relative pose from ``(N, 2)`` pixel correspondences and intrinsics ``K (3, 3)``.
 
     Tries every estimator in ``cfg.estimators`` and keeps the decomposition with most inliers; falls back to the
-    fundamental matrix (E = K^T F K) when no essential matrix gives ``min_inliers``. Call ``cv2.setRNGSeed``
-    beforehand for reproducible RANSAC.
+    fundamental matrix (E = K^T F K) when no essential matrix gives ``min_inliers``. ``rng`` shuffles the
+    correspondences before the robust estimators see them (``inliers`` is returned in the input order): the same
+    generator state gives identical results, another one other samples. Without ``rng`` the input order is used
+    (deterministic too); ``cv2.setRNGSeed`` has no effect on these OpenCV 5 estimators.
     """
     cfg = cfg or GeometryConfig()
     p0 = np.asarray(points_ref_px, dtype=np.float64).reshape(-1, 2)
     p1 = np.asarray(points_cur_px, dtype=np.float64).reshape(-1, 2)
+    if rng is None:
+        return _estimate_ordered(p0, p1, K, cfg, min_inliers)
+    order = rng.permutation(len(p0))
+    est = _estimate_ordered(p0[order], p1[order], K, cfg, min_inliers)
+    inliers = np.zeros(len(p0), bool)
+    inliers[order] = est.inliers
+    return replace(est, inliers=inliers)
+
+
+def _estimate_ordered(p0: np.ndarray, p1: np.ndarray, K: np.ndarray, cfg: GeometryConfig,
+                      min_inliers: int) -> TwoViewEstimate:
     n = len(p0)
     attempts: list[str] = []
     if n < 5:
@@ -165,6 +291,7 @@ def estimate_two_view(points_ref_px: np.ndarray, points_cur_px: np.ndarray, K: n
     focal = float(K[0, 0])
     n0, n1 = normalize_points(p0, K), normalize_points(p1, K)
     rot_px = rotation_only_residual_px(n0, n1, focal)
+    degeneracy = degeneracy_measures(p0, p1, K, cfg)
     if cfg.normalize:
         a, b, K_est, thr = n0, n1, np.eye(3), cfg.threshold_px / focal
     else:
@@ -199,15 +326,16 @@ def estimate_two_view(points_ref_px: np.ndarray, points_cur_px: np.ndarray, K: n
                     best = (*rec, "F-fallback")
 
     if best is None:
-        return _failed(n, "no essential/fundamental matrix found (" + "; ".join(attempts) + ")", attempts, rot_px)
+        return _failed(n, "no essential/fundamental matrix found (" + "; ".join(attempts) + ")", attempts, rot_px,
+                       degeneracy)
     n_good, R, t, inliers, method = best
     if n_good < 5:
-        return _failed(n, f"too few pose inliers ({n_good}) from {method}", attempts, rot_px)
+        return _failed(n, f"too few pose inliers ({n_good}) from {method}", attempts, rot_px, degeneracy)
     if cfg.refine and n_good >= 8:
         R, t = refine_pose(R, t, n0[inliers], n1[inliers], focal)
     par = parallax_px(R, n0[inliers], n1[inliers], focal)
     return TwoViewEstimate(R, t / max(np.linalg.norm(t), 1e-300), inliers, method, n_good, par, None, tuple(attempts),
-                           rot_px)
+                           rot_px, **asdict(degeneracy))
 
 
 def triangulate(R_cur_ref: np.ndarray, t_cur_ref: np.ndarray, norm_ref: np.ndarray,
