@@ -128,8 +128,8 @@ def test_seq01_relative_scale_per_pipeline_beats_unit_steps(seq01, name, ape_max
 @pytest.mark.slow
 def test_seq01_relative_scale_orb_ratio_test(seq01):
     """The second report's pipeline (CLAHE + ORB 3000 + ratio test, unrefined MAGSAC) with relative scale: 1.03 m
-    (before: 2.62 m with the scale kept on 28 frames; unit steps 0.54 m). Three of its poses (frames 42, 43, 47)
-    have translation directions 45-59 deg off, which no scale can repair; the bound records the figure."""
+    (before: 2.62 m with the scale kept on 28 frames; unit steps 0.54 m), short of the 0.3 m target: its scale
+    drifts down ~25 % over frames 10-25 although 40-190 corners vote per step; the bound records the figure."""
     result, ape_m = _run(seq01, "orb_knn_ratio")
     assert not result.rejected and result.n_scale_kept <= 1
     assert ape_m <= 1.15
