@@ -46,6 +46,18 @@ def test_vo_on_bundled_kitti_sample_writes_run_folder(tmp_path, capsys):
     assert csv[0].startswith("frame,ref_frame,n_features,n_matches,n_inliers") and len(csv) == 9
 
 
+def test_vo_relative_scale_reports_kept_scale_frames(tmp_path, capsys):
+    """The kept-scale count (VOResult.n_scale_kept) reaches the CLI table and metrics.json, and equals the
+    diagnostics rows noting it."""
+    out = tmp_path / "run"
+    code, stdout, _ = _run(["vo", str(sample_path("kitti_vo", "06")), "--scale", "relative", "--preset", "report_orb",
+                            "--out", str(out)], capsys)
+    assert code in (0, None) and "scale kept from the previous step" in stdout
+    metrics = json.loads((out / "metrics.json").read_text())
+    notes = [row.split(",") for row in (out / "diagnostics.csv").read_text().splitlines()[1:]]
+    assert metrics["scale_kept_frames"] == sum("scale kept from the previous step" in ",".join(r) for r in notes)
+
+
 def test_vo_on_plain_image_folder_guesses_intrinsics(tmp_path, capsys, caplog):
     src = sample_path("kitti_vo", "06", "image_0")
     folder = tmp_path / "imgs"

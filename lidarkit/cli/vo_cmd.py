@@ -94,6 +94,8 @@ def vo_command(
     if summary["rejection_reasons"]:
         top = list(summary["rejection_reasons"].items())[:_TOP_REASONS]
         table.add_row("top rejection reasons", escape("; ".join(f"{kind} ({count})" for kind, count in top)))
+    if cfg.scale.mode == "relative":
+        table.add_row("scale kept from the previous step", f"{summary['scale_kept_frames']} frames")
     table.add_row("frames/s (pipeline)", f"{summary['frames_per_s']:.1f}")
     table.add_row("intrinsics", escape(vo_input.K_source))
     for variant, m in metrics.items():
