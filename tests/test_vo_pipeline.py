@@ -223,13 +223,23 @@ def test_without_sanity_checks_failures_still_never_give_nan(sim):
 
 
 @pytest.mark.parametrize("name", ["lidarkit", "report_orb"])
-def test_two_runs_are_identical(sim, name):
+@pytest.mark.parametrize("seed", [None, 5])
+def test_two_runs_are_identical(sim, name, seed):
     traj, K, images = sim
-    cfg = preset(name, **{"scale.mode": "relative"})
+    cfg = preset(name, **{"scale.mode": "relative", "seed": seed})
     a = MonoVO(cfg, K).run(images)
     b = MonoVO(cfg, K).run(images)
     assert np.array_equal(a.trajectory.poses_se3, b.trajectory.poses_se3)
     assert [d.n_inliers for d in a.diagnostics] == [d.n_inliers for d in b.diagnostics]
+
+
+def test_seed_reaches_the_two_view_stage(sim):
+    """A seed shuffles the correspondences the robust estimators sample from: other (equally valid) poses than the
+    detection order."""
+    traj, K, images = sim
+    a = MonoVO(preset("lidarkit"), K).run(images)
+    b = MonoVO(preset("lidarkit", seed=5), K).run(images)
+    assert not np.array_equal(a.trajectory.poses_se3, b.trajectory.poses_se3)
 
 
 def test_lost_tracking_moves_the_reference_instead_of_cascading(sim):

@@ -113,10 +113,11 @@ def _run(seq, name, mode="relative"):
     return result, evaluate_vo(result.trajectory, gt, mode)["ape_rmse_m"]
 
 
-# Sim(3) APE on frames 0-50, measured: relative 0.065 / 0.088 / 0.094 m on 01 (before this change 0.065 / 3.69 /
-# 0.155 m), unit steps 0.525 / 0.638 / 0.533 m. Bounds: measured plus ~10-15 %.
+# Sim(3) APE on frames 0-50 in the default (detection) correspondence order, measured: relative 0.114 / 0.138 /
+# 0.093 m on 01 (before the scale corners 0.114 / 3.69 / 0.155 m), unit steps 0.524 / 0.624 / 0.530 m.
+# Bounds: measured plus ~10-15 %. Across seeds the non-default pipelines spread widely (benchmarks/results/vo).
 @pytest.mark.slow
-@pytest.mark.parametrize("name,ape_max_m", [("default", 0.072), ("orb_klt", 0.10), ("sift_bf_cross", 0.11)])
+@pytest.mark.parametrize("name,ape_max_m", [("default", 0.13), ("orb_klt", 0.16), ("sift_bf_cross", 0.11)])
 def test_seq01_relative_scale_per_pipeline_beats_unit_steps(seq01, name, ape_max_m):
     result, ape_m = _run(seq01, name)
     assert not result.rejected and result.n_scale_kept == 0
@@ -126,20 +127,31 @@ def test_seq01_relative_scale_per_pipeline_beats_unit_steps(seq01, name, ape_max
 
 
 @pytest.mark.slow
+def test_seq01_default_relative_scale_meets_the_target_for_any_seed(seq01):
+    """The acceptance (Sim(3) APE <= 0.3 m on 01) does not hinge on the RANSAC samples: shuffled correspondence
+    orders (seeds 0-4) measured 0.062-0.095 m, the detection order 0.114 m."""
+    images, K, gt = seq01
+    for seed in (1, 3):
+        result = MonoVO(preset("lidarkit", seed=seed), K).run(images)
+        assert evaluate_vo(result.trajectory, gt, "relative")["ape_rmse_m"] <= 0.11, seed
+
+
+@pytest.mark.slow
 def test_seq01_relative_scale_orb_ratio_test(seq01):
-    """The second report's pipeline (CLAHE + ORB 3000 + ratio test, unrefined MAGSAC) with relative scale: 1.03 m
-    (before: 2.62 m with the scale kept on 28 frames; unit steps 0.54 m), short of the 0.3 m target: its scale
-    drifts down ~25 % over frames 10-25 although 40-190 corners vote per step; the bound records the figure."""
+    """The second report's pipeline (CLAHE + ORB 3000 + ratio test, unrefined MAGSAC) with relative scale: 0.876 m
+    (before the scale corners: 2.62 m with the scale kept on 28 frames; unit steps 0.92 m), far from the 0.3 m
+    target, and 0.20-1.99 m over seeds 0-4: its scale drifts although 40-190 corners vote per step; the bound
+    records the figure."""
     result, ape_m = _run(seq01, "orb_knn_ratio")
     assert not result.rejected and result.n_scale_kept <= 1
-    assert ape_m <= 1.15
+    assert ape_m <= 1.0
 
 
-# 06 drives at a nearly constant speed, so unit steps are the better guess there (0.031 / 0.036 / 0.055 / 0.042 m);
-# relative scale measured 0.065 / 0.130 / 0.096 / 0.067 m (before: 0.065 / 0.080 / 0.422 / 0.108 m)
+# 06 drives at a nearly constant speed, so unit steps are the better guess there (0.031 / 0.033 / 0.080 / 0.054 m);
+# relative scale measured 0.040 / 0.131 / 0.133 / 0.116 m
 @pytest.mark.slow
-@pytest.mark.parametrize("name,ape_max_m", [("default", 0.072), ("orb_klt", 0.15), ("orb_knn_ratio", 0.11),
-                                            ("sift_bf_cross", 0.08)])
+@pytest.mark.parametrize("name,ape_max_m", [("default", 0.05), ("orb_klt", 0.15), ("orb_knn_ratio", 0.155),
+                                            ("sift_bf_cross", 0.135)])
 def test_seq06_relative_scale_per_pipeline(seq06, name, ape_max_m):
     result, ape_m = _run(seq06, name)
     assert not result.rejected and result.n_scale_kept == 0

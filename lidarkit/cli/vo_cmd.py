@@ -39,7 +39,8 @@ def vo_command(
     kind: str = typer.Option("auto", help="Input kind: auto | kitti | tum | images."),
     start: int = typer.Option(0, help="First frame."),
     max_frames: Optional[int] = typer.Option(None, help="Number of frames to process (default: all)."),
-    seed: int = typer.Option(_D.seed, help="Seed of the order in which correspondences reach RANSAC/MAGSAC/LMedS (same seed, same poses)."),
+    seed: Optional[int] = typer.Option(None, help="Shuffle the correspondences fed to RANSAC/MAGSAC/LMedS with this "
+                                       "seed (same seed, same poses); default: detection order, also deterministic."),
     set_: Optional[list[str]] = typer.Option(None, "--set", help="Any config field, repeatable: "
                                              "--set matching.klt_levels=4 --set scale.min_common_points=20."),
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="Run folder for poses, diagnostics, config, plot."),

@@ -6,7 +6,7 @@ normalized coordinates, Sampson refinement); ``preset(name)`` gives the two repo
 
 from __future__ import annotations
 
-from typing import Any, Literal
+from typing import Any, Literal, Optional
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
@@ -150,9 +150,10 @@ class VOConfig(_Stage):
     scale: ScaleConfig = ScaleConfig()
     smoothing: SmoothingConfig = SmoothingConfig()
     on_reject: Literal["constant_velocity", "identity"] = "constant_velocity"
-    # seeds the order in which correspondences reach OpenCV's RANSAC/MAGSAC/LMedS (their own RNG ignores
-    # cv2.setRNGSeed): same seed -> identical poses, another seed -> other (equally valid) samples
-    seed: int = Field(0, ge=0)
+    # the order in which correspondences reach OpenCV's RANSAC/MAGSAC/LMedS (their own RNG ignores cv2.setRNGSeed):
+    # None keeps the detection order (deterministic; what the two reports ran, so their figures are reproduced),
+    # a seed shuffles it: same seed -> identical poses, another seed -> other (equally valid) samples
+    seed: Optional[int] = Field(None, ge=0)
 
     @model_validator(mode="after")
     def _descriptor_for_matching(self) -> VOConfig:

@@ -266,7 +266,7 @@ class MonoVO:
         for j in range(s + 1, n):
             image, reason = load(j)
             start = time.perf_counter()
-            cv2.setRNGSeed(int(cfg.seed) * 1_000_003 + j)  # for OpenCV calls that do use its RNG
+            cv2.setRNGSeed(int(cfg.seed or 0) * 1_000_003 + j)  # for OpenCV calls that do use its RNG
             diag = FrameDiagnostics(frame=j, ref_frame=ref_index, n_features=len(ref_feats.points_px))
             result = None
             cur_image = None
@@ -375,7 +375,7 @@ class MonoVO:
         pts_ref = ref.points_px[idx_ref]
         pts_cur = cur.points_px[idx_cur]
         est = estimate_two_view(pts_ref, pts_cur, self.K, cfg.geometry, min_inliers=cfg.sanity.min_inliers,
-                                rng=correspondence_rng(cfg.seed, j))
+                                rng=None if cfg.seed is None else correspondence_rng(cfg.seed, j))
         diag.method = est.method
         diag.n_inliers = est.n_inliers
         if est.ok:
