@@ -44,6 +44,24 @@ def rng() -> np.random.Generator:
     return np.random.default_rng(12345)
 
 
+@pytest.fixture(scope="session")
+def kitti_vo_frames():
+    """``load("06" | "01") -> (images, K, camera ground truth)`` of ../shared KITTI image frames 0-50, each sequence
+    read once per session."""
+    from lidarkit.io.kitti import KittiOdometry
+    from lidarkit.vo import images_in_memory
+
+    loaded = {}
+
+    def load(sequence: str):
+        if sequence not in loaded:
+            ds = KittiOdometry(shared_path("kitti_images", "sequences", sequence)).as_image_sequence()
+            loaded[sequence] = (images_in_memory(ds), ds.K, ds.ground_truth)
+        return loaded[sequence]
+
+    return load
+
+
 @pytest.fixture
 def copy_of(tmp_path):
     """Copy a file or folder into tmp_path so a test can corrupt it: ``copy_of(path) -> new path``."""

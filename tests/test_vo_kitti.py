@@ -4,26 +4,19 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import shared_path
 
-from lidarkit.io.kitti import KittiOdometry
-from lidarkit.vo import MonoVO, images_in_memory, preset
+from lidarkit.vo import MonoVO, preset
 from lidarkit.vo.evaluation import evaluate_vo
 
 
-def _sequence(seq):
-    ds = KittiOdometry(shared_path("kitti_images", "sequences", seq)).as_image_sequence()
-    return images_in_memory(ds), ds.K, ds.ground_truth
+@pytest.fixture
+def seq06(kitti_vo_frames):
+    return kitti_vo_frames("06")
 
 
-@pytest.fixture(scope="module")
-def seq06():
-    return _sequence("06")
-
-
-@pytest.fixture(scope="module")
-def seq01():
-    return _sequence("01")
+@pytest.fixture
+def seq01(kitti_vo_frames):
+    return kitti_vo_frames("01")
 
 
 @pytest.mark.slow

@@ -5,11 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import shared_path
 
 from lidarkit.errors import ConfigError
-from lidarkit.io.kitti import KittiOdometry
-from lidarkit.vo import MonoVO, images_in_memory, preset
+from lidarkit.vo import MonoVO, preset
 from lidarkit.vo.config import ScaleConfig
 from lidarkit.vo.evaluation import evaluate_vo
 from lidarkit.vo.scale import SCALE_KEPT_NOTE, guarded_scale, relative_scale
@@ -71,19 +69,14 @@ def test_guard_bound_is_validated():
 
 
 # ---- KITTI ------------------------------------------------------------------------------------------------------
-def _sequence(seq):
-    ds = KittiOdometry(shared_path("kitti_images", "sequences", seq)).as_image_sequence()
-    return images_in_memory(ds), ds.K, ds.ground_truth
+@pytest.fixture
+def seq01(kitti_vo_frames):
+    return kitti_vo_frames("01")
 
 
-@pytest.fixture(scope="module")
-def seq01():
-    return _sequence("01")
-
-
-@pytest.fixture(scope="module")
-def seq06():
-    return _sequence("06")
+@pytest.fixture
+def seq06(kitti_vo_frames):
+    return kitti_vo_frames("06")
 
 
 def test_kept_scale_frames_are_counted_and_reported(seq01):
