@@ -3,7 +3,8 @@
 Measures APE (SE(3) alignment for ground-truth scale, Sim(3) otherwise) and RPE over 1 frame through
 ``lidarkit.eval``, the final-frame error, frames/s with images preloaded (best of ``--repeats`` runs, plus the ratio
 to the report-2 ORB pipeline timed in the same run), rejected frames; raw vs smoothed; with/without sanity checks;
-and the sensitivity of the error to the focal length (including the image-size guess used without calibration).
+the spread of relative scale over RANSAC sample orders (seeds), and the sensitivity of the error to the focal length
+(including the image-size guess used without calibration).
 
     python benchmarks/vo_kitti.py [--data ../shared/data/kitti_images/sequences] [--out benchmarks/results/vo]
 
@@ -47,6 +48,14 @@ PIPELINES = [
       "features.grid_cols": 1, "matching.method": "knn_ratio", "geometry.estimators": ("magsac", "ransac")}),
 ]
 PLOTTED = {PIPELINES[i][0] for i in (0, 1, 3, 4)}
+# relative scale per pipeline over RANSAC sample orders: the detection order (seed None) and shuffles with seeds 0-4
+SEED_PIPELINES = [
+    ("lidarkit (KLT on corners)", "lidarkit", {}),
+    ("lidarkit with ORB keypoints (KLT)", "lidarkit", {"features.detector": "orb"}),
+    ("report 2 pipeline (ORB + ratio test)", "report_orb", {}),
+    ("report 1 pipeline (SIFT + BF cross-check)", "report_sift", {}),
+]
+SEEDS = (0, 1, 2, 3, 4)
 FOCAL_FACTORS = (0.8, 0.9, 0.95, 1.0, 1.05, 1.1, 1.25)
 
 
@@ -97,7 +106,7 @@ def main(argv=None) -> int:
     results = {"command": " ".join(["python", "benchmarks/vo_kitti.py", *(argv if argv is not None else sys.argv[1:])]),
                "date_utc": started.strftime("%Y-%m-%d %H:%M UTC"),
                "machine": machine_info(),
-               "pipelines": [], "intrinsics": []}
+               "pipelines": [], "intrinsics": [], "seeds": []}
     trajectories = {}
     for seq in args.sequences:
         images, K, gt = load(args.data, seq)
@@ -132,6 +141,16 @@ def main(argv=None) -> int:
                                               "focal_error_pct": 100 * (K_var[0, 0] / K[0, 0] - 1),
                                               "rejected": len(result.rejected), **m})
                 print(f"{seq} {mode} {label}: APE {m['ape_rmse_m']:.4f} rejected {len(result.rejected)}", flush=True)
+        for label, name, changes in SEED_PIPELINES:
+            ape = {}
+            for seed in (None, *SEEDS):
+                cfg = preset(name, **{**changes, "scale.mode": "relative", "seed": seed})
+                ape[str(seed)] = evaluate_vo(run_once(cfg, K, gt, images).trajectory, gt, "relative")["ape_rmse_m"]
+            unit = preset(name, **{**changes, "scale.mode": "none"})
+            unit_ape = evaluate_vo(run_once(unit, K, gt, images).trajectory, gt, "none")["ape_rmse_m"]
+            results["seeds"].append({"sequence": seq, "pipeline": label, "ape_rmse_m": ape, "unit_steps_ape_m": unit_ape})
+            print(f"{seq} seeds {label}: " + " ".join(f"{k}={v:.3f}" for k, v in ape.items()), flush=True)
+
         cfg = preset("report_orb")
         result = run_once(cfg, K_from_image_size(w, h), gt, images)
         m = evaluate_vo(result.trajectory, gt, "none")
@@ -179,6 +198,18 @@ def markdown(results: dict) -> str:
                          f"{fmt(sm['final_error_m'])} | {r['frames_per_s']:.1f} | {r['speed_vs_report2_orb']:.2f} | "
                          f"{r['rejected']} |")
         lines.append("")
+    lines += ["## Relative scale over RANSAC sample orders", "",
+              "Sim(3) APE (m) with relative scale: `detection` is the default correspondence order (seed None), "
+              f"seeds {SEEDS[0]}-{SEEDS[-1]} shuffle it; unit steps (detection order) for comparison.", "",
+              "| sequence | pipeline | detection | " + " | ".join(f"seed {k}" for k in SEEDS) +
+              " | median of seeds | max of seeds | unit steps |",
+              "|---|---|---|" + "---|" * len(SEEDS) + "---|---|---|"]
+    for r in results["seeds"]:
+        shuffled = [r["ape_rmse_m"][str(k)] for k in SEEDS]
+        lines.append(f"| {r['sequence']} | {r['pipeline']} | {fmt(r['ape_rmse_m']['None'])} | "
+                     + " | ".join(fmt(v) for v in shuffled)
+                     + f" | {fmt(float(np.median(shuffled)))} | {fmt(max(shuffled))} | {fmt(r['unit_steps_ape_m'])} |")
+    lines.append("")
     lines += ["## Intrinsics sensitivity (lidarkit pipeline; focal length scaled, principal point kept)", "",
               "| sequence | scale | K | focal error % | APE m | final m | final al. m | RPE deg | rejected |",
               "|---|---|---|---|---|---|---|---|---|"]
