@@ -257,6 +257,8 @@ def test_copied_sequence_folder_with_trimmed_poses_and_full_times(tmp_path):
     assert len(ds) == 51 and len(ds.ground_truth_camera) == 51
     full = np.loadtxt(shared_path("kitti_images", "sequences", "06", "times.txt"))
     np.testing.assert_array_equal(ds.timestamps_s, full[:51])
+    every_row = ds.ground_truth_at(None, frame="camera")
+    assert len(every_row) == 51 and np.array_equal(every_row.timestamps_s, full[:51])
     # files of different lengths where the shorter does not end at the last frame present: still an error
     poses = shared_path("kitti_images", "poses", "06.txt").read_text().splitlines()
     (seq / "poses.txt").write_text("\n".join(poses[:60]) + "\n")

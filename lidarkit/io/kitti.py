@@ -311,7 +311,8 @@ class KittiOdometry:
             ts = None if self._times_all is None else self._times_all[frames]
             gt = Trajectory(gt.poses_se3[frames], ts, gt.name)
         elif self._times_all is not None:
-            gt = gt.with_timestamps(self._times_all)
+            n = min(len(gt), len(self._times_all))  # an excerpt may trim one of the files to the frames present
+            gt = gt[:n].with_timestamps(self._times_all[:n])
         if frame == "camera":
             return gt
         if frame != "lidar":
