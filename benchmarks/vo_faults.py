@@ -30,6 +30,7 @@ from lidarkit.trajectory import Trajectory
 from lidarkit.vo import MonoVO, images_in_memory, preset
 from lidarkit.vo.evaluation import evaluate_vo
 from lidarkit.vo.intrinsics import K_from_image_size
+from lidarkit.vo.pipeline import rejection_key
 
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT_DATA = REPO.parent / "shared" / "data" / "kitti_images" / "sequences"
@@ -96,8 +97,8 @@ def main(argv=None) -> int:
     for seq in args.sequences:
         ds = KittiOdometry(args.data / seq).as_image_sequence()
         clean = images_in_memory(ds)
+        images, gt, faults = inject_faults(clean, ds.ground_truth, ds.K)
         for K_label, K in (("calib", ds.K), ("guessed", K_from_image_size(clean[0].shape[1], clean[0].shape[0]))):
-            images, gt, faults = inject_faults(clean, ds.ground_truth, ds.K)
             for label, name, changes in PIPELINES:
                 for sanity in (True, False):
                     row = {"sequence": seq, **run(images, K, gt, faults, label, name, changes, sanity, K_label)}
@@ -128,7 +129,7 @@ def markdown(results: dict) -> str:
         cells = []
         for f in faults:
             o = r["faults"][f]
-            verdict = "ok" if o["accepted"] else o["reason"].split(" (")[0]
+            verdict = "ok" if o["accepted"] else rejection_key(o["reason"])
             cells.append(f"{o['step_m']:.2f} m, {verdict}")
         lines.append(f"| {r['sequence']} | {r['K']} | {r['pipeline']} | {'on' if r['sanity'] else 'off'} | "
                      f"{r['ape_rmse_m']:.4f} | {r['rejected']} | " + " | ".join(cells) + " |")

@@ -242,15 +242,41 @@ def test_seed_reaches_the_two_view_stage(sim):
     assert not np.array_equal(a.trajectory.poses_se3, b.trajectory.poses_se3)
 
 
-def test_lost_tracking_moves_the_reference_instead_of_cascading(sim):
-    """After 'too few matches' on a frame that has features of its own, the next frame is matched against it."""
+def test_one_unrelated_frame_does_not_take_over_the_reference(sim):
+    """A single frame unrelated to its neighbours (corrupt, mis-ordered) is rejected; the next frame is matched
+    against the old reference and accepted."""
     traj, K, images = sim
     bad = list(images)
     bad[3] = np.ascontiguousarray(np.flipud(images[3]))  # textured, but unrelated to its neighbours
     result = MonoVO(_cfg("none"), K).run(bad)
-    d3 = result.diagnostics[3]
-    assert not d3.accepted and d3.note == "reference moved to this frame"
-    assert result.diagnostics[4].ref_frame == 3 and _finite(result)
+    d3, d4 = result.diagnostics[3], result.diagnostics[4]
+    assert not d3.accepted and d3.reason.startswith("too few") and d3.note == ""
+    assert d4.accepted and d4.ref_frame == 2 and _finite(result)
+    assert [d.frame for d in result.rejected] == [3]
+
+
+def test_tracking_lost_twice_moves_the_reference_instead_of_cascading(sim):
+    """Lost on two frames in a row (the scene changed): the second becomes the reference, so tracking resumes."""
+    traj, K, images = sim
+    bad = [np.ascontiguousarray(np.flipud(im)) if i >= 3 else im for i, im in enumerate(images)]  # a new "scene"
+    result = MonoVO(_cfg("none"), K).run(bad)
+    d3, d4 = result.diagnostics[3], result.diagnostics[4]
+    assert not d3.accepted and d3.note == ""
+    assert not d4.accepted and d4.note == "reference moved to this frame"
+    assert all(d.accepted and d.ref_frame == d.frame - 1 for d in result.diagnostics[5:]) and _finite(result)
+
+
+def test_long_standstill_keeps_its_reference(sim):
+    """Seven copies of a frame (a stop longer than the 5-frame stale limit) keep the reference: the depths carried
+    for relative scale survive the stop, and the next moving frame is matched against the pre-stop reference."""
+    traj, K, images = sim
+    stopped = list(images[:3]) + [images[2]] * 7 + list(images[3:])
+    result = MonoVO(_cfg("relative"), K).run(stopped)
+    still = result.diagnostics[3:10]
+    assert all(not d.accepted and d.reason.startswith("insufficient parallax") and d.ref_frame == 2 for d in still)
+    assert all(d.note != "reference moved to this frame" for d in still)
+    moving = result.diagnostics[10]
+    assert moving.accepted and moving.ref_frame == 2 and moving.n_scale_points >= 15
 
 
 @pytest.mark.parametrize("mode", ["relative", "none"])

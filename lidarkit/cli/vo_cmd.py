@@ -77,7 +77,8 @@ def vo_command(
     if result.n_frames > 1 and result.accepted_pairs == 0:
         _fail_without_pairs(result, out, extra_config)
     if gt is not None and cfg.scale.mode != "gt":
-        result.trajectory = result.trajectory.transformed(T_left=gt.poses_se3[0])
+        # into the GT's frame at the start frame (a later one when the first frames were unusable)
+        result.trajectory = result.trajectory.transformed(T_left=gt.poses_se3[result.meta["start_frame"]])
 
     metrics = {}
     if gt is not None and len(gt) >= 3:

@@ -23,7 +23,7 @@ import cv2
 import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
-from lidarkit.geometry import kabsch_umeyama, rotation_angle_deg, se3_exp, se3_inverse, se3_log, skew
+from lidarkit.geometry import is_rotation, kabsch_umeyama, rotation_angle_deg, se3_exp, se3_inverse, se3_log, skew
 from lidarkit.trajectory import Trajectory
 from lidarkit.vo.config import FeatureConfig, VOConfig
 from lidarkit.vo.features import get_detector, get_preprocessor
@@ -259,6 +259,7 @@ class MonoVO:
         ref_index, ref_image = s, self.preprocess(first)
         ref_feats = self._reference_features(ref_image, None)
         n_still = 0  # frames since the reference rejected for lack of parallax (the camera stood still)
+        previous_lost = False  # the previous frame was rejected because tracking against the reference was lost
         total_s += time.perf_counter() - start
         diags.append(FrameDiagnostics(frame=s, ref_frame=s, n_features=len(ref_feats.points_px), accepted=True,
                                       note="start"))
@@ -283,7 +284,7 @@ class MonoVO:
                 diag.accepted = True
                 if tracks is not None:
                     tracks.append((j, *pts))
-                ref_index, ref_image, n_still = j, cur_image, 0
+                ref_index, ref_image, n_still, previous_lost = j, cur_image, 0, False
                 ref_feats = self._reference_features(cur_image, cur_feats)
             else:
                 diag.reason = reason or "rejected"
@@ -295,11 +296,13 @@ class MonoVO:
                     poses[j] = poses[j - 1] @ self._predicted_motion(step_motion, j)
                 log.info("frame %d rejected: %s", j, diag.reason)
                 # move the reference to this frame when the reference cannot serve (too few features), after a long
-                # gap, or when tracking was lost (a later frame would be even farther from the reference); a frame
-                # without features of its own (black, blank) never becomes the reference
-                stale = j - ref_index >= 5 or len(ref_feats.points_px) < cfg.sanity.min_features
+                # gap of moving frames (a standstill keeps its reference and depths), or when tracking was lost on two
+                # frames in a row (a later frame would be even farther from the reference; one unrelated frame, e.g.
+                # corrupt or mis-ordered, must not take over); a frame without features of its own never does
+                stale = j - ref_index - n_still >= 5 or len(ref_feats.points_px) < cfg.sanity.min_features
                 lost = diag.reason.startswith(_TRACKING_LOST)
-                if cur_image is not None and (stale or lost):
+                lost_twice, previous_lost = lost and previous_lost, lost
+                if cur_image is not None and (stale or lost_twice):
                     candidate = self._reference_features(cur_image, None)
                     if len(candidate.points_px) >= cfg.sanity.min_features:
                         ref_index, ref_image, ref_feats, n_still = j, cur_image, candidate, 0
@@ -553,10 +556,8 @@ def _rotation_only_fit(norm_ref: np.ndarray, norm_cur: np.ndarray) -> np.ndarray
 
 
 def _is_valid_rotation(R: np.ndarray, max_deg: float) -> bool:
-    """Finite, orthonormal with det +1 and turning at most ``max_deg``."""
-    if not np.all(np.isfinite(R)) or abs(float(np.linalg.det(R)) - 1.0) > 1e-6:
-        return False
-    return bool(np.allclose(R @ R.T, np.eye(3), atol=1e-6)) and float(rotation_angle_deg(R)) <= max_deg
+    """Finite, a rotation (orthonormal, det +1) and turning at most ``max_deg``."""
+    return bool(np.all(np.isfinite(R))) and is_rotation(R, tol=1e-6) and float(rotation_angle_deg(R)) <= max_deg
 
 
 def run_vo(images: Any, K: np.ndarray, config: VOConfig | None = None, ground_truth: Trajectory | None = None,
