@@ -23,7 +23,7 @@ import cv2
 import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
-from lidarkit.geometry import is_rotation, kabsch_umeyama, rotation_angle_deg, se3_exp, se3_inverse, se3_log, skew
+from lidarkit.geometry import is_rotation, rotation_angle_deg, se3_exp, se3_inverse, se3_log, skew
 from lidarkit.trajectory import Trajectory
 from lidarkit.vo.config import FeatureConfig, VOConfig
 from lidarkit.vo.features import get_detector, get_preprocessor
@@ -32,8 +32,8 @@ from lidarkit.vo.matching import get_matcher, track_klt
 from lidarkit.vo.sanity import check_pose
 from lidarkit.vo.scale import SCALE_KEPT_NOTE, guarded_scale, relative_scale
 from lidarkit.vo.smoothing import smooth_translations
-from lidarkit.vo.two_view import (correspondence_rng, estimate_two_view, normalize_points, sampson_residuals,
-                                  triangulate)
+from lidarkit.vo.two_view import (correspondence_rng, estimate_two_view, normalize_points, rotation_only_fit,
+                                  sampson_residuals, triangulate)
 
 log = logging.getLogger(__name__)
 
@@ -390,7 +390,8 @@ class MonoVO:
                 self._rejected_R_cur_ref = est.R_cur_ref
             elif reason.startswith(_NO_PARALLAX) and est.rotation_only_px < cfg.sanity.min_parallax_px:
                 # no essential matrix (typical of a pure rotation) but a pure rotation explains the matches
-                R = _rotation_only_fit(normalize_points(pts_ref, self.K), normalize_points(pts_cur, self.K))
+                R = rotation_only_fit(normalize_points(pts_ref, self.K), normalize_points(pts_cur, self.K),
+                                      float(self.K[0, 0]))[0]
                 if _is_valid_rotation(R, cfg.sanity.max_rotation_deg):
                     self._rejected_R_cur_ref = R
             return None, reason
@@ -537,22 +538,6 @@ def _per_frame_motion(T_ref_cur: np.ndarray, gap: int) -> np.ndarray:
     if gap <= 1:
         return T_ref_cur.copy()
     return se3_exp(se3_log(T_ref_cur) / gap)
-
-
-def _rotation_only_fit(norm_ref: np.ndarray, norm_cur: np.ndarray) -> np.ndarray:
-    """``R_cur_ref`` of the pure rotation that best maps the reference bearings onto the current ones (Kabsch on the
-    bearings and their negatives, so no translation is fitted), refit once on the better half."""
-    b0 = np.column_stack([norm_ref, np.ones(len(norm_ref))])
-    b1 = np.column_stack([norm_cur, np.ones(len(norm_cur))])
-    b0 /= np.linalg.norm(b0, axis=1, keepdims=True)
-    b1 /= np.linalg.norm(b1, axis=1, keepdims=True)
-    use = np.ones(len(b0), bool)
-    R = np.eye(3)
-    for _ in range(2):
-        R = kabsch_umeyama(np.vstack([b0[use], -b0[use]]), np.vstack([b1[use], -b1[use]])).rotation
-        residual = np.linalg.norm(b0 @ R.T - b1, axis=1)
-        use = residual <= np.median(residual)
-    return R
 
 
 def _is_valid_rotation(R: np.ndarray, max_deg: float) -> bool:

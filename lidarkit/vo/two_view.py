@@ -168,17 +168,19 @@ def degeneracy_measures(p0: np.ndarray, p1: np.ndarray, K: np.ndarray, cfg: Geom
     return Degeneracy(share, n_f, residual, focal)
 
 
-def rotation_only_residual_px(norm_ref: np.ndarray, norm_cur: np.ndarray, focal_px: float) -> float:
-    """Median image residual (px) of the best pure rotation mapping the reference rays onto the current ones
-    (least squares on bearings, refit once on the better half); ~0 when the camera only rotated."""
+def rotation_only_fit(norm_ref: np.ndarray, norm_cur: np.ndarray, focal_px: float) -> tuple[np.ndarray, float]:
+    """``(R_cur_ref, median image residual px)`` of the best pure rotation mapping the reference rays onto the current
+    ones (least squares on bearings, refit once on the better half); the residual is ~0 when the camera only rotated
+    (identity and inf for fewer than 3 rays)."""
     if len(norm_ref) < 3:
-        return float("inf")
+        return np.eye(3), float("inf")
     b0 = np.column_stack([norm_ref, np.ones(len(norm_ref))])
     b1 = np.column_stack([norm_cur, np.ones(len(norm_cur))])
     b0 /= np.linalg.norm(b0, axis=1, keepdims=True)
     b1 /= np.linalg.norm(b1, axis=1, keepdims=True)
     use = np.ones(len(b0), bool)
     residual = np.zeros(len(b0))
+    R = np.eye(3)
     for _ in range(2):
         U, _, Vt = np.linalg.svd(b0[use].T @ b1[use])
         D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
@@ -188,7 +190,7 @@ def rotation_only_residual_px(norm_ref: np.ndarray, norm_cur: np.ndarray, focal_
             residual = np.linalg.norm(rays[:, :2] / rays[:, 2:3] - norm_cur, axis=1) * focal_px
         residual = np.where(np.isfinite(residual), residual, np.inf)
         use = residual <= np.median(residual)
-    return float(np.median(residual))
+    return R, float(np.median(residual))
 
 
 def normalize_points(points_px: np.ndarray, K: np.ndarray) -> np.ndarray:
@@ -290,7 +292,7 @@ def _estimate_ordered(p0: np.ndarray, p1: np.ndarray, K: np.ndarray, cfg: Geomet
         return _failed(n, f"too few correspondences for the essential matrix ({n} < 5)", attempts)
     focal = float(K[0, 0])
     n0, n1 = normalize_points(p0, K), normalize_points(p1, K)
-    rot_px = rotation_only_residual_px(n0, n1, focal)
+    rot_px = rotation_only_fit(n0, n1, focal)[1]
     degeneracy = degeneracy_measures(p0, p1, K, cfg)
     if cfg.normalize:
         a, b, K_est, thr = n0, n1, np.eye(3), cfg.threshold_px / focal
