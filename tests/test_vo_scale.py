@@ -7,6 +7,8 @@ import numpy as np
 import pytest
 
 from lidarkit.errors import ConfigError
+from lidarkit.sim.camera import default_K, forward_trajectory, make_plane_scene, render_sequence
+from lidarkit.trajectory import Trajectory
 from lidarkit.vo import MonoVO, preset
 from lidarkit.vo.config import ScaleConfig
 from lidarkit.vo.evaluation import evaluate_vo
@@ -149,3 +151,21 @@ def test_seq06_relative_scale_per_pipeline(seq06, name, ape_max_m):
     result, ape_m = _run(seq06, name)
     assert not result.rejected and result.n_scale_kept == 0
     assert ape_m <= ape_max_m
+
+
+def test_accelerating_from_slow_speed_is_not_refused_by_the_guard():
+    """Rendered forward motion pulling away at x1.6 per frame (0.05 -> 0.6 m/frame): the default step-change bound
+    lets the real speed-up through (measured APE 0.105 m, no kept frame); the old bound x1.5 kept the scale twice and
+    locked in a wrong one (0.40 m)."""
+    base = forward_trajectory(14, step_m=1.0)
+    steps = np.minimum(0.05 * 1.6 ** np.arange(13), 0.6)
+    poses = base.poses_se3.copy()
+    poses[:, 2, 3] = np.concatenate([[0.0], np.cumsum(steps)])
+    truth = Trajectory(poses, base.timestamps_s, name="pulling away")
+    K = default_K()
+    images = render_sequence(make_plane_scene(np.random.default_rng(7)), truth, K)
+    result = MonoVO(preset("lidarkit"), K).run(images)
+    assert result.n_scale_kept == 0
+    assert evaluate_vo(result.trajectory, truth, "relative")["ape_rmse_m"] <= 0.15
+    tight = MonoVO(preset("lidarkit", **{"scale.max_step_change": 1.5}), K).run(images)
+    assert tight.n_scale_kept >= 1

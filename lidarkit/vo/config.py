@@ -120,7 +120,7 @@ class ScaleConfig(_Stage):
     min_triangulation_angle_deg: float = Field(1.0, gt=0)
     min_common_points: int = Field(15, ge=3)
     max_carried_points: int = Field(1500, ge=10)
-    max_step_change: float = Field(1.5, gt=1)
+    max_step_change: float = Field(3.0, gt=1)
     points: Literal["corners", "features"] = "corners"
     max_depth_views: int = Field(10, ge=1)
     corner_min_angle_deg: float = Field(0.5, gt=0)
