@@ -114,7 +114,12 @@ class ScaleConfig(_Stage):
     running (log) mean over up to ``max_depth_views`` pairs (1 = last pair only), less noisy than one pair's, so
     corners need only ``corner_min_angle_deg`` (more, farther static points vote). A per-frame scale changing by
     more than the factor ``max_step_change`` from the previous step is not accepted: the previous scale is kept
-    with a note (``VOResult.n_scale_kept`` counts those frames)."""
+    with a note (``VOResult.n_scale_kept`` counts those frames). ``corner_pose``: the pose the corners are
+    triangulated with: ``pair`` (the pipeline's pose) or ``corners`` (the pair's pose estimated again on the
+    tracked corners with the default geometry, E-RANSAC 0.5 px + Sampson refinement; the pair's pose when that
+    fails). Only the scale path uses it; the trajectory keeps the pipeline's rotation and translation direction.
+    ``report_orb`` sets ``corners``: its unrefined ORB + MAGSAC translation direction (~2 deg off) biases the corner
+    depths and its scale drifted; poses that explain the corners about as well (SIFT, ORB + KLT) keep ``pair``."""
 
     mode: Literal["gt", "none", "relative"] = "relative"
     min_triangulation_angle_deg: float = Field(1.0, gt=0)
@@ -124,6 +129,7 @@ class ScaleConfig(_Stage):
     points: Literal["corners", "features"] = "corners"
     max_depth_views: int = Field(10, ge=1)
     corner_min_angle_deg: float = Field(0.5, gt=0)
+    corner_pose: Literal["corners", "pair"] = "pair"
 
 
 class SmoothingConfig(_Stage):
@@ -208,7 +214,8 @@ _PRESETS: dict[str, dict[str, Any]] = {
         "matching": {"method": "knn_ratio", "ratio": 0.75},
         "geometry": {"estimators": ("magsac",), "threshold_px": 1.0, "refine": False, "fundamental_fallback": True},
         "sanity": {"enabled": True, "max_rotation_deg": 60.0, "min_parallax_px": 0.0},
-        "scale": {"mode": "none"},
+        # corner_pose: relative scale triangulates its corners with their own pose, not the unrefined MAGSAC one
+        "scale": {"mode": "none", "corner_pose": "corners"},
     },
 }
 
