@@ -266,6 +266,18 @@ def test_tracking_lost_twice_moves_the_reference_instead_of_cascading(sim):
     assert all(d.accepted and d.ref_frame == d.frame - 1 for d in result.diagnostics[5:]) and _finite(result)
 
 
+def test_scale_kept_after_a_reference_reset_is_noted_and_counted(sim):
+    """Relative scale: after the reference moved to a new frame (no depths there), the next pair cannot measure the
+    scale; it keeps the previous one with a note, and VOResult counts it (only the very first pair starts silently)."""
+    traj, K, images = sim
+    bad = [np.ascontiguousarray(np.flipud(im)) if i >= 3 else im for i, im in enumerate(images)]
+    result = MonoVO(_cfg("relative"), K).run(bad)
+    moved = [d.frame for d in result.diagnostics if d.note == "reference moved to this frame"]
+    after = result.diagnostics[moved[-1] + 1]
+    assert after.accepted and after.note.startswith("scale kept from the previous step")
+    assert result.n_scale_kept >= 1 and result.diagnostics[1].note == ""
+
+
 def test_long_standstill_keeps_its_reference(sim):
     """Seven copies of a frame (a stop longer than the 5-frame stale limit) keep the reference: the depths carried
     for relative scale survive the stop, and the next moving frame is matched against the pre-stop reference."""

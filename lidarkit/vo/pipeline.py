@@ -266,6 +266,7 @@ class MonoVO:
         ref_feats = self._reference_features(ref_image, None)
         n_still = 0  # frames since the reference rejected for lack of parallax (the camera stood still)
         previous_lost = False  # the previous frame was rejected because tracking against the reference was lost
+        n_accepted = 0  # frame pairs accepted so far
         total_s += time.perf_counter() - start
         diags.append(FrameDiagnostics(frame=s, ref_frame=s, n_features=len(ref_feats.points_px), accepted=True,
                                       note="start"))
@@ -280,7 +281,7 @@ class MonoVO:
             if image is not None:
                 cur_image = self.preprocess(image)
                 result, reason = self._estimate(ref_index, ref_image, ref_feats, j, cur_image, diag, last_scale,
-                                                n_still)
+                                                n_still, first_pair=n_accepted == 0)
             if result is not None:
                 T_ref_cur, cur_feats, scale, pts = result
                 poses[j] = poses[ref_index] @ T_ref_cur
@@ -288,6 +289,7 @@ class MonoVO:
                 step_motion = _per_frame_motion(T_ref_cur, moving)
                 last_scale = scale / moving
                 diag.accepted = True
+                n_accepted += 1
                 if tracks is not None:
                     tracks.append((j, *pts))
                 ref_index, ref_image, n_still, previous_lost = j, cur_image, 0, False
@@ -360,10 +362,11 @@ class MonoVO:
                         carried.scale_points_depth, carried.scale_points_views)
 
     def _estimate(self, ref_index: int, ref_image: np.ndarray, ref: Features, j: int, cur_image: np.ndarray,
-                  diag: FrameDiagnostics, last_scale: float, n_still: int = 0):
+                  diag: FrameDiagnostics, last_scale: float, n_still: int = 0, first_pair: bool = True):
         """Relative pose of frame j w.r.t. the reference; ``(T_ref_cur, cur_features, scale, (pts_ref, pts_cur))``
         or ``(None, reason)``. ``n_still``: frames since the reference rejected as standstill (not counted as
-        motion by unit steps). A rejected pose's valid rotation is kept in ``self._rejected_R_cur_ref``."""
+        motion by unit steps); ``first_pair``: no pair accepted yet (relative scale starts at 1 without a note). A
+        rejected pose's valid rotation is kept in ``self._rejected_R_cur_ref``."""
         cfg = self.config
         self._rejected_R_cur_ref = None
         if len(ref.points_px) < cfg.sanity.min_features:
@@ -421,10 +424,11 @@ class MonoVO:
                 found, n_common = relative_scale(tracked.depth_ref, tracked.X_ref, tracked.angle_deg, tracked.usable,
                                                  cfg.scale, cfg.scale.corner_min_angle_deg)
             diag.n_scale_points = n_common
-            has_depths = bool(np.isfinite(ref.depth if tracked is None else tracked.depth_ref).any())
             moving = max(gap - n_still, 1)  # frame steps with motion, as run() counts them
-            decision = guarded_scale(None if found is None else found / moving, last_scale, n_common,
-                                     not has_depths, cfg.scale)
+            # only the first pair starts the scale silently; a later pair without depths (the reference was reset)
+            # keeps the previous scale with a note
+            decision = guarded_scale(None if found is None else found / moving, last_scale, n_common, first_pair,
+                                     cfg.scale)
             scale = decision.scale * moving
             if decision.note:
                 diag.note = decision.note
