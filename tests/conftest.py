@@ -63,6 +63,18 @@ def kitti_vo_frames():
 
 
 @pytest.fixture
+def seq06(kitti_vo_frames):
+    """KITTI sequence 06 image frames 0-50: ``(images, K, camera ground truth)``."""
+    return kitti_vo_frames("06")
+
+
+@pytest.fixture
+def seq01(kitti_vo_frames):
+    """KITTI sequence 01 image frames 0-50: ``(images, K, camera ground truth)``."""
+    return kitti_vo_frames("01")
+
+
+@pytest.fixture
 def copy_of(tmp_path):
     """Copy a file or folder into tmp_path so a test can corrupt it: ``copy_of(path) -> new path``."""
 

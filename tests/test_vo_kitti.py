@@ -9,16 +9,6 @@ from lidarkit.vo import MonoVO, preset
 from lidarkit.vo.evaluation import evaluate_vo
 
 
-@pytest.fixture
-def seq06(kitti_vo_frames):
-    return kitti_vo_frames("06")
-
-
-@pytest.fixture
-def seq01(kitti_vo_frames):
-    return kitti_vo_frames("01")
-
-
 @pytest.mark.slow
 def test_seq06_gt_scale_beats_sift_reference(seq06):
     """Report 1 (SIFT + BF, RANSAC, gt scale) measured APE 0.046 m (SE3) here; acceptance: <= 0.03 m."""

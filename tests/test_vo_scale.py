@@ -71,16 +71,6 @@ def test_guard_bound_is_validated():
 
 
 # ---- KITTI ------------------------------------------------------------------------------------------------------
-@pytest.fixture
-def seq01(kitti_vo_frames):
-    return kitti_vo_frames("01")
-
-
-@pytest.fixture
-def seq06(kitti_vo_frames):
-    return kitti_vo_frames("06")
-
-
 def test_kept_scale_frames_are_counted_and_reported(seq01):
     """A bound tighter than the real per-step changes keeps frames; each has a note and VOResult counts them."""
     images, K, _ = seq01
