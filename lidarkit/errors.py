@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from typing import Any
 
 
 class LidarKitError(Exception):
@@ -39,3 +40,9 @@ class RegistrationError(LidarKitError):
 
 class EvaluationError(LidarKitError):
     """Two trajectories cannot be compared as asked (lengths, timestamps, too short for a metric)."""
+
+
+def validation_problems(err: Any, unnamed: str = "?") -> str:
+    """One line for a pydantic ``ValidationError``: ``"field.path: message; ..."`` (``unnamed`` for a model-level
+    problem), for the ConfigError that replaces it."""
+    return "; ".join(f"{'.'.join(map(str, e['loc'])) or unnamed}: {e['msg']}" for e in err.errors())

@@ -14,7 +14,7 @@ from typing import Any, Literal, get_args, get_origin
 
 import pydantic
 
-from lidarkit.errors import ConfigError
+from lidarkit.errors import ConfigError, validation_problems
 from lidarkit.registration.base import Registration
 
 log = logging.getLogger(__name__)
@@ -112,7 +112,7 @@ def get_icp(name: str, **params: Any) -> Registration:
     try:
         config = cls.Config(**params)
     except pydantic.ValidationError as err:
-        problems = "; ".join(f"{'.'.join(str(p) for p in e['loc']) or '?'}: {e['msg']}" for e in err.errors())
+        problems = validation_problems(err)
         raise ConfigError(f"invalid parameters ({problems}); valid parameters: {valid}", source=f"method {name!r}") from None
     except ValueError as err:
         raise ConfigError(f"invalid parameters ({err}); valid parameters: {valid}", source=f"method {name!r}") from None

@@ -34,7 +34,7 @@ from typing import Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from lidarkit.errors import ConfigError, DataError
+from lidarkit.errors import ConfigError, DataError, validation_problems
 from lidarkit.io.base import Scan
 from lidarkit.trajectory import Trajectory
 
@@ -94,7 +94,7 @@ def make_config(**params: object) -> LidarSimConfig:
     try:
         return LidarSimConfig(**params)
     except ValidationError as err:
-        problems = "; ".join(f"{'.'.join(map(str, e['loc'])) or 'config'}: {e['msg']}" for e in err.errors())
+        problems = validation_problems(err, unnamed="config")
         raise ConfigError(f"{problems} (valid: {', '.join(LidarSimConfig.model_fields)})", source="lidar simulator") from None
 
 

@@ -13,7 +13,7 @@ import cv2
 import numpy as np
 from pydantic import ValidationError
 
-from lidarkit.errors import ConfigError
+from lidarkit.errors import ConfigError, validation_problems
 from lidarkit.vo.config import FeatureConfig, PreprocessConfig
 
 _SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 0.01)
@@ -162,6 +162,5 @@ def get_detector(cfg: FeatureConfig | str, **params) -> Detector:
         try:
             cfg = FeatureConfig(detector=cfg, **params)
         except ValidationError as err:
-            first = err.errors()[0]
-            raise ConfigError(first["msg"], source=f"detector {cfg} {'.'.join(map(str, first['loc']))}".strip()) from err
+            raise ConfigError(validation_problems(err, unnamed="features"), source=f"detector {cfg}") from err
     return Detector(cfg)

@@ -8,7 +8,7 @@ from typing import Any
 
 from lidarkit.bench.datasets import dataset_options, dataset_path
 from lidarkit.bench.jobs import canonical_json
-from lidarkit.errors import ConfigError
+from lidarkit.errors import ConfigError, validation_problems
 
 _CACHE: OrderedDict[str, Any] = OrderedDict()
 _CACHE_SIZE = 4
@@ -67,5 +67,5 @@ def options_model(model: type, options: dict[str, Any], task: str) -> Any:
     try:
         return model(**options)
     except ValidationError as err:
-        problems = "; ".join(f"{'.'.join(map(str, e['loc'])) or '?'}: {e['msg']}" for e in err.errors())
+        problems = validation_problems(err)
         raise ConfigError(f"{problems} (options of task {task!r}: {', '.join(model.model_fields)})", source="options") from None

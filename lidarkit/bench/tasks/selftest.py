@@ -16,7 +16,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from lidarkit.bench.jobs import Job
 from lidarkit.bench.tasks import Metric, Task, TaskOutput
-from lidarkit.errors import ConfigError
+from lidarkit.errors import ConfigError, validation_problems
 
 log = logging.getLogger(__name__)
 
@@ -61,7 +61,7 @@ def selftest_config(method: str, **params: Any) -> _Params:
         return model(**params)
     except ValidationError as err:
         known = ", ".join(model.model_fields)
-        problems = "; ".join(f"{'.'.join(map(str, e['loc'])) or '?'}: {e['msg']}" for e in err.errors())
+        problems = validation_problems(err)
         raise ConfigError(f"{problems} (params of {method!r}: {known})", source=f"method {method}") from None
 
 
