@@ -1,0 +1,87 @@
+"""Inputs of an odometry run: dataset specs and frame selections."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lidarkit.errors import ConfigError, DataError
+from lidarkit.io.base import ScanSequence
+
+FrameSelection = slice | range | Sequence[int] | np.ndarray | str | None
+
+
+def open_sequence(spec: str | os.PathLike | ScanSequence) -> ScanSequence:
+    """A scan sequence from a spec, or the sequence itself.
+
+    Specs: ``sim:SCENE?key=value&...`` (the simulator, see :func:`lidarkit.sim.lidar.open_sim`);
+    ``KIND:PATH[?key=value&...]`` with KIND a :func:`lidarkit.io.available_datasets` reader
+    (e.g. ``kitti:/data/kitti?sequence=05``); a plain folder path: a KITTI sequence / odometry root when it
+    holds ``velodyne/`` or ``sequences/``, otherwise a folder of scan files.
+    """
+    if not isinstance(spec, (str, os.PathLike)):
+        if isinstance(spec, ScanSequence):
+            return spec
+        raise ConfigError(f"expected a ScanSequence or a dataset spec, got {type(spec).__name__}", source="dataset")
+    from lidarkit import io as lio
+
+    text = os.fspath(spec)
+    if text.startswith("sim:"):
+        from lidarkit.sim.lidar import open_sim
+
+        return open_sim(text)
+    kind, sep, rest = text.partition(":")
+    if sep and kind in lio.available_datasets() and len(kind) > 1:
+        path, _, query = rest.partition("?")
+        from lidarkit.params import parse_kv
+
+        return lio.open_dataset(kind, path, **parse_kv(query, option=f"{kind} dataset option"))
+    path = Path(text)
+    if not path.exists():
+        raise DataError("dataset not found (a folder, KIND:PATH or sim:SCENE?...)", source=text)
+    if (path / "velodyne").is_dir() or (path / "sequences").is_dir():
+        return lio.open_dataset("kitti", path)
+    return lio.open_dataset("folder", path)
+
+
+def parse_frames(frames: FrameSelection, n_frames: int) -> np.ndarray:
+    """Dataset indices selected by ``frames``: None (all), a slice/range, an index list or ``"a:b[:step]"``."""
+    if frames is None:
+        return np.arange(n_frames)
+    if isinstance(frames, str):
+        parts = frames.split(":")
+        if len(parts) not in (2, 3):
+            raise ConfigError("expected START:STOP or START:STOP:STEP (each may be empty)", source=f"frames {frames!r}")
+        try:
+            frames = slice(*(int(p) if p.strip() else None for p in parts))
+        except ValueError:
+            raise ConfigError("frame bounds must be integers", source=f"frames {frames!r}") from None
+    if isinstance(frames, slice):
+        if frames.step == 0:
+            raise ConfigError("the step of a frame slice must not be zero", source=f"frames {frames_repr(frames, np.arange(0))!r}")
+        return np.arange(n_frames)[frames]
+    idx = np.asarray(list(frames) if isinstance(frames, range) else frames)
+    if idx.ndim != 1 or (idx.size and not np.issubdtype(idx.dtype, np.integer)):
+        raise ConfigError("frame indices must be a 1-D list of integers", source="frames")
+    idx = idx.astype(np.int64)
+    if idx.size and (idx.min() < 0 or idx.max() >= n_frames):
+        raise ConfigError(f"frame indices must lie in 0..{n_frames - 1}", source="frames")
+    if idx.size > 1 and not (np.diff(idx) > 0).all():
+        raise ConfigError("frame indices must be strictly increasing", source="frames")
+    return idx
+
+
+def frames_repr(frames: FrameSelection, indices: np.ndarray) -> Any:
+    if frames is None:
+        return "all"
+    if isinstance(frames, str):
+        return frames
+    if isinstance(frames, slice):
+        return f"{'' if frames.start is None else frames.start}:{'' if frames.stop is None else frames.stop}" + (
+            "" if frames.step is None else f":{frames.step}"
+        )
+    return [int(i) for i in indices]

@@ -1,0 +1,64 @@
+"""The run folder of an odometry run: poses (KITTI + TUM), config, metrics, timing and plots."""
+
+from __future__ import annotations
+
+import datetime as _dt
+import os
+import platform
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lidarkit import atomic
+from lidarkit.odometry.metrics import paired
+from lidarkit.odometry.result import OdometryResult
+
+
+def write_run(result: OdometryResult, out_dir: str | os.PathLike) -> Path:
+    """Write the run folder: poses_kitti.txt, poses_tum.txt, config.yaml, metrics.json, timing.csv, and with
+    ground truth ground_truth_kitti.txt, trajectory.png and ape.png; every file atomically."""
+    import json
+
+    import yaml
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    traj = result.trajectory
+    traj.to_kitti(out / "poses_kitti.txt")
+    tum = traj if traj.timestamps_s is not None else traj.with_timestamps(np.arange(len(traj), dtype=np.float64))
+    tum.to_tum(out / "poses_tum.txt")
+    if result.ground_truth is not None:
+        result.ground_truth.to_kitti(out / "ground_truth_kitti.txt")
+    from lidarkit import __version__
+
+    config = dict(result.config)
+    config["lidarkit_version"] = __version__
+    config["created_utc"] = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    config["machine"] = f"{platform.node()} ({platform.machine()}, {os.cpu_count()} cpus, Python {platform.python_version()})"
+    atomic.write_text(out / "config.yaml", yaml.safe_dump(config, sort_keys=False))
+    atomic.write_text(out / "metrics.json", json.dumps(result.metrics, indent=2, default=_json_default) + "\n")
+    atomic.write_text(out / "timing.csv", result.stats.to_csv())
+    _write_plots(result, out)
+    return out
+
+
+def _json_default(obj: Any) -> Any:
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, (np.floating, np.integer, np.bool_)):
+        return obj.item()
+    return str(obj)
+
+
+def _write_plots(result: OdometryResult, out: Path) -> None:
+    """``trajectory.png`` (top view, estimate vs ground truth) and ``ape.png`` (error over time), through
+    ``lidarkit.eval.plots``; only when there is ground truth to compare with."""
+    if result.ground_truth is None or len(result.frames) < 2:
+        return
+    from lidarkit import eval as leval
+    from lidarkit.eval import plots
+
+    ref, est = paired(result.ground_truth, result.trajectory)
+    plots.plot_trajectories(ref.with_name("ground truth"), est, out / "trajectory.png", title=result.trajectory.name)
+    plots.plot_errors(leval.ape(ref, est, align="none", relation="translation"), out / "ape.png")
