@@ -18,7 +18,7 @@ EXECUTOR_HELP = "serial | process (local process pool sized to the machine) | da
 def progress_bar() -> Progress:
     """Rich progress bar with ETA on stderr (results go to stdout)."""
     return Progress(
-        TextColumn("[bold]{task.description}"),
+        TextColumn("{task.description}", style="bold", markup=False),
         BarColumn(),
         MofNCompleteColumn(),
         TextColumn("{task.fields[failed]} failed"),
@@ -31,7 +31,8 @@ def progress_bar() -> Progress:
 
 
 def run_with_progress(suite, out: Path, *, executor: str, workers: int | None, address: str | None, force: bool):
-    """Run ``suite`` into ``out`` showing a progress bar; KeyboardInterrupt says how to resume and exits 130."""
+    """Run ``suite`` into ``out`` showing a progress bar; Ctrl-C / SIGTERM say how to resume and exit 130 / 143."""
+    from lidarkit.lifetime import Interrupted
     from lidarkit.bench.runner import run_suite
 
     err = stderr()
@@ -56,10 +57,12 @@ def run_with_progress(suite, out: Path, *, executor: str, workers: int | None, a
         try:
             return run_suite(suite, out, executor=executor, workers=workers, address=address, force=force,
                              on_start=on_start, on_result=on_result)
-        except KeyboardInterrupt:
+        except (KeyboardInterrupt, Interrupted) as stop:
             progress.stop()
-            err.print(f"interrupted: finished results are kept in {out}/jobs; run the same command again to resume")
-            raise typer.Exit(130) from None
+            what = f"by {stop}" if isinstance(stop, Interrupted) else "by SIGINT"
+            err.print(f"interrupted {what}: finished results are kept in {out}/jobs; run the same command again to resume",
+                      soft_wrap=True)
+            raise typer.Exit(getattr(stop, "exit_code", 130)) from None
 
 
 def print_run_summary(summary) -> None:
@@ -110,8 +113,11 @@ def bench(
     from lidarkit.bench.report import build_report
     from lidarkit.bench.suite import load_suite
 
+    from lidarkit.atomic import check_target
+
     suite = load_suite(suite_file)
     out = out or Path("results") / suite_file.stem
+    check_target(out, "folder")
     if dry_run:
         from lidarkit.bench.results import is_finished
 

@@ -33,8 +33,10 @@ def odometry(
     strict: bool = typer.Option(False, "--strict", help="Fail on the first frame whose registration does not converge (default: warn, use constant velocity)."),
 ) -> None:
     """Odometry of one ICP variant over a scan sequence, scored against its ground truth when it has one."""
+    from lidarkit.atomic import check_target
     from lidarkit.odometry import run
 
+    check_target(out, "folder")
     result = run(data, method, params=parse_params(param), frames=frames, out_dir=out, progress=progress, strict=strict)
     m = result.metrics
     table = Table(title=result.trajectory.name, show_header=True)
