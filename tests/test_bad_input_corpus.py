@@ -217,3 +217,48 @@ def test_markup_in_a_bad_file_name_in_a_table(tmp_path, gt_file, capsys):
     code, out, err = run_cli(["eval", gt_file, named], capsys)
     assert code == 0, err
     assert "est[v2][bold red]" in out
+
+
+# ---------------------------------------------------------------- suites (Found 5: silent acceptance)
+
+SUITE_OK = """\
+name: s
+seeds: [0, 1]
+experiments:
+  - name: a
+    task: selftest
+    dataset: {kind: synthetic}
+    methods: [random_walk]
+"""
+
+
+@pytest.mark.parametrize("text, line, reason", [
+    (SUITE_OK.replace("name: s\n", "name: s\nname: t\n"), 2, "duplicate key 'name' (first on line 1)"),
+    (SUITE_OK.replace("    task: selftest\n", "    task: selftest\n    task: selftest\n"), 6, "duplicate key 'task'"),
+    (SUITE_OK.replace("seeds: [0, 1]", "seeds: [0, 1, 1]"), 2, "duplicate seeds [1]"),
+    (SUITE_OK.replace("methods: [random_walk]", "methods: [random_walk, random_walk]"), 7, "duplicate method 'random_walk'"),
+    (SUITE_OK + SUITE_OK[SUITE_OK.index("  - name: a"):], 8, "duplicate experiment name 'a'"),
+    (SUITE_OK.replace("methods: [random_walk]", "methods: [{name: random_walk, grid: {steps: [5, 5]}}]"), 7,
+     "grid 'steps' lists a value twice"),
+    (SUITE_OK.replace("seeds: [0, 1]", "seeds: [-1]"), 2, "seeds must be >= 0"),
+])
+def test_suite_duplicates_are_refused_with_file_and_line(tmp_path, capsys, text, line, reason):
+    path = tmp_path / "suite.yaml"
+    path.write_text(text)
+    code, _, err = run_cli(["bench", path, "--dry-run"], capsys)
+    assert_one_line_error(code, err, "suite.yaml", f"line {line}", reason)
+
+
+def test_a_huge_grid_is_refused_instantly_with_its_count(tmp_path, capsys):
+    import time
+
+    path = tmp_path / "suite.yaml"
+    grid = "{noise_m: [" + ", ".join(str(i / 1000) for i in range(1000)) + "], steps: [" + ", ".join(str(i) for i in range(2, 102)) + "]}"
+    path.write_text(SUITE_OK.replace("methods: [random_walk]", f"methods: [{{name: random_walk, grid: {grid}}}]").replace(
+        "seeds: [0, 1]", "seeds: 10"))
+    t0 = time.perf_counter()
+    code, _, err = run_cli(["bench", path, "--dry-run"], capsys)
+    assert time.perf_counter() - t0 < 5.0
+    assert_one_line_error(code, err, "suite.yaml", "1,000,000 jobs", "limit of 100,000", "--max-jobs")
+    code, _, err = run_cli(["bench", path, "--dry-run", "--max-jobs", "999"], capsys)
+    assert_one_line_error(code, err, "1,000,000 jobs", "limit of 999")

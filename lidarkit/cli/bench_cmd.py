@@ -108,6 +108,7 @@ def bench(
     force: bool = typer.Option(False, "--force", help="Rerun jobs that already have a result."),
     report: bool = typer.Option(True, "--report/--no-report", help="Write the report when the run ends."),
     dry_run: bool = typer.Option(False, "--dry-run", help="Validate and list the jobs, run nothing."),
+    max_jobs: int = typer.Option(100_000, "--max-jobs", min=1, help="Refuse a suite that expands to more jobs."),
 ) -> None:
     """Run a benchmark suite: validate it, expand it into jobs, run the unfinished ones, write one JSON per job."""
     from lidarkit.bench.report import build_report
@@ -115,7 +116,7 @@ def bench(
 
     from lidarkit.atomic import check_target
 
-    suite = load_suite(suite_file)
+    suite = load_suite(suite_file, max_jobs=max_jobs)
     out = out or Path("results") / suite_file.stem
     check_target(out, "folder")
     if dry_run:
