@@ -16,12 +16,23 @@ from lidarkit.errors import DataError
 ORTHONORMAL_TOL = 1e-4
 
 
+MAX_ABS_COORDINATE_M = 1e7
+"""Largest coordinate magnitude accepted (10,000 km: covers UTM northings). Beyond it a cloud is garbage (a text file
+read as floats, a unit error) and the backends (Open3D voxel grids, KD-trees) fail with internal errors."""
+
+
 def as_points(points_xyz: np.ndarray, name: str = "points", min_points: int = 0) -> np.ndarray:
-    """Validate an ``(N, 3)`` finite point array and return it as float64."""
+    """Validate an ``(N, 3)`` real, finite point array within ``MAX_ABS_COORDINATE_M`` and return it as float64.
+
+    This is the boundary before every backend (Open3D, kiss-icp, small_gicp, scipy): nothing they would reject
+    with an internal error, or accept silently (a complex array losing its imaginary part), gets past it.
+    """
     arr = np.asarray(points_xyz)
     if arr.ndim != 2 or arr.shape[1] != 3:
         raise DataError(f"expected an (N, 3) point array, got shape {arr.shape}", source=name)
-    if not np.issubdtype(arr.dtype, np.number):
+    if np.issubdtype(arr.dtype, np.complexfloating):
+        raise DataError(f"expected real coordinates, got a complex array ({arr.dtype})", source=name)
+    if not np.issubdtype(arr.dtype, np.number) or arr.dtype == np.bool_:
         raise DataError(f"expected a numeric point array, got dtype {arr.dtype}", source=name)
     arr = arr.astype(np.float64, copy=False)
     if len(arr) < min_points:
@@ -29,7 +40,20 @@ def as_points(points_xyz: np.ndarray, name: str = "points", min_points: int = 0)
     if not np.isfinite(arr).all():
         bad = int((~np.isfinite(arr).all(axis=1)).sum())
         raise DataError(f"{bad} of {len(arr)} points are NaN or infinite", source=name)
+    check_magnitude(arr, name)
     return arr
+
+
+def check_magnitude(points_xyz: np.ndarray, source: str, location: str | None = None) -> None:
+    """DataError if any finite coordinate exceeds ``MAX_ABS_COORDINATE_M`` in magnitude (names the first point)."""
+    if len(points_xyz) == 0:
+        return
+    big = np.abs(points_xyz).max(axis=1) > MAX_ABS_COORDINATE_M
+    if big.any():
+        first = int(np.argmax(big))
+        raise DataError(f"{int(big.sum())} of {len(big)} points have a coordinate beyond {MAX_ABS_COORDINATE_M:g} m "
+                        f"(first: point {first}, {np.abs(points_xyz[first]).max():.3g} m): not a metric point cloud",
+                        source=source, location=location)
 
 
 def make_se3(rotation: np.ndarray | None = None, translation: np.ndarray | None = None) -> np.ndarray:

@@ -262,3 +262,95 @@ def test_a_huge_grid_is_refused_instantly_with_its_count(tmp_path, capsys):
     assert_one_line_error(code, err, "suite.yaml", "1,000,000 jobs", "limit of 100,000", "--max-jobs")
     code, _, err = run_cli(["bench", path, "--dry-run", "--max-jobs", "999"], capsys)
     assert_one_line_error(code, err, "1,000,000 jobs", "limit of 999")
+
+
+# ---------------------------------------------------------------- backend boundaries (Found 2, Found 5 overlap)
+
+def _pcd_ascii(n_declared: int, n_body: int) -> str:
+    rng = np.random.default_rng(0)
+    body = "\n".join(" ".join(f"{v:.3f}" for v in row) for row in rng.uniform(-5, 5, (n_body, 3)))
+    return (f"# .PCD v0.7\nVERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH {n_declared}\nHEIGHT 1\n"
+            f"VIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n_declared}\nDATA ascii\n{body}\n")
+
+
+def _pcd_binary(n_declared: int, n_body: int) -> bytes:
+    header = (f"VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH {n_declared}\nHEIGHT 1\n"
+              f"VIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n_declared}\nDATA binary\n").encode()
+    return header + np.random.default_rng(0).uniform(-5, 5, (n_body, 3)).astype("<f4").tobytes()
+
+
+def _bad_scan(tmp_path: Path, kind: str) -> tuple[Path, str]:
+    """(file, expected reason) for each bad scan of the corpus."""
+    if kind == "text_as_bin":
+        path = tmp_path / "notes.bin"
+        path.write_bytes(b"this is a text file renamed .bin, not a KITTI scan!!" * 64)  # floats near 1e31
+        return path, "not a metric point cloud"
+    if kind == "scaled_1e300":
+        path = tmp_path / "huge.npy"
+        np.save(path, np.load(PAIR / "000094.npy")[:, :3].astype(np.float64) * 1e300)
+        return path, "beyond 1e+07 m"
+    if kind == "complex":
+        path = tmp_path / "complex.npy"
+        np.save(path, np.load(PAIR / "000094.npy")[:100, :3].astype(np.complex128))
+        return path, "complex128"
+    if kind == "pcd_ascii_short":
+        path = tmp_path / "short.pcd"
+        path.write_text(_pcd_ascii(200, 190))
+        return path, "declares 200 points but the ascii body holds 190"
+    if kind == "pcd_binary_short":
+        path = tmp_path / "short_bin.pcd"
+        path.write_bytes(_pcd_binary(200, 190))
+        return path, "declares 200 points"
+    raise AssertionError(kind)
+
+
+@pytest.mark.parametrize("kind", ["text_as_bin", "scaled_1e300", "complex", "pcd_ascii_short", "pcd_binary_short"])
+def test_bad_scan_never_reaches_a_backend(tmp_path, capsys, kind):
+    bad, reason = _bad_scan(tmp_path, kind)
+    out = tmp_path / "run"
+    code, _, err = run_cli(["icp", bad, PAIR / "000095.npy", "--method", "open3d_gicp", "--out", out], capsys)
+    assert_one_line_error(code, err, bad.name, reason)
+    assert not out.exists()
+
+
+def test_complex_and_huge_arrays_are_refused_by_align():
+    from lidarkit.errors import DataError
+    from lidarkit.registration import get_icp
+
+    cloud = np.load(PAIR / "000094.npy")[:2000, :3].astype(np.float64)
+    with pytest.raises(DataError, match="source cloud: expected real coordinates, got a complex array"):
+        get_icp("vanilla").align(cloud.astype(np.complex128), cloud)
+    with pytest.raises(DataError, match="target cloud: .*beyond 1e\\+07 m"):
+        get_icp("open3d_gicp").align(cloud, cloud * 1e300)
+
+
+@pytest.mark.parametrize("method", ["vanilla", "kiss", "open3d_gicp"])
+def test_pair_without_initial_overlap_is_flagged(method):
+    from lidarkit.registration import get_icp
+
+    scan = np.load(PAIR / "000094.npy")[:, :3].astype(np.float64)
+    far = scan + np.array([5000.0, 0.0, 0.0])
+    result = get_icp(method).align(far, scan)
+    assert not result.converged
+    assert "no initial overlap" in result.reason and "pass init_T" in result.reason
+    if method == "kiss":
+        return  # kiss crops the source by range from its own origin: the shifted copy has no point in range
+    T = np.eye(4)
+    T[0, 3] = -5000.0
+    good = get_icp(method).align(far, scan, init_T=T)  # the same pair with a guess: aligned
+    assert good.converged and abs(good.T_target_source[0, 3] + 5000.0) < 0.5
+
+
+def test_backend_exception_becomes_a_registration_error():
+    from lidarkit.errors import RegistrationError
+    from lidarkit.registration.vanilla import VanillaICP
+
+    class Broken(VanillaICP):
+        name = "broken"
+
+        def _align(self, source_xyz, target_xyz, init_T):
+            raise RuntimeError("[Open3D Error] (ShapeUtil.cpp:195) shape mismatch")
+
+    cloud = np.load(PAIR / "000094.npy")[:500, :3]
+    with pytest.raises(RegistrationError, match=r"broken \(500 source / 500 target points\): the broken backend failed.*ShapeUtil"):
+        Broken().align(cloud, cloud)

@@ -129,7 +129,7 @@ def test_corrupt_files(tmp_path, copy_of):
     pcd = copy_of(shared_path("lidar_pairs", "251370668.pcd"))
     data = pcd.read_bytes()
     pcd.write_bytes(data[: len(data) // 2])
-    with pytest.raises(DataError, match=r"251370668\.pcd \(frame 0\): no points read"):
+    with pytest.raises(DataError, match=r"251370668\.pcd \(frame 0\): the header declares 69088 points .* holds 552610 bytes"):
         ScanFolder(pcd.parent, suffixes=(".pcd",)).read_scan(0)
     folder = tmp_path / "bins"
     folder.mkdir()

@@ -67,7 +67,12 @@ def test_open3d_zero_fitness_is_a_failure():
     rng = np.random.default_rng(4)
     target = structured_cloud(rng, n=3000)
     far = target + [1000.0, 0.0, 0.0]
-    res = get_icp("open3d_point_to_point", min_fitness=0.0, min_correspondences=3).align(far, target)
+    icp = get_icp("open3d_point_to_point", min_fitness=0.0, min_correspondences=3)
+    res = icp.align(far, target)  # flagged before Open3D runs: the boxes are 1 km apart
+    assert not res.converged and res.fitness == 0.0 and "no initial overlap" in res.reason
+    from lidarkit.registration.base import accept
+
+    res = accept(icp._align(far, target, np.eye(4)), icp.config)  # Open3D's own zero-fitness result is a failure too
     assert not res.converged and res.fitness == 0.0 and "fitness" in res.reason
 
 

@@ -63,6 +63,9 @@ def finite_points(
         intensity = None if intensity is None else intensity[ok]
     if len(points_xyz) == 0:
         raise DataError("scan has no finite points", source=source, location=where)
+    from lidarkit.geometry import check_magnitude
+
+    check_magnitude(points_xyz, str(source), where)
     return points_xyz, intensity
 
 
@@ -104,7 +107,8 @@ def read_npy_scan(
         data = np.load(path, allow_pickle=False)
     except (OSError, ValueError) as err:
         raise DataError(f"not a readable .npy array ({err})", source=path, location=f"frame {frame}") from err
-    if data.ndim != 2 or data.shape[1] not in (3, 4) or not np.issubdtype(data.dtype, np.number):
+    if data.ndim != 2 or data.shape[1] not in (3, 4) or not np.issubdtype(data.dtype, np.number) \
+            or np.issubdtype(data.dtype, np.complexfloating) or data.dtype == np.bool_:
         raise DataError(
             f"expected a numeric (N, 3) or (N, 4) array, got shape {data.shape} dtype {data.dtype}",
             source=path,
@@ -126,6 +130,8 @@ def read_open3d_scan(
     """
     path = Path(path)
     _require_file(path, frame)
+    if path.suffix.lower() == ".pcd":
+        check_pcd_counts(path, frame)
     import open3d as o3d  # slow import: only when a pcd/ply is read
 
     try:
@@ -142,6 +148,55 @@ def read_open3d_scan(
             break
     points, intensity = finite_points(points, intensity, source=path, frame=frame, drop_nonfinite=drop_nonfinite)
     return Scan(points, intensity, None, timestamp_s, frame, str(path))
+
+
+_PCD_HEADER_KEYS = ("VERSION", "FIELDS", "SIZE", "TYPE", "COUNT", "WIDTH", "HEIGHT", "VIEWPOINT", "POINTS", "DATA")
+
+
+def check_pcd_counts(path: Path, frame: int | None = None) -> None:
+    """Check a ``.pcd`` body against its header before Open3D reads it: Open3D fills a short body with zeros (or
+    fails deep inside), so a header declaring more points than the body holds is a DataError here."""
+    where = None if frame is None else f"frame {frame}"
+    with open(path, "rb") as fh:
+        header: dict[str, list[str]] = {}
+        offset = 0
+        for line_no in range(1, 64):
+            raw = fh.readline()
+            if not raw:
+                raise DataError("truncated .pcd header (no DATA line)", source=path, location=where)
+            offset += len(raw)
+            text = raw.decode("ascii", errors="replace").strip()
+            if not text or text.startswith("#"):
+                continue
+            key, *values = text.split()
+            header[key.upper()] = values
+            if key.upper() == "DATA":
+                break
+        else:
+            raise DataError("not a .pcd header (no DATA line in the first 64 lines)", source=path, location=where)
+        body = fh.read()
+    try:
+        n_points = int(header["POINTS"][0]) if "POINTS" in header else int(header["WIDTH"][0]) * int(header.get("HEIGHT", ["1"])[0])
+        sizes = [int(v) for v in header["SIZE"]]
+        counts = [int(v) for v in header.get("COUNT", ["1"] * len(sizes))]
+        data = header["DATA"][0].lower()
+    except (KeyError, IndexError, ValueError) as err:
+        raise DataError(f"malformed .pcd header ({type(err).__name__}: {err})", source=path, location=where) from None
+    if n_points < 0 or len(counts) != len(sizes):
+        raise DataError("malformed .pcd header (negative POINTS or SIZE/COUNT lengths differ)", source=path, location=where)
+    if data == "ascii":
+        held = sum(1 for line in body.splitlines() if line.strip())
+    elif data == "binary":
+        record = sum(s * c for s, c in zip(sizes, counts))
+        held = len(body) // record if record else 0
+        if record and len(body) < n_points * record:
+            raise DataError(f"the header declares {n_points} points ({n_points * record} bytes) but the binary body holds "
+                            f"{len(body)} bytes ({held} points)", source=path, location=where)
+        return
+    else:
+        return  # binary_compressed: Open3D checks the compressed sizes itself
+    if held != n_points:
+        raise DataError(f"the header declares {n_points} points but the ascii body holds {held}", source=path, location=where)
 
 
 def read_point_file(
@@ -162,6 +217,7 @@ def read_point_file(
 
 __all__ = [
     "POINT_FILE_SUFFIXES",
+    "check_pcd_counts",
     "finite_points",
     "read_kitti_bin",
     "read_npy_scan",

@@ -16,7 +16,7 @@ from typing import Any, ClassVar
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from lidarkit.errors import DataError
+from lidarkit.errors import DataError, LidarKitError, RegistrationError
 from lidarkit.geometry import as_points, is_rotation, orthonormalize_se3
 
 #: A result is flagged ``degenerate`` when min/max eigenvalue of the normalised normal matrix is below this
@@ -188,6 +188,31 @@ def check_pair(
     return src, dst, T0
 
 
+NO_OVERLAP_MARGIN = 0.05  # boxes further apart than 5 % of the target's extent (at least 1 m) do not overlap
+
+
+def initial_gap_m(source_xyz: np.ndarray, target_xyz: np.ndarray, T0: np.ndarray) -> float | None:
+    """Distance (m) between the bounding boxes of the source moved by ``T0`` and the target when they do not
+    overlap (beyond a margin); None when they do. ICP from no overlap converges to a meaningless local fit."""
+    moved = source_xyz @ T0[:3, :3].T + T0[:3, 3]
+    lo_s, hi_s = moved.min(axis=0), moved.max(axis=0)
+    lo_t, hi_t = target_xyz.min(axis=0), target_xyz.max(axis=0)
+    margin = max(1.0, NO_OVERLAP_MARGIN * float(np.linalg.norm(hi_t - lo_t)))
+    gap = np.maximum(0.0, np.maximum(lo_s - hi_t, lo_t - hi_s))
+    distance = float(np.linalg.norm(gap))
+    return distance if distance > margin else None
+
+
+def no_overlap_result(T0: np.ndarray, gap_m: float, method: str) -> RegistrationResult:
+    """The flagged result for a pair that starts without overlap (no iteration run)."""
+    return RegistrationResult(
+        T_target_source=T0.copy(), converged=False, iterations=0, rmse_history=(), n_correspondences=0, runtime_s=0.0,
+        fitness=0.0, degeneracy=Degeneracy.unknown("no initial overlap"), method=method,
+        reason=f"no initial overlap: the source (moved by the initial guess) is {gap_m:.1f} m from the target's "
+               "bounding box; pass init_T",
+    )
+
+
 def accept(result: RegistrationResult, config: RegistrationConfig) -> RegistrationResult:
     """Apply the config's acceptance gate: too few correspondences or too low a fitness -> not converged."""
     if not result.converged:
@@ -228,8 +253,17 @@ class Registration:
     ) -> RegistrationResult:
         """Estimate ``T_target_source`` for ``(N, 3)`` source and ``(M, 3)`` target clouds."""
         src, dst, T0 = check_pair(source_xyz, target_xyz, init_T)
+        gap = initial_gap_m(src, dst, T0)
+        if gap is not None:
+            return no_overlap_result(T0, gap, self.name)
         start = time.perf_counter()
-        result = self._align(src, dst, T0)
+        try:
+            result = self._align(src, dst, T0)
+        except LidarKitError:
+            raise
+        except (RuntimeError, ValueError, MemoryError, IndexError, TypeError) as err:  # a backend's own refusal
+            raise RegistrationError(f"the {self.name} backend failed on this pair: {type(err).__name__}: {err}",
+                                    source=f"{self.name} ({len(src)} source / {len(dst)} target points)") from err
         runtime = time.perf_counter() - start
         return dataclasses.replace(accept(result, self._config), runtime_s=runtime, method=self.name)
 
