@@ -354,3 +354,30 @@ def test_backend_exception_becomes_a_registration_error():
     cloud = np.load(PAIR / "000094.npy")[:500, :3]
     with pytest.raises(RegistrationError, match=r"broken \(500 source / 500 target points\): the broken backend failed.*ShapeUtil"):
         Broken().align(cloud, cloud)
+
+
+# ---------------------------------------------------------------- parameter bounds and memory (Found 6)
+
+@pytest.mark.parametrize("args, names", [
+    (["sim", "lidar", "-o", "{tmp}/s", "-p", "speed_mps=inf"], ["speed_mps", "finite"]),
+    (["sim", "lidar", "-o", "{tmp}/s", "-p", "speed_mps=1e6"], ["speed_mps", "less than or equal to 100"]),
+    (["sim", "lidar", "-o", "{tmp}/s", "-p", "frame_rate_hz=1e-9"], ["frame_rate_hz", "greater than or equal to 0.1"]),
+    (["sim", "lidar", "-o", "{tmp}/s", "-p", "n_beams=100000", "-p", "n_azimuths=100000"], ["n_azimuths", "GiB of memory"]),
+    (["sim", "lidar", "-o", "{tmp}/s", "--seed", "-1"], ["seed", "greater than or equal to 0"]),
+    (["odometry", "sim:open?frames=3&speed_mps=1e6", "--no-progress"], ["speed_mps", "less than or equal to 100"]),
+    (["pf", str(FREIBURG), "-n", "1000000000000"], ["--particles", "1,000,000,000,000 particles", "GiB of memory"]),
+    (["pf", str(FREIBURG), "--seed", "-1"], ["--seed", "must be >= 0, got -1"]),
+    (["vo", str(sample_path("kitti_vo", "06")), "--seed", "-1"], ["--seed", "must be >= 0, got -1"]),
+])
+def test_unbounded_parameters_are_refused(tmp_path, capsys, args, names):
+    code, _, err = run_cli([a.replace("{tmp}", str(tmp_path)) for a in args], capsys)
+    assert_one_line_error(code, err, *names)
+    assert not (tmp_path / "s").exists()
+
+
+def test_pf_recorded_without_sensor_readings(tmp_path, capsys):
+    (tmp_path / "world.dat").write_text((FREIBURG / "world.dat").read_text())
+    odometry_only = [line for line in (FREIBURG / "sensor_data.dat").read_text().splitlines() if line.startswith("ODOMETRY")]
+    (tmp_path / "sensor_data.dat").write_text("\n".join(odometry_only[:40]) + "\n")
+    code, _, err = run_cli(["pf", tmp_path, "--recorded"], capsys)
+    assert_one_line_error(code, err, "sensor_data.dat", "--recorded needs SENSOR readings")

@@ -57,7 +57,17 @@ def pf_command(
     from lidarkit.atomic import check_target
 
     check_target(out, "folder")
+    if seed < 0:
+        raise ConfigError(f"must be >= 0, got {seed}", source="--seed")
+    from lidarkit.resources import check_memory
+
+    n_snapshots = len(_steps(snapshots)) + (1000 if gif else 0)
+    # state, weights, resampling copies and per-reading likelihoods (~40 float64 per particle), plus the snapshots
+    check_memory(particles * (320.0 + 24.0 * n_snapshots), f"a filter of {particles:,} particles", "--particles")
     data = open_dataset("landmarks", data_dir)
+    if recorded and getattr(data, "n_readings", 1) == 0:
+        raise ConfigError("--recorded needs SENSOR readings, and this file has none (run without --recorded to "
+                          "simulate readings)", source=getattr(data, "sensor_path", data_dir))
     cfg = PFConfig.make(
         n_particles=particles, likelihood=likelihood, estimator=estimator, resampler=resampler, kernel=kernel,
         ess_threshold=ess_threshold, roughening=roughening, q=_floats(q, 2, "--q"), q_as=q_as,

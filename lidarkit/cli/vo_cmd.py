@@ -57,6 +57,8 @@ def vo_command(
     from lidarkit.atomic import check_target
 
     check_target(out, "folder")
+    if seed is not None and seed < 0:
+        raise ConfigError(f"must be >= 0, got {seed}", source="--seed")
     if max_frames is not None and max_frames < 1:
         raise ConfigError(f"must be >= 1, got {max_frames}", source="--max-frames")
     changes = {

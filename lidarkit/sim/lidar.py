@@ -49,7 +49,7 @@ _INSTANT_FRACTION = {"start": 0.0, "mid": 0.5, "end": 1.0}
 class LidarSimConfig(BaseModel):
     """Everything that defines a simulated sequence; equal configs give bit-identical scans."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
     scene: Literal["street", "open", "ground"] = "street"
     n_frames: int = Field(300, ge=1, description="number of sweeps")
@@ -64,8 +64,8 @@ class LidarSimConfig(BaseModel):
     sensor_height_m: float = Field(1.73, gt=0.0, description="sensor above the ground plane")
     range_noise_std_m: float = Field(0.0, ge=0.0, description="Gaussian noise along each ray")
     # motion
-    frame_rate_hz: float = Field(10.0, gt=0.0)
-    speed_mps: float = Field(10.0, ge=0.0, description="cruise speed")
+    frame_rate_hz: float = Field(10.0, ge=0.1, le=1000.0)
+    speed_mps: float = Field(10.0, ge=0.0, le=100.0, description="cruise speed (at most 100 m/s = 360 km/h)")
     accel_time_s: float = Field(
         2.0, ge=0.0, description="the drive starts at rest and reaches speed_mps after this (smooth ramp); 0: moving from t = 0"
     )
