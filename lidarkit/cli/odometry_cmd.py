@@ -53,7 +53,6 @@ def odometry(
     ),
 ) -> None:
     """Odometry of one ICP variant over a scan sequence, scored against its ground truth when it has one."""
-    from lidarkit.cli.app import stderr
     from lidarkit.odometry import run
 
     result = run(data, method, params=parse_params(param), frames=frames, out_dir=out, progress=progress, strict=strict, name=name)
@@ -98,7 +97,7 @@ def odometry(
             table.add_row("KITTI drift", m.get("kitti_drift_note", "-"))
     else:
         table.add_row("ground truth", "none: no scores")
-    for message in m.get("warnings") or []:
+    for message in m.get("warnings") or []:  # also logged (stderr) by the runner
         table.add_row("[yellow]warning[/]", f"[yellow]{escape(message)}[/]")
     if result.out_dir is not None:
         table.add_row("run folder", str(result.out_dir.resolve()))
@@ -106,5 +105,3 @@ def odometry(
     console.print(table)
     if result.out_dir is not None:
         console.print(f"run folder: {escape(str(result.out_dir.resolve()))}", soft_wrap=True)
-    for message in m.get("warnings") or []:
-        stderr().print(f"warning: {escape(message)}", soft_wrap=True)
