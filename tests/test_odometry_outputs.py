@@ -112,6 +112,22 @@ def test_deskew_off_or_not_offered_is_stated_without_a_warning(exported, tmp_pat
     assert "does not deskew" in scan_to_scan.metrics["effective"]["deskew"]["reason"]
 
 
+def test_what_the_reader_reports_applying_is_recorded_and_printed(exported, tmp_path, capsys):
+    class CorrectedKitti(KittiOdometry):  # a reader that reports a correction it applied (as KITTI's angle fix)
+        @property
+        def reader_options(self):
+            return {"vertical_correction": "auto", "vertical_correction_applied": True, "vertical_correction_deg": 0.205}
+
+    result = run(CorrectedKitti(exported), "kiss", frames="0:3", out_dir=tmp_path / "run")
+    effective = result.metrics["effective"]
+    assert effective["corrections"] == {"vertical_correction": "auto", "vertical_correction_applied": True, "vertical_correction_deg": 0.205}
+    assert effective["reader"]["point_times_dir"] == str(exported / "point_times")
+    assert effective["ground_truth_instant"] == "not stated by the reader" and effective["estimate_instant"] == "end"
+    assert "vertical_correction_deg: 0.205" in (tmp_path / "run" / "config.yaml").read_text()
+    sim = run("sim:street?frames=3&beams=8&azimuths=90", "kiss").metrics["effective"]
+    assert (sim["ground_truth_instant"], sim["estimate_instant"]) == ("end", "end")  # deskewed to the sweep end, scored there
+
+
 # ---- alignment of every score ---------------------------------------------------------------------------------
 def _yawed_first_pose(seq: Path, yaw_deg: float) -> None:
     """Rotate the ground truth of frame 0 about z: anchoring at the first pose turns the whole reference."""

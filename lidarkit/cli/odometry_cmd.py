@@ -65,8 +65,8 @@ def odometry(
     table.add_row("frame rate (Hz)", f"{m['fps']:.2f}")
     table.add_row("registration time mean (ms)", f"{1e3 * m['register_time_s']['mean']:.1f}")
     table.add_row("deskew", _deskew_text(effective.get("deskew")))
-    for key, value in (effective.get("corrections") or {}).items():
-        table.add_row(f"reader: {key}", str(value))
+    corrections = effective.get("corrections") or {}
+    table.add_row("reader corrections", ", ".join(f"{k}={v}" for k, v in corrections.items()) or "none reported by the reader")
     if m.get("convergence_measured", True):
         table.add_row("not converged / degenerate (variant's verdict)", f"{m['n_not_converged']} / {m['n_degenerate']}")
         table.add_row("constant-velocity fallbacks", str(m.get("n_constant_velocity_fallback", 0)))
@@ -84,6 +84,8 @@ def odometry(
     if "final_error" in m:
         table.add_row("ground truth", str(m["ground_truth"]))
         table.add_row("ground-truth instant / estimate instant", f"{effective.get('ground_truth_instant')} / {effective.get('estimate_instant')}")
+        if m.get("ground_truth_instant_note"):
+            table.add_row("ground-truth instant note", escape(str(m["ground_truth_instant_note"])))
         table.add_row("ground-truth path (m)", f"{m['ground_truth_length_m']:.2f}")
         table.add_row("final error, unaligned (m / deg)", f"{m['final_error']['translation_m']:.3f} / {m['final_error']['rotation_deg']:.3f}")
         if "ape_translation_m" in m:

@@ -61,9 +61,13 @@ def require_point_times(scan: Any, sequence: Any, dataset_name: str, frame: int)
 
 
 def reader_settings(sequence: Any) -> dict[str, Any]:
-    """The reader's public scalar settings as applied (paths, options, corrections), JSON-ready."""
+    """The reader's public scalar settings as applied (paths, options, corrections), JSON-ready: its attributes,
+    then what it reports itself in ``reader_options`` (e.g. a KITTI correction and whether it was applied)."""
     out: dict[str, Any] = {"reader": type(sequence).__name__}
-    for key, value in sorted(vars(sequence).items()) if hasattr(sequence, "__dict__") else ():
+    items = list(sorted(vars(sequence).items())) if hasattr(sequence, "__dict__") else []
+    reported = getattr(sequence, "reader_options", None)
+    items += list(reported.items()) if isinstance(reported, dict) else []
+    for key, value in items:
         if key.startswith("_"):
             continue
         if isinstance(value, (str, int, float, bool)) or value is None:
@@ -117,7 +121,8 @@ def effective_settings(
             deskew["reason"] += f" for {n_times} of {n} frames"
             warnings.append(f"deskew applied to {n_times} of {n} frames only: {point_times_not_found(sequence)}")
     if deskew["applied"]:
-        estimate_instant = "end" if method == "kiss" else "the instant the variant deskews to (not stated)"
+        stated = getattr(registration, "deskew_instant", None)
+        estimate_instant = str(stated) if stated else "end" if method == "kiss" else "the instant the variant deskews to (not stated)"
     else:
         estimate_instant = "none: each scan taken as one snapshot"
     gt_instant = None if reference is None else ground_truth_instant(sequence, reference)
