@@ -13,10 +13,12 @@ import numpy as np
 from lidarkit.errors import ConfigError, DataError, EvaluationError, LidarKitError, RegistrationError
 from lidarkit.geometry import orthonormalize_se3
 from lidarkit.io.base import Scan, ScanSequence
+from lidarkit.odometry.frame_check import FrameChecker, FrameCheckConfig
 from lidarkit.odometry.inputs import FrameSelection, frames_repr, open_sequence, parse_frames
 from lidarkit.odometry.metrics import odometry_metrics
 from lidarkit.odometry.result import FrameStats, OdometryResult
 from lidarkit.odometry.run_folder import write_run
+from lidarkit.odometry.settings import deskew_requested, effective_settings, require_point_times
 from lidarkit.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
@@ -85,6 +87,8 @@ def run(
     progress: bool = False,
     ground_truth: Trajectory | None = None,
     strict: bool = False,
+    name: str | None = None,
+    frame_check: FrameCheckConfig | None = None,
 ) -> OdometryResult:
     """Odometry of ``method`` (a registered name or a configured variant) over ``dataset``.
 
@@ -96,11 +100,20 @@ def run(
     constant-velocity motion (previous relative motion) for the frame's pose and the next guess; the
     frames are counted in ``metrics["n_not_converged"]`` / ``["n_constant_velocity_fallback"]``. With
     ``strict=True`` such a frame raises :class:`RegistrationError` naming it instead.
+
+    What was really applied is recorded in ``config["run"]["effective"]`` and ``metrics["effective"]``
+    (:func:`lidarkit.odometry.settings.effective_settings`): deskew on/off and why, the instants compared,
+    the reader's settings. A deskew the method requests but cannot apply (no per-point times) is a warning
+    in ``metrics["warnings"]``, or with ``strict=True`` a :class:`DataError` naming the first such frame.
+    Every frame also goes through the independent check of :mod:`lidarkit.odometry.frame_check`
+    (``frame_check`` sets its thresholds). ``name`` titles the run (default: the dataset's name, e.g. its folder).
     """
     sequence = open_sequence(dataset)
     registration = _resolve_method(method, params)
-    name = getattr(registration, "name", type(registration).__name__) or type(registration).__name__
+    method_name = getattr(registration, "name", type(registration).__name__) or type(registration).__name__
     dataset_name = str(getattr(sequence, "name", "dataset"))
+    title = name or dataset_name
+    name = method_name
     n_total = len(sequence)
     if n_total == 0:
         raise DataError("the dataset has no scans", source=dataset_name)
@@ -121,8 +134,12 @@ def run(
     n_corr = np.full(n, -1, dtype=np.int64)
     degenerate = np.zeros(n, dtype=bool)
     reasons = [""] * n
+    checker = FrameChecker(n, frame_check)
+    need_times = strict and stateful and bool(deskew_requested(registration))
+    if strict and not stateful and deskew_requested(registration):
+        raise ConfigError(f"deskew requested, but {name} runs scan-to-scan through align(), which takes no per-point times", source=name)
 
-    bar = _progress_bar(n, f"{name} on {dataset_name}") if progress else None
+    bar = _progress_bar(n, f"{name} on {title}") if progress else None
     clock = time.perf_counter
     loop_start = clock()
     try:
@@ -133,6 +150,8 @@ def run(
                 try:
                     scan = _read_nonempty_scan(sequence, int(idx))
                     points = scan.points_xyz
+                    if need_times:
+                        require_point_times(scan, sequence, dataset_name, int(idx))
                     t1 = clock()
                     poses[k] = registration.register_frame(points, scan.point_times_s)
                 except Exception as err:
@@ -140,6 +159,7 @@ def run(
                         raise
                     raise _frame_error(err, dataset_name, int(idx)) from err
                 t2 = clock()
+                checker.add(k, int(idx), points, scan.point_times_s, poses)
                 read_s[k], register_s[k], n_points[k] = t1 - t0, t2 - t1, len(points)
                 if bar is not None:
                     bar[0].advance(bar[1])
@@ -184,6 +204,7 @@ def run(
                 elif degenerate[k]:
                     log.warning("%s frame %d: %s flagged degenerate geometry (%s)", dataset_name, int(idx), name, reasons[k] or "degenerate")
                 t2 = clock()
+                checker.add(k, int(idx), points, scan.point_times_s, poses)
                 previous = points
                 read_s[k], register_s[k], n_points[k] = t1 - t0, t2 - t1, len(points)
                 if bar is not None:
@@ -195,15 +216,22 @@ def run(
 
     timestamps = sequence.timestamps_s
     timestamps = None if timestamps is None else np.asarray(timestamps, dtype=np.float64)[indices]
-    trajectory = Trajectory(poses, timestamps, name=f"{name} on {dataset_name}", meta={"method": name, "dataset": dataset_name})
+    trajectory = Trajectory(poses, timestamps, name=f"{name} on {title}", meta={"method": name, "dataset": dataset_name})
     reference = _reference(sequence, ground_truth, indices, dataset_name)
+    check = checker.finish(poses, timestamps)
+    why = tuple("+".join(w for w, bad in (("motion", m), ("fitness", f)) if bad) for m, f in zip(check.failed_motion, check.failed_fitness))
     stats = FrameStats(
-        indices.copy(), read_s, register_s, n_points, converged, iterations, rmse_m, n_corr, degenerate, tuple(reasons), measured, fallback
+        indices.copy(), read_s, register_s, n_points, converged, iterations, rmse_m, n_corr, degenerate, tuple(reasons), measured, fallback,
+        checker.has_point_times, check.motion_dev_m, check.rotation_dev_deg, check.fitness, check.failed, why, checker.check_s,
     )
+    effective, warnings = effective_settings(sequence, registration, name, stateful, checker.has_point_times, reference)
+    for message in warnings:
+        log.warning("%s: %s", title, message)
     config = {
         "method": name,
         "method_config": config_dict(getattr(registration, "config", None)),
         "run": {
+            "name": title,
             "dataset": dataset_name,
             "dataset_config": config_dict(getattr(sequence, "config", None)) if hasattr(getattr(sequence, "config", None), "model_dump") else None,
             "frames": frames_repr(frames, indices),
@@ -213,6 +241,9 @@ def run(
             "initial_guess": "register_frame (own map and motion model)" if stateful else "constant velocity (previous relative motion)",
             "ground_truth": None if reference is None else reference.name,
             "ground_truth_meta": None if reference is None else _plain(reference.meta),
+            "effective": effective,
+            "warnings": warnings,
+            "frame_check": check.config.describe(),
         },
     }
     result = OdometryResult(trajectory, name, config, indices.copy(), stats, total, reference)
