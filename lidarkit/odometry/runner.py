@@ -101,6 +101,8 @@ def run(
     registration = _resolve_method(method, params)
     name = getattr(registration, "name", type(registration).__name__) or type(registration).__name__
     dataset_name = str(getattr(sequence, "name", "dataset"))
+    if callable(getattr(sequence, "configure_for_method", None)):
+        sequence.configure_for_method(name)  # e.g. KITTI's vertical-angle correction for kiss (recorded below)
     n_total = len(sequence)
     if n_total == 0:
         raise DataError("the dataset has no scans", source=dataset_name)
@@ -206,6 +208,7 @@ def run(
         "run": {
             "dataset": dataset_name,
             "dataset_config": config_dict(getattr(sequence, "config", None)) if hasattr(getattr(sequence, "config", None), "model_dump") else None,
+            "dataset_options": _plain(getattr(sequence, "reader_options", None) or {}),
             "frames": frames_repr(frames, indices),
             "n_frames": n,
             "stateful": stateful,
