@@ -358,7 +358,22 @@ class KittiOdometry:
         if frame != "lidar":
             raise ConfigError(f"unknown pose frame {frame!r}; known: lidar, camera", source="frame")
         Tr = self.T_cam0_velo
-        return gt.transformed(T_left=se3_inverse(Tr), T_right=Tr).with_name(f"{self.name}_gt_lidar")
+        gt = gt.transformed(T_left=se3_inverse(Tr), T_right=Tr).with_name(f"{self.name}_gt_lidar")
+        instant = self._simulated_instant
+        return gt if instant is None else Trajectory(gt.poses_se3, gt.timestamps_s, gt.name, meta={**gt.meta, "pose_instant": instant})
+
+    @cached_property
+    def _simulated_instant(self) -> str | None:
+        """The sweep instant of poses.txt in a folder written by lidarkit's simulator (sim.yaml), else None (unknown)."""
+        if not self.simulated or self.poses_path != self.sequence_dir / "poses.txt":
+            return None
+        import yaml
+
+        try:
+            instant = yaml.safe_load((self.sequence_dir / "sim.yaml").read_text()).get("pose_instant")
+        except (OSError, yaml.YAMLError, AttributeError):
+            return None
+        return instant if instant in ("start", "mid", "end") else None
 
     def relative_pose(self, frame_a: int, frame_b: int, *, frame: str = "lidar") -> np.ndarray:
         """(4, 4) ground-truth motion ``T_a_b`` from KITTI frame ``frame_b`` to ``frame_a`` (e.g. 94 -> 95).

@@ -14,7 +14,9 @@ from lidarkit.errors import ConfigError, DataError, EvaluationError, LidarKitErr
 from lidarkit.geometry import orthonormalize_se3
 from lidarkit.io.base import Scan, ScanSequence
 from lidarkit.odometry.inputs import FrameSelection, frames_repr, open_sequence, parse_frames
+from lidarkit.odometry.instants import estimate_instant, like_with_like
 from lidarkit.odometry.metrics import odometry_metrics
+from lidarkit.odometry.prefetch import DEFAULT_DEPTH, prefetched
 from lidarkit.odometry.result import FrameStats, OdometryResult
 from lidarkit.odometry.run_folder import write_run
 from lidarkit.trajectory import Trajectory
@@ -85,6 +87,7 @@ def run(
     progress: bool = False,
     ground_truth: Trajectory | None = None,
     strict: bool = False,
+    prefetch: int = DEFAULT_DEPTH,
 ) -> OdometryResult:
     """Odometry of ``method`` (a registered name or a configured variant) over ``dataset``.
 
@@ -95,7 +98,9 @@ def run(
     does not converge is logged (warning naming the frame and the reason) and replaced by the
     constant-velocity motion (previous relative motion) for the frame's pose and the next guess; the
     frames are counted in ``metrics["n_not_converged"]`` / ``["n_constant_velocity_fallback"]``. With
-    ``strict=True`` such a frame raises :class:`RegistrationError` naming it instead.
+    ``strict=True`` such a frame raises :class:`RegistrationError` naming it instead. ``prefetch``: scans read
+    ahead in a background thread (0: read inline). Ground truth whose instant of the sweep differs from the
+    estimate's is re-timed with a note or refused (:mod:`lidarkit.odometry.instants`).
     """
     sequence = open_sequence(dataset)
     registration = _resolve_method(method, params)
@@ -127,13 +132,18 @@ def run(
     bar = _progress_bar(n, f"{name} on {dataset_name}") if progress else None
     clock = time.perf_counter
     loop_start = clock()
+    first_scan = None
+    # scans are read in a background thread, at most `prefetch` ahead (0: inline); only the previous scan is kept
+    stream = prefetched(lambda i: _read_nonempty_scan(sequence, i), indices, prefetch)
     try:
         if stateful:
             registration.reset()
-            for k, idx in enumerate(indices):
-                t0 = clock()
+            for k, (idx, scan, read_time, read_error) in enumerate(stream):
+                read_s[k] = read_time
                 try:
-                    scan = _read_nonempty_scan(sequence, int(idx))
+                    if read_error is not None:
+                        raise read_error
+                    first_scan = scan if k == 0 else first_scan
                     points = scan.points_xyz
                     t1 = clock()
                     poses[k] = registration.register_frame(points, scan.point_times_s)
@@ -142,16 +152,18 @@ def run(
                         raise
                     raise _frame_error(err, dataset_name, int(idx)) from err
                 t2 = clock()
-                read_s[k], register_s[k], n_points[k] = t1 - t0, t2 - t1, len(points)
+                register_s[k], n_points[k] = t2 - t1, len(points)
                 if bar is not None:
                     bar[0].advance(bar[1])
         else:
             motion = np.eye(4)
             previous = None
-            for k, idx in enumerate(indices):
-                t0 = clock()
+            for k, (idx, scan, read_time, read_error) in enumerate(stream):
+                read_s[k] = read_time
                 try:
-                    scan = _read_nonempty_scan(sequence, int(idx))
+                    if read_error is not None:
+                        raise read_error
+                    first_scan = scan if k == 0 else first_scan
                     points = scan.points_xyz
                     t1 = clock()
                     if previous is None:
@@ -187,10 +199,11 @@ def run(
                     log.warning("%s frame %d: %s flagged degenerate geometry (%s)", dataset_name, int(idx), name, reasons[k] or "degenerate")
                 t2 = clock()
                 previous = points
-                read_s[k], register_s[k], n_points[k] = t1 - t0, t2 - t1, len(points)
+                register_s[k], n_points[k] = t2 - t1, len(points)
                 if bar is not None:
                     bar[0].advance(bar[1])
     finally:
+        stream.close()  # stops and joins the reading thread, also on error
         if bar is not None:
             bar[0].stop()
     total = clock() - loop_start
@@ -199,6 +212,12 @@ def run(
     timestamps = None if timestamps is None else np.asarray(timestamps, dtype=np.float64)[indices]
     trajectory = Trajectory(poses, timestamps, name=f"{name} on {dataset_name}", meta={"method": name, "dataset": dataset_name})
     reference = _reference(sequence, ground_truth, indices, dataset_name)
+    instant_note = None
+    if reference is not None:  # score like with like: the estimate's and the ground truth's instant of the sweep
+        retimed, instant_note = like_with_like(reference, estimate_instant(registration, first_scan), sequence=sequence,
+                                               own_ground_truth=ground_truth is None, method=name)
+        if instant_note is not None:
+            reference = _reference(sequence, retimed, indices, dataset_name)
     stats = FrameStats(
         indices.copy(), read_s, register_s, n_points, converged, iterations, rmse_m, n_corr, degenerate, tuple(reasons), measured, fallback
     )
@@ -216,10 +235,13 @@ def run(
             "initial_guess": "register_frame (own map and motion model)" if stateful else "constant velocity (previous relative motion)",
             "ground_truth": None if reference is None else reference.name,
             "ground_truth_meta": None if reference is None else _plain(reference.meta),
+            "ground_truth_instant_note": instant_note,
         },
     }
     result = OdometryResult(trajectory, name, config, indices.copy(), stats, total, reference)
     metrics = odometry_metrics(result)
+    if instant_note is not None:
+        metrics["ground_truth_instant_note"] = instant_note
     result = OdometryResult(trajectory, name, config, indices.copy(), stats, total, reference, metrics)
     if out_dir is not None:
         write_run(result, out_dir)
