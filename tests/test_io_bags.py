@@ -135,6 +135,7 @@ def test_missing_extra_is_a_config_error_with_the_pip_line(tmp_path, monkeypatch
     real = importlib.util.find_spec
     monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name.startswith(("ouster", "rosbags")) else real(name, *a))
     (tmp_path / "x.pcap").write_bytes(b"\0" * 64)
+    (tmp_path / "x.json").write_text("{}")
     with pytest.raises(ConfigError, match=r"pip install 'lidarkit\[ouster\]'"):
         open_dataset("ouster", tmp_path / "x.pcap")
     with pytest.raises(ConfigError, match=r"pip install 'lidarkit\[ros\]'"):

@@ -178,7 +178,6 @@ class OusterScans(KissLoaderScans):
     requires = {"ouster.sdk": OUSTER_EXTRA}
 
     def __init__(self, path: str | os.PathLike, meta: str | None = None):
-        require_modules(self.requires, self.kind)
         pcap = Path(path)
         if not pcap.is_file():
             raise DataError("Ouster pcap not found (the ouster reader takes one .pcap file)", source=pcap)
@@ -187,7 +186,7 @@ class OusterScans(KissLoaderScans):
         if meta is None and not list(pcap.parent.glob("*.json")):
             raise DataError("no sensor metadata: an Ouster pcap needs the .json recorded with it (beside it, or meta=PATH)",
                             source=pcap, location="frame 0")
-        super().__init__(pcap, meta=meta)
+        super().__init__(pcap, meta=meta)  # then the ouster-sdk check (ConfigError with the pip line)
 
 
 class NcltScans(KissLoaderScans):
