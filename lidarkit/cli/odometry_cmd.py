@@ -11,9 +11,16 @@ from rich.table import Table
 
 from lidarkit.cli.app import app, parse_params, stdout
 
+def _kinds() -> str:
+    from lidarkit.io import available_datasets
+
+    return ", ".join(available_datasets())
+
+
 DATA_HELP = (
-    "A KITTI sequence folder (or odometry root), a folder of scans, KIND:PATH[?opt=v&...] for any dataset reader "
-    "(e.g. 'kitti:/data/kitti?sequence=05&poses_file=...'), or the simulator: 'sim:street?frames=300&seed=0' "
+    "A KITTI sequence folder (or odometry root), a .bag / .mcap / .pcap file or ROS 2 bag folder (detected), a folder "
+    "of scans, KIND:PATH[?opt=v&...] for any dataset reader (e.g. 'kitti:/data/kitti?sequence=05&poses_file=...', "
+    f"'rosbag:run.bag?topic=/velodyne_points'; kinds: {_kinds()}), or the simulator: 'sim:street?frames=300&seed=0' "
     "(scenes street|open|ground; keys: frames, seed, beams, azimuths, noise, distortion, instant, speed or any "
     "simulator config field)."
 )
