@@ -442,6 +442,7 @@ class SimulatedLidarSequence:
             timestamp_s=float(self.timestamps_s[index]),
             frame=index,
             source=f"{self.name} frame {index}",
+            stamp_instant=cfg.pose_instant,
         )
 
 
