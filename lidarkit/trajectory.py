@@ -11,7 +11,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from lidarkit import atomic
-from lidarkit.errors import DataError
+from lidarkit.errors import DataError, LidarKitError
 from lidarkit.geometry import ORTHONORMAL_TOL, orthonormalize_se3, se3_inverse
 from lidarkit.textfile import read_numeric_table
 
@@ -43,14 +43,16 @@ class Trajectory:
             raise DataError("last row of the pose is not [0, 0, 0, 1]", source=source, location=f"frame {frame}")
         R = poses[:, :3, :3]
         err = np.abs(np.swapaxes(R, 1, 2) @ R - np.eye(3)).max(axis=(1, 2)) if len(poses) else np.zeros(0)
-        bad = np.flatnonzero((err > ORTHONORMAL_TOL) | (np.linalg.det(R) <= 0)) if len(poses) else []
+        det = np.linalg.det(R) if len(poses) else np.zeros(0)
+        bad = np.flatnonzero((err > ORTHONORMAL_TOL) | (det <= 0)) if len(poses) else []
         if len(bad):
-            raise DataError(
-                f"rotation is not orthonormal (max |R^T R - I| = {err[bad[0]]:.2e}); "
-                "use geometry.orthonormalize_se3 if this is rounding",
-                source=source,
-                location=f"frame {int(bad[0])}",
-            )
+            k = int(bad[0])
+            if err[k] <= ORTHONORMAL_TOL:
+                reason = f"rotation is a reflection (det R = {det[k]:.3g}, a proper rotation has det R = +1)"
+            else:
+                reason = (f"rotation is not orthonormal (max |R^T R - I| = {err[k]:.2e}); "
+                          "use geometry.orthonormalize_se3 if this is rounding")
+            raise DataError(reason, source=source, location=f"frame {k}")
         object.__setattr__(self, "poses_se3", poses)
         if self.timestamps_s is not None:
             ts = np.array(self.timestamps_s, dtype=np.float64).reshape(-1)
@@ -153,6 +155,7 @@ class Trajectory:
         rows = read_numeric_table(path, 12)
         poses = np.tile(np.eye(4), (len(rows), 1, 1))
         poses[:, :3, :4] = rows.reshape(-1, 3, 4)
+        times_path = None
         if isinstance(timestamps_s, (str, os.PathLike)):
             times_path = timestamps_s
             timestamps_s = read_numeric_table(times_path, 1)[:, 0]
@@ -163,7 +166,16 @@ class Trajectory:
                 timestamps_s = np.asarray(timestamps_s, dtype=np.float64)
             except (TypeError, ValueError) as err:
                 raise DataError(f"timestamps are not numbers ({err})", source="timestamps_s") from None
-        return cls(poses, timestamps_s, Path(path).stem if name is None else name)
+        try:
+            Trajectory(poses, None, "poses")
+        except DataError as err:  # name the file and its line, not the trajectory and frame
+            raise DataError(err.reason, source=path, location=_file_line(path, err.location)) from None
+        try:
+            return cls(poses, timestamps_s, Path(path).stem if name is None else name)
+        except DataError as err:
+            if times_path is not None and "timestamp" in err.reason:
+                raise DataError(err.reason, source=times_path, location=_file_line(times_path, err.location)) from None
+            raise
 
     @classmethod
     def from_tum(cls, path: str | os.PathLike, name: str | None = None) -> Trajectory:
@@ -237,3 +249,18 @@ class Trajectory:
 
     def copy(self) -> Trajectory:
         return copy.deepcopy(self)
+
+
+def _file_line(path: str | os.PathLike, location: str | None) -> str | None:
+    """``"frame K"`` of a table read by ``read_numeric_table`` -> ``"line L"`` of ``path`` (blank and ``#`` lines
+    skipped as the reader skips them); other locations unchanged."""
+    if not location or not location.startswith("frame "):
+        return location
+    try:
+        k = int(location.split()[1])
+        from lidarkit.textfile import read_lines
+
+        data_lines = [i for i, raw in enumerate(read_lines(path), start=1) if raw.strip() and not raw.strip().startswith("#")]
+        return f"line {data_lines[k]} ({location})"
+    except (ValueError, IndexError, LidarKitError):
+        return location

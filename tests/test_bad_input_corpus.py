@@ -381,3 +381,91 @@ def test_pf_recorded_without_sensor_readings(tmp_path, capsys):
     (tmp_path / "sensor_data.dat").write_text("\n".join(odometry_only[:40]) + "\n")
     code, _, err = run_cli(["pf", tmp_path, "--recorded"], capsys)
     assert_one_line_error(code, err, "sensor_data.dat", "--recorded needs SENSOR readings")
+
+
+# ---------------------------------------------------------------- messages that name the culprit (Found 7)
+
+def _poses_with(tmp_path: Path, gt_file: Path, row: int, R: np.ndarray, name: str = "bad_poses.txt") -> Path:
+    lines = gt_file.read_text().splitlines()
+    values = np.array(lines[row].split(), dtype=float).reshape(3, 4)
+    values[:, :3] = R
+    lines[row] = " ".join(f"{v:.9e}" for v in values.ravel())
+    path = tmp_path / name
+    path.write_text("# a comment line\n" + "\n".join(lines) + "\n")
+    return path
+
+
+def test_non_orthonormal_rotation_names_file_and_line(tmp_path, gt_file, capsys):
+    bad = _poses_with(tmp_path, gt_file, 2, np.diag([1.0, 1.3, 1.0]))
+    code, _, err = run_cli(["eval", gt_file, bad], capsys)
+    assert_one_line_error(code, err, "bad_poses.txt (line 4 (frame 2))", "not orthonormal")
+
+
+def test_reflection_is_called_a_reflection(tmp_path, gt_file, capsys):
+    bad = _poses_with(tmp_path, gt_file, 5, np.diag([1.0, 1.0, -1.0]))
+    code, _, err = run_cli(["eval", gt_file, bad], capsys)
+    assert_one_line_error(code, err, "bad_poses.txt (line 7 (frame 5))", "reflection", "det R = -1")
+
+
+def test_non_monotonic_ref_times_names_the_times_file(tmp_path, gt_file, capsys):
+    times = tmp_path / "ref_times.txt"
+    stamps = np.arange(30) * 0.1
+    stamps[7] = 0.05
+    times.write_text("".join(f"{t:.3f}\n" for t in stamps))
+    code, _, err = run_cli(["eval", gt_file, gt_file, "--ref-times", times], capsys)
+    assert_one_line_error(code, err, "ref_times.txt (line 8 (frame 7))", "not strictly increasing")
+
+
+def test_non_rigid_tr_in_calib_names_calib_and_tr(tmp_path):
+    from lidarkit.errors import DataError
+    from lidarkit.io.kitti import read_kitti_calib as read_calib
+
+    calib = tmp_path / "calib.txt"
+    calib.write_text("P0: 7 0 6 0 0 7 1 0 0 0 1 0\nTr: 2 0 0 0 0 1 0 0 0 0 1 0\n")
+    with pytest.raises(DataError, match=r"calib.txt \(line 2\): Tr \(LiDAR-to-camera\) is not rigid"):
+        read_calib(calib)
+
+
+def test_reversed_frame_selection(capsys):
+    code, _, err = run_cli(["odometry", "sim:open?frames=3", "--frames", "::-1", "--no-progress"], capsys)
+    assert_one_line_error(code, err, "::-1", "reversed frame selection")
+
+
+def test_huge_odometry_in_sensor_data_names_file_and_line(tmp_path, capsys):
+    (tmp_path / "world.dat").write_text((FREIBURG / "world.dat").read_text())
+    lines = (FREIBURG / "sensor_data.dat").read_text().splitlines()
+    lines[4] = "ODOMETRY 1e300 0.1 0.0"
+    (tmp_path / "sensor_data.dat").write_text("\n".join(lines) + "\n")
+    code, _, err = run_cli(["pf", tmp_path, "-n", "20"], capsys)
+    assert_one_line_error(code, err, "sensor_data.dat (line 5)", "1e300")
+
+
+def test_too_few_steps_for_the_mse(tmp_path, capsys):
+    (tmp_path / "world.dat").write_text((FREIBURG / "world.dat").read_text())
+    text, steps = [], 0
+    for line in (FREIBURG / "sensor_data.dat").read_text().splitlines():
+        steps += line.startswith("ODOMETRY")
+        if steps > 3:
+            break
+        text.append(line)
+    (tmp_path / "sensor_data.dat").write_text("\n".join(text) + "\n")
+    code, _, err = run_cli(["pf", tmp_path, "-n", "20"], capsys)
+    assert_one_line_error(code, err, "needs more than 10 steps for the MSE from step 10")
+
+
+def test_zero_focal_length(tmp_path, capsys):
+    calib = tmp_path / "K.txt"
+    calib.write_text("0 0 320 240\n")
+    code, _, err = run_cli(["vo", sample_path("kitti_vo", "06"), "--calib", calib], capsys)
+    assert_one_line_error(code, err, "K.txt", "focal lengths must be > 0 pixels, got fx = 0, fy = 0")
+
+
+def test_bad_vo_timestamps_named_before_the_run(tmp_path, capsys):
+    n = len(list(sample_path("kitti_vo", "06", "image_0").iterdir()))
+    stamps = np.arange(n) * 0.1
+    stamps[3] = 0.05
+    times = tmp_path / "stamps.txt"
+    times.write_text("".join(f"{t:.3f}\n" for t in stamps))
+    code, out, err = run_cli(["vo", sample_path("kitti_vo", "06"), "--timestamps", times], capsys)
+    assert_one_line_error(code, err, "stamps.txt (line 4", "not strictly increasing")
+    assert out == ""  # refused before any frame was processed

@@ -245,8 +245,10 @@ def test_position_mse_hand_computed():
     assert position_mse(ref, est, start=1) == pytest.approx((1 + 4 + 4) / 3)
     assert position_mse(ref, est, start=1, dims=2) == pytest.approx((1 + 4 + 0) / 3)
     assert position_mse(ref, ref) == 0.0
-    with pytest.raises(EvaluationError, match="start must be a frame index in \\[0, 3\\]"):
+    with pytest.raises(EvaluationError, match="needs more than 4 steps for the MSE from step 4; has 4"):
         position_mse(ref, est, start=4)
+    with pytest.raises(EvaluationError, match="start must be a frame index in \\[0, 3\\]"):
+        position_mse(ref, est, start=-1)
     with pytest.raises(ConfigError, match="dims"):
         position_mse(ref, est, dims=1)
     with pytest.raises(EvaluationError, match="differ in length"):

@@ -19,6 +19,9 @@ def position_mse(ref: Trajectory, est: Trajectory, start: int = 0, *, dims: int 
     if dims not in (2, 3):
         raise ConfigError(f"dims must be 2 or 3, got {dims}", source="dims")
     ref, est = paired(ref, est)
+    if int(start) == start and start >= len(ref) >= 0 and start >= 0:
+        raise EvaluationError(f"needs more than {int(start)} steps for the MSE from step {int(start)}; has {len(ref)}",
+                              source=source)
     if int(start) != start or not 0 <= start < len(ref):
         raise EvaluationError(f"start must be a frame index in [0, {len(ref) - 1}], got {start}", source=source)
     diff = est.poses_se3[int(start):, :dims, 3] - ref.poses_se3[int(start):, :dims, 3]

@@ -46,6 +46,8 @@ def read_intrinsics(path: str | os.PathLike) -> np.ndarray:
         K = np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1.0]])
     else:
         raise DataError(f"expected 9 numbers (K), 4 (fx fy cx cy) or KITTI P rows; found {values.size}", source=path)
+    if np.all(np.isfinite(K)) and (K[0, 0] <= 0 or K[1, 1] <= 0):
+        raise DataError(f"focal lengths must be > 0 pixels, got fx = {K[0, 0]:g}, fy = {K[1, 1]:g}", source=path)
     if not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0 or not np.allclose(K[2], [0, 0, 1]):
         raise DataError("not a valid intrinsics matrix [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]", source=path)
     return K

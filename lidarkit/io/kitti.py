@@ -89,6 +89,12 @@ def read_kitti_calib(path: str | os.PathLike) -> dict[str, np.ndarray]:
             if key == "Tr":
                 T = np.eye(4)
                 T[:3, :4] = values.reshape(3, 4)
+                R = T[:3, :3]
+                err = float(np.abs(R.T @ R - np.eye(3)).max())
+                if err > 1e-3 or np.linalg.det(R) <= 0:  # KITTI prints ~9 digits: a rigid Tr is orthonormal to ~1e-6
+                    what = "a reflection (det < 0)" if err <= 1e-3 else f"not a rotation (max |R^T R - I| = {err:.2e})"
+                    raise DataError(f"Tr (LiDAR-to-camera) is not rigid: its 3x3 block is {what}", source=path,
+                                    location=f"line {lineno}")
                 calib[key] = T
             else:
                 calib[key] = values.reshape(3, 4)

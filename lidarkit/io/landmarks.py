@@ -202,7 +202,13 @@ def _parse_float(text: str, path: Path | str | os.PathLike, where: str) -> float
         raise DataError(f"not a number: {text!r}", source=path, location=where) from None
     if not math.isfinite(value):
         raise DataError(f"non-finite value {text!r}", source=path, location=where)
+    if abs(value) > MAX_ABS_VALUE:
+        raise DataError(f"value {text} beyond {MAX_ABS_VALUE:g} in magnitude: not a distance (m) or angle (rad) of "
+                        "this data", source=path, location=where)
     return value
+
+
+MAX_ABS_VALUE = 1e7  # landmark coordinates, odometry, ranges and bearings: metres and radians of a planar robot
 
 
 def _parse_int(text: str, path: Path | str | os.PathLike, where: str) -> int:

@@ -62,6 +62,9 @@ def parse_frames(frames: FrameSelection, n_frames: int) -> np.ndarray:
     if isinstance(frames, slice):
         if frames.step == 0:
             raise ConfigError("the step of a frame slice must not be zero", source=f"frames {frames_repr(frames, np.arange(0))!r}")
+        if frames.step is not None and frames.step < 0:
+            raise ConfigError("reversed frame selection (negative step): odometry runs forward in time; use a "
+                              "positive step", source=f"frames {frames_repr(frames, np.arange(0))!r}")
         return np.arange(n_frames)[frames]
     idx = np.asarray(list(frames) if isinstance(frames, range) else frames)
     if idx.ndim != 1 or (idx.size and not np.issubdtype(idx.dtype, np.integer)):

@@ -42,6 +42,22 @@ def detect_kind(path: Path) -> str:
     return "images"
 
 
+def _check_timestamps(timestamps_s: Any, path: str | os.PathLike) -> None:
+    """A time stamps file is checked before the run (not when the trajectory is built at its end): finite and
+    strictly increasing, errors naming the file and line."""
+    if timestamps_s is None:
+        return
+    from lidarkit.errors import DataError
+    from lidarkit.trajectory import _file_line
+
+    ts = np.asarray(timestamps_s, dtype=np.float64).reshape(-1)
+    steps = np.diff(ts)
+    if len(steps) and not (steps > 0).all():
+        k = int(np.argmax(~(steps > 0))) + 1
+        raise DataError(f"time stamps are not strictly increasing ({ts[k]:.9g} after {ts[k - 1]:.9g})", source=path,
+                        location=_file_line(path, f"frame {k}"))
+
+
 def open_vo_input(path: str | os.PathLike, *, kind: str = "auto", calib: str | os.PathLike | None = None,
                   timestamps: str | os.PathLike | None = None, poses: str | os.PathLike | None = None,
                   poses_format: str = "kitti", focal_factor: float = DEFAULT_FOCAL_FACTOR) -> VOInput:
@@ -74,6 +90,8 @@ def open_vo_input(path: str | os.PathLike, *, kind: str = "auto", calib: str | o
 
         images = ImageFolder(path, timestamps=timestamps, poses=poses, poses_format=poses_format)
         ground_truth = images.ground_truth
+    if timestamps is not None:
+        _check_timestamps(images.timestamps_s, timestamps)
     if calib is not None:
         from lidarkit.io.images import read_intrinsics
 
