@@ -105,7 +105,7 @@ def read_npy_scan(
     _require_file(path, frame)
     try:
         data = np.load(path, allow_pickle=False)
-    except (OSError, ValueError) as err:
+    except Exception as err:  # noqa: BLE001 - a corrupt header raises ValueError, SyntaxError, tokenize.TokenError, ...
         raise DataError(f"not a readable .npy array ({err})", source=path, location=f"frame {frame}") from err
     if data.ndim != 2 or data.shape[1] not in (3, 4) or not np.issubdtype(data.dtype, np.number) \
             or np.issubdtype(data.dtype, np.complexfloating) or data.dtype == np.bool_:
