@@ -29,6 +29,7 @@ def odometry_metrics(result: OdometryResult) -> dict[str, Any]:
         "n_not_converged": result.n_not_converged if result.convergence_measured else None,
         "n_constant_velocity_fallback": result.n_fallback,
         "n_degenerate": int(stats.degenerate.sum()) if result.convergence_measured else None,
+        "n_ground_removal_flagged": sum("too little left after ground removal" in r for r in stats.reason),
         "estimated_length_m": result.trajectory.length_m,
         "n_bad_frames": result.n_bad_frames if stats.check_failed is not None else None,
         "frame_check": frame_check_summary(result),
