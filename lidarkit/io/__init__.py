@@ -21,6 +21,7 @@ _BUILTIN: dict[str, str] = {
     "folder": "lidarkit.io.folder:ScanFolder",
     "tum": "lidarkit.io.tum:TumRGBD",
     "landmarks": "lidarkit.io.landmarks:LandmarkData",
+    "carmen": "lidarkit.io.carmen:CarmenLog",
 }
 _REGISTERED: dict[str, Callable[..., Any]] = {}
 

@@ -85,6 +85,7 @@ def run(
     progress: bool = False,
     ground_truth: Trajectory | None = None,
     strict: bool = False,
+    init: str = "constant_velocity",
 ) -> OdometryResult:
     """Odometry of ``method`` (a registered name or a configured variant) over ``dataset``.
 
@@ -96,6 +97,9 @@ def run(
     constant-velocity motion (previous relative motion) for the frame's pose and the next guess; the
     frames are counted in ``metrics["n_not_converged"]`` / ``["n_constant_velocity_fallback"]``. With
     ``strict=True`` such a frame raises :class:`RegistrationError` naming it instead.
+    ``init`` (stateless variants): the initial guess of each pair, ``"constant_velocity"`` (the previous relative
+    motion) or ``"odometry"`` (the relative motion of the dataset's own ``odometry`` trajectory, e.g. a CARMEN
+    log's wheel odometry; it also replaces a non-converged registration).
     """
     sequence = open_sequence(dataset)
     registration = _resolve_method(method, params)
@@ -108,6 +112,7 @@ def run(
     if len(indices) == 0:
         raise DataError(f"the frame selection {frames!r} selects no scan of {n_total}", source=dataset_name)
     stateful = bool(getattr(registration, "stateful", False))
+    odometry_poses = _odometry_guess(sequence, init, stateful, n_total, dataset_name)
     n = len(indices)
     poses = np.empty((n, 4, 4))
     read_s = np.zeros(n)
@@ -155,6 +160,8 @@ def run(
                     if previous is None:
                         poses[k] = np.eye(4)
                     else:
+                        if odometry_poses is not None:
+                            motion = orthonormalize_se3(np.linalg.solve(odometry_poses[indices[k - 1]], odometry_poses[idx]))
                         result = registration.align(points, previous, init_T=motion)
                         measured[k] = True
                         converged[k] = bool(result.converged)
@@ -178,8 +185,8 @@ def run(
                         raise RegistrationError(f"registration did not converge ({why})", source=dataset_name, location=f"frame {int(idx)}")
                     fallback[k] = True
                     log.warning(
-                        "%s frame %d: %s did not converge (%s); using the constant-velocity motion instead",
-                        dataset_name, int(idx), name, why,
+                        "%s frame %d: %s did not converge (%s); using the %s motion instead",
+                        dataset_name, int(idx), name, why, "odometry" if odometry_poses is not None else "constant-velocity",
                     )
                 elif degenerate[k]:
                     log.warning("%s frame %d: %s flagged degenerate geometry (%s)", dataset_name, int(idx), name, reasons[k] or "degenerate")
@@ -210,7 +217,9 @@ def run(
             "n_frames": n,
             "stateful": stateful,
             "strict": strict,
-            "initial_guess": "register_frame (own map and motion model)" if stateful else "constant velocity (previous relative motion)",
+            "initial_guess": "register_frame (own map and motion model)" if stateful else (
+                "dataset odometry (relative motion)" if odometry_poses is not None else "constant velocity (previous relative motion)"
+            ),
             "ground_truth": None if reference is None else reference.name,
             "ground_truth_meta": None if reference is None else _plain(reference.meta),
         },
@@ -222,6 +231,26 @@ def run(
         write_run(result, out_dir)
         result = OdometryResult(trajectory, name, config, indices.copy(), stats, total, reference, metrics, Path(out_dir))
     return result
+
+
+#: Initial guesses of a stateless variant's pairwise registration (``run(init=...)``).
+INIT_GUESSES = ("constant_velocity", "odometry")
+
+
+def _odometry_guess(sequence: ScanSequence, init: str, stateful: bool, n_total: int, dataset_name: str) -> np.ndarray | None:
+    """``(n_total, 4, 4)`` odometry poses for ``init="odometry"``, None for constant velocity."""
+    if init not in INIT_GUESSES:
+        raise ConfigError(f"unknown initial guess {init!r}; known: {', '.join(INIT_GUESSES)}", source="init")
+    if init == "constant_velocity":
+        return None
+    if stateful:
+        raise ConfigError("init='odometry' applies to stateless variants; a stateful one keeps its own motion model", source="init")
+    odometry = getattr(sequence, "odometry", None)
+    if odometry is None:
+        raise ConfigError(f"init='odometry' needs a dataset with its own odometry (e.g. a CARMEN log); {dataset_name} has none", source="init")
+    if len(odometry) != n_total:
+        raise DataError(f"odometry has {len(odometry)} poses for {n_total} scans", source=dataset_name)
+    return np.asarray(odometry.poses_se3, dtype=np.float64)
 
 
 def _progress_bar(total: int, label: str):

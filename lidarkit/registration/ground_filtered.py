@@ -15,6 +15,7 @@ from pydantic import Field
 from lidarkit.errors import RegistrationError
 from lidarkit.registration.base import RegistrationResult
 from lidarkit.registration.neighbors import NearestNeighbors
+from lidarkit.registration.planar import refuse_2d
 from lidarkit.registration.preprocess import KITTI_SENSOR_HEIGHT_M, ground_mask_by_height, ground_mask_by_plane
 from lidarkit.registration.registry import register_icp
 from lidarkit.registration.vanilla import VanillaConfig, VanillaICP, prepare, staged_icp
@@ -52,6 +53,8 @@ class GroundFilteredICP(VanillaICP):
 
     def _align(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray) -> RegistrationResult:
         c = self.config
+        if c.ground_method == "ransac":
+            refuse_2d(self.name, source_xyz, target_xyz, "a RANSAC ground plane of a 2D scan is the scan plane itself")
         clouds = []
         for name, pts in (("source cloud", source_xyz), ("target cloud", target_xyz)):
             kept = pts[~ground_mask(pts, c)]

@@ -15,6 +15,7 @@ from pydantic import Field
 
 from lidarkit.registration.assessment import assess_alignment
 from lidarkit.registration.base import Registration, RegistrationConfig, RegistrationResult
+from lidarkit.registration.planar import refuse_2d
 from lidarkit.registration.preprocess import voxel_downsample
 from lidarkit.registration.registry import register_icp
 
@@ -46,6 +47,8 @@ if _small_gicp is not None:
 
         def _align(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray) -> RegistrationResult:
             c = self.config
+            if c.registration_type != "ICP":
+                refuse_2d(self.name, source_xyz, target_xyz, f"{c.registration_type} needs surface covariances / normals, undefined on a 2D scan")
             out = _small_gicp.align(
                 target_xyz,
                 source_xyz,
