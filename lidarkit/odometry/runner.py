@@ -97,9 +97,10 @@ def run(
     constant-velocity motion (previous relative motion) for the frame's pose and the next guess; the
     frames are counted in ``metrics["n_not_converged"]`` / ``["n_constant_velocity_fallback"]``. With
     ``strict=True`` such a frame raises :class:`RegistrationError` naming it instead.
-    ``init`` (stateless variants): the initial guess of each pair, ``"constant_velocity"`` (the previous relative
-    motion) or ``"odometry"`` (the relative motion of the dataset's own ``odometry`` trajectory, e.g. a CARMEN
-    log's wheel odometry; it also replaces a non-converged registration).
+    ``init``: the initial guess of each frame, ``"constant_velocity"`` (the previous relative motion; stateful
+    variants: their own model) or ``"odometry"`` (the relative motion of the dataset's own ``odometry`` trajectory,
+    e.g. a CARMEN log's wheel odometry; for a stateless variant it also replaces a non-converged registration; a
+    stateful one gets it as ``register_frame(..., motion_guess=...)`` if it ``accepts_motion_guess``).
     """
     sequence = open_sequence(dataset)
     registration = _resolve_method(method, params)
@@ -112,7 +113,7 @@ def run(
     if len(indices) == 0:
         raise DataError(f"the frame selection {frames!r} selects no scan of {n_total}", source=dataset_name)
     stateful = bool(getattr(registration, "stateful", False))
-    odometry_poses = _odometry_guess(sequence, init, stateful, n_total, dataset_name)
+    odometry_poses = _odometry_guess(sequence, init, registration, n_total, dataset_name)
     n = len(indices)
     poses = np.empty((n, 4, 4))
     read_s = np.zeros(n)
@@ -139,7 +140,11 @@ def run(
                     scan = _read_nonempty_scan(sequence, int(idx))
                     points = scan.points_xyz
                     t1 = clock()
-                    poses[k] = registration.register_frame(points, scan.point_times_s)
+                    if odometry_poses is not None and k > 0:
+                        guess = orthonormalize_se3(np.linalg.solve(odometry_poses[indices[k - 1]], odometry_poses[idx]))
+                        poses[k] = registration.register_frame(points, scan.point_times_s, motion_guess=guess)
+                    else:
+                        poses[k] = registration.register_frame(points, scan.point_times_s)
                 except Exception as err:
                     if not _is_frame_error(err):
                         raise
@@ -217,8 +222,8 @@ def run(
             "n_frames": n,
             "stateful": stateful,
             "strict": strict,
-            "initial_guess": "register_frame (own map and motion model)" if stateful else (
-                "dataset odometry (relative motion)" if odometry_poses is not None else "constant velocity (previous relative motion)"
+            "initial_guess": "dataset odometry (relative motion)" if odometry_poses is not None else (
+                "register_frame (own map and motion model)" if stateful else "constant velocity (previous relative motion)"
             ),
             "ground_truth": None if reference is None else reference.name,
             "ground_truth_meta": None if reference is None else _plain(reference.meta),
@@ -237,14 +242,14 @@ def run(
 INIT_GUESSES = ("constant_velocity", "odometry")
 
 
-def _odometry_guess(sequence: ScanSequence, init: str, stateful: bool, n_total: int, dataset_name: str) -> np.ndarray | None:
+def _odometry_guess(sequence: ScanSequence, init: str, registration: Any, n_total: int, dataset_name: str) -> np.ndarray | None:
     """``(n_total, 4, 4)`` odometry poses for ``init="odometry"``, None for constant velocity."""
     if init not in INIT_GUESSES:
         raise ConfigError(f"unknown initial guess {init!r}; known: {', '.join(INIT_GUESSES)}", source="init")
     if init == "constant_velocity":
         return None
-    if stateful:
-        raise ConfigError("init='odometry' applies to stateless variants; a stateful one keeps its own motion model", source="init")
+    if getattr(registration, "stateful", False) and not getattr(registration, "accepts_motion_guess", False):
+        raise ConfigError("init='odometry': this stateful variant keeps its own motion model (no motion_guess)", source="init")
     odometry = getattr(sequence, "odometry", None)
     if odometry is None:
         raise ConfigError(f"init='odometry' needs a dataset with its own odometry (e.g. a CARMEN log); {dataset_name} has none", source="init")
