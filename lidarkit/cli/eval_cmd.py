@@ -67,6 +67,7 @@ def eval_command(
             raise typer.BadParameter("times files apply to KITTI-format trajectories only")
         return Trajectory.read(path, kind, **kwargs)
 
+    atomic.check_target(json_out, "file")
     if relations is not None:
         if est is not None:
             raise typer.BadParameter("with --relations give one trajectory (EST) only")
@@ -74,6 +75,8 @@ def eval_command(
         return
     if est is None:
         raise typer.BadParameter("missing EST (the estimated trajectory file)")
+    atomic.check_target(markdown, "file")
+    atomic.check_target(plot, "figure")
     ref_traj = load(ref, ref_format, ref_times)
     est_traj = load(est, est_format, est_times)
     settings = EvaluationSettings(
