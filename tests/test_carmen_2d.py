@@ -331,3 +331,18 @@ def test_odometry_with_log_odometry_as_initial_guess(carmen_logs, caplog):
         run(aces, "vanilla", frames="0:3", init="imu")
     with pytest.raises(ConfigError, match="own odometry"):
         run("sim:street?frames=3", "vanilla", init="odometry")
+
+
+def test_odometry_cli_on_a_carmen_log(tmp_path, capsys):
+    log_path = shared_path("carmen_2d", "aces.clf.bz2")
+    out = tmp_path / "run"
+    argv = ["odometry", f"carmen:{log_path}", "--method", "vanilla", "--param", "planar=true", "--frames", "0:40", "--init", "odometry", "--no-progress", "--out", str(out)]
+    assert cli_exit_code(argv) == 0
+    est = Trajectory.read(out / "poses_tum.txt", "tum")
+    assert len(est) == 40 and np.abs(est.poses_se3[:, 2, 3]).max() < 1e-6
+    bad = tmp_path / "bad.clf"
+    bad.write_text("FLASER 3 1.0 2.0 x 0 0 0 0 0 0 1.0 host 1.0\n")
+    capsys.readouterr()
+    assert cli_exit_code(["odometry", f"carmen:{bad}", "--method", "vanilla", "--no-progress"]) == 1
+    err = capsys.readouterr().err
+    assert "bad.clf (line 1)" in err and "not a number: 'x'" in err and "Traceback" not in err
