@@ -140,6 +140,7 @@ def kill_trial(suite: Path, out: Path, executor: str, sig: signal.Signals, delay
         "corrupt": n_corrupt + corrupt_after,
         "orphans": [cmd for _, cmd in orphans],
         "traceback": "Traceback" in stderr,
+        "stderr_tail": stderr[-1200:] if "Traceback" in stderr else "",
         "message": lines[-1] if lines else "",
         "rerun_returncode": rerun.returncode,
         "rerun_complete": rerun.returncode == 0 and n_after == n_jobs,

@@ -78,6 +78,12 @@ class ProcessExecutor:
         self.context = multiprocessing.get_context(start_method)
         if start_method == "forkserver":
             self.context.set_forkserver_preload(["lidarkit.bench._forkserver", "lidarkit.bench.worker", "lidarkit.bench.tasks", "numpy"])
+            # Start the fork server (and Python's resource tracker) with SIGINT ignored from birth: a Ctrl-C to the
+            # process group while they load would print their KeyboardInterrupt tracebacks; workers inherit it.
+            from multiprocessing import forkserver
+
+            with ignored_sigint():
+                forkserver.ensure_running()
 
     def run(self, fn: JobFn, items: list[Item]) -> Iterator[tuple[str, dict[str, Any]]]:
         if not items:

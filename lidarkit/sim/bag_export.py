@@ -49,8 +49,11 @@ def export_bag(sequence, out: str | os.PathLike, fmt: str = "rosbag2", *, storag
     out = Path(out)
     if out.exists():
         raise DataError("exists already; bags are never overwritten", source=out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    scratch = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    from lidarkit import atomic
+
+    atomic.ensure_dir(out.parent)
+    with atomic.output_errors(out):
+        scratch = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
     try:
         if fmt == "rosbag1":
             from rosbags.rosbag1 import Writer
@@ -70,7 +73,8 @@ def export_bag(sequence, out: str | os.PathLike, fmt: str = "rosbag2", *, storag
         _write_messages(sequence, writer, typestore, serialize, ros1=fmt == "rosbag1", on_frame=on_frame)
         if fmt == "mcap":
             target = next(target.glob("*.mcap"))
-        os.replace(target, out)
+        with atomic.output_errors(out):
+            os.replace(target, out)
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
     return out
