@@ -13,7 +13,7 @@ SIGINT to its process group, like Ctrl-C), ``--repeats`` times:
 
     python benchmarks/bench_kill.py [--repeats 20] [--out benchmarks/results/reliability]
 
-Writes ``kill.json`` (every trial) and ``kill.md`` (summary table) under ``--out``. The test suite runs the same
+Writes ``TAG.json`` (every trial) and ``TAG.md`` (summary table) under ``--out`` (``--tag``, default ``kill``). The test suite runs the same
 code with one trial per signal (``tests/test_signals.py``).
 """
 
@@ -220,14 +220,15 @@ def main() -> None:
     parser.add_argument("--signals", default="SIGKILL,SIGTERM,SIGINT")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "reliability")
+    parser.add_argument("--tag", default="kill", help="file stem of the results: TAG.json, TAG.md")
     args = parser.parse_args()
     sigs = [signal.Signals[s] for s in args.signals.split(",")]
     with tempfile.TemporaryDirectory(prefix="lidarkit-kill-") as tmp:
         trials = run(args.repeats, args.executors.split(","), sigs, args.seed, Path(tmp))
     command = "python benchmarks/bench_kill.py " + " ".join(sys.argv[1:])
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "kill.json").write_text(json.dumps({"command": command, "trials": trials}, indent=1) + "\n")
-    (args.out / "kill.md").write_text(summary_markdown(trials, command))
+    (args.out / f"{args.tag}.json").write_text(json.dumps({"command": command, "trials": trials}, indent=1) + "\n")
+    (args.out / f"{args.tag}.md").write_text(summary_markdown(trials, command))
     print(summary_markdown(trials, command))
     sys.exit(0 if all(t["ok"] for t in trials) else 1)
 
