@@ -63,6 +63,12 @@ def odometry(
             table.add_row("KITTI drift", m.get("kitti_drift_note", "-"))
     else:
         table.add_row("ground truth", "none: no scores")
+    cov = m.get("pose_covariance")
+    if cov and cov.get("final_position_sigma_m") is not None:
+        table.add_row("propagated end-pose 1-sigma (m / deg)", f"{cov['final_position_sigma_m']:.3f} / {cov['final_heading_sigma_deg']:.3f}")
+        if "relative_nees_mean" in cov:
+            table.add_row("NEES of 1-frame motions (6 = calibrated)", f"{cov['relative_nees_mean']:.2f} ({100 * cov['relative_inside_95']:.0f} % inside 95 %)")
+            table.add_row("end error explained by bias", f"{100 * min(cov['end_error_bias_share'], 1.0):.0f} %")
     if result.out_dir is not None:
         table.add_row("run folder", str(result.out_dir))
     stdout().print(table)

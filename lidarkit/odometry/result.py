@@ -20,6 +20,7 @@ class FrameStats:
     ``read_s`` / ``register_s``: wall time reading the scan and registering it; ``n_points``: points in
     the scan; for stateless variants ``converged``, ``iterations``, ``rmse_m``, ``n_correspondences``,
     ``degenerate`` and ``reason`` of the scan-to-scan alignment that produced the frame's pose;
+    ``min_eigenvalue``: smallest eigenvalue of the frame's normalised normal matrix (NaN where not assessed);
     ``measured``: False where the runner has no convergence verdict (frame 0 of a stateless chain, every
     frame of a stateful variant such as kiss, which reports none): there ``converged`` is True only as a
     placeholder, iterations -1, rmse NaN, and the CSV / CLI show "n/a"; ``fallback``: the registration was
@@ -38,21 +39,24 @@ class FrameStats:
     reason: tuple[str, ...]
     measured: np.ndarray
     fallback: np.ndarray
+    min_eigenvalue: np.ndarray | None = None
 
     def to_csv(self) -> str:
         buf = io.StringIO()
         writer = csv.writer(buf, lineterminator="\n")
         writer.writerow([
             "frame", "read_s", "register_s", "n_points", "converged", "iterations", "rmse_m", "n_correspondences", "degenerate",
-            "constant_velocity_fallback", "reason",
+            "constant_velocity_fallback", "min_eigenvalue", "reason",
         ])
+        min_eig = self.min_eigenvalue if self.min_eigenvalue is not None else np.full(len(self.frame), np.nan)
         for k in range(len(self.frame)):
             measured = bool(self.measured[k])
             writer.writerow([
                 int(self.frame[k]), f"{self.read_s[k]:.6f}", f"{self.register_s[k]:.6f}", int(self.n_points[k]),
                 int(self.converged[k]) if measured else "n/a", int(self.iterations[k]) if measured else "n/a",
                 f"{self.rmse_m[k]:.6g}" if measured else "n/a", int(self.n_correspondences[k]) if measured else "n/a",
-                int(self.degenerate[k]) if measured else "n/a", int(self.fallback[k]), self.reason[k],
+                int(self.degenerate[k]) if measured else "n/a", int(self.fallback[k]),
+                f"{min_eig[k]:.6g}" if np.isfinite(min_eig[k]) else "n/a", self.reason[k],
             ])
         return buf.getvalue()
 
@@ -75,6 +79,17 @@ class OdometryResult:
     ground_truth: Trajectory | None = None
     metrics: dict[str, Any] = field(default_factory=dict)
     out_dir: Path | None = None
+    covariances: tuple[np.ndarray, np.ndarray] | None = None
+
+    @property
+    def relative_covariance(self) -> np.ndarray | None:
+        """``(n, 6, 6)`` covariance of each frame's relative motion (NaN where none; row 0 unused), or None."""
+        return None if self.covariances is None else self.covariances[0]
+
+    @property
+    def pose_covariance(self) -> np.ndarray | None:
+        """``(n, 6, 6)`` propagated covariance of each pose (see :mod:`lidarkit.odometry.covariance`), or None."""
+        return None if self.covariances is None else self.covariances[1]
 
     @property
     def fps(self) -> float:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import os
 import time
@@ -13,6 +14,7 @@ import numpy as np
 from lidarkit.errors import ConfigError, DataError, EvaluationError, LidarKitError, RegistrationError
 from lidarkit.geometry import orthonormalize_se3
 from lidarkit.io.base import Scan, ScanSequence
+from lidarkit.odometry.covariance import propagate
 from lidarkit.odometry.inputs import FrameSelection, frames_repr, open_sequence, parse_frames
 from lidarkit.odometry.metrics import odometry_metrics
 from lidarkit.odometry.result import FrameStats, OdometryResult
@@ -85,6 +87,7 @@ def run(
     progress: bool = False,
     ground_truth: Trajectory | None = None,
     strict: bool = False,
+    pose_covariance: bool | None = None,
 ) -> OdometryResult:
     """Odometry of ``method`` (a registered name or a configured variant) over ``dataset``.
 
@@ -96,6 +99,9 @@ def run(
     constant-velocity motion (previous relative motion) for the frame's pose and the next guess; the
     frames are counted in ``metrics["n_not_converged"]`` / ``["n_constant_velocity_fallback"]``. With
     ``strict=True`` such a frame raises :class:`RegistrationError` naming it instead.
+    ``pose_covariance``: propagate each frame's registration covariance into a covariance per pose
+    (:mod:`lidarkit.odometry.covariance`); None = for stateless variants (whose results carry one), not for
+    stateful ones (which need an extra assessment of each frame against the previous one: True asks for it).
     """
     sequence = open_sequence(dataset)
     registration = _resolve_method(method, params)
@@ -120,7 +126,10 @@ def run(
     rmse_m = np.full(n, np.nan)
     n_corr = np.full(n, -1, dtype=np.int64)
     degenerate = np.zeros(n, dtype=bool)
+    min_eigenvalue = np.full(n, np.nan)
+    relative_cov = np.full((n, 6, 6), np.nan)
     reasons = [""] * n
+    want_covariance = (not stateful) if pose_covariance is None else bool(pose_covariance)
 
     bar = _progress_bar(n, f"{name} on {dataset_name}") if progress else None
     clock = time.perf_counter
@@ -128,6 +137,7 @@ def run(
     try:
         if stateful:
             registration.reset()
+            previous = None
             for k, idx in enumerate(indices):
                 t0 = clock()
                 try:
@@ -135,6 +145,9 @@ def run(
                     points = scan.points_xyz
                     t1 = clock()
                     poses[k] = registration.register_frame(points, scan.point_times_s)
+                    if want_covariance and k > 0:
+                        relative_cov[k], min_eigenvalue[k] = frame_covariance(previous, points, poses[k - 1], poses[k], name)
+                    previous = points
                 except Exception as err:
                     if not _is_frame_error(err):
                         raise
@@ -164,6 +177,9 @@ def run(
                         n_corr[k] = int(result.n_correspondences)
                         deg = getattr(result, "degeneracy", None)
                         degenerate[k] = bool(getattr(deg, "degenerate", False))
+                        min_eigenvalue[k] = float(deg.eigenvalues[0]) if deg is not None else np.nan
+                        if want_covariance and getattr(result, "covariance", None) is not None and converged[k]:
+                            relative_cov[k] = result.covariance
                         reasons[k] = str(getattr(result, "reason", "") or "")
                         if converged[k]:
                             motion = orthonormalize_se3(np.asarray(result.T_target_source, dtype=np.float64))
@@ -198,8 +214,10 @@ def run(
     trajectory = Trajectory(poses, timestamps, name=f"{name} on {dataset_name}", meta={"method": name, "dataset": dataset_name})
     reference = _reference(sequence, ground_truth, indices, dataset_name)
     stats = FrameStats(
-        indices.copy(), read_s, register_s, n_points, converged, iterations, rmse_m, n_corr, degenerate, tuple(reasons), measured, fallback
+        indices.copy(), read_s, register_s, n_points, converged, iterations, rmse_m, n_corr, degenerate, tuple(reasons), measured, fallback,
+        min_eigenvalue,
     )
+    covariances = (relative_cov, propagate(poses, relative_cov)) if want_covariance else None
     config = {
         "method": name,
         "method_config": config_dict(getattr(registration, "config", None)),
@@ -215,12 +233,12 @@ def run(
             "ground_truth_meta": None if reference is None else _plain(reference.meta),
         },
     }
-    result = OdometryResult(trajectory, name, config, indices.copy(), stats, total, reference)
+    result = OdometryResult(trajectory, name, config, indices.copy(), stats, total, reference, covariances=covariances)
     metrics = odometry_metrics(result)
-    result = OdometryResult(trajectory, name, config, indices.copy(), stats, total, reference, metrics)
+    result = dataclasses.replace(result, metrics=metrics)
     if out_dir is not None:
         write_run(result, out_dir)
-        result = OdometryResult(trajectory, name, config, indices.copy(), stats, total, reference, metrics, Path(out_dir))
+        result = dataclasses.replace(result, out_dir=Path(out_dir))
     return result
 
 
@@ -250,3 +268,26 @@ def _reference(sequence: ScanSequence, ground_truth: Trajectory | None, indices:
             source=gt.name or dataset_name,
         )
     return gt.relative_to_first()
+
+
+#: voxel size (m) of the two scans a stateful variant's frame covariance is assessed on, and the pair distance
+FRAME_COVARIANCE_VOXEL_M = 0.5
+FRAME_COVARIANCE_INLIER_M = 1.0
+
+
+def frame_covariance(previous_xyz: np.ndarray, points_xyz: np.ndarray, T_world_prev: np.ndarray, T_world_cur: np.ndarray,
+                     variant: str) -> tuple[np.ndarray, float]:
+    """Covariance (and smallest normal-matrix eigenvalue) of a stateful variant's frame-to-frame motion, assessed
+    after the fact on the two voxelized scans at the motion it estimated (the variant itself exposes no Hessian)."""
+    from lidarkit.geometry import se3_inverse
+    from lidarkit.registration.assessment import assess_alignment
+    from lidarkit.registration.covariance import calibrate
+    from lidarkit.registration.preprocess import voxel_downsample
+
+    T_rel = se3_inverse(T_world_prev) @ T_world_cur
+    target = voxel_downsample(previous_xyz, FRAME_COVARIANCE_VOXEL_M)
+    source = voxel_downsample(points_xyz, FRAME_COVARIANCE_VOXEL_M)
+    assessment = assess_alignment(source, target, T_rel, FRAME_COVARIANCE_INLIER_M)
+    if assessment.covariance is None:
+        return np.full((6, 6), np.nan), float("nan")
+    return calibrate(assessment.covariance, variant), float(assessment.degeneracy.eigenvalues[0])
