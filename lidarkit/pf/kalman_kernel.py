@@ -146,19 +146,26 @@ class KalmanParticleFilter(LandmarkFilterBase):
         theta = np.arctan2(np.sin(self.states[2]) @ w, np.cos(self.states[2]) @ w)
         return np.array([self.states[0] @ w, self.states[1] @ w, theta])
 
-    def innovation_nis(self, landmark_index: np.ndarray, z: np.ndarray) -> np.ndarray:
-        """NIS ``(M,)`` of each reading against the mixture's predictive distribution (chi-square(2) if consistent)."""
+    def innovation_stats(self, landmark_index: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Innovations ``(M, 2)`` against the mixture and its predictive spread without Q ``(M, 2, 2)``."""
         z = np.asarray(z, dtype=np.float64).reshape(-1, 2)
-        out = np.zeros(len(z))
+        nu_all, P_all = np.zeros((len(z), 2)), np.zeros((len(z), 2, 2))
         w = self.weights
         for m, k in enumerate(np.asarray(landmark_index, dtype=np.int64).reshape(-1)):
             e, H = self._innovation(self.landmarks_xy[k], z[m])
-            S_k = H @ self.cov @ H.transpose(0, 2, 1) + self.q_cov
+            HPHt = H @ self.cov @ H.transpose(0, 2, 1)
             nu = w @ e
             d = e - nu
-            S = np.einsum("n,nij->ij", w, S_k) + (d * w[:, None]).T @ d
-            out[m] = float(nu @ np.linalg.solve(S, nu))
-        return out
+            nu_all[m] = nu
+            P_all[m] = np.einsum("n,nij->ij", w, HPHt) + (d * w[:, None]).T @ d
+        return nu_all, P_all
+
+    def innovation_nis(self, landmark_index: np.ndarray, z: np.ndarray) -> np.ndarray:
+        """NIS ``(M,)`` of each reading against the mixture's predictive distribution (chi-square(2) if consistent)."""
+        from lidarkit.pf.filter import nis_values
+
+        nu, P = self.innovation_stats(landmark_index, z)
+        return nis_values(nu, P + self.q_cov)
 
 
 __all__ = ["KalmanParticleFilter"]
