@@ -339,6 +339,7 @@ def run_protocol(
     with_ape_rpe: bool = True,
     kidnap_at_step: int | None = None,
     kidnap_offset: tuple[float, float, float] = KIDNAP_OFFSET,
+    warn_lost: bool = True,
     **config_overrides: Any,
 ) -> PFRunResult:
     """Simulate the report's protocol on ``data`` (a LandmarkData) and run the filter once.
@@ -379,7 +380,8 @@ def run_protocol(
         **_filter_outputs(out, pf),
     )
     result.metrics = score_against_ground_truth(result, mse_start=mse_start, with_ape_rpe=with_ape_rpe)
-    _warn_lost(result)
+    if warn_lost:
+        _warn_lost(result)
     return result
 
 
