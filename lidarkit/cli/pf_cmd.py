@@ -46,7 +46,8 @@ def _counts(text: str) -> list[int]:
     except ValueError:
         values = []
     if not values or any(not 1 <= v <= MAX_PARTICLES for v in values):
-        raise ConfigError(f"expected particle counts in 1..{MAX_PARTICLES} (comma-separated), got {text!r}", source="--particles")
+        raise ConfigError(f"n_particles must be >= 1 and <= {MAX_PARTICLES} (one count or a comma-separated list), got {text!r}",
+                          source="--particles")
     return values
 
 
@@ -150,7 +151,7 @@ def _recorded(data, cfg: PFConfig, seed: int, fit_q: bool, out: Path | None, sna
         stdout().print(escape("before: " + first.metrics["q_verdict"]["text"]))
         table = Table(title="--fit-q: maximum-likelihood Q from the innovations, filter re-run")
         for col in ("run", "Q range variance [m²]", "Q bearing variance [rad²]", "NIS mean", "NIS < 5.99"):
-            table.add_column(col, justify="right")
+            table.add_column(escape(col), justify="right")
         for i, r in enumerate([first, *runs]):
             qc = r.settings["q_cov"]
             table.add_row("given Q" if i == 0 else f"fit {i}", f"{qc[0][0]:.4g}", f"{qc[1][1]:.4g}", f"{r.metrics['nis_mean']:.3f}",
@@ -169,7 +170,7 @@ def _print_study(rows, cfg: PFConfig, protocol: str, kidnap_at: int | None) -> N
              f"init {cfg.init}{', augmented MCL' if cfg.augmented else ''}{', KLD' if cfg.kld else ''}), seeds {seeds[0]}..{seeds[-1]}")
     table = Table(title=escape(title))
     for col in ("N", "MSE [m²] mean ± std", "mean N", "localized", "lost", "s/run"):
-        table.add_column(col, justify="right")
+        table.add_column(escape(col), justify="right")
     if kidnap_at is not None:
         table.add_column("recovered", justify="right")
     table.caption = (f"MSE: position, from step 10, over {len(seeds)} seeds (std ddof=0); mean N: particles per step; "

@@ -127,7 +127,11 @@ class KalmanParticleFilter(LandmarkFilterBase):
         return True
 
     def _resample_states(self, idx: np.ndarray) -> None:
-        """Take the kernels ``idx`` and split each child: mean + sqrt(1 - a) L eps, covariance a P."""
+        """Take the kernels ``idx`` and split each child: mean + sqrt(1 - a) L eps, covariance a P.
+
+        A single kernel is left as it is (N=1 is a plain EKF: splitting would only add noise)."""
+        if self.n == 1:
+            return
         states, cov = self.states[:, idx], self.cov[idx]
         if self.split < 1.0:
             L = np.linalg.cholesky(cov + 1e-12 * np.eye(3))
