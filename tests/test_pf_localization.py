@@ -17,9 +17,8 @@ from lidarkit.io.landmarks import LandmarkData
 from lidarkit.pf import PFConfig
 from lidarkit.pf.augmented import LikelihoodAverages
 from lidarkit.pf.consistency import fit_q, q_verdict
-from lidarkit.pf.kld import bin_ids, kld_bound, kld_sample_size
+from lidarkit.pf.kld import bin_keys, kld_bound, kld_sample_size
 from lidarkit.pf.protocol import kidnapped_ground_truth, run_protocol
-from lidarkit.pf.resampling import multinomial
 from lidarkit.pf.study import localized_fraction, steps_to_recover
 
 SEEDS = [0, 1, 2]
@@ -33,11 +32,13 @@ def stachniss() -> LandmarkData:
 def _fox_loop(states, weights, seed, **kw):
     """Fox's algorithm one sample at a time (the definition the vectorized version must reproduce)."""
     rng = np.random.default_rng(seed)
-    ids, _ = bin_ids(states, kw["bin_m"], kw["bin_rad"])
+    ids = bin_keys(states, kw["bin_m"], kw["bin_rad"])
     draws, total, chunk = [], 0, min(kw["n_max"], max(kw["n_min"], len(weights)))
     seen: set[int] = set()
     while True:
-        draws.append(ids[multinomial(weights, rng, chunk)])
+        cdf = np.cumsum(weights)
+        u = rng.random(chunk) * cdf[-1]
+        draws.append(ids[np.minimum(np.searchsorted(cdf, u, side="right"), len(weights) - 1)])
         for i, b in enumerate(draws[-1]):
             seen.add(int(b))
             n = total + i + 1

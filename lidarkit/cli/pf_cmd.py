@@ -88,7 +88,7 @@ def pf_command(
 ) -> None:
     """Localize with a particle filter on Freiburg landmark data and score it (MSE from step 10, APE, RPE), or run a study."""
     from lidarkit.io import open_dataset
-    from lidarkit.pf.protocol import fit_q_recorded, run_protocol, run_recorded
+    from lidarkit.pf.protocol import run_protocol
     from lidarkit.pf.study import protocol_config, run_study
 
     counts = _counts(particles)

@@ -13,7 +13,6 @@ the fit is at its floor.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np

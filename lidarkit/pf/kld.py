@@ -10,11 +10,12 @@ and the size is the first prefix length that meets the bound. All of it vectoriz
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from lidarkit.pf.resampling import multinomial
-
-DENSE_ID_LIMIT = 1 << 22  # bins in the particles' bounding box above which the ids are made dense by sorting
+KEY_STRIDE = float(1 << 24)  # y bins per x bin in a bin key (integer-valued float64 keys stay exact)
+SCALAR_K = 48  # up to this many occupied bins the bound is solved with Python floats
 
 
 def kld_bound(k: np.ndarray | int, epsilon: float, z: float) -> np.ndarray:
@@ -26,26 +27,18 @@ def kld_bound(k: np.ndarray | int, epsilon: float, z: float) -> np.ndarray:
     return np.where(k > 1, n, 1.0)
 
 
-def bin_ids(states: np.ndarray, bin_m: float, bin_rad: float) -> tuple[np.ndarray, int]:
-    """Dense bin number ``(N,)`` int64 of every particle (``states`` ``(3, N)``) and the size of the id range.
-
-    Bins are ``bin_m`` x ``bin_m`` x ``bin_rad`` cells; ids index the box spanned by the particles (no sort).
-    """
+def bin_keys(states: np.ndarray, bin_m: float, bin_rad: float) -> np.ndarray:
+    """Bin key ``(N,)`` float64 of every particle: one integer-valued number per (x, y, theta) cell (only compared)."""
     x, y, theta = states
-    ix = np.floor(x * (1.0 / bin_m)).astype(np.int64)
-    iy = np.floor(y * (1.0 / bin_m)).astype(np.int64)
     n_theta = max(1, int(np.ceil(2.0 * np.pi / bin_rad)))
-    it = np.floor((theta % (2.0 * np.pi)) * (n_theta / (2.0 * np.pi))).astype(np.int64)
-    np.minimum(it, n_theta - 1, out=it)  # float rounding at exactly 2 pi
-    ix -= ix.min()
-    iy -= iy.min()
-    ny = int(iy.max()) + 1
-    n_ids = (int(ix.max()) + 1) * ny * n_theta
-    if n_ids > DENSE_ID_LIMIT:  # particles spread very far: number the occupied bins by sorting instead
-        _, ids = np.unique(np.stack([ix, iy, it]), axis=1, return_inverse=True)
-        ids = ids.reshape(-1)
-        return ids, int(ids.max()) + 1
-    return (ix * ny + iy) * n_theta + it, n_ids
+    key = np.floor(np.multiply(x, 1.0 / bin_m, dtype=np.float64))
+    key *= KEY_STRIDE
+    key += np.floor(np.multiply(y, 1.0 / bin_m, dtype=np.float64))
+    key *= n_theta
+    t = np.remainder(theta, 2.0 * np.pi, dtype=np.float64)
+    t *= n_theta / (2.0 * np.pi)
+    key += np.minimum(np.floor(t), n_theta - 1)
+    return key
 
 
 def kld_sample_size(
@@ -65,45 +58,56 @@ def kld_sample_size(
     Ancestors are drawn multinomially in chunks (first ``max(n_min, N)``, doubling up to ``n_max``) until a
     prefix of the draw satisfies Fox's bound; the count is that prefix length clipped to [n_min, n_max].
     """
-    ids, n_ids = bin_ids(states, bin_m, bin_rad)
-    seen: np.ndarray | None = None
-    starts = np.zeros(0, dtype=np.int64)  # sorted draw positions where bin number 1, 2, ... first appears
+    keys = bin_keys(states, bin_m, bin_rad)
+    cdf = np.cumsum(weights, dtype=np.float64)
+    last = weights.shape[0] - 1
+    drawn_bins: np.ndarray | None = None
+    starts: list[np.ndarray] = []  # sorted draw positions where bin number 1, 2, ... first appears
     total = 0
     chunk = min(n_max, max(n_min, weights.shape[0]))
     while True:
-        b = ids[multinomial(weights, rng, chunk)]
-        bins, first = np.unique(b, return_index=True)  # first occurrence of every bin in this chunk
-        if total == 0:
-            fresh_first = first
+        u = rng.random(chunk)
+        u *= cdf[-1]
+        anc = np.searchsorted(cdf, u, side="right")
+        np.minimum(anc, last, out=anc)
+        bins, first = np.unique(keys[anc], return_index=True)  # first occurrence of every bin in this chunk
+        if drawn_bins is None:
+            drawn_bins, fresh_first = bins, first
         else:  # keep only bins not seen in the earlier chunks
-            if seen is None:
-                seen = np.zeros(n_ids, dtype=bool)
-                seen[ids_drawn] = True
-            fresh = ~seen[bins]
+            fresh = ~np.isin(bins, drawn_bins, assume_unique=True)
             fresh_first = first[fresh]
-        ids_drawn = bins if total == 0 else np.union1d(ids_drawn, bins)
-        if seen is not None:
-            seen[bins] = True
-        starts = np.concatenate([starts, np.sort(fresh_first) + total])
+            drawn_bins = np.union1d(drawn_bins, bins)
+        fresh_first.sort()
+        starts.append(fresh_first + total)
         total += chunk
-        n = _first_feasible(starts, total, epsilon, z, n_min)
+        pos = starts[0] if len(starts) == 1 else np.concatenate(starts)
+        n = _first_feasible(pos, total, epsilon, z, n_min)
         if n is not None:
-            return n, int(np.searchsorted(starts, n - 1, side="right"))
+            return n, int(np.searchsorted(pos, n - 1, side="right"))
         if total >= n_max:
-            return n_max, len(starts)
+            return n_max, len(pos)
         chunk = min(n_max - total, total)
 
 
 def _first_feasible(starts: np.ndarray, total: int, epsilon: float, z: float, n_min: int) -> int | None:
     """Smallest n <= ``total`` with n >= max(n_min, bound(k(n))), where k(n) = #starts < n; None if there is none.
 
-    k(n) = j on the interval starts[j-1] < n - 1 + 1 <= starts[j] (the j-th bin appears at position
-    starts[j-1]), so one candidate per j: max(starts[j-1] + 1, bound(j), n_min) if it is still in the interval.
+    k(n) = j for starts[j-1] < n <= starts[j] (the j-th bin appears at position starts[j-1]), so there is one
+    candidate per j: max(starts[j-1] + 1, bound(j), n_min), if it is still in that interval.
     """
-    j = np.arange(1, len(starts) + 1)
+    k_all = len(starts)
+    if k_all <= SCALAR_K:  # converged clouds occupy few bins: plain floats beat a dozen tiny numpy calls
+        pos = starts.tolist()
+        for j in range(1, k_all + 1):
+            lower = max(pos[j - 1] + 1, math.ceil(_bound_scalar(j, epsilon, z)), n_min)
+            upper = pos[j] if j < k_all else total
+            if lower <= upper:
+                return int(lower)
+        return None
+    j = np.arange(1, k_all + 1)
     lower = np.maximum(np.maximum(starts + 1, np.ceil(kld_bound(j, epsilon, z))), n_min)
-    upper = np.empty(len(starts), dtype=np.int64)
-    upper[:-1] = starts[1:]  # n - 1 < starts[j] keeps k(n) = j
+    upper = np.empty(k_all, dtype=np.int64)
+    upper[:-1] = starts[1:]
     upper[-1] = total
     ok = lower <= upper
     if not ok.any():
@@ -111,4 +115,11 @@ def _first_feasible(starts: np.ndarray, total: int, epsilon: float, z: float, n_
     return int(lower[np.argmax(ok)])
 
 
-__all__ = ["bin_ids", "kld_bound", "kld_sample_size"]
+def _bound_scalar(k: int, epsilon: float, z: float) -> float:
+    if k <= 1:
+        return 1.0
+    a = 2.0 / (9.0 * (k - 1))
+    return (k - 1) / (2.0 * epsilon) * (1.0 - a + math.sqrt(a) * z) ** 3
+
+
+__all__ = ["bin_keys", "kld_bound", "kld_sample_size"]
