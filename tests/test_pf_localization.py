@@ -207,3 +207,17 @@ def test_cli_bad_study_and_kidnap_options(capsys):
         assert exc.value.code == 1, args
         err = capsys.readouterr().err
         assert "error:" in err and pattern in err and "Traceback" not in err, (args, err)
+
+
+def test_kld_relocalization_spreads_the_maximum_count(stachniss):
+    from lidarkit.pf import make_filter
+
+    pf = make_filter(stachniss.landmarks.positions_xy, PFConfig.make(n_particles=1000, kld=True), 0)
+    pf.predict(np.array(stachniss.odometry[0]))
+    pf.update(np.array([0, 7]), np.array([[2.2, 0.5], [7.1, 0.8]]))
+    pf.resample()
+    assert 200 <= pf.n < 5000 and pf.n != 1000 and pf.states.shape == (3, pf.n)
+    pf.initialize_uniform()  # what recovery="reinit" does when the filter is lost
+    assert pf.n == 5000 and pf.states.shape == (3, 5000) and pf.weights.shape == (5000,)
+    pf.predict(np.array(stachniss.odometry[1]))
+    assert np.isfinite(pf.estimate()).all()

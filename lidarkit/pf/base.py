@@ -86,6 +86,8 @@ class LandmarkFilterBase:
 
     def initialize_uniform(self, bounds_xy: tuple[float, float, float, float] | None = None) -> None:
         """Global localization: x, y uniform over ``(xmin, xmax, ymin, ymax)`` (default: landmarks +- margin), theta uniform."""
+        if self.config.kld and self.n_updates > 0:  # relocalization (recovery="reinit"): as many particles as KLD allows
+            self._resize(self.config.kld_max_n)
         states, span = self._uniform_draw(self.n, bounds_xy)
         self._set_uniform_states(states, span)
         self._reset_weights()
@@ -105,6 +107,10 @@ class LandmarkFilterBase:
         lo = np.array([x0, y0, -np.pi])[:, None]
         span = np.array([x1 - x0, y1 - y0, 2 * np.pi])
         return lo + u * span[:, None], span
+
+    def _resize(self, n: int) -> None:
+        """Change the hypothesis count to ``n`` (the state is replaced right after; KLD-capable filters only)."""
+        raise NotImplementedError
 
     def _set_uniform_states(self, states: np.ndarray, span: np.ndarray) -> None:
         """Take the uniformly drawn float64 ``states`` ``(3, N)`` over the box of size ``span`` ``(3,)``."""

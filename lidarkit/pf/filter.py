@@ -65,6 +65,11 @@ class ParticleFilter(LandmarkFilterBase):
     def _set_uniform_states(self, states: np.ndarray, span: np.ndarray) -> None:
         self.states = states.astype(self.dtype)
 
+    def _resize(self, n: int) -> None:
+        self.n = int(n)
+        if self.n != self._buffers_n:
+            self._allocate()
+
     def set_particles(self, particles: np.ndarray, weights: np.ndarray | None = None) -> None:
         """Replace the particle set with ``(N, 3)`` poses (and optional weights, normalized here)."""
         p = np.asarray(particles, dtype=np.float64)
