@@ -5,7 +5,8 @@ navigation". The weights follow each kernel's predictive likelihood N(z; h(mean)
 resampling splits a kernel into children drawn from N(mean, (1 - a) P) with covariance a P
 (``kernel_split`` = a), which keeps the mixture's mean and covariance. Because every kernel carries
 its own uncertainty, a few tens of kernels reach the accuracy of ~10^4 point particles on the
-Freiburg data (see docs/particle_filter.md). Vectorized over kernels with batched 3x3 algebra;
+Freiburg data; so does N=1, which is a plain EKF (a single kernel is never split): on that tracking
+problem the kernels add nothing, they matter on multi-modal ones (see docs/particle_filter.md). Vectorized over kernels with batched 3x3 algebra;
 meant for small N (memory and time grow as N x 9).
 """
 
