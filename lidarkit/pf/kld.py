@@ -28,17 +28,34 @@ def kld_bound(k: np.ndarray | int, epsilon: float, z: float) -> np.ndarray:
 
 
 def bin_keys(states: np.ndarray, bin_m: float, bin_rad: float) -> np.ndarray:
-    """Bin key ``(N,)`` float64 of every particle: one integer-valued number per (x, y, theta) cell (only compared)."""
+    """Bin key ``(N,)`` float64 of every particle: one integer-valued number per (x, y, theta) cell (only compared).
+
+    Headings are binned as stored (the filter wraps them to [-pi, pi] every few steps): cells are aligned at
+    multiples of ``bin_rad`` either way, and a wrap moves a particle to another cell exactly like crossing a cell
+    border would.
+    """
     x, y, theta = states
-    n_theta = max(1, int(np.ceil(2.0 * np.pi / bin_rad)))
-    key = np.floor(np.multiply(x, 1.0 / bin_m, dtype=np.float64))
+    key = np.multiply(x, 1.0 / bin_m, dtype=np.float64)
+    np.floor(key, out=key)
     key *= KEY_STRIDE
-    key += np.floor(np.multiply(y, 1.0 / bin_m, dtype=np.float64))
-    key *= n_theta
-    t = np.remainder(theta, 2.0 * np.pi, dtype=np.float64)
-    t *= n_theta / (2.0 * np.pi)
-    key += np.minimum(np.floor(t), n_theta - 1)
+    ky = np.multiply(y, 1.0 / bin_m, dtype=np.float64)
+    np.floor(ky, out=ky)
+    key += ky
+    key *= KEY_STRIDE
+    np.multiply(theta, 1.0 / bin_rad, out=ky, dtype=np.float64)
+    np.floor(ky, out=ky)
+    key += ky
     return key
+
+
+def _first_occurrences(b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distinct values of ``b`` and the position of each one's first occurrence (a stable sort, no np.unique overhead)."""
+    order = np.argsort(b, kind="stable")
+    sb = b[order]
+    new = np.empty(len(b), dtype=bool)
+    new[0] = True
+    np.not_equal(sb[1:], sb[:-1], out=new[1:])
+    return sb[new], order[new]
 
 
 def kld_sample_size(
@@ -70,7 +87,7 @@ def kld_sample_size(
         u *= cdf[-1]
         anc = np.searchsorted(cdf, u, side="right")
         np.minimum(anc, last, out=anc)
-        bins, first = np.unique(keys[anc], return_index=True)  # first occurrence of every bin in this chunk
+        bins, first = _first_occurrences(keys[anc])  # first occurrence of every bin in this chunk
         if drawn_bins is None:
             drawn_bins, fresh_first = bins, first
         else:  # keep only bins not seen in the earlier chunks
@@ -78,7 +95,7 @@ def kld_sample_size(
             fresh_first = first[fresh]
             drawn_bins = np.union1d(drawn_bins, bins)
         fresh_first.sort()
-        starts.append(fresh_first + total)
+        starts.append(fresh_first + total if total else fresh_first)
         total += chunk
         pos = starts[0] if len(starts) == 1 else np.concatenate(starts)
         n = _first_feasible(pos, total, epsilon, z, n_min)
