@@ -8,7 +8,6 @@ from pathlib import Path
 import numpy as np
 import typer
 import yaml
-from rich.markup import escape
 from rich.table import Table
 
 from lidarkit.cli.app import app, stderr, stdout
@@ -91,6 +90,9 @@ def pf_command(
     from lidarkit.pf.protocol import run_protocol
     from lidarkit.pf.study import protocol_config, run_study
 
+    from lidarkit.atomic import check_target
+
+    check_target(out, "folder")
     counts = _counts(particles)
     if not 1 <= seeds <= MAX_SEEDS:
         raise ConfigError(f"--seeds must be in 1..{MAX_SEEDS}, got {seeds}", source="--seeds")
@@ -122,7 +124,7 @@ def pf_command(
         _print_study(rows, cfg, protocol, kidnap_at)
         if out is not None:
             _write_study(rows, cfg, protocol, scenario, out)
-            stderr().print(f"results written to {escape(str(out))}")
+            stderr().print(f"results written to {out}")
         return
     snap = set(_steps(snapshots))
     if gif:
@@ -133,7 +135,7 @@ def pf_command(
     _print(result)
     if out is not None:
         _write(result, out, snap_steps=_steps(snapshots), gif=gif)
-        stderr().print(f"results written to {escape(str(out))}")
+        stderr().print(f"results written to {out}")
 
 
 def _recorded(data, cfg: PFConfig, seed: int, fit_q: bool, out: Path | None, snap_steps: tuple[int, ...], gif: bool) -> None:
@@ -143,24 +145,24 @@ def _recorded(data, cfg: PFConfig, seed: int, fit_q: bool, out: Path | None, sna
     if not fit_q:
         result = run_recorded(data, None, seed, config=cfg, snapshot_steps=snap)
         _print(result)
-        stdout().print(escape(result.metrics["q_verdict"]["text"]))
+        stdout().print(result.metrics["q_verdict"]["text"])
     else:
         first, runs = fit_q_recorded(data, None, seed, config=cfg)
         result = run_recorded(data, None, seed, config=runs[-1].config, snapshot_steps=snap) if snap else runs[-1]
         _print(first)
-        stdout().print(escape("before: " + first.metrics["q_verdict"]["text"]))
+        stdout().print("before: " + first.metrics["q_verdict"]["text"])
         table = Table(title="--fit-q: maximum-likelihood Q from the innovations, filter re-run")
         for col in ("run", "Q range variance [m²]", "Q bearing variance [rad²]", "NIS mean", "NIS < 5.99"):
-            table.add_column(escape(col), justify="right")
+            table.add_column(col, justify="right")
         for i, r in enumerate([first, *runs]):
             qc = r.settings["q_cov"]
             table.add_row("given Q" if i == 0 else f"fit {i}", f"{qc[0][0]:.4g}", f"{qc[1][1]:.4g}", f"{r.metrics['nis_mean']:.3f}",
                           f"{r.metrics['nis_fraction_below_chi2_95']:.3f}")
         stdout().print(table)
-        stdout().print(escape("after: " + runs[-1].metrics["q_verdict"]["text"]))
+        stdout().print("after: " + runs[-1].metrics["q_verdict"]["text"])
     if out is not None:
         _write(result, out, snap_steps=snap_steps, gif=gif)
-        stderr().print(f"results written to {escape(str(out))}")
+        stderr().print(f"results written to {out}")
 
 
 def _print_study(rows, cfg: PFConfig, protocol: str, kidnap_at: int | None) -> None:
@@ -168,9 +170,9 @@ def _print_study(rows, cfg: PFConfig, protocol: str, kidnap_at: int | None) -> N
     title = (f"particle filter study ({protocol} protocol, {cfg.likelihood}"
              f"{'/' + cfg.nearest_association if cfg.likelihood == 'nearest' else ''}, estimator {cfg.estimator}, "
              f"init {cfg.init}{', augmented MCL' if cfg.augmented else ''}{', KLD' if cfg.kld else ''}), seeds {seeds[0]}..{seeds[-1]}")
-    table = Table(title=escape(title))
+    table = Table(title=title)
     for col in ("N", "MSE [m²] mean ± std", "mean N", "localized", "lost", "s/run"):
-        table.add_column(escape(col), justify="right")
+        table.add_column(col, justify="right")
     if kidnap_at is not None:
         table.add_column("recovered", justify="right")
     table.caption = (f"MSE: position, from step 10, over {len(seeds)} seeds (std ddof=0); mean N: particles per step; "
@@ -188,9 +190,15 @@ def _print_study(rows, cfg: PFConfig, protocol: str, kidnap_at: int | None) -> N
 
 def _write_study(rows, cfg: PFConfig, protocol: str, scenario: dict, out: Path) -> None:
     from lidarkit import atomic
+
+    with atomic.run_folder(out) as tmp:
+        _write_study_files(rows, cfg, protocol, scenario, tmp)
+
+
+def _write_study_files(rows, cfg: PFConfig, protocol: str, scenario: dict, out: Path) -> None:
+    from lidarkit import atomic
     from lidarkit.eval.report import write_json
 
-    out.mkdir(parents=True, exist_ok=True)
     atomic.write_text(out / "config.yaml", yaml.safe_dump({"pf": cfg.model_dump(mode="json"), "protocol": protocol,
                                                             "scenario": {k: (list(v) if isinstance(v, tuple) else v) for k, v in scenario.items()}},
                                                            sort_keys=False))
@@ -198,7 +206,7 @@ def _write_study(rows, cfg: PFConfig, protocol: str, scenario: dict, out: Path) 
 
 
 def _row(table: Table, label: str, value: str) -> None:
-    table.add_row(escape(label), value)
+    table.add_row(label, value)
 
 
 def _print(result) -> None:
@@ -239,10 +247,16 @@ def _print(result) -> None:
 
 def _write(result, out: Path, *, snap_steps: tuple[int, ...], gif: bool) -> None:
     from lidarkit import atomic
+
+    with atomic.run_folder(out) as tmp:
+        _write_files(result, tmp, snap_steps=snap_steps, gif=gif)
+
+
+def _write_files(result, out: Path, *, snap_steps: tuple[int, ...], gif: bool) -> None:
+    from lidarkit import atomic
     from lidarkit.eval.report import write_json
     from lidarkit.pf import plots
 
-    out.mkdir(parents=True, exist_ok=True)
     atomic.write_text(out / "config.yaml", yaml.safe_dump({"pf": result.config.model_dump(mode="json"), "run": result.settings}, sort_keys=False))
     write_json(result.to_dict(), out / "metrics.json")
     est = result.trajectory("estimate")
