@@ -221,3 +221,16 @@ def test_kld_relocalization_spreads_the_maximum_count(stachniss):
     assert pf.n == 5000 and pf.states.shape == (3, 5000) and pf.weights.shape == (5000,)
     pf.predict(np.array(stachniss.odometry[1]))
     assert np.isfinite(pf.estimate()).all()
+
+
+def test_cli_recorded_without_readings_is_one_line_error(tmp_path, capsys):
+    src = shared_path("pf", "burgard_ekf")
+    (tmp_path / "world.dat").write_text((src / "world.dat").read_text())
+    odometry = [line for line in (src / "sensor_data.dat").read_text().splitlines() if line.startswith("ODOMETRY")][:20]
+    (tmp_path / "sensor_data.dat").write_text("\n".join(odometry) + "\n")
+    for extra in ([], ["--fit-q"]):
+        with pytest.raises(SystemExit) as exc:
+            main(["pf", str(tmp_path), "--recorded", *extra])
+        assert exc.value.code == 1
+        err = capsys.readouterr().err
+        assert "0 SENSOR readings" in err and "Traceback" not in err
