@@ -28,6 +28,7 @@ from lidarkit.registration.ground import (
     get_ground_segmenter,
 )
 from lidarkit.registration.neighbors import NearestNeighbors
+from lidarkit.registration.planar import refuse_2d
 from lidarkit.registration.registry import register_icp
 from lidarkit.registration.vanilla import VanillaConfig, VanillaICP, prepare, staged_icp
 
@@ -97,6 +98,8 @@ class GroundFilteredICP(VanillaICP):
 
     def _align(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray) -> RegistrationResult:
         c = self.config
+        if c.ground_method != "height":
+            refuse_2d(self.name, source_xyz, target_xyz, f"{c.ground_method} ground segmentation of a 2D scan finds the scan plane itself")
         clouds = [pts[~self.segmenter.segment(pts)] for pts in (source_xyz, target_xyz)]
         kept = {"source_points_kept": len(clouds[0]), "target_points_kept": len(clouds[1]), "ground_method": c.ground_method}
         fewest = min(len(clouds[0]), len(clouds[1]))
