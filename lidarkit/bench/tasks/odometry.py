@@ -49,6 +49,14 @@ def trajectory_series(ref_xyz: np.ndarray | None, est_xyz: np.ndarray, times_s: 
     return series
 
 
+def seeded_dataset(job: Job) -> dict[str, Any]:
+    """The job's dataset spec; a simulated sequence without its own ``seed`` is seeded by the job's seed, so
+    ``seeds: 10`` in a suite runs a method over 10 different simulated drives (the unit of a paired test)."""
+    if job.dataset.get("kind") == "sim_lidar" and "seed" not in job.dataset:
+        return {**job.dataset, "seed": int(job.seed)}
+    return job.dataset
+
+
 class OdometryTask(Task):
     description = "sequence odometry with an ICP variant (APE, RPE, KITTI drift, frame rate)"
     dataset_kinds = ("kitti", "folder", "sim_lidar", "kitti_raw")
@@ -88,7 +96,7 @@ class OdometryTask(Task):
         from lidarkit.odometry import run
 
         options = OdometryOptions(**job.options)
-        sequence = open_dataset_spec(job.dataset)
+        sequence = open_dataset_spec(seeded_dataset(job))
         result = run(sequence, job.method, params=dict(job.params), frames=options.frames)
         m = result.metrics
         metrics = {
