@@ -27,6 +27,7 @@ from lidarkit import atomic
 from lidarkit.bench.jobs import Job
 from lidarkit.bench.results import load_results
 from lidarkit.errors import DataError
+from lidarkit.eval.statistics import summarize
 
 log = logging.getLogger(__name__)
 
@@ -51,6 +52,7 @@ class Row:
     n_ok: int
     n_failed: int
     stats: dict[str, tuple[float, float, int]]  # metric -> (mean, std, n)
+    summaries: dict[str, Any] = field(default_factory=dict)  # metric -> lidarkit.eval.Summary (median, bootstrap CI)
 
 
 @dataclass
@@ -78,6 +80,7 @@ class Report:
     warnings: list[tuple[str, str]] = field(default_factory=list)  # (job label, message)
     skipped: list[tuple[str, str]] = field(default_factory=list)  # experiments the last run skipped (name, reason)
     n_records: int = 0
+    publication: Any = None  # lidarkit.bench.publication.Publication (odometry tables, box plots)
     html_path: Path | None = None
     markdown_path: Path | None = None
     csv_path: Path | None = None
@@ -127,13 +130,15 @@ def aggregate(records: list[dict[str, Any]]) -> list[TaskTable]:
         rows = []
         for (experiment, dataset, method), items in sorted(groups.items(), key=lambda kv: order[kv[0]]):
             ok = [r for r in items if r.get("status") == "ok"]
-            stats = {}
+            stats, summaries = {}, {}
             for m in metrics:
                 if m.name == "runtime_s":
-                    stats[m.name] = _stats([r.get("runtime_s") for r in ok])
+                    values = [r.get("runtime_s") for r in ok]
                 else:
-                    stats[m.name] = _stats([r["metrics"].get(m.name) for r in ok])
-            rows.append(Row(task, experiment, dataset, method, len(ok), len(items) - len(ok), stats))
+                    values = [r["metrics"].get(m.name) for r in ok]
+                stats[m.name] = _stats(values)
+                summaries[m.name] = summarize([v for v in values if v is not None and math.isfinite(v)], seed=0)
+            rows.append(Row(task, experiment, dataset, method, len(ok), len(items) - len(ok), stats, summaries))
         tables.append(TaskTable(task, metrics, rows))
     return tables
 
@@ -328,6 +333,11 @@ def _markdown(report: Report, title: str) -> str:
         out += ["All metrics:", "", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
         out += ["| " + " | ".join(c.replace("|", "\\|") for c in row) + " |" for row in rows]
         out.append("")
+    pub = report.publication
+    if pub is not None and pub.tables:
+        out += ["## Publication tables", "", f"Also as CSV and LaTeX (booktabs) in `{out_dir_name(report)}/tables/`.", ""]
+        out += [t.to_markdown() for t in pub.tables]
+        out += [f"![{caption}](plots/{path.name})\n\n{caption}\n" for caption, path in pub.boxplots]
     if report.plots:
         out += ["## Plots", ""] + [f"![{p.title}](plots/{p.filename})" for p in report.plots] + [""]
     if report.skipped:
@@ -339,15 +349,23 @@ def _markdown(report: Report, title: str) -> str:
     return "\n".join(out)
 
 
+def out_dir_name(report: Report) -> str:
+    return report.out_dir.name
+
+
 def _csv(report: Report) -> str:
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
-    writer.writerow(["task", "experiment", "dataset", "method", "metric", "mean", "std", "n", "n_ok", "n_failed"])
+    writer.writerow(["task", "experiment", "dataset", "method", "metric", "mean", "std", "n", "n_ok", "n_failed",
+                     "median", "ci95_low", "ci95_high"])
     for table in report.tables:
         for r in table.rows:
             for m in table.metrics:
                 mean, std, n = r.stats[m.name]
-                writer.writerow([r.task, r.experiment, r.dataset, r.method, m.name, repr(mean), repr(std), n, r.n_ok, r.n_failed])
+                s = r.summaries.get(m.name)
+                extra = [repr(s.median), repr(s.ci_low), repr(s.ci_high)] if s is not None else ["", "", ""]
+                writer.writerow([r.task, r.experiment, r.dataset, r.method, m.name, repr(mean), repr(std), n, r.n_ok,
+                                 r.n_failed, *extra])
     return buf.getvalue()
 
 
@@ -359,7 +377,26 @@ th{background:#f0f0f0} td.l,th.l{text-align:left}
 figure{display:inline-block;margin:0.5em;vertical-align:top}
 figcaption{font-size:0.85em;color:#555}
 .failed{color:#a00}
+tr.summary td{border-top:2px solid #444;font-weight:600}
+caption{font-weight:600;text-align:left;padding:2px 0}
 """
+
+
+def _pubtable_html(table) -> str:
+    """A :class:`lidarkit.eval.tables.PubTable` as an HTML table (best per row bold, summary rows set apart)."""
+    e = html.escape
+    best = table.best_mask()
+    rows = []
+    n = len(table.row_labels)
+    for i, label in enumerate(table.row_labels):
+        cls = ' class="summary"' if i >= n - table.n_summary_rows else ""
+        cells = "".join(f"<td><b>{e(table.cell(i, j))}</b></td>" if best[i, j] else f"<td>{e(table.cell(i, j))}</td>"
+                        for j in range(len(table.col_labels)))
+        rows.append(f'<tr{cls}><td class="l">{e(label)}</td>{cells}</tr>')
+    head = f'<th class="l">{e(table.corner)}</th>' + "".join(f"<th>{e(c)}</th>" for c in table.col_labels)
+    note = f"<figcaption>{e(table.note)}</figcaption>" if table.note else ""
+    return (f'<figure class="table"><table><caption>{e(table.title)}</caption><thead><tr>{head}</tr></thead>'
+            f"<tbody>{''.join(rows)}</tbody></table>{note}</figure>")
 
 
 def _html(report: Report, title: str) -> str:
@@ -398,6 +435,14 @@ def _html(report: Report, title: str) -> str:
             parts.append("<tr>" + "".join(f'<td class="l">{e(c)}</td>' if i < 4 else f"<td>{e(c)}</td>" for i, c in enumerate(row)) + "</tr>")
         parts.append("</tbody>")
         parts.append("</table>")
+    pub = report.publication
+    if pub is not None and pub.tables:
+        parts.append("<h2>Publication tables</h2>")
+        parts.append("<p>Also as Markdown, CSV and LaTeX (booktabs) in <code>tables/</code>. Bold: best method per row.</p>")
+        parts += [_pubtable_html(t) for t in pub.tables]
+        for caption, path in pub.boxplots:
+            data = base64.b64encode(path.read_bytes()).decode("ascii")
+            parts.append(f'<figure><img src="data:image/png;base64,{data}" alt="{e(caption)}"><figcaption>{e(caption)}</figcaption></figure>')
     if report.plots:
         parts.append("<h2>Plots</h2>")
         for p in report.plots:
@@ -459,6 +504,9 @@ def build_report(out_dir: str | Path, *, title: str | None = None, plots: bool =
         report.plots = make_plots(records)
         for p in report.plots:
             atomic.write_bytes(out_dir / "plots" / p.filename, p.png)
+    from lidarkit.bench.publication import build_publication
+
+    report.publication = build_publication(records, out_dir, plots=plots)
     report.markdown_path = atomic.write_text(out_dir / "report.md", _markdown(report, title))
     report.csv_path = atomic.write_text(out_dir / "report.csv", _csv(report))
     report.html_path = atomic.write_text(out_dir / "report.html", _html(report, title))

@@ -49,6 +49,23 @@ def trajectory_series(ref_xyz: np.ndarray | None, est_xyz: np.ndarray, times_s: 
     return series
 
 
+def drift_segments(result: Any) -> dict[str, list[float]] | None:
+    """Per-segment KITTI errors of an odometry result (for pooled averages, per-speed tables and box plots)."""
+    from lidarkit import eval as leval
+    from lidarkit.eval.tables import KITTI_FRAME_PERIOD_S, SegmentErrors
+    from lidarkit.odometry.metrics import paired
+
+    if result.ground_truth is None:
+        return None
+    ref, est = paired(result.ground_truth, result.trajectory)
+    if not leval.drift_segments_possible(ref):
+        return None
+    period = KITTI_FRAME_PERIOD_S
+    if ref.timestamps_s is not None and len(ref) > 1:
+        period = float(np.median(np.diff(ref.timestamps_s)))
+    return SegmentErrors.from_drift(leval.kitti_drift(ref, est), frame_period_s=period).to_dict()
+
+
 def seeded_dataset(job: Job) -> dict[str, Any]:
     """The job's dataset spec; a simulated sequence without its own ``seed`` is seeded by the job's seed, so
     ``seeds: 10`` in a suite runs a method over 10 different simulated drives (the unit of a paired test)."""
@@ -115,4 +132,7 @@ class OdometryTask(Task):
         times = est.timestamps_s if est.timestamps_s is not None else np.arange(len(est)) * 0.1
         ref_xyz = None if result.ground_truth is None else result.ground_truth.positions_xyz
         series = trajectory_series(ref_xyz, est.positions_xyz, np.asarray(times, dtype=float))
+        segments = drift_segments(result)
+        if segments is not None:
+            series["drift_segments"] = segments
         return TaskOutput(metrics=metrics, series=series, info={"odometry_metrics": m, "config": result.config})
