@@ -18,6 +18,7 @@ from lidarkit.cli import sim_cmd  # noqa: E402,F401
 from lidarkit.cli import bench_cmd  # noqa: E402,F401
 from lidarkit.cli import icp_cmd  # noqa: E402,F401
 from lidarkit.cli import compare_cmd  # noqa: E402,F401
+from lidarkit.cli import baseline_cmd  # noqa: E402,F401
 
 __all__ = ["app", "main"]
 

@@ -110,29 +110,35 @@ class OdometryTask(Task):
         get_icp(method, **params)
 
     def run(self, job: Job) -> TaskOutput:
-        from lidarkit.odometry import run
+        return run_odometry_job(job)[1]
 
-        options = OdometryOptions(**job.options)
-        sequence = open_dataset_spec(seeded_dataset(job))
-        result = run(sequence, job.method, params=dict(job.params), frames=options.frames)
-        m = result.metrics
-        metrics = {
-            "ape_rmse_m": _get(m, "ape_translation_m", "stats", "rmse"),
-            "rpe_trans_rmse_m": _get(m, "rpe_translation_m", "stats", "rmse"),
-            "rpe_rot_rmse_deg": _get(m, "rpe_rotation_deg", "stats", "rmse"),
-            "drift_translation_pct": _get(m, "kitti_drift", "translation_pct"),
-            "drift_rotation_deg_per_100m": _get(m, "kitti_drift", "rotation_deg_per_100m"),
-            "final_error_m": _get(m, "final_error", "translation_m"),
-            "hz": float(result.fps),
-            "n_frames": float(len(result.frames)),
-            "n_not_converged": float(result.n_not_converged),
-        }
-        metrics = {k: v for k, v in metrics.items() if v is not None}
-        est = result.trajectory
-        times = est.timestamps_s if est.timestamps_s is not None else np.arange(len(est)) * 0.1
-        ref_xyz = None if result.ground_truth is None else result.ground_truth.positions_xyz
-        series = trajectory_series(ref_xyz, est.positions_xyz, np.asarray(times, dtype=float))
-        segments = drift_segments(result)
-        if segments is not None:
-            series["drift_segments"] = segments
-        return TaskOutput(metrics=metrics, series=series, info={"odometry_metrics": m, "config": result.config})
+
+def run_odometry_job(job: Job) -> tuple[Any, TaskOutput]:
+    """The odometry result of ``job`` and its task output (metrics, plot series, config), for the task and for
+    golden baselines (which also keep the trajectory)."""
+    from lidarkit.odometry import run
+
+    options = OdometryOptions(**job.options)
+    sequence = open_dataset_spec(seeded_dataset(job))
+    result = run(sequence, job.method, params=dict(job.params), frames=options.frames)
+    m = result.metrics
+    metrics = {
+        "ape_rmse_m": _get(m, "ape_translation_m", "stats", "rmse"),
+        "rpe_trans_rmse_m": _get(m, "rpe_translation_m", "stats", "rmse"),
+        "rpe_rot_rmse_deg": _get(m, "rpe_rotation_deg", "stats", "rmse"),
+        "drift_translation_pct": _get(m, "kitti_drift", "translation_pct"),
+        "drift_rotation_deg_per_100m": _get(m, "kitti_drift", "rotation_deg_per_100m"),
+        "final_error_m": _get(m, "final_error", "translation_m"),
+        "hz": float(result.fps),
+        "n_frames": float(len(result.frames)),
+        "n_not_converged": float(result.n_not_converged),
+    }
+    metrics = {k: v for k, v in metrics.items() if v is not None}
+    est = result.trajectory
+    times = est.timestamps_s if est.timestamps_s is not None else np.arange(len(est)) * 0.1
+    ref_xyz = None if result.ground_truth is None else result.ground_truth.positions_xyz
+    series = trajectory_series(ref_xyz, est.positions_xyz, np.asarray(times, dtype=float))
+    segments = drift_segments(result)
+    if segments is not None:
+        series["drift_segments"] = segments
+    return result, TaskOutput(metrics=metrics, series=series, info={"odometry_metrics": m, "config": result.config})
