@@ -113,14 +113,8 @@ class OdometryTask(Task):
         return run_odometry_job(job)[1]
 
 
-def run_odometry_job(job: Job) -> tuple[Any, TaskOutput]:
-    """The odometry result of ``job`` and its task output (metrics, plot series, config), for the task and for
-    golden baselines (which also keep the trajectory)."""
-    from lidarkit.odometry import run
-
-    options = OdometryOptions(**job.options)
-    sequence = open_dataset_spec(seeded_dataset(job))
-    result = run(sequence, job.method, params=dict(job.params), frames=options.frames)
+def scalar_metrics(result: Any) -> dict[str, float]:
+    """The bench metrics (``ape_rmse_m``, ``drift_translation_pct``, ...) of an :class:`OdometryResult`."""
     m = result.metrics
     metrics = {
         "ape_rmse_m": _get(m, "ape_translation_m", "stats", "rmse"),
@@ -134,6 +128,19 @@ def run_odometry_job(job: Job) -> tuple[Any, TaskOutput]:
         "n_not_converged": float(result.n_not_converged),
     }
     metrics = {k: v for k, v in metrics.items() if v is not None}
+    return metrics
+
+
+def run_odometry_job(job: Job) -> tuple[Any, TaskOutput]:
+    """The odometry result of ``job`` and its task output (metrics, plot series, config), for the task and for
+    golden baselines (which also keep the trajectory)."""
+    from lidarkit.odometry import run
+
+    options = OdometryOptions(**job.options)
+    sequence = open_dataset_spec(seeded_dataset(job))
+    result = run(sequence, job.method, params=dict(job.params), frames=options.frames)
+    m = result.metrics
+    metrics = scalar_metrics(result)
     est = result.trajectory
     times = est.timestamps_s if est.timestamps_s is not None else np.arange(len(est)) * 0.1
     ref_xyz = None if result.ground_truth is None else result.ground_truth.positions_xyz
