@@ -29,6 +29,7 @@ class Publication:
     tables: list[PubTable] = field(default_factory=list)
     files: list[Path] = field(default_factory=list)
     boxplots: list[tuple[str, Path]] = field(default_factory=list)  # (caption, png path)
+    comparisons: list[tuple[str, Any]] = field(default_factory=list)  # (dataset, PairedComparison) vs the reference
 
 
 def _grids(records: list[dict[str, Any]]):
@@ -54,10 +55,58 @@ def _grids(records: list[dict[str, Any]]):
     return merged, {k: float(np.mean(v)) for k, v in ape.items()}, {k: float(np.mean(v)) for k, v in rpe.items()}
 
 
+REFERENCE_METHOD = "kiss"
+
+
+def reference_comparisons(records: list[dict[str, Any]], reference: str = REFERENCE_METHOD) -> list[tuple[str, Any]]:
+    """Paired Wilcoxon comparisons of the reference method with every other method, per dataset.
+
+    Units: the KITTI segments of every common seed (same ground truth, so the same segments) when both have
+    them, else the common seeds (at least 5) on APE RMSE; a dataset without enough units is left out.
+    """
+    from lidarkit.errors import LidarKitError
+    from lidarkit.eval.statistics import paired_test
+
+    per: dict[str, dict[str, dict[int, dict[str, Any]]]] = defaultdict(lambda: defaultdict(dict))
+    for r in records:
+        if r.get("status") != "ok" or r["job"]["task"] != "odometry":
+            continue
+        job = Job.from_spec(r["job"])
+        per[job.dataset_name][job.method_label][job.seed] = r
+    out = []
+    for dataset, methods in per.items():
+        if reference not in methods:
+            continue
+        ref = methods[reference]
+        for label, runs in methods.items():
+            if label == reference:
+                continue
+            seeds = sorted(set(ref) & set(runs))
+            segs = [((ref[s].get("series") or {}).get("drift_segments"), (runs[s].get("series") or {}).get("drift_segments"))
+                    for s in seeds]
+            try:
+                if seeds and all(a and b and len(a["translation_pct"]) == len(b["translation_pct"]) for a, b in segs):
+                    va = np.concatenate([a["translation_pct"] for a, _ in segs])
+                    vb = np.concatenate([b["translation_pct"] for _, b in segs])
+                    out.append((dataset, paired_test(va, vb, name_a=reference, name_b=label, metric="KITTI drift %",
+                                                     pairing="segment")))
+                elif len(seeds) >= 5:
+                    va = [ref[s]["metrics"].get("ape_rmse_m") for s in seeds]
+                    vb = [runs[s]["metrics"].get("ape_rmse_m") for s in seeds]
+                    if None not in va and None not in vb:
+                        out.append((dataset, paired_test(va, vb, name_a=reference, name_b=label, metric="APE RMSE m",
+                                                         pairing="seed")))
+            except LidarKitError as err:
+                log.info("no paired comparison %s vs %s on %s: %s", reference, label, dataset, err)
+    return out
+
+
 def build_publication(records: list[dict[str, Any]], out_dir: Path, *, plots: bool = True) -> Publication:
-    """Tables (and box plots with ``plots``) of the odometry records, written under ``out_dir``."""
+    """Tables (and box plots with ``plots``) of the odometry records, written under ``out_dir``; paired
+    comparisons with the reference (kiss)."""
     segments, ape, rpe = _grids(records)
     pub = Publication(publication_tables(segments or None, ape or None, rpe or None).tables)
+    pub.comparisons = reference_comparisons(records)
     if not pub.tables:
         return pub
     for table in pub.tables:

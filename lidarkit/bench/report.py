@@ -67,6 +67,8 @@ class Plot:
     title: str
     filename: str
     png: bytes
+    task: str = ""
+    caption: str = ""
 
 
 @dataclass
@@ -221,7 +223,9 @@ def make_plots(records: list[dict[str, Any]]) -> list[Plot]:
             ax.set_aspect("equal", adjustable="datalim")
             ax.legend(fontsize=7)
             ax.set_title(f"trajectories: {where}", fontsize=9)
-            plots.append(Plot(f"Trajectories — {where}", f"traj_{_slug(where)}.png", _png(fig)))
+            plots.append(Plot(f"Trajectories — {where}", f"traj_{_slug(where)}.png", _png(fig), task,
+                              f"Top view of the estimated trajectories (first seed of each method) against the "
+                              f"reference (dashed): {experiment}, {dataset}."))
         chosen = _first_ok_per_method(items, "error_over_time")
         if chosen:
             fig, ax = plt.subplots(figsize=(6, 3.2))
@@ -234,7 +238,8 @@ def make_plots(records: list[dict[str, Any]]) -> list[Plot]:
             ax.set_ylabel(ylabel)
             ax.legend(fontsize=7)
             ax.set_title(f"error over time: {where}", fontsize=9)
-            plots.append(Plot(f"Error over time — {where}", f"err_{_slug(where)}.png", _png(fig)))
+            plots.append(Plot(f"Error over time — {where}", f"err_{_slug(where)}.png", _png(fig), task,
+                              f"{ylabel} over time per method: {experiment}, {dataset}."))
         chosen = _first_ok_per_method(items, "rmse_history")
         if chosen:
             fig, ax = plt.subplots(figsize=(6, 3.2))
@@ -248,7 +253,8 @@ def make_plots(records: list[dict[str, Any]]) -> list[Plot]:
             ax.set_yscale("log")
             ax.legend(fontsize=7)
             ax.set_title(f"ICP RMSE vs iteration: {where}", fontsize=9)
-            plots.append(Plot(f"RMSE vs iteration — {where}", f"rmse_{_slug(where)}.png", _png(fig)))
+            plots.append(Plot(f"RMSE vs iteration — {where}", f"rmse_{_slug(where)}.png", _png(fig), task,
+                              f"Correspondence RMSE per ICP iteration (first pair, log scale): {experiment}, {dataset}."))
     plots.extend(_sweep_plots(records))
     return plots
 
@@ -286,7 +292,8 @@ def _sweep_plots(records: list[dict[str, Any]]) -> list[Plot]:
             ax.set_xscale("log" if max(max(p) for p in lines.values()) / max(min(min(p) for p in lines.values()), 1e-12) >= 10 else "linear")
             ax.legend(fontsize=7)
             ax.set_title(f"{task}: {metric} vs {param} (mean ± std over seeds)", fontsize=9)
-            plots.append(Plot(f"{metric} vs {param} — {task}", f"sweep_{_slug(task + '_' + metric + '_' + param)}.png", _png(fig)))
+            plots.append(Plot(f"{metric} vs {param} — {task}", f"sweep_{_slug(task + '_' + metric + '_' + param)}.png", _png(fig),
+                              task, f"{metric} against {param}: mean ± std over seeds, one line per dataset and method."))
     return plots
 
 
@@ -306,8 +313,10 @@ def pivot(table: TaskTable, metric: str) -> tuple[list[str], list[list[str]]]:
     """Methods x datasets for one metric (``experiment: method`` rows, dataset columns, mean ± std cells)."""
     datasets = sorted({r.dataset for r in table.rows})
     cells: dict[str, dict[str, str]] = {}
+    one_experiment = len({r.experiment for r in table.rows}) == 1  # no prefix repeated on every row
     for r in table.rows:
-        cells.setdefault(f"{r.experiment}: {r.method}", {})[r.dataset] = format_stat(r.stats[metric])
+        label = r.method if one_experiment else f"{r.experiment}: {r.method}"
+        cells.setdefault(label, {})[r.dataset] = format_stat(r.stats[metric])
     header = ["method"] + datasets
     return header, [[label] + [row.get(d, "") for d in datasets] for label, row in cells.items()]
 
@@ -338,6 +347,10 @@ def _markdown(report: Report, title: str) -> str:
         out += ["## Publication tables", "", f"Also as CSV and LaTeX (booktabs) in `{out_dir_name(report)}/tables/`.", ""]
         out += [t.to_markdown() for t in pub.tables]
         out += [f"![{caption}](plots/{path.name})\n\n{caption}\n" for caption, path in pub.boxplots]
+    if pub is not None and pub.comparisons:
+        header, rows = comparison_rows(pub.comparisons)
+        out += ["## Paired comparisons with the reference", "", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+        out += ["| " + " | ".join(c.replace("|", "\\|") for c in row) + " |" for row in rows] + [""]
     if report.plots:
         out += ["## Plots", ""] + [f"![{p.title}](plots/{p.filename})" for p in report.plots] + [""]
     if report.skipped:
@@ -374,7 +387,10 @@ body{font-family:system-ui,sans-serif;margin:2em;max-width:1200px;color:#222}
 table{border-collapse:collapse;margin:1em 0;font-size:0.9em}
 th,td{border:1px solid #ccc;padding:3px 8px;text-align:right}
 th{background:#f0f0f0} td.l,th.l{text-align:left}
-figure{display:inline-block;margin:0.5em;vertical-align:top}
+figure{display:inline-block;margin:0.5em;vertical-align:top;max-width:560px}
+figure.table{display:block;max-width:none}
+section{margin-top:2em;border-top:1px solid #ddd}
+details{margin:0.5em 0}
 figcaption{font-size:0.85em;color:#555}
 .failed{color:#a00}
 tr.summary td{border-top:2px solid #444;font-weight:600}
@@ -399,7 +415,75 @@ def _pubtable_html(table) -> str:
             f"<tbody>{''.join(rows)}</tbody></table>{note}</figure>")
 
 
+def _table_html(header: list[str], rows: list[list[str]], n_left: int = 1, caption: str = "") -> str:
+    e = html.escape
+    head = "".join(f'<th class="l">{e(h)}</th>' if i < n_left else f"<th>{e(h)}</th>" for i, h in enumerate(header))
+    body = "".join(
+        "<tr>" + "".join(f'<td class="l">{e(c)}</td>' if i < n_left else f"<td>{e(c)}</td>" for i, c in enumerate(row)) + "</tr>"
+        for row in rows
+    )
+    cap = f"<caption>{e(caption)}</caption>" if caption else ""
+    return f"<table>{cap}<thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
+
+
+def _figure_html(png: bytes, alt: str, caption: str) -> str:
+    e = html.escape
+    data = base64.b64encode(png).decode("ascii")
+    return (f'<figure><img src="data:image/png;base64,{data}" alt="{e(alt)}" width="540">'
+            f"<figcaption>{e(caption)}</figcaption></figure>")
+
+
+def summary_rows(report: Report) -> tuple[list[str], list[list[str]]]:
+    """The page's first table: per task and dataset, the best method on the task's headline accuracy metric."""
+    header = ["section", "dataset", "headline metric", "best method", "value (mean ± std)", "methods"]
+    rows = []
+    for table in report.tables:
+        metric = next((m for m in table.metrics if m.kind == "accuracy"), None)
+        if metric is None:
+            continue
+        better_higher = _better_higher(table.task, metric.name)
+        for dataset in sorted({r.dataset for r in table.rows}):
+            candidates = [r for r in table.rows if r.dataset == dataset and r.stats[metric.name][2] > 0]
+            if not candidates:
+                continue
+            best = (max if better_higher else min)(candidates, key=lambda r: r.stats[metric.name][0])
+            rows.append([table.task, dataset, metric.label, _short_label(best, table), format_stat(best.stats[metric.name]),
+                         str(len({r.method for r in table.rows if r.dataset == dataset}))])
+    return header, rows
+
+
+def _better_higher(task: str, metric: str) -> bool:
+    try:
+        from lidarkit.bench.tasks import get_task
+
+        return any(m.name == metric and m.better == "higher" for m in get_task(task).metrics)
+    except Exception:  # noqa: BLE001 - metadata is optional for the report
+        return False
+
+
+def _short_label(row: Row, table: TaskTable) -> str:
+    return row.method if len({r.experiment for r in table.rows}) == 1 else f"{row.experiment}: {row.method}"
+
+
+def statistics_rows(table: TaskTable) -> tuple[list[str], list[list[str]]]:
+    """Per (dataset, method): the headline metric's n, mean, std, median and seeded 95 % bootstrap CI over seeds."""
+    metric = next((m for m in table.metrics if m.kind == "accuracy"), None)
+    header = ["dataset", "method", "n", "mean", "std", "median", "95 % CI (bootstrap)"]
+    if metric is None:
+        return header, []
+    rows = []
+    for r in table.rows:
+        s = r.summaries.get(metric.name)
+        if s is None or s.n == 0:
+            continue
+        rows.append([r.dataset, _short_label(r, table), str(s.n), _fmt(s.mean), _fmt(s.std) if s.n > 1 else "–",
+                     _fmt(s.median), f"[{_fmt(s.ci_low)}, {_fmt(s.ci_high)}]" if s.n > 1 else "–"])
+    return header, rows
+
+
 def _html(report: Report, title: str) -> str:
+    """One self-contained page: summary table first, then one section per task (tables, statistics, plots with
+    captions, and for odometry the publication tables and paired comparisons), then what did not run."""
     e = html.escape
     parts = [
         "<!DOCTYPE html>",
@@ -414,40 +498,49 @@ def _html(report: Report, title: str) -> str:
         f"<p>Generated {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC from {report.n_records} job results. "
         "Cells: mean ± std over seeds (sample std).</p>",
     ]
+    header, rows = summary_rows(report)
+    if rows:
+        parts += ['<section id="summary">', "<h2>Summary</h2>",
+                  _table_html(header, rows, n_left=4, caption="Best method per task and dataset on the headline metric"),
+                  "</section>"]
     for table in report.tables:
+        parts.append(f'<section id="task-{e(_slug(table.task))}">')
         parts.append(f"<h2>{e(table.task)}</h2>")
+        description = _task_description(table.task)
+        if description:
+            parts.append(f"<p>{e(description)}</p>")
         for m in _pivot_metrics(table):
             header, rows = pivot(table, m.name)
-            parts.append(f"<h3>{e(m.label)}: methods x datasets</h3>")
-            parts.append("<table>")
-            parts.append("<thead><tr>" + "".join(f'<th class="l">{e(h)}</th>' if i == 0 else f"<th>{e(h)}</th>" for i, h in enumerate(header)) + "</tr></thead>")
-            parts.append("<tbody>")
-            for row in rows:
-                parts.append("<tr>" + "".join(f'<td class="l">{e(c)}</td>' if i == 0 else f"<td>{e(c)}</td>" for i, c in enumerate(row)) + "</tr>")
-            parts.append("</tbody>")
-            parts.append("</table>")
+            parts.append(_table_html(header, rows, caption=f"{m.label}: methods x datasets"))
+        header, rows = statistics_rows(table)
+        if rows and any(r[2] not in ("0", "1") for r in rows):
+            parts.append(_table_html(header, rows, n_left=2, caption="Statistics over seeds of the headline metric"))
         header, rows = _table_rows(table)
-        parts.append("<h3>All metrics</h3>")
-        parts.append("<table>")
-        parts.append("<thead><tr>" + "".join(f'<th class="l">{e(h)}</th>' if i < 4 else f"<th>{e(h)}</th>" for i, h in enumerate(header)) + "</tr></thead>")
-        parts.append("<tbody>")
-        for row in rows:
-            parts.append("<tr>" + "".join(f'<td class="l">{e(c)}</td>' if i < 4 else f"<td>{e(c)}</td>" for i, c in enumerate(row)) + "</tr>")
-        parts.append("</tbody>")
-        parts.append("</table>")
-    pub = report.publication
-    if pub is not None and pub.tables:
-        parts.append("<h2>Publication tables</h2>")
-        parts.append("<p>Also as Markdown, CSV and LaTeX (booktabs) in <code>tables/</code>. Bold: best method per row.</p>")
-        parts += [_pubtable_html(t) for t in pub.tables]
-        for caption, path in pub.boxplots:
-            data = base64.b64encode(path.read_bytes()).decode("ascii")
-            parts.append(f'<figure><img src="data:image/png;base64,{data}" alt="{e(caption)}"><figcaption>{e(caption)}</figcaption></figure>')
-    if report.plots:
-        parts.append("<h2>Plots</h2>")
-        for p in report.plots:
-            data = base64.b64encode(p.png).decode("ascii")
-            parts.append(f'<figure><img src="data:image/png;base64,{data}" alt="{e(p.title)}" width="540"><figcaption>{e(p.title)}</figcaption></figure>')
+        parts.append("<details><summary>All metrics</summary>")
+        parts.append(_table_html(header, rows, n_left=4))
+        parts.append("</details>")
+        pub = report.publication
+        if table.task == "odometry" and pub is not None:
+            if pub.comparisons:
+                parts.append(_table_html(*comparison_rows(pub.comparisons), n_left=3,
+                                         caption="Paired comparisons with the reference (Wilcoxon signed-rank)"))
+            if pub.tables:
+                parts.append("<h3>Publication tables</h3>")
+                parts.append("<p>Also as Markdown, CSV and LaTeX (booktabs) in <code>tables/</code>. "
+                             "Bold: best method per row.</p>")
+                parts += [_pubtable_html(t) for t in pub.tables]
+                for caption, path in pub.boxplots:
+                    parts.append(_figure_html(path.read_bytes(), caption, caption))
+        task_plots = [p for p in report.plots if p.task == table.task]
+        if task_plots:
+            parts.append("<h3>Plots</h3>")
+            parts += [_figure_html(p.png, p.title, p.caption or p.title) for p in task_plots]
+        parts.append("</section>")
+    other = [p for p in report.plots if p.task not in {t.task for t in report.tables}]
+    if other:
+        parts.append("<section><h2>Other plots</h2>")
+        parts += [_figure_html(p.png, p.title, p.caption or p.title) for p in other]
+        parts.append("</section>")
     sections = (
         ("Experiments not run", [f"<li>{e(name)}: {e(reason)}</li>" for name, reason in report.skipped]),
         ("Warnings logged by jobs", [f"<li>{e(label)}: {e(message)}</li>" for label, message in report.warnings]),
@@ -457,9 +550,29 @@ def _html(report: Report, title: str) -> str:
     )
     for heading, items in sections:
         if items:
-            parts += [f"<h2>{heading}</h2>", "<ul>", *items, "</ul>"]
+            parts += [f"<section><h2>{heading}</h2>", "<ul>", *items, "</ul></section>"]
     parts += ["</body>", "</html>", ""]
     return "\n".join(parts)
+
+
+def comparison_rows(comparisons: list[Any]) -> tuple[list[str], list[list[str]]]:
+    """Rows of paired comparisons ``(dataset, PairedComparison)``: who, units, means, p, effect, verdict."""
+    header = ["dataset", "A", "B", "paired units", "mean A", "mean B", "p", "effect", "verdict"]
+    rows = []
+    for dataset, c in comparisons:
+        verdict = (f"{c.name_a if c.better == 'a' else c.name_b} better" if c.better else "no significant difference")
+        rows.append([dataset, c.name_a, c.name_b, f"{c.n_pairs} {c.pairing}s ({c.metric})", _fmt(c.mean_a),
+                     _fmt(c.mean_b), f"{c.p_value:.2g}", f"{c.effect_size:+.2f}", verdict])
+    return header, rows
+
+
+def _task_description(task: str) -> str:
+    try:
+        from lidarkit.bench.tasks import get_task
+
+        return get_task(task).description
+    except Exception:  # noqa: BLE001 - metadata is optional for the report
+        return ""
 
 
 def latest_per_job(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
