@@ -393,7 +393,7 @@ section{margin-top:2em;border-top:1px solid #ddd}
 details{margin:0.5em 0}
 figcaption{font-size:0.85em;color:#555}
 .failed{color:#a00}
-tr.summary td{border-top:2px solid #444;font-weight:600}
+tr.summary td{border-top:2px solid #444;font-style:italic}
 caption{font-weight:600;text-align:left;padding:2px 0}
 """
 
