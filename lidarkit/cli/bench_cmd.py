@@ -169,3 +169,6 @@ def report_cmd(
         out.print(table)
     out.print(f"{built.n_records} results, {len(built.failures)} failed; {len(built.plots)} plots")
     out.print(f"markdown: {built.markdown_path}\ncsv: {built.csv_path}\nhtml: {built.html_path}", soft_wrap=True)
+    publication = getattr(built, "publication", None)
+    if publication is not None and publication.tables:
+        out.print(f"publication tables (Markdown, CSV, LaTeX): {built.out_dir / 'tables'}", soft_wrap=True)
