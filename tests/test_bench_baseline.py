@@ -127,6 +127,20 @@ def test_changed_data_file_is_a_protocol_change_not_a_regression(recorded, tmp_p
         scan.write_bytes(original)
 
 
+def test_another_kiss_icp_version_is_a_protocol_change(recorded, tmp_path):
+    import shutil
+
+    _, out, _ = recorded
+    copy = tmp_path / "baseline"
+    shutil.copytree(out, copy)
+    manifest = json.loads((copy / "manifest.json").read_text())
+    manifest["environment"]["packages"]["kiss-icp"] = "0.0.1"
+    (copy / "manifest.json").write_text(json.dumps(manifest))
+    result = check(copy)
+    assert not result.passed and not result.measured  # nothing re-run: the numbers would not be comparable
+    assert any(line.startswith("protocol changed: environment: packages.kiss-icp: 0.0.1 -> ") for line in result.lines())
+
+
 def test_bad_baseline_folders_are_clear_errors(recorded, tmp_path, capsys):
     _, out, _ = recorded
     with pytest.raises(DataError, match="no manifest.json: not a baseline folder"):

@@ -459,6 +459,8 @@ def check(
             if len(data_changes) > 10:
                 result.findings.append(Finding("protocol changed", name, f"... {len(data_changes) - 10} more data files"))
             continue
+        if env_changes or eval_changes:
+            continue  # numbers under another environment or evaluation are not comparable: do not spend the run
         run = run_job(job, cache)
         result.measured[pinned["key"]] = run.metrics
         then = {k: v for k, v in pinned["protocol"].items() if k not in ("checksums", "method_config")}
@@ -468,7 +470,7 @@ def check(
             result.findings.append(Finding("protocol changed", name, line))
         for line in _diff("method config", pinned["protocol"].get("method_config", {}), run.protocol.get("method_config", {})):
             result.findings.append(Finding("note", name, line))
-        if protocol_changes or env_changes or eval_changes:
+        if protocol_changes:
             continue
         for metric in pinned["checked"]:
             ref = float(pinned["metrics"][metric])
