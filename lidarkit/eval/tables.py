@@ -208,9 +208,12 @@ def per_length_table(grid: Grid, quantity: str = "translation_pct", lengths_m: S
             sel = length == L
             values[i, j] = q[sel].mean() if sel.any() else np.nan
         values[-1, j] = q.mean() if q.size else np.nan
+    keep = np.isfinite(values).any(axis=1)
+    keep[-1] = True  # lengths no sequence is long enough for are left out; the "all" row stays
+    labels = [f"{L:g}" for L in lengths_m] + ["all"]
     return PubTable(
         title=f"KITTI {QUANTITIES[quantity]} per segment length", corner="length (m)",
-        row_labels=[f"{L:g}" for L in lengths_m] + ["all"], col_labels=methods, values=values,
+        row_labels=[lab for lab, k in zip(labels, keep) if k], col_labels=methods, values=values[keep],
         digits=2 if quantity == "translation_pct" else 3, n_summary_rows=1, name=f"kitti_{quantity}_per_length",
     )
 
