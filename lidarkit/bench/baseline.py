@@ -23,7 +23,6 @@ import logging
 import math
 import os
 import platform
-import shutil
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -262,19 +261,18 @@ def record(
     repeats: int = 3,
     on_job: Callable[[Job, int], None] | None = None,
 ) -> Baseline:
-    """Run ``suite_path`` ``repeats`` times and write the baseline folder ``out_dir`` (all or nothing: it is
-    assembled beside and renamed into place; an existing folder is replaced only when complete)."""
+    """Run ``suite_path`` ``repeats`` times and write the baseline folder ``out_dir`` (all or nothing, through
+    :func:`lidarkit.atomic.run_folder`: a failed run leaves no partial baseline)."""
     from lidarkit.bench.suite import load_suite
 
     if int(repeats) != repeats or repeats < 1:
         raise ConfigError(f"repeats must be a positive integer, got {repeats}", source="repeats")
     suite = load_suite(suite_path)
     out = Path(out_dir)
-    tmp = out.with_name(f".{out.name}.recording")
-    shutil.rmtree(tmp, ignore_errors=True)
+    atomic.check_target(out, "folder")
     cache: dict[str, str] = {}
     jobs = []
-    try:
+    with atomic.run_folder(out) as tmp:
         for job in suite.jobs:
             runs = []
             for r in range(int(repeats)):
@@ -301,17 +299,6 @@ def record(
                     "band_rule": f"max({NOISE_FACTOR:g} x run-to-run std, per-metric floor, {RELATIVE_FLOOR:g} x value)",
                     "jobs": jobs}
         atomic.write_text(tmp / MANIFEST, json.dumps(_jsonable(manifest), indent=1) + "\n")
-        if out.exists():
-            old = out.with_name(f".{out.name}.old")
-            shutil.rmtree(old, ignore_errors=True)
-            os.replace(out, old)
-            os.replace(tmp, out)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            out.parent.mkdir(parents=True, exist_ok=True)
-            os.replace(tmp, out)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
     return load_baseline(out)
 
 

@@ -96,6 +96,11 @@ class KissRegistration(Registration):
         self._kiss = None
 
     @property
+    def deskew_instant(self) -> str | None:
+        """The instant of the sweep deskewed poses refer to: kiss-icp 1.x deskews to the latest point (the END)."""
+        return "end" if self.config.deskew else None
+
+    @property
     def kiss_config(self):
         """The ``kiss_icp`` KISSConfig this wrapper runs with (a fresh object each call)."""
         return self.config.to_kiss_config()

@@ -1,7 +1,9 @@
 """``odometry``: any registered ICP variant over a scan sequence through ``lidarkit.odometry.run``, scored vs ground truth.
 
 Options: ``frames`` — a frame selection as ``lidarkit.odometry.run`` takes it (``"0:50"``, or a list of indices).
-Metrics come from the odometry run's own scoring (APE / RPE / KITTI drift through ``lidarkit.eval``).
+Metrics come from the odometry run's own scoring (APE / RPE / KITTI drift through ``lidarkit.eval``); every
+label names its alignment (``info["metric_alignment"]`` too, for the report), and ``n_bad_frames`` counts the
+frames failing the independent per-frame check (:mod:`lidarkit.odometry.frame_check`).
 """
 
 from __future__ import annotations
@@ -17,6 +19,15 @@ from lidarkit.bench.tasks._datasets import check_reader_options, open_dataset_sp
 from lidarkit.errors import ConfigError
 
 MAX_SERIES_POINTS = 2000
+
+#: Alignment of each APE / RPE metric of this task (read by the report's labelling, see ``lidarkit.bench.report``).
+METRIC_ALIGNMENT_BY_NAME = {
+    "ape_se3_rmse_m": "SE(3)-aligned",
+    "ape_rmse_m": "unaligned, first pose anchored",
+    "rpe_trans_rmse_m": "1 frame, alignment-free",
+    "rpe_rot_rmse_deg": "1 frame, alignment-free",
+    "final_error_m": "unaligned",
+}
 
 
 class OdometryOptions(BaseModel):
@@ -78,12 +89,14 @@ class OdometryTask(Task):
     description = "sequence odometry with an ICP variant (APE, RPE, KITTI drift, frame rate)"
     dataset_kinds = ("kitti", "folder", "sim_lidar", "kitti_raw")
     metrics = (
-        Metric("ape_rmse_m", "APE RMSE [m]"),
-        Metric("rpe_trans_rmse_m", "RPE trans. [m/frame]"),
-        Metric("rpe_rot_rmse_deg", "RPE rot. [deg/frame]"),
+        Metric("ape_se3_rmse_m", "APE RMSE (SE(3)-aligned) [m]"),
+        Metric("ape_rmse_m", "APE RMSE (unaligned, first pose anchored) [m]"),
+        Metric("rpe_trans_rmse_m", "RPE trans. (1 frame, alignment-free) [m/frame]"),
+        Metric("rpe_rot_rmse_deg", "RPE rot. (1 frame, alignment-free) [deg/frame]"),
         Metric("drift_translation_pct", "KITTI drift [%]"),
         Metric("drift_rotation_deg_per_100m", "KITTI rot. [deg/100m]"),
-        Metric("final_error_m", "final error [m]"),
+        Metric("final_error_m", "final error (unaligned) [m]"),
+        Metric("n_bad_frames", "bad frames (independent check)"),
         Metric("hz", "frames/s", kind="speed", better="higher"),
     )
 
@@ -117,6 +130,7 @@ def scalar_metrics(result: Any) -> dict[str, float]:
     """The bench metrics (``ape_rmse_m``, ``drift_translation_pct``, ...) of an :class:`OdometryResult`."""
     m = result.metrics
     metrics = {
+        "ape_se3_rmse_m": _get(m, "ape_translation_se3_m", "stats", "rmse"),
         "ape_rmse_m": _get(m, "ape_translation_m", "stats", "rmse"),
         "rpe_trans_rmse_m": _get(m, "rpe_translation_m", "stats", "rmse"),
         "rpe_rot_rmse_deg": _get(m, "rpe_rotation_deg", "stats", "rmse"),
@@ -126,6 +140,7 @@ def scalar_metrics(result: Any) -> dict[str, float]:
         "hz": float(result.fps),
         "n_frames": float(len(result.frames)),
         "n_not_converged": float(result.n_not_converged),
+        "n_bad_frames": float(result.n_bad_frames),
     }
     metrics = {k: v for k, v in metrics.items() if v is not None}
     return metrics
@@ -148,4 +163,5 @@ def run_odometry_job(job: Job) -> tuple[Any, TaskOutput]:
     segments = drift_segments(result)
     if segments is not None:
         series["drift_segments"] = segments
-    return result, TaskOutput(metrics=metrics, series=series, info={"odometry_metrics": m, "config": result.config})
+    info = {"odometry_metrics": m, "config": result.config, "metric_alignment": METRIC_ALIGNMENT_BY_NAME}
+    return result, TaskOutput(metrics=metrics, series=series, info=info)
