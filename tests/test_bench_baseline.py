@@ -15,7 +15,6 @@ from pydantic import Field
 from lidarkit.bench.baseline import check, load_baseline, record
 from lidarkit.cli import main
 from lidarkit.errors import ConfigError, DataError
-from lidarkit.registration import available_icp, register_icp
 from lidarkit.registration import registry as registry_module
 from lidarkit.registration.open3d_icp import Open3DPointToPlane, Open3DSurfaceConfig
 
@@ -36,8 +35,6 @@ class Stretch(Open3DPointToPlane):
         return dataclasses.replace(result, T_target_source=T)
 
 
-if "test_stretch" not in available_icp():
-    register_icp("test_stretch")(Stretch)
 
 
 class StretchedMoreConfig(StretchConfig):
@@ -49,7 +46,16 @@ class StretchedMore(Stretch):
 
 
 @pytest.fixture(scope="module")
-def recorded(tmp_path_factory):
+def stretch_registered():
+    """``test_stretch`` in the registry for this module only (other modules parametrize over available_icp())."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(Stretch, "name", "test_stretch")
+        mp.setitem(registry_module._VARIANTS, "test_stretch", Stretch)
+        yield
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory, stretch_registered):
     root = tmp_path_factory.mktemp("fake_kitti")
     write_fake_kitti_sequence(root, "00", 56, step_m=2.0, seed=0)  # 110 m: 100 m KITTI segments exist
     suite = root / "golden.yaml"
@@ -93,6 +99,7 @@ def test_record_pins_protocol_and_unchanged_check_passes(recorded, capsys):
 
 def test_drifting_variant_fails_with_regression(recorded, monkeypatch, capsys):
     _, out, baseline = recorded
+    monkeypatch.setattr(StretchedMore, "name", "test_stretch")
     monkeypatch.setitem(registry_module._VARIANTS, "test_stretch", StretchedMore)
     result = check(out)
     assert not result.passed
