@@ -83,8 +83,13 @@ def test_pytest_plugin_fixture_in_a_user_test_run(tiny_baseline, tmp_path):
             assert_no_worse_than({"ape_rmse_m": pinned["ape_rmse_m"] + 1}, lidarkit_baseline, metric="ape_rmse_m")
     """))
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])}
+    # installed (pip install -e .), the pytest11 entry point loads the plugin by itself; else name it with -p
+    from importlib.metadata import entry_points
+
+    installed = any(ep.value == "lidarkit.testing.plugin" for ep in entry_points(group="pytest11"))
+    load = [] if installed else ["-p", "lidarkit.testing.plugin"]
     proc = subprocess.run(
-        [sys.executable, "-m", "pytest", "-q", "-p", "lidarkit.testing.plugin", "-p", "no:cacheprovider",
+        [sys.executable, "-m", "pytest", "-q", *load, "-p", "no:cacheprovider",
          "--lidarkit-baseline", str(tiny_baseline.path), "test_user.py"],
         cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
     assert "1 failed, 1 passed" in proc.stdout, proc.stdout + proc.stderr
