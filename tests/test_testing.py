@@ -94,3 +94,24 @@ def test_pytest_plugin_fixture_in_a_user_test_run(tiny_baseline, tmp_path):
         cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
     assert "1 failed, 1 passed" in proc.stdout, proc.stdout + proc.stderr
     assert "regression: ape_rmse_m" in proc.stdout
+
+
+def test_compare_holds_a_difference_against_the_noise_a_baseline_measured(tiny_baseline, tmp_path, capsys):
+    from lidarkit.bench.runner import run_suite
+    from lidarkit.bench.suite import load_suite
+    from lidarkit.cli import main
+
+    folders = []
+    for noise_m in (0.05, 0.0502):  # a tiny but systematic difference
+        path = tmp_path / f"s{noise_m}.yaml"
+        path.write_text(textwrap.dedent(SUITE).replace("noise_m: 0.05", f"noise_m: {noise_m}") + "seeds: 8\n")
+        run_suite(load_suite(path), tmp_path / f"r{noise_m}", executor="serial")
+        folders.append(str(tmp_path / f"r{noise_m}"))
+    argv = ["compare", *folders, "--metric", "ape_rmse_m"]
+    with pytest.raises(SystemExit):
+        main(argv)
+    assert "is better than" in capsys.readouterr().out  # p < 0.05 over 8 seeds, same sign everywhere
+    with pytest.raises(SystemExit):
+        main([*argv, "--noise-from", str(tiny_baseline.path)])
+    out = capsys.readouterr().out
+    assert "no significant difference" in out and "within the run-to-run noise" in out

@@ -333,6 +333,18 @@ def load_baseline(path: str | os.PathLike) -> Baseline:
     return Baseline(path, manifest)
 
 
+def measured_noise(path: str | os.PathLike, metric: str | None) -> float:
+    """The widest band a baseline folder recorded for ``metric`` (its run-to-run noise allowance, metric unit);
+    ConfigError when no pinned job checks that metric."""
+    baseline = load_baseline(path)
+    bands = [float(job["bands"][metric]) for job in baseline.jobs if metric in job.get("bands", {})]
+    if not bands:
+        known = sorted({m for job in baseline.jobs for m in job.get("bands", {})})
+        raise ConfigError(f"no band for metric {metric!r} in this baseline (it has: {', '.join(known)}); "
+                          "name the metric with --metric", source=baseline.path)
+    return max(bands)
+
+
 # ---------------------------------------------------------------- check
 
 

@@ -22,12 +22,19 @@ def compare_command(
     method_b: Optional[str] = typer.Option(None, "--method-b", help="Method label in RUN_B when it holds several."),
     alpha: float = typer.Option(DEFAULT_ALPHA, help="Significance level of the Wilcoxon signed-rank test."),
     noise: float = typer.Option(0.0, help="Run-to-run noise of the metric (its unit): smaller differences are not called."),
+    noise_from: Optional[Path] = typer.Option(
+        None, "--noise-from", help="Baseline folder (lidarkit baseline record): take --noise from the band it measured "
+        "for the metric (the widest over its jobs)."),
     seed: int = typer.Option(0, "--seed", help="Seed of the bootstrap CI of the difference."),
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write the comparison as JSON here."),
 ) -> None:
     """Pair RUN_A and RUN_B on the same units (KITTI segments, frames or seeds) and test the difference (Wilcoxon)."""
     from lidarkit.eval.compare import compare
 
+    if noise_from is not None:
+        from lidarkit.bench.baseline import measured_noise
+
+        noise = max(noise, measured_noise(noise_from, metric))
     result = compare(run_a, run_b, metric=metric, method_a=method_a, method_b=method_b, alpha=alpha, noise=noise,
                      seed=seed)
     console = stdout()
