@@ -345,6 +345,10 @@ def _pivot_metrics(table: TaskTable) -> list[MetricInfo]:
 def _markdown(report: Report, title: str) -> str:
     out = [f"# {title}", "", f"Generated {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC from {report.n_records} job results "
            f"in `{report.out_dir}`. Cells: mean ± std over seeds (sample std).", ""]
+    header, rows = summary_rows(report)
+    if rows:
+        out += ["## Summary", "", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+        out += ["| " + " | ".join(c.replace("|", "\\|") for c in row) + " |" for row in rows] + [""]
     for table in report.tables:
         out += [f"## {table.task}", ""]
         for m in _pivot_metrics(table):
