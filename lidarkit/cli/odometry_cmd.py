@@ -58,13 +58,17 @@ def odometry(
         help="Fail on the first frame whose registration does not converge, and when a requested deskew cannot happen "
         "(default: warn; non-converged frames use constant velocity).",
     ),
+    init: str = typer.Option(
+        "constant_velocity", "--init",
+        help="Initial guess per frame: constant_velocity | odometry (the dataset's own odometry, e.g. a carmen: log).",
+    ),
 ) -> None:
     """Odometry of one ICP variant over a scan sequence, scored against its ground truth when it has one."""
     from lidarkit.atomic import check_target
     from lidarkit.odometry import run
 
     check_target(out, "folder")
-    result = run(data, method, params=parse_params(param), frames=frames, out_dir=out, progress=progress, strict=strict, name=name)
+    result = run(data, method, params=parse_params(param), frames=frames, out_dir=out, progress=progress, strict=strict, name=name, init=init)
     m = result.metrics
     effective = m.get("effective") or {}
     table = Table(title=result.trajectory.name, show_header=True)

@@ -30,6 +30,7 @@ from lidarkit.eval.compare import compare
 from lidarkit.eval.mse import position_mse
 from lidarkit.eval.pairing import paired
 from lidarkit.eval.statistics import PairedComparison, Summary, bootstrap_ci, paired_test, summarize
+from lidarkit.eval.relations import RelationError, relation_error
 
 __all__ = [
     "ALIGNMENTS",
@@ -46,6 +47,7 @@ __all__ = [
     "Summary",
     "EvaluationSettings",
     "RPEResult",
+    "RelationError",
     "align_trajectory",
     "bootstrap_ci",
     "compare",
@@ -56,6 +58,7 @@ __all__ = [
     "paired",
     "paired_test",
     "position_mse",
+    "relation_error",
     "rpe",
     "summarize",
 ]

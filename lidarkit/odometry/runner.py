@@ -92,6 +92,7 @@ def run(
     name: str | None = None,
     frame_check: FrameCheckConfig | None = None,
     prefetch: int = DEFAULT_DEPTH,
+    init: str = "constant_velocity",
 ) -> OdometryResult:
     """Odometry of ``method`` (a registered name or a configured variant) over ``dataset``.
 
@@ -112,6 +113,10 @@ def run(
     (``frame_check`` sets its thresholds). ``name`` titles the run (default: the dataset's name, e.g. its folder). ``prefetch``: scans read
     ahead in a background thread (0: read inline). Ground truth whose instant of the sweep differs from the
     estimate's is re-timed with a note or refused (:mod:`lidarkit.odometry.instants`).
+    ``init``: the initial guess of each frame, ``"constant_velocity"`` (the previous relative motion; stateful
+    variants: their own model) or ``"odometry"`` (the relative motion of the dataset's own ``odometry`` trajectory,
+    e.g. a CARMEN log's wheel odometry; for a stateless variant it also replaces a non-converged registration; a
+    stateful one gets it as ``register_frame(..., motion_guess=...)`` if it ``accepts_motion_guess``).
     """
     sequence = open_sequence(dataset)
     registration = _resolve_method(method, params)
@@ -128,6 +133,7 @@ def run(
     if len(indices) == 0:
         raise DataError(f"the frame selection {frames!r} selects no scan of {n_total}", source=dataset_name)
     stateful = bool(getattr(registration, "stateful", False))
+    odometry_poses = _odometry_guess(sequence, init, registration, n_total, dataset_name)
     n = len(indices)
     poses = np.empty((n, 4, 4))
     read_s = np.zeros(n)
@@ -165,7 +171,11 @@ def run(
                     if need_times:
                         require_point_times(scan, sequence, dataset_name, int(idx))
                     t1 = clock()
-                    poses[k] = registration.register_frame(points, scan.point_times_s)
+                    if odometry_poses is not None and k > 0:
+                        guess = orthonormalize_se3(np.linalg.solve(odometry_poses[indices[k - 1]], odometry_poses[idx]))
+                        poses[k] = registration.register_frame(points, scan.point_times_s, motion_guess=guess)
+                    else:
+                        poses[k] = registration.register_frame(points, scan.point_times_s)
                 except Exception as err:
                     if not _is_frame_error(err):
                         raise
@@ -189,6 +199,8 @@ def run(
                     if previous is None:
                         poses[k] = np.eye(4)
                     else:
+                        if odometry_poses is not None:
+                            motion = orthonormalize_se3(np.linalg.solve(odometry_poses[indices[k - 1]], odometry_poses[idx]))
                         result = registration.align(points, previous, init_T=motion)
                         measured[k] = True
                         converged[k] = bool(result.converged)
@@ -212,8 +224,8 @@ def run(
                         raise RegistrationError(f"registration did not converge ({why})", source=dataset_name, location=f"frame {int(idx)}")
                     fallback[k] = True
                     log.warning(
-                        "%s frame %d: %s did not converge (%s); using the constant-velocity motion instead",
-                        dataset_name, int(idx), name, why,
+                        "%s frame %d: %s did not converge (%s); using the %s motion instead",
+                        dataset_name, int(idx), name, why, "odometry" if odometry_poses is not None else "constant-velocity",
                     )
                 elif degenerate[k]:
                     log.warning("%s frame %d: %s flagged degenerate geometry (%s)", dataset_name, int(idx), name, reasons[k] or "degenerate")
@@ -260,7 +272,9 @@ def run(
             "n_frames": n,
             "stateful": stateful,
             "strict": strict,
-            "initial_guess": "register_frame (own map and motion model)" if stateful else "constant velocity (previous relative motion)",
+            "initial_guess": "dataset odometry (relative motion)" if odometry_poses is not None else (
+                "register_frame (own map and motion model)" if stateful else "constant velocity (previous relative motion)"
+            ),
             "ground_truth": None if reference is None else reference.name,
             "ground_truth_meta": None if reference is None else _plain(reference.meta),
             "effective": effective,
@@ -278,6 +292,26 @@ def run(
         write_run(result, out_dir)
         result = OdometryResult(trajectory, name, config, indices.copy(), stats, total, reference, metrics, Path(out_dir))
     return result
+
+
+#: Initial guesses of a run's registrations (``run(init=...)``).
+INIT_GUESSES = ("constant_velocity", "odometry")
+
+
+def _odometry_guess(sequence: ScanSequence, init: str, registration: Any, n_total: int, dataset_name: str) -> np.ndarray | None:
+    """``(n_total, 4, 4)`` odometry poses for ``init="odometry"``, None for constant velocity."""
+    if init not in INIT_GUESSES:
+        raise ConfigError(f"unknown initial guess {init!r}; known: {', '.join(INIT_GUESSES)}", source="init")
+    if init == "constant_velocity":
+        return None
+    if getattr(registration, "stateful", False) and not getattr(registration, "accepts_motion_guess", False):
+        raise ConfigError("init='odometry': this stateful variant keeps its own motion model (no motion_guess)", source="init")
+    odometry = getattr(sequence, "odometry", None)
+    if odometry is None:
+        raise ConfigError(f"init='odometry' needs a dataset with its own odometry (e.g. a CARMEN log); {dataset_name} has none", source="init")
+    if len(odometry) != n_total:
+        raise DataError(f"odometry has {len(odometry)} poses for {n_total} scans", source=dataset_name)
+    return np.asarray(odometry.poses_se3, dtype=np.float64)
 
 
 def _progress_bar(total: int, label: str):
