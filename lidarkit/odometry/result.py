@@ -59,8 +59,8 @@ class FrameStats:
         writer = csv.writer(buf, lineterminator="\n")
         writer.writerow([
             "frame", "read_s", "register_s", "n_points", "converged", "iterations", "rmse_m", "n_correspondences", "degenerate",
-            "constant_velocity_fallback", "reason", "point_times", "motion_dev_m", "rotation_dev_deg", "fitness",
-            "check_failed", "check_why", "min_eigenvalue",
+            "min_eigenvalue", "constant_velocity_fallback", "reason", "point_times", "motion_dev_m", "rotation_dev_deg", "fitness",
+            "check_failed", "check_why",
         ])
         n = len(self.frame)
         nan = np.full(n, np.nan)
@@ -77,9 +77,9 @@ class FrameStats:
                 int(self.frame[k]), f"{self.read_s[k]:.6f}", f"{self.register_s[k]:.6f}", int(self.n_points[k]),
                 int(self.converged[k]) if measured else "n/a", int(self.iterations[k]) if measured else "n/a",
                 f"{self.rmse_m[k]:.6g}" if measured else "n/a", int(self.n_correspondences[k]) if measured else "n/a",
-                int(self.degenerate[k]) if measured else "n/a", int(self.fallback[k]), self.reason[k],
+                int(self.degenerate[k]) if measured else "n/a", f"{min_eig[k]:.6g}" if np.isfinite(min_eig[k]) else "n/a",
+                int(self.fallback[k]), self.reason[k],
                 int(has_times[k]), _opt(dev_t[k], ".4f"), _opt(dev_r[k], ".4f"), _opt(fitness[k], ".3f"), int(failed[k]), why[k],
-                f"{min_eig[k]:.6g}" if np.isfinite(min_eig[k]) else "n/a",
             ])
         return buf.getvalue()
 
