@@ -53,6 +53,9 @@ def eval_command(
             raise typer.BadParameter("times files apply to KITTI-format trajectories only")
         return Trajectory.read(path, kind, **kwargs)
 
+    atomic.check_target(json_out, "file")
+    atomic.check_target(markdown, "file")
+    atomic.check_target(plot, "figure")
     ref_traj = load(ref, ref_format, ref_times)
     est_traj = load(est, est_format, est_times)
     settings = EvaluationSettings(

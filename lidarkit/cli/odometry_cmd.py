@@ -53,8 +53,10 @@ def odometry(
     ),
 ) -> None:
     """Odometry of one ICP variant over a scan sequence, scored against its ground truth when it has one."""
+    from lidarkit.atomic import check_target
     from lidarkit.odometry import run
 
+    check_target(out, "folder")
     result = run(data, method, params=parse_params(param), frames=frames, out_dir=out, progress=progress, strict=strict, name=name)
     m = result.metrics
     effective = m.get("effective") or {}

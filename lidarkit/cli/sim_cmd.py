@@ -30,6 +30,9 @@ def sim_lidar(
     from lidarkit.errors import ConfigError
     from lidarkit.sim.lidar import SimulatedLidarSequence, export_kitti, make_config
 
+    from lidarkit.atomic import check_target
+
+    check_target(out, "folder")
     params = parse_params(param)
     own = {"scene": "--scene", "n_frames": "--frames", "seed": "--seed"}
     for key in sorted(own.keys() & params.keys()):
