@@ -6,8 +6,8 @@ from pathlib import Path
 from typing import Optional
 
 import typer
-from rich.markup import escape
 from rich.table import Table
+from rich.text import Text
 
 from lidarkit.cli.app import app, parse_params, stdout
 
@@ -87,7 +87,7 @@ def odometry(
         table.add_row("ground truth", str(m["ground_truth"]))
         table.add_row("ground-truth instant / estimate instant", f"{effective.get('ground_truth_instant')} / {effective.get('estimate_instant')}")
         if m.get("ground_truth_instant_note"):
-            table.add_row("ground-truth instant note", escape(str(m["ground_truth_instant_note"])))
+            table.add_row("ground-truth instant note", str(m["ground_truth_instant_note"]))
         table.add_row("ground-truth path (m)", f"{m['ground_truth_length_m']:.2f}")
         table.add_row("final error, unaligned (m / deg)", f"{m['final_error']['translation_m']:.3f} / {m['final_error']['rotation_deg']:.3f}")
         if "ape_translation_m" in m:
@@ -102,10 +102,10 @@ def odometry(
     else:
         table.add_row("ground truth", "none: no scores")
     for message in m.get("warnings") or []:  # also logged (stderr) by the runner
-        table.add_row("[yellow]warning[/]", f"[yellow]{escape(message)}[/]")
+        table.add_row(Text("warning", style="yellow"), Text(message, style="yellow"))
     if result.out_dir is not None:
         table.add_row("run folder", str(result.out_dir.resolve()))
     console = stdout()
     console.print(table)
     if result.out_dir is not None:
-        console.print(f"run folder: {escape(str(result.out_dir.resolve()))}", soft_wrap=True)
+        console.print(f"run folder: {result.out_dir.resolve()}", soft_wrap=True)
