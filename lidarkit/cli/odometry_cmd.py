@@ -11,9 +11,16 @@ from rich.text import Text
 
 from lidarkit.cli.app import app, parse_params, stdout
 
+def _kinds() -> str:
+    from lidarkit.io import available_datasets
+
+    return ", ".join(available_datasets())
+
+
 DATA_HELP = (
-    "A KITTI sequence folder (or odometry root), a folder of scans, KIND:PATH[?opt=v&...] for any dataset reader "
-    "(e.g. 'kitti:/data/kitti?sequence=05&poses_file=...'), or the simulator: 'sim:street?frames=300&seed=0' "
+    "A KITTI sequence folder (or odometry root), a .bag / .mcap / .pcap file or ROS 2 bag folder (detected), a folder "
+    "of scans, KIND:PATH[?opt=v&...] for any dataset reader (e.g. 'kitti:/data/kitti?sequence=05&poses_file=...', "
+    f"'rosbag:run.bag?topic=/velodyne_points'; kinds: {_kinds()}), or the simulator: 'sim:street?frames=300&seed=0' "
     "(scenes street|open|ground; keys: frames, seed, beams, azimuths, noise, distortion, instant, speed or any "
     "simulator config field)."
 )
@@ -51,13 +58,17 @@ def odometry(
         help="Fail on the first frame whose registration does not converge, and when a requested deskew cannot happen "
         "(default: warn; non-converged frames use constant velocity).",
     ),
+    init: str = typer.Option(
+        "constant_velocity", "--init",
+        help="Initial guess per frame: constant_velocity | odometry (the dataset's own odometry, e.g. a carmen: log).",
+    ),
 ) -> None:
     """Odometry of one ICP variant over a scan sequence, scored against its ground truth when it has one."""
     from lidarkit.atomic import check_target
     from lidarkit.odometry import run
 
     check_target(out, "folder")
-    result = run(data, method, params=parse_params(param), frames=frames, out_dir=out, progress=progress, strict=strict, name=name)
+    result = run(data, method, params=parse_params(param), frames=frames, out_dir=out, progress=progress, strict=strict, name=name, init=init)
     m = result.metrics
     effective = m.get("effective") or {}
     table = Table(title=result.trajectory.name, show_header=True)

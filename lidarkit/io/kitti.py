@@ -42,6 +42,10 @@ log = logging.getLogger(__name__)
 #: Folders beside ``velodyne/`` searched, in this order, for per-point times ``{frame:06d}.npy`` (1-D, one time per
 #: point of the scan, seconds from the sweep start); docs/datasets.md lists the same names (a test checks it).
 POINT_TIME_FOLDERS = ("point_times", "timestamps", "times", "point_timestamps")
+#: KITTI's HDL-64 vertical-angle correction, as kiss-icp's KITTI loader applies it (``_correct_kitti_scan``)
+KITTI_VERTICAL_CORRECTION_DEG = 0.205
+#: methods whose reference pipeline reads KITTI with the correction (``vertical_correction="auto"`` turns it on)
+CORRECTED_BY_DEFAULT = ("kiss",)
 
 CALIB_KEYS_IN_ORDER = ("P0", "P1", "P2", "P3", "Tr")  # meaning of bare (prefix-less) calib lines
 _TR_ALIASES = ("Tr", "Tr_velo_to_cam", "Tr_velo_cam")
@@ -137,6 +141,14 @@ class KittiOdometry:
     folder of extra frames used with this sequence's calib and poses), ``poses_file`` another pose
     file (e.g. ``poses_semantickitti.txt``), ``calib_file`` / ``times_file`` likewise;
     ``drop_nonfinite`` drops NaN/inf points with a warning instead of raising.
+
+    ``vertical_correction``: rotate every point about the axis perpendicular to its azimuth by
+    :data:`KITTI_VERTICAL_CORRECTION_DEG` (KITTI's HDL-64 calibration error, corrected exactly as kiss-icp's KITTI
+    loader does, through kiss-icp's own ``_correct_kitti_scan``). ``True`` / ``False`` force it; ``"auto"``
+    (default) applies it when an odometry run of a method in :data:`CORRECTED_BY_DEFAULT` (kiss) asks through
+    :meth:`configure_for_method`, so that "kiss through lidarkit" is kiss-icp's own experiment, and never to a
+    folder written by lidarkit's simulator (``sim.yaml``: no HDL-64 behind it). Read directly, "auto" reads the
+    points as stored. ``reader_options`` records what was applied.
     """
 
     def __init__(
@@ -151,7 +163,12 @@ class KittiOdometry:
         calib_file: str | os.PathLike | None = None,
         times_file: str | os.PathLike | None = None,
         ground_truth_frame: str = "auto",
+        vertical_correction: bool | str = "auto",
     ):
+        if vertical_correction not in (True, False, "auto"):
+            raise ConfigError(f"vertical_correction must be true, false or auto, got {vertical_correction!r}", source="vertical_correction")
+        self.vertical_correction = vertical_correction
+        self._correct = vertical_correction is True
         if ground_truth_frame not in ("auto", "lidar", "camera"):
             raise ConfigError(
                 f"unknown ground_truth_frame {ground_truth_frame!r}; known: auto, lidar, camera", source="ground_truth_frame"
@@ -196,6 +213,28 @@ class KittiOdometry:
         if ground_truth_frame == "auto":
             ground_truth_frame = "lidar" if self.scan_paths else "camera"
         self.ground_truth_frame = ground_truth_frame
+
+    # ---- options -----------------------------------------------------------------------------------
+    @property
+    def simulated(self) -> bool:
+        """True for a folder written by lidarkit's simulator (``sim.yaml`` beside ``velodyne/``)."""
+        return (self.sequence_dir / "sim.yaml").is_file()
+
+    def configure_for_method(self, method: str) -> None:
+        """Resolve ``vertical_correction="auto"`` for an odometry run of ``method`` (on for kiss on real KITTI)."""
+        if self.vertical_correction == "auto":
+            self._correct = method in CORRECTED_BY_DEFAULT and not self.simulated
+
+    @property
+    def reader_options(self) -> dict:
+        """What the reader did to the data, for the run config."""
+        return {
+            "kind": "kitti",
+            "path": str(self.sequence_dir),
+            "vertical_correction": self.vertical_correction,
+            "vertical_correction_applied": self._correct,
+            "vertical_correction_deg": KITTI_VERTICAL_CORRECTION_DEG if self._correct else 0.0,
+        }
 
     # ---- layout ------------------------------------------------------------------------------------
     def _locate_sequence(self, root: Path) -> tuple[Path, Path | None]:
@@ -332,7 +371,22 @@ class KittiOdometry:
         if frame != "lidar":
             raise ConfigError(f"unknown pose frame {frame!r}; known: lidar, camera", source="frame")
         Tr = self.T_cam0_velo
-        return gt.transformed(T_left=se3_inverse(Tr), T_right=Tr).with_name(f"{self.name}_gt_lidar")
+        gt = gt.transformed(T_left=se3_inverse(Tr), T_right=Tr).with_name(f"{self.name}_gt_lidar")
+        instant = self._simulated_instant
+        return gt if instant is None else Trajectory(gt.poses_se3, gt.timestamps_s, gt.name, meta={**gt.meta, "pose_instant": instant})
+
+    @cached_property
+    def _simulated_instant(self) -> str | None:
+        """The sweep instant of poses.txt in a folder written by lidarkit's simulator (sim.yaml), else None (unknown)."""
+        if not self.simulated or self.poses_path != self.sequence_dir / "poses.txt":
+            return None
+        import yaml
+
+        try:
+            instant = yaml.safe_load((self.sequence_dir / "sim.yaml").read_text()).get("pose_instant")
+        except (OSError, yaml.YAMLError, AttributeError):
+            return None
+        return instant if instant in ("start", "mid", "end") else None
 
     def relative_pose(self, frame_a: int, frame_b: int, *, frame: str = "lidar") -> np.ndarray:
         """(4, 4) ground-truth motion ``T_a_b`` from KITTI frame ``frame_b`` to ``frame_a`` (e.g. 94 -> 95).
@@ -375,6 +429,8 @@ class KittiOdometry:
         frame = int(self.scan_frames[index])
         ts = None if self._times_all is None else float(self._times_all[frame])
         scan = read_kitti_bin(self.scan_paths[index], frame=frame, timestamp_s=ts, drop_nonfinite=self.drop_nonfinite)
+        if self._correct:
+            scan = dataclasses.replace(scan, points_xyz=correct_vertical_angle(scan.points_xyz))
         if self.point_times_dir is None:
             return scan
         times_path = self.point_times_dir / f"{frame:06d}.npy"
@@ -419,6 +475,14 @@ class KittiOdometry:
     def as_image_sequence(self) -> KittiImages:
         """The images of this sequence as an ``ImageSequence`` (ground truth in the camera frame)."""
         return KittiImages(self)
+
+
+def correct_vertical_angle(points_xyz: np.ndarray) -> np.ndarray:
+    """KITTI's vertical-angle correction (:data:`KITTI_VERTICAL_CORRECTION_DEG`) through kiss-icp's own routine."""
+    from kiss_icp.pybind import kiss_icp_pybind
+
+    points = np.ascontiguousarray(points_xyz, dtype=np.float64)
+    return np.asarray(kiss_icp_pybind._correct_kitti_scan(kiss_icp_pybind._Vector3dVector(points)))
 
 
 class KittiImages:
@@ -472,4 +536,7 @@ def read_gray_image(path: str | os.PathLike, *, frame: int | None = None) -> np.
     return image
 
 
-__all__ = ["POINT_TIME_FOLDERS", "KittiImages", "KittiOdometry", "indexed_files", "read_gray_image", "read_kitti_bin", "read_kitti_calib"]
+__all__ = [
+    "KITTI_VERTICAL_CORRECTION_DEG", "POINT_TIME_FOLDERS", "KittiImages", "KittiOdometry", "correct_vertical_angle", "indexed_files",
+    "read_gray_image", "read_kitti_bin", "read_kitti_calib",
+]
