@@ -380,7 +380,7 @@ def test_pf_recorded_without_sensor_readings(tmp_path, capsys):
     odometry_only = [line for line in (FREIBURG / "sensor_data.dat").read_text().splitlines() if line.startswith("ODOMETRY")]
     (tmp_path / "sensor_data.dat").write_text("\n".join(odometry_only[:40]) + "\n")
     code, _, err = run_cli(["pf", tmp_path, "--recorded"], capsys)
-    assert_one_line_error(code, err, "sensor_data.dat", "--recorded needs SENSOR readings")
+    assert_one_line_error(code, err, "sensor_data.dat", "0 SENSOR readings")
 
 
 # ---------------------------------------------------------------- messages that name the culprit (Found 7)

@@ -118,9 +118,6 @@ def pf_command(
     dx, dy, dth = _floats(kidnap_offset, 3, "--kidnap-offset")
     scenario = dict(visible=visible, kidnap_at_step=kidnap_at, kidnap_offset=(dx, dy, math.radians(dth)))
     data = open_dataset("landmarks", data_dir)  # loaded once: its warnings (negative range) appear once per command
-    if recorded and getattr(data, "n_readings", 1) == 0:
-        raise ConfigError("--recorded needs SENSOR readings, and this file has none (run without --recorded to "
-                          "simulate readings)", source=getattr(data, "sensor_path", data_dir))
     seed_list = list(range(seed, seed + seeds))
     if recorded:
         if len(counts) > 1 or seeds > 1:

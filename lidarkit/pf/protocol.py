@@ -422,7 +422,7 @@ def run_recorded(
     """Run on the data's own odometry and SENSOR readings; report NIS consistency and distance to dead reckoning."""
     if len(data.meas_range_m) < 2:
         raise DataError(f"{len(data.meas_range_m)} SENSOR readings: the recorded mode needs at least 2 to judge Q by",
-                        source=str(getattr(data, "root", "recorded data")))
+                        source=str(getattr(data, "sensor_path", None) or getattr(data, "root", "recorded data")))
     cfg = _resolve_config(config, n_particles, config_overrides)
     pf = make_filter(data.landmarks.positions_xy, cfg, np.random.default_rng(seed))
     odo = np.asarray(data.odometry, dtype=np.float64)
