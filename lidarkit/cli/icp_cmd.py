@@ -45,6 +45,21 @@ def _list_methods() -> None:
             lines.append(f"{key}: {type_name} = {default!r} — {desc}")
         table.add_row(name + (" (stateful)" if cls.stateful else ""), "\n".join(lines))
     stdout().print(table)
+    _list_ground_segmenters()
+
+
+def _list_ground_segmenters() -> None:
+    from lidarkit.registration.ground import available_ground_segmenters, get_ground_segmenter_class, ground_config_fields
+
+    table = Table(title="Ground segmenters of ground_filtered (-p ground_method=NAME -p 'ground_params={key: value}')", show_lines=True)
+    table.add_column("segmenter", style="bold")
+    table.add_column("parameters (default) — description")
+    for name in available_ground_segmenters():
+        doc = (get_ground_segmenter_class(name).__doc__ or "").strip().splitlines()
+        lines = [f"[italic]{doc[0]}[/italic]"] if doc else []
+        lines += [f"{key}: {type_name} = {default!r} — {desc}" for key, (type_name, default, desc) in ground_config_fields(name).items()]
+        table.add_row(name, "\n".join(lines))
+    stdout().print(table)
 
 
 def _result_table(result, source: Path, target: Path) -> Table:

@@ -146,6 +146,7 @@ def run(
         else:
             motion = np.eye(4)
             previous = None
+            previous_times = None
             for k, idx in enumerate(indices):
                 t0 = clock()
                 try:
@@ -155,7 +156,12 @@ def run(
                     if previous is None:
                         poses[k] = np.eye(4)
                     else:
-                        result = registration.align(points, previous, init_T=motion)
+                        if getattr(registration, "accepts_point_times", False):  # e.g. ground_filtered deskews with them
+                            result = registration.align(
+                                points, previous, init_T=motion, source_times_s=scan.point_times_s, target_times_s=previous_times
+                            )
+                        else:
+                            result = registration.align(points, previous, init_T=motion)
                         measured[k] = True
                         converged[k] = bool(result.converged)
                         iterations[k] = int(result.iterations)
@@ -184,7 +190,7 @@ def run(
                 elif degenerate[k]:
                     log.warning("%s frame %d: %s flagged degenerate geometry (%s)", dataset_name, int(idx), name, reasons[k] or "degenerate")
                 t2 = clock()
-                previous = points
+                previous, previous_times = points, scan.point_times_s
                 read_s[k], register_s[k], n_points[k] = t1 - t0, t2 - t1, len(points)
                 if bar is not None:
                     bar[0].advance(bar[1])
