@@ -40,6 +40,7 @@ from lidarkit.registration.ground import (
     get_ground_segmenter,
 )
 from lidarkit.registration.neighbors import NearestNeighbors
+from lidarkit.registration.planar import refuse_2d
 from lidarkit.registration.registry import register_icp
 from lidarkit.registration.vanilla import VanillaConfig, VanillaICP, prepare, staged_icp
 
@@ -121,12 +122,14 @@ def deskew_to_sweep_end(points_xyz: np.ndarray, fraction: np.ndarray, T_motion: 
 def refine_on_ground(
     source_ground_xyz: np.ndarray, target_ground_xyz: np.ndarray, T_target_source: np.ndarray, iterations: int = 5,
     voxel_m: float = 0.5, max_distance_m: float = 1.0, k: int = 12, max_range_m: float = 30.0, min_normal_z: float = 0.8,
+    max_source_points: int = 5000,
 ) -> np.ndarray:
     """``T_target_source`` with its z, roll and pitch (target frame) refined by point-to-plane ICP of the ground points.
 
     Target normals from the PCA of ``k`` neighbours in the target ground voxelized at ``voxel_m``, within ``max_range_m``
     (beyond, the rings are too far apart for a normal) and at most ``acos(min_normal_z)`` from vertical; each
-    Gauss-Newton step solves the 3 x 3 system in (tz, rx, ry) of the residuals ``n . (T p - q)`` within ``max_distance_m``.
+    Gauss-Newton step solves the 3 x 3 system in (tz, rx, ry) of the residuals ``n . (T p - q)`` within ``max_distance_m``,
+    Cauchy-weighted on their median absolute deviation.
     x, y and yaw, which the ground cannot fix without biasing them, are left to the non-ground alignment.
     """
     from scipy.spatial import cKDTree
@@ -137,7 +140,9 @@ def refine_on_ground(
         return points[np.hypot(points[:, 0], points[:, 1]) <= max_range_m]
 
     target = voxel_downsample(near(target_ground_xyz), voxel_m)
-    source = voxel_downsample(near(source_ground_xyz), voxel_m)
+    source = near(source_ground_xyz)  # raw points lie on the ground; voxel centroids of a moved copy need not
+    if len(source) > max_source_points:
+        source = source[np.random.default_rng(0).choice(len(source), max_source_points, replace=False)]
     if len(target) < k or len(source) < 10:
         return T_target_source
     _, nbr = cKDTree(target).query(target, k=k)
@@ -158,12 +163,15 @@ def refine_on_ground(
             break
         n, q, pp = normals[idx[ok]], target[idx[ok]], p[ok]
         r = np.einsum("ni,ni->n", n, pp - q)
+        # Cauchy weights on the MAD scale: the feet of walls that segmentation left in the ground do not pull
+        scale = max(1.4826 * float(np.median(np.abs(r))), 1e-3)
+        w = 1.0 / (1.0 + (r / (3.0 * scale)) ** 2)
         pxn = np.cross(pp, n)
         J = np.stack([n[:, 2], pxn[:, 0], pxn[:, 1]], axis=1)
-        H = J.T @ J
+        H = J.T @ (w[:, None] * J)
         if np.linalg.cond(H) > 1e8:
             break
-        tz, rx, ry = np.linalg.solve(H, -J.T @ r)
+        tz, rx, ry = np.linalg.solve(H, -J.T @ (w * r))
         T = make_se3(so3_exp(np.array([rx, ry, 0.0])), np.array([0.0, 0.0, tz])) @ T
         if abs(tz) < 1e-5 and abs(rx) < 1e-6 and abs(ry) < 1e-6:
             break
@@ -171,11 +179,13 @@ def refine_on_ground(
 
 
 def _degenerate_after_refine(degeneracy: Degeneracy, ground_refine: bool) -> bool:
-    """Degenerate in a direction nothing fixes: with ``ground_refine`` the ground fixes z, roll and pitch, so only a
-    weakest direction mostly in x, y and yaw counts."""
+    """Degenerate in a direction nothing fixes: with ``ground_refine`` the ground fixes z, roll and pitch, so a weakly
+    constrained problem counts when its weakest direction lies mostly in x, y and yaw, or when it is singular
+    (min/max eigenvalue < 1e-4: a null space of several directions, e.g. a single wall, whose weakest vector is
+    an arbitrary member)."""
     if not degeneracy.degenerate:
         return False
-    if not ground_refine:
+    if not ground_refine or degeneracy.ratio < 1e-4:
         return True
     w = np.asarray(degeneracy.weakest_direction, dtype=np.float64)
     return bool(w[0] ** 2 + w[1] ** 2 + w[5] ** 2 > 0.5)
@@ -219,6 +229,8 @@ class GroundFilteredICP(VanillaICP):
 
     def _align(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray) -> RegistrationResult:
         c = self.config
+        if c.ground_method != "height":
+            refuse_2d(self.name, source_xyz, target_xyz, f"{c.ground_method} ground segmentation of a 2D scan finds the scan plane itself")
         masks = [~self.segmenter.segment(pts) for pts in (source_xyz, target_xyz)]
         clouds = [pts[m] for pts, m in zip((source_xyz, target_xyz), masks)]
         frac_src, frac_dst = self._fractions

@@ -592,6 +592,7 @@ class SimulatedLidarSequence:
             timestamp_s=float(self.timestamps_s[index]),
             frame=index,
             source=f"{self.name} frame {index}",
+            stamp_instant=cfg.pose_instant,
         )
         return scan, hit
 
@@ -647,9 +648,9 @@ def export_kitti(
     from lidarkit import atomic
 
     out = Path(out_dir)
-    (out / "velodyne").mkdir(parents=True, exist_ok=True)
+    atomic.ensure_dir(out / "velodyne")
     if sequence.config.point_times:
-        (out / "point_times").mkdir(exist_ok=True)
+        atomic.ensure_dir(out / "point_times")
     for i in range(len(sequence)):
         scan = sequence.read_scan(i)
         data = np.empty((len(scan.points_xyz), 4), dtype=np.float32)
