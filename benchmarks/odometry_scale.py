@@ -19,7 +19,8 @@ kiss >= 0.95x kiss-icp's pipeline, lidarkit small_gicp >= 0.9x small_gicp's own 
 
     nice -n 10 .venv/bin/python benchmarks/odometry_scale.py [--frames 4541] [--data /tmp/lidarkit_scale] [--keep-data]
 
-Writes ``benchmarks/results/odometry/odometry_scale.{md,json}``.
+Writes ``benchmarks/results/odometry/odometry_scale[_TAG].{md,json}`` (after every runner, so an interrupted run
+keeps the runners it finished).
 """
 
 from __future__ import annotations
@@ -152,6 +153,7 @@ def main() -> None:
     parser.add_argument("--data", type=Path, default=Path("/tmp/lidarkit_scale"))
     parser.add_argument("--runners", default=",".join(RUNNERS))
     parser.add_argument("--keep-data", action="store_true", help="keep the written sequence (default: delete it at the end)")
+    parser.add_argument("--tag", default="", help="results go to odometry_scale[_TAG].{md,json} (runs of different sizes side by side)")
     parser.add_argument("--child", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
@@ -200,7 +202,8 @@ def write_results(rows: list[dict], args, size_gb: float) -> None:
     payload = {"date_utc": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"), "machine": describe_machine(machine_info()),
                "command": command, "frames": args.frames, "sim": SIM, "data_size_gb": size_gb, "runs": rows, "ratios": ratios, "rss": rss}
     RESULTS.mkdir(parents=True, exist_ok=True)
-    atomic.write_text(RESULTS / "odometry_scale.json", json.dumps(payload, indent=2) + "\n")
+    stem = "odometry_scale" + (f"_{args.tag}" if args.tag else "")
+    atomic.write_text(RESULTS / f"{stem}.json", json.dumps(payload, indent=2) + "\n")
     lines = [
         "# Odometry at KITTI length (issue 10)", "",
         f"{payload['date_utc']} on {payload['machine']}; `{command}`", "",
@@ -223,7 +226,7 @@ def write_results(rows: list[dict], args, size_gb: float) -> None:
     lines += ["", "| runner | peak RSS end / 500 | (end - trajectory) / 500 |", "|---|---|---|"]
     for name, v in rss.items():
         lines.append(f"| {name} | {v['ratio_end_over_500']:.3f} | {v['ratio_end_minus_trajectory_over_500']:.3f} |")
-    atomic.write_text(RESULTS / "odometry_scale.md", "\n".join(lines) + "\n")
+    atomic.write_text(RESULTS / f"{stem}.md", "\n".join(lines) + "\n")
 
 
 if __name__ == "__main__":
