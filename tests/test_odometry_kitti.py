@@ -54,6 +54,10 @@ def test_kiss_gives_exactly_the_poses_of_kiss_icp(seq00):
     expected = _kiss_icp_direct(frames, None, load_config(None))
     np.testing.assert_allclose(result.trajectory.poses_se3, expected, rtol=0, atol=EXACT_ATOL)
     assert result.config["method_config"]["deskew"] is True  # no per-point times in KITTI .bin: nothing to deskew
+    assert result.metrics["effective"]["deskew"]["applied"] is False  # ... and the run says so
+    assert "deskew requested, no per-point times found" in result.metrics["warnings"][0]
+    assert result.metrics["n_bad_frames"] == 0  # the independent check passes every frame of a good run
+    assert np.nanmin(result.stats.fitness) > 0.8
 
 
 def test_kiss_with_point_times_matches_kiss_icp_deskew():

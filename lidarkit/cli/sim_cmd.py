@@ -38,6 +38,9 @@ def sim_lidar(
     if storage != "sqlite3" and fmt != "rosbag2":
         raise ConfigError("--storage applies to --format rosbag2 only", source="--storage")
 
+    from lidarkit.atomic import check_target
+
+    check_target(out, "folder")
     params = parse_params(param)
     own = {"scene": "--scene", "n_frames": "--frames", "seed": "--seed"}
     for key in sorted(own.keys() & params.keys()):

@@ -21,6 +21,7 @@ _BUILTIN: dict[str, str] = {
     "folder": "lidarkit.io.folder:ScanFolder",
     "tum": "lidarkit.io.tum:TumRGBD",
     "landmarks": "lidarkit.io.landmarks:LandmarkData",
+    "carmen": "lidarkit.io.carmen:CarmenLog",
     # kiss-icp's dataloaders (lidarkit.io.kiss_loaders.KISS_KINDS maps kiss-icp names to these kinds)
     "rosbag": "lidarkit.io.rosbag:RosbagScans",
     "mcap": "lidarkit.io.rosbag:McapScans",

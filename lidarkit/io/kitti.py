@@ -7,6 +7,11 @@ Layout (``root`` is the odometry root, or a sequence folder itself)::
     root/sequences/NN/calib.txt             "P0: 12 numbers" ... "Tr: 12 numbers" (or bare lines P0, P1, ...)
     root/sequences/NN/times.txt             one time stamp [s] per frame
     root/poses/NN.txt                       3x4 row-major T_world_cam0 per frame (or sequences/NN/poses.txt)
+    root/sequences/NN/point_times/000000.npy   optional: one time per point [s from the sweep start]
+
+Per-point times (KITTI proper has none) are looked for in the first folder of :data:`POINT_TIME_FOLDERS`
+that exists beside ``velodyne/`` (``point_times/`` as lidarkit's simulator writes it, then the names other
+tools use); ``point_times_dir`` says which one was found (None: no per-point times).
 
 Frame numbers come from the file names, so a folder holding only some scans (``000094.bin``,
 ``000095.bin``) reads poses row 94 and 95. Ground truth is given in the camera frame as stored
@@ -34,6 +39,9 @@ from lidarkit.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
 
+#: Folders beside ``velodyne/`` searched, in this order, for per-point times ``{frame:06d}.npy`` (1-D, one time per
+#: point of the scan, seconds from the sweep start); docs/datasets.md lists the same names (a test checks it).
+POINT_TIME_FOLDERS = ("point_times", "timestamps", "times", "point_timestamps")
 #: KITTI's HDL-64 vertical-angle correction, as kiss-icp's KITTI loader applies it (``_correct_kitti_scan``)
 KITTI_VERTICAL_CORRECTION_DEG = 0.205
 #: methods whose reference pipeline reads KITTI with the correction (``vertical_correction="auto"`` turns it on)
@@ -172,7 +180,9 @@ class KittiOdometry:
             raise DataError("dataset folder not found" if not root.exists() else "not a folder", source=root)
         self.root = root
         self.sequence_dir, odometry_root = self._locate_sequence(root)
-        self.name = f"kitti_{self.sequence}"
+        # titled after the folder: kitti_NN for a numbered KITTI sequence, the folder's own name otherwise
+        folder = self.sequence_dir.name
+        self.name = f"kitti_{self.sequence}" if folder.isdigit() or folder == self.sequence else folder
 
         self.velodyne_dir = Path(velodyne_dir) if velodyne_dir is not None else self.sequence_dir / "velodyne"
         self.image_dir = Path(image_dir) if image_dir is not None else self.sequence_dir / "image_0"
@@ -196,6 +206,9 @@ class KittiOdometry:
         if times_file is not None and not self.times_path.is_file():
             raise DataError("times file not found", source=self.times_path)
         self.poses_path = self._locate_poses(poses_file, odometry_root)
+        self.point_times_dir = next(
+            (self.sequence_dir / d for d in POINT_TIME_FOLDERS if (self.sequence_dir / d).is_dir()), None
+        )
         self._check_counts()
         if ground_truth_frame == "auto":
             ground_truth_frame = "lidar" if self.scan_paths else "camera"
@@ -404,9 +417,10 @@ class KittiOdometry:
     def read_scan(self, index: int) -> Scan:
         """The ``index``-th scan (position in ``scan_paths``) with its KITTI frame number and time stamp.
 
-        When the sequence folder holds ``point_times/{frame:06d}.npy`` (as written by
-        :func:`lidarkit.sim.lidar.export_kitti`: one time per point, seconds from the sweep start) it becomes
-        ``Scan.point_times_s`` (float64); a length that does not match the scan is a DataError.
+        When ``point_times_dir`` (the first of :data:`POINT_TIME_FOLDERS` beside ``velodyne/``, e.g. ``point_times/``
+        as written by :func:`lidarkit.sim.lidar.export_kitti`) holds ``{frame:06d}.npy`` (one time per point,
+        seconds from the sweep start) it becomes ``Scan.point_times_s`` (float64); a length that does not match
+        the scan is a DataError; a frame without its file has no per-point times.
         """
         if not self.scan_paths:
             raise DataError("sequence has no scans", source=self.velodyne_dir)
@@ -417,7 +431,9 @@ class KittiOdometry:
         scan = read_kitti_bin(self.scan_paths[index], frame=frame, timestamp_s=ts, drop_nonfinite=self.drop_nonfinite)
         if self._correct:
             scan = dataclasses.replace(scan, points_xyz=correct_vertical_angle(scan.points_xyz))
-        times_path = self.sequence_dir / "point_times" / f"{frame:06d}.npy"
+        if self.point_times_dir is None:
+            return scan
+        times_path = self.point_times_dir / f"{frame:06d}.npy"
         if not times_path.is_file():
             return scan
         return dataclasses.replace(scan, point_times_s=self._read_point_times(times_path, self.scan_paths[index], scan, frame))
@@ -520,4 +536,7 @@ def read_gray_image(path: str | os.PathLike, *, frame: int | None = None) -> np.
     return image
 
 
-__all__ = ["KITTI_VERTICAL_CORRECTION_DEG", "KittiImages", "KittiOdometry", "correct_vertical_angle", "indexed_files", "read_gray_image", "read_kitti_bin", "read_kitti_calib"]
+__all__ = [
+    "KITTI_VERTICAL_CORRECTION_DEG", "POINT_TIME_FOLDERS", "KittiImages", "KittiOdometry", "correct_vertical_angle", "indexed_files",
+    "read_gray_image", "read_kitti_bin", "read_kitti_calib",
+]

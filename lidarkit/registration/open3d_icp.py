@@ -13,6 +13,7 @@ from pydantic import Field
 from lidarkit.geometry import transform_points
 from lidarkit.registration.assessment import assess_alignment
 from lidarkit.registration.base import Registration, RegistrationConfig, RegistrationResult
+from lidarkit.registration.planar import refuse_2d
 from lidarkit.registration.registry import register_icp
 
 
@@ -63,6 +64,8 @@ class _Open3DBase(Registration):
 
         reg = o3d.pipelines.registration
         c = self.config
+        if self._kind != "point_to_point":
+            refuse_2d(self.name, source_xyz, target_xyz, "normals / covariances of a 2D scan's line-like neighbourhoods are undefined in 3D")
         src, dst = self._clouds(source_xyz, target_xyz)
         criteria = reg.ICPConvergenceCriteria(c.relative_fitness, c.relative_rmse, c.max_iterations)
         if self._kind == "gicp":

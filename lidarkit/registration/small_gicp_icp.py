@@ -16,6 +16,7 @@ from pydantic import Field
 from lidarkit.geometry import transform_points
 from lidarkit.registration.assessment import assess_alignment
 from lidarkit.registration.base import Registration, RegistrationConfig, RegistrationResult
+from lidarkit.registration.planar import refuse_2d
 from lidarkit.registration.registry import register_icp
 
 log = logging.getLogger(__name__)
@@ -62,6 +63,8 @@ if _small_gicp is not None:
 
         def _align(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray) -> RegistrationResult:
             c = self.config
+            if c.registration_type != "ICP":
+                refuse_2d(self.name, source_xyz, target_xyz, f"{c.registration_type} needs surface covariances / normals, undefined on a 2D scan")
             if c.registration_type == "VGICP":
                 out = _small_gicp.align(
                     target_xyz, source_xyz, init_T, registration_type="VGICP", voxel_resolution=c.voxel_resolution_m,
