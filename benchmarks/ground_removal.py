@@ -176,6 +176,28 @@ def _fmt(value, digits: int = 2) -> str:
     return str(value)
 
 
+def acceptance_lines(rows: list[dict]) -> list[str]:
+    """Default segmenter's worst precision / recall, 300-sweep drifts per scene and seed, vanilla where measured."""
+    out = []
+    seg = [r for r in rows if r["section"] == "seg" and r["method"] == DEFAULT_GROUND_SEGMENTER]
+    if seg:
+        out.append(f"- `{DEFAULT_GROUND_SEGMENTER}` ground precision min {min(r['precision'] for r in seg):.4f}, recall min "
+                   f"{min(r['recall'] for r in seg):.4f} over {len(seg)} scene/seed sets (target >= 0.95)")
+    odo = [r for r in rows if r["section"] == "odo" and r.get("sweeps") == COMMON["n_frames"] and r["method"] == f"ground_filtered[{DEFAULT_GROUND_SEGMENTER}]"]
+    for scene in sorted({r["scene"] for r in odo}):
+        sel = sorted((r for r in odo if r["scene"] == scene), key=lambda r: r["seed"])
+        drifts = ", ".join(f"seed {r['seed']}: {r['drift_pct']:.2f} %" for r in sel)
+        out.append(f"- `{scene}`, {COMMON['n_frames']} sweeps, ground_filtered drift: {drifts} (max {max(r['drift_pct'] for r in sel):.2f} %)")
+    two = [r for r in rows if r["section"] == "two"]
+    for scene in sorted({r["scene"] for r in two}):
+        for seed in sorted({r["seed"] for r in two if r["scene"] == scene}):
+            pair = {r["method"]: r for r in two if r["scene"] == scene and r["seed"] == seed}
+            if {"vanilla", "ground_filtered"} <= set(pair):
+                out.append(f"- `{scene}` seed {seed}, 32 x 720 rays: ground_filtered {pair['ground_filtered']['drift_pct']:.2f} % vs "
+                           f"vanilla {pair['vanilla']['drift_pct']:.2f} %")
+    return out
+
+
 def section_report(out: Path, command: str) -> None:
     path = out / "records.jsonl"
     records = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
@@ -232,6 +254,9 @@ def section_report(out: Path, command: str) -> None:
     table("KITTI pairs: ground_filtered with each segmenter", "kitti_pair",
           [("pair", "data", -1), ("segmenter", "method", -1), ("error m", "error_m", 3), ("error deg", "error_deg", 3), ("converged", "converged", -1),
            ("kept share", "kept_fraction", 2), ("runtime s", "runtime_s", 2)])
+    summary = acceptance_lines(rows)
+    if summary:
+        lines.extend(["## Acceptance figures (issue 18), computed from the tables above", "", *summary, ""])
     write_text(out / "README.md", "\n".join(lines) + "\n")
     write_text(out / "results.json", json.dumps(rows, indent=1))
 
