@@ -1,0 +1,88 @@
+"""Preprocessing steps applied to each (deskewed) sweep in the sensor frame, in the order the pipeline lists them.
+
+They are thin components over :mod:`lidarkit.registration.preprocess`; ``ground_filter`` calls its
+``remove_ground`` (``method`` ``"height"`` or ``"ransac"``), the place a ground-segmenter registry plugs in.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+import numpy as np
+from pydantic import Field, model_validator
+
+from lidarkit.registration import preprocess
+from lidarkit.registration.components.maps import first_per_voxel
+from lidarkit.registration.components.registry import Component, ComponentConfig, component_base, register_component
+
+
+@component_base("preprocess")
+class Preprocess(Component):
+    """``(N, 3)`` sensor-frame points in, fewer points out."""
+
+    def apply(self, points_xyz: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
+
+class RangeCropConfig(ComponentConfig):
+    min_range_m: float = Field(0.0, ge=0, description="drop points at or closer than this (m)")
+    max_range_m: float = Field(100.0, gt=0, description="drop points at or beyond this (m)")
+
+    @model_validator(mode="after")
+    def _order(self) -> "RangeCropConfig":
+        if self.max_range_m <= self.min_range_m:
+            raise ValueError(f"max_range_m ({self.max_range_m}) must exceed min_range_m ({self.min_range_m})")
+        return self
+
+
+@register_component("preprocess", "range_crop")
+class RangeCrop(Preprocess):
+    """Keep points with ``min_range_m < range < max_range_m`` (strict, as kiss-icp)."""
+
+    Config = RangeCropConfig
+
+    def apply(self, points_xyz: np.ndarray) -> np.ndarray:
+        pts = np.asarray(points_xyz, dtype=np.float64)
+        r = np.linalg.norm(pts, axis=1)
+        return pts[(r > self.config.min_range_m) & (r < self.config.max_range_m)]
+
+
+class VoxelDownsampleConfig(ComponentConfig):
+    voxel_size_m: float = Field(0.5, gt=0, description="voxel edge (m)")
+    mode: Literal["first", "centroid"] = Field("first", description="keep each voxel's first point (kiss-icp) or the centroid")
+
+
+@register_component("preprocess", "voxel_downsample")
+class VoxelDownsample(Preprocess):
+    """One point per occupied voxel."""
+
+    Config = VoxelDownsampleConfig
+
+    def apply(self, points_xyz: np.ndarray) -> np.ndarray:
+        if self.config.mode == "first":
+            return first_per_voxel(points_xyz, self.config.voxel_size_m)
+        return preprocess.voxel_downsample(points_xyz, self.config.voxel_size_m)
+
+
+class GroundFilterConfig(ComponentConfig):
+    method: str = Field("height", description="ground removal of registration.preprocess.remove_ground: 'height' or 'ransac'")
+    options: dict[str, Any] = Field(default_factory=dict, description="keyword options of that method (e.g. sensor_height_m)")
+
+    @model_validator(mode="after")
+    def _known(self) -> "GroundFilterConfig":
+        if self.method not in ("height", "ransac"):
+            raise ValueError(f"unknown ground removal method {self.method!r}; available: height, ransac")
+        return self
+
+
+@register_component("preprocess", "ground_filter")
+class GroundFilter(Preprocess):
+    """Remove ground points (flat-road height rule or a RANSAC plane)."""
+
+    Config = GroundFilterConfig
+
+    def apply(self, points_xyz: np.ndarray) -> np.ndarray:
+        return preprocess.remove_ground(points_xyz, self.config.method, **self.config.options)
+
+
+__all__ = ["GroundFilter", "Preprocess", "RangeCrop", "VoxelDownsample"]
