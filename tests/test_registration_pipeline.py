@@ -67,7 +67,7 @@ def test_kiss_like_reproduces_kiss_icp_on_the_10_kitti_scans(seq00):
 def test_kiss_like_deskews_as_kiss_icp_and_the_reference_instant_is_explicit():
     from lidarkit.sim.lidar import SimulatedLidarSequence
 
-    seq = SimulatedLidarSequence(scene="street", n_frames=20, n_beams=16, n_azimuths=500, accel_time_s=0.0)
+    seq = SimulatedLidarSequence(scene="street", n_frames=12, n_beams=16, n_azimuths=500, accel_time_s=0.0)
     scans = [seq.read_scan(i) for i in range(len(seq))]
     frames, times = [s.points_xyz for s in scans], [s.point_times_s for s in scans]
     end = get_icp("pipeline", preset="kiss_like", voxel_size_m=0.8)
