@@ -139,13 +139,14 @@ def run_genz(cache: Path, n: int, repeats: int) -> dict[str, tuple[np.ndarray, f
     return out
 
 
-def run_dataset(name: str, seed: int, frames: int, data: Path, out: Path, genz: bool) -> Path:
+def run_dataset(name: str, seed: int, frames: int, data: Path, out: Path, genz: bool, variants: list[str] | None = None) -> Path:
     from lidarkit.registration import available_icp, get_icp
 
     label, n, read, gt = open_dataset(name, seed, frames, data)
     methods = {"kiss": get_icp("kiss")}
     for key, params in ABLATIONS.items():
-        methods[key] = get_icp("pipeline", **{"preset": "kiss_like", **params})
+        if variants is None or key in variants:
+            methods[key] = get_icp("pipeline", **{"preset": "kiss_like", **params})
     for m in methods.values():
         m.reset()
     names = list(methods)
@@ -167,13 +168,14 @@ def run_dataset(name: str, seed: int, frames: int, data: Path, out: Path, genz: 
                 spent[key] += time.perf_counter() - t
             if (i + 1) % 25 == 0 or i + 1 == n:
                 log(f"{label}: {i + 1}/{n} frames")
+                if i + 1 < n:  # a checkpoint: the frames so far, kept if the run is cut short
+                    _write(out, name, seed, i + 1, variants, {
+                        "dataset": name, "seed": seed if name != "kitti" else None, "n_frames": i + 1, "label": f"{label}, first {i + 1}",
+                        "partial_of": n, "rows": _rows(names, poses, spent, gt, i + 1),
+                    }, partial=True)
         genz_runs = run_genz(cache, n, 3 if name == "kitti" else 1) if genz else {}
-    rows = {}
-    for key in names:
-        rows[key] = {**score(poses[key], gt), "fps": n / spent[key], "seconds": spent[key]}
-    for key in names:
-        rows[key]["fps_ratio_to_kiss"] = rows[key]["fps"] / rows["kiss"]["fps"]
-    kiss_like_gap = np.abs(poses["kiss_like"] - poses["kiss"]).max()
+    rows = _rows(names, poses, spent, gt, n)
+    kiss_like_gap = np.abs(poses["kiss_like"] - poses["kiss"]).max() if "kiss_like" in poses else float("nan")
     extra = {"kiss_like_max_abs_pose_difference_to_kiss": float(kiss_like_gap)}
     for mode, key in (("direct", "genz-icp (direct)"), ("lidarkit", "genz")):
         if mode in genz_runs:
@@ -187,13 +189,34 @@ def run_dataset(name: str, seed: int, frames: int, data: Path, out: Path, genz: 
         "dataset": name, "seed": seed if name != "kitti" else None, "n_frames": n, "label": label,
         "mean_points_per_scan": n_points / n, "rows": rows, **extra,
     }
-    raw = out / "raw"
-    raw.mkdir(parents=True, exist_ok=True)
-    path = raw / (f"{name}.json" if name == "kitti" else f"{name}_seed{seed}_{n}.json")
+    path = _write(out, name, seed, n, variants, record)
+    partial = _path(out, name, seed, n, variants, partial=True)
+    if partial.exists():
+        partial.unlink()
+    log(f"wrote {path}")
+    return path
+
+
+def _rows(names, poses, spent_s, gt, n) -> dict:
+    rows = {key: {**score(poses[key][:n], gt[:n]), "fps": n / spent_s[key], "seconds": spent_s[key]} for key in names}
+    for key in names:
+        rows[key]["fps_ratio_to_kiss"] = rows[key]["fps"] / rows["kiss"]["fps"]
+    return rows
+
+
+def _path(out: Path, name: str, seed: int, n: int, variants, partial: bool = False) -> Path:
+    subset = "" if variants is None else "_" + "-".join(sorted(variants))
+    stem = name if name == "kitti" else f"{name}_seed{seed}"
+    return out / ("partial" if partial else "raw") / f"{stem}{'' if partial else '_' + str(n) if name != 'kitti' else ''}{subset}.json"
+
+
+def _write(out: Path, name: str, seed: int, n: int, variants, record: dict, partial: bool = False) -> Path:
     from lidarkit.atomic import write_text
 
+    path = _path(out, name, seed, n, variants, partial)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    record["variants_subset"] = variants
     write_text(path, json.dumps(record, indent=2) + "\n")
-    log(f"wrote {path}")
     return path
 
 
@@ -239,8 +262,10 @@ def report(out: Path, command: str) -> None:
         lines.append("")
         summary["datasets"].append(r)
     sims = [r for r in records if r["dataset"] != "kitti"]
-    for scene in sorted({r["dataset"] for r in sims}):
-        recs = sorted([r for r in sims if r["dataset"] == scene], key=lambda r: r["seed"])
+    groups = sorted({(r["dataset"], r["n_frames"], tuple(r.get("variants_subset") or ())) for r in sims})
+    for scene, n_frames, subset in groups:
+        recs = sorted([r for r in sims if (r["dataset"], r["n_frames"], tuple(r.get("variants_subset") or ())) == (scene, n_frames, subset)],
+                      key=lambda r: r["seed"])
         seeds = [r["seed"] for r in recs]
         lines += [f"## sim {scene}: {recs[0]['n_frames']} sweeps, seeds {', '.join(map(str, seeds))} (mean +- std over seeds; per seed in results.json)", "",
                   "| variant | KITTI drift % | deg/100 m | APE RMSE m | end error m | frame rate Hz | x kiss | drift change vs kiss_like (pct points) |",
@@ -270,7 +295,7 @@ def report(out: Path, command: str) -> None:
             lines.append("genz vs genz-icp direct, largest difference / frame-rate ratio per seed: "
                          + ", ".join(f"seed {r['seed']}: {r['genz_max_abs_pose_difference_to_direct']:.2e} / {r['genz_fps_ratio_to_direct']:.3f}" for r in recs))
         lines.append("")
-        summary["sim"][scene] = scene_summary
+        summary["sim"][f"{scene} {n_frames} sweeps" + (" (kiss vs kiss_like only)" if subset else "")] = scene_summary
     _chart(summary, out)
     lines += ["![drift change of each single-component switch](ablation.png)", ""]
     write_text(out / "results.json", json.dumps({"records": records, "summary_sim": summary["sim"]}, indent=2, default=float) + "\n")
@@ -285,8 +310,8 @@ def _chart(summary: dict, out: Path) -> None:
 
     from lidarkit.atomic import save_figure
 
-    scenes = sorted(summary["sim"])
     keys = [k for k in ABLATIONS if k != "kiss_like"]
+    scenes = sorted(k for k, v in summary["sim"].items() if any(key in v for key in keys))
     if not scenes:
         return
     fig, axes = plt.subplots(1, len(scenes), figsize=(5.5 * len(scenes), 4), squeeze=False)
@@ -311,6 +336,7 @@ def main(argv: list[str] | None = None) -> None:
     r.add_argument("--dataset", choices=["kitti", "street", "open"], required=True)
     r.add_argument("--seed", type=int, default=0)
     r.add_argument("--frames", type=int, default=300)
+    r.add_argument("--variants", nargs="+", choices=list(ABLATIONS), help="only these pipeline variants (kiss always runs)")
     a = sub.add_parser("all", help="KITTI and every scene x seed, then the report")
     a.add_argument("--seeds", type=int, nargs="+", default=[0, 1])
     a.add_argument("--frames", type=int, default=300)
@@ -323,7 +349,7 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
     command = "python benchmarks/ablation.py " + " ".join(sys.argv[1:] if argv is None else argv)
     if args.cmd == "run":
-        run_dataset(args.dataset, args.seed, args.frames, args.data, args.out, not args.no_genz)
+        run_dataset(args.dataset, args.seed, args.frames, args.data, args.out, not args.no_genz, args.variants)
     elif args.cmd == "all":
         run_dataset("kitti", 0, 10, args.data, args.out, not args.no_genz)
         for scene in args.scenes:
