@@ -123,7 +123,7 @@ class Map(Component):
             dist = np.sqrt(np.einsum("ij,ij->i", diff, diff))  # float64 from the indices
         else:
             bound = max_distance_m if np.isfinite(max_distance_m) else np.inf
-            dist, idx = self._tree.query(query_xyz, k=1, distance_upper_bound=bound)
+            dist, idx = self._tree.query(query_xyz, k=1, distance_upper_bound=bound, workers=self.config.workers)
         valid = dist < max_distance_m
         return dist, np.where(valid, idx, 0).astype(np.int64), valid
 
@@ -154,6 +154,7 @@ class ScanToScanConfig(ComponentConfig):
     nn_backend: Literal["scipy", "open3d"] = Field(
         "scipy", description="nearest-neighbour index: scipy cKDTree (float64, exact) or Open3D (float32 search, float64 distances)"
     )
+    workers: int = Field(-1, description="threads of the scipy nearest-neighbour queries (-1: all cores, as kiss-icp's TBB)")
 
 
 @register_component("map", "scan_to_scan")
@@ -181,6 +182,7 @@ class VoxelHashConfig(ComponentConfig):
     nn_backend: Literal["scipy", "open3d"] = Field(
         "scipy", description="nearest-neighbour index: scipy cKDTree (float64, exact) or Open3D (float32 search, float64 distances)"
     )
+    workers: int = Field(-1, description="threads of the scipy nearest-neighbour queries (-1: all cores, as kiss-icp's TBB)")
 
 
 @register_component("map", "voxel_hash")
@@ -223,7 +225,7 @@ class VoxelHashMap(Map):
             if self._tree is not None:
                 # any map point of the same voxel within the spacing (the nearest may lie in the next voxel)
                 k = int(min(8, len(self.points_xyz)))
-                d, idx = self._tree.query(new, k=k, distance_upper_bound=spacing)
+                d, idx = self._tree.query(new, k=k, distance_upper_bound=spacing, workers=self.config.workers)
                 d, idx = d.reshape(len(new), k), idx.reshape(len(new), k)
                 hit = d < spacing
                 same = np.zeros_like(hit)
@@ -306,7 +308,7 @@ class VoxelHashMap(Map):
             redo = far[outside]
             if len(redo):
                 k = int(min(32, len(self.points_xyz)))
-                d_k, i_k = self._tree.query(query_xyz[redo], k=k, distance_upper_bound=max_distance_m)
+                d_k, i_k = self._tree.query(query_xyz[redo], k=k, distance_upper_bound=max_distance_m, workers=self.config.workers)
                 d_k, i_k = d_k.reshape(len(redo), k), i_k.reshape(len(redo), k)
                 found = np.isfinite(d_k)
                 safe = np.where(found, i_k, 0)
