@@ -1,8 +1,16 @@
 """lidarkit: LiDAR registration, particle-filter localization and monocular VO, scored by one evaluation layer."""
 
 from lidarkit.errors import ConfigError, DataError, LidarKitError, RegistrationError
-from lidarkit.trajectory import Trajectory
 
 __version__ = "0.1.0"
+
+
+def __getattr__(name: str):
+    # Trajectory (numpy, scipy) loads on first use, so `lidarkit` starts fast enough to handle Ctrl-C from the start
+    if name == "Trajectory":
+        from lidarkit.trajectory import Trajectory
+
+        return Trajectory
+    raise AttributeError(f"module 'lidarkit' has no attribute {name!r}")
 
 __all__ = ["ConfigError", "DataError", "LidarKitError", "RegistrationError", "Trajectory", "__version__"]

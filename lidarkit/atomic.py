@@ -1,15 +1,79 @@
-"""Atomic file writes: results are either complete or absent, never half-written."""
+"""The output layer: every file and folder lidarkit writes goes through here.
+
+- Files are written atomically (a temporary file beside the target, fsync, one rename): complete or absent.
+- Run folders are all-or-nothing (:func:`run_folder`): written under a temporary hidden name and renamed into
+  place only once every file is there, so a failed or killed run never leaves a folder that looks finished.
+- Any ``OSError`` (a file where a folder is needed, a folder where a file is needed, read-only file system,
+  disk full, permission denied) and an unknown plot format become :class:`OutputError` naming the path.
+"""
 
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
+import shutil
 import tempfile
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
+from lidarkit.errors import OutputError
+
+__all__ = ["OutputError", "atomic_path", "ensure_dir", "output_errors", "run_folder", "save_figure", "write_bytes",
+           "write_text"]
+
 _UMASK = os.umask(0o022)
 os.umask(_UMASK)  # read once at import: os.umask can only be read by setting it
+
+PARTIAL_MARK = ".partial-"  # temporary run folders: ``.<name>.partial-XXXX`` beside the final one
+
+_REASONS = {
+    errno.EEXIST: "a file is in the way (a folder is needed here)",
+    errno.ENOTDIR: "a file is in the way (a folder is needed here)",
+    errno.EISDIR: "is a folder (a file name is needed here)",
+    errno.EROFS: "read-only file system",
+    errno.ENOSPC: "no space left on the device",
+    errno.EDQUOT: "disk quota exceeded",
+    errno.EACCES: "permission denied",
+    errno.EPERM: "permission denied",
+    errno.EFBIG: "file too large for the file system",
+    errno.ENAMETOOLONG: "file name too long",
+    errno.ENOTEMPTY: "a non-empty folder is in the way",
+}
+
+
+def _reason(err: OSError) -> str:
+    return _REASONS.get(err.errno, err.strerror or str(err))
+
+
+def error_for(path: str | os.PathLike, err: OSError, what: str = "cannot write") -> OutputError:
+    """The OutputError for an ``OSError`` met while writing ``path``."""
+    return OutputError(f"{what}: {_reason(err)}", source=path)
+
+
+@contextlib.contextmanager
+def output_errors(path: str | os.PathLike, what: str = "cannot write") -> Iterator[None]:
+    """Turn any ``OSError`` raised inside the block into an :class:`OutputError` naming ``path``."""
+    try:
+        yield
+    except OutputError:
+        raise
+    except OSError as err:
+        raise error_for(path, err, what) from err
+
+
+def ensure_dir(path: str | os.PathLike) -> Path:
+    """Create the folder ``path`` (and its parents) if needed; a file in the way is an OutputError."""
+    path = Path(path)
+    if path.is_dir():
+        return path
+    culprit = next((p for p in (path, *path.parents) if p.exists() and not p.is_dir()), None)
+    if culprit is not None:
+        raise OutputError("cannot create the folder: a file is in the way (a folder is needed here)", source=culprit)
+    with output_errors(path, "cannot create the folder"):
+        path.mkdir(parents=True, exist_ok=True)
+    return path
 
 
 @contextlib.contextmanager
@@ -17,38 +81,30 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; on success it replaces ``path`` in one rename.
 
     The temporary name keeps the suffix so writers that pick a format by extension
-    (matplotlib, numpy, Open3D) still work.
+    (matplotlib, numpy, Open3D) still work. An ``OSError`` inside the block or while
+    renaming becomes an OutputError naming ``path``.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
-    os.close(fd)
+    if path.is_dir():
+        raise OutputError("cannot write: is a folder (a file name is needed here)", source=path)
+    ensure_dir(path.parent)
+    with output_errors(path):
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
+        os.close(fd)
     tmp_path = Path(tmp)
-    os.chmod(tmp_path, 0o666 & ~_UMASK)  # mkstemp creates 0600; results should get the usual permissions
     try:
-        yield tmp_path
-        os.replace(tmp_path, path)
+        with output_errors(path):
+            os.chmod(tmp_path, 0o666 & ~_UMASK)  # mkstemp creates 0600; results should get the usual permissions
+            yield tmp_path
+            os.replace(tmp_path, path)
     finally:
-        if tmp_path.exists():
+        with contextlib.suppress(OSError):
             tmp_path.unlink()
 
 
 def write_text(path: str | os.PathLike, text: str) -> Path:
     """Write ``text`` to ``path`` atomically; return the path."""
-    with atomic_path(path) as tmp:
-        with open(tmp, "w", encoding="utf-8") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-    return Path(path)
-
-
-def save_figure(fig, path: str | os.PathLike, *, dpi: float | None = None) -> Path:
-    """Save a matplotlib figure atomically, in the format its suffix names (PNG when there is none)."""
-    path = Path(path)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format=path.suffix.lstrip(".") or "png", dpi=dpi)
-    return path
+    return write_bytes(path, text.encode("utf-8"))
 
 
 def write_bytes(path: str | os.PathLike, data: bytes) -> Path:
@@ -59,3 +115,116 @@ def write_bytes(path: str | os.PathLike, data: bytes) -> Path:
             fh.flush()
             os.fsync(fh.fileno())
     return Path(path)
+
+
+def figure_format(fig, path: str | os.PathLike) -> str:
+    """The format ``path``'s suffix names (PNG without one); an unknown suffix is an OutputError listing the known."""
+    fmt = Path(path).suffix.lstrip(".").lower() or "png"
+    if fig is None:
+        from matplotlib.backend_bases import FigureCanvasBase
+
+        known = FigureCanvasBase.get_supported_filetypes()
+    else:
+        known = fig.canvas.get_supported_filetypes()
+    if fmt not in known:
+        raise OutputError(f"unknown plot format {'.' + fmt!r}; use one of: {', '.join('.' + k for k in sorted(known))}",
+                          source=path)
+    return fmt
+
+
+def save_figure(fig, path: str | os.PathLike, *, dpi: float | None = None) -> Path:
+    """Save a matplotlib figure atomically, in the format its suffix names (PNG when there is none)."""
+    path = Path(path)
+    fmt = figure_format(fig, path)
+    with atomic_path(path) as tmp:
+        try:
+            fig.savefig(tmp, format=fmt, dpi=dpi)
+        except ValueError as err:  # matplotlib's own refusal of a format or size
+            raise OutputError(f"cannot write the plot: {err}", source=path) from err
+    return path
+
+
+def check_target(path: str | os.PathLike | None, kind: str = "file") -> None:
+    """Refuse an output path before any work is done: ``kind`` is ``"file"``, ``"figure"`` (a known plot suffix
+    too) or ``"folder"``. Checks what is in the way and whether the nearest existing folder is writable."""
+    if path is None:
+        return
+    path = Path(path)
+    if kind == "folder":
+        if path.exists() and not path.is_dir():
+            raise OutputError("cannot write the run folder: a file is in the way (a folder is needed here)", source=path)
+    else:
+        if path.is_dir():
+            raise OutputError("cannot write: is a folder (a file name is needed here)", source=path)
+        if kind == "figure":
+            figure_format(None, path)
+    candidates = (path.absolute(), *path.absolute().parents) if kind == "folder" else path.absolute().parents
+    parent = next((p for p in candidates if p.exists()), None)
+    if parent is not None and not parent.is_dir():
+        raise OutputError("cannot create the folder: a file is in the way (a folder is needed here)", source=parent)
+    if parent is not None and not os.access(parent, os.W_OK | os.X_OK):
+        # access() reports a read-only file system even for root
+        try:
+            os.statvfs(parent)
+            readonly = bool(os.statvfs(parent).f_flag & os.ST_RDONLY)
+        except OSError:
+            readonly = False
+        raise OutputError(f"cannot write: {'read-only file system' if readonly else 'permission denied'}", source=path)
+
+
+@contextlib.contextmanager
+def run_folder(path: str | os.PathLike) -> Iterator[Path]:
+    """Yield a temporary folder to write a run into; on success it becomes ``path``, on failure it is removed.
+
+    A new ``path`` appears in one rename, complete. An existing folder keeps its other files: the run's files are
+    moved into it one rename each, only after all were written. Errors name ``path``, not the temporary folder.
+    """
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise OutputError("cannot write the run folder: a file is in the way (a folder is needed here)", source=path)
+    ensure_dir(path.parent)
+    with output_errors(path, "cannot create the run folder"):
+        tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}{PARTIAL_MARK}", dir=path.parent))
+        os.chmod(tmp, 0o777 & ~_UMASK)
+    remove_stale_partials(path)
+    try:
+        try:
+            yield tmp
+        except OutputError as err:
+            if err.source and err.source.startswith(str(tmp)):  # name the final path, not the temporary one
+                raise OutputError(err.reason, source=path / os.path.relpath(err.source, tmp), location=err.location) from err
+            raise
+        with output_errors(path, "cannot complete the run folder"):
+            _move_into_place(tmp, path)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _move_into_place(tmp: Path, path: Path) -> None:
+    try:
+        os.rename(tmp, path)  # a missing or empty ``path``: one rename
+        return
+    except OSError as err:
+        if err.errno not in (errno.EEXIST, errno.ENOTEMPTY, errno.EISDIR, errno.ENOTDIR):
+            raise
+    for src in sorted(tmp.rglob("*")):
+        dst = path / src.relative_to(tmp)
+        if src.is_dir():
+            ensure_dir(dst)
+        else:
+            if dst.is_dir():
+                raise OutputError("cannot write: is a folder (a file name is needed here)", source=dst)
+            ensure_dir(dst.parent)
+            os.replace(src, dst)
+
+
+def remove_stale_partials(path: str | os.PathLike, older_than_s: float = 3600.0) -> int:
+    """Remove temporary run folders of ``path`` a killed run left behind (older than ``older_than_s``)."""
+    path = Path(path)
+    removed = 0
+    with contextlib.suppress(OSError):
+        for stale in path.parent.glob(f".{path.name}{PARTIAL_MARK}*"):
+            if stale.is_dir() and time.time() - stale.stat().st_mtime > older_than_s:
+                shutil.rmtree(stale, ignore_errors=True)
+                removed += 1
+    return removed

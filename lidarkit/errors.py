@@ -42,6 +42,10 @@ class EvaluationError(LidarKitError):
     """Two trajectories cannot be compared as asked (lengths, timestamps, too short for a metric)."""
 
 
+class OutputError(LidarKitError):
+    """A result file or folder cannot be written (a file in the way, read-only, disk full, unknown plot format)."""
+
+
 def validation_problems(err: Any, unnamed: str = "?") -> str:
     """One line for a pydantic ``ValidationError``: ``"field.path: message; ..."`` (``unnamed`` for a model-level
     problem), for the ConfigError that replaces it."""

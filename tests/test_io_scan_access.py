@@ -49,7 +49,7 @@ def test_kitti_point_times_length_mismatch_is_a_data_error(exported, tmp_path):
 
 def test_out_of_range_scan_index_names_the_sequence(exported, tmp_path):
     _, folder = exported
-    with pytest.raises(DataError, match=r"kitti_.*scan index 3 out of range for 3 scans"):
+    with pytest.raises(DataError, match=r"seq \(.*\): scan index 3 out of range for 3 scans"):
         KittiOdometry(folder).read_scan(3)
     scans = tmp_path / "scans"
     scans.mkdir()

@@ -46,11 +46,18 @@ def test_kiss_gives_exactly_the_poses_of_kiss_icp(seq00):
 
     result = run(seq00, "kiss")
     assert len(seq00) == 10 and len(result.trajectory) == 10
-    # the reference reads the .bin files itself, as kiss-icp's KITTI loader does, with kiss-icp's own defaults
-    frames = [np.fromfile(p, dtype=np.float32).reshape(-1, 4)[:, :3].astype(np.float64) for p in seq00.scan_paths]
+    # the reference reads the .bin files itself, as kiss-icp's KITTI loader does (vertical-angle correction
+    # included: lidarkit applies it for kiss by default), with kiss-icp's own defaults
+    from lidarkit.io.kitti import correct_vertical_angle
+
+    frames = [correct_vertical_angle(np.fromfile(p, dtype=np.float32).reshape(-1, 4)[:, :3].astype(np.float64)) for p in seq00.scan_paths]
     expected = _kiss_icp_direct(frames, None, load_config(None))
     np.testing.assert_allclose(result.trajectory.poses_se3, expected, rtol=0, atol=EXACT_ATOL)
     assert result.config["method_config"]["deskew"] is True  # no per-point times in KITTI .bin: nothing to deskew
+    assert result.metrics["effective"]["deskew"]["applied"] is False  # ... and the run says so
+    assert "deskew requested, no per-point times found" in result.metrics["warnings"][0]
+    assert result.metrics["n_bad_frames"] == 0  # the independent check passes every frame of a good run
+    assert np.nanmin(result.stats.fitness) > 0.8
 
 
 def test_kiss_with_point_times_matches_kiss_icp_deskew():

@@ -10,11 +10,13 @@ from __future__ import annotations
 import logging
 import multiprocessing
 import os
+import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
+from lidarkit.lifetime import ignored_sigint, init_worker, mark_abandoned
 from lidarkit.errors import ConfigError
 
 log = logging.getLogger(__name__)
@@ -63,7 +65,8 @@ class ProcessExecutor:
 
     A worker that dies (segfault, abort in a C extension) breaks the pool; the jobs it took down are
     re-run one at a time in a fresh single-worker pool so that only the job that really crashes is
-    recorded as failed.
+    recorded as failed. Workers die with this process (:mod:`lidarkit.bench.lifetime`); an interrupted or
+    failing run stops them before returning.
     """
 
     name = "process"
@@ -74,13 +77,13 @@ class ProcessExecutor:
             start_method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
         self.context = multiprocessing.get_context(start_method)
         if start_method == "forkserver":
-            self.context.set_forkserver_preload(["lidarkit.bench.worker", "lidarkit.bench.tasks", "numpy"])
+            self.context.set_forkserver_preload(["lidarkit.bench._forkserver", "lidarkit.bench.worker", "lidarkit.bench.tasks", "numpy"])
 
     def run(self, fn: JobFn, items: list[Item]) -> Iterator[tuple[str, dict[str, Any]]]:
         if not items:
             return
         broken: list[Item] = []
-        pool = ProcessPoolExecutor(max_workers=min(self.workers, len(items)), mp_context=self.context)
+        pool = self._pool(min(self.workers, len(items)))
         try:
             futures = {pool.submit(fn, spec): (key, spec) for key, spec in items}
             pending = set(futures)
@@ -103,7 +106,7 @@ class ProcessExecutor:
             yield from self._run_isolated(fn, broken)
 
     def _run_isolated(self, fn: JobFn, items: list[Item]) -> Iterator[tuple[str, dict[str, Any]]]:
-        pool = ProcessPoolExecutor(max_workers=1, mp_context=self.context)
+        pool = self._pool(1)
         try:
             for key, spec in items:
                 try:
@@ -111,26 +114,48 @@ class ProcessExecutor:
                 except BrokenProcessPool as err:
                     outcome = crash_outcome("WorkerCrashed", f"the worker process died while running this job ({err})")
                     _shutdown(pool)
-                    pool = ProcessPoolExecutor(max_workers=1, mp_context=self.context)
+                    pool = self._pool(1)
                 except Exception as err:
                     outcome = crash_outcome(type(err).__name__, str(err))
                 yield key, outcome
         finally:
             _shutdown(pool)
 
+    def _pool(self, workers: int) -> ProcessPoolExecutor:
+        return ProcessPoolExecutor(max_workers=workers, mp_context=self.context, initializer=init_worker,
+                                   initargs=(os.getpid(),))
+
     def close(self) -> None:
         pass
 
 
 def _shutdown(pool: ProcessPoolExecutor) -> None:
-    """Cancel queued jobs and stop the workers now (an interrupted run loses only the jobs in flight)."""
-    processes = list(getattr(pool, "_processes", {}).values() or [])
+    """Cancel queued jobs and stop the workers now (an interrupted run loses only the jobs in flight).
+
+    Normal completion: the pool joins its idle workers. Otherwise the workers are terminated (SIGKILL after 2 s);
+    if the pool's reader thread stays blocked on a result a worker was killed while sending, the process is
+    marked so the CLI exits without waiting on it.
+    """
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    thread = getattr(pool, "_executor_manager_thread", None)
+    pending = bool(getattr(pool, "_pending_work_items", None))
     pool.shutdown(wait=False, cancel_futures=True)
+    if not pending:
+        for proc in processes:
+            proc.join(timeout=5)
     for proc in processes:
         if proc.is_alive():
             proc.terminate()
+    deadline = time.monotonic() + 2.0
     for proc in processes:
-        proc.join(timeout=5)
+        proc.join(timeout=max(0.0, deadline - time.monotonic()))
+        if proc.is_alive():
+            proc.kill()
+            proc.join(timeout=2)
+    if thread is not None:
+        thread.join(timeout=2)
+        if thread.is_alive():
+            mark_abandoned()
 
 
 class DaskExecutor:
@@ -153,10 +178,18 @@ class DaskExecutor:
                 raise ConfigError(f"cannot connect to the Dask scheduler: {err}", source=address) from None
         else:
             n = workers or min(2, default_workers())
-            self.cluster = distributed.LocalCluster(
-                n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=logging.ERROR
-            )
-            self.client = distributed.Client(self.cluster)
+            self._quiet = logging.getLogger("distributed")
+            self._level = self._quiet.level
+            self._quiet.setLevel(logging.ERROR)  # a local cluster's INFO lines would only bury the progress bar
+            os.environ.setdefault("DASK_LOGGING__DISTRIBUTED", "error")  # read by the worker processes at start
+            # Worker processes start with SIGINT ignored (an ignored signal stays ignored across exec, and Python
+            # keeps it so): Ctrl-C reaches the whole process group, and only this process decides how the cluster
+            # stops. A Ctrl-C while the cluster starts is reported when it has started.
+            with ignored_sigint():
+                self.cluster = distributed.LocalCluster(
+                    n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=logging.ERROR
+                )
+                self.client = distributed.Client(self.cluster)
 
     def run(self, fn: JobFn, items: list[Item]) -> Iterator[tuple[str, dict[str, Any]]]:
         if not items:
@@ -179,6 +212,7 @@ class DaskExecutor:
         self.client.close()
         if self.cluster is not None:
             self.cluster.close()
+            self._quiet.setLevel(self._level)
 
 
 def check_executor_args(name: str, workers: int | None = None, address: str | None = None) -> None:

@@ -116,6 +116,7 @@ def aggregate(records: list[dict[str, Any]]) -> list[TaskTable]:
             present.update(k for k, v in r.get("metrics", {}).items() if isinstance(v, (int, float)) or v is None)
         metrics = [m for m in declared if m.name in present]
         metrics += [MetricInfo(name, name) for name in sorted(present - {m.name for m in metrics})]
+        metrics = [label_alignment(m, recs) for m in metrics]
         metrics.append(MetricInfo("runtime_s", "runtime [s]", "speed"))
         groups: dict[tuple[str, str, str], list[dict[str, Any]]] = defaultdict(list)
         order: dict[tuple[str, str, str], tuple] = {}
@@ -136,6 +137,19 @@ def aggregate(records: list[dict[str, Any]]) -> list[TaskTable]:
             rows.append(Row(task, experiment, dataset, method, len(ok), len(items) - len(ok), stats))
         tables.append(TaskTable(task, metrics, rows))
     return tables
+
+
+def label_alignment(metric: MetricInfo, records: list[dict[str, Any]]) -> MetricInfo:
+    """The metric's label naming the alignment its records state (``info["metric_alignment"][name]``), e.g.
+    "APE RMSE [m]" -> "APE RMSE (sim3-aligned) [m]"; several alignments are all named; a label that already
+    names it, or records that state none, keep the label."""
+    stated = sorted({str(a) for r in records if (a := ((r.get("info") or {}).get("metric_alignment") or {}).get(metric.name))})
+    text = " / ".join(stated)
+    if not stated or all(a in metric.label for a in stated):
+        return metric
+    head, sep, unit = metric.label.rpartition(" [")
+    label = f"{head} ({text}){sep}{unit}" if sep and metric.label.endswith("]") else f"{metric.label} ({text})"
+    return MetricInfo(metric.name, label, metric.kind)
 
 
 def _natural(params: dict[str, Any]) -> tuple:

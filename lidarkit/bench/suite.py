@@ -23,6 +23,8 @@ from lidarkit.errors import ConfigError, DataError, LidarKitError
 
 log = logging.getLogger(__name__)
 
+MAX_JOBS = 100_000  # a suite expanding to more jobs is refused before expansion (load_suite(max_jobs=...), --max-jobs)
+
 
 class MethodSpec(BaseModel):
     """A method with fixed ``params`` and a ``grid`` (param -> list of values, expanded as a cartesian product)."""
@@ -154,6 +156,7 @@ def read_suite_file(path: str | Path) -> tuple[SuiteModel, _Locator]:
         problem = getattr(err, "problem", None) or str(err).splitlines()[0]
         raise ConfigError(f"malformed YAML: {problem}", source=path, location=where) from None
     locator = _Locator(path, root)
+    _refuse_duplicate_keys(root, path)
     if not isinstance(raw, dict):
         raise ConfigError("a suite is a YAML mapping with an 'experiments' list", source=path)
     try:
@@ -175,15 +178,98 @@ def read_suite_file(path: str | Path) -> tuple[SuiteModel, _Locator]:
     return model, locator
 
 
-def load_suite(path: str | Path, *, skip_unavailable: bool = False, only_tasks: set[str] | None = None) -> Suite:
+def _refuse_duplicate_keys(node: yaml.Node | None, path: Path) -> None:
+    """A mapping that names a key twice (YAML keeps the last value silently) is a ConfigError naming both lines."""
+    stack = [node]
+    while stack:
+        node = stack.pop()
+        if isinstance(node, yaml.MappingNode):
+            first: dict[str, int] = {}
+            for key_node, value_node in node.value:
+                if isinstance(key_node, yaml.ScalarNode):
+                    line = key_node.start_mark.line + 1
+                    if key_node.value in first:
+                        raise ConfigError(f"duplicate key {key_node.value!r} (first on line {first[key_node.value]})",
+                                          source=path, location=f"line {line}")
+                    first[key_node.value] = line
+                stack.append(value_node)
+        elif isinstance(node, yaml.SequenceNode):
+            stack.extend(node.value)
+
+
+def _count_jobs(model: SuiteModel) -> int:
+    """Jobs the suite expands to (datasets x grid points x seeds per method), computed without expanding."""
+    total = 0
+    for exp in model.experiments:
+        n_datasets = 1 if exp.dataset is not None else len(exp.datasets or [])
+        seeds = exp.seeds if exp.seeds is not None else model.seeds
+        n_seeds = seeds if isinstance(seeds, int) else len(seeds)
+        for method in exp.methods:
+            n_grid = 1
+            if isinstance(method, MethodSpec):
+                for values in method.grid.values():
+                    n_grid *= len(values)
+            total += n_datasets * n_grid * max(n_seeds, 0)
+    return total
+
+
+def _refuse_duplicates(model: SuiteModel, locator: _Locator) -> None:
+    """Duplicate experiment names, methods (same name and settings), datasets or seeds would run the same jobs
+    twice: a ConfigError naming the file and line."""
+    def fail(what: str, loc: tuple[Any, ...]) -> None:
+        raise ConfigError(what, source=locator.path, location=locator.location(loc))
+
+    names: dict[str, int] = {}
+    for i, exp in enumerate(model.experiments):
+        if exp.name is not None:
+            if exp.name in names:
+                fail(f"duplicate experiment name {exp.name!r} (also experiments[{names[exp.name]}])", ("experiments", i, "name"))
+            names[exp.name] = i
+        methods: dict[str, int] = {}
+        for j, method in enumerate(exp.methods):
+            m = MethodSpec(name=method) if isinstance(method, str) else method
+            ident = repr((m.name, sorted(m.params.items(), key=str), sorted(m.grid.items(), key=str)))
+            if ident in methods:
+                fail(f"duplicate method {m.name!r} with the same params and grid (also methods[{methods[ident]}])",
+                     ("experiments", i, "methods", j))
+            methods[ident] = j
+            for key, values in m.grid.items():
+                reprs = [repr(v) for v in values]
+                if len(set(reprs)) != len(reprs):
+                    fail(f"grid {key!r} lists a value twice: {values}", ("experiments", i, "methods", j, "grid", key))
+        if exp.datasets:
+            seen_ds: dict[str, int] = {}
+            for k, d in enumerate(exp.datasets):
+                ident = d if isinstance(d, str) else repr(sorted(d.model_dump(exclude_none=True).items(), key=str))
+                if ident in seen_ds:
+                    fail(f"duplicate dataset (also datasets[{seen_ds[ident]}])", ("experiments", i, "datasets", k))
+                seen_ds[ident] = k
+        for seeds, loc in ((exp.seeds, ("experiments", i, "seeds")), (model.seeds, ("seeds",))):
+            if isinstance(seeds, list) and len(set(seeds)) != len(seeds):
+                dup = sorted({s for s in seeds if seeds.count(s) > 1})
+                fail(f"duplicate seeds {dup}", loc)
+            if isinstance(seeds, int) and seeds < 1:
+                fail(f"seeds must be >= 1 (a count) or a list, got {seeds}", loc)
+            if isinstance(seeds, list) and any(s < 0 for s in seeds):
+                fail(f"seeds must be >= 0, got {[s for s in seeds if s < 0]}", loc)
+
+
+def load_suite(path: str | Path, *, skip_unavailable: bool = False, only_tasks: set[str] | None = None,
+               max_jobs: int = MAX_JOBS) -> Suite:
     """Read, validate and expand a suite file into jobs; raise on the first problem, before anything runs.
 
     ``skip_unavailable``: experiments whose task module or bundled ``sample:`` dataset is not installed, and
     methods the task does not have here (an optional extra such as ``small_gicp``), are skipped (listed in
     ``Suite.skipped``) instead of refused — what ``lidarkit demo`` does. ``only_tasks`` keeps only those tasks.
+    A suite expanding to more than ``max_jobs`` jobs is refused before expansion.
     """
     path = Path(path).resolve()
     model, locator = read_suite_file(path)
+    _refuse_duplicates(model, locator)
+    n_jobs = _count_jobs(model)
+    if n_jobs > max_jobs:
+        raise ConfigError(f"expands to {n_jobs:,} jobs, above the limit of {max_jobs:,} (split the suite, or raise "
+                          "the limit with --max-jobs)", source=path)
     base_dir = path.parent
     jobs: list[Job] = []
     seen: set[str] = set()

@@ -3,10 +3,17 @@
 from __future__ import annotations
 
 import logging
+import os
 import sys
 
-from lidarkit.cli.app import app, stderr
-from lidarkit.errors import LidarKitError
+from lidarkit import lifetime
+
+if os.path.basename(sys.argv[0]) in ("lidarkit", "-m"):  # the console script or `python -m lidarkit.cli`
+    lifetime.install_startup_handlers()
+
+from lidarkit.lifetime import Interrupted, abandoned, handle_signals  # noqa: E402
+from lidarkit.cli.app import app, print_error, stderr  # noqa: E402
+from lidarkit.errors import LidarKitError  # noqa: E402
 
 # Each module registers its commands on ``app`` when imported; listed here explicitly.
 from lidarkit.cli import eval_cmd  # noqa: E402,F401
@@ -22,10 +29,30 @@ __all__ = ["app", "main"]
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Entry point of the ``lidarkit`` console script; a LidarKitError becomes one line and exit code 1."""
+    """Entry point of the ``lidarkit`` console script.
+
+    A LidarKitError becomes one line and exit code 1; SIGINT / SIGTERM stop the command through its cleanup
+    (temporary files and run folders removed, worker processes stopped) with one line and exit code 130 / 143.
+    """
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    code = 0
     try:
-        app(args=argv, prog_name="lidarkit")
+        with handle_signals():
+            app(args=argv, prog_name="lidarkit")
     except LidarKitError as err:
-        stderr().print(f"[bold red]error:[/bold red] {err}", markup=True, soft_wrap=True)
-        sys.exit(1)
+        print_error(err)
+        code = 1
+    except Interrupted as err:
+        stderr().print(f"interrupted by {err}: stopped; finished results are kept (files are complete or absent)",
+                       soft_wrap=True)
+        code = err.exit_code
+    except SystemExit as exc:
+        if not abandoned():
+            raise
+        code = exc.code if isinstance(exc.code, int) else 1
+    if abandoned():  # a pool thread is stuck on a result its killed worker never finished sending
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    if code:
+        sys.exit(code)

@@ -23,13 +23,26 @@ def parse_params(items: list[str], option: str = "--param") -> dict:
 
 
 def stdout() -> Console:
-    """Console for results (created per call so test capture works)."""
-    return Console(highlight=False)
+    """Console for results (created per call so test capture works).
+
+    Markup is off: file names, method labels and messages are user strings (``scan[v2].bin``, ``[/red]``) and must
+    print as they are; styling goes through ``rich.text.Text`` or an explicit ``markup=True`` with ``escape``.
+    """
+    return Console(highlight=False, markup=False)
 
 
 def stderr() -> Console:
-    """Console for errors and progress."""
-    return Console(stderr=True, highlight=False)
+    """Console for errors and progress (markup off, like :func:`stdout`)."""
+    return Console(stderr=True, highlight=False, markup=False)
+
+
+def print_error(err: BaseException) -> None:
+    """The one line the CLI prints for a LidarKitError (the message verbatim, never read as markup)."""
+    from rich.text import Text
+
+    line = Text("error:", style="bold red")
+    line.append(" " + str(err))
+    stderr().print(line, soft_wrap=True)
 
 
 @app.callback()

@@ -18,7 +18,7 @@ EXECUTOR_HELP = "serial | process (local process pool sized to the machine) | da
 def progress_bar() -> Progress:
     """Rich progress bar with ETA on stderr (results go to stdout)."""
     return Progress(
-        TextColumn("[bold]{task.description}"),
+        TextColumn("{task.description}", style="bold", markup=False),
         BarColumn(),
         MofNCompleteColumn(),
         TextColumn("{task.fields[failed]} failed"),
@@ -31,7 +31,8 @@ def progress_bar() -> Progress:
 
 
 def run_with_progress(suite, out: Path, *, executor: str, workers: int | None, address: str | None, force: bool):
-    """Run ``suite`` into ``out`` showing a progress bar; KeyboardInterrupt says how to resume and exits 130."""
+    """Run ``suite`` into ``out`` showing a progress bar; Ctrl-C / SIGTERM say how to resume and exit 130 / 143."""
+    from lidarkit.lifetime import Interrupted
     from lidarkit.bench.runner import run_suite
 
     err = stderr()
@@ -56,10 +57,12 @@ def run_with_progress(suite, out: Path, *, executor: str, workers: int | None, a
         try:
             return run_suite(suite, out, executor=executor, workers=workers, address=address, force=force,
                              on_start=on_start, on_result=on_result)
-        except KeyboardInterrupt:
+        except (KeyboardInterrupt, Interrupted) as stop:
             progress.stop()
-            err.print(f"interrupted: finished results are kept in {out}/jobs; run the same command again to resume")
-            raise typer.Exit(130) from None
+            what = f"by {stop}" if isinstance(stop, Interrupted) else "by SIGINT"
+            err.print(f"interrupted {what}: finished results are kept in {out}/jobs; run the same command again to resume",
+                      soft_wrap=True)
+            raise typer.Exit(getattr(stop, "exit_code", 130)) from None
 
 
 def print_run_summary(summary) -> None:
@@ -105,13 +108,17 @@ def bench(
     force: bool = typer.Option(False, "--force", help="Rerun jobs that already have a result."),
     report: bool = typer.Option(True, "--report/--no-report", help="Write the report when the run ends."),
     dry_run: bool = typer.Option(False, "--dry-run", help="Validate and list the jobs, run nothing."),
+    max_jobs: int = typer.Option(100_000, "--max-jobs", min=1, help="Refuse a suite that expands to more jobs."),
 ) -> None:
     """Run a benchmark suite: validate it, expand it into jobs, run the unfinished ones, write one JSON per job."""
     from lidarkit.bench.report import build_report
     from lidarkit.bench.suite import load_suite
 
-    suite = load_suite(suite_file)
+    from lidarkit.atomic import check_target
+
+    suite = load_suite(suite_file, max_jobs=max_jobs)
     out = out or Path("results") / suite_file.stem
+    check_target(out, "folder")
     if dry_run:
         from lidarkit.bench.results import is_finished
 

@@ -10,6 +10,7 @@ import typer
 from lidarkit.cli.app import app, stdout
 from lidarkit.eval.ape_rpe import ALIGNMENTS, DELTA_UNITS
 from lidarkit.eval.evaluate import EvaluationSettings
+from lidarkit.eval.relations import DEFAULT_MAX_TIME_DIFF_S
 from lidarkit.trajectory import FORMATS
 
 _D = EvaluationSettings()
@@ -17,9 +18,11 @@ _D = EvaluationSettings()
 
 @app.command("eval")
 def eval_command(
-    ref: Path = typer.Argument(..., help="Reference (ground-truth) trajectory file."),
-    est: Path = typer.Argument(..., help="Estimated trajectory file."),
-    fmt: str = typer.Option("kitti", "--format", "-f", help=f"Format of both files: {' | '.join(FORMATS)}."),
+    ref: Path = typer.Argument(..., help="Reference (ground-truth) trajectory file (with --relations: EST)."),
+    est: Optional[Path] = typer.Argument(None, help="Estimated trajectory file."),
+    fmt: Optional[str] = typer.Option(
+        None, "--format", "-f", help=f"Format of both files: {' | '.join(FORMATS)} (default kitti; tum with --relations)."
+    ),
     ref_format: Optional[str] = typer.Option(None, help="Format of REF if it differs from --format."),
     est_format: Optional[str] = typer.Option(None, help="Format of EST if it differs from --format."),
     ref_times: Optional[Path] = typer.Option(None, help="times.txt for a KITTI-format REF (one time per pose)."),
@@ -40,11 +43,22 @@ def eval_command(
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write all results as JSON here."),
     plot: Optional[Path] = typer.Option(None, "--plot", help="Write a PNG: trajectories, APE/RPE over time, drift."),
     markdown: Optional[Path] = typer.Option(None, "--markdown", help="Write a Markdown report here."),
+    relations: Optional[Path] = typer.Option(
+        None, "--relations", help="Score the one trajectory given against a .relations file (Kümmerle et al. 2009) instead."
+    ),
+    relation_max_diff: float = typer.Option(
+        DEFAULT_MAX_TIME_DIFF_S, help="--relations: max. time difference (s) between a relation and the nearest pose."
+    ),
 ) -> None:
-    """Score EST against REF: APE and RPE (evo) in translation and rotation, and KITTI drift; print a table."""
+    """Score EST against REF: APE and RPE (evo) in translation and rotation, and KITTI drift; print a table.
+
+    With --relations R: score the single trajectory given (``lidarkit eval --relations aces.relations EST``).
+    """
     from lidarkit import atomic
     from lidarkit.eval import evaluate, report
     from lidarkit.trajectory import Trajectory
+
+    fmt = fmt or ("tum" if relations is not None else "kitti")
 
     def load(path: Path, kind: str | None, times: Path | None) -> Trajectory:
         kind = kind or fmt
@@ -53,6 +67,16 @@ def eval_command(
             raise typer.BadParameter("times files apply to KITTI-format trajectories only")
         return Trajectory.read(path, kind, **kwargs)
 
+    atomic.check_target(json_out, "file")
+    if relations is not None:
+        if est is not None:
+            raise typer.BadParameter("with --relations give one trajectory (EST) only")
+        _relations_report(load(ref, est_format, est_times), relations, relation_max_diff, json_out)
+        return
+    if est is None:
+        raise typer.BadParameter("missing EST (the estimated trajectory file)")
+    atomic.check_target(markdown, "file")
+    atomic.check_target(plot, "figure")
     ref_traj = load(ref, ref_format, ref_times)
     est_traj = load(est, est_format, est_times)
     settings = EvaluationSettings(
@@ -85,3 +109,29 @@ def eval_command(
 
         plots.plot_evaluation(evaluation, plot)
         console.print(f"wrote {plot}")
+
+
+def _relations_report(est_traj, relations_path: Path, max_diff_s: float, json_out: Path | None) -> None:
+    """Relations metric of one trajectory: a table as in the 2009 paper (absolute and squared errors)."""
+    from rich.table import Table
+
+    from lidarkit.eval import report
+    from lidarkit.eval.relations import relation_error
+    from lidarkit.io.carmen import Relations
+
+    result = relation_error(est_traj, Relations.read(relations_path), max_time_diff_s=max_diff_s)
+    table = Table(title=f"relations metric: {result.n_used} of {result.n_relations} relations (|dt| <= {max_diff_s:g} s)")
+    for column in ("error", "mean", "std", "max"):
+        table.add_column(column, justify="right" if column != "error" else "left")
+    for label, stats in (
+        ("translational |e| (m)", result.translation_abs),
+        ("translational e^2 (m^2)", result.translation_sq),
+        ("rotational |e| (deg)", result.rotation_abs),
+        ("rotational e^2 (deg^2)", result.rotation_sq),
+    ):
+        table.add_row(label, *(f"{stats[k]:.4f}" for k in ("mean", "std", "max")))
+    console = stdout()
+    console.print(table)
+    if json_out is not None:
+        report.write_json({**result.to_dict(), "relations_path": str(relations_path)}, json_out)
+        console.print(f"wrote {json_out}")

@@ -9,6 +9,7 @@ from typing import Optional
 import numpy as np
 import typer
 from rich.table import Table
+from rich.text import Text
 
 from lidarkit.cli.app import app, stdout
 from lidarkit.errors import ConfigError, DataError
@@ -40,10 +41,10 @@ def _list_methods() -> None:
     for name in available_icp():
         cls = get_icp_class(name)
         doc = (cls.__doc__ or "").strip().splitlines()[0] if cls.__doc__ else ""
-        lines = [f"[italic]{doc}[/italic]"] if doc else []
+        cell = Text(doc, style="italic") if doc else Text()
         for key, (type_name, default, desc) in config_fields(name).items():
-            lines.append(f"{key}: {type_name} = {default!r} — {desc}")
-        table.add_row(name + (" (stateful)" if cls.stateful else ""), "\n".join(lines))
+            cell.append(("\n" if cell else "") + f"{key}: {type_name} = {default!r} — {desc}")
+        table.add_row(name + (" (stateful)" if cls.stateful else ""), cell)
     stdout().print(table)
 
 
@@ -106,11 +107,14 @@ def icp(
         return
     if source is None or target is None:
         raise ConfigError("give SOURCE and TARGET scan files (or --list)", source="lidarkit icp")
-    from lidarkit.atomic import write_text
+    from lidarkit.atomic import run_folder, write_text
     from lidarkit.cli.app import parse_params
     from lidarkit.io.pointfile import read_point_file
     from lidarkit.registration import get_icp
 
+    from lidarkit.atomic import check_target
+
+    check_target(out, "folder")
     registration = get_icp(method, **parse_params(param))
     source_xyz = read_point_file(source).points_xyz
     target_xyz = read_point_file(target).points_xyz
@@ -120,11 +124,11 @@ def icp(
     if out is not None:
         from lidarkit.registration.plots import save_bev_before_after
 
-        out.mkdir(parents=True, exist_ok=True)
         payload = {"source": str(source), "target": str(target), "init": None if init is None else str(init), **result.to_dict()}
-        write_text(out / "result.json", json.dumps(payload, indent=2, allow_nan=False) + "\n")
-        write_text(out / "config.json", json.dumps({"method": method, "params": registration.config.model_dump(mode="json")}, indent=2, allow_nan=False) + "\n")
-        save_bev_before_after(
-            out / "bev.png", source_xyz, target_xyz, result.T_target_source, init_T, title=f"{method}: {source.name} -> {target.name}"
-        )
+        with run_folder(out) as tmp:
+            write_text(tmp / "result.json", json.dumps(payload, indent=2, allow_nan=False) + "\n")
+            write_text(tmp / "config.json", json.dumps({"method": method, "params": registration.config.model_dump(mode="json")}, indent=2, allow_nan=False) + "\n")
+            save_bev_before_after(
+                tmp / "bev.png", source_xyz, target_xyz, result.T_target_source, init_T, title=f"{method}: {source.name} -> {target.name}"
+            )
         stdout().print(f"wrote {out / 'result.json'}, {out / 'config.json'}, {out / 'bev.png'}")

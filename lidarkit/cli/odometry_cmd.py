@@ -6,13 +6,21 @@ from pathlib import Path
 from typing import Optional
 
 import typer
+from rich.text import Text
 from rich.table import Table
 
 from lidarkit.cli.app import app, parse_params, stdout
 
+def _kinds() -> str:
+    from lidarkit.io import available_datasets
+
+    return ", ".join(available_datasets())
+
+
 DATA_HELP = (
-    "A KITTI sequence folder (or odometry root), a folder of scans, KIND:PATH[?opt=v&...] for any dataset reader "
-    "(e.g. 'kitti:/data/kitti?sequence=05&poses_file=...'), or the simulator: 'sim:street?frames=300&seed=0' "
+    "A KITTI sequence folder (or odometry root), a .bag / .mcap / .pcap file or ROS 2 bag folder (detected), a folder "
+    "of scans, KIND:PATH[?opt=v&...] for any dataset reader (e.g. 'kitti:/data/kitti?sequence=05&poses_file=...', "
+    f"'rosbag:run.bag?topic=/velodyne_points'; kinds: {_kinds()}), or the simulator: 'sim:street?frames=300&seed=0' "
     "(scenes street|open|ground; keys: frames, seed, beams, azimuths, noise, distortion, instant, speed or any "
     "simulator config field)."
 )
@@ -22,6 +30,20 @@ def _fmt(value: object, spec: str = ".3f") -> str:
     return "-" if value is None else format(value, spec)
 
 
+def _deskew_text(deskew: dict | None) -> str:
+    if not deskew:
+        return "-"
+    if deskew["applied"]:
+        return f"on: {deskew['reason']}"
+    if deskew["requested"]:
+        return f"REQUESTED, NOT APPLIED: {deskew['reason']}"
+    return f"off: {deskew['reason']}"
+
+
+def _stat(m: dict, key: str, spec: str = ".3f") -> str:
+    return _fmt(((m.get(key) or {}).get("stats") or {}).get("rmse"), spec)
+
+
 @app.command("odometry")
 def odometry(
     data: str = typer.Argument(..., help=DATA_HELP),
@@ -29,40 +51,72 @@ def odometry(
     param: list[str] = typer.Option([], "--param", "-p", help="Method parameter KEY=VALUE (repeatable)."),
     frames: Optional[str] = typer.Option(None, "--frames", help="Frames START:STOP[:STEP] (Python slice, dataset indices)."),
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="Run folder: poses (KITTI, TUM), config.yaml, metrics.json, timing.csv, plot."),
+    name: Optional[str] = typer.Option(None, "--name", help="Title of the run (default: the dataset's folder name)."),
     progress: bool = typer.Option(True, "--progress/--no-progress", help="Progress bar on stderr."),
-    strict: bool = typer.Option(False, "--strict", help="Fail on the first frame whose registration does not converge (default: warn, use constant velocity)."),
+    strict: bool = typer.Option(
+        False, "--strict",
+        help="Fail on the first frame whose registration does not converge, and when a requested deskew cannot happen "
+        "(default: warn; non-converged frames use constant velocity).",
+    ),
+    init: str = typer.Option(
+        "constant_velocity", "--init",
+        help="Initial guess per frame: constant_velocity | odometry (the dataset's own odometry, e.g. a carmen: log).",
+    ),
 ) -> None:
     """Odometry of one ICP variant over a scan sequence, scored against its ground truth when it has one."""
+    from lidarkit.atomic import check_target
     from lidarkit.odometry import run
 
-    result = run(data, method, params=parse_params(param), frames=frames, out_dir=out, progress=progress, strict=strict)
+    check_target(out, "folder")
+    result = run(data, method, params=parse_params(param), frames=frames, out_dir=out, progress=progress, strict=strict, name=name, init=init)
     m = result.metrics
+    effective = m.get("effective") or {}
     table = Table(title=result.trajectory.name, show_header=True)
     table.add_column("metric")
-    table.add_column("value", justify="right")
+    table.add_column("value", overflow="fold")
     table.add_row("frames", str(m["n_frames"]))
     table.add_row("frame rate (Hz)", f"{m['fps']:.2f}")
     table.add_row("registration time mean (ms)", f"{1e3 * m['register_time_s']['mean']:.1f}")
+    table.add_row("deskew", _deskew_text(effective.get("deskew")))
+    corrections = effective.get("corrections") or {}
+    table.add_row("reader corrections", ", ".join(f"{k}={v}" for k, v in corrections.items()) or "none reported by the reader")
     if m.get("convergence_measured", True):
-        table.add_row("not converged / degenerate", f"{m['n_not_converged']} / {m['n_degenerate']}")
+        table.add_row("not converged / degenerate (variant's verdict)", f"{m['n_not_converged']} / {m['n_degenerate']}")
         table.add_row("constant-velocity fallbacks", str(m.get("n_constant_velocity_fallback", 0)))
     else:
-        table.add_row("not converged / degenerate", "n/a (not measured by a stateful method)")
+        table.add_row("not converged / degenerate (variant's verdict)", "n/a (a stateful method gives no verdict)")
+    check = m.get("frame_check")
+    if check:
+        table.add_row(
+            "bad frames (independent check)",
+            f"{check['n_bad_frames']} of {m['n_frames']} (motion {check['n_bad_motion']}, fitness {check['n_bad_fitness']})",
+        )
+        said = check["n_said_converged_but_bad"]
+        table.add_row("  of which the variant called converged", "n/a (no verdict)" if said is None else str(said))
     table.add_row("estimated path (m)", f"{m['estimated_length_m']:.2f}")
     if "final_error" in m:
         table.add_row("ground truth", str(m["ground_truth"]))
+        table.add_row("ground-truth instant / estimate instant", f"{effective.get('ground_truth_instant')} / {effective.get('estimate_instant')}")
+        if m.get("ground_truth_instant_note"):
+            table.add_row("ground-truth instant note", str(m["ground_truth_instant_note"]))
         table.add_row("ground-truth path (m)", f"{m['ground_truth_length_m']:.2f}")
-        table.add_row("final error (m / deg)", f"{m['final_error']['translation_m']:.3f} / {m['final_error']['rotation_deg']:.3f}")
+        table.add_row("final error, unaligned (m / deg)", f"{m['final_error']['translation_m']:.3f} / {m['final_error']['rotation_deg']:.3f}")
         if "ape_translation_m" in m:
-            table.add_row("APE translation RMSE (m)", _fmt(m["ape_translation_m"]["stats"]["rmse"]))
-            table.add_row("RPE 1 frame RMSE (m / deg)", f"{m['rpe_translation_m']['stats']['rmse']:.4f} / {m['rpe_rotation_deg']['stats']['rmse']:.4f}")
+            table.add_row("APE translation RMSE, SE(3)-aligned (m)", _stat(m, "ape_translation_se3_m"))
+            table.add_row("APE translation RMSE, unaligned, first pose anchored (m)", _stat(m, "ape_translation_m"))
+            table.add_row("RPE 1 frame RMSE, alignment-free (m / deg)", f"{_stat(m, 'rpe_translation_m', '.4f')} / {_stat(m, 'rpe_rotation_deg', '.4f')}")
         drift = m.get("kitti_drift")
         if drift:
-            table.add_row("KITTI drift (% / deg per 100 m)", f"{drift['translation_pct']:.3f} / {drift['rotation_deg_per_100m']:.4f}")
+            table.add_row("KITTI drift, alignment-free (% / deg per 100 m)", f"{drift['translation_pct']:.3f} / {drift['rotation_deg_per_100m']:.4f}")
         else:
             table.add_row("KITTI drift", m.get("kitti_drift_note", "-"))
     else:
         table.add_row("ground truth", "none: no scores")
+    for message in m.get("warnings") or []:  # also logged (stderr) by the runner
+        table.add_row(Text("warning", style="yellow"), Text(message, style="yellow"))
     if result.out_dir is not None:
-        table.add_row("run folder", str(result.out_dir))
-    stdout().print(table)
+        table.add_row("run folder", str(result.out_dir.resolve()))
+    console = stdout()
+    console.print(table)
+    if result.out_dir is not None:
+        console.print(f"run folder: {result.out_dir.resolve()}", soft_wrap=True)

@@ -6,7 +6,6 @@ from pathlib import Path
 
 import typer
 import yaml
-from rich.markup import escape
 from rich.table import Table
 
 from lidarkit.cli.app import app, stderr, stdout
@@ -55,6 +54,9 @@ def pf_command(
     from lidarkit.io import open_dataset
     from lidarkit.pf.protocol import run_protocol, run_recorded
 
+    from lidarkit.atomic import check_target
+
+    check_target(out, "folder")
     data = open_dataset("landmarks", data_dir)
     cfg = PFConfig.make(
         n_particles=particles, likelihood=likelihood, estimator=estimator, resampler=resampler, kernel=kernel,
@@ -77,7 +79,7 @@ def pf_command(
 
 
 def _row(table: Table, label: str, value: str) -> None:
-    table.add_row(escape(label), value)
+    table.add_row(label, value)
 
 
 def _print(result) -> None:
@@ -113,7 +115,15 @@ def _write(result, out: Path, *, snap_steps: tuple[int, ...], gif: bool) -> None
     from lidarkit.eval.report import write_json
     from lidarkit.pf import plots
 
-    out.mkdir(parents=True, exist_ok=True)
+    with atomic.run_folder(out) as tmp:
+        _write_files(result, tmp, snap_steps=snap_steps, gif=gif)
+
+
+def _write_files(result, out: Path, *, snap_steps: tuple[int, ...], gif: bool) -> None:
+    from lidarkit import atomic
+    from lidarkit.eval.report import write_json
+    from lidarkit.pf import plots
+
     atomic.write_text(out / "config.yaml", yaml.safe_dump({"pf": result.config.model_dump(mode="json"), "run": result.settings}, sort_keys=False))
     write_json(result.to_dict(), out / "metrics.json")
     est = result.trajectory("estimate")

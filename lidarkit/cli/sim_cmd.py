@@ -1,4 +1,4 @@
-"""``lidarkit sim lidar``: write a simulated LiDAR sequence as a KITTI-style folder.
+"""``lidarkit sim lidar``: write a simulated LiDAR sequence as a KITTI-style folder, a ROS 1/2 bag or an MCAP file.
 
 The ``sim`` command group is ``sim_app``; other simulators attach their own sub-commands to it.
 """
@@ -18,7 +18,9 @@ app.add_typer(sim_app, name="sim")
 
 @sim_app.command("lidar")
 def sim_lidar(
-    out: Path = typer.Option(..., "--out", "-o", help="Output folder (velodyne/*.bin, point_times/*.npy, poses*.txt, times.txt, calib.txt, sim.yaml)."),
+    out: Path = typer.Option(..., "--out", "-o", help="Output: a folder for kitti (velodyne/*.bin, point_times/*.npy, poses*.txt, times.txt, calib.txt, sim.yaml), a .bag file for rosbag1, a bag folder for rosbag2, a .mcap file for mcap."),
+    fmt: str = typer.Option("kitti", "--format", "-f", help="kitti | rosbag1 | rosbag2 | mcap (bags: PointCloud2 on /points with per-point 'time' float32 s and 't' uint32 ns, nav_msgs/Odometry ground truth on /ground_truth)."),
+    storage: str = typer.Option("sqlite3", "--storage", help="ROS 2 bag storage: sqlite3 | mcap (only with --format rosbag2)."),
     frames: int = typer.Option(300, "--frames", "-n", help="Number of sweeps."),
     scene: str = typer.Option("street", "--scene", help="street | open | ground"),
     seed: int = typer.Option(0, "--seed", help="Seeds the scene, the path and the range noise."),
@@ -28,25 +30,39 @@ def sim_lidar(
     """Simulate a spinning LiDAR driving through a procedural scene; poses are T_world_lidar at the sweep end by default."""
     from lidarkit.cli.app import parse_params
     from lidarkit.errors import ConfigError
+    from lidarkit.sim.bag_export import BAG_FORMATS, export_bag
     from lidarkit.sim.lidar import SimulatedLidarSequence, export_kitti, make_config
 
+    if fmt not in ("kitti", *BAG_FORMATS):
+        raise ConfigError(f"unknown format {fmt!r}; known: kitti, {', '.join(BAG_FORMATS)}", source="--format")
+    if storage != "sqlite3" and fmt != "rosbag2":
+        raise ConfigError("--storage applies to --format rosbag2 only", source="--storage")
+
+    from lidarkit.atomic import check_target
+
+    check_target(out, "folder")
     params = parse_params(param)
     own = {"scene": "--scene", "n_frames": "--frames", "seed": "--seed"}
     for key in sorted(own.keys() & params.keys()):
         raise ConfigError(f"{key} has its own option: use {own[key]} instead of --param {key}=...", source=f"--param {key}")
     config = make_config(scene=scene, n_frames=frames, seed=seed, **params)
     sequence = SimulatedLidarSequence(config)
+    def export(on_frame=None):
+        if fmt == "kitti":
+            return export_kitti(sequence, out, on_frame=on_frame)
+        return export_bag(sequence, out, fmt, storage=storage, on_frame=on_frame)
+
     if progress:
         with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(), console=stderr(), transient=True) as bar:
             task = bar.add_task(f"sim {scene}", total=frames)
-            folder = export_kitti(sequence, out, on_frame=lambda _i: bar.advance(task))
+            folder = export(on_frame=lambda _i: bar.advance(task))
     else:
-        folder = export_kitti(sequence, out)
+        folder = export()
     gt = sequence.ground_truth
     stdout().print(
         f"wrote {frames} sweeps of the {scene} scene to {folder} "
         f"({config.n_beams}x{config.n_azimuths} rays, path {gt.length_m:.1f} m, poses at the sweep {config.pose_instant}; "
-        f"also poses_start/mid/end.txt)"
+        + ("also poses_start/mid/end.txt)" if fmt == "kitti" else f"{fmt} with /points and /ground_truth)")
     )
 
 

@@ -47,7 +47,6 @@ def vo_command(
     gif: bool = typer.Option(False, help="Also write features.gif (tracked inliers) into --out."),
 ) -> None:
     """Estimate the camera trajectory; print frames, rejected frames, speed and APE/RPE when ground truth exists."""
-    from rich.markup import escape
     from rich.table import Table
 
     from lidarkit.vo.config import preset as make_preset
@@ -55,6 +54,9 @@ def vo_command(
     from lidarkit.vo.inputs import frame_range, open_vo_input
     from lidarkit.vo.pipeline import MonoVO
 
+    from lidarkit.atomic import check_target
+
+    check_target(out, "folder")
     if max_frames is not None and max_frames < 1:
         raise ConfigError(f"must be >= 1, got {max_frames}", source="--max-frames")
     changes = {
@@ -95,19 +97,19 @@ def vo_command(
     table.add_row("rejected frames", str(summary["rejected"]))
     if summary["rejection_reasons"]:
         top = list(summary["rejection_reasons"].items())[:_TOP_REASONS]
-        table.add_row("top rejection reasons", escape("; ".join(f"{kind} ({count})" for kind, count in top)))
+        table.add_row("top rejection reasons", "; ".join(f"{kind} ({count})" for kind, count in top))
     if cfg.scale.mode == "relative":
         table.add_row("scale kept from the previous step", f"{summary['scale_kept_frames']} frames")
     table.add_row("frames/s (pipeline)", f"{summary['frames_per_s']:.1f}")
-    table.add_row("intrinsics", escape(vo_input.K_source))
+    table.add_row("intrinsics", vo_input.K_source)
     for variant, m in metrics.items():
-        table.add_row(escape(f"APE {variant} ({m['align']}) [m]"), f"{m['ape_rmse_m']:.4f}")
-        table.add_row(escape(f"RPE {variant} 1 frame [m / deg]"),
+        table.add_row(f"APE {variant} ({m['align']}) [m]", f"{m['ape_rmse_m']:.4f}")
+        table.add_row(f"RPE {variant} 1 frame [m / deg]",
                       f"{m['rpe_trans_rmse_m']:.4f} / {m['rpe_rot_rmse_deg']:.4f}")
-        table.add_row(escape(f"final error {variant} [m]"), f"{m['final_error_m']:.3f}")
+        table.add_row(f"final error {variant} [m]", f"{m['final_error_m']:.3f}")
     console.print(table)
     for d in result.rejected[:_LISTED_REJECTIONS]:
-        console.print(escape(f"frame {d.frame} rejected: {d.reason}"), soft_wrap=True)
+        console.print(f"frame {d.frame} rejected: {d.reason}", soft_wrap=True)
     if len(result.rejected) > _LISTED_REJECTIONS:
         console.print(f"... and {len(result.rejected) - _LISTED_REJECTIONS} more rejected frames (see diagnostics.csv "
                       "with --out)")

@@ -27,6 +27,7 @@ from lidarkit.eval.kitti_drift import (
 )
 from lidarkit.eval.mse import position_mse
 from lidarkit.eval.pairing import paired
+from lidarkit.eval.relations import RelationError, relation_error
 
 __all__ = [
     "ALIGNMENTS",
@@ -41,6 +42,7 @@ __all__ = [
     "Evaluation",
     "EvaluationSettings",
     "RPEResult",
+    "RelationError",
     "align_trajectory",
     "ape",
     "drift_segments_possible",
@@ -48,5 +50,6 @@ __all__ = [
     "kitti_drift",
     "paired",
     "position_mse",
+    "relation_error",
     "rpe",
 ]

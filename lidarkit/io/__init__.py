@@ -21,6 +21,22 @@ _BUILTIN: dict[str, str] = {
     "folder": "lidarkit.io.folder:ScanFolder",
     "tum": "lidarkit.io.tum:TumRGBD",
     "landmarks": "lidarkit.io.landmarks:LandmarkData",
+    "carmen": "lidarkit.io.carmen:CarmenLog",
+    # kiss-icp's dataloaders (lidarkit.io.kiss_loaders.KISS_KINDS maps kiss-icp names to these kinds)
+    "rosbag": "lidarkit.io.rosbag:RosbagScans",
+    "mcap": "lidarkit.io.rosbag:McapScans",
+    "ouster": "lidarkit.io.kiss_loaders:OusterScans",
+    "nclt": "lidarkit.io.kiss_loaders:NcltScans",
+    "mulran": "lidarkit.io.kiss_loaders:MulranScans",
+    "ncd": "lidarkit.io.kiss_loaders:NewerCollegeScans",
+    "helipr": "lidarkit.io.kiss_loaders:HeliprScans",
+    "boreas": "lidarkit.io.kiss_loaders:BoreasScans",
+    "apollo": "lidarkit.io.kiss_loaders:ApolloScans",
+    "nuscenes": "lidarkit.io.kiss_loaders:NuScenesScans",
+    "generic": "lidarkit.io.kiss_loaders:GenericScans",
+    "kiss_kitti": "lidarkit.io.kiss_loaders:KissKittiScans",
+    "kiss_kitti_raw": "lidarkit.io.kiss_loaders:KissKittiRawScans",
+    "kiss_tum": "lidarkit.io.kiss_loaders:KissTumScans",
 }
 _REGISTERED: dict[str, Callable[..., Any]] = {}
 
@@ -38,6 +54,25 @@ def register_dataset(kind: str) -> Callable[[Callable[..., Any]], Callable[..., 
 def available_datasets() -> list[str]:
     """Names of every dataset kind ``open_dataset`` accepts."""
     return sorted(set(_BUILTIN) | set(_REGISTERED))
+
+
+def detect_kind(path: str | os.PathLike) -> str | None:
+    """The dataset kind a path unambiguously is, by extension or layout, else None.
+
+    ``.bag`` (or a folder of ``.bag`` files) and a ROS 2 bag folder (``metadata.yaml``): ``rosbag``;
+    ``.mcap``: ``mcap``; ``.pcap``: ``ouster``; a folder with ``velodyne/`` or ``sequences/``: ``kitti``.
+    """
+    from pathlib import Path
+
+    p = Path(path)
+    suffix = p.suffix.lower()
+    if p.is_file() or not p.exists():
+        return {".bag": "rosbag", ".mcap": "mcap", ".pcap": "ouster"}.get(suffix)
+    if (p / "metadata.yaml").is_file() or any(p.glob("*.bag")):
+        return "rosbag"
+    if (p / "velodyne").is_dir() or (p / "sequences").is_dir():
+        return "kitti"
+    return None
 
 
 def get_reader(kind: str) -> Callable[..., Any]:
@@ -72,4 +107,4 @@ def open_dataset(kind: str, path: str | os.PathLike, **options: Any) -> Any:
     return reader(path, **options)
 
 
-__all__ = ["available_datasets", "get_reader", "open_dataset", "register_dataset"]
+__all__ = ["available_datasets", "detect_kind", "get_reader", "open_dataset", "register_dataset"]

@@ -3,11 +3,30 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol, runtime_checkable
+from typing import Literal, Protocol, runtime_checkable
 
 import numpy as np
 
 from lidarkit.trajectory import Trajectory
+
+
+#: How ``Scan.point_times_s`` is expressed: seconds from the sweep start (KITTI-layout ``point_times``, the
+#: simulator, ROS ``time``/``t`` fields relative to the message stamp), absolute seconds on the clock of
+#: ``timestamp_s``, or the fraction of the sweep in [0, 1] (kiss-icp's Ouster, MulRan, Newer College loaders).
+PointTimeConvention = Literal["relative_s", "absolute_s", "fraction"]
+POINT_TIME_CONVENTIONS = ("relative_s", "absolute_s", "fraction")
+#: The instant of a sweep a time stamp or a pose refers to; None where a reader cannot tell.
+PoseInstant = Literal["start", "mid", "end"]
+POSE_INSTANTS = ("start", "mid", "end")
+INSTANT_FRACTION = {"start": 0.0, "mid": 0.5, "end": 1.0}
+
+
+def classify_instant(fraction: float, tol: float = 0.05) -> str | None:
+    """``"start"`` / ``"mid"`` / ``"end"`` for a position ``fraction`` within the sweep (0 start, 1 end), None otherwise."""
+    for name, value in INSTANT_FRACTION.items():
+        if abs(fraction - value) <= tol:
+            return name
+    return None
 
 
 @dataclass(frozen=True)
@@ -15,8 +34,13 @@ class Scan:
     """One LiDAR sweep.
 
     ``points_xyz``: ``(N, 3)`` float64 in the sensor frame; ``intensity``: ``(N,)`` or None;
-    ``point_times_s``: ``(N,)`` per-point time relative to the sweep start (None if unknown);
-    ``timestamp_s``: the sweep's time stamp; ``frame``: its index in the sequence.
+    ``point_times_s``: ``(N,)`` per-point times in ``point_time_convention`` (None if unknown);
+    ``timestamp_s``: the sweep's time stamp, referring to ``stamp_instant`` of the sweep (None: the reader
+    cannot tell); ``frame``: its index in the sequence.
+
+    Deskewing variants only use the order and spacing of the per-point times (kiss-icp normalizes them to
+    [0, 1] and deskews to the latest point, the sweep END), so every convention works for them; the
+    convention and instant matter when scoring against ground truth (see :mod:`lidarkit.odometry.instants`).
     """
 
     points_xyz: np.ndarray
@@ -25,11 +49,26 @@ class Scan:
     timestamp_s: float | None = None
     frame: int = 0
     source: str = ""
+    point_time_convention: PointTimeConvention = "relative_s"
+    stamp_instant: PoseInstant | None = None
+
+    def point_fractions(self) -> np.ndarray | None:
+        """Per-point position within the sweep in [0, 1] (first point 0, last point 1), whatever the convention."""
+        if self.point_times_s is None or len(self.point_times_s) == 0:
+            return None
+        t = np.asarray(self.point_times_s, dtype=np.float64)
+        lo, hi = float(t.min()), float(t.max())
+        return np.zeros_like(t) if hi <= lo else (t - lo) / (hi - lo)
 
 
 @runtime_checkable
 class ScanSequence(Protocol):
-    """A sequence of LiDAR scans; ``ground_truth`` is in the LiDAR frame (or None)."""
+    """A sequence of LiDAR scans; ``ground_truth`` is in the LiDAR frame (or None).
+
+    Readers that know which instant of each sweep their ground truth refers to say so in
+    ``ground_truth.meta["pose_instant"]`` (``"start"``, ``"mid"`` or ``"end"``); a reader that can give other
+    instants offers ``ground_truth_at(instant)`` (the simulator does).
+    """
 
     name: str
 

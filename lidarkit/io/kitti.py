@@ -7,6 +7,11 @@ Layout (``root`` is the odometry root, or a sequence folder itself)::
     root/sequences/NN/calib.txt             "P0: 12 numbers" ... "Tr: 12 numbers" (or bare lines P0, P1, ...)
     root/sequences/NN/times.txt             one time stamp [s] per frame
     root/poses/NN.txt                       3x4 row-major T_world_cam0 per frame (or sequences/NN/poses.txt)
+    root/sequences/NN/point_times/000000.npy   optional: one time per point [s from the sweep start]
+
+Per-point times (KITTI proper has none) are looked for in the first folder of :data:`POINT_TIME_FOLDERS`
+that exists beside ``velodyne/`` (``point_times/`` as lidarkit's simulator writes it, then the names other
+tools use); ``point_times_dir`` says which one was found (None: no per-point times).
 
 Frame numbers come from the file names, so a folder holding only some scans (``000094.bin``,
 ``000095.bin``) reads poses row 94 and 95. Ground truth is given in the camera frame as stored
@@ -33,6 +38,14 @@ from lidarkit.textfile import is_number, read_lines, read_numeric_table
 from lidarkit.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
+
+#: Folders beside ``velodyne/`` searched, in this order, for per-point times ``{frame:06d}.npy`` (1-D, one time per
+#: point of the scan, seconds from the sweep start); docs/datasets.md lists the same names (a test checks it).
+POINT_TIME_FOLDERS = ("point_times", "timestamps", "times", "point_timestamps")
+#: KITTI's HDL-64 vertical-angle correction, as kiss-icp's KITTI loader applies it (``_correct_kitti_scan``)
+KITTI_VERTICAL_CORRECTION_DEG = 0.205
+#: methods whose reference pipeline reads KITTI with the correction (``vertical_correction="auto"`` turns it on)
+CORRECTED_BY_DEFAULT = ("kiss",)
 
 CALIB_KEYS_IN_ORDER = ("P0", "P1", "P2", "P3", "Tr")  # meaning of bare (prefix-less) calib lines
 _TR_ALIASES = ("Tr", "Tr_velo_to_cam", "Tr_velo_cam")
@@ -128,6 +141,14 @@ class KittiOdometry:
     folder of extra frames used with this sequence's calib and poses), ``poses_file`` another pose
     file (e.g. ``poses_semantickitti.txt``), ``calib_file`` / ``times_file`` likewise;
     ``drop_nonfinite`` drops NaN/inf points with a warning instead of raising.
+
+    ``vertical_correction``: rotate every point about the axis perpendicular to its azimuth by
+    :data:`KITTI_VERTICAL_CORRECTION_DEG` (KITTI's HDL-64 calibration error, corrected exactly as kiss-icp's KITTI
+    loader does, through kiss-icp's own ``_correct_kitti_scan``). ``True`` / ``False`` force it; ``"auto"``
+    (default) applies it when an odometry run of a method in :data:`CORRECTED_BY_DEFAULT` (kiss) asks through
+    :meth:`configure_for_method`, so that "kiss through lidarkit" is kiss-icp's own experiment, and never to a
+    folder written by lidarkit's simulator (``sim.yaml``: no HDL-64 behind it). Read directly, "auto" reads the
+    points as stored. ``reader_options`` records what was applied.
     """
 
     def __init__(
@@ -142,7 +163,12 @@ class KittiOdometry:
         calib_file: str | os.PathLike | None = None,
         times_file: str | os.PathLike | None = None,
         ground_truth_frame: str = "auto",
+        vertical_correction: bool | str = "auto",
     ):
+        if vertical_correction not in (True, False, "auto"):
+            raise ConfigError(f"vertical_correction must be true, false or auto, got {vertical_correction!r}", source="vertical_correction")
+        self.vertical_correction = vertical_correction
+        self._correct = vertical_correction is True
         if ground_truth_frame not in ("auto", "lidar", "camera"):
             raise ConfigError(
                 f"unknown ground_truth_frame {ground_truth_frame!r}; known: auto, lidar, camera", source="ground_truth_frame"
@@ -154,7 +180,9 @@ class KittiOdometry:
             raise DataError("dataset folder not found" if not root.exists() else "not a folder", source=root)
         self.root = root
         self.sequence_dir, odometry_root = self._locate_sequence(root)
-        self.name = f"kitti_{self.sequence}"
+        # titled after the folder: kitti_NN for a numbered KITTI sequence, the folder's own name otherwise
+        folder = self.sequence_dir.name
+        self.name = f"kitti_{self.sequence}" if folder.isdigit() or folder == self.sequence else folder
 
         self.velodyne_dir = Path(velodyne_dir) if velodyne_dir is not None else self.sequence_dir / "velodyne"
         self.image_dir = Path(image_dir) if image_dir is not None else self.sequence_dir / "image_0"
@@ -178,10 +206,35 @@ class KittiOdometry:
         if times_file is not None and not self.times_path.is_file():
             raise DataError("times file not found", source=self.times_path)
         self.poses_path = self._locate_poses(poses_file, odometry_root)
+        self.point_times_dir = next(
+            (self.sequence_dir / d for d in POINT_TIME_FOLDERS if (self.sequence_dir / d).is_dir()), None
+        )
         self._check_counts()
         if ground_truth_frame == "auto":
             ground_truth_frame = "lidar" if self.scan_paths else "camera"
         self.ground_truth_frame = ground_truth_frame
+
+    # ---- options -----------------------------------------------------------------------------------
+    @property
+    def simulated(self) -> bool:
+        """True for a folder written by lidarkit's simulator (``sim.yaml`` beside ``velodyne/``)."""
+        return (self.sequence_dir / "sim.yaml").is_file()
+
+    def configure_for_method(self, method: str) -> None:
+        """Resolve ``vertical_correction="auto"`` for an odometry run of ``method`` (on for kiss on real KITTI)."""
+        if self.vertical_correction == "auto":
+            self._correct = method in CORRECTED_BY_DEFAULT and not self.simulated
+
+    @property
+    def reader_options(self) -> dict:
+        """What the reader did to the data, for the run config."""
+        return {
+            "kind": "kitti",
+            "path": str(self.sequence_dir),
+            "vertical_correction": self.vertical_correction,
+            "vertical_correction_applied": self._correct,
+            "vertical_correction_deg": KITTI_VERTICAL_CORRECTION_DEG if self._correct else 0.0,
+        }
 
     # ---- layout ------------------------------------------------------------------------------------
     def _locate_sequence(self, root: Path) -> tuple[Path, Path | None]:
@@ -318,7 +371,22 @@ class KittiOdometry:
         if frame != "lidar":
             raise ConfigError(f"unknown pose frame {frame!r}; known: lidar, camera", source="frame")
         Tr = self.T_cam0_velo
-        return gt.transformed(T_left=se3_inverse(Tr), T_right=Tr).with_name(f"{self.name}_gt_lidar")
+        gt = gt.transformed(T_left=se3_inverse(Tr), T_right=Tr).with_name(f"{self.name}_gt_lidar")
+        instant = self._simulated_instant
+        return gt if instant is None else Trajectory(gt.poses_se3, gt.timestamps_s, gt.name, meta={**gt.meta, "pose_instant": instant})
+
+    @cached_property
+    def _simulated_instant(self) -> str | None:
+        """The sweep instant of poses.txt in a folder written by lidarkit's simulator (sim.yaml), else None (unknown)."""
+        if not self.simulated or self.poses_path != self.sequence_dir / "poses.txt":
+            return None
+        import yaml
+
+        try:
+            instant = yaml.safe_load((self.sequence_dir / "sim.yaml").read_text()).get("pose_instant")
+        except (OSError, yaml.YAMLError, AttributeError):
+            return None
+        return instant if instant in ("start", "mid", "end") else None
 
     def relative_pose(self, frame_a: int, frame_b: int, *, frame: str = "lidar") -> np.ndarray:
         """(4, 4) ground-truth motion ``T_a_b`` from KITTI frame ``frame_b`` to ``frame_a`` (e.g. 94 -> 95).
@@ -349,9 +417,10 @@ class KittiOdometry:
     def read_scan(self, index: int) -> Scan:
         """The ``index``-th scan (position in ``scan_paths``) with its KITTI frame number and time stamp.
 
-        When the sequence folder holds ``point_times/{frame:06d}.npy`` (as written by
-        :func:`lidarkit.sim.lidar.export_kitti`: one time per point, seconds from the sweep start) it becomes
-        ``Scan.point_times_s`` (float64); a length that does not match the scan is a DataError.
+        When ``point_times_dir`` (the first of :data:`POINT_TIME_FOLDERS` beside ``velodyne/``, e.g. ``point_times/``
+        as written by :func:`lidarkit.sim.lidar.export_kitti`) holds ``{frame:06d}.npy`` (one time per point,
+        seconds from the sweep start) it becomes ``Scan.point_times_s`` (float64); a length that does not match
+        the scan is a DataError; a frame without its file has no per-point times.
         """
         if not self.scan_paths:
             raise DataError("sequence has no scans", source=self.velodyne_dir)
@@ -360,7 +429,11 @@ class KittiOdometry:
         frame = int(self.scan_frames[index])
         ts = None if self._times_all is None else float(self._times_all[frame])
         scan = read_kitti_bin(self.scan_paths[index], frame=frame, timestamp_s=ts, drop_nonfinite=self.drop_nonfinite)
-        times_path = self.sequence_dir / "point_times" / f"{frame:06d}.npy"
+        if self._correct:
+            scan = dataclasses.replace(scan, points_xyz=correct_vertical_angle(scan.points_xyz))
+        if self.point_times_dir is None:
+            return scan
+        times_path = self.point_times_dir / f"{frame:06d}.npy"
         if not times_path.is_file():
             return scan
         return dataclasses.replace(scan, point_times_s=self._read_point_times(times_path, self.scan_paths[index], scan, frame))
@@ -402,6 +475,14 @@ class KittiOdometry:
     def as_image_sequence(self) -> KittiImages:
         """The images of this sequence as an ``ImageSequence`` (ground truth in the camera frame)."""
         return KittiImages(self)
+
+
+def correct_vertical_angle(points_xyz: np.ndarray) -> np.ndarray:
+    """KITTI's vertical-angle correction (:data:`KITTI_VERTICAL_CORRECTION_DEG`) through kiss-icp's own routine."""
+    from kiss_icp.pybind import kiss_icp_pybind
+
+    points = np.ascontiguousarray(points_xyz, dtype=np.float64)
+    return np.asarray(kiss_icp_pybind._correct_kitti_scan(kiss_icp_pybind._Vector3dVector(points)))
 
 
 class KittiImages:
@@ -455,4 +536,7 @@ def read_gray_image(path: str | os.PathLike, *, frame: int | None = None) -> np.
     return image
 
 
-__all__ = ["KittiImages", "KittiOdometry", "indexed_files", "read_gray_image", "read_kitti_bin", "read_kitti_calib"]
+__all__ = [
+    "KITTI_VERTICAL_CORRECTION_DEG", "POINT_TIME_FOLDERS", "KittiImages", "KittiOdometry", "correct_vertical_angle", "indexed_files",
+    "read_gray_image", "read_kitti_bin", "read_kitti_calib",
+]

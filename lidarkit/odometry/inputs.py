@@ -21,7 +21,8 @@ def open_sequence(spec: str | os.PathLike | ScanSequence) -> ScanSequence:
     Specs: ``sim:SCENE?key=value&...`` (the simulator, see :func:`lidarkit.sim.lidar.open_sim`);
     ``KIND:PATH[?key=value&...]`` with KIND a :func:`lidarkit.io.available_datasets` reader
     (e.g. ``kitti:/data/kitti?sequence=05``); a plain folder path: a KITTI sequence / odometry root when it
-    holds ``velodyne/`` or ``sequences/``, otherwise a folder of scan files.
+    holds ``velodyne/`` or ``sequences/``, a ROS bag / MCAP / Ouster pcap by :func:`lidarkit.io.detect_kind`,
+    otherwise a folder of scan files.
     """
     if not isinstance(spec, (str, os.PathLike)):
         if isinstance(spec, ScanSequence):
@@ -42,10 +43,8 @@ def open_sequence(spec: str | os.PathLike | ScanSequence) -> ScanSequence:
         return lio.open_dataset(kind, path, **parse_kv(query, option=f"{kind} dataset option"))
     path = Path(text)
     if not path.exists():
-        raise DataError("dataset not found (a folder, KIND:PATH or sim:SCENE?...)", source=text)
-    if (path / "velodyne").is_dir() or (path / "sequences").is_dir():
-        return lio.open_dataset("kitti", path)
-    return lio.open_dataset("folder", path)
+        raise DataError("dataset not found (a folder, a .bag/.mcap/.pcap file, KIND:PATH or sim:SCENE?...)", source=text)
+    return lio.open_dataset(lio.detect_kind(path) or "folder", path)
 
 
 def parse_frames(frames: FrameSelection, n_frames: int) -> np.ndarray:

@@ -6,15 +6,19 @@ from typing import Any
 
 import numpy as np
 
+from lidarkit.errors import EvaluationError
 from lidarkit.geometry import pose_error
 from lidarkit.odometry.result import OdometryResult
+from lidarkit.odometry.settings import METRIC_ALIGNMENT
 from lidarkit.trajectory import Trajectory
 
 
 def odometry_metrics(result: OdometryResult) -> dict[str, Any]:
-    """Timing summary always; APE / RPE / final pose error against ground truth when there is one, and the
-    KITTI drift when the path is long enough for at least one devkit segment (100 m)."""
+    """Timing summary, the independent per-frame check and what was really applied, always; APE (unaligned and
+    SE(3)-aligned) / RPE / final pose error against ground truth when there is one, and the KITTI drift when the
+    path is long enough for at least one devkit segment (100 m). Every score names its alignment (``alignment``)."""
     stats = result.stats
+    run = result.config.get("run", {})
     out: dict[str, Any] = {
         "method": result.method,
         "n_frames": int(len(result.frames)),
@@ -26,7 +30,12 @@ def odometry_metrics(result: OdometryResult) -> dict[str, Any]:
         "n_not_converged": result.n_not_converged if result.convergence_measured else None,
         "n_constant_velocity_fallback": result.n_fallback,
         "n_degenerate": int(stats.degenerate.sum()) if result.convergence_measured else None,
+        "n_ground_removal_flagged": sum("too little left after ground removal" in r for r in stats.reason),
         "estimated_length_m": result.trajectory.length_m,
+        "n_bad_frames": result.n_bad_frames if stats.check_failed is not None else None,
+        "frame_check": frame_check_summary(result),
+        "effective": run.get("effective"),
+        "warnings": list(run.get("warnings") or []),
     }
     ref = result.ground_truth
     if ref is None:
@@ -37,17 +46,51 @@ def odometry_metrics(result: OdometryResult) -> dict[str, Any]:
     trans_m, rot_deg = pose_error(est.poses_se3[-1], ref.poses_se3[-1])
     out["ground_truth"] = ref.name
     out["ground_truth_length_m"] = ref.length_m
-    out["final_error"] = {"translation_m": float(trans_m), "rotation_deg": float(rot_deg)}
+    out["final_error"] = {"translation_m": float(trans_m), "rotation_deg": float(rot_deg), "alignment": METRIC_ALIGNMENT["final_error"]}
     if len(ref) >= 2:
         out["ape_translation_m"] = leval.ape(ref, est, align="none", relation="translation").to_dict(include_errors=False)
+        if len(ref) >= 3:  # a rigid fit needs three poses, not all on one line
+            try:
+                out["ape_translation_se3_m"] = leval.ape(ref, est, align="se3", relation="translation").to_dict(include_errors=False)
+            except EvaluationError as err:
+                out["ape_translation_se3_note"] = f"no SE(3)-aligned APE: {err.reason}"
         out["rpe_translation_m"] = leval.rpe(ref, est, delta=1, delta_unit="frames", relation="translation").to_dict(include_errors=False)
         out["rpe_rotation_deg"] = leval.rpe(ref, est, delta=1, delta_unit="frames", relation="rotation_angle_deg").to_dict(include_errors=False)
+        for key in ("ape_translation_m", "ape_translation_se3_m", "rpe_translation_m", "rpe_rotation_deg"):
+            if key in out:
+                out[key]["alignment"] = METRIC_ALIGNMENT[key]
     if leval.drift_segments_possible(ref):
         out["kitti_drift"] = leval.kitti_drift(ref, est).to_dict()
+        out["kitti_drift"]["alignment"] = METRIC_ALIGNMENT["kitti_drift"]
     else:
         out["kitti_drift"] = None
         out["kitti_drift_note"] = f"path {ref.length_m:.1f} m is shorter than the shortest devkit segment (100 m)"
     return out
+
+
+def frame_check_summary(result: OdometryResult) -> dict[str, Any] | None:
+    """Counts of the independent per-frame check: bad frames (and why), how many the variant called converged."""
+    stats = result.stats
+    if stats.check_failed is None:
+        return None
+    failed = stats.check_failed
+    by_motion = np.array(["motion" in w for w in stats.check_why], dtype=bool) if stats.check_why else np.zeros_like(failed)
+    by_fitness = np.array(["fitness" in w for w in stats.check_why], dtype=bool) if stats.check_why else np.zeros_like(failed)
+    verdict = result.convergence_measured
+    converged_but_bad = int((failed & stats.measured & stats.converged).sum()) if verdict else None
+    return {
+        "n_bad_frames": int(failed.sum()),
+        "n_bad_motion": int(by_motion.sum()),
+        "n_bad_fitness": int(by_fitness.sum()),
+        "n_motion_checked": int(np.isfinite(stats.motion_dev_m).sum()),
+        "n_fitness_checked": int(np.isfinite(stats.fitness).sum()),
+        "n_said_converged_but_bad": converged_but_bad,
+        "variant_verdict": "per-frame converged flag" if verdict else "none (stateful variant: no per-frame verdict)",
+        "bad_frames": [int(f) for f in stats.frame[failed][:100]],
+        "fitness_median": float(np.nanmedian(stats.fitness)) if np.isfinite(stats.fitness).any() else None,
+        "check_time_s_mean": float(stats.check_s.mean()) if stats.check_s is not None and len(stats.check_s) else None,
+        "thresholds": result.config.get("run", {}).get("frame_check"),
+    }
 
 
 def paired(ref: Trajectory, est: Trajectory) -> tuple[Trajectory, Trajectory]:

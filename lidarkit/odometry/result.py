@@ -24,6 +24,12 @@ class FrameStats:
     frame of a stateful variant such as kiss, which reports none): there ``converged`` is True only as a
     placeholder, iterations -1, rmse NaN, and the CSV / CLI show "n/a"; ``fallback``: the registration was
     rejected (not converged) and the frame's pose uses the previous relative motion (constant velocity).
+
+    The independent check (:mod:`lidarkit.odometry.frame_check`, every variant): ``motion_dev_m`` /
+    ``rotation_dev_deg`` (deviation from the constant-velocity prediction, NaN for frames 0-1), ``fitness``
+    (above-ground fitness against the previous scan, NaN when not checked), ``check_failed`` and ``check_why``
+    (``"motion"``, ``"fitness"``, ``"motion+fitness"`` or ``""``); ``has_point_times``: the scan came with
+    per-point times; ``check_s``: time spent on the check.
     """
 
     frame: np.ndarray
@@ -38,23 +44,44 @@ class FrameStats:
     reason: tuple[str, ...]
     measured: np.ndarray
     fallback: np.ndarray
+    has_point_times: np.ndarray | None = None
+    motion_dev_m: np.ndarray | None = None
+    rotation_dev_deg: np.ndarray | None = None
+    fitness: np.ndarray | None = None
+    check_failed: np.ndarray | None = None
+    check_why: tuple[str, ...] = ()
+    check_s: np.ndarray | None = None
 
     def to_csv(self) -> str:
         buf = io.StringIO()
         writer = csv.writer(buf, lineterminator="\n")
         writer.writerow([
             "frame", "read_s", "register_s", "n_points", "converged", "iterations", "rmse_m", "n_correspondences", "degenerate",
-            "constant_velocity_fallback", "reason",
+            "constant_velocity_fallback", "reason", "point_times", "motion_dev_m", "rotation_dev_deg", "fitness",
+            "check_failed", "check_why",
         ])
-        for k in range(len(self.frame)):
+        n = len(self.frame)
+        nan = np.full(n, np.nan)
+        has_times = self.has_point_times if self.has_point_times is not None else np.zeros(n, dtype=bool)
+        dev_t = self.motion_dev_m if self.motion_dev_m is not None else nan
+        dev_r = self.rotation_dev_deg if self.rotation_dev_deg is not None else nan
+        fitness = self.fitness if self.fitness is not None else nan
+        failed = self.check_failed if self.check_failed is not None else np.zeros(n, dtype=bool)
+        why = self.check_why or ("",) * n
+        for k in range(n):
             measured = bool(self.measured[k])
             writer.writerow([
                 int(self.frame[k]), f"{self.read_s[k]:.6f}", f"{self.register_s[k]:.6f}", int(self.n_points[k]),
                 int(self.converged[k]) if measured else "n/a", int(self.iterations[k]) if measured else "n/a",
                 f"{self.rmse_m[k]:.6g}" if measured else "n/a", int(self.n_correspondences[k]) if measured else "n/a",
                 int(self.degenerate[k]) if measured else "n/a", int(self.fallback[k]), self.reason[k],
+                int(has_times[k]), _opt(dev_t[k], ".4f"), _opt(dev_r[k], ".4f"), _opt(fitness[k], ".3f"), int(failed[k]), why[k],
             ])
         return buf.getvalue()
+
+
+def _opt(value: float, spec: str) -> str:
+    return "n/a" if not np.isfinite(value) else format(value, spec)
 
 
 @dataclass(frozen=True)
@@ -90,6 +117,11 @@ class OdometryResult:
     def n_fallback(self) -> int:
         """Frames whose pose came from the constant-velocity motion because registration was rejected."""
         return int(self.stats.fallback.sum())
+
+    @property
+    def n_bad_frames(self) -> int:
+        """Frames failing the independent per-frame check (every variant, stateful ones included)."""
+        return 0 if self.stats.check_failed is None else int(self.stats.check_failed.sum())
 
     @property
     def convergence_measured(self) -> bool:

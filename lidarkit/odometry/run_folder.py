@@ -17,13 +17,17 @@ from lidarkit.odometry.result import OdometryResult
 
 def write_run(result: OdometryResult, out_dir: str | os.PathLike) -> Path:
     """Write the run folder: poses_kitti.txt, poses_tum.txt, config.yaml, metrics.json, timing.csv, and with
-    ground truth ground_truth_kitti.txt, trajectory.png and ape.png; every file atomically."""
+    ground truth ground_truth_kitti.txt, trajectory.png and ape.png; the folder all-or-nothing (``atomic.run_folder``)."""
+    with atomic.run_folder(out_dir) as tmp:
+        _write_files(result, tmp)
+    return Path(out_dir)
+
+
+def _write_files(result: OdometryResult, out: Path) -> None:
     import json
 
     import yaml
 
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     traj = result.trajectory
     traj.to_kitti(out / "poses_kitti.txt")
     tum = traj if traj.timestamps_s is not None else traj.with_timestamps(np.arange(len(traj), dtype=np.float64))
@@ -40,7 +44,6 @@ def write_run(result: OdometryResult, out_dir: str | os.PathLike) -> Path:
     atomic.write_text(out / "metrics.json", json.dumps(result.metrics, indent=2, default=_json_default) + "\n")
     atomic.write_text(out / "timing.csv", result.stats.to_csv())
     _write_plots(result, out)
-    return out
 
 
 def _json_default(obj: Any) -> Any:

@@ -13,10 +13,14 @@ import numpy as np
 from lidarkit.errors import ConfigError, DataError, EvaluationError, LidarKitError, RegistrationError
 from lidarkit.geometry import orthonormalize_se3
 from lidarkit.io.base import Scan, ScanSequence
+from lidarkit.odometry.frame_check import FrameChecker, FrameCheckConfig
 from lidarkit.odometry.inputs import FrameSelection, frames_repr, open_sequence, parse_frames
+from lidarkit.odometry.instants import estimate_instant, like_with_like
 from lidarkit.odometry.metrics import odometry_metrics
+from lidarkit.odometry.prefetch import DEFAULT_DEPTH, prefetched
 from lidarkit.odometry.result import FrameStats, OdometryResult
 from lidarkit.odometry.run_folder import write_run
+from lidarkit.odometry.settings import deskew_requested, effective_settings, require_point_times
 from lidarkit.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
@@ -85,6 +89,10 @@ def run(
     progress: bool = False,
     ground_truth: Trajectory | None = None,
     strict: bool = False,
+    name: str | None = None,
+    frame_check: FrameCheckConfig | None = None,
+    prefetch: int = DEFAULT_DEPTH,
+    init: str = "constant_velocity",
 ) -> OdometryResult:
     """Odometry of ``method`` (a registered name or a configured variant) over ``dataset``.
 
@@ -96,11 +104,28 @@ def run(
     constant-velocity motion (previous relative motion) for the frame's pose and the next guess; the
     frames are counted in ``metrics["n_not_converged"]`` / ``["n_constant_velocity_fallback"]``. With
     ``strict=True`` such a frame raises :class:`RegistrationError` naming it instead.
+
+    What was really applied is recorded in ``config["run"]["effective"]`` and ``metrics["effective"]``
+    (:func:`lidarkit.odometry.settings.effective_settings`): deskew on/off and why, the instants compared,
+    the reader's settings. A deskew the method requests but cannot apply (no per-point times) is a warning
+    in ``metrics["warnings"]``, or with ``strict=True`` a :class:`DataError` naming the first such frame.
+    Every frame also goes through the independent check of :mod:`lidarkit.odometry.frame_check`
+    (``frame_check`` sets its thresholds). ``name`` titles the run (default: the dataset's name, e.g. its folder). ``prefetch``: scans read
+    ahead in a background thread (0: read inline). Ground truth whose instant of the sweep differs from the
+    estimate's is re-timed with a note or refused (:mod:`lidarkit.odometry.instants`).
+    ``init``: the initial guess of each frame, ``"constant_velocity"`` (the previous relative motion; stateful
+    variants: their own model) or ``"odometry"`` (the relative motion of the dataset's own ``odometry`` trajectory,
+    e.g. a CARMEN log's wheel odometry; for a stateless variant it also replaces a non-converged registration; a
+    stateful one gets it as ``register_frame(..., motion_guess=...)`` if it ``accepts_motion_guess``).
     """
     sequence = open_sequence(dataset)
     registration = _resolve_method(method, params)
-    name = getattr(registration, "name", type(registration).__name__) or type(registration).__name__
+    method_name = getattr(registration, "name", type(registration).__name__) or type(registration).__name__
     dataset_name = str(getattr(sequence, "name", "dataset"))
+    title = name or dataset_name
+    name = method_name
+    if callable(getattr(sequence, "configure_for_method", None)):
+        sequence.configure_for_method(method_name)  # e.g. KITTI's vertical-angle correction for kiss (recorded below)
     n_total = len(sequence)
     if n_total == 0:
         raise DataError("the dataset has no scans", source=dataset_name)
@@ -108,6 +133,7 @@ def run(
     if len(indices) == 0:
         raise DataError(f"the frame selection {frames!r} selects no scan of {n_total}", source=dataset_name)
     stateful = bool(getattr(registration, "stateful", False))
+    odometry_poses = _odometry_guess(sequence, init, registration, n_total, dataset_name)
     n = len(indices)
     poses = np.empty((n, 4, 4))
     read_s = np.zeros(n)
@@ -121,40 +147,60 @@ def run(
     n_corr = np.full(n, -1, dtype=np.int64)
     degenerate = np.zeros(n, dtype=bool)
     reasons = [""] * n
+    checker = FrameChecker(n, frame_check)
+    need_times = strict and stateful and bool(deskew_requested(registration))
+    if strict and not stateful and deskew_requested(registration):
+        raise ConfigError(f"deskew requested, but {name} runs scan-to-scan through align(), which takes no per-point times", source=name)
 
-    bar = _progress_bar(n, f"{name} on {dataset_name}") if progress else None
+    bar = _progress_bar(n, f"{name} on {title}") if progress else None
     clock = time.perf_counter
     loop_start = clock()
+    first_scan = None
+    # scans are read in a background thread, at most `prefetch` ahead (0: inline); only the previous scan is kept
+    stream = prefetched(lambda i: _read_nonempty_scan(sequence, i), indices, prefetch)
     try:
         if stateful:
             registration.reset()
-            for k, idx in enumerate(indices):
-                t0 = clock()
+            for k, (idx, scan, read_time, read_error) in enumerate(stream):
+                read_s[k] = read_time
                 try:
-                    scan = _read_nonempty_scan(sequence, int(idx))
+                    if read_error is not None:
+                        raise read_error
+                    first_scan = scan if k == 0 else first_scan
                     points = scan.points_xyz
+                    if need_times:
+                        require_point_times(scan, sequence, dataset_name, int(idx))
                     t1 = clock()
-                    poses[k] = registration.register_frame(points, scan.point_times_s)
+                    if odometry_poses is not None and k > 0:
+                        guess = orthonormalize_se3(np.linalg.solve(odometry_poses[indices[k - 1]], odometry_poses[idx]))
+                        poses[k] = registration.register_frame(points, scan.point_times_s, motion_guess=guess)
+                    else:
+                        poses[k] = registration.register_frame(points, scan.point_times_s)
                 except Exception as err:
                     if not _is_frame_error(err):
                         raise
                     raise _frame_error(err, dataset_name, int(idx)) from err
                 t2 = clock()
-                read_s[k], register_s[k], n_points[k] = t1 - t0, t2 - t1, len(points)
+                checker.add(k, int(idx), points, scan.point_times_s, poses)
+                register_s[k], n_points[k] = t2 - t1, len(points)
                 if bar is not None:
                     bar[0].advance(bar[1])
         else:
             motion = np.eye(4)
             previous = None
-            for k, idx in enumerate(indices):
-                t0 = clock()
+            for k, (idx, scan, read_time, read_error) in enumerate(stream):
+                read_s[k] = read_time
                 try:
-                    scan = _read_nonempty_scan(sequence, int(idx))
+                    if read_error is not None:
+                        raise read_error
+                    first_scan = scan if k == 0 else first_scan
                     points = scan.points_xyz
                     t1 = clock()
                     if previous is None:
                         poses[k] = np.eye(4)
                     else:
+                        if odometry_poses is not None:
+                            motion = orthonormalize_se3(np.linalg.solve(odometry_poses[indices[k - 1]], odometry_poses[idx]))
                         result = registration.align(points, previous, init_T=motion)
                         measured[k] = True
                         converged[k] = bool(result.converged)
@@ -178,45 +224,69 @@ def run(
                         raise RegistrationError(f"registration did not converge ({why})", source=dataset_name, location=f"frame {int(idx)}")
                     fallback[k] = True
                     log.warning(
-                        "%s frame %d: %s did not converge (%s); using the constant-velocity motion instead",
-                        dataset_name, int(idx), name, why,
+                        "%s frame %d: %s did not converge (%s); using the %s motion instead",
+                        dataset_name, int(idx), name, why, "odometry" if odometry_poses is not None else "constant-velocity",
                     )
                 elif degenerate[k]:
                     log.warning("%s frame %d: %s flagged degenerate geometry (%s)", dataset_name, int(idx), name, reasons[k] or "degenerate")
                 t2 = clock()
+                checker.add(k, int(idx), points, scan.point_times_s, poses)
                 previous = points
-                read_s[k], register_s[k], n_points[k] = t1 - t0, t2 - t1, len(points)
+                register_s[k], n_points[k] = t2 - t1, len(points)
                 if bar is not None:
                     bar[0].advance(bar[1])
     finally:
+        stream.close()  # stops and joins the reading thread, also on error
         if bar is not None:
             bar[0].stop()
     total = clock() - loop_start
 
     timestamps = sequence.timestamps_s
     timestamps = None if timestamps is None else np.asarray(timestamps, dtype=np.float64)[indices]
-    trajectory = Trajectory(poses, timestamps, name=f"{name} on {dataset_name}", meta={"method": name, "dataset": dataset_name})
+    trajectory = Trajectory(poses, timestamps, name=f"{name} on {title}", meta={"method": name, "dataset": dataset_name})
     reference = _reference(sequence, ground_truth, indices, dataset_name)
+    instant_note = None
+    if reference is not None:  # score like with like: the estimate's and the ground truth's instant of the sweep
+        retimed, instant_note = like_with_like(reference, estimate_instant(registration, first_scan), sequence=sequence,
+                                               own_ground_truth=ground_truth is None, method=name)
+        if instant_note is not None:
+            reference = _reference(sequence, retimed, indices, dataset_name)
+    check = checker.finish(poses, timestamps)
+    why = tuple("+".join(w for w, bad in (("motion", m), ("fitness", f)) if bad) for m, f in zip(check.failed_motion, check.failed_fitness))
     stats = FrameStats(
-        indices.copy(), read_s, register_s, n_points, converged, iterations, rmse_m, n_corr, degenerate, tuple(reasons), measured, fallback
+        indices.copy(), read_s, register_s, n_points, converged, iterations, rmse_m, n_corr, degenerate, tuple(reasons), measured, fallback,
+        checker.has_point_times, check.motion_dev_m, check.rotation_dev_deg, check.fitness, check.failed, why, checker.check_s,
     )
+    effective, warnings = effective_settings(sequence, registration, name, stateful, checker.has_point_times, reference)
+    for message in warnings:
+        log.warning("%s: %s", title, message)
     config = {
         "method": name,
         "method_config": config_dict(getattr(registration, "config", None)),
         "run": {
+            "name": title,
             "dataset": dataset_name,
             "dataset_config": config_dict(getattr(sequence, "config", None)) if hasattr(getattr(sequence, "config", None), "model_dump") else None,
+            "dataset_options": _plain(getattr(sequence, "reader_options", None) or {}),
             "frames": frames_repr(frames, indices),
             "n_frames": n,
             "stateful": stateful,
             "strict": strict,
-            "initial_guess": "register_frame (own map and motion model)" if stateful else "constant velocity (previous relative motion)",
+            "initial_guess": "dataset odometry (relative motion)" if odometry_poses is not None else (
+                "register_frame (own map and motion model)" if stateful else "constant velocity (previous relative motion)"
+            ),
             "ground_truth": None if reference is None else reference.name,
             "ground_truth_meta": None if reference is None else _plain(reference.meta),
+            "effective": effective,
+            "warnings": warnings,
+            "frame_check": check.config.describe(),
+            "ground_truth_instant_note": instant_note,
         },
     }
     result = OdometryResult(trajectory, name, config, indices.copy(), stats, total, reference)
     metrics = odometry_metrics(result)
+    if instant_note is not None:
+        metrics["ground_truth_instant_note"] = instant_note
     result = OdometryResult(trajectory, name, config, indices.copy(), stats, total, reference, metrics)
     if out_dir is not None:
         write_run(result, out_dir)
@@ -224,11 +294,31 @@ def run(
     return result
 
 
+#: Initial guesses of a run's registrations (``run(init=...)``).
+INIT_GUESSES = ("constant_velocity", "odometry")
+
+
+def _odometry_guess(sequence: ScanSequence, init: str, registration: Any, n_total: int, dataset_name: str) -> np.ndarray | None:
+    """``(n_total, 4, 4)`` odometry poses for ``init="odometry"``, None for constant velocity."""
+    if init not in INIT_GUESSES:
+        raise ConfigError(f"unknown initial guess {init!r}; known: {', '.join(INIT_GUESSES)}", source="init")
+    if init == "constant_velocity":
+        return None
+    if getattr(registration, "stateful", False) and not getattr(registration, "accepts_motion_guess", False):
+        raise ConfigError("init='odometry': this stateful variant keeps its own motion model (no motion_guess)", source="init")
+    odometry = getattr(sequence, "odometry", None)
+    if odometry is None:
+        raise ConfigError(f"init='odometry' needs a dataset with its own odometry (e.g. a CARMEN log); {dataset_name} has none", source="init")
+    if len(odometry) != n_total:
+        raise DataError(f"odometry has {len(odometry)} poses for {n_total} scans", source=dataset_name)
+    return np.asarray(odometry.poses_se3, dtype=np.float64)
+
+
 def _progress_bar(total: int, label: str):
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
-    bar = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(), console=Console(stderr=True), transient=True)
+    bar = Progress(TextColumn("{task.description}", markup=False), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(), console=Console(stderr=True), transient=True)
     bar.start()
     return bar, bar.add_task(label, total=total)
 

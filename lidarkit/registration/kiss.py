@@ -90,10 +90,17 @@ class KissRegistration(Registration):
 
     Config = KissConfig
     stateful = True
+    #: ``register_frame`` takes ``motion_guess`` (e.g. wheel odometry) instead of kiss-icp's constant velocity
+    accepts_motion_guess = True
 
     def __init__(self, config: KissConfig | None = None, **params):
         super().__init__(config, **params)
         self._kiss = None
+
+    @property
+    def deskew_instant(self) -> str | None:
+        """The instant of the sweep deskewed poses refer to: kiss-icp 1.x deskews to the latest point (the END)."""
+        return "end" if self.config.deskew else None
 
     @property
     def kiss_config(self):
@@ -115,8 +122,14 @@ class KissRegistration(Registration):
         if T_world_lidar_initial is not None:
             self._kiss.last_pose = kiss_safe_pose(T_world_lidar_initial, "T_world_lidar_initial")
 
-    def register_frame(self, points_xyz: np.ndarray, point_times_s: np.ndarray | None = None) -> np.ndarray:
-        """Register one sweep; returns ``T_world_lidar`` (4x4) of this frame (at the end of the sweep when deskewed)."""
+    def register_frame(
+        self, points_xyz: np.ndarray, point_times_s: np.ndarray | None = None, motion_guess: np.ndarray | None = None
+    ) -> np.ndarray:
+        """Register one sweep; returns ``T_world_lidar`` (4x4) of this frame (at the end of the sweep when deskewed).
+
+        ``motion_guess``: the previous-to-this-frame motion to start from (and deskew with), e.g. from wheel
+        odometry, in place of kiss-icp's constant-velocity prediction (``last_delta``).
+        """
         kiss = self.pipeline
         frame = np.ascontiguousarray(as_points(points_xyz, "frame", min_points=1))
         if point_times_s is None:
@@ -126,7 +139,7 @@ class KissRegistration(Registration):
             if len(times) != len(frame) or not np.isfinite(times).all():
                 raise DataError(f"need {len(frame)} finite per-point times, got {len(times)}", source="point_times_s")
         kiss.last_pose = kiss_safe_pose(kiss.last_pose, "last_pose")
-        kiss.last_delta = kiss_safe_pose(kiss.last_delta, "last_delta")
+        kiss.last_delta = kiss_safe_pose(kiss.last_delta if motion_guess is None else motion_guess, "last_delta")
         kiss.register_frame(frame, times)
         return np.array(kiss.last_pose, dtype=np.float64)
 

@@ -10,8 +10,10 @@ from __future__ import annotations
 import numpy as np
 from pydantic import Field
 
+from lidarkit.geometry import transform_points
 from lidarkit.registration.assessment import assess_alignment
 from lidarkit.registration.base import Registration, RegistrationConfig, RegistrationResult
+from lidarkit.registration.planar import refuse_2d
 from lidarkit.registration.registry import register_icp
 
 
@@ -33,26 +35,37 @@ class Open3DSurfaceConfig(Open3DPointToPointConfig):
 class _Open3DBase(Registration):
     _kind = "point_to_point"
 
+    _last: tuple | None = None  # (fingerprint, Open3D cloud) of the last prepared cloud
+
     def _clouds(self, source_xyz: np.ndarray, target_xyz: np.ndarray):
+        """Open3D clouds (downsampled, with normals for the surface variants). In a scan-to-scan chain the source
+        of one frame is the target of the next: that cloud is prepared once, as an Open3D odometry loop would."""
         import open3d as o3d
 
         c = self.config
         clouds = []
-        for pts in (source_xyz, target_xyz):
+        for pts in (target_xyz, source_xyz):
+            key = (id(pts), pts.shape, pts.ctypes.data, pts[:: max(1, len(pts) // 32)].tobytes())
+            if self._last is not None and self._last[0] == key:
+                clouds.append(self._last[1])
+                continue
             pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
             if c.voxel_size_m is not None:
                 pc = pc.voxel_down_sample(c.voxel_size_m)
             if self._kind != "point_to_point":
                 # GICP builds its plane-like covariances from these normals (Open3D's own rule)
                 pc.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=c.normal_radius_m, max_nn=c.normal_max_nn))
+            self._last = (key, pc)
             clouds.append(pc)
-        return clouds
+        return clouds[1], clouds[0]
 
     def _align(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray) -> RegistrationResult:
         import open3d as o3d
 
         reg = o3d.pipelines.registration
         c = self.config
+        if self._kind != "point_to_point":
+            refuse_2d(self.name, source_xyz, target_xyz, "normals / covariances of a 2D scan's line-like neighbourhoods are undefined in 3D")
         src, dst = self._clouds(source_xyz, target_xyz)
         criteria = reg.ICPConvergenceCriteria(c.relative_fitness, c.relative_rmse, c.max_iterations)
         if self._kind == "gicp":
@@ -68,7 +81,16 @@ class _Open3DBase(Registration):
             out = reg.registration_icp(src, dst, c.max_correspondence_distance_m, init_T, estimation, criteria)
         T = np.array(out.transformation, dtype=np.float64)
         src_pts, dst_pts = np.asarray(src.points), np.asarray(dst.points)
-        assessment = assess_alignment(src_pts, dst_pts, T, c.max_correspondence_distance_m)
+        # Open3D's own final correspondences (nearest target point within the distance, at the returned pose): the
+        # assessment reuses them instead of indexing the target a second time
+        pairs = np.asarray(out.correspondence_set, dtype=np.int64).reshape(-1, 2)
+        dist2 = np.full(len(src_pts), np.inf)
+        index = np.zeros(len(src_pts), dtype=np.int64)
+        if len(pairs):
+            gap = transform_points(T, src_pts[pairs[:, 0]]) - dst_pts[pairs[:, 1]]
+            dist2[pairs[:, 0]] = np.einsum("ij,ij->i", gap, gap)
+            index[pairs[:, 0]] = pairs[:, 1]
+        assessment = assess_alignment(src_pts, dst_pts, T, c.max_correspondence_distance_m, dist2=dist2, index=index)
         no_pairs = float(out.fitness) <= 0
         return assessment.to_result(
             T,

@@ -13,9 +13,10 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
+from lidarkit.geometry import transform_points
 from lidarkit.registration.assessment import assess_alignment
 from lidarkit.registration.base import Registration, RegistrationConfig, RegistrationResult
-from lidarkit.registration.preprocess import voxel_downsample
+from lidarkit.registration.planar import refuse_2d
 from lidarkit.registration.registry import register_icp
 
 log = logging.getLogger(__name__)
@@ -44,23 +45,49 @@ if _small_gicp is not None:
 
         Config = SmallGICPConfig
 
+        def __init__(self, config: SmallGICPConfig | None = None, **params):
+            super().__init__(config, **params)
+            self._cache: tuple | None = None  # (fingerprint, PointCloud, KdTree) of the last preprocessed cloud
+
+        def _preprocess(self, points: np.ndarray):
+            """small_gicp's own downsampling + covariances + KdTree, reused when the same cloud comes back (in a
+            scan-to-scan chain the source of one frame is the target of the next: preprocessed once, as small_gicp's
+            own odometry loop does)."""
+            c = self.config
+            key = (id(points), points.shape, points.ctypes.data, points[:: max(1, len(points) // 32)].tobytes(), c.downsampling_resolution_m)
+            if self._cache is not None and self._cache[0] == key:
+                return self._cache[1], self._cache[2]
+            cloud, tree = _small_gicp.preprocess_points(np.asarray(points, dtype=np.float64), c.downsampling_resolution_m, num_threads=c.num_threads)
+            self._cache = (key, cloud, tree)
+            return cloud, tree
+
         def _align(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray) -> RegistrationResult:
             c = self.config
-            out = _small_gicp.align(
-                target_xyz,
-                source_xyz,
-                init_T,
-                registration_type=c.registration_type,
-                voxel_resolution=c.voxel_resolution_m,
-                downsampling_resolution=c.downsampling_resolution_m,
-                max_correspondence_distance=c.max_correspondence_distance_m,
-                num_threads=c.num_threads,
-                max_iterations=c.max_iterations,
-            )
-            T = np.array(out.T_target_source, dtype=np.float64)
-            src = voxel_downsample(source_xyz, c.downsampling_resolution_m)
-            dst = voxel_downsample(target_xyz, c.downsampling_resolution_m)
-            assessment = assess_alignment(src, dst, T, c.max_correspondence_distance_m)
+            if c.registration_type != "ICP":
+                refuse_2d(self.name, source_xyz, target_xyz, f"{c.registration_type} needs surface covariances / normals, undefined on a 2D scan")
+            if c.registration_type == "VGICP":
+                out = _small_gicp.align(
+                    target_xyz, source_xyz, init_T, registration_type="VGICP", voxel_resolution=c.voxel_resolution_m,
+                    downsampling_resolution=c.downsampling_resolution_m, max_correspondence_distance=c.max_correspondence_distance_m,
+                    num_threads=c.num_threads, max_iterations=c.max_iterations,
+                )
+                src = _small_gicp.voxelgrid_sampling(source_xyz, c.downsampling_resolution_m, num_threads=c.num_threads).points()[:, :3]
+                dst = _small_gicp.voxelgrid_sampling(target_xyz, c.downsampling_resolution_m, num_threads=c.num_threads).points()[:, :3]
+                T = np.array(out.T_target_source, dtype=np.float64)
+                assessment = assess_alignment(src, dst, T, c.max_correspondence_distance_m)
+            else:
+                # the same computation as small_gicp.align(points...) (identical poses), with the preprocessed clouds and
+                # the target's KdTree kept for the assessment instead of voxelizing and indexing both clouds again
+                target, target_tree = self._preprocess(target_xyz)
+                source, _ = self._preprocess(source_xyz)  # stays cached: the next frame's target
+                out = _small_gicp.align(
+                    target, source, target_tree, init_T, registration_type=c.registration_type,
+                    max_correspondence_distance=c.max_correspondence_distance_m, num_threads=c.num_threads, max_iterations=c.max_iterations,
+                )
+                T = np.array(out.T_target_source, dtype=np.float64)
+                src, dst = source.points()[:, :3], target.points()[:, :3]
+                index, dist2 = target_tree.batch_nearest_neighbor_search(transform_points(T, src), num_threads=c.num_threads)
+                assessment = assess_alignment(src, dst, T, c.max_correspondence_distance_m, dist2=np.asarray(dist2), index=np.asarray(index))
             native = np.linalg.eigvalsh(0.5 * (np.asarray(out.H) + np.asarray(out.H).T))
             return assessment.to_result(
                 T,

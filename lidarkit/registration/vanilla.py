@@ -16,6 +16,7 @@ from lidarkit.geometry import kabsch_umeyama, make_se3
 from lidarkit.registration.assessment import assess_alignment
 from lidarkit.registration.base import Degeneracy, Registration, RegistrationConfig, RegistrationResult
 from lidarkit.registration.neighbors import NearestNeighbors
+from lidarkit.registration.planar import planar_kabsch
 from lidarkit.registration.preprocess import voxel_downsample
 from lidarkit.registration.registry import register_icp
 
@@ -36,6 +37,9 @@ class VanillaConfig(RegistrationConfig):
     coarse_stride: int = Field(
         8, ge=1, description="first converge with every k-th source point, then refine with all (1: single stage)"
     )
+    planar: bool = Field(
+        False, description="solve x, y, yaw only (SE(2)); z, roll and pitch stay as in init_T (2D laser scans)"
+    )
 
 
 def point_to_point_icp(
@@ -49,11 +53,13 @@ def point_to_point_icp(
     max_correspondence_distance_m: float | None,
     min_correspondences: int,
     assess: bool = True,
+    planar: bool = False,
 ) -> RegistrationResult:
     """The ICP loop on prepared clouds with a prebuilt index over ``target_xyz``.
 
     ``assess=False`` skips the final fitness / degeneracy assessment (for an intermediate stage whose result
     only seeds the next one): fitness is then the loop's last inlier fraction and the degeneracy unknown.
+    ``planar=True`` updates x, y and yaw only (closed-form 2D fit, :func:`planar_kabsch`).
     """
     T = init_T.copy()
     history: list[float] = []
@@ -80,8 +86,11 @@ def point_to_point_icp(
         if iterations == max_iterations:
             break
         prev_mse = mse
-        step = kabsch_umeyama(moved[inlier], target_xyz[index[inlier]])
-        T = make_se3(step.rotation, step.translation) @ T
+        if planar:
+            T = make_se3(*planar_kabsch(moved[inlier], target_xyz[index[inlier]])) @ T
+        else:
+            step = kabsch_umeyama(moved[inlier], target_xyz[index[inlier]])
+            T = make_se3(step.rotation, step.translation) @ T
         iterations += 1
     if not assess:
         return RegistrationResult(
@@ -139,6 +148,7 @@ def staged_icp(
         epsilon_m2=config.epsilon_m2,
         max_correspondence_distance_m=config.max_correspondence_distance_m,
         min_correspondences=config.min_correspondences,
+        planar=config.planar,
     )
     stride = config.coarse_stride
     if stride <= 1 or len(source_xyz) < stride * 4 * config.min_correspondences:

@@ -92,12 +92,19 @@ def write_run(result: VOResult, out_dir: str | os.PathLike, *, ground_truth: Tra
     (summary + ``metrics``), ``trajectory.png`` (if ``plot``), ``features.gif`` (if ``gif_images`` and tracks).
     Without time stamps the TUM files count frames as seconds: logged once and noted in config and metrics.
     """
-    out = Path(out_dir)
+    final = Path(out_dir)
+    with atomic.run_folder(final) as tmp:
+        paths = _write_files(result, tmp, ground_truth=ground_truth, metrics=metrics, extra_config=extra_config,
+                             plot=plot, gif_images=gif_images)
+    return {name: final / path.relative_to(tmp) for name, path in paths.items()}
+
+
+def _write_files(result: VOResult, out: Path, *, ground_truth: Trajectory | None, metrics: dict[str, Any] | None,
+                 extra_config: dict[str, Any] | None, plot: bool, gif_images: Any) -> dict[str, Path]:
     notes = {}
     if result.trajectory.timestamps_s is None:
         log.warning(NO_TIMESTAMPS_NOTE)
         notes["timestamps"] = NO_TIMESTAMPS_NOTE
-    out.mkdir(parents=True, exist_ok=True)
     smoothed = result.smoothed()
     paths = {
         "poses_kitti": result.trajectory.to_kitti(out / "poses_kitti.txt"),

@@ -1,7 +1,9 @@
 """``odometry``: any registered ICP variant over a scan sequence through ``lidarkit.odometry.run``, scored vs ground truth.
 
 Options: ``frames`` — a frame selection as ``lidarkit.odometry.run`` takes it (``"0:50"``, or a list of indices).
-Metrics come from the odometry run's own scoring (APE / RPE / KITTI drift through ``lidarkit.eval``).
+Metrics come from the odometry run's own scoring (APE / RPE / KITTI drift through ``lidarkit.eval``); every
+label names its alignment (``info["metric_alignment"]`` too, for the report), and ``n_bad_frames`` counts the
+frames failing the independent per-frame check (:mod:`lidarkit.odometry.frame_check`).
 """
 
 from __future__ import annotations
@@ -17,6 +19,15 @@ from lidarkit.bench.tasks._datasets import check_reader_options, open_dataset_sp
 from lidarkit.errors import ConfigError
 
 MAX_SERIES_POINTS = 2000
+
+#: Alignment of each APE / RPE metric of this task (read by the report's labelling, see ``lidarkit.bench.report``).
+METRIC_ALIGNMENT_BY_NAME = {
+    "ape_se3_rmse_m": "SE(3)-aligned",
+    "ape_rmse_m": "unaligned, first pose anchored",
+    "rpe_trans_rmse_m": "1 frame, alignment-free",
+    "rpe_rot_rmse_deg": "1 frame, alignment-free",
+    "final_error_m": "unaligned",
+}
 
 
 class OdometryOptions(BaseModel):
@@ -53,12 +64,14 @@ class OdometryTask(Task):
     description = "sequence odometry with an ICP variant (APE, RPE, KITTI drift, frame rate)"
     dataset_kinds = ("kitti", "folder", "sim_lidar", "kitti_raw")
     metrics = (
-        Metric("ape_rmse_m", "APE RMSE [m]"),
-        Metric("rpe_trans_rmse_m", "RPE trans. [m/frame]"),
-        Metric("rpe_rot_rmse_deg", "RPE rot. [deg/frame]"),
+        Metric("ape_se3_rmse_m", "APE RMSE (SE(3)-aligned) [m]"),
+        Metric("ape_rmse_m", "APE RMSE (unaligned, first pose anchored) [m]"),
+        Metric("rpe_trans_rmse_m", "RPE trans. (1 frame, alignment-free) [m/frame]"),
+        Metric("rpe_rot_rmse_deg", "RPE rot. (1 frame, alignment-free) [deg/frame]"),
         Metric("drift_translation_pct", "KITTI drift [%]"),
         Metric("drift_rotation_deg_per_100m", "KITTI rot. [deg/100m]"),
-        Metric("final_error_m", "final error [m]"),
+        Metric("final_error_m", "final error (unaligned) [m]"),
+        Metric("n_bad_frames", "bad frames (independent check)"),
         Metric("hz", "frames/s", kind="speed", better="higher"),
     )
 
@@ -92,6 +105,7 @@ class OdometryTask(Task):
         result = run(sequence, job.method, params=dict(job.params), frames=options.frames)
         m = result.metrics
         metrics = {
+            "ape_se3_rmse_m": _get(m, "ape_translation_se3_m", "stats", "rmse"),
             "ape_rmse_m": _get(m, "ape_translation_m", "stats", "rmse"),
             "rpe_trans_rmse_m": _get(m, "rpe_translation_m", "stats", "rmse"),
             "rpe_rot_rmse_deg": _get(m, "rpe_rotation_deg", "stats", "rmse"),
@@ -101,10 +115,12 @@ class OdometryTask(Task):
             "hz": float(result.fps),
             "n_frames": float(len(result.frames)),
             "n_not_converged": float(result.n_not_converged),
+            "n_bad_frames": float(result.n_bad_frames),
         }
         metrics = {k: v for k, v in metrics.items() if v is not None}
         est = result.trajectory
         times = est.timestamps_s if est.timestamps_s is not None else np.arange(len(est)) * 0.1
         ref_xyz = None if result.ground_truth is None else result.ground_truth.positions_xyz
         series = trajectory_series(ref_xyz, est.positions_xyz, np.asarray(times, dtype=float))
-        return TaskOutput(metrics=metrics, series=series, info={"odometry_metrics": m, "config": result.config})
+        info = {"odometry_metrics": m, "config": result.config, "metric_alignment": METRIC_ALIGNMENT_BY_NAME}
+        return TaskOutput(metrics=metrics, series=series, info=info)

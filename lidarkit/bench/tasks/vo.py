@@ -116,4 +116,13 @@ class VisualOdometryTask(Task):
         else:
             info_align = None
         return TaskOutput(metrics=metrics, series=series,
-                          info={"summary": summary, "align": info_align, "config": config.model_dump(mode="json")})
+                          info={"summary": summary, "align": info_align, "config": config.model_dump(mode="json"),
+                                "metric_alignment": _alignment_labels(info_align)})
+
+
+def _alignment_labels(align: str | None) -> dict[str, str]:
+    """Alignment of the APE / RPE metrics for the report labels ("sim3-aligned", "unaligned")."""
+    if align is None:
+        return {}
+    text = "unaligned" if align == "none" else f"{align}-aligned"
+    return {"ape_rmse_m": text, "rpe_trans_rmse_m": text}

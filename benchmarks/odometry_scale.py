@@ -1,0 +1,230 @@
+"""KITTI-length odometry: frame rate and peak memory over a 4541-sweep simulated sequence read from disk.
+
+The benchmark writes the sequence itself (KITTI layout, lidarkit's simulator: street scene, 32 beams x 360
+columns, ~0.15 MB per sweep, under 1 GB in all; never committed) and runs each of these in its own process,
+one after the other, on the same files:
+
+* ``lidarkit:kiss``: ``lidarkit.odometry.run`` (reader thread + kiss through lidarkit);
+* ``kiss-icp``: kiss-icp's own ``OdometryPipeline`` over its ``generic`` loader on the same ``velodyne/*.bin``;
+* ``lidarkit:small_gicp``: ``lidarkit.odometry.run`` with small_gicp;
+* ``small_gicp``: small_gicp's own scan-to-scan loop (``preprocess_points`` once per sweep, ``align`` on the
+  previous sweep's cloud and KdTree, constant-velocity guess), as its odometry example does.
+
+The exported sweeps have no per-point times (``point_times=false``) because kiss-icp's generic loader reads
+none: both kiss runs then do exactly the same computation (their final poses are compared). Frame rate
+(frames / wall time including reading) and peak RSS are recorded when the run passes 500 and 2000 frames and
+at the end (4541, after the run's own end work: metrics, trajectory). Ratios are lidarkit / library in the
+same run. Acceptance (issue 10): peak RSS at 4541 within 1.2x of 500 (plus the trajectory's size), lidarkit
+kiss >= 0.95x kiss-icp's pipeline, lidarkit small_gicp >= 0.9x small_gicp's own loop.
+
+    nice -n 10 .venv/bin/python benchmarks/odometry_scale.py [--frames 4541] [--data /tmp/lidarkit_scale] [--keep-data]
+
+Writes ``benchmarks/results/odometry/odometry_scale.{md,json}``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import json
+import os
+import resource
+import shlex
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+RESULTS = REPO / "benchmarks" / "results" / "odometry"
+CHECKPOINTS = (500, 2000)
+RUNNERS = ("lidarkit:kiss", "kiss-icp", "lidarkit:small_gicp", "small_gicp")
+SIM = dict(scene="street", n_beams=32, n_azimuths=360, range_noise_std_m=0.02, seed=0, point_times=False)
+
+
+def peak_rss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # KiB on Linux
+
+
+class Checkpoints:
+    """Frame rate and peak RSS when the run has read frame 500, 2000, ... (reads are at most a few frames ahead)."""
+
+    def __init__(self, start: float):
+        self.start = start
+        self.rows: list[dict] = []
+
+    def seen(self, index: int) -> None:
+        if index + 1 in CHECKPOINTS:
+            wall = time.perf_counter() - self.start
+            self.rows.append({"frames": index + 1, "wall_s": wall, "fps": (index + 1) / wall, "peak_rss_mb": peak_rss_mb()})
+
+
+def child(runner: str, data: Path, n: int) -> dict:
+    """One run in this process; returns its checkpoints, end figures and final pose."""
+    rss_before = peak_rss_mb()
+    if runner.startswith("lidarkit:"):
+        from lidarkit.io.kitti import KittiOdometry
+        from lidarkit.odometry import run
+
+        class Counted(KittiOdometry):
+            def read_scan(self, index):
+                marks.seen(index)
+                return super().read_scan(index)
+
+        seq = Counted(data)
+        rss_before = peak_rss_mb()
+        marks = Checkpoints(time.perf_counter())
+        result = run(seq, runner.split(":", 1)[1], frames=f"0:{n}")
+        wall = time.perf_counter() - marks.start
+        final = result.trajectory.poses_se3[-1]
+        loop_fps = result.fps
+    elif runner == "kiss-icp":
+        from kiss_icp.datasets.generic import GenericDataset
+        from kiss_icp.pipeline import OdometryPipeline
+
+        class Counted(GenericDataset):
+            def __getitem__(self, idx):
+                marks.seen(idx)
+                return super().__getitem__(idx)
+
+        dataset = Counted(data / "velodyne")
+        pipeline = OdometryPipeline(dataset, n_scans=n)
+        rss_before = peak_rss_mb()
+        marks = Checkpoints(time.perf_counter())
+        pipeline._run_pipeline()  # the odometry loop (its run() adds evaluation and result files)
+        wall = time.perf_counter() - marks.start
+        final = pipeline.poses[-1]
+        loop_fps = n / wall
+    elif runner == "small_gicp":
+        import small_gicp
+
+        from lidarkit.registration.small_gicp_icp import SmallGICPConfig
+
+        c = SmallGICPConfig()
+        files = sorted((data / "velodyne").glob("*.bin"))[:n]
+        marks = Checkpoints(time.perf_counter())
+        pose, motion, previous = np.eye(4), np.eye(4), None
+        poses = np.empty((n, 4, 4))
+        for k, path in enumerate(files):
+            marks.seen(k)
+            points = np.fromfile(path, dtype=np.float32).reshape(-1, 4)[:, :3].astype(np.float64)
+            cloud, tree = small_gicp.preprocess_points(points, c.downsampling_resolution_m, num_threads=c.num_threads)
+            if previous is not None:
+                out = small_gicp.align(previous[0], cloud, previous[1], motion, registration_type=c.registration_type,
+                                       max_correspondence_distance=c.max_correspondence_distance_m, num_threads=c.num_threads,
+                                       max_iterations=c.max_iterations)
+                if out.converged:
+                    motion = np.asarray(out.T_target_source)
+                pose = pose @ motion
+            poses[k] = pose
+            previous = (cloud, tree)
+        wall = time.perf_counter() - marks.start
+        final = poses[-1]
+        loop_fps = n / wall
+    else:
+        raise SystemExit(f"unknown runner {runner}")
+    return {
+        "runner": runner, "frames": n, "wall_s": wall, "fps": n / wall, "loop_fps": loop_fps,
+        "peak_rss_mb": peak_rss_mb(), "rss_before_loop_mb": rss_before, "checkpoints": marks.rows,
+        "final_position_m": [float(x) for x in np.asarray(final)[:3, 3]],
+    }
+
+
+def make_data(data: Path, n: int) -> float:
+    """Write the sequence unless a complete one is there; returns its size in GB."""
+    from lidarkit.sim.lidar import SimulatedLidarSequence, export_kitti
+
+    done = data / "velodyne" / f"{n - 1:06d}.bin"
+    if not (done.is_file() and (data / "sim.yaml").is_file()):
+        shutil.rmtree(data, ignore_errors=True)
+        t0 = time.perf_counter()
+        export_kitti(SimulatedLidarSequence(n_frames=n, **SIM), data)
+        print(f"wrote {n} sweeps to {data} in {time.perf_counter() - t0:.0f} s", flush=True)
+    return sum(p.stat().st_size for p in data.rglob("*") if p.is_file()) / 1e9
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--frames", type=int, default=4541)
+    parser.add_argument("--data", type=Path, default=Path("/tmp/lidarkit_scale"))
+    parser.add_argument("--runners", default=",".join(RUNNERS))
+    parser.add_argument("--keep-data", action="store_true", help="keep the written sequence (default: delete it at the end)")
+    parser.add_argument("--child", help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.child:
+        print(json.dumps(child(args.child, args.data, args.frames)))
+        return
+
+    size_gb = make_data(args.data, args.frames)
+    rows = []
+    for runner in args.runners.split(","):
+        t0 = time.perf_counter()
+        proc = subprocess.run([sys.executable, __file__, "--child", runner, "--data", str(args.data), "--frames", str(args.frames)],
+                              capture_output=True, text=True, env={**os.environ, "PYTHONPATH": str(REPO)})
+        if proc.returncode != 0:
+            raise SystemExit(f"{runner} failed:\n{proc.stderr[-3000:]}")
+        row = json.loads(proc.stdout.strip().splitlines()[-1])
+        rows.append(row)
+        print(f"{runner}: {row['fps']:.2f} fps, peak RSS {row['peak_rss_mb']:.0f} MB ({time.perf_counter() - t0:.0f} s)", flush=True)
+        write_results(rows, args, size_gb)  # after every runner: a partial table survives an interrupted run
+    if not args.keep_data:
+        shutil.rmtree(args.data, ignore_errors=True)
+
+
+def write_results(rows: list[dict], args, size_gb: float) -> None:
+    from lidarkit import atomic
+    from lidarkit.bench.machine import describe_machine, machine_info
+
+    by = {r["runner"]: r for r in rows}
+    ratios = {}
+    for ours, lib in (("lidarkit:kiss", "kiss-icp"), ("lidarkit:small_gicp", "small_gicp")):
+        if ours in by and lib in by:
+            ratios[f"{ours} / {lib}"] = {
+                "fps_ratio": by[ours]["loop_fps"] / by[lib]["loop_fps"],
+                "whole_run_fps_ratio": by[ours]["fps"] / by[lib]["fps"],
+                "fps_ratio_at": {str(a["frames"]): a["fps"] / b["fps"] for a, b in zip(by[ours]["checkpoints"], by[lib]["checkpoints"])},
+                "final_position_gap_m": float(np.linalg.norm(np.subtract(by[ours]["final_position_m"], by[lib]["final_position_m"]))),
+            }
+    rss = {}
+    for r in rows:
+        first = r["checkpoints"][0] if r["checkpoints"] else None
+        trajectory_mb = r["frames"] * (16 * 8 * 2 + 8) / 1e6  # estimate + ground truth 4x4 float64 and stamps
+        if first:
+            rss[r["runner"]] = {"at_500_mb": first["peak_rss_mb"], "at_end_mb": r["peak_rss_mb"],
+                                "ratio_end_over_500": r["peak_rss_mb"] / first["peak_rss_mb"],
+                                "ratio_end_minus_trajectory_over_500": (r["peak_rss_mb"] - trajectory_mb) / first["peak_rss_mb"]}
+    command = "nice -n 10 .venv/bin/python benchmarks/odometry_scale.py " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    payload = {"date_utc": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"), "machine": describe_machine(machine_info()),
+               "command": command, "frames": args.frames, "sim": SIM, "data_size_gb": size_gb, "runs": rows, "ratios": ratios, "rss": rss}
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    atomic.write_text(RESULTS / "odometry_scale.json", json.dumps(payload, indent=2) + "\n")
+    lines = [
+        "# Odometry at KITTI length (issue 10)", "",
+        f"{payload['date_utc']} on {payload['machine']}; `{command}`", "",
+        f"{args.frames} simulated sweeps ({SIM['n_beams']}x{SIM['n_azimuths']} rays, street, no per-point times), "
+        f"{size_gb:.2f} GB on disk, written by the benchmark and deleted after. Each runner in its own process, one "
+        "after the other, on a shared 2-core machine: compare ratios, not absolute rates.", "",
+        "| runner | fps @500 | fps @2000 | fps @end | peak RSS @500 (MB) | @2000 | @end |", "|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        cp = {c["frames"]: c for c in r["checkpoints"]}
+        cell = lambda k, key: f"{cp[k][key]:.{1 if key == 'fps' else 0}f}" if k in cp else "-"  # noqa: E731
+        lines.append(f"| {r['runner']} | {cell(500, 'fps')} | {cell(2000, 'fps')} | {r['fps']:.1f} | {cell(500, 'peak_rss_mb')} | "
+                     f"{cell(2000, 'peak_rss_mb')} | {r['peak_rss_mb']:.0f} |")
+    lines += ["", "fps (loop): frames / time of the odometry loop (reading + registration); whole run: also the run's set-up",
+              "and end work (lidarkit: metrics against ground truth, trajectory); at 500 / 2000: loop rate up to that frame.", "",
+              "| ratio | fps (loop) | fps (whole run) | at 500 / 2000 | final position gap (m) |", "|---|---|---|---|---|"]
+    for name, v in ratios.items():
+        at = " / ".join(f"{x:.3f}" for x in v["fps_ratio_at"].values())
+        lines.append(f"| {name} | {v['fps_ratio']:.3f} | {v['whole_run_fps_ratio']:.3f} | {at} | {v['final_position_gap_m']:.2e} |")
+    lines += ["", "| runner | peak RSS end / 500 | (end - trajectory) / 500 |", "|---|---|---|"]
+    for name, v in rss.items():
+        lines.append(f"| {name} | {v['ratio_end_over_500']:.3f} | {v['ratio_end_minus_trajectory_over_500']:.3f} |")
+    atomic.write_text(RESULTS / "odometry_scale.md", "\n".join(lines) + "\n")
+
+
+if __name__ == "__main__":
+    main()

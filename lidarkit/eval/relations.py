@@ -1,0 +1,143 @@
+"""The relations metric of Kümmerle et al., "On measuring the accuracy of SLAM algorithms" (Auton. Robots 2009).
+
+Ground truth is a set of relative poses ``delta*_ij`` between pairs of time stamps (hand-verified scan
+alignments, :class:`lidarkit.io.carmen.Relations`). For each relation the estimate's own relative pose
+``delta_ij = inv(T(t_i)) @ T(t_j)`` is taken between the poses nearest ``t_i`` and ``t_j`` (within
+``max_time_diff_s``), and the error ``delta_ij (-) delta*_ij`` is split into a translational part (m, the norm
+of the difference of the planar translations) and a rotational part (deg, the wrapped yaw difference). The
+paper's tables report mean +- std of the absolute and of the squared errors, and the maximum; so does
+:class:`RelationError`. The metric is planar: only x, y and yaw of the estimate enter.
+
+Because it scores relative poses, no alignment of the estimate is needed, and odometry, scan matching and SLAM
+results are scored the same way.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from lidarkit.errors import EvaluationError
+from lidarkit.io.carmen import Relations
+from lidarkit.trajectory import Trajectory
+
+#: Default tolerance between a relation's time stamp and the nearest estimated pose (s). The relations of the
+#: Freiburg benchmark are stamped with the scans' own time stamps (ACES: exact match), while the logs scan at
+#: 5-10 Hz (>= 0.07 s apart), so 0.01 s accepts only the scan a relation was made from.
+DEFAULT_MAX_TIME_DIFF_S = 0.01
+
+
+def _stats(values: np.ndarray) -> dict[str, float]:
+    return {"mean": float(values.mean()), "std": float(values.std()), "max": float(values.max())}
+
+
+@dataclass(frozen=True)
+class RelationError:
+    """Relation errors of one estimate: per relation ``translation_m`` / ``rotation_deg`` ``(K,)`` and summaries.
+
+    ``n_relations``: relations in the file; ``n_used``: those with an estimated pose within ``max_time_diff_s`` of
+    both time stamps (the others are listed by index in ``unmatched``).
+    """
+
+    translation_m: np.ndarray
+    rotation_deg: np.ndarray
+    used: np.ndarray
+    n_relations: int
+    max_time_diff_s: float
+    name: str = ""
+
+    @property
+    def n_used(self) -> int:
+        return int(len(self.used))
+
+    @property
+    def unmatched(self) -> np.ndarray:
+        return np.setdiff1d(np.arange(self.n_relations), self.used)
+
+    @property
+    def translation_abs(self) -> dict[str, float]:
+        """mean / std / max of |translational error| (m)."""
+        return _stats(self.translation_m)
+
+    @property
+    def translation_sq(self) -> dict[str, float]:
+        """mean / std / max of the squared translational error (m^2)."""
+        return _stats(self.translation_m**2)
+
+    @property
+    def rotation_abs(self) -> dict[str, float]:
+        """mean / std / max of |rotational error| (deg)."""
+        return _stats(self.rotation_deg)
+
+    @property
+    def rotation_sq(self) -> dict[str, float]:
+        """mean / std / max of the squared rotational error (deg^2)."""
+        return _stats(self.rotation_deg**2)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "n_relations": self.n_relations,
+            "n_used": self.n_used,
+            "max_time_diff_s": self.max_time_diff_s,
+            "translation_abs_m": self.translation_abs,
+            "translation_sq_m2": self.translation_sq,
+            "rotation_abs_deg": self.rotation_abs,
+            "rotation_sq_deg2": self.rotation_sq,
+        }
+
+
+def nearest_pose_index(timestamps_s: np.ndarray, query_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Index of the time stamp nearest each query and the absolute time difference (s); timestamps increasing."""
+    ts = np.asarray(timestamps_s, dtype=np.float64)
+    q = np.asarray(query_s, dtype=np.float64)
+    right = np.clip(np.searchsorted(ts, q), 1, len(ts) - 1) if len(ts) > 1 else np.zeros(len(q), dtype=np.int64)
+    left = np.maximum(right - 1, 0)
+    pick = np.where(np.abs(ts[left] - q) <= np.abs(ts[right] - q), left, right)
+    return pick, np.abs(ts[pick] - q)
+
+
+def relation_error(
+    estimate: Trajectory,
+    relations: Relations,
+    max_time_diff_s: float = DEFAULT_MAX_TIME_DIFF_S,
+) -> RelationError:
+    """Score ``estimate`` (a Trajectory with timestamps, ``T_world_laser``) against relative-pose ground truth.
+
+    Relations whose time stamps have no estimated pose within ``max_time_diff_s`` are left out (counted in the
+    result); none matching at all is an EvaluationError.
+    """
+    source = estimate.name or "estimate"
+    if estimate.timestamps_s is None:
+        raise EvaluationError("the relations metric needs the estimate's timestamps (e.g. a TUM-format file)", source=source)
+    if not (np.isfinite(max_time_diff_s) and max_time_diff_s >= 0):
+        raise EvaluationError(f"max_time_diff_s must be a finite number >= 0, got {max_time_diff_s!r}", source="max_time_diff_s")
+    if len(estimate) == 0 or len(relations) == 0:
+        raise EvaluationError(f"nothing to score ({len(estimate)} poses, {len(relations)} relations)", source=source)
+    i, di = nearest_pose_index(estimate.timestamps_s, relations.t1_s)
+    j, dj = nearest_pose_index(estimate.timestamps_s, relations.t2_s)
+    used = np.flatnonzero((di <= max_time_diff_s) & (dj <= max_time_diff_s))
+    if len(used) == 0:
+        span = (float(estimate.timestamps_s[0]), float(estimate.timestamps_s[-1]))
+        raise EvaluationError(
+            f"no relation has estimated poses within {max_time_diff_s:g} s of both its time stamps "
+            f"(estimate spans {span[0]:.3f}..{span[1]:.3f} s, relations {relations.t1_s.min():.3f}..{relations.t2_s.max():.3f} s)",
+            source=source,
+        )
+    P = estimate.poses_se3
+    Ti, Tj = P[i[used]], P[j[used]]
+    # delta_ij = inv(Ti) @ Tj, planar part: R_i^T (t_j - t_i) and yaw_j - yaw_i
+    yaw_i = np.arctan2(Ti[:, 1, 0], Ti[:, 0, 0])
+    yaw_j = np.arctan2(Tj[:, 1, 0], Tj[:, 0, 0])
+    d = Tj[:, :2, 3] - Ti[:, :2, 3]
+    c, s = np.cos(yaw_i), np.sin(yaw_i)
+    dx, dy = c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]
+    trans = np.hypot(dx - relations.dx_m[used], dy - relations.dy_m[used])
+    dyaw = (yaw_j - yaw_i) - relations.dyaw_rad[used]
+    rot = np.degrees(np.abs(np.arctan2(np.sin(dyaw), np.cos(dyaw))))
+    return RelationError(trans, rot, used, len(relations), float(max_time_diff_s), name=source)
+
+
+__all__ = ["DEFAULT_MAX_TIME_DIFF_S", "RelationError", "nearest_pose_index", "relation_error"]

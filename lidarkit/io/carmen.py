@@ -1,0 +1,404 @@
+"""CARMEN laser logs (``.clf``, plain, ``.bz2`` or ``.gz``) as 2D scan sequences, and ``.relations`` ground truth.
+
+The classic 2D SLAM benchmark logs (Intel Research Lab, ACES, Freiburg 079, ...) are CARMEN logs: one message per
+line. The laser messages become scans with ``z = 0``, in the laser frame (x forward, y left):
+
+- ``FLASER n r_1..r_n x y theta odom_x odom_y odom_theta ipc_ts host logger_ts``: the old format carries no
+  sensor configuration; CARMEN's own reader assumes the first beam at -90 deg and 1 deg (180/181 beams), 0.5 deg
+  (360/361) or 0.25 deg (400/401) between beams, which this reader follows. ``x y theta`` is the laser pose by
+  odometry (the robot's odometry with the laser offset applied).
+- ``ROBOTLASER1 type start_angle fov resolution max_range accuracy remission_mode n r.. m rem.. laser_x laser_y
+  laser_theta robot_x robot_y robot_theta tv rv forward_safety side_safety turn_axis ipc_ts host logger_ts``.
+- ``RAWLASER1`` (same configuration fields, no pose): the laser pose is interpolated from the ``ODOM`` messages.
+
+Readings at or above the maximum range (no return) and at or below ``min_range_m`` are dropped. The maximum range
+of FLASER logs is not written down and differs per log (ACES saturates at 50 m, Intel and FR079 at ~81.9 m): by
+default it is the largest reading of the log, the value the driver writes for "no return".
+
+Parsing is vectorized: each line is split once, the numbers of all scans are converted by one ``numpy`` call, and
+the points of a scan are computed on request from its ranges and precomputed beam directions. Any malformed line
+raises :class:`DataError` naming the file and the line.
+"""
+
+from __future__ import annotations
+
+import bz2
+import gzip
+import lzma
+import os
+import zlib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+
+from lidarkit.errors import ConfigError, DataError
+from lidarkit.io.base import Scan
+from lidarkit.textfile import read_numeric_table
+from lidarkit.trajectory import Trajectory
+
+LASER_MESSAGES = ("FLASER", "ROBOTLASER1", "RAWLASER1")
+
+#: FLASER beam spacing by number of beams (CARMEN's guess for the unconfigured old format); others: 180 deg / (n - 1).
+_FLASER_RESOLUTION_RAD = {180: np.pi / 180, 181: np.pi / 180, 360: np.pi / 360, 361: np.pi / 360, 400: np.pi / 720, 401: np.pi / 720}
+_FLASER_START_RAD = -np.pi / 2
+
+
+def _open_text(path: Path) -> str:
+    """The whole file as text, decompressing ``.bz2`` / ``.gz`` / ``.xz``; unreadable files are DataErrors."""
+    if not path.is_file():
+        raise DataError("file not found" if not path.exists() else "not a regular file", source=path)
+    opener = {".bz2": bz2.open, ".gz": gzip.open, ".xz": lzma.open}.get(path.suffix.lower(), open)
+    try:
+        with opener(path, "rt", encoding="utf-8", errors="strict") as fh:
+            return fh.read()
+    except (OSError, EOFError, UnicodeDecodeError, lzma.LZMAError, zlib.error) as err:
+        raise DataError(f"cannot read ({type(err).__name__}: {err})", source=path) from err
+
+
+def yaw_pose_se3(x: np.ndarray, y: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    """``(N, 4, 4)`` SE(3) poses of planar poses ``(x, y, theta)`` (m, m, rad), z = 0."""
+    c, s = np.cos(theta), np.sin(theta)
+    poses = np.zeros((len(x), 4, 4))
+    poses[:, 0, 0], poses[:, 0, 1], poses[:, 1, 0], poses[:, 1, 1] = c, -s, s, c
+    poses[:, 2, 2] = poses[:, 3, 3] = 1.0
+    poses[:, 0, 3], poses[:, 1, 3] = x, y
+    return poses
+
+
+@dataclass(frozen=True)
+class Relations:
+    """Relative-pose ground truth (Kümmerle et al. 2009): the pose at ``t2_s`` in the frame of the pose at ``t1_s``.
+
+    ``t1_s``, ``t2_s``: ``(K,)`` float64 timestamps (s, the log's clock); ``dx_m``, ``dy_m``, ``dyaw_rad``: ``(K,)``
+    the planar relative pose ``inv(T(t1)) @ T(t2)``.
+    """
+
+    t1_s: np.ndarray
+    t2_s: np.ndarray
+    dx_m: np.ndarray
+    dy_m: np.ndarray
+    dyaw_rad: np.ndarray
+    source: str = ""
+
+    def __len__(self) -> int:
+        return int(len(self.t1_s))
+
+    @classmethod
+    def read(cls, path: str | os.PathLike) -> "Relations":
+        """Parse a ``.relations`` file: ``t1 t2 x y z roll pitch yaw`` per line (z, roll, pitch must be 0)."""
+        table = read_numeric_table(path, (8,))
+        if len(table) == 0:
+            raise DataError("no relations in the file", source=path)
+        off_plane = np.flatnonzero(np.abs(table[:, 4:7]).max(axis=1) > 1e-9)
+        if len(off_plane):
+            raise DataError(
+                "z, roll and pitch of a planar relation must be 0 (relation %d)" % (off_plane[0] + 1), source=path
+            )
+        return cls(table[:, 0], table[:, 1], table[:, 2], table[:, 3], table[:, 7], source=str(path))
+
+
+@dataclass(frozen=True)
+class _Parsed:
+    message: str
+    ranges_m: np.ndarray  # flat (sum n,) float64
+    offsets: np.ndarray  # (S + 1,) int64 into ranges_m
+    start_rad: np.ndarray  # (S,)
+    step_rad: np.ndarray  # (S,)
+    max_range_m: np.ndarray  # (S,) the message's own maximum (nan: not stated)
+    laser_xyt: np.ndarray  # (S, 3) laser pose by odometry
+    timestamps_s: np.ndarray  # (S,) ipc time stamps
+    lines: np.ndarray  # (S,) 1-based line numbers
+    counts: dict = field(default_factory=dict)
+
+
+class _LineParser:
+    """Collects the fields of one laser message type; numbers stay strings until one vectorized conversion."""
+
+    def __init__(self, path: Path, message: str):
+        self.path, self.message = path, message
+        self.range_tokens: list[str] = []
+        self.fixed_tokens: list[str] = []  # per scan: start, step, max_range, x, y, theta, ts
+        self.lengths: list[int] = []
+        self.lines: list[int] = []
+
+    def fail(self, lineno: int, reason: str) -> DataError:
+        return DataError(f"{self.message}: {reason}", source=self.path, location=f"line {lineno}")
+
+    def _count(self, tokens: list[str], i: int, lineno: int, what: str) -> int:
+        try:
+            n = int(tokens[i])
+        except (IndexError, ValueError):
+            raise self.fail(lineno, f"{what} is not an integer ({tokens[i] if i < len(tokens) else 'missing'!r})") from None
+        if n < 0:
+            raise self.fail(lineno, f"negative {what} {n}")
+        return n
+
+    def add(self, tokens: list[str], lineno: int) -> None:
+        if self.message == "FLASER":
+            n = self._count(tokens, 1, lineno, "number of readings")
+            if n == 0:
+                raise self.fail(lineno, "0 readings")
+            if len(tokens) != n + 11:
+                raise self.fail(lineno, f"expected {n + 11} fields for {n} readings, found {len(tokens)}")
+            step = _FLASER_RESOLUTION_RAD.get(n, np.pi / max(n - 1, 1))
+            self.range_tokens.extend(tokens[2 : 2 + n])
+            self.fixed_tokens.extend((repr(_FLASER_START_RAD), repr(step), "nan", *tokens[2 + n : 5 + n], tokens[8 + n]))
+        else:
+            n = self._count(tokens, 8, lineno, "number of readings")
+            m = self._count(tokens, 9 + n, lineno, "number of remissions")
+            tail = 14 if self.message == "ROBOTLASER1" else 3  # pose + velocities + safety, then ts host logger_ts
+            if len(tokens) != 10 + n + m + tail:
+                raise self.fail(lineno, f"expected {10 + n + m + tail} fields for {n} readings, {m} remissions, found {len(tokens)}")
+            if n == 0:
+                raise self.fail(lineno, "0 readings")
+            rest = 10 + n + m
+            pose = tokens[rest : rest + 3] if self.message == "ROBOTLASER1" else ["nan"] * 3
+            self.range_tokens.extend(tokens[9 : 9 + n])
+            self.fixed_tokens.extend((tokens[2], tokens[4], tokens[5], *pose, tokens[-3]))
+        self.lengths.append(n)
+        self.lines.append(lineno)
+
+    def _to_float(self, tokens: list[str], per_line: list[int]) -> np.ndarray:
+        try:
+            return np.array(tokens, dtype=np.float64)
+        except ValueError:
+            pass
+        # locate the offending token only on failure: the fast path is one conversion
+        start = 0
+        for lineno, count in zip(self.lines, per_line):
+            for token in tokens[start : start + count]:
+                try:
+                    float(token)
+                except ValueError:
+                    raise self.fail(lineno, f"not a number: {token!r}") from None
+            start += count
+        raise self.fail(self.lines[-1], "not a number")  # unreachable: some token failed above
+
+    def finish(self) -> _Parsed:
+        lengths = np.asarray(self.lengths, dtype=np.int64)
+        ranges = self._to_float(self.range_tokens, self.lengths)
+        fixed = self._to_float(self.fixed_tokens, [7] * len(self.lines)).reshape(-1, 7)
+        lines = np.asarray(self.lines, dtype=np.int64)
+        offsets = np.concatenate([[0], np.cumsum(lengths)])
+        bad_range = ~np.isfinite(ranges)
+        if bad_range.any():
+            scan = int(np.searchsorted(offsets, int(np.argmax(bad_range)), side="right") - 1)
+            raise self.fail(int(lines[scan]), "range reading is NaN or infinite")
+        check = fixed[:, [0, 1, 6]] if self.message == "RAWLASER1" else fixed[:, [0, 1, 3, 4, 5, 6]]
+        bad = ~np.isfinite(check).all(axis=1)
+        if bad.any():
+            raise self.fail(int(lines[np.argmax(bad)]), "pose, angle or timestamp is NaN or infinite")
+        if (fixed[:, 1] <= 0).any():
+            raise self.fail(int(lines[np.argmax(fixed[:, 1] <= 0)]), "angular resolution must be positive")
+        return _Parsed(self.message, ranges, offsets, fixed[:, 0], fixed[:, 1], fixed[:, 2], fixed[:, 3:6], fixed[:, 6], lines)
+
+
+def _parse_odom(path: Path, entries: list[tuple[int, list[str]]]) -> tuple[np.ndarray, np.ndarray]:
+    """ODOM messages ``x y theta tv rv accel ts host logger_ts`` -> ``(M, 3)`` poses and ``(M,)`` timestamps."""
+    tokens: list[str] = []
+    for lineno, parts in entries:
+        if len(parts) != 10:
+            raise DataError(f"ODOM: expected 10 fields, found {len(parts)}", source=path, location=f"line {lineno}")
+        tokens.extend((*parts[1:4], parts[7]))
+    try:
+        values = np.array(tokens, dtype=np.float64).reshape(-1, 4)
+    except ValueError:
+        for lineno, parts in entries:
+            for token in (*parts[1:4], parts[7]):
+                try:
+                    float(token)
+                except ValueError:
+                    raise DataError(f"ODOM: not a number: {token!r}", source=path, location=f"line {lineno}") from None
+        raise
+    return values[:, :3], values[:, 3]
+
+
+def _interpolate_pose(odom_xyt: np.ndarray, odom_t: np.ndarray, t: np.ndarray, path: Path) -> np.ndarray:
+    """Odometry poses at times ``t`` (linear in x, y and unwrapped theta; clamped at the ends)."""
+    if len(odom_t) == 0:
+        raise DataError("RAWLASER1 messages carry no pose and the log has no ODOM messages to interpolate", source=path)
+    order = np.argsort(odom_t, kind="stable")
+    ts, xyt = odom_t[order], odom_xyt[order]
+    theta = np.unwrap(xyt[:, 2])
+    out = np.column_stack([np.interp(t, ts, xyt[:, 0]), np.interp(t, ts, xyt[:, 1]), np.interp(t, ts, theta)])
+    out[:, 2] = np.arctan2(np.sin(out[:, 2]), np.cos(out[:, 2]))
+    return out
+
+
+def parse_log(path: str | os.PathLike, message: str = "auto") -> _Parsed:
+    """Parse the laser messages of one CARMEN log (``message``: one of LASER_MESSAGES or ``"auto"``: the first
+    of them the log contains)."""
+    path = Path(path)
+    if message != "auto" and message not in LASER_MESSAGES:
+        raise ConfigError(f"unknown laser message {message!r}; known: auto, {', '.join(LASER_MESSAGES)}", source="laser")
+    text = _open_text(path)
+    groups: dict[str, list[tuple[int, list[str]]]] = {m: [] for m in (*LASER_MESSAGES, "ODOM")}
+    counts: dict[str, int] = {}
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        if not line or line[0] == "#":
+            continue
+        parts = line.split()
+        if not parts:
+            continue
+        kind = parts[0]
+        counts[kind] = counts.get(kind, 0) + 1
+        if kind in groups:
+            groups[kind].append((lineno, parts))
+        elif kind[:1].isdigit() or kind[:1] in "-+.":
+            raise DataError(f"line does not start with a message name ({kind!r})", source=path, location=f"line {lineno}")
+    if message == "auto":
+        message = next((m for m in LASER_MESSAGES if groups[m]), "")
+        if not message:
+            raise DataError(f"no laser messages ({', '.join(LASER_MESSAGES)}) in the log", source=path)
+    elif not groups[message]:
+        raise DataError(f"no {message} messages in the log", source=path)
+    parser = _LineParser(path, message)
+    for lineno, parts in groups[message]:
+        parser.add(parts, lineno)
+    parsed = parser.finish()
+    if message == "RAWLASER1":
+        odom_xyt, odom_t = _parse_odom(path, groups["ODOM"])
+        parsed.laser_xyt[:] = _interpolate_pose(odom_xyt, odom_t, parsed.timestamps_s, path)
+    parsed.counts.update(counts)
+    return parsed
+
+
+class CarmenLog:
+    """A CARMEN log as a 2D :class:`~lidarkit.io.base.ScanSequence` with the log's odometry and relation ground truth.
+
+    ``open_dataset("carmen", "aces.clf.bz2")``. Options: ``laser`` (which message: ``"auto"``, ``"FLASER"``,
+    ``"ROBOTLASER1"``, ``"RAWLASER1"``); ``min_range_m`` (readings at or below are dropped); ``max_range_m``
+    (readings at or above are dropped as "no return"; None: the message's own maximum for ROBOTLASER1/RAWLASER1,
+    the log's largest reading for FLASER); ``relations`` (a ``.relations`` file; ``"auto"``: ``NAME.relations``
+    beside the log if present; None: none).
+
+    ``odometry``: the laser pose by odometry per scan (a Trajectory with the scan timestamps); ``ground_truth`` is
+    None (these logs have relative ground truth only: ``relations``).
+    """
+
+    def __init__(
+        self,
+        path: str | os.PathLike,
+        laser: Literal["auto", "FLASER", "ROBOTLASER1", "RAWLASER1"] = "auto",
+        min_range_m: float = 0.0,
+        max_range_m: float | None = None,
+        relations: str | os.PathLike | None = "auto",
+    ):
+        self.path = Path(path)
+        if not (np.isfinite(min_range_m) and min_range_m >= 0):
+            raise ConfigError(f"min_range_m must be a finite number >= 0, got {min_range_m!r}", source="carmen dataset options")
+        if max_range_m is not None and not (np.isfinite(max_range_m) and max_range_m > min_range_m):
+            raise ConfigError(f"max_range_m must exceed min_range_m ({min_range_m}), got {max_range_m!r}", source="carmen dataset options")
+        self._log = parse_log(self.path, laser)
+        stem = self.path.name.split(".")[0]
+        self.name = stem
+        self.laser = self._log.message
+        self.min_range_m = float(min_range_m)
+        log = self._log
+        if max_range_m is not None:
+            self.max_range_m = np.full(len(log.timestamps_s), float(max_range_m))
+        elif self.laser == "FLASER":
+            self.max_range_m = np.full(len(log.timestamps_s), float(log.ranges_m.max()))
+        else:
+            self.max_range_m = log.max_range_m.copy()
+        # scans in time order: some logs (Intel: 631 of 13,631) hold messages up to ~0.9 s out of order
+        order = np.argsort(log.timestamps_s, kind="stable")
+        ts = log.timestamps_s[order]
+        if len(ts) > 1 and not (np.diff(ts) > 0).all():
+            k = int(np.argmax(~(np.diff(ts) > 0))) + 1
+            raise DataError(
+                f"two laser scans with the same timestamp {ts[k]!r} (also line {int(log.lines[order[k - 1]])})",
+                source=self.path, location=f"line {int(log.lines[order[k]])}",
+            )
+        self.n_reordered = int((order != np.arange(len(order))).sum())
+        self._order = order
+        self._timestamps_s = ts
+        self._starts = log.offsets[:-1][order]
+        self._lengths = np.diff(log.offsets)[order]
+        self.max_range_m = self.max_range_m[order]
+        self._relations_path = self._find_relations(relations)
+        self._relations: Relations | None = None
+        self._odometry: Trajectory | None = None
+
+    def _find_relations(self, relations: str | os.PathLike | None) -> Path | None:
+        if relations is None:
+            return None
+        if isinstance(relations, str) and relations == "auto":
+            candidate = self.path.with_name(self.name + ".relations")
+            return candidate if candidate.is_file() else None
+        path = Path(relations)
+        if not path.is_file():
+            raise DataError("relations file not found", source=path)
+        return path
+
+    # ---- ScanSequence ------------------------------------------------------------------------
+    def __len__(self) -> int:
+        return int(len(self._timestamps_s))
+
+    @property
+    def timestamps_s(self) -> np.ndarray:
+        """``(S,)`` float64 ipc time stamps of the scans (s), strictly increasing (scans are in time order)."""
+        return self._timestamps_s
+
+    @property
+    def ground_truth(self) -> Trajectory | None:
+        """None: the CARMEN logs have relation ground truth (``relations``), not absolute poses."""
+        return None
+
+    @property
+    def odometry(self) -> Trajectory:
+        """The laser pose by odometry at each scan (``T_odom_laser``, z = 0), timestamps = scan timestamps."""
+        if self._odometry is None:
+            xyt = self._log.laser_xyt[self._order]
+            self._odometry = Trajectory(
+                yaw_pose_se3(xyt[:, 0], xyt[:, 1], xyt[:, 2]), self.timestamps_s, name=f"{self.name} odometry",
+                meta={"frame": "laser", "source": "log odometry"},
+            )
+        return self._odometry
+
+    @property
+    def relations(self) -> Relations | None:
+        """The relation ground truth (``.relations`` file), or None if there is none."""
+        if self._relations is None and self._relations_path is not None:
+            self._relations = Relations.read(self._relations_path)
+        return self._relations
+
+    def ranges_m(self, index: int) -> np.ndarray:
+        """All range readings of scan ``index`` as logged ``(n,)`` (nothing dropped)."""
+        start = int(self._starts[index])
+        return self._log.ranges_m[start : start + int(self._lengths[index])]
+
+    def beam_angles_rad(self, index: int) -> np.ndarray:
+        """Bearing of every beam of scan ``index`` in the laser frame ``(n,)`` (0 = forward, counter-clockwise)."""
+        k = self._order[index]
+        return self._log.start_rad[k] + self._log.step_rad[k] * np.arange(int(self._lengths[index]))
+
+    def line_of(self, index: int) -> int:
+        """The 1-based line of the log that holds scan ``index``."""
+        return int(self._log.lines[self._order[index]])
+
+    def read_scan(self, index: int) -> Scan:
+        """Scan ``index`` as ``(N, 3)`` points in the laser frame, z = 0, invalid readings dropped."""
+        if not -len(self) <= index < len(self):
+            raise DataError(f"scan index {index} out of range 0..{len(self) - 1}", source=self.path)
+        index = int(index) % len(self)
+        ranges = self.ranges_m(index)
+        keep = ranges > self.min_range_m
+        max_range = self.max_range_m[index]
+        if np.isfinite(max_range):
+            keep &= ranges < max_range
+        bearing = self.beam_angles_rad(index)[keep]
+        r = ranges[keep]
+        points = np.zeros((len(r), 3))
+        points[:, 0], points[:, 1] = r * np.cos(bearing), r * np.sin(bearing)
+        return Scan(points, timestamp_s=float(self.timestamps_s[index]), frame=index, source=f"{self.path}:{int(self._log.lines[self._order[index]])}")
+
+    @property
+    def message_counts(self) -> dict[str, int]:
+        """How many messages of each kind the log holds (``{"FLASER": 7374, "ODOM": 7375, ...}``)."""
+        return dict(self._log.counts)
+
+
+__all__ = ["LASER_MESSAGES", "CarmenLog", "Relations", "parse_log", "yaw_pose_se3"]

@@ -1,0 +1,286 @@
+"""Every other kiss-icp dataloader (``kiss_icp.datasets``) as a lidarkit scan sequence.
+
+Each class here wraps one kiss-icp loader: it checks what the loader would otherwise print-and-exit on
+(missing packages, a missing file), builds the loader inside :func:`~lidarkit.io.rosbag.guarded_loader`, and
+turns its frames into :class:`~lidarkit.io.base.Scan` (points, per-point times in the convention that loader
+uses) and its ``gt_poses`` into a :class:`~lidarkit.trajectory.Trajectory`.
+
+Ground truth is given exactly as kiss-icp's loader holds it (the frame kiss-icp evaluates in, named in
+``meta["frame"]``); ``meta["pose_instant"]`` is None (kiss-icp's loaders do not say which instant of the sweep).
+kiss-icp's ``kitti``, ``kitti_raw`` and ``tum`` loaders are the kinds ``kiss_kitti``, ``kiss_kitti_raw`` and
+``kiss_tum`` (lidarkit has its own readers under the plain names).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lidarkit.errors import DataError
+from lidarkit.io.base import Scan
+from lidarkit.io.rosbag import guarded_loader, require_modules
+from lidarkit.trajectory import Trajectory
+
+#: kiss-icp loader name -> lidarkit dataset kind
+KISS_KINDS = {
+    "apollo": "apollo", "boreas": "boreas", "generic": "generic", "helipr": "helipr", "kitti": "kiss_kitti",
+    "kitti_raw": "kiss_kitti_raw", "mcap": "mcap", "mulran": "mulran", "ncd": "ncd", "nclt": "nclt",
+    "nuscenes": "nuscenes", "ouster": "ouster", "rosbag": "rosbag", "tum": "kiss_tum",
+}
+#: kiss-icp loader name -> its class in ``kiss_icp.datasets.<name>``
+KISS_CLASSES = {
+    "apollo": "ApolloDataset", "boreas": "BoreasDataset", "generic": "GenericDataset", "helipr": "HeLiPRDataset",
+    "kitti": "KITTIOdometryDataset", "kitti_raw": "KITTIRawDataset", "mcap": "McapDataloader", "mulran": "MulranDataset",
+    "ncd": "NewerCollegeDataset", "nclt": "NCLTDataset", "nuscenes": "NuScenesDataset", "ouster": "OusterDataloader",
+    "rosbag": "RosbagDataset", "tum": "TUMDataset",
+}
+OUSTER_EXTRA = "pip install 'lidarkit[ouster]'  (ouster-sdk)"
+
+
+class KissLoaderScans:
+    """A kiss-icp dataloader as a ``ScanSequence`` (subclasses fix the loader and its options)."""
+
+    loader_name = ""
+    #: how the loader's per-point times are expressed (see ``lidarkit.io.base.PointTimeConvention``)
+    point_time_convention = "fraction"
+    #: module -> pip line, checked before the loader is built
+    requires: dict[str, str] = {}
+    #: what the loader's gt_poses are
+    ground_truth_frame = "as kiss-icp's loader gives it"
+
+    def __init__(self, path: str | os.PathLike, **loader_options: Any):
+        self.path = Path(path)
+        require_modules(self.requires, self.kind)
+        if not self.path.exists():
+            raise DataError(f"{self.kind} dataset not found", source=self.path)
+        self.loader_options = {k: v for k, v in loader_options.items() if v is not None}
+        self.loader = self._build()
+        self.name = f"{self.kind}:{getattr(self.loader, 'sequence_id', self.path.name)}"
+
+    @property
+    def kind(self) -> str:
+        return KISS_KINDS[self.loader_name]
+
+    @property
+    def reader_options(self) -> dict[str, Any]:
+        return {"kind": self.kind, "path": str(self.path), "kiss_icp_loader": self.loader_name, **self.loader_options}
+
+    def _build(self) -> Any:
+        import importlib
+
+        module = importlib.import_module(f"kiss_icp.datasets.{self.loader_name}")
+        cls = getattr(module, KISS_CLASSES[self.loader_name])
+        with guarded_loader(self.loader_name, str(self.path)):
+            return cls(self.path, **self.loader_options)
+
+    def __len__(self) -> int:
+        return len(self.loader)
+
+    def read_scan(self, index: int) -> Scan:
+        n = len(self)
+        if not 0 <= index < n:
+            raise DataError(f"scan index {index} out of range for {n} scans", source=self.path)
+        with guarded_loader(self.loader_name, f"{self.path} (frame {index})"):
+            item = self.loader[index]
+        points, times = item if isinstance(item, tuple) else (item, None)
+        points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        times = None if times is None or np.size(times) == 0 else np.asarray(times, dtype=np.float64).ravel()
+        if times is not None and len(times) != len(points):
+            raise DataError(f"{len(times)} per-point times for {len(points)} points", source=self.path, location=f"frame {index}")
+        if times is not None and not np.isfinite(times).all():
+            raise DataError("per-point times contain NaN or infinite values", source=self.path, location=f"frame {index}")
+        stamps = self._stamps()
+        stamp = None if stamps is None or index >= len(stamps) else float(stamps[index])
+        return Scan(points, None, times, stamp, index, f"{self.path} frame {index}", self.point_time_convention, None)
+
+    def _stamps(self) -> np.ndarray | None:
+        get = getattr(self.loader, "get_frames_timestamps", None)
+        if get is None:
+            return None
+        try:
+            with guarded_loader(self.loader_name, str(self.path)):
+                stamps = np.asarray(get(), dtype=np.float64).ravel()
+        except DataError:
+            return None
+        return stamps if len(stamps) == len(self) else None
+
+    @property
+    def timestamps_s(self) -> np.ndarray | None:
+        return self._stamps()
+
+    @property
+    def ground_truth(self) -> Trajectory | None:
+        poses = getattr(self.loader, "gt_poses", None)
+        if poses is None:
+            return None
+        poses = np.asarray(poses, dtype=np.float64)
+        stamps = self._stamps()
+        return Trajectory(poses, stamps if stamps is not None and len(stamps) == len(poses) else None, name=f"{self.name}_gt",
+                          meta={"frame": self.ground_truth_frame, "pose_instant": None, "kiss_icp_loader": self.loader_name})
+
+
+class KissKittiScans(KissLoaderScans):
+    """KITTI odometry as kiss-icp reads it (vertical-angle correction applied, GT in the LiDAR frame)."""
+
+    loader_name = "kitti"
+    point_time_convention = "relative_s"
+    ground_truth_frame = "LiDAR frame (Tr^-1 P Tr, kiss-icp's KITTI loader)"
+
+    def __init__(self, path: str | os.PathLike, sequence: str | int = "00"):
+        if not (Path(path) / "sequences" / f"{int(sequence):02d}" / "velodyne").is_dir():
+            raise DataError(f"no sequences/{int(sequence):02d}/velodyne/ (kiss-icp's KITTI loader reads the odometry root)", source=path)
+        super().__init__(path, sequence=f"{int(sequence):02d}")
+
+    @property
+    def timestamps_s(self) -> np.ndarray | None:
+        path = self.path / "sequences" / f"{int(self.loader.sequence_id):02d}" / "times.txt"
+        return np.loadtxt(path).ravel() if path.is_file() else None
+
+    @property
+    def ground_truth(self) -> Trajectory | None:
+        if not hasattr(self.loader, "gt_poses"):
+            return None
+        gt = np.asarray(self.loader.gt_poses, dtype=np.float64)[: len(self)]
+        return Trajectory(gt, None, name=f"{self.name}_gt", meta={"frame": self.ground_truth_frame, "pose_instant": None})
+
+
+class KissKittiRawScans(KissLoaderScans):
+    """KITTI raw drives mapped to odometry sequences, as kiss-icp's ``kitti_raw`` loader reads them."""
+
+    loader_name = "kitti_raw"
+    requires = {"pykitti": "pip install pykitti"}
+
+    def __init__(self, path: str | os.PathLike, sequence: str | int = "00"):
+        super().__init__(path, sequence=f"{int(sequence):02d}")
+
+
+class KissTumScans(KissLoaderScans):
+    """TUM RGB-D depth images as point clouds (kiss-icp's ``tum`` loader)."""
+
+    loader_name = "tum"
+    point_time_convention = "relative_s"
+
+    def __init__(self, path: str | os.PathLike):
+        for needed in ("depth.txt", "groundtruth.txt", "rgb"):
+            if not (Path(path) / needed).exists():
+                raise DataError(f"a TUM RGB-D sequence folder needs {needed}", source=path)
+        super().__init__(path)
+
+
+class OusterScans(KissLoaderScans):
+    """An Ouster ``.pcap`` with its sensor metadata ``.json`` (``meta``; default: the json beside it with the
+    longest common name prefix, as kiss-icp looks for it). Per-point times are the column fraction in [0, 1)."""
+
+    loader_name = "ouster"
+    requires = {"ouster.sdk": OUSTER_EXTRA}
+
+    def __init__(self, path: str | os.PathLike, meta: str | None = None):
+        pcap = Path(path)
+        if not pcap.is_file():
+            raise DataError("Ouster pcap not found (the ouster reader takes one .pcap file)", source=pcap)
+        if meta is not None and not Path(meta).is_file():
+            raise DataError("Ouster metadata json not found", source=meta)
+        if meta is None and not list(pcap.parent.glob("*.json")):
+            raise DataError("no sensor metadata: an Ouster pcap needs the .json recorded with it (beside it, or meta=PATH)",
+                            source=pcap, location="frame 0")
+        super().__init__(pcap, meta=meta)  # then the ouster-sdk check (ConfigError with the pip line)
+
+
+class NcltScans(KissLoaderScans):
+    """NCLT (``velodyne_sync`` + ``ground_truth``), kiss-icp's ``nclt`` loader."""
+
+    loader_name = "nclt"
+    point_time_convention = "relative_s"
+
+    def __init__(self, path: str | os.PathLike):
+        super().__init__(path)
+
+
+class MulranScans(KissLoaderScans):
+    """MulRan (Ouster ``.bin`` + ``global_pose.csv``), kiss-icp's ``mulran`` loader."""
+
+    loader_name = "mulran"
+
+    def __init__(self, path: str | os.PathLike):
+        super().__init__(path)
+
+
+class NewerCollegeScans(KissLoaderScans):
+    """Newer College (``raw_format/ouster_scan/*.pcd`` + ``ground_truth``), kiss-icp's ``ncd`` loader."""
+
+    loader_name = "ncd"
+    requires = {"pyntcloud": "pip install pyntcloud"}
+
+    def __init__(self, path: str | os.PathLike):
+        super().__init__(path)
+
+
+class HeliprScans(KissLoaderScans):
+    """HeLiPR (``LiDAR/<sensor>`` + ``LiDAR_GT``), kiss-icp's ``helipr`` loader; ``sequence`` is the sensor."""
+
+    loader_name = "helipr"
+    SENSORS = ("Avia", "Aeva", "Ouster", "Velodyne")
+
+    def __init__(self, path: str | os.PathLike, sequence: str = "Ouster"):
+        if sequence not in self.SENSORS:
+            from lidarkit.errors import ConfigError
+
+            raise ConfigError(f"unknown HeLiPR sensor {sequence!r}; known: {', '.join(self.SENSORS)}", source="helipr sequence")
+        super().__init__(path, sequence=sequence)
+
+
+class BoreasScans(KissLoaderScans):
+    """Boreas (``lidar/*.bin`` + ``applanix/lidar_poses.csv``), kiss-icp's ``boreas`` loader."""
+
+    loader_name = "boreas"
+
+    def __init__(self, path: str | os.PathLike):
+        super().__init__(path)
+
+
+class ApolloScans(KissLoaderScans):
+    """Apollo-SouthBay (``pcds`` + ``poses/gt_poses.txt``), kiss-icp's ``apollo`` loader."""
+
+    loader_name = "apollo"
+    point_time_convention = "relative_s"
+
+    def __init__(self, path: str | os.PathLike):
+        super().__init__(path)
+
+
+class NuScenesScans(KissLoaderScans):
+    """nuScenes scene ``sequence`` (number), kiss-icp's ``nuscenes`` loader (needs nuscenes-devkit)."""
+
+    loader_name = "nuscenes"
+    requires = {"nuscenes": "pip install nuscenes-devkit"}
+    point_time_convention = "relative_s"
+
+    def __init__(self, path: str | os.PathLike, sequence: str | int = "0061"):
+        super().__init__(path, sequence=str(sequence))
+
+
+class GenericScans(KissLoaderScans):
+    """A folder of point-cloud files of one kind (``.bin`` KITTI format, ``.pcd``, ``.ply``, ...), kiss-icp's
+    ``generic`` loader; per-point times from a ``t``/``timestamp``/``time`` attribute of PCD/PLY files."""
+
+    loader_name = "generic"
+    point_time_convention = "relative_s"
+
+    def __init__(self, path: str | os.PathLike):
+        from kiss_icp.datasets import supported_file_extensions
+
+        folder = Path(path)
+        if not folder.is_dir():
+            raise DataError("the generic reader takes a folder of point-cloud files", source=folder)
+        if not any(p.suffix.lstrip(".") in supported_file_extensions() for p in folder.iterdir()):
+            raise DataError(f"no point-cloud files ({', '.join(supported_file_extensions())})", source=folder)
+        super().__init__(folder)
+
+
+__all__ = [
+    "KISS_KINDS", "ApolloScans", "BoreasScans", "GenericScans", "HeliprScans", "KissKittiRawScans", "KissKittiScans",
+    "KissLoaderScans", "KissTumScans", "MulranScans", "NcltScans", "NewerCollegeScans", "NuScenesScans", "OusterScans",
+]

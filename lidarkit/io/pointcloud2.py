@@ -1,0 +1,142 @@
+"""``sensor_msgs/PointCloud2`` messages to lidarkit arrays, with every check a recorded bag needs.
+
+kiss-icp's bag loaders read the field layout from the ``PointField`` constants (``FLOAT32 = 7`` ...), which
+messages decoded from MCAP schemas without constants lack; lidarkit reads the datatype codes of the ROS
+definition directly and adds what kiss-icp leaves out: missing x/y/z fields, a data buffer shorter than the
+header says, non-finite per-point times, and the unit of the time field.
+
+Per-point time fields (the first present of :data:`TIME_FIELDS`, or the one asked for):
+
+* ``time`` float32 seconds relative to the message stamp (Velodyne drivers; negative when the stamp is the
+  sweep end), ``t`` uint32 nanoseconds from the sweep start (Ouster drivers), ``timestamp(s)`` as either;
+* integer fields are nanoseconds; float fields are seconds, or nanoseconds when larger than 1e15;
+* values beyond 1e5 s are absolute time (``point_time_convention="absolute_s"``), otherwise relative to the
+  message stamp (``"relative_s"``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from lidarkit.errors import DataError
+
+TIME_FIELDS = ("time", "t", "timestamp", "timestamps")
+_ABSOLUTE_AFTER_S = 1e5
+_NANOSECONDS_AFTER = 1e15
+
+
+@dataclass(frozen=True)
+class DecodedCloud:
+    """One decoded message: ``points_xyz`` (N, 3) float64 without non-finite points, ``intensity`` (N,) float32
+    or None, ``point_times_s`` (N,) float64 or None in ``point_time_convention``, ``time_field`` its source."""
+
+    points_xyz: np.ndarray
+    intensity: np.ndarray | None
+    point_times_s: np.ndarray | None
+    point_time_convention: str
+    time_field: str | None
+
+
+def stamp_seconds(stamp: Any) -> float:
+    """A ROS 1 (``sec``/``nanosec``, as rosbags names both) or ROS 2 ``builtin_interfaces/Time`` in seconds."""
+    return float(stamp.sec) + 1e-9 * float(stamp.nanosec)
+
+
+def decode_pointcloud2(msg: Any, *, source: str, location: str, time_field: str | None = "auto") -> DecodedCloud:
+    """Points, intensity and per-point times of a PointCloud2 ``msg`` (any object with its fields).
+
+    ``time_field``: ``"auto"`` (first of :data:`TIME_FIELDS`), a field name, or None to ignore times.
+    Every problem raises DataError naming ``source`` (the file) and ``location`` (topic and message index).
+    """
+    names = [f.name for f in msg.fields]
+    missing = [axis for axis in ("x", "y", "z") if axis not in names]
+    if missing:
+        raise DataError(f"PointCloud2 has no {'/'.join(missing)} field (fields: {', '.join(names) or 'none'})", source=source, location=location)
+    try:
+        dtype = fields_dtype(msg.fields, int(msg.point_step))
+    except (ValueError, TypeError, KeyError) as err:
+        raise DataError(f"PointCloud2 field layout not readable ({err})", source=source, location=location) from None
+    n_points = int(msg.width) * int(msg.height)
+    step = int(msg.point_step)
+    if n_points and step <= 0:
+        raise DataError(f"point_step {step} for {n_points} points", source=source, location=location)
+    data = msg.data
+    buffer = np.frombuffer(data if isinstance(data, (bytes, bytearray, memoryview, np.ndarray)) else bytes(data), dtype=np.uint8)
+    if buffer.size < n_points * step:
+        raise DataError(
+            f"data holds {buffer.size} bytes but width x height = {n_points} points of {step} bytes need "
+            f"{n_points * step} (truncated message)", source=source, location=location,
+        )
+    cloud = np.ndarray(shape=(n_points,), dtype=dtype, buffer=buffer)
+    if msg.is_bigendian:
+        cloud = cloud.view(cloud.dtype.newbyteorder(">"))
+    xyz = np.column_stack([cloud["x"], cloud["y"], cloud["z"]]).astype(np.float64)
+    keep = np.isfinite(xyz).all(axis=1)  # organized clouds mark missing returns with NaN
+    all_kept = bool(keep.all())
+    if not all_kept:
+        xyz = xyz[keep]
+    intensity = None
+    if "intensity" in names:
+        intensity = np.asarray(cloud["intensity"], dtype=np.float32)
+        intensity = intensity if all_kept else intensity[keep]
+
+    field = _time_field(names, time_field, source, location)
+    if field is None:
+        return DecodedCloud(xyz, intensity, None, "relative_s", None)
+    raw = cloud[field] if all_kept else cloud[field][keep]
+    if np.issubdtype(raw.dtype, np.integer):
+        times = raw.astype(np.float64) * 1e-9
+    else:
+        times = raw.astype(np.float64)
+        bad = np.flatnonzero(~np.isfinite(times))
+        if len(bad):
+            raise DataError(
+                f"per-point time field {field!r} has {len(bad)} NaN or infinite values (first at point {int(bad[0])})",
+                source=source, location=location,
+            )
+        if len(times) and float(np.abs(times).max()) > _NANOSECONDS_AFTER:
+            times = times * 1e-9
+    convention = "absolute_s" if len(times) and float(np.abs(times).max()) > _ABSOLUTE_AFTER_S else "relative_s"
+    return DecodedCloud(xyz, intensity, times, convention, field)
+
+
+#: sensor_msgs/PointField datatype codes
+POINTFIELD_DTYPES = {1: "i1", 2: "u1", 3: "<i2", 4: "<u2", 5: "<i4", 6: "<u4", 7: "<f4", 8: "<f8"}
+
+
+def fields_dtype(fields: Any, point_step: int) -> np.dtype:
+    """Structured little-endian dtype of a PointCloud2 point; fields with ``count > 1`` become ``name_0, name_1, ...``."""
+    names, formats, offsets = [], [], []
+    for i, field in enumerate(fields):
+        code = int(field.datatype)
+        if code not in POINTFIELD_DTYPES:
+            raise ValueError(f"field {field.name!r} has unknown datatype code {code}")
+        base = np.dtype(POINTFIELD_DTYPES[code])
+        count = int(field.count) if int(field.count) > 0 else 1
+        for a in range(count):
+            name = field.name or f"unnamed_field_{i}"
+            names.append(name if count == 1 else f"{name}_{a}")
+            formats.append(base)
+            offsets.append(int(field.offset) + a * base.itemsize)
+    if len(set(names)) != len(names):
+        raise ValueError("duplicate field names")
+    end = max((o + f.itemsize for o, f in zip(offsets, formats)), default=0)
+    if end > point_step:
+        raise ValueError(f"fields end at byte {end} but point_step is {point_step}")
+    return np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": point_step})
+
+
+def _time_field(names: list[str], wanted: str | None, source: str, location: str) -> str | None:
+    if wanted is None or wanted in ("", "none"):
+        return None
+    if wanted == "auto":
+        return next((f for f in TIME_FIELDS if f in names), None)
+    if wanted not in names:
+        raise DataError(f"no per-point time field {wanted!r} (fields: {', '.join(names)})", source=source, location=location)
+    return wanted
+
+
+__all__ = ["TIME_FIELDS", "DecodedCloud", "decode_pointcloud2", "fields_dtype", "stamp_seconds"]

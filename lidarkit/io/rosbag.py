@@ -1,0 +1,359 @@
+"""ROS bags and MCAP files as scan sequences, through kiss-icp's ``rosbag`` and ``mcap`` dataloaders.
+
+``open_dataset("rosbag", path, topic=...)`` reads a ROS 1 ``.bag`` (or a folder of split ``.bag`` files) or a
+ROS 2 bag folder (``metadata.yaml``, sqlite3 or mcap storage); ``open_dataset("mcap", path, topic=...)`` a
+standalone ``.mcap`` file. kiss-icp's loaders open the files; lidarkit checks the topic first (kiss-icp prints
+and exits on a missing one) and decodes each message with :func:`lidarkit.io.pointcloud2.decode_pointcloud2`.
+
+Per scan: ``timestamp_s`` is the message header stamp; ``stamp_instant`` says which instant of the sweep that
+stamp is, read from the per-point times (relative times starting at 0: the sweep start; ending at 0: the end).
+Ground truth: a ``nav_msgs/Odometry`` topic (``ground_truth_topic``; found automatically when there is one),
+one pose per scan (by count, else the nearest stamp), expressed relative to nothing (as recorded); its
+``meta["pose_instant"]`` is read from its stamps against the sweep's point times.
+
+Access is sequential (a bag is a stream); reading an earlier index reopens the bag.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import logging
+import os
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lidarkit.errors import ConfigError, DataError
+from lidarkit.io.base import Scan, classify_instant
+from lidarkit.io.pointcloud2 import decode_pointcloud2, stamp_seconds
+from lidarkit.trajectory import Trajectory
+
+log = logging.getLogger(__name__)
+
+POINTCLOUD2 = "sensor_msgs/msg/PointCloud2"
+ODOMETRY = "nav_msgs/msg/Odometry"
+ROS_EXTRA = "pip install 'lidarkit[ros]'  (rosbags, mcap, mcap-ros2-support)"
+
+
+def require_modules(modules: dict[str, str], kind: str) -> None:
+    """ConfigError naming the pip line when a module a reader needs is not installed."""
+    import importlib.util
+
+    for module, pip_line in modules.items():
+        try:
+            found = importlib.util.find_spec(module) is not None
+        except (ImportError, ValueError):
+            found = False
+        if not found:
+            raise ConfigError(f"the {kind} reader needs the Python package {module.split('.')[0]!r}: {pip_line}", source=f"{kind} dataset")
+
+
+@contextlib.contextmanager
+def guarded_loader(kind: str, source: str) -> Iterator[None]:
+    """Run a kiss-icp loader call so that it can neither print to stdout nor end the process.
+
+    kiss-icp's loaders print and call ``exit()`` on problems they find; lidarkit checks first, and anything left
+    becomes a DataError carrying what the loader printed.
+    """
+    out = io.StringIO()
+    try:
+        with contextlib.redirect_stdout(out):
+            yield
+    except SystemExit:
+        said = " ".join(out.getvalue().split()) or "no message"
+        raise DataError(f"kiss-icp's {kind} loader gave up: {said}", source=source) from None
+    except (AssertionError, OSError, IndexError, KeyError, ValueError, StopIteration) as err:
+        raise DataError(f"kiss-icp's {kind} loader failed: {type(err).__name__}: {err}", source=source) from None
+    finally:
+        if out.getvalue().strip():
+            log.debug("%s loader said: %s", kind, out.getvalue().strip())
+
+
+class _BagScans:
+    """What the ROS bag and MCAP readers share: sequential reading, decoding, stamps and ground truth."""
+
+    kind = "bag"
+
+    def __init__(self, path: str | os.PathLike, topic: str | None, ground_truth_topic: str | None, time_field: str | None):
+        self.path = Path(path)
+        if not self.path.exists():
+            raise DataError("bag not found", source=self.path)
+        self.time_field = time_field
+        self._next = 0
+        self._stream: Iterator[tuple[int, Any]] | None = None
+        self._stamps: dict[int, float] = {}
+        self._last_stamp: tuple[int, float] | None = None
+        topics = self._list_topics()  # {topic: msgtype}
+        clouds = sorted(t for t, m in topics.items() if m == POINTCLOUD2)
+        listing = ", ".join(f"{t} ({m})" for t, m in sorted(topics.items())) or "none"
+        if topic:
+            if topic not in topics:
+                raise DataError(f"no topic {topic!r}; topics present: {listing}", source=self.path)
+            if topics[topic] != POINTCLOUD2:
+                raise DataError(f"topic {topic!r} carries {topics[topic]}, not {POINTCLOUD2}; topics present: {listing}", source=self.path)
+        elif not clouds:
+            raise DataError(f"no {POINTCLOUD2} topic; topics present: {listing}", source=self.path)
+        elif len(clouds) > 1:
+            raise DataError(f"several {POINTCLOUD2} topics ({', '.join(clouds)}): choose one with topic=...", source=self.path)
+        self.topic = topic or clouds[0]
+        odometry = sorted(t for t, m in topics.items() if m == ODOMETRY)
+        if ground_truth_topic:
+            if topics.get(ground_truth_topic) != ODOMETRY:
+                raise DataError(f"ground_truth_topic {ground_truth_topic!r} is not a {ODOMETRY} topic; topics present: {listing}", source=self.path)
+            self.ground_truth_topic: str | None = ground_truth_topic
+        elif ground_truth_topic is None and len(odometry) == 1:
+            self.ground_truth_topic = odometry[0]
+        else:
+            self.ground_truth_topic = None
+        self.name = f"{self.kind}:{self.path.name}{self.topic}"
+        self._open_loader()
+
+    # ---- subclasses ----------------------------------------------------------------------------
+    def _list_topics(self) -> dict[str, str]:
+        raise NotImplementedError
+
+    def _open_loader(self) -> None:
+        raise NotImplementedError
+
+    def _messages(self, topic: str) -> Iterator[tuple[int, Any]]:
+        """``(index, deserialized message)`` of ``topic`` in order."""
+        raise NotImplementedError
+
+    # ---- ScanSequence ----------------------------------------------------------------------------
+    def __len__(self) -> int:
+        return self.n_scans
+
+    @property
+    def reader_options(self) -> dict[str, Any]:
+        return {"kind": self.kind, "path": str(self.path), "topic": self.topic, "ground_truth_topic": self.ground_truth_topic,
+                "time_field": self.time_field}
+
+    def _location(self, index: int) -> str:
+        return f"message {index} on {self.topic}"
+
+    def read_scan(self, index: int) -> Scan:
+        """Scan ``index`` (messages are read in order; an earlier index restarts the stream)."""
+        if not 0 <= index < self.n_scans:
+            raise DataError(f"scan index {index} out of range for {self.n_scans} messages on {self.topic}", source=self.path)
+        if self._stream is None or index < self._next:
+            self._stream = self._messages(self.topic)
+            self._next = 0
+            self._last_stamp = None
+        msg = None
+        while self._next <= index:
+            try:
+                k, msg = next(self._stream)
+            except StopIteration:
+                raise DataError(f"the bag ends after {self._next} of {self.n_scans} messages (truncated?)", source=self.path,
+                                location=self._location(self._next)) from None
+            except DataError:
+                raise
+            except Exception as err:  # noqa: BLE001 - any reader failure of a damaged file becomes a DataError
+                raise DataError(f"cannot read the message ({type(err).__name__}: {err}); truncated or damaged file?",
+                                source=self.path, location=self._location(self._next)) from None
+            self._next += 1
+            stamp = stamp_seconds(msg.header.stamp)
+            if self._last_stamp is not None and stamp < self._last_stamp[1]:
+                raise DataError(
+                    f"time goes backwards: header stamp {stamp:.9f} s is before {self._last_stamp[1]:.9f} s of message {self._last_stamp[0]}",
+                    source=self.path, location=self._location(k),
+                )
+            self._last_stamp = (k, stamp)
+            self._stamps[k] = stamp
+        decoded = decode_pointcloud2(msg, source=str(self.path), location=self._location(index), time_field=self.time_field)
+        stamp = self._stamps[index]
+        instant = None
+        if decoded.point_times_s is not None and len(decoded.point_times_s):
+            t = decoded.point_times_s - (stamp if decoded.point_time_convention == "absolute_s" else 0.0)
+            lo, hi = float(t.min()), float(t.max())
+            if hi > lo:
+                instant = classify_instant(-lo / (hi - lo))
+        return Scan(decoded.points_xyz, decoded.intensity, decoded.point_times_s, stamp, index,
+                    f"{self.path} {self._location(index)}", decoded.point_time_convention, instant)
+
+    @property
+    def timestamps_s(self) -> np.ndarray:
+        """Header stamps of every scan (one pass over the messages not read yet)."""
+        if len(self._stamps) < self.n_scans:
+            last = None
+            for k, msg in self._messages(self.topic):
+                stamp = stamp_seconds(msg.header.stamp)
+                if last is not None and stamp < last:
+                    raise DataError(f"time goes backwards: header stamp {stamp:.9f} s is before {last:.9f} s",
+                                    source=self.path, location=self._location(k))
+                last = stamp
+                self._stamps[k] = stamp
+        return np.array([self._stamps[k] for k in range(self.n_scans)], dtype=np.float64)
+
+    @property
+    def ground_truth(self) -> Trajectory | None:
+        """One recorded odometry pose per scan, ``meta["pose_instant"]`` read from the stamps (None if unclear)."""
+        if self.ground_truth_topic is None:
+            return None
+        stamps, poses = [], []
+        for _, msg in self._messages(self.ground_truth_topic):
+            p, q = msg.pose.pose.position, msg.pose.pose.orientation
+            stamps.append(stamp_seconds(msg.header.stamp))
+            poses.append(_pose_matrix([p.x, p.y, p.z], [q.x, q.y, q.z, q.w]))
+        if not poses:
+            raise DataError(f"ground-truth topic {self.ground_truth_topic} has no messages", source=self.path)
+        gt_stamps, gt_poses = np.array(stamps), np.stack(poses)
+        scan_stamps = self.timestamps_s
+        if len(gt_stamps) != len(scan_stamps):
+            pick = np.clip(np.searchsorted(gt_stamps, scan_stamps), 1, len(gt_stamps) - 1)
+            pick = np.where(np.abs(gt_stamps[pick - 1] - scan_stamps) <= np.abs(gt_stamps[pick] - scan_stamps), pick - 1, pick)
+            gt_stamps, gt_poses = gt_stamps[pick], gt_poses[pick]
+        meta = {"frame": f"as recorded on {self.ground_truth_topic}", "pose_instant": self._ground_truth_instant(gt_stamps)}
+        return Trajectory(gt_poses, gt_stamps, name=f"{self.path.name}{self.ground_truth_topic}", meta=meta)
+
+    def _ground_truth_instant(self, gt_stamps: np.ndarray) -> str | None:
+        """Which instant of the sweep the ground truth stamps are, from scan 0's absolute point times."""
+        scan = self.read_scan(0)
+        if scan.point_times_s is None or len(scan.point_times_s) < 2:
+            return None
+        t = scan.point_times_s + (0.0 if scan.point_time_convention == "absolute_s" else scan.timestamp_s)
+        lo, hi = float(t.min()), float(t.max())
+        if hi <= lo:
+            return None
+        period = hi - lo
+        if len(self._stamps) > 1:  # the nominal sweep period: spacing of the stamps (the last point fires just before it)
+            period = float(np.median(np.diff(self.timestamps_s)))
+        return classify_instant((float(gt_stamps[0]) - lo) / period)
+
+
+def _pose_matrix(xyz: list[float], quat_xyzw: list[float]) -> np.ndarray:
+    from scipy.spatial.transform import Rotation
+
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_quat(quat_xyzw).as_matrix()
+    T[:3, 3] = xyz
+    return T
+
+
+class RosbagScans(_BagScans):
+    """ROS 1 ``.bag`` (or a folder of split bags) or ROS 2 bag folder, via kiss-icp's ``RosbagDataset``.
+
+    Options: ``topic`` (the PointCloud2 topic; needed when there are several), ``ground_truth_topic`` (a
+    ``nav_msgs/Odometry`` topic; default: the only one, ``""``: none), ``time_field`` (``auto``, a field name or
+    ``none``).
+    """
+
+    kind = "rosbag"
+
+    def __init__(self, path: str | os.PathLike, topic: str | None = None, ground_truth_topic: str | None = None,
+                 time_field: str | None = "auto"):
+        require_modules({"rosbags": ROS_EXTRA}, "rosbag")
+        super().__init__(path, topic, ground_truth_topic, time_field)
+
+    def _reader_paths(self) -> list[Path]:
+        if self.path.is_dir():
+            split = sorted(self.path.glob("*.bag"))
+            if split:
+                return split
+        return [self.path]
+
+    def _list_topics(self) -> dict[str, str]:
+        from rosbags.highlevel import AnyReader
+
+        try:
+            with AnyReader(self._reader_paths()) as reader:
+                return {t: info.msgtype for t, info in reader.topics.items()}
+        except Exception as err:  # noqa: BLE001 - rosbags raises its own error types for damaged files
+            raise DataError(f"not a readable ROS bag ({type(err).__name__}: {err})", source=self.path) from None
+
+    def _open_loader(self) -> None:
+        from kiss_icp.datasets.rosbag import RosbagDataset
+
+        with guarded_loader("rosbag", str(self.path)):
+            self.loader = RosbagDataset(self.path, topic=self.topic)
+        self.n_scans = int(self.loader.n_scans)
+
+    def _messages(self, topic: str) -> Iterator[tuple[int, Any]]:
+        bag = self.loader.bag
+        connections = [c for c in bag.connections if c.topic == topic]
+        for k, (connection, _, raw) in enumerate(bag.messages(connections=connections)):
+            try:
+                msg = bag.deserialize(raw, connection.msgtype)
+            except Exception as err:  # noqa: BLE001
+                raise DataError(f"cannot decode the message ({type(err).__name__}: {err})", source=self.path,
+                                location=f"message {k} on {topic}") from None
+            yield k, msg
+
+    def close(self) -> None:
+        """Release the bag (kiss-icp's loader keeps an open message cursor; a cursor left open locks sqlite3)."""
+        for stream in (getattr(self, "_stream", None), getattr(getattr(self, "loader", None), "msgs", None)):
+            if stream is not None:
+                with contextlib.suppress(Exception):
+                    stream.close()
+        self._stream = None
+        bag = getattr(getattr(self, "loader", None), "bag", None)
+        if bag is not None:
+            with contextlib.suppress(Exception):
+                bag.close()
+            del self.loader.bag  # kiss-icp's __del__ closes it only when still there
+
+    def __del__(self) -> None:
+        self.close()
+
+
+class McapScans(_BagScans):
+    """A standalone ROS 2 ``.mcap`` file, via kiss-icp's ``McapDataloader`` (options as :class:`RosbagScans`)."""
+
+    kind = "mcap"
+
+    def __init__(self, path: str | os.PathLike, topic: str | None = None, ground_truth_topic: str | None = None,
+                 time_field: str | None = "auto"):
+        require_modules({"mcap": ROS_EXTRA, "mcap_ros2": ROS_EXTRA}, "mcap")
+        if Path(path).is_dir():
+            raise DataError("an MCAP dataset is one .mcap file; a ROS 2 bag folder is read with rosbag:PATH", source=path)
+        super().__init__(path, topic, ground_truth_topic, time_field)
+
+    def _summary(self):
+        from mcap.reader import make_reader
+
+        try:
+            with open(self.path, "rb") as fh:
+                summary = make_reader(fh).get_summary()
+        except Exception as err:  # noqa: BLE001 - mcap raises its own error types for damaged files
+            raise DataError(f"not a readable MCAP file ({type(err).__name__}: {err})", source=self.path) from None
+        if summary is None:
+            raise DataError("MCAP file has no summary section (truncated, or written without one)", source=self.path)
+        return summary
+
+    def _list_topics(self) -> dict[str, str]:
+        summary = self._summary()
+        topics = {}
+        for channel in summary.channels.values():
+            schema = summary.schemas.get(channel.schema_id)
+            name = schema.name if schema is not None else "no schema"
+            if schema is not None and name == POINTCLOUD2 and schema.encoding != "ros2msg":
+                name = f"{name} [{schema.encoding} schema, not ros2msg]"
+            topics[channel.topic] = name
+        return topics
+
+    def _open_loader(self) -> None:
+        from kiss_icp.datasets.mcap import McapDataloader
+
+        with guarded_loader("mcap", str(self.path)):
+            self.loader = McapDataloader(str(self.path), topic=self.topic)
+        self.n_scans = int(self.loader.n_scans)
+
+    def _messages(self, topic: str) -> Iterator[tuple[int, Any]]:
+        stream = self.loader.read_ros2_messages(str(self.path), topics=[topic])
+        k = 0
+        while True:
+            try:
+                item = next(stream)
+            except StopIteration:
+                return
+            except Exception as err:  # noqa: BLE001
+                raise DataError(f"cannot decode the message ({type(err).__name__}: {err})", source=self.path,
+                                location=f"message {k} on {topic}") from None
+            yield k, item.ros_msg
+            k += 1
+
+
+__all__ = ["McapScans", "RosbagScans", "guarded_loader", "require_modules"]

@@ -1,0 +1,151 @@
+"""Process lifetime: worker processes die with the process that started them; SIGINT / SIGTERM end the CLI cleanly.
+
+Only the standard library is imported here: the CLI installs :func:`install_startup_handlers` before its heavy
+imports, and the fork server preloads this module.
+
+- :func:`init_worker` runs first in every pool worker: it ignores SIGINT (Ctrl-C reaches the whole process
+  group; only the parent decides what to do), asks Linux to SIGKILL the worker when its parent dies
+  (``PR_SET_PDEATHSIG``) and starts a watchdog thread that ends the worker once the lidarkit process that owns the
+  pool is gone (the parent of a forkserver worker is the fork server, not lidarkit; and not every OS has prctl).
+- :class:`Interrupted` is what SIGINT / SIGTERM become in the CLI (:func:`handle_signals`): a ``BaseException``
+  (so ``except Exception`` in job code does not swallow it) carrying the exit code 128 + signal number.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import os
+import signal
+import sys
+import threading
+import time
+from collections.abc import Iterator
+
+WATCHDOG_PERIOD_S = 0.5
+
+
+class Interrupted(BaseException):
+    """SIGINT or SIGTERM received; ``exit_code`` is 130 or 143."""
+
+    def __init__(self, signum: int):
+        self.signum = signum
+        self.exit_code = 128 + signum
+        super().__init__(signal.Signals(signum).name)
+
+
+def _raise_interrupted(signum: int, _frame) -> None:
+    for s in (signal.SIGINT, signal.SIGTERM):  # the cleanup that follows must not be interrupted in turn
+        signal.signal(s, signal.SIG_IGN)
+    raise Interrupted(signum)
+
+
+def _exit_at_startup(signum: int, _frame) -> None:
+    os.write(2, f"interrupted by {signal.Signals(signum).name} while starting: nothing was written\n".encode())
+    os._exit(128 + signum)
+
+
+def install_startup_handlers() -> None:
+    """SIGINT / SIGTERM before the command runs (while modules load): one line, exit 130 / 143, no traceback."""
+    if threading.current_thread() is threading.main_thread():
+        for s in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(s, _exit_at_startup)
+
+
+def _quiet_bootstrap_hook(exc_type, exc, tb) -> None:
+    """Fork-server children: a worker that cannot start because its pool is already shut down (its semaphore or
+    pipe gone) exits quietly instead of printing a traceback over the parent's last line."""
+    if issubclass(exc_type, (OSError, EOFError)):
+        return
+    sys.__excepthook__(exc_type, exc, tb)
+
+
+def setup_fork_server() -> None:
+    """Run in the fork server (preloaded, before it saves the handlers its children get): children ignore SIGINT
+    from birth (Ctrl-C reaches the whole process group; the parent decides) and get the quiet bootstrap hook."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    sys.excepthook = _quiet_bootstrap_hook
+
+
+@contextlib.contextmanager
+def handle_signals() -> Iterator[None]:
+    """Within the block SIGINT and SIGTERM raise :class:`Interrupted` (main thread only); handlers restored after."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    for s in previous:
+        signal.signal(s, _raise_interrupted)
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler if handler is not None else signal.SIG_DFL)
+
+
+def _set_parent_death_signal() -> None:
+    if not sys.platform.startswith("linux"):
+        return
+    with contextlib.suppress(OSError, AttributeError):
+        libc = ctypes.CDLL(None, use_errno=True)
+        PR_SET_PDEATHSIG = 1
+        libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # exists, owned by someone else (pid reused): treat as gone
+        return False
+    return True
+
+
+def _watch(owner_pid: int) -> None:
+    while True:
+        if not _alive(owner_pid) or os.getppid() == 1:
+            os._exit(1)  # the owner is gone: nobody will read this worker's result
+        time.sleep(WATCHDOG_PERIOD_S)
+
+
+def init_worker(owner_pid: int) -> None:
+    """Pool-worker initializer (see the module docstring)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    _set_parent_death_signal()
+    if not _alive(owner_pid):
+        os._exit(1)
+    threading.Thread(target=_watch, args=(owner_pid,), name="lidarkit-owner-watchdog", daemon=True).start()
+
+
+@contextlib.contextmanager
+def ignored_sigint() -> Iterator[None]:
+    """Ignore SIGINT while the block starts child processes: they inherit the ignored disposition through exec
+    (Python keeps it) and never see Ctrl-C. This thread also blocks SIGINT meanwhile, so on Linux a Ctrl-C in the
+    window stays pending and is delivered to the restored handler afterwards instead of being lost."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    can_block = hasattr(signal, "pthread_sigmask")
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT}) if can_block else None
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous if previous is not None else signal.SIG_DFL)
+        if can_block:
+            signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+
+
+_abandoned = threading.Event()
+
+
+def mark_abandoned() -> None:
+    """A pool could not be joined cleanly (a worker killed while sending its result leaves the pool's reader
+    thread blocked): the CLI then ends the process with ``os._exit`` after its cleanup instead of hanging."""
+    _abandoned.set()
+
+
+def abandoned() -> bool:
+    return _abandoned.is_set()

@@ -1,0 +1,206 @@
+"""An independent per-frame check of an odometry estimate, the same for every variant (stateful ones included).
+
+A variant's own verdict ("converged") says its optimizer stopped, not that the pose is right: point-to-point ICP
+on an open scene "converges" every frame onto the ground rings while the trajectory falls metres behind. This
+check uses only the estimated poses and the raw scans, never the variant's verdict:
+
+* **motion**: the frame's relative motion against the constant-velocity prediction (the previous relative
+  motion, scaled by the ratio of the frame intervals). The deviation implies an acceleration ``d / dt^2``;
+  a frame fails when it exceeds ``max_accel_mps2`` (translation) or ``max_angular_accel_dps2`` (rotation).
+  Frame 1 has no prediction and is not checked for motion.
+* **fitness**: scan ``k`` mapped into scan ``k-1`` by the estimated relative motion; the fraction of its
+  above-ground points (a random subsample of ``n_sample``) whose nearest above-ground point of scan ``k-1``
+  lies within ``max(inlier_min_m, inlier_range_fraction * range)``. A frame fails below ``min_fitness``.
+  The ground is left out because a flat ground fits any in-plane slide, and its rings (fixed to the sensor)
+  fit best at zero motion: they would reward exactly the failure the check looks for. The ground is the
+  densest 0.1 m layer of heights within 30 m of the sensor (a roughly level sensor); a scan with fewer than
+  ``min_points`` points above it is not checked for fitness.
+
+Cost: each scan is subsampled to ``max_target_points`` (seeded), split at the ground, one KD-tree over its
+above-ground points and ``n_sample`` queries; the motion part is vectorized over the whole run afterwards.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+
+#: Height bins (m) and horizontal radius (m) of the ground estimate.
+_GROUND_BIN_M = 0.1
+_GROUND_RADIUS_M = 30.0
+
+
+@dataclass(frozen=True)
+class FrameCheckConfig:
+    """Thresholds of the per-frame check (defaults: a road vehicle; a 10 Hz sensor gives 0.15 m and 1 deg)."""
+
+    max_accel_mps2: float = 15.0
+    """Largest plausible change of velocity per second (1.5 g; cars brake at <= 10 m/s^2)."""
+    max_angular_accel_dps2: float = 100.0
+    """Largest plausible change of turn rate per second (deg/s^2)."""
+    nominal_period_s: float = 0.1
+    """Frame interval used when the dataset has no time stamps."""
+    min_fitness: float = 0.3
+    inlier_min_m: float = 0.2
+    inlier_range_fraction: float = 0.02
+    ground_clearance_m: float = 0.3
+    n_sample: int = 1500
+    max_target_points: int = 20000
+    """Scans are thinned (every k-th point) to at most this many points before the ground split and the KD-tree."""
+    min_points: int = 50
+    seed: int = 0
+
+    def describe(self) -> dict[str, Any]:
+        """The thresholds in words and numbers (written to metrics.json)."""
+        return {
+            **asdict(self),
+            "motion_rule": "fails when |t_k - t_pred| / dt^2 > max_accel_mps2 or angle(R_pred^T R_k) / dt^2 > max_angular_accel_dps2 "
+            "(prediction: the previous relative motion; frame 1 not checked)",
+            "fitness_rule": "fails when fewer than min_fitness of the sampled above-ground points of scan k, mapped by the estimated "
+            "motion, lie within max(inlier_min_m, inlier_range_fraction * range) of an above-ground point of scan k-1",
+        }
+
+
+@dataclass
+class ScanGeometry:
+    """What the check keeps of a scan: its above-ground points (a target for the next frame, with their KD-tree)
+    and the sampled above-ground points mapped onto the previous scan."""
+
+    target_xyz: np.ndarray
+    tree: Any
+    sample_xyz: np.ndarray
+
+
+def ground_height(points_xyz: np.ndarray) -> float | None:
+    """Height of the densest ``0.1 m`` layer of points within 30 m of the sensor (the ground of a level sensor), or None."""
+    near = points_xyz[np.einsum("ij,ij->i", points_xyz[:, :2], points_xyz[:, :2]) < _GROUND_RADIUS_M**2, 2]
+    if len(near) < 50:
+        return None
+    lo = float(near.min())
+    counts = np.bincount(((near - lo) / _GROUND_BIN_M).astype(np.int64))
+    i = int(counts.argmax())
+    if counts[i] < 0.1 * len(near):  # no dominant layer: no ground to leave out
+        return None
+    return lo + (i + 0.5) * _GROUND_BIN_M
+
+
+def scan_geometry(points_xyz: np.ndarray, config: FrameCheckConfig, frame: int) -> ScanGeometry:
+    """The check's view of one scan: every k-th point (at most ``max_target_points``) split at the ground height, and
+    ``n_sample`` of its above-ground points drawn with a generator seeded by ``(seed, frame)`` (so the result does
+    not depend on which frames were checked before)."""
+    from scipy.spatial import cKDTree
+
+    rng = np.random.default_rng([config.seed, int(frame)])
+    points = points_xyz[:: -(-len(points_xyz) // config.max_target_points)]  # every k-th point: spread over the sweep
+    g = ground_height(points)
+    z = points[:, 2]
+    target = points if g is None else points[z > g + 0.5 * config.ground_clearance_m]
+    candidates = points if g is None else points[z > g + config.ground_clearance_m]
+    if len(candidates) > config.n_sample:
+        candidates = candidates[rng.choice(len(candidates), size=config.n_sample, replace=False)]
+    tree = cKDTree(target, balanced_tree=False, compact_nodes=False) if len(target) >= config.min_points else None
+    return ScanGeometry(target, tree, candidates)
+
+
+def scan_fitness(previous: ScanGeometry, current: ScanGeometry, T_previous_current: np.ndarray, config: FrameCheckConfig) -> float:
+    """Fitness of the current scan's sample mapped by ``T_previous_current`` onto the previous scan's above-ground
+    points; NaN when either has fewer than ``min_points`` above-ground points (not checked)."""
+    sample = current.sample_xyz
+    if previous.tree is None or len(sample) < config.min_points:
+        return float("nan")
+    mapped = sample @ T_previous_current[:3, :3].T + T_previous_current[:3, 3]
+    tolerance = np.maximum(config.inlier_min_m, config.inlier_range_fraction * np.linalg.norm(sample, axis=1))
+    dist, _ = previous.tree.query(mapped, k=1, distance_upper_bound=float(tolerance.max()))
+    return float(np.mean(dist < tolerance))
+
+
+def motion_deviation(poses_se3: np.ndarray, times_s: np.ndarray | None, config: FrameCheckConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per frame ``(n,)``: translation deviation (m) and rotation deviation (deg) of the relative motion from the
+    constant-velocity prediction, and the frame interval used (s). NaN for frames 0 and 1 (no prediction)."""
+    n = len(poses_se3)
+    dev_t, dev_r = np.full(n, np.nan), np.full(n, np.nan)
+    dt = np.full(n, np.nan)
+    if n >= 2:
+        if times_s is not None and len(times_s) == n and np.all(np.diff(times_s) > 0):
+            dt[1:] = np.diff(np.asarray(times_s, dtype=np.float64))
+        else:
+            dt[1:] = config.nominal_period_s
+    if n < 3:
+        return dev_t, dev_r, dt
+    rel = _relative(poses_se3)  # (n-1, 4, 4): motion of frame k in frame k-1, k = 1..n-1
+    scale = dt[2:] / dt[1:-1]
+    predicted_t = rel[:-1, :3, 3] * scale[:, None]
+    dev_t[2:] = np.linalg.norm(rel[1:, :3, 3] - predicted_t, axis=1)
+    r_err = np.einsum("nji,njk->nik", rel[:-1, :3, :3], rel[1:, :3, :3])
+    cos = np.clip((np.trace(r_err, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)
+    dev_r[2:] = np.degrees(np.arccos(cos))
+    return dev_t, dev_r, dt
+
+
+def _relative(poses: np.ndarray) -> np.ndarray:
+    """``T_{k-1}^-1 T_k`` for k = 1..n-1, vectorized (rigid inverse: R^T, -R^T t)."""
+    R, t = poses[:-1, :3, :3], poses[:-1, :3, 3]
+    inv = np.zeros_like(poses[:-1])
+    inv[:, :3, :3] = np.transpose(R, (0, 2, 1))
+    inv[:, :3, 3] = -np.einsum("nji,nj->ni", R, t)
+    inv[:, 3, 3] = 1.0
+    return np.einsum("nij,njk->nik", inv, poses[1:])
+
+
+def motion_limits(dt_s: np.ndarray, config: FrameCheckConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Per-frame limits of the translation (m) and rotation (deg) deviation implied by the acceleration bounds."""
+    return config.max_accel_mps2 * dt_s**2, config.max_angular_accel_dps2 * dt_s**2
+
+
+@dataclass(frozen=True)
+class FrameCheck:
+    """Per-frame outcome ``(n,)`` arrays: deviations, limits, fitness, and which frames failed (and why)."""
+
+    motion_dev_m: np.ndarray
+    rotation_dev_deg: np.ndarray
+    motion_limit_m: np.ndarray
+    rotation_limit_deg: np.ndarray
+    fitness: np.ndarray
+    failed_motion: np.ndarray
+    failed_fitness: np.ndarray
+    config: FrameCheckConfig
+
+    @property
+    def failed(self) -> np.ndarray:
+        return self.failed_motion | self.failed_fitness
+
+
+class FrameChecker:
+    """Runs the check frame by frame inside the odometry loop (fitness needs both scans); motion at the end."""
+
+    def __init__(self, n_frames: int, config: FrameCheckConfig | None = None):
+        self.config = config or FrameCheckConfig()
+        self.fitness = np.full(n_frames, np.nan)
+        self.has_point_times = np.zeros(n_frames, dtype=bool)
+        self.check_s = np.zeros(n_frames)
+        self._previous: ScanGeometry | None = None
+
+    def add(self, k: int, frame: int, points_xyz: np.ndarray, point_times_s: np.ndarray | None, poses_se3: np.ndarray) -> None:
+        """Frame ``k`` of the run (dataset index ``frame``) once its pose ``poses_se3[k]`` is known."""
+        import time
+
+        t0 = time.perf_counter()
+        self.has_point_times[k] = point_times_s is not None
+        geometry = scan_geometry(points_xyz, self.config, frame)
+        if k > 0 and self._previous is not None:
+            T = _relative(poses_se3[k - 1 : k + 1])[0]
+            self.fitness[k] = scan_fitness(self._previous, geometry, T, self.config)
+        self._previous = geometry
+        self.check_s[k] = time.perf_counter() - t0
+
+    def finish(self, poses_se3: np.ndarray, times_s: np.ndarray | None) -> FrameCheck:
+        cfg = self.config
+        dev_t, dev_r, dt = motion_deviation(poses_se3, times_s, cfg)
+        lim_t, lim_r = motion_limits(dt, cfg)
+        with np.errstate(invalid="ignore"):
+            failed_motion = (dev_t > lim_t) | (dev_r > lim_r)
+            failed_fitness = self.fitness < cfg.min_fitness
+        self._previous = None
+        return FrameCheck(dev_t, dev_r, lim_t, lim_r, self.fitness.copy(), failed_motion, failed_fitness, cfg)

@@ -1,0 +1,142 @@
+"""What a run really applied, as opposed to what was asked for: deskew and why, the instants compared, the
+reader's settings (e.g. a KITTI correction) and the alignment of every metric.
+
+``config.yaml`` keeps the requested method config (``deskew: true``); these settings say whether it happened.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lidarkit.errors import DataError
+
+#: Alignment of every score in metrics.json, the CLI table and the bench tables.
+METRIC_ALIGNMENT = {
+    "ape_translation_m": "unaligned, first pose anchored",
+    "ape_translation_se3_m": "SE(3)-aligned",
+    "rpe_translation_m": "relative over 1 frame, alignment-free",
+    "rpe_rotation_deg": "relative over 1 frame, alignment-free",
+    "final_error": "unaligned, first pose anchored",
+    "kitti_drift": "KITTI devkit segments, alignment-free",
+}
+
+
+def deskew_requested(registration: Any) -> bool | None:
+    """True/False when the variant's config has a ``deskew`` switch, None when the variant does not deskew at all."""
+    config = getattr(registration, "config", None)
+    value = getattr(config, "deskew", None) if config is not None else None
+    return None if value is None else bool(value)
+
+
+def point_time_source(sequence: Any) -> str:
+    """Where the reader takes per-point times from, in words (the folder for a KITTI layout)."""
+    folder = getattr(sequence, "point_times_dir", None)
+    if folder is not None:
+        return f"{Path(folder).name}/ ({folder})"
+    if type(sequence).__name__ == "SimulatedLidarSequence":
+        return "the simulator (column firing times)"
+    return f"the {type(sequence).__name__} reader"
+
+
+def point_times_not_found(sequence: Any) -> str:
+    """Why a reader gave no per-point times: for a KITTI layout, the folder names it looked for."""
+    from lidarkit.io.kitti import POINT_TIME_FOLDERS
+
+    if hasattr(sequence, "point_times_dir") and getattr(sequence, "sequence_dir", None) is not None:
+        if sequence.point_times_dir is None:
+            names = ", ".join(f"{d}/" for d in POINT_TIME_FOLDERS)
+            return f"no per-point times found (looked for {names} beside velodyne/ in {sequence.sequence_dir})"
+        return f"no per-point times found for some frames in {sequence.point_times_dir}"
+    return f"no per-point times found ({type(sequence).__name__} gives none)"
+
+
+def require_point_times(scan: Any, sequence: Any, dataset_name: str, frame: int) -> None:
+    """``--strict`` with deskew requested: a scan without per-point times is an error naming the frame."""
+    if scan.point_times_s is None:
+        raise DataError(f"deskew requested, {point_times_not_found(sequence)}", source=dataset_name, location=f"frame {frame}")
+
+
+def reader_settings(sequence: Any) -> dict[str, Any]:
+    """The reader's public scalar settings as applied (paths, options, corrections), JSON-ready: its attributes,
+    then what it reports itself in ``reader_options`` (e.g. a KITTI correction and whether it was applied)."""
+    out: dict[str, Any] = {"reader": type(sequence).__name__}
+    items = list(sorted(vars(sequence).items())) if hasattr(sequence, "__dict__") else []
+    reported = getattr(sequence, "reader_options", None)
+    items += list(reported.items()) if isinstance(reported, dict) else []
+    for key, value in items:
+        if key.startswith("_"):
+            continue
+        if isinstance(value, (str, int, float, bool)) or value is None:
+            out[key] = value
+        elif isinstance(value, (os.PathLike, np.generic)):
+            out[key] = str(value) if isinstance(value, os.PathLike) else value.item()
+    return out
+
+
+def corrections(reader: dict[str, Any]) -> dict[str, Any]:
+    """Reader settings that correct the data (e.g. a KITTI vertical-angle correction), by name."""
+    return {k: v for k, v in reader.items() if "correct" in k.lower() or "angle" in k.lower()}
+
+
+def ground_truth_instant(sequence: Any, reference: Any) -> str:
+    """The instant of each sweep the ground truth refers to, as the reader states it."""
+    meta = getattr(reference, "meta", None) or {}
+    for key in ("pose_instant", "instant"):
+        if meta.get(key):
+            return str(meta[key])
+    for owner in (sequence, getattr(sequence, "config", None)):
+        for key in ("pose_instant", "ground_truth_instant"):
+            value = getattr(owner, key, None) if owner is not None else None
+            if isinstance(value, str) and value:
+                return value
+    return "not stated by the reader"
+
+
+def effective_settings(
+    sequence: Any, registration: Any, method: str, stateful: bool, has_point_times: np.ndarray, reference: Any
+) -> tuple[dict[str, Any], list[str]]:
+    """(settings really applied, warnings) of a finished run; ``has_point_times`` (n,) bool per processed frame."""
+    warnings: list[str] = []
+    requested = deskew_requested(registration)
+    n, n_times = len(has_point_times), int(np.count_nonzero(has_point_times))
+    deskew: dict[str, Any] = {"requested": requested, "applied": False, "frames_with_point_times": n_times, "n_frames": n}
+    if requested is None:
+        deskew["reason"] = f"{method} does not deskew (no deskew option)"
+    elif not requested:
+        deskew["reason"] = "deskew off in the method config"
+    elif not stateful:
+        deskew["reason"] = f"{method} runs scan-to-scan through align(), which takes no per-point times"
+        warnings.append(f"deskew requested, not applied: {deskew['reason']}")
+    elif n_times == 0:
+        deskew["reason"] = point_times_not_found(sequence)
+        warnings.append(f"deskew requested, {deskew['reason']}: ran without deskew")
+    else:
+        deskew["applied"] = True
+        deskew["reason"] = f"per-point times from {point_time_source(sequence)}"
+        if n_times < n:
+            deskew["reason"] += f" for {n_times} of {n} frames"
+            warnings.append(f"deskew applied to {n_times} of {n} frames only: {point_times_not_found(sequence)}")
+    if deskew["applied"]:
+        stated = getattr(registration, "deskew_instant", None)
+        estimate_instant = str(stated) if stated else "end" if method == "kiss" else "the instant the variant deskews to (not stated)"
+    else:
+        estimate_instant = "none: each scan taken as one snapshot"
+    gt_instant = None if reference is None else ground_truth_instant(sequence, reference)
+    if deskew["applied"] and gt_instant in ("start", "mid") and estimate_instant == "end":
+        warnings.append(
+            f"the estimate refers to the sweep end (kiss-icp deskews to the last point) but the ground truth to the sweep {gt_instant}"
+        )
+    reader = reader_settings(sequence)
+    settings = {
+        "deskew": deskew,
+        "estimate_instant": estimate_instant,
+        "ground_truth_instant": gt_instant,
+        "reader": reader,
+        "corrections": corrections(reader),
+        "metric_alignment": dict(METRIC_ALIGNMENT),
+    }
+    return settings, warnings

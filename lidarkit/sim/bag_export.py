@@ -1,0 +1,132 @@
+"""Write a simulated sequence as the files users record: ROS 1 bags, ROS 2 bags (sqlite3 or mcap) and MCAP.
+
+One ``sensor_msgs/PointCloud2`` per sweep on ``/points`` with fields ``x y z intensity`` (float32), ``time``
+(float32 seconds from the sweep start, as Velodyne drivers write it) and ``t`` (uint32 nanoseconds from the
+sweep start, as Ouster drivers write it); the header stamp is the sweep start. One ``nav_msgs/Odometry`` per
+sweep on ``/ground_truth`` with ``T_world_lidar`` at the config's ``pose_instant``, stamped at that instant.
+Points are in firing order, exactly as :meth:`SimulatedLidarSequence.read_scan` returns them (float32), so the
+bag and the KITTI-layout export hold the same sweeps. Written with the ``rosbags`` writers.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from lidarkit.errors import ConfigError, DataError
+
+BAG_FORMATS = ("rosbag1", "rosbag2", "mcap")
+STORAGES = ("sqlite3", "mcap")
+POINTS_TOPIC = "/points"
+GROUND_TRUTH_TOPIC = "/ground_truth"
+FRAME_ID = "lidar"
+_POINT_DTYPE = np.dtype({"names": ["x", "y", "z", "intensity", "time", "t"],
+                         "formats": ["<f4", "<f4", "<f4", "<f4", "<f4", "<u4"], "offsets": [0, 4, 8, 12, 16, 20], "itemsize": 24})
+_PF_FLOAT32, _PF_UINT32 = 7, 6  # sensor_msgs/PointField datatype codes
+
+
+def export_bag(sequence, out: str | os.PathLike, fmt: str = "rosbag2", *, storage: str = "sqlite3",
+               on_frame: Callable[[int], None] | None = None) -> Path:
+    """Write ``sequence`` (a :class:`~lidarkit.sim.lidar.SimulatedLidarSequence`) to ``out`` and return it.
+
+    ``fmt``: ``"rosbag1"`` (``out`` is a ``.bag`` file), ``"rosbag2"`` (``out`` is a bag folder; ``storage``
+    ``"sqlite3"`` or ``"mcap"``) or ``"mcap"`` (``out`` is a ``.mcap`` file). The result appears only when
+    complete (written beside it, then renamed); an existing ``out`` is an error, as with the ROS tools.
+    """
+    if fmt not in BAG_FORMATS:
+        raise ConfigError(f"unknown bag format {fmt!r}; known: {', '.join(BAG_FORMATS)}", source="format")
+    if storage not in STORAGES:
+        raise ConfigError(f"unknown ROS 2 storage {storage!r}; known: {', '.join(STORAGES)}", source="storage")
+    try:
+        from rosbags.typesys import Stores, get_typestore
+    except ImportError:
+        raise ConfigError("writing bags needs the Python package 'rosbags': pip install 'lidarkit[ros]'", source=f"format {fmt}") from None
+    out = Path(out)
+    if out.exists():
+        raise DataError("exists already; bags are never overwritten", source=out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    scratch = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    try:
+        if fmt == "rosbag1":
+            from rosbags.rosbag1 import Writer
+
+            typestore = get_typestore(Stores.ROS1_NOETIC)
+            target = scratch / out.name
+            writer = Writer(target)
+            serialize = typestore.serialize_ros1
+        else:
+            from rosbags.rosbag2 import StoragePlugin, Writer
+
+            typestore = get_typestore(Stores.ROS2_HUMBLE)
+            target = scratch / "bag"
+            plugin = StoragePlugin.MCAP if (fmt == "mcap" or storage == "mcap") else StoragePlugin.SQLITE3
+            writer = Writer(target, version=8, storage_plugin=plugin)
+            serialize = typestore.serialize_cdr
+        _write_messages(sequence, writer, typestore, serialize, ros1=fmt == "rosbag1", on_frame=on_frame)
+        if fmt == "mcap":
+            target = next(target.glob("*.mcap"))
+        os.replace(target, out)
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+    return out
+
+
+def _write_messages(sequence, writer, typestore, serialize, *, ros1: bool, on_frame) -> None:
+    from scipy.spatial.transform import Rotation
+
+    T = typestore.types
+    pc2, odom = "sensor_msgs/msg/PointCloud2", "nav_msgs/msg/Odometry"
+    fields = [T["sensor_msgs/msg/PointField"](name=n, offset=o, datatype=_PF_UINT32 if n == "t" else _PF_FLOAT32, count=1)
+              for n, o in zip(_POINT_DTYPE.names, (0, 4, 8, 12, 16, 20))]
+    gt = sequence.ground_truth
+    quat_xyzw = Rotation.from_matrix(gt.poses_se3[:, :3, :3]).as_quat()
+    period = sequence.config.sweep_period_s
+
+    def header(seq: int, t_s: float):
+        sec = int(np.floor(t_s))
+        stamp = T["builtin_interfaces/msg/Time"](sec=sec, nanosec=int(round((t_s - sec) * 1e9)))
+        if ros1:
+            return T["std_msgs/msg/Header"](seq=seq, stamp=stamp, frame_id=FRAME_ID)
+        return T["std_msgs/msg/Header"](stamp=stamp, frame_id=FRAME_ID)
+
+    zeros36 = np.zeros(36)
+    vec = T["geometry_msgs/msg/Vector3"]
+    with writer:
+        points_conn = writer.add_connection(POINTS_TOPIC, pc2, typestore=typestore)
+        gt_conn = writer.add_connection(GROUND_TRUTH_TOPIC, odom, typestore=typestore)
+        for i in range(len(sequence)):
+            scan = sequence.read_scan(i)
+            times = np.zeros(len(scan.points_xyz)) if scan.point_times_s is None else scan.point_times_s
+            cloud = np.zeros(len(scan.points_xyz), dtype=_POINT_DTYPE)
+            for k, axis in enumerate("xyz"):
+                cloud[axis] = scan.points_xyz[:, k]
+            cloud["intensity"] = 0.0 if scan.intensity is None else scan.intensity
+            cloud["time"] = times
+            cloud["t"] = np.round(times * 1e9).astype(np.uint32)
+            start_s = i * period
+            msg = T[pc2](header=header(i, start_s), height=1, width=len(cloud), fields=fields, is_bigendian=False,
+                         point_step=_POINT_DTYPE.itemsize, row_step=_POINT_DTYPE.itemsize * len(cloud),
+                         data=cloud.view(np.uint8).ravel(), is_dense=True)
+            writer.write(points_conn, int(round(start_s * 1e9)), serialize(msg, pc2))
+            pose = gt.poses_se3[i]
+            q = quat_xyzw[i]
+            odom_msg = T[odom](
+                header=header(i, float(gt.timestamps_s[i])), child_frame_id=FRAME_ID,
+                pose=T["geometry_msgs/msg/PoseWithCovariance"](
+                    pose=T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=pose[0, 3], y=pose[1, 3], z=pose[2, 3]),
+                                                     orientation=T["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3])),
+                    covariance=zeros36),
+                twist=T["geometry_msgs/msg/TwistWithCovariance"](
+                    twist=T["geometry_msgs/msg/Twist"](linear=vec(x=0.0, y=0.0, z=0.0), angular=vec(x=0.0, y=0.0, z=0.0)), covariance=zeros36),
+            )
+            writer.write(gt_conn, int(round(float(gt.timestamps_s[i]) * 1e9)), serialize(odom_msg, odom))
+            if on_frame is not None:
+                on_frame(i)
+
+
+__all__ = ["BAG_FORMATS", "GROUND_TRUTH_TOPIC", "POINTS_TOPIC", "STORAGES", "export_bag"]

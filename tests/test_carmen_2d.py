@@ -1,0 +1,348 @@
+"""CARMEN 2D logs (Intel, ACES, FR079): reader on the real files and corrupted copies, the relations metric,
+planar registration of 2D scans and the variants that refuse them."""
+
+from __future__ import annotations
+
+import bz2
+import gzip
+import logging
+
+import numpy as np
+import pytest
+
+from conftest import cli_exit_code, shared_path
+from lidarkit.errors import ConfigError, DataError, EvaluationError
+from lidarkit.eval.relations import relation_error
+from lidarkit.io import open_dataset
+from lidarkit.io.carmen import CarmenLog, Relations
+from lidarkit.registration import available_icp, get_icp
+from lidarkit.trajectory import Trajectory
+
+EXPECTED = {"intel": (13631, 180), "aces": (7374, 180), "fr079": (4934, 360)}
+
+
+@pytest.fixture(scope="session")
+def carmen_logs() -> dict[str, CarmenLog]:
+    """The three real logs, each parsed once per session (~2 s in all)."""
+    return {name: open_dataset("carmen", shared_path("carmen_2d", f"{name}.clf.bz2")) for name in EXPECTED}
+
+
+@pytest.fixture(scope="session")
+def aces_text() -> list[str]:
+    return bz2.decompress(shared_path("carmen_2d", "aces.clf.bz2").read_bytes()).decode().splitlines()
+
+
+# ---- reader on the real logs --------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("name", list(EXPECTED))
+def test_real_logs_read_completely(carmen_logs, name):
+    log = carmen_logs[name]
+    n_scans, n_beams = EXPECTED[name]
+    assert len(log) == n_scans == log.message_counts["FLASER"]
+    assert len(log.odometry) == n_scans and (np.diff(log.timestamps_s) > 0).all()
+    assert len(log.ranges_m(0)) == n_beams
+    last = log.read_scan(len(log) - 1)
+    assert last.points_xyz.shape[1] == 3 and np.all(last.points_xyz[:, 2] == 0.0)
+    # FLASER beams: first at -90 deg, 1 deg (180 beams) or 0.5 deg (360 beams) apart
+    angles = np.degrees(log.beam_angles_rad(0))
+    assert angles[0] == pytest.approx(-90.0) and np.diff(angles) == pytest.approx(180.0 / n_beams)
+
+
+def test_max_range_readings_are_dropped(carmen_logs):
+    aces = carmen_logs["aces"]
+    assert aces.max_range_m[0] == 50.0  # ACES saturates at 50 m; Intel / FR079 at ~81.9 m
+    assert carmen_logs["intel"].max_range_m[0] == pytest.approx(81.83)
+    ranges = np.concatenate([aces.ranges_m(i) for i in range(0, len(aces), 50)])
+    points = np.concatenate([aces.read_scan(i).points_xyz for i in range(0, len(aces), 50)])
+    n_saturated = int((ranges >= 50.0).sum())
+    assert n_saturated > 0 and len(points) == len(ranges) - n_saturated
+    assert np.linalg.norm(points, axis=1).max() < 50.0
+
+
+def test_intel_scans_are_put_in_time_order(carmen_logs):
+    intel = carmen_logs["intel"]
+    assert intel.n_reordered > 0  # Intel holds FLASER messages up to 0.9 s out of order
+    assert (np.diff(intel.timestamps_s) > 0).all()
+
+
+def test_first_aces_scan_matches_the_log_line(carmen_logs, aces_text):
+    line = next(raw for raw in aces_text if raw.startswith("FLASER"))
+    fields = line.split()
+    ranges = np.array(fields[2:182], dtype=float)
+    x, y, theta = (float(v) for v in fields[182:185])
+    aces = carmen_logs["aces"]
+    scan = aces.read_scan(0)
+    bearing = np.radians(-90.0 + np.arange(180.0))[ranges < 50.0]
+    expected = np.column_stack([ranges[ranges < 50.0] * np.cos(bearing), ranges[ranges < 50.0] * np.sin(bearing)])
+    np.testing.assert_allclose(scan.points_xyz[:, :2], expected, atol=1e-12)
+    assert scan.timestamp_s == float(fields[188])
+    T = aces.odometry.poses_se3[0]
+    np.testing.assert_allclose([T[0, 3], T[1, 3], np.arctan2(T[1, 0], T[0, 0])], [x, y, theta], atol=1e-12)
+
+
+def test_plain_and_gzip_copies_read_the_same(tmp_path, aces_text, carmen_logs):
+    head = "\n".join(aces_text[:400]) + "\n"
+    plain = tmp_path / "head.clf"
+    plain.write_text(head)
+    with gzip.open(tmp_path / "head.clf.gz", "wt") as fh:
+        fh.write(head)
+    a, b = CarmenLog(plain), CarmenLog(tmp_path / "head.clf.gz")
+    n = sum(raw.startswith("FLASER") for raw in aces_text[:400])
+    assert len(a) == len(b) == n > 100
+    np.testing.assert_array_equal(a.read_scan(n - 1).points_xyz, carmen_logs["aces"].read_scan(n - 1).points_xyz)
+    np.testing.assert_array_equal(b.odometry.poses_se3, carmen_logs["aces"].odometry.poses_se3[:n])
+    assert a.relations is None  # no head.relations beside it
+
+
+# ---- corrupted copies ----------------------------------------------------------------------------
+
+
+def _corrupt(tmp_path, aces_text, lineno: int, edit, name="bad.clf.bz2"):
+    lines = list(aces_text[:300])
+    lines[lineno - 1] = edit(lines[lineno - 1])
+    path = tmp_path / name
+    path.write_bytes(bz2.compress(("\n".join(lines) + "\n").encode()))
+    return path
+
+
+def _flaser_lineno(aces_text, k: int = 20) -> int:
+    return [i for i, raw in enumerate(aces_text[:300], start=1) if raw.startswith("FLASER")][k]
+
+
+@pytest.mark.parametrize(
+    "edit, words",
+    [
+        (lambda s: " ".join(s.split()[:5] + ["x1.2"] + s.split()[6:]), "not a number: 'x1.2'"),
+        (lambda s: " ".join(s.split()[:-5]), "expected 191 fields"),
+        (lambda s: "FLASER many " + " ".join(s.split()[2:]), "not an integer"),
+        (lambda s: " ".join(s.split()[:183] + ["nan"] + s.split()[184:]), "NaN or infinite"),
+        (lambda s: "1.5 " + s, "does not start with a message name"),
+    ],
+)
+def test_malformed_line_names_file_and_line(tmp_path, aces_text, edit, words):
+    lineno = _flaser_lineno(aces_text)
+    path = _corrupt(tmp_path, aces_text, lineno, edit)
+    with pytest.raises(DataError) as err:
+        CarmenLog(path)
+    assert f"line {lineno}" in str(err.value) and "bad.clf.bz2" in str(err.value) and words in str(err.value)
+
+
+def test_truncated_and_empty_logs(tmp_path, aces_text):
+    data = bz2.compress(("\n".join(aces_text[:300]) + "\n").encode())
+    cut = tmp_path / "cut.clf.bz2"
+    cut.write_bytes(data[: len(data) // 2])
+    with pytest.raises(DataError, match="cut.clf.bz2.*cannot read"):
+        CarmenLog(cut)
+    odom_only = tmp_path / "odom.clf"
+    odom_only.write_text("\n".join(raw for raw in aces_text[:300] if not raw.startswith("FLASER")) + "\n")
+    with pytest.raises(DataError, match="no laser messages"):
+        CarmenLog(odom_only)
+    with pytest.raises(DataError, match="file not found"):
+        CarmenLog(tmp_path / "missing.clf")
+
+
+def test_relations_file_and_bad_relations(tmp_path, carmen_logs):
+    rel = carmen_logs["aces"].relations
+    assert isinstance(rel, Relations) and len(rel) == 1279
+    assert rel.t1_s[0] == 90.239599 and rel.dx_m[0] == 0.42233 and rel.dyaw_rad[0] == 0.01726
+    bad = tmp_path / "bad.relations"
+    bad.write_text("1 2 0.1 0 0 0 0 0.01\n3 4 0.1 0 0 0 0.01\n")
+    with pytest.raises(DataError, match=r"bad.relations \(line 2\).*expected 8 numbers"):
+        Relations.read(bad)
+    with pytest.raises(DataError, match="relations file not found"):
+        CarmenLog(shared_path("carmen_2d", "aces.clf.bz2"), relations=tmp_path / "none.relations")
+
+
+def test_robotlaser_and_rawlaser_messages(tmp_path):
+    # 5 beams from -45 deg every 22.5 deg, max range 10 m (the 10.0 reading is "no return")
+    robot = "ROBOTLASER1 0 -0.785398 1.570796 0.392699 10.0 0.01 0 5 1.0 2.0 10.0 3.0 0.0 0 1.0 2.0 0.5 1.0 2.0 0.5 0 0 0 0 0 {t} host {t}"
+    raw = "RAWLASER1 0 -0.785398 1.570796 0.392699 10.0 0.01 0 5 1.0 2.0 10.0 3.0 0.0 0 {t} host {t}"
+    odom = "ODOM {x} 0.0 0.0 0 0 0 {t} host {t}"
+    log = tmp_path / "r.clf"
+    log.write_text("\n".join([robot.format(t=1.0), robot.format(t=2.0)]) + "\n")
+    scan = CarmenLog(log).read_scan(1)
+    bearing = -0.785398 + 0.392699 * np.array([0, 1, 3])  # 10.0: max range, 0.0: below min_range
+    np.testing.assert_allclose(scan.points_xyz[:, :2], np.column_stack([[1, 2, 3] * np.cos(bearing), [1, 2, 3] * np.sin(bearing)]))
+    np.testing.assert_allclose(CarmenLog(log).odometry.poses_se3[0, :2, 3], [1.0, 2.0])
+    log.write_text("\n".join([odom.format(x=0.0, t=0.0), raw.format(t=0.5), odom.format(x=2.0, t=1.0)]) + "\n")
+    np.testing.assert_allclose(CarmenLog(log).odometry.poses_se3[0, :2, 3], [1.0, 0.0])  # interpolated
+    log.write_text(robot.format(t=1.0).replace(" 5 1.0", " 6 1.0", 1) + "\n")
+    with pytest.raises(DataError, match=r"line 1\).*ROBOTLASER1: number of remissions is not an integer"):
+        CarmenLog(log)
+
+
+def test_bad_reader_options(carmen_logs):
+    path = shared_path("carmen_2d", "aces.clf.bz2")
+    with pytest.raises(ConfigError, match="max_range_m"):
+        open_dataset("carmen", path, min_range_m=5.0, max_range_m=2.0)
+    with pytest.raises(ConfigError, match="unknown laser message"):
+        open_dataset("carmen", path, laser="LASER9")
+    with pytest.raises(ConfigError, match="valid options"):
+        open_dataset("carmen", path, beams=3)
+
+
+# ---- relations metric ------------------------------------------------------------------------------
+
+
+def _relations_of(traj: Trajectory, pairs: np.ndarray) -> Relations:
+    P, ts = traj.poses_se3, traj.timestamps_s
+    rel = np.linalg.inv(P[pairs[:, 0]]) @ P[pairs[:, 1]]
+    return Relations(ts[pairs[:, 0]], ts[pairs[:, 1]], rel[:, 0, 3], rel[:, 1, 3], np.arctan2(rel[:, 1, 0], rel[:, 0, 0]))
+
+
+def test_relation_error_is_zero_on_own_relations_and_measures_a_known_offset(carmen_logs):
+    odo = carmen_logs["aces"].odometry[:400]
+    pairs = np.column_stack([np.arange(0, 380, 7), np.arange(0, 380, 7) + np.arange(1, 56)[: len(range(0, 380, 7))] % 20 + 1])
+    rel = _relations_of(odo, pairs)
+    exact = relation_error(odo, rel)
+    assert exact.n_used == len(pairs) and exact.translation_abs["max"] < 1e-9 and exact.rotation_abs["max"] < 1e-7
+    shifted = Relations(rel.t1_s, rel.t2_s, rel.dx_m + 0.3, rel.dy_m - 0.4, rel.dyaw_rad + np.radians(2.0))
+    err = relation_error(odo, shifted)
+    assert err.translation_abs["mean"] == pytest.approx(0.5) and err.translation_abs["std"] < 1e-9
+    assert err.translation_sq["mean"] == pytest.approx(0.25) and err.rotation_abs["mean"] == pytest.approx(2.0)
+    assert err.rotation_sq["mean"] == pytest.approx(4.0)
+
+
+def test_relation_time_tolerance(carmen_logs):
+    odo = carmen_logs["aces"].odometry[:100]
+    rel = _relations_of(odo, np.array([[0, 5], [10, 20]]))
+    late = Relations(rel.t1_s + np.array([0.0, 0.02]), rel.t2_s, rel.dx_m, rel.dy_m, rel.dyaw_rad)
+    assert relation_error(odo, late).n_used == 1  # 0.02 s > default 0.01 s
+    assert relation_error(odo, late, max_time_diff_s=0.03).n_used == 2
+    with pytest.raises(EvaluationError, match="no relation has estimated poses"):
+        relation_error(odo[50:], late)
+    with pytest.raises(EvaluationError, match="timestamps"):
+        relation_error(odo.with_timestamps(None), late)
+
+
+def test_aces_odometry_relation_error(carmen_logs):
+    aces = carmen_logs["aces"]
+    err = relation_error(aces.odometry, aces.relations)
+    # every ACES relation is stamped with a scan time; raw odometry: 0.549 m mean, 18.9 m max (long loops)
+    assert err.n_used == 1279
+    assert err.translation_abs["mean"] == pytest.approx(0.5493, abs=1e-3)
+    assert err.translation_abs["max"] == pytest.approx(18.899, abs=1e-2)
+    assert err.rotation_abs["mean"] == pytest.approx(2.3275, abs=1e-3)
+
+
+def test_eval_cli_relations(tmp_path, carmen_logs, capsys):
+    est = tmp_path / "aces_odometry_tum.txt"
+    carmen_logs["aces"].odometry.to_tum(est)
+    out_json = tmp_path / "rel.json"
+    rel = shared_path("carmen_2d", "aces.relations")
+    assert cli_exit_code(["eval", "--relations", str(rel), str(est), "--json", str(out_json)]) == 0
+    assert "0.5493" in capsys.readouterr().out
+    import json
+
+    assert json.loads(out_json.read_text())["n_used"] == 1279
+    assert cli_exit_code(["eval", "--relations", str(rel), str(est), str(est)]) != 0
+
+
+# ---- planar registration -----------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def aces_pair(carmen_logs):
+    aces = carmen_logs["aces"]
+    odo = aces.odometry.poses_se3
+    target, source = aces.read_scan(2000).points_xyz, aces.read_scan(2003).points_xyz
+    return source, target, np.linalg.inv(odo[2000]) @ odo[2003]
+
+
+def _xy_yaw(T):
+    return np.array([T[0, 3], T[1, 3], np.arctan2(T[1, 0], T[0, 0])])
+
+
+@pytest.mark.parametrize("name", ["vanilla", "knn", "ground_filtered"])
+def test_planar_and_3d_solutions_of_a_2d_pair_agree(aces_pair, name):
+    source, target, init = aces_pair
+    planar = get_icp(name, planar=True, max_correspondence_distance_m=0.5).align(source, target, init)
+    full = get_icp(name, max_correspondence_distance_m=0.5).align(source, target, init)
+    assert planar.converged and full.converged
+    np.testing.assert_allclose(_xy_yaw(planar.T_target_source), _xy_yaw(full.T_target_source), atol=1e-6)
+    # the 3D solution of a 2D pair stays in the plane; the planar one is in SE(2) by construction
+    np.testing.assert_allclose(full.T_target_source[2, :3], [0, 0, 1], atol=1e-9)
+    assert abs(full.T_target_source[2, 3]) < 1e-9
+    assert np.abs(_xy_yaw(planar.T_target_source) - _xy_yaw(init)).max() > 1e-3  # ICP moved off the guess
+
+
+def test_planar_matches_open3d_point_to_point_on_a_2d_pair(aces_pair):
+    source, target, init = aces_pair
+    ours = get_icp("vanilla", planar=True, max_correspondence_distance_m=0.5).align(source, target, init)
+    o3d = get_icp("open3d_point_to_point", max_correspondence_distance_m=0.5).align(source, target, init)
+    diff = _xy_yaw(ours.T_target_source) - _xy_yaw(o3d.T_target_source)
+    assert np.hypot(diff[0], diff[1]) < 0.005 and abs(np.degrees(diff[2])) < 0.05
+
+
+def test_planar_keeps_z_roll_pitch_of_the_guess_on_3d_clouds(rng):
+    from lidarkit.geometry import make_se3, so3_exp
+
+    cloud = rng.uniform(-10, 10, size=(3000, 3))
+    yaw = np.radians(4.0)
+    truth = make_se3(so3_exp(np.array([0.0, 0.0, yaw])), np.array([0.4, -0.2, 0.0]))
+    target = cloud @ truth[:3, :3].T + truth[:3, 3]
+    result = get_icp("vanilla", planar=True).align(cloud, target)
+    np.testing.assert_allclose(result.T_target_source, truth, atol=1e-6)
+    tilted = make_se3(so3_exp(np.array([0.02, 0.0, 0.0])), np.array([0.0, 0.0, 0.1]))
+    out = get_icp("vanilla", planar=True).align(cloud, target, tilted).T_target_source
+    np.testing.assert_allclose(out[2], tilted[2], atol=1e-12)  # z row (tilt and height) is not solved for
+
+
+@pytest.mark.parametrize(
+    "name, params",
+    [
+        ("open3d_point_to_plane", {}),
+        ("open3d_gicp", {}),
+        ("small_gicp", {"registration_type": "GICP"}),
+        ("small_gicp", {"registration_type": "PLANE_ICP"}),
+        ("ground_filtered", {"ground_method": "ransac"}),
+    ],
+)
+def test_variants_that_cannot_handle_2d_scans_refuse_them(aces_pair, name, params):
+    if name not in available_icp():
+        pytest.skip(f"{name} not installed")
+    source, target, init = aces_pair
+    with pytest.raises(ConfigError, match="not applicable to 2D scans"):
+        get_icp(name, **params).align(source, target, init)
+
+
+# ---- odometry over a CARMEN log ---------------------------------------------------------------------
+
+
+def test_odometry_with_log_odometry_as_initial_guess(carmen_logs, caplog):
+    from lidarkit.odometry import run
+
+    aces = carmen_logs["aces"]
+    frames = np.arange(2000, 2300)  # ~55 s of ACES holding 71 relations
+    odo = relation_error(aces.odometry[frames], aces.relations)
+    assert odo.n_used == 71 and odo.rotation_abs["mean"] == pytest.approx(1.384, abs=1e-3)
+    with caplog.at_level(logging.ERROR):
+        result = run(aces, "vanilla", params={"planar": True, "max_correspondence_distance_m": 0.5}, frames="2000:2300", init="odometry")
+        kiss = run(aces, "kiss", params={"voxel_size_m": 0.05, "max_range_m": 50.0}, frames="2000:2300", init="odometry")
+    assert result.config["run"]["initial_guess"].startswith("dataset odometry")
+    assert kiss.config["run"]["initial_guess"].startswith("dataset odometry")
+    assert np.abs(result.trajectory.poses_se3[:, 2, 3]).max() < 1e-9
+    # measured: vanilla 0.43 deg, kiss 0.91 deg vs odometry 1.38 deg; translation ~0.044 m for all three
+    ours, theirs = relation_error(result.trajectory, aces.relations), relation_error(kiss.trajectory, aces.relations)
+    assert ours.rotation_abs["mean"] < 0.5 * odo.rotation_abs["mean"] and ours.translation_abs["mean"] < 0.06
+    assert theirs.rotation_abs["mean"] < 0.8 * odo.rotation_abs["mean"] and theirs.translation_abs["mean"] < 0.06
+    with pytest.raises(ConfigError, match="unknown initial guess"):
+        run(aces, "vanilla", frames="0:3", init="imu")
+    with pytest.raises(ConfigError, match="own odometry"):
+        run("sim:street?frames=3", "vanilla", init="odometry")
+
+
+def test_odometry_cli_on_a_carmen_log(tmp_path, capsys):
+    log_path = shared_path("carmen_2d", "aces.clf.bz2")
+    out = tmp_path / "run"
+    argv = ["odometry", f"carmen:{log_path}", "--method", "vanilla", "--param", "planar=true", "--frames", "0:40", "--init", "odometry", "--no-progress", "--out", str(out)]
+    assert cli_exit_code(argv) == 0
+    est = Trajectory.read(out / "poses_tum.txt", "tum")
+    assert len(est) == 40 and np.abs(est.poses_se3[:, 2, 3]).max() < 1e-6
+    bad = tmp_path / "bad.clf"
+    bad.write_text("FLASER 3 1.0 2.0 x 0 0 0 0 0 0 1.0 host 1.0\n")
+    capsys.readouterr()
+    assert cli_exit_code(["odometry", f"carmen:{bad}", "--method", "vanilla", "--no-progress"]) == 1
+    err = capsys.readouterr().err
+    assert "bad.clf (line 1)" in err and "not a number: 'x'" in err and "Traceback" not in err

@@ -1,0 +1,125 @@
+"""Bad recordings: each a DataError naming the file, the message (or frame) and the reason. Real files, no mocks."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lidarkit.errors import DataError
+from lidarkit.io import open_dataset
+from lidarkit.odometry import run
+
+F32, U32 = 7, 6
+
+
+def _cloud_bytes(n: int, times: np.ndarray | None = None) -> tuple[list[tuple[str, int, int]], int, bytes]:
+    """x, y, z, time float32 points on a 10 m ring (a valid cloud unless the caller breaks it)."""
+    angle = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    rec = np.zeros(n, dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("time", "<f4")])
+    rec["x"], rec["y"], rec["z"] = 10 * np.cos(angle), 10 * np.sin(angle), np.linspace(-1, 1, n)
+    rec["time"] = np.linspace(0, 0.1, n) if times is None else times
+    return [("x", 0, F32), ("y", 4, F32), ("z", 8, F32), ("time", 12, F32)], 16, rec.tobytes()
+
+
+def write_ros1_bag(path, clouds, *, extra_odometry: bool = False, topic: str = "/points"):
+    """A ROS 1 bag with one PointCloud2 per ``(stamp_s, fields, point_step, data, width)`` in ``clouds``."""
+    from rosbags.rosbag1 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS1_NOETIC)
+    T = store.types
+    pc2 = "sensor_msgs/msg/PointCloud2"
+    with Writer(path) as writer:
+        conn = writer.add_connection(topic, pc2, typestore=store) if clouds else None
+        for k, (stamp_s, fields, step, data, width) in enumerate(clouds):
+            sec = int(np.floor(stamp_s))
+            header = T["std_msgs/msg/Header"](seq=k, stamp=T["builtin_interfaces/msg/Time"](sec=sec, nanosec=int(round((stamp_s - sec) * 1e9))), frame_id="lidar")
+            msg = T[pc2](header=header, height=1, width=width, is_bigendian=False, point_step=step, row_step=step * width,
+                         fields=[T["sensor_msgs/msg/PointField"](name=n, offset=o, datatype=d, count=1) for n, o, d in fields],
+                         data=np.frombuffer(data, dtype=np.uint8), is_dense=True)
+            writer.write(conn, 10**12 + k * 10**8, store.serialize_ros1(msg, pc2))  # receive time: increasing
+        if extra_odometry or not clouds:
+            odom = writer.add_connection("/odom", "std_msgs/msg/String", typestore=store)
+            writer.write(odom, 1, store.serialize_ros1(T["std_msgs/msg/String"](data="not a cloud"), "std_msgs/msg/String"))
+    return path
+
+
+def good(k: int, n: int = 64):
+    fields, step, data = _cloud_bytes(n)
+    return (1000.0 + 0.1 * k, fields, step, data, n)
+
+
+def test_bag_without_pointcloud2_topic(tmp_path):
+    bag = write_ros1_bag(tmp_path / "no_clouds.bag", [])
+    with pytest.raises(DataError, match=r"no_clouds\.bag: no sensor_msgs/msg/PointCloud2 topic; topics present: /odom \(std_msgs/msg/String\)"):
+        open_dataset("rosbag", bag)
+
+
+def test_pointcloud2_without_xyz(tmp_path):
+    fields, step, data = _cloud_bytes(64)
+    fields = [("a" if name == "y" else name, offset, dt) for name, offset, dt in fields]
+    bag = write_ros1_bag(tmp_path / "no_y.bag", [good(0), (1000.1, fields, step, data, 64)])
+    with pytest.raises(DataError, match=r"rosbag:no_y\.bag/points \(frame 1\): .*no_y\.bag \(message 1 on /points\): PointCloud2 has no y field \(fields: x, a, z, time\)"):
+        run(str(bag), "kiss")
+    with pytest.raises(DataError, match=r"no_y\.bag \(message 1 on /points\): PointCloud2 has no y field"):
+        open_dataset("rosbag", bag).read_scan(1)
+
+
+def test_truncated_bag_and_truncated_message(tmp_path):
+    whole = write_ros1_bag(tmp_path / "whole.bag", [good(k, 2000) for k in range(4)])
+    cut = tmp_path / "cut.bag"
+    cut.write_bytes(whole.read_bytes()[: whole.stat().st_size // 2])
+    with pytest.raises(DataError, match=r"cut\.bag: not a readable ROS bag \("):
+        open_dataset("rosbag", cut)
+    fields, step, data = _cloud_bytes(100)
+    short = write_ros1_bag(tmp_path / "short.bag", [good(0), (1000.1, fields, step, data[: 50 * step], 100)])
+    with pytest.raises(DataError, match=r"short\.bag \(message 1 on /points\): data holds 800 bytes but .* need 1600 \(truncated message\)"):
+        open_dataset("rosbag", short).read_scan(1)
+
+
+def test_mcap_with_unknown_schema(tmp_path):
+    from mcap.writer import Writer
+
+    path = tmp_path / "blob.mcap"
+    with open(path, "wb") as fh:
+        writer = Writer(fh)
+        writer.start()
+        schema = writer.register_schema(name="acme_msgs/msg/Blob", encoding="jsonschema", data=b"{}")
+        channel = writer.register_channel(topic="/blob", message_encoding="json", schema_id=schema)
+        writer.add_message(channel, log_time=1, data=b"{}", publish_time=1)
+        cloud_schema = writer.register_schema(name="sensor_msgs/msg/PointCloud2", encoding="jsonschema", data=b"{}")
+        writer.register_channel(topic="/points_json", message_encoding="json", schema_id=cloud_schema)
+        writer.finish()
+    with pytest.raises(DataError, match=r"blob\.mcap: no sensor_msgs/msg/PointCloud2 topic; topics present: /blob \(acme_msgs/msg/Blob\), "
+                                        r"/points_json \(sensor_msgs/msg/PointCloud2 \[jsonschema schema, not ros2msg\]\)"):
+        open_dataset("mcap", path)
+    with pytest.raises(DataError, match=r"topic '/blob' carries acme_msgs/msg/Blob, not sensor_msgs/msg/PointCloud2"):
+        open_dataset("mcap", path, topic="/blob")
+
+
+def test_time_field_with_nan(tmp_path):
+    times = np.linspace(0, 0.1, 64)
+    times[17] = np.nan
+    fields, step, data = _cloud_bytes(64, times)
+    bag = write_ros1_bag(tmp_path / "nan.bag", [good(0), good(1), (1000.2, fields, step, data, 64)])
+    with pytest.raises(DataError, match=r"nan\.bag \(message 2 on /points\): per-point time field 'time' has 1 NaN or infinite values \(first at point 17\)"):
+        open_dataset("rosbag", bag).read_scan(2)
+
+
+def test_time_going_backwards(tmp_path):
+    bag = write_ros1_bag(tmp_path / "back.bag", [good(0), good(1), (good(1)[0] - 0.05, *good(2)[1:])])
+    ds = open_dataset("rosbag", bag)
+    with pytest.raises(DataError, match=r"back\.bag \(message 2 on /points\): time goes backwards: header stamp 1000\.050000000 s is before "
+                                        r"1000\.100000000 s of message 1"):
+        ds.read_scan(2)
+    with pytest.raises(DataError, match="time goes backwards"):
+        ds.timestamps_s
+
+
+def test_ouster_pcap_without_metadata(tmp_path):
+    pcap = tmp_path / "drive.pcap"
+    pcap.write_bytes(b"\xd4\xc3\xb2\xa1" + b"\0" * 60)  # a pcap header, no json beside it
+    with pytest.raises(DataError, match=r"drive\.pcap \(frame 0\): no sensor metadata: an Ouster pcap needs the \.json recorded with it"):
+        open_dataset("ouster", pcap)
+    with pytest.raises(DataError, match=r"meta\.json: Ouster metadata json not found"):
+        open_dataset("ouster", pcap, meta=str(tmp_path / "meta.json"))

@@ -1,0 +1,150 @@
+"""ROS 1/2 bags and MCAP written by the simulator read back through lidarkit, and every kiss-icp loader exposed."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from conftest import cli_exit_code
+from lidarkit.errors import ConfigError, DataError
+from lidarkit.io import available_datasets, detect_kind, open_dataset
+from lidarkit.sim.bag_export import export_bag
+from lidarkit.sim.lidar import SimulatedLidarSequence, export_kitti
+
+N_FRAMES = 8
+FORMATS = [("rosbag1", "sqlite3", "run.bag", "rosbag"), ("rosbag2", "sqlite3", "run_sqlite3", "rosbag"),
+           ("rosbag2", "mcap", "run_mcap", "rosbag"), ("mcap", "sqlite3", "run.mcap", "mcap")]
+
+
+@pytest.fixture(scope="module")
+def sim():
+    return SimulatedLidarSequence(n_frames=N_FRAMES, n_beams=16, n_azimuths=720, seed=3, accel_time_s=0.0, speed_mps=5.0)
+
+
+@pytest.fixture(scope="module")
+def exports(sim, tmp_path_factory):
+    """The same sweeps as a KITTI-layout folder and as every bag format."""
+    root = tmp_path_factory.mktemp("bags")
+    out = {"kitti": export_kitti(sim, root / "kitti")}
+    for fmt, storage, name, _ in FORMATS:
+        out[(fmt, storage)] = export_bag(sim, root / name, fmt, storage=storage)
+    return out
+
+
+def test_every_kiss_icp_loader_is_a_dataset_kind():
+    from kiss_icp.datasets import available_dataloaders
+
+    import importlib
+
+    from lidarkit.io.kiss_loaders import KISS_CLASSES, KISS_KINDS
+
+    kinds = available_datasets()
+    assert set(available_dataloaders()) <= set(KISS_KINDS)
+    for loader in available_dataloaders():
+        assert KISS_KINDS[loader] in kinds, loader
+        assert isinstance(getattr(importlib.import_module(f"kiss_icp.datasets.{loader}"), KISS_CLASSES[loader]), type)
+
+
+def test_odometry_help_lists_the_kinds(capsys):
+    assert cli_exit_code(["odometry", "--help"]) == 0
+    text = " ".join(capsys.readouterr().out.split())
+    for kind in ("rosbag", "mcap", "ouster", "nclt", "mulran", "ncd", "helipr", "boreas", "apollo", "nuscenes", "generic", "kiss_kitti"):
+        assert kind in text
+
+
+def test_detect_kind(exports, tmp_path):
+    (tmp_path / "x.pcap").write_bytes(b"")
+    assert detect_kind(exports[("rosbag1", "sqlite3")]) == "rosbag"
+    assert detect_kind(exports[("rosbag2", "sqlite3")]) == "rosbag"  # folder with metadata.yaml
+    assert detect_kind(exports[("rosbag2", "mcap")]) == "rosbag"
+    assert detect_kind(exports[("mcap", "sqlite3")]) == "mcap"
+    assert detect_kind(tmp_path / "x.pcap") == "ouster"
+    assert detect_kind(exports["kitti"]) == "kitti"
+    assert detect_kind(tmp_path) is None
+
+
+@pytest.mark.parametrize("fmt,storage,name,kind", FORMATS)
+def test_bag_round_trip_points_times_and_ground_truth(sim, exports, fmt, storage, name, kind):
+    ds = open_dataset(kind, exports[(fmt, storage)])
+    assert len(ds) == N_FRAMES and ds.topic == "/points" and ds.ground_truth_topic == "/ground_truth"
+    by_t = open_dataset(kind, exports[(fmt, storage)], time_field="t")
+    for i in (0, 3, N_FRAMES - 1):
+        ref = sim.read_scan(i)
+        scan = ds.read_scan(i)
+        np.testing.assert_array_equal(scan.points_xyz, ref.points_xyz.astype(np.float32).astype(np.float64))
+        np.testing.assert_array_equal(scan.intensity, ref.intensity)
+        # 'time': float32 seconds from the sweep start, bit-identical to the KITTI-layout export's point_times
+        np.testing.assert_array_equal(scan.point_times_s, ref.point_times_s.astype(np.float32).astype(np.float64))
+        assert scan.point_time_convention == "relative_s" and scan.stamp_instant == "start"
+        assert scan.timestamp_s == pytest.approx(i * sim.config.sweep_period_s, abs=1e-9)
+        # 't': uint32 nanoseconds, the simulator's times to the nanosecond
+        np.testing.assert_allclose(by_t.read_scan(i).point_times_s, ref.point_times_s, rtol=0, atol=0.51e-9)
+    gt = ds.ground_truth
+    assert gt.meta["pose_instant"] == "end"
+    np.testing.assert_allclose(gt.poses_se3, sim.ground_truth.poses_se3, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(gt.timestamps_s, sim.timestamps_s, rtol=0, atol=1e-9)
+
+
+def test_odometry_over_bags_equals_the_kitti_export(exports, tmp_path):
+    """kiss through every bag format gives the KITTI-layout export's trajectory (1e-9 m); one via the CLI."""
+    from lidarkit.odometry import run
+
+    reference = run(exports["kitti"], "kiss").trajectory.poses_se3
+    assert np.linalg.norm(reference[-1, :3, 3]) > 1.0  # it moved
+    for fmt, storage, _, kind in FORMATS[1:]:
+        poses = run(f"{kind}:{exports[(fmt, storage)]}", "kiss").trajectory.poses_se3
+        assert np.abs(poses[:, :3, 3] - reference[:, :3, 3]).max() <= 1e-9, (fmt, storage)
+    out = tmp_path / "run"
+    assert cli_exit_code(["odometry", str(exports[("rosbag1", "sqlite3")]), "--method", "kiss", "--out", str(out), "--no-progress"]) == 0
+    poses = np.loadtxt(out / "poses_kitti.txt").reshape(-1, 3, 4)
+    assert np.abs(poses[:, :, 3] - reference[:, :3, 3]).max() <= 1e-9
+
+
+def test_sim_cli_writes_each_format(tmp_path):
+    for fmt, extra, name in (("rosbag2", ["--storage", "mcap"], "b2"), ("mcap", [], "c.mcap")):
+        args = ["sim", "lidar", "--out", str(tmp_path / name), "--frames", "2", "--format", fmt, "--no-progress",
+                "-p", "n_beams=8", "-p", "n_azimuths=180", *extra]
+        assert cli_exit_code(args) == 0
+        assert len(open_dataset(detect_kind(tmp_path / name), tmp_path / name)) == 2
+    assert cli_exit_code(["sim", "lidar", "--out", str(tmp_path / "x"), "--format", "ply", "--no-progress"]) != 0
+
+
+def test_unknown_topic_lists_the_topics_and_never_exits(exports):
+    with pytest.raises(DataError, match=r"no topic '/velodyne_points'; topics present: /ground_truth \(nav_msgs/msg/Odometry\), /points"):
+        open_dataset("rosbag", exports[("rosbag1", "sqlite3")], topic="/velodyne_points")
+    with pytest.raises(DataError, match="carries nav_msgs/msg/Odometry"):
+        open_dataset("mcap", exports[("mcap", "sqlite3")], topic="/ground_truth")
+
+
+def test_a_loader_that_calls_exit_becomes_a_data_error(exports):
+    """kiss-icp's own rosbag loader prints and exits on an unknown topic; the guard turns that into a DataError."""
+    from pathlib import Path
+
+    from kiss_icp.datasets.rosbag import RosbagDataset
+
+    from lidarkit.io.rosbag import guarded_loader
+
+    with pytest.raises(DataError, match="gave up: .*does not containg any msg with the topic name"):
+        with guarded_loader("rosbag", "run.bag"):
+            RosbagDataset(Path(exports[("rosbag1", "sqlite3")]), topic="/nope")
+
+
+def test_missing_extra_is_a_config_error_with_the_pip_line(tmp_path, monkeypatch):
+    import importlib.util
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name.startswith(("ouster", "rosbags")) else real(name, *a))
+    (tmp_path / "x.pcap").write_bytes(b"\0" * 64)
+    (tmp_path / "x.json").write_text("{}")
+    with pytest.raises(ConfigError, match=r"pip install 'lidarkit\[ouster\]'"):
+        open_dataset("ouster", tmp_path / "x.pcap")
+    with pytest.raises(ConfigError, match=r"pip install 'lidarkit\[ros\]'"):
+        open_dataset("rosbag", tmp_path / "x.bag")
+
+
+def test_kiss_generic_loader_reads_a_kitti_bin_folder(exports):
+    """kiss-icp's generic loader through lidarkit: same points as lidarkit's KITTI reader."""
+    generic = open_dataset("generic", exports["kitti"] / "velodyne")
+    kitti = open_dataset("kitti", exports["kitti"])
+    assert len(generic) == N_FRAMES
+    np.testing.assert_array_equal(generic.read_scan(2).points_xyz, kitti.read_scan(2).points_xyz)

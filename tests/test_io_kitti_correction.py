@@ -1,0 +1,66 @@
+"""KITTI as kiss-icp reads it: the vertical-angle correction makes `lidarkit odometry --method kiss` kiss-icp's own run."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import yaml
+
+from conftest import cli_exit_code, shared_path
+
+pytestmark = pytest.mark.shared_data
+
+
+@pytest.fixture(scope="module")
+def kiss_icp_pipeline_poses():
+    """kiss-icp's OdometryPipeline with kiss-icp's own KITTI dataloader on the 10 shared scans of sequence 00."""
+    from kiss_icp.datasets.kitti import KITTIOdometryDataset
+    from kiss_icp.pipeline import OdometryPipeline
+
+    dataset = KITTIOdometryDataset(shared_path("kitti_odometry"), sequence="00")
+    assert len(dataset) == 10
+    pipeline = OdometryPipeline(dataset)
+    pipeline._run_pipeline()  # the odometry loop only: no result folder written
+    return pipeline.poses.copy()
+
+
+def test_kiss_through_lidarkit_equals_kiss_icp_pipeline(kiss_icp_pipeline_poses, tmp_path):
+    out = tmp_path / "run"
+    root = shared_path("kitti_odometry")
+    assert cli_exit_code(["odometry", f"kitti:{root}?sequence=00", "--method", "kiss", "--out", str(out), "--no-progress"]) == 0
+    poses = np.loadtxt(out / "poses_kitti.txt").reshape(-1, 3, 4)
+    assert poses.shape[0] == 10
+    gap = np.linalg.norm(poses[:, :, 3] - kiss_icp_pipeline_poses[:, :3, 3], axis=1).max()
+    assert gap <= 1e-6
+    options = yaml.safe_load((out / "config.yaml").read_text())["run"]["dataset_options"]
+    assert options["vertical_correction"] == "auto" and options["vertical_correction_applied"] is True
+    assert options["vertical_correction_deg"] == pytest.approx(0.205)
+
+
+def test_without_the_correction_it_is_another_experiment(kiss_icp_pipeline_poses):
+    from lidarkit.odometry import run
+
+    root = shared_path("kitti_odometry")
+    result = run(f"kitti:{root}?sequence=00&vertical_correction=false", "kiss")
+    gap = np.linalg.norm(result.trajectory.poses_se3[:, :3, 3] - kiss_icp_pipeline_poses[:, :3, 3], axis=1).max()
+    assert gap > 1e-4  # the correction changes kiss's poses measurably
+    assert result.config["run"]["dataset_options"]["vertical_correction_applied"] is False
+
+
+def test_auto_is_off_for_other_methods_and_for_simulated_folders(tmp_path):
+    from lidarkit.io.kitti import KittiOdometry
+    from lidarkit.sim.lidar import SimulatedLidarSequence, export_kitti
+
+    ds = KittiOdometry(shared_path("kitti_odometry"), "00")
+    raw = ds.read_scan(0).points_xyz
+    ds.configure_for_method("small_gicp")
+    assert ds.reader_options["vertical_correction_applied"] is False
+    ds.configure_for_method("kiss")
+    corrected = ds.read_scan(0).points_xyz
+    # a point at range r moves by about r * 0.205 deg, along the vertical direction of its azimuth
+    moved = np.linalg.norm(corrected - raw, axis=1) / np.linalg.norm(raw, axis=1)
+    assert np.median(moved) == pytest.approx(np.deg2rad(0.205), rel=0.05)
+    sim = export_kitti(SimulatedLidarSequence(n_frames=1, n_beams=4, n_azimuths=64), tmp_path / "sim")
+    simulated = KittiOdometry(sim)
+    simulated.configure_for_method("kiss")
+    assert simulated.reader_options["vertical_correction_applied"] is False

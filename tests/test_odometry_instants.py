@@ -1,0 +1,63 @@
+"""Scoring like with like: the instant of the sweep an estimate refers to against its ground truth's instant."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lidarkit.errors import EvaluationError
+from lidarkit.geometry import pose_error
+from lidarkit.odometry import run
+from lidarkit.registration import available_icp
+from lidarkit.sim.lidar import SimulatedLidarSequence
+
+#: a distorted drive pulling away to 10 m/s within 1 s: the motion within a sweep grows from 0 to 1 m, so which
+#: instant of the sweep a pose refers to matters even relative to the first pose
+SIM = dict(n_frames=10, n_beams=16, n_azimuths=720, seed=5, speed_mps=10.0, accel_time_s=1.0, motion_distortion=True)
+
+
+@pytest.fixture(scope="module")
+def sims():
+    return {instant: SimulatedLidarSequence(pose_instant=instant, **SIM) for instant in ("start", "mid", "end")}
+
+
+def test_kiss_is_scored_at_the_sweep_end_whatever_instant_the_ground_truth_has(sims):
+    """kiss deskews to the END: ground truth at start/mid is re-timed with a note, at end it is used as is."""
+    results = {instant: run(seq, "kiss") for instant, seq in sims.items()}
+    assert results["end"].metrics.get("ground_truth_instant_note") is None
+    for instant in ("start", "mid"):
+        note = results[instant].metrics["ground_truth_instant_note"]
+        assert f"from the sweep {instant} to the sweep end" in note
+        assert results[instant].config["run"]["ground_truth_instant_note"] == note
+        # the reference actually used is the end-of-sweep ground truth
+        np.testing.assert_allclose(results[instant].ground_truth.poses_se3, results["end"].ground_truth.poses_se3, atol=1e-12)
+        np.testing.assert_allclose(results[instant].trajectory.poses_se3, results["end"].trajectory.poses_se3, atol=1e-9)
+    # and that matters: relative to its first pose, the start-of-sweep truth is another trajectory (by ~the last
+    # sweep's motion), so scoring against it would have charged the estimate with it
+    start_truth = sims["start"].ground_truth.relative_to_first().poses_se3[-1]
+    shift_m, _ = pose_error(results["start"].ground_truth.poses_se3[-1], start_truth)
+    assert shift_m > 0.5
+
+
+def test_ground_truth_of_another_instant_that_cannot_be_re_timed_is_refused(sims):
+    with pytest.raises(EvaluationError, match="refer to the sweep end but the ground truth to the sweep start"):
+        run(sims["end"], "kiss", ground_truth=sims["end"].ground_truth_at("start"))
+
+
+def test_without_deskew_the_scan_stamp_instant_counts(sims):
+    """kiss without deskew and a stateless variant: poses refer to the instant the scans are stamped at (the
+    simulator stamps at its pose_instant), so the ground truth is used as is."""
+    result = run(sims["mid"], "kiss", params={"deskew": False})
+    assert result.metrics.get("ground_truth_instant_note") is None
+    with pytest.raises(EvaluationError, match="refer to the sweep mid but the ground truth to the sweep end"):
+        run(sims["mid"], "kiss", params={"deskew": False}, ground_truth=sims["mid"].ground_truth_at("end"))
+    method = "small_gicp" if "small_gicp" in available_icp() else "open3d_point_to_plane"
+    assert run(sims["start"], method, frames="0:4").metrics.get("ground_truth_instant_note") is None
+
+
+def test_scan_states_its_time_convention(sims):
+    scan = sims["mid"].read_scan(1)
+    assert scan.point_time_convention == "relative_s" and scan.stamp_instant == "mid"
+    fractions = scan.point_fractions()
+    assert fractions.min() == 0.0 and fractions.max() == 1.0
+    np.testing.assert_allclose(fractions, scan.point_times_s / scan.point_times_s.max())

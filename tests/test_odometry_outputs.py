@@ -1,0 +1,271 @@
+"""Outputs that say what was actually done (issue 19): effective deskew and why, every score named by its
+alignment, an independent per-frame check for every variant, runs titled after their folder, docs that match
+the reader.
+
+One small simulated KITTI-layout export (12 sweeps of 16 x 360 rays, moving from t = 0) serves the CLI tests;
+the open scene of the frame-check test is 25 sweeps of 16 x 360 rays.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from lidarkit.cli import main
+from lidarkit.io.kitti import POINT_TIME_FOLDERS, KittiOdometry
+from lidarkit.odometry import run
+from lidarkit.odometry.frame_check import FrameCheckConfig, motion_deviation, motion_limits
+from lidarkit.sim.lidar import SimulatedLidarSequence, export_kitti
+
+DOCS = Path(__file__).resolve().parents[1] / "docs"
+EXPORT = {"scene": "street", "n_frames": 12, "n_beams": 16, "n_azimuths": 360, "seed": 0, "accel_time_s": 0.0}
+
+
+def _cli(args: list[str], capsys) -> tuple[int, str, str]:
+    try:
+        code = main(args)
+    except SystemExit as exc:
+        code = exc.code
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+@pytest.fixture(autouse=True)
+def wide_console(monkeypatch):
+    """Rich tables one row per line (no wrapping at 80 columns), so rows can be matched as printed."""
+    monkeypatch.setenv("COLUMNS", "300")
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory) -> Path:
+    """A KITTI-layout sequence with per-point times in point_times/ (as lidarkit's simulator writes it)."""
+    return export_kitti(SimulatedLidarSequence(**EXPORT), tmp_path_factory.mktemp("sim") / "street_seq")
+
+
+def _copy(exported: Path, dest: Path, times_folder: str | None) -> Path:
+    """A copy of the export whose per-point times live in ``times_folder`` (None: no per-point times)."""
+    shutil.copytree(exported, dest)
+    if times_folder is None:
+        shutil.rmtree(dest / "point_times")
+    elif times_folder != "point_times":
+        (dest / "point_times").rename(dest / times_folder)
+    return dest
+
+
+# ---- deskew: requested vs applied -----------------------------------------------------------------------------
+def test_per_point_times_under_every_documented_folder_name_are_found_and_deskew_is_applied(exported, tmp_path, capsys):
+    poses = {}
+    for folder in POINT_TIME_FOLDERS:
+        seq = _copy(exported, tmp_path / folder / "street_seq", folder)
+        assert KittiOdometry(seq).point_times_dir == seq / folder
+        out = tmp_path / folder / "run"
+        code, text, _ = _cli(["odometry", str(seq), "-m", "kiss", "--no-progress", "--out", str(out)], capsys)
+        assert code == 0
+        metrics = json.loads((out / "metrics.json").read_text())
+        deskew = metrics["effective"]["deskew"]
+        assert deskew["requested"] is True and deskew["applied"] is True and deskew["frames_with_point_times"] == 12
+        assert f"{folder}/" in deskew["reason"] and metrics["warnings"] == []
+        assert re.search(rf"on: per-point times from {folder}/", text)
+        poses[folder] = np.loadtxt(out / "poses_kitti.txt")
+    for folder in POINT_TIME_FOLDERS[1:]:  # the same times under another name: the same deskewed estimate
+        np.testing.assert_allclose(poses[folder], poses["point_times"], atol=1e-9)
+    without = run(_copy(exported, tmp_path / "none" / "street_seq", None), "kiss")
+    assert without.metrics["effective"]["deskew"]["applied"] is False
+    deskewed = poses["point_times"].reshape(-1, 3, 4)
+    assert np.abs(without.trajectory.poses_se3[:, :3, :] - deskewed).max() > 0.01  # deskew changed the estimate
+
+
+def test_per_point_times_under_an_unknown_folder_name_say_deskew_was_not_applied(exported, tmp_path, capsys):
+    seq = _copy(exported, tmp_path / "street_seq", "stamps")
+    out = tmp_path / "run"
+    code, text, _ = _cli(["odometry", str(seq), "-m", "kiss", "--no-progress", "--out", str(out)], capsys)
+    assert code == 0
+    assert re.search(r"│ warning +│ deskew requested, no per-point times found \(looked for point_times/", text)
+    assert "REQUESTED, NOT APPLIED: no per-point times found (looked for point_times/, timestamps/" in text
+    metrics = json.loads((out / "metrics.json").read_text())
+    deskew = metrics["effective"]["deskew"]
+    assert deskew == {**deskew, "requested": True, "applied": False, "frames_with_point_times": 0}
+    assert "no per-point times found" in deskew["reason"] and "timestamps/" in deskew["reason"]
+    assert any(w.startswith("deskew requested, no per-point times found") for w in metrics["warnings"])
+    config = (out / "config.yaml").read_text()
+    assert "deskew: true" in config and "applied: false" in config  # requested and effective side by side
+
+    code, _, err = _cli(["odometry", str(seq), "-m", "kiss", "--no-progress", "--strict"], capsys)
+    assert code == 1
+    (line,) = [ln for ln in err.splitlines() if ln.strip()]
+    assert "frame 0" in line and "deskew requested, no per-point times found" in line
+
+
+def test_deskew_off_or_not_offered_is_stated_without_a_warning(exported, tmp_path):
+    seq = _copy(exported, tmp_path / "street_seq", "point_times")
+    off = run(seq, "kiss", params={"deskew": False}, frames="0:3")
+    assert off.metrics["effective"]["deskew"] == {**off.metrics["effective"]["deskew"], "requested": False, "applied": False}
+    assert off.metrics["warnings"] == []
+    scan_to_scan = run(seq, "vanilla", frames="0:3")
+    assert scan_to_scan.metrics["effective"]["deskew"]["requested"] is None
+    assert "does not deskew" in scan_to_scan.metrics["effective"]["deskew"]["reason"]
+
+
+def test_what_the_reader_reports_applying_is_recorded_and_printed(exported, tmp_path, capsys):
+    class CorrectedKitti(KittiOdometry):  # a reader that reports a correction it applied (as KITTI's angle fix)
+        @property
+        def reader_options(self):
+            return {"vertical_correction": "auto", "vertical_correction_applied": True, "vertical_correction_deg": 0.205}
+
+    result = run(CorrectedKitti(exported), "kiss", frames="0:3", out_dir=tmp_path / "run")
+    effective = result.metrics["effective"]
+    assert effective["corrections"] == {"vertical_correction": "auto", "vertical_correction_applied": True, "vertical_correction_deg": 0.205}
+    assert effective["reader"]["point_times_dir"] == str(exported / "point_times")
+    # a simulator export states its ground-truth instant (sim.yaml): the sweep end, where kiss deskews to
+    assert effective["ground_truth_instant"] == "end" and effective["estimate_instant"] == "end"
+    assert "vertical_correction_deg: 0.205" in (tmp_path / "run" / "config.yaml").read_text()
+    sim = run("sim:street?frames=3&beams=8&azimuths=90", "kiss").metrics["effective"]
+    assert (sim["ground_truth_instant"], sim["estimate_instant"]) == ("end", "end")  # deskewed to the sweep end, scored there
+
+
+# ---- alignment of every score ---------------------------------------------------------------------------------
+def _yawed_first_pose(seq: Path, yaw_deg: float) -> None:
+    """Rotate the ground truth of frame 0 about z: anchoring at the first pose turns the whole reference."""
+    poses = np.loadtxt(seq / "poses.txt").reshape(-1, 3, 4)
+    c, s = np.cos(np.radians(yaw_deg)), np.sin(np.radians(yaw_deg))
+    poses[0, :, :3] = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ poses[0, :, :3]
+    np.savetxt(seq / "poses.txt", poses.reshape(-1, 12), fmt="%.12e")
+
+
+def test_every_score_names_its_alignment_in_cli_metrics_bench_table_and_report(exported, tmp_path, capsys):
+    seq = _copy(exported, tmp_path / "street_seq", "point_times")
+    _yawed_first_pose(seq, 3.0)
+    out = tmp_path / "run"
+    code, text, _ = _cli(["odometry", str(seq), "-m", "open3d_gicp", "--no-progress", "--out", str(out)], capsys)
+    assert code == 0
+    m = json.loads((out / "metrics.json").read_text())
+    aligned, unaligned = m["ape_translation_se3_m"]["stats"]["rmse"], m["ape_translation_m"]["stats"]["rmse"]
+    assert unaligned > 10 * aligned and aligned < 0.1  # a 3 deg first-pose yaw over a 12 m drive
+    assert m["ape_translation_se3_m"]["alignment"] == "SE(3)-aligned" and m["ape_translation_se3_m"]["align"] == "se3"
+    assert m["ape_translation_m"]["alignment"] == "unaligned, first pose anchored" and m["ape_translation_m"]["align"] == "none"
+    assert "alignment-free" in m["rpe_translation_m"]["alignment"] and "alignment-free" in m["rpe_rotation_deg"]["alignment"]
+    assert m["final_error"]["alignment"] == "unaligned, first pose anchored"
+    flat = " ".join(text.split())
+    assert f"APE translation RMSE, SE(3)-aligned (m) │ {aligned:.3f}" in flat
+    assert f"APE translation RMSE, unaligned, first pose anchored (m) │ {unaligned:.3f}" in flat
+    assert m["n_bad_frames"] == 0  # an accurate run: the independent check flags nothing
+
+    from lidarkit.bench.report import build_report
+    from lidarkit.bench.runner import run_suite
+    from lidarkit.bench.suite import load_suite
+
+    (tmp_path / "suite.yaml").write_text(textwrap.dedent(f"""
+        name: alignment-labels
+        seeds: [0]
+        experiments:
+          - name: odo
+            task: odometry
+            dataset: {{kind: kitti, path: "{seq}", name: yawed}}
+            methods:
+              - name: open3d_gicp
+        """))
+    run_suite(load_suite(tmp_path / "suite.yaml"), tmp_path / "bench", executor="serial")
+    report = build_report(tmp_path / "bench", plots=False)
+    (table,) = report.tables
+    labels = {metric.name: metric.label for metric in table.metrics}
+    assert labels["ape_se3_rmse_m"] == "APE RMSE (SE(3)-aligned) [m]"
+    assert labels["ape_rmse_m"] == "APE RMSE (unaligned, first pose anchored) [m]"
+    assert "alignment-free" in labels["rpe_trans_rmse_m"] and "alignment-free" in labels["rpe_rot_rmse_deg"]
+    (row,) = table.rows
+    assert row.stats["ape_rmse_m"][0] > 10 * row.stats["ape_se3_rmse_m"][0]
+    assert row.stats["ape_se3_rmse_m"][0] == pytest.approx(aligned, rel=1e-6)
+    html = report.html_path.read_text()
+    markdown = report.markdown_path.read_text()
+    for text_out in (html, markdown):
+        assert "APE RMSE (SE(3)-aligned) [m]" in text_out and "APE RMSE (unaligned, first pose anchored) [m]" in text_out
+    assert "APE RMSE (SE(3)-aligned) [m], methods x datasets" in markdown  # the aligned APE is the headline view
+
+
+def test_report_labels_metrics_with_the_alignment_their_records_state():
+    from lidarkit.bench.report import MetricInfo, label_alignment
+
+    def record(align):
+        return {"info": {"metric_alignment": {"ape_rmse_m": align}}}
+
+    ape = MetricInfo("ape_rmse_m", "APE RMSE [m]")
+    assert label_alignment(ape, [record("sim3-aligned"), record("sim3-aligned")]).label == "APE RMSE (sim3-aligned) [m]"
+    assert label_alignment(ape, [record("sim3-aligned"), record("unaligned")]).label == "APE RMSE (sim3-aligned / unaligned) [m]"
+    assert label_alignment(ape, [{"info": {}}]).label == "APE RMSE [m]"  # nothing stated: nothing invented
+    named = MetricInfo("ape_rmse_m", "APE RMSE (unaligned) [m]")
+    assert label_alignment(named, [record("unaligned")]).label == "APE RMSE (unaligned) [m]"
+
+
+# ---- the independent per-frame check --------------------------------------------------------------------------
+def test_motion_check_thresholds_follow_the_stated_accelerations():
+    cfg = FrameCheckConfig()
+    n = 8
+    poses = np.tile(np.eye(4), (n, 1, 1))
+    poses[:, 0, 3] = np.arange(n) * 1.0  # 10 m/s at 10 Hz: constant velocity
+    poses[5:, 0, 3] += 0.2  # frame 5 jumps 0.2 m ahead: 20 m/s^2 > 15 m/s^2 (limit 0.15 m at 0.1 s)
+    dev_t, dev_r, dt = motion_deviation(poses, None, cfg)
+    lim_t, lim_r = motion_limits(dt, cfg)
+    assert np.isnan(dev_t[:2]).all() and np.allclose(lim_t[1:], 0.15) and np.allclose(lim_r[1:], 1.0)
+    np.testing.assert_allclose(dev_t[2:], [0, 0, 0, 0.2, 0.2, 0], atol=1e-12)  # frame 6 stops jumping: a second deviation
+    assert list(np.flatnonzero(dev_t > lim_t)) == [5, 6]
+    times = np.arange(n) * 0.05  # a 20 Hz sensor: limits are 4x tighter, the deviation halves (velocity fixed)
+    dev20, _, dt20 = motion_deviation(poses, times, cfg)
+    lim20 = motion_limits(dt20, cfg)[0]
+    assert np.allclose(lim20[1:], 15.0 * 0.05**2) and list(np.flatnonzero(dev20 > lim20)) == [5, 6]
+
+
+def test_independent_check_counts_the_bad_frames_of_a_drifting_variant_that_says_converged(tmp_path, capsys):
+    spec = "sim:open?frames=25&beams=16&azimuths=360"
+    out = tmp_path / "run"
+    code, text, _ = _cli(["odometry", spec, "-m", "open3d_point_to_point", "--no-progress", "--out", str(out)], capsys)
+    assert code == 0
+    m = json.loads((out / "metrics.json").read_text())
+    check = m["frame_check"]
+    assert m["n_not_converged"] == 0  # the variant's own verdict: every frame converged
+    assert m["ape_translation_se3_m"]["stats"]["rmse"] > 2.0  # ... while it drifts
+    assert m["n_bad_frames"] == check["n_bad_frames"] >= 5
+    assert check["n_said_converged_but_bad"] == check["n_bad_frames"]
+    assert check["n_bad_motion"] + check["n_bad_fitness"] >= check["n_bad_frames"]
+    assert check["thresholds"]["max_accel_mps2"] == 15.0 and check["thresholds"]["min_fitness"] == 0.3
+    flat = " ".join(text.split())
+    assert f"bad frames (independent check) │ {check['n_bad_frames']} of 25" in flat
+    timing = (out / "timing.csv").read_text().splitlines()
+    assert timing[0].endswith("point_times,motion_dev_m,rotation_dev_deg,fitness,check_failed,check_why")
+    assert sum(line.split(",")[-2] == "1" for line in timing[1:]) == check["n_bad_frames"]
+
+
+def test_stateful_variants_are_checked_too(exported, tmp_path):
+    seq = _copy(exported, tmp_path / "street_seq", "point_times")
+    result = run(seq, "kiss")
+    check = result.metrics["frame_check"]
+    assert result.metrics["convergence_measured"] is False
+    assert check["n_fitness_checked"] == 11 and check["n_motion_checked"] == 10
+    assert check["n_said_converged_but_bad"] is None  # kiss gives no verdict to contradict
+    assert np.isfinite(result.stats.fitness[1:]).all()
+
+
+# ---- names, paths and docs -------------------------------------------------------------------------------------
+def test_runs_are_titled_after_the_folder_or_name_and_print_the_full_run_folder(exported, tmp_path, capsys):
+    deep = tmp_path / ("a_rather_long_folder_name_for_runs_" * 3) / "run"
+    code, text, _ = _cli(["odometry", str(exported), "-m", "kiss", "--frames", "0:3", "--no-progress", "--out", str(deep)], capsys)
+    assert code == 0
+    assert "kiss on street_seq" in text and "kitti_00" not in text
+    assert f"run folder: {deep.resolve()}" in text.splitlines()
+    code, text, _ = _cli(["odometry", str(exported), "-m", "kiss", "--frames", "0:3", "--no-progress", "--name", "my drive"], capsys)
+    assert code == 0 and "kiss on my drive" in text
+    assert KittiOdometry(exported).name == "street_seq"
+
+
+def test_docs_list_the_per_point_time_folders_the_reader_searches():
+    datasets = (DOCS / "datasets.md").read_text()
+    assert "### Per-point times" in datasets
+    (line,) = [ln for ln in datasets.splitlines() if ln.startswith("Folders searched, in order")]
+    assert tuple(re.findall(r"`([A-Za-z0-9_.-]+)/`", line.partition(":")[2])) == POINT_TIME_FOLDERS
+    simulator = (DOCS / "simulator.md").read_text()
+    assert "does not read `point_times/`" not in simulator
+    assert "datasets.md#per-point-times" in simulator
