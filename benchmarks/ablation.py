@@ -289,6 +289,15 @@ def report(out: Path, command: str) -> None:
                 f"| {key} | {_fmt(d[0], 2)} +- {_fmt(d[1], 2)} | {_fmt(ddeg[0], 2)} +- {_fmt(ddeg[1], 2)} | {_fmt(ape[0], 2)} +- {_fmt(ape[1], 2)} | "
                 f"{_fmt(end[0], 2)} +- {_fmt(end[1], 2)} | {_fmt(fps[0], 1)} | {_fmt(ratio[0], 2)} | {_fmt(change.mean(), 2)} +- {_fmt(change.std(), 2)} |"
             )
+        singles = {k: v["drift_change_vs_kiss_like"][0] for k, v in scene_summary.items() if k in ABLATIONS and k not in ("kiss_like", "vanilla_settings")}
+        singles = {k: v for k, v in singles.items() if np.isfinite(v)}
+        if singles and "vanilla_settings" in scene_summary:
+            worst = max(singles, key=singles.get)
+            gap = scene_summary["vanilla_settings"]["drift_change_vs_kiss_like"][0]
+            lines += ["", f"Gap vanilla_settings - kiss_like: {gap:+.2f} pct points of drift; the single switch that costs most: "
+                      f"**{worst}** ({singles[worst]:+.2f}, {100 * singles[worst] / gap:.0f} % of the gap); the others: "
+                      + ", ".join(f"{k} {v:+.2f}" for k, v in sorted(singles.items(), key=lambda kv: -kv[1]) if k != worst)]
+            scene_summary["_largest_single_component"] = {"component": worst, "drift_change": singles[worst], "vanilla_gap": gap}
         lines += ["", "kiss_like vs kiss-icp, largest pose-matrix difference per seed: "
                   + ", ".join(f"seed {r['seed']}: {r['kiss_like_max_abs_pose_difference_to_kiss']:.2e}" for r in recs)]
         if all("genz_max_abs_pose_difference_to_direct" in r for r in recs):
@@ -311,7 +320,7 @@ def _chart(summary: dict, out: Path) -> None:
     from lidarkit.atomic import save_figure
 
     keys = [k for k in ABLATIONS if k != "kiss_like"]
-    scenes = sorted(k for k, v in summary["sim"].items() if any(key in v for key in keys))
+    scenes = sorted(k for k, v in summary["sim"].items() if any(key in v for key in keys))[:4]
     if not scenes:
         return
     fig, axes = plt.subplots(1, len(scenes), figsize=(5.5 * len(scenes), 4), squeeze=False)

@@ -61,8 +61,10 @@ def test_unknown_names_and_params_raise_config_error_listing_valid_ones():
         get_icp("pipeline", map={"name": "voxel_hash", "max_points": 3})
     with pytest.raises(ConfigError, match="preset"):
         get_icp("pipeline", preset="kiss")
-    with pytest.raises(ConfigError, match="ground removal method 'plane'"):
+    with pytest.raises(ConfigError, match="unknown ground segmenter 'plane'; available: .*height"):
         get_icp("pipeline", preprocess=[{"name": "ground_filter", "method": "plane"}])
+    icp = get_icp("pipeline", preprocess=["range_crop", {"name": "ground_filter", "method": "ransac"}])
+    assert icp.describe()["preprocess"][1] == {"name": "ground_filter", "method": "ransac", "options": {}}
 
 
 def test_kernel_weights():

@@ -1,7 +1,7 @@
 """Preprocessing steps applied to each (deskewed) sweep in the sensor frame, in the order the pipeline lists them.
 
-They are thin components over :mod:`lidarkit.registration.preprocess`; ``ground_filter`` calls its
-``remove_ground`` (``method`` ``"height"`` or ``"ransac"``), the place a ground-segmenter registry plugs in.
+They are thin components over :mod:`lidarkit.registration.preprocess` and, for ``ground_filter``, the ground
+segmenter registry :mod:`lidarkit.registration.ground` (any registered segmenter by name).
 """
 
 from __future__ import annotations
@@ -65,24 +65,34 @@ class VoxelDownsample(Preprocess):
 
 
 class GroundFilterConfig(ComponentConfig):
-    method: str = Field("height", description="ground removal of registration.preprocess.remove_ground: 'height' or 'ransac'")
-    options: dict[str, Any] = Field(default_factory=dict, description="keyword options of that method (e.g. sensor_height_m)")
+    method: str = Field("height", description="ground segmenter of lidarkit.registration.ground (height, ransac, local_plane, ...)")
+    options: dict[str, Any] = Field(default_factory=dict, description="parameters of that segmenter (e.g. sensor_height_m)")
 
     @model_validator(mode="after")
     def _known(self) -> "GroundFilterConfig":
-        if self.method not in ("height", "ransac"):
-            raise ValueError(f"unknown ground removal method {self.method!r}; available: height, ransac")
+        from lidarkit.registration.ground import available_ground_segmenters
+
+        names = available_ground_segmenters()
+        if self.method not in names:
+            raise ValueError(f"unknown ground segmenter {self.method!r}; available: {', '.join(names)}")
         return self
 
 
 @register_component("preprocess", "ground_filter")
 class GroundFilter(Preprocess):
-    """Remove ground points (flat-road height rule or a RANSAC plane)."""
+    """Remove the points a ground segmenter marks (flat-road height rule, RANSAC plane, local planes, ...)."""
 
     Config = GroundFilterConfig
 
+    def __init__(self, config=None, **params):
+        from lidarkit.registration.ground import get_ground_segmenter
+
+        super().__init__(config, **params)
+        self._segmenter = get_ground_segmenter(self.config.method, **self.config.options)
+
     def apply(self, points_xyz: np.ndarray) -> np.ndarray:
-        return preprocess.remove_ground(points_xyz, self.config.method, **self.config.options)
+        pts = np.asarray(points_xyz, dtype=np.float64)
+        return pts[~self._segmenter.segment(pts)]
 
 
 __all__ = ["GroundFilter", "Preprocess", "RangeCrop", "VoxelDownsample"]
