@@ -4,6 +4,7 @@ Starting from ``kiss_like`` (kiss-icp rebuilt from lidarkit components), one com
 
   no_deskew        constant-velocity prediction kept, no motion compensation
   fixed_threshold  a fixed 1 m correspondence distance instead of the adaptive threshold (kernel scale follows it)
+  unlimited_threshold  every nearest neighbour is a correspondence (vanilla's threshold; the kernel then weighs all alike)
   no_kernel        plain least squares instead of the Geman-McClure kernel
   scan_to_scan     the previous sweep as the map instead of the voxel-hash local map
   point_to_plane   point-to-plane residual (map normals) instead of point-to-point
@@ -47,6 +48,7 @@ ABLATIONS: dict[str, dict] = {
     "kiss_like": {},
     "no_deskew": {"deskew": {"name": "constant_velocity", "deskew": False}},
     "fixed_threshold": {"threshold": {"name": "fixed", "max_distance_m": 1.0}},
+    "unlimited_threshold": {"threshold": {"name": "fixed", "max_distance_m": None}},
     "no_kernel": {"kernel": "none"},
     "scan_to_scan": {"map": "scan_to_scan"},
     "point_to_plane": {"residual": "point_to_plane"},
@@ -262,6 +264,16 @@ def report(out: Path, command: str) -> None:
         lines.append("")
         summary["datasets"].append(r)
     sims = [r for r in records if r["dataset"] != "kitti"]
+    # a subset run (--variants) of a sequence that also has a full run adds its extra variants to that run's rows
+    full = {(r["dataset"], r["n_frames"], r["seed"]): r for r in sims if not r.get("variants_subset")}
+    for r in [r for r in sims if r.get("variants_subset")]:
+        target = full.get((r["dataset"], r["n_frames"], r["seed"]))
+        if target is not None:
+            extra = {k: v for k, v in r["rows"].items() if k not in target["rows"]}
+            for v in extra.values():  # its frame rate relative to its own run's kiss-icp
+                v["fps_note"] = "separate run"
+            target["rows"].update(extra)
+            sims.remove(r)
     groups = sorted({(r["dataset"], r["n_frames"], tuple(r.get("variants_subset") or ())) for r in sims})
     for scene, n_frames, subset in groups:
         recs = sorted([r for r in sims if (r["dataset"], r["n_frames"], tuple(r.get("variants_subset") or ())) == (scene, n_frames, subset)],
@@ -282,7 +294,8 @@ def report(out: Path, command: str) -> None:
 
             d, ddeg, ape, end, fps, ratio = (stat(f) for f in ("drift_pct", "drift_deg_per_100m", "ape_rmse_m", "end_error_m", "fps", "fps_ratio_to_kiss"))
             change = np.array([r["rows"][key].get("drift_pct", np.nan) - r["rows"]["kiss_like"].get("drift_pct", np.nan) for r in recs if key in r["rows"]])
-            scene_summary[key] = {"drift_pct": d, "drift_deg_per_100m": ddeg, "ape_rmse_m": ape, "end_error_m": end, "fps": fps,
+            ape_change = np.array([r["rows"][key]["ape_rmse_m"] - r["rows"]["kiss_like"]["ape_rmse_m"] for r in recs if key in r["rows"]])
+            scene_summary[key] = {"ape_change_vs_kiss_like": (float(ape_change.mean()), float(ape_change.std())), "drift_pct": d, "drift_deg_per_100m": ddeg, "ape_rmse_m": ape, "end_error_m": end, "fps": fps,
                                   "fps_ratio_to_kiss": ratio, "drift_change_vs_kiss_like": (float(change.mean()), float(change.std())),
                                   "per_seed": {str(r["seed"]): r["rows"][key] for r in recs if key in r["rows"]}}
             lines.append(
@@ -306,7 +319,10 @@ def report(out: Path, command: str) -> None:
         lines.append("")
         summary["sim"][f"{scene} {n_frames} sweeps" + (" (kiss vs kiss_like only)" if subset else "")] = scene_summary
     _chart(summary, out)
-    lines += ["![drift change of each single-component switch](ablation.png)", ""]
+    lines += ["![change each single-component switch makes (drift, or APE where the run is too short for drift)](ablation.png)", ""]
+    notes = out / "notes.md"  # hand-written findings and the runs' limits, kept beside the generated tables
+    if notes.exists():
+        lines += [notes.read_text().rstrip(), ""]
     write_text(out / "results.json", json.dumps({"records": records, "summary_sim": summary["sim"]}, indent=2, default=float) + "\n")
     write_text(out / "README.md", "\n".join(lines) + "\n")
 
@@ -326,13 +342,19 @@ def _chart(summary: dict, out: Path) -> None:
     fig, axes = plt.subplots(1, len(scenes), figsize=(5.5 * len(scenes), 4), squeeze=False)
     for ax, scene in zip(axes[0], scenes):
         s = summary["sim"][scene]
-        means = [s[k]["drift_change_vs_kiss_like"][0] if k in s else np.nan for k in keys]
-        stds = [s[k]["drift_change_vs_kiss_like"][1] if k in s else 0 for k in keys]
+        use_drift = np.isfinite(s["kiss_like"]["drift_pct"][0])
+        field = "drift_change_vs_kiss_like" if use_drift else "ape_change_vs_kiss_like"
+        means = [s[k][field][0] if k in s else np.nan for k in keys]
+        stds = [s[k][field][1] if k in s else 0 for k in keys]
         ax.barh(keys, means, xerr=stds, color=["tab:red" if m > 0 else "tab:green" for m in means])
         ax.axvline(0, color="k", lw=0.8)
         ax.set_xscale("symlog", linthresh=0.1)
-        ax.set_title(f"sim {scene}: kiss_like drift {s['kiss_like']['drift_pct'][0]:.2f} %")
-        ax.set_xlabel("KITTI drift change vs kiss_like (percentage points)")
+        if use_drift:
+            ax.set_title(f"sim {scene}: kiss_like drift {s['kiss_like']['drift_pct'][0]:.2f} %")
+            ax.set_xlabel("KITTI drift change vs kiss_like (percentage points)")
+        else:
+            ax.set_title(f"sim {scene}: kiss_like APE {s['kiss_like']['ape_rmse_m'][0]:.2f} m")
+            ax.set_xlabel("APE RMSE change vs kiss_like (m)")
     fig.tight_layout()
     save_figure(fig, out / "ablation.png", dpi=110)
     plt.close(fig)
