@@ -6,8 +6,8 @@ from pathlib import Path
 from typing import Optional
 
 import typer
-from rich.text import Text
 from rich.table import Table
+from rich.text import Text
 
 from lidarkit.cli.app import app, parse_params, stdout
 
@@ -62,13 +62,23 @@ def odometry(
         "constant_velocity", "--init",
         help="Initial guess per frame: constant_velocity | odometry (the dataset's own odometry, e.g. a carmen: log).",
     ),
+    check: list[str] = typer.Option(
+        [], "--check",
+        help="Threshold of the independent per-frame check KEY=VALUE (repeatable), e.g. max_angular_accel_dps2=500 "
+        "(keys: max_accel_mps2, max_angular_accel_dps2, min_fitness, inlier_min_m, inlier_range_fraction, ...).",
+    ),
 ) -> None:
     """Odometry of one ICP variant over a scan sequence, scored against its ground truth when it has one."""
     from lidarkit.atomic import check_target
     from lidarkit.odometry import run
+    from lidarkit.odometry.frame_check import make_frame_check
 
     check_target(out, "folder")
-    result = run(data, method, params=parse_params(param), frames=frames, out_dir=out, progress=progress, strict=strict, name=name, init=init)
+    frame_check = make_frame_check(**parse_params(check, option="--check"))
+    result = run(
+        data, method, params=parse_params(param), frames=frames, out_dir=out, progress=progress, strict=strict, name=name, init=init,
+        frame_check=frame_check,
+    )
     m = result.metrics
     effective = m.get("effective") or {}
     table = Table(title=result.trajectory.name, show_header=True)
