@@ -27,6 +27,8 @@ def test_no_motion_falls_back_to_the_size_guess():
     assert est.focal_px == pytest.approx(_GUESS) and est.sigma_px == float("inf")
     assert "translation parallax" in est.reason and "guess" in est.describe()
     assert est.K(*_SIZE)[0, 0] == pytest.approx(_GUESS)
+    images[5] = None  # an unreadable frame skips its window instead of raising
+    assert not estimate_focal(images, AutocalibConfig(window=4, stride=4)).constrained
 
 
 def test_pure_rotation_falls_back_to_the_size_guess():

@@ -217,10 +217,11 @@ def estimate_focal(images: Any, cfg: AutocalibConfig | None = None,
     cfg = cfg or AutocalibConfig()
     if cfg.window < 3:
         raise ConfigError(f"window must be >= 3 frames, got {cfg.window}", source="autocalib")
+    from lidarkit.vo.pipeline import MonoVO, sequence_image_shape
+
     read = images.read_image if hasattr(images, "read_image") else (lambda i: images[i])
     n = len(images)
-    first = read(0)
-    h, w = first.shape[:2]
+    h, w = sequence_image_shape(images)[:2]
     guess = float(K_from_image_size(w, h, focal_factor)[0, 0])
     center = np.array([(w - 1) / 2.0, (h - 1) / 2.0])
     guess_K = K_from_image_size(w, h, focal_factor)
@@ -235,7 +236,9 @@ def estimate_focal(images: Any, cfg: AutocalibConfig | None = None,
         starts = [starts[i] for i in np.linspace(0, len(starts) - 1, cfg.max_windows).astype(int)]
     windows = []
     for s in starts:
-        frames = [read(i) for i in range(s, s + cfg.window)]
+        frames = [MonoVO._load(read, i)[0] for i in range(s, s + cfg.window)]
+        if any(f is None or f.shape[:2] != (h, w) for f in frames):
+            continue  # an unreadable or odd-sized frame: the window is skipped
         obs = _window_tracks(frames, cfg)
         if obs is not None and _has_parallax(obs, guess_K, cfg):
             ba = _WindowBA(obs, center, cfg.huber_px)
