@@ -4,14 +4,15 @@ Assumption: square pixels (``fx = fy = f``), no skew, principal point at the ima
 static scene. Method: short-window bundle adjustment. In windows of ``window`` consecutive frames, corners are
 followed by KLT through the whole window; for each focal length of a geometric grid the window's poses and the
 points' inverse depths (anchored in the window's first frame) are adjusted (``scipy.optimize.least_squares``, sparse
-Jacobian, robust Huber loss), and the reprojection cost is summed over windows. The focal length is the minimum of that
-profile (parabola in log f through the three lowest grid points) and its uncertainty comes from the profile's
-curvature (Gauss-Newton: ``var(log f) = 2 s^2 / C''``, ``s^2`` the residual variance), widened by the spread of the
-per-window minima.
+Jacobian, robust Huber loss). Each window's focal length is the minimum of its cost profile (parabola in log f); the
+estimate is the median over windows and its 1-sigma 1.4826 MAD / sqrt(n) in log f (single windows' adjustments can
+land in different basins, so summing their costs would let one bad window decide).
 
 Two-view criteria are almost flat in f for car motion (yaw plus forward translation is close to a critical motion);
 several frames with a growing baseline constrain it better, but not always: the profile is then flat and the
-estimate falls back to the image-size guess with the reason. A window counts only when its first and last frames show
+estimate falls back to the image-size guess with the reason (windows disagreeing by more than
+``max_relative_sigma``, or too few windows with an interior minimum). Measured: KITTI 01 frames 0-50 -5.9 %
+(benchmarks/results/vo_autocalib). A window counts only when its first and last frames show
 translation parallax (not explained by a homography); no motion or pure rotation throughout leaves no window, and
 the estimate falls back.
 """
