@@ -20,7 +20,8 @@ import pytest
 from lidarkit.cli import main
 from lidarkit.io.kitti import POINT_TIME_FOLDERS, KittiOdometry
 from lidarkit.odometry import run
-from lidarkit.odometry.frame_check import FrameCheckConfig, motion_deviation, motion_limits
+from lidarkit.errors import ConfigError
+from lidarkit.odometry.frame_check import FrameCheckConfig, make_frame_check, motion_deviation, motion_limits
 from lidarkit.sim.lidar import SimulatedLidarSequence, export_kitti
 
 DOCS = Path(__file__).resolve().parents[1] / "docs"
@@ -210,13 +211,31 @@ def test_motion_check_thresholds_follow_the_stated_accelerations():
     poses[5:, 0, 3] += 0.2  # frame 5 jumps 0.2 m ahead: 20 m/s^2 > 15 m/s^2 (limit 0.15 m at 0.1 s)
     dev_t, dev_r, dt = motion_deviation(poses, None, cfg)
     lim_t, lim_r = motion_limits(dt, cfg)
-    assert np.isnan(dev_t[:2]).all() and np.allclose(lim_t[1:], 0.15) and np.allclose(lim_r[1:], 1.0)
+    assert np.isnan(dev_t[:2]).all() and np.allclose(lim_t[1:], 0.15) and np.allclose(lim_r[1:], 3.0)
     np.testing.assert_allclose(dev_t[2:], [0, 0, 0, 0.2, 0.2, 0], atol=1e-12)  # frame 6 stops jumping: a second deviation
     assert list(np.flatnonzero(dev_t > lim_t)) == [5, 6]
     times = np.arange(n) * 0.05  # a 20 Hz sensor: limits are 4x tighter, the deviation halves (velocity fixed)
     dev20, _, dt20 = motion_deviation(poses, times, cfg)
     lim20 = motion_limits(dt20, cfg)[0]
     assert np.allclose(lim20[1:], 15.0 * 0.05**2) and list(np.flatnonzero(dev20 > lim20)) == [5, 6]
+
+
+def test_motion_prediction_follows_irregular_frame_intervals():
+    """A constant speed and turn rate sampled at irregular times deviates nowhere from the prediction."""
+    times = np.cumsum([0.0, 0.1, 0.3, 0.05, 0.2, 0.1, 0.4, 0.1])
+    yaw, x = np.radians(30.0) * times, 10.0 * times  # a constant turn rate (30 deg/s) while sliding along x at 10 m/s
+    poses = np.tile(np.eye(4), (len(times), 1, 1))
+    poses[:, 0, 0], poses[:, 0, 1], poses[:, 1, 0], poses[:, 1, 1] = np.cos(yaw), -np.sin(yaw), np.sin(yaw), np.cos(yaw)
+    poses[:, 0, 3] = x
+    dev_t, dev_r, dt = motion_deviation(poses, times, FrameCheckConfig())
+    np.testing.assert_allclose(dt[1:], np.diff(times))
+    # the translation is no constant twist (it slides while turning): only the scaled rotation is checked here
+    assert np.nanmax(dev_r) < 1e-9
+    with pytest.raises(ConfigError, match="unknown setting.*max_accel"):
+        make_frame_check(max_acel_mps2=3)
+    with pytest.raises(ConfigError, match="min_fitness must be positive"):
+        make_frame_check(min_fitness="-1")
+    assert make_frame_check(max_angular_accel_dps2="500", n_sample="100") == FrameCheckConfig(max_angular_accel_dps2=500.0, n_sample=100)
 
 
 def test_independent_check_counts_the_bad_frames_of_a_drifting_variant_that_says_converged(tmp_path, capsys):

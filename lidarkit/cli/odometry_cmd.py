@@ -6,8 +6,8 @@ from pathlib import Path
 from typing import Optional
 
 import typer
-from rich.text import Text
 from rich.table import Table
+from rich.text import Text
 
 from lidarkit.cli.app import app, parse_params, stdout
 
@@ -53,6 +53,11 @@ def odometry(
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="Run folder: poses (KITTI, TUM), config.yaml, metrics.json, timing.csv, plot."),
     name: Optional[str] = typer.Option(None, "--name", help="Title of the run (default: the dataset's folder name)."),
     progress: bool = typer.Option(True, "--progress/--no-progress", help="Progress bar on stderr."),
+    pose_covariance: Optional[bool] = typer.Option(
+        None, "--pose-covariance/--no-pose-covariance",
+        help="Propagate the per-frame covariances into pose_covariance.txt (default: on for scan-to-scan variants, off for "
+        "stateful ones such as kiss, where it costs an extra assessment per frame).",
+    ),
     strict: bool = typer.Option(
         False, "--strict",
         help="Fail on the first frame whose registration does not converge, and when a requested deskew cannot happen "
@@ -62,13 +67,23 @@ def odometry(
         "constant_velocity", "--init",
         help="Initial guess per frame: constant_velocity | odometry (the dataset's own odometry, e.g. a carmen: log).",
     ),
+    check: list[str] = typer.Option(
+        [], "--check",
+        help="Threshold of the independent per-frame check KEY=VALUE (repeatable), e.g. max_angular_accel_dps2=500 "
+        "(keys: max_accel_mps2, max_angular_accel_dps2, min_fitness, inlier_min_m, inlier_range_fraction, ...).",
+    ),
 ) -> None:
     """Odometry of one ICP variant over a scan sequence, scored against its ground truth when it has one."""
     from lidarkit.atomic import check_target
     from lidarkit.odometry import run
+    from lidarkit.odometry.frame_check import make_frame_check
 
     check_target(out, "folder")
-    result = run(data, method, params=parse_params(param), frames=frames, out_dir=out, progress=progress, strict=strict, name=name, init=init)
+    frame_check = make_frame_check(**parse_params(check, option="--check"))
+    result = run(
+        data, method, params=parse_params(param), frames=frames, out_dir=out, progress=progress, strict=strict, name=name, init=init,
+        pose_covariance=pose_covariance, frame_check=frame_check,
+    )
     m = result.metrics
     effective = m.get("effective") or {}
     table = Table(title=result.trajectory.name, show_header=True)
@@ -112,6 +127,12 @@ def odometry(
             table.add_row("KITTI drift", m.get("kitti_drift_note", "-"))
     else:
         table.add_row("ground truth", "none: no scores")
+    cov = m.get("pose_covariance")
+    if cov and cov.get("final_position_sigma_m") is not None:
+        table.add_row("propagated end-pose 1-sigma (m / deg)", f"{cov['final_position_sigma_m']:.3f} / {cov['final_heading_sigma_deg']:.3f}")
+        if "relative_nees_mean" in cov:
+            table.add_row("NEES of 1-frame motions (6 = calibrated)", f"{cov['relative_nees_mean']:.2f} ({100 * cov['relative_inside_95']:.0f} % inside 95 %)")
+            table.add_row("end error explained by bias", f"{100 * min(cov['end_error_bias_share'], 1.0):.0f} %")
     for message in m.get("warnings") or []:  # also logged (stderr) by the runner
         table.add_row(Text("warning", style="yellow"), Text(message, style="yellow"))
     if result.out_dir is not None:

@@ -9,13 +9,16 @@
 diagnostics, the resolved config and the metrics) rather than a bare Trajectory, so that one call
 gives everything a run folder holds. Stateless variants are chained scan-to-scan with a
 constant-velocity initial guess (``init = previous relative motion``); stateful ones (``kiss``) get
-every frame through ``register_frame`` and keep their own map.
+every frame through ``register_frame`` and keep their own map. Every run records what it really applied
+(``metrics["effective"]``: deskew and why, instants, reader corrections), names the alignment of every score,
+and counts the frames failing an independent per-frame check (``metrics["frame_check"]``) for every variant.
 """
 
+from lidarkit.odometry.frame_check import FrameCheckConfig
 from lidarkit.odometry.inputs import FrameSelection, open_sequence, parse_frames
 from lidarkit.odometry.metrics import odometry_metrics
 from lidarkit.odometry.result import FrameStats, OdometryResult
 from lidarkit.odometry.run_folder import write_run
 from lidarkit.odometry.runner import config_dict, run
 
-__all__ = ["FrameSelection", "FrameStats", "OdometryResult", "config_dict", "odometry_metrics", "open_sequence", "parse_frames", "run", "write_run"]
+__all__ = ["FrameCheckConfig", "FrameSelection", "FrameStats", "OdometryResult", "config_dict", "odometry_metrics", "open_sequence", "parse_frames", "run", "write_run"]

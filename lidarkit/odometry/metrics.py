@@ -37,6 +37,11 @@ def odometry_metrics(result: OdometryResult) -> dict[str, Any]:
         "effective": run.get("effective"),
         "warnings": list(run.get("warnings") or []),
     }
+    if result.covariances is not None:
+        from lidarkit.odometry.covariance import covariance_metrics
+
+        truth = None if result.ground_truth is None or len(result.ground_truth) != len(result.trajectory) else result.ground_truth.poses_se3
+        out["pose_covariance"] = covariance_metrics(result.trajectory.poses_se3, *result.covariances, truth)
     ref = result.ground_truth
     if ref is None:
         return out

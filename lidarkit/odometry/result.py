@@ -20,6 +20,7 @@ class FrameStats:
     ``read_s`` / ``register_s``: wall time reading the scan and registering it; ``n_points``: points in
     the scan; for stateless variants ``converged``, ``iterations``, ``rmse_m``, ``n_correspondences``,
     ``degenerate`` and ``reason`` of the scan-to-scan alignment that produced the frame's pose;
+    ``min_eigenvalue``: smallest eigenvalue of the frame's normalised normal matrix (NaN where not assessed);
     ``measured``: False where the runner has no convergence verdict (frame 0 of a stateless chain, every
     frame of a stateful variant such as kiss, which reports none): there ``converged`` is True only as a
     placeholder, iterations -1, rmse NaN, and the CSV / CLI show "n/a"; ``fallback``: the registration was
@@ -51,13 +52,14 @@ class FrameStats:
     check_failed: np.ndarray | None = None
     check_why: tuple[str, ...] = ()
     check_s: np.ndarray | None = None
+    min_eigenvalue: np.ndarray | None = None
 
     def to_csv(self) -> str:
         buf = io.StringIO()
         writer = csv.writer(buf, lineterminator="\n")
         writer.writerow([
             "frame", "read_s", "register_s", "n_points", "converged", "iterations", "rmse_m", "n_correspondences", "degenerate",
-            "constant_velocity_fallback", "reason", "point_times", "motion_dev_m", "rotation_dev_deg", "fitness",
+            "min_eigenvalue", "constant_velocity_fallback", "reason", "point_times", "motion_dev_m", "rotation_dev_deg", "fitness",
             "check_failed", "check_why",
         ])
         n = len(self.frame)
@@ -68,13 +70,15 @@ class FrameStats:
         fitness = self.fitness if self.fitness is not None else nan
         failed = self.check_failed if self.check_failed is not None else np.zeros(n, dtype=bool)
         why = self.check_why or ("",) * n
+        min_eig = self.min_eigenvalue if self.min_eigenvalue is not None else nan
         for k in range(n):
             measured = bool(self.measured[k])
             writer.writerow([
                 int(self.frame[k]), f"{self.read_s[k]:.6f}", f"{self.register_s[k]:.6f}", int(self.n_points[k]),
                 int(self.converged[k]) if measured else "n/a", int(self.iterations[k]) if measured else "n/a",
                 f"{self.rmse_m[k]:.6g}" if measured else "n/a", int(self.n_correspondences[k]) if measured else "n/a",
-                int(self.degenerate[k]) if measured else "n/a", int(self.fallback[k]), self.reason[k],
+                int(self.degenerate[k]) if measured else "n/a", f"{min_eig[k]:.6g}" if np.isfinite(min_eig[k]) else "n/a",
+                int(self.fallback[k]), self.reason[k],
                 int(has_times[k]), _opt(dev_t[k], ".4f"), _opt(dev_r[k], ".4f"), _opt(fitness[k], ".3f"), int(failed[k]), why[k],
             ])
         return buf.getvalue()
@@ -102,6 +106,17 @@ class OdometryResult:
     ground_truth: Trajectory | None = None
     metrics: dict[str, Any] = field(default_factory=dict)
     out_dir: Path | None = None
+    covariances: tuple[np.ndarray, np.ndarray] | None = None
+
+    @property
+    def relative_covariance(self) -> np.ndarray | None:
+        """``(n, 6, 6)`` covariance of each frame's relative motion (NaN where none; row 0 unused), or None."""
+        return None if self.covariances is None else self.covariances[0]
+
+    @property
+    def pose_covariance(self) -> np.ndarray | None:
+        """``(n, 6, 6)`` propagated covariance of each pose (see :mod:`lidarkit.odometry.covariance`), or None."""
+        return None if self.covariances is None else self.covariances[1]
 
     @property
     def fps(self) -> float:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import os
 import time
@@ -13,6 +14,7 @@ import numpy as np
 from lidarkit.errors import ConfigError, DataError, EvaluationError, LidarKitError, RegistrationError
 from lidarkit.geometry import orthonormalize_se3
 from lidarkit.io.base import Scan, ScanSequence
+from lidarkit.odometry.covariance import propagate
 from lidarkit.odometry.frame_check import FrameChecker, FrameCheckConfig
 from lidarkit.odometry.inputs import FrameSelection, frames_repr, open_sequence, parse_frames
 from lidarkit.odometry.instants import estimate_instant, like_with_like
@@ -93,6 +95,7 @@ def run(
     frame_check: FrameCheckConfig | None = None,
     prefetch: int = DEFAULT_DEPTH,
     init: str = "constant_velocity",
+    pose_covariance: bool | None = None,
 ) -> OdometryResult:
     """Odometry of ``method`` (a registered name or a configured variant) over ``dataset``.
 
@@ -117,6 +120,9 @@ def run(
     variants: their own model) or ``"odometry"`` (the relative motion of the dataset's own ``odometry`` trajectory,
     e.g. a CARMEN log's wheel odometry; for a stateless variant it also replaces a non-converged registration; a
     stateful one gets it as ``register_frame(..., motion_guess=...)`` if it ``accepts_motion_guess``).
+    ``pose_covariance``: propagate each frame's registration covariance into a covariance per pose
+    (:mod:`lidarkit.odometry.covariance`); None = for stateless variants (whose results carry one), not for
+    stateful ones (which need an extra assessment of each frame against the previous one: True asks for it).
     """
     sequence = open_sequence(dataset)
     registration = _resolve_method(method, params)
@@ -146,7 +152,10 @@ def run(
     rmse_m = np.full(n, np.nan)
     n_corr = np.full(n, -1, dtype=np.int64)
     degenerate = np.zeros(n, dtype=bool)
+    min_eigenvalue = np.full(n, np.nan)
+    relative_cov = np.full((n, 6, 6), np.nan)
     reasons = [""] * n
+    want_covariance = (not stateful) if pose_covariance is None else bool(pose_covariance)
     checker = FrameChecker(n, frame_check)
     need_times = strict and stateful and bool(deskew_requested(registration))
     if strict and not stateful and deskew_requested(registration):
@@ -161,6 +170,7 @@ def run(
     try:
         if stateful:
             registration.reset()
+            previous = None
             for k, (idx, scan, read_time, read_error) in enumerate(stream):
                 read_s[k] = read_time
                 try:
@@ -176,6 +186,9 @@ def run(
                         poses[k] = registration.register_frame(points, scan.point_times_s, motion_guess=guess)
                     else:
                         poses[k] = registration.register_frame(points, scan.point_times_s)
+                    if want_covariance and k > 0:
+                        relative_cov[k], min_eigenvalue[k] = frame_covariance(previous, points, poses[k - 1], poses[k], name)
+                    previous = points
                 except Exception as err:
                     if not _is_frame_error(err):
                         raise
@@ -210,6 +223,9 @@ def run(
                         n_corr[k] = int(result.n_correspondences)
                         deg = getattr(result, "degeneracy", None)
                         degenerate[k] = bool(getattr(deg, "degenerate", False))
+                        min_eigenvalue[k] = float(deg.eigenvalues[0]) if deg is not None else np.nan
+                        if want_covariance and getattr(result, "covariance", None) is not None and converged[k]:
+                            relative_cov[k] = result.covariance
                         reasons[k] = str(getattr(result, "reason", "") or "")
                         if converged[k]:
                             motion = orthonormalize_se3(np.asarray(result.T_target_source, dtype=np.float64))
@@ -256,10 +272,12 @@ def run(
     stats = FrameStats(
         indices.copy(), read_s, register_s, n_points, converged, iterations, rmse_m, n_corr, degenerate, tuple(reasons), measured, fallback,
         checker.has_point_times, check.motion_dev_m, check.rotation_dev_deg, check.fitness, check.failed, why, checker.check_s,
+        min_eigenvalue,
     )
     effective, warnings = effective_settings(sequence, registration, name, stateful, checker.has_point_times, reference)
     for message in warnings:
         log.warning("%s: %s", title, message)
+    covariances = (relative_cov, propagate(poses, relative_cov)) if want_covariance else None
     config = {
         "method": name,
         "method_config": config_dict(getattr(registration, "config", None)),
@@ -283,14 +301,14 @@ def run(
             "ground_truth_instant_note": instant_note,
         },
     }
-    result = OdometryResult(trajectory, name, config, indices.copy(), stats, total, reference)
+    result = OdometryResult(trajectory, name, config, indices.copy(), stats, total, reference, covariances=covariances)
     metrics = odometry_metrics(result)
     if instant_note is not None:
         metrics["ground_truth_instant_note"] = instant_note
-    result = OdometryResult(trajectory, name, config, indices.copy(), stats, total, reference, metrics)
+    result = dataclasses.replace(result, metrics=metrics)
     if out_dir is not None:
         write_run(result, out_dir)
-        result = OdometryResult(trajectory, name, config, indices.copy(), stats, total, reference, metrics, Path(out_dir))
+        result = dataclasses.replace(result, out_dir=Path(out_dir))
     return result
 
 
@@ -340,3 +358,26 @@ def _reference(sequence: ScanSequence, ground_truth: Trajectory | None, indices:
             source=gt.name or dataset_name,
         )
     return gt.relative_to_first()
+
+
+#: voxel size (m) of the two scans a stateful variant's frame covariance is assessed on, and the pair distance
+FRAME_COVARIANCE_VOXEL_M = 0.5
+FRAME_COVARIANCE_INLIER_M = 1.0
+
+
+def frame_covariance(previous_xyz: np.ndarray, points_xyz: np.ndarray, T_world_prev: np.ndarray, T_world_cur: np.ndarray,
+                     variant: str) -> tuple[np.ndarray, float]:
+    """Covariance (and smallest normal-matrix eigenvalue) of a stateful variant's frame-to-frame motion, assessed
+    after the fact on the two voxelized scans at the motion it estimated (the variant itself exposes no Hessian)."""
+    from lidarkit.geometry import se3_inverse
+    from lidarkit.registration.assessment import assess_alignment
+    from lidarkit.registration.covariance import calibrate
+    from lidarkit.registration.preprocess import voxel_downsample
+
+    T_rel = se3_inverse(T_world_prev) @ T_world_cur
+    target = voxel_downsample(previous_xyz, FRAME_COVARIANCE_VOXEL_M)
+    source = voxel_downsample(points_xyz, FRAME_COVARIANCE_VOXEL_M)
+    assessment = assess_alignment(source, target, T_rel, FRAME_COVARIANCE_INLIER_M)
+    if assessment.covariance is None:
+        return np.full((6, 6), np.nan), float("nan")
+    return calibrate(assessment.covariance, variant), float(assessment.degeneracy.eigenvalues[0])

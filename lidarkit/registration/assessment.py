@@ -8,7 +8,8 @@ import numpy as np
 
 from lidarkit.geometry import transform_points
 from lidarkit.registration.base import Degeneracy, RegistrationResult
-from lidarkit.registration.degeneracy import assess_degeneracy
+from lidarkit.registration.covariance import CovarianceModel, active_model, effective_observations, registration_covariance
+from lidarkit.registration.degeneracy import matched_constraints, normal_matrix, summarize
 from lidarkit.registration.neighbors import NearestNeighbors
 
 
@@ -21,6 +22,7 @@ class Assessment:
     rmse_m: float
     degeneracy: Degeneracy
     inlier_distance_m: float = float("nan")
+    covariance: np.ndarray | None = None
 
     def to_result(
         self,
@@ -50,6 +52,7 @@ class Assessment:
             degeneracy=self.degeneracy,
             reason=reason,
             extra=extra or {},
+            covariance=self.covariance,
         )
 
 
@@ -61,8 +64,15 @@ def assess_alignment(
     neighbors: NearestNeighbors | None = None,
     dist2: np.ndarray | None = None,
     index: np.ndarray | None = None,
+    covariance_model: CovarianceModel | None | str = "active",
 ) -> Assessment:
-    """Score a pose: pass ``dist2``/``index`` of the final correspondences if already known."""
+    """Score a pose: pass ``dist2``/``index`` of the final correspondences if already known.
+
+    The degeneracy summary and the covariance (``covariance_model=None``: not computed) share one set of
+    local surfaces around at most 2000 of the matched pairs; ``"active"`` takes the model of the registration that
+    is running (:func:`lidarkit.registration.covariance.use_model`)."""
+    if isinstance(covariance_model, str):
+        covariance_model = active_model()
     aligned = transform_points(T_target_source, source_xyz)
     if dist2 is None or index is None:
         if neighbors is None:
@@ -71,9 +81,21 @@ def assess_alignment(
     inlier = dist2 <= inlier_distance_m**2
     n = int(inlier.sum())
     rmse = float(np.sqrt(dist2[inlier].mean())) if n else float("nan")
-    degeneracy = assess_degeneracy(aligned[inlier], target_xyz, index[inlier])
+    covariance = None
+    if n < 3:
+        degeneracy = Degeneracy.unknown(f"{n} correspondences")
+    else:
+        matched, matched_index = aligned[inlier], index[inlier]
+        pick, constraints = matched_constraints(matched, target_xyz, matched_index)
+        degeneracy = summarize(normal_matrix(matched[pick], constraints))
+        if covariance_model is not None:
+            n_eff = effective_observations(matched, covariance_model.correlation_voxel_m)
+            covariance = registration_covariance(
+                matched[pick], target_xyz[matched_index[pick]], constraints, T_target_source, covariance_model, n_total=n, n_effective=n_eff
+            )
     return Assessment(
-        n_correspondences=n, fitness=n / max(len(source_xyz), 1), rmse_m=rmse, degeneracy=degeneracy, inlier_distance_m=inlier_distance_m
+        n_correspondences=n, fitness=n / max(len(source_xyz), 1), rmse_m=rmse, degeneracy=degeneracy,
+        inlier_distance_m=inlier_distance_m, covariance=covariance,
     )
 
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
@@ -54,6 +54,18 @@ class RegistrationConfig(BaseModel):
     min_correspondences: int = Field(
         DEFAULT_MIN_CORRESPONDENCES, ge=3, description="fewer final correspondences than this -> not converged"
     )
+    covariance: Literal["censi", "gauss_newton", "none"] = Field(
+        "censi", description="closed form of the result's 6x6 covariance (none: skip it)"
+    )
+    calibrated_covariance: bool = Field(
+        True, description="apply the variant's measured translation/rotation factors (benchmarks/covariance_calibration.py)"
+    )
+
+    def covariance_model(self):
+        """The :class:`~lidarkit.registration.covariance.CovarianceModel` this config asks for (None: no covariance)."""
+        from lidarkit.registration.covariance import CovarianceModel
+
+        return None if self.covariance == "none" else CovarianceModel(method=self.covariance)
 
 
 def json_safe(value: Any) -> Any:
@@ -81,7 +93,9 @@ class Degeneracy:
     (rotation columns scaled by the RMS radius of the matched points, so all six are in m^2 / m^2);
     ``condition_number``: max/min eigenvalue (inf if min is 0); ``degenerate``: min/max below
     ``threshold``; ``weakest_direction``: unit eigenvector of the smallest eigenvalue in
-    ``TWIST_ORDER`` (tx, ty, tz, rx, ry, rz); ``kind``: which residual the normal matrix models.
+    ``TWIST_ORDER`` (tx, ty, tz, rx, ry, rz); ``kind``: which residual the normal matrix models;
+    ``weak_directions``: the eigen-directions below ``threshold`` in words, in the target sensor frame
+    (e.g. ``"translation along x"``), empty when nothing is degenerate.
     """
 
     eigenvalues: tuple[float, ...]
@@ -90,6 +104,7 @@ class Degeneracy:
     weakest_direction: tuple[float, ...]
     threshold: float = DEGENERACY_RATIO_THRESHOLD
     kind: str = "point_to_surface"
+    weak_directions: tuple[str, ...] = ()
 
     @property
     def ratio(self) -> float:
@@ -122,7 +137,9 @@ class RegistrationResult:
 
     ``T_target_source``: ``(4, 4)`` float64; ``rmse_history``: RMSE (m) of the correspondences at
     each iteration; ``fitness``: fraction of source points with a correspondence within the inlier
-    distance at the solution; ``reason``: why it did not converge or was flagged ("" if all is well).
+    distance at the solution; ``reason``: why it did not converge or was flagged ("" if all is well);
+    ``covariance``: ``(6, 6)`` uncertainty of ``T_target_source`` (left perturbation in the target frame,
+    translation first, m and rad: see ``lidarkit.registration.covariance``), None where it was not computed.
     """
 
     T_target_source: np.ndarray
@@ -136,6 +153,16 @@ class RegistrationResult:
     reason: str = ""
     method: str = ""
     extra: dict[str, Any] = field(default_factory=dict)
+    covariance: np.ndarray | None = None
+
+    @property
+    def information(self) -> np.ndarray | None:
+        """Inverse of ``covariance`` (eigenvalues floored, so unconstrained directions get ~0 information)."""
+        if self.covariance is None:
+            return None
+        from lidarkit.registration.covariance import safe_inverse
+
+        return safe_inverse(self.covariance)
 
     @property
     def rmse(self) -> float:
@@ -157,6 +184,7 @@ class RegistrationResult:
             "degeneracy": self.degeneracy.to_dict(),
             "reason": self.reason,
             "extra": self.extra,
+            "covariance": None if self.covariance is None else np.asarray(self.covariance).tolist(),
         })
 
 
@@ -227,11 +255,17 @@ class Registration:
         self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray | None = None
     ) -> RegistrationResult:
         """Estimate ``T_target_source`` for ``(N, 3)`` source and ``(M, 3)`` target clouds."""
+        from lidarkit.registration.covariance import calibrate, use_model
+
         src, dst, T0 = check_pair(source_xyz, target_xyz, init_T)
         start = time.perf_counter()
-        result = self._align(src, dst, T0)
+        with use_model(self._config.covariance_model()):
+            result = self._align(src, dst, T0)
         runtime = time.perf_counter() - start
-        return dataclasses.replace(accept(result, self._config), runtime_s=runtime, method=self.name)
+        covariance = result.covariance
+        if covariance is not None and self._config.calibrated_covariance and self._config.covariance == "censi":
+            covariance = calibrate(covariance, self.name)
+        return dataclasses.replace(accept(result, self._config), runtime_s=runtime, method=self.name, covariance=covariance)
 
     def _align(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray) -> RegistrationResult:
         raise NotImplementedError

@@ -63,6 +63,7 @@ def summarize(H: np.ndarray, threshold: float = DEGENERACY_RATIO_THRESHOLD, kind
     ratio = evals[0] / top if top > 0 else 0.0
     weakest = evecs[:, 0]
     weakest = weakest * (1.0 if weakest[np.argmax(np.abs(weakest))] >= 0 else -1.0)
+    weak = [describe_direction(evecs[:, i]) for i in range(6) if top > 0 and evals[i] / top < threshold] if top > 0 else ["all six"]
     return Degeneracy(
         eigenvalues=tuple(float(x) for x in evals),
         condition_number=float(top / evals[0]) if evals[0] > 0 else float("inf"),
@@ -70,10 +71,33 @@ def summarize(H: np.ndarray, threshold: float = DEGENERACY_RATIO_THRESHOLD, kind
         weakest_direction=tuple(float(x) for x in weakest),
         threshold=threshold,
         kind=kind,
+        weak_directions=tuple(weak),
     )
 
 
-def assess_degeneracy(
+_AXES = ("x", "y", "z")
+
+
+def describe_direction(direction: np.ndarray) -> str:
+    """A 6-vector in ``TWIST_ORDER`` (rotation part scaled to metres, as in :func:`normal_matrix`) in words:
+    ``"translation along x"``, ``"rotation about z (yaw)"``, or the vector when no axis dominates."""
+    v = np.asarray(direction, dtype=np.float64).reshape(6)
+    trans, rot = v[:3], v[3:]
+    part, kind = (trans, "translation along") if np.linalg.norm(trans) >= np.linalg.norm(rot) else (rot, "rotation about")
+    unit = part / max(np.linalg.norm(part), 1e-300)
+    axis = int(np.argmax(np.abs(unit)))
+    if abs(unit[axis]) >= 0.9:
+        name = _AXES[axis]
+        if kind == "rotation about":
+            name += f" ({('roll', 'pitch', 'yaw')[axis]})"
+    else:
+        unit = unit * np.sign(unit[axis])
+        name = "(" + ", ".join(f"{c:.2f}" for c in unit) + ")"
+    mixed = min(np.linalg.norm(trans), np.linalg.norm(rot)) > 0.3 * max(np.linalg.norm(trans), np.linalg.norm(rot))
+    return f"{kind} {name}" + (" coupled with " + ("rotation" if kind.startswith("translation") else "translation") if mixed else "")
+
+
+def matched_constraints(
     source_aligned_xyz: np.ndarray,
     target_xyz: np.ndarray,
     matched_target_index: np.ndarray,
@@ -81,22 +105,19 @@ def assess_degeneracy(
     surface_voxel_m: float | None = SURFACE_VOXEL_M,
     max_points: int = 2000,
     seed: int = 0,
-    threshold: float = DEGENERACY_RATIO_THRESHOLD,
-) -> Degeneracy:
-    """Degeneracy of matched pairs (``source_aligned_xyz[i]`` <-> ``target_xyz[matched_target_index[i]]``).
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(picked pair indices (m,), surface projectors (m, 3, 3))`` of at most ``max_points`` matched pairs
+    (a seeded random subset), shared by the degeneracy summary and the covariance.
 
     Local surfaces come from the ``k`` nearest neighbours in the target voxelized at
     ``min(surface_voxel_m, RMS radius / 10)`` (``surface_voxel_m=None``: the raw target), searched with a
-    scipy KD-tree. At most ``max_points`` pairs are used (a seeded random subset) to keep this cheap.
+    scipy KD-tree.
     """
     n = len(source_aligned_xyz)
-    if n < 3:
-        return Degeneracy.unknown(f"{n} correspondences")
+    pick = np.arange(n)
     if n > max_points:
-        pick = np.random.default_rng(seed).choice(n, size=max_points, replace=False)
-        source_aligned_xyz = source_aligned_xyz[pick]
-        matched_target_index = matched_target_index[pick]
-    anchors = target_xyz[matched_target_index]
+        pick = np.sort(np.random.default_rng(seed).choice(n, size=max_points, replace=False))
+    anchors = target_xyz[matched_target_index[pick]]
     surface = target_xyz
     if surface_voxel_m is not None:
         from lidarkit.registration.preprocess import voxel_downsample
@@ -111,8 +132,25 @@ def assess_degeneracy(
 
     _, nbr = cKDTree(surface).query(anchors, k=k)
     nbr = np.asarray(nbr).reshape(len(anchors), k)
-    constraints = surface_constraints(surface[nbr])
-    return summarize(normal_matrix(source_aligned_xyz, constraints), threshold)
+    return pick, surface_constraints(surface[nbr])
 
 
-__all__ = ["THIN_RATIO", "assess_degeneracy", "normal_matrix", "summarize", "surface_constraints"]
+def assess_degeneracy(
+    source_aligned_xyz: np.ndarray,
+    target_xyz: np.ndarray,
+    matched_target_index: np.ndarray,
+    k: int = 20,
+    surface_voxel_m: float | None = SURFACE_VOXEL_M,
+    max_points: int = 2000,
+    seed: int = 0,
+    threshold: float = DEGENERACY_RATIO_THRESHOLD,
+) -> Degeneracy:
+    """Degeneracy of matched pairs (``source_aligned_xyz[i]`` <-> ``target_xyz[matched_target_index[i]]``), on the
+    surfaces of :func:`matched_constraints`."""
+    if len(source_aligned_xyz) < 3:
+        return Degeneracy.unknown(f"{len(source_aligned_xyz)} correspondences")
+    pick, constraints = matched_constraints(source_aligned_xyz, target_xyz, matched_target_index, k, surface_voxel_m, max_points, seed)
+    return summarize(normal_matrix(source_aligned_xyz[pick], constraints), threshold)
+
+
+__all__ = ["THIN_RATIO", "assess_degeneracy", "describe_direction", "matched_constraints", "normal_matrix", "summarize", "surface_constraints"]

@@ -121,6 +121,7 @@ def point_to_point_icp(
         fitness=assessment.fitness,
         degeneracy=degeneracy,
         reason=reason,
+        covariance=assessment.covariance,
     )
 
 

@@ -1,0 +1,246 @@
+"""The 6x6 covariance of a registration, computed after the fact from its final correspondences.
+
+Convention (every variant, see ``COVARIANCE_CONVENTION``): the perturbation is applied on the **left, in the
+target frame**, translation first: ``T_true = se3_exp(xi) @ T_target_source`` with
+``xi = (tx, ty, tz, rx, ry, rz)`` in metres and radians. ``information`` is its inverse (on the constrained
+subspace; see :func:`safe_inverse`).
+
+Both closed forms model each matched pair by its point-to-surface residual ``r_i = M_i (p_i - q_i)`` (``M_i``:
+projector on the directions in which the target surface around ``q_i`` is thin, as in ``degeneracy.py``) with
+Jacobian ``J_i = M_i [I, -[p_i]x]`` for the aligned source point ``p_i``:
+
+- ``gauss_newton``: ``sigma^2 (sum J^T J)^-1``, ``sigma^2`` the residual variance per constrained dimension.
+- ``censi`` (Censi 2007, the default): ``A^-1 B A^-1`` with ``A = sum J^T J`` and
+  ``B = sum J^T Sigma_i J``, where ``Sigma_i`` is the noise of the pair along the two sensor rays (range noise of
+  the source point along its ray from the source origin, of the target point along its ray from the target
+  origin). It weights grazing returns correctly, which the isotropic residual variance cannot.
+
+Closed forms assume every correspondence carries independent noise; on real and simulated scans neighbouring
+returns share their sampling error (the ray pattern, the surface discretisation), so taken as they are they are
+over-confident by one to three orders of magnitude (``benchmarks/covariance_calibration.py``). Both are therefore
+scaled by ``n / n_eff``, ``n_eff`` the number of distinct ``correlation_voxel_m`` voxels that hold a matched
+source point (pairs inside one voxel count as one observation), and the default ``censi`` form by a measured
+per-variant factor on the translation and on the rotation block (:data:`CALIBRATION`), learned on one scene and
+seed and checked on others.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import contextvars
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import numpy as np
+
+from lidarkit.errors import ConfigError
+
+COVARIANCE_CONVENTION = (
+    "left perturbation in the target frame, T_true = se3_exp(xi) @ T_target_source, "
+    "xi = (tx, ty, tz, rx, ry, rz) in m and rad"
+)
+COVARIANCE_METHODS = ("censi", "gauss_newton")
+
+#: Matched source points within one voxel of this size count as one independent observation (see module doc).
+DEFAULT_CORRELATION_VOXEL_M = 1.0
+
+#: Eigenvalues of the information below this fraction of the largest are treated as this fraction: the
+#: unconstrained directions get a large but finite variance, and the result stays symmetric positive definite.
+EIGEN_FLOOR = 1e-12
+
+
+@dataclass(frozen=True)
+class CovarianceModel:
+    """How :func:`registration_covariance` turns correspondences into a covariance.
+
+    ``range_noise_m``: the sensor's range noise (std); ``None`` estimates it from the residuals of the pairs.
+    """
+
+    method: str = "censi"
+    correlation_voxel_m: float | None = DEFAULT_CORRELATION_VOXEL_M
+    range_noise_m: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.method not in COVARIANCE_METHODS:
+            raise ConfigError(f"unknown covariance method {self.method!r}; valid: {', '.join(COVARIANCE_METHODS)}", source="covariance")
+        if self.correlation_voxel_m is not None and not self.correlation_voxel_m > 0:
+            raise ConfigError("correlation_voxel_m must be > 0 (or None: every pair independent)", source="covariance")
+        if self.range_noise_m is not None and not (np.isfinite(self.range_noise_m) and self.range_noise_m > 0):
+            raise ConfigError("range_noise_m must be a finite positive number (or None: from the residuals)", source="covariance")
+
+
+DEFAULT_MODEL = CovarianceModel()
+
+_ACTIVE_MODEL: contextvars.ContextVar[CovarianceModel | None] = contextvars.ContextVar("covariance_model", default=DEFAULT_MODEL)
+
+
+def active_model() -> CovarianceModel | None:
+    """The model of the registration running in this context (None: no covariance wanted)."""
+    return _ACTIVE_MODEL.get()
+
+
+@contextlib.contextmanager
+def use_model(model: CovarianceModel | None) -> Iterator[None]:
+    """Run a registration with ``model`` (set by ``Registration.align`` from the variant's config), so the shared
+    end-of-registration assessment computes the covariance the variant asked for, however deep it is called."""
+    token = _ACTIVE_MODEL.set(model)
+    try:
+        yield
+    finally:
+        _ACTIVE_MODEL.reset(token)
+
+
+#: Per-variant correction of the default (``censi``) covariance: factors on the variance of the translation block
+#: and of the rotation block, measured as mean(xi_j^2 / Sigma_jj) on the street scene, seed 0
+#: (``benchmarks/covariance_calibration.py``; 15 draws for the slow point-to-point variants, 60 for the others) and
+#: checked on seed 1 and the other scenes. They absorb what range
+#: noise does not model: the sampling of the surfaces by the beam pattern and each variant's own bias.
+CALIBRATION: dict[str, tuple[float, float]] = {
+    "vanilla": (555, 117),
+    "ground_filtered": (28.2, 339),
+    "open3d_point_to_point": (426, 21.8),
+    "open3d_point_to_plane": (2.49, 19.4),
+    "open3d_gicp": (0.283, 15),
+    "small_gicp": (0.302, 23.7),
+    "kiss": (7.12, 17.9),
+}
+
+
+def calibrate(covariance: np.ndarray, variant: str) -> np.ndarray:
+    """``covariance`` with the variant's translation/rotation factors of :data:`CALIBRATION` applied (unchanged for a
+    variant that has none)."""
+    factors = CALIBRATION.get(variant)
+    if factors is None:
+        return covariance
+    scale = np.sqrt(np.repeat(np.asarray(factors, dtype=np.float64), 3))
+    return make_psd(covariance * np.outer(scale, scale))
+
+
+def left_jacobians(points_xyz: np.ndarray) -> np.ndarray:
+    """``(n, 3, 6)`` derivative of ``se3_exp(xi) @ p`` at ``xi = 0``: ``[I, -[p]x]``."""
+    p = np.asarray(points_xyz, dtype=np.float64)
+    n = len(p)
+    J = np.zeros((n, 3, 6))
+    J[:, 0, 0] = J[:, 1, 1] = J[:, 2, 2] = 1.0
+    J[:, 0, 4], J[:, 0, 5] = p[:, 2], -p[:, 1]
+    J[:, 1, 3], J[:, 1, 5] = -p[:, 2], p[:, 0]
+    J[:, 2, 3], J[:, 2, 4] = p[:, 1], -p[:, 0]
+    return J
+
+
+def make_psd(S: np.ndarray) -> np.ndarray:
+    """Symmetric positive semi-definite part of a 6x6 matrix (negative eigenvalues from rounding set to 0)."""
+    S = 0.5 * (S + S.T)
+    w, V = np.linalg.eigh(S)
+    return (V * np.clip(w, 0.0, None)) @ V.T
+
+
+def safe_inverse(A: np.ndarray, floor: float = EIGEN_FLOOR) -> np.ndarray:
+    """Inverse of a symmetric PSD 6x6 matrix with its eigenvalues floored at ``floor * max``: a direction the data
+    do not constrain gets a large finite variance instead of inf/NaN."""
+    A = 0.5 * (A + A.T)
+    w, V = np.linalg.eigh(A)
+    top = max(float(w[-1]), 0.0)
+    if top <= 0 or not np.isfinite(top):
+        return np.eye(6) / floor
+    w = np.maximum(w, floor * top)
+    return (V / w) @ V.T
+
+
+def effective_observations(points_xyz: np.ndarray, voxel_m: float | None) -> int:
+    """Number of distinct ``voxel_m`` voxels holding a point (``len(points)`` when ``voxel_m`` is None)."""
+    if voxel_m is None or len(points_xyz) == 0:
+        return len(points_xyz)
+    keys = np.floor(np.asarray(points_xyz) / voxel_m).astype(np.int64)
+    return int(len(np.unique(keys, axis=0)))
+
+
+def registration_covariance(
+    source_aligned_xyz: np.ndarray,
+    matched_target_xyz: np.ndarray,
+    constraints: np.ndarray,
+    T_target_source: np.ndarray,
+    model: CovarianceModel = DEFAULT_MODEL,
+    n_total: int | None = None,
+    n_effective: int | None = None,
+) -> np.ndarray:
+    """6x6 covariance (see the module doc for the convention) of a registration from ``n`` matched pairs.
+
+    ``source_aligned_xyz`` / ``matched_target_xyz``: ``(n, 3)`` pairs in the target frame; ``constraints``:
+    ``(n, 3, 3)`` surface projectors; ``T_target_source`` places the source sensor origin. When the pairs are a
+    subsample, ``n_total`` is the number of pairs they stand for (the Hessian is scaled up to it) and
+    ``n_effective`` the independent observations among them (default: all of ``n_total``).
+    """
+    p = np.asarray(source_aligned_xyz, dtype=np.float64)
+    q = np.asarray(matched_target_xyz, dtype=np.float64)
+    n = len(p)
+    if n < 3:
+        return np.eye(6) / EIGEN_FLOOR
+    n_total = n if n_total is None else int(n_total)
+    n_effective = n_total if n_effective is None else max(int(n_effective), 1)
+    M = np.asarray(constraints, dtype=np.float64)
+    J = np.einsum("nij,njk->nik", M, left_jacobians(p))
+    A = np.einsum("nki,nkj->ij", J, J)
+    r = np.einsum("nij,nj->ni", M, p - q)
+    if model.method == "gauss_newton":
+        dof = float(np.trace(M, axis1=1, axis2=2).sum())
+        sigma2 = float((r * r).sum()) / max(dof - 6.0, 1.0)
+        cov_subsample = sigma2 * safe_inverse(A)
+    else:
+        origin_source = np.asarray(T_target_source, dtype=np.float64)[:3, 3]
+        d_s = _unit(p - origin_source)
+        d_t = _unit(q)
+        # noise of the pair's residual per unit range variance: M (d_s d_s^T + d_t d_t^T) M
+        Ms, Mt = np.einsum("nij,nj->ni", M, d_s), np.einsum("nij,nj->ni", M, d_t)
+        if model.range_noise_m is None:
+            unit_var = float((Ms * Ms).sum() + (Mt * Mt).sum())
+            sigma2 = float((r * r).sum()) / max(unit_var, 1e-12)
+        else:
+            sigma2 = float(model.range_noise_m) ** 2
+        # B = sigma^2 sum J0^T (M d_s d_s^T M + M d_t d_t^T M) J0 with J0 = [I, -[p]x]
+        J0 = left_jacobians(p)
+        gs = np.einsum("ni,nij->nj", Ms, J0)
+        gt = np.einsum("ni,nij->nj", Mt, J0)
+        B = sigma2 * (gs.T @ gs + gt.T @ gt)
+        A_inv = safe_inverse(A)
+        # the sandwich vanishes where A does (B has no noise there either): directions the data do not constrain
+        # get the Gauss-Newton variance on the floored eigenvalue instead, i.e. a large one
+        w, V = np.linalg.eigh(0.5 * (A + A.T))
+        top = max(float(w[-1]), 0.0)
+        free = w < EIGEN_FLOOR * top if top > 0 else np.ones(6, bool)
+        cov_subsample = A_inv @ B @ A_inv
+        if free.any():
+            floor = max(EIGEN_FLOOR * top, 1e-300)
+            cov_subsample = cov_subsample + (V[:, free] * (sigma2 / floor)) @ V[:, free].T
+    # the subsample stands for n_total pairs of which n_effective are independent
+    cov = cov_subsample * (n / n_total) * (n_total / n_effective)
+    return make_psd(cov)
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    norm = np.linalg.norm(v, axis=1, keepdims=True)
+    return np.where(norm > 0, v / np.where(norm > 0, norm, 1.0), 0.0)
+
+
+def nees(error_xi: np.ndarray, covariance: np.ndarray) -> float:
+    """Normalized estimation error squared ``xi^T Sigma^-1 xi`` (expected value 6 for a calibrated covariance)."""
+    xi = np.asarray(error_xi, dtype=np.float64).reshape(6)
+    return float(xi @ safe_inverse(covariance) @ xi)
+
+
+def adjoint(T: np.ndarray) -> np.ndarray:
+    """6x6 adjoint of an SE(3) pose for twists ordered translation first: ``se3_exp(Ad xi) = T se3_exp(xi) T^-1``."""
+    from lidarkit.geometry import skew
+
+    R, t = T[:3, :3], T[:3, 3]
+    Ad = np.zeros((6, 6))
+    Ad[:3, :3] = R
+    Ad[:3, 3:] = skew(t) @ R
+    Ad[3:, 3:] = R
+    return Ad
+
+
+__all__ = [
+    "COVARIANCE_CONVENTION", "COVARIANCE_METHODS", "CovarianceModel", "DEFAULT_CORRELATION_VOXEL_M", "DEFAULT_MODEL",
+    "CALIBRATION", "active_model", "adjoint", "calibrate", "effective_observations", "use_model", "left_jacobians", "make_psd", "nees", "registration_covariance", "safe_inverse",
+]

@@ -1,0 +1,190 @@
+"""Registration covariance: convention, positive semi-definiteness, degenerate directions named, propagation."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from lidarkit.errors import ConfigError
+from lidarkit.geometry import se3_exp, se3_inverse, se3_log, transform_points
+from lidarkit.odometry.covariance import propagate, relative_errors
+from lidarkit.registration import get_icp
+from lidarkit.registration.covariance import (
+    CovarianceModel, adjoint, calibrate, effective_observations, left_jacobians, nees, registration_covariance, safe_inverse,
+)
+from lidarkit.registration.degeneracy import describe_direction, matched_constraints, surface_constraints
+from lidarkit.sim.scan_pairs import ScanPairs
+from registration_helpers import kitti_pair as _kitti_pair
+
+
+@pytest.fixture(scope="module")
+def kitti_pair():
+    from conftest import shared_path
+
+    return _kitti_pair(shared_path, 94, 95)
+
+
+def _is_psd(S: np.ndarray) -> bool:
+    return S.shape == (6, 6) and np.all(np.isfinite(S)) and np.allclose(S, S.T, atol=1e-12 * max(1.0, np.abs(S).max())) and (
+        np.linalg.eigvalsh(0.5 * (S + S.T)).min() >= -1e-9 * max(1.0, np.abs(S).max()))
+
+
+def test_left_jacobian_matches_finite_differences_of_the_left_perturbation():
+    rng = np.random.default_rng(0)
+    p = rng.normal(size=(5, 3)) * 4
+    J = left_jacobians(p)
+    eps = 1e-6
+    for j in range(6):
+        xi = np.zeros(6)
+        xi[j] = eps
+        moved = transform_points(se3_exp(xi), p)
+        np.testing.assert_allclose((moved - p) / eps, J[:, :, j], atol=1e-4)
+
+
+def test_adjoint_moves_a_twist_between_frames():
+    rng = np.random.default_rng(1)
+    T = se3_exp(rng.normal(size=6))
+    xi = rng.normal(size=6) * 1e-3
+    np.testing.assert_allclose(se3_exp(adjoint(T) @ xi), T @ se3_exp(xi) @ se3_inverse(T), atol=1e-9)
+
+
+def _plane_pair(rng, n=3000, noise=0.01):
+    """A noisy floor patch (z = 0) seen twice: x, y and yaw are unconstrained."""
+    pts = np.column_stack([rng.uniform(-10, 10, n), rng.uniform(-10, 10, n), np.zeros(n)])
+    return pts + np.column_stack([np.zeros((n, 2)), rng.normal(0, noise, n)]), pts
+
+
+def test_plane_leaves_translation_in_the_plane_and_yaw_unconstrained():
+    rng = np.random.default_rng(2)
+    src, dst = _plane_pair(rng)
+    M = surface_constraints(np.stack([dst[np.argsort(np.linalg.norm(dst[:, :2] - q[:2], axis=1))[:20]] for q in dst[:200]]))
+    cov = registration_covariance(src[:200], dst[:200], M, np.eye(4))
+    sigma = np.sqrt(np.diag(cov))
+    # z, roll and pitch are constrained by the plane; x, y and yaw are not (huge variance, still finite)
+    assert sigma[0] > 1e3 * sigma[2] and sigma[1] > 1e3 * sigma[2] and sigma[5] > 1e3 * sigma[3]
+    assert np.all(np.isfinite(cov)) and _is_psd(cov)
+    # z is known to about the noise over sqrt(number of independent samples)
+    assert 0.01 / np.sqrt(200) / 3 < sigma[2] < 0.01 * 3
+
+
+def test_describe_direction_names_axes():
+    assert describe_direction([1, 0, 0, 0, 0, 0]) == "translation along x"
+    assert describe_direction([0, 0, 0, 0, 0, -1]) == "rotation about z (yaw)"
+    assert describe_direction([0.7, 0.7, 0, 0, 0, 0]).startswith("translation along (0.71, 0.71")
+
+
+@pytest.mark.parametrize("method", ["censi", "gauss_newton"])
+def test_residual_variance_recovers_the_noise_of_a_plane(method):
+    """On a plane with noise only across it, the variance along the normal is the noise over the sample size."""
+    rng = np.random.default_rng(5)
+    src, dst = _plane_pair(rng, n=4000, noise=0.02)
+    M = np.broadcast_to(np.diag([0.0, 0.0, 1.0]), (len(src), 3, 3))
+    T = np.eye(4)
+    T[:3, 3] = [0.0, 0.0, 50.0]  # source sensor far above: its rays hit the plane head-on, as the noise model assumes
+    cov = registration_covariance(src + [0, 0, 0], dst, M, T, CovarianceModel(method=method, correlation_voxel_m=None))
+    expected = 0.02**2 / len(src)
+    assert 0.5 * expected < cov[2, 2] < 2.0 * expected, (cov[2, 2], expected)
+
+
+def test_corridor_axis_is_the_least_known_translation():
+    """A featureless tunnel along x: the covariance along the axis is far larger than across it."""
+    pairs = ScanPairs("corridor", seed=0, n_frames=4, n_beams=32, n_azimuths=1024)
+    for i in range(2):
+        pair = pairs.draw(i)
+        res = get_icp("small_gicp").align(pair.source_xyz, pair.target_xyz, init_T=pair.init_T)
+        cov = res.covariance
+        assert cov[0, 0] >= 10 * cov[1, 1], np.diag(cov)
+        assert np.argmax(np.diag(cov)[:3]) == 0
+
+
+def test_every_variant_returns_a_psd_covariance_and_its_information(kitti_pair):
+    src, dst, T_gt = kitti_pair
+    for name in ("vanilla", "small_gicp", "kiss", "open3d_point_to_plane"):
+        res = get_icp(name).align(src, dst, init_T=T_gt)
+        assert _is_psd(res.covariance), name
+        np.testing.assert_allclose(res.information @ res.covariance, np.eye(6), atol=1e-6)
+        # the true error (init = ground truth, so the error is the registration's own) is within a few sigma
+        err = se3_log(T_gt @ se3_inverse(res.T_target_source))
+        assert nees(err, res.covariance) < 200, name
+        assert res.to_dict()["covariance"] is not None
+
+
+def test_no_covariance_when_asked_for_none(kitti_pair):
+    src, dst, T_gt = kitti_pair
+    assert get_icp("small_gicp", covariance="none").align(src, dst, init_T=T_gt).covariance is None
+    with pytest.raises(ConfigError):
+        get_icp("small_gicp", covariance="magic")
+    with pytest.raises(ConfigError):
+        CovarianceModel(method="magic")
+
+
+clouds = st.integers(min_value=0, max_value=10_000).flatmap(lambda seed: st.sampled_from(["random", "plane", "line", "point", "two"]).map(lambda kind: (seed, kind)))
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(clouds)
+def test_covariance_is_always_symmetric_psd(case):
+    seed, kind = case
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(3, 300))
+    if kind == "random":
+        pts = rng.normal(size=(n, 3)) * rng.uniform(0.01, 50)
+    elif kind == "plane":
+        pts = np.column_stack([rng.uniform(-5, 5, (n, 2)), np.zeros(n)])
+    elif kind == "line":
+        pts = np.outer(rng.uniform(-5, 5, n), rng.normal(size=3))
+    elif kind == "point":
+        pts = np.tile(rng.normal(size=3), (n, 1))
+    else:
+        pts = np.vstack([np.zeros((n // 2 + 1, 3)), np.ones((n - n // 2 - 1 + 2, 3))])[:n]
+    dst = pts + rng.normal(0, rng.uniform(0, 0.1), pts.shape)
+    T = se3_exp(rng.normal(size=6) * 0.1)
+    src = transform_points(se3_inverse(T), dst) + rng.normal(0, 0.01, pts.shape)
+    aligned = transform_points(T, src)
+    _, pick_M = matched_constraints(aligned, dst, np.arange(len(dst)), k=min(10, len(dst)))
+    for method in ("censi", "gauss_newton"):
+        cov = registration_covariance(aligned, dst, pick_M, T, CovarianceModel(method=method),
+                                      n_effective=effective_observations(aligned, 1.0))
+        assert _is_psd(cov), (kind, method)
+        assert _is_psd(safe_inverse(cov))
+        assert _is_psd(calibrate(cov, "small_gicp"))
+
+
+def test_propagated_covariance_grows_along_the_path():
+    rng = np.random.default_rng(3)
+    step = se3_exp(np.array([1.0, 0, 0, 0, 0, 0.02]))
+    poses = np.stack([np.linalg.matrix_power(step, k) for k in range(30)])
+    rel = np.broadcast_to(np.diag([1e-4, 1e-4, 1e-4, 1e-6, 1e-6, 1e-6]), (30, 6, 6)).copy()
+    rel[0] = np.nan
+    cov = propagate(poses, rel)
+    trace = np.trace(cov[:, :3, :3], axis1=1, axis2=2)
+    assert trace[0] == 0 and np.all(np.diff(trace) > 0)
+    # heading uncertainty turns into lateral uncertainty: growth faster than linear in the number of steps
+    assert trace[-1] > 29 * 3e-4 * 1.5
+    # a missing frame reuses the previous covariance
+    rel[10] = np.nan
+    np.testing.assert_allclose(propagate(poses, rel), cov)
+    # relative errors in the same convention recover a known perturbation
+    noisy = poses.copy()
+    for k in range(1, 30):
+        noisy[k] = noisy[k - 1] @ se3_inverse(poses[k - 1]) @ poses[k]
+    assert np.abs(relative_errors(poses, noisy)).max() < 1e-9
+    del rng
+
+
+def test_odometry_writes_pose_covariance_and_min_eigenvalue(tmp_path):
+    from lidarkit.odometry import run
+
+    result = run("sim:street?frames=6&seed=4&n_beams=16&n_azimuths=512&range_noise_std_m=0.02", "small_gicp", out_dir=tmp_path / "run")
+    cov = result.pose_covariance
+    assert cov.shape == (6, 6, 6) and all(_is_psd(c) for c in cov)
+    trace = np.trace(cov[:, :3, :3], axis1=1, axis2=2)
+    assert np.all(np.diff(trace) > 0)
+    metrics = result.metrics["pose_covariance"]
+    assert metrics["frames_with_covariance"] == 5 and metrics["relative_nees_mean"] > 0
+    rows = np.loadtxt(tmp_path / "run" / "pose_covariance.txt")
+    np.testing.assert_allclose(rows.reshape(-1, 6, 6), cov, rtol=1e-8, atol=1e-15)
+    header = (tmp_path / "run" / "timing.csv").read_text().splitlines()[0].split(",")
+    assert "min_eigenvalue" in header
