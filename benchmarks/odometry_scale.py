@@ -19,7 +19,8 @@ kiss >= 0.95x kiss-icp's pipeline, lidarkit small_gicp >= 0.9x small_gicp's own 
 
     nice -n 10 .venv/bin/python benchmarks/odometry_scale.py [--frames 4541] [--data /tmp/lidarkit_scale] [--keep-data]
 
-Writes ``benchmarks/results/odometry/odometry_scale.{md,json}``.
+Writes ``benchmarks/results/odometry/odometry_scale[_TAG].{md,json}`` (after every runner, so an interrupted run
+keeps the runners it finished).
 """
 
 from __future__ import annotations
@@ -152,6 +153,10 @@ def main() -> None:
     parser.add_argument("--data", type=Path, default=Path("/tmp/lidarkit_scale"))
     parser.add_argument("--runners", default=",".join(RUNNERS))
     parser.add_argument("--keep-data", action="store_true", help="keep the written sequence (default: delete it at the end)")
+    parser.add_argument("--tag", default="", help="results go to odometry_scale[_TAG].{md,json} (runs of different sizes side by side)")
+    parser.add_argument("--interleaved", type=int, default=0, metavar="N",
+                        help="instead: frame-rate ratios from N-frame runs, lidarkit and library alternately (--repeats each)")
+    parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--child", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
@@ -159,6 +164,9 @@ def main() -> None:
         return
 
     size_gb = make_data(args.data, args.frames)
+    if args.interleaved:
+        interleaved(args, size_gb)
+        return
     rows = []
     for runner in args.runners.split(","):
         t0 = time.perf_counter()
@@ -172,6 +180,46 @@ def main() -> None:
         write_results(rows, args, size_gb)  # after every runner: a partial table survives an interrupted run
     if not args.keep_data:
         shutil.rmtree(args.data, ignore_errors=True)
+
+
+def run_child(runner: str, data: Path, n: int) -> dict:
+    proc = subprocess.run([sys.executable, __file__, "--child", runner, "--data", str(data), "--frames", str(n)],
+                          capture_output=True, text=True, env={**os.environ, "PYTHONPATH": str(REPO)})
+    if proc.returncode != 0:
+        raise SystemExit(f"{runner} failed:\n{proc.stderr[-3000:]}")
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def interleaved(args, size_gb: float) -> None:
+    """Frame-rate ratio lidarkit / library from short runs taken alternately, so that a machine whose load drifts
+    over a long run charges both sides alike; median over the repeats."""
+    from lidarkit import atomic
+    from lidarkit.bench.machine import describe_machine, machine_info
+
+    runners = args.runners.split(",")
+    pairs = [(a, b) for a, b in (("lidarkit:kiss", "kiss-icp"), ("lidarkit:small_gicp", "small_gicp")) if a in runners and b in runners]
+    fps: dict[str, list[float]] = {r: [] for pair in pairs for r in pair}
+    for _ in range(args.repeats):
+        for pair in pairs:
+            for runner in pair:
+                fps[runner].append(run_child(runner, args.data, args.interleaved)["loop_fps"])
+                print(f"{runner}: {fps[runner][-1]:.2f} fps", flush=True)
+    ratios = {f"{a} / {b}": {"median_ratio": float(np.median(np.divide(fps[a], fps[b]))), "ratios": list(np.divide(fps[a], fps[b]))}
+              for a, b in pairs}
+    command = "nice -n 10 .venv/bin/python benchmarks/odometry_scale.py " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    payload = {"date_utc": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"), "machine": describe_machine(machine_info()),
+               "command": command, "frames_per_run": args.interleaved, "repeats": args.repeats, "loop_fps": fps, "ratios": ratios}
+    stem = "odometry_scale_interleaved" + (f"_{args.tag}" if args.tag else "")
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    atomic.write_text(RESULTS / f"{stem}.json", json.dumps(payload, indent=2) + "\n")
+    lines = ["# Odometry frame rate, lidarkit / library, interleaved short runs (issue 10)", "",
+             f"{payload['date_utc']} on {payload['machine']}; `{command}`", "",
+             f"{args.interleaved}-frame runs from disk (the sequence of odometry_scale.md), each in its own process, lidarkit "
+             f"and the library alternately, {args.repeats} times; loop frame rate (reading + registration).", "",
+             "| ratio | median | per repeat |", "|---|---|---|"]
+    for name, v in ratios.items():
+        lines.append(f"| {name} | {v['median_ratio']:.3f} | {', '.join(f'{x:.3f}' for x in v['ratios'])} |")
+    atomic.write_text(RESULTS / f"{stem}.md", "\n".join(lines) + "\n")
 
 
 def write_results(rows: list[dict], args, size_gb: float) -> None:
@@ -200,7 +248,8 @@ def write_results(rows: list[dict], args, size_gb: float) -> None:
     payload = {"date_utc": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"), "machine": describe_machine(machine_info()),
                "command": command, "frames": args.frames, "sim": SIM, "data_size_gb": size_gb, "runs": rows, "ratios": ratios, "rss": rss}
     RESULTS.mkdir(parents=True, exist_ok=True)
-    atomic.write_text(RESULTS / "odometry_scale.json", json.dumps(payload, indent=2) + "\n")
+    stem = "odometry_scale" + (f"_{args.tag}" if args.tag else "")
+    atomic.write_text(RESULTS / f"{stem}.json", json.dumps(payload, indent=2) + "\n")
     lines = [
         "# Odometry at KITTI length (issue 10)", "",
         f"{payload['date_utc']} on {payload['machine']}; `{command}`", "",
@@ -223,7 +272,7 @@ def write_results(rows: list[dict], args, size_gb: float) -> None:
     lines += ["", "| runner | peak RSS end / 500 | (end - trajectory) / 500 |", "|---|---|---|"]
     for name, v in rss.items():
         lines.append(f"| {name} | {v['ratio_end_over_500']:.3f} | {v['ratio_end_minus_trajectory_over_500']:.3f} |")
-    atomic.write_text(RESULTS / "odometry_scale.md", "\n".join(lines) + "\n")
+    atomic.write_text(RESULTS / f"{stem}.md", "\n".join(lines) + "\n")
 
 
 if __name__ == "__main__":

@@ -129,3 +129,46 @@ def test_degenerate_remainder_is_flagged():
     assert not res.converged and "degenerate geometry" in res.reason, res.reason
     kept = get_icp("ground_filtered", max_correspondence_distance_m=1.0, fallback_on_degenerate=False).align(cloud, cloud)
     assert kept.converged and kept.degeneracy.degenerate
+
+
+def test_deskew_moves_distorted_points_onto_the_scene():
+    import open3d as o3d
+
+    from lidarkit.registration.ground_filtered import deskew_to_sweep_end, sweep_fraction
+
+    seq = SimulatedLidarSequence(scene="street", n_frames=22, n_beams=32, n_azimuths=720, accel_time_s=0.0)
+    gt = seq.ground_truth.poses_se3  # sweep END poses
+    scan = seq.read_scan(20)
+    motion = np.linalg.inv(gt[19]) @ gt[20]
+
+    def off_scene_m(points):
+        world = points @ gt[20][:3, :3].T + gt[20][:3, 3]
+        return float(np.median(seq.scene.compute_distance(o3d.core.Tensor(world.astype(np.float32))).numpy()))
+
+    fixed = deskew_to_sweep_end(scan.points_xyz, sweep_fraction(scan.point_times_s), motion)
+    assert off_scene_m(scan.points_xyz) > 0.003 and off_scene_m(fixed) < 0.1 * off_scene_m(scan.points_xyz)
+    np.testing.assert_allclose(deskew_to_sweep_end(scan.points_xyz, sweep_fraction(scan.point_times_s), np.eye(4)), scan.points_xyz, atol=1e-12)
+
+
+def test_on_hills_the_ground_fixes_tilt():
+    """Open scene on 2 m hills: what is left after ground removal is vertical (poles, trunks, walls) and lets height,
+    roll and pitch slide; the ground-plane refinement holds them."""
+    from lidarkit.odometry import run
+
+    seq = SimulatedLidarSequence(scene="open", n_frames=25, seed=0, terrain_amplitude_m=2.0, n_beams=64, n_azimuths=720, range_noise_std_m=0.02)
+    default = run(seq, "ground_filtered")
+    plain = run(seq, "ground_filtered", params={"ground_refine": False})
+    # per-frame rotation error 0.11 vs 0.26 deg RMS (measured), end rotation 1.7 vs 3.8 deg
+    step, step_plain = (r.metrics["rpe_rotation_deg"]["stats"]["rmse"] for r in (default, plain))
+    assert step < 0.6 * step_plain, (step, step_plain)
+    end, end_plain = (r.metrics["final_error"]["rotation_deg"] for r in (default, plain))
+    assert end < 0.6 * end_plain, (end, end_plain)
+
+
+def test_the_runner_hands_point_times_to_ground_filtered_for_deskew():
+    from lidarkit.odometry import run
+
+    seq = SimulatedLidarSequence(scene="street", n_frames=4, seed=0, n_beams=16, n_azimuths=360, accel_time_s=0.0)
+    with_times = run(seq, "ground_filtered").trajectory.poses_se3
+    without = run(seq, "ground_filtered", params={"deskew": False}).trajectory.poses_se3
+    assert np.abs(with_times - without).max() > 1e-3

@@ -64,3 +64,16 @@ def test_auto_is_off_for_other_methods_and_for_simulated_folders(tmp_path):
     simulated = KittiOdometry(sim)
     simulated.configure_for_method("kiss")
     assert simulated.reader_options["vertical_correction_applied"] is False
+
+
+def test_kiss_kitti_kind_reads_what_the_corrected_kitti_reader_reads():
+    from lidarkit.io import open_dataset
+
+    root = shared_path("kitti_odometry")
+    theirs = open_dataset("kiss_kitti", root, sequence="00")
+    ours = open_dataset("kitti", root, sequence="00", vertical_correction=True)
+    assert len(theirs) == len(ours) == 10
+    np.testing.assert_array_equal(theirs.read_scan(4).points_xyz, ours.read_scan(4).points_xyz)
+    assert theirs.read_scan(4).timestamp_s == ours.read_scan(4).timestamp_s
+    # kiss-icp reads calib.txt in float32: its LiDAR-frame ground truth agrees to ~1e-6 m
+    np.testing.assert_allclose(theirs.ground_truth.poses_se3, ours.ground_truth.poses_se3, rtol=0, atol=1e-5)

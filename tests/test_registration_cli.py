@@ -69,6 +69,11 @@ def test_list_shows_every_method_and_its_defaults(capsys):
     for name in available_icp():
         assert name in flat
     assert "epsilon_m2" in flat and "1e-06" in flat and "max_range_m" in flat
+    from lidarkit.registration.ground import available_ground_segmenters
+
+    for name in available_ground_segmenters():  # the ground segmenters ground_filtered can use, with their parameters
+        assert name in flat
+    assert "cell_size_m" in flat and "cloth_resolution_m" in flat
 
 
 @pytest.mark.parametrize(

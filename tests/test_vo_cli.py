@@ -205,3 +205,19 @@ def test_metrics_json_is_strict_json_with_non_finite_values_as_null(tmp_path):
 
     metrics = json.loads(paths["metrics"].read_text(), parse_constant=refuse)
     assert metrics["final_error_m"] is None and metrics["ape"] == [0.5, None] and metrics["frames"] == 4
+
+
+def test_vo_self_calibration_falls_back_and_says_why(tmp_path, capsys, caplog):
+    """7 straight KITTI 06 frames give one window: self-calibration cannot constrain f; the size guess stays, the
+    reason is logged once and shown in the summary, and config.yaml records it."""
+    folder = tmp_path / "imgs"
+    shutil.copytree(sample_path("kitti_vo", "06", "image_0"), folder)
+    out = tmp_path / "run"
+    code, stdout, err = _run(["vo", str(folder), "--scale", "none", "--self-calibrate", "--out", str(out)], capsys)
+    assert code in (0, None)
+    said = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"] + err.splitlines()
+    assert sum("focal length self-calibration" in line for line in said) == 1
+    assert "not constrained" in stdout
+    recorded = yaml.safe_load((out / "config.yaml").read_text())["self_calibration"]
+    assert recorded["constrained"] is False and recorded["sigma_px"] is None
+    assert recorded["focal_px"] == pytest.approx(0.9 * 1226)

@@ -48,6 +48,38 @@ def _list_methods() -> None:
             cell.append(("\n" if cell else "") + f"{key}: {type_name} = {default!r} — {desc}")
         table.add_row(name + (" (stateful)" if cls.stateful else ""), cell)
     stdout().print(table)
+    _list_ground_segmenters()
+
+
+def _list_ground_segmenters() -> None:
+    from lidarkit.registration.ground import available_ground_segmenters, get_ground_segmenter_class, ground_config_fields
+
+    table = Table(title="Ground segmenters of ground_filtered (-p ground_method=NAME -p 'ground_params={key: value}')", show_lines=True)
+    table.add_column("segmenter", style="bold")
+    table.add_column("parameters (default) — description")
+    for name in available_ground_segmenters():
+        doc = (get_ground_segmenter_class(name).__doc__ or "").strip().splitlines()
+        lines = [f"[italic]{doc[0]}[/italic]"] if doc else []
+        lines += [f"{key}: {type_name} = {default!r} — {desc}" for key, (type_name, default, desc) in ground_config_fields(name).items()]
+        table.add_row(name, "\n".join(lines))
+    stdout().print(table)
+
+
+def _list_components() -> None:
+    from lidarkit.registration.components import KINDS, available_components, component_fields, get_component_class
+
+    table = Table(title="pipeline components (-m pipeline -p residual=|kernel=|threshold=|deskew=|map=NAME; motion goes in deskew=)", show_lines=True)
+    table.add_column("kind / name", style="bold")
+    table.add_column("parameters (default) — description")
+    for kind in KINDS:
+        for name in available_components(kind):
+            cls = get_component_class(kind, name)
+            doc = (cls.__doc__ or "").strip().splitlines()[0] if cls.__doc__ else ""
+            lines = [f"[italic]{doc}[/italic]"] if doc else []
+            for key, (type_name, default, desc) in component_fields(kind, name).items():
+                lines.append(f"{key}: {type_name} = {default!r} — {desc}")
+            table.add_row(f"{kind} / {name}", "\n".join(lines))
+    stdout().print(table)
 
 
 def _result_table(result, source: Path, target: Path) -> Table:
@@ -84,10 +116,16 @@ def icp(
     init: Optional[Path] = typer.Option(None, "--init", help="Initial T_target_source: 4x4 text file or one KITTI row."),
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="Folder for result.json, config.json and bev.png."),
     list_methods: bool = typer.Option(False, "--list", help="List the registered variants with their parameters and exit."),
+    list_components: bool = typer.Option(
+        False, "--list-components", help="List the components the 'pipeline' variant composes (by kind) and exit."
+    ),
 ) -> None:
     """Register SOURCE onto TARGET with one ICP variant; prints T_target_source, iterations, RMSE, degeneracy."""
     if list_methods:
         _list_methods()
+        return
+    if list_components:
+        _list_components()
         return
     if source is None or target is None:
         raise ConfigError("give SOURCE and TARGET scan files (or --list)", source="lidarkit icp")

@@ -36,6 +36,10 @@ def vo_command(
     poses: Optional[Path] = typer.Option(None, help="Ground-truth camera poses for an image folder (or other KITTI poses)."),
     poses_format: str = typer.Option("kitti", help="Format of --poses: kitti | tum."),
     focal_factor: float = typer.Option(DEFAULT_FOCAL_FACTOR, help="Without intrinsics: fx = fy = factor * max(w, h)."),
+    self_calibrate: bool = typer.Option(False, "--self-calibrate/--no-self-calibrate",
+                                        help="Without intrinsics: estimate fx = fy from the sequence (principal point "
+                                        "at the centre); falls back to the size guess when the motion does not "
+                                        "constrain it. Costs about a minute per 50 KITTI frames."),
     kind: str = typer.Option("auto", help="Input kind: auto | kitti | tum | images."),
     start: int = typer.Option(0, help="First frame."),
     max_frames: Optional[int] = typer.Option(None, help="Number of frames to process (default: all)."),
@@ -51,7 +55,7 @@ def vo_command(
 
     from lidarkit.vo.config import preset as make_preset
     from lidarkit.vo.evaluation import evaluate_vo
-    from lidarkit.vo.inputs import frame_range, open_vo_input
+    from lidarkit.vo.inputs import frame_range, open_vo_input, self_calibrate as calibrate
     from lidarkit.vo.pipeline import MonoVO
 
     from lidarkit.atomic import check_target
@@ -74,10 +78,17 @@ def vo_command(
     vo_input = open_vo_input(data, kind=kind, calib=calib, timestamps=timestamps, poses=poses,
                              poses_format=poses_format, focal_factor=focal_factor)
     vo_input = frame_range(vo_input, start, max_frames)
+    focal = None
+    if self_calibrate:
+        vo_input, focal = calibrate(vo_input)
     gt = vo_input.ground_truth  # (a guessed K is logged as a warning by open_vo_input)
     result = MonoVO(cfg, vo_input.K, gt if cfg.scale.mode == "gt" else None).run(vo_input.images, keep_tracks=gif)
     extra_config = {"input": str(data), "kind": vo_input.kind, "K_source": vo_input.K_source, "start": start,
                     "max_frames": max_frames}
+    if focal is not None:
+        extra_config["self_calibration"] = {"focal_px": focal.focal_px, "sigma_px": focal.sigma_px if focal.constrained else None,
+                                            "constrained": focal.constrained, "reason": focal.reason,
+                                            "window_focals_px": list(focal.window_focals_px)}
     if result.n_frames > 1 and result.accepted_pairs == 0:
         _fail_without_pairs(result, out, extra_config)
     if gt is not None and cfg.scale.mode != "gt":
@@ -104,6 +115,8 @@ def vo_command(
         table.add_row("scale kept from the previous step", f"{summary['scale_kept_frames']} frames")
     table.add_row("frames/s (pipeline)", f"{summary['frames_per_s']:.1f}")
     table.add_row("intrinsics", vo_input.K_source)
+    if focal is not None and not focal.constrained:
+        table.add_row("self-calibration", f"not constrained: {focal.reason}")
     for variant, m in metrics.items():
         table.add_row(f"APE {variant} ({m['align']}) [m]", f"{m['ape_rmse_m']:.4f}")
         table.add_row(f"RPE {variant} 1 frame [m / deg]",

@@ -134,10 +134,14 @@ class KissKittiScans(KissLoaderScans):
             raise DataError(f"no sequences/{int(sequence):02d}/velodyne/ (kiss-icp's KITTI loader reads the odometry root)", source=path)
         super().__init__(path, sequence=f"{int(sequence):02d}")
 
-    @property
-    def timestamps_s(self) -> np.ndarray | None:
+    def _stamps(self) -> np.ndarray | None:
+        """times.txt rows of the scans present (kiss-icp's loader returns the whole file)."""
         path = self.path / "sequences" / f"{int(self.loader.sequence_id):02d}" / "times.txt"
-        return np.loadtxt(path).ravel() if path.is_file() else None
+        if not path.is_file():
+            return None
+        times = np.loadtxt(path).ravel()
+        frames = [int(Path(f).stem) for f in self.loader.scan_files]
+        return times[frames] if frames and max(frames) < len(times) else None
 
     @property
     def ground_truth(self) -> Trajectory | None:

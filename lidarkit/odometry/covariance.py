@@ -24,17 +24,33 @@ POSE_COVARIANCE_CONVENTION = (
 )
 
 
+#: What a frame's motion is known to without its registration (the constant-velocity or odometry guess it started
+#: from): 1 m and 0.1 rad (1-sigma). Fused with each frame's covariance, it bounds the variance of a direction the
+#: scans do not constrain (a corridor's axis) instead of letting one frame's near-infinite variance swamp the rest.
+MOTION_PRIOR_SIGMA = (1.0, 0.1)
+
+
+def with_motion_prior(covariance: np.ndarray, prior_sigma: tuple[float, float] = MOTION_PRIOR_SIGMA) -> np.ndarray:
+    """``(Sigma^-1 + P^-1)^-1`` with ``P`` the diagonal motion prior: unchanged where the scans constrain the motion
+    well, bounded by the prior where they do not."""
+    from lidarkit.registration.covariance import safe_inverse
+
+    prior_info = np.diag(np.repeat([prior_sigma[0] ** -2, prior_sigma[1] ** -2], 3))
+    return make_psd(np.linalg.inv(safe_inverse(covariance) + prior_info))
+
+
 def propagate(poses: np.ndarray, relative_covariances: np.ndarray) -> np.ndarray:
     """``(n, 6, 6)`` world-frame pose covariances from ``(n, 4, 4)`` poses and the ``(n, 6, 6)`` covariance of each
     frame's relative motion (row 0 unused). A frame without one (NaN: a fallback, or a variant that gives none)
-    takes the previous frame's: the motion it reused is no better known."""
+    takes the previous frame's: the motion it reused is no better known. Each frame's covariance is first fused
+    with the motion prior (:func:`with_motion_prior`)."""
     n = len(poses)
     out = np.zeros((n, 6, 6))
     last = None
     for k in range(1, n):  # a running sum over frames: each step needs the previous one
         rel = relative_covariances[k]
         if np.all(np.isfinite(rel)):
-            last = rel
+            last = with_motion_prior(rel)
         if last is None:
             out[k] = np.full((6, 6), np.nan)
             continue
@@ -89,4 +105,4 @@ def covariance_metrics(poses: np.ndarray, relative_covariances: np.ndarray, pose
     return out
 
 
-__all__ = ["CHI2_6_95", "POSE_COVARIANCE_CONVENTION", "covariance_metrics", "propagate", "relative_errors"]
+__all__ = ["CHI2_6_95", "MOTION_PRIOR_SIGMA", "POSE_COVARIANCE_CONVENTION", "with_motion_prior", "covariance_metrics", "propagate", "relative_errors"]

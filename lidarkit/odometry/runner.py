@@ -201,6 +201,7 @@ def run(
         else:
             motion = np.eye(4)
             previous = None
+            previous_times = None
             for k, (idx, scan, read_time, read_error) in enumerate(stream):
                 read_s[k] = read_time
                 try:
@@ -214,7 +215,12 @@ def run(
                     else:
                         if odometry_poses is not None:
                             motion = orthonormalize_se3(np.linalg.solve(odometry_poses[indices[k - 1]], odometry_poses[idx]))
-                        result = registration.align(points, previous, init_T=motion)
+                        if getattr(registration, "accepts_point_times", False):  # e.g. ground_filtered deskews with them
+                            result = registration.align(
+                                points, previous, init_T=motion, source_times_s=scan.point_times_s, target_times_s=previous_times
+                            )
+                        else:
+                            result = registration.align(points, previous, init_T=motion)
                         measured[k] = True
                         converged[k] = bool(result.converged)
                         iterations[k] = int(result.iterations)
@@ -247,7 +253,7 @@ def run(
                     log.warning("%s frame %d: %s flagged degenerate geometry (%s)", dataset_name, int(idx), name, reasons[k] or "degenerate")
                 t2 = clock()
                 checker.add(k, int(idx), points, scan.point_times_s, poses)
-                previous = points
+                previous, previous_times = points, scan.point_times_s
                 register_s[k], n_points[k] = t2 - t1, len(points)
                 if bar is not None:
                     bar[0].advance(bar[1])

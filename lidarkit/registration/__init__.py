@@ -31,6 +31,8 @@ from lidarkit.registration import knn  # noqa: E402,F401
 from lidarkit.registration import kiss  # noqa: E402,F401
 from lidarkit.registration import open3d_icp  # noqa: E402,F401
 from lidarkit.registration import small_gicp_icp  # noqa: E402,F401  (registers only if small_gicp imports)
+from lidarkit.registration import pipeline  # noqa: E402,F401
+from lidarkit.registration import genz  # noqa: E402,F401  (registers only if genz_icp imports)
 
 __all__ = [
     "DEGENERACY_RATIO_THRESHOLD",

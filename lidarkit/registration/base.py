@@ -299,6 +299,11 @@ class Registration:
         covariance = result.covariance
         if covariance is not None and self._config.calibrated_covariance and self._config.covariance == "censi":
             covariance = calibrate(covariance, self.name)
+        if covariance is not None and getattr(self._config, "planar", False):
+            # a planar solve keeps z, roll and pitch of the guess: they are not estimated, and carry no variance here
+            covariance = covariance.copy()
+            covariance[[2, 3, 4], :] = 0.0
+            covariance[:, [2, 3, 4]] = 0.0
         return dataclasses.replace(accept(result, self._config), runtime_s=runtime, method=self.name, covariance=covariance)
 
     def _align(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray) -> RegistrationResult:

@@ -9,6 +9,16 @@ In open country little may be left once the ground is gone. A frame whose kept p
 ``min_points_kept`` or whose final alignment is degenerate is *flagged* (its reason starts with
 :data:`TOO_LITTLE_REASON`) and falls back: ``constant_velocity`` reports it not converged, so the
 odometry runner keeps the previous motion and counts it; ``with_ground`` solves again on the full clouds.
+
+A spinning sensor measures while it moves: at 10 m/s a sweep spans 1 m, and the sparse objects left in open
+country are warped by it. When the odometry runner hands over per-point times (the simulator, rosbags; not
+KITTI odometry, whose scans are already compensated), both clouds are deskewed to their sweep end with the
+constant-velocity motion (``init_T``), and the source once more with the estimate (``deskew``).
+
+Removing the ground also removes what fixes height, roll and pitch: the poles, trunks and walls that remain
+are vertical and let the estimate tilt (on hills, 0.1 m and 0.3 deg per frame, measured). With
+``ground_refine`` the result's z, roll and pitch are refined by point-to-plane residuals of the ground points
+(which cannot drag the motion along the road, unlike the point-to-point pairs of the report's ICP).
 """
 
 from __future__ import annotations
@@ -19,6 +29,8 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import Field, model_validator
 
+from lidarkit.errors import DataError
+from lidarkit.geometry import make_se3, se3_log, so3_exp
 from lidarkit.registration.base import Degeneracy, RegistrationResult
 from lidarkit.registration.ground import (
     DEFAULT_GROUND_SEGMENTER,
@@ -56,6 +68,10 @@ class GroundFilteredConfig(VanillaConfig):
         100, ge=3, description="fewer points left in either cloud after ground removal -> the frame is flagged and falls back"
     )
     fallback_on_degenerate: bool = Field(True, description="a degenerate alignment of the remaining points also flags the frame")
+    deskew: bool = Field(
+        True, description="with per-point times: deskew both clouds to their sweep end with the constant-velocity motion, then the source with the estimate"
+    )
+    ground_refine: bool = Field(True, description="refine z, roll and pitch of the result on the ground points (point to plane)")
     fallback: Literal["constant_velocity", "with_ground"] = Field(
         "constant_velocity", description="flagged frame: 'constant_velocity' (not converged: the runner keeps the previous motion) or 'with_ground' (solve on the full clouds)"
     )
@@ -81,6 +97,100 @@ def ground_segmenter(config: GroundFilteredConfig) -> GroundSegmenter:
     return get_ground_segmenter(config.ground_method, **params)
 
 
+def sweep_fraction(point_times_s: np.ndarray) -> np.ndarray | None:
+    """``(N,)`` normalised time in the sweep (0 at its first point, 1 at its last); None without a time span."""
+    t = np.asarray(point_times_s, dtype=np.float64)
+    span = float(t.max() - t.min()) if len(t) else 0.0
+    return (t - t.min()) / span if span > 0 and np.isfinite(span) else None
+
+
+def deskew_to_sweep_end(points_xyz: np.ndarray, fraction: np.ndarray, T_motion: np.ndarray) -> np.ndarray:
+    """Points measured at sweep fraction ``s`` moved into the sensor frame of the sweep end, for a sensor whose
+    motion over one sweep is ``T_motion`` (constant velocity): ``p_end = exp((s - 1) log T_motion) p``.
+
+    The translation of the exponential is kept to second order (``tau rho + tau^2 / 2 phi x rho``): the
+    rotation over one sweep is a few degrees at most.
+    """
+    xi = se3_log(T_motion)
+    rho, phi = xi[:3], xi[3:]
+    tau = np.asarray(fraction, dtype=np.float64) - 1.0
+    rot = so3_exp(tau[:, None] * phi[None, :]).reshape(-1, 3, 3)
+    shift = tau[:, None] * rho[None, :] + 0.5 * (tau**2)[:, None] * np.cross(phi, rho)[None, :]
+    return np.einsum("nij,nj->ni", rot, points_xyz) + shift
+
+
+def refine_on_ground(
+    source_ground_xyz: np.ndarray, target_ground_xyz: np.ndarray, T_target_source: np.ndarray, iterations: int = 5,
+    voxel_m: float = 0.5, max_distance_m: float = 1.0, k: int = 12, max_range_m: float = 30.0, min_normal_z: float = 0.8,
+    max_source_points: int = 5000,
+) -> np.ndarray:
+    """``T_target_source`` with its z, roll and pitch (target frame) refined by point-to-plane ICP of the ground points.
+
+    Target normals from the PCA of ``k`` neighbours in the target ground voxelized at ``voxel_m``, within ``max_range_m``
+    (beyond, the rings are too far apart for a normal) and at most ``acos(min_normal_z)`` from vertical; each
+    Gauss-Newton step solves the 3 x 3 system in (tz, rx, ry) of the residuals ``n . (T p - q)`` within ``max_distance_m``,
+    Cauchy-weighted on their median absolute deviation.
+    x, y and yaw, which the ground cannot fix without biasing them, are left to the non-ground alignment.
+    """
+    from scipy.spatial import cKDTree
+
+    from lidarkit.registration.preprocess import voxel_downsample
+
+    def near(points: np.ndarray) -> np.ndarray:
+        return points[np.hypot(points[:, 0], points[:, 1]) <= max_range_m]
+
+    target = voxel_downsample(near(target_ground_xyz), voxel_m)
+    source = near(source_ground_xyz)  # raw points lie on the ground; voxel centroids of a moved copy need not
+    if len(source) > max_source_points:
+        source = source[np.random.default_rng(0).choice(len(source), max_source_points, replace=False)]
+    if len(target) < k or len(source) < 10:
+        return T_target_source
+    _, nbr = cKDTree(target).query(target, k=k)
+    centred = target[nbr] - target[nbr].mean(axis=1, keepdims=True)
+    evals, evecs = np.linalg.eigh(np.einsum("nki,nkj->nij", centred, centred))
+    normals = evecs[:, :, 0]
+    planar = (np.abs(normals[:, 2]) >= min_normal_z) & (evals[:, 0] < 0.1 * evals[:, 1])
+    target, normals = target[planar], normals[planar]
+    if len(target) < k:
+        return T_target_source
+    tree = cKDTree(target)
+    T = np.array(T_target_source, dtype=np.float64)
+    for _ in range(iterations):
+        p = np.einsum("ij,nj->ni", T[:3, :3], source) + T[:3, 3]
+        dist, idx = tree.query(p, distance_upper_bound=max_distance_m)
+        ok = np.isfinite(dist)
+        if ok.sum() < 10:
+            break
+        n, q, pp = normals[idx[ok]], target[idx[ok]], p[ok]
+        r = np.einsum("ni,ni->n", n, pp - q)
+        # Cauchy weights on the MAD scale: the feet of walls that segmentation left in the ground do not pull
+        scale = max(1.4826 * float(np.median(np.abs(r))), 1e-3)
+        w = 1.0 / (1.0 + (r / (3.0 * scale)) ** 2)
+        pxn = np.cross(pp, n)
+        J = np.stack([n[:, 2], pxn[:, 0], pxn[:, 1]], axis=1)
+        H = J.T @ (w[:, None] * J)
+        if np.linalg.cond(H) > 1e8:
+            break
+        tz, rx, ry = np.linalg.solve(H, -J.T @ (w * r))
+        T = make_se3(so3_exp(np.array([rx, ry, 0.0])), np.array([0.0, 0.0, tz])) @ T
+        if abs(tz) < 1e-5 and abs(rx) < 1e-6 and abs(ry) < 1e-6:
+            break
+    return T
+
+
+def _degenerate_after_refine(degeneracy: Degeneracy, ground_refine: bool) -> bool:
+    """Degenerate in a direction nothing fixes: with ``ground_refine`` the ground fixes z, roll and pitch, so a weakly
+    constrained problem counts when its weakest direction lies mostly in x, y and yaw, or when it is singular
+    (min/max eigenvalue < 1e-4: a null space of several directions, e.g. a single wall, whose weakest vector is
+    an arbitrary member)."""
+    if not degeneracy.degenerate:
+        return False
+    if not ground_refine or degeneracy.ratio < 1e-4:
+        return True
+    w = np.asarray(degeneracy.weakest_direction, dtype=np.float64)
+    return bool(w[0] ** 2 + w[1] ** 2 + w[5] ** 2 > 0.5)
+
+
 def ground_mask(points_xyz: np.ndarray, config: GroundFilteredConfig) -> np.ndarray:
     """``(N,)`` bool mask of ground points according to the config."""
     return ground_segmenter(config).segment(points_xyz)
@@ -91,16 +201,44 @@ class GroundFilteredICP(VanillaICP):
     """Ground removal (a registry segmenter, default slope-following local planes) followed by point-to-point ICP."""
 
     Config = GroundFilteredConfig
+    #: the odometry runner passes ``source_times_s`` / ``target_times_s`` (per-point times) to :meth:`align`
+    accepts_point_times = True
 
     def __init__(self, config: GroundFilteredConfig | None = None, **params: Any):
         super().__init__(config, **params)
         self.segmenter = ground_segmenter(self.config)
+        self._fractions: tuple[np.ndarray | None, np.ndarray | None] = (None, None)
+
+    def align(
+        self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray | None = None, *,
+        source_times_s: np.ndarray | None = None, target_times_s: np.ndarray | None = None,
+    ) -> RegistrationResult:
+        """As :meth:`Registration.align`; with both clouds' per-point times (s) and ``deskew`` the clouds are deskewed."""
+        fractions: list[np.ndarray | None] = [None, None]
+        if self.config.deskew and source_times_s is not None and target_times_s is not None:
+            for k, (name, pts, times) in enumerate((("source", source_xyz, source_times_s), ("target", target_xyz, target_times_s))):
+                times = np.asarray(times, dtype=np.float64).reshape(-1)
+                if len(times) != len(pts) or not np.isfinite(times).all():
+                    raise DataError(f"{len(times)} finite per-point times expected for {len(pts)} points", source=f"{name} times")
+                fractions[k] = sweep_fraction(times)
+        self._fractions = (fractions[0], fractions[1]) if fractions[0] is not None and fractions[1] is not None else (None, None)
+        try:
+            return super().align(source_xyz, target_xyz, init_T)
+        finally:
+            self._fractions = (None, None)
 
     def _align(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray) -> RegistrationResult:
         c = self.config
         if c.ground_method != "height":
             refuse_2d(self.name, source_xyz, target_xyz, f"{c.ground_method} ground segmentation of a 2D scan finds the scan plane itself")
-        clouds = [pts[~self.segmenter.segment(pts)] for pts in (source_xyz, target_xyz)]
+        masks = [~self.segmenter.segment(pts) for pts in (source_xyz, target_xyz)]
+        clouds = [pts[m] for pts, m in zip((source_xyz, target_xyz), masks)]
+        frac_src, frac_dst = self._fractions
+        deskew = frac_src is not None and frac_dst is not None
+        if deskew:
+            frac_src, frac_dst = frac_src[masks[0]], frac_dst[masks[1]]
+            raw_source = clouds[0]
+            clouds = [deskew_to_sweep_end(clouds[0], frac_src, init_T), deskew_to_sweep_end(clouds[1], frac_dst, init_T)]
         kept = {"source_points_kept": len(clouds[0]), "target_points_kept": len(clouds[1]), "ground_method": c.ground_method}
         fewest = min(len(clouds[0]), len(clouds[1]))
         if fewest < c.min_points_kept:
@@ -109,7 +247,18 @@ class GroundFilteredICP(VanillaICP):
         src, dst = prepare(clouds[0], clouds[1], c.voxel_size_m)
         neighbors = NearestNeighbors(dst, backend=c.nn_backend, leafsize=c.leafsize, workers=c.workers)
         result = staged_icp(src, dst, init_T, neighbors, c)
-        if c.fallback_on_degenerate and result.converged and result.degeneracy.degenerate:
+        if deskew and result.converged:  # once more with the source deskewed by the estimated motion
+            src = prepare(deskew_to_sweep_end(raw_source, frac_src, result.T_target_source), clouds[1], c.voxel_size_m)[0]
+            first = result
+            result = staged_icp(src, dst, result.T_target_source, neighbors, c)
+            result = dataclasses.replace(result, iterations=first.iterations + result.iterations, extra={**result.extra, "deskewed": True})
+        if c.ground_refine and result.converged:
+            # raw ground points: the sweep's motion mostly slides them along the ground, which a plane residual ignores,
+            # and deskewing them with a motion that carries the last frame's tilt error would feed that error back
+            grounds = [pts[~m] for pts, m in zip((source_xyz, target_xyz), masks)]
+            refined = refine_on_ground(grounds[0], grounds[1], result.T_target_source)
+            result = dataclasses.replace(result, T_target_source=refined, extra={**result.extra, "ground_refined": True})
+        if c.fallback_on_degenerate and result.converged and _degenerate_after_refine(result.degeneracy, c.ground_refine):
             why = f"{TOO_LITTLE_REASON}: degenerate geometry (min/max eigenvalue {result.degeneracy.ratio:.1e}, {c.ground_method})"
             return self._fallback(source_xyz, target_xyz, init_T, why, kept, result.degeneracy)
         return dataclasses.replace(result, extra={**result.extra, **kept})

@@ -1,0 +1,395 @@
+"""Ablation of KISS-ICP's building blocks with the ``pipeline`` variant, and the wrapped references beside it.
+
+Starting from ``kiss_like`` (kiss-icp rebuilt from lidarkit components), one component is switched at a time:
+
+  no_deskew        constant-velocity prediction kept, no motion compensation
+  fixed_threshold  a fixed 1 m correspondence distance instead of the adaptive threshold (kernel scale follows it)
+  unlimited_threshold  every nearest neighbour is a correspondence (vanilla's threshold; the kernel then weighs all alike)
+  no_kernel        plain least squares instead of the Geman-McClure kernel
+  scan_to_scan     the previous sweep as the map instead of the voxel-hash local map
+  point_to_plane   point-to-plane residual (map normals) instead of point-to-point
+  vanilla_settings every component as in the report's vanilla ICP (``vanilla_seq``: point-to-point, no kernel,
+                   every nearest neighbour, no deskew, scan-to-scan) but on kiss's voxelized clouds (full clouds
+                   would take ~3 s a sweep)
+
+and compared with kiss-icp itself (``kiss``) and GenZ-ICP (``genz`` through lidarkit vs ``genz_icp.GenZICP``
+called directly, each in a fresh process because genz-icp keeps process-wide state between instances).
+
+Data: the 10 KITTI seq-00 scans (end error vs SemanticKITTI), and simulated ``street`` / ``open`` sequences
+(``sim:SCENE?frames=N&seed=S``: HDL-64-like 64 x 2000 rays, motion distortion, ground truth at the sweep end).
+The in-process variants run in lockstep on the same scans (each scan read once, the order of the variants
+rotated every frame), so frame rates are comparable and reported as ratios to kiss-icp's in the same run.
+
+    python benchmarks/ablation.py run --dataset kitti
+    python benchmarks/ablation.py run --dataset street --seed 0 --frames 300
+    python benchmarks/ablation.py report          # tables, bar chart, results.json from every raw/*.json
+    python benchmarks/ablation.py all --seeds 0 1 --frames 300
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+DEFAULT_DATA = REPO.parent / "shared" / "data"
+DEFAULT_OUT = REPO / "benchmarks" / "results" / "ablation"
+
+#: kiss_like with one component switched (pipeline parameters on top of preset=kiss_like).
+ABLATIONS: dict[str, dict] = {
+    "kiss_like": {},
+    "no_deskew": {"deskew": {"name": "constant_velocity", "deskew": False}},
+    "fixed_threshold": {"threshold": {"name": "fixed", "max_distance_m": 1.0}},
+    "unlimited_threshold": {"threshold": {"name": "fixed", "max_distance_m": None}},
+    "no_kernel": {"kernel": "none"},
+    "scan_to_scan": {"map": "scan_to_scan"},
+    "point_to_plane": {"residual": "point_to_plane"},
+    "vanilla_settings": {"preset": "vanilla_seq", "map_voxel_factor": 0.5, "source_voxel_factor": 1.5},
+}
+#: genz-icp's pretuned KITTI settings (genz_icp/config/pretuned/kitti.yaml), used on every dataset.
+GENZ_PARAMS = {"min_range_m": 5.0, "voxel_size_m": 0.6, "desired_num_voxelized_points": 3000, "planarity_threshold": 0.18, "max_points_per_voxel": 3}
+
+
+def log(msg: str) -> None:
+    print(f"[{time.strftime('%H:%M:%S')}] {msg}", file=sys.stderr, flush=True)
+
+
+def open_dataset(name: str, seed: int, frames: int, data: Path):
+    """``(label, n_frames, read(i) -> (points, times or None), ground truth (N, 4, 4) relative to frame 0)``."""
+    if name == "kitti":
+        from lidarkit.io.kitti import KittiOdometry
+
+        folder = data / "kitti_odometry" / "sequences" / "00"
+        seq = KittiOdometry(folder, poses_file=folder / "poses_semantickitti.txt")
+        label = "KITTI 00 (10 scans)"
+    else:
+        from lidarkit.sim.lidar import open_sim
+
+        seq = open_sim(f"sim:{name}?frames={frames}&seed={seed}")
+        label = f"sim {name} seed {seed} ({frames} sweeps)"
+    gt = seq.ground_truth.poses_se3
+    gt = np.linalg.inv(gt[0]) @ gt
+
+    def read(i: int):
+        scan = seq.read_scan(i)
+        return np.asarray(scan.points_xyz, dtype=np.float64), scan.point_times_s
+
+    return label, len(seq), read, gt
+
+
+def score(poses: np.ndarray, gt: np.ndarray) -> dict:
+    """End error, APE RMSE (no alignment: both start at the identity) and KITTI drift when the path allows."""
+    from lidarkit import eval as leval
+    from lidarkit.geometry import pose_error
+    from lidarkit.trajectory import Trajectory
+
+    stamps = np.arange(len(gt), dtype=np.float64) * 0.1
+    ref, est = Trajectory(gt, stamps, name="ground truth"), Trajectory(poses, stamps, name="estimate")
+    dt, dr = pose_error(poses[-1], gt[-1])
+    out = {"end_error_m": float(dt), "end_error_deg": float(dr), "path_m": float(ref.length_m)}
+    out["ape_rmse_m"] = float(leval.ape(ref, est, align="none", relation="translation").stats["rmse"])
+    if leval.drift_segments_possible(ref):
+        d = leval.kitti_drift(ref, est)
+        out["drift_pct"], out["drift_deg_per_100m"] = float(d.translation_pct), float(d.rotation_deg_per_100m)
+    return out
+
+
+GENZ_CHILD = r"""
+import json, sys, time, numpy as np
+cache, mode, params = sys.argv[1], sys.argv[2], json.loads(sys.argv[3])
+n = int(sys.argv[4])
+frames = [np.load(f"{cache}/{i:05d}.npy") for i in range(n)]
+from lidarkit.registration import get_icp
+method = get_icp("genz", **params)
+poses, spent = [], 0.0
+if mode == "direct":
+    from genz_icp.genz_icp import GenZICP
+    odometry = GenZICP(method.config.to_genz_config())
+    for f in frames:
+        t = time.perf_counter(); odometry.register_frame(f, None); spent += time.perf_counter() - t
+        poses.append(odometry.last_pose.copy())
+else:
+    method.reset()
+    for f in frames:
+        t = time.perf_counter(); poses.append(method.register_frame(f)); spent += time.perf_counter() - t
+np.save(f"{cache}/poses_{mode}.npy", np.stack(poses))
+print(json.dumps({"seconds": spent}))
+"""
+
+
+def run_genz(cache: Path, n: int, repeats: int) -> dict[str, tuple[np.ndarray, float]]:
+    """genz-icp direct and genz through lidarkit, each the first GenZICP of a fresh process, on cached scans."""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])}
+    out = {}
+    for mode in ("direct", "lidarkit") * repeats:  # interleaved repeats: keep each one's faster loop
+        done = subprocess.run(
+            [sys.executable, "-c", GENZ_CHILD, str(cache), mode, json.dumps(GENZ_PARAMS), str(n)],
+            env=env, capture_output=True, text=True, check=True,
+        )
+        seconds = json.loads(done.stdout.strip().splitlines()[-1])["seconds"]
+        poses = np.load(cache / f"poses_{mode}.npy")
+        if mode not in out or seconds < out[mode][1]:
+            out[mode] = (poses, seconds)
+    return out
+
+
+def run_dataset(name: str, seed: int, frames: int, data: Path, out: Path, genz: bool, variants: list[str] | None = None) -> Path:
+    from lidarkit.registration import available_icp, get_icp
+
+    label, n, read, gt = open_dataset(name, seed, frames, data)
+    methods = {"kiss": get_icp("kiss")}
+    for key, params in ABLATIONS.items():
+        if variants is None or key in variants:
+            methods[key] = get_icp("pipeline", **{"preset": "kiss_like", **params})
+    for m in methods.values():
+        m.reset()
+    names = list(methods)
+    poses = {k: np.empty((n, 4, 4)) for k in names}
+    spent = {k: 0.0 for k in names}
+    genz = genz and "genz" in available_icp()
+    with tempfile.TemporaryDirectory(prefix="lidarkit-ablation-") as tmp:
+        cache = Path(tmp)
+        n_points = 0
+        for i in range(n):
+            points, times = read(i)
+            n_points += len(points)
+            if genz:
+                np.save(cache / f"{i:05d}.npy", points)
+            order = names[i % len(names):] + names[: i % len(names)]
+            for key in order:
+                t = time.perf_counter()
+                poses[key][i] = methods[key].register_frame(points, times)
+                spent[key] += time.perf_counter() - t
+            if (i + 1) % 25 == 0 or i + 1 == n:
+                log(f"{label}: {i + 1}/{n} frames")
+                if i + 1 < n:  # a checkpoint: the frames so far, kept if the run is cut short
+                    _write(out, name, seed, i + 1, variants, {
+                        "dataset": name, "seed": seed if name != "kitti" else None, "n_frames": i + 1, "label": f"{label}, first {i + 1}",
+                        "partial_of": n, "rows": _rows(names, poses, spent, gt, i + 1),
+                    }, partial=True)
+        genz_runs = run_genz(cache, n, 3 if name == "kitti" else 1) if genz else {}
+    rows = _rows(names, poses, spent, gt, n)
+    kiss_like_gap = np.abs(poses["kiss_like"] - poses["kiss"]).max() if "kiss_like" in poses else float("nan")
+    extra = {"kiss_like_max_abs_pose_difference_to_kiss": float(kiss_like_gap)}
+    for mode, key in (("direct", "genz-icp (direct)"), ("lidarkit", "genz")):
+        if mode in genz_runs:
+            p, s = genz_runs[mode]
+            rows[key] = {**score(p, gt), "fps": n / s, "seconds": s}
+            rows[key]["fps_ratio_to_kiss"] = rows[key]["fps"] / rows["kiss"]["fps"]
+    if genz_runs:
+        extra["genz_max_abs_pose_difference_to_direct"] = float(np.abs(genz_runs["lidarkit"][0] - genz_runs["direct"][0]).max())
+        extra["genz_fps_ratio_to_direct"] = rows["genz"]["fps"] / rows["genz-icp (direct)"]["fps"]
+    record = {
+        "dataset": name, "seed": seed if name != "kitti" else None, "n_frames": n, "label": label,
+        "mean_points_per_scan": n_points / n, "rows": rows, **extra,
+    }
+    path = _write(out, name, seed, n, variants, record)
+    partial = _path(out, name, seed, n, variants, partial=True)
+    if partial.exists():
+        partial.unlink()
+    log(f"wrote {path}")
+    return path
+
+
+def _rows(names, poses, spent_s, gt, n) -> dict:
+    rows = {key: {**score(poses[key][:n], gt[:n]), "fps": n / spent_s[key], "seconds": spent_s[key]} for key in names}
+    for key in names:
+        rows[key]["fps_ratio_to_kiss"] = rows[key]["fps"] / rows["kiss"]["fps"]
+    return rows
+
+
+def _path(out: Path, name: str, seed: int, n: int, variants, partial: bool = False) -> Path:
+    subset = "" if variants is None else "_" + "-".join(sorted(variants))
+    stem = name if name == "kitti" else f"{name}_seed{seed}"
+    return out / ("partial" if partial else "raw") / f"{stem}{'' if partial else '_' + str(n) if name != 'kitti' else ''}{subset}.json"
+
+
+def _write(out: Path, name: str, seed: int, n: int, variants, record: dict, partial: bool = False) -> Path:
+    from lidarkit.atomic import write_text
+
+    path = _path(out, name, seed, n, variants, partial)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    record["variants_subset"] = variants
+    write_text(path, json.dumps(record, indent=2) + "\n")
+    return path
+
+
+# ---------------------------------------------------------------------------------------------- report
+ORDER = ["kiss", "kiss_like", *[k for k in ABLATIONS if k != "kiss_like"], "genz", "genz-icp (direct)"]
+
+
+def _fmt(v, digits=3):
+    return "-" if v is None or (isinstance(v, float) and not np.isfinite(v)) else f"{v:.{digits}f}"
+
+
+def report(out: Path, command: str) -> None:
+    import datetime as dt
+
+    from lidarkit.atomic import write_text
+    from lidarkit.bench.machine import describe_machine, machine_info
+
+    records = [json.loads(p.read_text()) for p in sorted((out / "raw").glob("*.json"))]
+    if not records:
+        raise SystemExit(f"no raw results in {out / 'raw'}")
+    lines = [
+        "# Ablation of KISS-ICP's components (pipeline variant)",
+        "",
+        f"- date: {dt.datetime.now(dt.timezone.utc).isoformat(timespec='seconds')}",
+        f"- machine: {describe_machine(machine_info())}",
+        f"- command: `{command}`",
+        "- frame rates: frames / time in `register_frame`, all variants in lockstep on the same scans; `x kiss` is the",
+        "  ratio to kiss-icp's rate in the same run (genz rows: each in its own fresh process, same cached scans).",
+        "",
+    ]
+    summary: dict = {"datasets": [], "sim": {}}
+    kitti = [r for r in records if r["dataset"] == "kitti"]
+    for r in kitti:
+        lines += [f"## {r['label']}: end error vs SemanticKITTI ({r['mean_points_per_scan']:.0f} points / scan)", "",
+                  "| variant | end error m | end error deg | APE RMSE m | frame rate Hz | x kiss |", "|---|---:|---:|---:|---:|---:|"]
+        for key in ORDER:
+            if key in r["rows"]:
+                row = r["rows"][key]
+                lines.append(f"| {key} | {_fmt(row['end_error_m'])} | {_fmt(row['end_error_deg'])} | {_fmt(row['ape_rmse_m'])} | {_fmt(row['fps'], 1)} | {_fmt(row['fps_ratio_to_kiss'], 2)} |")
+        lines += ["", f"kiss_like vs kiss-icp, largest pose-matrix difference over the 10 frames: {r['kiss_like_max_abs_pose_difference_to_kiss']:.2e}"]
+        if "genz_max_abs_pose_difference_to_direct" in r:
+            lines.append(f"genz vs genz-icp direct: largest difference {r['genz_max_abs_pose_difference_to_direct']:.2e}, frame-rate ratio {r['genz_fps_ratio_to_direct']:.3f}")
+        lines.append("")
+        summary["datasets"].append(r)
+    sims = [r for r in records if r["dataset"] != "kitti"]
+    # a subset run (--variants) of a sequence that also has a full run adds its extra variants to that run's rows
+    full = {(r["dataset"], r["n_frames"], r["seed"]): r for r in sims if not r.get("variants_subset")}
+    for r in [r for r in sims if r.get("variants_subset")]:
+        target = full.get((r["dataset"], r["n_frames"], r["seed"]))
+        if target is not None:
+            extra = {k: v for k, v in r["rows"].items() if k not in target["rows"]}
+            for v in extra.values():  # its frame rate relative to its own run's kiss-icp
+                v["fps_note"] = "separate run"
+            target["rows"].update(extra)
+            sims.remove(r)
+    groups = sorted({(r["dataset"], r["n_frames"], tuple(r.get("variants_subset") or ())) for r in sims})
+    for scene, n_frames, subset in groups:
+        recs = sorted([r for r in sims if (r["dataset"], r["n_frames"], tuple(r.get("variants_subset") or ())) == (scene, n_frames, subset)],
+                      key=lambda r: r["seed"])
+        seeds = [r["seed"] for r in recs]
+        lines += [f"## sim {scene}: {recs[0]['n_frames']} sweeps, seeds {', '.join(map(str, seeds))} (mean +- std over seeds; per seed in results.json)", "",
+                  "| variant | KITTI drift % | deg/100 m | APE RMSE m | end error m | frame rate Hz | x kiss | drift change vs kiss_like (pct points) |",
+                  "|---|---:|---:|---:|---:|---:|---:|---:|"]
+        scene_summary = {}
+        for key in ORDER:
+            vals = [r["rows"][key] for r in recs if key in r["rows"]]
+            if not vals:
+                continue
+
+            def stat(field, vals=vals):
+                x = np.array([v.get(field, np.nan) for v in vals], dtype=float)
+                return float(np.mean(x)), float(np.std(x))
+
+            d, ddeg, ape, end, fps, ratio = (stat(f) for f in ("drift_pct", "drift_deg_per_100m", "ape_rmse_m", "end_error_m", "fps", "fps_ratio_to_kiss"))
+            change = np.array([r["rows"][key].get("drift_pct", np.nan) - r["rows"]["kiss_like"].get("drift_pct", np.nan) for r in recs if key in r["rows"]])
+            ape_change = np.array([r["rows"][key]["ape_rmse_m"] - r["rows"]["kiss_like"]["ape_rmse_m"] for r in recs if key in r["rows"]])
+            scene_summary[key] = {"ape_change_vs_kiss_like": (float(ape_change.mean()), float(ape_change.std())), "drift_pct": d, "drift_deg_per_100m": ddeg, "ape_rmse_m": ape, "end_error_m": end, "fps": fps,
+                                  "fps_ratio_to_kiss": ratio, "drift_change_vs_kiss_like": (float(change.mean()), float(change.std())),
+                                  "per_seed": {str(r["seed"]): r["rows"][key] for r in recs if key in r["rows"]}}
+            lines.append(
+                f"| {key} | {_fmt(d[0], 2)} +- {_fmt(d[1], 2)} | {_fmt(ddeg[0], 2)} +- {_fmt(ddeg[1], 2)} | {_fmt(ape[0], 2)} +- {_fmt(ape[1], 2)} | "
+                f"{_fmt(end[0], 2)} +- {_fmt(end[1], 2)} | {_fmt(fps[0], 1)} | {_fmt(ratio[0], 2)} | {_fmt(change.mean(), 2)} +- {_fmt(change.std(), 2)} |"
+            )
+        singles = {k: v["drift_change_vs_kiss_like"][0] for k, v in scene_summary.items() if k in ABLATIONS and k not in ("kiss_like", "vanilla_settings")}
+        singles = {k: v for k, v in singles.items() if np.isfinite(v)}
+        if singles and "vanilla_settings" in scene_summary:
+            worst = max(singles, key=singles.get)
+            gap = scene_summary["vanilla_settings"]["drift_change_vs_kiss_like"][0]
+            lines += ["", f"Gap vanilla_settings - kiss_like: {gap:+.2f} pct points of drift; the single switch that costs most: "
+                      f"**{worst}** ({singles[worst]:+.2f}, {100 * singles[worst] / gap:.0f} % of the gap); the others: "
+                      + ", ".join(f"{k} {v:+.2f}" for k, v in sorted(singles.items(), key=lambda kv: -kv[1]) if k != worst)]
+            scene_summary["_largest_single_component"] = {"component": worst, "drift_change": singles[worst], "vanilla_gap": gap}
+        lines += ["", "kiss_like vs kiss-icp, largest pose-matrix difference per seed: "
+                  + ", ".join(f"seed {r['seed']}: {r['kiss_like_max_abs_pose_difference_to_kiss']:.2e}" for r in recs)]
+        if all("genz_max_abs_pose_difference_to_direct" in r for r in recs):
+            lines.append("genz vs genz-icp direct, largest difference / frame-rate ratio per seed: "
+                         + ", ".join(f"seed {r['seed']}: {r['genz_max_abs_pose_difference_to_direct']:.2e} / {r['genz_fps_ratio_to_direct']:.3f}" for r in recs))
+        lines.append("")
+        summary["sim"][f"{scene} {n_frames} sweeps" + (" (kiss vs kiss_like only)" if subset else "")] = scene_summary
+    _chart(summary, out)
+    lines += ["![change each single-component switch makes (drift, or APE where the run is too short for drift)](ablation.png)", ""]
+    notes = out / "notes.md"  # hand-written findings and the runs' limits, kept beside the generated tables
+    if notes.exists():
+        lines += [notes.read_text().rstrip(), ""]
+    write_text(out / "results.json", json.dumps({"records": records, "summary_sim": summary["sim"]}, indent=2, default=float) + "\n")
+    write_text(out / "README.md", "\n".join(lines) + "\n")
+
+
+def _chart(summary: dict, out: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from lidarkit.atomic import save_figure
+
+    keys = [k for k in ABLATIONS if k != "kiss_like"]
+    scenes = sorted(k for k, v in summary["sim"].items() if any(key in v for key in keys))[:4]
+    if not scenes:
+        return
+    fig, axes = plt.subplots(1, len(scenes), figsize=(5.5 * len(scenes), 4), squeeze=False)
+    for ax, scene in zip(axes[0], scenes):
+        s = summary["sim"][scene]
+        use_drift = np.isfinite(s["kiss_like"]["drift_pct"][0])
+        field = "drift_change_vs_kiss_like" if use_drift else "ape_change_vs_kiss_like"
+        means = [s[k][field][0] if k in s else np.nan for k in keys]
+        stds = [s[k][field][1] if k in s else 0 for k in keys]
+        ax.barh(keys, means, xerr=stds, color=["tab:red" if m > 0 else "tab:green" for m in means])
+        ax.axvline(0, color="k", lw=0.8)
+        ax.set_xscale("symlog", linthresh=0.1)
+        if use_drift:
+            ax.set_title(f"sim {scene}: kiss_like drift {s['kiss_like']['drift_pct'][0]:.2f} %")
+            ax.set_xlabel("KITTI drift change vs kiss_like (percentage points)")
+        else:
+            ax.set_title(f"sim {scene}: kiss_like APE {s['kiss_like']['ape_rmse_m'][0]:.2f} m")
+            ax.set_xlabel("APE RMSE change vs kiss_like (m)")
+    fig.tight_layout()
+    save_figure(fig, out / "ablation.png", dpi=110)
+    plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = parser.add_subparsers(dest="cmd", required=True)
+    r = sub.add_parser("run", help="one dataset -> raw/*.json")
+    r.add_argument("--dataset", choices=["kitti", "street", "open"], required=True)
+    r.add_argument("--seed", type=int, default=0)
+    r.add_argument("--frames", type=int, default=300)
+    r.add_argument("--variants", nargs="+", choices=list(ABLATIONS), help="only these pipeline variants (kiss always runs)")
+    a = sub.add_parser("all", help="KITTI and every scene x seed, then the report")
+    a.add_argument("--seeds", type=int, nargs="+", default=[0, 1])
+    a.add_argument("--frames", type=int, default=300)
+    a.add_argument("--scenes", nargs="+", default=["street", "open"])
+    sub.add_parser("report", help="tables and chart from raw/*.json")
+    for p in (r, a):
+        p.add_argument("--no-genz", action="store_true", help="skip genz / genz-icp")
+    parser.add_argument("--data", type=Path, default=DEFAULT_DATA)
+    parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
+    args = parser.parse_args(argv)
+    command = "python benchmarks/ablation.py " + " ".join(sys.argv[1:] if argv is None else argv)
+    if args.cmd == "run":
+        run_dataset(args.dataset, args.seed, args.frames, args.data, args.out, not args.no_genz, args.variants)
+    elif args.cmd == "all":
+        run_dataset("kitti", 0, 10, args.data, args.out, not args.no_genz)
+        for scene in args.scenes:
+            for seed in args.seeds:
+                run_dataset(scene, seed, args.frames, args.data, args.out, not args.no_genz)
+        report(args.out, command)
+    else:
+        report(args.out, command)
+
+
+if __name__ == "__main__":
+    main()

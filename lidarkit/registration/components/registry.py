@@ -1,0 +1,213 @@
+"""Registries of pipeline components, one per kind: ``@register_component(kind, name)``, ``make_component``.
+
+A component is a small class with a typed ``Config`` (pydantic, frozen, unknown keys rejected). Built-in
+components register when :mod:`lidarkit.registration.components` imports their modules; third-party packages
+declare an entry point in the group ``lidarkit.components`` named ``KIND.NAME`` (``kernel.my_kernel =
+"pkg.module:MyKernel"``), loaded lazily the first time a registry is asked for names or for that component.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Mapping
+from importlib.metadata import entry_points
+from typing import Any, ClassVar
+
+import pydantic
+from pydantic import BaseModel, ConfigDict
+
+from lidarkit.errors import ConfigError, validation_problems
+
+log = logging.getLogger(__name__)
+
+ENTRY_POINT_GROUP = "lidarkit.components"
+
+#: The kinds of component a pipeline is composed of, in the order a frame meets them.
+KINDS = ("motion", "preprocess", "map", "residual", "kernel", "threshold")
+
+
+class ComponentConfig(BaseModel):
+    """Base of every component's config: frozen, unknown keys rejected."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+
+class Component:
+    """Base of every component: subclasses set ``Config``; ``kind`` is set by the kind's base class."""
+
+    kind: ClassVar[str] = ""
+    name: ClassVar[str] = ""
+    Config: ClassVar[type[ComponentConfig]] = ComponentConfig
+
+    def __init__(self, config: ComponentConfig | None = None, **params: Any):
+        if config is not None and params:
+            raise TypeError("pass either a config object or keyword parameters, not both")
+        self.config = config if config is not None else self.Config(**params)
+
+    def describe(self) -> dict[str, Any]:
+        """``{"name": ..., **params}``: what a run folder records for this component."""
+        return {"name": self.name, **self.config.model_dump(mode="json")}
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.config!r})"
+
+
+_COMPONENTS: dict[str, dict[str, type[Component]]] = {kind: {} for kind in KINDS}
+_BASES: dict[str, type[Component]] = {}
+_PLUGINS_LOADED = False
+
+
+def component_base(kind: str) -> Callable[[type[Component]], type[Component]]:
+    """Class decorator for the abstract base of one kind (plugins must subclass it)."""
+    if kind not in KINDS:
+        raise ConfigError(f"unknown component kind {kind!r}; kinds: {', '.join(KINDS)}", source="component_base")
+
+    def decorator(cls: type[Component]) -> type[Component]:
+        cls.kind = kind
+        _BASES[kind] = cls
+        return cls
+
+    return decorator
+
+
+def _check_kind(kind: str) -> None:
+    if kind not in KINDS:
+        raise ConfigError(f"unknown component kind {kind!r}; kinds: {', '.join(KINDS)}", source="component kind")
+
+
+def register_component(kind: str, name: str) -> Callable[[type[Component]], type[Component]]:
+    """Class decorator: register a component class of ``kind`` under ``name`` (sets ``cls.name``)."""
+    _check_kind(kind)
+
+    def decorator(cls: type[Component]) -> type[Component]:
+        base = _BASES.get(kind, Component)
+        if not (isinstance(cls, type) and issubclass(cls, base)):
+            raise ConfigError(f"{cls!r} is not a {base.__name__} subclass", source=f"register_component({kind!r}, {name!r})")
+        existing = _COMPONENTS[kind].get(name)
+        if existing is not None and existing is not cls:
+            raise ConfigError(
+                f"name already taken by {existing.__module__}.{existing.__qualname__}", source=f"register_component({kind!r}, {name!r})"
+            )
+        cls.name = name
+        _COMPONENTS[kind][name] = cls
+        return cls
+
+    return decorator
+
+
+def _load_plugins() -> None:
+    """Import every ``lidarkit.components`` entry point once; a broken one raises ConfigError naming it."""
+    global _PLUGINS_LOADED
+    if _PLUGINS_LOADED:
+        return
+    _PLUGINS_LOADED = True
+    for ep in entry_points(group=ENTRY_POINT_GROUP):
+        kind, _, name = ep.name.partition(".")
+        source = f"component plugin {ep.name!r}"
+        if kind not in KINDS or not name:
+            _PLUGINS_LOADED = False
+            raise ConfigError(f"entry point names must read KIND.NAME with KIND one of {', '.join(KINDS)}", source=source)
+        if name in _COMPONENTS[kind]:
+            continue
+        try:
+            obj = ep.load()
+        except Exception as err:  # a plugin may fail in any way while importing
+            _PLUGINS_LOADED = False
+            raise ConfigError(f"failed to load plugin {ep.value!r}: {type(err).__name__}: {err}", source=source) from err
+        if name not in _COMPONENTS[kind]:
+            try:
+                register_component(kind, name)(obj)
+            except ConfigError:
+                _PLUGINS_LOADED = False
+                raise
+        log.info("loaded %s component %s from %s", kind, name, ep.value)
+
+
+def reload_component_plugins() -> None:
+    """Forget which entry points were loaded and scan the group again (after installing a plugin)."""
+    global _PLUGINS_LOADED
+    _PLUGINS_LOADED = False
+    _load_plugins()
+
+
+def available_components(kind: str | None = None) -> dict[str, list[str]] | list[str]:
+    """Sorted names of the registered components of ``kind`` (plugins included); all kinds if None."""
+    _load_plugins()
+    if kind is None:
+        return {k: sorted(_COMPONENTS[k]) for k in KINDS}
+    _check_kind(kind)
+    return sorted(_COMPONENTS[kind])
+
+
+def get_component_class(kind: str, name: str) -> type[Component]:
+    """The class registered as ``name`` for ``kind``; unknown names raise ConfigError listing the valid ones."""
+    _check_kind(kind)
+    if name not in _COMPONENTS[kind]:
+        _load_plugins()
+    if name not in _COMPONENTS[kind]:
+        raise ConfigError(f"unknown {kind} component {name!r}; available: {', '.join(available_components(kind))}", source=kind)
+    return _COMPONENTS[kind][name]
+
+
+def component_fields(kind: str, name: str) -> dict[str, tuple[str, Any, str]]:
+    """``{param: (type, default, description)}`` of a component's config."""
+    from lidarkit.registration.registry import _type_name
+
+    cls = get_component_class(kind, name)
+    return {
+        key: (_type_name(info.annotation), info.get_default(call_default_factory=True), info.description or "")
+        for key, info in cls.Config.model_fields.items()
+    }
+
+
+ComponentSpec = str | Mapping[str, Any]
+
+
+def split_spec(kind: str, spec: ComponentSpec) -> tuple[str, dict[str, Any]]:
+    """``"huber"`` or ``{"name": "huber", "scale_m": 0.5}`` -> ``("huber", {"scale_m": 0.5})``."""
+    if isinstance(spec, str):
+        return spec, {}
+    if isinstance(spec, Mapping):
+        params = dict(spec)
+        name = params.pop("name", None)
+        if not isinstance(name, str):
+            raise ConfigError(f"a {kind} given as a mapping needs a 'name' key (one of: {', '.join(available_components(kind))})", source=kind)
+        return name, params
+    raise ConfigError(f"expected a component name or a mapping with 'name', got {type(spec).__name__}", source=kind)
+
+
+def make_component(kind: str, spec: ComponentSpec, **defaults: Any) -> Component:
+    """An instance of the component ``spec`` names; ``defaults`` fill params the spec does not set (and the
+    component's config knows). Unknown or invalid params raise ConfigError listing the valid ones."""
+    name, params = split_spec(kind, spec)
+    cls = get_component_class(kind, name)
+    known = cls.Config.model_fields
+    merged = {k: v for k, v in defaults.items() if k in known and v is not None}
+    merged.update(params)
+    valid = ", ".join(f"{k}={v[1]!r}" for k, v in component_fields(kind, name).items()) or "(none)"
+    try:
+        config = cls.Config(**merged)
+    except pydantic.ValidationError as err:
+        raise ConfigError(
+            f"invalid parameters ({validation_problems(err)}); valid parameters: {valid}", source=f"{kind} component {name!r}"
+        ) from None
+    except ValueError as err:
+        raise ConfigError(f"invalid parameters ({err}); valid parameters: {valid}", source=f"{kind} component {name!r}") from None
+    return cls(config=config)
+
+
+__all__ = [
+    "ENTRY_POINT_GROUP",
+    "KINDS",
+    "Component",
+    "ComponentConfig",
+    "ComponentSpec",
+    "available_components",
+    "component_base",
+    "component_fields",
+    "get_component_class",
+    "make_component",
+    "register_component",
+    "reload_component_plugins",
+    "split_spec",
+]

@@ -1,0 +1,221 @@
+"""Pipeline components (lidarkit.registration.components): registries, and each component against kiss-icp's own
+primitives where kiss-icp has one (voxel downsampling, voxel-hash map, adaptive threshold, deskew, kernel)."""
+
+from __future__ import annotations
+
+import textwrap
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from conftest import cli_exit_code, shared_path
+
+from lidarkit.errors import ConfigError
+from lidarkit.geometry import make_se3, se3_exp, so3_exp
+from lidarkit.registration import get_icp
+from lidarkit.registration.components import (
+    ENTRY_POINT_GROUP,
+    KINDS,
+    available_components,
+    make_component,
+    registry as component_registry,
+    reload_component_plugins,
+)
+from lidarkit.registration.components.maps import VoxelHashMap, first_per_voxel
+
+
+@pytest.fixture(scope="module")
+def kitti_frame():
+    from lidarkit.io.kitti import KittiOdometry
+
+    folder = shared_path("kitti_odometry", "sequences", "00")
+    seq = KittiOdometry(folder)
+    return [seq.read_scan(i).points_xyz for i in (0, 1)]
+
+
+def test_every_kind_lists_its_builtins():
+    names = available_components()
+    assert set(names) == set(KINDS)
+    assert names["residual"] == ["plane_to_plane", "point_to_plane", "point_to_point"]
+    assert names["kernel"] == ["cauchy", "geman_mcclure", "huber", "none", "tukey"]
+    assert names["threshold"] == ["adaptive", "fixed"]
+    assert names["motion"] == ["constant_velocity", "none"]
+    assert names["map"] == ["scan_to_scan", "voxel_hash"]
+    assert {"range_crop", "voxel_downsample", "ground_filter"} <= set(names["preprocess"])
+
+
+def test_unknown_names_and_params_raise_config_error_listing_valid_ones():
+    with pytest.raises(ConfigError, match="available: cauchy, geman_mcclure, huber, none, tukey"):
+        make_component("kernel", "welsch")
+    with pytest.raises(ConfigError, match="scale_m="):
+        make_component("kernel", {"name": "huber", "scale": 0.3})
+    with pytest.raises(ConfigError, match="scale_m"):
+        make_component("kernel", {"name": "huber", "scale_m": -1.0})
+    with pytest.raises(ConfigError, match="kinds: motion"):
+        available_components("solver")
+    # through the pipeline variant: the component's kind and its valid names / parameters are named
+    with pytest.raises(ConfigError, match="unknown residual component 'point_to_line'; available: plane_to_plane"):
+        get_icp("pipeline", residual="point_to_line")
+    with pytest.raises(ConfigError, match="valid parameters: voxel_size_m="):
+        get_icp("pipeline", map={"name": "voxel_hash", "max_points": 3})
+    with pytest.raises(ConfigError, match="preset"):
+        get_icp("pipeline", preset="kiss")
+    with pytest.raises(ConfigError, match="unknown ground segmenter 'plane'; available: .*height"):
+        get_icp("pipeline", preprocess=[{"name": "ground_filter", "method": "plane"}])
+    icp = get_icp("pipeline", preprocess=["range_crop", {"name": "ground_filter", "method": "ransac"}])
+    assert icp.describe()["preprocess"][1] == {"name": "ground_filter", "method": "ransac", "options": {}}
+
+
+def test_kernel_weights():
+    r2 = np.array([0.0, 0.01, 0.25, 1.0, 4.0])
+    sigma = 0.4
+    gm = make_component("kernel", {"name": "geman_mcclure", "scale_m": "kiss"}).weights(r2, sigma)
+    kiss = sigma**2 / (sigma + r2) ** 2  # kiss-icp 1.3's weight, kernel = sigma
+    np.testing.assert_allclose(gm, kiss / kiss[0], rtol=1e-12)
+    np.testing.assert_allclose(make_component("kernel", {"name": "huber", "scale_m": 0.5}).weights(r2, sigma), [1, 1, 1, 0.5, 0.25])
+    np.testing.assert_allclose(make_component("kernel", {"name": "cauchy", "scale_m": 1.0}).weights(r2, sigma), 1 / (1 + r2))
+    np.testing.assert_allclose(make_component("kernel", {"name": "tukey", "scale_m": 1.0}).weights(r2, sigma), [1, 0.99**2, 0.75**2, 0, 0])
+    np.testing.assert_allclose(make_component("kernel", "cauchy").weights(r2, sigma), 1 / (1 + r2 / sigma**2))  # adaptive: c = sigma
+    assert (make_component("kernel", "none").weights(r2, sigma) == 1).all()
+
+
+def test_adaptive_threshold_equals_kiss_icp():
+    from kiss_icp.config import KISSConfig
+    from kiss_icp.threshold import AdaptiveThreshold
+
+    reference = AdaptiveThreshold(KISSConfig())
+    ours = make_component("threshold", "adaptive")
+    rng = np.random.default_rng(3)
+    assert ours.sigma_m == reference.get_threshold() == 2.0 and ours.max_distance_m == 6.0
+    for k in range(30):
+        scale = 0.3 if k % 3 else 0.01  # some deviations below min_motion_th (not counted)
+        deviation = se3_exp(np.r_[rng.normal(0, scale, 3), rng.normal(0, scale / 100, 3)])
+        reference.update_model_deviation(deviation)
+        ours.update(deviation)
+        assert ours.sigma_m == pytest.approx(reference.get_threshold(), rel=1e-12)
+    fixed = make_component("threshold", {"name": "fixed", "max_distance_m": 1.5})
+    assert fixed.max_distance_m == 1.5 and fixed.sigma_m == 0.5
+    assert make_component("threshold", {"name": "fixed", "max_distance_m": None}).max_distance_m == np.inf
+
+
+def test_voxel_downsampling_and_map_equal_kiss_icp(kitti_frame):
+    from kiss_icp.mapping import VoxelHashMap as KissMap
+    from kiss_icp.voxelization import voxel_down_sample
+
+    frame0, frame1 = kitti_frame
+    kiss_down = voxel_down_sample(frame0, 0.5)
+    ours = first_per_voxel(frame0, 0.5, order="kiss_hash")
+    np.testing.assert_array_equal(ours, kiss_down)  # same points in the same (hash-table) order
+    assert set(map(tuple, first_per_voxel(frame0, 0.5))) == set(map(tuple, kiss_down))
+    T1 = make_se3(so3_exp([0.0, 0.0, 0.02]), [0.7, 0.01, 0.0])
+    reference = KissMap(voxel_size=1.0, max_distance=30.0, max_points_per_voxel=20)
+    local_map = VoxelHashMap(voxel_size_m=1.0, max_range_m=30.0, max_points_per_voxel=20)
+    for frame, T in ((frame0, np.eye(4)), (frame1, T1)):
+        down = voxel_down_sample(frame, 0.5)
+        reference.update(down, T)
+        local_map.update(down, T)
+        expected = reference.point_cloud()
+        assert len(local_map.points_xyz) == len(expected)
+        # the same points (up to the rounding of kiss-icp's own transform): far voxels removed alike
+        gap, _ = cKDTree(expected).query(local_map.points_xyz)
+        assert gap.max() < 1e-9
+    assert np.linalg.norm(local_map.points_xyz - T1[:3, 3], axis=1).max() < 30.0 + 2 * np.sqrt(3)
+
+
+def test_constant_velocity_deskew_equals_kiss_icp_and_moves_the_reference_instant(rng):
+    from kiss_icp.preprocess import Preprocessor
+
+    points = rng.uniform(-30, 30, (2000, 3))
+    times = np.sort(rng.uniform(0.0, 0.1, 2000))
+    delta = se3_exp([0.9, 0.05, 0.01, 0.001, 0.002, 0.03])
+    kiss = Preprocessor(max_range=1e3, min_range=0.0, deskew=True, max_num_threads=1).preprocess(points, times, delta)
+    end = make_component("motion", "constant_velocity").deskew(points, times, delta)
+    np.testing.assert_allclose(end, kiss, atol=1e-9)
+    middle = make_component("motion", {"name": "constant_velocity", "reference": "middle"}).deskew(points, times, delta)
+    half = se3_exp(0.5 * np.asarray([0.9, 0.05, 0.01, 0.001, 0.002, 0.03]))  # exact for a constant twist
+    np.testing.assert_allclose(middle, end @ half[:3, :3].T + half[:3, 3], atol=1e-9)
+    assert make_component("motion", {"name": "constant_velocity", "deskew": False}).deskew(points, times, delta) is points
+    assert make_component("motion", "none").predict(np.eye(4), delta) == pytest.approx(np.eye(4))
+
+
+@pytest.mark.parametrize(
+    "residual, kernel",
+    [(r, "geman_mcclure") for r in ("point_to_point", "point_to_plane", "plane_to_plane")]
+    + [("point_to_plane", k) for k in ("none", "huber", "cauchy", "tukey")],
+)
+def test_each_residual_and_kernel_recovers_a_known_motion(residual, kernel):
+    """A structured synthetic scene, sampled twice independently: every residual x kernel finds the motion."""
+    from registration_helpers import structured_cloud
+
+    from lidarkit.geometry import pose_error, transform_points
+
+    target = structured_cloud(np.random.default_rng(7), n=12000)
+    T_gt = make_se3(so3_exp(np.radians([0.3, -0.4, 4.0])), [0.6, -0.25, 0.05])
+    source = transform_points(np.linalg.inv(T_gt), structured_cloud(np.random.default_rng(8), n=12000))
+    icp = get_icp(
+        "pipeline", residual=residual, kernel=kernel, threshold={"name": "fixed", "max_distance_m": 2.0},
+        voxel_size_m=0.2, map={"name": "voxel_hash", "neighbors": 12},
+    )
+    result = icp.align(source, target)
+    dt, dr = pose_error(result.T_target_source, T_gt)
+    assert dt < 0.05 and dr < 0.15, (residual, kernel, dt, dr)
+    assert result.converged and result.iterations < 100
+
+
+PLUGIN_SOURCE = textwrap.dedent(
+    '''
+    import numpy as np
+    from lidarkit.registration.components import Kernel
+    from lidarkit.registration.components.kernels import KernelConfig
+
+    class HalfConfig(KernelConfig):
+        floor: float = 0.5
+
+    class HalfKernel(Kernel):
+        """Weight 1 within the scale, ``floor`` beyond."""
+        Config = HalfConfig
+        def _weights(self, r2, c):
+            return np.where(r2 <= c * c, 1.0, self.config.floor)
+    '''
+)
+
+
+def test_component_plugin_from_an_installed_package_is_discovered(tmp_path, monkeypatch, capsys):
+    site = tmp_path / "site"
+    site.mkdir()
+    (site / "lk_kernel_plugin.py").write_text(PLUGIN_SOURCE)
+    dist = site / "lk_kernel_plugin-0.1.dist-info"
+    dist.mkdir()
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: lk-kernel-plugin\nVersion: 0.1\n")
+    (dist / "entry_points.txt").write_text(f"[{ENTRY_POINT_GROUP}]\nkernel.half = lk_kernel_plugin:HalfKernel\n")
+    monkeypatch.syspath_prepend(str(site))
+    try:
+        reload_component_plugins()
+        assert "half" in available_components("kernel")
+        kernel = make_component("kernel", {"name": "half", "scale_m": 1.0, "floor": 0.25})
+        np.testing.assert_allclose(kernel.weights(np.array([0.5, 2.0]), 1.0), [1.0, 0.25])
+        icp = get_icp("pipeline", kernel={"name": "half", "floor": 0.1})
+        assert icp.describe()["kernel"] == {"name": "half", "scale_m": "adaptive", "floor": 0.1}
+        with pytest.raises(ConfigError, match="floor="):
+            make_component("kernel", {"name": "half", "flor": 1})
+        assert cli_exit_code(["icp", "--list-components"]) == 0
+        assert "kernel / half" in capsys.readouterr().out
+    finally:
+        component_registry._COMPONENTS["kernel"].pop("half", None)
+
+
+def test_broken_component_plugin_names_itself(tmp_path, monkeypatch):
+    site = tmp_path / "site"
+    site.mkdir()
+    dist = site / "lk_bad_components-0.1.dist-info"
+    dist.mkdir()
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: lk-bad-components\nVersion: 0.1\n")
+    (dist / "entry_points.txt").write_text(f"[{ENTRY_POINT_GROUP}]\nsolver.fast = os:getcwd\n")
+    monkeypatch.syspath_prepend(str(site))
+    try:
+        with pytest.raises(ConfigError, match="KIND.NAME"):
+            reload_component_plugins()
+    finally:
+        monkeypatch.undo()
+        reload_component_plugins()

@@ -1,0 +1,90 @@
+"""``genz``: GenZ-ICP through lidarkit equals direct ``genz_icp.GenZICP`` calls on the 10 KITTI scans.
+
+genz-icp 0.3.2 keeps process-wide state between ``GenZICP`` instances (the second instance in a process gives
+poses a few cm off the first's, identically in every process), so each side runs as the first instance of a
+fresh interpreter.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from conftest import shared_path
+
+from lidarkit.errors import DataError
+from lidarkit.registration import available_icp, get_icp
+
+pytestmark = pytest.mark.skipif("genz" not in available_icp(), reason="genz-icp not installed (extra 'genz')")
+
+REPO = Path(__file__).resolve().parents[1]
+EXACT_ATOL_M = 1e-9
+
+DIRECT = textwrap.dedent(
+    """
+    import sys, numpy as np
+    from genz_icp.genz_icp import GenZICP
+    from lidarkit.registration import get_icp
+    from lidarkit.io.kitti import KittiOdometry
+    seq = KittiOdometry(sys.argv[1])
+    frames = [np.fromfile(p, dtype=np.float32).reshape(-1, 4)[:, :3].astype(np.float64) for p in seq.scan_paths]
+    odometry = GenZICP(get_icp("genz", **PARAMS).config.to_genz_config())
+    poses = []
+    for frame in frames:
+        odometry.register_frame(frame, None)
+        poses.append(odometry.last_pose.copy())
+    np.save(sys.argv[2], np.stack(poses))
+    """
+)
+
+THROUGH_LIDARKIT = textwrap.dedent(
+    """
+    import sys, numpy as np
+    from lidarkit.odometry import run
+    from lidarkit.io.kitti import KittiOdometry
+    result = run(KittiOdometry(sys.argv[1]), "genz", params=PARAMS)
+    np.save(sys.argv[2], result.trajectory.poses_se3)
+    """
+)
+
+
+def _fresh_process(source: str, params: dict, out: Path) -> np.ndarray:
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])}
+    folder = shared_path("kitti_odometry", "sequences", "00")
+    code = f"PARAMS = {params!r}\n" + source
+    done = subprocess.run([sys.executable, "-c", code, str(folder), str(out)], env=env, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    return np.load(out)
+
+
+def test_genz_equals_direct_genz_icp_on_the_10_kitti_scans(tmp_path):
+    """genz-icp's pretuned KITTI settings (config/pretuned/kitti.yaml)."""
+    params = {"min_range_m": 5.0, "voxel_size_m": 0.6, "desired_num_voxelized_points": 3000, "planarity_threshold": 0.18, "max_points_per_voxel": 3}
+    direct = _fresh_process(DIRECT, params, tmp_path / "direct.npy")
+    ours = _fresh_process(THROUGH_LIDARKIT, params, tmp_path / "ours.npy")
+    assert direct.shape == ours.shape == (10, 4, 4)
+    np.testing.assert_allclose(ours, direct, rtol=0, atol=EXACT_ATOL_M)
+    R = ours[:, :3, :3]
+    np.testing.assert_allclose(np.einsum("nji,njk->nik", R, R), np.broadcast_to(np.eye(3), R.shape), atol=1e-9)
+    assert 6.0 < np.linalg.norm(ours[-1, :3, 3]) < 7.5  # SemanticKITTI: 6.7 m driven over the 10 scans
+
+
+def test_genz_config_mirrors_genz_icp_and_times_are_normalised():
+    from genz_icp.config import load_config
+
+    reference = load_config(None)
+    ours = get_icp("genz").config.to_genz_config()
+    assert ours.data == reference.data and ours.mapping == reference.mapping
+    assert ours.adaptive_threshold == reference.adaptive_threshold
+    assert ours.registration.max_num_iterations == reference.registration.max_num_iterations
+    from lidarkit.registration.genz import normalized_times
+
+    np.testing.assert_allclose(normalized_times(np.array([0.02, 0.07, 0.12]), 3), [0.0, 0.5, 1.0])
+    with pytest.raises(DataError, match="per-point times"):
+        get_icp("genz").register_frame(np.random.default_rng(0).normal(size=(100, 3)), np.zeros(5))

@@ -1,0 +1,98 @@
+"""The ``pipeline`` variant: presets, sequence mode against kiss-icp itself, the CLI."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import yaml
+
+from conftest import cli_exit_code, shared_path
+
+from lidarkit.geometry import pose_error
+from lidarkit.odometry import run
+from lidarkit.registration import get_icp
+from lidarkit.registration.pipeline import PRESETS
+
+#: Acceptance (issue 12): kiss_like's end pose on the 10 KITTI scans within this of kiss-icp's.
+END_TOLERANCE_M, END_TOLERANCE_DEG = 0.03, 0.1
+#: What kiss_like achieves: the same map, the same correspondences, the same steps (rounding only).
+SAME_POSES_ATOL = 1e-6
+
+
+@pytest.fixture(scope="module")
+def seq00():
+    from lidarkit.io.kitti import KittiOdometry
+
+    return KittiOdometry(shared_path("kitti_odometry", "sequences", "00"))
+
+
+def _kiss_icp_direct(frames, times, config) -> np.ndarray:
+    from kiss_icp.kiss_icp import KissICP
+
+    odometry = KissICP(config)
+    poses = []
+    for k, frame in enumerate(frames):
+        odometry.register_frame(frame, np.array([]) if times is None else times[k])
+        poses.append(odometry.last_pose.copy())
+    return np.stack(poses)
+
+
+def test_presets_fill_defaults_that_explicit_parameters_override():
+    icp = get_icp("pipeline", preset="kiss_like", kernel="none")
+    d = icp.describe()
+    assert d["kernel"] == {"name": "none"} and d["residual"]["name"] == "point_to_point"
+    assert d["deskew"] == {"name": "constant_velocity", "deskew": True, "reference": "end"}
+    assert d["threshold"]["name"] == "adaptive" and d["map"]["name"] == "voxel_hash" and d["map"]["voxel_size_m"] == 1.0
+    vanilla = get_icp("pipeline", preset="vanilla_seq").describe()
+    assert vanilla["kernel"] == {"name": "none"} and vanilla["map"]["name"] == "scan_to_scan"
+    assert vanilla["threshold"] == {"name": "fixed", "max_distance_m": None} and vanilla["deskew"]["deskew"] is False
+    assert get_icp("pipeline", preset="vanilla_seq").config.source_voxel_factor is None  # full clouds, as the report
+    assert set(PRESETS) == {"kiss_like", "vanilla_seq"}
+
+
+def test_kiss_like_reproduces_kiss_icp_on_the_10_kitti_scans(seq00):
+    from kiss_icp.config import load_config
+
+    result = run(seq00, "pipeline", params={"preset": "kiss_like"})
+    frames = [seq00.read_scan(i).points_xyz for i in range(len(seq00))]
+    expected = _kiss_icp_direct(frames, None, load_config(None))
+    dt, dr = pose_error(result.trajectory.poses_se3[-1], expected[-1])
+    assert dt < END_TOLERANCE_M and dr < END_TOLERANCE_DEG
+    np.testing.assert_allclose(result.trajectory.poses_se3, expected, rtol=0, atol=SAME_POSES_ATOL)
+    assert result.config["run"]["stateful"] is True and result.config["method_config"]["preset"] == "kiss_like"
+
+
+def test_kiss_like_deskews_as_kiss_icp_and_the_reference_instant_is_explicit():
+    from lidarkit.sim.lidar import SimulatedLidarSequence
+
+    seq = SimulatedLidarSequence(scene="street", n_frames=12, n_beams=16, n_azimuths=500, accel_time_s=0.0)
+    scans = [seq.read_scan(i) for i in range(len(seq))]
+    frames, times = [s.points_xyz for s in scans], [s.point_times_s for s in scans]
+    end = get_icp("pipeline", preset="kiss_like", voxel_size_m=0.8)
+    poses_end = np.stack([end.register_frame(f, t) for f, t in zip(frames, times)])
+    expected = _kiss_icp_direct(frames, times, get_icp("kiss", voxel_size_m=0.8).kiss_config)
+    np.testing.assert_allclose(poses_end, expected, rtol=0, atol=SAME_POSES_ATOL)
+    # deskewed to mid-sweep instead (the component test checks the geometry): recorded, and it changes the poses
+    middle = get_icp("pipeline", preset="kiss_like", voxel_size_m=0.8, deskew={"name": "constant_velocity", "reference": "middle"})
+    poses_mid = np.stack([middle.register_frame(f, t) for f, t in zip(frames[:5], times[:5])])
+    assert middle.describe()["deskew"]["reference"] == "middle"
+    assert 1e-4 < pose_error(poses_mid[-1], poses_end[4])[0] < 1.0
+
+
+def test_pipeline_through_the_odometry_cli(tmp_path, capsys):
+    spec = "sim:street?frames=6&beams=16&azimuths=360&accel_time_s=0"
+    out = tmp_path / "run"
+    code = cli_exit_code([
+        "odometry", spec, "-m", "pipeline", "-p", "preset=kiss_like", "-p", "kernel={name: huber, scale_m: 0.3}",
+        "-p", "residual=point_to_plane", "--out", str(out), "--no-progress",
+    ])
+    assert code == 0, capsys.readouterr().err
+    config = yaml.safe_load((out / "config.yaml").read_text())
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["n_frames"] == 6 and metrics["final_error"]["translation_m"] < 0.5
+    assert config["method_config"]["kernel"] == {"name": "huber", "scale_m": 0.3}
+    assert config["method_config"]["residual"] == "point_to_plane" and config["method_config"]["threshold"] == "adaptive"
+    assert cli_exit_code(["odometry", spec, "-m", "pipeline", "-p", "map=octree", "--no-progress"]) == 1
+    assert "unknown map component 'octree'; available: scan_to_scan, voxel_hash" in " ".join(capsys.readouterr().err.split())

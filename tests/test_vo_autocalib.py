@@ -1,0 +1,44 @@
+"""Focal length self-calibration (lidarkit.vo.autocalib): falls back with a reason when the motion cannot constrain f."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lidarkit.errors import ConfigError
+from lidarkit.geometry import make_se3, so3_exp
+from lidarkit.sim.camera import default_K, make_plane_scene
+from lidarkit.vo.autocalib import AutocalibConfig, estimate_focal
+
+_SIZE = (640, 480)
+_GUESS = 0.9 * 640
+
+
+def _render(poses):
+    K = default_K(_SIZE, 500.0)
+    scene = make_plane_scene(np.random.default_rng(0))
+    return [scene.render(T, K, _SIZE) for T in poses]
+
+
+def test_no_motion_falls_back_to_the_size_guess():
+    images = _render([np.eye(4)] * 8)
+    est = estimate_focal(images, AutocalibConfig(window=4, stride=4))
+    assert not est.constrained
+    assert est.focal_px == pytest.approx(_GUESS) and est.sigma_px == float("inf")
+    assert "translation parallax" in est.reason and "guess" in est.describe()
+    assert est.K(*_SIZE)[0, 0] == pytest.approx(_GUESS)
+    images[5] = None  # an unreadable frame skips its window instead of raising
+    assert not estimate_focal(images, AutocalibConfig(window=4, stride=4)).constrained
+
+
+def test_pure_rotation_falls_back_to_the_size_guess():
+    poses = [make_se3(so3_exp(np.radians([0.3 * k, 1.5 * k, 0.1 * k])), np.zeros(3)) for k in range(8)]
+    est = estimate_focal(_render(poses), AutocalibConfig(window=4, stride=4))
+    assert not est.constrained and est.windows == 0
+    assert "no motion or pure rotation" in est.reason
+
+
+def test_too_short_sequence_falls_back_and_bad_window_is_refused():
+    assert "a window needs 5" in estimate_focal(_render([np.eye(4)] * 3)).reason
+    with pytest.raises(ConfigError, match="window"):
+        estimate_focal(_render([np.eye(4)] * 3), AutocalibConfig(window=2))
