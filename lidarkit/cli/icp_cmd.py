@@ -11,7 +11,6 @@ import typer
 from rich.table import Table
 from rich.text import Text
 
-from rich.markup import escape
 
 from lidarkit.cli.app import app, stdout
 from lidarkit.errors import ConfigError, DataError
@@ -100,7 +99,7 @@ def _result_table(result, source: Path, target: Path) -> Table:
     weakest = ", ".join(f"{n}={v:+.2f}" for n, v in zip(("tx", "ty", "tz", "rx", "ry", "rz"), deg.weakest_direction) if abs(v) > 0.1)
     table.add_row("weakest direction", weakest or "-")
     if deg.weak_directions:
-        table.add_row("degenerate directions", escape("; ".join(deg.weak_directions)) + " (sensor frame of the target)")
+        table.add_row("degenerate directions", "; ".join(deg.weak_directions) + " (sensor frame of the target)")
     if result.covariance is not None:
         sigma = np.sqrt(np.clip(np.diag(result.covariance), 0, None))
         table.add_row("1-sigma (m / deg)", "t " + " ".join(f"{v:.4f}" for v in sigma[:3]) + "  r " + " ".join(f"{np.degrees(v):.4f}" for v in sigma[3:]))
