@@ -26,7 +26,7 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install -q --upgrade pip
 	@# opencv-python(-headless) and opencv-contrib-python-headless install the same cv2 package: keep only contrib
 	@$(PY) -m pip uninstall -q -y opencv-python-headless opencv-python 2>/dev/null || true
-	$(PY) -m pip install -q -e ".[test,gicp,ros]" || $(PY) -m pip install -q -e ".[test,ros]"
+	$(PY) -m pip install -q -e ".[test,ros,gicp,ground]" || $(PY) -m pip install -q -e ".[test,ros]"
 	@touch $(STAMP)
 
 clean:

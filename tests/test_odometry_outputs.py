@@ -122,7 +122,8 @@ def test_what_the_reader_reports_applying_is_recorded_and_printed(exported, tmp_
     effective = result.metrics["effective"]
     assert effective["corrections"] == {"vertical_correction": "auto", "vertical_correction_applied": True, "vertical_correction_deg": 0.205}
     assert effective["reader"]["point_times_dir"] == str(exported / "point_times")
-    assert effective["ground_truth_instant"] == "not stated by the reader" and effective["estimate_instant"] == "end"
+    # a simulator export states its ground-truth instant (sim.yaml): the sweep end, where kiss deskews to
+    assert effective["ground_truth_instant"] == "end" and effective["estimate_instant"] == "end"
     assert "vertical_correction_deg: 0.205" in (tmp_path / "run" / "config.yaml").read_text()
     sim = run("sim:street?frames=3&beams=8&azimuths=90", "kiss").metrics["effective"]
     assert (sim["ground_truth_instant"], sim["estimate_instant"]) == ("end", "end")  # deskewed to the sweep end, scored there

@@ -282,10 +282,13 @@ def test_too_few_correspondences_is_not_converged_with_reason(rng):
     assert res.degeneracy.degenerate
 
 
-def test_ground_filter_with_nothing_left_raises(rng):
+def test_ground_filter_with_nothing_left_is_flagged_not_converged(rng):
     flat = np.c_[rng.uniform(-10, 10, (500, 2)), np.full(500, -1.73)]
-    with pytest.raises(RegistrationError, match="ground removal"):
-        get_icp("ground_filtered").align(flat, flat)
+    for method in ("height", "local_plane"):
+        res = get_icp("ground_filtered", ground_method=method).align(flat, flat, init_T=make_se3(np.eye(3), [0.5, 0, 0]))
+        assert not res.converged and res.reason.startswith("too little left after ground removal"), res.reason
+        assert res.extra["ground_removal_flagged"] and res.extra["source_points_kept"] == 0
+        np.testing.assert_allclose(res.T_target_source[:3, 3], [0.5, 0, 0])  # the guess, for the runner to replace
 
 
 # ---------------------------------------------------------------- degeneracy

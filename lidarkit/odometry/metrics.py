@@ -6,6 +6,7 @@ from typing import Any
 
 import numpy as np
 
+from lidarkit.errors import EvaluationError
 from lidarkit.geometry import pose_error
 from lidarkit.odometry.result import OdometryResult
 from lidarkit.odometry.settings import METRIC_ALIGNMENT
@@ -29,6 +30,7 @@ def odometry_metrics(result: OdometryResult) -> dict[str, Any]:
         "n_not_converged": result.n_not_converged if result.convergence_measured else None,
         "n_constant_velocity_fallback": result.n_fallback,
         "n_degenerate": int(stats.degenerate.sum()) if result.convergence_measured else None,
+        "n_ground_removal_flagged": sum("too little left after ground removal" in r for r in stats.reason),
         "estimated_length_m": result.trajectory.length_m,
         "n_bad_frames": result.n_bad_frames if stats.check_failed is not None else None,
         "frame_check": frame_check_summary(result),
@@ -47,8 +49,11 @@ def odometry_metrics(result: OdometryResult) -> dict[str, Any]:
     out["final_error"] = {"translation_m": float(trans_m), "rotation_deg": float(rot_deg), "alignment": METRIC_ALIGNMENT["final_error"]}
     if len(ref) >= 2:
         out["ape_translation_m"] = leval.ape(ref, est, align="none", relation="translation").to_dict(include_errors=False)
-        if len(ref) >= 3:  # a rigid fit needs three poses
-            out["ape_translation_se3_m"] = leval.ape(ref, est, align="se3", relation="translation").to_dict(include_errors=False)
+        if len(ref) >= 3:  # a rigid fit needs three poses, not all on one line
+            try:
+                out["ape_translation_se3_m"] = leval.ape(ref, est, align="se3", relation="translation").to_dict(include_errors=False)
+            except EvaluationError as err:
+                out["ape_translation_se3_note"] = f"no SE(3)-aligned APE: {err.reason}"
         out["rpe_translation_m"] = leval.rpe(ref, est, delta=1, delta_unit="frames", relation="translation").to_dict(include_errors=False)
         out["rpe_rotation_deg"] = leval.rpe(ref, est, delta=1, delta_unit="frames", relation="rotation_angle_deg").to_dict(include_errors=False)
         for key in ("ape_translation_m", "ape_translation_se3_m", "rpe_translation_m", "rpe_rotation_deg"):

@@ -12,10 +12,12 @@ import numpy as np
 
 from lidarkit.errors import ConfigError
 
-log = logging.getLogger(__name__)
+# ground segmentation lives in registration.ground; these names stay importable from here
+from lidarkit.registration.ground.base import KITTI_SENSOR_HEIGHT_M
+from lidarkit.registration.ground.height import ground_mask_by_height
+from lidarkit.registration.ground.ransac import ground_mask_by_plane
 
-#: Mounting height of KITTI's Velodyne HDL-64E above the road (m).
-KITTI_SENSOR_HEIGHT_M = 1.73
+log = logging.getLogger(__name__)
 
 
 def voxel_downsample(points_xyz: np.ndarray, voxel_size_m: float) -> np.ndarray:
@@ -52,62 +54,11 @@ def crop_range(points_xyz: np.ndarray, min_range_m: float = 0.0, max_range_m: fl
     return np.asarray(points_xyz, dtype=np.float64)[range_mask(points_xyz, min_range_m, max_range_m)]
 
 
-def ground_mask_by_height(
-    points_xyz: np.ndarray, sensor_height_m: float = KITTI_SENSOR_HEIGHT_M, ground_threshold_m: float = 0.73
-) -> np.ndarray:
-    """Boolean ``(N,)`` mask of ground points: lower than ``ground_threshold_m`` above the road.
-
-    The road is assumed flat at ``z = -sensor_height_m`` in the sensor frame. The defaults reproduce
-    the report's rule "drop points more than 1 m below the LiDAR" for KITTI (1.73 m - 0.73 m = 1 m).
-    """
-    if sensor_height_m < 0:
-        raise ConfigError(f"sensor height must be >= 0, got {sensor_height_m}", source="sensor_height_m")
-    z = np.asarray(points_xyz, dtype=np.float64)[:, 2]
-    return z < -sensor_height_m + ground_threshold_m
-
-
-def ground_mask_by_plane(
-    points_xyz: np.ndarray,
-    distance_threshold_m: float = 0.2,
-    num_iterations: int = 200,
-    max_tilt_deg: float = 20.0,
-    sensor_height_m: float = KITTI_SENSOR_HEIGHT_M,
-    seed: int = 0,
-) -> np.ndarray:
-    """Boolean ``(N,)`` mask of points within ``distance_threshold_m`` of a RANSAC ground plane.
-
-    The plane is fitted (Open3D ``segment_plane``, global seed ``seed``) to the points below the
-    sensor's half height; a plane tilted more than ``max_tilt_deg`` from horizontal is rejected and no
-    point is marked (logged), so a wall is never removed as "ground".
-    """
-    import open3d as o3d
-
-    pts = np.asarray(points_xyz, dtype=np.float64)
-    low = pts[:, 2] < -0.5 * sensor_height_m
-    if low.sum() < 3:
-        log.info("RANSAC ground: fewer than 3 points below the sensor, nothing removed")
-        return np.zeros(len(pts), dtype=bool)
-    o3d.utility.random.seed(int(seed))
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts[low]))
-    plane, _ = cloud.segment_plane(float(distance_threshold_m), 3, int(num_iterations))
-    normal = np.asarray(plane[:3], dtype=np.float64)
-    norm = np.linalg.norm(normal)
-    if norm == 0 or np.degrees(np.arccos(min(1.0, abs(normal[2]) / norm))) > max_tilt_deg:
-        log.info("RANSAC ground: best plane is not horizontal (normal %s), nothing removed", normal)
-        return np.zeros(len(pts), dtype=bool)
-    dist = np.abs(pts @ normal + plane[3]) / norm
-    return dist <= distance_threshold_m
-
-
 def remove_ground(points_xyz: np.ndarray, method: str = "height", **options: float) -> np.ndarray:
-    """Points that are not ground, by ``method`` ``"height"`` (:func:`ground_mask_by_height`) or ``"ransac"``."""
-    if method == "height":
-        mask = ground_mask_by_height(points_xyz, **options)
-    elif method == "ransac":
-        mask = ground_mask_by_plane(points_xyz, **options)
-    else:
-        raise ConfigError(f"unknown ground removal method {method!r}; available: height, ransac", source="ground_method")
-    return np.asarray(points_xyz, dtype=np.float64)[~mask]
+    """Points that are not ground according to the segmenter ``method`` of :mod:`lidarkit.registration.ground`."""
+    from lidarkit.registration.ground import get_ground_segmenter
+
+    return np.asarray(points_xyz, dtype=np.float64)[~get_ground_segmenter(method, **options).segment(points_xyz)]
 
 
 __all__ = [

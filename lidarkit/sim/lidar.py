@@ -41,6 +41,11 @@ from lidarkit.trajectory import Trajectory
 log = logging.getLogger(__name__)
 
 SCENES = ("street", "open", "ground")
+
+#: Per-point semantic labels (``read_scan_labels``): the class of the scene triangle each ray hit.
+LABEL_NAMES = ("unlabeled", "ground", "building", "pole", "trunk", "vegetation", "car")
+LABELS = {name: code for code, name in enumerate(LABEL_NAMES)}
+GROUND_LABEL = LABELS["ground"]
 POSE_INSTANTS = ("start", "mid", "end")
 PoseInstant = Literal["start", "mid", "end"]
 _INSTANT_FRACTION = {"start": 0.0, "mid": 0.5, "end": 1.0}
@@ -72,6 +77,14 @@ class LidarSimConfig(BaseModel):
     max_curvature_per_m: float = Field(1.0 / 150.0, ge=0.0, description="bound of the path curvature (gentle curves)")
     sway_deg: float = Field(0.3, ge=0.0, le=10.0, description="amplitude of the body's pitch and roll oscillation (suspension)")
     heave_m: float = Field(0.02, ge=0.0, le=1.0, description="amplitude of the body's vertical oscillation")
+    # terrain (0: the flat ground plane; > 0: rolling hills the vehicle and every object follow)
+    terrain_amplitude_m: float = Field(
+        0.0, ge=0.0, le=20.0, description="undulating ground: height amplitude of the seeded hills (0: flat ground plane)"
+    )
+    terrain_wavelength_m: float = Field(60.0, ge=10.0, description="undulating ground: typical wavelength of the hills")
+    open_object_lateral_m: tuple[float, float] | None = Field(
+        None, description="open scene: objects this far left/right of the path (min, max) in m; None: 8..40 m"
+    )
     motion_distortion: bool = True
     point_times: bool = Field(True, description="attach per-point times to each Scan")
     pose_instant: PoseInstant = "end"
@@ -82,6 +95,9 @@ class LidarSimConfig(BaseModel):
             raise ValueError("elevation_min_deg must not exceed elevation_max_deg")
         if self.min_range_m >= self.max_range_m:
             raise ValueError("min_range_m must be below max_range_m")
+        lateral = self.open_object_lateral_m
+        if lateral is not None and not 0.0 <= lateral[0] < lateral[1]:
+            raise ValueError("open_object_lateral_m must be (min, max) with 0 <= min < max")
         return self
 
     @property
@@ -139,6 +155,67 @@ def _cumtrapz(values: np.ndarray, step: float) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------------------------------------------
+# Terrain: a seeded sum of plane waves, zero at the origin (the world origin stays the sensor at the start).
+# ---------------------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Terrain:
+    """Ground height ``h(x, y)`` above the start (m): ``A sum_k w_k (sin(k_k . xy + phi_k) - sin(phi_k))``.
+
+    ``wave_vectors`` (K, 2) rad/m, ``phases`` (K,), ``weights`` (K,) summing to 1; amplitude 0 is flat ground.
+    """
+
+    amplitude_m: float
+    wave_vectors: np.ndarray
+    phases: np.ndarray
+    weights: np.ndarray
+
+    def height(self, xy_m: np.ndarray) -> np.ndarray:
+        """``(M,)`` ground height at world ``xy_m`` (M, 2)."""
+        xy = np.asarray(xy_m, dtype=np.float64).reshape(-1, 2)
+        if self.amplitude_m == 0.0:
+            return np.zeros(len(xy))
+        arg = xy @ self.wave_vectors.T + self.phases
+        return self.amplitude_m * ((np.sin(arg) - np.sin(self.phases)) @ self.weights)
+
+    def gradient(self, xy_m: np.ndarray) -> np.ndarray:
+        """``(M, 2)`` height gradient (dh/dx, dh/dy) at world ``xy_m`` (M, 2)."""
+        xy = np.asarray(xy_m, dtype=np.float64).reshape(-1, 2)
+        if self.amplitude_m == 0.0:
+            return np.zeros((len(xy), 2))
+        arg = xy @ self.wave_vectors.T + self.phases
+        return self.amplitude_m * (np.cos(arg) * self.weights) @ self.wave_vectors
+
+    @property
+    def max_slope(self) -> float:
+        """Upper bound of ``|grad h|`` (rise over run)."""
+        return float(self.amplitude_m * (self.weights * np.linalg.norm(self.wave_vectors, axis=1)).sum())
+
+
+def make_terrain(rng: np.random.Generator, amplitude_m: float, wavelength_m: float) -> Terrain:
+    """Three plane waves in seeded directions with wavelengths 0.7..1.4 x ``wavelength_m``."""
+    angle = rng.uniform(0.0, np.pi, size=3)
+    wavelengths = wavelength_m * rng.uniform(0.7, 1.4, size=3)
+    wave_vectors = (2.0 * np.pi / wavelengths)[:, None] * np.stack([np.cos(angle), np.sin(angle)], axis=1)
+    weights = rng.uniform(0.5, 1.0, size=3)
+    return Terrain(float(amplitude_m), wave_vectors, rng.uniform(0.0, 2.0 * np.pi, size=3), weights / weights.sum())
+
+
+def _heightfield(terrain: Terrain, lo: np.ndarray, hi: np.ndarray, ground_z: float, spacing_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices and triangles of the terrain sampled on a grid anchored at multiples of ``spacing_m``."""
+    xs = np.arange(np.floor(lo[0] / spacing_m), np.ceil(hi[0] / spacing_m) + 1) * spacing_m
+    ys = np.arange(np.floor(lo[1] / spacing_m), np.ceil(hi[1] / spacing_m) + 1) * spacing_m
+    gx, gy = np.meshgrid(xs, ys, indexing="ij")
+    xy = np.c_[gx.ravel(), gy.ravel()]
+    verts = np.c_[xy, ground_z + terrain.height(xy)]
+    nx, ny = len(xs), len(ys)
+    i, j = np.meshgrid(np.arange(nx - 1), np.arange(ny - 1), indexing="ij")
+    a = (i * ny + j).ravel()
+    b, c, d = a + ny, a + ny + 1, a + 1
+    faces = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+    return verts, faces
+
+
+# ---------------------------------------------------------------------------------------------------------------
 # Scene: triangle soup from numpy primitives (boxes, prisms, crowns) placed along the path.
 # ---------------------------------------------------------------------------------------------------------------
 _BOX_CORNERS = np.array([[x, y, z] for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (0.0, 1.0)])
@@ -181,11 +258,12 @@ class _SceneBuilder:
         self._verts: list[np.ndarray] = []
         self._faces: list[np.ndarray] = []
         self._reflectivity: list[np.ndarray] = []
+        self._labels: list[np.ndarray] = []
         self._n_verts = 0
 
     def add(
         self, prim: tuple[np.ndarray, np.ndarray], scale_xyz: np.ndarray, yaw_rad: np.ndarray, origin_xyz: np.ndarray,
-        reflectivity: float, vertex_scale: np.ndarray | None = None,
+        reflectivity: float, vertex_scale: np.ndarray | None = None, label: str = "unlabeled",
     ) -> None:
         """Add M instances: ``scale_xyz`` (M, 3), ``yaw_rad`` (M,), ``origin_xyz`` (M, 3); ``vertex_scale``
         (M, V, 1) optionally scales each unit vertex (irregular shapes such as tree crowns)."""
@@ -206,10 +284,19 @@ class _SceneBuilder:
         self._verts.append(world.reshape(-1, 3))
         self._faces.append((unit_faces[None, :, :] + offsets[:, None, None]).reshape(-1, 3))
         self._reflectivity.append(np.full(m * len(unit_faces), reflectivity))
+        self._labels.append(np.full(m * len(unit_faces), LABELS[label], dtype=np.uint8))
         self._n_verts += m * len(unit_verts)
 
-    def build(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        return np.concatenate(self._verts), np.concatenate(self._faces), np.concatenate(self._reflectivity)
+    def add_mesh(self, verts: np.ndarray, faces: np.ndarray, reflectivity: float, label: str) -> None:
+        """Add one mesh given in world coordinates."""
+        self._verts.append(verts)
+        self._faces.append(faces + self._n_verts)
+        self._reflectivity.append(np.full(len(faces), reflectivity))
+        self._labels.append(np.full(len(faces), LABELS[label], dtype=np.uint8))
+        self._n_verts += len(verts)
+
+    def build(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        return np.concatenate(self._verts), np.concatenate(self._faces), np.concatenate(self._reflectivity), np.concatenate(self._labels)
 
 
 def _place_along(path: PlanarPath, s_m: np.ndarray, lateral_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -219,11 +306,15 @@ def _place_along(path: PlanarPath, s_m: np.ndarray, lateral_m: np.ndarray) -> tu
     return xy + lateral_m[:, None] * normal, heading
 
 
-def _add_trees(builder: _SceneBuilder, xy: np.ndarray, ground_z: float, crown_r: np.ndarray, yaw: np.ndarray, vertex_scale: np.ndarray) -> None:
-    """Trunks (3 m prisms) with irregular crowns of radius ``crown_r`` (M,) on top."""
-    builder.add(_PRISM, np.tile([0.2, 0.2, 3.0], (len(xy), 1)), np.zeros(len(xy)), np.c_[xy, np.full(len(xy), ground_z)], 0.4)
-    top = np.c_[xy, ground_z + 3.0 + 1.1 * crown_r]
-    builder.add(_CROWN, np.c_[crown_r, crown_r, 1.3 * crown_r], yaw, top, 0.3, vertex_scale=vertex_scale)
+def _add_trees(
+    builder: _SceneBuilder, xy: np.ndarray, ground_z: float | np.ndarray, crown_r: np.ndarray, yaw: np.ndarray, vertex_scale: np.ndarray,
+    sink_m: float = 0.0,
+) -> None:
+    """Trunks (3 m prisms, ``sink_m`` more below ground) with irregular crowns of radius ``crown_r`` (M,) on top."""
+    base = np.broadcast_to(np.asarray(ground_z, dtype=np.float64), (len(xy),))
+    builder.add(_PRISM, np.tile([0.2, 0.2, 3.0 + sink_m], (len(xy), 1)), np.zeros(len(xy)), np.c_[xy, base - sink_m], 0.4, label="trunk")
+    top = np.c_[xy, base + 3.0 + 1.1 * crown_r]
+    builder.add(_CROWN, np.c_[crown_r, crown_r, 1.3 * crown_r], yaw, top, 0.3, vertex_scale=vertex_scale, label="vegetation")
 
 
 def build_scene_mesh(config: LidarSimConfig, path: PlanarPath) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -232,14 +323,35 @@ def build_scene_mesh(config: LidarSimConfig, path: PlanarPath) -> tuple[np.ndarr
     Every object class draws from its own seeded stream, object by object along the path, so a longer
     sequence contains the scene of a shorter one with the same seed.
     """
+    return build_labeled_scene_mesh(config, path, scene_terrain(config))[:3]
+
+
+def scene_terrain(config: LidarSimConfig) -> Terrain:
+    """The seeded terrain of a config (flat when ``terrain_amplitude_m`` is 0)."""
+    return make_terrain(np.random.default_rng([config.seed, 3]), config.terrain_amplitude_m, config.terrain_wavelength_m)
+
+
+def build_labeled_scene_mesh(
+    config: LidarSimConfig, path: PlanarPath, terrain: Terrain
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`build_scene_mesh` plus the per-triangle label ``(F,)`` uint8 (codes of ``LABEL_NAMES``).
+
+    Objects stand on the terrain: each base is sunk by ``max_slope x footprint radius`` (and made that much
+    taller) so that no edge floats above a slope.
+    """
     ground_z = -config.sensor_height_m
+    slope = terrain.max_slope
     s0, s1 = float(path.s_m[0]), float(path.s_m[-1])
     builder = _SceneBuilder()
     # ground: one large quad covering the path plus the sensor range (extent rounded to 500 m)
     lo = np.floor((path.xy_m.min(axis=0) - config.max_range_m - 20.0) / 500.0) * 500.0
     hi = np.ceil((path.xy_m.max(axis=0) + config.max_range_m + 20.0) / 500.0) * 500.0
-    centre = np.r_[(lo + hi) / 2.0, ground_z - 1.0]
-    builder.add((_BOX_CORNERS, _BOX_FACES), np.array([[hi[0] - lo[0], hi[1] - lo[1], 1.0]]), np.zeros(1), centre[None], 0.25)
+    if terrain.amplitude_m == 0.0:
+        centre = np.r_[(lo + hi) / 2.0, ground_z - 1.0]
+        builder.add((_BOX_CORNERS, _BOX_FACES), np.array([[hi[0] - lo[0], hi[1] - lo[1], 1.0]]), np.zeros(1), centre[None], 0.25, label="ground")
+    else:
+        spacing = min(2.0, config.terrain_wavelength_m / 25.0)
+        builder.add_mesh(*_heightfield(terrain, lo, hi, ground_z, spacing), 0.25, label="ground")
 
     def stream(k: int) -> np.random.Generator:
         return np.random.default_rng([config.seed, 100 + k])
@@ -254,8 +366,8 @@ def build_scene_mesh(config: LidarSimConfig, path: PlanarPath) -> tuple[np.ndarr
         xy, heading = _place_along(path, s, lateral)
         return xy, heading, u[:, 3:]
 
-    def ground_origin(xy: np.ndarray) -> np.ndarray:
-        return np.c_[xy, np.full(len(xy), ground_z)]
+    def ground_origin(xy: np.ndarray, sink_m: float = 0.0) -> np.ndarray:
+        return np.c_[xy, ground_z + terrain.height(xy) - sink_m]
 
     n_crown = len(_CROWN[0])
     if config.scene == "street":
@@ -271,28 +383,45 @@ def build_scene_mesh(config: LidarSimConfig, path: PlanarPath) -> tuple[np.ndarr
                     next_cross = s + rng.uniform(90.0, 130.0)
                 length, depth, height, setback, gap, bay_height = rng.uniform([8, 8, 6, 9, 2, 0.3], [28, 16, 20, 13, 9, 1.0])
                 xy, heading = _place_along(path, np.array([s + length / 2.0]), np.array([side * (setback + depth / 2.0)]))
-                builder.add((_BOX_CORNERS, _BOX_FACES), np.array([[length, depth, height]]), heading, ground_origin(xy), 0.5)
+                sink = slope * 0.5 * float(np.hypot(length, depth))
+                builder.add((_BOX_CORNERS, _BOX_FACES), np.array([[length, depth, height + sink]]), heading, ground_origin(xy, sink), 0.5, label="building")
                 bay = rng.uniform([2.5, 0.3, 0.4], [6.0, 0.9, 1.2], size=(int(length / 2.5) + 1, 3))  # spacing, protrusion, width
                 at = s + np.cumsum(bay[:, 0])
                 bay = bay[at < s + length - 0.5]
                 at = at[at < s + length - 0.5]
                 xy, heading = _place_along(path, at, side * (setback - bay[:, 1] / 2.0))
-                builder.add((_BOX_CORNERS, _BOX_FACES), np.c_[bay[:, 2], bay[:, 1], np.full(len(at), height * bay_height)], heading, ground_origin(xy), 0.55)
+                sink = slope * 0.8
+                builder.add(
+                    (_BOX_CORNERS, _BOX_FACES), np.c_[bay[:, 2], bay[:, 1], np.full(len(at), height * bay_height + sink)], heading,
+                    ground_origin(xy, sink), 0.55, label="building",
+                )
                 s += length + gap
         xy, _, u = objects_along(2, 12.0, 5.5, 7.0, 3.0, 1)  # poles and signs
-        builder.add(_PRISM, np.c_[np.full(len(xy), 0.15), np.full(len(xy), 0.15), 2.5 + 4.5 * u[:, 0]], np.zeros(len(xy)), ground_origin(xy), 0.7)
+        sink = slope * 0.15
+        builder.add(
+            _PRISM, np.c_[np.full(len(xy), 0.15), np.full(len(xy), 0.15), 2.5 + 4.5 * u[:, 0] + sink], np.zeros(len(xy)), ground_origin(xy, sink), 0.7,
+            label="pole",
+        )
         xy, _, u = objects_along(3, 15.0, 5.0, 7.5, 5.0, 2 + n_crown)  # trees: trunk + irregular crown
-        _add_trees(builder, xy, ground_z, 1.2 + 1.0 * u[:, 0], np.pi * u[:, 1], 0.6 + 0.7 * u[:, 2:, None])
+        _add_trees(builder, xy, ground_z + terrain.height(xy), 1.2 + 1.0 * u[:, 0], np.pi * u[:, 1], 0.6 + 0.7 * u[:, 2:, None], slope * 0.2)
         xy, heading, _ = objects_along(4, 13.0, 4.2, 5.0, 4.0)  # parked cars
-        builder.add((_BOX_CORNERS, _BOX_FACES), np.tile([4.4, 1.8, 1.5], (len(xy), 1)), heading, ground_origin(xy), 0.6)
+        sink = slope * 2.4
+        builder.add((_BOX_CORNERS, _BOX_FACES), np.tile([4.4, 1.8, 1.5 + sink], (len(xy), 1)), heading, ground_origin(xy, sink), 0.6, label="car")
     elif config.scene == "open":
-        # ground dominates: a few sparse objects 8..40 m from the path
-        xy, _, _ = objects_along(5, 25.0, 8.0, 40.0, 10.0)
-        builder.add(_PRISM, np.tile([0.2, 0.2, 6.0], (len(xy), 1)), np.zeros(len(xy)), ground_origin(xy), 0.7)
-        xy, heading, u = objects_along(6, 35.0, 10.0, 40.0, 15.0, 4)
-        builder.add((_BOX_CORNERS, _BOX_FACES), np.c_[2 + 4 * u[:, 0], 2 + 4 * u[:, 1], 1.5 + 2.5 * u[:, 2]], heading + np.pi * u[:, 3], ground_origin(xy), 0.5)
-        xy, _, u = objects_along(7, 40.0, 8.0, 35.0, 15.0, 2 + n_crown)
-        _add_trees(builder, xy, ground_z, 1.5 + 1.5 * u[:, 0], np.pi * u[:, 1], 0.6 + 0.7 * u[:, 2:, None])
+        # ground dominates: a few sparse objects 8..40 m from the path (or open_object_lateral_m)
+        near = config.open_object_lateral_m
+        lat = ((8.0, 40.0), (10.0, 40.0), (8.0, 35.0)) if near is None else (near, near, near)
+        xy, _, _ = objects_along(5, 25.0, *lat[0], 10.0)
+        sink = slope * 0.2
+        builder.add(_PRISM, np.tile([0.2, 0.2, 6.0 + sink], (len(xy), 1)), np.zeros(len(xy)), ground_origin(xy, sink), 0.7, label="pole")
+        xy, heading, u = objects_along(6, 35.0, *lat[1], 15.0, 4)
+        sink = slope * np.hypot(2 + 4 * u[:, 0], 2 + 4 * u[:, 1]) / 2.0
+        builder.add(
+            (_BOX_CORNERS, _BOX_FACES), np.c_[2 + 4 * u[:, 0], 2 + 4 * u[:, 1], 1.5 + 2.5 * u[:, 2] + sink], heading + np.pi * u[:, 3],
+            ground_origin(xy) - np.c_[np.zeros((len(xy), 2)), sink], 0.5, label="building",
+        )
+        xy, _, u = objects_along(7, 40.0, *lat[2], 15.0, 2 + n_crown)
+        _add_trees(builder, xy, ground_z + terrain.height(xy), 1.5 + 1.5 * u[:, 0], np.pi * u[:, 1], 0.6 + 0.7 * u[:, 2:, None], slope * 0.2)
     return builder.build()
 
 
@@ -315,7 +444,8 @@ class SimulatedLidarSequence:
         period = cfg.sweep_period_s
         s_end = cfg.speed_mps * period * (cfg.n_frames + 1) + cfg.max_range_m + 40.0
         self.path = make_path(np.random.default_rng([cfg.seed, 0]), -(cfg.max_range_m + 40.0), s_end, cfg.max_curvature_per_m)
-        self.vertices_xyz, self.triangles, self.reflectivity = build_scene_mesh(cfg, self.path)
+        self.terrain = scene_terrain(cfg)
+        self.vertices_xyz, self.triangles, self.reflectivity, self.triangle_labels = build_labeled_scene_mesh(cfg, self.path, self.terrain)
         sway = np.random.default_rng([cfg.seed, 2]).uniform(size=(3, 2))  # frequencies and phases of pitch, roll, heave
         self._sway_freq_hz = 0.4 + 0.8 * sway[:, 0]
         self._sway_phase = 2.0 * np.pi * sway[:, 1]
@@ -364,6 +494,15 @@ class SimulatedLidarSequence:
         wave = np.sin(2.0 * np.pi * self._sway_freq_hz[:, None] * t[None, :] + self._sway_phase[:, None])
         wave -= np.sin(self._sway_phase)[:, None]  # zero at t = 0: the world origin is the sensor at the start
         pitch, roll = np.deg2rad(cfg.sway_deg) * wave[0], np.deg2rad(cfg.sway_deg) * wave[1]
+        lift = np.zeros(len(t))
+        if self.terrain.amplitude_m > 0.0:
+            # on hills the body follows the ground: height, and pitch / roll from the slope along / across the heading
+            grad = self.terrain.gradient(xy)
+            forward = grad[:, 0] * np.cos(heading) + grad[:, 1] * np.sin(heading)
+            left = -grad[:, 0] * np.sin(heading) + grad[:, 1] * np.cos(heading)
+            pitch = pitch - np.arctan(forward)
+            roll = roll + np.arctan(left)
+            lift = self.terrain.height(xy)
         cy, sy, cp, sp, cr, sr = np.cos(heading), np.sin(heading), np.cos(pitch), np.sin(pitch), np.cos(roll), np.sin(roll)
         T = np.zeros((len(t), 4, 4))
         # R = Rz(heading) Ry(pitch) Rx(roll)
@@ -372,7 +511,7 @@ class SimulatedLidarSequence:
         T[:, 2, 0], T[:, 2, 1], T[:, 2, 2] = -sp, cp * sr, cp * cr
         T[:, 3, 3] = 1.0
         T[:, :2, 3] = xy
-        T[:, 2, 3] = cfg.heave_m * wave[2]
+        T[:, 2, 3] = cfg.heave_m * wave[2] + lift
         return T
 
     def frame_times_s(self, instant: PoseInstant | None = None) -> np.ndarray:
@@ -406,6 +545,16 @@ class SimulatedLidarSequence:
 
     def read_scan(self, index: int) -> Scan:
         """Cast sweep ``index``; points ``(N, 3)`` in the sensor frame, ordered by firing time."""
+        return self._cast(index)[0]
+
+    def read_scan_labels(self, index: int) -> tuple[Scan, np.ndarray]:
+        """Sweep ``index`` and the ``(N,)`` uint8 label of each point: the class of the triangle its ray hit
+        (codes of ``LABEL_NAMES``; ``GROUND_LABEL`` is the ground)."""
+        scan, hit = self._cast(index)
+        return scan, self.triangle_labels[hit]
+
+    def _cast(self, index: int) -> tuple[Scan, np.ndarray]:
+        """The scan of sweep ``index`` and the scene triangle index ``(N,)`` of each point."""
         cfg = self.config
         if not 0 <= int(index) < cfg.n_frames:
             raise DataError(f"frame {index} out of range 0..{cfg.n_frames - 1}", source=self.name)
@@ -433,9 +582,10 @@ class SimulatedLidarSequence:
         # intensity: reflectivity of the hit triangle times the cosine of the incidence angle
         normals = hits["primitive_normals"].numpy()[keep].astype(np.float64)
         cos_inc = np.abs(np.einsum("ij,ij->i", normals, dirs_world.reshape(-1, 3)[keep]))
-        intensity = (self.reflectivity[hits["primitive_ids"].numpy()[keep].astype(np.int64)] * cos_inc).astype(np.float32)
+        hit = hits["primitive_ids"].numpy()[keep].astype(np.int64)
+        intensity = (self.reflectivity[hit] * cos_inc).astype(np.float32)
         times = np.repeat(self.column_times_s, n_beams)[keep] if cfg.point_times else None
-        return Scan(
+        scan = Scan(
             points_xyz=points,
             intensity=intensity,
             point_times_s=times,
@@ -444,6 +594,7 @@ class SimulatedLidarSequence:
             source=f"{self.name} frame {index}",
             stamp_instant=cfg.pose_instant,
         )
+        return scan, hit
 
 
 def open_sim(spec: str) -> SimulatedLidarSequence:
@@ -525,8 +676,15 @@ def export_kitti(
 
 
 __all__ = [
+    "GROUND_LABEL",
+    "LABELS",
+    "LABEL_NAMES",
     "POSE_INSTANTS",
     "SCENES",
+    "Terrain",
+    "build_labeled_scene_mesh",
+    "make_terrain",
+    "scene_terrain",
     "LidarSimConfig",
     "PlanarPath",
     "SimulatedLidarSequence",

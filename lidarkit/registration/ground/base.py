@@ -1,0 +1,111 @@
+"""The ground segmenter interface and its registry: ``segment(points_xyz) -> (N,) bool mask of ground points``.
+
+Segmenters are preprocessing components: ``ground_filtered`` takes one by name, and any other variant or
+pipeline can call one the same way. Like the ICP registry, a class registers itself under a name and
+validates its parameters with a frozen pydantic config.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any, ClassVar
+
+import numpy as np
+import pydantic
+from pydantic import BaseModel, ConfigDict
+
+from lidarkit.errors import ConfigError, DataError, validation_problems
+
+#: Mounting height of KITTI's Velodyne HDL-64E above the road (m).
+KITTI_SENSOR_HEIGHT_M = 1.73
+
+
+class GroundConfig(BaseModel):
+    """Base of every segmenter's config: frozen, unknown keys rejected."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+
+class GroundSegmenter:
+    """Base class: subclasses set ``name`` and ``Config`` and implement :meth:`_segment`."""
+
+    name: ClassVar[str] = ""
+    Config: ClassVar[type[GroundConfig]] = GroundConfig
+
+    def __init__(self, config: GroundConfig | None = None, **params: Any):
+        if config is not None and params:
+            raise TypeError("pass either a config object or keyword parameters, not both")
+        self.config = config if config is not None else self.Config(**params)
+
+    def segment(self, points_xyz: np.ndarray) -> np.ndarray:
+        """``(N,)`` bool mask of the ground points of an ``(N, 3)`` cloud in the sensor frame (z up)."""
+        pts = np.asarray(points_xyz, dtype=np.float64)
+        if pts.ndim != 2 or pts.shape[1] != 3:
+            raise DataError(f"expected an (N, 3) point array, got shape {pts.shape}", source=f"ground segmenter {self.name!r}")
+        if len(pts) == 0:
+            return np.zeros(0, dtype=bool)
+        mask = np.asarray(self._segment(pts), dtype=bool)
+        if mask.shape != (len(pts),):
+            raise DataError(f"segmenter returned a mask of shape {mask.shape} for {len(pts)} points", source=self.name)
+        return mask
+
+    def _segment(self, points_xyz: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.config!r})"
+
+
+_REGISTRY: dict[str, type[GroundSegmenter]] = {}
+
+
+def register_ground_segmenter(name: str) -> Callable[[type[GroundSegmenter]], type[GroundSegmenter]]:
+    """Class decorator: register a :class:`GroundSegmenter` subclass under ``name``."""
+
+    def decorator(cls: type[GroundSegmenter]) -> type[GroundSegmenter]:
+        if not (isinstance(cls, type) and issubclass(cls, GroundSegmenter)):
+            raise ConfigError(f"{cls!r} is not a GroundSegmenter subclass", source=f"register_ground_segmenter({name!r})")
+        if name in _REGISTRY and _REGISTRY[name] is not cls:
+            raise ConfigError(f"name already taken by {_REGISTRY[name].__qualname__}", source=f"register_ground_segmenter({name!r})")
+        cls.name = name
+        _REGISTRY[name] = cls
+        return cls
+
+    return decorator
+
+
+def available_ground_segmenters() -> list[str]:
+    """Registered segmenter names, sorted (wrapped libraries are listed even when not installed)."""
+    return sorted(_REGISTRY)
+
+
+def get_ground_segmenter_class(name: str) -> type[GroundSegmenter]:
+    """The class registered as ``name``; an unknown name raises ConfigError listing the known ones."""
+    try:
+        return _REGISTRY[name]
+    except KeyError:
+        raise ConfigError(
+            f"unknown ground segmenter {name!r}; available: {', '.join(available_ground_segmenters())}", source="ground segmenter"
+        ) from None
+
+
+def ground_config_fields(name: str) -> dict[str, tuple[str, Any, str]]:
+    """``{param: (type, default, description)}`` of a segmenter's config, generated from the model."""
+    from lidarkit.registration.registry import _type_name
+
+    cls = get_ground_segmenter_class(name)
+    return {
+        key: (_type_name(info.annotation), info.get_default(call_default_factory=True), info.description or "")
+        for key, info in cls.Config.model_fields.items()
+    }
+
+
+def get_ground_segmenter(name: str, **params: Any) -> GroundSegmenter:
+    """A configured segmenter; bad or unknown params raise ConfigError listing the valid ones."""
+    cls = get_ground_segmenter_class(name)
+    try:
+        config = cls.Config(**params)
+    except pydantic.ValidationError as err:
+        valid = ", ".join(f"{k}={v[1]!r}" for k, v in ground_config_fields(name).items()) or "(none)"
+        raise ConfigError(f"invalid parameters ({validation_problems(err)}); valid parameters: {valid}", source=f"ground segmenter {name!r}") from None
+    return cls(config=config)

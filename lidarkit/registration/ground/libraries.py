@@ -1,0 +1,128 @@
+"""Wrapped ground segmentation libraries behind the segmenter interface: Patchwork++ and the cloth simulation filter.
+
+Both are optional (``pip install 'lidarkit[ground]'``); a missing one is a ConfigError naming the pip line when
+the segmenter is created, not when lidarkit is imported. Their C++ cores print progress on the process's
+stdout, which library code must not do: the calls run with file descriptor 1 sent to /dev/null.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import sys
+from typing import Any
+
+import numpy as np
+from pydantic import Field
+
+from lidarkit.errors import ConfigError
+from lidarkit.registration.ground.base import KITTI_SENSOR_HEIGHT_M, GroundConfig, GroundSegmenter, register_ground_segmenter
+
+
+def _import(module: str, package: str) -> Any:
+    import importlib
+
+    try:
+        return importlib.import_module(module)
+    except ImportError as err:
+        raise ConfigError(
+            f"needs the Python package {package!r} ({err}); install it with: pip install {package}  (or pip install 'lidarkit[ground]')",
+            source=f"ground segmenter ({module})",
+        ) from None
+
+
+@contextlib.contextmanager
+def _quiet_stdout():
+    """Silence C/C++ writes to stdout (fd 1) for the duration of a library call."""
+    try:
+        sys.stdout.flush()
+        saved = os.dup(1)
+    except (OSError, ValueError, AttributeError):  # no real fd 1 (e.g. captured in a notebook): nothing to silence
+        yield
+        return
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, 1)
+        yield
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+        os.close(devnull)
+
+
+class PatchworkConfig(GroundConfig):
+    sensor_height_m: float = Field(KITTI_SENSOR_HEIGHT_M, gt=0, description="sensor height above the ground (m)")
+    min_range_m: float = Field(2.7, ge=0, description="points closer are ignored (m)")
+    max_range_m: float = Field(80.0, gt=0, description="points farther are ignored (m)")
+    th_dist_m: float = Field(0.125, gt=0, description="distance of ground points to their patch plane (m)")
+    uprightness_thr: float = Field(0.707, ge=0, le=1, description="min z component of a ground patch's normal")
+    enable_rnr: bool = Field(True, description="reflected-noise removal (needs intensities; off if none given)")
+
+
+@register_ground_segmenter("patchworkpp")
+class PatchworkSegmenter(GroundSegmenter):
+    """Patchwork++ (pypatchworkpp): concentric-zone patches, region-wise plane fits, adaptive thresholds."""
+
+    Config = PatchworkConfig
+
+    def __init__(self, config: GroundConfig | None = None, **params: Any):
+        super().__init__(config, **params)
+        pw = _import("pypatchworkpp", "pypatchworkpp")
+        c = self.config
+        p = pw.Parameters()
+        p.verbose = False
+        p.sensor_height = float(c.sensor_height_m)
+        p.min_range = float(c.min_range_m)
+        p.max_range = float(c.max_range_m)
+        p.th_dist = float(c.th_dist_m)
+        p.uprightness_thr = float(c.uprightness_thr)
+        p.enable_RNR = False  # the interface passes no intensities
+        with _quiet_stdout():
+            self._engine = pw.patchworkpp(p)
+
+    def _segment(self, points_xyz: np.ndarray) -> np.ndarray:
+        cloud = np.zeros((len(points_xyz), 4), dtype=np.float32)
+        cloud[:, :3] = points_xyz
+        with _quiet_stdout():
+            self._engine.estimateGround(cloud)
+            index = np.asarray(self._engine.getGroundIndices(), dtype=np.int64)
+        mask = np.zeros(len(points_xyz), dtype=bool)
+        mask[index] = True
+        return mask
+
+
+class ClothConfig(GroundConfig):
+    cloth_resolution_m: float = Field(0.5, gt=0, description="grid spacing of the simulated cloth (m)")
+    rigidness: int = Field(2, ge=1, le=3, description="1: steep terrain, 2: relief, 3: flat")
+    class_threshold_m: float = Field(0.5, gt=0, description="points closer than this to the cloth are ground (m)")
+    slope_smooth: bool = Field(True, description="post-process steep slopes")
+    time_step: float = Field(0.65, gt=0, description="simulation time step")
+    iterations: int = Field(500, ge=1, description="maximum simulation iterations")
+
+
+@register_ground_segmenter("csf")
+class ClothSegmenter(GroundSegmenter):
+    """Cloth simulation filter (cloth-simulation-filter): a cloth dropped on the upside-down cloud settles on the ground."""
+
+    Config = ClothConfig
+
+    def __init__(self, config: GroundConfig | None = None, **params: Any):
+        super().__init__(config, **params)
+        self._csf = _import("CSF", "cloth-simulation-filter")
+
+    def _segment(self, points_xyz: np.ndarray) -> np.ndarray:
+        c = self.config
+        engine = self._csf.CSF()
+        engine.params.bSloopSmooth = bool(c.slope_smooth)
+        engine.params.cloth_resolution = float(c.cloth_resolution_m)
+        engine.params.rigidness = int(c.rigidness)
+        engine.params.class_threshold = float(c.class_threshold_m)
+        engine.params.time_step = float(c.time_step)
+        engine.params.interations = int(c.iterations)
+        ground, rest = self._csf.VecInt(), self._csf.VecInt()
+        with _quiet_stdout():
+            engine.setPointCloud(np.ascontiguousarray(points_xyz, dtype=np.float64))
+            engine.do_filtering(ground, rest, False)
+        mask = np.zeros(len(points_xyz), dtype=bool)
+        mask[np.asarray(ground, dtype=np.int64)] = True
+        return mask
