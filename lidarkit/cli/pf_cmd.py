@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
+import numpy as np
 import typer
 import yaml
 from rich.table import Table
@@ -32,50 +34,175 @@ def _steps(text: str) -> tuple[int, ...]:
         raise ConfigError(f"snapshot steps must be comma-separated integers, got {text!r}", source="--snapshots") from None
 
 
+MAX_PARTICLES = 10_000_000
+MAX_SEEDS = 10_000
+
+
+def _counts(text: str) -> list[int]:
+    """``--particles``: one count or a comma-separated list, each in 1..MAX_PARTICLES."""
+    try:
+        values = [int(s) for s in text.split(",") if s.strip()]
+    except ValueError:
+        values = []
+    if not values or any(not 1 <= v <= MAX_PARTICLES for v in values):
+        raise ConfigError(f"n_particles must be >= 1 and <= {MAX_PARTICLES} (one count or a comma-separated list), got {text!r}",
+                          source="--particles")
+    return values
+
+
 @app.command("pf")
 def pf_command(
     data_dir: Path = typer.Argument(..., help="Folder with world.dat and sensor_data.dat (Freiburg landmark data)."),
-    particles: int = typer.Option(_D.n_particles, "--particles", "-n", help="Number of particles N."),
+    particles: str = typer.Option(str(_D.n_particles), "--particles", "-n", help="Number of particles N, or a list '50,100,1000' (a study)."),
+    seeds: int = typer.Option(1, "--seeds", help="Number of seeds (seed, seed+1, ...); > 1 or several N prints a mean ± std table."),
+    protocol: str = typer.Option("default", "--protocol", help="default | report: the first report's choices (nearest landmark per particle, best particle, Q as std)."),
     likelihood: str = typer.Option(_D.likelihood, help="all: every reading of the step; nearest: the closest landmark only."),
+    nearest_association: str = typer.Option(_D.nearest_association, help="nearest likelihood: known landmark id, or per_particle (no ids)."),
     estimator: str = typer.Option(_D.estimator, help="mean: weighted mean; best: highest-weight particle."),
     resampler: str = typer.Option(_D.resampler, help="multinomial | systematic | stratified | residual."),
-    kernel: str = typer.Option(_D.kernel, help="point: classic particles; kalman: Kalman-particle kernels (few N)."),
+    kernel: str = typer.Option(_D.kernel, help="point: classic particles; kalman: Kalman-particle kernels (few N; N=1 is an EKF)."),
     ess_threshold: float = typer.Option(_D.ess_threshold, help="Resample when ESS < threshold*N (>= 1: every step)."),
     roughening: float = typer.Option(_D.roughening, help="Gordon roughening constant K (0 = off)."),
     q: str = typer.Option(",".join(str(v) for v in _D.q), "--q", help="Measurement noise Q diagonal 'range,bearing'."),
     q_as: str = typer.Option(_D.q_as, "--q-as", help="Read Q as variances (a covariance, default) or standard deviations."),
-    seed: int = typer.Option(0, help="Seed for the simulated data and the filter."),
-    recorded: bool = typer.Option(False, "--recorded", help="Run on the recorded SENSOR readings (no ground truth)."),
+    init: str = typer.Option(_D.init, help="gaussian: around the start pose; uniform: global localization over the map box, all headings."),
+    augmented: bool = typer.Option(False, "--augmented", help="Augmented MCL: inject uniform particles when the short-term likelihood drops."),
+    alpha_slow: float = typer.Option(_D.alpha_slow, help="Augmented MCL long-term averaging rate."),
+    alpha_fast: float = typer.Option(_D.alpha_fast, help="Augmented MCL short-term averaging rate."),
+    kld: bool = typer.Option(False, "--kld", help="KLD-sampling: adapt N per step (N from --particles is the initial count)."),
+    kld_epsilon: float = typer.Option(_D.kld_epsilon, help="KLD error bound epsilon."),
+    kld_z: float = typer.Option(_D.kld_z, help="KLD upper standard normal quantile z (2.326: 99%)."),
+    kld_bin: str = typer.Option(f"{_D.kld_bin_m},{math.degrees(_D.kld_bin_rad):g}", help="KLD bin size 'metres,degrees'."),
+    kld_min: int = typer.Option(_D.kld_min_n, help="KLD minimum particle count."),
+    kld_max: int = typer.Option(_D.kld_max_n, help="KLD maximum particle count."),
+    visible: str = typer.Option("recorded", help="Simulated readings: recorded landmark ids per step, or all landmarks every step."),
+    kidnap_at: int | None = typer.Option(None, "--kidnap-at", help="Teleport the simulated robot after this step."),
+    kidnap_offset: str = typer.Option("0,-5,-90", "--kidnap-offset", help="Kidnap offset 'dx_m,dy_m,dtheta_deg' (world frame)."),
+    seed: int = typer.Option(0, help="First seed for the simulated data and the filter."),
+    recorded: bool = typer.Option(False, "--recorded", help="Run on the recorded SENSOR readings (no ground truth); prints the NIS verdict on Q."),
+    fit_q: bool = typer.Option(False, "--fit-q", help="With --recorded: fit Q to the innovations (maximum likelihood), re-run, show the NIS after."),
     out: Path | None = typer.Option(None, "--out", help="Write poses, config, metrics and plots into this folder."),
     snapshots: str = typer.Option("0,10,50,150,250,331", help="Steps for the particle-snapshot figure."),
     gif: bool = typer.Option(False, "--gif", help="Also write animation.gif (needs --out)."),
 ) -> None:
-    """Localize with a particle filter on Freiburg landmark data and score it (MSE from step 10, APE, RPE)."""
+    """Localize with a particle filter on Freiburg landmark data and score it (MSE from step 10, APE, RPE), or run a study."""
     from lidarkit.io import open_dataset
-    from lidarkit.pf.protocol import run_protocol, run_recorded
+    from lidarkit.pf.protocol import run_protocol
+    from lidarkit.pf.study import protocol_config, run_study
 
     from lidarkit.atomic import check_target
 
     check_target(out, "folder")
-    data = open_dataset("landmarks", data_dir)
-    cfg = PFConfig.make(
-        n_particles=particles, likelihood=likelihood, estimator=estimator, resampler=resampler, kernel=kernel,
-        ess_threshold=ess_threshold, roughening=roughening, q=_floats(q, 2, "--q"), q_as=q_as,
-    )
+    counts = _counts(particles)
+    if not 1 <= seeds <= MAX_SEEDS:
+        raise ConfigError(f"--seeds must be in 1..{MAX_SEEDS}, got {seeds}", source="--seeds")
+    if seed < 0:
+        raise ConfigError(f"--seed must be >= 0, got {seed}", source="--seed")
     if gif and out is None:
         raise ConfigError("--gif needs --out DIR", source="--gif")
+    if fit_q and not recorded:
+        raise ConfigError("--fit-q needs --recorded", source="--fit-q")
+    bin_m, bin_deg = _floats(kld_bin, 2, "--kld-bin")
+    cfg = PFConfig.make(
+        n_particles=counts[0], likelihood=likelihood, nearest_association=nearest_association, estimator=estimator,
+        resampler=resampler, kernel=kernel, ess_threshold=ess_threshold, roughening=roughening, q=_floats(q, 2, "--q"), q_as=q_as,
+        init=init, augmented=augmented, alpha_slow=alpha_slow, alpha_fast=alpha_fast, kld=kld, kld_epsilon=kld_epsilon,
+        kld_z=kld_z, kld_bin_m=bin_m, kld_bin_rad=math.radians(bin_deg) if bin_deg > 0 else bin_deg, kld_min_n=kld_min, kld_max_n=kld_max,
+    )
+    cfg = protocol_config(cfg, protocol)
+    dx, dy, dth = _floats(kidnap_offset, 3, "--kidnap-offset")
+    scenario = dict(visible=visible, kidnap_at_step=kidnap_at, kidnap_offset=(dx, dy, math.radians(dth)))
+    data = open_dataset("landmarks", data_dir)  # loaded once: its warnings (negative range) appear once per command
+    seed_list = list(range(seed, seed + seeds))
+    if recorded:
+        if len(counts) > 1 or seeds > 1:
+            raise ConfigError("--recorded runs one filter: give one --particles value and --seeds 1", source="--recorded")
+        _recorded(data, cfg, seed, fit_q, out, _steps(snapshots), gif)
+        return
+    if len(counts) > 1 or seeds > 1:
+        rows = run_study(data, counts, seed_list, config=cfg, **scenario)
+        _print_study(rows, cfg, protocol, kidnap_at)
+        if out is not None:
+            _write_study(rows, cfg, protocol, scenario, out)
+            stderr().print(f"results written to {out}")
+        return
     snap = set(_steps(snapshots))
     if gif:
         snap |= set(range(0, len(data) + 1, 2))
     snap = tuple(sorted(s for s in snap if 0 <= s <= len(data)))
-    if recorded:
-        result = run_recorded(data, particles, seed, config=cfg, snapshot_steps=snap)
-    else:
-        result = run_protocol(data, particles, seed, config=cfg, estimators=("mean", "best"), snapshot_steps=snap)
+    result = run_protocol(data, counts[0], seed, config=cfg, estimators=tuple(dict.fromkeys((cfg.estimator, "mean", "best"))),
+                          snapshot_steps=snap, **scenario)
     _print(result)
     if out is not None:
         _write(result, out, snap_steps=_steps(snapshots), gif=gif)
         stderr().print(f"results written to {out}")
+
+
+def _recorded(data, cfg: PFConfig, seed: int, fit_q: bool, out: Path | None, snap_steps: tuple[int, ...], gif: bool) -> None:
+    from lidarkit.pf.protocol import fit_q_recorded, run_recorded
+
+    snap = tuple(sorted(s for s in set(snap_steps) | (set(range(0, len(data) + 1, 2)) if gif else set()) if 0 <= s <= len(data)))
+    if not fit_q:
+        result = run_recorded(data, None, seed, config=cfg, snapshot_steps=snap)
+        _print(result)
+        stdout().print(result.metrics["q_verdict"]["text"])
+    else:
+        first, runs = fit_q_recorded(data, None, seed, config=cfg)
+        result = run_recorded(data, None, seed, config=runs[-1].config, snapshot_steps=snap) if snap else runs[-1]
+        _print(first)
+        stdout().print("before: " + first.metrics["q_verdict"]["text"])
+        table = Table(title="--fit-q: maximum-likelihood Q from the innovations, filter re-run")
+        for col in ("run", "Q range variance [m²]", "Q bearing variance [rad²]", "NIS mean", "NIS < 5.99"):
+            table.add_column(col, justify="right")
+        for i, r in enumerate([first, *runs]):
+            qc = r.settings["q_cov"]
+            table.add_row("given Q" if i == 0 else f"fit {i}", f"{qc[0][0]:.4g}", f"{qc[1][1]:.4g}", f"{r.metrics['nis_mean']:.3f}",
+                          f"{r.metrics['nis_fraction_below_chi2_95']:.3f}")
+        stdout().print(table)
+        stdout().print("after: " + runs[-1].metrics["q_verdict"]["text"])
+    if out is not None:
+        _write(result, out, snap_steps=snap_steps, gif=gif)
+        stderr().print(f"results written to {out}")
+
+
+def _print_study(rows, cfg: PFConfig, protocol: str, kidnap_at: int | None) -> None:
+    seeds = rows[0].seeds
+    title = (f"particle filter study ({protocol} protocol, {cfg.likelihood}"
+             f"{'/' + cfg.nearest_association if cfg.likelihood == 'nearest' else ''}, estimator {cfg.estimator}, "
+             f"init {cfg.init}{', augmented MCL' if cfg.augmented else ''}{', KLD' if cfg.kld else ''}), seeds {seeds[0]}..{seeds[-1]}")
+    table = Table(title=title)
+    for col in ("N", "MSE [m²] mean ± std", "mean N", "localized", "lost", "s/run"):
+        table.add_column(col, justify="right")
+    if kidnap_at is not None:
+        table.add_column("recovered", justify="right")
+    table.caption = (f"MSE: position, from step 10, over {len(seeds)} seeds (std ddof=0); mean N: particles per step; "
+                     "localized: seeds with error < 0.5 m at >= 95% of the steps from 50 on; lost: seeds with a step beyond "
+                     "the chi-square 99.9% gate" + ("; recovered: seeds back below 0.5 m for good within 40 steps of the kidnap"
+                                                    if kidnap_at is not None else ""))
+    for r in rows:
+        cells = [str(r.n_particles), f"{r.mse_mean:.4g} ± {r.mse_std:.3g}", f"{np.mean(r.mean_count):.0f}",
+                 f"{sum(f >= 0.95 for f in r.localized)} / {len(seeds)}", f"{r.lost_seeds} / {len(seeds)}", f"{np.mean(r.runtime_s):.3f}"]
+        if kidnap_at is not None:
+            cells.append(f"{sum(k is not None and k <= 40 for k in r.recovered_in)} / {len(seeds)}")
+        table.add_row(*cells)
+    stdout().print(table)
+
+
+def _write_study(rows, cfg: PFConfig, protocol: str, scenario: dict, out: Path) -> None:
+    from lidarkit import atomic
+
+    with atomic.run_folder(out) as tmp:
+        _write_study_files(rows, cfg, protocol, scenario, tmp)
+
+
+def _write_study_files(rows, cfg: PFConfig, protocol: str, scenario: dict, out: Path) -> None:
+    from lidarkit import atomic
+    from lidarkit.eval.report import write_json
+
+    atomic.write_text(out / "config.yaml", yaml.safe_dump({"pf": cfg.model_dump(mode="json"), "protocol": protocol,
+                                                            "scenario": {k: (list(v) if isinstance(v, tuple) else v) for k, v in scenario.items()}},
+                                                           sort_keys=False))
+    write_json({"protocol": protocol, "rows": [r.to_dict() for r in rows]}, out / "study.json")
 
 
 def _row(table: Table, label: str, value: str) -> None:
@@ -103,6 +230,14 @@ def _print(result) -> None:
         _row(table, "reading residual std at estimate (range m, bearing rad)", f"{r['range_m']:.3f}, {r['bearing_rad']:.3f}")
         d = m["estimate_vs_dead_reckoning_m"]
         _row(table, "estimate vs dead reckoning (mean / max) [m]", f"{d['mean']:.3f} / {d['max']:.3f}")
+    if result.n_particles is not None and (result.config.kld or result.n_particles.min() != result.n_particles.max()):
+        n = result.n_particles[1:]
+        _row(table, "particles per step (mean / min / max)", f"{n.mean():.0f} / {n.min()} / {n.max()}")
+    if result.injected is not None and result.config.augmented:
+        _row(table, "particles injected (augmented MCL)", str(int(result.injected.sum())))
+    if result.ground_truth is not None:
+        err = result.position_error_m()
+        _row(table, "position error at the last step [m]", f"{err[-1]:.3f}")
     _row(table, "filter runtime [s]", f"{result.runtime_s:.3f}")
     _row(table, "resamples / steps", f"{int(result.resampled.sum())} / {result.n_steps}")
     if result.n_weight_resets:
@@ -112,8 +247,6 @@ def _print(result) -> None:
 
 def _write(result, out: Path, *, snap_steps: tuple[int, ...], gif: bool) -> None:
     from lidarkit import atomic
-    from lidarkit.eval.report import write_json
-    from lidarkit.pf import plots
 
     with atomic.run_folder(out) as tmp:
         _write_files(result, tmp, snap_steps=snap_steps, gif=gif)
@@ -136,5 +269,9 @@ def _write_files(result, out: Path, *, snap_steps: tuple[int, ...], gif: bool) -
     steps = [s for s in snap_steps if s in result.snapshots]
     if steps:
         plots.plot_snapshots(result, out / "particles.png", steps)
+    if result.n_particles is not None and (result.config.kld or result.config.augmented):
+        errors = {"position error": result.position_error_m()} if result.ground_truth is not None else None
+        plots.plot_particle_count({"particles": result.n_particles}, out / "particles_per_step.png", errors_m=errors,
+                                  mark_step=result.settings.get("kidnap_at_step"))
     if gif:
         plots.animate(result, out / "animation.gif")

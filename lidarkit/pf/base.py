@@ -14,7 +14,9 @@ import logging
 import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
+from lidarkit.pf.augmented import LikelihoodAverages
 from lidarkit.pf.config import PFConfig
+from lidarkit.pf.kld import kld_sample_size
 from lidarkit.pf.resampling import effective_sample_size, get_resampler
 
 
@@ -54,6 +56,12 @@ class LandmarkFilterBase:
         self.n_resamples = 0
         self.n_weight_resets = 0
         self.last_max_loglik = 0.0
+        self.last_log_mean_lik = float("nan")  # log of the prior-weighted average likelihood of the last update
+        c = self.config
+        self.averages = LikelihoodAverages(c.alpha_slow, c.alpha_fast) if c.augmented else None
+        self.n_injected = 0  # particles replaced by uniform draws (augmented MCL), in total
+        self.last_injected = 0
+        self.last_kld_bins = 0  # occupied bins at the last KLD-sized resampling
         if self.config.init == "uniform":
             self.initialize_uniform()
         else:
@@ -78,18 +86,31 @@ class LandmarkFilterBase:
 
     def initialize_uniform(self, bounds_xy: tuple[float, float, float, float] | None = None) -> None:
         """Global localization: x, y uniform over ``(xmin, xmax, ymin, ymax)`` (default: landmarks +- margin), theta uniform."""
-        if bounds_xy is None:
-            m = self.config.uniform_margin_m
-            lo, hi = self.landmarks_xy.min(axis=0) - m, self.landmarks_xy.max(axis=0) + m
-            bounds_xy = (lo[0], hi[0], lo[1], hi[1])
-        x0, x1, y0, y1 = (float(b) for b in bounds_xy)
+        if self.config.kld and self.n_updates > 0:  # relocalization (recovery="reinit"): as many particles as KLD allows
+            self._resize(self.config.kld_max_n)
+        states, span = self._uniform_draw(self.n, bounds_xy)
+        self._set_uniform_states(states, span)
+        self._reset_weights()
+
+    def uniform_bounds(self) -> tuple[float, float, float, float]:
+        """(xmin, xmax, ymin, ymax) of global localization and injection: the landmarks' box + ``uniform_margin_m``."""
+        m = self.config.uniform_margin_m
+        lo, hi = self.landmarks_xy.min(axis=0) - m, self.landmarks_xy.max(axis=0) + m
+        return float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])
+
+    def _uniform_draw(self, n: int, bounds_xy: tuple[float, float, float, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """``n`` poses ``(3, n)`` float64 uniform over the box and all headings, and the box size ``(3,)``."""
+        x0, x1, y0, y1 = (float(b) for b in (self.uniform_bounds() if bounds_xy is None else bounds_xy))
         if not (x1 > x0 and y1 > y0):
-            raise ConfigError(f"empty bounds {bounds_xy!r}", source="initialize_uniform")
-        u = self.rng.random((3, self.n))
+            raise ConfigError(f"empty bounds {(x0, x1, y0, y1)!r}", source="initialize_uniform")
+        u = self.rng.random((3, n))
         lo = np.array([x0, y0, -np.pi])[:, None]
         span = np.array([x1 - x0, y1 - y0, 2 * np.pi])
-        self._set_uniform_states(lo + u * span[:, None], span)
-        self._reset_weights()
+        return lo + u * span[:, None], span
+
+    def _resize(self, n: int) -> None:
+        """Change the hypothesis count to ``n`` (the state is replaced right after; KLD-capable filters only)."""
+        raise NotImplementedError
 
     def _set_uniform_states(self, states: np.ndarray, span: np.ndarray) -> None:
         """Take the uniformly drawn float64 ``states`` ``(3, N)`` over the box of size ``span`` ``(3,)``."""
@@ -98,7 +119,7 @@ class LandmarkFilterBase:
     # ---- weights ------------------------------------------------------------------------------------
     def _reset_weights(self) -> None:
         # shared read-only arrays: every update creates new weight arrays
-        if self._uniform_w is None:
+        if self._uniform_w is None or self._uniform_w.shape[0] != self.n:
             self._uniform_w = np.full(self.n, 1.0 / self.n, dtype=self.dtype)
             self._uniform_lw = np.full(self.n, -np.log(self.n), dtype=self.dtype)
             self._uniform_w.flags.writeable = False
@@ -152,6 +173,8 @@ class LandmarkFilterBase:
         lw -= m
         w = np.exp(lw)
         s = w.sum(dtype=np.float64)
+        # log sum_i w_i L_i (prior weights w_i): with a skipped uniform prior, lw = ll and the mean is over N
+        self.last_log_mean_lik = float(m) + float(np.log(s)) - (float(np.log(self.n)) if prior_skipped else 0.0)
         w /= self.dtype.type(s)
         self.weights, self._uniform = w, False
         self._lw_shifted, self._log_sum, self._log_weights = lw, self.dtype.type(np.log(s)), None
@@ -171,23 +194,63 @@ class LandmarkFilterBase:
         return idx, z
 
     # ---- resample -----------------------------------------------------------------------------------
+    def track_likelihood(self, n_readings: int) -> None:
+        """Augmented MCL: fold the last update's average likelihood, per reading, into w_slow / w_fast."""
+        if self.averages is not None and n_readings > 0:
+            self.averages.update(self.last_log_mean_lik / n_readings)
+
+    def injection_probability(self) -> float:
+        """Probability that a particle is replaced by a uniform draw at the next resampling (0 without augmented MCL)."""
+        return self.averages.injection_probability() if self.averages is not None else 0.0
+
     def needs_resampling(self) -> bool:
         if self._uniform:
             return False
         thr = self.config.ess_threshold
-        return thr >= 1.0 or effective_sample_size(self.weights) < thr * self.n
+        if thr >= 1.0 or self.injection_probability() > 0.0:
+            return True
+        return effective_sample_size(self.weights) < thr * self.n
+
+    def next_count(self) -> int:
+        """Particles after the next resampling: Fox's KLD bound with ``kld``, else the current count."""
+        c = self.config
+        if not c.kld:
+            return self.n
+        n, self.last_kld_bins = kld_sample_size(
+            self.states, self.weights, self.rng, epsilon=c.kld_epsilon, z=c.kld_z, bin_m=c.kld_bin_m,
+            bin_rad=c.kld_bin_rad, n_min=c.kld_min_n, n_max=c.kld_max_n,
+        )
+        return n
 
     def resample(self, force: bool = False) -> bool:
-        """Resample (always if ``force``, else per the ESS threshold); returns whether it happened."""
+        """Resample (always if ``force``, else per the ESS threshold); returns whether it happened.
+
+        The new count comes from :meth:`next_count` (KLD-sampling); with augmented MCL each new particle is
+        then replaced with probability :meth:`injection_probability` by a uniform draw over the map box.
+        """
         if not force and not self.needs_resampling():
             return False
-        self._resample_states(self.resampler(self.weights, self.rng, self.n))
+        p_inject = self.injection_probability()
+        self._resample_states(self.resampler(self.weights, self.rng, self.next_count()))
+        self.last_injected = 0
+        if p_inject > 0.0:
+            replace = self.rng.random(self.n) < p_inject
+            k = int(np.count_nonzero(replace))
+            if k:
+                self._replace_states(replace, self._uniform_draw(k)[0])
+                self.last_injected = k
+                self.n_injected += k
         self._reset_weights()
         self.n_resamples += 1
         return True
 
+    def _replace_states(self, mask: np.ndarray, states: np.ndarray) -> None:
+        """Overwrite the hypotheses where ``mask`` ``(N,)`` by ``states`` ``(3, count)`` float64 (augmented MCL)."""
+        raise NotImplementedError
+
     def _resample_states(self, idx: np.ndarray) -> None:
-        """Replace the state by the hypotheses ``idx`` ``(N,)`` (weights are still the pre-resampling ones here)."""
+        """Replace the state by the hypotheses ``idx`` ``(n,)`` and set ``self.n = n`` (weights are still the
+        pre-resampling ones here)."""
         raise NotImplementedError
 
     # ---- estimate -----------------------------------------------------------------------------------

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, ValidationError, field_validator, model_validator
 
 from lidarkit.errors import ConfigError
 
@@ -33,6 +33,15 @@ class PFConfig(BaseModel):
     ``recovery="reinit"``: when even the best particle fails the chi-square(2) 99.9% gate on a step
     (the filter is lost), spread all particles uniformly over the map and reweight them by that step's
     readings (global relocalization); otherwise lost steps are only counted and logged.
+
+    ``augmented``: augmented MCL (Thrun et al., Probabilistic Robotics, 8.3.5): short- and long-term
+    averages of the per-reading measurement likelihood (rates ``alpha_fast`` > ``alpha_slow``, bias
+    corrected) and, at each resampling, every particle replaced with probability
+    max(0, 1 - w_fast / w_slow) by a uniform draw over the map box (kidnapped-robot recovery).
+    ``kld``: KLD-sampling (Fox 2003): each resampling draws as many particles as Fox's bound asks for
+    the number k of occupied (x, y, theta) bins of size ``kld_bin_m`` x ``kld_bin_m`` x ``kld_bin_rad``
+    (error ``kld_epsilon``, standard normal quantile ``kld_z``), clipped to [``kld_min_n``, ``kld_max_n``];
+    ``n_particles`` is then only the initial count (point particles only).
     """
 
     model_config = ConfigDict(frozen=True, extra="forbid")
@@ -57,6 +66,16 @@ class PFConfig(BaseModel):
     init_std: tuple[float, float, float] = (math.sqrt(2.0), math.sqrt(2.0), math.sqrt(0.1))
     uniform_margin_m: float = 2.0
     recovery: Literal["none", "reinit"] = "none"
+    augmented: bool = False
+    alpha_slow: float = 0.001
+    alpha_fast: float = 0.1
+    kld: bool = False
+    kld_epsilon: float = 0.05
+    kld_z: float = 2.326  # upper 1% standard normal quantile (1 - delta = 0.99)
+    kld_bin_m: float = 0.5
+    kld_bin_rad: float = math.radians(10.0)
+    kld_min_n: int = 200
+    kld_max_n: int = 5000
     dtype: Literal["float32", "float64"] = "float32"
     noise_block_elements: int = 1 << 17  # motion noise drawn for this many numbers at once (cache-sized)
 
@@ -66,6 +85,37 @@ class PFConfig(BaseModel):
         if v < 1:
             raise ValueError(f"n_particles must be >= 1, got {v}")
         return v
+
+    @field_validator("alpha_slow", "alpha_fast", "kld_epsilon")
+    @classmethod
+    def _unit_rate(cls, v: float) -> float:
+        if not (math.isfinite(v) and 0.0 < v <= 1.0):
+            raise ValueError(f"must be in (0, 1], got {v}")
+        return v
+
+    @field_validator("kld_z", "kld_bin_m", "kld_bin_rad")
+    @classmethod
+    def _positive(cls, v: float) -> float:
+        if not (math.isfinite(v) and v > 0):
+            raise ValueError(f"must be finite and > 0, got {v}")
+        return v
+
+    @field_validator("kld_min_n", "kld_max_n")
+    @classmethod
+    def _positive_count(cls, v: int) -> int:
+        if v < 1:
+            raise ValueError(f"must be >= 1, got {v}")
+        return v
+
+    @model_validator(mode="after")
+    def _consistent(self) -> PFConfig:
+        if self.augmented and not self.alpha_slow < self.alpha_fast:
+            raise ValueError(f"augmented MCL needs alpha_slow < alpha_fast, got {self.alpha_slow} and {self.alpha_fast}")
+        if self.kld and self.kld_min_n > self.kld_max_n:
+            raise ValueError(f"kld_min_n {self.kld_min_n} > kld_max_n {self.kld_max_n}")
+        if (self.kld or self.augmented) and self.kernel == "kalman":
+            raise ValueError("KLD-sampling and augmented MCL need point particles (kernel='point')")
+        return self
 
     @field_validator("kernel_split")
     @classmethod

@@ -31,19 +31,28 @@ class ParticleFilter(LandmarkFilterBase):
         self.motion = OdometryMotionModel(self.config.motion_noise_std)
         self.sensor = RangeBearingModel(resolve_q(self.config.q, self.config.q_as))
         self._landmarks_typed = self.landmarks_xy.astype(self.dtype)
+        self._has_motion_noise = bool(self.motion.noise_std.any())
+        self._odometry: np.ndarray | None = None
+        self._odometry_pos = 0
+        self._predicts_since_wrap = 0
+        self._allocate()
+
+    def _allocate(self) -> None:
+        """Per-particle buffers for the current ``self.n``; pre-drawn noise and controls are dropped."""
+        self._buffers_n = self.n
         self._noise_block: np.ndarray | None = None
         self._noise_pos = 0
         self._scratch = (np.empty(self.n, dtype=self.dtype), np.empty(self.n, dtype=self.dtype))
         self._controls = np.empty((3, self.n), dtype=self.dtype)
         self._estimate_buf = np.empty((4, self.n), dtype=self.dtype)
         self._work: np.ndarray | None = None  # (3, M, N) likelihood workspace, grown on demand
-        self._has_motion_noise = bool(self.motion.noise_std.any())
-        self._odometry: np.ndarray | None = None
-        self._odometry_pos = 0
         self._control_block: np.ndarray | None = None
         self._control_buf: np.ndarray | None = None
         self._control_pos = 0
-        self._predicts_since_wrap = 0
+
+    def _block_steps(self) -> int:
+        """Steps of motion noise drawn at once: cache-sized blocks; one step when the count changes per step (KLD)."""
+        return 1 if self.config.kld else max(1, self.config.noise_block_elements // (3 * self.n))
 
     # ---- initialization -------------------------------------------------------------------------
     def initialize_gaussian(self, mean: np.ndarray | None = None, std: np.ndarray | None = None) -> None:
@@ -55,6 +64,11 @@ class ParticleFilter(LandmarkFilterBase):
 
     def _set_uniform_states(self, states: np.ndarray, span: np.ndarray) -> None:
         self.states = states.astype(self.dtype)
+
+    def _resize(self, n: int) -> None:
+        self.n = int(n)
+        if self.n != self._buffers_n:
+            self._allocate()
 
     def set_particles(self, particles: np.ndarray, weights: np.ndarray | None = None) -> None:
         """Replace the particle set with ``(N, 3)`` poses (and optional weights, normalized here)."""
@@ -75,7 +89,7 @@ class ParticleFilter(LandmarkFilterBase):
     # ---- predict ----------------------------------------------------------------------------------
     def _next_noise(self) -> np.ndarray:
         if self._noise_block is None or self._noise_pos >= self._noise_block.shape[0]:
-            steps = max(1, self.config.noise_block_elements // (3 * self.n))
+            steps = self._block_steps()
             self._noise_block = self.motion.sample_noise(self.rng, steps, self.n, self.dtype, self.config.antithetic)
             self._noise_pos = 0
         noise = self._noise_block[self._noise_pos]
@@ -115,7 +129,7 @@ class ParticleFilter(LandmarkFilterBase):
         if self._odometry is None or self._odometry_pos >= len(self._odometry):
             raise DataError("no odometry left: call begin_odometry(odometry) first", source="predict_next")
         if self._control_block is None or self._control_pos >= self._control_block.shape[0]:
-            steps = max(1, self.config.noise_block_elements // (3 * self.n))
+            steps = self._block_steps()
             if self._control_buf is None:  # reused: no fresh large allocation per block
                 self._control_buf = np.empty(steps * 3 * self.n + ((steps * 3 * self.n) & 1), dtype=self.dtype)
             self._control_block = self.motion.controls_block(
@@ -164,20 +178,27 @@ class ParticleFilter(LandmarkFilterBase):
         if len(z) == 0:
             return False
         self.apply_log_likelihood(self.log_likelihood(landmark_index, z))
+        self.track_likelihood(1 if self.config.likelihood == "nearest" else len(z))
         return True
 
     # ---- resample ---------------------------------------------------------------------------------
     def _resample_states(self, idx: np.ndarray) -> None:
-        """Take the particles ``idx``, then moment matching / regularization / roughening per the config."""
+        """Take the particles ``idx`` (KLD: a new count), then moment matching / regularization / roughening per the config."""
         matching = self.config.moment_matching
         before = self._moments(self.weights, matching == "mean_cov") if matching != "none" else None
         self.states = np.take(self.states, idx, axis=1)
+        self.n = int(idx.shape[0])
+        if self.n != self._buffers_n:
+            self._allocate()
         if before is not None:
             self._match_moments(before)
         if self.config.regularization > 0:
             self._regularize(self.config.regularization)
         if self.config.roughening > 0:
             self._roughen()
+
+    def _replace_states(self, mask: np.ndarray, states: np.ndarray) -> None:
+        self.states[:, mask] = states.astype(self.dtype)
 
     def _moments(self, weights: np.ndarray, with_cov: bool) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
         """Weighted mean (circular for theta), deviations ``(3, N)`` float64 and covariance (or None)."""
@@ -249,27 +270,37 @@ class ParticleFilter(LandmarkFilterBase):
         return np.array([x, y, np.arctan2(s, c)], dtype=np.float64)
 
     # ---- consistency ------------------------------------------------------------------------------
+    def innovation_stats(self, landmark_index: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Innovations ``(M, 2)`` (weighted mean of the per-particle residuals) and the particle set's own
+        predictive spread ``(M, 2, 2)`` (their weighted covariance); S = spread + Q."""
+        z = np.asarray(z, dtype=np.float64).reshape(-1, 2)
+        if len(z) == 0:
+            return np.zeros((0, 2)), np.zeros((0, 2, 2))
+        lm = self.landmarks_xy[np.asarray(landmark_index, dtype=np.int64)]
+        e_r, e_b = self.sensor.residuals(self.states.astype(np.float64), lm, z)
+        w = self.weights.astype(np.float64)
+        nu = np.stack([e_r @ w, e_b @ w], axis=1)  # (M, 2)
+        dr, db = e_r - nu[:, :1], e_b - nu[:, 1:]
+        P = np.empty((len(z), 2, 2))
+        P[:, 0, 0], P[:, 1, 1] = (dr * dr) @ w, (db * db) @ w
+        P[:, 0, 1] = P[:, 1, 0] = (dr * db) @ w
+        return nu, P
+
     def innovation_nis(self, landmark_index: np.ndarray, z: np.ndarray) -> np.ndarray:
         """Normalized innovation squared ``(M,)`` of each reading against the current (predicted) particle set.
 
         Innovation = weighted mean of the per-particle residuals; S = their weighted covariance + Q.
         For a consistent filter each value is chi-square distributed with 2 degrees of freedom.
         """
-        z = np.asarray(z, dtype=np.float64).reshape(-1, 2)
-        if len(z) == 0:
-            return np.zeros(0)
-        lm = self.landmarks_xy[np.asarray(landmark_index, dtype=np.int64)]
-        e_r, e_b = self.sensor.residuals(self.states.astype(np.float64), lm, z)
-        w = self.weights
-        nu = np.stack([e_r @ w, e_b @ w], axis=1)  # (M, 2)
-        dr, db = e_r - nu[:, :1], e_b - nu[:, 1:]
-        s_rr, s_bb, s_rb = (dr * dr) @ w, (db * db) @ w, (dr * db) @ w
-        q = self.sensor.q_cov
-        S = np.empty((len(z), 2, 2))
-        S[:, 0, 0] = s_rr + q[0, 0]
-        S[:, 1, 1] = s_bb + q[1, 1]
-        S[:, 0, 1] = S[:, 1, 0] = s_rb + q[0, 1]
-        return np.einsum("mi,mij,mj->m", nu, np.linalg.inv(S), nu)
+        nu, P = self.innovation_stats(landmark_index, z)
+        return nis_values(nu, P + self.sensor.q_cov)
+
+
+def nis_values(nu: np.ndarray, S: np.ndarray) -> np.ndarray:
+    """``nu_m^T S_m^-1 nu_m`` for ``(M, 2)`` innovations and ``(M, 2, 2)`` covariances."""
+    if len(nu) == 0:
+        return np.zeros(0)
+    return np.einsum("mi,mij,mj->m", nu, np.linalg.inv(S), nu)
 
 
 def make_filter(landmarks_xy: np.ndarray, config: PFConfig | None = None, rng: np.random.Generator | int | None = 0):
@@ -282,4 +313,4 @@ def make_filter(landmarks_xy: np.ndarray, config: PFConfig | None = None, rng: n
     return ParticleFilter(landmarks_xy, config, rng)
 
 
-__all__ = ["ParticleFilter", "make_filter"]
+__all__ = ["ParticleFilter", "make_filter", "nis_values"]

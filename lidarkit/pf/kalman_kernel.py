@@ -5,7 +5,8 @@ navigation". The weights follow each kernel's predictive likelihood N(z; h(mean)
 resampling splits a kernel into children drawn from N(mean, (1 - a) P) with covariance a P
 (``kernel_split`` = a), which keeps the mixture's mean and covariance. Because every kernel carries
 its own uncertainty, a few tens of kernels reach the accuracy of ~10^4 point particles on the
-Freiburg data (see docs/particle_filter.md). Vectorized over kernels with batched 3x3 algebra;
+Freiburg data; so does N=1, which is a plain EKF (a single kernel is never split): on that tracking
+problem the kernels add nothing, they matter on multi-modal ones (see docs/particle_filter.md). Vectorized over kernels with batched 3x3 algebra;
 meant for small N (memory and time grow as N x 9).
 """
 
@@ -127,7 +128,11 @@ class KalmanParticleFilter(LandmarkFilterBase):
         return True
 
     def _resample_states(self, idx: np.ndarray) -> None:
-        """Take the kernels ``idx`` and split each child: mean + sqrt(1 - a) L eps, covariance a P."""
+        """Take the kernels ``idx`` and split each child: mean + sqrt(1 - a) L eps, covariance a P.
+
+        A single kernel is left as it is (N=1 is a plain EKF: splitting would only add noise)."""
+        if self.n == 1:
+            return
         states, cov = self.states[:, idx], self.cov[idx]
         if self.split < 1.0:
             L = np.linalg.cholesky(cov + 1e-12 * np.eye(3))
@@ -146,19 +151,26 @@ class KalmanParticleFilter(LandmarkFilterBase):
         theta = np.arctan2(np.sin(self.states[2]) @ w, np.cos(self.states[2]) @ w)
         return np.array([self.states[0] @ w, self.states[1] @ w, theta])
 
-    def innovation_nis(self, landmark_index: np.ndarray, z: np.ndarray) -> np.ndarray:
-        """NIS ``(M,)`` of each reading against the mixture's predictive distribution (chi-square(2) if consistent)."""
+    def innovation_stats(self, landmark_index: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Innovations ``(M, 2)`` against the mixture and its predictive spread without Q ``(M, 2, 2)``."""
         z = np.asarray(z, dtype=np.float64).reshape(-1, 2)
-        out = np.zeros(len(z))
+        nu_all, P_all = np.zeros((len(z), 2)), np.zeros((len(z), 2, 2))
         w = self.weights
         for m, k in enumerate(np.asarray(landmark_index, dtype=np.int64).reshape(-1)):
             e, H = self._innovation(self.landmarks_xy[k], z[m])
-            S_k = H @ self.cov @ H.transpose(0, 2, 1) + self.q_cov
+            HPHt = H @ self.cov @ H.transpose(0, 2, 1)
             nu = w @ e
             d = e - nu
-            S = np.einsum("n,nij->ij", w, S_k) + (d * w[:, None]).T @ d
-            out[m] = float(nu @ np.linalg.solve(S, nu))
-        return out
+            nu_all[m] = nu
+            P_all[m] = np.einsum("n,nij->ij", w, HPHt) + (d * w[:, None]).T @ d
+        return nu_all, P_all
+
+    def innovation_nis(self, landmark_index: np.ndarray, z: np.ndarray) -> np.ndarray:
+        """NIS ``(M,)`` of each reading against the mixture's predictive distribution (chi-square(2) if consistent)."""
+        from lidarkit.pf.filter import nis_values
+
+        nu, P = self.innovation_stats(landmark_index, z)
+        return nis_values(nu, P + self.q_cov)
 
 
 __all__ = ["KalmanParticleFilter"]

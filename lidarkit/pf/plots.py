@@ -125,6 +125,37 @@ def plot_mse_vs_n(
     return _save(fig, path)
 
 
+def plot_particle_count(
+    counts: Mapping[str, np.ndarray], path: str | os.PathLike, title: str = "particles per step",
+    errors_m: Mapping[str, np.ndarray] | None = None, mark_step: int | None = None,
+) -> Path:
+    """Particle count per step (KLD-sampling) for one or more runs, optionally with their position errors below."""
+    plt = _pyplot()
+    rows = 2 if errors_m else 1
+    fig, axes = plt.subplots(rows, 1, figsize=(8, 3.2 * rows), sharex=True, squeeze=False)
+    ax = axes[0, 0]
+    for label, n in counts.items():
+        ax.step(np.arange(len(n)), n, where="post", lw=1.2, label=label)
+    ax.set_yscale("log")
+    ax.set_ylabel("particles N")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)
+    ax.set_title(title)
+    if errors_m:
+        ax2 = axes[1, 0]
+        for label, e in errors_m.items():
+            ax2.plot(np.arange(len(e)), e, lw=1, label=label)
+        ax2.axhline(0.5, c="k", ls=":", lw=1)
+        ax2.set_yscale("log")
+        ax2.set_ylabel("position error [m]")
+        ax2.grid(alpha=0.3, which="both")
+    for a in axes[:, 0]:
+        if mark_step is not None:
+            a.axvline(mark_step, c="tab:red", ls="--", lw=1)
+    axes[-1, 0].set_xlabel("step")
+    return _save(fig, path)
+
+
 def _save(fig, path: str | os.PathLike) -> Path:
     plt = _pyplot()
     fig.tight_layout()
@@ -133,4 +164,4 @@ def _save(fig, path: str | os.PathLike) -> Path:
     return Path(path)
 
 
-__all__ = ["animate", "plot_mse_vs_n", "plot_snapshots", "plot_trajectory"]
+__all__ = ["animate", "plot_mse_vs_n", "plot_particle_count", "plot_snapshots", "plot_trajectory"]

@@ -23,7 +23,8 @@ import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.pf.config import PFConfig
-from lidarkit.pf.filter import ParticleFilter, make_filter
+from lidarkit.pf.consistency import fit_q, q_verdict
+from lidarkit.pf.filter import ParticleFilter, make_filter, nis_values
 from lidarkit.pf.models import integrate_odometry, resolve_q, wrap_angle
 from lidarkit.trajectory import Trajectory
 
@@ -34,6 +35,7 @@ MSE_START_STEP = 10
 VISIBILITY = ("recorded", "all")
 CHI2_2DOF_95 = 5.991464547107979  # chi-square(2) 95% quantile
 CHI2_2DOF_999 = 13.815510557964274  # chi-square(2) 99.9% quantile: "lost" threshold per reading
+KIDNAP_OFFSET = (0.0, -5.0, -np.pi / 2)  # 5 m and 90 deg; from step 150 on the robot stays inside the map box
 
 
 @dataclass(frozen=True, eq=False)
@@ -57,6 +59,22 @@ class StepReadings:
         return cls(np.asarray(landmark_index)[order], np.asarray(z, dtype=np.float64)[order], offsets)
 
 
+def kidnapped_ground_truth(odometry: np.ndarray, kidnap_at_step: int | None, kidnap_offset: tuple[float, float, float]) -> np.ndarray:
+    """Clean odometry integrated from (0, 0, 0) ``(T+1, 3)``, with pose ``kidnap_at_step`` moved by ``kidnap_offset`` (if given)."""
+    T = len(odometry)
+    if kidnap_at_step is None:
+        return integrate_odometry(odometry)
+    k = int(kidnap_at_step)
+    offset = np.asarray(kidnap_offset, dtype=np.float64).reshape(-1)
+    if not 1 <= k <= T:
+        raise ConfigError(f"kidnap step must be in 1..{T}, got {k}", source="kidnap_at_step")
+    if offset.shape != (3,) or not np.isfinite(offset).all():
+        raise ConfigError(f"kidnap offset must be 3 finite values (dx_m, dy_m, dtheta_rad), got {kidnap_offset!r}", source="kidnap_offset")
+    before = integrate_odometry(odometry[:k])
+    after = integrate_odometry(odometry[k:], before[-1] + offset)
+    return np.concatenate([before[:-1], after])
+
+
 @dataclass(frozen=True, eq=False)
 class SimulatedData:
     """The protocol's inputs for one seed: ``ground_truth`` ``(T+1, 3)``, ``odometry_noisy`` ``(T, 3)``,
@@ -76,13 +94,20 @@ def simulate(
     *,
     odometry_noise_std: tuple[float, float, float] = ODOMETRY_NOISE_STD,
     visible: str = "recorded",
+    kidnap_at_step: int | None = None,
+    kidnap_offset: tuple[float, float, float] = KIDNAP_OFFSET,
 ) -> SimulatedData:
-    """Ground truth, noisy odometry and simulated readings (range, bearing) + N(0, Q) for one data set."""
+    """Ground truth, noisy odometry and simulated readings (range, bearing) + N(0, Q) for one data set.
+
+    ``kidnap_at_step`` = k: right after its k-th motion the robot is teleported by ``kidnap_offset``
+    ``(dx_m, dy_m, dtheta_rad)`` (world frame) and drives on from there with the same odometry; the
+    filter's odometry does not show the jump (the readings from step k on do).
+    """
     if visible not in VISIBILITY:
         raise ConfigError(f"visible must be one of {VISIBILITY}, got {visible!r}", source="visible")
     odo = np.asarray(data.odometry, dtype=np.float64)
     T = len(odo)
-    gt = integrate_odometry(odo)
+    gt = kidnapped_ground_truth(odo, kidnap_at_step, kidnap_offset)
     noisy = odo + rng.standard_normal((T, 3)) * np.asarray(odometry_noise_std, dtype=np.float64)
     lm = np.asarray(data.landmarks.positions_xy, dtype=np.float64)
     if visible == "recorded":
@@ -124,6 +149,8 @@ class PFRunResult:
     n_weight_resets: int
     lost_steps: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     n_recoveries: int = 0
+    n_particles: np.ndarray | None = None  # (T+1,) particle count after each step's resampling (row 0: initial)
+    injected: np.ndarray | None = None  # (T,) particles replaced by uniform draws per step (augmented MCL)
     odometry_used: np.ndarray | None = field(default=None, repr=False)
     snapshots: dict[int, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict, repr=False)
     metrics: dict[str, Any] = field(default_factory=dict)
@@ -135,6 +162,13 @@ class PFRunResult:
     @property
     def n_steps(self) -> int:
         return len(self.dead_reckoning) - 1
+
+    def position_error_m(self, which: str = "estimate") -> np.ndarray:
+        """``(T+1,)`` distance between an estimate and the ground truth (protocol runs only)."""
+        if self.ground_truth is None:
+            raise ConfigError("no ground truth in a recorded run", source="position_error_m")
+        est = self.estimate if which == "estimate" else self.estimates[which]
+        return np.hypot(*(est[:, :2] - self.ground_truth[:, :2]).T)
 
     def trajectory(self, which: str = "estimate") -> Trajectory:
         """``estimate`` / ``mean`` / ``best`` / ``ground_truth`` / ``dead_reckoning`` as an SE(3) Trajectory (z = 0)."""
@@ -154,6 +188,9 @@ class PFRunResult:
             "n_weight_resets": self.n_weight_resets,
             "n_lost_steps": int(len(self.lost_steps)),
             "n_recoveries": self.n_recoveries,
+            "n_particles_mean": float(self.n_particles[1:].mean()) if self.n_particles is not None and len(self.n_particles) > 1 else None,
+            "n_particles_per_step": self.n_particles.tolist() if self.n_particles is not None else None,
+            "n_injected": int(self.injected.sum()) if self.injected is not None else 0,
             "first_lost_step": int(self.lost_steps[0]) + 1 if len(self.lost_steps) else None,
             "metrics": self.metrics,
         }
@@ -202,12 +239,16 @@ def run_filter(
         est[k][0] = pf.estimate(k)
     ess = np.full(T, float(pf.n))
     resampled = np.zeros(T, dtype=bool)
+    n_particles = np.empty(T + 1, dtype=np.int64)  # count after each step's resampling (row 0: initial)
+    n_particles[0] = pf.n
+    injected = np.zeros(T, dtype=np.int64)
     max_ll = np.full(T, np.nan)
     snaps: dict[int, tuple[np.ndarray, np.ndarray]] = {}
     snapshot_set = set(int(s) for s in snapshot_steps)
     if 0 in snapshot_set:
         snaps[0] = (pf.particles.astype(np.float64), pf.weights.copy())
-    nis_values: list[np.ndarray] = []
+    innovations: list[np.ndarray] = []
+    spreads: list[np.ndarray] = []
     offsets = readings.offsets.tolist()
     sequence = hasattr(pf, "begin_odometry")
     if sequence:
@@ -225,7 +266,9 @@ def run_filter(
         if b > a:
             idx, z = lm_index[a:b], z_all[a:b]
             if nis:
-                nis_values.append(pf.innovation_nis(idx, readings.z[a:b]))
+                nu, P = pf.innovation_stats(idx, readings.z[a:b])
+                innovations.append(nu)
+                spreads.append(P)
             pf.update(idx, z, check=False)
             max_ll[t] = pf.last_max_loglik
             if recover and _is_lost(pf.last_max_loglik, 1 if nearest else b - a):
@@ -238,6 +281,8 @@ def run_filter(
             snaps[t + 1] = (pf.particles.astype(np.float64), pf.weights.copy())
         ess[t] = pf.ess
         resampled[t] = pf.resample()
+        n_particles[t + 1] = pf.n
+        injected[t] = pf.last_injected if resampled[t] else 0
     runtime = time.perf_counter() - t0
     n_readings = np.ones(T) if nearest else np.diff(readings.offsets)
     lost = np.flatnonzero(_is_lost(max_ll, n_readings))
@@ -247,10 +292,13 @@ def run_filter(
         "estimates": est,
         "ess": ess,
         "resampled": resampled,
+        "n_particles": n_particles,
+        "injected": injected,
         "max_loglik": max_ll,
         "snapshots": snaps,
         "runtime_s": runtime,
-        "nis": np.concatenate(nis_values) if nis_values else np.zeros(0),
+        "innovations": np.concatenate(innovations) if innovations else np.zeros((0, 2)),
+        "innovation_spread": np.concatenate(spreads) if spreads else np.zeros((0, 2, 2)),
     }
 
 
@@ -270,7 +318,7 @@ def _resolve_config(config: PFConfig | None, n_particles: int | None, changes: d
 
 def _filter_outputs(out: dict, pf) -> dict:
     """The PFRunResult fields that come straight from a ``run_filter`` output and the filter."""
-    keys = ("estimates", "runtime_s", "ess", "resampled", "max_loglik", "lost_steps", "n_recoveries", "snapshots")
+    keys = ("estimates", "runtime_s", "ess", "resampled", "max_loglik", "lost_steps", "n_recoveries", "snapshots", "n_particles", "injected")
     return {**{key: out[key] for key in keys}, "n_weight_resets": pf.n_weight_resets}
 
 
@@ -289,6 +337,9 @@ def run_protocol(
     snapshot_steps: tuple[int, ...] = (),
     mse_start: int = MSE_START_STEP,
     with_ape_rpe: bool = True,
+    kidnap_at_step: int | None = None,
+    kidnap_offset: tuple[float, float, float] = KIDNAP_OFFSET,
+    warn_lost: bool = True,
     **config_overrides: Any,
 ) -> PFRunResult:
     """Simulate the report's protocol on ``data`` (a LandmarkData) and run the filter once.
@@ -298,12 +349,13 @@ def run_protocol(
     the same Q the filter uses (``q``/``q_as`` of the config). ``n_particles`` (if given) overrides the
     config's. ``estimators`` (default: the config's)
     are all recorded; MSE uses ``lidarkit.eval.position_mse`` from step ``mse_start`` on.
+    ``kidnap_at_step`` / ``kidnap_offset``: teleport the simulated robot (see :func:`simulate`).
     """
     overrides = {k: v for k, v in dict(likelihood=likelihood, estimator=estimator, resampler=resampler, q_as=q_as).items() if v is not None}
     cfg = _resolve_config(config, n_particles, {**overrides, **config_overrides})
     data_seq, filter_seq = np.random.SeedSequence(seed).spawn(2)
     q_cov = resolve_q(cfg.q, cfg.q_as)
-    sim = simulate(data, np.random.default_rng(data_seq), q_cov, visible=visible)
+    sim = simulate(data, np.random.default_rng(data_seq), q_cov, visible=visible, kidnap_at_step=kidnap_at_step, kidnap_offset=kidnap_offset)
     pf = make_filter(data.landmarks.positions_xy, cfg, np.random.default_rng(filter_seq))
     estimators = tuple(estimators) if estimators else (cfg.estimator,)
     readings = sim.nearest if cfg.likelihood == "nearest" else sim.readings
@@ -315,6 +367,8 @@ def run_protocol(
             "seed": seed,
             "visible": visible,
             "mse_start": mse_start,
+            "kidnap_at_step": kidnap_at_step,
+            "kidnap_offset": list(kidnap_offset) if kidnap_at_step is not None else None,
             "odometry_noise_std": list(ODOMETRY_NOISE_STD),
             "q_cov": q_cov.tolist(),
             "data": str(getattr(data, "root", "")),
@@ -326,7 +380,8 @@ def run_protocol(
         **_filter_outputs(out, pf),
     )
     result.metrics = score_against_ground_truth(result, mse_start=mse_start, with_ape_rpe=with_ape_rpe)
-    _warn_lost(result)
+    if warn_lost:
+        _warn_lost(result)
     return result
 
 
@@ -365,6 +420,9 @@ def run_recorded(
     **config_overrides: Any,
 ) -> PFRunResult:
     """Run on the data's own odometry and SENSOR readings; report NIS consistency and distance to dead reckoning."""
+    if len(data.meas_range_m) < 2:
+        raise DataError(f"{len(data.meas_range_m)} SENSOR readings: the recorded mode needs at least 2 to judge Q by",
+                        source=str(getattr(data, "root", "recorded data")))
     cfg = _resolve_config(config, n_particles, config_overrides)
     pf = make_filter(data.landmarks.positions_xy, cfg, np.random.default_rng(seed))
     odo = np.asarray(data.odometry, dtype=np.float64)
@@ -385,9 +443,44 @@ def run_recorded(
         odometry_used=odo,
         **_filter_outputs(out, pf),
     )
-    result.metrics = consistency_metrics(out["nis"], result.estimate, dr, data, resolve_q(cfg.q, cfg.q_as))
+    q_cov = resolve_q(cfg.q, cfg.q_as)
+    nis = nis_values(out["innovations"], out["innovation_spread"] + q_cov)
+    result.metrics = consistency_metrics(nis, result.estimate, dr, data, q_cov)
+    if len(nis) >= 2:
+        q_fit = fit_q(out["innovations"], out["innovation_spread"], q_cov)
+        verdict = q_verdict(result.metrics["nis_mean"], q_cov)
+        result.metrics["q_fit_ml"] = q_fit.tolist()
+        result.metrics["q_verdict"] = {"status": verdict.status, "factor": verdict.factor, "text": verdict.text}
     _warn_lost(result)
     return result
+
+
+def fit_q_recorded(data, n_particles: int | None = None, seed: int = 0, *, config: PFConfig | None = None,
+                   max_rounds: int = 5, **config_overrides: Any) -> tuple[PFRunResult, list[PFRunResult]]:
+    """``--fit-q``: run on the recorded readings, take the ML Q of the innovations, run again with it; repeat
+    (the particle spread changes with Q) until the NIS mean is within [1.5, 2.5] or ``max_rounds`` re-runs.
+
+    Returns the first run and the re-runs (the last one is the answer; its config holds the fitted Q as variances).
+    """
+    from lidarkit.pf.consistency import NIS_CONSISTENT, at_lower_bound, scale_fit
+
+    first = run_recorded(data, n_particles, seed, config=config, **config_overrides)
+    runs: list[PFRunResult] = []
+    current = first
+    for _ in range(max_rounds):
+        if "q_fit_ml" not in current.metrics:
+            raise DataError("no readings to fit Q on", source="fit_q")
+        q_fit = np.asarray(current.metrics["q_fit_ml"])
+        if at_lower_bound(q_fit):  # the spread alone over-explains the innovations: scale Q by the ML scale instead
+            q_fit = np.asarray(current.settings["q_cov"]) * scale_fit(current.metrics["nis_mean"])
+        q_diag = np.diag(q_fit)
+        cfg = current.config.replace(q=(float(q_diag[0]), float(q_diag[1])), q_as="variance")
+        current = run_recorded(data, None, seed, config=cfg)
+        runs.append(current)
+        lo, hi = NIS_CONSISTENT
+        if lo <= current.metrics["nis_mean"] <= hi:
+            break
+    return first, runs
 
 
 def consistency_metrics(nis: np.ndarray, estimate: np.ndarray, dead_reckoning: np.ndarray, data, q_cov: np.ndarray) -> dict[str, Any]:
@@ -431,6 +524,7 @@ __all__ = [
     "SimulatedData",
     "StepReadings",
     "consistency_metrics",
+    "fit_q_recorded",
     "poses_to_trajectory",
     "run_filter",
     "run_protocol",
