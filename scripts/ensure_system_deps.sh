@@ -1,5 +1,7 @@
 #!/usr/bin/env sh
-# Make sure the system library Open3D loads (libusb-1.0) is present; install it with apt when root.
+# Make sure the system packages lidarkit needs are present; install the missing ones with apt when root:
+#   libusb-1.0   loaded by Open3D (required)
+#   chromium     the headless browser the report-page test opens (tests/test_report_browser.py)
 set -eu
 have_libusb() {
     ldconfig -p 2>/dev/null | grep -q 'libusb-1.0.so.0' && return 0
@@ -8,14 +10,26 @@ have_libusb() {
     done
     return 1
 }
-have_libusb && exit 0
+have_chromium() {
+    [ -n "${LIDARKIT_CHROMIUM:-}" ] && [ -x "${LIDARKIT_CHROMIUM}" ] && return 0
+    command -v chromium >/dev/null 2>&1 || command -v chromium-browser >/dev/null 2>&1 || command -v google-chrome >/dev/null 2>&1
+}
+missing=""
+have_libusb || missing="libusb-1.0-0"
+have_chromium || missing="$missing chromium"
+[ -z "$missing" ] && exit 0
 if [ "$(id -u)" = "0" ] && command -v apt-get >/dev/null 2>&1; then
-    echo "lidarkit setup: installing libusb-1.0-0 (needed by Open3D) with apt-get"
+    echo "lidarkit setup: installing$(printf ' %s' $missing) with apt-get"
     export DEBIAN_FRONTEND=noninteractive
     apt-get update -qq >/dev/null
-    apt-get install -y -qq libusb-1.0-0 >/dev/null
-    have_libusb && exit 0
+    # shellcheck disable=SC2086
+    apt-get install -y -qq $missing >/dev/null || true
 fi
+if ! have_chromium; then
+    echo "lidarkit setup: chromium (headless browser for the report test) is missing; that test will fail." >&2
+    echo "  Install it:  sudo apt-get install chromium   (or set LIDARKIT_CHROMIUM=/path/to/chrome)" >&2
+fi
+have_libusb && exit 0
 echo "lidarkit setup: Open3D needs the system library libusb-1.0, which is missing." >&2
 echo "  Install it, then re-run:  sudo apt-get install libusb-1.0-0   (Debian/Ubuntu)" >&2
 echo "                            sudo dnf install libusb1             (Fedora/RHEL)" >&2

@@ -114,7 +114,8 @@ def test_report_tables_are_mean_and_sample_std_over_seeds(results_dir):
 
     header, prow = pivot(table, "ape_rmse_m")
     assert header == ["method", "synth"]
-    assert ["walk: random_walk(noise_m=0.03, steps=40)", format_stat((mean, std, n))] in prow
+    # one experiment in the task: rows carry the method alone, not "walk: " on every row
+    assert ["random_walk(noise_m=0.03, steps=40)", format_stat((mean, std, n))] in prow
     md = report.markdown_path.read_text()
     assert "APE RMSE [m], methods x datasets:" in md
     assert "| walk | synth | random_walk(noise_m=0.03, steps=40) | 3/0 |" in md

@@ -27,6 +27,7 @@ from lidarkit import atomic
 from lidarkit.bench.jobs import Job
 from lidarkit.bench.results import load_results
 from lidarkit.errors import DataError
+from lidarkit.eval.statistics import summarize
 
 log = logging.getLogger(__name__)
 
@@ -51,6 +52,7 @@ class Row:
     n_ok: int
     n_failed: int
     stats: dict[str, tuple[float, float, int]]  # metric -> (mean, std, n)
+    summaries: dict[str, Any] = field(default_factory=dict)  # metric -> lidarkit.eval.Summary (median, bootstrap CI)
 
 
 @dataclass
@@ -65,6 +67,8 @@ class Plot:
     title: str
     filename: str
     png: bytes
+    task: str = ""
+    caption: str = ""
 
 
 @dataclass
@@ -78,6 +82,7 @@ class Report:
     warnings: list[tuple[str, str]] = field(default_factory=list)  # (job label, message)
     skipped: list[tuple[str, str]] = field(default_factory=list)  # experiments the last run skipped (name, reason)
     n_records: int = 0
+    publication: Any = None  # lidarkit.bench.publication.Publication (odometry tables, box plots)
     html_path: Path | None = None
     markdown_path: Path | None = None
     csv_path: Path | None = None
@@ -128,13 +133,15 @@ def aggregate(records: list[dict[str, Any]]) -> list[TaskTable]:
         rows = []
         for (experiment, dataset, method), items in sorted(groups.items(), key=lambda kv: order[kv[0]]):
             ok = [r for r in items if r.get("status") == "ok"]
-            stats = {}
+            stats, summaries = {}, {}
             for m in metrics:
                 if m.name == "runtime_s":
-                    stats[m.name] = _stats([r.get("runtime_s") for r in ok])
+                    values = [r.get("runtime_s") for r in ok]
                 else:
-                    stats[m.name] = _stats([r["metrics"].get(m.name) for r in ok])
-            rows.append(Row(task, experiment, dataset, method, len(ok), len(items) - len(ok), stats))
+                    values = [r["metrics"].get(m.name) for r in ok]
+                stats[m.name] = _stats(values)
+                summaries[m.name] = summarize([v for v in values if v is not None and math.isfinite(v)], seed=0)
+            rows.append(Row(task, experiment, dataset, method, len(ok), len(items) - len(ok), stats, summaries))
         tables.append(TaskTable(task, metrics, rows))
     return tables
 
@@ -230,7 +237,9 @@ def make_plots(records: list[dict[str, Any]]) -> list[Plot]:
             ax.set_aspect("equal", adjustable="datalim")
             ax.legend(fontsize=7)
             ax.set_title(f"trajectories: {where}", fontsize=9)
-            plots.append(Plot(f"Trajectories — {where}", f"traj_{_slug(where)}.png", _png(fig)))
+            plots.append(Plot(f"Trajectories — {where}", f"traj_{_slug(where)}.png", _png(fig), task,
+                              f"Top view of the estimated trajectories (first seed of each method) against the "
+                              f"reference (dashed): {experiment}, {dataset}."))
         chosen = _first_ok_per_method(items, "error_over_time")
         if chosen:
             fig, ax = plt.subplots(figsize=(6, 3.2))
@@ -243,7 +252,8 @@ def make_plots(records: list[dict[str, Any]]) -> list[Plot]:
             ax.set_ylabel(ylabel)
             ax.legend(fontsize=7)
             ax.set_title(f"error over time: {where}", fontsize=9)
-            plots.append(Plot(f"Error over time — {where}", f"err_{_slug(where)}.png", _png(fig)))
+            plots.append(Plot(f"Error over time — {where}", f"err_{_slug(where)}.png", _png(fig), task,
+                              f"{ylabel} over time per method: {experiment}, {dataset}."))
         chosen = _first_ok_per_method(items, "rmse_history")
         if chosen:
             fig, ax = plt.subplots(figsize=(6, 3.2))
@@ -257,7 +267,8 @@ def make_plots(records: list[dict[str, Any]]) -> list[Plot]:
             ax.set_yscale("log")
             ax.legend(fontsize=7)
             ax.set_title(f"ICP RMSE vs iteration: {where}", fontsize=9)
-            plots.append(Plot(f"RMSE vs iteration — {where}", f"rmse_{_slug(where)}.png", _png(fig)))
+            plots.append(Plot(f"RMSE vs iteration — {where}", f"rmse_{_slug(where)}.png", _png(fig), task,
+                              f"Correspondence RMSE per ICP iteration (first pair, log scale): {experiment}, {dataset}."))
     plots.extend(_sweep_plots(records))
     return plots
 
@@ -295,7 +306,8 @@ def _sweep_plots(records: list[dict[str, Any]]) -> list[Plot]:
             ax.set_xscale("log" if max(max(p) for p in lines.values()) / max(min(min(p) for p in lines.values()), 1e-12) >= 10 else "linear")
             ax.legend(fontsize=7)
             ax.set_title(f"{task}: {metric} vs {param} (mean ± std over seeds)", fontsize=9)
-            plots.append(Plot(f"{metric} vs {param} — {task}", f"sweep_{_slug(task + '_' + metric + '_' + param)}.png", _png(fig)))
+            plots.append(Plot(f"{metric} vs {param} — {task}", f"sweep_{_slug(task + '_' + metric + '_' + param)}.png", _png(fig),
+                              task, f"{metric} against {param}: mean ± std over seeds, one line per dataset and method."))
     return plots
 
 
@@ -315,8 +327,10 @@ def pivot(table: TaskTable, metric: str) -> tuple[list[str], list[list[str]]]:
     """Methods x datasets for one metric (``experiment: method`` rows, dataset columns, mean ± std cells)."""
     datasets = sorted({r.dataset for r in table.rows})
     cells: dict[str, dict[str, str]] = {}
+    one_experiment = len({r.experiment for r in table.rows}) == 1  # no prefix repeated on every row
     for r in table.rows:
-        cells.setdefault(f"{r.experiment}: {r.method}", {})[r.dataset] = format_stat(r.stats[metric])
+        label = r.method if one_experiment else f"{r.experiment}: {r.method}"
+        cells.setdefault(label, {})[r.dataset] = format_stat(r.stats[metric])
     header = ["method"] + datasets
     return header, [[label] + [row.get(d, "") for d in datasets] for label, row in cells.items()]
 
@@ -331,6 +345,10 @@ def _pivot_metrics(table: TaskTable) -> list[MetricInfo]:
 def _markdown(report: Report, title: str) -> str:
     out = [f"# {title}", "", f"Generated {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC from {report.n_records} job results "
            f"in `{report.out_dir}`. Cells: mean ± std over seeds (sample std).", ""]
+    header, rows = summary_rows(report)
+    if rows:
+        out += ["## Summary", "", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+        out += ["| " + " | ".join(c.replace("|", "\\|") for c in row) + " |" for row in rows] + [""]
     for table in report.tables:
         out += [f"## {table.task}", ""]
         for m in _pivot_metrics(table):
@@ -342,6 +360,15 @@ def _markdown(report: Report, title: str) -> str:
         out += ["All metrics:", "", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
         out += ["| " + " | ".join(c.replace("|", "\\|") for c in row) + " |" for row in rows]
         out.append("")
+    pub = report.publication
+    if pub is not None and pub.tables:
+        out += ["## Publication tables", "", f"Also as CSV and LaTeX (booktabs) in `{out_dir_name(report)}/tables/`.", ""]
+        out += [t.to_markdown() for t in pub.tables]
+        out += [f"![{caption}](plots/{path.name})\n\n{caption}\n" for caption, path in pub.boxplots]
+    if pub is not None and pub.comparisons:
+        header, rows = comparison_rows(pub.comparisons)
+        out += ["## Paired comparisons with the reference", "", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+        out += ["| " + " | ".join(c.replace("|", "\\|") for c in row) + " |" for row in rows] + [""]
     if report.plots:
         out += ["## Plots", ""] + [f"![{p.title}](plots/{p.filename})" for p in report.plots] + [""]
     if report.skipped:
@@ -353,15 +380,23 @@ def _markdown(report: Report, title: str) -> str:
     return "\n".join(out)
 
 
+def out_dir_name(report: Report) -> str:
+    return report.out_dir.name
+
+
 def _csv(report: Report) -> str:
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
-    writer.writerow(["task", "experiment", "dataset", "method", "metric", "mean", "std", "n", "n_ok", "n_failed"])
+    writer.writerow(["task", "experiment", "dataset", "method", "metric", "mean", "std", "n", "n_ok", "n_failed",
+                     "median", "ci95_low", "ci95_high"])
     for table in report.tables:
         for r in table.rows:
             for m in table.metrics:
                 mean, std, n = r.stats[m.name]
-                writer.writerow([r.task, r.experiment, r.dataset, r.method, m.name, repr(mean), repr(std), n, r.n_ok, r.n_failed])
+                s = r.summaries.get(m.name)
+                extra = [repr(s.median), repr(s.ci_low), repr(s.ci_high)] if s is not None else ["", "", ""]
+                writer.writerow([r.task, r.experiment, r.dataset, r.method, m.name, repr(mean), repr(std), n, r.n_ok,
+                                 r.n_failed, *extra])
     return buf.getvalue()
 
 
@@ -370,13 +405,103 @@ body{font-family:system-ui,sans-serif;margin:2em;max-width:1200px;color:#222}
 table{border-collapse:collapse;margin:1em 0;font-size:0.9em}
 th,td{border:1px solid #ccc;padding:3px 8px;text-align:right}
 th{background:#f0f0f0} td.l,th.l{text-align:left}
-figure{display:inline-block;margin:0.5em;vertical-align:top}
+figure{display:inline-block;margin:0.5em;vertical-align:top;max-width:560px}
+figure.table{display:block;max-width:none}
+section{margin-top:2em;border-top:1px solid #ddd}
+details{margin:0.5em 0}
 figcaption{font-size:0.85em;color:#555}
 .failed{color:#a00}
+tr.summary td{border-top:2px solid #444;font-style:italic}
+caption{font-weight:600;text-align:left;padding:2px 0}
 """
 
 
+def _pubtable_html(table) -> str:
+    """A :class:`lidarkit.eval.tables.PubTable` as an HTML table (best per row bold, summary rows set apart)."""
+    e = html.escape
+    best = table.best_mask()
+    rows = []
+    n = len(table.row_labels)
+    for i, label in enumerate(table.row_labels):
+        cls = ' class="summary"' if i >= n - table.n_summary_rows else ""
+        cells = "".join(f"<td><b>{e(table.cell(i, j))}</b></td>" if best[i, j] else f"<td>{e(table.cell(i, j))}</td>"
+                        for j in range(len(table.col_labels)))
+        rows.append(f'<tr{cls}><td class="l">{e(label)}</td>{cells}</tr>')
+    head = f'<th class="l">{e(table.corner)}</th>' + "".join(f"<th>{e(c)}</th>" for c in table.col_labels)
+    note = f"<figcaption>{e(table.note)}</figcaption>" if table.note else ""
+    return (f'<figure class="table"><table><caption>{e(table.title)}</caption><thead><tr>{head}</tr></thead>'
+            f"<tbody>{''.join(rows)}</tbody></table>{note}</figure>")
+
+
+def _table_html(header: list[str], rows: list[list[str]], n_left: int = 1, caption: str = "") -> str:
+    e = html.escape
+    head = "".join(f'<th class="l">{e(h)}</th>' if i < n_left else f"<th>{e(h)}</th>" for i, h in enumerate(header))
+    body = "".join(
+        "<tr>" + "".join(f'<td class="l">{e(c)}</td>' if i < n_left else f"<td>{e(c)}</td>" for i, c in enumerate(row)) + "</tr>"
+        for row in rows
+    )
+    cap = f"<caption>{e(caption)}</caption>" if caption else ""
+    return f"<table>{cap}<thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
+
+
+def _figure_html(png: bytes, alt: str, caption: str) -> str:
+    e = html.escape
+    data = base64.b64encode(png).decode("ascii")
+    return (f'<figure><img src="data:image/png;base64,{data}" alt="{e(alt)}" width="540">'
+            f"<figcaption>{e(caption)}</figcaption></figure>")
+
+
+def summary_rows(report: Report) -> tuple[list[str], list[list[str]]]:
+    """The page's first table: per task and dataset, the best method on the task's headline accuracy metric."""
+    header = ["section", "dataset", "headline metric", "best method", "value (mean ± std)", "methods"]
+    rows = []
+    for table in report.tables:
+        metric = next((m for m in table.metrics if m.kind == "accuracy"), None)
+        if metric is None:
+            continue
+        better_higher = _better_higher(table.task, metric.name)
+        for dataset in sorted({r.dataset for r in table.rows}):
+            candidates = [r for r in table.rows if r.dataset == dataset and r.stats[metric.name][2] > 0]
+            if not candidates:
+                continue
+            best = (max if better_higher else min)(candidates, key=lambda r: r.stats[metric.name][0])
+            rows.append([table.task, dataset, metric.label, _short_label(best, table), format_stat(best.stats[metric.name]),
+                         str(len({r.method for r in table.rows if r.dataset == dataset}))])
+    return header, rows
+
+
+def _better_higher(task: str, metric: str) -> bool:
+    try:
+        from lidarkit.bench.tasks import get_task
+
+        return any(m.name == metric and m.better == "higher" for m in get_task(task).metrics)
+    except Exception:  # noqa: BLE001 - metadata is optional for the report
+        return False
+
+
+def _short_label(row: Row, table: TaskTable) -> str:
+    return row.method if len({r.experiment for r in table.rows}) == 1 else f"{row.experiment}: {row.method}"
+
+
+def statistics_rows(table: TaskTable) -> tuple[list[str], list[list[str]]]:
+    """Per (dataset, method): the headline metric's n, mean, std, median and seeded 95 % bootstrap CI over seeds."""
+    metric = next((m for m in table.metrics if m.kind == "accuracy"), None)
+    header = ["dataset", "method", "n", "mean", "std", "median", "95 % CI (bootstrap)"]
+    if metric is None:
+        return header, []
+    rows = []
+    for r in table.rows:
+        s = r.summaries.get(metric.name)
+        if s is None or s.n == 0:
+            continue
+        rows.append([r.dataset, _short_label(r, table), str(s.n), _fmt(s.mean), _fmt(s.std) if s.n > 1 else "–",
+                     _fmt(s.median), f"[{_fmt(s.ci_low)}, {_fmt(s.ci_high)}]" if s.n > 1 else "–"])
+    return header, rows
+
+
 def _html(report: Report, title: str) -> str:
+    """One self-contained page: summary table first, then one section per task (tables, statistics, plots with
+    captions, and for odometry the publication tables and paired comparisons), then what did not run."""
     e = html.escape
     parts = [
         "<!DOCTYPE html>",
@@ -391,32 +516,49 @@ def _html(report: Report, title: str) -> str:
         f"<p>Generated {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC from {report.n_records} job results. "
         "Cells: mean ± std over seeds (sample std).</p>",
     ]
+    header, rows = summary_rows(report)
+    if rows:
+        parts += ['<section id="summary">', "<h2>Summary</h2>",
+                  _table_html(header, rows, n_left=4, caption="Best method per task and dataset on the headline metric"),
+                  "</section>"]
     for table in report.tables:
+        parts.append(f'<section id="task-{e(_slug(table.task))}">')
         parts.append(f"<h2>{e(table.task)}</h2>")
+        description = _task_description(table.task)
+        if description:
+            parts.append(f"<p>{e(description)}</p>")
         for m in _pivot_metrics(table):
             header, rows = pivot(table, m.name)
-            parts.append(f"<h3>{e(m.label)}: methods x datasets</h3>")
-            parts.append("<table>")
-            parts.append("<thead><tr>" + "".join(f'<th class="l">{e(h)}</th>' if i == 0 else f"<th>{e(h)}</th>" for i, h in enumerate(header)) + "</tr></thead>")
-            parts.append("<tbody>")
-            for row in rows:
-                parts.append("<tr>" + "".join(f'<td class="l">{e(c)}</td>' if i == 0 else f"<td>{e(c)}</td>" for i, c in enumerate(row)) + "</tr>")
-            parts.append("</tbody>")
-            parts.append("</table>")
+            parts.append(_table_html(header, rows, caption=f"{m.label}: methods x datasets"))
+        header, rows = statistics_rows(table)
+        if rows and any(r[2] not in ("0", "1") for r in rows):
+            parts.append(_table_html(header, rows, n_left=2, caption="Statistics over seeds of the headline metric"))
         header, rows = _table_rows(table)
-        parts.append("<h3>All metrics</h3>")
-        parts.append("<table>")
-        parts.append("<thead><tr>" + "".join(f'<th class="l">{e(h)}</th>' if i < 4 else f"<th>{e(h)}</th>" for i, h in enumerate(header)) + "</tr></thead>")
-        parts.append("<tbody>")
-        for row in rows:
-            parts.append("<tr>" + "".join(f'<td class="l">{e(c)}</td>' if i < 4 else f"<td>{e(c)}</td>" for i, c in enumerate(row)) + "</tr>")
-        parts.append("</tbody>")
-        parts.append("</table>")
-    if report.plots:
-        parts.append("<h2>Plots</h2>")
-        for p in report.plots:
-            data = base64.b64encode(p.png).decode("ascii")
-            parts.append(f'<figure><img src="data:image/png;base64,{data}" alt="{e(p.title)}" width="540"><figcaption>{e(p.title)}</figcaption></figure>')
+        parts.append("<details><summary>All metrics</summary>")
+        parts.append(_table_html(header, rows, n_left=4))
+        parts.append("</details>")
+        pub = report.publication
+        if table.task == "odometry" and pub is not None:
+            if pub.comparisons:
+                parts.append(_table_html(*comparison_rows(pub.comparisons), n_left=3,
+                                         caption="Paired comparisons with the reference (Wilcoxon signed-rank)"))
+            if pub.tables:
+                parts.append("<h3>Publication tables</h3>")
+                parts.append("<p>Also as Markdown, CSV and LaTeX (booktabs) in <code>tables/</code>. "
+                             "Bold: best method per row.</p>")
+                parts += [_pubtable_html(t) for t in pub.tables]
+                for caption, path in pub.boxplots:
+                    parts.append(_figure_html(path.read_bytes(), caption, caption))
+        task_plots = [p for p in report.plots if p.task == table.task]
+        if task_plots:
+            parts.append("<h3>Plots</h3>")
+            parts += [_figure_html(p.png, p.title, p.caption or p.title) for p in task_plots]
+        parts.append("</section>")
+    other = [p for p in report.plots if p.task not in {t.task for t in report.tables}]
+    if other:
+        parts.append("<section><h2>Other plots</h2>")
+        parts += [_figure_html(p.png, p.title, p.caption or p.title) for p in other]
+        parts.append("</section>")
     sections = (
         ("Experiments not run", [f"<li>{e(name)}: {e(reason)}</li>" for name, reason in report.skipped]),
         ("Warnings logged by jobs", [f"<li>{e(label)}: {e(message)}</li>" for label, message in report.warnings]),
@@ -426,9 +568,29 @@ def _html(report: Report, title: str) -> str:
     )
     for heading, items in sections:
         if items:
-            parts += [f"<h2>{heading}</h2>", "<ul>", *items, "</ul>"]
+            parts += [f"<section><h2>{heading}</h2>", "<ul>", *items, "</ul></section>"]
     parts += ["</body>", "</html>", ""]
     return "\n".join(parts)
+
+
+def comparison_rows(comparisons: list[Any]) -> tuple[list[str], list[list[str]]]:
+    """Rows of paired comparisons ``(dataset, PairedComparison)``: who, units, means, p, effect, verdict."""
+    header = ["dataset", "A", "B", "paired units", "mean A", "mean B", "p", "effect", "verdict"]
+    rows = []
+    for dataset, c in comparisons:
+        verdict = (f"{c.name_a if c.better == 'a' else c.name_b} better" if c.better else "no significant difference")
+        rows.append([dataset, c.name_a, c.name_b, f"{c.n_pairs} {c.pairing}s ({c.metric})", _fmt(c.mean_a),
+                     _fmt(c.mean_b), f"{c.p_value:.2g}", f"{c.effect_size:+.2f}", verdict])
+    return header, rows
+
+
+def _task_description(task: str) -> str:
+    try:
+        from lidarkit.bench.tasks import get_task
+
+        return get_task(task).description
+    except Exception:  # noqa: BLE001 - metadata is optional for the report
+        return ""
 
 
 def latest_per_job(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -473,6 +635,9 @@ def build_report(out_dir: str | Path, *, title: str | None = None, plots: bool =
         report.plots = make_plots(records)
         for p in report.plots:
             atomic.write_bytes(out_dir / "plots" / p.filename, p.png)
+    from lidarkit.bench.publication import build_publication
+
+    report.publication = build_publication(records, out_dir, plots=plots)
     report.markdown_path = atomic.write_text(out_dir / "report.md", _markdown(report, title))
     report.csv_path = atomic.write_text(out_dir / "report.csv", _csv(report))
     report.html_path = atomic.write_text(out_dir / "report.html", _html(report, title))

@@ -24,6 +24,8 @@ from lidarkit.cli import odometry_cmd  # noqa: E402,F401
 from lidarkit.cli import sim_cmd  # noqa: E402,F401
 from lidarkit.cli import bench_cmd  # noqa: E402,F401
 from lidarkit.cli import icp_cmd  # noqa: E402,F401
+from lidarkit.cli import compare_cmd  # noqa: E402,F401
+from lidarkit.cli import baseline_cmd  # noqa: E402,F401
 
 __all__ = ["app", "main"]
 

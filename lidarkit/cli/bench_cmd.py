@@ -108,15 +108,34 @@ def bench(
     force: bool = typer.Option(False, "--force", help="Rerun jobs that already have a result."),
     report: bool = typer.Option(True, "--report/--no-report", help="Write the report when the run ends."),
     dry_run: bool = typer.Option(False, "--dry-run", help="Validate and list the jobs, run nothing."),
+    data: Optional[Path] = typer.Option(None, "--data", help="`bench kitti` only: the KITTI odometry root (sequences/, poses/)."),
+    methods: Optional[str] = typer.Option(None, "--methods", help="`bench kitti` only: comma-separated variants (default: the bundled strong ones)."),
+    sequences: Optional[str] = typer.Option(None, "--sequences", help="`bench kitti` only: comma-separated sequences (default 00-10)."),
     max_jobs: int = typer.Option(100_000, "--max-jobs", min=1, help="Refuse a suite that expands to more jobs."),
 ) -> None:
-    """Run a benchmark suite: validate it, expand it into jobs, run the unfinished ones, write one JSON per job."""
+    """Run a benchmark suite: validate it, expand it into jobs, run the unfinished ones, write one JSON per job.
+
+    `lidarkit bench kitti --data ROOT` runs the bundled KITTI suite (sequences 00-10 x strong variants) and prints
+    the KISS-ICP-paper table (drift per sequence with the devkit average row)."""
     from lidarkit.bench.report import build_report
     from lidarkit.bench.suite import load_suite
 
     from lidarkit.atomic import check_target
 
-    suite = load_suite(suite_file, max_jobs=max_jobs)
+    kitti = str(suite_file) == "kitti" and not suite_file.exists()
+    if kitti:
+        from lidarkit.bench.kitti import kitti_suite
+
+        if data is None:
+            raise typer.BadParameter("`lidarkit bench kitti` needs --data /path/to/kitti/dataset", param_hint="--data")
+        out = out or Path("results") / "kitti"
+        check_target(out, "folder")
+        split = (lambda text: [x.strip() for x in text.split(",") if x.strip()] if text else None)
+        suite = kitti_suite(data, out, methods=split(methods), sequences=split(sequences))
+    else:
+        if data is not None or methods is not None or sequences is not None:
+            raise typer.BadParameter("--data/--methods/--sequences apply to `lidarkit bench kitti` only", param_hint="--data")
+        suite = load_suite(suite_file, max_jobs=max_jobs)
     out = out or Path("results") / suite_file.stem
     check_target(out, "folder")
     if dry_run:
@@ -135,6 +154,11 @@ def bench(
     print_run_summary(summary)
     if report:
         built = build_report(out, only_keys={job.key() for job in suite.jobs})
+        if kitti:
+            from lidarkit.bench.kitti import paper_table
+
+            stdout().print(paper_table(built) or "no sequence long enough for KITTI drift (100 m)", soft_wrap=True,
+                           markup=False)
         stdout().print(f"report: {built.html_path}", soft_wrap=True)
 
 
@@ -153,3 +177,6 @@ def report_cmd(
         out.print(table)
     out.print(f"{built.n_records} results, {len(built.failures)} failed; {len(built.plots)} plots")
     out.print(f"markdown: {built.markdown_path}\ncsv: {built.csv_path}\nhtml: {built.html_path}", soft_wrap=True)
+    publication = getattr(built, "publication", None)
+    if publication is not None and publication.tables:
+        out.print(f"publication tables (Markdown, CSV, LaTeX): {built.out_dir / 'tables'}", soft_wrap=True)

@@ -49,6 +49,9 @@ def demo_command(
     if result.report is not None:
         for table in summary_table(result.report):
             console.print(table)
+        publication = getattr(result.report, "publication", None)
+        for dataset, comparison in getattr(publication, "comparisons", []) or []:
+            console.print(f"{dataset}: {comparison.verdict()}", soft_wrap=True, markup=False)
         console.print(f"report: {result.report.html_path}  (also report.md, report.csv)", soft_wrap=True)
     else:
         console.print("no benchmark experiment could run (see the skipped list above)")

@@ -43,6 +43,9 @@ def eval_command(
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write all results as JSON here."),
     plot: Optional[Path] = typer.Option(None, "--plot", help="Write a PNG: trajectories, APE/RPE over time, drift."),
     markdown: Optional[Path] = typer.Option(None, "--markdown", help="Write a Markdown report here."),
+    tables: Optional[Path] = typer.Option(
+        None, "--tables", help="Write publication tables (KITTI drift per length/speed, APE/RPE) as .md/.csv/.tex "
+        "and a per-segment box plot into this folder."),
     relations: Optional[Path] = typer.Option(
         None, "--relations", help="Score the one trajectory given against a .relations file (Kümmerle et al. 2009) instead."
     ),
@@ -77,6 +80,7 @@ def eval_command(
         raise typer.BadParameter("missing EST (the estimated trajectory file)")
     atomic.check_target(markdown, "file")
     atomic.check_target(plot, "figure")
+    atomic.check_target(tables, "folder")
     ref_traj = load(ref, ref_format, ref_times)
     est_traj = load(est, est_format, est_times)
     settings = EvaluationSettings(
@@ -104,6 +108,18 @@ def eval_command(
     if markdown is not None:
         atomic.write_text(markdown, report.evaluation_markdown(evaluation))
         console.print(f"wrote {markdown}")
+    if tables is not None:
+        from lidarkit.eval.tables import SegmentErrors, publication_tables
+
+        key = (ref_traj.name or ref.stem, est_traj.name or est.stem)
+        segments = {key: SegmentErrors.from_drift(evaluation.drift)} if evaluation.drift is not None else None
+        pub = publication_tables(segments, {key: evaluation.ape.rmse}, {key: evaluation.rpe.rmse})
+        written = pub.write(tables)
+        if segments:
+            from lidarkit.eval.plots import plot_segment_boxplots
+
+            written.append(plot_segment_boxplots(segments, tables / "segments_translation_pct.png"))
+        console.print(f"wrote {len(written)} table/plot files to {tables}", soft_wrap=True)
     if plot is not None:
         from lidarkit.eval import plots
 

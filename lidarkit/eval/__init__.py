@@ -1,4 +1,5 @@
-"""Evaluation layer: APE/RPE (evo), KITTI devkit drift, position MSE; reports and plots on top.
+"""Evaluation layer: APE/RPE (evo), KITTI devkit drift, position MSE, statistics over runs and paired
+comparisons; reports and plots on top.
 
 Every metric takes ``(ref, est)`` lidarkit Trajectories of equal length (frame-aligned) unless it says
 otherwise, never modifies them, and returns a frozen result with ``.to_dict()``. Plots live in
@@ -25,8 +26,10 @@ from lidarkit.eval.kitti_drift import (
     drift_segments_possible,
     kitti_drift,
 )
+from lidarkit.eval.compare import compare
 from lidarkit.eval.mse import position_mse
 from lidarkit.eval.pairing import paired
+from lidarkit.eval.statistics import PairedComparison, Summary, bootstrap_ci, paired_test, summarize
 from lidarkit.eval.relations import RelationError, relation_error
 
 __all__ = [
@@ -40,16 +43,22 @@ __all__ = [
     "DriftResult",
     "DriftRow",
     "Evaluation",
+    "PairedComparison",
+    "Summary",
     "EvaluationSettings",
     "RPEResult",
     "RelationError",
     "align_trajectory",
+    "bootstrap_ci",
+    "compare",
     "ape",
     "drift_segments_possible",
     "evaluate",
     "kitti_drift",
     "paired",
+    "paired_test",
     "position_mse",
     "relation_error",
     "rpe",
+    "summarize",
 ]

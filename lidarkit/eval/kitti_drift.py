@@ -50,7 +50,7 @@ class DriftRow:
 class DriftResult:
     """KITTI drift of an estimate: pooled means plus the per-length table and per-segment arrays.
 
-    Per-segment arrays (``(S,)``): ``segment_first_frame`` (int), ``segment_length_m``,
+    Per-segment arrays (``(S,)``): ``segment_first_frame``, ``segment_last_frame`` (int), ``segment_length_m``,
     ``segment_translation_pct``, ``segment_rotation_deg_per_100m``. When no segment fits (reference
     shorter than the shortest length and ``allow_empty=True``), ``n_segments == 0`` and the means are NaN.
     """
@@ -64,6 +64,7 @@ class DriftResult:
     ref_name: str = ""
     est_name: str = ""
     segment_first_frame: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64), repr=False)
+    segment_last_frame: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64), repr=False)
     segment_length_m: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
     segment_translation_pct: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
     segment_rotation_deg_per_100m: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
@@ -172,6 +173,7 @@ def kitti_drift(
         ref_name=ref.name,
         est_name=est.name,
         segment_first_frame=a,
+        segment_last_frame=b,
         segment_length_m=seg_len_m,
         segment_translation_pct=t_seg,
         segment_rotation_deg_per_100m=r_seg,

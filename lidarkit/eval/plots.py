@@ -134,3 +134,24 @@ def plot_evaluation(evaluation: Evaluation, path: str | os.PathLike, *, plane: s
         handles = ax.get_legend_handles_labels()[0] + ax2.get_legend_handles_labels()[0]
         ax.legend(handles, [h.get_label() for h in handles], fontsize=8, loc="upper right")
     return save_figure(fig, path)
+
+
+def plot_segment_boxplots(grid, path: str | os.PathLike, quantity: str = "translation_pct") -> Path:
+    """Box plots of the per-segment KITTI errors, one box per method (segments pooled over sequences).
+
+    ``grid`` maps ``(sequence, method)`` to :class:`lidarkit.eval.tables.SegmentErrors`.
+    """
+    from lidarkit.eval.tables import QUANTITIES
+
+    methods = list(dict.fromkeys(m for _, m in grid))
+    data = [np.concatenate([getattr(s, quantity) for (_, m), s in grid.items() if m == method] or [np.zeros(0)])
+            for method in methods]
+    fig = _figure(max(4.0, 0.9 * len(methods) + 2.0), 3.6)
+    ax = fig.add_subplot(1, 1, 1)
+    ax.boxplot([d if d.size else [np.nan] for d in data], showfliers=True, flierprops={"markersize": 2})
+    ax.set_xticks(range(1, len(methods) + 1), methods, rotation=20, ha="right", fontsize=8)
+    ax.set_ylabel(QUANTITIES.get(quantity, quantity))
+    ax.set_title(f"per-segment KITTI {QUANTITIES.get(quantity, quantity)} ({sum(d.size for d in data)} segments)",
+                 fontsize=9)
+    ax.grid(axis="y", alpha=0.3)
+    return save_figure(fig, path)

@@ -60,6 +60,31 @@ def trajectory_series(ref_xyz: np.ndarray | None, est_xyz: np.ndarray, times_s: 
     return series
 
 
+def drift_segments(result: Any) -> dict[str, list[float]] | None:
+    """Per-segment KITTI errors of an odometry result (for pooled averages, per-speed tables and box plots)."""
+    from lidarkit import eval as leval
+    from lidarkit.eval.tables import KITTI_FRAME_PERIOD_S, SegmentErrors
+    from lidarkit.odometry.metrics import paired
+
+    if result.ground_truth is None:
+        return None
+    ref, est = paired(result.ground_truth, result.trajectory)
+    if not leval.drift_segments_possible(ref):
+        return None
+    period = KITTI_FRAME_PERIOD_S
+    if ref.timestamps_s is not None and len(ref) > 1:
+        period = float(np.median(np.diff(ref.timestamps_s)))
+    return SegmentErrors.from_drift(leval.kitti_drift(ref, est), frame_period_s=period).to_dict()
+
+
+def seeded_dataset(job: Job) -> dict[str, Any]:
+    """The job's dataset spec; a simulated sequence without its own ``seed`` is seeded by the job's seed, so
+    ``seeds: 10`` in a suite runs a method over 10 different simulated drives (the unit of a paired test)."""
+    if job.dataset.get("kind") == "sim_lidar" and "seed" not in job.dataset:
+        return {**job.dataset, "seed": int(job.seed)}
+    return job.dataset
+
+
 class OdometryTask(Task):
     description = "sequence odometry with an ICP variant (APE, RPE, KITTI drift, frame rate)"
     dataset_kinds = ("kitti", "folder", "sim_lidar", "kitti_raw")
@@ -98,29 +123,45 @@ class OdometryTask(Task):
         get_icp(method, **params)
 
     def run(self, job: Job) -> TaskOutput:
-        from lidarkit.odometry import run
+        return run_odometry_job(job)[1]
 
-        options = OdometryOptions(**job.options)
-        sequence = open_dataset_spec(job.dataset)
-        result = run(sequence, job.method, params=dict(job.params), frames=options.frames)
-        m = result.metrics
-        metrics = {
-            "ape_se3_rmse_m": _get(m, "ape_translation_se3_m", "stats", "rmse"),
-            "ape_rmse_m": _get(m, "ape_translation_m", "stats", "rmse"),
-            "rpe_trans_rmse_m": _get(m, "rpe_translation_m", "stats", "rmse"),
-            "rpe_rot_rmse_deg": _get(m, "rpe_rotation_deg", "stats", "rmse"),
-            "drift_translation_pct": _get(m, "kitti_drift", "translation_pct"),
-            "drift_rotation_deg_per_100m": _get(m, "kitti_drift", "rotation_deg_per_100m"),
-            "final_error_m": _get(m, "final_error", "translation_m"),
-            "hz": float(result.fps),
-            "n_frames": float(len(result.frames)),
-            "n_not_converged": float(result.n_not_converged),
-            "n_bad_frames": float(result.n_bad_frames),
-        }
-        metrics = {k: v for k, v in metrics.items() if v is not None}
-        est = result.trajectory
-        times = est.timestamps_s if est.timestamps_s is not None else np.arange(len(est)) * 0.1
-        ref_xyz = None if result.ground_truth is None else result.ground_truth.positions_xyz
-        series = trajectory_series(ref_xyz, est.positions_xyz, np.asarray(times, dtype=float))
-        info = {"odometry_metrics": m, "config": result.config, "metric_alignment": METRIC_ALIGNMENT_BY_NAME}
-        return TaskOutput(metrics=metrics, series=series, info=info)
+
+def scalar_metrics(result: Any) -> dict[str, float]:
+    """The bench metrics (``ape_rmse_m``, ``drift_translation_pct``, ...) of an :class:`OdometryResult`."""
+    m = result.metrics
+    metrics = {
+        "ape_se3_rmse_m": _get(m, "ape_translation_se3_m", "stats", "rmse"),
+        "ape_rmse_m": _get(m, "ape_translation_m", "stats", "rmse"),
+        "rpe_trans_rmse_m": _get(m, "rpe_translation_m", "stats", "rmse"),
+        "rpe_rot_rmse_deg": _get(m, "rpe_rotation_deg", "stats", "rmse"),
+        "drift_translation_pct": _get(m, "kitti_drift", "translation_pct"),
+        "drift_rotation_deg_per_100m": _get(m, "kitti_drift", "rotation_deg_per_100m"),
+        "final_error_m": _get(m, "final_error", "translation_m"),
+        "hz": float(result.fps),
+        "n_frames": float(len(result.frames)),
+        "n_not_converged": float(result.n_not_converged),
+        "n_bad_frames": float(result.n_bad_frames),
+    }
+    metrics = {k: v for k, v in metrics.items() if v is not None}
+    return metrics
+
+
+def run_odometry_job(job: Job) -> tuple[Any, TaskOutput]:
+    """The odometry result of ``job`` and its task output (metrics, plot series, config), for the task and for
+    golden baselines (which also keep the trajectory)."""
+    from lidarkit.odometry import run
+
+    options = OdometryOptions(**job.options)
+    sequence = open_dataset_spec(seeded_dataset(job))
+    result = run(sequence, job.method, params=dict(job.params), frames=options.frames)
+    m = result.metrics
+    metrics = scalar_metrics(result)
+    est = result.trajectory
+    times = est.timestamps_s if est.timestamps_s is not None else np.arange(len(est)) * 0.1
+    ref_xyz = None if result.ground_truth is None else result.ground_truth.positions_xyz
+    series = trajectory_series(ref_xyz, est.positions_xyz, np.asarray(times, dtype=float))
+    segments = drift_segments(result)
+    if segments is not None:
+        series["drift_segments"] = segments
+    info = {"odometry_metrics": m, "config": result.config, "metric_alignment": METRIC_ALIGNMENT_BY_NAME}
+    return result, TaskOutput(metrics=metrics, series=series, info=info)

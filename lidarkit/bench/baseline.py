@@ -1,0 +1,487 @@
+"""Golden baselines: a suite's results pinned under a protocol manifest, and a check that re-runs and compares.
+
+``record(suite, out)`` runs every job ``repeats`` times (in this process, one after the other), keeps the
+first run's trajectory and metrics, and measures the run-to-run spread (kiss-icp is not bit-reproducible
+across thread schedules) to set each metric's band. The manifest pins what makes a number reproducible:
+library versions, the method's resolved config, checksums of the dataset files, the KITTI angle correction,
+the instant poses refer to (deskew reference), the evaluation settings and the platform.
+
+``check(folder)`` re-runs the pinned jobs. A job whose protocol differs reports ``protocol changed: ...``
+(its numbers are not comparable, whatever they are); otherwise a metric outside its band on the worse side
+is ``regression: ...``; outside on the better side ``improved: ...`` (passes; re-record to tighten).
+
+Layout: ``DIR/manifest.json``, ``DIR/suite.yaml`` (the suite as recorded), ``DIR/jobs/<key>/metrics.json``
+and, for odometry jobs, ``DIR/jobs/<key>/poses_kitti.txt``.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import hashlib
+import json
+import logging
+import math
+import os
+import platform
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lidarkit import atomic
+from lidarkit.bench.jobs import Job, canonical_json
+from lidarkit.errors import ConfigError, DataError, LidarKitError
+
+log = logging.getLogger(__name__)
+
+SCHEMA = "lidarkit-baseline/1"
+MANIFEST = "manifest.json"
+#: packages whose version is part of the protocol (lidarkit itself is what a check tests: noted, not a change)
+PROTOCOL_PACKAGES = ("kiss-icp", "open3d", "numpy", "scipy", "evo", "small_gicp")
+#: band = max(NOISE_FACTOR * run-to-run std, ABSOLUTE_FLOOR[metric], RELATIVE_FLOOR * |value|)
+NOISE_FACTOR = 4.0
+RELATIVE_FLOOR = 0.02
+ABSOLUTE_FLOOR = {
+    "drift_translation_pct": 0.05,  # re-runs of one method on KITTI differ by 0.05-0.1 pp across setups
+    "drift_rotation_deg_per_100m": 0.005,
+    "ape_rmse_m": 0.01,
+    "final_error_m": 0.01,
+    "rpe_trans_rmse_m": 0.001,
+    "rpe_rot_rmse_deg": 0.001,
+}
+DEFAULT_FLOOR = 1e-9
+HIGHER_IS_BETTER = frozenset({"hz", "converged_fraction"})
+
+
+def _utc() -> str:
+    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+
+
+def environment() -> dict[str, Any]:
+    """Versions of lidarkit and the protocol packages, and the platform."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    from lidarkit import __version__
+
+    packages = {}
+    for name in PROTOCOL_PACKAGES:
+        try:
+            packages[name] = version(name)
+        except PackageNotFoundError:
+            packages[name] = None
+    return {
+        "lidarkit": __version__,
+        "packages": packages,
+        "platform": {"system": platform.system(), "machine": platform.machine()},
+        "python": platform.python_version(),
+    }
+
+
+def evaluation_settings() -> dict[str, Any]:
+    """How the odometry metrics are computed (what ``lidarkit.odometry.odometry_metrics`` does)."""
+    from lidarkit.eval.kitti_drift import KITTI_LENGTHS_M, KITTI_STEP_FRAMES
+
+    return {"kitti_segment_lengths_m": list(KITTI_LENGTHS_M), "kitti_step_frames": KITTI_STEP_FRAMES,
+            "ape_alignment": "none", "rpe_delta": "1 frame", "frame_pairing": "by index"}
+
+
+# ---------------------------------------------------------------- protocol of one job
+
+
+def _sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(chunk)
+    return digest.hexdigest()
+
+
+def dataset_files(spec: Mapping[str, Any]) -> list[Path]:
+    """The files a dataset spec reads: every file under its path (a KITTI sequence also its ``poses/NN.txt``)."""
+    from lidarkit.bench.datasets import PATHLESS_KINDS, dataset_path
+
+    if spec.get("kind") in PATHLESS_KINDS:
+        return []
+    root = Path(dataset_path(dict(spec)))
+    files = [root] if root.is_file() else sorted(p for p in root.rglob("*") if p.is_file())
+    if root.is_dir() and root.parent.name == "sequences":
+        poses = root.parent.parent / "poses" / f"{root.name}.txt"
+        if poses.is_file():
+            files.append(poses)
+    return files
+
+
+def dataset_checksums(spec: Mapping[str, Any], cache: dict[str, str] | None = None) -> dict[str, str]:
+    """``{relative file: sha256}`` of a dataset spec's files; a generated dataset gives its config's hash."""
+    from lidarkit.bench.datasets import PATHLESS_KINDS, dataset_path
+
+    if spec.get("kind") in PATHLESS_KINDS:
+        return {"<generated>": hashlib.sha256(canonical_json(dict(spec)).encode()).hexdigest()}
+    root = Path(dataset_path(dict(spec)))
+    base = root.parent.parent if root.parent.name == "sequences" else root.parent
+    out = {}
+    for path in dataset_files(spec):
+        key = str(path)
+        if cache is not None and key in cache:
+            digest = cache[key]
+        else:
+            digest = _sha256(path)
+            if cache is not None:
+                cache[key] = digest
+        out[str(path.relative_to(base)) if path.is_relative_to(base) else str(path)] = digest
+    return out
+
+
+def _angle_correction(dataset: Any) -> Any:
+    for attr in ("angle_correction", "correct_angle", "correct_vertical_angle", "_correct"):
+        value = getattr(dataset, attr, None)
+        if isinstance(value, (bool, str)):
+            return value
+    return None
+
+
+def _pose_instant(dataset: Any, result: Any) -> Any:
+    gt = getattr(result, "ground_truth", None)
+    if gt is not None and isinstance(getattr(gt, "meta", None), dict) and gt.meta.get("pose_instant"):
+        return gt.meta["pose_instant"]
+    config = getattr(dataset, "config", None)
+    return getattr(config, "pose_instant", None)
+
+
+def _jsonable(value: Any) -> Any:
+    from lidarkit.eval.report import json_safe
+
+    return json_safe(value)
+
+
+@dataclass
+class JobRun:
+    """One execution of a job: metrics, the estimated trajectory (odometry) and the job's protocol."""
+
+    metrics: dict[str, float]
+    trajectory: Any
+    protocol: dict[str, Any]
+
+
+def run_job(job: Job, checksum_cache: dict[str, str] | None = None) -> JobRun:
+    """Run ``job`` in this process and collect its protocol (config, data checksums, angle correction, instant)."""
+    from lidarkit.bench.tasks import get_task
+
+    protocol: dict[str, Any] = {"dataset": dict(job.dataset), "checksums": dataset_checksums(job.dataset, checksum_cache)}
+    if job.task == "odometry":
+        from lidarkit.bench.tasks._datasets import open_dataset_spec
+        from lidarkit.bench.tasks.odometry import run_odometry_job, seeded_dataset
+
+        result, output = run_odometry_job(job)
+        dataset = open_dataset_spec(seeded_dataset(job))
+        config = dict(result.config.get("method_config", result.config)) if isinstance(result.config, dict) else {}
+        protocol.update(
+            method_config=_jsonable(config),
+            kitti_angle_correction=_angle_correction(dataset),
+            pose_instant=_pose_instant(dataset, result),
+            deskew=_jsonable(_find_key(result.config, "deskew")),
+        )
+        return JobRun(dict(output.metrics), result.trajectory, protocol)
+    output = get_task(job.task).run(job)
+    protocol["method_config"] = _jsonable(output.info.get("method_config") or output.info.get("config") or {})
+    return JobRun(dict(output.metrics), None, protocol)
+
+
+def _find_key(data: Any, key: str) -> Any:
+    if isinstance(data, dict):
+        if key in data:
+            return data[key]
+        for value in data.values():
+            found = _find_key(value, key)
+            if found is not None:
+                return found
+    return None
+
+
+def _band(metric: str, value: float, std: float) -> float:
+    floor = ABSOLUTE_FLOOR.get(metric, DEFAULT_FLOOR)
+    return float(max(NOISE_FACTOR * std, floor, RELATIVE_FLOOR * abs(value)))
+
+
+def checked_metrics(task: str, metrics: Mapping[str, Any]) -> list[str]:
+    """The accuracy metrics of ``task`` present in ``metrics`` (speed depends on the machine: never checked)."""
+    try:
+        from lidarkit.bench.tasks import get_task
+
+        declared = [m.name for m in get_task(task).metrics if m.kind != "speed"]
+    except LidarKitError:
+        declared = []
+    names = [m for m in declared if isinstance(metrics.get(m), (int, float))]
+    return names or sorted(k for k, v in metrics.items() if isinstance(v, (int, float)) and k not in ("hz", "n_frames"))
+
+
+# ---------------------------------------------------------------- record
+
+
+@dataclass
+class Baseline:
+    """A loaded baseline folder."""
+
+    path: Path
+    manifest: dict[str, Any]
+
+    @property
+    def jobs(self) -> list[dict[str, Any]]:
+        return self.manifest["jobs"]
+
+    def job(self, method: str | None = None, dataset: str | None = None) -> dict[str, Any]:
+        """The one pinned job with this method label (or name) and dataset name; DataError if none or several."""
+        found = [j for j in self.jobs if (method is None or method in (j["label"], j["spec"]["method"]))
+                 and (dataset is None or j["spec"]["dataset_name"] == dataset)]
+        if len(found) != 1:
+            labels = ", ".join(f"{j['label']} on {j['spec']['dataset_name']}" for j in self.jobs)
+            raise DataError(f"{len(found)} pinned jobs match method={method!r} dataset={dataset!r}; pinned: {labels}",
+                            source=self.path)
+        return found[0]
+
+    def metrics(self, method: str | None = None, dataset: str | None = None) -> dict[str, float]:
+        return dict(self.job(method, dataset)["metrics"])
+
+    def trajectory(self, method: str | None = None, dataset: str | None = None):
+        from lidarkit.trajectory import Trajectory
+
+        job = self.job(method, dataset)
+        path = self.path / "jobs" / job["key"] / "poses_kitti.txt"
+        if not path.is_file():
+            raise DataError("this pinned job has no trajectory (not an odometry job)", source=path)
+        return Trajectory.from_kitti(path, name=job["label"])
+
+
+def record(
+    suite_path: str | os.PathLike,
+    out_dir: str | os.PathLike,
+    *,
+    repeats: int = 3,
+    on_job: Callable[[Job, int], None] | None = None,
+) -> Baseline:
+    """Run ``suite_path`` ``repeats`` times and write the baseline folder ``out_dir`` (all or nothing, through
+    :func:`lidarkit.atomic.run_folder`: a failed run leaves no partial baseline)."""
+    from lidarkit.bench.suite import load_suite
+
+    if int(repeats) != repeats or repeats < 1:
+        raise ConfigError(f"repeats must be a positive integer, got {repeats}", source="repeats")
+    suite = load_suite(suite_path)
+    out = Path(out_dir)
+    atomic.check_target(out, "folder")
+    cache: dict[str, str] = {}
+    jobs = []
+    with atomic.run_folder(out) as tmp:
+        for job in suite.jobs:
+            runs = []
+            for r in range(int(repeats)):
+                if on_job is not None:
+                    on_job(job, r)
+                runs.append(run_job(job, cache))
+            first = runs[0]
+            key = job.key()
+            names = checked_metrics(job.task, first.metrics)
+            noise = {m: float(np.std([run.metrics[m] for run in runs], ddof=1)) if len(runs) > 1 else 0.0 for m in names}
+            bands = {m: _band(m, float(first.metrics[m]), noise[m]) for m in names}
+            folder = tmp / "jobs" / key
+            atomic.write_text(folder / "metrics.json", json.dumps(_jsonable(first.metrics), indent=1, sort_keys=True) + "\n")
+            if first.trajectory is not None:
+                first.trajectory.to_kitti(folder / "poses_kitti.txt")
+            jobs.append({
+                "key": key, "label": job.method_label, "spec": job.spec(), "protocol": first.protocol,
+                "metrics": _jsonable(first.metrics), "checked": names, "noise_std": noise, "bands": bands,
+                "repeats": [_jsonable(run.metrics) for run in runs],
+            })
+        atomic.write_text(tmp / "suite.yaml", Path(suite_path).read_text(encoding="utf-8"))
+        manifest = {"schema": SCHEMA, "created_utc": _utc(), "suite": suite.name, "repeats": int(repeats),
+                    "environment": environment(), "evaluation": evaluation_settings(),
+                    "band_rule": f"max({NOISE_FACTOR:g} x run-to-run std, per-metric floor, {RELATIVE_FLOOR:g} x value)",
+                    "jobs": jobs}
+        atomic.write_text(tmp / MANIFEST, json.dumps(_jsonable(manifest), indent=1) + "\n")
+    return load_baseline(out)
+
+
+def load_baseline(path: str | os.PathLike) -> Baseline:
+    """A baseline folder; DataError when the folder, its manifest or a field of it is missing or corrupt."""
+    path = Path(path)
+    if not path.is_dir():
+        raise DataError("baseline folder does not exist", source=path)
+    manifest_path = path / MANIFEST
+    if not manifest_path.is_file():
+        raise DataError(f"no {MANIFEST}: not a baseline folder (write one with `lidarkit baseline record`)", source=path)
+    try:
+        manifest = json.loads(manifest_path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as err:
+        raise DataError(f"corrupt manifest: not readable JSON ({err})", source=manifest_path) from None
+    if not isinstance(manifest, dict) or manifest.get("schema") != SCHEMA:
+        found = manifest.get("schema") if isinstance(manifest, dict) else type(manifest).__name__
+        raise DataError(f"corrupt manifest: schema {found!r}, expected {SCHEMA!r}", source=manifest_path)
+    for key in ("environment", "evaluation", "jobs"):
+        if key not in manifest:
+            raise DataError(f"corrupt manifest: no {key!r}", source=manifest_path)
+    if not isinstance(manifest["jobs"], list) or not manifest["jobs"]:
+        raise DataError("corrupt manifest: no pinned jobs", source=manifest_path)
+    for i, job in enumerate(manifest["jobs"]):
+        missing = [k for k in ("key", "label", "spec", "protocol", "metrics", "checked", "bands") if k not in job]
+        if missing:
+            raise DataError(f"corrupt manifest: job {i} lacks {', '.join(missing)}", source=manifest_path)
+        try:
+            Job.from_spec(job["spec"])
+        except TypeError as err:
+            raise DataError(f"corrupt manifest: job {i} has a bad spec ({err})", source=manifest_path) from None
+    return Baseline(path, manifest)
+
+
+def measured_noise(path: str | os.PathLike, metric: str | None) -> float:
+    """The widest band a baseline folder recorded for ``metric`` (its run-to-run noise allowance, metric unit);
+    ConfigError when no pinned job checks that metric."""
+    baseline = load_baseline(path)
+    bands = [float(job["bands"][metric]) for job in baseline.jobs if metric in job.get("bands", {})]
+    if not bands:
+        known = sorted({m for job in baseline.jobs for m in job.get("bands", {})})
+        raise ConfigError(f"no band for metric {metric!r} in this baseline (it has: {', '.join(known)}); "
+                          "name the metric with --metric", source=baseline.path)
+    return max(bands)
+
+
+# ---------------------------------------------------------------- check
+
+
+@dataclass
+class Finding:
+    kind: str  # "protocol changed" | "regression" | "improved" | "note"
+    job: str
+    message: str
+
+    def line(self) -> str:
+        return f"{self.kind}: {self.job}: {self.message}"
+
+
+@dataclass
+class CheckResult:
+    """Findings of a check; ``passed`` unless a protocol changed or a metric regressed."""
+
+    path: Path
+    findings: list[Finding] = field(default_factory=list)
+    n_jobs: int = 0
+    measured: dict[str, dict[str, float]] = field(default_factory=dict)  # job key -> metrics now
+
+    @property
+    def passed(self) -> bool:
+        return not any(f.kind in ("protocol changed", "regression") for f in self.findings)
+
+    def lines(self) -> list[str]:
+        order = {"protocol changed": 0, "regression": 1, "improved": 2, "note": 3}
+        return [f.line() for f in sorted(self.findings, key=lambda f: order[f.kind])]
+
+
+def _diff(prefix: str, old: Any, new: Any) -> list[str]:
+    if isinstance(old, dict) and isinstance(new, dict):
+        out = []
+        for key in sorted(set(old) | set(new), key=str):
+            out += _diff(f"{prefix}.{key}" if prefix else str(key), old.get(key, "<absent>"), new.get(key, "<absent>"))
+        return out
+    if old != new and not (isinstance(old, float) and isinstance(new, float) and math.isclose(old, new, rel_tol=1e-12)):
+        return [f"{prefix}: {_short(old)} -> {_short(new)}"]
+    return []
+
+
+def _short(value: Any) -> str:
+    text = json.dumps(value) if not isinstance(value, str) else value
+    return text if len(text) <= 24 else text[:10] + "..." + text[-8:]
+
+
+def parse_tolerances(items: list[str] | Mapping[str, float] | None) -> dict[str, float]:
+    """``["metric=band", ...]`` (absolute bands in the metric's unit) -> dict; ConfigError on a bad item."""
+    if items is None:
+        return {}
+    if isinstance(items, Mapping):
+        pairs = list(items.items())
+    else:
+        pairs = []
+        for item in items:
+            name, sep, value = str(item).partition("=")
+            if not sep:
+                raise ConfigError(f"expected METRIC=BAND, got {item!r}", source="--tolerance")
+            pairs.append((name.strip(), value))
+    out = {}
+    for name, value in pairs:
+        try:
+            band = float(value)
+        except (TypeError, ValueError):
+            raise ConfigError(f"band of {name!r} is not a number: {value!r}", source="--tolerance") from None
+        if not band >= 0 or not math.isfinite(band):
+            raise ConfigError(f"band of {name!r} must be a finite number >= 0, got {value!r}", source="--tolerance")
+        out[name] = band
+    return out
+
+
+def check(
+    path: str | os.PathLike,
+    *,
+    tolerances: list[str] | Mapping[str, float] | None = None,
+    on_job: Callable[[Job], None] | None = None,
+) -> CheckResult:
+    """Re-run the pinned jobs of the baseline at ``path`` and compare (see the module docstring).
+
+    ``tolerances`` overrides bands: ``{"drift_translation_pct": 0.2}`` or ``["drift_translation_pct=0.2"]``.
+    """
+    baseline = load_baseline(path)
+    bands_override = parse_tolerances(tolerances)
+    result = CheckResult(baseline.path, n_jobs=len(baseline.jobs))
+    env_then, env_now = baseline.manifest["environment"], environment()
+    env_changes = _diff("", {"packages": env_then.get("packages"), "platform": env_then.get("platform")},
+                        {"packages": env_now["packages"], "platform": env_now["platform"]})
+    for line in env_changes:
+        result.findings.append(Finding("protocol changed", "environment", line))
+    if env_then.get("lidarkit") != env_now["lidarkit"]:
+        result.findings.append(Finding("note", "environment", f"lidarkit {env_then.get('lidarkit')} -> {env_now['lidarkit']}"))
+    eval_changes = _diff("", baseline.manifest["evaluation"], evaluation_settings())
+    for line in eval_changes:
+        result.findings.append(Finding("protocol changed", "evaluation", line))
+    cache: dict[str, str] = {}
+    for pinned in baseline.jobs:
+        job = Job.from_spec(pinned["spec"])
+        name = f"{job.method_label} on {job.dataset_name} (seed {job.seed})"
+        if on_job is not None:
+            on_job(job)
+        try:
+            checksums_now = dataset_checksums(job.dataset, cache)
+        except DataError as err:
+            result.findings.append(Finding("protocol changed", name, f"dataset not readable: {err}"))
+            continue
+        data_changes = _diff("data", pinned["protocol"].get("checksums", {}), checksums_now)
+        if data_changes:
+            for line in data_changes[:10]:
+                result.findings.append(Finding("protocol changed", name, line))
+            if len(data_changes) > 10:
+                result.findings.append(Finding("protocol changed", name, f"... {len(data_changes) - 10} more data files"))
+            continue
+        if env_changes or eval_changes:
+            continue  # numbers under another environment or evaluation are not comparable: do not spend the run
+        run = run_job(job, cache)
+        result.measured[pinned["key"]] = run.metrics
+        then = {k: v for k, v in pinned["protocol"].items() if k not in ("checksums", "method_config")}
+        now = {k: v for k, v in run.protocol.items() if k not in ("checksums", "method_config")}
+        protocol_changes = _diff("", then, now)
+        for line in protocol_changes:
+            result.findings.append(Finding("protocol changed", name, line))
+        for line in _diff("method config", pinned["protocol"].get("method_config", {}), run.protocol.get("method_config", {})):
+            result.findings.append(Finding("note", name, line))
+        if protocol_changes:
+            continue
+        for metric in pinned["checked"]:
+            ref = float(pinned["metrics"][metric])
+            band = bands_override.get(metric, float(pinned["bands"][metric]))
+            value = run.metrics.get(metric)
+            if value is None or not math.isfinite(float(value)):
+                result.findings.append(Finding("regression", name, f"{metric} is missing now (baseline {ref:.6g})"))
+                continue
+            delta = float(value) - ref
+            if abs(delta) <= band:
+                continue
+            worse = (delta < 0) if metric in HIGHER_IS_BETTER else (delta > 0)
+            text = f"{metric} = {float(value):.6g}, baseline {ref:.6g} ± {band:.3g} (change {delta:+.3g})"
+            result.findings.append(Finding("regression" if worse else "improved", name, text))
+    return result

@@ -1,0 +1,122 @@
+"""Publication tables of a bench results folder: KITTI drift per dataset x method with the devkit average row,
+per length, per speed, APE/RPE, and box plots of the per-segment errors (odometry results only).
+
+Seeds of one (dataset, method) are pooled: their segments together, their APE/RPE averaged.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import defaultdict
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lidarkit.bench.jobs import Job
+from lidarkit.eval.tables import PubTable, SegmentErrors, publication_tables
+
+log = logging.getLogger(__name__)
+
+TABLES_DIR = "tables"
+
+
+@dataclass
+class Publication:
+    """The tables (also written as ``tables/<name>.{md,csv,tex}``) and the box-plot files of a report."""
+
+    tables: list[PubTable] = field(default_factory=list)
+    files: list[Path] = field(default_factory=list)
+    boxplots: list[tuple[str, Path]] = field(default_factory=list)  # (caption, png path)
+    comparisons: list[tuple[str, Any]] = field(default_factory=list)  # (dataset, PairedComparison) vs the reference
+
+
+def _grids(records: list[dict[str, Any]]):
+    segments: dict[tuple[str, str], list[SegmentErrors]] = defaultdict(list)
+    ape: dict[tuple[str, str], list[float]] = defaultdict(list)
+    rpe: dict[tuple[str, str], list[float]] = defaultdict(list)
+    for r in records:
+        if r.get("status") != "ok" or r["job"]["task"] != "odometry":
+            continue
+        job = Job.from_spec(r["job"])
+        key = (job.dataset_name, job.method_label)
+        seg = (r.get("series") or {}).get("drift_segments")
+        if seg:
+            segments[key].append(SegmentErrors.from_dict(seg))
+        metrics = r.get("metrics") or {}
+        if metrics.get("ape_rmse_m") is not None:
+            ape[key].append(float(metrics["ape_rmse_m"]))
+        if metrics.get("rpe_trans_rmse_m") is not None:
+            rpe[key].append(float(metrics["rpe_trans_rmse_m"]))
+    merged = {k: SegmentErrors(*(np.concatenate([getattr(s, f) for s in v]) for f in
+                                 ("length_m", "translation_pct", "rotation_deg_per_100m", "speed_mps")))
+              for k, v in segments.items()}
+    return merged, {k: float(np.mean(v)) for k, v in ape.items()}, {k: float(np.mean(v)) for k, v in rpe.items()}
+
+
+REFERENCE_METHOD = "kiss"
+
+
+def reference_comparisons(records: list[dict[str, Any]], reference: str = REFERENCE_METHOD) -> list[tuple[str, Any]]:
+    """Paired Wilcoxon comparisons of the reference method with every other method, per dataset.
+
+    Units: the KITTI segments of every common seed (same ground truth, so the same segments) when both have
+    them, else the common seeds (at least 5) on APE RMSE; a dataset without enough units is left out.
+    """
+    from lidarkit.errors import LidarKitError
+    from lidarkit.eval.statistics import paired_test
+
+    per: dict[str, dict[str, dict[int, dict[str, Any]]]] = defaultdict(lambda: defaultdict(dict))
+    for r in records:
+        if r.get("status") != "ok" or r["job"]["task"] != "odometry":
+            continue
+        job = Job.from_spec(r["job"])
+        per[job.dataset_name][job.method_label][job.seed] = r
+    out = []
+    for dataset, methods in per.items():
+        if reference not in methods:
+            continue
+        ref = methods[reference]
+        for label, runs in methods.items():
+            if label == reference:
+                continue
+            seeds = sorted(set(ref) & set(runs))
+            segs = [((ref[s].get("series") or {}).get("drift_segments"), (runs[s].get("series") or {}).get("drift_segments"))
+                    for s in seeds]
+            try:
+                if seeds and all(a and b and len(a["translation_pct"]) == len(b["translation_pct"]) for a, b in segs):
+                    va = np.concatenate([a["translation_pct"] for a, _ in segs])
+                    vb = np.concatenate([b["translation_pct"] for _, b in segs])
+                    out.append((dataset, paired_test(va, vb, name_a=reference, name_b=label, metric="KITTI drift %",
+                                                     pairing="segment")))
+                elif len(seeds) >= 5:
+                    va = [ref[s]["metrics"].get("ape_rmse_m") for s in seeds]
+                    vb = [runs[s]["metrics"].get("ape_rmse_m") for s in seeds]
+                    if None not in va and None not in vb:
+                        out.append((dataset, paired_test(va, vb, name_a=reference, name_b=label, metric="APE RMSE m",
+                                                         pairing="seed")))
+            except LidarKitError as err:
+                log.info("no paired comparison %s vs %s on %s: %s", reference, label, dataset, err)
+    return out
+
+
+def build_publication(records: list[dict[str, Any]], out_dir: Path, *, plots: bool = True) -> Publication:
+    """Tables (and box plots with ``plots``) of the odometry records, written under ``out_dir``; paired
+    comparisons with the reference (kiss)."""
+    segments, ape, rpe = _grids(records)
+    pub = Publication(publication_tables(segments or None, ape or None, rpe or None).tables)
+    pub.comparisons = reference_comparisons(records)
+    if not pub.tables:
+        return pub
+    for table in pub.tables:
+        pub.files += table.write(out_dir / TABLES_DIR)
+    if plots and segments:
+        from lidarkit.eval.plots import plot_segment_boxplots
+
+        for quantity, what in (("translation_pct", "translational"), ("rotation_deg_per_100m", "rotational")):
+            path = plot_segment_boxplots(segments, out_dir / "plots" / f"segments_{quantity}.png", quantity)
+            n = sum(len(s) for s in segments.values())
+            pub.boxplots.append((f"Per-segment KITTI {what} drift per method: {n} segments (100-800 m) pooled over "
+                                 "datasets and seeds; box = quartiles, whiskers = 1.5 IQR.", path))
+    return pub

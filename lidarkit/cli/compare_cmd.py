@@ -1,0 +1,53 @@
+"""``lidarkit compare RUN_A RUN_B``: paired significance test of two runs (odometry run folders or bench results)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from lidarkit.cli.app import app, stdout
+from lidarkit.eval.statistics import DEFAULT_ALPHA
+
+
+@app.command("compare")
+def compare_command(
+    run_a: Path = typer.Argument(..., help="Odometry run folder (lidarkit odometry --out) or bench results folder."),
+    run_b: Path = typer.Argument(..., help="The run to compare with (same kind and same data as RUN_A)."),
+    metric: Optional[str] = typer.Option(
+        None, help="Run folders: segment_translation_pct | segment_rotation_deg_per_100m | rpe_translation_m | "
+        "rpe_rotation_deg; bench folders: a job metric (default: drift_translation_pct, else ape_rmse_m)."),
+    method_a: Optional[str] = typer.Option(None, "--method-a", help="Method label in RUN_A when it holds several."),
+    method_b: Optional[str] = typer.Option(None, "--method-b", help="Method label in RUN_B when it holds several."),
+    alpha: float = typer.Option(DEFAULT_ALPHA, help="Significance level of the Wilcoxon signed-rank test."),
+    noise: float = typer.Option(0.0, help="Run-to-run noise of the metric (its unit): smaller differences are not called."),
+    noise_from: Optional[Path] = typer.Option(
+        None, "--noise-from", help="Baseline folder (lidarkit baseline record): take --noise from the band it measured "
+        "for the metric (the widest over its jobs)."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the bootstrap CI of the difference."),
+    json_out: Optional[Path] = typer.Option(None, "--json", help="Write the comparison as JSON here."),
+) -> None:
+    """Pair RUN_A and RUN_B on the same units (KITTI segments, frames or seeds) and test the difference (Wilcoxon)."""
+    from lidarkit.eval.compare import compare
+
+    if noise_from is not None:
+        from lidarkit.bench.baseline import measured_noise
+
+        noise = max(noise, measured_noise(noise_from, metric))
+    result = compare(run_a, run_b, metric=metric, method_a=method_a, method_b=method_b, alpha=alpha, noise=noise,
+                     seed=seed)
+    console = stdout()
+    console.print(f"A: {result.name_a}   B: {result.name_b}   metric: {result.metric} ({result.n_pairs} paired "
+                  f"{result.pairing}s, {result.n_ties} ties)", soft_wrap=True)
+    console.print(f"mean A {result.mean_a:.6g}   mean B {result.mean_b:.6g}   A - B: mean {result.mean_diff:+.4g}, "
+                  f"median {result.median_diff:+.4g}, 95% CI [{result.diff_ci_low:+.4g}, {result.diff_ci_high:+.4g}]",
+                  soft_wrap=True)
+    console.print(f"Wilcoxon signed-rank: statistic {result.statistic:g}, p = {result.p_value:.3g}; "
+                  f"effect size (rank-biserial) {result.effect_size:+.3f}", soft_wrap=True)
+    console.print(result.verdict(), soft_wrap=True, markup=False)
+    if json_out is not None:
+        from lidarkit.eval.report import write_json
+
+        write_json(result.to_dict(), json_out)
+        console.print(f"wrote {json_out}", soft_wrap=True)

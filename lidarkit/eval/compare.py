@@ -1,0 +1,214 @@
+"""Paired comparison of two runs: odometry run folders (per KITTI segment or per frame) or bench results (per seed).
+
+``compare(a, b)`` loads both sides, checks they ran over the same data (same ground truth, or the same
+dataset specs and seeds), pairs the units and returns a :class:`~lidarkit.eval.statistics.PairedComparison`
+whose ``verdict()`` says plainly who is better or that the difference does not stand out of the noise.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lidarkit.errors import ConfigError, DataError, EvaluationError
+from lidarkit.eval.statistics import DEFAULT_ALPHA, PairedComparison, paired_test
+from lidarkit.trajectory import Trajectory
+
+#: metrics of bench results where higher is better (everything else: lower is better)
+HIGHER_IS_BETTER = frozenset({"hz", "converged_fraction"})
+#: the default bench metric, first present wins
+DEFAULT_BENCH_METRICS = ("drift_translation_pct", "ape_rmse_m", "translation_error_m", "mse", "ape_translation_rmse_m")
+RUN_METRICS = ("segment_translation_pct", "segment_rotation_deg_per_100m", "rpe_translation_m", "rpe_rotation_deg")
+
+
+@dataclass
+class OdometryRun:
+    """An odometry run folder: its estimate, its ground truth and its metrics.json."""
+
+    path: Path
+    name: str
+    estimate: Trajectory
+    ground_truth: Trajectory
+    metrics: dict[str, Any]
+
+
+@dataclass
+class BenchRuns:
+    """Successful bench results of one method label, keyed by (dataset spec, task options, seed)."""
+
+    path: Path
+    name: str
+    values: dict[str, dict[str, Any]] = field(default_factory=dict)  # pair key -> metrics
+    labels: dict[str, str] = field(default_factory=dict)  # pair key -> "dataset, seed N"
+
+
+def load_odometry_run(path: str | os.PathLike) -> OdometryRun:
+    """A run folder written by ``lidarkit odometry --out`` (``poses_kitti.txt``, ``ground_truth_kitti.txt``,
+    ``metrics.json``); DataError naming what is missing."""
+    path = Path(path)
+    if not path.is_dir():
+        raise DataError("run folder does not exist", source=path)
+    metrics_file = path / "metrics.json"
+    if not metrics_file.is_file():
+        raise DataError("no metrics.json: not a finished odometry run folder", source=path)
+    try:
+        metrics = json.loads(metrics_file.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as err:
+        raise DataError(f"unreadable metrics.json ({err})", source=metrics_file) from None
+    if not isinstance(metrics, dict):
+        raise DataError("metrics.json is not a JSON object", source=metrics_file)
+    for name in ("poses_kitti.txt", "ground_truth_kitti.txt"):
+        if not (path / name).is_file():
+            raise DataError(f"no {name}: a paired comparison needs the estimate and its ground truth", source=path)
+    name = str(metrics.get("method") or path.name)
+    return OdometryRun(
+        path, name,
+        Trajectory.from_kitti(path / "poses_kitti.txt", name=name),
+        Trajectory.from_kitti(path / "ground_truth_kitti.txt", name="ground truth"),
+        metrics,
+    )
+
+
+def load_bench_runs(path: str | os.PathLike, method: str | None = None) -> BenchRuns:
+    """The successful results of one method of a bench folder; ``method`` is a method label (``kiss``,
+    ``vanilla(voxel_size_m=0.5)``) or a bare method name when only one label has it. ConfigError lists the
+    labels when the choice is ambiguous."""
+    from lidarkit.bench.jobs import Job, canonical_json
+    from lidarkit.bench.report import latest_per_job
+    from lidarkit.bench.results import load_results
+
+    path = Path(path)
+    if not (path / "jobs").is_dir():
+        raise DataError("not a bench results folder (no jobs/ inside)", source=path)
+    records = [r for r in latest_per_job(load_results(path)) if r.get("status") == "ok"]
+    if not records:
+        raise DataError("no successful job results in jobs/", source=path)
+    labels = sorted({Job.from_spec(r["job"]).method_label for r in records})
+    if method is None:
+        if len(labels) > 1:
+            raise ConfigError(f"{len(labels)} methods in this folder; choose one of: {', '.join(labels)}", source=path)
+        chosen = labels[0]
+    elif method in labels:
+        chosen = method
+    else:
+        named = sorted({Job.from_spec(r["job"]).method_label for r in records if r["job"]["method"] == method})
+        if len(named) != 1:
+            known = ", ".join(labels)
+            raise ConfigError(f"method {method!r} {'is ambiguous' if named else 'not found'}; this folder has: {known}",
+                              source=path)
+        chosen = named[0]
+    runs = BenchRuns(path, chosen)
+    for r in records:
+        job = Job.from_spec(r["job"])
+        if job.method_label != chosen:
+            continue
+        key = canonical_json({"task": job.task, "dataset": job.dataset, "options": job.options, "seed": job.seed})
+        runs.values[key] = dict(r.get("metrics") or {})
+        runs.labels[key] = f"{job.dataset_name}, seed {job.seed}"
+    return runs
+
+
+def _same_ground_truth(a: OdometryRun, b: OdometryRun) -> None:
+    ga, gb = a.ground_truth, b.ground_truth
+    if len(ga) != len(gb) or not np.allclose(ga.poses_se3, gb.poses_se3, atol=1e-6):
+        raise EvaluationError(
+            f"runs over different data: {a.path} has {len(ga)} ground-truth poses, {b.path} has {len(gb)}"
+            + (" with other values" if len(ga) == len(gb) else ""),
+            source="compare",
+        )
+
+
+def run_units(run: OdometryRun, metric: str) -> np.ndarray:
+    """Per-unit errors of a run folder: per KITTI segment (``segment_*``) or per frame pair (``rpe_*``)."""
+    from lidarkit import eval as leval
+
+    ref, est = run.ground_truth, run.estimate
+    if len(ref) != len(est):
+        raise DataError(f"{len(est)} estimated poses for {len(ref)} ground-truth poses", source=run.path)
+    if metric.startswith("segment_"):
+        drift = leval.kitti_drift(ref, est)
+        return drift.segment_translation_pct if metric == "segment_translation_pct" else drift.segment_rotation_deg_per_100m
+    relation = "translation" if metric == "rpe_translation_m" else "rotation_angle_deg"
+    return np.asarray(leval.rpe(ref, est, delta=1, delta_unit="frames", relation=relation).errors, dtype=np.float64)
+
+
+def compare(
+    a: str | os.PathLike | OdometryRun | BenchRuns,
+    b: str | os.PathLike | OdometryRun | BenchRuns,
+    *,
+    metric: str | None = None,
+    method_a: str | None = None,
+    method_b: str | None = None,
+    alpha: float = DEFAULT_ALPHA,
+    noise: float = 0.0,
+    seed: int = 0,
+) -> PairedComparison:
+    """Paired Wilcoxon comparison of run ``a`` against run ``b`` (``diff = a - b``).
+
+    Odometry run folders pair per KITTI segment (``metric="segment_translation_pct"``, the default when the
+    path allows 100 m segments) or per frame (``rpe_translation_m``, the default otherwise). Bench results
+    folders pair per (dataset, seed) on a job metric (default: KITTI drift, else APE RMSE); ``method_a`` /
+    ``method_b`` pick a method when a folder holds several (the same folder may be given twice).
+    Runs over different data raise EvaluationError.
+    """
+    side_a = _load(a, method_a)
+    side_b = _load(b, method_b)
+    if type(side_a) is not type(side_b):
+        raise EvaluationError("compare an odometry run folder with another run folder, a bench folder with a bench folder",
+                              source="compare")
+    name_a, name_b = side_a.name, side_b.name
+    if name_a == name_b:
+        name_a, name_b = f"{name_a} (A)", f"{name_b} (B)"
+    if isinstance(side_a, OdometryRun):
+        _same_ground_truth(side_a, side_b)
+        if metric is None:
+            from lidarkit.eval import drift_segments_possible
+
+            metric = "segment_translation_pct" if drift_segments_possible(side_a.ground_truth) else "rpe_translation_m"
+        if metric not in RUN_METRICS:
+            raise ConfigError(f"unknown run metric {metric!r}; choose one of: {', '.join(RUN_METRICS)}", source="metric")
+        va, vb = run_units(side_a, metric), run_units(side_b, metric)
+        pairing = "segment" if metric.startswith("segment_") else "frame"
+        return paired_test(va, vb, name_a=name_a, name_b=name_b, metric=metric, pairing=pairing,
+                           alpha=alpha, noise=noise, seed=seed)
+    keys_a, keys_b = set(side_a.values), set(side_b.values)
+    common = sorted(keys_a & keys_b)
+    if not common:
+        raise EvaluationError(
+            f"runs over different data: no (dataset, seed) in common between {side_a.path} ({side_a.name}: "
+            f"{', '.join(sorted(set(side_a.labels.values())))}) and {side_b.path} ({side_b.name}: "
+            f"{', '.join(sorted(set(side_b.labels.values())))})",
+            source="compare",
+        )
+    if metric is None:
+        present = set.intersection(*(set(side_a.values[k]) & set(side_b.values[k]) for k in common))
+        metric = next((m for m in DEFAULT_BENCH_METRICS if m in present), None)
+        if metric is None:
+            raise EvaluationError(f"no default metric in these results; pass one of: {', '.join(sorted(present))}",
+                                  source="compare")
+    missing = [side_a.labels.get(k) or side_b.labels[k] for k in common
+               if side_a.values[k].get(metric) is None or side_b.values[k].get(metric) is None]
+    if missing:
+        raise EvaluationError(f"metric {metric!r} missing for {', '.join(missing[:5])}", source="compare")
+    va = np.array([side_a.values[k][metric] for k in common], dtype=np.float64)
+    vb = np.array([side_b.values[k][metric] for k in common], dtype=np.float64)
+    return paired_test(va, vb, name_a=name_a, name_b=name_b, metric=metric, pairing="seed",
+                       lower_is_better=metric not in HIGHER_IS_BETTER, alpha=alpha, noise=noise, seed=seed)
+
+
+def _load(side: Any, method: str | None) -> OdometryRun | BenchRuns:
+    if isinstance(side, (OdometryRun, BenchRuns)):
+        return side
+    path = Path(side)
+    if not path.exists():
+        raise DataError("does not exist", source=path)
+    if (path / "jobs").is_dir():
+        return load_bench_runs(path, method)
+    if method is not None:
+        raise ConfigError("a method applies to bench results folders only", source=path)
+    return load_odometry_run(path)

@@ -1,0 +1,219 @@
+"""Statistics over runs: summaries with seeded bootstrap confidence intervals and paired significance tests.
+
+A single run of an odometry method is one draw: seeds, data excerpts and (for kiss-icp, which is not
+bit-reproducible across thread schedules) the run itself vary. ``summarize`` turns the runs of one
+(method, dataset) into mean, std, median and a percentile bootstrap CI; ``paired_test`` compares two
+methods on the *same* units (seeds, KITTI segments, frames) with the Wilcoxon signed-rank test, because
+per-unit differences are rarely normal and one bad seed should not decide the verdict.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+
+from lidarkit.errors import ConfigError, EvaluationError
+
+DEFAULT_CONFIDENCE = 0.95
+DEFAULT_N_BOOT = 2000
+DEFAULT_ALPHA = 0.05
+#: differences smaller than this fraction of the values' scale are floating-point noise and count as ties
+RELATIVE_TIE_TOLERANCE = 1e-9
+
+
+def _finite(values: Any, source: str) -> np.ndarray:
+    arr = np.asarray(values, dtype=np.float64).reshape(-1)
+    if arr.size and not np.isfinite(arr).all():
+        raise EvaluationError(f"{int((~np.isfinite(arr)).sum())} non-finite value(s) among {arr.size}", source=source)
+    return arr
+
+
+def bootstrap_ci(
+    values: Any,
+    *,
+    confidence: float = DEFAULT_CONFIDENCE,
+    n_boot: int = DEFAULT_N_BOOT,
+    seed: int = 0,
+    statistic: str = "mean",
+) -> tuple[float, float]:
+    """Percentile bootstrap CI of the mean (or ``statistic="median"``) of ``values`` ``(N,)``.
+
+    All resamples are drawn at once from ``numpy.random.default_rng(seed)``: the same values and seed give
+    bit-identical bounds. One value gives a zero-width interval at that value.
+    """
+    if not 0.0 < confidence < 1.0:
+        raise ConfigError(f"confidence must be in (0, 1), got {confidence}", source="confidence")
+    if int(n_boot) != n_boot or n_boot < 1:
+        raise ConfigError(f"n_boot must be a positive integer, got {n_boot}", source="n_boot")
+    if statistic not in ("mean", "median"):
+        raise ConfigError(f"statistic must be 'mean' or 'median', got {statistic!r}", source="statistic")
+    arr = _finite(values, "bootstrap")
+    if arr.size == 0:
+        raise EvaluationError("no values to bootstrap", source="bootstrap")
+    if arr.size == 1:
+        return float(arr[0]), float(arr[0])
+    rng = np.random.default_rng(seed)
+    idx = rng.integers(0, arr.size, size=(int(n_boot), arr.size))
+    samples = arr[idx]
+    stats = samples.mean(axis=1) if statistic == "mean" else np.median(samples, axis=1)
+    tail = 100.0 * (1.0 - confidence) / 2.0
+    lo, hi = np.percentile(stats, [tail, 100.0 - tail])
+    return float(lo), float(hi)
+
+
+@dataclass(frozen=True)
+class Summary:
+    """Mean, sample std, median and bootstrap CI (of the mean) of ``n`` runs."""
+
+    n: int
+    mean: float
+    std: float
+    median: float
+    ci_low: float
+    ci_high: float
+    confidence: float = DEFAULT_CONFIDENCE
+    n_boot: int = DEFAULT_N_BOOT
+    seed: int = 0
+
+    def to_dict(self) -> dict[str, Any]:
+        return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in asdict(self).items()}
+
+    def format(self, digits: int = 4) -> str:
+        """``mean ± std [ci_low, ci_high]`` (the mean alone for one run)."""
+        if self.n == 0:
+            return "–"
+        if self.n == 1:
+            return f"{self.mean:.{digits}g}"
+        return f"{self.mean:.{digits}g} ± {self.std:.2g} [{self.ci_low:.{digits}g}, {self.ci_high:.{digits}g}]"
+
+
+def summarize(
+    values: Any, *, confidence: float = DEFAULT_CONFIDENCE, n_boot: int = DEFAULT_N_BOOT, seed: int = 0
+) -> Summary:
+    """Summary of the runs' values ``(N,)``; no values gives ``n == 0`` and NaNs."""
+    arr = _finite(values, "summarize")
+    if arr.size == 0:
+        nan = float("nan")
+        return Summary(0, nan, nan, nan, nan, nan, confidence, n_boot, seed)
+    lo, hi = bootstrap_ci(arr, confidence=confidence, n_boot=n_boot, seed=seed)
+    std = float(arr.std(ddof=1)) if arr.size > 1 else 0.0
+    return Summary(int(arr.size), float(arr.mean()), std, float(np.median(arr)), lo, hi, confidence, int(n_boot), seed)
+
+
+@dataclass(frozen=True)
+class PairedComparison:
+    """Wilcoxon signed-rank comparison of ``a`` and ``b`` over ``n_pairs`` matched units.
+
+    ``diff = a - b`` per unit. ``effect_size`` is the matched-pairs rank-biserial correlation in [-1, 1]
+    (positive: ``a`` larger; +-1: every unit agrees). ``better`` is ``"a"``, ``"b"`` or ``""`` (no significant
+    difference, or the difference is within ``noise``). ``noise`` is the run-to-run noise of the metric the
+    verdict was held against (0 when none was measured).
+    """
+
+    name_a: str
+    name_b: str
+    metric: str
+    pairing: str
+    n_pairs: int
+    n_ties: int
+    mean_a: float
+    mean_b: float
+    mean_diff: float
+    median_diff: float
+    diff_ci_low: float
+    diff_ci_high: float
+    statistic: float
+    p_value: float
+    effect_size: float
+    alpha: float
+    noise: float
+    lower_is_better: bool
+    better: str
+
+    @property
+    def significant(self) -> bool:
+        return bool(self.better)
+
+    def verdict(self) -> str:
+        """One plain sentence for a reader: who is better and how sure, or that no difference shows."""
+        m, unit = self.metric, f"over {self.n_pairs} paired {self.pairing}s"
+        p = "p = 1" if self.p_value >= 1 else f"p = {self.p_value:.2g}"
+        if self.better:
+            win, lose = (self.name_a, self.name_b) if self.better == "a" else (self.name_b, self.name_a)
+            return (f"{win} is better than {lose} on {m}: mean {self.mean_a:.4g} vs {self.mean_b:.4g} "
+                    f"(difference {self.mean_diff:+.3g}, 95% CI [{self.diff_ci_low:+.3g}, {self.diff_ci_high:+.3g}]), "
+                    f"Wilcoxon {p}, effect size {self.effect_size:+.2f}, {unit}")
+        why = (f"the difference {self.mean_diff:+.3g} is within the run-to-run noise (±{self.noise:.3g})"
+               if self.noise > 0 and abs(self.mean_diff) <= self.noise
+               else f"Wilcoxon {p} >= {self.alpha:g}")
+        if self.n_ties == self.n_pairs:
+            why = "every paired difference is zero (within floating-point noise)"
+        return (f"no significant difference between {self.name_a} and {self.name_b} on {m}: {why}; "
+                f"mean {self.mean_a:.4g} vs {self.mean_b:.4g}, {unit}")
+
+    def to_dict(self) -> dict[str, Any]:
+        out = {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in asdict(self).items()}
+        out["significant"] = self.significant
+        out["verdict"] = self.verdict()
+        return out
+
+
+def paired_test(
+    a: Any,
+    b: Any,
+    *,
+    name_a: str = "a",
+    name_b: str = "b",
+    metric: str = "error",
+    pairing: str = "seed",
+    lower_is_better: bool = True,
+    alpha: float = DEFAULT_ALPHA,
+    noise: float = 0.0,
+    seed: int = 0,
+) -> PairedComparison:
+    """Compare matched values ``a[i]`` and ``b[i]`` (same seed / segment / frame) with the Wilcoxon signed-rank test.
+
+    Differences below ``RELATIVE_TIE_TOLERANCE`` of the values' scale are ties (two runs of one deterministic
+    method differ by round-off only) and are dropped as Wilcoxon does; all ties give p = 1. A difference is
+    called significant when p < ``alpha`` and the mean difference exceeds ``noise`` (the measured run-to-run
+    noise, same unit as the metric).
+    """
+    from scipy import stats as sstats
+
+    va, vb = _finite(a, name_a), _finite(b, name_b)
+    if va.shape != vb.shape:
+        raise EvaluationError(f"paired values differ in count: {va.size} for {name_a}, {vb.size} for {name_b}",
+                              source=metric)
+    if va.size < 2:
+        raise EvaluationError(f"a paired test needs at least 2 matched {pairing}s, got {va.size}", source=metric)
+    if not 0.0 < alpha < 1.0:
+        raise ConfigError(f"alpha must be in (0, 1), got {alpha}", source="alpha")
+    if noise < 0 or not math.isfinite(noise):
+        raise ConfigError(f"noise must be a finite value >= 0, got {noise}", source="noise")
+    diff = va - vb
+    scale = max(float(np.max(np.abs(np.concatenate([va, vb])))), 1e-300)
+    tie = np.abs(diff) <= RELATIVE_TIE_TOLERANCE * scale
+    diff = np.where(tie, 0.0, diff)
+    nz = diff[~tie]
+    if nz.size == 0:
+        statistic, p_value, effect = 0.0, 1.0, 0.0
+    else:
+        res = sstats.wilcoxon(nz, zero_method="wilcox", alternative="two-sided")
+        statistic, p_value = float(res.statistic), float(res.pvalue)
+        ranks = sstats.rankdata(np.abs(nz))
+        effect = float((ranks[nz > 0].sum() - ranks[nz < 0].sum()) / ranks.sum())
+    lo, hi = bootstrap_ci(diff, seed=seed)
+    mean_diff = float(diff.mean())
+    better = ""
+    if p_value < alpha and abs(mean_diff) > noise:
+        a_lower = mean_diff < 0
+        better = "a" if a_lower == lower_is_better else "b"
+    return PairedComparison(
+        name_a=name_a, name_b=name_b, metric=metric, pairing=pairing, n_pairs=int(va.size), n_ties=int(tie.sum()),
+        mean_a=float(va.mean()), mean_b=float(vb.mean()), mean_diff=mean_diff, median_diff=float(np.median(diff)),
+        diff_ci_low=lo, diff_ci_high=hi, statistic=statistic, p_value=p_value, effect_size=effect, alpha=alpha,
+        noise=float(noise), lower_is_better=lower_is_better, better=better,
+    )

@@ -1,0 +1,297 @@
+"""Tables researchers publish: KITTI drift per sequence x method with the devkit's average row, per length,
+per speed, APE/RPE; exported as Markdown, CSV and LaTeX (booktabs, best method per row in bold).
+
+The average row follows the KITTI devkit (and the KISS-ICP paper): the segments of all sequences are pooled
+and averaged together, so a long sequence weighs more than a short one (length-weighted), unlike the mean
+of the per-sequence numbers.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lidarkit import atomic
+from lidarkit.errors import EvaluationError
+from lidarkit.eval.kitti_drift import KITTI_LENGTHS_M, DriftResult
+
+#: devkit speed bins of a segment (m/s): the devkit's 2..25 m/s, in coarser steps that a table can hold
+SPEED_BINS_MPS = (0.0, 5.0, 10.0, 15.0, 20.0, 25.0, math.inf)
+#: the devkit's frame period, used to turn a segment's frame count into its duration
+KITTI_FRAME_PERIOD_S = 0.1
+QUANTITIES = {
+    "translation_pct": "translational drift (%)",
+    "rotation_deg_per_100m": "rotational drift (deg/100 m)",
+}
+
+
+@dataclass(frozen=True, eq=False)
+class SegmentErrors:
+    """Per-segment KITTI errors of one (sequence, method): ``(S,)`` float arrays."""
+
+    length_m: np.ndarray
+    translation_pct: np.ndarray
+    rotation_deg_per_100m: np.ndarray
+    speed_mps: np.ndarray
+
+    @classmethod
+    def from_drift(cls, drift: DriftResult, frame_period_s: float = KITTI_FRAME_PERIOD_S) -> SegmentErrors:
+        """From a :class:`DriftResult`; a segment's speed is its length over its duration as the devkit takes it
+        (``(last - first + 1) * frame_period_s``)."""
+        n_frames = (np.asarray(drift.segment_last_frame) - np.asarray(drift.segment_first_frame) + 1).astype(np.float64)
+        speed = drift.segment_length_m / np.maximum(n_frames * frame_period_s, 1e-12)
+        return cls(np.asarray(drift.segment_length_m, float), np.asarray(drift.segment_translation_pct, float),
+                   np.asarray(drift.segment_rotation_deg_per_100m, float), speed)
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> SegmentErrors:
+        try:
+            arrays = [np.asarray(data[k], dtype=np.float64).reshape(-1)
+                      for k in ("length_m", "translation_pct", "rotation_deg_per_100m", "speed_mps")]
+        except (KeyError, TypeError, ValueError) as err:
+            raise EvaluationError(f"not a per-segment error record ({err})", source="segments") from None
+        if len({a.size for a in arrays}) != 1:
+            raise EvaluationError("per-segment arrays differ in length", source="segments")
+        return cls(*arrays)
+
+    def to_dict(self) -> dict[str, list[float]]:
+        return {"length_m": self.length_m.tolist(), "translation_pct": np.round(self.translation_pct, 6).tolist(),
+                "rotation_deg_per_100m": np.round(self.rotation_deg_per_100m, 6).tolist(),
+                "speed_mps": np.round(self.speed_mps, 4).tolist()}
+
+    def __len__(self) -> int:
+        return int(self.length_m.size)
+
+
+def pooled(segments: Sequence[SegmentErrors], quantity: str = "translation_pct") -> float:
+    """The devkit average: mean over the segments of all sequences together (NaN when there is none)."""
+    values = np.concatenate([getattr(s, quantity) for s in segments]) if segments else np.zeros(0)
+    return float(values.mean()) if values.size else float("nan")
+
+
+@dataclass
+class PubTable:
+    """A table of numbers: ``values[i, j]`` for row ``row_labels[i]`` and column ``col_labels[j]`` (NaN = no value).
+
+    The last ``n_summary_rows`` rows are summaries (the average row), set apart by a rule. ``bold_best`` marks the
+    best value of each row across the columns (the methods), lower is better unless ``higher_is_better``.
+    """
+
+    title: str
+    corner: str
+    row_labels: list[str]
+    col_labels: list[str]
+    values: np.ndarray
+    digits: int = 2
+    n_summary_rows: int = 0
+    higher_is_better: bool = False
+    bold_best: bool = True
+    note: str = ""
+    name: str = "table"
+
+    def best_mask(self) -> np.ndarray:
+        v = np.where(np.isfinite(self.values), self.values, np.nan)
+        mask = np.zeros(v.shape, dtype=bool)
+        if not self.bold_best or v.shape[1] < 2:
+            return mask
+        for i, row in enumerate(v):
+            if np.isfinite(row).any():
+                best = np.nanmax(row) if self.higher_is_better else np.nanmin(row)
+                mask[i] = np.isclose(row, best, rtol=0, atol=0.5 * 10 ** -self.digits) & np.isfinite(row)
+        return mask
+
+    def cell(self, i: int, j: int) -> str:
+        x = self.values[i, j]
+        return "–" if not np.isfinite(x) else f"{x:.{self.digits}f}"
+
+    def to_markdown(self) -> str:
+        best = self.best_mask()
+        lines = [f"**{self.title}**", "", "| " + " | ".join([self.corner, *self.col_labels]) + " |",
+                 "|---|" + "---:|" * len(self.col_labels)]
+        for i, label in enumerate(self.row_labels):
+            cells = [f"**{self.cell(i, j)}**" if best[i, j] else self.cell(i, j) for j in range(len(self.col_labels))]
+            label = f"**{label}**" if i >= len(self.row_labels) - self.n_summary_rows else label
+            lines.append("| " + " | ".join([label.replace("|", "\\|"), *cells]) + " |")
+        if self.note:
+            lines += ["", self.note]
+        return "\n".join(lines) + "\n"
+
+    def to_csv(self) -> str:
+        buf = io.StringIO()
+        writer = csv.writer(buf, lineterminator="\n")
+        writer.writerow([self.corner, *self.col_labels])
+        for i, label in enumerate(self.row_labels):
+            writer.writerow([label, *("" if not np.isfinite(x) else repr(float(x)) for x in self.values[i])])
+        return buf.getvalue()
+
+    def to_latex(self) -> str:
+        """A booktabs ``tabular`` (needs ``\\usepackage{booktabs}``); the best value of each row in ``\\textbf``."""
+        best = self.best_mask()
+        esc = _latex_escape
+        lines = [f"% {self.title}" + (f". {self.note}" if self.note else ""),
+                 "\\begin{tabular}{l" + "r" * len(self.col_labels) + "}", "\\toprule",
+                 " & ".join([esc(self.corner), *(esc(c) for c in self.col_labels)]) + " \\\\", "\\midrule"]
+        for i, label in enumerate(self.row_labels):
+            if self.n_summary_rows and i == len(self.row_labels) - self.n_summary_rows:
+                lines.append("\\midrule")
+            cells = [f"\\textbf{{{self.cell(i, j)}}}" if best[i, j] else self.cell(i, j).replace("–", "--")
+                     for j in range(len(self.col_labels))]
+            lines.append(" & ".join([esc(label), *cells]) + " \\\\")
+        lines += ["\\bottomrule", "\\end{tabular}"]
+        return "\n".join(lines) + "\n"
+
+    def write(self, out_dir: str | os.PathLike, stem: str | None = None) -> list[Path]:
+        """``<stem>.md``, ``<stem>.csv`` and ``<stem>.tex`` in ``out_dir``, each written atomically."""
+        out = Path(out_dir)
+        stem = stem or self.name
+        return [atomic.write_text(out / f"{stem}.md", self.to_markdown()),
+                atomic.write_text(out / f"{stem}.csv", self.to_csv()),
+                atomic.write_text(out / f"{stem}.tex", self.to_latex())]
+
+
+def _latex_escape(text: str) -> str:
+    for a, b in (("\\", "\\textbackslash{}"), ("&", "\\&"), ("%", "\\%"), ("_", "\\_"), ("#", "\\#"), ("$", "\\$"),
+                 ("{", "\\{"), ("}", "\\}")):
+        text = text.replace(a, b) if a != "\\" else text.replace(a, "\x00")
+    return text.replace("\x00", "\\textbackslash{}")
+
+
+Grid = Mapping[tuple[str, str], SegmentErrors]
+
+
+def _axes(grid: Mapping[tuple[str, str], Any]) -> tuple[list[str], list[str]]:
+    sequences = list(dict.fromkeys(seq for seq, _ in grid))
+    methods = list(dict.fromkeys(method for _, method in grid))
+    return sequences, methods
+
+
+def drift_table(grid: Grid, quantity: str = "translation_pct", *, average_label: str = "Avg.") -> PubTable:
+    """Sequences x methods table of the mean KITTI drift, plus the devkit average row (segments pooled)."""
+    if quantity not in QUANTITIES:
+        raise EvaluationError(f"unknown drift quantity {quantity!r}; use {', '.join(QUANTITIES)}", source="drift_table")
+    sequences, methods = _axes(grid)
+    values = np.full((len(sequences) + 1, len(methods)), np.nan)
+    for j, method in enumerate(methods):
+        for i, seq in enumerate(sequences):
+            s = grid.get((seq, method))
+            if s is not None and len(s):
+                values[i, j] = float(getattr(s, quantity).mean())
+        # pooled over the sequences where *every* method has segments, so methods are averaged on the same data
+        common = [grid[(seq, method)] for seq in sequences
+                  if all(grid.get((seq, m)) is not None and len(grid[(seq, m)]) for m in methods)]
+        values[-1, j] = pooled(common, quantity)
+    return PubTable(
+        title=f"KITTI {QUANTITIES[quantity]} per sequence",
+        corner="sequence", row_labels=[*sequences, average_label], col_labels=methods, values=values,
+        digits=2 if quantity == "translation_pct" else 3, n_summary_rows=1, name=f"kitti_{quantity}",
+        note=f"{average_label}: mean over the segments of all sequences pooled (KITTI devkit, length-weighted).",
+    )
+
+
+def per_length_table(grid: Grid, quantity: str = "translation_pct", lengths_m: Sequence[float] = KITTI_LENGTHS_M) -> PubTable:
+    """Segment length x method table, segments pooled over sequences, plus the all-lengths row."""
+    _, methods = _axes(grid)
+    values = np.full((len(lengths_m) + 1, len(methods)), np.nan)
+    for j, method in enumerate(methods):
+        segs = [s for (_, m), s in grid.items() if m == method]
+        length = np.concatenate([s.length_m for s in segs]) if segs else np.zeros(0)
+        q = np.concatenate([getattr(s, quantity) for s in segs]) if segs else np.zeros(0)
+        for i, L in enumerate(lengths_m):
+            sel = length == L
+            values[i, j] = q[sel].mean() if sel.any() else np.nan
+        values[-1, j] = q.mean() if q.size else np.nan
+    keep = np.isfinite(values).any(axis=1)
+    keep[-1] = True  # lengths no sequence is long enough for are left out; the "all" row stays
+    labels = [f"{L:g}" for L in lengths_m] + ["all"]
+    return PubTable(
+        title=f"KITTI {QUANTITIES[quantity]} per segment length", corner="length (m)",
+        row_labels=[lab for lab, k in zip(labels, keep) if k], col_labels=methods, values=values[keep],
+        digits=2 if quantity == "translation_pct" else 3, n_summary_rows=1, name=f"kitti_{quantity}_per_length",
+    )
+
+
+def per_speed_table(grid: Grid, quantity: str = "translation_pct", bins_mps: Sequence[float] = SPEED_BINS_MPS) -> PubTable:
+    """Segment speed bin x method table (the devkit's error-vs-speed curve as rows), pooled over sequences."""
+    _, methods = _axes(grid)
+    edges = list(bins_mps)
+    labels = [f"{lo:g}-{hi:g} m/s" if math.isfinite(hi) else f">= {lo:g} m/s" for lo, hi in zip(edges[:-1], edges[1:])]
+    values = np.full((len(labels), len(methods)), np.nan)
+    for j, method in enumerate(methods):
+        segs = [s for (_, m), s in grid.items() if m == method]
+        if not segs:
+            continue
+        speed = np.concatenate([s.speed_mps for s in segs])
+        q = np.concatenate([getattr(s, quantity) for s in segs])
+        for i, (lo, hi) in enumerate(zip(edges[:-1], edges[1:])):
+            sel = (speed >= lo) & (speed < hi)
+            values[i, j] = q[sel].mean() if sel.any() else np.nan
+    keep = np.isfinite(values).any(axis=1)
+    return PubTable(
+        title=f"KITTI {QUANTITIES[quantity]} per segment speed", corner="speed",
+        row_labels=[lab for lab, k in zip(labels, keep) if k], col_labels=methods, values=values[keep],
+        digits=2 if quantity == "translation_pct" else 3, name=f"kitti_{quantity}_per_speed",
+    )
+
+
+def value_table(grid: Mapping[tuple[str, str], float], title: str, *, name: str, digits: int = 3,
+                higher_is_better: bool = False, mean_label: str = "Mean") -> PubTable:
+    """Sequences x methods table of one scalar per cell (APE RMSE, RPE RMSE, ...) with the mean over sequences."""
+    sequences, methods = _axes(grid)
+    values = np.full((len(sequences) + 1, len(methods)), np.nan)
+    for (seq, method), v in grid.items():
+        values[sequences.index(seq), methods.index(method)] = np.nan if v is None else float(v)
+    body = values[:-1]
+    complete = np.isfinite(body).all(axis=1)
+    values[-1] = body[complete].mean(axis=0) if complete.any() else np.nan
+    return PubTable(title=title, corner="sequence", row_labels=[*sequences, mean_label], col_labels=methods,
+                    values=values, digits=digits, n_summary_rows=1, higher_is_better=higher_is_better, name=name,
+                    note=f"{mean_label}: unweighted mean over the sequences every method completed.")
+
+
+def short_method_labels(labels: Sequence[str]) -> dict[str, str]:
+    """Method labels without the prefix they all share (``"icp_sim: kiss"`` -> ``"kiss"``), unchanged if none."""
+    labels = list(labels)
+    if len(labels) < 2:
+        return {lab: lab.split(": ", 1)[-1] for lab in labels}
+    prefix = os.path.commonprefix(labels)
+    cut = max(prefix.rfind(": "), prefix.rfind(" | "))
+    if cut < 0:
+        return {lab: lab for lab in labels}
+    return {lab: lab[cut + 2:].lstrip() or lab for lab in labels}
+
+
+@dataclass
+class PublicationTables:
+    """Every table for one set of runs, ready to write."""
+
+    tables: list[PubTable] = field(default_factory=list)
+
+    def write(self, out_dir: str | os.PathLike) -> list[Path]:
+        return [p for t in self.tables for p in t.write(out_dir)]
+
+    def markdown(self) -> str:
+        return "\n".join(t.to_markdown() for t in self.tables)
+
+
+def publication_tables(segments: Grid | None = None, ape_rmse_m: Mapping[tuple[str, str], float] | None = None,
+                       rpe_rmse_m: Mapping[tuple[str, str], float] | None = None) -> PublicationTables:
+    """Drift (translation, rotation), per-length, per-speed, APE and RPE tables from what is available."""
+    out = PublicationTables()
+    if segments:
+        for q in QUANTITIES:
+            out.tables.append(drift_table(segments, q))
+        out.tables.append(per_length_table(segments))
+        out.tables.append(per_speed_table(segments))
+    if ape_rmse_m:
+        out.tables.append(value_table(ape_rmse_m, "APE translation RMSE (m)", name="ape_rmse"))
+    if rpe_rmse_m:
+        out.tables.append(value_table(rpe_rmse_m, "RPE translation RMSE (m per frame)", name="rpe_rmse", digits=4))
+    return out

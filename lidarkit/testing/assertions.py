@@ -1,0 +1,104 @@
+"""``assert_trajectory_close`` and ``assert_no_worse_than``: AssertionErrors whose message says by how much."""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lidarkit.errors import ConfigError, EvaluationError
+from lidarkit.trajectory import Trajectory
+
+HIGHER_IS_BETTER = frozenset({"hz", "converged_fraction"})
+
+
+def assert_trajectory_close(
+    actual: Trajectory,
+    expected: Trajectory,
+    *,
+    atol_m: float = 1e-3,
+    atol_deg: float = 0.05,
+    align: str = "none",
+) -> None:
+    """Every pose of ``actual`` within ``atol_m`` (position) and ``atol_deg`` (rotation angle) of ``expected``.
+
+    ``align`` ("none", "se3", "sim3") first aligns ``actual`` onto ``expected`` (evo's Umeyama); the message
+    names the worst frame. Different lengths fail as an AssertionError too.
+    """
+    if len(actual) != len(expected):
+        raise AssertionError(f"trajectories differ in length: {len(actual)} poses vs {len(expected)} expected")
+    if align != "none":
+        from lidarkit.eval import align_trajectory
+
+        actual = align_trajectory(expected, actual, align)[0]
+    A, E = actual.poses_se3, expected.poses_se3
+    d_m = np.linalg.norm(A[:, :3, 3] - E[:, :3, 3], axis=1)
+    R = np.einsum("nji,njk->nik", E[:, :3, :3], A[:, :3, :3])
+    d_deg = np.degrees(np.arccos(np.clip((np.trace(R, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)))
+    bad_t, bad_r = d_m > atol_m, d_deg > atol_deg
+    if bad_t.any() or bad_r.any():
+        i = int(np.argmax(d_m)) if bad_t.any() else int(np.argmax(d_deg))
+        raise AssertionError(
+            f"{int((bad_t | bad_r).sum())} of {len(A)} poses differ: worst at frame {i}: {d_m[i]:.4g} m, {d_deg[i]:.4g} deg "
+            f"(tolerance {atol_m:g} m, {atol_deg:g} deg; max over all: {d_m.max():.4g} m, {d_deg.max():.4g} deg)")
+
+
+def metrics_of(result: Any) -> dict[str, float]:
+    """Scalar metrics of an odometry result, a bench record, a baseline job or a plain mapping."""
+    from lidarkit.odometry.result import OdometryResult
+
+    if isinstance(result, OdometryResult):
+        from lidarkit.bench.tasks.odometry import scalar_metrics
+
+        return scalar_metrics(result)
+    if isinstance(result, Mapping):
+        inner = result.get("metrics") if isinstance(result.get("metrics"), Mapping) else result
+        return {k: float(v) for k, v in inner.items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
+    raise ConfigError(f"cannot read metrics from a {type(result).__name__}", source="assert_no_worse_than")
+
+
+def assert_no_worse_than(
+    result: Any,
+    baseline: Any,
+    *,
+    metric: str = "drift_translation_pct",
+    tolerance: float | None = None,
+    method: str | None = None,
+    dataset: str | None = None,
+) -> None:
+    """``result``'s ``metric`` is at most ``tolerance`` worse than ``baseline``'s (lower is better unless the metric
+    is a rate).
+
+    ``result``: an OdometryResult, a bench record or a metrics mapping. ``baseline``: a baseline folder (path or
+    :class:`lidarkit.bench.baseline.Baseline`; ``method`` / ``dataset`` pick the pinned job) or a metrics mapping.
+    ``tolerance`` None uses the baseline's recorded band (from its run-to-run noise); with a plain mapping it is 0.
+    """
+    from lidarkit.bench.baseline import Baseline, load_baseline
+
+    band = 0.0
+    if isinstance(baseline, (str, os.PathLike)):
+        baseline = load_baseline(Path(baseline))
+    if isinstance(baseline, Baseline):
+        job = baseline.job(method, dataset)
+        ref_metrics = {k: float(v) for k, v in job["metrics"].items() if isinstance(v, (int, float))}
+        band = float(job.get("bands", {}).get(metric, 0.0))
+    else:
+        ref_metrics = metrics_of(baseline)
+    now_metrics = metrics_of(result)
+    for name, source in ((metric, now_metrics), (metric, ref_metrics)):
+        if name not in source:
+            which = "result" if source is now_metrics else "baseline"
+            raise EvaluationError(f"metric {name!r} not in the {which} (it has: {', '.join(sorted(source))})",
+                                  source="assert_no_worse_than")
+    tol = band if tolerance is None else float(tolerance)
+    if not tol >= 0 or not math.isfinite(tol):
+        raise ConfigError(f"tolerance must be a finite number >= 0, got {tolerance}", source="assert_no_worse_than")
+    now, ref = now_metrics[metric], ref_metrics[metric]
+    worse_by = (ref - now) if metric in HIGHER_IS_BETTER else (now - ref)
+    if not math.isfinite(now) or worse_by > tol:
+        raise AssertionError(f"regression: {metric} = {now:.6g}, baseline {ref:.6g} (worse by {worse_by:.4g}, "
+                             f"tolerance {tol:.4g})")

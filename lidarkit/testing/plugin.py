@@ -1,0 +1,41 @@
+"""pytest plugin (entry point ``lidarkit`` in the ``pytest11`` group): baseline fixtures for users' test suites.
+
+- ``--lidarkit-baseline DIR`` (or the ini option ``lidarkit_baseline``): the default baseline folder.
+- ``lidarkit_baseline``: that folder loaded as a :class:`lidarkit.bench.baseline.Baseline` (skips the test with
+  a reason when none is configured).
+- ``load_lidarkit_baseline``: a function loading any baseline folder (relative paths from the rootdir).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+
+def pytest_addoption(parser):
+    group = parser.getgroup("lidarkit")
+    group.addoption("--lidarkit-baseline", action="store", default=None, metavar="DIR",
+                    help="baseline folder written by `lidarkit baseline record` (fixture lidarkit_baseline)")
+    parser.addini("lidarkit_baseline", "baseline folder for the lidarkit_baseline fixture", default="")
+
+
+@pytest.fixture(scope="session")
+def load_lidarkit_baseline(pytestconfig):
+    """``load(path)`` -> Baseline; relative paths resolve against the pytest rootdir."""
+    from lidarkit.bench.baseline import load_baseline
+
+    def load(path):
+        path = Path(path)
+        return load_baseline(path if path.is_absolute() else Path(pytestconfig.rootpath) / path)
+
+    return load
+
+
+@pytest.fixture(scope="session")
+def lidarkit_baseline(pytestconfig, load_lidarkit_baseline):
+    """The configured baseline folder (``--lidarkit-baseline`` or ini ``lidarkit_baseline``)."""
+    path = pytestconfig.getoption("--lidarkit-baseline") or pytestconfig.getini("lidarkit_baseline")
+    if not path:
+        pytest.skip("no baseline configured: pass --lidarkit-baseline DIR or set lidarkit_baseline in pytest.ini")
+    return load_lidarkit_baseline(path)

@@ -1,0 +1,171 @@
+"""Golden baselines: record then check passes; a drifting variant fails with "regression"; changed data gives
+"protocol changed"; bad baseline folders are clear errors."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import textwrap
+from pathlib import Path
+
+import pytest
+from fake_kitti import write_fake_kitti_sequence
+from pydantic import Field
+
+from lidarkit.bench.baseline import check, load_baseline, record
+from lidarkit.cli import main
+from lidarkit.errors import ConfigError, DataError
+from lidarkit.registration import registry as registry_module
+from lidarkit.registration.open3d_icp import Open3DPointToPlane, Open3DSurfaceConfig
+
+
+class StretchConfig(Open3DSurfaceConfig):
+    stretch: float = Field(1.0, gt=0, description="scale of the estimated translation (a deliberate drift)")
+
+
+class Stretch(Open3DPointToPlane):
+    """Open3D point-to-plane whose translations are scaled by ``stretch``: +0.75 % gives ~+0.5 pp more KITTI drift here."""
+
+    Config = StretchConfig
+
+    def _align(self, source_xyz, target_xyz, init_T):
+        result = super()._align(source_xyz, target_xyz, init_T)
+        T = result.T_target_source.copy()
+        T[:3, 3] *= self.config.stretch
+        return dataclasses.replace(result, T_target_source=T)
+
+
+
+
+class StretchedMoreConfig(StretchConfig):
+    stretch: float = Field(1.0075, gt=0)
+
+
+class StretchedMore(Stretch):
+    Config = StretchedMoreConfig
+
+
+@pytest.fixture(scope="module")
+def stretch_registered():
+    """``test_stretch`` in the registry for this module only (other modules parametrize over available_icp())."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(Stretch, "name", "test_stretch")
+        mp.setitem(registry_module._VARIANTS, "test_stretch", Stretch)
+        yield
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory, stretch_registered):
+    root = tmp_path_factory.mktemp("fake_kitti")
+    write_fake_kitti_sequence(root, "00", 56, step_m=2.0, seed=0)  # 110 m: 100 m KITTI segments exist
+    suite = root / "golden.yaml"
+    suite.write_text(textwrap.dedent(f"""
+        name: golden
+        experiments:
+          - name: fake
+            task: odometry
+            dataset: {{kind: kitti, path: "{root / 'sequences' / '00'}", name: "fake 00"}}
+            methods: [test_stretch]
+    """))
+    out = root / "baseline"
+    baseline = record(suite, out, repeats=2)
+    return root, out, baseline
+
+
+def run_cli(argv, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    out, err = capsys.readouterr()
+    return int(exc.value.code or 0), out, err
+
+
+def test_record_pins_protocol_and_unchanged_check_passes(recorded, capsys):
+    root, out, baseline = recorded
+    manifest = json.loads((out / "manifest.json").read_text())
+    env = manifest["environment"]
+    assert env["packages"]["kiss-icp"] and env["packages"]["open3d"] and env["packages"]["numpy"]
+    assert env["platform"]["machine"] and manifest["evaluation"]["kitti_step_frames"] == 10
+    job = manifest["jobs"][0]
+    assert job["protocol"]["checksums"]["sequences/00/velodyne/000000.bin"] and "poses/00.txt" in job["protocol"]["checksums"]
+    assert job["protocol"]["method_config"]["stretch"] == 1.0
+    assert "kitti_angle_correction" in job["protocol"] and "pose_instant" in job["protocol"]
+    drift = job["metrics"]["drift_translation_pct"]
+    assert 0 < drift < 1.0, drift  # the fake sequence registers well
+    assert job["bands"]["drift_translation_pct"] >= 0.05
+    assert baseline.trajectory("test_stretch").poses_se3.shape == (56, 4, 4)
+    code, text, _ = run_cli(["baseline", "check", str(out)], capsys)
+    assert code == 0 and "baseline check passed" in text and "regression" not in text
+
+
+def test_drifting_variant_fails_with_regression(recorded, monkeypatch, capsys):
+    _, out, baseline = recorded
+    monkeypatch.setattr(StretchedMore, "name", "test_stretch")
+    monkeypatch.setitem(registry_module._VARIANTS, "test_stretch", StretchedMore)
+    result = check(out)
+    assert not result.passed
+    lines = result.lines()
+    regression = [line for line in lines if line.startswith("regression:") and "drift_translation_pct" in line]
+    assert regression, lines
+    assert not any(line.startswith("protocol changed") for line in lines)
+    assert any(line.startswith("note:") and "stretch: 1.0 -> 1.0075" in line for line in lines)
+    now = next(iter(result.measured.values()))["drift_translation_pct"]
+    assert now - baseline.jobs[0]["metrics"]["drift_translation_pct"] > 0.4
+    # a band given by the user replaces the recorded one
+    from lidarkit.bench.baseline import parse_tolerances
+
+    assert parse_tolerances(["drift_translation_pct=0.2", "ape_rmse_m=1e-2"]) == {"drift_translation_pct": 0.2,
+                                                                                   "ape_rmse_m": 0.01}
+
+
+def test_changed_data_file_is_a_protocol_change_not_a_regression(recorded, tmp_path, capsys):
+    root, out, _ = recorded
+    scan = root / "sequences" / "00" / "velodyne" / "000003.bin"
+    original = scan.read_bytes()
+    try:
+        scan.write_bytes(original[:-16])  # one point less
+        result = check(out)
+        assert not result.passed
+        lines = result.lines()
+        assert any(line.startswith("protocol changed: test_stretch on fake 00 (seed 0): data.sequences/00/velodyne/000003.bin") for line in lines)
+        assert not any(line.startswith("regression") for line in lines)
+        code, text, _ = run_cli(["baseline", "check", str(out)], capsys)
+        assert code == 1 and "protocol changed" in text
+    finally:
+        scan.write_bytes(original)
+
+
+def test_another_kiss_icp_version_is_a_protocol_change(recorded, tmp_path):
+    import shutil
+
+    _, out, _ = recorded
+    copy = tmp_path / "baseline"
+    shutil.copytree(out, copy)
+    manifest = json.loads((copy / "manifest.json").read_text())
+    manifest["environment"]["packages"]["kiss-icp"] = "0.0.1"
+    (copy / "manifest.json").write_text(json.dumps(manifest))
+    result = check(copy)
+    assert not result.passed and not result.measured  # nothing re-run: the numbers would not be comparable
+    assert any(line.startswith("protocol changed: environment: packages.kiss-icp: 0.0.1 -> ") for line in result.lines())
+
+
+def test_bad_baseline_folders_are_clear_errors(recorded, tmp_path, capsys):
+    _, out, _ = recorded
+    with pytest.raises(DataError, match="no manifest.json: not a baseline folder"):
+        load_baseline(tmp_path)
+    with pytest.raises(DataError, match="does not exist"):
+        check(tmp_path / "nowhere")
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    (bad / "manifest.json").write_text("{ not json")
+    with pytest.raises(DataError, match="corrupt manifest: not readable JSON"):
+        check(bad)
+    manifest = json.loads((out / "manifest.json").read_text())
+    del manifest["jobs"][0]["bands"]
+    (bad / "manifest.json").write_text(json.dumps(manifest))
+    with pytest.raises(DataError, match="corrupt manifest: job 0 lacks bands"):
+        check(bad)
+    (bad / "manifest.json").write_text(json.dumps({"schema": "something-else"}))
+    code, _, err = run_cli(["baseline", "check", str(bad)], capsys)
+    assert code == 1 and "corrupt manifest: schema 'something-else'" in err
+    with pytest.raises(ConfigError, match="METRIC=BAND"):
+        check(out, tolerances=["drift_translation_pct"])

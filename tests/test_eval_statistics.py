@@ -1,0 +1,151 @@
+"""Statistics over runs and paired comparisons: bootstrap CIs, Wilcoxon verdicts, `lidarkit compare` on runs."""
+
+from __future__ import annotations
+
+import json
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy import stats as sstats
+
+from lidarkit.cli import main
+from lidarkit.errors import ConfigError, DataError, EvaluationError
+from lidarkit.eval import bootstrap_ci, compare, paired_test, summarize
+
+
+def run_cli(argv: list[str], capsys) -> tuple[int, str, str]:
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    out, err = capsys.readouterr()
+    return int(exc.value.code or 0), out, err
+
+
+def test_summary_matches_numpy_and_bootstrap_reproduces_exactly():
+    values = np.random.default_rng(3).gamma(2.0, 0.5, size=12)
+    s = summarize(values, seed=7)
+    assert (s.n, s.mean, s.median) == (12, pytest.approx(values.mean()), pytest.approx(np.median(values)))
+    assert s.std == pytest.approx(values.std(ddof=1))
+    assert s.ci_low < s.mean < s.ci_high
+    again = summarize(values.copy(), seed=7)
+    assert (again.ci_low, again.ci_high) == (s.ci_low, s.ci_high)  # bit-identical for the same seed
+    other = summarize(values, seed=8)
+    assert (other.ci_low, other.ci_high) != (s.ci_low, s.ci_high)
+    # the percentile interval of a large normal sample is close to mean +- 1.96 sem
+    big = np.random.default_rng(0).normal(5.0, 2.0, 4000)
+    lo, hi = bootstrap_ci(big, seed=1)
+    sem = big.std(ddof=1) / np.sqrt(big.size)
+    assert (hi - lo) == pytest.approx(2 * 1.96 * sem, rel=0.1)
+    assert bootstrap_ci([2.5]) == (2.5, 2.5)
+    assert summarize([]).n == 0
+
+
+def test_bad_statistics_input_raises():
+    with pytest.raises(EvaluationError, match="non-finite"):
+        summarize([1.0, float("nan")])
+    with pytest.raises(ConfigError, match="confidence"):
+        bootstrap_ci([1.0, 2.0], confidence=1.5)
+    with pytest.raises(EvaluationError, match="differ in count"):
+        paired_test([1.0, 2.0, 3.0], [1.0, 2.0])
+    with pytest.raises(EvaluationError, match="at least 2"):
+        paired_test([1.0], [2.0])
+
+
+def test_paired_test_agrees_with_scipy_and_reads_plainly():
+    rng = np.random.default_rng(1)
+    b = rng.uniform(1.0, 2.0, 15)
+    a = b - rng.uniform(0.05, 0.3, 15)  # a lower (better) on every unit
+    res = paired_test(a, b, name_a="kiss", name_b="vanilla", metric="ape_rmse_m")
+    ref = sstats.wilcoxon(a - b)
+    assert res.p_value == pytest.approx(ref.pvalue) and res.statistic == pytest.approx(ref.statistic)
+    assert res.p_value < 0.001 and res.effect_size == pytest.approx(-1.0) and res.better == "a"
+    assert res.verdict().startswith("kiss is better than vanilla on ape_rmse_m")
+    flipped = paired_test(b, a, name_a="vanilla", name_b="kiss", metric="ape_rmse_m")
+    assert flipped.better == "b" and flipped.effect_size == pytest.approx(1.0)
+    # higher-is-better metrics flip the winner
+    assert paired_test(a, b, lower_is_better=False).better == "b"
+    # differences of pure round-off are ties: p = 1 and "no significant difference"
+    same = paired_test(b, b * (1 + 1e-15), name_a="kiss", name_b="kiss again")
+    assert same.n_ties == 15 and same.p_value == 1.0 and not same.significant
+    assert "no significant difference" in same.verdict()
+    # a significant but tiny difference inside the measured noise is not called
+    small = paired_test(a, b, noise=1.0)
+    assert not small.significant and "within the run-to-run noise" in small.verdict()
+
+
+SUITE = """
+name: sim-seeds
+seeds: 10
+experiments:
+  - name: sim
+    task: odometry
+    # no dataset seed: each job seed simulates another drive
+    dataset: {{kind: sim_lidar, scene: street, n_frames: 10, n_beams: 32, n_azimuths: 720, name: sim street}}
+    methods: {methods}
+"""
+
+
+def _run(tmp_path: Path, name: str, methods: str) -> Path:
+    from lidarkit.bench.runner import run_suite
+    from lidarkit.bench.suite import load_suite
+
+    path = tmp_path / f"{name}.yaml"
+    path.write_text(textwrap.dedent(SUITE.format(methods=methods)))
+    out = tmp_path / name
+    summary = run_suite(load_suite(path), out, executor="serial")
+    assert summary.failed == 0
+    return out
+
+
+def test_compare_tells_kiss_from_vanilla_and_kiss_from_itself_over_10_simulated_seeds(tmp_path, capsys):
+    both = _run(tmp_path, "both", "[kiss, {name: vanilla, params: {voxel_size_m: 0.5}}]")
+    again = _run(tmp_path, "kiss_again", "[kiss]")
+    code, out, _ = run_cli(["compare", str(both), str(both), "--method-a", "kiss", "--method-b", "vanilla",
+                            "--metric", "ape_rmse_m", "--json", str(tmp_path / "cmp.json")], capsys)
+    assert code == 0
+    data = json.loads((tmp_path / "cmp.json").read_text())
+    assert data["n_pairs"] == 10 and data["p_value"] < 0.01 and data["better"] == "a"
+    assert "kiss is better than vanilla(voxel_size_m=0.5)" in out
+    same = compare(both, again, method_a="kiss", metric="ape_rmse_m")
+    assert same.n_pairs == 10 and not same.significant
+    assert "no significant difference" in same.verdict()
+    # the per-seed APE summary over the 10 drives is reproducible
+    from lidarkit.eval.compare import load_bench_runs
+
+    values = [v["ape_rmse_m"] for v in load_bench_runs(both, "kiss").values.values()]
+    assert summarize(values, seed=0) == summarize(values, seed=0)
+    # different data: the kiss-only folder against a suite over another simulated scene
+    other = tmp_path / "other.yaml"
+    other.write_text(textwrap.dedent(SUITE.format(methods="[kiss]")).replace("seeds: 10", "seeds: [11, 12]"))
+    from lidarkit.bench.runner import run_suite
+    from lidarkit.bench.suite import load_suite
+
+    run_suite(load_suite(other), tmp_path / "other", executor="serial")
+    with pytest.raises(EvaluationError, match="runs over different data"):
+        compare(again, tmp_path / "other")
+    with pytest.raises(ConfigError, match="choose one of"):
+        compare(both, again)
+
+
+def test_compare_run_folders_per_frame_and_bad_input(tmp_path, capsys):
+    from lidarkit.odometry import run
+    from lidarkit.sim.lidar import SimulatedLidarSequence
+
+    seq = SimulatedLidarSequence(scene="street", n_frames=10, n_beams=32, n_azimuths=720, seed=4)
+    run(seq, "kiss", out_dir=tmp_path / "kiss")
+    run(seq, "vanilla", params={"voxel_size_m": 0.5}, out_dir=tmp_path / "vanilla")
+    res = compare(tmp_path / "kiss", tmp_path / "vanilla")
+    assert res.pairing == "frame" and res.metric == "rpe_translation_m" and res.n_pairs == 9
+    assert res.mean_a < res.mean_b
+    code, out, _ = run_cli(["compare", str(tmp_path / "kiss"), str(tmp_path / "kiss")], capsys)
+    assert code == 0 and "no significant difference" in out
+    other = SimulatedLidarSequence(scene="street", n_frames=10, n_beams=32, n_azimuths=720, seed=5)
+    run(other, "kiss", out_dir=tmp_path / "kiss_other")
+    with pytest.raises(EvaluationError, match="runs over different data"):
+        compare(tmp_path / "kiss", tmp_path / "kiss_other")
+    (tmp_path / "kiss_other" / "metrics.json").unlink()
+    with pytest.raises(DataError, match="no metrics.json"):
+        compare(tmp_path / "kiss", tmp_path / "kiss_other")
+    code, _, err = run_cli(["compare", str(tmp_path / "kiss"), str(tmp_path / "kiss_other")], capsys)
+    assert code == 1 and "no metrics.json" in err

@@ -1,0 +1,85 @@
+"""Publication tables: the devkit average row (segments pooled = length-weighted) against a hand computation."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lidarkit.eval import kitti_drift
+from lidarkit.eval.tables import SegmentErrors, drift_table, per_length_table, per_speed_table, value_table
+from lidarkit.trajectory import Trajectory
+
+
+def straight(n_frames: int, scale: float = 1.0, name: str = "") -> Trajectory:
+    """Frames 1 m apart along x (``scale`` stretches the estimate: every segment's error is |scale - 1| * L)."""
+    poses = np.tile(np.eye(4), (n_frames, 1, 1))
+    poses[:, 0, 3] = scale * np.arange(n_frames, dtype=float)
+    return Trajectory(poses, timestamps_s=0.1 * np.arange(n_frames), name=name)
+
+
+def grid():
+    # sequence "A": 151 frames (150 m), sequence "B": 400 frames (399 m); kiss 1 % / 3 % too long, other 2 % everywhere
+    g = {}
+    for seq, n, kiss_scale in (("A", 151, 1.01), ("B", 400, 1.03)):
+        ref = straight(n)
+        g[(seq, "kiss")] = SegmentErrors.from_drift(kitti_drift(ref, straight(n, kiss_scale)))
+        g[(seq, "other")] = SegmentErrors.from_drift(kitti_drift(ref, straight(n, 1.02)))
+    return g
+
+
+def test_average_row_is_the_devkit_pooled_mean_checked_by_hand():
+    g = grid()
+    # by hand: A has 100 m segments starting at frames 0, 10, ..., 40 (the last frame must exceed start + 100 m
+    # and exist): 5 segments. B (399 m): starts 0..290 for 100 m (30), 0..190 for 200 m (20), 0..90 for 300 m (10).
+    assert len(g[("A", "kiss")]) == 5 and len(g[("B", "kiss")]) == 60
+    # a segment of nominal length L spans L + 1 m (its last frame is the first beyond L), so a scale error s gives
+    # s * (L + 1) / L; the devkit divides by the nominal L.
+    seg_a = 5 * [1.0 * 101 / 100]
+    seg_b = 30 * [3.0 * 101 / 100] + 20 * [3.0 * 201 / 200] + 10 * [3.0 * 301 / 300]
+    seq_means = [np.mean(seg_a), np.mean(seg_b)]
+    expected_avg = (sum(seg_a) + sum(seg_b)) / 65  # pooled: 2.867 %, not the mean of sequences (2.016 %)
+    other_b = (30 * 101 / 100 + 20 * 201 / 200 + 10 * 301 / 300) * 2.0 / 60
+    table = drift_table(g)
+    assert table.row_labels == ["A", "B", "Avg."] and table.col_labels == ["kiss", "other"]
+    np.testing.assert_allclose(table.values[:, 0], [*seq_means, expected_avg], atol=1e-9)
+    np.testing.assert_allclose(table.values[:, 1], [2.02, other_b, (5 * 2.02 + 60 * other_b) / 65], atol=1e-9)
+    assert abs(expected_avg - np.mean(seq_means)) > 0.8
+    md = table.to_markdown()
+    assert "| **Avg.** | 2.87 | **2.01** |" in md and "| A | **1.01** | 2.02 |" in md
+    tex = table.to_latex()
+    assert "\\toprule" in tex and "\\bottomrule" in tex and tex.count("\\midrule") == 2
+    assert "Avg. & 2.87 & \\textbf{2.01} \\\\" in tex and "A & \\textbf{1.01} & 2.02 \\\\" in tex
+    csv_lines = table.to_csv().splitlines()
+    assert csv_lines[0] == "sequence,kiss,other" and csv_lines[-1].startswith(f"Avg.,{expected_avg!r}"[:15])
+    rot = drift_table(g, "rotation_deg_per_100m")
+    np.testing.assert_allclose(rot.values, 0.0, atol=1e-9)
+
+
+def test_per_length_speed_and_value_tables():
+    g = grid()
+    lengths = per_length_table(g)
+    # 100 m: 5 segments of A at 1 % and 30 of B at 3 %; 200 m and 300 m: B only
+    np.testing.assert_allclose(lengths.values[:3, 0], [(5 + 90) / 35 * 1.01, 3.0 * 1.005, 3.0 * 301 / 300], atol=1e-9)
+    assert lengths.row_labels == ["100", "200", "300", "all"]  # no sequence reaches 400 m: no empty rows
+    speeds = per_speed_table(g)
+    # 1 m per 0.1 s frame: the devkit duration (frames + 1) * 0.1 s gives just under 10 m/s
+    assert speeds.row_labels == ["5-10 m/s"]
+    apes = value_table({("A", "kiss"): 0.5, ("A", "other"): 0.7, ("B", "kiss"): 1.5, ("B", "other"): 1.0},
+                       "APE", name="ape")
+    np.testing.assert_allclose(apes.values[-1], [1.0, 0.85])
+    assert apes.best_mask().tolist() == [[True, False], [False, True], [False, True]]
+
+
+def test_eval_cli_writes_tables(tmp_path, capsys):
+    from lidarkit.cli import main
+
+    ref, est = straight(400), straight(400, 1.03)
+    ref.to_kitti(tmp_path / "ref.txt")
+    est.to_kitti(tmp_path / "est.txt")
+    with pytest.raises(SystemExit) as exc:
+        main(["eval", str(tmp_path / "ref.txt"), str(tmp_path / "est.txt"), "--align", "none", "--tables", str(tmp_path / "t")])
+    assert exc.value.code in (0, None)
+    text = (tmp_path / "t" / "kitti_translation_pct.md").read_text()
+    assert "Avg." in text and "3.02" in text
+    assert (tmp_path / "t" / "kitti_translation_pct.tex").read_text().count("\\toprule") == 1
+    assert (tmp_path / "t" / "segments_translation_pct.png").read_bytes()[:4] == b"\x89PNG"

@@ -1,0 +1,117 @@
+"""lidarkit.testing: trajectory and baseline assertions, and the pytest plugin's fixtures in a user's test run."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from lidarkit.bench.baseline import record
+from lidarkit.errors import EvaluationError
+from lidarkit.geometry import make_se3, so3_exp
+from lidarkit.testing import assert_no_worse_than, assert_trajectory_close
+from lidarkit.trajectory import Trajectory
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def walk(n: int = 20, offset_m: float = 0.0, yaw_deg: float = 0.0) -> Trajectory:
+    poses = np.stack([make_se3(so3_exp([0, 0, np.radians(yaw_deg)]), [i + offset_m * (i == 7), 0.0, 0.0]) for i in range(n)])
+    return Trajectory(poses)
+
+
+def test_assert_trajectory_close_names_the_worst_frame():
+    assert_trajectory_close(walk(), walk())
+    with pytest.raises(AssertionError, match=r"1 of 20 poses differ: worst at frame 7: 0.01 m"):
+        assert_trajectory_close(walk(offset_m=0.01), walk(), atol_m=0.005)
+    with pytest.raises(AssertionError, match="0.1 deg"):
+        assert_trajectory_close(walk(yaw_deg=0.1), walk(), atol_deg=0.05)
+    assert_trajectory_close(walk(yaw_deg=0.1), walk(), atol_deg=0.2)
+    with pytest.raises(AssertionError, match="differ in length"):
+        assert_trajectory_close(walk(5), walk(6))
+
+
+SUITE = """
+name: tiny-golden
+experiments:
+  - name: walk
+    task: selftest
+    dataset: {kind: synthetic, name: synth}
+    methods:
+      - {name: random_walk, params: {steps: 40, noise_m: 0.05}}
+"""
+
+
+@pytest.fixture(scope="module")
+def tiny_baseline(tmp_path_factory):
+    root = tmp_path_factory.mktemp("tiny")
+    (root / "suite.yaml").write_text(textwrap.dedent(SUITE))
+    return record(root / "suite.yaml", root / "baseline", repeats=2)
+
+
+def test_assert_no_worse_than_against_a_baseline_and_a_mapping(tiny_baseline):
+    pinned = tiny_baseline.metrics("random_walk")
+    ape = pinned["ape_rmse_m"]
+    band = tiny_baseline.job("random_walk")["bands"]["ape_rmse_m"]
+    assert band == pytest.approx(max(0.01, 0.02 * ape))  # deterministic job: the floor sets the band
+    assert_no_worse_than({"ape_rmse_m": ape + 0.5 * band}, tiny_baseline, metric="ape_rmse_m")
+    assert_no_worse_than({"ape_rmse_m": ape - 1.0}, tiny_baseline.path, metric="ape_rmse_m", method="random_walk")
+    with pytest.raises(AssertionError, match=r"regression: ape_rmse_m = .* \(worse by 0.02"):
+        assert_no_worse_than({"ape_rmse_m": ape + 0.02}, tiny_baseline, metric="ape_rmse_m", tolerance=0.0)
+    with pytest.raises(AssertionError, match="regression"):
+        assert_no_worse_than({"hz": 9.0}, {"hz": 10.0}, metric="hz", tolerance=0.5)
+    assert_no_worse_than({"hz": 11.0}, {"hz": 10.0}, metric="hz")
+    with pytest.raises(EvaluationError, match="not in the result"):
+        assert_no_worse_than({"x": 1.0}, tiny_baseline, metric="ape_rmse_m")
+
+
+def test_pytest_plugin_fixture_in_a_user_test_run(tiny_baseline, tmp_path):
+    (tmp_path / "test_user.py").write_text(textwrap.dedent("""
+        from lidarkit.testing import assert_no_worse_than
+
+        def test_my_variant_holds(lidarkit_baseline):
+            pinned = lidarkit_baseline.metrics("random_walk")
+            assert_no_worse_than({"ape_rmse_m": pinned["ape_rmse_m"]}, lidarkit_baseline, metric="ape_rmse_m")
+
+        def test_my_variant_regressed(lidarkit_baseline):
+            pinned = lidarkit_baseline.metrics("random_walk")
+            assert_no_worse_than({"ape_rmse_m": pinned["ape_rmse_m"] + 1}, lidarkit_baseline, metric="ape_rmse_m")
+    """))
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])}
+    # installed (pip install -e .), the pytest11 entry point loads the plugin by itself; else name it with -p
+    from importlib.metadata import entry_points
+
+    installed = any(ep.value == "lidarkit.testing.plugin" for ep in entry_points(group="pytest11"))
+    load = [] if installed else ["-p", "lidarkit.testing.plugin"]
+    proc = subprocess.run(
+        [sys.executable, "-m", "pytest", "-q", *load, "-p", "no:cacheprovider",
+         "--lidarkit-baseline", str(tiny_baseline.path), "test_user.py"],
+        cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
+    assert "1 failed, 1 passed" in proc.stdout, proc.stdout + proc.stderr
+    assert "regression: ape_rmse_m" in proc.stdout
+
+
+def test_compare_holds_a_difference_against_the_noise_a_baseline_measured(tiny_baseline, tmp_path, capsys):
+    from lidarkit.bench.runner import run_suite
+    from lidarkit.bench.suite import load_suite
+    from lidarkit.cli import main
+
+    folders = []
+    for noise_m in (0.05, 0.0502):  # a tiny but systematic difference
+        path = tmp_path / f"s{noise_m}.yaml"
+        path.write_text(textwrap.dedent(SUITE).replace("noise_m: 0.05", f"noise_m: {noise_m}") + "seeds: 8\n")
+        run_suite(load_suite(path), tmp_path / f"r{noise_m}", executor="serial")
+        folders.append(str(tmp_path / f"r{noise_m}"))
+    argv = ["compare", *folders, "--metric", "ape_rmse_m"]
+    with pytest.raises(SystemExit):
+        main(argv)
+    assert "is better than" in capsys.readouterr().out  # p < 0.05 over 8 seeds, same sign everywhere
+    with pytest.raises(SystemExit):
+        main([*argv, "--noise-from", str(tiny_baseline.path)])
+    out = capsys.readouterr().out
+    assert "no significant difference" in out and "within the run-to-run noise" in out
