@@ -179,7 +179,8 @@ def registration_covariance(
     n_total = n if n_total is None else int(n_total)
     n_effective = n_total if n_effective is None else max(int(n_effective), 1)
     M = np.asarray(constraints, dtype=np.float64)
-    J = np.einsum("nij,njk->nik", M, left_jacobians(p))
+    J0 = left_jacobians(p)
+    J = np.matmul(M, J0)
     A = np.einsum("nki,nkj->ij", J, J)
     r = np.einsum("nij,nj->ni", M, p - q)
     if model.method == "gauss_newton":
@@ -198,7 +199,6 @@ def registration_covariance(
         else:
             sigma2 = float(model.range_noise_m) ** 2
         # B = sigma^2 sum J0^T (M d_s d_s^T M + M d_t d_t^T M) J0 with J0 = [I, -[p]x]
-        J0 = left_jacobians(p)
         gs = np.einsum("ni,nij->nj", Ms, J0)
         gt = np.einsum("ni,nij->nj", Mt, J0)
         B = sigma2 * (gs.T @ gs + gt.T @ gt)

@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from lidarkit.registration.base import DEGENERACY_RATIO_THRESHOLD, Degeneracy
+from lidarkit.registration.covariance import left_jacobians
 
 #: An eigen-direction of the local covariance is "thin" (constrained) below this fraction of the largest.
 THIN_RATIO = 0.1
@@ -45,12 +46,7 @@ def normal_matrix(points_xyz: np.ndarray, constraints: np.ndarray) -> np.ndarray
     radius = float(np.sqrt((p * p).sum(axis=1).mean()))
     scale = 1.0 / radius if radius > 0 else 0.0
     n = len(p)
-    J = np.zeros((n, 3, 6))
-    J[:, 0, 0] = J[:, 1, 1] = J[:, 2, 2] = 1.0
-    # -[p]x / r : rotation columns in metres per radian-at-radius
-    J[:, 0, 4], J[:, 0, 5] = p[:, 2] * scale, -p[:, 1] * scale
-    J[:, 1, 3], J[:, 1, 5] = -p[:, 2] * scale, p[:, 0] * scale
-    J[:, 2, 3], J[:, 2, 4] = p[:, 1] * scale, -p[:, 0] * scale
+    J = left_jacobians(p * scale)  # [I, -[p]x / r]: rotation columns in metres per radian-at-radius
     MJ = np.matmul(constraints, J)  # (n, 3, 6): two contractions instead of one 4-index einsum (10x faster)
     return np.einsum("nki,nkj->ij", J, MJ) / max(n, 1)
 
