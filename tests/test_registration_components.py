@@ -219,3 +219,46 @@ def test_broken_component_plugin_names_itself(tmp_path, monkeypatch):
     finally:
         monkeypatch.undo()
         reload_component_plugins()
+
+
+def test_voxel_hash_nearest_follows_kiss_icps_27_voxel_rule(rng):
+    # kiss-icp answers a query with the closest map point of the 3 x 3 x 3 voxels around the query's voxel, even
+    # when a closer point lies outside them; a plain KD-tree answer would differ (the open scene diverged so)
+    v = 1.0
+    local_map = VoxelHashMap(voxel_size_m=v, max_range_m=1e3, max_points_per_voxel=20, min_point_spacing_m=0.0)
+    pts = rng.uniform(-6.0, 6.0, size=(400, 3))
+    local_map.update(pts, np.eye(4))
+    queries = rng.uniform(-8.0, 8.0, size=(3000, 3))
+    qk = np.floor(queries / v).astype(np.int64)
+    pk = np.floor(local_map.points_xyz / v).astype(np.int64)
+    diff = queries[:, None, :] - local_map.points_xyz[None, :, :]
+    d_all = np.sqrt(np.einsum("qpi,qpi->qp", diff, diff))
+    in_block = np.abs(qk[:, None, :] - pk[None, :, :]).max(axis=2) <= 1
+    expected = np.where(in_block, d_all, np.inf).min(axis=1)
+    for max_d in (np.inf, 1.2, 2.5):
+        dist, idx, valid = local_map.nearest(queries, max_d)
+        np.testing.assert_array_equal(valid, expected < max_d)
+        np.testing.assert_allclose(dist[valid], expected[valid], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(d_all[valid, idx[valid]], expected[valid], rtol=0, atol=1e-12)
+    # the case the rule exists for: the global nearest is outside the block, and the answers differ
+    differs = np.isfinite(expected) & (d_all.min(axis=1) < expected - 1e-9)
+    assert differs.sum() > 20
+    kd = VoxelHashMap(voxel_size_m=v, max_range_m=1e3, max_points_per_voxel=20, min_point_spacing_m=0.0, search="kdtree")
+    kd.update(pts, np.eye(4))
+    d_kd, _, _ = kd.nearest(queries, np.inf)
+    np.testing.assert_allclose(d_kd, d_all.min(axis=1), rtol=0, atol=1e-12)
+    assert np.all(d_kd[differs] < dist[differs])
+
+
+def test_27_voxel_rule_holds_behind_a_crowd_of_closer_points_outside_the_block(rng):
+    # 60 points just outside the query's block, closer than the only point inside it: the answer is still the
+    # inside point (a search among the k nearest would give up when the crowd is larger than k)
+    crowd = np.array([2.05, 0.5, 0.5]) + rng.uniform(-0.04, 0.04, size=(60, 3))
+    inside = np.array([[-0.95, 0.5, 0.5]])
+    local_map = VoxelHashMap(voxel_size_m=1.0, max_range_m=1e3, max_points_per_voxel=100, min_point_spacing_m=0.0)
+    local_map.update(np.vstack([crowd, inside]), np.eye(4))
+    dist, idx, valid = local_map.nearest(np.array([[0.9, 0.5, 0.5]]), 5.0)
+    assert valid[0] and abs(dist[0] - 1.85) < 1e-12
+    np.testing.assert_array_equal(local_map.points_xyz[idx[0]], inside[0])
+    dist, _, valid = local_map.nearest(np.array([[0.9, 0.5, 0.5]]), 1.8)  # inside point beyond the threshold
+    assert not valid[0]

@@ -96,3 +96,20 @@ def test_pipeline_through_the_odometry_cli(tmp_path, capsys):
     assert config["method_config"]["residual"] == "point_to_plane" and config["method_config"]["threshold"] == "adaptive"
     assert cli_exit_code(["odometry", spec, "-m", "pipeline", "-p", "map=octree", "--no-progress"]) == 1
     assert "unknown map component 'octree'; available: scan_to_scan, voxel_hash" in " ".join(capsys.readouterr().err.split())
+
+
+def test_kiss_like_equals_kiss_icp_on_a_short_simulated_open_sequence():
+    # the open scene (sparse, far surfaces) is where a neighbour search other than kiss-icp's 27-voxel rule
+    # made kiss_like leave kiss-icp's path; with the rule both follow the same steps (rounding only)
+    from lidarkit.sim.lidar import SimulatedLidarSequence
+
+    seq = SimulatedLidarSequence(scene="open", n_frames=25, n_beams=32, n_azimuths=720, range_noise_std_m=0.02, seed=1)
+    kiss, kiss_like = get_icp("kiss"), get_icp("pipeline", preset="kiss_like")
+    kiss.reset()
+    kiss_like.reset()
+    gap = 0.0
+    for i in range(len(seq)):
+        scan = seq.read_scan(i)
+        pts = np.asarray(scan.points_xyz, dtype=np.float64)
+        gap = max(gap, float(np.abs(kiss.register_frame(pts, scan.point_times_s) - kiss_like.register_frame(pts, scan.point_times_s)).max()))
+    assert gap < 1e-9

@@ -20,6 +20,7 @@ from lidarkit.registration.components.registry import Component, ComponentConfig
 
 _KEY_BITS = 21
 _KEY_OFFSET = 1 << (_KEY_BITS - 1)
+_BLOCK = np.stack(np.meshgrid([-1, 0, 1], [-1, 0, 1], [-1, 0, 1], indexing="ij"), axis=-1).reshape(-1, 3)
 
 
 def voxel_keys(points_xyz: np.ndarray, voxel_size_m: float) -> np.ndarray:
@@ -108,6 +109,7 @@ class Map(Component):
             self._nns.knn_index()
         self._normals = None
         self._covs = None
+        self._by_code = None  # map point order by voxel code, built on the first block search
 
     def nearest(self, query_xyz: np.ndarray, max_distance_m: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(dist (N,) m, index (N,), valid (N,) bool)``: the nearest map point closer than ``max_distance_m``."""
@@ -294,6 +296,35 @@ class VoxelHashMap(Map):
         keep = ~np.isin(self._pcodes, gone)
         self.points_xyz, self._pkeys, self._pcodes = self.points_xyz[keep], self._pkeys[keep], self._pcodes[keep]
 
+    def block_nearest(self, query_xyz: np.ndarray, query_keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Exact nearest map point among the 27 voxels around each query's voxel (kiss-icp's search rule).
+
+        ``(dist (Q,) m, index (Q,))``; ``inf`` where the 27 voxels are empty. Brute force over the block's points
+        (at most 27 x max points per voxel each), meant for the few queries the KD-tree answer does not settle.
+        """
+        q = len(query_xyz)
+        if q == 0 or len(self.points_xyz) == 0:
+            return np.full(q, np.inf), np.zeros(q, dtype=np.int64)
+        if getattr(self, "_by_code", None) is None:
+            self._by_code = np.argsort(self._pcodes, kind="stable")
+        sorted_codes = self._pcodes[self._by_code]
+        cells = (query_keys[:, None, :] + _BLOCK[None, :, :]).reshape(-1, 3)
+        codes = encode_keys(cells)
+        lo = np.searchsorted(sorted_codes, codes, side="left")
+        hi = np.searchsorted(sorted_codes, codes, side="right")
+        counts = hi - lo
+        owner = np.repeat(np.repeat(np.arange(q), len(_BLOCK)), counts)
+        starts = np.repeat(lo - np.r_[0, np.cumsum(counts)[:-1]], counts)
+        cand = self._by_code[np.arange(counts.sum()) + starts]
+        diff = self.points_xyz[cand] - query_xyz[owner]
+        d = np.sqrt(np.einsum("ij,ij->i", diff, diff))
+        dist = np.full(q, np.inf)
+        np.minimum.at(dist, owner, d)
+        idx = np.zeros(q, dtype=np.int64)
+        best = d == dist[owner]
+        idx[owner[best][::-1]] = cand[best][::-1]  # ties: the first candidate (block order, then insertion)
+        return dist, idx
+
     def nearest(self, query_xyz: np.ndarray, max_distance_m: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         dist, idx, valid = super().nearest(query_xyz, max_distance_m)
         if self.config.search == "kdtree" or not valid.any():
@@ -307,18 +338,9 @@ class VoxelHashMap(Map):
             outside = np.abs(self._pkeys[idx[far]] - qkeys).max(axis=1) > 1
             redo = far[outside]
             if len(redo):
-                k = int(min(32, len(self.points_xyz)))
-                d_k, i_k = self._tree.query(query_xyz[redo], k=k, distance_upper_bound=max_distance_m, workers=self.config.workers)
-                d_k, i_k = d_k.reshape(len(redo), k), i_k.reshape(len(redo), k)
-                found = np.isfinite(d_k)
-                safe = np.where(found, i_k, 0)
-                adjacent = found & (np.abs(self._pkeys[safe] - voxel_keys(query_xyz[redo], v)[:, None, :]).max(axis=2) <= 1)
-                has = adjacent.any(axis=1)
-                first = adjacent.argmax(axis=1)
-                rows = np.arange(len(redo))
-                dist[redo] = np.where(has, d_k[rows, first], np.inf)
-                idx[redo] = np.where(has, safe[rows, first], 0)
-                valid[redo] = has & (dist[redo] < max_distance_m)
+                d_r, i_r = self.block_nearest(query_xyz[redo], qkeys[outside])
+                dist[redo], idx[redo] = d_r, np.where(np.isfinite(d_r), i_r, 0)
+                valid[redo] = d_r < max_distance_m
         return dist, idx, valid
 
 
