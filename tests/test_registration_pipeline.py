@@ -10,6 +10,7 @@ import yaml
 
 from conftest import cli_exit_code, shared_path
 
+from lidarkit.errors import ConfigError
 from lidarkit.geometry import pose_error
 from lidarkit.odometry import run
 from lidarkit.registration import get_icp
@@ -113,3 +114,16 @@ def test_kiss_like_equals_kiss_icp_on_a_short_simulated_open_sequence():
         pts = np.asarray(scan.points_xyz, dtype=np.float64)
         gap = max(gap, float(np.abs(kiss.register_frame(pts, scan.point_times_s) - kiss_like.register_frame(pts, scan.point_times_s)).max()))
     assert gap < 1e-9
+
+
+def test_numpy_voxel_backend_gives_the_same_poses_as_kiss_icps_compiled_downsampling(seq00):
+    frames = [np.asarray(seq00.read_scan(i).points_xyz, dtype=np.float64) for i in range(4)]
+    poses = {}
+    for backend in ("numpy", "kiss_icp"):
+        icp = get_icp("pipeline", preset="kiss_like", voxel_backend=backend)
+        icp.reset()
+        poses[backend] = np.stack([icp.register_frame(f) for f in frames])
+    np.testing.assert_allclose(poses["numpy"], poses["kiss_icp"], rtol=0, atol=1e-12)
+    assert np.linalg.norm(poses["numpy"][-1][:3, 3]) > 1.0  # the car moved: the comparison is not of identities
+    with pytest.raises(ConfigError, match="voxel_backend"):
+        get_icp("pipeline", preset="kiss_like", voxel_backend="cuda")

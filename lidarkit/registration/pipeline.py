@@ -81,6 +81,9 @@ class PipelineConfig(RegistrationConfig):
     voxel_size_m: float | None = Field(None, gt=0, description="map voxel (m); None: max_range_m / 100 (kiss-icp)")
     map_voxel_factor: float | None = Field(0.5, gt=0, description="map points: one per (factor x voxel) cell; None: all points")
     source_voxel_factor: float | None = Field(1.5, gt=0, description="registered points: one per (factor x voxel) cell of the map points; None: all")
+    voxel_backend: Literal["auto", "kiss_icp", "numpy"] = Field(
+        "auto", description="voxel downsampling in kiss-icp's compiled code (same points, same order; auto: when installed) or numpy"
+    )
     voxel_order: Literal["kiss_hash", "input"] = Field(
         "kiss_hash", description="order of the downsampled points: kiss-icp's hash-table order (decides which points its map keeps) or input order"
     )
@@ -181,8 +184,8 @@ class PipelineRegistration(Registration):
     def _voxelize(self, frame: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         cfg, v = self.config, self.config.resolved_voxel_size_m
         order = cfg.voxel_order
-        map_points = frame if cfg.map_voxel_factor is None else first_per_voxel(frame, cfg.map_voxel_factor * v, order)
-        source = map_points if cfg.source_voxel_factor is None else first_per_voxel(map_points, cfg.source_voxel_factor * v, order)
+        map_points = frame if cfg.map_voxel_factor is None else first_per_voxel(frame, cfg.map_voxel_factor * v, order, cfg.voxel_backend)
+        source = map_points if cfg.source_voxel_factor is None else first_per_voxel(map_points, cfg.source_voxel_factor * v, order, cfg.voxel_backend)
         return map_points, source
 
     def _source_covariances(self, source: np.ndarray, dense: np.ndarray) -> np.ndarray | None:

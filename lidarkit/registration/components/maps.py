@@ -46,15 +46,25 @@ def kiss_hash_buckets(keys: np.ndarray, n_reserved: int) -> np.ndarray:
     return h & (n_buckets - 1)
 
 
-def first_per_voxel(points_xyz: np.ndarray, voxel_size_m: float, order: str = "input") -> np.ndarray:
+def first_per_voxel(points_xyz: np.ndarray, voxel_size_m: float, order: str = "input", backend: str = "numpy") -> np.ndarray:
     """kiss-icp's voxel downsampling: the first point (in input order) of every occupied voxel.
 
     ``order="input"`` returns them in input order; ``"kiss_hash"`` in the order kiss-icp's hash table yields
     them (see :func:`kiss_hash_buckets`), which decides the order kiss-icp inserts them into its map.
+    ``backend="kiss_icp"`` (``"kiss_hash"`` order only) calls kiss-icp's compiled downsampling, the same points
+    in the same order several times faster; ``"auto"`` does so when kiss-icp is installed.
     """
     pts = np.asarray(points_xyz, dtype=np.float64)
     if len(pts) == 0:
         return pts.reshape(0, 3)
+    if order == "kiss_hash" and backend != "numpy":
+        try:
+            from kiss_icp.voxelization import voxel_down_sample
+        except ImportError:
+            if backend == "kiss_icp":
+                raise
+        else:
+            return np.asarray(voxel_down_sample(np.ascontiguousarray(pts), float(voxel_size_m)), dtype=np.float64).reshape(-1, 3)
     keys = voxel_keys(pts, voxel_size_m)
     _, first = np.unique(encode_keys(keys), return_index=True)
     first = np.sort(first)
