@@ -39,11 +39,14 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", type=Path, default=DEFAULT_DATA)
     ap.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "vo_autocalib")
-    ap.add_argument("--sequences", nargs="*", default=["01", "06"])
+    ap.add_argument("--sequences", nargs="*", default=["06", "01", "00"])
     args = ap.parse_args(argv)
     rows = {}
     for seq in args.sequences:
-        ds = KittiOdometry(args.data / seq).as_image_sequence()
+        folder = args.data / seq
+        # sequence 00's image excerpt has no poses.txt beside it: its ground truth is the odometry folder's
+        poses = None if (folder / "poses.txt").exists() else args.data.parents[1] / "kitti_odometry" / "poses" / f"{seq}.txt"
+        ds = KittiOdometry(folder, poses_file=poses).as_image_sequence()
         images, K_true, gt = images_in_memory(ds), ds.K, ds.ground_truth
         h, w = images[0].shape
         start = time.perf_counter()
@@ -57,7 +60,7 @@ def main(argv: list[str] | None = None) -> int:
                "ape_true_K_m": ape_sim3(images, K_true, gt), "ape_guess_K_m": ape_sim3(images, K_guess, gt),
                "ape_self_K_m": ape_sim3(images, est.K(w, h), gt)}
         print(seq, row, file=sys.stderr)
-        rows[f"KITTI {seq} frames 0-50"] = row
+        rows[f"KITTI {seq} frames 0-{len(images) - 1}"] = row
     stamp = dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     cmd = "nice -n 10 python benchmarks/vo_autocalib.py " + " ".join(argv if argv is not None else sys.argv[1:])
     lines = ["# Focal length self-calibration", "", f"Command: `{cmd.strip()}`  ", f"Date: {stamp}  ",
