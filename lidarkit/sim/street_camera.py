@@ -440,19 +440,20 @@ class SimulatedCameraSequence:
         self.triangles_xyz = xyz
         self.triangle_surface = tri_surface
         self.surfaces = surfaces
-        uv = uv.astype(np.float32)
-        self._uv0, self._e1, self._e2 = uv[:, 0], uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
-        self._texel_m = np.array([s.texel_m for s in surfaces], np.float32)
-        self._shade = np.array([s.shade for s in surfaces], np.float32)
-        self._mip_xy = np.zeros((len(surfaces), N_MIP_LEVELS, 2), np.float32)  # atlas offset per level
-        self._mip_max = np.zeros((len(surfaces), N_MIP_LEVELS, 2), np.float32)  # last texel index per level
+        texel_m = np.array([s.texel_m for s in surfaces])
+        shade = np.array([s.shade for s in surfaces])
+        self._tri_table = np.c_[uv[:, 0], uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0], 1.0 / texel_m[tri_surface],
+                                shade[tri_surface]].astype(np.float32)
+        # per (surface, level): atlas x, y of the level's texture, its last texel x, y, and the scale 2^-level
+        self._mip_table = np.zeros((len(surfaces) * N_MIP_LEVELS, 5), np.float32)
+        self._mip_table[:, 4] = np.tile(np.exp2(-np.arange(N_MIP_LEVELS)), len(surfaces))
         self._ready = np.zeros(len(surfaces), bool)
         self.atlas = TextureAtlas()
         self._scene = None
         w, h = cfg.width, cfg.height
         u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
         K = cfg.K
-        dirs = np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], np.ones_like(u)], axis=-1).reshape(-1, 3)
+        dirs = self.pixel_directions(np.c_[u.ravel(), v.ravel()]).astype(np.float64)
         self._dirs_cam = dirs.astype(np.float32)
         self._ray_norm = np.linalg.norm(dirs, axis=1).astype(np.float32)
         self._pixel_rad = 1.0 / math.sqrt(K[0, 0] * K[1, 1])
@@ -528,6 +529,25 @@ class SimulatedCameraSequence:
             self._scene = scene
         return self._scene
 
+    def pixel_directions(self, uv: np.ndarray) -> np.ndarray:
+        """``(M, 3)`` float32 camera-frame ray directions ``K^-1 (u, v, 1)`` (z = 1) of pixel coordinates ``uv``
+        (M, 2); pixel centres sit at integer coordinates (OpenCV convention). The renderer casts exactly these."""
+        K = self.config.K
+        uv = np.asarray(uv, np.float64).reshape(-1, 2)
+        return np.c_[(uv[:, 0] - K[0, 2]) / K[0, 0], (uv[:, 1] - K[1, 2]) / K[1, 1], np.ones(len(uv))].astype(np.float32)
+
+    def cast_pixels(self, index: int, uv: np.ndarray) -> np.ndarray:
+        """World points ``(M, 3)`` seen at pixel coordinates ``uv`` (M, 2) of frame ``index`` (NaN: sky)."""
+        import open3d as o3d
+
+        T = self._T_world_cam[int(index)]
+        dirs = self.pixel_directions(uv) @ T[:3, :3].T.astype(np.float32)
+        rays = np.c_[np.broadcast_to(T[:3, 3], dirs.shape), dirs].astype(np.float32)
+        t_hit = self.scene.cast_rays(o3d.core.Tensor(rays), nthreads=self.config.threads)["t_hit"].numpy()
+        points = T[:3, 3] + t_hit[:, None].astype(np.float64) * dirs
+        points[~np.isfinite(t_hit)] = np.nan
+        return points
+
     def _ensure_textures(self, surfaces: np.ndarray) -> None:
         for i in surfaces[~self._ready[surfaces]]:
             surf = self.surfaces[i]
@@ -538,8 +558,7 @@ class SimulatedCameraSequence:
                 img = levels[min(lev, len(levels) - 1)]
                 if lev < len(levels):
                     x, y = self.atlas.add(img)
-                self._mip_xy[i, lev] = (x, y)
-                self._mip_max[i, lev] = (img.shape[1] - 1, img.shape[0] - 1)
+                self._mip_table[i * N_MIP_LEVELS + lev, :4] = (x, y, img.shape[1] - 1, img.shape[0] - 1)
             self._ready[i] = True
 
     def render_at(self, T_world_cam: np.ndarray) -> np.ndarray:
@@ -554,42 +573,43 @@ class SimulatedCameraSequence:
         rays[:, :3] = t
         rays[:, 3:] = dirs
         hits = self.scene.cast_rays(o3d.core.Tensor(rays), nthreads=cfg.threads)
-        ids = hits["primitive_ids"].numpy()
-        idx = np.flatnonzero(ids != o3d.t.geometry.RaycastingScene.INVALID_ID)
-        tri = ids[idx].astype(np.int64)
-        bary = hits["primitive_uvs"].numpy()[idx]
+        # whole-image arrays (misses read triangle 0 and are overwritten by the sky at the end): no hit gathers
+        tri = hits["primitive_ids"].numpy().view(np.int32)  # INVALID_ID (2^32 - 1) reads -1
+        miss = tri < 0
+        tri = np.maximum(tri, 0)
         surf = self.triangle_surface[tri]
-        seen = np.flatnonzero(np.bincount(surf, minlength=len(self.surfaces)))
+        seen = np.flatnonzero(np.bincount(surf[~miss], minlength=len(self.surfaces)))
         self._ensure_textures(seen)
+        bary = hits["primitive_uvs"].numpy()
+        tab = self._tri_table[tri]  # (N, 8): uv0, e1, e2 (texels), 1 / texel size, shade
         a, b = bary[:, 0], bary[:, 1]
-        e1, e2 = self._e1[tri], self._e2[tri]
-        tex = self._uv0[tri] + a[:, None] * e1 + b[:, None] * e2  # (n, 2) level-0 texel coordinates
+        tx = tab[:, 0] + a * tab[:, 2] + b * tab[:, 4]
+        ty = tab[:, 1] + a * tab[:, 3] + b * tab[:, 5]
         # footprint of a pixel in texels: distance / focal, stretched by the incidence (geometric mean of the axes)
-        dist = hits["t_hit"].numpy()[idx] * self._ray_norm[idx]
-        normals = hits["primitive_normals"].numpy()[idx]
-        cos = np.abs(np.einsum("ij,ij->i", normals, dirs[idx])) / self._ray_norm[idx]
-        foot = dist * self._pixel_rad / (np.sqrt(np.maximum(cos, 0.02)) * self._texel_m[surf])
-        level = np.clip(np.log2(np.maximum(foot, 1e-6)), 0.0, N_MIP_LEVELS - 1.001).astype(np.float32)
-        l0 = level.astype(np.int64)
+        dist = hits["t_hit"].numpy() * self._ray_norm
+        cos = np.abs(np.einsum("ij,ij->i", hits["primitive_normals"].numpy(), dirs)) / self._ray_norm
+        foot = dist * (self._pixel_rad * tab[:, 6]) / np.sqrt(np.maximum(cos, 0.02))
+        foot[miss] = 1.0
+        level = np.clip(np.log2(foot), 0.0, N_MIP_LEVELS - 1.001)
+        l0 = level.astype(np.int32)
         frac = level - l0
-        value = np.zeros(len(idx), np.float32)
+        shape = (cfg.height, cfg.width)
+        image = np.zeros(len(dirs), np.float32)
+        base = surf * N_MIP_LEVELS
         for lev, weight in ((l0, 1.0 - frac), (l0 + 1, frac)):
-            scale = np.exp2(-lev.astype(np.float32))
-            coord = (tex - (1.0 / scale - 1.0)[:, None] * 0.5) * scale[:, None]
-            coord = np.clip(coord, 0.0, self._mip_max[surf, lev]) + self._mip_xy[surf, lev]
-            cols = _remap_columns(len(coord))
-            mx = np.full(cols * ((len(coord) + cols - 1) // cols), -1.0, np.float32)
-            my = mx.copy()
-            mx[: len(coord)], my[: len(coord)] = coord[:, 0], coord[:, 1]
-            sampled = cv2.remap(self.atlas.image, mx.reshape(-1, cols), my.reshape(-1, cols), cv2.INTER_LINEAR,
-                                borderMode=cv2.BORDER_CONSTANT)
-            value += weight * sampled.reshape(-1)[: len(coord)]
-        image = np.empty(len(dirs), np.float32)
+            mip = self._mip_table[base + lev]  # (N, 5): atlas x, y, last texel x, y, level scale
+            scale = mip[:, 4]
+            half = 0.5 * (1.0 / scale - 1.0)  # texel centres of a halved level sit between two finer ones
+            # snapped to remap's 1/32 texel grid before the (integer) atlas offset is added, so the sampled value
+            # does not depend on where in the atlas the texture landed (i.e. on the order frames are read)
+            mx = np.rint(np.clip((tx - half) * scale, 0.0, mip[:, 2]) * 32.0) * (1.0 / 32.0) + mip[:, 0]
+            my = np.rint(np.clip((ty - half) * scale, 0.0, mip[:, 3]) * 32.0) * (1.0 / 32.0) + mip[:, 1]
+            sampled = cv2.remap(self.atlas.image, mx.reshape(shape), my.reshape(shape), cv2.INTER_LINEAR)
+            image += weight * sampled.reshape(-1)
+        image *= tab[:, 7]
         # sky: brighter towards the zenith
-        up = dirs[:, 2] / self._ray_norm
-        image[:] = 185.0 + 55.0 * np.clip(up, 0.0, 1.0)
-        image[idx] = value * self._shade[surf]
-        return image.reshape(cfg.height, cfg.width)
+        image[miss] = 185.0 + 55.0 * np.clip(dirs[miss, 2] / self._ray_norm[miss], 0.0, 1.0)
+        return image.reshape(shape)
 
     def read_image(self, index: int) -> np.ndarray:
         """Frame ``index`` as ``(h, w)`` uint8, with the configured nuisances."""
@@ -643,11 +663,6 @@ class SimulatedCameraSequence:
         a, b = max(x0, 0), min(x0 + ow, w)
         if b > a:
             image[top:, a:b] = self._occluder_tex[:, a - x0 : b - x0]
-
-
-def _remap_columns(n: int) -> int:
-    """Width of the 2-D map the sampled texels are laid out in (cv2.remap wants 2-D maps below 32767 a side)."""
-    return 1024 if n > 1024 * 30000 else min(1024, max(n, 1))
 
 
 def open_simcam(spec: str) -> SimulatedCameraSequence:
