@@ -48,7 +48,9 @@ KITTI_K = np.array([[718.856, 0.0, 607.1928], [0.0, 718.856, 185.2157], [0.0, 0.
 N_MIP_LEVELS = 6
 _ROAD_HALF_M = 5.5  # two lanes and a parking lane each side
 _ROAD_LIFT_M = 0.12  # road surface above the ground tiles (keeps it above their chords on hills)
-_CORNER_CLEAR_M = 28.0  # no building this close (along the path) to a corner: the intersection stays open
+_CROSSING_CLEAR_M = 19.0  # buildings start this far (along their street) from a crossing's centre
+_SETBACK_M = (8.5, 10.0)  # building fronts this far from the street's centre line
+_DEPTH_M = (6.0, 8.0)  # building depth: setback + depth < _CROSSING_CLEAR_M keeps the four corner blocks apart
 _SUN = np.array([0.45, -0.35, 0.82]) / np.linalg.norm([0.45, -0.35, 0.82])
 # body frame (x forward, y left, z up) -> camera frame (x right, y down, z forward): columns are the camera axes
 _R_BODY_CAM = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
@@ -322,29 +324,30 @@ def build_street_scene(cfg: CameraSimConfig, street: StreetPath, terrain: Terrai
         faces = np.array([[0, 1, 2], [0, 2, 3]])
         b.surface(p[faces], uv[faces], "ground", 0.05 if d < 16.0 else 0.15, (2, int(i) + 2**20, int(j) + 2**20))
 
-    # buildings: per stretch and side, consecutive blocks with gaps, kept clear of the corners
+    # buildings: per stretch and side, consecutive blocks with gaps; every corner is a crossing, so the stretch
+    # before it continues straight on past the crossing and the one after it continues backwards (no road there)
+    def along_path(d: np.ndarray, lateral: float) -> np.ndarray:
+        return _frame_at(street, d, lateral)
+
     for side, sign in ((0, 1.0), (1, -1.0)):
         rng = np.random.default_rng([cfg.seed, 10 + side])
-        n = 0
-        for a_s, b_s in street.stretches:
-            a_s = max(a_s + (_CORNER_CLEAR_M if a_s > street.path.s_m[0] + 1.0 else 0.0), s_lo)
-            b_s = min(b_s - (_CORNER_CLEAR_M if cfg.corners else 0.0), s_hi)
-            s = a_s
-            while s < b_s:
-                length, gap = rng.uniform(8.0, 25.0), (rng.uniform(1.0, 5.0) if rng.random() < 0.3 else 0.0)
-                setback, height, depth = rng.uniform(8.5, 10.0), rng.uniform(6.0, 22.0), rng.uniform(8.0, 14.0)
-                e = min(s + length, b_s)
-                if e - s > 3.0:
-                    front = _frame_at(street, np.array([s, e]), sign * setback)
-                    chord = front[1] - front[0]
-                    out = sign * np.array([-chord[1], chord[0]]) / max(np.linalg.norm(chord), 1e-9)
-                    foot = np.array([front[0], front[1], front[1] + depth * out, front[0] + depth * out])
-                    if sign < 0:  # keep the front face first, corners counter-clockwise from outside alike
-                        foot = foot[[1, 0, 3, 2]]
-                    zg = ground_z(foot)
-                    b.box(foot, zg.min() - 1.0, zg.max() + height, ("facade", "wall"), (0.04, 0.12), (3, side, n))
-                n += 1
-                s = e + gap
+        for j, (a_s, b_s) in enumerate(street.stretches):
+            if j > 0:  # after a corner: start clear of the crossing
+                a_s = street.corners[j - 1, 1] - _corner_radius(street.corners[j - 1]) + _CROSSING_CLEAR_M
+            if j < len(street.corners):
+                b_s = street.corners[j, 0] + _corner_radius(street.corners[j]) - _CROSSING_CLEAR_M
+            _place_blocks(b, rng, along_path, max(a_s, s_lo), min(b_s, s_hi), sign, ground_z, (3, side, j))
+        rng = np.random.default_rng([cfg.seed, 12 + side])
+        for j, (c_a, c_b) in enumerate(street.corners):
+            if c_a > s_hi:
+                break
+            centre, ahead, behind = _crossing(street, c_a, c_b)
+            for k, direction in enumerate((ahead, behind)):
+                def along_line(d: np.ndarray, lateral: float, u=direction) -> np.ndarray:
+                    d = np.atleast_1d(d)
+                    return centre + d[:, None] * u + lateral * np.array([-u[1], u[0]])
+
+                _place_blocks(b, rng, along_line, _CROSSING_CLEAR_M, 80.0, sign, ground_z, (7, side, j, k))
 
     # poles and parked cars along both sides (not inside corners)
     for side, sign in ((0, 1.0), (1, -1.0)):
@@ -390,6 +393,42 @@ def build_street_scene(cfg: CameraSimConfig, street: StreetPath, terrain: Terrai
                 n += 1
                 s += rng.uniform(10.0, 25.0)
     return b.build()
+
+
+def _corner_radius(corner: np.ndarray) -> float:
+    return float(corner[1] - corner[0]) / (np.pi / 2)
+
+
+def _crossing(street: StreetPath, s_a: float, s_b: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Centre of the crossing at the corner ``[s_a, s_b]`` (where the two streets' centre lines meet), the
+    direction of the street before it (continuing ahead) and the backward direction of the street after it."""
+    xy, heading = street.at(np.array([s_a, s_b]))
+    radius = _corner_radius(np.array([s_a, s_b]))
+    u_a = np.array([np.cos(heading[0]), np.sin(heading[0])])
+    u_b = np.array([np.cos(heading[1]), np.sin(heading[1])])
+    return xy[0] + radius * u_a, u_a, -u_b
+
+
+def _place_blocks(b: _SceneBuilder, rng: np.random.Generator, frame: Callable, d0: float, d1: float, sign: float,
+                  ground_z: Callable, key: tuple) -> None:
+    """Consecutive building blocks (8..25 m long, sometimes a 1..5 m gap) from ``d0`` to ``d1`` along a street whose
+    ``frame(d, lateral)`` gives world xy; ``sign`` +1: left side, -1: right side. The front face faces the street."""
+    d, n = d0, 0
+    while d < d1:
+        length, gap = rng.uniform(8.0, 25.0), (rng.uniform(1.0, 5.0) if rng.random() < 0.3 else 0.0)
+        setback, height, depth = rng.uniform(*_SETBACK_M), rng.uniform(6.0, 22.0), rng.uniform(*_DEPTH_M)
+        e = min(d + length, d1)
+        if e - d > 3.0:
+            front = frame(np.array([d, e]), sign * setback)
+            chord = front[1] - front[0]
+            out = sign * np.array([-chord[1], chord[0]]) / max(np.linalg.norm(chord), 1e-9)
+            foot = np.array([front[0], front[1], front[1] + depth * out, front[0] + depth * out])
+            if sign < 0:  # keep the front face first
+                foot = foot[[1, 0, 3, 2]]
+            zg = ground_z(foot)
+            b.box(foot, zg.min() - 1.0, zg.max() + height, ("facade", "wall"), (0.04, 0.12), (*key, n))
+        n += 1
+        d = e + gap
 
 
 def _add_tree(b: _SceneBuilder, rng: np.random.Generator, centre: np.ndarray, ground_z: Callable, key: tuple) -> None:
