@@ -121,16 +121,22 @@ def timed(cfg, ref_cfg, K, gt, images, repeats: int):
     return best, ref
 
 
-def score(label, name, changes, seq, images, K, gt, repeats, fill=None):
+def score(label, name, changes, seq, images, K, gt, repeats, fill=None, orb_fps=None):
+    """One candidate on one sequence. ``orb_fps``: the speed reference measured once for the sequence (long
+    simulated runs); otherwise it is timed alternately with the candidate ``repeats`` times."""
     cfg = preset(name, **{**changes, "scale.mode": "gt"})
-    result, orb = timed(cfg, preset(SPEED_REFERENCE[1]), K, gt, images, repeats)
+    if orb_fps is None:
+        result, orb = timed(cfg, preset(SPEED_REFERENCE[1]), K, gt, images, repeats)
+        orb_fps = orb.frames_per_s
+    else:
+        result = run(cfg, K, gt, images)
     m = evaluate_vo(result.trajectory, gt, "gt")
     row = {"sequence": seq, "pipeline": label, "preset": name,
            "changes": {k: list(v) if isinstance(v, tuple) else v for k, v in changes.items()},
            "frames": result.n_frames, "rejected": len(result.rejected), "ape_m": m["ape_rmse_m"],
            "final_0_m": m["final_error_raw_m"], "final_aligned_m": m["final_error_aligned_m"],
-           "frames_per_s": result.frames_per_s, "orb_frames_per_s": orb.frames_per_s,
-           "speed_ratio": result.frames_per_s / orb.frames_per_s}
+           "frames_per_s": result.frames_per_s, "orb_frames_per_s": orb_fps,
+           "speed_ratio": result.frames_per_s / orb_fps}
     row["final_m"] = row["final_0_m"]
     if fill is not None:
         start, R_gt_cam = fill
@@ -138,6 +144,20 @@ def score(label, name, changes, seq, images, K, gt, repeats, fill=None):
         row["final_fill_m"] = final_from(cfg, K, gt, images, start)
         row["final_m"] = final_from(cfg, K, gt, images, start, R_gt_cam)
     return row
+
+
+def scale_drift(images, K, gt) -> dict:
+    """The default with relative scale: Sim(3) APE and the drift of its scale, the slope of log(estimated /
+    true step length) over the distance driven, in % per 100 m (steps shorter than 5 cm, stops, left out)."""
+    traj = run(preset("lidarkit", **{"scale.mode": "relative"}), K, None, images).trajectory
+    m = evaluate_vo(traj, gt, "relative")
+    step_est = np.linalg.norm(np.diff(traj.positions_xyz, axis=0), axis=1)
+    step_gt = np.linalg.norm(np.diff(gt.positions_xyz, axis=0), axis=1)
+    dist = np.cumsum(step_gt)
+    ok = (step_gt > 0.05) & (step_est > 0)
+    slope = np.polyfit(dist[ok], np.log(step_est[ok] / step_gt[ok]), 1)[0]
+    return {"ape_sim3_m": m["ape_rmse_m"], "final_aligned_m": m["final_error_aligned_m"], "length_m": float(dist[-1]),
+            "drift_pct_per_100m": float(100 * np.expm1(100 * slope))}
 
 
 def holds(row, ref, min_ratio: float) -> dict:
@@ -181,28 +201,35 @@ def main(argv: list[str] | None = None) -> int:
     load_start = os.getloadavg()
     sources = [(f"KITTI {s}", lambda s=s: load_kitti(args.data, s), s) for s in args.sequences]
     sources += [(spec, lambda spec=spec: load_sim(spec), spec) for spec in args.sim]
-    rows, refs, frames, fills = [], {}, {}, {}
+    rows, refs, frames, fills, drift = [], {}, {}, {}, {}
     for name, loader, key in sources:
         images, K, gt = loader()
+        simulated = key in args.sim
+        orb_fps = run(preset(SPEED_REFERENCE[1]), K, gt, images).frames_per_s if simulated else None
         frames[name] = len(images)
         fill = gt_fill(images, K, gt)
         if fill is not None:
             fills[name] = {"fill_end": fill[0], "R_gt_cam_deg": np.degrees(so3_log(fill[1])).tolist()}
         for label, pname, changes in [REFERENCE, *CANDIDATES]:
-            row = score(label, pname, changes, key, images, K, gt, args.repeats if label != REFERENCE[0] else 1, fill)
+            repeats = args.repeats if label != REFERENCE[0] else 1
+            row = score(label, pname, changes, key, images, K, gt, repeats, fill, orb_fps)
             row["sequence"] = name
             if label == REFERENCE[0]:
                 refs[name] = row
             rows.append(row)
             print(f"{name} | {label}: APE {row['ape_m']:.4f} final {row['final_m']:.3f} (0: {row['final_0_m']:.3f}) "
                   f"x{row['speed_ratio']:.2f} {row['frames_per_s']:.1f} fps", file=sys.stderr, flush=True)
+        if simulated:
+            drift[name] = scale_drift(images, K, gt)
+            print(f"{name} relative scale: {drift[name]}", file=sys.stderr, flush=True)
     for r in rows:
         if r["pipeline"] != REFERENCE[0]:
             r["holds"] = holds(r, refs[r["sequence"]], args.min_ratio)
     loo = leave_one_out(rows, refs, args.min_ratio)
     cmd = "nice -n 5 python benchmarks/vo_defaults.py " + " ".join(argv if argv is not None else sys.argv[1:])
     result = {"command": cmd.strip(), "date": started, "load_start": load_start, "load_end": os.getloadavg(),
-              "machine": machine_info(), "frames": frames, "gt_fills": fills, "min_ratio": args.min_ratio, "rows": rows,
+              "machine": machine_info(), "frames": frames, "gt_fills": fills, "relative_scale": drift,
+              "min_ratio": args.min_ratio, "rows": rows,
               "leave_one_out": loo}
     atomic.write_text(args.out / "results.json", json.dumps(result, indent=2, default=float) + "\n")
     atomic.write_text(args.out / "results.md", markdown(result))
@@ -221,11 +248,13 @@ def markdown(res: dict) -> str:
              "the run from frame 0; fills: " + (", ".join(f"{k}: frames 0-{v['fill_end']}, rotation (x, y, z) "
              + ", ".join(f"{a:+.2f}" for a in v["R_gt_cam_deg"]) + " deg" for k, v in res["gt_fills"].items())
              or "none") + "). `x ORB`: frames/s ratio to report 2's ORB pipeline timed alternately in the same "
-             f"run (required >= {res['min_ratio']:g}). holds: APE and final no larger than report 1's SIFT and the "
+             f"run (required >= {res['min_ratio']:g}; simulated runs: the reference timed once per sequence, each "
+             "candidate once). holds: APE and final no larger than report 1's SIFT and the "
              "speed ratio met (A/F/S mark a failed condition).", ""]
     for seq in res["frames"]:
         lines += [f"## {seq} ({res['frames'][seq]} frames)", "",
-                  "| pipeline | APE m | final m | final fill- m | final 0- m | final aligned m | frames/s | x ORB | rejected "
+                  "| pipeline | APE m | final m | final fill- m | final 0- m | final aligned m | frames/s | x ORB | "
+                  "rejected "
                   "| holds |", "|---|---|---|---|---|---|---|---|---|---|"]
         for r in res["rows"]:
             if r["sequence"] != seq:
@@ -245,6 +274,15 @@ def markdown(res: dict) -> str:
     for r in res["leave_one_out"]:
         lines.append(f"| {r['held_out']} | {r['selected']} | {'yes' if r['holds_on_training'] else 'no'} | "
                      f"{'yes' if r['holds_on_held_out'] else 'no'} |")
+    if res["relative_scale"]:
+        lines += ["", "## Relative scale on the simulated runs (default pipeline)", "",
+                  "Sim(3) APE, final error after alignment, and the scale drift: slope of log(estimated / true step "
+                  "length) over the distance driven.", "",
+                  "| sequence | length m | APE sim3 m | final aligned m | scale drift % per 100 m |",
+                  "|---|---|---|---|---|"]
+        for seq, d in res["relative_scale"].items():
+            lines.append(f"| {seq} | {d['length_m']:.0f} | {d['ape_sim3_m']:.3f} | {d['final_aligned_m']:.3f} | "
+                         f"{d['drift_pct_per_100m']:+.2f} |")
     default = CANDIDATES[0][0]
     held = [s for s in res["frames"] if all(rows_of(res["rows"], default, s)["holds"].values())]
     lines += ["", f"Default holds on {len(held)} of {len(res['frames'])} sequences: {', '.join(held) or '-'}.", ""]

