@@ -487,6 +487,8 @@ class SimulatedCameraSequence:
         self._mip_table = np.zeros((len(surfaces) * N_MIP_LEVELS, 5), np.float32)
         self._mip_table[:, 4] = np.tile(np.exp2(-np.arange(N_MIP_LEVELS)), len(surfaces))
         self._ready = np.zeros(len(surfaces), bool)
+        self._mip_pairs_cache: np.ndarray | None = None
+        self._rays: np.ndarray | None = None
         self.atlas = TextureAtlas()
         self._scene = None
         w, h = cfg.width, cfg.height
@@ -599,6 +601,7 @@ class SimulatedCameraSequence:
                     x, y = self.atlas.add(img)
                 self._mip_table[i * N_MIP_LEVELS + lev, :4] = (x, y, img.shape[1] - 1, img.shape[0] - 1)
             self._ready[i] = True
+            self._mip_pairs_cache = None
 
     def render_at(self, T_world_cam: np.ndarray) -> np.ndarray:
         """Noise-free float32 image ``(h, w)`` (grey levels) seen from world pose ``T_world_cam``."""
@@ -607,48 +610,62 @@ class SimulatedCameraSequence:
 
         cfg = self.config
         R, t = T_world_cam[:3, :3].astype(np.float32), T_world_cam[:3, 3].astype(np.float32)
-        dirs = self._dirs_cam @ R.T
-        rays = np.empty((len(dirs), 6), np.float32)
+        if self._rays is None:  # reused: a fresh 11 MB array per frame costs page faults
+            self._rays = np.empty((len(self._dirs_cam), 6), np.float32)
+        rays = self._rays
         rays[:, :3] = t
-        rays[:, 3:] = dirs
-        hits = self.scene.cast_rays(o3d.core.Tensor(rays), nthreads=cfg.threads)
+        dirs = rays[:, 3:]
+        np.matmul(self._dirs_cam, R.T, out=dirs)
+        hits = self.scene.cast_rays(o3d.core.Tensor.from_numpy(rays), nthreads=cfg.threads)
         # whole-image arrays (misses read triangle 0 and are overwritten by the sky at the end): no hit gathers
         tri = hits["primitive_ids"].numpy().view(np.int32)  # INVALID_ID (2^32 - 1) reads -1
         miss = tri < 0
         tri = np.maximum(tri, 0)
-        surf = self.triangle_surface[tri]
-        seen = np.flatnonzero(np.bincount(surf[~miss], minlength=len(self.surfaces)))
-        self._ensure_textures(seen)
+        surf = np.take(self.triangle_surface, tri)
+        fresh = ~self._ready[np.flatnonzero(np.bincount(surf[~miss], minlength=len(self.surfaces)))]
+        if fresh.any():
+            self._ensure_textures(np.flatnonzero(np.bincount(surf[~miss], minlength=len(self.surfaces))))
         bary = hits["primitive_uvs"].numpy()
-        tab = self._tri_table[tri]  # (N, 8): uv0, e1, e2 (texels), 1 / texel size, shade
-        a, b = bary[:, 0], bary[:, 1]
-        tx = tab[:, 0] + a * tab[:, 2] + b * tab[:, 4]
-        ty = tab[:, 1] + a * tab[:, 3] + b * tab[:, 5]
+        tab = np.take(self._tri_table, tri, axis=0)  # (N, 8): uv0, e1, e2 (texels), 1 / texel size, shade
+        a, b = bary[:, :1], bary[:, 1:]
+        tex = tab[:, 0:2] + a * tab[:, 2:4] + b * tab[:, 4:6]  # (N, 2) level-0 texel coordinates
         # footprint of a pixel in texels: distance / focal, stretched by the incidence (geometric mean of the axes)
-        dist = hits["t_hit"].numpy() * self._ray_norm
-        cos = np.abs(np.einsum("ij,ij->i", hits["primitive_normals"].numpy(), dirs)) / self._ray_norm
-        foot = dist * (self._pixel_rad * tab[:, 6]) / np.sqrt(np.maximum(cos, 0.02))
+        cos = np.abs(np.einsum("ij,ij->i", hits["primitive_normals"].numpy(), dirs))
+        foot = hits["t_hit"].numpy() * self._ray_norm
+        foot *= tab[:, 6] * np.float32(self._pixel_rad)
+        foot /= np.sqrt(np.maximum(cos / self._ray_norm, np.float32(0.02)))
         foot[miss] = 1.0
         level = np.clip(np.log2(foot), 0.0, N_MIP_LEVELS - 1.001)
         l0 = level.astype(np.int32)
         frac = level - l0
         shape = (cfg.height, cfg.width)
-        image = np.zeros(len(dirs), np.float32)
-        base = surf * N_MIP_LEVELS
-        for lev, weight in ((l0, 1.0 - frac), (l0 + 1, frac)):
-            mip = self._mip_table[base + lev]  # (N, 5): atlas x, y, last texel x, y, level scale
-            scale = mip[:, 4]
-            half = 0.5 * (1.0 / scale - 1.0)  # texel centres of a halved level sit between two finer ones
+        # one gather for both levels: row i of the pair table holds (surface, level) i and i + 1
+        mips = np.take(self._mip_pairs(), surf * N_MIP_LEVELS + l0, axis=0)  # (N, 10)
+        image = np.zeros(len(rays), np.float32)
+        for mip, weight in ((mips[:, :5], 1.0 - frac), (mips[:, 5:], frac)):
+            scale = mip[:, 4:5]
+            coord = tex - 0.5 * (1.0 / scale - 1.0)  # texel centres of a halved level sit between two finer ones
+            coord *= scale
+            np.clip(coord, 0.0, mip[:, 2:4], out=coord)
             # snapped to remap's 1/32 texel grid before the (integer) atlas offset is added, so the sampled value
             # does not depend on where in the atlas the texture landed (i.e. on the order frames are read)
-            mx = np.rint(np.clip((tx - half) * scale, 0.0, mip[:, 2]) * 32.0) * (1.0 / 32.0) + mip[:, 0]
-            my = np.rint(np.clip((ty - half) * scale, 0.0, mip[:, 3]) * 32.0) * (1.0 / 32.0) + mip[:, 1]
-            sampled = cv2.remap(self.atlas.image, mx.reshape(shape), my.reshape(shape), cv2.INTER_LINEAR)
+            coord *= 32.0
+            np.rint(coord, out=coord)
+            coord *= 1.0 / 32.0
+            coord += mip[:, 0:2]
+            sampled = cv2.remap(self.atlas.image, coord.reshape(*shape, 2), None, cv2.INTER_LINEAR)
             image += weight * sampled.reshape(-1)
         image *= tab[:, 7]
         # sky: brighter towards the zenith
         image[miss] = 185.0 + 55.0 * np.clip(dirs[miss, 2] / self._ray_norm[miss], 0.0, 1.0)
         return image.reshape(shape)
+
+    def _mip_pairs(self) -> np.ndarray:
+        """``(S * L, 10)``: the mip table row of (surface, level) beside the row of the next level (cached)."""
+        if self._mip_pairs_cache is None:
+            table = self._mip_table
+            self._mip_pairs_cache = np.hstack([table, np.vstack([table[1:], table[-1:]])])
+        return self._mip_pairs_cache
 
     def read_image(self, index: int) -> np.ndarray:
         """Frame ``index`` as ``(h, w)`` uint8, with the configured nuisances."""
