@@ -488,7 +488,7 @@ class SimulatedCameraSequence:
         self._mip_table[:, 4] = np.tile(np.exp2(-np.arange(N_MIP_LEVELS)), len(surfaces))
         self._ready = np.zeros(len(surfaces), bool)
         self._mip_pairs_cache: np.ndarray | None = None
-        self._rays: np.ndarray | None = None
+        self._buffers: dict[str, np.ndarray] = {}
         self.atlas = TextureAtlas()
         self._scene = None
         w, h = cfg.width, cfg.height
@@ -604,47 +604,75 @@ class SimulatedCameraSequence:
             self._mip_pairs_cache = None
 
     def render_at(self, T_world_cam: np.ndarray) -> np.ndarray:
-        """Noise-free float32 image ``(h, w)`` (grey levels) seen from world pose ``T_world_cam``."""
+        """Noise-free float32 image ``(h, w)`` (grey levels) seen from world pose ``T_world_cam``.
+
+        Whole-image arrays throughout (misses read triangle 0 and get the sky at the end), written into buffers
+        kept between frames: fresh multi-megabyte temporaries per frame cost as much in page faults as the
+        arithmetic itself."""
         import cv2
         import open3d as o3d
 
         cfg = self.config
+        n = len(self._dirs_cam)
+        buf = self._buffers
+        if not buf:
+            f32 = np.float32
+            buf.update(rays=np.empty((n, 6), f32), tmp3=np.empty((n, 3), f32), surf=np.empty(n, np.int32), tab=np.empty((n, 8), f32),
+                       tex=np.empty((n, 2), f32), coord=np.empty((n, 2), f32), tmp=np.empty((n, 2), f32),
+                       mips=np.empty((n, 10), f32), foot=np.empty(n, f32), cos=np.empty(n, f32), q=np.empty(n, f32),
+                       frac=np.empty(n, np.float64), weighted=np.empty(n, np.float64), image=np.empty(n, f32),
+                       row=np.empty(n, np.int32))
         R, t = T_world_cam[:3, :3].astype(np.float32), T_world_cam[:3, 3].astype(np.float32)
-        if self._rays is None:  # reused: a fresh 11 MB array per frame costs page faults
-            self._rays = np.empty((len(self._dirs_cam), 6), np.float32)
-        rays = self._rays
+        rays = buf["rays"]
         rays[:, :3] = t
-        dirs = rays[:, 3:]
-        np.matmul(self._dirs_cam, R.T, out=dirs)
+        dirs, tmp3 = rays[:, 3:], buf["tmp3"]
+        # R (x, y, 1) element-wise: a BLAS matmul with an inner dimension of 3 costs 5x more CPU (idle threads spin)
+        np.multiply(self._dirs_cam[:, :1], R[:, 0], out=dirs)
+        np.multiply(self._dirs_cam[:, 1:2], R[:, 1], out=tmp3)
+        dirs += tmp3
+        dirs += R[:, 2]
         hits = self.scene.cast_rays(o3d.core.Tensor.from_numpy(rays), nthreads=cfg.threads)
-        # whole-image arrays (misses read triangle 0 and are overwritten by the sky at the end): no hit gathers
         tri = hits["primitive_ids"].numpy().view(np.int32)  # INVALID_ID (2^32 - 1) reads -1
         miss = tri < 0
-        tri = np.maximum(tri, 0)
-        surf = np.take(self.triangle_surface, tri)
-        fresh = ~self._ready[np.flatnonzero(np.bincount(surf[~miss], minlength=len(self.surfaces)))]
-        if fresh.any():
-            self._ensure_textures(np.flatnonzero(np.bincount(surf[~miss], minlength=len(self.surfaces))))
+        np.maximum(tri, 0, out=tri)
+        surf = np.take(self.triangle_surface, tri, out=buf["surf"])
+        seen = np.flatnonzero(np.bincount(surf[~miss], minlength=len(self.surfaces)))
+        if not self._ready[seen].all():
+            self._ensure_textures(seen)
+        tab = np.take(self._tri_table, tri, axis=0, out=buf["tab"])  # uv0, e1, e2 (texels), 1 / texel, shade
         bary = hits["primitive_uvs"].numpy()
-        tab = np.take(self._tri_table, tri, axis=0)  # (N, 8): uv0, e1, e2 (texels), 1 / texel size, shade
-        a, b = bary[:, :1], bary[:, 1:]
-        tex = tab[:, 0:2] + a * tab[:, 2:4] + b * tab[:, 4:6]  # (N, 2) level-0 texel coordinates
+        tex, tmp = buf["tex"], buf["tmp"]
+        np.multiply(bary[:, :1], tab[:, 2:4], out=tex)  # level-0 texel coordinates (uv0 + a e1) + b e2
+        tex += tab[:, 0:2]
+        np.multiply(bary[:, 1:], tab[:, 4:6], out=tmp)
+        tex += tmp
         # footprint of a pixel in texels: distance / focal, stretched by the incidence (geometric mean of the axes)
-        cos = np.abs(np.einsum("ij,ij->i", hits["primitive_normals"].numpy(), dirs))
-        foot = hits["t_hit"].numpy() * self._ray_norm
-        foot *= tab[:, 6] * np.float32(self._pixel_rad)
-        foot /= np.sqrt(np.maximum(cos / self._ray_norm, np.float32(0.02)))
+        foot, cos = buf["foot"], buf["cos"]
+        np.einsum("ij,ij->i", hits["primitive_normals"].numpy(), dirs, out=cos)
+        np.abs(cos, out=cos)
+        cos /= self._ray_norm
+        np.maximum(cos, np.float32(0.02), out=cos)
+        np.sqrt(cos, out=cos)
+        np.multiply(hits["t_hit"].numpy(), self._ray_norm, out=foot)
+        foot *= np.multiply(tab[:, 6], np.float32(self._pixel_rad), out=buf["q"])
+        foot /= cos
         foot[miss] = 1.0
-        level = np.clip(np.log2(foot), 0.0, N_MIP_LEVELS - 1.001)
-        l0 = level.astype(np.int32)
-        frac = level - l0
-        shape = (cfg.height, cfg.width)
+        level = np.log2(foot, out=foot)
+        np.clip(level, 0.0, N_MIP_LEVELS - 1.001, out=level)
+        row = buf["row"]
+        np.copyto(row, level, casting="unsafe")  # floor (level >= 0)
+        frac = np.subtract(level, row, out=buf["frac"])  # float64: the blend weight of the coarser level
         # one gather for both levels: row i of the pair table holds (surface, level) i and i + 1
-        mips = np.take(self._mip_pairs(), surf * N_MIP_LEVELS + l0, axis=0)  # (N, 10)
-        image = np.zeros(len(rays), np.float32)
-        for mip, weight in ((mips[:, :5], 1.0 - frac), (mips[:, 5:], frac)):
+        row += surf * N_MIP_LEVELS
+        mips = np.take(self._mip_pairs(), row, axis=0, out=buf["mips"])
+        shape = (cfg.height, cfg.width)
+        image, coord, weighted = buf["image"], buf["coord"], buf["weighted"]
+        for k, mip in enumerate((mips[:, :5], mips[:, 5:])):
             scale = mip[:, 4:5]
-            coord = tex - 0.5 * (1.0 / scale - 1.0)  # texel centres of a halved level sit between two finer ones
+            np.reciprocal(scale, out=tmp)  # texel centres of a halved level sit between two finer ones
+            tmp -= 1.0
+            tmp *= 0.5
+            np.subtract(tex, tmp, out=coord)
             coord *= scale
             np.clip(coord, 0.0, mip[:, 2:4], out=coord)
             # snapped to remap's 1/32 texel grid before the (integer) atlas offset is added, so the sampled value
@@ -653,12 +681,18 @@ class SimulatedCameraSequence:
             np.rint(coord, out=coord)
             coord *= 1.0 / 32.0
             coord += mip[:, 0:2]
-            sampled = cv2.remap(self.atlas.image, coord.reshape(*shape, 2), None, cv2.INTER_LINEAR)
-            image += weight * sampled.reshape(-1)
+            sampled = cv2.remap(self.atlas.image, coord.reshape(*shape, 2), None, cv2.INTER_LINEAR).reshape(-1)
+            if k == 0:
+                np.subtract(1.0, frac, out=weighted)
+                weighted *= sampled
+                np.copyto(image, weighted, casting="same_kind")
+            else:
+                np.multiply(frac, sampled, out=weighted)
+                np.add(image, weighted, out=image, casting="same_kind")
         image *= tab[:, 7]
         # sky: brighter towards the zenith
         image[miss] = 185.0 + 55.0 * np.clip(dirs[miss, 2] / self._ray_norm[miss], 0.0, 1.0)
-        return image.reshape(shape)
+        return image.reshape(shape).copy()
 
     def _mip_pairs(self) -> np.ndarray:
         """``(S * L, 10)``: the mip table row of (surface, level) beside the row of the next level (cached)."""
