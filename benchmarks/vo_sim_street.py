@@ -102,6 +102,10 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     info_start = machine_info()
     command = "python benchmarks/vo_sim_street.py " + " ".join(sys.argv[1:] if argv is None else argv)
+    import subprocess
+
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO, capture_output=True, text=True).stdout.strip()
+    command += f"  (at commit {commit or 'unknown'})"
     speed = render_speed(args.seeds[0], args.speed_frames)
     print("render speed", speed, file=sys.stderr)
     rows = {}
@@ -111,6 +115,11 @@ def main(argv: list[str] | None = None) -> int:
             row = run_vo(seq, mode)
             print(seed, mode, {k: v for k, v in row.items() if k != "scale_drift"}, file=sys.stderr)
             rows[f"street seed {seed}, {args.frames} frames, scale {mode}"] = row
+            write(args, command, info_start, speed, rows)  # after every run: a long benchmark keeps what it did
+    return 0
+
+
+def write(args, command: str, info_start: dict, speed: dict, rows: dict) -> None:
     info_end = machine_info()
     args.out.mkdir(parents=True, exist_ok=True)
     atomic.write_text(args.out / "results.json", json.dumps(
@@ -135,7 +144,6 @@ def main(argv: list[str] | None = None) -> int:
               f"{speed['render_over_cast']:.2f}, measured interleaved)."]
     atomic.write_text(args.out / "README.md", "\n".join(lines) + "\n")
     print("\n".join(lines))
-    return 0
 
 
 if __name__ == "__main__":

@@ -590,7 +590,25 @@ class SimulatedCameraSequence:
         return points
 
     def _ensure_textures(self, surfaces: np.ndarray) -> None:
-        for i in surfaces[~self._ready[surfaces]]:
+        """Generate the textures of ``surfaces`` not in the atlas yet. A full atlas is cleared and refilled with
+        just these: images do not depend on where a texture sits in the atlas, so this changes nothing visible."""
+        from lidarkit.sim.textures import AtlasFullError
+
+        try:
+            self._generate(surfaces[~self._ready[surfaces]])
+        except AtlasFullError:
+            log.debug("texture atlas full: cleared and refilled with the %d surfaces in view", len(surfaces))
+            self.atlas.clear()
+            self._ready[:] = False
+            try:
+                self._generate(surfaces)
+            except AtlasFullError:
+                raise ConfigError("the textures one frame sees do not fit the texture atlas; use a larger texel_scale",
+                                  source=self.name) from None
+
+    def _generate(self, surfaces: np.ndarray) -> None:
+        self._mip_pairs_cache = None
+        for i in surfaces:
             surf = self.surfaces[i]
             tex = natural_texture(np.random.default_rng(list(surf.seed_key)), surf.size_texels, surf.texel_m,
                                   surf.material)
@@ -601,7 +619,6 @@ class SimulatedCameraSequence:
                     x, y = self.atlas.add(img)
                 self._mip_table[i * N_MIP_LEVELS + lev, :4] = (x, y, img.shape[1] - 1, img.shape[0] - 1)
             self._ready[i] = True
-            self._mip_pairs_cache = None
 
     def render_at(self, T_world_cam: np.ndarray) -> np.ndarray:
         """Noise-free float32 image ``(h, w)`` (grey levels) seen from world pose ``T_world_cam``.
