@@ -179,6 +179,10 @@ def test_vo_input_and_kitti_export(tmp_path):
     vin = open_vo_input(spec)
     assert vin.kind == "simcam" and vin.K_source.startswith("simulator") and vin.K[0, 0] == 190.0
     assert open_vo_input(spec, kind="images").K_source.startswith("guess")
+    with pytest.raises(ConfigError, match="own poses"):
+        open_vo_input(spec, poses=tmp_path / "poses.txt")
+    with pytest.raises(ConfigError, match="kind auto"):
+        open_vo_input(spec, kind="tum")
     out = tmp_path / "sim"
     args = ["sim", "camera", "-o", str(out), "-n", "3", "--seed", "4", "--no-progress"]
     for kv in ("width=320", "height=112", "fx=190", "fy=190", "cx=null", "cy=null"):
