@@ -97,12 +97,54 @@ def render_speed(seed: int, frames: int) -> dict:
             "render_frames_per_cpu_s": 1.0 / cpu_render}
 
 
+def geometry_checks(seed: int, frames: int, every: int) -> dict:
+    """The synthetic-camera geometry check (tests/test_sim_camera.py) on pairs ``(k, k + 1)`` every ``every``
+    frames of a ``frames``-frame run: GFTT + KLT, essential matrix (RANSAC), rotation error and translation-direction
+    error against the ground truth. Pairs that move less than 5 cm (stops) have no direction and are skipped."""
+    import cv2
+
+    from lidarkit.geometry import se3_inverse
+    from lidarkit.vo import VOConfig, estimate_two_view, get_detector, track_klt
+    from lidarkit.vo.two_view import rotation_error_deg
+
+    seq = SimulatedCameraSequence(n_frames=frames, seed=seed)
+    gt = seq.ground_truth.poses_se3
+    cfg = VOConfig()
+    detector = get_detector(cfg.features)
+    rows = []
+    for k in range(0, frames - 1, every):
+        T = se3_inverse(gt[k + 1]) @ gt[k]
+        step = float(np.linalg.norm(T[:3, 3]))
+        if step < 0.05:
+            continue
+        a, b = seq.read_image(k), seq.read_image(k + 1)
+        p0, _ = detector.detect(a)
+        p1, ok = track_klt(a, b, p0, cfg.matching)
+        cv2.setRNGSeed(k)
+        est = estimate_two_view(p0[ok], p1[ok], seq.K, cfg.geometry)
+        if not est.ok:
+            rows.append({"frame": k, "step_m": step, "ok": False})
+            continue
+        direction = float(np.degrees(np.arccos(np.clip(est.t_cur_ref @ (T[:3, 3] / step), -1, 1))))
+        rows.append({"frame": k, "step_m": step, "ok": True, "rot_deg": rotation_error_deg(est.R_cur_ref, T[:3, :3]),
+                     "dir_deg": direction})
+    good = [r for r in rows if r["ok"]]
+    passed = [r for r in good if r["rot_deg"] < 0.1 and r["dir_deg"] < 1.0]
+    return {"seed": seed, "every": every, "pairs": len(rows), "estimated": len(good), "passed": len(passed),
+            "rot_deg_max": max((r["rot_deg"] for r in good), default=float("nan")),
+            "dir_deg_max": max((r["dir_deg"] for r in good), default=float("nan")),
+            "rot_deg_median": float(np.median([r["rot_deg"] for r in good])) if good else float("nan"),
+            "dir_deg_median": float(np.median([r["dir_deg"] for r in good])) if good else float("nan"),
+            "failing": [r for r in rows if r not in passed]}
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", nargs="*", type=int, default=[0])
     ap.add_argument("--frames", type=int, default=1000)
     ap.add_argument("--modes", nargs="*", default=["gt", "relative"], help="scale modes (none given: speed only)")
     ap.add_argument("--speed-frames", type=int, default=60)
+    ap.add_argument("--geometry-every", type=int, default=0, help="geometry checks on pairs every N frames (0: none)")
     ap.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "vo_sim")
     args = ap.parse_args(argv)
     info_start = machine_info()
@@ -114,24 +156,26 @@ def main(argv: list[str] | None = None) -> int:
     speed = render_speed(args.seeds[0], args.speed_frames)
     print("render speed", speed, file=sys.stderr)
     rows = {}
-    if not args.modes:
-        write(args, command, info_start, speed, rows)
+    geometry = [geometry_checks(seed, args.frames, args.geometry_every) for seed in args.seeds] \
+        if args.geometry_every else []
+    if not args.modes or not args.seeds:
+        write(args, command, info_start, speed, rows, geometry)
     for seed in args.seeds if args.modes else []:
         seq = SimulatedCameraSequence(n_frames=args.frames, seed=seed)
         for mode in args.modes:
             row = run_vo(seq, mode)
             print(seed, mode, {k: v for k, v in row.items() if k != "scale_drift"}, file=sys.stderr)
             rows[f"street seed {seed}, {args.frames} frames, scale {mode}"] = row
-            write(args, command, info_start, speed, rows)  # after every run: a long benchmark keeps what it did
+            write(args, command, info_start, speed, rows, geometry)  # after every run: a long benchmark keeps what it did
     return 0
 
 
-def write(args, command: str, info_start: dict, speed: dict, rows: dict) -> None:
+def write(args, command: str, info_start: dict, speed: dict, rows: dict, geometry: list) -> None:
     info_end = machine_info()
     args.out.mkdir(parents=True, exist_ok=True)
     atomic.write_text(args.out / "results.json", json.dumps(
         {"command": command, "machine_start": info_start, "machine_end": info_end, "render_speed": speed,
-         "runs": rows}, indent=1))
+         "runs": rows, "geometry_checks": geometry}, indent=1))
     lines = [f"# VO on simulated street runs ({args.frames} frames, KITTI size and intrinsics)", "",
              f"Command: `{command}`", "", f"Start: {describe_machine(info_start)}", "",
              f"End: {describe_machine(info_end)}", "",
@@ -152,6 +196,11 @@ def write(args, command: str, info_start: dict, speed: dict, rows: dict) -> None
               + (f"; CPU time (less sensitive to other jobs' load) {speed['render_cpu_ms_median']:.1f} ms per frame = "
                  f"{speed['render_frames_per_cpu_s']:.1f} frames per CPU second, bare cast "
                  f"{speed['cast_rays_cpu_ms_median']:.1f} ms." if "render_cpu_ms_median" in speed else ".")]
+    for g in geometry:
+        lines += ["", f"Geometry check, seed {g['seed']} (GFTT + KLT + RANSAC essential matrix on pairs (k, k + 1) every "
+                  f"{g['every']} frames, noise-free, moving pairs): {g['passed']} of {g['pairs']} pairs within rotation "
+                  f"< 0.1 deg and direction < 1 deg ({g['estimated']} estimated); median {g['rot_deg_median']:.3f} deg / "
+                  f"{g['dir_deg_median']:.2f} deg, worst {g['rot_deg_max']:.3f} deg / {g['dir_deg_max']:.2f} deg."]
     atomic.write_text(args.out / "README.md", "\n".join(lines) + "\n")
     print("\n".join(lines))
 
