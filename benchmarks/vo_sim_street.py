@@ -178,10 +178,11 @@ def write(args, command: str, info_start: dict, speed: dict, rows: dict, geometr
          "runs": rows, "geometry_checks": geometry}, indent=1))
     lines = [f"# VO on simulated street runs ({args.frames} frames, KITTI size and intrinsics)", "",
              f"Command: `{command}`", "", f"Start: {describe_machine(info_start)}", "",
-             f"End: {describe_machine(info_end)}", "",
-             "| run | path m | accepted pairs | APE m (align) | final error m | KITTI drift % / deg per 100 m "
+             f"End: {describe_machine(info_end)}", ""]
+    if rows:
+        lines += ["| run | path m | accepted pairs | APE m (align) | final error m | KITTI drift % / deg per 100 m "
              "| 100 m scale ratio min..max | scale change % per 100 m |",
-             "|---|---|---|---|---|---|---|---|"]
+                  "|---|---|---|---|---|---|---|---|"]
     for name, r in rows.items():
         sd = r["scale_drift"]
         kt = r["kitti_translation_pct"]
