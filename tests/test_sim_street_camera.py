@@ -179,6 +179,10 @@ def test_vo_input_and_kitti_export(tmp_path):
     vin = open_vo_input(spec)
     assert vin.kind == "simcam" and vin.K_source.startswith("simulator") and vin.K[0, 0] == 190.0
     assert open_vo_input(spec, kind="images").K_source.startswith("guess")
+    with pytest.raises(ConfigError, match="own poses"):
+        open_vo_input(spec, poses=tmp_path / "poses.txt")
+    with pytest.raises(ConfigError, match="kind auto"):
+        open_vo_input(spec, kind="tum")
     out = tmp_path / "sim"
     args = ["sim", "camera", "-o", str(out), "-n", "3", "--seed", "4", "--no-progress"]
     for kv in ("width=320", "height=112", "fx=190", "fy=190", "cx=null", "cy=null"):
@@ -190,3 +194,24 @@ def test_vo_input_and_kitti_export(tmp_path):
     np.testing.assert_allclose(back.K, vin.K, atol=1e-9)
     np.testing.assert_allclose(back.ground_truth.poses_se3, vin.ground_truth.poses_se3, atol=1e-6)
     assert np.array_equal(back.images.read_image(2), vin.images.read_image(2))
+
+
+def test_full_texture_atlas_is_refilled_without_changing_images(monkeypatch):
+    """A long run may outgrow the atlas: it is cleared and refilled with what the frame sees, same images."""
+    from lidarkit.sim.textures import TextureAtlas
+
+    frames = range(0, 40, 4)
+    ref = SimulatedCameraSequence(n_frames=40, seed=5, **SMALL)
+    ref_images = [ref.read_image(k) for k in frames]
+    first = SimulatedCameraSequence(n_frames=40, seed=5, **SMALL)
+    first.read_image(0)
+    assert ref.atlas.used_rows > first.atlas.used_rows  # later frames added textures
+    clears = []
+    original = TextureAtlas.clear
+    monkeypatch.setattr(TextureAtlas, "clear", lambda self: (clears.append(1), original(self)))
+    monkeypatch.setattr(TextureAtlas, "MAX_ROWS", (first.atlas.used_rows + ref.atlas.used_rows) // 2)
+    small = SimulatedCameraSequence(n_frames=40, seed=5, **SMALL)
+    images = [small.read_image(k) for k in frames]
+    assert len(clears) >= 2  # the constructor's and at least one refill
+    for a, b in zip(images, ref_images):
+        assert np.array_equal(a, b)

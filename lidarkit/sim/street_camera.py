@@ -487,6 +487,8 @@ class SimulatedCameraSequence:
         self._mip_table = np.zeros((len(surfaces) * N_MIP_LEVELS, 5), np.float32)
         self._mip_table[:, 4] = np.tile(np.exp2(-np.arange(N_MIP_LEVELS)), len(surfaces))
         self._ready = np.zeros(len(surfaces), bool)
+        self._mip_pairs_cache: np.ndarray | None = None
+        self._buffers: dict[str, np.ndarray] = {}
         self.atlas = TextureAtlas()
         self._scene = None
         w, h = cfg.width, cfg.height
@@ -588,7 +590,25 @@ class SimulatedCameraSequence:
         return points
 
     def _ensure_textures(self, surfaces: np.ndarray) -> None:
-        for i in surfaces[~self._ready[surfaces]]:
+        """Generate the textures of ``surfaces`` not in the atlas yet. A full atlas is cleared and refilled with
+        just these: images do not depend on where a texture sits in the atlas, so this changes nothing visible."""
+        from lidarkit.sim.textures import AtlasFullError
+
+        try:
+            self._generate(surfaces[~self._ready[surfaces]])
+        except AtlasFullError:
+            log.debug("texture atlas full: cleared and refilled with the %d surfaces in view", len(surfaces))
+            self.atlas.clear()
+            self._ready[:] = False
+            try:
+                self._generate(surfaces)
+            except AtlasFullError:
+                raise ConfigError("the textures one frame sees do not fit the texture atlas; use a larger texel_scale",
+                                  source=self.name) from None
+
+    def _generate(self, surfaces: np.ndarray) -> None:
+        self._mip_pairs_cache = None
+        for i in surfaces:
             surf = self.surfaces[i]
             tex = natural_texture(np.random.default_rng(list(surf.seed_key)), surf.size_texels, surf.texel_m,
                                   surf.material)
@@ -601,54 +621,102 @@ class SimulatedCameraSequence:
             self._ready[i] = True
 
     def render_at(self, T_world_cam: np.ndarray) -> np.ndarray:
-        """Noise-free float32 image ``(h, w)`` (grey levels) seen from world pose ``T_world_cam``."""
+        """Noise-free float32 image ``(h, w)`` (grey levels) seen from world pose ``T_world_cam``.
+
+        Whole-image arrays throughout (misses read triangle 0 and get the sky at the end), written into buffers
+        kept between frames: fresh multi-megabyte temporaries per frame cost as much in page faults as the
+        arithmetic itself."""
         import cv2
         import open3d as o3d
 
         cfg = self.config
+        n = len(self._dirs_cam)
+        buf = self._buffers
+        if not buf:
+            f32 = np.float32
+            buf.update(rays=np.empty((n, 6), f32), tmp3=np.empty((n, 3), f32), surf=np.empty(n, np.int32), tab=np.empty((n, 8), f32),
+                       tex=np.empty((n, 2), f32), coord=np.empty((n, 2), f32), tmp=np.empty((n, 2), f32),
+                       mips=np.empty((n, 10), f32), foot=np.empty(n, f32), cos=np.empty(n, f32), q=np.empty(n, f32),
+                       frac=np.empty(n, np.float64), weighted=np.empty(n, np.float64), image=np.empty(n, f32),
+                       row=np.empty(n, np.int32))
         R, t = T_world_cam[:3, :3].astype(np.float32), T_world_cam[:3, 3].astype(np.float32)
-        dirs = self._dirs_cam @ R.T
-        rays = np.empty((len(dirs), 6), np.float32)
+        rays = buf["rays"]
         rays[:, :3] = t
-        rays[:, 3:] = dirs
-        hits = self.scene.cast_rays(o3d.core.Tensor(rays), nthreads=cfg.threads)
-        # whole-image arrays (misses read triangle 0 and are overwritten by the sky at the end): no hit gathers
+        dirs, tmp3 = rays[:, 3:], buf["tmp3"]
+        # R (x, y, 1) element-wise: a BLAS matmul with an inner dimension of 3 costs 5x more CPU (idle threads spin)
+        np.multiply(self._dirs_cam[:, :1], R[:, 0], out=dirs)
+        np.multiply(self._dirs_cam[:, 1:2], R[:, 1], out=tmp3)
+        dirs += tmp3
+        dirs += R[:, 2]
+        hits = self.scene.cast_rays(o3d.core.Tensor.from_numpy(rays), nthreads=cfg.threads)
         tri = hits["primitive_ids"].numpy().view(np.int32)  # INVALID_ID (2^32 - 1) reads -1
         miss = tri < 0
-        tri = np.maximum(tri, 0)
-        surf = self.triangle_surface[tri]
+        np.maximum(tri, 0, out=tri)
+        surf = np.take(self.triangle_surface, tri, out=buf["surf"])
         seen = np.flatnonzero(np.bincount(surf[~miss], minlength=len(self.surfaces)))
-        self._ensure_textures(seen)
+        if not self._ready[seen].all():
+            self._ensure_textures(seen)
+        tab = np.take(self._tri_table, tri, axis=0, out=buf["tab"])  # uv0, e1, e2 (texels), 1 / texel, shade
         bary = hits["primitive_uvs"].numpy()
-        tab = self._tri_table[tri]  # (N, 8): uv0, e1, e2 (texels), 1 / texel size, shade
-        a, b = bary[:, 0], bary[:, 1]
-        tx = tab[:, 0] + a * tab[:, 2] + b * tab[:, 4]
-        ty = tab[:, 1] + a * tab[:, 3] + b * tab[:, 5]
+        tex, tmp = buf["tex"], buf["tmp"]
+        np.multiply(bary[:, :1], tab[:, 2:4], out=tex)  # level-0 texel coordinates (uv0 + a e1) + b e2
+        tex += tab[:, 0:2]
+        np.multiply(bary[:, 1:], tab[:, 4:6], out=tmp)
+        tex += tmp
         # footprint of a pixel in texels: distance / focal, stretched by the incidence (geometric mean of the axes)
-        dist = hits["t_hit"].numpy() * self._ray_norm
-        cos = np.abs(np.einsum("ij,ij->i", hits["primitive_normals"].numpy(), dirs)) / self._ray_norm
-        foot = dist * (self._pixel_rad * tab[:, 6]) / np.sqrt(np.maximum(cos, 0.02))
+        foot, cos = buf["foot"], buf["cos"]
+        np.einsum("ij,ij->i", hits["primitive_normals"].numpy(), dirs, out=cos)
+        np.abs(cos, out=cos)
+        cos /= self._ray_norm
+        np.maximum(cos, np.float32(0.02), out=cos)
+        np.sqrt(cos, out=cos)
+        np.multiply(hits["t_hit"].numpy(), self._ray_norm, out=foot)
+        foot *= np.multiply(tab[:, 6], np.float32(self._pixel_rad), out=buf["q"])
+        foot /= cos
         foot[miss] = 1.0
-        level = np.clip(np.log2(foot), 0.0, N_MIP_LEVELS - 1.001)
-        l0 = level.astype(np.int32)
-        frac = level - l0
+        level = np.log2(foot, out=foot)
+        np.clip(level, 0.0, N_MIP_LEVELS - 1.001, out=level)
+        row = buf["row"]
+        np.copyto(row, level, casting="unsafe")  # floor (level >= 0)
+        frac = np.subtract(level, row, out=buf["frac"])  # float64: the blend weight of the coarser level
+        # one gather for both levels: row i of the pair table holds (surface, level) i and i + 1
+        row += surf * N_MIP_LEVELS
+        mips = np.take(self._mip_pairs(), row, axis=0, out=buf["mips"])
         shape = (cfg.height, cfg.width)
-        image = np.zeros(len(dirs), np.float32)
-        base = surf * N_MIP_LEVELS
-        for lev, weight in ((l0, 1.0 - frac), (l0 + 1, frac)):
-            mip = self._mip_table[base + lev]  # (N, 5): atlas x, y, last texel x, y, level scale
-            scale = mip[:, 4]
-            half = 0.5 * (1.0 / scale - 1.0)  # texel centres of a halved level sit between two finer ones
+        image, coord, weighted = buf["image"], buf["coord"], buf["weighted"]
+        for k, mip in enumerate((mips[:, :5], mips[:, 5:])):
+            scale = mip[:, 4:5]
+            np.reciprocal(scale, out=tmp)  # texel centres of a halved level sit between two finer ones
+            tmp -= 1.0
+            tmp *= 0.5
+            np.subtract(tex, tmp, out=coord)
+            coord *= scale
+            np.clip(coord, 0.0, mip[:, 2:4], out=coord)
             # snapped to remap's 1/32 texel grid before the (integer) atlas offset is added, so the sampled value
             # does not depend on where in the atlas the texture landed (i.e. on the order frames are read)
-            mx = np.rint(np.clip((tx - half) * scale, 0.0, mip[:, 2]) * 32.0) * (1.0 / 32.0) + mip[:, 0]
-            my = np.rint(np.clip((ty - half) * scale, 0.0, mip[:, 3]) * 32.0) * (1.0 / 32.0) + mip[:, 1]
-            sampled = cv2.remap(self.atlas.image, mx.reshape(shape), my.reshape(shape), cv2.INTER_LINEAR)
-            image += weight * sampled.reshape(-1)
+            coord *= 32.0
+            np.rint(coord, out=coord)
+            coord *= 1.0 / 32.0
+            coord += mip[:, 0:2]
+            sampled = cv2.remap(self.atlas.image, coord.reshape(*shape, 2), None, cv2.INTER_LINEAR).reshape(-1)
+            if k == 0:
+                np.subtract(1.0, frac, out=weighted)
+                weighted *= sampled
+                np.copyto(image, weighted, casting="same_kind")
+            else:
+                np.multiply(frac, sampled, out=weighted)
+                np.add(image, weighted, out=image, casting="same_kind")
         image *= tab[:, 7]
         # sky: brighter towards the zenith
         image[miss] = 185.0 + 55.0 * np.clip(dirs[miss, 2] / self._ray_norm[miss], 0.0, 1.0)
-        return image.reshape(shape)
+        return image.reshape(shape).copy()
+
+    def _mip_pairs(self) -> np.ndarray:
+        """``(S * L, 10)``: the mip table row of (surface, level) beside the row of the next level (cached)."""
+        if self._mip_pairs_cache is None:
+            table = self._mip_table
+            self._mip_pairs_cache = np.hstack([table, np.vstack([table[1:], table[-1:]])])
+        return self._mip_pairs_cache
 
     def read_image(self, index: int) -> np.ndarray:
         """Frame ``index`` as ``(h, w)`` uint8, with the configured nuisances."""

@@ -96,11 +96,17 @@ def mip_levels(texture: np.ndarray, n_levels: int) -> list[np.ndarray]:
     return levels
 
 
+class AtlasFullError(ConfigError):
+    """No room left in a :class:`TextureAtlas` (its owner clears it and regenerates what it needs)."""
+
+
 class TextureAtlas:
-    """One uint8 image holding many textures and their mip levels (shelf packing, grown on demand).
+    """One uint8 image holding many textures and their mip levels, grown on demand.
 
     ``cv2.remap`` addresses at most 32767 rows and columns, so the atlas is ``width`` wide and grows downwards up to
-    that height; textures are added lazily (when a surface is first seen), so only what the camera sees is stored.
+    ``MAX_ROWS``. Textures are packed on shelves whose heights are powers of two (a texture goes to a shelf of the
+    next power of two of its height), so tall facades and tiny mip levels do not share a shelf and little space is
+    lost. When it is full :meth:`add` raises :class:`AtlasFullError`; :meth:`clear` empties it.
     """
 
     MAX_ROWS = 32000
@@ -108,30 +114,37 @@ class TextureAtlas:
     def __init__(self, width: int = 4096):
         self.width = int(width)
         self.image = np.zeros((1024, self.width), np.uint8)
-        self._x = self._y = self._shelf_h = 0
+        self.clear()
+
+    def clear(self) -> None:
+        """Forget every texture (the memory is kept)."""
+        self._shelves: dict[int, tuple[int, int]] = {}  # height bucket -> (shelf y, next free x)
+        self._top = 0  # first row no shelf uses
+
+    @property
+    def used_rows(self) -> int:
+        return self._top
 
     def add(self, image: np.ndarray) -> tuple[int, int]:
         """Copy ``image`` into free space; returns its top-left ``(x, y)`` in the atlas."""
         h, w = image.shape
         if w > self.width:
             raise ConfigError(f"texture {w} texels wide exceeds the atlas width {self.width}", source="TextureAtlas")
-        if self._x + w > self.width:
-            self._x, self._y, self._shelf_h = 0, self._y + self._shelf_h, 0
-        if self._y + h > self.image.shape[0]:
-            rows = max(self.image.shape[0] * 2, self._y + h)
-            if rows > self.MAX_ROWS:
-                if self._y + h > self.MAX_ROWS:
-                    raise ConfigError("the texture atlas is full (too many surfaces in view for the texel size); "
-                                      "use a larger texel_scale or fewer frames", source="TextureAtlas")
-                rows = self.MAX_ROWS
-            grown = np.zeros((rows, self.width), np.uint8)
-            grown[: self.image.shape[0]] = self.image
-            self.image = grown
-        x, y = self._x, self._y
+        bucket = max(int(np.ceil(np.log2(max(h, 1)))), 0)
+        shelf_h = 2**bucket
+        y, x = self._shelves.get(bucket, (-1, self.width))
+        if x + w > self.width:  # open a new shelf of this height class
+            if self._top + shelf_h > self.MAX_ROWS:
+                raise AtlasFullError("the texture atlas is full", source="TextureAtlas")
+            y, x = self._top, 0
+            self._top += shelf_h
+            if self._top > self.image.shape[0]:
+                grown = np.zeros((min(max(self.image.shape[0] * 2, self._top), self.MAX_ROWS), self.width), np.uint8)
+                grown[: self.image.shape[0]] = self.image
+                self.image = grown
         self.image[y : y + h, x : x + w] = image
-        self._x += w
-        self._shelf_h = max(self._shelf_h, h)
+        self._shelves[bucket] = (y, x + w)
         return x, y
 
 
-__all__ = ["MATERIALS", "Material", "TextureAtlas", "mip_levels", "natural_texture"]
+__all__ = ["AtlasFullError", "MATERIALS", "Material", "TextureAtlas", "mip_levels", "natural_texture"]

@@ -66,6 +66,9 @@ def open_vo_input(path: str | os.PathLike, *, kind: str = "auto", calib: str | o
     from lidarkit.errors import ConfigError
 
     if str(path).startswith("simcam:"):
+        for given, option in ((timestamps, "timestamps"), (poses, "poses")):
+            if given is not None:
+                raise ConfigError(f"the camera simulator has its own {option}; drop --{option}", source=str(path))
         return _open_simcam(str(path), kind, calib, focal_factor)
     path = Path(path)
     if not path.exists():
