@@ -1,4 +1,5 @@
-"""Focal length self-calibration (lidarkit.vo.autocalib): falls back with a reason when the motion cannot constrain f."""
+"""Focal length self-calibration (lidarkit.vo.autocalib): within 5 % on KITTI, and a fallback with a reason when
+the motion cannot constrain f."""
 
 from __future__ import annotations
 
@@ -42,3 +43,23 @@ def test_too_short_sequence_falls_back_and_bad_window_is_refused():
     assert "a window needs 5" in estimate_focal(_render([np.eye(4)] * 3)).reason
     with pytest.raises(ConfigError, match="window"):
         estimate_focal(_render([np.eye(4)] * 3), AutocalibConfig(window=2))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sequence", ["01", "06"])
+def test_kitti_focal_within_5_percent(kitti_vo_frames, sequence):
+    """KITTI 01 (curve) and 06 (almost straight), frames 0-50, no intrinsics: the estimate is within 5 % of the
+    calibration (measured -2.7 % / +3.6 %); before the plain-then-robust adjustment it was -5.9 % on 01 and a
+    fallback on 06, so the tolerance can fail."""
+    images, K, _ = kitti_vo_frames(sequence)
+    est = estimate_focal(images)
+    assert est.constrained, est.reason
+    assert est.focal_px == pytest.approx(K[0, 0], rel=0.05)
+    assert 0 < est.sigma_px < 0.1 * est.focal_px and est.windows >= 3
+
+
+def test_one_window_of_frames_falls_back():
+    """Five frames hold one 5-frame window (KITTI 00's excerpt): not enough to compare windows."""
+    poses = [make_se3(np.eye(3), np.array([0.05 * k, 0.0, 0.5 * k])) for k in range(5)]
+    est = estimate_focal(_render(poses))
+    assert not est.constrained and "one window" in est.reason

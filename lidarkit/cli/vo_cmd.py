@@ -1,4 +1,5 @@
-"""``lidarkit vo DATA``: monocular visual odometry on a KITTI sequence, a TUM folder or a plain image folder."""
+"""``lidarkit vo DATA``: monocular visual odometry on a KITTI sequence, a TUM folder, a plain image folder or the camera
+simulator (``simcam:street?...``)."""
 
 from __future__ import annotations
 
@@ -19,7 +20,7 @@ _LISTED_REJECTIONS = 10  # rejected frames listed one per line
 
 @app.command("vo")
 def vo_command(
-    data: Path = typer.Argument(..., help="KITTI sequence folder (image_0/, calib.txt), TUM folder (rgb.txt) or image folder."),
+    data: Path = typer.Argument(..., help="KITTI sequence folder (image_0/, calib.txt), TUM folder (rgb.txt), image folder, or the camera simulator: 'simcam:street?frames=500&seed=0' (exact K and ground truth; --kind images hides its K)."),
     preset: str = typer.Option("lidarkit", help=f"Starting configuration: {' | '.join(available_presets())}."),
     detector: Optional[str] = typer.Option(None, help=f"gftt | fast | orb | sift | akaze (lidarkit: {_D.features.detector})."),
     matcher: Optional[str] = typer.Option(None, help=f"klt | bf_cross | knn_ratio (lidarkit: {_D.matching.method})."),
@@ -40,7 +41,7 @@ def vo_command(
                                         help="Without intrinsics: estimate fx = fy from the sequence (principal point "
                                         "at the centre); falls back to the size guess when the motion does not "
                                         "constrain it. Costs about a minute per 50 KITTI frames."),
-    kind: str = typer.Option("auto", help="Input kind: auto | kitti | tum | images."),
+    kind: str = typer.Option("auto", help="Input kind: auto | kitti | tum | images (for simcam: auto | images)."),
     start: int = typer.Option(0, help="First frame."),
     max_frames: Optional[int] = typer.Option(None, help="Number of frames to process (default: all)."),
     seed: Optional[int] = typer.Option(None, help="Shuffle the correspondences fed to RANSAC/MAGSAC/LMedS with this "

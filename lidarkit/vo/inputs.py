@@ -65,6 +65,11 @@ def open_vo_input(path: str | os.PathLike, *, kind: str = "auto", calib: str | o
     K is guessed as ``fx = fy = focal_factor * max(w, h)``, principal point at the centre (logged as a warning)."""
     from lidarkit.errors import ConfigError
 
+    if str(path).startswith("simcam:"):
+        for given, option in ((timestamps, "timestamps"), (poses, "poses")):
+            if given is not None:
+                raise ConfigError(f"the camera simulator has its own {option}; drop --{option}", source=str(path))
+        return _open_simcam(str(path), kind, calib, focal_factor)
     path = Path(path)
     if not path.exists():
         raise DataError("input not found", source=path)
@@ -106,6 +111,29 @@ def open_vo_input(path: str | os.PathLike, *, kind: str = "auto", calib: str | o
         source = f"guess: fx = fy = {focal_factor:g} * max({w}, {h}) = {K[0, 0]:.1f} px, principal point at centre"
         log.warning("no intrinsics given; %s", source)
     return VOInput(images, validate_K(K, source=str(calib or path)), source, ground_truth, kind)
+
+
+def _open_simcam(spec: str, kind: str, calib: str | os.PathLike | None, focal_factor: float) -> VOInput:
+    """The camera simulator (:func:`lidarkit.sim.street_camera.open_simcam`) with its exact K and ground truth;
+    ``kind="images"`` hides its K (the no-intrinsics setting: K from ``calib`` or the size-based guess)."""
+    from lidarkit.sim.street_camera import open_simcam
+
+    if kind not in ("auto", "images"):
+        raise ConfigError(f"a simcam: spec is read as kind auto (simulator K) or images (K unknown), not {kind!r}",
+                          source="vo input kind")
+    images = open_simcam(spec)
+    if calib is not None:
+        from lidarkit.io.images import read_intrinsics
+
+        K, source = read_intrinsics(calib), f"file {calib}"
+    elif kind == "auto":
+        K, source = images.K, "simulator intrinsics (exact)"
+    else:
+        h, w = images.config.height, images.config.width
+        K = K_from_image_size(w, h, focal_factor)
+        source = f"guess: fx = fy = {focal_factor:g} * max({w}, {h}) = {K[0, 0]:.1f} px, principal point at centre"
+        log.warning("no intrinsics given; %s", source)
+    return VOInput(images, validate_K(K, source=str(calib or spec)), source, images.ground_truth, "simcam")
 
 
 class FrameRange:
