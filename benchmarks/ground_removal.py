@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import datetime as dt
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -126,14 +127,17 @@ def section_odo(out: Path, scenes: list[str], seeds: list[int], variants: list[s
                 log(f"  drift {rec['drift_pct']:.2f} % APE {rec['ape_rmse_m']:.2f} m flagged {rec['n_ground_removal_flagged']}")
 
 
-def section_two(out: Path, scenes: list[str], seeds: list[int]) -> None:
+def section_two(out: Path, scenes: list[str], seeds: list[int], methods: list[str], full: bool) -> None:
+    """Every method with its defaults on each scene and seed; ``full``: the simulator's default 64 x 2000 rays."""
+    resolution = "64x2000" if full else "32x720"
     for scene in scenes:
         for seed in seeds:
-            for method in ("ground_filtered", "vanilla"):
-                seq = sequence(scene, seed, **LOW_RES)
-                log(f"two {scene} seed {seed} {method} (32 x 720) ...")
+            for method in methods:
+                seq = sequence(scene, seed, **({} if full else LOW_RES))
+                log(f"two {scene} seed {seed} {method} ({resolution}) ...")
                 result = run(seq, method)
-                rec = {"section": "two", "scene": scene, "seed": seed, "method": method, "resolution": "32x720", **odometry_row(result)}
+                rec = {"section": "two", "scene": scene, "seed": seed, "method": method, "resolution": resolution, "sweeps": len(seq),
+                       "load": os.getloadavg()[0], **odometry_row(result)}
                 append(out, rec)
                 log(f"  drift {rec['drift_pct']:.2f} % APE {rec['ape_rmse_m']:.2f} m")
 
@@ -268,6 +272,8 @@ def main() -> None:
     parser.add_argument("--seeds", default="0,1,2")
     parser.add_argument("--variants", default=DEFAULT_GROUND_SEGMENTER, help="odo: segmenters of ground_filtered to run")
     parser.add_argument("--methods", default=",".join(available_ground_segmenters()), help="seg / kitti: segmenters")
+    parser.add_argument("--two-methods", default="ground_filtered,vanilla", help="two: odometry variants (defaults) compared")
+    parser.add_argument("--full", action="store_true", help="two: the simulator's default 64 x 2000 rays (the acceptance resolution)")
     parser.add_argument("--seg-step", type=int, default=15)
     parser.add_argument("--frames", type=int, default=COMMON["n_frames"], help="odo: sweeps per sequence (acceptance: 300)")
     parser.add_argument("--data", type=Path, default=DEFAULT_DATA)
@@ -283,7 +289,7 @@ def main() -> None:
     if "odo" in sections:
         section_odo(args.out, scenes, seeds, args.variants.split(","))
     if "two" in sections:
-        section_two(args.out, scenes, seeds)
+        section_two(args.out, scenes, seeds, args.two_methods.split(","), args.full)
     if "kitti" in sections:
         section_kitti(args.out, args.data, methods)
     if "report" in sections:

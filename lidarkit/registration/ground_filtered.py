@@ -15,6 +15,11 @@ country are warped by it. When the odometry runner hands over per-point times (t
 KITTI odometry, whose scans are already compensated), both clouds are deskewed to their sweep end with the
 constant-velocity motion (``init_T``), and the source once more with the estimate (``deskew``).
 
+A 2D scan (a planar laser, e.g. a CARMEN log: every point at one z) holds no ground: the scan plane lies above
+the floor. Such a pair is passed through unsegmented to the ``vanilla`` solve (``planar`` as configured), with
+``extra["ground_removal"]`` saying so and one log message per instance, so that a variant list run over 3D and
+2D data gives ``ground_filtered`` = ``vanilla`` on the 2D logs instead of an error or a scan-plane "ground".
+
 Removing the ground also removes what fixes height, roll and pitch: the poles, trunks and walls that remain
 are vertical and let the estimate tilt (on hills, 0.1 m and 0.3 deg per frame, measured). With
 ``ground_refine`` the result's z, roll and pitch are refined by point-to-plane residuals of the ground points
@@ -24,6 +29,7 @@ are vertical and let the estimate tilt (on hills, 0.1 m and 0.3 deg per frame, m
 from __future__ import annotations
 
 import dataclasses
+import logging
 from typing import Any, Literal
 
 import numpy as np
@@ -40,9 +46,14 @@ from lidarkit.registration.ground import (
     get_ground_segmenter,
 )
 from lidarkit.registration.neighbors import NearestNeighbors
-from lidarkit.registration.planar import refuse_2d
+from lidarkit.registration.planar import is_2d_scan
 from lidarkit.registration.registry import register_icp
 from lidarkit.registration.vanilla import VanillaConfig, VanillaICP, prepare, staged_icp
+
+log = logging.getLogger(__name__)
+
+#: ``extra["ground_removal"]`` of a 2D pair, solved without segmentation.
+SKIPPED_2D_NOTE = "skipped: 2D scan (all points at one z), no ground to remove"
 
 #: Start of the reason of every frame flagged for having too little left after ground removal.
 TOO_LITTLE_REASON = "too little left after ground removal"
@@ -208,6 +219,7 @@ class GroundFilteredICP(VanillaICP):
         super().__init__(config, **params)
         self.segmenter = ground_segmenter(self.config)
         self._fractions: tuple[np.ndarray | None, np.ndarray | None] = (None, None)
+        self._told_2d = False
 
     def align(
         self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray | None = None, *,
@@ -229,8 +241,12 @@ class GroundFilteredICP(VanillaICP):
 
     def _align(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray) -> RegistrationResult:
         c = self.config
-        if c.ground_method != "height":
-            refuse_2d(self.name, source_xyz, target_xyz, f"{c.ground_method} ground segmentation of a 2D scan finds the scan plane itself")
+        if is_2d_scan(source_xyz) or is_2d_scan(target_xyz):
+            if not self._told_2d:
+                log.info("ground_filtered: 2D scans hold no ground; solving them unsegmented (vanilla%s)", ", planar" if c.planar else "")
+                self._told_2d = True
+            result = super()._align(source_xyz, target_xyz, init_T)
+            return dataclasses.replace(result, extra={**result.extra, "ground_removal": SKIPPED_2D_NOTE, "ground_method": c.ground_method})
         masks = [~self.segmenter.segment(pts) for pts in (source_xyz, target_xyz)]
         clouds = [pts[m] for pts, m in zip((source_xyz, target_xyz), masks)]
         frac_src, frac_dst = self._fractions
