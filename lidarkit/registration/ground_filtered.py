@@ -83,7 +83,10 @@ class GroundFilteredConfig(VanillaConfig):
         True, description="with per-point times: deskew both clouds to their sweep end with the constant-velocity motion, then the source with the estimate"
     )
     ground_refine: bool = Field(True, description="refine z, roll and pitch of the result on the ground points (point to plane)")
-    fallback: Literal["constant_velocity", "with_ground"] = Field(
+    ground_keep_share: float = Field(0.0, ge=0, le=1, description="share of the ground points kept in the alignment (evenly spaced; 0: drop all)")
+    ground_keep_range_m: float | None = Field(None, gt=0, description="kept ground points: only within this horizontal range (m); None: all")
+    fallback_ground_share: float = Field(0.1, gt=0, le=1, description="fallback 'thinned_ground': share of the ground points added back")
+    fallback: Literal["constant_velocity", "with_ground", "thinned_ground"] = Field(
         "constant_velocity", description="flagged frame: 'constant_velocity' (not converged: the runner keeps the previous motion) or 'with_ground' (solve on the full clouds)"
     )
 
@@ -189,6 +192,18 @@ def refine_on_ground(
     return T
 
 
+def thin_ground(points_xyz: np.ndarray, ground: np.ndarray, share: float, max_range_m: float | None = None) -> np.ndarray:
+    """``(N,)`` mask of an evenly spaced ``share`` of the ``ground`` points (every ``round(1 / share)``-th in scan
+    order, so every ring and direction keeps some), within ``max_range_m`` horizontally if given."""
+    pick = ground.copy()
+    if max_range_m is not None:
+        pick &= np.hypot(points_xyz[:, 0], points_xyz[:, 1]) <= max_range_m
+    idx = np.flatnonzero(pick)
+    out = np.zeros(len(ground), dtype=bool)
+    out[idx[:: max(1, int(round(1.0 / share)))]] = True
+    return out
+
+
 def _degenerate_after_refine(degeneracy: Degeneracy, ground_refine: bool) -> bool:
     """Degenerate in a direction nothing fixes: with ``ground_refine`` the ground fixes z, roll and pitch, so a weakly
     constrained problem counts when its weakest direction lies mostly in x, y and yaw, or when it is singular
@@ -247,7 +262,25 @@ class GroundFilteredICP(VanillaICP):
                 self._told_2d = True
             result = super()._align(source_xyz, target_xyz, init_T)
             return dataclasses.replace(result, extra={**result.extra, "ground_removal": SKIPPED_2D_NOTE, "ground_method": c.ground_method})
-        masks = [~self.segmenter.segment(pts) for pts in (source_xyz, target_xyz)]
+        ground = [self.segmenter.segment(pts) for pts in (source_xyz, target_xyz)]
+        self._ground = ground
+        masks = [~g for g in ground]
+        if c.ground_keep_share > 0:
+            masks = [m | thin_ground(pts, g, c.ground_keep_share, c.ground_keep_range_m) for pts, m, g in zip((source_xyz, target_xyz), masks, ground)]
+        kept = {"source_points_kept": int(masks[0].sum()), "target_points_kept": int(masks[1].sum()), "ground_method": c.ground_method}
+        fewest = min(kept["source_points_kept"], kept["target_points_kept"])
+        if fewest < c.min_points_kept:
+            why = f"{TOO_LITTLE_REASON}: {fewest} points (min_points_kept={c.min_points_kept}, {c.ground_method})"
+            return self._fallback(source_xyz, target_xyz, init_T, why, kept)
+        result = self._solve(source_xyz, target_xyz, init_T, masks)
+        if c.fallback_on_degenerate and result.converged and _degenerate_after_refine(result.degeneracy, c.ground_refine):
+            why = f"{TOO_LITTLE_REASON}: degenerate geometry (min/max eigenvalue {result.degeneracy.ratio:.1e}, {c.ground_method})"
+            return self._fallback(source_xyz, target_xyz, init_T, why, kept, result.degeneracy)
+        return dataclasses.replace(result, extra={**result.extra, **kept})
+
+    def _solve(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray, masks: list[np.ndarray]) -> RegistrationResult:
+        """Staged ICP of the points ``masks`` keep (deskewed when per-point times came), then the ground refinement."""
+        c = self.config
         clouds = [pts[m] for pts, m in zip((source_xyz, target_xyz), masks)]
         frac_src, frac_dst = self._fractions
         deskew = frac_src is not None and frac_dst is not None
@@ -255,11 +288,6 @@ class GroundFilteredICP(VanillaICP):
             frac_src, frac_dst = frac_src[masks[0]], frac_dst[masks[1]]
             raw_source = clouds[0]
             clouds = [deskew_to_sweep_end(clouds[0], frac_src, init_T), deskew_to_sweep_end(clouds[1], frac_dst, init_T)]
-        kept = {"source_points_kept": len(clouds[0]), "target_points_kept": len(clouds[1]), "ground_method": c.ground_method}
-        fewest = min(len(clouds[0]), len(clouds[1]))
-        if fewest < c.min_points_kept:
-            why = f"{TOO_LITTLE_REASON}: {fewest} points (min_points_kept={c.min_points_kept}, {c.ground_method})"
-            return self._fallback(source_xyz, target_xyz, init_T, why, kept)
         src, dst = prepare(clouds[0], clouds[1], c.voxel_size_m)
         neighbors = NearestNeighbors(dst, backend=c.nn_backend, leafsize=c.leafsize, workers=c.workers)
         result = staged_icp(src, dst, init_T, neighbors, c)
@@ -271,19 +299,22 @@ class GroundFilteredICP(VanillaICP):
         if c.ground_refine and result.converged:
             # raw ground points: the sweep's motion mostly slides them along the ground, which a plane residual ignores,
             # and deskewing them with a motion that carries the last frame's tilt error would feed that error back
-            grounds = [pts[~m] for pts, m in zip((source_xyz, target_xyz), masks)]
+            grounds = [pts[g] for pts, g in zip((source_xyz, target_xyz), self._ground)]
             refined = refine_on_ground(grounds[0], grounds[1], result.T_target_source)
             result = dataclasses.replace(result, T_target_source=refined, extra={**result.extra, "ground_refined": True})
-        if c.fallback_on_degenerate and result.converged and _degenerate_after_refine(result.degeneracy, c.ground_refine):
-            why = f"{TOO_LITTLE_REASON}: degenerate geometry (min/max eigenvalue {result.degeneracy.ratio:.1e}, {c.ground_method})"
-            return self._fallback(source_xyz, target_xyz, init_T, why, kept, result.degeneracy)
-        return dataclasses.replace(result, extra={**result.extra, **kept})
+        return result
 
     def _fallback(
         self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray, why: str, kept: dict, degeneracy: Degeneracy | None = None
     ) -> RegistrationResult:
         c = self.config
         extra = {**kept, "ground_removal_flagged": True, "fallback": c.fallback}
+        if c.fallback == "thinned_ground":
+            masks = [~g | thin_ground(pts, g, c.fallback_ground_share, c.ground_keep_range_m) for pts, g in zip((source_xyz, target_xyz), self._ground)]
+            result = self._solve(source_xyz, target_xyz, init_T, masks)
+            if result.converged:
+                reason = f"{why}; solved with {c.fallback_ground_share:g} of the ground points added back"
+                return dataclasses.replace(result, reason=reason, extra={**result.extra, **extra})
         if c.fallback == "with_ground":
             src, dst = prepare(source_xyz, target_xyz, c.voxel_size_m)
             neighbors = NearestNeighbors(dst, backend=c.nn_backend, leafsize=c.leafsize, workers=c.workers)
