@@ -83,11 +83,14 @@ class GroundFilteredConfig(VanillaConfig):
         True, description="with per-point times: deskew both clouds to their sweep end with the constant-velocity motion, then the source with the estimate"
     )
     ground_refine: bool = Field(True, description="refine z, roll and pitch of the result on the ground points (point to plane)")
-    ground_keep_share: float = Field(0.0, ge=0, le=1, description="share of the ground points kept in the alignment (evenly spaced; 0: drop all)")
-    ground_keep_range_m: float | None = Field(None, gt=0, description="kept ground points: only within this horizontal range (m); None: all")
-    fallback_ground_share: float = Field(0.1, gt=0, le=1, description="fallback 'thinned_ground': share of the ground points added back")
+    fallback_ground_share: float = Field(
+        0.1, gt=0, le=1, description="fallback 'thinned_ground': share of the ground points added back (evenly spaced in scan order)"
+    )
+    fallback_ground_range_m: float | None = Field(None, gt=0, description="fallback 'thinned_ground': only ground within this range (m); None: all")
     fallback: Literal["constant_velocity", "with_ground", "thinned_ground"] = Field(
-        "constant_velocity", description="flagged frame: 'constant_velocity' (not converged: the runner keeps the previous motion) or 'with_ground' (solve on the full clouds)"
+        "constant_velocity",
+        description="flagged frame: 'constant_velocity' (not converged: the runner keeps the previous motion), 'with_ground' (solve on the full "
+        "clouds) or 'thinned_ground' (solve again with a share of the ground points added back; constant velocity if that does not converge)",
     )
 
     @model_validator(mode="after")
@@ -265,8 +268,6 @@ class GroundFilteredICP(VanillaICP):
         ground = [self.segmenter.segment(pts) for pts in (source_xyz, target_xyz)]
         self._ground = ground
         masks = [~g for g in ground]
-        if c.ground_keep_share > 0:
-            masks = [m | thin_ground(pts, g, c.ground_keep_share, c.ground_keep_range_m) for pts, m, g in zip((source_xyz, target_xyz), masks, ground)]
         kept = {"source_points_kept": int(masks[0].sum()), "target_points_kept": int(masks[1].sum()), "ground_method": c.ground_method}
         fewest = min(kept["source_points_kept"], kept["target_points_kept"])
         if fewest < c.min_points_kept:
@@ -310,7 +311,7 @@ class GroundFilteredICP(VanillaICP):
         c = self.config
         extra = {**kept, "ground_removal_flagged": True, "fallback": c.fallback}
         if c.fallback == "thinned_ground":
-            masks = [~g | thin_ground(pts, g, c.fallback_ground_share, c.ground_keep_range_m) for pts, g in zip((source_xyz, target_xyz), self._ground)]
+            masks = [~g | thin_ground(pts, g, c.fallback_ground_share, c.fallback_ground_range_m) for pts, g in zip((source_xyz, target_xyz), self._ground)]
             result = self._solve(source_xyz, target_xyz, init_T, masks)
             if result.converged:
                 reason = f"{why}; solved with {c.fallback_ground_share:g} of the ground points added back"
