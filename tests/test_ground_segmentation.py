@@ -185,6 +185,9 @@ def test_the_runner_hands_point_times_to_ground_filtered_for_deskew():
     from lidarkit.odometry import run
 
     seq = SimulatedLidarSequence(scene="street", n_frames=4, seed=0, n_beams=16, n_azimuths=360, accel_time_s=0.0)
-    with_times = run(seq, "ground_filtered").trajectory.poses_se3
+    deskewed = run(seq, "ground_filtered")
+    with_times = deskewed.trajectory.poses_se3
     without = run(seq, "ground_filtered", params={"deskew": False}).trajectory.poses_se3
     assert np.abs(with_times - without).max() > 1e-3
+    # ... and the run says it was applied (no "deskew requested, not applied" warning for a scan-to-scan variant taking times)
+    assert deskewed.metrics["effective"]["deskew"]["applied"] is True
