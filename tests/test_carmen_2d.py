@@ -254,7 +254,7 @@ def _xy_yaw(T):
     return np.array([T[0, 3], T[1, 3], np.arctan2(T[1, 0], T[0, 0])])
 
 
-@pytest.mark.parametrize("name", ["vanilla", "knn"])  # ground_filtered: a 2D scan is refused or flagged degenerate
+@pytest.mark.parametrize("name", ["vanilla", "knn"])  # ground_filtered passes 2D scans to vanilla (tested below)
 def test_planar_and_3d_solutions_of_a_2d_pair_agree(aces_pair, name):
     source, target, init = aces_pair
     planar = get_icp(name, planar=True, max_correspondence_distance_m=0.5).align(source, target, init)
@@ -296,8 +296,6 @@ def test_planar_keeps_z_roll_pitch_of_the_guess_on_3d_clouds(rng):
         ("open3d_gicp", {}),
         ("small_gicp", {"registration_type": "GICP"}),
         ("small_gicp", {"registration_type": "PLANE_ICP"}),
-        ("ground_filtered", {"ground_method": "ransac"}),
-        ("ground_filtered", {}),  # the default slope-following segmenter
     ],
 )
 def test_variants_that_cannot_handle_2d_scans_refuse_them(aces_pair, name, params):
@@ -306,6 +304,23 @@ def test_variants_that_cannot_handle_2d_scans_refuse_them(aces_pair, name, param
     source, target, init = aces_pair
     with pytest.raises(ConfigError, match="not applicable to 2D scans"):
         get_icp(name, **params).align(source, target, init)
+
+
+@pytest.mark.parametrize("params", [{}, {"ground_method": "ransac"}, {"planar": True}])
+def test_ground_filtered_passes_2d_scans_through_unsegmented(aces_pair, params, caplog):
+    from lidarkit.registration.ground_filtered import SKIPPED_2D_NOTE
+
+    source, target, init = aces_pair
+    icp = get_icp("ground_filtered", max_correspondence_distance_m=0.5, **params)
+    with caplog.at_level(logging.INFO, logger="lidarkit.registration.ground_filtered"):
+        ours = icp.align(source, target, init)
+        icp.align(source, target, init)
+    plain = get_icp("vanilla", max_correspondence_distance_m=0.5, planar=params.get("planar", False)).align(source, target, init)
+    assert ours.converged and not ours.extra.get("ground_removal_flagged")
+    assert ours.extra["ground_removal"] == SKIPPED_2D_NOTE
+    np.testing.assert_allclose(ours.T_target_source, plain.T_target_source, atol=1e-9)  # the vanilla solve, bit for bit
+    assert np.abs(_xy_yaw(ours.T_target_source) - _xy_yaw(init)).max() > 1e-3  # and it moved off the guess
+    assert sum("2D scans hold no ground" in r.getMessage() for r in caplog.records) == 1  # told once per instance
 
 
 # ---- odometry over a CARMEN log ---------------------------------------------------------------------

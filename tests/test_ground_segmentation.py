@@ -117,6 +117,22 @@ def test_frames_with_too_little_left_are_flagged_counted_and_fall_back():
     res = get_icp("ground_filtered", fallback="with_ground", max_correspondence_distance_m=1.0).align(scan1.points_xyz, scan0.points_xyz)
     assert res.extra["ground_removal_flagged"] and "solved with the ground included" in res.reason
     assert res.iterations > 0
+    # 'thinned_ground' solves again with every 10th ground point: on bare ground that is point-to-point on rings,
+    # which the flag still marks; the estimate is a solve, not the constant-velocity guess
+    thin = get_icp("ground_filtered", fallback="thinned_ground", max_correspondence_distance_m=1.0).align(scan1.points_xyz, scan0.points_xyz)
+    assert thin.extra["ground_removal_flagged"] and "0.1 of the ground points added back" in thin.reason
+    assert thin.iterations > 0
+
+
+def test_thin_ground_keeps_an_even_share_within_range():
+    from lidarkit.registration.ground_filtered import thin_ground
+
+    pts = np.c_[np.linspace(-50, 50, 1000), np.zeros(1000), np.full(1000, -1.7)]
+    ground = np.arange(1000) % 2 == 0  # 500 ground points
+    kept = thin_ground(pts, ground, 0.1)
+    assert kept.sum() == 50 and not (kept & ~ground).any()
+    near = thin_ground(pts, ground, 0.1, max_range_m=10.0)
+    assert 0 < near.sum() <= 11 and np.abs(pts[near, 0]).max() <= 10.0
 
 
 def test_degenerate_remainder_is_flagged():
@@ -169,6 +185,9 @@ def test_the_runner_hands_point_times_to_ground_filtered_for_deskew():
     from lidarkit.odometry import run
 
     seq = SimulatedLidarSequence(scene="street", n_frames=4, seed=0, n_beams=16, n_azimuths=360, accel_time_s=0.0)
-    with_times = run(seq, "ground_filtered").trajectory.poses_se3
+    deskewed = run(seq, "ground_filtered")
+    with_times = deskewed.trajectory.poses_se3
     without = run(seq, "ground_filtered", params={"deskew": False}).trajectory.poses_se3
     assert np.abs(with_times - without).max() > 1e-3
+    # ... and the run says it was applied (no "deskew requested, not applied" warning for a scan-to-scan variant taking times)
+    assert deskewed.metrics["effective"]["deskew"]["applied"] is True

@@ -108,7 +108,7 @@ def effective_settings(
         deskew["reason"] = f"{method} does not deskew (no deskew option)"
     elif not requested:
         deskew["reason"] = "deskew off in the method config"
-    elif not stateful:
+    elif not stateful and not getattr(registration, "accepts_point_times", False):
         deskew["reason"] = f"{method} runs scan-to-scan through align(), which takes no per-point times"
         warnings.append(f"deskew requested, not applied: {deskew['reason']}")
     elif n_times == 0:

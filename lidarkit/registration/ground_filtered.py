@@ -15,6 +15,11 @@ country are warped by it. When the odometry runner hands over per-point times (t
 KITTI odometry, whose scans are already compensated), both clouds are deskewed to their sweep end with the
 constant-velocity motion (``init_T``), and the source once more with the estimate (``deskew``).
 
+A 2D scan (a planar laser, e.g. a CARMEN log: every point at one z) holds no ground: the scan plane lies above
+the floor. Such a pair is passed through unsegmented to the ``vanilla`` solve (``planar`` as configured), with
+``extra["ground_removal"]`` saying so and one log message per instance, so that a variant list run over 3D and
+2D data gives ``ground_filtered`` = ``vanilla`` on the 2D logs instead of an error or a scan-plane "ground".
+
 Removing the ground also removes what fixes height, roll and pitch: the poles, trunks and walls that remain
 are vertical and let the estimate tilt (on hills, 0.1 m and 0.3 deg per frame, measured). With
 ``ground_refine`` the result's z, roll and pitch are refined by point-to-plane residuals of the ground points
@@ -24,6 +29,7 @@ are vertical and let the estimate tilt (on hills, 0.1 m and 0.3 deg per frame, m
 from __future__ import annotations
 
 import dataclasses
+import logging
 from typing import Any, Literal
 
 import numpy as np
@@ -40,9 +46,14 @@ from lidarkit.registration.ground import (
     get_ground_segmenter,
 )
 from lidarkit.registration.neighbors import NearestNeighbors
-from lidarkit.registration.planar import refuse_2d
+from lidarkit.registration.planar import is_2d_scan
 from lidarkit.registration.registry import register_icp
 from lidarkit.registration.vanilla import VanillaConfig, VanillaICP, prepare, staged_icp
+
+log = logging.getLogger(__name__)
+
+#: ``extra["ground_removal"]`` of a 2D pair, solved without segmentation.
+SKIPPED_2D_NOTE = "skipped: 2D scan (all points at one z), no ground to remove"
 
 #: Start of the reason of every frame flagged for having too little left after ground removal.
 TOO_LITTLE_REASON = "too little left after ground removal"
@@ -72,8 +83,14 @@ class GroundFilteredConfig(VanillaConfig):
         True, description="with per-point times: deskew both clouds to their sweep end with the constant-velocity motion, then the source with the estimate"
     )
     ground_refine: bool = Field(True, description="refine z, roll and pitch of the result on the ground points (point to plane)")
-    fallback: Literal["constant_velocity", "with_ground"] = Field(
-        "constant_velocity", description="flagged frame: 'constant_velocity' (not converged: the runner keeps the previous motion) or 'with_ground' (solve on the full clouds)"
+    fallback_ground_share: float = Field(
+        0.1, gt=0, le=1, description="fallback 'thinned_ground': share of the ground points added back (evenly spaced in scan order)"
+    )
+    fallback_ground_range_m: float | None = Field(None, gt=0, description="fallback 'thinned_ground': only ground within this range (m); None: all")
+    fallback: Literal["constant_velocity", "with_ground", "thinned_ground"] = Field(
+        "constant_velocity",
+        description="flagged frame: 'constant_velocity' (not converged: the runner keeps the previous motion), 'with_ground' (solve on the full "
+        "clouds) or 'thinned_ground' (solve again with a share of the ground points added back; constant velocity if that does not converge)",
     )
 
     @model_validator(mode="after")
@@ -178,6 +195,18 @@ def refine_on_ground(
     return T
 
 
+def thin_ground(points_xyz: np.ndarray, ground: np.ndarray, share: float, max_range_m: float | None = None) -> np.ndarray:
+    """``(N,)`` mask of an evenly spaced ``share`` of the ``ground`` points (every ``round(1 / share)``-th in scan
+    order, so every ring and direction keeps some), within ``max_range_m`` horizontally if given."""
+    pick = ground.copy()
+    if max_range_m is not None:
+        pick &= np.hypot(points_xyz[:, 0], points_xyz[:, 1]) <= max_range_m
+    idx = np.flatnonzero(pick)
+    out = np.zeros(len(ground), dtype=bool)
+    out[idx[:: max(1, int(round(1.0 / share)))]] = True
+    return out
+
+
 def _degenerate_after_refine(degeneracy: Degeneracy, ground_refine: bool) -> bool:
     """Degenerate in a direction nothing fixes: with ``ground_refine`` the ground fixes z, roll and pitch, so a weakly
     constrained problem counts when its weakest direction lies mostly in x, y and yaw, or when it is singular
@@ -208,6 +237,7 @@ class GroundFilteredICP(VanillaICP):
         super().__init__(config, **params)
         self.segmenter = ground_segmenter(self.config)
         self._fractions: tuple[np.ndarray | None, np.ndarray | None] = (None, None)
+        self._told_2d = False
 
     def align(
         self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray | None = None, *,
@@ -229,9 +259,29 @@ class GroundFilteredICP(VanillaICP):
 
     def _align(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray) -> RegistrationResult:
         c = self.config
-        if c.ground_method != "height":
-            refuse_2d(self.name, source_xyz, target_xyz, f"{c.ground_method} ground segmentation of a 2D scan finds the scan plane itself")
-        masks = [~self.segmenter.segment(pts) for pts in (source_xyz, target_xyz)]
+        if is_2d_scan(source_xyz) or is_2d_scan(target_xyz):
+            if not self._told_2d:
+                log.info("ground_filtered: 2D scans hold no ground; solving them unsegmented (vanilla%s)", ", planar" if c.planar else "")
+                self._told_2d = True
+            result = super()._align(source_xyz, target_xyz, init_T)
+            return dataclasses.replace(result, extra={**result.extra, "ground_removal": SKIPPED_2D_NOTE, "ground_method": c.ground_method})
+        ground = [self.segmenter.segment(pts) for pts in (source_xyz, target_xyz)]
+        self._ground = ground
+        masks = [~g for g in ground]
+        kept = {"source_points_kept": int(masks[0].sum()), "target_points_kept": int(masks[1].sum()), "ground_method": c.ground_method}
+        fewest = min(kept["source_points_kept"], kept["target_points_kept"])
+        if fewest < c.min_points_kept:
+            why = f"{TOO_LITTLE_REASON}: {fewest} points (min_points_kept={c.min_points_kept}, {c.ground_method})"
+            return self._fallback(source_xyz, target_xyz, init_T, why, kept)
+        result = self._solve(source_xyz, target_xyz, init_T, masks)
+        if c.fallback_on_degenerate and result.converged and _degenerate_after_refine(result.degeneracy, c.ground_refine):
+            why = f"{TOO_LITTLE_REASON}: degenerate geometry (min/max eigenvalue {result.degeneracy.ratio:.1e}, {c.ground_method})"
+            return self._fallback(source_xyz, target_xyz, init_T, why, kept, result.degeneracy)
+        return dataclasses.replace(result, extra={**result.extra, **kept})
+
+    def _solve(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray, masks: list[np.ndarray]) -> RegistrationResult:
+        """Staged ICP of the points ``masks`` keep (deskewed when per-point times came), then the ground refinement."""
+        c = self.config
         clouds = [pts[m] for pts, m in zip((source_xyz, target_xyz), masks)]
         frac_src, frac_dst = self._fractions
         deskew = frac_src is not None and frac_dst is not None
@@ -239,11 +289,6 @@ class GroundFilteredICP(VanillaICP):
             frac_src, frac_dst = frac_src[masks[0]], frac_dst[masks[1]]
             raw_source = clouds[0]
             clouds = [deskew_to_sweep_end(clouds[0], frac_src, init_T), deskew_to_sweep_end(clouds[1], frac_dst, init_T)]
-        kept = {"source_points_kept": len(clouds[0]), "target_points_kept": len(clouds[1]), "ground_method": c.ground_method}
-        fewest = min(len(clouds[0]), len(clouds[1]))
-        if fewest < c.min_points_kept:
-            why = f"{TOO_LITTLE_REASON}: {fewest} points (min_points_kept={c.min_points_kept}, {c.ground_method})"
-            return self._fallback(source_xyz, target_xyz, init_T, why, kept)
         src, dst = prepare(clouds[0], clouds[1], c.voxel_size_m)
         neighbors = NearestNeighbors(dst, backend=c.nn_backend, leafsize=c.leafsize, workers=c.workers)
         result = staged_icp(src, dst, init_T, neighbors, c)
@@ -255,19 +300,22 @@ class GroundFilteredICP(VanillaICP):
         if c.ground_refine and result.converged:
             # raw ground points: the sweep's motion mostly slides them along the ground, which a plane residual ignores,
             # and deskewing them with a motion that carries the last frame's tilt error would feed that error back
-            grounds = [pts[~m] for pts, m in zip((source_xyz, target_xyz), masks)]
+            grounds = [pts[g] for pts, g in zip((source_xyz, target_xyz), self._ground)]
             refined = refine_on_ground(grounds[0], grounds[1], result.T_target_source)
             result = dataclasses.replace(result, T_target_source=refined, extra={**result.extra, "ground_refined": True})
-        if c.fallback_on_degenerate and result.converged and _degenerate_after_refine(result.degeneracy, c.ground_refine):
-            why = f"{TOO_LITTLE_REASON}: degenerate geometry (min/max eigenvalue {result.degeneracy.ratio:.1e}, {c.ground_method})"
-            return self._fallback(source_xyz, target_xyz, init_T, why, kept, result.degeneracy)
-        return dataclasses.replace(result, extra={**result.extra, **kept})
+        return result
 
     def _fallback(
         self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray, why: str, kept: dict, degeneracy: Degeneracy | None = None
     ) -> RegistrationResult:
         c = self.config
         extra = {**kept, "ground_removal_flagged": True, "fallback": c.fallback}
+        if c.fallback == "thinned_ground":
+            masks = [~g | thin_ground(pts, g, c.fallback_ground_share, c.fallback_ground_range_m) for pts, g in zip((source_xyz, target_xyz), self._ground)]
+            result = self._solve(source_xyz, target_xyz, init_T, masks)
+            if result.converged:
+                reason = f"{why}; solved with {c.fallback_ground_share:g} of the ground points added back"
+                return dataclasses.replace(result, reason=reason, extra={**result.extra, **extra})
         if c.fallback == "with_ground":
             src, dst = prepare(source_xyz, target_xyz, c.voxel_size_m)
             neighbors = NearestNeighbors(dst, backend=c.nn_backend, leafsize=c.leafsize, workers=c.workers)
