@@ -37,6 +37,8 @@ def as_points(points_xyz: np.ndarray, name: str = "points", min_points: int = 0)
     arr = arr.astype(np.float64, copy=False)
     if len(arr) < min_points:
         raise DataError(f"needs at least {min_points} points, got {len(arr)}", source=name)
+    if len(arr) and _within_limits(arr):  # the common case in two flat reductions (NaN fails them: details below)
+        return arr
     if not np.isfinite(arr).all():
         bad = int((~np.isfinite(arr).all(axis=1)).sum())
         raise DataError(f"{bad} of {len(arr)} points are NaN or infinite", source=name)
@@ -44,9 +46,16 @@ def as_points(points_xyz: np.ndarray, name: str = "points", min_points: int = 0)
     return arr
 
 
+def _within_limits(arr: np.ndarray) -> bool:
+    """All coordinates finite and within ``MAX_ABS_COORDINATE_M``: a flat max and min (NaN propagates through both),
+    ~20x faster than a per-row test on an ``(N, 3)`` array."""
+    hi, lo = float(arr.max()), float(arr.min())
+    return bool(hi <= MAX_ABS_COORDINATE_M and lo >= -MAX_ABS_COORDINATE_M)
+
+
 def check_magnitude(points_xyz: np.ndarray, source: str, location: str | None = None) -> None:
     """DataError if any finite coordinate exceeds ``MAX_ABS_COORDINATE_M`` in magnitude (names the first point)."""
-    if len(points_xyz) == 0:
+    if len(points_xyz) == 0 or _within_limits(np.asarray(points_xyz)):
         return
     big = np.abs(points_xyz).max(axis=1) > MAX_ABS_COORDINATE_M
     if big.any():

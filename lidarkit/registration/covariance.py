@@ -152,7 +152,12 @@ def effective_observations(points_xyz: np.ndarray, voxel_m: float | None) -> int
     if voxel_m is None or len(points_xyz) == 0:
         return len(points_xyz)
     keys = np.floor(np.asarray(points_xyz) / voxel_m).astype(np.int64)
-    return int(len(np.unique(keys, axis=0)))
+    cols = [keys[:, i] - keys[:, i].min() for i in range(3)]
+    span = [int(c.max()) + 1 for c in cols]
+    if float(span[0]) * span[1] * span[2] >= 2.0**62:  # no room for one packed integer key: compare rows
+        return int(len(np.unique(keys, axis=0)))
+    # one integer per voxel: a 1-D unique, ~5x faster than np.unique(axis=0) on rows
+    return int(len(np.unique((cols[0] * span[1] + cols[1]) * span[2] + cols[2])))
 
 
 def registration_covariance(
