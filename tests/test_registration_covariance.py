@@ -99,6 +99,31 @@ def test_corridor_axis_is_the_least_known_translation():
         assert np.argmax(np.diag(cov)[:3]) == 0
 
 
+@pytest.mark.parametrize("variant", ["kiss", "open3d_point_to_plane", "small_gicp"])
+def test_corridor_weakest_direction_is_named_the_corridor_axis(variant):
+    """The weakest eigen-direction of the normal matrix is the translation along the tunnel (x) in every draw: the
+    wall-floor corners constrain only their best plane's normal, and roll is measured at its own lever arm (the
+    tunnel's half-width), not at the points' distance along the tunnel."""
+    pairs = ScanPairs("corridor", seed=2, n_frames=6, n_beams=32, n_azimuths=1024)
+    icp = get_icp(variant)
+    for i in range(4):
+        pair = pairs.draw(i)
+        deg = icp.align(pair.source_xyz, pair.target_xyz, init_T=pair.init_T).degeneracy
+        assert deg.weakest_name == "translation along x", (i, deg.eigenvalues, deg.weakest_direction)
+        assert abs(deg.weakest_direction[0]) > 0.95
+
+
+def test_corner_constrains_only_its_best_plane_normal():
+    """Points on a wall-floor edge along x (an L in y-z): no constraint along x, the edge's direction."""
+    rng = np.random.default_rng(4)
+    x = rng.uniform(-1, 1, 40)
+    t = rng.uniform(0, 1, 40)
+    on_floor = rng.random(40) < 0.5
+    pts = np.column_stack([x, np.where(on_floor, t, 0.0), np.where(on_floor, 0.0, t)])
+    M = surface_constraints(pts[None])[0]
+    assert abs(M[0, 0]) < 1e-3 and np.linalg.matrix_rank(M, tol=1e-6) == 1  # the normal of the L's best plane only
+
+
 def test_every_variant_returns_a_psd_covariance_and_its_information(kitti_pair):
     src, dst, T_gt = kitti_pair
     for name in ("vanilla", "small_gicp", "kiss", "open3d_point_to_plane"):

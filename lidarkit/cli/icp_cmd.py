@@ -97,7 +97,7 @@ def _result_table(result, source: Path, target: Path) -> Table:
     table.add_row("degeneracy min/max eig", f"{deg.ratio:.2e} ({'DEGENERATE' if deg.degenerate else 'ok'}, threshold {deg.threshold:g})")
     table.add_row("eigenvalues", " ".join(f"{e:.3g}" for e in deg.eigenvalues))
     weakest = ", ".join(f"{n}={v:+.2f}" for n, v in zip(("tx", "ty", "tz", "rx", "ry", "rz"), deg.weakest_direction) if abs(v) > 0.1)
-    table.add_row("weakest direction", weakest or "-")
+    table.add_row("weakest direction", (f"{deg.weakest_name} ({weakest})" if deg.weakest_name else weakest) or "-")
     if deg.weak_directions:
         table.add_row("degenerate directions", "; ".join(deg.weak_directions) + " (sensor frame of the target)")
     if result.covariance is not None:

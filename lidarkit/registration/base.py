@@ -90,12 +90,14 @@ class Degeneracy:
     """How well the final alignment constrains the 6 degrees of freedom.
 
     ``eigenvalues``: ascending eigenvalues of the normalised 6x6 normal matrix ``J^T M J / n``
-    (rotation columns scaled by the RMS radius of the matched points, so all six are in m^2 / m^2);
+    (the rotation about each axis scaled by the RMS distance of the matched points from that axis, so all six
+    are in m^2 / m^2);
     ``condition_number``: max/min eigenvalue (inf if min is 0); ``degenerate``: min/max below
     ``threshold``; ``weakest_direction``: unit eigenvector of the smallest eigenvalue in
     ``TWIST_ORDER`` (tx, ty, tz, rx, ry, rz); ``kind``: which residual the normal matrix models;
     ``weak_directions``: the eigen-directions below ``threshold`` in words, in the target sensor frame
-    (e.g. ``"translation along x"``), empty when nothing is degenerate.
+    (e.g. ``"translation along x"``), empty when nothing is degenerate; ``weakest_name``: the weakest direction in
+    words, whether or not it is below ``threshold``.
     """
 
     eigenvalues: tuple[float, ...]
@@ -105,6 +107,7 @@ class Degeneracy:
     threshold: float = DEGENERACY_RATIO_THRESHOLD
     kind: str = "point_to_surface"
     weak_directions: tuple[str, ...] = ()
+    weakest_name: str = ""
 
     @property
     def ratio(self) -> float:

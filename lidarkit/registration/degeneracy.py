@@ -4,8 +4,9 @@ The point-to-point normal matrix ``sum J_i^T J_i`` is full rank for any three no
 it cannot reveal that a flat patch lets the source slide. We therefore weight each residual by the
 directions in which the target surface around its match is *thin*: ``M_i = n n^T`` on a plane,
 the two normals of a line, ``I`` in volumetric clutter (local PCA of the target's k nearest
-neighbours). With ``J_i = [I, -[p_i]x / r]`` (points centred on their centroid, rotations scaled by
-the RMS radius ``r`` so that all six columns are in metres) the normal matrix is
+neighbours). With ``J_i = [I, -[p_i]x diag(1/r)]`` (points centred on their centroid, the rotation about each axis
+scaled by the RMS distance ``r`` of the points from that axis, so that all six columns are in metres) the normal
+matrix is
 ``H = (1/n) sum J_i^T M_i J_i``. A plane leaves 3 zero eigenvalues, a line 2; the result is
 flagged ``degenerate`` when ``min(eig) / max(eig) < DEGENERACY_RATIO_THRESHOLD`` (1e-2). Measured on
 KITTI seq 00: full scans ~0.3, road-only patches (z < -1.5 m, 8-40 m around the car) 5e-4 to 6e-3.
@@ -21,6 +22,9 @@ from lidarkit.registration.covariance import left_jacobians
 #: An eigen-direction of the local covariance is "thin" (constrained) below this fraction of the largest.
 THIN_RATIO = 0.1
 
+#: The lever arm of a rotation in the normal matrix is at least this fraction of the RMS radius of the points.
+MIN_ARM_FRACTION = 0.05
+
 #: Local surfaces are estimated on the target voxelized at min(this, RMS radius / 10) so that the
 #: anisotropic sampling of a spinning LiDAR (dense along a ring, sparse across rings) does not make a
 #: flat road look like a set of lines.
@@ -34,8 +38,9 @@ def surface_constraints(neighborhoods_xyz: np.ndarray) -> np.ndarray:
     evals, evecs = np.linalg.eigh(cov)  # ascending
     top = evals[:, 2:3]
     thin = evals <= THIN_RATIO * top
-    volumetric = evals[:, 0] > THIN_RATIO * evals[:, 2]
-    thin[volumetric] = True
+    # no thin direction: a corner or an edge between two surfaces (or clutter). Only the normal of the best-fitting
+    # plane is trusted; constraining all three would let a wall-floor corner pin the direction along the corner.
+    thin[:, 0] = True
     thin[top[:, 0] <= 0] = True  # all neighbours identical: no surface, plain point-to-point
     return np.matmul(evecs * thin.astype(np.float64)[:, None, :], evecs.transpose(0, 2, 1))
 
@@ -43,10 +48,17 @@ def surface_constraints(neighborhoods_xyz: np.ndarray) -> np.ndarray:
 def normal_matrix(points_xyz: np.ndarray, constraints: np.ndarray) -> np.ndarray:
     """Normalised 6x6 ``H`` for ``(n, 3)`` aligned source points and ``(n, 3, 3)`` projectors."""
     p = points_xyz - points_xyz.mean(axis=0)
-    radius = float(np.sqrt((p * p).sum(axis=1).mean()))
-    scale = 1.0 / radius if radius > 0 else 0.0
     n = len(p)
-    J = left_jacobians(p * scale)  # [I, -[p]x / r]: rotation columns in metres per radian-at-radius
+    # RMS lever arm about each axis through the centroid: a rotation about x is scaled by the distance of the points
+    # from the x axis, not by their distance from the centroid (in a long corridor the two differ tenfold and a
+    # single radius would make roll look weaker than the unconstrained translation along the corridor)
+    # (the arm is floored at MIN_ARM_FRACTION of the RMS radius: about the axis of a thin line no point moves)
+    sq = p * p
+    radius = float(np.sqrt(sq.sum(axis=1).mean()))
+    arm = np.sqrt(np.maximum(sq.sum(axis=1, keepdims=True) - sq, 0.0).mean(axis=0))
+    arm = np.maximum(arm, MIN_ARM_FRACTION * radius)
+    J = left_jacobians(p)
+    J[:, :, 3:] *= np.where(arm > 0, 1.0 / np.where(arm > 0, arm, 1.0), 0.0)  # rotation columns in metres at the lever arm
     MJ = np.matmul(constraints, J)  # (n, 3, 6): two contractions instead of one 4-index einsum (10x faster)
     return np.einsum("nki,nkj->ij", J, MJ) / max(n, 1)
 
@@ -68,6 +80,7 @@ def summarize(H: np.ndarray, threshold: float = DEGENERACY_RATIO_THRESHOLD, kind
         threshold=threshold,
         kind=kind,
         weak_directions=tuple(weak),
+        weakest_name=describe_direction(weakest) if top > 0 else "all six",
     )
 
 
