@@ -213,3 +213,31 @@ def test_odometry_writes_pose_covariance_and_min_eigenvalue(tmp_path):
     np.testing.assert_allclose(rows.reshape(-1, 6, 6), cov, rtol=1e-8, atol=1e-15)
     header = (tmp_path / "run" / "timing.csv").read_text().splitlines()[0].split(",")
     assert "min_eigenvalue" in header
+
+
+def test_surface_thickness_adds_the_map_noise():
+    """A target surface known only to 5 cm across it: the height of the plane is known to 0.05^2 / n, not to the
+    (here negligible) range noise over n; without the term only the range noise remains."""
+    rng = np.random.default_rng(7)
+    src, dst = _plane_pair(rng, n=2000, noise=0.0)
+    M = np.broadcast_to(np.diag([0.0, 0.0, 1.0]), (len(src), 3, 3))
+    T = np.eye(4)
+    T[:3, 3] = [0.0, 0.0, 50.0]
+    thickness = np.full(len(src), 0.05**2)
+    for surface_noise, expected in ((True, 0.05**2 / len(src)), (False, 1e-6**2 / len(src))):
+        model = CovarianceModel(range_noise_m=1e-6, correlation_voxel_m=None, surface_noise=surface_noise)
+        cov = registration_covariance(src, dst, M, T, model, surface_variance=thickness)
+        assert 0.9 * expected < cov[2, 2] < 1.1 * expected, (surface_noise, cov[2, 2], expected)
+
+
+def test_calibrate_scales_each_axis_variance(monkeypatch):
+    from lidarkit.registration import covariance as covariance_module
+
+    rng = np.random.default_rng(8)
+    A = rng.normal(size=(6, 6))
+    cov = A @ A.T
+    monkeypatch.setitem(covariance_module.CALIBRATION, "test_variant", (1.0, 4.0, 9.0, 0.25, 1.0, 16.0))
+    out = calibrate(cov, "test_variant")
+    np.testing.assert_allclose(np.diag(out), np.diag(cov) * [1, 4, 9, 0.25, 1, 16], rtol=1e-9)
+    assert _is_psd(out)
+    np.testing.assert_array_equal(calibrate(cov, "no_such_variant"), cov)

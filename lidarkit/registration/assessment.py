@@ -86,12 +86,13 @@ def assess_alignment(
         degeneracy = Degeneracy.unknown(f"{n} correspondences")
     else:
         matched, matched_index = aligned[inlier], index[inlier]
-        pick, constraints = matched_constraints(matched, target_xyz, matched_index)
+        pick, constraints, thickness = matched_constraints(matched, target_xyz, matched_index, return_thickness=True)
         degeneracy = summarize(normal_matrix(matched[pick], constraints))
         if covariance_model is not None:
             n_eff = effective_observations(matched, covariance_model.correlation_voxel_m)
             covariance = registration_covariance(
-                matched[pick], target_xyz[matched_index[pick]], constraints, T_target_source, covariance_model, n_total=n, n_effective=n_eff
+                matched[pick], target_xyz[matched_index[pick]], constraints, T_target_source, covariance_model, n_total=n, n_effective=n_eff,
+                surface_variance=thickness,
             )
     return Assessment(
         n_correspondences=n, fitness=n / max(len(source_xyz), 1), rmse_m=rmse, degeneracy=degeneracy,

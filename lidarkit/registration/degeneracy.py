@@ -31,8 +31,10 @@ MIN_ARM_FRACTION = 0.05
 SURFACE_VOXEL_M = 0.5
 
 
-def surface_constraints(neighborhoods_xyz: np.ndarray) -> np.ndarray:
-    """``(n, 3, 3)`` constraint projectors ``M_i`` from ``(n, k, 3)`` neighbourhoods of target points."""
+def surface_constraints(neighborhoods_xyz: np.ndarray, return_thickness: bool = False):
+    """``(n, 3, 3)`` constraint projectors ``M_i`` from ``(n, k, 3)`` neighbourhoods of target points; with
+    ``return_thickness`` also ``(n,)`` the variance of the neighbours across the surface (mean over its constrained
+    directions, m^2): range noise plus what a plane does not model (curvature, sparse rings)."""
     centred = neighborhoods_xyz - neighborhoods_xyz.mean(axis=1, keepdims=True)
     cov = np.matmul(centred.transpose(0, 2, 1), centred) / neighborhoods_xyz.shape[1]  # batched matmul: 4x the einsum
     evals, evecs = np.linalg.eigh(cov)  # ascending
@@ -42,7 +44,10 @@ def surface_constraints(neighborhoods_xyz: np.ndarray) -> np.ndarray:
     # plane is trusted; constraining all three would let a wall-floor corner pin the direction along the corner.
     thin[:, 0] = True
     thin[top[:, 0] <= 0] = True  # all neighbours identical: no surface, plain point-to-point
-    return np.matmul(evecs * thin.astype(np.float64)[:, None, :], evecs.transpose(0, 2, 1))
+    M = np.matmul(evecs * thin.astype(np.float64)[:, None, :], evecs.transpose(0, 2, 1))
+    if not return_thickness:
+        return M
+    return M, (np.clip(evals, 0.0, None) * thin).sum(axis=1) / thin.sum(axis=1)
 
 
 def normal_matrix(points_xyz: np.ndarray, constraints: np.ndarray) -> np.ndarray:
@@ -114,9 +119,11 @@ def matched_constraints(
     surface_voxel_m: float | None = SURFACE_VOXEL_M,
     max_points: int = 2000,
     seed: int = 0,
-) -> tuple[np.ndarray, np.ndarray]:
+    return_thickness: bool = False,
+):
     """``(picked pair indices (m,), surface projectors (m, 3, 3))`` of at most ``max_points`` matched pairs
-    (a seeded random subset), shared by the degeneracy summary and the covariance.
+    (a seeded random subset), shared by the degeneracy summary and the covariance; with ``return_thickness`` also the
+    ``(m,)`` across-surface variance of each target neighbourhood (:func:`surface_constraints`).
 
     Local surfaces come from the ``k`` nearest neighbours in the target voxelized at
     ``min(surface_voxel_m, RMS radius / 10)`` (``surface_voxel_m=None``: the raw target), searched with a
@@ -143,7 +150,11 @@ def matched_constraints(
     unique_anchors, inverse = np.unique(matched_target_index[pick], return_inverse=True)
     _, nbr = cKDTree(surface, balanced_tree=False, compact_nodes=False).query(target_xyz[unique_anchors], k=k)
     nbr = np.asarray(nbr).reshape(len(unique_anchors), k)
-    return pick, surface_constraints(surface[nbr])[inverse.reshape(-1)]
+    inverse = inverse.reshape(-1)
+    if return_thickness:
+        M, thickness = surface_constraints(surface[nbr], return_thickness=True)
+        return pick, M[inverse], thickness[inverse]
+    return pick, surface_constraints(surface[nbr])[inverse]
 
 
 def assess_degeneracy(
