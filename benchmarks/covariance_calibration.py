@@ -5,10 +5,10 @@ initial guess, frames along the path). Every variant registers each pair with it
 covariance; the error ``xi = se3_log(T_true inv(T_est))`` is scored against it: NEES ``xi^T Sigma^-1 xi`` (6 for a
 calibrated covariance) and the share inside the chi-square(6) 95 % bound (12.59).
 
-1. Training (``--train``, street seeds 0 and 2 by default): per variant and tangent-space axis the variance factor
-   ``f_j = mean(xi_j^2 / Sigma_jj)`` over the pooled draws (the per-axis calibration of
-   ``lidarkit.registration.covariance.CALIBRATION``); for comparison, the older two factors (translation block,
-   rotation block) from the same draws.
+1. Training (``--train``, street seeds 0 and 2 by default): per variant and tangent-space axis a variance factor
+   ``f_j`` and a systematic sigma ``b_j`` with ``E[xi_j^2 | Sigma_jj] = f_j Sigma_jj + b_j^2`` over the pooled draws
+   (``lidarkit.registration.covariance.CALIBRATION``); for comparison, factors alone (``mean(xi_j^2 / Sigma_jj)``
+   per axis) and the older two factors (translation block, rotation block) from the same draws.
 2. Check (``--check``, scenes and seeds not used for training): the factors applied unchanged. References measured
    on the same pairs: Open3D's ``get_information_matrix_from_point_clouds`` (times the known range variance) for the
    Open3D point-to-plane result, small_gicp's Hessian (inverse, moved to the left/target-frame convention) for
@@ -107,8 +107,30 @@ def score(errors: np.ndarray, covs: np.ndarray) -> dict:
             "n": int(len(values))}
 
 
+#: the fitted factor of an axis is at least this share of the plain ratio mean(xi^2) / mean(Sigma): a weak direction
+#: (a corridor's axis) keeps most of its large variance instead of being replaced by the constant floor
+MIN_SCALE_SHARE = 0.25
+
+
+def axis_calibration(runs: list[dict]) -> tuple[np.ndarray, np.ndarray]:
+    """Per axis ``(factor f_j, systematic sigma b_j)`` with ``E[xi_j^2 | Sigma_jj] = f_j Sigma_jj + b_j^2`` over the
+    pooled draws (bounded least squares on the standardised variances)."""
+    from scipy.optimize import lsq_linear
+
+    errors = np.concatenate([r["errors"] for r in runs])
+    var = np.concatenate([np.einsum("nii->ni", r["covs"]) for r in runs])
+    f, b = np.zeros(6), np.zeros(6)
+    for j in range(6):
+        unit = var[:, j].mean()
+        y = errors[:, j] ** 2 / unit
+        X = np.column_stack([var[:, j] / unit, np.ones(len(y))])
+        fit = lsq_linear(X, y, bounds=([MIN_SCALE_SHARE * y.mean(), 0.0], [np.inf, np.inf]))
+        f[j], b[j] = fit.x[0], np.sqrt(fit.x[1] * unit)
+    return f, b
+
+
 def axis_factors(runs: list[dict]) -> np.ndarray:
-    """Per-axis variance factors: mean of xi_j^2 / Sigma_jj over all draws of the runs."""
+    """Per-axis variance factors alone (no floor): mean of xi_j^2 / Sigma_jj over all draws of the runs."""
     errors = np.concatenate([r["errors"] for r in runs])
     var = np.concatenate([np.einsum("nii->ni", r["covs"]) for r in runs])
     return (errors**2 / var).mean(axis=0)
@@ -122,16 +144,17 @@ def block_factors(runs: list[dict]) -> np.ndarray:
     return np.repeat([ratio[:, :3].mean(), ratio[:, 3:].mean()], 3)
 
 
-def scaled(covs: np.ndarray, factors: np.ndarray) -> np.ndarray:
+def scaled(covs: np.ndarray, factors: np.ndarray, sigmas: np.ndarray | None = None) -> np.ndarray:
     s = np.sqrt(np.asarray(factors, dtype=np.float64))
-    return covs * np.outer(s, s)
+    out = covs * np.outer(s, s)
+    return out if sigmas is None else out + np.diag(np.asarray(sigmas) ** 2)
 
 
-def row(run: dict, fac: np.ndarray, blk: np.ndarray) -> dict:
-    calibrated = scaled(run["covs"], fac)
+def row(run: dict, cal: tuple[np.ndarray, np.ndarray], fac: np.ndarray, blk: np.ndarray) -> dict:
+    calibrated = scaled(run["covs"], *cal)
     out = {"failed": int(run["failed"]), "seconds_per_pair": float(run["seconds_per_pair"]),
            "raw": score(run["errors"], run["covs"]), "block": score(run["errors"], scaled(run["covs"], blk)),
-           "calibrated": score(run["errors"], calibrated)}
+           "axis": score(run["errors"], scaled(run["covs"], fac)), "calibrated": score(run["errors"], calibrated)}
     if len(run["errors"]):
         z2 = run["errors"] ** 2 / np.einsum("nii->ni", calibrated)
         out["z2_per_axis"] = z2.mean(axis=0).tolist()
@@ -164,19 +187,23 @@ def main(argv=None) -> int:
     log = lambda msg: print(msg, file=sys.stderr, flush=True)  # noqa: E731
     cache = args.out / "draws"
     train = {name: [collect(sc, sd, args.train_draws, name, cache, log) for sc, sd in parse_runs(args.train)] for name in variants}
+    cal = {name: axis_calibration(runs) for name, runs in train.items()}
     fac = {name: axis_factors(runs) for name, runs in train.items()}
     blk = {name: block_factors(runs) for name, runs in train.items()}
     results = {
         "command": " ".join(["benchmarks/covariance_calibration.py", *(sys.argv[1:] if argv is None else argv)]),
         "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "machine": describe_machine(machine_info()),
         "load_average": os.getloadavg()[0], "sensor": "32 beams x 1024 columns, range noise 0.02 m",
-        "train": {"runs": args.train, "draws": args.train_draws, "factors": {n: f.tolist() for n, f in fac.items()},
-                  "rows": {f"{sc}:{sd}": {name: row(train[name][i], fac[name], blk[name]) for name in variants}
+        "train": {"runs": args.train, "draws": args.train_draws,
+                  "calibration": {n: {"factors": c[0].tolist(), "sigmas": c[1].tolist()} for n, c in cal.items()},
+                  "axis_factors_only": {n: f.tolist() for n, f in fac.items()},
+                  "rows": {f"{sc}:{sd}": {name: row(train[name][i], cal[name], fac[name], blk[name]) for name in variants}
                            for i, (sc, sd) in enumerate(parse_runs(args.train))}},
         "check": {},
     }
     for sc, sd in parse_runs(args.check):
-        results["check"][f"{sc}:{sd}"] = {name: row(collect(sc, sd, args.draws, name, cache, log), fac[name], blk[name]) for name in variants}
+        results["check"][f"{sc}:{sd}"] = {name: row(collect(sc, sd, args.draws, name, cache, log), cal[name], fac[name], blk[name])
+                                          for name in variants}
     args.out.mkdir(parents=True, exist_ok=True)
     write_text(args.out / "results.json", json.dumps(results, indent=2) + "\n")
     write_text(args.out / "README.md", render(results))
@@ -194,27 +221,30 @@ def render(results: dict) -> str:
              "NEES = xi^T Sigma^-1 xi of the true error (6 when calibrated); inside = share below the chi-square(6) 95 % "
              "bound. Target on the well-constrained (street) scenes: mean NEES in [4.2, 9] and inside in [0.90, 0.98]. "
              "Raw: the closed form (Censi with the target surface's thickness, correlation voxel 1 m); block: times a "
-             "translation and a rotation factor; calibrated (the default): times a factor per tangent-space axis. Both "
-             "sets of factors are learned on the training runs and applied unchanged to the check runs.", "",
+             "translation and a rotation factor; axis factors only: times a factor per tangent-space axis; calibrated (the "
+             "default): a factor and a systematic floor per axis. All are learned on the training runs and applied "
+             "unchanged to the check runs.", "",
              f"## Training: {results['train']['runs']} ({results['train']['draws']} draws each)", "",
-             "| variant | " + " | ".join(f"f {a}" for a in AXES) + " |", "|---|" + "---|" * 6]
-    for name, f in results["train"]["factors"].items():
-        lines.append(f"| {name} | " + " | ".join(f"{v:.3g}" for v in f) + " |")
-    lines += ["", "Mean NEES / inside on the training runs themselves:", "", "| run | variant | draws | raw | block | calibrated |", "|---|---|---|---|---|---|"]
+             "Factor f and systematic sigma b per axis (b in mm and mrad): `Sigma' = S Sigma S + diag(b^2)`, `S = diag(sqrt(f))`.", "",
+             "| variant | " + " | ".join(f"f {a}" for a in AXES) + " | " + " | ".join(f"b {a}" for a in AXES) + " |", "|---|" + "---|" * 12]
+    for name, c in results["train"]["calibration"].items():
+        lines.append(f"| {name} | " + " | ".join(f"{v:.3g}" for v in c["factors"]) + " | " + " | ".join(f"{1e3 * v:.2g}" for v in c["sigmas"]) + " |")
+    lines += ["", "Mean NEES / inside on the training runs themselves:", "", "| run | variant | draws | raw | block | axis factors only | calibrated |",
+              "|---|---|---|---|---|---|---|"]
     for run, rows in results["train"]["rows"].items():
         for name, r in rows.items():
-            lines.append(f"| {run} | {name} | {r['raw']['n']} | {_fmt(r['raw'])} | {_fmt(r['block'])} | {_fmt(r['calibrated'])} |")
+            lines.append(f"| {run} | {name} | {r['raw']['n']} | {_fmt(r['raw'])} | {_fmt(r['block'])} | {_fmt(r['axis'])} | {_fmt(r['calibrated'])} |")
     for run, rows in results["check"].items():
         scene = run.split(":")[0]
         lines += ["", f"## Check: {run.replace(':', ', seed ')}", "",
-                  "| variant | draws (no cov.) | raw NEES / inside | block | **calibrated** | reference | z^2 per axis (tx ty tz rx ry rz) | "
+                  "| variant | draws (no cov.) | raw NEES / inside | block | axis factors only | **calibrated** | reference | z^2 per axis (tx ty tz rx ry rz) | "
                   + ("weakest named 'translation along x' | cov xx / yy median (min) | " if scene == "corridor" else "") + "s/pair |",
-                  "|---|---|---|---|---|---|---|" + ("---|---|" if scene == "corridor" else "") + "---|"]
+                  "|---|---|---|---|---|---|---|---|" + ("---|---|" if scene == "corridor" else "") + "---|"]
         for name, r in rows.items():
             ref = _fmt(r["reference"]) if "reference" in r else "-"
             z2 = " ".join(f"{v:.2f}" for v in r.get("z2_per_axis", []))
             corridor = f"{r.get('axis_named', float('nan')):.2f} | {r.get('cov_xx_over_yy_median', float('nan')):.0f} ({r.get('cov_xx_over_yy_min', float('nan')):.0f}) | " if scene == "corridor" else ""
-            lines.append(f"| {name} | {r['raw']['n']} ({r['failed']}) | {_fmt(r['raw'])} | {_fmt(r['block'])} | **{_fmt(r['calibrated'])}** | {ref} | {z2} | "
+            lines.append(f"| {name} | {r['raw']['n']} ({r['failed']}) | {_fmt(r['raw'])} | {_fmt(r['block'])} | {_fmt(r['axis'])} | **{_fmt(r['calibrated'])}** | {ref} | {z2} | "
                          f"{corridor}{r['seconds_per_pair']:.2f} |")
     lines += ["", "References (same pairs, same run): Open3D's `get_information_matrix_from_point_clouds` (times the known range "
               "variance) on the open3d_point_to_plane row, small_gicp's Hessian (inverse, moved to the left/target-frame "

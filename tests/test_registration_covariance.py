@@ -168,10 +168,11 @@ def test_covariance_is_always_symmetric_psd(case):
     T = se3_exp(rng.normal(size=6) * 0.1)
     src = transform_points(se3_inverse(T), dst) + rng.normal(0, 0.01, pts.shape)
     aligned = transform_points(T, src)
-    _, pick_M = matched_constraints(aligned, dst, np.arange(len(dst)), k=min(10, len(dst)))
+    _, pick_M, thickness = matched_constraints(aligned, dst, np.arange(len(dst)), k=min(10, len(dst)), return_thickness=True)
+    assert np.all(np.isfinite(thickness)) and np.all(thickness >= 0)
     for method in ("censi", "gauss_newton"):
         cov = registration_covariance(aligned, dst, pick_M, T, CovarianceModel(method=method),
-                                      n_effective=effective_observations(aligned, 1.0))
+                                      n_effective=effective_observations(aligned, 1.0), surface_variance=thickness)
         assert _is_psd(cov), (kind, method)
         assert _is_psd(safe_inverse(cov))
         assert _is_psd(calibrate(cov, "small_gicp"))
@@ -236,8 +237,11 @@ def test_calibrate_scales_each_axis_variance(monkeypatch):
     rng = np.random.default_rng(8)
     A = rng.normal(size=(6, 6))
     cov = A @ A.T
-    monkeypatch.setitem(covariance_module.CALIBRATION, "test_variant", (1.0, 4.0, 9.0, 0.25, 1.0, 16.0))
+    sigmas = np.array([0.1, 0.0, 0.0, 0.0, 0.01, 0.0])
+    monkeypatch.setitem(covariance_module.CALIBRATION, "test_variant", ((1.0, 4.0, 9.0, 0.25, 1.0, 16.0), tuple(sigmas)))
     out = calibrate(cov, "test_variant")
-    np.testing.assert_allclose(np.diag(out), np.diag(cov) * [1, 4, 9, 0.25, 1, 16], rtol=1e-9)
+    np.testing.assert_allclose(np.diag(out), np.diag(cov) * [1, 4, 9, 0.25, 1, 16] + sigmas**2, rtol=1e-9)
+    # off-diagonal terms keep the closed form's correlations (scaled): a weak direction off the axes stays weak
+    np.testing.assert_allclose(out[0, 1], cov[0, 1] * 2.0, rtol=1e-9)
     assert _is_psd(out)
     np.testing.assert_array_equal(calibrate(cov, "no_such_variant"), cov)
