@@ -103,7 +103,16 @@ def use_model(model: CovarianceModel | None) -> Iterator[None]:
 #: ``b`` each variant's systematic error that no residual shows and that does not scale with the closed form
 #: (point-to-point matching of ring-sampled ground holds the forward translation back by a third of the motion).
 #: A variant without an entry is returned uncalibrated.
-CALIBRATION: dict[str, tuple[tuple[float, ...], tuple[float, ...]]] = {}
+#: Fitted on street seeds 0 and 2, 100 draws each (benchmarks/results/covariance/README.md).
+CALIBRATION: dict[str, tuple[tuple[float, ...], tuple[float, ...]]] = {
+    "vanilla": ((313, 127, 0.725, 0.274, 0.567, 42), (0, 0, 0.00185, 0.00088, 0.000224, 0)),
+    "ground_filtered": ((0.0437, 0.508, 1.1e-05, 5.19e-06, 0.000109, 0.0696), (0.00558, 0, 0.00023, 3.06e-05, 3.63e-05, 0)),
+    "open3d_point_to_point": ((193, 30.9, 0.31, 0.248, 0.685, 0.785), (0, 0, 0.00253, 0.000916, 0, 0)),
+    "open3d_point_to_plane": ((0.571, 0.0579, 0.112, 0.0517, 0.0738, 0.0416), (0, 0.00677, 0, 0.000403, 0.000494, 0.000188)),
+    "open3d_gicp": ((0.00644, 0.0177, 0.00422, 0.0149, 0.259, 0.0191), (0.00207, 0.00374, 0.00111, 0.000333, 0, 0.000133)),
+    "small_gicp": ((0.00564, 0.00237, 0.0122, 0.0506, 0.0219, 0.00337), (0, 0.000995, 0.00132, 0.000504, 0.000403, 8.45e-05)),
+    "kiss": ((0.837, 1.27, 0.223, 0.178, 1.39, 0.0521), (0.122, 0, 0, 0.00109, 0.00136, 0.000536)),
+}
 
 
 def calibrate(covariance: np.ndarray, variant: str) -> np.ndarray:
