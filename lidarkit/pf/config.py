@@ -41,7 +41,11 @@ class PFConfig(BaseModel):
     ``kld``: KLD-sampling (Fox 2003): each resampling draws as many particles as Fox's bound asks for
     the number k of occupied (x, y, theta) bins of size ``kld_bin_m`` x ``kld_bin_m`` x ``kld_bin_rad``
     (error ``kld_epsilon``, standard normal quantile ``kld_z``), clipped to [``kld_min_n``, ``kld_max_n``];
-    ``n_particles`` is then only the initial count (point particles only).
+    ``n_particles`` is then only the initial count (point particles only). While the belief is not converged
+    (weighted RMS position spread not yet below ``kld_converged_m`` on ``kld_converged_steps`` resamplings in
+    a row) the count stays at least ``kld_unconverged_n``:
+    the bound counts bins of a set the likelihood has just collapsed, and a ~1 m wide posterior fills only
+    ~50-100 bins (bound < 1000) while the sample that represents it is still thin (global localization).
     """
 
     model_config = ConfigDict(frozen=True, extra="forbid")
@@ -76,6 +80,9 @@ class PFConfig(BaseModel):
     kld_bin_rad: float = math.radians(10.0)
     kld_min_n: int = 200
     kld_max_n: int = 5000
+    kld_unconverged_n: int = 1000
+    kld_converged_m: float = 0.4
+    kld_converged_steps: int = 3
     dtype: Literal["float32", "float64"] = "float32"
     noise_block_elements: int = 1 << 17  # motion noise drawn for this many numbers at once (cache-sized)
 
@@ -93,14 +100,14 @@ class PFConfig(BaseModel):
             raise ValueError(f"must be in (0, 1], got {v}")
         return v
 
-    @field_validator("kld_z", "kld_bin_m", "kld_bin_rad")
+    @field_validator("kld_z", "kld_bin_m", "kld_bin_rad", "kld_converged_m")
     @classmethod
     def _positive(cls, v: float) -> float:
         if not (math.isfinite(v) and v > 0):
             raise ValueError(f"must be finite and > 0, got {v}")
         return v
 
-    @field_validator("kld_min_n", "kld_max_n")
+    @field_validator("kld_min_n", "kld_max_n", "kld_unconverged_n", "kld_converged_steps")
     @classmethod
     def _positive_count(cls, v: int) -> int:
         if v < 1:
