@@ -255,3 +255,24 @@ def test_cli_recorded_without_readings_is_one_line_error(tmp_path, capsys):
         assert exc.value.code == 1
         err = capsys.readouterr().err
         assert "0 SENSOR readings" in err and "Traceback" not in err
+
+
+def test_gated_ekf_from_a_wrong_start_fails_where_the_particle_filter_localizes(stachniss):
+    """An EKF believing it is at (5, 5) m (std 0.5 m, 0.1 rad; the truth starts at the origin) with a 99 % innovation
+    gate rejects the readings until odometry has inflated its covariance; without the gate, with landmark ids, it
+    recovers in ~25 steps (the honest figure); the particle filter needs no start at all."""
+    wrong = dict(kernel="kalman", init_mean=(5.0, 5.0, 0.1), init_std=(0.5, 0.5, 0.1), with_ape_rpe=False, warn_lost=False)
+    for s in (0, 2, 5):
+        gated = run_protocol(stachniss, 1, s, innovation_gate=9.21, **wrong).position_error_m()
+        k = steps_to_recover(gated, 0)
+        assert localized_fraction(gated) < 0.95 and (k is None or k > 50), (s, k)
+        assert gated[1:40].min() > 2.0  # the readings are all rejected at first: it dead-reckons 7 m off
+        plain = run_protocol(stachniss, 1, s, **wrong).position_error_m()
+        assert steps_to_recover(plain, 0) <= 40 and localized_fraction(plain) >= 0.95, s
+        pf = run_protocol(stachniss, 3000, s, init="uniform", with_ape_rpe=False).position_error_m()
+        assert steps_to_recover(pf, 0) <= 20 and localized_fraction(pf) >= 0.95, s
+
+
+def test_innovation_gate_config():
+    with pytest.raises(ConfigError):
+        PFConfig.make(innovation_gate=-1.0)

@@ -30,6 +30,9 @@ class PFConfig(BaseModel):
     restore the pre-resampling weighted mean (and covariance) after resampling. ``antithetic``: motion
     noise in +/- pairs. ``kernel="kalman"``: each particle is a Gaussian kernel with its own EKF
     (:mod:`lidarkit.pf.kalman_kernel`), ``kernel_split`` = a (children get covariance a P).
+    ``innovation_gate`` (Kalman kernels): chi-square(2) threshold on a reading's Mahalanobis distance
+    e^T S^-1 e; a kernel is not corrected by a reading beyond it (outlier rejection as EKF localization
+    does it in practice; 9.21 = 99 %), the reading still enters its weight; 0 = off.
     ``recovery="reinit"``: when even the best particle fails the chi-square(2) 99.9% gate on a step
     (the filter is lost), spread all particles uniformly over the map and reweight them by that step's
     readings (global relocalization); otherwise lost steps are only counted and logged.
@@ -53,6 +56,7 @@ class PFConfig(BaseModel):
     n_particles: int = 1000
     kernel: Literal["point", "kalman"] = "point"
     kernel_split: float = 0.5
+    innovation_gate: float = 0.0
     likelihood: Literal["all", "nearest"] = "all"
     nearest_association: Literal["known", "per_particle"] = "known"
     estimator: Literal["mean", "best"] = "mean"
@@ -138,7 +142,7 @@ class PFConfig(BaseModel):
             raise ValueError(f"regularization bandwidth must be in [0, 1), got {v}")
         return v
 
-    @field_validator("ess_threshold", "roughening", "uniform_margin_m")
+    @field_validator("ess_threshold", "roughening", "uniform_margin_m", "innovation_gate")
     @classmethod
     def _non_negative(cls, v: float) -> float:
         if not math.isfinite(v) or v < 0:
