@@ -75,6 +75,8 @@ def pf_command(
     kld_bin: str = typer.Option(f"{_D.kld_bin_m},{math.degrees(_D.kld_bin_rad):g}", help="KLD bin size 'metres,degrees'."),
     kld_min: int = typer.Option(_D.kld_min_n, help="KLD minimum particle count."),
     kld_max: int = typer.Option(_D.kld_max_n, help="KLD maximum particle count."),
+    kld_unconverged: int = typer.Option(_D.kld_unconverged_n, help="KLD minimum count until the belief is narrow (global localization)."),
+    innovation_gate: float = typer.Option(_D.innovation_gate, help="Kalman kernels: chi-square gate on each reading (9.21 = 99%; 0 = off)."),
     visible: str = typer.Option("recorded", help="Simulated readings: recorded landmark ids per step, or all landmarks every step."),
     kidnap_at: int | None = typer.Option(None, "--kidnap-at", help="Teleport the simulated robot after this step."),
     kidnap_offset: str = typer.Option("0,-5,-90", "--kidnap-offset", help="Kidnap offset 'dx_m,dy_m,dtheta_deg' (world frame)."),
@@ -113,6 +115,7 @@ def pf_command(
         resampler=resampler, kernel=kernel, ess_threshold=ess_threshold, roughening=roughening, q=_floats(q, 2, "--q"), q_as=q_as,
         init=init, augmented=augmented, alpha_slow=alpha_slow, alpha_fast=alpha_fast, kld=kld, kld_epsilon=kld_epsilon,
         kld_z=kld_z, kld_bin_m=bin_m, kld_bin_rad=math.radians(bin_deg) if bin_deg > 0 else bin_deg, kld_min_n=kld_min, kld_max_n=kld_max,
+        kld_unconverged_n=kld_unconverged, innovation_gate=innovation_gate,
     )
     cfg = protocol_config(cfg, protocol)
     dx, dy, dth = _floats(kidnap_offset, 3, "--kidnap-offset")

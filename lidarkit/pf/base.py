@@ -16,7 +16,7 @@ import numpy as np
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.pf.augmented import LikelihoodAverages
 from lidarkit.pf.config import PFConfig
-from lidarkit.pf.kld import kld_sample_size
+from lidarkit.pf.kld import bins_and_spread, kld_sample_count, occupied_bins
 from lidarkit.pf.resampling import effective_sample_size, get_resampler
 
 
@@ -62,6 +62,9 @@ class LandmarkFilterBase:
         self.n_injected = 0  # particles replaced by uniform draws (augmented MCL), in total
         self.last_injected = 0
         self.last_kld_bins = 0  # occupied bins at the last KLD-sized resampling
+        # resamplings in a row with a narrow belief (KLD convergence test): a known start counts as converged,
+        # a uniform (global) initialization re-arms the test
+        self._narrow_steps = self.config.kld_converged_steps
         if self.config.init == "uniform":
             self.initialize_uniform()
         else:
@@ -91,6 +94,7 @@ class LandmarkFilterBase:
         states, span = self._uniform_draw(self.n, bounds_xy)
         self._set_uniform_states(states, span)
         self._reset_weights()
+        self._narrow_steps = 0
 
     def uniform_bounds(self) -> tuple[float, float, float, float]:
         """(xmin, xmax, ymin, ymax) of global localization and injection: the landmarks' box + ``uniform_margin_m``."""
@@ -211,14 +215,31 @@ class LandmarkFilterBase:
             return True
         return effective_sample_size(self.weights) < thr * self.n
 
+    @property
+    def kld_converged(self) -> bool:
+        """KLD's convergence test: the belief's weighted RMS position spread was at most ``kld_converged_m`` on the
+        last ``kld_converged_steps`` resamplings. A Gaussian (known-start) initialization counts as converged; the
+        test is re-armed by a uniform (re)initialization and by augmented-MCL injections."""
+        return self._narrow_steps >= self.config.kld_converged_steps
+
     def next_count(self) -> int:
-        """Particles after the next resampling: Fox's KLD bound with ``kld``, else the current count."""
+        """Particles after the next resampling: the current count, or with ``kld`` Fox's bound for the number of bins
+        the predicted set occupies, clipped to [floor, ``kld_max_n``]; the floor is ``kld_unconverged_n`` until
+        :attr:`kld_converged`, then ``kld_min_n`` (the bound counts bins of a set that one informative update can
+        collapse onto a few ancestors: a ~1 m wide posterior fills only ~50-100 bins, a bound below 1000)."""
         c = self.config
         if not c.kld:
             return self.n
-        n, self.last_kld_bins = kld_sample_size(
-            self.states, self.weights, self.rng, epsilon=c.kld_epsilon, z=c.kld_z, bin_m=c.kld_bin_m,
-            bin_rad=c.kld_bin_rad, n_min=c.kld_min_n, n_max=c.kld_max_n,
+        if self.kld_converged:  # steady state: bins only
+            floor = c.kld_min_n
+            k = occupied_bins(self.states, c.kld_bin_m, c.kld_bin_rad)
+        else:
+            k, spread = bins_and_spread(self.states, self.weights, c.kld_bin_m, c.kld_bin_rad)
+            self._narrow_steps = self._narrow_steps + 1 if spread <= c.kld_converged_m else 0
+            floor = c.kld_min_n if self.kld_converged else max(c.kld_min_n, min(c.kld_unconverged_n, c.kld_max_n))
+        n, self.last_kld_bins = kld_sample_count(
+            self.states, k, epsilon=c.kld_epsilon, z=c.kld_z, bin_m=c.kld_bin_m, bin_rad=c.kld_bin_rad,
+            n_min=floor, n_max=c.kld_max_n,
         )
         return n
 
@@ -238,6 +259,7 @@ class LandmarkFilterBase:
             k = int(np.count_nonzero(replace))
             if k:
                 self._replace_states(replace, self._uniform_draw(k)[0])
+                self._narrow_steps = 0  # random hypotheses: KLD keeps kld_unconverged_n until the belief is narrow again
                 self.last_injected = k
                 self.n_injected += k
         self._reset_weights()

@@ -30,6 +30,9 @@ class PFConfig(BaseModel):
     restore the pre-resampling weighted mean (and covariance) after resampling. ``antithetic``: motion
     noise in +/- pairs. ``kernel="kalman"``: each particle is a Gaussian kernel with its own EKF
     (:mod:`lidarkit.pf.kalman_kernel`), ``kernel_split`` = a (children get covariance a P).
+    ``innovation_gate`` (Kalman kernels): chi-square(2) threshold on a reading's Mahalanobis distance
+    e^T S^-1 e; a kernel is not corrected by a reading beyond it (outlier rejection as EKF localization
+    does it in practice; 9.21 = 99 %), the reading still enters its weight; 0 = off.
     ``recovery="reinit"``: when even the best particle fails the chi-square(2) 99.9% gate on a step
     (the filter is lost), spread all particles uniformly over the map and reweight them by that step's
     readings (global relocalization); otherwise lost steps are only counted and logged.
@@ -41,7 +44,11 @@ class PFConfig(BaseModel):
     ``kld``: KLD-sampling (Fox 2003): each resampling draws as many particles as Fox's bound asks for
     the number k of occupied (x, y, theta) bins of size ``kld_bin_m`` x ``kld_bin_m`` x ``kld_bin_rad``
     (error ``kld_epsilon``, standard normal quantile ``kld_z``), clipped to [``kld_min_n``, ``kld_max_n``];
-    ``n_particles`` is then only the initial count (point particles only).
+    ``n_particles`` is then only the initial count (point particles only). While the belief is not converged
+    (weighted RMS position spread not yet below ``kld_converged_m`` on ``kld_converged_steps`` resamplings in
+    a row) the count stays at least ``kld_unconverged_n``:
+    the bound counts bins of a set the likelihood has just collapsed, and a ~1 m wide posterior fills only
+    ~50-100 bins (bound < 1000) while the sample that represents it is still thin (global localization).
     """
 
     model_config = ConfigDict(frozen=True, extra="forbid")
@@ -49,6 +56,7 @@ class PFConfig(BaseModel):
     n_particles: int = 1000
     kernel: Literal["point", "kalman"] = "point"
     kernel_split: float = 0.5
+    innovation_gate: float = 0.0
     likelihood: Literal["all", "nearest"] = "all"
     nearest_association: Literal["known", "per_particle"] = "known"
     estimator: Literal["mean", "best"] = "mean"
@@ -76,6 +84,9 @@ class PFConfig(BaseModel):
     kld_bin_rad: float = math.radians(10.0)
     kld_min_n: int = 200
     kld_max_n: int = 5000
+    kld_unconverged_n: int = 1000
+    kld_converged_m: float = 0.4
+    kld_converged_steps: int = 3
     dtype: Literal["float32", "float64"] = "float32"
     noise_block_elements: int = 1 << 17  # motion noise drawn for this many numbers at once (cache-sized)
 
@@ -93,14 +104,14 @@ class PFConfig(BaseModel):
             raise ValueError(f"must be in (0, 1], got {v}")
         return v
 
-    @field_validator("kld_z", "kld_bin_m", "kld_bin_rad")
+    @field_validator("kld_z", "kld_bin_m", "kld_bin_rad", "kld_converged_m")
     @classmethod
     def _positive(cls, v: float) -> float:
         if not (math.isfinite(v) and v > 0):
             raise ValueError(f"must be finite and > 0, got {v}")
         return v
 
-    @field_validator("kld_min_n", "kld_max_n")
+    @field_validator("kld_min_n", "kld_max_n", "kld_unconverged_n", "kld_converged_steps")
     @classmethod
     def _positive_count(cls, v: int) -> int:
         if v < 1:
@@ -131,7 +142,7 @@ class PFConfig(BaseModel):
             raise ValueError(f"regularization bandwidth must be in [0, 1), got {v}")
         return v
 
-    @field_validator("ess_threshold", "roughening", "uniform_margin_m")
+    @field_validator("ess_threshold", "roughening", "uniform_margin_m", "innovation_gate")
     @classmethod
     def _non_negative(cls, v: float) -> float:
         if not math.isfinite(v) or v < 0:

@@ -36,6 +36,7 @@ class KalmanParticleFilter(LandmarkFilterBase):
             raise ConfigError(f"kernel_split must be in (0, 1], got {self.split}", source="kernel_split")
         self.motion_var = np.asarray(self.config.motion_noise_std, dtype=np.float64) ** 2
         self.q_cov = resolve_q(self.config.q, self.config.q_as)
+        self.n_gated = 0  # kernel-reading pairs rejected by the innovation gate
 
     # ---- initialization ---------------------------------------------------------------------------
     def initialize_gaussian(self, mean: np.ndarray | None = None, std: np.ndarray | None = None) -> None:
@@ -90,7 +91,10 @@ class KalmanParticleFilter(LandmarkFilterBase):
         return e, H
 
     def update(self, landmark_index: np.ndarray, z: np.ndarray, *, check: bool = True) -> bool:
-        """Sequential EKF update of every kernel with each reading; weights times the predictive likelihoods."""
+        """Sequential EKF update of every kernel with each reading; weights times the predictive likelihoods.
+
+        With ``innovation_gate`` > 0 a reading whose Mahalanobis distance exceeds it does not correct the kernel
+        (K = 0: mean and covariance unchanged) but still enters the kernel's weight."""
         z = np.asarray(z, dtype=np.float64).reshape(-1, 2)
         if len(z) == 0:
             return False
@@ -100,6 +104,7 @@ class KalmanParticleFilter(LandmarkFilterBase):
             z, idx = z[k : k + 1], idx[k : k + 1]
         ll = np.zeros(self.n)
         d2_sum = np.zeros(self.n)
+        gate = self.config.innovation_gate
         eye = np.eye(3)
         for m in range(len(z)):
             if self.config.likelihood == "nearest" and self.config.nearest_association == "per_particle":
@@ -119,6 +124,9 @@ class KalmanParticleFilter(LandmarkFilterBase):
             d2_sum += d2
             ll += -0.5 * d2 - 0.5 * np.log(det)
             K = PHt @ S_inv
+            if gate > 0.0:  # outlier rejection: no correction by a reading beyond the gate
+                K[d2 > gate] = 0.0
+                self.n_gated += int(np.count_nonzero(d2 > gate))
             self.states += np.einsum("nij,nj->in", K, e)
             IKH = eye - K @ H
             self.cov = IKH @ self.cov @ IKH.transpose(0, 2, 1) + K @ self.q_cov @ K.transpose(0, 2, 1)  # Joseph form

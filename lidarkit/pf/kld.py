@@ -1,11 +1,16 @@
-"""KLD-sampling (Fox 2003): how many particles the current belief needs, from the occupied (x, y, theta) bins.
+"""KLD-sampling (Fox 2003): how many particles the belief needs, from the number of occupied (x, y, theta) bins.
 
 Fox's bound: with k occupied bins, n >= (k - 1) / (2 epsilon) * (1 - 2 / (9 (k - 1)) + sqrt(2 / (9 (k - 1))) z)^3
 samples keep the KL divergence between the sample-based and the true (binned) posterior below ``epsilon``
-with probability 1 - delta (``z`` = the upper 1 - delta standard normal quantile). As in Fox's algorithm
-(and AMCL), k is counted on the resampled set while it is drawn: ancestors are drawn multinomially
-in chunks, the number of distinct bins of every prefix follows from the bins' first occurrences,
-and the size is the first prefix length that meets the bound. All of it vectorized over the draws.
+with probability 1 - delta (``z`` = the upper 1 - delta standard normal quantile).
+
+As in Fox (2003), k is counted on the predicted set (the particles after the motion update, before the
+likelihood reweights and resampling thins them), not on the resampled set. Fox draws and predicts one
+sample at a time and stops at the bound; here the whole predicted set of the last count is binned at once
+(one sort of the bin keys, the number of key changes) and the next resampling draws ``bound(k)`` particles;
+an oversampled set is thinned evenly and counted again (:func:`kld_sample_count`), which reaches the same
+fixed point n = bound(k(n)) as Fox's loop. Only k matters, never which bins: no per-bin bookkeeping, a
+handful of vector ops per step (one sort of N keys in the steady state).
 """
 
 from __future__ import annotations
@@ -14,8 +19,10 @@ import math
 
 import numpy as np
 
-KEY_STRIDE = float(1 << 24)  # y bins per x bin in a bin key (integer-valued float64 keys stay exact)
-SCALAR_K = 48  # up to this many occupied bins the bound is solved with Python floats
+KEY_STRIDE = float(1 << 20)  # cells per axis in a bin key (see bin_keys)
+
+_SCALES: dict[tuple[float, float], np.ndarray] = {}
+_KEY_WEIGHTS = np.array([KEY_STRIDE * KEY_STRIDE, KEY_STRIDE, 1.0])
 
 
 def kld_bound(k: np.ndarray | int, epsilon: float, z: float) -> np.ndarray:
@@ -27,116 +34,89 @@ def kld_bound(k: np.ndarray | int, epsilon: float, z: float) -> np.ndarray:
     return np.where(k > 1, n, 1.0)
 
 
+def kld_count(k: int, epsilon: float, z: float, n_min: int, n_max: int) -> int:
+    """Particles for ``k`` occupied bins: ``ceil(kld_bound(k))`` clipped to [n_min, n_max] (plain floats: one value)."""
+    if k <= 1:
+        n = 1.0
+    else:
+        a = 2.0 / (9.0 * (k - 1))
+        n = (k - 1) / (2.0 * epsilon) * (1.0 - a + math.sqrt(a) * z) ** 3
+    return int(min(max(math.ceil(n - 1e-9), n_min), n_max))
+
+
+def _scale(bin_m: float, bin_rad: float) -> np.ndarray:
+    key = (float(bin_m), float(bin_rad))
+    s = _SCALES.get(key)
+    if s is None:
+        if len(_SCALES) > 32:
+            _SCALES.clear()
+        s = _SCALES[key] = np.array([[1.0 / bin_m], [1.0 / bin_m], [1.0 / bin_rad]])
+    return s
+
+
 def bin_keys(states: np.ndarray, bin_m: float, bin_rad: float) -> np.ndarray:
     """Bin key ``(N,)`` float64 of every particle: one integer-valued number per (x, y, theta) cell (only compared).
 
-    Headings are binned as stored (the filter wraps them to [-pi, pi] every few steps): cells are aligned at
-    multiples of ``bin_rad`` either way, and a wrap moves a particle to another cell exactly like crossing a cell
-    border would.
+    key = (floor(x / bin_m) * S + floor(y / bin_m)) * S + floor(theta / bin_rad), S = 2^20: distinct cells get
+    distinct keys while |y| / bin_m and |theta| / bin_rad stay below 2^19 and |x| / bin_m below 2^12 (2 km at
+    0.5 m bins; beyond that, far-apart cells may share a key, which only lowers k). Headings are binned as stored
+    (the filter wraps them every few steps): a wrap moves a particle to another cell like crossing a border would.
     """
-    x, y, theta = states
-    key = np.multiply(x, 1.0 / bin_m, dtype=np.float64)
-    np.floor(key, out=key)
-    key *= KEY_STRIDE
-    ky = np.multiply(y, 1.0 / bin_m, dtype=np.float64)
-    np.floor(ky, out=ky)
-    key += ky
-    key *= KEY_STRIDE
-    np.multiply(theta, 1.0 / bin_rad, out=ky, dtype=np.float64)
-    np.floor(ky, out=ky)
-    key += ky
-    return key
+    cells = np.multiply(states, _scale(bin_m, bin_rad))  # float64 (3, N)
+    np.floor(cells, out=cells)
+    return _KEY_WEIGHTS @ cells
 
 
-def _first_occurrences(b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Distinct values of ``b`` and the position of each one's first occurrence (a stable sort, no np.unique overhead)."""
-    order = np.argsort(b, kind="stable")
-    sb = b[order]
-    new = np.empty(len(b), dtype=bool)
-    new[0] = True
-    np.not_equal(sb[1:], sb[:-1], out=new[1:])
-    return sb[new], order[new]
-
-
-def kld_sample_size(
-    states: np.ndarray,
-    weights: np.ndarray,
-    rng: np.random.Generator,
-    *,
-    epsilon: float,
-    z: float,
-    bin_m: float,
-    bin_rad: float,
-    n_min: int,
-    n_max: int,
-) -> tuple[int, int]:
-    """(particle count, occupied bins k at that count) for resampling the weighted set ``states`` ``(3, N)``.
-
-    Ancestors are drawn multinomially in chunks (first ``max(n_min, N)``, doubling up to ``n_max``) until a
-    prefix of the draw satisfies Fox's bound; the count is that prefix length clipped to [n_min, n_max].
-    """
+def occupied_bins(states: np.ndarray, bin_m: float, bin_rad: float) -> int:
+    """Number of distinct (x, y, theta) bins among the particles ``(3, N)`` (sorted keys, count of changes)."""
+    if states.shape[1] == 0:
+        return 0
     keys = bin_keys(states, bin_m, bin_rad)
-    cdf = np.cumsum(weights, dtype=np.float64)
-    last = weights.shape[0] - 1
-    drawn_bins: np.ndarray | None = None
-    starts: list[np.ndarray] = []  # sorted draw positions where bin number 1, 2, ... first appears
-    total = 0
-    chunk = min(n_max, max(n_min, weights.shape[0]))
-    while True:
-        u = rng.random(chunk)
-        u *= cdf[-1]
-        anc = np.searchsorted(cdf, u, side="right")
-        np.minimum(anc, last, out=anc)
-        bins, first = _first_occurrences(keys[anc])  # first occurrence of every bin in this chunk
-        if drawn_bins is None:
-            drawn_bins, fresh_first = bins, first
-        else:  # keep only bins not seen in the earlier chunks
-            fresh = ~np.isin(bins, drawn_bins, assume_unique=True)
-            fresh_first = first[fresh]
-            drawn_bins = np.union1d(drawn_bins, bins)
-        fresh_first.sort()
-        starts.append(fresh_first + total if total else fresh_first)
-        total += chunk
-        pos = starts[0] if len(starts) == 1 else np.concatenate(starts)
-        n = _first_feasible(pos, total, epsilon, z, n_min)
-        if n is not None:
-            return n, int(np.searchsorted(pos, n - 1, side="right"))
-        if total >= n_max:
-            return n_max, len(pos)
-        chunk = min(n_max - total, total)
+    keys.sort()
+    return int(np.count_nonzero(keys[1:] != keys[:-1])) + 1
 
 
-def _first_feasible(starts: np.ndarray, total: int, epsilon: float, z: float, n_min: int) -> int | None:
-    """Smallest n <= ``total`` with n >= max(n_min, bound(k(n))), where k(n) = #starts < n; None if there is none.
+def bins_and_spread(states: np.ndarray, weights: np.ndarray, bin_m: float, bin_rad: float) -> tuple[int, float]:
+    """(occupied bins of ``states`` ``(3, N)``, weighted RMS position spread [m]) from one pass over the cells.
 
-    k(n) = j for starts[j-1] < n <= starts[j] (the j-th bin appears at position starts[j-1]), so there is one
-    candidate per j: max(starts[j-1] + 1, bound(j), n_min), if it is still in that interval.
+    The spread (sqrt of var x + var y under ``weights``) is taken on the positions in bin units (float64)
+    before they are floored into keys, so the convergence test costs two matrix-vector products.
     """
-    k_all = len(starts)
-    if k_all <= SCALAR_K:  # converged clouds occupy few bins: plain floats beat a dozen tiny numpy calls
-        pos = starts.tolist()
-        for j in range(1, k_all + 1):
-            lower = max(pos[j - 1] + 1, math.ceil(_bound_scalar(j, epsilon, z)), n_min)
-            upper = pos[j] if j < k_all else total
-            if lower <= upper:
-                return int(lower)
-        return None
-    j = np.arange(1, k_all + 1)
-    lower = np.maximum(np.maximum(starts + 1, np.ceil(kld_bound(j, epsilon, z))), n_min)
-    upper = np.empty(k_all, dtype=np.int64)
-    upper[:-1] = starts[1:]
-    upper[-1] = total
-    ok = lower <= upper
-    if not ok.any():
-        return None
-    return int(lower[np.argmax(ok)])
+    cells = np.multiply(states, _scale(bin_m, bin_rad))  # float64 (3, N): positions in bins
+    xy = cells[:2]
+    w = weights.astype(np.float64)
+    total = float(w.sum())  # ~1 (float32 weights): divided out exactly
+    mx, my = (xy @ w).tolist()
+    sx, sy = ((xy * xy) @ w).tolist()
+    var = (sx + sy) / total - (mx * mx + my * my) / (total * total)
+    np.floor(cells, out=cells)
+    keys = _KEY_WEIGHTS @ cells
+    keys.sort()
+    return int(np.count_nonzero(keys[1:] != keys[:-1])) + 1, bin_m * math.sqrt(max(var, 0.0))
 
 
-def _bound_scalar(k: int, epsilon: float, z: float) -> float:
-    if k <= 1:
-        return 1.0
-    a = 2.0 / (9.0 * (k - 1))
-    return (k - 1) / (2.0 * epsilon) * (1.0 - a + math.sqrt(a) * z) ** 3
+def kld_sample_count(
+    states: np.ndarray, k: int, *, epsilon: float, z: float, bin_m: float, bin_rad: float, n_min: int, n_max: int, rounds: int = 3
+) -> tuple[int, int]:
+    """(particle count, occupied bins it rests on) for the predicted set ``states`` ``(3, N)`` occupying ``k`` bins.
+
+    n = bound(k(N)). If that is well below N the set is oversampled and k(N) overstates what n particles would
+    occupy: k is counted again on n evenly spaced particles of the set (a fair subsample whatever the order)
+    and n = bound(k(n)), up to ``rounds`` times: the fixed point n = bound(k(n)) that Fox's one-at-a-time loop
+    stops at, in a few sorts (only while the count shrinks). A set that is too small grows to bound(k(N)) at
+    once. The result is clipped to [n_min, n_max].
+    """
+    size = states.shape[1]
+    n = kld_count(k, epsilon, z, 1, n_max)
+    sub = states
+    for _ in range(rounds):
+        if n <= n_min or n >= 0.8 * size:
+            break
+        sub = sub[:, (np.arange(n) * (size / n)).astype(np.int64)]  # n evenly spaced particles
+        size = n
+        k = occupied_bins(sub, bin_m, bin_rad)
+        n = kld_count(k, epsilon, z, 1, n_max)
+    return min(max(n, n_min), n_max), k
 
 
-__all__ = ["bin_keys", "kld_bound", "kld_sample_size"]
+__all__ = ["bin_keys", "bins_and_spread", "kld_bound", "kld_count", "kld_sample_count", "occupied_bins"]
