@@ -81,6 +81,8 @@ class CameraSimConfig(BaseModel):
     corner_speed_mps: float = Field(5.0, gt=0.0, le=30.0, description="speed limit through a street corner")
     corners: bool = Field(True, description="90-degree street corners between straight stretches")
     corner_spacing_m: tuple[float, float] = Field((120.0, 280.0), description="stretch length between corners")
+    first_corner_m: float | None = Field(None, ge=10.0, le=1000.0,
+                                         description="arc length to the first corner (None: drawn like the others)")
     curve_curvature_per_m: float = Field(1.0 / 500.0, ge=0.0, le=0.05, description="gentle curves within stretches")
     terrain_amplitude_m: float = Field(2.0, ge=0.0, le=20.0, description="rolling hills (slopes); 0: flat")
     terrain_wavelength_m: float = Field(250.0, ge=50.0)
@@ -144,13 +146,16 @@ def make_street_path(rng: np.random.Generator, s_begin_m: float, s_end_m: float,
                      step_m: float = 0.1) -> StreetPath:
     """Stretches with gentle curves (sinusoidal curvature that returns the heading to its target) joined by
     90-degree corners of 12..20 m radius; the heading alternates between the start direction and +-90 degrees, so
-    the path never comes back on itself. Heading 0 at ``s = 0``, which is the origin."""
+    the path never comes back on itself. Heading 0 at ``s = 0``, which is the origin. ``first_corner_m`` puts the
+    first corner that far ahead (short sequences that turn, as KITTI's do)."""
     s = np.arange(s_begin_m, s_end_m + step_m, step_m)
     kappa = np.zeros_like(s)
     corners, stretches = [], []
     start, heading_target, first = s_begin_m, 0.0, True
     while start < s_end_m:
         length = rng.uniform(*cfg.corner_spacing_m) + (-s_begin_m + 40.0 if first else 0.0)
+        if first and cfg.corners and cfg.first_corner_m is not None:
+            length = cfg.first_corner_m - s_begin_m  # drawn all the same: the seed's later draws stay put
         first = False
         end = start + length
         inside = (s >= start) & (s < end)
@@ -184,7 +189,7 @@ def simulate_speed(rng: np.random.Generator, duration_s: float, corners: np.ndar
                    dt: float = 0.02) -> tuple[np.ndarray, np.ndarray]:
     """Times ``(M,)`` and arc lengths ``(M,)`` of a drive: cruise targets change every 4..15 s (sometimes a stop of
     2..6 s), the speed follows with bounded acceleration and brakes to ``corner_speed_mps`` before every corner.
-    The drive starts moving at its first cruise speed."""
+    The drive starts moving at its first cruise speed, or slower when a corner is too close to brake for."""
     n = int(math.ceil(duration_s / dt)) + 2
     change_t, targets = [0.0], [rng.uniform(cfg.speed_min_mps, cfg.speed_max_mps)]
     while change_t[-1] < duration_s:
@@ -199,6 +204,9 @@ def simulate_speed(rng: np.random.Generator, duration_s: float, corners: np.ndar
     s_out = np.zeros(n)
     v, s_pos, a = float(targets[0]), 0.0, cfg.accel_mps2
     vc2 = cfg.corner_speed_mps**2
+    ahead = corners[corners[:, 1] > 0.0]
+    if len(ahead):  # a corner close ahead of the start: start no faster than braking for it allows
+        v = min(v, float(np.sqrt(vc2 + 2.0 * a * max(ahead[0, 0], 0.0))))
     for k in range(n):  # a short scalar integration (M ~ 50 per second of drive), not a per-pixel loop
         s_out[k] = s_pos
         desired = target_at[k]
