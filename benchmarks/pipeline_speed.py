@@ -50,6 +50,7 @@ def main() -> None:
     ap.add_argument("--no-genz", dest="genz", action="store_false", help="skip the genz pair")
     ap.add_argument("--profile", type=Path, help="instead: profile kiss_like on the scans (cProfile) and write the table here")
     a = ap.parse_args()
+    load_start = [f"{x:.2f}" for x in os.getloadavg()]
     _, n, read, _ = open_dataset("kitti", 0, 10, a.data)
     frames = [read(i) for i in range(n)]
     if a.profile:
@@ -104,10 +105,12 @@ def main() -> None:
         if k in names and ref in names:
             overall[k]["ratio_to_reference"] = total[ref] / total[k]
             overall[k]["max_abs_pose_difference_to_reference"] = gaps[k]
+            ratios = [row[k]["ratio_to_reference"] for row in per_repeat if k in row and "ratio_to_reference" in row[k]]
+            overall[k]["ratio_per_repeat_median_min_max"] = [float(np.median(ratios)), float(np.min(ratios)), float(np.max(ratios))]
     record = {
         "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
         "command": "python benchmarks/pipeline_speed.py " + " ".join(sys.argv[1:]),
-        "machine": f"{platform.machine()}, {os.cpu_count()} cores, load {[f'{x:.2f}' for x in os.getloadavg()]} (1/5/15 min, at the end)",
+        "machine": f"{platform.machine()}, {os.cpu_count()} cores, load {load_start} at the start, {[f'{x:.2f}' for x in os.getloadavg()]} at the end (1/5/15 min)",
         "scans": n, "mean_points_per_scan": float(np.mean([len(p) for p, _ in frames])), "repeats": a.repeats,
         "overall": overall, "per_repeat": per_repeat,
     }
