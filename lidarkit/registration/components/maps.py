@@ -86,6 +86,10 @@ def pca_geometry(points_xyz: np.ndarray, tree: cKDTree, query_xyz: np.ndarray, k
     return vecs[:, :, 0], cov
 
 
+#: Fewer query points than this are searched on one thread (scipy starts Python threads per call otherwise).
+SMALL_QUERY = 1024
+
+
 @component_base("map")
 class Map(Component):
     """A world-frame point map with nearest-neighbour queries and lazily computed local geometry."""
@@ -160,7 +164,8 @@ class Map(Component):
             redo = np.flatnonzero(~(2.0 * np.sqrt(np.einsum("ij,ij->i", shift, shift)) < state["margin"]))
         state["searched"] = len(redo)
         if len(redo):
-            d, i = self._tree.query(query_xyz[redo], k=2, distance_upper_bound=bound, workers=self.config.workers)
+            workers = self.config.workers if len(redo) >= SMALL_QUERY else 1  # starting threads costs more than a few searches
+            d, i = self._tree.query(query_xyz[redo], k=2, distance_upper_bound=bound, workers=workers)
             # any other map point was at least min(second nearest, bound) from the anchor; inf - inf -> nan: search again
             with np.errstate(invalid="ignore"):
                 state["margin"][redo] = np.minimum(d[:, 1], bound) - d[:, 0]
