@@ -43,7 +43,12 @@ REPO = Path(__file__).resolve().parents[1]
 DEFAULT_DATA = REPO.parent / "shared" / "data"
 DEFAULT_OUT = REPO / "benchmarks" / "results" / "ablation"
 
-#: kiss_like with one component switched (pipeline parameters on top of preset=kiss_like).
+#: vanilla ICP's components on kiss's voxelized clouds (full clouds would take ~3 s a sweep).
+VANILLA = {"preset": "vanilla_seq", "map_voxel_factor": 0.5, "source_voxel_factor": 1.5}
+#: kiss ties its kernel scale to the adaptive threshold (c^2 = sigma x 1 m), which is infinite with vanilla's
+#: unlimited threshold; the kernel added alone therefore gets kiss's scale before any motion is seen (sigma = 2 m).
+VANILLA_KERNEL_SCALE_M = 2.0**0.5
+#: kiss_like with one component switched (pipeline parameters on top of preset=kiss_like), and vanilla with one added.
 ABLATIONS: dict[str, dict] = {
     "kiss_like": {},
     "no_deskew": {"deskew": {"name": "constant_velocity", "deskew": False}},
@@ -52,8 +57,16 @@ ABLATIONS: dict[str, dict] = {
     "no_kernel": {"kernel": "none"},
     "scan_to_scan": {"map": "scan_to_scan"},
     "point_to_plane": {"residual": "point_to_plane"},
-    "vanilla_settings": {"preset": "vanilla_seq", "map_voxel_factor": 0.5, "source_voxel_factor": 1.5},
+    "vanilla_settings": VANILLA,
+    # the other direction: vanilla_settings with one of kiss's components added
+    "vanilla+deskew": {**VANILLA, "deskew": {"name": "constant_velocity", "deskew": True, "reference": "end"}},
+    "vanilla+adaptive_threshold": {**VANILLA, "threshold": "adaptive"},
+    "vanilla+kernel": {**VANILLA, "kernel": {"name": "geman_mcclure", "scale_m": VANILLA_KERNEL_SCALE_M}},
+    "vanilla+local_map": {**VANILLA, "map": "voxel_hash"},
 }
+#: The single-component removals from kiss_like and the single-component additions to vanilla_settings.
+REMOVALS = ["no_deskew", "fixed_threshold", "unlimited_threshold", "no_kernel", "scan_to_scan", "point_to_plane"]
+ADDITIONS = ["vanilla+deskew", "vanilla+adaptive_threshold", "vanilla+kernel", "vanilla+local_map"]
 #: genz-icp's pretuned KITTI settings (genz_icp/config/pretuned/kitti.yaml), used on every dataset.
 GENZ_PARAMS = {"min_range_m": 5.0, "voxel_size_m": 0.6, "desired_num_voxelized_points": 3000, "planarity_threshold": 0.18, "max_points_per_voxel": 3}
 
@@ -223,6 +236,64 @@ def _write(out: Path, name: str, seed: int, n: int, variants, record: dict, part
 
 
 # ---------------------------------------------------------------------------------------------- report
+#: The kiss component each single change concerns: (removed from kiss_like, added to vanilla_settings).
+COMPONENTS = {
+    "deskew": (["no_deskew"], ["vanilla+deskew"]),
+    "adaptive threshold": (["fixed_threshold", "unlimited_threshold"], ["vanilla+adaptive_threshold"]),
+    "robust kernel": (["no_kernel"], ["vanilla+kernel"]),
+    "local map": (["scan_to_scan"], ["vanilla+local_map"]),
+}
+
+
+def attribute_gap(recs: list[dict]) -> tuple[list[str], dict]:
+    """Which single component accounts for most of the gap vanilla_settings - kiss_like, in both directions.
+
+    The metric is KITTI drift (percentage points) where every seed's path allows it, APE RMSE (m) otherwise.
+    Removal: the change a switch away from kiss makes to kiss_like; addition: the change adding that component
+    makes to vanilla_settings, as a share of the gap (100 % = the whole gap, negative = makes it worse).
+    """
+    use_drift = all(np.isfinite(r["rows"]["kiss_like"].get("drift_pct", np.nan)) for r in recs)
+    field, unit = ("drift_pct", "pct points of drift") if use_drift else ("ape_rmse_m", "m APE RMSE")
+    val = lambda r, k: r["rows"][k].get(field, np.nan) if k in r["rows"] else np.nan  # noqa: E731
+    gap = np.array([val(r, "vanilla_settings") - val(r, "kiss_like") for r in recs])
+    rows, out = [], {"metric": field, "gap": (float(gap.mean()), float(gap.std())), "per_seed_gap": gap.tolist(), "components": {}}
+    for comp, (removals, additions) in COMPONENTS.items():
+        # a component with several removals (threshold: fixed 1 m, unlimited) is judged by vanilla's own choice
+        removal = removals[-1]
+        cost = np.array([val(r, removal) - val(r, "kiss_like") for r in recs])
+        gain = np.array([val(r, "vanilla_settings") - val(r, additions[0]) for r in recs])
+        out["components"][comp] = {
+            "removal": removal, "removal_cost": cost.tolist(), "removal_share_of_gap": (cost / gap).tolist(),
+            "addition": additions[0], "addition_gain": gain.tolist(), "addition_share_of_gap": (gain / gap).tolist(),
+        }
+        rows.append(f"| {comp} | {removal} | {np.nanmean(cost):+.3g} +- {np.nanstd(cost):.2g} | {100 * np.nanmean(cost / gap):.0f} % "
+                    f"| {additions[0]} | {np.nanmean(gain):+.3g} +- {np.nanstd(gain):.2g} | {100 * np.nanmean(gain / gap):.0f} % |")
+    comps = out["components"]
+    by_removal = max(comps, key=lambda c: np.nanmean(comps[c]["removal_cost"]))
+    by_addition = max(comps, key=lambda c: np.nanmean(comps[c]["addition_gain"]))
+    per_seed_removal = [max(comps, key=lambda c: comps[c]["removal_cost"][i]) for i in range(len(recs))]
+    per_seed_addition = [max(comps, key=lambda c: comps[c]["addition_gain"][i]) for i in range(len(recs))]
+    out.update(largest_by_removal=by_removal, largest_by_addition=by_addition,
+               per_seed_largest_by_removal=per_seed_removal, per_seed_largest_by_addition=per_seed_addition)
+    seeds = [r["seed"] for r in recs]
+    text = [
+        f"Gap vanilla_settings - kiss_like: {gap.mean():+.3g} +- {gap.std():.2g} {unit} (per seed: "
+        + ", ".join(f"{s}: {g:+.3g}" for s, g in zip(seeds, gap)) + "). Each kiss component changed alone, mean +- std over seeds:",
+        "",
+        f"| component | removed from kiss_like | cost ({unit}) | share of gap | added to vanilla_settings | gain ({unit}) | share of gap closed |",
+        "|---|---|---:|---:|---|---:|---:|",
+        *rows,
+        "",
+        (f"**The single component that accounts for most of the gap: {by_removal}**: removing it from kiss_like costs most"
+         if by_removal == by_addition else
+         f"**Removing {by_removal} from kiss_like costs most, but adding {by_addition} to vanilla_settings closes most of the gap**: removal")
+        + " (largest per seed: " + ", ".join(f"{s}: {c}" for s, c in zip(seeds, per_seed_removal)) + "), and adding it to vanilla_settings closes most "
+        "(per seed: " + ", ".join(f"{s}: {c}" for s, c in zip(seeds, per_seed_addition)) + "). The shares need not add up to 100 %: the components interact.",
+    ]
+    return text, out
+
+
+
 ORDER = ["kiss", "kiss_like", *[k for k in ABLATIONS if k != "kiss_like"], "genz", "genz-icp (direct)"]
 
 
@@ -261,6 +332,9 @@ def report(out: Path, command: str) -> None:
         lines += ["", f"kiss_like vs kiss-icp, largest pose-matrix difference over the 10 frames: {r['kiss_like_max_abs_pose_difference_to_kiss']:.2e}"]
         if "genz_max_abs_pose_difference_to_direct" in r:
             lines.append(f"genz vs genz-icp direct: largest difference {r['genz_max_abs_pose_difference_to_direct']:.2e}, frame-rate ratio {r['genz_fps_ratio_to_direct']:.3f}")
+        if all(k in r["rows"] for k in ("kiss_like", "vanilla_settings", *ADDITIONS)):
+            text, r["gap_attribution"] = attribute_gap([{**r, "seed": "KITTI"}])
+            lines += ["", *text]
         lines.append("")
         summary["datasets"].append(r)
     sims = [r for r in records if r["dataset"] != "kitti"]
@@ -280,7 +354,7 @@ def report(out: Path, command: str) -> None:
                       key=lambda r: r["seed"])
         seeds = [r["seed"] for r in recs]
         lines += [f"## sim {scene}: {recs[0]['n_frames']} sweeps, seeds {', '.join(map(str, seeds))} (mean +- std over seeds; per seed in results.json)", "",
-                  "| variant | KITTI drift % | deg/100 m | APE RMSE m | end error m | frame rate Hz | x kiss | drift change vs kiss_like (pct points) |",
+                  "| variant | KITTI drift % | deg/100 m | APE RMSE m | end error m | frame rate Hz | x kiss | drift change vs base (pct points; base: kiss_like, for vanilla+ rows vanilla_settings) |",
                   "|---|---:|---:|---:|---:|---:|---:|---:|"]
         scene_summary = {}
         for key in ORDER:
@@ -293,33 +367,28 @@ def report(out: Path, command: str) -> None:
                 return float(np.mean(x)), float(np.std(x))
 
             d, ddeg, ape, end, fps, ratio = (stat(f) for f in ("drift_pct", "drift_deg_per_100m", "ape_rmse_m", "end_error_m", "fps", "fps_ratio_to_kiss"))
-            change = np.array([r["rows"][key].get("drift_pct", np.nan) - r["rows"]["kiss_like"].get("drift_pct", np.nan) for r in recs if key in r["rows"]])
-            ape_change = np.array([r["rows"][key]["ape_rmse_m"] - r["rows"]["kiss_like"]["ape_rmse_m"] for r in recs if key in r["rows"]])
-            scene_summary[key] = {"ape_change_vs_kiss_like": (float(ape_change.mean()), float(ape_change.std())), "drift_pct": d, "drift_deg_per_100m": ddeg, "ape_rmse_m": ape, "end_error_m": end, "fps": fps,
-                                  "fps_ratio_to_kiss": ratio, "drift_change_vs_kiss_like": (float(change.mean()), float(change.std())),
+            base = "vanilla_settings" if key in ADDITIONS else "kiss_like"
+            change = np.array([r["rows"][key].get("drift_pct", np.nan) - r["rows"][base].get("drift_pct", np.nan) for r in recs if key in r["rows"] and base in r["rows"]])
+            ape_change = np.array([r["rows"][key]["ape_rmse_m"] - r["rows"][base]["ape_rmse_m"] for r in recs if key in r["rows"] and base in r["rows"]])
+            scene_summary[key] = {"base": base, "ape_change_vs_base": (float(ape_change.mean()), float(ape_change.std())), "drift_pct": d, "drift_deg_per_100m": ddeg, "ape_rmse_m": ape, "end_error_m": end, "fps": fps,
+                                  "fps_ratio_to_kiss": ratio, "drift_change_vs_base": (float(change.mean()), float(change.std())),
                                   "per_seed": {str(r["seed"]): r["rows"][key] for r in recs if key in r["rows"]}}
             lines.append(
                 f"| {key} | {_fmt(d[0], 2)} +- {_fmt(d[1], 2)} | {_fmt(ddeg[0], 2)} +- {_fmt(ddeg[1], 2)} | {_fmt(ape[0], 2)} +- {_fmt(ape[1], 2)} | "
                 f"{_fmt(end[0], 2)} +- {_fmt(end[1], 2)} | {_fmt(fps[0], 1)} | {_fmt(ratio[0], 2)} | {_fmt(change.mean(), 2)} +- {_fmt(change.std(), 2)} |"
             )
-        singles = {k: v["drift_change_vs_kiss_like"][0] for k, v in scene_summary.items() if k in ABLATIONS and k not in ("kiss_like", "vanilla_settings")}
-        singles = {k: v for k, v in singles.items() if np.isfinite(v)}
-        if singles and "vanilla_settings" in scene_summary:
-            worst = max(singles, key=singles.get)
-            gap = scene_summary["vanilla_settings"]["drift_change_vs_kiss_like"][0]
-            lines += ["", f"Gap vanilla_settings - kiss_like: {gap:+.2f} pct points of drift; the single switch that costs most: "
-                      f"**{worst}** ({singles[worst]:+.2f}, {100 * singles[worst] / gap:.0f} % of the gap); the others: "
-                      + ", ".join(f"{k} {v:+.2f}" for k, v in sorted(singles.items(), key=lambda kv: -kv[1]) if k != worst)]
-            scene_summary["_largest_single_component"] = {"component": worst, "drift_change": singles[worst], "vanilla_gap": gap}
+        if all(k in recs[0]["rows"] for k in ("kiss_like", "vanilla_settings")):
+            text, scene_summary["_gap_attribution"] = attribute_gap(recs)
+            lines += ["", *text]
         lines += ["", "kiss_like vs kiss-icp, largest pose-matrix difference per seed: "
-                  + ", ".join(f"seed {r['seed']}: {r['kiss_like_max_abs_pose_difference_to_kiss']:.2e}" for r in recs)]
+                  + ", ".join(f"seed {r['seed']}: {r.get('kiss_like_max_abs_pose_difference_to_kiss', float('nan')):.2e}" for r in recs)]
         if all("genz_max_abs_pose_difference_to_direct" in r for r in recs):
             lines.append("genz vs genz-icp direct, largest difference / frame-rate ratio per seed: "
                          + ", ".join(f"seed {r['seed']}: {r['genz_max_abs_pose_difference_to_direct']:.2e} / {r['genz_fps_ratio_to_direct']:.3f}" for r in recs))
         lines.append("")
         summary["sim"][f"{scene} {n_frames} sweeps" + (" (kiss vs kiss_like only)" if subset else "")] = scene_summary
     _chart(summary, out)
-    lines += ["![change each single-component switch makes (drift, or APE where the run is too short for drift)](ablation.png)", ""]
+    lines += ["![change each single-component switch makes: removals vs kiss_like (top), additions vs vanilla_settings (bottom); drift, or APE where the run is too short for drift](ablation.png)", ""]
     notes = out / "notes.md"  # hand-written findings and the runs' limits, kept beside the generated tables
     if notes.exists():
         lines += [notes.read_text().rstrip(), ""]
@@ -328,6 +397,7 @@ def report(out: Path, command: str) -> None:
 
 
 def _chart(summary: dict, out: Path) -> None:
+    """Per scene: each single change's effect, removals from kiss_like (top) and additions to vanilla (bottom)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -335,28 +405,27 @@ def _chart(summary: dict, out: Path) -> None:
 
     from lidarkit.atomic import save_figure
 
-    keys = [k for k in ABLATIONS if k != "kiss_like"]
-    scenes = sorted(k for k, v in summary["sim"].items() if any(key in v for key in keys))[:4]
+    scenes = sorted(k for k, v in summary["sim"].items() if "kiss_like" in v and any(key in v for key in REMOVALS))[:3]
     if not scenes:
         return
-    fig, axes = plt.subplots(1, len(scenes), figsize=(5.5 * len(scenes), 4), squeeze=False)
-    for ax, scene in zip(axes[0], scenes):
+    fig, axes = plt.subplots(2, len(scenes), figsize=(5.8 * len(scenes), 7), squeeze=False)
+    for col, scene in enumerate(scenes):
         s = summary["sim"][scene]
         use_drift = np.isfinite(s["kiss_like"]["drift_pct"][0])
-        field = "drift_change_vs_kiss_like" if use_drift else "ape_change_vs_kiss_like"
-        means = [s[k][field][0] if k in s else np.nan for k in keys]
-        stds = [s[k][field][1] if k in s else 0 for k in keys]
-        ax.barh(keys, means, xerr=stds, color=["tab:red" if m > 0 else "tab:green" for m in means])
-        ax.axvline(0, color="k", lw=0.8)
-        ax.set_xscale("symlog", linthresh=0.1)
-        if use_drift:
-            ax.set_title(f"sim {scene}: kiss_like drift {s['kiss_like']['drift_pct'][0]:.2f} %")
-            ax.set_xlabel("KITTI drift change vs kiss_like (percentage points)")
-        else:
-            ax.set_title(f"sim {scene}: kiss_like APE {s['kiss_like']['ape_rmse_m'][0]:.2f} m")
-            ax.set_xlabel("APE RMSE change vs kiss_like (m)")
+        field = "drift_change_vs_base" if use_drift else "ape_change_vs_base"
+        unit = "KITTI drift change (percentage points)" if use_drift else "APE RMSE change (m)"
+        for row, (keys, base) in enumerate(((REMOVALS, "kiss_like"), (ADDITIONS, "vanilla_settings"))):
+            ax = axes[row, col]
+            keys = [k for k in keys if k in s]
+            means = [s[k][field][0] for k in keys]
+            ax.barh(keys, means, xerr=[s[k][field][1] for k in keys], color=["tab:red" if m > 0 else "tab:green" for m in means])
+            ax.axvline(0, color="k", lw=0.8)
+            ax.set_xscale("symlog", linthresh=0.1)
+            level = s[base]["drift_pct" if use_drift else "ape_rmse_m"][0]
+            ax.set_title(f"sim {scene}: vs {base} ({level:.2f} {'%' if use_drift else 'm'})", fontsize=10)
+            ax.set_xlabel(unit + " (mean +- std over seeds)")
     fig.tight_layout()
-    save_figure(fig, out / "ablation.png", dpi=110)
+    save_figure(fig, out / "ablation.png", dpi=100)
     plt.close(fig)
 
 

@@ -16,6 +16,7 @@ import argparse
 import json
 import os
 import platform
+import re
 import subprocess
 import sys
 import tempfile
@@ -47,9 +48,13 @@ def main() -> None:
     ap.add_argument("--methods", nargs="+", default=["kiss-icp", "kiss_like"])
     ap.add_argument("--out", type=Path, default=OUT)
     ap.add_argument("--no-genz", dest="genz", action="store_false", help="skip the genz pair")
+    ap.add_argument("--profile", type=Path, help="instead: profile kiss_like on the scans (cProfile) and write the table here")
     a = ap.parse_args()
+    load_start = [f"{x:.2f}" for x in os.getloadavg()]
     _, n, read, _ = open_dataset("kitti", 0, 10, a.data)
     frames = [read(i) for i in range(n)]
+    if a.profile:
+        return profile(frames, a.profile, a.repeats)
     names = a.methods
     per_repeat = []
     total = dict.fromkeys(names, 0.0)
@@ -100,16 +105,50 @@ def main() -> None:
         if k in names and ref in names:
             overall[k]["ratio_to_reference"] = total[ref] / total[k]
             overall[k]["max_abs_pose_difference_to_reference"] = gaps[k]
+            ratios = [row[k]["ratio_to_reference"] for row in per_repeat if k in row and "ratio_to_reference" in row[k]]
+            overall[k]["ratio_per_repeat_median_min_max"] = [float(np.median(ratios)), float(np.min(ratios)), float(np.max(ratios))]
     record = {
         "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
         "command": "python benchmarks/pipeline_speed.py " + " ".join(sys.argv[1:]),
-        "machine": f"{platform.machine()}, {os.cpu_count()} cores, load {[f'{x:.2f}' for x in os.getloadavg()]} (1/5/15 min, at the end)",
+        "machine": f"{platform.machine()}, {os.cpu_count()} cores, load {load_start} at the start, {[f'{x:.2f}' for x in os.getloadavg()]} at the end (1/5/15 min)",
         "scans": n, "mean_points_per_scan": float(np.mean([len(p) for p, _ in frames])), "repeats": a.repeats,
         "overall": overall, "per_repeat": per_repeat,
     }
     a.out.parent.mkdir(parents=True, exist_ok=True)
     a.out.write_text(json.dumps(record, indent=1) + "\n")
     print(json.dumps(overall, indent=1))
+
+
+def profile(frames, out: Path, repeats: int) -> None:
+    """Where kiss_like's time goes: cProfile over ``repeats`` passes of the scans, cumulative and own time."""
+    import cProfile
+    import io
+    import pstats
+
+    prof = cProfile.Profile()
+    wall = 0.0
+    for _ in range(repeats):
+        m = build("kiss_like")
+        t = time.perf_counter()
+        prof.enable()
+        for points, times in frames:
+            m.register_frame(points, times)
+        prof.disable()
+        wall += time.perf_counter() - t
+    n = len(frames) * repeats
+    text = io.StringIO()
+    text.write(f"# kiss_like on the 10 KITTI scans, {repeats} passes: {n / wall:.2f} frames/s under cProfile "
+               f"({time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime())}, {os.cpu_count()} cores, "
+               f"load {[f'{x:.2f}' for x in os.getloadavg()]})\n")
+    text.write("# command: python benchmarks/pipeline_speed.py --repeats %d --profile %s\n\n" % (repeats, out.name))
+    for key in ("cumulative", "tottime"):
+        text.write(f"## sorted by {key}\n")
+        stats = pstats.Stats(prof, stream=text)
+        stats.sort_stats(key).print_stats(25)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    body = re.sub(r"/[^\s:(]*/(site-packages|lib/python3\.\d+)/", "", text.getvalue().replace(str(REPO) + "/", ""))  # no machine paths
+    out.write_text("\n".join(line.rstrip() for line in body.splitlines()) + "\n")
+    log(f"wrote {out}")
 
 
 if __name__ == "__main__":

@@ -262,3 +262,28 @@ def test_27_voxel_rule_holds_behind_a_crowd_of_closer_points_outside_the_block(r
     np.testing.assert_array_equal(local_map.points_xyz[idx[0]], inside[0])
     dist, _, valid = local_map.nearest(np.array([[0.9, 0.5, 0.5]]), 1.8)  # inside point beyond the threshold
     assert not valid[0]
+
+
+@pytest.mark.parametrize("kind", ["voxel_hash", "scan_to_scan"])
+def test_tracked_nearest_gives_the_fresh_answers_with_fewer_searches(rng, kind):
+    # ICP iterations query the same points moved a little; the map keeps a point's nearest while it provably
+    # stays the nearest (moved less than half the gap to the second nearest): the answers must equal new searches
+    params = {"voxel_size_m": 1.0, "max_range_m": 1e3, "max_points_per_voxel": 20, "min_point_spacing_m": 0.0} if kind == "voxel_hash" else {}
+    local_map = make_component("map", {"name": kind, **params})
+    local_map.update(rng.uniform(-10.0, 10.0, size=(3000, 3)), np.eye(4))
+    source = rng.uniform(-11.0, 11.0, size=(2000, 3))
+    for max_d in (np.inf, 2.5):  # a point with nothing within max_d is searched again every time
+        state: dict = {}
+        T = np.eye(4)
+        searched = []
+        for step_m, step_rad in [(0.0, 0.0), (0.3, 0.02), (0.05, 0.005), (0.01, 1e-3), (1e-3, 1e-4), (1e-4, 0.0), (0.5, 0.05), (1e-5, 1e-6)]:
+            T = make_se3(so3_exp(rng.normal(size=3) * step_rad), rng.normal(size=3) * step_m) @ T
+            moved = source @ T[:3, :3].T + T[:3, 3]
+            fresh = local_map.nearest(moved, max_d)
+            tracked = local_map.nearest(moved, max_d, state=state)
+            np.testing.assert_array_equal(tracked[2], fresh[2])
+            np.testing.assert_array_equal(tracked[1], fresh[1])
+            np.testing.assert_allclose(tracked[0][fresh[2]], fresh[0][fresh[2]], rtol=0, atol=1e-12)
+            searched.append(state["searched"])
+        assert searched[0] == len(source)
+        assert searched[4] < 0.05 * len(source) and searched[5] < 0.05 * len(source)  # tiny steps: almost no search

@@ -22,6 +22,7 @@ constant-velocity guess). Explicit parameters override the preset's.
 from __future__ import annotations
 
 import copy
+import inspect
 from typing import Any, Literal
 
 import numpy as np
@@ -208,8 +209,11 @@ class PipelineRegistration(Registration):
         n = 0
         iterations = 0
         converged = False
+        # the same points move a little each iteration: the map may keep their nearest points between searches
+        tracks = getattr(local_map.config, "track_neighbors", False) and "state" in inspect.signature(local_map.nearest).parameters
+        track = {} if tracks else None
         for _ in range(self.config.max_iterations):
-            _, index, valid = local_map.nearest(moved, max_distance_m)
+            _, index, valid = local_map.nearest(moved, max_distance_m) if track is None else local_map.nearest(moved, max_distance_m, state=track)
             n = int(valid.sum())
             if n < 6:
                 break

@@ -86,6 +86,10 @@ def pca_geometry(points_xyz: np.ndarray, tree: cKDTree, query_xyz: np.ndarray, k
     return vecs[:, :, 0], cov
 
 
+#: Fewer query points than this are searched on one thread (scipy starts Python threads per call otherwise).
+SMALL_QUERY = 1024
+
+
 @component_base("map")
 class Map(Component):
     """A world-frame point map with nearest-neighbour queries and lazily computed local geometry."""
@@ -121,11 +125,20 @@ class Map(Component):
         self._covs = None
         self._by_code = None  # map point order by voxel code, built on the first block search
 
-    def nearest(self, query_xyz: np.ndarray, max_distance_m: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(dist (N,) m, index (N,), valid (N,) bool)``: the nearest map point closer than ``max_distance_m``."""
+    def nearest(
+        self, query_xyz: np.ndarray, max_distance_m: float, state: dict | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(dist (N,) m, index (N,), valid (N,) bool)``: the nearest map point closer than ``max_distance_m``.
+
+        ``state``: a dict kept by the caller across queries of the same points moving (ICP iterations); a point
+        that moved less than half the margin between its nearest and second-nearest map point since it was last
+        searched keeps its nearest point without a new search (exact: no other point can have come closer).
+        """
         n = len(query_xyz)
         if self._tree is None or n == 0:
             return np.full(n, np.inf), np.zeros(n, dtype=np.int64), np.zeros(n, dtype=bool)
+        if state is not None and self._nns is None:
+            return self._tracked_nearest(np.asarray(query_xyz, dtype=np.float64), max_distance_m, state)
         if self._nns is not None:
             import open3d.core as o3c
 
@@ -136,6 +149,34 @@ class Map(Component):
         else:
             bound = max_distance_m if np.isfinite(max_distance_m) else np.inf
             dist, idx = self._tree.query(query_xyz, k=1, distance_upper_bound=bound, workers=self.config.workers)
+        valid = dist < max_distance_m
+        return dist, np.where(valid, idx, 0).astype(np.int64), valid
+
+    def _tracked_nearest(self, query_xyz: np.ndarray, max_distance_m: float, state: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        bound = float(max_distance_m) if np.isfinite(max_distance_m) else np.inf
+        n = len(query_xyz)
+        fresh = state.get("tree") is not self._tree or state.get("bound") != bound or len(state.get("anchor", ())) != n
+        if fresh:
+            state.update(tree=self._tree, bound=bound, anchor=query_xyz.copy(), margin=np.zeros(n), index=np.zeros(n, dtype=np.int64))
+            redo = np.arange(n)
+        else:
+            shift = query_xyz - state["anchor"]
+            redo = np.flatnonzero(~(2.0 * np.sqrt(np.einsum("ij,ij->i", shift, shift)) < state["margin"]))
+        state["searched"] = len(redo)
+        if len(redo):
+            workers = self.config.workers if len(redo) >= SMALL_QUERY else 1  # starting threads costs more than a few searches
+            d, i = self._tree.query(query_xyz[redo], k=2, distance_upper_bound=bound, workers=workers)
+            # any other map point was at least min(second nearest, bound) from the anchor; inf - inf -> nan: search again
+            with np.errstate(invalid="ignore"):
+                state["margin"][redo] = np.minimum(d[:, 1], bound) - d[:, 0]
+            state["index"][redo] = np.where(np.isfinite(d[:, 0]), i[:, 0], 0)
+            state["anchor"][redo] = query_xyz[redo]
+            state["found"] = state.get("found", np.zeros(n, dtype=bool))
+            state["found"][redo] = np.isfinite(d[:, 0])
+        idx = state["index"].copy()
+        diff = query_xyz - self.points_xyz[idx]
+        dist = np.sqrt(np.einsum("ij,ij->i", diff, diff))
+        dist[~state["found"] | (dist >= bound)] = np.inf
         valid = dist < max_distance_m
         return dist, np.where(valid, idx, 0).astype(np.int64), valid
 
@@ -167,6 +208,9 @@ class ScanToScanConfig(ComponentConfig):
         "scipy", description="nearest-neighbour index: scipy cKDTree (float64, exact) or Open3D (float32 search, float64 distances)"
     )
     workers: int = Field(-1, description="threads of the scipy nearest-neighbour queries (-1: all cores, as kiss-icp's TBB)")
+    track_neighbors: bool = Field(
+        True, description="ICP iterations: keep a point's nearest map point while it provably stays the nearest (same answers, fewer searches)"
+    )
 
 
 @register_component("map", "scan_to_scan")
@@ -195,6 +239,9 @@ class VoxelHashConfig(ComponentConfig):
         "scipy", description="nearest-neighbour index: scipy cKDTree (float64, exact) or Open3D (float32 search, float64 distances)"
     )
     workers: int = Field(-1, description="threads of the scipy nearest-neighbour queries (-1: all cores, as kiss-icp's TBB)")
+    track_neighbors: bool = Field(
+        True, description="ICP iterations: keep a point's nearest map point while it provably stays the nearest (same answers, fewer searches)"
+    )
 
 
 @register_component("map", "voxel_hash")
@@ -335,8 +382,10 @@ class VoxelHashMap(Map):
         idx[owner[best][::-1]] = cand[best][::-1]  # ties: the first candidate (block order, then insertion)
         return dist, idx
 
-    def nearest(self, query_xyz: np.ndarray, max_distance_m: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        dist, idx, valid = super().nearest(query_xyz, max_distance_m)
+    def nearest(
+        self, query_xyz: np.ndarray, max_distance_m: float, state: dict | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        dist, idx, valid = super().nearest(query_xyz, max_distance_m, state)
         if self.config.search == "kdtree" or not valid.any():
             return dist, idx, valid
         # kiss-icp looks only in the 27 voxels around the query: a nearest point farther than one voxel may lie
