@@ -461,3 +461,23 @@ def test_initial_gap_probe_path_matches_the_exact_boxes():
             assert got is None
             seen["none"] += 1
     assert min(seen.values()) > 20  # both branches exercised
+
+
+def test_surface_neighbours_match_scipy_on_a_kitti_scan():
+    """The local surfaces of the degeneracy summary / covariance come from small_gicp's KdTree when installed: on a
+    KITTI scan the k nearest neighbours are the same sets as scipy's exact tree, so the projectors are identical."""
+    from conftest import shared_path
+    from scipy.spatial import cKDTree
+
+    from lidarkit.registration import degeneracy
+
+    if degeneracy._small_gicp is None:
+        pytest.skip("small_gicp not installed: scipy's tree is the only path")
+    scan = np.fromfile(shared_path("kitti_odometry", "sequences", "00", "velodyne", "000000.bin"), dtype=np.float32)
+    points = scan.reshape(-1, 4)[::4, :3].astype(np.float64)
+    queries = points[np.random.default_rng(0).choice(len(points), 1500, replace=False)]
+    ours = degeneracy._knn(points, queries, 20)
+    _, ref = cKDTree(points).query(queries, k=20)
+    assert all(set(a) == set(b) for a, b in zip(ours, ref))
+    assert np.array_equal(degeneracy.surface_constraints(points[np.sort(ours, axis=1)]),
+                          degeneracy.surface_constraints(points[np.sort(ref, axis=1)]))
