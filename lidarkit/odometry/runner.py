@@ -182,6 +182,7 @@ def run(
                     if read_error is not None:
                         raise read_error
                     scan, prepared = payload
+                    read_s[k] = read_time - prepared[1]  # the reading alone (the check's part is in check_s)
                     first_scan = scan if k == 0 else first_scan
                     points = scan.points_xyz
                     if need_times:
@@ -214,6 +215,7 @@ def run(
                     if read_error is not None:
                         raise read_error
                     scan, prepared = payload
+                    read_s[k] = read_time - prepared[1]  # the reading alone (the check's part is in check_s)
                     first_scan = scan if k == 0 else first_scan
                     points = scan.points_xyz
                     t1 = clock()
