@@ -437,3 +437,47 @@ def test_small_gicp_missing_is_unlisted_with_a_logged_note():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert "small_gicp not installed" in out.stderr and "unknown ICP method 'small_gicp'" in out.stdout
+
+
+def test_initial_gap_probe_path_matches_the_exact_boxes():
+    """initial_gap_m settles overlap on a few moved points first: over random poses near and far, its answer equals
+    the distance between the exact boxes of the moved source and the target (None within the margin)."""
+    from lidarkit.registration.base import NO_OVERLAP_MARGIN, bounds, initial_gap_m
+
+    rng = np.random.default_rng(3)
+    cloud = rng.uniform(-20, 20, size=(5000, 3)) * [1.0, 1.0, 0.1]
+    seen = {"none": 0, "gap": 0}
+    for _ in range(200):
+        T = make_se3(so3_exp(rng.normal(size=3) * rng.uniform(0, 1.5)), rng.normal(size=3) * rng.uniform(0, 60))
+        lo_s, hi_s = bounds(transform_points(T, cloud))
+        lo_t, hi_t = bounds(cloud)
+        margin = max(1.0, NO_OVERLAP_MARGIN * float(np.linalg.norm(hi_t - lo_t)))
+        exact = float(np.linalg.norm(np.maximum(0.0, np.maximum(lo_s - hi_t, lo_t - hi_s))))
+        got = initial_gap_m(cloud, cloud, T)
+        if exact > margin:
+            assert got == pytest.approx(exact, rel=1e-12)
+            seen["gap"] += 1
+        else:
+            assert got is None
+            seen["none"] += 1
+    assert min(seen.values()) > 20  # both branches exercised
+
+
+def test_surface_neighbours_match_scipy_on_a_kitti_scan():
+    """The local surfaces of the degeneracy summary / covariance come from small_gicp's KdTree when installed: on a
+    KITTI scan the k nearest neighbours are the same sets as scipy's exact tree, so the projectors are identical."""
+    from conftest import shared_path
+    from scipy.spatial import cKDTree
+
+    from lidarkit.registration import degeneracy
+
+    if degeneracy._small_gicp is None:
+        pytest.skip("small_gicp not installed: scipy's tree is the only path")
+    scan = np.fromfile(shared_path("kitti_odometry", "sequences", "00", "velodyne", "000000.bin"), dtype=np.float32)
+    points = scan.reshape(-1, 4)[::4, :3].astype(np.float64)
+    queries = points[np.random.default_rng(0).choice(len(points), 1500, replace=False)]
+    ours = degeneracy._knn(points, queries, 20)
+    _, ref = cKDTree(points).query(queries, k=20)
+    assert all(set(a) == set(b) for a, b in zip(ours, ref))
+    assert np.array_equal(degeneracy.surface_constraints(points[np.sort(ours, axis=1)]),
+                          degeneracy.surface_constraints(points[np.sort(ref, axis=1)]))

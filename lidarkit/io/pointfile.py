@@ -44,6 +44,10 @@ def finite_points(
     drop_nonfinite: bool = False,
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """Check ``(N, 3)`` points (and ``(N,)`` intensity) for NaN/inf; raise DataError or drop them with a warning."""
+    from lidarkit.geometry import _within_limits, check_magnitude
+
+    if len(points_xyz) and _within_limits(points_xyz) and (intensity is None or bool(np.isfinite(intensity).all())):
+        return points_xyz, intensity  # the common case in flat reductions (NaN fails them); the per-row test below is ~20x slower
     where = None if frame is None else f"frame {frame}"
     ok = np.isfinite(points_xyz).all(axis=1)
     if intensity is not None:
@@ -63,8 +67,6 @@ def finite_points(
         intensity = None if intensity is None else intensity[ok]
     if len(points_xyz) == 0:
         raise DataError("scan has no finite points", source=source, location=where)
-    from lidarkit.geometry import check_magnitude
-
     check_magnitude(points_xyz, str(source), where)
     return points_xyz, intensity
 

@@ -209,18 +209,31 @@ class FrameChecker:
         self.check_s = np.zeros(n_frames)
         self._previous: ScanGeometry | None = None
 
-    def add(self, k: int, frame: int, points_xyz: np.ndarray, point_times_s: np.ndarray | None, poses_se3: np.ndarray) -> None:
-        """Frame ``k`` of the run (dataset index ``frame``) once its pose ``poses_se3[k]`` is known."""
+    def prepare(self, frame: int, points_xyz: np.ndarray) -> tuple[ScanGeometry, float]:
+        """The scan's part of the check, which needs no pose (``(geometry, seconds)``): the odometry runner calls it
+        in its reading thread, so it overlaps the registration of the previous frame."""
+        import time
+
+        t0 = time.perf_counter()
+        geometry = scan_geometry(points_xyz, self.config, frame)
+        return geometry, time.perf_counter() - t0
+
+    def add(
+        self, k: int, frame: int, points_xyz: np.ndarray, point_times_s: np.ndarray | None, poses_se3: np.ndarray,
+        prepared: tuple[ScanGeometry, float] | None = None,
+    ) -> None:
+        """Frame ``k`` of the run (dataset index ``frame``) once its pose ``poses_se3[k]`` is known; ``prepared``:
+        :meth:`prepare`'s result for this scan if already computed (``check_s`` counts its time as well)."""
         import time
 
         t0 = time.perf_counter()
         self.has_point_times[k] = point_times_s is not None
-        geometry = scan_geometry(points_xyz, self.config, frame)
+        geometry, prepare_s = prepared if prepared is not None else (scan_geometry(points_xyz, self.config, frame), 0.0)
         if k > 0 and self._previous is not None:
             T = _relative(poses_se3[k - 1 : k + 1])[0]
             self.fitness[k] = scan_fitness(self._previous, geometry, T, self.config)
         self._previous = geometry
-        self.check_s[k] = time.perf_counter() - t0
+        self.check_s[k] = time.perf_counter() - t0 + prepare_s
 
     def finish(self, poses_se3: np.ndarray, times_s: np.ndarray | None) -> FrameCheck:
         cfg = self.config

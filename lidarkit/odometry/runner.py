@@ -165,17 +165,24 @@ def run(
     clock = time.perf_counter
     loop_start = clock()
     first_scan = None
-    # scans are read in a background thread, at most `prefetch` ahead (0: inline); only the previous scan is kept
-    stream = prefetched(lambda i: _read_nonempty_scan(sequence, i), indices, prefetch)
+    # scans are read in a background thread, at most `prefetch` ahead (0: inline); only the previous scan is kept. The
+    # thread also does the pose-free part of the frame check, overlapped with the registration of earlier frames
+    def read(i: int) -> tuple[Scan, tuple]:
+        scan = _read_nonempty_scan(sequence, i)
+        return scan, checker.prepare(i, scan.points_xyz)
+
+    stream = prefetched(read, indices, prefetch)
     try:
         if stateful:
             registration.reset()
             previous = None
-            for k, (idx, scan, read_time, read_error) in enumerate(stream):
+            for k, (idx, payload, read_time, read_error) in enumerate(stream):
                 read_s[k] = read_time
                 try:
                     if read_error is not None:
                         raise read_error
+                    scan, prepared = payload
+                    read_s[k] = read_time - prepared[1]  # the reading alone (the check's part is in check_s)
                     first_scan = scan if k == 0 else first_scan
                     points = scan.points_xyz
                     if need_times:
@@ -194,7 +201,7 @@ def run(
                     if not _is_frame_error(err):
                         raise
                     raise _frame_error(err, dataset_name, int(idx)) from err
-                checker.add(k, int(idx), points, scan.point_times_s, poses)
+                checker.add(k, int(idx), points, scan.point_times_s, poses, prepared)
                 register_s[k], n_points[k] = t2 - t1, len(points)
                 if bar is not None:
                     bar[0].advance(bar[1])
@@ -202,11 +209,13 @@ def run(
             motion = np.eye(4)
             previous = None
             previous_times = None
-            for k, (idx, scan, read_time, read_error) in enumerate(stream):
+            for k, (idx, payload, read_time, read_error) in enumerate(stream):
                 read_s[k] = read_time
                 try:
                     if read_error is not None:
                         raise read_error
+                    scan, prepared = payload
+                    read_s[k] = read_time - prepared[1]  # the reading alone (the check's part is in check_s)
                     first_scan = scan if k == 0 else first_scan
                     points = scan.points_xyz
                     t1 = clock()
@@ -252,7 +261,7 @@ def run(
                 elif degenerate[k]:
                     log.warning("%s frame %d: %s flagged degenerate geometry (%s)", dataset_name, int(idx), name, reasons[k] or "degenerate")
                 t2 = clock()
-                checker.add(k, int(idx), points, scan.point_times_s, poses)
+                checker.add(k, int(idx), points, scan.point_times_s, poses, prepared)
                 previous, previous_times = points, scan.point_times_s
                 register_s[k], n_points[k] = t2 - t1, len(points)
                 if bar is not None:

@@ -76,7 +76,8 @@ def assess_alignment(
     aligned = transform_points(T_target_source, source_xyz)
     if dist2 is None or index is None:
         if neighbors is None:
-            neighbors = NearestNeighbors(target_xyz, backend="scipy")
+            # one query pass: scipy's worker threads (Python threads started per call) cost more than they save here
+            neighbors = NearestNeighbors(target_xyz, backend="scipy", workers=1)
         dist2, index = neighbors.query(aligned)
     inlier = dist2 <= inlier_distance_m**2
     n = int(inlier.sum())

@@ -57,7 +57,11 @@ if _small_gicp is not None:
             key = (id(points), points.shape, points.ctypes.data, points[:: max(1, len(points) // 32)].tobytes(), c.downsampling_resolution_m)
             if self._cache is not None and self._cache[0] == key:
                 return self._cache[1], self._cache[2]
-            cloud, tree = _small_gicp.preprocess_points(np.asarray(points, dtype=np.float64), c.downsampling_resolution_m, num_threads=c.num_threads)
+            # the steps small_gicp.align(points...) takes (voxel grid, KdTree built on one thread, 10-neighbour covariances):
+            # preprocess_points builds its KdTree on num_threads threads, which costs more than it saves on a busy machine
+            cloud = _small_gicp.voxelgrid_sampling(np.asarray(points, dtype=np.float64), c.downsampling_resolution_m, num_threads=c.num_threads)
+            tree = _small_gicp.KdTree(cloud, num_threads=1)
+            _small_gicp.estimate_covariances(cloud, tree, num_neighbors=10, num_threads=c.num_threads)
             self._cache = (key, cloud, tree)
             return cloud, tree
 
