@@ -125,14 +125,14 @@ def test_kld_tracking_uses_few_particles(stachniss):
     assert np.mean(kld) <= 1.2 * np.mean(fixed)
 
 
-@pytest.mark.parametrize("seed", [0, 1, 3])
+@pytest.mark.parametrize("seed", [0, 1, 23])
 def test_kld_global_localization_keeps_1000_particles_until_converged(stachniss, seed):
     g = run_protocol(stachniss, 5000, seed, init="uniform", kld=True, with_ape_rpe=False)
     err = g.position_error_m()
     localized = int(np.argmax(err < 0.5))
     assert err[localized] < 0.5
-    # never below 1000 before the error first drops under 0.5 m, nor while the belief is still wider than 0.4 m
-    assert g.n_particles[0] == 5000 and g.n_particles[: max(localized, 4)].min() >= 1000, g.n_particles[:20]
+    # never below 1000 before the error first drops under 0.5 m, nor before the belief has been narrow for 10 steps
+    assert g.n_particles[0] == 5000 and g.n_particles[: max(localized, 11)].min() >= 1000, g.n_particles[:20]
     assert g.n_particles[-100:].mean() <= 350  # few once converged (5000 at the start)
     assert localized_fraction(err) >= 0.9
 

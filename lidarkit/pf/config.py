@@ -42,11 +42,12 @@ class PFConfig(BaseModel):
     corrected) and, at each resampling, every particle replaced with probability
     max(0, 1 - w_fast / w_slow) by a uniform draw over the map box (kidnapped-robot recovery).
     ``kld``: KLD-sampling (Fox 2003): each resampling draws as many particles as Fox's bound asks for
-    the number k of occupied (x, y, theta) bins of size ``kld_bin_m`` x ``kld_bin_m`` x ``kld_bin_rad``
+    the number k of (x, y, theta) bins the predicted set occupies, bins of size ``kld_bin_m`` x ``kld_bin_m`` x ``kld_bin_rad``
     (error ``kld_epsilon``, standard normal quantile ``kld_z``), clipped to [``kld_min_n``, ``kld_max_n``];
     ``n_particles`` is then only the initial count (point particles only). While the belief is not converged
     (weighted RMS position spread not yet below ``kld_converged_m`` on ``kld_converged_steps`` resamplings in
-    a row) the count stays at least ``kld_unconverged_n``:
+    a row: with two or three readings a step a narrow belief can sit ~1 m off for ~10 steps before the
+    readings pull it in) the count stays at least ``kld_unconverged_n``:
     the bound counts bins of a set the likelihood has just collapsed, and a ~1 m wide posterior fills only
     ~50-100 bins (bound < 1000) while the sample that represents it is still thin (global localization).
     """
@@ -86,7 +87,7 @@ class PFConfig(BaseModel):
     kld_max_n: int = 5000
     kld_unconverged_n: int = 1000
     kld_converged_m: float = 0.4
-    kld_converged_steps: int = 3
+    kld_converged_steps: int = 10
     dtype: Literal["float32", "float64"] = "float32"
     noise_block_elements: int = 1 << 17  # motion noise drawn for this many numbers at once (cache-sized)
 
