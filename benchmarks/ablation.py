@@ -433,7 +433,7 @@ def _chart(summary: dict, out: Path) -> None:
             ax.set_xscale("symlog", linthresh=0.1)
             level = s[base]["drift_pct" if use_drift else "ape_rmse_m"][0]
             ax.set_title(f"sim {scene}: vs {base} ({level:.2f} {'%' if use_drift else 'm'})", fontsize=10)
-            ax.set_xlabel(unit + " (mean +- std over seeds)")
+            ax.set_xlabel(unit + ", mean +- std", fontsize=9)
     fig.tight_layout()
     save_figure(fig, out / "ablation.png", dpi=100)
     plt.close(fig)
