@@ -245,6 +245,18 @@ COMPONENTS = {
 }
 
 
+def _verdict(comps: dict, by_removal: str, by_addition: str) -> str:
+    cost = np.nanmean(comps[by_removal]["removal_cost"])
+    gain = np.nanmean(comps[by_addition]["addition_gain"])
+    if by_removal == by_addition and cost > 0 and gain > 0:
+        return (f"**The single component that accounts for most of the gap: {by_removal}**: removing it from kiss_like costs most, "
+                "and adding it to vanilla_settings closes most.")
+    first = f"Removing **{by_removal}** from kiss_like costs most" if cost > 0 else "No single removal from kiss_like costs anything"
+    second = (f"adding **{by_addition}** to vanilla_settings closes most" if gain > 0
+              else f"no single addition to vanilla_settings closes any of the gap (each makes it worse; {by_addition} least)")
+    return f"{first}; {second}: the two directions do not name the same component here."
+
+
 def attribute_gap(recs: list[dict]) -> tuple[list[str], dict]:
     """Which single component accounts for most of the gap vanilla_settings - kiss_like, in both directions.
 
@@ -284,11 +296,9 @@ def attribute_gap(recs: list[dict]) -> tuple[list[str], dict]:
         "|---|---|---:|---:|---|---:|---:|",
         *rows,
         "",
-        (f"**The single component that accounts for most of the gap: {by_removal}**: removing it from kiss_like costs most"
-         if by_removal == by_addition else
-         f"**Removing {by_removal} from kiss_like costs most, but adding {by_addition} to vanilla_settings closes most of the gap**: removal")
-        + " (largest per seed: " + ", ".join(f"{s}: {c}" for s, c in zip(seeds, per_seed_removal)) + "), and adding it to vanilla_settings closes most "
-        "(per seed: " + ", ".join(f"{s}: {c}" for s, c in zip(seeds, per_seed_addition)) + "). The shares need not add up to 100 %: the components interact.",
+        _verdict(comps, by_removal, by_addition)
+        + " Largest per seed, removal: " + ", ".join(f"{s}: {c}" for s, c in zip(seeds, per_seed_removal))
+        + "; addition: " + ", ".join(f"{s}: {c}" for s, c in zip(seeds, per_seed_addition)) + ". The shares need not add up to 100 %: the components interact.",
     ]
     return text, out
 
@@ -423,7 +433,7 @@ def _chart(summary: dict, out: Path) -> None:
             ax.set_xscale("symlog", linthresh=0.1)
             level = s[base]["drift_pct" if use_drift else "ape_rmse_m"][0]
             ax.set_title(f"sim {scene}: vs {base} ({level:.2f} {'%' if use_drift else 'm'})", fontsize=10)
-            ax.set_xlabel(unit + " (mean +- std over seeds)")
+            ax.set_xlabel(unit + ", mean +- std", fontsize=9)
     fig.tight_layout()
     save_figure(fig, out / "ablation.png", dpi=100)
     plt.close(fig)
