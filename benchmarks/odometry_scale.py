@@ -47,6 +47,15 @@ SIM = dict(scene="street", n_beams=32, n_azimuths=360, range_noise_std_m=0.02, s
 
 
 def peak_rss_mb() -> float:
+    """This process's peak resident memory (MB): ``VmHWM`` of its own address space. ``ru_maxrss`` is not used where
+    ``VmHWM`` exists: it survives ``execve`` and a runner forked from a parent that just wrote the sequence started
+    with the parent's peak (256 MB in the run of 2026-11-25, where the run itself peaked at ~108 MB)."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024.0  # kB
+    except OSError:
+        pass
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # KiB on Linux
 
 

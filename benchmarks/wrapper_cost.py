@@ -10,7 +10,7 @@ once per scan + ``align`` on the previous scan's cloud and KdTree; Open3D: each 
 
     nice -n 10 .venv/bin/python benchmarks/wrapper_cost.py [--repeats 5] [--odometry-repeats 3]
 
-Writes ``benchmarks/results/icp/wrapper_cost.{md,json}``.
+Writes ``benchmarks/results/icp/wrapper_cost[_TAG].{md,json}``.
 """
 
 from __future__ import annotations
@@ -190,6 +190,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--odometry-repeats", type=int, default=3)
+    parser.add_argument("--tag", default="", help="results go to wrapper_cost[_TAG].{md,json} (e.g. a run with OMP_WAIT_POLICY=passive)")
     parser.add_argument("--variants", default="kiss,small_gicp,open3d_point_to_point,open3d_point_to_plane,open3d_gicp")
     args = parser.parse_args()
 
@@ -245,11 +246,14 @@ def main() -> None:
         })
         print(json.dumps(rows[-1]), flush=True)
     load_end = load_average()
-    command = "nice -n 10 .venv/bin/python benchmarks/wrapper_cost.py " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    omp = os.environ.get("OMP_WAIT_POLICY")
+    command = (f"OMP_WAIT_POLICY={omp} " if omp else "") + "nice -n 10 .venv/bin/python benchmarks/wrapper_cost.py " + " ".join(
+        shlex.quote(a) for a in sys.argv[1:])
+    stem = "wrapper_cost" + (f"_{args.tag}" if args.tag else "")
     payload = {"date_utc": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"), "machine": describe_machine(machine_info()),
-               "command": command, "load_average_start_end": [load_start, load_end], "rows": rows}
+               "command": command, "omp_wait_policy": omp, "load_average_start_end": [load_start, load_end], "rows": rows}
     RESULTS.mkdir(parents=True, exist_ok=True)
-    atomic.write_text(RESULTS / "wrapper_cost.json", json.dumps(payload, indent=2) + "\n")
+    atomic.write_text(RESULTS / f"{stem}.json", json.dumps(payload, indent=2) + "\n")
     lines = ["# Wrapper cost: lidarkit variants against their libraries (issue 10)", "",
              f"{payload['date_utc']} on {payload['machine']}; load average {load_start:.1f} at the start, {load_end:.1f} at the end; "
              f"`{command}`", "",
@@ -274,7 +278,7 @@ def main() -> None:
     for r in rows:
         p = r["profile"]
         lines.append(f"| {r['variant']} | {p['total_cpu_s_per_align']:.3f} | " + " | ".join(f"{100 * p[k]:.0f} %" for k in PROFILE_PARTS) + " |")
-    atomic.write_text(RESULTS / "wrapper_cost.md", "\n".join(lines) + "\n")
+    atomic.write_text(RESULTS / f"{stem}.md", "\n".join(lines) + "\n")
 
 
 if __name__ == "__main__":

@@ -90,7 +90,9 @@ if _small_gicp is not None:
                 )
                 T = np.array(out.T_target_source, dtype=np.float64)
                 src, dst = source.points()[:, :3], target.points()[:, :3]
-                index, dist2 = target_tree.batch_nearest_neighbor_search(transform_points(T, src), num_threads=c.num_threads)
+                # one thread: a single pass of nearest neighbours does not repay another OpenMP region (its threads spin
+                # while they wait, which on a busy machine costs more CPU than the pass saves)
+                index, dist2 = target_tree.batch_nearest_neighbor_search(transform_points(T, src), num_threads=1)
                 assessment = assess_alignment(src, dst, T, c.max_correspondence_distance_m, dist2=np.asarray(dist2), index=np.asarray(index))
             native = np.linalg.eigvalsh(0.5 * (np.asarray(out.H) + np.asarray(out.H).T))
             return assessment.to_result(
