@@ -65,6 +65,7 @@ class LandmarkFilterBase:
         # resamplings in a row with a narrow belief (KLD convergence test): a known start counts as converged,
         # a uniform (global) initialization re-arms the test
         self._narrow_steps = self.config.kld_converged_steps
+        self._injected_mask: np.ndarray | None = None  # hypotheses replaced by uniform draws at the last resampling
         if self.config.init == "uniform":
             self.initialize_uniform()
         else:
@@ -95,6 +96,7 @@ class LandmarkFilterBase:
         self._set_uniform_states(states, span)
         self._reset_weights()
         self._narrow_steps = 0
+        self._injected_mask = None
 
     def uniform_bounds(self) -> tuple[float, float, float, float]:
         """(xmin, xmax, ymin, ymax) of global localization and injection: the landmarks' box + ``uniform_margin_m``."""
@@ -219,7 +221,7 @@ class LandmarkFilterBase:
     def kld_converged(self) -> bool:
         """KLD's convergence test: the belief's weighted RMS position spread was at most ``kld_converged_m`` on the
         last ``kld_converged_steps`` resamplings. A Gaussian (known-start) initialization counts as converged; the
-        test is re-armed by a uniform (re)initialization and by augmented-MCL injections."""
+        test is re-armed by a uniform (re)initialization, and by augmented-MCL injections that leave the belief wide."""
         return self._narrow_steps >= self.config.kld_converged_steps
 
     def next_count(self) -> int:
@@ -230,15 +232,21 @@ class LandmarkFilterBase:
         c = self.config
         if not c.kld:
             return self.n
-        if self.kld_converged:  # steady state: bins only
+        injected = self._injected_mask
+        # uniform draws of augmented MCL each fill a bin of their own: the bound is taken on the rest
+        core = self.states if injected is None else self.states[:, ~injected]
+        if self.kld_converged and injected is None:  # steady state: bins only
             floor = c.kld_min_n
-            k = occupied_bins(self.states, c.kld_bin_m, c.kld_bin_rad)
+            k = occupied_bins(core, c.kld_bin_m, c.kld_bin_rad)
         else:
             k, spread = bins_and_spread(self.states, self.weights, c.kld_bin_m, c.kld_bin_rad)
-            self._narrow_steps = self._narrow_steps + 1 if spread <= c.kld_converged_m else 0
+            if injected is not None:
+                k = occupied_bins(core, c.kld_bin_m, c.kld_bin_rad)
+            if not self.kld_converged or spread > c.kld_converged_m:  # injections the readings favour re-arm the test
+                self._narrow_steps = self._narrow_steps + 1 if spread <= c.kld_converged_m else 0
             floor = c.kld_min_n if self.kld_converged else max(c.kld_min_n, min(c.kld_unconverged_n, c.kld_max_n))
         n, self.last_kld_bins = kld_sample_count(
-            self.states, k, epsilon=c.kld_epsilon, z=c.kld_z, bin_m=c.kld_bin_m, bin_rad=c.kld_bin_rad,
+            core, k, epsilon=c.kld_epsilon, z=c.kld_z, bin_m=c.kld_bin_m, bin_rad=c.kld_bin_rad,
             n_min=floor, n_max=c.kld_max_n,
         )
         return n
@@ -254,12 +262,13 @@ class LandmarkFilterBase:
         p_inject = self.injection_probability()
         self._resample_states(self.resampler(self.weights, self.rng, self.next_count()))
         self.last_injected = 0
+        self._injected_mask = None
         if p_inject > 0.0:
             replace = self.rng.random(self.n) < p_inject
             k = int(np.count_nonzero(replace))
             if k:
                 self._replace_states(replace, self._uniform_draw(k)[0])
-                self._narrow_steps = 0  # random hypotheses: KLD keeps kld_unconverged_n until the belief is narrow again
+                self._injected_mask = replace if self.config.kld else None
                 self.last_injected = k
                 self.n_injected += k
         self._reset_weights()
