@@ -137,15 +137,20 @@ def main(argv: list[str] | None = None) -> int:
                 row["inliers_change_pct"] = 100.0 * (row["inliers_mean"] / base["inliers_mean"] - 1.0)
                 row["speed_ratio_vs_none"] = row["frames_per_s"] / base["frames_per_s"]
             results[name][label] = rows
+        cmd = "nice -n 10 python benchmarks/vo_preprocessing.py " + " ".join(argv if argv is not None else sys.argv[1:])
+        write_results(args.out, args.name, cmd, results, skipped, args.repeats)  # after every sequence: long runs
+    return 0
 
+
+def write_results(out: Path, name_stem: str, cmd: str, results: dict, skipped: list[str], repeats: int) -> None:
+    """``NAME.md`` (tables per sequence) and ``NAME.json`` into ``out``."""
     stamp = dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-    cmd = "nice -n 10 python benchmarks/vo_preprocessing.py " + " ".join(argv if argv is not None else sys.argv[1:])
     lines = ["# VO preprocessing study (report 2, section 4.2, reproduced)", "",
              f"Command: `{cmd.strip()}`  ", f"Date: {stamp}  ", f"Machine: {describe_machine(machine_info())}", "",
              "Pipeline: lidarkit preset with ground-truth scale, the detector family changed; inliers = essential-"
              "matrix inliers per frame pair (recoverPose cheirality inliers), APE = SE(3)-aligned translation RMSE. "
              "Speed is the ratio of frames/s to the unfiltered run of the same family (images preloaded, best of "
-             f"{args.repeats}); absolute frames/s are load-dependent on this shared machine.", ""]
+             f"{repeats}); absolute frames/s are load-dependent on this shared machine.", ""]
     if skipped:
         lines += [f"Not run (--no-akaze or not in this OpenCV build): {', '.join(skipped)}.", ""]
     for name, fams in results.items():
@@ -158,11 +163,10 @@ def main(argv: list[str] | None = None) -> int:
                              f"{r['inliers_min']:.0f} | {r['rejected']} | {r['ape_m']:.3f} | "
                              f"{r['final_error_m']:.3f} | {r['speed_ratio_vs_none']:.2f} |")
         lines.append("")
-    atomic.write_text(args.out / f"{args.name}.md", "\n".join(lines))
-    atomic.write_text(args.out / f"{args.name}.json", json.dumps(
+    atomic.write_text(out / f"{name_stem}.md", "\n".join(lines))
+    atomic.write_text(out / f"{name_stem}.json", json.dumps(
         {"command": cmd.strip(), "date": stamp, "machine": machine_info(), "results": results}, indent=2))
     print("\n".join(lines))
-    return 0
 
 
 if __name__ == "__main__":
