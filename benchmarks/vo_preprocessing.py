@@ -112,10 +112,14 @@ def main(argv: list[str] | None = None) -> int:
                     help="KITTI sequence numbers, 'sim' (textured planes) or simcam:street?... specs")
     ap.add_argument("--name", default="results", help="file stem of the written results (.md/.json)")
     ap.add_argument("--no-akaze", action="store_true", help="Skip the AKAZE family (the slowest after SIFT).")
+    ap.add_argument("--families", nargs="*", default=None,
+                    help="run only the families whose label starts with one of these (gftt fast orb sift akaze)")
     args = ap.parse_args(argv)
 
     use_akaze = akaze_available() and not args.no_akaze
     families = [f for f in FAMILIES if f[1].get("features.detector") != "akaze" or use_akaze]
+    if args.families is not None:
+        families = [f for f in families if any(f[0].startswith(p) for p in args.families)]
     skipped = [f[0] for f in FAMILIES if f not in families]
     results: dict[str, dict] = {}
     for seq in args.sequences:
@@ -152,7 +156,7 @@ def write_results(out: Path, name_stem: str, cmd: str, results: dict, skipped: l
              "Speed is the ratio of frames/s to the unfiltered run of the same family (images preloaded, best of "
              f"{repeats}); absolute frames/s are load-dependent on this shared machine.", ""]
     if skipped:
-        lines += [f"Not run (--no-akaze or not in this OpenCV build): {', '.join(skipped)}.", ""]
+        lines += [f"Not run (--no-akaze, --families or not in this OpenCV build): {', '.join(skipped)}.", ""]
     for name, fams in results.items():
         lines += [f"## {name}", "", "| detector | preprocess | inliers mean | change vs none | p25 / median / p75 | "
                   "min | rejected | APE [m] | final [m] | speed vs none |", "|---|---|---|---|---|---|---|---|---|---|"]
