@@ -72,7 +72,7 @@ def main(argv: list[str] | None = None) -> int:
         print(seq, row, file=sys.stderr)
         rows[name] = row
     stamp = dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-    cmd = "nice -n 10 python benchmarks/vo_autocalib.py " + " ".join(argv if argv is not None else sys.argv[1:])
+    cmd = "nice -n 5 python benchmarks/vo_autocalib.py " + " ".join(argv if argv is not None else sys.argv[1:])
     lines = ["# Focal length self-calibration", "", f"Command: `{cmd.strip()}`  ", f"Date: {stamp}  ",
              f"Machine: {describe_machine(machine_info())}", "",
              "APE: relative-scale trajectory of the default pipeline, Sim(3)-aligned translation RMSE. "

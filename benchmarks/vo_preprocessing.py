@@ -112,10 +112,14 @@ def main(argv: list[str] | None = None) -> int:
                     help="KITTI sequence numbers, 'sim' (textured planes) or simcam:street?... specs")
     ap.add_argument("--name", default="results", help="file stem of the written results (.md/.json)")
     ap.add_argument("--no-akaze", action="store_true", help="Skip the AKAZE family (the slowest after SIFT).")
+    ap.add_argument("--families", nargs="*", default=None,
+                    help="run only the families whose label starts with one of these (gftt fast orb sift akaze)")
     args = ap.parse_args(argv)
 
     use_akaze = akaze_available() and not args.no_akaze
     families = [f for f in FAMILIES if f[1].get("features.detector") != "akaze" or use_akaze]
+    if args.families is not None:
+        families = [f for f in families if any(f[0].startswith(p) for p in args.families)]
     skipped = [f[0] for f in FAMILIES if f not in families]
     results: dict[str, dict] = {}
     for seq in args.sequences:
@@ -137,17 +141,22 @@ def main(argv: list[str] | None = None) -> int:
                 row["inliers_change_pct"] = 100.0 * (row["inliers_mean"] / base["inliers_mean"] - 1.0)
                 row["speed_ratio_vs_none"] = row["frames_per_s"] / base["frames_per_s"]
             results[name][label] = rows
+        cmd = "nice -n 10 python benchmarks/vo_preprocessing.py " + " ".join(argv if argv is not None else sys.argv[1:])
+        write_results(args.out, args.name, cmd, results, skipped, args.repeats)  # after every sequence: long runs
+    return 0
 
+
+def write_results(out: Path, name_stem: str, cmd: str, results: dict, skipped: list[str], repeats: int) -> None:
+    """``NAME.md`` (tables per sequence) and ``NAME.json`` into ``out``."""
     stamp = dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-    cmd = "nice -n 10 python benchmarks/vo_preprocessing.py " + " ".join(argv if argv is not None else sys.argv[1:])
     lines = ["# VO preprocessing study (report 2, section 4.2, reproduced)", "",
              f"Command: `{cmd.strip()}`  ", f"Date: {stamp}  ", f"Machine: {describe_machine(machine_info())}", "",
              "Pipeline: lidarkit preset with ground-truth scale, the detector family changed; inliers = essential-"
              "matrix inliers per frame pair (recoverPose cheirality inliers), APE = SE(3)-aligned translation RMSE. "
              "Speed is the ratio of frames/s to the unfiltered run of the same family (images preloaded, best of "
-             f"{args.repeats}); absolute frames/s are load-dependent on this shared machine.", ""]
+             f"{repeats}); absolute frames/s are load-dependent on this shared machine.", ""]
     if skipped:
-        lines += [f"Not run (--no-akaze or not in this OpenCV build): {', '.join(skipped)}.", ""]
+        lines += [f"Not run (--no-akaze, --families or not in this OpenCV build): {', '.join(skipped)}.", ""]
     for name, fams in results.items():
         lines += [f"## {name}", "", "| detector | preprocess | inliers mean | change vs none | p25 / median / p75 | "
                   "min | rejected | APE [m] | final [m] | speed vs none |", "|---|---|---|---|---|---|---|---|---|---|"]
@@ -158,11 +167,10 @@ def main(argv: list[str] | None = None) -> int:
                              f"{r['inliers_min']:.0f} | {r['rejected']} | {r['ape_m']:.3f} | "
                              f"{r['final_error_m']:.3f} | {r['speed_ratio_vs_none']:.2f} |")
         lines.append("")
-    atomic.write_text(args.out / f"{args.name}.md", "\n".join(lines))
-    atomic.write_text(args.out / f"{args.name}.json", json.dumps(
+    atomic.write_text(out / f"{name_stem}.md", "\n".join(lines))
+    atomic.write_text(out / f"{name_stem}.json", json.dumps(
         {"command": cmd.strip(), "date": stamp, "machine": machine_info(), "results": results}, indent=2))
     print("\n".join(lines))
-    return 0
 
 
 if __name__ == "__main__":

@@ -215,3 +215,22 @@ def test_full_texture_atlas_is_refilled_without_changing_images(monkeypatch):
     assert len(clears) >= 2  # the constructor's and at least one refill
     for a, b in zip(images, ref_images):
         assert np.array_equal(a, b)
+
+
+def test_first_corner_m_puts_a_corner_close_ahead_and_the_drive_brakes_for_it():
+    """``first_corner_m`` moves only the first corner (the seed's later draws stay); the drive starts no faster than
+    braking to the corner speed allows, so it takes the corner at about ``corner_speed_mps``."""
+    from lidarkit.sim.street_camera import simulate_speed
+
+    base, near = make_camera_config(seed=6), make_camera_config(seed=6, first_corner_m=15.0)
+    s_base = make_street_path(np.random.default_rng([6, 0]), -40.0, 600.0, base)
+    s_near = make_street_path(np.random.default_rng([6, 0]), -40.0, 600.0, near)
+    assert s_near.corners[0, 0] == pytest.approx(15.0, abs=0.11)
+    assert s_base.corners[0, 0] > 150.0
+    # the same turn radius (arc length of the 90-degree corner): the seed's draws after the first length are kept
+    assert np.diff(s_near.corners[0]) == pytest.approx(np.diff(s_base.corners[0]), abs=1e-9)
+    t, s = simulate_speed(np.random.default_rng([6, 2]), 10.0, s_near.corners, near)
+    v = np.gradient(s, t)  # seed 6's first cruise speed is 14.9 m/s: uncapped, it would reach the corner too fast
+    assert v[1] <= np.sqrt(near.corner_speed_mps**2 + 2 * near.accel_mps2 * 15.0) + 0.05
+    in_corner = (s >= s_near.corners[0, 0]) & (s <= s_near.corners[0, 1])
+    assert in_corner.any() and v[in_corner].max() <= near.corner_speed_mps + 0.1

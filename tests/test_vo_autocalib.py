@@ -69,7 +69,7 @@ def test_one_window_of_frames_falls_back():
 def test_simulated_street_corner_focal_within_5_percent():
     """A 51-frame simulated drive through a street corner (``first_corner_m``), principal point at the image centre
     (the method's assumption): the estimate is within 5 % of the simulator's focal length (measured -0.2 % on seed 1, seeds 0-2 in
-    benchmarks/results/vo_autocalib); with 5-frame windows only it was +7..+11 % off on these sequences."""
+    benchmarks/results/vo_autocalib); with 5-frame windows only it was +7.5 % on seed 1."""
     from lidarkit.sim.street_camera import SimulatedCameraSequence
 
     seq = SimulatedCameraSequence(n_frames=51, seed=1, first_corner_m=15.0, cx=None, cy=None)

@@ -5,9 +5,9 @@ static scene. Method: short-window bundle adjustment. In windows of ``window`` c
 followed by KLT through the whole window; for each focal length of a geometric grid the window's poses and the
 points' inverse depths (anchored in the window's first frame) are adjusted (``scipy.optimize.least_squares``, sparse
 Jacobian, robust Huber loss). A window grows from ``window`` to ``long_window`` frames when every corner survives
-its short span (slow image motion, e.g. a simulated car braking through a corner: 5 frames gave +7..+11 %, 10 frames
--0.2..+2.9 % on three seeds); on KITTI 06 and 01 corners are lost faster and the windows stay short. Each window's focal length is the minimum of its cost profile (parabola in log f); the
-estimate is the median over windows and its 1-sigma 1.4826 MAD / sqrt(n) in log f (single windows' adjustments can
+its short span (slow image motion, e.g. a simulated car braking through a corner: 5 frames gave +3.0 / +7.5 %, 10 frames
+-0.2..+2.9 % on three seeds, principal point centred); on KITTI 06 and 01 corners are lost faster and the windows stay short. Each window's
+focal length is the minimum of its cost profile (parabola in log f); the estimate is the median over windows and its 1-sigma 1.4826 MAD / sqrt(n) in log f (single windows' adjustments can
 land in different basins, so summing their costs would let one bad window decide).
 
 Two-view criteria are almost flat in f for car motion (yaw plus forward translation is close to a critical motion);
