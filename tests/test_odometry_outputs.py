@@ -288,3 +288,28 @@ def test_docs_list_the_per_point_time_folders_the_reader_searches():
     simulator = (DOCS / "simulator.md").read_text()
     assert "does not read `point_times/`" not in simulator
     assert "datasets.md#per-point-times" in simulator
+
+
+def test_frame_check_fitness_is_the_same_with_either_nearest_neighbour_tree(monkeypatch):
+    """The check's KD-tree is small_gicp's when installed, else scipy's: on consecutive KITTI scans and a few
+    motions (right, off by 0.3 m, off by 2 m) both give exactly the same fitness."""
+    from conftest import shared_path
+
+    from lidarkit.geometry import make_se3
+    from lidarkit.odometry import frame_check
+
+    if frame_check._small_gicp is None:
+        pytest.skip("small_gicp not installed: scipy's tree is the only path")
+    folder = shared_path("kitti_odometry", "sequences", "00", "velodyne")
+    scans = [np.fromfile(folder / f"{i:06d}.bin", dtype=np.float32).reshape(-1, 4)[:, :3].astype(np.float64) for i in (0, 1)]
+    cfg = FrameCheckConfig()
+    motions = [make_se3(np.eye(3), t) for t in ([0.0, 0.0, 0.0], [0.3, 0.0, 0.0], [2.0, 0.0, 0.0])]
+
+    def fitness() -> list[float]:
+        previous, current = (frame_check.scan_geometry(s, cfg, k) for k, s in enumerate(scans))
+        return [frame_check.scan_fitness(previous, current, T, cfg) for T in motions]
+
+    fast = fitness()
+    monkeypatch.setattr(frame_check, "_small_gicp", None)
+    assert fitness() == fast
+    assert fast[0] > fast[2]  # the check does tell a wrong motion

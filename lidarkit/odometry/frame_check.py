@@ -17,7 +17,8 @@ check uses only the estimated poses and the raw scans, never the variant's verdi
   ``min_points`` points above it is not checked for fitness.
 
 Cost: each scan is subsampled to ``max_target_points`` (seeded), split at the ground, one KD-tree over its
-above-ground points and ``n_sample`` queries; the motion part is vectorized over the whole run afterwards.
+above-ground points (small_gicp's when installed, else scipy's) and ``n_sample`` queries; the motion part is
+vectorized over the whole run afterwards.
 """
 
 from __future__ import annotations
@@ -26,6 +27,11 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
+
+try:  # optional (extra ``gicp``): a faster exact nearest-neighbour search
+    import small_gicp as _small_gicp
+except ImportError:
+    _small_gicp = None
 
 #: Height bins (m) and horizontal radius (m) of the ground estimate.
 _GROUND_BIN_M = 0.1
@@ -125,8 +131,20 @@ def scan_geometry(points_xyz: np.ndarray, config: FrameCheckConfig, frame: int) 
     candidates = points if g is None else points[z > g + config.ground_clearance_m]
     if len(candidates) > config.n_sample:
         candidates = candidates[rng.choice(len(candidates), size=config.n_sample, replace=False)]
-    tree = cKDTree(target, balanced_tree=False, compact_nodes=False) if len(target) >= config.min_points else None
+    tree = None
+    if len(target) >= config.min_points:
+        # small_gicp's KdTree (when installed) answers the 1500 nearest-neighbour queries in half scipy's time, exactly
+        tree = _small_gicp.KdTree(target, num_threads=1) if _small_gicp is not None else cKDTree(target, balanced_tree=False, compact_nodes=False)
     return ScanGeometry(target, tree, candidates)
+
+
+def _nearest_distance(tree: Any, queries_xyz: np.ndarray, upper_m: float) -> np.ndarray:
+    """Distance (m) from each query to its nearest point of ``tree`` (inf or any value above ``upper_m`` when farther)."""
+    if _small_gicp is not None and isinstance(tree, _small_gicp.KdTree):
+        _, dist2 = tree.batch_nearest_neighbor_search(queries_xyz, num_threads=1)
+        return np.sqrt(np.asarray(dist2, dtype=np.float64))
+    dist, _ = tree.query(queries_xyz, k=1, distance_upper_bound=upper_m)
+    return dist
 
 
 def scan_fitness(previous: ScanGeometry, current: ScanGeometry, T_previous_current: np.ndarray, config: FrameCheckConfig) -> float:
@@ -137,7 +155,7 @@ def scan_fitness(previous: ScanGeometry, current: ScanGeometry, T_previous_curre
         return float("nan")
     mapped = sample @ T_previous_current[:3, :3].T + T_previous_current[:3, 3]
     tolerance = np.maximum(config.inlier_min_m, config.inlier_range_fraction * np.linalg.norm(sample, axis=1))
-    dist, _ = previous.tree.query(mapped, k=1, distance_upper_bound=float(tolerance.max()))
+    dist = _nearest_distance(previous.tree, mapped, float(tolerance.max()))
     return float(np.mean(dist < tolerance))
 
 
