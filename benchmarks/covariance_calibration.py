@@ -227,6 +227,7 @@ def main(argv=None) -> int:
     fits = {name: fit_calibration(runs) for name, runs in train.items()}
     cal = {name: f[0] for name, f in fits.items()}
     before = {name: factor_floor([collect(sc, sd, args.train_draws, name, cache, log) for sc, sd in parse_runs(args.before)]) for name in variants}
+    before = {name: AxisCalibration(c.factors, c.sigmas) for name, c in before.items()}  # as it was: no coverage, no guard
     blk = {name: block_factors(runs) for name, runs in train.items()}
     results = {
         "command": " ".join(["benchmarks/covariance_calibration.py", *(sys.argv[1:] if argv is None else argv)]),
