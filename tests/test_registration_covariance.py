@@ -12,7 +12,8 @@ from lidarkit.geometry import se3_exp, se3_inverse, se3_log, transform_points
 from lidarkit.odometry.covariance import propagate, relative_errors
 from lidarkit.registration import get_icp
 from lidarkit.registration.covariance import (
-    CovarianceModel, adjoint, calibrate, effective_observations, left_jacobians, nees, registration_covariance, safe_inverse,
+    AxisCalibration, CovarianceModel, adjoint, apply_calibration, calibrate, effective_observations, left_jacobians, nees,
+    registration_covariance, safe_inverse,
 )
 from lidarkit.registration.degeneracy import describe_direction, matched_constraints, surface_constraints
 from lidarkit.sim.scan_pairs import ScanPairs
@@ -238,13 +239,64 @@ def test_calibrate_scales_each_axis_variance(monkeypatch):
     A = rng.normal(size=(6, 6))
     cov = A @ A.T
     sigmas = np.array([0.1, 0.0, 0.0, 0.0, 0.01, 0.0])
-    monkeypatch.setitem(covariance_module.CALIBRATION, "test_variant", ((1.0, 4.0, 9.0, 0.25, 1.0, 16.0), tuple(sigmas)))
+    monkeypatch.setitem(covariance_module.CALIBRATION, "test_variant", AxisCalibration((1.0, 4.0, 9.0, 0.25, 1.0, 16.0), tuple(sigmas)))
     out = calibrate(cov, "test_variant")
     np.testing.assert_allclose(np.diag(out), np.diag(cov) * [1, 4, 9, 0.25, 1, 16] + sigmas**2, rtol=1e-9)
     # off-diagonal terms keep the closed form's correlations (scaled): a weak direction off the axes stays weak
     np.testing.assert_allclose(out[0, 1], cov[0, 1] * 2.0, rtol=1e-9)
     assert _is_psd(out)
     np.testing.assert_array_equal(calibrate(cov, "no_such_variant"), cov)
+
+
+def test_coverage_scalar_scales_the_whole_calibrated_matrix():
+    rng = np.random.default_rng(9)
+    A = rng.normal(size=(6, 6))
+    cov = A @ A.T
+    factors, sigmas = (0.5, 2.0, 1.0, 3.0, 0.1, 1.0), (0.01, 0.0, 0.02, 0.0, 0.001, 0.0)
+    base = apply_calibration(cov, AxisCalibration(factors, sigmas))
+    out = apply_calibration(cov, AxisCalibration(factors, sigmas, coverage=1.7))
+    np.testing.assert_allclose(out, 1.7 * base, rtol=1e-9, atol=1e-15)
+    # NEES scales by 1 / c: the share inside the bound is what the scalar was chosen for
+    xi = rng.normal(size=6)
+    assert nees(xi, out) == pytest.approx(nees(xi, base) / 1.7, rel=1e-9)
+
+
+def test_variance_beyond_the_training_range_is_not_shrunk():
+    """A factor < 1 measured where an axis was constrained applies only up to the training range v: the excess (a
+    corridor's axis) keeps its closed-form size, so the axis stays >= 10x the constrained ones after calibration."""
+    entry = AxisCalibration((0.01, 0.01, 0.01, 1.0, 1.0, 1.0), (0.004, 0.004, 0.001, 0.0, 0.0, 0.0), 1.0, (1e-3, 1e-3, 1e-3, 1.0, 1.0, 1.0))
+    cov = np.diag([0.01, 3e-4, 3e-4, 1e-6, 1e-6, 1e-6])  # x far beyond the training range, y and z within it
+    out = apply_calibration(cov, entry)
+    assert out[0, 0] == pytest.approx(0.01 * 1e-3 + (0.01 - 1e-3) + 0.004**2, rel=1e-9)
+    assert out[1, 1] == pytest.approx(0.01 * 3e-4 + 0.004**2, rel=1e-9)
+    assert out[0, 0] >= 10 * out[1, 1]
+    no_guard = apply_calibration(cov, AxisCalibration(entry.factors, entry.sigmas, 1.0, None))
+    assert no_guard[0, 0] < 10 * no_guard[1, 1]  # without it the floor of y swamps the ratio
+    # a factor > 1 still applies to the excess (never shrunk, never less than the closed form times f)
+    big = apply_calibration(cov, AxisCalibration((4.0,) * 6, (0.0,) * 6, 1.0, (1e-3,) * 6))
+    np.testing.assert_allclose(np.diag(big), 4.0 * np.diag(cov), rtol=1e-9)
+
+
+@pytest.mark.parametrize("variant", ["open3d_gicp", "small_gicp"])
+def test_calibrated_corridor_axis_is_ten_times_the_across_axis(variant):
+    """The default (calibrated) covariance of a corridor pair: along the tunnel >= 10x across it."""
+    pairs = ScanPairs("corridor", seed=1, n_frames=4, n_beams=32, n_azimuths=1024)
+    for i in range(2):
+        pair = pairs.draw(i)
+        cov = get_icp(variant).align(pair.source_xyz, pair.target_xyz, init_T=pair.init_T).covariance
+        assert cov[0, 0] >= 10 * cov[1, 1], (i, np.diag(cov))
+
+
+def test_every_variant_has_a_calibration():
+    from lidarkit.registration import available_icp
+    from lidarkit.registration.covariance import CALIBRATION
+
+    for name in available_icp():
+        if name in ("knn", "pipeline"):  # experiments (leaf size, components composed by name): returned uncalibrated
+            continue
+        entry = CALIBRATION[name]
+        assert len(entry.factors) == len(entry.sigmas) == len(entry.trained_variance) == 6
+        assert 0.5 < entry.coverage < 2.0
 
 
 @settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow])
