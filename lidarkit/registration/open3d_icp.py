@@ -11,7 +11,8 @@ import numpy as np
 from pydantic import Field
 
 from lidarkit.geometry import transform_points
-from lidarkit.registration.assessment import assess_alignment
+from lidarkit.registration.assessment import assess_alignment, background
+from lidarkit.registration.degeneracy import SurfaceIndex
 from lidarkit.registration.base import Registration, RegistrationConfig, RegistrationResult
 from lidarkit.registration.planar import refuse_2d
 from lidarkit.registration.registry import register_icp
@@ -60,6 +61,9 @@ class _Open3DBase(Registration):
         return clouds[1], clouds[0]
 
     def _align(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray) -> RegistrationResult:
+        return self._register(source_xyz, target_xyz, init_T)[2]()
+
+    def _register(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray):
         import open3d as o3d
 
         reg = o3d.pipelines.registration
@@ -67,38 +71,51 @@ class _Open3DBase(Registration):
         if self._kind != "point_to_point":
             refuse_2d(self.name, source_xyz, target_xyz, "normals / covariances of a 2D scan's line-like neighbourhoods are undefined in 3D")
         src, dst = self._clouds(source_xyz, target_xyz)
+        dst_pts = np.asarray(dst.points)
+        # the assessment's pose-free part (the target's local-surface index) is built in another thread while Open3D,
+        # which releases the GIL, registers
+        surfaces = background(lambda: SurfaceIndex(dst_pts))
         criteria = reg.ICPConvergenceCriteria(c.relative_fitness, c.relative_rmse, c.max_iterations)
-        if self._kind == "gicp":
-            out = reg.registration_generalized_icp(
-                src, dst, c.max_correspondence_distance_m, init_T, reg.TransformationEstimationForGeneralizedICP(), criteria
-            )
-        else:
-            estimation = (
-                reg.TransformationEstimationPointToPoint()
-                if self._kind == "point_to_point"
-                else reg.TransformationEstimationPointToPlane()
-            )
-            out = reg.registration_icp(src, dst, c.max_correspondence_distance_m, init_T, estimation, criteria)
+        try:
+            if self._kind == "gicp":
+                out = reg.registration_generalized_icp(
+                    src, dst, c.max_correspondence_distance_m, init_T, reg.TransformationEstimationForGeneralizedICP(), criteria
+                )
+            else:
+                estimation = (
+                    reg.TransformationEstimationPointToPoint()
+                    if self._kind == "point_to_point"
+                    else reg.TransformationEstimationPointToPlane()
+                )
+                out = reg.registration_icp(src, dst, c.max_correspondence_distance_m, init_T, estimation, criteria)
+        except BaseException:
+            surfaces.result()  # joined (its thread ends) before the error goes on
+            raise
         T = np.array(out.transformation, dtype=np.float64)
-        src_pts, dst_pts = np.asarray(src.points), np.asarray(dst.points)
-        # Open3D's own final correspondences (nearest target point within the distance, at the returned pose): the
-        # assessment reuses them instead of indexing the target a second time
-        pairs = np.asarray(out.correspondence_set, dtype=np.int64).reshape(-1, 2)
-        dist2 = np.full(len(src_pts), np.inf)
-        index = np.zeros(len(src_pts), dtype=np.int64)
-        if len(pairs):
-            gap = transform_points(T, src_pts[pairs[:, 0]]) - dst_pts[pairs[:, 1]]
-            dist2[pairs[:, 0]] = np.einsum("ij,ij->i", gap, gap)
-            index[pairs[:, 0]] = pairs[:, 1]
-        assessment = assess_alignment(src_pts, dst_pts, T, c.max_correspondence_distance_m, dist2=dist2, index=index)
         no_pairs = float(out.fitness) <= 0
-        return assessment.to_result(
-            T,
-            converged=not no_pairs,
-            reason=f"Open3D fitness 0: no correspondence within {c.max_correspondence_distance_m} m" if no_pairs else "",
-            rmse_history=(float("nan") if no_pairs else float(out.inlier_rmse),),  # Open3D reports 0 for "no pairs"
-            extra={"iterations_reported": False, "open3d_fitness": float(out.fitness)},
-        )
+
+        def assess() -> RegistrationResult:
+            src_pts = np.asarray(src.points)
+            # Open3D's own final correspondences (nearest target point within the distance, at the returned pose): the
+            # assessment reuses them instead of indexing the target a second time
+            pairs = np.asarray(out.correspondence_set, dtype=np.int64).reshape(-1, 2)
+            dist2 = np.full(len(src_pts), np.inf)
+            index = np.zeros(len(src_pts), dtype=np.int64)
+            if len(pairs):
+                gap = transform_points(T, src_pts[pairs[:, 0]]) - dst_pts[pairs[:, 1]]
+                dist2[pairs[:, 0]] = np.einsum("ij,ij->i", gap, gap)
+                index[pairs[:, 0]] = pairs[:, 1]
+            assessment = assess_alignment(src_pts, dst_pts, T, c.max_correspondence_distance_m, dist2=dist2, index=index,
+                                          surfaces=surfaces.result())
+            return assessment.to_result(
+                T,
+                converged=not no_pairs,
+                reason=f"Open3D fitness 0: no correspondence within {c.max_correspondence_distance_m} m" if no_pairs else "",
+                rmse_history=(float("nan") if no_pairs else float(out.inlier_rmse),),  # Open3D reports 0 for "no pairs"
+                extra={"iterations_reported": False, "open3d_fitness": float(out.fitness)},
+            )
+
+        return T, not no_pairs, assess
 
 
 @register_icp("open3d_point_to_point")
