@@ -324,7 +324,7 @@ def run(
 
     bar = _progress_bar(n, f"{name} on {title}") if progress else None
     clock = time.perf_counter
-    loop_start = clock()
+    loop_start, loop_cpu_start = clock(), time.process_time()
     first_scan = None
     # scans are read in a background thread, at most `prefetch` ahead (0: inline); only the previous scan is kept. The
     # thread also does the pose-free part of the frame check, overlapped with the registration of earlier frames
@@ -389,7 +389,7 @@ def run(
         stream.close()  # stops and joins the reading thread, also on error
         if bar is not None:
             bar[0].stop()
-    total = clock() - loop_start
+    total, total_cpu = clock() - loop_start, time.process_time() - loop_cpu_start
 
     timestamps = sequence.timestamps_s
     timestamps = None if timestamps is None else np.asarray(timestamps, dtype=np.float64)[indices]
@@ -435,7 +435,7 @@ def run(
             "ground_truth_instant_note": instant_note,
         },
     }
-    result = OdometryResult(trajectory, name, config, indices.copy(), stats, total, reference, covariances=covariances)
+    result = OdometryResult(trajectory, name, config, indices.copy(), stats, total, reference, covariances=covariances, total_cpu_s=total_cpu)
     metrics = odometry_metrics(result)
     if instant_note is not None:
         metrics["ground_truth_instant_note"] = instant_note
