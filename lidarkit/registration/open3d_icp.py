@@ -36,7 +36,7 @@ class Open3DSurfaceConfig(Open3DPointToPointConfig):
 class _Open3DBase(Registration):
     _kind = "point_to_point"
 
-    _last: tuple | None = None  # (fingerprint, Open3D cloud) of the last prepared cloud
+    _last: tuple = ()  # (fingerprint, Open3D cloud) of the last two prepared clouds (a frame registered again finds both)
 
     def _clouds(self, source_xyz: np.ndarray, target_xyz: np.ndarray):
         """Open3D clouds (downsampled, with normals for the surface variants). In a scan-to-scan chain the source
@@ -47,8 +47,9 @@ class _Open3DBase(Registration):
         clouds = []
         for pts in (target_xyz, source_xyz):
             key = (id(pts), pts.shape, pts.ctypes.data, pts[:: max(1, len(pts) // 32)].tobytes())
-            if self._last is not None and self._last[0] == key:
-                clouds.append(self._last[1])
+            hit = next((cloud for k, cloud in self._last if k == key), None)
+            if hit is not None:
+                clouds.append(hit)
                 continue
             pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
             if c.voxel_size_m is not None:
@@ -56,7 +57,7 @@ class _Open3DBase(Registration):
             if self._kind != "point_to_point":
                 # GICP builds its plane-like covariances from these normals (Open3D's own rule)
                 pc.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=c.normal_radius_m, max_nn=c.normal_max_nn))
-            self._last = (key, pc)
+            self._last = (*self._last[-1:], (key, pc))
             clouds.append(pc)
         return clouds[1], clouds[0]
 

@@ -47,7 +47,9 @@ if _small_gicp is not None:
 
         def __init__(self, config: SmallGICPConfig | None = None, **params):
             super().__init__(config, **params)
-            self._cache: tuple | None = None  # (fingerprint, PointCloud, KdTree) of the last preprocessed cloud
+            # (fingerprint, PointCloud, KdTree) of the last two preprocessed clouds: a frame registered again (the odometry
+            # runner's overlap, when the gate turns the previous frame down) finds both of its clouds
+            self._cache: list[tuple] = []
 
         def _preprocess(self, points: np.ndarray):
             """small_gicp's own downsampling + covariances + KdTree, reused when the same cloud comes back (in a
@@ -55,14 +57,15 @@ if _small_gicp is not None:
             own odometry loop does)."""
             c = self.config
             key = (id(points), points.shape, points.ctypes.data, points[:: max(1, len(points) // 32)].tobytes(), c.downsampling_resolution_m)
-            if self._cache is not None and self._cache[0] == key:
-                return self._cache[1], self._cache[2]
+            for cached in self._cache:
+                if cached[0] == key:
+                    return cached[1], cached[2]
             # the steps small_gicp.align(points...) takes (voxel grid, KdTree built on one thread, 10-neighbour covariances):
             # preprocess_points builds its KdTree on num_threads threads, which costs more than it saves on a busy machine
             cloud = _small_gicp.voxelgrid_sampling(np.asarray(points, dtype=np.float64), c.downsampling_resolution_m, num_threads=c.num_threads)
             tree = _small_gicp.KdTree(cloud, num_threads=1)
             _small_gicp.estimate_covariances(cloud, tree, num_neighbors=10, num_threads=c.num_threads)
-            self._cache = (key, cloud, tree)
+            self._cache = [*self._cache[-1:], (key, cloud, tree)]
             return cloud, tree
 
         def _align(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray) -> RegistrationResult:
