@@ -162,11 +162,12 @@ def test_an_error_names_its_frame_and_leaves_no_thread(where):
 
 
 @pytest.mark.parametrize("where", ["register", "assess"])
-def test_an_interrupt_leaves_no_thread(where):
+def test_an_interrupt_leaves_no_thread_and_writes_nothing(where, tmp_path):
     failing = _Failing(get_icp("open3d_point_to_plane"), fail_at=3, where=where, error=KeyboardInterrupt())
     with pytest.raises(KeyboardInterrupt):
-        run(SPEC, failing)
+        run(SPEC, failing, out_dir=tmp_path / "run")
     assert not _our_threads()
+    assert list(tmp_path.iterdir()) == []  # no run folder, not even a partial one
 
 
 @pytest.mark.skipif(not hasattr(os, "getpriority") or not sys.platform.startswith("linux"), reason="per-thread nice is Linux's")
