@@ -187,3 +187,22 @@ def test_helper_threads_run_at_the_lowest_priority_and_leave_the_caller_alone():
     assert own_nice() == before
     with Overlap(enabled=False) as inline:  # in line: runs in the caller's thread, at its priority
         assert inline.submit(own_nice).result() == before
+
+
+def test_a_subclass_overriding_align_keeps_its_override(scans):
+    import dataclasses
+
+    from lidarkit.registration.open3d_icp import Open3DPointToPlane
+
+    class Shifted(Open3DPointToPlane):  # post-processes the split variant's result in _align
+        def _align(self, source_xyz, target_xyz, init_T):
+            result = super()._align(source_xyz, target_xyz, init_T)
+            T = result.T_target_source.copy()
+            T[0, 3] += 1.0
+            return dataclasses.replace(result, T_target_source=T)
+
+    plain = Open3DPointToPlane().align(scans[1], scans[0]).T_target_source
+    pending = Shifted().align_deferred(scans[1], scans[0])
+    assert pending.T_target_source[0, 3] == pytest.approx(plain[0, 3] + 1.0, abs=1e-9)
+    assert pending.result().T_target_source[0, 3] == pytest.approx(plain[0, 3] + 1.0, abs=1e-9)
+    assert Shifted().align(scans[1], scans[0]).T_target_source[0, 3] == pytest.approx(plain[0, 3] + 1.0, abs=1e-9)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import functools
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -319,6 +320,16 @@ class PendingAlignment:
             return self._result
 
 
+def _split_below_align(cls: type) -> bool:
+    """Whether the nearest definition of ``_register`` / ``_align`` in ``cls``'s MRO is a ``_register``."""
+    for klass in cls.__mro__:
+        if "_register" in vars(klass):
+            return True
+        if "_align" in vars(klass):
+            return False
+    return False
+
+
 class Registration:
     """Base of every ICP variant: subclasses set ``name``, ``Config`` and implement :meth:`_align`.
 
@@ -366,8 +377,10 @@ class Registration:
         model = self._config.covariance_model()
         source = f"{self.name} ({len(src)} source / {len(dst)} target points)"
         start = time.perf_counter()
+        # a subclass that overrides _align below the class that split it (e.g. to post-process the result) gets its _align
+        register = self._register if _split_below_align(type(self)) else functools.partial(Registration._register, self)
         with use_backend(self.name, source), use_model(model):
-            T, likely_converged, assess = self._register(src, dst, T0)
+            T, likely_converged, assess = register(src, dst, T0)
         register_s = time.perf_counter() - start
 
         def finish() -> RegistrationResult:
