@@ -155,11 +155,10 @@ class SurfaceIndex:
         self._M = np.empty((n, 3, 3))
         self._thickness = np.empty(n)
         self._known = np.zeros(n, dtype=bool)
-        order = np.random.default_rng(0).permutation(n)  # spread over the cloud: stopped early, it covers it evenly
         for start in range(0, n, chunk):
             if stop is not None and stop.is_set():
                 return
-            rows = order[start : start + chunk]
+            rows = slice(start, min(n, start + chunk))
             M, thickness = surface_constraints(self.surface_xyz[self.knn(self.target_xyz[rows], k)], return_thickness=True)
             self._M[rows], self._thickness[rows] = M, thickness
             self._known[rows] = True

@@ -14,7 +14,6 @@ through :func:`kiss_safe_pose`.
 
 from __future__ import annotations
 
-import contextlib
 import threading
 
 import numpy as np
@@ -192,13 +191,9 @@ class KissRegistration(Registration):
                 max_correspondance_distance=3.0 * sigma,
                 kernel=sigma,
             )
-        except BaseException:
+        finally:
             stop.set()
-            with contextlib.suppress(Exception):
-                prepared.result()  # joined (its thread ends) before the error goes on
-            raise
-        stop.set()
-        neighbors, surfaces = prepared.result()
+            neighbors, surfaces = prepared.result()
         T = np.array(T, dtype=np.float64)
 
         def assess() -> RegistrationResult:

@@ -7,16 +7,13 @@ and ``rmse_history`` holds the final RMSE only (``extra["iterations_reported"] =
 
 from __future__ import annotations
 
-import contextlib
-import threading
-
 import numpy as np
 from pydantic import Field
 
 from lidarkit.geometry import transform_points
 from lidarkit.registration.assessment import assess_alignment, background
+from lidarkit.registration.degeneracy import SurfaceIndex
 from lidarkit.registration.base import Registration, RegistrationConfig, RegistrationResult
-from lidarkit.registration.degeneracy import SURFACE_K, SurfaceIndex
 from lidarkit.registration.planar import refuse_2d
 from lidarkit.registration.registry import register_icp
 
@@ -76,17 +73,9 @@ class _Open3DBase(Registration):
             refuse_2d(self.name, source_xyz, target_xyz, "normals / covariances of a 2D scan's line-like neighbourhoods are undefined in 3D")
         src, dst = self._clouds(source_xyz, target_xyz)
         dst_pts = np.asarray(dst.points)
-        # the assessment's pose-free part is built in another thread while Open3D, which releases the GIL, registers:
-        # the target's local-surface index, then the local surface around its points until the registration returns
-        # (the anchors the assessment needs and that were not reached are computed after, exactly the same way)
-        stop = threading.Event()
-
-        def prepare() -> SurfaceIndex:
-            index = SurfaceIndex(dst_pts)
-            index.precompute(SURFACE_K, stop)
-            return index
-
-        surfaces = background(prepare)
+        # the assessment's pose-free part (the target's local-surface index) is built in another thread while Open3D,
+        # which releases the GIL, registers
+        surfaces = background(lambda: SurfaceIndex(dst_pts))
         criteria = reg.ICPConvergenceCriteria(c.relative_fitness, c.relative_rmse, c.max_iterations)
         try:
             if self._kind == "gicp":
@@ -101,12 +90,8 @@ class _Open3DBase(Registration):
                 )
                 out = reg.registration_icp(src, dst, c.max_correspondence_distance_m, init_T, estimation, criteria)
         except BaseException:
-            stop.set()
-            with contextlib.suppress(Exception):
-                surfaces.result()  # joined (its thread ends) before the error goes on
+            surfaces.result()  # joined (its thread ends) before the error goes on
             raise
-        stop.set()  # the pose is known: the preparation ends after its current chunk
-        prepared = surfaces.result()
         T = np.array(out.transformation, dtype=np.float64)
         no_pairs = float(out.fitness) <= 0
 
@@ -122,7 +107,7 @@ class _Open3DBase(Registration):
                 dist2[pairs[:, 0]] = np.einsum("ij,ij->i", gap, gap)
                 index[pairs[:, 0]] = pairs[:, 1]
             assessment = assess_alignment(src_pts, dst_pts, T, c.max_correspondence_distance_m, dist2=dist2, index=index,
-                                          surfaces=prepared)
+                                          surfaces=surfaces.result())
             return assessment.to_result(
                 T,
                 converged=not no_pairs,
