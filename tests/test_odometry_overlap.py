@@ -206,27 +206,3 @@ def test_a_subclass_overriding_align_keeps_its_override(scans):
     assert pending.T_target_source[0, 3] == pytest.approx(plain[0, 3] + 1.0, abs=1e-9)
     assert pending.result().T_target_source[0, 3] == pytest.approx(plain[0, 3] + 1.0, abs=1e-9)
     assert Shifted().align(scans[1], scans[0]).T_target_source[0, 3] == pytest.approx(plain[0, 3] + 1.0, abs=1e-9)
-
-
-@pytest.mark.parametrize("reached", ["none", "part", "all"])
-def test_local_surfaces_prepared_ahead_are_the_ones_computed_on_demand(scans, reached):
-    from lidarkit.registration.degeneracy import SURFACE_K, SurfaceIndex, matched_constraints
-    from lidarkit.registration.preprocess import voxel_downsample
-
-    target = voxel_downsample(scans[0], 0.5)
-    source = voxel_downsample(scans[1], 0.5)
-    index = np.random.default_rng(0).integers(0, len(target), size=len(source))  # any matched anchors
-    on_demand = matched_constraints(source, target, index, return_thickness=True)
-    surfaces = SurfaceIndex(target)
-    if reached != "none":
-        stop = threading.Event()
-        if reached == "part":
-            stop.set()  # stops before the first chunk; then let one chunk through by hand
-            surfaces.precompute(SURFACE_K, stop)
-            surfaces.precompute(SURFACE_K, None, chunk=len(target) // 3)
-            surfaces._known[len(target) // 3 :] = False
-        else:
-            surfaces.precompute(SURFACE_K)
-    ahead = matched_constraints(source, target, index, return_thickness=True, surfaces=surfaces)
-    for a, b in zip(on_demand, ahead):
-        np.testing.assert_array_equal(a, b)

@@ -14,8 +14,6 @@ KITTI seq 00: full scans ~0.3, road-only patches (z < -1.5 m, 8-40 m around the 
 
 from __future__ import annotations
 
-import threading
-
 import numpy as np
 
 from lidarkit.registration.base import DEGENERACY_RATIO_THRESHOLD, Degeneracy
@@ -36,9 +34,6 @@ MIN_ARM_FRACTION = 0.05
 #: anisotropic sampling of a spinning LiDAR (dense along a ring, sparse across rings) does not make a
 #: flat road look like a set of lines.
 SURFACE_VOXEL_M = 0.5
-
-#: Neighbours of a local surface.
-SURFACE_K = 20
 
 
 def surface_constraints(neighborhoods_xyz: np.ndarray, return_thickness: bool = False):
@@ -145,42 +140,12 @@ class SurfaceIndex:
         """``(q, k)`` indices of the ``k`` nearest surface points of each query (exact)."""
         return _knn_query(self._tree, queries_xyz, k)
 
-    def precompute(self, k: int, stop: threading.Event | None = None, chunk: int = 256) -> None:
-        """The local surface around every target point (what :func:`matched_constraints` computes for the matched
-        anchors), chunk by chunk until ``stop`` is set: done ahead, e.g. while the registration runs, so that only
-        the anchors not reached yet are left for after it. Each anchor's surface is computed exactly as on demand."""
-        n = len(self.target_xyz)
-        k = int(min(k, len(self.surface_xyz)))
-        self._k = k
-        self._M = np.empty((n, 3, 3))
-        self._thickness = np.empty(n)
-        self._known = np.zeros(n, dtype=bool)
-        for start in range(0, n, chunk):
-            if stop is not None and stop.is_set():
-                return
-            rows = slice(start, min(n, start + chunk))
-            M, thickness = surface_constraints(self.surface_xyz[self.knn(self.target_xyz[rows], k)], return_thickness=True)
-            self._M[rows], self._thickness[rows] = M, thickness
-            self._known[rows] = True
-
-    def constraints(self, anchors: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
-        """``(projectors (a, 3, 3), thickness (a,))`` of the local surfaces around target points ``anchors``
-        (:func:`surface_constraints` of their ``k`` nearest surface points), reusing :meth:`precompute`'s."""
-        if getattr(self, "_k", None) != k:
-            return surface_constraints(self.surface_xyz[self.knn(self.target_xyz[anchors], k)], return_thickness=True)
-        missing = anchors[~self._known[anchors]]
-        if len(missing):
-            M, thickness = surface_constraints(self.surface_xyz[self.knn(self.target_xyz[missing], k)], return_thickness=True)
-            self._M[missing], self._thickness[missing] = M, thickness
-            self._known[missing] = True
-        return self._M[anchors], self._thickness[anchors]
-
 
 def matched_constraints(
     source_aligned_xyz: np.ndarray,
     target_xyz: np.ndarray,
     matched_target_index: np.ndarray,
-    k: int = SURFACE_K,
+    k: int = 20,
     surface_voxel_m: float | None = SURFACE_VOXEL_M,
     max_points: int = 2000,
     seed: int = 0,
@@ -205,11 +170,12 @@ def matched_constraints(
     k = int(min(k, len(surface)))
     # several source points often share a target point: each distinct anchor is queried and analysed once
     unique_anchors, inverse = np.unique(matched_target_index[pick], return_inverse=True)
-    M, thickness = surfaces.constraints(unique_anchors, k)
+    nbr = surfaces.knn(target_xyz[unique_anchors], k)
     inverse = inverse.reshape(-1)
     if return_thickness:
+        M, thickness = surface_constraints(surface[nbr], return_thickness=True)
         return pick, M[inverse], thickness[inverse]
-    return pick, M[inverse]
+    return pick, surface_constraints(surface[nbr])[inverse]
 
 
 def _kdtree(points_xyz: np.ndarray):
@@ -240,7 +206,7 @@ def assess_degeneracy(
     source_aligned_xyz: np.ndarray,
     target_xyz: np.ndarray,
     matched_target_index: np.ndarray,
-    k: int = SURFACE_K,
+    k: int = 20,
     surface_voxel_m: float | None = SURFACE_VOXEL_M,
     max_points: int = 2000,
     seed: int = 0,
@@ -254,4 +220,4 @@ def assess_degeneracy(
     return summarize(normal_matrix(source_aligned_xyz[pick], constraints), threshold)
 
 
-__all__ = ["SURFACE_K", "THIN_RATIO", "SurfaceIndex", "assess_degeneracy", "describe_direction", "matched_constraints", "normal_matrix", "summarize", "surface_constraints"]
+__all__ = ["THIN_RATIO", "SurfaceIndex", "assess_degeneracy", "describe_direction", "matched_constraints", "normal_matrix", "summarize", "surface_constraints"]

@@ -14,8 +14,6 @@ through :func:`kiss_safe_pose`.
 
 from __future__ import annotations
 
-import threading
-
 import numpy as np
 from pydantic import Field, model_validator
 
@@ -23,7 +21,7 @@ from lidarkit.errors import DataError, RegistrationError
 from lidarkit.geometry import as_points, is_rotation, orthonormalize_se3
 from lidarkit.registration.assessment import assess_alignment, background
 from lidarkit.registration.base import Registration, RegistrationConfig, RegistrationResult
-from lidarkit.registration.degeneracy import SURFACE_K, SurfaceIndex
+from lidarkit.registration.degeneracy import SurfaceIndex
 from lidarkit.registration.neighbors import NearestNeighbors
 from lidarkit.registration.registry import register_icp
 
@@ -171,18 +169,9 @@ class KissRegistration(Registration):
         source_down = voxel_down_sample(voxel_down_sample(source, voxel * 0.5), voxel * 1.5)
         sigma = c.fixed_threshold_m if c.fixed_threshold_m is not None else c.initial_threshold_m
         map_points = local_map.point_cloud()
-        # the assessment's pose-free part is built in another thread while kiss-icp, which releases the GIL, registers:
-        # the nearest-neighbour index and local-surface index of the map, then the local surface around every map point
-        # until the registration returns (the map is small; those the assessment needs and that were not reached yet
-        # are computed after, exactly the same way)
-        stop = threading.Event()
-
-        def prepare():
-            neighbors, surfaces = NearestNeighbors(map_points, backend="scipy", workers=1), SurfaceIndex(map_points)
-            surfaces.precompute(SURFACE_K, stop)
-            return neighbors, surfaces
-
-        prepared = background(prepare)
+        # the assessment's pose-free part (nearest-neighbour index and local surfaces of the map) is built in another
+        # thread while kiss-icp, which releases the GIL, registers
+        prepared = background(lambda: (NearestNeighbors(map_points, backend="scipy", workers=1), SurfaceIndex(map_points)))
         try:
             T = get_registration(kcfg).align_points_to_map(
                 points=source_down,
@@ -192,7 +181,6 @@ class KissRegistration(Registration):
                 kernel=sigma,
             )
         finally:
-            stop.set()
             neighbors, surfaces = prepared.result()
         T = np.array(T, dtype=np.float64)
 
