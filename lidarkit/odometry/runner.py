@@ -283,7 +283,7 @@ def run(
     stateful ones (which need an extra assessment of each frame against the previous one: True asks for it).
     ``overlap``: run each frame's after-the-fact work (assessment, covariance, frame check) in a worker thread while
     the next frame registers (:mod:`lidarkit.odometry.overlap`; the same results as ``overlap=False``, which runs it in
-    line).
+    line). A variant whose backend holds the GIL (``overlap_assessment = False``, small_gicp) is assessed in line.
     """
     sequence = open_sequence(dataset)
     registration = _resolve_method(method, params)
@@ -335,7 +335,7 @@ def run(
     stream = prefetched(read, indices, prefetch)
     # frame k's after-the-fact work (assessment, covariance, frame check) runs in one worker thread while frame k+1
     # registers; results are those of the same calls in line (see _run_stateless for the one decision that waits)
-    worker = Overlap(overlap)
+    worker = Overlap(overlap and bool(getattr(registration, "overlap_assessment", True)))
     try:
         if stateful:
             registration.reset()

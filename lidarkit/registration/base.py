@@ -340,6 +340,9 @@ class Registration:
     name: ClassVar[str] = ""
     Config: ClassVar[type[RegistrationConfig]] = RegistrationConfig
     stateful: ClassVar[bool] = False
+    #: the odometry runner may assess frame k in a worker thread while frame k+1 registers (False for a backend that
+    #: holds the GIL through its calls: the worker would only contend for it)
+    overlap_assessment: ClassVar[bool] = True
 
     def __init__(self, config: RegistrationConfig | None = None, **params: Any):
         if config is not None and params:

@@ -7,6 +7,8 @@ and ``rmse_history`` holds the final RMSE only (``extra["iterations_reported"] =
 
 from __future__ import annotations
 
+import contextlib
+
 import numpy as np
 from pydantic import Field
 
@@ -90,8 +92,10 @@ class _Open3DBase(Registration):
                 )
                 out = reg.registration_icp(src, dst, c.max_correspondence_distance_m, init_T, estimation, criteria)
         except BaseException:
-            surfaces.result()  # joined (its thread ends) before the error goes on
+            with contextlib.suppress(Exception):
+                surfaces.result()  # joined (its thread ends) before the error goes on
             raise
+        prepared = surfaces.result()  # joined here: the preparation never outlives the registration
         T = np.array(out.transformation, dtype=np.float64)
         no_pairs = float(out.fitness) <= 0
 
@@ -107,7 +111,7 @@ class _Open3DBase(Registration):
                 dist2[pairs[:, 0]] = np.einsum("ij,ij->i", gap, gap)
                 index[pairs[:, 0]] = pairs[:, 1]
             assessment = assess_alignment(src_pts, dst_pts, T, c.max_correspondence_distance_m, dist2=dist2, index=index,
-                                          surfaces=surfaces.result())
+                                          surfaces=prepared)
             return assessment.to_result(
                 T,
                 converged=not no_pairs,
