@@ -213,3 +213,36 @@ def test_a_subclass_overriding_align_keeps_its_override(scans):
     assert pending.T_target_source[0, 3] == pytest.approx(plain[0, 3] + 1.0, abs=1e-9)
     assert pending.result().T_target_source[0, 3] == pytest.approx(plain[0, 3] + 1.0, abs=1e-9)
     assert Shifted().align(scans[1], scans[0]).T_target_source[0, 3] == pytest.approx(plain[0, 3] + 1.0, abs=1e-9)
+
+
+def test_points_checked_once_are_trusted_only_inside_the_block_and_only_by_identity():
+    from lidarkit.errors import DataError
+    from lidarkit.geometry import as_points, validated_points
+
+    checked = np.zeros((10, 3))
+    bad = np.full((10, 3), np.nan)  # stands for an array changed after its check: only the registered object is trusted
+    with validated_points({id(bad): bad}):
+        assert as_points(bad) is bad
+        with pytest.raises(DataError):
+            as_points(bad.copy())  # same content, another object: checked
+        with pytest.raises(DataError):
+            as_points(bad, min_points=11)  # the point count is still enforced
+    with pytest.raises(DataError):
+        as_points(bad)  # outside the block: checked
+    assert as_points(checked) is checked
+
+
+def test_the_run_checks_each_scan_in_its_reading_thread_not_again_in_the_registration(monkeypatch):
+    import lidarkit.geometry as geometry
+
+    calls = []
+    original = geometry._within_limits
+
+    def counting(arr):
+        calls.append(threading.current_thread().name)
+        return original(arr)
+
+    monkeypatch.setattr(geometry, "_within_limits", counting)
+    run(SPEC, "open3d_point_to_plane")
+    in_main = [name for name in calls if name == threading.main_thread().name]
+    assert len(calls) >= 10 and not in_main  # the reader's and the run's checks, all in the reading thread

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from lidarkit.errors import ConfigError, DataError, EvaluationError, LidarKitError, RegistrationError
-from lidarkit.geometry import orthonormalize_se3
+from lidarkit.geometry import as_points, orthonormalize_se3, validated_points
 from lidarkit.io.base import Scan, ScanSequence
 from lidarkit.odometry.covariance import propagate
 from lidarkit.odometry.frame_check import FrameChecker, FrameCheckConfig
@@ -99,7 +99,8 @@ def _stateful_after(k: int, frame: int, previous: np.ndarray | None, scan: Scan,
 
 
 def _run_stateless(stream, registration: Any, worker: Overlap, indices: np.ndarray, odometry_poses: np.ndarray | None,
-                   poses: np.ndarray, checker: FrameChecker, strict: bool, name: str, dataset_name: str, bar, *,
+                   poses: np.ndarray, checker: FrameChecker, strict: bool, name: str, dataset_name: str, bar,
+                   validated: dict[int, np.ndarray], *,
                    read_s, register_s, n_points, converged, measured, fallback, iterations, rmse_m, n_corr, degenerate,
                    min_eigenvalue, relative_cov, reasons) -> Scan | None:
     """Scan-to-scan chaining, frame k's assessment overlapped with frame k+1's registration.
@@ -227,6 +228,7 @@ def _run_stateless(stream, registration: Any, worker: Overlap, indices: np.ndarr
                     reg_s += again_s
             pending = {"k": k, "idx": idx, "out": out, "future": assess(out, idx), "register_s": reg_s, "guess": guess,
                        "scan": scan, "prepared": prepared}
+            validated.pop(id(previous), None)  # frame k-1's points: not passed to the backend again
         previous, previous_times = points, scan.point_times_s
         if bar is not None:
             bar[0].advance(bar[1])
@@ -328,14 +330,27 @@ def run(
     first_scan = None
     # scans are read in a background thread, at most `prefetch` ahead (0: inline); only the previous scan is kept. The
     # thread also does the pose-free part of the frame check, overlapped with the registration of earlier frames
+    # each scan's points are checked once, here in the reading thread (as_points), instead of again by the
+    # registration as its source and once more as the next frame's target; an entry lives while its frame is in use
+    validated: dict[int, np.ndarray] = {}
+
     def read(i: int) -> tuple[Scan, tuple]:
         scan = _read_nonempty_scan(sequence, i)
+        try:
+            points = as_points(scan.points_xyz, "scan")
+        except LidarKitError:
+            points = None  # left to the registration, which refuses it naming the frame, as without this check
+        if points is not None:
+            scan = scan if points is scan.points_xyz else dataclasses.replace(scan, points_xyz=points)
+            validated[id(points)] = points
         return scan, checker.prepare(i, scan.points_xyz)
 
     stream = prefetched(read, indices, prefetch)
     # frame k's after-the-fact work (assessment, covariance, frame check) runs in one worker thread while frame k+1
     # registers; results are those of the same calls in line (see _run_stateless for the one decision that waits)
     worker = Overlap(overlap and bool(getattr(registration, "overlap_assessment", True)))
+    trusted = validated_points(validated)
+    trusted.__enter__()
     try:
         if stateful:
             registration.reset()
@@ -372,6 +387,7 @@ def run(
                     _stateful_after, k, int(idx), previous, scan, prepared, poses, checker, want_covariance, relative_cov,
                     min_eigenvalue, name, dataset_name,
                 ))
+                validated.pop(id(points), None)  # registered: not passed to the backend again
                 previous = points
                 if bar is not None:
                     bar[0].advance(bar[1])
@@ -379,12 +395,13 @@ def run(
                 inflight.result()
         else:
             first_scan = _run_stateless(
-                stream, registration, worker, indices, odometry_poses, poses, checker, strict, name, dataset_name, bar,
+                stream, registration, worker, indices, odometry_poses, poses, checker, strict, name, dataset_name, bar, validated,
                 read_s=read_s, register_s=register_s, n_points=n_points, converged=converged, measured=measured, fallback=fallback,
                 iterations=iterations, rmse_m=rmse_m, n_corr=n_corr, degenerate=degenerate, min_eigenvalue=min_eigenvalue,
                 relative_cov=relative_cov if want_covariance else None, reasons=reasons,
             )
     finally:
+        trusted.__exit__(None, None, None)
         worker.close()  # cancels what has not started, joins the worker thread, also on error
         stream.close()  # stops and joins the reading thread, also on error
         if bar is not None:
