@@ -19,10 +19,8 @@ from pydantic import Field, model_validator
 
 from lidarkit.errors import DataError, RegistrationError
 from lidarkit.geometry import as_points, is_rotation, orthonormalize_se3
-from lidarkit.registration.assessment import assess_alignment, background
+from lidarkit.registration.assessment import assess_alignment
 from lidarkit.registration.base import Registration, RegistrationConfig, RegistrationResult
-from lidarkit.registration.degeneracy import SurfaceIndex
-from lidarkit.registration.neighbors import NearestNeighbors
 from lidarkit.registration.registry import register_icp
 
 #: Rotations passed to kiss-icp must be orthonormal to this (Sophus checks ~1e-10).
@@ -168,24 +166,19 @@ class KissRegistration(Registration):
         local_map.update(voxel_down_sample(target, voxel * 0.5), identity)
         source_down = voxel_down_sample(voxel_down_sample(source, voxel * 0.5), voxel * 1.5)
         sigma = c.fixed_threshold_m if c.fixed_threshold_m is not None else c.initial_threshold_m
-        map_points = local_map.point_cloud()
-        # the assessment's pose-free part (nearest-neighbour index and local surfaces of the map) is built in another
-        # thread while kiss-icp, which releases the GIL, registers
-        prepared = background(lambda: (NearestNeighbors(map_points, backend="scipy", workers=1), SurfaceIndex(map_points)))
-        try:
-            T = get_registration(kcfg).align_points_to_map(
-                points=source_down,
-                voxel_map=local_map,
-                initial_guess=kiss_safe_pose(init_T, "init_T"),
-                max_correspondance_distance=3.0 * sigma,
-                kernel=sigma,
-            )
-        finally:
-            neighbors, surfaces = prepared.result()
+        # (building the assessment's map index in a helper thread while kiss-icp registers was measured: no gain, kiss-icp
+        # holds the GIL for about half of its align call; benchmarks/results/icp/gil_probe.md)
+        T = get_registration(kcfg).align_points_to_map(
+            points=source_down,
+            voxel_map=local_map,
+            initial_guess=kiss_safe_pose(init_T, "init_T"),
+            max_correspondance_distance=3.0 * sigma,
+            kernel=sigma,
+        )
         T = np.array(T, dtype=np.float64)
 
         def assess() -> RegistrationResult:
-            assessment = assess_alignment(source_down, map_points, T, 3.0 * sigma, neighbors=neighbors, surfaces=surfaces)
+            assessment = assess_alignment(source_down, local_map.point_cloud(), T, 3.0 * sigma)
             return assessment.to_result(
                 T, extra={"iterations_reported": False, "threshold_sigma_m": sigma, "source_keypoints": len(source_down)}
             )
