@@ -58,7 +58,20 @@ def main() -> None:
               f"load average {os.getloadavg()[0]:.1f}\n# `{command}`\n# {args.runs} runs x {n_frames} frames (cumtime / "
               f"{args.runs * n_frames} = CPU s per frame; per-frame calls: ncalls / {args.runs * n_frames})\n\n")
     RESULTS.mkdir(parents=True, exist_ok=True)
-    atomic.write_text(RESULTS / f"wrapper_profile_{args.variant}.txt", header + out.getvalue())
+    atomic.write_text(RESULTS / f"wrapper_profile_{args.variant}.txt", header + relative_paths(out.getvalue()))
+
+
+def relative_paths(text: str) -> str:
+    """The profile's file names without this machine's folders (the repository, site-packages, the stdlib)."""
+    import re
+    import sysconfig
+
+    text = text.replace(str(REPO) + os.sep, "")
+    for key in ("purelib", "platlib", "stdlib"):
+        folder = sysconfig.get_paths().get(key)
+        if folder:
+            text = text.replace(folder + os.sep, f"<{key}>/")
+    return re.sub(r"/\S*/(site-packages|lib/python3\.\d+)/", r"<\1>/", text)
 
 
 if __name__ == "__main__":
