@@ -4,8 +4,6 @@ the speculative guess redone when the acceptance gate turns a frame down, errors
 from __future__ import annotations
 
 import logging
-import os
-import sys
 import threading
 
 import numpy as np
@@ -175,25 +173,6 @@ def test_an_interrupt_leaves_no_thread_and_writes_nothing(where, tmp_path):
         run(SPEC, failing, out_dir=tmp_path / "run")
     assert not _our_threads()
     assert list(tmp_path.iterdir()) == []  # no run folder, not even a partial one
-
-
-@pytest.mark.skipif(not hasattr(os, "getpriority") or not sys.platform.startswith("linux"), reason="per-thread nice is Linux's")
-def test_helper_threads_run_at_the_lowest_priority_and_leave_the_caller_alone():
-    from lidarkit.odometry.overlap import Overlap
-    from lidarkit.registration.assessment import background
-    from lidarkit.threads import HELPER_NICENESS
-
-    def own_nice() -> int:
-        return os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
-
-    before = own_nice()
-    expected = min(19, before + HELPER_NICENESS)
-    with Overlap() as worker:
-        assert worker.submit(own_nice).result() == expected
-    assert background(own_nice).result() == expected
-    assert own_nice() == before
-    with Overlap(enabled=False) as inline:  # in line: runs in the caller's thread, at its priority
-        assert inline.submit(own_nice).result() == before
 
 
 def test_a_subclass_overriding_align_keeps_its_override(scans):

@@ -4,8 +4,7 @@ The backends release the GIL while they register (Open3D, kiss-icp's map search,
 frame k's assessment (correspondences, degeneracy, covariance) and frame check run in this thread while frame k+1
 registers. Tasks run one at a time in the order submitted, each in a copy of the submitting thread's context (the
 covariance model in force, :func:`lidarkit.registration.covariance.use_model`), so their results are those of the
-same calls made in line. The thread runs at the lowest priority (:mod:`lidarkit.threads`): it takes only the CPU
-the backend leaves idle. :meth:`Overlap.close` cancels what has not started and joins the thread, also on error or
+same calls made in line. :meth:`Overlap.close` cancels what has not started and joins the thread, also on error or
 interrupt: a run leaves no thread behind.
 """
 
@@ -16,8 +15,6 @@ from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Any, TypeVar
 
-from lidarkit.threads import lower_priority
-
 T = TypeVar("T")
 
 
@@ -25,7 +22,7 @@ class Overlap:
     """``submit(fn)`` runs ``fn`` in one persistent worker thread (``enabled=False``: in line, at once)."""
 
     def __init__(self, enabled: bool = True):
-        self._pool = ThreadPoolExecutor(1, thread_name_prefix="lidarkit-assess", initializer=lower_priority) if enabled else None
+        self._pool = ThreadPoolExecutor(1, thread_name_prefix="lidarkit-assess") if enabled else None
 
     def submit(self, fn: Callable[[], T]) -> Future:
         if self._pool is None:

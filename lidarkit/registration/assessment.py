@@ -14,7 +14,6 @@ from lidarkit.registration.base import Degeneracy, RegistrationResult
 from lidarkit.registration.covariance import CovarianceModel, active_model, effective_observations, registration_covariance
 from lidarkit.registration.degeneracy import SurfaceIndex, matched_constraints, normal_matrix, summarize
 from lidarkit.registration.neighbors import NearestNeighbors
-from lidarkit.threads import lower_priority
 
 
 @dataclass(frozen=True)
@@ -117,7 +116,6 @@ class background:  # noqa: N801 - used like a function
         self._error: BaseException | None = None
 
         def work() -> None:
-            lower_priority()  # only the CPU the backend leaves idle (lidarkit.threads)
             try:
                 self._value = fn()
             except BaseException as err:  # noqa: BLE001 - handed to result()
