@@ -113,7 +113,7 @@ def _run_stateless(stream, registration: Any, worker: Overlap, indices: np.ndarr
     clock = time.perf_counter
     deferred = callable(getattr(registration, "align_deferred", None)) and not getattr(registration, "accepts_point_times", False)
     motion = np.eye(4)  # the motion of the last resolved frame (the in-line loop's `motion`)
-    pending = None  # the frame registered last, not resolved yet: dict(k, idx, pending, future, points, ...)
+    pending = None  # the frame registered last, not resolved yet: dict(k, idx, out, future, register_s, guess, scan, prepared)
     first_scan = None
     previous = previous_times = None
 
