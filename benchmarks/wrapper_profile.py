@@ -1,7 +1,7 @@
 """Where the CPU of a lidarkit odometry run goes, per function: the profile behind ``wrapper_cost.md``'s ratios.
 
-Runs ``lidarkit.odometry.run`` over the 10 KITTI 00 scans (../shared/data) with one variant, reading inline
-(``prefetch=0``, so every call is in one thread), once to warm up and ``--runs`` times under cProfile with a
+Runs ``lidarkit.odometry.run`` over the 10 KITTI 00 scans (../shared/data) with one variant, reading inline and
+assessing in line (``prefetch=0, overlap=False``, so every call is in one thread), once to warm up and ``--runs`` times under cProfile with a
 process-time clock (CPU of all threads, steadier than wall time on a shared machine), and writes the functions
 by cumulative CPU time per frame.
 
@@ -42,22 +42,36 @@ def main() -> None:
 
     logging.disable(logging.WARNING)
     spec = f"kitti:{DATA}?sequence=00"
-    n_frames = len(run(spec, args.variant, prefetch=0).trajectory.poses_se3)
+    n_frames = len(run(spec, args.variant, prefetch=0, overlap=False).trajectory.poses_se3)
     profiler = cProfile.Profile(time.process_time)
     profiler.enable()
     for _ in range(args.runs):
-        run(spec, args.variant, prefetch=0)
+        run(spec, args.variant, prefetch=0, overlap=False)
     profiler.disable()
     out = io.StringIO()
     pstats.Stats(profiler, stream=out).sort_stats("cumulative").print_stats(args.lines)
     omp = os.environ.get("OMP_WAIT_POLICY")
-    command = (f"OMP_WAIT_POLICY={omp} " if omp else "") + "nice -n 10 .venv/bin/python benchmarks/wrapper_profile.py " + " ".join(
-        shlex.quote(a) for a in sys.argv[1:])
+    niceness = os.nice(0)
+    command = (f"OMP_WAIT_POLICY={omp} " if omp else "") + (f"nice -n {niceness} " if niceness else "") + \
+        ".venv/bin/python benchmarks/wrapper_profile.py " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     header = (f"# {dt.datetime.now(dt.timezone.utc).isoformat(timespec='seconds')} on {describe_machine(machine_info())}, "
               f"load average {os.getloadavg()[0]:.1f}\n# `{command}`\n# {args.runs} runs x {n_frames} frames (cumtime / "
               f"{args.runs * n_frames} = CPU s per frame; per-frame calls: ncalls / {args.runs * n_frames})\n\n")
     RESULTS.mkdir(parents=True, exist_ok=True)
-    atomic.write_text(RESULTS / f"wrapper_profile_{args.variant}.txt", header + out.getvalue())
+    atomic.write_text(RESULTS / f"wrapper_profile_{args.variant}.txt", header + relative_paths(out.getvalue()))
+
+
+def relative_paths(text: str) -> str:
+    """The profile's file names without this machine's folders (the repository, site-packages, the stdlib)."""
+    import re
+    import sysconfig
+
+    text = text.replace(str(REPO) + os.sep, "")
+    for key in ("purelib", "platlib", "stdlib"):
+        folder = sysconfig.get_paths().get(key)
+        if folder:
+            text = text.replace(folder + os.sep, f"<{key}>/")
+    return re.sub(r"/\S*/(site-packages|lib/python3\.\d+)/", r"<\1>/", text)
 
 
 if __name__ == "__main__":

@@ -6,6 +6,9 @@ Arrays of poses have shape ``(N, 4, 4)``; point sets ``(N, 3)``; everything is f
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,12 +24,32 @@ MAX_ABS_COORDINATE_M = 1e7
 read as floats, a unit error) and the backends (Open3D voxel grids, KD-trees) fail with internal errors."""
 
 
+#: arrays already checked by :func:`as_points` in the current context (``id -> array``; see :func:`validated_points`)
+_VALIDATED: contextvars.ContextVar[dict[int, np.ndarray] | None] = contextvars.ContextVar("validated_points", default=None)
+
+
+@contextlib.contextmanager
+def validated_points(arrays: dict[int, np.ndarray]) -> Iterator[None]:
+    """Within the block, :func:`as_points` returns an array of ``arrays`` (``id -> array``, checked by ``as_points``
+    before it was put there) without checking it again. The odometry runner checks each scan once, in its reading
+    thread, and keeps a frame's entry only while that frame is in use: nothing outside the block, and no array that
+    could have changed since its check, is trusted."""
+    token = _VALIDATED.set(arrays)
+    try:
+        yield
+    finally:
+        _VALIDATED.reset(token)
+
+
 def as_points(points_xyz: np.ndarray, name: str = "points", min_points: int = 0) -> np.ndarray:
     """Validate an ``(N, 3)`` real, finite point array within ``MAX_ABS_COORDINATE_M`` and return it as float64.
 
     This is the boundary before every backend (Open3D, kiss-icp, small_gicp, scipy): nothing they would reject
     with an internal error, or accept silently (a complex array losing its imaginary part), gets past it.
     """
+    known = _VALIDATED.get()
+    if known is not None and known.get(id(points_xyz)) is points_xyz and len(points_xyz) >= min_points:
+        return points_xyz  # checked once already (validated_points)
     arr = np.asarray(points_xyz)
     if arr.ndim != 2 or arr.shape[1] != 3:
         raise DataError(f"expected an (N, 3) point array, got shape {arr.shape}", source=name)

@@ -107,6 +107,8 @@ class OdometryResult:
     metrics: dict[str, Any] = field(default_factory=dict)
     out_dir: Path | None = None
     covariances: tuple[np.ndarray, np.ndarray] | None = None
+    total_cpu_s: float | None = None
+    """Process CPU time (all threads: reading, the backend's, the assessment's) of the same loop as ``total_time_s``."""
 
     @property
     def relative_covariance(self) -> np.ndarray | None:

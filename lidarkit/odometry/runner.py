@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 import logging
 import os
 import time
@@ -12,17 +13,19 @@ from typing import Any
 import numpy as np
 
 from lidarkit.errors import ConfigError, DataError, EvaluationError, LidarKitError, RegistrationError
-from lidarkit.geometry import orthonormalize_se3
+from lidarkit.geometry import as_points, orthonormalize_se3, validated_points
 from lidarkit.io.base import Scan, ScanSequence
 from lidarkit.odometry.covariance import propagate
 from lidarkit.odometry.frame_check import FrameChecker, FrameCheckConfig
 from lidarkit.odometry.inputs import FrameSelection, frames_repr, open_sequence, parse_frames
 from lidarkit.odometry.instants import estimate_instant, like_with_like
 from lidarkit.odometry.metrics import odometry_metrics
+from lidarkit.odometry.overlap import Overlap
 from lidarkit.odometry.prefetch import DEFAULT_DEPTH, prefetched
 from lidarkit.odometry.result import FrameStats, OdometryResult
 from lidarkit.odometry.run_folder import write_run
 from lidarkit.odometry.settings import deskew_requested, effective_settings, require_point_times
+from lidarkit.registration.base import PendingAlignment
 from lidarkit.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
@@ -81,6 +84,162 @@ def _frame_error(err: Exception, dataset_name: str, frame: int) -> LidarKitError
     return RegistrationError(f"{type(err).__name__}: {err}", source=dataset_name, location=f"frame {frame}")
 
 
+def _stateful_after(k: int, frame: int, previous: np.ndarray | None, scan: Scan, prepared: tuple, poses: np.ndarray,
+                    checker: FrameChecker, want_covariance: bool, relative_cov: np.ndarray, min_eigenvalue: np.ndarray,
+                    name: str, dataset_name: str) -> None:
+    """A stateful variant's frame k once its pose is known: the after-the-fact covariance, then the frame check."""
+    if want_covariance and k > 0:
+        try:
+            relative_cov[k], min_eigenvalue[k] = frame_covariance(previous, scan.points_xyz, poses[k - 1], poses[k], name)
+        except Exception as err:
+            if not _is_frame_error(err):
+                raise
+            raise _frame_error(err, dataset_name, frame) from err
+    checker.add(k, frame, scan.points_xyz, scan.point_times_s, poses, prepared)
+
+
+def _run_stateless(stream, registration: Any, worker: Overlap, indices: np.ndarray, odometry_poses: np.ndarray | None,
+                   poses: np.ndarray, checker: FrameChecker, strict: bool, name: str, dataset_name: str, bar,
+                   validated: dict[int, np.ndarray], *,
+                   read_s, register_s, n_points, converged, measured, fallback, iterations, rmse_m, n_corr, degenerate,
+                   min_eigenvalue, relative_cov, reasons) -> Scan | None:
+    """Scan-to-scan chaining, frame k's assessment overlapped with frame k+1's registration.
+
+    The only thing frame k+1 needs from frame k's assessment is its verdict: a result the acceptance gate turns down
+    (too few correspondences, too low a fitness) is not converged, and the next guess is then the previous motion.
+    Frame k+1 therefore registers from the guess the backend's own verdict implies (the usual case: both agree) and is
+    registered again, from the right guess, when the assessment turns frame k down; every pose and result is the one
+    of the in-line definition (``align`` frame after frame)."""
+    clock = time.perf_counter
+    deferred = callable(getattr(registration, "align_deferred", None)) and not getattr(registration, "accepts_point_times", False)
+    motion = np.eye(4)  # the motion of the last resolved frame (the in-line loop's `motion`)
+    pending = None  # the frame registered last, not resolved yet: dict(k, idx, out, future, register_s, guess, scan, prepared)
+    first_scan = None
+    previous = previous_times = None
+
+    def register(k: int, idx: int, points: np.ndarray, times, guess: np.ndarray):
+        t0 = clock()
+        try:
+            if deferred:
+                out = registration.align_deferred(points, previous, init_T=guess)
+            elif getattr(registration, "accepts_point_times", False):  # e.g. ground_filtered deskews with them
+                out = PendingAlignment.done(registration.align(points, previous, init_T=guess, source_times_s=times, target_times_s=previous_times))
+            else:
+                out = PendingAlignment.done(registration.align(points, previous, init_T=guess))
+        except Exception as err:
+            if not _is_frame_error(err):
+                raise
+            raise _frame_error(err, dataset_name, idx) from err
+        return out, clock() - t0
+
+    def assess(out, idx: int):
+        def task():
+            t0 = clock()
+            try:
+                return out.result(), clock() - t0
+            except Exception as err:
+                if not _is_frame_error(err):
+                    raise
+                raise _frame_error(err, dataset_name, idx) from err
+        return worker.submit(task)
+
+    def resolve(item: dict) -> None:
+        """Frame item["k"]: its result, its pose, the next guess; then its frame check (in the worker)."""
+        nonlocal motion
+        k, idx = item["k"], item["idx"]
+        result, assess_s = item["future"].result()
+        register_s[k] = item["register_s"] + assess_s
+        measured[k] = True
+        converged[k] = bool(result.converged)
+        iterations[k] = int(result.iterations)
+        history = result.rmse_history
+        rmse_m[k] = float(history[-1]) if len(history) else np.nan
+        n_corr[k] = int(result.n_correspondences)
+        deg = getattr(result, "degeneracy", None)
+        degenerate[k] = bool(getattr(deg, "degenerate", False))
+        min_eigenvalue[k] = float(deg.eigenvalues[0]) if deg is not None else np.nan
+        if relative_cov is not None and getattr(result, "covariance", None) is not None and converged[k]:
+            relative_cov[k] = result.covariance
+        reasons[k] = str(getattr(result, "reason", "") or "")
+        if converged[k]:
+            motion = orthonormalize_se3(np.asarray(result.T_target_source, dtype=np.float64))
+        elif odometry_poses is not None:
+            motion = item["guess"]
+        poses[k] = poses[k - 1] @ motion
+        if not converged[k]:
+            why = reasons[k] or "no reason given"
+            if strict:
+                raise RegistrationError(f"registration did not converge ({why})", source=dataset_name, location=f"frame {idx}")
+            fallback[k] = True
+            log.warning(
+                "%s frame %d: %s did not converge (%s); using the %s motion instead",
+                dataset_name, idx, name, why, "odometry" if odometry_poses is not None else "constant-velocity",
+            )
+        elif degenerate[k]:
+            log.warning("%s frame %d: %s flagged degenerate geometry (%s)", dataset_name, idx, name, reasons[k] or "degenerate")
+
+    checks = None  # the last frame check submitted (checks run in frame order in the one worker)
+
+    def check(k: int, idx: int, scan: Scan, prepared: tuple) -> None:
+        nonlocal checks
+        if checks is not None:
+            checks.result()  # done already (the worker runs tasks in order): raises its error, if any
+        checks = worker.submit(functools.partial(checker.add, k, idx, scan.points_xyz, scan.point_times_s, poses, prepared))
+
+    for k, (idx, payload, read_time, read_error) in enumerate(stream):
+        idx = int(idx)
+        read_s[k] = read_time
+        if read_error is not None:
+            if pending is not None:  # the frames before the failed read come first, as in line
+                resolve(pending)
+            if checks is not None:
+                checks.result()
+            if not _is_frame_error(read_error):
+                raise read_error
+            raise _frame_error(read_error, dataset_name, idx) from read_error
+        scan, prepared = payload
+        read_s[k] = read_time - prepared[1]  # the reading alone (the check's part is in check_s)
+        first_scan = scan if k == 0 else first_scan
+        points = scan.points_xyz
+        n_points[k] = len(points)
+        if k == 0:
+            poses[0] = np.eye(4)
+            check(0, idx, scan, prepared)
+        else:
+            if odometry_poses is not None:
+                guess = orthonormalize_se3(np.linalg.solve(odometry_poses[indices[k - 1]], odometry_poses[idx]))
+            elif pending is not None and pending["out"].likely_converged:
+                guess = orthonormalize_se3(np.asarray(pending["out"].T_target_source, dtype=np.float64))  # speculative
+            else:
+                guess = motion
+            try:
+                out, reg_s = register(k, idx, points, scan.point_times_s, guess)
+            except BaseException:
+                if pending is not None:
+                    resolve(pending)  # an earlier frame's error (or strict refusal) comes first, as in line
+                raise
+            if pending is not None:
+                resolve(pending)
+                check(pending["k"], pending["idx"], pending["scan"], pending["prepared"])
+                if odometry_poses is None and guess is not motion and not np.array_equal(guess, motion):
+                    # frame k-1 was turned down after all: register frame k again from the previous motion
+                    guess = motion
+                    out, again_s = register(k, idx, points, scan.point_times_s, guess)
+                    reg_s += again_s
+            pending = {"k": k, "idx": idx, "out": out, "future": assess(out, idx), "register_s": reg_s, "guess": guess,
+                       "scan": scan, "prepared": prepared}
+            validated.pop(id(previous), None)  # frame k-1's points: not passed to the backend again
+        previous, previous_times = points, scan.point_times_s
+        if bar is not None:
+            bar[0].advance(bar[1])
+    if pending is not None:
+        resolve(pending)
+        check(pending["k"], pending["idx"], pending["scan"], pending["prepared"])
+    if checks is not None:
+        checks.result()
+    return first_scan
+
+
 def run(
     dataset: ScanSequence | str | os.PathLike,
     method: Any,
@@ -96,6 +255,7 @@ def run(
     prefetch: int = DEFAULT_DEPTH,
     init: str = "constant_velocity",
     pose_covariance: bool | None = None,
+    overlap: bool = True,
 ) -> OdometryResult:
     """Odometry of ``method`` (a registered name or a configured variant) over ``dataset``.
 
@@ -123,6 +283,9 @@ def run(
     ``pose_covariance``: propagate each frame's registration covariance into a covariance per pose
     (:mod:`lidarkit.odometry.covariance`); None = for stateless variants (whose results carry one), not for
     stateful ones (which need an extra assessment of each frame against the previous one: True asks for it).
+    ``overlap``: run each frame's after-the-fact work (assessment, covariance, frame check) in a worker thread while
+    the next frame registers (:mod:`lidarkit.odometry.overlap`; the same results as ``overlap=False``, which runs it in
+    line). A variant whose backend holds the GIL (``overlap_assessment = False``, small_gicp) is assessed in line.
     """
     sequence = open_sequence(dataset)
     registration = _resolve_method(method, params)
@@ -163,19 +326,36 @@ def run(
 
     bar = _progress_bar(n, f"{name} on {title}") if progress else None
     clock = time.perf_counter
-    loop_start = clock()
+    loop_start, loop_cpu_start = clock(), time.process_time()
     first_scan = None
     # scans are read in a background thread, at most `prefetch` ahead (0: inline); only the previous scan is kept. The
     # thread also does the pose-free part of the frame check, overlapped with the registration of earlier frames
+    # each scan's points are checked once, here in the reading thread (as_points), instead of again by the
+    # registration as its source and once more as the next frame's target; an entry lives while its frame is in use
+    validated: dict[int, np.ndarray] = {}
+
     def read(i: int) -> tuple[Scan, tuple]:
         scan = _read_nonempty_scan(sequence, i)
+        try:
+            points = as_points(scan.points_xyz, "scan")
+        except LidarKitError:
+            points = None  # left to the registration, which refuses it naming the frame, as without this check
+        if points is not None:
+            scan = scan if points is scan.points_xyz else dataclasses.replace(scan, points_xyz=points)
+            validated[id(points)] = points
         return scan, checker.prepare(i, scan.points_xyz)
 
     stream = prefetched(read, indices, prefetch)
+    # frame k's after-the-fact work (assessment, covariance, frame check) runs in one worker thread while frame k+1
+    # registers; results are those of the same calls in line (see _run_stateless for the one decision that waits)
+    worker = Overlap(overlap and bool(getattr(registration, "overlap_assessment", True)))
+    trusted = validated_points(validated)
+    trusted.__enter__()
     try:
         if stateful:
             registration.reset()
             previous = None
+            inflight = None  # frame k-1's after-the-fact task
             for k, (idx, payload, read_time, read_error) in enumerate(stream):
                 read_s[k] = read_time
                 try:
@@ -194,83 +374,39 @@ def run(
                     else:
                         poses[k] = registration.register_frame(points, scan.point_times_s)
                     t2 = clock()  # the variant's own time: the after-the-fact covariance below is not part of it
-                    if want_covariance and k > 0:
-                        relative_cov[k], min_eigenvalue[k] = frame_covariance(previous, points, poses[k - 1], poses[k], name)
-                    previous = points
                 except Exception as err:
+                    if inflight is not None:
+                        inflight.result()  # an earlier frame's error comes first, as in line
                     if not _is_frame_error(err):
                         raise
                     raise _frame_error(err, dataset_name, int(idx)) from err
-                checker.add(k, int(idx), points, scan.point_times_s, poses, prepared)
                 register_s[k], n_points[k] = t2 - t1, len(points)
+                if inflight is not None:
+                    inflight.result()
+                inflight = worker.submit(functools.partial(
+                    _stateful_after, k, int(idx), previous, scan, prepared, poses, checker, want_covariance, relative_cov,
+                    min_eigenvalue, name, dataset_name,
+                ))
+                validated.pop(id(points), None)  # registered: not passed to the backend again
+                previous = points
                 if bar is not None:
                     bar[0].advance(bar[1])
+            if inflight is not None:
+                inflight.result()
         else:
-            motion = np.eye(4)
-            previous = None
-            previous_times = None
-            for k, (idx, payload, read_time, read_error) in enumerate(stream):
-                read_s[k] = read_time
-                try:
-                    if read_error is not None:
-                        raise read_error
-                    scan, prepared = payload
-                    read_s[k] = read_time - prepared[1]  # the reading alone (the check's part is in check_s)
-                    first_scan = scan if k == 0 else first_scan
-                    points = scan.points_xyz
-                    t1 = clock()
-                    if previous is None:
-                        poses[k] = np.eye(4)
-                    else:
-                        if odometry_poses is not None:
-                            motion = orthonormalize_se3(np.linalg.solve(odometry_poses[indices[k - 1]], odometry_poses[idx]))
-                        if getattr(registration, "accepts_point_times", False):  # e.g. ground_filtered deskews with them
-                            result = registration.align(
-                                points, previous, init_T=motion, source_times_s=scan.point_times_s, target_times_s=previous_times
-                            )
-                        else:
-                            result = registration.align(points, previous, init_T=motion)
-                        measured[k] = True
-                        converged[k] = bool(result.converged)
-                        iterations[k] = int(result.iterations)
-                        history = result.rmse_history
-                        rmse_m[k] = float(history[-1]) if len(history) else np.nan
-                        n_corr[k] = int(result.n_correspondences)
-                        deg = getattr(result, "degeneracy", None)
-                        degenerate[k] = bool(getattr(deg, "degenerate", False))
-                        min_eigenvalue[k] = float(deg.eigenvalues[0]) if deg is not None else np.nan
-                        if want_covariance and getattr(result, "covariance", None) is not None and converged[k]:
-                            relative_cov[k] = result.covariance
-                        reasons[k] = str(getattr(result, "reason", "") or "")
-                        if converged[k]:
-                            motion = orthonormalize_se3(np.asarray(result.T_target_source, dtype=np.float64))
-                        poses[k] = poses[k - 1] @ motion
-                except Exception as err:
-                    if not _is_frame_error(err):
-                        raise
-                    raise _frame_error(err, dataset_name, int(idx)) from err
-                if measured[k] and not converged[k]:
-                    why = reasons[k] or "no reason given"
-                    if strict:
-                        raise RegistrationError(f"registration did not converge ({why})", source=dataset_name, location=f"frame {int(idx)}")
-                    fallback[k] = True
-                    log.warning(
-                        "%s frame %d: %s did not converge (%s); using the %s motion instead",
-                        dataset_name, int(idx), name, why, "odometry" if odometry_poses is not None else "constant-velocity",
-                    )
-                elif degenerate[k]:
-                    log.warning("%s frame %d: %s flagged degenerate geometry (%s)", dataset_name, int(idx), name, reasons[k] or "degenerate")
-                t2 = clock()
-                checker.add(k, int(idx), points, scan.point_times_s, poses, prepared)
-                previous, previous_times = points, scan.point_times_s
-                register_s[k], n_points[k] = t2 - t1, len(points)
-                if bar is not None:
-                    bar[0].advance(bar[1])
+            first_scan = _run_stateless(
+                stream, registration, worker, indices, odometry_poses, poses, checker, strict, name, dataset_name, bar, validated,
+                read_s=read_s, register_s=register_s, n_points=n_points, converged=converged, measured=measured, fallback=fallback,
+                iterations=iterations, rmse_m=rmse_m, n_corr=n_corr, degenerate=degenerate, min_eigenvalue=min_eigenvalue,
+                relative_cov=relative_cov if want_covariance else None, reasons=reasons,
+            )
     finally:
+        trusted.__exit__(None, None, None)
+        worker.close()  # cancels what has not started, joins the worker thread, also on error
         stream.close()  # stops and joins the reading thread, also on error
         if bar is not None:
             bar[0].stop()
-    total = clock() - loop_start
+    total, total_cpu = clock() - loop_start, time.process_time() - loop_cpu_start
 
     timestamps = sequence.timestamps_s
     timestamps = None if timestamps is None else np.asarray(timestamps, dtype=np.float64)[indices]
@@ -316,7 +452,7 @@ def run(
             "ground_truth_instant_note": instant_note,
         },
     }
-    result = OdometryResult(trajectory, name, config, indices.copy(), stats, total, reference, covariances=covariances)
+    result = OdometryResult(trajectory, name, config, indices.copy(), stats, total, reference, covariances=covariances, total_cpu_s=total_cpu)
     metrics = odometry_metrics(result)
     if instant_note is not None:
         metrics["ground_truth_instant_note"] = instant_note

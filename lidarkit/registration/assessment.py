@@ -2,14 +2,17 @@
 
 from __future__ import annotations
 
+import threading
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from lidarkit.geometry import transform_points
 from lidarkit.registration.base import Degeneracy, RegistrationResult
 from lidarkit.registration.covariance import CovarianceModel, active_model, effective_observations, registration_covariance
-from lidarkit.registration.degeneracy import matched_constraints, normal_matrix, summarize
+from lidarkit.registration.degeneracy import SurfaceIndex, matched_constraints, normal_matrix, summarize
 from lidarkit.registration.neighbors import NearestNeighbors
 
 
@@ -65,12 +68,15 @@ def assess_alignment(
     dist2: np.ndarray | None = None,
     index: np.ndarray | None = None,
     covariance_model: CovarianceModel | None | str = "active",
+    surfaces: SurfaceIndex | None = None,
 ) -> Assessment:
     """Score a pose: pass ``dist2``/``index`` of the final correspondences if already known.
 
     The degeneracy summary and the covariance (``covariance_model=None``: not computed) share one set of
     local surfaces around at most 2000 of the matched pairs; ``"active"`` takes the model of the registration that
-    is running (:func:`lidarkit.registration.covariance.use_model`)."""
+    is running (:func:`lidarkit.registration.covariance.use_model`); ``surfaces``: the target's
+    :class:`~lidarkit.registration.degeneracy.SurfaceIndex` if already built (e.g. by :func:`background` while the
+    registration ran)."""
     if isinstance(covariance_model, str):
         covariance_model = active_model()
     aligned = transform_points(T_target_source, source_xyz)
@@ -87,7 +93,7 @@ def assess_alignment(
         degeneracy = Degeneracy.unknown(f"{n} correspondences")
     else:
         matched, matched_index = aligned[inlier], index[inlier]
-        pick, constraints, thickness = matched_constraints(matched, target_xyz, matched_index, return_thickness=True)
+        pick, constraints, thickness = matched_constraints(matched, target_xyz, matched_index, return_thickness=True, surfaces=surfaces)
         degeneracy = summarize(normal_matrix(matched[pick], constraints))
         if covariance_model is not None:
             n_eff = effective_observations(matched, covariance_model.correlation_voxel_m)
@@ -101,4 +107,28 @@ def assess_alignment(
     )
 
 
-__all__ = ["Assessment", "assess_alignment"]
+class background:  # noqa: N801 - used like a function
+    """``fn()`` in a thread of its own, started now; :meth:`result` joins it and returns its value (or raises its
+    error). For the pose-free part of an assessment, built while a backend that releases the GIL registers."""
+
+    def __init__(self, fn: Callable[[], Any]):
+        self._value: Any = None
+        self._error: BaseException | None = None
+
+        def work() -> None:
+            try:
+                self._value = fn()
+            except BaseException as err:  # noqa: BLE001 - handed to result()
+                self._error = err
+
+        self._thread = threading.Thread(target=work, name="lidarkit-assessment-prep", daemon=True)
+        self._thread.start()
+
+    def result(self) -> Any:
+        self._thread.join()
+        if self._error is not None:
+            raise self._error
+        return self._value
+
+
+__all__ = ["Assessment", "assess_alignment", "background"]

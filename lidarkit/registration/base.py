@@ -8,8 +8,12 @@ ground truth is ``inv(T_world_a) @ T_world_b``.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import functools
+import threading
 import time
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Literal
 
@@ -18,6 +22,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from lidarkit.errors import DataError, LidarKitError, RegistrationError
 from lidarkit.geometry import as_points, is_rotation, orthonormalize_se3
+from lidarkit.registration.covariance import use_model
 
 #: A result is flagged ``degenerate`` when min/max eigenvalue of the normalised normal matrix is below this
 #: (KITTI full scans: ~0.3; road-only patches: 5e-4 to 6e-3; see degeneracy.py).
@@ -273,6 +278,58 @@ def accept(result: RegistrationResult, config: RegistrationConfig) -> Registrati
     return dataclasses.replace(result, converged=False, reason="; ".join([result.reason, *problems] if result.reason else problems))
 
 
+@contextlib.contextmanager
+def use_backend(name: str, source: str) -> Iterator[None]:
+    """A backend's own refusal (RuntimeError, ValueError, ... from Open3D, kiss-icp, small_gicp) becomes a
+    :class:`RegistrationError` naming the variant and the clouds; lidarkit's own errors pass unchanged."""
+    try:
+        yield
+    except LidarKitError:
+        raise
+    except (RuntimeError, ValueError, MemoryError, IndexError, TypeError) as err:
+        raise RegistrationError(f"the {name} backend failed on this pair: {type(err).__name__}: {err}", source=source) from err
+
+
+class PendingAlignment:
+    """A registration whose pose is known and whose assessment is still to come (:meth:`Registration.align_deferred`).
+
+    ``T_target_source``: the backend's pose (the result's, whatever the assessment says); ``likely_converged``: the
+    backend's own verdict, which the result's ``converged`` keeps unless the acceptance gate (too few correspondences,
+    too low a fitness) turns it down. :meth:`result` runs the assessment once (thread-safe) and returns the result.
+    """
+
+    def __init__(self, T_target_source: np.ndarray, likely_converged: bool, finish: Callable[[], RegistrationResult]):
+        self.T_target_source = T_target_source
+        self.likely_converged = likely_converged
+        self._finish: Callable[[], RegistrationResult] | None = finish
+        self._result: RegistrationResult | None = None
+        self._lock = threading.Lock()
+
+    @staticmethod
+    def done(result: RegistrationResult) -> "PendingAlignment":
+        pending = PendingAlignment(np.asarray(result.T_target_source, dtype=np.float64), bool(result.converged), lambda: result)
+        pending._result, pending._finish = result, None
+        return pending
+
+    def result(self) -> RegistrationResult:
+        with self._lock:
+            if self._result is None:
+                assert self._finish is not None
+                self._result = self._finish()
+                self._finish = None  # drops the clouds the assessment held
+            return self._result
+
+
+def _split_below_align(cls: type) -> bool:
+    """Whether the nearest definition of ``_register`` / ``_align`` in ``cls``'s MRO is a ``_register``."""
+    for klass in cls.__mro__:
+        if "_register" in vars(klass):
+            return True
+        if "_align" in vars(klass):
+            return False
+    return False
+
+
 class Registration:
     """Base of every ICP variant: subclasses set ``name``, ``Config`` and implement :meth:`_align`.
 
@@ -283,6 +340,9 @@ class Registration:
     name: ClassVar[str] = ""
     Config: ClassVar[type[RegistrationConfig]] = RegistrationConfig
     stateful: ClassVar[bool] = False
+    #: the odometry runner may assess frame k in a worker thread while frame k+1 registers (False for a backend that
+    #: holds the GIL through its calls: the worker would only contend for it)
+    overlap_assessment: ClassVar[bool] = True
 
     def __init__(self, config: RegistrationConfig | None = None, **params: Any):
         if config is not None and params:
@@ -298,22 +358,46 @@ class Registration:
         self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray | None = None
     ) -> RegistrationResult:
         """Estimate ``T_target_source`` for ``(N, 3)`` source and ``(M, 3)`` target clouds."""
-        from lidarkit.registration.covariance import calibrate, use_model
+        return self._deferred(source_xyz, target_xyz, init_T).result()
 
+    def align_deferred(
+        self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray | None = None
+    ) -> "PendingAlignment":
+        """:meth:`align` in two steps: the backend's registration now (the pose), the after-the-fact assessment
+        (correspondences, degeneracy, covariance) when :meth:`PendingAlignment.result` is called, possibly in another
+        thread, so that it can overlap the next registration. ``align`` is exactly ``align_deferred(...).result()``.
+
+        A variant that overrides :meth:`align` itself (e.g. to take extra arguments) is run whole, here and now."""
+        if type(self).align is not Registration.align:
+            return PendingAlignment.done(self.align(source_xyz, target_xyz, init_T))
+        return self._deferred(source_xyz, target_xyz, init_T)
+
+    def _deferred(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray | None) -> "PendingAlignment":
         src, dst, T0 = check_pair(source_xyz, target_xyz, init_T)
         gap = initial_gap_m(src, dst, T0)
         if gap is not None:
-            return no_overlap_result(T0, gap, self.name)
+            return PendingAlignment.done(no_overlap_result(T0, gap, self.name))
+        model = self._config.covariance_model()
+        source = f"{self.name} ({len(src)} source / {len(dst)} target points)"
         start = time.perf_counter()
-        try:
-            with use_model(self._config.covariance_model()):
-                result = self._align(src, dst, T0)
-        except LidarKitError:
-            raise
-        except (RuntimeError, ValueError, MemoryError, IndexError, TypeError) as err:  # a backend's own refusal
-            raise RegistrationError(f"the {self.name} backend failed on this pair: {type(err).__name__}: {err}",
-                                    source=f"{self.name} ({len(src)} source / {len(dst)} target points)") from err
-        runtime = time.perf_counter() - start
+        # a subclass that overrides _align below the class that split it (e.g. to post-process the result) gets its _align
+        register = self._register if _split_below_align(type(self)) else functools.partial(Registration._register, self)
+        with use_backend(self.name, source), use_model(model):
+            T, likely_converged, assess = register(src, dst, T0)
+        register_s = time.perf_counter() - start
+
+        def finish() -> RegistrationResult:
+            start = time.perf_counter()
+            with use_backend(self.name, source), use_model(model):
+                result = assess()
+            return self._finish(result, register_s + time.perf_counter() - start)
+
+        return PendingAlignment(np.asarray(T, dtype=np.float64), bool(likely_converged), finish)
+
+    def _finish(self, result: RegistrationResult, runtime: float) -> RegistrationResult:
+        """The config's calibration and acceptance gate applied to the variant's assessed result."""
+        from lidarkit.registration.covariance import calibrate
+
         covariance = result.covariance
         if covariance is not None and self._config.calibrated_covariance and self._config.covariance == "censi":
             covariance = calibrate(covariance, self.name)
@@ -323,6 +407,14 @@ class Registration:
             covariance[[2, 3, 4], :] = 0.0
             covariance[:, [2, 3, 4]] = 0.0
         return dataclasses.replace(accept(result, self._config), runtime_s=runtime, method=self.name, covariance=covariance)
+
+    def _register(
+        self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray
+    ) -> tuple[np.ndarray, bool, Callable[[], RegistrationResult]]:
+        """The backend's part of an alignment: ``(pose, the backend's own convergence verdict, the assessment still to
+        do)``. Variants whose assessment can run apart override it; by default the whole :meth:`_align` runs now."""
+        result = self._align(source_xyz, target_xyz, init_T)
+        return result.T_target_source, bool(result.converged), lambda: result
 
     def _align(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray) -> RegistrationResult:
         raise NotImplementedError

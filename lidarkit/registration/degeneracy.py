@@ -116,6 +116,31 @@ def describe_direction(direction: np.ndarray) -> str:
     return f"{kind} {name}" + (" coupled with " + ("rotation" if kind.startswith("translation") else "translation") if mixed else "")
 
 
+class SurfaceIndex:
+    """The pose-free part of :func:`matched_constraints` for one target cloud: the target voxelized at
+    ``min(surface_voxel_m, RMS radius / 10)`` (``None``: the raw target) and a KD-tree over it. Built apart so that
+    it can be prepared (e.g. in another thread) while the registration that needs it is still running."""
+
+    def __init__(self, target_xyz: np.ndarray, surface_voxel_m: float | None = SURFACE_VOXEL_M):
+        self.target_xyz = target_xyz
+        self.surface_voxel_m = surface_voxel_m
+        surface = target_xyz
+        if surface_voxel_m is not None:
+            from lidarkit.registration.preprocess import voxel_downsample
+
+            centred = target_xyz - target_xyz.mean(axis=0)
+            rms_radius = float(np.sqrt((centred * centred).sum(axis=1).mean()))
+            voxel = min(surface_voxel_m, rms_radius / 10.0)
+            if voxel > 0:
+                surface = voxel_downsample(target_xyz, voxel)
+        self.surface_xyz = surface
+        self._tree = _kdtree(surface)
+
+    def knn(self, queries_xyz: np.ndarray, k: int) -> np.ndarray:
+        """``(q, k)`` indices of the ``k`` nearest surface points of each query (exact)."""
+        return _knn_query(self._tree, queries_xyz, k)
+
+
 def matched_constraints(
     source_aligned_xyz: np.ndarray,
     target_xyz: np.ndarray,
@@ -125,31 +150,27 @@ def matched_constraints(
     max_points: int = 2000,
     seed: int = 0,
     return_thickness: bool = False,
+    surfaces: SurfaceIndex | None = None,
 ):
     """``(picked pair indices (m,), surface projectors (m, 3, 3))`` of at most ``max_points`` matched pairs
     (a seeded random subset), shared by the degeneracy summary and the covariance; with ``return_thickness`` also the
     ``(m,)`` across-surface variance of each target neighbourhood (:func:`surface_constraints`).
 
     Local surfaces come from the ``k`` nearest neighbours in the target voxelized at
-    ``min(surface_voxel_m, RMS radius / 10)`` (``surface_voxel_m=None``: the raw target), searched by :func:`_knn`.
+    ``min(surface_voxel_m, RMS radius / 10)`` (``surface_voxel_m=None``: the raw target), searched by :func:`_knn`;
+    ``surfaces``: that :class:`SurfaceIndex` of ``target_xyz`` if already built.
     """
     n = len(source_aligned_xyz)
     pick = np.arange(n)
     if n > max_points:
         pick = np.sort(np.random.default_rng(seed).choice(n, size=max_points, replace=False))
-    surface = target_xyz
-    if surface_voxel_m is not None:
-        from lidarkit.registration.preprocess import voxel_downsample
-
-        centred = target_xyz - target_xyz.mean(axis=0)
-        rms_radius = float(np.sqrt((centred * centred).sum(axis=1).mean()))
-        voxel = min(surface_voxel_m, rms_radius / 10.0)
-        if voxel > 0:
-            surface = voxel_downsample(target_xyz, voxel)
+    if surfaces is None or surfaces.target_xyz is not target_xyz or surfaces.surface_voxel_m != surface_voxel_m:
+        surfaces = SurfaceIndex(target_xyz, surface_voxel_m)
+    surface = surfaces.surface_xyz
     k = int(min(k, len(surface)))
     # several source points often share a target point: each distinct anchor is queried and analysed once
     unique_anchors, inverse = np.unique(matched_target_index[pick], return_inverse=True)
-    nbr = _knn(surface, target_xyz[unique_anchors], k)
+    nbr = surfaces.knn(target_xyz[unique_anchors], k)
     inverse = inverse.reshape(-1)
     if return_thickness:
         M, thickness = surface_constraints(surface[nbr], return_thickness=True)
@@ -157,17 +178,28 @@ def matched_constraints(
     return pick, surface_constraints(surface[nbr])[inverse]
 
 
-def _knn(points_xyz: np.ndarray, queries_xyz: np.ndarray, k: int) -> np.ndarray:
-    """``(q, k)`` indices of the ``k`` nearest of ``points_xyz`` to each query (exact): small_gicp's KdTree when
-    installed (~2x scipy's on a few thousand queries of a scan, one thread), else a scipy tree built without the
-    balancing and compaction that only pay off for many queries."""
+def _kdtree(points_xyz: np.ndarray):
+    """An exact KD-tree for :func:`_knn_query`: small_gicp's when installed (~2x scipy's on a few thousand queries of a
+    scan, one thread), else a scipy tree built without the balancing and compaction that only pay off for many
+    queries."""
     if _small_gicp is not None:
-        index, _ = _small_gicp.KdTree(points_xyz, num_threads=1).batch_knn_search(queries_xyz, k, num_threads=1)
-        return np.asarray(index, dtype=np.int64).reshape(len(queries_xyz), k)
+        return _small_gicp.KdTree(points_xyz, num_threads=1)
     from scipy.spatial import cKDTree
 
-    _, index = cKDTree(points_xyz, balanced_tree=False, compact_nodes=False).query(queries_xyz, k=k)
+    return cKDTree(points_xyz, balanced_tree=False, compact_nodes=False)
+
+
+def _knn_query(tree, queries_xyz: np.ndarray, k: int) -> np.ndarray:
+    if _small_gicp is not None and isinstance(tree, _small_gicp.KdTree):
+        index, _ = tree.batch_knn_search(queries_xyz, k, num_threads=1)
+        return np.asarray(index, dtype=np.int64).reshape(len(queries_xyz), k)
+    _, index = tree.query(queries_xyz, k=k)
     return np.asarray(index).reshape(len(queries_xyz), k)
+
+
+def _knn(points_xyz: np.ndarray, queries_xyz: np.ndarray, k: int) -> np.ndarray:
+    """``(q, k)`` indices of the ``k`` nearest of ``points_xyz`` to each query (exact, :func:`_kdtree`)."""
+    return _knn_query(_kdtree(points_xyz), queries_xyz, k)
 
 
 def assess_degeneracy(
@@ -188,4 +220,4 @@ def assess_degeneracy(
     return summarize(normal_matrix(source_aligned_xyz[pick], constraints), threshold)
 
 
-__all__ = ["THIN_RATIO", "assess_degeneracy", "describe_direction", "matched_constraints", "normal_matrix", "summarize", "surface_constraints"]
+__all__ = ["THIN_RATIO", "SurfaceIndex", "assess_degeneracy", "describe_direction", "matched_constraints", "normal_matrix", "summarize", "surface_constraints"]

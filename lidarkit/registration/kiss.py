@@ -144,6 +144,9 @@ class KissRegistration(Registration):
         return np.array(kiss.last_pose, dtype=np.float64)
 
     def _align(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray) -> RegistrationResult:
+        return self._register(source_xyz, target_xyz, init_T)[2]()
+
+    def _register(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray):
         from kiss_icp.mapping import get_voxel_hash_map
         from kiss_icp.preprocess import Preprocessor
         from kiss_icp.registration import get_registration
@@ -163,6 +166,8 @@ class KissRegistration(Registration):
         local_map.update(voxel_down_sample(target, voxel * 0.5), identity)
         source_down = voxel_down_sample(voxel_down_sample(source, voxel * 0.5), voxel * 1.5)
         sigma = c.fixed_threshold_m if c.fixed_threshold_m is not None else c.initial_threshold_m
+        # (building the assessment's map index in a helper thread while kiss-icp registers was measured: no gain, kiss-icp
+        # holds the GIL for about half of its align call; benchmarks/results/icp/gil_probe.md)
         T = get_registration(kcfg).align_points_to_map(
             points=source_down,
             voxel_map=local_map,
@@ -171,8 +176,11 @@ class KissRegistration(Registration):
             kernel=sigma,
         )
         T = np.array(T, dtype=np.float64)
-        map_points = local_map.point_cloud()
-        assessment = assess_alignment(source_down, map_points, T, 3.0 * sigma)
-        return assessment.to_result(
-            T, extra={"iterations_reported": False, "threshold_sigma_m": sigma, "source_keypoints": len(source_down)}
-        )
+
+        def assess() -> RegistrationResult:
+            assessment = assess_alignment(source_down, local_map.point_cloud(), T, 3.0 * sigma)
+            return assessment.to_result(
+                T, extra={"iterations_reported": False, "threshold_sigma_m": sigma, "source_keypoints": len(source_down)}
+            )
+
+        return T, True, assess

@@ -7,11 +7,14 @@ and ``rmse_history`` holds the final RMSE only (``extra["iterations_reported"] =
 
 from __future__ import annotations
 
+import contextlib
+
 import numpy as np
 from pydantic import Field
 
 from lidarkit.geometry import transform_points
-from lidarkit.registration.assessment import assess_alignment
+from lidarkit.registration.assessment import assess_alignment, background
+from lidarkit.registration.degeneracy import SurfaceIndex
 from lidarkit.registration.base import Registration, RegistrationConfig, RegistrationResult
 from lidarkit.registration.planar import refuse_2d
 from lidarkit.registration.registry import register_icp
@@ -35,7 +38,7 @@ class Open3DSurfaceConfig(Open3DPointToPointConfig):
 class _Open3DBase(Registration):
     _kind = "point_to_point"
 
-    _last: tuple | None = None  # (fingerprint, Open3D cloud) of the last prepared cloud
+    _last: tuple = ()  # (fingerprint, Open3D cloud) of the last two prepared clouds (a frame registered again finds both)
 
     def _clouds(self, source_xyz: np.ndarray, target_xyz: np.ndarray):
         """Open3D clouds (downsampled, with normals for the surface variants). In a scan-to-scan chain the source
@@ -46,8 +49,9 @@ class _Open3DBase(Registration):
         clouds = []
         for pts in (target_xyz, source_xyz):
             key = (id(pts), pts.shape, pts.ctypes.data, pts[:: max(1, len(pts) // 32)].tobytes())
-            if self._last is not None and self._last[0] == key:
-                clouds.append(self._last[1])
+            hit = next((cloud for k, cloud in self._last if k == key), None)
+            if hit is not None:
+                clouds.append(hit)
                 continue
             pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
             if c.voxel_size_m is not None:
@@ -55,11 +59,14 @@ class _Open3DBase(Registration):
             if self._kind != "point_to_point":
                 # GICP builds its plane-like covariances from these normals (Open3D's own rule)
                 pc.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=c.normal_radius_m, max_nn=c.normal_max_nn))
-            self._last = (key, pc)
+            self._last = (*self._last[-1:], (key, pc))
             clouds.append(pc)
         return clouds[1], clouds[0]
 
     def _align(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray) -> RegistrationResult:
+        return self._register(source_xyz, target_xyz, init_T)[2]()
+
+    def _register(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray):
         import open3d as o3d
 
         reg = o3d.pipelines.registration
@@ -67,38 +74,53 @@ class _Open3DBase(Registration):
         if self._kind != "point_to_point":
             refuse_2d(self.name, source_xyz, target_xyz, "normals / covariances of a 2D scan's line-like neighbourhoods are undefined in 3D")
         src, dst = self._clouds(source_xyz, target_xyz)
+        dst_pts = np.asarray(dst.points)
+        # the assessment's pose-free part (the target's local-surface index) is built in another thread while Open3D,
+        # which releases the GIL, registers
+        surfaces = background(lambda: SurfaceIndex(dst_pts))
         criteria = reg.ICPConvergenceCriteria(c.relative_fitness, c.relative_rmse, c.max_iterations)
-        if self._kind == "gicp":
-            out = reg.registration_generalized_icp(
-                src, dst, c.max_correspondence_distance_m, init_T, reg.TransformationEstimationForGeneralizedICP(), criteria
-            )
-        else:
-            estimation = (
-                reg.TransformationEstimationPointToPoint()
-                if self._kind == "point_to_point"
-                else reg.TransformationEstimationPointToPlane()
-            )
-            out = reg.registration_icp(src, dst, c.max_correspondence_distance_m, init_T, estimation, criteria)
+        try:
+            if self._kind == "gicp":
+                out = reg.registration_generalized_icp(
+                    src, dst, c.max_correspondence_distance_m, init_T, reg.TransformationEstimationForGeneralizedICP(), criteria
+                )
+            else:
+                estimation = (
+                    reg.TransformationEstimationPointToPoint()
+                    if self._kind == "point_to_point"
+                    else reg.TransformationEstimationPointToPlane()
+                )
+                out = reg.registration_icp(src, dst, c.max_correspondence_distance_m, init_T, estimation, criteria)
+        except BaseException:
+            with contextlib.suppress(Exception):
+                surfaces.result()  # joined (its thread ends) before the error goes on
+            raise
+        prepared = surfaces.result()  # joined here: the preparation never outlives the registration
         T = np.array(out.transformation, dtype=np.float64)
-        src_pts, dst_pts = np.asarray(src.points), np.asarray(dst.points)
-        # Open3D's own final correspondences (nearest target point within the distance, at the returned pose): the
-        # assessment reuses them instead of indexing the target a second time
-        pairs = np.asarray(out.correspondence_set, dtype=np.int64).reshape(-1, 2)
-        dist2 = np.full(len(src_pts), np.inf)
-        index = np.zeros(len(src_pts), dtype=np.int64)
-        if len(pairs):
-            gap = transform_points(T, src_pts[pairs[:, 0]]) - dst_pts[pairs[:, 1]]
-            dist2[pairs[:, 0]] = np.einsum("ij,ij->i", gap, gap)
-            index[pairs[:, 0]] = pairs[:, 1]
-        assessment = assess_alignment(src_pts, dst_pts, T, c.max_correspondence_distance_m, dist2=dist2, index=index)
         no_pairs = float(out.fitness) <= 0
-        return assessment.to_result(
-            T,
-            converged=not no_pairs,
-            reason=f"Open3D fitness 0: no correspondence within {c.max_correspondence_distance_m} m" if no_pairs else "",
-            rmse_history=(float("nan") if no_pairs else float(out.inlier_rmse),),  # Open3D reports 0 for "no pairs"
-            extra={"iterations_reported": False, "open3d_fitness": float(out.fitness)},
-        )
+
+        def assess() -> RegistrationResult:
+            src_pts = np.asarray(src.points)
+            # Open3D's own final correspondences (nearest target point within the distance, at the returned pose): the
+            # assessment reuses them instead of indexing the target a second time
+            pairs = np.asarray(out.correspondence_set, dtype=np.int64).reshape(-1, 2)
+            dist2 = np.full(len(src_pts), np.inf)
+            index = np.zeros(len(src_pts), dtype=np.int64)
+            if len(pairs):
+                gap = transform_points(T, src_pts[pairs[:, 0]]) - dst_pts[pairs[:, 1]]
+                dist2[pairs[:, 0]] = np.einsum("ij,ij->i", gap, gap)
+                index[pairs[:, 0]] = pairs[:, 1]
+            assessment = assess_alignment(src_pts, dst_pts, T, c.max_correspondence_distance_m, dist2=dist2, index=index,
+                                          surfaces=prepared)
+            return assessment.to_result(
+                T,
+                converged=not no_pairs,
+                reason=f"Open3D fitness 0: no correspondence within {c.max_correspondence_distance_m} m" if no_pairs else "",
+                rmse_history=(float("nan") if no_pairs else float(out.inlier_rmse),),  # Open3D reports 0 for "no pairs"
+                extra={"iterations_reported": False, "open3d_fitness": float(out.fitness)},
+            )
+
+        return T, not no_pairs, assess
 
 
 @register_icp("open3d_point_to_point")

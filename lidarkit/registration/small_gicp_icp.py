@@ -44,10 +44,15 @@ if _small_gicp is not None:
         """small_gicp's GICP (or ICP / PLANE_ICP / VGICP) with its own downsampling and covariances."""
 
         Config = SmallGICPConfig
+        # small_gicp holds the GIL through its KdTree, covariance and align calls (benchmarks/results/icp/gil_probe.md):
+        # an assessment in a worker thread only contends for it (10 KITTI scans: 0.50 s in line, 0.53 s overlapped)
+        overlap_assessment = False
 
         def __init__(self, config: SmallGICPConfig | None = None, **params):
             super().__init__(config, **params)
-            self._cache: tuple | None = None  # (fingerprint, PointCloud, KdTree) of the last preprocessed cloud
+            # (fingerprint, PointCloud, KdTree) of the last two preprocessed clouds: a frame registered again (the odometry
+            # runner's overlap, when the gate turns the previous frame down) finds both of its clouds
+            self._cache: list[tuple] = []
 
         def _preprocess(self, points: np.ndarray):
             """small_gicp's own downsampling + covariances + KdTree, reused when the same cloud comes back (in a
@@ -55,17 +60,21 @@ if _small_gicp is not None:
             own odometry loop does)."""
             c = self.config
             key = (id(points), points.shape, points.ctypes.data, points[:: max(1, len(points) // 32)].tobytes(), c.downsampling_resolution_m)
-            if self._cache is not None and self._cache[0] == key:
-                return self._cache[1], self._cache[2]
+            for cached in self._cache:
+                if cached[0] == key:
+                    return cached[1], cached[2]
             # the steps small_gicp.align(points...) takes (voxel grid, KdTree built on one thread, 10-neighbour covariances):
             # preprocess_points builds its KdTree on num_threads threads, which costs more than it saves on a busy machine
             cloud = _small_gicp.voxelgrid_sampling(np.asarray(points, dtype=np.float64), c.downsampling_resolution_m, num_threads=c.num_threads)
             tree = _small_gicp.KdTree(cloud, num_threads=1)
             _small_gicp.estimate_covariances(cloud, tree, num_neighbors=10, num_threads=c.num_threads)
-            self._cache = (key, cloud, tree)
+            self._cache = [*self._cache[-1:], (key, cloud, tree)]
             return cloud, tree
 
         def _align(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray) -> RegistrationResult:
+            return self._register(source_xyz, target_xyz, init_T)[2]()
+
+        def _register(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray):
             c = self.config
             if c.registration_type != "ICP":
                 refuse_2d(self.name, source_xyz, target_xyz, f"{c.registration_type} needs surface covariances / normals, undefined on a 2D scan")
@@ -75,25 +84,35 @@ if _small_gicp is not None:
                     downsampling_resolution=c.downsampling_resolution_m, max_correspondence_distance=c.max_correspondence_distance_m,
                     num_threads=c.num_threads, max_iterations=c.max_iterations,
                 )
-                src = _small_gicp.voxelgrid_sampling(source_xyz, c.downsampling_resolution_m, num_threads=c.num_threads).points()[:, :3]
-                dst = _small_gicp.voxelgrid_sampling(target_xyz, c.downsampling_resolution_m, num_threads=c.num_threads).points()[:, :3]
                 T = np.array(out.T_target_source, dtype=np.float64)
-                assessment = assess_alignment(src, dst, T, c.max_correspondence_distance_m)
-            else:
-                # the same computation as small_gicp.align(points...) (identical poses), with the preprocessed clouds and
-                # the target's KdTree kept for the assessment instead of voxelizing and indexing both clouds again
-                target, target_tree = self._preprocess(target_xyz)
-                source, _ = self._preprocess(source_xyz)  # stays cached: the next frame's target
-                out = _small_gicp.align(
-                    target, source, target_tree, init_T, registration_type=c.registration_type,
-                    max_correspondence_distance=c.max_correspondence_distance_m, num_threads=c.num_threads, max_iterations=c.max_iterations,
-                )
-                T = np.array(out.T_target_source, dtype=np.float64)
+
+                def assess() -> RegistrationResult:
+                    src = _small_gicp.voxelgrid_sampling(source_xyz, c.downsampling_resolution_m, num_threads=c.num_threads).points()[:, :3]
+                    dst = _small_gicp.voxelgrid_sampling(target_xyz, c.downsampling_resolution_m, num_threads=c.num_threads).points()[:, :3]
+                    return self._result(out, T, assess_alignment(src, dst, T, c.max_correspondence_distance_m))
+
+                return T, bool(out.converged), assess
+            # the same computation as small_gicp.align(points...) (identical poses), with the preprocessed clouds and
+            # the target's KdTree kept for the assessment instead of voxelizing and indexing both clouds again
+            target, target_tree = self._preprocess(target_xyz)
+            source, _ = self._preprocess(source_xyz)  # stays cached: the next frame's target
+            out = _small_gicp.align(
+                target, source, target_tree, init_T, registration_type=c.registration_type,
+                max_correspondence_distance=c.max_correspondence_distance_m, num_threads=c.num_threads, max_iterations=c.max_iterations,
+            )
+            T = np.array(out.T_target_source, dtype=np.float64)
+
+            def assess() -> RegistrationResult:
                 src, dst = source.points()[:, :3], target.points()[:, :3]
                 # one thread: a single pass of nearest neighbours does not repay another OpenMP region (its threads spin
                 # while they wait, which on a busy machine costs more CPU than the pass saves)
                 index, dist2 = target_tree.batch_nearest_neighbor_search(transform_points(T, src), num_threads=1)
                 assessment = assess_alignment(src, dst, T, c.max_correspondence_distance_m, dist2=np.asarray(dist2), index=np.asarray(index))
+                return self._result(out, T, assessment)
+
+            return T, bool(out.converged), assess
+
+        def _result(self, out, T: np.ndarray, assessment) -> RegistrationResult:
             native = np.linalg.eigvalsh(0.5 * (np.asarray(out.H) + np.asarray(out.H).T))
             return assessment.to_result(
                 T,
