@@ -315,10 +315,11 @@ def main(argv=None) -> int:
     ap.add_argument("--draws", type=int, default=200)
     ap.add_argument("--variants", default=",".join(VARIANTS))
     ap.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "covariance")
+    ap.add_argument("--cache", type=Path, default=None, help="draws cache (default: <out>/draws)")
     args = ap.parse_args(argv)
     variants = [v for v in args.variants.split(",") if v in available_icp()]
     log = lambda msg: print(msg, file=sys.stderr, flush=True)  # noqa: E731
-    cache = args.out / "draws"
+    cache = args.cache if args.cache is not None else args.out / "draws"
     train = {name: [collect(sc, sd, args.train_draws, name, cache, log) for sc, sd in parse_runs(args.train)] for name in variants}
     fits = {name: fit_calibration(runs) for name, runs in train.items()}
     cal = {name: f[0] for name, f in fits.items()}

@@ -191,13 +191,20 @@ def main(argv=None) -> int:
     ap.add_argument("--draws", type=int, default=200)
     ap.add_argument("--corridor", default="corridor:1", help="run for the along/across ratio of the floor study ('' to skip)")
     ap.add_argument("--variants", default=",".join(cc.VARIANTS))
+    ap.add_argument("--register", default="", help="variants to register again for their own result features (iterations, ...)")
+    ap.add_argument("--only-collect", action="store_true", help="compute the feature caches, skip the study")
     ap.add_argument("--cache", type=Path, default=cc.REPO / "benchmarks" / "results" / "covariance" / "draws")
     ap.add_argument("--out", type=Path, default=cc.REPO / "benchmarks" / "results" / "covariance" / "features")
     args = ap.parse_args(argv)
     log = lambda msg: print(msg, file=sys.stderr, flush=True)  # noqa: E731
     train_runs, check_runs = cc.parse_runs(args.train), cc.parse_runs(args.check)
+    for name in [v for v in args.register.split(",") if v]:
+        for sc, sd in train_runs + check_runs:
+            cc.collect(sc, sd, args.train_draws if (sc, sd) in train_runs else args.draws, name, args.cache, log, features=True)
     for sc, sd in train_runs + check_runs:  # one pair draw serves every variant
         cc.replay_pose_features(sc, sd, args.train_draws if (sc, sd) in train_runs else args.draws, args.variants.split(","), args.cache, log)
+    if args.only_collect:
+        return 0
     results = {"command": " ".join(["benchmarks/covariance_features.py", *(sys.argv[1:] if argv is None else argv)]),
                "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "machine": describe_machine(machine_info()), "variants": {}}
     for name in args.variants.split(","):
