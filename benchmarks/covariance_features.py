@@ -68,11 +68,11 @@ def corr(x: np.ndarray, y: np.ndarray) -> float:
     return float(np.corrcoef(x[ok], y[ok])[0, 1])
 
 
-def load(scene: str, seed: int, draws: int, name: str, cache: Path, log) -> dict:
+def load(scene: str, seed: int, draws: int, name: str, cache: Path, log, features: bool = True) -> dict:
     """Cached draws with the calibrated NEES and their features (pose features replayed; result features if cached)."""
     run = cc.collect(scene, seed, draws, name, cache, log)
     feats = {}
-    pose = cc.replay_pose_features(scene, seed, draws, [name], cache, log)
+    pose = cc.replay_pose_features(scene, seed, draws, [name], cache, log) if features else {}
     if name in pose:
         feats.update(feature_matrix(pose[name], cc.POSE_FEATURES))
     path = cache / f"{scene}_s{seed}_{name}_{draws}_{cc.FEATURE_SUFFIX}.npz"
@@ -112,6 +112,33 @@ def study(name: str, train: list[dict], check: list[dict], labels_check: list[st
     ranked = [f for f in common if np.isfinite(out["features"][f]["corr_pairs_train"]) and "cells" in out["features"][f]]
     out["chosen"] = max(ranked, key=lambda f: abs(out["features"][f]["corr_pairs_train"])) if ranked else None
     return out
+
+
+def frame_study(check_nees: list[np.ndarray], n_frames: int = 40, resamples: int = 4000, seed: int = 0) -> dict:
+    """How much of the held-out seed-to-seed spread is the scene and how much the sampling of its frames.
+
+    Draw ``i`` of a run uses frame pair ``i % n_frames``: 200 draws are 40 frame pairs with 5 noise/guess draws
+    each. ``eta2``: share of the variance of log NEES explained by the frame pair (1/5 if the 5 draws of a frame were
+    as different as draws of different frames). The permutation deals the frame pairs of all held-out seeds at random
+    to the seeds (no scene effect left, the same 40 frames per seed): the spread of the seeds' log mean NEES it gives,
+    and the expected number of seeds meeting both targets."""
+    rng = np.random.default_rng(seed)
+    per_frame = np.array([[v[np.arange(len(v)) % n_frames == j] for j in range(n_frames)] for v in check_nees])  # seeds x frames x draws
+    eta2 = []
+    for v, frames in zip(check_nees, per_frame):
+        lv = np.log(v)
+        means = np.log(frames).mean(axis=1)
+        eta2.append(float(np.var(means[np.arange(len(v)) % n_frames]) / np.var(lv)))
+    pooled = per_frame.reshape(-1, per_frame.shape[-1])
+    spread, hits = [], 0
+    for _ in range(resamples):
+        deal = pooled[rng.permutation(len(pooled))].reshape(len(check_nees), -1)
+        spread.append(float(np.std(np.log(deal.mean(axis=1)))))
+        hits += sum(meets(row) for row in deal)
+    observed = float(np.std(np.log([v.mean() for v in check_nees])))
+    return {"eta2": eta2, "spread_observed": observed, "spread_permuted": float(np.mean(spread)),
+            "p_value": float(np.mean(np.array(spread) >= observed)), "cells_observed": int(sum(meets(v) for v in check_nees)),
+            "cells_permuted": hits / resamples}
 
 
 #: powers p of the floor-scaling experiment: floor b_j^2 times min(1, Sigma_jj / median training Sigma_jj)^p (0 = as now)
@@ -159,6 +186,8 @@ def render(results: dict) -> str:
              "cells meeting both targets with the scale term `s = exp(k (log feature - mean))` (k from the training pairs, coverage "
              "re-fitted on training). Chosen (bold) = largest |corr| on the training pairs; chosen before the held-out cells were seen.", ""]
     for name, r in results["variants"].items():
+        if "features" not in r:
+            continue
         lines += [f"## {name}", "", f"Cells without a scale term: {r['before']['cells']} of {len(r['check_labels'])}", "",
                   "| feature | corr pairs train | held-out | corr per seed train | held-out | slope k | cells train (of 4) | cells held-out | held-out mean NEES / inside per seed |",
                   "|---|---|---|---|---|---|---|---|---|"]
@@ -169,7 +198,19 @@ def render(results: dict) -> str:
                          f"{info['corr_seeds_check']:+.2f} | {info.get('slope', float('nan')):+.2f} | {info.get('train_cells', '-')} | "
                          f"{info.get('cells', '-')} | {seeds} |")
         lines.append("")
-    lines += ["## Floors scaled by the closed form (kiss in the corridor)", "",
+    lines += ["## Frames or scenes: where the held-out spread comes from", "",
+              "Draw i uses frame pair i mod 40 (200 draws = 40 frame pairs x 5 noise and initial-guess draws). eta^2 = share of "
+              "the variance of log NEES explained by the frame pair, per held-out seed (0.2 by chance). Spread = standard "
+              "deviation of the five held-out seeds' log mean NEES: observed, and when the 200 frame pairs of the five seeds are "
+              "dealt to the seeds at random (no scene effect; p = share of deals with at least the observed spread). Cells = "
+              "held-out seeds meeting both targets: observed, and expected under the random deal.", "",
+              "| variant | eta^2 per seed | spread observed | random deal | p | cells observed | random deal |", "|---|---|---|---|---|---|---|"]
+    for name, r in results["variants"].items():
+        fr = r.get("frames")
+        if fr:
+            lines.append(f"| {name} | {' '.join(f'{e:.2f}' for e in fr['eta2'])} | {fr['spread_observed']:.3f} | {fr['spread_permuted']:.3f} | "
+                         f"{fr['p_value']:.3f} | {fr['cells_observed']} | {fr['cells_permuted']:.2f} |")
+    lines += ["", "## Floors scaled by the closed form (kiss in the corridor)", "",
               "Floor `b_j^2` times `min(1, Sigma_jj / median training Sigma_jj)^p` (p = 0: the calibration as committed), "
               "coverage re-fitted on the training seeds; held-out street cells meeting both targets and the corridor's "
               "calibrated covariance along x over across (y), per draw: median (5th percentile, min).", "",
@@ -192,6 +233,7 @@ def main(argv=None) -> int:
     ap.add_argument("--corridor", default="corridor:1", help="run for the along/across ratio of the floor study ('' to skip)")
     ap.add_argument("--variants", default=",".join(cc.VARIANTS))
     ap.add_argument("--register", default="", help="variants to register again for their own result features (iterations, ...)")
+    ap.add_argument("--no-features", action="store_true", help="only the frame and floor studies (cached draws, no replay)")
     ap.add_argument("--only-collect", action="store_true", help="compute the feature caches, skip the study")
     ap.add_argument("--cache", type=Path, default=cc.REPO / "benchmarks" / "results" / "covariance" / "draws")
     ap.add_argument("--out", type=Path, default=cc.REPO / "benchmarks" / "results" / "covariance" / "features")
@@ -201,16 +243,17 @@ def main(argv=None) -> int:
     for name in [v for v in args.register.split(",") if v]:
         for sc, sd in train_runs + check_runs:
             cc.collect(sc, sd, args.train_draws if (sc, sd) in train_runs else args.draws, name, args.cache, log, features=True)
-    for sc, sd in train_runs + check_runs:  # one pair draw serves every variant
+    for sc, sd in ([] if args.no_features else train_runs + check_runs):  # one pair draw serves every variant
         cc.replay_pose_features(sc, sd, args.train_draws if (sc, sd) in train_runs else args.draws, args.variants.split(","), args.cache, log)
     if args.only_collect:
         return 0
     results = {"command": " ".join(["benchmarks/covariance_features.py", *(sys.argv[1:] if argv is None else argv)]),
                "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "machine": describe_machine(machine_info()), "variants": {}}
     for name in args.variants.split(","):
-        train = [load(sc, sd, args.train_draws, name, args.cache, log) for sc, sd in train_runs]
-        check = [load(sc, sd, args.draws, name, args.cache, log) for sc, sd in check_runs]
-        results["variants"][name] = study(name, train, check, [f"{sc}:{sd}" for sc, sd in check_runs])
+        train = [load(sc, sd, args.train_draws, name, args.cache, log, not args.no_features) for sc, sd in train_runs]
+        check = [load(sc, sd, args.draws, name, args.cache, log, not args.no_features) for sc, sd in check_runs]
+        results["variants"][name] = study(name, train, check, [f"{sc}:{sd}" for sc, sd in check_runs]) if not args.no_features else {}
+        results["variants"][name]["frames"] = frame_study([r["nees"] for r in check])
         corridor = None
         if args.corridor:
             sc, sd = cc.parse_runs(args.corridor)[0]
