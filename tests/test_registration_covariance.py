@@ -292,8 +292,6 @@ def test_every_variant_has_a_calibration():
     from lidarkit.registration.covariance import CALIBRATION
 
     for name in available_icp():
-        if name in ("knn", "pipeline"):  # experiments (leaf size, components composed by name): returned uncalibrated
-            continue
         entry = CALIBRATION[name]
         assert len(entry.factors) == len(entry.sigmas) == len(entry.trained_variance) == 6
         assert 0.5 < entry.coverage < 2.0
@@ -350,3 +348,13 @@ def test_calibration_pose_features_measure_the_correction_and_the_residuals():
     assert 1.0 <= at_truth["sigma_ratio"] < at_guess["sigma_ratio"]
     assert 0 < at_truth["n_eff"] <= at_truth["n_matched"] and 0 < at_truth["fit1"] <= 1
     assert set(at_truth) == set(bench.POSE_FEATURES)
+
+
+def test_default_pipeline_is_calibrated_like_kiss():
+    """The default pipeline composition registers a pair exactly as kiss does (same pose, same raw covariance), so its
+    calibration entry is kiss's and the calibrated covariances agree to rounding."""
+    pair = ScanPairs("street", seed=1, n_frames=3, n_beams=16, n_azimuths=512).draw(0)
+    kiss = get_icp("kiss").align(pair.source_xyz, pair.target_xyz, init_T=pair.init_T)
+    pipe = get_icp("pipeline").align(pair.source_xyz, pair.target_xyz, init_T=pair.init_T)
+    np.testing.assert_allclose(pipe.T_target_source, kiss.T_target_source, atol=1e-9)
+    np.testing.assert_allclose(pipe.covariance, kiss.covariance, rtol=1e-6, atol=1e-15)
