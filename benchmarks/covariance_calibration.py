@@ -122,13 +122,19 @@ def pose_features(source_xyz: np.ndarray, target_xyz: np.ndarray, T_est: np.ndar
     return out
 
 
-def collect(scene: str, seed: int, draws: int, name: str, cache: Path, log, features: bool = False) -> dict:
-    """``draws`` registrations of one variant on one scene/seed with the raw covariance (cached)."""
-    path = cache / f"{scene}_s{seed}_{name}_{draws}{'_' + FEATURE_SUFFIX if features else ''}.npz"
+#: frames per run: draw i uses frame pair i mod (N_FRAMES - 1), so 200 draws are 40 frame pairs x 5 draws
+N_FRAMES = 41
+
+
+def collect(scene: str, seed: int, draws: int, name: str, cache: Path, log, features: bool = False, n_frames: int = N_FRAMES) -> dict:
+    """``draws`` registrations of one variant on one scene/seed with the raw covariance (cached). ``n_frames`` >
+    ``draws``: every draw its own frame pair (a longer path through a longer scene of the same seed)."""
+    frames_tag = "" if n_frames == N_FRAMES else f"_f{n_frames}"
+    path = cache / f"{scene}_s{seed}_{name}_{draws}{frames_tag}{'_' + FEATURE_SUFFIX if features else ''}.npz"
     if path.exists():
         d = np.load(path, allow_pickle=False)
         return {k: d[k] for k in d.files}
-    pairs = ScanPairs(scene, seed=seed, n_frames=41)
+    pairs = ScanPairs(scene, seed=seed, n_frames=n_frames)
     icp = get_icp(name, calibrated_covariance=False)
     errors, covs, refs, weak, feats, index = [], [], [], [], [], []
     failed, t0 = 0, time.perf_counter()
@@ -316,6 +322,8 @@ def main(argv=None) -> int:
     ap.add_argument("--variants", default=",".join(VARIANTS))
     ap.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "covariance")
     ap.add_argument("--cache", type=Path, default=None, help="draws cache (default: <out>/draws)")
+    ap.add_argument("--check-frames", type=int, default=N_FRAMES,
+                    help=f"frames per check run ({N_FRAMES}: 40 frame pairs; draws + 1: one frame pair per draw)")
     args = ap.parse_args(argv)
     variants = [v for v in args.variants.split(",") if v in available_icp()]
     log = lambda msg: print(msg, file=sys.stderr, flush=True)  # noqa: E731
@@ -329,7 +337,8 @@ def main(argv=None) -> int:
     results = {
         "command": " ".join(["benchmarks/covariance_calibration.py", *(sys.argv[1:] if argv is None else argv)]),
         "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "machine": describe_machine(machine_info()),
-        "load_average": os.getloadavg()[0], "sensor": "32 beams x 1024 columns, range noise 0.02 m",
+        "load_average": os.getloadavg()[0], "sensor": "32 beams x 1024 columns, range noise 0.02 m"
+        + ("" if args.check_frames == N_FRAMES else f"; check runs: {args.check_frames} frames (one frame pair per draw)"),
         "train": {"runs": args.train, "draws": args.train_draws, "before_runs": args.before,
                   "calibration": {n: {"factors": list(c.factors), "sigmas": list(c.sigmas), "coverage": c.coverage,
                                       "trained_variance": list(c.trained_variance), **fits[n][1]} for n, c in cal.items()},
@@ -338,7 +347,7 @@ def main(argv=None) -> int:
         "check": {},
     }
     for sc, sd in parse_runs(args.check):
-        results["check"][f"{sc}:{sd}"] = {name: row(collect(sc, sd, args.draws, name, cache, log), cal[name], before[name], blk[name])
+        results["check"][f"{sc}:{sd}"] = {name: row(collect(sc, sd, args.draws, name, cache, log, n_frames=args.check_frames), cal[name], before[name], blk[name])
                                           for name in variants}
     args.out.mkdir(parents=True, exist_ok=True)
     write_text(args.out / "results.json", json.dumps(results, indent=2) + "\n")
