@@ -19,7 +19,10 @@ calibrated covariance) and the share inside the chi-square(6) 95 % bound (12.59)
    for small_gicp's result. The corridor rows also count how often the weakest direction is named "translation
    along x" (the corridor axis) and the ratio of the calibrated covariance along the axis to across it.
 
-Raw draws are cached per (scene, seed, variant, draws) under ``<out>/draws/`` so the tables can be re-rendered.
+Raw draws are cached per (scene, seed, variant, draws) under ``<out>/draws/`` so the tables can be re-rendered
+(``_f<n>``: check runs of ``--check-frames n``, one frame pair per draw when ``n > draws``; ``_feat``: with the
+per-pair features of :func:`collect`; ``_pose``: :func:`pose_features` replayed on a cache, see
+``covariance_features.py``).
 
     .venv/bin/python benchmarks/covariance_calibration.py --train street:0,street:2,street:4,street:6 --train-draws 100 \\
         --check street:1,street:3,street:5,corridor:1 --draws 200

@@ -13,7 +13,9 @@ recomputed at the cached estimate ``se3_exp(-xi) T_true``; ``RESULT_FEATURES`` o
 2. a scale term ``Sigma'' = s Sigma'`` with ``log s = a + k (log feature - mean)``: ``k`` from the pooled training
    pairs (least squares of ``log NEES`` on ``log feature``), then the coverage scalar re-fitted on the training NEES
    by the calibration's rule; the feature per variant is chosen on the training seeds only (largest pooled
-   ``|corr|``), and the held-out cells are counted before and after.
+   ``|corr|``), and the held-out cells are counted before and after;
+3. how much of the held-out seed-to-seed spread is the frame pairs (:func:`frame_study`) and, for kiss in the
+   corridor, floors scaled by the closed form (:func:`floor_study`).
 
     .venv/bin/python benchmarks/covariance_features.py --train street:0,street:2,street:4,street:6 --train-draws 100 \\
         --check street:1,street:3,street:5,street:7,street:8 --draws 200
