@@ -19,7 +19,10 @@ calibrated covariance) and the share inside the chi-square(6) 95 % bound (12.59)
    for small_gicp's result. The corridor rows also count how often the weakest direction is named "translation
    along x" (the corridor axis) and the ratio of the calibrated covariance along the axis to across it.
 
-Raw draws are cached per (scene, seed, variant, draws) under ``<out>/draws/`` so the tables can be re-rendered.
+Raw draws are cached per (scene, seed, variant, draws) under ``<out>/draws/`` so the tables can be re-rendered
+(``_f<n>``: check runs of ``--check-frames n``, one frame pair per draw when ``n > draws``; ``_feat``: with the
+per-pair features of :func:`collect`; ``_pose``: :func:`pose_features` replayed on a cache, see
+``covariance_features.py``).
 
     .venv/bin/python benchmarks/covariance_calibration.py --train street:0,street:2,street:4,street:6 --train-draws 100 \\
         --check street:1,street:3,street:5,corridor:1 --draws 200
@@ -72,15 +75,71 @@ def small_gicp_reference(pair, T_est: np.ndarray) -> np.ndarray:
     return Ad @ cov_right @ Ad.T
 
 
-def collect(scene: str, seed: int, draws: int, name: str, cache: Path, log) -> dict:
-    """``draws`` registrations of one variant on one scene/seed with the raw covariance (cached)."""
-    path = cache / f"{scene}_s{seed}_{name}_{draws}.npz"
+#: per-pair features stored with the draws: observable without ground truth (the variant's own result, the size of
+#: the correction it applied to the initial guess, and the final correspondences scored at one common inlier distance)
+RESULT_FEATURES = ("fitness", "rmse", "n_correspondences", "iterations", "converged")
+POSE_FEATURES = ("correction_t", "correction_r", "fit1", "rmse1", "n_matched", "n_eff", "plane_rms", "thickness", "sigma_ratio",
+                 "eig_min", "eig_ratio", "logdet_raw")
+FEATURE_SUFFIX = "feat"
+FEATURE_DISTANCE_M = 1.0
+
+
+def pose_features(source_xyz: np.ndarray, target_xyz: np.ndarray, T_est: np.ndarray, init_T: np.ndarray, range_noise_m: float,
+                  raw_cov: np.ndarray | None = None) -> dict:
+    """Features of a registered pair that need no ground truth: the correction applied to the guess
+    (``se3_log(T_est inv(init_T))``, m and rad), and the final correspondences within ``FEATURE_DISTANCE_M`` scored
+    the way the covariance sees them (public functions of ``degeneracy``/``covariance``, not the assessment): share
+    and RMS of the matches, matched and effective (1 m voxel) counts, the point-to-surface residual RMS, the mean
+    surface thickness, the residual sigma over the range noise (the censi residual variance estimate), the smallest
+    eigenvalue of the normal matrix and its ratio to the largest, and the log-determinant of the raw covariance."""
+    from lidarkit.geometry import transform_points
+    from lidarkit.registration.covariance import effective_observations
+    from lidarkit.registration.degeneracy import matched_constraints, normal_matrix
+    from lidarkit.registration.neighbors import NearestNeighbors
+
+    corr = se3_log(T_est @ se3_inverse(init_T))
+    out = {"correction_t": float(np.linalg.norm(corr[:3])), "correction_r": float(np.linalg.norm(corr[3:]))}
+    aligned = transform_points(T_est, source_xyz)
+    dist2, index = NearestNeighbors(target_xyz, backend="scipy", workers=1).query(aligned)
+    inlier = dist2 <= FEATURE_DISTANCE_M**2
+    n = int(inlier.sum())
+    out.update(fit1=n / max(len(source_xyz), 1), rmse1=float(np.sqrt(dist2[inlier].mean())) if n else float("nan"), n_matched=float(n))
+    if n < 3:
+        out.update({k: float("nan") for k in POSE_FEATURES if k not in out})
+        return out
+    matched, matched_index = aligned[inlier], index[inlier]
+    pick, M, thickness = matched_constraints(matched, target_xyz, matched_index, return_thickness=True)
+    p, q = matched[pick], target_xyz[matched_index[pick]]
+    r = np.einsum("nij,nj->ni", M, p - q)
+    dof = float(np.trace(M, axis1=1, axis2=2).sum())
+    d_s = p - T_est[:3, 3]
+    d_s /= np.linalg.norm(d_s, axis=1, keepdims=True)
+    d_t = q / np.linalg.norm(q, axis=1, keepdims=True)
+    Ms, Mt = np.einsum("nij,nj->ni", M, d_s), np.einsum("nij,nj->ni", M, d_t)
+    unit_var = float((Ms * Ms).sum() + (Mt * Mt).sum())
+    w = np.linalg.eigvalsh(normal_matrix(p, M))
+    out.update(n_eff=float(effective_observations(matched, 1.0)), plane_rms=float(np.sqrt((r * r).sum() / max(dof, 1.0))),
+               thickness=float(np.sqrt(np.mean(thickness))), sigma_ratio=float(np.sqrt((r * r).sum() / max(unit_var, 1e-12))) / range_noise_m,
+               eig_min=float(w[0]), eig_ratio=float(w[0] / w[-1]) if w[-1] > 0 else 0.0,
+               logdet_raw=float(np.linalg.slogdet(raw_cov)[1]) if raw_cov is not None else float("nan"))
+    return out
+
+
+#: frames per run: draw i uses frame pair i mod (N_FRAMES - 1), so 200 draws are 40 frame pairs x 5 draws
+N_FRAMES = 41
+
+
+def collect(scene: str, seed: int, draws: int, name: str, cache: Path, log, features: bool = False, n_frames: int = N_FRAMES) -> dict:
+    """``draws`` registrations of one variant on one scene/seed with the raw covariance (cached). ``n_frames`` >
+    ``draws``: every draw its own frame pair (a longer path through a longer scene of the same seed)."""
+    frames_tag = "" if n_frames == N_FRAMES else f"_f{n_frames}"
+    path = cache / f"{scene}_s{seed}_{name}_{draws}{frames_tag}{'_' + FEATURE_SUFFIX if features else ''}.npz"
     if path.exists():
         d = np.load(path, allow_pickle=False)
         return {k: d[k] for k in d.files}
-    pairs = ScanPairs(scene, seed=seed, n_frames=41)
+    pairs = ScanPairs(scene, seed=seed, n_frames=n_frames)
     icp = get_icp(name, calibrated_covariance=False)
-    errors, covs, refs, weak = [], [], [], []
+    errors, covs, refs, weak, feats, index = [], [], [], [], [], []
     failed, t0 = 0, time.perf_counter()
     for i in range(draws):
         pair = pairs.draw(i)
@@ -91,15 +150,61 @@ def collect(scene: str, seed: int, draws: int, name: str, cache: Path, log) -> d
         errors.append(se3_log(pair.T_target_source @ se3_inverse(res.T_target_source)))
         covs.append(res.covariance)
         weak.append(res.degeneracy.weakest_name)
+        index.append(i)
+        if features:
+            f = {"fitness": res.fitness, "rmse": res.rmse, "n_correspondences": res.n_correspondences, "iterations": res.iterations,
+                 "converged": float(res.converged)}
+            f.update(pose_features(pair.source_xyz, pair.target_xyz, res.T_target_source, pair.init_T, pairs.range_noise_m, res.covariance))
+            feats.append([f[k] for k in RESULT_FEATURES + POSE_FEATURES])
         if name == "open3d_point_to_plane":
             refs.append(open3d_reference(pair, res.T_target_source, pairs.range_noise_m))
         elif name == "small_gicp":
             refs.append(small_gicp_reference(pair, res.T_target_source))
     out = {"errors": np.array(errors).reshape(-1, 6), "covs": np.array(covs).reshape(-1, 6, 6), "weakest": np.array(weak, dtype="U64"),
-           "refs": np.array(refs).reshape(-1, 6, 6), "failed": np.array(failed), "seconds_per_pair": np.array((time.perf_counter() - t0) / draws)}
+           "refs": np.array(refs).reshape(-1, 6, 6), "failed": np.array(failed), "seconds_per_pair": np.array((time.perf_counter() - t0) / draws), "index": np.array(index)}
+    if features:
+        out["features"] = np.array(feats, dtype=np.float64).reshape(-1, len(RESULT_FEATURES + POSE_FEATURES))
+        out["feature_names"] = np.array(RESULT_FEATURES + POSE_FEATURES, dtype="U32")
     cache.mkdir(parents=True, exist_ok=True)
     np.savez(path, **out)
     log(f"{scene} seed {seed} {name}: {draws} draws, {failed} without covariance, {float(out['seconds_per_pair']):.2f} s/pair")
+    return out
+
+
+REPLAY_SUFFIX = "pose"
+
+
+def replay_pose_features(scene: str, seed: int, draws: int, names: list[str], cache: Path, log) -> dict[str, np.ndarray]:
+    """:func:`pose_features` for the cached draws of ``names`` without registering again: the estimate is
+    ``se3_exp(-xi) T_true`` from the cached error, the pair is drawn again from ``(seed, index)``, and one draw serves
+    every variant. Only for caches without failures (their order is then the draw index). Cached per variant."""
+    from lidarkit.geometry import se3_exp
+
+    out, todo = {}, {}
+    for name in names:
+        path = cache / f"{scene}_s{seed}_{name}_{draws}_{REPLAY_SUFFIX}.npz"
+        if path.exists():
+            out[name] = np.load(path)["features"]
+            continue
+        run = collect(scene, seed, draws, name, cache, log)
+        if int(run["failed"]) == 0 and len(run["errors"]) == draws:
+            todo[name] = run
+    if not todo:
+        return out
+    pairs = ScanPairs(scene, seed=seed, n_frames=41)
+    feats = {name: [] for name in todo}
+    t0 = time.perf_counter()
+    for i in range(draws):
+        pair = pairs.draw(i)
+        for name, run in todo.items():
+            T_est = se3_exp(-run["errors"][i]) @ pair.T_target_source
+            f = pose_features(pair.source_xyz, pair.target_xyz, T_est, pair.init_T, pairs.range_noise_m, run["covs"][i])
+            feats[name].append([f[k] for k in POSE_FEATURES])
+    for name, rows in feats.items():
+        out[name] = np.array(rows, dtype=np.float64)
+        np.savez(cache / f"{scene}_s{seed}_{name}_{draws}_{REPLAY_SUFFIX}.npz", features=out[name],
+                 feature_names=np.array(POSE_FEATURES, dtype="U32"))
+    log(f"{scene} seed {seed}: pose features of {len(todo)} variants replayed, {(time.perf_counter() - t0) / draws:.2f} s/draw")
     return out
 
 
@@ -219,10 +324,13 @@ def main(argv=None) -> int:
     ap.add_argument("--draws", type=int, default=200)
     ap.add_argument("--variants", default=",".join(VARIANTS))
     ap.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "covariance")
+    ap.add_argument("--cache", type=Path, default=None, help="draws cache (default: <out>/draws)")
+    ap.add_argument("--check-frames", type=int, default=N_FRAMES,
+                    help=f"frames per check run ({N_FRAMES}: 40 frame pairs; draws + 1: one frame pair per draw)")
     args = ap.parse_args(argv)
     variants = [v for v in args.variants.split(",") if v in available_icp()]
     log = lambda msg: print(msg, file=sys.stderr, flush=True)  # noqa: E731
-    cache = args.out / "draws"
+    cache = args.cache if args.cache is not None else args.out / "draws"
     train = {name: [collect(sc, sd, args.train_draws, name, cache, log) for sc, sd in parse_runs(args.train)] for name in variants}
     fits = {name: fit_calibration(runs) for name, runs in train.items()}
     cal = {name: f[0] for name, f in fits.items()}
@@ -232,7 +340,8 @@ def main(argv=None) -> int:
     results = {
         "command": " ".join(["benchmarks/covariance_calibration.py", *(sys.argv[1:] if argv is None else argv)]),
         "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "machine": describe_machine(machine_info()),
-        "load_average": os.getloadavg()[0], "sensor": "32 beams x 1024 columns, range noise 0.02 m",
+        "load_average": os.getloadavg()[0], "sensor": "32 beams x 1024 columns, range noise 0.02 m"
+        + ("" if args.check_frames == N_FRAMES else f"; check runs: {args.check_frames} frames (one frame pair per draw)"),
         "train": {"runs": args.train, "draws": args.train_draws, "before_runs": args.before,
                   "calibration": {n: {"factors": list(c.factors), "sigmas": list(c.sigmas), "coverage": c.coverage,
                                       "trained_variance": list(c.trained_variance), **fits[n][1]} for n, c in cal.items()},
@@ -241,7 +350,7 @@ def main(argv=None) -> int:
         "check": {},
     }
     for sc, sd in parse_runs(args.check):
-        results["check"][f"{sc}:{sd}"] = {name: row(collect(sc, sd, args.draws, name, cache, log), cal[name], before[name], blk[name])
+        results["check"][f"{sc}:{sd}"] = {name: row(collect(sc, sd, args.draws, name, cache, log, n_frames=args.check_frames), cal[name], before[name], blk[name])
                                           for name in variants}
     args.out.mkdir(parents=True, exist_ok=True)
     write_text(args.out / "results.json", json.dumps(results, indent=2) + "\n")

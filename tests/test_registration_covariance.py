@@ -292,8 +292,6 @@ def test_every_variant_has_a_calibration():
     from lidarkit.registration.covariance import CALIBRATION
 
     for name in available_icp():
-        if name in ("knn", "pipeline"):  # experiments (leaf size, components composed by name): returned uncalibrated
-            continue
         entry = CALIBRATION[name]
         assert len(entry.factors) == len(entry.sigmas) == len(entry.trained_variance) == 6
         assert 0.5 < entry.coverage < 2.0
@@ -325,3 +323,38 @@ def test_every_variant_returns_a_psd_calibrated_covariance(seed, kind):
             continue  # a clear refusal (too few points for a variant's own preprocessing) is fine here
         if res.covariance is not None:
             assert _is_psd(res.covariance), (name, kind)
+
+
+def test_calibration_pose_features_measure_the_correction_and_the_residuals():
+    """The per-pair features of the calibration study (no ground truth used): the correction is exactly the injected
+    guess perturbation, the residual RMS is smaller at the true pose than at the perturbed guess, and at the true pose
+    the point-to-surface residual sigma is at least the simulated 2 cm range noise (the sampling of the surface adds to
+    it, so it is not equal) and below its value at the guess."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "covariance_calibration.py"
+    spec = importlib.util.spec_from_file_location("covariance_calibration", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    pair = ScanPairs("street", seed=0, n_frames=3, n_beams=16, n_azimuths=512).draw(0)
+    at_truth = bench.pose_features(pair.source_xyz, pair.target_xyz, pair.T_target_source, pair.init_T, 0.02)
+    at_guess = bench.pose_features(pair.source_xyz, pair.target_xyz, pair.init_T, pair.init_T, 0.02)
+    injected = se3_log(pair.T_target_source @ se3_inverse(pair.init_T))
+    assert at_truth["correction_t"] == pytest.approx(np.linalg.norm(injected[:3]), rel=1e-9)
+    assert at_truth["correction_r"] == pytest.approx(np.linalg.norm(injected[3:]), rel=1e-9)
+    assert at_guess["correction_t"] == pytest.approx(0.0, abs=1e-12)
+    assert at_truth["plane_rms"] < at_guess["plane_rms"]
+    assert 1.0 <= at_truth["sigma_ratio"] < at_guess["sigma_ratio"]
+    assert 0 < at_truth["n_eff"] <= at_truth["n_matched"] and 0 < at_truth["fit1"] <= 1
+    assert set(at_truth) == set(bench.POSE_FEATURES)
+
+
+def test_default_pipeline_is_calibrated_like_kiss():
+    """The default pipeline composition registers a pair exactly as kiss does (same pose, same raw covariance), so its
+    calibration entry is kiss's and the calibrated covariances agree to rounding."""
+    pair = ScanPairs("street", seed=1, n_frames=3, n_beams=16, n_azimuths=512).draw(0)
+    kiss = get_icp("kiss").align(pair.source_xyz, pair.target_xyz, init_T=pair.init_T)
+    pipe = get_icp("pipeline").align(pair.source_xyz, pair.target_xyz, init_T=pair.init_T)
+    np.testing.assert_allclose(pipe.T_target_source, kiss.T_target_source, atol=1e-9)
+    np.testing.assert_allclose(pipe.covariance, kiss.covariance, rtol=1e-6, atol=1e-15)
