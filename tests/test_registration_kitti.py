@@ -55,17 +55,20 @@ def test_best_variants_within_2cm_0p05deg(pairs, pair, name):
     assert dt < 0.02 and dr < 0.05, (name, dt, dr)
 
 
-def test_small_gicp_covariance_repeats_exactly_with_two_threads(pairs):
-    """small_gicp's voxel grid returns its points in a varying order on two threads; the covariance and the degeneracy
-    summary of the same alignment must not change with it (they did by ~3 % before the points were ordered by voxel)."""
+def test_small_gicp_covariance_repeats_with_two_threads(pairs):
+    """small_gicp's voxel grid returns its points in a varying order on two threads; the assessment orders them by
+    voxel, so the covariance and the degeneracy summary of the same alignment no longer follow that order (they
+    changed by ~3 % before). What remains on two threads (~1.5e-4) is the voxel grid itself: a few of its points move
+    by 2-10 cm between runs. On one thread the result repeats exactly."""
     if "small_gicp" not in available_icp():
         pytest.skip("small_gicp not installed")
     src, dst, _ = pairs[(94, 95)]
     for registration_type in ("GICP", "VGICP"):
-        runs = [get_icp("small_gicp", num_threads=2, registration_type=registration_type).align(src, dst) for _ in range(8)]
-        for res in runs[1:]:
-            assert np.allclose(res.covariance, runs[0].covariance, rtol=1e-9, atol=0), registration_type
-            assert np.allclose(res.degeneracy.eigenvalues, runs[0].degeneracy.eigenvalues, rtol=1e-9, atol=0), registration_type
+        for threads, rtol in ((2, 1e-3), (1, 1e-12)):
+            runs = [get_icp("small_gicp", num_threads=threads, registration_type=registration_type).align(src, dst) for _ in range(6)]
+            for res in runs[1:]:
+                assert np.allclose(res.covariance, runs[0].covariance, rtol=rtol, atol=0), (registration_type, threads)
+                assert np.allclose(res.degeneracy.eigenvalues, runs[0].degeneracy.eigenvalues, rtol=rtol, atol=0), (registration_type, threads)
 
 
 @pytest.mark.parametrize("name, tol_m, tol_deg", [("kiss", 0.05, 0.15), ("open3d_point_to_plane", 0.03, 0.1)])

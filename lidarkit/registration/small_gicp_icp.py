@@ -58,26 +58,31 @@ if _small_gicp is not None:
 
         def __init__(self, config: SmallGICPConfig | None = None, **params):
             super().__init__(config, **params)
-            # (fingerprint, PointCloud, KdTree) of the last two preprocessed clouds: a frame registered again (the odometry
-            # runner's overlap, when the gate turns the previous frame down) finds both of its clouds
+            # (fingerprint, PointCloud, KdTree, voxel-ordered points, rank) of the last two preprocessed clouds: a frame
+            # registered again (the odometry runner's overlap, when the gate turns the previous frame down) finds both
             self._cache: list[tuple] = []
 
         def _preprocess(self, points: np.ndarray):
             """small_gicp's own downsampling + covariances + KdTree, reused when the same cloud comes back (in a
             scan-to-scan chain the source of one frame is the target of the next: preprocessed once, as small_gicp's
-            own odometry loop does)."""
+            own odometry loop does). Also the cloud's points in voxel order and each point's rank in that order, for the
+            assessment (:func:`voxel_order`)."""
             c = self.config
             key = (id(points), points.shape, points.ctypes.data, points[:: max(1, len(points) // 32)].tobytes(), c.downsampling_resolution_m)
             for cached in self._cache:
                 if cached[0] == key:
-                    return cached[1], cached[2]
+                    return cached[1:]
             # the steps small_gicp.align(points...) takes (voxel grid, KdTree built on one thread, 10-neighbour covariances):
             # preprocess_points builds its KdTree on num_threads threads, which costs more than it saves on a busy machine
             cloud = _small_gicp.voxelgrid_sampling(np.asarray(points, dtype=np.float64), c.downsampling_resolution_m, num_threads=c.num_threads)
             tree = _small_gicp.KdTree(cloud, num_threads=1)
             _small_gicp.estimate_covariances(cloud, tree, num_neighbors=10, num_threads=c.num_threads)
-            self._cache = [*self._cache[-1:], (key, cloud, tree)]
-            return cloud, tree
+            xyz = cloud.points()[:, :3]
+            order = voxel_order(xyz, c.downsampling_resolution_m)
+            rank = np.empty_like(order)
+            rank[order] = np.arange(len(order))
+            self._cache = [*self._cache[-1:], (key, cloud, tree, xyz[order], rank)]
+            return self._cache[-1][1:]
 
         def _align(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray) -> RegistrationResult:
             return self._register(source_xyz, target_xyz, init_T)[2]()
@@ -104,8 +109,8 @@ if _small_gicp is not None:
                 return T, bool(out.converged), assess
             # the same computation as small_gicp.align(points...) (identical poses), with the preprocessed clouds and
             # the target's KdTree kept for the assessment instead of voxelizing and indexing both clouds again
-            target, target_tree = self._preprocess(target_xyz)
-            source, _ = self._preprocess(source_xyz)  # stays cached: the next frame's target
+            target, target_tree, dst, dst_rank = self._preprocess(target_xyz)
+            source, _, src, _ = self._preprocess(source_xyz)  # stays cached: the next frame's target
             out = _small_gicp.align(
                 target, source, target_tree, init_T, registration_type=c.registration_type,
                 max_correspondence_distance=c.max_correspondence_distance_m, num_threads=c.num_threads, max_iterations=c.max_iterations,
@@ -113,16 +118,10 @@ if _small_gicp is not None:
             T = np.array(out.T_target_source, dtype=np.float64)
 
             def assess() -> RegistrationResult:
-                src, dst = source.points()[:, :3], target.points()[:, :3]
-                src = src[voxel_order(src, c.downsampling_resolution_m)]
-                dst_order = voxel_order(dst, c.downsampling_resolution_m)
-                dst = dst[dst_order]
                 # one thread: a single pass of nearest neighbours does not repay another OpenMP region (its threads spin
                 # while they wait, which on a busy machine costs more CPU than the pass saves)
                 index, dist2 = target_tree.batch_nearest_neighbor_search(transform_points(T, src), num_threads=1)
-                rank = np.empty_like(dst_order)
-                rank[dst_order] = np.arange(len(dst_order))
-                index = rank[np.asarray(index)]  # the tree's indices into the voxel-ordered target
+                index = dst_rank[np.asarray(index)]  # the tree's indices into the voxel-ordered target
                 assessment = assess_alignment(src, dst, T, c.max_correspondence_distance_m, dist2=np.asarray(dist2), index=index)
                 return self._result(out, T, assessment)
 
