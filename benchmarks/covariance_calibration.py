@@ -20,7 +20,7 @@ calibrated covariance) and the share inside the chi-square(6) 95 % bound (12.59)
    along x" (the corridor axis) and the ratio of the calibrated covariance along the axis to across it.
 
 Raw draws are cached per (scene, seed, variant, draws) under ``<out>/draws/`` so the tables can be re-rendered
-(``_f<n>``: check runs of ``--check-frames n``, one frame pair per draw when ``n > draws``; ``_feat``: with the
+(``_f<n>``: training or check runs of ``--train-frames n`` / ``--check-frames n``, one frame pair per draw when ``n > draws``; ``_feat``: with the
 per-pair features of :func:`collect`; ``_pose``: :func:`pose_features` replayed on a cache, see
 ``covariance_features.py``).
 
@@ -325,13 +325,15 @@ def main(argv=None) -> int:
     ap.add_argument("--variants", default=",".join(VARIANTS))
     ap.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "covariance")
     ap.add_argument("--cache", type=Path, default=None, help="draws cache (default: <out>/draws)")
-    ap.add_argument("--check-frames", type=int, default=N_FRAMES,
-                    help=f"frames per check run ({N_FRAMES}: 40 frame pairs; draws + 1: one frame pair per draw)")
+    for which in ("train", "check"):
+        ap.add_argument(f"--{which}-frames", type=int, default=N_FRAMES,
+                        help=f"frames per {which} run ({N_FRAMES}: 40 frame pairs; draws + 1: one frame pair per draw)")
     args = ap.parse_args(argv)
     variants = [v for v in args.variants.split(",") if v in available_icp()]
     log = lambda msg: print(msg, file=sys.stderr, flush=True)  # noqa: E731
     cache = args.cache if args.cache is not None else args.out / "draws"
-    train = {name: [collect(sc, sd, args.train_draws, name, cache, log) for sc, sd in parse_runs(args.train)] for name in variants}
+    train = {name: [collect(sc, sd, args.train_draws, name, cache, log, n_frames=args.train_frames) for sc, sd in parse_runs(args.train)]
+             for name in variants}
     fits = {name: fit_calibration(runs) for name, runs in train.items()}
     cal = {name: f[0] for name, f in fits.items()}
     before = {name: factor_floor([collect(sc, sd, args.train_draws, name, cache, log) for sc, sd in parse_runs(args.before)]) for name in variants}
@@ -341,7 +343,8 @@ def main(argv=None) -> int:
         "command": " ".join(["benchmarks/covariance_calibration.py", *(sys.argv[1:] if argv is None else argv)]),
         "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "machine": describe_machine(machine_info()),
         "load_average": os.getloadavg()[0], "sensor": "32 beams x 1024 columns, range noise 0.02 m"
-        + ("" if args.check_frames == N_FRAMES else f"; check runs: {args.check_frames} frames (one frame pair per draw)"),
+        + "".join(f"; {w} runs: {n} frames (one frame pair per draw)" for w, n in (("training", args.train_frames), ("check", args.check_frames))
+                  if n != N_FRAMES),
         "train": {"runs": args.train, "draws": args.train_draws, "before_runs": args.before,
                   "calibration": {n: {"factors": list(c.factors), "sigmas": list(c.sigmas), "coverage": c.coverage,
                                       "trained_variance": list(c.trained_variance), **fits[n][1]} for n, c in cal.items()},
