@@ -5,8 +5,8 @@ initial guess, frames along the path). Every variant registers each pair with it
 covariance; the error ``xi = se3_log(T_true inv(T_est))`` is scored against it: NEES ``xi^T Sigma^-1 xi`` (6 for a
 calibrated covariance) and the share inside the chi-square(6) 95 % bound (12.59).
 
-1. Training (``--train``, street seeds 0, 2, 4 and 6 by default): per variant and tangent-space axis a variance
-   factor ``f_j`` and a systematic sigma ``b_j`` with ``E[xi_j^2 | Sigma_jj] = f_j Sigma_jj + b_j^2`` over the pooled
+1. Training (``--train``, street seeds 0, 2, 4 and 6 by default; ``CALIBRATION`` with ``--train-frames 201``): per
+   variant and tangent-space axis a variance factor ``f_j`` and a systematic sigma ``b_j`` with ``E[xi_j^2 | Sigma_jj] = f_j Sigma_jj + b_j^2`` over the pooled
    draws of all seeds, the largest closed-form variance per axis (the range the factors were measured on; beyond it a
    factor does not shrink), and one coverage scalar ``c`` per variant that puts 94.5 % of the pooled training NEES
    inside the 95 % bound (or their mean at 5 when heavy tails would push it lower)
@@ -25,7 +25,7 @@ per-pair features of :func:`collect`; ``_pose``: :func:`pose_features` replayed 
 ``covariance_features.py``).
 
     .venv/bin/python benchmarks/covariance_calibration.py --train street:0,street:2,street:4,street:6 --train-draws 100 \\
-        --check street:1,street:3,street:5,corridor:1 --draws 200
+        --train-frames 201 --check street:1,street:3,street:5,street:7,street:8,corridor:1 --draws 200
 """
 
 from __future__ import annotations
