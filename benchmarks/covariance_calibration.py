@@ -5,8 +5,8 @@ initial guess, frames along the path). Every variant registers each pair with it
 covariance; the error ``xi = se3_log(T_true inv(T_est))`` is scored against it: NEES ``xi^T Sigma^-1 xi`` (6 for a
 calibrated covariance) and the share inside the chi-square(6) 95 % bound (12.59).
 
-1. Training (``--train``, street seeds 0, 2, 4 and 6 by default): per variant and tangent-space axis a variance
-   factor ``f_j`` and a systematic sigma ``b_j`` with ``E[xi_j^2 | Sigma_jj] = f_j Sigma_jj + b_j^2`` over the pooled
+1. Training (``--train``, street seeds 0, 2, 4 and 6 by default; ``CALIBRATION`` with ``--train-frames 201``): per
+   variant and tangent-space axis a variance factor ``f_j`` and a systematic sigma ``b_j`` with ``E[xi_j^2 | Sigma_jj] = f_j Sigma_jj + b_j^2`` over the pooled
    draws of all seeds, the largest closed-form variance per axis (the range the factors were measured on; beyond it a
    factor does not shrink), and one coverage scalar ``c`` per variant that puts 94.5 % of the pooled training NEES
    inside the 95 % bound (or their mean at 5 when heavy tails would push it lower)
@@ -20,12 +20,12 @@ calibrated covariance) and the share inside the chi-square(6) 95 % bound (12.59)
    along x" (the corridor axis) and the ratio of the calibrated covariance along the axis to across it.
 
 Raw draws are cached per (scene, seed, variant, draws) under ``<out>/draws/`` so the tables can be re-rendered
-(``_f<n>``: check runs of ``--check-frames n``, one frame pair per draw when ``n > draws``; ``_feat``: with the
+(``_f<n>``: training or check runs of ``--train-frames n`` / ``--check-frames n``, one frame pair per draw when ``n > draws``; ``_feat``: with the
 per-pair features of :func:`collect`; ``_pose``: :func:`pose_features` replayed on a cache, see
 ``covariance_features.py``).
 
     .venv/bin/python benchmarks/covariance_calibration.py --train street:0,street:2,street:4,street:6 --train-draws 100 \\
-        --check street:1,street:3,street:5,corridor:1 --draws 200
+        --train-frames 201 --check street:1,street:3,street:5,street:7,street:8,corridor:1 --draws 200
 """
 
 from __future__ import annotations
@@ -325,13 +325,15 @@ def main(argv=None) -> int:
     ap.add_argument("--variants", default=",".join(VARIANTS))
     ap.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "covariance")
     ap.add_argument("--cache", type=Path, default=None, help="draws cache (default: <out>/draws)")
-    ap.add_argument("--check-frames", type=int, default=N_FRAMES,
-                    help=f"frames per check run ({N_FRAMES}: 40 frame pairs; draws + 1: one frame pair per draw)")
+    for which in ("train", "check"):
+        ap.add_argument(f"--{which}-frames", type=int, default=N_FRAMES,
+                        help=f"frames per {which} run ({N_FRAMES}: 40 frame pairs; draws + 1: one frame pair per draw)")
     args = ap.parse_args(argv)
     variants = [v for v in args.variants.split(",") if v in available_icp()]
     log = lambda msg: print(msg, file=sys.stderr, flush=True)  # noqa: E731
     cache = args.cache if args.cache is not None else args.out / "draws"
-    train = {name: [collect(sc, sd, args.train_draws, name, cache, log) for sc, sd in parse_runs(args.train)] for name in variants}
+    train = {name: [collect(sc, sd, args.train_draws, name, cache, log, n_frames=args.train_frames) for sc, sd in parse_runs(args.train)]
+             for name in variants}
     fits = {name: fit_calibration(runs) for name, runs in train.items()}
     cal = {name: f[0] for name, f in fits.items()}
     before = {name: factor_floor([collect(sc, sd, args.train_draws, name, cache, log) for sc, sd in parse_runs(args.before)]) for name in variants}
@@ -341,7 +343,8 @@ def main(argv=None) -> int:
         "command": " ".join(["benchmarks/covariance_calibration.py", *(sys.argv[1:] if argv is None else argv)]),
         "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "machine": describe_machine(machine_info()),
         "load_average": os.getloadavg()[0], "sensor": "32 beams x 1024 columns, range noise 0.02 m"
-        + ("" if args.check_frames == N_FRAMES else f"; check runs: {args.check_frames} frames (one frame pair per draw)"),
+        + "".join(f"; {w} runs: {n} frames (one frame pair per draw)" for w, n in (("training", args.train_frames), ("check", args.check_frames))
+                  if n != N_FRAMES),
         "train": {"runs": args.train, "draws": args.train_draws, "before_runs": args.before,
                   "calibration": {n: {"factors": list(c.factors), "sigmas": list(c.sigmas), "coverage": c.coverage,
                                       "trained_variance": list(c.trained_variance), **fits[n][1]} for n, c in cal.items()},
