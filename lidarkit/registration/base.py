@@ -417,7 +417,11 @@ class Registration:
         return result.T_target_source, bool(result.converged), lambda: result
 
     def _align(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray) -> RegistrationResult:
-        raise NotImplementedError
+        """The whole alignment at once: a variant implements this or :meth:`_register` (then this runs its assessment
+        at once)."""
+        if type(self)._register is Registration._register:
+            raise NotImplementedError
+        return self._register(source_xyz, target_xyz, init_T)[2]()
 
     # stateful API (kiss); stateless variants refuse it so the odometry runner can tell them apart
     def reset(self) -> None:

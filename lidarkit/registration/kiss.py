@@ -143,9 +143,6 @@ class KissRegistration(Registration):
         kiss.register_frame(frame, times)
         return np.array(kiss.last_pose, dtype=np.float64)
 
-    def _align(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray) -> RegistrationResult:
-        return self._register(source_xyz, target_xyz, init_T)[2]()
-
     def _register(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray):
         from kiss_icp.mapping import get_voxel_hash_map
         from kiss_icp.preprocess import Preprocessor

@@ -63,9 +63,6 @@ class _Open3DBase(Registration):
             clouds.append(pc)
         return clouds[1], clouds[0]
 
-    def _align(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray) -> RegistrationResult:
-        return self._register(source_xyz, target_xyz, init_T)[2]()
-
     def _register(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray):
         import open3d as o3d
 

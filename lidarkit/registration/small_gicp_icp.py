@@ -84,9 +84,6 @@ if _small_gicp is not None:
             self._cache = [*self._cache[-1:], (key, cloud, tree, xyz[order], rank)]
             return self._cache[-1][1:]
 
-        def _align(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray) -> RegistrationResult:
-            return self._register(source_xyz, target_xyz, init_T)[2]()
-
         def _register(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray):
             c = self.config
             if c.registration_type != "ICP":
