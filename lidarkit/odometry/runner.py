@@ -529,4 +529,5 @@ def frame_covariance(previous_xyz: np.ndarray, points_xyz: np.ndarray, T_world_p
     assessment = assess_alignment(source, target, T_rel, FRAME_COVARIANCE_INLIER_M)
     if assessment.covariance is None:
         return np.full((6, 6), np.nan), float("nan")
-    return calibrate(assessment.covariance, variant, assessment.surface_step), float(assessment.degeneracy.eigenvalues[0])
+    # without the step (CALIBRATION_WITHOUT_STEP): the step of this pair of voxelized scans is not the variant's own
+    return calibrate(assessment.covariance, variant), float(assessment.degeneracy.eigenvalues[0])
