@@ -6,13 +6,14 @@ covariance; the error ``xi = se3_log(T_true inv(T_est))`` is scored against it: 
 calibrated covariance) and the share inside the chi-square(6) 95 % bound (12.59).
 
 1. Training (``--train``, street seeds 0, 2, 4 and 6 by default; ``CALIBRATION`` with ``--train-frames 201``): per
-   variant and tangent-space axis a variance factor ``f_j`` and a systematic sigma ``b_j`` with ``E[xi_j^2 | Sigma_jj] = f_j Sigma_jj + b_j^2`` over the pooled
-   draws of all seeds, the largest closed-form variance per axis (the range the factors were measured on; beyond it a
-   factor does not shrink), and one coverage scalar ``c`` per variant that puts 94.5 % of the pooled training NEES
-   inside the 95 % bound (or their mean at 5 when heavy tails would push it lower)
-   (``lidarkit.registration.covariance.CALIBRATION``). The leave-one-seed-out NEES (each training seed scored with
-   the factors learned on the others) are reported as the training-side estimate of the held-out spread. For comparison: the block factors (translation, rotation) and
-   the previous calibration (factor and floor learned on ``--before``, street seeds 0 and 2) from the same draws.
+   variant the calibration of ``covariance_fit.py`` over the pooled draws of all seeds: per-axis gains of the result's
+   point-to-surface step (where it predicts the error), a variance factor ``f_j`` and a systematic sigma ``b_j`` of
+   what the step leaves, the largest closed-form variance per axis (beyond it a factor does not shrink), and one
+   coverage scalar ``c`` that puts 94.5 % of the pooled training NEES inside the 95 % bound (or their mean at 5 when
+   heavy tails would push it lower) (``lidarkit.registration.covariance.CALIBRATION``). The leave-one-seed-out NEES
+   (each training seed scored with the calibration learned on the others) are reported as the training-side estimate
+   of the held-out spread. For comparison, from the same draws: the block factors (translation, rotation) and the
+   previous calibration (the same without the step term).
 2. Check (``--check``, scenes and seeds not used for training): the calibration applied unchanged. References
    measured on the same pairs: Open3D's ``get_information_matrix_from_point_clouds`` (times the known range variance)
    for the Open3D point-to-plane result, small_gicp's Hessian (inverse, moved to the left/target-frame convention)
@@ -24,8 +25,8 @@ Raw draws are cached per (scene, seed, variant, draws) under ``<out>/draws/`` so
 per-pair features of :func:`collect`; ``_pose``: :func:`pose_features` replayed on a cache, see
 ``covariance_features.py``).
 
-    .venv/bin/python benchmarks/covariance_calibration.py --train street:0,street:2,street:4,street:6 --train-draws 100 \\
-        --train-frames 201 --check street:1,street:3,street:5,street:7,street:8,corridor:1 --draws 200
+    .venv/bin/python benchmarks/covariance_calibration.py   # training street 0, 2, 4, 6 (100 draws); check street 1, 3, 5, 7, 8
+                                                             # and corridor 1 (200 draws); one frame pair per draw
 """
 
 from __future__ import annotations
@@ -43,11 +44,15 @@ from lidarkit.atomic import write_text
 from lidarkit.bench.machine import describe_machine, machine_info
 from lidarkit.geometry import se3_inverse, se3_log
 from lidarkit.registration import available_icp, get_icp
-from lidarkit.registration.covariance import AxisCalibration, adjoint, apply_calibration, nees, safe_inverse
+from lidarkit.registration.covariance import AxisCalibration, adjoint, nees, safe_inverse
 from lidarkit.sim.scan_pairs import ScanPairs
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from covariance_fit import (  # noqa: E402,F401 - re-exported for covariance_features.py and covariance_odometry.py
+    CHI2_6_95, MIN_MEAN_NEES, STEP_MIN_CORRELATION, TARGET_INSIDE, apply_all, block_factors, fit_calibration, nees_values, scaled,
+)
+
 REPO = Path(__file__).resolve().parents[1]
-CHI2_6_95 = 12.5916
 VARIANTS = ("vanilla", "ground_filtered", "open3d_point_to_point", "open3d_point_to_plane", "open3d_gicp", "small_gicp", "kiss", "genz")
 AXES = ("tx", "ty", "tz", "rx", "ry", "rz")
 
@@ -136,10 +141,11 @@ def collect(scene: str, seed: int, draws: int, name: str, cache: Path, log, feat
     path = cache / f"{scene}_s{seed}_{name}_{draws}{frames_tag}{'_' + FEATURE_SUFFIX if features else ''}.npz"
     if path.exists():
         d = np.load(path, allow_pickle=False)
-        return {k: d[k] for k in d.files}
+        if "steps" in d.files:  # (caches from before the point-to-surface step are drawn again)
+            return {k: d[k] for k in d.files}
     pairs = ScanPairs(scene, seed=seed, n_frames=n_frames)
     icp = get_icp(name, calibrated_covariance=False)
-    errors, covs, refs, weak, feats, index = [], [], [], [], [], []
+    errors, covs, steps, refs, weak, feats, index = [], [], [], [], [], [], []
     failed, t0 = 0, time.perf_counter()
     for i in range(draws):
         pair = pairs.draw(i)
@@ -149,6 +155,7 @@ def collect(scene: str, seed: int, draws: int, name: str, cache: Path, log, feat
             continue
         errors.append(se3_log(pair.T_target_source @ se3_inverse(res.T_target_source)))
         covs.append(res.covariance)
+        steps.append(res.surface_step)
         weak.append(res.degeneracy.weakest_name)
         index.append(i)
         if features:
@@ -160,7 +167,7 @@ def collect(scene: str, seed: int, draws: int, name: str, cache: Path, log, feat
             refs.append(open3d_reference(pair, res.T_target_source, pairs.range_noise_m))
         elif name == "small_gicp":
             refs.append(small_gicp_reference(pair, res.T_target_source))
-    out = {"errors": np.array(errors).reshape(-1, 6), "covs": np.array(covs).reshape(-1, 6, 6), "weakest": np.array(weak, dtype="U64"),
+    out = {"errors": np.array(errors).reshape(-1, 6), "covs": np.array(covs).reshape(-1, 6, 6), "steps": np.array(steps).reshape(-1, 6), "weakest": np.array(weak, dtype="U64"),
            "refs": np.array(refs).reshape(-1, 6, 6), "failed": np.array(failed), "seconds_per_pair": np.array((time.perf_counter() - t0) / draws), "index": np.array(index)}
     if features:
         out["features"] = np.array(feats, dtype=np.float64).reshape(-1, len(RESULT_FEATURES + POSE_FEATURES))
@@ -216,80 +223,10 @@ def score(errors: np.ndarray, covs: np.ndarray) -> dict:
             "n": int(len(values))}
 
 
-#: the fitted factor of an axis is at least this share of the plain ratio mean(xi^2) / mean(Sigma): a weak direction
-#: (a corridor's axis) keeps most of its large variance instead of being replaced by the constant floor
-MIN_SCALE_SHARE = 0.25
-
-
-def axis_calibration(runs: list[dict]) -> tuple[np.ndarray, np.ndarray]:
-    """Per axis ``(factor f_j, systematic sigma b_j)`` with ``E[xi_j^2 | Sigma_jj] = f_j Sigma_jj + b_j^2`` over the
-    pooled draws (bounded least squares on the standardised variances)."""
-    from scipy.optimize import lsq_linear
-
-    errors = np.concatenate([r["errors"] for r in runs])
-    var = np.concatenate([np.einsum("nii->ni", r["covs"]) for r in runs])
-    f, b = np.zeros(6), np.zeros(6)
-    for j in range(6):
-        unit = var[:, j].mean()
-        y = errors[:, j] ** 2 / unit
-        X = np.column_stack([var[:, j] / unit, np.ones(len(y))])
-        fit = lsq_linear(X, y, bounds=([MIN_SCALE_SHARE * y.mean(), 0.0], [np.inf, np.inf]))
-        f[j], b[j] = fit.x[0], np.sqrt(fit.x[1] * unit)
-    return f, b
-
-
-def block_factors(runs: list[dict]) -> np.ndarray:
-    """The oldest calibration: one factor for the translation block, one for the rotation block."""
-    errors = np.concatenate([r["errors"] for r in runs])
-    var = np.concatenate([np.einsum("nii->ni", r["covs"]) for r in runs])
-    ratio = errors**2 / var
-    return np.repeat([ratio[:, :3].mean(), ratio[:, 3:].mean()], 3)
-
-
-#: the coverage scalar puts this share of the pooled training errors inside the 95 % bound ...
-TARGET_INSIDE = 0.945
-#: ... unless that pushes their mean NEES below this (heavy-tailed NEES: kiss, genz), then it puts the mean here
-MIN_MEAN_NEES = 5.0
-
-
-def scaled(covs: np.ndarray, factors: np.ndarray) -> np.ndarray:
-    s = np.sqrt(np.asarray(factors, dtype=np.float64))
-    return covs * np.outer(s, s)
-
-
-def apply_all(covs: np.ndarray, entry: AxisCalibration) -> np.ndarray:
-    return np.array([apply_calibration(c, entry) for c in covs]).reshape(-1, 6, 6)
-
-
-def nees_values(errors: np.ndarray, covs: np.ndarray) -> np.ndarray:
-    return np.array([nees(e, c) for e, c in zip(errors, covs)])
-
-
-def factor_floor(runs: list[dict]) -> AxisCalibration:
-    """Per-axis factor and floor pooled over ``runs``, with the training range of the closed-form variances."""
-    f, b = axis_calibration(runs)
-    top = np.max(np.concatenate([np.einsum("nii->ni", r["covs"]) for r in runs if len(r["covs"])]), axis=0)
-    return AxisCalibration(tuple(f.tolist()), tuple(b.tolist()), 1.0, tuple(top.tolist()))
-
-
-def fit_calibration(runs: list[dict]) -> tuple[AxisCalibration, dict]:
-    """Factor and floor per axis pooled over all training runs (seeds), then the coverage scalar from the pooled
-    training NEES. Also the leave-one-seed-out NEES (each seed scored with the factors learned on the others), the
-    training-side estimate of how the calibration does on a scene it has not seen."""
-    base = factor_floor(runs)
-    pooled = np.concatenate([nees_values(r["errors"], apply_all(r["covs"], base)) for r in runs])
-    c = min(float(np.quantile(pooled, TARGET_INSIDE)) / CHI2_6_95, float(pooled.mean()) / MIN_MEAN_NEES)
-    entry = AxisCalibration(base.factors, base.sigmas, c, base.trained_variance)
-    oof = np.concatenate([nees_values(r["errors"], apply_all(r["covs"], factor_floor(runs[:k] + runs[k + 1:])))
-                          for k, r in enumerate(runs)]) if len(runs) > 1 else pooled
-    stats = lambda v: {"nees_mean": float(v.mean()), "inside_95": float((v < CHI2_6_95).mean())}  # noqa: E731
-    return entry, {"pooled_before_coverage": stats(pooled), "pooled_after_coverage": stats(pooled / c),
-                   "leave_one_out_after_coverage": stats(oof / c)}
-
-
 def row(run: dict, cal: AxisCalibration, before: AxisCalibration, blk: np.ndarray) -> dict:
-    calibrated = apply_all(run["covs"], cal)
-    no_coverage = apply_all(run["covs"], AxisCalibration(cal.factors, cal.sigmas, 1.0, None))
+    steps = run.get("steps")
+    calibrated = apply_all(run["covs"], cal, steps)
+    no_coverage = apply_all(run["covs"], AxisCalibration(cal.factors, cal.sigmas, 1.0, None, cal.step_gains), steps)
     previous = apply_all(run["covs"], before)
     out = {"failed": int(run["failed"]), "seconds_per_pair": float(run["seconds_per_pair"]),
            "raw": score(run["errors"], run["covs"]), "block": score(run["errors"], scaled(run["covs"], blk)),
@@ -318,16 +255,16 @@ def parse_runs(text: str) -> list[tuple[str, int]]:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--train", default="street:0,street:2,street:4,street:6")
-    ap.add_argument("--before", default="street:0,street:2", help="training runs of the previous calibration (factor and floor only)")
     ap.add_argument("--train-draws", type=int, default=100)
-    ap.add_argument("--check", default="street:1,street:3,street:5,corridor:1")
+    ap.add_argument("--check", default="street:1,street:3,street:5,street:7,street:8,corridor:1")
     ap.add_argument("--draws", type=int, default=200)
     ap.add_argument("--variants", default=",".join(VARIANTS))
     ap.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "covariance")
     ap.add_argument("--cache", type=Path, default=None, help="draws cache (default: <out>/draws)")
     for which in ("train", "check"):
-        ap.add_argument(f"--{which}-frames", type=int, default=N_FRAMES,
-                        help=f"frames per {which} run ({N_FRAMES}: 40 frame pairs; draws + 1: one frame pair per draw)")
+        ap.add_argument(f"--{which}-frames", type=int, default=201,
+                        help=f"frames per {which} run (default 201: one frame pair per draw up to 200 draws; {N_FRAMES}: 40 frame "
+                             "pairs, 5 draws each)")
     args = ap.parse_args(argv)
     variants = [v for v in args.variants.split(",") if v in available_icp()]
     log = lambda msg: print(msg, file=sys.stderr, flush=True)  # noqa: E731
@@ -336,8 +273,8 @@ def main(argv=None) -> int:
              for name in variants}
     fits = {name: fit_calibration(runs) for name, runs in train.items()}
     cal = {name: f[0] for name, f in fits.items()}
-    before = {name: factor_floor([collect(sc, sd, args.train_draws, name, cache, log) for sc, sd in parse_runs(args.before)]) for name in variants}
-    before = {name: AxisCalibration(c.factors, c.sigmas) for name, c in before.items()}  # as it was: no coverage, no guard
+    # the previous calibration (without the step term) learned on the same training draws
+    before = {name: fit_calibration(runs, use_step=False)[0] for name, runs in train.items()}
     blk = {name: block_factors(runs) for name, runs in train.items()}
     results = {
         "command": " ".join(["benchmarks/covariance_calibration.py", *(sys.argv[1:] if argv is None else argv)]),
@@ -345,11 +282,16 @@ def main(argv=None) -> int:
         "load_average": os.getloadavg()[0], "sensor": "32 beams x 1024 columns, range noise 0.02 m"
         + "".join(f"; {w} runs: {n} frames (one frame pair per draw)" for w, n in (("training", args.train_frames), ("check", args.check_frames))
                   if n != N_FRAMES),
-        "train": {"runs": args.train, "draws": args.train_draws, "before_runs": args.before,
+        "train": {"runs": args.train, "draws": args.train_draws,
                   "calibration": {n: {"factors": list(c.factors), "sigmas": list(c.sigmas), "coverage": c.coverage,
-                                      "trained_variance": list(c.trained_variance), **fits[n][1]} for n, c in cal.items()},
+                                      "trained_variance": list(c.trained_variance),
+                                      "step_gains": None if c.step_gains is None else list(c.step_gains), **fits[n][1]}
+                                  for n, c in cal.items()},
                   "rows": {f"{sc}:{sd}": {name: row(train[name][i], cal[name], before[name], blk[name]) for name in variants}
                            for i, (sc, sd) in enumerate(parse_runs(args.train))}},
+        "calibration_without_step": {n: {"factors": list(c.factors), "sigmas": list(c.sigmas), "coverage": c.coverage,
+                                         "trained_variance": list(c.trained_variance), "step_gains": None}
+                                     for n, c in before.items() if cal[n].step_gains is not None},
         "check": {},
     }
     for sc, sd in parse_runs(args.check):
@@ -380,7 +322,8 @@ def calibration_source(calibration: dict) -> str:
     for name, c in calibration.items():
         lines += [f'    "{name}": AxisCalibration(', f'        ({", ".join(_g(v) for v in c["factors"])}),',
                   f'        ({", ".join(_g(v) for v in c["sigmas"])}),',
-                  f'        {c["coverage"]:.3g}, ({", ".join(_g(v) for v in c["trained_variance"])})),']
+                  f'        {c["coverage"]:.3g}, ({", ".join(_g(v) for v in c["trained_variance"])}),',
+                  f'        {"None" if c.get("step_gains") is None else "(" + ", ".join(_g(v) for v in c["step_gains"]) + ")"}),']
     return "\n".join(lines)
 
 
@@ -391,22 +334,27 @@ def render(results: dict) -> str:
              "NEES = xi^T Sigma^-1 xi of the true error (6 when calibrated); inside = share below the chi-square(6) 95 % "
              "bound. Target on the well-constrained (street) scenes: mean NEES in [4.2, 9] and inside in [0.90, 0.98]. "
              "Columns: raw = the closed form (Censi with the target surface's thickness, correlation voxel 1 m); block = "
-             "times one translation and one rotation factor; before = the previous calibration (factor and floor per axis "
-             f"learned on {tr['before_runs']} only); factor+floor = the same learned on all training runs; **calibrated** "
-             "(the default) = factor+floor, the training-range guard and the coverage scalar. All are learned on the "
-             "training runs and applied unchanged to the check runs.", "",
+             "times one translation and one rotation factor; no step = the previous calibration (per-axis factor and floor, "
+             "training-range guard, coverage scalar; no step term); step+factor+floor = the step term and the per-axis "
+             "factor and floor of what it leaves, without the coverage scalar; **calibrated** (the default) = the same with "
+             "the coverage scalar. All are learned on the training runs and applied unchanged to the check runs.", "",
              f"## Training: {tr['runs']} ({tr['draws']} draws each)", "",
-             "`Sigma' = c (S Sigma S + diag(b^2))`, `S = diag(sqrt(f))` while `Sigma_jj` is within the training range v "
-             "(beyond it the excess is scaled by max(f, 1)). b in mm and mrad; c from the pooled training NEES "
-             f"(target {TARGET_INSIDE:.3f} inside, mean NEES at least {MIN_MEAN_NEES:g}).", "",
-             "| variant | " + " | ".join(f"f {a}" for a in AXES) + " | " + " | ".join(f"b {a}" for a in AXES)
-             + " | c | pooled NEES / inside before c | after c | leave-one-seed-out, after c |", "|---|" + "---|" * 16]
+             "`Sigma' = c (S Sigma S + diag(b^2) + (g * step)(g * step)^T)`, `S = diag(sqrt(f))` while `Sigma_jj` is within "
+             "the training range v (beyond it the excess is scaled by max(f, 1)); `step`: the result's point-to-surface "
+             f"Gauss-Newton step (`surface_step`), `g` its gain per axis where it correlates with the error (r >= "
+             f"{STEP_MIN_CORRELATION:g}, else 0). b in mm and mrad; c from the pooled training NEES (target {TARGET_INSIDE:.3f} "
+             f"inside, mean NEES at least {MIN_MEAN_NEES:g}).", "",
+             "| variant | step correlation r (tx ty tz rx ry rz) | g | " + " | ".join(f"f {a}" for a in AXES) + " | "
+             + " | ".join(f"b {a}" for a in AXES) + " | c | pooled NEES / inside before c | after c | leave-one-seed-out, after c |",
+             "|---|" + "---|" * 18]
     for name, c in tr["calibration"].items():
-        lines.append(f"| {name} | " + " | ".join(_g(v) for v in c["factors"]) + " | " + " | ".join(f"{1e3 * v:.2g}" for v in c["sigmas"])
+        gains = "-" if c.get("step_gains") is None else " ".join(f"{v:.2f}" for v in c["step_gains"])
+        lines.append(f"| {name} | {' '.join(f'{v:+.2f}' for v in c['step_correlation'])} | {gains} | "
+                     + " | ".join(_g(v) for v in c["factors"]) + " | " + " | ".join(f"{1e3 * v:.2g}" for v in c["sigmas"])
                      + f" | {c['coverage']:.3f} | {_fmt2(c['pooled_before_coverage'])} | {_fmt2(c['pooled_after_coverage'])} | "
                      f"{_fmt2(c['leave_one_out_after_coverage'])} |")
     lines += ["", "Mean NEES / inside on the training runs themselves (in-sample):", "",
-              "| run | variant | draws | raw | block | before | factor+floor | calibrated |", "|---|---|---|---|---|---|---|---|"]
+              "| run | variant | draws | raw | block | no step | step+factor+floor | calibrated |", "|---|---|---|---|---|---|---|---|"]
     for run, rows in tr["rows"].items():
         for name, r in rows.items():
             lines.append(f"| {run} | {name} | {r['raw']['n']} | {_fmt(r['raw'])} | {_fmt(r['block'])} | {_fmt(r['before'])} | "
@@ -415,8 +363,8 @@ def render(results: dict) -> str:
         scene = run.split(":")[0]
         corridor = scene == "corridor"
         lines += ["", f"## Check: {run.replace(':', ', seed ')}", "",
-                  "| variant | draws (no cov.) | raw NEES / inside | block | before | factor+floor | **calibrated** | reference | z^2 per axis (tx ty tz rx ry rz) | "
-                  + ("weakest named 'translation along x' | cov xx / yy median (min), before | calibrated | " if corridor else "") + "s/pair |",
+                  "| variant | draws (no cov.) | raw NEES / inside | block | no step | step+factor+floor | **calibrated** | reference | z^2 per axis (tx ty tz rx ry rz) | "
+                  + ("weakest named 'translation along x' | cov xx / yy median (min), no step | calibrated | " if corridor else "") + "s/pair |",
                   "|---|---|---|---|---|---|---|---|---|" + ("---|---|---|" if corridor else "") + "---|"]
         for name, r in rows.items():
             ref = _fmt(r["reference"]) if "reference" in r else "-"
@@ -431,8 +379,11 @@ def render(results: dict) -> str:
     lines += ["", "References (same pairs, same run): Open3D's `get_information_matrix_from_point_clouds` (times the known range "
               "variance) on the open3d_point_to_plane row, small_gicp's Hessian (inverse, moved to the left/target-frame "
               "convention) on the small_gicp row. z^2 per axis: mean of xi_j^2 / Sigma_jj after calibration (1 when that axis is "
-              "calibrated).", "", "`CALIBRATION` entries (`lidarkit/registration/covariance.py`; factors, sigmas, coverage, training range):", "",
-              "```python", calibration_source(tr["calibration"]), "```"]
+              "calibrated).", "", "`CALIBRATION` entries (`lidarkit/registration/covariance.py`; factors, sigmas, coverage, training range, step gains):", "",
+              "```python", calibration_source(tr["calibration"]), "```", "",
+              "`CALIBRATION_WITHOUT_STEP` entries (the same learned without the step term, for a covariance without its step: "
+              "the odometry frame covariance of a stateful variant):", "", "```python",
+              calibration_source(results.get("calibration_without_step", {})), "```"]
     return "\n".join(lines) + "\n"
 
 

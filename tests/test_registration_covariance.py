@@ -12,8 +12,8 @@ from lidarkit.geometry import se3_exp, se3_inverse, se3_log, transform_points
 from lidarkit.odometry.covariance import propagate, relative_errors
 from lidarkit.registration import get_icp
 from lidarkit.registration.covariance import (
-    AxisCalibration, CovarianceModel, adjoint, apply_calibration, calibrate, effective_observations, left_jacobians, nees,
-    registration_covariance, safe_inverse,
+    CALIBRATION, CALIBRATION_WITHOUT_STEP, AxisCalibration, CovarianceModel, adjoint, apply_calibration, calibrate, covariance_and_step, effective_observations,
+    left_jacobians, nees, registration_covariance, safe_inverse,
 )
 from lidarkit.registration.degeneracy import describe_direction, matched_constraints, surface_constraints
 from lidarkit.sim.scan_pairs import ScanPairs
@@ -232,6 +232,89 @@ def test_surface_thickness_adds_the_map_noise():
         assert 0.9 * expected < cov[2, 2] < 1.1 * expected, (surface_noise, cov[2, 2], expected)
 
 
+def _pairs_at(T_est: np.ndarray, pair, max_distance_m: float = 1.0):
+    """Matched pairs (aligned source, nearest target point) and their surface projectors at the pose ``T_est``."""
+    from scipy.spatial import cKDTree
+
+    aligned = transform_points(T_est, pair.source_xyz)
+    d, idx = cKDTree(pair.target_xyz).query(aligned)
+    keep = d <= max_distance_m
+    pick, M = matched_constraints(aligned[keep], pair.target_xyz, idx[keep], max_points=5000)
+    return aligned[keep][pick], pair.target_xyz[idx[keep][pick]], M
+
+
+@pytest.mark.parametrize("seed", [3, 5])
+def test_surface_step_follows_a_pose_error(seed):
+    """Moving the pose off by a known small error moves the point-to-surface step (no ground truth used) by that
+    error: within 30 % of its size, direction within 20 degrees. At the true pose the step is the surfaces' own
+    preference, which can be several cm along the street (its weak axis: ring sampling, few walls across it)."""
+    pair = ScanPairs("street", seed=seed, n_frames=3).draw(0)
+    xi = np.array([0.06, -0.04, 0.02, 0.002, -0.0015, 0.004])
+    steps = []
+    for T in (se3_exp(-xi) @ pair.T_target_source, pair.T_target_source):
+        p, q, M = _pairs_at(T, pair)
+        steps.append(covariance_and_step(p, q, M, pair.T_target_source)[1])
+    response = steps[0] - steps[1]
+    assert np.linalg.norm(response - xi) < 0.3 * np.linalg.norm(xi), (response, xi)
+    assert response @ xi / np.linalg.norm(response) / np.linalg.norm(xi) > np.cos(np.radians(20))
+    assert np.abs(steps[1][1:3]).max() < 0.01 and np.abs(steps[1][3:]).max() < 1e-3, steps[1]
+
+
+def test_surface_step_ignores_far_pairs_and_unconstrained_directions():
+    """Pairs beyond STEP_PAIR_DISTANCE_M do not steer the step (the covariance still uses them); on one plane the step
+    has no component along the plane (nothing there to step to), and too few pairs give NaN."""
+    from lidarkit.registration.covariance import STEP_PAIR_DISTANCE_M
+
+    rng = np.random.default_rng(4)
+    q = np.column_stack([rng.uniform(-10, 10, 400), rng.uniform(-10, 10, 400), np.zeros(400)])
+    M = np.broadcast_to(np.diag([0.0, 0.0, 1.0]), (400, 3, 3)).copy()
+    p = q + [0.3, -0.2, 0.05]  # off by 5 cm across the plane, 36 cm along it
+    _, step = covariance_and_step(p, q, M, np.eye(4))
+    assert step[2] == pytest.approx(-0.05, abs=1e-9)
+    np.testing.assert_allclose(step[[0, 1, 5]], 0.0, atol=1e-9)  # along the plane and its yaw: unconstrained
+    far = p.copy()
+    far[:40, 2] += 2.0 * STEP_PAIR_DISTANCE_M  # wrong matches 2 m off: they change the covariance, not the step
+    cov_far, step_far = covariance_and_step(far, q, M, np.eye(4))
+    assert step_far[2] == pytest.approx(-0.05, abs=1e-9)
+    assert not np.allclose(cov_far, covariance_and_step(p, q, M, np.eye(4))[0])
+    assert np.isnan(covariance_and_step(p[:5], q[:5], M[:5], np.eye(4))[1]).all()
+
+
+def test_step_term_adds_the_predicted_error_as_a_rank_one_term():
+    rng = np.random.default_rng(10)
+    A = rng.normal(size=(6, 6))
+    cov = A @ A.T * 1e-4
+    factors, sigmas, gains = (0.5, 2.0, 1.0, 3.0, 0.1, 1.0), (0.01, 0.0, 0.02, 0.0, 0.001, 0.0), (1.5, 1.4, 0.0, 0.8, 0.0, 1.3)
+    step = np.array([0.2, -0.05, 0.3, 0.001, 0.002, -0.004])
+    base = apply_calibration(cov, AxisCalibration(factors, sigmas, 1.3))
+    out = apply_calibration(cov, AxisCalibration(factors, sigmas, 1.3, None, gains), step)
+    bias = np.asarray(gains) * step
+    np.testing.assert_allclose(out, base + 1.3 * np.outer(bias, bias), rtol=1e-9, atol=1e-15)
+    assert _is_psd(out)
+    # the error the step predicts is inside the bound: its NEES drops from far outside to below 1 / 1.3
+    assert nees(bias, base) > 100 and nees(bias, out) < 1 / 1.3 + 1e-9
+    # no step (or a NaN one): the entry without its step term
+    np.testing.assert_allclose(apply_calibration(cov, AxisCalibration(factors, sigmas, 1.3, None, gains)), base, rtol=1e-12)
+    np.testing.assert_allclose(apply_calibration(cov, AxisCalibration(factors, sigmas, 1.3, None, gains), np.full(6, np.nan)), base,
+                               rtol=1e-12)
+
+
+def test_every_variant_reports_its_surface_step(kitti_pair):
+    """Each result carries the step of its own final correspondences (finite, in the covariance's convention), and the
+    calibrated covariance includes it where the variant's entry has step gains."""
+    from lidarkit.registration import available_icp
+
+    src, dst, T_gt = kitti_pair
+    for name in ("vanilla", "open3d_point_to_point", "kiss", "small_gicp"):
+        res = get_icp(name).align(src, dst, init_T=T_gt)
+        assert res.surface_step.shape == (6,) and np.all(np.isfinite(res.surface_step)), name
+        assert np.linalg.norm(res.surface_step[:3]) < 0.5, name  # a correction, not a jump
+        assert res.to_dict()["surface_step"] == pytest.approx(res.surface_step.tolist())
+        raw = get_icp(name, calibrated_covariance=False).align(src, dst, init_T=T_gt)
+        np.testing.assert_allclose(res.covariance, calibrate(raw.covariance, name, raw.surface_step), rtol=1e-9, atol=1e-18)
+    assert any(CALIBRATION[n].step_gains is not None for n in available_icp())
+
+
 def test_calibrate_scales_each_axis_variance(monkeypatch):
     from lidarkit.registration import covariance as covariance_module
 
@@ -289,12 +372,26 @@ def test_calibrated_corridor_axis_is_ten_times_the_across_axis(variant):
 
 def test_every_variant_has_a_calibration():
     from lidarkit.registration import available_icp
-    from lidarkit.registration.covariance import CALIBRATION
 
     for name in available_icp():
         entry = CALIBRATION[name]
         assert len(entry.factors) == len(entry.sigmas) == len(entry.trained_variance) == 6
         assert 0.5 < entry.coverage < 2.0
+        if entry.step_gains is not None:  # and the entry for a covariance without its step
+            assert len(entry.step_gains) == 6 and CALIBRATION_WITHOUT_STEP[name].step_gains is None
+
+
+def test_a_covariance_without_its_step_gets_the_entry_learned_without_it():
+    """The step-trained factors and floors are smaller (the step term carries part of the error): applied without
+    the step they would under-state it, so ``calibrate`` without a step uses ``CALIBRATION_WITHOUT_STEP``."""
+    cov = np.diag([1e-4, 1e-4, 1e-5, 1e-6, 1e-6, 1e-6])
+    step = np.array([0.05, -0.02, 0.01, 0.001, 0.0005, -0.001])
+    for name in ("vanilla", "kiss"):
+        np.testing.assert_allclose(calibrate(cov, name), apply_calibration(cov, CALIBRATION_WITHOUT_STEP[name]), rtol=1e-12)
+        np.testing.assert_allclose(calibrate(cov, name, np.full(6, np.nan)), calibrate(cov, name), rtol=1e-12)
+        np.testing.assert_allclose(calibrate(cov, name, step), apply_calibration(cov, CALIBRATION[name], step), rtol=1e-12)
+    # a variant without step gains has one entry either way
+    np.testing.assert_allclose(calibrate(cov, "open3d_point_to_plane"), calibrate(cov, "open3d_point_to_plane", step), rtol=1e-12)
 
 
 @settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow])

@@ -56,19 +56,32 @@ def test_best_variants_within_2cm_0p05deg(pairs, pair, name):
 
 
 def test_small_gicp_covariance_repeats_with_two_threads(pairs):
-    """small_gicp's voxel grid returns its points in a varying order on two threads; the assessment orders them by
-    voxel, so the covariance and the degeneracy summary of the same alignment no longer follow that order (they
-    changed by ~3 % before). What remains on two threads (~1.5e-4) is the voxel grid itself: a few of its points move
-    by 2-10 cm between runs. On one thread the result repeats exactly."""
+    """small_gicp's voxel grid returns its points in a varying order on two threads (and can leave a voxel in two
+    parts); the assessment orders them by voxel, ties by their coordinates, so the covariance and the degeneracy
+    summary of the same alignment no longer follow that order (they changed by 1-3 % before, on 2 of 6 runs under
+    load): on one or two threads they repeat to rounding."""
     if "small_gicp" not in available_icp():
         pytest.skip("small_gicp not installed")
     src, dst, _ = pairs[(94, 95)]
     for registration_type in ("GICP", "VGICP"):
-        for threads, rtol in ((2, 1e-3), (1, 1e-12)):
+        for threads, rtol in ((2, 1e-9), (1, 1e-9)):
             runs = [get_icp("small_gicp", num_threads=threads, registration_type=registration_type).align(src, dst) for _ in range(6)]
             for res in runs[1:]:
                 assert np.allclose(res.covariance, runs[0].covariance, rtol=rtol, atol=0), (registration_type, threads)
                 assert np.allclose(res.degeneracy.eigenvalues, runs[0].degeneracy.eigenvalues, rtol=rtol, atol=0), (registration_type, threads)
+
+
+def test_voxel_order_does_not_depend_on_the_input_order():
+    """The same voxelized points in any order (two of them sharing a voxel) come out in one order."""
+    from lidarkit.registration.small_gicp_icp import voxel_order
+
+    rng = np.random.default_rng(3)
+    points = rng.uniform(-40, 40, (5000, 3))
+    points = np.vstack([points, points[:20] + 0.01])  # 20 voxels hold two points
+    reference = points[voxel_order(points, 0.25)]
+    for _ in range(3):
+        shuffled = points[rng.permutation(len(points))]
+        np.testing.assert_array_equal(shuffled[voxel_order(shuffled, 0.25)], reference)
 
 
 @pytest.mark.parametrize("name, tol_m, tol_deg", [("kiss", 0.05, 0.15), ("open3d_point_to_plane", 0.03, 0.1)])

@@ -349,59 +349,57 @@ def run(
     # frame k's after-the-fact work (assessment, covariance, frame check) runs in one worker thread while frame k+1
     # registers; results are those of the same calls in line (see _run_stateless for the one decision that waits)
     worker = Overlap(overlap and bool(getattr(registration, "overlap_assessment", True)))
-    trusted = validated_points(validated)
-    trusted.__enter__()
     try:
-        if stateful:
-            registration.reset()
-            previous = None
-            inflight = None  # frame k-1's after-the-fact task
-            for k, (idx, payload, read_time, read_error) in enumerate(stream):
-                read_s[k] = read_time
-                try:
-                    if read_error is not None:
-                        raise read_error
-                    scan, prepared = payload
-                    read_s[k] = read_time - prepared[1]  # the reading alone (the check's part is in check_s)
-                    first_scan = scan if k == 0 else first_scan
-                    points = scan.points_xyz
-                    if need_times:
-                        require_point_times(scan, sequence, dataset_name, int(idx))
-                    t1 = clock()
-                    if odometry_poses is not None and k > 0:
-                        guess = orthonormalize_se3(np.linalg.solve(odometry_poses[indices[k - 1]], odometry_poses[idx]))
-                        poses[k] = registration.register_frame(points, scan.point_times_s, motion_guess=guess)
-                    else:
-                        poses[k] = registration.register_frame(points, scan.point_times_s)
-                    t2 = clock()  # the variant's own time: the after-the-fact covariance below is not part of it
-                except Exception as err:
+        with validated_points(validated):
+            if stateful:
+                registration.reset()
+                previous = None
+                inflight = None  # frame k-1's after-the-fact task
+                for k, (idx, payload, read_time, read_error) in enumerate(stream):
+                    read_s[k] = read_time
+                    try:
+                        if read_error is not None:
+                            raise read_error
+                        scan, prepared = payload
+                        read_s[k] = read_time - prepared[1]  # the reading alone (the check's part is in check_s)
+                        first_scan = scan if k == 0 else first_scan
+                        points = scan.points_xyz
+                        if need_times:
+                            require_point_times(scan, sequence, dataset_name, int(idx))
+                        t1 = clock()
+                        if odometry_poses is not None and k > 0:
+                            guess = orthonormalize_se3(np.linalg.solve(odometry_poses[indices[k - 1]], odometry_poses[idx]))
+                            poses[k] = registration.register_frame(points, scan.point_times_s, motion_guess=guess)
+                        else:
+                            poses[k] = registration.register_frame(points, scan.point_times_s)
+                        t2 = clock()  # the variant's own time: the after-the-fact covariance below is not part of it
+                    except Exception as err:
+                        if inflight is not None:
+                            inflight.result()  # an earlier frame's error comes first, as in line
+                        if not _is_frame_error(err):
+                            raise
+                        raise _frame_error(err, dataset_name, int(idx)) from err
+                    register_s[k], n_points[k] = t2 - t1, len(points)
                     if inflight is not None:
-                        inflight.result()  # an earlier frame's error comes first, as in line
-                    if not _is_frame_error(err):
-                        raise
-                    raise _frame_error(err, dataset_name, int(idx)) from err
-                register_s[k], n_points[k] = t2 - t1, len(points)
+                        inflight.result()
+                    inflight = worker.submit(functools.partial(
+                        _stateful_after, k, int(idx), previous, scan, prepared, poses, checker, want_covariance, relative_cov,
+                        min_eigenvalue, name, dataset_name,
+                    ))
+                    validated.pop(id(points), None)  # registered: not passed to the backend again
+                    previous = points
+                    if bar is not None:
+                        bar[0].advance(bar[1])
                 if inflight is not None:
                     inflight.result()
-                inflight = worker.submit(functools.partial(
-                    _stateful_after, k, int(idx), previous, scan, prepared, poses, checker, want_covariance, relative_cov,
-                    min_eigenvalue, name, dataset_name,
-                ))
-                validated.pop(id(points), None)  # registered: not passed to the backend again
-                previous = points
-                if bar is not None:
-                    bar[0].advance(bar[1])
-            if inflight is not None:
-                inflight.result()
-        else:
-            first_scan = _run_stateless(
-                stream, registration, worker, indices, odometry_poses, poses, checker, strict, name, dataset_name, bar, validated,
-                read_s=read_s, register_s=register_s, n_points=n_points, converged=converged, measured=measured, fallback=fallback,
-                iterations=iterations, rmse_m=rmse_m, n_corr=n_corr, degenerate=degenerate, min_eigenvalue=min_eigenvalue,
-                relative_cov=relative_cov if want_covariance else None, reasons=reasons,
-            )
+            else:
+                first_scan = _run_stateless(
+                    stream, registration, worker, indices, odometry_poses, poses, checker, strict, name, dataset_name, bar, validated,
+                    read_s=read_s, register_s=register_s, n_points=n_points, converged=converged, measured=measured, fallback=fallback,
+                    iterations=iterations, rmse_m=rmse_m, n_corr=n_corr, degenerate=degenerate, min_eigenvalue=min_eigenvalue,
+                    relative_cov=relative_cov if want_covariance else None, reasons=reasons,
+                )
     finally:
-        trusted.__exit__(None, None, None)
         worker.close()  # cancels what has not started, joins the worker thread, also on error
         stream.close()  # stops and joins the reading thread, also on error
         if bar is not None:
@@ -531,4 +529,5 @@ def frame_covariance(previous_xyz: np.ndarray, points_xyz: np.ndarray, T_world_p
     assessment = assess_alignment(source, target, T_rel, FRAME_COVARIANCE_INLIER_M)
     if assessment.covariance is None:
         return np.full((6, 6), np.nan), float("nan")
+    # without the step (CALIBRATION_WITHOUT_STEP): the step of this pair of voxelized scans is not the variant's own
     return calibrate(assessment.covariance, variant), float(assessment.degeneracy.eigenvalues[0])

@@ -11,7 +11,7 @@ import numpy as np
 
 from lidarkit.geometry import transform_points
 from lidarkit.registration.base import Degeneracy, RegistrationResult
-from lidarkit.registration.covariance import CovarianceModel, active_model, effective_observations, registration_covariance
+from lidarkit.registration.covariance import CovarianceModel, active_model, covariance_and_step, effective_observations
 from lidarkit.registration.degeneracy import SurfaceIndex, matched_constraints, normal_matrix, summarize
 from lidarkit.registration.neighbors import NearestNeighbors
 
@@ -26,6 +26,7 @@ class Assessment:
     degeneracy: Degeneracy
     inlier_distance_m: float = float("nan")
     covariance: np.ndarray | None = None
+    surface_step: np.ndarray | None = None
 
     def to_result(
         self,
@@ -56,6 +57,7 @@ class Assessment:
             reason=reason,
             extra=extra or {},
             covariance=self.covariance,
+            surface_step=self.surface_step,
         )
 
 
@@ -88,7 +90,7 @@ def assess_alignment(
     inlier = dist2 <= inlier_distance_m**2
     n = int(inlier.sum())
     rmse = float(np.sqrt(dist2[inlier].mean())) if n else float("nan")
-    covariance = None
+    covariance = step = None
     if n < 3:
         degeneracy = Degeneracy.unknown(f"{n} correspondences")
     else:
@@ -97,13 +99,13 @@ def assess_alignment(
         degeneracy = summarize(normal_matrix(matched[pick], constraints))
         if covariance_model is not None:
             n_eff = effective_observations(matched, covariance_model.correlation_voxel_m)
-            covariance = registration_covariance(
+            covariance, step = covariance_and_step(
                 matched[pick], target_xyz[matched_index[pick]], constraints, T_target_source, covariance_model, n_total=n, n_effective=n_eff,
                 surface_variance=thickness,
             )
     return Assessment(
         n_correspondences=n, fitness=n / max(len(source_xyz), 1), rmse_m=rmse, degeneracy=degeneracy,
-        inlier_distance_m=inlier_distance_m, covariance=covariance,
+        inlier_distance_m=inlier_distance_m, covariance=covariance, surface_step=step,
     )
 
 

@@ -147,7 +147,10 @@ class RegistrationResult:
     each iteration; ``fitness``: fraction of source points with a correspondence within the inlier
     distance at the solution; ``reason``: why it did not converge or was flagged ("" if all is well);
     ``covariance``: ``(6, 6)`` uncertainty of ``T_target_source`` (left perturbation in the target frame,
-    translation first, m and rad: see ``lidarkit.registration.covariance``), None where it was not computed.
+    translation first, m and rad: see ``lidarkit.registration.covariance``), None where it was not computed;
+    ``surface_step``: ``(6,)`` one Gauss-Newton step of the point-to-surface residuals from ``T_target_source``, in
+    the covariance's convention: where the local surfaces would move the pose (the variant's systematic error as the
+    data show it; the calibrated covariance includes it), None with the covariance.
     """
 
     T_target_source: np.ndarray
@@ -162,6 +165,7 @@ class RegistrationResult:
     method: str = ""
     extra: dict[str, Any] = field(default_factory=dict)
     covariance: np.ndarray | None = None
+    surface_step: np.ndarray | None = None
 
     @property
     def information(self) -> np.ndarray | None:
@@ -193,6 +197,7 @@ class RegistrationResult:
             "reason": self.reason,
             "extra": self.extra,
             "covariance": None if self.covariance is None else np.asarray(self.covariance).tolist(),
+            "surface_step": None if self.surface_step is None else np.asarray(self.surface_step).tolist(),
         })
 
 
@@ -400,7 +405,7 @@ class Registration:
 
         covariance = result.covariance
         if covariance is not None and self._config.calibrated_covariance and self._config.covariance == "censi":
-            covariance = calibrate(covariance, self.name)
+            covariance = calibrate(covariance, self.name, result.surface_step)
         if covariance is not None and getattr(self._config, "planar", False):
             # a planar solve keeps z, roll and pitch of the guess: they are not estimated, and carry no variance here
             covariance = covariance.copy()

@@ -122,6 +122,7 @@ def point_to_point_icp(
         degeneracy=degeneracy,
         reason=reason,
         covariance=assessment.covariance,
+        surface_step=assessment.surface_step,
     )
 
 
