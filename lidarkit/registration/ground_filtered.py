@@ -302,6 +302,7 @@ class GroundFilteredICP(VanillaICP):
             # and deskewing them with a motion that carries the last frame's tilt error would feed that error back
             grounds = [pts[g] for pts, g in zip((source_xyz, target_xyz), self._ground)]
             refined = refine_on_ground(grounds[0], grounds[1], result.T_target_source)
+            # the covariance and surface_step stay those of the non-ground alignment: the calibration was learned so
             result = dataclasses.replace(result, T_target_source=refined, extra={**result.extra, "ground_refined": True})
         return result
 
