@@ -25,8 +25,8 @@ Raw draws are cached per (scene, seed, variant, draws) under ``<out>/draws/`` so
 per-pair features of :func:`collect`; ``_pose``: :func:`pose_features` replayed on a cache, see
 ``covariance_features.py``).
 
-    .venv/bin/python benchmarks/covariance_calibration.py   # training street 0, 2, 4, 6; check street 1, 3, 5, 7, 8
-                                                             # and corridor 1; 200 draws each, one frame pair per draw
+    .venv/bin/python benchmarks/covariance_calibration.py   # training street 0, 2, 4, 6; check street 1, 3, 5, 7, 8,
+                                                             # 9, 10, 11 and corridor 1; 200 draws each, one frame pair per draw
 """
 
 from __future__ import annotations
@@ -256,7 +256,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--train", default="street:0,street:2,street:4,street:6")
     ap.add_argument("--train-draws", type=int, default=200)
-    ap.add_argument("--check", default="street:1,street:3,street:5,street:7,street:8,corridor:1")
+    ap.add_argument("--check", default="street:1,street:3,street:5,street:7,street:8,street:9,street:10,street:11,corridor:1")
     ap.add_argument("--draws", type=int, default=200)
     ap.add_argument("--variants", default=",".join(VARIANTS))
     ap.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "covariance")
