@@ -20,9 +20,10 @@ calibrated covariance) and the share inside the chi-square(6) 95 % bound (12.59)
    for small_gicp's result. The corridor rows also count how often the weakest direction is named "translation
    along x" (the corridor axis) and the ratio of the calibrated covariance along the axis to across it.
 
-Both steps use only the draws the variant reports converged (:func:`converged_only`): a covariance describes a
-converged alignment, and a result flagged otherwise is one a user discards. Flagged draws are counted apart, as are
-draws without a covariance.
+Both steps score only the draws the variant reports converged (:func:`converged_only`): a covariance describes a
+converged alignment, and a result flagged otherwise is one a user discards (the odometry runner keeps the previous
+motion instead). Flagged draws are counted apart, as are draws without a covariance. The corridor's direction names
+and along / across ratios count every draw with a covariance, converged or not.
 
 Raw draws are cached per (scene, seed, variant, draws) under ``<out>/draws/`` so the tables can be re-rendered
 (``_f<n>``: training or check runs of ``--train-frames n`` / ``--check-frames n``, one frame pair per draw when ``n > draws``; ``_feat``: with the
@@ -245,7 +246,11 @@ def score(errors: np.ndarray, covs: np.ndarray) -> dict:
             "n": int(len(values))}
 
 
-def row(run: dict, cal: AxisCalibration, before: AxisCalibration, blk: np.ndarray) -> dict:
+def row(run: dict, cal: AxisCalibration, before: AxisCalibration, blk: np.ndarray, every: dict | None = None) -> dict:
+    """A run's scores (``run``: the draws scored, see :func:`converged_only`); the weakest direction's name and the
+    along / across ratio of the covariance are counted over ``every`` draw with a covariance (default ``run``): they
+    describe the geometry, which a result that stopped sliding along a corridor's axis shows as well as any."""
+    every = run if every is None else every
     steps = run.get("steps")
     calibrated = apply_all(run["covs"], cal, steps)
     no_coverage = apply_all(run["covs"], AxisCalibration(cal.factors, cal.sigmas, 1.0, None, cal.step_gains), steps)
@@ -259,11 +264,13 @@ def row(run: dict, cal: AxisCalibration, before: AxisCalibration, blk: np.ndarra
         out["z2_per_axis"] = z2.mean(axis=0).tolist()
         out["error_mean"] = run["errors"].mean(axis=0).tolist()
         out["error_std"] = run["errors"].std(axis=0).tolist()
-        out["axis_named"] = float(np.mean([w == "translation along x" for w in run["weakest"]]))
-        for key, covs in (("", calibrated), ("before_", previous)):
+    if len(every["errors"]):
+        out["named_draws"] = int(len(every["weakest"]))
+        out["axis_named"] = float(np.mean([w == "translation along x" for w in every["weakest"]]))
+        for key, covs in (("", apply_all(every["covs"], cal, every.get("steps"))), ("before_", apply_all(every["covs"], before))):
             out[f"{key}cov_xx_over_yy_median"] = float(np.median(covs[:, 0, 0] / covs[:, 1, 1]))
             out[f"{key}cov_xx_over_yy_min"] = float(np.min(covs[:, 0, 0] / covs[:, 1, 1]))
-        names, counts = np.unique(run["weakest"], return_counts=True)
+        names, counts = np.unique(every["weakest"], return_counts=True)
         out["weakest_names"] = {str(n): int(c) for n, c in zip(names, counts)}
     if len(run["refs"]):
         out["reference"] = score(run["errors"], run["refs"])
@@ -317,8 +324,8 @@ def main(argv=None) -> int:
         "check": {},
     }
     for sc, sd in parse_runs(args.check):
-        results["check"][f"{sc}:{sd}"] = {name: row(converged_only(collect(sc, sd, args.draws, name, cache, log, n_frames=args.check_frames)), cal[name], before[name],
-                                                      blk[name])
+        drawn = {name: collect(sc, sd, args.draws, name, cache, log, n_frames=args.check_frames) for name in variants}
+        results["check"][f"{sc}:{sd}"] = {name: row(converged_only(drawn[name]), cal[name], before[name], blk[name], every=drawn[name])
                                           for name in variants}
     args.out.mkdir(parents=True, exist_ok=True)
     write_text(args.out / "results.json", json.dumps(results, indent=2) + "\n")
@@ -389,14 +396,14 @@ def render(results: dict) -> str:
         corridor = scene == "corridor"
         lines += ["", f"## Check: {run.replace(':', ', seed ')}", "",
                   "| variant | draws scored (no cov., not converged) | raw NEES / inside | block | no step | step+factor+floor | **calibrated** | reference | z^2 per axis (tx ty tz rx ry rz) | "
-                  + ("weakest named 'translation along x' | cov xx / yy median (min), no step | calibrated | " if corridor else "") + "s/pair |",
+                  + ("weakest named 'translation along x' (draws with a covariance) | cov xx / yy median (min), no step | calibrated | " if corridor else "") + "s/pair |",
                   "|---|---|---|---|---|---|---|---|---|" + ("---|---|---|" if corridor else "") + "---|"]
         for name, r in rows.items():
             ref = _fmt(r["reference"]) if "reference" in r else "-"
             z2 = " ".join(f"{v:.2f}" for v in r.get("z2_per_axis", []))
             extra = ""
             if corridor:
-                extra = (f"{r.get('axis_named', float('nan')):.2f} | {r.get('before_cov_xx_over_yy_median', float('nan')):.0f} "
+                extra = (f"{r.get('axis_named', float('nan')):.2f} of {r.get('named_draws', 0)} | {r.get('before_cov_xx_over_yy_median', float('nan')):.0f} "
                          f"({r.get('before_cov_xx_over_yy_min', float('nan')):.0f}) | {r.get('cov_xx_over_yy_median', float('nan')):.0f} "
                          f"({r.get('cov_xx_over_yy_min', float('nan')):.0f}) | ")
             lines.append(f"| {name} | {r['raw']['n']} ({r['failed']}, {r.get('flagged', 0)}) | {_fmt(r['raw'])} | {_fmt(r['block'])} | {_fmt(r['before'])} | "
