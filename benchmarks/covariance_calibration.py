@@ -5,7 +5,7 @@ initial guess, frames along the path). Every variant registers each pair with it
 covariance; the error ``xi = se3_log(T_true inv(T_est))`` is scored against it: NEES ``xi^T Sigma^-1 xi`` (6 for a
 calibrated covariance) and the share inside the chi-square(6) 95 % bound (12.59).
 
-1. Training (``--train``, street seeds 0, 2, 4 and 6 by default, 200 draws each, one frame pair per draw): per
+1. Training (``--train``, street seeds 0, 2, 4, 6 and 12-15 by default, 200 draws each, one frame pair per draw): per
    variant the calibration of ``covariance_fit.py`` over the pooled draws of all seeds: per-axis gains of the result's
    point-to-surface step (where it predicts the error), a variance factor ``f_j`` and a systematic sigma ``b_j`` of
    what the step leaves, the largest closed-form variance per axis (beyond it a factor does not shrink), and one
@@ -30,7 +30,7 @@ Raw draws are cached per (scene, seed, variant, draws) under ``<out>/draws/`` so
 per-pair features of :func:`collect`; ``_pose``: :func:`pose_features` replayed on a cache, see
 ``covariance_features.py``).
 
-    .venv/bin/python benchmarks/covariance_calibration.py   # training street 0, 2, 4, 6; check street 1, 3, 5, 7, 8,
+    .venv/bin/python benchmarks/covariance_calibration.py   # training street 0, 2, 4, 6, 12-15; check street 1, 3, 5, 7, 8,
                                                              # 9, 10, 11 and corridor 1; 200 draws each, one frame pair per draw
 """
 
@@ -283,7 +283,7 @@ def parse_runs(text: str) -> list[tuple[str, int]]:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--train", default="street:0,street:2,street:4,street:6")
+    ap.add_argument("--train", default="street:0,street:2,street:4,street:6,street:12,street:13,street:14,street:15")
     ap.add_argument("--train-draws", type=int, default=200)
     ap.add_argument("--check", default="street:1,street:3,street:5,street:7,street:8,street:9,street:10,street:11,corridor:1")
     ap.add_argument("--draws", type=int, default=200)
