@@ -18,7 +18,8 @@ calibrated covariance) and the share inside the chi-square(6) 95 % bound (12.59)
    measured on the same pairs: Open3D's ``get_information_matrix_from_point_clouds`` (times the known range variance)
    for the Open3D point-to-plane result, small_gicp's Hessian (inverse, moved to the left/target-frame convention)
    for small_gicp's result. The corridor rows also count how often the weakest direction is named "translation
-   along x" (the corridor axis) and the ratio of the calibrated covariance along the axis to across it.
+   along x" (the corridor axis) and the ratio of the calibrated covariance along the axis to across it. Open ground
+(``open``: flat ground and a few far objects, several weak directions) is checked too, without a target.
 
 Both steps score only the draws the variant reports converged (:func:`converged_only`): a covariance describes a
 converged alignment, and a result flagged otherwise is one a user discards (the odometry runner keeps the previous
@@ -31,7 +32,7 @@ per-pair features of :func:`collect`; ``_pose``: :func:`pose_features` replayed 
 ``covariance_features.py``).
 
     .venv/bin/python benchmarks/covariance_calibration.py   # training street 0, 2, 4, 6, 12-15; check street 1, 3, 5, 7, 8,
-                                                             # 9, 10, 11 and corridor 1; 200 draws each, one frame pair per draw
+                                                             # 9, 10, 11, corridor 1 and open 1; 200 draws each, one frame pair per draw
 """
 
 from __future__ import annotations
@@ -285,7 +286,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--train", default="street:0,street:2,street:4,street:6,street:12,street:13,street:14,street:15")
     ap.add_argument("--train-draws", type=int, default=200)
-    ap.add_argument("--check", default="street:1,street:3,street:5,street:7,street:8,street:9,street:10,street:11,corridor:1")
+    ap.add_argument("--check", default="street:1,street:3,street:5,street:7,street:8,street:9,street:10,street:11,corridor:1,open:1")
     ap.add_argument("--draws", type=int, default=200)
     ap.add_argument("--variants", default=",".join(VARIANTS))
     ap.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "covariance")

@@ -127,8 +127,8 @@ class AxisCalibration:
 CALIBRATION_TRAINING = ("street:0", "street:2", "street:4", "street:6", "street:12", "street:13", "street:14", "street:15")
 
 #: Per-variant calibration of the default covariance, learned on street seeds 0, 2, 4, 6, 12, 13, 14 and 15 (200 draws
-#: each, one frame pair per draw along a 201-frame street) and checked on street seeds 1, 3, 5, 7, 8, 9, 10, 11 and
-#: corridor seed 1 (200 draws each;
+#: each, one frame pair per draw along a 201-frame street) and checked on street seeds 1, 3, 5, 7, 8, 9, 10, 11,
+#: corridor seed 1 and open seed 1 (200 draws each;
 #: ``benchmarks/covariance_calibration.py``, results in ``benchmarks/results/covariance``). ``g`` (step gains) carries
 #: the error the point-to-surface step predicts (the sampling bias of point-to-point matching: vanilla, knn,
 #: open3d_point_to_point, kiss, genz; ground_filtered's x, y and yaw; small_gicp's pitch); ``f`` absorbs what the closed form under- or
