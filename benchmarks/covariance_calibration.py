@@ -5,7 +5,7 @@ initial guess, frames along the path). Every variant registers each pair with it
 covariance; the error ``xi = se3_log(T_true inv(T_est))`` is scored against it: NEES ``xi^T Sigma^-1 xi`` (6 for a
 calibrated covariance) and the share inside the chi-square(6) 95 % bound (12.59).
 
-1. Training (``--train``, street seeds 0, 2, 4 and 6 by default, 200 draws each, one frame pair per draw): per
+1. Training (``--train``, street seeds 0, 2, 4, 6 and 12-15 by default, 200 draws each, one frame pair per draw): per
    variant the calibration of ``covariance_fit.py`` over the pooled draws of all seeds: per-axis gains of the result's
    point-to-surface step (where it predicts the error), a variance factor ``f_j`` and a systematic sigma ``b_j`` of
    what the step leaves, the largest closed-form variance per axis (beyond it a factor does not shrink), and one
@@ -18,15 +18,21 @@ calibrated covariance) and the share inside the chi-square(6) 95 % bound (12.59)
    measured on the same pairs: Open3D's ``get_information_matrix_from_point_clouds`` (times the known range variance)
    for the Open3D point-to-plane result, small_gicp's Hessian (inverse, moved to the left/target-frame convention)
    for small_gicp's result. The corridor rows also count how often the weakest direction is named "translation
-   along x" (the corridor axis) and the ratio of the calibrated covariance along the axis to across it.
+   along x" (the corridor axis) and the ratio of the calibrated covariance along the axis to across it. Open ground
+(``open``: flat ground and a few far objects, several weak directions) is checked too, without a target.
+
+Both steps score only the draws the variant reports converged (:func:`converged_only`): a covariance describes a
+converged alignment, and a result flagged otherwise is one a user discards (the odometry runner keeps the previous
+motion instead). Flagged draws are counted apart, as are draws without a covariance. The corridor's direction names
+and along / across ratios count every draw with a covariance, converged or not.
 
 Raw draws are cached per (scene, seed, variant, draws) under ``<out>/draws/`` so the tables can be re-rendered
 (``_f<n>``: training or check runs of ``--train-frames n`` / ``--check-frames n``, one frame pair per draw when ``n > draws``; ``_feat``: with the
 per-pair features of :func:`collect`; ``_pose``: :func:`pose_features` replayed on a cache, see
 ``covariance_features.py``).
 
-    .venv/bin/python benchmarks/covariance_calibration.py   # training street 0, 2, 4, 6; check street 1, 3, 5, 7, 8,
-                                                             # 9, 10, 11 and corridor 1; 200 draws each, one frame pair per draw
+    .venv/bin/python benchmarks/covariance_calibration.py   # training street 0, 2, 4, 6, 12-15; check street 1, 3, 5, 7, 8,
+                                                             # 9, 10, 11, corridor 1 and open 1; 200 draws each, one frame pair per draw
 """
 
 from __future__ import annotations
@@ -141,11 +147,11 @@ def collect(scene: str, seed: int, draws: int, name: str, cache: Path, log, feat
     path = cache / f"{scene}_s{seed}_{name}_{draws}{frames_tag}{'_' + FEATURE_SUFFIX if features else ''}.npz"
     if path.exists():
         d = np.load(path, allow_pickle=False)
-        if "steps" in d.files:  # (caches from before the point-to-surface step are drawn again)
+        if "converged" in d.files:  # (caches from before the convergence flag are drawn again)
             return {k: d[k] for k in d.files}
     pairs = ScanPairs(scene, seed=seed, n_frames=n_frames)
     icp = get_icp(name, calibrated_covariance=False)
-    errors, covs, steps, refs, weak, feats, index = [], [], [], [], [], [], []
+    errors, covs, steps, refs, weak, feats, index, converged = [], [], [], [], [], [], [], []
     failed, t0 = 0, time.perf_counter()
     for i in range(draws):
         pair = pairs.draw(i)
@@ -156,6 +162,7 @@ def collect(scene: str, seed: int, draws: int, name: str, cache: Path, log, feat
         errors.append(se3_log(pair.T_target_source @ se3_inverse(res.T_target_source)))
         covs.append(res.covariance)
         steps.append(res.surface_step)
+        converged.append(bool(res.converged))
         weak.append(res.degeneracy.weakest_name)
         index.append(i)
         if features:
@@ -167,14 +174,31 @@ def collect(scene: str, seed: int, draws: int, name: str, cache: Path, log, feat
             refs.append(open3d_reference(pair, res.T_target_source, pairs.range_noise_m))
         elif name == "small_gicp":
             refs.append(small_gicp_reference(pair, res.T_target_source))
-    out = {"errors": np.array(errors).reshape(-1, 6), "covs": np.array(covs).reshape(-1, 6, 6), "steps": np.array(steps).reshape(-1, 6), "weakest": np.array(weak, dtype="U64"),
+    out = {"errors": np.array(errors).reshape(-1, 6), "covs": np.array(covs).reshape(-1, 6, 6), "steps": np.array(steps).reshape(-1, 6),
+           "converged": np.array(converged, dtype=bool), "weakest": np.array(weak, dtype="U64"),
            "refs": np.array(refs).reshape(-1, 6, 6), "failed": np.array(failed), "seconds_per_pair": np.array((time.perf_counter() - t0) / draws), "index": np.array(index)}
     if features:
         out["features"] = np.array(feats, dtype=np.float64).reshape(-1, len(RESULT_FEATURES + POSE_FEATURES))
         out["feature_names"] = np.array(RESULT_FEATURES + POSE_FEATURES, dtype="U32")
     cache.mkdir(parents=True, exist_ok=True)
     np.savez(path, **out)
-    log(f"{scene} seed {seed} {name}: {draws} draws, {failed} without covariance, {float(out['seconds_per_pair']):.2f} s/pair")
+    log(f"{scene} seed {seed} {name}: {draws} draws, {failed} without covariance, {int((~out['converged']).sum())} flagged not converged, "
+        f"{float(out['seconds_per_pair']):.2f} s/pair")
+    return out
+
+
+def converged_only(run: dict) -> dict:
+    """The draws of ``run`` whose result the variant reports converged (``flagged``: how many it does not): a covariance
+    describes a converged alignment, and a result flagged otherwise (an iteration limit reached, the acceptance gate's
+    fitness or correspondence count missed) is one a user discards, as the runner does in odometry."""
+    keep = np.asarray(run["converged"], dtype=bool)
+    out = dict(run)
+    for key in ("errors", "covs", "steps", "weakest", "index", "features"):
+        if key in run and len(run[key]) == len(keep):
+            out[key] = run[key][keep]
+    if len(run["refs"]) == len(keep):
+        out["refs"] = run["refs"][keep]
+    out["flagged"] = np.array(int((~keep).sum()))
     return out
 
 
@@ -223,12 +247,16 @@ def score(errors: np.ndarray, covs: np.ndarray) -> dict:
             "n": int(len(values))}
 
 
-def row(run: dict, cal: AxisCalibration, before: AxisCalibration, blk: np.ndarray) -> dict:
+def row(run: dict, cal: AxisCalibration, before: AxisCalibration, blk: np.ndarray, every: dict | None = None) -> dict:
+    """A run's scores (``run``: the draws scored, see :func:`converged_only`); the weakest direction's name and the
+    along / across ratio of the covariance are counted over ``every`` draw with a covariance (default ``run``): they
+    describe the geometry, which a result that stopped sliding along a corridor's axis shows as well as any."""
+    every = run if every is None else every
     steps = run.get("steps")
     calibrated = apply_all(run["covs"], cal, steps)
     no_coverage = apply_all(run["covs"], AxisCalibration(cal.factors, cal.sigmas, 1.0, None, cal.step_gains), steps)
     previous = apply_all(run["covs"], before)
-    out = {"failed": int(run["failed"]), "seconds_per_pair": float(run["seconds_per_pair"]),
+    out = {"failed": int(run["failed"]), "flagged": int(run.get("flagged", 0)), "seconds_per_pair": float(run["seconds_per_pair"]),
            "raw": score(run["errors"], run["covs"]), "block": score(run["errors"], scaled(run["covs"], blk)),
            "before": score(run["errors"], previous), "factor_floor": score(run["errors"], no_coverage),
            "calibrated": score(run["errors"], calibrated)}
@@ -237,11 +265,13 @@ def row(run: dict, cal: AxisCalibration, before: AxisCalibration, blk: np.ndarra
         out["z2_per_axis"] = z2.mean(axis=0).tolist()
         out["error_mean"] = run["errors"].mean(axis=0).tolist()
         out["error_std"] = run["errors"].std(axis=0).tolist()
-        out["axis_named"] = float(np.mean([w == "translation along x" for w in run["weakest"]]))
-        for key, covs in (("", calibrated), ("before_", previous)):
+    if len(every["errors"]):
+        out["named_draws"] = int(len(every["weakest"]))
+        out["axis_named"] = float(np.mean([w == "translation along x" for w in every["weakest"]]))
+        for key, covs in (("", apply_all(every["covs"], cal, every.get("steps"))), ("before_", apply_all(every["covs"], before))):
             out[f"{key}cov_xx_over_yy_median"] = float(np.median(covs[:, 0, 0] / covs[:, 1, 1]))
             out[f"{key}cov_xx_over_yy_min"] = float(np.min(covs[:, 0, 0] / covs[:, 1, 1]))
-        names, counts = np.unique(run["weakest"], return_counts=True)
+        names, counts = np.unique(every["weakest"], return_counts=True)
         out["weakest_names"] = {str(n): int(c) for n, c in zip(names, counts)}
     if len(run["refs"]):
         out["reference"] = score(run["errors"], run["refs"])
@@ -254,9 +284,9 @@ def parse_runs(text: str) -> list[tuple[str, int]]:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--train", default="street:0,street:2,street:4,street:6")
+    ap.add_argument("--train", default="street:0,street:2,street:4,street:6,street:12,street:13,street:14,street:15")
     ap.add_argument("--train-draws", type=int, default=200)
-    ap.add_argument("--check", default="street:1,street:3,street:5,street:7,street:8,street:9,street:10,street:11,corridor:1")
+    ap.add_argument("--check", default="street:1,street:3,street:5,street:7,street:8,street:9,street:10,street:11,corridor:1,open:1")
     ap.add_argument("--draws", type=int, default=200)
     ap.add_argument("--variants", default=",".join(VARIANTS))
     ap.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "covariance")
@@ -269,7 +299,7 @@ def main(argv=None) -> int:
     variants = [v for v in args.variants.split(",") if v in available_icp()]
     log = lambda msg: print(msg, file=sys.stderr, flush=True)  # noqa: E731
     cache = args.cache if args.cache is not None else args.out / "draws"
-    train = {name: [collect(sc, sd, args.train_draws, name, cache, log, n_frames=args.train_frames) for sc, sd in parse_runs(args.train)]
+    train = {name: [converged_only(collect(sc, sd, args.train_draws, name, cache, log, n_frames=args.train_frames)) for sc, sd in parse_runs(args.train)]
              for name in variants}
     fits = {name: fit_calibration(runs) for name, runs in train.items()}
     cal = {name: f[0] for name, f in fits.items()}
@@ -295,7 +325,8 @@ def main(argv=None) -> int:
         "check": {},
     }
     for sc, sd in parse_runs(args.check):
-        results["check"][f"{sc}:{sd}"] = {name: row(collect(sc, sd, args.draws, name, cache, log, n_frames=args.check_frames), cal[name], before[name], blk[name])
+        drawn = {name: collect(sc, sd, args.draws, name, cache, log, n_frames=args.check_frames) for name in variants}
+        results["check"][f"{sc}:{sd}"] = {name: row(converged_only(drawn[name]), cal[name], before[name], blk[name], every=drawn[name])
                                           for name in variants}
     args.out.mkdir(parents=True, exist_ok=True)
     write_text(args.out / "results.json", json.dumps(results, indent=2) + "\n")
@@ -337,7 +368,9 @@ def render(results: dict) -> str:
              "times one translation and one rotation factor; no step = the previous calibration (per-axis factor and floor, "
              "training-range guard, coverage scalar; no step term); step+factor+floor = the step term and the per-axis "
              "factor and floor of what it leaves, without the coverage scalar; **calibrated** (the default) = the same with "
-             "the coverage scalar. All are learned on the training runs and applied unchanged to the check runs.", "",
+             "the coverage scalar. All are learned on the training runs and applied unchanged to the check runs. Only the draws "
+             "the variant reports converged are learned from and scored (a covariance describes a converged alignment); the "
+             "draws it flags not converged, and those without a covariance, are counted apart.", "",
              f"## Training: {tr['runs']} ({tr['draws']} draws each)", "",
              "`Sigma' = c (S Sigma S + diag(b^2) + (g * step)(g * step)^T)`, `S = diag(sqrt(f))` while `Sigma_jj` is within "
              "the training range v (beyond it the excess is scaled by max(f, 1)); `step`: the result's point-to-surface "
@@ -354,27 +387,27 @@ def render(results: dict) -> str:
                      + f" | {c['coverage']:.3f} | {_fmt2(c['pooled_before_coverage'])} | {_fmt2(c['pooled_after_coverage'])} | "
                      f"{_fmt2(c['leave_one_out_after_coverage'])} |")
     lines += ["", "Mean NEES / inside on the training runs themselves (in-sample):", "",
-              "| run | variant | draws | raw | block | no step | step+factor+floor | calibrated |", "|---|---|---|---|---|---|---|---|"]
+              "| run | variant | draws scored (not converged) | raw | block | no step | step+factor+floor | calibrated |", "|---|---|---|---|---|---|---|---|"]
     for run, rows in tr["rows"].items():
         for name, r in rows.items():
-            lines.append(f"| {run} | {name} | {r['raw']['n']} | {_fmt(r['raw'])} | {_fmt(r['block'])} | {_fmt(r['before'])} | "
+            lines.append(f"| {run} | {name} | {r['raw']['n']} ({r.get('flagged', 0)}) | {_fmt(r['raw'])} | {_fmt(r['block'])} | {_fmt(r['before'])} | "
                          f"{_fmt(r['factor_floor'])} | {_fmt(r['calibrated'])} |")
     for run, rows in results["check"].items():
         scene = run.split(":")[0]
         corridor = scene == "corridor"
         lines += ["", f"## Check: {run.replace(':', ', seed ')}", "",
-                  "| variant | draws (no cov.) | raw NEES / inside | block | no step | step+factor+floor | **calibrated** | reference | z^2 per axis (tx ty tz rx ry rz) | "
-                  + ("weakest named 'translation along x' | cov xx / yy median (min), no step | calibrated | " if corridor else "") + "s/pair |",
+                  "| variant | draws scored (no cov., not converged) | raw NEES / inside | block | no step | step+factor+floor | **calibrated** | reference | z^2 per axis (tx ty tz rx ry rz) | "
+                  + ("weakest named 'translation along x' (draws with a covariance) | cov xx / yy median (min), no step | calibrated | " if corridor else "") + "s/pair |",
                   "|---|---|---|---|---|---|---|---|---|" + ("---|---|---|" if corridor else "") + "---|"]
         for name, r in rows.items():
             ref = _fmt(r["reference"]) if "reference" in r else "-"
             z2 = " ".join(f"{v:.2f}" for v in r.get("z2_per_axis", []))
             extra = ""
             if corridor:
-                extra = (f"{r.get('axis_named', float('nan')):.2f} | {r.get('before_cov_xx_over_yy_median', float('nan')):.0f} "
+                extra = (f"{r.get('axis_named', float('nan')):.2f} of {r.get('named_draws', 0)} | {r.get('before_cov_xx_over_yy_median', float('nan')):.0f} "
                          f"({r.get('before_cov_xx_over_yy_min', float('nan')):.0f}) | {r.get('cov_xx_over_yy_median', float('nan')):.0f} "
                          f"({r.get('cov_xx_over_yy_min', float('nan')):.0f}) | ")
-            lines.append(f"| {name} | {r['raw']['n']} ({r['failed']}) | {_fmt(r['raw'])} | {_fmt(r['block'])} | {_fmt(r['before'])} | "
+            lines.append(f"| {name} | {r['raw']['n']} ({r['failed']}, {r.get('flagged', 0)}) | {_fmt(r['raw'])} | {_fmt(r['block'])} | {_fmt(r['before'])} | "
                          f"{_fmt(r['factor_floor'])} | **{_fmt(r['calibrated'])}** | {ref} | {z2} | {extra}{r['seconds_per_pair']:.2f} |")
     lines += ["", "References (same pairs, same run): Open3D's `get_information_matrix_from_point_clouds` (times the known range "
               "variance) on the open3d_point_to_plane row, small_gicp's Hessian (inverse, moved to the left/target-frame "

@@ -1,7 +1,7 @@
 """Pose covariance along odometry: NEES of the 1-frame relative motions on simulated 300-sweep sequences.
 
 The sequences should use scenes and seeds that no covariance correction was learned on (the factors of
-``lidarkit.registration.covariance.CALIBRATION`` come from ``CALIBRATION_TRAINING``, street seeds 0, 2, 4 and 6,
+``lidarkit.registration.covariance.CALIBRATION`` come from ``CALIBRATION_TRAINING``, street seeds 0, 2, 4, 6 and 12-15,
 ``covariance_calibration.py``); a run on a training scene is marked in the table.
 Each run goes through ``lidarkit.odometry.run(..., pose_covariance=True)``; the metrics are the ones
 ``lidarkit odometry`` reports (``metrics["pose_covariance"]``): mean NEES of the relative motions against the truth

@@ -422,11 +422,8 @@ def test_every_variant_returns_a_psd_calibrated_covariance(seed, kind):
             assert _is_psd(res.covariance), (name, kind)
 
 
-def test_calibration_pose_features_measure_the_correction_and_the_residuals():
-    """The per-pair features of the calibration study (no ground truth used): the correction is exactly the injected
-    guess perturbation, the residual RMS is smaller at the true pose than at the perturbed guess, and at the true pose
-    the point-to-surface residual sigma is at least the simulated 2 cm range noise (the sampling of the surface adds to
-    it, so it is not equal) and below its value at the guess."""
+def _calibration_study():
+    """``benchmarks/covariance_calibration.py`` as a module."""
     import importlib.util
     from pathlib import Path
 
@@ -434,6 +431,33 @@ def test_calibration_pose_features_measure_the_correction_and_the_residuals():
     spec = importlib.util.spec_from_file_location("covariance_calibration", path)
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
+    return bench
+
+
+def test_calibration_study_scores_only_converged_draws(tmp_path):
+    """The study caches each draw's ``converged`` flag with its error, raw covariance, step and reference, and scores
+    only the draws the variant reports converged: a flagged draw leaves every per-draw array together (the same draws
+    drop out of each) and is counted apart."""
+    bench = _calibration_study()
+    run = bench.collect("street", 0, 3, "small_gicp", tmp_path, log=lambda msg: None)
+    assert run["converged"].dtype == bool and run["converged"].all() and len(run["converged"]) == len(run["errors"]) == 3
+    cached = np.load(next(tmp_path.glob("street_s0_small_gicp_3.npz")))
+    np.testing.assert_array_equal(cached["converged"], run["converged"])
+    flagged = {**run, "converged": np.array([True, False, True])}
+    kept = bench.converged_only(flagged)
+    assert int(kept["flagged"]) == 1
+    for key in ("errors", "covs", "steps", "refs", "weakest", "index"):
+        np.testing.assert_array_equal(kept[key], run[key][[0, 2]])
+    row = bench.row(kept, CALIBRATION["small_gicp"], CALIBRATION_WITHOUT_STEP["small_gicp"], np.ones(6))
+    assert row["flagged"] == 1 and row["calibrated"]["n"] == 2 and row["raw"]["n"] == 2
+
+
+def test_calibration_pose_features_measure_the_correction_and_the_residuals():
+    """The per-pair features of the calibration study (no ground truth used): the correction is exactly the injected
+    guess perturbation, the residual RMS is smaller at the true pose than at the perturbed guess, and at the true pose
+    the point-to-surface residual sigma is at least the simulated 2 cm range noise (the sampling of the surface adds to
+    it, so it is not equal) and below its value at the guess."""
+    bench = _calibration_study()
     pair = ScanPairs("street", seed=0, n_frames=3, n_beams=16, n_azimuths=512).draw(0)
     at_truth = bench.pose_features(pair.source_xyz, pair.target_xyz, pair.T_target_source, pair.init_T, 0.02)
     at_guess = bench.pose_features(pair.source_xyz, pair.target_xyz, pair.init_T, pair.init_T, 0.02)
