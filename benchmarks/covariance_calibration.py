@@ -19,7 +19,7 @@ calibrated covariance) and the share inside the chi-square(6) 95 % bound (12.59)
    for the Open3D point-to-plane result, small_gicp's Hessian (inverse, moved to the left/target-frame convention)
    for small_gicp's result. The corridor rows also count how often the weakest direction is named "translation
    along x" (the corridor axis) and the ratio of the calibrated covariance along the axis to across it. Open ground
-(``open``: flat ground and a few far objects, several weak directions) is checked too, without a target.
+   (``open``: flat ground and a few far objects, several weak directions) is checked too, without a target.
 
 Both steps score only the draws the variant reports converged (:func:`converged_only`): a covariance describes a
 converged alignment, and a result flagged otherwise is one a user discards (the odometry runner keeps the previous
