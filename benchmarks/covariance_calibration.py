@@ -24,7 +24,8 @@ calibrated covariance) and the share inside the chi-square(6) 95 % bound (12.59)
 Both steps score only the draws the variant reports converged (:func:`converged_only`): a covariance describes a
 converged alignment, and a result flagged otherwise is one a user discards (the odometry runner keeps the previous
 motion instead). Flagged draws are counted apart, as are draws without a covariance. The corridor's direction names
-and along / across ratios count every draw with a covariance, converged or not.
+count every draw, converged or not, with a covariance or not (a variant's degeneracy summary names the weakest
+direction when it returns no covariance too), the along / across ratios every draw with a covariance.
 
 Raw draws are cached per (scene, seed, variant, draws) under ``<out>/draws/`` so the tables can be re-rendered
 (``_f<n>``: training or check runs of ``--train-frames n`` / ``--check-frames n``, one frame pair per draw when ``n > draws``; ``_feat``: with the
@@ -151,13 +152,14 @@ def collect(scene: str, seed: int, draws: int, name: str, cache: Path, log, feat
             return {k: d[k] for k in d.files}
     pairs = ScanPairs(scene, seed=seed, n_frames=n_frames)
     icp = get_icp(name, calibrated_covariance=False)
-    errors, covs, steps, refs, weak, feats, index, converged = [], [], [], [], [], [], [], []
+    errors, covs, steps, refs, weak, feats, index, converged, weak_without = [], [], [], [], [], [], [], [], []
     failed, t0 = 0, time.perf_counter()
     for i in range(draws):
         pair = pairs.draw(i)
         res = icp.align(pair.source_xyz, pair.target_xyz, init_T=pair.init_T)
         if res.covariance is None:  # no covariance: too few points left or a fallback (ground removal in a corridor)
             failed += 1
+            weak_without.append(res.degeneracy.weakest_name)  # its degeneracy summary still names the weakest direction
             continue
         errors.append(se3_log(pair.T_target_source @ se3_inverse(res.T_target_source)))
         covs.append(res.covariance)
@@ -176,6 +178,7 @@ def collect(scene: str, seed: int, draws: int, name: str, cache: Path, log, feat
             refs.append(small_gicp_reference(pair, res.T_target_source))
     out = {"errors": np.array(errors).reshape(-1, 6), "covs": np.array(covs).reshape(-1, 6, 6), "steps": np.array(steps).reshape(-1, 6),
            "converged": np.array(converged, dtype=bool), "weakest": np.array(weak, dtype="U64"),
+           "weakest_without_covariance": np.array(weak_without, dtype="U64"),
            "refs": np.array(refs).reshape(-1, 6, 6), "failed": np.array(failed), "seconds_per_pair": np.array((time.perf_counter() - t0) / draws), "index": np.array(index)}
     if features:
         out["features"] = np.array(feats, dtype=np.float64).reshape(-1, len(RESULT_FEATURES + POSE_FEATURES))
@@ -248,9 +251,10 @@ def score(errors: np.ndarray, covs: np.ndarray) -> dict:
 
 
 def row(run: dict, cal: AxisCalibration, before: AxisCalibration, blk: np.ndarray, every: dict | None = None) -> dict:
-    """A run's scores (``run``: the draws scored, see :func:`converged_only`); the weakest direction's name and the
-    along / across ratio of the covariance are counted over ``every`` draw with a covariance (default ``run``): they
-    describe the geometry, which a result that stopped sliding along a corridor's axis shows as well as any."""
+    """A run's scores (``run``: the draws scored, see :func:`converged_only`); the along / across ratio of the
+    covariance is counted over ``every`` draw with a covariance (default ``run``), the weakest direction's name over
+    every draw: they describe the geometry, which a result that stopped sliding along a corridor's axis shows as well
+    as any."""
     every = run if every is None else every
     steps = run.get("steps")
     calibrated = apply_all(run["covs"], cal, steps)
@@ -266,12 +270,13 @@ def row(run: dict, cal: AxisCalibration, before: AxisCalibration, blk: np.ndarra
         out["error_mean"] = run["errors"].mean(axis=0).tolist()
         out["error_std"] = run["errors"].std(axis=0).tolist()
     if len(every["errors"]):
-        out["named_draws"] = int(len(every["weakest"]))
-        out["axis_named"] = float(np.mean([w == "translation along x" for w in every["weakest"]]))
+        named = np.concatenate([every["weakest"], every.get("weakest_without_covariance", np.zeros(0, dtype="U64"))])
+        out["named_draws"] = int(len(named))
+        out["axis_named"] = float(np.mean([w == "translation along x" for w in named]))
         for key, covs in (("", apply_all(every["covs"], cal, every.get("steps"))), ("before_", apply_all(every["covs"], before))):
             out[f"{key}cov_xx_over_yy_median"] = float(np.median(covs[:, 0, 0] / covs[:, 1, 1]))
             out[f"{key}cov_xx_over_yy_min"] = float(np.min(covs[:, 0, 0] / covs[:, 1, 1]))
-        names, counts = np.unique(every["weakest"], return_counts=True)
+        names, counts = np.unique(named, return_counts=True)
         out["weakest_names"] = {str(n): int(c) for n, c in zip(names, counts)}
     if len(run["refs"]):
         out["reference"] = score(run["errors"], run["refs"])
@@ -397,7 +402,7 @@ def render(results: dict) -> str:
         corridor = scene == "corridor"
         lines += ["", f"## Check: {run.replace(':', ', seed ')}", "",
                   "| variant | draws scored (no cov., not converged) | raw NEES / inside | block | no step | step+factor+floor | **calibrated** | reference | z^2 per axis (tx ty tz rx ry rz) | "
-                  + ("weakest named 'translation along x' (draws with a covariance) | cov xx / yy median (min), no step | calibrated | " if corridor else "") + "s/pair |",
+                  + ("weakest named 'translation along x' (every draw) | cov xx / yy median (min), no step, draws with a covariance | calibrated | " if corridor else "") + "s/pair |",
                   "|---|---|---|---|---|---|---|---|---|" + ("---|---|---|" if corridor else "") + "---|"]
         for name, r in rows.items():
             ref = _fmt(r["reference"]) if "reference" in r else "-"
