@@ -441,6 +441,7 @@ def test_calibration_study_scores_only_converged_draws(tmp_path):
     bench = _calibration_study()
     run = bench.collect("street", 0, 3, "small_gicp", tmp_path, log=lambda msg: None)
     assert run["converged"].dtype == bool and run["converged"].all() and len(run["converged"]) == len(run["errors"]) == 3
+    assert int(run["failed"]) == 0 and run["weakest_without_covariance"].shape == (0,)  # names of draws without a covariance
     cached = np.load(next(tmp_path.glob("street_s0_small_gicp_3.npz")))
     np.testing.assert_array_equal(cached["converged"], run["converged"])
     flagged = {**run, "converged": np.array([True, False, True])}
