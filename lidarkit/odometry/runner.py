@@ -20,7 +20,7 @@ from lidarkit.odometry.frame_check import FrameChecker, FrameCheckConfig
 from lidarkit.odometry.inputs import FrameSelection, frames_repr, open_sequence, parse_frames
 from lidarkit.odometry.instants import estimate_instant, like_with_like
 from lidarkit.odometry.metrics import odometry_metrics
-from lidarkit.odometry.overlap import Overlap
+from lidarkit.threads import Overlap
 from lidarkit.odometry.prefetch import DEFAULT_DEPTH, prefetched
 from lidarkit.odometry.result import FrameStats, OdometryResult
 from lidarkit.odometry.run_folder import write_run
@@ -284,7 +284,7 @@ def run(
     (:mod:`lidarkit.odometry.covariance`); None = for stateless variants (whose results carry one), not for
     stateful ones (which need an extra assessment of each frame against the previous one: True asks for it).
     ``overlap``: run each frame's after-the-fact work (assessment, covariance, frame check) in a worker thread while
-    the next frame registers (:mod:`lidarkit.odometry.overlap`; the same results as ``overlap=False``, which runs it in
+    the next frame registers (:class:`lidarkit.threads.Overlap`; the same results as ``overlap=False``, which runs it in
     line). A variant whose backend holds the GIL (``overlap_assessment = False``, small_gicp) is assessed in line.
     """
     sequence = open_sequence(dataset)

@@ -2,10 +2,7 @@
 
 from __future__ import annotations
 
-import threading
-from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
@@ -77,8 +74,8 @@ def assess_alignment(
     The degeneracy summary and the covariance (``covariance_model=None``: not computed) share one set of
     local surfaces around at most 2000 of the matched pairs; ``"active"`` takes the model of the registration that
     is running (:func:`lidarkit.registration.covariance.use_model`); ``surfaces``: the target's
-    :class:`~lidarkit.registration.degeneracy.SurfaceIndex` if already built (e.g. by :func:`background` while the
-    registration ran)."""
+    :class:`~lidarkit.registration.degeneracy.SurfaceIndex` if already built (e.g. by :class:`lidarkit.threads.background`
+    while the registration ran)."""
     if isinstance(covariance_model, str):
         covariance_model = active_model()
     aligned = transform_points(T_target_source, source_xyz)
@@ -109,28 +106,4 @@ def assess_alignment(
     )
 
 
-class background:  # noqa: N801 - used like a function
-    """``fn()`` in a thread of its own, started now; :meth:`result` joins it and returns its value (or raises its
-    error). For the pose-free part of an assessment, built while a backend that releases the GIL registers."""
-
-    def __init__(self, fn: Callable[[], Any]):
-        self._value: Any = None
-        self._error: BaseException | None = None
-
-        def work() -> None:
-            try:
-                self._value = fn()
-            except BaseException as err:  # noqa: BLE001 - handed to result()
-                self._error = err
-
-        self._thread = threading.Thread(target=work, name="lidarkit-assessment-prep", daemon=True)
-        self._thread.start()
-
-    def result(self) -> Any:
-        self._thread.join()
-        if self._error is not None:
-            raise self._error
-        return self._value
-
-
-__all__ = ["Assessment", "assess_alignment", "background"]
+__all__ = ["Assessment", "assess_alignment"]

@@ -13,11 +13,12 @@ import numpy as np
 from pydantic import Field
 
 from lidarkit.geometry import transform_points
-from lidarkit.registration.assessment import assess_alignment, background
+from lidarkit.registration.assessment import assess_alignment
 from lidarkit.registration.degeneracy import SurfaceIndex
 from lidarkit.registration.base import Registration, RegistrationConfig, RegistrationResult
 from lidarkit.registration.planar import refuse_2d
 from lidarkit.registration.registry import register_icp
+from lidarkit.threads import background
 
 
 class Open3DPointToPointConfig(RegistrationConfig):
