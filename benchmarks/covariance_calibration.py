@@ -51,7 +51,7 @@ from lidarkit.atomic import write_text
 from lidarkit.bench.machine import describe_machine, machine_info
 from lidarkit.geometry import se3_inverse, se3_log
 from lidarkit.registration import available_icp, get_icp
-from lidarkit.registration.covariance import AxisCalibration, adjoint, nees, safe_inverse
+from lidarkit.registration.covariance import AxisCalibration, adjoint, safe_inverse
 from lidarkit.sim.scan_pairs import ScanPairs
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -196,11 +196,9 @@ def converged_only(run: dict) -> dict:
     fitness or correspondence count missed) is one a user discards, as the runner does in odometry."""
     keep = np.asarray(run["converged"], dtype=bool)
     out = dict(run)
-    for key in ("errors", "covs", "steps", "weakest", "index", "features"):
+    for key in ("errors", "covs", "steps", "refs", "weakest", "index", "features"):  # refs: only for the reference variants
         if key in run and len(run[key]) == len(keep):
             out[key] = run[key][keep]
-    if len(run["refs"]) == len(keep):
-        out["refs"] = run["refs"][keep]
     out["flagged"] = np.array(int((~keep).sum()))
     return out
 
@@ -243,7 +241,7 @@ def replay_pose_features(scene: str, seed: int, draws: int, names: list[str], ca
 
 
 def score(errors: np.ndarray, covs: np.ndarray) -> dict:
-    values = np.array([nees(e, c) for e, c in zip(errors, covs)])
+    values = nees_values(errors, covs)
     if len(values) == 0:
         return {"nees_mean": float("nan"), "nees_median": float("nan"), "inside_95": float("nan"), "n": 0}
     return {"nees_mean": float(values.mean()), "nees_median": float(np.median(values)), "inside_95": float((values < CHI2_6_95).mean()),
