@@ -256,7 +256,7 @@ def row(run: dict, cal: AxisCalibration, before: AxisCalibration, blk: np.ndarra
     every = run if every is None else every
     steps = run.get("steps")
     calibrated = apply_all(run["covs"], cal, steps)
-    no_coverage = apply_all(run["covs"], AxisCalibration(cal.factors, cal.sigmas, 1.0, None, cal.step_gains), steps)
+    no_coverage = apply_all(run["covs"], AxisCalibration(cal.factors, cal.sigmas, 1.0, None, cal.step_gains, cal.step_spread), steps)
     previous = apply_all(run["covs"], before)
     out = {"failed": int(run["failed"]), "flagged": int(run.get("flagged", 0)), "seconds_per_pair": float(run["seconds_per_pair"]),
            "raw": score(run["errors"], run["covs"]), "block": score(run["errors"], scaled(run["covs"], blk)),
@@ -318,12 +318,13 @@ def main(argv=None) -> int:
         "train": {"runs": args.train, "draws": args.train_draws,
                   "calibration": {n: {"factors": list(c.factors), "sigmas": list(c.sigmas), "coverage": c.coverage,
                                       "trained_variance": list(c.trained_variance),
-                                      "step_gains": None if c.step_gains is None else list(c.step_gains), **fits[n][1]}
+                                      "step_gains": None if c.step_gains is None else list(c.step_gains),
+                                      "step_spread": None if c.step_spread is None else list(c.step_spread), **fits[n][1]}
                                   for n, c in cal.items()},
                   "rows": {f"{sc}:{sd}": {name: row(train[name][i], cal[name], before[name], blk[name]) for name in variants}
                            for i, (sc, sd) in enumerate(parse_runs(args.train))}},
         "calibration_without_step": {n: {"factors": list(c.factors), "sigmas": list(c.sigmas), "coverage": c.coverage,
-                                         "trained_variance": list(c.trained_variance), "step_gains": None}
+                                         "trained_variance": list(c.trained_variance), "step_gains": None, "step_spread": None}
                                      for n, c in before.items() if cal[n].step_gains is not None},
         "check": {},
     }
@@ -351,13 +352,14 @@ def _g(v: float) -> str:
 
 
 def calibration_source(calibration: dict) -> str:
-    """The ``CALIBRATION`` entries of ``lidarkit.registration.covariance`` as Python source."""
+    """The ``CALIBRATION`` entries of ``lidarkit.registration.covariance`` as Python source (the step gains and spread
+    only where the entry has them)."""
     lines = []
     for name, c in calibration.items():
-        lines += [f'    "{name}": AxisCalibration(', f'        ({", ".join(_g(v) for v in c["factors"])}),',
-                  f'        ({", ".join(_g(v) for v in c["sigmas"])}),',
-                  f'        {c["coverage"]:.3g}, ({", ".join(_g(v) for v in c["trained_variance"])}),',
-                  f'        {"None" if c.get("step_gains") is None else "(" + ", ".join(_g(v) for v in c["step_gains"]) + ")"}),']
+        fields = [f'({", ".join(_g(v) for v in c["factors"])})', f'({", ".join(_g(v) for v in c["sigmas"])})',
+                  f'{c["coverage"]:.3g}, ({", ".join(_g(v) for v in c["trained_variance"])})']
+        fields += [f'({", ".join(_g(v) for v in c[key])})' for key in ("step_gains", "step_spread") if c.get(key) is not None]
+        lines += [f'    "{name}": AxisCalibration(', *(f"        {f}," for f in fields[:-1]), f"        {fields[-1]}),"]
     return "\n".join(lines)
 
 
@@ -375,17 +377,20 @@ def render(results: dict) -> str:
              "the variant reports converged are learned from and scored (a covariance describes a converged alignment); the "
              "draws it flags not converged, and those without a covariance, are counted apart.", "",
              f"## Training: {tr['runs']} ({tr['draws']} draws each)", "",
-             "`Sigma' = c (S Sigma S + diag(b^2) + (g * step)(g * step)^T)`, `S = diag(sqrt(f))` while `Sigma_jj` is within "
-             "the training range v (beyond it the excess is scaled by max(f, 1)); `step`: the result's point-to-surface "
-             f"Gauss-Newton step (`surface_step`), `g` its gain per axis where it correlates with the error (r >= "
-             f"{STEP_MIN_CORRELATION:g}, else 0). b in mm and mrad; c from the pooled training NEES (target {TARGET_INSIDE:.3f} "
+             "`Sigma' = c (S Sigma S + diag(b^2) + |step_t|^2 diag(h^2) + (g * step)(g * step)^T)`, `S = diag(sqrt(f))` while "
+             "`Sigma_jj` is within the training range v (beyond it the excess is scaled by max(f, 1)); `step`: the result's "
+             f"point-to-surface Gauss-Newton step (`surface_step`, `step_t` its translation), `g` its gain per axis where it "
+             f"correlates with the error (r >= {STEP_MIN_CORRELATION:g}, else 0), `h` the spread of what the step leaves per "
+             "metre of step (only with a step term). b in mm and mrad, h in mm and mrad per m; "
+             f"c from the pooled training NEES (target {TARGET_INSIDE:.3f} "
              f"inside, mean NEES at least {MIN_MEAN_NEES:g}).", "",
-             "| variant | step correlation r (tx ty tz rx ry rz) | g | " + " | ".join(f"f {a}" for a in AXES) + " | "
+             "| variant | step correlation r (tx ty tz rx ry rz) | g | h | " + " | ".join(f"f {a}" for a in AXES) + " | "
              + " | ".join(f"b {a}" for a in AXES) + " | c | pooled NEES / inside before c | after c | leave-one-seed-out, after c |",
-             "|---|" + "---|" * 18]
+             "|---|" + "---|" * 19]
     for name, c in tr["calibration"].items():
         gains = "-" if c.get("step_gains") is None else " ".join(f"{v:.2f}" for v in c["step_gains"])
-        lines.append(f"| {name} | {' '.join(f'{v:+.2f}' for v in c['step_correlation'])} | {gains} | "
+        spread = "-" if c.get("step_spread") is None else " ".join(f"{1e3 * v:.2g}" for v in c["step_spread"])
+        lines.append(f"| {name} | {' '.join(f'{v:+.2f}' for v in c['step_correlation'])} | {gains} | {spread} | "
                      + " | ".join(_g(v) for v in c["factors"]) + " | " + " | ".join(f"{1e3 * v:.2g}" for v in c["sigmas"])
                      + f" | {c['coverage']:.3f} | {_fmt2(c['pooled_before_coverage'])} | {_fmt2(c['pooled_after_coverage'])} | "
                      f"{_fmt2(c['leave_one_out_after_coverage'])} |")
@@ -415,7 +420,7 @@ def render(results: dict) -> str:
     lines += ["", "References (same pairs, same run): Open3D's `get_information_matrix_from_point_clouds` (times the known range "
               "variance) on the open3d_point_to_plane row, small_gicp's Hessian (inverse, moved to the left/target-frame "
               "convention) on the small_gicp row. z^2 per axis: mean of xi_j^2 / Sigma_jj after calibration (1 when that axis is "
-              "calibrated).", "", "`CALIBRATION` entries (`lidarkit/registration/covariance.py`; factors, sigmas, coverage, training range, step gains):", "",
+              "calibrated).", "", "`CALIBRATION` entries (`lidarkit/registration/covariance.py`; factors, sigmas, coverage, training range, step gains, step spread):", "",
               "```python", calibration_source(tr["calibration"]), "```", "",
               "`CALIBRATION_WITHOUT_STEP` entries (the same learned without the step term, for a covariance without its step: "
               "the odometry frame covariance of a stateful variant):", "", "```python",

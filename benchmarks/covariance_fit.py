@@ -3,11 +3,12 @@
 A run is a dict of per-draw arrays: ``errors`` ``(n, 6)`` (true error, left/target-frame convention), ``covs``
 ``(n, 6, 6)`` (the raw closed form) and ``steps`` ``(n, 6)`` (the result's point-to-surface step). The learned
 :class:`~lidarkit.registration.covariance.AxisCalibration` models the second moment of the error as
-``c (S Sigma S + diag(b^2) + (g * step)(g * step)^T)``:
+``c (S Sigma S + diag(b^2) + |step_t|^2 diag(h^2) + (g * step)(g * step)^T)``:
 
 1. step gains ``g``: per axis, the regression (through the origin) of the error on the step, kept where their pooled
    correlation is at least ``STEP_MIN_CORRELATION`` (elsewhere the step is noise and would only widen the bound);
-2. factor ``f`` and floor ``b`` per axis on what the step leaves (``xi - g * step``);
+2. factor ``f``, floor ``b`` and step spread ``h`` per axis on what the step leaves (``xi - g * step``); ``h`` only
+   where the step term is used (``g`` not all zero);
 3. one coverage scalar ``c`` on the pooled training NEES.
 """
 
@@ -60,21 +61,26 @@ def residual_runs(runs: list[dict], gains: np.ndarray | None) -> list[dict]:
     return [{**r, "errors": r["errors"] - np.nan_to_num(gains * _steps(r))} for r in runs]
 
 
-def axis_calibration(runs: list[dict]) -> tuple[np.ndarray, np.ndarray]:
-    """Per axis ``(factor f_j, systematic sigma b_j)`` with ``E[xi_j^2 | Sigma_jj] = f_j Sigma_jj + b_j^2`` over the
-    pooled draws (bounded least squares on the standardised variances)."""
+def axis_calibration(runs: list[dict], spread: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """Per axis ``(factor f_j, systematic sigma b_j, step spread h_j)`` with
+    ``E[xi_j^2 | Sigma_jj, step] = f_j Sigma_jj + b_j^2 + h_j^2 |step_t|^2`` over the pooled draws (bounded least
+    squares on the standardised variances); ``h`` None unless ``spread``."""
     from scipy.optimize import lsq_linear
 
     errors = np.concatenate([r["errors"] for r in runs])
     var = np.concatenate([np.einsum("nii->ni", r["covs"]) for r in runs])
-    f, b = np.zeros(6), np.zeros(6)
+    step2 = np.concatenate([(np.nan_to_num(_steps(r))[:, :3] ** 2).sum(axis=1) for r in runs])
+    f, b, h = np.zeros(6), np.zeros(6), np.zeros(6)
     for j in range(6):
         unit = var[:, j].mean()
         y = errors[:, j] ** 2 / unit
-        X = np.column_stack([var[:, j] / unit, np.ones(len(y))])
-        fit = lsq_linear(X, y, bounds=([MIN_SCALE_SHARE * y.mean(), 0.0], [np.inf, np.inf]))
+        X = np.column_stack([var[:, j] / unit, np.ones(len(y))] + ([step2 / unit] if spread else []))
+        lower = [MIN_SCALE_SHARE * y.mean()] + [0.0] * (X.shape[1] - 1)
+        fit = lsq_linear(X, y, bounds=(lower, [np.inf] * X.shape[1]))
         f[j], b[j] = fit.x[0], np.sqrt(fit.x[1] * unit)
-    return f, b
+        if spread:
+            h[j] = np.sqrt(fit.x[2])
+    return f, b, (h if spread else None)
 
 
 def block_factors(runs: list[dict]) -> np.ndarray:
@@ -100,13 +106,13 @@ def nees_values(errors: np.ndarray, covs: np.ndarray) -> np.ndarray:
 
 
 def factor_floor(runs: list[dict], use_step: bool = True) -> AxisCalibration:
-    """Step gains (``use_step``), then the per-axis factor and floor of what they leave, pooled over ``runs``, with
+    """Step gains (``use_step``), then the per-axis factor, floor and step spread of what they leave, pooled over ``runs``, with
     the training range of the closed-form variances; coverage 1."""
     gains = step_gains(runs)[0] if use_step else None
-    f, b = axis_calibration(residual_runs(runs, gains))
+    f, b, h = axis_calibration(residual_runs(runs, gains), spread=gains is not None)
     top = np.max(np.concatenate([np.einsum("nii->ni", r["covs"]) for r in runs if len(r["covs"])]), axis=0)
     return AxisCalibration(tuple(f.tolist()), tuple(b.tolist()), 1.0, tuple(top.tolist()),
-                           None if gains is None else tuple(gains.tolist()))
+                           None if gains is None else tuple(gains.tolist()), None if h is None else tuple(h.tolist()))
 
 
 def calibrated_nees(run: dict, entry: AxisCalibration) -> np.ndarray:
@@ -120,7 +126,7 @@ def fit_calibration(runs: list[dict], use_step: bool = True) -> tuple[AxisCalibr
     base = factor_floor(runs, use_step)
     pooled = np.concatenate([calibrated_nees(r, base) for r in runs])
     c = min(float(np.quantile(pooled, TARGET_INSIDE)) / CHI2_6_95, float(pooled.mean()) / MIN_MEAN_NEES)
-    entry = AxisCalibration(base.factors, base.sigmas, c, base.trained_variance, base.step_gains)
+    entry = AxisCalibration(base.factors, base.sigmas, c, base.trained_variance, base.step_gains, base.step_spread)
     oof = np.concatenate([calibrated_nees(r, factor_floor(runs[:k] + runs[k + 1:], use_step)) for k, r in enumerate(runs)]) \
         if len(runs) > 1 else pooled
     stats = lambda v: {"nees_mean": float(v.mean()), "inside_95": float((v < CHI2_6_95).mean())}  # noqa: E731

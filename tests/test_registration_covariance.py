@@ -370,6 +370,48 @@ def test_calibrated_corridor_axis_is_ten_times_the_across_axis(variant):
         assert cov[0, 0] >= 10 * cov[1, 1], (i, np.diag(cov))
 
 
+def test_step_spread_widens_every_axis_with_the_size_of_the_step():
+    """What the step leaves grows with the step: ``h_j^2 |step_t|^2`` on the diagonal, on top of the rank-one term,
+    zero for a zero step, and only with a step term (an entry without gains ignores it)."""
+    cov = np.diag([1e-4, 2e-4, 1e-5, 1e-6, 2e-6, 1e-6])
+    factors, sigmas, gains = (1.0,) * 6, (0.0,) * 6, (1.5, 1.4, 0.0, 0.0, 0.0, 1.3)
+    spread = (0.1, 0.2, 0.05, 0.01, 0.0, 0.003)
+    step = np.array([0.3, -0.4, 0.0, 0.001, 0.002, -0.004])  # |step_t| = 0.5 m
+    with_gains = apply_calibration(cov, AxisCalibration(factors, sigmas, 1.3, None, gains), step)
+    out = apply_calibration(cov, AxisCalibration(factors, sigmas, 1.3, None, gains, spread), step)
+    np.testing.assert_allclose(out - with_gains, 1.3 * np.diag(np.square(spread) * 0.25), rtol=1e-9, atol=1e-12)
+    assert _is_psd(out)
+    np.testing.assert_allclose(apply_calibration(cov, AxisCalibration(factors, sigmas, 1.3, None, gains, spread), np.zeros(6)),
+                               apply_calibration(cov, AxisCalibration(factors, sigmas, 1.3)), rtol=1e-12)
+    np.testing.assert_allclose(apply_calibration(cov, AxisCalibration(factors, sigmas, 1.3, None, None, spread), step),
+                               apply_calibration(cov, AxisCalibration(factors, sigmas, 1.3)), rtol=1e-12)
+
+
+def test_fit_learns_the_step_spread_from_errors_that_grow_with_the_step(tmp_path):
+    """The calibration fit recovers a known spread: errors drawn as ``g step + N(0, Sigma) + N(0, h^2 |step_t|^2)``."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from covariance_fit import factor_floor
+
+    rng = np.random.default_rng(3)
+    n, h_true = 4000, np.array([0.3, 0.1, 0.05, 0.0, 0.0, 0.0])
+    steps = np.zeros((n, 6))
+    steps[:, :3] = rng.normal(scale=0.2, size=(n, 3))
+    sd = np.array([0.01, 0.01, 0.005, 1e-3, 1e-3, 1e-3])
+    covs = np.repeat(np.diag(sd**2)[None], n, axis=0) * rng.uniform(0.5, 2.0, size=(n, 1, 1))
+    norms = np.linalg.norm(steps[:, :3], axis=1)
+    errors = 1.2 * steps + rng.normal(size=(n, 6)) * np.sqrt(np.einsum("nii->ni", covs)) \
+        + rng.normal(size=(n, 6)) * h_true * norms[:, None]
+    entry = factor_floor([{"errors": errors[: n // 2], "covs": covs[: n // 2], "steps": steps[: n // 2]},
+                          {"errors": errors[n // 2:], "covs": covs[n // 2:], "steps": steps[n // 2:]}])
+    np.testing.assert_allclose(entry.step_gains[:3], 1.2, atol=0.05)
+    np.testing.assert_allclose(entry.step_spread[:3], h_true[:3], atol=0.03)
+    np.testing.assert_allclose(entry.step_spread[3:], 0.0, atol=2e-3)
+    np.testing.assert_allclose(entry.factors[3:], 1.0, atol=0.15)  # the axes without spread keep their factor
+
+
 def test_every_variant_has_a_calibration():
     from lidarkit.registration import available_icp
 
