@@ -287,3 +287,27 @@ def test_tracked_nearest_gives_the_fresh_answers_with_fewer_searches(rng, kind):
             searched.append(state["searched"])
         assert searched[0] == len(source)
         assert searched[4] < 0.05 * len(source) and searched[5] < 0.05 * len(source)  # tiny steps: almost no search
+
+
+def test_deskew_with_one_rotation_axis_equals_the_per_point_exponential():
+    """``exp_scaled_twist_apply`` (Rodrigues with the one axis, per-point scalars) against ``se3_exp_batch`` (a 3x3
+    exponential per point): equal to 1e-10 m for a curve, a pure translation, a rotation of a few nano-radians (its
+    series branch) and a fast turn; the sweep-end point stays, the sweep start moves back by the whole motion."""
+    from lidarkit.geometry import se3_exp
+    from lidarkit.registration.components.motion import deskew_constant_velocity, exp_scaled_twist_apply, se3_exp_batch
+
+    rng = np.random.default_rng(4)
+    points = rng.normal(size=(5000, 3)) * 20.0
+    s = np.sort(rng.uniform(-1.0, 0.3, len(points)))
+    s[:5], s[5:10] = 0.0, 1e-7
+    for xi in ([1.0, 0.02, 0.01, 0.001, 0.002, 0.02], [0.5, 0.0, 0.0, 0.0, 0.0, 0.0], [1.0, 0.0, 0.0, 3e-9, 0.0, 0.0],
+               [0.3, -0.2, 0.1, 0.3, -0.5, 1.2]):
+        xi = np.asarray(xi)
+        R, t = se3_exp_batch(s[:, None] * xi[None, :])
+        np.testing.assert_allclose(exp_scaled_twist_apply(xi, s, points), np.einsum("nij,nj->ni", R, points) + t, atol=1e-10)
+    delta = se3_exp(np.array([1.0, 0.05, 0.0, 0.0, 0.01, 0.03]))
+    times = np.linspace(0.0, 0.1, len(points))
+    moved = deskew_constant_velocity(points, times, delta, "end")
+    np.testing.assert_allclose(moved[-1], points[-1], atol=1e-12)
+    np.testing.assert_allclose(moved[0], np.linalg.inv(delta)[:3, :3] @ points[0] + np.linalg.inv(delta)[:3, 3], atol=1e-10)
+    assert deskew_constant_velocity(points, None, delta) is points

@@ -38,6 +38,7 @@ from pydantic import Field, model_validator
 from lidarkit.errors import DataError
 from lidarkit.geometry import make_se3, se3_log, so3_exp
 from lidarkit.registration.base import Degeneracy, RegistrationResult
+from lidarkit.registration.components.motion import exp_scaled_twist_apply
 from lidarkit.registration.ground import (
     DEFAULT_GROUND_SEGMENTER,
     KITTI_SENSOR_HEIGHT_M,
@@ -123,17 +124,10 @@ def sweep_fraction(point_times_s: np.ndarray) -> np.ndarray | None:
 
 def deskew_to_sweep_end(points_xyz: np.ndarray, fraction: np.ndarray, T_motion: np.ndarray) -> np.ndarray:
     """Points measured at sweep fraction ``s`` moved into the sensor frame of the sweep end, for a sensor whose
-    motion over one sweep is ``T_motion`` (constant velocity): ``p_end = exp((s - 1) log T_motion) p``.
-
-    The translation of the exponential is kept to second order (``tau rho + tau^2 / 2 phi x rho``): the
-    rotation over one sweep is a few degrees at most.
-    """
-    xi = se3_log(T_motion)
-    rho, phi = xi[:3], xi[3:]
+    motion over one sweep is ``T_motion`` (constant velocity): ``p_end = exp((s - 1) log T_motion) p`` (the
+    ``pipeline`` variant's deskew, :func:`~lidarkit.registration.components.motion.exp_scaled_twist_apply`)."""
     tau = np.asarray(fraction, dtype=np.float64) - 1.0
-    rot = so3_exp(tau[:, None] * phi[None, :]).reshape(-1, 3, 3)
-    shift = tau[:, None] * rho[None, :] + 0.5 * (tau**2)[:, None] * np.cross(phi, rho)[None, :]
-    return np.einsum("nij,nj->ni", rot, points_xyz) + shift
+    return exp_scaled_twist_apply(se3_log(T_motion), tau, np.asarray(points_xyz, dtype=np.float64))
 
 
 def refine_on_ground(

@@ -85,16 +85,48 @@ class ConstantVelocity(Motion):
         return np.asarray(last_pose, dtype=np.float64) @ np.asarray(last_delta, dtype=np.float64)
 
     def deskew(self, points_xyz: np.ndarray, point_times_s: np.ndarray | None, delta: np.ndarray) -> np.ndarray:
-        if not self.config.deskew or point_times_s is None or len(point_times_s) == 0:
+        if not self.config.deskew:
             return points_xyz
-        times = np.asarray(point_times_s, dtype=np.float64).ravel()
-        t0, t1 = float(times.min()), float(times.max())
-        if not t1 > t0:
-            return points_xyz
-        s = (times - t0) / (t1 - t0) - REFERENCE_FRACTION[self.config.reference]
-        omega = se3_log(delta)
-        R, t = se3_exp_batch(s[:, None] * omega[None, :])
-        return np.einsum("nij,nj->ni", R, points_xyz) + t
+        return deskew_constant_velocity(points_xyz, point_times_s, delta, self.config.reference)
 
 
-__all__ = ["REFERENCE_FRACTION", "ConstantVelocity", "Motion", "NoMotion", "se3_exp_batch"]
+def deskew_constant_velocity(points_xyz: np.ndarray, point_times_s: np.ndarray | None, delta: np.ndarray,
+                             reference: str = "end") -> np.ndarray:
+    """``points_xyz`` moved to the ``reference`` instant of their sweep (start / middle / end) for a sensor that moved
+    by ``delta`` over the sweep at constant velocity (see the module doc); unchanged without per-point times or when
+    they span no time."""
+    if point_times_s is None or len(point_times_s) == 0:
+        return points_xyz
+    times = np.asarray(point_times_s, dtype=np.float64).ravel()
+    t0, t1 = float(times.min()), float(times.max())
+    if not t1 > t0:
+        return points_xyz
+    s = (times - t0) / (t1 - t0) - REFERENCE_FRACTION[reference]
+    return exp_scaled_twist_apply(se3_log(delta), s, np.asarray(points_xyz, dtype=np.float64))
+
+
+def exp_scaled_twist_apply(xi: np.ndarray, s: np.ndarray, points_xyz: np.ndarray) -> np.ndarray:
+    """``exp(s_i xi) p_i`` for one twist ``xi`` (translation first) scaled per point by ``s`` ``(N,)``: Rodrigues'
+    formula with the one rotation axis, so only per-point scalars are formed (the same as :func:`se3_exp_batch`
+    applied point by point, ~10x faster than its ``(N, 3, 3)`` matrices on a 32k-point sweep)."""
+    rho, phi = np.asarray(xi[:3], dtype=np.float64), np.asarray(xi[3:], dtype=np.float64)
+    w = float(np.linalg.norm(phi))
+    if w < 1e-12:
+        return points_xyz + s[:, None] * rho[None, :]
+    K = np.array([[0.0, -phi[2], phi[1]], [phi[2], 0.0, -phi[0]], [-phi[1], phi[0], 0.0]]) / w  # [u]x, u the unit axis
+    theta = s * w
+    sin, versine = np.sin(theta), 2.0 * np.sin(0.5 * theta) ** 2  # 1 - cos, without its cancellation
+    rotated = points_xyz + sin[:, None] * (points_xyz @ K.T) + versine[:, None] * (points_xyz @ (K @ K).T)
+    # V(s phi) (s rho) = s rho + (1 - cos) / w^2 (phi x rho) + (theta - sin) / w^3 (phi x (phi x rho)); near theta = 0
+    # the two coefficients by their series (s^2 / 2 and s^3 / 6 to the next order), free of cancellation
+    b, c = versine / w**2, (theta - sin) / w**3
+    small = np.flatnonzero(np.abs(theta) < 1e-4)
+    if small.size:
+        s2 = s[small] * s[small]
+        b[small] = s2 * (0.5 - s2 * w * w / 24.0)
+        c[small] = s2 * s[small] * (1.0 / 6.0 - s2 * w * w / 120.0)
+    pr = np.cross(phi, rho)
+    return rotated + s[:, None] * rho + b[:, None] * pr + c[:, None] * np.cross(phi, pr)
+
+
+__all__ = ["REFERENCE_FRACTION", "ConstantVelocity", "Motion", "NoMotion", "deskew_constant_velocity", "exp_scaled_twist_apply", "se3_exp_batch"]
