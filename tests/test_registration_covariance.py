@@ -217,6 +217,47 @@ def test_odometry_writes_pose_covariance_and_min_eigenvalue(tmp_path):
     assert "min_eigenvalue" in header
 
 
+def test_odometry_widens_the_frame_covariance_of_distorted_sweeps_registered_as_they_are(monkeypatch):
+    """A scan-to-scan variant without deskew on sweeps with per-point times: each frame covariance gains
+    ``diag((d * |t|)^2)`` (``DISTORTION_SIGMA``, ``|t|`` the frame's translation); without per-point times (a snapshot)
+    nothing is added, and the poses are the same either way."""
+    from lidarkit.odometry import run
+    from lidarkit.registration import covariance as covariance_module
+    from lidarkit.sim.lidar import SimulatedLidarSequence
+
+    sim = dict(scene="street", n_frames=5, seed=4, n_beams=16, n_azimuths=512, range_noise_std_m=0.02, accel_time_s=0.0)
+    d = np.array([0.01, 0.002, 0.003, 0.0005, 0.001, 0.0002])
+    monkeypatch.setitem(covariance_module.DISTORTION_SIGMA, "small_gicp", tuple(d))
+    distorted = SimulatedLidarSequence(**sim)
+    widened = run(distorted, "small_gicp", pose_covariance=True)
+    monkeypatch.delitem(covariance_module.DISTORTION_SIGMA, "small_gicp")
+    plain = run(distorted, "small_gicp", pose_covariance=True)
+    np.testing.assert_allclose(widened.trajectory.poses_se3, plain.trajectory.poses_se3, atol=1e-12)
+    motion_m = np.linalg.norm(plain.trajectory.relative_motions()[:, :3, 3], axis=1)
+    added = widened.covariances[0][1:] - plain.covariances[0][1:]
+    np.testing.assert_allclose(added, np.einsum("ni,ij->nij", (d[None, :] * motion_m[:, None]) ** 2, np.eye(6)), rtol=1e-9, atol=1e-15)
+    assert motion_m.min() > 0.5  # the drive is at speed: the floor is not negligible
+    monkeypatch.setitem(covariance_module.DISTORTION_SIGMA, "small_gicp", tuple(d))
+    snapshot = SimulatedLidarSequence(**sim, motion_distortion=False, point_times=False)
+    with_entry = run(snapshot, "small_gicp", pose_covariance=True)
+    monkeypatch.delitem(covariance_module.DISTORTION_SIGMA, "small_gicp")
+    np.testing.assert_allclose(with_entry.covariances[0][1:], run(snapshot, "small_gicp", pose_covariance=True).covariances[0][1:], rtol=1e-9)
+
+
+def test_distortion_floor_only_for_variants_that_register_sweeps_as_they_are():
+    from lidarkit.odometry.settings import deskew_requested
+    from lidarkit.registration import available_icp, get_icp
+    from lidarkit.registration.covariance import DISTORTION_SIGMA
+
+    assert {"open3d_point_to_plane", "small_gicp"} <= set(DISTORTION_SIGMA)
+    for name, sigma in DISTORTION_SIGMA.items():
+        if name not in available_icp():
+            continue
+        icp = get_icp(name)
+        assert len(sigma) == 6 and min(sigma) >= 0.0 and max(sigma[:3]) < 0.5  # m per m of motion
+        assert not getattr(icp, "stateful", False) and deskew_requested(icp) is None and not getattr(icp, "accepts_point_times", False)
+
+
 def test_surface_thickness_adds_the_map_noise():
     """A target surface known only to 5 cm across it: the height of the plane is known to 0.05^2 / n, not to the
     (here negligible) range noise over n; without the term only the range noise remains."""

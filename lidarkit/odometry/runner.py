@@ -26,6 +26,7 @@ from lidarkit.odometry.result import FrameStats, OdometryResult
 from lidarkit.odometry.run_folder import write_run
 from lidarkit.odometry.settings import deskew_requested, effective_settings, require_point_times
 from lidarkit.registration.base import PendingAlignment
+from lidarkit.registration.covariance import widen_for_distortion
 from lidarkit.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
@@ -160,6 +161,10 @@ def _run_stateless(stream, registration: Any, worker: Overlap, indices: np.ndarr
         min_eigenvalue[k] = float(deg.eigenvalues[0]) if deg is not None else np.nan
         if relative_cov is not None and getattr(result, "covariance", None) is not None and converged[k]:
             relative_cov[k] = result.covariance
+            if distorted(item["scan"]) and not getattr(registration, "accepts_point_times", False):
+                # a sweep skewed by the motion within it, registered as it is: the skew that does not cancel between
+                # two sweeps is not in the pair calibration (DISTORTION_SIGMA, benchmarks/covariance_distortion.py)
+                relative_cov[k] = widen_for_distortion(result.covariance, name, float(np.linalg.norm(result.T_target_source[:3, 3])))
         reasons[k] = str(getattr(result, "reason", "") or "")
         if converged[k]:
             motion = orthonormalize_se3(np.asarray(result.T_target_source, dtype=np.float64))
@@ -282,7 +287,9 @@ def run(
     stateful one gets it as ``register_frame(..., motion_guess=...)`` if it ``accepts_motion_guess``).
     ``pose_covariance``: propagate each frame's registration covariance into a covariance per pose
     (:mod:`lidarkit.odometry.covariance`); None = for stateless variants (whose results carry one), not for
-    stateful ones (which need an extra assessment of each frame against the previous one: True asks for it).
+    stateful ones (which need an extra assessment of each frame against the previous one: True asks for it). A
+    variant without deskew registering sweeps that carry per-point times gets the learned distortion floor on each
+    frame covariance (:func:`lidarkit.registration.covariance.widen_for_distortion`).
     ``overlap``: run each frame's after-the-fact work (assessment, covariance, frame check) in a worker thread while
     the next frame registers (:class:`lidarkit.threads.Overlap`; the same results as ``overlap=False``, which runs it in
     line). A variant whose backend holds the GIL (``overlap_assessment = False``, small_gicp) is assessed in line.
@@ -459,6 +466,12 @@ def run(
         write_run(result, out_dir)
         result = dataclasses.replace(result, out_dir=Path(out_dir))
     return result
+
+
+def distorted(scan: Scan) -> bool:
+    """Whether ``scan`` carries per-point times that span part of a sweep (its points were measured while moving)."""
+    times = scan.point_times_s
+    return times is not None and len(times) > 1 and float(np.ptp(times)) > 0.0
 
 
 #: Initial guesses of a run's registrations (``run(init=...)``).
