@@ -237,6 +237,8 @@ def test_odometry_widens_the_frame_covariance_of_distorted_sweeps_registered_as_
     added = widened.covariances[0][1:] - plain.covariances[0][1:]
     np.testing.assert_allclose(added, np.einsum("ni,ij->nij", (d[None, :] * motion_m[:, None]) ** 2, np.eye(6)), rtol=1e-9, atol=1e-15)
     assert motion_m.min() > 0.5  # the drive is at speed: the floor is not negligible
+    assert widened.metrics["pose_covariance"]["distortion_floor"].startswith("4 frames: motion-distorted sweeps")
+    assert "distortion_floor" not in plain.metrics["pose_covariance"]
     monkeypatch.setitem(covariance_module.DISTORTION_SIGMA, "small_gicp", tuple(d))
     snapshot = SimulatedLidarSequence(**sim, motion_distortion=False, point_times=False)
     with_entry = run(snapshot, "small_gicp", pose_covariance=True)

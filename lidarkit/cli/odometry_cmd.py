@@ -133,6 +133,8 @@ def odometry(
         if "relative_nees_mean" in cov:
             table.add_row("NEES of 1-frame motions (6 = calibrated)", f"{cov['relative_nees_mean']:.2f} ({100 * cov['relative_inside_95']:.0f} % inside 95 %)")
             table.add_row("end error explained by bias", f"{100 * min(cov['end_error_bias_share'], 1.0):.0f} %")
+        if cov.get("distortion_floor"):
+            table.add_row("covariance distortion floor", cov["distortion_floor"])
     for message in m.get("warnings") or []:  # also logged (stderr) by the runner
         table.add_row(Text("warning", style="yellow"), Text(message, style="yellow"))
     if result.out_dir is not None:

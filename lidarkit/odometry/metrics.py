@@ -42,6 +42,8 @@ def odometry_metrics(result: OdometryResult) -> dict[str, Any]:
 
         truth = None if result.ground_truth is None or len(result.ground_truth) != len(result.trajectory) else result.ground_truth.poses_se3
         out["pose_covariance"] = covariance_metrics(result.trajectory.poses_se3, *result.covariances, truth)
+        if run.get("covariance_distortion_floor"):
+            out["pose_covariance"]["distortion_floor"] = run["covariance_distortion_floor"]
     ref = result.ground_truth
     if ref is None:
         return out

@@ -103,14 +103,15 @@ def _run_stateless(stream, registration: Any, worker: Overlap, indices: np.ndarr
                    poses: np.ndarray, checker: FrameChecker, strict: bool, name: str, dataset_name: str, bar,
                    validated: dict[int, np.ndarray], *,
                    read_s, register_s, n_points, converged, measured, fallback, iterations, rmse_m, n_corr, degenerate,
-                   min_eigenvalue, relative_cov, reasons) -> Scan | None:
+                   min_eigenvalue, relative_cov, reasons, widened: list[int]) -> Scan | None:
     """Scan-to-scan chaining, frame k's assessment overlapped with frame k+1's registration.
 
     The only thing frame k+1 needs from frame k's assessment is its verdict: a result the acceptance gate turns down
     (too few correspondences, too low a fitness) is not converged, and the next guess is then the previous motion.
     Frame k+1 therefore registers from the guess the backend's own verdict implies (the usual case: both agree) and is
     registered again, from the right guess, when the assessment turns frame k down; every pose and result is the one
-    of the in-line definition (``align`` frame after frame)."""
+    of the in-line definition (``align`` frame after frame). ``widened`` collects the frames whose covariance got the
+    distortion floor."""
     clock = time.perf_counter
     deferred = callable(getattr(registration, "align_deferred", None)) and not getattr(registration, "accepts_point_times", False)
     motion = np.eye(4)  # the motion of the last resolved frame (the in-line loop's `motion`)
@@ -164,7 +165,10 @@ def _run_stateless(stream, registration: Any, worker: Overlap, indices: np.ndarr
             if distorted(item["scan"]) and not getattr(registration, "accepts_point_times", False):
                 # a sweep skewed by the motion within it, registered as it is: the skew that does not cancel between
                 # two sweeps is not in the pair calibration (DISTORTION_SIGMA, benchmarks/covariance_distortion.py)
-                relative_cov[k] = widen_for_distortion(result.covariance, name, float(np.linalg.norm(result.T_target_source[:3, 3])))
+                cov = widen_for_distortion(result.covariance, name, float(np.linalg.norm(result.T_target_source[:3, 3])))
+                if cov is not result.covariance:
+                    relative_cov[k] = cov
+                    widened.append(k)
         reasons[k] = str(getattr(result, "reason", "") or "")
         if converged[k]:
             motion = orthonormalize_se3(np.asarray(result.T_target_source, dtype=np.float64))
@@ -326,6 +330,7 @@ def run(
     relative_cov = np.full((n, 6, 6), np.nan)
     reasons = [""] * n
     want_covariance = (not stateful) if pose_covariance is None else bool(pose_covariance)
+    widened: list[int] = []  # frames whose covariance got the distortion floor
     checker = FrameChecker(n, frame_check)
     need_times = strict and stateful and bool(deskew_requested(registration))
     if strict and not stateful and deskew_requested(registration):
@@ -404,7 +409,7 @@ def run(
                     stream, registration, worker, indices, odometry_poses, poses, checker, strict, name, dataset_name, bar, validated,
                     read_s=read_s, register_s=register_s, n_points=n_points, converged=converged, measured=measured, fallback=fallback,
                     iterations=iterations, rmse_m=rmse_m, n_corr=n_corr, degenerate=degenerate, min_eigenvalue=min_eigenvalue,
-                    relative_cov=relative_cov if want_covariance else None, reasons=reasons,
+                    relative_cov=relative_cov if want_covariance else None, reasons=reasons, widened=widened,
                 )
     finally:
         worker.close()  # cancels what has not started, joins the worker thread, also on error
@@ -455,6 +460,10 @@ def run(
             "warnings": warnings,
             "frame_check": check.config.describe(),
             "ground_truth_instant_note": instant_note,
+            "covariance_distortion_floor": (
+                f"{len(widened)} frames: motion-distorted sweeps registered without deskew, frame covariance widened by "
+                f"DISTORTION_SIGMA[{name!r}]" if widened else None
+            ),
         },
     }
     result = OdometryResult(trajectory, name, config, indices.copy(), stats, total, reference, covariances=covariances, total_cpu_s=total_cpu)
