@@ -58,10 +58,10 @@ def frame_errors(scene: str, seed: int, variant: str, frames: int, cache: Path, 
         result = run(sim, variant, pose_covariance=True)
     finally:
         covariance_module.DISTORTION_SIGMA.update(saved)
-    P, G, C = result.trajectory.poses_se3, result.ground_truth.poses_se3, result.covariances[0]
-    keep = [k for k in range(1, len(P)) if np.isfinite(C[k]).all()]
-    est = se3_inverse(P[np.array(keep) - 1]) @ P[keep]
-    true = se3_inverse(G[np.array(keep) - 1]) @ G[keep]
+    C = result.covariances[0]
+    keep = np.array([k for k in range(1, len(C)) if np.isfinite(C[k]).all()])
+    est = result.trajectory.relative_motions()[keep - 1]
+    true = result.ground_truth.relative_motions()[keep - 1]
     out = {"errors": np.array([se3_log(t @ se3_inverse(e)) for t, e in zip(true, est)]), "covs": C[keep],
            "motion_m": np.linalg.norm(est[:, :3, 3], axis=1)}
     cache.mkdir(parents=True, exist_ok=True)

@@ -60,6 +60,11 @@ class Scan:
         lo, hi = float(t.min()), float(t.max())
         return np.zeros_like(t) if hi <= lo else (t - lo) / (hi - lo)
 
+    def has_time_span(self) -> bool:
+        """Whether the per-point times span part of a sweep (the points were measured while the sensor moved)."""
+        times = self.point_times_s
+        return times is not None and len(times) > 1 and float(np.ptp(times)) > 0.0
+
 
 @runtime_checkable
 class ScanSequence(Protocol):

@@ -20,13 +20,13 @@ from lidarkit.odometry.frame_check import FrameChecker, FrameCheckConfig
 from lidarkit.odometry.inputs import FrameSelection, frames_repr, open_sequence, parse_frames
 from lidarkit.odometry.instants import estimate_instant, like_with_like
 from lidarkit.odometry.metrics import odometry_metrics
-from lidarkit.threads import Overlap
 from lidarkit.odometry.prefetch import DEFAULT_DEPTH, prefetched
 from lidarkit.odometry.result import FrameStats, OdometryResult
 from lidarkit.odometry.run_folder import write_run
 from lidarkit.odometry.settings import deskew_requested, effective_settings, require_point_times
 from lidarkit.registration.base import PendingAlignment
 from lidarkit.registration.covariance import widen_for_distortion
+from lidarkit.threads import Overlap
 from lidarkit.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
@@ -162,7 +162,7 @@ def _run_stateless(stream, registration: Any, worker: Overlap, indices: np.ndarr
         min_eigenvalue[k] = float(deg.eigenvalues[0]) if deg is not None else np.nan
         if relative_cov is not None and getattr(result, "covariance", None) is not None and converged[k]:
             relative_cov[k] = result.covariance
-            if distorted(item["scan"]) and not getattr(registration, "accepts_point_times", False):
+            if item["scan"].has_time_span() and not getattr(registration, "accepts_point_times", False):
                 # a sweep skewed by the motion within it, registered as it is: the skew that does not cancel between
                 # two sweeps is not in the pair calibration (DISTORTION_SIGMA, benchmarks/covariance_distortion.py)
                 cov = widen_for_distortion(result.covariance, name, float(np.linalg.norm(result.T_target_source[:3, 3])))
@@ -475,12 +475,6 @@ def run(
         write_run(result, out_dir)
         result = dataclasses.replace(result, out_dir=Path(out_dir))
     return result
-
-
-def distorted(scan: Scan) -> bool:
-    """Whether ``scan`` carries per-point times that span part of a sweep (its points were measured while moving)."""
-    times = scan.point_times_s
-    return times is not None and len(times) > 1 and float(np.ptp(times)) > 0.0
 
 
 #: Initial guesses of a run's registrations (``run(init=...)``).
