@@ -203,6 +203,21 @@ def test_nonfinite_points_raise_or_drop(tmp_path, odo_root, caplog, bad):
     assert "dropped 3 of 124668" in caplog.text and "frame 0" in caplog.text
 
 
+def test_bounds_test_of_whole_records_falls_back_to_the_per_column_check(tmp_path, odo_root):
+    """The reader tests x, y, z and intensity in one pass over the records; a value it cannot pass there (a huge but
+    finite intensity) goes to the per-column check, which accepts it, while a huge coordinate is still refused."""
+    path = _scan_copy(tmp_path, odo_root)
+    data = np.fromfile(path, dtype=np.float32).reshape(-1, 4)
+    data[7, 3] = 3e8  # beyond the coordinate bound, but an intensity has none
+    data.tofile(path)
+    scan = read_kitti_bin(path)
+    assert scan.intensity[7] == np.float32(3e8) and np.array_equal(scan.points_xyz, data[:, :3].astype(np.float64))
+    data[7, 3], data[11, 1] = 0.5, 3e8
+    data.tofile(path)
+    with pytest.raises(DataError, match=r"1 of 124668 points have a coordinate beyond .*first: point 11"):
+        read_kitti_bin(path)
+
+
 def test_all_nonfinite_is_an_error_even_when_dropping(tmp_path):
     path = tmp_path / "000000.bin"
     np.full((5, 4), np.nan, dtype=np.float32).tofile(path)

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from lidarkit.errors import DataError
+from lidarkit.geometry import _within_limits
 from lidarkit.io.base import Scan
 
 log = logging.getLogger(__name__)
@@ -44,7 +45,7 @@ def finite_points(
     drop_nonfinite: bool = False,
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """Check ``(N, 3)`` points (and ``(N,)`` intensity) for NaN/inf; raise DataError or drop them with a warning."""
-    from lidarkit.geometry import _within_limits, check_magnitude
+    from lidarkit.geometry import check_magnitude
 
     if len(points_xyz) and _within_limits(points_xyz) and (intensity is None or bool(np.isfinite(intensity).all())):
         return points_xyz, intensity  # the common case in flat reductions (NaN fails them); the per-row test below is ~20x slower
@@ -93,9 +94,12 @@ def read_kitti_bin(
             location=f"frame {frame}",
         )
     data = np.fromfile(path, dtype="<f4").reshape(-1, 4)
-    points, intensity = finite_points(
-        data[:, :3], data[:, 3], source=path, frame=frame, drop_nonfinite=drop_nonfinite
-    )
+    if len(data) and _within_limits(data):
+        # every value finite and bounded, tested in one flat pass over the contiguous records (~20x faster than the
+        # same test on the strided x/y/z and intensity columns; anything else takes the full check below)
+        points, intensity = data[:, :3], data[:, 3]
+    else:
+        points, intensity = finite_points(data[:, :3], data[:, 3], source=path, frame=frame, drop_nonfinite=drop_nonfinite)
     return Scan(points.astype(np.float64), np.ascontiguousarray(intensity), None, timestamp_s, frame, str(path))
 
 
