@@ -87,11 +87,11 @@ def _frame_error(err: Exception, dataset_name: str, frame: int) -> LidarKitError
 
 def _stateful_after(k: int, frame: int, previous: np.ndarray | None, scan: Scan, prepared: tuple, poses: np.ndarray,
                     checker: FrameChecker, want_covariance: bool, relative_cov: np.ndarray, min_eigenvalue: np.ndarray,
-                    name: str, dataset_name: str) -> None:
+                    name: str, dataset_name: str, voxelized: VoxelizedScans) -> None:
     """A stateful variant's frame k once its pose is known: the after-the-fact covariance, then the frame check."""
     if want_covariance and k > 0:
         try:
-            relative_cov[k], min_eigenvalue[k] = frame_covariance(previous, scan.points_xyz, poses[k - 1], poses[k], name)
+            relative_cov[k], min_eigenvalue[k] = frame_covariance(previous, scan.points_xyz, poses[k - 1], poses[k], name, voxelized)
         except Exception as err:
             if not _is_frame_error(err):
                 raise
@@ -366,6 +366,7 @@ def run(
             if stateful:
                 registration.reset()
                 previous = None
+                voxelized = VoxelizedScans()  # used by the worker thread only, one frame after another
                 inflight = None  # frame k-1's after-the-fact task
                 for k, (idx, payload, read_time, read_error) in enumerate(stream):
                     read_s[k] = read_time
@@ -396,7 +397,7 @@ def run(
                         inflight.result()
                     inflight = worker.submit(functools.partial(
                         _stateful_after, k, int(idx), previous, scan, prepared, poses, checker, want_covariance, relative_cov,
-                        min_eigenvalue, name, dataset_name,
+                        min_eigenvalue, name, dataset_name, voxelized,
                     ))
                     validated.pop(id(points), None)  # registered: not passed to the backend again
                     previous = points
@@ -530,18 +531,34 @@ FRAME_COVARIANCE_VOXEL_M = 0.5
 FRAME_COVARIANCE_INLIER_M = 1.0
 
 
+class VoxelizedScans:
+    """The scans a stateful variant's frame covariance is assessed on, voxelized at :data:`FRAME_COVARIANCE_VOXEL_M`;
+    the last one is kept, since the scan of frame k is the target of frame k+1 (voxelized once, not twice)."""
+
+    def __init__(self) -> None:
+        self._last: tuple[np.ndarray | None, np.ndarray | None] = (None, None)
+
+    def __call__(self, points_xyz: np.ndarray) -> np.ndarray:
+        from lidarkit.registration.preprocess import voxel_downsample
+
+        if self._last[0] is not points_xyz:
+            self._last = (points_xyz, voxel_downsample(points_xyz, FRAME_COVARIANCE_VOXEL_M))
+        return self._last[1]
+
+
 def frame_covariance(previous_xyz: np.ndarray, points_xyz: np.ndarray, T_world_prev: np.ndarray, T_world_cur: np.ndarray,
-                     variant: str) -> tuple[np.ndarray, float]:
+                     variant: str, voxelized: VoxelizedScans | None = None) -> tuple[np.ndarray, float]:
     """Covariance (and smallest normal-matrix eigenvalue) of a stateful variant's frame-to-frame motion, assessed
-    after the fact on the two voxelized scans at the motion it estimated (the variant itself exposes no Hessian)."""
+    after the fact on the two voxelized scans at the motion it estimated (the variant itself exposes no Hessian).
+    ``voxelized``: the run's :class:`VoxelizedScans`, which has the previous scan voxelized already."""
     from lidarkit.geometry import se3_inverse
     from lidarkit.registration.assessment import assess_alignment
     from lidarkit.registration.covariance import calibrate
-    from lidarkit.registration.preprocess import voxel_downsample
 
+    voxelized = voxelized or VoxelizedScans()
     T_rel = se3_inverse(T_world_prev) @ T_world_cur
-    target = voxel_downsample(previous_xyz, FRAME_COVARIANCE_VOXEL_M)
-    source = voxel_downsample(points_xyz, FRAME_COVARIANCE_VOXEL_M)
+    target = voxelized(previous_xyz)
+    source = voxelized(points_xyz)
     assessment = assess_alignment(source, target, T_rel, FRAME_COVARIANCE_INLIER_M)
     if assessment.covariance is None:
         return np.full((6, 6), np.nan), float("nan")
