@@ -77,23 +77,28 @@ def library_pairwise(name: str, cfg, source: np.ndarray, target: np.ndarray) -> 
             out = reg.registration_icp(*clouds, cfg.max_correspondence_distance_m, init, est, criteria)
         return np.asarray(out.transformation)
     if name == "kiss":
-        from kiss_icp.mapping import get_voxel_hash_map
-        from kiss_icp.preprocess import Preprocessor
         from kiss_icp.registration import get_registration
-        from kiss_icp.voxelization import voxel_down_sample
 
-        kcfg = cfg.to_kiss_config()
-        crop = Preprocessor(cfg.max_range_m, cfg.min_range_m, False, cfg.max_num_threads)
-        tgt = crop.preprocess(np.ascontiguousarray(target), np.array([]), init)
-        src = crop.preprocess(np.ascontiguousarray(source), np.array([]), init)
-        voxel = cfg.resolved_voxel_size_m
-        local_map = get_voxel_hash_map(kcfg)
-        local_map.update(voxel_down_sample(tgt, voxel * 0.5), init)
-        src = voxel_down_sample(voxel_down_sample(src, voxel * 0.5), voxel * 1.5)
+        keypoints, local_map = kiss_inputs(cfg, source, target)
         sigma = cfg.initial_threshold_m
-        return np.asarray(get_registration(kcfg).align_points_to_map(points=src, voxel_map=local_map, initial_guess=init,
-                                                                   max_correspondance_distance=3.0 * sigma, kernel=sigma))
+        return np.asarray(get_registration(cfg.to_kiss_config()).align_points_to_map(
+            points=keypoints, voxel_map=local_map, initial_guess=init, max_correspondance_distance=3.0 * sigma, kernel=sigma))
     raise ValueError(name)
+
+
+def kiss_inputs(cfg, source: np.ndarray, target: np.ndarray):
+    """kiss-icp's own steps before its registration of ``source`` on ``target``: (source keypoints, local map)."""
+    from kiss_icp.mapping import get_voxel_hash_map
+    from kiss_icp.preprocess import Preprocessor
+    from kiss_icp.voxelization import voxel_down_sample
+
+    init, voxel = np.eye(4), cfg.resolved_voxel_size_m
+    crop = Preprocessor(cfg.max_range_m, cfg.min_range_m, False, cfg.max_num_threads)
+    tgt = crop.preprocess(np.ascontiguousarray(target), np.array([]), init)
+    src = crop.preprocess(np.ascontiguousarray(source), np.array([]), init)
+    local_map = get_voxel_hash_map(cfg.to_kiss_config())
+    local_map.update(voxel_down_sample(tgt, voxel * 0.5), init)
+    return voxel_down_sample(voxel_down_sample(src, voxel * 0.5), voxel * 1.5), local_map
 
 
 def kiss_nearest_pass(cfg, source: np.ndarray, target: np.ndarray, T: np.ndarray, repeats: int) -> float:
@@ -101,17 +106,10 @@ def kiss_nearest_pass(cfg, source: np.ndarray, target: np.ndarray, T: np.ndarray
     exact nearest-neighbour search of kiss's source keypoints, moved by the final pose ``T``, in its local map (a
     small_gicp KdTree built over the map and queried, both in C++, one thread)."""
     import small_gicp
-    from kiss_icp.mapping import get_voxel_hash_map
-    from kiss_icp.preprocess import Preprocessor
-    from kiss_icp.voxelization import voxel_down_sample
 
     from lidarkit.geometry import transform_points
 
-    crop = Preprocessor(cfg.max_range_m, cfg.min_range_m, False, cfg.max_num_threads)
-    voxel, init = cfg.resolved_voxel_size_m, np.eye(4)
-    local_map = get_voxel_hash_map(cfg.to_kiss_config())
-    local_map.update(voxel_down_sample(crop.preprocess(np.ascontiguousarray(target), np.array([]), init), voxel * 0.5), init)
-    keypoints = voxel_down_sample(voxel_down_sample(crop.preprocess(np.ascontiguousarray(source), np.array([]), init), voxel * 0.5), voxel * 1.5)
+    keypoints, local_map = kiss_inputs(cfg, source, target)
     map_points = np.asarray(local_map.point_cloud())
     times = []
     for _ in range(repeats):
