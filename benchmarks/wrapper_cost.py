@@ -16,7 +16,8 @@ timed on its own (``align_deferred(...).result()``, the pose-free part already b
 ``library / (library + that)`` is the best ratio this assessment allows. For kiss, the least any assessment of the
 final pose must do (one exact nearest-neighbour search of its keypoints in its map, in C++) is timed as well; and as
 kiss is stateful, whose frames the odometry runner assesses only when asked, its loop is also timed with
-``pose_covariance=True``.
+``pose_covariance=True``. Every variant is also timed without the assessment (``assess=False``), pairwise and in
+odometry.
 
     .venv/bin/python benchmarks/wrapper_cost.py [--repeats 5] [--odometry-repeats 3]   # on a quiet machine
 
@@ -275,6 +276,7 @@ def main() -> None:
         icp = get_icp(name)
         cfg = icp.config
         lib_t, ours_t, lib_c, ours_c, lib_o, ours_o, lib_oc, ours_oc = [], [], [], [], [], [], [], []
+        bare_t, bare_o = [], []  # assess=False: the backend's pose and verdict only
         T_lib = T_ours = None
         for _ in range(args.repeats):
             t, c, T_lib = timed_cpu(lambda: library_pairwise(name, cfg, source, target))
@@ -285,6 +287,8 @@ def main() -> None:
             ours_t.append(t)
             ours_c.append(c)
             T_ours = res.T_target_source
+            bare = get_icp(name, assess=False)
+            bare_t.append(timed(lambda: bare.align(source, target, init_T=np.eye(4)))[0])
         after = []  # the pose-dependent part of the assessment, on its own (see the module doc)
         for _ in range(args.repeats):
             pending = get_icp(name).align_deferred(source, target, init_T=np.eye(4))
@@ -304,6 +308,8 @@ def main() -> None:
                 inline_o.append(run(f"kitti:{DATA}?sequence=00", name, overlap=False).total_time_s)
             if icp.stateful:  # the runner assesses a stateful variant's frames only when asked (pose_covariance=True)
                 assessed_o.append(run(f"kitti:{DATA}?sequence=00", name, pose_covariance=True).total_time_s)
+            else:
+                bare_o.append(run(f"kitti:{DATA}?sequence=00", name, params={"assess": False}).total_time_s)
         rows.append({
             "variant": name,
             "pairwise_library_s": float(np.median(lib_t)), "pairwise_lidarkit_s": float(np.median(ours_t)),
@@ -315,6 +321,10 @@ def main() -> None:
             "pairwise_after_library_s": float(np.median(after)),
             "pairwise_floor_ratio": float(np.median(lib_t) / (np.median(lib_t) + np.median(after))),
             "pairwise_nearest_pass_s": nearest_pass,
+            "pairwise_unassessed_s": float(np.median(bare_t)),
+            "pairwise_unassessed_ratio": float(np.median(lib_t) / np.median(bare_t)),
+            "odometry_unassessed_s": float(np.median(bare_o)) if bare_o else None,
+            "odometry_unassessed_ratio": float(np.median(lib_o) / np.median(bare_o)) if bare_o else None,
             "odometry_lidarkit_inline_s": float(np.median(inline_o)) if inline_o else None,
             "odometry_lidarkit_assessed_s": float(np.median(assessed_o)) if assessed_o else None,
             "odometry_library_s": float(np.median(lib_o)), "odometry_lidarkit_s": float(np.median(ours_o)),
@@ -372,6 +382,14 @@ def main() -> None:
                       "each frame against the previous scan) only when asked (`pose_covariance=True`); the ratios above are with the "
                       f"runner's default, without it. Asked for, its loop takes {r['odometry_lidarkit_assessed_s']:.2f} s, a ratio of "
                       f"{r['odometry_library_s'] / r['odometry_lidarkit_assessed_s']:.2f}."]
+    lines += ["", "Without the assessment (`assess=False`: the backend's pose and its own verdict, no correspondences, degeneracy "
+              "summary or covariance; the odometry loop keeps its frame check). kiss's odometry loop assesses no frame by default, "
+              "so its figure is the one above.", "",
+              "| variant | pairwise (s) | pairwise ratio | odometry (s) | odometry ratio |", "|---|---|---|---|---|"]
+    for r in rows:
+        bare_o = r["odometry_unassessed_s"]
+        lines.append(f"| {r['variant']} | {r['pairwise_unassessed_s']:.3f} | {r['pairwise_unassessed_ratio']:.2f} | "
+                     + (f"{bare_o:.2f} | {r['odometry_unassessed_ratio']:.2f} |" if bare_o else "- | - |"))
     lines += ["", *reading(rows)]
     lines += ["", "Where a lidarkit pairwise alignment's CPU time goes (cProfile with a process-time clock, 3 alignments; the rest "
               "is the library's own work and lidarkit's glue):", "",

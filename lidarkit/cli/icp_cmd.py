@@ -90,6 +90,10 @@ def _result_table(result, source: Path, target: Path) -> Table:
     table.add_row("converged", str(result.converged) + (f" ({result.reason})" if result.reason else ""))
     reported = result.extra.get("iterations_reported", True)
     table.add_row("iterations", str(result.iterations) if reported else "not reported by the backend")
+    if not result.extra.get("assessed", True):
+        table.add_row("runtime (s)", f"{result.runtime_s:.3f}")
+        table.add_row("assessment", "off (assess=False): no correspondences, fitness, RMSE, degeneracy or covariance")
+        return table
     table.add_row("final RMSE (m)", f"{result.rmse:.4f}")
     table.add_row("correspondences / fitness", f"{result.n_correspondences} / {result.fitness:.3f}")
     table.add_row("runtime (s)", f"{result.runtime_s:.3f}")

@@ -290,8 +290,9 @@ def run(
     e.g. a CARMEN log's wheel odometry; for a stateless variant it also replaces a non-converged registration; a
     stateful one gets it as ``register_frame(..., motion_guess=...)`` if it ``accepts_motion_guess``).
     ``pose_covariance``: propagate each frame's registration covariance into a covariance per pose
-    (:mod:`lidarkit.odometry.covariance`); None = for stateless variants (whose results carry one), not for
-    stateful ones (which need an extra assessment of each frame against the previous one: True asks for it). A
+    (:mod:`lidarkit.odometry.covariance`); None = for stateless variants (whose results carry one, unless registered
+    with ``assess=False``, which leaves it out: True is then an error), not for stateful ones (which need an extra
+    assessment of each frame against the previous one: True asks for it). A
     variant without deskew registering sweeps that carry per-point times gets the learned distortion floor on each
     frame covariance (:func:`lidarkit.registration.covariance.widen_for_distortion`).
     ``overlap``: run each frame's after-the-fact work (assessment, covariance, frame check) in a worker thread while
@@ -329,7 +330,10 @@ def run(
     min_eigenvalue = np.full(n, np.nan)
     relative_cov = np.full((n, 6, 6), np.nan)
     reasons = [""] * n
-    want_covariance = (not stateful) if pose_covariance is None else bool(pose_covariance)
+    assessed = stateful or bool(getattr(getattr(registration, "config", None), "assess", True))
+    if pose_covariance and not assessed:
+        raise ConfigError("pose_covariance needs each frame's covariance, which assess=False leaves out", source=name)
+    want_covariance = (not stateful and assessed) if pose_covariance is None else bool(pose_covariance)
     widened: list[int] = []  # frames whose covariance got the distortion floor
     checker = FrameChecker(n, frame_check)
     need_times = strict and stateful and bool(deskew_requested(registration))

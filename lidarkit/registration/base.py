@@ -20,7 +20,7 @@ from typing import Any, ClassVar, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from lidarkit.errors import DataError, LidarKitError, RegistrationError
+from lidarkit.errors import ConfigError, DataError, LidarKitError, RegistrationError
 from lidarkit.geometry import as_points, is_rotation, orthonormalize_se3
 from lidarkit.registration.covariance import use_model
 
@@ -64,6 +64,11 @@ class RegistrationConfig(BaseModel):
     )
     calibrated_covariance: bool = Field(
         True, description="apply the variant's measured translation/rotation factors (benchmarks/covariance_calibration.py)"
+    )
+    assess: bool = Field(
+        True, description="score the result once the backend returns: final correspondences, fitness, RMSE, degeneracy summary, "
+        "covariance, acceptance gate (False: the backend's pose and its own verdict only, at the library's speed; for the "
+        "variants that register apart from their assessment: kiss, small_gicp, the Open3D ones)"
     )
 
     def covariance_model(self):
@@ -126,6 +131,13 @@ class Degeneracy:
         out["ratio"] = self.ratio
         out["twist_order"] = list(TWIST_ORDER)
         return json_safe(out)
+
+    @staticmethod
+    def not_assessed() -> "Degeneracy":
+        """The summary of a result registered with ``assess=False``: nothing known, nothing flagged."""
+        nan = float("nan")
+        return Degeneracy(eigenvalues=(nan,) * 6, condition_number=nan, degenerate=False, weakest_direction=(nan,) * 6,
+                          kind="not assessed (assess=False)")
 
     @staticmethod
     def unknown(reason: str = "not computed") -> "Degeneracy":
@@ -269,6 +281,17 @@ def no_overlap_result(T0: np.ndarray, gap_m: float, method: str) -> Registration
     )
 
 
+def unassessed_result(T_target_source: np.ndarray, converged: bool, method: str, runtime_s: float) -> RegistrationResult:
+    """The result of an alignment with ``assess=False``: the backend's pose and verdict, nothing counted or scored
+    (no correspondences: -1, fitness and RMSE unknown, no covariance, no acceptance gate)."""
+    return RegistrationResult(
+        T_target_source=np.asarray(T_target_source, dtype=np.float64), converged=converged, iterations=0, rmse_history=(),
+        n_correspondences=-1, runtime_s=runtime_s, fitness=float("nan"), degeneracy=Degeneracy.not_assessed(),
+        reason="" if converged else f"{method} reports no convergence", method=method,
+        extra={"assessed": False, "iterations_reported": False},
+    )
+
+
 def accept(result: RegistrationResult, config: RegistrationConfig) -> RegistrationResult:
     """Apply the config's acceptance gate: too few correspondences or too low a fitness -> not converged."""
     if not result.converged:
@@ -353,6 +376,12 @@ class Registration:
         if config is not None and params:
             raise TypeError("pass either a config object or keyword parameters, not both")
         self._config = config if config is not None else self.Config(**params)
+        if not self._config.assess and not _split_below_align(type(self)):
+            from lidarkit.registration.registry import available_icp, get_icp_class
+
+            split = [n for n in available_icp() if _split_below_align(get_icp_class(n))]
+            raise ConfigError(f"assess=False is for the variants that register apart from their assessment ({', '.join(split)}); "
+                              f"{self.name} scores its result within its own iterations", source=self.name or type(self).__name__)
 
     @property
     def config(self) -> RegistrationConfig:
@@ -390,6 +419,8 @@ class Registration:
         with use_backend(self.name, source), use_model(model):
             T, likely_converged, assess = register(src, dst, T0)
         register_s = time.perf_counter() - start
+        if not self._config.assess:
+            return PendingAlignment.done(unassessed_result(T, bool(likely_converged), self.name, register_s))
 
         def finish() -> RegistrationResult:
             start = time.perf_counter()

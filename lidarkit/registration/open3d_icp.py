@@ -75,7 +75,7 @@ class _Open3DBase(Registration):
         dst_pts = np.asarray(dst.points)
         # the assessment's pose-free part (the target's local-surface index) is built in another thread while Open3D,
         # which releases the GIL, registers
-        surfaces = background(lambda: SurfaceIndex(dst_pts))
+        surfaces = background(lambda: SurfaceIndex(dst_pts)) if c.assess else None
         criteria = reg.ICPConvergenceCriteria(c.relative_fitness, c.relative_rmse, c.max_iterations)
         try:
             if self._kind == "gicp":
@@ -90,10 +90,11 @@ class _Open3DBase(Registration):
                 )
                 out = reg.registration_icp(src, dst, c.max_correspondence_distance_m, init_T, estimation, criteria)
         except BaseException:
-            with contextlib.suppress(Exception):
-                surfaces.result()  # joined (its thread ends) before the error goes on
+            if surfaces is not None:
+                with contextlib.suppress(Exception):
+                    surfaces.result()  # joined (its thread ends) before the error goes on
             raise
-        prepared = surfaces.result()  # joined here: the preparation never outlives the registration
+        prepared = surfaces.result() if surfaces is not None else None  # joined here: it never outlives the registration
         T = np.array(out.transformation, dtype=np.float64)
         no_pairs = float(out.fitness) <= 0
 

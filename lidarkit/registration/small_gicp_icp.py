@@ -76,7 +76,7 @@ if _small_gicp is not None:
             """small_gicp's own downsampling + covariances + KdTree, reused when the same cloud comes back (in a
             scan-to-scan chain the source of one frame is the target of the next: preprocessed once, as small_gicp's
             own odometry loop does). Also the cloud's points in voxel order and each point's rank in that order, for the
-            assessment (:func:`voxel_order`)."""
+            assessment (:func:`voxel_order`; None with ``assess=False``)."""
             c = self.config
             key = (id(points), points.shape, points.ctypes.data, points[:: max(1, len(points) // 32)].tobytes(), c.downsampling_resolution_m)
             for cached in self._cache:
@@ -87,11 +87,14 @@ if _small_gicp is not None:
             cloud = _small_gicp.voxelgrid_sampling(np.asarray(points, dtype=np.float64), c.downsampling_resolution_m, num_threads=c.num_threads)
             tree = _small_gicp.KdTree(cloud, num_threads=1)
             _small_gicp.estimate_covariances(cloud, tree, num_neighbors=10, num_threads=c.num_threads)
-            xyz = cloud.points()[:, :3]
-            order = voxel_order(xyz, c.downsampling_resolution_m)
-            rank = np.empty_like(order)
-            rank[order] = np.arange(len(order))
-            self._cache = [*self._cache[-1:], (key, cloud, tree, xyz[order], rank)]
+            ordered = rank = None  # only the assessment needs them
+            if c.assess:
+                xyz = cloud.points()[:, :3]
+                order = voxel_order(xyz, c.downsampling_resolution_m)
+                rank = np.empty_like(order)
+                rank[order] = np.arange(len(order))
+                ordered = xyz[order]
+            self._cache = [*self._cache[-1:], (key, cloud, tree, ordered, rank)]
             return self._cache[-1][1:]
 
         def _register(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray):

@@ -1,0 +1,63 @@
+"""``assess=False``: the wrapped libraries' pose and verdict without lidarkit's after-the-fact assessment."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import cli_exit_code, shared_path
+from registration_helpers import kitti_pair
+
+from lidarkit.errors import ConfigError
+from lidarkit.odometry import run
+from lidarkit.registration import get_icp
+
+SPLIT = ["kiss", "small_gicp", "open3d_point_to_plane", "open3d_gicp"]
+
+
+@pytest.fixture(scope="module")
+def pair():
+    src, dst, T_gt = kitti_pair(shared_path, 94, 95)
+    return src, dst, T_gt
+
+
+@pytest.mark.parametrize("name", SPLIT)
+def test_the_pose_is_the_assessed_one_and_nothing_is_scored(pair, name):
+    src, dst, T_gt = pair
+    assessed = get_icp(name).align(src, dst)
+    bare = get_icp(name, assess=False).align(src, dst)
+    np.testing.assert_allclose(bare.T_target_source, assessed.T_target_source, atol=1e-9)
+    assert np.linalg.norm(bare.T_target_source[:3, 3] - T_gt[:3, 3]) < 0.1  # the backend's own alignment, right
+    assert bare.converged and assessed.converged
+    assert bare.covariance is None and assessed.covariance is not None
+    assert bare.n_correspondences == -1 and np.isnan(bare.fitness) and np.isnan(bare.rmse)
+    assert bare.degeneracy.kind.startswith("not assessed") and not bare.degeneracy.degenerate
+    assert np.isnan(bare.degeneracy.eigenvalues).all() and bare.extra["assessed"] is False
+    assert bare.method == name and bare.runtime_s > 0
+
+
+def test_variants_that_score_within_their_iterations_refuse_it():
+    with pytest.raises(ConfigError, match=r"vanilla.*assess=False is for the variants that register apart from their "
+                                          r"assessment \(.*kiss.*small_gicp.*\); vanilla scores its result within"):
+        get_icp("vanilla", assess=False)
+
+
+def test_odometry_without_assessment_gives_the_same_trajectory_and_no_covariance():
+    spec = f"kitti:{shared_path('kitti_odometry')}?sequence=00"
+    assessed = run(spec, "small_gicp", progress=False)
+    bare = run(spec, "small_gicp", params={"assess": False}, progress=False)
+    np.testing.assert_allclose(bare.trajectory.poses_se3, assessed.trajectory.poses_se3, atol=1e-9)
+    assert bare.covariances is None and "pose_covariance" not in bare.metrics
+    assert bare.metrics["n_degenerate"] == 0 and bare.metrics["n_not_converged"] == 0
+    assert (bare.stats.n_correspondences[1:] == -1).all() and np.isnan(bare.stats.min_eigenvalue).all()
+    assert np.isfinite(bare.stats.fitness[1:]).all()  # the independent frame check still runs
+    assert bare.config["method_config"]["assess"] is False
+    with pytest.raises(ConfigError, match="pose_covariance needs each frame's covariance, which assess=False leaves out"):
+        run(spec, "small_gicp", params={"assess": False}, pose_covariance=True, progress=False)
+
+
+def test_cli_says_the_assessment_is_off(capsys):
+    velodyne = shared_path("kitti_odometry", "extra_frames", "00", "velodyne")
+    code = cli_exit_code(["icp", str(velodyne / "000095.bin"), str(velodyne / "000094.bin"), "-m", "open3d_gicp", "-p", "assess=false"])
+    out = capsys.readouterr().out
+    assert code == 0
+    assert "off (assess=False)" in out and "correspondences / fitness" not in out and "eigenvalues" not in out
