@@ -80,15 +80,17 @@ def library_pairwise(name: str, cfg, source: np.ndarray, target: np.ndarray) -> 
     if name == "kiss":
         from kiss_icp.registration import get_registration
 
-        keypoints, local_map = kiss_inputs(cfg, source, target)
+        kcfg = cfg.to_kiss_config()
+        keypoints, local_map = kiss_inputs(cfg, kcfg, source, target)
         sigma = cfg.initial_threshold_m
-        return np.asarray(get_registration(cfg.to_kiss_config()).align_points_to_map(
+        return np.asarray(get_registration(kcfg).align_points_to_map(
             points=keypoints, voxel_map=local_map, initial_guess=init, max_correspondance_distance=3.0 * sigma, kernel=sigma))
     raise ValueError(name)
 
 
-def kiss_inputs(cfg, source: np.ndarray, target: np.ndarray):
-    """kiss-icp's own steps before its registration of ``source`` on ``target``: (source keypoints, local map)."""
+def kiss_inputs(cfg, kcfg, source: np.ndarray, target: np.ndarray):
+    """kiss-icp's own steps before its registration of ``source`` on ``target`` (``kcfg``: the KISSConfig of ``cfg``):
+    (source keypoints, local map)."""
     from kiss_icp.mapping import get_voxel_hash_map
     from kiss_icp.preprocess import Preprocessor
     from kiss_icp.voxelization import voxel_down_sample
@@ -97,7 +99,7 @@ def kiss_inputs(cfg, source: np.ndarray, target: np.ndarray):
     crop = Preprocessor(cfg.max_range_m, cfg.min_range_m, False, cfg.max_num_threads)
     tgt = crop.preprocess(np.ascontiguousarray(target), np.array([]), init)
     src = crop.preprocess(np.ascontiguousarray(source), np.array([]), init)
-    local_map = get_voxel_hash_map(cfg.to_kiss_config())
+    local_map = get_voxel_hash_map(kcfg)
     local_map.update(voxel_down_sample(tgt, voxel * 0.5), init)
     return voxel_down_sample(voxel_down_sample(src, voxel * 0.5), voxel * 1.5), local_map
 
@@ -110,7 +112,7 @@ def kiss_nearest_pass(cfg, source: np.ndarray, target: np.ndarray, T: np.ndarray
 
     from lidarkit.geometry import transform_points
 
-    keypoints, local_map = kiss_inputs(cfg, source, target)
+    keypoints, local_map = kiss_inputs(cfg, cfg.to_kiss_config(), source, target)
     map_points = np.asarray(local_map.point_cloud())
     times = []
     for _ in range(repeats):
