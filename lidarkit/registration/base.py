@@ -67,7 +67,7 @@ class RegistrationConfig(BaseModel):
     )
     assess: bool = Field(
         True, description="score the result once the backend returns: final correspondences, fitness, RMSE, degeneracy summary, "
-        "covariance, acceptance gate (False: the backend's pose and its own verdict only, at the library's speed; for the "
+        "covariance, acceptance gate (False: the backend's pose and its own verdict only, near the library's speed; for the "
         "variants that register apart from their assessment: kiss, small_gicp, the Open3D ones)"
     )
 
