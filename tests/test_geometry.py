@@ -147,3 +147,31 @@ def test_orthonormalize_repairs_rounded_rotations(rng):
     assert rotation_angle_deg(fixed[:3, :3].T @ T[:3, :3]) < 0.01
     stack = orthonormalize(np.stack([noisy[:3, :3]] * 3))
     assert stack.shape == (3, 3, 3) and is_rotation(stack, tol=1e-12)
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+@pytest.mark.parametrize("case", ["street", "far", "nan", "inf", "over", "under", "at_limit", "strided"])
+def test_within_limits_equals_the_exact_test(dtype, case):
+    """The one-pass sum of squares settles the usual case; every other case must get the exact answer."""
+    from lidarkit.geometry import MAX_ABS_COORDINATE_M, _within_limits
+
+    pts = np.random.default_rng(3).normal(scale=30.0, size=(50_000, 3))
+    if case == "far":  # a legitimate cloud 500 km out: too large a sum for the fast path, within the limits
+        pts += 5e5
+    elif case == "nan":
+        pts[777, 1] = np.nan
+    elif case == "inf":
+        pts[12, 2] = -np.inf
+    elif case == "over":
+        pts[40_000, 0] = 1.0001 * MAX_ABS_COORDINATE_M
+    elif case == "under":
+        pts[3, 2] = -1.0001 * MAX_ABS_COORDINATE_M
+    elif case == "at_limit":
+        pts[9, 0] = MAX_ABS_COORDINATE_M
+    arr = pts.astype(dtype)
+    if case == "strided":
+        arr = np.c_[arr, arr[:, :1]][:, :3]
+        assert not arr.flags.c_contiguous
+    exact = bool(np.isfinite(arr).all() and np.abs(arr).max() <= MAX_ABS_COORDINATE_M)
+    assert _within_limits(arr) is exact
+    assert exact is (case in ("street", "far", "at_limit", "strided"))

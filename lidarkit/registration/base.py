@@ -243,6 +243,7 @@ def check_pair(
 
 NO_OVERLAP_MARGIN = 0.05  # boxes further apart than 5 % of the target's extent (at least 1 m) do not overlap
 _OVERLAP_PROBES = 64  # source points moved first by initial_gap_m (an evenly strided sample)
+_BOX_SAMPLE = 1024  # target points whose box initial_gap_m tries first
 
 
 def bounds(points_xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -257,14 +258,18 @@ def initial_gap_m(source_xyz: np.ndarray, target_xyz: np.ndarray, T0: np.ndarray
     overlap (beyond a margin); None when they do. ICP from no overlap converges to a meaningless local fit."""
     from lidarkit.geometry import transform_points
 
-    lo_t, hi_t = bounds(target_xyz)
-    margin = max(1.0, NO_OVERLAP_MARGIN * float(np.linalg.norm(hi_t - lo_t)))
     # the moved source's box holds each of its moved points, so one of them within the margin of the target's box
-    # already settles "overlap" (the usual case) without moving the whole cloud; otherwise the exact boxes decide
+    # already settles "overlap" (the usual case) without moving the whole cloud; otherwise the exact boxes decide.
+    # The box of an evenly strided sample of the target lies inside the target's box, with a margin no larger, so a
+    # probe within that margin of it is within the margin of the whole box too: the sample settles the usual case
+    # without a pass over the whole target (~0.6 ms on a KITTI scan)
     probe = transform_points(T0, source_xyz[:: max(1, len(source_xyz) // _OVERLAP_PROBES)])
-    outside = np.maximum(0.0, np.maximum(probe - hi_t, lo_t - probe))
-    if float(np.einsum("ij,ij->i", outside, outside).min()) <= margin**2:
-        return None
+    for target in (target_xyz[:: max(1, len(target_xyz) // _BOX_SAMPLE)], target_xyz):
+        lo_t, hi_t = bounds(target)
+        margin = max(1.0, NO_OVERLAP_MARGIN * float(np.linalg.norm(hi_t - lo_t)))
+        outside = np.maximum(0.0, np.maximum(probe - hi_t, lo_t - probe))
+        if float(np.einsum("ij,ij->i", outside, outside).min()) <= margin**2:
+            return None
     lo_s, hi_s = bounds(transform_points(T0, source_xyz))
     gap = np.maximum(0.0, np.maximum(lo_s - hi_t, lo_t - hi_s))
     distance = float(np.linalg.norm(gap))
