@@ -61,3 +61,14 @@ def test_cli_says_the_assessment_is_off(capsys):
     out = capsys.readouterr().out
     assert code == 0
     assert "off (assess=False)" in out and "correspondences / fitness" not in out and "eigenvalues" not in out
+
+
+def test_the_variant_list_offers_assess_only_where_it_is_taken(capsys):
+    from lidarkit.registration import available_icp, get_icp_class
+    from lidarkit.registration.base import assessed_apart
+
+    assert cli_exit_code(["icp", "--list"]) == 0
+    out = capsys.readouterr().out
+    apart = [n for n in available_icp() if assessed_apart(get_icp_class(n))]
+    assert set(SPLIT) <= set(apart) and "vanilla" not in apart and "genz" not in apart
+    assert out.count("assess: bool = True") == len(apart)

@@ -35,6 +35,7 @@ def read_init_pose(path: Path) -> np.ndarray:
 
 def _list_methods() -> None:
     from lidarkit.registration import available_icp, config_fields, get_icp_class
+    from lidarkit.registration.base import assessed_apart
 
     table = Table(title="ICP variants (lidarkit icp --method NAME --param key=value)", show_lines=True)
     table.add_column("method", style="bold")
@@ -44,6 +45,8 @@ def _list_methods() -> None:
         doc = (cls.__doc__ or "").strip().splitlines()[0] if cls.__doc__ else ""
         cell = Text(doc, style="italic") if doc else Text()
         for key, (type_name, default, desc) in config_fields(name).items():
+            if key == "assess" and not assessed_apart(cls):
+                continue  # refused by the variants that score their result within their own iterations
             cell.append(("\n" if cell else "") + f"{key}: {type_name} = {default!r} — {desc}")
         table.add_row(name + (" (stateful)" if cls.stateful else ""), cell)
     stdout().print(table)

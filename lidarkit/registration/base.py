@@ -363,6 +363,12 @@ def _split_below_align(cls: type) -> bool:
     return False
 
 
+def assessed_apart(cls: type) -> bool:
+    """Whether variant class ``cls`` registers apart from its after-the-fact assessment, so that a result can leave the
+    assessment out (``assess=False``): the wrapped libraries (kiss, small_gicp, Open3D)."""
+    return _split_below_align(cls)
+
+
 class Registration:
     """Base of every ICP variant: subclasses set ``name``, ``Config`` and implement :meth:`_align`.
 
@@ -381,10 +387,10 @@ class Registration:
         if config is not None and params:
             raise TypeError("pass either a config object or keyword parameters, not both")
         self._config = config if config is not None else self.Config(**params)
-        if not self._config.assess and not _split_below_align(type(self)):
+        if not self._config.assess and not assessed_apart(type(self)):
             from lidarkit.registration.registry import available_icp, get_icp_class
 
-            split = [n for n in available_icp() if _split_below_align(get_icp_class(n))]
+            split = [n for n in available_icp() if assessed_apart(get_icp_class(n))]
             raise ConfigError(f"assess=False is for the variants that register apart from their assessment ({', '.join(split)}); "
                               f"{self.name} scores its result within its own iterations", source=self.name or type(self).__name__)
 
