@@ -353,20 +353,16 @@ class PendingAlignment:
             return self._result
 
 
-def _split_below_align(cls: type) -> bool:
-    """Whether the nearest definition of ``_register`` / ``_align`` in ``cls``'s MRO is a ``_register``."""
+def assessed_apart(cls: type) -> bool:
+    """Whether variant class ``cls`` registers apart from its after-the-fact assessment (the nearest definition of
+    ``_register`` / ``_align`` in its MRO is a ``_register``), so that a result can leave the assessment out
+    (``assess=False``): the wrapped libraries (kiss, small_gicp, Open3D)."""
     for klass in cls.__mro__:
         if "_register" in vars(klass):
             return True
         if "_align" in vars(klass):
             return False
     return False
-
-
-def assessed_apart(cls: type) -> bool:
-    """Whether variant class ``cls`` registers apart from its after-the-fact assessment, so that a result can leave the
-    assessment out (``assess=False``): the wrapped libraries (kiss, small_gicp, Open3D)."""
-    return _split_below_align(cls)
 
 
 class Registration:
@@ -426,7 +422,7 @@ class Registration:
         source = f"{self.name} ({len(src)} source / {len(dst)} target points)"
         start = time.perf_counter()
         # a subclass that overrides _align below the class that split it (e.g. to post-process the result) gets its _align
-        register = self._register if _split_below_align(type(self)) else functools.partial(Registration._register, self)
+        register = self._register if assessed_apart(type(self)) else functools.partial(Registration._register, self)
         with use_backend(self.name, source), use_model(model):
             T, likely_converged, assess = register(src, dst, T0)
         register_s = time.perf_counter() - start
