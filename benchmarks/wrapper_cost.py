@@ -17,7 +17,8 @@ timed on its own (``align_deferred(...).result()``, the pose-free part already b
 final pose must do (one exact nearest-neighbour search of its keypoints in its map, in C++) is timed as well; and as
 kiss is stateful, whose frames the odometry runner assesses only when asked, its loop is also timed with
 ``pose_covariance=True``. Every variant is also timed without the assessment (``assess=False``), pairwise and in
-odometry.
+odometry, and in odometry "lean": without the assessment and without the frame check's fitness test
+(``FrameCheckConfig(n_sample=0)``), i.e. the wrapper alone.
 
     .venv/bin/python benchmarks/wrapper_cost.py [--repeats 5] [--odometry-repeats 3]   # on a quiet machine
 
@@ -275,7 +276,7 @@ def main() -> None:
 
     from lidarkit import atomic
     from lidarkit.bench.machine import describe_machine, machine_info
-    from lidarkit.odometry import run
+    from lidarkit.odometry import FrameCheckConfig, run
     from lidarkit.registration import available_icp, get_icp
 
     source, target = load_pair()
@@ -288,6 +289,7 @@ def main() -> None:
         cfg = icp.config
         lib_t, ours_t, lib_c, ours_c, lib_o, ours_o, lib_oc, ours_oc = [], [], [], [], [], [], [], []
         bare_t, bare_o = [], []  # assess=False: the backend's pose and verdict only
+        lean_o = []  # odometry with all lidarkit adds left out: assess=False, the frame check's motion test only
         T_lib = T_ours = None
         for _ in range(args.repeats):
             t, c, T_lib = timed_cpu(lambda: library_pairwise(name, cfg, source, target))
@@ -321,6 +323,8 @@ def main() -> None:
                 assessed_o.append(run(f"kitti:{DATA}?sequence=00", name, pose_covariance=True).total_time_s)
             else:
                 bare_o.append(run(f"kitti:{DATA}?sequence=00", name, params={"assess": False}).total_time_s)
+            lean_o.append(run(f"kitti:{DATA}?sequence=00", name, params=None if icp.stateful else {"assess": False},
+                              frame_check=FrameCheckConfig(n_sample=0)).total_time_s)
         rows.append({
             "variant": name,
             "pairwise_library_s": float(np.median(lib_t)), "pairwise_lidarkit_s": float(np.median(ours_t)),
@@ -337,6 +341,8 @@ def main() -> None:
             "pairwise_unassessed_ratio": float(np.median(lib_t) / np.median(bare_t)),
             "odometry_unassessed_s": float(np.median(bare_o)) if bare_o else None,
             "odometry_unassessed_ratio": float(np.median(lib_o) / np.median(bare_o)) if bare_o else None,
+            "odometry_lean_s": float(np.median(lean_o)),
+            "odometry_lean_ratio": float(np.median(lib_o) / np.median(lean_o)),
             "odometry_lidarkit_inline_s": float(np.median(inline_o)) if inline_o else None,
             "odometry_lidarkit_assessed_s": float(np.median(assessed_o)) if assessed_o else None,
             "odometry_library_s": float(np.median(lib_o)), "odometry_lidarkit_s": float(np.median(ours_o)),
@@ -396,12 +402,16 @@ def main() -> None:
                       f"{r['odometry_library_s'] / r['odometry_lidarkit_assessed_s']:.2f}."]
     lines += ["", "Without the assessment (`assess=False`: the backend's pose and its own verdict, no correspondences, degeneracy "
               "summary or covariance; the odometry loop keeps its frame check). kiss's odometry loop assesses no frame by default, "
-              "so its figure is the one above.", "",
-              "| variant | pairwise (s) | pairwise ratio | odometry (s) | odometry ratio |", "|---|---|---|---|---|"]
+              "so its figure is the one above. Lean odometry: all that lidarkit adds to the library's loop left out, the assessment "
+              "and the frame check's fitness test (`FrameCheckConfig(n_sample=0)`, `--check n_sample=0`; its motion test "
+              "stays): what the wrapper itself costs (reading and its checks, the runner).", "",
+              "| variant | pairwise (s) | pairwise ratio | odometry (s) | odometry ratio | lean odometry (s) | lean ratio |",
+              "|---|---|---|---|---|---|---|"]
     for r in rows:
         bare_o = r["odometry_unassessed_s"]
         lines.append(f"| {r['variant']} | {r['pairwise_unassessed_s']:.3f} | {r['pairwise_unassessed_ratio']:.2f} | "
-                     + (f"{bare_o:.2f} | {r['odometry_unassessed_ratio']:.2f} |" if bare_o else "- | - |"))
+                     + (f"{bare_o:.2f} | {r['odometry_unassessed_ratio']:.2f} |" if bare_o else "- | - |")
+                     + f" {r['odometry_lean_s']:.2f} | {r['odometry_lean_ratio']:.2f} |")
     lines += ["", *reading(rows)]
     lines += ["", "Where a lidarkit pairwise alignment's CPU time goes (cProfile with a process-time clock, 3 alignments; the rest "
               "is the library's own work and lidarkit's glue):", "",

@@ -257,6 +257,19 @@ def test_independent_check_counts_the_bad_frames_of_a_drifting_variant_that_says
     assert timing[0].endswith("point_times,motion_dev_m,rotation_dev_deg,fitness,check_failed,check_why")
     assert sum(line.split(",")[-2] == "1" for line in timing[1:]) == check["n_bad_frames"]
 
+    # --check n_sample=0: no fitness test, the same motion test and poses
+    lean = tmp_path / "lean"
+    code, _, _ = _cli(["odometry", spec, "-m", "open3d_point_to_point", "--no-progress", "--out", str(lean), "--check", "n_sample=0"], capsys)
+    assert code == 0
+    m0 = json.loads((lean / "metrics.json").read_text())
+    check0 = m0["frame_check"]
+    assert check0["n_fitness_checked"] == 0 and check0["n_bad_fitness"] == 0 and check0["fitness_median"] is None
+    assert check0["n_motion_checked"] == check["n_motion_checked"] and check0["n_bad_motion"] == check["n_bad_motion"] > 0
+    assert check0["thresholds"]["n_sample"] == 0
+    np.testing.assert_array_equal(np.loadtxt(lean / "poses_kitti.txt"), np.loadtxt(out / "poses_kitti.txt"))
+    with pytest.raises(ConfigError, match="n_sample must be >= 0"):
+        make_frame_check(n_sample=-1)
+
 
 def test_stateful_variants_are_checked_too(exported, tmp_path):
     seq = _copy(exported, tmp_path / "street_seq", "point_times")
