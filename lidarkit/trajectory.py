@@ -138,6 +138,32 @@ class Trajectory:
             poses[i + 1] = poses[i] @ M
         return cls(poses, timestamps_s, name)
 
+    def interpolated(self, times_s: np.ndarray, *, max_extrapolation_s: float = 0.0) -> Trajectory:
+        """Poses at ``times_s``: between two stamped poses, the rotation slerped and the position linear in time;
+        up to ``max_extrapolation_s`` before the first or after the last stamp, the first or last interval's motion
+        continued at constant velocity. Times farther out raise DataError naming the first of them."""
+        source = self.name or "trajectory"
+        if self.timestamps_s is None or len(self) < 2:
+            raise DataError("interpolating needs at least two poses with time stamps", source=source)
+        t = np.asarray(times_s, dtype=np.float64).reshape(-1)
+        stamps = self.timestamps_s
+        outside = np.maximum(stamps[0] - t, t - stamps[-1])
+        if len(t) and (not np.isfinite(t).all() or outside.max() > max_extrapolation_s):
+            k = int(np.argmax(~np.isfinite(t) | (outside > max_extrapolation_s)))
+            raise DataError(
+                f"time {t[k]:.6f} s lies {outside[k]:.3f} s outside the stamps {stamps[0]:.6f}-{stamps[-1]:.6f} s "
+                f"(at most {max_extrapolation_s:g} s is extrapolated)", source=source, location=f"time {k}",
+            )
+        i = np.clip(np.searchsorted(stamps, t, side="right") - 1, 0, len(stamps) - 2)
+        alpha = (t - stamps[i]) / (stamps[i + 1] - stamps[i])  # < 0 or > 1 beyond the ends: constant velocity
+        R0 = Rotation.from_matrix(self.poses_se3[i, :3, :3])
+        step = (R0.inv() * Rotation.from_matrix(self.poses_se3[i + 1, :3, :3])).as_rotvec()
+        poses = np.tile(np.eye(4), (len(t), 1, 1))
+        poses[:, :3, :3] = (R0 * Rotation.from_rotvec(step * alpha[:, None])).as_matrix()
+        p0, p1 = self.poses_se3[i, :3, 3], self.poses_se3[i + 1, :3, 3]
+        poses[:, :3, 3] = p0 + alpha[:, None] * (p1 - p0)
+        return Trajectory(poses, t, self.name, dict(self.meta))
+
     def orthonormalized(self) -> Trajectory:
         """Copy whose rotations are exactly orthonormal (text files round them)."""
         return Trajectory(orthonormalize_se3(self.poses_se3), self.timestamps_s, self.name, dict(self.meta))

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from lidarkit.errors import EvaluationError
-from lidarkit.geometry import pose_error
+from lidarkit.geometry import pose_error, se3_inverse
 from lidarkit.odometry import run
 from lidarkit.registration import available_icp
 from lidarkit.sim.lidar import SimulatedLidarSequence
@@ -61,3 +61,52 @@ def test_scan_states_its_time_convention(sims):
     fractions = scan.point_fractions()
     assert fractions.min() == 0.0 and fractions.max() == 1.0
     np.testing.assert_allclose(fractions, scan.point_times_s / scan.point_times_s.max())
+
+
+def test_a_bag_s_ground_truth_is_interpolated_to_the_estimate_s_instant(tmp_path):
+    """The simulator's bag stamps each sweep at its start and records the ground truth at the sweep ends. small_gicp
+    (no deskew) refers to the stamps, the sweep start: the bag's recorded poses are re-timed to it (interpolated; frame
+    0, before the first recorded pose, continued at constant velocity), instead of being refused."""
+    from lidarkit.io import open_dataset
+    from lidarkit.sim.bag_export import export_bag
+
+    sim = SimulatedLidarSequence(pose_instant="end", **{**SIM, "n_frames": 6})
+    bag = open_dataset("rosbag", export_bag(sim, tmp_path / "run.bag", "rosbag1"))
+    assert bag.ground_truth.meta["pose_instant"] == "end" and bag.read_scan(0).stamp_instant == "start"
+    def in_frame_of(poses: np.ndarray, truth: np.ndarray, k: int = 1) -> np.ndarray:
+        """``poses`` in the world of ``truth`` (each simulated instant starts its own world at its first pose)."""
+        return truth[k] @ se3_inverse(poses[k]) @ poses
+
+    start = bag.ground_truth_at("start")
+    truth = sim.ground_truth_at("start").poses_se3
+    start_poses = in_frame_of(start.poses_se3, truth)
+    # the start of sweep k is the end of sweep k-1, a recorded pose; sweep 0 starts a sweep before the first one
+    np.testing.assert_allclose(start_poses[1:], truth[1:], atol=1e-9)
+    assert pose_error(start_poses[0], truth[0])[0] < 0.08  # constant velocity over 0.1 s from rest: the ramp gains ~0.03 m
+    assert "1 frame(s) continued at constant velocity" in start.meta["retimed"]
+    # between recorded poses the position is linear in time, off by at most a dt^2 / 8 (the smoothstep pull-away
+    # peaks at 1.5 x 10 m/s / 1 s = 15 m/s^2: 0.019 m at dt = 0.1 s)
+    truth_mid = sim.ground_truth_at("mid").poses_se3
+    mid_poses = in_frame_of(bag.ground_truth_at("mid").poses_se3, truth_mid, k=2)
+    assert max(pose_error(a, b)[0] for a, b in zip(mid_poses[1:], truth_mid[1:])) < 0.02
+    method = "small_gicp" if "small_gicp" in available_icp() else "open3d_point_to_plane"
+    result = run(bag, method)
+    note = result.metrics["ground_truth_instant_note"]
+    assert "re-timed from the sweep end to the sweep start (interpolated between the 6 poses recorded on /ground_truth" in note
+    np.testing.assert_allclose(result.ground_truth.poses_se3, start.relative_to_first().poses_se3, atol=1e-12)  # the run's frame
+
+
+def test_a_ground_truth_that_cannot_be_re_timed_is_refused_with_the_reason(sims):
+    from lidarkit.errors import DataError
+    from lidarkit.odometry.instants import like_with_like
+
+    class Recording:
+        def ground_truth_at(self, instant):
+            raise DataError("the recording stops 2 s before the last sweep", source="run.bag")
+
+    with pytest.raises(EvaluationError, match="re-timing it failed: the recording stops 2 s before the last sweep.*"
+                                              r"\(the scans are stamped at the sweep start\)"):
+        like_with_like(sims["end"].ground_truth, "start", sequence=Recording(), own_ground_truth=True, method="small_gicp",
+                       deskewed=False)
+    with pytest.raises(EvaluationError, match=r"\(or run without deskewing\)"):
+        like_with_like(sims["end"].ground_truth, "start", sequence=None, own_ground_truth=True, method="kiss")

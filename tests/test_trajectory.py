@@ -110,3 +110,29 @@ def test_times_count_mismatch(tmp_path):
     times.write_text("0.0\n0.1\n")
     with pytest.raises(DataError, match="2 timestamps for 3 poses"):
         Trajectory.from_kitti(poses, timestamps_s=times)
+
+
+def test_interpolated_poses_between_and_just_beyond_the_stamps():
+    """A constant twist (yaw rate and velocity): slerp + linear position reproduce it exactly between the stamps,
+    and at constant velocity up to max_extrapolation_s beyond them; farther is a DataError naming the time."""
+    from scipy.spatial.transform import Rotation
+
+    from lidarkit.errors import DataError
+
+    def truth(t):
+        T = np.tile(np.eye(4), (len(t), 1, 1))
+        T[:, :3, :3] = Rotation.from_euler("z", 0.3 * t[:, None]).as_matrix()
+        T[:, :3, 3] = np.column_stack([2.0 * t, -0.5 * t, 0.1 * t])
+        return T
+
+    stamps = np.array([0.0, 0.1, 0.25, 0.4])
+    traj = Trajectory(truth(stamps), stamps, name="gt", meta={"pose_instant": "end"})
+    times = np.array([-0.05, 0.0, 0.07, 0.1, 0.3, 0.4, 0.5])
+    out = traj.interpolated(times, max_extrapolation_s=0.1)
+    np.testing.assert_allclose(out.poses_se3, truth(times), atol=1e-12)
+    np.testing.assert_array_equal(out.timestamps_s, times)
+    assert out.meta == {"pose_instant": "end"} and out.name == "gt"
+    with pytest.raises(DataError, match=r"\(time 1\): time 0\.600000 s lies 0\.200 s outside the stamps"):
+        traj.interpolated(np.array([0.3, 0.6]), max_extrapolation_s=0.1)
+    with pytest.raises(DataError, match="two poses with time stamps"):
+        Trajectory(truth(stamps)).interpolated(times)

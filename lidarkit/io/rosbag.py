@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
-from lidarkit.io.base import Scan, classify_instant
+from lidarkit.io.base import INSTANT_FRACTION, Scan, classify_instant
 from lidarkit.io.pointcloud2 import decode_pointcloud2, stamp_seconds
 from lidarkit.trajectory import Trajectory
 
@@ -193,14 +193,7 @@ class _BagScans:
         """One recorded odometry pose per scan, ``meta["pose_instant"]`` read from the stamps (None if unclear)."""
         if self.ground_truth_topic is None:
             return None
-        stamps, poses = [], []
-        for _, msg in self._messages(self.ground_truth_topic):
-            p, q = msg.pose.pose.position, msg.pose.pose.orientation
-            stamps.append(stamp_seconds(msg.header.stamp))
-            poses.append(_pose_matrix([p.x, p.y, p.z], [q.x, q.y, q.z, q.w]))
-        if not poses:
-            raise DataError(f"ground-truth topic {self.ground_truth_topic} has no messages", source=self.path)
-        gt_stamps, gt_poses = np.array(stamps), np.stack(poses)
+        gt_stamps, gt_poses = self._recorded_ground_truth()
         scan_stamps = self.timestamps_s
         if len(gt_stamps) != len(scan_stamps):
             pick = np.clip(np.searchsorted(gt_stamps, scan_stamps), 1, len(gt_stamps) - 1)
@@ -208,6 +201,49 @@ class _BagScans:
             gt_stamps, gt_poses = gt_stamps[pick], gt_poses[pick]
         meta = {"frame": f"as recorded on {self.ground_truth_topic}", "pose_instant": self._ground_truth_instant(gt_stamps)}
         return Trajectory(gt_poses, gt_stamps, name=f"{self.path.name}{self.ground_truth_topic}", meta=meta)
+
+    def ground_truth_at(self, instant: str) -> Trajectory:
+        """The recorded odometry at the ``instant`` (start, mid or end) of every sweep: interpolated between the recorded
+        poses (rotation slerped, position linear), or continued at constant velocity for at most 1.5 recording
+        intervals beyond the first or last one (e.g. the start of sweep 0 when the poses are stamped at sweep ends).
+        The instants are placed by scan 0's point times and the scans' stamp spacing; DataError when the scans carry no
+        point times or the recording does not reach."""
+        if instant not in INSTANT_FRACTION:
+            raise DataError(f"unknown instant {instant!r}; valid: {', '.join(INSTANT_FRACTION)}", source=self.path)
+        if self.ground_truth_topic is None:
+            raise DataError("no ground-truth topic", source=self.path)
+        scan = self.read_scan(0)
+        if scan.point_times_s is None or len(scan.point_times_s) < 2 or np.ptp(scan.point_times_s) <= 0:
+            raise DataError("the scans carry no per-point times, so where a sweep starts and ends is unknown", source=self.path,
+                            location=self._location(0))
+        scan_stamps = self.timestamps_s
+        start = float(scan.point_times_s.min()) + (0.0 if scan.point_time_convention == "absolute_s" else scan.timestamp_s)
+        period = float(np.median(np.diff(scan_stamps))) if len(scan_stamps) > 1 else float(np.ptp(scan.point_times_s))
+        times = scan_stamps + (start - scan_stamps[0]) + INSTANT_FRACTION[instant] * period
+        stamps, poses = self._recorded_ground_truth()
+        if len(stamps) < 2 or not (np.diff(stamps) > 0).all():
+            raise DataError(f"{self.ground_truth_topic}: interpolating needs two or more poses with increasing stamps",
+                            source=self.path)
+        recorded = Trajectory(poses, stamps, name=f"{self.path.name}{self.ground_truth_topic}")
+        reach = 1.5 * float(np.median(np.diff(stamps)))
+        out = recorded.interpolated(times, max_extrapolation_s=reach)
+        n_out = int(((times < stamps[0]) | (times > stamps[-1])).sum())
+        how = f"interpolated between the {len(stamps)} poses recorded on {self.ground_truth_topic}"
+        if n_out:
+            how += f", {n_out} frame(s) continued at constant velocity beyond them"
+        meta = {"frame": f"as recorded on {self.ground_truth_topic}", "pose_instant": instant, "retimed": how}
+        return Trajectory(out.poses_se3, times, name=recorded.name, meta=meta)
+
+    def _recorded_ground_truth(self) -> tuple[np.ndarray, np.ndarray]:
+        """Stamps (s) and poses ``(n, 4, 4)`` of every message on the ground-truth topic."""
+        stamps, poses = [], []
+        for _, msg in self._messages(self.ground_truth_topic):
+            p, q = msg.pose.pose.position, msg.pose.pose.orientation
+            stamps.append(stamp_seconds(msg.header.stamp))
+            poses.append(_pose_matrix([p.x, p.y, p.z], [q.x, q.y, q.z, q.w]))
+        if not poses:
+            raise DataError(f"ground-truth topic {self.ground_truth_topic} has no messages", source=self.path)
+        return np.array(stamps), np.stack(poses)
 
     def _ground_truth_instant(self, gt_stamps: np.ndarray) -> str | None:
         """Which instant of the sweep the ground truth stamps are, from scan 0's absolute point times."""

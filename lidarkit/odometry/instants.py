@@ -13,38 +13,51 @@ from __future__ import annotations
 
 from typing import Any
 
-from lidarkit.errors import EvaluationError
+from lidarkit.errors import EvaluationError, LidarKitError
 from lidarkit.io.base import Scan
 from lidarkit.trajectory import Trajectory
+
+
+def deskews(registration: Any, scan: Scan | None) -> bool:
+    """Whether ``registration`` moves the points of scans like ``scan`` to one instant of the sweep."""
+    return (getattr(registration, "deskew_instant", None) is not None and scan is not None
+            and scan.point_times_s is not None and len(scan.point_times_s) > 0)
 
 
 def estimate_instant(registration: Any, scan: Scan | None) -> str | None:
     """The instant of the sweep the poses of ``registration`` over scans like ``scan`` refer to (None: unknown)."""
     if scan is None:
         return None
-    deskew_to = getattr(registration, "deskew_instant", None)
-    if deskew_to is not None and scan.point_times_s is not None and len(scan.point_times_s) > 0:
-        return str(deskew_to)
+    if deskews(registration, scan):
+        return str(registration.deskew_instant)
     return scan.stamp_instant
 
 
 def like_with_like(reference: Trajectory, estimate_at: str | None, *, sequence: Any, own_ground_truth: bool,
-                   method: str) -> tuple[Trajectory, str | None]:
-    """``(reference at the estimate's instant, note or None)``; EvaluationError when it cannot be re-timed."""
+                   method: str, deskewed: bool = True) -> tuple[Trajectory, str | None]:
+    """``(reference at the estimate's instant, note or None)``; EvaluationError when it cannot be re-timed.
+    ``deskewed``: the estimate's instant is the one the variant deskews to (else the scans' stamp instant)."""
     truth_at = reference.meta.get("pose_instant") if reference.meta else None
     if estimate_at is None or truth_at is None or estimate_at == truth_at:
         return reference, None
     retime = getattr(sequence, "ground_truth_at", None)
+    why_not = ""
     if own_ground_truth and callable(retime):
-        retimed = retime(estimate_at)
-        note = (f"ground truth re-timed from the sweep {truth_at} to the sweep {estimate_at}: {method}'s poses refer "
-                f"to the sweep {estimate_at}")
-        return retimed, note
+        try:
+            retimed = retime(estimate_at)
+        except LidarKitError as err:  # the dataset cannot give it (e.g. a recording that does not reach): refused below
+            why_not = f"; re-timing it failed: {err.reason}"
+        else:
+            how = (retimed.meta or {}).get("retimed")
+            note = (f"ground truth re-timed from the sweep {truth_at} to the sweep {estimate_at}" + (f" ({how})" if how else "")
+                    + f": {method}'s poses refer to the sweep {estimate_at}")
+            return retimed, note
     raise EvaluationError(
         f"{method}'s poses refer to the sweep {estimate_at} but the ground truth to the sweep {truth_at}; comparing them "
-        f"would score the motion within a sweep as error. Give ground truth at the sweep {estimate_at} (or run without "
-        "deskewing)", source=reference.name or "ground truth",
+        f"would score the motion within a sweep as error{why_not}. Give ground truth at the sweep {estimate_at}"
+        + (" (or run without deskewing)" if deskewed else f" (the scans are stamped at the sweep {estimate_at})"),
+        source=reference.name or "ground truth",
     )
 
 
-__all__ = ["estimate_instant", "like_with_like"]
+__all__ = ["deskews", "estimate_instant", "like_with_like"]

@@ -18,7 +18,7 @@ from lidarkit.io.base import Scan, ScanSequence
 from lidarkit.odometry.covariance import propagate
 from lidarkit.odometry.frame_check import FrameChecker, FrameCheckConfig
 from lidarkit.odometry.inputs import FrameSelection, frames_repr, open_sequence, parse_frames
-from lidarkit.odometry.instants import estimate_instant, like_with_like
+from lidarkit.odometry.instants import deskews, estimate_instant, like_with_like
 from lidarkit.odometry.metrics import odometry_metrics
 from lidarkit.odometry.prefetch import DEFAULT_DEPTH, prefetched
 from lidarkit.odometry.result import FrameStats, OdometryResult
@@ -430,7 +430,8 @@ def run(
     instant_note = None
     if reference is not None:  # score like with like: the estimate's and the ground truth's instant of the sweep
         retimed, instant_note = like_with_like(reference, estimate_instant(registration, first_scan), sequence=sequence,
-                                               own_ground_truth=ground_truth is None, method=name)
+                                               own_ground_truth=ground_truth is None, method=name,
+                                               deskewed=deskews(registration, first_scan))
         if instant_note is not None:
             reference = _reference(sequence, retimed, indices, dataset_name)
     check = checker.finish(poses, timestamps)
