@@ -8,7 +8,9 @@ one after the other, on the same files:
 * ``kiss-icp``: kiss-icp's own ``OdometryPipeline`` over its ``generic`` loader on the same ``velodyne/*.bin``;
 * ``lidarkit:small_gicp``: ``lidarkit.odometry.run`` with small_gicp;
 * ``small_gicp``: small_gicp's own scan-to-scan loop (``preprocess_points`` once per sweep, ``align`` on the
-  previous sweep's cloud and KdTree, constant-velocity guess), as its odometry example does.
+  previous sweep's cloud and KdTree, constant-velocity guess), as its odometry example does;
+* on request (``--runners``), ``lidarkit:small_gicp:lean`` and ``lidarkit:kiss:lean``: the wrapper alone, the
+  assessment (``assess=False``, small_gicp) and the frame check's fitness test (``n_sample=0``) left out.
 
 The exported sweeps have no per-point times (``point_times=false``) because kiss-icp's generic loader reads
 none: both kiss runs then do exactly the same computation (their final poses are compared). Frame rate
@@ -43,6 +45,9 @@ REPO = Path(__file__).resolve().parents[1]
 RESULTS = REPO / "benchmarks" / "results" / "odometry"
 CHECKPOINTS = (500, 2000)
 RUNNERS = ("lidarkit:kiss", "kiss-icp", "lidarkit:small_gicp", "small_gicp")
+#: (lidarkit runner, the library runner it is compared with)
+LIBRARY_OF = (("lidarkit:kiss", "kiss-icp"), ("lidarkit:small_gicp", "small_gicp"), ("lidarkit:kiss:lean", "kiss-icp"),
+              ("lidarkit:small_gicp:lean", "small_gicp"))
 SIM = dict(scene="street", n_beams=32, n_azimuths=360, range_noise_std_m=0.02, seed=0, point_times=False)
 
 
@@ -84,10 +89,14 @@ def child(runner: str, data: Path, n: int) -> dict:
                 marks.seen(index)
                 return super().read_scan(index)
 
+        from lidarkit.odometry import FrameCheckConfig
+
         seq = Counted(data)
+        method, _, mode = runner.split(":", 1)[1].partition(":")
+        lean = {"params": None if method == "kiss" else {"assess": False}, "frame_check": FrameCheckConfig(n_sample=0)} if mode == "lean" else {}
         rss_before = peak_rss_mb()
         marks = Checkpoints(time.perf_counter())
-        result = run(seq, runner.split(":", 1)[1], frames=f"0:{n}")
+        result = run(seq, method, frames=f"0:{n}", **lean)
         wall = time.perf_counter() - marks.start
         final = result.trajectory.poses_se3[-1]
         loop_fps = result.fps
@@ -206,16 +215,18 @@ def interleaved(args, size_gb: float) -> None:
     from lidarkit.bench.machine import describe_machine, machine_info
 
     runners = args.runners.split(",")
-    pairs = [(a, b) for a, b in (("lidarkit:kiss", "kiss-icp"), ("lidarkit:small_gicp", "small_gicp")) if a in runners and b in runners]
-    fps: dict[str, list[float]] = {r: [] for pair in pairs for r in pair}
+    pairs = [(a, b) for a, b in LIBRARY_OF if a in runners and b in runners]
+    fps: dict[str, dict[str, list[float]]] = {f"{a} / {b}": {a: [], b: []} for a, b in pairs}  # a library run per pair
     for _ in range(args.repeats):
-        for pair in pairs:
-            for runner in pair:
-                fps[runner].append(run_child(runner, args.data, args.interleaved)["loop_fps"])
-                print(f"{runner}: {fps[runner][-1]:.2f} fps", flush=True)
-    ratios = {f"{a} / {b}": {"median_ratio": float(np.median(np.divide(fps[a], fps[b]))), "ratios": list(np.divide(fps[a], fps[b]))}
-              for a, b in pairs}
-    command = "nice -n 10 .venv/bin/python benchmarks/odometry_scale.py " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+        for a, b in pairs:
+            for runner in (a, b):
+                fps[f"{a} / {b}"][runner].append(run_child(runner, args.data, args.interleaved)["loop_fps"])
+                print(f"{runner}: {fps[f'{a} / {b}'][runner][-1]:.2f} fps", flush=True)
+    ratios = {}
+    for a, b in pairs:
+        side = fps[f"{a} / {b}"]
+        ratios[f"{a} / {b}"] = {"median_ratio": float(np.median(np.divide(side[a], side[b]))), "ratios": list(np.divide(side[a], side[b]))}
+    command = _command(args)
     payload = {"date_utc": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"), "machine": describe_machine(machine_info()),
                "command": command, "frames_per_run": args.interleaved, "repeats": args.repeats, "loop_fps": fps, "ratios": ratios}
     stem = "odometry_scale_interleaved" + (f"_{args.tag}" if args.tag else "")
@@ -231,13 +242,20 @@ def interleaved(args, size_gb: float) -> None:
     atomic.write_text(RESULTS / f"{stem}.md", "\n".join(lines) + "\n")
 
 
+def _command(args) -> str:
+    """The command line as run (its niceness; the scratch data folder named SCRATCH_DIR: no machine paths in results)."""
+    niceness = os.nice(0)
+    words = [("SCRATCH_DIR" if a == str(args.data) else a) for a in sys.argv[1:]]
+    return (f"nice -n {niceness} " if niceness else "") + ".venv/bin/python benchmarks/odometry_scale.py " + " ".join(shlex.quote(a) for a in words)
+
+
 def write_results(rows: list[dict], args, size_gb: float) -> None:
     from lidarkit import atomic
     from lidarkit.bench.machine import describe_machine, machine_info
 
     by = {r["runner"]: r for r in rows}
     ratios = {}
-    for ours, lib in (("lidarkit:kiss", "kiss-icp"), ("lidarkit:small_gicp", "small_gicp")):
+    for ours, lib in LIBRARY_OF:
         if ours in by and lib in by:
             ratios[f"{ours} / {lib}"] = {
                 "fps_ratio": by[ours]["loop_fps"] / by[lib]["loop_fps"],
@@ -253,7 +271,7 @@ def write_results(rows: list[dict], args, size_gb: float) -> None:
             rss[r["runner"]] = {"at_500_mb": first["peak_rss_mb"], "at_end_mb": r["peak_rss_mb"],
                                 "ratio_end_over_500": r["peak_rss_mb"] / first["peak_rss_mb"],
                                 "ratio_end_minus_trajectory_over_500": (r["peak_rss_mb"] - trajectory_mb) / first["peak_rss_mb"]}
-    command = "nice -n 10 .venv/bin/python benchmarks/odometry_scale.py " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    command = _command(args)
     payload = {"date_utc": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"), "machine": describe_machine(machine_info()),
                "command": command, "frames": args.frames, "sim": SIM, "data_size_gb": size_gb, "runs": rows, "ratios": ratios, "rss": rss}
     RESULTS.mkdir(parents=True, exist_ok=True)

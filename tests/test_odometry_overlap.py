@@ -119,18 +119,25 @@ def test_stateful_overlap_equals_the_in_line_calls():
     sequence.configure_for_method("kiss")  # the scans as the run reads them for kiss (KITTI's vertical-angle correction)
     scans = [sequence.read_scan(i).points_xyz for i in range(len(sequence))]
 
-    out = run(SPEC, "kiss", pose_covariance=True)
-    poses = out.trajectory.poses_se3
-    checker = FrameChecker(len(scans))
-    for k, points in enumerate(scans):
-        checker.add(k, k, points, None, poses)
-        if k:
-            cov, min_eig = frame_covariance(scans[k - 1], points, poses[k - 1], poses[k], "kiss")
-            np.testing.assert_array_equal(out.covariances[0][k], cov)
-            assert out.stats.min_eigenvalue[k] == min_eig
-    np.testing.assert_array_equal(out.stats.fitness, checker.fitness)
-    assert np.isfinite(out.covariances[0][1:]).all()
-    assert not _our_threads()
+    from lidarkit.registration.kiss import KissRegistration
+
+    class OverlappedKiss(KissRegistration):
+        overlap_assessment = True  # kiss runs its after-the-fact work in line (it holds the GIL): the worker path, forced
+
+    assert get_icp("kiss").overlap_assessment is False
+    for variant in ("kiss", OverlappedKiss()):
+        out = run(SPEC, variant, pose_covariance=True)
+        poses = out.trajectory.poses_se3
+        checker = FrameChecker(len(scans))
+        for k, points in enumerate(scans):
+            checker.add(k, k, points, None, poses)
+            if k:
+                cov, min_eig = frame_covariance(scans[k - 1], points, poses[k - 1], poses[k], "kiss")
+                np.testing.assert_array_equal(out.covariances[0][k], cov)
+                assert out.stats.min_eigenvalue[k] == min_eig
+        np.testing.assert_array_equal(out.stats.fitness, checker.fitness)
+        assert np.isfinite(out.covariances[0][1:]).all()
+        assert not _our_threads()
 
 
 class _Failing:

@@ -297,7 +297,7 @@ def run(
     frame covariance (:func:`lidarkit.registration.covariance.widen_for_distortion`).
     ``overlap``: run each frame's after-the-fact work (assessment, covariance, frame check) in a worker thread while
     the next frame registers (:class:`lidarkit.threads.Overlap`; the same results as ``overlap=False``, which runs it in
-    line). A variant whose backend holds the GIL (``overlap_assessment = False``, small_gicp) is assessed in line.
+    line). A variant whose backend holds the GIL (``overlap_assessment = False``: small_gicp, kiss) is assessed in line.
     """
     sequence = open_sequence(dataset)
     registration = _resolve_method(method, params)
