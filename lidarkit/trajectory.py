@@ -147,13 +147,18 @@ class Trajectory:
             raise DataError("interpolating needs at least two poses with time stamps", source=source)
         t = np.asarray(times_s, dtype=np.float64).reshape(-1)
         stamps = self.timestamps_s
+        if not np.isfinite(t).all():
+            k = int(np.argmax(~np.isfinite(t)))
+            raise DataError(f"time {t[k]} is not a finite number", source=source, location=f"time {k}")
         outside = np.maximum(stamps[0] - t, t - stamps[-1])
-        if len(t) and (not np.isfinite(t).all() or outside.max() > max_extrapolation_s):
-            k = int(np.argmax(~np.isfinite(t) | (outside > max_extrapolation_s)))
+        if len(t) and outside.max() > max_extrapolation_s:
+            k = int(np.argmax(outside > max_extrapolation_s))
             raise DataError(
                 f"time {t[k]:.6f} s lies {outside[k]:.3f} s outside the stamps {stamps[0]:.6f}-{stamps[-1]:.6f} s "
                 f"(at most {max_extrapolation_s:g} s is extrapolated)", source=source, location=f"time {k}",
             )
+        if not len(t):
+            return Trajectory(np.zeros((0, 4, 4)), t, self.name, dict(self.meta))
         i = np.clip(np.searchsorted(stamps, t, side="right") - 1, 0, len(stamps) - 2)
         alpha = (t - stamps[i]) / (stamps[i + 1] - stamps[i])  # < 0 or > 1 beyond the ends: constant velocity
         R0 = Rotation.from_matrix(self.poses_se3[i, :3, :3])

@@ -134,5 +134,8 @@ def test_interpolated_poses_between_and_just_beyond_the_stamps():
     assert out.meta == {"pose_instant": "end"} and out.name == "gt"
     with pytest.raises(DataError, match=r"\(time 1\): time 0\.600000 s lies 0\.200 s outside the stamps"):
         traj.interpolated(np.array([0.3, 0.6]), max_extrapolation_s=0.1)
+    with pytest.raises(DataError, match=r"\(time 1\): time nan is not a finite number"):
+        traj.interpolated(np.array([0.3, np.nan]))
+    assert len(traj.interpolated(np.array([]))) == 0
     with pytest.raises(DataError, match="two poses with time stamps"):
         Trajectory(truth(stamps)).interpolated(times)
