@@ -94,6 +94,8 @@ def test_a_bag_s_ground_truth_is_interpolated_to_the_estimate_s_instant(tmp_path
     note = result.metrics["ground_truth_instant_note"]
     assert "re-timed from the sweep end to the sweep start (interpolated between the 6 poses recorded on /ground_truth" in note
     np.testing.assert_allclose(result.ground_truth.poses_se3, start.relative_to_first().poses_se3, atol=1e-12)  # the run's frame
+    effective = result.metrics["effective"]
+    assert effective["ground_truth_instant"] == "start" and effective["estimate_instant"].startswith("start (the scans' stamps")
 
 
 def test_a_ground_truth_that_cannot_be_re_timed_is_refused_with_the_reason(sims):

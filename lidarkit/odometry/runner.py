@@ -441,7 +441,8 @@ def run(
         checker.has_point_times, check.motion_dev_m, check.rotation_dev_deg, check.fitness, check.failed, why, checker.check_s,
         min_eigenvalue,
     )
-    effective, warnings = effective_settings(sequence, registration, name, stateful, checker.has_point_times, reference)
+    effective, warnings = effective_settings(sequence, registration, name, stateful, checker.has_point_times, reference,
+                                             stamp_instant=getattr(first_scan, "stamp_instant", None))
     for message in warnings:
         log.warning("%s: %s", title, message)
     covariances = (relative_cov, propagate(poses, relative_cov)) if want_covariance else None

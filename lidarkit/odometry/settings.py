@@ -97,9 +97,11 @@ def ground_truth_instant(sequence: Any, reference: Any) -> str:
 
 
 def effective_settings(
-    sequence: Any, registration: Any, method: str, stateful: bool, has_point_times: np.ndarray, reference: Any
+    sequence: Any, registration: Any, method: str, stateful: bool, has_point_times: np.ndarray, reference: Any,
+    stamp_instant: str | None = None,
 ) -> tuple[dict[str, Any], list[str]]:
-    """(settings really applied, warnings) of a finished run; ``has_point_times`` (n,) bool per processed frame."""
+    """(settings really applied, warnings) of a finished run; ``has_point_times`` (n,) bool per processed frame;
+    ``stamp_instant``: the instant of the sweep the scans' stamps refer to (what an estimate without deskew refers to)."""
     warnings: list[str] = []
     requested = deskew_requested(registration)
     n, n_times = len(has_point_times), int(np.count_nonzero(has_point_times))
@@ -123,6 +125,8 @@ def effective_settings(
     if deskew["applied"]:
         stated = getattr(registration, "deskew_instant", None)
         estimate_instant = str(stated) if stated else "end" if method == "kiss" else "the instant the variant deskews to (not stated)"
+    elif stamp_instant is not None:
+        estimate_instant = f"{stamp_instant} (the scans' stamps: each scan taken as one snapshot)"
     else:
         estimate_instant = "none: each scan taken as one snapshot"
     gt_instant = None if reference is None else ground_truth_instant(sequence, reference)
