@@ -77,7 +77,7 @@ def test_a_bag_s_ground_truth_is_interpolated_to_the_estimate_s_instant(tmp_path
         """``poses`` in the world of ``truth`` (each simulated instant starts its own world at its first pose)."""
         return truth[k] @ se3_inverse(poses[k]) @ poses
 
-    start = bag.ground_truth_at("start")
+    start = bag.ground_truth_at_instant("start")
     truth = sim.ground_truth_at("start").poses_se3
     start_poses = in_frame_of(start.poses_se3, truth)
     # the start of sweep k is the end of sweep k-1, a recorded pose; sweep 0 starts a sweep before the first one
@@ -87,7 +87,7 @@ def test_a_bag_s_ground_truth_is_interpolated_to_the_estimate_s_instant(tmp_path
     # between recorded poses the position is linear in time, off by at most a dt^2 / 8 (the smoothstep pull-away
     # peaks at 1.5 x 10 m/s / 1 s = 15 m/s^2: 0.019 m at dt = 0.1 s)
     truth_mid = sim.ground_truth_at("mid").poses_se3
-    mid_poses = in_frame_of(bag.ground_truth_at("mid").poses_se3, truth_mid, k=2)
+    mid_poses = in_frame_of(bag.ground_truth_at_instant("mid").poses_se3, truth_mid, k=2)
     assert max(pose_error(a, b)[0] for a, b in zip(mid_poses[1:], truth_mid[1:])) < 0.02
     method = "small_gicp" if "small_gicp" in available_icp() else "open3d_point_to_plane"
     result = run(bag, method)
@@ -103,7 +103,7 @@ def test_a_ground_truth_that_cannot_be_re_timed_is_refused_with_the_reason(sims)
     from lidarkit.odometry.instants import like_with_like
 
     class Recording:
-        def ground_truth_at(self, instant):
+        def ground_truth_at_instant(self, instant):
             raise DataError("the recording stops 2 s before the last sweep", source="run.bag")
 
     with pytest.raises(EvaluationError, match="re-timing it failed: the recording stops 2 s before the last sweep.*"
@@ -112,3 +112,23 @@ def test_a_ground_truth_that_cannot_be_re_timed_is_refused_with_the_reason(sims)
                        deskewed=False)
     with pytest.raises(EvaluationError, match=r"\(or run without deskewing\)"):
         like_with_like(sims["end"].ground_truth, "start", sequence=None, own_ground_truth=True, method="kiss")
+
+
+def test_a_kitti_folder_written_by_the_simulator_is_re_timed_from_its_other_pose_files(tmp_path):
+    """The simulator's KITTI-layout folder keeps poses_start/mid/end.txt: kiss (deskewed to the END) on a folder whose
+    poses.txt is at the sweep start is scored against poses_end.txt; a KITTI folder without them is refused with the
+    reason (it used to reach KittiOdometry.ground_truth_at, whose argument is a frame list, and fail with a ValueError)."""
+    import shutil
+
+    from lidarkit.sim.lidar import export_kitti
+
+    sim = SimulatedLidarSequence(pose_instant="start", **{**SIM, "n_frames": 6})
+    folder = export_kitti(sim, tmp_path / "seq")
+    result = run(folder, "kiss")
+    assert "re-timed from the sweep start to the sweep end (the simulator's poses_end.txt)" in result.metrics["ground_truth_instant_note"]
+    np.testing.assert_allclose(result.ground_truth.poses_se3, sim.ground_truth_at("end").relative_to_first().poses_se3, atol=1e-6)
+    for instant in ("start", "mid", "end"):
+        (folder / f"poses_{instant}.txt").unlink()
+    with pytest.raises(EvaluationError, match="re-timing it failed: no ground truth at the sweep end"):
+        run(folder, "kiss")
+    shutil.rmtree(folder)

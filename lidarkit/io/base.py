@@ -72,7 +72,8 @@ class ScanSequence(Protocol):
 
     Readers that know which instant of each sweep their ground truth refers to say so in
     ``ground_truth.meta["pose_instant"]`` (``"start"``, ``"mid"`` or ``"end"``); a reader that can give other
-    instants offers ``ground_truth_at(instant)`` (the simulator does).
+    instants offers ``ground_truth_at_instant(instant)``, one pose per frame as ``ground_truth``, or a LidarKitError
+    saying why not (the simulator, bags, KITTI-layout folders the simulator wrote).
     """
 
     name: str

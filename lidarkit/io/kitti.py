@@ -32,7 +32,7 @@ import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.geometry import se3_inverse
-from lidarkit.io.base import Scan
+from lidarkit.io.base import INSTANT_FRACTION, Scan
 from lidarkit.io.pointfile import read_kitti_bin
 from lidarkit.textfile import is_number, read_lines, read_numeric_table
 from lidarkit.trajectory import Trajectory
@@ -380,6 +380,26 @@ class KittiOdometry:
         gt = gt.transformed(T_left=se3_inverse(Tr), T_right=Tr).with_name(f"{self.name}_gt_lidar")
         instant = self._simulated_instant
         return gt if instant is None else Trajectory(gt.poses_se3, gt.timestamps_s, gt.name, meta={**gt.meta, "pose_instant": instant})
+
+    def ground_truth_at_instant(self, instant: str) -> Trajectory:
+        """Ground truth of ``frames`` (LiDAR frame) at another instant of each sweep: a folder written by lidarkit's
+        simulator keeps ``poses_{instant}.txt`` beside ``poses.txt``; DataError for any other folder, which has only the
+        one instant of ``poses.txt``."""
+        path = self.sequence_dir / f"poses_{instant}.txt"
+        if instant not in INSTANT_FRACTION or self._simulated_instant is None or not path.is_file():
+            raise DataError(f"no ground truth at the sweep {instant} (only the simulator's folders keep poses_{instant}.txt)",
+                            source=self.sequence_dir)
+        poses = Trajectory.from_kitti(path, name=f"{self.name}_gt").poses_se3
+        if len(poses) <= int(np.max(self.frames, initial=0)):
+            raise DataError(f"{len(poses)} poses for frame {int(np.max(self.frames))}", source=path)
+        Tr = self.T_cam0_velo
+        lidar = se3_inverse(Tr) @ poses[self.frames] @ Tr
+        times = self.timestamps_s
+        if times is not None and len(self._times_all) > 1:  # times.txt is at poses.txt's instant: moved by the period
+            period = float(np.median(np.diff(self._times_all)))
+            times = times + (INSTANT_FRACTION[instant] - INSTANT_FRACTION[self._simulated_instant]) * period
+        return Trajectory(lidar, times, f"{self.name}_gt_lidar", meta={"pose_instant": instant,
+                                                                       "retimed": f"the simulator's poses_{instant}.txt"})
 
     @cached_property
     def _simulated_instant(self) -> str | None:

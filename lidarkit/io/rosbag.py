@@ -202,7 +202,7 @@ class _BagScans:
         meta = {"frame": f"as recorded on {self.ground_truth_topic}", "pose_instant": self._ground_truth_instant(gt_stamps)}
         return Trajectory(gt_poses, gt_stamps, name=f"{self.path.name}{self.ground_truth_topic}", meta=meta)
 
-    def ground_truth_at(self, instant: str) -> Trajectory:
+    def ground_truth_at_instant(self, instant: str) -> Trajectory:
         """The recorded odometry at the ``instant`` (start, mid or end) of every sweep: interpolated between the recorded
         poses (rotation slerped, position linear), or continued at constant velocity for at most 1.5 recording
         intervals beyond the first or last one (e.g. the start of sweep 0 when the poses are stamped at sweep ends).

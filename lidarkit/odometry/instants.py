@@ -5,7 +5,8 @@ deskews to the latest point, the sweep END (``Registration.deskew_instant``). Wi
 without deskewing) the pose refers to the instant the scan's stamp refers to (``Scan.stamp_instant``, as the
 reader labels it). Ground truth states its instant in ``meta["pose_instant"]``. When both are known and differ,
 the run re-times the ground truth to the estimate's instant when the dataset can give it
-(``ground_truth_at(instant)``, the simulator) and says so in a note; otherwise it refuses (EvaluationError).
+(``ground_truth_at_instant(instant)``: the simulator, bags, the simulator's KITTI folders) and says so in a note;
+otherwise it refuses (EvaluationError).
 Unknown instants (None) are compared as they are: the reader could not tell.
 """
 
@@ -40,7 +41,7 @@ def like_with_like(reference: Trajectory, estimate_at: str | None, *, sequence: 
     truth_at = reference.meta.get("pose_instant") if reference.meta else None
     if estimate_at is None or truth_at is None or estimate_at == truth_at:
         return reference, None
-    retime = getattr(sequence, "ground_truth_at", None)
+    retime = getattr(sequence, "ground_truth_at_instant", None)
     why_not = ""
     if own_ground_truth and callable(retime):
         try:

@@ -525,6 +525,11 @@ class SimulatedLidarSequence:
         times = self.frame_times_s(instant)
         return Trajectory(self.poses_at(times), times, name=f"{self.name} ground truth ({instant})", meta={"pose_instant": instant})
 
+    def ground_truth_at_instant(self, instant: PoseInstant) -> Trajectory:
+        """:meth:`ground_truth_at` under the name every reader that can re-time its ground truth offers
+        (:class:`lidarkit.io.base.ScanSequence`)."""
+        return self.ground_truth_at(instant)
+
     @property
     def ground_truth(self) -> Trajectory:
         return self.ground_truth_at(self.config.pose_instant)
