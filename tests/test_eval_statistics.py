@@ -149,3 +149,30 @@ def test_compare_run_folders_per_frame_and_bad_input(tmp_path, capsys):
         compare(tmp_path / "kiss", tmp_path / "kiss_other")
     code, _, err = run_cli(["compare", str(tmp_path / "kiss"), str(tmp_path / "kiss_other")], capsys)
     assert code == 1 and "no metrics.json" in err
+
+
+def test_compare_runs_over_one_bag_scored_at_their_own_sweep_instants(tmp_path, capsys):
+    """kiss (deskewed to the sweep end) and small_gicp (the scans' stamps: the sweep start) over one bag are each scored
+    against the bag's ground truth re-timed to their own instant: the truths differ, yet it is the same data, so the
+    comparison runs and says so; a run over another drive is still refused."""
+    from lidarkit.odometry import run
+    from lidarkit.registration import available_icp
+    from lidarkit.sim.bag_export import export_bag
+    from lidarkit.sim.lidar import SimulatedLidarSequence
+
+    other_method = "small_gicp" if "small_gicp" in available_icp() else "open3d_point_to_plane"
+    sim = dict(scene="street", n_frames=6, n_beams=16, n_azimuths=720, speed_mps=5.0, accel_time_s=0.0)
+    bag = export_bag(SimulatedLidarSequence(pose_instant="mid", seed=4, **sim), tmp_path / "run.bag", "rosbag1")
+    run(bag, "kiss", out_dir=tmp_path / "kiss")
+    run(bag, other_method, out_dir=tmp_path / "other")
+    res = compare(tmp_path / "kiss", tmp_path / "other")
+    assert res.n_pairs == 5
+    assert f"(kiss: end, {other_method}: start), over the same dataset and frames" in res.note
+    code, out, _ = run_cli(["compare", str(tmp_path / "kiss"), str(tmp_path / "other"), "--json", str(tmp_path / "c.json")], capsys)
+    assert code == 0 and "note: each run is scored against the ground truth at its own instant" in " ".join(out.split())
+    assert json.loads((tmp_path / "c.json").read_text())["note"] == res.note
+    assert compare(tmp_path / "kiss", tmp_path / "kiss").note == ""
+    another = export_bag(SimulatedLidarSequence(pose_instant="mid", seed=5, **sim), tmp_path / "another.bag", "rosbag1")
+    run(another, other_method, out_dir=tmp_path / "another")
+    with pytest.raises(EvaluationError, match="runs over different data"):
+        compare(tmp_path / "kiss", tmp_path / "another")

@@ -46,6 +46,8 @@ def compare_command(
     console.print(f"Wilcoxon signed-rank: statistic {result.statistic:g}, p = {result.p_value:.3g}; "
                   f"effect size (rank-biserial) {result.effect_size:+.3f}", soft_wrap=True)
     console.print(result.verdict(), soft_wrap=True, markup=False)
+    if result.note:
+        console.print(f"note: {result.note}", soft_wrap=True, markup=False)
     if json_out is not None:
         from lidarkit.eval.report import write_json
 

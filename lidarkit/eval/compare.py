@@ -7,6 +7,7 @@ whose ``verdict()`` says plainly who is better or that the difference does not s
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 from dataclasses import dataclass, field
@@ -113,14 +114,34 @@ def load_bench_runs(path: str | os.PathLike, method: str | None = None) -> Bench
     return runs
 
 
-def _same_ground_truth(a: OdometryRun, b: OdometryRun) -> None:
+def _same_ground_truth(a: OdometryRun, b: OdometryRun) -> str:
+    """"" when both runs were scored against the same ground truth; a note when they ran over the same dataset and
+    frames but each against the truth at its own instant of the sweep (the run re-timed it: e.g. kiss deskews to the
+    sweep end, small_gicp refers to the scans' stamps); EvaluationError otherwise."""
     ga, gb = a.ground_truth, b.ground_truth
-    if len(ga) != len(gb) or not np.allclose(ga.poses_se3, gb.poses_se3, atol=1e-6):
-        raise EvaluationError(
-            f"runs over different data: {a.path} has {len(ga)} ground-truth poses, {b.path} has {len(gb)}"
-            + (" with other values" if len(ga) == len(gb) else ""),
-            source="compare",
-        )
+    if len(ga) == len(gb) and np.allclose(ga.poses_se3, gb.poses_se3, atol=1e-6):
+        return ""
+    instants = [(run.metrics.get("effective") or {}).get("ground_truth_instant") for run in (a, b)]
+    data = [_data_of(run) for run in (a, b)]
+    if len(ga) == len(gb) and None not in instants and instants[0] != instants[1] and None not in data and data[0] == data[1]:
+        return (f"each run is scored against the ground truth at its own instant of the sweep ({a.name}: {instants[0]}, "
+                f"{b.name}: {instants[1]}), over the same dataset and frames ({data[0][0]}, frames {data[0][1]})")
+    raise EvaluationError(
+        f"runs over different data: {a.path} has {len(ga)} ground-truth poses, {b.path} has {len(gb)}"
+        + (" with other values" if len(ga) == len(gb) else ""),
+        source="compare",
+    )
+
+
+def _data_of(run: OdometryRun) -> tuple[str, str] | None:
+    """(dataset, frame selection) of a run folder from its config.yaml, None when unreadable."""
+    import yaml
+
+    try:
+        cfg = yaml.safe_load((run.path / "config.yaml").read_text(encoding="utf-8"))
+        return str(cfg["run"]["dataset"]), str(cfg["run"]["frames"])
+    except (OSError, yaml.YAMLError, KeyError, TypeError):
+        return None
 
 
 def run_units(run: OdometryRun, metric: str) -> np.ndarray:
@@ -154,7 +175,8 @@ def compare(
     path allows 100 m segments) or per frame (``rpe_translation_m``, the default otherwise). Bench results
     folders pair per (dataset, seed) on a job metric (default: KITTI drift, else APE RMSE); ``method_a`` /
     ``method_b`` pick a method when a folder holds several (the same folder may be given twice).
-    Runs over different data raise EvaluationError.
+    Runs over different data raise EvaluationError; two runs over the same dataset and frames, each scored against the
+    ground truth at its own instant of the sweep, are compared with a ``note`` saying so.
     """
     side_a = _load(a, method_a)
     side_b = _load(b, method_b)
@@ -165,7 +187,7 @@ def compare(
     if name_a == name_b:
         name_a, name_b = f"{name_a} (A)", f"{name_b} (B)"
     if isinstance(side_a, OdometryRun):
-        _same_ground_truth(side_a, side_b)
+        note = _same_ground_truth(side_a, side_b)
         if metric is None:
             from lidarkit.eval import drift_segments_possible
 
@@ -174,8 +196,9 @@ def compare(
             raise ConfigError(f"unknown run metric {metric!r}; choose one of: {', '.join(RUN_METRICS)}", source="metric")
         va, vb = run_units(side_a, metric), run_units(side_b, metric)
         pairing = "segment" if metric.startswith("segment_") else "frame"
-        return paired_test(va, vb, name_a=name_a, name_b=name_b, metric=metric, pairing=pairing,
-                           alpha=alpha, noise=noise, seed=seed)
+        result = paired_test(va, vb, name_a=name_a, name_b=name_b, metric=metric, pairing=pairing,
+                             alpha=alpha, noise=noise, seed=seed)
+        return dataclasses.replace(result, note=note) if note else result
     keys_a, keys_b = set(side_a.values), set(side_b.values)
     common = sorted(keys_a & keys_b)
     if not common:

@@ -132,6 +132,8 @@ class PairedComparison:
     noise: float
     lower_is_better: bool
     better: str
+    note: str = ""
+    """What the reader should know about the pairing (e.g. each run scored against its own instant of the sweep)."""
 
     @property
     def significant(self) -> bool:
