@@ -364,11 +364,7 @@ class KittiOdometry:
             return None
         gt = self._poses_camera_all
         if frames is not None:
-            frames = np.asarray(frames, dtype=np.int64)
-            if len(frames) and (frames.min() < 0 or frames.max() >= len(gt)):
-                raise DataError(f"frame {int(frames.max())} outside the {len(gt)} poses", source=self.poses_path)
-            ts = None if self._times_all is None else self._times_all[frames]
-            gt = Trajectory(gt.poses_se3[frames], ts, gt.name)
+            gt = self._rows(gt, frames, self.poses_path)
         elif self._times_all is not None:
             n = min(len(gt), len(self._times_all))  # an excerpt may trim one of the files to the frames present
             gt = gt[:n].with_timestamps(self._times_all[:n])
@@ -376,8 +372,7 @@ class KittiOdometry:
             return gt
         if frame != "lidar":
             raise ConfigError(f"unknown pose frame {frame!r}; known: lidar, camera", source="frame")
-        Tr = self.T_cam0_velo
-        gt = gt.transformed(T_left=se3_inverse(Tr), T_right=Tr).with_name(f"{self.name}_gt_lidar")
+        gt = self._in_lidar_frame(gt)
         instant = self._simulated_instant
         return gt if instant is None else Trajectory(gt.poses_se3, gt.timestamps_s, gt.name, meta={**gt.meta, "pose_instant": instant})
 
@@ -389,17 +384,25 @@ class KittiOdometry:
         if instant not in INSTANT_FRACTION or self._simulated_instant is None or not path.is_file():
             raise DataError(f"no ground truth at the sweep {instant} (only the simulator's folders keep poses_{instant}.txt)",
                             source=self.sequence_dir)
-        poses = Trajectory.from_kitti(path, name=f"{self.name}_gt").poses_se3
-        if len(poses) <= int(np.max(self.frames, initial=0)):
-            raise DataError(f"{len(poses)} poses for frame {int(np.max(self.frames))}", source=path)
-        Tr = self.T_cam0_velo
-        lidar = se3_inverse(Tr) @ poses[self.frames] @ Tr
-        times = self.timestamps_s
+        gt = self._in_lidar_frame(self._rows(Trajectory.from_kitti(path, name=f"{self.name}_gt"), self.frames, path))
+        times = gt.timestamps_s
         if times is not None and len(self._times_all) > 1:  # times.txt is at poses.txt's instant: moved by the period
             period = float(np.median(np.diff(self._times_all)))
             times = times + (INSTANT_FRACTION[instant] - INSTANT_FRACTION[self._simulated_instant]) * period
-        return Trajectory(lidar, times, f"{self.name}_gt_lidar", meta={"pose_instant": instant,
-                                                                       "retimed": f"the simulator's poses_{instant}.txt"})
+        return Trajectory(gt.poses_se3, times, gt.name, meta={"pose_instant": instant, "retimed": f"the simulator's poses_{instant}.txt"})
+
+    def _rows(self, gt: Trajectory, frames: np.ndarray | list[int], source: Path) -> Trajectory:
+        """The poses of KITTI frame numbers ``frames`` of a whole-sequence pose file, with their times.txt stamps."""
+        frames = np.asarray(frames, dtype=np.int64)
+        if len(frames) and (frames.min() < 0 or frames.max() >= len(gt)):
+            raise DataError(f"frame {int(frames.max())} outside the {len(gt)} poses", source=source)
+        ts = None if self._times_all is None else self._times_all[frames]
+        return Trajectory(gt.poses_se3[frames], ts, gt.name)
+
+    def _in_lidar_frame(self, gt: Trajectory) -> Trajectory:
+        """Camera-frame poses ``P`` as LiDAR-frame poses ``Tr^-1 P Tr``."""
+        Tr = self.T_cam0_velo
+        return gt.transformed(T_left=se3_inverse(Tr), T_right=Tr).with_name(f"{self.name}_gt_lidar")
 
     @cached_property
     def _simulated_instant(self) -> str | None:

@@ -212,13 +212,12 @@ class _BagScans:
             raise DataError(f"unknown instant {instant!r}; valid: {', '.join(INSTANT_FRACTION)}", source=self.path)
         if self.ground_truth_topic is None:
             raise DataError("no ground-truth topic", source=self.path)
-        scan = self.read_scan(0)
-        if scan.point_times_s is None or len(scan.point_times_s) < 2 or np.ptp(scan.point_times_s) <= 0:
+        timing = self._sweep_timing()
+        if timing is None:
             raise DataError("the scans carry no per-point times, so where a sweep starts and ends is unknown", source=self.path,
                             location=self._location(0))
+        start, period = timing
         scan_stamps = self.timestamps_s
-        start = float(scan.point_times_s.min()) + (0.0 if scan.point_time_convention == "absolute_s" else scan.timestamp_s)
-        period = float(np.median(np.diff(scan_stamps))) if len(scan_stamps) > 1 else float(np.ptp(scan.point_times_s))
         times = scan_stamps + (start - scan_stamps[0]) + INSTANT_FRACTION[instant] * period
         stamps, poses = self._recorded_ground_truth()
         if len(stamps) < 2 or not (np.diff(stamps) > 0).all():
@@ -246,7 +245,17 @@ class _BagScans:
         return np.array(stamps), np.stack(poses)
 
     def _ground_truth_instant(self, gt_stamps: np.ndarray) -> str | None:
-        """Which instant of the sweep the ground truth stamps are, from scan 0's absolute point times."""
+        """Which instant of the sweep the ground truth stamps are (None: the scans carry no point times)."""
+        timing = self._sweep_timing()
+        if timing is None:
+            return None
+        start, period = timing
+        return classify_instant((float(gt_stamps[0]) - start) / period)
+
+    def _sweep_timing(self) -> tuple[float, float] | None:
+        """(absolute time of sweep 0's first point, the nominal sweep period) from scan 0's point times and the
+        spacing of the stamps (the last point fires just before the next sweep; one scan: its own time span);
+        None when the scans carry no point times."""
         scan = self.read_scan(0)
         if scan.point_times_s is None or len(scan.point_times_s) < 2:
             return None
@@ -254,10 +263,8 @@ class _BagScans:
         lo, hi = float(t.min()), float(t.max())
         if hi <= lo:
             return None
-        period = hi - lo
-        if len(self._stamps) > 1:  # the nominal sweep period: spacing of the stamps (the last point fires just before it)
-            period = float(np.median(np.diff(self.timestamps_s)))
-        return classify_instant((float(gt_stamps[0]) - lo) / period)
+        stamps = self.timestamps_s
+        return lo, float(np.median(np.diff(stamps))) if len(stamps) > 1 else hi - lo
 
 
 def _pose_matrix(xyz: list[float], quat_xyzw: list[float]) -> np.ndarray:
