@@ -74,6 +74,19 @@ def test_paired_test_agrees_with_scipy_and_reads_plainly():
     assert not small.significant and "within the run-to-run noise" in small.verdict()
 
 
+def test_the_winner_is_the_one_the_ranks_favour_not_the_mean():
+    """A better on 19 of 20 seeds, one seed 5 worse: the mean points at B, the signed-rank test and the median at A."""
+    b = np.linspace(1.0, 2.0, 20)
+    a = b - 0.1
+    a[-1] = b[-1] + 5.0
+    res = paired_test(a, b, name_a="A", name_b="B", metric="ape_rmse_m")
+    assert res.mean_diff > 0 and res.median_diff == pytest.approx(-0.1) and res.effect_size < 0
+    assert res.p_value < 0.05 and res.better == "a"
+    assert res.diff_ci_high == pytest.approx(-0.1) and res.diff_ci_low < 0  # the median's CI: it excludes 0 here
+    text = res.verdict()
+    assert text.startswith("A is better than B") and "median difference -0.1" in text and "points the other way" in text
+
+
 SUITE = """
 name: sim-seeds
 seeds: 10

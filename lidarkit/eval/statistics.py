@@ -107,10 +107,11 @@ def summarize(
 class PairedComparison:
     """Wilcoxon signed-rank comparison of ``a`` and ``b`` over ``n_pairs`` matched units.
 
-    ``diff = a - b`` per unit. ``effect_size`` is the matched-pairs rank-biserial correlation in [-1, 1]
-    (positive: ``a`` larger; +-1: every unit agrees). ``better`` is ``"a"``, ``"b"`` or ``""`` (no significant
-    difference, or the difference is within ``noise``). ``noise`` is the run-to-run noise of the metric the
-    verdict was held against (0 when none was measured).
+    ``diff = a - b`` per unit; ``diff_ci_low``/``diff_ci_high``: bootstrap CI of its median. ``effect_size`` is the
+    matched-pairs rank-biserial correlation in [-1, 1] (positive: ``a`` larger; +-1: every unit agrees). ``better``
+    is ``"a"``, ``"b"`` or ``""`` (no significant difference, or the median difference is within ``noise``); its
+    direction is the rank test's (the sign of ``effect_size``), never the mean's, which one unit can turn. ``noise``
+    is the run-to-run noise of the metric the verdict was held against (0 when none was measured).
     """
 
     name_a: str
@@ -145,12 +146,18 @@ class PairedComparison:
         p = "p = 1" if self.p_value >= 1 else f"p = {self.p_value:.2g}"
         if self.better:
             win, lose = (self.name_a, self.name_b) if self.better == "a" else (self.name_b, self.name_a)
-            return (f"{win} is better than {lose} on {m}: mean {self.mean_a:.4g} vs {self.mean_b:.4g} "
-                    f"(difference {self.mean_diff:+.3g}, 95% CI [{self.diff_ci_low:+.3g}, {self.diff_ci_high:+.3g}]), "
+            text = (f"{win} is better than {lose} on {m}: median difference {self.median_diff:+.3g} "
+                    f"(95% CI [{self.diff_ci_low:+.3g}, {self.diff_ci_high:+.3g}]), mean {self.mean_a:.4g} vs {self.mean_b:.4g}, "
                     f"Wilcoxon {p}, effect size {self.effect_size:+.2f}, {unit}")
-        why = (f"the difference {self.mean_diff:+.3g} is within the run-to-run noise (±{self.noise:.3g})"
-               if self.noise > 0 and abs(self.mean_diff) <= self.noise
-               else f"Wilcoxon {p} >= {self.alpha:g}")
+            if self.mean_diff * self.effect_size < 0:
+                text += f"; the mean difference ({self.mean_diff:+.3g}) points the other way: a few units differ a lot"
+            return text
+        why = f"Wilcoxon {p} >= {self.alpha:g}"
+        if self.p_value < self.alpha and self.noise > 0 and abs(self.median_diff) <= self.noise:
+            why = f"the median difference {self.median_diff:+.3g} is within the run-to-run noise (±{self.noise:.3g})"
+        elif self.p_value < self.alpha and self.median_diff * self.effect_size <= 0:
+            why = (f"the ranks (effect size {self.effect_size:+.2f}) and the median difference ({self.median_diff:+.3g}) "
+                   "disagree in direction")
         if self.n_ties == self.n_pairs:
             why = "every paired difference is zero (within floating-point noise)"
         return (f"no significant difference between {self.name_a} and {self.name_b} on {m}: {why}; "
@@ -180,8 +187,8 @@ def paired_test(
 
     Differences below ``RELATIVE_TIE_TOLERANCE`` of the values' scale are ties (two runs of one deterministic
     method differ by round-off only) and are dropped as Wilcoxon does; all ties give p = 1. A difference is
-    called significant when p < ``alpha`` and the mean difference exceeds ``noise`` (the measured run-to-run
-    noise, same unit as the metric).
+    called significant when p < ``alpha`` and the median difference exceeds ``noise`` (the measured run-to-run
+    noise, same unit as the metric) in the direction of the ranks; the better side is the one the ranks favour.
     """
     from scipy import stats as sstats
 
@@ -207,15 +214,16 @@ def paired_test(
         statistic, p_value = float(res.statistic), float(res.pvalue)
         ranks = sstats.rankdata(np.abs(nz))
         effect = float((ranks[nz > 0].sum() - ranks[nz < 0].sum()) / ranks.sum())
-    lo, hi = bootstrap_ci(diff, seed=seed)
-    mean_diff = float(diff.mean())
+    lo, hi = bootstrap_ci(diff, seed=seed, statistic="median")
+    median_diff = float(np.median(diff))
     better = ""
-    if p_value < alpha and abs(mean_diff) > noise:
-        a_lower = mean_diff < 0
+    # the direction is the ranks' (what the test tested); the median must agree with it and exceed the noise
+    if p_value < alpha and effect * median_diff > 0 and abs(median_diff) > noise:
+        a_lower = effect < 0
         better = "a" if a_lower == lower_is_better else "b"
     return PairedComparison(
         name_a=name_a, name_b=name_b, metric=metric, pairing=pairing, n_pairs=int(va.size), n_ties=int(tie.sum()),
-        mean_a=float(va.mean()), mean_b=float(vb.mean()), mean_diff=mean_diff, median_diff=float(np.median(diff)),
+        mean_a=float(va.mean()), mean_b=float(vb.mean()), mean_diff=float(diff.mean()), median_diff=median_diff,
         diff_ci_low=lo, diff_ci_high=hi, statistic=statistic, p_value=p_value, effect_size=effect, alpha=alpha,
         noise=float(noise), lower_is_better=lower_is_better, better=better,
     )
