@@ -166,3 +166,34 @@ def test_results_of_an_older_version_do_not_count_twice(tmp_path):
     report = build_report(tmp_path, plots=False)
     (row,) = report.tables[0].rows
     assert row.stats["ape_rmse_m"] == (2.0, 0.0, 1)
+
+
+@pytest.mark.parametrize("edit, reason", [
+    (lambda r: r.update(metrics=None), "metrics is None, not a mapping"),
+    (lambda r: r["metrics"].update(ape_rmse_m="x"), "metric ape_rmse_m is 'x', not a number"),
+    (lambda r: r["job"].pop("experiment"), "job lacks experiment"),
+    (lambda r: r["job"].update(added_later=1), "job has unknown added_later"),
+    (lambda r: r.update(job=None), "'job' is NoneType, not a mapping"),
+    (lambda r: r["job"].update(params=None), "job params is None, not a mapping"),
+    (lambda r: r.update(runtime_s="1 s"), "runtime_s is '1 s', not a number"),
+    (lambda r: r.update(warnings=5), "warnings is 5, not a list of text"),
+])
+def test_a_malformed_result_file_is_skipped_with_its_reason(tmp_path, caplog, edit, reason):
+    """A result edited by hand (or written by another version) is left out with a one-line warning naming the file
+    and what is wrong with it; the report, compare and a resumed bench read the other results."""
+    import json
+
+    from lidarkit.bench.jobs import Job
+    from lidarkit.bench.results import make_record, write_result
+
+    outcome = {"status": "ok", "metrics": {"ape_rmse_m": 1.0}, "series": {}, "info": {}, "error": None, "runtime_s": 0.1,
+               "finished_utc": "2026-01-01T00:00:00.000+00:00"}
+    paths = [write_result(tmp_path, make_record(job, job.key(), "1", outcome)) for job in
+             (Job("selftest", "e", "synth", {"kind": "synthetic"}, "random_walk", {"steps": 10}, seed=s) for s in (0, 1))]
+    record = json.loads(paths[0].read_text())
+    edit(record)
+    paths[0].write_text(json.dumps(record))
+    assert len(load_results(tmp_path)) == 1
+    assert f"ignoring {paths[0]}: {reason}" in caplog.text
+    (row,) = build_report(tmp_path, plots=False).tables[0].rows
+    assert row.n_ok == 1

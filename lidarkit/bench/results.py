@@ -41,7 +41,50 @@ def read_result(path: Path) -> dict[str, Any] | None:
     if not isinstance(record, dict) or record.get("schema") != SCHEMA_VERSION or "job" not in record:
         log.warning("ignoring %s: not a lidarkit bench result", path)
         return None
+    problem = malformed(record)
+    if problem:
+        log.warning("ignoring %s: %s", path, problem)
+        return None
     return record
+
+
+def malformed(record: dict[str, Any]) -> str:
+    """Why a result record cannot be read (edited by hand, or written by another lidarkit version), or ''."""
+    from dataclasses import fields
+
+    job = record["job"]
+    if not isinstance(job, dict):
+        return f"'job' is {type(job).__name__}, not a mapping"
+    names = {f.name for f in fields(Job)}
+    if set(job) != names:
+        missing, extra = sorted(names - set(job)), sorted(set(job) - names)
+        return "job " + "; ".join(x for x in (f"lacks {', '.join(missing)}" if missing else "",
+                                                f"has unknown {', '.join(extra)}" if extra else "") if x)
+    for key in ("task", "experiment", "dataset_name", "method"):
+        if not isinstance(job[key], str):
+            return f"job {key} is {job[key]!r}, not text"
+    for key in ("dataset", "params", "options"):
+        if not isinstance(job[key], dict):
+            return f"job {key} is {job[key]!r}, not a mapping"
+    if not isinstance(job["seed"], int) or isinstance(job["seed"], bool):
+        return f"job seed is {job['seed']!r}, not an integer"
+    if not isinstance(record.get("status"), str):
+        return f"status is {record.get('status')!r}, not text"
+    metrics = record.get("metrics", {})
+    if not isinstance(metrics, dict):
+        return f"metrics is {metrics!r}, not a mapping"
+    for name, value in metrics.items():  # tasks write numbers (None: not defined for this run)
+        if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))):
+            return f"metric {name} is {value!r}, not a number"
+    runtime = record.get("runtime_s")
+    if runtime is not None and (isinstance(runtime, bool) or not isinstance(runtime, (int, float))):
+        return f"runtime_s is {runtime!r}, not a number"
+    warnings = record.get("warnings", [])
+    if warnings is not None and (not isinstance(warnings, list) or not all(isinstance(w, str) for w in warnings)):
+        return f"warnings is {warnings!r}, not a list of text"
+    if record.get("error") is not None and not isinstance(record["error"], dict):
+        return f"error is {record['error']!r}, not a mapping"
+    return ""
 
 
 def is_finished(out_dir: Path, key: str) -> bool:
