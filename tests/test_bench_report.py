@@ -197,3 +197,35 @@ def test_a_malformed_result_file_is_skipped_with_its_reason(tmp_path, caplog, ed
     assert f"ignoring {paths[0]}: {reason}" in caplog.text
     (row,) = build_report(tmp_path, plots=False).tables[0].rows
     assert row.n_ok == 1
+
+
+def test_datasets_and_params_that_print_alike_are_separate_rows(tmp_path):
+    """Two unnamed datasets of one kind, parameters equal to 6 digits, and a folder reused after the suite's
+    options changed: each job is its own row (never pooled as if seeds of one), labelled by what differs."""
+    suite = tmp_path / "suite.yaml"
+    suite.write_text(textwrap.dedent("""
+        seeds: [0, 1]
+        experiments:
+          - name: walk
+            task: selftest
+            datasets: [{kind: synthetic}, {kind: synthetic, name: synthetic, note: b}]
+            methods:
+              - name: random_walk
+                grid: {noise_m: [0.5000001, 0.5000002]}
+    """))
+    loaded = load_suite(suite)
+    assert sorted({job.dataset_name for job in loaded.jobs}) == ["synthetic(name=None, note=None)", "synthetic(name=synthetic, note=b)"]
+    assert sorted({job.method_label for job in loaded.jobs}) == ["random_walk(noise_m=0.5000001)", "random_walk(noise_m=0.5000002)"]
+    run_suite(loaded, tmp_path / "out", executor="serial")
+    rows = build_report(tmp_path / "out", plots=False).tables[0].rows
+    assert len(rows) == 4 and all(row.n_ok == 2 for row in rows)
+    # the folder reused with other task options: the old and the new jobs are separate rows, told apart by them
+    from lidarkit.bench.jobs import Job
+    from lidarkit.bench.results import make_record, write_result
+
+    outcome = {"status": "ok", "metrics": {"ape_rmse_m": 1.0}, "series": {}, "info": {}, "error": None, "runtime_s": 0.1}
+    for steps in (10, 20):
+        job = Job("selftest", "e", "synth", {"kind": "synthetic"}, "random_walk", {}, seed=0, options={"steps": steps})
+        write_result(tmp_path / "reused", make_record(job, job.key(), "1", outcome))
+    rows = build_report(tmp_path / "reused", plots=False).tables[0].rows
+    assert [row.dataset for row in rows] == ["synth(steps=10)", "synth(steps=20)"] and all(row.n_ok == 1 for row in rows)

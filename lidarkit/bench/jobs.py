@@ -55,6 +55,28 @@ class Job:
 
 
 def _short(value: Any) -> str:
+    """A value as labels show it: floats in ``:g`` form unless that reads as another number (0.5000001)."""
     if isinstance(value, float):
-        return f"{value:g}"
+        text = f"{value:g}"
+        return text if float(text) == value else repr(value)
     return str(value)
+
+
+def distinct_labels(labels: list[str], specs: list[dict[str, Any]]) -> list[str]:
+    """``labels`` made unique: labels shared by different ``specs`` get the fields those specs differ in,
+    ``sim_lidar(scene=open)``, so that a report never pools two datasets as if they were seeds of one."""
+    def text(value: Any) -> str:  # (values that are not plain JSON are refused later, naming the suite's line)
+        return json.dumps(value, sort_keys=True, default=repr)
+
+    out = list(labels)
+    groups: dict[str, list[int]] = {}
+    for i, label in enumerate(labels):
+        groups.setdefault(label, []).append(i)
+    for label, group in groups.items():
+        if len(group) < 2 or len({text(specs[i]) for i in group}) < 2:
+            continue
+        keys = sorted({k for i in group for k in specs[i]})
+        differing = [k for k in keys if len({text(specs[i].get(k)) for i in group}) > 1]
+        for i in group:
+            out[i] = f"{label}({', '.join(f'{k}={_short(specs[i].get(k))}' for k in differing)})"
+    return out

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from lidarkit.bench.jobs import Job
+from lidarkit.bench.results import dataset_labels
 from lidarkit.eval.tables import PubTable, SegmentErrors, publication_tables
 
 log = logging.getLogger(__name__)
@@ -36,11 +37,12 @@ def _grids(records: list[dict[str, Any]]):
     segments: dict[tuple[str, str], list[SegmentErrors]] = defaultdict(list)
     ape: dict[tuple[str, str], list[float]] = defaultdict(list)
     rpe: dict[tuple[str, str], list[float]] = defaultdict(list)
+    label = dataset_labels(records)
     for r in records:
         if r.get("status") != "ok" or r["job"]["task"] != "odometry":
             continue
         job = Job.from_spec(r["job"])
-        key = (job.dataset_name, job.method_label)
+        key = (label[id(r)], job.method_label)
         seg = (r.get("series") or {}).get("drift_segments")
         if seg:
             segments[key].append(SegmentErrors.from_dict(seg))
@@ -68,11 +70,12 @@ def reference_comparisons(records: list[dict[str, Any]], reference: str = REFERE
     from lidarkit.eval.statistics import paired_test
 
     per: dict[str, dict[str, dict[int, dict[str, Any]]]] = defaultdict(lambda: defaultdict(dict))
+    label = dataset_labels(records)
     for r in records:
         if r.get("status") != "ok" or r["job"]["task"] != "odometry":
             continue
         job = Job.from_spec(r["job"])
-        per[job.dataset_name][job.method_label][job.seed] = r
+        per[label[id(r)]][job.method_label][job.seed] = r
     out = []
     for dataset, methods in per.items():
         if reference not in methods:

@@ -24,8 +24,8 @@ from typing import Any
 import numpy as np
 
 from lidarkit import atomic
-from lidarkit.bench.jobs import Job
-from lidarkit.bench.results import load_results
+from lidarkit.bench.jobs import Job, canonical_json
+from lidarkit.bench.results import dataset_labels, load_results
 from lidarkit.errors import DataError
 from lidarkit.eval.statistics import summarize
 
@@ -108,7 +108,7 @@ def _stats(values: list[float]) -> tuple[float, float, int]:
 
 
 def aggregate(records: list[dict[str, Any]]) -> list[TaskTable]:
-    """Group records per task and (experiment, dataset, method label); mean ± std (sample std) over seeds."""
+    """Group records per task and job (all but the seed); mean ± std (sample std) over seeds."""
     by_task: dict[str, list[dict[str, Any]]] = defaultdict(list)
     for r in records:
         by_task[r["job"]["task"]].append(r)
@@ -123,15 +123,20 @@ def aggregate(records: list[dict[str, Any]]) -> list[TaskTable]:
         metrics += [MetricInfo(name, name) for name in sorted(present - {m.name for m in metrics})]
         metrics = [label_alignment(m, recs) for m in metrics]
         metrics.append(MetricInfo("runtime_s", "runtime [s]", "speed"))
-        groups: dict[tuple[str, str, str], list[dict[str, Any]]] = defaultdict(list)
-        order: dict[tuple[str, str, str], tuple] = {}
+        # rows are jobs that differ in their seed only (not rows that print alike: two datasets with one name, or a
+        # folder reused after the suite's options changed); rows that would print alike are told apart by what differs
+        groups: dict[str, list[dict[str, Any]]] = defaultdict(list)
         for r in recs:
-            job = Job.from_spec(r["job"])
-            key = (job.experiment, job.dataset_name, job.method_label)
-            groups[key].append(r)
-            order[key] = (job.experiment, job.dataset_name, job.method, _natural(job.params))
+            job = r["job"]
+            groups[canonical_json({k: v for k, v in job.items() if k != "seed"})].append(r)
+        jobs = {ident: Job.from_spec(items[0]["job"]) for ident, items in groups.items()}
+        label_of = dataset_labels(recs)
+        dataset_of = {ident: label_of[id(items[0])] for ident, items in groups.items()}
+        order = {i: (jobs[i].experiment, dataset_of[i], jobs[i].method, _natural(jobs[i].params)) for i in jobs}
         rows = []
-        for (experiment, dataset, method), items in sorted(groups.items(), key=lambda kv: order[kv[0]]):
+        for ident in sorted(jobs, key=lambda i: order[i]):
+            items = groups[ident]
+            experiment, dataset, method = jobs[ident].experiment, dataset_of[ident], jobs[ident].method_label
             ok = [r for r in items if r.get("status") == "ok"]
             stats, summaries = {}, {}
             for m in metrics:

@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from lidarkit import atomic
-from lidarkit.bench.jobs import Job
+from lidarkit.bench.jobs import Job, distinct_labels
 
 log = logging.getLogger(__name__)
 
@@ -106,6 +106,14 @@ def load_results(out_dir: Path) -> list[dict[str, Any]]:
         return (j["task"], j["experiment"], j["dataset_name"], j["method"], json.dumps(j["params"], sort_keys=True), j["seed"])
 
     return sorted(records, key=order)
+
+
+def dataset_labels(records: list[dict[str, Any]]) -> dict[int, str]:
+    """Each record's dataset label (by ``id``), told apart where different datasets or task options share one
+    (two unnamed simulated scenes, a folder reused after a suite's options changed)."""
+    labels = [r["job"]["dataset_name"] for r in records]
+    specs = [{**r["job"]["dataset"], **r["job"]["options"]} for r in records]
+    return dict(zip(map(id, records), distinct_labels(labels, specs)))
 
 
 def remove_stale_temp_files(out_dir: Path, older_than_s: float = 600.0) -> int:

@@ -17,7 +17,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from lidarkit.bench.datasets import SAMPLE_PREFIX, dataset_label, resolve_dataset, resolve_option_paths
-from lidarkit.bench.jobs import Job
+from lidarkit.bench.jobs import Job, distinct_labels
 from lidarkit.bench.tasks import get_task
 from lidarkit.errors import ConfigError, DataError, LidarKitError
 
@@ -334,7 +334,7 @@ def load_suite(path: str | Path, *, skip_unavailable: bool = False, only_tasks: 
             if overlap:
                 raise ConfigError(f"{', '.join(sorted(overlap))} given both in params and grid", source=path, location=locator.location(m_loc))
             for params in _grid(method):
-                for spec in resolved:
+                for spec, label in zip(resolved, distinct_labels([dataset_label(d) for d in resolved], resolved)):
                     check_key = repr((exp.task, method.name, sorted(params.items()), sorted(spec.items()), sorted(options.items())))
                     if check_key not in validated:
                         _check(locator, m_loc, task.validate, method.name, params, spec, options)
@@ -343,7 +343,7 @@ def load_suite(path: str | Path, *, skip_unavailable: bool = False, only_tasks: 
                         job = Job(
                             task=exp.task,
                             experiment=exp_name,
-                            dataset_name=dataset_label(spec),
+                            dataset_name=label,
                             dataset=spec,
                             method=method.name,
                             params=params,
