@@ -169,3 +169,36 @@ def test_bad_baseline_folders_are_clear_errors(recorded, tmp_path, capsys):
     assert code == 1 and "corrupt manifest: schema 'something-else'" in err
     with pytest.raises(ConfigError, match="METRIC=BAND"):
         check(out, tolerances=["drift_translation_pct"])
+
+
+@pytest.mark.parametrize("edit, reason", [
+    (lambda m: m["jobs"][0]["checked"].append("nosuch_m"), "job 0 checks 'nosuch_m' but its metric is None, not a finite number"),
+    (lambda m: m["jobs"][0].update(bands={}), "job 0 checks 'ape_se3_rmse_m' but its band is None, not a finite number"),
+    (lambda m: m["jobs"][0]["metrics"].update(ape_se3_rmse_m=None), "job 0 checks 'ape_se3_rmse_m' but its metric is None"),
+    (lambda m: m["jobs"][0].update(protocol=None), "job 0 protocol is None, not a mapping"),
+    (lambda m: m.update(jobs=[1]), "job 0 is 1, not a mapping"),
+    (lambda m: m.update(environment=None), "'environment' is None, not a mapping"),
+])
+def test_a_hand_edited_manifest_is_a_clear_error(recorded, tmp_path, edit, reason):
+    _, out, _ = recorded
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["jobs"][0]["checked"][0] == "ape_se3_rmse_m"
+    edit(manifest)
+    (tmp_path / "manifest.json").write_text(json.dumps(manifest))
+    with pytest.raises(DataError, match=f"corrupt manifest: {reason}".replace("(", r"\(").replace(")", r"\)")):
+        check(tmp_path)
+
+
+def test_a_failing_job_and_an_unknown_tolerance_are_one_line_errors(recorded, tmp_path, capsys):
+    """A method that raises its own exception during record names the job; ``-t`` on a metric no job checks is refused
+    (a typo would otherwise never apply); the APE bands have their 1 cm floor."""
+    _, out, baseline = recorded
+    assert baseline.jobs[0]["bands"]["ape_se3_rmse_m"] >= 0.01
+    suite = tmp_path / "fails.yaml"
+    suite.write_text("experiments:\n  - name: bad\n    task: selftest\n    dataset: {kind: synthetic}\n    methods: [random_walk, fail]\n")
+    code, _, err = run_cli(["baseline", "record", str(suite), "--out", str(tmp_path / "bl")], capsys)
+    assert code == 1 and "Traceback" not in err
+    assert "bad: fail on synthetic (seed 0): the job failed: RuntimeError: selftest failure" in " ".join(err.split())
+    assert not (tmp_path / "bl").exists()
+    with pytest.raises(ConfigError, match="no pinned job checks nosuch_metric; checked metrics: ape_rmse_m, ape_se3_rmse_m"):
+        check(out, tolerances=["nosuch_metric=0.1"])

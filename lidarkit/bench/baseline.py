@@ -32,7 +32,7 @@ import numpy as np
 
 from lidarkit import atomic
 from lidarkit.bench.jobs import Job, canonical_json
-from lidarkit.errors import ConfigError, DataError, LidarKitError
+from lidarkit.errors import ConfigError, DataError, LidarKitError, RegistrationError
 
 log = logging.getLogger(__name__)
 
@@ -47,6 +47,7 @@ ABSOLUTE_FLOOR = {
     "drift_translation_pct": 0.05,  # re-runs of one method on KITTI differ by 0.05-0.1 pp across setups
     "drift_rotation_deg_per_100m": 0.005,
     "ape_rmse_m": 0.01,
+    "ape_se3_rmse_m": 0.01,
     "final_error_m": 0.01,
     "rpe_trans_rmse_m": 0.001,
     "rpe_rot_rmse_deg": 0.001,
@@ -166,7 +167,25 @@ class JobRun:
 
 
 def run_job(job: Job, checksum_cache: dict[str, str] | None = None) -> JobRun:
-    """Run ``job`` in this process and collect its protocol (config, data checksums, angle correction, instant)."""
+    """Run ``job`` in this process and collect its protocol (config, data checksums, angle correction, instant).
+    A job that fails raises a LidarKitError naming the job (a method's own exception type and message kept in it)."""
+    try:
+        return _run_job(job, checksum_cache)
+    except LidarKitError as err:
+        if str(err.source) == str(_job_name(job)):
+            raise
+        raise type(err)(str(err), source=_job_name(job)) from err
+    except (KeyboardInterrupt, SystemExit, MemoryError):
+        raise
+    except Exception as err:  # noqa: BLE001 - a method's or plugin's own failure: one line naming the job
+        raise RegistrationError(f"the job failed: {type(err).__name__}: {err}", source=_job_name(job)) from err
+
+
+def _job_name(job: Job) -> str:
+    return f"{job.experiment}: {job.method_label} on {job.dataset_name} (seed {job.seed})"
+
+
+def _run_job(job: Job, checksum_cache: dict[str, str] | None) -> JobRun:
     from lidarkit.bench.tasks import get_task
 
     protocol: dict[str, Any] = {"dataset": dict(job.dataset), "checksums": dataset_checksums(job.dataset, checksum_cache)}
@@ -320,17 +339,42 @@ def load_baseline(path: str | os.PathLike) -> Baseline:
     for key in ("environment", "evaluation", "jobs"):
         if key not in manifest:
             raise DataError(f"corrupt manifest: no {key!r}", source=manifest_path)
+    for key in ("environment", "evaluation"):
+        if not isinstance(manifest[key], dict):
+            raise DataError(f"corrupt manifest: {key!r} is {manifest[key]!r}, not a mapping", source=manifest_path)
     if not isinstance(manifest["jobs"], list) or not manifest["jobs"]:
         raise DataError("corrupt manifest: no pinned jobs", source=manifest_path)
     for i, job in enumerate(manifest["jobs"]):
-        missing = [k for k in ("key", "label", "spec", "protocol", "metrics", "checked", "bands") if k not in job]
-        if missing:
-            raise DataError(f"corrupt manifest: job {i} lacks {', '.join(missing)}", source=manifest_path)
-        try:
-            Job.from_spec(job["spec"])
-        except TypeError as err:
-            raise DataError(f"corrupt manifest: job {i} has a bad spec ({err})", source=manifest_path) from None
+        problem = _pinned_job_problem(job)
+        if problem:
+            raise DataError(f"corrupt manifest: job {i} {problem}", source=manifest_path)
     return Baseline(path, manifest)
+
+
+def _pinned_job_problem(job: Any) -> str:
+    """What is wrong with one pinned job of a manifest (edited by hand, cut short), or ''."""
+    if not isinstance(job, dict):
+        return f"is {job!r}, not a mapping"
+    missing = [k for k in ("key", "label", "spec", "protocol", "metrics", "checked", "bands") if k not in job]
+    if missing:
+        return f"lacks {', '.join(missing)}"
+    try:
+        Job.from_spec(job["spec"])
+    except TypeError as err:
+        return f"has a bad spec ({err})"
+    for key in ("protocol", "metrics", "bands"):
+        if not isinstance(job[key], dict):
+            return f"{key} is {job[key]!r}, not a mapping"
+    if not isinstance(job["checked"], list):
+        return f"checked is {job['checked']!r}, not a list"
+    for metric in job["checked"]:
+        for where in ("metrics", "bands"):
+            value = job[where].get(metric) if isinstance(metric, str) else None
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+                return f"checks {metric!r} but its {where[:-1]} is {value!r}, not a finite number"
+        if job["bands"][metric] < 0:
+            return f"band of {metric!r} is negative ({job['bands'][metric]!r})"
+    return ""
 
 
 def measured_noise(path: str | os.PathLike, metric: str | None) -> float:
@@ -429,6 +473,10 @@ def check(
     """
     baseline = load_baseline(path)
     bands_override = parse_tolerances(tolerances)
+    checked = sorted({m for job in baseline.jobs for m in job["checked"]})
+    unknown = sorted(set(bands_override) - set(checked))
+    if unknown:
+        raise ConfigError(f"no pinned job checks {', '.join(unknown)}; checked metrics: {', '.join(checked)}", source="--tolerance")
     result = CheckResult(baseline.path, n_jobs=len(baseline.jobs))
     env_then, env_now = baseline.manifest["environment"], environment()
     env_changes = _diff("", {"packages": env_then.get("packages"), "platform": env_then.get("platform")},
