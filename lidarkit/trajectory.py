@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import logging
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -14,6 +15,8 @@ from lidarkit import atomic
 from lidarkit.errors import DataError, LidarKitError
 from lidarkit.geometry import ORTHONORMAL_TOL, orthonormalize_se3, se3_inverse
 from lidarkit.textfile import read_numeric_table
+
+log = logging.getLogger(__name__)
 
 FORMATS = ("kitti", "tum")
 
@@ -210,15 +213,29 @@ class Trajectory:
 
     @classmethod
     def from_tum(cls, path: str | os.PathLike, name: str | None = None) -> Trajectory:
-        """Read a TUM trajectory: ``timestamp tx ty tz qx qy qz qw`` per line, ``#`` comments."""
+        """Read a TUM trajectory: ``timestamp tx ty tz qx qy qz qw`` per line, ``#`` comments.
+
+        A pose stamped like the one before it is left out (with a warning naming the lines): TUM RGB-D's own ground
+        truth of ``fr2/desk`` has one. Timestamps that go backwards are a DataError naming the line."""
         rows = read_numeric_table(path, 8)
         quat_xyzw = rows[:, 4:8]
         norms = np.linalg.norm(quat_xyzw, axis=1)
         if (np.abs(norms - 1.0) > 1e-2).any():
             i = int(np.argmax(np.abs(norms - 1.0) > 1e-2))
-            raise DataError(f"quaternion norm {norms[i]:.4f} is not 1", source=path, location=f"pose {i}")
+            raise DataError(f"quaternion norm {norms[i]:.4f} is not 1", source=path, location=_file_line(path, f"frame {i}"))
+        step = np.diff(rows[:, 0])
+        if (step < 0).any():
+            k = int(np.argmax(step < 0)) + 1
+            raise DataError(f"timestamp {rows[k, 0]:.6f} is earlier than the one before it ({rows[k - 1, 0]:.6f})",
+                            source=path, location=_file_line(path, f"frame {k}"))
+        repeated = np.flatnonzero(step == 0) + 1
+        if repeated.size:
+            lines = ", ".join(str(_file_line(path, f"frame {k}")).split(" (")[0] for k in repeated[:5])
+            log.warning("%s: %d pose(s) repeat the timestamp of the pose before them (%s%s): each left out",
+                        path, repeated.size, lines, ", ..." if repeated.size > 5 else "")
+            rows = np.delete(rows, repeated, axis=0)
         poses = np.tile(np.eye(4), (len(rows), 1, 1))
-        poses[:, :3, :3] = Rotation.from_quat(quat_xyzw).as_matrix()
+        poses[:, :3, :3] = Rotation.from_quat(rows[:, 4:8]).as_matrix()
         poses[:, :3, 3] = rows[:, 1:4]
         return cls(poses, rows[:, 0], Path(path).stem if name is None else name)
 

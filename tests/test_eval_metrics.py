@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from conftest import shared_path
 
-from lidarkit.errors import ConfigError, EvaluationError
+from lidarkit.errors import ConfigError, DataError, EvaluationError
 from lidarkit.eval import align_trajectory, ape, position_mse, rpe
 from lidarkit.geometry import make_se3, random_se3
 from lidarkit.trajectory import Trajectory
@@ -182,6 +182,33 @@ def test_associate_by_timestamps(rng):
     assert res.n_errors == len(keep) and res.rmse == 0.0 and res.associated
     with pytest.raises(EvaluationError, match="association failed"):
         ape(ref, est, associate=True, max_diff_s=0.001)
+
+
+@pytest.mark.parametrize("gt, est, max_diff_s, align", [
+    ("freiburg1_xyz-groundtruth", "freiburg1_xyz-rgbdslam", 0.05, "se3"),  # a window that matches ground-truth poses twice
+    ("fr2_desk_groundtruth", "fr2_desk_ORB_kf_mono", 0.01, "sim3"),  # TUM's own ground truth repeats one timestamp
+])
+def test_tum_association_scores_as_evo_does(gt, est, max_diff_s, align, caplog):
+    from evo.core import metrics, sync
+    from evo.tools import file_interface
+
+    ref_path, est_path = (shared_path("evo_testdata", f"{name}.txt") for name in (gt, est))
+    res = ape(Trajectory.from_tum(ref_path), Trajectory.from_tum(est_path), align=align, associate=True, max_diff_s=max_diff_s)
+    evo_ref, evo_est = sync.associate_trajectories(file_interface.read_tum_trajectory_file(ref_path),
+                                                   file_interface.read_tum_trajectory_file(est_path), max_diff=max_diff_s)
+    evo_est.align(evo_ref, correct_scale=align == "sim3")
+    evo_ape = metrics.APE(metrics.PoseRelation.translation_part)
+    evo_ape.process_data((evo_ref, evo_est))
+    assert res.n_errors == evo_est.num_poses and res.rmse == pytest.approx(evo_ape.get_statistic(metrics.StatisticsType.rmse), rel=1e-9)
+    if gt == "fr2_desk_groundtruth":
+        assert "1 pose(s) repeat the timestamp of the pose before them (line 10863): each left out" in caplog.text
+
+
+def test_tum_timestamps_going_backwards_name_the_line(tmp_path):
+    path = tmp_path / "back.txt"
+    path.write_text("# t x y z qx qy qz qw\n1.0 0 0 0 0 0 0 1\n2.0 0 0 0 0 0 0 1\n\n1.5 0 0 0 0 0 0 1\n")
+    with pytest.raises(DataError, match=r"back.txt \(line 5 \(frame 2\)\): timestamp 1.500000 is earlier than the one before it"):
+        Trajectory.from_tum(path)
 
 
 def test_n_to_align_uses_first_poses_only(rng):

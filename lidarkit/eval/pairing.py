@@ -53,7 +53,19 @@ def paired(
         ref_evo, est_evo = sync.associate_trajectories(ref.to_evo(), est.to_evo(), max_diff=float(max_diff_s))
     except EvoException as err:
         raise EvaluationError(f"timestamp association failed: {err}", source=source) from err
-    ref_out = Trajectory.from_evo(ref_evo, name=ref.name)
-    est_out = Trajectory.from_evo(est_evo, name=est.name)
+    ref_out, est_out = _matched(ref_evo, est_evo, ref.name), _matched(est_evo, ref_evo, est.name)
     logger.info("associated %d of %d/%d poses (max diff %.3g s)", len(ref_out), len(ref), len(est), max_diff_s)
     return ref_out, est_out
+
+
+def _matched(traj, partner, name: str) -> Trajectory:
+    """One side of evo's association as a Trajectory. A window wider than half a pose interval can match one pose to
+    two of the other side (evo scores both pairs, and so does lidarkit): that side then takes its partner's stamps,
+    which are distinct and within ``max_diff_s`` of its own."""
+    import numpy as np
+
+    stamps = np.asarray(traj.timestamps, dtype=np.float64)
+    if len(stamps) > 1 and not (np.diff(stamps) > 0).all():
+        logger.info("%s: %d poses matched more than once", name, int((np.diff(stamps) <= 0).sum()))
+        stamps = np.asarray(partner.timestamps, dtype=np.float64)
+    return Trajectory(np.array(traj.poses_se3, dtype=np.float64), stamps, name)
