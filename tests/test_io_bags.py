@@ -148,3 +148,18 @@ def test_kiss_generic_loader_reads_a_kitti_bin_folder(exports):
     kitti = open_dataset("kitti", exports["kitti"])
     assert len(generic) == N_FRAMES
     np.testing.assert_array_equal(generic.read_scan(2).points_xyz, kitti.read_scan(2).points_xyz)
+
+
+@pytest.mark.parametrize("fmt, name", [("rosbag1", "plain.bag"), ("mcap", "plain.mcap")])
+def test_an_export_without_point_times_has_no_time_fields(tmp_path, fmt, name):
+    """point_times=false writes clouds without time fields (as a driver that writes none), not times of zero: kiss on
+    such a bag runs without deskew and says why, instead of normalizing zero-span times (kiss-icp aborts on them)."""
+    from lidarkit.odometry import run
+
+    sim = SimulatedLidarSequence(n_frames=4, n_beams=16, n_azimuths=360, seed=1, point_times=False)
+    ds = open_dataset(fmt if fmt == "mcap" else "rosbag", export_bag(sim, tmp_path / name, fmt))
+    scan = ds.read_scan(2)
+    assert scan.point_times_s is None
+    np.testing.assert_array_equal(scan.points_xyz, sim.read_scan(2).points_xyz.astype(np.float32).astype(np.float64))
+    deskew = run(ds, "kiss").metrics["effective"]["deskew"]
+    assert deskew["applied"] is False and deskew["reason"].startswith("no per-point times found")

@@ -21,6 +21,7 @@ from lidarkit.cli import main
 from lidarkit.io.kitti import POINT_TIME_FOLDERS, KittiOdometry
 from lidarkit.odometry import run
 from lidarkit.errors import ConfigError
+from lidarkit.registration import get_icp
 from lidarkit.odometry.frame_check import FrameCheckConfig, make_frame_check, motion_deviation, motion_limits
 from lidarkit.sim.lidar import SimulatedLidarSequence, export_kitti
 
@@ -101,6 +102,25 @@ def test_per_point_times_under_an_unknown_folder_name_say_deskew_was_not_applied
     assert code == 1
     (line,) = [ln for ln in err.splitlines() if ln.strip()]
     assert "frame 0" in line and "deskew requested, no per-point times found" in line
+
+
+def test_per_point_times_that_are_all_equal_are_not_deskewed_with(exported, tmp_path):
+    """A driver that writes zeros in its time field: kiss-icp would normalize the times by their zero span and abort
+    the whole process (Sophus, SIGABRT). The frames are read as frames without per-point times, and the run says so."""
+    seq = _copy(exported, tmp_path / "street_seq", "point_times")
+    for path in sorted((seq / "point_times").glob("*.npy")):
+        np.save(path, np.full_like(np.load(path), 0.05))
+    flat = run(seq, "kiss", frames="0:4")
+    plain = run(_copy(exported, tmp_path / "none" / "street_seq", None), "kiss", frames="0:4")
+    np.testing.assert_allclose(flat.trajectory.poses_se3, plain.trajectory.poses_se3, atol=1e-9)  # (kiss-icp: round-off)
+    deskew = flat.metrics["effective"]["deskew"]
+    assert deskew["applied"] is False and deskew["frames_with_point_times"] == 0
+    assert deskew["reason"] == "the per-point times of 4 of 4 frames are all equal (nothing to deskew with)"
+    # kiss called directly with such times: no deskew rather than an aborted process
+    scan = KittiOdometry(seq).read_scan(1)
+    direct = get_icp("kiss")
+    direct.register_frame(KittiOdometry(seq).read_scan(0).points_xyz, np.zeros(len(KittiOdometry(seq).read_scan(0).points_xyz)))
+    assert np.isfinite(direct.register_frame(scan.points_xyz, scan.point_times_s)).all()
 
 
 def test_deskew_off_or_not_offered_is_stated_without_a_warning(exported, tmp_path):

@@ -350,8 +350,14 @@ def run(
     # registration as its source and once more as the next frame's target; an entry lives while its frame is in use
     validated: dict[int, np.ndarray] = {}
 
+    flat_times: list[int] = []  # frames whose per-point times are all equal: nothing to deskew with (kiss-icp would
+    # normalize them by their zero span and abort the process), so they are read as scans without per-point times
+
     def read(i: int) -> tuple[Scan, tuple]:
         scan = _read_nonempty_scan(sequence, i)
+        if scan.point_times_s is not None and not scan.has_time_span():
+            flat_times.append(i)
+            scan = dataclasses.replace(scan, point_times_s=None)
         try:
             points = as_points(scan.points_xyz, "scan")
         except LidarKitError:
@@ -442,7 +448,7 @@ def run(
         min_eigenvalue,
     )
     effective, warnings = effective_settings(sequence, registration, name, stateful, checker.has_point_times, reference,
-                                             stamp_instant=getattr(first_scan, "stamp_instant", None))
+                                             stamp_instant=getattr(first_scan, "stamp_instant", None), n_flat_times=len(flat_times))
     for message in warnings:
         log.warning("%s: %s", title, message)
     covariances = (relative_cov, propagate(poses, relative_cov)) if want_covariance else None

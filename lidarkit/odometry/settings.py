@@ -98,13 +98,17 @@ def ground_truth_instant(sequence: Any, reference: Any) -> str:
 
 def effective_settings(
     sequence: Any, registration: Any, method: str, stateful: bool, has_point_times: np.ndarray, reference: Any,
-    stamp_instant: str | None = None,
+    stamp_instant: str | None = None, n_flat_times: int = 0,
 ) -> tuple[dict[str, Any], list[str]]:
     """(settings really applied, warnings) of a finished run; ``has_point_times`` (n,) bool per processed frame;
-    ``stamp_instant``: the instant of the sweep the scans' stamps refer to (what an estimate without deskew refers to)."""
+    ``stamp_instant``: the instant of the sweep the scans' stamps refer to (what an estimate without deskew refers to);
+    ``n_flat_times``: frames whose per-point times were all equal (read as frames without per-point times)."""
     warnings: list[str] = []
     requested = deskew_requested(registration)
     n, n_times = len(has_point_times), int(np.count_nonzero(has_point_times))
+    missing = point_times_not_found(sequence)
+    if n_flat_times:
+        missing = f"the per-point times of {n_flat_times} of {n} frames are all equal (nothing to deskew with)"
     deskew: dict[str, Any] = {"requested": requested, "applied": False, "frames_with_point_times": n_times, "n_frames": n}
     if requested is None:
         deskew["reason"] = f"{method} does not deskew (no deskew option)"
@@ -114,14 +118,14 @@ def effective_settings(
         deskew["reason"] = f"{method} runs scan-to-scan through align(), which takes no per-point times"
         warnings.append(f"deskew requested, not applied: {deskew['reason']}")
     elif n_times == 0:
-        deskew["reason"] = point_times_not_found(sequence)
+        deskew["reason"] = missing
         warnings.append(f"deskew requested, {deskew['reason']}: ran without deskew")
     else:
         deskew["applied"] = True
         deskew["reason"] = f"per-point times from {point_time_source(sequence)}"
         if n_times < n:
             deskew["reason"] += f" for {n_times} of {n} frames"
-            warnings.append(f"deskew applied to {n_times} of {n} frames only: {point_times_not_found(sequence)}")
+            warnings.append(f"deskew applied to {n_times} of {n} frames only: {missing}")
     if deskew["applied"]:
         stated = getattr(registration, "deskew_instant", None)
         estimate_instant = str(stated) if stated else "end" if method == "kiss" else "the instant the variant deskews to (not stated)"

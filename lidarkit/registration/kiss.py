@@ -142,6 +142,8 @@ class KissRegistration(Registration):
             times = np.asarray(point_times_s, dtype=np.float64).ravel()
             if len(times) != len(frame) or not np.isfinite(times).all():
                 raise DataError(f"need {len(frame)} finite per-point times, got {len(times)}", source="point_times_s")
+            if np.ptp(times) <= 0.0:  # all equal: kiss-icp would divide by their zero span and abort the process
+                times = np.array([])
         kiss.last_pose = kiss_safe_pose(kiss.last_pose, "last_pose")
         kiss.last_delta = kiss_safe_pose(kiss.last_delta if motion_guess is None else motion_guess, "last_delta")
         kiss.register_frame(frame, times)

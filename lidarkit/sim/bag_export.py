@@ -27,6 +27,7 @@ GROUND_TRUTH_TOPIC = "/ground_truth"
 FRAME_ID = "lidar"
 _POINT_DTYPE = np.dtype({"names": ["x", "y", "z", "intensity", "time", "t"],
                          "formats": ["<f4", "<f4", "<f4", "<f4", "<f4", "<u4"], "offsets": [0, 4, 8, 12, 16, 20], "itemsize": 24})
+_POINT_DTYPE_NO_TIMES = np.dtype({"names": ["x", "y", "z", "intensity"], "formats": ["<f4"] * 4, "offsets": [0, 4, 8, 12], "itemsize": 16})
 _PF_FLOAT32, _PF_UINT32 = 7, 6  # sensor_msgs/PointField datatype codes
 
 
@@ -85,8 +86,10 @@ def _write_messages(sequence, writer, typestore, serialize, *, ros1: bool, on_fr
 
     T = typestore.types
     pc2, odom = "sensor_msgs/msg/PointCloud2", "nav_msgs/msg/Odometry"
-    fields = [T["sensor_msgs/msg/PointField"](name=n, offset=o, datatype=_PF_UINT32 if n == "t" else _PF_FLOAT32, count=1)
-              for n, o in zip(_POINT_DTYPE.names, (0, 4, 8, 12, 16, 20))]
+    # without per-point times (point_times=false) the clouds have no time fields, as a driver that writes none
+    dtype = _POINT_DTYPE if sequence.config.point_times else _POINT_DTYPE_NO_TIMES
+    fields = [T["sensor_msgs/msg/PointField"](name=n, offset=dtype.fields[n][1], datatype=_PF_UINT32 if n == "t" else _PF_FLOAT32, count=1)
+              for n in dtype.names]
     gt = sequence.ground_truth
     quat_xyzw = Rotation.from_matrix(gt.poses_se3[:, :3, :3]).as_quat()
     period = sequence.config.sweep_period_s
@@ -105,16 +108,16 @@ def _write_messages(sequence, writer, typestore, serialize, *, ros1: bool, on_fr
         gt_conn = writer.add_connection(GROUND_TRUTH_TOPIC, odom, typestore=typestore)
         for i in range(len(sequence)):
             scan = sequence.read_scan(i)
-            times = np.zeros(len(scan.points_xyz)) if scan.point_times_s is None else scan.point_times_s
-            cloud = np.zeros(len(scan.points_xyz), dtype=_POINT_DTYPE)
+            cloud = np.zeros(len(scan.points_xyz), dtype=dtype)
             for k, axis in enumerate("xyz"):
                 cloud[axis] = scan.points_xyz[:, k]
             cloud["intensity"] = 0.0 if scan.intensity is None else scan.intensity
-            cloud["time"] = times
-            cloud["t"] = np.round(times * 1e9).astype(np.uint32)
+            if scan.point_times_s is not None:
+                cloud["time"] = scan.point_times_s
+                cloud["t"] = np.round(scan.point_times_s * 1e9).astype(np.uint32)
             start_s = i * period
             msg = T[pc2](header=header(i, start_s), height=1, width=len(cloud), fields=fields, is_bigendian=False,
-                         point_step=_POINT_DTYPE.itemsize, row_step=_POINT_DTYPE.itemsize * len(cloud),
+                         point_step=dtype.itemsize, row_step=dtype.itemsize * len(cloud),
                          data=cloud.view(np.uint8).ravel(), is_dense=True)
             writer.write(points_conn, int(round(start_s * 1e9)), serialize(msg, pc2))
             pose = gt.poses_se3[i]
