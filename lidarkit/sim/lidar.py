@@ -51,6 +51,10 @@ PoseInstant = Literal["start", "mid", "end"]
 _INSTANT_FRACTION = {"start": 0.0, "mid": 0.5, "end": 1.0}
 
 
+#: Longest drive the simulator builds a scene along (m): ~5 MB of scene mesh per km.
+MAX_DRIVE_M = 200_000.0
+
+
 class LidarSimConfig(BaseModel):
     """Everything that defines a simulated sequence; equal configs give bit-identical scans."""
 
@@ -64,7 +68,7 @@ class LidarSimConfig(BaseModel):
     n_azimuths: int = Field(2000, ge=8, description="columns per sweep")
     elevation_max_deg: float = Field(2.0, ge=-89.0, le=89.0)
     elevation_min_deg: float = Field(-24.8, ge=-89.0, le=89.0)
-    max_range_m: float = Field(80.0, gt=0.0)
+    max_range_m: float = Field(80.0, gt=0.0, le=1000.0, description="longest range measured (m; a kilometre at most)")
     min_range_m: float = Field(1.0, ge=0.0)
     sensor_height_m: float = Field(1.73, gt=0.0, description="sensor above the ground plane")
     range_noise_std_m: float = Field(0.0, ge=0.0, description="Gaussian noise along each ray")
@@ -98,7 +102,16 @@ class LidarSimConfig(BaseModel):
         lateral = self.open_object_lateral_m
         if lateral is not None and not 0.0 <= lateral[0] < lateral[1]:
             raise ValueError("open_object_lateral_m must be (min, max) with 0 <= min < max")
+        if self.drive_length_m > MAX_DRIVE_M:
+            raise ValueError(f"the drive is {self.drive_length_m / 1000:.4g} km long (speed_mps x n_frames / frame_rate_hz, plus "
+                             f"the scene around its ends); at most {MAX_DRIVE_M / 1000:g} km (~1 GB of scene): fewer frames or a "
+                             "lower speed")
         return self
+
+    @property
+    def drive_length_m(self) -> float:
+        """Length of the path the scene is built along (the drive plus the sensor's reach around its ends)."""
+        return self.speed_mps * (self.n_frames + 1) / self.frame_rate_hz + 2.0 * (self.max_range_m + 40.0)
 
     @property
     def sweep_period_s(self) -> float:
