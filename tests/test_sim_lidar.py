@@ -212,3 +212,25 @@ def test_a_drive_too_long_to_build_is_refused_before_any_allocation():
         make_config(max_range_m=1e30)
     longest = make_config(n_frames=int(MAX_DRIVE_M / 1.0) - 400, speed_mps=10.0)  # 1 m a frame: just within the bound
     assert longest.drive_length_m <= MAX_DRIVE_M
+
+
+def test_export_kitti_is_all_or_nothing_and_never_mixes_two_exports(tmp_path):
+    """An export that fails part-way leaves no folder that reads as a sequence; a folder holding files is refused
+    (3 sweeps written over 5 used to leave sweeps 3-4 of the old export beside the new poses)."""
+    from lidarkit.errors import OutputError
+
+    seq = SimulatedLidarSequence(scene="street", n_beams=8, n_azimuths=180, n_frames=5)
+
+    def fail_at_3(i):
+        if i == 3:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        export_kitti(seq, tmp_path / "cut", on_frame=fail_at_3)
+    assert not (tmp_path / "cut").exists() and list(tmp_path.iterdir()) == []
+    export_kitti(seq, tmp_path / "seq")
+    with pytest.raises(OutputError, match="seq: the folder already holds files"):
+        export_kitti(SimulatedLidarSequence(scene="street", n_beams=8, n_azimuths=180, n_frames=3), tmp_path / "seq")
+    assert len(list((tmp_path / "seq" / "velodyne").iterdir())) == 5
+    (tmp_path / "empty").mkdir()
+    assert len(list((export_kitti(seq, tmp_path / "empty") / "velodyne").iterdir())) == 5  # an empty folder is used

@@ -34,7 +34,7 @@ from typing import Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from lidarkit.errors import ConfigError, DataError, validation_problems
+from lidarkit.errors import ConfigError, DataError, OutputError, validation_problems
 from lidarkit.io.base import Scan
 from lidarkit.trajectory import Trajectory
 
@@ -659,13 +659,27 @@ def export_kitti(
     ``velodyne/NNNNNN.bin`` (float32 x, y, z, intensity), ``point_times/NNNNNN.npy`` (float32 per-point time from
     the sweep start, s), ``times.txt`` (stamps at ``pose_instant``), ``poses.txt`` (KITTI format, LiDAR frame, at
     ``pose_instant``), ``poses_start.txt`` / ``poses_mid.txt`` / ``poses_end.txt``, ``calib.txt`` (``Tr`` = identity:
-    poses are already in the LiDAR frame) and ``sim.yaml`` (the resolved config). Every file is written atomically.
+    poses are already in the LiDAR frame) and ``sim.yaml`` (the resolved config).
+
+    All or nothing: the folder appears complete or not at all (an interrupted export leaves nothing that reads as a
+    sequence), and a folder that already holds files is refused (sweeps of two exports are never mixed).
     """
+    from lidarkit import atomic
+
+    out = Path(out_dir)
+    if out.is_dir() and any(out.iterdir()):
+        raise OutputError("the folder already holds files: an export never mixes its sweeps with another's (remove it "
+                          "or choose a new folder)", source=out)
+    with atomic.run_folder(out) as tmp:
+        _write_kitti(sequence, tmp, on_frame)
+    return out
+
+
+def _write_kitti(sequence: SimulatedLidarSequence, out: Path, on_frame: Callable[[int], None] | None) -> None:
     import yaml
 
     from lidarkit import atomic
 
-    out = Path(out_dir)
     atomic.ensure_dir(out / "velodyne")
     if sequence.config.point_times:
         atomic.ensure_dir(out / "point_times")
@@ -690,7 +704,6 @@ def export_kitti(
     cfg = sequence.config.model_dump()
     cfg["note"] = "poses are T_world_lidar at pose_instant of each sweep; point_times are seconds from the sweep start"
     atomic.write_text(out / "sim.yaml", yaml.safe_dump(cfg, sort_keys=False))
-    return out
 
 
 __all__ = [
