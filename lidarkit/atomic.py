@@ -205,7 +205,7 @@ def _move_into_place(tmp: Path, path: Path) -> None:
         os.rename(tmp, path)  # a missing or empty ``path``: one rename
         return
     except OSError as err:
-        if err.errno not in (errno.EEXIST, errno.ENOTEMPTY, errno.EISDIR, errno.ENOTDIR):
+        if err.errno not in (errno.EEXIST, errno.ENOTEMPTY, errno.EISDIR, errno.ENOTDIR, errno.EBUSY):  # EBUSY: "." itself
             raise
     for src in sorted(tmp.rglob("*")):
         dst = path / src.relative_to(tmp)

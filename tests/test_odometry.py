@@ -245,6 +245,23 @@ def test_run_folder(tmp_path, rng):
     assert config["method"] == "oracle" and config["run"]["n_frames"] == 130 and "machine" in config
     rows = (out / "timing.csv").read_text().splitlines()
     assert rows[0].startswith("frame,read_s,register_s") and len(rows) == 131
+    # the same folder again for a run without ground truth: the earlier run's ground truth and plots go, a user's
+    # own file stays; "." (the folder the command runs in) works as a run folder too
+    (out / "notes.txt").write_text("mine")
+    no_truth = MemorySequence(poses, _room_points(rng, 50))
+    no_truth.__class__ = type("NoTruth", (MemorySequence,), {"ground_truth": property(lambda self: None)})
+    run(no_truth, OracleICP(noisy), out_dir=out)
+    assert sorted(p.name for p in out.iterdir()) == ["config.yaml", "metrics.json", "notes.txt", "pose_covariance.txt", "poses_kitti.txt",
+                                                    "poses_tum.txt", "timing.csv"]
+    import os
+
+    here = os.getcwd()
+    try:
+        os.chdir(out)
+        run(seq, OracleICP(noisy), out_dir=".")
+    finally:
+        os.chdir(here)
+    assert (out / "ape.png").is_file() and (out / "notes.txt").read_text() == "mine"
 
 
 def test_short_path_reports_no_drift(rng):

@@ -15,12 +15,24 @@ from lidarkit.odometry.metrics import paired
 from lidarkit.odometry.result import OdometryResult
 
 
+#: Every file a run folder can hold: those of an earlier run into the same folder that this run does not write (its
+#: ground truth, covariances, plots) are removed, so that they are never read as this run's
+RUN_FILES = ("poses_kitti.txt", "poses_tum.txt", "ground_truth_kitti.txt", "config.yaml", "metrics.json", "timing.csv",
+             "pose_covariance.txt", "trajectory.png", "ape.png")
+
+
 def write_run(result: OdometryResult, out_dir: str | os.PathLike) -> Path:
     """Write the run folder: poses_kitti.txt, poses_tum.txt, config.yaml, metrics.json, timing.csv, and with
-    ground truth ground_truth_kitti.txt, trajectory.png and ape.png; the folder all-or-nothing (``atomic.run_folder``)."""
-    with atomic.run_folder(out_dir) as tmp:
+    ground truth ground_truth_kitti.txt, trajectory.png and ape.png; the folder all-or-nothing (``atomic.run_folder``).
+    An earlier run's files in the folder that this run does not write are removed (other files are left alone)."""
+    out = Path(out_dir)
+    with atomic.run_folder(out) as tmp:
         _write_files(result, tmp)
-    return Path(out_dir)
+        written = {p.name for p in tmp.iterdir()}
+    for name in sorted(set(RUN_FILES) - written):
+        with atomic.output_errors(out / name, "cannot remove an earlier run's file"):
+            (out / name).unlink(missing_ok=True)
+    return out
 
 
 def _write_files(result: OdometryResult, out: Path) -> None:
