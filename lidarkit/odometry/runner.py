@@ -78,6 +78,8 @@ def _is_frame_error(err: BaseException) -> bool:
 def _frame_error(err: Exception, dataset_name: str, frame: int) -> LidarKitError:
     """Re-raise an error of frame ``frame`` so that its message names the frame."""
     if isinstance(err, LidarKitError):
+        if err.source == dataset_name and err.location == f"frame {frame}":
+            return err  # names the frame already
         try:
             return type(err)(str(err), source=dataset_name, location=f"frame {frame}")
         except TypeError:  # a subclass with another constructor
@@ -103,8 +105,9 @@ def _run_stateless(stream, registration: Any, worker: Overlap, indices: np.ndarr
                    poses: np.ndarray, checker: FrameChecker, strict: bool, name: str, dataset_name: str, bar,
                    validated: dict[int, np.ndarray], *,
                    read_s, register_s, n_points, converged, measured, fallback, iterations, rmse_m, n_corr, degenerate,
-                   min_eigenvalue, relative_cov, reasons, widened: list[int]) -> Scan | None:
-    """Scan-to-scan chaining, frame k's assessment overlapped with frame k+1's registration.
+                   min_eigenvalue, relative_cov, reasons, widened: list[int], require_times=None) -> Scan | None:
+    """Scan-to-scan chaining, frame k's assessment overlapped with frame k+1's registration (``require_times``: the
+    ``--strict`` refusal of a scan without per-point times, for a variant that deskews with them).
 
     The only thing frame k+1 needs from frame k's assessment is its verdict: a result the acceptance gate turns down
     (too few correspondences, too low a fitness) is not converged, and the next guess is then the previous motion.
@@ -211,6 +214,8 @@ def _run_stateless(stream, registration: Any, worker: Overlap, indices: np.ndarr
         first_scan = scan if k == 0 else first_scan
         points = scan.points_xyz
         n_points[k] = len(points)
+        if require_times is not None:
+            require_times(scan, frame=idx)
         if k == 0:
             poses[0] = np.eye(4)
             check(0, idx, scan, prepared)
@@ -336,8 +341,8 @@ def run(
     want_covariance = (not stateful and assessed) if pose_covariance is None else bool(pose_covariance)
     widened: list[int] = []  # frames whose covariance got the distortion floor
     checker = FrameChecker(n, frame_check)
-    need_times = strict and stateful and bool(deskew_requested(registration))
-    if strict and not stateful and deskew_requested(registration):
+    need_times = strict and bool(deskew_requested(registration)) and (stateful or getattr(registration, "accepts_point_times", False))
+    if strict and not stateful and deskew_requested(registration) and not getattr(registration, "accepts_point_times", False):
         raise ConfigError(f"deskew requested, but {name} runs scan-to-scan through align(), which takes no per-point times", source=name)
 
     bar = _progress_bar(n, f"{name} on {title}") if progress else None
@@ -418,6 +423,7 @@ def run(
             else:
                 first_scan = _run_stateless(
                     stream, registration, worker, indices, odometry_poses, poses, checker, strict, name, dataset_name, bar, validated,
+                    require_times=functools.partial(require_point_times, sequence=sequence, dataset_name=dataset_name) if need_times else None,
                     read_s=read_s, register_s=register_s, n_points=n_points, converged=converged, measured=measured, fallback=fallback,
                     iterations=iterations, rmse_m=rmse_m, n_corr=n_corr, degenerate=degenerate, min_eigenvalue=min_eigenvalue,
                     relative_cov=relative_cov if want_covariance else None, reasons=reasons, widened=widened,

@@ -233,6 +233,11 @@ class GroundFilteredICP(VanillaICP):
         self._fractions: tuple[np.ndarray | None, np.ndarray | None] = (None, None)
         self._told_2d = False
 
+    @property
+    def deskew_instant(self) -> str | None:
+        """The instant of the sweep deskewed poses refer to: both clouds are moved to their sweep END."""
+        return "end" if self.config.deskew else None
+
     def align(
         self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray | None = None, *,
         source_times_s: np.ndarray | None = None, target_times_s: np.ndarray | None = None,

@@ -135,6 +135,15 @@ class PipelineRegistration(Registration):
         super().__init__(config, **params)
         self.reset()
 
+    @property
+    def deskew_instant(self) -> str | None:
+        """The instant of the sweep deskewed poses refer to: the deskew component's ``reference`` (None: it does not
+        deskew)."""
+        motion = self._components["deskew"]
+        if not getattr(getattr(motion, "config", None), "deskew", False):
+            return None
+        return {"start": "start", "middle": "mid", "end": "end"}.get(str(motion.reference))
+
     def describe(self) -> dict[str, Any]:
         """Every component with its resolved parameters."""
         c = self._components
