@@ -407,7 +407,14 @@ class KittiOdometry:
     @cached_property
     def _simulated_instant(self) -> str | None:
         """The sweep instant of poses.txt in a folder written by lidarkit's simulator (sim.yaml), else None (unknown)."""
-        if not self.simulated or self.poses_path != self.sequence_dir / "poses.txt":
+        if self.poses_path != self.sequence_dir / "poses.txt":
+            return None
+        return self._simulator_pose_instant
+
+    @cached_property
+    def _simulator_pose_instant(self) -> str | None:
+        """``pose_instant`` of the simulator's ``sim.yaml`` (its poses.txt and times.txt refer to it), else None."""
+        if not self.simulated:
             return None
         import yaml
 
@@ -458,6 +465,8 @@ class KittiOdometry:
         frame = int(self.scan_frames[index])
         ts = None if self._times_all is None else float(self._times_all[frame])
         scan = read_kitti_bin(self.scan_paths[index], frame=frame, timestamp_s=ts, drop_nonfinite=self.drop_nonfinite)
+        if ts is not None and self._simulator_pose_instant is not None:  # the simulator stamps sweeps at its pose instant
+            scan = dataclasses.replace(scan, stamp_instant=self._simulator_pose_instant)
         if self._correct:
             scan = dataclasses.replace(scan, points_xyz=correct_vertical_angle(scan.points_xyz))
         if self.point_times_dir is None:
