@@ -221,12 +221,28 @@ def test_cli_bad_study_and_kidnap_options(capsys):
         (["--kidnap-at", "5000"], "kidnap step"),
         (["--kidnap-offset", "1,2"], "--kidnap-offset"),
         (["--protocol", "paper"], "unknown protocol"),
+        # an option the protocol sets otherwise, and simulation options with the recorded readings, are refused
+        (["--protocol", "report", "--estimator", "mean"], "--estimator mean conflicts with --protocol report, which sets"),
+        (["--recorded", "--kidnap-at", "100"], "--kidnap-at applies to the simulated readings, not to --recorded"),
+        (["--recorded", "--visible", "all"], "--visible applies to the simulated readings"),
     ):
         with pytest.raises(SystemExit) as exc:
             main(["pf", str(data), *args])
         assert exc.value.code == 1, args
         err = capsys.readouterr().err
         assert "error:" in err and pattern in err and "Traceback" not in err, (args, err)
+
+
+def test_a_seed_that_cannot_reproduce_a_run_is_refused(stachniss):
+    """None would draw fresh entropy (two runs differ and the recorded seed says None); -1, 1.5 and "a" are not seeds."""
+    from lidarkit.pf.protocol import run_protocol, run_recorded
+
+    for seed in (None, -1, 1.5, "a", True):
+        with pytest.raises(ConfigError, match="seed must be an integer >= 0"):
+            run_protocol(stachniss, n_particles=10, seed=seed)
+    with pytest.raises(ConfigError, match="seed must be an integer >= 0"):
+        run_recorded(stachniss, 10, -1)
+    assert run_protocol(stachniss, n_particles=10, seed=np.int64(3)).settings["seed"] == 3
 
 
 def test_kld_relocalization_spreads_the_maximum_count(stachniss):

@@ -52,6 +52,7 @@ def _counts(text: str) -> list[int]:
 
 @app.command("pf")
 def pf_command(
+    ctx: typer.Context,
     data_dir: Path = typer.Argument(..., help="Folder with world.dat and sensor_data.dat (Freiburg landmark data)."),
     particles: str = typer.Option(str(_D.n_particles), "--particles", "-n", help="Number of particles N, or a list '50,100,1000' (a study)."),
     seeds: int = typer.Option(1, "--seeds", help="Number of seeds (seed, seed+1, ...); > 1 or several N prints a mean ± std table."),
@@ -117,6 +118,8 @@ def pf_command(
         kld_z=kld_z, kld_bin_m=bin_m, kld_bin_rad=math.radians(bin_deg) if bin_deg > 0 else bin_deg, kld_min_n=kld_min, kld_max_n=kld_max,
         kld_unconverged_n=kld_unconverged, innovation_gate=innovation_gate,
     )
+    _refuse_protocol_clashes(ctx, protocol, dict(likelihood=likelihood, nearest_association=nearest_association,
+                                                 estimator=estimator, q_as=q_as))
     cfg = protocol_config(cfg, protocol)
     dx, dy, dth = _floats(kidnap_offset, 3, "--kidnap-offset")
     scenario = dict(visible=visible, kidnap_at_step=kidnap_at, kidnap_offset=(dx, dy, math.radians(dth)))
@@ -125,6 +128,10 @@ def pf_command(
     if recorded:
         if len(counts) > 1 or seeds > 1:
             raise ConfigError("--recorded runs one filter: give one --particles value and --seeds 1", source="--recorded")
+        simulated_only = [f"--{name.replace('_', '-')}" for name in ("visible", "kidnap_at", "kidnap_offset")
+                          if _given(ctx, name)]
+        if simulated_only:
+            raise ConfigError(f"{', '.join(simulated_only)} applies to the simulated readings, not to --recorded", source="--recorded")
         _recorded(data, cfg, seed, fit_q, out, _steps(snapshots), gif)
         return
     if len(counts) > 1 or seeds > 1:
@@ -144,6 +151,25 @@ def pf_command(
     if out is not None:
         _write(result, out, snap_steps=_steps(snapshots), gif=gif)
         stderr().print(f"results written to {out}")
+
+
+def _given(ctx: typer.Context, name: str) -> bool:
+    """Whether option ``name`` was given on the command line (not left at its default)."""
+    source = ctx.get_parameter_source(name)
+    return source is not None and source.name == "COMMANDLINE"
+
+
+def _refuse_protocol_clashes(ctx: typer.Context, protocol: str, given: dict[str, str]) -> None:
+    """An option given on the command line that the protocol sets otherwise is a ConfigError (the protocol used to
+    override it without a word)."""
+    from lidarkit.pf.study import PROTOCOLS
+
+    clashes = [f"--{name.replace('_', '-')} {value}" for name, value in given.items()
+               if _given(ctx, name)
+               and PROTOCOLS.get(protocol, {}).get(name, value) != value]
+    if clashes:
+        sets = ", ".join(f"{k.replace('_', '-')} {v}" for k, v in PROTOCOLS[protocol].items())
+        raise ConfigError(f"{', '.join(clashes)} conflicts with --protocol {protocol}, which sets {sets}", source="--protocol")
 
 
 def _recorded(data, cfg: PFConfig, seed: int, fit_q: bool, out: Path | None, snap_steps: tuple[int, ...], gif: bool) -> None:

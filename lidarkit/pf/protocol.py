@@ -322,6 +322,13 @@ def _filter_outputs(out: dict, pf) -> dict:
     return {**{key: out[key] for key in keys}, "n_weight_resets": pf.n_weight_resets}
 
 
+def checked_seed(seed: Any) -> int:
+    """``seed`` as the integer >= 0 a reproducible run needs (None would draw fresh entropy: refused)."""
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ConfigError(f"seed must be an integer >= 0 (the same seed gives the same run), got {seed!r}", source="seed")
+    return int(seed)
+
+
 def run_protocol(
     data,
     n_particles: int | None = None,
@@ -353,6 +360,7 @@ def run_protocol(
     """
     overrides = {k: v for k, v in dict(likelihood=likelihood, estimator=estimator, resampler=resampler, q_as=q_as).items() if v is not None}
     cfg = _resolve_config(config, n_particles, {**overrides, **config_overrides})
+    seed = checked_seed(seed)
     data_seq, filter_seq = np.random.SeedSequence(seed).spawn(2)
     q_cov = resolve_q(cfg.q, cfg.q_as)
     sim = simulate(data, np.random.default_rng(data_seq), q_cov, visible=visible, kidnap_at_step=kidnap_at_step, kidnap_offset=kidnap_offset)
@@ -423,6 +431,7 @@ def run_recorded(
     if len(data.meas_range_m) < 2:
         raise DataError(f"{len(data.meas_range_m)} SENSOR readings: the recorded mode needs at least 2 to judge Q by",
                         source=str(getattr(data, "sensor_path", None) or getattr(data, "root", "recorded data")))
+    seed = checked_seed(seed)
     cfg = _resolve_config(config, n_particles, config_overrides)
     pf = make_filter(data.landmarks.positions_xy, cfg, np.random.default_rng(seed))
     odo = np.asarray(data.odometry, dtype=np.float64)
