@@ -129,6 +129,12 @@ def test_vo_cli_errors_are_one_line(tmp_path, capsys):
     code, _, err = _run(["vo", str(sample_path("kitti_vo", "06", "image_0")), "--kind", "images", "--scale", "gt"],
                         capsys)
     assert code == 1 and "needs a ground-truth" in err
+    # options checked before anything runs, whether or not this input would use them
+    seq = str(sample_path("kitti_vo", "06"))
+    for args, message in ((["--gif"], "--gif: --gif needs --out DIR"), (["--poses-format", "foo"], "--poses-format: unknown format 'foo'"),
+                          (["--focal-factor", "0"], "--focal-factor: must be a finite number > 0, got 0.0")):
+        code, _, err = _run(["vo", seq, "--max-frames", "3", *args], capsys)
+        assert code == 1 and message in err, args
 
 
 def test_image_folder_checks_counts(tmp_path):

@@ -3,6 +3,7 @@ simulator (``simcam:street?...``)."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Optional
 
@@ -66,6 +67,12 @@ def vo_command(
         raise ConfigError(f"must be >= 0, got {seed}", source="--seed")
     if max_frames is not None and max_frames < 1:
         raise ConfigError(f"must be >= 1, got {max_frames}", source="--max-frames")
+    if gif and out is None:
+        raise ConfigError("--gif needs --out DIR", source="--gif")
+    if poses_format not in ("kitti", "tum"):
+        raise ConfigError(f"unknown format {poses_format!r}; known: kitti, tum", source="--poses-format")
+    if not (math.isfinite(focal_factor) and focal_factor > 0):
+        raise ConfigError(f"must be a finite number > 0, got {focal_factor}", source="--focal-factor")
     changes = {
         "features.detector": detector, "matching.method": matcher,
         "geometry.estimators": tuple(estimator) if estimator else None, "preprocess.method": preprocess,
@@ -122,7 +129,9 @@ def vo_command(
         table.add_row(f"APE {variant} ({m['align']}) [m]", f"{m['ape_rmse_m']:.4f}")
         table.add_row(f"RPE {variant} 1 frame [m / deg]",
                       f"{m['rpe_trans_rmse_m']:.4f} / {m['rpe_rot_rmse_deg']:.4f}")
-        table.add_row(f"final error {variant} [m]", f"{m['final_error_m']:.3f}")
+        # (gt scale: the raw distance of the last positions, both trajectories starting together; else after alignment)
+        final_align = "unaligned" if cfg.scale.mode == "gt" else f"{m['align']}-aligned"
+        table.add_row(f"final error {variant} ({final_align}) [m]", f"{m['final_error_m']:.3f}")
     console.print(table)
     for d in result.rejected[:_LISTED_REJECTIONS]:
         console.print(f"frame {d.frame} rejected: {d.reason}", soft_wrap=True)
