@@ -96,6 +96,12 @@ def test_cli_bad_files_are_one_line_errors(tmp_path, capsys, copy_of):
     assert code == 1 and "unknown trajectory format 'g2o'" in err
     code, _, err = run_cli(["eval", str(gt), str(gt), "--delta-unit", "parsecs"], capsys)
     assert code == 1 and "unknown delta unit 'parsecs'" in err
+    # misused options: one line and exit code 1 as every other error (not a usage box and exit code 2)
+    tum = shared_path("evo_testdata", "freiburg1_xyz-groundtruth.txt")
+    code, _, err = run_cli(["eval", str(tum), str(tum), "--format", "tum", "--ref-times", str(gt)], capsys)
+    assert code == 1 and err.strip() == "error: --ref-times/--est-times: times files apply to KITTI-format trajectories only"
+    code, _, err = run_cli(["eval", str(gt)], capsys)
+    assert code == 1 and "missing EST" in err and len(err.strip().splitlines()) == 1
 
 
 def test_sample_accessor(tmp_path):

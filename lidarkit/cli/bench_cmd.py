@@ -11,6 +11,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from lidarkit.cli.app import app, stderr, stdout
+from lidarkit.errors import ConfigError
 
 EXECUTOR_HELP = "serial | process (local process pool sized to the machine) | dask (--address, or a local Dask cluster)"
 
@@ -127,14 +128,14 @@ def bench(
         from lidarkit.bench.kitti import kitti_suite
 
         if data is None:
-            raise typer.BadParameter("`lidarkit bench kitti` needs --data /path/to/kitti/dataset", param_hint="--data")
+            raise ConfigError("`lidarkit bench kitti` needs --data /path/to/kitti/dataset", source="--data")
         out = out or Path("results") / "kitti"
         check_target(out, "folder")
         split = (lambda text: [x.strip() for x in text.split(",") if x.strip()] if text else None)
         suite = kitti_suite(data, out, methods=split(methods), sequences=split(sequences))
     else:
         if data is not None or methods is not None or sequences is not None:
-            raise typer.BadParameter("--data/--methods/--sequences apply to `lidarkit bench kitti` only", param_hint="--data")
+            raise ConfigError("--data/--methods/--sequences apply to `lidarkit bench kitti` only", source="--data")
         suite = load_suite(suite_file, max_jobs=max_jobs)
     out = out or Path("results") / suite_file.stem
     check_target(out, "folder")

@@ -8,6 +8,7 @@ from typing import Optional
 import typer
 
 from lidarkit.cli.app import app, stdout
+from lidarkit.errors import ConfigError
 from lidarkit.eval.ape_rpe import ALIGNMENTS, DELTA_UNITS
 from lidarkit.eval.evaluate import EvaluationSettings
 from lidarkit.eval.relations import DEFAULT_MAX_TIME_DIFF_S
@@ -67,17 +68,17 @@ def eval_command(
         kind = kind or fmt
         kwargs = {"timestamps_s": times} if times is not None and kind == "kitti" else {}
         if times is not None and kind != "kitti":
-            raise typer.BadParameter("times files apply to KITTI-format trajectories only")
+            raise ConfigError("times files apply to KITTI-format trajectories only", source="--ref-times/--est-times")
         return Trajectory.read(path, kind, **kwargs)
 
     atomic.check_target(json_out, "file")
     if relations is not None:
         if est is not None:
-            raise typer.BadParameter("with --relations give one trajectory (EST) only")
+            raise ConfigError("with --relations give one trajectory (EST) only", source="--relations")
         _relations_report(load(ref, est_format, est_times), relations, relation_max_diff, json_out)
         return
     if est is None:
-        raise typer.BadParameter("missing EST (the estimated trajectory file)")
+        raise ConfigError("missing EST (the estimated trajectory file): lidarkit eval REF EST", source="EST")
     atomic.check_target(markdown, "file")
     atomic.check_target(plot, "figure")
     atomic.check_target(tables, "folder")
