@@ -160,6 +160,17 @@ BAD = {
         ConfigError,
         ["takes no options, got speed", "experiments[0].options, line 5"],
     ),
+    "bad_frames_option": (
+        """
+        experiments:
+          - task: odometry
+            dataset: {kind: sim_lidar, scene: street, n_frames: 4, n_beams: 16, n_azimuths: 360}
+            options: {frames: "0:abc"}
+            methods: [vanilla]
+        """,
+        ConfigError,
+        ["frames '0:abc': frame bounds must be integers", "experiments[0].options, line 5"],
+    ),
     "not_plain_json": (
         """
         experiments:

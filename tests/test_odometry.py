@@ -222,6 +222,15 @@ def test_frame_selection():
             parse_frames(bad, 10)
 
 
+def test_a_frame_slice_past_the_end_is_cut_with_a_warning(rng, caplog):
+    """'0:50' on 10 scans runs the 10 and says so (in the log and metrics.json), instead of silently."""
+    poses = _drive(10, step_m=1.0)
+    result = run(MemorySequence(poses, _room_points(rng, 50)), OracleICP(se3_inverse(poses[:-1]) @ poses[1:]), frames="0:50")
+    assert len(result.trajectory) == 10
+    assert "frames 0:50 end after the last frame (9): ran up to it" in result.metrics["warnings"]
+    assert "frames 0:50 end after the last frame" in caplog.text
+
+
 # ---- run folder ---------------------------------------------------------------------------------------------------
 def test_run_folder(tmp_path, rng):
     poses = _drive(130, step_m=1.0, yaw_rate_rad=0.01)  # 129 m: long enough for one devkit segment

@@ -47,8 +47,21 @@ def open_sequence(spec: str | os.PathLike | ScanSequence) -> ScanSequence:
     return lio.open_dataset(lio.detect_kind(path) or "folder", path)
 
 
+def frames_past_the_end(frames: FrameSelection, n_frames: int) -> str | None:
+    """What a slice ``frames`` asks for beyond the last of ``n_frames`` frames (it is cut there), or None."""
+    if isinstance(frames, str) and frames.count(":") in (1, 2):
+        try:
+            frames = slice(*(int(p) if p.strip() else None for p in frames.split(":")))
+        except ValueError:
+            return None
+    if isinstance(frames, slice) and frames.stop is not None and frames.stop > n_frames:
+        return f"frames {frames_repr(frames, np.arange(0))} end after the last frame ({n_frames - 1}): ran up to it"
+    return None
+
+
 def parse_frames(frames: FrameSelection, n_frames: int) -> np.ndarray:
-    """Dataset indices selected by ``frames``: None (all), a slice/range, an index list or ``"a:b[:step]"``."""
+    """Dataset indices selected by ``frames``: None (all), a slice/range, an index list or ``"a:b[:step]"``; a slice
+    reaching past the end is cut there (:func:`frames_past_the_end` says so)."""
     if frames is None:
         return np.arange(n_frames)
     if isinstance(frames, str):

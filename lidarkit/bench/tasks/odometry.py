@@ -113,6 +113,11 @@ class OdometryTask(Task):
 
     def validate_options(self, options: dict[str, Any]) -> None:
         options_model(OdometryOptions, options, "odometry")
+        if options.get("frames") is not None:  # its syntax, before anything runs (its range is the dataset's)
+            from lidarkit.odometry.inputs import parse_frames
+
+            frames = options["frames"]
+            parse_frames(frames, 1 + max((f for f in frames if isinstance(f, int)), default=0) if isinstance(frames, list) else 1)
 
     def validate_dataset(self, dataset: dict[str, Any], options: dict[str, Any]) -> None:
         check_reader_options(dataset)
