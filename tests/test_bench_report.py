@@ -229,3 +229,24 @@ def test_datasets_and_params_that_print_alike_are_separate_rows(tmp_path):
         write_result(tmp_path / "reused", make_record(job, job.key(), "1", outcome))
     rows = build_report(tmp_path / "reused", plots=False).tables[0].rows
     assert [row.dataset for row in rows] == ["synth(steps=10)", "synth(steps=20)"] and all(row.n_ok == 1 for row in rows)
+
+
+def test_a_method_that_failed_on_most_seeds_is_not_the_best_and_its_cells_say_so(tmp_path):
+    from lidarkit.bench.jobs import Job
+    from lidarkit.bench.report import pivot, summary_rows
+    from lidarkit.bench.results import make_record, write_result
+
+    def result(method, seed, ape):
+        job = Job("selftest", "e", "synth", {"kind": "synthetic"}, "random_walk", {"noise_m": method}, seed=seed)
+        outcome = ({"status": "ok", "metrics": {"ape_rmse_m": ape}, "error": None, "runtime_s": 0.1} if ape is not None else
+                   {"status": "failed", "metrics": {}, "error": {"type": "RuntimeError", "message": "lost"}, "runtime_s": 0.1})
+        write_result(tmp_path, make_record(job, job.key(), "1", outcome))
+
+    for seed in range(5):
+        result(0.1, seed, 0.1 if seed == 0 else None)  # fragile: one lucky seed, four failures
+        result(0.2, seed, 0.2 + 0.01 * seed)  # robust
+    report = build_report(tmp_path, plots=False)
+    _, rows = summary_rows(report)
+    assert rows[0][3] == "random_walk(noise_m=0.2)"
+    _, cells = pivot(report.tables[0], "ape_rmse_m")
+    assert cells[0][1] == "0.1 (4 of 5 failed)"

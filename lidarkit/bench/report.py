@@ -335,7 +335,7 @@ def pivot(table: TaskTable, metric: str) -> tuple[list[str], list[list[str]]]:
     one_experiment = len({r.experiment for r in table.rows}) == 1  # no prefix repeated on every row
     for r in table.rows:
         label = r.method if one_experiment else f"{r.experiment}: {r.method}"
-        cells.setdefault(label, {})[r.dataset] = format_stat(r.stats[metric])
+        cells.setdefault(label, {})[r.dataset] = format_stat(r.stats[metric]) + _failed_note(r)
     header = ["method"] + datasets
     return header, [[label] + [row.get(d, "") for d in datasets] for label, row in cells.items()]
 
@@ -469,10 +469,18 @@ def summary_rows(report: Report) -> tuple[list[str], list[list[str]]]:
             candidates = [r for r in table.rows if r.dataset == dataset and r.stats[metric.name][2] > 0]
             if not candidates:
                 continue
-            best = (max if better_higher else min)(candidates, key=lambda r: r.stats[metric.name][0])
-            rows.append([table.task, dataset, metric.label, _short_label(best, table), format_stat(best.stats[metric.name]),
+            # a method that failed on some seeds is not the best over one lucky seed: complete rows come first
+            sign = -1.0 if better_higher else 1.0
+            best = min(candidates, key=lambda r: (r.n_failed > 0, sign * r.stats[metric.name][0]))
+            rows.append([table.task, dataset, metric.label, _short_label(best, table),
+                         format_stat(best.stats[metric.name]) + _failed_note(best),
                          str(len({r.method for r in table.rows if r.dataset == dataset}))])
     return header, rows
+
+
+def _failed_note(row: Row) -> str:
+    """`` (3 of 5 failed)`` for a row some of whose seeds failed (its numbers are over the others), else ''."""
+    return f" ({row.n_failed} of {row.n_ok + row.n_failed} failed)" if row.n_failed else ""
 
 
 def _better_higher(task: str, metric: str) -> bool:
