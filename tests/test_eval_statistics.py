@@ -139,6 +139,12 @@ def test_compare_tells_kiss_from_vanilla_and_kiss_from_itself_over_10_simulated_
         compare(again, tmp_path / "other")
     with pytest.raises(ConfigError, match="choose one of"):
         compare(both, again)
+    # a folder over 3 of the 10 seeds: the 3 are paired, and the comparison says 7 were left out
+    few = tmp_path / "few.yaml"
+    few.write_text(textwrap.dedent(SUITE.format(methods="[kiss]")).replace("seeds: 10", "seeds: [0, 1, 2]"))
+    run_suite(load_suite(few), tmp_path / "few", executor="serial")
+    partial = compare(again, tmp_path / "few", metric="ape_rmse_m")
+    assert partial.n_pairs == 3 and partial.note == "7 (dataset, seed) units only in A and 0 only in B are left out: 3 paired"
 
 
 def test_compare_run_folders_per_frame_and_bad_input(tmp_path, capsys):

@@ -17,7 +17,7 @@ def compare_command(
     run_b: Path = typer.Argument(..., help="The run to compare with (same kind and same data as RUN_A)."),
     metric: Optional[str] = typer.Option(
         None, help="Run folders: segment_translation_pct | segment_rotation_deg_per_100m | rpe_translation_m | "
-        "rpe_rotation_deg; bench folders: a job metric (default: drift_translation_pct, else ape_rmse_m)."),
+        "rpe_rotation_deg; bench folders: a job metric (default: the first of drift_translation_pct, mse_m2, ape_rmse_m, translation_error_m)."),
     method_a: Optional[str] = typer.Option(None, "--method-a", help="Method label in RUN_A when it holds several."),
     method_b: Optional[str] = typer.Option(None, "--method-b", help="Method label in RUN_B when it holds several."),
     alpha: float = typer.Option(DEFAULT_ALPHA, help="Significance level of the Wilcoxon signed-rank test."),
@@ -31,12 +31,8 @@ def compare_command(
     """Pair RUN_A and RUN_B on the same units (KITTI segments, frames or seeds) and test the difference (Wilcoxon)."""
     from lidarkit.eval.compare import compare
 
-    if noise_from is not None:
-        from lidarkit.bench.baseline import measured_noise
-
-        noise = max(noise, measured_noise(noise_from, metric))
     result = compare(run_a, run_b, metric=metric, method_a=method_a, method_b=method_b, alpha=alpha, noise=noise,
-                     seed=seed)
+                     noise_from=noise_from, seed=seed)
     console = stdout()
     console.print(f"A: {result.name_a}   B: {result.name_b}   metric: {result.metric} ({result.n_pairs} paired "
                   f"{result.pairing}s, {result.n_ties} ties)", soft_wrap=True)

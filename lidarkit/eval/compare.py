@@ -23,7 +23,9 @@ from lidarkit.trajectory import Trajectory
 #: metrics of bench results where higher is better (everything else: lower is better)
 HIGHER_IS_BETTER = frozenset({"hz", "converged_fraction"})
 #: the default bench metric, first present wins
-DEFAULT_BENCH_METRICS = ("drift_translation_pct", "ape_rmse_m", "translation_error_m", "mse", "ape_translation_rmse_m")
+#: the first of these a bench folder's jobs have is compared by default (KITTI drift, the particle filter's MSE, APE, an
+#: ICP pair's translation error)
+DEFAULT_BENCH_METRICS = ("drift_translation_pct", "mse_m2", "ape_rmse_m", "translation_error_m")
 RUN_METRICS = ("segment_translation_pct", "segment_rotation_deg_per_100m", "rpe_translation_m", "rpe_rotation_deg")
 
 
@@ -167,9 +169,12 @@ def compare(
     method_b: str | None = None,
     alpha: float = DEFAULT_ALPHA,
     noise: float = 0.0,
+    noise_from: str | os.PathLike | None = None,
     seed: int = 0,
 ) -> PairedComparison:
     """Paired Wilcoxon comparison of run ``a`` against run ``b`` (``diff = a - b``).
+
+    ``noise_from``: a baseline folder whose band for the compared metric (the default one too) raises ``noise``.
 
     Odometry run folders pair per KITTI segment (``metric="segment_translation_pct"``, the default when the
     path allows 100 m segments) or per frame (``rpe_translation_m``, the default otherwise). Bench results
@@ -194,6 +199,7 @@ def compare(
             metric = "segment_translation_pct" if drift_segments_possible(side_a.ground_truth) else "rpe_translation_m"
         if metric not in RUN_METRICS:
             raise ConfigError(f"unknown run metric {metric!r}; choose one of: {', '.join(RUN_METRICS)}", source="metric")
+        noise = _with_measured_noise(noise, noise_from, metric)
         va, vb = run_units(side_a, metric), run_units(side_b, metric)
         pairing = "segment" if metric.startswith("segment_") else "frame"
         result = paired_test(va, vb, name_a=name_a, name_b=name_b, metric=metric, pairing=pairing,
@@ -220,8 +226,22 @@ def compare(
         raise EvaluationError(f"metric {metric!r} missing for {', '.join(missing[:5])}", source="compare")
     va = np.array([side_a.values[k][metric] for k in common], dtype=np.float64)
     vb = np.array([side_b.values[k][metric] for k in common], dtype=np.float64)
-    return paired_test(va, vb, name_a=name_a, name_b=name_b, metric=metric, pairing="seed",
-                       lower_is_better=metric not in HIGHER_IS_BETTER, alpha=alpha, noise=noise, seed=seed)
+    result = paired_test(va, vb, name_a=name_a, name_b=name_b, metric=metric, pairing="seed",
+                         lower_is_better=metric not in HIGHER_IS_BETTER, alpha=alpha,
+                         noise=_with_measured_noise(noise, noise_from, metric), seed=seed)
+    only_a, only_b = len(keys_a - keys_b), len(keys_b - keys_a)
+    if only_a or only_b:  # the pairs are those both have: say what was left out
+        result = dataclasses.replace(result, note=f"{only_a} (dataset, seed) units only in A and {only_b} only in B are "
+                                                  f"left out: {len(common)} paired")
+    return result
+
+
+def _with_measured_noise(noise: float, noise_from: str | os.PathLike | None, metric: str) -> float:
+    if noise_from is None:
+        return noise
+    from lidarkit.bench.baseline import measured_noise
+
+    return max(noise, measured_noise(noise_from, metric))
 
 
 def _load(side: Any, method: str | None) -> OdometryRun | BenchRuns:
