@@ -42,3 +42,22 @@ def test_bench_kitti_bad_root(tmp_path, capsys):
     with pytest.raises(SystemExit) as exc:
         main(["bench", "kitti", "--data", str(tmp_path), "--out", str(tmp_path / "o")])
     assert exc.value.code == 1 and "ground-truth poses" in capsys.readouterr().err
+
+
+def test_bench_kitti_names_what_it_cannot_run_and_a_dry_run_writes_nothing(tmp_path, capsys):
+    """A sequence asked for by name that the root lacks, and an unknown method, are errors naming them (not dropped,
+    not blamed on the generated suite file); a dry run and a refused run leave no folder behind."""
+    root = write_fake_kitti_root(tmp_path / "kitti", {"00": 8})
+
+    def bench(*args):
+        with pytest.raises(SystemExit) as exc:
+            main(["bench", "kitti", "--data", str(root), "--executor", "serial", *args])
+        return exc.value.code, capsys.readouterr()
+
+    code, io = bench("--sequences", "00,05", "--out", str(tmp_path / "a"))
+    assert code == 1 and "no velodyne/ scans with ground-truth poses for sequence(s) 05 (found: 00)" in io.err
+    code, io = bench("--methods", "nosuch", "--out", str(tmp_path / "b"))
+    assert code == 1 and "error: --methods: unknown method(s) nosuch; known:" in io.err
+    code, io = bench("--methods", "vanilla", "--out", str(tmp_path / "c"), "--dry-run")
+    assert code in (0, None) and "vanilla" in io.out
+    assert not any((tmp_path / name).exists() for name in ("a", "b", "c"))

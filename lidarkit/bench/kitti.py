@@ -8,6 +8,8 @@ is written beside the results (``OUT/kitti_suite.yaml``) so the run is resumable
 
 from __future__ import annotations
 
+import dataclasses
+import logging
 import os
 from collections.abc import Sequence
 from pathlib import Path
@@ -17,6 +19,8 @@ import yaml
 from lidarkit import atomic
 from lidarkit.bench.suite import Suite, load_suite
 from lidarkit.errors import DataError
+
+log = logging.getLogger(__name__)
 
 KITTI_SUITE = Path(__file__).resolve().parent / "suites" / "kitti.yaml"
 
@@ -41,25 +45,47 @@ def kitti_sequences(root: str | os.PathLike, wanted: Sequence[str]) -> list[str]
 
 def kitti_suite(
     root: str | os.PathLike,
-    out_dir: str | os.PathLike,
+    out_dir: str | os.PathLike | None,
     *,
     methods: Sequence[str] | None = None,
     sequences: Sequence[str] | None = None,
     suite_path: str | os.PathLike = KITTI_SUITE,
 ) -> Suite:
-    """The bundled KITTI suite over ``root``'s sequences, written to ``out_dir/kitti_suite.yaml`` and loaded."""
+    """The bundled KITTI suite over ``root``'s sequences, written to ``out_dir/kitti_suite.yaml`` and loaded
+    (``out_dir=None``: validated in a temporary folder, nothing written, e.g. for a dry run).
+
+    Sequences asked for by name that ``root`` lacks are a DataError; of the suite's default list, those missing are
+    left out with a warning. Unknown ``methods`` are a ConfigError naming the known ones."""
+    import tempfile
+
+    from lidarkit.errors import ConfigError
+    from lidarkit.registration import available_icp
+
     root = Path(root).expanduser().resolve()
     spec = yaml.safe_load(Path(suite_path).read_text(encoding="utf-8"))
     wanted = list(sequences) if sequences else [str(s) for s in spec.pop("sequences")]
     spec.pop("sequences", None)
     present = kitti_sequences(root, wanted)
+    missing = [seq for seq in wanted if seq not in present]
+    if missing and sequences:
+        raise DataError(f"no velodyne/ scans with ground-truth poses for sequence(s) {', '.join(missing)} "
+                        f"(found: {', '.join(present)})", source=root / "sequences")
+    if missing:
+        log.warning("%s: sequences %s have no velodyne/ scans with ground-truth poses: left out", root, ", ".join(missing))
+    unknown = [m for m in methods or () if m not in available_icp()]
+    if unknown:
+        raise ConfigError(f"unknown method(s) {', '.join(unknown)}; known: {', '.join(available_icp())}", source="--methods")
     experiment = spec["experiments"][0]
-    if methods:  # any registered variant; the suite loader rejects unknown names, listing the known ones
+    if methods:
         experiment["methods"] = list(methods)
     experiment["datasets"] = [{"kind": "kitti", "path": str(root / "sequences" / seq), "name": seq} for seq in present]
-    out = Path(out_dir)
-    path = atomic.write_text(out / "kitti_suite.yaml", yaml.safe_dump(spec, sort_keys=False))
-    return load_suite(path)
+    text = yaml.safe_dump(spec, sort_keys=False)
+    with tempfile.TemporaryDirectory() as scratch:  # validated before anything is written where the user looks
+        suite = load_suite(atomic.write_text(Path(scratch) / "kitti_suite.yaml", text))
+    if out_dir is not None:
+        path = atomic.write_text(Path(out_dir) / "kitti_suite.yaml", text)
+        suite = dataclasses.replace(suite, path=path)
+    return suite
 
 
 def paper_table(report) -> str:

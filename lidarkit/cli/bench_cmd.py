@@ -123,6 +123,9 @@ def bench(
 
     from lidarkit.atomic import check_target
 
+    from lidarkit.bench.executors import check_executor_args
+
+    check_executor_args(executor, workers, address)  # before anything, a dry run included
     kitti = str(suite_file) == "kitti" and not suite_file.exists()
     if kitti:
         from lidarkit.bench.kitti import kitti_suite
@@ -132,7 +135,7 @@ def bench(
         out = out or Path("results") / "kitti"
         check_target(out, "folder")
         split = (lambda text: [x.strip() for x in text.split(",") if x.strip()] if text else None)
-        suite = kitti_suite(data, out, methods=split(methods), sequences=split(sequences))
+        suite = kitti_suite(data, None if dry_run else out, methods=split(methods), sequences=split(sequences))
     else:
         if data is not None or methods is not None or sequences is not None:
             raise ConfigError("--data/--methods/--sequences apply to `lidarkit bench kitti` only", source="--data")
