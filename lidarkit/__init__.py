@@ -1,6 +1,6 @@
 """lidarkit: LiDAR registration, particle-filter localization and monocular VO, scored by one evaluation layer."""
 
-from lidarkit.errors import ConfigError, DataError, LidarKitError, RegistrationError
+from lidarkit.errors import ConfigError, DataError, EvaluationError, LidarKitError, OutputError, RegistrationError
 
 __version__ = "0.1.0"
 
@@ -13,4 +13,4 @@ def __getattr__(name: str):
         return Trajectory
     raise AttributeError(f"module 'lidarkit' has no attribute {name!r}")
 
-__all__ = ["ConfigError", "DataError", "LidarKitError", "RegistrationError", "Trajectory", "__version__"]
+__all__ = ["ConfigError", "DataError", "EvaluationError", "LidarKitError", "OutputError", "RegistrationError", "Trajectory", "__version__"]

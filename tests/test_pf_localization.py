@@ -302,3 +302,29 @@ def test_kld_with_augmented_mcl_counts_the_belief_not_the_injections(stachniss):
     k = run_protocol(stachniss, 1000, 1, kld=True, augmented=True, kidnap_at_step=150, visible="all", with_ape_rpe=False, warn_lost=False)
     assert k.n_particles[145:150].max() < 1000 and k.n_particles[152:160].min() >= 1000
     assert steps_to_recover(k.position_error_m(), 150) <= 40
+
+
+def test_cli_list_and_kld_options_are_checked(capsys):
+    data = shared_path("pf", "burgard_particle_filter")
+    for args, message in ((["-n", "20,,50"], "n_particles must be >= 1"), (["-n", "50,50"], "a particle count is listed twice"),
+                          (["--kld", "--kld-max", "10"], "error: pf config: kld_min_n 200 > kld_max_n 10"),
+                          (["--kld", "--kld-unconverged", "100000"], "kld_unconverged_n 100000 > kld_max_n 5000"),
+                          (["--snapshots", "-1"], "snapshot steps must be >= 0")):
+        with pytest.raises(SystemExit) as exc:
+            main(["pf", str(data), *args])
+        err = capsys.readouterr().err
+        assert exc.value.code == 1 and message in err and "{" not in err, (args, err)
+
+
+def test_resampling_and_step_access_refuse_what_they_cannot_use(stachniss):
+    from lidarkit.errors import DataError
+    from lidarkit.pf.resampling import available_resamplers, get_resampler
+
+    for name in available_resamplers():
+        for weights in (np.array([np.nan, 1.0]), np.array([-1.0, 2.0]), np.zeros(3)):
+            with pytest.raises(DataError, match="finite weights >= 0 that are not all zero"):
+                get_resampler(name)(weights, np.random.default_rng(0))
+    with pytest.raises(DataError, match=r"step 331 out of range: the data has steps 0..330"):
+        stachniss.readings(331)
+    with pytest.raises(DataError, match="step -1 out of range"):
+        stachniss.readings(-1)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import math
 from pathlib import Path
 
@@ -16,6 +17,8 @@ from lidarkit.pf.config import PFConfig
 
 _D = PFConfig()
 
+log = logging.getLogger(__name__)
+
 
 def _floats(text: str, n: int, option: str) -> tuple[float, ...]:
     try:
@@ -29,9 +32,12 @@ def _floats(text: str, n: int, option: str) -> tuple[float, ...]:
 
 def _steps(text: str) -> tuple[int, ...]:
     try:
-        return tuple(int(s) for s in text.split(",") if s.strip())
+        steps = tuple(int(s) for s in text.split(",") if s.strip())
     except ValueError:
         raise ConfigError(f"snapshot steps must be comma-separated integers, got {text!r}", source="--snapshots") from None
+    if any(s < 0 for s in steps):
+        raise ConfigError(f"snapshot steps must be >= 0, got {text!r}", source="--snapshots")
+    return steps
 
 
 MAX_PARTICLES = 10_000_000
@@ -41,9 +47,11 @@ MAX_SEEDS = 10_000
 def _counts(text: str) -> list[int]:
     """``--particles``: one count or a comma-separated list, each in 1..MAX_PARTICLES."""
     try:
-        values = [int(s) for s in text.split(",") if s.strip()]
+        values = [int(s) for s in text.split(",")]
     except ValueError:
         values = []
+    if len(set(values)) != len(values):
+        raise ConfigError(f"a particle count is listed twice: {text!r}", source="--particles")
     if not values or any(not 1 <= v <= MAX_PARTICLES for v in values):
         raise ConfigError(f"n_particles must be >= 1 and <= {MAX_PARTICLES} (one count or a comma-separated list), got {text!r}",
                           source="--particles")
@@ -301,6 +309,9 @@ def _write_files(result, out: Path, *, snap_steps: tuple[int, ...], gif: bool) -
         result.trajectory("ground_truth").to_tum(out / "ground_truth_tum.txt")
     plots.plot_trajectory(result, out / "trajectory.png")
     steps = [s for s in snap_steps if s in result.snapshots]
+    beyond = [s for s in snap_steps if s not in result.snapshots]
+    if beyond:
+        log.warning("--snapshots %s: past the last step (%d), left out of particles.png", ",".join(map(str, beyond)), result.n_steps)
     if steps:
         plots.plot_snapshots(result, out / "particles.png", steps)
     if result.n_particles is not None and (result.config.kld or result.config.augmented):

@@ -185,7 +185,9 @@ class LandmarkData:
         return int(self.meas_range_m.shape[0])
 
     def readings(self, step: int) -> slice:
-        """Slice of the flat reading arrays belonging to ``step``."""
+        """Slice of the flat reading arrays belonging to ``step`` (0 .. len - 1)."""
+        if not 0 <= step < len(self.step_offsets) - 1:
+            raise DataError(f"step {step} out of range: the data has steps 0..{len(self.step_offsets) - 2}", source=str(self.root))
         return slice(int(self.step_offsets[step]), int(self.step_offsets[step + 1]))
 
     def __repr__(self) -> str:

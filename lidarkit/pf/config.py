@@ -125,6 +125,8 @@ class PFConfig(BaseModel):
             raise ValueError(f"augmented MCL needs alpha_slow < alpha_fast, got {self.alpha_slow} and {self.alpha_fast}")
         if self.kld and self.kld_min_n > self.kld_max_n:
             raise ValueError(f"kld_min_n {self.kld_min_n} > kld_max_n {self.kld_max_n}")
+        if self.kld and self.kld_unconverged_n > self.kld_max_n:
+            raise ValueError(f"kld_unconverged_n {self.kld_unconverged_n} > kld_max_n {self.kld_max_n}")
         if (self.kld or self.augmented) and self.kernel == "kalman":
             raise ValueError("KLD-sampling and augmented MCL need point particles (kernel='point')")
         return self
@@ -164,11 +166,11 @@ class PFConfig(BaseModel):
             return cls(**values)
         except ValidationError as err:
             first = err.errors()[0]
-            field = ".".join(str(p) for p in first.get("loc", ())) or "config"
+            field = ".".join(str(p) for p in first.get("loc", ()))
             msg = str(first.get("msg", "invalid value")).removeprefix("Value error, ")
-            if "got" not in msg:
+            if field and "got" not in msg:  # (a rule across fields names its values itself: no dump of the config)
                 msg = f"{msg} (got {first.get('input')!r})"
-            raise ConfigError(msg, source=f"pf config {field}") from None
+            raise ConfigError(msg, source=f"pf config {field}" if field else "pf config") from None
 
     def replace(self, **changes) -> PFConfig:
         return PFConfig.make(**{**self.model_dump(), **changes})

@@ -10,7 +10,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from lidarkit.errors import ConfigError
+from lidarkit.errors import ConfigError, DataError
 
 Resampler = Callable[[np.ndarray, np.random.Generator, "int | None"], np.ndarray]
 
@@ -23,7 +23,17 @@ def effective_sample_size(weights: np.ndarray) -> float:
     return float(1.0 / np.add.reduce(weights * weights))
 
 
+def _check_weights(weights: np.ndarray) -> float:
+    """The weights' sum; DataError unless they are finite, >= 0 and not all zero (one reduction each)."""
+    total = float(np.sum(weights, dtype=np.float64))
+    if not (np.isfinite(total) and total > 0.0) or float(np.min(weights)) < 0.0:
+        raise DataError(f"resampling needs finite weights >= 0 that are not all zero (sum {total:g}, smallest "
+                        f"{float(np.min(weights)):g})", source="weights")
+    return total
+
+
 def _scaled_cdf(weights: np.ndarray, n: int) -> np.ndarray:
+    _check_weights(weights)
     cdf = np.cumsum(weights, dtype=np.float64)
     cdf *= n / cdf[-1]
     cdf[-1] = n  # exact, whatever the rounding
@@ -86,7 +96,7 @@ def residual(weights: np.ndarray, rng: np.random.Generator, n: int | None = None
     """floor(n w_i) deterministic copies, the remainder drawn multinomially from the residual weights."""
     weights = np.asarray(weights, dtype=np.float64)
     n = weights.shape[0] if n is None else n
-    scaled = weights * (n / weights.sum())
+    scaled = weights * (n / _check_weights(weights))
     counts = np.floor(scaled).astype(np.int64)
     remainder = n - int(counts.sum())
     if remainder > 0:

@@ -30,8 +30,10 @@ KISS_ORTHONORMAL_TOL = 1e-12
 def kiss_safe_pose(T: np.ndarray, name: str = "pose") -> np.ndarray:
     """A float64 4x4 pose kiss-icp accepts: re-orthonormalized unless already exact (then returned as is)."""
     T = np.asarray(T, dtype=np.float64)
-    if T.shape != (4, 4) or not np.isfinite(T).all():
-        raise DataError(f"expected a finite 4x4 pose, got shape {T.shape}", source=name)
+    if T.shape != (4, 4):
+        raise DataError(f"expected a 4x4 pose, got shape {T.shape}", source=name)
+    if not np.isfinite(T).all():
+        raise DataError(f"{int((~np.isfinite(T)).sum())} of its 16 entries are NaN or infinite", source=name)
     if is_rotation(T[:3, :3], tol=KISS_ORTHONORMAL_TOL) and np.array_equal(T[3], [0.0, 0.0, 0.0, 1.0]):
         return T
     return orthonormalize_se3(T)
