@@ -53,6 +53,19 @@ def test_odometry_without_assessment_gives_the_same_trajectory_and_no_covariance
     assert bare.config["method_config"]["assess"] is False
     with pytest.raises(ConfigError, match="pose_covariance needs each frame's covariance, which assess=False leaves out"):
         run(spec, "small_gicp", params={"assess": False}, pose_covariance=True, progress=False)
+    with pytest.raises(ConfigError, match="pose_covariance needs each frame's covariance, which assess=False leaves out"):
+        run(spec, "kiss", params={"assess": False}, pose_covariance=True, progress=False)  # stateful too
+
+
+@pytest.mark.parametrize("value", [float("inf"), float("nan")])
+def test_no_variant_takes_a_non_finite_setting(value):
+    """``voxel_size_m=inf`` passed ``gt=0``: every variant's config refuses NaN and infinity (no limit is None)."""
+    from lidarkit.registration import available_icp
+
+    for method in ("kiss", "vanilla", "open3d_point_to_plane"):
+        assert method in available_icp()
+        with pytest.raises(ConfigError, match="voxel_size_m: Input should be a finite number"):
+            get_icp(method, voxel_size_m=value)
 
 
 def test_cli_says_the_assessment_is_off(capsys):

@@ -335,7 +335,7 @@ def run(
     min_eigenvalue = np.full(n, np.nan)
     relative_cov = np.full((n, 6, 6), np.nan)
     reasons = [""] * n
-    assessed = stateful or bool(getattr(getattr(registration, "config", None), "assess", True))
+    assessed = bool(getattr(getattr(registration, "config", None), "assess", True))
     if pose_covariance and not assessed:
         raise ConfigError("pose_covariance needs each frame's covariance, which assess=False leaves out", source=name)
     want_covariance = (not stateful and assessed) if pose_covariance is None else bool(pose_covariance)

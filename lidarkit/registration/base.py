@@ -51,7 +51,8 @@ class RegistrationConfig(BaseModel):
     alignment (see :meth:`Registration.align`): below either, the result is reported ``converged=False``.
     """
 
-    model_config = ConfigDict(frozen=True, extra="forbid")
+    # NaN and infinity are refused in every field (``voxel_size_m=inf`` passed ``gt=0``); "no limit" is None
+    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
 
     min_fitness: float = Field(
         DEFAULT_MIN_FITNESS, ge=0, le=1, description="final fitness below this -> not converged (good pairs: > 0.8)"
