@@ -109,6 +109,22 @@ def test_sim_cli_writes_each_format(tmp_path):
     assert cli_exit_code(["sim", "lidar", "--out", str(tmp_path / "x"), "--format", "ply", "--no-progress"]) != 0
 
 
+def test_sim_cli_refuses_a_bag_name_the_readers_would_not_recognise_or_an_existing_bag(tmp_path, capsys):
+    from lidarkit.cli import main
+
+    def sim(out, fmt):
+        with pytest.raises(SystemExit) as exc:
+            main(["sim", "lidar", "--out", str(out), "--frames", "2", "--format", fmt, "--no-progress", "-p", "n_beams=8",
+                  "-p", "n_azimuths=90"])
+        return exc.value.code, capsys.readouterr().err
+
+    assert sim(tmp_path / "xdir", "rosbag1") == (1, "error: --out: a rosbag1 file is named *.bag, got 'xdir'\n")
+    assert sim(tmp_path / "x.txt", "mcap")[1].startswith("error: --out: a mcap file is named *.mcap")
+    assert sim(tmp_path / "m.mcap", "mcap")[0] in (0, None)
+    code, err = sim(tmp_path / "m.mcap", "mcap")
+    assert code == 1 and "m.mcap: exists already; bags are never overwritten" in err
+
+
 def test_unknown_topic_lists_the_topics_and_never_exits(exports):
     with pytest.raises(DataError, match=r"no topic '/velodyne_points'; topics present: /ground_truth \(nav_msgs/msg/Odometry\), /points"):
         open_dataset("rosbag", exports[("rosbag1", "sqlite3")], topic="/velodyne_points")

@@ -30,7 +30,7 @@ def sim_lidar(
 ) -> None:
     """Simulate a spinning LiDAR driving through a procedural scene; poses are T_world_lidar at the sweep end by default."""
     from lidarkit.cli.app import parse_params
-    from lidarkit.errors import ConfigError
+    from lidarkit.errors import ConfigError, OutputError
     from lidarkit.sim.bag_export import BAG_FORMATS, export_bag
     from lidarkit.sim.lidar import SimulatedLidarSequence, export_kitti, make_config
 
@@ -41,7 +41,12 @@ def sim_lidar(
 
     from lidarkit.atomic import check_target
 
-    check_target(out, "folder")
+    suffix = {"rosbag1": ".bag", "mcap": ".mcap"}.get(fmt)
+    if suffix is not None and out.suffix != suffix:  # what the readers (and their detection) recognise the file by
+        raise ConfigError(f"a {fmt} file is named *{suffix}, got {out.name!r}", source="--out")
+    if fmt != "kitti" and out.exists():
+        raise OutputError("exists already; bags are never overwritten", source=out)
+    check_target(out, "file" if suffix else "folder")
     params = parse_params(param)
     own = {"scene": "--scene", "n_frames": "--frames", "seed": "--seed"}
     for key in sorted(own.keys() & params.keys()):

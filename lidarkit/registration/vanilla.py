@@ -75,7 +75,8 @@ def point_to_point_icp(
         inlier = dist2 <= max_d2
         n = int(inlier.sum())
         if n < min_correspondences:
-            reason = f"only {n} correspondences within {max_correspondence_distance_m} m (need {min_correspondences})"
+            within = "in all" if max_correspondence_distance_m is None else f"within {max_correspondence_distance_m:g} m"
+            reason = f"only {n} correspondences {within} (need {min_correspondences})"
             converged = False
             break
         mse = float(dist2[inlier].mean())
