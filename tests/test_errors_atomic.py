@@ -45,6 +45,14 @@ def test_cli_prints_one_line_and_exits_1_on_lidarkit_error(tmp_path, capsys):
     assert exc.value.code == 1
     err = capsys.readouterr().err
     assert "error:" in err and "nope.txt" in err and "Traceback" not in err
+    # a library's message with line breaks (rosbags quoting a YAML parser) still prints as one line
+    bag = tmp_path / "bag"
+    bag.mkdir()
+    (bag / "metadata.yaml").write_text("rosbag2_bagfile_information:\n  version: [\n")
+    with pytest.raises(SystemExit) as exc:
+        main(["odometry", f"rosbag:{bag}", "--no-progress"])
+    err = capsys.readouterr().err
+    assert exc.value.code == 1 and len(err.strip().splitlines()) == 1 and "not a readable ROS bag" in err
 
 
 def test_cli_params_are_yaml_scalars_and_bad_ones_name_the_option():

@@ -41,7 +41,7 @@ def print_error(err: BaseException) -> None:
     from rich.text import Text
 
     line = Text("error:", style="bold red")
-    line.append(" " + str(err))
+    line.append(" " + " ".join(str(err).split()))  # one line, whatever a wrapped library put in its message
     stderr().print(line, soft_wrap=True)
 
 
