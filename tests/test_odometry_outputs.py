@@ -346,3 +346,12 @@ def test_frame_check_fitness_is_the_same_with_either_nearest_neighbour_tree(monk
     monkeypatch.setattr(frame_check, "_small_gicp", None)
     assert fitness() == fast
     assert fast[0] > fast[2]  # the check does tell a wrong motion
+
+
+def test_kiss_with_every_point_cropped_is_an_error_not_a_still_trajectory(exported):
+    """max_range_m below the sensor's minimum range: kiss-icp registers nothing and the estimate never moves (it
+    passed every check); the first such sweep is a RegistrationError naming the ranges."""
+    from lidarkit.errors import RegistrationError
+
+    with pytest.raises(RegistrationError, match=r"\(frame 0\): kiss: no point of the sweep lies within \[0, 0.5\] m of the sensor"):
+        run(exported, "kiss", params={"max_range_m": 0.5}, frames="0:3")

@@ -148,7 +148,11 @@ class KissRegistration(Registration):
                 times = np.array([])
         kiss.last_pose = kiss_safe_pose(kiss.last_pose, "last_pose")
         kiss.last_delta = kiss_safe_pose(kiss.last_delta if motion_guess is None else motion_guess, "last_delta")
-        kiss.register_frame(frame, times)
+        _, source = kiss.register_frame(frame, times)
+        if len(source) == 0 and kiss.local_map.empty():  # nothing registered yet and nothing to register with
+            c = self.config
+            raise RegistrationError(f"no point of the sweep lies within [{c.min_range_m:g}, {c.max_range_m:g}] m of the sensor "
+                                    "(min_range_m / max_range_m): there is nothing to register", source="kiss")
         return np.array(kiss.last_pose, dtype=np.float64)
 
     def _register(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray):
