@@ -250,3 +250,16 @@ def test_a_method_that_failed_on_most_seeds_is_not_the_best_and_its_cells_say_so
     assert rows[0][3] == "random_walk(noise_m=0.2)"
     _, cells = pivot(report.tables[0], "ape_rmse_m")
     assert cells[0][1] == "0.1 (4 of 5 failed)"
+
+
+def test_a_pipe_in_a_name_does_not_break_the_markdown_tables(tmp_path):
+    from lidarkit.bench.jobs import Job
+    from lidarkit.bench.results import make_record, write_result
+
+    for seed in (0, 1):
+        job = Job("selftest", "e", "a|b", {"kind": "synthetic"}, "random_walk", {}, seed=seed)
+        write_result(tmp_path, make_record(job, job.key(), "1", {"status": "ok", "metrics": {"ape_rmse_m": 1.0 + seed},
+                                                                 "error": None, "runtime_s": 0.1}))
+    md = build_report(tmp_path, plots=False).markdown_path.read_text()
+    named = [line for line in md.splitlines() if "a" in line and "b |" in line and line.startswith("| ")]
+    assert named and all("a\\|b" in line for line in named)  # escaped in every table (the pivot's header too)

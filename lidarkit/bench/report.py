@@ -27,6 +27,7 @@ from lidarkit import atomic
 from lidarkit.bench.jobs import Job, canonical_json
 from lidarkit.bench.results import dataset_labels, load_results
 from lidarkit.errors import DataError
+from lidarkit.eval.report import markdown_table
 from lidarkit.eval.statistics import summarize
 
 log = logging.getLogger(__name__)
@@ -352,19 +353,14 @@ def _markdown(report: Report, title: str) -> str:
            f"in `{report.out_dir}`. Cells: mean ± std over seeds (sample std).", ""]
     header, rows = summary_rows(report)
     if rows:
-        out += ["## Summary", "", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-        out += ["| " + " | ".join(c.replace("|", "\\|") for c in row) + " |" for row in rows] + [""]
+        out += ["## Summary", "", markdown_table(header, rows)]
     for table in report.tables:
         out += [f"## {table.task}", ""]
         for m in _pivot_metrics(table):
             header, rows = pivot(table, m.name)
-            out += [f"{m.label}, methods x datasets:", "", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-            out += ["| " + " | ".join(c.replace("|", "\\|") for c in row) + " |" for row in rows]
-            out.append("")
+            out += [f"{m.label}, methods x datasets:", "", markdown_table(header, rows)]
         header, rows = _table_rows(table)
-        out += ["All metrics:", "", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-        out += ["| " + " | ".join(c.replace("|", "\\|") for c in row) + " |" for row in rows]
-        out.append("")
+        out += ["All metrics:", "", markdown_table(header, rows)]
     pub = report.publication
     if pub is not None and pub.tables:
         out += ["## Publication tables", "", f"Also as CSV and LaTeX (booktabs) in `{out_dir_name(report)}/tables/`.", ""]
@@ -372,8 +368,7 @@ def _markdown(report: Report, title: str) -> str:
         out += [f"![{caption}](plots/{path.name})\n\n{caption}\n" for caption, path in pub.boxplots]
     if pub is not None and pub.comparisons:
         header, rows = comparison_rows(pub.comparisons)
-        out += ["## Paired comparisons with the reference", "", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-        out += ["| " + " | ".join(c.replace("|", "\\|") for c in row) + " |" for row in rows] + [""]
+        out += ["## Paired comparisons with the reference", "", markdown_table(header, rows)]
     if report.plots:
         out += ["## Plots", ""] + [f"![{p.title}](plots/{p.filename})" for p in report.plots] + [""]
     if report.skipped:

@@ -95,10 +95,11 @@ def summary_table(evaluations: Sequence[Evaluation], title: str = "Evaluation su
 
 
 def markdown_table(header: list[str], rows: list[list[str]]) -> str:
-    """GitHub-flavoured Markdown table."""
-    lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
-    lines += ["| " + " | ".join(row) + " |" for row in rows]
-    return "\n".join(lines) + "\n"
+    """GitHub-flavoured Markdown table; a ``|`` inside a cell (a dataset named ``a|b``) is escaped."""
+    def line(cells: list[str]) -> str:
+        return "| " + " | ".join(str(c).replace("|", "\\|") for c in cells) + " |"
+
+    return "\n".join([line(header), "|" + "|".join("---" for _ in header) + "|", *map(line, rows)]) + "\n"
 
 
 def evaluation_markdown(evaluation: Evaluation) -> str:
