@@ -160,6 +160,17 @@ BAD = {
         ConfigError,
         ["takes no options, got speed", "experiments[0].options, line 5"],
     ),
+    "boolean_seed": (
+        """
+        seeds: [true, 2]
+        experiments:
+          - task: selftest
+            dataset: {kind: synthetic}
+            methods: [random_walk]
+        """,
+        ConfigError,
+        ["seeds[0]: Input should be a valid integer", "line 2"],
+    ),
     "bad_frames_option": (
         """
         experiments:

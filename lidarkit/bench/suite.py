@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, Field, StrictInt, ValidationError, field_validator
 
 from lidarkit.bench.datasets import SAMPLE_PREFIX, dataset_label, resolve_dataset, resolve_option_paths
 from lidarkit.bench.jobs import Job, distinct_labels
@@ -61,7 +61,7 @@ class Experiment(BaseModel):
     dataset: DatasetSpec | str | None = None
     datasets: list[DatasetSpec | str] | None = None
     methods: list[MethodSpec | str] = Field(min_length=1)
-    seeds: list[int] | int | None = None
+    seeds: list[StrictInt] | StrictInt | None = None
     options: dict[str, Any] = Field(default_factory=dict)
 
 
@@ -71,7 +71,7 @@ class SuiteModel(BaseModel):
     model_config = ConfigDict(extra="forbid")
     name: str = "suite"
     description: str = ""
-    seeds: list[int] | int = Field(default_factory=lambda: [0])
+    seeds: list[StrictInt] | StrictInt = Field(default_factory=lambda: [0])
     datasets: dict[str, DatasetSpec] = Field(default_factory=dict)
     experiments: list[Experiment] = Field(min_length=1)
 
