@@ -222,6 +222,17 @@ def test_frame_selection():
             parse_frames(bad, 10)
 
 
+def test_scans_far_apart_in_time_are_named_in_a_warning():
+    from conftest import shared_path
+
+    kitti = shared_path("kitti_odometry")
+    spec = f"kitti:{kitti / 'sequences' / '00'}?velodyne_dir={kitti / 'extra_frames' / '00' / 'velodyne'}"
+    result = run(spec, "open3d_point_to_plane", progress=False)  # KITTI frames 94, 95, 198, 199
+    assert any(w.startswith("1 gap(s) in time between consecutive scans, the largest 10.7 s between frames 95 and 198")
+               for w in result.metrics["warnings"])
+    assert not any("gap" in w for w in run(f"kitti:{kitti / 'sequences' / '00'}", "open3d_point_to_plane", progress=False).metrics["warnings"])
+
+
 def test_a_frame_slice_past_the_end_is_cut_with_a_warning(rng, caplog):
     """'0:50' on 10 scans runs the 10 and says so (in the log and metrics.json), instead of silently."""
     poses = _drive(10, step_m=1.0)

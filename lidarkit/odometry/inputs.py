@@ -59,6 +59,21 @@ def frames_past_the_end(frames: FrameSelection, n_frames: int) -> str | None:
     return None
 
 
+def time_gap_warning(times_s: np.ndarray | None, frames: np.ndarray) -> str | None:
+    """A warning when consecutive scans of a run lie far apart in time (more than 3x the median interval: scans
+    missing from a recording, a folder of non-consecutive scans), or None. ``frames``: their dataset indices."""
+    if times_s is None or len(times_s) < 3:
+        return None
+    dt = np.diff(np.asarray(times_s, dtype=np.float64))
+    median = float(np.median(dt))
+    gaps = np.flatnonzero(dt > 3.0 * median) if median > 0 else np.zeros(0, dtype=np.int64)
+    if not gaps.size:
+        return None
+    k = int(gaps[np.argmax(dt[gaps])])
+    return (f"{gaps.size} gap(s) in time between consecutive scans, the largest {dt[k]:.3g} s between frames {int(frames[k])} "
+            f"and {int(frames[k + 1])} (median interval {median:.3g} s): odometry takes the motion between consecutive scans as small")
+
+
 def parse_frames(frames: FrameSelection, n_frames: int) -> np.ndarray:
     """Dataset indices selected by ``frames``: None (all), a slice/range, an index list or ``"a:b[:step]"``; a slice
     reaching past the end is cut there (:func:`frames_past_the_end` says so)."""

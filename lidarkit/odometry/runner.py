@@ -17,7 +17,7 @@ from lidarkit.geometry import as_points, orthonormalize_se3, validated_points
 from lidarkit.io.base import Scan, ScanSequence
 from lidarkit.odometry.covariance import propagate
 from lidarkit.odometry.frame_check import FrameChecker, FrameCheckConfig
-from lidarkit.odometry.inputs import FrameSelection, frames_past_the_end, frames_repr, open_sequence, parse_frames
+from lidarkit.odometry.inputs import FrameSelection, frames_past_the_end, frames_repr, open_sequence, parse_frames, time_gap_warning
 from lidarkit.odometry.instants import deskews, estimate_instant, like_with_like
 from lidarkit.odometry.metrics import odometry_metrics
 from lidarkit.odometry.prefetch import DEFAULT_DEPTH, prefetched
@@ -456,7 +456,9 @@ def run(
     past_the_end = frames_past_the_end(frames, n_total)
     effective, warnings = effective_settings(sequence, registration, name, stateful, checker.has_point_times, reference,
                                              stamp_instant=getattr(first_scan, "stamp_instant", None), n_flat_times=len(flat_times))
-    warnings = [past_the_end, *warnings] if past_the_end else warnings
+    numbers = getattr(sequence, "scan_frames", None)  # the recording's own frame numbers (KITTI's file names), if any
+    numbers = np.asarray(numbers)[indices] if numbers is not None and len(numbers) == n_total else indices
+    warnings = [w for w in (past_the_end, time_gap_warning(timestamps, numbers)) if w] + warnings
     for message in warnings:
         log.warning("%s: %s", title, message)
     covariances = (relative_cov, propagate(poses, relative_cov)) if want_covariance else None
