@@ -45,7 +45,7 @@ def main(argv: list[str] | None = None) -> None:
         print_error(err)
         code = 1
     except Interrupted as err:
-        stderr().print(f"interrupted by {err}: stopped; finished results are kept (files are complete or absent)",
+        stderr().print(f"interrupted by {err}: stopped; no file is left half-written (each is complete or absent)",
                        soft_wrap=True)
         code = err.exit_code
     except SystemExit as exc:
