@@ -122,7 +122,6 @@ def bench(
     from lidarkit.bench.suite import load_suite
 
     from lidarkit.atomic import check_target
-
     from lidarkit.bench.executors import check_executor_args
 
     check_executor_args(executor, workers, address)  # before anything, a dry run included
