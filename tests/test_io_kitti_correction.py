@@ -77,3 +77,28 @@ def test_kiss_kitti_kind_reads_what_the_corrected_kitti_reader_reads():
     assert theirs.read_scan(4).timestamp_s == ours.read_scan(4).timestamp_s
     # kiss-icp reads calib.txt in float32: its LiDAR-frame ground truth agrees to ~1e-6 m
     np.testing.assert_allclose(theirs.ground_truth.poses_se3, ours.ground_truth.poses_se3, rtol=0, atol=1e-5)
+
+
+def test_kiss_kitti_on_an_excerpt_pairs_each_scan_with_its_own_ground_truth(tmp_path):
+    """Scans 5-9 only: the ground truth is that of frames 5-9 (it was frames 0-4, beside the right time stamps)."""
+    import shutil
+
+    from lidarkit.io import open_dataset
+
+    root = shared_path("kitti_odometry")
+    copy = tmp_path / "kitti"
+    shutil.copytree(root, copy, ignore=shutil.ignore_patterns("extra_frames"))
+    for frame in range(5):
+        (copy / "sequences" / "00" / "velodyne" / f"{frame:06d}.bin").unlink()
+    theirs, ours = open_dataset("kiss_kitti", copy), open_dataset("kitti", copy)
+    assert len(theirs) == len(ours) == 5
+    np.testing.assert_allclose(theirs.ground_truth.poses_se3, ours.ground_truth.poses_se3, rtol=0, atol=1e-5)
+    np.testing.assert_array_equal(theirs.timestamps_s, ours.timestamps_s)
+    with (copy / "sequences" / "00" / "times.txt").open("a") as f:
+        f.write("garbage\n")
+    from lidarkit.errors import ConfigError, DataError
+
+    with pytest.raises(DataError, match=r"times.txt \(line 4542\)"):
+        open_dataset("kiss_kitti", copy).timestamps_s
+    with pytest.raises(ConfigError, match="sequence must be a number such as 00, got 'abc'"):
+        open_dataset("kiss_kitti", copy, sequence="abc")

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from lidarkit.errors import DataError
+from lidarkit.errors import ConfigError, DataError
 from lidarkit.io.base import Scan
 from lidarkit.io.rosbag import guarded_loader, require_modules
 from lidarkit.trajectory import Trajectory
@@ -130,25 +130,40 @@ class KissKittiScans(KissLoaderScans):
     ground_truth_frame = "LiDAR frame (Tr^-1 P Tr, kiss-icp's KITTI loader)"
 
     def __init__(self, path: str | os.PathLike, sequence: str | int = "00"):
-        if not (Path(path) / "sequences" / f"{int(sequence):02d}" / "velodyne").is_dir():
-            raise DataError(f"no sequences/{int(sequence):02d}/velodyne/ (kiss-icp's KITTI loader reads the odometry root)", source=path)
-        super().__init__(path, sequence=f"{int(sequence):02d}")
+        try:
+            number = int(sequence)
+        except (TypeError, ValueError):
+            raise ConfigError(f"sequence must be a number such as 00, got {sequence!r}", source="sequence") from None
+        if not (Path(path) / "sequences" / f"{number:02d}" / "velodyne").is_dir():
+            raise DataError(f"no sequences/{number:02d}/velodyne/ (kiss-icp's KITTI loader reads the odometry root)", source=path)
+        super().__init__(path, sequence=f"{number:02d}")
+
+    @property
+    def _frames(self) -> list[int]:
+        """The KITTI frame number of each scan present (its file name): an excerpt need not start at 0."""
+        return [int(Path(f).stem) for f in self.loader.scan_files]
 
     def _stamps(self) -> np.ndarray | None:
         """times.txt rows of the scans present (kiss-icp's loader returns the whole file)."""
+        from lidarkit.textfile import read_numeric_table
+
         path = self.path / "sequences" / f"{int(self.loader.sequence_id):02d}" / "times.txt"
         if not path.is_file():
             return None
-        times = np.loadtxt(path).ravel()
-        frames = [int(Path(f).stem) for f in self.loader.scan_files]
+        times = read_numeric_table(path, 1)[:, 0]  # (a bad row is a DataError naming the file and line)
+        frames = self._frames
         return times[frames] if frames and max(frames) < len(times) else None
 
     @property
     def ground_truth(self) -> Trajectory | None:
         if not hasattr(self.loader, "gt_poses"):
             return None
-        gt = np.asarray(self.loader.gt_poses, dtype=np.float64)[: len(self)]
-        return Trajectory(gt, None, name=f"{self.name}_gt", meta={"frame": self.ground_truth_frame, "pose_instant": None})
+        gt = np.asarray(self.loader.gt_poses, dtype=np.float64)
+        frames = self._frames
+        if frames and max(frames) >= len(gt):
+            raise DataError(f"{len(gt)} ground-truth poses, but the scans reach frame {max(frames)}", source=self.path)
+        # the rows of the scans present, by frame number (an excerpt from frame 5 on is not frames 0, 1, ...)
+        return Trajectory(gt[frames], None, name=f"{self.name}_gt", meta={"frame": self.ground_truth_frame, "pose_instant": None})
 
 
 class KissKittiRawScans(KissLoaderScans):
