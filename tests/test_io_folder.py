@@ -153,3 +153,33 @@ def test_missing_or_empty_folder_and_bad_options(tmp_path):
         ScanFolder(tmp_path, poses_format="g2o")
     with pytest.raises(ConfigError, match="unsupported scan suffix '.las'"):
         ScanFolder(tmp_path, suffixes=(".las",))
+
+
+def test_cut_or_garbled_files_are_refused_not_read_as_garbage(tmp_path, rng):
+    """A cut .ply (Open3D returned its full vertex count with leftover memory for the tail), an ascii .pcd row with a
+    word or a missing value (read as zeros), an .npz under an .npy name and an empty .npy: each a DataError."""
+    import open3d as o3d
+
+    from lidarkit.io.pointfile import read_point_file
+
+    xyz = rng.uniform(-20, 20, size=(2000, 3)).astype(np.float32)
+    for name, ascii_body in (("bin.ply", False), ("text.ply", True)):
+        path = tmp_path / name
+        assert o3d.t.io.write_point_cloud(str(path), o3d.t.geometry.PointCloud(o3d.core.Tensor(xyz)), write_ascii=ascii_body)
+        data = path.read_bytes()
+        path.write_bytes(data[: len(data) // 2])
+        with pytest.raises(DataError, match=rf"{name} \(frame 0\): truncated: the header declares 2000 vertices"):
+            read_point_file(path)
+    header = "VERSION 0.7\nFIELDS x y z intensity\nSIZE 4 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 1\nWIDTH 2\nHEIGHT 1\nPOINTS 2\nDATA ascii\n"
+    for body, message in (("1 2 3 0.5\n1 2 x 4\n", "ascii point 1 is not numbers: '1 2 x 4'"),
+                          ("1 2 3 0.5\n1 2 3\n", "ascii point 1 has 3 values, the header declares 4")):
+        (tmp_path / "a.pcd").write_text(header + body)
+        with pytest.raises(DataError, match=message):
+            read_point_file(tmp_path / "a.pcd")
+    with open(tmp_path / "z.npy", "wb") as fh:
+        np.savez(fh, a=np.zeros((5, 3)))
+    with pytest.raises(DataError, match=r"z.npy \(frame 0\): not an .npy array \(a NpzFile: an .npz archive\?\)"):
+        read_point_file(tmp_path / "z.npy")
+    (tmp_path / "e.npy").write_bytes(b"\x93NUMPY\x01\x00")
+    with pytest.raises(DataError, match=r"e.npy \(frame 0\): not a readable .npy array"):
+        read_point_file(tmp_path / "e.npy")

@@ -327,3 +327,23 @@ def test_unknown_dataset_kind_lists_known_kinds():
     with pytest.raises(ConfigError, match=r"unknown dataset kind 'kitty'; known: .*kitti, kitti_raw") as err:
         open_dataset("kitty", ".")
     assert all(kind in str(err.value) for kind in available_datasets())
+
+
+def test_per_point_times_files_integer_or_unreadable(tmp_path):
+    """Integer per-point times are nanoseconds (as drivers write them and as bags are read); an empty file, an .npz
+    archive or complex numbers under an .npy name are DataErrors naming the file and frame (EOFError and
+    AttributeError escaped before, the CLI printing only 'Aborted.')."""
+    from lidarkit.sim.lidar import SimulatedLidarSequence, export_kitti
+
+    sim = SimulatedLidarSequence(n_frames=2, n_beams=8, n_azimuths=90)
+    folder = export_kitti(sim, tmp_path / "seq")
+    times = np.load(folder / "point_times" / "000001.npy").astype(np.float64)
+    np.save(folder / "point_times" / "000001.npy", np.round(times * 1e9).astype(np.uint32))
+    np.testing.assert_allclose(KittiOdometry(folder).read_scan(1).point_times_s, times, rtol=0, atol=1e-9)
+    target = folder / "point_times" / "000001.npy"
+    for write, message in ((lambda: target.write_bytes(b""), "not a readable .npy array"),
+                           (lambda: np.savez(open(target, "wb"), a=times), "not an .npy array"),
+                           (lambda: np.save(target, times.astype(np.complex64)), "expected a 1-D numeric array")):
+        write()
+        with pytest.raises(DataError, match=rf"000001.npy \(frame 1\): {message}"):
+            KittiOdometry(folder).read_scan(1)

@@ -33,7 +33,7 @@ import numpy as np
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.geometry import se3_inverse
 from lidarkit.io.base import INSTANT_FRACTION, Scan
-from lidarkit.io.pointfile import read_kitti_bin
+from lidarkit.io.pointfile import load_npy, read_kitti_bin
 from lidarkit.textfile import is_number, read_lines, read_numeric_table
 from lidarkit.trajectory import Trajectory
 
@@ -479,13 +479,11 @@ class KittiOdometry:
     @staticmethod
     def _read_point_times(times_path: Path, scan_path: Path, scan: Scan, frame: int) -> np.ndarray:
         """Per-point times of ``scan`` from ``times_path``, with the points dropped as non-finite dropped too."""
-        try:
-            times = np.load(times_path, allow_pickle=False)
-        except (OSError, ValueError) as err:
-            raise DataError(f"not a readable .npy array ({err})", source=times_path, location=f"frame {frame}") from err
-        if times.ndim != 1 or not np.issubdtype(times.dtype, np.number):
+        times = load_npy(times_path, f"frame {frame}")
+        if times.ndim != 1 or not np.issubdtype(times.dtype, np.number) or np.issubdtype(times.dtype, np.complexfloating):
             raise DataError(f"expected a 1-D numeric array, got shape {times.shape} dtype {times.dtype}", source=times_path, location=f"frame {frame}")
-        times = times.astype(np.float64)
+        # integers are nanoseconds, as drivers write them (Ouster's uint32 't') and as the bag reader reads them
+        times = times * 1e-9 if np.issubdtype(times.dtype, np.integer) else times.astype(np.float64)
         n_points = len(scan.points_xyz)
         if len(times) != n_points:
             raw = np.fromfile(scan_path, dtype="<f4").reshape(-1, 4)

@@ -33,7 +33,22 @@ def _require_file(path: Path, frame: int | None) -> int:
     size = path.stat().st_size
     if size == 0:
         raise DataError("empty scan file (0 bytes)", source=path, location=where)
+    if not os.access(path, os.R_OK):
+        raise DataError("cannot read it (permission denied)", source=path, location=where)
     return size
+
+
+def load_npy(path: Path, location: str | None) -> np.ndarray:
+    """The array of an ``.npy`` file; DataError naming the file for anything unreadable: a cut or corrupt header, an
+    empty file, an ``.npz`` archive under an ``.npy`` name, a file that cannot be opened."""
+    try:
+        data = np.load(path, allow_pickle=False)
+    except Exception as err:  # noqa: BLE001 - a corrupt header raises ValueError, EOFError, SyntaxError, tokenize.TokenError, ...
+        raise DataError(f"not a readable .npy array ({type(err).__name__}: {err})", source=path, location=location) from None
+    if not isinstance(data, np.ndarray):  # np.load opens an .npz archive whatever the file's name
+        getattr(data, "close", lambda: None)()
+        raise DataError(f"not an .npy array (a {type(data).__name__}: an .npz archive?)", source=path, location=location)
+    return data
 
 
 def finite_points(
@@ -109,10 +124,7 @@ def read_npy_scan(
     """Read a ``.npy`` array of shape ``(N, 3)`` (x, y, z) or ``(N, 4)`` (x, y, z, intensity)."""
     path = Path(path)
     _require_file(path, frame)
-    try:
-        data = np.load(path, allow_pickle=False)
-    except Exception as err:  # noqa: BLE001 - a corrupt header raises ValueError, SyntaxError, tokenize.TokenError, ...
-        raise DataError(f"not a readable .npy array ({err})", source=path, location=f"frame {frame}") from err
+    data = load_npy(path, f"frame {frame}")
     if data.ndim != 2 or data.shape[1] not in (3, 4) or not np.issubdtype(data.dtype, np.number) \
             or np.issubdtype(data.dtype, np.complexfloating) or data.dtype == np.bool_:
         raise DataError(
@@ -138,6 +150,8 @@ def read_open3d_scan(
     _require_file(path, frame)
     if path.suffix.lower() == ".pcd":
         check_pcd_counts(path, frame)
+    elif path.suffix.lower() == ".ply":
+        check_ply_counts(path, frame)
     import open3d as o3d  # slow import: only when a pcd/ply is read
 
     try:
@@ -163,7 +177,11 @@ def check_pcd_counts(path: Path, frame: int | None = None) -> None:
     """Check a ``.pcd`` body against its header before Open3D reads it: Open3D fills a short body with zeros (or
     fails deep inside), so a header declaring more points than the body holds is a DataError here."""
     where = None if frame is None else f"frame {frame}"
-    with open(path, "rb") as fh:
+    try:
+        fh = open(path, "rb")
+    except OSError as err:
+        raise DataError(f"cannot read it ({err.strerror})", source=path, location=where) from None
+    with fh:
         header: dict[str, list[str]] = {}
         offset = 0
         for line_no in range(1, 64):
@@ -191,7 +209,16 @@ def check_pcd_counts(path: Path, frame: int | None = None) -> None:
     if n_points < 0 or len(counts) != len(sizes):
         raise DataError("malformed .pcd header (negative POINTS or SIZE/COUNT lengths differ)", source=path, location=where)
     if data == "ascii":
-        held = sum(1 for line in body.splitlines() if line.strip())
+        rows = [line.split() for line in body.decode("ascii", errors="replace").splitlines() if line.strip()]
+        held = len(rows)
+        width = sum(counts)
+        for k, row in enumerate(rows):  # Open3D reads a short row or a word in it as zeros
+            try:
+                [float(v) for v in row]
+            except ValueError:
+                raise DataError(f"ascii point {k} is not numbers: {' '.join(row)[:60]!r}", source=path, location=where) from None
+            if len(row) != width:
+                raise DataError(f"ascii point {k} has {len(row)} values, the header declares {width}", source=path, location=where)
     elif data == "binary":
         record = sum(s * c for s, c in zip(sizes, counts))
         held = len(body) // record if record else 0
@@ -203,6 +230,50 @@ def check_pcd_counts(path: Path, frame: int | None = None) -> None:
         return  # binary_compressed: Open3D checks the compressed sizes itself
     if held != n_points:
         raise DataError(f"the header declares {n_points} points but the ascii body holds {held}", source=path, location=where)
+
+
+_PLY_TYPE_BYTES = {"char": 1, "int8": 1, "uchar": 1, "uint8": 1, "short": 2, "int16": 2, "ushort": 2, "uint16": 2,
+                   "int": 4, "int32": 4, "uint": 4, "uint32": 4, "float": 4, "float32": 4, "double": 8, "float64": 8}
+
+
+def check_ply_counts(path: Path, frame: int | None = None) -> None:
+    """Check a ``.ply`` body against the vertex count of its header before Open3D reads it: Open3D returns a cut
+    file's full vertex count with whatever memory held for the missing tail, so a short body is a DataError here."""
+    where = None if frame is None else f"frame {frame}"
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(65536)
+    except OSError as err:
+        raise DataError(f"cannot read it ({err.strerror})", source=path, location=where) from None
+    end = head.find(b"end_header")
+    if not head.startswith(b"ply") or end < 0:
+        raise DataError("not a .ply file (no 'ply' ... 'end_header' header)", source=path, location=where)
+    body_start = head.find(b"\n", end) + 1
+    lines = head[:end].decode("ascii", errors="replace").splitlines()
+    fmt, elements = "", []  # (name, count, [property byte sizes, None for a list])
+    for line in lines:
+        words = line.split()
+        if words[:1] == ["format"] and len(words) > 1:
+            fmt = words[1]
+        elif words[:1] == ["element"] and len(words) == 3 and words[2].isdigit():
+            elements.append((words[1], int(words[2]), []))
+        elif words[:1] == ["property"] and elements:
+            elements[-1][2].append(None if words[1:2] == ["list"] else _PLY_TYPE_BYTES.get(words[1] if len(words) > 1 else ""))
+    if not elements or elements[0][0] != "vertex" or None in elements[0][2]:
+        return  # an unusual layout: left to Open3D
+    n_vertices, vertex_bytes = elements[0][1], sum(elements[0][2])
+    size = path.stat().st_size - body_start
+    if fmt.startswith("binary"):
+        if size < n_vertices * vertex_bytes:
+            raise DataError(f"truncated: the header declares {n_vertices} vertices ({n_vertices * vertex_bytes} bytes) but the body "
+                            f"holds {size} bytes", source=path, location=where)
+    elif fmt == "ascii":
+        with open(path, "rb") as fh:
+            fh.seek(body_start)
+            held = sum(1 for line in fh if line.strip())
+        if held < n_vertices:
+            raise DataError(f"truncated: the header declares {n_vertices} vertices but the ascii body holds {held} lines",
+                            source=path, location=where)
 
 
 def read_point_file(
@@ -224,6 +295,7 @@ def read_point_file(
 __all__ = [
     "POINT_FILE_SUFFIXES",
     "check_pcd_counts",
+    "check_ply_counts",
     "finite_points",
     "read_kitti_bin",
     "read_npy_scan",
