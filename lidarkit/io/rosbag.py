@@ -236,10 +236,14 @@ class _BagScans:
     def _recorded_ground_truth(self) -> tuple[np.ndarray, np.ndarray]:
         """Stamps (s) and poses ``(n, 4, 4)`` of every message on the ground-truth topic."""
         stamps, poses = [], []
-        for _, msg in self._messages(self.ground_truth_topic):
+        for k, (_, msg) in enumerate(self._messages(self.ground_truth_topic)):
             p, q = msg.pose.pose.position, msg.pose.pose.orientation
             stamps.append(stamp_seconds(msg.header.stamp))
-            poses.append(_pose_matrix([p.x, p.y, p.z], [q.x, q.y, q.z, q.w]))
+            xyz, quat = [p.x, p.y, p.z], [q.x, q.y, q.z, q.w]
+            if not np.isfinite(xyz + quat).all() or not np.linalg.norm(quat) > 1e-6:
+                raise DataError(f"pose {xyz} with orientation {quat}: not a finite position and unit quaternion",
+                                source=f"{self.path}{self.ground_truth_topic}", location=f"message {k}")
+            poses.append(_pose_matrix(xyz, quat))
         if not poses:
             raise DataError(f"ground-truth topic {self.ground_truth_topic} has no messages", source=self.path)
         return np.array(stamps), np.stack(poses)
