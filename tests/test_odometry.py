@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import yaml
 
-from conftest import cli_exit_code
+from conftest import cli_exit_code, shared_path
 
 from lidarkit.errors import ConfigError, DataError, EvaluationError, LidarKitError, RegistrationError
 from lidarkit.geometry import make_se3, se3_inverse, so3_exp
@@ -223,8 +223,6 @@ def test_frame_selection():
 
 
 def test_scans_far_apart_in_time_are_named_in_a_warning():
-    from conftest import shared_path
-
     kitti = shared_path("kitti_odometry")
     spec = f"kitti:{kitti / 'sequences' / '00'}?velodyne_dir={kitti / 'extra_frames' / '00' / 'velodyne'}"
     result = run(spec, "open3d_point_to_plane", progress=False)  # KITTI frames 94, 95, 198, 199
@@ -363,6 +361,18 @@ def test_open_sequence_specs(tmp_path):
         open_sequence(tmp_path / "missing")
     with pytest.raises(ConfigError):
         open_sequence(42)
+    # a kind with a typo, a kind that holds no scans, an option of the wrong type, a scan that is a broken link
+    with pytest.raises(ConfigError, match=r"kiti:.*: unknown dataset kind 'kiti'; known: sim, "):
+        open_sequence(f"kiti:{folder}")
+    with pytest.raises(ConfigError, match="a LandmarkData holds no LiDAR scans"):
+        open_sequence(f"landmarks:{shared_path('pf', 'burgard_particle_filter')}")
+    with pytest.raises(ConfigError, match="kitti dataset option drop_nonfinite: Input should be a valid boolean.*got 'flase'"):
+        open_sequence(f"kitti:{folder}?drop_nonfinite=flase")
+    (folder / "velodyne" / "000001.bin").unlink()
+    (folder / "velodyne" / "000001.bin").symlink_to(tmp_path / "nowhere.bin")
+    for spec in (folder, folder / "velodyne"):
+        with pytest.raises(DataError, match=r"000001.bin: a broken link \(to .*nowhere.bin\)"):
+            open_sequence(spec)
 
 
 _cli = cli_exit_code

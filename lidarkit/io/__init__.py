@@ -104,7 +104,33 @@ def open_dataset(kind: str, path: str | os.PathLike, **options: Any) -> Any:
             raise ConfigError(
                 f"{err}; valid options: {', '.join(valid) or 'none'}", source=f"{kind} dataset options"
             ) from None
+        options = _typed_options(reader, kind, options)
     return reader(path, **options)
+
+
+def _typed_options(reader: Any, kind: str, options: dict[str, Any]) -> dict[str, Any]:
+    """Options checked against the reader's annotations where those are plain (bool, int, float, str, None and their
+    unions): ``drop_nonfinite=flase`` (a typo, truthy as text) or ``min_range_m=abc`` is a ConfigError naming it."""
+    import typing
+
+    from pydantic import TypeAdapter, ValidationError
+
+    try:
+        hints = typing.get_type_hints(reader.__init__ if inspect.isclass(reader) else reader)
+    except Exception:  # noqa: BLE001 - annotations that do not resolve: the reader checks its options itself
+        return options
+    plain = {bool, int, float, str, type(None)}
+    out = dict(options)
+    for name, value in options.items():
+        hint = hints.get(name)
+        if hint is None or not set(typing.get_args(hint) or (hint,)) <= plain:
+            continue
+        try:
+            out[name] = TypeAdapter(hint).validate_python(value)
+        except ValidationError as err:
+            reason = err.errors()[0].get("msg", "invalid value")
+            raise ConfigError(f"{reason}, got {value!r}", source=f"{kind} dataset option {name}") from None
+    return out
 
 
 __all__ = ["available_datasets", "detect_kind", "get_reader", "open_dataset", "register_dataset"]

@@ -60,6 +60,9 @@ class ScanFolder:
         self.path = folder
         self.name = name or folder.name
         self.drop_nonfinite = drop_nonfinite
+        broken = next((p for p in folder.iterdir() if p.suffix.lower() in wanted and p.is_symlink() and not p.exists()), None)
+        if broken is not None:  # a scan that is not there: never skipped without a word
+            raise DataError(f"a broken link (to {os.readlink(broken)})", source=broken)
         self.scan_paths = sorted(
             (p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in wanted), key=lambda p: natural_key(p.name)
         )

@@ -115,7 +115,11 @@ def indexed_files(folder: Path, suffix: str) -> tuple[list[Path], np.ndarray]:
     """
     paths: list[tuple[int, Path]] = []
     for p in folder.iterdir():
-        if p.suffix.lower() != suffix or not p.is_file():
+        if p.suffix.lower() != suffix:
+            continue
+        if p.is_symlink() and not p.exists():  # a scan that is not there: never skipped without a word
+            raise DataError(f"a broken link (to {os.readlink(p)})", source=p)
+        if not p.is_file():
             continue
         m = _FRAME_NAME.match(p.stem)
         if m is None:

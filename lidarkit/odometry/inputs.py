@@ -40,11 +40,20 @@ def open_sequence(spec: str | os.PathLike | ScanSequence) -> ScanSequence:
         path, _, query = rest.partition("?")
         from lidarkit.params import parse_kv
 
-        return lio.open_dataset(kind, path, **parse_kv(query, option=f"{kind} dataset option"))
+        return _scans(lio.open_dataset(kind, path, **parse_kv(query, option=f"{kind} dataset option")), text)
     path = Path(text)
     if not path.exists():
+        if sep and len(kind) > 1 and "/" not in kind and "\\" not in kind:  # KIND:PATH with a kind no reader has
+            raise ConfigError(f"unknown dataset kind {kind!r}; known: sim, {', '.join(lio.available_datasets())}", source=text)
         raise DataError("dataset not found (a folder, a .bag/.mcap/.pcap file, KIND:PATH or sim:SCENE?...)", source=text)
-    return lio.open_dataset(lio.detect_kind(path) or "folder", path)
+    return _scans(lio.open_dataset(lio.detect_kind(path) or "folder", path), text)
+
+
+def _scans(dataset: Any, spec: str) -> Any:
+    """``dataset`` when it is a sequence of scans; a ConfigError for readers of other data (TUM images, landmarks)."""
+    if not callable(getattr(dataset, "read_scan", None)):
+        raise ConfigError(f"a {type(dataset).__name__} holds no LiDAR scans: odometry needs a scan sequence", source=spec)
+    return dataset
 
 
 def frames_past_the_end(frames: FrameSelection, n_frames: int) -> str | None:
