@@ -41,6 +41,12 @@ def validated_points(arrays: dict[int, np.ndarray]) -> Iterator[None]:
         _VALIDATED.reset(token)
 
 
+def is_validated(points_xyz: np.ndarray) -> bool:
+    """Whether ``points_xyz`` is an array the current :func:`validated_points` block holds (checked, not changed)."""
+    known = _VALIDATED.get()
+    return known is not None and known.get(id(points_xyz)) is points_xyz
+
+
 def as_points(points_xyz: np.ndarray, name: str = "points", min_points: int = 0) -> np.ndarray:
     """Validate an ``(N, 3)`` real, finite point array within ``MAX_ABS_COORDINATE_M`` and return it as float64.
 

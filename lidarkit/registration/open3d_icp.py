@@ -14,8 +14,9 @@ from pydantic import Field
 
 from lidarkit.geometry import transform_points
 from lidarkit.registration.assessment import assess_alignment
-from lidarkit.registration.degeneracy import SurfaceIndex
 from lidarkit.registration.base import Registration, RegistrationConfig, RegistrationResult
+from lidarkit.registration.cloud_cache import CloudCache
+from lidarkit.registration.degeneracy import SurfaceIndex
 from lidarkit.registration.planar import refuse_2d
 from lidarkit.registration.registry import register_icp
 from lidarkit.threads import background
@@ -39,7 +40,9 @@ class Open3DSurfaceConfig(Open3DPointToPointConfig):
 class _Open3DBase(Registration):
     _kind = "point_to_point"
 
-    _last: tuple = ()  # (fingerprint, Open3D cloud) of the last two prepared clouds (a frame registered again finds both)
+    def __init__(self, config=None, **params):
+        super().__init__(config, **params)
+        self._cache = CloudCache()  # the last two prepared clouds: a frame registered again finds both
 
     def _clouds(self, source_xyz: np.ndarray, target_xyz: np.ndarray):
         """Open3D clouds (downsampled, with normals for the surface variants). In a scan-to-scan chain the source
@@ -49,8 +52,7 @@ class _Open3DBase(Registration):
         c = self.config
         clouds = []
         for pts in (target_xyz, source_xyz):
-            key = (id(pts), pts.shape, pts.ctypes.data, pts[:: max(1, len(pts) // 32)].tobytes())
-            hit = next((cloud for k, cloud in self._last if k == key), None)
+            hit = self._cache.get(pts)
             if hit is not None:
                 clouds.append(hit)
                 continue
@@ -60,8 +62,7 @@ class _Open3DBase(Registration):
             if self._kind != "point_to_point":
                 # GICP builds its plane-like covariances from these normals (Open3D's own rule)
                 pc.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=c.normal_radius_m, max_nn=c.normal_max_nn))
-            self._last = (*self._last[-1:], (key, pc))
-            clouds.append(pc)
+            clouds.append(self._cache.put(pts, pc))
         return clouds[1], clouds[0]
 
     def _register(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray):

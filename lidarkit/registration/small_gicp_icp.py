@@ -16,6 +16,7 @@ from pydantic import Field
 from lidarkit.geometry import transform_points
 from lidarkit.registration.assessment import assess_alignment
 from lidarkit.registration.base import Registration, RegistrationConfig, RegistrationResult
+from lidarkit.registration.cloud_cache import CloudCache
 from lidarkit.registration.planar import refuse_2d
 from lidarkit.registration.registry import register_icp
 
@@ -68,9 +69,9 @@ if _small_gicp is not None:
 
         def __init__(self, config: SmallGICPConfig | None = None, **params):
             super().__init__(config, **params)
-            # (fingerprint, PointCloud, KdTree, voxel-ordered points, rank) of the last two preprocessed clouds: a frame
-            # registered again (the odometry runner's overlap, when the gate turns the previous frame down) finds both
-            self._cache: list[tuple] = []
+            # (PointCloud, KdTree, voxel-ordered points, rank) of the last two preprocessed clouds: a frame registered
+            # again (the odometry runner's overlap, when the gate turns the previous frame down) finds both
+            self._cache = CloudCache()
 
         def _preprocess(self, points: np.ndarray):
             """small_gicp's own downsampling + covariances + KdTree, reused when the same cloud comes back (in a
@@ -78,10 +79,10 @@ if _small_gicp is not None:
             own odometry loop does). Also the cloud's points in voxel order and each point's rank in that order, for the
             assessment (:func:`voxel_order`; None with ``assess=False``)."""
             c = self.config
-            key = (id(points), points.shape, points.ctypes.data, points[:: max(1, len(points) // 32)].tobytes(), c.downsampling_resolution_m)
-            for cached in self._cache:
-                if cached[0] == key:
-                    return cached[1:]
+            settings = (c.downsampling_resolution_m, c.assess)
+            cached = self._cache.get(points, settings)
+            if cached is not None:
+                return cached
             # the steps of small_gicp.preprocess_points (voxel grid, KdTree, 10-neighbour covariances, all on num_threads),
             # taken one by one to keep the cloud; the KdTree on num_threads rather than on one thread as align(points...)
             # builds it: ~1 ms less a KITTI scan, 2-3 % of a frame (10 KITTI scans, pairwise and odometry, with and without
@@ -96,8 +97,7 @@ if _small_gicp is not None:
                 rank = np.empty_like(order)
                 rank[order] = np.arange(len(order))
                 ordered = xyz[order]
-            self._cache = [*self._cache[-1:], (key, cloud, tree, ordered, rank)]
-            return self._cache[-1][1:]
+            return self._cache.put(points, (cloud, tree, ordered, rank), settings)
 
         def _register(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray):
             c = self.config
