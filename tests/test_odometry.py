@@ -231,6 +231,20 @@ def test_scans_far_apart_in_time_are_named_in_a_warning():
     assert not any("gap" in w for w in run(f"kitti:{kitti / 'sequences' / '00'}", "open3d_point_to_plane", progress=False).metrics["warnings"])
 
 
+def test_a_variant_returning_a_non_finite_pose_is_a_registration_error_naming_the_frame(rng):
+    """A backend or plugin returning NaN instead of raising: one RegistrationError naming the method and the frame
+    (numpy's LinAlgError 'SVD did not converge' escaped before), stateless and stateful alike."""
+    poses = _drive(4)
+    motions = se3_inverse(poses[:-1]) @ poses[1:]
+    motions[1] = np.full((4, 4), np.nan)
+    with pytest.raises(RegistrationError, match=r"memory \(frame 2\): oracle returned a pose with NaN or infinite entries"):
+        run(MemorySequence(poses, _room_points(rng, 50)), OracleICP(motions))
+    bad = poses.copy()
+    bad[2] = np.nan
+    with pytest.raises(RegistrationError, match=r"memory \(frame 2\): map_stand_in returned a pose with NaN or infinite entries"):
+        run(MemorySequence(poses, _room_points(rng, 50)), MapStandIn(bad))
+
+
 def test_a_frame_slice_past_the_end_is_cut_with_a_warning(rng, caplog):
     """'0:50' on 10 scans runs the 10 and says so (in the log and metrics.json), instead of silently."""
     poses = _drive(10, step_m=1.0)

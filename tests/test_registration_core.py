@@ -500,3 +500,18 @@ def test_an_array_changed_in_place_is_prepared_again(method):
     source[moved] += [5.0, 0.0, 0.0]
     np.testing.assert_allclose(icp.align(source, target).T_target_source, get_icp(method).align(source, target).T_target_source,
                                atol=1e-9)
+
+
+def test_a_variant_whose_backend_returns_nan_raises_a_registration_error():
+    import dataclasses
+
+    from lidarkit.registration.open3d_icp import Open3DPointToPlane
+
+    class NanICP(Open3DPointToPlane):
+        def _align(self, source_xyz, target_xyz, init_T):
+            return dataclasses.replace(super()._align(source_xyz, target_xyz, init_T), T_target_source=np.full((4, 4), np.nan))
+
+    rng = np.random.default_rng(0)
+    cloud = rng.uniform(-10, 10, size=(500, 3))
+    with pytest.raises(RegistrationError, match="returned a pose with NaN or infinite entries, not a finite 4x4 matrix"):
+        NanICP().align(cloud, cloud)

@@ -131,6 +131,8 @@ def _run_stateless(stream, registration: Any, worker: Overlap, indices: np.ndarr
                 out = PendingAlignment.done(registration.align(points, previous, init_T=guess, source_times_s=times, target_times_s=previous_times))
             else:
                 out = PendingAlignment.done(registration.align(points, previous, init_T=guess))
+            if not np.isfinite(np.asarray(out.T_target_source, dtype=np.float64)).all():  # garbage instead of an error
+                raise RegistrationError(f"{name} returned a pose with NaN or infinite entries")
         except Exception as err:
             if not _is_frame_error(err):
                 raise
@@ -400,6 +402,8 @@ def run(
                             poses[k] = registration.register_frame(points, scan.point_times_s, motion_guess=guess)
                         else:
                             poses[k] = registration.register_frame(points, scan.point_times_s)
+                        if not np.isfinite(poses[k]).all():  # a variant (or plugin) returning garbage instead of raising
+                            raise RegistrationError(f"{name} returned a pose with NaN or infinite entries")
                         t2 = clock()  # the variant's own time: the after-the-fact covariance below is not part of it
                     except Exception as err:
                         if inflight is not None:

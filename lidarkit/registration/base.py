@@ -428,6 +428,10 @@ class Registration:
         register = self._register if assessed_apart(type(self)) else functools.partial(Registration._register, self)
         with use_backend(self.name, source), use_model(model):
             T, likely_converged, assess = register(src, dst, T0)
+        T = np.asarray(T, dtype=np.float64)
+        if T.shape != (4, 4) or not np.isfinite(T).all():  # a backend (or a plugin) that returns garbage instead of raising
+            what = "NaN or infinite entries" if T.shape == (4, 4) else f"shape {T.shape}"
+            raise RegistrationError(f"{self.name} returned a pose with {what}, not a finite 4x4 matrix", source=source)
         register_s = time.perf_counter() - start
         if not self._config.assess:
             return PendingAlignment.done(unassessed_result(T, bool(likely_converged), self.name, register_s))
@@ -438,7 +442,7 @@ class Registration:
                 result = assess()
             return self._finish(result, register_s + time.perf_counter() - start)
 
-        return PendingAlignment(np.asarray(T, dtype=np.float64), bool(likely_converged), finish)
+        return PendingAlignment(T, bool(likely_converged), finish)
 
     def _finish(self, result: RegistrationResult, runtime: float) -> RegistrationResult:
         """The config's calibration and acceptance gate applied to the variant's assessed result."""
