@@ -73,6 +73,9 @@ def test_list_shows_every_method_and_its_defaults(capsys):
 
     for name in available_ground_segmenters():  # the ground segmenters ground_filtered can use, with their parameters
         assert name in flat
+    assert "[italic]" not in out and "[/" not in out  # the docstrings are styled, not printed with markup tags
+    code, out, _ = run_cli(capsys, "--list-components")
+    assert code == 0 and "Constant-velocity prediction" in out and "[italic]" not in out
     assert "cell_size_m" in flat and "cloth_resolution_m" in flat
 
 

@@ -61,9 +61,8 @@ def _list_ground_segmenters() -> None:
     table.add_column("parameters (default) — description")
     for name in available_ground_segmenters():
         doc = (get_ground_segmenter_class(name).__doc__ or "").strip().splitlines()
-        lines = [f"[italic]{doc[0]}[/italic]"] if doc else []
-        lines += [f"{key}: {type_name} = {default!r} — {desc}" for key, (type_name, default, desc) in ground_config_fields(name).items()]
-        table.add_row(name, "\n".join(lines))
+        lines = [f"{key}: {type_name} = {default!r} — {desc}" for key, (type_name, default, desc) in ground_config_fields(name).items()]
+        table.add_row(name, _described(doc[0] if doc else "", lines))
     stdout().print(table)
 
 
@@ -77,11 +76,20 @@ def _list_components() -> None:
         for name in available_components(kind):
             cls = get_component_class(kind, name)
             doc = (cls.__doc__ or "").strip().splitlines()[0] if cls.__doc__ else ""
-            lines = [f"[italic]{doc}[/italic]"] if doc else []
-            for key, (type_name, default, desc) in component_fields(kind, name).items():
-                lines.append(f"{key}: {type_name} = {default!r} — {desc}")
-            table.add_row(f"{kind} / {name}", "\n".join(lines))
+            lines = [f"{key}: {type_name} = {default!r} — {desc}" for key, (type_name, default, desc) in component_fields(kind, name).items()]
+            table.add_row(f"{kind} / {name}", _described(doc, lines))
     stdout().print(table)
+
+
+def _described(doc: str, lines: list[str]):
+    """A table cell: the docstring's first line in italics, then the parameter lines (plain text: the console prints
+    no markup, so a markup tag would show as text)."""
+    from rich.text import Text
+
+    cell = Text(doc, style="italic")
+    for line in lines:
+        cell.append(("\n" if len(cell) else "") + line)
+    return cell
 
 
 def _result_table(result, source: Path, target: Path) -> Table:
