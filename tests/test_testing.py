@@ -94,6 +94,18 @@ def test_pytest_plugin_fixture_in_a_user_test_run(tiny_baseline, tmp_path):
         cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
     assert "1 failed, 1 passed" in proc.stdout, proc.stdout + proc.stderr
     assert "regression: ape_rmse_m" in proc.stdout
+    # relative folders: on the command line from where pytest runs, in pytest.ini from the ini file's folder
+    import shutil
+
+    project = tmp_path / "project"
+    shutil.copytree(tiny_baseline.path, project / "baselines" / "b")
+    (project / "tests").mkdir()
+    (project / "tests" / "test_user.py").write_text((tmp_path / "test_user.py").read_text())
+    (project / "pytest.ini").write_text("[pytest]\nlidarkit_baseline = baselines/b\n")
+    for option in (["--lidarkit-baseline", "../baselines/b"], []):
+        proc = subprocess.run([sys.executable, "-m", "pytest", "-q", *load, "-p", "no:cacheprovider", *option, "test_user.py"],
+                              cwd=project / "tests", env=env, capture_output=True, text=True, timeout=120)
+        assert "1 failed, 1 passed" in proc.stdout, (option, proc.stdout + proc.stderr)
 
 
 def test_compare_holds_a_difference_against_the_noise_a_baseline_measured(tiny_baseline, tmp_path, capsys):

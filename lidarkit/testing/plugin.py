@@ -1,6 +1,7 @@
 """pytest plugin (entry point ``lidarkit`` in the ``pytest11`` group): baseline fixtures for users' test suites.
 
-- ``--lidarkit-baseline DIR`` (or the ini option ``lidarkit_baseline``): the default baseline folder.
+- ``--lidarkit-baseline DIR`` (relative to the directory pytest runs in, as pytest's own path options) or the ini
+  option ``lidarkit_baseline`` (relative to the ini file's directory): the default baseline folder.
 - ``lidarkit_baseline``: that folder loaded as a :class:`lidarkit.bench.baseline.Baseline` (skips the test with
   a reason when none is configured).
 - ``load_lidarkit_baseline``: a function loading any baseline folder (relative paths from the rootdir).
@@ -35,7 +36,11 @@ def load_lidarkit_baseline(pytestconfig):
 @pytest.fixture(scope="session")
 def lidarkit_baseline(pytestconfig, load_lidarkit_baseline):
     """The configured baseline folder (``--lidarkit-baseline`` or ini ``lidarkit_baseline``)."""
-    path = pytestconfig.getoption("--lidarkit-baseline") or pytestconfig.getini("lidarkit_baseline")
+    given = pytestconfig.getoption("--lidarkit-baseline")
+    if given:  # a command-line path: from where pytest was started
+        return load_lidarkit_baseline(Path(pytestconfig.invocation_params.dir) / given)
+    path = pytestconfig.getini("lidarkit_baseline")
     if not path:
         pytest.skip("no baseline configured: pass --lidarkit-baseline DIR or set lidarkit_baseline in pytest.ini")
-    return load_lidarkit_baseline(path)
+    base = Path(pytestconfig.inipath).parent if pytestconfig.inipath else Path(pytestconfig.rootpath)
+    return load_lidarkit_baseline(base / path)
