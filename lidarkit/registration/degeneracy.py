@@ -30,6 +30,9 @@ THIN_RATIO = 0.1
 #: The lever arm of a rotation in the normal matrix is at least this fraction of the RMS radius of the points.
 MIN_ARM_FRACTION = 0.05
 
+#: Neighbours of a local line in a 2D scan (a laser scan: its surfaces are walls seen as lines).
+PLANAR_NEIGHBOURS = 5
+
 #: Local surfaces are estimated on the target voxelized at min(this, RMS radius / 10) so that the
 #: anisotropic sampling of a spinning LiDAR (dense along a ring, sparse across rings) does not make a
 #: flat road look like a set of lines.
@@ -161,6 +164,11 @@ def matched_constraints(
     ``surfaces``: that :class:`SurfaceIndex` of ``target_xyz`` if already built.
     """
     n = len(source_aligned_xyz)
+    if len(target_xyz) and float(np.ptp(target_xyz[:, 2])) == 0.0:
+        # a 2D scan (one plane, a few hundred points): its surfaces are lines, seen only by close neighbours of the raw
+        # points (20 neighbours of a voxelized 2D scan span both walls of a corridor and leave z as the only thin
+        # direction: x, y and yaw then looked unconstrained on every frame)
+        k, surface_voxel_m = min(k, PLANAR_NEIGHBOURS), None
     pick = np.arange(n)
     if n > max_points:
         pick = np.sort(np.random.default_rng(seed).choice(n, size=max_points, replace=False))
