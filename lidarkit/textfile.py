@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lidarkit.errors import DataError
+from lidarkit.errors import DataError, LidarKitError
 
 
 def read_lines(path: str | os.PathLike) -> list[str]:
@@ -69,3 +69,16 @@ def is_number(text: str) -> bool:
     except ValueError:
         return False
     return True
+
+
+def file_line(path: str | os.PathLike, location: str | None) -> str | None:
+    """``"frame K"`` of a table read by ``read_numeric_table`` -> ``"line L"`` of ``path`` (blank and ``#`` lines
+    skipped as the reader skips them); other locations unchanged."""
+    if not location or not location.startswith("frame "):
+        return location
+    try:
+        k = int(location.split()[1])
+        data_lines = [i for i, raw in enumerate(read_lines(path), start=1) if raw.strip() and not raw.strip().startswith("#")]
+        return f"line {data_lines[k]} ({location})"
+    except (ValueError, IndexError, LidarKitError):
+        return location

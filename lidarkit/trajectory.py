@@ -12,9 +12,9 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from lidarkit import atomic
-from lidarkit.errors import DataError, LidarKitError
+from lidarkit.errors import DataError
 from lidarkit.geometry import ORTHONORMAL_TOL, orthonormalize_se3, se3_inverse
-from lidarkit.textfile import read_numeric_table
+from lidarkit.textfile import file_line, read_numeric_table
 
 log = logging.getLogger(__name__)
 
@@ -203,12 +203,12 @@ class Trajectory:
         try:
             Trajectory(poses, None, "poses")
         except DataError as err:  # name the file and its line, not the trajectory and frame
-            raise DataError(err.reason, source=path, location=_file_line(path, err.location)) from None
+            raise DataError(err.reason, source=path, location=file_line(path, err.location)) from None
         try:
             return cls(poses, timestamps_s, Path(path).stem if name is None else name)
         except DataError as err:
             if times_path is not None and "timestamp" in err.reason:
-                raise DataError(err.reason, source=times_path, location=_file_line(times_path, err.location)) from None
+                raise DataError(err.reason, source=times_path, location=file_line(times_path, err.location)) from None
             raise
 
     @classmethod
@@ -222,15 +222,15 @@ class Trajectory:
         norms = np.linalg.norm(quat_xyzw, axis=1)
         if (np.abs(norms - 1.0) > 1e-2).any():
             i = int(np.argmax(np.abs(norms - 1.0) > 1e-2))
-            raise DataError(f"quaternion norm {norms[i]:.4f} is not 1", source=path, location=_file_line(path, f"frame {i}"))
+            raise DataError(f"quaternion norm {norms[i]:.4f} is not 1", source=path, location=file_line(path, f"frame {i}"))
         step = np.diff(rows[:, 0])
         if (step < 0).any():
             k = int(np.argmax(step < 0)) + 1
             raise DataError(f"timestamp {rows[k, 0]:.6f} is earlier than the one before it ({rows[k - 1, 0]:.6f})",
-                            source=path, location=_file_line(path, f"frame {k}"))
+                            source=path, location=file_line(path, f"frame {k}"))
         repeated = np.flatnonzero(step == 0) + 1
         if repeated.size:
-            lines = ", ".join(str(_file_line(path, f"frame {k}")).split(" (")[0] for k in repeated[:5])
+            lines = ", ".join(str(file_line(path, f"frame {k}")).split(" (")[0] for k in repeated[:5])
             log.warning("%s: %d pose(s) repeat the timestamp of the pose before them (%s%s): each left out",
                         path, repeated.size, lines, ", ..." if repeated.size > 5 else "")
             rows = np.delete(rows, repeated, axis=0)
@@ -297,18 +297,3 @@ class Trajectory:
 
     def copy(self) -> Trajectory:
         return copy.deepcopy(self)
-
-
-def _file_line(path: str | os.PathLike, location: str | None) -> str | None:
-    """``"frame K"`` of a table read by ``read_numeric_table`` -> ``"line L"`` of ``path`` (blank and ``#`` lines
-    skipped as the reader skips them); other locations unchanged."""
-    if not location or not location.startswith("frame "):
-        return location
-    try:
-        k = int(location.split()[1])
-        from lidarkit.textfile import read_lines
-
-        data_lines = [i for i, raw in enumerate(read_lines(path), start=1) if raw.strip() and not raw.strip().startswith("#")]
-        return f"line {data_lines[k]} ({location})"
-    except (ValueError, IndexError, LidarKitError):
-        return location

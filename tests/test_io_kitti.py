@@ -163,6 +163,19 @@ def test_root_may_be_the_sequence_folder():
     seq01 = KittiOdometry(shared_path("kitti_images", "sequences", "01"))
     assert seq01.poses_path.name == "poses.txt" and len(seq01.ground_truth_camera) == 51
     assert seq01.timestamps_s is None and seq01.K[0, 0] == pytest.approx(718.856)
+    # another sequence asked of a sequence folder is refused, not ignored
+    with pytest.raises(ConfigError, match="the folder is sequence 06 itself; sequence=05 names another"):
+        KittiOdometry(shared_path("kitti_images", "sequences", "06"), sequence="05")
+
+
+def test_times_out_of_order_name_the_file_line(tmp_path, odo_root):
+    seq = tmp_path / "seq"
+    shutil.copytree(odo_root / "sequences" / "00", seq)
+    lines = (seq / "times.txt").read_text().splitlines()
+    lines[4] = lines[2]  # frame 4 back at frame 2's time
+    (seq / "times.txt").write_text("# stamps\n\n" + "\n".join(lines) + "\n")
+    with pytest.raises(DataError, match=r"times.txt \(line 7 \(frame 4\)\): time stamps are not strictly increasing"):
+        KittiOdometry(seq).timestamps_s
 
 
 # ---- corrupted copies -------------------------------------------------------------------------------------

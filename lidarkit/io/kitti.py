@@ -34,7 +34,7 @@ from lidarkit.errors import ConfigError, DataError
 from lidarkit.geometry import se3_inverse
 from lidarkit.io.base import INSTANT_FRACTION, Scan
 from lidarkit.io.pointfile import load_npy, read_kitti_bin
-from lidarkit.textfile import is_number, read_lines, read_numeric_table
+from lidarkit.textfile import file_line, is_number, read_lines, read_numeric_table
 from lidarkit.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
@@ -254,6 +254,10 @@ class KittiOdometry:
             return candidate, root
         if (root / "velodyne").is_dir() or (root / "image_0").is_dir() or (root / "calib.txt").is_file():
             if root.name.isdigit():
+                asked = str(self.sequence)
+                if asked.isdigit() and int(asked) not in (0, int(root.name)):  # (00 is the default: not a choice)
+                    raise ConfigError(f"the folder is sequence {root.name} itself; sequence={asked} names another (give the "
+                                      "odometry root that holds sequences/)", source=root)
                 self.sequence = root.name
             parent = root.parent.parent if root.parent.name == "sequences" else None
             return root, parent
@@ -342,7 +346,8 @@ class KittiOdometry:
         times = read_numeric_table(self.times_path, 1)[:, 0]
         bad = np.flatnonzero(np.diff(times) <= 0)
         if len(bad):
-            raise DataError("time stamps are not strictly increasing", source=self.times_path, location=f"line {bad[0] + 2}")
+            raise DataError("time stamps are not strictly increasing", source=self.times_path,
+                            location=file_line(self.times_path, f"frame {bad[0] + 1}"))
         return times
 
     @cached_property
