@@ -204,12 +204,13 @@ def test_relation_error_is_zero_on_own_relations_and_measures_a_known_offset(car
     assert err.rotation_sq["mean"] == pytest.approx(4.0)
 
 
-def test_relation_time_tolerance(carmen_logs):
+def test_relation_time_tolerance(carmen_logs, caplog):
     odo = carmen_logs["aces"].odometry[:100]
-    rel = _relations_of(odo, np.array([[0, 5], [10, 20]]))
-    late = Relations(rel.t1_s + np.array([0.0, 0.02]), rel.t2_s, rel.dx_m, rel.dy_m, rel.dyaw_rad)
+    rel = _relations_of(odo, np.array([[0, 5], [10, 20], [30, 40]]))
+    late = Relations(rel.t1_s + np.array([0.0, 0.02, 0.02]), rel.t2_s, rel.dx_m, rel.dy_m, rel.dyaw_rad)
     assert relation_error(odo, late).n_used == 1  # 0.02 s > default 0.01 s
-    assert relation_error(odo, late, max_time_diff_s=0.03).n_used == 2
+    assert "only 1 of 3 relations have estimated poses within 0.01 s" in caplog.text  # most left out: said
+    assert relation_error(odo, late, max_time_diff_s=0.03).n_used == 3
     with pytest.raises(EvaluationError, match="no relation has estimated poses"):
         relation_error(odo[50:], late)
     with pytest.raises(EvaluationError, match="timestamps"):

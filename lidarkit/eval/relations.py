@@ -14,6 +14,7 @@ results are scored the same way.
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 from typing import Any
 
@@ -22,6 +23,8 @@ import numpy as np
 from lidarkit.errors import EvaluationError
 from lidarkit.io.carmen import Relations
 from lidarkit.trajectory import Trajectory
+
+logger = logging.getLogger(__name__)
 
 #: Default tolerance between a relation's time stamp and the nearest estimated pose (s). The relations of the
 #: Freiburg benchmark are stamped with the scans' own time stamps (ACES: exact match), while the logs scan at
@@ -126,6 +129,11 @@ def relation_error(
             f"(estimate spans {span[0]:.3f}..{span[1]:.3f} s, relations {relations.t1_s.min():.3f}..{relations.t2_s.max():.3f} s)",
             source=source,
         )
+    if len(used) < 0.5 * len(relations):  # most relations left out: the estimate's clock or its span does not match
+        span = (float(estimate.timestamps_s[0]), float(estimate.timestamps_s[-1]))
+        logger.warning("%s: only %d of %d relations have estimated poses within %g s of both their time stamps (estimate "
+                       "spans %.3f..%.3f s, relations %.3f..%.3f s): the score covers those only", source, len(used), len(relations),
+                       max_time_diff_s, span[0], span[1], relations.t1_s.min(), relations.t2_s.max())
     P = estimate.poses_se3
     Ti, Tj = P[i[used]], P[j[used]]
     # delta_ij = inv(Ti) @ Tj, planar part: R_i^T (t_j - t_i) and yaw_j - yaw_i
