@@ -21,8 +21,9 @@ def _cloud_bytes(n: int, times: np.ndarray | None = None) -> tuple[list[tuple[st
     return [("x", 0, F32), ("y", 4, F32), ("z", 8, F32), ("time", 12, F32)], 16, rec.tobytes()
 
 
-def write_ros1_bag(path, clouds, *, extra_odometry: bool = False, topic: str = "/points"):
-    """A ROS 1 bag with one PointCloud2 per ``(stamp_s, fields, point_step, data, width)`` in ``clouds``."""
+def write_ros1_bag(path, clouds, *, extra_odometry: bool = False, topic: str = "/points", odometry=()):
+    """A ROS 1 bag with one PointCloud2 per ``(stamp_s, fields, point_step, data, width)`` in ``clouds`` and one
+    nav_msgs/Odometry on /ground_truth per ``(stamp_s, xyz, quat_xyzw)`` in ``odometry``."""
     from rosbags.rosbag1 import Writer
     from rosbags.typesys import Stores, get_typestore
 
@@ -38,6 +39,19 @@ def write_ros1_bag(path, clouds, *, extra_odometry: bool = False, topic: str = "
                          fields=[T["sensor_msgs/msg/PointField"](name=n, offset=o, datatype=d, count=1) for n, o, d in fields],
                          data=np.frombuffer(data, dtype=np.uint8), is_dense=True)
             writer.write(conn, 10**12 + k * 10**8, store.serialize_ros1(msg, pc2))  # receive time: increasing
+        if odometry:
+            odo = writer.add_connection("/ground_truth", "nav_msgs/msg/Odometry", typestore=store)
+            zeros, vec = np.zeros(36), T["geometry_msgs/msg/Vector3"]
+            for k, (stamp_s, xyz, q) in enumerate(odometry):
+                sec = int(np.floor(stamp_s))
+                header = T["std_msgs/msg/Header"](seq=k, stamp=T["builtin_interfaces/msg/Time"](sec=sec, nanosec=int(round((stamp_s - sec) * 1e9))), frame_id="odom")
+                pose = T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=xyz[0], y=xyz[1], z=xyz[2]),
+                                                   orientation=T["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3]))
+                msg = T["nav_msgs/msg/Odometry"](
+                    header=header, child_frame_id="lidar", pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=zeros),
+                    twist=T["geometry_msgs/msg/TwistWithCovariance"](twist=T["geometry_msgs/msg/Twist"](
+                        linear=vec(x=0.0, y=0.0, z=0.0), angular=vec(x=0.0, y=0.0, z=0.0)), covariance=zeros))
+                writer.write(odo, 10**12 + k * 10**8 + 1, store.serialize_ros1(msg, "nav_msgs/msg/Odometry"))
         if extra_odometry or not clouds:
             odom = writer.add_connection("/odom", "std_msgs/msg/String", typestore=store)
             writer.write(odom, 1, store.serialize_ros1(T["std_msgs/msg/String"](data="not a cloud"), "std_msgs/msg/String"))
@@ -123,3 +137,19 @@ def test_ouster_pcap_without_metadata(tmp_path):
         open_dataset("ouster", pcap)
     with pytest.raises(DataError, match=r"meta\.json: Ouster metadata json not found"):
         open_dataset("ouster", pcap, meta=str(tmp_path / "meta.json"))
+
+
+def test_ground_truth_poses_that_cannot_stand_one_per_scan(tmp_path):
+    """A zero quaternion, and fewer (or sparser) poses than scans: DataErrors saying so (a scipy ValueError, and
+    'timestamps are not strictly increasing' about a pose used for two scans, before)."""
+    scans = [good(k) for k in range(3)]
+    zero = write_ros1_bag(tmp_path / "zero.bag", scans, odometry=[(1000.0 + 0.1 * k, (k, 0, 0), (0, 0, 0, 0)) for k in range(3)])
+    with pytest.raises(DataError, match=r"zero.bag/ground_truth \(message 0\): .*not a finite position and unit quaternion"):
+        open_dataset("rosbag", zero).ground_truth
+    sparse = write_ros1_bag(tmp_path / "sparse.bag", scans, odometry=[(1000.0, (0, 0, 0), (0, 0, 0, 1)), (1005.0, (5, 0, 0), (0, 0, 0, 1))])
+    with pytest.raises(DataError, match=r"2 poses for 3 scans: scans 0 and 1 are both nearest to the pose at 1000.000 s"):
+        open_dataset("rosbag", sparse).ground_truth
+    one = write_ros1_bag(tmp_path / "one.bag", scans, odometry=[(1000.0, (0, 0, 0), (0, 0, 0, 1))])
+    with pytest.raises(DataError, match=r"1 pose\(s\) for 3 scans: one pose per scan needed"):
+        open_dataset("rosbag", one).ground_truth
+

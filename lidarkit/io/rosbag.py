@@ -196,8 +196,16 @@ class _BagScans:
         gt_stamps, gt_poses = self._recorded_ground_truth()
         scan_stamps = self.timestamps_s
         if len(gt_stamps) != len(scan_stamps):
+            source = f"{self.path}{self.ground_truth_topic}"
+            if len(gt_stamps) < 2:
+                raise DataError(f"{len(gt_stamps)} pose(s) for {len(scan_stamps)} scans: one pose per scan needed", source=source)
             pick = np.clip(np.searchsorted(gt_stamps, scan_stamps), 1, len(gt_stamps) - 1)
             pick = np.where(np.abs(gt_stamps[pick - 1] - scan_stamps) <= np.abs(gt_stamps[pick] - scan_stamps), pick - 1, pick)
+            twice = np.flatnonzero(np.diff(pick) == 0)
+            if len(twice):  # fewer (or sparser) poses than scans: one pose would stand for two scans
+                k = int(twice[0])
+                raise DataError(f"{len(gt_stamps)} poses for {len(scan_stamps)} scans: scans {k} and {k + 1} are both nearest to the "
+                                f"pose at {gt_stamps[pick[k]]:.3f} s; one pose per scan needed (a denser odometry topic)", source=source)
             gt_stamps, gt_poses = gt_stamps[pick], gt_poses[pick]
         meta = {"frame": f"as recorded on {self.ground_truth_topic}", "pose_instant": self._ground_truth_instant(gt_stamps)}
         return Trajectory(gt_poses, gt_stamps, name=f"{self.path.name}{self.ground_truth_topic}", meta=meta)
