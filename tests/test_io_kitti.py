@@ -128,6 +128,11 @@ def test_semantickitti_poses_option(odo_root):
     suma = KittiOdometry(odo_root, "00", poses_file=odo_root / "sequences" / "00" / "poses_semantickitti.txt")
     step = suma.ground_truth.relative_motions()[0][:3, 3]
     assert 0.6 < step[0] < 0.75 < 0.8 < official[0]  # SOURCES.md: SuMa 0.67-0.74 m vs GT 0.86 m at the start
+    # relative to the dataset folder, as docs/datasets.md writes it (from any working directory)
+    relative = KittiOdometry(odo_root, "00", poses_file="sequences/00/poses_semantickitti.txt")
+    np.testing.assert_array_equal(relative.ground_truth.poses_se3, suma.ground_truth.poses_se3)
+    with pytest.raises(DataError, match="calib file not found"):
+        KittiOdometry(odo_root, "00", calib_file="nope.txt")  # at once, not when the ground truth is first used
 
 
 def test_image_only_sequence_with_bare_calib():

@@ -194,8 +194,8 @@ class KittiOdometry:
         folder = self.sequence_dir.name
         self.name = f"kitti_{self.sequence}" if folder.isdigit() or folder == self.sequence else folder
 
-        self.velodyne_dir = Path(velodyne_dir) if velodyne_dir is not None else self.sequence_dir / "velodyne"
-        self.image_dir = Path(image_dir) if image_dir is not None else self.sequence_dir / "image_0"
+        self.velodyne_dir = self._option_path(velodyne_dir) if velodyne_dir is not None else self.sequence_dir / "velodyne"
+        self.image_dir = self._option_path(image_dir) if image_dir is not None else self.sequence_dir / "image_0"
         for given, folder in ((velodyne_dir, self.velodyne_dir), (image_dir, self.image_dir)):
             if given is not None and not folder.is_dir():
                 raise DataError("folder not found", source=folder)
@@ -211,8 +211,10 @@ class KittiOdometry:
                 source=self.sequence_dir,
             )
 
-        self.calib_path = Path(calib_file) if calib_file is not None else self.sequence_dir / "calib.txt"
-        self.times_path = Path(times_file) if times_file is not None else self.sequence_dir / "times.txt"
+        self.calib_path = self._option_path(calib_file) if calib_file is not None else self.sequence_dir / "calib.txt"
+        self.times_path = self._option_path(times_file) if times_file is not None else self.sequence_dir / "times.txt"
+        if calib_file is not None and not self.calib_path.is_file():  # checked now, as the other files given are
+            raise DataError("calib file not found", source=self.calib_path)
         if times_file is not None and not self.times_path.is_file():
             raise DataError("times file not found", source=self.times_path)
         self.poses_path = self._locate_poses(poses_file, odometry_root)
@@ -266,9 +268,17 @@ class KittiOdometry:
             source=root,
         )
 
+    def _option_path(self, given: str | os.PathLike) -> Path:
+        """A path option as given, or, when it is relative and not found from the working directory, inside the
+        dataset folder or the sequence folder (``poses_file=sequences/00/poses_semantickitti.txt`` with the root)."""
+        path = Path(given)
+        if path.is_absolute() or path.exists():
+            return path
+        return next((base / path for base in (self.root, self.sequence_dir) if (base / path).exists()), path)
+
     def _locate_poses(self, poses_file: str | os.PathLike | None, odometry_root: Path | None) -> Path | None:
         if poses_file is not None:
-            path = Path(poses_file)
+            path = self._option_path(poses_file)
             if not path.is_file():
                 raise DataError("poses file not found", source=path)
             return path
