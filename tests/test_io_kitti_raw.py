@@ -140,6 +140,10 @@ def test_malformed_oxts_and_timestamps(raw_copy):
     stamps.write_text("\n".join(lines) + "\n")
     with pytest.raises(DataError, match=r"oxts/timestamps\.txt \(line 4\): not a time stamp"):
         KittiRaw(raw_copy, DATE, DRIVE)
+    lines[3] = lines[1]  # back in time: named by its line, not later as a frame of some trajectory
+    stamps.write_text("\n".join(lines) + "\n")
+    with pytest.raises(DataError, match=r"oxts/timestamps\.txt \(line 4 \(frame 3\)\): time stamps are not strictly increasing"):
+        KittiRaw(raw_copy, DATE, DRIVE)
 
 
 def test_pykitti_errors_are_wrapped(raw_copy):

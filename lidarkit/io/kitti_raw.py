@@ -27,7 +27,7 @@ from lidarkit.geometry import se3_inverse
 from lidarkit.io.base import Scan
 from lidarkit.io.kitti import indexed_files, read_gray_image
 from lidarkit.io.pointfile import read_kitti_bin
-from lidarkit.textfile import read_lines, read_numeric_table
+from lidarkit.textfile import file_line, read_lines, read_numeric_table
 from lidarkit.trajectory import Trajectory
 
 CALIB_FILES = ("calib_cam_to_cam.txt", "calib_velo_to_cam.txt", "calib_imu_to_velo.txt")
@@ -49,6 +49,9 @@ def read_kitti_raw_timestamps(path: str | os.PathLike) -> np.ndarray:
     if not stamps:
         raise DataError("no time stamps", source=path)
     ns = np.array(stamps, dtype="datetime64[ns]").astype(np.int64)
+    back = np.flatnonzero(np.diff(ns) <= 0)
+    if len(back):  # named by the file's line here, not later as a frame of some trajectory
+        raise DataError("time stamps are not strictly increasing", source=path, location=file_line(path, f"frame {back[0] + 1}"))
     return ns.astype(np.float64) * 1e-9
 
 
@@ -214,8 +217,8 @@ class KittiRaw:
         if not -len(self) <= index < len(self):
             raise DataError(f"scan index {index} out of range for {len(self)} scans", source=f"{self.name} ({self.drive_dir})")
         frame = int(self.scan_frames[index])
-        times = self._velo_times_all
-        ts = float(times[frame]) if times is not None and frame < len(times) else None
+        times = self.timestamps_s  # (a timestamps.txt that does not cover the scans is an error, not a missing stamp)
+        ts = None if times is None else float(times[index])
         return read_kitti_bin(self.scan_paths[index], frame=frame, timestamp_s=ts, drop_nonfinite=self.drop_nonfinite)
 
     def read_image(self, index: int) -> np.ndarray:
