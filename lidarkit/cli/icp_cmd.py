@@ -100,7 +100,9 @@ def _result_table(result, source: Path, target: Path) -> Table:
     table.add_row("T_target_source", "\n".join(" ".join(f"{v: .6f}" for v in row) for row in T))
     table.add_row("converged", str(result.converged) + (f" ({result.reason})" if result.reason else ""))
     reported = result.extra.get("iterations_reported", True)
-    table.add_row("iterations", str(result.iterations) if reported else "not reported by the backend")
+    unassessed = not result.extra.get("assessed", True)
+    table.add_row("iterations", "not recorded (assess=False)" if unassessed else str(result.iterations) if reported
+                  else "not reported by the backend")
     if not result.extra.get("assessed", True):
         table.add_row("runtime (s)", f"{result.runtime_s:.3f}")
         table.add_row("assessment", "off (assess=False): no correspondences, fitness, RMSE, degeneracy or covariance")
