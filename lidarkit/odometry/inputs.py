@@ -70,7 +70,7 @@ def frames_past_the_end(frames: FrameSelection, n_frames: int) -> str | None:
 
 def time_gap_warning(times_s: np.ndarray | None, frames: np.ndarray) -> str | None:
     """A warning when consecutive scans of a run lie far apart in time (more than 3x the median interval: scans
-    missing from a recording, a folder of non-consecutive scans), or None. ``frames``: their dataset indices."""
+    missing from a recording, a folder of non-consecutive scans), or None. ``frames``: their numbers, as the warning names them."""
     if times_s is None or len(times_s) < 3:
         return None
     dt = np.diff(np.asarray(times_s, dtype=np.float64))
