@@ -15,7 +15,7 @@ import os
 import shutil
 import tempfile
 import time
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 from lidarkit.errors import OutputError
@@ -173,11 +173,13 @@ def check_target(path: str | os.PathLike | None, kind: str = "file") -> None:
 
 
 @contextlib.contextmanager
-def run_folder(path: str | os.PathLike) -> Iterator[Path]:
+def run_folder(path: str | os.PathLike, replaces: Iterable[str] = ()) -> Iterator[Path]:
     """Yield a temporary folder to write a run into; on success it becomes ``path``, on failure it is removed.
 
     A new ``path`` appears in one rename, complete. An existing folder keeps its other files: the run's files are
     moved into it one rename each, only after all were written. Errors name ``path``, not the temporary folder.
+    ``replaces``: the names a run of this kind can write; those this run did not write are removed from an existing
+    folder (an earlier run's ground truth or plots are never read as this run's).
     """
     path = Path(path)
     if path.exists() and not path.is_dir():
@@ -194,8 +196,12 @@ def run_folder(path: str | os.PathLike) -> Iterator[Path]:
             if err.source and err.source.startswith(str(tmp)):  # name the final path, not the temporary one
                 raise OutputError(err.reason, source=path / os.path.relpath(err.source, tmp), location=err.location) from err
             raise
+        written = {p.name for p in tmp.iterdir()}
         with output_errors(path, "cannot complete the run folder"):
             _move_into_place(tmp, path)
+        for name in sorted(set(replaces) - written):
+            with output_errors(path / name, "cannot remove an earlier run's file"):
+                (path / name).unlink(missing_ok=True)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 

@@ -151,6 +151,12 @@ def test_cli_pf_writes_results(tmp_path, capsys):
     for name in ("config.yaml", "poses_kitti.txt", "poses_tum.txt", "ground_truth_tum.txt", "trajectory.png", "particles.png"):
         assert (out / name).stat().st_size > 0, name
     assert len((out / "poses_kitti.txt").read_text().splitlines()) == 332
+    # the same folder again for a recorded run (no ground truth): the earlier run's ground truth goes, a user's file stays
+    (out / "notes.txt").write_text("mine")
+    with pytest.raises(SystemExit):
+        main(["pf", str(shared_path("pf", "burgard_particle_filter")), "--particles", "50", "--recorded", "--out", str(out)])
+    assert not (out / "ground_truth_tum.txt").exists() and (out / "notes.txt").read_text() == "mine"
+    assert (out / "dead_reckoning_tum.txt").is_file()
 
 
 def test_cli_pf_bad_input_is_one_line_error(tmp_path, capsys):

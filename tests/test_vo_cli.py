@@ -44,6 +44,9 @@ def test_vo_on_bundled_kitti_sample_writes_run_folder(tmp_path, capsys):
     assert config["vo"]["matching"]["klt_window_px"] == 17
     csv = (out / "diagnostics.csv").read_text().splitlines()
     assert csv[0].startswith("frame,ref_frame,n_features,n_matches,n_inliers") and len(csv) == 9
+    # the same folder without --gif: the earlier run's features.gif goes (it was left beside the new run)
+    code, _, _ = _run(["vo", str(seq), "--scale", "gt", "--max-frames", "4", "--out", str(out)], capsys)
+    assert code in (0, None) and not (out / "features.gif").exists() and len(Trajectory.from_kitti(out / "poses_kitti.txt")) == 4
 
 
 def test_vo_relative_scale_reports_kept_scale_frames(tmp_path, capsys):

@@ -40,6 +40,9 @@ def _steps(text: str) -> tuple[int, ...]:
     return steps
 
 
+#: Every file a pf run or study folder can hold (an earlier run's that this one does not write are removed)
+RUN_FILES = ("config.yaml", "metrics.json", "study.json", "poses_kitti.txt", "poses_tum.txt", "dead_reckoning_tum.txt",
+             "ground_truth_tum.txt", "trajectory.png", "particles.png", "particles_per_step.png", "animation.gif")
 MAX_PARTICLES = 10_000_000
 MAX_SEEDS = 10_000
 
@@ -233,7 +236,7 @@ def _print_study(rows, cfg: PFConfig, protocol: str, kidnap_at: int | None) -> N
 def _write_study(rows, cfg: PFConfig, protocol: str, scenario: dict, out: Path) -> None:
     from lidarkit import atomic
 
-    with atomic.run_folder(out) as tmp:
+    with atomic.run_folder(out, replaces=RUN_FILES) as tmp:
         _write_study_files(rows, cfg, protocol, scenario, tmp)
 
 
@@ -290,7 +293,7 @@ def _print(result) -> None:
 def _write(result, out: Path, *, snap_steps: tuple[int, ...], gif: bool) -> None:
     from lidarkit import atomic
 
-    with atomic.run_folder(out) as tmp:
+    with atomic.run_folder(out, replaces=RUN_FILES) as tmp:
         _write_files(result, tmp, snap_steps=snap_steps, gif=gif)
 
 

@@ -26,12 +26,8 @@ def write_run(result: OdometryResult, out_dir: str | os.PathLike) -> Path:
     ground truth ground_truth_kitti.txt, trajectory.png and ape.png; the folder all-or-nothing (``atomic.run_folder``).
     An earlier run's files in the folder that this run does not write are removed (other files are left alone)."""
     out = Path(out_dir)
-    with atomic.run_folder(out) as tmp:
+    with atomic.run_folder(out, replaces=RUN_FILES) as tmp:
         _write_files(result, tmp)
-        written = {p.name for p in tmp.iterdir()}
-    for name in sorted(set(RUN_FILES) - written):
-        with atomic.output_errors(out / name, "cannot remove an earlier run's file"):
-            (out / name).unlink(missing_ok=True)
     return out
 
 

@@ -53,6 +53,8 @@ _INSTANT_FRACTION = {"start": 0.0, "mid": 0.5, "end": 1.0}
 
 #: Longest drive the simulator builds a scene along (m): ~5 MB of scene mesh per km.
 MAX_DRIVE_M = 200_000.0
+#: Most sweeps of one sequence: its ground truth and stamps take ~0.7 KB a sweep (0.7 GB for a million).
+MAX_FRAMES = 1_000_000
 
 
 class LidarSimConfig(BaseModel):
@@ -61,7 +63,7 @@ class LidarSimConfig(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
     scene: Literal["street", "open", "ground"] = "street"
-    n_frames: int = Field(300, ge=1, description="number of sweeps")
+    n_frames: int = Field(300, ge=1, le=MAX_FRAMES, description="number of sweeps (a million at most: 28 hours at 10 Hz)")
     seed: int = Field(0, ge=0, description="seeds the scene, the path and the range noise")
     # sensor (KITTI HDL-64-like)
     n_beams: int = Field(64, ge=1)

@@ -22,6 +22,9 @@ from lidarkit.vo.pipeline import FrameDiagnostics, VOResult
 
 log = logging.getLogger(__name__)
 
+#: Every file a VO run folder can hold (an earlier run's that this one does not write are removed)
+RUN_FILES = ("poses_kitti.txt", "poses_tum.txt", "poses_smoothed_kitti.txt", "poses_smoothed_tum.txt", "diagnostics.csv",
+             "config.yaml", "metrics.json", "trajectory.png", "features.gif")
 NO_TIMESTAMPS_NOTE = "no time stamps given: poses_tum.txt and poses_smoothed_tum.txt use frame indices as seconds"
 
 
@@ -93,7 +96,7 @@ def write_run(result: VOResult, out_dir: str | os.PathLike, *, ground_truth: Tra
     Without time stamps the TUM files count frames as seconds: logged once and noted in config and metrics.
     """
     final = Path(out_dir)
-    with atomic.run_folder(final) as tmp:
+    with atomic.run_folder(final, replaces=RUN_FILES) as tmp:
         paths = _write_files(result, tmp, ground_truth=ground_truth, metrics=metrics, extra_config=extra_config,
                              plot=plot, gif_images=gif_images)
     return {name: final / path.relative_to(tmp) for name, path in paths.items()}
