@@ -522,7 +522,7 @@ def test_georeferenced_clouds_register_as_at_the_origin(method):
     """The real KITTI pair 1000 km out (UTM-like coordinates): small_gicp's voxel grid overflowed (no correspondences,
     100k warnings) and Open3D's GICP / point-to-plane drifted metres off. The backends now work around a local origin:
     the same pose as at the origin (moved by the offset), the same fitness."""
-    from lidarkit.registration.local_origin import LocalOrigin
+    from lidarkit.registration.local_origin import into
     from lidarkit.samples import sample_path
 
     if method not in available_icp():
@@ -533,4 +533,10 @@ def test_georeferenced_clouds_register_as_at_the_origin(method):
     near = get_icp(method).align(source, target)
     far = get_icp(method).align(source + offset, target + offset)
     assert far.converged and far.fitness == pytest.approx(near.fitness, abs=1e-6)
-    np.testing.assert_allclose(LocalOrigin.into(far.T_target_source, offset), near.T_target_source, atol=1e-8)
+    np.testing.assert_allclose(into(far.T_target_source, offset, offset), near.T_target_source, atol=1e-8)
+    # only the source far out, init_T bringing it back: each cloud works around its own origin
+    T0 = np.eye(4)
+    T0[:3, 3] = -offset
+    apart = get_icp(method).align(source + offset, target, init_T=T0)
+    assert apart.converged and apart.fitness == pytest.approx(near.fitness, abs=1e-3)
+    np.testing.assert_allclose(into(apart.T_target_source, None, offset), near.T_target_source, atol=1e-6)

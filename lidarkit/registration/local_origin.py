@@ -1,10 +1,11 @@
-"""A local origin for backends that lose precision far from the origin (georeferenced clouds, 1e5-1e6 m out).
+"""Local origins for backends that lose precision far from the origin (georeferenced clouds, 1e5-1e6 m out).
 
 small_gicp's voxel grid overflows its integer voxel coordinates ("voxel coord is out of range", and no
 correspondences) and Open3D's GICP and point-to-plane drift off by metres once coordinates reach 1e5-1e6 m; the
-point-to-point variants and lidarkit's own search are exact there. Those backends get both clouds shifted by one
-origin near them; the pose they return is shifted back (``T = S T' S^-1``) and the assessment runs on the clouds as
-given. Clouds within :data:`FAR_M` of the origin are passed on as they are (no copy, nothing changes).
+point-to-point variants and lidarkit's own search are exact there. Those backends get each cloud shifted to an origin
+near it (a whole kilometre, so that one cloud always gets the same one and a prepared cloud can be reused); the pose
+they return is shifted back, ``T = S_target T' S_source^-1``, and the assessment runs on the clouds as given. A cloud
+within :data:`FAR_M` of the origin is passed on as it is (no copy, nothing changes).
 """
 
 from __future__ import annotations
@@ -15,46 +16,39 @@ import numpy as np
 FAR_M = 1e4
 
 
-class LocalOrigin:
-    """The origin one registration instance works in: kept while the clouds stay within :data:`FAR_M` of it (so that
-    prepared clouds cached from one frame serve the next), moved when they leave."""
-
-    def __init__(self):
-        self.offset: np.ndarray | None = None
-
-    def update(self, target_xyz: np.ndarray) -> np.ndarray | None:
-        """The offset to subtract from both clouds of this registration (None: none needed)."""
-        probe = target_xyz[:: max(1, len(target_xyz) // 64)]
-        reference = np.zeros(3) if self.offset is None else self.offset
-        if np.abs(probe - reference).max(initial=0.0) <= FAR_M:
-            return self.offset
-        if np.abs(probe).max(initial=0.0) <= FAR_M:
-            self.offset = None  # back near the true origin
-        else:
-            self.offset = np.round(probe.mean(axis=0), -3)  # a whole kilometre: the same origin for nearby clouds
-        return self.offset
-
-    @staticmethod
-    def shift(points_xyz: np.ndarray, offset: np.ndarray | None) -> np.ndarray:
-        return points_xyz if offset is None else points_xyz - offset
-
-    @staticmethod
-    def into(T: np.ndarray, offset: np.ndarray | None) -> np.ndarray:
-        """A pose between the given clouds as a pose between the shifted ones: ``S^-1 T S`` (S: translation by offset)."""
-        if offset is None:
-            return T
-        out = np.array(T, dtype=np.float64)
-        out[:3, 3] = T[:3, :3] @ offset + T[:3, 3] - offset
-        return out
-
-    @staticmethod
-    def out_of(T: np.ndarray, offset: np.ndarray | None) -> np.ndarray:
-        """A pose between the shifted clouds as one between the given clouds: ``S T S^-1``."""
-        if offset is None:
-            return T
-        out = np.array(T, dtype=np.float64)
-        out[:3, 3] = T[:3, 3] + offset - T[:3, :3] @ offset
-        return out
+def local_offset(points_xyz: np.ndarray) -> np.ndarray | None:
+    """The origin to move ``points_xyz`` to (its mean to the kilometre), or None when it lies near the origin."""
+    probe = points_xyz[:: max(1, len(points_xyz) // 64)]
+    if np.abs(probe).max(initial=0.0) <= FAR_M:
+        return None
+    return np.round(probe.mean(axis=0), -3)
 
 
-__all__ = ["FAR_M", "LocalOrigin"]
+def shift(points_xyz: np.ndarray, offset: np.ndarray | None) -> np.ndarray:
+    return points_xyz if offset is None else points_xyz - offset
+
+
+def into(T: np.ndarray, target_offset: np.ndarray | None, source_offset: np.ndarray | None) -> np.ndarray:
+    """A pose between the given clouds as one between the shifted ones: ``S_target^-1 T S_source``."""
+    if target_offset is None and source_offset is None:
+        return T
+    out = np.array(T, dtype=np.float64)
+    out[:3, 3] = T[:3, 3] + (0.0 if source_offset is None else T[:3, :3] @ source_offset) - (0.0 if target_offset is None else target_offset)
+    return out
+
+
+def out_of(T: np.ndarray, target_offset: np.ndarray | None, source_offset: np.ndarray | None) -> np.ndarray:
+    """A pose between the shifted clouds as one between the given clouds: ``S_target T S_source^-1``."""
+    if target_offset is None and source_offset is None:
+        return T
+    out = np.array(T, dtype=np.float64)
+    out[:3, 3] = T[:3, 3] - (0.0 if source_offset is None else T[:3, :3] @ source_offset) + (0.0 if target_offset is None else target_offset)
+    return out
+
+
+def given(points_xyz: np.ndarray, offset: np.ndarray | None) -> np.ndarray:
+    """Shifted points back where the cloud is."""
+    return points_xyz if offset is None else points_xyz + offset
+
+
+__all__ = ["FAR_M", "given", "into", "local_offset", "out_of", "shift"]

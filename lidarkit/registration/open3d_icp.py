@@ -17,7 +17,7 @@ from lidarkit.registration.assessment import assess_alignment
 from lidarkit.registration.base import Registration, RegistrationConfig, RegistrationResult
 from lidarkit.registration.cloud_cache import CloudCache
 from lidarkit.registration.degeneracy import SurfaceIndex
-from lidarkit.registration.local_origin import LocalOrigin
+from lidarkit.registration import local_origin
 from lidarkit.registration.planar import refuse_2d
 from lidarkit.registration.registry import register_icp
 from lidarkit.threads import background
@@ -44,29 +44,29 @@ class _Open3DBase(Registration):
     def __init__(self, config=None, **params):
         super().__init__(config, **params)
         self._cache = CloudCache()  # the last two prepared clouds: a frame registered again finds both
-        self._origin = LocalOrigin()  # clouds far from the origin are registered near a local one
 
-    def _clouds(self, source_xyz: np.ndarray, target_xyz: np.ndarray, offset: np.ndarray | None = None):
-        """Open3D clouds (downsampled, with normals for the surface variants), around the local origin ``offset``. In a
-        scan-to-scan chain the source of one frame is the target of the next: that cloud is prepared once, as an Open3D
-        odometry loop would."""
+    def _clouds(self, source_xyz: np.ndarray, target_xyz: np.ndarray):
+        """``(source, target)``, each an Open3D cloud (downsampled, with normals for the surface variants) around its
+        local origin (:mod:`lidarkit.registration.local_origin`) and that origin (None: the origin). In a scan-to-scan
+        chain the source of one frame is the target of the next: that cloud is prepared once, as an Open3D odometry loop
+        would."""
         import open3d as o3d
 
         c = self.config
         clouds = []
-        settings = None if offset is None else tuple(offset)
         for pts in (target_xyz, source_xyz):
-            hit = self._cache.get(pts, settings)
+            hit = self._cache.get(pts)
             if hit is not None:
                 clouds.append(hit)
                 continue
-            pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(LocalOrigin.shift(pts, offset)))
+            offset = local_origin.local_offset(pts)
+            pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(local_origin.shift(pts, offset)))
             if c.voxel_size_m is not None:
                 pc = pc.voxel_down_sample(c.voxel_size_m)
             if self._kind != "point_to_point":
                 # GICP builds its plane-like covariances from these normals (Open3D's own rule)
                 pc.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=c.normal_radius_m, max_nn=c.normal_max_nn))
-            clouds.append(self._cache.put(pts, pc, settings))
+            clouds.append(self._cache.put(pts, (pc, offset)))
         return clouds[1], clouds[0]
 
     def _register(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray):
@@ -76,11 +76,8 @@ class _Open3DBase(Registration):
         c = self.config
         if self._kind != "point_to_point":
             refuse_2d(self.name, source_xyz, target_xyz, "normals / covariances of a 2D scan's line-like neighbourhoods are undefined in 3D")
-        offset = self._origin.update(target_xyz)
-        src, dst = self._clouds(source_xyz, target_xyz, offset)
-        dst_pts = np.asarray(dst.points)
-        if offset is not None:  # the assessment works where the clouds are (the backend near the local origin)
-            dst_pts = dst_pts + offset
+        (src, so), (dst, to) = self._clouds(source_xyz, target_xyz)
+        dst_pts = local_origin.given(np.asarray(dst.points), to)  # the assessment works where the clouds are
         # the assessment's pose-free part (the target's local-surface index) is built in another thread while Open3D,
         # which releases the GIL, registers
         surfaces = background(lambda: SurfaceIndex(dst_pts)) if c.assess else None
@@ -88,7 +85,7 @@ class _Open3DBase(Registration):
         try:
             if self._kind == "gicp":
                 out = reg.registration_generalized_icp(
-                    src, dst, c.max_correspondence_distance_m, LocalOrigin.into(init_T, offset),
+                    src, dst, c.max_correspondence_distance_m, local_origin.into(init_T, to, so),
                     reg.TransformationEstimationForGeneralizedICP(), criteria,
                 )
             else:
@@ -97,18 +94,18 @@ class _Open3DBase(Registration):
                     if self._kind == "point_to_point"
                     else reg.TransformationEstimationPointToPlane()
                 )
-                out = reg.registration_icp(src, dst, c.max_correspondence_distance_m, LocalOrigin.into(init_T, offset), estimation, criteria)
+                out = reg.registration_icp(src, dst, c.max_correspondence_distance_m, local_origin.into(init_T, to, so), estimation, criteria)
         except BaseException:
             if surfaces is not None:
                 with contextlib.suppress(Exception):
                     surfaces.result()  # joined (its thread ends) before the error goes on
             raise
         prepared = surfaces.result() if surfaces is not None else None  # joined here: it never outlives the registration
-        T = LocalOrigin.out_of(np.array(out.transformation, dtype=np.float64), offset)
+        T = local_origin.out_of(np.array(out.transformation, dtype=np.float64), to, so)
         no_pairs = float(out.fitness) <= 0
 
         def assess() -> RegistrationResult:
-            src_pts = np.asarray(src.points) if offset is None else np.asarray(src.points) + offset
+            src_pts = local_origin.given(np.asarray(src.points), so)
             # Open3D's own final correspondences (nearest target point within the distance, at the returned pose): the
             # assessment reuses them instead of indexing the target a second time
             pairs = np.asarray(out.correspondence_set, dtype=np.int64).reshape(-1, 2)

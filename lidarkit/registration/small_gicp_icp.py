@@ -17,7 +17,7 @@ from lidarkit.geometry import transform_points
 from lidarkit.registration.assessment import assess_alignment
 from lidarkit.registration.base import Registration, RegistrationConfig, RegistrationResult
 from lidarkit.registration.cloud_cache import CloudCache
-from lidarkit.registration.local_origin import LocalOrigin
+from lidarkit.registration import local_origin
 from lidarkit.registration.planar import refuse_2d
 from lidarkit.registration.registry import register_icp
 
@@ -73,16 +73,15 @@ if _small_gicp is not None:
             # (PointCloud, KdTree, voxel-ordered points, rank) of the last two preprocessed clouds: a frame registered
             # again (the odometry runner's overlap, when the gate turns the previous frame down) finds both
             self._cache = CloudCache()
-            self._origin = LocalOrigin()  # clouds far from the origin are registered near a local one
 
-        def _preprocess(self, points: np.ndarray, offset: np.ndarray | None = None):
+        def _preprocess(self, points: np.ndarray):
             """small_gicp's own downsampling + covariances + KdTree, reused when the same cloud comes back (in a
             scan-to-scan chain the source of one frame is the target of the next: preprocessed once, as small_gicp's
             own odometry loop does). Also the cloud's points in voxel order and each point's rank in that order, for the
-            assessment (:func:`voxel_order`; None with ``assess=False``). ``offset``: the local origin (see
-            :mod:`lidarkit.registration.local_origin`) the cloud is prepared around."""
+            assessment (:func:`voxel_order`; None with ``assess=False``); and the local origin the cloud was prepared
+            around (None: the origin, see :mod:`lidarkit.registration.local_origin`)."""
             c = self.config
-            settings = (c.downsampling_resolution_m, c.assess, None if offset is None else tuple(offset))
+            settings = (c.downsampling_resolution_m, c.assess)
             cached = self._cache.get(points, settings)
             if cached is not None:
                 return cached
@@ -90,8 +89,9 @@ if _small_gicp is not None:
             # taken one by one to keep the cloud; the KdTree on num_threads rather than on one thread as align(points...)
             # builds it: ~1 ms less a KITTI scan, 2-3 % of a frame (10 KITTI scans, pairwise and odometry, with and without
             # the assessment, 9 alternating runs)
-            cloud = _small_gicp.voxelgrid_sampling(LocalOrigin.shift(np.asarray(points, dtype=np.float64), offset),
-                                                   c.downsampling_resolution_m, num_threads=c.num_threads)
+            points = np.asarray(points, dtype=np.float64)
+            offset = local_origin.local_offset(points)
+            cloud = _small_gicp.voxelgrid_sampling(local_origin.shift(points, offset), c.downsampling_resolution_m, num_threads=c.num_threads)
             tree = _small_gicp.KdTree(cloud, num_threads=c.num_threads)
             _small_gicp.estimate_covariances(cloud, tree, num_neighbors=10, num_threads=c.num_threads)
             ordered = rank = None  # only the assessment needs them
@@ -101,49 +101,48 @@ if _small_gicp is not None:
                 rank = np.empty_like(order)
                 rank[order] = np.arange(len(order))
                 ordered = xyz[order]
-            return self._cache.put(points, (cloud, tree, ordered, rank), settings)
+            return self._cache.put(points, (cloud, tree, ordered, rank, offset), settings)
 
         def _register(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray):
             c = self.config
             if c.registration_type != "ICP":
                 refuse_2d(self.name, source_xyz, target_xyz, f"{c.registration_type} needs surface covariances / normals, undefined on a 2D scan")
-            offset = self._origin.update(target_xyz)
             if c.registration_type == "VGICP":
+                to, so = local_origin.local_offset(target_xyz), local_origin.local_offset(source_xyz)
                 out = _small_gicp.align(
-                    LocalOrigin.shift(target_xyz, offset), LocalOrigin.shift(source_xyz, offset), LocalOrigin.into(init_T, offset),
+                    local_origin.shift(target_xyz, to), local_origin.shift(source_xyz, so), local_origin.into(init_T, to, so),
                     registration_type="VGICP", voxel_resolution=c.voxel_resolution_m, downsampling_resolution=c.downsampling_resolution_m,
                     max_correspondence_distance=c.max_correspondence_distance_m, num_threads=c.num_threads, max_iterations=c.max_iterations,
                 )
-                T = LocalOrigin.out_of(np.array(out.T_target_source, dtype=np.float64), offset)
+                T = local_origin.out_of(np.array(out.T_target_source, dtype=np.float64), to, so)
 
                 def assess() -> RegistrationResult:
-                    def voxelized(points):  # voxel-ordered, around the local origin, then back where the cloud is
-                        xyz = _small_gicp.voxelgrid_sampling(LocalOrigin.shift(points, offset), c.downsampling_resolution_m,
+                    def voxelized(points, offset):  # voxel-ordered, around the local origin, then back where the cloud is
+                        xyz = _small_gicp.voxelgrid_sampling(local_origin.shift(points, offset), c.downsampling_resolution_m,
                                                              num_threads=c.num_threads).points()[:, :3]
-                        xyz = xyz[voxel_order(xyz, c.downsampling_resolution_m)]
-                        return xyz if offset is None else xyz + offset
+                        return local_origin.given(xyz[voxel_order(xyz, c.downsampling_resolution_m)], offset)
 
-                    src, dst = voxelized(source_xyz), voxelized(target_xyz)
+                    src, dst = voxelized(source_xyz, so), voxelized(target_xyz, to)
                     return self._result(out, T, assess_alignment(src, dst, T, c.max_correspondence_distance_m))
 
                 return T, bool(out.converged), assess
             # the same computation as small_gicp.align(points...) (identical poses), with the preprocessed clouds and
             # the target's KdTree kept for the assessment instead of voxelizing and indexing both clouds again
-            target, target_tree, dst, dst_rank = self._preprocess(target_xyz, offset)
-            source, _, src, _ = self._preprocess(source_xyz, offset)  # stays cached: the next frame's target
+            target, target_tree, dst, dst_rank, to = self._preprocess(target_xyz)
+            source, _, src, _, so = self._preprocess(source_xyz)  # stays cached: the next frame's target
             out = _small_gicp.align(
-                target, source, target_tree, LocalOrigin.into(init_T, offset), registration_type=c.registration_type,
+                target, source, target_tree, local_origin.into(init_T, to, so), registration_type=c.registration_type,
                 max_correspondence_distance=c.max_correspondence_distance_m, num_threads=c.num_threads, max_iterations=c.max_iterations,
             )
             T_local = np.array(out.T_target_source, dtype=np.float64)
-            T = LocalOrigin.out_of(T_local, offset)
+            T = local_origin.out_of(T_local, to, so)
 
             def assess() -> RegistrationResult:
                 # one thread: a single pass of nearest neighbours does not repay another OpenMP region (its threads spin
                 # while they wait, which on a busy machine costs more CPU than the pass saves)
                 index, dist2 = target_tree.batch_nearest_neighbor_search(transform_points(T_local, src), num_threads=1)
                 index = dst_rank[np.asarray(index)]  # the tree's indices into the voxel-ordered target
-                given_src, given_dst = (src, dst) if offset is None else (src + offset, dst + offset)  # where the clouds are
+                given_src, given_dst = local_origin.given(src, so), local_origin.given(dst, to)  # where the clouds are
                 assessment = assess_alignment(given_src, given_dst, T, c.max_correspondence_distance_m, dist2=np.asarray(dist2), index=index)
                 return self._result(out, T, assessment)
 
