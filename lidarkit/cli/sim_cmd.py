@@ -44,6 +44,8 @@ def sim_lidar(
     suffix = {"rosbag1": ".bag", "mcap": ".mcap"}.get(fmt)
     if suffix is not None and out.suffix != suffix:  # what the readers (and their detection) recognise the file by
         raise ConfigError(f"a {fmt} file is named *{suffix}, got {out.name!r}", source="--out")
+    if fmt == "rosbag2" and out.suffix in (".bag", ".mcap"):  # a ROS 2 bag is a folder: read as a file by that name
+        raise ConfigError(f"a rosbag2 bag is a folder: name it without {out.suffix}, got {out.name!r}", source="--out")
     if fmt != "kitti" and out.exists():
         raise OutputError("exists already; bags are never overwritten", source=out)
     check_target(out, "file" if suffix else "folder")
