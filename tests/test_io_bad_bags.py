@@ -149,6 +149,21 @@ def test_ground_truth_poses_that_cannot_stand_one_per_scan(tmp_path):
     sparse = write_ros1_bag(tmp_path / "sparse.bag", scans, odometry=[(1000.0, (0, 0, 0), (0, 0, 0, 1)), (1005.0, (5, 0, 0), (0, 0, 0, 1))])
     with pytest.raises(DataError, match=r"2 poses for 3 scans: scans 0 and 1 are both nearest to the pose at 1000.000 s"):
         open_dataset("rosbag", sparse).ground_truth
+    registered = []
+
+    class Counting:  # a stateful stand-in: the ground truth's problem comes before any frame is registered
+        name, stateful, config = "counting", True, None
+
+        def reset(self):
+            pass
+
+        def register_frame(self, points_xyz, point_times_s=None):
+            registered.append(1)
+            return np.eye(4)
+
+    with pytest.raises(DataError, match="2 poses for 3 scans"):
+        run(open_dataset("rosbag", sparse), Counting())
+    assert registered == []
     one = write_ros1_bag(tmp_path / "one.bag", scans, odometry=[(1000.0, (0, 0, 0), (0, 0, 0, 1))])
     with pytest.raises(DataError, match=r"1 pose\(s\) for 3 scans: one pose per scan needed"):
         open_dataset("rosbag", one).ground_truth

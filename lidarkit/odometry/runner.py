@@ -343,6 +343,9 @@ def run(
     want_covariance = (not stateful and assessed) if pose_covariance is None else bool(pose_covariance)
     widened: list[int] = []  # frames whose covariance got the distortion floor
     checker = FrameChecker(n, frame_check)
+    # the ground truth is read before the run: a problem with it (too few poses in a bag, a bad pose file) is reported
+    # now, not after registering every frame
+    reference = _reference(sequence, ground_truth, indices, dataset_name)
     need_times = strict and bool(deskew_requested(registration)) and (stateful or getattr(registration, "accepts_point_times", False))
     if strict and not stateful and deskew_requested(registration) and not getattr(registration, "accepts_point_times", False):
         raise ConfigError(f"deskew requested, but {name} runs scan-to-scan through align(), which takes no per-point times", source=name)
@@ -442,7 +445,6 @@ def run(
     timestamps = sequence.timestamps_s
     timestamps = None if timestamps is None else np.asarray(timestamps, dtype=np.float64)[indices]
     trajectory = Trajectory(poses, timestamps, name=f"{name} on {title}", meta={"method": name, "dataset": dataset_name})
-    reference = _reference(sequence, ground_truth, indices, dataset_name)
     instant_note = None
     if reference is not None:  # score like with like: the estimate's and the ground truth's instant of the sweep
         retimed, instant_note = like_with_like(reference, estimate_instant(registration, first_scan), sequence=sequence,
