@@ -164,6 +164,7 @@ def test_ground_truth_poses_that_cannot_stand_one_per_scan(tmp_path):
     with pytest.raises(DataError, match="2 poses for 3 scans"):
         run(open_dataset("rosbag", sparse), Counting())
     assert registered == []
+    assert open_dataset("rosbag", sparse, ground_truth_topic="none").ground_truth is None  # none named (an empty spec value is "auto")
     one = write_ros1_bag(tmp_path / "one.bag", scans, odometry=[(1000.0, (0, 0, 0), (0, 0, 0, 1))])
     with pytest.raises(DataError, match=r"1 pose\(s\) for 3 scans: one pose per scan needed"):
         open_dataset("rosbag", one).ground_truth

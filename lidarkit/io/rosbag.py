@@ -100,6 +100,8 @@ class _BagScans:
             raise DataError(f"several {POINTCLOUD2} topics ({', '.join(clouds)}): choose one with topic=...", source=self.path)
         self.topic = topic or clouds[0]
         odometry = sorted(t for t, m in topics.items() if m == ODOMETRY)
+        if ground_truth_topic == "none":  # (a spec's empty value reads as "auto": none is named)
+            ground_truth_topic = ""
         if ground_truth_topic:
             if topics.get(ground_truth_topic) != ODOMETRY:
                 raise DataError(f"ground_truth_topic {ground_truth_topic!r} is not a {ODOMETRY} topic; topics present: {listing}", source=self.path)
@@ -292,7 +294,7 @@ class RosbagScans(_BagScans):
     """ROS 1 ``.bag`` (or a folder of split bags) or ROS 2 bag folder, via kiss-icp's ``RosbagDataset``.
 
     Options: ``topic`` (the PointCloud2 topic; needed when there are several), ``ground_truth_topic`` (a
-    ``nav_msgs/Odometry`` topic; default: the only one, ``""``: none), ``time_field`` (``auto``, a field name or
+    ``nav_msgs/Odometry`` topic; default: the only one, ``""`` or ``none``: none), ``time_field`` (``auto``, a field name or
     ``none``).
     """
 
