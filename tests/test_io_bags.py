@@ -50,6 +50,8 @@ def test_odometry_help_lists_the_kinds(capsys):
     text = " ".join(capsys.readouterr().out.split())
     for kind in ("rosbag", "mcap", "ouster", "nclt", "mulran", "ncd", "helipr", "boreas", "apollo", "nuscenes", "generic", "kiss_kitti"):
         assert kind in text
+    listed = text.split("kinds:")[1].split(")")[0].replace("│", " ")
+    assert "landmarks" not in listed and " tum," not in f" {' '.join(listed.split())},"  # no scans to run odometry on
 
 
 def test_detect_kind(exports, tmp_path):

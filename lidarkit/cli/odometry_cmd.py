@@ -12,9 +12,9 @@ from rich.text import Text
 from lidarkit.cli.app import app, parse_params, stdout
 
 def _kinds() -> str:
-    from lidarkit.io import available_datasets
+    from lidarkit.io import NOT_SCANS, available_datasets
 
-    return ", ".join(available_datasets())
+    return ", ".join(kind for kind in available_datasets() if kind not in NOT_SCANS)
 
 
 DATA_HELP = (

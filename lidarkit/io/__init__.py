@@ -39,6 +39,8 @@ _BUILTIN: dict[str, str] = {
     "kiss_tum": "lidarkit.io.kiss_loaders:KissTumScans",
 }
 _REGISTERED: dict[str, Callable[..., Any]] = {}
+#: Built-in kinds whose readers hold other data than LiDAR scans (TUM RGB-D images, a landmark map)
+NOT_SCANS = frozenset({"tum", "landmarks"})
 
 
 def register_dataset(kind: str) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
@@ -133,4 +135,4 @@ def _typed_options(reader: Any, kind: str, options: dict[str, Any]) -> dict[str,
     return out
 
 
-__all__ = ["available_datasets", "detect_kind", "get_reader", "open_dataset", "register_dataset"]
+__all__ = ["NOT_SCANS", "available_datasets", "detect_kind", "get_reader", "open_dataset", "register_dataset"]
