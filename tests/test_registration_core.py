@@ -540,3 +540,11 @@ def test_georeferenced_clouds_register_as_at_the_origin(method):
     apart = get_icp(method).align(source + offset, target, init_T=T0)
     assert apart.converged and apart.fitness == pytest.approx(near.fitness, abs=1e-3)
     np.testing.assert_allclose(into(apart.T_target_source, None, offset), near.T_target_source, atol=1e-6)
+
+
+def test_a_cloud_that_is_one_point_repeated_is_refused():
+    """1000 copies of one point is a 1-point cloud: vanilla, knn and genz returned 'converged' with an arbitrary pose."""
+    rng = np.random.default_rng(0)
+    for method in ("vanilla", "knn", "open3d_point_to_plane"):
+        with pytest.raises(DataError, match=r"source cloud: all 1000 points are one point \(1, 1, 1\): nothing to register"):
+            get_icp(method).align(np.ones((1000, 3)), rng.uniform(-5, 5, (500, 3)))

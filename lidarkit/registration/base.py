@@ -240,6 +240,11 @@ def check_pair(
     """
     src = as_points(source_xyz, "source cloud", min_points=min_points)
     dst = as_points(target_xyz, "target cloud", min_points=min_points)
+    for name, cloud in (("source cloud", src), ("target cloud", dst)):
+        probe = cloud[:: max(1, len(cloud) // 64)]
+        if not np.ptp(probe, axis=0).any() and not np.ptp(cloud, axis=0).any():  # (the whole cloud only when the probe is)
+            raise DataError(f"all {len(cloud)} points are one point ({', '.join(f'{v:g}' for v in cloud[0])}): nothing to register",
+                            source=name)
     T0 = np.eye(4) if init_T is None else check_init_T(init_T)
     return src, dst, T0
 
