@@ -71,14 +71,18 @@ def is_number(text: str) -> bool:
     return True
 
 
+def data_line_numbers(path: str | os.PathLike) -> list[int]:
+    """The file line (from 1) of each row ``read_numeric_table`` reads from ``path`` (blank and ``#`` lines skipped
+    as the reader skips them)."""
+    return [i for i, raw in enumerate(read_lines(path), start=1) if raw.strip() and not raw.strip().startswith("#")]
+
+
 def file_line(path: str | os.PathLike, location: str | None) -> str | None:
-    """``"frame K"`` of a table read by ``read_numeric_table`` -> ``"line L"`` of ``path`` (blank and ``#`` lines
-    skipped as the reader skips them); other locations unchanged."""
+    """``"frame K"`` of a table read by ``read_numeric_table`` -> ``"line L"`` of ``path``; other locations unchanged."""
     if not location or not location.startswith("frame "):
         return location
     try:
         k = int(location.split()[1])
-        data_lines = [i for i, raw in enumerate(read_lines(path), start=1) if raw.strip() and not raw.strip().startswith("#")]
-        return f"line {data_lines[k]} ({location})"
+        return f"line {data_line_numbers(path)[k]} ({location})"
     except (ValueError, IndexError, LidarKitError):
         return location

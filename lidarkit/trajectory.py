@@ -14,7 +14,7 @@ from scipy.spatial.transform import Rotation
 from lidarkit import atomic
 from lidarkit.errors import DataError
 from lidarkit.geometry import ORTHONORMAL_TOL, orthonormalize_se3, se3_inverse
-from lidarkit.textfile import file_line, read_numeric_table
+from lidarkit.textfile import data_line_numbers, file_line, read_numeric_table
 
 log = logging.getLogger(__name__)
 
@@ -230,7 +230,8 @@ class Trajectory:
                             source=path, location=file_line(path, f"frame {k}"))
         repeated = np.flatnonzero(step == 0) + 1
         if repeated.size:
-            lines = ", ".join(str(file_line(path, f"frame {k}")).split(" (")[0] for k in repeated[:5])
+            numbers = data_line_numbers(path)  # (the file is read once for all the lines named)
+            lines = ", ".join(f"line {numbers[k]}" for k in repeated[:5])
             log.warning("%s: %d pose(s) repeat the timestamp of the pose before them (%s%s): each left out",
                         path, repeated.size, lines, ", ..." if repeated.size > 5 else "")
             rows = np.delete(rows, repeated, axis=0)
