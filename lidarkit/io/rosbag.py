@@ -21,6 +21,7 @@ import io
 import logging
 import os
 from collections.abc import Iterator
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -195,7 +196,7 @@ class _BagScans:
         """One recorded odometry pose per scan, ``meta["pose_instant"]`` read from the stamps (None if unclear)."""
         if self.ground_truth_topic is None:
             return None
-        gt_stamps, gt_poses = self._recorded_ground_truth()
+        gt_stamps, gt_poses = self._recorded_ground_truth
         scan_stamps = self.timestamps_s
         if len(gt_stamps) != len(scan_stamps):
             source = f"{self.path}{self.ground_truth_topic}"
@@ -222,14 +223,14 @@ class _BagScans:
             raise DataError(f"unknown instant {instant!r}; valid: {', '.join(INSTANT_FRACTION)}", source=self.path)
         if self.ground_truth_topic is None:
             raise DataError("no ground-truth topic", source=self.path)
-        timing = self._sweep_timing()
+        timing = self._sweep_timing
         if timing is None:
             raise DataError("the scans carry no per-point times, so where a sweep starts and ends is unknown", source=self.path,
                             location=self._location(0))
         start, period = timing
         scan_stamps = self.timestamps_s
         times = scan_stamps + (start - scan_stamps[0]) + INSTANT_FRACTION[instant] * period
-        stamps, poses = self._recorded_ground_truth()
+        stamps, poses = self._recorded_ground_truth
         if len(stamps) < 2 or not (np.diff(stamps) > 0).all():
             raise DataError(f"{self.ground_truth_topic}: interpolating needs two or more poses with increasing stamps",
                             source=self.path)
@@ -243,8 +244,10 @@ class _BagScans:
         meta = {"frame": f"as recorded on {self.ground_truth_topic}", "pose_instant": instant, "retimed": how}
         return Trajectory(out.poses_se3, times, name=recorded.name, meta=meta)
 
+    @cached_property
     def _recorded_ground_truth(self) -> tuple[np.ndarray, np.ndarray]:
-        """Stamps (s) and poses ``(n, 4, 4)`` of every message on the ground-truth topic."""
+        """Stamps (s) and poses ``(n, 4, 4)`` of every message on the ground-truth topic (read once: the ground truth
+        and its re-timing both use them)."""
         stamps, poses = [], []
         for k, (_, msg) in enumerate(self._messages(self.ground_truth_topic)):
             p, q = msg.pose.pose.position, msg.pose.pose.orientation
@@ -260,12 +263,13 @@ class _BagScans:
 
     def _ground_truth_instant(self, gt_stamps: np.ndarray) -> str | None:
         """Which instant of the sweep the ground truth stamps are (None: the scans carry no point times)."""
-        timing = self._sweep_timing()
+        timing = self._sweep_timing
         if timing is None:
             return None
         start, period = timing
         return classify_instant((float(gt_stamps[0]) - start) / period)
 
+    @cached_property
     def _sweep_timing(self) -> tuple[float, float] | None:
         """(absolute time of sweep 0's first point, the nominal sweep period) from scan 0's point times and the
         spacing of the stamps (the last point fires just before the next sweep; one scan: its own time span);
