@@ -214,13 +214,19 @@ class RegistrationResult:
         })
 
 
+def finite_4x4(T: np.ndarray, source: str, what: str = "matrix") -> np.ndarray:
+    """``T`` as a float64 4x4 array; DataError naming ``source`` for another shape or NaN / infinite entries."""
+    T = np.asarray(T, dtype=np.float64)
+    if T.shape != (4, 4):
+        raise DataError(f"expected a 4x4 {what}, got shape {T.shape}", source=source)
+    if not np.isfinite(T).all():
+        raise DataError(f"{int((~np.isfinite(T)).sum())} of its 16 entries are NaN or infinite", source=source)
+    return T
+
+
 def check_init_T(init_T: np.ndarray, source: str = "init_T") -> np.ndarray:
     """A validated initial guess with an exactly orthonormal rotation (see :func:`check_pair`)."""
-    T0 = np.asarray(init_T, dtype=np.float64)
-    if T0.shape != (4, 4):
-        raise DataError(f"expected a 4x4 matrix, got shape {T0.shape}", source=source)
-    if not np.isfinite(T0).all():
-        raise DataError(f"{int((~np.isfinite(T0)).sum())} of its 16 entries are NaN or infinite", source=source)
+    T0 = finite_4x4(init_T, source)
     if not np.array_equal(T0[3], [0.0, 0.0, 0.0, 1.0]):
         raise DataError(f"last row must be [0, 0, 0, 1], got {T0[3].tolist()}", source=source)
     if not is_rotation(T0[:3, :3], tol=INIT_ROTATION_TOL):

@@ -20,7 +20,7 @@ from pydantic import Field, model_validator
 from lidarkit.errors import DataError, RegistrationError
 from lidarkit.geometry import as_points, is_rotation, orthonormalize_se3
 from lidarkit.registration.assessment import assess_alignment
-from lidarkit.registration.base import Registration, RegistrationConfig, RegistrationResult
+from lidarkit.registration.base import Registration, RegistrationConfig, RegistrationResult, finite_4x4
 from lidarkit.registration.registry import register_icp
 
 #: Rotations passed to kiss-icp must be orthonormal to this (Sophus checks ~1e-10).
@@ -29,11 +29,7 @@ KISS_ORTHONORMAL_TOL = 1e-12
 
 def kiss_safe_pose(T: np.ndarray, name: str = "pose") -> np.ndarray:
     """A float64 4x4 pose kiss-icp accepts: re-orthonormalized unless already exact (then returned as is)."""
-    T = np.asarray(T, dtype=np.float64)
-    if T.shape != (4, 4):
-        raise DataError(f"expected a 4x4 pose, got shape {T.shape}", source=name)
-    if not np.isfinite(T).all():
-        raise DataError(f"{int((~np.isfinite(T)).sum())} of its 16 entries are NaN or infinite", source=name)
+    T = finite_4x4(T, name, "pose")
     if is_rotation(T[:3, :3], tol=KISS_ORTHONORMAL_TOL) and np.array_equal(T[3], [0.0, 0.0, 0.0, 1.0]):
         return T
     return orthonormalize_se3(T)
