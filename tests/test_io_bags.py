@@ -123,6 +123,8 @@ def test_sim_cli_refuses_a_bag_name_the_readers_would_not_recognise_or_an_existi
     assert sim(tmp_path / "xdir", "rosbag1") == (1, "error: --out: a rosbag1 file is named *.bag, got 'xdir'\n")
     assert sim(tmp_path / "x.txt", "mcap")[1].startswith("error: --out: a mcap file is named *.mcap")
     assert sim(tmp_path / "r2.bag", "rosbag2")[1].startswith("error: --out: a rosbag2 bag is a folder: name it without .bag")
+    with pytest.raises(ConfigError, match=r"a rosbag1 file is named \*\.bag, got 'lib'"):  # the library refuses it too
+        export_bag(SimulatedLidarSequence(n_frames=1, n_beams=8, n_azimuths=90), tmp_path / "lib", "rosbag1")
     assert sim(tmp_path / "m.mcap", "mcap")[0] in (0, None)
     code, err = sim(tmp_path / "m.mcap", "mcap")
     assert code == 1 and "m.mcap: exists already; bags are never overwritten" in err

@@ -30,8 +30,8 @@ def sim_lidar(
 ) -> None:
     """Simulate a spinning LiDAR driving through a procedural scene; poses are T_world_lidar at the sweep end by default."""
     from lidarkit.cli.app import parse_params
-    from lidarkit.errors import ConfigError, OutputError
-    from lidarkit.sim.bag_export import BAG_FORMATS, export_bag
+    from lidarkit.errors import ConfigError
+    from lidarkit.sim.bag_export import BAG_FORMATS, check_bag_target, export_bag
     from lidarkit.sim.lidar import SimulatedLidarSequence, export_kitti, make_config
 
     if fmt not in ("kitti", *BAG_FORMATS):
@@ -41,14 +41,9 @@ def sim_lidar(
 
     from lidarkit.atomic import check_target
 
-    suffix = {"rosbag1": ".bag", "mcap": ".mcap"}.get(fmt)
-    if suffix is not None and out.suffix != suffix:  # what the readers (and their detection) recognise the file by
-        raise ConfigError(f"a {fmt} file is named *{suffix}, got {out.name!r}", source="--out")
-    if fmt == "rosbag2" and out.suffix in (".bag", ".mcap"):  # a ROS 2 bag is a folder: read as a file by that name
-        raise ConfigError(f"a rosbag2 bag is a folder: name it without {out.suffix}, got {out.name!r}", source="--out")
-    if fmt != "kitti" and out.exists():
-        raise OutputError("exists already; bags are never overwritten", source=out)
-    check_target(out, "file" if suffix else "folder")
+    if fmt != "kitti":  # before the simulation: a bag's name and that it is not there yet
+        check_bag_target(out, fmt, option="--out")
+    check_target(out, "file" if fmt in ("rosbag1", "mcap") else "folder")
     params = parse_params(param)
     own = {"scene": "--scene", "n_frames": "--frames", "seed": "--seed"}
     for key in sorted(own.keys() & params.keys()):

@@ -31,6 +31,21 @@ _POINT_DTYPE_NO_TIMES = np.dtype({"names": ["x", "y", "z", "intensity"], "format
 _PF_FLOAT32, _PF_UINT32 = 7, 6  # sensor_msgs/PointField datatype codes
 
 
+def check_bag_target(out: str | os.PathLike, fmt: str, option: str | None = None) -> Path:
+    """``out`` as a bag of ``fmt`` may be named (as the readers and their detection recognise it) and is not there yet;
+    ConfigError naming ``option`` (default: the path) for a name, DataError for an existing bag. Checked again by
+    :func:`export_bag`; the CLI calls it before simulating."""
+    out = Path(out)
+    suffix = {"rosbag1": ".bag", "mcap": ".mcap"}.get(fmt)
+    if suffix is not None and out.suffix != suffix:
+        raise ConfigError(f"a {fmt} file is named *{suffix}, got {out.name!r}", source=option or out)
+    if fmt == "rosbag2" and out.suffix in (".bag", ".mcap"):  # a ROS 2 bag is a folder: read as a file by that name
+        raise ConfigError(f"a rosbag2 bag is a folder: name it without {out.suffix}, got {out.name!r}", source=option or out)
+    if out.exists():
+        raise DataError("exists already; bags are never overwritten", source=out)
+    return out
+
+
 def export_bag(sequence, out: str | os.PathLike, fmt: str = "rosbag2", *, storage: str = "sqlite3",
                on_frame: Callable[[int], None] | None = None) -> Path:
     """Write ``sequence`` (a :class:`~lidarkit.sim.lidar.SimulatedLidarSequence`) to ``out`` and return it.
@@ -47,9 +62,7 @@ def export_bag(sequence, out: str | os.PathLike, fmt: str = "rosbag2", *, storag
         from rosbags.typesys import Stores, get_typestore
     except ImportError:
         raise ConfigError("writing bags needs the Python package 'rosbags': pip install 'lidarkit[ros]'", source=f"format {fmt}") from None
-    out = Path(out)
-    if out.exists():
-        raise DataError("exists already; bags are never overwritten", source=out)
+    out = check_bag_target(out, fmt)
     from lidarkit import atomic
 
     atomic.ensure_dir(out.parent)
@@ -136,4 +149,4 @@ def _write_messages(sequence, writer, typestore, serialize, *, ros1: bool, on_fr
                 on_frame(i)
 
 
-__all__ = ["BAG_FORMATS", "GROUND_TRUTH_TOPIC", "POINTS_TOPIC", "STORAGES", "export_bag"]
+__all__ = ["BAG_FORMATS", "GROUND_TRUTH_TOPIC", "POINTS_TOPIC", "STORAGES", "check_bag_target", "export_bag"]
