@@ -87,6 +87,12 @@ def test_config_is_resolved_frozen_and_described():
     fields = config_fields("kiss")
     assert fields["max_range_m"][1] == 100.0 and fields["deskew"][1] is True
     assert all(desc for _, _, desc in fields.values())
+    assert fields["max_range_m"][0] == "float"
+    # a container reads as one (dict[str, Any], not "str | Any"); only unions join with |
+    ground = config_fields("ground_filtered")
+    assert ground["ground_params"][0] == "dict[str, Any]"
+    assert ground["max_correspondence_distance_m"][0] == "float | None"
+    assert config_fields("pipeline")["preprocess"][0] == "list[str | dict[str, Any]]"
 
 
 def test_register_icp_rejects_non_registration_and_name_clash():

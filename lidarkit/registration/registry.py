@@ -10,7 +10,8 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable
 from importlib.metadata import entry_points
-from typing import Any, Literal, get_args, get_origin
+from types import UnionType
+from typing import Any, Literal, Union, get_args, get_origin
 
 import pydantic
 
@@ -90,8 +91,14 @@ def _type_name(annotation: Any) -> str:
     if get_origin(annotation) is Literal:
         return " | ".join(repr(a) for a in get_args(annotation))
     args = get_args(annotation)
-    if args:
+    origin = get_origin(annotation)
+    if args and origin in (Union, UnionType):
         return " | ".join(_type_name(a) for a in args)
+    if args:  # a container: dict[str, Any], tuple[float, ...]
+        inner = ", ".join("..." if a is Ellipsis else _type_name(a) for a in args)
+        return f"{getattr(origin, '__name__', str(origin))}[{inner}]"
+    if annotation is Any:
+        return "Any"
     return "None" if annotation is type(None) else getattr(annotation, "__name__", str(annotation))
 
 
