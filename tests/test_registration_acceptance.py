@@ -165,3 +165,5 @@ def test_staged_icp_assesses_only_the_final_stage(monkeypatch):
     res = get_icp("vanilla", coarse_stride=8).align(transform_points(np.linalg.inv(T), target), target)
     assert res.extra["coarse_iterations"] > 0 and res.converged
     assert calls == [len(target)]  # once, on the full-resolution stage
+    # one RMSE at the initial guess and one after each iteration of either stage, as with one stage
+    assert len(res.rmse_history) == res.iterations + 1 and res.rmse_history[0] > res.rmse_history[-1]

@@ -156,9 +156,11 @@ class Degeneracy:
 class RegistrationResult:
     """Outcome of one pairwise registration.
 
-    ``T_target_source``: ``(4, 4)`` float64; ``rmse_history``: RMSE (m) of the correspondences at
-    each iteration; ``fitness``: fraction of source points with a correspondence within the inlier
-    distance at the solution; ``reason``: why it did not converge or was flagged ("" if all is well);
+    ``T_target_source``: ``(4, 4)`` float64; ``rmse_history``: RMSE (m) of the correspondences as the variant's
+    loop measured them, oldest first (lidarkit's point-to-point loops: at the initial guess and after each iteration,
+    ``iterations + 1`` values; ``pipeline``: at the start of each iteration; the final RMSE alone where the library
+    reports no RMSE per iteration: small_gicp, Open3D, kiss, genz); ``fitness``: fraction of source points with a
+    correspondence within the inlier distance at the solution; ``reason``: why it did not converge or was flagged ("" if all is well);
     ``covariance``: ``(6, 6)`` uncertainty of ``T_target_source`` (left perturbation in the target frame,
     translation first, m and rad: see ``lidarkit.registration.covariance``), None where it was not computed;
     ``surface_step``: ``(6,)`` one Gauss-Newton step of the point-to-surface residuals from ``T_target_source``, in

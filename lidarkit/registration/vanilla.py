@@ -162,7 +162,9 @@ def staged_icp(
     return dataclasses.replace(
         fine,
         iterations=coarse.iterations + fine.iterations,
-        rmse_history=coarse.rmse_history + fine.rmse_history,
+        # one value at the initial guess and one after each iteration: the fine stage's first value (at the coarse
+        # result, where the coarse stage measured last on its subsample) is left out
+        rmse_history=coarse.rmse_history + fine.rmse_history[1:],
         extra={**fine.extra, "coarse_iterations": coarse.iterations, "coarse_stride": stride},
     )
 
