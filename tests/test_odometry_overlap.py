@@ -201,6 +201,23 @@ def test_a_subclass_overriding_align_keeps_its_override(scans):
     assert Shifted().align(scans[1], scans[0]).T_target_source[0, 3] == pytest.approx(plain[0, 3] + 1.0, abs=1e-9)
 
 
+def test_a_subclass_moving_the_pose_in_register_but_not_in_its_assessment_is_refused(scans):
+    from lidarkit.registration.open3d_icp import Open3DPointToPlane
+
+    class Shifted(Open3DPointToPlane):  # moves the pose and keeps the parent's assessment (at the parent's pose)
+        def _register(self, source_xyz, target_xyz, init_T):
+            T, converged, assess = super()._register(source_xyz, target_xyz, init_T)
+            T = T.copy()
+            T[0, 3] += 1.0
+            return T, converged, assess
+
+    with pytest.raises(RegistrationError, match="_register returned a pose that its assess"):
+        Shifted().align(scans[1], scans[0])
+    with pytest.raises(RegistrationError, match="assess\\(\\) must score the pose"):
+        run(SPEC, Shifted(), frames="0:3")
+    assert not _our_threads()
+
+
 def test_points_checked_once_are_trusted_only_inside_the_block_and_only_by_identity():
     from lidarkit.errors import DataError
     from lidarkit.geometry import as_points, validated_points

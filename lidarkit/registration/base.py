@@ -453,6 +453,10 @@ class Registration:
             start = time.perf_counter()
             with use_backend(self.name, source), use_model(model):
                 result = assess()
+            if not np.allclose(result.T_target_source, T, rtol=0.0, atol=1e-9):
+                # a subclass's _register that moves the pose but returns its parent's assess(): which pose is the result's?
+                raise RegistrationError(f"{type(self).__name__}._register returned a pose that its assess() result does not carry; "
+                                        "assess() must score the pose _register returns (or override _align instead)", source=source)
             return self._finish(result, register_s + time.perf_counter() - start)
 
         return PendingAlignment(T, bool(likely_converged), finish)
