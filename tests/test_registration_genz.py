@@ -88,3 +88,18 @@ def test_genz_config_mirrors_genz_icp_and_times_are_normalised():
     np.testing.assert_allclose(normalized_times(np.array([0.02, 0.07, 0.12]), 3), [0.0, 0.5, 1.0])
     with pytest.raises(DataError, match="per-point times"):
         get_icp("genz").register_frame(np.random.default_rng(0).normal(size=(100, 3)), np.zeros(5))
+
+
+def test_genz_pairwise_scores_the_source_against_the_target_alone():
+    """The assessment's map is the target's: scored against a map that also held the source, any cloud matched itself
+    (an unrelated box of points: fitness 1.000 and converged)."""
+    from lidarkit.io.kitti import KittiOdometry
+
+    sequence = KittiOdometry(shared_path("kitti_odometry", "sequences", "00"))
+    target, source = sequence.read_scan(0).points_xyz, sequence.read_scan(1).points_xyz
+    rng = np.random.default_rng(1)
+    box = np.column_stack([rng.uniform(-40, 40, (20000, 2)), rng.uniform(-2, 3, 20000)])
+    unrelated = get_icp("genz").align(box, target)
+    assert unrelated.fitness < 0.75  # 0.51: the random points within 3 m of a target point (was 1.000)
+    right = get_icp("genz").align(source, target)
+    assert right.fitness > 0.95 and right.rmse_history[-1] < unrelated.rmse_history[-1] / 2

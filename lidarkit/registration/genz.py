@@ -150,9 +150,11 @@ class GenzRegistration(Registration):
         try:
             self._genz = GenZICP(c.to_genz_config())
             self.register_frame(target_xyz)
+            # the map of the target alone: after the source's frame it holds the source too, which then matches itself
+            # (fitness 1 and "converged" for any cloud)
+            map_points = np.array(self._genz.local_map.point_cloud(), dtype=np.float64)
             moved = transform_points(init_T, source_xyz)
             T_rel = self.register_frame(moved)
-            map_points = np.asarray(self._genz.local_map.point_cloud())
         finally:
             self._genz = saved
         if len(map_points) < 3:
