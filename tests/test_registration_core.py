@@ -251,6 +251,9 @@ def test_init_guess_is_used_and_orthonormalized(synthetic_pair):
     assert pose_error(res.T_target_source, T_gt)[0] < 0.05
     with pytest.raises(DataError, match="init_T"):
         get_icp("vanilla").align(source, target, init_T=np.eye(3))
+    for not_numbers in ("identity", [[1, 0, 0, 0]] * 3 + [[0, 0, 1]], {"x": 1}):
+        with pytest.raises(DataError, match="init_T.*4x4 matrix"):
+            get_icp("vanilla").align(source, target, init_T=not_numbers)
 
 
 # ---------------------------------------------------------------- bad input

@@ -218,7 +218,10 @@ class RegistrationResult:
 
 def finite_4x4(T: np.ndarray, source: str, what: str = "matrix") -> np.ndarray:
     """``T`` as a float64 4x4 array; DataError naming ``source`` for another shape or NaN / infinite entries."""
-    T = np.asarray(T, dtype=np.float64)
+    try:
+        T = np.asarray(T, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise DataError(f"expected a 4x4 {what} of numbers, got {type(T).__name__} {str(T)[:40]!r}", source=source) from None
     if T.shape != (4, 4):
         raise DataError(f"expected a 4x4 {what}, got shape {T.shape}", source=source)
     if not np.isfinite(T).all():
