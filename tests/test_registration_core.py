@@ -70,7 +70,8 @@ def test_unknown_method_lists_available_names():
 
 @pytest.mark.parametrize(
     "params, fragment",
-    [({"max_iterationz": 3}, "max_iterationz"), ({"max_iterations": 0}, "max_iterations"), ({"nn_backend": "gpu"}, "nn_backend")],
+    [({"max_iterationz": 3}, "max_iterationz"), ({"max_iterations": 0}, "max_iterations"), ({"nn_backend": "gpu"}, "nn_backend"),
+     ({"workers": 0}, "workers must be -1"), ({"workers": -2}, "workers must be -1")],
 )
 def test_bad_params_raise_config_error_listing_valid_params(params, fragment):
     with pytest.raises(ConfigError) as err:

@@ -10,7 +10,7 @@ import dataclasses
 from typing import Literal
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, field_validator
 
 from lidarkit.geometry import kabsch_umeyama, make_se3
 from lidarkit.registration.assessment import assess_alignment
@@ -33,13 +33,20 @@ class VanillaConfig(RegistrationConfig):
     voxel_size_m: float | None = Field(None, gt=0, description="voxel-downsample both clouds first (m); None keeps all points")
     nn_backend: Literal["auto", "scipy", "open3d", "brute"] = Field("auto", description="nearest-neighbour search backend")
     leafsize: int = Field(16, ge=1, description="KD-tree leaf size (scipy backend)")
-    workers: int = Field(-1, description="threads for the scipy KD-tree query (-1: all cores)")
+    workers: int = Field(-1, description="threads for the scipy KD-tree query (nn_backend scipy; -1: all cores)")
     coarse_stride: int = Field(
         8, ge=1, description="first converge with every k-th source point, then refine with all (1: single stage)"
     )
     planar: bool = Field(
         False, description="solve x, y, yaw only (SE(2)); z, roll and pitch stay as in init_T (2D laser scans)"
     )
+
+    @field_validator("workers")
+    @classmethod
+    def _workers(cls, value: int) -> int:
+        if value != -1 and value < 1:  # scipy's own error came only at the first query, as a failure of the pair
+            raise ValueError(f"workers must be -1 (all cores) or >= 1, got {value}")
+        return value
 
 
 def point_to_point_icp(
