@@ -101,3 +101,16 @@ def test_cli_bad_files(capsys, tmp_path):
     assert code == 1 and "init.txt" in err
     code, _, err = run_cli(capsys, str(SOURCE))
     assert code == 1 and "SOURCE and TARGET" in err
+
+
+def test_nan_points_refused_with_advice_the_cli_can_follow(capsys, tmp_path):
+    source = np.load(SOURCE).astype(np.float64)[:, :3]
+    source[::50] = np.nan  # an organized cloud's missing returns
+    path = tmp_path / "holes.npy"
+    np.save(path, source)
+    code, _, err = run_cli(capsys, str(path), str(TARGET), "-m", "small_gicp")
+    assert code == 1 and "holes.npy" in err and "NaN" in err and "--drop-nonfinite" in err
+    code, _, err = run_cli(capsys, str(path), str(TARGET), "-m", "small_gicp", "--drop-nonfinite", "--out", str(tmp_path / "run"))
+    assert code == 0, err
+    result = json.loads((tmp_path / "run" / "result.json").read_text())
+    assert result["drop_nonfinite"] is True and pose_error(np.asarray(result["T_target_source"]), T_GT)[0] < 0.05

@@ -131,6 +131,9 @@ def icp(
     param: list[str] = typer.Option([], "--param", "-p", help="Method parameter KEY=VALUE (repeatable)."),
     init: Optional[Path] = typer.Option(None, "--init", help="Initial T_target_source: 4x4 text file or one KITTI row."),
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="Folder for result.json, config.json and bev.png."),
+    drop_nonfinite: bool = typer.Option(
+        False, "--drop-nonfinite", help="Drop NaN / infinite points (organized clouds' missing returns) instead of refusing the file."
+    ),
     list_methods: bool = typer.Option(False, "--list", help="List the registered variants with their parameters and exit."),
     list_components: bool = typer.Option(
         False, "--list-components", help="List the components the 'pipeline' variant composes (by kind) and exit."
@@ -154,15 +157,16 @@ def icp(
 
     check_target(out, "folder")
     registration = get_icp(method, **parse_params(param))
-    source_xyz = read_point_file(source).points_xyz
-    target_xyz = read_point_file(target).points_xyz
+    source_xyz = read_point_file(source, drop_nonfinite=drop_nonfinite).points_xyz
+    target_xyz = read_point_file(target, drop_nonfinite=drop_nonfinite).points_xyz
     init_T = read_init_pose(init) if init is not None else None
     result = registration.align(source_xyz, target_xyz, init_T=init_T)
     stdout().print(_result_table(result, source, target))
     if out is not None:
         from lidarkit.registration.plots import save_bev_before_after
 
-        payload = {"source": str(source), "target": str(target), "init": None if init is None else str(init), **result.to_dict()}
+        payload = {"source": str(source), "target": str(target), "init": None if init is None else str(init),
+                   "drop_nonfinite": drop_nonfinite, **result.to_dict()}
         with run_folder(out) as tmp:
             write_text(tmp / "result.json", json.dumps(payload, indent=2, allow_nan=False) + "\n")
             write_text(tmp / "config.json", json.dumps({"method": method, "params": registration.config.model_dump(mode="json")}, indent=2, allow_nan=False) + "\n")

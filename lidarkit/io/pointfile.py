@@ -74,7 +74,7 @@ def finite_points(
         if not drop_nonfinite:
             raise DataError(
                 f"{n_bad} of {len(ok)} points are NaN or infinite (first at point {first}); "
-                "pass drop_nonfinite=True to drop them",
+                "drop them with drop_nonfinite=True (a dataset spec's ?drop_nonfinite=true, lidarkit icp --drop-nonfinite)",
                 source=source,
                 location=where,
             )
