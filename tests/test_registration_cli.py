@@ -114,3 +114,24 @@ def test_nan_points_refused_with_advice_the_cli_can_follow(capsys, tmp_path):
     assert code == 0, err
     result = json.loads((tmp_path / "run" / "result.json").read_text())
     assert result["drop_nonfinite"] is True and pose_error(np.asarray(result["T_target_source"]), T_GT)[0] < 0.05
+
+
+def _drawn_pixels(png) -> int:
+    import matplotlib.image
+
+    image = matplotlib.image.imread(png)[..., :3]
+    return int((np.abs(image - 1.0).sum(axis=2) > 0.3).sum())  # not white (axes, text and points)
+
+
+def test_bev_of_a_georeferenced_pair_is_drawn_around_the_clouds(tmp_path):
+    from lidarkit.registration.plots import save_bev_before_after
+
+    source, target = np.load(SOURCE)[:, :3].astype(np.float64), np.load(TARGET)[:, :3].astype(np.float64)
+    far = np.array([500000.0, 4500000.0, 100.0])  # UTM-like coordinates
+    save_bev_before_after(tmp_path / "near.png", source, target, T_GT)
+    save_bev_before_after(tmp_path / "far.png", source + far, target + far, T_GT)
+    empty_target = np.array([[1000.0, 1000.0, 0.0]] * 3)  # only the axes and labels get drawn
+    save_bev_before_after(tmp_path / "axes.png", empty_target, empty_target, np.eye(4))
+    axes_only = _drawn_pixels(tmp_path / "axes.png")
+    near, far_drawn = _drawn_pixels(tmp_path / "near.png"), _drawn_pixels(tmp_path / "far.png")
+    assert near > 3 * axes_only and far_drawn > 0.8 * near  # the far pair is drawn as the near one (was: empty panels)

@@ -41,12 +41,19 @@ def save_bev_before_after(
     extent_m: float = 40.0,
     max_points: int = 60000,
 ) -> Path:
-    """Two BEV panels (x forward, y left, target frame): source at ``init_T`` and at the estimate."""
+    """Two BEV panels (x forward, y left, target frame): source at ``init_T`` and at the estimate, ``extent_m``
+    around the sensor, or around the target's median point when that lies farther out (a georeferenced cloud; the
+    axes then count from that point)."""
     plt = _pyplot()
     src = _thin(np.asarray(source_xyz, dtype=np.float64), max_points, 1)
     dst = _thin(np.asarray(target_xyz, dtype=np.float64), max_points, 2)
-    before = transform_points(np.eye(4) if init_T is None else init_T, src)
-    after = transform_points(T_target_source, src)
+    centre = np.median(dst[:, :2], axis=0)
+    if np.abs(centre).max() <= extent_m:
+        centre = np.zeros(2)
+    shift = np.array([*centre, 0.0])
+    before = transform_points(np.eye(4) if init_T is None else init_T, src) - shift
+    after = transform_points(T_target_source, src) - shift
+    dst = dst - shift
     fig, axes = plt.subplots(1, 2, figsize=(12, 6), sharex=True, sharey=True)
     for ax, moved, label in ((axes[0], before, "before"), (axes[1], after, "after")):
         ax.scatter(dst[:, 0], dst[:, 1], s=0.2, c="tab:blue", alpha=0.5, linewidths=0, label="target")
@@ -55,9 +62,9 @@ def save_bev_before_after(
         ax.set_xlim(-extent_m, extent_m)
         ax.set_ylim(-extent_m, extent_m)
         ax.set_aspect("equal")
-        ax.set_xlabel("x (m)")
+        ax.set_xlabel("x (m)" if not centre.any() else f"x - {centre[0]:.1f} (m)")
         ax.legend(loc="upper right", markerscale=20)
-    axes[0].set_ylabel("y (m)")
+    axes[0].set_ylabel("y (m)" if not centre.any() else f"y - {centre[1]:.1f} (m)")
     if title:
         fig.suptitle(title)
     return _save(plt, fig, path)
