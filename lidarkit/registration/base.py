@@ -64,7 +64,8 @@ class RegistrationConfig(BaseModel):
         "censi", description="closed form of the result's 6x6 covariance (none: skip it)"
     )
     calibrated_covariance: bool = Field(
-        True, description="apply the variant's measured translation/rotation factors (benchmarks/covariance_calibration.py)"
+        True, description="apply the variant's measured translation/rotation factors (benchmarks/covariance_calibration.py; "
+        "learned on covariance='censi' and applied to it only: gauss_newton is returned as computed)"
     )
     assess: bool = Field(
         True, description="score the result once the backend returns: final correspondences, fitness, RMSE, degeneracy summary, "
