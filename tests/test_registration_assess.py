@@ -57,6 +57,15 @@ def test_odometry_without_assessment_gives_the_same_trajectory_and_no_covariance
         run(spec, "kiss", params={"assess": False}, pose_covariance=True, progress=False)  # stateful too
 
 
+def test_odometry_with_covariance_none_writes_no_pose_covariance(tmp_path):
+    spec = f"kitti:{shared_path('kitti_odometry')}?sequence=00"
+    result = run(spec, "small_gicp", params={"covariance": "none"}, frames="0:4", out_dir=tmp_path / "run", progress=False)
+    assert result.covariances is None and "pose_covariance" not in result.metrics  # was: all-NaN rows and an empty block
+    assert not (tmp_path / "run" / "pose_covariance.txt").exists() and (tmp_path / "run" / "poses_kitti.txt").exists()
+    with pytest.raises(ConfigError, match="which covariance='none' leaves out"):
+        run(spec, "small_gicp", params={"covariance": "none"}, pose_covariance=True, progress=False)
+
+
 @pytest.mark.parametrize("value", [float("inf"), float("nan")])
 def test_no_variant_takes_a_non_finite_setting(value):
     """``voxel_size_m=inf`` passed ``gt=0``: every variant's config refuses NaN and infinity (no limit is None)."""

@@ -337,10 +337,14 @@ def run(
     min_eigenvalue = np.full(n, np.nan)
     relative_cov = np.full((n, 6, 6), np.nan)
     reasons = [""] * n
-    assessed = bool(getattr(getattr(registration, "config", None), "assess", True))
+    config = getattr(registration, "config", None)
+    assessed = bool(getattr(config, "assess", True))
     if pose_covariance and not assessed:
         raise ConfigError("pose_covariance needs each frame's covariance, which assess=False leaves out", source=name)
-    want_covariance = (not stateful and assessed) if pose_covariance is None else bool(pose_covariance)
+    no_covariance = getattr(config, "covariance", "censi") == "none"
+    if pose_covariance and no_covariance:
+        raise ConfigError("pose_covariance needs each frame's covariance, which covariance='none' leaves out", source=name)
+    want_covariance = (not stateful and assessed and not no_covariance) if pose_covariance is None else bool(pose_covariance)
     widened: list[int] = []  # frames whose covariance got the distortion floor
     checker = FrameChecker(n, frame_check)
     # the ground truth is read before the run: a problem with it (too few poses in a bag, a bad pose file) is reported
