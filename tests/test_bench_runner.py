@@ -90,15 +90,30 @@ def test_failing_job_is_recorded_and_the_suite_completes(tmp_path):
 
 def test_result_file_records_key_version_and_resolved_job(tmp_path):
     from lidarkit import __version__
+    from lidarkit.provenance import code_version
 
     suite = load_suite(suite_file(tmp_path, TINY))
     run_suite(suite, tmp_path / "out", executor="serial")
     job = suite.jobs[0]
     record = json.loads(result_path(tmp_path / "out", job.key()).read_text())
-    assert record["key"] == job.key() and record["lidarkit_version"] == __version__
+    assert record["key"] == job.key() and record["lidarkit_version"] == code_version()
+    assert code_version().startswith(__version__ + "+src.") and len(code_version()) == len(__version__) + 15
     assert record["job"] == job.spec()
     manifest = json.loads((tmp_path / "out" / "suite.json").read_text())
     assert [j["key"] for j in manifest["jobs"]] == [j.key() for j in suite.jobs]
+
+
+def test_a_folder_resumed_after_the_code_changed_runs_its_jobs_again(tmp_path, monkeypatch):
+    """The release number does not change between commits of a checkout: the key holds a digest of the source, so
+    results the changed code might not give are not kept as done."""
+    import lidarkit.provenance as provenance
+
+    suite = load_suite(suite_file(tmp_path, TINY))
+    first = run_suite(suite, tmp_path / "out", executor="serial")
+    assert run_suite(suite, tmp_path / "out", executor="serial").skipped == 6  # the 2 failed jobs are tried again
+    monkeypatch.setattr(provenance, "source_digest", lambda: "0123456789")  # the source as another commit has it
+    again = run_suite(suite, tmp_path / "out", executor="serial")
+    assert (again.skipped, again.ran) == (0, first.total)
 
 
 SLEEPS = """

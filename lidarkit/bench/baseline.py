@@ -64,7 +64,7 @@ def environment() -> dict[str, Any]:
     """Versions of lidarkit and the protocol packages, and the platform."""
     from importlib.metadata import PackageNotFoundError, version
 
-    from lidarkit import __version__
+    from lidarkit.provenance import code_version
 
     packages = {}
     for name in PROTOCOL_PACKAGES:
@@ -73,7 +73,7 @@ def environment() -> dict[str, Any]:
         except PackageNotFoundError:
             packages[name] = None
     return {
-        "lidarkit": __version__,
+        "lidarkit": code_version(),
         "packages": packages,
         "platform": {"system": platform.system(), "machine": platform.machine()},
         "python": platform.python_version(),

@@ -39,9 +39,12 @@ class Job:
         return cls(**spec)
 
     def key(self, version: str | None = None) -> str:
-        """Hex key from the canonical spec and the lidarkit version: same job, same version -> same key."""
+        """Hex key from the canonical spec and the code's version (:func:`lidarkit.provenance.code_version`: the
+        release and a digest of the source): same job, same code -> same key."""
         if version is None:
-            from lidarkit import __version__ as version
+            from lidarkit.provenance import code_version
+
+            version = code_version()
         payload = canonical_json({"job": self.spec(), "lidarkit_version": version})
         return hashlib.sha256(payload.encode("ascii")).hexdigest()[:20]
 

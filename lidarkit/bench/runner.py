@@ -55,16 +55,17 @@ def run_suite(
     ``on_start(n_to_run, n_skipped)`` and ``on_result(job, record)`` let a CLI drive a progress bar.
     Failed jobs are recorded (status "failed", error type and message) and retried on the next run.
     """
-    from lidarkit import __version__
+    from lidarkit.provenance import code_version
 
+    version = code_version()
     check_executor_args(executor, workers, address)
     out_dir = Path(out_dir)
     t0 = time.perf_counter()
-    keyed = [(job.key(__version__), job) for job in suite.jobs]
+    keyed = [(job.key(version), job) for job in suite.jobs]
     by_key = dict(keyed)
     todo = [(key, job) for key, job in keyed if force or not is_finished(out_dir, key)]
     summary = RunSummary(out_dir=out_dir, total=len(keyed), skipped=len(keyed) - len(todo))
-    _write_manifest(suite, out_dir, keyed, __version__)
+    _write_manifest(suite, out_dir, keyed, version)
     remove_stale_temp_files(out_dir)
     if on_start is not None:
         on_start(len(todo), summary.skipped)
@@ -73,7 +74,7 @@ def run_suite(
         try:
             for key, outcome in runner.run(job_fn, [(key, job.spec()) for key, job in todo]):
                 job = by_key[key]
-                record = make_record(job, key, __version__, outcome)
+                record = make_record(job, key, version, outcome)
                 write_result(out_dir, record)
                 summary.ran += 1
                 if record["status"] == "ok":

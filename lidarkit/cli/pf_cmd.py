@@ -149,7 +149,7 @@ def pf_command(
         rows = run_study(data, counts, seed_list, config=cfg, **scenario)
         _print_study(rows, cfg, protocol, kidnap_at)
         if out is not None:
-            _write_study(rows, cfg, protocol, scenario, out)
+            _write_study(rows, cfg, protocol, {**scenario, "data": str(getattr(data, "root", data_dir))}, out)
             stderr().print(f"results written to {out}")
         return
     snap = set(_steps(snapshots))
@@ -244,7 +244,9 @@ def _write_study_files(rows, cfg: PFConfig, protocol: str, scenario: dict, out: 
     from lidarkit import atomic
     from lidarkit.eval.report import write_json
 
-    atomic.write_text(out / "config.yaml", yaml.safe_dump({"pf": cfg.model_dump(mode="json"), "protocol": protocol,
+    from lidarkit.provenance import code_version
+
+    atomic.write_text(out / "config.yaml", yaml.safe_dump({"lidarkit_version": code_version(), "pf": cfg.model_dump(mode="json"), "protocol": protocol,
                                                             "scenario": {k: (list(v) if isinstance(v, tuple) else v) for k, v in scenario.items()}},
                                                            sort_keys=False))
     write_json({"protocol": protocol, "rows": [r.to_dict() for r in rows]}, out / "study.json")
@@ -302,7 +304,10 @@ def _write_files(result, out: Path, *, snap_steps: tuple[int, ...], gif: bool) -
     from lidarkit.eval.report import write_json
     from lidarkit.pf import plots
 
-    atomic.write_text(out / "config.yaml", yaml.safe_dump({"pf": result.config.model_dump(mode="json"), "run": result.settings}, sort_keys=False))
+    from lidarkit.provenance import code_version
+
+    atomic.write_text(out / "config.yaml", yaml.safe_dump({"lidarkit_version": code_version(), "pf": result.config.model_dump(mode="json"),
+                                                            "run": result.settings}, sort_keys=False))
     write_json(result.to_dict(), out / "metrics.json")
     est = result.trajectory("estimate")
     est.to_kitti(out / "poses_kitti.txt")

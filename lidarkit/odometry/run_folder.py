@@ -42,10 +42,10 @@ def _write_files(result: OdometryResult, out: Path) -> None:
     tum.to_tum(out / "poses_tum.txt")
     if result.ground_truth is not None:
         result.ground_truth.to_kitti(out / "ground_truth_kitti.txt")
-    from lidarkit import __version__
+    from lidarkit.provenance import code_version
 
     config = dict(result.config)
-    config["lidarkit_version"] = __version__
+    config["lidarkit_version"] = code_version()
     config["created_utc"] = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
     config["machine"] = f"{platform.node()} ({platform.machine()}, {os.cpu_count()} cpus, Python {platform.python_version()})"
     atomic.write_text(out / "config.yaml", yaml.safe_dump(config, sort_keys=False))

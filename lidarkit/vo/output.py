@@ -116,8 +116,10 @@ def _write_files(result: VOResult, out: Path, *, ground_truth: Trajectory | None
         "poses_smoothed_tum": smoothed.to_tum(out / "poses_smoothed_tum.txt"),
         "diagnostics": atomic.write_text(out / "diagnostics.csv", diagnostics_csv(result.diagnostics)),
     }
-    config = {"vo": result.config.model_dump(mode="json"), "K": np.asarray(result.K).tolist(), **(extra_config or {}),
-              **notes}
+    from lidarkit.provenance import code_version
+
+    config = {"lidarkit_version": code_version(), "vo": result.config.model_dump(mode="json"), "K": np.asarray(result.K).tolist(),
+              **(extra_config or {}), **notes}
     paths["config"] = atomic.write_text(out / "config.yaml", yaml.safe_dump(config, sort_keys=False))
     summary = {**result.summary(), **(metrics or {}), **notes}
     from lidarkit.eval.report import write_json
