@@ -263,3 +263,50 @@ def test_a_pipe_in_a_name_does_not_break_the_markdown_tables(tmp_path):
     md = build_report(tmp_path, plots=False).markdown_path.read_text()
     named = [line for line in md.splitlines() if "a" in line and "b |" in line and line.startswith("| ")]
     assert named and all("a\\|b" in line for line in named)  # escaped in every table (the pivot's header too)
+
+
+def test_the_report_holds_the_suite_last_run_in_the_folder_and_says_what_is_missing(tmp_path, capsys):
+    """A folder reused by an edited suite keeps the earlier suite's results: the report holds the jobs of suite.json
+    (the others counted as left out, ``--all`` takes them); the suite's jobs without a result are named, their rows
+    say how many seeds were not run, and such a row is not the best over fewer seeds."""
+    from lidarkit.bench.report import pivot, summary_rows
+    from lidarkit.bench.results import result_path
+
+    (tmp_path / "a.yaml").write_text(textwrap.dedent(SUITE))  # 3 seeds x (3 noise levels + fail) = 12 jobs
+    run_suite(load_suite(tmp_path / "a.yaml"), tmp_path / "out", executor="serial")
+    (tmp_path / "b.yaml").write_text(textwrap.dedent("""
+        name: edited
+        seeds: [0, 1]
+        experiments:
+          - name: walk
+            task: selftest
+            dataset: {kind: synthetic, name: synth}
+            methods:
+              - name: random_walk
+                params: {steps: 40}
+                grid: {noise_m: [0.01, 0.5]}
+    """))
+    edited = load_suite(tmp_path / "b.yaml")
+    run_suite(edited, tmp_path / "out", executor="serial")
+    report = build_report(tmp_path / "out", plots=False)
+    assert sorted(row.method for row in report.tables[0].rows) == ["random_walk(noise_m=0.01, steps=40)", "random_walk(noise_m=0.5, steps=40)"]
+    assert all(row.n_ok == 2 for row in report.tables[0].rows)  # the 0.01 row was 3 seeds: the earlier suite's seed 2
+    assert (report.n_records, report.n_expected, report.n_left_out, report.not_run) == (4, 4, 10, [])
+    assert "10 results in jobs/ of jobs not in the folder's suite.json" in (tmp_path / "out" / "report.md").read_text()
+    assert len(build_report(tmp_path / "out", plots=False, every_result=True).tables[0].rows) == 5
+    with pytest.raises(SystemExit) as exc:
+        main(["report", str(tmp_path / "out"), "--all", "--no-plots"])
+    assert exc.value.code == 0
+    assert "14 results, 3 failed" in capsys.readouterr().out
+
+    # an interrupted run: the better method has one seed so far
+    low_noise = next(job for job in edited.jobs if job.params["noise_m"] == 0.01 and job.seed == 1)
+    result_path(tmp_path / "out", low_noise.key()).unlink()
+    report = build_report(tmp_path / "out", plots=False)
+    assert report.not_run == ["selftest | walk | synth | random_walk(noise_m=0.01, steps=40) | seed 1"]
+    _, cells = pivot(report.tables[0], "ape_rmse_m")
+    assert cells[0][1].endswith("(1 of 2 not run)")
+    _, summary = summary_rows(report)
+    assert summary[0][3] == "random_walk(noise_m=0.5, steps=40)"  # the complete row, though its mean is larger
+    text = (tmp_path / "out" / "report.md").read_text()
+    assert "3 job results of the suite's 4 jobs (1 not run yet)" in text and "## Jobs of the suite without a result" in text

@@ -54,6 +54,7 @@ class Row:
     n_failed: int
     stats: dict[str, tuple[float, float, int]]  # metric -> (mean, std, n)
     summaries: dict[str, Any] = field(default_factory=dict)  # metric -> lidarkit.eval.Summary (median, bootstrap CI)
+    n_missing: int = 0  # seeds of the suite with no result yet (an interrupted run)
 
 
 @dataclass
@@ -83,6 +84,9 @@ class Report:
     warnings: list[tuple[str, str]] = field(default_factory=list)  # (job label, message)
     skipped: list[tuple[str, str]] = field(default_factory=list)  # experiments the last run skipped (name, reason)
     n_records: int = 0
+    n_expected: int = 0  # jobs of the suite (suite.json) the report is restricted to; 0: every result in the folder
+    n_left_out: int = 0  # results in jobs/ from jobs not in the suite (an earlier suite in the same folder)
+    not_run: list[str] = field(default_factory=list)  # labels of the suite's jobs with no result
     publication: Any = None  # lidarkit.bench.publication.Publication (odometry tables, box plots)
     html_path: Path | None = None
     markdown_path: Path | None = None
@@ -108,8 +112,12 @@ def _stats(values: list[float]) -> tuple[float, float, int]:
     return (float(arr.mean()), std, int(arr.size))
 
 
-def aggregate(records: list[dict[str, Any]]) -> list[TaskTable]:
-    """Group records per task and job (all but the seed); mean ± std (sample std) over seeds."""
+def aggregate(records: list[dict[str, Any]], missing: list[dict[str, Any]] = ()) -> list[TaskTable]:
+    """Group records per task and job (all but the seed); mean ± std (sample std) over seeds. ``missing``: specs of
+    the suite's jobs with no result (their rows say how many seeds were not run)."""
+    missing_per_row: dict[str, int] = defaultdict(int)
+    for spec in missing:
+        missing_per_row[canonical_json({k: v for k, v in spec.items() if k != "seed"})] += 1
     by_task: dict[str, list[dict[str, Any]]] = defaultdict(list)
     for r in records:
         by_task[r["job"]["task"]].append(r)
@@ -147,7 +155,8 @@ def aggregate(records: list[dict[str, Any]]) -> list[TaskTable]:
                     values = [r["metrics"].get(m.name) for r in ok]
                 stats[m.name] = _stats(values)
                 summaries[m.name] = summarize([v for v in values if v is not None and math.isfinite(v)], seed=0)
-            rows.append(Row(task, experiment, dataset, method, len(ok), len(items) - len(ok), stats, summaries))
+            rows.append(Row(task, experiment, dataset, method, len(ok), len(items) - len(ok), stats, summaries,
+                            n_missing=missing_per_row.get(ident, 0)))
         tables.append(TaskTable(task, metrics, rows))
     return tables
 
@@ -348,9 +357,26 @@ def _pivot_metrics(table: TaskTable) -> list[MetricInfo]:
     return first + (speed or [m for m in table.metrics if m.name == "runtime_s"])
 
 
+def coverage_text(report: Report) -> str:
+    """What the report holds against the suite: `` of the suite's 24 jobs (17 not run yet); 9 results of jobs not in
+    suite.json left out`` ('' when it holds every job of the suite and nothing was left out)."""
+    text = ""
+    if report.n_expected and report.n_records < report.n_expected:
+        text += f" of the suite's {report.n_expected} jobs ({len(report.not_run)} not run yet)"
+    if report.n_left_out:
+        text += (f"; {report.n_left_out} results in jobs/ of jobs not in the folder's suite.json (an earlier suite) left out"
+                 if report.n_expected else f"; {report.n_left_out} results of jobs not in this run's suite left out")
+    return text
+
+
+def _not_run_lines(report: Report, limit: int = 50) -> list[str]:
+    lines = report.not_run[:limit]
+    return lines + ([f"... and {len(report.not_run) - limit} more"] if len(report.not_run) > limit else [])
+
+
 def _markdown(report: Report, title: str) -> str:
-    out = [f"# {title}", "", f"Generated {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC from {report.n_records} job results "
-           f"in `{report.out_dir}`. Cells: mean ± std over seeds (sample std).", ""]
+    out = [f"# {title}", "", f"Generated {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC from {report.n_records} job results"
+           f"{coverage_text(report)} in `{report.out_dir}`. Cells: mean ± std over seeds (sample std).", ""]
     header, rows = summary_rows(report)
     if rows:
         out += ["## Summary", "", markdown_table(header, rows)]
@@ -373,6 +399,8 @@ def _markdown(report: Report, title: str) -> str:
         out += ["## Plots", ""] + [f"![{p.title}](plots/{p.filename})" for p in report.plots] + [""]
     if report.skipped:
         out += ["## Experiments not run", ""] + [f"- {name}: {reason}" for name, reason in report.skipped] + [""]
+    if report.not_run:
+        out += ["## Jobs of the suite without a result", ""] + [f"- {line}" for line in _not_run_lines(report)] + [""]
     if report.warnings:
         out += ["## Warnings logged by jobs", ""] + [f"- {label}: {message}" for label, message in report.warnings] + [""]
     if report.failures:
@@ -466,7 +494,7 @@ def summary_rows(report: Report) -> tuple[list[str], list[list[str]]]:
                 continue
             # a method that failed on some seeds is not the best over one lucky seed: complete rows come first
             sign = -1.0 if better_higher else 1.0
-            best = min(candidates, key=lambda r: (r.n_failed > 0, sign * r.stats[metric.name][0]))
+            best = min(candidates, key=lambda r: (r.n_failed > 0 or r.n_missing > 0, sign * r.stats[metric.name][0]))
             rows.append([table.task, dataset, metric.label, _short_label(best, table),
                          format_stat(best.stats[metric.name]) + _failed_note(best),
                          str(len({r.method for r in table.rows if r.dataset == dataset}))])
@@ -474,8 +502,11 @@ def summary_rows(report: Report) -> tuple[list[str], list[list[str]]]:
 
 
 def _failed_note(row: Row) -> str:
-    """`` (3 of 5 failed)`` for a row some of whose seeds failed (its numbers are over the others), else ''."""
-    return f" ({row.n_failed} of {row.n_ok + row.n_failed} failed)" if row.n_failed else ""
+    """`` (3 of 5 failed)`` / `` (4 of 12 not run)`` for a row some of whose seeds failed or have no result yet (its
+    numbers are over the others), else ''."""
+    total = row.n_ok + row.n_failed + row.n_missing
+    notes = [f"{row.n_failed} of {total} failed"] * bool(row.n_failed) + [f"{row.n_missing} of {total} not run"] * bool(row.n_missing)
+    return f" ({', '.join(notes)})" if notes else ""
 
 
 def _better_higher(task: str, metric: str) -> bool:
@@ -521,7 +552,7 @@ def _html(report: Report, title: str) -> str:
         "</head>",
         "<body>",
         f"<h1>{e(title)}</h1>",
-        f"<p>Generated {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC from {report.n_records} job results. "
+        f"<p>Generated {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC from {report.n_records} job results{e(coverage_text(report))}. "
         "Cells: mean ± std over seeds (sample std).</p>",
     ]
     header, rows = summary_rows(report)
@@ -569,6 +600,7 @@ def _html(report: Report, title: str) -> str:
         parts.append("</section>")
     sections = (
         ("Experiments not run", [f"<li>{e(name)}: {e(reason)}</li>" for name, reason in report.skipped]),
+        ("Jobs of the suite without a result", [f"<li>{e(line)}</li>" for line in _not_run_lines(report)]),
         ("Warnings logged by jobs", [f"<li>{e(label)}: {e(message)}</li>" for label, message in report.warnings]),
         ("Failed jobs", [
             f'<li class="failed"><code>{e(f["key"])}</code> {e(f["label"])}: {e(f["error"])}</li>' for f in report.failures
@@ -615,23 +647,37 @@ def latest_per_job(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return [r for r in records if id(r) in kept]
 
 
-def build_report(out_dir: str | Path, *, title: str | None = None, plots: bool = True, only_keys: set[str] | None = None) -> Report:
+def build_report(
+    out_dir: str | Path, *, title: str | None = None, plots: bool = True, only_keys: set[str] | None = None, every_result: bool = False,
+) -> Report:
     """Read ``out_dir/jobs/*.json`` and write ``report.md``, ``report.csv``, ``report.html`` and ``plots/*.png`` there.
 
-    ``only_keys``: restrict to these job keys (e.g. the suite just run; default: every result in the folder).
+    ``only_keys``: restrict to these job keys (e.g. the suite just run). By default the report holds the jobs of the
+    folder's ``suite.json`` (the last suite run there: results an earlier suite left in the folder are counted as
+    left out, and the suite's jobs without a result as not run); ``every_result``: every result in the folder.
     """
     out_dir = Path(out_dir)
     if not (out_dir / "jobs").is_dir():
         raise DataError("not a bench results folder (no jobs/ inside)", source=out_dir)
     records = load_results(out_dir)
+    suite_jobs = {} if every_result else _suite_jobs(out_dir)
+    if only_keys is None and suite_jobs:
+        only_keys = set(suite_jobs)
+    n_all = len(latest_per_job(records))
     if only_keys is not None:
         records = [r for r in records if r["key"] in only_keys]
     records = latest_per_job(records)
     if not records:
-        raise DataError("no readable job results in jobs/", source=out_dir)
+        raise DataError("no readable job results in jobs/" + (" for the jobs of suite.json (every_result: all of them)" if suite_jobs else ""),
+                        source=out_dir)
     if title is None:
         title = _suite_title(out_dir)
-    report = Report(out_dir=out_dir, tables=aggregate(records), n_records=len(records), skipped=_skipped(out_dir))
+    done = {r["key"] for r in records}
+    expected = {k: spec for k, spec in suite_jobs.items() if only_keys is None or k in only_keys}
+    missing = [spec for k, spec in expected.items() if k not in done]
+    report = Report(out_dir=out_dir, tables=aggregate(records, missing), n_records=len(records), skipped=_skipped(out_dir),
+                    n_expected=len(expected), n_left_out=n_all - len(records),
+                    not_run=[_label({"job": spec}) for spec in missing])
     for r in records:
         for message in r.get("warnings") or []:
             if len(report.warnings) < 100:
@@ -655,6 +701,15 @@ def build_report(out_dir: str | Path, *, title: str | None = None, plots: bool =
 def _label(record: dict[str, Any]) -> str:
     job = Job.from_spec(record["job"])
     return f"{job.task} | {job.experiment} | {job.dataset_name} | {job.method_label} | seed {job.seed}"
+
+
+def _suite_jobs(out_dir: Path) -> dict[str, dict[str, Any]]:
+    """``{key: job spec}`` of the folder's ``suite.json`` (the last suite run there), {} without a readable one."""
+    try:
+        manifest = json.loads((out_dir / "suite.json").read_text(encoding="utf-8"))
+        return {str(j["key"]): {k: v for k, v in j.items() if k != "key"} for j in manifest["jobs"]}
+    except (OSError, ValueError, KeyError, TypeError):
+        return {}
 
 
 def _skipped(out_dir: Path) -> list[tuple[str, str]]:

@@ -170,15 +170,18 @@ def report_cmd(
     results_dir: Path = typer.Argument(..., help="Folder written by `lidarkit bench`."),
     title: Optional[str] = typer.Option(None, help="Page title (default: from the suite name)."),
     plots: bool = typer.Option(True, "--plots/--no-plots", help="Draw and embed plots."),
+    every_result: bool = typer.Option(
+        False, "--all", help="Every result in the folder (default: the jobs of its suite.json, the last suite run there)."
+    ),
 ) -> None:
     """Aggregate a results folder into report.md, report.csv and a self-contained report.html."""
-    from lidarkit.bench.report import build_report
+    from lidarkit.bench.report import build_report, coverage_text
 
-    built = build_report(results_dir, title=title, plots=plots)
+    built = build_report(results_dir, title=title, plots=plots, every_result=every_result)
     out = stdout()
     for table in summary_table(built):
         out.print(table)
-    out.print(f"{built.n_records} results, {len(built.failures)} failed; {len(built.plots)} plots")
+    out.print(f"{built.n_records} results{coverage_text(built)}, {len(built.failures)} failed; {len(built.plots)} plots", soft_wrap=True)
     out.print(f"markdown: {built.markdown_path}\ncsv: {built.csv_path}\nhtml: {built.html_path}", soft_wrap=True)
     publication = getattr(built, "publication", None)
     if publication is not None and publication.tables:
