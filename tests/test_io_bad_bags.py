@@ -165,6 +165,20 @@ def test_ground_truth_poses_that_cannot_stand_one_per_scan(tmp_path):
         run(open_dataset("rosbag", sparse), Counting())
     assert registered == []
     assert open_dataset("rosbag", sparse, ground_truth_topic="none").ground_truth is None  # none named (an empty spec value is "auto")
+    # as many poses as scans, but 4 sweeps later: paired by count, scan 0 was scored against the pose of scan 4
+    shifted = write_ros1_bag(tmp_path / "shifted.bag", scans, odometry=[(1000.4 + 0.1 * k, (k, 0, 0), (0, 0, 0, 1)) for k in range(3)])
+    with pytest.raises(DataError, match=r"shifted.bag/ground_truth: pose 0 is stamped 1000.400 s, scan 0 1000.000 s: 0.400 s apart, "
+                                        r"more than a sweep \(0.100 s\)"):
+        open_dataset("rosbag", shifted).ground_truth
+    late = write_ros1_bag(tmp_path / "late.bag", scans, odometry=[(1000.15 + 0.02 * k, (k, 0, 0), (0, 0, 0, 1)) for k in range(10)])
+    with pytest.raises(DataError, match=r"10 poses for 3 scans: scan 0 \(1000.000 s\) comes before the first pose \(1000.150 s\)"):
+        open_dataset("rosbag", late).ground_truth
+    # every header stamp equal (a driver that stamps nothing): one line, not a ZeroDivisionError
+    fields, step, data = _cloud_bytes(64)
+    same = write_ros1_bag(tmp_path / "same.bag", [(1000.0, fields, step, data, 64)] * 3,
+                          odometry=[(1000.0, (k, 0, 0), (0, 0, 0, 1)) for k in range(3)])
+    with pytest.raises(DataError, match=r"same.bag/ground_truth \(frame 1\): timestamps are not strictly increasing"):
+        open_dataset("rosbag", same).ground_truth
     one = write_ros1_bag(tmp_path / "one.bag", scans, odometry=[(1000.0, (0, 0, 0), (0, 0, 0, 1))])
     with pytest.raises(DataError, match=r"1 pose\(s\) for 3 scans: one pose per scan needed"):
         open_dataset("rosbag", one).ground_truth

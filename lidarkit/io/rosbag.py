@@ -198,8 +198,8 @@ class _BagScans:
             return None
         gt_stamps, gt_poses = self._recorded_ground_truth
         scan_stamps = self.timestamps_s
+        source = f"{self.path}{self.ground_truth_topic}"
         if len(gt_stamps) != len(scan_stamps):
-            source = f"{self.path}{self.ground_truth_topic}"
             if len(gt_stamps) < 2:
                 raise DataError(f"{len(gt_stamps)} pose(s) for {len(scan_stamps)} scans: one pose per scan needed", source=source)
             pick = np.clip(np.searchsorted(gt_stamps, scan_stamps), 1, len(gt_stamps) - 1)
@@ -207,9 +207,19 @@ class _BagScans:
             twice = np.flatnonzero(np.diff(pick) == 0)
             if len(twice):  # fewer (or sparser) poses than scans: one pose would stand for two scans
                 k = int(twice[0])
-                raise DataError(f"{len(gt_stamps)} poses for {len(scan_stamps)} scans: scans {k} and {k + 1} are both nearest to the "
-                                f"pose at {gt_stamps[pick[k]]:.3f} s; one pose per scan needed (a denser odometry topic)", source=source)
+                where = (f"scan {k} ({scan_stamps[k]:.3f} s) comes before the first pose ({gt_stamps[0]:.3f} s)"
+                         if scan_stamps[k + 1] <= gt_stamps[0] else
+                         f"scan {k + 1} ({scan_stamps[k + 1]:.3f} s) comes after the last pose ({gt_stamps[-1]:.3f} s)"
+                         if scan_stamps[k] >= gt_stamps[-1] else
+                         f"scans {k} and {k + 1} are both nearest to the pose at {gt_stamps[pick[k]]:.3f} s")
+                raise DataError(f"{len(gt_stamps)} poses for {len(scan_stamps)} scans: {where}; one pose per scan needed", source=source)
             gt_stamps, gt_poses = gt_stamps[pick], gt_poses[pick]
+        period = float(np.median(np.diff(scan_stamps))) if len(scan_stamps) > 1 else 0.0
+        off = np.abs(gt_stamps - scan_stamps)
+        if period > 0 and off.max() > 1.5 * period:  # one pose per scan by count, but not the scan's own time
+            k = int(np.flatnonzero(off > 1.5 * period)[0])
+            raise DataError(f"pose {k} is stamped {gt_stamps[k]:.3f} s, scan {k} {scan_stamps[k]:.3f} s: {off[k]:.3f} s apart, more "
+                            f"than a sweep ({period:.3f} s); the odometry does not cover the scans one pose each", source=source)
         meta = {"frame": f"as recorded on {self.ground_truth_topic}", "pose_instant": self._ground_truth_instant(gt_stamps)}
         return Trajectory(gt_poses, gt_stamps, name=f"{self.path.name}{self.ground_truth_topic}", meta=meta)
 
@@ -267,6 +277,8 @@ class _BagScans:
         if timing is None:
             return None
         start, period = timing
+        if period <= 0:  # the scans' stamps are all equal: no sweep period to place the poses in
+            return None
         return classify_instant((float(gt_stamps[0]) - start) / period)
 
     @cached_property
