@@ -21,9 +21,10 @@ def _cloud_bytes(n: int, times: np.ndarray | None = None) -> tuple[list[tuple[st
     return [("x", 0, F32), ("y", 4, F32), ("z", 8, F32), ("time", 12, F32)], 16, rec.tobytes()
 
 
-def write_ros1_bag(path, clouds, *, extra_odometry: bool = False, topic: str = "/points", odometry=()):
+def write_ros1_bag(path, clouds, *, extra_odometry: bool = False, topic: str = "/points", odometry=(), second_odometry: bool = False):
     """A ROS 1 bag with one PointCloud2 per ``(stamp_s, fields, point_step, data, width)`` in ``clouds`` and one
-    nav_msgs/Odometry on /ground_truth per ``(stamp_s, xyz, quat_xyzw)`` in ``odometry``."""
+    nav_msgs/Odometry on /ground_truth (and /ground_truth2 with ``second_odometry``) per ``(stamp_s, xyz, quat_xyzw)``
+    in ``odometry``."""
     from rosbags.rosbag1 import Writer
     from rosbags.typesys import Stores, get_typestore
 
@@ -39,8 +40,8 @@ def write_ros1_bag(path, clouds, *, extra_odometry: bool = False, topic: str = "
                          fields=[T["sensor_msgs/msg/PointField"](name=n, offset=o, datatype=d, count=1) for n, o, d in fields],
                          data=np.frombuffer(data, dtype=np.uint8), is_dense=True)
             writer.write(conn, 10**12 + k * 10**8, store.serialize_ros1(msg, pc2))  # receive time: increasing
-        if odometry:
-            odo = writer.add_connection("/ground_truth", "nav_msgs/msg/Odometry", typestore=store)
+        for odometry_topic in ("/ground_truth", "/ground_truth2")[: 1 + second_odometry] if odometry else ():
+            odo = writer.add_connection(odometry_topic, "nav_msgs/msg/Odometry", typestore=store)
             zeros, vec = np.zeros(36), T["geometry_msgs/msg/Vector3"]
             for k, (stamp_s, xyz, q) in enumerate(odometry):
                 sec = int(np.floor(stamp_s))
@@ -179,6 +180,11 @@ def test_ground_truth_poses_that_cannot_stand_one_per_scan(tmp_path):
                           odometry=[(1000.0, (k, 0, 0), (0, 0, 0, 1)) for k in range(3)])
     with pytest.raises(DataError, match=r"same.bag/ground_truth \(frame 1\): timestamps are not strictly increasing"):
         open_dataset("rosbag", same).ground_truth
+    two = write_ros1_bag(tmp_path / "two.bag", scans, odometry=[(1000.0 + 0.1 * k, (k, 0, 0), (0, 0, 0, 1)) for k in range(3)],
+                         second_odometry=True)
+    with pytest.raises(DataError, match=r"several nav_msgs/msg/Odometry topics \(/ground_truth, /ground_truth2\): choose"):
+        open_dataset("rosbag", two)  # was: no ground truth at all, silently
+    assert len(open_dataset("rosbag", two, ground_truth_topic="/ground_truth2").ground_truth) == 3
     one = write_ros1_bag(tmp_path / "one.bag", scans, odometry=[(1000.0, (0, 0, 0), (0, 0, 0, 1))])
     with pytest.raises(DataError, match=r"1 pose\(s\) for 3 scans: one pose per scan needed"):
         open_dataset("rosbag", one).ground_truth

@@ -109,6 +109,9 @@ class _BagScans:
             self.ground_truth_topic: str | None = ground_truth_topic
         elif ground_truth_topic is None and len(odometry) == 1:
             self.ground_truth_topic = odometry[0]
+        elif ground_truth_topic is None and len(odometry) > 1:  # which one is the ground truth is the user's call
+            raise DataError(f"several {ODOMETRY} topics ({', '.join(odometry)}): choose the ground truth with ground_truth_topic=... "
+                            "(or ground_truth_topic=none)", source=self.path)
         else:
             self.ground_truth_topic = None
         self.name = f"{self.kind}:{self.path.name}{self.topic}"
