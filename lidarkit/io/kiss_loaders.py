@@ -13,6 +13,7 @@ kiss-icp's ``kitti``, ``kitti_raw`` and ``tum`` loaders are the kinds ``kiss_kit
 
 from __future__ import annotations
 
+import logging
 import os
 from pathlib import Path
 from typing import Any
@@ -23,6 +24,8 @@ from lidarkit.errors import ConfigError, DataError
 from lidarkit.io.base import Scan
 from lidarkit.io.rosbag import guarded_loader, require_modules
 from lidarkit.trajectory import Trajectory
+
+log = logging.getLogger(__name__)
 
 #: kiss-icp loader name -> lidarkit dataset kind
 KISS_KINDS = {
@@ -57,8 +60,27 @@ class KissLoaderScans:
         if not self.path.exists():
             raise DataError(f"{self.kind} dataset not found", source=self.path)
         self.loader_options = {k: v for k, v in loader_options.items() if v is not None}
+        self._check_pose_rows()
         self.loader = self._build()
         self.name = f"{self.kind}:{getattr(self.loader, 'sequence_id', self.path.name)}"
+        self._stamp_cache: tuple[np.ndarray | None] | None = None
+
+    def _pose_file(self) -> tuple[Path, int, list[Path]] | None:
+        """(ground-truth file, its header lines, the scan files it must give one pose each) for the loaders that pair
+        them by count; None: nothing to check before the loader is built."""
+        return None
+
+    def _check_pose_rows(self) -> None:
+        """One ground-truth row per scan, said before a loader that pairs them by count fails on it (an
+        AssertionError without a message, or numpy's broadcasting error)."""
+        found = self._pose_file()
+        if found is None or not found[0].is_file():
+            return
+        path, header, scans = found
+        with open(path, "rb") as f:
+            rows = sum(1 for line in f if line.strip()) - header
+        if rows != len(scans):
+            raise DataError(f"{rows} ground-truth poses for {len(scans)} scans: one pose per scan needed", source=path)
 
     @property
     def kind(self) -> str:
@@ -92,7 +114,7 @@ class KissLoaderScans:
             raise DataError(f"{len(times)} per-point times for {len(points)} points", source=self.path, location=f"frame {index}")
         if times is not None and not np.isfinite(times).all():
             raise DataError("per-point times contain NaN or infinite values", source=self.path, location=f"frame {index}")
-        stamps = self._stamps()
+        stamps = self.timestamps_s
         stamp = None if stamps is None or index >= len(stamps) else float(stamps[index])
         return Scan(points, None, times, stamp, index, f"{self.path} frame {index}", self.point_time_convention, None)
 
@@ -109,7 +131,10 @@ class KissLoaderScans:
 
     @property
     def timestamps_s(self) -> np.ndarray | None:
-        return self._stamps()
+        """The scans' stamps (s), read once (read_scan asks for them every frame)."""
+        if self._stamp_cache is None:
+            self._stamp_cache = (self._stamps(),)
+        return self._stamp_cache[0]
 
     @property
     def ground_truth(self) -> Trajectory | None:
@@ -117,7 +142,9 @@ class KissLoaderScans:
         if poses is None:
             return None
         poses = np.asarray(poses, dtype=np.float64)
-        stamps = self._stamps()
+        if len(poses) != len(self):
+            raise DataError(f"{len(poses)} ground-truth poses for {len(self)} scans: one pose per scan needed", source=self.path)
+        stamps = self.timestamps_s
         return Trajectory(poses, stamps if stamps is not None and len(stamps) == len(poses) else None, name=f"{self.name}_gt",
                           meta={"frame": self.ground_truth_frame, "pose_instant": None, "kiss_icp_loader": self.loader_name})
 
@@ -208,47 +235,135 @@ class OusterScans(KissLoaderScans):
         super().__init__(pcap, meta=meta)  # then the ouster-sdk check (ConfigError with the pip line)
 
 
+def nclt_points(path: str | os.PathLike) -> np.ndarray:
+    """One NCLT ``velodyne_sync`` file: x, y, z as little-endian uint16 at 5 mm from -100 m, then intensity and laser
+    id bytes (NCLT's own ``read_vel_sync.py``: ``'<HHHBB'``), turned to z up as kiss-icp does (x, -y, -z). kiss-icp's
+    loader reads them as int16: every coordinate beyond 63.835 m came back 327.68 m short."""
+    raw = np.fromfile(path, dtype=np.dtype([("xyz", "<u2", 3), ("intensity", "u1"), ("laser", "u1")]))
+    xyz = raw["xyz"].astype(np.float64) * 0.005 - 100.0
+    return xyz * np.array([1.0, -1.0, -1.0])
+
+
 class NcltScans(KissLoaderScans):
-    """NCLT (``velodyne_sync`` + ``ground_truth``), kiss-icp's ``nclt`` loader."""
+    """NCLT (``velodyne_sync`` + ``ground_truth``), kiss-icp's ``nclt`` loader with the points read as NCLT stores
+    them (:func:`nclt_points`); the scans outside the ground truth's time span are left out, as the loader does
+    (with a warning saying how many). Stamps: the file names (microseconds)."""
 
     loader_name = "nclt"
     point_time_convention = "relative_s"
 
     def __init__(self, path: str | os.PathLike):
         super().__init__(path)
+        self.loader.read_point_cloud = nclt_points
+        on_disk = len([p for p in (self.path / "velodyne_sync").iterdir() if p.is_file()])
+        if on_disk > len(self.loader):
+            log.warning("%s: %d of %d scans lie outside the ground truth's time span and are left out (kiss-icp's NCLT "
+                        "loader reads only scans with ground truth)", self.path, on_disk - len(self.loader), on_disk)
+
+    def _stamps(self) -> np.ndarray | None:
+        return np.asarray(self.loader.timestamps, dtype=np.float64) * 1e-6
 
 
 class MulranScans(KissLoaderScans):
-    """MulRan (Ouster ``.bin`` + ``global_pose.csv``), kiss-icp's ``mulran`` loader."""
+    """MulRan (Ouster ``.bin`` + ``global_pose.csv``), kiss-icp's ``mulran`` loader. Stamps: the file names
+    (nanoseconds); a scan outside the span of ``global_pose.csv`` is a DataError (the loader gives it the nearest pose,
+    the last one for every scan past the end)."""
 
     loader_name = "mulran"
 
     def __init__(self, path: str | os.PathLike):
         super().__init__(path)
 
+    def _stamps(self) -> np.ndarray | None:
+        return np.asarray(self.loader.scan_timestamps, dtype=np.float64) * 1e-9
+
+    @property
+    def ground_truth(self) -> Trajectory | None:
+        stamps_ns = np.loadtxt(self.path / "global_pose.csv", delimiter=",", usecols=0, ndmin=1)
+        scans_ns = np.asarray(self.loader.scan_timestamps, dtype=np.float64)
+        outside = np.flatnonzero((scans_ns < stamps_ns.min() - 5e7) | (scans_ns > stamps_ns.max() + 5e7))  # half a 10 Hz sweep
+        if len(outside):
+            raise DataError(f"{len(outside)} of {len(scans_ns)} scans (the first: scan {outside[0]}) lie outside the poses' time "
+                            f"span ({stamps_ns.min() * 1e-9:.3f} to {stamps_ns.max() * 1e-9:.3f} s): one pose per scan needed",
+                            source=self.path / "global_pose.csv")
+        return super().ground_truth
+
 
 class NewerCollegeScans(KissLoaderScans):
-    """Newer College (``raw_format/ouster_scan/*.pcd`` + ``ground_truth``), kiss-icp's ``ncd`` loader."""
+    """Newer College (``raw_format/ouster_scan/*.pcd`` + ``ground_truth``), kiss-icp's ``ncd`` loader with the
+    clouds read by Open3D (kiss-icp's pyntcloud fails on binary PCD files under numpy 2), every point kept so that the
+    64 x 1024 per-point times still fit."""
 
     loader_name = "ncd"
-    requires = {"pyntcloud": "pip install pyntcloud"}
 
     def __init__(self, path: str | os.PathLike):
         super().__init__(path)
+        self.loader.PyntCloud = _Open3DPcd
+
+
+class _Open3DPcd:
+    """What kiss-icp's ``ncd`` loader asks of pyntcloud (``from_file(path).points[["x", "y", "z"]].to_numpy()``)."""
+
+    def __init__(self, xyz: np.ndarray):
+        self._xyz = xyz
+
+    @classmethod
+    def from_file(cls, path: str) -> "_Open3DPcd":
+        import open3d as o3d
+
+        cloud = o3d.io.read_point_cloud(str(path), remove_nan_points=False, remove_infinite_points=False)
+        return cls(np.asarray(cloud.points, dtype=np.float64))
+
+    @property
+    def points(self) -> "_Open3DPcd":
+        return self
+
+    def __getitem__(self, columns) -> "_Open3DPcd":
+        return self
+
+    def to_numpy(self) -> np.ndarray:
+        return self._xyz
+
+
+#: struct format characters of kiss-icp's HeLiPR loader -> numpy types (standard sizes, little endian)
+_STRUCT_TYPES = {"f": "<f4", "B": "u1", "H": "<u2", "I": "<u4", "L": "<u4", "l": "<i4"}
 
 
 class HeliprScans(KissLoaderScans):
-    """HeLiPR (``LiDAR/<sensor>`` + ``LiDAR_GT``), kiss-icp's ``helipr`` loader; ``sequence`` is the sensor."""
+    """HeLiPR (``LiDAR/<sensor>`` + ``LiDAR_GT``), kiss-icp's ``helipr`` loader; ``sequence`` is the sensor. Files are
+    read whole with numpy (the loader unpacked them point by point and dropped each file's last point). Stamps: the
+    file names (nanoseconds)."""
 
     loader_name = "helipr"
     SENSORS = ("Avia", "Aeva", "Ouster", "Velodyne")
 
     def __init__(self, path: str | os.PathLike, sequence: str = "Ouster"):
-        if sequence not in self.SENSORS:
-            from lidarkit.errors import ConfigError
-
+        if not isinstance(sequence, str) or sequence not in self.SENSORS:
             raise ConfigError(f"unknown HeLiPR sensor {sequence!r}; known: {', '.join(self.SENSORS)}", source="helipr sequence")
         super().__init__(path, sequence=sequence)
+        self.loader.get_data = self._records
+
+    def _pose_file(self) -> tuple[Path, int, list[Path]] | None:
+        sensor = self.loader_options["sequence"]
+        return (self.path / "LiDAR_GT" / f"global_{sensor}_gt.txt", 0, sorted((self.path / "LiDAR" / sensor).glob("*.bin")))
+
+    def _records(self, index: int) -> np.ndarray:
+        loader = self.loader
+        path = loader.scan_files[index]
+        fmt = loader.format_string
+        if loader.sequence_id == "Aeva" and int(Path(path).stem) <= 1691936557946849179:  # early Aeva files: no intensity
+            loader.intensity_channel, fmt = None, loader.format_string_no_intensity
+        dtype = np.dtype([(f"c{i}", _STRUCT_TYPES[c]) for i, c in enumerate(fmt)])
+        size = os.path.getsize(path)
+        if size % dtype.itemsize:
+            raise DataError(f"{size} bytes is not a whole number of {dtype.itemsize}-byte points", source=path)
+        raw = np.fromfile(path, dtype=dtype)
+        if len(raw) == 0:
+            raise DataError("no points", source=path)
+        return np.column_stack([raw[name].astype(np.float64) for name in dtype.names])
+
+    def _stamps(self) -> np.ndarray | None:
+        return np.asarray(self.loader.scan_timestamps, dtype=np.float64) * 1e-9
 
 
 class BoreasScans(KissLoaderScans):
@@ -259,6 +374,9 @@ class BoreasScans(KissLoaderScans):
     def __init__(self, path: str | os.PathLike):
         super().__init__(path)
 
+    def _pose_file(self) -> tuple[Path, int, list[Path]] | None:
+        return self.path / "applanix" / "lidar_poses.csv", 1, sorted((self.path / "lidar").glob("*.bin"))
+
 
 class ApolloScans(KissLoaderScans):
     """Apollo-SouthBay (``pcds`` + ``poses/gt_poses.txt``), kiss-icp's ``apollo`` loader."""
@@ -268,6 +386,9 @@ class ApolloScans(KissLoaderScans):
 
     def __init__(self, path: str | os.PathLike):
         super().__init__(path)
+
+    def _pose_file(self) -> tuple[Path, int, list[Path]] | None:
+        return self.path / "poses" / "gt_poses.txt", 0, sorted((self.path / "pcds").glob("*.pcd"))
 
 
 class NuScenesScans(KissLoaderScans):

@@ -1,0 +1,107 @@
+"""kiss-icp's dataloaders as lidarkit reads them, on small datasets written in each dataset's own layout: points as the
+dataset stores them, stamps from the file names, and ground truth that cannot stand one pose per scan refused."""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import pytest
+
+from lidarkit.errors import DataError
+from lidarkit.io import open_dataset
+
+RING = np.column_stack([np.cos(np.linspace(0, 6, 200)) * 20, np.sin(np.linspace(0, 6, 200)) * 20, np.linspace(-1, 1, 200)])
+
+
+def test_nclt_points_are_unsigned_and_scans_outside_the_ground_truth_are_counted(tmp_path, caplog):
+    sequence = tmp_path / "2012-01-08"
+    (sequence / "velodyne_sync").mkdir(parents=True)
+    (tmp_path / "ground_truth").mkdir()
+    points = np.vstack([RING, [[70.0, 0.0, 0.0], [0.0, 80.0, -2.0]]])  # beyond 63.835 m: past int16's range
+    stored = np.round((points * [1.0, -1.0, -1.0] + 100.0) / 0.005).astype(np.uint16)  # NCLT: z down, 5 mm from -100 m
+    utimes = 1326031000000000 + np.arange(4) * 100000
+    for ut in utimes:
+        record = np.zeros(len(stored), dtype=[("xyz", "<u2", 3), ("i", "u1"), ("l", "u1")])
+        record["xyz"] = stored
+        record.tofile(sequence / "velodyne_sync" / f"{ut}.bin")
+    gt = [[ut, k, 0, 0, 0, 0, 0] for k, ut in enumerate([utimes[0] - 50000, *utimes[:3], utimes[2] + 50000])]  # scan 3 outside
+    np.savetxt(tmp_path / "ground_truth" / "groundtruth_2012-01-08.csv", gt, delimiter=",", fmt="%d")
+    with caplog.at_level(logging.WARNING):
+        dataset = open_dataset("nclt", sequence)
+    assert len(dataset) == 3 and "1 of 4 scans lie outside the ground truth's time span" in caplog.text
+    np.testing.assert_allclose(dataset.read_scan(0).points_xyz, points, atol=0.003)  # x = 70 m read as -257.68 m before
+    np.testing.assert_allclose(dataset.timestamps_s, utimes[:3] * 1e-6)
+    assert dataset.read_scan(1).timestamp_s == pytest.approx(utimes[1] * 1e-6)
+
+
+def _mulran(root, n_scans: int, n_poses: int):
+    (root / "Ouster").mkdir(parents=True)
+    ns = 1_600_000_000_000_000_000 + np.arange(n_scans) * 100_000_000
+    for stamp in ns:
+        np.column_stack([RING, np.ones(len(RING))]).astype(np.float32).tofile(root / "Ouster" / f"{stamp}.bin")
+    with open(root / "global_pose.csv", "w") as f:
+        for k in range(n_poses):
+            f.write(f"{ns[k]}," + ",".join(f"{v:g}" for v in np.eye(4)[:3].ravel() + np.array([0, 0, 0, k, 0, 0, 0, 0, 0, 0, 0, 0])) + "\n")
+    return ns
+
+
+def test_mulran_stamps_and_a_pose_file_that_ends_before_the_scans(tmp_path):
+    ns = _mulran(tmp_path / "full", 4, 4)
+    dataset = open_dataset("mulran", tmp_path / "full")
+    np.testing.assert_allclose(dataset.timestamps_s, ns * 1e-9)
+    assert len(dataset.ground_truth) == 4
+    _mulran(tmp_path / "half", 6, 3)  # the last 3 scans got the last pose, silently
+    with pytest.raises(DataError, match=r"global_pose.csv: 3 of 6 scans \(the first: scan 3\) lie outside the poses' time span"):
+        open_dataset("mulran", tmp_path / "half").ground_truth
+
+
+def test_helipr_reads_every_point_and_checks_the_pose_rows(tmp_path):
+    folder = tmp_path / "LiDAR" / "Ouster"
+    folder.mkdir(parents=True)
+    (tmp_path / "LiDAR_GT").mkdir()
+    dtype = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("i", "<f4"), ("t", "<u4"), ("r", "<u2"), ("ring", "<u2"), ("a", "<u2")])
+    ns = 1_690_000_000_000_000_000 + np.arange(3) * 100_000_000
+    for stamp in ns:
+        record = np.zeros(len(RING), dtype=dtype)
+        record["x"], record["y"], record["z"] = RING.T
+        record["t"] = np.arange(len(RING)) * 1000
+        record.tofile(folder / f"{stamp}.bin")
+    rows = [f"{stamp} {k} 0 0 0 0 0 1" for k, stamp in enumerate(ns)]
+    (tmp_path / "LiDAR_GT" / "global_Ouster_gt.txt").write_text("\n".join(rows) + "\n")
+    dataset = open_dataset("helipr", tmp_path, sequence="Ouster")
+    scan = dataset.read_scan(0)
+    np.testing.assert_allclose(scan.points_xyz, RING.astype(np.float32), atol=1e-6)  # the last point was dropped
+    np.testing.assert_allclose(scan.point_times_s, np.linspace(0, 1, len(RING)))
+    np.testing.assert_allclose(dataset.timestamps_s, ns * 1e-9)
+    (tmp_path / "LiDAR_GT" / "global_Ouster_gt.txt").write_text("\n".join(rows[:2]) + "\n")
+    with pytest.raises(DataError, match=r"global_Ouster_gt.txt: 2 ground-truth poses for 3 scans"):  # numpy's broadcast error
+        open_dataset("helipr", tmp_path, sequence="Ouster")
+
+
+def test_boreas_pose_rows_are_checked_before_the_loader_asserts(tmp_path):
+    (tmp_path / "lidar").mkdir()
+    (tmp_path / "applanix").mkdir()
+    for k in range(3):
+        np.zeros((10, 6), np.float32).tofile(tmp_path / "lidar" / f"{1606417230000000 + k * 100000}.bin")
+    header = "GPSTime,easting,northing,altitude,vel_east,vel_north,vel_up,roll,pitch,heading,angvel_z,angvel_y,angvel_x\n"
+    (tmp_path / "applanix" / "lidar_poses.csv").write_text(header + "1606417230.0" + ",0" * 12 + "\n")
+    with pytest.raises(DataError, match=r"lidar_poses.csv: 1 ground-truth poses for 3 scans"):  # an AssertionError without text
+        open_dataset("boreas", tmp_path)
+
+
+def test_newer_college_binary_pcd_without_pyntcloud(tmp_path):
+    import open3d as o3d
+
+    (tmp_path / "raw_format" / "ouster_scan").mkdir(parents=True)
+    (tmp_path / "ground_truth").mkdir()
+    rows = []
+    for k in range(2):
+        secs, nsecs = 1583836591 + k, 182590976
+        cloud = o3d.t.geometry.PointCloud(o3d.core.Tensor(RING.astype(np.float32)))
+        o3d.t.io.write_point_cloud(str(tmp_path / "raw_format" / "ouster_scan" / f"cloud_{secs}_{nsecs}.pcd"), cloud)
+        rows.append(f"{secs},{nsecs},{k},0,0,0,0,0,1")
+    (tmp_path / "ground_truth" / "registered_poses.csv").write_text("\n".join(rows) + "\n")
+    dataset = open_dataset("ncd", tmp_path)
+    np.testing.assert_allclose(dataset.read_scan(1).points_xyz, RING.astype(np.float32), atol=1e-6)
+    assert len(dataset.ground_truth) == 2
