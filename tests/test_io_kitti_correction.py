@@ -65,6 +65,16 @@ def test_auto_is_off_for_other_methods_and_for_simulated_folders(tmp_path):
     simulated.configure_for_method("kiss")
     assert simulated.reader_options["vertical_correction_applied"] is False
 
+    # a user's own recording kept in the KITTI layout (the simulator's sweeps, sim.yaml gone): no HDL-64 behind it
+    (sim / "sim.yaml").unlink()
+    recording = KittiOdometry(sim)
+    recording.configure_for_method("kiss")
+    assert not recording.recorded_by_kitti and recording.reader_options["vertical_correction_applied"] is False
+    (sim / "calib.txt").write_text((shared_path("kitti_odometry", "sequences", "00", "calib.txt")).read_text())
+    copied_calib = KittiOdometry(sim)  # KITTI's camera calibration: taken for KITTI's own recording
+    copied_calib.configure_for_method("kiss")
+    assert copied_calib.recorded_by_kitti and copied_calib.reader_options["vertical_correction_applied"] is True
+
 
 def test_kiss_kitti_kind_reads_what_the_corrected_kitti_reader_reads():
     from lidarkit.io import open_dataset

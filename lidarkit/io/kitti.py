@@ -44,6 +44,10 @@ log = logging.getLogger(__name__)
 POINT_TIME_FOLDERS = ("point_times", "timestamps", "times", "point_timestamps")
 #: KITTI's HDL-64 vertical-angle correction, as kiss-icp's KITTI loader applies it (``_correct_kitti_scan``)
 KITTI_VERTICAL_CORRECTION_DEG = 0.205
+#: fx (px) of KITTI's rectified cameras, one per recording day (2011_09_26, _28, _29, _30, 10_03): a calib.txt with one
+#: of them is KITTI's own (its HDL-64 needs the vertical correction), not a user's recording in the KITTI layout
+KITTI_FOCAL_LENGTHS_PX = np.array([721.5377, 707.0493, 718.3351, 707.0912, 718.856])
+
 #: methods whose reference pipeline reads KITTI with the correction (``vertical_correction="auto"`` turns it on)
 CORRECTED_BY_DEFAULT = ("kiss",)
 
@@ -156,8 +160,9 @@ class KittiOdometry:
     :data:`KITTI_VERTICAL_CORRECTION_DEG` (KITTI's HDL-64 calibration error, corrected exactly as kiss-icp's KITTI
     loader does, through kiss-icp's own ``_correct_kitti_scan``). ``True`` / ``False`` force it; ``"auto"``
     (default) applies it when an odometry run of a method in :data:`CORRECTED_BY_DEFAULT` (kiss) asks through
-    :meth:`configure_for_method`, so that "kiss through lidarkit" is kiss-icp's own experiment, and never to a
-    folder written by lidarkit's simulator (``sim.yaml``: no HDL-64 behind it). Read directly, "auto" reads the
+    :meth:`configure_for_method` on KITTI's own recordings (:attr:`recorded_by_kitti`), so that "kiss through
+    lidarkit" is kiss-icp's own experiment, and never to another folder in the KITTI layout (a user's recording, the
+    simulator's export: no HDL-64 behind it). Read directly, "auto" reads the
     points as stored. ``reader_options`` records what was applied.
     """
 
@@ -232,10 +237,24 @@ class KittiOdometry:
         """True for a folder written by lidarkit's simulator (``sim.yaml`` beside ``velodyne/``)."""
         return (self.sequence_dir / "sim.yaml").is_file()
 
+    @cached_property
+    def recorded_by_kitti(self) -> bool:
+        """True for KITTI's own recordings (its HDL-64): a ``calib.txt`` whose camera focal length is one of KITTI's
+        rectified calibrations (:data:`KITTI_FOCAL_LENGTHS_PX`), and no ``sim.yaml``. A user's recording kept in the
+        KITTI layout has another camera, or none."""
+        if self.simulated or not self.calib_path.is_file():
+            return False
+        try:
+            P0 = self.calib.get("P0")
+        except DataError:
+            return False
+        return P0 is not None and bool(np.isclose(P0[0, 0], KITTI_FOCAL_LENGTHS_PX, atol=1e-3).any())
+
     def configure_for_method(self, method: str) -> None:
-        """Resolve ``vertical_correction="auto"`` for an odometry run of ``method`` (on for kiss on real KITTI)."""
+        """Resolve ``vertical_correction="auto"`` for an odometry run of ``method`` (on for kiss on KITTI's own
+        recordings, :attr:`recorded_by_kitti`)."""
         if self.vertical_correction == "auto":
-            self._correct = method in CORRECTED_BY_DEFAULT and not self.simulated
+            self._correct = method in CORRECTED_BY_DEFAULT and self.recorded_by_kitti
 
     @property
     def reader_options(self) -> dict:
