@@ -189,3 +189,24 @@ def test_ground_truth_poses_that_cannot_stand_one_per_scan(tmp_path):
     with pytest.raises(DataError, match=r"1 pose\(s\) for 3 scans: one pose per scan needed"):
         open_dataset("rosbag", one).ground_truth
 
+
+
+def test_padded_rows_of_an_organized_cloud(tmp_path):
+    """row_step beyond width x point_step (drivers pad rows): each row starts row_step bytes after the one before
+    (read as if packed, every point after the first row was shifted, up to 91 m off)."""
+    from types import SimpleNamespace
+
+    from lidarkit.io.pointcloud2 import decode_pointcloud2
+
+    fields, step, data = _cloud_bytes(6)
+    field_msgs = [SimpleNamespace(name=n, offset=o, datatype=d, count=1) for n, o, d in fields]
+    rows = [data[:3 * step], data[3 * step:]]
+    padded = rows[0] + b"\xff" * 4 + rows[1] + b"\xff" * 4
+    msg = SimpleNamespace(fields=field_msgs, point_step=step, width=3, height=2, row_step=3 * step + 4, data=padded, is_bigendian=False)
+    packed = SimpleNamespace(**{**vars(msg), "row_step": 3 * step, "data": data})
+    cloud = decode_pointcloud2(msg, source="pad.bag", location="/points message 0")
+    np.testing.assert_array_equal(cloud.points_xyz, decode_pointcloud2(packed, source="p", location="m").points_xyz)
+    with pytest.raises(DataError, match=r"pad.bag \(/points message 0\): row_step 40 is less than width 3 x point_step 16"):
+        decode_pointcloud2(SimpleNamespace(**{**vars(msg), "row_step": 40}), source="pad.bag", location="/points message 0")
+    with pytest.raises(DataError, match="truncated message"):
+        decode_pointcloud2(SimpleNamespace(**{**vars(msg), "data": padded[:-10]}), source="pad.bag", location="/points message 0")

@@ -59,18 +59,27 @@ def decode_pointcloud2(msg: Any, *, source: str, location: str, time_field: str 
         dtype = fields_dtype(msg.fields, int(msg.point_step))
     except (ValueError, TypeError, KeyError) as err:
         raise DataError(f"PointCloud2 field layout not readable ({err})", source=source, location=location) from None
-    n_points = int(msg.width) * int(msg.height)
+    width, height = int(msg.width), int(msg.height)
+    n_points = width * height
     step = int(msg.point_step)
     if n_points and step <= 0:
         raise DataError(f"point_step {step} for {n_points} points", source=source, location=location)
+    # rows may be padded (row_step > width x point_step): each row starts row_step bytes after the one before
+    row_step = int(getattr(msg, "row_step", 0) or 0) if height > 1 else width * step
+    if n_points and row_step < width * step:
+        raise DataError(f"row_step {row_step} is less than width {width} x point_step {step}", source=source, location=location)
     data = msg.data
     buffer = np.frombuffer(data if isinstance(data, (bytes, bytearray, memoryview, np.ndarray)) else bytes(data), dtype=np.uint8)
-    if buffer.size < n_points * step:
+    need = (height - 1) * row_step + width * step if n_points else 0
+    if buffer.size < need:
         raise DataError(
             f"data holds {buffer.size} bytes but width x height = {n_points} points of {step} bytes need "
-            f"{n_points * step} (truncated message)", source=source, location=location,
+            f"{need} (truncated message)", source=source, location=location,
         )
-    cloud = np.ndarray(shape=(n_points,), dtype=dtype, buffer=buffer)
+    if row_step == width * step:
+        cloud = np.ndarray(shape=(n_points,), dtype=dtype, buffer=buffer)
+    else:
+        cloud = np.ndarray(shape=(height, width), dtype=dtype, buffer=buffer, strides=(row_step, step)).reshape(-1)
     if msg.is_bigendian:
         cloud = cloud.view(cloud.dtype.newbyteorder(">"))
     xyz = np.column_stack([cloud["x"], cloud["y"], cloud["z"]]).astype(np.float64)
