@@ -153,6 +153,15 @@ def test_missing_or_empty_folder_and_bad_options(tmp_path):
         ScanFolder(tmp_path, poses_format="g2o")
     with pytest.raises(ConfigError, match="unsupported scan suffix '.las'"):
         ScanFolder(tmp_path, suffixes=(".las",))
+    np.save(tmp_path / "a.npy", np.zeros((5, 3)))
+    np.zeros((5, 4), np.float32).tofile(tmp_path / "b.bin")
+    from lidarkit.io import open_dataset
+    from lidarkit.odometry.inputs import open_sequence
+
+    assert len(open_sequence(f"folder:{tmp_path}?suffixes=.npy,.bin")) == 2  # the text, not its characters ('.')
+    assert len(open_dataset("folder", tmp_path, suffixes=".npy")) == 1
+    with pytest.raises(ConfigError, match="unsupported scan suffix '.las'"):
+        open_sequence(f"folder:{tmp_path}?suffixes=.npy,.las")
 
 
 def test_cut_or_garbled_files_are_refused_not_read_as_garbage(tmp_path, rng):

@@ -33,7 +33,8 @@ class ScanFolder:
 
     ``poses_format`` is ``"kitti"`` (12 numbers per row) or ``"tum"`` (``t x y z qx qy qz qw``; its
     time stamps become ``timestamps_s`` unless ``timestamps`` is given). ``suffixes`` restricts the
-    file types read; a folder mixing several types is read as one sequence in name order.
+    file types read (a sequence, or text such as ``".npy,.bin"`` as a spec writes it); a folder mixing several types
+    is read as one sequence in name order.
     ``drop_nonfinite`` drops NaN/inf points with a logged warning instead of raising DataError.
     """
 
@@ -45,9 +46,11 @@ class ScanFolder:
         poses_format: str = "kitti",
         timestamps: str | os.PathLike | np.ndarray | list[float] | None = None,
         drop_nonfinite: bool = False,
-        suffixes: tuple[str, ...] = POINT_FILE_SUFFIXES,
+        suffixes: tuple[str, ...] | str = POINT_FILE_SUFFIXES,
         name: str | None = None,
     ):
+        if isinstance(suffixes, str):  # a spec's ?suffixes=.npy,.bin: the text, not its characters
+            suffixes = tuple(s.strip() for s in suffixes.strip("[]()").split(",") if s.strip())
         folder = Path(path)
         if not folder.is_dir():
             raise DataError("scan folder not found" if not folder.exists() else "not a folder", source=folder)
