@@ -355,3 +355,16 @@ def test_kiss_with_every_point_cropped_is_an_error_not_a_still_trajectory(export
 
     with pytest.raises(RegistrationError, match=r"\(frame 0\): kiss: no point of the sweep lies within \[0, 0.5\] m of the sensor"):
         run(exported, "kiss", params={"max_range_m": 0.5}, frames="0:3")
+
+
+def test_progress_is_printed_as_lines_where_no_bar_can_be_drawn(exported, capsys):
+    """stderr to a file or a pipe (a log, CI): a line at every tenth of the run instead of a bar that never shows."""
+    with pytest.raises(SystemExit) as exc:
+        main(["odometry", str(exported), "-m", "small_gicp"])
+    assert exc.value.code == 0
+    lines = [line for line in capsys.readouterr().err.splitlines() if " frames (" in line]
+    assert 8 <= len(lines) <= 11 and lines[-1].startswith("small_gicp on street_seq: 12/12 frames (100 %)")
+    assert re.search(r"\d+\.\d frames/s, ~\d+ s left$", lines[0])
+    with pytest.raises(SystemExit):
+        main(["odometry", str(exported), "-m", "small_gicp", "--frames", "0:5", "--no-progress"])
+    assert " frames (" not in capsys.readouterr().err
