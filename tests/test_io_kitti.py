@@ -162,7 +162,7 @@ def test_image_only_sequence_with_bare_calib():
     assert step[2] > 0.9 and abs(step[0]) < 0.1
 
 
-def test_root_may_be_the_sequence_folder():
+def test_root_may_be_the_sequence_folder(tmp_path, monkeypatch):
     seq06 = KittiOdometry(shared_path("kitti_images", "sequences", "06"))
     assert seq06.name == "kitti_06" and seq06.poses_path.name == "06.txt"  # ../../poses/06.txt preferred
     seq01 = KittiOdometry(shared_path("kitti_images", "sequences", "01"))
@@ -171,6 +171,18 @@ def test_root_may_be_the_sequence_folder():
     # another sequence asked of a sequence folder is refused, not ignored
     with pytest.raises(ConfigError, match="the folder is sequence 06 itself; sequence=05 names another"):
         KittiOdometry(shared_path("kitti_images", "sequences", "06"), sequence="05")
+
+    # the same under a name that is not a number (a folder of one sequence): sequence=05 was ignored
+    renamed = tmp_path / "drive_a"
+    shutil.copytree(shared_path("kitti_odometry", "sequences", "00"), renamed)
+    assert len(KittiOdometry(renamed)) == 10
+    with pytest.raises(ConfigError, match="the folder is one sequence itself .*sequence=05 names another"):
+        KittiOdometry(renamed, sequence="05")
+    # a spec's path after "kind:" is not expanded by the shell: lidarkit expands ~
+    from lidarkit.odometry.inputs import open_sequence
+
+    monkeypatch.setenv("HOME", str(tmp_path))
+    assert len(open_sequence("kitti:~/drive_a")) == 10
 
 
 def test_times_out_of_order_name_the_file_line(tmp_path, odo_root):

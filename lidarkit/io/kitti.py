@@ -274,12 +274,15 @@ class KittiOdometry:
         if candidate.is_dir():
             return candidate, root
         if (root / "velodyne").is_dir() or (root / "image_0").is_dir() or (root / "calib.txt").is_file():
+            asked = str(self.sequence)
             if root.name.isdigit():
-                asked = str(self.sequence)
                 if asked.isdigit() and int(asked) not in (0, int(root.name)):  # (00 is the default: not a choice)
                     raise ConfigError(f"the folder is sequence {root.name} itself; sequence={asked} names another (give the "
                                       "odometry root that holds sequences/)", source=root)
                 self.sequence = root.name
+            elif asked.isdigit() and int(asked) != 0:  # one sequence under another name: no other to choose
+                raise ConfigError(f"the folder is one sequence itself (no sequences/ inside); sequence={asked} names another "
+                                  "(give the odometry root that holds sequences/)", source=root)
             parent = root.parent.parent if root.parent.name == "sequences" else None
             return root, parent
         raise DataError(

@@ -38,6 +38,7 @@ def open_sequence(spec: str | os.PathLike | ScanSequence) -> ScanSequence:
     kind, sep, rest = text.partition(":")
     if sep and kind in lio.available_datasets() and len(kind) > 1:
         path, _, query = rest.partition("?")
+        path = os.path.expanduser(path)  # the shell leaves ~ after "kind:" as it is
         from lidarkit.params import parse_kv
 
         return _scans(lio.open_dataset(kind, path, **parse_kv(query, option=f"{kind} dataset option")), text)
