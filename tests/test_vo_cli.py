@@ -230,3 +230,19 @@ def test_vo_self_calibration_falls_back_and_says_why(tmp_path, capsys, caplog):
     recorded = yaml.safe_load((out / "config.yaml").read_text())["self_calibration"]
     assert recorded["constrained"] is False and recorded["sigma_px"] is None
     assert recorded["focal_px"] == pytest.approx(0.9 * 1226)
+
+
+def test_timestamps_file_is_used_and_checked(tmp_path, capsys):
+    """``--timestamps`` (it raised an ImportError on every file): the stamps reach poses_tum.txt; stamps that go back
+    are a one-line error naming the file's line, before the run."""
+    seq = sample_path("kitti_vo", "06")
+    stamps = tmp_path / "stamps.txt"
+    stamps.write_text("".join(f"{100.0 + 0.1 * k:.3f}\n" for k in range(8)))
+    out = tmp_path / "run"
+    code, _, err = _run(["vo", str(seq), "--scale", "gt", "--timestamps", str(stamps), "--out", str(out)], capsys)
+    assert code in (0, None), err
+    est = Trajectory.from_tum(out / "poses_tum.txt")
+    np.testing.assert_allclose(est.timestamps_s, 100.0 + 0.1 * np.arange(8), atol=1e-6)
+    stamps.write_text("".join(f"{100.0 + 0.1 * k:.3f}\n" for k in (0, 1, 2, 1, 4, 5, 6, 7)))
+    code, _, err = _run(["vo", str(seq), "--timestamps", str(stamps)], capsys)
+    assert code == 1 and "stamps.txt (line 4 (frame 3)): time stamps are not strictly increasing" in err and len(err.strip().splitlines()) == 1

@@ -48,14 +48,14 @@ def _check_timestamps(timestamps_s: Any, path: str | os.PathLike) -> None:
     if timestamps_s is None:
         return
     from lidarkit.errors import DataError
-    from lidarkit.trajectory import _file_line
+    from lidarkit.textfile import file_line
 
     ts = np.asarray(timestamps_s, dtype=np.float64).reshape(-1)
     steps = np.diff(ts)
     if len(steps) and not (steps > 0).all():
         k = int(np.argmax(~(steps > 0))) + 1
         raise DataError(f"time stamps are not strictly increasing ({ts[k]:.9g} after {ts[k - 1]:.9g})", source=path,
-                        location=_file_line(path, f"frame {k}"))
+                        location=file_line(path, f"frame {k}"))
 
 
 def open_vo_input(path: str | os.PathLike, *, kind: str = "auto", calib: str | os.PathLike | None = None,
