@@ -170,6 +170,13 @@ def check_target(path: str | os.PathLike | None, kind: str = "file") -> None:
         except OSError:
             readonly = False
         raise OutputError(f"cannot write: {'read-only file system' if readonly else 'permission denied'}", source=path)
+    if parent is not None:
+        # access() passes where creating still fails (/sys, /proc, some network mounts): create what the writers
+        # create first, a hidden folder beside the target, and remove it
+        try:
+            os.rmdir(tempfile.mkdtemp(prefix=".lidarkit-check-", dir=parent))
+        except OSError as err:
+            raise OutputError(f"cannot write: {(err.strerror or str(err)).lower()}", source=path) from None
 
 
 @contextlib.contextmanager

@@ -13,6 +13,7 @@ import os
 import shutil
 import subprocess
 import sys
+import tempfile
 import textwrap
 from pathlib import Path
 
@@ -180,6 +181,22 @@ def _in_private_tmpfs(tmp_path: Path, mount_opts: str, command: str) -> subproce
 def test_read_only_file_system(tmp_path, gt_file):
     proc = _in_private_tmpfs(tmp_path, "size=64k,ro", f"{sys.executable} -m lidarkit.cli eval {gt_file} {gt_file} --json fs/e.json")
     assert_one_line_error(proc.returncode, proc.stderr, "fs/e.json", "read-only file system")
+
+
+def _sysfs_refuses_folders() -> bool:
+    try:
+        os.rmdir(tempfile.mkdtemp(dir="/sys"))
+    except OSError:
+        return Path("/sys").is_dir() and os.access("/sys", os.W_OK)  # access() says yes, creating says no
+    return False
+
+
+@pytest.mark.skipif(not _sysfs_refuses_folders(), reason="needs a /sys that access() calls writable but refuses folders")
+def test_an_output_folder_that_cannot_be_created_is_refused_before_the_run(capsys):
+    """access() passes /sys for root: vo ran the whole sequence and then lost it ('cannot create the run folder')."""
+    code, out, err = run_cli(["vo", "simcam:street?frames=30&seed=1", "--out", "/sys/lidarkit_vo_out"], capsys)
+    assert_one_line_error(code, err, "/sys/lidarkit_vo_out", "cannot write")
+    assert "APE" not in out  # refused before the run, not after it
 
 
 @needs_mount
