@@ -194,6 +194,10 @@ def test_vo_input_and_kitti_export(tmp_path):
     np.testing.assert_allclose(back.K, vin.K, atol=1e-9)
     np.testing.assert_allclose(back.ground_truth.poses_se3, vin.ground_truth.poses_se3, atol=1e-6)
     assert np.array_equal(back.images.read_image(2), vin.images.read_image(2))
+    # the same folder again with fewer frames: refused (the earlier export's images stood beside the new poses)
+    again = CliRunner().invoke(app, [a if a != "3" else "2" for a in args])
+    assert again.exit_code == 1 and "already holds files" in str(again.exception)
+    assert sorted(p.name for p in (out / "image_0").iterdir()) == ["000000.png", "000001.png", "000002.png"]
 
 
 def test_full_texture_atlas_is_refilled_without_changing_images(monkeypatch):

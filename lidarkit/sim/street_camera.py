@@ -34,7 +34,7 @@ from typing import Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from lidarkit.errors import ConfigError, DataError, validation_problems
+from lidarkit.errors import ConfigError, DataError, OutputError, validation_problems
 from lidarkit.sim.lidar import PlanarPath, Terrain, make_terrain
 from lidarkit.sim.textures import TextureAtlas, mip_levels, natural_texture
 from lidarkit.trajectory import Trajectory
@@ -807,14 +807,27 @@ def open_simcam(spec: str) -> SimulatedCameraSequence:
 def export_kitti_images(sequence: SimulatedCameraSequence, out_dir: str | os.PathLike,
                         on_frame: Callable[[int], None] | None = None) -> Path:
     """Write a KITTI-odometry-like folder: ``image_0/NNNNNN.png``, ``calib.txt`` (P0..P3 = [K | 0], Tr identity),
-    ``poses.txt`` (``T_cam0_camk``), ``times.txt`` and ``sim.yaml`` (the resolved config). Files are written
-    atomically."""
+    ``poses.txt`` (``T_cam0_camk``), ``times.txt`` and ``sim.yaml`` (the resolved config).
+
+    All or nothing, as the LiDAR export: the folder appears complete or not at all, and a folder that already holds
+    files is refused (an earlier export's images were left beside a shorter one's poses)."""
+    from lidarkit import atomic
+
+    out = Path(out_dir)
+    if out.is_dir() and any(out.iterdir()):
+        raise OutputError("the folder already holds files: an export never mixes its images with another's (remove it "
+                          "or choose a new folder)", source=out)
+    with atomic.run_folder(out) as tmp:
+        _write_kitti_images(sequence, tmp, on_frame)
+    return out
+
+
+def _write_kitti_images(sequence: SimulatedCameraSequence, out: Path, on_frame: Callable[[int], None] | None) -> None:
     import cv2
     import yaml
 
     from lidarkit import atomic
 
-    out = Path(out_dir)
     atomic.ensure_dir(out / "image_0")
     for i in range(len(sequence)):
         ok, data = cv2.imencode(".png", sequence.read_image(i))
@@ -832,7 +845,6 @@ def export_kitti_images(sequence: SimulatedCameraSequence, out_dir: str | os.Pat
     cfg = sequence.config.model_dump()
     cfg["note"] = "poses are T_cam0_camk (camera: x right, y down, z forward) at each frame's time"
     atomic.write_text(out / "sim.yaml", yaml.safe_dump(cfg, sort_keys=False))
-    return out
 
 
 __all__ = [
