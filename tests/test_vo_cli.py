@@ -246,3 +246,18 @@ def test_timestamps_file_is_used_and_checked(tmp_path, capsys):
     stamps.write_text("".join(f"{100.0 + 0.1 * k:.3f}\n" for k in (0, 1, 2, 1, 4, 5, 6, 7)))
     code, _, err = _run(["vo", str(seq), "--timestamps", str(stamps)], capsys)
     assert code == 1 and "stamps.txt (line 4 (frame 3)): time stamps are not strictly increasing" in err and len(err.strip().splitlines()) == 1
+
+
+def test_a_missing_image_is_a_rejected_frame_not_a_frame_left_out(tmp_path, capsys):
+    """000003.png gone from image_0/: frame 3 is rejected as unreadable (before, the frames after it were renumbered
+    and the smoothing took frames 2 and 4 as one step apart: smoothed APE 40x the raw one)."""
+    seq = tmp_path / "06"
+    shutil.copytree(sample_path("kitti_vo", "06"), seq)
+    (seq / "image_0" / "000003.png").unlink()
+    out = tmp_path / "run"
+    code, stdout, err = _run(["vo", str(seq), "--scale", "gt", "--out", str(out)], capsys)
+    assert code in (0, None), err
+    assert "frame 3 rejected: unreadable image" in stdout + err and "000003.png (frame 3): image file not found" in stdout + err
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["rejected"] == 1 and len(Trajectory.from_kitti(out / "poses_kitti.txt")) == 8
+    assert metrics["smoothed"]["ape_rmse_m"] < 2 * metrics["raw"]["ape_rmse_m"] + 0.01

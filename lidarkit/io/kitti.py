@@ -570,20 +570,31 @@ class KittiImages:
             raise DataError("sequence has no images", source=odometry.image_dir)
         self.odometry = odometry
         self.name = f"{odometry.name}_image_0"
+        # every frame from the first image to the last: a missing file is a frame whose image cannot be read (the VO
+        # run rejects it with that reason), not a frame left out (its neighbours taken as one frame apart)
+        present = dict(zip((int(f) for f in odometry.image_frames), odometry.image_paths))
+        first, last = min(present), max(present)
+        self._frames = np.arange(first, last + 1)
+        suffix = odometry.image_paths[0].suffix
+        self._paths = [present.get(int(f), odometry.image_paths[0].with_name(f"{int(f):06d}{suffix}")) for f in self._frames]
+        missing = [int(f) for f in self._frames if int(f) not in present]
+        if missing:
+            log.warning("%s: %d image(s) missing between frames %d and %d (the first: %s); read as unreadable frames",
+                        odometry.image_dir, len(missing), first, last, self._paths[missing[0] - first].name)
 
     def __len__(self) -> int:
-        return self.odometry.n_images
+        return len(self._frames)
 
     @property
     def frames(self) -> np.ndarray:
-        return self.odometry.image_frames
+        return self._frames
 
     @property
     def image_paths(self) -> list[Path]:
-        return self.odometry.image_paths
+        return self._paths
 
     def read_image(self, index: int) -> np.ndarray:
-        return self.odometry.read_image(index)
+        return read_gray_image(self._paths[index], frame=int(self._frames[index]))
 
     @property
     def K(self) -> np.ndarray:
