@@ -138,6 +138,9 @@ def test_vo_cli_errors_are_one_line(tmp_path, capsys):
                           (["--focal-factor", "0"], "--focal-factor: must be a finite number > 0, got 0.0")):
         code, _, err = _run(["vo", seq, "--max-frames", "3", *args], capsys)
         assert code == 1 and message in err, args
+    # options an input has no use for are refused, not dropped
+    code, _, err = _run(["vo", seq, "--poses", str(sample_path("kitti_vo", "06", "poses.txt")), "--poses-format", "tum"], capsys)
+    assert code == 1 and "a KITTI folder's poses are KITTI rows" in err
 
 
 def test_image_folder_checks_counts(tmp_path):
@@ -183,6 +186,9 @@ def test_vo_on_synthetic_tum_folder_with_calib_file(tmp_path, capsys):
     assert metrics["rejected"] == 0 and metrics["raw"]["ape_rmse_m"] < 0.01
     est = Trajectory.from_tum(out / "poses_tum.txt")
     np.testing.assert_allclose(est.timestamps_s, traj.timestamps_s + 100.0, atol=1e-6)
+    # its own ground truth and stamps: --poses / --timestamps are refused (they were dropped, silently)
+    code, _, err = _run(["vo", str(folder), "--calib", str(tmp_path / "K.txt"), "--poses", str(folder / "groundtruth.txt")], capsys)
+    assert code == 1 and "a TUM RGB-D folder has its own groundtruth.txt; drop --poses" in err
 
 
 def test_frame_count_below_one_is_a_config_error(capsys):

@@ -76,6 +76,14 @@ def open_vo_input(path: str | os.PathLike, *, kind: str = "auto", calib: str | o
     if kind not in INPUT_KINDS:
         raise ConfigError(f"unknown input kind {kind!r}; known: {', '.join(INPUT_KINDS)}", source="vo input kind")
     kind = detect_kind(path) if kind == "auto" else kind
+    if kind == "kitti" and poses_format != "kitti":
+        raise ConfigError(f"a KITTI folder's poses are KITTI rows (12 numbers, one per image): --poses-format {poses_format} is for "
+                          "image folders", source=str(path))
+    if kind == "tum":  # its own stamps (rgb.txt) and ground truth (groundtruth.txt)
+        for given, option in ((timestamps, "timestamps"), (poses, "poses")):
+            if given is not None:
+                raise ConfigError(f"a TUM RGB-D folder has its own {'rgb.txt stamps' if option == 'timestamps' else 'groundtruth.txt'}; "
+                                  f"drop --{option}", source=str(path))
     if kind == "kitti":
         from lidarkit.io.kitti import KittiOdometry
 
