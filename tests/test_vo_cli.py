@@ -267,3 +267,19 @@ def test_a_missing_image_is_a_rejected_frame_not_a_frame_left_out(tmp_path, caps
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["rejected"] == 1 and len(Trajectory.from_kitti(out / "poses_kitti.txt")) == 8
     assert metrics["smoothed"]["ape_rmse_m"] < 2 * metrics["raw"]["ape_rmse_m"] + 0.01
+
+
+def test_frames_are_named_by_their_number_in_the_input_and_one_frame_is_refused(tmp_path, capsys):
+    """--start 3: a rejected frame is named by its number in the input in the message and diagnostics.csv (it said
+    "frame 2 rejected: ... 000005.png (frame 5)"); a single frame is an error, not an empty success."""
+    seq = tmp_path / "06"
+    shutil.copytree(sample_path("kitti_vo", "06"), seq)
+    (seq / "image_0" / "000005.png").write_bytes(b"not a png")
+    out = tmp_path / "run"
+    code, stdout, err = _run(["vo", str(seq), "--scale", "gt", "--start", "3", "--out", str(out)], capsys)
+    assert code in (0, None), err
+    assert "frame 5 rejected: unreadable image" in stdout
+    rows = [line.split(",") for line in (out / "diagnostics.csv").read_text().splitlines()[1:]]
+    assert [int(r[0]) for r in rows] == [3, 4, 5, 6, 7] and int(rows[1][1]) == 3
+    code, _, err = _run(["vo", str(seq), "--start", "7"], capsys)
+    assert code == 1 and "1 frame from frame 7 on: VO needs two frames or more" in err

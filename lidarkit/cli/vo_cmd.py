@@ -10,7 +10,7 @@ from typing import Optional
 import typer
 
 from lidarkit.cli.app import app, parse_params, stdout
-from lidarkit.errors import ConfigError
+from lidarkit.errors import ConfigError, DataError
 from lidarkit.vo.config import VOConfig, available_presets
 from lidarkit.vo.intrinsics import DEFAULT_FOCAL_FACTOR
 
@@ -90,7 +90,13 @@ def vo_command(
     if self_calibrate:
         vo_input, focal = calibrate(vo_input)
     gt = vo_input.ground_truth  # (a guessed K is logged as a warning by open_vo_input)
+    if len(vo_input.images) < 2:
+        raise DataError(f"{len(vo_input.images)} frame from frame {start} on: VO needs two frames or more (no frame pair)", source=str(data))
     result = MonoVO(cfg, vo_input.K, gt if cfg.scale.mode == "gt" else None).run(vo_input.images, keep_tracks=gif)
+    if start:  # the diagnostics name the input's frame numbers (the run counts from its first frame)
+        import dataclasses
+
+        result.diagnostics = [dataclasses.replace(d, frame=d.frame + start, ref_frame=d.ref_frame + start) for d in result.diagnostics]
     extra_config = {"input": str(data), "kind": vo_input.kind, "K_source": vo_input.K_source, "start": start,
                     "max_frames": max_frames}
     if focal is not None:
