@@ -18,6 +18,8 @@ from lidarkit.vo.inputs import detect_kind, open_vo_input
 
 
 def _run(argv, capsys):
+    if argv[0] == "vo" and "--progress" not in argv:  # (progress lines on stderr are tested on their own)
+        argv = [*argv, "--no-progress"]
     with pytest.raises(SystemExit) as exc:
         main(argv)
     out = capsys.readouterr()
@@ -283,3 +285,10 @@ def test_frames_are_named_by_their_number_in_the_input_and_one_frame_is_refused(
     assert [int(r[0]) for r in rows] == [3, 4, 5, 6, 7] and int(rows[1][1]) == 3
     code, _, err = _run(["vo", str(seq), "--start", "7"], capsys)
     assert code == 1 and "1 frame from frame 7 on: VO needs two frames or more" in err
+
+
+def test_progress_lines_on_stderr(capsys):
+    code, _, err = _run(["vo", str(sample_path("kitti_vo", "06")), "--scale", "gt", "--progress"], capsys)
+    assert code in (0, None)
+    lines = [line for line in err.splitlines() if " frames (" in line]
+    assert len(lines) == 8 and lines[-1].endswith("s left") and "8/8 frames (100 %)" in lines[-1]

@@ -51,6 +51,7 @@ def vo_command(
                                              "--set matching.klt_levels=4 --set scale.min_common_points=20."),
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="Run folder for poses, diagnostics, config, plot."),
     gif: bool = typer.Option(False, help="Also write features.gif (tracked inliers) into --out."),
+    progress: bool = typer.Option(True, "--progress/--no-progress", help="Progress on stderr."),
 ) -> None:
     """Estimate the camera trajectory; print frames, rejected frames, speed and APE/RPE when ground truth exists."""
     from rich.table import Table
@@ -92,7 +93,15 @@ def vo_command(
     gt = vo_input.ground_truth  # (a guessed K is logged as a warning by open_vo_input)
     if len(vo_input.images) < 2:
         raise DataError(f"{len(vo_input.images)} frame from frame {start} on: VO needs two frames or more (no frame pair)", source=str(data))
-    result = MonoVO(cfg, vo_input.K, gt if cfg.scale.mode == "gt" else None).run(vo_input.images, keep_tracks=gif)
+    from lidarkit.progress import progress_bar
+
+    bar = progress_bar(len(vo_input.images), f"vo on {data}") if progress else None
+    try:
+        result = MonoVO(cfg, vo_input.K, gt if cfg.scale.mode == "gt" else None).run(
+            vo_input.images, keep_tracks=gif, on_frame=None if bar is None else (lambda _j: bar[0].advance(bar[1])))
+    finally:
+        if bar is not None:
+            bar[0].stop()
     if start:  # the diagnostics name the input's frame numbers (the run counts from its first frame)
         import dataclasses
 

@@ -17,6 +17,7 @@ from lidarkit.geometry import as_points, orthonormalize_se3, validated_points
 from lidarkit.io.base import Scan, ScanSequence
 from lidarkit.odometry.covariance import propagate
 from lidarkit.odometry.frame_check import FrameChecker, FrameCheckConfig
+from lidarkit.progress import progress_bar
 from lidarkit.odometry.inputs import FrameSelection, frames_past_the_end, frames_repr, open_sequence, parse_frames, time_gap_warning
 from lidarkit.odometry.instants import deskews, estimate_instant, like_with_like
 from lidarkit.odometry.metrics import odometry_metrics
@@ -354,7 +355,7 @@ def run(
     if strict and not stateful and deskew_requested(registration) and not getattr(registration, "accepts_point_times", False):
         raise ConfigError(f"deskew requested, but {name} runs scan-to-scan through align(), which takes no per-point times", source=name)
 
-    bar = _progress_bar(n, f"{name} on {title}") if progress else None
+    bar = progress_bar(n, f"{name} on {title}") if progress else None
     clock = time.perf_counter
     loop_start, loop_cpu_start = clock(), time.process_time()
     first_scan = None
@@ -528,48 +529,6 @@ def _odometry_guess(sequence: ScanSequence, init: str, registration: Any, n_tota
     if len(odometry) != n_total:
         raise DataError(f"odometry has {len(odometry)} poses for {n_total} scans", source=dataset_name)
     return np.asarray(odometry.poses_se3, dtype=np.float64)
-
-
-class _ProgressLines:
-    """Progress where no bar can be drawn (stderr to a file or a pipe: a log, CI): one line at every tenth of the run
-    and at least every 30 s, with the frame rate and the time left."""
-
-    def __init__(self, total: int, label: str):
-        import time
-
-        self.total, self.label, self.done = total, label, 0
-        self.start = self.last = time.monotonic()
-        self.next_tenth = 1
-
-    def advance(self, _task: int, advance: int = 1) -> None:
-        import sys
-        import time
-
-        self.done += advance
-        now = time.monotonic()
-        tenth = 10 * self.done // max(self.total, 1)
-        if tenth < self.next_tenth and now - self.last < 30.0 and self.done < self.total:
-            return
-        self.next_tenth, self.last = tenth + 1, now
-        rate = self.done / max(now - self.start, 1e-9)
-        left = (self.total - self.done) / rate if rate > 0 else float("nan")
-        print(f"{self.label}: {self.done}/{self.total} frames ({100 * self.done / max(self.total, 1):.0f} %), {rate:.1f} frames/s, "
-              f"~{left:.0f} s left", file=sys.stderr, flush=True)
-
-    def stop(self) -> None:
-        pass
-
-
-def _progress_bar(total: int, label: str):
-    from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
-
-    console = Console(stderr=True)
-    if not console.is_terminal:
-        return _ProgressLines(total, label), 0
-    bar = Progress(TextColumn("{task.description}", markup=False), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(), console=console, transient=True)
-    bar.start()
-    return bar, bar.add_task(label, total=total)
 
 
 def _plain(meta: dict) -> dict:

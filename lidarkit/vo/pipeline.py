@@ -15,7 +15,7 @@ import logging
 import re
 import time
 from collections import Counter
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any, NamedTuple
 
@@ -214,12 +214,14 @@ class MonoVO:
         self._rejected_R_cur_ref: np.ndarray | None = None  # set by _estimate on a rejection
 
     # ---- public ----------------------------------------------------------------------------------------------
-    def run(self, images: Any, keep_tracks: bool = False, timestamps_s: np.ndarray | None = None) -> VOResult:
+    def run(self, images: Any, keep_tracks: bool = False, timestamps_s: np.ndarray | None = None,
+            on_frame: Callable[[int], None] | None = None) -> VOResult:
         """Estimate one camera pose per image.
 
         ``images``: an ``ImageSequence`` (``len`` + ``read_image(i)``; a DataError from it rejects that frame) or a
         sequence of ``(H, W)`` uint8 arrays (None marks an unreadable frame). ``keep_tracks`` stores the inlier
-        correspondences of every accepted frame (for the feature GIF).
+        correspondences of every accepted frame (for the feature GIF). ``on_frame(index)`` is called as each frame is
+        done (a progress bar).
         """
         n = len(images)
         if n < 1:
@@ -270,6 +272,8 @@ class MonoVO:
         total_s += time.perf_counter() - start
         diags.append(FrameDiagnostics(frame=s, ref_frame=s, n_features=len(ref_feats.points_px), accepted=True,
                                       note="start"))
+        for k in range(s + 1) if on_frame is not None else ():  # the start frame and the unusable ones before it
+            on_frame(k)
 
         for j in range(s + 1, n):
             image, reason = load(j)
@@ -319,6 +323,8 @@ class MonoVO:
             total_s += elapsed
             diag.runtime_ms = 1000.0 * elapsed
             diags.append(diag)
+            if on_frame is not None:
+                on_frame(j)
 
         if not np.all(np.isfinite(poses)):  # defensive: must never happen
             raise DataError("non-finite pose produced", source="MonoVO")
