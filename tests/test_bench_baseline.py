@@ -202,3 +202,37 @@ def test_a_failing_job_and_an_unknown_tolerance_are_one_line_errors(recorded, tm
     assert not (tmp_path / "bl").exists()
     with pytest.raises(ConfigError, match="no pinned job checks nosuch_metric; checked metrics: ape_rmse_m, ape_se3_rmse_m"):
         check(out, tolerances=["nosuch_metric=0.1"])
+
+
+def test_a_particle_filter_job_pins_its_filter_config(tmp_path, monkeypatch):
+    """The pf task keeps its resolved config under info["run"]: it was pinned as {}, so a changed filter default was
+    never reported."""
+    from conftest import shared_path
+
+    from lidarkit.pf.config import PFConfig
+
+    suite = tmp_path / "pf.yaml"
+    suite.write_text(textwrap.dedent(f"""
+        name: pf-golden
+        experiments:
+          - name: pf
+            task: pf
+            dataset: {{kind: landmarks, path: "{shared_path('pf', 'robot_mapping_stachniss')}", name: Freiburg}}
+            methods: [{{name: particle_filter, params: {{n_particles: 200}}}}]
+    """))
+    out = tmp_path / "baseline"
+    record(suite, out, repeats=1)
+    pinned = json.loads((out / "manifest.json").read_text())["jobs"][0]["protocol"]["method_config"]
+    assert pinned["n_particles"] == 200 and pinned["q"] == list(PFConfig().q)
+    import copy
+
+    changed = copy.copy(PFConfig.model_fields["q"])
+    changed.default = (4.0, 0.4)  # another default in a later version of the code
+    monkeypatch.setitem(PFConfig.model_fields, "q", changed)
+    PFConfig.model_rebuild(force=True)
+    try:
+        lines = check(out).lines()
+    finally:
+        monkeypatch.undo()
+        PFConfig.model_rebuild(force=True)
+    assert any(line.startswith("note:") and "method config.q" in line for line in lines), lines

@@ -204,7 +204,9 @@ def _run_job(job: Job, checksum_cache: dict[str, str] | None) -> JobRun:
         )
         return JobRun(dict(output.metrics), result.trajectory, protocol)
     output = get_task(job.task).run(job)
-    protocol["method_config"] = _jsonable(output.info.get("method_config") or output.info.get("config") or {})
+    # where each task keeps the resolved config of its method (the pf task: info["run"]["config"])
+    run_info = output.info.get("run") if isinstance(output.info.get("run"), dict) else {}
+    protocol["method_config"] = _jsonable(output.info.get("method_config") or output.info.get("config") or run_info.get("config") or {})
     return JobRun(dict(output.metrics), None, protocol)
 
 
