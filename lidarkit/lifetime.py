@@ -46,9 +46,14 @@ def _exit_at_startup(signum: int, _frame) -> None:
 
 
 def install_startup_handlers() -> None:
-    """SIGINT / SIGTERM before the command runs (while modules load): one line, exit 130 / 143, no traceback."""
+    """SIGINT / SIGTERM before the command runs (while modules load): one line, exit 130 / 143, no traceback.
+
+    An ignored SIGINT stays ignored: it is a child process started to leave Ctrl-C to its parent (a Dask worker
+    re-imports this module as its ``__main__``; it exited on the Ctrl-C its cluster's start was to ride out)."""
     if threading.current_thread() is threading.main_thread():
         for s in (signal.SIGINT, signal.SIGTERM):
+            if s == signal.SIGINT and signal.getsignal(s) is signal.SIG_IGN:
+                continue
             signal.signal(s, _exit_at_startup)
 
 

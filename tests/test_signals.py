@@ -30,3 +30,27 @@ def test_killed_bench_leaves_no_orphans_no_corrupt_results_and_resumes(tmp_path,
         assert trial["message"].startswith("interrupted by SIGTERM") and "run the same command again" in trial["message"]
     assert trial["rerun_complete"], trial
     assert bench_kill.trial_ok(trial)
+
+
+def test_a_child_started_with_sigint_ignored_keeps_ignoring_it():
+    """A Dask worker re-imports the CLI as its __main__: the CLI's start-up handler made it exit on the Ctrl-C its
+    cluster's start was to ride out ("Nanny failed to start" and a traceback in the parent). An ignored SIGINT stays
+    ignored; SIGTERM still ends the process with one line."""
+    import subprocess
+
+    code = textwrap.dedent("""
+        import os, signal, sys
+        sys.argv = ["lidarkit"]  # as a spawned worker has it: its parent's argv
+        import lidarkit.cli  # installs the start-up handlers
+        os.kill(os.getpid(), signal.SIGINT)
+        print("still running")
+        os.kill(os.getpid(), signal.SIGTERM)
+        print("not reached")
+    """)
+    env_root = Path(__file__).resolve().parents[1]
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=env_root,
+                          preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+    assert done.stdout.strip() == "still running" and done.returncode == 128 + signal.SIGTERM
+    assert done.stderr.strip() == "interrupted by SIGTERM while starting: nothing was written"
+    normal = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=env_root)
+    assert normal.returncode == 130 and normal.stdout == ""  # without the inherited ignore: the one-line exit as before
