@@ -236,3 +236,32 @@ def test_a_particle_filter_job_pins_its_filter_config(tmp_path, monkeypatch):
         monkeypatch.undo()
         PFConfig.model_rebuild(force=True)
     assert any(line.startswith("note:") and "method config.q" in line for line in lines), lines
+
+
+def test_recording_again_replaces_the_baseline_and_never_merges_into_other_folders(tmp_path):
+    from conftest import shared_path
+
+    def suite(counts):
+        path = tmp_path / f"pf{len(counts)}.yaml"
+        methods = ", ".join(f"{{name: particle_filter, params: {{n_particles: {n}}}}}" for n in counts)
+        path.write_text(textwrap.dedent(f"""
+            name: pf-golden
+            experiments:
+              - name: pf
+                task: pf
+                dataset: {{kind: landmarks, path: "{shared_path('pf', 'robot_mapping_stachniss')}", name: Freiburg}}
+                methods: [{methods}]
+        """))
+        return path
+
+    out = tmp_path / "baseline"
+    record(suite([100, 150]), out, repeats=1)
+    record(suite([100]), out, repeats=1)
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert [p.name for p in (out / "jobs").iterdir()] == [job["key"] for job in manifest["jobs"]]  # was: 2 folders, 1 pinned
+    bench_folder = tmp_path / "results"
+    (bench_folder / "jobs").mkdir(parents=True)
+    (bench_folder / "suite.json").write_text("{}")
+    with pytest.raises(Exception, match="holds files but no manifest.json: not a baseline to replace"):
+        record(suite([100]), bench_folder, repeats=1)
+    assert sorted(p.name for p in bench_folder.iterdir()) == ["jobs", "suite.json"]

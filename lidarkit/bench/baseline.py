@@ -23,6 +23,7 @@ import logging
 import math
 import os
 import platform
+import shutil
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -32,7 +33,7 @@ import numpy as np
 
 from lidarkit import atomic
 from lidarkit.bench.jobs import Job, canonical_json
-from lidarkit.errors import ConfigError, DataError, LidarKitError, RegistrationError
+from lidarkit.errors import ConfigError, DataError, LidarKitError, OutputError, RegistrationError
 
 log = logging.getLogger(__name__)
 
@@ -283,7 +284,9 @@ def record(
     on_job: Callable[[Job, int], None] | None = None,
 ) -> Baseline:
     """Run ``suite_path`` ``repeats`` times and write the baseline folder ``out_dir`` (all or nothing, through
-    :func:`lidarkit.atomic.run_folder`: a failed run leaves no partial baseline)."""
+    :func:`lidarkit.atomic.run_folder`: a failed run leaves no partial baseline). An earlier baseline in ``out_dir``
+    is replaced whole (its pinned jobs that this one does not pin are removed); a folder holding anything else (a
+    bench results folder) is refused rather than merged into."""
     from lidarkit.bench.suite import load_suite
 
     if int(repeats) != repeats or repeats < 1:
@@ -291,6 +294,9 @@ def record(
     suite = load_suite(suite_path)
     out = Path(out_dir)
     atomic.check_target(out, "folder")
+    if out.is_dir() and any(out.iterdir()) and not (out / MANIFEST).is_file():
+        raise OutputError(f"the folder holds files but no {MANIFEST}: not a baseline to replace (a bench results folder?); "
+                          "choose a new folder", source=out)
     cache: dict[str, str] = {}
     jobs = []
     with atomic.run_folder(out) as tmp:
@@ -320,6 +326,10 @@ def record(
                     "band_rule": f"max({NOISE_FACTOR:g} x run-to-run std, per-metric floor, {RELATIVE_FLOOR:g} x value)",
                     "jobs": jobs}
         atomic.write_text(tmp / MANIFEST, json.dumps(_jsonable(manifest), indent=1) + "\n")
+    pinned = {job["key"] for job in jobs}
+    for folder in sorted((out / "jobs").iterdir()):  # an earlier baseline's jobs this one does not pin
+        if folder.is_dir() and folder.name not in pinned:
+            shutil.rmtree(folder)
     return load_baseline(out)
 
 

@@ -17,7 +17,7 @@ app.add_typer(baseline_app, name="baseline")
 @baseline_app.command("record")
 def record_command(
     suite_file: Path = typer.Argument(..., help="Suite YAML file (see docs/benchmarks.md)."),
-    out: Path = typer.Option(..., "--out", "-o", help="Baseline folder to write (replaced only when complete)."),
+    out: Path = typer.Option(..., "--out", "-o", help="Baseline folder to write: an earlier baseline there is replaced whole, once the new one is complete; a folder holding anything else is refused."),
     repeats: int = typer.Option(3, help="Runs per job; their spread sets each metric's default band."),
 ) -> None:
     """Run SUITE_FILE REPEATS times and pin trajectories, metrics, bands and the protocol manifest in --out."""
