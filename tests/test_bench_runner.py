@@ -223,6 +223,8 @@ def test_unknown_executor_and_misplaced_address_are_config_errors(tmp_path):
         run_suite(suite, tmp_path / "a", executor="threads")
     with pytest.raises(ConfigError, match="--address only applies to the dask executor"):
         run_suite(suite, tmp_path / "b", executor="process", address="tcp://127.0.0.1:8786")
+    with pytest.raises(ConfigError, match="the serial executor runs one job at a time; --workers 2"):  # it was ignored
+        run_suite(suite, tmp_path / "b", executor="serial", workers=2)
     assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()  # refused before writing anything
 
 

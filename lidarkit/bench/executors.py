@@ -229,6 +229,8 @@ def check_executor_args(name: str, workers: int | None = None, address: str | No
         raise ConfigError("--address only applies to the dask executor", source="--address")
     if workers is not None and workers < 1:
         raise ConfigError(f"workers must be >= 1, got {workers}", source="--workers")
+    if workers is not None and workers > 1 and name == "serial":  # (it was ignored: one job at a time)
+        raise ConfigError(f"the serial executor runs one job at a time; --workers {workers} is for process or dask", source="--workers")
 
 
 def make_executor(name: str, *, workers: int | None = None, address: str | None = None):

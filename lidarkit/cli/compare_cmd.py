@@ -24,7 +24,7 @@ def compare_command(
     noise: float = typer.Option(0.0, help="Run-to-run noise of the metric (its unit): smaller differences are not called."),
     noise_from: Optional[Path] = typer.Option(
         None, "--noise-from", help="Baseline folder (lidarkit baseline record): take --noise from the band it measured "
-        "for the metric (the widest over its jobs)."),
+        "for the metric (the widest over its jobs; with --noise too, the larger of the two)."),
     seed: int = typer.Option(0, "--seed", help="Seed of the bootstrap CI of the difference."),
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write the comparison as JSON here."),
 ) -> None:

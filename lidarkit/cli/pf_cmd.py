@@ -146,6 +146,8 @@ def pf_command(
         _recorded(data, cfg, seed, fit_q, out, _steps(snapshots), gif)
         return
     if len(counts) > 1 or seeds > 1:
+        if gif:  # (it was ignored)
+            raise ConfigError("--gif animates one run; a study (several --particles or --seeds) writes its table only", source="--gif")
         rows = run_study(data, counts, seed_list, config=cfg, **scenario)
         _print_study(rows, cfg, protocol, kidnap_at)
         if out is not None:
