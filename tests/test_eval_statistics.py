@@ -39,6 +39,11 @@ def test_summary_matches_numpy_and_bootstrap_reproduces_exactly():
     assert (hi - lo) == pytest.approx(2 * 1.96 * sem, rel=0.1)
     assert bootstrap_ci([2.5]) == (2.5, 2.5)
     assert summarize([]).n == 0
+    same = summarize([0.0419] * 5)  # numpy's std of equal floats is 8.5e-18, printed as "0.0419 ± 8.5e-18"
+    assert same.std == 0.0 and same.format() == "0.0419 ± 0 [0.0419, 0.0419]"
+    from lidarkit.bench.report import _stats
+
+    assert _stats([0.0419] * 5) == (pytest.approx(0.0419), 0.0, 5)
 
 
 def test_bad_statistics_input_raises():

@@ -108,7 +108,7 @@ def _stats(values: list[float]) -> tuple[float, float, int]:
     arr = np.asarray([v for v in values if v is not None and math.isfinite(v)], dtype=float)
     if arr.size == 0:
         return (math.nan, math.nan, 0)
-    std = float(arr.std(ddof=1)) if arr.size > 1 else 0.0
+    std = float(arr.std(ddof=1)) if arr.size > 1 and np.ptp(arr) > 0 else 0.0  # equal values: 0, not numpy's 8.5e-18
     return (float(arr.mean()), std, int(arr.size))
 
 

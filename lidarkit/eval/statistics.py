@@ -99,7 +99,7 @@ def summarize(
         nan = float("nan")
         return Summary(0, nan, nan, nan, nan, nan, confidence, n_boot, seed)
     lo, hi = bootstrap_ci(arr, confidence=confidence, n_boot=n_boot, seed=seed)
-    std = float(arr.std(ddof=1)) if arr.size > 1 else 0.0
+    std = float(arr.std(ddof=1)) if arr.size > 1 and np.ptp(arr) > 0 else 0.0  # equal values: 0, not numpy's 8.5e-18
     return Summary(int(arr.size), float(arr.mean()), std, float(np.median(arr)), lo, hi, confidence, int(n_boot), seed)
 
 
