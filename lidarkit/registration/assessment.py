@@ -10,7 +10,11 @@ from lidarkit.geometry import transform_points
 from lidarkit.registration.base import Degeneracy, RegistrationResult
 from lidarkit.registration.covariance import CovarianceModel, active_model, covariance_and_step, effective_observations
 from lidarkit.registration.degeneracy import SurfaceIndex, matched_constraints, normal_matrix, summarize
+from lidarkit.registration import local_origin
 from lidarkit.registration.neighbors import NearestNeighbors
+
+#: ``RegistrationResult.extra`` key: the point (target frame, m) the covariance was computed around before it was moved
+COVARIANCE_ORIGIN_KEY = "covariance_origin_m"
 
 
 @dataclass(frozen=True)
@@ -24,6 +28,14 @@ class Assessment:
     inlier_distance_m: float = float("nan")
     covariance: np.ndarray | None = None
     surface_step: np.ndarray | None = None
+    covariance_origin: np.ndarray | None = None
+    """Where the covariance and step were computed (clouds far from their origin, see :func:`assess_alignment`), or
+    None: at the target frame's origin."""
+
+    @property
+    def covariance_extra(self) -> dict:
+        """The result's ``extra`` entry that says where the covariance was computed (empty at the origin)."""
+        return {} if self.covariance_origin is None else {COVARIANCE_ORIGIN_KEY: [float(v) for v in self.covariance_origin]}
 
     def to_result(
         self,
@@ -52,7 +64,7 @@ class Assessment:
             fitness=self.fitness,
             degeneracy=self.degeneracy,
             reason=reason,
-            extra=extra or {},
+            extra={**(extra or {}), **self.covariance_extra},
             covariance=self.covariance,
             surface_step=self.surface_step,
         )
@@ -75,7 +87,13 @@ def assess_alignment(
     local surfaces around at most 2000 of the matched pairs; ``"active"`` takes the model of the registration that
     is running (:func:`lidarkit.registration.covariance.use_model`); ``surfaces``: the target's
     :class:`~lidarkit.registration.degeneracy.SurfaceIndex` if already built (e.g. by :class:`lidarkit.threads.background`
-    while the registration ran)."""
+    while the registration ran).
+
+    Clouds far from their origin (georeferenced, beyond :data:`lidarkit.registration.local_origin.COVARIANCE_FAR_M`):
+    the covariance and step are computed around a local origin ``c`` near the target, where the lever arms stay small
+    (at 7 km the closed form lost the rotation to rounding: sigmas 0.06x; at 1e6 m an 8x too small yaw), and ``extra``
+    names it; :meth:`lidarkit.registration.base.Registration.align` calibrates them there and moves them to the
+    target frame (``Ad(c) Sigma Ad(c)^T``)."""
     if isinstance(covariance_model, str):
         covariance_model = active_model()
     aligned = transform_points(T_target_source, source_xyz)
@@ -87,7 +105,7 @@ def assess_alignment(
     inlier = dist2 <= inlier_distance_m**2
     n = int(inlier.sum())
     rmse = float(np.sqrt(dist2[inlier].mean())) if n else float("nan")
-    covariance = step = None
+    covariance = step = origin = None
     if n < 3:
         degeneracy = Degeneracy.unknown(f"{n} correspondences")
     else:
@@ -95,15 +113,19 @@ def assess_alignment(
         pick, constraints, thickness = matched_constraints(matched, target_xyz, matched_index, return_thickness=True, surfaces=surfaces)
         degeneracy = summarize(normal_matrix(matched[pick], constraints))
         if covariance_model is not None:
-            n_eff = effective_observations(matched, covariance_model.correlation_voxel_m)
+            origin = local_origin.local_offset(target_xyz, local_origin.COVARIANCE_FAR_M)
+            T_local = local_origin.into(T_target_source, origin, None)  # places the source's sensor in the local frame
+            p, q = local_origin.shift(matched[pick], origin), local_origin.shift(target_xyz[matched_index[pick]], origin)
+            n_eff = effective_observations(local_origin.shift(matched, origin), covariance_model.correlation_voxel_m)
             covariance, step = covariance_and_step(
-                matched[pick], target_xyz[matched_index[pick]], constraints, T_target_source, covariance_model, n_total=n, n_effective=n_eff,
-                surface_variance=thickness,
+                p, q, constraints, T_local, covariance_model, n_total=n, n_effective=n_eff, surface_variance=thickness,
+                target_origin=None if origin is None else -origin,
             )
     return Assessment(
         n_correspondences=n, fitness=n / max(len(source_xyz), 1), rmse_m=rmse, degeneracy=degeneracy,
         inlier_distance_m=inlier_distance_m, covariance=covariance, surface_step=step,
+        covariance_origin=origin if covariance is not None else None,
     )
 
 
-__all__ = ["Assessment", "assess_alignment"]
+__all__ = ["COVARIANCE_ORIGIN_KEY", "Assessment", "assess_alignment"]

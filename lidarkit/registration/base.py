@@ -466,18 +466,29 @@ class Registration:
         return PendingAlignment(T, bool(likely_converged), finish)
 
     def _finish(self, result: RegistrationResult, runtime: float) -> RegistrationResult:
-        """The config's calibration and acceptance gate applied to the variant's assessed result."""
-        from lidarkit.registration.covariance import calibrate
+        """The config's calibration and acceptance gate applied to the variant's assessed result; a covariance computed
+        around a local origin (far clouds: ``extra["covariance_origin_m"]``) is calibrated there, then moved to the
+        target frame's origin with the adjoint."""
+        from lidarkit.registration.assessment import COVARIANCE_ORIGIN_KEY
+        from lidarkit.registration.covariance import adjoint, calibrate
 
-        covariance = result.covariance
+        covariance, step = result.covariance, result.surface_step
         if covariance is not None and self._config.calibrated_covariance and self._config.covariance == "censi":
-            covariance = calibrate(covariance, self.name, result.surface_step)
+            covariance = calibrate(covariance, self.name, step)
         if covariance is not None and getattr(self._config, "planar", False):
             # a planar solve keeps z, roll and pitch of the guess: they are not estimated, and carry no variance here
             covariance = covariance.copy()
             covariance[[2, 3, 4], :] = 0.0
             covariance[:, [2, 3, 4]] = 0.0
-        return dataclasses.replace(accept(result, self._config), runtime_s=runtime, method=self.name, covariance=covariance)
+        origin = result.extra.get(COVARIANCE_ORIGIN_KEY)
+        if covariance is not None and origin is not None:
+            S = np.eye(4)
+            S[:3, 3] = origin
+            Ad = adjoint(S)  # se3_exp(Ad xi) = S se3_exp(xi) S^-1: a perturbation at c as one at the frame's origin
+            covariance = Ad @ covariance @ Ad.T
+            step = None if step is None else Ad @ step
+        return dataclasses.replace(accept(result, self._config), runtime_s=runtime, method=self.name, covariance=covariance,
+                                   surface_step=step)
 
     def _register(
         self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray

@@ -384,10 +384,12 @@ def covariance_and_step(
     n_total: int | None = None,
     n_effective: int | None = None,
     surface_variance: np.ndarray | None = None,
+    target_origin: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`registration_covariance` and, from the same normal equations, the point-to-surface Gauss-Newton step
     ``xi = -(sum J^T J)^-1 sum J^T r`` (same convention as the covariance: ``se3_exp(xi) @ T_target_source`` is the
-    pose the surfaces prefer), NaN with fewer than 3 pairs."""
+    pose the surfaces prefer), NaN with fewer than 3 pairs. ``target_origin``: where the target's sensor is in the
+    frame of the points (default: their origin; a frame moved to a local origin puts it elsewhere)."""
     p = np.asarray(source_aligned_xyz, dtype=np.float64)
     q = np.asarray(matched_target_xyz, dtype=np.float64)
     n = len(p)
@@ -409,7 +411,7 @@ def covariance_and_step(
     else:
         origin_source = np.asarray(T_target_source, dtype=np.float64)[:3, 3]
         d_s = _unit(p - origin_source)
-        d_t = _unit(q)
+        d_t = _unit(q if target_origin is None else q - np.asarray(target_origin, dtype=np.float64))
         # noise of the pair's residual per unit range variance: M (d_s d_s^T + d_t d_t^T) M
         Ms, Mt = np.einsum("nij,nj->ni", M, d_s), np.einsum("nij,nj->ni", M, d_t)
         if model.range_noise_m is None:

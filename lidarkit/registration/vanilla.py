@@ -131,6 +131,7 @@ def point_to_point_icp(
         reason=reason,
         covariance=assessment.covariance,
         surface_step=assessment.surface_step,
+        extra=assessment.covariance_extra,
     )
 
 
