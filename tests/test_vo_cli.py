@@ -292,3 +292,9 @@ def test_progress_lines_on_stderr(capsys):
     assert code in (0, None)
     lines = [line for line in err.splitlines() if " frames (" in line]
     assert len(lines) == 8 and lines[-1].endswith("s left") and "8/8 frames (100 %)" in lines[-1]
+
+
+def test_options_that_replace_a_guessed_focal_length_say_when_they_are_not_used(capsys):
+    code, _, err = _run(["vo", str(sample_path("kitti_vo", "06")), "--self-calibrate", "--focal-factor", "1.2"], capsys)
+    assert code in (0, None)
+    assert "note: --self-calibrate and --focal-factor not used: the intrinsics are known (kitti calibration)" in err

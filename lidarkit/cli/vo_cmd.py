@@ -9,7 +9,7 @@ from typing import Optional
 
 import typer
 
-from lidarkit.cli.app import app, parse_params, stdout
+from lidarkit.cli.app import app, parse_params, stderr, stdout
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.vo.config import VOConfig, available_presets
 from lidarkit.vo.intrinsics import DEFAULT_FOCAL_FACTOR
@@ -41,7 +41,7 @@ def vo_command(
     self_calibrate: bool = typer.Option(False, "--self-calibrate/--no-self-calibrate",
                                         help="Without intrinsics: estimate fx = fy from the sequence (principal point "
                                         "at the centre); falls back to the size guess when the motion does not "
-                                        "constrain it. Costs about a minute per 50 KITTI frames."),
+                                        "constrain it. Costs 20-45 s per 50 KITTI frames."),
     kind: str = typer.Option("auto", help="Input kind: auto | kitti | tum | images (for simcam: auto | images)."),
     start: int = typer.Option(0, help="First frame."),
     max_frames: Optional[int] = typer.Option(None, help="Number of frames to process (default: all)."),
@@ -87,6 +87,12 @@ def vo_command(
     vo_input = open_vo_input(data, kind=kind, calib=calib, timestamps=timestamps, poses=poses,
                              poses_format=poses_format, focal_factor=focal_factor)
     vo_input = frame_range(vo_input, start, max_frames)
+    if not vo_input.K_source.startswith("guess"):  # intrinsics known: the options that replace a guess do nothing
+        unused = [name for name, given in (("--self-calibrate", self_calibrate), ("--focal-factor", focal_factor != DEFAULT_FOCAL_FACTOR))
+                  if given]
+        if unused:
+            stderr().print(f"note: {' and '.join(unused)} not used: the intrinsics are known ({vo_input.K_source})", soft_wrap=True,
+                           markup=False)
     focal = None
     if self_calibrate:
         vo_input, focal = calibrate(vo_input)
