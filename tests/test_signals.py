@@ -54,3 +54,24 @@ def test_a_child_started_with_sigint_ignored_keeps_ignoring_it():
     assert done.stderr.strip() == "interrupted by SIGTERM while starting: nothing was written"
     normal = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=env_root)
     assert normal.returncode == 130 and normal.stdout == ""  # without the inherited ignore: the one-line exit as before
+
+
+def test_an_interrupt_a_library_wraps_in_its_own_error_is_still_an_interrupt(monkeypatch, capsys):
+    """Ctrl-C while open3d is first imported in the middle of a run came out as 'ImportError: initialization failed'
+    (caused by the Interrupted) with a traceback and exit 1; it is the interrupt's one line and exit 130."""
+    from lidarkit import cli
+    from lidarkit.lifetime import Interrupted
+
+    def wrapped(*_args, **_kwargs):
+        try:
+            raise Interrupted(signal.SIGINT)
+        except Interrupted as err:
+            raise ImportError("initialization failed") from err
+
+    monkeypatch.setattr(cli, "app", wrapped)
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["version"])
+    assert exc.value.code == 130 and capsys.readouterr().err.startswith("interrupted by SIGINT: stopped")
+    monkeypatch.setattr(cli, "app", lambda *a, **k: (_ for _ in ()).throw(ImportError("not an interrupt")))
+    with pytest.raises(ImportError, match="not an interrupt"):
+        cli.main(["version"])

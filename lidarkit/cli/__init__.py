@@ -30,6 +30,17 @@ from lidarkit.cli import baseline_cmd  # noqa: E402,F401
 __all__ = ["app", "main"]
 
 
+def _interrupt_behind(err: BaseException) -> Interrupted | None:
+    """The Interrupted that caused ``err`` (its ``__cause__`` / ``__context__`` chain), or None."""
+    seen = set()
+    while err is not None and id(err) not in seen:
+        if isinstance(err, Interrupted):
+            return err
+        seen.add(id(err))
+        err = err.__cause__ or err.__context__
+    return None
+
+
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``lidarkit`` console script.
 
@@ -39,8 +50,11 @@ def main(argv: list[str] | None = None) -> None:
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     code = 0
     try:
-        with handle_signals():
-            app(args=argv, prog_name="lidarkit")
+        try:
+            with handle_signals():
+                app(args=argv, prog_name="lidarkit")
+        except Exception as err:  # an interrupt that a library turned into its own error (open3d's import: ImportError)
+            raise _interrupt_behind(err) or err
     except LidarKitError as err:
         print_error(err)
         code = 1
