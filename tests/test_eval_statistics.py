@@ -200,3 +200,48 @@ def test_compare_runs_over_one_bag_scored_at_their_own_sweep_instants(tmp_path, 
     run(another, other_method, out_dir=tmp_path / "another")
     with pytest.raises(EvaluationError, match="runs over different data"):
         compare(tmp_path / "kiss", tmp_path / "another")
+
+
+def test_a_metric_a_task_declares_better_higher_is_compared_that_way(tmp_path):
+    """compare and assert_no_worse_than took the direction from a fixed list (hz, converged_fraction): a task's
+    Metric(better="higher") was compared as lower-is-better, and the verdict inverted."""
+    import textwrap
+
+    from lidarkit.bench import Metric, Task, TaskOutput, load_suite, register_task, run_suite
+    from lidarkit.bench.tasks import higher_is_better
+    from lidarkit.eval import compare
+    from lidarkit.testing import assert_no_worse_than
+
+    @register_task("success_test_task")
+    class SuccessTask(Task):
+        dataset_kinds = ("synthetic",)
+        metrics = (Metric("success_rate", "success rate", better="higher"), Metric("error_m", "error [m]"))
+
+        def validate_options(self, options):
+            pass
+
+        def validate_dataset(self, dataset, options):
+            pass
+
+        def validate(self, method, params, dataset, options):
+            pass
+
+        def run(self, job):
+            bump = 0.01 * np.random.default_rng(job.seed).random()
+            good = job.method == "good"
+            return TaskOutput(metrics={"success_rate": (0.9 if good else 0.5) + bump, "error_m": (0.1 if good else 0.5) + bump},
+                              series={}, info={})
+
+    assert higher_is_better("success_rate") and not higher_is_better("error_m") and higher_is_better("hz")
+    (tmp_path / "s.yaml").write_text(textwrap.dedent("""
+        seeds: 8
+        experiments:
+          - {name: e, task: success_test_task, dataset: {kind: synthetic}, methods: [good, bad]}
+    """))
+    run_suite(load_suite(tmp_path / "s.yaml"), tmp_path / "out", executor="serial")
+    for metric in ("success_rate", "error_m"):
+        verdict = compare(tmp_path / "out", tmp_path / "out", method_a="good", method_b="bad", metric=metric).verdict()
+        assert verdict.startswith("good is better than bad"), verdict
+    assert_no_worse_than({"success_rate": 0.95}, {"success_rate": 0.90}, metric="success_rate", tolerance=0.0)
+    with pytest.raises(AssertionError, match="regression: success_rate"):
+        assert_no_worse_than({"success_rate": 0.85}, {"success_rate": 0.90}, metric="success_rate", tolerance=0.0)

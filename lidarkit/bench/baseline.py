@@ -33,6 +33,7 @@ import numpy as np
 
 from lidarkit import atomic
 from lidarkit.bench.jobs import Job, canonical_json
+from lidarkit.bench.tasks import higher_is_better
 from lidarkit.errors import ConfigError, DataError, LidarKitError, OutputError, RegistrationError
 
 log = logging.getLogger(__name__)
@@ -54,7 +55,6 @@ ABSOLUTE_FLOOR = {
     "rpe_rot_rmse_deg": 0.001,
 }
 DEFAULT_FLOOR = 1e-9
-HIGHER_IS_BETTER = frozenset({"hz", "converged_fraction"})
 
 
 def _utc() -> str:
@@ -541,7 +541,7 @@ def check(
             delta = float(value) - ref
             if abs(delta) <= band:
                 continue
-            worse = (delta < 0) if metric in HIGHER_IS_BETTER else (delta > 0)
+            worse = (delta < 0) if higher_is_better(metric, pinned["spec"]["task"]) else (delta > 0)
             text = f"{metric} = {float(value):.6g}, baseline {ref:.6g} ± {band:.3g} (change {delta:+.3g})"
             result.findings.append(Finding("regression" if worse else "improved", name, text))
     return result

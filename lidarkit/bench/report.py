@@ -510,12 +510,9 @@ def _failed_note(row: Row) -> str:
 
 
 def _better_higher(task: str, metric: str) -> bool:
-    try:
-        from lidarkit.bench.tasks import get_task
+    from lidarkit.bench.tasks import higher_is_better
 
-        return any(m.name == metric and m.better == "higher" for m in get_task(task).metrics)
-    except Exception:  # noqa: BLE001 - metadata is optional for the report
-        return False
+    return higher_is_better(metric, task)
 
 
 def _short_label(row: Row, table: TaskTable) -> str:

@@ -20,8 +20,6 @@ from lidarkit.errors import ConfigError, DataError, EvaluationError
 from lidarkit.eval.statistics import DEFAULT_ALPHA, PairedComparison, paired_test
 from lidarkit.trajectory import Trajectory
 
-#: metrics of bench results where higher is better (everything else: lower is better)
-HIGHER_IS_BETTER = frozenset({"hz", "converged_fraction"})
 #: the default bench metric, first present wins
 #: the first of these a bench folder's jobs have is compared by default (KITTI drift, the particle filter's MSE, APE, an
 #: ICP pair's translation error)
@@ -224,10 +222,12 @@ def compare(
                if side_a.values[k].get(metric) is None or side_b.values[k].get(metric) is None]
     if missing:
         raise EvaluationError(f"metric {metric!r} missing for {', '.join(missing[:5])}", source="compare")
+    from lidarkit.bench.tasks import higher_is_better  # (as the task that wrote the results declares it)
+
     va = np.array([side_a.values[k][metric] for k in common], dtype=np.float64)
     vb = np.array([side_b.values[k][metric] for k in common], dtype=np.float64)
     result = paired_test(va, vb, name_a=name_a, name_b=name_b, metric=metric, pairing="seed",
-                         lower_is_better=metric not in HIGHER_IS_BETTER, alpha=alpha,
+                         lower_is_better=not higher_is_better(metric), alpha=alpha,
                          noise=_with_measured_noise(noise, noise_from, metric), seed=seed)
     only_a, only_b = len(keys_a - keys_b), len(keys_b - keys_a)
     if only_a or only_b:  # the pairs are those both have: say what was left out

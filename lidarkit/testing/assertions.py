@@ -13,8 +13,6 @@ import numpy as np
 from lidarkit.errors import ConfigError, EvaluationError
 from lidarkit.trajectory import Trajectory
 
-HIGHER_IS_BETTER = frozenset({"hz", "converged_fraction"})
-
 
 def assert_trajectory_close(
     actual: Trajectory,
@@ -98,7 +96,9 @@ def assert_no_worse_than(
     if not tol >= 0 or not math.isfinite(tol):
         raise ConfigError(f"tolerance must be a finite number >= 0, got {tolerance}", source="assert_no_worse_than")
     now, ref = now_metrics[metric], ref_metrics[metric]
-    worse_by = (ref - now) if metric in HIGHER_IS_BETTER else (now - ref)
+    from lidarkit.bench.tasks import higher_is_better
+
+    worse_by = (ref - now) if higher_is_better(metric) else (now - ref)
     if not math.isfinite(now) or worse_by > tol:
         raise AssertionError(f"regression: {metric} = {now:.6g}, baseline {ref:.6g} (worse by {worse_by:.4g}, "
                              f"tolerance {tol:.4g})")

@@ -119,6 +119,26 @@ def get_task(name: str) -> Task:
     return _INSTANCES[name]
 
 
+#: run-folder and library metrics that are better higher (the tasks declare theirs with ``Metric.better``)
+HIGHER_IS_BETTER = frozenset({"hz", "converged_fraction"})
+
+
+def higher_is_better(metric: str, task: str | None = None) -> bool:
+    """Whether a larger ``metric`` is better: as ``task`` declares it (``Metric.better``), or as any task that can be
+    loaded declares a metric of that name; else :data:`HIGHER_IS_BETTER`."""
+    if metric in HIGHER_IS_BETTER:
+        return True
+    names = [task] if task is not None else available_tasks()
+    for name in names:
+        try:
+            metrics = get_task(name).metrics
+        except Exception:  # noqa: BLE001 - a task whose module cannot load here declares nothing
+            continue
+        if any(m.name == metric and m.better == "higher" for m in metrics):
+            return True
+    return False
+
+
 def import_module_for_task(task: str, module: str) -> Any:
     """Import ``module`` for ``task``; a missing module becomes a ConfigError saying which task needs it."""
     try:
@@ -127,4 +147,5 @@ def import_module_for_task(task: str, module: str) -> Any:
         raise ConfigError(f"task {task!r} needs {module}, which is not available ({err})", source="task") from err
 
 
-__all__ = ["Metric", "Task", "TaskOutput", "available_tasks", "get_task", "import_module_for_task", "register_task"]
+__all__ = ["HIGHER_IS_BETTER", "Metric", "Task", "TaskOutput", "available_tasks", "get_task", "higher_is_better", "import_module_for_task",
+           "register_task"]
