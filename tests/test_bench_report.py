@@ -310,3 +310,18 @@ def test_the_report_holds_the_suite_last_run_in_the_folder_and_says_what_is_miss
     assert summary[0][3] == "random_walk(noise_m=0.5, steps=40)"  # the complete row, though its mean is larger
     text = (tmp_path / "out" / "report.md").read_text()
     assert "3 job results of the suite's 4 jobs (1 not run yet)" in text and "## Jobs of the suite without a result" in text
+
+
+def test_an_earlier_reports_plots_and_tables_do_not_stay_beside_the_new_ones(results_dir, tmp_path):
+    import shutil
+
+    folder = tmp_path / "reused"
+    shutil.copytree(results_dir, folder)
+    (folder / "tables").mkdir(exist_ok=True)
+    (folder / "plots").mkdir(exist_ok=True)
+    for stale in ("tables/kitti_translation_pct.md", "tables/kitti_translation_pct.tex", "plots/segments_translation_pct.png"):
+        (folder / stale).write_text("an earlier suite's (odometry over 100 m)")
+    (folder / "tables" / "my_notes.md").write_text("mine")
+    report = build_report(folder)
+    assert sorted(p.name for p in (folder / "plots").iterdir()) == sorted(p.filename for p in report.plots)
+    assert sorted(p.name for p in (folder / "tables").iterdir()) == ["my_notes.md"]

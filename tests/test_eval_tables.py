@@ -83,3 +83,12 @@ def test_eval_cli_writes_tables(tmp_path, capsys):
     assert "Avg." in text and "3.02" in text
     assert (tmp_path / "t" / "kitti_translation_pct.tex").read_text().count("\\toprule") == 1
     assert (tmp_path / "t" / "segments_translation_pct.png").read_bytes()[:4] == b"\x89PNG"
+    # the same folder for a run too short for drift: the earlier drift tables and box plot go, the user's file stays
+    (tmp_path / "t" / "notes.txt").write_text("mine")
+    straight(40).to_kitti(tmp_path / "ref_short.txt")
+    straight(40, 1.03).to_kitti(tmp_path / "est_short.txt")
+    with pytest.raises(SystemExit) as exc:
+        main(["eval", str(tmp_path / "ref_short.txt"), str(tmp_path / "est_short.txt"), "--align", "none", "--tables", str(tmp_path / "t")])
+    assert exc.value.code in (0, None)
+    assert sorted(p.name for p in (tmp_path / "t").iterdir()) == [
+        "ape_rmse.csv", "ape_rmse.md", "ape_rmse.tex", "notes.txt", "rpe_rmse.csv", "rpe_rmse.md", "rpe_rmse.tex"]

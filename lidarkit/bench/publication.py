@@ -108,12 +108,13 @@ def build_publication(records: list[dict[str, Any]], out_dir: Path, *, plots: bo
     """Tables (and box plots with ``plots``) of the odometry records, written under ``out_dir``; paired
     comparisons with the reference (kiss)."""
     segments, ape, rpe = _grids(records)
-    pub = Publication(publication_tables(segments or None, ape or None, rpe or None).tables)
+    tables = publication_tables(segments or None, ape or None, rpe or None)
+    pub = Publication(tables.tables)
     pub.comparisons = reference_comparisons(records)
+    if pub.tables or (out_dir / TABLES_DIR).is_dir():  # (an earlier report's tables that these replace are removed)
+        pub.files += tables.write(out_dir / TABLES_DIR)
     if not pub.tables:
         return pub
-    for table in pub.tables:
-        pub.files += table.write(out_dir / TABLES_DIR)
     if plots and segments:
         from lidarkit.eval.plots import plot_segment_boxplots
 

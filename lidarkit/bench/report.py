@@ -689,6 +689,12 @@ def build_report(
     from lidarkit.bench.publication import build_publication
 
     report.publication = build_publication(records, out_dir, plots=plots)
+    if plots:  # plots/ is the report's own: an earlier report's figures this one does not draw go
+        drawn = {p.filename for p in report.plots} | {path.name for _, path in report.publication.boxplots}
+        for stale in (out_dir / "plots").glob("*.png"):
+            if stale.name not in drawn:
+                stale.unlink()
+
     report.markdown_path = atomic.write_text(out_dir / "report.md", _markdown(report, title))
     report.csv_path = atomic.write_text(out_dir / "report.csv", _csv(report))
     report.html_path = atomic.write_text(out_dir / "report.html", _html(report, title))

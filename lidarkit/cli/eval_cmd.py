@@ -116,10 +116,13 @@ def eval_command(
         segments = {key: SegmentErrors.from_drift(evaluation.drift)} if evaluation.drift is not None else None
         pub = publication_tables(segments, {key: evaluation.ape.rmse}, {key: evaluation.rpe.rmse})
         written = pub.write(tables)
+        boxplot = tables / "segments_translation_pct.png"
         if segments:
             from lidarkit.eval.plots import plot_segment_boxplots
 
-            written.append(plot_segment_boxplots(segments, tables / "segments_translation_pct.png"))
+            written.append(plot_segment_boxplots(segments, boxplot))
+        else:  # an earlier evaluation's, beside tables without drift
+            boxplot.unlink(missing_ok=True)
         console.print(f"wrote {len(written)} table/plot files to {tables}", soft_wrap=True)
     if plot is not None:
         from lidarkit.eval import plots

@@ -268,6 +268,11 @@ def short_method_labels(labels: Sequence[str]) -> dict[str, str]:
     return {lab: lab[cut + 2:].lstrip() or lab for lab in labels}
 
 
+#: every table a :class:`PublicationTables` can hold, by file stem
+TABLE_NAMES = (*(f"kitti_{q}{part}" for q in QUANTITIES for part in ("", "_per_length", "_per_speed")), "ape_rmse", "rpe_rmse")
+TABLE_SUFFIXES = (".md", ".csv", ".tex")
+
+
 @dataclass
 class PublicationTables:
     """Every table for one set of runs, ready to write."""
@@ -275,7 +280,16 @@ class PublicationTables:
     tables: list[PubTable] = field(default_factory=list)
 
     def write(self, out_dir: str | os.PathLike) -> list[Path]:
-        return [p for t in self.tables for p in t.write(out_dir)]
+        """Each table's .md/.csv/.tex in ``out_dir``; an earlier set's tables that this one does not hold (a run over
+        shorter sequences has no drift tables) are removed, so the folder never mixes two sets."""
+        written = [p for t in self.tables for p in t.write(out_dir)]
+        keep = {p.name for p in written}
+        for stem in TABLE_NAMES:
+            for suffix in TABLE_SUFFIXES:
+                stale = Path(out_dir) / f"{stem}{suffix}"
+                if stale.name not in keep and stale.is_file():
+                    stale.unlink()
+        return written
 
     def markdown(self) -> str:
         return "\n".join(t.to_markdown() for t in self.tables)
