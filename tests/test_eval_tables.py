@@ -92,3 +92,18 @@ def test_eval_cli_writes_tables(tmp_path, capsys):
     assert exc.value.code in (0, None)
     assert sorted(p.name for p in (tmp_path / "t").iterdir()) == [
         "ape_rmse.csv", "ape_rmse.md", "ape_rmse.tex", "notes.txt", "rpe_rmse.csv", "rpe_rmse.md", "rpe_rmse.tex"]
+
+
+def test_pooled_rows_compare_methods_on_the_sequences_all_of_them_ran():
+    """B has no segments on 01: the drift table's Avg. row left 01 out, the per-length "all" row pooled A's 10 % there
+    and bolded B as best (A 5.50 vs B 2.00 beside Avg. A 1.00 vs B 2.00). Every pooled row now uses the same
+    sequences, and the notes name the one left out."""
+    def seg(value):
+        return SegmentErrors(np.full(3, 100.0), np.full(3, value), np.full(3, value / 10), np.full(3, 8.0))
+
+    g = {("00", "A"): seg(1.0), ("00", "B"): seg(2.0), ("01", "A"): seg(10.0)}
+    avg = drift_table(g).values[-1]
+    for table in (per_length_table(g), per_speed_table(g)):
+        np.testing.assert_allclose(table.values[-1], avg)
+        assert "Left out: 01" in table.note
+    assert "Left out: 01" in drift_table(g).note and drift_table(g).values[1, 0] == 10.0  # its own row stays

@@ -173,6 +173,15 @@ def _axes(grid: Mapping[tuple[str, str], Any]) -> tuple[list[str], list[str]]:
     return sequences, methods
 
 
+def _common_sequences(grid: Grid) -> tuple[list[str], str]:
+    """The sequences on which every method has segments (so that pooled rows compare methods on the same data), and a
+    note naming those left out ('' when none is)."""
+    sequences, methods = _axes(grid)
+    common = [seq for seq in sequences if all(grid.get((seq, m)) is not None and len(grid[(seq, m)]) for m in methods)]
+    left = [seq for seq in sequences if seq not in common]
+    return common, (f" Left out: {', '.join(left)} (not every method has segments there)." if left else "")
+
+
 def drift_table(grid: Grid, quantity: str = "translation_pct", *, average_label: str = "Avg.") -> PubTable:
     """Sequences x methods table of the mean KITTI drift, plus the devkit average row (segments pooled)."""
     if quantity not in QUANTITIES:
@@ -184,24 +193,26 @@ def drift_table(grid: Grid, quantity: str = "translation_pct", *, average_label:
             s = grid.get((seq, method))
             if s is not None and len(s):
                 values[i, j] = float(getattr(s, quantity).mean())
-        # pooled over the sequences where *every* method has segments, so methods are averaged on the same data
-        common = [grid[(seq, method)] for seq in sequences
-                  if all(grid.get((seq, m)) is not None and len(grid[(seq, m)]) for m in methods)]
-        values[-1, j] = pooled(common, quantity)
+    # pooled over the sequences where *every* method has segments, so methods are averaged on the same data
+    common, left_out = _common_sequences(grid)
+    for j, method in enumerate(methods):
+        values[-1, j] = pooled([grid[(seq, method)] for seq in common], quantity)
     return PubTable(
         title=f"KITTI {QUANTITIES[quantity]} per sequence",
         corner="sequence", row_labels=[*sequences, average_label], col_labels=methods, values=values,
         digits=2 if quantity == "translation_pct" else 3, n_summary_rows=1, name=f"kitti_{quantity}",
-        note=f"{average_label}: mean over the segments of all sequences pooled (KITTI devkit, length-weighted).",
+        note=f"{average_label}: mean over the segments of the sequences pooled (KITTI devkit, length-weighted).{left_out}",
     )
 
 
 def per_length_table(grid: Grid, quantity: str = "translation_pct", lengths_m: Sequence[float] = KITTI_LENGTHS_M) -> PubTable:
-    """Segment length x method table, segments pooled over sequences, plus the all-lengths row."""
+    """Segment length x method table, segments pooled over the sequences every method has segments on (those of
+    the drift table's average row), plus the all-lengths row."""
     _, methods = _axes(grid)
+    common, left_out = _common_sequences(grid)
     values = np.full((len(lengths_m) + 1, len(methods)), np.nan)
     for j, method in enumerate(methods):
-        segs = [s for (_, m), s in grid.items() if m == method]
+        segs = [grid[(seq, method)] for seq in common]
         length = np.concatenate([s.length_m for s in segs]) if segs else np.zeros(0)
         q = np.concatenate([getattr(s, quantity) for s in segs]) if segs else np.zeros(0)
         for i, L in enumerate(lengths_m):
@@ -215,17 +226,20 @@ def per_length_table(grid: Grid, quantity: str = "translation_pct", lengths_m: S
         title=f"KITTI {QUANTITIES[quantity]} per segment length", corner="length (m)",
         row_labels=[lab for lab, k in zip(labels, keep) if k], col_labels=methods, values=values[keep],
         digits=2 if quantity == "translation_pct" else 3, n_summary_rows=1, name=f"kitti_{quantity}_per_length",
+        note=f"Segments pooled over the sequences.{left_out}",
     )
 
 
 def per_speed_table(grid: Grid, quantity: str = "translation_pct", bins_mps: Sequence[float] = SPEED_BINS_MPS) -> PubTable:
-    """Segment speed bin x method table (the devkit's error-vs-speed curve as rows), pooled over sequences."""
+    """Segment speed bin x method table (the devkit's error-vs-speed curve as rows), pooled over the sequences every
+    method has segments on."""
     _, methods = _axes(grid)
+    common, left_out = _common_sequences(grid)
     edges = list(bins_mps)
     labels = [f"{lo:g}-{hi:g} m/s" if math.isfinite(hi) else f">= {lo:g} m/s" for lo, hi in zip(edges[:-1], edges[1:])]
     values = np.full((len(labels), len(methods)), np.nan)
     for j, method in enumerate(methods):
-        segs = [s for (_, m), s in grid.items() if m == method]
+        segs = [grid[(seq, method)] for seq in common]
         if not segs:
             continue
         speed = np.concatenate([s.speed_mps for s in segs])
@@ -238,6 +252,7 @@ def per_speed_table(grid: Grid, quantity: str = "translation_pct", bins_mps: Seq
         title=f"KITTI {QUANTITIES[quantity]} per segment speed", corner="speed",
         row_labels=[lab for lab, k in zip(labels, keep) if k], col_labels=methods, values=values[keep],
         digits=2 if quantity == "translation_pct" else 3, name=f"kitti_{quantity}_per_speed",
+        note=f"Segments pooled over the sequences.{left_out}",
     )
 
 
