@@ -107,3 +107,17 @@ def test_pooled_rows_compare_methods_on_the_sequences_all_of_them_ran():
         np.testing.assert_allclose(table.values[-1], avg)
         assert "Left out: 01" in table.note
     assert "Left out: 01" in drift_table(g).note and drift_table(g).values[1, 0] == 10.0  # its own row stays
+
+
+def test_segment_speeds_follow_the_time_stamps(tmp_path, capsys):
+    """1 m per frame at 5 Hz is 5 m/s: the per-speed table took every sequence as 10 Hz (10 m/s)."""
+    from lidarkit.cli import main
+
+    ref, est = straight(400), straight(400, 1.03)
+    Trajectory(ref.poses_se3, 0.2 * np.arange(400)).to_tum(tmp_path / "ref.tum")
+    Trajectory(est.poses_se3, 0.2 * np.arange(400)).to_tum(tmp_path / "est.tum")
+    with pytest.raises(SystemExit) as exc:
+        main(["eval", str(tmp_path / "ref.tum"), str(tmp_path / "est.tum"), "--align", "none", "--tables", str(tmp_path / "t")])
+    assert exc.value.code in (0, None)
+    text = (tmp_path / "t" / "kitti_translation_pct_per_speed.md").read_text()
+    assert "| 0-5 m/s |" in text and "5-10 m/s" not in text  # (just under 5 m/s: the devkit's (frames + 1) periods)

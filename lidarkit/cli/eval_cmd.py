@@ -110,10 +110,15 @@ def eval_command(
         atomic.write_text(markdown, report.evaluation_markdown(evaluation))
         console.print(f"wrote {markdown}")
     if tables is not None:
-        from lidarkit.eval.tables import SegmentErrors, publication_tables
+        import numpy as np
+
+        from lidarkit.eval.tables import KITTI_FRAME_PERIOD_S, SegmentErrors, publication_tables
 
         key = (ref_traj.name or ref.stem, est_traj.name or est.stem)
-        segments = {key: SegmentErrors.from_drift(evaluation.drift)} if evaluation.drift is not None else None
+        period = KITTI_FRAME_PERIOD_S  # a segment's speed: its length over its frames' duration (KITTI: 10 Hz)
+        if ref_traj.timestamps_s is not None and len(ref_traj) > 1:
+            period = float(np.median(np.diff(ref_traj.timestamps_s)))
+        segments = {key: SegmentErrors.from_drift(evaluation.drift, frame_period_s=period)} if evaluation.drift is not None else None
         pub = publication_tables(segments, {key: evaluation.ape.rmse}, {key: evaluation.rpe.rmse})
         written = pub.write(tables)
         boxplot = tables / "segments_translation_pct.png"

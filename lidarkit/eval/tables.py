@@ -252,7 +252,8 @@ def per_speed_table(grid: Grid, quantity: str = "translation_pct", bins_mps: Seq
         title=f"KITTI {QUANTITIES[quantity]} per segment speed", corner="speed",
         row_labels=[lab for lab, k in zip(labels, keep) if k], col_labels=methods, values=values[keep],
         digits=2 if quantity == "translation_pct" else 3, name=f"kitti_{quantity}_per_speed",
-        note=f"Segments pooled over the sequences.{left_out}",
+        note=f"Segments pooled over the sequences; a segment's speed is its length over (frames + 1) x the frame period (the "
+             f"time stamps' median interval, 0.1 s without them).{left_out}",
     )
 
 
