@@ -117,7 +117,7 @@ def test_segment_speeds_follow_the_time_stamps(tmp_path, capsys):
     Trajectory(ref.poses_se3, 0.2 * np.arange(400)).to_tum(tmp_path / "ref.tum")
     Trajectory(est.poses_se3, 0.2 * np.arange(400)).to_tum(tmp_path / "est.tum")
     with pytest.raises(SystemExit) as exc:
-        main(["eval", str(tmp_path / "ref.tum"), str(tmp_path / "est.tum"), "--align", "none", "--tables", str(tmp_path / "t")])
+        main(["eval", str(tmp_path / "ref.tum"), str(tmp_path / "est.tum"), "-f", "tum", "--align", "none", "--tables", str(tmp_path / "t")])
     assert exc.value.code in (0, None)
     text = (tmp_path / "t" / "kitti_translation_pct_per_speed.md").read_text()
     assert "| 0-5 m/s |" in text and "5-10 m/s" not in text  # (just under 5 m/s: the devkit's (frames + 1) periods)
