@@ -54,6 +54,9 @@ def test_unknown_names_and_params_raise_config_error_listing_valid_ones():
         make_component("kernel", {"name": "huber", "scale_m": -1.0})
     with pytest.raises(ConfigError, match="kinds: motion"):
         available_components("solver")
+    for name in ("voxel_hash", "scan_to_scan"):  # scipy's threads: 0 failed at the first pair, as the pair's failure
+        with pytest.raises(ConfigError, match="workers must be -1 \\(all cores\\) or >= 1, got 0"):
+            make_component("map", {"name": name, "workers": 0})
     # through the pipeline variant: the component's kind and its valid names / parameters are named
     with pytest.raises(ConfigError, match="unknown residual component 'point_to_line'; available: plane_to_plane"):
         get_icp("pipeline", residual="point_to_line")

@@ -10,11 +10,24 @@ Backends:
 
 from __future__ import annotations
 
+from typing import Annotated
+
 import numpy as np
+from pydantic import AfterValidator
 
 from lidarkit.errors import ConfigError
 
 BACKENDS = ("auto", "scipy", "open3d", "brute")
+
+
+def _scipy_workers(value: int) -> int:
+    if value != -1 and value < 1:  # scipy's own error came only at the first query, reported as a failure of the pair
+        raise ValueError(f"workers must be -1 (all cores) or >= 1, got {value}")
+    return value
+
+
+#: a config field's type for scipy's query threads: -1 (all cores) or a count, checked when the config is made
+ScipyWorkers = Annotated[int, AfterValidator(_scipy_workers)]
 
 
 class NearestNeighbors:

@@ -10,12 +10,12 @@ import dataclasses
 from typing import Literal
 
 import numpy as np
-from pydantic import Field, field_validator
+from pydantic import Field
 
 from lidarkit.geometry import kabsch_umeyama, make_se3
 from lidarkit.registration.assessment import assess_alignment
 from lidarkit.registration.base import Degeneracy, Registration, RegistrationConfig, RegistrationResult
-from lidarkit.registration.neighbors import NearestNeighbors
+from lidarkit.registration.neighbors import NearestNeighbors, ScipyWorkers
 from lidarkit.registration.planar import planar_kabsch
 from lidarkit.registration.preprocess import voxel_downsample
 from lidarkit.registration.registry import register_icp
@@ -33,20 +33,13 @@ class VanillaConfig(RegistrationConfig):
     voxel_size_m: float | None = Field(None, gt=0, description="voxel-downsample both clouds first (m); None keeps all points")
     nn_backend: Literal["auto", "scipy", "open3d", "brute"] = Field("auto", description="nearest-neighbour search backend")
     leafsize: int = Field(16, ge=1, description="KD-tree leaf size (scipy backend)")
-    workers: int = Field(-1, description="threads for the scipy KD-tree query (nn_backend scipy; -1: all cores)")
+    workers: ScipyWorkers = Field(-1, description="threads for the scipy KD-tree query (nn_backend scipy; -1: all cores)")
     coarse_stride: int = Field(
         8, ge=1, description="first converge with every k-th source point, then refine with all (1: single stage)"
     )
     planar: bool = Field(
         False, description="solve x, y, yaw only (SE(2)); z, roll and pitch stay as in init_T (2D laser scans)"
     )
-
-    @field_validator("workers")
-    @classmethod
-    def _workers(cls, value: int) -> int:
-        if value != -1 and value < 1:  # scipy's own error came only at the first query, as a failure of the pair
-            raise ValueError(f"workers must be -1 (all cores) or >= 1, got {value}")
-        return value
 
 
 def point_to_point_icp(

@@ -17,6 +17,7 @@ from scipy.spatial import cKDTree
 
 from lidarkit.geometry import transform_points
 from lidarkit.registration.components.registry import Component, ComponentConfig, component_base, register_component
+from lidarkit.registration.neighbors import ScipyWorkers
 
 _KEY_BITS = 21
 _KEY_OFFSET = 1 << (_KEY_BITS - 1)
@@ -207,7 +208,7 @@ class ScanToScanConfig(ComponentConfig):
     nn_backend: Literal["scipy", "open3d"] = Field(
         "scipy", description="nearest-neighbour index: scipy cKDTree (float64, exact) or Open3D (float32 search, float64 distances)"
     )
-    workers: int = Field(-1, description="threads of the scipy nearest-neighbour queries (-1: all cores, as kiss-icp's TBB)")
+    workers: ScipyWorkers = Field(-1, description="threads of the scipy nearest-neighbour queries (-1: all cores, as kiss-icp's TBB)")
     track_neighbors: bool = Field(
         True, description="ICP iterations: keep a point's nearest map point while it provably stays the nearest (same answers, fewer searches)"
     )
@@ -238,7 +239,7 @@ class VoxelHashConfig(ComponentConfig):
     nn_backend: Literal["scipy", "open3d"] = Field(
         "scipy", description="nearest-neighbour index: scipy cKDTree (float64, exact) or Open3D (float32 search, float64 distances)"
     )
-    workers: int = Field(-1, description="threads of the scipy nearest-neighbour queries (-1: all cores, as kiss-icp's TBB)")
+    workers: ScipyWorkers = Field(-1, description="threads of the scipy nearest-neighbour queries (-1: all cores, as kiss-icp's TBB)")
     track_neighbors: bool = Field(
         True, description="ICP iterations: keep a point's nearest map point while it provably stays the nearest (same answers, fewer searches)"
     )
