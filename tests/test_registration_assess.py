@@ -66,6 +66,26 @@ def test_odometry_with_covariance_none_writes_no_pose_covariance(tmp_path):
         run(spec, "small_gicp", params={"covariance": "none"}, pose_covariance=True, progress=False)
 
 
+
+def test_a_variant_whose_results_carry_no_covariance_writes_no_pose_covariance(tmp_path, caplog):
+    """A plugin built on the docs' earlier template (a RegistrationResult without covariance): all-NaN rows were
+    written as its pose covariance; now a warning says there is none."""
+    import dataclasses
+    import logging
+
+    from lidarkit.registration.open3d_icp import Open3DPointToPlane
+
+    class NoCovariance(Open3DPointToPlane):
+        def _align(self, source_xyz, target_xyz, init_T):
+            return dataclasses.replace(super()._align(source_xyz, target_xyz, init_T), covariance=None, surface_step=None)
+
+    spec = f"kitti:{shared_path('kitti_odometry')}?sequence=00"
+    with caplog.at_level(logging.WARNING):
+        result = run(spec, NoCovariance(), frames="0:4", out_dir=tmp_path / "run", progress=False)
+    assert result.covariances is None and "pose_covariance" not in result.metrics
+    assert not (tmp_path / "run" / "pose_covariance.txt").exists() and "no frame's registration gave a covariance" in caplog.text
+
+
 @pytest.mark.parametrize("value", [float("inf"), float("nan")])
 def test_no_variant_takes_a_non_finite_setting(value):
     """``voxel_size_m=inf`` passed ``gt=0``: every variant's config refuses NaN and infinity (no limit is None)."""
