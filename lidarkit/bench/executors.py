@@ -190,7 +190,7 @@ class DaskExecutor:
             os.environ.setdefault("DASK_LOGGING__DISTRIBUTED", "error")  # read by the worker processes at start
             # Worker processes start with SIGINT ignored (an ignored signal stays ignored across exec, and Python
             # keeps it so): Ctrl-C reaches the whole process group, and only this process decides how the cluster
-            # stops. A Ctrl-C while the cluster starts is reported when it has started.
+            # stops. A Ctrl-C in the few seconds the cluster takes to start is lost (see ignored_sigint).
             with ignored_sigint():
                 self.cluster = distributed.LocalCluster(
                     n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=logging.ERROR
