@@ -169,6 +169,7 @@ class PipelineRegistration(Registration):
                 point_times_s = None
             elif len(point_times_s) != len(frame) or not np.isfinite(point_times_s).all():
                 raise DataError(f"need {len(frame)} finite per-point times, got {len(point_times_s)}", source="point_times_s")
+        raw = frame
         frame = c["deskew"].deskew(frame, point_times_s, self.last_delta)
         map_points, source = self._voxelize(self._preprocess(frame))
         guess = c["deskew"].predict(self.last_pose, self.last_delta)
@@ -183,7 +184,8 @@ class PipelineRegistration(Registration):
         self.last_delta = se3_inverse(self.last_pose) @ T
         self.last_pose = T
         self.last_frame = {**info, "sigma_m": sigma, "source_points": len(source), "map_points": len(c["map"].points_xyz)}
-        return T.copy()
+        # the pose at the reference instant (the deskew component may register at another one; undeskewed: as is)
+        return T.copy() if frame is raw else c["deskew"].reported(T, self.last_delta)
 
     # ------------------------------------------------------------------ stages
     def _preprocess(self, points_xyz: np.ndarray) -> np.ndarray:
