@@ -127,3 +127,21 @@ def test_numpy_voxel_backend_gives_the_same_poses_as_kiss_icps_compiled_downsamp
     assert np.linalg.norm(poses["numpy"][-1][:3, 3]) > 1.0  # the car moved: the comparison is not of identities
     with pytest.raises(ConfigError, match="voxel_backend"):
         get_icp("pipeline", preset="kiss_like", voxel_backend="cuda")
+
+
+@pytest.mark.parametrize("residual", ["point_to_plane", "plane_to_plane"])
+def test_residuals_built_on_surfaces_refuse_2d_scans(residual):
+    """point_to_plane on a 2D laser scan returned the initial guess as converged (a 600-frame ACES run ended 565 m
+    off); like the other variants built on normals or covariances it now refuses the scan, pairwise and in sequence."""
+    from lidarkit.errors import ConfigError
+
+    rng = np.random.default_rng(0)
+    scan = np.column_stack([rng.uniform(-10, 10, (2000, 2)), np.zeros(2000)])
+    icp = get_icp("pipeline", preset="kiss_like", residual=residual)
+    with pytest.raises(ConfigError, match=f"not applicable to 2D scans .* the {residual} residual .*residual=point_to_point works"):
+        icp.align(scan + [0.1, 0.0, 0.0], scan)
+    icp.reset()
+    with pytest.raises(ConfigError, match="not applicable to 2D scans"):
+        icp.register_frame(scan)
+    moved = get_icp("pipeline", preset="kiss_like", residual="point_to_point").align(scan + [0.1, 0.0, 0.0], scan)
+    assert moved.converged and abs(moved.T_target_source[0, 3] + 0.1) < 0.02

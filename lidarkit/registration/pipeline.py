@@ -34,6 +34,7 @@ from lidarkit.geometry import as_points, orthonormalize_se3, se3_inverse, transf
 from lidarkit.registration.assessment import assess_alignment
 from lidarkit.registration.base import Degeneracy, Registration, RegistrationConfig, RegistrationResult
 from lidarkit.registration.components import make_component
+from lidarkit.registration.planar import refuse_2d
 from lidarkit.registration.components.maps import first_per_voxel, pca_geometry
 from lidarkit.registration.components.motion import se3_exp_batch
 from lidarkit.registration.components.residuals import plane_regularized
@@ -169,6 +170,8 @@ class PipelineRegistration(Registration):
                 point_times_s = None
             elif len(point_times_s) != len(frame) or not np.isfinite(point_times_s).all():
                 raise DataError(f"need {len(frame)} finite per-point times, got {len(point_times_s)}", source="point_times_s")
+        if c["map"].empty:  # the first frame says what the sequence is
+            self._refuse_2d(frame, frame)
         raw = frame
         frame = c["deskew"].deskew(frame, point_times_s, self.last_delta)
         map_points, source = self._voxelize(self._preprocess(frame))
@@ -188,6 +191,14 @@ class PipelineRegistration(Registration):
         return T.copy() if frame is raw else c["deskew"].reported(T, self.last_delta)
 
     # ------------------------------------------------------------------ stages
+    def _refuse_2d(self, source_xyz: np.ndarray, target_xyz: np.ndarray, components: dict[str, Any] | None = None) -> None:
+        """A residual built on normals or covariances is undefined on a 2D scan (point_to_plane returned the initial
+        guess as converged)."""
+        residual = (components or self._components)["residual"]
+        if getattr(residual, "needs_normals", False) or getattr(residual, "needs_covariances", False):
+            refuse_2d(self.name or "pipeline", source_xyz, target_xyz,
+                      f"the {residual.describe().get('name', 'residual')} residual needs normals / covariances, undefined on a 2D scan (residual=point_to_point works)")
+
     def _preprocess(self, points_xyz: np.ndarray) -> np.ndarray:
         for step in self._components["preprocess"]:
             points_xyz = step.apply(points_xyz)
@@ -254,6 +265,7 @@ class PipelineRegistration(Registration):
     def _align(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray) -> RegistrationResult:
         """Pairwise: the map is built from the target alone; the threshold is its initial value (no motion seen)."""
         c = build_components(self.config)
+        self._refuse_2d(source_xyz, target_xyz, c)
         steps = c["preprocess"]
         for step in steps:
             source_xyz, target_xyz = step.apply(source_xyz), step.apply(target_xyz)
