@@ -191,3 +191,39 @@ def test_the_runner_hands_point_times_to_ground_filtered_for_deskew():
     assert np.abs(with_times - without).max() > 1e-3
     # ... and the run says it was applied (no "deskew requested, not applied" warning for a scan-to-scan variant taking times)
     assert deskewed.metrics["effective"]["deskew"]["applied"] is True
+
+
+def test_segmenters_are_deterministic_stateless_and_refuse_bad_input(hilly_scans):
+    """patchworkpp kept state between scans (the same scan twice: 72600 then 72361 ground points), ransac drew on
+    Open3D's worker threads (other planes in other processes under one seed), csf crashed the process on a NaN point,
+    and some settings were accepted that could not work."""
+    import subprocess
+    import sys
+
+    from lidarkit.errors import DataError
+
+    a, b = hilly_scans[0][1].points_xyz, hilly_scans[2][1].points_xyz
+    for name in ("patchworkpp", "ransac", "local_plane"):
+        segmenter = get_ground_segmenter(name)
+        first = segmenter.segment(a)
+        segmenter.segment(b)
+        assert np.array_equal(segmenter.segment(a), first), name  # not changed by the scan seen in between
+    code = ("import numpy as np; from lidarkit.sim.lidar import SimulatedLidarSequence as S; "
+            "from lidarkit.registration.ground import get_ground_segmenter as g; "
+            "p = S(scene='street', n_frames=80, seed=8, terrain_amplitude_m=1.0, n_beams=32, n_azimuths=720).read_scan(30).points_xyz; "
+            "print(int(np.packbits(g('ransac', seed=3).segment(p)).astype(np.int64).sum()))")
+    runs = {subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout for _ in range(2)}
+    assert len(runs) == 1  # the same plane in two processes
+    bad = a.copy()
+    bad[5] = np.nan
+    for name in available_ground_segmenters():
+        with pytest.raises(DataError, match="1 of .* points are NaN or infinite"):
+            get_ground_segmenter(name).segment(bad)
+    with pytest.raises(ConfigError, match="min_range_m 90 must be below max_range_m 80"):
+        get_ground_segmenter("patchworkpp", min_range_m=90, max_range_m=80)
+    with pytest.raises(ConfigError, match="ground_threshold_m"):
+        get_ground_segmenter("height", ground_threshold_m=-3)
+    icp = get_icp("ground_filtered", ground_method="patchworkpp", sensor_height_m=2.5)
+    from lidarkit.registration.ground_filtered import ground_segmenter
+
+    assert ground_segmenter(icp.config).config.sensor_height_m == 2.5  # (it kept 1.73)

@@ -69,7 +69,7 @@ class GroundFilteredConfig(VanillaConfig):
         DEFAULT_GROUND_SEGMENTER, description="ground segmenter (lidarkit.registration.ground): local_plane, height, ransac, patchworkpp, csf"
     )
     ground_params: dict[str, Any] = Field(default_factory=dict, description="parameters of the ground segmenter")
-    sensor_height_m: float = Field(KITTI_SENSOR_HEIGHT_M, ge=0, description="height / ransac methods: sensor height above the road (m)")
+    sensor_height_m: float = Field(KITTI_SENSOR_HEIGHT_M, ge=0, description="height / ransac / patchworkpp methods: sensor height above the road (m)")
     ground_threshold_m: float = Field(
         0.73, description="height method: points lower than this above the road are ground (1.73-0.73 = 1 m below the sensor)"
     )
@@ -107,6 +107,8 @@ def ground_segmenter(config: GroundFilteredConfig) -> GroundSegmenter:
     if config.ground_method == "height":
         params.setdefault("sensor_height_m", config.sensor_height_m)
         params.setdefault("ground_threshold_m", config.ground_threshold_m)
+    elif config.ground_method == "patchworkpp":  # (sensor_height_m was not passed on: it kept its 1.73 m)
+        params.setdefault("sensor_height_m", config.sensor_height_m)
     elif config.ground_method == "ransac":
         params.setdefault("sensor_height_m", config.sensor_height_m)
         params.setdefault("distance_threshold_m", config.ransac_distance_m)

@@ -44,6 +44,9 @@ class GroundSegmenter:
             raise DataError(f"expected an (N, 3) point array, got shape {pts.shape}", source=f"ground segmenter {self.name!r}")
         if len(pts) == 0:
             return np.zeros(0, dtype=bool)
+        if not np.isfinite(pts).all():  # (the cloth filter crashed the process on one NaN point)
+            bad = int((~np.isfinite(pts).all(axis=1)).sum())
+            raise DataError(f"{bad} of {len(pts)} points are NaN or infinite", source=f"ground segmenter {self.name!r}")
         mask = np.asarray(self._segment(pts), dtype=bool)
         if mask.shape != (len(pts),):
             raise DataError(f"segmenter returned a mask of shape {mask.shape} for {len(pts)} points", source=self.name)

@@ -28,7 +28,7 @@ def ground_mask_by_height(
 
 class HeightConfig(GroundConfig):
     sensor_height_m: float = Field(KITTI_SENSOR_HEIGHT_M, ge=0, description="sensor height above the road (m)")
-    ground_threshold_m: float = Field(0.73, description="points lower than this above the road are ground (m)")
+    ground_threshold_m: float = Field(0.73, ge=0, description="points lower than this above the road are ground (m)")
 
 
 @register_ground_segmenter("height")

@@ -13,7 +13,7 @@ import sys
 from typing import Any
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from lidarkit.errors import ConfigError
 from lidarkit.registration.ground.base import KITTI_SENSOR_HEIGHT_M, GroundConfig, GroundSegmenter, register_ground_segmenter
@@ -56,7 +56,12 @@ class PatchworkConfig(GroundConfig):
     max_range_m: float = Field(80.0, gt=0, description="points farther are ignored (m)")
     th_dist_m: float = Field(0.125, gt=0, description="distance of ground points to their patch plane (m)")
     uprightness_thr: float = Field(0.707, ge=0, le=1, description="min z component of a ground patch's normal")
-    enable_rnr: bool = Field(True, description="reflected-noise removal (needs intensities; off if none given)")
+
+    @model_validator(mode="after")
+    def _ranges(self) -> "PatchworkConfig":
+        if self.min_range_m >= self.max_range_m:  # (it marked no point as ground, silently)
+            raise ValueError(f"min_range_m {self.min_range_m:g} must be below max_range_m {self.max_range_m:g}")
+        return self
 
 
 @register_ground_segmenter("patchworkpp")
@@ -76,16 +81,18 @@ class PatchworkSegmenter(GroundSegmenter):
         p.max_range = float(c.max_range_m)
         p.th_dist = float(c.th_dist_m)
         p.uprightness_thr = float(c.uprightness_thr)
-        p.enable_RNR = False  # the interface passes no intensities
-        with _quiet_stdout():
-            self._engine = pw.patchworkpp(p)
+        p.enable_RNR = False  # reflected-noise removal needs intensities, which the interface does not pass
+        self._pw, self._parameters = pw, p
 
     def _segment(self, points_xyz: np.ndarray) -> np.ndarray:
         cloud = np.zeros((len(points_xyz), 4), dtype=np.float32)
         cloud[:, :3] = points_xyz
         with _quiet_stdout():
-            self._engine.estimateGround(cloud)
-            index = np.asarray(self._engine.getGroundIndices(), dtype=np.int64)
+            # a fresh engine per scan: one engine keeps state between calls (the same scan twice gave 72600 and then
+            # 72361 ground points), which made a stateless variant's result depend on the scans it saw before
+            engine = self._pw.patchworkpp(self._parameters)
+            engine.estimateGround(cloud)
+            index = np.asarray(engine.getGroundIndices(), dtype=np.int64)
         mask = np.zeros(len(points_xyz), dtype=bool)
         mask[index] = True
         return mask
