@@ -145,3 +145,17 @@ def test_residuals_built_on_surfaces_refuse_2d_scans(residual):
         icp.register_frame(scan)
     moved = get_icp("pipeline", preset="kiss_like", residual="point_to_point").align(scan + [0.1, 0.0, 0.0], scan)
     assert moved.converged and abs(moved.T_target_source[0, 3] + 0.1) < 0.02
+
+
+def test_a_kernel_that_weighs_every_correspondence_zero_is_not_converged():
+    """tukey with a 1 mm scale on a 0.7 m motion: every weight zero, the step zero, and the identity came back as
+    converged with fitness 0.999."""
+    from conftest import shared_path
+
+    from lidarkit.io.kitti import KittiOdometry
+
+    seq = KittiOdometry(shared_path("kitti_odometry", "sequences", "00"))
+    source, target = seq.read_scan(1).points_xyz, seq.read_scan(0).points_xyz
+    zero = get_icp("pipeline", preset="kiss_like", kernel={"name": "tukey", "scale_m": 0.001}).align(source, target)
+    assert not zero.converged and "no correspondence carried weight" in zero.reason
+    assert get_icp("pipeline", preset="kiss_like").align(source, target).converged

@@ -231,6 +231,7 @@ class PipelineRegistration(Registration):
         n = 0
         iterations = 0
         converged = False
+        reason = ""
         # the same points move a little each iteration: the map may keep their nearest points between searches
         tracks = getattr(local_map.config, "track_neighbors", False) and "state" in inspect.signature(local_map.nearest).parameters
         track = {} if tracks else None
@@ -245,6 +246,9 @@ class PipelineRegistration(Registration):
                 moved[valid], local_map.points_xyz[index[valid]], index[valid], local_map, cov, kernel, sigma_m
             )
             history.append(float(np.sqrt(r2.mean())))
+            if not np.any(JTJ):  # the kernel gave every correspondence zero weight: there is nothing to solve for
+                reason = f"no correspondence carried weight ({n} matched; the kernel's scale rejects them all)"
+                break
             try:
                 dx = np.linalg.solve(JTJ, -JTr)
             except np.linalg.LinAlgError:
@@ -259,7 +263,8 @@ class PipelineRegistration(Registration):
                 converged = True
                 break
         T = orthonormalize_se3(T_icp @ guess)
-        return T, {"iterations": iterations, "n_correspondences": n, "rmse_history": tuple(history), "converged": converged}
+        return T, {"iterations": iterations, "n_correspondences": n, "rmse_history": tuple(history), "converged": converged,
+                   "reason": reason}
 
     # ------------------------------------------------------------------ pairwise mode
     def _align(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray) -> RegistrationResult:
@@ -287,7 +292,8 @@ class PipelineRegistration(Registration):
         result = assessment.to_result(
             T,
             converged=bool(info["converged"]),
-            reason="" if info["converged"] else f"no convergence within {info['iterations']} iterations ({info['n_correspondences']} correspondences)",
+            reason="" if info["converged"] else info.get("reason") or f"no convergence within {info['iterations']} iterations "
+                                                                              f"({info['n_correspondences']} correspondences)",
             iterations=int(info["iterations"]),
             rmse_history=info["rmse_history"] or None,
             extra={"threshold_sigma_m": threshold.sigma_m, "source_points": len(source), "components": self.describe()},
