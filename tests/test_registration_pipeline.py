@@ -159,3 +159,15 @@ def test_a_kernel_that_weighs_every_correspondence_zero_is_not_converged():
     zero = get_icp("pipeline", preset="kiss_like", kernel={"name": "tukey", "scale_m": 0.001}).align(source, target)
     assert not zero.converged and "no correspondence carried weight" in zero.reason
     assert get_icp("pipeline", preset="kiss_like").align(source, target).converged
+
+
+def test_a_sequence_with_nothing_left_to_register_is_an_error():
+    """max_range_m=1 leaves no point of a KITTI sweep: every frame returned the prediction, 'bad frames 0 of 10' and a
+    0 m path without a word."""
+    from conftest import shared_path
+
+    from lidarkit.errors import RegistrationError
+    from lidarkit.odometry import run
+
+    with pytest.raises(RegistrationError, match="no point of the sweep is left after preprocessing"):
+        run(f"kitti:{shared_path('kitti_odometry')}?sequence=00", "pipeline", params={"preset": "kiss_like", "max_range_m": 1.0})

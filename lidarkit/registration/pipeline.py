@@ -178,6 +178,9 @@ class PipelineRegistration(Registration):
         guess = c["deskew"].predict(self.last_pose, self.last_delta)
         threshold = c["threshold"]
         sigma = threshold.sigma_m
+        if len(source) == 0 and c["map"].empty:  # (every frame returned the prediction: a 0 m path, no warning)
+            raise RegistrationError("no point of the sweep is left after preprocessing (max_range_m / min_range_m, the "
+                                    "preprocess steps): there is nothing to register", source="pipeline")
         if c["map"].empty or len(source) == 0:
             T, info = guess, {"iterations": 0, "n_correspondences": 0, "rmse_history": ()}
         else:
