@@ -106,6 +106,8 @@ def test_bad_arguments():
     ref = straight_line(300)
     with pytest.raises(ConfigError, match="lengths"):
         kitti_drift(ref, ref, lengths=(100.0, -5.0))
+    with pytest.raises(ConfigError, match="segment lengths must differ"):  # (100 m counted twice in the pooled mean)
+        kitti_drift(ref, ref, lengths=(100.0, 100.0, 200.0))
     with pytest.raises(ConfigError, match="step"):
         kitti_drift(ref, ref, step=0)
     with pytest.raises(EvaluationError, match="differ in length"):

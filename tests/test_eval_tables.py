@@ -121,3 +121,11 @@ def test_segment_speeds_follow_the_time_stamps(tmp_path, capsys):
     assert exc.value.code in (0, None)
     text = (tmp_path / "t" / "kitti_translation_pct_per_speed.md").read_text()
     assert "| 0-5 m/s |" in text and "5-10 m/s" not in text  # (just under 5 m/s: the devkit's (frames + 1) periods)
+
+
+def test_latex_cells_escape_what_would_break_or_misprint():
+    from lidarkit.eval.tables import _latex_escape
+
+    assert _latex_escape("a^2 ~b >= 25 m/s_x") == "a\\textasciicircum{}2 \\textasciitilde{}b \\textgreater{}= 25 m/s\\_x"
+    tex = per_speed_table(grid()).to_latex()
+    assert ">=" not in tex and "^" not in tex.replace("\\textasciicircum", "")

@@ -118,6 +118,8 @@ def kitti_drift(
     lengths_arr = np.asarray(lengths, dtype=np.float64).reshape(-1)
     if lengths_arr.size == 0 or not np.isfinite(lengths_arr).all() or (lengths_arr <= 0).any():
         raise ConfigError(f"segment lengths must be positive numbers, got {list(lengths)}", source="lengths")
+    if len(np.unique(lengths_arr)) != lengths_arr.size:  # (a repeated length counted its segments twice in the mean)
+        raise ConfigError(f"segment lengths must differ, got {list(lengths)}", source="lengths")
     if int(step) != step or step < 1:
         raise ConfigError(f"step must be a positive integer number of frames, got {step}", source="step")
     step = int(step)

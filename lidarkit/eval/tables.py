@@ -158,10 +158,14 @@ class PubTable:
 
 
 def _latex_escape(text: str) -> str:
-    for a, b in (("\\", "\\textbackslash{}"), ("&", "\\&"), ("%", "\\%"), ("_", "\\_"), ("#", "\\#"), ("$", "\\$"),
-                 ("{", "\\{"), ("}", "\\}")):
-        text = text.replace(a, b) if a != "\\" else text.replace(a, "\x00")
-    return text.replace("\x00", "\\textbackslash{}")
+    """``text`` for LaTeX's text mode under any font encoding (``^`` broke the compile, ``~`` became a space, ``<`` /
+    ``>`` printed as inverted marks under OT1)."""
+    out = []
+    for ch in text:
+        out.append({"\\": "\\textbackslash{}", "&": "\\&", "%": "\\%", "_": "\\_", "#": "\\#", "$": "\\$", "{": "\\{",
+                    "}": "\\}", "^": "\\textasciicircum{}", "~": "\\textasciitilde{}", "<": "\\textless{}",
+                    ">": "\\textgreater{}"}.get(ch, ch))
+    return "".join(out)
 
 
 Grid = Mapping[tuple[str, str], SegmentErrors]
