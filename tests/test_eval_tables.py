@@ -83,6 +83,9 @@ def test_eval_cli_writes_tables(tmp_path, capsys):
     assert "Avg." in text and "3.02" in text
     assert (tmp_path / "t" / "kitti_translation_pct.tex").read_text().count("\\toprule") == 1
     assert (tmp_path / "t" / "segments_translation_pct.png").read_bytes()[:4] == b"\x89PNG"
+    # the titles say how the values were computed (every run read "APE ... (m)" and "RPE ... (m per frame)")
+    assert (tmp_path / "t" / "ape_rmse.md").read_text().startswith("**APE translation RMSE (m, unaligned)**")
+    assert (tmp_path / "t" / "rpe_rmse.md").read_text().startswith("**RPE translation RMSE (m per frame)**")
     # the same folder for a run too short for drift: the earlier drift tables and box plot go, the user's file stays
     (tmp_path / "t" / "notes.txt").write_text("mine")
     straight(40).to_kitti(tmp_path / "ref_short.txt")

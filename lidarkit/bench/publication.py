@@ -108,7 +108,10 @@ def build_publication(records: list[dict[str, Any]], out_dir: Path, *, plots: bo
     """Tables (and box plots with ``plots``) of the odometry records, written under ``out_dir``; paired
     comparisons with the reference (kiss)."""
     segments, ape, rpe = _grids(records)
-    tables = publication_tables(segments or None, ape or None, rpe or None)
+    from lidarkit.bench.tasks.odometry import METRIC_ALIGNMENT_BY_NAME
+
+    tables = publication_tables(segments or None, ape or None, rpe or None, ape_alignment=METRIC_ALIGNMENT_BY_NAME["ape_rmse_m"],
+                                rpe_delta="frame")
     pub = Publication(tables.tables)
     pub.comparisons = reference_comparisons(records)
     if pub.tables or (out_dir / TABLES_DIR).is_dir():  # (an earlier report's tables that these replace are removed)

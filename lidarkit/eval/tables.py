@@ -316,8 +316,11 @@ class PublicationTables:
 
 
 def publication_tables(segments: Grid | None = None, ape_rmse_m: Mapping[tuple[str, str], float] | None = None,
-                       rpe_rmse_m: Mapping[tuple[str, str], float] | None = None) -> PublicationTables:
-    """Drift (translation, rotation), per-length, per-speed, APE and RPE tables from what is available."""
+                       rpe_rmse_m: Mapping[tuple[str, str], float] | None = None, *, ape_alignment: str = "SE(3)-aligned",
+                       rpe_delta: str = "1 frame") -> PublicationTables:
+    """Drift (translation, rotation), per-length, per-speed, APE and RPE tables from what is available; the APE and
+    RPE titles state the alignment and the delta the values were computed with (one title for every kind read as
+    SE(3)-aligned APE and 1-frame RPE)."""
     out = PublicationTables()
     if segments:
         for q in QUANTITIES:
@@ -325,7 +328,7 @@ def publication_tables(segments: Grid | None = None, ape_rmse_m: Mapping[tuple[s
         out.tables.append(per_length_table(segments))
         out.tables.append(per_speed_table(segments))
     if ape_rmse_m:
-        out.tables.append(value_table(ape_rmse_m, "APE translation RMSE (m)", name="ape_rmse"))
+        out.tables.append(value_table(ape_rmse_m, f"APE translation RMSE (m, {ape_alignment})", name="ape_rmse"))
     if rpe_rmse_m:
-        out.tables.append(value_table(rpe_rmse_m, "RPE translation RMSE (m per frame)", name="rpe_rmse", digits=4))
+        out.tables.append(value_table(rpe_rmse_m, f"RPE translation RMSE (m per {rpe_delta})", name="rpe_rmse", digits=4))
     return out
