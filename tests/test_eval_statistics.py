@@ -245,3 +245,16 @@ def test_a_metric_a_task_declares_better_higher_is_compared_that_way(tmp_path):
     assert_no_worse_than({"success_rate": 0.95}, {"success_rate": 0.90}, metric="success_rate", tolerance=0.0)
     with pytest.raises(AssertionError, match="regression: success_rate"):
         assert_no_worse_than({"success_rate": 0.85}, {"success_rate": 0.90}, metric="success_rate", tolerance=0.0)
+
+
+def test_verdicts_with_tied_units_and_a_median_ci_across_zero():
+    """The median counts tied units, which the rank test leaves out: with 10 of 18 tied it is 0, and the verdict said the
+    ranks and the median 'disagree in direction'. A verdict beside a median CI reaching across 0 read as a contradiction."""
+    tied = paired_test([1.0] * 10 + [2.0] * 8, [1.0] * 18, name_a="A", name_b="B")
+    assert tied.better == "" and "the median difference is 0: 10 of 18 seeds are tied" in tied.verdict()
+    clear = paired_test([1.0] * 8 + [2.0] * 10, [1.0] * 18, name_a="A", name_b="B")
+    assert clear.better == "b" and clear.diff_ci_low == 0.0  # a CI that touches 0 without crossing it still decides
+    diffs = np.random.default_rng(16).normal(0.3, 1.0, 25)  # Wilcoxon p = 0.048, median +0.44, its CI [-0.07, +0.87]
+    mixed = paired_test(diffs, np.zeros(25), name_a="A", name_b="B")
+    assert mixed.p_value < mixed.alpha and mixed.diff_ci_low < 0 < mixed.diff_ci_high
+    assert mixed.better == "" and "reaches across 0" in mixed.verdict()

@@ -155,9 +155,14 @@ class PairedComparison:
         why = f"Wilcoxon {p} >= {self.alpha:g}"
         if self.p_value < self.alpha and self.noise > 0 and abs(self.median_diff) <= self.noise:
             why = f"the median difference {self.median_diff:+.3g} is within the run-to-run noise (±{self.noise:.3g})"
-        elif self.p_value < self.alpha and self.median_diff * self.effect_size <= 0:
+        elif self.p_value < self.alpha and self.median_diff == 0:
+            why = (f"the median difference is 0: {self.n_ties} of {self.n_pairs} {self.pairing}s are tied (the test ranks the "
+                   f"{self.n_pairs - self.n_ties} others, effect size {self.effect_size:+.2f})")
+        elif self.p_value < self.alpha and self.median_diff * self.effect_size < 0:
             why = (f"the ranks (effect size {self.effect_size:+.2f}) and the median difference ({self.median_diff:+.3g}) "
                    "disagree in direction")
+        elif self.p_value < self.alpha and self.diff_ci_low < 0 < self.diff_ci_high:
+            why = f"the 95% CI of the median difference [{self.diff_ci_low:+.3g}, {self.diff_ci_high:+.3g}] reaches across 0"
         if self.n_ties == self.n_pairs:
             why = "every paired difference is zero (within floating-point noise)"
         return (f"no significant difference between {self.name_a} and {self.name_b} on {m}: {why}; "
@@ -217,8 +222,10 @@ def paired_test(
     lo, hi = bootstrap_ci(diff, seed=seed, statistic="median")
     median_diff = float(np.median(diff))
     better = ""
-    # the direction is the ranks' (what the test tested); the median must agree with it and exceed the noise
-    if p_value < alpha and effect * median_diff > 0 and abs(median_diff) > noise:
+    # the direction is the ranks' (what the test tested); the median must agree with it, exceed the noise, and its
+    # bootstrap CI must not reach across 0 (a verdict beside a CI of [-0.0006, +0.0044] read as a contradiction)
+    ci_clear = not lo < 0 < hi
+    if p_value < alpha and effect * median_diff > 0 and abs(median_diff) > noise and ci_clear:
         a_lower = effect < 0
         better = "a" if a_lower == lower_is_better else "b"
     return PairedComparison(
