@@ -258,3 +258,17 @@ def test_verdicts_with_tied_units_and_a_median_ci_across_zero():
     mixed = paired_test(diffs, np.zeros(25), name_a="A", name_b="B")
     assert mixed.p_value < mixed.alpha and mixed.diff_ci_low < 0 < mixed.diff_ci_high
     assert mixed.better == "" and "reaches across 0" in mixed.verdict()
+
+
+def test_noise_from_a_baseline_is_refused_for_run_folders(tmp_path):
+    """A baseline's bands are of whole-run metrics: for two run folders (compared per segment or frame) no metric ever
+    matched, and the hint to name one could not be followed."""
+    from conftest import shared_path
+
+    from lidarkit.odometry import run
+
+    spec = f"kitti:{shared_path('kitti_odometry')}?sequence=00"
+    for name in ("a", "b"):
+        run(spec, "small_gicp", out_dir=tmp_path / name, progress=False)
+    with pytest.raises(ConfigError, match="a baseline's bands are of bench metrics .* give that noise with --noise"):
+        compare(tmp_path / "a", tmp_path / "b", metric="rpe_translation_m", noise_from=tmp_path / "baseline")

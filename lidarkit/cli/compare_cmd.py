@@ -23,7 +23,7 @@ def compare_command(
     alpha: float = typer.Option(DEFAULT_ALPHA, help="Significance level of the Wilcoxon signed-rank test."),
     noise: float = typer.Option(0.0, help="Run-to-run noise of the metric (its unit): smaller differences are not called."),
     noise_from: Optional[Path] = typer.Option(
-        None, "--noise-from", help="Baseline folder (lidarkit baseline record): take --noise from the band it measured "
+        None, "--noise-from", help="Bench result folders only: a baseline folder (lidarkit baseline record) to take --noise from, the band it measured "
         "for the metric (the widest over its jobs; with --noise too, the larger of the two)."),
     seed: int = typer.Option(0, "--seed", help="Seed of the bootstrap CI of the difference."),
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write the comparison as JSON here."),

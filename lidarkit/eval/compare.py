@@ -197,7 +197,10 @@ def compare(
             metric = "segment_translation_pct" if drift_segments_possible(side_a.ground_truth) else "rpe_translation_m"
         if metric not in RUN_METRICS:
             raise ConfigError(f"unknown run metric {metric!r}; choose one of: {', '.join(RUN_METRICS)}", source="metric")
-        noise = _with_measured_noise(noise, noise_from, metric)
+        if noise_from is not None:  # a baseline's bands are of whole-run metrics, not of one segment or frame
+            raise ConfigError("a baseline's bands are of bench metrics (one value per run); two run folders are compared "
+                              f"per {'segment' if metric.startswith('segment_') else 'frame'}: give that noise with --noise",
+                              source="--noise-from")
         va, vb = run_units(side_a, metric), run_units(side_b, metric)
         pairing = "segment" if metric.startswith("segment_") else "frame"
         result = paired_test(va, vb, name_a=name_a, name_b=name_b, metric=metric, pairing=pairing,
