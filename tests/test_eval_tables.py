@@ -132,3 +132,12 @@ def test_latex_cells_escape_what_would_break_or_misprint():
     assert _latex_escape("a^2 ~b >= 25 m/s_x") == "a\\textasciicircum{}2 \\textasciitilde{}b \\textgreater{}= 25 m/s\\_x"
     tex = per_speed_table(grid()).to_latex()
     assert ">=" not in tex and "^" not in tex.replace("\\textasciicircum", "")
+
+
+def test_only_cells_that_print_as_the_best_are_bold():
+    from lidarkit.eval.tables import PubTable
+
+    table = PubTable(title="t", corner="s", row_labels=["00"], col_labels=["A", "B", "C"], values=np.array([[1.004, 1.006, 1.0041]]),
+                     digits=2)
+    assert table.best_mask().tolist() == [[True, False, True]]  # 1.00, 1.01, 1.00 (1.01 was bold too)
+    assert "| 00 | **1.00** | 1.01 | **1.00** |" in table.to_markdown()

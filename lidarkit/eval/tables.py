@@ -105,7 +105,9 @@ class PubTable:
         for i, row in enumerate(v):
             if np.isfinite(row).any():
                 best = np.nanmax(row) if self.higher_is_better else np.nanmin(row)
-                mask[i] = np.isclose(row, best, rtol=0, atol=0.5 * 10 ** -self.digits) & np.isfinite(row)
+                # every cell that prints as the best does (1.004 and 1.006 printed 1.00 and 1.01, both bold)
+                shown = f"{best:.{self.digits}f}"
+                mask[i] = np.array([np.isfinite(x) and f"{x:.{self.digits}f}" == shown for x in row])
         return mask
 
     def cell(self, i: int, j: int) -> str:
