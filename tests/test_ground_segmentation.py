@@ -227,3 +227,15 @@ def test_segmenters_are_deterministic_stateless_and_refuse_bad_input(hilly_scans
     from lidarkit.registration.ground_filtered import ground_segmenter
 
     assert ground_segmenter(icp.config).config.sensor_height_m == 2.5  # (it kept 1.73)
+
+
+def test_planar_ground_filtered_keeps_z_roll_and_pitch_of_the_guess():
+    """planar=True solves x, y and yaw only: the ground refinement re-estimated z, roll and pitch after it (z 5 mm,
+    tilted rotation on a KITTI pair)."""
+    from conftest import shared_path
+
+    from lidarkit.io.kitti import KittiOdometry
+
+    seq = KittiOdometry(shared_path("kitti_odometry", "sequences", "00"))
+    T = get_icp("ground_filtered", planar=True).align(seq.read_scan(1).points_xyz, seq.read_scan(0).points_xyz).T_target_source
+    assert T[2, 3] == 0.0 and np.allclose(T[2, :3], [0.0, 0.0, 1.0], atol=1e-12) and T[0, 3] > 0.6

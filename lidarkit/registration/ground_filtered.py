@@ -275,7 +275,7 @@ class GroundFilteredICP(VanillaICP):
             why = f"{TOO_LITTLE_REASON}: {fewest} points (min_points_kept={c.min_points_kept}, {c.ground_method})"
             return self._fallback(source_xyz, target_xyz, init_T, why, kept)
         result = self._solve(source_xyz, target_xyz, init_T, masks)
-        if c.fallback_on_degenerate and result.converged and _degenerate_after_refine(result.degeneracy, c.ground_refine):
+        if c.fallback_on_degenerate and result.converged and _degenerate_after_refine(result.degeneracy, c.ground_refine and not c.planar):
             why = f"{TOO_LITTLE_REASON}: degenerate geometry (min/max eigenvalue {result.degeneracy.ratio:.1e}, {c.ground_method})"
             return self._fallback(source_xyz, target_xyz, init_T, why, kept, result.degeneracy)
         return dataclasses.replace(result, extra={**result.extra, **kept})
@@ -298,7 +298,7 @@ class GroundFilteredICP(VanillaICP):
             first = result
             result = staged_icp(src, dst, result.T_target_source, neighbors, c)
             result = dataclasses.replace(result, iterations=first.iterations + result.iterations, extra={**result.extra, "deskewed": True})
-        if c.ground_refine and result.converged:
+        if c.ground_refine and result.converged and not c.planar:  # planar: z, roll and pitch stay as in init_T
             # raw ground points: the sweep's motion mostly slides them along the ground, which a plane residual ignores,
             # and deskewing them with a motion that carries the last frame's tilt error would feed that error back
             grounds = [pts[g] for pts, g in zip((source_xyz, target_xyz), self._ground)]
