@@ -170,6 +170,9 @@ def test_robotlaser_and_rawlaser_messages(tmp_path):
     log.write_text(robot.format(t=1.0).replace(" 5 1.0", " 6 1.0", 1) + "\n")
     with pytest.raises(DataError, match=r"line 1\).*ROBOTLASER1: number of remissions is not an integer"):
         CarmenLog(log)
+    log.write_text("\n".join([robot.format(t=1.0), robot.format(t=70.92), robot.format(t=70.92)]) + "\n")
+    with pytest.raises(DataError, match=r"r.clf \(line 3\): two laser scans with the same timestamp 70.920000 s \(also line 2\)"):
+        CarmenLog(log).timestamps_s  # (it printed np.float64(70.92))
 
 
 def test_bad_reader_options(carmen_logs):

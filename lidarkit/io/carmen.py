@@ -309,7 +309,7 @@ class CarmenLog:
         if len(ts) > 1 and not (np.diff(ts) > 0).all():
             k = int(np.argmax(~(np.diff(ts) > 0))) + 1
             raise DataError(
-                f"two laser scans with the same timestamp {ts[k]!r} (also line {int(log.lines[order[k - 1]])})",
+                f"two laser scans with the same timestamp {float(ts[k]):.6f} s (also line {int(log.lines[order[k - 1]])})",
                 source=self.path, location=f"line {int(log.lines[order[k]])}",
             )
         self.n_reordered = int((order != np.arange(len(order))).sum())
