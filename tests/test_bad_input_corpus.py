@@ -257,6 +257,10 @@ experiments:
     (SUITE_OK + SUITE_OK[SUITE_OK.index("  - name: a"):], 8, "duplicate experiment name 'a'"),
     (SUITE_OK.replace("methods: [random_walk]", "methods: [{name: random_walk, grid: {steps: [5, 5]}}]"), 7,
      "grid 'steps' lists a value twice"),
+    (SUITE_OK.replace("methods: [random_walk]", "methods: [{name: random_walk, grid: {steps: [5, 5.0]}}]"), 7,
+     "grid 'steps' lists a value twice"),  # 5 and 5.0 are one job (they ran twice, two rows with one label)
+    (SUITE_OK.replace("methods: [random_walk]", "methods: [{name: random_walk, params: {steps: 50}}, {name: random_walk, params: {steps: 50.0}}]"),
+     7, "duplicate method 'random_walk'"),
     (SUITE_OK.replace("seeds: [0, 1]", "seeds: [-1]"), 2, "seeds must be >= 0"),
 ])
 def test_suite_duplicates_are_refused_with_file_and_line(tmp_path, capsys, text, line, reason):

@@ -213,6 +213,17 @@ def _count_jobs(model: SuiteModel) -> int:
     return total
 
 
+def _same_value(value: Any) -> Any:
+    """``value`` with whole floats as ints (``100.0`` and ``100`` make one job), recursively."""
+    if isinstance(value, float) and value.is_integer():
+        return int(value)
+    if isinstance(value, dict):
+        return {k: _same_value(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_same_value(v) for v in value]
+    return value
+
+
 def _refuse_duplicates(model: SuiteModel, locator: _Locator) -> None:
     """Duplicate experiment names, methods (same name and settings), datasets or seeds would run the same jobs
     twice: a ConfigError naming the file and line."""
@@ -228,13 +239,13 @@ def _refuse_duplicates(model: SuiteModel, locator: _Locator) -> None:
         methods: dict[str, int] = {}
         for j, method in enumerate(exp.methods):
             m = MethodSpec(name=method) if isinstance(method, str) else method
-            ident = repr((m.name, sorted(m.params.items(), key=str), sorted(m.grid.items(), key=str)))
+            ident = repr((m.name, sorted(_same_value(m.params).items(), key=str), sorted(_same_value(m.grid).items(), key=str)))
             if ident in methods:
                 fail(f"duplicate method {m.name!r} with the same params and grid (also methods[{methods[ident]}])",
                      ("experiments", i, "methods", j))
             methods[ident] = j
             for key, values in m.grid.items():
-                reprs = [repr(v) for v in values]
+                reprs = [repr(_same_value(v)) for v in values]
                 if len(set(reprs)) != len(reprs):
                     fail(f"grid {key!r} lists a value twice: {values}", ("experiments", i, "methods", j, "grid", key))
         if exp.datasets:
