@@ -236,6 +236,12 @@ def test_a_particle_filter_job_pins_its_filter_config(tmp_path, monkeypatch):
         monkeypatch.undo()
         PFConfig.model_rebuild(force=True)
     assert any(line.startswith("note:") and "method config.q" in line for line in lines), lines
+    # a baseline recorded before the filter's config was pinned: one note, not one per setting
+    manifest = json.loads((out / "manifest.json").read_text())
+    manifest["jobs"][0]["protocol"]["method_config"] = {}
+    (out / "manifest.json").write_text(json.dumps(manifest))
+    notes = [line for line in check(out).lines() if line.startswith("note:")]
+    assert len(notes) == 1 and "the baseline pinned no method config" in notes[0]
 
 
 def test_recording_again_replaces_the_baseline_and_never_merges_into_other_folders(tmp_path):

@@ -527,8 +527,13 @@ def check(
         protocol_changes = _diff("", then, now)
         for line in protocol_changes:
             result.findings.append(Finding("protocol changed", name, line))
-        for line in _diff("method config", pinned["protocol"].get("method_config", {}), run.protocol.get("method_config", {})):
-            result.findings.append(Finding("note", name, line))
+        pinned_config = pinned["protocol"].get("method_config", {})
+        if not pinned_config and run.protocol.get("method_config"):  # (one note, not one per setting)
+            result.findings.append(Finding("note", name, "the baseline pinned no method config (recorded before lidarkit "
+                                                          "pinned this task's); record it again to compare settings"))
+        else:
+            for line in _diff("method config", pinned_config, run.protocol.get("method_config", {})):
+                result.findings.append(Finding("note", name, line))
         if protocol_changes:
             continue
         for metric in pinned["checked"]:
