@@ -298,3 +298,15 @@ def test_options_that_replace_a_guessed_focal_length_say_when_they_are_not_used(
     code, _, err = _run(["vo", str(sample_path("kitti_vo", "06")), "--self-calibrate", "--focal-factor", "1.2"], capsys)
     assert code in (0, None)
     assert "note: --self-calibrate and --focal-factor not used: the intrinsics are known (kitti calibration)" in err
+
+
+def test_frames_keep_their_file_numbers_when_the_first_images_are_missing(tmp_path, capsys):
+    seq = tmp_path / "06"
+    shutil.copytree(sample_path("kitti_vo", "06"), seq)
+    (seq / "image_0" / "000000.png").unlink()  # the sequence's images start at frame 1
+    (seq / "image_0" / "000004.png").write_bytes(b"not a png")
+    out = tmp_path / "run"
+    code, stdout, err = _run(["vo", str(seq), "--scale", "none", "--start", "2", "--out", str(out)], capsys)
+    assert code in (0, None), err
+    assert "frame 4 rejected: unreadable image" in stdout  # (position 3 of the run: it said "frame 2" for 000003.png before)
+    assert [int(r.split(",")[0]) for r in (out / "diagnostics.csv").read_text().splitlines()[1:]] == [3, 4, 5, 6, 7]

@@ -86,6 +86,7 @@ def vo_command(
     cfg = make_preset(preset, **{k: v for k, v in changes.items() if v is not None})
     vo_input = open_vo_input(data, kind=kind, calib=calib, timestamps=timestamps, poses=poses,
                              poses_format=poses_format, focal_factor=focal_factor)
+    numbers = getattr(vo_input.images, "frames", None)  # the input's own frame numbers (KITTI's file names), if any
     vo_input = frame_range(vo_input, start, max_frames)
     if not vo_input.K_source.startswith("guess"):  # intrinsics known: the options that replace a guess do nothing
         unused = [name for name, given in (("--self-calibrate", self_calibrate), ("--focal-factor", focal_factor != DEFAULT_FOCAL_FACTOR))
@@ -108,10 +109,13 @@ def vo_command(
     finally:
         if bar is not None:
             bar[0].stop()
-    if start:  # the diagnostics name the input's frame numbers (the run counts from its first frame)
+    if start or numbers is not None:  # the diagnostics name the input's frame numbers (the run counts from its first frame)
         import dataclasses
 
-        result.diagnostics = [dataclasses.replace(d, frame=d.frame + start, ref_frame=d.ref_frame + start) for d in result.diagnostics]
+        def number(k: int) -> int:
+            return int(numbers[start + k]) if numbers is not None else start + k
+
+        result.diagnostics = [dataclasses.replace(d, frame=number(d.frame), ref_frame=number(d.ref_frame)) for d in result.diagnostics]
     extra_config = {"input": str(data), "kind": vo_input.kind, "K_source": vo_input.K_source, "start": start,
                     "max_frames": max_frames}
     if focal is not None:
