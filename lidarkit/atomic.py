@@ -213,6 +213,18 @@ def run_folder(path: str | os.PathLike, replaces: Iterable[str] = ()) -> Iterato
         shutil.rmtree(tmp, ignore_errors=True)
 
 
+@contextlib.contextmanager
+def export_folder(path: str | os.PathLike, what: str) -> Iterator[Path]:
+    """:func:`run_folder` for an export whose files must never mix with another export's (``what``: its items, for
+    the message): a folder that already holds files is refused."""
+    path = Path(path)
+    if path.is_dir() and any(path.iterdir()):
+        raise OutputError(f"the folder already holds files: an export never mixes its {what} with another's (remove it "
+                          "or choose a new folder)", source=path)
+    with run_folder(path) as tmp:
+        yield tmp
+
+
 def _move_into_place(tmp: Path, path: Path) -> None:
     try:
         os.rename(tmp, path)  # a missing or empty ``path``: one rename

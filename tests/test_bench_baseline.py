@@ -204,22 +204,29 @@ def test_a_failing_job_and_an_unknown_tolerance_are_one_line_errors(recorded, tm
         check(out, tolerances=["nosuch_metric=0.1"])
 
 
-def test_a_particle_filter_job_pins_its_filter_config(tmp_path, monkeypatch):
-    """The pf task keeps its resolved config under info["run"]: it was pinned as {}, so a changed filter default was
-    never reported."""
+def _pf_suite(folder: Path, counts: tuple[int, ...]) -> Path:
+    """A particle-filter suite on the Freiburg data, one method per particle count."""
     from conftest import shared_path
 
-    from lidarkit.pf.config import PFConfig
-
-    suite = tmp_path / "pf.yaml"
-    suite.write_text(textwrap.dedent(f"""
+    path = folder / f"pf{'_'.join(map(str, counts))}.yaml"
+    methods = ", ".join(f"{{name: particle_filter, params: {{n_particles: {n}}}}}" for n in counts)
+    path.write_text(textwrap.dedent(f"""
         name: pf-golden
         experiments:
           - name: pf
             task: pf
             dataset: {{kind: landmarks, path: "{shared_path('pf', 'robot_mapping_stachniss')}", name: Freiburg}}
-            methods: [{{name: particle_filter, params: {{n_particles: 200}}}}]
+            methods: [{methods}]
     """))
+    return path
+
+
+def test_a_particle_filter_job_pins_its_filter_config(tmp_path, monkeypatch):
+    """The pf task keeps its resolved config under info["run"]: it was pinned as {}, so a changed filter default was
+    never reported."""
+    from lidarkit.pf.config import PFConfig
+
+    suite = _pf_suite(tmp_path, (200,))
     out = tmp_path / "baseline"
     record(suite, out, repeats=1)
     pinned = json.loads((out / "manifest.json").read_text())["jobs"][0]["protocol"]["method_config"]
@@ -245,20 +252,8 @@ def test_a_particle_filter_job_pins_its_filter_config(tmp_path, monkeypatch):
 
 
 def test_recording_again_replaces_the_baseline_and_never_merges_into_other_folders(tmp_path):
-    from conftest import shared_path
-
     def suite(counts):
-        path = tmp_path / f"pf{len(counts)}.yaml"
-        methods = ", ".join(f"{{name: particle_filter, params: {{n_particles: {n}}}}}" for n in counts)
-        path.write_text(textwrap.dedent(f"""
-            name: pf-golden
-            experiments:
-              - name: pf
-                task: pf
-                dataset: {{kind: landmarks, path: "{shared_path('pf', 'robot_mapping_stachniss')}", name: Freiburg}}
-                methods: [{methods}]
-        """))
-        return path
+        return _pf_suite(tmp_path, tuple(counts))
 
     out = tmp_path / "baseline"
     record(suite([100, 150]), out, repeats=1)

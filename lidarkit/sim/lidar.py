@@ -34,7 +34,7 @@ from typing import Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from lidarkit.errors import ConfigError, DataError, OutputError, validation_problems
+from lidarkit.errors import ConfigError, DataError, validation_problems
 from lidarkit.io.base import Scan
 from lidarkit.trajectory import Trajectory
 
@@ -669,10 +669,7 @@ def export_kitti(
     from lidarkit import atomic
 
     out = Path(out_dir)
-    if out.is_dir() and any(out.iterdir()):
-        raise OutputError("the folder already holds files: an export never mixes its sweeps with another's (remove it "
-                          "or choose a new folder)", source=out)
-    with atomic.run_folder(out) as tmp:
+    with atomic.export_folder(out, "sweeps") as tmp:
         _write_kitti(sequence, tmp, on_frame)
     return out
 

@@ -34,7 +34,7 @@ from typing import Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from lidarkit.errors import ConfigError, DataError, OutputError, validation_problems
+from lidarkit.errors import ConfigError, DataError, validation_problems
 from lidarkit.sim.lidar import PlanarPath, Terrain, make_terrain
 from lidarkit.sim.textures import TextureAtlas, mip_levels, natural_texture
 from lidarkit.trajectory import Trajectory
@@ -814,10 +814,7 @@ def export_kitti_images(sequence: SimulatedCameraSequence, out_dir: str | os.Pat
     from lidarkit import atomic
 
     out = Path(out_dir)
-    if out.is_dir() and any(out.iterdir()):
-        raise OutputError("the folder already holds files: an export never mixes its images with another's (remove it "
-                          "or choose a new folder)", source=out)
-    with atomic.run_folder(out) as tmp:
+    with atomic.export_folder(out, "images") as tmp:
         _write_kitti_images(sequence, tmp, on_frame)
     return out
 
