@@ -157,7 +157,9 @@ def run_genz(cache: Path, n: int, repeats: int) -> dict[str, tuple[np.ndarray, f
 def run_dataset(name: str, seed: int, frames: int, data: Path, out: Path, genz: bool, variants: list[str] | None = None) -> Path:
     from lidarkit.registration import available_icp, get_icp
 
+    log(f"{name}: opening the data (a simulated sequence is ray-cast first)")
     label, n, read, gt = open_dataset(name, seed, frames, data)
+    log(f"{label}: {n} frames, {1 + len(ABLATIONS if variants is None else [k for k in ABLATIONS if k in variants])} methods")
     methods = {"kiss": get_icp("kiss")}
     for key, params in ABLATIONS.items():
         if variants is None or key in variants:
@@ -181,7 +183,7 @@ def run_dataset(name: str, seed: int, frames: int, data: Path, out: Path, genz: 
                 t = time.perf_counter()
                 poses[key][i] = methods[key].register_frame(points, times)
                 spent[key] += time.perf_counter() - t
-            if (i + 1) % 25 == 0 or i + 1 == n:
+            if (i + 1) % 25 == 0 or i + 1 == n or i == 0:
                 log(f"{label}: {i + 1}/{n} frames")
                 if i + 1 < n:  # a checkpoint: the frames so far, kept if the run is cut short
                     _write(out, name, seed, i + 1, variants, {
