@@ -183,7 +183,9 @@ def run_dataset(name: str, seed: int, frames: int, data: Path, out: Path, genz: 
                 t = time.perf_counter()
                 poses[key][i] = methods[key].register_frame(points, times)
                 spent[key] += time.perf_counter() - t
-            if (i + 1) % 25 == 0 or i + 1 == n or i == 0:
+            if i == 0:
+                log(f"{label}: frame 1 done by every method")
+            if (i + 1) % 25 == 0 or i + 1 == n:
                 log(f"{label}: {i + 1}/{n} frames")
                 if i + 1 < n:  # a checkpoint: the frames so far, kept if the run is cut short
                     _write(out, name, seed, i + 1, variants, {
