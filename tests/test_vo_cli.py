@@ -310,3 +310,21 @@ def test_frames_keep_their_file_numbers_when_the_first_images_are_missing(tmp_pa
     assert code in (0, None), err
     assert "frame 4 rejected: unreadable image" in stdout  # (position 3 of the run: it said "frame 2" for 000003.png before)
     assert [int(r.split(",")[0]) for r in (out / "diagnostics.csv").read_text().splitlines()[1:]] == [3, 4, 5, 6, 7]
+
+
+def test_a_vo_run_into_an_odometry_run_folder_leaves_no_odometry_file(tmp_path, capsys):
+    """Each command removed only its own earlier files: vo into an odometry folder kept its ape.png, timing.csv and
+    ground truth beside the new poses ("wrote 8 files" beside 12)."""
+    from conftest import shared_path
+
+    from lidarkit.odometry import run
+
+    out = tmp_path / "run"
+    run(f"kitti:{shared_path('kitti_odometry')}?sequence=00", "small_gicp", frames="0:3", out_dir=out, progress=False)
+    assert (out / "timing.csv").exists() and (out / "ground_truth_kitti.txt").exists()
+    (out / "notes.txt").write_text("mine")
+    code, _, err = _run(["vo", str(sample_path("kitti_vo", "06")), "--scale", "gt", "--out", str(out)], capsys)
+    assert code in (0, None), err
+    names = sorted(p.name for p in out.iterdir())
+    assert "timing.csv" not in names and "ground_truth_kitti.txt" not in names and "ape.png" not in names
+    assert "diagnostics.csv" in names and "notes.txt" in names

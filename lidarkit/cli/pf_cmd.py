@@ -14,6 +14,7 @@ from rich.table import Table
 from lidarkit.cli.app import app, stderr, stdout
 from lidarkit.errors import ConfigError
 from lidarkit.pf.config import PFConfig
+from lidarkit.run_files import RUN_FILES
 
 _D = PFConfig()
 
@@ -40,9 +41,6 @@ def _steps(text: str) -> tuple[int, ...]:
     return steps
 
 
-#: Every file a pf run or study folder can hold (an earlier run's that this one does not write are removed)
-RUN_FILES = ("config.yaml", "metrics.json", "study.json", "poses_kitti.txt", "poses_tum.txt", "dead_reckoning_tum.txt",
-             "ground_truth_tum.txt", "trajectory.png", "particles.png", "particles_per_step.png", "animation.gif")
 MAX_PARTICLES = 10_000_000
 MAX_SEEDS = 10_000
 

@@ -13,12 +13,9 @@ import numpy as np
 from lidarkit import atomic
 from lidarkit.odometry.metrics import paired
 from lidarkit.odometry.result import OdometryResult
+from lidarkit.run_files import RUN_FILES
 
 
-#: Every file a run folder can hold: those of an earlier run into the same folder that this run does not write (its
-#: ground truth, covariances, plots) are removed, so that they are never read as this run's
-RUN_FILES = ("poses_kitti.txt", "poses_tum.txt", "ground_truth_kitti.txt", "config.yaml", "metrics.json", "timing.csv",
-             "pose_covariance.txt", "trajectory.png", "ape.png")
 
 
 def write_run(result: OdometryResult, out_dir: str | os.PathLike) -> Path:

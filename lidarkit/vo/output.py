@@ -17,14 +17,12 @@ import numpy as np
 import yaml
 
 from lidarkit import atomic
+from lidarkit.run_files import RUN_FILES
 from lidarkit.trajectory import Trajectory
 from lidarkit.vo.pipeline import FrameDiagnostics, VOResult
 
 log = logging.getLogger(__name__)
 
-#: Every file a VO run folder can hold (an earlier run's that this one does not write are removed)
-RUN_FILES = ("poses_kitti.txt", "poses_tum.txt", "poses_smoothed_kitti.txt", "poses_smoothed_tum.txt", "diagnostics.csv",
-             "config.yaml", "metrics.json", "trajectory.png", "features.gif")
 NO_TIMESTAMPS_NOTE = "no time stamps given: poses_tum.txt and poses_smoothed_tum.txt use frame indices as seconds"
 
 
