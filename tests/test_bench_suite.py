@@ -301,3 +301,23 @@ def test_uninstalled_methods_are_skipped_only_when_asked(tmp_path, monkeypatch):
     suite = load_suite(path, skip_unavailable=True)
     assert [j.method for j in suite.jobs] == ["sleep"]
     assert suite.skipped == [("e: burn", "method 'burn' is not installed (available: sleep)")]
+
+
+def test_a_pf_suite_scoring_past_the_end_of_its_data_is_refused_before_running(tmp_path):
+    """mse_start beyond the Freiburg data's steps passed validation (and --dry-run); every job then failed at its end."""
+    from conftest import shared_path
+
+    path = tmp_path / "pf.yaml"
+    path.write_text(textwrap.dedent(f"""
+        seeds: [0]
+        experiments:
+          - name: e
+            task: pf
+            dataset: {{kind: landmarks, path: "{shared_path('pf', 'robot_mapping_stachniss')}"}}
+            options: {{mse_start: 100000}}
+            methods: [particle_filter]
+    """))
+    with pytest.raises(ConfigError, match=r"pf.yaml \(experiments\[0\].dataset, line 6\): mse_start 100000 is not below the data's 331 steps"):
+        load_suite(path)
+    path.write_text(path.read_text().replace("100000", "10"))
+    assert len(load_suite(path).jobs) == 1

@@ -64,6 +64,10 @@ class ParticleFilterTask(Task):
 
     def validate_dataset(self, dataset: dict[str, Any], options: dict[str, Any]) -> None:
         check_reader_options(dataset)
+        mse_start = PFOptions(**options).mse_start
+        data = open_dataset_spec(dataset)  # (a few hundred steps: read at once) the steps the MSE is taken over
+        if mse_start >= len(data):  # (every job failed at its end, after the whole filter run)
+            raise ConfigError(f"mse_start {mse_start} is not below the data's {len(data)} steps", source="options")
 
     def validate(self, method: str, params: dict[str, Any], dataset: dict[str, Any], options: dict[str, Any]) -> None:
         if method not in METHODS:
