@@ -182,7 +182,7 @@ def test_root_may_be_the_sequence_folder(tmp_path, monkeypatch):
     from lidarkit.odometry.inputs import open_sequence
 
     monkeypatch.setenv("HOME", str(tmp_path))
-    assert len(open_sequence("kitti:~/drive_a")) == 10
+    assert len(open_sequence("kitti:~/drive_a")) == 10 and len(open_sequence("~/drive_a")) == 10  # (quoted: no shell expands it)
 
 
 def test_times_out_of_order_name_the_file_line(tmp_path, odo_root):

@@ -42,7 +42,7 @@ def open_sequence(spec: str | os.PathLike | ScanSequence) -> ScanSequence:
         from lidarkit.params import parse_kv
 
         return _scans(lio.open_dataset(kind, path, **parse_kv(query, option=f"{kind} dataset option")), text)
-    path = Path(text)
+    path = Path(os.path.expanduser(text))
     if not path.exists():
         if sep and len(kind) > 1 and "/" not in kind and "\\" not in kind:  # KIND:PATH with a kind no reader has
             raise ConfigError(f"unknown dataset kind {kind!r}; known: sim, {', '.join(lio.available_datasets())}", source=text)

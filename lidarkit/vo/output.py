@@ -62,8 +62,12 @@ def plot_vo_trajectories(path: str | os.PathLike, trajectories: dict[str, Trajec
 
 def write_feature_gif(path: str | os.PathLike, images: Any, tracks: list[tuple[int, np.ndarray, np.ndarray]],
                       max_frames: int = 60, width_px: int = 640, fps: float = 8.0) -> Path:
-    """Animated GIF of the inlier tracks (reference -> current position) drawn on each accepted frame."""
+    """Animated GIF of the inlier tracks (reference -> current position) drawn on the first ``max_frames`` accepted
+    frames (a GIF of a whole sequence is too large to open; the log says when it stops early)."""
     from PIL import Image
+
+    if len(tracks) > max_frames:
+        log.info("features.gif: the first %d of %d accepted frames", max_frames, len(tracks))
 
     read = images.read_image if hasattr(images, "read_image") else (lambda i: images[i])
     frames = []
