@@ -257,3 +257,23 @@ def test_bench_dry_run_lists_jobs_and_runs_nothing(tmp_path, capsys):
     suite = load_suite(path)
     assert all(job.key() in out for job in suite.jobs)
     assert not (tmp_path / "out").exists()
+
+
+def test_a_dataset_warning_reaches_every_job_that_uses_the_dataset(tmp_path):
+    """The Freiburg data warns on loading (a negative range kept); the dataset is cached per worker, so the warning went
+    to the first job of each worker only and the report's warnings changed with the executor."""
+    from conftest import shared_path
+
+    path = suite_file(tmp_path, f"""
+name: warned
+seeds: [0, 1, 2]
+experiments:
+  - name: e
+    task: pf
+    dataset: {{kind: landmarks, path: "{shared_path('pf', 'robot_mapping_stachniss')}"}}
+    methods: [{{name: particle_filter, params: {{n_particles: 50}}}}]
+""")
+    run_suite(load_suite(path), tmp_path / "out", executor="serial")
+    records = load_results(tmp_path / "out")
+    assert len(records) == 3
+    assert all(any("kept negative range" in w for w in r["warnings"]) for r in records), [r["warnings"] for r in records]

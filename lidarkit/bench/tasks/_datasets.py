@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import inspect
+import logging
 from collections import OrderedDict
 from typing import Any
 
@@ -38,23 +39,45 @@ def check_reader_options(spec: dict[str, Any]) -> None:
         )
 
 
+class _Warnings(logging.Handler):
+    """The warnings logged while a dataset opens (to log again for every job that uses the cached dataset)."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.WARNING)
+        self.records: list[logging.LogRecord] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.records.append(record)
+
+
 def open_dataset_spec(spec: dict[str, Any]) -> Any:
-    """The reader / simulator object of a resolved dataset spec; the last few are kept per process."""
+    """The reader / simulator object of a resolved dataset spec; the last few are kept per process. The warnings its
+    opening logged are logged again for every job that takes it from the cache, so that each job's result holds them
+    (they went to the first job of each worker only, and a report's warnings changed with the executor)."""
     cache_key = canonical_json(spec)
     if cache_key in _CACHE:
         _CACHE.move_to_end(cache_key)
-        return _CACHE[cache_key]
+        dataset, records = _CACHE[cache_key]
+        for record in records:
+            logging.getLogger(record.name).log(record.levelno, "%s", record.getMessage())
+        return dataset
     kind = spec["kind"]
     options = dataset_options(spec)
-    if kind == "sim_lidar":
-        from lidarkit.sim.lidar import SimulatedLidarSequence
+    caught = _Warnings()
+    root = logging.getLogger()
+    root.addHandler(caught)
+    try:
+        if kind == "sim_lidar":
+            from lidarkit.sim.lidar import SimulatedLidarSequence
 
-        dataset = SimulatedLidarSequence(**options)
-    else:
-        from lidarkit.io import open_dataset
+            dataset = SimulatedLidarSequence(**options)
+        else:
+            from lidarkit.io import open_dataset
 
-        dataset = open_dataset(kind, dataset_path(spec), **options)
-    _CACHE[cache_key] = dataset
+            dataset = open_dataset(kind, dataset_path(spec), **options)
+    finally:
+        root.removeHandler(caught)
+    _CACHE[cache_key] = (dataset, caught.records)
     while len(_CACHE) > _CACHE_SIZE:
         _CACHE.popitem(last=False)
     return dataset
