@@ -88,6 +88,9 @@ def test_boreas_pose_rows_are_checked_before_the_loader_asserts(tmp_path):
     (tmp_path / "applanix" / "lidar_poses.csv").write_text(header + "1606417230.0" + ",0" * 12 + "\n")
     with pytest.raises(DataError, match=r"lidar_poses.csv: 1 ground-truth poses for 3 scans"):  # an AssertionError without text
         open_dataset("boreas", tmp_path)
+    rows = "".join(f"{1606417230.0 + 0.1 * k}" + ",0" * 12 + "\n" for k in range(3))
+    (tmp_path / "applanix" / "lidar_poses.csv").write_text(header + rows)
+    np.testing.assert_allclose(open_dataset("boreas", tmp_path).timestamps_s, 1606417230.0 + 0.1 * np.arange(3))  # (none before)
 
 
 def test_newer_college_binary_pcd_without_pyntcloud(tmp_path):

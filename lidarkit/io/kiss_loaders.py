@@ -367,7 +367,8 @@ class HeliprScans(KissLoaderScans):
 
 
 class BoreasScans(KissLoaderScans):
-    """Boreas (``lidar/*.bin`` + ``applanix/lidar_poses.csv``), kiss-icp's ``boreas`` loader."""
+    """Boreas (``lidar/*.bin`` + ``applanix/lidar_poses.csv``), kiss-icp's ``boreas`` loader. Stamps: the file names
+    (microseconds)."""
 
     loader_name = "boreas"
 
@@ -376,6 +377,12 @@ class BoreasScans(KissLoaderScans):
 
     def _pose_file(self) -> tuple[Path, int, list[Path]] | None:
         return self.path / "applanix" / "lidar_poses.csv", 1, sorted((self.path / "lidar").glob("*.bin"))
+
+    def _stamps(self) -> np.ndarray | None:
+        try:
+            return np.array([int(Path(f).stem) for f in self.loader.scan_files], dtype=np.float64) * 1e-6
+        except ValueError:  # files not named by their time
+            return None
 
 
 class ApolloScans(KissLoaderScans):
