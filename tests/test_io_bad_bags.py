@@ -174,6 +174,10 @@ def test_ground_truth_poses_that_cannot_stand_one_per_scan(tmp_path):
     late = write_ros1_bag(tmp_path / "late.bag", scans, odometry=[(1000.15 + 0.02 * k, (k, 0, 0), (0, 0, 0, 1)) for k in range(10)])
     with pytest.raises(DataError, match=r"10 poses for 3 scans: scan 0 \(1000.000 s\) comes before the first pose \(1000.150 s\)"):
         open_dataset("rosbag", late).ground_truth
+    # the scans the odometry covers can still be run and scored (the whole recording's pairing refused every --frames)
+    covered = open_dataset("rosbag", late).ground_truth_of([1, 2])
+    np.testing.assert_allclose(covered.timestamps_s, [1000.15, 1000.19])  # the poses nearest scans 1 and 2
+    assert len(run(open_dataset("rosbag", late), Counting(), frames="1:").ground_truth) == 2
     # every header stamp equal (a driver that stamps nothing): one line, not a ZeroDivisionError
     fields, step, data = _cloud_bytes(64)
     same = write_ros1_bag(tmp_path / "same.bag", [(1000.0, fields, step, data, 64)] * 3,

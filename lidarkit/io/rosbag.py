@@ -197,32 +197,39 @@ class _BagScans:
     @property
     def ground_truth(self) -> Trajectory | None:
         """One recorded odometry pose per scan, ``meta["pose_instant"]`` read from the stamps (None if unclear)."""
+        return self.ground_truth_of(None)
+
+    def ground_truth_of(self, scans: np.ndarray | list[int] | None) -> Trajectory | None:
+        """:attr:`ground_truth` of the scans numbered ``scans`` only (None: all): a recording whose odometry covers part
+        of its scans is scored on that part (``--frames``; the whole recording's pairing refused the run)."""
         if self.ground_truth_topic is None:
             return None
         gt_stamps, gt_poses = self._recorded_ground_truth
-        scan_stamps = self.timestamps_s
+        numbers = np.arange(self.n_scans) if scans is None else np.asarray(scans, dtype=np.int64)
+        scan_stamps = self.timestamps_s[numbers]
         source = f"{self.path}{self.ground_truth_topic}"
         if len(gt_stamps) != len(scan_stamps):
             if len(gt_stamps) < 2:
-                raise DataError(f"{len(gt_stamps)} pose(s) for {len(scan_stamps)} scans: one pose per scan needed (ground_truth_topic=none runs it without scores)", source=source)
+                raise DataError(f"{len(gt_stamps)} pose(s) for {len(scan_stamps)} scans: one pose per scan needed (--frames can pick the scans it covers; ground_truth_topic=none runs without scores)", source=source)
             pick = np.clip(np.searchsorted(gt_stamps, scan_stamps), 1, len(gt_stamps) - 1)
             pick = np.where(np.abs(gt_stamps[pick - 1] - scan_stamps) <= np.abs(gt_stamps[pick] - scan_stamps), pick - 1, pick)
             twice = np.flatnonzero(np.diff(pick) == 0)
             if len(twice):  # fewer (or sparser) poses than scans: one pose would stand for two scans
                 k = int(twice[0])
-                where = (f"scan {k} ({scan_stamps[k]:.3f} s) comes before the first pose ({gt_stamps[0]:.3f} s)"
+                a, b = int(numbers[k]), int(numbers[k + 1])
+                where = (f"scan {a} ({scan_stamps[k]:.3f} s) comes before the first pose ({gt_stamps[0]:.3f} s)"
                          if scan_stamps[k + 1] <= gt_stamps[0] else
-                         f"scan {k + 1} ({scan_stamps[k + 1]:.3f} s) comes after the last pose ({gt_stamps[-1]:.3f} s)"
+                         f"scan {b} ({scan_stamps[k + 1]:.3f} s) comes after the last pose ({gt_stamps[-1]:.3f} s)"
                          if scan_stamps[k] >= gt_stamps[-1] else
-                         f"scans {k} and {k + 1} are both nearest to the pose at {gt_stamps[pick[k]]:.3f} s")
-                raise DataError(f"{len(gt_stamps)} poses for {len(scan_stamps)} scans: {where}; one pose per scan needed (ground_truth_topic=none runs it without scores)", source=source)
+                         f"scans {a} and {b} are both nearest to the pose at {gt_stamps[pick[k]]:.3f} s")
+                raise DataError(f"{len(gt_stamps)} poses for {len(scan_stamps)} scans: {where}; one pose per scan needed (--frames can pick the scans it covers; ground_truth_topic=none runs without scores)", source=source)
             gt_stamps, gt_poses = gt_stamps[pick], gt_poses[pick]
         period = float(np.median(np.diff(scan_stamps))) if len(scan_stamps) > 1 else 0.0
         off = np.abs(gt_stamps - scan_stamps)
         if period > 0 and off.max() > 1.5 * period:  # one pose per scan by count, but not the scan's own time
             k = int(np.flatnonzero(off > 1.5 * period)[0])
-            raise DataError(f"pose {k} is stamped {gt_stamps[k]:.3f} s, scan {k} {scan_stamps[k]:.3f} s: {off[k]:.3f} s apart, more "
-                            f"than a sweep ({period:.3f} s); the odometry does not cover the scans one pose each (ground_truth_topic=none runs it without scores)", source=source)
+            raise DataError(f"pose {k} is stamped {gt_stamps[k]:.3f} s, scan {int(numbers[k])} {scan_stamps[k]:.3f} s: {off[k]:.3f} s apart, more "
+                            f"than a sweep ({period:.3f} s); the odometry does not cover the scans one pose each (--frames can pick the scans it covers; ground_truth_topic=none runs without scores)", source=source)
         meta = {"frame": f"as recorded on {self.ground_truth_topic}", "pose_instant": self._ground_truth_instant(gt_stamps)}
         return Trajectory(gt_poses, gt_stamps, name=f"{self.path.name}{self.ground_truth_topic}", meta=meta)
 

@@ -25,7 +25,9 @@ def open_sequence(spec: str | os.PathLike | ScanSequence) -> ScanSequence:
     otherwise a folder of scan files.
     """
     if not isinstance(spec, (str, os.PathLike)):
-        if isinstance(spec, ScanSequence):
+        # (looked up on the class: isinstance with the protocol reads every property, a bag's whole ground truth
+        # included, and a ground-truth problem then refused the object before --frames could select around it)
+        if all(callable(getattr(type(spec), name, None)) for name in ("read_scan", "__len__")):
             return spec
         raise ConfigError(f"expected a ScanSequence or a dataset spec, got {type(spec).__name__}", source="dataset")
     from lidarkit import io as lio

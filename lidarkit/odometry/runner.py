@@ -541,7 +541,12 @@ def _plain(meta: dict) -> dict:
 
 def _reference(sequence: ScanSequence, ground_truth: Trajectory | None, indices: np.ndarray, dataset_name: str) -> Trajectory | None:
     """Ground truth of the selected frames, relative to its first pose (the estimate starts at identity)."""
-    gt = ground_truth if ground_truth is not None else sequence.ground_truth
+    if ground_truth is not None:
+        gt = ground_truth
+    elif callable(getattr(sequence, "ground_truth_of", None)):  # a recording's odometry paired with the selected scans only
+        gt = sequence.ground_truth_of(indices)
+    else:
+        gt = sequence.ground_truth
     if gt is None:
         return None
     if len(gt) == len(sequence):
