@@ -15,6 +15,7 @@ import pydantic
 from pydantic import BaseModel, ConfigDict
 
 from lidarkit.errors import ConfigError, DataError, validation_problems
+from lidarkit.geometry import as_points
 
 #: Mounting height of KITTI's Velodyne HDL-64E above the road (m).
 KITTI_SENSOR_HEIGHT_M = 1.73
@@ -39,14 +40,10 @@ class GroundSegmenter:
 
     def segment(self, points_xyz: np.ndarray) -> np.ndarray:
         """``(N,)`` bool mask of the ground points of an ``(N, 3)`` cloud in the sensor frame (z up)."""
-        pts = np.asarray(points_xyz, dtype=np.float64)
-        if pts.ndim != 2 or pts.shape[1] != 3:
-            raise DataError(f"expected an (N, 3) point array, got shape {pts.shape}", source=f"ground segmenter {self.name!r}")
+        # the registration backends' own input check: shape, dtype, NaN (the cloth filter crashed the process on one)
+        pts = as_points(points_xyz, f"ground segmenter {self.name!r}")
         if len(pts) == 0:
             return np.zeros(0, dtype=bool)
-        if not np.isfinite(pts).all():  # (the cloth filter crashed the process on one NaN point)
-            bad = int((~np.isfinite(pts).all(axis=1)).sum())
-            raise DataError(f"{bad} of {len(pts)} points are NaN or infinite", source=f"ground segmenter {self.name!r}")
         mask = np.asarray(self._segment(pts), dtype=bool)
         if mask.shape != (len(pts),):
             raise DataError(f"segmenter returned a mask of shape {mask.shape} for {len(pts)} points", source=self.name)
