@@ -657,7 +657,8 @@ def build_report(
     if not (out_dir / "jobs").is_dir():
         raise DataError("not a bench results folder (no jobs/ inside)", source=out_dir)
     records = load_results(out_dir)
-    suite_jobs = {} if every_result else _suite_jobs(out_dir)
+    manifest = _suite_manifest(out_dir)
+    suite_jobs = {} if every_result else _suite_jobs(manifest)
     if only_keys is None and suite_jobs:
         only_keys = set(suite_jobs)
     n_all = len(latest_per_job(records))
@@ -668,11 +669,11 @@ def build_report(
         raise DataError("no readable job results in jobs/" + (" for the jobs of suite.json (every_result: all of them)" if suite_jobs else ""),
                         source=out_dir)
     if title is None:
-        title = _suite_title(out_dir)
+        title = _suite_title(manifest)
     done = {r["key"] for r in records}
     expected = {k: spec for k, spec in suite_jobs.items() if only_keys is None or k in only_keys}
     missing = [spec for k, spec in expected.items() if k not in done]
-    report = Report(out_dir=out_dir, tables=aggregate(records, missing), n_records=len(records), skipped=_skipped(out_dir),
+    report = Report(out_dir=out_dir, tables=aggregate(records, missing), n_records=len(records), skipped=_skipped(manifest),
                     n_expected=len(expected), n_left_out=n_all - len(records),
                     not_run=[_label({"job": spec}) for spec in missing])
     for r in records:
@@ -706,26 +707,29 @@ def _label(record: dict[str, Any]) -> str:
     return f"{job.task} | {job.experiment} | {job.dataset_name} | {job.method_label} | seed {job.seed}"
 
 
-def _suite_jobs(out_dir: Path) -> dict[str, dict[str, Any]]:
-    """``{key: job spec}`` of the folder's ``suite.json`` (the last suite run there), {} without a readable one."""
+def _suite_manifest(out_dir: Path) -> dict[str, Any]:
+    """The folder's ``suite.json`` (the last suite run there), read once per report; {} without a readable one."""
     try:
         manifest = json.loads((out_dir / "suite.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+    return manifest if isinstance(manifest, dict) else {}
+
+
+def _suite_jobs(manifest: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    """``{key: job spec}`` of a suite manifest, {} without a readable job list."""
+    try:
         return {str(j["key"]): {k: v for k, v in j.items() if k != "key"} for j in manifest["jobs"]}
-    except (OSError, ValueError, KeyError, TypeError):
+    except (KeyError, TypeError, AttributeError):
         return {}
 
 
-def _skipped(out_dir: Path) -> list[tuple[str, str]]:
+def _skipped(manifest: dict[str, Any]) -> list[tuple[str, str]]:
     try:
-        manifest = json.loads((out_dir / "suite.json").read_text(encoding="utf-8"))
         return [(str(s["experiment"]), str(s["reason"])) for s in manifest.get("skipped_experiments", [])]
-    except (OSError, ValueError, KeyError, TypeError):
+    except (KeyError, TypeError):
         return []
 
 
-def _suite_title(out_dir: Path) -> str:
-    try:
-        name = json.loads((out_dir / "suite.json").read_text(encoding="utf-8"))["suite"]
-        return f"lidarkit benchmark report: {name}"
-    except (OSError, ValueError, KeyError):
-        return "lidarkit benchmark report"
+def _suite_title(manifest: dict[str, Any]) -> str:
+    return f"lidarkit benchmark report: {manifest['suite']}" if "suite" in manifest else "lidarkit benchmark report"
