@@ -6,22 +6,20 @@
 
 from __future__ import annotations
 
+import sys
+import time
+
 
 class ProgressLines:
     """Progress where no bar can be drawn (stderr to a file or a pipe: a log, CI): one line at every tenth of the run
     and at least every 30 s, with the frame rate and the time left."""
 
     def __init__(self, total: int, label: str):
-        import time
-
         self.total, self.label, self.done = total, label, 0
         self.start = self.last = time.monotonic()
         self.next_tenth = 1
 
     def advance(self, _task: int, advance: int = 1) -> None:
-        import sys
-        import time
-
         self.done += advance
         now = time.monotonic()
         tenth = 10 * self.done // max(self.total, 1)
