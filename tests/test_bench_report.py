@@ -274,18 +274,10 @@ def test_the_report_holds_the_suite_last_run_in_the_folder_and_says_what_is_miss
 
     (tmp_path / "a.yaml").write_text(textwrap.dedent(SUITE))  # 3 seeds x (3 noise levels + fail) = 12 jobs
     run_suite(load_suite(tmp_path / "a.yaml"), tmp_path / "out", executor="serial")
-    (tmp_path / "b.yaml").write_text(textwrap.dedent("""
-        name: edited
-        seeds: [0, 1]
-        experiments:
-          - name: walk
-            task: selftest
-            dataset: {kind: synthetic, name: synth}
-            methods:
-              - name: random_walk
-                params: {steps: 40}
-                grid: {noise_m: [0.01, 0.5]}
-    """))
+    edited_text = (SUITE.replace("name: report-test", "name: edited").replace("seeds: [0, 1, 2]", "seeds: [0, 1]")
+                   .replace("[0.01, 0.03, 0.1]", "[0.01, 0.5]").replace("      - name: fail\n", ""))
+    assert edited_text.count("fail") == 0 and "[0.01, 0.5]" in edited_text  # the suite edited: 2 seeds x 2 noise levels
+    (tmp_path / "b.yaml").write_text(textwrap.dedent(edited_text))
     edited = load_suite(tmp_path / "b.yaml")
     run_suite(edited, tmp_path / "out", executor="serial")
     report = build_report(tmp_path / "out", plots=False)
