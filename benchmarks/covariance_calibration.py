@@ -281,6 +281,24 @@ def row(run: dict, cal: AxisCalibration, before: AxisCalibration, blk: np.ndarra
     return out
 
 
+TURNS_DEG = (0, 30, 45, 90)
+
+
+def turned_scores(run: dict, principal: AxisCalibration, frame_axes: AxisCalibration) -> dict:
+    """Scores of ``run`` with its target frame turned about z by each of :data:`TURNS_DEG` (covariances, errors and
+    steps turned as a left perturbation is, ``blockdiag(R, R)``: the scene as it would read with the sensor turned),
+    calibrated in the principal axes (the default, the same at every turn) and in the target frame's axes."""
+    out: dict = {}
+    for deg in TURNS_DEG:
+        a = np.radians(deg)
+        P = np.zeros((6, 6))
+        P[:3, :3] = P[3:, 3:] = [[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]]
+        covs = np.einsum("ij,njk,lk->nil", P, run["covs"], P)
+        errors, steps = run["errors"] @ P.T, None if run.get("steps") is None else run["steps"] @ P.T
+        out[str(deg)] = {"principal": score(errors, apply_all(covs, principal, steps)), "frame_axes": score(errors, apply_all(covs, frame_axes, steps))}
+    return out
+
+
 def parse_runs(text: str) -> list[tuple[str, int]]:
     return [(item.split(":")[0], int(item.split(":")[1])) for item in text.split(",") if item]
 
@@ -309,6 +327,9 @@ def main(argv=None) -> int:
     # the previous calibration (without the step term) learned on the same training draws
     before = {name: fit_calibration(runs, use_step=False)[0] for name, runs in train.items()}
     blk = {name: block_factors(runs) for name, runs in train.items()}
+    # the same model learned in the target frame's axes (the calibration before it moved to the principal axes), to show
+    # what turning a scene in the frame does to each
+    frame_axes = {name: fit_calibration(runs, axes="target")[0] for name, runs in train.items()}
     results = {
         "command": " ".join(["benchmarks/covariance_calibration.py", *(sys.argv[1:] if argv is None else argv)]),
         "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "machine": describe_machine(machine_info()),
@@ -319,12 +340,13 @@ def main(argv=None) -> int:
                   "calibration": {n: {"factors": list(c.factors), "sigmas": list(c.sigmas), "coverage": c.coverage,
                                       "trained_variance": list(c.trained_variance),
                                       "step_gains": None if c.step_gains is None else list(c.step_gains),
-                                      "step_spread": None if c.step_spread is None else list(c.step_spread), **fits[n][1]}
+                                      "step_spread": None if c.step_spread is None else list(c.step_spread), "axes": c.axes, **fits[n][1]}
                                   for n, c in cal.items()},
                   "rows": {f"{sc}:{sd}": {name: row(train[name][i], cal[name], before[name], blk[name]) for name in variants}
                            for i, (sc, sd) in enumerate(parse_runs(args.train))}},
         "calibration_without_step": {n: {"factors": list(c.factors), "sigmas": list(c.sigmas), "coverage": c.coverage,
-                                         "trained_variance": list(c.trained_variance), "step_gains": None, "step_spread": None}
+                                         "trained_variance": list(c.trained_variance), "step_gains": None, "step_spread": None,
+                                         "axes": c.axes}
                                      for n, c in before.items() if cal[n].step_gains is not None},
         "check": {},
     }
@@ -332,6 +354,8 @@ def main(argv=None) -> int:
         drawn = {name: collect(sc, sd, args.draws, name, cache, log, n_frames=args.check_frames) for name in variants}
         results["check"][f"{sc}:{sd}"] = {name: row(converged_only(drawn[name]), cal[name], before[name], blk[name], every=drawn[name])
                                           for name in variants}
+        results.setdefault("turned", {})[f"{sc}:{sd}"] = {name: turned_scores(converged_only(drawn[name]), cal[name], frame_axes[name])
+                                                          for name in variants}
     args.out.mkdir(parents=True, exist_ok=True)
     write_text(args.out / "results.json", json.dumps(results, indent=2) + "\n")
     write_text(args.out / "README.md", render(results))
@@ -359,6 +383,9 @@ def calibration_source(calibration: dict) -> str:
         fields = [f'({", ".join(_g(v) for v in c["factors"])})', f'({", ".join(_g(v) for v in c["sigmas"])})',
                   f'{c["coverage"]:.3g}, ({", ".join(_g(v) for v in c["trained_variance"])})']
         fields += [f'({", ".join(_g(v) for v in c[key])})' for key in ("step_gains", "step_spread") if c.get(key) is not None]
+        if c.get("axes", "target") != "target":
+            fields[-1] += f', axes="{c["axes"]}"'  # a keyword after the positional fields, with or without the step terms
+
         lines += [f'    "{name}": AxisCalibration(', *(f"        {f}," for f in fields[:-1]), f"        {fields[-1]}),"]
     return "\n".join(lines)
 
@@ -417,6 +444,19 @@ def render(results: dict) -> str:
                          f"({r.get('cov_xx_over_yy_min', float('nan')):.0f}) | ")
             lines.append(f"| {name} | {r['raw']['n']} ({r['failed']}, {r.get('flagged', 0)}) | {_fmt(r['raw'])} | {_fmt(r['block'])} | {_fmt(r['before'])} | "
                          f"{_fmt(r['factor_floor'])} | **{_fmt(r['calibrated'])}** | {ref} | {z2} | {extra}{r['seconds_per_pair']:.2f} |")
+    if results.get("turned"):
+        lines += ["", "## Turned scenes", "",
+                  "Each check run with its target frame turned about z (covariances, errors and steps turned as a left "
+                  "perturbation is: the scene as a sensor turned by that angle reads it), mean NEES / inside. **principal** "
+                  "(the default): the calibration learned in the principal axes (x along the weakest horizontal direction "
+                  "of each closed form), the same at every turn; frame axes: the same model learned in the target frame's "
+                  "axes, on the same training draws.", "",
+                  "| run | variant | " + " | ".join(f"{d} deg principal | frame axes" for d in TURNS_DEG) + " |",
+                  "|---|---|" + "---|---|" * len(TURNS_DEG)]
+        for run, rows in results["turned"].items():
+            for name, r in rows.items():
+                lines.append(f"| {run} | {name} | " + " | ".join(f"**{_fmt(r[str(d)]['principal'])}** | {_fmt(r[str(d)]['frame_axes'])}"
+                                                                for d in TURNS_DEG) + " |")
     lines += ["", "References (same pairs, same run): Open3D's `get_information_matrix_from_point_clouds` (times the known range "
               "variance) on the open3d_point_to_plane row, small_gicp's Hessian (inverse, moved to the left/target-frame "
               "convention) on the small_gicp row. z^2 per axis: mean of xi_j^2 / Sigma_jj after calibration (1 when that axis is "

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lidarkit.registration.covariance import AxisCalibration, apply_calibration, nees
+from lidarkit.registration.covariance import AxisCalibration, apply_calibration, nees, principal_turn
 
 CHI2_6_95 = 12.5916
 
@@ -27,6 +27,8 @@ MIN_SCALE_SHARE = 0.25
 TARGET_INSIDE = 0.945
 #: ... unless that pushes their mean NEES below this (heavy-tailed NEES: kiss, genz), then it puts the mean here
 MIN_MEAN_NEES = 5.0
+#: the axes the calibration is learned in (``AxisCalibration.axes``): a street's own, however it runs in the frame
+AXES = "principal"
 #: an axis's step gain is used when the step and the error correlate at least this much on the pooled training draws
 STEP_MIN_CORRELATION = 0.5
 
@@ -105,30 +107,43 @@ def nees_values(errors: np.ndarray, covs: np.ndarray) -> np.ndarray:
     return np.array([nees(e, c) for e, c in zip(errors, covs)])
 
 
-def factor_floor(runs: list[dict], use_step: bool = True) -> AxisCalibration:
-    """Step gains (``use_step``), then the per-axis factor, floor and step spread of what they leave, pooled over ``runs``, with
-    the training range of the closed-form variances; coverage 1."""
+def in_axes(run: dict, axes: str) -> dict:
+    """``run`` with each draw's covariance, error and step turned into the calibration's ``axes`` (``"principal"``: x along
+    the draw's weakest horizontal direction, :func:`~lidarkit.registration.covariance.principal_turn`; NEES unchanged)."""
+    if axes == "target" or not len(run["covs"]):
+        return run
+    turns = np.array([principal_turn(c) for c in run["covs"]])
+    out = {**run, "covs": np.einsum("nij,njk,nlk->nil", turns, run["covs"], turns), "errors": np.einsum("nij,nj->ni", turns, run["errors"])}
+    if run.get("steps") is not None and len(run["steps"]) == len(run["errors"]):
+        out["steps"] = np.einsum("nij,nj->ni", turns, run["steps"])
+    return out
+
+
+def factor_floor(runs: list[dict], use_step: bool = True, axes: str = AXES) -> AxisCalibration:
+    """Step gains (``use_step``), then the per-axis factor, floor and step spread of what they leave, pooled over ``runs``
+    (turned into ``axes``), with the training range of the closed-form variances; coverage 1."""
+    runs = [in_axes(r, axes) for r in runs]
     gains = step_gains(runs)[0] if use_step else None
     f, b, h = axis_calibration(residual_runs(runs, gains), spread=gains is not None)
     top = np.max(np.concatenate([np.einsum("nii->ni", r["covs"]) for r in runs if len(r["covs"])]), axis=0)
     return AxisCalibration(tuple(f.tolist()), tuple(b.tolist()), 1.0, tuple(top.tolist()),
-                           None if gains is None else tuple(gains.tolist()), None if h is None else tuple(h.tolist()))
+                           None if gains is None else tuple(gains.tolist()), None if h is None else tuple(h.tolist()), axes)
 
 
 def calibrated_nees(run: dict, entry: AxisCalibration) -> np.ndarray:
     return nees_values(run["errors"], apply_all(run["covs"], entry, _steps(run)))
 
 
-def fit_calibration(runs: list[dict], use_step: bool = True) -> tuple[AxisCalibration, dict]:
+def fit_calibration(runs: list[dict], use_step: bool = True, axes: str = AXES) -> tuple[AxisCalibration, dict]:
     """:func:`factor_floor` pooled over all training runs (seeds), then the coverage scalar from the pooled training
     NEES. Also the leave-one-seed-out NEES (each seed scored with the calibration learned on the others), the
     training-side estimate of how the calibration does on a scene it has not seen."""
-    base = factor_floor(runs, use_step)
+    base = factor_floor(runs, use_step, axes)
     pooled = np.concatenate([calibrated_nees(r, base) for r in runs])
     c = min(float(np.quantile(pooled, TARGET_INSIDE)) / CHI2_6_95, float(pooled.mean()) / MIN_MEAN_NEES)
-    entry = AxisCalibration(base.factors, base.sigmas, c, base.trained_variance, base.step_gains, base.step_spread)
-    oof = np.concatenate([calibrated_nees(r, factor_floor(runs[:k] + runs[k + 1:], use_step)) for k, r in enumerate(runs)]) \
+    entry = AxisCalibration(base.factors, base.sigmas, c, base.trained_variance, base.step_gains, base.step_spread, axes)
+    oof = np.concatenate([calibrated_nees(r, factor_floor(runs[:k] + runs[k + 1:], use_step, axes)) for k, r in enumerate(runs)]) \
         if len(runs) > 1 else pooled
     stats = lambda v: {"nees_mean": float(v.mean()), "inside_95": float((v < CHI2_6_95).mean())}  # noqa: E731
     return entry, {"pooled_before_coverage": stats(pooled), "pooled_after_coverage": stats(pooled / c),
-                   "leave_one_out_after_coverage": stats(oof / c), "step_correlation": step_gains(runs)[1].tolist()}
+                   "leave_one_out_after_coverage": stats(oof / c), "step_correlation": step_gains([in_axes(r, axes) for r in runs])[1].tolist()}
