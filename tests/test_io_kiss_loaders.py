@@ -56,6 +56,23 @@ def test_mulran_stamps_and_a_pose_file_that_ends_before_the_scans(tmp_path):
         open_dataset("mulran", tmp_path / "half").ground_truth
 
 
+def test_mulran_scans_the_pose_file_covers_are_scored_on_their_own(tmp_path):
+    """``--frames`` within the span of ``global_pose.csv``: the run is scored on those scans (the whole recording's
+    pairing refused it); a selection reaching past the span names its first scan outside."""
+    from lidarkit.odometry import run
+
+    _mulran(tmp_path / "half", 6, 3)
+    _mulran(tmp_path / "full", 3, 3)  # the same first three scans and poses, nothing uncovered
+    dataset = open_dataset("mulran", tmp_path / "half")
+    expected = open_dataset("mulran", tmp_path / "full").ground_truth.poses_se3
+    np.testing.assert_allclose(dataset.ground_truth_of([0, 1, 2]).poses_se3, expected, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(expected[:, :3, 3], axis=1), [0.0, 1.0, 2.0], atol=1e-4)  # 1 m apart, as written
+    with pytest.raises(DataError, match=r"1 of 2 selected scans \(the first: scan 3\) lie outside"):
+        dataset.ground_truth_of([2, 3])
+    result = run(dataset, "vanilla", frames="0:3")
+    np.testing.assert_allclose(np.linalg.norm(result.ground_truth.poses_se3[:, :3, 3], axis=1), [0.0, 1.0, 2.0], atol=1e-4)
+
+
 def test_helipr_reads_every_point_and_checks_the_pose_rows(tmp_path):
     folder = tmp_path / "LiDAR" / "Ouster"
     folder.mkdir(parents=True)

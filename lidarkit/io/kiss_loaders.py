@@ -279,14 +279,23 @@ class MulranScans(KissLoaderScans):
 
     @property
     def ground_truth(self) -> Trajectory | None:
+        return self.ground_truth_of(None)
+
+    def ground_truth_of(self, scans: np.ndarray | list[int] | None) -> Trajectory | None:
+        """:attr:`ground_truth` of the scans numbered ``scans`` only (None: all): a recording whose ``global_pose.csv``
+        covers part of its scans is scored on that part (``--frames``)."""
         stamps_ns = np.loadtxt(self.path / "global_pose.csv", delimiter=",", usecols=0, ndmin=1)
         scans_ns = np.asarray(self.loader.scan_timestamps, dtype=np.float64)
-        outside = np.flatnonzero((scans_ns < stamps_ns.min() - 5e7) | (scans_ns > stamps_ns.max() + 5e7))  # half a 10 Hz sweep
+        numbers = np.arange(len(scans_ns)) if scans is None else np.asarray(scans, dtype=np.int64)
+        picked = scans_ns[numbers]
+        outside = numbers[(picked < stamps_ns.min() - 5e7) | (picked > stamps_ns.max() + 5e7)]  # half a 10 Hz sweep
         if len(outside):
-            raise DataError(f"{len(outside)} of {len(scans_ns)} scans (the first: scan {outside[0]}) lie outside the poses' time "
-                            f"span ({stamps_ns.min() * 1e-9:.3f} to {stamps_ns.max() * 1e-9:.3f} s): one pose per scan needed",
-                            source=self.path / "global_pose.csv")
-        return super().ground_truth
+            which = "scans" if scans is None else "selected scans"
+            raise DataError(f"{len(outside)} of {len(numbers)} {which} (the first: scan {outside[0]}) lie outside the poses' time "
+                            f"span ({stamps_ns.min() * 1e-9:.3f} to {stamps_ns.max() * 1e-9:.3f} s): one pose per scan needed "
+                            "(--frames can pick the scans it covers)", source=self.path / "global_pose.csv")
+        everything = super().ground_truth
+        return everything if scans is None or everything is None else everything[numbers]
 
 
 class NewerCollegeScans(KissLoaderScans):
