@@ -32,7 +32,7 @@ def test_vo_on_bundled_kitti_sample_writes_run_folder(tmp_path, capsys):
     code, stdout, _ = _run(["vo", str(seq), "--scale", "gt", "--out", str(out), "--gif",
                             "--set", "matching.klt_window_px=17"], capsys)
     assert code in (0, None)
-    assert "frames" in stdout and "APE raw (se3)" in stdout
+    assert "frames" in stdout and "APE raw (SE(3)-aligned)" in stdout
     for name in ("poses_kitti.txt", "poses_tum.txt", "poses_smoothed_kitti.txt", "poses_smoothed_tum.txt",
                  "diagnostics.csv", "config.yaml", "metrics.json", "trajectory.png", "features.gif"):
         assert (out / name).is_file(), name

@@ -119,9 +119,9 @@ def eval_command(
         if ref_traj.timestamps_s is not None and len(ref_traj) > 1:
             period = float(np.median(np.diff(ref_traj.timestamps_s)))
         segments = {key: SegmentErrors.from_drift(evaluation.drift, frame_period_s=period)} if evaluation.drift is not None else None
-        from lidarkit.eval.ape_rpe import DELTA_UNITS
+        from lidarkit.eval.ape_rpe import DELTA_UNITS, alignment_label
 
-        aligned = {"none": "unaligned", "se3": "SE(3)-aligned", "sim3": "Sim(3)-aligned", "scale": "scale-corrected"}.get(align, align)
+        aligned = alignment_label(align)
         unit = DELTA_UNITS.get(delta_unit, delta_unit)
         pub = publication_tables(segments, {key: evaluation.ape.rmse}, {key: evaluation.rpe.rmse}, ape_alignment=aligned,
                                  rpe_delta="frame" if (delta, unit) == (1, "frames") else f"{delta:g} {unit}")

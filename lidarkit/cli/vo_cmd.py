@@ -56,6 +56,7 @@ def vo_command(
     """Estimate the camera trajectory; print frames, rejected frames, speed and APE/RPE when ground truth exists."""
     from rich.table import Table
 
+    from lidarkit.eval.ape_rpe import alignment_label
     from lidarkit.vo.config import preset as make_preset
     from lidarkit.vo.evaluation import evaluate_vo
     from lidarkit.vo.inputs import frame_range, open_vo_input, self_calibrate as calibrate
@@ -151,11 +152,11 @@ def vo_command(
     if focal is not None and not focal.constrained:
         table.add_row("self-calibration", f"not constrained: {focal.reason}")
     for variant, m in metrics.items():
-        table.add_row(f"APE {variant} ({m['align']}) [m]", f"{m['ape_rmse_m']:.4f}")
+        table.add_row(f"APE {variant} ({alignment_label(m['align'])}) [m]", f"{m['ape_rmse_m']:.4f}")
         table.add_row(f"RPE {variant} 1 frame [m / deg]",
                       f"{m['rpe_trans_rmse_m']:.4f} / {m['rpe_rot_rmse_deg']:.4f}")
         # (gt scale: the raw distance of the last positions, both trajectories starting together; else after alignment)
-        final_align = "unaligned" if cfg.scale.mode == "gt" else f"{m['align']}-aligned"
+        final_align = "unaligned" if cfg.scale.mode == "gt" else alignment_label(m["align"])
         table.add_row(f"final error {variant} ({final_align}) [m]", f"{m['final_error_m']:.3f}")
     console.print(table)
     for d in result.rejected[:_LISTED_REJECTIONS]:

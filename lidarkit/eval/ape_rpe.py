@@ -226,6 +226,16 @@ def _aligned_copies(ref: Trajectory, est: Trajectory, align: str, align_origin: 
     return ref_evo, est_evo, transform
 
 
+#: How an estimate was aligned, in the words of labels and table titles (``alignment_label``)
+ALIGNMENT_LABELS = {"none": "unaligned", "se3": "SE(3)-aligned", "sim3": "Sim(3)-aligned", "scale": "scale-corrected"}
+
+
+def alignment_label(align: str) -> str:
+    """``"unaligned"``, ``"SE(3)-aligned"``, ``"Sim(3)-aligned"`` or ``"scale-corrected"`` for an ``align`` mode (other
+    text as given): one wording for plot legends, table titles and report labels."""
+    return ALIGNMENT_LABELS.get(align, align)
+
+
 def _title(metric, align: str, align_origin: bool, n: int) -> str:
     suffix = {
         "none": "not aligned",

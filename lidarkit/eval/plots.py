@@ -104,8 +104,9 @@ def plot_evaluation(evaluation: Evaluation, path: str | os.PathLike, *, plane: s
     plane = choose_plane(ape_res.ref, plane)
     fig = _figure(12.0, 9.0)
     axes = fig.subplots(2, 2)
-    align = {"none": "not aligned", "se3": "SE(3) aligned", "sim3": "Sim(3) aligned", "scale": "scale corrected"}
-    est_label = f"{evaluation.est_name or 'estimate'} ({align[ape_res.align]})"
+    from lidarkit.eval.ape_rpe import alignment_label
+
+    est_label = f"{evaluation.est_name or 'estimate'} ({alignment_label(ape_res.align)})"
     _draw_trajectories(axes[0, 0], ape_res.ref, ape_res.est_aligned, plane, est_label)
     axes[0, 0].set_title(f"{evaluation.est_name} vs {evaluation.ref_name}", fontsize=9)
     _draw_errors(axes[0, 1], ape_res)

@@ -121,8 +121,10 @@ class VisualOdometryTask(Task):
 
 
 def _alignment_labels(align: str | None) -> dict[str, str]:
-    """Alignment of the APE / RPE metrics for the report labels ("sim3-aligned", "unaligned")."""
+    """Alignment of the APE / RPE metrics for the report labels ("Sim(3)-aligned", "unaligned")."""
+    from lidarkit.eval.ape_rpe import alignment_label
+
     if align is None:
         return {}
-    text = "unaligned" if align == "none" else f"{align}-aligned"
+    text = alignment_label(align)
     return {"ape_rmse_m": text, "rpe_trans_rmse_m": text}
