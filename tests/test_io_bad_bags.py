@@ -92,6 +92,24 @@ def test_truncated_bag_and_truncated_message(tmp_path):
         open_dataset("rosbag", short).read_scan(1)
 
 
+def test_a_bag_damaged_in_the_middle_is_a_data_error_in_every_pass(tmp_path):
+    """A ROS 1 bag whose fourth message record header is overwritten: the stamps pass and the ground-truth pass (each
+    reads a whole topic) say which message could not be read, as reading the scans does (they raised the reader's own
+    exception)."""
+    clouds = [good(k, 2000) for k in range(8)]
+    whole = write_ros1_bag(tmp_path / "whole.bag", clouds, odometry=[(1000.0 + 0.1 * k, (k, 0, 0), (0, 0, 0, 1)) for k in range(8)])
+    data = bytearray(whole.read_bytes())
+    at = -1
+    for _ in range(4):  # the header field "op=2" of a message data record
+        at = data.index(b"op=\x02", at + 1)
+    data[at - 8: at + 56] = b"\xff" * 64
+    damaged = tmp_path / "damaged.bag"
+    damaged.write_bytes(bytes(data))
+    for what in ("timestamps_s", "ground_truth"):
+        with pytest.raises(DataError, match=r"damaged\.bag \(message \d+ on /(points|ground_truth)\): cannot read the message .*damaged file"):
+            getattr(open_dataset("rosbag", damaged), what)
+
+
 def test_mcap_with_unknown_schema(tmp_path):
     from mcap.writer import Writer
 

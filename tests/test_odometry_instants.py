@@ -114,6 +114,37 @@ def test_a_bag_s_ground_truth_is_interpolated_to_the_estimate_s_instant(tmp_path
     assert effective["ground_truth_instant"] == "start" and effective["estimate_instant"].startswith("start (the scans' stamps")
 
 
+@pytest.mark.parametrize("instant", ["start", "mid", "end"])
+def test_a_bag_s_selected_scans_get_the_poses_and_instant_the_whole_recording_gives_them(tmp_path, sims, instant):
+    """``--frames`` on a bag: the selected scans are paired with the same recorded poses as in the whole recording
+    and keep its instant (a subset was paired by nearest stamp and its instant measured from scan 0: end-stamped poses
+    one sweep early, mid-stamped ones refused, the instant lost from frame 5 on)."""
+    from lidarkit.io import open_dataset
+    from lidarkit.sim.bag_export import export_bag
+
+    sim = sims[instant]
+    bag = open_dataset("rosbag", export_bag(sim, tmp_path / "run.bag", "rosbag1"))
+    truth = sim.ground_truth.poses_se3
+    for frames in (np.arange(0, 3), np.arange(5, 10), np.arange(0, 10, 3)):
+        gt = bag.ground_truth_of(frames)
+        assert gt.meta["pose_instant"] == instant, frames
+        np.testing.assert_allclose(gt.poses_se3[:, :3, 3], truth[frames, :3, 3], atol=1e-9)
+
+
+def test_a_bag_whose_odometry_covers_part_of_the_scans_is_paired_where_the_poses_are_stamped(tmp_path):
+    """Poses stamped mid-sweep for scans 3-7 of 10 (as far from the next scan's stamp as from their own): each
+    selected scan gets the pose stamped within its own sweep, and the instant says mid."""
+    from test_io_bad_bags import good, write_ros1_bag
+
+    from lidarkit.io import open_dataset
+
+    poses = [(1000.0 + 0.1 * k + 0.05, (float(k), 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)) for k in range(3, 8)]
+    bag = open_dataset("rosbag", write_ros1_bag(tmp_path / "mid.bag", [good(k) for k in range(10)], odometry=poses))
+    gt = bag.ground_truth_of([3, 4, 5, 6, 7])
+    np.testing.assert_allclose(gt.poses_se3[:, 0, 3], [3, 4, 5, 6, 7])
+    assert gt.meta["pose_instant"] == "mid"
+
+
 def test_a_ground_truth_that_cannot_be_re_timed_is_refused_with_the_reason(sims):
     from lidarkit.errors import DataError
     from lidarkit.odometry.instants import like_with_like

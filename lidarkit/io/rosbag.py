@@ -8,7 +8,8 @@ and exits on a missing one) and decodes each message with :func:`lidarkit.io.poi
 Per scan: ``timestamp_s`` is the message header stamp; ``stamp_instant`` says which instant of the sweep that
 stamp is, read from the per-point times (relative times starting at 0: the sweep start; ending at 0: the end).
 Ground truth: a ``nav_msgs/Odometry`` topic (``ground_truth_topic``; found automatically when there is one),
-one pose per scan (by count, else the nearest stamp), expressed relative to nothing (as recorded); its
+one pose per scan (by count, also for a selection of scans; else the pose nearest the place in the sweep where the
+poses are stamped), expressed relative to nothing (as recorded); its
 ``meta["pose_instant"]`` is read from its stamps against the sweep's point times.
 
 Access is sequential (a bag is a stream); reading an earlier index reopens the bag.
@@ -140,12 +141,30 @@ class _BagScans:
     def _location(self, index: int) -> str:
         return f"message {index} on {self.topic}"
 
+    def _read_all(self, topic: str) -> Iterator[tuple[int, Any]]:
+        """:meth:`_messages` of ``topic`` with a damaged file's reader failure as a DataError naming the message (the
+        passes for the stamps and the ground truth read the whole topic, as :meth:`read_scan` reads up to a scan)."""
+        stream = self._messages(topic)
+        k = 0
+        while True:
+            try:
+                item = next(stream)
+            except StopIteration:
+                return
+            except DataError:
+                raise
+            except Exception as err:  # noqa: BLE001 - any reader failure of a damaged file becomes a DataError
+                raise DataError(f"cannot read the message ({type(err).__name__}: {err}); truncated or damaged file?",
+                                source=self.path, location=f"message {k} on {topic}") from None
+            yield item
+            k += 1
+
     def read_scan(self, index: int) -> Scan:
         """Scan ``index`` (messages are read in order; an earlier index restarts the stream)."""
         if not 0 <= index < self.n_scans:
             raise DataError(f"scan index {index} out of range for {self.n_scans} messages on {self.topic}", source=self.path)
         if self._stream is None or index < self._next:
-            self._stream = self._messages(self.topic)
+            self._stream = self._read_all(self.topic)
             self._next = 0
             self._last_stamp = None
         msg = None
@@ -155,11 +174,6 @@ class _BagScans:
             except StopIteration:
                 raise DataError(f"the bag ends after {self._next} of {self.n_scans} messages (truncated?)", source=self.path,
                                 location=self._location(self._next)) from None
-            except DataError:
-                raise
-            except Exception as err:  # noqa: BLE001 - any reader failure of a damaged file becomes a DataError
-                raise DataError(f"cannot read the message ({type(err).__name__}: {err}); truncated or damaged file?",
-                                source=self.path, location=self._location(self._next)) from None
             self._next += 1
             stamp = stamp_seconds(msg.header.stamp)
             if self._last_stamp is not None and stamp < self._last_stamp[1]:
@@ -185,7 +199,7 @@ class _BagScans:
         """Header stamps of every scan (one pass over the messages not read yet)."""
         if len(self._stamps) < self.n_scans:
             last = None
-            for k, msg in self._messages(self.topic):
+            for k, msg in self._read_all(self.topic):
                 stamp = stamp_seconds(msg.header.stamp)
                 if last is not None and stamp < last:
                     raise DataError(f"time goes backwards: header stamp {stamp:.9f} s is before {last:.9f} s",
@@ -200,37 +214,44 @@ class _BagScans:
         return self.ground_truth_of(None)
 
     def ground_truth_of(self, scans: np.ndarray | list[int] | None) -> Trajectory | None:
-        """:attr:`ground_truth` of the scans numbered ``scans`` only (None: all): a recording whose odometry covers part
-        of its scans is scored on that part (``--frames``; the whole recording's pairing refused the run)."""
+        """:attr:`ground_truth` of the scans numbered ``scans`` only (None: all): the same poses (and instant) the
+        whole recording pairs with them; a recording whose odometry covers part of its scans is scored on that part
+        (``--frames``; the whole recording's pairing refused the run)."""
         if self.ground_truth_topic is None:
             return None
         gt_stamps, gt_poses = self._recorded_ground_truth
+        all_stamps = self.timestamps_s
         numbers = np.arange(self.n_scans) if scans is None else np.asarray(scans, dtype=np.int64)
-        scan_stamps = self.timestamps_s[numbers]
+        scan_stamps = all_stamps[numbers]
         source = f"{self.path}{self.ground_truth_topic}"
-        if len(gt_stamps) != len(scan_stamps):
+        if len(gt_stamps) == self.n_scans:  # one pose per scan: paired by count, whichever scans are selected
+            gt_stamps, gt_poses = gt_stamps[numbers], gt_poses[numbers]
+        else:
             if len(gt_stamps) < 2:
                 raise DataError(f"{len(gt_stamps)} pose(s) for {len(scan_stamps)} scans: one pose per scan needed (--frames can pick the scans it covers; ground_truth_topic=none runs without scores)", source=source)
-            pick = np.clip(np.searchsorted(gt_stamps, scan_stamps), 1, len(gt_stamps) - 1)
-            pick = np.where(np.abs(gt_stamps[pick - 1] - scan_stamps) <= np.abs(gt_stamps[pick] - scan_stamps), pick - 1, pick)
+            # each scan's pose is the one nearest the place in the sweep where the poses are stamped (a pose stamped
+            # mid-sweep lies as near the next scan's stamp as its own)
+            target = scan_stamps + _pose_phase(gt_stamps, all_stamps)
+            pick = np.clip(np.searchsorted(gt_stamps, target), 1, len(gt_stamps) - 1)
+            pick = np.where(np.abs(gt_stamps[pick - 1] - target) <= np.abs(gt_stamps[pick] - target), pick - 1, pick)
             twice = np.flatnonzero(np.diff(pick) == 0)
             if len(twice):  # fewer (or sparser) poses than scans: one pose would stand for two scans
                 k = int(twice[0])
                 a, b = int(numbers[k]), int(numbers[k + 1])
                 where = (f"scan {a} ({scan_stamps[k]:.3f} s) comes before the first pose ({gt_stamps[0]:.3f} s)"
-                         if scan_stamps[k + 1] <= gt_stamps[0] else
+                         if target[k + 1] <= gt_stamps[0] else
                          f"scan {b} ({scan_stamps[k + 1]:.3f} s) comes after the last pose ({gt_stamps[-1]:.3f} s)"
-                         if scan_stamps[k] >= gt_stamps[-1] else
+                         if target[k] >= gt_stamps[-1] else
                          f"scans {a} and {b} are both nearest to the pose at {gt_stamps[pick[k]]:.3f} s")
                 raise DataError(f"{len(gt_stamps)} poses for {len(scan_stamps)} scans: {where}; one pose per scan needed (--frames can pick the scans it covers; ground_truth_topic=none runs without scores)", source=source)
             gt_stamps, gt_poses = gt_stamps[pick], gt_poses[pick]
-        period = float(np.median(np.diff(scan_stamps))) if len(scan_stamps) > 1 else 0.0
+        period = float(np.median(np.diff(all_stamps))) if len(all_stamps) > 1 else 0.0
         off = np.abs(gt_stamps - scan_stamps)
         if period > 0 and off.max() > 1.5 * period:  # one pose per scan by count, but not the scan's own time
             k = int(np.flatnonzero(off > 1.5 * period)[0])
             raise DataError(f"pose {k} is stamped {gt_stamps[k]:.3f} s, scan {int(numbers[k])} {scan_stamps[k]:.3f} s: {off[k]:.3f} s apart, more "
                             f"than a sweep ({period:.3f} s); the odometry does not cover the scans one pose each (--frames can pick the scans it covers; ground_truth_topic=none runs without scores)", source=source)
-        meta = {"frame": f"as recorded on {self.ground_truth_topic}", "pose_instant": self._ground_truth_instant(gt_stamps)}
+        meta = {"frame": f"as recorded on {self.ground_truth_topic}", "pose_instant": self._ground_truth_instant(gt_stamps, scan_stamps)}
         return Trajectory(gt_poses, gt_stamps, name=f"{self.path.name}{self.ground_truth_topic}", meta=meta)
 
     def ground_truth_at_instant(self, instant: str) -> Trajectory:
@@ -269,7 +290,7 @@ class _BagScans:
         """Stamps (s) and poses ``(n, 4, 4)`` of every message on the ground-truth topic (read once: the ground truth
         and its re-timing both use them)."""
         stamps, poses = [], []
-        for k, (_, msg) in enumerate(self._messages(self.ground_truth_topic)):
+        for k, (_, msg) in enumerate(self._read_all(self.ground_truth_topic)):
             p, q = msg.pose.pose.position, msg.pose.pose.orientation
             stamps.append(stamp_seconds(msg.header.stamp))
             xyz, quat = [p.x, p.y, p.z], [q.x, q.y, q.z, q.w]
@@ -281,15 +302,17 @@ class _BagScans:
             raise DataError(f"ground-truth topic {self.ground_truth_topic} has no messages", source=self.path)
         return np.array(stamps), np.stack(poses)
 
-    def _ground_truth_instant(self, gt_stamps: np.ndarray) -> str | None:
-        """Which instant of the sweep the ground truth stamps are (None: the scans carry no point times)."""
+    def _ground_truth_instant(self, gt_stamps: np.ndarray, scan_stamps: np.ndarray) -> str | None:
+        """Which instant of its scan's sweep each pose is stamped at (``gt_stamps[j]`` paired with the scan stamped
+        ``scan_stamps[j]``; the median over the pairs), None when the scans carry no point times or it is no instant."""
         timing = self._sweep_timing
         if timing is None:
             return None
         start, period = timing
         if period <= 0:  # the scans' stamps are all equal: no sweep period to place the poses in
             return None
-        return classify_instant((float(gt_stamps[0]) - start) / period)
+        sweep_start = scan_stamps + (start - float(self.timestamps_s[0]))  # a sweep starts as far from its stamp as sweep 0
+        return classify_instant(float(np.median((gt_stamps - sweep_start) / period)))
 
     @cached_property
     def _sweep_timing(self) -> tuple[float, float] | None:
@@ -305,6 +328,20 @@ class _BagScans:
             return None
         stamps = self.timestamps_s
         return lo, float(np.median(np.diff(stamps))) if len(stamps) > 1 else hi - lo
+
+
+def _pose_phase(gt_stamps: np.ndarray, scan_stamps: np.ndarray) -> float:
+    """Where in the scan period the poses are stamped (s after a scan's stamp, in ``[0, period)``), when they keep one
+    place (one pose per sweep, stamped at its start, middle or end); 0 when they do not (odometry at its own rate)."""
+    if len(scan_stamps) < 2:
+        return 0.0
+    period = float(np.median(np.diff(scan_stamps)))
+    if not period > 0:
+        return 0.0
+    mean = np.exp(2j * np.pi * (gt_stamps - scan_stamps[0]) / period).mean()
+    if abs(mean) < 0.8:  # spread over the period: not one pose per sweep at one instant
+        return 0.0
+    return float(np.angle(mean) / (2 * np.pi) % 1.0) * period
 
 
 def _pose_matrix(xyz: list[float], quat_xyzw: list[float]) -> np.ndarray:
