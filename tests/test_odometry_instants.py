@@ -145,6 +145,31 @@ def test_a_bag_whose_odometry_covers_part_of_the_scans_is_paired_where_the_poses
     assert gt.meta["pose_instant"] == "mid"
 
 
+def test_poses_are_stamped_at_the_instant_they_refer_to(tmp_path):
+    """The simulator's bag stamps each sweep at its start; kiss's poses refer to the sweep end. The run's trajectory
+    (``poses_tum.txt``) is stamped at the sweep ends, as its re-timed ground truth is: associating the two by time gives
+    the APE of pairing them by index (stamped at the scans' stamps, each pose met the ground truth a sweep earlier)."""
+    from lidarkit.eval import ape
+    from lidarkit.io import open_dataset
+    from lidarkit.sim.bag_export import export_bag
+
+    sim = SimulatedLidarSequence(pose_instant="end", **SIM)
+    bag = export_bag(sim, tmp_path / "run.bag", "rosbag1")
+    result = run(open_dataset("rosbag", bag), "kiss", out_dir=tmp_path / "run")
+    stamps = open_dataset("rosbag", bag).timestamps_s
+    np.testing.assert_allclose(result.trajectory.timestamps_s, stamps + 0.1, atol=1e-9)
+    np.testing.assert_allclose(result.trajectory.timestamps_s, result.ground_truth.timestamps_s, atol=1e-9)
+    by_index = ape(result.ground_truth, result.trajectory, align="se3").rmse
+    assert ape(result.ground_truth, result.trajectory, align="se3", associate=True).rmse == pytest.approx(by_index, rel=1e-9)
+    assert "stamped at the sweep end (the scans' stamps, at the sweep start, moved by +0.1000 s)" in result.config["run"]["estimate_stamps_note"]
+    written = np.loadtxt(tmp_path / "run" / "poses_tum.txt")
+    np.testing.assert_allclose(written[:, 0], stamps + 0.1, atol=1e-6)
+    # without deskew the poses refer to the scans' stamps: left as they are
+    plain = run(open_dataset("rosbag", bag), "open3d_point_to_plane")
+    np.testing.assert_allclose(plain.trajectory.timestamps_s, stamps, atol=1e-12)
+    assert plain.config["run"]["estimate_stamps_note"] is None
+
+
 def test_a_ground_truth_that_cannot_be_re_timed_is_refused_with_the_reason(sims):
     from lidarkit.errors import DataError
     from lidarkit.odometry.instants import like_with_like

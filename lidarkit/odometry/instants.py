@@ -14,8 +14,10 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+
 from lidarkit.errors import EvaluationError, LidarKitError
-from lidarkit.io.base import Scan
+from lidarkit.io.base import INSTANT_FRACTION, Scan
 from lidarkit.trajectory import Trajectory
 
 
@@ -32,6 +34,25 @@ def estimate_instant(registration: Any, scan: Scan | None) -> str | None:
     if deskews(registration, scan):
         return str(registration.deskew_instant)
     return scan.stamp_instant
+
+
+def stamps_at_instant(stamps_s: np.ndarray | None, scan: Scan | None, instant: str | None) -> tuple[np.ndarray | None, str | None]:
+    """``(the scans' stamps moved to the ``instant`` of their sweeps, note or None)``: the estimate's poses refer to
+    ``instant`` (a deskewing variant's), its stamps to ``scan.stamp_instant``; stamped as they are, a pose written
+    with its scan's stamp (``poses_tum.txt``) was paired with another instant's ground truth by anyone associating by
+    time. The sweep lasts the scans' stamp spacing (one scan: its point times' span)."""
+    stamp_at = None if scan is None else scan.stamp_instant
+    if stamps_s is None or instant is None or stamp_at is None or instant == stamp_at:
+        return stamps_s, None
+    stamps_s = np.asarray(stamps_s, dtype=np.float64)
+    if len(stamps_s) > 1:
+        duration = float(np.median(np.diff(stamps_s)))
+    elif scan.point_time_convention != "fraction" and scan.has_time_span():
+        duration = float(np.ptp(scan.point_times_s))
+    else:
+        return stamps_s, None
+    shift = (INSTANT_FRACTION[instant] - INSTANT_FRACTION[stamp_at]) * duration
+    return stamps_s + shift, f"stamped at the sweep {instant} (the scans' stamps, at the sweep {stamp_at}, moved by {shift:+.4f} s)"
 
 
 def like_with_like(reference: Trajectory, estimate_at: str | None, *, sequence: Any, own_ground_truth: bool,
@@ -61,4 +82,4 @@ def like_with_like(reference: Trajectory, estimate_at: str | None, *, sequence: 
     )
 
 
-__all__ = ["deskews", "estimate_instant", "like_with_like"]
+__all__ = ["deskews", "estimate_instant", "like_with_like", "stamps_at_instant"]

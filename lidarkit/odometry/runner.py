@@ -19,7 +19,7 @@ from lidarkit.odometry.covariance import propagate
 from lidarkit.odometry.frame_check import FrameChecker, FrameCheckConfig
 from lidarkit.progress import progress_bar
 from lidarkit.odometry.inputs import FrameSelection, frames_past_the_end, frames_repr, open_sequence, parse_frames, time_gap_warning
-from lidarkit.odometry.instants import deskews, estimate_instant, like_with_like
+from lidarkit.odometry.instants import deskews, estimate_instant, like_with_like, stamps_at_instant
 from lidarkit.odometry.metrics import odometry_metrics
 from lidarkit.odometry.prefetch import DEFAULT_DEPTH, prefetched
 from lidarkit.odometry.result import FrameStats, OdometryResult
@@ -449,7 +449,10 @@ def run(
 
     timestamps = sequence.timestamps_s
     timestamps = None if timestamps is None else np.asarray(timestamps, dtype=np.float64)[indices]
-    trajectory = Trajectory(poses, timestamps, name=f"{name} on {title}", meta={"method": name, "dataset": dataset_name})
+    # the poses are stamped at the instant they refer to (a deskewing variant's), not at the one the scans' stamps do
+    timestamps, stamp_note = stamps_at_instant(timestamps, first_scan, estimate_instant(registration, first_scan))
+    trajectory = Trajectory(poses, timestamps, name=f"{name} on {title}",
+                            meta={"method": name, "dataset": dataset_name, **({"stamps": stamp_note} if stamp_note else {})})
     instant_note = None
     if reference is not None:  # score like with like: the estimate's and the ground truth's instant of the sweep
         retimed, instant_note = like_with_like(reference, estimate_instant(registration, first_scan), sequence=sequence,
@@ -498,6 +501,7 @@ def run(
             "warnings": warnings,
             "frame_check": check.config.describe(),
             "ground_truth_instant_note": instant_note,
+            "estimate_stamps_note": stamp_note,
             "covariance_distortion_floor": (
                 f"{len(widened)} frames: motion-distorted sweeps registered without deskew, frame covariance widened by "
                 f"DISTORTION_SIGMA[{name!r}]" if widened else None
