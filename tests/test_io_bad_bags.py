@@ -137,6 +137,12 @@ def test_time_field_with_nan(tmp_path):
     bag = write_ros1_bag(tmp_path / "nan.bag", [good(0), good(1), (1000.2, fields, step, data, 64)])
     with pytest.raises(DataError, match=r"nan\.bag \(message 2 on /points\): per-point time field 'time' has 1 NaN or infinite values \(first at point 17\)"):
         open_dataset("rosbag", bag).read_scan(2)
+    # points 0-2 missing returns (NaN x): the bad time is still named by its place in the message (it said point 14)
+    rec = np.frombuffer(data, dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("time", "<f4")]).copy()
+    rec["x"][:3] = np.nan
+    holes = write_ros1_bag(tmp_path / "holes.bag", [(1000.0, fields, step, rec.tobytes(), 64)])
+    with pytest.raises(DataError, match=r"has 1 NaN or infinite values \(first at point 17\)"):
+        open_dataset("rosbag", holes).read_scan(0)
 
 
 def test_time_going_backwards(tmp_path):

@@ -128,6 +128,9 @@ def test_sim_cli_refuses_a_bag_name_the_readers_would_not_recognise_or_an_existi
     assert sim(tmp_path / "m.mcap", "mcap")[0] in (0, None)
     code, err = sim(tmp_path / "m.mcap", "mcap")
     assert code == 1 and "m.mcap: exists already; bags are never overwritten" in err
+    with pytest.raises(SystemExit):  # --storage with another format, at its default value too (it was ignored)
+        main(["sim", "lidar", "--out", str(tmp_path / "s.mcap"), "--frames", "2", "--format", "mcap", "--storage", "sqlite3"])
+    assert "--storage: --storage applies to --format rosbag2 only" in capsys.readouterr().err and not (tmp_path / "s.mcap").exists()
 
 
 def test_unknown_topic_lists_the_topics_and_never_exits(exports):

@@ -7,6 +7,7 @@ The ``sim`` command group is ``sim_app``; other simulators attach their own sub-
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Optional
 
 import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
@@ -21,7 +22,7 @@ app.add_typer(sim_app, name="sim")
 def sim_lidar(
     out: Path = typer.Option(..., "--out", "-o", help="Output: a folder for kitti (velodyne/*.bin, point_times/*.npy, poses*.txt, times.txt, calib.txt, sim.yaml), a .bag file for rosbag1, a bag folder for rosbag2, a .mcap file for mcap."),
     fmt: str = typer.Option("kitti", "--format", "-f", help="kitti | rosbag1 | rosbag2 | mcap (bags: PointCloud2 on /points with per-point 'time' float32 s and 't' uint32 ns, nav_msgs/Odometry ground truth on /ground_truth)."),
-    storage: str = typer.Option("sqlite3", "--storage", help="ROS 2 bag storage: sqlite3 | mcap (only with --format rosbag2)."),
+    storage: Optional[str] = typer.Option(None, "--storage", help="ROS 2 bag storage: sqlite3 (default) | mcap (only with --format rosbag2)."),
     frames: int = typer.Option(300, "--frames", "-n", help="Number of sweeps."),
     scene: str = typer.Option("street", "--scene", help="street | open | ground"),
     seed: int = typer.Option(0, "--seed", help="Seeds the scene, the path and the range noise."),
@@ -36,8 +37,9 @@ def sim_lidar(
 
     if fmt not in ("kitti", *BAG_FORMATS):
         raise ConfigError(f"unknown format {fmt!r}; known: kitti, {', '.join(BAG_FORMATS)}", source="--format")
-    if storage != "sqlite3" and fmt != "rosbag2":
+    if storage is not None and fmt != "rosbag2":  # (given at its default value too: it would say nothing)
         raise ConfigError("--storage applies to --format rosbag2 only", source="--storage")
+    storage = storage or "sqlite3"
 
     from lidarkit.atomic import check_target
 

@@ -102,8 +102,9 @@ def decode_pointcloud2(msg: Any, *, source: str, location: str, time_field: str 
         times = raw.astype(np.float64)
         bad = np.flatnonzero(~np.isfinite(times))
         if len(bad):
+            first = int(bad[0]) if all_kept else int(np.flatnonzero(keep)[bad[0]])  # numbered in the message, missing returns included
             raise DataError(
-                f"per-point time field {field!r} has {len(bad)} NaN or infinite values (first at point {int(bad[0])})",
+                f"per-point time field {field!r} has {len(bad)} NaN or infinite values (first at point {first})",
                 source=source, location=location,
             )
         if len(times) and float(np.abs(times).max()) > _NANOSECONDS_AFTER:
