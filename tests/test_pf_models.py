@@ -217,6 +217,23 @@ def test_identical_seeds_identical_results_and_different_seeds_differ():
     assert not np.array_equal(run(5), run(6))
 
 
+def test_roughening_jitters_a_cloud_facing_pi_as_one_facing_zero():
+    """Gordon's roughening scales the jitter by the cloud's spread: a tight cloud whose headings straddle +-pi spans a
+    few degrees, not 2 pi (its heading jitter was 10x the same cloud's at heading 0)."""
+    rng = np.random.default_rng(0)
+    cloud = np.column_stack([rng.normal(0, 0.1, 1000), rng.normal(0, 0.1, 1000), rng.normal(0, 0.05, 1000)])
+    out = {}
+    for heading in (0.0, np.pi):
+        pf = ParticleFilter(LANDMARKS, PFConfig.make(n_particles=1000, roughening=0.1, dtype="float64"), 1)
+        turned = cloud.copy()
+        turned[:, 2] = wrap_angle(turned[:, 2] + heading)
+        pf.set_particles(turned, np.ones(1000))
+        pf.resample(force=True)
+        out[heading] = pf.particles.copy()
+    np.testing.assert_allclose(out[np.pi][:, :2], out[0.0][:, :2], atol=1e-12)
+    np.testing.assert_allclose(wrap_angle(out[np.pi][:, 2] - np.pi), out[0.0][:, 2], atol=1e-9)
+
+
 def test_uniform_init_covers_the_map_and_ess_threshold_skips_resampling():
     pf = ParticleFilter(LANDMARKS, PFConfig.make(n_particles=4000, ess_threshold=0.5), 0)
     pf.initialize_uniform()

@@ -16,6 +16,14 @@ log = logging.getLogger(__name__)
 THETA_WRAP_EVERY = 32  # predictions between wraps of the particle headings (keeps float32 theta precise)
 
 
+def _heading_range(theta: np.ndarray) -> float:
+    """The arc the headings span (rad): the smaller of their range wrapped to [-pi, pi) and to [0, 2 pi), exact
+    below pi (a cloud facing +-pi spans a few degrees, not 2 pi)."""
+    wrapped = np.remainder(theta.astype(np.float64) + np.pi, 2 * np.pi) - np.pi
+    around_pi = np.remainder(wrapped, 2 * np.pi)
+    return float(min(np.ptp(wrapped), np.ptp(around_pi)))
+
+
 class ParticleFilter(LandmarkFilterBase):
     """Landmark-based Monte-Carlo localization in 2D (pose x_m, y_m, theta_rad).
 
@@ -242,7 +250,7 @@ class ParticleFilter(LandmarkFilterBase):
 
     def _roughen(self) -> None:
         spread = self.states.max(axis=1) - self.states.min(axis=1)
-        spread[2] = min(float(spread[2]), np.pi)
+        spread[2] = min(_heading_range(self.states[2]), np.pi)
         sigma = (self.config.roughening * self.n ** (-1.0 / 3.0)) * spread
         eps = standard_normal(self.rng, (3, self.n), self.dtype)
         eps *= sigma.astype(self.dtype)[:, None]
