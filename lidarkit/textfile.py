@@ -11,12 +11,13 @@ from lidarkit.errors import DataError, LidarKitError
 
 
 def read_lines(path: str | os.PathLike) -> list[str]:
-    """All lines of a text file; a missing or unreadable file is a DataError naming it."""
+    """All lines of a text file (a UTF-8 byte-order mark, as some editors save, left out); a missing or unreadable
+    file is a DataError naming it."""
     path = Path(path)
     if not path.is_file():
         raise DataError("file not found" if not path.exists() else "not a regular file", source=path)
     try:
-        return path.read_text(encoding="utf-8").splitlines()
+        return path.read_text(encoding="utf-8-sig").splitlines()
     except (OSError, UnicodeDecodeError) as err:
         raise DataError(f"cannot read as text ({err.__class__.__name__}: {err})", source=path) from err
 

@@ -84,12 +84,27 @@ def _corrupt(copy_of, variant: str, filename: str, edit) -> LandmarkData:
         ("world.dat", lambda ls: ls[:1] + ["2 0"] + ls[2:], r"world.dat \(line 2\).*3 fields"),
         ("world.dat", lambda ls: [], r"world.dat: no landmarks"),
         ("world.dat", lambda ls: ls[:-1] + ["9 5 nan"], r"world.dat \(line 9\).*non-finite"),
+        # an id beyond int64 was an OverflowError; a 10 kB token is quoted shortened; the ids that exist are listed
+        ("world.dat", lambda ls: ["99999999999999999999999 1 1"] + ls[1:], r"world.dat \(line 1\).*landmark id '9{23}' is beyond a 64-bit"),
+        ("sensor_data.dat", lambda ls: ls[:2] + ["ODOMETRY 0.1 " + "7" * 10000 + "x 0.0"] + ls[2:], r"not a number: '7{40}'\.\.\. \(10001 characters\)$"),
+        ("world.dat", lambda ls: ["-1 1 1"] + ls[1:], r"unknown landmark id 1 \(world file world.dat has ids -1, 2, 3, 4, 5, 6, 7, 8, 9\)"),
     ],
 )
 def test_corrupted_copies_raise_dataerror(copy_of, filename, edit, pattern):
     folder = _corrupt(copy_of, "burgard_particle_filter", filename, edit)
     with pytest.raises(DataError, match=pattern):
         LandmarkData(folder)
+
+
+def test_a_byte_order_mark_is_left_out(copy_of):
+    """A file an editor saved with a UTF-8 byte-order mark reads as the same data (its first record was 'unknown')."""
+    folder = copy_of(shared_path("pf", "burgard_particle_filter"))
+    plain = LandmarkData(folder)
+    for name in ("world.dat", "sensor_data.dat"):
+        (folder / name).write_bytes(b"\xef\xbb\xbf" + (folder / name).read_bytes())
+    marked = LandmarkData(folder)
+    np.testing.assert_array_equal(marked.odometry, plain.odometry)
+    np.testing.assert_array_equal(marked.landmarks.ids, plain.landmarks.ids)
 
 
 def test_missing_files(tmp_path):

@@ -139,8 +139,7 @@ class LandmarkData:
                 lid = _parse_int(fields[1], path, where)
                 if lid not in known:
                     raise DataError(
-                        f"unknown landmark id {lid} (world file {self.world_path.name} has ids "
-                        f"{int(self.landmarks.ids.min())}..{int(self.landmarks.ids.max())})",
+                        f"unknown landmark id {lid} (world file {self.world_path.name} has {_id_list(self.landmarks.ids)})",
                         source=path,
                         location=where,
                     )
@@ -160,7 +159,7 @@ class LandmarkData:
                 m_bearing.append(bearing)
                 m_line.append(lineno)
             else:
-                raise DataError(f"unknown record type {fields[0]!r} (expected ODOMETRY or SENSOR)", source=path, location=where)
+                raise DataError(f"unknown record type {_shown(fields[0])} (expected ODOMETRY or SENSOR)", source=path, location=where)
         if not odometry:
             raise DataError("no ODOMETRY records (empty file)", source=path)
         self.odometry = np.asarray(odometry, dtype=np.float64).reshape(-1, 3)
@@ -201,11 +200,11 @@ def _parse_float(text: str, path: Path | str | os.PathLike, where: str) -> float
     try:
         value = float(text)
     except ValueError:
-        raise DataError(f"not a number: {text!r}", source=path, location=where) from None
+        raise DataError(f"not a number: {_shown(text)}", source=path, location=where) from None
     if not math.isfinite(value):
-        raise DataError(f"non-finite value {text!r}", source=path, location=where)
+        raise DataError(f"non-finite value {_shown(text)}", source=path, location=where)
     if abs(value) > MAX_ABS_VALUE:
-        raise DataError(f"value {text} beyond {MAX_ABS_VALUE:g} in magnitude: not a distance (m) or angle (rad) of "
+        raise DataError(f"value {_shown(text)} beyond {MAX_ABS_VALUE:g} in magnitude: not a distance (m) or angle (rad) of "
                         "this data", source=path, location=where)
     return value
 
@@ -215,13 +214,29 @@ MAX_ABS_VALUE = 1e7  # landmark coordinates, odometry, ranges and bearings: metr
 
 def _parse_int(text: str, path: Path | str | os.PathLike, where: str) -> int:
     try:
-        return int(text)
+        value = int(text)
     except ValueError:
-        pass
-    value = _parse_float(text, path, where)
-    if not value.is_integer():
-        raise DataError(f"landmark id is not an integer: {text!r}", source=path, location=where)
-    return int(value)
+        number = _parse_float(text, path, where)
+        if not number.is_integer():
+            raise DataError(f"landmark id is not an integer: {_shown(text)}", source=path, location=where) from None
+        value = int(number)
+    if not -(2**63) <= value < 2**63:  # the ids are kept as int64
+        raise DataError(f"landmark id {_shown(text)} is beyond a 64-bit integer", source=path, location=where)
+    return value
+
+
+def _id_list(ids: np.ndarray, limit: int = 12) -> str:
+    """``ids 1..9`` when they run without a gap, else the ids themselves (the first ``limit``)."""
+    ids = np.sort(ids)
+    if len(ids) > 1 and np.all(np.diff(ids) == 1):
+        return f"ids {int(ids[0])}..{int(ids[-1])}"
+    shown = ", ".join(str(int(i)) for i in ids[:limit])
+    return f"ids {shown}" + (f", ... ({len(ids)} in all)" if len(ids) > limit else "")
+
+
+def _shown(text: str, limit: int = 40) -> str:
+    """A token of a data file as an error message quotes it: at most ``limit`` characters (a 50 MB line is not echoed)."""
+    return repr(text) if len(text) <= limit else repr(text[:limit]) + f"... ({len(text)} characters)"
 
 
 __all__ = ["LandmarkData", "LandmarkMap", "NEGATIVE_RANGE_POLICIES", "read_world"]
