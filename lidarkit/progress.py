@@ -14,8 +14,8 @@ class ProgressLines:
     """Progress where no bar can be drawn (stderr to a file or a pipe: a log, CI): one line at every tenth of the run
     and at least every 30 s, with the frame rate and the time left."""
 
-    def __init__(self, total: int, label: str):
-        self.total, self.label, self.done = total, label, 0
+    def __init__(self, total: int, label: str, unit: str = "frames"):
+        self.total, self.label, self.unit, self.done = total, label, unit, 0
         self.start = self.last = time.monotonic()
         self.next_tenth = 1
 
@@ -28,21 +28,21 @@ class ProgressLines:
         self.next_tenth, self.last = tenth + 1, now
         rate = self.done / max(now - self.start, 1e-9)
         left = (self.total - self.done) / rate if rate > 0 else float("nan")
-        print(f"{self.label}: {self.done}/{self.total} frames ({100 * self.done / max(self.total, 1):.0f} %), {rate:.1f} frames/s, "
+        print(f"{self.label}: {self.done}/{self.total} {self.unit} ({100 * self.done / max(self.total, 1):.0f} %), {rate:.1f} {self.unit}/s, "
               f"~{left:.0f} s left", file=sys.stderr, flush=True)
 
     def stop(self) -> None:
         pass
 
 
-def progress_bar(total: int, label: str):
-    """``(bar, task)`` for ``total`` items titled ``label``: rich's bar where stderr is a terminal, else lines."""
+def progress_bar(total: int, label: str, unit: str = "frames"):
+    """``(bar, task)`` for ``total`` items (``unit``) titled ``label``: rich's bar where stderr is a terminal, else lines."""
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
     console = Console(stderr=True)
     if not console.is_terminal:
-        return ProgressLines(total, label), 0
+        return ProgressLines(total, label, unit), 0
     bar = Progress(TextColumn("{task.description}", markup=False), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(), console=console, transient=True)
     bar.start()
     return bar, bar.add_task(label, total=total)

@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 import pytest
+import yaml
 from conftest import shared_path
 
 from lidarkit.cli import main
@@ -174,10 +175,12 @@ def test_fit_q_recovers_the_noise_of_synthetic_innovations():
     assert q_verdict(2.1, np.diag([1.0, 0.1])).status == "consistent"
 
 
-def test_cli_recorded_prints_the_verdict_and_fit_q_makes_nis_consistent(capsys):
+def test_cli_recorded_prints_the_verdict_and_fit_q_makes_nis_consistent(capsys, tmp_path):
+    import json
+
     data = shared_path("pf", "robot_mapping_stachniss")
     with pytest.raises(SystemExit) as exc:
-        main(["pf", str(data), "--recorded", "-n", "500", "--fit-q"])
+        main(["pf", str(data), "--recorded", "-n", "500", "--fit-q", "--out", str(tmp_path / "run")])
     assert exc.value.code in (0, None)
     out = " ".join(capsys.readouterr().out.split())
     assert "before: Q too large by about" in out
@@ -185,6 +188,10 @@ def test_cli_recorded_prints_the_verdict_and_fit_q_makes_nis_consistent(capsys):
     assert after.strip().startswith("Q consistent with the readings")
     nis_after = float(after.split("NIS mean")[1].split(",")[0])
     assert 1.5 <= nis_after <= 2.5
+    # the run folder keeps the Q given and every fit beside the last fit's run (only the fitted Q was kept)
+    fits = json.loads((tmp_path / "run" / "metrics.json").read_text())["metrics"]["fit_q"]
+    assert fits[0]["run"] == "given Q" and fits[0]["q_cov"] == [[1.0, 0.0], [0.0, 0.1]] and fits[0]["nis_mean"] < 0.1
+    assert fits[-1]["nis_mean"] == pytest.approx(nis_after, abs=1e-3)
 
 
 def test_cli_report_protocol_reproduces_the_committed_figure_and_warns_once(capsys, caplog):
@@ -314,6 +321,55 @@ def test_cli_list_and_kld_options_are_checked(capsys):
             main(["pf", str(data), *args])
         err = capsys.readouterr().err
         assert exc.value.code == 1 and message in err and "{" not in err, (args, err)
+
+
+def test_cli_options_that_would_change_nothing_are_refused(capsys):
+    """Each of these changed nothing, without a word (identical results); and KLD's counts reached past the particle
+    limit and the memory check (a MemoryError traceback at 1e10)."""
+    data = shared_path("pf", "burgard_particle_filter")
+    for args, message in (
+        (["--innovation-gate", "9.21"], "--innovation-gate only acts with --kernel kalman"),
+        (["--kld-min", "500", "--kld-max", "600"], "--kld-min, --kld-max only act with --kld"),
+        (["--alpha-fast", "0.5"], "--alpha-fast only acts with --augmented"),
+        (["--nearest-association", "per_particle"], "--nearest-association only acts with --likelihood nearest"),
+        (["--kidnap-offset", "3,3,10"], "--kidnap-offset only acts with --kidnap-at"),
+        (["--kernel", "kalman", "--roughening", "0.5"], "--roughening only acts with --kernel point"),
+        (["-n", "50,100", "--snapshots", "0,10"], "--snapshots only acts with one run"),
+        (["--kld", "--init", "uniform", "--kld-max", "10000000000", "--kld-unconverged", "10000000000"], "--kld-max: must be <= 10000000"),
+        (["--kld", "--kld-bin", "0.5,-10"], "--kld-bin: both bin sizes must be > 0"),
+    ):
+        with pytest.raises(SystemExit) as exc:
+            main(["pf", str(data), *args])
+        err = capsys.readouterr().err
+        assert exc.value.code == 1 and message in err and "Traceback" not in err, (args, err)
+    with pytest.raises(ConfigError, match="roughening move point particles"):  # the library refuses them too
+        PFConfig.make(kernel="kalman", roughening=0.1)
+    with pytest.raises(ConfigError, match="innovation_gate gates the readings of the Kalman kernels"):
+        PFConfig.make(innovation_gate=9.21)
+    with pytest.raises(SystemExit) as exc:  # the report protocol's likelihood is nearest
+        main(["pf", str(data), "--protocol", "report", "--nearest-association", "per_particle"])
+    assert exc.value.code in (0, None)
+
+
+def test_cli_study_on_short_data_and_the_files_a_run_read(tmp_path, capsys):
+    """A recording shorter than the 50 steps the localized count starts at says n/a (it said 0 / 2); the run folder
+    names the files read (a sensor file given in place of the folder was recorded as the folder)."""
+    folder = tmp_path / "short"
+    folder.mkdir()
+    source = shared_path("pf", "burgard_particle_filter")
+    (folder / "world.dat").write_text((source / "world.dat").read_text())
+    lines = (source / "sensor_data.dat").read_text().splitlines()
+    cut = [i for i, line in enumerate(lines) if line.startswith("ODOMETRY")][40]
+    (folder / "short_sensor.dat").write_text("\n".join(lines[:cut]) + "\n")
+    with pytest.raises(SystemExit) as exc:
+        main(["pf", str(folder / "short_sensor.dat"), "-n", "50", "--seeds", "2", "--out", str(tmp_path / "study")])
+    assert exc.value.code in (0, None)
+    out = capsys.readouterr()
+    row = next(line for line in out.out.splitlines() if line.strip().startswith("│  50") or line.strip().startswith("│ 50"))
+    assert "n/a" in row and "pf study: 2/2 runs" in out.err
+    scenario = yaml.safe_load((tmp_path / "study" / "config.yaml").read_text())["scenario"]
+    assert scenario["sensor_file"] == str((folder / "short_sensor.dat").resolve()) and scenario["seeds"] == [0, 1]
+    assert scenario["n_particles"] == [50]
 
 
 def test_resampling_and_step_access_refuse_what_they_cannot_use(stachniss):

@@ -99,7 +99,7 @@ def pf_command(
 ) -> None:
     """Localize with a particle filter on Freiburg landmark data and score it (MSE from step 10, APE, RPE), or run a study."""
     from lidarkit.io import open_dataset
-    from lidarkit.pf.protocol import run_protocol
+    from lidarkit.pf.protocol import data_files, run_protocol
     from lidarkit.pf.study import protocol_config, run_study
 
     from lidarkit.atomic import check_target
@@ -112,19 +112,35 @@ def pf_command(
         raise ConfigError(f"--seed must be >= 0, got {seed}", source="--seed")
     from lidarkit.resources import check_memory
 
-    n_snapshots = len(_steps(snapshots)) + (1000 if gif else 0)
+    from lidarkit.pf.study import PROTOCOLS
+
+    study = len(counts) > 1 or seeds > 1
+    _refuse_unused_options(ctx, kld=kld, augmented=augmented, kernel=kernel, kidnap_at=kidnap_at, study=study,
+                           likelihood=PROTOCOLS.get(protocol, {}).get("likelihood", likelihood))  # (the report protocol's is nearest)
+    largest, option = max(counts), "--particles"
+    if kld:  # KLD-sampling grows the set up to these counts
+        for name, value in (("--kld-max", kld_max), ("--kld-unconverged", kld_unconverged)):
+            if value > MAX_PARTICLES:
+                raise ConfigError(f"must be <= {MAX_PARTICLES}, got {value}", source=name)
+            if value > largest:
+                largest, option = value, name
+    # snapshots are kept for the figures of a run folder only
+    snapshot_steps = _steps(snapshots)  # checked whether or not there is a run folder to draw them in
+    n_snapshots = (len(snapshot_steps) + (1000 if gif else 0)) if out is not None else 0
     # state, weights, resampling copies and per-reading likelihoods (~40 float64 per particle), plus the snapshots
-    check_memory(max(counts) * (320.0 + 24.0 * n_snapshots), f"a filter of {max(counts):,} particles", "--particles")
+    check_memory(largest * (320.0 + 24.0 * n_snapshots), f"a filter of {largest:,} particles", option)
     if gif and out is None:
         raise ConfigError("--gif needs --out DIR", source="--gif")
     if fit_q and not recorded:
         raise ConfigError("--fit-q needs --recorded", source="--fit-q")
     bin_m, bin_deg = _floats(kld_bin, 2, "--kld-bin")
+    if not (bin_m > 0 and bin_deg > 0):
+        raise ConfigError(f"both bin sizes must be > 0 (metres, degrees), got {kld_bin!r}", source="--kld-bin")
     cfg = PFConfig.make(
         n_particles=counts[0], likelihood=likelihood, nearest_association=nearest_association, estimator=estimator,
         resampler=resampler, kernel=kernel, ess_threshold=ess_threshold, roughening=roughening, q=_floats(q, 2, "--q"), q_as=q_as,
         init=init, augmented=augmented, alpha_slow=alpha_slow, alpha_fast=alpha_fast, kld=kld, kld_epsilon=kld_epsilon,
-        kld_z=kld_z, kld_bin_m=bin_m, kld_bin_rad=math.radians(bin_deg) if bin_deg > 0 else bin_deg, kld_min_n=kld_min, kld_max_n=kld_max,
+        kld_z=kld_z, kld_bin_m=bin_m, kld_bin_rad=math.radians(bin_deg), kld_min_n=kld_min, kld_max_n=kld_max,
         kld_unconverged_n=kld_unconverged, innovation_gate=innovation_gate,
     )
     _refuse_protocol_clashes(ctx, protocol, dict(likelihood=likelihood, nearest_association=nearest_association,
@@ -146,13 +162,19 @@ def pf_command(
     if len(counts) > 1 or seeds > 1:
         if gif:  # (it was ignored)
             raise ConfigError("--gif animates one run; a study (several --particles or --seeds) writes its table only", source="--gif")
-        rows = run_study(data, counts, seed_list, config=cfg, **scenario)
+        from lidarkit.progress import progress_bar
+
+        bar, task = progress_bar(len(counts) * len(seed_list), "pf study", unit="runs")
+        try:
+            rows = run_study(data, counts, seed_list, config=cfg, on_run=lambda: bar.advance(task), **scenario)
+        finally:
+            bar.stop()
         _print_study(rows, cfg, protocol, kidnap_at)
         if out is not None:
-            _write_study(rows, cfg, protocol, {**scenario, "data": str(getattr(data, "root", data_dir))}, out)
+            _write_study(rows, cfg, protocol, {**scenario, **data_files(data), "n_particles": counts, "seeds": seed_list}, out)
             stderr().print(f"results written to {out}")
         return
-    snap = set(_steps(snapshots))
+    snap = set(_steps(snapshots)) if out is not None else set()  # the particle clouds are kept for the figures only
     if gif:
         snap |= set(range(0, len(data) + 1, 2))
     snap = tuple(sorted(s for s in snap if 0 <= s <= len(data)))
@@ -168,6 +190,25 @@ def _given(ctx: typer.Context, name: str) -> bool:
     """Whether option ``name`` was given on the command line (not left at its default)."""
     source = ctx.get_parameter_source(name)
     return source is not None and source.name == "COMMANDLINE"
+
+
+def _refuse_unused_options(ctx: typer.Context, *, kld: bool, augmented: bool, kernel: str, likelihood: str, kidnap_at: int | None,
+                           study: bool) -> None:
+    """An option given on the command line that the rest of the command would ignore is a ConfigError (they changed
+    nothing, without a word)."""
+    needs = (
+        (("kld_epsilon", "kld_z", "kld_bin", "kld_min", "kld_max", "kld_unconverged"), "--kld", kld),
+        (("alpha_slow", "alpha_fast"), "--augmented", augmented),
+        (("innovation_gate",), "--kernel kalman", kernel == "kalman"),
+        (("roughening",), "--kernel point (the Kalman kernels resample by splitting)", kernel != "kalman"),
+        (("nearest_association",), "--likelihood nearest", likelihood == "nearest"),
+        (("kidnap_offset",), "--kidnap-at", kidnap_at is not None),
+        (("snapshots",), "one run (a study writes its table only)", not study),
+    )
+    for names, needed, on in needs:
+        given = [f"--{name.replace('_', '-')}" for name in names if _given(ctx, name)]
+        if given and not on:
+            raise ConfigError(f"{', '.join(given)} only {'act' if len(given) > 1 else 'acts'} with {needed}", source=given[0])
 
 
 def _refuse_protocol_clashes(ctx: typer.Context, protocol: str, given: dict[str, str]) -> None:
@@ -186,7 +227,8 @@ def _refuse_protocol_clashes(ctx: typer.Context, protocol: str, given: dict[str,
 def _recorded(data, cfg: PFConfig, seed: int, fit_q: bool, out: Path | None, snap_steps: tuple[int, ...], gif: bool) -> None:
     from lidarkit.pf.protocol import fit_q_recorded, run_recorded
 
-    snap = tuple(sorted(s for s in set(snap_steps) | (set(range(0, len(data) + 1, 2)) if gif else set()) if 0 <= s <= len(data)))
+    kept = set(snap_steps) if out is not None else set()  # the particle clouds are kept for the figures only
+    snap = tuple(sorted(s for s in kept | (set(range(0, len(data) + 1, 2)) if gif else set()) if 0 <= s <= len(data)))
     if not fit_q:
         result = run_recorded(data, None, seed, config=cfg, snapshot_steps=snap)
         _print(result)
@@ -205,6 +247,9 @@ def _recorded(data, cfg: PFConfig, seed: int, fit_q: bool, out: Path | None, sna
                           f"{r.metrics['nis_fraction_below_chi2_95']:.3f}")
         stdout().print(table)
         stdout().print("after: " + runs[-1].metrics["q_verdict"]["text"])
+        # the run folder holds the last fit's run: the Q given and each fit are kept beside it (metrics.json, "fit_q")
+        result.metrics["fit_q"] = [{"run": "given Q" if i == 0 else f"fit {i}", "q_cov": r.settings["q_cov"], "nis_mean": r.metrics["nis_mean"],
+                                    "nis_fraction_below_chi2_95": r.metrics["nis_fraction_below_chi2_95"]} for i, r in enumerate([first, *runs])]
     if out is not None:
         _write(result, out, snap_steps=snap_steps, gif=gif)
         stderr().print(f"results written to {out}")
@@ -225,8 +270,10 @@ def _print_study(rows, cfg: PFConfig, protocol: str, kidnap_at: int | None) -> N
                      "the chi-square 99.9% gate" + ("; recovered: seeds back below 0.5 m for good within 40 steps of the kidnap"
                                                     if kidnap_at is not None else ""))
     for r in rows:
+        judged = [f for f in r.localized if np.isfinite(f)]  # NaN: no step from 50 on to judge (a shorter recording)
+        localized = f"{sum(f >= 0.95 for f in judged)} / {len(judged)}" if judged else "n/a"
         cells = [str(r.n_particles), f"{r.mse_mean:.4g} ± {r.mse_std:.3g}", f"{np.mean(r.mean_count):.0f}",
-                 f"{sum(f >= 0.95 for f in r.localized)} / {len(seeds)}", f"{r.lost_seeds} / {len(seeds)}", f"{np.mean(r.runtime_s):.3f}"]
+                 localized, f"{r.lost_seeds} / {len(seeds)}", f"{np.mean(r.runtime_s):.3f}"]
         if kidnap_at is not None:
             cells.append(f"{sum(k is not None and k <= 40 for k in r.recovered_in)} / {len(seeds)}")
         table.add_row(*cells)
@@ -327,4 +374,10 @@ def _write_files(result, out: Path, *, snap_steps: tuple[int, ...], gif: bool) -
         plots.plot_particle_count({"particles": result.n_particles}, out / "particles_per_step.png", errors_m=errors,
                                   mark_step=result.settings.get("kidnap_at_step"))
     if gif:
-        plots.animate(result, out / "animation.gif")
+        from lidarkit.progress import progress_bar
+
+        bar, task = progress_bar(len(result.snapshots), "animation.gif")
+        try:
+            plots.animate(result, out / "animation.gif", on_frame=lambda: bar.advance(task))
+        finally:
+            bar.stop()

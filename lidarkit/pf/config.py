@@ -129,6 +129,13 @@ class PFConfig(BaseModel):
             raise ValueError(f"kld_unconverged_n {self.kld_unconverged_n} > kld_max_n {self.kld_max_n}")
         if (self.kld or self.augmented) and self.kernel == "kalman":
             raise ValueError("KLD-sampling and augmented MCL need point particles (kernel='point')")
+        if self.kernel == "kalman":  # the kernels resample by splitting: these moves of point particles would be ignored
+            moves = [name for name, on in (("roughening", self.roughening > 0), ("regularization", self.regularization > 0),
+                                           ("moment_matching", self.moment_matching != "none"), ("antithetic", self.antithetic)) if on]
+            if moves:
+                raise ValueError(f"{', '.join(moves)} move point particles; the Kalman kernels (kernel='kalman') resample by splitting")
+        elif self.innovation_gate > 0:
+            raise ValueError("innovation_gate gates the readings of the Kalman kernels (kernel='kalman'); point particles weigh every reading")
         return self
 
     @field_validator("kernel_split")

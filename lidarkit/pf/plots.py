@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -78,8 +78,9 @@ def _draw_particles(ax, result, step: int, max_arrows: int = 300) -> None:
     ax.set_title(f"step {step}")
 
 
-def animate(result, path: str | os.PathLike, fps: int = 10) -> Path:
-    """GIF of the particle cloud over every recorded snapshot (matplotlib PillowWriter)."""
+def animate(result, path: str | os.PathLike, fps: int = 10, on_frame: Callable[[], None] | None = None) -> Path:
+    """GIF of the particle cloud over every recorded snapshot (matplotlib PillowWriter); ``on_frame``: called after
+    each frame is drawn (progress)."""
     plt = _pyplot()
     from matplotlib.animation import PillowWriter
 
@@ -95,6 +96,8 @@ def animate(result, path: str | os.PathLike, fps: int = 10) -> Path:
                 ax.clear()
                 _draw_particles(ax, result, step)
                 writer.grab_frame()
+                if on_frame is not None:
+                    on_frame()
     plt.close(fig)
     return path
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import logging
 import time
+from pathlib import Path
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -322,6 +323,16 @@ def _filter_outputs(out: dict, pf) -> dict:
     return {**{key: out[key] for key in keys}, "n_weight_resets": pf.n_weight_resets}
 
 
+def data_files(data: Any) -> dict[str, str]:
+    """The files a run read, as absolute paths (``data``: their folder; a sensor file passed in place of the folder is
+    named, not only the folder, whose own sensor_data.dat may be another recording)."""
+    out = {"data": str(Path(getattr(data, "root", "")).resolve()) if getattr(data, "root", None) is not None else ""}
+    for key, attr in (("world_file", "world_path"), ("sensor_file", "sensor_path")):
+        if getattr(data, attr, None) is not None:
+            out[key] = str(Path(getattr(data, attr)).resolve())
+    return out
+
+
 def checked_seed(seed: Any) -> int:
     """``seed`` as the integer >= 0 a reproducible run needs (None would draw fresh entropy: refused)."""
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
@@ -379,7 +390,7 @@ def run_protocol(
             "kidnap_offset": list(kidnap_offset) if kidnap_at_step is not None else None,
             "odometry_noise_std": list(ODOMETRY_NOISE_STD),
             "q_cov": q_cov.tolist(),
-            "data": str(getattr(data, "root", "")),
+            **data_files(data),
         },
         landmarks_xy=np.asarray(data.landmarks.positions_xy, dtype=np.float64),
         dead_reckoning=sim.dead_reckoning,
@@ -445,7 +456,7 @@ def run_recorded(
     dr = integrate_odometry(odo)
     result = PFRunResult(
         config=cfg,
-        settings={"mode": "recorded", "seed": seed, "q_cov": resolve_q(cfg.q, cfg.q_as).tolist(), "data": str(getattr(data, "root", ""))},
+        settings={"mode": "recorded", "seed": seed, "q_cov": resolve_q(cfg.q, cfg.q_as).tolist(), **data_files(data)},
         landmarks_xy=np.asarray(data.landmarks.positions_xy, dtype=np.float64),
         dead_reckoning=dr,
         ground_truth=None,

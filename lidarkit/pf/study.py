@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -78,8 +79,10 @@ class StudyRow:
                 "lost_seeds": self.lost_seeds, "localized_fraction": self.localized, "recovered_in_steps": self.recovered_in}
 
 
-def run_study(data, particles: list[int], seeds: list[int], *, config: PFConfig | None = None, **protocol_kwargs: Any) -> list[StudyRow]:
-    """``run_protocol`` for every particle count x seed; one :class:`StudyRow` per count."""
+def run_study(data, particles: list[int], seeds: list[int], *, config: PFConfig | None = None,
+              on_run: Callable[[], None] | None = None, **protocol_kwargs: Any) -> list[StudyRow]:
+    """``run_protocol`` for every particle count x seed; one :class:`StudyRow` per count. ``on_run``: called after
+    each run (progress)."""
     from lidarkit.pf.protocol import run_protocol
 
     if not particles or not seeds:
@@ -99,6 +102,8 @@ def run_study(data, particles: list[int], seeds: list[int], *, config: PFConfig 
             row.localized.append(localized_fraction(err))
             if kidnap is not None:
                 row.recovered_in.append(steps_to_recover(err, int(kidnap)))
+            if on_run is not None:
+                on_run()
         rows.append(row)
     lost = sum(r.lost_seeds for r in rows)
     if lost:
