@@ -171,7 +171,20 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true", help="few N values, 3 seeds, small speed runs (smoke test)")
     ap.add_argument("--speed-only", action="store_true", help="re-measure only the speed section of an existing result")
     args = ap.parse_args(argv)
+    if args.workers < 1 or args.seeds < 1:
+        ap.error(f"--workers and --seeds must be >= 1, got {args.workers} and {args.seeds}")
 
+    from lidarkit.lifetime import Interrupted, handle_signals
+
+    try:
+        with handle_signals():  # SIGINT / SIGTERM: one line, the workers stopped, nothing half-written
+            return _main(args)
+    except Interrupted as stop:
+        print(f"pf_particles: interrupted by {stop}; no result written", file=sys.stderr)
+        return stop.exit_code
+
+
+def _main(args: argparse.Namespace) -> int:
     from lidarkit import atomic
     from lidarkit.io.landmarks import LandmarkData
     from lidarkit.pf.plots import plot_mse_vs_n
@@ -197,8 +210,15 @@ def main(argv: list[str] | None = None) -> int:
     abl_n, ref_n = 100, 10000
     abl_jobs = [(path, abl_n, s, kw) for _, kw in ABLATION for s in seeds] + [(path, ref_n, s, {}) for s in seeds]
     abl_jobs += [(path, 20, s, dict(kernel="kalman", ess_threshold=0.5)) for s in seeds]
-    with ProcessPoolExecutor(max_workers=args.workers) as pool:
+    from lidarkit.bench.executors import stop_pool
+    from lidarkit.lifetime import init_worker
+
+    # workers die with this process (SIGTERM to it left them waiting for work that never came)
+    pool = ProcessPoolExecutor(max_workers=args.workers, initializer=init_worker, initargs=(os.getpid(),))
+    try:
         results = list(pool.map(_run, jobs + abl_jobs, chunksize=4))
+    finally:  # interrupted or failed: the workers are stopped now instead of finishing their jobs
+        stop_pool(pool)
     table_res, abl_res = results[: len(jobs)], results[len(jobs):]
 
     rows: dict[str, dict] = {}

@@ -106,7 +106,7 @@ class ProcessExecutor:
                         outcome = crash_outcome(type(err).__name__, str(err))
                     yield key, outcome
         finally:
-            _shutdown(pool)
+            stop_pool(pool)
         if broken:
             log.warning("a worker process died; re-running %d job(s) one at a time to find the culprit", len(broken))
             yield from self._run_isolated(fn, broken)
@@ -119,13 +119,13 @@ class ProcessExecutor:
                     outcome = pool.submit(fn, spec).result()
                 except BrokenProcessPool as err:
                     outcome = crash_outcome("WorkerCrashed", f"the worker process died while running this job ({err})")
-                    _shutdown(pool)
+                    stop_pool(pool)
                     pool = self._pool(1)
                 except Exception as err:
                     outcome = crash_outcome(type(err).__name__, str(err))
                 yield key, outcome
         finally:
-            _shutdown(pool)
+            stop_pool(pool)
 
     def _pool(self, workers: int) -> ProcessPoolExecutor:
         return ProcessPoolExecutor(max_workers=workers, mp_context=self.context, initializer=init_worker,
@@ -135,7 +135,7 @@ class ProcessExecutor:
         pass
 
 
-def _shutdown(pool: ProcessPoolExecutor) -> None:
+def stop_pool(pool: ProcessPoolExecutor) -> None:
     """Cancel queued jobs and stop the workers now (an interrupted run loses only the jobs in flight).
 
     Normal completion: the pool joins its idle workers. Otherwise the workers are terminated (SIGKILL after 2 s);
