@@ -260,6 +260,40 @@ def test_verdicts_with_tied_units_and_a_median_ci_across_zero():
     assert mixed.better == "" and "reaches across 0" in mixed.verdict()
 
 
+def test_seeds_that_change_nothing_are_one_measurement_and_few_seeds_say_so():
+    """Six seeds of deterministic methods on fixed data gave six copies of one difference: Wilcoxon p = 0.031 and a
+    winner. Five pairs can never reach p < 0.05: the verdict says so instead of 'no significant difference' alone."""
+    copies = paired_test([0.40] * 6, [0.35] * 6, name_a="A", name_b="B")
+    assert copies.repeated and copies.better == "" and copies.p_value < 0.05
+    assert "one measurement repeated, not 6 independent ones" in copies.verdict()
+    varied = paired_test([0.40, 0.41, 0.42, 0.43, 0.44, 0.45], [0.35] * 6, name_a="A", name_b="B")  # B fixed, A varies: a test
+    assert not varied.repeated and varied.better == "b"
+    assert not paired_test([1.0] * 6, [2.0] * 6, pairing="segment").repeated  # segments are units by construction
+    few = paired_test(np.arange(1.0, 6.0) * 10, np.arange(1.0, 6.0), name_a="A", name_b="B")
+    assert few.better == "" and few.p_value == pytest.approx(0.0625)
+    assert "with 5 differing seeds the smallest p this test can give is 0.0625: at least 6 are needed to reach p < 0.05" in few.verdict()
+
+
+def test_compare_holds_the_jobs_of_the_folder_s_suite_as_its_report(tmp_path, capsys):
+    """A folder reused for a smaller suite still holds the earlier suite's results: compare paired them too (its
+    report left them out), turning p = 0.25 over 3 seeds into a verdict over 10."""
+    from lidarkit.bench.runner import run_suite
+    from lidarkit.bench.suite import load_suite
+
+    folder = _run(tmp_path, "reused", "[kiss, {name: vanilla, params: {voxel_size_m: 0.5}}]")  # 10 seeds
+    smaller = tmp_path / "smaller.yaml"
+    smaller.write_text(textwrap.dedent(SUITE.format(methods="[kiss, {name: vanilla, params: {voxel_size_m: 0.5}}]"))
+                       .replace("seeds: 10", "seeds: [0, 1, 2]"))
+    run_suite(load_suite(smaller), folder, executor="serial")
+    now = compare(folder, folder, method_a="kiss", method_b="vanilla", metric="ape_rmse_m")
+    assert now.n_pairs == 3 and "14 result(s) in" in now.note and "not in its suite.json (an earlier suite) left out" in now.note
+    every = compare(folder, folder, method_a="kiss", method_b="vanilla", metric="ape_rmse_m", every_result=True)
+    assert every.n_pairs == 10 and every.note == ""
+    code, out, _ = run_cli(["compare", str(folder), str(folder), "--method-a", "kiss", "--method-b", "vanilla", "--metric", "ape_rmse_m",
+                            "--all"], capsys)
+    assert code == 0 and "(10 paired seeds" in out
+
+
 def test_noise_from_a_baseline_is_refused_for_run_folders(tmp_path):
     """A baseline's bands are of whole-run metrics: for two run folders (compared per segment or frame) no metric ever
     matched, and the hint to name one could not be followed."""

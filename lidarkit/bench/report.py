@@ -724,6 +724,12 @@ def _suite_jobs(manifest: dict[str, Any]) -> dict[str, dict[str, Any]]:
         return {}
 
 
+def suite_job_keys(out_dir: str | Path) -> set[str]:
+    """The job keys of the folder's ``suite.json`` (the last suite run there); empty without a readable one. What a
+    report, and a comparison of the folder, is restricted to by default."""
+    return set(_suite_jobs(_suite_manifest(Path(out_dir))))
+
+
 def _skipped(manifest: dict[str, Any]) -> list[tuple[str, str]]:
     try:
         return [(str(s["experiment"]), str(s["reason"])) for s in manifest.get("skipped_experiments", [])]

@@ -27,12 +27,13 @@ def compare_command(
         "for the metric (the widest over its jobs; with --noise too, the larger of the two)."),
     seed: int = typer.Option(0, "--seed", help="Seed of the bootstrap CI of the difference."),
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write the comparison as JSON here."),
+    every_result: bool = typer.Option(False, "--all", help="Bench folders: every result in the folder, not only the jobs of its suite.json (as its report)."),
 ) -> None:
     """Pair RUN_A and RUN_B on the same units (KITTI segments, frames or seeds) and test the difference (Wilcoxon)."""
     from lidarkit.eval.compare import compare
 
     result = compare(run_a, run_b, metric=metric, method_a=method_a, method_b=method_b, alpha=alpha, noise=noise,
-                     noise_from=noise_from, seed=seed)
+                     noise_from=noise_from, seed=seed, every_result=every_result)
     console = stdout()
     console.print(f"A: {result.name_a}   B: {result.name_b}   metric: {result.metric} ({result.n_pairs} paired "
                   f"{result.pairing}s, {result.n_ties} ties)", soft_wrap=True)

@@ -46,6 +46,7 @@ class BenchRuns:
     name: str
     values: dict[str, dict[str, Any]] = field(default_factory=dict)  # pair key -> metrics
     labels: dict[str, str] = field(default_factory=dict)  # pair key -> "dataset, seed N"
+    n_left_out: int = 0  # results of jobs outside the folder's suite.json (an earlier suite) not compared
 
 
 def load_odometry_run(path: str | os.PathLike) -> OdometryRun:
@@ -75,20 +76,26 @@ def load_odometry_run(path: str | os.PathLike) -> OdometryRun:
     )
 
 
-def load_bench_runs(path: str | os.PathLike, method: str | None = None) -> BenchRuns:
+def load_bench_runs(path: str | os.PathLike, method: str | None = None, every_result: bool = False) -> BenchRuns:
     """The successful results of one method of a bench folder; ``method`` is a method label (``kiss``,
     ``vanilla(voxel_size_m=0.5)``) or a bare method name when only one label has it. ConfigError lists the
-    labels when the choice is ambiguous."""
+    labels when the choice is ambiguous. As the report, only the jobs of the folder's ``suite.json`` (results an
+    earlier suite left in a reused folder are counted in ``n_left_out``); ``every_result``: all of them."""
     from lidarkit.bench.jobs import Job, canonical_json
-    from lidarkit.bench.report import latest_per_job
+    from lidarkit.bench.report import latest_per_job, suite_job_keys
     from lidarkit.bench.results import load_results
 
     path = Path(path)
     if not (path / "jobs").is_dir():
         raise DataError("not a bench results folder (no jobs/ inside)", source=path)
     records = [r for r in latest_per_job(load_results(path)) if r.get("status") == "ok"]
+    suite = set() if every_result else suite_job_keys(path)
+    n_all = len(records)
+    if suite:
+        records = [r for r in records if r["key"] in suite]
     if not records:
-        raise DataError("no successful job results in jobs/", source=path)
+        raise DataError("no successful job results in jobs/" + (" for the jobs of suite.json (--all: every result)" if suite else ""),
+                        source=path)
     labels = sorted({Job.from_spec(r["job"]).method_label for r in records})
     if method is None:
         if len(labels) > 1:
@@ -103,7 +110,7 @@ def load_bench_runs(path: str | os.PathLike, method: str | None = None) -> Bench
             raise ConfigError(f"method {method!r} {'is ambiguous' if named else 'not found'}; this folder has: {known}",
                               source=path)
         chosen = named[0]
-    runs = BenchRuns(path, chosen)
+    runs = BenchRuns(path, chosen, n_left_out=n_all - len(records))
     for r in records:
         job = Job.from_spec(r["job"])
         if job.method_label != chosen:
@@ -169,6 +176,7 @@ def compare(
     noise: float = 0.0,
     noise_from: str | os.PathLike | None = None,
     seed: int = 0,
+    every_result: bool = False,
 ) -> PairedComparison:
     """Paired Wilcoxon comparison of run ``a`` against run ``b`` (``diff = a - b``).
 
@@ -177,12 +185,13 @@ def compare(
     Odometry run folders pair per KITTI segment (``metric="segment_translation_pct"``, the default when the
     path allows 100 m segments) or per frame (``rpe_translation_m``, the default otherwise). Bench results
     folders pair per (dataset, seed) on a job metric (default: KITTI drift, else APE RMSE); ``method_a`` /
-    ``method_b`` pick a method when a folder holds several (the same folder may be given twice).
+    ``method_b`` pick a method when a folder holds several (the same folder may be given twice); only the jobs of each
+    folder's ``suite.json`` are compared, as its report holds them (``every_result``: every result in the folder).
     Runs over different data raise EvaluationError; two runs over the same dataset and frames, each scored against the
     ground truth at its own instant of the sweep, are compared with a ``note`` saying so.
     """
-    side_a = _load(a, method_a)
-    side_b = _load(b, method_b)
+    side_a = _load(a, method_a, every_result)
+    side_b = _load(b, method_b, every_result)
     if type(side_a) is not type(side_b):
         raise EvaluationError("compare an odometry run folder with another run folder, a bench folder with a bench folder",
                               source="compare")
@@ -232,11 +241,15 @@ def compare(
     result = paired_test(va, vb, name_a=name_a, name_b=name_b, metric=metric, pairing="seed",
                          lower_is_better=not higher_is_better(metric), alpha=alpha,
                          noise=_with_measured_noise(noise, noise_from, metric), seed=seed)
+    notes = []
     only_a, only_b = len(keys_a - keys_b), len(keys_b - keys_a)
     if only_a or only_b:  # the pairs are those both have: say what was left out
-        result = dataclasses.replace(result, note=f"{only_a} (dataset, seed) units only in A and {only_b} only in B are "
-                                                  f"left out: {len(common)} paired")
-    return result
+        notes.append(f"{only_a} (dataset, seed) units only in A and {only_b} only in B are left out: {len(common)} paired")
+    stale = {side_a.path: side_a.n_left_out, side_b.path: side_b.n_left_out}
+    for folder, n in stale.items():
+        if n:
+            notes.append(f"{n} result(s) in {folder} of jobs not in its suite.json (an earlier suite) left out (--all: every result)")
+    return dataclasses.replace(result, note="; ".join(notes)) if notes else result
 
 
 def _with_measured_noise(noise: float, noise_from: str | os.PathLike | None, metric: str) -> float:
@@ -247,14 +260,14 @@ def _with_measured_noise(noise: float, noise_from: str | os.PathLike | None, met
     return max(noise, measured_noise(noise_from, metric))
 
 
-def _load(side: Any, method: str | None) -> OdometryRun | BenchRuns:
+def _load(side: Any, method: str | None, every_result: bool = False) -> OdometryRun | BenchRuns:
     if isinstance(side, (OdometryRun, BenchRuns)):
         return side
     path = Path(side)
     if not path.exists():
         raise DataError("does not exist", source=path)
     if (path / "jobs").is_dir():
-        return load_bench_runs(path, method)
+        return load_bench_runs(path, method, every_result)
     if method is not None:
         raise ConfigError("a method applies to bench results folders only", source=path)
     return load_odometry_run(path)

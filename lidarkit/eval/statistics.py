@@ -135,6 +135,9 @@ class PairedComparison:
     better: str
     note: str = ""
     """What the reader should know about the pairing (e.g. each run scored against its own instant of the sweep)."""
+    repeated: bool = False
+    """Every seed gave the same value on each side (a deterministic method on fixed data): one measurement repeated,
+    not independent units, so no test is made."""
 
     @property
     def significant(self) -> bool:
@@ -163,8 +166,17 @@ class PairedComparison:
                    "disagree in direction")
         elif self.p_value < self.alpha and self.diff_ci_low < 0 < self.diff_ci_high:
             why = f"the 95% CI of the median difference [{self.diff_ci_low:+.3g}, {self.diff_ci_high:+.3g}] reaches across 0"
+        n_ranked = self.n_pairs - self.n_ties
+        smallest_p = 2.0 ** (1 - n_ranked) if n_ranked > 0 else 1.0  # exact two-sided: every unit on one side
+        if self.p_value >= self.alpha and smallest_p >= self.alpha and n_ranked > 0:
+            why += (f"; with {n_ranked} differing {self.pairing}s the smallest p this test can give is {smallest_p:.3g}: "
+                    f"at least {math.ceil(1 - math.log2(self.alpha))} are needed to reach p < {self.alpha:g}")
         if self.n_ties == self.n_pairs:
             why = "every paired difference is zero (within floating-point noise)"
+        if self.repeated:
+            why = (f"each side gave the same value for every one of the {self.n_pairs} {self.pairing}s: the {self.pairing}s change "
+                   "nothing here (deterministic methods on fixed data), so they are one measurement repeated, not "
+                   f"{self.n_pairs} independent ones, and no test is made")
         return (f"no significant difference between {self.name_a} and {self.name_b} on {m}: {why}; "
                 f"mean {self.mean_a:.4g} vs {self.mean_b:.4g}, {unit}")
 
@@ -222,15 +234,18 @@ def paired_test(
     lo, hi = bootstrap_ci(diff, seed=seed, statistic="median")
     median_diff = float(np.median(diff))
     better = ""
+    # seeds that change nothing on either side are one measurement repeated: any constant difference would rank as
+    # "significant" (6 copies of one value gave p = 0.031)
+    repeated = pairing == "seed" and bool(np.ptp(va) <= RELATIVE_TIE_TOLERANCE * scale and np.ptp(vb) <= RELATIVE_TIE_TOLERANCE * scale)
     # the direction is the ranks' (what the test tested); the median must agree with it, exceed the noise, and its
     # bootstrap CI must not reach across 0 (a verdict beside a CI of [-0.0006, +0.0044] read as a contradiction)
     ci_clear = not lo < 0 < hi
-    if p_value < alpha and effect * median_diff > 0 and abs(median_diff) > noise and ci_clear:
+    if p_value < alpha and effect * median_diff > 0 and abs(median_diff) > noise and ci_clear and not repeated:
         a_lower = effect < 0
         better = "a" if a_lower == lower_is_better else "b"
     return PairedComparison(
         name_a=name_a, name_b=name_b, metric=metric, pairing=pairing, n_pairs=int(va.size), n_ties=int(tie.sum()),
         mean_a=float(va.mean()), mean_b=float(vb.mean()), mean_diff=float(diff.mean()), median_diff=median_diff,
         diff_ci_low=lo, diff_ci_high=hi, statistic=statistic, p_value=p_value, effect_size=effect, alpha=alpha,
-        noise=float(noise), lower_is_better=lower_is_better, better=better,
+        noise=float(noise), lower_is_better=lower_is_better, better=better, repeated=repeated,
     )
