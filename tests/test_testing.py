@@ -70,6 +70,30 @@ def test_assert_no_worse_than_against_a_baseline_and_a_mapping(tiny_baseline):
         assert_no_worse_than({"x": 1.0}, tiny_baseline, metric="ape_rmse_m")
 
 
+def test_a_result_over_other_data_than_the_pinned_job_is_refused(tmp_path):
+    """kiss pinned on an 8-sweep simulated drive: vanilla over 3 sweeps of it passed at tolerance 0 (nothing said the
+    data differ); over another seed of the scene too."""
+    from lidarkit.odometry import run
+    from lidarkit.sim.lidar import SimulatedLidarSequence
+
+    (tmp_path / "suite.yaml").write_text(textwrap.dedent("""
+        name: kiss-reference
+        experiments:
+          - name: sim
+            task: odometry
+            dataset: {kind: sim_lidar, scene: street, n_frames: 8, n_beams: 16, n_azimuths: 360, seed: 0, name: sim street}
+            methods: [kiss]
+    """))
+    baseline = record(tmp_path / "suite.yaml", tmp_path / "baseline", repeats=1)
+    drive = dict(scene="street", n_beams=16, n_azimuths=360)
+    same = run(SimulatedLidarSequence(n_frames=8, seed=0, **drive), "kiss")
+    assert_no_worse_than(same, baseline, method="kiss", metric="ape_rmse_m", tolerance=1e-9)
+    with pytest.raises(EvaluationError, match="the result ran over 3 frames, the pinned job 'kiss' over 8: not the pinned data"):
+        assert_no_worse_than(run(SimulatedLidarSequence(n_frames=3, seed=0, **drive), "kiss"), baseline, method="kiss", metric="ape_rmse_m")
+    with pytest.raises(EvaluationError, match=r"dataset differs from the pinned job 'kiss': seed 1 \(pinned 0\)"):
+        assert_no_worse_than(run(SimulatedLidarSequence(n_frames=8, seed=1, **drive), "kiss"), baseline, method="kiss", metric="ape_rmse_m")
+
+
 def test_pytest_plugin_fixture_in_a_user_test_run(tiny_baseline, tmp_path):
     (tmp_path / "test_user.py").write_text(textwrap.dedent("""
         from lidarkit.testing import assert_no_worse_than

@@ -80,13 +80,14 @@ def assert_no_worse_than(
     band = 0.0
     if isinstance(baseline, (str, os.PathLike)):
         baseline = load_baseline(Path(baseline))
+    now_metrics = metrics_of(result)
     if isinstance(baseline, Baseline):
         job = baseline.job(method, dataset)
         ref_metrics = {k: float(v) for k, v in job["metrics"].items() if isinstance(v, (int, float))}
         band = float(job.get("bands", {}).get(metric, 0.0))
+        _check_same_data(result, now_metrics, job, ref_metrics)
     else:
         ref_metrics = metrics_of(baseline)
-    now_metrics = metrics_of(result)
     for name, source in ((metric, now_metrics), (metric, ref_metrics)):
         if name not in source:
             which = "result" if source is now_metrics else "baseline"
@@ -102,3 +103,21 @@ def assert_no_worse_than(
     if not math.isfinite(now) or worse_by > tol:
         raise AssertionError(f"regression: {metric} = {now:.6g}, baseline {ref:.6g} (worse by {worse_by:.4g}, "
                              f"tolerance {tol:.4g})")
+
+
+def _check_same_data(result: Any, now_metrics: dict[str, float], job: Mapping[str, Any], ref_metrics: dict[str, float]) -> None:
+    """EvaluationError when ``result`` did not run on the pinned job's data: another number of frames, or (a simulated
+    run) another simulator setting than the pinned dataset spec names. A metric is comparable on the same data only:
+    3 sweeps of the pinned 8-sweep drive passed against it at tolerance 0."""
+    if "n_frames" in now_metrics and "n_frames" in ref_metrics and now_metrics["n_frames"] != ref_metrics["n_frames"]:
+        raise EvaluationError(f"the result ran over {now_metrics['n_frames']:g} frames, the pinned job {job.get('label', '')!r} over "
+                              f"{ref_metrics['n_frames']:g}: not the pinned data", source="assert_no_worse_than")
+    pinned = ((job.get("spec") or {}).get("dataset") or {}) if isinstance(job.get("spec"), Mapping) else {}
+    config = getattr(result, "config", None)
+    ran = ((config or {}).get("run") or {}).get("dataset_config") if isinstance(config, Mapping) else None
+    if not isinstance(pinned, Mapping) or not isinstance(ran, Mapping):
+        return
+    differ = [f"{k} {ran[k]!r} (pinned {v!r})" for k, v in pinned.items() if k not in ("kind", "name") and k in ran and ran[k] != v]
+    if differ:
+        raise EvaluationError(f"the result's dataset differs from the pinned job {job.get('label', '')!r}: {', '.join(differ)}",
+                              source="assert_no_worse_than")
