@@ -231,6 +231,29 @@ def test_datasets_and_params_that_print_alike_are_separate_rows(tmp_path):
     assert [row.dataset for row in rows] == ["synth(steps=10)", "synth(steps=20)"] and all(row.n_ok == 1 for row in rows)
 
 
+def test_every_plot_has_its_own_file(tmp_path):
+    """Experiments named "x/y" and "x y", and two datasets whose labels share their first 80 characters: each plot
+    has its own file (report.md showed one experiment's trajectories under the other's caption)."""
+    suite = tmp_path / "suite.yaml"
+    suite.write_text(textwrap.dedent("""
+        experiments:
+          - name: random_walk_noise_sweep_on_the_synthetic_paths_for_the_paper_ablation
+            task: selftest
+            datasets: [{kind: synthetic, name: "path A (short)"}, {kind: synthetic, name: "path B (long)"}]
+            methods: [random_walk]
+          - {name: "x/y", task: selftest, dataset: {kind: synthetic, name: d}, methods: [random_walk]}
+          - {name: "x y", task: selftest, dataset: {kind: synthetic, name: d}, methods: [random_walk]}
+    """))
+    run_suite(load_suite(suite), tmp_path / "out", executor="serial")
+    report = build_report(tmp_path / "out")
+    names = [p.filename for p in report.plots]
+    assert len(names) == len(set(names)) and sum(name.startswith("traj_") for name in names) == 4
+    links = [line for line in (tmp_path / "out" / "report.md").read_text().splitlines() if "](plots/" in line]
+    assert len(links) == len({line.split("](plots/")[1] for line in links})
+    build_report(tmp_path / "out", plots=False)  # a report without plots leaves none of the earlier report's behind
+    assert not list((tmp_path / "out" / "plots").glob("*.png"))
+
+
 def test_a_method_that_failed_on_most_seeds_is_not_the_best_and_its_cells_say_so(tmp_path):
     from lidarkit.bench.jobs import Job
     from lidarkit.bench.report import pivot, summary_rows

@@ -214,6 +214,14 @@ def _slug(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", text).strip("_")[:80] or "plot"
 
 
+def _file_slug(text: str) -> str:
+    """:func:`_slug` and a short digest of ``text``: a file name per text ("x y" and "x/y", two long names that share
+    their first 80 characters each drew over the other's plot)."""
+    import hashlib
+
+    return f"{_slug(text)[:72]}_{hashlib.sha1(text.encode()).hexdigest()[:8]}"
+
+
 def _first_ok_per_method(items: list[dict[str, Any]], series: str) -> dict[str, dict[str, Any]]:
     out: dict[str, dict[str, Any]] = {}
     for r in sorted(items, key=lambda r: r["job"]["seed"]):
@@ -252,7 +260,7 @@ def make_plots(records: list[dict[str, Any]]) -> list[Plot]:
             ax.set_aspect("equal", adjustable="datalim")
             ax.legend(fontsize=7)
             ax.set_title(f"trajectories: {where}", fontsize=9)
-            plots.append(Plot(f"Trajectories — {where}", f"traj_{_slug(where)}.png", _png(fig), task,
+            plots.append(Plot(f"Trajectories — {where}", f"traj_{_file_slug(where)}.png", _png(fig), task,
                               f"Top view of the estimated trajectories (first seed of each method) against the "
                               f"reference (dashed): {experiment}, {dataset}."))
         chosen = _first_ok_per_method(items, "error_over_time")
@@ -267,7 +275,7 @@ def make_plots(records: list[dict[str, Any]]) -> list[Plot]:
             ax.set_ylabel(ylabel)
             ax.legend(fontsize=7)
             ax.set_title(f"error over time: {where}", fontsize=9)
-            plots.append(Plot(f"Error over time — {where}", f"err_{_slug(where)}.png", _png(fig), task,
+            plots.append(Plot(f"Error over time — {where}", f"err_{_file_slug(where)}.png", _png(fig), task,
                               f"{ylabel} over time per method: {experiment}, {dataset}."))
         chosen = _first_ok_per_method(items, "rmse_history")
         if chosen:
@@ -282,7 +290,7 @@ def make_plots(records: list[dict[str, Any]]) -> list[Plot]:
             ax.set_yscale("log")
             ax.legend(fontsize=7)
             ax.set_title(f"ICP RMSE vs iteration: {where}", fontsize=9)
-            plots.append(Plot(f"RMSE vs iteration — {where}", f"rmse_{_slug(where)}.png", _png(fig), task,
+            plots.append(Plot(f"RMSE vs iteration — {where}", f"rmse_{_file_slug(where)}.png", _png(fig), task,
                               f"Correspondence RMSE per ICP iteration (first pair, log scale): {experiment}, {dataset}."))
     plots.extend(_sweep_plots(records))
     return plots
@@ -321,7 +329,7 @@ def _sweep_plots(records: list[dict[str, Any]]) -> list[Plot]:
             ax.set_xscale("log" if max(max(p) for p in lines.values()) / max(min(min(p) for p in lines.values()), 1e-12) >= 10 else "linear")
             ax.legend(fontsize=7)
             ax.set_title(f"{task}: {metric} vs {param} (mean ± std over seeds)", fontsize=9)
-            plots.append(Plot(f"{metric} vs {param} — {task}", f"sweep_{_slug(task + '_' + metric + '_' + param)}.png", _png(fig),
+            plots.append(Plot(f"{metric} vs {param} — {task}", f"sweep_{_file_slug(task + '_' + metric + '_' + param)}.png", _png(fig),
                               task, f"{metric} against {param}: mean ± std over seeds, one line per dataset and method."))
     return plots
 
@@ -690,11 +698,11 @@ def build_report(
     from lidarkit.bench.publication import build_publication
 
     report.publication = build_publication(records, out_dir, plots=plots)
-    if plots:  # plots/ is the report's own: an earlier report's figures this one does not draw go
-        drawn = {p.filename for p in report.plots} | {path.name for _, path in report.publication.boxplots}
-        for stale in (out_dir / "plots").glob("*.png"):
-            if stale.name not in drawn:
-                stale.unlink()
+    # plots/ is the report's own: an earlier report's figures this one does not draw go (all of them with plots=False)
+    drawn = {p.filename for p in report.plots} | {path.name for _, path in report.publication.boxplots}
+    for stale in (out_dir / "plots").glob("*.png"):
+        if stale.name not in drawn:
+            stale.unlink()
 
     report.markdown_path = atomic.write_text(out_dir / "report.md", _markdown(report, title))
     report.csv_path = atomic.write_text(out_dir / "report.csv", _csv(report))
