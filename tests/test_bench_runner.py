@@ -225,7 +225,38 @@ def test_unknown_executor_and_misplaced_address_are_config_errors(tmp_path):
         run_suite(suite, tmp_path / "b", executor="process", address="tcp://127.0.0.1:8786")
     with pytest.raises(ConfigError, match="the serial executor runs one job at a time; --workers 2"):  # it was ignored
         run_suite(suite, tmp_path / "b", executor="serial", workers=2)
+    for address in ("notanaddress", "tcp://127.0.0.1", "tls://host:99999"):  # distributed's ValueError traceback, after suite.json
+        with pytest.raises(ConfigError, match=rf"--address: '{address}' is not a scheduler address"):
+            run_suite(suite, tmp_path / "b", executor="dask", address=address)
     assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()  # refused before writing anything
+
+
+def test_a_folder_another_bench_is_running_in_is_refused(tmp_path):
+    """Two runs on one folder ran every job twice and one's report took the other's title: the second is refused,
+    naming the process that holds the folder; the lock goes with that process."""
+    from lidarkit.bench.runner import folder_lock
+    from lidarkit.errors import OutputError
+
+    suite = load_suite(suite_file(tmp_path, TINY))
+    out = tmp_path / "out"
+    with folder_lock(out):
+        with pytest.raises(OutputError, match=rf"another lidarkit bench is running in this folder \(pid {os.getpid()}\)"):
+            run_suite(suite, out, executor="serial")
+        assert not (out / "suite.json").exists()
+    summary = run_suite(suite, out, executor="serial")  # released: the next run goes ahead
+    assert summary.ran == summary.total
+    # a holder killed with SIGKILL leaves the lock file but not the lock
+    holder = subprocess.Popen([sys.executable, "-c", "import sys, time; from pathlib import Path; "
+                               "from lidarkit.bench.runner import folder_lock; lock = folder_lock(Path(sys.argv[1])); lock.__enter__(); "
+                               "print('held', flush=True); time.sleep(60)", str(out)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        with pytest.raises(OutputError, match=rf"\(pid {holder.pid}\)"):
+            run_suite(suite, out, executor="serial")
+    finally:
+        holder.kill()
+        holder.wait()
+    assert run_suite(suite, out, executor="serial").total == summary.total
 
 
 def test_job_warnings_go_into_the_result_and_the_report(tmp_path, capsys):

@@ -227,10 +227,27 @@ def check_executor_args(name: str, workers: int | None = None, address: str | No
         raise ConfigError(f"unknown executor {name!r}; known: {', '.join(EXECUTORS)}", source="--executor")
     if address and name != "dask":
         raise ConfigError("--address only applies to the dask executor", source="--address")
+    if address:
+        _check_address(address)
     if workers is not None and workers < 1:
         raise ConfigError(f"workers must be >= 1, got {workers}", source="--workers")
     if workers is not None and workers > 1 and name == "serial":  # (it was ignored: one job at a time)
         raise ConfigError(f"the serial executor runs one job at a time; --workers {workers} is for process or dask", source="--workers")
+
+
+def _check_address(address: str) -> None:
+    """A Dask scheduler address is ``[protocol://]host:port`` (``inproc://`` needs no port); anything else is a
+    ConfigError before a folder is written (distributed raised a ValueError traceback after the run had started)."""
+    scheme, sep, rest = address.partition("://")
+    if not sep:
+        scheme, rest = "tcp", address
+    if scheme == "inproc" and rest:
+        return
+    host, colon, port = rest.rpartition(":")
+    known = ("tcp", "tls", "ws", "wss", "ucx")
+    if scheme not in known or not colon or not host.strip("[]") or not port.isdigit() or not 0 < int(port) < 65536:
+        raise ConfigError(f"{address!r} is not a scheduler address: [{'|'.join(known)}://]host:port, e.g. tcp://127.0.0.1:8786",
+                          source="--address")
 
 
 def make_executor(name: str, *, workers: int | None = None, address: str | None = None):

@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import json
 import logging
+import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -16,6 +19,7 @@ from lidarkit.bench.jobs import Job
 from lidarkit.bench.results import is_finished, make_record, remove_stale_temp_files, write_result
 from lidarkit.bench.suite import Suite
 from lidarkit.bench.worker import execute_job
+from lidarkit.errors import OutputError
 
 log = logging.getLogger(__name__)
 
@@ -62,33 +66,61 @@ def run_suite(
     out_dir = Path(out_dir)
     t0 = time.perf_counter()
     keyed = [(job.key(version), job) for job in suite.jobs]
-    by_key = dict(keyed)
-    todo = [(key, job) for key, job in keyed if force or not is_finished(out_dir, key)]
-    summary = RunSummary(out_dir=out_dir, total=len(keyed), skipped=len(keyed) - len(todo))
-    _write_manifest(suite, out_dir, keyed, version)
-    remove_stale_temp_files(out_dir)
-    if on_start is not None:
-        on_start(len(todo), summary.skipped)
-    if todo:
-        runner = make_executor(executor, workers=workers, address=address)
+    with folder_lock(out_dir):
+        by_key = dict(keyed)
+        todo = [(key, job) for key, job in keyed if force or not is_finished(out_dir, key)]
+        summary = RunSummary(out_dir=out_dir, total=len(keyed), skipped=len(keyed) - len(todo))
+        _write_manifest(suite, out_dir, keyed, version)
+        remove_stale_temp_files(out_dir)
+        if on_start is not None:
+            on_start(len(todo), summary.skipped)
+        if todo:
+            runner = make_executor(executor, workers=workers, address=address)
+            try:
+                for key, outcome in runner.run(job_fn, [(key, job.spec()) for key, job in todo]):
+                    job = by_key[key]
+                    record = make_record(job, key, version, outcome)
+                    write_result(out_dir, record)
+                    summary.ran += 1
+                    if record["status"] == "ok":
+                        summary.ok += 1
+                    else:
+                        summary.failed += 1
+                        err = record.get("error") or {}
+                        summary.failures.append((key, job_label(job), f"{err.get('type')}: {err.get('message')}"))
+                    if on_result is not None:
+                        on_result(job, record)
+            finally:
+                runner.close()
+        summary.wall_s = time.perf_counter() - t0
+        return summary
+
+
+LOCK_FILE = ".lidarkit-bench.lock"
+
+
+@contextlib.contextmanager
+def folder_lock(out_dir: Path) -> Iterator[None]:
+    """Hold ``out_dir`` for one suite run: a second ``lidarkit bench`` on the folder is an OutputError naming the
+    process that holds it (two runs ran every job twice, and one's report showed the other's title). The lock is the
+    kernel's (``flock``): it goes with the process, even one killed with SIGKILL."""
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        fd = os.open(out_dir / LOCK_FILE, os.O_RDWR | os.O_CREAT, 0o644)
+    except OSError as err:
+        raise OutputError(f"cannot write the results folder ({err.strerror or err})", source=out_dir) from None
+    try:
         try:
-            for key, outcome in runner.run(job_fn, [(key, job.spec()) for key, job in todo]):
-                job = by_key[key]
-                record = make_record(job, key, version, outcome)
-                write_result(out_dir, record)
-                summary.ran += 1
-                if record["status"] == "ok":
-                    summary.ok += 1
-                else:
-                    summary.failed += 1
-                    err = record.get("error") or {}
-                    summary.failures.append((key, job_label(job), f"{err.get('type')}: {err.get('message')}"))
-                if on_result is not None:
-                    on_result(job, record)
-        finally:
-            runner.close()
-    summary.wall_s = time.perf_counter() - t0
-    return summary
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(fd, 32, 0).decode(errors="replace").strip() or "?"
+            raise OutputError(f"another lidarkit bench is running in this folder (pid {holder}): wait for it to end or give "
+                              "another --out", source=out_dir) from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, str(os.getpid()).encode(), 0)
+        yield
+    finally:
+        os.close(fd)  # (closing the descriptor releases the lock)
 
 
 def _write_manifest(suite: Suite, out_dir: Path, keyed: list[tuple[str, Job]], version: str) -> None:
