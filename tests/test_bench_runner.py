@@ -190,6 +190,30 @@ def test_worker_crash_is_isolated_to_its_job(tmp_path):
             assert by_key[key]["status"] == "ok"
 
 
+def test_a_worker_crash_isolates_only_the_jobs_the_pool_may_have_held(tmp_path, caplog):
+    """One crashing job among 12: the jobs queued behind it go to a fresh pool of full size (all 10 ran one at a time,
+    which halved a large suite's throughput for the rest of the run)."""
+    import logging
+
+    from lidarkit.bench import executors
+
+    suite = load_suite(suite_file(tmp_path, """
+        seeds: 12
+        experiments:
+          - task: selftest
+            dataset: {kind: synthetic}
+            methods: [{name: random_walk, params: {steps: 5}}]
+        """))
+    items = [(job.key(), {**job.spec(), "method": "crash"} if job.seed == 1 else job.spec()) for job in suite.jobs]
+    with caplog.at_level(logging.WARNING, logger="lidarkit.bench.executors"):
+        outcomes = dict(executors.ProcessExecutor(workers=2).run(_crash_or_run, items))
+    assert len(outcomes) == 12 and sum(o["status"] == "ok" for o in outcomes.values()) == 11
+    said = [r.getMessage() for r in caplog.records if "a worker process died" in r.getMessage()]
+    assert said and all("one at a time" in m for m in said)
+    held = [int(m.split("re-running the ")[1].split(" ")[0]) for m in said]
+    assert max(held) <= 3, said  # at most one job per worker and one queued: never the whole rest of the suite
+
+
 def _crash_or_run(spec):
     if spec["method"] == "crash":
         os._exit(3)  # like a C extension aborting the process

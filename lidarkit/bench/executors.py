@@ -86,30 +86,37 @@ class ProcessExecutor:
                 forkserver.ensure_running()
 
     def run(self, fn: JobFn, items: list[Item]) -> Iterator[tuple[str, dict[str, Any]]]:
-        if not items:
-            return
-        broken: list[Item] = []
-        pool = self._pool(min(self.workers, len(items)))
-        try:
-            futures = {pool.submit(fn, spec): (key, spec) for key, spec in items}
-            pending = set(futures)
-            while pending:
-                done, pending = wait(pending, return_when=FIRST_COMPLETED)
-                for fut in done:
-                    key, spec = futures[fut]
-                    try:
-                        outcome = fut.result()
-                    except BrokenProcessPool:
-                        broken.append((key, spec))
-                        continue
-                    except Exception as err:  # e.g. a result that cannot be pickled back
-                        outcome = crash_outcome(type(err).__name__, str(err))
-                    yield key, outcome
-        finally:
-            stop_pool(pool)
-        if broken:
-            log.warning("a worker process died; re-running %d job(s) one at a time to find the culprit", len(broken))
-            yield from self._run_isolated(fn, broken)
+        queue = list(items)
+        while queue:
+            broken: list[tuple[int, Item]] = []  # (submission order, item) of the jobs the broken pool took down
+            pool = self._pool(min(self.workers, len(queue)))
+            try:
+                futures = {pool.submit(fn, spec): (order, (key, spec)) for order, (key, spec) in enumerate(queue)}
+                pending = set(futures)
+                while pending:
+                    done, pending = wait(pending, return_when=FIRST_COMPLETED)
+                    for fut in done:
+                        order, (key, spec) = futures[fut]
+                        try:
+                            outcome = fut.result()
+                        except BrokenProcessPool:
+                            broken.append((order, (key, spec)))
+                            continue
+                        except Exception as err:  # e.g. a result that cannot be pickled back
+                            outcome = crash_outcome(type(err).__name__, str(err))
+                        yield key, outcome
+            finally:
+                stop_pool(pool)
+            if not broken:
+                return
+            # the pool starts jobs in submission order, and at most one per worker plus one queued had left it: only
+            # those can hold the culprit; the rest go to a fresh pool of full size (all of them ran one at a time)
+            broken = [item for _, item in sorted(broken, key=lambda b: b[0])]
+            in_flight = min(len(broken), self.workers + 1)
+            log.warning("a worker process died; re-running the %d job(s) it may have held one at a time, %d other(s) in a new pool",
+                        in_flight, len(broken) - in_flight)
+            yield from self._run_isolated(fn, broken[:in_flight])
+            queue = broken[in_flight:]
 
     def _run_isolated(self, fn: JobFn, items: list[Item]) -> Iterator[tuple[str, dict[str, Any]]]:
         pool = self._pool(1)
