@@ -289,6 +289,8 @@ def test_compare_holds_the_jobs_of_the_folder_s_suite_as_its_report(tmp_path, ca
     assert now.n_pairs == 3 and "14 result(s) in" in now.note and "not in its suite.json (an earlier suite) left out" in now.note
     every = compare(folder, folder, method_a="kiss", method_b="vanilla", metric="ape_rmse_m", every_result=True)
     assert every.n_pairs == 10 and every.note == ""
+    with pytest.raises(ConfigError, match=r"unknown metric 'ape_rmse'; these results have: .*ape_rmse_m"):  # it listed the seeds
+        compare(folder, folder, method_a="kiss", method_b="vanilla", metric="ape_rmse")
     code, out, _ = run_cli(["compare", str(folder), str(folder), "--method-a", "kiss", "--method-b", "vanilla", "--metric", "ape_rmse_m",
                             "--all"], capsys)
     assert code == 0 and "(10 paired seeds" in out

@@ -232,6 +232,9 @@ def compare(
                                   source="compare")
     missing = [side_a.labels.get(k) or side_b.labels[k] for k in common
                if side_a.values[k].get(metric) is None or side_b.values[k].get(metric) is None]
+    if len(missing) == len(common):  # in no unit: a misspelt metric, not results that lack it
+        present = set.union(*(set(side_a.values[k]) & set(side_b.values[k]) for k in common))
+        raise ConfigError(f"unknown metric {metric!r}; these results have: {', '.join(sorted(present))}", source="metric")
     if missing:
         raise EvaluationError(f"metric {metric!r} missing for {', '.join(missing[:5])}", source="compare")
     from lidarkit.bench.tasks import higher_is_better  # (as the task that wrote the results declares it)
