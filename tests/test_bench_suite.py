@@ -5,6 +5,7 @@ from __future__ import annotations
 import textwrap
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from lidarkit.bench.datasets import resolve_dataset
@@ -320,4 +321,22 @@ def test_a_pf_suite_scoring_past_the_end_of_its_data_is_refused_before_running(t
     with pytest.raises(ConfigError, match=r"pf.yaml \(experiments\[0\].dataset, line 6\): mse_start 100000 is not below the data's 331 steps"):
         load_suite(path)
     path.write_text(path.read_text().replace("100000", "10"))
+    assert len(load_suite(path).jobs) == 1
+
+
+def test_a_kitti_sequence_that_is_not_there_is_refused_with_the_suite(tmp_path):
+    """sequence: "05" of a root that holds 00 only passed validation and --dry-run; every job then failed."""
+    root = tmp_path / "kitti"
+    (root / "sequences" / "00" / "velodyne").mkdir(parents=True)
+    np.zeros((10, 4), dtype=np.float32).tofile(root / "sequences" / "00" / "velodyne" / "000000.bin")
+    path = tmp_path / "kitti.yaml"
+    path.write_text(textwrap.dedent(f"""
+        experiments:
+          - task: odometry
+            dataset: {{kind: kitti, path: "{root}", sequence: "05"}}
+            methods: [kiss]
+    """))
+    with pytest.raises(DataError, match=r"kitti.yaml \(experiments\[0\].dataset, line 4\): .*sequence 05 not found"):
+        load_suite(path)
+    path.write_text(path.read_text().replace('"05"', '"00"'))
     assert len(load_suite(path).jobs) == 1

@@ -37,6 +37,12 @@ def check_reader_options(spec: dict[str, Any]) -> None:
             f"unknown option(s) {', '.join(unknown)} for dataset kind {kind!r}; it takes: {', '.join(accepted)}",
             source="dataset",
         )
+    if kind in OPENED_AT_LOAD:  # a sequence that is not there is refused with the suite, not when its jobs run
+        reader(dataset_path(spec), **options)
+
+
+#: readers cheap to open (a folder listing) whose options name what must exist, e.g. KITTI's ``sequence``
+OPENED_AT_LOAD = frozenset({"kitti"})
 
 
 class _Warnings(logging.Handler):
