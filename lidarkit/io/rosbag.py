@@ -153,7 +153,7 @@ class _BagScans:
                 return
             except DataError:
                 raise
-            except Exception as err:  # noqa: BLE001 - any reader failure of a damaged file becomes a DataError
+            except Exception as err:  # noqa: BLE001 - any reader or decoder failure of a damaged file becomes a DataError
                 raise DataError(f"cannot read the message ({type(err).__name__}: {err}); truncated or damaged file?",
                                 source=self.path, location=f"message {k} on {topic}") from None
             yield item
@@ -462,18 +462,9 @@ class McapScans(_BagScans):
         self.n_scans = int(self.loader.n_scans)
 
     def _messages(self, topic: str) -> Iterator[tuple[int, Any]]:
-        stream = self.loader.read_ros2_messages(str(self.path), topics=[topic])
-        k = 0
-        while True:
-            try:
-                item = next(stream)
-            except StopIteration:
-                return
-            except Exception as err:  # noqa: BLE001
-                raise DataError(f"cannot decode the message ({type(err).__name__}: {err})", source=self.path,
-                                location=f"message {k} on {topic}") from None
+        # (a message that cannot be decoded is a DataError naming it: _read_all)
+        for k, item in enumerate(self.loader.read_ros2_messages(str(self.path), topics=[topic])):
             yield k, item.ros_msg
-            k += 1
 
 
 __all__ = ["McapScans", "RosbagScans", "guarded_loader", "require_modules"]
