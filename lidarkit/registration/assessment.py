@@ -89,10 +89,10 @@ def assess_alignment(
     :class:`~lidarkit.registration.degeneracy.SurfaceIndex` if already built (e.g. by :class:`lidarkit.threads.background`
     while the registration ran).
 
-    Clouds far from their origin (georeferenced, beyond :data:`lidarkit.registration.local_origin.COVARIANCE_FAR_M`):
-    the covariance and step are computed around a local origin ``c`` near the target, where the lever arms stay small
-    (at 7 km the closed form lost the rotation to rounding: sigmas 0.06x; at 1e6 m an 8x too small yaw), and ``extra``
-    names it; :meth:`lidarkit.registration.base.Registration.align` calibrates them there and moves them to the
+    Clouds not in their sensor frame (a map frame, georeferenced; :func:`lidarkit.registration.local_origin.sensor_proxy`):
+    the covariance and step are computed around the target's likely sensor ``c``, where the calibration was learned and
+    the lever arms stay small (at 7 km the closed form lost the rotation to rounding: sigmas 0.06x; at 1e6 m an 8x too
+    small yaw), with the sensor model's rays from there and from the source's likely sensor, and ``extra`` names ``c``; :meth:`lidarkit.registration.base.Registration.align` calibrates them there and moves them to the
     target frame (``Ad(c) Sigma Ad(c)^T``)."""
     if isinstance(covariance_model, str):
         covariance_model = active_model()
@@ -113,13 +113,17 @@ def assess_alignment(
         pick, constraints, thickness = matched_constraints(matched, target_xyz, matched_index, return_thickness=True, surfaces=surfaces)
         degeneracy = summarize(normal_matrix(matched[pick], constraints))
         if covariance_model is not None:
-            origin = local_origin.local_offset(target_xyz, local_origin.COVARIANCE_FAR_M)
-            T_local = local_origin.into(T_target_source, origin, None)  # places the source's sensor in the local frame
+            # around the target's sensor (its frame's origin, or where its points say it is: see sensor_proxy), where
+            # the calibration was learned; the source's rays run from its own sensor
+            origin = local_origin.sensor_proxy(target_xyz)
+            source_sensor = local_origin.sensor_proxy(source_xyz)
+            T_local = local_origin.into(T_target_source, origin, None)
+            source_origin = None if source_sensor is None else T_local[:3, :3] @ source_sensor + T_local[:3, 3]
             p, q = local_origin.shift(matched[pick], origin), local_origin.shift(target_xyz[matched_index[pick]], origin)
             n_eff = effective_observations(local_origin.shift(matched, origin), covariance_model.correlation_voxel_m)
             covariance, step = covariance_and_step(
                 p, q, constraints, T_local, covariance_model, n_total=n, n_effective=n_eff, surface_variance=thickness,
-                target_origin=None if origin is None else -origin,
+                source_origin=source_origin,
             )
     return Assessment(
         n_correspondences=n, fitness=n / max(len(source_xyz), 1), rmse_m=rmse, degeneracy=degeneracy,

@@ -416,11 +416,14 @@ def covariance_and_step(
     n_effective: int | None = None,
     surface_variance: np.ndarray | None = None,
     target_origin: np.ndarray | None = None,
+    source_origin: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`registration_covariance` and, from the same normal equations, the point-to-surface Gauss-Newton step
     ``xi = -(sum J^T J)^-1 sum J^T r`` (same convention as the covariance: ``se3_exp(xi) @ T_target_source`` is the
     pose the surfaces prefer), NaN with fewer than 3 pairs. ``target_origin``: where the target's sensor is in the
-    frame of the points (default: their origin; a frame moved to a local origin puts it elsewhere)."""
+    frame of the points (default: their origin; a frame moved to a local origin puts it elsewhere); ``source_origin``:
+    where the source's sensor is, in the same frame (default: the source frame's origin, ``T_target_source``'s
+    translation)."""
     p = np.asarray(source_aligned_xyz, dtype=np.float64)
     q = np.asarray(matched_target_xyz, dtype=np.float64)
     n = len(p)
@@ -440,7 +443,8 @@ def covariance_and_step(
         sigma2 = float((r * r).sum()) / max(dof - 6.0, 1.0)
         cov_subsample = sigma2 * A_inv
     else:
-        origin_source = np.asarray(T_target_source, dtype=np.float64)[:3, 3]
+        origin_source = (np.asarray(T_target_source, dtype=np.float64)[:3, 3] if source_origin is None
+                         else np.asarray(source_origin, dtype=np.float64))
         d_s = _unit(p - origin_source)
         d_t = _unit(q if target_origin is None else q - np.asarray(target_origin, dtype=np.float64))
         # noise of the pair's residual per unit range variance: M (d_s d_s^T + d_t d_t^T) M
