@@ -186,11 +186,13 @@ def run_folder(path: str | os.PathLike, replaces: Iterable[str] = ()) -> Iterato
     A new ``path`` appears in one rename, complete. An existing folder keeps its other files: the run's files are
     moved into it one rename each, only after all were written. Errors name ``path``, not the temporary folder.
     ``replaces``: the names a run of this kind can write; those this run did not write are removed from an existing
-    folder (an earlier run's ground truth or plots are never read as this run's).
+    folder that held an earlier run (its ``config.yaml`` names a lidarkit version: its ground truth or plots are never
+    read as this run's); a folder that held no run keeps every file (a user's own ``trajectory.png`` went).
     """
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise OutputError("cannot write the run folder: a file is in the way (a folder is needed here)", source=path)
+    held_a_run = _holds_a_run(path)
     ensure_dir(path.parent)
     with output_errors(path, "cannot create the run folder"):
         tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}{PARTIAL_MARK}", dir=path.parent))
@@ -206,11 +208,19 @@ def run_folder(path: str | os.PathLike, replaces: Iterable[str] = ()) -> Iterato
         written = {p.name for p in tmp.iterdir()}
         with output_errors(path, "cannot complete the run folder"):
             _move_into_place(tmp, path)
-        for name in sorted(set(replaces) - written):
+        for name in sorted(set(replaces) - written) if held_a_run else ():
             with output_errors(path / name, "cannot remove an earlier run's file"):
                 (path / name).unlink(missing_ok=True)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _holds_a_run(path: Path) -> bool:
+    """Whether ``path`` holds a lidarkit run (a ``config.yaml`` that names the lidarkit version that wrote it)."""
+    try:
+        return "lidarkit_version" in (path / "config.yaml").read_text(encoding="utf-8", errors="replace")[:1_000_000]
+    except OSError:
+        return False
 
 
 @contextlib.contextmanager

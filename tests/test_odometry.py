@@ -294,6 +294,13 @@ def test_run_folder(tmp_path, rng):
     finally:
         os.chdir(here)
     assert (out / "ape.png").is_file() and (out / "notes.txt").read_text() == "mine"
+    # a folder that never held a run keeps the user's own files, even those named like a run's (they went)
+    own = tmp_path / "own"
+    own.mkdir()
+    for name in ("trajectory.png", "ape.png", "ground_truth_kitti.txt"):
+        (own / name).write_text("mine")
+    run(no_truth, OracleICP(noisy), out_dir=own)
+    assert all((own / name).read_text() == "mine" for name in ("trajectory.png", "ape.png", "ground_truth_kitti.txt"))
 
 
 def test_short_path_reports_no_drift(rng):
