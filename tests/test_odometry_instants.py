@@ -164,6 +164,9 @@ def test_poses_are_stamped_at_the_instant_they_refer_to(tmp_path):
     assert "stamped at the sweep end (the scans' stamps, at the sweep start, moved by +0.1000 s)" in result.config["run"]["estimate_stamps_note"]
     written = np.loadtxt(tmp_path / "run" / "poses_tum.txt")
     np.testing.assert_allclose(written[:, 0], stamps + 0.1, atol=1e-6)
+    # a selection with a step is moved by one sweep, not by its own spacing (0:10:3 moved them by 0.3 s)
+    strided = run(open_dataset("rosbag", bag), "kiss", frames="0:10:3")
+    np.testing.assert_allclose(strided.trajectory.timestamps_s, stamps[::3] + 0.1, atol=1e-9)
     # without deskew the poses refer to the scans' stamps: left as they are
     plain = run(open_dataset("rosbag", bag), "open3d_point_to_plane")
     np.testing.assert_allclose(plain.trajectory.timestamps_s, stamps, atol=1e-12)

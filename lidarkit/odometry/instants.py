@@ -36,17 +36,20 @@ def estimate_instant(registration: Any, scan: Scan | None) -> str | None:
     return scan.stamp_instant
 
 
-def stamps_at_instant(stamps_s: np.ndarray | None, scan: Scan | None, instant: str | None) -> tuple[np.ndarray | None, str | None]:
+def stamps_at_instant(stamps_s: np.ndarray | None, scan: Scan | None, instant: str | None,
+                      all_stamps_s: np.ndarray | None = None) -> tuple[np.ndarray | None, str | None]:
     """``(the scans' stamps moved to the ``instant`` of their sweeps, note or None)``: the estimate's poses refer to
     ``instant`` (a deskewing variant's), its stamps to ``scan.stamp_instant``; stamped as they are, a pose written
     with its scan's stamp (``poses_tum.txt``) was paired with another instant's ground truth by anyone associating by
-    time. The sweep lasts the scans' stamp spacing (one scan: its point times' span)."""
+    time. The sweep lasts the spacing of consecutive stamps of the whole sequence (``all_stamps_s``; not of a
+    selection such as ``--frames 0:300:5``, which moved them by five sweeps), else the point times' span."""
     stamp_at = None if scan is None else scan.stamp_instant
     if stamps_s is None or instant is None or stamp_at is None or instant == stamp_at:
         return stamps_s, None
     stamps_s = np.asarray(stamps_s, dtype=np.float64)
-    if len(stamps_s) > 1:
-        duration = float(np.median(np.diff(stamps_s)))
+    consecutive = np.asarray(stamps_s if all_stamps_s is None else all_stamps_s, dtype=np.float64)
+    if len(consecutive) > 1:
+        duration = float(np.median(np.diff(consecutive)))
     elif scan.point_time_convention != "fraction" and scan.has_time_span():
         duration = float(np.ptp(scan.point_times_s))
     else:

@@ -447,10 +447,10 @@ def run(
             bar[0].stop()
     total, total_cpu = clock() - loop_start, time.process_time() - loop_cpu_start
 
-    timestamps = sequence.timestamps_s
-    timestamps = None if timestamps is None else np.asarray(timestamps, dtype=np.float64)[indices]
+    all_stamps = sequence.timestamps_s
+    timestamps = None if all_stamps is None else np.asarray(all_stamps, dtype=np.float64)[indices]
     # the poses are stamped at the instant they refer to (a deskewing variant's), not at the one the scans' stamps do
-    timestamps, stamp_note = stamps_at_instant(timestamps, first_scan, estimate_instant(registration, first_scan))
+    timestamps, stamp_note = stamps_at_instant(timestamps, first_scan, estimate_instant(registration, first_scan), all_stamps)
     trajectory = Trajectory(poses, timestamps, name=f"{name} on {title}",
                             meta={"method": name, "dataset": dataset_name, **({"stamps": stamp_note} if stamp_note else {})})
     instant_note = None
