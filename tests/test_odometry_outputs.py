@@ -256,6 +256,15 @@ def test_motion_prediction_follows_irregular_frame_intervals():
     with pytest.raises(ConfigError, match="min_fitness must be positive"):
         make_frame_check(min_fitness="-1")
     assert make_frame_check(max_angular_accel_dps2="500", n_sample="100") == FrameCheckConfig(max_angular_accel_dps2=500.0, n_sample=100)
+    # settings under which no frame could be checked, or every frame fails, were accepted in silence
+    for params, message in (({"n_sample": "20"}, "n_sample 20 is below min_points 50: no frame would be checked"),
+                            ({"n_sample": "1.5"}, "n_sample must be a whole number"),
+                            ({"max_target_points": "10"}, "max_target_points 10 is below min_points 50"),
+                            ({"min_fitness": "1.5"}, "min_fitness is a share of the sampled points, at most 1"),
+                            ({"max_accel_mps2": "inf"}, "max_accel_mps2 must be a finite number")):
+        with pytest.raises(ConfigError, match=message):
+            make_frame_check(**params)
+    assert make_frame_check(n_sample="0", max_target_points="10") == FrameCheckConfig(n_sample=0, max_target_points=10)
 
 
 def test_independent_check_counts_the_bad_frames_of_a_drifting_variant_that_says_converged(tmp_path, capsys):
@@ -279,8 +288,8 @@ def test_independent_check_counts_the_bad_frames_of_a_drifting_variant_that_says
 
     # --check n_sample=0: no fitness test, the same motion test and poses
     lean = tmp_path / "lean"
-    code, _, _ = _cli(["odometry", spec, "-m", "open3d_point_to_point", "--no-progress", "--out", str(lean), "--check", "n_sample=0"], capsys)
-    assert code == 0
+    code, lean_text, _ = _cli(["odometry", spec, "-m", "open3d_point_to_point", "--no-progress", "--out", str(lean), "--check", "n_sample=0"], capsys)
+    assert code == 0 and "fitness not checked)" in " ".join(lean_text.split())  # (it said "fitness 0")
     m0 = json.loads((lean / "metrics.json").read_text())
     check0 = m0["frame_check"]
     assert check0["n_fitness_checked"] == 0 and check0["n_bad_fitness"] == 0 and check0["fitness_median"] is None

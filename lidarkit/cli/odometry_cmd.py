@@ -105,7 +105,8 @@ def odometry(
     if check:
         table.add_row(
             "bad frames (independent check)",
-            f"{check['n_bad_frames']} of {m['n_frames']} (motion {check['n_bad_motion']}, fitness {check['n_bad_fitness']})",
+            f"{check['n_bad_frames']} of {m['n_frames']} (motion {check['n_bad_motion']}, fitness "
+            + (f"{check['n_bad_fitness']})" if check.get("n_fitness_checked", 1) else "not checked)"),
         )
         said = check["n_said_converged_but_bad"]
         table.add_row("  of which the variant called converged", "n/a (no verdict)" if said is None else str(said))

@@ -85,16 +85,29 @@ def make_frame_check(**params: Any) -> FrameCheckConfig:
         raise ConfigError(f"unknown setting(s) {', '.join(unknown)}; valid: {', '.join(valid)}", source="frame check")
     values: dict[str, Any] = {}
     for key, value in params.items():
-        cast = int if valid[key] in (int, "int") else float
+        whole = valid[key] in (int, "int")
         try:
-            number = cast(value)
+            number = float(value)
         except (TypeError, ValueError):
             raise ConfigError(f"{key} must be a number, got {value!r}", source="frame check") from None
+        if not np.isfinite(number):
+            raise ConfigError(f"{key} must be a finite number, got {value!r}", source="frame check")
+        if whole and not number.is_integer():  # (1.5 was cut to 1)
+            raise ConfigError(f"{key} must be a whole number, got {value!r}", source="frame check")
         may_be_zero = key in ("seed", "n_sample")  # n_sample=0: no fitness test
-        if not np.isfinite(number) or (number < 0 if may_be_zero else number <= 0):
+        if number < 0 if may_be_zero else number <= 0:
             raise ConfigError(f"{key} must be {'>= 0' if may_be_zero else 'positive'}, got {value!r}", source="frame check")
-        values[key] = number
-    return FrameCheckConfig(**values)
+        values[key] = int(number) if whole else number
+    config = FrameCheckConfig(**values)
+    if config.min_fitness > 1:
+        raise ConfigError(f"min_fitness is a share of the sampled points, at most 1, got {config.min_fitness:g}", source="frame check")
+    if 0 < config.n_sample < config.min_points:  # the test would skip every frame (fewer than min_points sampled)
+        raise ConfigError(f"n_sample {config.n_sample} is below min_points {config.min_points}: no frame would be checked for "
+                          "fitness (n_sample=0 turns the test off)", source="frame check")
+    if config.n_sample and config.max_target_points < config.min_points:
+        raise ConfigError(f"max_target_points {config.max_target_points} is below min_points {config.min_points}: no frame would "
+                          "be checked for fitness", source="frame check")
+    return config
 
 
 @dataclass
