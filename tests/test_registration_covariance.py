@@ -675,3 +675,26 @@ def test_the_calibrated_covariance_moves_with_the_frame(method):
         back = adjoint(se3_inverse(C)) @ far.covariance @ adjoint(se3_inverse(C)).T
         ratio = np.sqrt(np.diag(back) / np.diag(at_origin.covariance))
         assert np.all((ratio > 1 / 1.3) & (ratio < 1.3)), (offset, ratio)
+
+
+def test_a_per_frame_bias_is_told_from_noise():
+    """The mean frame error chained along a straight path rebuilds the end error whatever the errors are (white noise
+    gave end_error_bias_share 1.0); per_frame_bias_z says whether the mean is a bias at all: small for noise, large
+    for a bias of a third of the noise."""
+    from lidarkit.odometry.covariance import covariance_metrics
+
+    rng = np.random.default_rng(1)
+    n = 300
+    step = np.eye(4)
+    step[0, 3] = 1.0
+    ref = np.stack([np.linalg.matrix_power(step, k) for k in range(n)])
+    cov = np.tile(np.diag([4e-4] * 3 + [1e-8] * 3), (n, 1, 1))
+    cov[0] = 0.0
+    for bias_m, expect_bias in ((0.0, False), (0.007, True)):
+        est = [np.eye(4)]
+        for _ in range(1, n):
+            est.append(est[-1] @ step @ se3_exp(np.r_[rng.normal(bias_m, 0.02, 3), rng.normal(0.0, 1e-4, 3)]))
+        m = covariance_metrics(np.stack(est), cov, np.cumsum(cov, axis=0), ref)
+        assert (m["per_frame_bias_z"] > 3) == expect_bias, (bias_m, m["per_frame_bias_z"])
+        if not expect_bias:
+            assert m["end_error_bias_share"] > 0.9  # the share alone would have called the noise a bias
