@@ -698,3 +698,22 @@ def test_a_per_frame_bias_is_told_from_noise():
         assert (m["per_frame_bias_z"] > 3) == expect_bias, (bias_m, m["per_frame_bias_z"])
         if not expect_bias:
             assert m["end_error_bias_share"] > 0.9  # the share alone would have called the noise a bias
+
+
+def test_the_degeneracy_summary_names_the_same_direction_at_any_heading():
+    """A corridor pair turned about z by 0, 30, 45 and 90 degrees: the weakest direction, turned back, is the corridor's
+    axis every time, with the same flag (lever arms about the frame's x and y named roll, degenerate, at 30-45)."""
+    from lidarkit.geometry import make_se3, so3_exp
+
+    pair = ScanPairs("corridor", seed=3, n_frames=201, n_beams=32, n_azimuths=1024).draw(0)
+    flags, ratios = set(), []
+    for degrees in (0.0, 30.0, 45.0, 90.0):
+        G = make_se3(so3_exp([0.0, 0.0, np.radians(degrees)]), np.zeros(3))
+        res = get_icp("open3d_point_to_plane").align(transform_points(G, pair.source_xyz), transform_points(G, pair.target_xyz),
+                                                    init_T=G @ pair.init_T @ se3_inverse(G))
+        weakest = np.asarray(res.degeneracy.weakest_direction)
+        back = np.concatenate([G[:3, :3].T @ weakest[:3], G[:3, :3].T @ weakest[3:]])
+        assert abs(back[0]) > 0.95, (degrees, np.round(back, 2))  # translation along the corridor
+        flags.add(res.degeneracy.degenerate)
+        ratios.append(res.degeneracy.ratio)
+    assert len(flags) == 1 and max(ratios) / min(ratios) < 2.5

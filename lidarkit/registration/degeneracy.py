@@ -59,9 +59,20 @@ def surface_constraints(neighborhoods_xyz: np.ndarray, return_thickness: bool = 
 
 
 def normal_matrix(points_xyz: np.ndarray, constraints: np.ndarray) -> np.ndarray:
-    """Normalised 6x6 ``H`` for ``(n, 3)`` aligned source points and ``(n, 3, 3)`` projectors."""
+    """Normalised 6x6 ``H`` for ``(n, 3)`` aligned source points and ``(n, 3, 3)`` projectors.
+
+    The lever arms are taken about the principal horizontal axes of the points (a corridor's own axis, however the
+    scene is turned in the frame) and ``H`` is turned back: its eigen-summary is the same for the same scene at any
+    heading (about the frame's x and y, a corridor at 30-45 degrees named roll as its weakest direction and flagged it
+    degenerate, at 0 and 90 degrees the translation along it)."""
     p = points_xyz - points_xyz.mean(axis=0)
     n = len(p)
+    xy = p[:, :2].T @ p[:, :2] / max(n, 1)
+    angle = 0.5 * np.arctan2(2.0 * xy[0, 1], xy[0, 0] - xy[1, 1])
+    c, s = np.cos(angle), np.sin(angle)
+    R = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])  # the points' major horizontal axis onto x
+    p = p @ R.T
+    constraints = np.einsum("ij,njk,lk->nil", R, constraints, R)
     # RMS lever arm about each axis through the centroid: a rotation about x is scaled by the distance of the points
     # from the x axis, not by their distance from the centroid (in a long corridor the two differ tenfold and a
     # single radius would make roll look weaker than the unconstrained translation along the corridor)
@@ -73,7 +84,10 @@ def normal_matrix(points_xyz: np.ndarray, constraints: np.ndarray) -> np.ndarray
     J = left_jacobians(p)
     J[:, :, 3:] *= np.where(arm > 0, 1.0 / np.where(arm > 0, arm, 1.0), 0.0)  # rotation columns in metres at the lever arm
     MJ = np.matmul(constraints, J)  # (n, 3, 6): two contractions instead of one 4-index einsum (10x faster)
-    return np.einsum("nki,nkj->ij", J, MJ) / max(n, 1)
+    H = np.einsum("nki,nkj->ij", J, MJ) / max(n, 1)
+    turn = np.zeros((6, 6))
+    turn[:3, :3] = turn[3:, 3:] = R
+    return turn.T @ H @ turn  # back in the frame's axes (a turn: the eigenvalues are the principal axes' own)
 
 
 def summarize(H: np.ndarray, threshold: float = DEGENERACY_RATIO_THRESHOLD, kind: str = "point_to_surface") -> Degeneracy:
