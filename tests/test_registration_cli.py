@@ -45,6 +45,9 @@ def test_every_method_through_the_cli(method, capsys, tmp_path):
     assert config["method"] == method and set(config["params"]) == set(config_fields(method))
     png = (tmp_path / "bev.png").read_bytes()
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
+    if result.get("covariance") is not None:  # sigmas to 3 significant digits (a fixed .4f printed 1 mm as 0.0011, 0.04 mm as 0.0000)
+        sigma = np.sqrt(np.diag(np.asarray(result["covariance"])))
+        assert f"t {sigma[0]:.3g} " in " ".join(out.split()), (method, sigma[0])
 
 
 def test_params_and_init_file(capsys, tmp_path):

@@ -119,7 +119,7 @@ def _result_table(result, source: Path, target: Path) -> Table:
         table.add_row("degenerate directions", "; ".join(deg.weak_directions) + " (sensor frame of the target)")
     if result.covariance is not None:
         sigma = np.sqrt(np.clip(np.diag(result.covariance), 0, None))
-        table.add_row("1-sigma (m / deg)", "t " + " ".join(f"{v:.4f}" for v in sigma[:3]) + "  r " + " ".join(f"{np.degrees(v):.4f}" for v in sigma[3:]))
+        table.add_row("1-sigma (m / deg)", "t " + " ".join(f"{v:.3g}" for v in sigma[:3]) + "  r " + " ".join(f"{np.degrees(v):.3g}" for v in sigma[3:]))
     return table
 
 
