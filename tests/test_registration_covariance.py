@@ -717,3 +717,22 @@ def test_the_degeneracy_summary_names_the_same_direction_at_any_heading():
         flags.add(res.degeneracy.degenerate)
         ratios.append(res.degeneracy.ratio)
     assert len(flags) == 1 and max(ratios) / min(ratios) < 2.5
+
+
+def test_the_principal_calibration_is_continuous_where_the_horizontal_block_turns_isotropic():
+    """A horizontal block whose two variances differ by 2 % either way: the calibrated covariance changes by a few
+    percent, not by swapping the factors of the two axes (a 3-7x jump in sigma)."""
+    rng = np.random.default_rng(3)
+    A = rng.normal(size=(6, 6)) * np.array([1e-2, 1e-2, 5e-3, 1e-3, 1e-3, 2e-3])
+    base = A @ A.T
+    base[:2, :2] = np.diag([1e-4, 1e-4])
+    base[:2, 2:] = base[2:, :2].T * 0.0
+    step = rng.normal(size=6) * 1e-3
+    for name in ("open3d_gicp", "small_gicp", "vanilla"):
+        out = []
+        for ratio in (0.98, 1.02):
+            cov = base.copy()
+            cov[0, 0] = 1e-4 * ratio
+            out.append(apply_calibration(cov, CALIBRATION[name], step))
+        change = np.sqrt(np.diag(out[1]) / np.diag(out[0]))
+        assert np.all(np.abs(change - 1) < 0.1), (name, np.round(change, 3))

@@ -171,17 +171,17 @@ CALIBRATION: dict[str, AxisCalibration] = {
     "open3d_point_to_point": AxisCalibration(
         (4.06, 1.6, 0.137, 0.0497, 0.263, 0.0903),
         (0.0109, 1.88e-10, 3.8e-13, 0.000468, 6.86e-10, 0.000461),
-        0.938, (0.0024, 0.000923, 9.36e-05, 3.82e-05, 6.88e-06, 8.5e-06),
+        0.933, (0.0024, 0.000923, 9.36e-05, 3.82e-05, 6.88e-06, 8.5e-06),
         (1.47, 1.6, 0.944, 0.862, 1.08, 1.14),
         (9.02e-13, 9.28e-09, 0.00752, 0.000446, 9.06e-17, 0.00267), axes="principal"),
     "open3d_point_to_plane": AxisCalibration(
         (0.504, 0.345, 0.0652, 0.0377, 0.193, 0.0337),
         (9.57e-10, 3.1e-08, 0.00296, 0.000451, 0.000274, 0.000206),
-        0.991, (0.00201, 0.000406, 0.000431, 2.26e-05, 7.46e-06, 2.5e-06), axes="principal"),
+        0.992, (0.00201, 0.000406, 0.000431, 2.26e-05, 7.46e-06, 2.5e-06), axes="principal"),
     "open3d_gicp": AxisCalibration(
         (0.00613, 0.0639, 0.0047, 0.0152, 0.244, 0.0164),
         (0.0026, 0.00149, 0.00124, 0.000363, 0.000234, 0.00014),
-        1.06, (0.00212, 0.000396, 0.000425, 2.19e-05, 8.96e-06, 2.75e-06), axes="principal"),
+        1.05, (0.00212, 0.000396, 0.000425, 2.19e-05, 8.96e-06, 2.75e-06), axes="principal"),
     "small_gicp": AxisCalibration(
         (0.0044, 0.00535, 0.00911, 0.0222, 0.0102, 0.00508),
         (0.000685, 0.000542, 0.00117, 0.000364, 0.000248, 7.51e-05),
@@ -224,19 +224,19 @@ CALIBRATION_WITHOUT_STEP: dict[str, AxisCalibration] = {
     "ground_filtered": AxisCalibration(
         (0.206, 0.424, 4.57e-06, 5.17e-06, 3.75e-05, 0.0196),
         (0.00442, 2.58e-13, 0.00023, 2.89e-05, 3.81e-05, 0.000319),
-        1.16, (0.00127, 0.000291, 0.0125, 0.000247, 0.000117, 9.06e-06), axes="principal"),
+        1.15, (0.00127, 0.000291, 0.0125, 0.000247, 0.000117, 9.06e-06), axes="principal"),
     "open3d_point_to_point": AxisCalibration(
         (172, 14.6, 0.94, 0.156, 0.744, 0.23),
         (7.6e-13, 1.02e-15, 2.41e-09, 0.000847, 9.68e-11, 0.0012),
-        0.811, (0.0024, 0.000923, 9.36e-05, 3.82e-05, 6.88e-06, 8.5e-06), axes="principal"),
+        0.788, (0.0024, 0.000923, 9.36e-05, 3.82e-05, 6.88e-06, 8.5e-06), axes="principal"),
     "small_gicp": AxisCalibration(
         (0.00706, 0.00626, 0.00911, 0.0222, 0.0242, 0.00508),
         (0.000151, 0.000438, 0.00122, 0.000387, 0.000439, 7.58e-05),
-        1.03, (0.000654, 0.00028, 0.000167, 3.15e-05, 7.67e-06, 2.55e-06), axes="principal"),
+        1.02, (0.000654, 0.00028, 0.000167, 3.15e-05, 7.67e-06, 2.55e-06), axes="principal"),
     "kiss": AxisCalibration(
         (0.695, 0.388, 0.269, 0.0761, 3.2, 0.0368),
         (0.109, 0.0391, 1.28e-08, 0.000978, 3.36e-13, 0.000464),
-        1.21, (0.0248, 0.00858, 0.00128, 4.72e-05, 3.55e-06, 6.16e-06), axes="principal"),
+        1.2, (0.0248, 0.00858, 0.00128, 4.72e-05, 3.55e-06, 6.16e-06), axes="principal"),
     "genz": AxisCalibration(
         (0.255, 1.14, 1.19, 0.154, 2.99, 0.0304),
         (0.0279, 0.0193, 0.00452, 0.00096, 0.00303, 0.000471),
@@ -298,10 +298,41 @@ def apply_calibration(covariance: np.ndarray, entry: AxisCalibration, step: np.n
     the variance beyond it is scaled by ``max(f_j, 1)`` only: a direction weaker than on any training scene (a
     corridor's axis) is not shrunk by a factor measured where it was constrained, so the floors ``b`` of the
     constrained axes do not swamp it. The axes ``j`` are the entry's (:attr:`AxisCalibration.axes`): with
-    ``"principal"`` the covariance and step are turned into them (:func:`principal_turn`) and the result turned back.
+    ``"principal"`` the covariance and step are turned into them (:func:`principal_turn`) and the result turned back;
+    a nearly isotropic horizontal block blends that with the two horizontal axes swapped (:data:`PRINCIPAL_BLEND_RATIO`),
+    so the result changes smoothly with the closed form.
     """
-    turn = principal_turn(covariance) if entry.axes == "principal" else None
-    if turn is not None:  # calibrated in the principal axes, then turned back
+    if entry.axes == "principal":  # calibrated in the principal axes, then turned back
+        turn = principal_turn(covariance)
+        weight = _principal_weight(covariance)
+        out = _calibrated_in(covariance, entry, step, turn)
+        if weight < 1.0:  # a nearly isotropic horizontal block: both orderings of its axes, blended
+            quarter = np.zeros((6, 6))
+            quarter[:3, :3] = quarter[3:, 3:] = [[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]
+            out = weight * out + (1.0 - weight) * _calibrated_in(covariance, entry, step, quarter @ turn)
+        return make_psd(float(entry.coverage) * out)
+    return make_psd(float(entry.coverage) * _calibrated_in(covariance, entry, step, None))
+
+
+#: Below this ratio of the horizontal block's eigenvalues the principal axes are blended with the same axes swapped,
+#: reaching an even mix at 1 (an isotropic block has no weak direction: with a hard choice a 2 % change of the
+#: closed form swapped the factors of the two axes, a 3-7x jump in sigma).
+PRINCIPAL_BLEND_RATIO = 1.25
+
+
+def _principal_weight(covariance: np.ndarray) -> float:
+    """Weight of the principal ordering of the horizontal axes: 1 at or beyond :data:`PRINCIPAL_BLEND_RATIO`, 0.5 for
+    an isotropic block."""
+    lo, hi = np.linalg.eigvalsh(0.5 * (covariance[:2, :2] + covariance[:2, :2].T))
+    if not hi > 0:
+        return 0.5
+    ratio = hi / max(lo, hi * 1e-12)
+    return float(0.5 + 0.5 * np.clip((ratio - 1.0) / (PRINCIPAL_BLEND_RATIO - 1.0), 0.0, 1.0))
+
+
+def _calibrated_in(covariance: np.ndarray, entry: AxisCalibration, step: np.ndarray | None, turn: np.ndarray | None) -> np.ndarray:
+    """The calibration's terms (before the coverage scalar) in the axes ``turn`` takes the frame to, turned back."""
+    if turn is not None:
         covariance = turn @ covariance @ turn.T
         step = None if step is None else turn @ np.asarray(step, dtype=np.float64).reshape(6)
     factors, sigmas = np.asarray(entry.factors, dtype=np.float64), np.asarray(entry.sigmas, dtype=np.float64)
@@ -321,9 +352,7 @@ def apply_calibration(covariance: np.ndarray, entry: AxisCalibration, step: np.n
         out = out + np.outer(bias, bias)
         if entry.step_spread is not None:
             out = out + np.diag(np.asarray(entry.step_spread, dtype=np.float64) ** 2 * float(step[:3] @ step[:3]))
-    if turn is not None:
-        out = turn.T @ out @ turn
-    return make_psd(float(entry.coverage) * out)
+    return out if turn is None else turn.T @ out @ turn
 
 
 def principal_turn(covariance: np.ndarray) -> np.ndarray:
