@@ -43,6 +43,7 @@ def test_kiss_is_scored_at_the_sweep_end_whatever_instant_the_ground_truth_has(s
     ("ground_filtered", {}, "end"),  # both clouds deskewed to their sweep end
     ("pipeline", {}, "end"),  # the deskew component's reference
     ("pipeline", {"deskew": {"name": "constant_velocity", "deskew": True, "reference": "middle"}}, "mid"),
+    pytest.param("genz", {"deskew": True}, "mid", marks=pytest.mark.skipif("genz" not in available_icp(), reason="genz-icp not installed")),
 ])
 def test_every_deskewing_variant_states_its_instant_and_is_scored_like_with_like(sims, method, params, instant):
     """pipeline and ground_filtered deskew too: their poses refer to their reference instant, so a ground truth of

@@ -117,6 +117,11 @@ class GenzRegistration(Registration):
             self.reset()
         return self._genz
 
+    @property
+    def deskew_instant(self) -> str | None:
+        """The instant of the sweep deskewed poses refer to: genz-icp deskews to mid-sweep (its scan's time 0.5)."""
+        return "mid" if self.config.deskew else None
+
     def reset(self) -> None:
         """Start a new sequence (genz-icp always starts at the identity)."""
         from genz_icp.genz_icp import GenZICP
