@@ -252,6 +252,9 @@ def test_a_frame_slice_past_the_end_is_cut_with_a_warning(rng, caplog):
     assert len(result.trajectory) == 10
     assert "frames 0:50 end after the last frame (9): ran up to it" in result.metrics["warnings"]
     assert "frames 0:50 end after the last frame" in caplog.text
+    early = run(MemorySequence(poses, _room_points(rng, 50)), OracleICP(se3_inverse(poses[:-1]) @ poses[1:]), frames="-5000:5")
+    assert len(early.trajectory) == 5  # (counted from the end, before the first frame: it was cut in silence)
+    assert "frames -5000:5 start 5000 frames from the end, before the first of 10: ran from it" in early.metrics["warnings"]
 
 
 # ---- run folder ---------------------------------------------------------------------------------------------------

@@ -60,7 +60,8 @@ def _scans(dataset: Any, spec: str) -> Any:
 
 
 def frames_past_the_end(frames: FrameSelection, n_frames: int) -> str | None:
-    """What a slice ``frames`` asks for beyond the last of ``n_frames`` frames (it is cut there), or None."""
+    """What a slice ``frames`` asks for beyond the last (or, counted from the end, before the first) of ``n_frames``
+    frames (it is cut there), or None."""
     if isinstance(frames, str) and frames.count(":") in (1, 2):
         try:
             frames = slice(*(int(p) if p.strip() else None for p in frames.split(":")))
@@ -68,6 +69,8 @@ def frames_past_the_end(frames: FrameSelection, n_frames: int) -> str | None:
             return None
     if isinstance(frames, slice) and frames.stop is not None and frames.stop > n_frames:
         return f"frames {frames_repr(frames, np.arange(0))} end after the last frame ({n_frames - 1}): ran up to it"
+    if isinstance(frames, slice) and frames.start is not None and frames.start < -n_frames:
+        return f"frames {frames_repr(frames, np.arange(0))} start {-frames.start} frames from the end, before the first of {n_frames}: ran from it"
     return None
 
 
