@@ -92,8 +92,9 @@ def assess_alignment(
     Clouds not in their sensor frame (a map frame, georeferenced; :func:`lidarkit.registration.local_origin.sensor_proxy`):
     the covariance and step are computed around the target's likely sensor ``c``, where the calibration was learned and
     the lever arms stay small (at 7 km the closed form lost the rotation to rounding: sigmas 0.06x; at 1e6 m an 8x too
-    small yaw), with the sensor model's rays from there and from the source's likely sensor, and ``extra`` names ``c``; :meth:`lidarkit.registration.base.Registration.align` calibrates them there and moves them to the
-    target frame (``Ad(c) Sigma Ad(c)^T``)."""
+    small yaw), with the sensor model's rays from there and from the source's likely sensor, and ``extra`` names
+    ``c``; :meth:`lidarkit.registration.base.Registration.align` calibrates them there and moves them to the target
+    frame (``Ad(c) Sigma Ad(c)^T``)."""
     if isinstance(covariance_model, str):
         covariance_model = active_model()
     aligned = transform_points(T_target_source, source_xyz)
