@@ -43,7 +43,6 @@ def test_kiss_is_scored_at_the_sweep_end_whatever_instant_the_ground_truth_has(s
     ("ground_filtered", {}, "end"),  # both clouds deskewed to their sweep end
     ("pipeline", {}, "end"),  # the deskew component's reference
     ("pipeline", {"deskew": {"name": "constant_velocity", "deskew": True, "reference": "middle"}}, "mid"),
-    pytest.param("genz", {"deskew": True}, "mid", marks=pytest.mark.skipif("genz" not in available_icp(), reason="genz-icp not installed")),
 ])
 def test_every_deskewing_variant_states_its_instant_and_is_scored_like_with_like(sims, method, params, instant):
     """pipeline and ground_filtered deskew too: their poses refer to their reference instant, so a ground truth of
@@ -54,6 +53,18 @@ def test_every_deskewing_variant_states_its_instant_and_is_scored_like_with_like
     assert f"from the sweep start to the sweep {instant}" in result.metrics["ground_truth_instant_note"]
     expected = sims["start"].ground_truth_at(instant)[0:4].relative_to_first().poses_se3
     np.testing.assert_allclose(result.ground_truth.relative_to_first().poses_se3, expected, atol=1e-12)
+
+
+@pytest.mark.skipif("genz" not in available_icp(), reason="genz-icp not installed")
+def test_genz_states_the_instant_it_deskews_to(sims):
+    """genz-icp deskews to mid-sweep: a deskewing genz says so (it said "not stated" and was compared as it was).
+    (Not run here: genz-icp carries state from one instance to the next in a process, which moves later tests' poses.)"""
+    from lidarkit.odometry.instants import estimate_instant
+    from lidarkit.registration import get_icp
+
+    scan = sims["start"].read_scan(0)
+    assert estimate_instant(get_icp("genz", deskew=True), scan) == "mid"
+    assert estimate_instant(get_icp("genz"), scan) == scan.stamp_instant == "start"
 
 
 def test_ground_truth_of_another_instant_that_cannot_be_re_timed_is_refused(sims):
