@@ -143,6 +143,19 @@ def test_what_the_reader_reports_applying_is_recorded_and_printed(exported, tmp_
     effective = result.metrics["effective"]
     assert effective["corrections"] == {"vertical_correction": "auto", "vertical_correction_applied": True, "vertical_correction_deg": 0.205}
     assert effective["reader"]["point_times_dir"] == str(exported / "point_times")
+    # paths recorded absolute (a run folder is read from anywhere), a file the reader did not find said to be absent
+    import os
+    import shutil
+
+    shutil.copytree(exported, tmp_path / "copy")
+    (tmp_path / "copy" / "times.txt").unlink()
+    here = os.getcwd()
+    try:
+        os.chdir(tmp_path)
+        reader = run(KittiOdometry("copy"), "vanilla", frames="0:2").metrics["effective"]["reader"]
+    finally:
+        os.chdir(here)
+    assert reader["times_path"] == f"{tmp_path / 'copy' / 'times.txt'} (absent)" and reader["path"] == str(tmp_path / "copy")
     # a simulator export states its ground-truth instant (sim.yaml): the sweep end, where kiss deskews to
     assert effective["ground_truth_instant"] == "end" and effective["estimate_instant"] == "end"
     assert "vertical_correction_deg: 0.205" in (tmp_path / "run" / "config.yaml").read_text()

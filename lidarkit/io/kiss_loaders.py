@@ -88,7 +88,7 @@ class KissLoaderScans:
 
     @property
     def reader_options(self) -> dict[str, Any]:
-        return {"kind": self.kind, "path": str(self.path), "kiss_icp_loader": self.loader_name, **self.loader_options}
+        return {"kind": self.kind, "path": str(self.path.absolute()), "kiss_icp_loader": self.loader_name, **self.loader_options}
 
     def _build(self) -> Any:
         import importlib

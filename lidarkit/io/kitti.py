@@ -261,7 +261,7 @@ class KittiOdometry:
         """What the reader did to the data, for the run config."""
         return {
             "kind": "kitti",
-            "path": str(self.sequence_dir),
+            "path": str(self.sequence_dir.absolute()),
             "vertical_correction": self.vertical_correction,
             "vertical_correction_applied": self._correct,
             "vertical_correction_deg": KITTI_VERTICAL_CORRECTION_DEG if self._correct else 0.0,

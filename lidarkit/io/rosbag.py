@@ -135,7 +135,7 @@ class _BagScans:
 
     @property
     def reader_options(self) -> dict[str, Any]:
-        return {"kind": self.kind, "path": str(self.path), "topic": self.topic, "ground_truth_topic": self.ground_truth_topic,
+        return {"kind": self.kind, "path": str(self.path.absolute()), "topic": self.topic, "ground_truth_topic": self.ground_truth_topic,
                 "time_field": self.time_field}
 
     def _location(self, index: int) -> str:

@@ -72,8 +72,11 @@ def reader_settings(sequence: Any) -> dict[str, Any]:
             continue
         if isinstance(value, (str, int, float, bool)) or value is None:
             out[key] = value
-        elif isinstance(value, (os.PathLike, np.generic)):
-            out[key] = str(value) if isinstance(value, os.PathLike) else value.item()
+        elif isinstance(value, os.PathLike):  # absolute (a run folder is read from anywhere), and said when absent
+            path = Path(value).absolute()
+            out[key] = str(path) if path.exists() else f"{path} (absent)"
+        elif isinstance(value, np.generic):
+            out[key] = value.item()
     return out
 
 
