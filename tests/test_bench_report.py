@@ -340,3 +340,23 @@ def test_an_earlier_reports_plots_and_tables_do_not_stay_beside_the_new_ones(res
     report = build_report(folder)
     assert sorted(p.name for p in (folder / "plots").iterdir()) == sorted(p.filename for p in report.plots)
     assert sorted(p.name for p in (folder / "tables").iterdir()) == ["my_notes.md"]
+
+
+def test_a_suite_job_whose_result_cannot_be_read_is_not_called_not_run(tmp_path):
+    """A job of the suite whose result file is damaged was listed as 'not run yet', as if it had never run."""
+    from lidarkit.bench.report import coverage_text
+    from lidarkit.bench.results import result_path
+
+    suite = tmp_path / "suite.yaml"
+    suite.write_text(textwrap.dedent("""
+        seeds: [0, 1, 2]
+        experiments:
+          - {name: walk, task: selftest, dataset: {kind: synthetic, name: synth}, methods: [random_walk]}
+    """))
+    run_suite(load_suite(suite), tmp_path / "out", executor="serial")
+    damaged = sorted((tmp_path / "out" / "jobs").glob("*.json"))[0]
+    damaged.write_text("{")
+    report = build_report(tmp_path / "out", plots=False)
+    assert len(report.not_run) == 1 and report.not_run[0].endswith("(its result file cannot be read: see the log)")
+    assert coverage_text(report) == " of the suite's 3 jobs (0 not run yet, 1 with a result file that cannot be read)"
+    assert result_path(tmp_path / "out", damaged.stem).exists()

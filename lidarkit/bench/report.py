@@ -25,7 +25,7 @@ import numpy as np
 
 from lidarkit import atomic
 from lidarkit.bench.jobs import Job, canonical_json
-from lidarkit.bench.results import dataset_labels, load_results
+from lidarkit.bench.results import dataset_labels, load_results, result_path
 from lidarkit.errors import DataError
 from lidarkit.eval.report import markdown_table
 from lidarkit.eval.statistics import summarize
@@ -370,7 +370,9 @@ def coverage_text(report: Report) -> str:
     suite.json left out`` ('' when it holds every job of the suite and nothing was left out)."""
     text = ""
     if report.n_expected and report.n_records < report.n_expected:
-        text += f" of the suite's {report.n_expected} jobs ({len(report.not_run)} not run yet)"
+        unreadable = sum(line.endswith("(its result file cannot be read: see the log)") for line in report.not_run)
+        text += f" of the suite's {report.n_expected} jobs ({len(report.not_run) - unreadable} not run yet"
+        text += f", {unreadable} with a result file that cannot be read)" if unreadable else ")"
     if report.n_left_out:
         text += (f"; {report.n_left_out} results in jobs/ of jobs not in the folder's suite.json (an earlier suite) left out"
                  if report.n_expected else f"; {report.n_left_out} results of jobs not in this run's suite left out")
@@ -683,7 +685,8 @@ def build_report(
     missing = [spec for k, spec in expected.items() if k not in done]
     report = Report(out_dir=out_dir, tables=aggregate(records, missing), n_records=len(records), skipped=_skipped(manifest),
                     n_expected=len(expected), n_left_out=n_all - len(records),
-                    not_run=[_label({"job": spec}) for spec in missing])
+                    not_run=[_label({"job": spec}) + (" (its result file cannot be read: see the log)" if result_path(out_dir, k).exists() else "")
+                             for k, spec in expected.items() if k not in done])
     for r in records:
         for message in r.get("warnings") or []:
             if len(report.warnings) < 100:
