@@ -49,9 +49,9 @@ import numpy as np
 
 from lidarkit.atomic import write_text
 from lidarkit.bench.machine import describe_machine, machine_info
-from lidarkit.geometry import se3_inverse, se3_log
+from lidarkit.geometry import se3_inverse, se3_log, so3_exp
 from lidarkit.registration import available_icp, get_icp
-from lidarkit.registration.covariance import AxisCalibration, adjoint, safe_inverse
+from lidarkit.registration.covariance import AxisCalibration, adjoint, safe_inverse, twist_turn
 from lidarkit.sim.scan_pairs import ScanPairs
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -290,9 +290,7 @@ def turned_scores(run: dict, principal: AxisCalibration, frame_axes: AxisCalibra
     calibrated in the principal axes (the default, the same at every turn) and in the target frame's axes."""
     out: dict = {}
     for deg in TURNS_DEG:
-        a = np.radians(deg)
-        P = np.zeros((6, 6))
-        P[:3, :3] = P[3:, 3:] = [[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]]
+        P = twist_turn(so3_exp([0.0, 0.0, np.radians(deg)]))
         covs = np.einsum("ij,njk,lk->nil", P, run["covs"], P)
         errors, steps = run["errors"] @ P.T, None if run.get("steps") is None else run["steps"] @ P.T
         out[str(deg)] = {"principal": score(errors, apply_all(covs, principal, steps)), "frame_axes": score(errors, apply_all(covs, frame_axes, steps))}

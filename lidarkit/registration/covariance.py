@@ -307,8 +307,7 @@ def apply_calibration(covariance: np.ndarray, entry: AxisCalibration, step: np.n
         weight = _principal_weight(covariance)
         out = _calibrated_in(covariance, entry, step, turn)
         if weight < 1.0:  # a nearly isotropic horizontal block: both orderings of its axes, blended
-            quarter = np.zeros((6, 6))
-            quarter[:3, :3] = quarter[3:, 3:] = [[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]
+            quarter = twist_turn(np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]))
             out = weight * out + (1.0 - weight) * _calibrated_in(covariance, entry, step, quarter @ turn)
         return make_psd(float(entry.coverage) * out)
     return make_psd(float(entry.coverage) * _calibrated_in(covariance, entry, step, None))
@@ -361,10 +360,20 @@ def principal_turn(covariance: np.ndarray) -> np.ndarray:
     direction (a street's or corridor's axis, however the scene runs in the target frame). Per-axis factors learned
     on streets along x otherwise follow the frame, not the street: the same corridor turned by 45 degrees got a 16x
     larger sigma across it. An isotropic block keeps the frame's axes."""
-    xy = np.asarray(covariance, dtype=np.float64)[:2, :2]
-    angle = 0.5 * np.arctan2(2.0 * xy[0, 1], xy[0, 0] - xy[1, 1])
+    return twist_turn(horizontal_turn(np.asarray(covariance, dtype=np.float64)[:2, :2]))
+
+
+def horizontal_turn(block_xy: np.ndarray) -> np.ndarray:
+    """The 3x3 turn about z that puts the major axis of a symmetric 2x2 ``block_xy`` (a covariance's or a point spread's
+    horizontal block) on x; the identity for an isotropic block."""
+    angle = 0.5 * np.arctan2(2.0 * block_xy[0, 1], block_xy[0, 0] - block_xy[1, 1])
     c, s = np.cos(angle), np.sin(angle)
-    R = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+    return np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def twist_turn(R: np.ndarray) -> np.ndarray:
+    """``blockdiag(R, R)``: how a twist ``(t, r)`` (and a 6x6 covariance or normal matrix, on both sides) is expressed
+    in a frame turned by ``R`` (the adjoint of a pure rotation)."""
     turn = np.zeros((6, 6))
     turn[:3, :3] = turn[3:, 3:] = R
     return turn
@@ -546,5 +555,5 @@ def adjoint(T: np.ndarray) -> np.ndarray:
 
 __all__ = [
     "COVARIANCE_CONVENTION", "COVARIANCE_METHODS", "CovarianceModel", "DEFAULT_CORRELATION_VOXEL_M", "DEFAULT_MODEL", "STEP_PAIR_DISTANCE_M",
-    "AxisCalibration", "CALIBRATION", "CALIBRATION_TRAINING", "CALIBRATION_WITHOUT_STEP", "active_model", "adjoint", "apply_calibration", "calibrate", "covariance_and_step", "effective_observations", "use_model", "left_jacobians", "make_psd", "nees", "principal_turn", "registration_covariance", "safe_inverse",
+    "AxisCalibration", "CALIBRATION", "CALIBRATION_TRAINING", "CALIBRATION_WITHOUT_STEP", "active_model", "adjoint", "apply_calibration", "calibrate", "covariance_and_step", "effective_observations", "use_model", "left_jacobians", "make_psd", "nees", "horizontal_turn", "principal_turn", "registration_covariance", "safe_inverse", "twist_turn",
 ]

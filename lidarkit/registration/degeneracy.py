@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from lidarkit.registration.base import DEGENERACY_RATIO_THRESHOLD, Degeneracy
-from lidarkit.registration.covariance import left_jacobians
+from lidarkit.registration.covariance import horizontal_turn, left_jacobians, twist_turn
 
 try:  # optional (extra ``gicp``): a faster exact k-nearest search for the local surfaces
     import small_gicp as _small_gicp
@@ -67,10 +67,7 @@ def normal_matrix(points_xyz: np.ndarray, constraints: np.ndarray) -> np.ndarray
     degenerate, at 0 and 90 degrees the translation along it)."""
     p = points_xyz - points_xyz.mean(axis=0)
     n = len(p)
-    xy = p[:, :2].T @ p[:, :2] / max(n, 1)
-    angle = 0.5 * np.arctan2(2.0 * xy[0, 1], xy[0, 0] - xy[1, 1])
-    c, s = np.cos(angle), np.sin(angle)
-    R = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])  # the points' major horizontal axis onto x
+    R = horizontal_turn(p[:, :2].T @ p[:, :2] / max(n, 1))  # the points' major horizontal axis onto x
     p = p @ R.T
     constraints = np.einsum("ij,njk,lk->nil", R, constraints, R)
     # RMS lever arm about each axis through the centroid: a rotation about x is scaled by the distance of the points
@@ -85,8 +82,7 @@ def normal_matrix(points_xyz: np.ndarray, constraints: np.ndarray) -> np.ndarray
     J[:, :, 3:] *= np.where(arm > 0, 1.0 / np.where(arm > 0, arm, 1.0), 0.0)  # rotation columns in metres at the lever arm
     MJ = np.matmul(constraints, J)  # (n, 3, 6): two contractions instead of one 4-index einsum (10x faster)
     H = np.einsum("nki,nkj->ij", J, MJ) / max(n, 1)
-    turn = np.zeros((6, 6))
-    turn[:3, :3] = turn[3:, 3:] = R
+    turn = twist_turn(R)
     return turn.T @ H @ turn  # back in the frame's axes (a turn: the eigenvalues are the principal axes' own)
 
 
