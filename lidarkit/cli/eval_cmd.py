@@ -110,15 +110,11 @@ def eval_command(
         atomic.write_text(markdown, report.evaluation_markdown(evaluation))
         console.print(f"wrote {markdown}")
     if tables is not None:
-        import numpy as np
-
-        from lidarkit.eval.tables import KITTI_FRAME_PERIOD_S, SegmentErrors, publication_tables
+        from lidarkit.eval.tables import SegmentErrors, frame_period_s, publication_tables
 
         key = (ref_traj.name or ref.stem, est_traj.name or est.stem)
-        period = KITTI_FRAME_PERIOD_S  # a segment's speed: its length over its frames' duration (KITTI: 10 Hz)
-        if ref_traj.timestamps_s is not None and len(ref_traj) > 1:
-            period = float(np.median(np.diff(ref_traj.timestamps_s)))
-        segments = {key: SegmentErrors.from_drift(evaluation.drift, frame_period_s=period)} if evaluation.drift is not None else None
+        segments = ({key: SegmentErrors.from_drift(evaluation.drift, frame_period_s=frame_period_s(ref_traj))}
+                    if evaluation.drift is not None else None)
         from lidarkit.eval.ape_rpe import DELTA_UNITS, alignment_label
 
         aligned = alignment_label(align)

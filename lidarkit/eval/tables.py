@@ -27,6 +27,17 @@ from lidarkit.eval.kitti_drift import KITTI_LENGTHS_M, DriftResult
 SPEED_BINS_MPS = (0.0, 5.0, 10.0, 15.0, 20.0, 25.0, math.inf)
 #: the devkit's frame period, used to turn a segment's frame count into its duration
 KITTI_FRAME_PERIOD_S = 0.1
+
+
+def frame_period_s(reference: Any) -> float:
+    """The frame period of a trajectory's segments: its time stamps' median interval, :data:`KITTI_FRAME_PERIOD_S`
+    without stamps (a segment's speed is its length over its frames' duration)."""
+    stamps = getattr(reference, "timestamps_s", None)
+    if stamps is None or len(stamps) < 2:
+        return KITTI_FRAME_PERIOD_S
+    return float(np.median(np.diff(np.asarray(stamps, dtype=np.float64))))
+
+
 QUANTITIES = {
     "translation_pct": "translational drift (%)",
     "rotation_deg_per_100m": "rotational drift (deg/100 m)",

@@ -63,7 +63,7 @@ def trajectory_series(ref_xyz: np.ndarray | None, est_xyz: np.ndarray, times_s: 
 def drift_segments(result: Any) -> dict[str, list[float]] | None:
     """Per-segment KITTI errors of an odometry result (for pooled averages, per-speed tables and box plots)."""
     from lidarkit import eval as leval
-    from lidarkit.eval.tables import KITTI_FRAME_PERIOD_S, SegmentErrors
+    from lidarkit.eval.tables import SegmentErrors, frame_period_s
     from lidarkit.odometry.metrics import paired
 
     if result.ground_truth is None:
@@ -71,10 +71,7 @@ def drift_segments(result: Any) -> dict[str, list[float]] | None:
     ref, est = paired(result.ground_truth, result.trajectory)
     if not leval.drift_segments_possible(ref):
         return None
-    period = KITTI_FRAME_PERIOD_S
-    if ref.timestamps_s is not None and len(ref) > 1:
-        period = float(np.median(np.diff(ref.timestamps_s)))
-    return SegmentErrors.from_drift(leval.kitti_drift(ref, est), frame_period_s=period).to_dict()
+    return SegmentErrors.from_drift(leval.kitti_drift(ref, est), frame_period_s=frame_period_s(ref)).to_dict()
 
 
 def seeded_dataset(job: Job) -> dict[str, Any]:
