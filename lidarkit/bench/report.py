@@ -87,6 +87,7 @@ class Report:
     n_expected: int = 0  # jobs of the suite (suite.json) the report is restricted to; 0: every result in the folder
     n_left_out: int = 0  # results in jobs/ from jobs not in the suite (an earlier suite in the same folder)
     not_run: list[str] = field(default_factory=list)  # labels of the suite's jobs with no result
+    n_unreadable: int = 0  # of those, the jobs whose result file is there but cannot be read
     publication: Any = None  # lidarkit.bench.publication.Publication (odometry tables, box plots)
     html_path: Path | None = None
     markdown_path: Path | None = None
@@ -370,9 +371,8 @@ def coverage_text(report: Report) -> str:
     suite.json left out`` ('' when it holds every job of the suite and nothing was left out)."""
     text = ""
     if report.n_expected and report.n_records < report.n_expected:
-        unreadable = sum(line.endswith("(its result file cannot be read: see the log)") for line in report.not_run)
-        text += f" of the suite's {report.n_expected} jobs ({len(report.not_run) - unreadable} not run yet"
-        text += f", {unreadable} with a result file that cannot be read)" if unreadable else ")"
+        text += f" of the suite's {report.n_expected} jobs ({len(report.not_run) - report.n_unreadable} not run yet"
+        text += f", {report.n_unreadable} with a result file that cannot be read)" if report.n_unreadable else ")"
     if report.n_left_out:
         text += (f"; {report.n_left_out} results in jobs/ of jobs not in the folder's suite.json (an earlier suite) left out"
                  if report.n_expected else f"; {report.n_left_out} results of jobs not in this run's suite left out")
@@ -682,11 +682,12 @@ def build_report(
         title = _suite_title(manifest)
     done = {r["key"] for r in records}
     expected = {k: spec for k, spec in suite_jobs.items() if only_keys is None or k in only_keys}
-    missing = [spec for k, spec in expected.items() if k not in done]
-    report = Report(out_dir=out_dir, tables=aggregate(records, missing), n_records=len(records), skipped=_skipped(manifest),
-                    n_expected=len(expected), n_left_out=n_all - len(records),
-                    not_run=[_label({"job": spec}) + (" (its result file cannot be read: see the log)" if result_path(out_dir, k).exists() else "")
-                             for k, spec in expected.items() if k not in done])
+    missing = {k: spec for k, spec in expected.items() if k not in done}
+    unreadable = {k for k in missing if result_path(out_dir, k).exists()}  # (load_results logged why)
+    report = Report(out_dir=out_dir, tables=aggregate(records, list(missing.values())), n_records=len(records),
+                    skipped=_skipped(manifest), n_expected=len(expected), n_left_out=n_all - len(records),
+                    not_run=[_label({"job": spec}) + (" (its result file cannot be read: see the log)" if k in unreadable else "")
+                             for k, spec in missing.items()], n_unreadable=len(unreadable))
     for r in records:
         for message in r.get("warnings") or []:
             if len(report.warnings) < 100:
