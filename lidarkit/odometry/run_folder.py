@@ -16,8 +16,6 @@ from lidarkit.odometry.result import OdometryResult
 from lidarkit.run_files import RUN_FILES
 
 
-
-
 def write_run(result: OdometryResult, out_dir: str | os.PathLike) -> Path:
     """Write the run folder: poses_kitti.txt, poses_tum.txt, config.yaml, metrics.json, timing.csv, and with
     ground truth ground_truth_kitti.txt, trajectory.png and ape.png; the folder all-or-nothing (``atomic.run_folder``).

@@ -449,13 +449,14 @@ def run(
 
     all_stamps = sequence.timestamps_s
     timestamps = None if all_stamps is None else np.asarray(all_stamps, dtype=np.float64)[indices]
+    estimate_at = estimate_instant(registration, first_scan)
     # the poses are stamped at the instant they refer to (a deskewing variant's), not at the one the scans' stamps do
-    timestamps, stamp_note = stamps_at_instant(timestamps, first_scan, estimate_instant(registration, first_scan), all_stamps)
+    timestamps, stamp_note = stamps_at_instant(timestamps, first_scan, estimate_at, all_stamps)
     trajectory = Trajectory(poses, timestamps, name=f"{name} on {title}",
                             meta={"method": name, "dataset": dataset_name, **({"stamps": stamp_note} if stamp_note else {})})
     instant_note = None
     if reference is not None:  # score like with like: the estimate's and the ground truth's instant of the sweep
-        retimed, instant_note = like_with_like(reference, estimate_instant(registration, first_scan), sequence=sequence,
+        retimed, instant_note = like_with_like(reference, estimate_at, sequence=sequence,
                                                own_ground_truth=ground_truth is None, method=name,
                                                deskewed=deskews(registration, first_scan))
         if instant_note is not None:
