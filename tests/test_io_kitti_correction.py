@@ -112,3 +112,60 @@ def test_kiss_kitti_on_an_excerpt_pairs_each_scan_with_its_own_ground_truth(tmp_
         open_dataset("kiss_kitti", copy).timestamps_s
     with pytest.raises(ConfigError, match="sequence must be a number such as 00, got 'abc'"):
         open_dataset("kiss_kitti", copy, sequence="abc")
+
+
+def _raw_drive_of_sequence_00(base):
+    """A KITTI raw drive laid out where kiss-icp's raw loader looks for odometry sequence 00 (2011_10_03 drive 0027),
+    holding the 10 shared scans of sequence 00 (the calibration and an OXTS packet of the shared 2011_09_26 drive)."""
+    import shutil
+
+    shared_day = shared_path("kitti_raw", "2011_09_26")
+    day = base / "2011_10_03"
+    drive = day / "2011_10_03_drive_0027_sync"
+    for name in ("calib_cam_to_cam.txt", "calib_velo_to_cam.txt", "calib_imu_to_velo.txt"):
+        (day).mkdir(parents=True, exist_ok=True)
+        shutil.copy2(shared_day / name, day / name)
+    shared_drive = shared_day / "2011_09_26_drive_0001_sync"
+    (drive / "oxts" / "data").mkdir(parents=True)
+    (drive / "velodyne_points" / "data").mkdir(parents=True)
+    shutil.copy2(shared_drive / "oxts" / "timestamps.txt", drive / "oxts" / "timestamps.txt")
+    shutil.copy2(shared_drive / "velodyne_points" / "timestamps.txt", drive / "velodyne_points" / "timestamps.txt")
+    scans = sorted(shared_path("kitti_odometry", "sequences", "00", "velodyne").glob("*.bin"))
+    for i, scan in enumerate(scans):
+        shutil.copy2(shared_drive / "oxts" / "data" / "0000000000.txt", drive / "oxts" / "data" / f"{i:010d}.txt")
+        shutil.copy2(scan, drive / "velodyne_points" / "data" / f"{i:010d}.bin")
+    return drive
+
+
+def test_kiss_on_kitti_raw_equals_kiss_icp_pipeline_with_its_raw_loader(tmp_path):
+    """kiss-icp's KITTI raw loader corrects every drive's scans as its KITTI loader does: so does lidarkit's
+    kitti_raw reader for kiss (auto), recorded in the run config; other methods read the points as stored."""
+    from kiss_icp.datasets.kitti_raw import KITTIRawDataset
+    from kiss_icp.pipeline import OdometryPipeline
+
+    from lidarkit.odometry import run
+
+    drive = _raw_drive_of_sequence_00(tmp_path)
+    dataset = KITTIRawDataset(tmp_path, sequence="00")
+    assert len(dataset) == 10
+    pipeline = OdometryPipeline(dataset)
+    pipeline._run_pipeline()
+    out = tmp_path / "run"
+    assert cli_exit_code(["odometry", f"kitti_raw:{drive}", "--method", "kiss", "--out", str(out), "--no-progress"]) == 0
+    poses = np.loadtxt(out / "poses_kitti.txt").reshape(-1, 3, 4)
+    assert np.linalg.norm(poses[:, :, 3] - pipeline.poses[:, :3, 3], axis=1).max() <= 1e-6
+    options = yaml.safe_load((out / "config.yaml").read_text())["run"]["dataset_options"]
+    assert options["kind"] == "kitti_raw" and options["vertical_correction_applied"] is True
+    uncorrected = run(f"kitti_raw:{drive}?vertical_correction=false", "kiss")
+    assert np.linalg.norm(uncorrected.trajectory.poses_se3[:, :3, 3] - pipeline.poses[:, :3, 3], axis=1).max() > 1e-4
+    other = run(f"kitti_raw:{drive}", "vanilla", frames="0:2")
+    assert other.config["run"]["dataset_options"]["vertical_correction_applied"] is False
+
+
+def test_a_number_is_not_a_correction_setting():
+    """1 == True in Python: it passed the check and was then never applied (neither True nor "auto")."""
+    from lidarkit.errors import ConfigError
+    from lidarkit.io.kitti import KittiOdometry
+
+    with pytest.raises(ConfigError, match="vertical_correction must be true, false or auto, got 1"):
+        KittiOdometry(shared_path("kitti_odometry"), "00", vertical_correction=1)

@@ -151,3 +151,51 @@ def test_pykitti_errors_are_wrapped(raw_copy):
     calib.write_text(calib.read_text().replace("R: 7.533745e-03 ", "R: "))  # 8 numbers: pykitti reshape fails
     with pytest.raises(DataError, match=r"pykitti cannot load the drive \(ValueError"):
         KittiRaw(raw_copy, DATE, DRIVE)
+
+
+def _moving_drive(base, n=6, north_deg_per_frame=1e-5):
+    """The shared drive with ``n`` KITTI scans and OXTS packets moving north by ``north_deg_per_frame`` a frame."""
+    drive = _drive(base)
+    oxts, velo = drive / "oxts" / "data", drive / "velodyne_points" / "data"
+    velo.mkdir()
+    fields = (oxts / "0000000000.txt").read_text().split()
+    lat0 = float(fields[0])
+    for k in range(n):
+        fields[0] = repr(lat0 + k * north_deg_per_frame)
+        (oxts / f"{k:010d}.txt").write_text(" ".join(fields) + "\n")
+        shutil.copy2(shared_path("kitti_odometry", "sequences", "00", "velodyne", f"{k:06d}.bin"), velo / f"{k:010d}.bin")
+    return drive
+
+
+def test_raw_scans_are_timed_by_azimuth_and_stamped_mid_sweep(raw_copy):
+    """As kiss-icp's raw loader: a clockwise sweep from behind (0) through forward (0.5) to behind (1)."""
+    ds = KittiRaw(_moving_drive(raw_copy, n=1))
+    scan = ds.read_scan(0)
+    assert scan.point_time_convention == "fraction" and scan.stamp_instant == "mid"
+    t, p = scan.point_times_s, scan.points_xyz
+    assert t.min() >= 0.0 and t.max() <= 1.0 and np.ptp(t) > 0.99
+    azimuth = np.degrees(np.arctan2(p[:, 1], p[:, 0]))
+    for deg, fraction in ((0.0, 0.5), (90.0, 0.25), (-90.0, 0.75), (179.0, 0.0)):
+        near = np.abs(azimuth - deg) < 1.0
+        assert near.sum() > 50 and np.abs(t[near] - fraction).max() < 0.01
+    assert KittiRaw(_drive(raw_copy), point_times="none").read_scan(0).point_times_s is None
+    with pytest.raises(Exception, match="point_times must be one of azimuth, none"):
+        KittiRaw(_drive(raw_copy), point_times="ring")
+
+
+def test_raw_ground_truth_retimed_to_the_sweep_end(raw_copy):
+    ds = KittiRaw(_moving_drive(raw_copy))
+    mid = ds.ground_truth
+    assert mid.meta["pose_instant"] == "mid"
+    step = np.linalg.norm(np.diff(mid.poses_se3[:, :3, 3], axis=0), axis=1)
+    assert step == pytest.approx(EARTH_RADIUS_M * np.radians(1e-5), rel=0.01)  # ~1.11 m a frame
+    same = ds.ground_truth_at_instant("mid")
+    np.testing.assert_allclose(same.poses_se3, mid.poses_se3, atol=1e-7)  # (the slerp re-orthonormalizes the rounded calib)
+    end = ds.ground_truth_at_instant("end")
+    assert end.meta["pose_instant"] == "end" and "OXTS" in end.meta["retimed"]
+    period = np.median(np.diff(ds._velo_times_all))
+    np.testing.assert_allclose(end.timestamps_s, mid.timestamps_s + 0.5 * period)
+    # half-way to the next frame's pose (its stamp is ~one period later), the last continued at constant velocity
+    halfway = mid.poses_se3[:-1, :3, 3] + 0.5 * period / np.diff(mid.timestamps_s)[:, None] * np.diff(mid.poses_se3[:, :3, 3], axis=0)
+    np.testing.assert_allclose(end.poses_se3[:-1, :3, 3], halfway, atol=1e-5)
+    assert np.linalg.norm(end.poses_se3[-1, :3, 3] - mid.poses_se3[-1, :3, 3]) == pytest.approx(0.5 * step[-1], rel=0.05)

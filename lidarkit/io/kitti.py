@@ -27,6 +27,7 @@ import os
 import re
 from functools import cached_property
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -180,9 +181,7 @@ class KittiOdometry:
         ground_truth_frame: str = "auto",
         vertical_correction: bool | str = "auto",
     ):
-        if vertical_correction not in (True, False, "auto"):
-            raise ConfigError(f"vertical_correction must be true, false or auto, got {vertical_correction!r}", source="vertical_correction")
-        self.vertical_correction = vertical_correction
+        self.vertical_correction = check_vertical_correction(vertical_correction)
         self._correct = vertical_correction is True
         if ground_truth_frame not in ("auto", "lidar", "camera"):
             raise ConfigError(
@@ -552,6 +551,13 @@ class KittiOdometry:
     def as_image_sequence(self) -> KittiImages:
         """The images of this sequence as an ``ImageSequence`` (ground truth in the camera frame)."""
         return KittiImages(self)
+
+
+def check_vertical_correction(value: Any) -> bool | str:
+    """``value`` if it is a ``vertical_correction`` setting (True, False or "auto"), else ConfigError."""
+    if value not in (True, False, "auto") or isinstance(value, (int, float)) and not isinstance(value, bool):
+        raise ConfigError(f"vertical_correction must be true, false or auto, got {value!r}", source="vertical_correction")
+    return value
 
 
 def correct_vertical_angle(points_xyz: np.ndarray) -> np.ndarray:

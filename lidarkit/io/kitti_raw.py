@@ -10,11 +10,19 @@ Layout::
 OXTS packets become poses ``T_enu_imu`` with pykitti's Mercator projection (scale from the first
 latitude, origin at the first GPS position, x east, y north, z up). ``ground_truth`` gives the
 LiDAR poses ``T_enu_velo = T_enu_imu @ T_velo_imu^-1`` of the scanned frames.
+
+Raw scans are not motion-compensated: as kiss-icp's own KITTI raw loader, the reader gives each point its place in
+the sweep from its azimuth (``point_times="azimuth"``: the HDL-64 turns clockwise seen from above, a sweep starts and
+ends facing backwards and faces forward half-way, when the cameras are triggered and ``velodyne_points/timestamps.txt``
+stamps it), so deskewing variants deskew them; the stamps and the OXTS ground truth refer to the sweep middle. The
+scans get KITTI's vertical-angle correction as the ``kitti`` reader does (``vertical_correction``; under ``"auto"``
+for kiss, as kiss-icp's loader reads every drive).
 Everything pykitti raises is turned into a DataError naming the file.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import re
 from functools import cached_property
@@ -22,16 +30,21 @@ from pathlib import Path
 
 import numpy as np
 
-from lidarkit.errors import DataError
+from lidarkit.errors import ConfigError, DataError
 from lidarkit.geometry import se3_inverse
-from lidarkit.io.base import Scan
-from lidarkit.io.kitti import indexed_files, read_gray_image
+from lidarkit.io.base import INSTANT_FRACTION, Scan
+from lidarkit.io.kitti import (
+    CORRECTED_BY_DEFAULT, KITTI_VERTICAL_CORRECTION_DEG, check_vertical_correction, correct_vertical_angle, indexed_files,
+    read_gray_image,
+)
 from lidarkit.io.pointfile import read_kitti_bin
 from lidarkit.textfile import file_line, read_lines, read_numeric_table
 from lidarkit.trajectory import Trajectory
 
 CALIB_FILES = ("calib_cam_to_cam.txt", "calib_velo_to_cam.txt", "calib_imu_to_velo.txt")
 OXTS_FIELDS = 30
+#: the per-point times a drive's scans are given (``"azimuth"``: each point's sweep fraction, as kiss-icp's loader)
+POINT_TIMES = ("azimuth", "none")
 _DRIVE_DIR = re.compile(r"^(\d{4}_\d{2}_\d{2})_drive_(\d{4})_(\w+)$")
 
 
@@ -62,6 +75,11 @@ class KittiRaw:
     case date, drive and dataset are taken from its name. ``len`` is the number of Velodyne scans
     (0 when the drive has none: calibration and OXTS poses are still available, ``read_scan``
     raises DataError). Frame numbers come from file names, as in :class:`KittiOdometry`.
+
+    ``vertical_correction``: as :class:`~lidarkit.io.kitti.KittiOdometry`'s; every raw drive is a recording of KITTI's
+    HDL-64, so ``"auto"`` corrects whenever an odometry run of a method in ``CORRECTED_BY_DEFAULT`` (kiss) asks
+    (:meth:`configure_for_method`), as kiss-icp's own KITTI raw loader does; read directly, the points as stored.
+    ``point_times``: ``"azimuth"`` (default) gives each point its sweep fraction from its azimuth, ``"none"`` none.
     """
 
     def __init__(
@@ -72,7 +90,14 @@ class KittiRaw:
         *,
         dataset: str = "sync",
         drop_nonfinite: bool = False,
+        vertical_correction: bool | str = "auto",
+        point_times: str = "azimuth",
     ):
+        self.vertical_correction = check_vertical_correction(vertical_correction)
+        if point_times not in POINT_TIMES:
+            raise ConfigError(f"point_times must be one of {', '.join(POINT_TIMES)}, got {point_times!r}", source="point_times")
+        self.point_times = point_times
+        self._correct = vertical_correction is True
         base = Path(base_dir)
         m = _DRIVE_DIR.match(base.name)
         if m and date is None and drive is None:
@@ -128,6 +153,23 @@ class KittiRaw:
 
     def __len__(self) -> int:
         return len(self.scan_paths)
+
+    def configure_for_method(self, method: str) -> None:
+        """Resolve ``vertical_correction="auto"`` for an odometry run of ``method`` (on for kiss)."""
+        if self.vertical_correction == "auto":
+            self._correct = method in CORRECTED_BY_DEFAULT
+
+    @property
+    def reader_options(self) -> dict:
+        """What the reader did to the data, for the run config."""
+        return {
+            "kind": "kitti_raw",
+            "path": str(self.drive_dir.absolute()),
+            "vertical_correction": self.vertical_correction,
+            "vertical_correction_applied": self._correct,
+            "vertical_correction_deg": KITTI_VERTICAL_CORRECTION_DEG if self._correct else 0.0,
+            "point_times": self.point_times,
+        }
 
     def __repr__(self) -> str:
         return f"KittiRaw({str(self.drive_dir)!r}, scans={len(self)}, oxts={len(self.oxts_paths)})"
@@ -204,10 +246,35 @@ class KittiRaw:
 
     @property
     def ground_truth(self) -> Trajectory | None:
-        """LiDAR poses of the scans in the ENU frame of the first GPS fix, or None when there are no scans."""
+        """LiDAR poses of the scans in the ENU frame of the first GPS fix (at the sweep middle, when the scan is
+        stamped), or None when there are no scans."""
         if not self.scan_paths:
             return None
-        return self.ground_truth_at(self.scan_frames).with_timestamps(self.timestamps_s)
+        gt = self.ground_truth_at(self.scan_frames).with_timestamps(self.timestamps_s)
+        return Trajectory(gt.poses_se3, gt.timestamps_s, gt.name, meta={"frame": "lidar", "pose_instant": "mid"})
+
+    def ground_truth_at_instant(self, instant: str) -> Trajectory:
+        """The scans' LiDAR poses at the ``instant`` (start, mid or end) of every sweep: the OXTS poses, each at its
+        frame's Velodyne stamp as :attr:`ground_truth` pairs them, interpolated at the scans' stamps moved by half the
+        stamps' median interval (continued at constant velocity for at most 1.5 intervals beyond the first or last
+        packet); DataError without Velodyne time stamps."""
+        if instant not in INSTANT_FRACTION:
+            raise DataError(f"unknown instant {instant!r}; valid: {', '.join(INSTANT_FRACTION)}", source=self.drive_dir)
+        stamps = self.timestamps_s
+        if stamps is None or len(stamps) < 2:
+            raise DataError("re-timing the ground truth needs the Velodyne time stamps of two or more scans", source=self.velodyne_dir)
+        period = float(np.median(np.diff(self._velo_times_all)))
+        times = stamps + (INSTANT_FRACTION[instant] - 0.5) * period
+        oxts = self.oxts_poses
+        velo_all = self._velo_times_all
+        # the sync drives pair OXTS packet f with scan f (as ground_truth does): both at the Velodyne stamp of frame f
+        at = velo_all[self.oxts_frames] if self.oxts_frames[-1] < len(velo_all) else oxts.timestamps_s
+        if len(oxts) < 2 or not (np.diff(at) > 0).all():
+            raise DataError("interpolating needs two or more OXTS packets with increasing time stamps", source=self.drive_dir / "oxts")
+        lidar = Trajectory(oxts.poses_se3 @ se3_inverse(self.T_velo_imu), at, f"{self.name}_gt_lidar")
+        out = lidar.interpolated(times, max_extrapolation_s=1.5 * float(np.median(np.diff(at))))
+        how = f"the {len(oxts)} OXTS poses interpolated {INSTANT_FRACTION[instant] - 0.5:+.1f} sweep from the scans' stamps"
+        return Trajectory(out.poses_se3, times, lidar.name, meta={"frame": "lidar", "pose_instant": instant, "retimed": how})
 
     # ---- data -------------------------------------------------------------------------------------------
     def read_scan(self, index: int) -> Scan:
@@ -219,7 +286,11 @@ class KittiRaw:
         frame = int(self.scan_frames[index])
         times = self.timestamps_s  # (a timestamps.txt that does not cover the scans is an error, not a missing stamp)
         ts = None if times is None else float(times[index])
-        return read_kitti_bin(self.scan_paths[index], frame=frame, timestamp_s=ts, drop_nonfinite=self.drop_nonfinite)
+        scan = read_kitti_bin(self.scan_paths[index], frame=frame, timestamp_s=ts, drop_nonfinite=self.drop_nonfinite)
+        if self._correct:
+            scan = dataclasses.replace(scan, points_xyz=correct_vertical_angle(scan.points_xyz))
+        fractions = sweep_fraction_from_azimuth(scan.points_xyz) if self.point_times == "azimuth" else None
+        return dataclasses.replace(scan, point_times_s=fractions, point_time_convention="fraction", stamp_instant="mid")
 
     def read_image(self, index: int) -> np.ndarray:
         """The ``index``-th image of camera 0 (gray left) as uint8."""
@@ -228,4 +299,10 @@ class KittiRaw:
         return read_gray_image(self.image_paths[index], frame=int(self.image_frames[index]))
 
 
-__all__ = ["KittiRaw", "read_kitti_raw_timestamps"]
+def sweep_fraction_from_azimuth(points_xyz: np.ndarray) -> np.ndarray:
+    """Each point's place in a clockwise sweep that starts facing backwards (0 at azimuth +180 degrees, 0.5 facing
+    forward, 1 at -180 degrees), as kiss-icp's KITTI raw loader times a scan."""
+    return 0.5 * (1.0 - np.arctan2(points_xyz[:, 1], points_xyz[:, 0]) / np.pi)
+
+
+__all__ = ["KittiRaw", "read_kitti_raw_timestamps", "sweep_fraction_from_azimuth"]
