@@ -313,8 +313,9 @@ def run(
     dataset_name = str(getattr(sequence, "name", "dataset"))
     title = name or dataset_name
     name = method_name
-    if callable(getattr(sequence, "configure_for_method", None)):
-        sequence.configure_for_method(method_name)  # e.g. KITTI's vertical-angle correction for kiss (recorded below)
+    if callable(getattr(sequence, "configure_for_method", None)):  # e.g. KITTI's vertical-angle correction for kiss
+        # (recorded below); a variant that stands for another (pipeline's kiss_like) gets that one's data
+        sequence.configure_for_method(getattr(registration, "reads_data_as", None) or method_name)
     n_total = len(sequence)
     if n_total == 0:
         raise DataError("the dataset has no scans", source=dataset_name)

@@ -145,6 +145,12 @@ class PipelineRegistration(Registration):
             return None
         return {"start": "start", "middle": "mid", "end": "end"}.get(str(motion.reference))
 
+    @property
+    def reads_data_as(self) -> str | None:
+        """``"kiss"`` for kiss's composition (preset kiss_like, the default): a reader prepares the data as for kiss (on
+        KITTI under ``vertical_correction=auto``, the vertical-angle correction), so the two see the same points."""
+        return "kiss" if self.config.preset in (None, "kiss_like") else None
+
     def describe(self) -> dict[str, Any]:
         """Every component with its resolved parameters."""
         c = self._components
