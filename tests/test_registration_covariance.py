@@ -736,3 +736,32 @@ def test_the_principal_calibration_is_continuous_where_the_horizontal_block_turn
             out.append(apply_calibration(cov, CALIBRATION[name], step))
         change = np.sqrt(np.diag(out[1]) / np.diag(out[0]))
         assert np.all(np.abs(change - 1) < 0.1), (name, np.round(change, 3))
+
+
+def test_a_subclass_of_a_variant_inherits_its_calibration_and_says_so(kitti_pair):
+    """A plugin deriving from vanilla got the raw closed form under its own name (relative NEES ~470 on a street);
+    it now gets vanilla's calibration, and a variant with none learned is told so in the result."""
+    from lidarkit.registration import Registration, RegistrationConfig
+    from lidarkit.registration.assessment import assess_alignment
+    from lidarkit.registration.vanilla import VanillaICP
+
+    class MyVanilla(VanillaICP):
+        name = "my_vanilla"
+
+    class MyICP(Registration):
+        name = "my_icp"
+        Config = RegistrationConfig
+
+        def _align(self, source_xyz, target_xyz, init_T):
+            return assess_alignment(source_xyz, target_xyz, init_T, 1.0).to_result(init_T, iterations=1)
+
+    source, target, _ = kitti_pair
+    own = get_icp("vanilla", voxel_size_m=0.5).align(source, target)
+    derived = MyVanilla(voxel_size_m=0.5).align(source, target)
+    np.testing.assert_allclose(derived.covariance, own.covariance, rtol=1e-12)
+    assert own.extra["covariance_calibration"] == "vanilla"
+    assert derived.extra["covariance_calibration"] == "vanilla's (inherited by my_vanilla)"
+    raw = get_icp("vanilla", voxel_size_m=0.5, calibrated_covariance=False).align(source, target)
+    assert not np.allclose(raw.covariance, own.covariance) and "covariance_calibration" not in raw.extra
+    mine = MyICP().align(source, target, own.T_target_source)
+    assert mine.covariance is not None and mine.extra["covariance_calibration"].startswith("none learned for my_icp")

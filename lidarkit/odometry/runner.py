@@ -88,13 +88,21 @@ def _frame_error(err: Exception, dataset_name: str, frame: int) -> LidarKitError
     return RegistrationError(f"{type(err).__name__}: {err}", source=dataset_name, location=f"frame {frame}")
 
 
+def _calibration_of(registration: Any, name: str) -> str | None:
+    """The variant whose learned covariance calibration applies to ``registration`` (its own, or the one it derives
+    from), as its pairwise results use; a registration outside the registry by its name."""
+    lookup = getattr(registration, "calibration_variant", None)
+    return lookup() if callable(lookup) else name
+
+
 def _stateful_after(k: int, frame: int, previous: np.ndarray | None, scan: Scan, prepared: tuple, poses: np.ndarray,
                     checker: FrameChecker, want_covariance: bool, relative_cov: np.ndarray, min_eigenvalue: np.ndarray,
-                    name: str, dataset_name: str, voxelized: VoxelizedScans) -> None:
-    """A stateful variant's frame k once its pose is known: the after-the-fact covariance, then the frame check."""
+                    calibration: str | None, dataset_name: str, voxelized: VoxelizedScans) -> None:
+    """A stateful variant's frame k once its pose is known: the after-the-fact covariance (calibrated as the variant
+    ``calibration``), then the frame check."""
     if want_covariance and k > 0:
         try:
-            relative_cov[k], min_eigenvalue[k] = frame_covariance(previous, scan.points_xyz, poses[k - 1], poses[k], name, voxelized)
+            relative_cov[k], min_eigenvalue[k] = frame_covariance(previous, scan.points_xyz, poses[k - 1], poses[k], calibration, voxelized)
         except Exception as err:
             if not _is_frame_error(err):
                 raise
@@ -171,7 +179,8 @@ def _run_stateless(stream, registration: Any, worker: Overlap, indices: np.ndarr
             if item["scan"].has_time_span() and not getattr(registration, "accepts_point_times", False):
                 # a sweep skewed by the motion within it, registered as it is: the skew that does not cancel between
                 # two sweeps is not in the pair calibration (DISTORTION_SIGMA, benchmarks/covariance_distortion.py)
-                cov = widen_for_distortion(result.covariance, name, float(np.linalg.norm(result.T_target_source[:3, 3])))
+                cov = widen_for_distortion(result.covariance, _calibration_of(registration, name),
+                                           float(np.linalg.norm(result.T_target_source[:3, 3])))
                 if cov is not result.covariance:
                     relative_cov[k] = cov
                     widened.append(k)
@@ -393,6 +402,7 @@ def run(
                 registration.reset()
                 previous = None
                 voxelized = VoxelizedScans()  # used by the worker thread only, one frame after another
+                calibration = _calibration_of(registration, name)
                 inflight = None  # frame k-1's after-the-fact task
                 for k, (idx, payload, read_time, read_error) in enumerate(stream):
                     read_s[k] = read_time
@@ -425,7 +435,7 @@ def run(
                         inflight.result()
                     inflight = worker.submit(functools.partial(
                         _stateful_after, k, int(idx), previous, scan, prepared, poses, checker, want_covariance, relative_cov,
-                        min_eigenvalue, name, dataset_name, voxelized,
+                        min_eigenvalue, calibration, dataset_name, voxelized,
                     ))
                     validated.pop(id(points), None)  # registered: not passed to the backend again
                     previous = points
@@ -586,10 +596,10 @@ class VoxelizedScans:
 
 
 def frame_covariance(previous_xyz: np.ndarray, points_xyz: np.ndarray, T_world_prev: np.ndarray, T_world_cur: np.ndarray,
-                     variant: str, voxelized: VoxelizedScans | None = None) -> tuple[np.ndarray, float]:
+                     variant: str | None, voxelized: VoxelizedScans | None = None) -> tuple[np.ndarray, float]:
     """Covariance (and smallest normal-matrix eigenvalue) of a stateful variant's frame-to-frame motion, assessed
-    after the fact on the two voxelized scans at the motion it estimated (the variant itself exposes no Hessian).
-    ``voxelized``: the run's :class:`VoxelizedScans`, which has the previous scan voxelized already."""
+    after the fact on the two voxelized scans at the motion it estimated (the variant itself exposes no Hessian),
+    calibrated as ``variant``'s (None: as computed). ``voxelized``: the run's :class:`VoxelizedScans`, which has the previous scan voxelized already."""
     from lidarkit.geometry import se3_inverse
     from lidarkit.registration.assessment import assess_alignment
     from lidarkit.registration.covariance import calibrate

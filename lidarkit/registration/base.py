@@ -153,6 +153,13 @@ class Degeneracy:
         )
 
 
+def calibration_note(variant: str, learned: str | None) -> str:
+    """What calibrated a variant's covariance, in words (``extra["covariance_calibration"]``)."""
+    if learned is None:
+        return f"none learned for {variant}: the closed form as computed (typically over-confident)"
+    return learned if learned == variant else f"{learned}'s (inherited by {variant})"
+
+
 @dataclass(frozen=True)
 class RegistrationResult:
     """Outcome of one pairwise registration.
@@ -465,6 +472,19 @@ class Registration:
 
         return PendingAlignment(T, bool(likely_converged), finish)
 
+    @classmethod
+    def calibration_variant(cls) -> str | None:
+        """The variant whose learned covariance calibration applies: this one's, else that of the nearest registered
+        variant it derives from (a plugin subclassing ``vanilla``), None where there is none (the closed form is then
+        returned as computed; ``extra["covariance_calibration"]`` says so)."""
+        from lidarkit.registration.covariance import CALIBRATION
+
+        for klass in cls.__mro__:
+            name = vars(klass).get("name")
+            if name and name in CALIBRATION:
+                return str(name)
+        return None
+
     def _finish(self, result: RegistrationResult, runtime: float) -> RegistrationResult:
         """The config's calibration and acceptance gate applied to the variant's assessed result; a covariance computed
         around a local origin (far clouds: ``extra["covariance_origin_m"]``) is calibrated there, then moved to the
@@ -472,9 +492,12 @@ class Registration:
         from lidarkit.registration.assessment import COVARIANCE_ORIGIN_KEY
         from lidarkit.registration.covariance import adjoint, calibrate
 
-        covariance, step = result.covariance, result.surface_step
+        covariance, step, extra = result.covariance, result.surface_step, result.extra
         if covariance is not None and self._config.calibrated_covariance and self._config.covariance == "censi":
-            covariance = calibrate(covariance, self.name, step)
+            learned = self.calibration_variant()
+            if learned is not None:
+                covariance = calibrate(covariance, learned, step)
+            extra = {**extra, "covariance_calibration": calibration_note(self.name, learned)}
         if covariance is not None and getattr(self._config, "planar", False):
             # a planar solve keeps z, roll and pitch of the guess: they are not estimated, and carry no variance here
             covariance = covariance.copy()
@@ -488,7 +511,7 @@ class Registration:
             covariance = Ad @ covariance @ Ad.T
             step = None if step is None else Ad @ step
         return dataclasses.replace(accept(result, self._config), runtime_s=runtime, method=self.name, covariance=covariance,
-                                   surface_step=step)
+                                   surface_step=step, extra=extra)
 
     def _register(
         self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray
