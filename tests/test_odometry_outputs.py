@@ -280,6 +280,26 @@ def test_motion_prediction_follows_irregular_frame_intervals():
     assert make_frame_check(n_sample="0", max_target_points="10") == FrameCheckConfig(n_sample=0, max_target_points=10)
 
 
+def test_frame_check_settings_given_to_run_are_checked_as_the_cli_checks_them():
+    """``run(frame_check=FrameCheckConfig(...))`` skipped the CLI's checks: n_sample=-5 was a numpy traceback,
+    min_fitness=2 failed every frame, a NaN limit turned its test off, all in silence."""
+    from lidarkit.odometry import run
+
+    for params, message in (({"n_sample": -5}, "n_sample must be >= 0"),
+                            ({"min_fitness": 2}, "min_fitness is a share of the sampled points, at most 1"),
+                            ({"max_angular_accel_dps2": float("nan")}, "max_angular_accel_dps2 must be a finite number"),
+                            ({"nominal_period_s": 0}, "nominal_period_s must be positive"),
+                            ({"seed": True}, "seed must be a number")):
+        with pytest.raises(ConfigError, match=message):
+            FrameCheckConfig(**params)
+    spec = "sim:open?frames=4&beams=16&azimuths=360"
+    with pytest.raises(ConfigError, match="frame_check must be a FrameCheckConfig or a mapping"):
+        run(spec, "vanilla", frame_check="min_fitness=0.5")
+    with pytest.raises(ConfigError, match="min_fitness is a share"):
+        run(spec, "vanilla", frame_check={"min_fitness": 2})
+    assert run(spec, "vanilla", frame_check={"min_fitness": "0.5"}).config["run"]["frame_check"]["min_fitness"] == 0.5
+
+
 def test_independent_check_counts_the_bad_frames_of_a_drifting_variant_that_says_converged(tmp_path, capsys):
     spec = "sim:open?frames=25&beams=16&azimuths=360"
     out = tmp_path / "run"

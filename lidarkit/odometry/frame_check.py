@@ -24,7 +24,7 @@ tenth of kiss-icp's frame); the motion part is vectorized over the whole run aft
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -61,6 +61,9 @@ class FrameCheckConfig:
     min_points: int = 50
     seed: int = 0
 
+    def __post_init__(self) -> None:  # built by the CLI (make_frame_check) or by hand: checked alike
+        _check_config(self)
+
     def describe(self) -> dict[str, Any]:
         """The thresholds in words and numbers (written to metrics.json)."""
         return {
@@ -73,32 +76,39 @@ class FrameCheckConfig:
 
 
 def make_frame_check(**params: Any) -> FrameCheckConfig:
-    """A :class:`FrameCheckConfig` from ``KEY=VALUE`` settings (e.g. the CLI's ``--check``); unknown keys and values
-    that are not positive numbers raise ConfigError naming the valid keys."""
-    from dataclasses import fields
-
+    """A :class:`FrameCheckConfig` from ``KEY=VALUE`` settings (e.g. the CLI's ``--check``, text or numbers); unknown
+    keys raise ConfigError naming the valid keys, bad values as :class:`FrameCheckConfig` does."""
     from lidarkit.errors import ConfigError
 
-    valid = {f.name: f.type for f in fields(FrameCheckConfig)}
+    valid = [f.name for f in fields(FrameCheckConfig)]
     unknown = sorted(set(params) - set(valid))
     if unknown:
         raise ConfigError(f"unknown setting(s) {', '.join(unknown)}; valid: {', '.join(valid)}", source="frame check")
     values: dict[str, Any] = {}
     for key, value in params.items():
-        whole = valid[key] in (int, "int")
         try:
             number = float(value)
         except (TypeError, ValueError):
             raise ConfigError(f"{key} must be a number, got {value!r}", source="frame check") from None
-        if not np.isfinite(number):
-            raise ConfigError(f"{key} must be a finite number, got {value!r}", source="frame check")
-        if whole and not number.is_integer():  # (1.5 was cut to 1)
-            raise ConfigError(f"{key} must be a whole number, got {value!r}", source="frame check")
-        may_be_zero = key in ("seed", "n_sample")  # n_sample=0: no fitness test
-        if number < 0 if may_be_zero else number <= 0:
-            raise ConfigError(f"{key} must be {'>= 0' if may_be_zero else 'positive'}, got {value!r}", source="frame check")
-        values[key] = int(number) if whole else number
-    config = FrameCheckConfig(**values)
+        values[key] = int(number) if _WHOLE[key] and number.is_integer() else number  # (1.5 is refused, not cut to 1)
+    return FrameCheckConfig(**values)
+
+
+def _check_config(config: FrameCheckConfig) -> None:
+    """ConfigError for a setting that is not a finite number of its kind, or settings under which nothing is checked."""
+    from lidarkit.errors import ConfigError
+
+    for f in fields(config):
+        value = getattr(config, f.name)
+        if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+            raise ConfigError(f"{f.name} must be a number, got {value!r}", source="frame check")
+        if not np.isfinite(value):
+            raise ConfigError(f"{f.name} must be a finite number, got {value!r}", source="frame check")
+        if _WHOLE[f.name] and not float(value).is_integer():
+            raise ConfigError(f"{f.name} must be a whole number, got {value!r}", source="frame check")
+        may_be_zero = f.name in ("seed", "n_sample")  # n_sample=0: no fitness test
+        if value < 0 if may_be_zero else value <= 0:
+            raise ConfigError(f"{f.name} must be {'>= 0' if may_be_zero else 'positive'}, got {value!r}", source="frame check")
     if config.min_fitness > 1:
         raise ConfigError(f"min_fitness is a share of the sampled points, at most 1, got {config.min_fitness:g}", source="frame check")
     if 0 < config.n_sample < config.min_points:  # the test would skip every frame (fewer than min_points sampled)
@@ -107,7 +117,23 @@ def make_frame_check(**params: Any) -> FrameCheckConfig:
     if config.n_sample and config.max_target_points < config.min_points:
         raise ConfigError(f"max_target_points {config.max_target_points} is below min_points {config.min_points}: no frame would "
                           "be checked for fitness", source="frame check")
-    return config
+
+
+def as_frame_check(value: Any) -> FrameCheckConfig:
+    """The run's frame-check settings: None (the defaults), a :class:`FrameCheckConfig` or a mapping of its settings."""
+    from lidarkit.errors import ConfigError
+
+    if value is None:
+        return FrameCheckConfig()
+    if isinstance(value, FrameCheckConfig):
+        return value
+    if isinstance(value, dict):
+        return make_frame_check(**value)
+    raise ConfigError(f"frame_check must be a FrameCheckConfig or a mapping of its settings, got {type(value).__name__}", source="frame check")
+
+
+#: settings that count things (whole numbers)
+_WHOLE = {f.name: f.type in (int, "int") for f in fields(FrameCheckConfig)}
 
 
 @dataclass
@@ -237,7 +263,7 @@ class FrameChecker:
     """Runs the check frame by frame inside the odometry loop (fitness needs both scans); motion at the end."""
 
     def __init__(self, n_frames: int, config: FrameCheckConfig | None = None):
-        self.config = config or FrameCheckConfig()
+        self.config = as_frame_check(config)
         self.fitness = np.full(n_frames, np.nan)
         self.has_point_times = np.zeros(n_frames, dtype=bool)
         self.check_s = np.zeros(n_frames)

@@ -277,7 +277,7 @@ def run(
     ground_truth: Trajectory | None = None,
     strict: bool = False,
     name: str | None = None,
-    frame_check: FrameCheckConfig | None = None,
+    frame_check: FrameCheckConfig | dict[str, Any] | None = None,
     prefetch: int = DEFAULT_DEPTH,
     init: str = "constant_velocity",
     pose_covariance: bool | None = None,
@@ -299,7 +299,8 @@ def run(
     the reader's settings. A deskew the method requests but cannot apply (no per-point times) is a warning
     in ``metrics["warnings"]``, or with ``strict=True`` a :class:`DataError` naming the first such frame.
     Every frame also goes through the independent check of :mod:`lidarkit.odometry.frame_check`
-    (``frame_check`` sets its thresholds). ``name`` titles the run (default: the dataset's name, e.g. its folder). ``prefetch``: scans read
+    (``frame_check`` sets its thresholds: a FrameCheckConfig or a mapping of its settings, checked as the CLI checks
+    them). ``name`` titles the run (default: the dataset's name, e.g. its folder). ``prefetch``: scans read
     ahead in a background thread (0: read inline). Ground truth whose instant of the sweep differs from the
     estimate's is re-timed with a note or refused (:mod:`lidarkit.odometry.instants`).
     ``init``: the initial guess of each frame, ``"constant_velocity"`` (the previous relative motion; stateful
