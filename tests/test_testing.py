@@ -92,6 +92,10 @@ def test_a_result_over_other_data_than_the_pinned_job_is_refused(tmp_path):
         assert_no_worse_than(run(SimulatedLidarSequence(n_frames=3, seed=0, **drive), "kiss"), baseline, method="kiss", metric="ape_rmse_m")
     with pytest.raises(EvaluationError, match=r"dataset differs from the pinned job 'kiss': seed 1 \(pinned 0\)"):
         assert_no_worse_than(run(SimulatedLidarSequence(n_frames=8, seed=1, **drive), "kiss"), baseline, method="kiss", metric="ape_rmse_m")
+    # a setting the suite leaves at its default is part of the pinned data too: a noisier sensor passed against it
+    with pytest.raises(EvaluationError, match=r"dataset differs from the pinned job 'kiss': range_noise_std_m 0.05 \(pinned 0.0\)"):
+        assert_no_worse_than(run(SimulatedLidarSequence(n_frames=8, seed=0, range_noise_std_m=0.05, **drive), "kiss"), baseline,
+                             method="kiss", metric="ape_rmse_m", tolerance=10.0)
 
 
 def test_pytest_plugin_fixture_in_a_user_test_run(tiny_baseline, tmp_path):

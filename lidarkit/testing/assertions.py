@@ -117,7 +117,28 @@ def _check_same_data(result: Any, now_metrics: dict[str, float], job: Mapping[st
     ran = ((config or {}).get("run") or {}).get("dataset_config") if isinstance(config, Mapping) else None
     if not isinstance(pinned, Mapping) or not isinstance(ran, Mapping):
         return
-    differ = [f"{k} {ran[k]!r} (pinned {v!r})" for k, v in pinned.items() if k not in ("kind", "name") and k in ran and ran[k] != v]
+    expected = _pinned_simulation(job) if pinned.get("kind") == "sim_lidar" else None
+    if expected is not None:  # every setting, those left at their defaults too (a noisier sensor is other data)
+        differ = [f"{k} {ran.get(k)!r} (pinned {v!r})" for k, v in expected.items() if ran.get(k) != v]
+    else:
+        differ = [f"{k} {ran[k]!r} (pinned {v!r})" for k, v in pinned.items() if k not in ("kind", "name") and k in ran and ran[k] != v]
     if differ:
         raise EvaluationError(f"the result's dataset differs from the pinned job {job.get('label', '')!r}: {', '.join(differ)}",
                               source="assert_no_worse_than")
+
+
+def _pinned_simulation(job: Mapping[str, Any]) -> dict[str, Any] | None:
+    """The whole simulator configuration the pinned job ran on (its spec's settings, the defaults for the rest, its
+    seed), as a run records it in ``config["run"]["dataset_config"]``; None when it cannot be rebuilt."""
+    from lidarkit.bench.datasets import dataset_options
+    from lidarkit.bench.jobs import Job
+    from lidarkit.bench.tasks.odometry import seeded_dataset
+    from lidarkit.errors import LidarKitError
+    from lidarkit.odometry import config_dict
+    from lidarkit.sim.lidar import make_config
+
+    try:
+        return config_dict(make_config(**dataset_options(seeded_dataset(Job.from_spec(dict(job["spec"]))))))
+    except (LidarKitError, KeyError, TypeError, ValueError):
+        return None
+
