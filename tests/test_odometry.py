@@ -438,3 +438,19 @@ def test_cli_smoke_every_method_on_a_tiny_simulated_sequence(tmp_path, capsys, m
     assert metrics["method"] == method and metrics["n_frames"] == 4
     assert metrics["final_error"]["translation_m"] < 3.0  # 3 m driven: a sanity bound, not an accuracy claim
     assert len(Trajectory.from_kitti(tmp_path / method / "poses_kitti.txt")) == 4
+
+
+def test_a_stateful_variant_failing_on_a_frame_in_scipy_is_that_frames_error(rng):
+    """A pipeline component that made NaN weights raised scipy's ValueError through run() and the CLI as a traceback;
+    pairwise, the same failure was already a RegistrationError."""
+    from lidarkit.errors import RegistrationError
+
+    class NaNOnFrame2(MapStandIn):
+        def register_frame(self, points_xyz, point_times_s=None):
+            if len(self.got_times) == 2:
+                raise ValueError("'x' must be finite")
+            return super().register_frame(points_xyz, point_times_s)
+
+    poses = _drive(4)
+    with pytest.raises(RegistrationError, match=r"\(frame 2\).*ValueError: 'x' must be finite"):
+        run(MemorySequence(poses, _room_points(rng, 500)), NaNOnFrame2(poses))

@@ -9,6 +9,7 @@ import textwrap
 
 import numpy as np
 import pytest
+from conftest import cli_exit_code
 from registration_helpers import structured_cloud
 
 from lidarkit.errors import ConfigError, DataError, RegistrationError
@@ -150,18 +151,55 @@ def test_entry_point_plugin_is_discovered_and_configurable(tmp_path, monkeypatch
         registry_module._VARIANTS.pop("lk_identity_plugin", None)
 
 
-def test_broken_plugin_raises_config_error_naming_it(tmp_path, monkeypatch):
+def test_broken_plugin_is_left_out_and_named_when_asked_for(tmp_path, monkeypatch, caplog):
+    """One broken plugin made every lookup fail (available_icp, `icp --list`, a typo's message): now it is left out
+    with a warning, the rest works, and asking for it says why it is missing."""
     site = tmp_path / "site"
     site.mkdir()
     (site / "lk_broken_plugin.py").write_text("raise RuntimeError('boom at import')\n")
     _install_dist_info(site, monkeypatch, "lk-broken-plugin", "lk_broken_plugin:Nope")
     try:
-        with pytest.raises(ConfigError) as err:
+        with caplog.at_level("WARNING", logger="lidarkit.registration.registry"):
             reload_plugins()
-        assert "lk_broken_plugin" in str(err.value) and "boom at import" in str(err.value)
+        assert "lk_broken_plugin" in caplog.text and "boom at import" in caplog.text
+        assert "vanilla" in available_icp() and "lk_broken_plugin" not in available_icp()
+        with pytest.raises(ConfigError, match=r"ICP plugin 'lk_broken_plugin': this plugin is installed but could not be loaded: .*boom at import"):
+            get_icp("lk_broken_plugin")
+        with pytest.raises(ConfigError, match="unknown ICP method 'kis'; available: .*kiss"):
+            get_icp("kis")
+        assert cli_exit_code(["icp", "--list"]) == 0
     finally:
         monkeypatch.undo()
         reload_plugins()
+
+
+def test_a_plugin_returning_a_bare_pose_or_a_plain_config_is_refused_naming_it():
+    """``_align`` returning a 4x4 array was an AttributeError from lidarkit's internals; a Config that is a plain
+    pydantic model was accepted, then failed on its first use."""
+    import pydantic
+
+    from lidarkit.errors import RegistrationError
+    from lidarkit.registration import Registration, RegistrationConfig, register_icp
+
+    class BarePose(Registration):
+        name = "bare_pose"
+        Config = RegistrationConfig
+
+        def _align(self, source_xyz, target_xyz, init_T):
+            return init_T
+
+    with pytest.raises(RegistrationError, match=r"bare_pose: BarePose._align returned ndarray, not a RegistrationResult"):
+        BarePose().align(np.eye(3) * 2 + 1, np.eye(3) * 3)
+
+    class Plain(pydantic.BaseModel):
+        offset_m: float = 0.0
+
+    class PlainConfig(Registration):
+        Config = Plain
+
+    with pytest.raises(ConfigError, match="PlainConfig.Config must derive from lidarkit.registration.RegistrationConfig"):
+        register_icp("plain_config")(PlainConfig)
+    assert "plain_config" not in available_icp()
 
 
 # ---------------------------------------------------------------- result contract and synthetic accuracy

@@ -35,6 +35,7 @@ def read_init_pose(path: Path) -> np.ndarray:
 
 def _list_methods() -> None:
     from lidarkit.registration import available_icp, config_fields, get_icp_class
+    from lidarkit.registration.registry import broken_plugins
     from lidarkit.registration.base import assessed_apart
 
     table = Table(title="ICP variants (lidarkit icp --method NAME --param key=value)", show_lines=True)
@@ -50,6 +51,8 @@ def _list_methods() -> None:
             cell.append(("\n" if cell else "") + f"{key}: {type_name} = {default!r} — {desc}")
         table.add_row(name + (" (stateful)" if cls.stateful else ""), cell)
     stdout().print(table)
+    for name, reason in broken_plugins().items():
+        stdout().print(f"[yellow]plugin {name!r} left out: {reason}[/]", markup=True, highlight=False)
     _list_ground_segmenters()
 
 

@@ -61,7 +61,9 @@ def config_dict(config: Any) -> dict[str, Any]:
 #: Errors re-raised naming the frame: lidarkit's own and the RuntimeErrors that backends (Open3D, kiss-icp,
 #: small_gicp) raise for bad input. Programming errors (AttributeError, TypeError, NotImplementedError, ...)
 #: propagate unchanged.
-_FRAME_ERRORS = (LidarKitError, RuntimeError)
+#: what a variant raises on a frame it cannot register (its backend's refusals, a plugin's NaN in scipy) and is
+#: reported as that frame's error; the same kinds a pairwise alignment reports (``use_backend``)
+_FRAME_ERRORS = (LidarKitError, RuntimeError, ValueError, ArithmeticError, MemoryError, IndexError, TypeError)
 
 
 def _read_nonempty_scan(sequence: ScanSequence, index: int) -> Scan:

@@ -519,6 +519,9 @@ class Registration:
         """The backend's part of an alignment: ``(pose, the backend's own convergence verdict, the assessment still to
         do)``. Variants whose assessment can run apart override it; by default the whole :meth:`_align` runs now."""
         result = self._align(source_xyz, target_xyz, init_T)
+        if not isinstance(result, RegistrationResult):  # (a bare 4x4 pose, None: a plugin's easy mistake)
+            raise RegistrationError(f"{type(self).__name__}._align returned {type(result).__name__}, not a RegistrationResult "
+                                    "(score the pose with assess_alignment(...).to_result(T))", source=self.name or type(self).__name__)
         return result.T_target_source, bool(result.converged), lambda: result
 
     def _align(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray) -> RegistrationResult:

@@ -16,7 +16,7 @@ from typing import Any, Literal, Union, get_args, get_origin
 import pydantic
 
 from lidarkit.errors import ConfigError, validation_problems
-from lidarkit.registration.base import Registration
+from lidarkit.registration.base import Registration, RegistrationConfig
 
 log = logging.getLogger(__name__)
 
@@ -24,6 +24,8 @@ ENTRY_POINT_GROUP = "lidarkit.icp"
 
 _VARIANTS: dict[str, type[Registration]] = {}
 _PLUGINS_LOADED = False
+#: installed plugins that failed to load: name -> reason
+_BROKEN: dict[str, str] = {}
 
 
 def register_icp(name: str) -> Callable[[type[Registration]], type[Registration]]:
@@ -32,6 +34,10 @@ def register_icp(name: str) -> Callable[[type[Registration]], type[Registration]
     def decorator(cls: type[Registration]) -> type[Registration]:
         if not (isinstance(cls, type) and issubclass(cls, Registration)):
             raise ConfigError(f"{cls!r} is not a Registration subclass", source=f"register_icp({name!r})")
+        config = getattr(cls, "Config", None)
+        if not (isinstance(config, type) and issubclass(config, RegistrationConfig)):
+            raise ConfigError(f"{cls.__qualname__}.Config must derive from lidarkit.registration.RegistrationConfig (it carries the "
+                              f"assessment and covariance settings every variant takes), got {config!r}", source=f"register_icp({name!r})")
         existing = _VARIANTS.get(name)
         if existing is not None and existing is not cls:
             raise ConfigError(f"name already taken by {existing.__module__}.{existing.__qualname__}", source=f"register_icp({name!r})")
@@ -43,25 +49,34 @@ def register_icp(name: str) -> Callable[[type[Registration]], type[Registration]
 
 
 def _load_plugins() -> None:
-    """Import every ``lidarkit.icp`` entry point once; a broken plugin raises ConfigError naming it."""
+    """Import every ``lidarkit.icp`` entry point once. A broken plugin is left out with a warning (the others and
+    the built-in variants stay usable); asking for it by name raises ConfigError with the reason (:data:`_BROKEN`)."""
     global _PLUGINS_LOADED
     if _PLUGINS_LOADED:
         return
     _PLUGINS_LOADED = True
+    _BROKEN.clear()
     for ep in entry_points(group=ENTRY_POINT_GROUP):
         if ep.name in _VARIANTS:
             continue
         try:
             obj = ep.load()
+            if ep.name not in _VARIANTS:
+                if not (isinstance(obj, type) and issubclass(obj, Registration)):
+                    raise ConfigError(f"entry point {ep.value!r} is not a Registration subclass", source=f"ICP plugin {ep.name!r}")
+                register_icp(ep.name)(obj)
         except Exception as err:  # a plugin may fail in any way while importing
-            _PLUGINS_LOADED = False
-            raise ConfigError(f"failed to load plugin {ep.value!r}: {type(err).__name__}: {err}", source=f"ICP plugin {ep.name!r}") from err
-        if ep.name not in _VARIANTS:
-            if not (isinstance(obj, type) and issubclass(obj, Registration)):
-                _PLUGINS_LOADED = False
-                raise ConfigError(f"entry point {ep.value!r} is not a Registration subclass", source=f"ICP plugin {ep.name!r}")
-            register_icp(ep.name)(obj)
+            reason = err.reason if isinstance(err, ConfigError) else f"failed to load {ep.value!r}: {type(err).__name__}: {err}"
+            _BROKEN[ep.name] = reason
+            log.warning("ICP plugin %r left out: %s", ep.name, reason)
+            continue
         log.info("loaded ICP plugin %s from %s", ep.name, ep.value)
+
+
+def broken_plugins() -> dict[str, str]:
+    """The installed ICP plugins that failed to load, with the reason (name -> reason)."""
+    _load_plugins()
+    return dict(_BROKEN)
 
 
 def reload_plugins() -> None:
@@ -81,6 +96,8 @@ def get_icp_class(name: str) -> type[Registration]:
     """The class registered as ``name``; unknown names raise ConfigError listing the known ones."""
     if name not in _VARIANTS:
         _load_plugins()
+    if name in _BROKEN:
+        raise ConfigError(f"this plugin is installed but could not be loaded: {_BROKEN[name]}", source=f"ICP plugin {name!r}")
     if name not in _VARIANTS:
         raise ConfigError(f"unknown ICP method {name!r}; available: {', '.join(available_icp())}", source="method")
     return _VARIANTS[name]
@@ -126,4 +143,4 @@ def get_icp(name: str, **params: Any) -> Registration:
     return cls(config=config)
 
 
-__all__ = ["ENTRY_POINT_GROUP", "available_icp", "config_fields", "get_icp", "get_icp_class", "register_icp", "reload_plugins"]
+__all__ = ["ENTRY_POINT_GROUP", "available_icp", "broken_plugins", "config_fields", "get_icp", "get_icp_class", "register_icp", "reload_plugins"]
