@@ -328,3 +328,16 @@ def test_a_vo_run_into_an_odometry_run_folder_leaves_no_odometry_file(tmp_path, 
     names = sorted(p.name for p in out.iterdir())
     assert "timing.csv" not in names and "ground_truth_kitti.txt" not in names and "ape.png" not in names
     assert "diagnostics.csv" in names and "notes.txt" in names
+
+
+def test_a_matcher_keeps_the_presets_descriptor_detector(tmp_path, capsys):
+    """--matcher bf_cross on report_sift (its own matcher) ran ORB instead of SIFT, silently; the default preset's
+    detector has no descriptors, so there ORB is taken, with a note."""
+    seq = str(sample_path("kitti_vo", "06"))
+    out = tmp_path / "run"
+    code, stdout, err = _run(["vo", seq, "--preset", "report_sift", "--matcher", "bf_cross", "--max-frames", "3", "--out", str(out)], capsys)
+    assert code in (0, None) and "sift + bf_cross" in " ".join(stdout.split()) and "note:" not in err
+    assert yaml.safe_load((out / "config.yaml").read_text())["vo"]["features"]["detector"] == "sift"
+    code, stdout, err = _run(["vo", seq, "--matcher", "knn_ratio", "--max-frames", "3"], capsys)
+    assert code in (0, None) and "orb + knn_ratio" in " ".join(stdout.split())
+    assert "note: --matcher knn_ratio needs descriptors, which gftt has none of: detector orb" in err

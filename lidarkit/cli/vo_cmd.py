@@ -82,8 +82,14 @@ def vo_command(
         "seed": seed,
     }
     changes.update(parse_params(set_ or [], option="--set"))
-    if matcher in ("bf_cross", "knn_ratio") and detector is None:
-        changes["features.detector"] = "orb"
+    if matcher in ("bf_cross", "knn_ratio") and changes.get("features.detector") is None:
+        # descriptor matching needs a detector with descriptors: the preset's own if it has them (report_sift keeps
+        # SIFT), else ORB, said
+        kept = make_preset(preset).features.detector
+        if kept in ("gftt", "fast"):
+            changes["features.detector"] = "orb"
+            stderr().print(f"note: --matcher {matcher} needs descriptors, which {kept} has none of: detector orb "
+                           "(--detector sift or akaze for another)", soft_wrap=True, markup=False)
     cfg = make_preset(preset, **{k: v for k, v in changes.items() if v is not None})
     vo_input = open_vo_input(data, kind=kind, calib=calib, timestamps=timestamps, poses=poses,
                              poses_format=poses_format, focal_factor=focal_factor)
