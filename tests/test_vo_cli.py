@@ -341,3 +341,21 @@ def test_a_matcher_keeps_the_presets_descriptor_detector(tmp_path, capsys):
     code, stdout, err = _run(["vo", seq, "--matcher", "knn_ratio", "--max-frames", "3"], capsys)
     assert code in (0, None) and "orb + knn_ratio" in " ".join(stdout.split())
     assert "note: --matcher knn_ratio needs descriptors, which gftt has none of: detector orb" in err
+
+
+def test_smoothing_settings_that_cannot_apply_are_refused_or_said(tmp_path, capsys):
+    """window=10 ran as 9 and window=4 with polyorder 3 smoothed nothing, both recorded as asked and the smoothed APE
+    printed as if applied."""
+    seq = str(sample_path("kitti_vo", "06"))
+    code, _, err = _run(["vo", seq, "--set", "smoothing.window=10"], capsys)
+    assert err.strip() == "error: vo config smoothing: window must be odd (the filter is centred on each pose), got 10" and code == 1
+    out = tmp_path / "run"
+    code, stdout, _ = _run(["vo", seq, "--scale", "gt", "--set", "smoothing.window=21", "--out", str(out)], capsys)
+    assert code in (0, None) and "smoothing" in stdout and "shrunk" in stdout
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["smoothed"]["smoothing"] == "window 7, polyorder 2 (window 21 shrunk to fit 8 poses)"
+    from lidarkit.trajectory import Trajectory as T
+    from lidarkit.vo.smoothing import smooth_translations
+
+    short = smooth_translations(T(np.tile(np.eye(4), (2, 1, 1))), window=9, polyorder=2)
+    assert short.meta["smoothing"] == "not smoothed: 2 poses leave no odd window above polyorder 2"

@@ -137,8 +137,9 @@ def vo_command(
 
     metrics = {}
     if gt is not None and len(gt) >= 3:
+        smoothed = result.smoothed()
         metrics = {"raw": evaluate_vo(result.trajectory, gt, cfg.scale.mode),
-                   "smoothed": evaluate_vo(result.smoothed(), gt, cfg.scale.mode)}
+                   "smoothed": {**evaluate_vo(smoothed, gt, cfg.scale.mode), "smoothing": smoothed.meta["smoothing"]}}
     console = stdout()
     summary = result.summary()
     table = Table(title=f"lidarkit vo: {data} ({vo_input.kind}, {cfg.features.detector} + {cfg.matching.method}, "
@@ -157,6 +158,8 @@ def vo_command(
     table.add_row("intrinsics", vo_input.K_source)
     if focal is not None and not focal.constrained:
         table.add_row("self-calibration", f"not constrained: {focal.reason}")
+    if metrics and not metrics["smoothed"]["smoothing"].startswith(f"window {cfg.smoothing.window},"):
+        table.add_row("smoothing", metrics["smoothed"]["smoothing"])  # not the configured window: said
     for variant, m in metrics.items():
         table.add_row(f"APE {variant} ({alignment_label(m['align'])}) [m]", f"{m['ape_rmse_m']:.4f}")
         table.add_row(f"RPE {variant} 1 frame [m / deg]",

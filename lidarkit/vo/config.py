@@ -140,6 +140,8 @@ class SmoothingConfig(_Stage):
 
     @model_validator(mode="after")
     def _order_below_window(self) -> SmoothingConfig:
+        if self.window % 2 == 0:  # (an even window ran as the odd one below it, recorded as asked)
+            raise ValueError(f"window must be odd (the filter is centred on each pose), got {self.window}")
         if self.polyorder >= self.window:
             raise ValueError(f"polyorder ({self.polyorder}) must be smaller than window ({self.window})")
         return self
@@ -190,8 +192,11 @@ def make_config(data: dict[str, Any] | None = None) -> VOConfig:
         return VOConfig.model_validate(data or {})
     except ValidationError as err:
         first = err.errors()[0]
-        where = ".".join(str(p) for p in first["loc"]) or "config"
-        raise ConfigError(f"{first['msg']} (got {first.get('input')!r})", source=f"vo config {where}") from err
+        where = " ".join(["vo config", *(".".join(str(p) for p in first["loc"]),)]).strip()
+        message = first["msg"].removeprefix("Value error, ")
+        value = first.get("input")
+        # a field's value is shown; a whole section's (a check across its fields) would repeat every setting
+        raise ConfigError(message if isinstance(value, dict) else f"{message} (got {value!r})", source=where) from err
 
 
 _PRESETS: dict[str, dict[str, Any]] = {

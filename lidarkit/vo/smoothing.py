@@ -10,15 +10,18 @@ from lidarkit.trajectory import Trajectory
 def smooth_translations(trajectory: Trajectory, window: int = 9, polyorder: int = 2) -> Trajectory:
     """Copy of ``trajectory`` with its positions filtered by ``savgol_filter(window, polyorder)`` along time.
 
-    The window shrinks to the largest odd length that fits; trajectories shorter than ``polyorder + 2`` poses are
-    returned unchanged.
+    The window shrinks to the largest odd length that fits; a trajectory too short for a window above ``polyorder``
+    is returned unchanged. ``meta["smoothing"]`` says what was applied (the window used, or why nothing was).
     """
     n = len(trajectory)
     win = min(window, n if n % 2 else n - 1)
     if win % 2 == 0:
         win -= 1
+    name = trajectory.name + "_smoothed"
     if win <= polyorder:
-        return trajectory.with_name(trajectory.name + "_smoothed")
+        note = f"not smoothed: {n} poses leave no odd window above polyorder {polyorder}"
+        return Trajectory(trajectory.poses_se3.copy(), trajectory.timestamps_s, name=name, meta={**trajectory.meta, "smoothing": note})
     poses = trajectory.poses_se3.copy()
     poses[:, :3, 3] = savgol_filter(poses[:, :3, 3], win, polyorder, axis=0, mode="interp")
-    return Trajectory(poses, trajectory.timestamps_s, name=trajectory.name + "_smoothed", meta=dict(trajectory.meta))
+    note = f"window {win}, polyorder {polyorder}" + (f" (window {window} shrunk to fit {n} poses)" if win != window else "")
+    return Trajectory(poses, trajectory.timestamps_s, name=name, meta={**trajectory.meta, "smoothing": note})
