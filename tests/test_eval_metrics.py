@@ -290,3 +290,30 @@ def test_results_to_dict_is_json_safe(rng):
         assert data["stats"]["rmse"] == pytest.approx(res.rmse)
         assert len(data["errors"]) == res.n_errors
     assert json.loads(json.dumps(rpe(ref, est).to_dict()))["pairs"][0] == [0, 1]
+
+
+def test_orientation_errors_after_an_alignment_the_positions_hardly_fix_are_flagged():
+    """5 poses of KITTI 00 lie on a line to 1e-6: the SE(3) alignment turns the estimate about it at random (APE
+    rotation 136 deg aligned, 0.29 deg as estimated), as evo does; the result now says so, the whole run does not."""
+    from lidarkit.eval import evaluate
+    from lidarkit.eval.ape_rpe import AXIS_SIGMA_LIMIT_DEG
+    from lidarkit.eval.report import evaluation_markdown, evaluation_notes
+
+    gt = Trajectory.from_kitti(shared_path("evo_testdata", "KITTI_00_gt.txt"))
+    orb = Trajectory.from_kitti(shared_path("evo_testdata", "KITTI_00_ORB.txt"))
+    short_gt, short_orb = Trajectory(gt.poses_se3[:5]), Trajectory(orb.poses_se3[:5])
+    aligned = ape(short_gt, short_orb, "se3", "rotation_angle_deg")
+    assert aligned.rmse > 100 and aligned.alignment.axis_sigma_deg > 1e4
+    assert "not meaningful" in aligned.warning and aligned.to_dict(False)["warning"] == aligned.warning
+    assert ape(short_gt, short_orb, "se3", "translation").warning == ""  # positions are what the fit fits
+    assert ape(short_gt, short_orb, "none", "rotation_angle_deg").warning == ""
+    whole = ape(gt, orb, "se3", "rotation_angle_deg")
+    assert whole.warning == "" and 0.1 < whole.alignment.axis_sigma_deg < AXIS_SIGMA_LIMIT_DEG / 2
+    # Sim(3): the scale is stated beside the alignment, and the drift said to be on the estimate as given
+    half = Trajectory(orb.poses_se3.copy())
+    half.poses_se3[:, :3, 3] *= 0.5
+    ev = evaluate(gt, half, align="sim3")
+    assert ev.ape.alignment.scale == pytest.approx(2.0, rel=0.01)
+    markdown = evaluation_markdown(ev)
+    assert "align=sim3 (scale 2.0" in markdown and "KITTI drift is the devkit's, on the estimate as given (unscaled)" in markdown
+    assert evaluation_notes(evaluate(short_gt, short_orb))[0] == aligned.warning

@@ -101,6 +101,8 @@ def eval_command(
         console.print(report.drift_table(evaluation))
     elif evaluation.drift_note:
         console.print(f"KITTI drift not computed: {evaluation.drift_note}")
+    for note in report.evaluation_notes(evaluation):
+        console.print(f"note: {note}", soft_wrap=True, markup=False, highlight=False)
     if json_out is not None:
         data = evaluation.to_dict()
         data.update(ref_path=str(ref), est_path=str(est))

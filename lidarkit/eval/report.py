@@ -48,7 +48,20 @@ def drift_rows(evaluation: Evaluation) -> tuple[list[str], list[list[str]]]:
 def _settings_line(evaluation: Evaluation) -> str:
     s = evaluation.settings
     pairs = "all pairs" if s.all_pairs else ("legacy pairs" if s.legacy_pairs else "consecutive pairs")
-    return f"align={s.align}, RPE delta={s.delta:g} {s.delta_unit} ({pairs})" + (", associated" if s.associate else "")
+    transform = evaluation.ape.alignment
+    align = f"align={s.align}" + (f" (scale {transform.scale:.4g})" if transform is not None and s.align in ("sim3", "scale") else "")
+    return f"{align}, RPE delta={s.delta:g} {s.delta_unit} ({pairs})" + (", associated" if s.associate else "")
+
+
+def evaluation_notes(evaluation: Evaluation) -> list[str]:
+    """What a reader of the table must know to read it right: orientation errors after an alignment the positions
+    hardly fix, and KITTI drift beside a scale-corrected APE (the devkit metric takes the estimate as given)."""
+    notes = [evaluation.ape_rotation.warning] if evaluation.ape_rotation.warning else []
+    transform = evaluation.ape.alignment
+    if evaluation.drift is not None and transform is not None and evaluation.settings.align in ("sim3", "scale"):
+        notes.append(f"KITTI drift is the devkit's, on the estimate as given (unscaled); APE and RPE above are on the "
+                     f"estimate scaled by {transform.scale:.4g}")
+    return notes
 
 
 def summary_rows(evaluations: Sequence[Evaluation]) -> tuple[list[str], list[list[str]]]:
@@ -108,6 +121,7 @@ def evaluation_markdown(evaluation: Evaluation) -> str:
         f"### {evaluation.est_name} vs {evaluation.ref_name}\n",
         f"{evaluation.n_poses} poses, reference path {evaluation.ref_length_m:.1f} m; {_settings_line(evaluation)}.\n",
         markdown_table(*metric_rows(evaluation)),
+        *(f"\nNote: {note}.\n" for note in evaluation_notes(evaluation)),
     ]
     if evaluation.drift is not None:
         parts += ["\nKITTI drift (devkit metric) per segment length:\n", markdown_table(*drift_rows(evaluation))]
