@@ -241,6 +241,12 @@ def test_eval_cli_relations(tmp_path, carmen_logs, capsys):
 
     assert json.loads(out_json.read_text())["n_used"] == 1279
     assert cli_exit_code(["eval", "--relations", str(rel), str(est), str(est)]) != 0
+    # options of the pose-by-pose evaluation were accepted and did nothing (no plot written, exit code 0)
+    capsys.readouterr()
+    plot = tmp_path / "r.png"
+    assert cli_exit_code(["eval", "--relations", str(rel), str(est), "--align", "sim3", "--plot", str(plot)]) == 1
+    err = capsys.readouterr().err
+    assert "--align, --plot do(es) not apply to the relations metric" in err and not plot.exists()
 
 
 # ---- planar registration -----------------------------------------------------------------------------

@@ -75,6 +75,16 @@ def eval_command(
     if relations is not None:
         if est is not None:
             raise ConfigError("with --relations give one trajectory (EST) only", source="--relations")
+        unused = [name for name, given in (
+            ("--align", align != _D.align), ("--delta", delta != _D.delta), ("--delta-unit", delta_unit != _D.delta_unit),
+            ("--all-pairs", all_pairs != _D.all_pairs), ("--legacy-pairs", legacy_pairs != _D.legacy_pairs),
+            ("--associate", associate != _D.associate), ("--max-diff", max_diff != _D.max_diff_s), ("--no-drift", drift != _D.drift),
+            ("--plot", plot is not None), ("--markdown", markdown is not None), ("--tables", tables is not None),
+            ("--ref-times", ref_times is not None), ("--ref-format", ref_format is not None),
+        ) if given]
+        if unused:  # (they were accepted and did nothing: no plot, no Markdown file, exit code 0)
+            raise ConfigError(f"{', '.join(unused)} do(es) not apply to the relations metric (it takes --json, "
+                              "--relation-max-diff, --format/--est-format and --est-times)", source="--relations")
         _relations_report(load(ref, est_format, est_times), relations, relation_max_diff, json_out)
         return
     if est is None:
