@@ -92,7 +92,8 @@ def odometry(
     table.add_column("value", overflow="fold")
     table.add_row("frames", str(m["n_frames"]))
     table.add_row("frame rate (Hz)", f"{m['fps']:.2f}")
-    table.add_row("registration time mean (ms)", f"{1e3 * m['register_time_s']['mean']:.1f}")
+    mean_s = m["register_time_s"]["mean"]
+    table.add_row("registration time mean (ms)", "n/a (one frame: nothing registered)" if mean_s is None else f"{1e3 * mean_s:.1f}")
     table.add_row("deskew", _deskew_text(effective.get("deskew")))
     corrections = effective.get("corrections") or {}
     table.add_row("reader corrections", ", ".join(f"{k}={v}" for k, v in corrections.items()) or "none reported by the reader")
