@@ -422,3 +422,10 @@ def test_registration_time_counts_the_frames_registered():
     assert odometry_metrics(result)["register_time_s"]["mean"] == pytest.approx(times[1:].mean())
     single = run("sim:open?frames=1&beams=16&azimuths=360", "vanilla")
     assert odometry_metrics(single)["register_time_s"] == {"mean": None, "median": None, "max": None}
+
+
+def test_ground_truth_given_as_an_array_is_refused_before_the_run():
+    from lidarkit.odometry import run
+
+    with pytest.raises(ConfigError, match="ground_truth must be a lidarkit Trajectory .* got ndarray"):
+        run("sim:open?frames=3&beams=16&azimuths=360", "vanilla", ground_truth=np.tile(np.eye(4), (3, 1, 1)))

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from lidarkit.bench.baseline import record
-from lidarkit.errors import EvaluationError
+from lidarkit.errors import ConfigError, EvaluationError
 from lidarkit.geometry import make_se3, so3_exp
 from lidarkit.testing import assert_no_worse_than, assert_trajectory_close
 from lidarkit.trajectory import Trajectory
@@ -34,6 +34,22 @@ def test_assert_trajectory_close_names_the_worst_frame():
     assert_trajectory_close(walk(yaw_deg=0.1), walk(), atol_deg=0.2)
     with pytest.raises(AssertionError, match="differ in length"):
         assert_trajectory_close(walk(5), walk(6))
+
+
+def test_assert_trajectory_close_on_a_text_copy_and_bad_arguments(tmp_path):
+    """A trajectory read back from its KITTI text differed from itself by 0.00085 deg (arccos of the trace near 1);
+    a negative tolerance and an array in place of a Trajectory were taken (the array as an AttributeError)."""
+    from scipy.spatial.transform import Rotation
+
+    poses = np.tile(np.eye(4), (5, 1, 1))
+    poses[:, :3, :3] = Rotation.from_rotvec(np.random.default_rng(0).normal(size=(5, 3))).as_matrix()
+    original = Trajectory(poses)
+    original.to_kitti(tmp_path / "poses.txt")
+    assert_trajectory_close(Trajectory.from_kitti(tmp_path / "poses.txt"), original, atol_m=1e-6, atol_deg=1e-4)
+    with pytest.raises(ConfigError, match="atol_m must be a finite number >= 0, got -1"):
+        assert_trajectory_close(original, original, atol_m=-1)
+    with pytest.raises(ConfigError, match="actual must be a lidarkit Trajectory .* got ndarray"):
+        assert_trajectory_close(poses, original)
 
 
 SUITE = """

@@ -561,6 +561,9 @@ def _plain(meta: dict) -> dict:
 def _reference(sequence: ScanSequence, ground_truth: Trajectory | None, indices: np.ndarray, dataset_name: str) -> Trajectory | None:
     """Ground truth of the selected frames, relative to its first pose (the estimate starts at identity)."""
     if ground_truth is not None:
+        if not isinstance(ground_truth, Trajectory):  # (an (N, 4, 4) array was an AttributeError after the run)
+            raise ConfigError(f"ground_truth must be a lidarkit Trajectory (Trajectory(poses_se3) wraps an (N, 4, 4) array), "
+                              f"got {type(ground_truth).__name__}", source="ground_truth")
         gt = ground_truth
     elif callable(getattr(sequence, "ground_truth_of", None)):  # a recording's odometry paired with the selected scans only
         gt = sequence.ground_truth_of(indices)

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from lidarkit.errors import ConfigError, EvaluationError
+from lidarkit.geometry import rotation_angle_deg
 from lidarkit.trajectory import Trajectory
 
 
@@ -27,6 +28,13 @@ def assert_trajectory_close(
     ``align`` ("none", "se3", "sim3") first aligns ``actual`` onto ``expected`` (evo's Umeyama); the message
     names the worst frame. Different lengths fail as an AssertionError too.
     """
+    for name, value in (("atol_m", atol_m), ("atol_deg", atol_deg)):
+        if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+            raise ConfigError(f"{name} must be a finite number >= 0, got {value!r}", source="assert_trajectory_close")
+    for name, value in (("actual", actual), ("expected", expected)):
+        if not isinstance(value, Trajectory):  # (an (N, 4, 4) array: Trajectory(poses) makes one)
+            raise ConfigError(f"{name} must be a lidarkit Trajectory (Trajectory(poses_se3) wraps an (N, 4, 4) array), got "
+                              f"{type(value).__name__}", source="assert_trajectory_close")
     if len(actual) != len(expected):
         raise AssertionError(f"trajectories differ in length: {len(actual)} poses vs {len(expected)} expected")
     if align != "none":
@@ -35,8 +43,8 @@ def assert_trajectory_close(
         actual = align_trajectory(expected, actual, align)[0]
     A, E = actual.poses_se3, expected.poses_se3
     d_m = np.linalg.norm(A[:, :3, 3] - E[:, :3, 3], axis=1)
-    R = np.einsum("nji,njk->nik", E[:, :3, :3], A[:, :3, :3])
-    d_deg = np.degrees(np.arccos(np.clip((np.trace(R, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)))
+    # (robust near 0: arccos of the trace read 0.00085 deg between a trajectory and its own text copy)
+    d_deg = rotation_angle_deg(np.einsum("nji,njk->nik", E[:, :3, :3], A[:, :3, :3]))
     bad_t, bad_r = d_m > atol_m, d_deg > atol_deg
     if bad_t.any() or bad_r.any():
         i = int(np.argmax(d_m)) if bad_t.any() else int(np.argmax(d_deg))
