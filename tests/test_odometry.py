@@ -454,3 +454,15 @@ def test_a_stateful_variant_failing_on_a_frame_in_scipy_is_that_frames_error(rng
     poses = _drive(4)
     with pytest.raises(RegistrationError, match=r"\(frame 2\).*ValueError: 'x' must be finite"):
         run(MemorySequence(poses, _room_points(rng, 500)), NaNOnFrame2(poses))
+
+
+def test_a_corrupt_coordinate_is_refused_by_name_not_by_the_frame_checks_histogram(rng):
+    """z = -1e30 in a bag's scan gave numpy's "'list' argument must have no negative elements" (a 772 GiB
+    MemoryError on another file): the frame check's ground histogram ran on points the reading had refused."""
+    poses = _drive(4)
+    world = _room_points(rng, 500)
+    broken = world.copy()
+    broken[5, 2] = -1e30
+    for method in ("vanilla", "kiss"):
+        with pytest.raises(LidarKitError, match=r"\(frame 2\).*coordinate beyond 1e\+07 m"):
+            run(MemorySequence(poses, world, bad={2: broken}), method)

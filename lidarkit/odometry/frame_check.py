@@ -293,6 +293,9 @@ class FrameChecker:
         if self.config.n_sample == 0:  # the motion test only (at the end): fitness stays NaN, "not checked"
             return
         geometry, prepare_s = prepared if prepared is not None else (scan_geometry(points_xyz, self.config, frame), 0.0)
+        if geometry is None:  # points the reading refused (left to the registration): not checked, nor the next frame
+            self._previous = None
+            return
         if k > 0 and self._previous is not None:
             T = _relative(poses_se3[k - 1 : k + 1])[0]
             self.fitness[k] = scan_fitness(self._previous, geometry, T, self.config)

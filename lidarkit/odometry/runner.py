@@ -390,9 +390,10 @@ def run(
             points = as_points(scan.points_xyz, "scan")
         except LidarKitError:
             points = None  # left to the registration, which refuses it naming the frame, as without this check
-        if points is not None:
-            scan = scan if points is scan.points_xyz else dataclasses.replace(scan, points_xyz=points)
-            validated[id(points)] = points
+        if points is None:  # the check's histogram would fail first, on what the registration refuses by name
+            return scan, (None, 0.0)
+        scan = scan if points is scan.points_xyz else dataclasses.replace(scan, points_xyz=points)
+        validated[id(points)] = points
         return scan, checker.prepare(i, scan.points_xyz)
 
     stream = prefetched(read, indices, prefetch)
