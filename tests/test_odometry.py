@@ -466,3 +466,14 @@ def test_a_corrupt_coordinate_is_refused_by_name_not_by_the_frame_checks_histogr
     for method in ("vanilla", "kiss"):
         with pytest.raises(LidarKitError, match=r"\(frame 2\).*coordinate beyond 1e\+07 m"):
             run(MemorySequence(poses, world, bad={2: broken}), method)
+
+
+def test_equal_time_stamps_are_refused_before_the_run(rng):
+    """A scan recorded twice (equal stamps) ran every frame, then failed writing the trajectory: the run was lost."""
+    poses = _drive(5)
+    seq = MemorySequence(poses, _room_points(rng, 500))
+    seq._timestamps = seq._timestamps.copy()
+    seq._timestamps[3] = seq._timestamps[2]
+    with pytest.raises(DataError, match=r"memory \(frame 3\): time stamps are not strictly increasing: 100.2 s after 100.2 s of frame 2"):
+        run(seq, "vanilla")
+    assert seq.reads == []  # refused before reading a scan

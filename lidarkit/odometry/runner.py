@@ -363,6 +363,7 @@ def run(
     checker = FrameChecker(n, frame_check)
     # the ground truth is read before the run: a problem with it (too few poses in a bag, a bad pose file) is reported
     # now, not after registering every frame
+    _check_stamps(sequence.timestamps_s, indices, dataset_name)  # now, not after registering every frame
     reference = _reference(sequence, ground_truth, indices, dataset_name)
     need_times = strict and bool(deskew_requested(registration)) and (stateful or getattr(registration, "accepts_point_times", False))
     if strict and not stateful and deskew_requested(registration) and not getattr(registration, "accepts_point_times", False):
@@ -557,6 +558,19 @@ def _odometry_guess(sequence: ScanSequence, init: str, registration: Any, n_tota
 
 def _plain(meta: dict) -> dict:
     return {str(k): (v if isinstance(v, (str, int, float, bool, type(None))) else str(v)) for k, v in meta.items()}
+
+
+def _check_stamps(stamps: np.ndarray | None, indices: np.ndarray, dataset_name: str) -> None:
+    """DataError naming the first selected frame whose time stamp does not come after the previous one's (a scan
+    recorded twice, unset stamps): the trajectory could not be written after the run."""
+    if stamps is None or len(indices) < 2:
+        return
+    selected = np.asarray(stamps, dtype=np.float64)[indices]
+    bad = np.flatnonzero(~(np.diff(selected) > 0))
+    if len(bad):
+        k = int(bad[0])
+        raise DataError(f"time stamps are not strictly increasing: {selected[k + 1]:.9g} s after {selected[k]:.9g} s of frame "
+                        f"{int(indices[k])}", source=dataset_name, location=f"frame {int(indices[k + 1])}")
 
 
 def _reference(sequence: ScanSequence, ground_truth: Trajectory | None, indices: np.ndarray, dataset_name: str) -> Trajectory | None:
