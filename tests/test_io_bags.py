@@ -187,3 +187,20 @@ def test_an_export_without_point_times_has_no_time_fields(tmp_path, fmt, name):
     np.testing.assert_array_equal(scan.points_xyz, sim.read_scan(2).points_xyz.astype(np.float32).astype(np.float64))
     deskew = run(ds, "kiss").metrics["effective"]["deskew"]
     assert deskew["applied"] is False and deskew["reason"].startswith("no per-point times found")
+
+
+def test_a_killed_exports_scratch_folder_is_removed_by_the_next_export(tmp_path):
+    """kill -9 during an export left `.big.bag.XXXX/` (285 MB after 6 s) that nothing removed: it is now marked as a
+    partial output, and an export to the same name removes one older than an hour."""
+    import os
+    import time
+
+    from lidarkit.atomic import PARTIAL_MARK
+
+    left = tmp_path / f".run.bag{PARTIAL_MARK}abcd"
+    left.mkdir()
+    (left / "run.bag").write_bytes(b"\0" * 1000)
+    old = time.time() - 2 * 3600
+    os.utime(left, (old, old))
+    export_bag(SimulatedLidarSequence(n_frames=1, n_beams=8, n_azimuths=90), tmp_path / "run.bag", "rosbag1")
+    assert (tmp_path / "run.bag").is_file() and sorted(p.name for p in tmp_path.iterdir()) == ["run.bag"]

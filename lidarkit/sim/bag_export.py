@@ -67,7 +67,9 @@ def export_bag(sequence, out: str | os.PathLike, fmt: str = "rosbag2", *, storag
 
     atomic.ensure_dir(out.parent)
     with atomic.output_errors(out):
-        scratch = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+        # marked as a partial output: one left by a killed export (kill -9) is removed by the next one after an hour
+        scratch = Path(tempfile.mkdtemp(prefix=f".{out.name}{atomic.PARTIAL_MARK}", dir=out.parent))
+    atomic.remove_stale_partials(out)
     try:
         if fmt == "rosbag1":
             from rosbags.rosbag1 import Writer
