@@ -204,3 +204,16 @@ def test_a_killed_exports_scratch_folder_is_removed_by_the_next_export(tmp_path)
     os.utime(left, (old, old))
     export_bag(SimulatedLidarSequence(n_frames=1, n_beams=8, n_azimuths=90), tmp_path / "run.bag", "rosbag1")
     assert (tmp_path / "run.bag").is_file() and sorted(p.name for p in tmp_path.iterdir()) == ["run.bag"]
+
+
+def test_sim_progress_lines_where_no_bar_can_be_drawn(tmp_path, capsys):
+    """stderr to a log or CI: a 3000-sweep export ran minutes without a word; now a line every tenth, as odometry."""
+    from lidarkit.cli import main
+
+    for command, name in ((["lidar", "-p", "n_beams=8", "-p", "n_azimuths=90"], "lidar"), (["camera", "-p", "width=64", "-p", "height=48"], "cam")):
+        with pytest.raises(SystemExit) as exc:
+            main(["sim", *command, "--out", str(tmp_path / name), "--frames", "10"])
+        assert exc.value.code in (0, None)
+        err = capsys.readouterr().err
+        unit = "sweeps" if name == "lidar" else "images"
+        assert f"10/10 {unit} (100 %)" in err and len([line for line in err.splitlines() if f" {unit} (" in line]) >= 5
