@@ -248,3 +248,33 @@ def test_a_pipeline_reporting_the_sweep_start_tracks_as_well_as_one_reporting_it
         assert result.metrics["effective"]["estimate_instant"] == reference
         final[reference] = pose_error(result.trajectory.poses_se3[-1], result.ground_truth.poses_se3[-1])[0]
     assert final["end"] < 1.0 and final["start"] < 1.5 * final["end"] + 0.05, final  # 0.43 and 0.42 m (was 5.7 m)
+
+
+def test_odometry_stamped_with_the_scans_covering_part_of_them_is_read_as_each_sweeps_end(tmp_path):
+    """Poses stamped at the sweep end (= the next scan's stamp) for scans 0-4 of 10: the phase came out 0 or one
+    period by rounding, and at 0 scans 0 and 1 both took the first pose ("--frames 0:5" refused); now every time the
+    end of the sweep before, whatever the rounding."""
+    from test_io_bad_bags import good, write_ros1_bag
+
+    from lidarkit.io import open_dataset
+
+    for jitter in (0.0, 1e-7, -1e-7):  # either side of a whole period
+        poses = [(1000.0 + 0.1 * (k + 1) + jitter, (float(k), 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)) for k in range(5)]
+        bag = open_dataset("rosbag", write_ros1_bag(tmp_path / f"end{jitter}.bag", [good(k) for k in range(10)], odometry=poses))
+        gt = bag.ground_truth_of([0, 1, 2, 3, 4])
+        np.testing.assert_allclose(gt.poses_se3[:, 0, 3], [0, 1, 2, 3, 4])
+        assert gt.meta["pose_instant"] == "end"
+
+
+def test_a_recording_begun_mid_rotation_places_the_sweeps_by_the_full_ones(tmp_path):
+    """Message 0 held only the points fired 0.05-0.1 s after its stamp: every sweep was placed by that part, the
+    sweep-end odometry read as mid and re-timed by half a sweep."""
+    from test_io_bad_bags import _cloud_bytes, good, write_ros1_bag
+
+    from lidarkit.io import open_dataset
+
+    half = _cloud_bytes(32, np.linspace(0.05, 0.1, 32))
+    clouds = [(1000.0, *half[:2], half[2], 32), *(good(k) for k in range(1, 10))]
+    poses = [(1000.0 + 0.1 * (k + 1), (float(k), 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)) for k in range(10)]
+    bag = open_dataset("rosbag", write_ros1_bag(tmp_path / "partial.bag", clouds, odometry=poses))
+    assert bag.ground_truth.meta["pose_instant"] == "end"

@@ -316,18 +316,28 @@ class _BagScans:
 
     @cached_property
     def _sweep_timing(self) -> tuple[float, float] | None:
-        """(absolute time of sweep 0's first point, the nominal sweep period) from scan 0's point times and the
-        spacing of the stamps (the last point fires just before the next sweep; one scan: its own time span);
-        None when the scans carry no point times."""
-        scan = self.read_scan(0)
-        if scan.point_times_s is None or len(scan.point_times_s) < 2:
-            return None
-        t = scan.point_times_s + (0.0 if scan.point_time_convention == "absolute_s" else scan.timestamp_s)
-        lo, hi = float(t.min()), float(t.max())
-        if hi <= lo:
+        """(absolute time sweep 0 starts, the nominal sweep period) from the point times of the first few scans (where
+        a sweep's first point fires after its stamp: the median, so that a recording begun mid-rotation, whose first
+        message holds part of a sweep, does not place every sweep by that part) and the spacing of the stamps (one
+        scan: its own time span); None when the scans carry no point times."""
+        offsets, span = [], 0.0
+        for k in range(min(self.n_scans, SWEEP_TIMING_SCANS)):
+            scan = self.read_scan(k)
+            if scan.point_times_s is None or len(scan.point_times_s) < 2:
+                return None
+            t = scan.point_times_s + (0.0 if scan.point_time_convention == "absolute_s" else scan.timestamp_s)
+            lo, hi = float(t.min()), float(t.max())
+            if hi > lo:
+                offsets.append(lo - scan.timestamp_s)
+                span = max(span, hi - lo)
+        if not offsets:
             return None
         stamps = self.timestamps_s
-        return lo, float(np.median(np.diff(stamps))) if len(stamps) > 1 else hi - lo
+        return float(stamps[0] + np.median(offsets)), float(np.median(np.diff(stamps))) if len(stamps) > 1 else span
+
+
+#: scans whose point times place the sweeps in the stamps (the median over them)
+SWEEP_TIMING_SCANS = 5
 
 
 def _pose_phase(gt_stamps: np.ndarray, scan_stamps: np.ndarray) -> float:
@@ -341,7 +351,10 @@ def _pose_phase(gt_stamps: np.ndarray, scan_stamps: np.ndarray) -> float:
     mean = np.exp(2j * np.pi * (gt_stamps - scan_stamps[0]) / period).mean()
     if abs(mean) < 0.8:  # spread over the period: not one pose per sweep at one instant
         return 0.0
-    return float(np.angle(mean) / (2 * np.pi) % 1.0) * period
+    phase = float(np.angle(mean) / (2 * np.pi) % 1.0)
+    # poses stamped with the scans (the end of one sweep is the start of the next, the same instant): read as each
+    # sweep's end, whichever side of the period rounding put them, so that the first scan keeps its pose
+    return period if min(phase, 1.0 - phase) < 0.02 else phase * period
 
 
 def _pose_matrix(xyz: list[float], quat_xyzw: list[float]) -> np.ndarray:
