@@ -49,4 +49,9 @@ class OutputError(LidarKitError):
 def validation_problems(err: Any, unnamed: str = "?") -> str:
     """One line for a pydantic ``ValidationError``: ``"field.path: message; ..."`` (``unnamed`` for a model-level
     problem), for the ConfigError that replaces it."""
-    return "; ".join(f"{'.'.join(map(str, e['loc'])) or unnamed}: {e['msg']}" for e in err.errors())
+    def line(e: dict) -> str:
+        message = e["msg"].removeprefix("Value error, ")  # (pydantic's prefix for a validator's own ValueError)
+        where = ".".join(map(str, e["loc"])) or unnamed
+        return f"{where}: {message}" if where else message
+
+    return "; ".join(line(e) for e in err.errors())

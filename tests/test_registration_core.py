@@ -596,3 +596,19 @@ def test_a_cloud_that_is_one_point_repeated_is_refused():
     for method in ("vanilla", "knn", "open3d_point_to_plane"):
         with pytest.raises(DataError, match=r"source cloud: all 1000 points are one point \(1, 1, 1\): nothing to register"):
             get_icp(method).align(np.ones((1000, 3)), rng.uniform(-5, 5, (500, 3)))
+
+
+def test_scipy_tree_settings_for_another_search_are_refused():
+    """The report's leaf-size experiment under the default backend (Open3D's search) compared identical runs:
+    leafsize was recorded and did nothing."""
+    from lidarkit.registration.neighbors import resolved_backend
+
+    if resolved_backend("auto") != "scipy":
+        with pytest.raises(ConfigError, match=r"leafsize sets scipy's KD-tree, which nn_backend='auto' \(open3d here\) does not use"):
+            get_icp("vanilla", leafsize=1)
+    with pytest.raises(ConfigError, match="leafsize and workers set scipy's KD-tree, which nn_backend='open3d' does not use"):
+        get_icp("vanilla", nn_backend="open3d", leafsize=1, workers=1)
+    with pytest.raises(ConfigError, match="leafsize sets scipy's KD-tree, which exact=true does not use: leave exact out"):
+        get_icp("knn", exact=True, leafsize=1)
+    assert get_icp("knn", leafsize=1).config.leafsize == 1  # knn searches with scipy by default
+    assert get_icp("vanilla", nn_backend="scipy", leafsize=1).config.leafsize == 1

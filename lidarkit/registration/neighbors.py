@@ -30,6 +30,13 @@ def _scipy_workers(value: int) -> int:
 ScipyWorkers = Annotated[int, AfterValidator(_scipy_workers)]
 
 
+def resolved_backend(backend: str) -> str:
+    """The backend ``"auto"`` stands for here (Open3D's when it is installed, else scipy's); others as given."""
+    if backend == "auto":
+        return "open3d" if _open3d_nns_available() else "scipy"
+    return backend
+
+
 class NearestNeighbors:
     """Index over ``(M, 3)`` target points; :meth:`query` returns squared distances and indices."""
 
@@ -38,8 +45,7 @@ class NearestNeighbors:
             raise ConfigError(f"unknown nearest-neighbour backend {backend!r}; available: {', '.join(BACKENDS)}", source="nn_backend")
         self.target_xyz = np.asarray(target_xyz, dtype=np.float64)
         self.workers = workers
-        if backend == "auto":
-            backend = "open3d" if _open3d_nns_available() else "scipy"
+        backend = resolved_backend(backend)
         self.backend = backend
         if backend == "scipy":
             from scipy.spatial import cKDTree

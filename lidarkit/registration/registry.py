@@ -136,7 +136,7 @@ def get_icp(name: str, **params: Any) -> Registration:
     try:
         config = cls.Config(**params)
     except pydantic.ValidationError as err:
-        problems = validation_problems(err)
+        problems = validation_problems(err, unnamed="")
         raise ConfigError(f"invalid parameters ({problems}); valid parameters: {valid}", source=f"method {name!r}") from None
     except ValueError as err:
         raise ConfigError(f"invalid parameters ({err}); valid parameters: {valid}", source=f"method {name!r}") from None
