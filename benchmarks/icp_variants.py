@@ -114,6 +114,7 @@ def run_pairs(pairs: Sequence[Pair], variants: dict[str, tuple[str, dict]] | Non
                     "degeneracy_ratio": res.degeneracy.ratio,
                     "reason": res.reason,
                     "rmse_history": list(res.rmse_history),
+                    "coarse_iterations": res.extra.get("coarse_iterations"),
                     "T_target_source": res.T_target_source.tolist(),
                 }
             )
@@ -324,8 +325,11 @@ def main(argv: list[str] | None = None) -> int:
     plots = []
     for source, target, _, label in pairs[:2]:
         tag = label.replace("->", "_").split(" ")[0]
-        hist = {r["variant"]: r["rmse_history"] for r in report["pairs"] if r["pair"] == label}
-        plots.append(save_rmse_history(out / f"rmse_vs_iteration_{tag}.png", hist, title=f"KITTI 00 {label}: RMSE per iteration"))
+        rows = [r for r in report["pairs"] if r["pair"] == label]
+        hist = {r["variant"]: r["rmse_history"] for r in rows}
+        coarse = {r["variant"]: r["coarse_iterations"] for r in rows if r.get("coarse_iterations")}
+        plots.append(save_rmse_history(out / f"rmse_vs_iteration_{tag}.png", hist, title=f"KITTI 00 {label}: RMSE per iteration",
+                                       coarse_iterations=coarse))
         for vlabel in ("vanilla", "ground_filtered (height)"):
             row = next(r for r in report["pairs"] if r["pair"] == label and r["variant"] == vlabel)
             name = vlabel.split(" ")[0]

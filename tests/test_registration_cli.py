@@ -45,6 +45,7 @@ def test_every_method_through_the_cli(method, capsys, tmp_path):
     assert config["method"] == method and set(config["params"]) == set(config_fields(method))
     png = (tmp_path / "bev.png").read_bytes()
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
+    assert (tmp_path / "rmse.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"  # the report's RMSE-per-iteration figure
     if result.get("covariance") is not None:  # sigmas to 3 significant digits (a fixed .4f printed 1 mm as 0.0011, 0.04 mm as 0.0000)
         sigma = np.sqrt(np.diag(np.asarray(result["covariance"])))
         assert f"t {sigma[0]:.3g} " in " ".join(out.split()), (method, sigma[0])

@@ -133,7 +133,7 @@ def icp(
     method: str = typer.Option("vanilla", "--method", "-m", help="Registered ICP variant (see --list)."),
     param: list[str] = typer.Option([], "--param", "-p", help="Method parameter KEY=VALUE (repeatable)."),
     init: Optional[Path] = typer.Option(None, "--init", help="Initial T_target_source: 4x4 text file or one KITTI row."),
-    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Folder for result.json, config.json and bev.png."),
+    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Folder for result.json, config.json, bev.png and rmse.png (RMSE per iteration)."),
     drop_nonfinite: bool = typer.Option(
         False, "--drop-nonfinite", help="Drop NaN / infinite points (organized clouds' missing returns) instead of refusing the file."
     ),
@@ -166,7 +166,7 @@ def icp(
     result = registration.align(source_xyz, target_xyz, init_T=init_T)
     stdout().print(_result_table(result, source, target))
     if out is not None:
-        from lidarkit.registration.plots import save_bev_before_after
+        from lidarkit.registration.plots import save_bev_before_after, save_rmse_history
 
         payload = {"source": str(source), "target": str(target), "init": None if init is None else str(init),
                    "drop_nonfinite": drop_nonfinite, **result.to_dict()}
@@ -176,4 +176,8 @@ def icp(
             save_bev_before_after(
                 tmp / "bev.png", source_xyz, target_xyz, result.T_target_source, init_T, title=f"{method}: {source.name} -> {target.name}"
             )
-        stdout().print(f"wrote {out / 'result.json'}, {out / 'config.json'}, {out / 'bev.png'}")
+            # the report's RMSE-per-iteration figure (one point for a backend that reports its final RMSE only)
+            coarse = result.extra.get("coarse_iterations")
+            save_rmse_history(tmp / "rmse.png", {method: result.rmse_history}, title=f"{method}: {source.name} -> {target.name}",
+                              coarse_iterations={method: coarse} if coarse else None)
+        stdout().print(f"wrote {', '.join(str(out / name) for name in ('result.json', 'config.json', 'bev.png', 'rmse.png'))}")

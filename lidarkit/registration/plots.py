@@ -70,14 +70,26 @@ def save_bev_before_after(
     return _save(plt, fig, path)
 
 
-def save_rmse_history(path: str | os.PathLike, histories: dict[str, Sequence[float]], title: str = "") -> Path:
-    """RMSE of the correspondences (m) against iteration, one line per labelled run."""
+def save_rmse_history(path: str | os.PathLike, histories: dict[str, Sequence[float]], title: str = "",
+                      coarse_iterations: dict[str, int] | None = None) -> Path:
+    """RMSE of the correspondences (m) against iteration, one line per labelled run. ``coarse_iterations``: per run
+    with a coarse-to-fine schedule (``result.extra["coarse_iterations"]``), where its history passes from every k-th
+    source point to all of them: drawn dashed up to there and marked, since the two stages' RMSE are of other points
+    (the full cloud's is higher at the same pose: the curve steps up at the switch)."""
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(7, 4.5))
     for label, hist in histories.items():
         hist = np.asarray(hist, dtype=float)
-        if len(hist) > 1:
+        if len(hist) <= 1:  # a backend that reports its final RMSE only
+            ax.plot(np.arange(len(hist)), hist, marker="o", linestyle="none", label=f"{label} (final RMSE only)")
+            continue
+        switch = (coarse_iterations or {}).get(label)
+        if switch is None or not 0 < switch < len(hist) - 1:
             ax.plot(np.arange(len(hist)), hist, marker=".", label=label)
+            continue
+        line, = ax.plot(np.arange(switch + 1), hist[: switch + 1], marker=".", linestyle="--", label=f"{label} (coarse: subsampled source)")
+        ax.plot(np.arange(switch + 1, len(hist)), hist[switch + 1:], marker=".", color=line.get_color(), label=f"{label} (all points)")
+        ax.axvline(switch + 0.5, color=line.get_color(), linestyle=":", alpha=0.6)
     ax.set_xlabel("iteration")
     ax.set_ylabel("correspondence RMSE (m)")
     ax.grid(True, alpha=0.3)
