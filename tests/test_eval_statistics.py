@@ -247,6 +247,51 @@ def test_a_metric_a_task_declares_better_higher_is_compared_that_way(tmp_path):
         assert_no_worse_than({"success_rate": 0.85}, {"success_rate": 0.90}, metric="success_rate", tolerance=0.0)
 
 
+def test_compare_in_a_suite_of_two_tasks_pairs_the_units_of_the_metric_s_task(tmp_path):
+    """A suite with an icp_pair and an odometry experiment could not be compared at all: every metric was "missing"
+    in the other task's units. Those units are left out now, said in the note."""
+    import textwrap
+
+    from lidarkit.bench import Metric, Task, TaskOutput, load_suite, register_task, run_suite
+    from lidarkit.eval import compare
+
+    def task(name: str, metric: str):
+        class T(Task):
+            dataset_kinds = ("synthetic",)
+            metrics = (Metric(metric, metric),)
+
+            def validate_options(self, options):
+                pass
+
+            def validate_dataset(self, dataset, options):
+                pass
+
+            def validate(self, method, params, dataset, options):
+                pass
+
+            def run(self, job):
+                base = 0.1 if job.method == "good" else 0.5
+                return TaskOutput(metrics={metric: base + 0.01 * np.random.default_rng(job.seed).random()}, series={}, info={})
+
+        register_task(name)(T)
+
+    task("pairs_test_task", "pair_error_m")
+    task("runs_test_task", "run_error_m")
+    (tmp_path / "s.yaml").write_text(textwrap.dedent("""
+        seeds: 8
+        experiments:
+          - {name: p, task: pairs_test_task, dataset: {kind: synthetic}, methods: [good, bad]}
+          - {name: r, task: runs_test_task, dataset: {kind: synthetic}, methods: [good, bad]}
+    """))
+    run_suite(load_suite(tmp_path / "s.yaml"), tmp_path / "out", executor="serial")
+    for metric, other in (("pair_error_m", "runs_test_task"), ("run_error_m", "pairs_test_task")):
+        result = compare(tmp_path / "out", tmp_path / "out", method_a="good", method_b="bad", metric=metric)
+        assert result.n_pairs == 8 and result.verdict().startswith("good is better than bad")
+        assert f"8 (dataset, seed) units of {other} (no {metric}) left out: 8 paired" in result.note
+    with pytest.raises(ConfigError, match="unknown metric 'error_m'"):
+        compare(tmp_path / "out", tmp_path / "out", method_a="good", method_b="bad", metric="error_m")
+
+
 def test_verdicts_with_tied_units_and_a_median_ci_across_zero():
     """The median counts tied units, which the rank test leaves out: with 10 of 18 tied it is 0, and the verdict said the
     ranks and the median 'disagree in direction'. A verdict beside a median CI reaching across 0 read as a contradiction."""

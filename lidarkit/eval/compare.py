@@ -224,17 +224,24 @@ def compare(
             f"{', '.join(sorted(set(side_b.labels.values())))})",
             source="compare",
         )
-    if metric is None:
-        present = set.intersection(*(set(side_a.values[k]) & set(side_b.values[k]) for k in common))
+    def has(k: str, name: str) -> bool:
+        return side_a.values[k].get(name) is not None and side_b.values[k].get(name) is not None
+
+    if metric is None:  # the first default metric any unit has (a suite of several tasks: the units of its task)
+        present = set.union(*(set(side_a.values[k]) & set(side_b.values[k]) for k in common))
         metric = next((m for m in DEFAULT_BENCH_METRICS if m in present), None)
         if metric is None:
             raise EvaluationError(f"no default metric in these results; pass one of: {', '.join(sorted(present))}",
                                   source="compare")
-    missing = [side_a.labels.get(k) or side_b.labels[k] for k in common
-               if side_a.values[k].get(metric) is None or side_b.values[k].get(metric) is None]
-    if len(missing) == len(common):  # in no unit: a misspelt metric, not results that lack it
+    if not any(has(k, metric) for k in common):  # in no unit: a misspelt metric, not results that lack it
         present = set.union(*(set(side_a.values[k]) & set(side_b.values[k]) for k in common))
         raise ConfigError(f"unknown metric {metric!r}; these results have: {', '.join(sorted(present))}", source="metric")
+    # units of a task that never reports the metric (an icp_pair experiment beside an odometry one) are another
+    # experiment: left out, said; a unit of a task that reports it elsewhere lacks it: an error
+    tasks_with = {_task_of(k) for k in common if has(k, metric)}
+    other_task = [k for k in common if _task_of(k) not in tasks_with]
+    common = [k for k in common if _task_of(k) in tasks_with]
+    missing = [side_a.labels.get(k) or side_b.labels[k] for k in common if not has(k, metric)]
     if missing:
         raise EvaluationError(f"metric {metric!r} missing for {', '.join(missing[:5])}", source="compare")
     from lidarkit.bench.tasks import higher_is_better  # (as the task that wrote the results declares it)
@@ -245,6 +252,9 @@ def compare(
                          lower_is_better=not higher_is_better(metric), alpha=alpha,
                          noise=_with_measured_noise(noise, noise_from, metric), seed=seed)
     notes = []
+    if other_task:
+        left = sorted({_task_of(k) for k in other_task})
+        notes.append(f"{len(other_task)} (dataset, seed) units of {', '.join(left)} (no {metric}) left out: {len(common)} paired")
     only_a, only_b = len(keys_a - keys_b), len(keys_b - keys_a)
     if only_a or only_b:  # the pairs are those both have: say what was left out
         notes.append(f"{only_a} (dataset, seed) units only in A and {only_b} only in B are left out: {len(common)} paired")
@@ -253,6 +263,11 @@ def compare(
         if n:
             notes.append(f"{n} result(s) in {folder} of jobs not in its suite.json (an earlier suite) left out (--all: every result)")
     return dataclasses.replace(result, note="; ".join(notes)) if notes else result
+
+
+def _task_of(unit_key: str) -> str:
+    """The bench task of a (task, dataset, options, seed) unit key."""
+    return str(json.loads(unit_key).get("task", ""))
 
 
 def _with_measured_noise(noise: float, noise_from: str | os.PathLike | None, metric: str) -> float:
