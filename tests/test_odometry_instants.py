@@ -278,3 +278,23 @@ def test_a_recording_begun_mid_rotation_places_the_sweeps_by_the_full_ones(tmp_p
     poses = [(1000.0 + 0.1 * (k + 1), (float(k), 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)) for k in range(10)]
     bag = open_dataset("rosbag", write_ros1_bag(tmp_path / "partial.bag", clouds, odometry=poses))
     assert bag.ground_truth.meta["pose_instant"] == "end"
+
+
+def test_a_selection_within_partial_odometry_is_re_timed_alone(tmp_path):
+    """Mid-sweep odometry for scans 0-4 of 10, scored at the sweep end for --frames 0:4: the whole recording was
+    re-timed and failed on scans 5-9, which the run never used ("time ... lies outside the stamps")."""
+    from test_io_bad_bags import good, write_ros1_bag
+
+    from lidarkit.errors import DataError
+    from lidarkit.io import open_dataset
+    from lidarkit.odometry.instants import like_with_like
+
+    poses = [(1000.0 + 0.1 * k + 0.05, (float(k), 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)) for k in range(5)]
+    bag = open_dataset("rosbag", write_ros1_bag(tmp_path / "mid.bag", [good(k) for k in range(10)], odometry=poses))
+    frames = np.arange(4)
+    gt = bag.ground_truth_of(frames)
+    with pytest.raises(DataError, match="outside the stamps"):
+        bag.ground_truth_at_instant("end")
+    retimed, note = like_with_like(gt, "end", sequence=bag, own_ground_truth=True, method="kiss", frames=frames)
+    assert len(retimed) == 4 and "re-timed from the sweep mid to the sweep end" in note
+    np.testing.assert_allclose(retimed.poses_se3[:, 0, 3], [0.5, 1.5, 2.5, 3.5], atol=1e-6)  # half a sweep on

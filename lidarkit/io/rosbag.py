@@ -254,12 +254,13 @@ class _BagScans:
         meta = {"frame": f"as recorded on {self.ground_truth_topic}", "pose_instant": self._ground_truth_instant(gt_stamps, scan_stamps)}
         return Trajectory(gt_poses, gt_stamps, name=f"{self.path.name}{self.ground_truth_topic}", meta=meta)
 
-    def ground_truth_at_instant(self, instant: str) -> Trajectory:
-        """The recorded odometry at the ``instant`` (start, mid or end) of every sweep: interpolated between the recorded
-        poses (rotation slerped, position linear), or continued at constant velocity for at most 1.5 recording
-        intervals beyond the first or last one (e.g. the start of sweep 0 when the poses are stamped at sweep ends).
-        The instants are placed by scan 0's point times and the scans' stamp spacing; DataError when the scans carry no
-        point times or the recording does not reach."""
+    def ground_truth_at_instant(self, instant: str, scans: np.ndarray | list[int] | None = None) -> Trajectory:
+        """The recorded odometry at the ``instant`` (start, mid or end) of every sweep (``scans``: of those only, e.g. a
+        ``--frames`` selection within what the recording covers): interpolated between the recorded poses (rotation
+        slerped, position linear), or continued at constant velocity for at most 1.5 recording intervals beyond the
+        first or last one (e.g. the start of sweep 0 when the poses are stamped at sweep ends). The instants are placed
+        by the first scans' point times and the scans' stamp spacing; DataError when the scans carry no point times or
+        the recording does not reach."""
         if instant not in INSTANT_FRACTION:
             raise DataError(f"unknown instant {instant!r}; valid: {', '.join(INSTANT_FRACTION)}", source=self.path)
         if self.ground_truth_topic is None:
@@ -269,8 +270,9 @@ class _BagScans:
             raise DataError("the scans carry no per-point times, so where a sweep starts and ends is unknown", source=self.path,
                             location=self._location(0))
         start, period = timing
-        scan_stamps = self.timestamps_s
-        times = scan_stamps + (start - scan_stamps[0]) + INSTANT_FRACTION[instant] * period
+        all_stamps = self.timestamps_s
+        scan_stamps = all_stamps if scans is None else all_stamps[np.asarray(scans, dtype=np.int64)]
+        times = scan_stamps + (start - all_stamps[0]) + INSTANT_FRACTION[instant] * period
         stamps, poses = self._recorded_ground_truth
         if len(stamps) < 2 or not (np.diff(stamps) > 0).all():
             raise DataError(f"{self.ground_truth_topic}: interpolating needs two or more poses with increasing stamps",

@@ -12,6 +12,8 @@ Unknown instants (None) are compared as they are: the reader could not tell.
 
 from __future__ import annotations
 
+import inspect
+
 from typing import Any
 
 import numpy as np
@@ -59,7 +61,7 @@ def stamps_at_instant(stamps_s: np.ndarray | None, scan: Scan | None, instant: s
 
 
 def like_with_like(reference: Trajectory, estimate_at: str | None, *, sequence: Any, own_ground_truth: bool,
-                   method: str, deskewed: bool = True) -> tuple[Trajectory, str | None]:
+                   method: str, deskewed: bool = True, frames: np.ndarray | None = None) -> tuple[Trajectory, str | None]:
     """``(reference at the estimate's instant, note or None)``; EvaluationError when it cannot be re-timed.
     ``deskewed``: the estimate's instant is the one the variant deskews to (else the scans' stamp instant)."""
     truth_at = reference.meta.get("pose_instant") if reference.meta else None
@@ -69,7 +71,9 @@ def like_with_like(reference: Trajectory, estimate_at: str | None, *, sequence: 
     why_not = ""
     if own_ground_truth and callable(retime):
         try:
-            retimed = retime(estimate_at)
+            # the selected frames only, where the reader can (a recording re-timed whole failed on scans not selected)
+            takes_frames = frames is not None and "scans" in inspect.signature(retime).parameters
+            retimed = retime(estimate_at, scans=frames) if takes_frames else retime(estimate_at)
         except LidarKitError as err:  # the dataset cannot give it (e.g. a recording that does not reach): refused below
             why_not = f"; re-timing it failed: {err.reason}"
         else:

@@ -472,7 +472,7 @@ def run(
                             meta={"method": name, "dataset": dataset_name, **({"stamps": stamp_note} if stamp_note else {})})
     instant_note = None
     if reference is not None:  # score like with like: the estimate's and the ground truth's instant of the sweep
-        retimed, instant_note = like_with_like(reference, estimate_at, sequence=sequence,
+        retimed, instant_note = like_with_like(reference, estimate_at, sequence=sequence, frames=indices,
                                                own_ground_truth=ground_truth is None, method=name,
                                                deskewed=deskews(registration, first_scan))
         if instant_note is not None:
