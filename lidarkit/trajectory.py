@@ -54,7 +54,8 @@ class Trajectory:
                 reason = f"rotation is a reflection (det R = {det[k]:.3g}, a proper rotation has det R = +1)"
             else:
                 reason = (f"rotation is not orthonormal (max |R^T R - I| = {err[k]:.2e}); "
-                          "use geometry.orthonormalize_se3 if this is rounding")
+                          "if it is a file's rounding, write more digits (or, in Python, lidarkit.geometry.orthonormalize_se3 "
+                          "the poses before making the Trajectory)")
             raise DataError(reason, source=source, location=f"frame {k}")
         object.__setattr__(self, "poses_se3", poses)
         if self.timestamps_s is not None:
