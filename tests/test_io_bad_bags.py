@@ -238,3 +238,23 @@ def test_padded_rows_of_an_organized_cloud(tmp_path):
         decode_pointcloud2(SimpleNamespace(**{**vars(msg), "row_step": 40}), source="pad.bag", location="/points message 0")
     with pytest.raises(DataError, match="truncated message"):
         decode_pointcloud2(SimpleNamespace(**{**vars(msg), "data": padded[:-10]}), source="pad.bag", location="/points message 0")
+
+
+def test_a_ros2_bags_storage_given_without_its_folder_or_metadata_says_so(tmp_path):
+    """A ROS 2 folder without metadata.yaml was read as a folder of scans ("no scan files (.bin, ...)"), its .db3
+    file given alone was "not a folder"."""
+    import shutil
+
+    from lidarkit.odometry import run
+    from lidarkit.sim.bag_export import export_bag
+    from lidarkit.sim.lidar import SimulatedLidarSequence
+
+    bag = export_bag(SimulatedLidarSequence(n_frames=2, n_beams=8, n_azimuths=90), tmp_path / "bag", "rosbag2")
+    with pytest.raises(DataError, match=r"bag\.db3: a ROS 2 bag is opened as its folder, the one with metadata\.yaml"):
+        run(str(next(bag.glob("*.db3"))), "vanilla")
+    bare = tmp_path / "bare"
+    shutil.copytree(bag, bare)
+    (bare / "metadata.yaml").unlink()
+    for spec in (str(bare), f"rosbag:{bare}"):
+        with pytest.raises(DataError, match="a ROS 2 bag folder .* without its metadata.yaml: 'ros2 bag reindex' rebuilds it"):
+            run(spec, "vanilla")

@@ -397,7 +397,11 @@ class RosbagScans(_BagScans):
             with AnyReader(self._reader_paths()) as reader:
                 return {t: info.msgtype for t, info in reader.topics.items()}
         except Exception as err:  # noqa: BLE001 - rosbags raises its own error types for damaged files
-            raise DataError(f"not a readable ROS bag ({type(err).__name__}: {err})", source=self.path) from None
+            from lidarkit.io import ros2_storage_problem
+
+            problem = ros2_storage_problem(self.path)
+            raise DataError(problem or f"not a readable ROS bag ({type(err).__name__}: {err}; truncated or damaged?)",
+                            source=self.path) from None
 
     def _open_loader(self) -> None:
         from kiss_icp.datasets.rosbag import RosbagDataset
@@ -453,7 +457,7 @@ class McapScans(_BagScans):
             with open(self.path, "rb") as fh:
                 summary = make_reader(fh).get_summary()
         except Exception as err:  # noqa: BLE001 - mcap raises its own error types for damaged files
-            raise DataError(f"not a readable MCAP file ({type(err).__name__}: {err})", source=self.path) from None
+            raise DataError(f"not a readable MCAP file ({type(err).__name__}: {err}; truncated or damaged?)", source=self.path) from None
         if summary is None:
             raise DataError("MCAP file has no summary section (truncated, or written without one)", source=self.path)
         return summary

@@ -49,7 +49,11 @@ def open_sequence(spec: str | os.PathLike | ScanSequence) -> ScanSequence:
         if sep and len(kind) > 1 and "/" not in kind and "\\" not in kind:  # KIND:PATH with a kind no reader has
             raise ConfigError(f"unknown dataset kind {kind!r}; known: sim, {', '.join(lio.available_datasets())}", source=text)
         raise DataError("dataset not found (a folder, a .bag/.mcap/.pcap file, KIND:PATH or sim:SCENE?...)", source=text)
-    return _scans(lio.open_dataset(lio.detect_kind(path) or "folder", path), text)
+    kind = lio.detect_kind(path)
+    problem = lio.ros2_storage_problem(path) if kind is None else None
+    if problem:
+        raise DataError(problem, source=text)
+    return _scans(lio.open_dataset(kind or "folder", path), text)
 
 
 def _scans(dataset: Any, spec: str) -> Any:
