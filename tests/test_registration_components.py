@@ -208,17 +208,27 @@ def test_component_plugin_from_an_installed_package_is_discovered(tmp_path, monk
         component_registry._COMPONENTS["kernel"].pop("half", None)
 
 
-def test_broken_component_plugin_names_itself(tmp_path, monkeypatch):
+def test_broken_component_plugin_is_left_out_and_names_itself(tmp_path, monkeypatch, caplog, capsys):
+    """A broken component plugin made --list-components, available_components and a kernel name's typo fail with its
+    error: it is left out with a warning now, and named when asked for."""
     site = tmp_path / "site"
     site.mkdir()
     dist = site / "lk_bad_components-0.1.dist-info"
     dist.mkdir()
     (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: lk-bad-components\nVersion: 0.1\n")
-    (dist / "entry_points.txt").write_text(f"[{ENTRY_POINT_GROUP}]\nsolver.fast = os:getcwd\n")
+    (dist / "entry_points.txt").write_text(f"[{ENTRY_POINT_GROUP}]\nsolver.fast = os:getcwd\nkernel.broken = nosuchmodule:K\n")
     monkeypatch.syspath_prepend(str(site))
     try:
-        with pytest.raises(ConfigError, match="KIND.NAME"):
+        with caplog.at_level("WARNING", logger="lidarkit.registration.components.registry"):
             reload_component_plugins()
+        assert "KIND.NAME" in caplog.text and "nosuchmodule" in caplog.text
+        assert "huber" in available_components("kernel") and "broken" not in available_components("kernel")
+        with pytest.raises(ConfigError, match=r"component plugin kernel\.broken: this plugin is installed but could not be loaded"):
+            make_component("kernel", {"name": "broken"})
+        with pytest.raises(ConfigError, match="unknown kernel component 'hubr'"):
+            make_component("kernel", {"name": "hubr"})
+        assert cli_exit_code(["icp", "--list-components"]) == 0
+        assert "kernel.broken" in capsys.readouterr().out
     finally:
         monkeypatch.undo()
         reload_component_plugins()

@@ -358,4 +358,8 @@ def test_smoothing_settings_that_cannot_apply_are_refused_or_said(tmp_path, caps
     from lidarkit.vo.smoothing import smooth_translations
 
     short = smooth_translations(T(np.tile(np.eye(4), (2, 1, 1))), window=9, polyorder=2)
-    assert short.meta["smoothing"] == "not smoothed: 2 poses leave no odd window above polyorder 2"
+    assert short.meta["smoothing"] == "not smoothed: 2 poses leave no odd window above polyorder + 1 (3)"
+    three = smooth_translations(T(np.tile(np.eye(4), (3, 1, 1))), window=9, polyorder=2)  # window 3 = order + 1: exact fit
+    assert three.meta["smoothing"].startswith("not smoothed: 3 poses")
+    code, _, err = _run(["vo", seq, "--set", "smoothing.window=3"], capsys)
+    assert code == 1 and "polyorder (2) must be below window - 1 (2)" in err

@@ -52,7 +52,7 @@ def _list_methods() -> None:
         table.add_row(name + (" (stateful)" if cls.stateful else ""), cell)
     stdout().print(table)
     for name, reason in broken_plugins().items():
-        stdout().print(f"[yellow]plugin {name!r} left out: {reason}[/]", markup=True, highlight=False)
+        stdout().print(f"plugin {name!r} left out: {reason}", style="yellow", markup=False, highlight=False)
     _list_ground_segmenters()
 
 
@@ -82,6 +82,10 @@ def _list_components() -> None:
             lines = [f"{key}: {type_name} = {default!r} — {desc}" for key, (type_name, default, desc) in component_fields(kind, name).items()]
             table.add_row(f"{kind} / {name}", _described(doc, lines))
     stdout().print(table)
+    from lidarkit.registration.components.registry import broken_component_plugins
+
+    for name, reason in broken_component_plugins().items():
+        stdout().print(f"plugin {name!r} left out: {reason}", style="yellow", markup=False, highlight=False)
 
 
 def _described(doc: str, lines: list[str]):

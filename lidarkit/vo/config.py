@@ -142,8 +142,9 @@ class SmoothingConfig(_Stage):
     def _order_below_window(self) -> SmoothingConfig:
         if self.window % 2 == 0:  # (an even window ran as the odd one below it, recorded as asked)
             raise ValueError(f"window must be odd (the filter is centred on each pose), got {self.window}")
-        if self.polyorder >= self.window:
-            raise ValueError(f"polyorder ({self.polyorder}) must be smaller than window ({self.window})")
+        if self.polyorder >= self.window - 1:  # a polynomial through every point of the window reproduces them
+            raise ValueError(f"polyorder ({self.polyorder}) must be below window - 1 ({self.window - 1}): a polynomial of "
+                             "that order passes through every pose of the window and smooths nothing")
         return self
 
 

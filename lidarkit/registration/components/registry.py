@@ -55,6 +55,8 @@ class Component:
 _COMPONENTS: dict[str, dict[str, type[Component]]] = {kind: {} for kind in KINDS}
 _BASES: dict[str, type[Component]] = {}
 _PLUGINS_LOADED = False
+#: installed component plugins that failed to load: (kind, name) -> reason
+_BROKEN: dict[tuple[str, str], str] = {}
 
 
 def component_base(kind: str) -> Callable[[type[Component]], type[Component]]:
@@ -96,31 +98,36 @@ def register_component(kind: str, name: str) -> Callable[[type[Component]], type
 
 
 def _load_plugins() -> None:
-    """Import every ``lidarkit.components`` entry point once; a broken one raises ConfigError naming it."""
+    """Import every ``lidarkit.components`` entry point once. A broken one is left out with a warning (the others and
+    the built-in components stay usable); asking for it by name raises ConfigError with the reason (:data:`_BROKEN`)."""
     global _PLUGINS_LOADED
     if _PLUGINS_LOADED:
         return
     _PLUGINS_LOADED = True
+    _BROKEN.clear()
     for ep in entry_points(group=ENTRY_POINT_GROUP):
         kind, _, name = ep.name.partition(".")
-        source = f"component plugin {ep.name!r}"
-        if kind not in KINDS or not name:
-            _PLUGINS_LOADED = False
-            raise ConfigError(f"entry point names must read KIND.NAME with KIND one of {', '.join(KINDS)}", source=source)
-        if name in _COMPONENTS[kind]:
-            continue
         try:
+            if kind not in KINDS or not name:
+                raise ConfigError(f"entry point names must read KIND.NAME with KIND one of {', '.join(KINDS)}",
+                                  source=f"component plugin {ep.name!r}")
+            if name in _COMPONENTS[kind]:
+                continue
             obj = ep.load()
-        except Exception as err:  # a plugin may fail in any way while importing
-            _PLUGINS_LOADED = False
-            raise ConfigError(f"failed to load plugin {ep.value!r}: {type(err).__name__}: {err}", source=source) from err
-        if name not in _COMPONENTS[kind]:
-            try:
+            if name not in _COMPONENTS[kind]:
                 register_component(kind, name)(obj)
-            except ConfigError:
-                _PLUGINS_LOADED = False
-                raise
+        except Exception as err:  # a plugin may fail in any way while importing
+            reason = err.reason if isinstance(err, ConfigError) else f"failed to load {ep.value!r}: {type(err).__name__}: {err}"
+            _BROKEN[(kind, name)] = reason
+            log.warning("component plugin %r left out: %s", ep.name, reason)
+            continue
         log.info("loaded %s component %s from %s", kind, name, ep.value)
+
+
+def broken_component_plugins() -> dict[str, str]:
+    """The installed component plugins that failed to load, ``"KIND.NAME" -> reason``."""
+    _load_plugins()
+    return {f"{kind}.{name}": reason for (kind, name), reason in _BROKEN.items()}
 
 
 def reload_component_plugins() -> None:
@@ -144,6 +151,9 @@ def get_component_class(kind: str, name: str) -> type[Component]:
     _check_kind(kind)
     if name not in _COMPONENTS[kind]:
         _load_plugins()
+    if (kind, name) in _BROKEN:
+        raise ConfigError(f"this plugin is installed but could not be loaded: {_BROKEN[(kind, name)]}",
+                          source=f"component plugin {kind}.{name}")
     if name not in _COMPONENTS[kind]:
         raise ConfigError(f"unknown {kind} component {name!r}; available: {', '.join(available_components(kind))}", source=kind)
     return _COMPONENTS[kind][name]
