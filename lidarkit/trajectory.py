@@ -187,7 +187,13 @@ class Trajectory:
         ``timestamps_s`` may be a ``times.txt`` path (``str`` / ``os.PathLike``, one number per line) or
         anything ``np.asarray`` turns into ``(N,)`` seconds (array, list, tuple).
         """
-        rows = read_numeric_table(path, 12)
+        try:
+            rows = read_numeric_table(path, 12)
+        except DataError as err:  # a TUM file (8 numbers a row: time, x y z, qx qy qz qw) read as KITTI: say so
+            if "expected 12 numbers, found 8" in err.reason:
+                raise DataError(err.reason + " (a TUM trajectory? read it as tum: --format tum, Trajectory.from_tum)",
+                                source=err.source, location=err.location) from None
+            raise
         poses = np.tile(np.eye(4), (len(rows), 1, 1))
         poses[:, :3, :4] = rows.reshape(-1, 3, 4)
         times_path = None

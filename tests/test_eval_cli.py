@@ -151,3 +151,13 @@ def test_summary_table_of_several_evaluations(rng):
     assert rows[1][0] == "perfect" and rows[1][3] == "0" and rows[0][-1] == "–"
     md = report.markdown_table(header, rows)
     assert md.count("\n") == 4 and md.startswith("| estimate |")
+
+
+def test_relations_settings_without_relations_and_a_tum_file_read_as_kitti_say_so(capsys):
+    from conftest import cli_exit_code
+
+    gt, orb, tum = (str(shared_path("evo_testdata", f)) for f in ("KITTI_00_gt.txt", "KITTI_00_ORB.txt", "fr2_desk_ORB.txt"))
+    assert cli_exit_code(["eval", gt, orb, "--relation-max-diff", "0.5"]) == 1  # accepted and ignored before
+    assert "--relation-max-diff applies to --relations only" in capsys.readouterr().err
+    assert cli_exit_code(["eval", tum, tum]) == 1
+    assert "expected 12 numbers, found 8 (a TUM trajectory? read it as tum" in capsys.readouterr().err

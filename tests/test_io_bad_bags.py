@@ -258,3 +258,7 @@ def test_a_ros2_bags_storage_given_without_its_folder_or_metadata_says_so(tmp_pa
     for spec in (str(bare), f"rosbag:{bare}"):
         with pytest.raises(DataError, match="a ROS 2 bag folder .* without its metadata.yaml: 'ros2 bag reindex' rebuilds it"):
             run(spec, "vanilla")
+    mcap = export_bag(SimulatedLidarSequence(n_frames=2, n_beams=8, n_azimuths=90), tmp_path / "m", "rosbag2", storage="mcap")
+    (mcap / "metadata.yaml").unlink()
+    with pytest.raises(DataError, match=r"\(\.mcap storage\) without its metadata\.yaml: .* or give one \.mcap file"):
+        run(str(mcap), "vanilla")

@@ -278,6 +278,12 @@ def test_a_recording_begun_mid_rotation_places_the_sweeps_by_the_full_ones(tmp_p
     poses = [(1000.0 + 0.1 * (k + 1), (float(k), 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)) for k in range(10)]
     bag = open_dataset("rosbag", write_ros1_bag(tmp_path / "partial.bag", clouds, odometry=poses))
     assert bag.ground_truth.meta["pose_instant"] == "end"
+    assert bag.read_scan(0).stamp_instant is None and bag.stamp_instant == "start"  # the recording's word, not scan 0's
+    from lidarkit.odometry import run
+
+    result = run(bag, "vanilla")  # no deskew: the poses refer to the scans' stamps (sweep start), not "none"
+    assert result.metrics["effective"]["estimate_instant"].startswith("start (the scans' stamps")
+    assert "re-timed from the sweep end to the sweep start" in result.metrics["ground_truth_instant_note"]
 
 
 def test_a_selection_within_partial_odometry_is_re_timed_alone(tmp_path):

@@ -87,6 +87,9 @@ def eval_command(
                               "--relation-max-diff, --format/--est-format and --est-times)", source="--relations")
         _relations_report(load(ref, est_format, est_times), relations, relation_max_diff, json_out)
         return
+    if relation_max_diff != DEFAULT_MAX_TIME_DIFF_S:  # (accepted and ignored without --relations)
+        raise ConfigError("--relation-max-diff applies to --relations only (pose-by-pose matching by time: --associate --max-diff)",
+                          source="--relation-max-diff")
     if est is None:
         raise ConfigError("missing EST (the estimated trajectory file): lidarkit eval REF EST", source="EST")
     atomic.check_target(markdown, "file")

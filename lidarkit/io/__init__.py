@@ -79,14 +79,19 @@ def detect_kind(path: str | os.PathLike) -> str | None:
 
 def ros2_storage_problem(path: str | os.PathLike) -> str | None:
     """Why ``path`` is a ROS 2 bag's storage that cannot be opened as it is (a ``.db3`` file given alone, a folder of
-    ``.db3`` files without ``metadata.yaml``), or None: read as a folder of scans it said "no scan files"."""
+    ``.db3`` or ``.mcap`` files without ``metadata.yaml``), or None: read as a folder of scans it said "no scan files"."""
     from pathlib import Path
 
     p = Path(path)
     if p.is_file() and p.suffix.lower() == ".db3":
         return f"a ROS 2 bag is opened as its folder, the one with metadata.yaml: give {p.parent}"
-    if p.is_dir() and not (p / "metadata.yaml").is_file() and any(p.glob("*.db3")):
-        return "a ROS 2 bag folder (.db3 storage) without its metadata.yaml: 'ros2 bag reindex' rebuilds it"
+    if p.is_dir() and not (p / "metadata.yaml").is_file():
+        if any(p.glob("*.db3")):
+            return "a ROS 2 bag folder (.db3 storage) without its metadata.yaml: 'ros2 bag reindex' rebuilds it"
+        mcaps = sorted(p.glob("*.mcap"))
+        if mcaps:
+            return (f"a ROS 2 bag folder (.mcap storage) without its metadata.yaml: 'ros2 bag reindex' rebuilds it, or "
+                    f"give one .mcap file ({mcaps[0]})")
     return None
 
 

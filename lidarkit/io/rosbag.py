@@ -316,6 +316,15 @@ class _BagScans:
         sweep_start = scan_stamps + (start - float(self.timestamps_s[0]))  # a sweep starts as far from its stamp as sweep 0
         return classify_instant(float(np.median((gt_stamps - sweep_start) / period)))
 
+    @property
+    def stamp_instant(self) -> str | None:
+        """Where in its sweep a scan is stamped (start, mid, end), from the first scans' point times (their median: a
+        first message holding part of a sweep does not decide it); None without point times or a clear instant."""
+        timing = self._sweep_timing
+        if timing is None or not timing[1] > 0:
+            return None
+        return classify_instant((float(self.timestamps_s[0]) - timing[0]) / timing[1])
+
     @cached_property
     def _sweep_timing(self) -> tuple[float, float] | None:
         """(absolute time sweep 0 starts, the nominal sweep period) from the point times of the first few scans (where

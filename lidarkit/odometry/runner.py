@@ -465,6 +465,11 @@ def run(
 
     all_stamps = sequence.timestamps_s
     timestamps = None if all_stamps is None else np.asarray(all_stamps, dtype=np.float64)[indices]
+    # where in the sweep the scans are stamped: the recording's word over the first scan's (a recording begun
+    # mid-rotation holds part of a sweep in its first message, which says no instant or a wrong one)
+    recorded_instant = getattr(sequence, "stamp_instant", None)
+    if first_scan is not None and recorded_instant is not None and recorded_instant != first_scan.stamp_instant:
+        first_scan = dataclasses.replace(first_scan, stamp_instant=recorded_instant)
     estimate_at = estimate_instant(registration, first_scan)
     # the poses are stamped at the instant they refer to (a deskewing variant's), not at the one the scans' stamps do
     timestamps, stamp_note = stamps_at_instant(timestamps, first_scan, estimate_at, all_stamps)
