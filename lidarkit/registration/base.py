@@ -153,6 +153,11 @@ class Degeneracy:
         )
 
 
+#: ``extra`` key of the covariance as calibrated about ``extra["covariance_origin_m"]`` (before it was moved to the
+#: target frame's origin): :meth:`RegistrationResult.covariance_about` returns it exactly
+LOCAL_COVARIANCE_KEY = "covariance_about_origin"
+
+
 def calibration_note(variant: str, learned: str | None) -> str:
     """What calibrated a variant's covariance, in words (``extra["covariance_calibration"]``)."""
     if learned is None:
@@ -199,6 +204,43 @@ class RegistrationResult:
         from lidarkit.registration.covariance import safe_inverse
 
         return safe_inverse(self.covariance)
+
+    def covariance_about(self, origin_m: np.ndarray | list[float]) -> np.ndarray | None:
+        """``covariance`` with the perturbation taken about the point ``origin_m`` (m, target frame) instead of the
+        target frame's origin: ``Ad(S)^-1 Sigma Ad(S)^-T``, ``S`` the translation to it. About
+        ``extra["covariance_origin_m"]`` (a target far from its frame's origin: a map frame, UTM) it is the covariance
+        as calibrated there, exactly, where moving the stored one back would lose what float64 cannot hold."""
+        if self.covariance is None:
+            return None
+        from lidarkit.registration.assessment import COVARIANCE_ORIGIN_KEY
+        from lidarkit.registration.covariance import adjoint
+
+        c = np.asarray(origin_m, dtype=np.float64).reshape(3)
+        local = self.extra.get(LOCAL_COVARIANCE_KEY)
+        at = self.extra.get(COVARIANCE_ORIGIN_KEY)
+        if local is not None and at is not None and np.array_equal(c, np.asarray(at, dtype=np.float64)):
+            return np.array(local, dtype=np.float64)
+        S_inv = np.eye(4)
+        S_inv[:3, 3] = -c
+        Ad = adjoint(S_inv)
+        return Ad @ self.covariance @ Ad.T
+
+    def nees(self, T_target_source_true: np.ndarray) -> float:
+        """Normalized estimation error squared of this pose against the true one, ``xi^T Sigma^-1 xi`` (6 on average
+        for a calibrated covariance; NaN without one), with ``T_true = se3_exp(xi) T`` taken about
+        ``extra["covariance_origin_m"]`` when there is one: exact at any coordinates (``nees`` of
+        :mod:`lidarkit.registration.covariance` with the stored covariance is not, far from the frame's origin)."""
+        if self.covariance is None:
+            return float("nan")
+        from lidarkit.geometry import se3_inverse, se3_log
+        from lidarkit.registration.assessment import COVARIANCE_ORIGIN_KEY
+        from lidarkit.registration.covariance import nees
+
+        c = np.asarray(self.extra.get(COVARIANCE_ORIGIN_KEY, (0.0, 0.0, 0.0)), dtype=np.float64)
+        S = np.eye(4)
+        S[:3, 3] = c
+        error = se3_inverse(S) @ np.asarray(T_target_source_true, dtype=np.float64) @ se3_inverse(self.T_target_source) @ S
+        return nees(se3_log(error), self.covariance_about(c))
 
     @property
     def rmse(self) -> float:
@@ -509,6 +551,8 @@ class Registration:
             S = np.eye(4)
             S[:3, 3] = origin
             Ad = adjoint(S)  # se3_exp(Ad xi) = S se3_exp(xi) S^-1: a perturbation at c as one at the frame's origin
+            # kept as calibrated about c: far out (UTM) the moved matrix spans more than float64 resolves
+            extra = {**extra, LOCAL_COVARIANCE_KEY: np.asarray(covariance, dtype=np.float64).tolist()}
             covariance = Ad @ covariance @ Ad.T
             step = None if step is None else Ad @ step
         return dataclasses.replace(accept(result, self._config), runtime_s=runtime, method=self.name, covariance=covariance,
