@@ -317,3 +317,39 @@ def test_orientation_errors_after_an_alignment_the_positions_hardly_fix_are_flag
     markdown = evaluation_markdown(ev)
     assert "align=sim3 (scale 2.0" in markdown and "KITTI drift is the devkit's, on the estimate as given (unscaled)" in markdown
     assert evaluation_notes(evaluate(short_gt, short_orb))[0] == aligned.warning
+
+
+def test_all_pairs_over_an_angle_delta_search_once_and_equal_evo(capsys):
+    """evo searched the all-pairs selection again inside every RPE (quadratic in the poses: 4 searches for
+    evaluate()'s two relations, 25 s on 1500 poses). The pairs are searched once now, the errors still evo's."""
+    from evo.core import metrics as evo_metrics
+    from evo.core.units import Unit
+
+    from lidarkit.eval import evaluate
+
+    gt = Trajectory.from_kitti(shared_path("evo_testdata", "KITTI_00_gt.txt"))
+    orb = Trajectory.from_kitti(shared_path("evo_testdata", "KITTI_00_ORB.txt"))
+    g, o = Trajectory(gt.poses_se3[:400]), Trajectory(orb.poses_se3[:400])
+    for relation, evo_relation in (("translation", "translation_part"), ("rotation_angle_deg", "rotation_angle_deg"), ("full", "full_transformation")):
+        ours = rpe(g, o, delta=5.0, delta_unit="degrees", all_pairs=True, relation=relation)
+        theirs = evo_metrics.RPE(evo_metrics.PoseRelation[evo_relation], 5.0, Unit.degrees, 0.1, True)
+        theirs.process_data((g.to_evo(), o.to_evo()))
+        stats = theirs.get_all_statistics()
+        assert len(ours.errors) == len(theirs.error) == len(ours.pairs) > 100
+        for name in ("rmse", "mean", "max", "min"):
+            assert getattr(ours, name) == pytest.approx(stats[name], rel=1e-12)
+    capsys.readouterr()
+    calls = []
+    original = evo_metrics.id_pairs_from_delta
+
+    def counted(*args, **kwargs):
+        calls.append(kwargs.get("all_pairs", args[4] if len(args) > 4 else False))
+        return original(*args, **kwargs)
+
+    evo_metrics.id_pairs_from_delta = counted
+    try:
+        evaluate(g, o, delta=5, delta_unit="degrees", all_pairs=True, drift=False)
+    finally:
+        evo_metrics.id_pairs_from_delta = original
+    assert sum(map(bool, calls)) == 1  # one all-pairs search (evo then compares consecutive copies: linear)
+    assert "%" not in capsys.readouterr().out  # evo's progress goes to stderr, not into the tables

@@ -109,6 +109,7 @@ def evaluate(ref: Trajectory, est: Trajectory, settings: EvaluationSettings | No
         note = f"reference path {ref_paired.length_m:.1f} m is not longer than {min(s.drift_lengths_m):g} m"
     if note:
         logger.info("KITTI drift skipped: %s", note)
+    translation = rpe(ref_paired, est_paired, relation="translation", **rpe_kw)
     return Evaluation(
         ref_name=ref.name,
         est_name=est.name,
@@ -117,8 +118,9 @@ def evaluate(ref: Trajectory, est: Trajectory, settings: EvaluationSettings | No
         settings=s,
         ape=_marked(ape(ref_paired, est_paired, s.align, "translation"), s.associate),
         ape_rotation=_marked(ape(ref_paired, est_paired, s.align, "rotation_angle_deg"), s.associate),
-        rpe=_marked(rpe(ref_paired, est_paired, relation="translation", **rpe_kw), s.associate),
-        rpe_rotation=_marked(rpe(ref_paired, est_paired, relation="rotation_angle_deg", **rpe_kw), s.associate),
+        rpe=_marked(translation, s.associate),
+        # the same pairs: evo's all-pairs search over a path or angle delta is quadratic in the poses
+        rpe_rotation=_marked(rpe(ref_paired, est_paired, relation="rotation_angle_deg", pairs=translation.pairs, **rpe_kw), s.associate),
         drift=drift,
         drift_note=note,
     )
