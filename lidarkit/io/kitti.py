@@ -258,13 +258,8 @@ class KittiOdometry:
     @property
     def reader_options(self) -> dict:
         """What the reader did to the data, for the run config."""
-        return {
-            "kind": "kitti",
-            "path": str(self.sequence_dir.absolute()),
-            "vertical_correction": self.vertical_correction,
-            "vertical_correction_applied": self._correct,
-            "vertical_correction_deg": KITTI_VERTICAL_CORRECTION_DEG if self._correct else 0.0,
-        }
+        return {"kind": "kitti", "path": str(self.sequence_dir.absolute()),
+                **correction_options(self.vertical_correction, self._correct)}
 
     # ---- layout ------------------------------------------------------------------------------------
     def _locate_sequence(self, root: Path) -> tuple[Path, Path | None]:
@@ -558,6 +553,12 @@ def check_vertical_correction(value: Any) -> bool | str:
     if value not in (True, False, "auto") or isinstance(value, (int, float)) and not isinstance(value, bool):
         raise ConfigError(f"vertical_correction must be true, false or auto, got {value!r}", source="vertical_correction")
     return value
+
+
+def correction_options(setting: bool | str, applied: bool) -> dict:
+    """A reader's vertical-angle correction in its run config: the setting, whether it applied, by how much."""
+    return {"vertical_correction": setting, "vertical_correction_applied": applied,
+            "vertical_correction_deg": KITTI_VERTICAL_CORRECTION_DEG if applied else 0.0}
 
 
 def correct_vertical_angle(points_xyz: np.ndarray) -> np.ndarray:

@@ -34,8 +34,7 @@ from lidarkit.errors import ConfigError, DataError
 from lidarkit.geometry import se3_inverse
 from lidarkit.io.base import INSTANT_FRACTION, Scan
 from lidarkit.io.kitti import (
-    CORRECTED_BY_DEFAULT, KITTI_VERTICAL_CORRECTION_DEG, check_vertical_correction, correct_vertical_angle, indexed_files,
-    read_gray_image,
+    CORRECTED_BY_DEFAULT, check_vertical_correction, correct_vertical_angle, correction_options, indexed_files, read_gray_image,
 )
 from lidarkit.io.pointfile import read_kitti_bin
 from lidarkit.textfile import file_line, read_lines, read_numeric_table
@@ -162,14 +161,8 @@ class KittiRaw:
     @property
     def reader_options(self) -> dict:
         """What the reader did to the data, for the run config."""
-        return {
-            "kind": "kitti_raw",
-            "path": str(self.drive_dir.absolute()),
-            "vertical_correction": self.vertical_correction,
-            "vertical_correction_applied": self._correct,
-            "vertical_correction_deg": KITTI_VERTICAL_CORRECTION_DEG if self._correct else 0.0,
-            "point_times": self.point_times,
-        }
+        return {"kind": "kitti_raw", "path": str(self.drive_dir.absolute()),
+                **correction_options(self.vertical_correction, self._correct), "point_times": self.point_times}
 
     def __repr__(self) -> str:
         return f"KittiRaw({str(self.drive_dir)!r}, scans={len(self)}, oxts={len(self.oxts_paths)})"
