@@ -217,3 +217,23 @@ def test_sim_progress_lines_where_no_bar_can_be_drawn(tmp_path, capsys):
         err = capsys.readouterr().err
         unit = "sweeps" if name == "lidar" else "images"
         assert f"10/10 {unit} (100 %)" in err and len([line for line in err.splitlines() if f" {unit} (" in line]) >= 5
+
+
+def test_sim_spec_memory_bag_t_field_and_odometry_frame(tmp_path):
+    """A sim: spec asking for 1e10 rays was a 74 GiB MemoryError traceback; a sweep longer than 4.29 s wrapped the
+    uint32 't' field back to 0; the odometry message said its pose was in the lidar frame."""
+    from rosbags.highlevel import AnyReader
+
+    from lidarkit.errors import ConfigError
+    from lidarkit.odometry import run
+
+    with pytest.raises(ConfigError, match=r"a sweep of 100000x100000 rays needs about .* of memory"):
+        run("sim:street?frames=2&beams=100000&azimuths=100000", "kiss")
+    slow = SimulatedLidarSequence(n_frames=2, n_beams=8, n_azimuths=90, frame_rate_hz=0.2)
+    with pytest.raises(ConfigError, match=r"frame_rate_hz: a sweep of 5 s overflows the uint32 nanosecond 't' field"):
+        export_bag(slow, tmp_path / "slow.bag", "rosbag1")
+    bag = export_bag(SimulatedLidarSequence(n_frames=2, n_beams=8, n_azimuths=90), tmp_path / "ok.bag", "rosbag1")
+    with AnyReader([bag]) as reader:
+        conn = next(c for c in reader.connections if c.topic == "/ground_truth")
+        msg = reader.deserialize(next(reader.messages(connections=[conn]))[2], conn.msgtype)
+    assert msg.header.frame_id == "world" and msg.child_frame_id == "lidar"

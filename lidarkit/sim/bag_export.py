@@ -25,6 +25,10 @@ STORAGES = ("sqlite3", "mcap")
 POINTS_TOPIC = "/points"
 GROUND_TRUTH_TOPIC = "/ground_truth"
 FRAME_ID = "lidar"
+#: the frame the ground-truth poses T_world_lidar are expressed in (the odometry message's header frame)
+WORLD_FRAME_ID = "world"
+#: the uint32 ``t`` field counts nanoseconds: a sweep longer than this overflows it
+MAX_T_FIELD_SWEEP_S = (2**32 - 1) * 1e-9
 _POINT_DTYPE = np.dtype({"names": ["x", "y", "z", "intensity", "time", "t"],
                          "formats": ["<f4", "<f4", "<f4", "<f4", "<f4", "<u4"], "offsets": [0, 4, 8, 12, 16, 20], "itemsize": 24})
 _POINT_DTYPE_NO_TIMES = np.dtype({"names": ["x", "y", "z", "intensity"], "formats": ["<f4"] * 4, "offsets": [0, 4, 8, 12], "itemsize": 16})
@@ -63,6 +67,11 @@ def export_bag(sequence, out: str | os.PathLike, fmt: str = "rosbag2", *, storag
     except ImportError:
         raise ConfigError("writing bags needs the Python package 'rosbags': pip install 'lidarkit[ros]'", source=f"format {fmt}") from None
     out = check_bag_target(out, fmt)
+    period = sequence.config.sweep_period_s
+    if period > MAX_T_FIELD_SWEEP_S:  # (a 5 s sweep wrapped its t values past 4.29 s back to 0)
+        raise ConfigError(f"a sweep of {period:g} s overflows the uint32 nanosecond 't' field drivers write (at most "
+                          f"{MAX_T_FIELD_SWEEP_S:.3g} s): frame_rate_hz must be at least {1 / MAX_T_FIELD_SWEEP_S:.3g} for a bag",
+                          source="frame_rate_hz")
     from lidarkit import atomic
 
     atomic.ensure_dir(out.parent)
@@ -109,12 +118,12 @@ def _write_messages(sequence, writer, typestore, serialize, *, ros1: bool, on_fr
     quat_xyzw = Rotation.from_matrix(gt.poses_se3[:, :3, :3]).as_quat()
     period = sequence.config.sweep_period_s
 
-    def header(seq: int, t_s: float):
+    def header(seq: int, t_s: float, frame_id: str = FRAME_ID):
         sec = int(np.floor(t_s))
         stamp = T["builtin_interfaces/msg/Time"](sec=sec, nanosec=int(round((t_s - sec) * 1e9)))
         if ros1:
-            return T["std_msgs/msg/Header"](seq=seq, stamp=stamp, frame_id=FRAME_ID)
-        return T["std_msgs/msg/Header"](stamp=stamp, frame_id=FRAME_ID)
+            return T["std_msgs/msg/Header"](seq=seq, stamp=stamp, frame_id=frame_id)
+        return T["std_msgs/msg/Header"](stamp=stamp, frame_id=frame_id)
 
     zeros36 = np.zeros(36)
     vec = T["geometry_msgs/msg/Vector3"]
@@ -138,7 +147,7 @@ def _write_messages(sequence, writer, typestore, serialize, *, ros1: bool, on_fr
             pose = gt.poses_se3[i]
             q = quat_xyzw[i]
             odom_msg = T[odom](
-                header=header(i, float(gt.timestamps_s[i])), child_frame_id=FRAME_ID,
+                header=header(i, float(gt.timestamps_s[i]), WORLD_FRAME_ID), child_frame_id=FRAME_ID,
                 pose=T["geometry_msgs/msg/PoseWithCovariance"](
                     pose=T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=pose[0, 3], y=pose[1, 3], z=pose[2, 3]),
                                                      orientation=T["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3])),

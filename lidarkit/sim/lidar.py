@@ -19,7 +19,7 @@ Frames, units and instants (the contract users score against):
   rolling (``sway_deg``) and heaving (``heave_m``) gently as on a suspension (set both to 0 for planar motion).
 * With ``motion_distortion=True`` every column is cast from the pose at its own firing time and its points are
   expressed in the sensor frame of that time (what a real spinning sensor reports). With ``False`` the whole sweep
-  is cast from the ground-truth pose (an ideal snapshot at ``pose_instant``).
+  is cast from the ground-truth pose (an ideal snapshot at ``pose_instant``), and carries no per-point times.
 """
 
 from __future__ import annotations
@@ -455,6 +455,11 @@ class SimulatedLidarSequence:
             raise ConfigError("pass either a LidarSimConfig or keyword parameters, not both", source="lidar simulator")
         self.config = config if config is not None else make_config(**params)
         cfg = self.config
+        from lidarkit.resources import check_memory
+
+        # per sweep: the ray directions and hits (float64) and the exported records, a few copies each (a sim: spec
+        # or a library call asking for 1e10 rays was a 74 GiB MemoryError traceback)
+        check_memory(cfg.n_beams * cfg.n_azimuths * 160.0, f"a sweep of {cfg.n_beams}x{cfg.n_azimuths} rays", "n_beams / n_azimuths")
         self.name = f"sim:{cfg.scene}?seed={cfg.seed}"
         period = cfg.sweep_period_s
         s_end = cfg.speed_mps * period * (cfg.n_frames + 1) + cfg.max_range_m + 40.0
@@ -604,7 +609,8 @@ class SimulatedLidarSequence:
         cos_inc = np.abs(np.einsum("ij,ij->i", normals, dirs_world.reshape(-1, 3)[keep]))
         hit = hits["primitive_ids"].numpy()[keep].astype(np.int64)
         intensity = (self.reflectivity[hit] * cos_inc).astype(np.float32)
-        times = np.repeat(self.column_times_s, n_beams)[keep] if cfg.point_times else None
+        # a snapshot (no motion distortion) has no time spread to deskew: its column times would add one
+        times = np.repeat(self.column_times_s, n_beams)[keep] if cfg.point_times and cfg.motion_distortion else None
         scan = Scan(
             points_xyz=points,
             intensity=intensity,
