@@ -612,3 +612,11 @@ def test_scipy_tree_settings_for_another_search_are_refused():
         get_icp("knn", exact=True, leafsize=1)
     assert get_icp("knn", leafsize=1).config.leafsize == 1  # knn searches with scipy by default
     assert get_icp("vanilla", nn_backend="scipy", leafsize=1).config.leafsize == 1
+
+
+def test_a_variant_whose_extra_is_missing_names_the_pip_line(monkeypatch):
+    """Without small_gicp installed, '-m small_gicp' read as a typo ("unknown ICP method 'small_gicp'; available: ...")."""
+    monkeypatch.delitem(registry_module._VARIANTS, "small_gicp", raising=False)
+    with pytest.raises(ConfigError, match=r"the 'small_gicp' variant needs the Python package 'small_gicp', not installed here: "
+                                          r"pip install 'lidarkit\[gicp\]'"):
+        get_icp("small_gicp")

@@ -214,7 +214,8 @@ def paired_test(
         raise EvaluationError(f"paired values differ in count: {va.size} for {name_a}, {vb.size} for {name_b}",
                               source=metric)
     if va.size < 2:
-        raise EvaluationError(f"a paired test needs at least 2 matched {pairing}s, got {va.size}", source=metric)
+        more = " (a suite's `seeds: N`: 2 or more, 6 or more for p < 0.05)" if pairing == "seed" else ""
+        raise EvaluationError(f"a paired test needs at least 2 matched {pairing}s, got {va.size}{more}", source=metric)
     if not 0.0 < alpha < 1.0:
         raise ConfigError(f"alpha must be in (0, 1), got {alpha}", source="alpha")
     if noise < 0 or not math.isfinite(noise):

@@ -24,6 +24,8 @@ ENTRY_POINT_GROUP = "lidarkit.icp"
 
 _VARIANTS: dict[str, type[Registration]] = {}
 _PLUGINS_LOADED = False
+#: built-in variants whose library is an optional extra: name -> (package, extra)
+OPTIONAL_VARIANTS = {"small_gicp": ("small_gicp", "gicp"), "genz": ("genz-icp", "genz")}
 #: installed plugins that failed to load: name -> reason
 _BROKEN: dict[str, str] = {}
 
@@ -98,6 +100,10 @@ def get_icp_class(name: str) -> type[Registration]:
         _load_plugins()
     if name in _BROKEN:
         raise ConfigError(f"this plugin is installed but could not be loaded: {_BROKEN[name]}", source=f"ICP plugin {name!r}")
+    if name in OPTIONAL_VARIANTS and name not in _VARIANTS:  # (it read as a typo: "unknown ICP method 'small_gicp'")
+        package, extra = OPTIONAL_VARIANTS[name]
+        raise ConfigError(f"the {name!r} variant needs the Python package {package!r}, not installed here: "
+                          f"pip install 'lidarkit[{extra}]'", source="method")
     if name not in _VARIANTS:
         raise ConfigError(f"unknown ICP method {name!r}; available: {', '.join(available_icp())}", source="method")
     return _VARIANTS[name]
