@@ -360,3 +360,31 @@ def test_a_suite_job_whose_result_cannot_be_read_is_not_called_not_run(tmp_path)
     assert len(report.not_run) == 1 and report.not_run[0].endswith("(its result file cannot be read: see the log)")
     assert coverage_text(report) == " of the suite's 3 jobs (0 not run yet, 1 with a result file that cannot be read)"
     assert result_path(tmp_path / "out", damaged.stem).exists()
+
+
+def test_plots_say_which_methods_they_leave_out_and_sweeps_keep_experiments_apart(tmp_path):
+    """12 methods were drawn as 8 with nothing said (plain random_walk among those dropped); a sweep over two
+    experiments on one dataset averaged them into one line."""
+    suite = tmp_path / "suite.yaml"
+    suite.write_text(textwrap.dedent("""
+        seeds: [0, 1]
+        experiments:
+          - name: many
+            task: selftest
+            dataset: {kind: synthetic, name: d}
+            methods: [{name: random_walk, grid: {steps: [10, 11, 12, 13, 14, 15, 16, 17, 18, 19]}}]
+          - name: short
+            task: selftest
+            dataset: {kind: synthetic, name: d}
+            methods: [{name: random_walk, params: {steps: 10}, grid: {noise_m: [0.01, 0.1]}}]
+          - name: long
+            task: selftest
+            dataset: {kind: synthetic, name: d}
+            methods: [{name: random_walk, params: {steps: 40}, grid: {noise_m: [0.01, 0.1]}}]
+    """))
+    run_suite(load_suite(suite), tmp_path / "out", executor="serial")
+    report = build_report(tmp_path / "out")
+    traj = next(p for p in report.plots if p.title.startswith("Trajectories") and "many" in p.title)
+    assert "8 of 10 shown; left out: random_walk(steps=18), random_walk(steps=19)." in traj.caption
+    sweep = next(p for p in report.plots if p.filename.startswith("sweep_"))
+    assert "one line per experiment, dataset and method" in sweep.caption and "left out" not in sweep.caption

@@ -223,14 +223,25 @@ def _file_slug(text: str) -> str:
     return f"{_slug(text)[:72]}_{hashlib.sha1(text.encode()).hexdigest()[:8]}"
 
 
-def _first_ok_per_method(items: list[dict[str, Any]], series: str) -> dict[str, dict[str, Any]]:
+def _first_ok_per_method(items: list[dict[str, Any]], series: str) -> tuple[dict[str, dict[str, Any]], str]:
+    """The first seed's record of each method with ``series`` (by label), at most :data:`MAX_LINES_PER_PLOT`, and the
+    caption's note naming the methods left out ("" when none is)."""
     out: dict[str, dict[str, Any]] = {}
     for r in sorted(items, key=lambda r: r["job"]["seed"]):
         if r.get("status") != "ok" or not r.get("series", {}).get(series):
             continue
         label = Job.from_spec(r["job"]).method_label
         out.setdefault(label, r)
-    return dict(list(out.items())[:MAX_LINES_PER_PLOT])
+    return _capped(dict(sorted(out.items())))
+
+
+def _capped(lines: dict[str, Any]) -> tuple[dict[str, Any], str]:
+    """At most :data:`MAX_LINES_PER_PLOT` of ``lines`` (a legend beyond that is unreadable) and a note naming the rest
+    (12 methods were drawn as 8, the rest left out without a word)."""
+    kept = dict(list(lines.items())[:MAX_LINES_PER_PLOT])
+    left = [k for k in lines if k not in kept]
+    note = f" {len(kept)} of {len(lines)} shown; left out: {', '.join(left)}." if left else ""
+    return kept, note
 
 
 def make_plots(records: list[dict[str, Any]]) -> list[Plot]:
@@ -247,7 +258,7 @@ def make_plots(records: list[dict[str, Any]]) -> list[Plot]:
         groups[(j["task"], j["experiment"], j["dataset_name"])].append(r)
     for (task, experiment, dataset), items in sorted(groups.items()):
         where = f"{task} · {experiment} · {dataset}"
-        chosen = _first_ok_per_method(items, "trajectory_xy")
+        chosen, left_out = _first_ok_per_method(items, "trajectory_xy")
         if chosen:
             fig, ax = plt.subplots(figsize=(6, 4.5))
             ref = np.asarray(next(iter(chosen.values()))["series"]["trajectory_xy"]["ref"], dtype=float)
@@ -263,8 +274,8 @@ def make_plots(records: list[dict[str, Any]]) -> list[Plot]:
             ax.set_title(f"trajectories: {where}", fontsize=9)
             plots.append(Plot(f"Trajectories — {where}", f"traj_{_file_slug(where)}.png", _png(fig), task,
                               f"Top view of the estimated trajectories (first seed of each method) against the "
-                              f"reference (dashed): {experiment}, {dataset}."))
-        chosen = _first_ok_per_method(items, "error_over_time")
+                              f"reference (dashed): {experiment}, {dataset}.{left_out}"))
+        chosen, left_out = _first_ok_per_method(items, "error_over_time")
         if chosen:
             fig, ax = plt.subplots(figsize=(6, 3.2))
             ylabel = "error"
@@ -277,8 +288,8 @@ def make_plots(records: list[dict[str, Any]]) -> list[Plot]:
             ax.legend(fontsize=7)
             ax.set_title(f"error over time: {where}", fontsize=9)
             plots.append(Plot(f"Error over time — {where}", f"err_{_file_slug(where)}.png", _png(fig), task,
-                              f"{ylabel} over time per method: {experiment}, {dataset}."))
-        chosen = _first_ok_per_method(items, "rmse_history")
+                              f"{ylabel} over time per method: {experiment}, {dataset}.{left_out}"))
+        chosen, left_out = _first_ok_per_method(items, "rmse_history")
         if chosen:
             fig, ax = plt.subplots(figsize=(6, 3.2))
             for label, r in chosen.items():
@@ -292,7 +303,7 @@ def make_plots(records: list[dict[str, Any]]) -> list[Plot]:
             ax.legend(fontsize=7)
             ax.set_title(f"ICP RMSE vs iteration: {where}", fontsize=9)
             plots.append(Plot(f"RMSE vs iteration — {where}", f"rmse_{_file_slug(where)}.png", _png(fig), task,
-                              f"Correspondence RMSE per ICP iteration (first pair, log scale): {experiment}, {dataset}."))
+                              f"Correspondence RMSE per ICP iteration (first pair, log scale): {experiment}, {dataset}.{left_out}"))
     plots.extend(_sweep_plots(records))
     return plots
 
@@ -306,6 +317,7 @@ def _sweep_plots(records: list[dict[str, Any]]) -> list[Plot]:
         by_task[r["job"]["task"]].append(r)
     for task, recs in sorted(by_task.items()):
         _, sweeps = _task_meta(task)
+        experiments = {r["job"]["experiment"] for r in recs}
         for param, metric in sweeps:
             lines: dict[str, dict[float, list[float]]] = defaultdict(lambda: defaultdict(list))
             for r in recs:
@@ -314,13 +326,16 @@ def _sweep_plots(records: list[dict[str, Any]]) -> list[Plot]:
                 if r.get("status") != "ok" or param not in p or value is None:
                     continue
                 others = {k: v for k, v in p.items() if k != param}
-                label = f"{r['job']['dataset_name']}: " + Job(task, "", "", {}, r["job"]["method"], others).method_label
+                # one line per experiment, dataset and method (two experiments on one dataset were pooled into one)
+                where = f"{r['job']['experiment']} · " if len(experiments) > 1 else ""
+                label = f"{where}{r['job']['dataset_name']}: " + Job(task, "", "", {}, r["job"]["method"], others).method_label
                 lines[label][float(p[param])].append(float(value))
-            lines = {k: v for k, v in lines.items() if len(v) >= 2}
+            lines = {k: v for k, v in sorted(lines.items()) if len(v) >= 2}
             if not lines:
                 continue
+            lines, left_out = _capped(lines)
             fig, ax = plt.subplots(figsize=(6, 3.6))
-            for label, points in list(lines.items())[:MAX_LINES_PER_PLOT]:
+            for label, points in lines.items():
                 xs = sorted(points)
                 means = [float(np.mean(points[x])) for x in xs]
                 stds = [float(np.std(points[x], ddof=1)) if len(points[x]) > 1 else 0.0 for x in xs]
@@ -331,7 +346,8 @@ def _sweep_plots(records: list[dict[str, Any]]) -> list[Plot]:
             ax.legend(fontsize=7)
             ax.set_title(f"{task}: {metric} vs {param} (mean ± std over seeds)", fontsize=9)
             plots.append(Plot(f"{metric} vs {param} — {task}", f"sweep_{_file_slug(task + '_' + metric + '_' + param)}.png", _png(fig),
-                              task, f"{metric} against {param}: mean ± std over seeds, one line per dataset and method."))
+                              task, f"{metric} against {param}: mean ± std over seeds, one line per experiment, dataset and "
+                              f"method.{left_out}"))
     return plots
 
 
