@@ -353,3 +353,40 @@ def test_noise_from_a_baseline_is_refused_for_run_folders(tmp_path):
         run(spec, "small_gicp", out_dir=tmp_path / name, progress=False)
     with pytest.raises(ConfigError, match="a baseline's bands are of bench metrics .* give that noise with --noise"):
         compare(tmp_path / "a", tmp_path / "b", metric="rpe_translation_m", noise_from=tmp_path / "baseline")
+
+
+def test_compare_counts_a_dataset_whose_seeds_change_nothing_once(tmp_path):
+    """Two datasets whose every seed gives each side one value: 10 "seeds" were tested as independent units
+    (p = 0.002) from 2 measurements; now one unit per dataset."""
+    import textwrap
+
+    from lidarkit.bench import Metric, Task, TaskOutput, load_suite, register_task, run_suite
+    from lidarkit.eval import compare
+
+    @register_task("fixed_data_test_task")
+    class Fixed(Task):
+        dataset_kinds = ("synthetic",)
+        metrics = (Metric("error_m", "error [m]"),)
+
+        def validate_options(self, options):
+            pass
+
+        def validate_dataset(self, dataset, options):
+            pass
+
+        def validate(self, method, params, dataset, options):
+            pass
+
+        def run(self, job):  # deterministic: the seed changes nothing
+            return TaskOutput(metrics={"error_m": (0.1 if job.method == "good" else 0.5) + len(job.dataset_name) * 0.01},
+                              series={}, info={})
+
+    (tmp_path / "s.yaml").write_text(textwrap.dedent("""
+        seeds: 5
+        experiments:
+          - {name: e, task: fixed_data_test_task, datasets: [{kind: synthetic, name: a}, {kind: synthetic, name: bb}], methods: [good, bad]}
+    """))
+    run_suite(load_suite(tmp_path / "s.yaml"), tmp_path / "out", executor="serial")
+    result = compare(tmp_path / "out", tmp_path / "out", method_a="good", method_b="bad", metric="error_m")
+    assert result.pairing == "dataset" and result.n_pairs == 2 and not result.significant
+    assert "with 2 differing datasets the smallest p this test can give is 0.5" in result.verdict()

@@ -192,7 +192,8 @@ def _run_job(job: Job, checksum_cache: dict[str, str] | None) -> JobRun:
     protocol: dict[str, Any] = {"dataset": dict(job.dataset), "checksums": dataset_checksums(job.dataset, checksum_cache)}
     if job.task == "odometry":
         from lidarkit.bench.tasks._datasets import open_dataset_spec
-        from lidarkit.bench.tasks.odometry import run_odometry_job, seeded_dataset
+        from lidarkit.bench.tasks._datasets import seeded_dataset
+        from lidarkit.bench.tasks.odometry import run_odometry_job
 
         result, output = run_odometry_job(job)
         dataset = open_dataset_spec(seeded_dataset(job))

@@ -140,7 +140,7 @@ def _pinned_simulation(job: Mapping[str, Any]) -> dict[str, Any] | None:
     seed), as a run records it in ``config["run"]["dataset_config"]``; None when it cannot be rebuilt."""
     from lidarkit.bench.datasets import dataset_options
     from lidarkit.bench.jobs import Job
-    from lidarkit.bench.tasks.odometry import seeded_dataset
+    from lidarkit.bench.tasks._datasets import seeded_dataset
     from lidarkit.errors import LidarKitError
     from lidarkit.odometry import config_dict
     from lidarkit.sim.lidar import make_config

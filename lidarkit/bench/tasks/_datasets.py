@@ -8,7 +8,7 @@ from collections import OrderedDict
 from typing import Any
 
 from lidarkit.bench.datasets import dataset_options, dataset_path
-from lidarkit.bench.jobs import canonical_json
+from lidarkit.bench.jobs import Job, canonical_json
 from lidarkit.errors import ConfigError, validation_problems
 
 _CACHE: OrderedDict[str, Any] = OrderedDict()
@@ -98,3 +98,11 @@ def options_model(model: type, options: dict[str, Any], task: str) -> Any:
     except ValidationError as err:
         problems = validation_problems(err)
         raise ConfigError(f"{problems} (options of task {task!r}: {', '.join(model.model_fields)})", source="options") from None
+
+
+def seeded_dataset(job: Job) -> dict[str, Any]:
+    """The job's dataset spec; a simulated sequence without its own ``seed`` is seeded by the job's seed, so
+    ``seeds: 10`` in a suite runs a method over 10 different simulated drives (the unit of a paired test)."""
+    if job.dataset.get("kind") == "sim_lidar" and "seed" not in job.dataset:
+        return {**job.dataset, "seed": int(job.seed)}
+    return job.dataset

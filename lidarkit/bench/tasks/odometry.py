@@ -15,7 +15,7 @@ from pydantic import BaseModel, ConfigDict
 
 from lidarkit.bench.jobs import Job
 from lidarkit.bench.tasks import Metric, Task, TaskOutput, import_module_for_task
-from lidarkit.bench.tasks._datasets import check_reader_options, open_dataset_spec, options_model
+from lidarkit.bench.tasks._datasets import check_reader_options, open_dataset_spec, options_model, seeded_dataset
 from lidarkit.errors import ConfigError
 
 MAX_SERIES_POINTS = 2000
@@ -72,14 +72,6 @@ def drift_segments(result: Any) -> dict[str, list[float]] | None:
     if not leval.drift_segments_possible(ref):
         return None
     return SegmentErrors.from_drift(leval.kitti_drift(ref, est), frame_period_s=frame_period_s(ref)).to_dict()
-
-
-def seeded_dataset(job: Job) -> dict[str, Any]:
-    """The job's dataset spec; a simulated sequence without its own ``seed`` is seeded by the job's seed, so
-    ``seeds: 10`` in a suite runs a method over 10 different simulated drives (the unit of a paired test)."""
-    if job.dataset.get("kind") == "sim_lidar" and "seed" not in job.dataset:
-        return {**job.dataset, "seed": int(job.seed)}
-    return job.dataset
 
 
 class OdometryTask(Task):
