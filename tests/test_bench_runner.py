@@ -332,3 +332,47 @@ experiments:
     records = load_results(tmp_path / "out")
     assert len(records) == 3
     assert all(any("kept negative range" in w for w in r["warnings"]) for r in records), [r["warnings"] for r in records]
+
+
+@pytest.mark.slow
+def test_a_lost_dask_scheduler_stops_the_run_in_one_line_and_keeps_what_finished(tmp_path):
+    """An external scheduler killed mid-run turned every remaining job into a recorded failure (87 of 108, 253 log
+    lines, exit code 0, a report picking the best method among the few that ran)."""
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    bin_dir = Path(sys.executable).parent
+    address = f"tcp://127.0.0.1:{port}"
+    scheduler = subprocess.Popen([str(bin_dir / "dask"), "scheduler", "--port", str(port), "--no-dashboard"],
+                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    worker = None
+    try:
+        time.sleep(4)
+        worker = subprocess.Popen([str(bin_dir / "dask"), "worker", address, "--nworkers", "1", "--nthreads", "1", "--no-dashboard"],
+                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        time.sleep(4)
+        suite = tmp_path / "suite.yaml"
+        suite.write_text(textwrap.dedent("""
+            seeds: 30
+            experiments:
+              - {name: e, task: selftest, dataset: {kind: synthetic}, methods: [{name: sleep, params: {seconds: 0.3}}]}
+        """))
+        run = subprocess.Popen([sys.executable, "-m", "lidarkit.cli", "bench", str(suite), "--out", str(tmp_path / "out"), "-e", "dask",
+                                "--address", address, "--no-report"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and not list((tmp_path / "out" / "jobs").glob("*.json")):
+            time.sleep(0.2)  # some jobs done, others still to run
+        scheduler.kill()
+        out, err = run.communicate(timeout=120)
+    finally:
+        for proc in (scheduler, worker):
+            if proc is not None and proc.poll() is None:
+                proc.kill()
+                proc.wait()
+    assert run.returncode == 1, err
+    lines = [line for line in err.splitlines() if line.startswith("error:")]
+    assert len(lines) == 1 and "lost the Dask scheduler" in lines[0] and "Traceback" not in err
+    records = load_results(tmp_path / "out")
+    assert records and all(r["status"] == "ok" for r in records) and len(records) < 30

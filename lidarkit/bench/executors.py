@@ -17,7 +17,7 @@ from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
 from lidarkit.lifetime import ignored_sigint, init_worker, mark_abandoned
-from lidarkit.errors import ConfigError
+from lidarkit.errors import ConfigError, LidarKitError
 
 log = logging.getLogger(__name__)
 
@@ -184,6 +184,10 @@ class DaskExecutor:
         self._distributed = distributed
         self.address = address
         self.cluster = None
+        # the client logs each failed reconnect with its traceback: a lost scheduler is reported once, by run()
+        self._client_log = logging.getLogger("distributed.client")
+        self._client_level = self._client_log.level
+        self._client_log.setLevel(logging.CRITICAL)
         if address:
             try:
                 self.client = distributed.Client(address, timeout="20s")
@@ -210,22 +214,44 @@ class DaskExecutor:
         futures = {}
         for key, spec in items:
             futures[self.client.submit(fn, spec, pure=False)] = key
+        yielded = 0
         try:
             for fut in self._distributed.as_completed(list(futures)):
                 key = futures[fut]
                 try:
                     outcome = fut.result()
                 except Exception as err:  # KilledWorker, lost connection, ...
+                    if self._scheduler_lost(err):  # not the job's failure: stop, keep what finished (a resume runs the rest)
+                        self._lost = True
+                        raise LidarKitError(f"lost the Dask scheduler ({type(err).__name__}): {len(futures) - yielded} job(s) "
+                                            "not run; the results so far are kept, run the suite again to run the rest",
+                                            source=self.address or "local Dask cluster") from None
                     outcome = crash_outcome(type(err).__name__, str(err))
+                yielded += 1
                 yield key, outcome
         finally:
             self.client.cancel([f for f in futures if not f.done()])
 
+    def _scheduler_lost(self, err: Exception) -> bool:
+        """Whether ``err`` comes from losing the scheduler (every future cancelled with it: 87 jobs were recorded as
+        failed, exit code 0), not from the job."""
+        cancelled = getattr(self._distributed, "FutureCancelledError", None) or getattr(
+            getattr(self._distributed, "client", None), "FutureCancelledError", ())
+        if isinstance(err, cancelled or ()):
+            return True
+        return getattr(self.client, "status", "running") not in ("running", "connecting")
+
     def close(self) -> None:
+        quiet = logging.getLogger("distributed")
+        level = quiet.level
+        if getattr(self, "_lost", False):  # the client's reconnect attempts would log their tracebacks while it closes
+            quiet.setLevel(logging.CRITICAL)
         self.client.close()
+        quiet.setLevel(level)
         if self.cluster is not None:
             self.cluster.close()
             self._quiet.setLevel(self._level)
+        self._client_log.setLevel(self._client_level)
 
 
 def check_executor_args(name: str, workers: int | None = None, address: str | None = None) -> None:
