@@ -363,3 +363,18 @@ def test_smoothing_settings_that_cannot_apply_are_refused_or_said(tmp_path, caps
     assert three.meta["smoothing"].startswith("not smoothed: 3 poses")
     code, _, err = _run(["vo", seq, "--set", "smoothing.window=3"], capsys)
     assert code == 1 and "polyorder (2) must be below window - 1 (2)" in err
+
+
+@pytest.mark.slow
+def test_self_calibration_shows_progress(tmp_path, capsys):
+    """--self-calibrate took 20-45 s per 50 frames before the first progress line."""
+    import shutil
+
+    from conftest import shared_path
+
+    folder = tmp_path / "imgs"
+    folder.mkdir()
+    for png in sorted(shared_path("kitti_images", "sequences", "06", "image_0").glob("*.png"))[:16]:
+        shutil.copy2(png, folder / png.name)
+    code, _, err = _run(["vo", str(folder), "--self-calibrate", "--progress"], capsys)
+    assert code in (0, None) and "self-calibrating the focal length:" in err

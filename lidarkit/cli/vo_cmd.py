@@ -101,14 +101,29 @@ def vo_command(
         if unused:
             stderr().print(f"note: {' and '.join(unused)} not used: the intrinsics are known ({vo_input.K_source})", soft_wrap=True,
                            markup=False)
+    from lidarkit.progress import progress_bar
+
     focal = None
-    if self_calibrate:
-        vo_input, focal = calibrate(vo_input)
+    if self_calibrate:  # 20-45 s per 50 frames: progress as its windows are tracked and adjusted
+        calib_bar: list = []  # (bar, task, steps shown), made at the first step, when the number of steps is known
+
+        def on_step(done: int, total: int) -> None:
+            if not progress:
+                return
+            if not calib_bar:
+                calib_bar.extend([*progress_bar(total, "self-calibrating the focal length", unit="steps"), 0])
+            if done > calib_bar[2]:
+                calib_bar[0].advance(calib_bar[1], done - calib_bar[2])
+                calib_bar[2] = done
+
+        try:
+            vo_input, focal = calibrate(vo_input, on_step=on_step)
+        finally:
+            if calib_bar:
+                calib_bar[0].stop()
     gt = vo_input.ground_truth  # (a guessed K is logged as a warning by open_vo_input)
     if len(vo_input.images) < 2:
         raise DataError(f"{len(vo_input.images)} frame from frame {start} on: VO needs two frames or more (no frame pair)", source=str(data))
-    from lidarkit.progress import progress_bar
-
     bar = progress_bar(len(vo_input.images), f"vo on {data}") if progress else None
     try:
         result = MonoVO(cfg, vo_input.K, gt if cfg.scale.mode == "gt" else None).run(

@@ -227,10 +227,11 @@ def _parabola_min(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
 
 
 def estimate_focal(images: Any, cfg: AutocalibConfig | None = None,
-                   focal_factor: float = DEFAULT_FOCAL_FACTOR) -> FocalEstimate:
+                   focal_factor: float = DEFAULT_FOCAL_FACTOR, on_step: Any = None) -> FocalEstimate:
     """Estimate ``fx = fy`` of an uncalibrated image sequence (``len`` + ``read_image(i)``, or a list of uint8
     ``(H, W)`` arrays). Falls back to ``focal_factor * max(w, h)`` with the reason when the motion does not
-    constrain it; never raises for degenerate motion."""
+    constrain it; never raises for degenerate motion. ``on_step(done, total)``: called as the windows are tracked
+    and adjusted (two steps a window), for progress."""
     cfg = cfg or AutocalibConfig()
     if cfg.window < 3:
         raise ConfigError(f"window must be >= 3 frames, got {cfg.window}", source="autocalib")
@@ -255,7 +256,14 @@ def estimate_focal(images: Any, cfg: AutocalibConfig | None = None,
     if len(starts) > cfg.max_windows:
         starts = [starts[i] for i in np.linspace(0, len(starts) - 1, cfg.max_windows).astype(int)]
     windows = []
-    for s in starts:
+    steps = 2 * len(starts)
+
+    def step(done: int) -> None:
+        if on_step is not None:
+            on_step(done, steps)
+
+    for k, s in enumerate(starts):
+        step(k)
         frames = [MonoVO._load(read, i)[0] for i in range(s, min(s + max(cfg.long_window, cfg.window), n))]
         if any(f is None or f.shape[:2] != (h, w) for f in frames):
             continue  # an unreadable or odd-sized frame: the window is skipped
@@ -280,10 +288,12 @@ def estimate_focal(images: Any, cfg: AutocalibConfig | None = None,
     # the neighbouring grid focal's solution, in an upward and a downward sweep; the lowest cost counts
     costs = np.full((len(windows), len(grid)), np.inf)
     for wi, ba in enumerate(windows):
+        step(len(starts) + round(wi * len(starts) / len(windows)))
         for sweep in (range(len(grid)), range(len(grid) - 1, -1, -1)):
             ba.x = None
             for gi in sweep:
                 costs[wi, gi] = min(costs[wi, gi], ba.cost(grid[gi]))
+    step(steps)
     usable = np.all(np.isfinite(costs), axis=1)
     costs = costs[usable]
     if len(costs) < 2:
