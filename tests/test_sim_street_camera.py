@@ -166,6 +166,17 @@ def test_bad_input_is_a_clear_error():
         open_simcam("sim:street")
     with pytest.raises(DataError, match="out of range"):
         SimulatedCameraSequence(n_frames=3, **SMALL).read_image(3)
+    # settings that failed minutes into an export, ran out of memory, or did nothing, in silence
+    with pytest.raises(ConfigError, match="texel_scale: Input should be greater than or equal to 0.5"):
+        make_camera_config(texel_scale=0.42)
+    with pytest.raises(ConfigError, match="n_frames: Input should be less than or equal to 100000"):
+        make_camera_config(n_frames=10**9)
+    with pytest.raises(ConfigError, match="the drive may reach .* km .* at most 50 km"):
+        make_camera_config(n_frames=100, frame_rate_hz=0.01)
+    with pytest.raises(ConfigError, match="occluder_start 1000 is beyond the 10 frames"):
+        make_camera_config(n_frames=10, occluder=True, occluder_start=1000)
+    with pytest.raises(ConfigError, match="first_corner_m places the first corner, and corners=false draws none"):
+        make_camera_config(corners=False, first_corner_m=50.0)
 
 
 def test_vo_input_and_kitti_export(tmp_path):

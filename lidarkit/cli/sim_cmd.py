@@ -77,7 +77,7 @@ def sim_camera(
     frames: int = typer.Option(500, "--frames", "-n", help="Number of images."),
     scene: str = typer.Option("street", "--scene", help="street"),
     seed: int = typer.Option(0, "--seed", help="Seeds the scene, its textures, the drive and the nuisances."),
-    param: list[str] = typer.Option([], "--param", "-p", help="Any other simulator field KEY=VALUE (e.g. noise_std=2, motion_blur_s=0.01, gain_std=0.05, vignetting=0.3, occluder=true, trees=true, width=640)."),
+    param: list[str] = typer.Option([], "--param", "-p", help="Any other simulator field KEY=VALUE (e.g. noise_std=2, motion_blur_s=0.01, gain_std=0.05, vignetting=0.3, occluder=true, trees=true; width=640 with cx=null cy=null centres the principal point, else KITTI's stays)."),
     progress: bool = typer.Option(True, "--progress/--no-progress", help="Progress bar on stderr."),
 ) -> None:
     """Simulate a camera driving through a textured street canyon (KITTI image size and intrinsics by default);

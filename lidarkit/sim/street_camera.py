@@ -56,13 +56,18 @@ _SUN = np.array([0.45, -0.35, 0.82]) / np.linalg.norm([0.45, -0.35, 0.82])
 _R_BODY_CAM = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 
 
+#: the longest drive a camera sequence may reach (m): its street is built before the first image
+MAX_CAMERA_DRIVE_M = 50_000.0
+
+
 class CameraSimConfig(BaseModel):
     """Everything that defines a simulated camera sequence; equal configs give identical images and poses."""
 
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
     scene: Literal["street"] = "street"
-    n_frames: int = Field(500, ge=2, description="number of images")
+    n_frames: int = Field(500, ge=2, le=100_000, description="number of images (100000 at most: the drive is built "
+                          "before the first image, ~1 min at that length)")
     seed: int = Field(0, ge=0, description="seeds the scene, its textures, the drive and the nuisances")
     # camera
     width: int = Field(KITTI_SIZE_WH[0], ge=16, le=8192)
@@ -88,7 +93,8 @@ class CameraSimConfig(BaseModel):
     terrain_wavelength_m: float = Field(250.0, ge=50.0)
     sway_deg: float = Field(0.2, ge=0.0, le=5.0, description="pitch and roll oscillation of the body")
     trees: bool = Field(False, description="trees (trunk + irregular crown) on the sidewalks")
-    texel_scale: float = Field(1.0, ge=0.25, le=8.0, description="texel sizes times this (coarser: less memory)")
+    texel_scale: float = Field(1.0, ge=0.5, le=8.0, description="texel sizes times this (coarser: less memory; below 0.5 "
+                               "a frame's textures overflowed the atlas, minutes into an export)")
     threads: int = Field(0, ge=0, description="ray casting threads (0: Open3D decides)")
     # nuisances
     noise_std: float = Field(0.0, ge=0.0, le=100.0, description="Gaussian sensor noise, grey levels")
@@ -108,6 +114,14 @@ class CameraSimConfig(BaseModel):
             raise ValueError("corner_spacing_m must be (min, max) with 20 <= min <= max")
         if self.speed_max_mps <= 0.0:
             raise ValueError("speed_max_mps must be > 0 (the camera must move)")
+        longest = self.speed_max_mps * (self.n_frames - 1) / self.frame_rate_hz
+        if longest > MAX_CAMERA_DRIVE_M:  # (100 frames at 0.05 Hz built a 13 km street first, a billion frames 112 GiB)
+            raise ValueError(f"the drive may reach {longest / 1000:.4g} km (speed_max_mps x n_frames / frame_rate_hz); at most "
+                             f"{MAX_CAMERA_DRIVE_M / 1000:g} km: fewer frames, a higher frame rate or a lower speed")
+        if self.occluder and self.occluder_start is not None and self.occluder_start >= self.n_frames:
+            raise ValueError(f"occluder_start {self.occluder_start} is beyond the {self.n_frames} frames: no frame is occluded")
+        if not self.corners and self.first_corner_m is not None:
+            raise ValueError("first_corner_m places the first corner, and corners=false draws none")
         return self
 
     @property
