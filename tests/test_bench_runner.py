@@ -376,3 +376,20 @@ def test_a_lost_dask_scheduler_stops_the_run_in_one_line_and_keeps_what_finished
     assert len(lines) == 1 and "lost the Dask scheduler" in lines[0] and "Traceback" not in err
     records = load_results(tmp_path / "out")
     assert records and all(r["status"] == "ok" for r in records) and len(records) < 30
+
+
+def test_bench_progress_lines_where_no_bar_can_be_drawn(tmp_path, capsys):
+    """stderr to a log or CI: nothing was printed until the run ended (71 of 108 jobs done, the log empty)."""
+    from lidarkit.cli import main
+
+    suite = tmp_path / "s.yaml"
+    suite.write_text(textwrap.dedent("""
+        seeds: 20
+        experiments:
+          - {name: e, task: selftest, dataset: {kind: synthetic}, methods: [{name: sleep, params: {seconds: 0.01}}]}
+    """))
+    with pytest.raises(SystemExit) as exc:
+        main(["bench", str(suite), "--out", str(tmp_path / "out"), "-e", "serial", "--no-report"])
+    assert exc.value.code in (0, None)
+    err = capsys.readouterr().err
+    assert "2/20 jobs (10 %)" in err and "20/20 jobs (100 %)" in err

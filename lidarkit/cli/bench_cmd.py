@@ -16,8 +16,40 @@ from lidarkit.errors import ConfigError
 EXECUTOR_HELP = "serial | process (local process pool sized to the machine) | dask (--address, or a local Dask cluster)"
 
 
-def progress_bar() -> Progress:
-    """Rich progress bar with ETA on stderr (results go to stdout)."""
+class _LineProgress:
+    """The progress bar's interface where no bar can be drawn (stderr to a log, CI): a line at every tenth of the jobs
+    and at least every 30 s (nothing was printed until the end), failures one line each."""
+
+    def __init__(self, console):
+        self.console = console
+        self._lines = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+    def add_task(self, description: str, total=None, **fields) -> int:
+        self._description = description
+        return 0
+
+    def update(self, task: int, total: int | None = None, advance: int = 0, **fields) -> None:
+        from lidarkit.progress import ProgressLines
+
+        if total is not None:
+            self._lines = ProgressLines(total, self._description, "jobs")
+        if advance and self._lines is not None:
+            self._lines.advance(task, advance)
+
+    def stop(self) -> None:
+        pass
+
+
+def progress_bar():
+    """Rich progress bar with ETA on stderr (results go to stdout); progress lines where stderr is no terminal."""
+    if not stderr().is_terminal:
+        return _LineProgress(stderr())
     return Progress(
         TextColumn("{task.description}", style="bold", markup=False),
         BarColumn(),
