@@ -388,3 +388,27 @@ def test_plots_say_which_methods_they_leave_out_and_sweeps_keep_experiments_apar
     assert "8 of 10 shown; left out: random_walk(steps=18), random_walk(steps=19)." in traj.caption
     sweep = next(p for p in report.plots if p.filename.startswith("sweep_"))
     assert "one line per experiment, dataset and method" in sweep.caption and "left out" not in sweep.caption
+
+
+def test_one_seed_has_no_spread_and_an_unreported_count_is_not_zero(tmp_path):
+    """report.csv gave one seed a std of 0 and a CI [v, v]; kiss's iterations (which kiss-icp does not report) read
+    as a measured 0 +- 0."""
+    import csv
+    import io
+
+    suite = tmp_path / "suite.yaml"
+    suite.write_text(textwrap.dedent("""
+        seeds: 1
+        experiments:
+          - name: p
+            task: icp_pair
+            dataset: {kind: sim_lidar, scene: street, n_frames: 3, n_beams: 8, n_azimuths: 360}
+            options: {max_pairs: 1}
+            methods: [kiss, vanilla]
+    """))
+    run_suite(load_suite(suite), tmp_path / "out", executor="serial")
+    build_report(tmp_path / "out")
+    rows = {(r["method"], r["metric"]): r for r in csv.DictReader(io.StringIO((tmp_path / "out" / "report.csv").read_text()))}
+    assert rows[("kiss", "iterations")]["mean"] == "" and rows[("kiss", "iterations")]["median"] == ""
+    vanilla = rows[("vanilla", "iterations")]
+    assert float(vanilla["mean"]) > 0 and vanilla["std"] == "" and vanilla["ci95_low"] == "" and vanilla["n"] == "1"

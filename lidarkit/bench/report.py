@@ -438,6 +438,11 @@ def out_dir_name(report: Report) -> str:
     return report.out_dir.name
 
 
+def _csv_number(x: Any) -> str:
+    """A CSV cell: the number, empty where there is none (NaN: a metric the method does not report)."""
+    return "" if x is None or (isinstance(x, float) and not math.isfinite(x)) else repr(x)
+
+
 def _csv(report: Report) -> str:
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
@@ -448,9 +453,10 @@ def _csv(report: Report) -> str:
             for m in table.metrics:
                 mean, std, n = r.stats[m.name]
                 s = r.summaries.get(m.name)
-                extra = [repr(s.median), repr(s.ci_low), repr(s.ci_high)] if s is not None else ["", "", ""]
-                writer.writerow([r.task, r.experiment, r.dataset, r.method, m.name, repr(mean), repr(std), n, r.n_ok,
-                                 r.n_failed, *extra])
+                # one value has no spread: empty cells, not a std of 0 and a CI [v, v] of zero width
+                extra = [_csv_number(s.median), repr(s.ci_low) if s.n > 1 else "", repr(s.ci_high) if s.n > 1 else ""] if s is not None else ["", "", ""]
+                writer.writerow([r.task, r.experiment, r.dataset, r.method, m.name, _csv_number(mean), repr(std) if n > 1 else "",
+                                 n, r.n_ok, r.n_failed, *extra])
     return buf.getvalue()
 
 

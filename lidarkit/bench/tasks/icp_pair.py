@@ -137,7 +137,9 @@ class IcpPairTask(Task):
             rows.append({
                 "target": int(target), "source": int(source),
                 "translation_error_m": float(trans_m), "rotation_error_deg": float(rot_deg),
-                "iterations": int(result.iterations), "converged": bool(result.converged),
+                # (kiss, genz, Open3D's legacy loop report no count: not a measured 0)
+                "iterations": int(result.iterations) if result.extra.get("iterations_reported", True) else None,
+                "converged": bool(result.converged),
                 "final_rmse_m": float(result.rmse), "runtime_s": float(result.runtime_s),
                 "n_correspondences": int(result.n_correspondences),
                 "degenerate": bool(getattr(result.degeneracy, "degenerate", False)), "reason": result.reason,
@@ -149,7 +151,7 @@ class IcpPairTask(Task):
         metrics = {
             "translation_error_m": float(np.mean([r["translation_error_m"] for r in rows])),
             "rotation_error_deg": float(np.mean([r["rotation_error_deg"] for r in rows])),
-            "iterations": float(np.mean([r["iterations"] for r in rows])),
+            "iterations": float(np.mean([r["iterations"] for r in rows])) if all(r["iterations"] is not None for r in rows) else float("nan"),
             "converged_fraction": float(np.mean([r["converged"] for r in rows])),
             "final_rmse_m": float(np.mean([r["final_rmse_m"] for r in rows])),
             "align_time_s": align_s,
