@@ -139,3 +139,12 @@ def test_bev_of_a_georeferenced_pair_is_drawn_around_the_clouds(tmp_path):
     axes_only = _drawn_pixels(tmp_path / "axes.png")
     near, far_drawn = _drawn_pixels(tmp_path / "near.png"), _drawn_pixels(tmp_path / "far.png")
     assert near > 3 * axes_only and far_drawn > 0.8 * near  # the far pair is drawn as the near one (was: empty panels)
+
+
+def test_a_folder_given_as_a_cloud_and_a_missing_results_folder_say_so(tmp_path, capsys):
+    code, _, err = run_cli(capsys, str(tmp_path), str(TARGET))
+    assert code == 1 and "a folder, not a point file" in err  # was "unsupported point file type ''"
+    from conftest import cli_exit_code
+
+    assert cli_exit_code(["report", str(tmp_path / "nope")]) == 1
+    assert "nope: folder not found" in capsys.readouterr().err  # was "not a bench results folder (no jobs/ inside)"

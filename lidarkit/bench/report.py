@@ -687,7 +687,7 @@ def build_report(
     """
     out_dir = Path(out_dir)
     if not (out_dir / "jobs").is_dir():
-        raise DataError("not a bench results folder (no jobs/ inside)", source=out_dir)
+        raise DataError("not a bench results folder (no jobs/ inside)" if Path(out_dir).exists() else "folder not found", source=out_dir)
     records = load_results(out_dir)
     manifest = _suite_manifest(out_dir)
     suite_jobs = {} if every_result else _suite_jobs(manifest)

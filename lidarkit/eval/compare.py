@@ -87,7 +87,7 @@ def load_bench_runs(path: str | os.PathLike, method: str | None = None, every_re
 
     path = Path(path)
     if not (path / "jobs").is_dir():
-        raise DataError("not a bench results folder (no jobs/ inside)", source=path)
+        raise DataError("not a bench results folder (no jobs/ inside)" if Path(path).exists() else "folder not found", source=path)
     records = [r for r in latest_per_job(load_results(path)) if r.get("status") == "ok"]
     suite = set() if every_result else suite_job_keys(path)
     n_all = len(records)

@@ -283,6 +283,8 @@ def read_point_file(
     path = Path(path)
     suffix = path.suffix.lower()
     readers = {".bin": read_kitti_bin, ".npy": read_npy_scan, ".pcd": read_open3d_scan, ".ply": read_open3d_scan}
+    if path.is_dir():  # (it read as "unsupported point file type ''")
+        raise DataError(f"a folder, not a point file ({', '.join(POINT_FILE_SUFFIXES)})", source=path)
     if suffix not in readers:
         raise DataError(
             f"unsupported point file type {suffix!r}; supported: {', '.join(POINT_FILE_SUFFIXES)}",
