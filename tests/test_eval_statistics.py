@@ -252,31 +252,12 @@ def test_compare_in_a_suite_of_two_tasks_pairs_the_units_of_the_metric_s_task(tm
     in the other task's units. Those units are left out now, said in the note."""
     import textwrap
 
-    from lidarkit.bench import Metric, Task, TaskOutput, load_suite, register_task, run_suite
+    from lidarkit.bench import load_suite, run_suite
     from lidarkit.eval import compare
 
-    def task(name: str, metric: str):
-        class T(Task):
-            dataset_kinds = ("synthetic",)
-            metrics = (Metric(metric, metric),)
-
-            def validate_options(self, options):
-                pass
-
-            def validate_dataset(self, dataset, options):
-                pass
-
-            def validate(self, method, params, dataset, options):
-                pass
-
-            def run(self, job):
-                base = 0.1 if job.method == "good" else 0.5
-                return TaskOutput(metrics={metric: base + 0.01 * np.random.default_rng(job.seed).random()}, series={}, info={})
-
-        register_task(name)(T)
-
-    task("pairs_test_task", "pair_error_m")
-    task("runs_test_task", "run_error_m")
+    for name, metric in (("pairs_test_task", "pair_error_m"), ("runs_test_task", "run_error_m")):
+        _register_metric_task(name, metric, lambda job, m=metric: (0.1 if job.method == "good" else 0.5)
+                              + 0.01 * np.random.default_rng(job.seed).random())
     (tmp_path / "s.yaml").write_text(textwrap.dedent("""
         seeds: 8
         experiments:
@@ -360,26 +341,12 @@ def test_compare_counts_a_dataset_whose_seeds_change_nothing_once(tmp_path):
     (p = 0.002) from 2 measurements; now one unit per dataset."""
     import textwrap
 
-    from lidarkit.bench import Metric, Task, TaskOutput, load_suite, register_task, run_suite
+    from lidarkit.bench import load_suite, run_suite
     from lidarkit.eval import compare
 
-    @register_task("fixed_data_test_task")
-    class Fixed(Task):
-        dataset_kinds = ("synthetic",)
-        metrics = (Metric("error_m", "error [m]"),)
-
-        def validate_options(self, options):
-            pass
-
-        def validate_dataset(self, dataset, options):
-            pass
-
-        def validate(self, method, params, dataset, options):
-            pass
-
-        def run(self, job):  # deterministic: the seed changes nothing
-            return TaskOutput(metrics={"error_m": (0.1 if job.method == "good" else 0.5) + len(job.dataset_name) * 0.01},
-                              series={}, info={})
+    # deterministic: the seed changes nothing
+    _register_metric_task("fixed_data_test_task", "error_m",
+                          lambda job: (0.1 if job.method == "good" else 0.5) + len(job.dataset_name) * 0.01)
 
     (tmp_path / "s.yaml").write_text(textwrap.dedent("""
         seeds: 5
@@ -390,3 +357,26 @@ def test_compare_counts_a_dataset_whose_seeds_change_nothing_once(tmp_path):
     result = compare(tmp_path / "out", tmp_path / "out", method_a="good", method_b="bad", metric="error_m")
     assert result.pairing == "dataset" and result.n_pairs == 2 and not result.significant
     assert "with 2 differing datasets the smallest p this test can give is 0.5" in result.verdict()
+
+
+def _register_metric_task(name: str, metric: str, value) -> None:
+    """A bench task on synthetic data reporting ``metric = value(job)`` (for compare over real bench folders)."""
+    from lidarkit.bench import Metric, Task, TaskOutput, register_task
+
+    class MetricTask(Task):
+        dataset_kinds = ("synthetic",)
+        metrics = (Metric(metric, metric),)
+
+        def validate_options(self, options):
+            pass
+
+        def validate_dataset(self, dataset, options):
+            pass
+
+        def validate(self, method, params, dataset, options):
+            pass
+
+        def run(self, job):
+            return TaskOutput(metrics={metric: value(job)}, series={}, info={})
+
+    register_task(name)(MetricTask)
