@@ -256,7 +256,7 @@ def test_compare_in_a_suite_of_two_tasks_pairs_the_units_of_the_metric_s_task(tm
     from lidarkit.eval import compare
 
     for name, metric in (("pairs_test_task", "pair_error_m"), ("runs_test_task", "run_error_m")):
-        _register_metric_task(name, metric, lambda job, m=metric: (0.1 if job.method == "good" else 0.5)
+        _register_metric_task(name, metric, lambda job: (0.1 if job.method == "good" else 0.5)
                               + 0.01 * np.random.default_rng(job.seed).random())
     (tmp_path / "s.yaml").write_text(textwrap.dedent("""
         seeds: 8
