@@ -161,3 +161,11 @@ def test_relations_settings_without_relations_and_a_tum_file_read_as_kitti_say_s
     assert "--relation-max-diff applies to --relations only" in capsys.readouterr().err
     assert cli_exit_code(["eval", tum, tum]) == 1
     assert "expected 12 numbers, found 8 (a TUM trajectory? read it as tum" in capsys.readouterr().err
+
+
+def test_associating_kitti_files_without_times_points_to_them(capsys):
+    from conftest import cli_exit_code
+
+    gt, orb = (str(shared_path("evo_testdata", f)) for f in ("KITTI_00_gt.txt", "KITTI_00_ORB.txt"))
+    assert cli_exit_code(["eval", gt, orb, "--associate"]) == 1
+    assert "has no timestamps (a KITTI pose file has none: give its times.txt, --ref-times / --est-times" in capsys.readouterr().err

@@ -43,7 +43,8 @@ def paired(
         return ref, est
     if ref.timestamps_s is None or est.timestamps_s is None:
         missing = "reference" if ref.timestamps_s is None else "estimate"
-        raise EvaluationError(f"cannot associate by time: the {missing} has no timestamps", source=source)
+        raise EvaluationError(f"cannot associate by time: the {missing} has no timestamps (a KITTI pose file has none: "
+                              "give its times.txt, --ref-times / --est-times, or a TUM file)", source=source)
     if not max_diff_s > 0:
         raise EvaluationError(f"max_diff_s must be > 0, got {max_diff_s}", source=source)
     from evo import EvoException

@@ -106,7 +106,9 @@ def plot_evaluation(evaluation: Evaluation, path: str | os.PathLike, *, plane: s
     axes = fig.subplots(2, 2)
     from lidarkit.eval.ape_rpe import alignment_label
 
-    est_label = f"{evaluation.est_name or 'estimate'} ({alignment_label(ape_res.align)})"
+    transform = ape_res.alignment
+    scaled = transform is not None and ape_res.align in ("sim3", "scale")
+    est_label = f"{evaluation.est_name or 'estimate'} ({alignment_label(ape_res.align)}" + (f", scale {transform.scale:.4g})" if scaled else ")")
     _draw_trajectories(axes[0, 0], ape_res.ref, ape_res.est_aligned, plane, est_label)
     axes[0, 0].set_title(f"{evaluation.est_name} vs {evaluation.ref_name}", fontsize=9)
     _draw_errors(axes[0, 1], ape_res)
@@ -129,7 +131,7 @@ def plot_evaluation(evaluation: Evaluation, path: str | os.PathLike, *, plane: s
         ax2.set_ylabel("rotational error (deg/100 m)")
         ax.set_title(
             f"KITTI drift: {drift.translation_pct:.3f} %, {drift.rotation_deg_per_100m:.3f} deg/100 m "
-            f"({drift.n_segments} segments)",
+            f"({drift.n_segments} segments" + (", estimate unscaled)" if scaled else ")"),
             fontsize=9,
         )
         handles = ax.get_legend_handles_labels()[0] + ax2.get_legend_handles_labels()[0]
