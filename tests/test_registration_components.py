@@ -324,3 +324,29 @@ def test_deskew_with_one_rotation_axis_equals_the_per_point_exponential():
     np.testing.assert_allclose(moved[-1], points[-1], atol=1e-12)
     np.testing.assert_allclose(moved[0], np.linalg.inv(delta)[:3, :3] @ points[0] + np.linalg.inv(delta)[:3, 3], atol=1e-10)
     assert deskew_constant_velocity(points, None, delta) is points
+
+
+def test_a_component_failing_inside_register_frame_is_a_registration_error():
+    """A kernel plugin returning NaN weights made scipy raise a bare ValueError out of register_frame (the odometry
+    runner named the frame, a direct call gave the ValueError)."""
+    from lidarkit.errors import RegistrationError
+    from lidarkit.registration.components import Kernel, register_component
+    from lidarkit.registration.components.kernels import KernelConfig
+
+    class NaNKernel(Kernel):
+        """Weights that are not numbers."""
+        Config = KernelConfig
+
+        def _weights(self, r2, c):
+            return np.full_like(r2, np.nan)
+
+    register_component("kernel", "nan_test")(NaNKernel)
+    try:
+        icp = get_icp("pipeline", kernel="nan_test")
+        rng = np.random.default_rng(0)
+        cloud = rng.uniform(-20, 20, size=(3000, 3))
+        icp.register_frame(cloud)
+        with pytest.raises(RegistrationError, match="pipeline"):
+            icp.register_frame(cloud + [0.3, 0.0, 0.0])
+    finally:
+        component_registry._COMPONENTS["kernel"].pop("nan_test", None)

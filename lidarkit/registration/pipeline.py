@@ -32,7 +32,7 @@ from scipy.spatial import cKDTree
 from lidarkit.errors import DataError, RegistrationError
 from lidarkit.geometry import as_points, orthonormalize_se3, se3_inverse, transform_points
 from lidarkit.registration.assessment import assess_alignment
-from lidarkit.registration.base import Degeneracy, Registration, RegistrationConfig, RegistrationResult
+from lidarkit.registration.base import Degeneracy, Registration, RegistrationConfig, RegistrationResult, use_backend
 from lidarkit.registration.components import make_component
 from lidarkit.registration.planar import refuse_2d
 from lidarkit.registration.components.maps import first_per_voxel, pca_geometry
@@ -167,7 +167,12 @@ class PipelineRegistration(Registration):
         self.last_frame: dict[str, Any] = {}
 
     def register_frame(self, points_xyz: np.ndarray, point_times_s: np.ndarray | None = None) -> np.ndarray:
-        """Register one sweep into the map; returns ``T_world_lidar`` at the deskew reference instant."""
+        """Register one sweep into the map; returns ``T_world_lidar`` at the deskew reference instant. A component's
+        failure (a plugin kernel's NaN weights in scipy) is a RegistrationError naming the variant, as in ``align``."""
+        with use_backend(self.name, f"{self.name} (frame of {len(points_xyz)} points)"):
+            return self._register_frame(points_xyz, point_times_s)
+
+    def _register_frame(self, points_xyz: np.ndarray, point_times_s: np.ndarray | None = None) -> np.ndarray:
         c = self._components
         frame = as_points(points_xyz, "frame", min_points=1)
         if point_times_s is not None:
