@@ -207,30 +207,18 @@ def test_a_metric_a_task_declares_better_higher_is_compared_that_way(tmp_path):
     Metric(better="higher") was compared as lower-is-better, and the verdict inverted."""
     import textwrap
 
-    from lidarkit.bench import Metric, Task, TaskOutput, load_suite, register_task, run_suite
+    from lidarkit.bench import Metric, load_suite, run_suite
     from lidarkit.bench.tasks import higher_is_better
     from lidarkit.eval import compare
     from lidarkit.testing import assert_no_worse_than
 
-    @register_task("success_test_task")
-    class SuccessTask(Task):
-        dataset_kinds = ("synthetic",)
-        metrics = (Metric("success_rate", "success rate", better="higher"), Metric("error_m", "error [m]"))
+    def success(job):
+        bump = 0.01 * np.random.default_rng(job.seed).random()
+        good = job.method == "good"
+        return {"success_rate": (0.9 if good else 0.5) + bump, "error_m": (0.1 if good else 0.5) + bump}
 
-        def validate_options(self, options):
-            pass
-
-        def validate_dataset(self, dataset, options):
-            pass
-
-        def validate(self, method, params, dataset, options):
-            pass
-
-        def run(self, job):
-            bump = 0.01 * np.random.default_rng(job.seed).random()
-            good = job.method == "good"
-            return TaskOutput(metrics={"success_rate": (0.9 if good else 0.5) + bump, "error_m": (0.1 if good else 0.5) + bump},
-                              series={}, info={})
+    _register_metric_task("success_test_task", (Metric("success_rate", "success rate", better="higher"), Metric("error_m", "error [m]")),
+                          success)
 
     assert higher_is_better("success_rate") and not higher_is_better("error_m") and higher_is_better("hz")
     (tmp_path / "s.yaml").write_text(textwrap.dedent("""
@@ -359,13 +347,16 @@ def test_compare_counts_a_dataset_whose_seeds_change_nothing_once(tmp_path):
     assert "with 2 differing datasets the smallest p this test can give is 0.5" in result.verdict()
 
 
-def _register_metric_task(name: str, metric: str, value) -> None:
-    """A bench task on synthetic data reporting ``metric = value(job)`` (for compare over real bench folders)."""
+def _register_metric_task(name: str, metric, value) -> None:
+    """A bench task on synthetic data (for compare over real bench folders): ``metric`` a name, reported as
+    ``value(job)``, or a tuple of ``Metric`` reported as the dict ``value(job)`` returns."""
     from lidarkit.bench import Metric, Task, TaskOutput, register_task
+
+    one = isinstance(metric, str)
 
     class MetricTask(Task):
         dataset_kinds = ("synthetic",)
-        metrics = (Metric(metric, metric),)
+        metrics = (Metric(metric, metric),) if one else tuple(metric)
 
         def validate_options(self, options):
             pass
@@ -377,6 +368,6 @@ def _register_metric_task(name: str, metric: str, value) -> None:
             pass
 
         def run(self, job):
-            return TaskOutput(metrics={metric: value(job)}, series={}, info={})
+            return TaskOutput(metrics={metric: value(job)} if one else value(job), series={}, info={})
 
     register_task(name)(MetricTask)
