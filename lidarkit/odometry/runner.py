@@ -25,7 +25,7 @@ from lidarkit.odometry.prefetch import DEFAULT_DEPTH, prefetched
 from lidarkit.odometry.result import FrameStats, OdometryResult
 from lidarkit.odometry.run_folder import write_run
 from lidarkit.odometry.settings import deskew_requested, effective_settings, require_point_times
-from lidarkit.registration.base import PendingAlignment
+from lidarkit.registration.base import BACKEND_ERRORS, PendingAlignment
 from lidarkit.registration.covariance import widen_for_distortion
 from lidarkit.threads import Overlap
 from lidarkit.trajectory import Trajectory
@@ -63,7 +63,7 @@ def config_dict(config: Any) -> dict[str, Any]:
 #: propagate unchanged.
 #: what a variant raises on a frame it cannot register (its backend's refusals, a plugin's NaN in scipy) and is
 #: reported as that frame's error; the same kinds a pairwise alignment reports (``use_backend``)
-_FRAME_ERRORS = (LidarKitError, RuntimeError, ValueError, ArithmeticError, MemoryError, IndexError, TypeError)
+_FRAME_ERRORS = (LidarKitError, ArithmeticError, *BACKEND_ERRORS)
 
 
 def _read_nonempty_scan(sequence: ScanSequence, index: int) -> Scan:

@@ -381,6 +381,10 @@ def accept(result: RegistrationResult, config: RegistrationConfig) -> Registrati
     return dataclasses.replace(result, converged=False, reason="; ".join([result.reason, *problems] if result.reason else problems))
 
 
+#: what a backend (Open3D, kiss-icp, small_gicp, scipy under a plugin) raises when it refuses its input
+BACKEND_ERRORS = (RuntimeError, ValueError, MemoryError, IndexError, TypeError)
+
+
 @contextlib.contextmanager
 def use_backend(name: str, source: str) -> Iterator[None]:
     """A backend's own refusal (RuntimeError, ValueError, ... from Open3D, kiss-icp, small_gicp) becomes a
@@ -389,7 +393,7 @@ def use_backend(name: str, source: str) -> Iterator[None]:
         yield
     except LidarKitError:
         raise
-    except (RuntimeError, ValueError, MemoryError, IndexError, TypeError) as err:
+    except BACKEND_ERRORS as err:
         raise RegistrationError(f"the {name} backend failed on this pair: {type(err).__name__}: {err}", source=source) from err
 
 
