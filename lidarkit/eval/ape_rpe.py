@@ -69,6 +69,11 @@ class AlignmentTransform:
     0.29 deg as estimated); 0 for alignments without a rotation."""
 
     @property
+    def rescaled(self) -> bool:
+        """Whether the estimate was rescaled (``sim3`` or ``scale``): its scale belongs beside any figure of it."""
+        return self.method in ("sim3", "scale")
+
+    @property
     def sim3(self) -> np.ndarray:
         """``(4, 4)`` matrix with ``scale * rotation`` in the upper-left block."""
         T = np.eye(4)

@@ -107,7 +107,7 @@ def plot_evaluation(evaluation: Evaluation, path: str | os.PathLike, *, plane: s
     from lidarkit.eval.ape_rpe import alignment_label
 
     transform = ape_res.alignment
-    scaled = transform is not None and ape_res.align in ("sim3", "scale")
+    scaled = transform is not None and transform.rescaled
     est_label = f"{evaluation.est_name or 'estimate'} ({alignment_label(ape_res.align)}" + (f", scale {transform.scale:.4g})" if scaled else ")")
     _draw_trajectories(axes[0, 0], ape_res.ref, ape_res.est_aligned, plane, est_label)
     axes[0, 0].set_title(f"{evaluation.est_name} vs {evaluation.ref_name}", fontsize=9)

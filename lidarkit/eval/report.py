@@ -49,7 +49,7 @@ def _settings_line(evaluation: Evaluation) -> str:
     s = evaluation.settings
     pairs = "all pairs" if s.all_pairs else ("legacy pairs" if s.legacy_pairs else "consecutive pairs")
     transform = evaluation.ape.alignment
-    align = f"align={s.align}" + (f" (scale {transform.scale:.4g})" if transform is not None and s.align in ("sim3", "scale") else "")
+    align = f"align={s.align}" + (f" (scale {transform.scale:.4g})" if transform is not None and transform.rescaled else "")
     return f"{align}, RPE delta={s.delta:g} {s.delta_unit} ({pairs})" + (", associated" if s.associate else "")
 
 
@@ -58,7 +58,7 @@ def evaluation_notes(evaluation: Evaluation) -> list[str]:
     hardly fix, and KITTI drift beside a scale-corrected APE (the devkit metric takes the estimate as given)."""
     notes = [evaluation.ape_rotation.warning] if evaluation.ape_rotation.warning else []
     transform = evaluation.ape.alignment
-    if evaluation.drift is not None and transform is not None and evaluation.settings.align in ("sim3", "scale"):
+    if evaluation.drift is not None and transform is not None and transform.rescaled:
         notes.append(f"KITTI drift is the devkit's, on the estimate as given (unscaled); APE and RPE above are on the "
                      f"estimate scaled by {transform.scale:.4g}")
     return notes
