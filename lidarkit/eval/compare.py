@@ -272,7 +272,7 @@ def _one_unit_per_dataset(keys: list[str], va: np.ndarray, vb: np.ndarray) -> tu
     """``(one value per dataset on each side)`` when several datasets each give both sides one value whatever the seed
     (a simulated dataset the task does not seed: 5 seeds of 2 datasets were tested as 10 independent units, p = 0.002,
     from 2 measurements); None otherwise (one dataset repeated is :func:`paired_test`'s "one measurement")."""
-    from lidarkit.eval.statistics import RELATIVE_TIE_TOLERANCE
+    from lidarkit.eval.statistics import tie_tolerance
 
     groups: dict[str, list[int]] = {}
     for i, key in enumerate(keys):
@@ -281,8 +281,7 @@ def _one_unit_per_dataset(keys: list[str], va: np.ndarray, vb: np.ndarray) -> tu
         groups.setdefault(json.dumps(unit, sort_keys=True), []).append(i)
     if len(groups) < 2 or all(len(g) == 1 for g in groups.values()):
         return None
-    scale = max(float(np.max(np.abs(np.concatenate([va, vb])))), 1e-300)
-    tol = RELATIVE_TIE_TOLERANCE * scale
+    tol = tie_tolerance(va, vb)
     if not all(np.ptp(va[g]) <= tol and np.ptp(vb[g]) <= tol for g in groups.values()):
         return None
     first = [g[0] for g in groups.values()]

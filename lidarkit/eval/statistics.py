@@ -187,6 +187,12 @@ class PairedComparison:
         return out
 
 
+def tie_tolerance(a: np.ndarray, b: np.ndarray) -> float:
+    """Differences up to this are ties: ``RELATIVE_TIE_TOLERANCE`` of the largest value of either side (two runs of
+    one deterministic method differ by round-off only)."""
+    return RELATIVE_TIE_TOLERANCE * max(float(np.max(np.abs(np.concatenate([a, b])))), 1e-300)
+
+
 def paired_test(
     a: Any,
     b: Any,
@@ -221,8 +227,8 @@ def paired_test(
     if noise < 0 or not math.isfinite(noise):
         raise ConfigError(f"noise must be a finite value >= 0, got {noise}", source="noise")
     diff = va - vb
-    scale = max(float(np.max(np.abs(np.concatenate([va, vb])))), 1e-300)
-    tie = np.abs(diff) <= RELATIVE_TIE_TOLERANCE * scale
+    tol = tie_tolerance(va, vb)
+    tie = np.abs(diff) <= tol
     diff = np.where(tie, 0.0, diff)
     nz = diff[~tie]
     if nz.size == 0:
@@ -237,7 +243,7 @@ def paired_test(
     better = ""
     # seeds that change nothing on either side are one measurement repeated: any constant difference would rank as
     # "significant" (6 copies of one value gave p = 0.031)
-    repeated = pairing == "seed" and bool(np.ptp(va) <= RELATIVE_TIE_TOLERANCE * scale and np.ptp(vb) <= RELATIVE_TIE_TOLERANCE * scale)
+    repeated = pairing == "seed" and bool(np.ptp(va) <= tol and np.ptp(vb) <= tol)
     # the direction is the ranks' (what the test tested); the median must agree with it, exceed the noise, and its
     # bootstrap CI must not reach across 0 (a verdict beside a CI of [-0.0006, +0.0044] read as a contradiction)
     ci_clear = not lo < 0 < hi
