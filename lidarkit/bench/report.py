@@ -25,7 +25,7 @@ import numpy as np
 
 from lidarkit import atomic
 from lidarkit.bench.jobs import Job, canonical_json
-from lidarkit.bench.results import dataset_labels, load_results, result_path
+from lidarkit.bench.results import dataset_labels, load_results, result_path, results_folder
 from lidarkit.errors import DataError
 from lidarkit.eval.report import markdown_table
 from lidarkit.eval.statistics import summarize
@@ -685,9 +685,7 @@ def build_report(
     folder's ``suite.json`` (the last suite run there: results an earlier suite left in the folder are counted as
     left out, and the suite's jobs without a result as not run); ``every_result``: every result in the folder.
     """
-    out_dir = Path(out_dir)
-    if not (out_dir / "jobs").is_dir():
-        raise DataError("not a bench results folder (no jobs/ inside)" if Path(out_dir).exists() else "folder not found", source=out_dir)
+    out_dir = results_folder(out_dir)
     records = load_results(out_dir)
     manifest = _suite_manifest(out_dir)
     suite_jobs = {} if every_result else _suite_jobs(manifest)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 from pathlib import Path
 from typing import Any
 
@@ -14,6 +15,16 @@ log = logging.getLogger(__name__)
 
 SCHEMA_VERSION = 1
 JOBS_DIR = "jobs"
+
+
+def results_folder(path: str | os.PathLike) -> Path:
+    """``path`` as a bench results folder (one with ``jobs/``); DataError saying it is missing or is another folder."""
+    from lidarkit.errors import DataError
+
+    path = Path(path)
+    if not (path / JOBS_DIR).is_dir():
+        raise DataError("not a bench results folder (no jobs/ inside)" if path.exists() else "folder not found", source=path)
+    return path
 
 
 def result_path(out_dir: Path, key: str) -> Path:

@@ -83,11 +83,9 @@ def load_bench_runs(path: str | os.PathLike, method: str | None = None, every_re
     earlier suite left in a reused folder are counted in ``n_left_out``); ``every_result``: all of them."""
     from lidarkit.bench.jobs import Job, canonical_json
     from lidarkit.bench.report import latest_per_job, suite_job_keys
-    from lidarkit.bench.results import load_results
+    from lidarkit.bench.results import load_results, results_folder
 
-    path = Path(path)
-    if not (path / "jobs").is_dir():
-        raise DataError("not a bench results folder (no jobs/ inside)" if Path(path).exists() else "folder not found", source=path)
+    path = results_folder(path)
     records = [r for r in latest_per_job(load_results(path)) if r.get("status") == "ok"]
     suite = set() if every_result else suite_job_keys(path)
     n_all = len(records)
