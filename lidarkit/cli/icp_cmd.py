@@ -51,8 +51,7 @@ def _list_methods() -> None:
             cell.append(("\n" if cell else "") + f"{key}: {type_name} = {default!r} — {desc}")
         table.add_row(name + (" (stateful)" if cls.stateful else ""), cell)
     stdout().print(table)
-    for name, reason in broken_plugins().items():
-        stdout().print(f"plugin {name!r} left out: {reason}", style="yellow", markup=False, highlight=False)
+    _print_left_out(broken_plugins())
     _list_ground_segmenters()
 
 
@@ -84,7 +83,12 @@ def _list_components() -> None:
     stdout().print(table)
     from lidarkit.registration.components.registry import broken_component_plugins
 
-    for name, reason in broken_component_plugins().items():
+    _print_left_out(broken_component_plugins())
+
+
+def _print_left_out(broken: dict[str, str]) -> None:
+    """One line per installed plugin that failed to load, with the reason (the listing above leaves it out)."""
+    for name, reason in broken.items():
         stdout().print(f"plugin {name!r} left out: {reason}", style="yellow", markup=False, highlight=False)
 
 
