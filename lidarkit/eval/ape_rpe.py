@@ -432,8 +432,9 @@ def rpe(
             pairs = np.array(found, dtype=np.int64).reshape(-1, 2)
         else:
             pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
-        quadratic = all_pairs and unit is not Unit.frames and relation not in ("point_distance", "point_distance_error_ratio")
-        if quadratic and len(pairs):
+        laid_out = (all_pairs and unit is not Unit.frames and len(pairs) > 0
+                    and relation not in ("point_distance", "point_distance_error_ratio"))
+        if laid_out:
             # evo would search the pairs again (quadratic): it compares consecutive poses of copies laid out as
             # i0, j0, i1, j1, ... instead, and every second error is one of the pairs
             layout = pairs.reshape(-1)
@@ -457,7 +458,7 @@ def rpe(
             metric = metrics.RPE(pose_relation, 1, Unit.frames, rel_delta_tol, False, pairs_from_reference)
         else:
             metric = metrics.RPE(pose_relation, evo_delta, unit, rel_delta_tol, all_pairs, pairs_from_reference)
-        if not (quadratic and len(pairs)):
+        if not laid_out:  # (the laid-out copies were compared above)
             metric.process_data((ref_evo, est_evo))
     except EvoException as err:
         raise EvaluationError(f"RPE failed: {err}", source=source) from err
