@@ -28,6 +28,7 @@ import logging
 import os
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 from typing import Literal
 
@@ -140,12 +141,19 @@ class PlanarPath:
     xy_m: np.ndarray
     heading_rad: np.ndarray
 
+    @cached_property
+    def _columns(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``s``, ``x``, ``y`` and heading as contiguous arrays: ``np.interp`` copies a strided column on every call,
+        which made placing the thousands of objects of a long drive quadratic in its length."""
+        return tuple(np.ascontiguousarray(a, dtype=np.float64) for a in (self.s_m, self.xy_m[:, 0], self.xy_m[:, 1], self.heading_rad))
+
     def at(self, s_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Position ``(M, 2)`` and heading ``(M,)`` at arc lengths ``s_m`` (linear interpolation)."""
         s = np.asarray(s_m, dtype=np.float64)
-        x = np.interp(s, self.s_m, self.xy_m[:, 0])
-        y = np.interp(s, self.s_m, self.xy_m[:, 1])
-        return np.stack([x, y], axis=-1), np.interp(s, self.s_m, self.heading_rad)
+        s_path, x_path, y_path, heading_path = self._columns
+        x = np.interp(s, s_path, x_path)
+        y = np.interp(s, s_path, y_path)
+        return np.stack([x, y], axis=-1), np.interp(s, s_path, heading_path)
 
 
 def make_path(rng: np.random.Generator, s_begin_m: float, s_end_m: float, max_curvature_per_m: float, step_m: float = 0.1) -> PlanarPath:
