@@ -178,6 +178,21 @@ def test_is_a_scan_sequence_and_checks_input():
         seq.ground_truth_at("middle")
     with pytest.raises(ConfigError, match="elevation_min_deg"):
         make_config(elevation_min_deg=5.0, elevation_max_deg=2.0)
+    with pytest.raises(ConfigError, match=r"open_object_lateral_m min 2 m would put the open scene's boxes .* at least 5 m"):
+        make_config(scene="open", open_object_lateral_m=(2.0, 10.0))
+
+
+def test_open_objects_at_the_nearest_allowed_band_leave_the_path_free():
+    """At the clearance bound, the open scene's objects stay more than 0.75 m from the sensor's path (it never drives
+    through a box; at 2 m it passes within 4 mm of one, which the config check refuses)."""
+    from lidarkit.sim.lidar import LABELS, OPEN_OBJECT_CLEARANCE_M
+
+    seq = SimulatedLidarSequence(make_config(scene="open", n_frames=600, open_object_lateral_m=(OPEN_OBJECT_CLEARANCE_M, OPEN_OBJECT_CLEARANCE_M + 0.1)))
+    objects = seq.triangles[seq.triangle_labels != LABELS["ground"]]
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(seq.vertices_xyz.astype(np.float32), objects.astype(np.uint32))
+    path = np.c_[seq.path.xy_m, np.zeros(len(seq.path.xy_m))].astype(np.float32)  # the sensor's height (z = 0)
+    assert len(objects) > 100 and scene.compute_distance(path).numpy().min() > 0.75
 
 
 def test_spec_string():

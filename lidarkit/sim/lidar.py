@@ -52,6 +52,9 @@ PoseInstant = Literal["start", "mid", "end"]
 _INSTANT_FRACTION = {"start": 0.0, "mid": 0.5, "end": 1.0}
 
 
+#: Nearest the open scene's objects may stand to the path (m): its largest box (6 x 6 m, turned any way) reaches 4.25 m
+#: from its centre, plus 0.75 m for the vehicle carrying the sensor.
+OPEN_OBJECT_CLEARANCE_M = 5.0
 #: Longest drive the simulator builds a scene along (m): ~5 MB of scene mesh per km.
 MAX_DRIVE_M = 200_000.0
 #: Most sweeps of one sequence: its ground truth and stamps take ~0.7 KB a sweep (0.7 GB for a million).
@@ -90,7 +93,7 @@ class LidarSimConfig(BaseModel):
     )
     terrain_wavelength_m: float = Field(60.0, ge=10.0, description="undulating ground: typical wavelength of the hills")
     open_object_lateral_m: tuple[float, float] | None = Field(
-        None, description="open scene: objects this far left/right of the path (min, max) in m; None: 8..40 m"
+        None, description=f"open scene: objects this far left/right of the path (min, max) in m, min >= {OPEN_OBJECT_CLEARANCE_M:g}; None: 8..40 m"
     )
     motion_distortion: bool = True
     point_times: bool = Field(True, description="attach per-point times to each Scan")
@@ -105,6 +108,9 @@ class LidarSimConfig(BaseModel):
         lateral = self.open_object_lateral_m
         if lateral is not None and not 0.0 <= lateral[0] < lateral[1]:
             raise ValueError("open_object_lateral_m must be (min, max) with 0 <= min < max")
+        if lateral is not None and lateral[0] < OPEN_OBJECT_CLEARANCE_M:
+            raise ValueError(f"open_object_lateral_m min {lateral[0]:g} m would put the open scene's boxes (up to 6 x 6 m, "
+                             f"turned any way) across the path: at least {OPEN_OBJECT_CLEARANCE_M:g} m")
         if self.drive_length_m > MAX_DRIVE_M:
             raise ValueError(f"the drive is {self.drive_length_m / 1000:.4g} km long (speed_mps x n_frames / frame_rate_hz, plus "
                              f"the scene around its ends); at most {MAX_DRIVE_M / 1000:g} km (~1 GB of scene): fewer frames or a "
