@@ -32,6 +32,27 @@ def test_killed_bench_leaves_no_orphans_no_corrupt_results_and_resumes(tmp_path,
     assert bench_kill.trial_ok(trial)
 
 
+@pytest.mark.slow
+def test_an_interrupted_run_says_the_folders_report_is_from_before_it(tmp_path):
+    """A suite run into a folder that holds an earlier run's report.html and stopped half-way leaves that report in
+    place: the interrupt's line says it predates the run and how to rebuild it."""
+    import subprocess
+
+    first = tmp_path / "first.yaml"
+    first.write_text(textwrap.dedent(bench_kill.SUITE.format(n_jobs=2, job_s=0.01)))
+    out = tmp_path / "out"
+    command = [c for c in bench_kill.bench_cmd(first, out, "process") if c != "--no-report"]
+    subprocess.run(command, check=True, capture_output=True, timeout=300)
+    assert (out / "report.html").is_file()
+    (out / "suite.json").unlink()  # the trial waits for the second run to write its own before it counts the delay
+    second = tmp_path / "second.yaml"
+    second.write_text(textwrap.dedent(bench_kill.SUITE.format(n_jobs=8, job_s=0.3)).replace("name: kill", "name: second"))
+    trial = bench_kill.kill_trial(second, out, "process", signal.SIGTERM, delay_s=1.0, n_jobs=8)
+    assert not trial["finished_before_signal"], trial
+    assert trial["message"].startswith("interrupted by SIGTERM"), trial
+    assert f"{out}/report.html is from before this run (`lidarkit report {out}` rebuilds it" in trial["message"], trial
+
+
 def test_a_child_started_with_sigint_ignored_keeps_ignoring_it():
     """A Dask worker re-imports the CLI as its __main__: the CLI's start-up handler made it exit on the Ctrl-C its
     cluster's start was to ride out ("Nanny failed to start" and a traceback in the parent). An ignored SIGINT stays
@@ -54,6 +75,25 @@ def test_a_child_started_with_sigint_ignored_keeps_ignoring_it():
     assert done.stderr.strip() == "interrupted by SIGTERM while starting: nothing was written"
     normal = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=env_root)
     assert normal.returncode == 130 and normal.stdout == ""  # without the inherited ignore: the one-line exit as before
+
+
+def test_a_pool_worker_importing_the_cli_as_its_main_leaves_sigterm_to_its_parent():
+    """A process-pool worker imports the CLI again as its parent's main module before it starts; when the pool closed
+    while workers were still starting, each printed "interrupted by SIGTERM while starting: nothing was written"
+    under the parent's own line. Such a worker (multiprocessing's start-up code loaded) ends silently on SIGTERM."""
+    import subprocess
+
+    code = textwrap.dedent("""
+        import os, signal, sys
+        import multiprocessing.spawn  # as in a forkserver or spawn child preparing itself
+        sys.argv = ["/venv/bin/lidarkit", "bench", "suite.yaml"]  # the parent's argv, which the child takes over
+        import lidarkit.cli
+        os.kill(os.getpid(), signal.SIGTERM)
+        print("not reached")
+    """)
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
+                          cwd=Path(__file__).resolve().parents[1])
+    assert (done.returncode, done.stdout, done.stderr) == (-signal.SIGTERM, "", "")
 
 
 def test_an_interrupt_a_library_wraps_in_its_own_error_is_still_an_interrupt(monkeypatch, capsys):

@@ -8,7 +8,10 @@ import sys
 
 from lidarkit import lifetime
 
-if os.path.basename(sys.argv[0]) in ("lidarkit", "-m"):  # the console script or `python -m lidarkit.cli`
+# the console script or `python -m lidarkit.cli`; not a pool worker, which imports this module again as its parent's
+# main before it starts (its parent ends it with SIGTERM when the pool closes: each worker still starting then printed
+# "interrupted by SIGTERM while starting" under the parent's own line)
+if os.path.basename(sys.argv[0]) in ("lidarkit", "-m") and "multiprocessing.spawn" not in sys.modules:
     lifetime.install_startup_handlers()
 
 from lidarkit.lifetime import Interrupted, abandoned, handle_signals  # noqa: E402

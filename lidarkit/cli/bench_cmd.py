@@ -93,8 +93,9 @@ def run_with_progress(suite, out: Path, *, executor: str, workers: int | None, a
         except (KeyboardInterrupt, Interrupted) as stop:
             progress.stop()
             what = f"by {stop}" if isinstance(stop, Interrupted) else "by SIGINT"
-            err.print(f"interrupted {what}: finished results are kept in {out}/jobs; run the same command again to resume",
-                      soft_wrap=True)
+            stale = f"; {out}/report.html is from before this run (`lidarkit report {out}` rebuilds it from the finished jobs)"
+            err.print(f"interrupted {what}: finished results are kept in {out}/jobs; run the same command again to resume"
+                      + (stale if (out / "report.html").exists() else ""), soft_wrap=True)
             raise typer.Exit(getattr(stop, "exit_code", 130)) from None
 
 
