@@ -141,3 +141,26 @@ def test_only_cells_that_print_as_the_best_are_bold():
                      digits=2)
     assert table.best_mask().tolist() == [[True, False, True]]  # 1.00, 1.01, 1.00 (1.01 was bold too)
     assert "| 00 | **1.00** | 1.01 | **1.00** |" in table.to_markdown()
+
+
+def test_sim3_tables_name_the_scale_the_estimate_was_given(tmp_path):
+    """A monocular estimate at half scale: the APE and RPE tables of a Sim(3) evaluation say by what factor the
+    estimate was scaled (the figures are in metres only after it); an SE(3) evaluation's titles say nothing of it."""
+    from lidarkit.cli import main
+
+    from lidarkit.geometry import make_se3, so3_exp
+
+    yaw = np.linspace(0.0, np.pi, 120)  # half a circle of 20 m radius (a line leaves Umeyama's rotation undefined)
+    ref = np.array([make_se3(so3_exp(np.array([0.0, 0.0, a])), [20.0 * np.sin(a), 20.0 * (1.0 - np.cos(a)), 0.0]) for a in yaw])
+    Trajectory(ref, 0.1 * np.arange(120)).to_tum(tmp_path / "ref.tum")
+    half = ref.copy()
+    half[:, :3, 3] *= 0.5
+    Trajectory(half, 0.1 * np.arange(120)).to_tum(tmp_path / "est.tum")
+    for align, folder in (("sim3", "s"), ("se3", "e")):
+        with pytest.raises(SystemExit) as exc:
+            main(["eval", str(tmp_path / "ref.tum"), str(tmp_path / "est.tum"), "-f", "tum", "--align", align, "--tables", str(tmp_path / folder)])
+        assert exc.value.code in (0, None)
+    assert "**APE translation RMSE (m, Sim(3)-aligned, estimate scaled by 2)**" in (tmp_path / "s" / "ape_rmse.md").read_text()
+    assert "**RPE translation RMSE (m per frame, estimate scaled by 2)**" in (tmp_path / "s" / "rpe_rmse.md").read_text()
+    assert "estimate scaled by 2" in (tmp_path / "s" / "ape_rmse.tex").read_text()
+    assert "scaled" not in (tmp_path / "e" / "ape_rmse.md").read_text() + (tmp_path / "e" / "rpe_rmse.md").read_text()

@@ -132,10 +132,15 @@ def eval_command(
                     if evaluation.drift is not None else None)
         from lidarkit.eval.ape_rpe import DELTA_UNITS, alignment_label
 
-        aligned = alignment_label(align)
+        def scaled(result) -> str:  # a Sim(3) / scale alignment's factor belongs beside the figures it changed
+            t = result.alignment
+            return f", estimate scaled by {t.scale:.4g}" if t is not None and t.rescaled else ""
+
+        aligned = alignment_label(align) + scaled(evaluation.ape)
         unit = DELTA_UNITS.get(delta_unit, delta_unit)
+        per = "frame" if (delta, unit) == (1, "frames") else f"{delta:g} {unit}"
         pub = publication_tables(segments, {key: evaluation.ape.rmse}, {key: evaluation.rpe.rmse}, ape_alignment=aligned,
-                                 rpe_delta="frame" if (delta, unit) == (1, "frames") else f"{delta:g} {unit}")
+                                 rpe_delta=per + scaled(evaluation.rpe))
         written = pub.write(tables)
         boxplot = tables / "segments_translation_pct.png"
         if segments:
