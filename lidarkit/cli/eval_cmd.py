@@ -56,7 +56,7 @@ def eval_command(
 ) -> None:
     """Score EST against REF: APE and RPE (evo) in translation and rotation, and KITTI drift; print a table.
 
-    With --relations R: score the single trajectory given (``lidarkit eval --relations aces.relations EST``).
+    With --relations R: score the single trajectory given (`lidarkit eval --relations aces.relations EST`).
     """
     from lidarkit import atomic
     from lidarkit.eval import evaluate, report

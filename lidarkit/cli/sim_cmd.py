@@ -81,7 +81,7 @@ def sim_camera(
     progress: bool = typer.Option(True, "--progress/--no-progress", help="Progress bar on stderr."),
 ) -> None:
     """Simulate a camera driving through a textured street canyon (KITTI image size and intrinsics by default);
-    read the folder back with ``lidarkit vo OUT`` (or skip the files: ``lidarkit vo 'simcam:street?frames=500&seed=0'``)."""
+    read the folder back with `lidarkit vo OUT` (or skip the files: `lidarkit vo 'simcam:street?frames=500&seed=0'`)."""
     from lidarkit.atomic import check_target
     from lidarkit.cli.app import parse_params
     from lidarkit.errors import ConfigError
