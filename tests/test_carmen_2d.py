@@ -60,10 +60,22 @@ def test_max_range_readings_are_dropped(carmen_logs):
     assert np.linalg.norm(points, axis=1).max() < 50.0
 
 
-def test_intel_scans_are_put_in_time_order(carmen_logs):
+def test_intel_scans_stay_in_file_order_with_their_stamps_made_increasing(carmen_logs):
+    """Intel's stamps go back at 631 lines (delivery times, up to 0.9 s); sorted by them, the odometry jumped back and
+    forth (94 steps > 0.3 m, path 661 m). In file order its steps are smooth (none > 0.3 m, 508 m); the stamps that
+    go back are moved, as little as possible, to increase by at least 0.1 ms."""
+    from lidarkit.io.carmen import MIN_STAMP_STEP_S, parse_log
+
     intel = carmen_logs["intel"]
-    assert intel.n_reordered > 0  # Intel holds FLASER messages up to 0.9 s out of order
-    assert (np.diff(intel.timestamps_s) > 0).all()
+    raw = parse_log(intel.path).timestamps_s
+    assert (np.diff(raw) <= 0).sum() == 631 and intel.n_restamped == 2042 and intel.max_restamp_s < 0.9
+    assert np.diff(intel.timestamps_s).min() >= 0.998 * MIN_STAMP_STEP_S  # (float64 stamps near 1e9 s: 0.1 us steps)
+    steady = np.r_[np.diff(raw) >= MIN_STAMP_STEP_S, True] & np.r_[True, np.diff(raw) >= MIN_STAMP_STEP_S]
+    assert (intel.timestamps_s == raw)[steady].mean() > 0.9  # the stamps of the well-ordered stretches as logged
+    assert [intel.line_of(k) for k in range(3)] == sorted(intel.line_of(k) for k in range(3))
+    step = np.linalg.norm(np.diff(intel.odometry.poses_se3[:, :2, 3], axis=0), axis=1)
+    assert step.max() < 0.3 and intel.odometry.length_m == pytest.approx(508.4, abs=0.1)
+    assert carmen_logs["aces"].n_restamped == 0
 
 
 def test_first_aces_scan_matches_the_log_line(carmen_logs, aces_text):

@@ -229,6 +229,13 @@ def test_scans_far_apart_in_time_are_named_in_a_warning():
     assert any(w.startswith("1 gap(s) in time between consecutive scans, the largest 10.7 s between frames 95 and 198")
                for w in result.metrics["warnings"])
     assert not any("gap" in w for w in run(f"kitti:{kitti / 'sequences' / '00'}", "open3d_point_to_plane", progress=False).metrics["warnings"])
+    # a run guided by the dataset's own odometry is not told the motion across the gap is taken as small
+    from lidarkit.odometry.inputs import time_gap_warning
+
+    times, frames = np.array([0.0, 0.1, 0.2, 1.2, 1.3]), np.arange(5)
+    assert time_gap_warning(times, frames).endswith("odometry takes the motion between consecutive scans as small")
+    guided = time_gap_warning(times, frames, odometry_guess=True)
+    assert guided.startswith("1 gap(s) in time") and guided.endswith("the dataset's odometry gives the guess across them; the scans on either side overlap less")
 
 
 def test_a_variant_returning_a_non_finite_pose_is_a_registration_error_naming_the_frame(rng):

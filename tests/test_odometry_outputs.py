@@ -253,6 +253,26 @@ def test_motion_check_thresholds_follow_the_stated_accelerations():
     assert np.allclose(lim20[1:], 15.0 * 0.05**2) and list(np.flatnonzero(dev20 > lim20)) == [5, 6]
 
 
+def test_stamps_that_cannot_time_the_motion_leave_their_frames_unchecked():
+    """Delivery stamps bunched 1 ms apart (Intel's CARMEN log) scaled the prediction by the interval ratio (0.2 s / 1 ms:
+    200-fold) and failed correct frames of a steady 0.1 m a frame; those frames are now not checked for motion, and
+    the frames around them, regularly timed, still are (and still catch a jump)."""
+    from lidarkit.odometry.frame_check import MAX_INTERVAL_RATIO, MIN_INTERVAL_FRACTION
+
+    n = 20
+    poses = np.tile(np.eye(4), (n, 1, 1))
+    poses[:, 0, 3] = 0.1 * np.arange(n)  # captured every 0.2 s at 0.5 m/s
+    times = 0.2 * np.arange(n)
+    times[8] = times[7] + 0.001  # delivered 1 ms after its predecessor
+    poses[15:, 0, 3] += 1.0  # a real jump at frame 15 (25 m/s^2 over 0.2 s: limit 0.6 m)
+    cfg = FrameCheckConfig()
+    dev_t, _, dt = motion_deviation(poses, times, cfg)
+    lim_t = motion_limits(dt, cfg)[0]
+    assert MIN_INTERVAL_FRACTION == 0.25 and MAX_INTERVAL_RATIO == 4.0
+    assert np.flatnonzero(np.isnan(dev_t)).tolist() == [0, 1, 8, 9]  # 8: 1 ms; 9: after it (ratio 199)
+    assert list(np.flatnonzero(dev_t > lim_t)) == [15, 16]
+
+
 def test_motion_prediction_follows_irregular_frame_intervals():
     """A constant speed and turn rate sampled at irregular times deviates nowhere from the prediction."""
     times = np.cumsum([0.0, 0.1, 0.3, 0.05, 0.2, 0.1, 0.4, 0.1])

@@ -106,8 +106,10 @@ def odometry(
     if check:
         table.add_row(
             "bad frames (independent check)",
-            f"{check['n_bad_frames']} of {m['n_frames']} (motion {check['n_bad_motion']}, fitness "
-            + (f"{check['n_bad_fitness']})" if check.get("n_fitness_checked", 1) else "not checked)"),
+            f"{check['n_bad_frames']} of {m['n_frames']} (motion {check['n_bad_motion']}"
+            # frames whose stamps cannot time the motion are not checked for it: said when they are more than a few
+            + (f" of {check['n_motion_checked']} checked" if check.get("n_motion_checked", m["n_frames"]) < 0.9 * (m["n_frames"] - 2) else "")
+            + ", fitness " + (f"{check['n_bad_fitness']})" if check.get("n_fitness_checked", 1) else "not checked)"),
         )
         said = check["n_said_converged_but_bad"]
         table.add_row("  of which the variant called converged", "n/a (no verdict)" if said is None else str(said))

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import bz2
 import gzip
+import logging
 import lzma
 import os
 import zlib
@@ -38,11 +39,28 @@ from lidarkit.io.base import Scan
 from lidarkit.textfile import read_numeric_table
 from lidarkit.trajectory import Trajectory
 
+log_ = logging.getLogger(__name__)
+
 LASER_MESSAGES = ("FLASER", "ROBOTLASER1", "RAWLASER1")
+
+#: Least step (s) between the stamps of consecutive scans once made increasing (:func:`_increasing_stamps`).
+MIN_STAMP_STEP_S = 1e-4
 
 #: FLASER beam spacing by number of beams (CARMEN's guess for the unconfigured old format); others: 180 deg / (n - 1).
 _FLASER_RESOLUTION_RAD = {180: np.pi / 180, 181: np.pi / 180, 360: np.pi / 360, 361: np.pi / 360, 400: np.pi / 720, 401: np.pi / 720}
 _FLASER_START_RAD = -np.pi / 2
+
+
+def _increasing_stamps(stamps_s: np.ndarray, min_step_s: float = MIN_STAMP_STEP_S) -> np.ndarray:
+    """``stamps_s`` made increasing (by at least ``min_step_s``) with the least squared change: the isotonic fit of
+    ``t_i - i * min_step_s``, plus ``i * min_step_s``. Stamps that already increase by ``min_step_s`` stay as logged; a
+    run that goes back is pooled to the times its neighbours allow, its scans spread ``min_step_s`` apart."""
+    if len(stamps_s) < 2 or (np.diff(stamps_s) >= min_step_s).all():
+        return stamps_s
+    from scipy.optimize import isotonic_regression
+
+    ramp = min_step_s * np.arange(len(stamps_s))
+    return isotonic_regression(stamps_s - ramp).x + ramp
 
 
 def _open_text(path: Path) -> str:
@@ -303,21 +321,29 @@ class CarmenLog:
             self.max_range_m = np.full(len(log.timestamps_s), float(log.ranges_m.max()))
         else:
             self.max_range_m = log.max_range_m.copy()
-        # scans in time order: some logs (Intel: 631 of 13,631) hold messages up to ~0.9 s out of order
-        order = np.argsort(log.timestamps_s, kind="stable")
-        ts = log.timestamps_s[order]
-        if len(ts) > 1 and not (np.diff(ts) > 0).all():
-            k = int(np.argmax(~(np.diff(ts) > 0))) + 1
+        # scans in file order, the order their poses follow: Intel's stamps are delivery times that go back up to 0.9 s
+        # at 631 lines (sorted by them, the robot jumped back and forth: 94 odometry steps > 0.3 m in 18 ms, none in
+        # file order); stamps that do are made increasing with the least change (see _increasing_stamps)
+        raw = log.timestamps_s
+        seen = np.argsort(raw, kind="stable")
+        same = np.flatnonzero(np.diff(raw[seen]) == 0)
+        if same.size:
+            first, second = sorted((int(seen[same[0]]), int(seen[same[0] + 1])))
             raise DataError(
-                f"two laser scans with the same timestamp {float(ts[k]):.6f} s (also line {int(log.lines[order[k - 1]])})",
-                source=self.path, location=f"line {int(log.lines[order[k]])}",
+                f"two laser scans with the same timestamp {float(raw[second]):.6f} s (also line {int(log.lines[first])})",
+                source=self.path, location=f"line {int(log.lines[second])}",
             )
-        self.n_reordered = int((order != np.arange(len(order))).sum())
-        self._order = order
-        self._timestamps_s = ts
-        self._starts = log.offsets[:-1][order]
-        self._lengths = np.diff(log.offsets)[order]
-        self.max_range_m = self.max_range_m[order]
+        self._timestamps_s = _increasing_stamps(raw)
+        restamped = self._timestamps_s != raw
+        self.n_restamped = int(restamped.sum())
+        """Scans whose logged stamp went back (or less than 0.1 ms forward) and was moved (0 on most logs)."""
+        self.max_restamp_s = float(np.abs(self._timestamps_s - raw).max()) if len(raw) else 0.0
+        if self.n_restamped:
+            log_.warning("%s: %d scan stamps go back in file order (delivery times): scans kept in file order, %d stamps "
+                         "moved by up to %.3f s to increase", self.path.name, int((np.diff(raw) <= 0).sum()), self.n_restamped,
+                         self.max_restamp_s)
+        self._starts = log.offsets[:-1]
+        self._lengths = np.diff(log.offsets)
         self._relations_path = self._find_relations(relations)
         self._relations: Relations | None = None
         self._odometry: Trajectory | None = None
@@ -339,7 +365,8 @@ class CarmenLog:
 
     @property
     def timestamps_s(self) -> np.ndarray:
-        """``(S,)`` float64 ipc time stamps of the scans (s), strictly increasing (scans are in time order)."""
+        """``(S,)`` float64 ipc time stamps of the scans (s) in file order, strictly increasing (``n_restamped`` of them
+        moved to be so)."""
         return self._timestamps_s
 
     @property
@@ -351,7 +378,7 @@ class CarmenLog:
     def odometry(self) -> Trajectory:
         """The laser pose by odometry at each scan (``T_odom_laser``, z = 0), timestamps = scan timestamps."""
         if self._odometry is None:
-            xyt = self._log.laser_xyt[self._order]
+            xyt = self._log.laser_xyt
             self._odometry = Trajectory(
                 yaw_pose_se3(xyt[:, 0], xyt[:, 1], xyt[:, 2]), self.timestamps_s, name=f"{self.name} odometry",
                 meta={"frame": "laser", "source": "log odometry"},
@@ -372,12 +399,11 @@ class CarmenLog:
 
     def beam_angles_rad(self, index: int) -> np.ndarray:
         """Bearing of every beam of scan ``index`` in the laser frame ``(n,)`` (0 = forward, counter-clockwise)."""
-        k = self._order[index]
-        return self._log.start_rad[k] + self._log.step_rad[k] * np.arange(int(self._lengths[index]))
+        return self._log.start_rad[index] + self._log.step_rad[index] * np.arange(int(self._lengths[index]))
 
     def line_of(self, index: int) -> int:
         """The 1-based line of the log that holds scan ``index``."""
-        return int(self._log.lines[self._order[index]])
+        return int(self._log.lines[index])
 
     def read_scan(self, index: int) -> Scan:
         """Scan ``index`` as ``(N, 3)`` points in the laser frame, z = 0, invalid readings dropped."""
@@ -393,7 +419,7 @@ class CarmenLog:
         r = ranges[keep]
         points = np.zeros((len(r), 3))
         points[:, 0], points[:, 1] = r * np.cos(bearing), r * np.sin(bearing)
-        return Scan(points, timestamp_s=float(self.timestamps_s[index]), frame=index, source=f"{self.path}:{int(self._log.lines[self._order[index]])}")
+        return Scan(points, timestamp_s=float(self.timestamps_s[index]), frame=index, source=f"{self.path}:{self.line_of(index)}")
 
     @property
     def message_counts(self) -> dict[str, int]:

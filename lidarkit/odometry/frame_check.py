@@ -7,7 +7,8 @@ check uses only the estimated poses and the raw scans, never the variant's verdi
 * **motion**: the frame's relative motion against the constant-velocity prediction (the previous relative
   motion, its translation and rotation vector scaled by the ratio of the frame intervals). The deviation implies an acceleration ``d / dt^2``;
   a frame fails when it exceeds ``max_accel_mps2`` (translation) or ``max_angular_accel_dps2`` (rotation).
-  Frame 1 has no prediction and is not checked for motion.
+  Frame 1 has no prediction and is not checked for motion; nor is a frame whose stamps cannot time the motion (an
+  interval under a quarter of the median, or 4 times longer or shorter than the previous one).
 * **fitness**: scan ``k`` mapped into scan ``k-1`` by the estimated relative motion; the fraction of its
   above-ground points (a random subsample of ``n_sample``) whose nearest above-ground point of scan ``k-1``
   lies within ``max(inlier_min_m, inlier_range_fraction * range)``. A frame fails below ``min_fitness``.
@@ -33,6 +34,12 @@ try:  # optional (extra ``gicp``): a faster exact nearest-neighbour search
     import small_gicp as _small_gicp
 except ImportError:
     _small_gicp = None
+
+#: The motion test skips a frame whose interval, or the previous one, is below this fraction of the run's median
+#: interval, or whose interval differs from the previous one by more than this ratio: such stamps do not time the motion
+#: (a 10 Hz sensor that drops a sweep, ratio 2, is still checked).
+MIN_INTERVAL_FRACTION = 0.25
+MAX_INTERVAL_RATIO = 4.0
 
 #: Height bins (m) and horizontal radius (m) of the ground estimate.
 _GROUND_BIN_M = 0.1
@@ -69,7 +76,8 @@ class FrameCheckConfig:
         return {
             **asdict(self),
             "motion_rule": "fails when |t_k - t_pred| / dt^2 > max_accel_mps2 or angle(R_pred^T R_k) / dt^2 > max_angular_accel_dps2 "
-            "(prediction: the previous relative motion; frame 1 not checked)",
+            "(prediction: the previous relative motion; not checked: frame 1, and frames whose interval or the previous one is "
+            f"below {MIN_INTERVAL_FRACTION:g} x the median interval, or differs from the previous one by more than {MAX_INTERVAL_RATIO:g}x)",
             "fitness_rule": "fails when fewer than min_fitness of the sampled above-ground points of scan k, mapped by the estimated "
             "motion, lie within max(inlier_min_m, inlier_range_fraction * range) of an above-ground point of scan k-1",
         }
@@ -223,6 +231,12 @@ def motion_deviation(poses_se3: np.ndarray, times_s: np.ndarray | None, config: 
     # the predicted rotation turns at the previous rate: its rotation vector scaled by the interval ratio
     predicted_r = Rotation.from_rotvec(Rotation.from_matrix(rel[:-1, :3, :3]).as_rotvec() * scale[:, None])
     dev_r[2:] = np.degrees((predicted_r.inv() * Rotation.from_matrix(rel[1:, :3, :3])).magnitude())
+    # intervals that cannot time the motion (stamps of delivery, not capture: Intel's CARMEN log has 109 frames 0.1-5 ms
+    # after the previous one, and scaled the prediction 483-fold after one): not checked for motion
+    untimed = ~((dt[2:] >= MIN_INTERVAL_FRACTION * np.median(dt[1:])) & (dt[1:-1] >= MIN_INTERVAL_FRACTION * np.median(dt[1:]))
+                & (scale <= MAX_INTERVAL_RATIO) & (scale >= 1.0 / MAX_INTERVAL_RATIO))
+    dev_t[2:][untimed] = np.nan
+    dev_r[2:][untimed] = np.nan
     return dev_t, dev_r, dt
 
 

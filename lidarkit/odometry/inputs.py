@@ -78,9 +78,10 @@ def frames_past_the_end(frames: FrameSelection, n_frames: int) -> str | None:
     return None
 
 
-def time_gap_warning(times_s: np.ndarray | None, frames: np.ndarray) -> str | None:
+def time_gap_warning(times_s: np.ndarray | None, frames: np.ndarray, odometry_guess: bool = False) -> str | None:
     """A warning when consecutive scans of a run lie far apart in time (more than 3x the median interval: scans
-    missing from a recording, a folder of non-consecutive scans), or None. ``frames``: their numbers, as the warning names them."""
+    missing from a recording, a folder of non-consecutive scans), or None. ``frames``: their numbers, as the warning
+    names them; ``odometry_guess``: the run takes the dataset's odometry as its guess (which bridges the gaps)."""
     if times_s is None or len(times_s) < 3:
         return None
     dt = np.diff(np.asarray(times_s, dtype=np.float64))
@@ -90,7 +91,9 @@ def time_gap_warning(times_s: np.ndarray | None, frames: np.ndarray) -> str | No
         return None
     k = int(gaps[np.argmax(dt[gaps])])
     return (f"{gaps.size} gap(s) in time between consecutive scans, the largest {dt[k]:.3g} s between frames {int(frames[k])} "
-            f"and {int(frames[k + 1])} (median interval {median:.3g} s): odometry takes the motion between consecutive scans as small")
+            f"and {int(frames[k + 1])} (median interval {median:.3g} s): "
+            + ("the dataset's odometry gives the guess across them; the scans on either side overlap less" if odometry_guess
+               else "odometry takes the motion between consecutive scans as small"))
 
 
 def parse_frames(frames: FrameSelection, n_frames: int) -> np.ndarray:

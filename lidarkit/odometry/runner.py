@@ -498,7 +498,7 @@ def run(
         # (a plugin whose results carry no covariance): no all-NaN pose covariance is written
         warnings.append(f"no frame's registration gave a covariance ({name} returns none): no pose covariance")
         want_covariance = False
-    warnings = [w for w in (past_the_end, time_gap_warning(timestamps, numbers)) if w] + warnings
+    warnings = [w for w in (past_the_end, time_gap_warning(timestamps, numbers, odometry_poses is not None)) if w] + warnings
     for message in warnings:
         log.warning("%s: %s", title, message)
     covariances = (relative_cov, propagate(poses, relative_cov)) if want_covariance else None
