@@ -266,3 +266,32 @@ def test_recording_again_replaces_the_baseline_and_never_merges_into_other_folde
     with pytest.raises(Exception, match="holds files but no manifest.json: not a baseline to replace"):
         record(suite([100]), bench_folder, repeats=1)
     assert sorted(p.name for p in bench_folder.iterdir()) == ["jobs", "suite.json"]
+    other_tool = tmp_path / "webapp"  # a manifest.json of something else: its files are not the baseline's to delete
+    (other_tool / "jobs" / "important").mkdir(parents=True)
+    (other_tool / "manifest.json").write_text('{"name": "my web app"}')
+    (other_tool / "jobs" / "important" / "data.txt").write_text("keep")
+    with pytest.raises(Exception, match="its manifest.json is not a lidarkit baseline's"):
+        record(suite([100]), other_tool, repeats=1)
+    assert (other_tool / "jobs" / "important" / "data.txt").read_text() == "keep"
+
+
+def test_a_metric_a_job_leaves_nan_is_not_checked_and_the_baseline_reads_back(tmp_path):
+    """kiss in an icp_pair job reports no iterations (NaN): the manifest stored null and its own reading refused it, after
+    the earlier baseline had been replaced. Such a metric is not checked; the manifest is read back before it replaces
+    anything."""
+    from conftest import shared_path
+
+    suite = tmp_path / "pair.yaml"
+    suite.write_text(textwrap.dedent(f"""
+        name: pair
+        experiments:
+          - task: icp_pair
+            dataset: {{kind: kitti, path: "{shared_path('kitti_odometry', 'sequences', '00')}", name: K00}}
+            options: {{pairs: [[0, 1]]}}
+            methods: [kiss]
+    """))
+    out = tmp_path / "baseline"
+    baseline = record(suite, out, repeats=2)
+    job = baseline.jobs[0]
+    assert "iterations" not in job["checked"] and "translation_error_m" in job["checked"]
+    assert check(out).passed

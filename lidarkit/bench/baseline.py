@@ -236,8 +236,14 @@ def checked_metrics(task: str, metrics: Mapping[str, Any]) -> list[str]:
         declared = [m.name for m in get_task(task).metrics if m.kind != "speed"]
     except LidarKitError:
         declared = []
-    names = [m for m in declared if isinstance(metrics.get(m), (int, float))]
-    return names or sorted(k for k, v in metrics.items() if isinstance(v, (int, float)) and k not in ("hz", "n_frames"))
+    names = [m for m in declared if _finite_number(metrics.get(m))]
+    return names or sorted(k for k, v in metrics.items() if _finite_number(v) and k not in ("hz", "n_frames"))
+
+
+def _finite_number(value: Any) -> bool:
+    """A metric a band can be set on: a finite number (kiss reports no ``iterations`` in an icp_pair job: NaN, which
+    the manifest stored as null and then refused to read)."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
 
 
 # ---------------------------------------------------------------- record
@@ -298,6 +304,9 @@ def record(
     if out.is_dir() and any(out.iterdir()) and not (out / MANIFEST).is_file():
         raise OutputError(f"the folder holds files but no {MANIFEST}: not a baseline to replace (a bench results folder?); "
                           "choose a new folder", source=out)
+    if (out / MANIFEST).is_file() and not _is_baseline_manifest(out / MANIFEST):
+        raise OutputError(f"its {MANIFEST} is not a lidarkit baseline's (schema {SCHEMA!r}): not a baseline to replace; "
+                          "choose a new folder", source=out)
     cache: dict[str, str] = {}
     jobs = []
     with atomic.run_folder(out) as tmp:
@@ -309,7 +318,8 @@ def record(
                 runs.append(run_job(job, cache))
             first = runs[0]
             key = job.key()
-            names = checked_metrics(job.task, first.metrics)
+            # a metric checked needs a value in every repeat (a NaN in a later one would make its band NaN)
+            names = [m for m in checked_metrics(job.task, first.metrics) if all(_finite_number(run.metrics.get(m)) for run in runs)]
             noise = {m: float(np.std([run.metrics[m] for run in runs], ddof=1)) if len(runs) > 1 else 0.0 for m in names}
             bands = {m: _band(m, float(first.metrics[m]), noise[m]) for m in names}
             folder = tmp / "jobs" / key
@@ -327,11 +337,22 @@ def record(
                     "band_rule": f"max({NOISE_FACTOR:g} x run-to-run std, per-metric floor, {RELATIVE_FLOOR:g} x value)",
                     "jobs": jobs}
         atomic.write_text(tmp / MANIFEST, json.dumps(_jsonable(manifest), indent=1) + "\n")
+        load_baseline(tmp)  # what a check will read, read before it replaces the earlier baseline
     pinned = {job["key"] for job in jobs}
     for folder in sorted((out / "jobs").iterdir()):  # an earlier baseline's jobs this one does not pin
         if folder.is_dir() and folder.name not in pinned:
             shutil.rmtree(folder)
     return load_baseline(out)
+
+
+def _is_baseline_manifest(path: Path) -> bool:
+    """Whether ``path`` is a baseline manifest (any readable JSON with this schema, corrupt fields or not): record
+    replaces such a folder whole, and nothing else."""
+    try:
+        manifest = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError):
+        return False
+    return isinstance(manifest, dict) and manifest.get("schema") == SCHEMA
 
 
 def load_baseline(path: str | os.PathLike) -> Baseline:
