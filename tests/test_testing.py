@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from lidarkit.bench.baseline import record
-from lidarkit.errors import ConfigError, EvaluationError
+from lidarkit.errors import ConfigError, DataError, EvaluationError
 from lidarkit.geometry import make_se3, so3_exp
 from lidarkit.testing import assert_no_worse_than, assert_trajectory_close
 from lidarkit.trajectory import Trajectory
@@ -112,6 +112,55 @@ def test_a_result_over_other_data_than_the_pinned_job_is_refused(tmp_path):
     with pytest.raises(EvaluationError, match=r"dataset differs from the pinned job 'kiss': range_noise_std_m 0.05 \(pinned 0.0\)"):
         assert_no_worse_than(run(SimulatedLidarSequence(n_frames=8, seed=0, range_noise_std_m=0.05, **drive), "kiss"), baseline,
                              method="kiss", metric="ape_rmse_m", tolerance=10.0)
+
+
+def test_a_result_over_other_frames_another_dataset_or_another_seed_is_refused(tmp_path):
+    """Pinned: kiss over frames 0:8 of a 12-sweep drive. Eight other sweeps of it (every other one, or 4:12), a
+    simulated run against a pinned KITTI job, and bench records of other seeds all passed against it."""
+    from conftest import shared_path
+
+    from lidarkit.bench.results import load_results
+    from lidarkit.bench.runner import run_suite
+    from lidarkit.bench.suite import load_suite
+    from lidarkit.odometry import run
+    from lidarkit.sim.lidar import SimulatedLidarSequence
+
+    kitti = shared_path("kitti_odometry", "sequences", "00")
+    (tmp_path / "suite.yaml").write_text(textwrap.dedent(f"""
+        name: frames
+        seeds: [0, 1]
+        experiments:
+          - name: sim
+            task: odometry
+            dataset: {{kind: sim_lidar, scene: street, n_frames: 12, n_beams: 16, n_azimuths: 360, seed: 0, name: sim street}}
+            options: {{frames: "0:8"}}
+            methods: [kiss]
+          - name: kitti
+            task: odometry
+            dataset: {{kind: kitti, path: "{kitti}", name: K00}}
+            options: {{frames: "0:5"}}
+            methods: [open3d_point_to_plane]
+    """))
+    baseline = record(tmp_path / "suite.yaml", tmp_path / "baseline", repeats=1)
+    sim = SimulatedLidarSequence(n_frames=12, seed=0, scene="street", n_beams=16, n_azimuths=360)
+    pick = dict(method="kiss", metric="ape_rmse_m", tolerance=10.0)
+    seed0 = {"method": "kiss", "dataset": "sim street"}
+    with pytest.raises(DataError, match="2 pinned jobs match"):  # two seeds pinned: the seed picks one
+        baseline.job(**seed0)
+    pinned = baseline.job(**seed0, seed=0)
+    assert_no_worse_than(run(sim, "kiss", frames="0:8"), baseline, dataset="sim street", seed=0, **pick)
+    for frames, shown in (([0, 2, 4, 6, 8, 9, 10, 11], r"\[0, 2, 4, 6, 8, 9\]\.\.\."), ("4:12", r"\[4, 5, 6, 7, 8, 9\]\.\.\.")):
+        with pytest.raises(EvaluationError, match=rf"the result's frames differs from the pinned job 'kiss': {shown} \(pinned 0:8"):
+            assert_no_worse_than(run(sim, "kiss", frames=frames), baseline, dataset="sim street", seed=0, **pick)
+    other = run(SimulatedLidarSequence(n_frames=5, seed=1, scene="street", n_beams=16, n_azimuths=360), "open3d_point_to_plane")
+    with pytest.raises(EvaluationError, match="the result's dataset differs from the pinned job 'open3d_point_to_plane': kind sim_lidar \\(pinned kitti\\)"):
+        assert_no_worse_than(other, baseline, method="open3d_point_to_plane", metric="ape_rmse_m", tolerance=10.0, seed=0)
+    run_suite(load_suite(tmp_path / "suite.yaml"), tmp_path / "results", executor="serial")
+    record_seed1 = next(r for r in load_results(tmp_path / "results") if r["job"]["method"] == "kiss" and r["job"]["seed"] == 1)
+    assert pinned["spec"]["seed"] == 0
+    with pytest.raises(EvaluationError, match="the result's job seed differs from the pinned job 'kiss': 1 \\(pinned 0\\)"):
+        assert_no_worse_than(record_seed1, baseline, dataset="sim street", seed=0, **pick)
+    assert_no_worse_than(record_seed1, baseline, dataset="sim street", seed=1, **pick)
 
 
 def test_pytest_plugin_fixture_in_a_user_test_run(tiny_baseline, tmp_path):

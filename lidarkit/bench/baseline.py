@@ -260,26 +260,28 @@ class Baseline:
     def jobs(self) -> list[dict[str, Any]]:
         return self.manifest["jobs"]
 
-    def job(self, method: str | None = None, dataset: str | None = None) -> dict[str, Any]:
-        """The one pinned job with this method label (or name) and dataset name; DataError if none or several."""
+    def job(self, method: str | None = None, dataset: str | None = None, seed: int | None = None) -> dict[str, Any]:
+        """The one pinned job with this method label (or name), dataset name and seed; DataError if none or several."""
         found = [j for j in self.jobs if (method is None or method in (j["label"], j["spec"]["method"]))
-                 and (dataset is None or j["spec"]["dataset_name"] == dataset)]
+                 and (dataset is None or j["spec"]["dataset_name"] == dataset) and (seed is None or j["spec"].get("seed") == seed)]
         if len(found) != 1:
-            labels = ", ".join(f"{j['label']} on {j['spec']['dataset_name']}" for j in self.jobs)
-            raise DataError(f"{len(found)} pinned jobs match method={method!r} dataset={dataset!r}; pinned: {labels}",
-                            source=self.path)
+            labels = ", ".join(f"{j['label']} on {j['spec']['dataset_name']} (seed {j['spec'].get('seed')})" for j in self.jobs)
+            raise DataError(f"{len(found)} pinned jobs match method={method!r} dataset={dataset!r} seed={seed!r}"
+                            f"; pinned: {labels}", source=self.path)
         return found[0]
 
-    def metrics(self, method: str | None = None, dataset: str | None = None) -> dict[str, float]:
-        return dict(self.job(method, dataset)["metrics"])
+    def metrics(self, method: str | None = None, dataset: str | None = None, seed: int | None = None) -> dict[str, float]:
+        return dict(self.job(method, dataset, seed)["metrics"])
 
-    def trajectory(self, method: str | None = None, dataset: str | None = None):
+    def trajectory(self, method: str | None = None, dataset: str | None = None, seed: int | None = None):
         from lidarkit.trajectory import Trajectory
 
-        job = self.job(method, dataset)
+        job = self.job(method, dataset, seed)
         path = self.path / "jobs" / job["key"] / "poses_kitti.txt"
         if not path.is_file():
-            raise DataError("this pinned job has no trajectory (not an odometry job)", source=path)
+            why = ("not an odometry job" if job["spec"].get("task") != "odometry"
+                   else "its poses_kitti.txt is missing from the baseline folder: record it again")
+            raise DataError(f"this pinned job has no trajectory ({why})", source=path)
         return Trajectory.from_kitti(path, name=job["label"])
 
 

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from lidarkit.errors import ConfigError, EvaluationError
+from lidarkit.errors import ConfigError, EvaluationError, LidarKitError
 from lidarkit.geometry import rotation_angle_deg
 from lidarkit.trajectory import Trajectory
 
@@ -75,12 +75,14 @@ def assert_no_worse_than(
     tolerance: float | None = None,
     method: str | None = None,
     dataset: str | None = None,
+    seed: int | None = None,
 ) -> None:
     """``result``'s ``metric`` is at most ``tolerance`` worse than ``baseline``'s (lower is better unless the metric
     is a rate).
 
     ``result``: an OdometryResult, a bench record or a metrics mapping. ``baseline``: a baseline folder (path or
-    :class:`lidarkit.bench.baseline.Baseline`; ``method`` / ``dataset`` pick the pinned job) or a metrics mapping.
+    :class:`lidarkit.bench.baseline.Baseline`; ``method`` / ``dataset`` / ``seed`` pick the pinned job) or a metrics
+    mapping. A result over other data than the pinned job's (frames, dataset, seed) is an EvaluationError.
     ``tolerance`` None uses the baseline's recorded band (from its run-to-run noise); with a plain mapping it is 0.
     """
     from lidarkit.bench.baseline import Baseline, load_baseline
@@ -90,7 +92,7 @@ def assert_no_worse_than(
         baseline = load_baseline(Path(baseline))
     now_metrics = metrics_of(result)
     if isinstance(baseline, Baseline):
-        job = baseline.job(method, dataset)
+        job = baseline.job(method, dataset, seed)
         ref_metrics = {k: float(v) for k, v in job["metrics"].items() if isinstance(v, (int, float))}
         band = float(job.get("bands", {}).get(metric, 0.0))
         _check_same_data(result, now_metrics, job, ref_metrics)
@@ -114,25 +116,78 @@ def assert_no_worse_than(
 
 
 def _check_same_data(result: Any, now_metrics: dict[str, float], job: Mapping[str, Any], ref_metrics: dict[str, float]) -> None:
-    """EvaluationError when ``result`` did not run on the pinned job's data: another number of frames, or (a simulated
-    run) another simulator setting than the pinned dataset spec names. A metric is comparable on the same data only:
-    3 sweeps of the pinned 8-sweep drive passed against it at tolerance 0."""
+    """EvaluationError when ``result`` did not run on the pinned job's data: another number of frames, other frames,
+    another dataset kind or path, (a simulated run) another simulator setting, or (a bench record) another dataset,
+    task options or seed than the pinned job's spec. A metric is comparable on the same data only: 3 sweeps of the
+    pinned 8-sweep drive, the sweeps 4-12 of it, or a simulated run against a pinned KITTI job passed against it."""
+    label = job.get("label", "")
+
+    def refuse(what: str, detail: str) -> None:
+        raise EvaluationError(f"the result's {what} differs from the pinned job {label!r}: {detail}", source="assert_no_worse_than")
+
     if "n_frames" in now_metrics and "n_frames" in ref_metrics and now_metrics["n_frames"] != ref_metrics["n_frames"]:
-        raise EvaluationError(f"the result ran over {now_metrics['n_frames']:g} frames, the pinned job {job.get('label', '')!r} over "
+        raise EvaluationError(f"the result ran over {now_metrics['n_frames']:g} frames, the pinned job {label!r} over "
                               f"{ref_metrics['n_frames']:g}: not the pinned data", source="assert_no_worse_than")
-    pinned = ((job.get("spec") or {}).get("dataset") or {}) if isinstance(job.get("spec"), Mapping) else {}
-    config = getattr(result, "config", None)
-    ran = ((config or {}).get("run") or {}).get("dataset_config") if isinstance(config, Mapping) else None
-    if not isinstance(pinned, Mapping) or not isinstance(ran, Mapping):
+    spec = job.get("spec") if isinstance(job.get("spec"), Mapping) else {}
+    pinned = spec.get("dataset") if isinstance(spec.get("dataset"), Mapping) else {}
+    if isinstance(result, Mapping) and isinstance(result.get("job"), Mapping):  # a bench record: its own job spec
+        from lidarkit.bench.jobs import canonical_json
+
+        ran_job = result["job"]
+        for key in ("task", "dataset", "options", "seed"):
+            a, b = ran_job.get(key), spec.get(key)
+            if key == "dataset" and isinstance(a, Mapping) and isinstance(b, Mapping):
+                a, b = ({k: v for k, v in d.items() if k != "name"} for d in (a, b))
+            if canonical_json({"v": a}) != canonical_json({"v": b}):
+                refuse(f"job {key}", f"{a!r} (pinned {b!r})")
         return
+    config = getattr(result, "config", None)
+    run = (config or {}).get("run") if isinstance(config, Mapping) else None
+    if not isinstance(run, Mapping) or not pinned:
+        return
+    sim = run.get("dataset_config") if isinstance(run.get("dataset_config"), Mapping) else None
+    options = run.get("dataset_options") if isinstance(run.get("dataset_options"), Mapping) else {}
+    ran_kind = options.get("kind") or ("sim_lidar" if sim is not None else None)
+    if ran_kind is not None and pinned.get("kind") is not None and ran_kind != pinned["kind"]:
+        refuse("dataset", f"kind {ran_kind} (pinned {pinned['kind']})")
+    _check_same_frames(getattr(result, "frames", None), spec, sim, refuse)
+    ran = sim if sim is not None else options
     expected = _pinned_simulation(job) if pinned.get("kind") == "sim_lidar" else None
     if expected is not None:  # every setting, those left at their defaults too (a noisier sensor is other data)
         differ = [f"{k} {ran.get(k)!r} (pinned {v!r})" for k, v in expected.items() if ran.get(k) != v]
     else:
-        differ = [f"{k} {ran[k]!r} (pinned {v!r})" for k, v in pinned.items() if k not in ("kind", "name") and k in ran and ran[k] != v]
+        differ = [f"{k} {ran[k]!r} (pinned {v!r})" for k, v in pinned.items()
+                  if k not in ("kind", "name") and k in ran and not _same_value(k, ran[k], v)]
     if differ:
-        raise EvaluationError(f"the result's dataset differs from the pinned job {job.get('label', '')!r}: {', '.join(differ)}",
-                              source="assert_no_worse_than")
+        refuse("dataset", ", ".join(differ))
+
+
+def _same_value(key: str, ran: Any, pinned: Any) -> bool:
+    if key.endswith("path") or key.endswith("_file") or key.endswith("_dir"):
+        try:
+            return Path(str(ran)).resolve() == Path(str(pinned)).resolve()
+        except (OSError, ValueError):
+            return ran == pinned
+    return ran == pinned
+
+
+def _check_same_frames(frames: Any, spec: Mapping[str, Any], sim: Mapping[str, Any] | None, refuse) -> None:
+    """The dataset frames the result ran over (``OdometryResult.frames``) against the pinned job's ``frames`` option
+    (all frames when it has none)."""
+    from lidarkit.odometry.inputs import parse_frames
+
+    if frames is None or not len(frames):
+        return
+    ran = [int(f) for f in np.asarray(frames).reshape(-1)]
+    selection = (spec.get("options") or {}).get("frames") if isinstance(spec.get("options"), Mapping) else None
+    n_total = int(sim["n_frames"]) if sim is not None and "n_frames" in sim else int(max(ran)) + 1
+    try:
+        expected = parse_frames(selection, n_total).tolist()
+    except LidarKitError:
+        return
+    if ran != expected:
+        shown = (lambda f: f"{f[:6]}{'...' if len(f) > 6 else ''}")
+        refuse("frames", f"{shown(ran)} (pinned {selection or 'all'}: {shown(expected)})")
 
 
 def _pinned_simulation(job: Mapping[str, Any]) -> dict[str, Any] | None:
@@ -141,7 +196,6 @@ def _pinned_simulation(job: Mapping[str, Any]) -> dict[str, Any] | None:
     from lidarkit.bench.datasets import dataset_options
     from lidarkit.bench.jobs import Job
     from lidarkit.bench.tasks._datasets import seeded_dataset
-    from lidarkit.errors import LidarKitError
     from lidarkit.odometry import config_dict
     from lidarkit.sim.lidar import make_config
 
