@@ -295,3 +295,34 @@ def test_a_metric_a_job_leaves_nan_is_not_checked_and_the_baseline_reads_back(tm
     job = baseline.jobs[0]
     assert "iterations" not in job["checked"] and "translation_error_m" in job["checked"]
     assert check(out).passed
+
+
+def test_the_checksums_cover_the_files_a_job_reads_and_only_those(tmp_path, stretch_registered):
+    """A KITTI root given with ``sequence: "00"`` hashed every file under the root (a note added beside the data, or
+    another sequence, read as changed data), while a ground-truth file kept outside it was not hashed (editing it
+    read as a regression). A moved dataset listed each pinned file as absent instead of naming the folder."""
+    root = tmp_path / "kdata"
+    write_fake_kitti_sequence(root, "00", 12, step_m=2.0, seed=0)
+    gt = tmp_path / "gt00.txt"
+    gt.write_text((root / "poses" / "00.txt").read_text())
+    suite = tmp_path / "suite.yaml"
+    suite.write_text(textwrap.dedent(f"""
+        name: files
+        experiments:
+          - task: odometry
+            dataset: {{kind: kitti, path: "{root}", sequence: "00", poses_file: "{gt}", name: K00}}
+            methods: [test_stretch]
+    """))
+    out = tmp_path / "baseline"
+    record(suite, out, repeats=1)
+    (root / "NOTES.txt").write_text("about the data")
+    write_fake_kitti_sequence(root, "01", 3, step_m=2.0, seed=1)
+    assert check(out).passed  # not data this job reads
+    lines = gt.read_text().splitlines()
+    gt.write_text("\n".join(lines[:-1] + [lines[-1].replace(lines[-1].split()[3], "9.5", 1)]) + "\n")
+    result = check(out)
+    assert any(line.startswith("protocol changed: test_stretch on K00 (seed 0): data.gt00.txt") for line in result.lines()), result.lines()
+    assert not any(line.startswith("regression") for line in result.lines())
+    root.rename(tmp_path / "moved")
+    lines = check(out).lines()
+    assert len(lines) == 1 and "dataset not readable" in lines[0] and "kdata: dataset path does not exist" in lines[0], lines

@@ -101,18 +101,36 @@ def _sha256(path: Path) -> str:
 
 
 def dataset_files(spec: Mapping[str, Any]) -> list[Path]:
-    """The files a dataset spec reads: every file under its path (a KITTI sequence also its ``poses/NN.txt``)."""
-    from lidarkit.bench.datasets import PATHLESS_KINDS, dataset_path
+    """The files a dataset spec reads: every file under its path, or under ``sequences/NN`` of a KITTI root given
+    with ``sequence: NN`` (not the other sequences); a KITTI sequence also its ``poses/NN.txt``; and the files of
+    options that name an existing path (a ``poses`` file kept elsewhere). DataError when the path does not exist."""
+    from lidarkit.bench.datasets import PATHLESS_KINDS, dataset_options, dataset_path
 
     if spec.get("kind") in PATHLESS_KINDS:
         return []
     root = Path(dataset_path(dict(spec)))
-    files = [root] if root.is_file() else sorted(p for p in root.rglob("*") if p.is_file())
+    if not root.exists():
+        raise DataError("dataset path does not exist (a baseline pins the paths it was recorded with: put the data back "
+                        "there or record again)", source=root)
+    sequence = spec.get("sequence")
+    if sequence is not None and (root / "sequences" / str(sequence)).is_dir():
+        root = root / "sequences" / str(sequence)
+    files = _files_under(root)
     if root.is_dir() and root.parent.name == "sequences":
         poses = root.parent.parent / "poses" / f"{root.name}.txt"
         if poses.is_file():
             files.append(poses)
+    seen = set(files)
+    for value in dataset_options(dict(spec)).values():
+        if isinstance(value, str) and os.path.isabs(value) and Path(value).exists():
+            extra = [f for f in _files_under(Path(value)) if f not in seen]
+            files += extra
+            seen.update(extra)
     return files
+
+
+def _files_under(path: Path) -> list[Path]:
+    return [path] if path.is_file() else sorted(p for p in path.rglob("*") if p.is_file())
 
 
 def dataset_checksums(spec: Mapping[str, Any], cache: dict[str, str] | None = None) -> dict[str, str]:
