@@ -378,3 +378,37 @@ def test_self_calibration_shows_progress(tmp_path, capsys):
         shutil.copy2(png, folder / png.name)
     code, _, err = _run(["vo", str(folder), "--self-calibrate", "--progress"], capsys)
     assert code in (0, None) and "self-calibrating the focal length:" in err
+
+
+def test_an_unreadable_first_frame_is_not_scored_as_an_estimate(tmp_path, capsys):
+    """000000.png corrupt: frame 0 only holds the start pose (frame 1's). Scored as an estimate, with the smoothing run
+    across it, it raised the APE of the same frames 67-fold (0.0048 -> 0.32 m, smoothed 0.004 -> 0.12 m)."""
+    seq = tmp_path / "06"
+    shutil.copytree(sample_path("kitti_vo", "06"), seq)
+    (seq / "image_0" / "000000.png").write_bytes(b"not a png")
+    runs = {}
+    for name, extra in (("bad_first", []), ("from_1", ["--start", "1"])):
+        code, stdout, err = _run(["vo", str(seq), "--out", str(tmp_path / name), *extra], capsys)
+        assert code in (0, None), err
+        runs[name] = json.loads((tmp_path / name / "metrics.json").read_text())
+    bad, clean = runs["bad_first"], runs["from_1"]
+    assert bad["scored_from_frame"] == 1 and "scored_from_frame" not in clean
+    for variant in ("raw", "smoothed"):
+        assert bad[variant]["ape_rmse_m"] == pytest.approx(clean[variant]["ape_rmse_m"], rel=1e-6), variant
+
+
+def test_a_ground_truth_that_cannot_align_leaves_the_run_unscored_not_lost(tmp_path, capsys):
+    """Ground truth on a straight line (Umeyama's rotation undefined): the finished run ended in an error and --out
+    wrote nothing; its poses are written, and the output says why it is not scored."""
+    seq = tmp_path / "06"
+    shutil.copytree(sample_path("kitti_vo", "06"), seq)
+    n = len(list((seq / "image_0").glob("*.png")))
+    line = "\n".join(f"1 0 0 0 0 1 0 0 0 0 1 {0.85 * i}" for i in range(n)) + "\n"
+    (tmp_path / "line.txt").write_text(line)
+    out = tmp_path / "run"
+    code, stdout, err = _run(["vo", str(seq), "--poses", str(tmp_path / "line.txt"), "--scale", "gt", "--out", str(out)], capsys)
+    assert code in (0, None), err
+    assert "not scored against the ground truth: se3 alignment failed" in stdout
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["not_scored"].startswith("se3 alignment failed") and "raw" not in metrics
+    assert len(Trajectory.from_kitti(out / "poses_kitti.txt")) == n

@@ -7,6 +7,7 @@ import math
 from pathlib import Path
 from typing import Optional
 
+import numpy as np
 import typer
 
 from lidarkit.cli.app import app, parse_params, stderr, stdout
@@ -58,7 +59,6 @@ def vo_command(
 
     from lidarkit.eval.ape_rpe import alignment_label
     from lidarkit.vo.config import preset as make_preset
-    from lidarkit.vo.evaluation import evaluate_vo
     from lidarkit.vo.inputs import frame_range, open_vo_input, self_calibrate as calibrate
     from lidarkit.vo.pipeline import MonoVO
 
@@ -150,11 +150,7 @@ def vo_command(
         # into the GT's frame at the start frame (a later one when the first frames were unusable)
         result.trajectory = result.trajectory.transformed(T_left=gt.poses_se3[result.meta["start_frame"]])
 
-    metrics = {}
-    if gt is not None and len(gt) >= 3:
-        smoothed = result.smoothed()
-        metrics = {"raw": evaluate_vo(result.trajectory, gt, cfg.scale.mode),
-                   "smoothed": {**evaluate_vo(smoothed, gt, cfg.scale.mode), "smoothing": smoothed.meta["smoothing"]}}
+    metrics, not_scored = _scores(result, gt, cfg.scale.mode)
     console = stdout()
     summary = result.summary()
     table = Table(title=f"lidarkit vo: {data} ({vo_input.kind}, {cfg.features.detector} + {cfg.matching.method}, "
@@ -175,7 +171,11 @@ def vo_command(
         table.add_row("self-calibration", f"not constrained: {focal.reason}")
     if metrics and not metrics["smoothed"]["smoothing"].startswith(f"window {cfg.smoothing.window},"):
         table.add_row("smoothing", metrics["smoothed"]["smoothing"])  # not the configured window: said
-    for variant, m in metrics.items():
+    if "scored_from_frame" in metrics:  # (the input's own frame number)
+        first = metrics["scored_from_frame"]
+        metrics["scored_from_frame"] = int(numbers[start + first]) if numbers is not None else start + first
+        table.add_row("scored from frame", f"{metrics['scored_from_frame']} (the frames before it unreadable: not estimates)")
+    for variant, m in ((v, metrics[v]) for v in ("raw", "smoothed") if v in metrics):
         table.add_row(f"APE {variant} ({alignment_label(m['align'])}) [m]", f"{m['ape_rmse_m']:.4f}")
         table.add_row(f"RPE {variant} 1 frame [m / deg]",
                       f"{m['rpe_trans_rmse_m']:.4f} / {m['rpe_rot_rmse_deg']:.4f}")
@@ -183,6 +183,8 @@ def vo_command(
         final_align = "unaligned" if cfg.scale.mode == "gt" else alignment_label(m["align"])
         table.add_row(f"final error {variant} ({final_align}) [m]", f"{m['final_error_m']:.3f}")
     console.print(table)
+    if not_scored:
+        console.print(f"not scored against the ground truth: {not_scored}", soft_wrap=True, markup=False)
     for d in result.rejected[:_LISTED_REJECTIONS]:
         console.print(f"frame {d.frame} rejected: {d.reason}", soft_wrap=True)
     if len(result.rejected) > _LISTED_REJECTIONS:
@@ -191,9 +193,33 @@ def vo_command(
     if out is not None:
         from lidarkit.vo.output import write_run
 
-        paths = write_run(result, out, ground_truth=gt, metrics=metrics, extra_config=extra_config,
-                          gif_images=vo_input.images if gif else None)
+        paths = write_run(result, out, ground_truth=gt, metrics={**metrics, **({"not_scored": not_scored} if not_scored else {})},
+                          extra_config=extra_config, gif_images=vo_input.images if gif else None)
         console.print(f"wrote {len(paths)} files to {out}")
+
+
+def _scores(result, gt, scale_mode: str) -> tuple[dict, str | None]:
+    """APE/RPE of the raw and smoothed estimate from the first estimated frame on (``({}, why)`` when they cannot be
+    computed: a run's poses are written all the same). Frames before it (unreadable at the start) only hold its pose:
+    scored, they raised the APE of a run with one bad first frame 67-fold."""
+    from lidarkit.errors import EvaluationError
+    from lidarkit.vo.evaluation import evaluate_vo
+
+    if gt is None:
+        return {}, None
+    first = int(result.meta.get("start_frame", 0))
+    if len(gt) - first < 3:
+        return {}, f"{len(gt) - first} pose(s) from the first estimated frame on; APE and RPE need 3"
+    tail = np.arange(first, len(gt))
+    smoothed = result.smoothed()
+    try:
+        scores = {"raw": evaluate_vo(result.trajectory[tail], gt[tail], scale_mode),
+                  "smoothed": {**evaluate_vo(smoothed[tail], gt[tail], scale_mode), "smoothing": smoothed.meta["smoothing"]}}
+    except EvaluationError as err:  # (a ground truth on a straight line leaves the alignment undefined)
+        return {}, err.reason
+    if first:
+        scores["scored_from_frame"] = first
+    return scores, None
 
 
 def _fail_without_pairs(result, out: Optional[Path], extra_config: dict) -> None:

@@ -147,9 +147,16 @@ class VOResult:
         return sum(1 for d in self.diagnostics if d.note.startswith(SCALE_KEPT_NOTE))
 
     def smoothed(self) -> Trajectory:
-        """Translations smoothed with the configured Savitzky-Golay filter; rotations unchanged."""
+        """Translations smoothed with the configured Savitzky-Golay filter; rotations unchanged. Only from the start
+        frame on: the frames before it (unreadable) hold its pose, and smoothed with the rest they pulled the first
+        estimates back (APE 0.12 m instead of 0.004 m after one bad first frame of KITTI 06)."""
         s = self.config.smoothing
-        return smooth_translations(self.trajectory, s.window, s.polyorder)
+        first = int(self.meta.get("start_frame", 0))
+        if first == 0:
+            return smooth_translations(self.trajectory, s.window, s.polyorder)
+        tail = smooth_translations(self.trajectory[np.arange(first, len(self.trajectory))], s.window, s.polyorder)
+        poses = np.concatenate([np.repeat(tail.poses_se3[:1], first, axis=0), tail.poses_se3])
+        return Trajectory(poses, self.trajectory.timestamps_s, name=tail.name, meta=tail.meta)
 
     def diagnostics_rows(self) -> list[dict[str, Any]]:
         return [asdict(d) for d in self.diagnostics]
