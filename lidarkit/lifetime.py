@@ -34,10 +34,33 @@ class Interrupted(BaseException):
         super().__init__(signal.Signals(signum).name)
 
 
+#: Signals :func:`_raise_interrupted` turned into :class:`Interrupted` in this command (cleared when one is handled).
+_received: list[int] = []
+
+
 def _raise_interrupted(signum: int, _frame) -> None:
     for s in (signal.SIGINT, signal.SIGTERM):  # the cleanup that follows must not be interrupted in turn
         signal.signal(s, signal.SIG_IGN)
+    _received.append(signum)
     raise Interrupted(signum)
+
+
+def swallowed_interrupt() -> Interrupted | None:
+    """The interrupt raised in this command that never reached its handler, or None. A library whose import code
+    catches everything (a bare ``except:``) can swallow it while it loads; the signals then stayed ignored (for a
+    cleanup that never came) and the run went on to its end, unstoppable, exiting 0 or 1 without a word."""
+    return Interrupted(_received[0]) if _received else None
+
+
+def raise_if_interrupted() -> None:
+    """At a point where stopping is safe (between jobs, between frames): raise an interrupt a library swallowed."""
+    if _received:
+        raise Interrupted(_received[0])
+
+
+def interrupt_handled() -> None:
+    """The command's handler has dealt with the interrupt (the next command in this process starts afresh)."""
+    _received.clear()
 
 
 def _exit_at_startup(signum: int, _frame) -> None:
@@ -79,6 +102,7 @@ def handle_signals() -> Iterator[None]:
         yield
         return
     previous = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    _received.clear()
     for s in previous:
         signal.signal(s, _raise_interrupted)
     try:

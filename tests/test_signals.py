@@ -96,6 +96,50 @@ def test_a_pool_worker_importing_the_cli_as_its_main_leaves_sigterm_to_its_paren
     assert (done.returncode, done.stdout, done.stderr) == (-signal.SIGTERM, "", "")
 
 
+def test_an_interrupt_a_library_swallows_still_ends_the_command_as_interrupted(monkeypatch, capsys):
+    """Ctrl-C while a library's import code caught everything: the handler had set SIGINT and SIGTERM ignored for a
+    cleanup that never came, so the run went on unstoppable and exited 0 or 1 without a word. A loop of lidarkit's
+    stops at its next step; a command that ran to its end says it was interrupted and exits 130."""
+    import os
+
+    from lidarkit import cli
+    from lidarkit.lifetime import raise_if_interrupted
+
+    steps = []
+
+    def swallowing_app(*_args, **_kwargs):
+        try:
+            os.kill(os.getpid(), signal.SIGINT)  # delivered at once: the handler raises inside the try
+        except BaseException:  # noqa: BLE001 - what a library's bare except does
+            pass
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN  # ignored for the cleanup: nothing would stop the run
+        steps.append("ran on")
+        raise SystemExit(0)
+
+    monkeypatch.setattr(cli, "app", swallowing_app)
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["version"])
+    err = capsys.readouterr().err
+    assert exc.value.code == 130 and steps == ["ran on"]
+    assert err.startswith("interrupted by SIGINT, which a library caught as it loaded: the command ran to its end")
+    raise_if_interrupted()  # handled: the next command in this process starts afresh
+
+    def looping_app(*_args, **_kwargs):
+        try:
+            os.kill(os.getpid(), signal.SIGINT)
+        except BaseException:  # noqa: BLE001
+            pass
+        for step in range(3):  # a run's frames or jobs: the next one stops it
+            raise_if_interrupted()
+            steps.append(step)
+
+    monkeypatch.setattr(cli, "app", looping_app)
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["version"])
+    assert exc.value.code == 130 and steps == ["ran on"]
+    assert capsys.readouterr().err.startswith("interrupted by SIGINT: stopped")
+
+
 def test_an_interrupt_a_library_wraps_in_its_own_error_is_still_an_interrupt(monkeypatch, capsys):
     """Ctrl-C while open3d is first imported in the middle of a run came out as 'ImportError: initialization failed'
     (caused by the Interrupted) with a traceback and exit 1; it is the interrupt's one line and exit 130."""

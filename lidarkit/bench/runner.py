@@ -17,6 +17,7 @@ from lidarkit import atomic
 from lidarkit.bench.executors import check_executor_args, make_executor
 from lidarkit.bench.jobs import Job
 from lidarkit.bench.results import is_finished, make_record, remove_stale_temp_files, write_result
+from lidarkit.lifetime import raise_if_interrupted
 from lidarkit.bench.suite import Suite
 from lidarkit.bench.worker import execute_job
 from lidarkit.errors import OutputError
@@ -81,6 +82,7 @@ def run_suite(
                     job = by_key[key]
                     record = make_record(job, key, version, outcome)
                     write_result(out_dir, record)
+                    raise_if_interrupted()  # (a Ctrl-C a library swallowed while it loaded: the run stops here, this job kept)
                     summary.ran += 1
                     if record["status"] == "ok":
                         summary.ok += 1

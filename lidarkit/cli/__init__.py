@@ -14,7 +14,7 @@ from lidarkit import lifetime
 if os.path.basename(sys.argv[0]) in ("lidarkit", "-m") and "multiprocessing.spawn" not in sys.modules:
     lifetime.install_startup_handlers()
 
-from lidarkit.lifetime import Interrupted, abandoned, handle_signals  # noqa: E402
+from lidarkit.lifetime import Interrupted, abandoned, handle_signals, interrupt_handled, swallowed_interrupt  # noqa: E402
 from lidarkit.cli.app import app, print_error, stderr  # noqa: E402
 from lidarkit.errors import LidarKitError  # noqa: E402
 
@@ -62,13 +62,21 @@ def main(argv: list[str] | None = None) -> None:
         print_error(err)
         code = 1
     except Interrupted as err:
+        interrupt_handled()
         stderr().print(f"interrupted by {err}: stopped; no file is left half-written (each is complete or absent)",
                        soft_wrap=True)
         code = err.exit_code
     except SystemExit as exc:
-        if not abandoned():
+        swallowed = swallowed_interrupt()
+        if swallowed is not None:  # caught by a library as it loaded: the command went on to its end
+            interrupt_handled()
+            stderr().print(f"interrupted by {swallowed}, which a library caught as it loaded: the command ran to its end "
+                           "(every file it wrote is complete)", soft_wrap=True)
+            code = swallowed.exit_code
+        elif not abandoned():
             raise
-        code = exc.code if isinstance(exc.code, int) else 1
+        else:
+            code = exc.code if isinstance(exc.code, int) else 1
     if abandoned():  # a pool thread is stuck on a result its killed worker never finished sending
         sys.stdout.flush()
         sys.stderr.flush()

@@ -65,7 +65,7 @@ def progress_bar():
 
 def run_with_progress(suite, out: Path, *, executor: str, workers: int | None, address: str | None, force: bool):
     """Run ``suite`` into ``out`` showing a progress bar; Ctrl-C / SIGTERM say how to resume and exit 130 / 143."""
-    from lidarkit.lifetime import Interrupted
+    from lidarkit.lifetime import Interrupted, interrupt_handled
     from lidarkit.bench.runner import run_suite
 
     err = stderr()
@@ -91,6 +91,7 @@ def run_with_progress(suite, out: Path, *, executor: str, workers: int | None, a
             return run_suite(suite, out, executor=executor, workers=workers, address=address, force=force,
                              on_start=on_start, on_result=on_result)
         except (KeyboardInterrupt, Interrupted) as stop:
+            interrupt_handled()
             progress.stop()
             what = f"by {stop}" if isinstance(stop, Interrupted) else "by SIGINT"
             stale = f"; {out}/report.html is from before this run (`lidarkit report {out}` rebuilds it from the finished jobs)"

@@ -15,6 +15,7 @@ import numpy as np
 from lidarkit.errors import ConfigError, DataError, EvaluationError, LidarKitError, RegistrationError
 from lidarkit.geometry import as_points, orthonormalize_se3, validated_points
 from lidarkit.io.base import Scan, ScanSequence
+from lidarkit.lifetime import raise_if_interrupted
 from lidarkit.odometry.covariance import propagate
 from lidarkit.odometry.frame_check import FrameChecker, FrameCheckConfig
 from lidarkit.progress import progress_bar
@@ -213,6 +214,7 @@ def _run_stateless(stream, registration: Any, worker: Overlap, indices: np.ndarr
         checks = worker.submit(functools.partial(checker.add, k, idx, scan.points_xyz, scan.point_times_s, poses, prepared))
 
     for k, (idx, payload, read_time, read_error) in enumerate(stream):
+        raise_if_interrupted()  # (a Ctrl-C a library swallowed while it loaded: the run stops here)
         idx = int(idx)
         read_s[k] = read_time
         if read_error is not None:
@@ -410,6 +412,7 @@ def run(
                 calibration = _calibration_of(registration, name)
                 inflight = None  # frame k-1's after-the-fact task
                 for k, (idx, payload, read_time, read_error) in enumerate(stream):
+                    raise_if_interrupted()  # (a Ctrl-C a library swallowed while it loaded: the run stops here)
                     read_s[k] = read_time
                     try:
                         if read_error is not None:
