@@ -246,18 +246,40 @@ def test_odometry_widens_the_frame_covariance_of_distorted_sweeps_registered_as_
     np.testing.assert_allclose(with_entry.covariances[0][1:], run(snapshot, "small_gicp", pose_covariance=True).covariances[0][1:], rtol=1e-9)
 
 
-def test_distortion_floor_only_for_variants_that_register_sweeps_as_they_are():
+def test_distortion_floor_only_for_variants_that_register_sweeps_as_they_are_or_deskew_at_constant_velocity():
     from lidarkit.odometry.settings import deskew_requested
     from lidarkit.registration import available_icp, get_icp
     from lidarkit.registration.covariance import DISTORTION_SIGMA
 
-    assert {"open3d_point_to_plane", "small_gicp"} <= set(DISTORTION_SIGMA)
+    assert {"open3d_point_to_plane", "small_gicp", "ground_filtered"} <= set(DISTORTION_SIGMA)
     for name, sigma in DISTORTION_SIGMA.items():
         if name not in available_icp():
             continue
         icp = get_icp(name)
         assert len(sigma) == 6 and min(sigma) >= 0.0 and max(sigma[:3]) < 0.5  # m per m of motion
-        assert not getattr(icp, "stateful", False) and deskew_requested(icp) is None and not getattr(icp, "accepts_point_times", False)
+        assert not getattr(icp, "stateful", False)
+        if name == "ground_filtered":  # its constant-velocity deskew leaves the changes of motion within the sweep
+            assert getattr(icp, "deskew_instant", None) == "end"
+        else:
+            assert deskew_requested(icp) is None and not getattr(icp, "accepts_point_times", False)
+
+
+def test_a_constant_velocity_deskew_gets_its_floor_too():
+    """ground_filtered deskews distorted sweeps at constant velocity; what that leaves (roll and pitch above all) made
+    its 1-frame NEES 268-804 on distorted streets (benchmarks/results/covariance/distortion_ground_filtered): its frame
+    covariances get DISTORTION_SIGMA["ground_filtered"] added, and the run says which frames and why."""
+    from lidarkit.odometry import run
+    from lidarkit.registration.covariance import DISTORTION_SIGMA
+    from lidarkit.sim.lidar import SimulatedLidarSequence
+
+    sim = SimulatedLidarSequence(scene="street", n_frames=5, seed=4, n_beams=16, n_azimuths=512, range_noise_std_m=0.02, accel_time_s=0.0)
+    result = run(sim, "ground_filtered", pose_covariance=True)
+    floor = result.metrics["pose_covariance"]["distortion_floor"]
+    assert floor.startswith("4 frames: motion-distorted sweeps registered with a constant-velocity deskew") and "ground_filtered" in floor
+    motion_m = np.linalg.norm(result.trajectory.relative_motions()[:, :3, 3], axis=1)
+    d = np.asarray(DISTORTION_SIGMA["ground_filtered"])
+    variances = np.einsum("nii->ni", result.covariances[0][1:])
+    assert (variances >= (d[None, :] * motion_m[:, None]) ** 2 * (1 - 1e-9)).all()
 
 
 def test_surface_thickness_adds_the_map_noise():

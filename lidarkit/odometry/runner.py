@@ -179,9 +179,11 @@ def _run_stateless(stream, registration: Any, worker: Overlap, indices: np.ndarr
         min_eigenvalue[k] = float(deg.eigenvalues[0]) if deg is not None else np.nan
         if relative_cov is not None and getattr(result, "covariance", None) is not None and converged[k]:
             relative_cov[k] = result.covariance
-            if item["scan"].has_time_span() and not getattr(registration, "accepts_point_times", False):
-                # a sweep skewed by the motion within it, registered as it is: the skew that does not cancel between
-                # two sweeps is not in the pair calibration (DISTORTION_SIGMA, benchmarks/covariance_distortion.py)
+            if item["scan"].has_time_span():
+                # a sweep skewed by the motion within it, registered as it is or deskewed at constant velocity: the skew
+                # that does not cancel between two sweeps, or that the deskew leaves (changes of speed, turn rate, pitch
+                # and roll within the sweep), is not in the pair calibration (DISTORTION_SIGMA, learned per variant by
+                # benchmarks/covariance_distortion.py; a variant without an entry is left as it is)
                 cov = widen_for_distortion(result.covariance, _calibration_of(registration, name),
                                            float(np.linalg.norm(result.T_target_source[:3, 3])))
                 if cov is not result.covariance:
@@ -315,8 +317,8 @@ def run(
     (:mod:`lidarkit.odometry.covariance`); None = for stateless variants (whose results carry one, unless registered
     with ``assess=False``, which leaves it out: True is then an error), not for stateful ones (which need an extra
     assessment of each frame against the previous one: True asks for it). A
-    variant without deskew registering sweeps that carry per-point times gets the learned distortion floor on each
-    frame covariance (:func:`lidarkit.registration.covariance.widen_for_distortion`).
+    variant registering sweeps that carry per-point times, without deskew or with a constant-velocity one, gets its
+    learned distortion floor on each frame covariance (:func:`lidarkit.registration.covariance.widen_for_distortion`).
     ``overlap``: run each frame's after-the-fact work (assessment, covariance, frame check) in a worker thread while
     the next frame registers (:class:`lidarkit.threads.Overlap`; the same results as ``overlap=False``, which runs it in
     line). A variant whose backend holds the GIL (``overlap_assessment = False``: small_gicp, kiss) is assessed in line.
@@ -528,8 +530,9 @@ def run(
             "ground_truth_instant_note": instant_note,
             "estimate_stamps_note": stamp_note,
             "covariance_distortion_floor": (
-                f"{len(widened)} frames: motion-distorted sweeps registered without deskew, frame covariance widened by "
-                f"DISTORTION_SIGMA[{name!r}]" if widened else None
+                f"{len(widened)} frames: motion-distorted sweeps registered "
+                + ("with a constant-velocity deskew" if getattr(registration, "deskew_instant", None) else "without deskew")
+                + f", frame covariance widened by DISTORTION_SIGMA[{name!r}]" if widened else None
             ),
         },
     }
