@@ -262,3 +262,23 @@ def test_a_ros2_bags_storage_given_without_its_folder_or_metadata_says_so(tmp_pa
     (mcap / "metadata.yaml").unlink()
     with pytest.raises(DataError, match=r"\(\.mcap storage\) without its metadata\.yaml: .* or give one \.mcap file"):
         run(str(mcap), "vanilla")
+
+
+@pytest.mark.parametrize("fmt, name, reason", [("rosbag1", "x.bag", "file too large for the file system"),
+                                               ("mcap", "x.mcap", "file too large for the file system"),
+                                               ("rosbag2", "x2", "disk I/O error (is the disk full?)")])
+def test_a_bag_export_that_fills_the_disk_is_one_line_and_leaves_nothing(tmp_path, fmt, name, reason):
+    """A 40 KB file-size limit (a full disk) mid-export: a traceback of the writer's OSError, or of sqlite3's
+    OperationalError for a ROS 2 bag; now one line naming the output, and nothing left behind."""
+    import resource
+    import subprocess
+    import sys
+
+    def limit():
+        resource.setrlimit(resource.RLIMIT_FSIZE, (40 * 1024, 40 * 1024))
+
+    done = subprocess.run([sys.executable, "-m", "lidarkit.cli", "sim", "lidar", "--out", name, "--format", fmt, "--frames", "5",
+                           "-p", "n_beams=16", "-p", "n_azimuths=400", "--no-progress"],
+                          cwd=tmp_path, capture_output=True, text=True, timeout=300, preexec_fn=limit)
+    assert done.returncode == 1 and done.stderr.strip().splitlines() == [f"error: {name}: cannot write: {reason}"], done.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == []

@@ -12,13 +12,14 @@ from __future__ import annotations
 
 import os
 import shutil
+import sqlite3
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
-from lidarkit.errors import ConfigError, DataError
+from lidarkit.errors import ConfigError, DataError, OutputError
 
 BAG_FORMATS = ("rosbag1", "rosbag2", "mcap")
 STORAGES = ("sqlite3", "mcap")
@@ -95,7 +96,13 @@ def export_bag(sequence, out: str | os.PathLike, fmt: str = "rosbag2", *, storag
             plugin = StoragePlugin.MCAP if (fmt == "mcap" or storage == "mcap") else StoragePlugin.SQLITE3
             writer = Writer(target, version=8, storage_plugin=plugin)
             serialize = typestore.serialize_cdr
-        _write_messages(sequence, writer, typestore, serialize, ros1=fmt == "rosbag1", on_frame=on_frame)
+        # a full disk (or a file-size limit) mid-write: one line naming the output (it was a traceback of the writer's
+        # OSError, or of sqlite3's "disk I/O error" for a ROS 2 bag in sqlite3 storage)
+        try:
+            with atomic.output_errors(out):
+                _write_messages(sequence, writer, typestore, serialize, ros1=fmt == "rosbag1", on_frame=on_frame)
+        except sqlite3.Error as err:
+            raise OutputError(f"cannot write: {err} (is the disk full?)", source=out) from err
         if fmt == "mcap":
             target = next(target.glob("*.mcap"))
         with atomic.output_errors(out):
