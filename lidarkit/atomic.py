@@ -242,13 +242,18 @@ def _move_into_place(tmp: Path, path: Path) -> None:
     except OSError as err:
         if err.errno not in (errno.EEXIST, errno.ENOTEMPTY, errno.EISDIR, errno.ENOTDIR, errno.EBUSY):  # EBUSY: "." itself
             raise
-    for src in sorted(tmp.rglob("*")):
-        dst = path / src.relative_to(tmp)
+    moves = [(src, path / src.relative_to(tmp)) for src in sorted(tmp.rglob("*"))]
+    # everything in the way is found before the first file moves: a folder where a file goes (or a file where a folder
+    # goes) found half-way left the folder half the earlier run's, half this one's
+    for src, dst in moves:
+        if not src.is_dir() and dst.is_dir():
+            raise OutputError("cannot write: is a folder (a file name is needed here)", source=dst)
+        if src.is_dir() and dst.exists() and not dst.is_dir():
+            raise OutputError("cannot create the folder: a file is in the way (a folder is needed here)", source=dst)
+    for src, dst in moves:
         if src.is_dir():
             ensure_dir(dst)
         else:
-            if dst.is_dir():
-                raise OutputError("cannot write: is a folder (a file name is needed here)", source=dst)
             ensure_dir(dst.parent)
             os.replace(src, dst)
 

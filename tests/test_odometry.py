@@ -313,6 +313,25 @@ def test_run_folder(tmp_path, rng):
     assert all((own / name).read_text() == "mine" for name in ("trajectory.png", "ape.png", "ground_truth_kitti.txt"))
 
 
+def test_a_run_that_cannot_complete_its_folder_leaves_the_earlier_run_whole(tmp_path, rng):
+    """A folder where the new run's ground_truth_kitti.txt goes: the error came after config.yaml and ape.png were
+    already the new run's while metrics.json was still the earlier one's (half of each). Everything in the way is
+    found before the first file moves: the earlier run stays as it was."""
+    from lidarkit.errors import OutputError
+
+    poses = _drive(12)
+    seq = MemorySequence(poses, _room_points(rng, 50))
+    out = tmp_path / "run"
+    run(seq, OracleICP(se3_inverse(poses[:-1]) @ poses[1:]), out_dir=out, frames="0:6")
+    before = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file() and p.name != "ground_truth_kitti.txt"}
+    (out / "ground_truth_kitti.txt").unlink()
+    (out / "ground_truth_kitti.txt").mkdir()
+    with pytest.raises(OutputError, match="ground_truth_kitti.txt: cannot write: is a folder"):
+        run(seq, OracleICP(se3_inverse(poses[:-1]) @ poses[1:]), out_dir=out)
+    after = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()}
+    assert after == before
+
+
 def test_short_path_reports_no_drift(rng):
     poses = _drive(4)
     result = run(MemorySequence(poses, _room_points(rng, 50)), OracleICP(se3_inverse(poses[:-1]) @ poses[1:]))
