@@ -111,7 +111,7 @@ def test_vo_without_any_accepted_pair_writes_diagnostics_and_fails(tmp_path, cap
     out = tmp_path / "run"
     code, stdout, err = _run(["vo", str(folder), "--out", str(out)], capsys)
     assert code == 1 and len(err.strip().splitlines()) == 1, err
-    assert err.startswith("error:") and "no frame pair accepted (4 of 5 frames rejected)" in err
+    assert err.startswith(f"error: {folder}: no frame pair accepted (4 of 5 frames rejected)")  # the input named (not vo_gftt_klt_...)
     assert "too few features in reference frame" in err and "diagnostics.csv" in err
     rows = (out / "diagnostics.csv").read_text().splitlines()
     assert len(rows) == 6 and sum(",False," in row for row in rows) == 4
@@ -412,3 +412,15 @@ def test_a_ground_truth_that_cannot_align_leaves_the_run_unscored_not_lost(tmp_p
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["not_scored"].startswith("se3 alignment failed") and "raw" not in metrics
     assert len(Trajectory.from_kitti(out / "poses_kitti.txt")) == n
+
+
+@pytest.mark.parametrize("detector", ["orb", "akaze"])
+def test_images_too_small_for_feature_detection_are_one_line(tmp_path, capsys, detector):
+    """200 x 1 px frames: ORB and AKAZE asserted inside OpenCV (a traceback; AKAZE tried to allocate 18 EB)."""
+    folder = tmp_path / "tiny"
+    folder.mkdir()
+    rng = np.random.default_rng(0)
+    for i in range(4):
+        cv2.imwrite(str(folder / f"{i:06d}.png"), (255 * rng.random((1, 200))).astype(np.uint8))
+    code, _, err = _run(["vo", str(folder), "--detector", detector, "--matcher", "knn_ratio"], capsys)
+    assert code == 1 and err.strip() == "error: tiny: images of 200 x 1 px: too small for feature detection (at least 32 px a side)"

@@ -145,7 +145,7 @@ def vo_command(
                                             "constrained": focal.constrained, "reason": focal.reason,
                                             "window_focals_px": list(focal.window_focals_px)}
     if result.n_frames > 1 and result.accepted_pairs == 0:
-        _fail_without_pairs(result, out, extra_config)
+        _fail_without_pairs(result, out, extra_config, str(data))
     if gt is not None and cfg.scale.mode != "gt":
         # into the GT's frame at the start frame (a later one when the first frames were unusable)
         result.trajectory = result.trajectory.transformed(T_left=gt.poses_se3[result.meta["start_frame"]])
@@ -222,8 +222,9 @@ def _scores(result, gt, scale_mode: str) -> tuple[dict, str | None]:
     return scores, None
 
 
-def _fail_without_pairs(result, out: Optional[Path], extra_config: dict) -> None:
-    """No frame pair accepted: write the run folder (diagnostics) when asked, then raise one clear error."""
+def _fail_without_pairs(result, out: Optional[Path], extra_config: dict, data: str) -> None:
+    """No frame pair accepted: write the run folder (diagnostics) when asked, then raise one clear error naming the
+    input ``data`` (not the run's internal trajectory name)."""
     from lidarkit.vo.pipeline import TrackingFailedError
 
     where = ""
@@ -235,4 +236,4 @@ def _fail_without_pairs(result, out: Optional[Path], extra_config: dict) -> None
     try:
         result.check_tracking()
     except TrackingFailedError as err:
-        raise TrackingFailedError(err.reason + where, source=err.source) from None
+        raise TrackingFailedError(err.reason + where, source=data) from None

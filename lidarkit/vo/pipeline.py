@@ -44,6 +44,9 @@ _NO_PARALLAX = "insufficient parallax"
 # two-view geometry of the scale corners' own pose (scale.corner_pose == "corners"): lidarkit's default (E-RANSAC
 # 0.5 px on normalized points + Sampson refinement), whatever the pipeline's geometry is
 _CORNER_GEOMETRY = GeometryConfig()
+#: Smallest image side (px) a sequence's frames may have: ORB's and AKAZE's pyramids fail below a patch's size.
+MIN_IMAGE_SIDE_PX = 32
+
 # the sequence's image size is the majority size of the first _SIZE_VOTES readable frames among the first _SIZE_PROBE
 _SIZE_VOTES, _SIZE_PROBE = 5, 10
 
@@ -565,7 +568,11 @@ def sequence_image_shape(images: Any, loaded: dict[int, tuple[np.ndarray | None,
         raise DataError(f"none of the first {len(loaded)} frames can be used ({reasons})",
                         source=getattr(images, "name", "images"))
     counts = Counter(shapes)
-    return max(counts, key=lambda shape: (counts[shape], -shapes.index(shape)))
+    shape = max(counts, key=lambda shape: (counts[shape], -shapes.index(shape)))
+    if min(shape[:2]) < MIN_IMAGE_SIDE_PX:  # ORB and AKAZE asserted inside OpenCV (a traceback) on 200 x 1 px frames
+        raise DataError(f"images of {shape[1]} x {shape[0]} px: too small for feature detection (at least "
+                        f"{MIN_IMAGE_SIDE_PX} px a side)", source=getattr(images, "name", "images"))
+    return shape
 
 
 def _per_frame_motion(T_ref_cur: np.ndarray, gap: int) -> np.ndarray:
