@@ -178,6 +178,7 @@ def test_bad_baseline_folders_are_clear_errors(recorded, tmp_path, capsys):
     (lambda m: m["jobs"][0].update(protocol=None), "job 0 protocol is None, not a mapping"),
     (lambda m: m.update(jobs=[1]), "job 0 is 1, not a mapping"),
     (lambda m: m.update(environment=None), "'environment' is None, not a mapping"),
+    (lambda m: m["jobs"][0]["spec"].update(dataset="kitti00"), "job 0 spec dataset is 'kitti00', not a mapping"),
 ])
 def test_a_hand_edited_manifest_is_a_clear_error(recorded, tmp_path, edit, reason):
     _, out, _ = recorded

@@ -55,6 +55,11 @@ def test_bad_statistics_input_raises():
         paired_test([1.0, 2.0, 3.0], [1.0, 2.0])
     with pytest.raises(EvaluationError, match="at least 2"):
         paired_test([1.0], [2.0])
+    for seed in (-1, 1.5, True):  # a ValueError / TypeError traceback from numpy's generator (lidarkit compare --seed -1)
+        with pytest.raises(ConfigError, match=f"seed must be an integer >= 0, got {seed!r}"):
+            paired_test([1.0, 2.0, 3.0], [2.0, 3.0, 4.5], seed=seed)
+        with pytest.raises(ConfigError, match="seed must be an integer >= 0"):
+            bootstrap_ci([1.0, 2.0], seed=seed)
 
 
 def test_paired_test_agrees_with_scipy_and_reads_plainly():

@@ -84,6 +84,11 @@ def test_assert_no_worse_than_against_a_baseline_and_a_mapping(tiny_baseline):
     assert_no_worse_than({"hz": 11.0}, {"hz": 10.0}, metric="hz")
     with pytest.raises(EvaluationError, match="not in the result"):
         assert_no_worse_than({"x": 1.0}, tiny_baseline, metric="ape_rmse_m")
+    for bad in ("abc", [0.1], -1.0, float("nan")):  # a bare ValueError / TypeError for the first two
+        with pytest.raises(ConfigError, match="tolerance must be a finite number >= 0"):
+            assert_no_worse_than({"ape_rmse_m": ape}, tiny_baseline, metric="ape_rmse_m", tolerance=bad)
+    with pytest.raises(EvaluationError, match="the baseline's ape_rmse_m is nan: nothing to hold the result against"):
+        assert_no_worse_than({"ape_rmse_m": 0.3}, {"ape_rmse_m": float("nan")}, metric="ape_rmse_m")  # (it passed)
 
 
 def test_a_result_over_other_data_than_the_pinned_job_is_refused(tmp_path):

@@ -414,8 +414,12 @@ def _pinned_job_problem(job: Any) -> str:
         return f"lacks {', '.join(missing)}"
     try:
         Job.from_spec(job["spec"])
-    except TypeError as err:
+    except (TypeError, ValueError, AttributeError) as err:
         return f"has a bad spec ({err})"
+    spec = job["spec"]
+    for key, kind in (("dataset", dict), ("params", dict), ("options", dict), ("method", str), ("task", str)):
+        if key in spec and not isinstance(spec[key], kind):  # (a string dataset failed later, an AttributeError traceback)
+            return f"spec {key} is {spec[key]!r}, not a {'mapping' if kind is dict else 'string'}"
     for key in ("protocol", "metrics", "bands"):
         if not isinstance(job[key], dict):
             return f"{key} is {job[key]!r}, not a mapping"

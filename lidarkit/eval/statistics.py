@@ -31,6 +31,12 @@ def _finite(values: Any, source: str) -> np.ndarray:
     return arr
 
 
+def check_seed(seed: object) -> None:
+    """A bootstrap seed: an integer >= 0 (numpy's generator took -1 as a ValueError traceback, 1.5 as a TypeError)."""
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ConfigError(f"seed must be an integer >= 0, got {seed!r}", source="seed")
+
+
 def bootstrap_ci(
     values: Any,
     *,
@@ -50,6 +56,7 @@ def bootstrap_ci(
         raise ConfigError(f"n_boot must be a positive integer, got {n_boot}", source="n_boot")
     if statistic not in ("mean", "median"):
         raise ConfigError(f"statistic must be 'mean' or 'median', got {statistic!r}", source="statistic")
+    check_seed(seed)
     arr = _finite(values, "bootstrap")
     if arr.size == 0:
         raise EvaluationError("no values to bootstrap", source="bootstrap")
@@ -224,6 +231,7 @@ def paired_test(
         raise EvaluationError(f"a paired test needs at least 2 matched {pairing}s, got {va.size}{more}", source=metric)
     if not 0.0 < alpha < 1.0:
         raise ConfigError(f"alpha must be in (0, 1), got {alpha}", source="alpha")
+    check_seed(seed)
     if noise < 0 or not math.isfinite(noise):
         raise ConfigError(f"noise must be a finite value >= 0, got {noise}", source="noise")
     diff = va - vb

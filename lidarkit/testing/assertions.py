@@ -103,10 +103,15 @@ def assert_no_worse_than(
             which = "result" if source is now_metrics else "baseline"
             raise EvaluationError(f"metric {name!r} not in the {which} (it has: {', '.join(sorted(source))})",
                                   source="assert_no_worse_than")
-    tol = band if tolerance is None else float(tolerance)
-    if not tol >= 0 or not math.isfinite(tol):
-        raise ConfigError(f"tolerance must be a finite number >= 0, got {tolerance}", source="assert_no_worse_than")
+    try:
+        tol = band if tolerance is None else float(tolerance)
+    except (TypeError, ValueError):
+        tol = float("nan")
+    if isinstance(tolerance, bool) or not tol >= 0 or not math.isfinite(tol):
+        raise ConfigError(f"tolerance must be a finite number >= 0, got {tolerance!r}", source="assert_no_worse_than")
     now, ref = now_metrics[metric], ref_metrics[metric]
+    if not math.isfinite(ref):  # (every result passed against a NaN baseline: no comparison is false)
+        raise EvaluationError(f"the baseline's {metric} is {ref}: nothing to hold the result against", source="assert_no_worse_than")
     from lidarkit.bench.tasks import higher_is_better
 
     worse_by = (ref - now) if higher_is_better(metric) else (now - ref)
