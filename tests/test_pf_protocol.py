@@ -165,6 +165,7 @@ def test_cli_pf_bad_input_is_one_line_error(tmp_path, capsys):
         (["--particles", "0"], "n_particles must be >= 1"),
         (["--resampler", "roulette"], "resampler"),
         (["--gif"], "--gif needs --out"),
+        (["--snapshots", "5,7"], "--snapshots: --snapshots needs --out DIR"),  # (ignored without a word)
         (["--gif", "--seeds", "2", "--out", str(tmp_path / "study")], "--gif animates one run; a study"),
     ):
         with pytest.raises(SystemExit) as exc:

@@ -131,6 +131,8 @@ def pf_command(
     check_memory(largest * (320.0 + 24.0 * n_snapshots), f"a filter of {largest:,} particles", option)
     if gif and out is None:
         raise ConfigError("--gif needs --out DIR", source="--gif")
+    if _given(ctx, "snapshots") and out is None:  # (they are figures of the run folder: without one, ignored in silence)
+        raise ConfigError("--snapshots needs --out DIR", source="--snapshots")
     if fit_q and not recorded:
         raise ConfigError("--fit-q needs --recorded", source="--fit-q")
     bin_m, bin_deg = _floats(kld_bin, 2, "--kld-bin")
