@@ -192,6 +192,22 @@ def test_cli_recorded_prints_the_verdict_and_fit_q_makes_nis_consistent(capsys, 
     fits = json.loads((tmp_path / "run" / "metrics.json").read_text())["metrics"]["fit_q"]
     assert fits[0]["run"] == "given Q" and fits[0]["q_cov"] == [[1.0, 0.0], [0.0, 0.1]] and fits[0]["nis_mean"] < 0.1
     assert fits[-1]["nis_mean"] == pytest.approx(nis_after, abs=1e-3)
+    assert json.loads((tmp_path / "run" / "metrics.json").read_text())["metrics"]["q_fit_settled"] is True
+
+
+def test_a_fit_that_does_not_settle_says_so(capsys, tmp_path):
+    """10 particles: the NIS mean swings 0.94 -> 3.19 -> 0.98 -> 3.51 -> 0.97 over the five re-runs; the output ended
+    "Q too large ...; --fit-q estimates Q" (the option just used) and metrics.json said nothing of it."""
+    import json
+
+    data = shared_path("pf", "robot_mapping_stachniss")
+    with pytest.raises(SystemExit) as exc:
+        main(["pf", str(data), "--recorded", "-n", "10", "--fit-q", "--out", str(tmp_path / "run")])
+    assert exc.value.code in (0, None)
+    after = " ".join(capsys.readouterr().out.split()).split("after:")[1]
+    assert "--fit-q estimates Q" not in after and "the fit did not settle within [1.5, 2.5] in 5 re-run(s) (NIS mean 0.115 ->" in after
+    metrics = json.loads((tmp_path / "run" / "metrics.json").read_text())["metrics"]
+    assert metrics["q_fit_settled"] is False and "did not settle" in metrics["q_verdict"]["text"]
 
 
 def test_cli_report_protocol_reproduces_the_committed_figure_and_warns_once(capsys, caplog):

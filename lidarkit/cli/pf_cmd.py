@@ -238,6 +238,9 @@ def _recorded(data, cfg: PFConfig, seed: int, fit_q: bool, out: Path | None, sna
     else:
         first, runs = fit_q_recorded(data, None, seed, config=cfg)
         result = run_recorded(data, None, seed, config=runs[-1].config, snapshot_steps=snap) if snap else runs[-1]
+        for key in ("q_verdict", "q_fit_settled"):  # (a re-run for the snapshots: the fit's own verdict)
+            if key in runs[-1].metrics:
+                result.metrics[key] = runs[-1].metrics[key]
         _print(first)
         stdout().print("before: " + first.metrics["q_verdict"]["text"])
         table = Table(title="--fit-q: maximum-likelihood Q from the innovations, filter re-run")

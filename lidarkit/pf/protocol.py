@@ -478,7 +478,9 @@ def run_recorded(
 def fit_q_recorded(data, n_particles: int | None = None, seed: int = 0, *, config: PFConfig | None = None,
                    max_rounds: int = 5, **config_overrides: Any) -> tuple[PFRunResult, list[PFRunResult]]:
     """``--fit-q``: run on the recorded readings, take the ML Q of the innovations, run again with it; repeat
-    (the particle spread changes with Q) until the NIS mean is within [1.5, 2.5] or ``max_rounds`` re-runs.
+    (the particle spread changes with Q) until the NIS mean is within [1.5, 2.5], the fit repeats itself, or
+    ``max_rounds`` re-runs. The last run's ``metrics["q_fit_settled"]`` says whether it got there (its verdict says so
+    when not).
 
     Returns the first run and the re-runs (the last one is the answer; its config holds the fitted Q as variances).
     """
@@ -494,12 +496,23 @@ def fit_q_recorded(data, n_particles: int | None = None, seed: int = 0, *, confi
         if at_lower_bound(q_fit):  # the spread alone over-explains the innovations: scale Q by the ML scale instead
             q_fit = np.asarray(current.settings["q_cov"]) * scale_fit(current.metrics["nis_mean"])
         q_diag = np.diag(q_fit)
+        if runs and np.allclose(q_fit, current.settings["q_cov"], rtol=1e-9, atol=0.0):
+            break  # the fit gives the Q it ran with: another re-run would repeat this one
         cfg = current.config.replace(q=(float(q_diag[0]), float(q_diag[1])), q_as="variance")
         current = run_recorded(data, None, seed, config=cfg)
         runs.append(current)
         lo, hi = NIS_CONSISTENT
         if lo <= current.metrics["nis_mean"] <= hi:
             break
+    last = runs[-1] if runs else first
+    lo, hi = NIS_CONSISTENT
+    settled = lo <= last.metrics["nis_mean"] <= hi
+    last.metrics["q_fit_settled"] = settled
+    if not settled and "q_verdict" in last.metrics:  # said, and not "--fit-q estimates Q" after --fit-q has run
+        history = " -> ".join(f"{r.metrics['nis_mean']:.3g}" for r in [first, *runs])
+        text = last.metrics["q_verdict"]["text"].replace("; --fit-q estimates Q", "")
+        last.metrics["q_verdict"]["text"] = (f"{text}; the fit did not settle within [{lo:g}, {hi:g}] in {len(runs)} re-run(s) "
+                                             f"(NIS mean {history}): Q is not all that the innovations say")
     return first, runs
 
 
