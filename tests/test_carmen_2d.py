@@ -371,6 +371,16 @@ def test_odometry_with_log_odometry_as_initial_guess(carmen_logs, caplog):
         run("sim:street?frames=3", "vanilla", init="odometry")
 
 
+def test_a_carmen_log_is_found_by_its_name_and_relations_none_in_a_spec(carmen_logs):
+    from lidarkit.io import open_dataset
+    from lidarkit.odometry.inputs import open_sequence
+
+    log_path = shared_path("carmen_2d", "aces.clf.bz2")
+    assert type(open_sequence(str(log_path))).__name__ == "CarmenLog"  # ("not a folder" without the carmen: prefix)
+    assert open_dataset("carmen", log_path, relations="none").relations is None  # ("none: relations file not found")
+    assert carmen_logs["aces"].relations is not None
+
+
 def test_odometry_cli_on_a_carmen_log(tmp_path, capsys):
     log_path = shared_path("carmen_2d", "aces.clf.bz2")
     out = tmp_path / "run"

@@ -159,6 +159,9 @@ def test_relations_settings_without_relations_and_a_tum_file_read_as_kitti_say_s
     gt, orb, tum = (str(shared_path("evo_testdata", f)) for f in ("KITTI_00_gt.txt", "KITTI_00_ORB.txt", "fr2_desk_ORB.txt"))
     assert cli_exit_code(["eval", gt, orb, "--relation-max-diff", "0.5"]) == 1  # accepted and ignored before
     assert "--relation-max-diff applies to --relations only" in capsys.readouterr().err
+    aces = str(shared_path("carmen_2d", "aces.relations"))
+    assert cli_exit_code(["eval", "--relations", aces, tum, "--relation-max-diff", "-1"]) == 1  # (named max_time_diff_s)
+    assert capsys.readouterr().err.strip() == "error: --relation-max-diff: must be a finite number of seconds >= 0, got -1"
     assert cli_exit_code(["eval", tum, tum]) == 1
     assert "expected 12 numbers, found 8 (a TUM trajectory? read it as tum" in capsys.readouterr().err
 

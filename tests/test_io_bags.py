@@ -63,6 +63,9 @@ def test_detect_kind(exports, tmp_path):
     assert detect_kind(tmp_path / "x.pcap") == "ouster"
     assert detect_kind(exports["kitti"]) == "kitti"
     assert detect_kind(tmp_path) is None
+    for name in ("aces.clf", "aces.clf.bz2", "intel.CLF.gz"):  # a CARMEN log (read as a scan folder: "not a folder")
+        assert detect_kind(tmp_path / name) == "carmen", name
+    assert detect_kind(tmp_path / "x.bz2") is None
 
 
 @pytest.mark.parametrize("fmt,storage,name,kind", FORMATS)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Optional
 
@@ -85,6 +86,8 @@ def eval_command(
         if unused:  # (they were accepted and did nothing: no plot, no Markdown file, exit code 0)
             raise ConfigError(f"{', '.join(unused)} do(es) not apply to the relations metric (it takes --json, "
                               "--relation-max-diff, --format/--est-format and --est-times)", source="--relations")
+        if not (math.isfinite(relation_max_diff) and relation_max_diff >= 0):  # (named the library's max_time_diff_s)
+            raise ConfigError(f"must be a finite number of seconds >= 0, got {relation_max_diff:g}", source="--relation-max-diff")
         _relations_report(load(ref, est_format, est_times), relations, relation_max_diff, json_out)
         return
     if relation_max_diff != DEFAULT_MAX_TIME_DIFF_S:  # (accepted and ignored without --relations)

@@ -62,13 +62,16 @@ def detect_kind(path: str | os.PathLike) -> str | None:
     """The dataset kind a path unambiguously is, by extension or layout, else None.
 
     ``.bag`` (or a folder of ``.bag`` files) and a ROS 2 bag folder (``metadata.yaml``): ``rosbag``;
-    ``.mcap``: ``mcap``; ``.pcap``: ``ouster``; a folder with ``velodyne/`` or ``sequences/``: ``kitti``.
+    ``.mcap``: ``mcap``; ``.pcap``: ``ouster``; a CARMEN log (``.clf``, also ``.clf.bz2`` / ``.gz`` / ``.xz``):
+    ``carmen``; a folder with ``velodyne/`` or ``sequences/``: ``kitti``.
     """
     from pathlib import Path
 
     p = Path(path)
     suffix = p.suffix.lower()
     if p.is_file() or not p.exists():
+        if ".clf" in [s.lower() for s in p.suffixes[-2:]]:
+            return "carmen"
         return {".bag": "rosbag", ".mcap": "mcap", ".pcap": "ouster"}.get(suffix)
     if (p / "metadata.yaml").is_file() or any(p.glob("*.bag")):
         return "rosbag"

@@ -349,7 +349,7 @@ class CarmenLog:
         self._odometry: Trajectory | None = None
 
     def _find_relations(self, relations: str | os.PathLike | None) -> Path | None:
-        if relations is None:
+        if relations is None or (isinstance(relations, str) and relations.lower() == "none"):  # ("?relations=none")
             return None
         if isinstance(relations, str) and relations == "auto":
             candidate = self.path.with_name(self.name + ".relations")
