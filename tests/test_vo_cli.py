@@ -424,3 +424,45 @@ def test_images_too_small_for_feature_detection_are_one_line(tmp_path, capsys, d
         cv2.imwrite(str(folder / f"{i:06d}.png"), (255 * rng.random((1, 200))).astype(np.uint8))
     code, _, err = _run(["vo", str(folder), "--detector", detector, "--matcher", "knn_ratio"], capsys)
     assert code == 1 and err.strip() == "error: tiny: images of 200 x 1 px: too small for feature detection (at least 32 px a side)"
+
+
+def test_intrinsics_of_other_images_are_warned_about(tmp_path, capsys, caplog):
+    """The sequence's images at half size with its full-size calib.txt: the run went through without a word (APE
+    looked fine, RPE was 0.48 m a frame). The principal point far from the images' centre is warned about; the
+    sequence as it is gives no such warning."""
+    import logging
+
+    seq = tmp_path / "06"
+    shutil.copytree(sample_path("kitti_vo", "06"), seq)
+    for path in sorted((seq / "image_0").glob("*.png")):
+        image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+        cv2.imwrite(str(path), cv2.resize(image, (image.shape[1] // 2, image.shape[0] // 2)))
+    with caplog.at_level(logging.WARNING):
+        code, _, err = _run(["vo", str(seq), "--scale", "gt"], capsys)
+    assert code in (0, None), err
+    assert any("is far from the centre of the 613 x 185 px images: intrinsics of other" in r.getMessage() for r in caplog.records)
+    caplog.clear()
+    with caplog.at_level(logging.WARNING):
+        _run(["vo", str(sample_path("kitti_vo", "06")), "--scale", "gt"], capsys)
+    assert not any("far from the centre" in r.getMessage() for r in caplog.records)
+
+
+def test_self_calibration_counts_the_windows_a_bad_frame_bars(tmp_path, capsys, caplog):
+    """10 KITTI 06 frames, frame 7 unreadable: the window at 5 holds it; the one at 0 is clean (its longer window
+    reached frame 7 and barred it too), and the reason blamed the motion: "0 of 2 windows show translation
+    parallax". The clean window is tracked, and the reason counts the window the bad frame bars."""
+    from conftest import shared_path
+
+    folder = tmp_path / "imgs"
+    folder.mkdir()
+    for i in range(10):
+        shutil.copy(shared_path("kitti_images", "sequences", "06", "image_0", f"{i:06d}.png"), folder / f"{i:06d}.png")
+    (folder / "000007.png").write_bytes(b"not a png")
+    import logging
+
+    with caplog.at_level(logging.WARNING):
+        code, _, err = _run(["vo", str(folder), "--scale", "none", "--self-calibrate"], capsys)
+    assert code in (0, None), err
+    said = [r.getMessage() for r in caplog.records if "focal length self-calibration" in r.getMessage()]
+    assert len(said) == 1 and "1 of 1 windows show translation parallax" in said[0], said
+    assert "1 more hold an unreadable or odd-sized frame" in said[0]

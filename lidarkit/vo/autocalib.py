@@ -262,11 +262,15 @@ def estimate_focal(images: Any, cfg: AutocalibConfig | None = None,
         if on_step is not None:
             on_step(done, steps)
 
+    unusable = 0  # windows with an unreadable or odd-sized frame among the frames they track
     for k, s in enumerate(starts):
         step(k)
         frames = [MonoVO._load(read, i)[0] for i in range(s, min(s + max(cfg.long_window, cfg.window), n))]
-        if any(f is None or f.shape[:2] != (h, w) for f in frames):
-            continue  # an unreadable or odd-sized frame: the window is skipped
+        good = [f is not None and f.shape[:2] == (h, w) for f in frames]
+        if not all(good[:cfg.window]):
+            unusable += 1  # (a bad frame beyond the window only bars the longer window: it dropped clean windows)
+            continue
+        frames = frames[:next((i for i, g in enumerate(good) if not g), len(frames))]  # the longer window ends before it
         obs = _window_tracks(frames[:cfg.window], cfg)
         if obs is not None and obs.shape[1] >= cfg.max_tracks and len(frames) > cfg.window:
             # every corner survived: the image moves slowly, and a longer window adds baseline and rotation
@@ -279,8 +283,9 @@ def estimate_focal(images: Any, cfg: AutocalibConfig | None = None,
             if ba.N >= cfg.min_tracks:
                 windows.append(ba)
     if len(windows) < 2:
-        return fallback(f"{len(windows)} of {len(starts)} windows show translation parallax (no motion or pure "
-                        "rotation); at least 2 are needed")
+        skipped = f", {unusable} more hold an unreadable or odd-sized frame" if unusable else ""
+        return fallback(f"{len(windows)} of {len(starts) - unusable} windows show translation parallax (no motion or pure "
+                        f"rotation){skipped}; at least 2 are needed")
 
     side = max(w, h)
     grid = side * np.geomspace(cfg.focal_range[0], cfg.focal_range[1], cfg.grid_steps)
@@ -311,7 +316,8 @@ def estimate_focal(images: Any, cfg: AutocalibConfig | None = None,
             per_window.append(float(np.exp(_parabola_min(logg[i - 1:i + 2], row[i - 1:i + 2])[0])))
     kw = dict(windows=len(costs), window_focals_px=tuple(per_window), profile=profile)
     if len(per_window) < cfg.min_windows:
-        return fallback(f"only {len(per_window)} of {len(costs)} windows have a reprojection-cost minimum inside the "
+        skipped = f" ({unusable} more hold an unreadable or odd-sized frame)" if unusable else ""
+        return fallback(f"only {len(per_window)} of {len(costs)} windows{skipped} have a reprojection-cost minimum inside the "
                         f"focal grid ({grid[0]:.0f}-{grid[-1]:.0f} px); at least {cfg.min_windows} are needed", **kw)
     logs = np.log(per_window)
     log_f = float(np.median(logs))
