@@ -166,6 +166,10 @@ def test_cli_pf_bad_input_is_one_line_error(tmp_path, capsys):
         (["--resampler", "roulette"], "resampler"),
         (["--gif"], "--gif needs --out"),
         (["--snapshots", "5,7"], "--snapshots: --snapshots needs --out DIR"),  # (ignored without a word)
+        (["--q", "0,0.1"], "--q: q (0.0, 0.1) (variance) gives a measurement variance of 0: each must be >= 1e-30"),
+        (["--q", "1e-20,1e-20", "--q-as", "std"], "gives a measurement variance of 1e-40"),  # (one warning a step, exit 0)
+        (["--roughening", "1e20"], "--roughening: must be <= 10"),
+        (["--ess-threshold", "-1"], "--ess-threshold: must be finite and >= 0"),  # (named "pf config ess_threshold")
         (["--gif", "--seeds", "2", "--out", str(tmp_path / "study")], "--gif animates one run; a study"),
     ):
         with pytest.raises(SystemExit) as exc:

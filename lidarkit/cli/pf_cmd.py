@@ -13,7 +13,7 @@ from rich.table import Table
 
 from lidarkit.cli.app import app, stderr, stdout
 from lidarkit.errors import ConfigError
-from lidarkit.pf.config import PFConfig
+from lidarkit.pf.config import PFConfig, q_problem
 from lidarkit.run_files import RUN_FILES
 
 _D = PFConfig()
@@ -138,13 +138,23 @@ def pf_command(
     bin_m, bin_deg = _floats(kld_bin, 2, "--kld-bin")
     if not (bin_m > 0 and bin_deg > 0):
         raise ConfigError(f"both bin sizes must be > 0 (metres, degrees), got {kld_bin!r}", source="--kld-bin")
-    cfg = PFConfig.make(
+    q_values = _floats(q, 2, "--q")
+    problem = q_problem(q_values, q_as) if all(math.isfinite(v) and v >= 0 for v in q_values) else None
+    if problem:
+        raise ConfigError(problem, source="--q")
+    settings = dict(
         n_particles=counts[0], likelihood=likelihood, nearest_association=nearest_association, estimator=estimator,
-        resampler=resampler, kernel=kernel, ess_threshold=ess_threshold, roughening=roughening, q=_floats(q, 2, "--q"), q_as=q_as,
+        resampler=resampler, kernel=kernel, ess_threshold=ess_threshold, roughening=roughening, q=q_values, q_as=q_as,
         init=init, augmented=augmented, alpha_slow=alpha_slow, alpha_fast=alpha_fast, kld=kld, kld_epsilon=kld_epsilon,
         kld_z=kld_z, kld_bin_m=bin_m, kld_bin_rad=math.radians(bin_deg), kld_min_n=kld_min, kld_max_n=kld_max,
         kld_unconverged_n=kld_unconverged, innovation_gate=innovation_gate,
     )
+    try:
+        cfg = PFConfig.make(**settings)
+    except ConfigError as err:  # a setting's error names its option, not the config field ("pf config q")
+        field = str(err.source or "").removeprefix("pf config").strip()
+        option = OPTION_OF.get(field, f"--{field.replace('_', '-')}") if field in settings else err.source
+        raise ConfigError(err.reason, source=option) from None
     _refuse_protocol_clashes(ctx, protocol, dict(likelihood=likelihood, nearest_association=nearest_association,
                                                  estimator=estimator, q_as=q_as))
     cfg = protocol_config(cfg, protocol)
@@ -192,6 +202,11 @@ def _given(ctx: typer.Context, name: str) -> bool:
     """Whether option ``name`` was given on the command line (not left at its default)."""
     source = ctx.get_parameter_source(name)
     return source is not None and source.name == "COMMANDLINE"
+
+
+#: The option of a PFConfig field whose name differs from it (the rest are --FIELD-NAME).
+OPTION_OF = {"n_particles": "--particles", "kld_min_n": "--kld-min", "kld_max_n": "--kld-max", "kld_unconverged_n": "--kld-unconverged",
+             "kld_bin_m": "--kld-bin", "kld_bin_rad": "--kld-bin"}
 
 
 def _refuse_unused_options(ctx: typer.Context, *, kld: bool, augmented: bool, kernel: str, likelihood: str, kidnap_at: int | None,

@@ -14,6 +14,23 @@ ESTIMATORS = ("mean", "best")
 INITS = ("gaussian", "uniform")
 
 
+#: Smallest measurement variance (m^2, rad^2) Q may hold: below it the filter's float32 information matrix overflows.
+MIN_Q_VARIANCE = 1e-30
+#: Largest roughening constant K (jitter std = K x spread x N^(-1/3); Gordon et al. use ~0.2).
+MAX_ROUGHENING = 10.0
+
+
+def q_problem(q: tuple[float, ...], q_as: str) -> str | None:
+    """Why ``q`` (read as ``q_as``) cannot be the measurement noise, or None: each variance must be >= MIN_Q_VARIANCE
+    (0 failed later as "Q must be symmetric positive definite"; 1e-40 ran a filter whose float32 information overflowed,
+    no particle keeping a finite likelihood, one warning a step)."""
+    variances = tuple(q) if q_as == "variance" else tuple(x * x for x in q)
+    if all(math.isfinite(v) for v in variances) and min(variances) < MIN_Q_VARIANCE:
+        return (f"q {tuple(q)} ({q_as}) gives a measurement variance of {min(variances):.3g}: each must be >= {MIN_Q_VARIANCE:g} "
+                "(Q positive definite, its inverse finite in float32)")
+    return None
+
+
 class PFConfig(BaseModel):
     """Particle-filter settings.
 
@@ -121,6 +138,9 @@ class PFConfig(BaseModel):
 
     @model_validator(mode="after")
     def _consistent(self) -> PFConfig:
+        problem = q_problem(self.q, self.q_as)
+        if problem:
+            raise ValueError(problem)
         if self.augmented and not self.alpha_slow < self.alpha_fast:
             raise ValueError(f"augmented MCL needs alpha_slow < alpha_fast, got {self.alpha_slow} and {self.alpha_fast}")
         if self.kld and self.kld_min_n > self.kld_max_n:
@@ -137,6 +157,13 @@ class PFConfig(BaseModel):
         elif self.innovation_gate > 0:
             raise ValueError("innovation_gate gates the readings of the Kalman kernels (kernel='kalman'); point particles weigh every reading")
         return self
+
+    @field_validator("roughening")
+    @classmethod
+    def _roughening_bound(cls, v: float) -> float:
+        if v > MAX_ROUGHENING:  # (1e20 scattered the particles 1e37 m, one warning a step, exit 0)
+            raise ValueError(f"must be <= {MAX_ROUGHENING:g} (Gordon's K is ~0.2), got {v:g}")
+        return v
 
     @field_validator("kernel_split")
     @classmethod
@@ -183,4 +210,4 @@ class PFConfig(BaseModel):
         return PFConfig.make(**{**self.model_dump(), **changes})
 
 
-__all__ = ["ESTIMATORS", "INITS", "LIKELIHOODS", "PFConfig"]
+__all__ = ["ESTIMATORS", "INITS", "LIKELIHOODS", "MAX_ROUGHENING", "MIN_Q_VARIANCE", "PFConfig", "q_problem"]
