@@ -317,6 +317,8 @@ def test_gated_ekf_from_a_wrong_start_fails_where_the_particle_filter_localizes(
 def test_innovation_gate_config():
     with pytest.raises(ConfigError):
         PFConfig.make(innovation_gate=-1.0)
+    with pytest.raises(ConfigError, match="init_mean: values must be finite"):  # (331 weight resets, then an error on the estimate)
+        PFConfig.make(init_mean=(float("nan"), 0.0, 0.0))
 
 
 def test_kld_with_augmented_mcl_counts_the_belief_not_the_injections(stachniss):

@@ -186,6 +186,13 @@ class PFConfig(BaseModel):
             raise ValueError(f"must be finite and >= 0, got {v}")
         return v
 
+    @field_validator("init_mean")
+    @classmethod
+    def _finite(cls, v: tuple[float, ...]) -> tuple[float, ...]:
+        if not all(math.isfinite(x) for x in v):  # (a NaN start ran 331 weight resets, then failed naming the estimate)
+            raise ValueError(f"values must be finite, got {v}")
+        return v
+
     @field_validator("q", "motion_noise_std", "init_std")
     @classmethod
     def _finite_non_negative(cls, v: tuple[float, ...]) -> tuple[float, ...]:
