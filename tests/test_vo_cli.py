@@ -466,3 +466,16 @@ def test_self_calibration_counts_the_windows_a_bad_frame_bars(tmp_path, capsys, 
     said = [r.getMessage() for r in caplog.records if "focal length self-calibration" in r.getMessage()]
     assert len(said) == 1 and "1 of 1 windows show translation parallax" in said[0], said
     assert "1 more hold an unreadable or odd-sized frame" in said[0]
+
+
+def test_scale_settings_the_pipeline_does_not_use_are_said(capsys):
+    """--set scale.corner_pose=corners left the default pipeline's poses byte-identical without a word (KLT on corners
+    builds no separate corner path), as did any scale setting under --scale gt."""
+    seq = str(sample_path("kitti_vo", "06"))
+    code, _, err = _run(["vo", seq, "--set", "scale.corner_pose=corners", "--set", "scale.min_common_points=20"], capsys)
+    assert code in (0, None) and err.count("note: --set") == 1
+    assert "note: --set scale.corner_pose not used: KLT on corners carries depth with its own tracks" in err
+    code, _, err = _run(["vo", seq, "--scale", "gt", "--set", "scale.min_common_points=20"], capsys)
+    assert "note: --set scale.min_common_points not used: scale mode gt: the scale settings act with relative" in err
+    code, _, err = _run(["vo", seq, "--detector", "orb", "--set", "scale.corner_pose=corners"], capsys)
+    assert "note: --set" not in err  # ORB + KLT builds the corner path: the setting acts

@@ -58,7 +58,7 @@ def vo_command(
     from rich.table import Table
 
     from lidarkit.eval.ape_rpe import alignment_label
-    from lidarkit.vo.config import preset as make_preset
+    from lidarkit.vo.config import inert_settings, preset as make_preset
     from lidarkit.vo.inputs import frame_range, open_vo_input, self_calibrate as calibrate
     from lidarkit.vo.pipeline import MonoVO
 
@@ -91,6 +91,8 @@ def vo_command(
             stderr().print(f"note: --matcher {matcher} needs descriptors, which {kept} has none of: detector orb "
                            "(--detector sift or akaze for another)", soft_wrap=True, markup=False)
     cfg = make_preset(preset, **{k: v for k, v in changes.items() if v is not None})
+    for key, why in inert_settings(cfg, parse_params(set_ or [], option="--set")):
+        stderr().print(f"note: --set {key} not used: {why}", soft_wrap=True, markup=False)
     vo_input = open_vo_input(data, kind=kind, calib=calib, timestamps=timestamps, poses=poses,
                              poses_format=poses_format, focal_factor=focal_factor)
     numbers = getattr(vo_input.images, "frames", None)  # the input's own frame numbers (KITTI's file names), if any

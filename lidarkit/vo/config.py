@@ -237,3 +237,24 @@ def preset(name: str, **changes: Any) -> VOConfig:
         raise ConfigError(f"unknown VO preset {name!r}; known: {', '.join(available_presets())}", source="preset")
     cfg = make_config(_PRESETS[name])
     return cfg.updated(**changes) if changes else cfg
+
+
+#: Scale settings of the separate corner path, which KLT on corners (gftt + klt) does not build: its own tracks carry
+#: the depth.
+CORNER_PATH_SETTINGS = ("points", "max_depth_views", "corner_min_angle_deg", "corner_pose")
+
+
+def inert_settings(cfg: VOConfig, keys: Any) -> list[tuple[str, str]]:
+    """``(setting, why)`` for the dotted settings among ``keys`` that ``cfg`` does not use (``--set
+    scale.corner_pose=corners`` left the default pipeline's poses byte-identical without a word)."""
+    own = cfg.matching.method == "klt" and cfg.features.detector == "gftt"
+    notes = []
+    for key in keys:
+        section, _, field = str(key).partition(".")
+        if section != "scale" or field == "mode":
+            continue
+        if cfg.scale.mode != "relative":
+            notes.append((str(key), f"scale mode {cfg.scale.mode}: the scale settings act with relative"))
+        elif field in CORNER_PATH_SETTINGS and own:
+            notes.append((str(key), "KLT on corners carries depth with its own tracks: no separate corner path"))
+    return notes
