@@ -162,6 +162,9 @@ def test_relations_file_and_bad_relations(tmp_path, carmen_logs):
     bad.write_text("1 2 0.1 0 0 0 0 0.01\n3 4 0.1 0 0 0 0.01\n")
     with pytest.raises(DataError, match=r"bad.relations \(line 2\).*expected 8 numbers"):
         Relations.read(bad)
+    bad.write_text("# header\n# more\n1 2 0.1 0 0 0 0 0\n\n3 4 0.1 0 0 0 0 0\n5 6 0.1 0 0.5 0 0 0\n")  # z of the third
+    with pytest.raises(DataError, match=r"bad.relations \(line 6\): z, roll and pitch of a planar relation must be 0 \(relation 3\)"):
+        Relations.read(bad)
     with pytest.raises(DataError, match="relations file not found"):
         CarmenLog(shared_path("carmen_2d", "aces.clf.bz2"), relations=tmp_path / "none.relations")
 

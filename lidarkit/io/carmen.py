@@ -36,7 +36,7 @@ import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.io.base import Scan
-from lidarkit.textfile import read_numeric_table
+from lidarkit.textfile import read_lines, read_numeric_table
 from lidarkit.trajectory import Trajectory
 
 log_ = logging.getLogger(__name__)
@@ -110,10 +110,10 @@ class Relations:
         if len(table) == 0:
             raise DataError("no relations in the file", source=path)
         off_plane = np.flatnonzero(np.abs(table[:, 4:7]).max(axis=1) > 1e-9)
-        if len(off_plane):
-            raise DataError(
-                "z, roll and pitch of a planar relation must be 0 (relation %d)" % (off_plane[0] + 1), source=path
-            )
+        if len(off_plane):  # named by its line, as every other error of the file (the row number misled past comments)
+            rows = [n for n, raw in enumerate(read_lines(path), start=1) if raw.strip() and not raw.strip().startswith("#")]
+            raise DataError(f"z, roll and pitch of a planar relation must be 0 (relation {off_plane[0] + 1})", source=path,
+                            location=f"line {rows[off_plane[0]]}")
         return cls(table[:, 0], table[:, 1], table[:, 2], table[:, 3], table[:, 7], source=str(path))
 
 
