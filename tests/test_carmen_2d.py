@@ -152,6 +152,15 @@ def test_truncated_and_empty_logs(tmp_path, aces_text):
         CarmenLog(odom_only)
     with pytest.raises(DataError, match="file not found"):
         CarmenLog(tmp_path / "missing.clf")
+    # a Latin-1 comment (old logs): the whole log was unreadable ("UnicodeDecodeError ... position 13"); a stray byte
+    # in a number is that line's error
+    latin = tmp_path / "latin.clf"
+    latin.write_bytes("# comment caf\xe9\n".encode("latin-1") + ("\n".join(aces_text[:300]) + "\n").encode())
+    assert len(CarmenLog(latin)) == sum(raw.startswith("FLASER") for raw in aces_text[:300]) > 0
+    stray = next(raw for raw in aces_text[:300] if raw.startswith("FLASER")).replace(" ", " 1\xe9 ", 1).encode("latin-1")
+    latin.write_bytes(stray + b"\n")
+    with pytest.raises(DataError, match=r"latin.clf \(line 1\)"):
+        CarmenLog(latin)
 
 
 def test_relations_file_and_bad_relations(tmp_path, carmen_logs):

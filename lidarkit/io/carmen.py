@@ -69,10 +69,14 @@ def _open_text(path: Path) -> str:
         raise DataError("file not found" if not path.exists() else "not a regular file", source=path)
     opener = {".bz2": bz2.open, ".gz": gzip.open, ".xz": lzma.open}.get(path.suffix.lower(), open)
     try:
-        with opener(path, "rt", encoding="utf-8", errors="strict") as fh:
-            return fh.read()
-    except (OSError, EOFError, UnicodeDecodeError, lzma.LZMAError, zlib.error) as err:
+        with opener(path, "rb") as fh:
+            data = fh.read()
+    except (OSError, EOFError, lzma.LZMAError, zlib.error) as err:
         raise DataError(f"cannot read ({type(err).__name__}: {err})", source=path) from err
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError:  # old logs carry Latin-1 comments: one such byte made the whole log unreadable
+        return data.decode("latin-1")  # (never fails; a stray byte in a number is then that line's error)
 
 
 def yaw_pose_se3(x: np.ndarray, y: np.ndarray, theta: np.ndarray) -> np.ndarray:
