@@ -244,3 +244,22 @@ def test_cli_metrics_json_is_strict_json_with_non_finite_values_as_null(tmp_path
     metrics = _strict_json((tmp_path / "metrics.json").read_text())
     assert metrics["metrics"]["not_a_number"] is None and metrics["metrics"]["per_step"] == [1.5, None, None]
     assert metrics["config"]["n_particles"] == 50
+
+
+def test_a_long_single_run_shows_its_progress(monkeypatch, capsys):
+    """A million particles ran two minutes without a line (only studies and --gif showed progress): a run from
+    PROGRESS_FROM_PARTICLES on draws its steps on stderr, --recorded --fit-q its runs' steps too."""
+    from lidarkit.cli import pf_cmd
+
+    data = shared_path("pf", "burgard_particle_filter")
+    assert pf_cmd.PROGRESS_FROM_PARTICLES == 100_000
+    monkeypatch.setattr(pf_cmd, "PROGRESS_FROM_PARTICLES", 50)  # (the same path, in a second instead of ten)
+    for args, label in (([], "pf run, 50 particles:"), (["--recorded", "--fit-q"], "pf --fit-q (up to 6 runs), 50 particles:")):
+        with pytest.raises(SystemExit) as exc:
+            main(["pf", str(data), "-n", "50", *args])
+        assert exc.value.code in (0, None)
+        err = capsys.readouterr().err
+        assert label in err and "steps" in err, err
+    with pytest.raises(SystemExit):
+        main(["pf", str(data), "-n", "49"])
+    assert "pf run" not in capsys.readouterr().err  # a short run stays quiet

@@ -16,8 +16,9 @@ from __future__ import annotations
 
 import logging
 import time
-from pathlib import Path
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -216,8 +217,10 @@ def run_filter(
     estimators: tuple[str, ...] = ("mean",),
     snapshot_steps: tuple[int, ...] = (),
     nis: bool = False,
+    on_step: Callable[[int, int], None] | None = None,
 ) -> dict[str, Any]:
-    """The filter loop over ``odometry`` ``(T, 3)``: predict, update (if readings), estimate, resample.
+    """The filter loop over ``odometry`` ``(T, 3)``: predict, update (if readings), estimate, resample; ``on_step(done,
+    T)`` after each step (a progress bar: a million particles take minutes).
 
     Returns estimates ``(T+1, 3)`` per estimator (row 0 = the initial particle set), ESS before
     resampling, resample flags, best log-likelihood per step, snapshots and (optionally) NIS values.
@@ -284,6 +287,8 @@ def run_filter(
         resampled[t] = pf.resample()
         n_particles[t + 1] = pf.n
         injected[t] = pf.last_injected if resampled[t] else 0
+        if on_step is not None:
+            on_step(t + 1, T)
     runtime = time.perf_counter() - t0
     n_readings = np.ones(T) if nearest else np.diff(readings.offsets)
     lost = np.flatnonzero(_is_lost(max_ll, n_readings))
@@ -358,6 +363,7 @@ def run_protocol(
     kidnap_at_step: int | None = None,
     kidnap_offset: tuple[float, float, float] = KIDNAP_OFFSET,
     warn_lost: bool = True,
+    on_step: Callable[[int, int], None] | None = None,
     **config_overrides: Any,
 ) -> PFRunResult:
     """Simulate the report's protocol on ``data`` (a LandmarkData) and run the filter once.
@@ -378,7 +384,7 @@ def run_protocol(
     pf = make_filter(data.landmarks.positions_xy, cfg, np.random.default_rng(filter_seq))
     estimators = tuple(estimators) if estimators else (cfg.estimator,)
     readings = sim.nearest if cfg.likelihood == "nearest" else sim.readings
-    out = run_filter(pf, sim.odometry_noisy, readings, estimators=estimators, snapshot_steps=snapshot_steps)
+    out = run_filter(pf, sim.odometry_noisy, readings, estimators=estimators, snapshot_steps=snapshot_steps, on_step=on_step)
     result = PFRunResult(
         config=cfg,
         settings={
@@ -436,6 +442,7 @@ def run_recorded(
     *,
     config: PFConfig | None = None,
     snapshot_steps: tuple[int, ...] = (),
+    on_step: Callable[[int, int], None] | None = None,
     **config_overrides: Any,
 ) -> PFRunResult:
     """Run on the data's own odometry and SENSOR readings; report NIS consistency and distance to dead reckoning."""
@@ -452,7 +459,7 @@ def run_recorded(
         np.asarray(data.step_offsets, dtype=np.int64),
     )
     estimators = tuple(dict.fromkeys((cfg.estimator, "mean", "best")))
-    out = run_filter(pf, odo, readings, estimators=estimators, snapshot_steps=snapshot_steps, nis=True)
+    out = run_filter(pf, odo, readings, estimators=estimators, snapshot_steps=snapshot_steps, nis=True, on_step=on_step)
     dr = integrate_odometry(odo)
     result = PFRunResult(
         config=cfg,
@@ -476,7 +483,8 @@ def run_recorded(
 
 
 def fit_q_recorded(data, n_particles: int | None = None, seed: int = 0, *, config: PFConfig | None = None,
-                   max_rounds: int = 5, **config_overrides: Any) -> tuple[PFRunResult, list[PFRunResult]]:
+                   max_rounds: int = 5, on_step: Callable[[int, int], None] | None = None,
+                   **config_overrides: Any) -> tuple[PFRunResult, list[PFRunResult]]:
     """``--fit-q``: run on the recorded readings, take the ML Q of the innovations, run again with it; repeat
     (the particle spread changes with Q) until the NIS mean is within [1.5, 2.5], the fit repeats itself, or
     ``max_rounds`` re-runs. The last run's ``metrics["q_fit_settled"]`` says whether it got there (its verdict says so
@@ -486,7 +494,7 @@ def fit_q_recorded(data, n_particles: int | None = None, seed: int = 0, *, confi
     """
     from lidarkit.pf.consistency import NIS_CONSISTENT, at_lower_bound, scale_fit
 
-    first = run_recorded(data, n_particles, seed, config=config, **config_overrides)
+    first = run_recorded(data, n_particles, seed, config=config, on_step=on_step, **config_overrides)
     runs: list[PFRunResult] = []
     current = first
     for _ in range(max_rounds):
@@ -499,7 +507,7 @@ def fit_q_recorded(data, n_particles: int | None = None, seed: int = 0, *, confi
         if runs and np.allclose(q_fit, current.settings["q_cov"], rtol=1e-9, atol=0.0):
             break  # the fit gives the Q it ran with: another re-run would repeat this one
         cfg = current.config.replace(q=(float(q_diag[0]), float(q_diag[1])), q_as="variance")
-        current = run_recorded(data, None, seed, config=cfg)
+        current = run_recorded(data, None, seed, config=cfg, on_step=on_step)
         runs.append(current)
         lo, hi = NIS_CONSISTENT
         if lo <= current.metrics["nis_mean"] <= hi:
