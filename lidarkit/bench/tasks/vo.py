@@ -4,9 +4,10 @@ Methods are the VO presets (``lidarkit.vo.available_presets()``: ``lidarkit``, `
 params are dotted-path changes to the preset (``scale.mode: relative``, ``features.detector: orb``), validated
 by ``lidarkit.vo.preset``. The job seed becomes the config's ``seed``. Options: ``max_frames`` (first N
 images), ``align`` (``auto``: SE(3) for ground-truth scale, Sim(3) otherwise; or ``none``/``se3``/``sim3``),
-``smoothed`` (score the Savitzky-Golay smoothed trajectory). Metrics come from ``lidarkit.vo.evaluation`` (the
-``lidarkit vo`` CLI's definitions: ``final_error_m`` is raw for ground-truth scale, aligned otherwise). Images
-are read into memory before the run, so frames/s is the pipeline's speed.
+``smoothed`` (score the Savitzky-Golay smoothed trajectory). Metrics come from ``lidarkit.vo.evaluation``;
+``final_error_m`` is the last position's error after the row's alignment, as APE's (the CLI's final error is raw for
+ground-truth scale: in a table of methods with other scale modes, raw and aligned rows made the best method look 5x
+worse). Images are read into memory before the run, so frames/s is the pipeline's speed.
 """
 
 from __future__ import annotations
@@ -102,7 +103,8 @@ class VisualOdometryTask(Task):
 
             scores = score_vo(est, gt, config.scale.mode, None if options.align == "auto" else options.align)
             align, ape = scores.metrics["align"], scores.ape
-            metrics.update({k: scores.metrics[k] for k in ("ape_rmse_m", "rpe_trans_rmse_m", "final_error_m")})
+            metrics.update({k: scores.metrics[k] for k in ("ape_rmse_m", "rpe_trans_rmse_m")})
+            metrics["final_error_m"] = scores.metrics["final_error_aligned_m"]  # (aligned as APE is, on every row)
             # camera frame: x right, z forward -> the ground plane is x-z
             ref_xz = np.asarray(ape.ref.positions_xyz)[:, [0, 2]]
             est_xz = np.asarray(ape.est_aligned.positions_xyz)[:, [0, 2]]
@@ -127,4 +129,4 @@ def _alignment_labels(align: str | None) -> dict[str, str]:
     if align is None:
         return {}
     text = alignment_label(align)
-    return {"ape_rmse_m": text, "rpe_trans_rmse_m": text}
+    return {"ape_rmse_m": text, "rpe_trans_rmse_m": text, "final_error_m": text}
