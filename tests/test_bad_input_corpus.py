@@ -262,6 +262,13 @@ experiments:
     (SUITE_OK.replace("methods: [random_walk]", "methods: [{name: random_walk, params: {steps: 50}}, {name: random_walk, params: {steps: 50.0}}]"),
      7, "duplicate method 'random_walk'"),
     (SUITE_OK.replace("seeds: [0, 1]", "seeds: [-1]"), 2, "seeds must be >= 0"),
+    # one job written two ways across a method's params and another's grid (1 / 1.0, 50 / "50"): it ran twice, and the
+    # report's pivot kept one of the two rows with one label
+    (SUITE_OK.replace("methods: [random_walk]", "methods: [{name: random_walk, params: {noise_m: 1}}, "
+                      "{name: random_walk, grid: {noise_m: [1.0, 2.0]}}]"), 7,
+     "runs the same job as experiments[0].methods[0] (a value written two ways, e.g. 1 and 1.0)"),
+    (SUITE_OK.replace("methods: [random_walk]", "methods: [{name: random_walk, params: {steps: 50}}, "
+                      "{name: random_walk, params: {steps: '50'}}]"), 7, "runs the same job as experiments[0].methods[0]"),
 ])
 def test_suite_duplicates_are_refused_with_file_and_line(tmp_path, capsys, text, line, reason):
     path = tmp_path / "suite.yaml"

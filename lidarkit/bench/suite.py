@@ -17,7 +17,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, StrictInt, ValidationError, field_validator
 
 from lidarkit.bench.datasets import SAMPLE_PREFIX, dataset_label, resolve_dataset, resolve_option_paths
-from lidarkit.bench.jobs import Job, distinct_labels
+from lidarkit.bench.jobs import Job, canonical_json, distinct_labels
 from lidarkit.bench.tasks import get_task
 from lidarkit.errors import ConfigError, DataError, LidarKitError
 
@@ -284,6 +284,7 @@ def load_suite(path: str | Path, *, skip_unavailable: bool = False, only_tasks: 
     base_dir = path.parent
     jobs: list[Job] = []
     seen: set[str] = set()
+    alike: dict[str, tuple[int, int]] = {}  # a job's spec with its numbers written one way -> (experiment, method) first
     skipped: list[tuple[str, str]] = []
     validated: set[str] = set()
     for i, exp in enumerate(model.experiments):
@@ -368,9 +369,31 @@ def load_suite(path: str | Path, *, skip_unavailable: bool = False, only_tasks: 
                                               source=path, location=locator.location(m_loc)) from None
                         if key in seen:
                             continue
+                        same = canonical_json({**job.spec(), "params": _plain_numbers(params)})
+                        if same in alike:  # 1 and 1.0 (or "50" and 50): one job under two keys, and one report row dropped
+                            raise ConfigError(f"{job.method_label} runs the same job as experiments[{alike[same][0]}].methods"
+                                              f"[{alike[same][1]}] (a value written two ways, e.g. 1 and 1.0): give it once",
+                                              source=path, location=locator.location(m_loc))
+                        alike[same] = (i, j)
                         seen.add(key)
                         jobs.append(job)
     return Suite(name=model.name, path=path, jobs=jobs, description=model.description, skipped=skipped)
+
+
+def _plain_numbers(value: Any) -> Any:
+    """``value`` with every number written one way (1.0 -> 1, "50" -> 50): what the validators make of them."""
+    if isinstance(value, dict):
+        return {k: _plain_numbers(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain_numbers(v) for v in value]
+    if isinstance(value, str):
+        try:
+            value = float(value)
+        except ValueError:
+            return value
+    if isinstance(value, float) and value.is_integer():
+        return int(value)
+    return value
 
 
 def _check(locator: _Locator, loc: tuple[Any, ...], fn: Any, *args: Any) -> None:
