@@ -294,6 +294,7 @@ def test_uninstalled_methods_are_skipped_only_when_asked(tmp_path, monkeypatch):
     from lidarkit.bench.tasks.selftest import SelfTestTask
 
     monkeypatch.setattr(SelfTestTask, "available_methods", lambda self: ["sleep"])  # as if 'burn' were an absent extra
+    monkeypatch.setattr(SelfTestTask, "optional_methods", lambda self: ("burn",))
     path = write(tmp_path, """
         experiments:
           - {name: e, task: selftest, dataset: {kind: synthetic}, methods: [sleep, burn]}
@@ -302,6 +303,13 @@ def test_uninstalled_methods_are_skipped_only_when_asked(tmp_path, monkeypatch):
     suite = load_suite(path, skip_unavailable=True)
     assert [j.method for j in suite.jobs] == ["sleep"]
     assert suite.skipped == [("e: burn", "method 'burn' is not installed (available: sleep)")]
+    # a name that is no optional extra (a typo in a user's demo suite) is validated, not skipped as "not installed"
+    path.write_text(path.read_text().replace("[sleep, burn]", "[sleep, slep]"))
+    with pytest.raises(ConfigError, match="slep"):
+        load_suite(path, skip_unavailable=True)
+    from lidarkit.bench.tasks import get_task
+
+    assert {"small_gicp", "genz"} <= set(get_task("odometry").optional_methods()) | set(get_task("icp_pair").optional_methods())
 
 
 def test_a_pf_suite_scoring_past_the_end_of_its_data_is_refused_before_running(tmp_path):

@@ -121,11 +121,13 @@ def test_odd_sized_first_frame_is_the_one_rejected(sim):
 def test_sequence_image_shape_is_the_majority_of_the_first_readable_frames():
     from lidarkit.vo.pipeline import sequence_image_shape
 
-    a, b = np.zeros((4, 6), np.uint8), np.zeros((5, 7), np.uint8)
-    assert sequence_image_shape([b, a, a, None, b, a]) == (4, 6)
-    assert sequence_image_shape([None, b, a]) == (5, 7)  # tie: the earliest
+    a, b = np.zeros((40, 60), np.uint8), np.zeros((50, 70), np.uint8)
+    assert sequence_image_shape([b, a, a, None, b, a]) == (40, 60)
+    assert sequence_image_shape([None, b, a]) == (50, 70)  # tie: the earliest
     loaded = {}
-    assert sequence_image_shape([a] * 20, loaded) == (4, 6) and sorted(loaded) == [0, 1, 2, 3, 4]
+    assert sequence_image_shape([a] * 20, loaded) == (40, 60) and sorted(loaded) == [0, 1, 2, 3, 4]
+    with pytest.raises(DataError, match="images of 6 x 4 px: too small for feature detection"):
+        sequence_image_shape([np.zeros((4, 6), np.uint8)] * 3)
 
 
 def test_image_of_different_size_is_rejected(sim):

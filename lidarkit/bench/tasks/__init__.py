@@ -72,6 +72,10 @@ class Task:
         """Method names usable here (e.g. registered ICP variants; optional extras may be absent), None if open."""
         return None
 
+    def optional_methods(self) -> tuple[str, ...]:
+        """Method names of optional extras, which a demo skips where they are absent (any other name is validated)."""
+        return ()
+
     def validate_options(self, options: dict[str, Any]) -> None:
         """Raise ConfigError for bad experiment ``options``; called once per experiment before the run."""
         if options:

@@ -96,6 +96,11 @@ class IcpPairTask(Task):
 
         return available_icp()
 
+    def optional_methods(self) -> tuple[str, ...]:
+        from lidarkit.registration.registry import OPTIONAL_VARIANTS
+
+        return tuple(OPTIONAL_VARIANTS)
+
     def validate_options(self, options: dict[str, Any]) -> None:
         opts = options_model(IcpPairOptions, options, "icp_pair")
         if opts.ground_truth_file is not None and (not opts.pairs or len(opts.pairs) != 1):

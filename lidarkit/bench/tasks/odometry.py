@@ -100,6 +100,11 @@ class OdometryTask(Task):
 
         return available_icp()
 
+    def optional_methods(self) -> tuple[str, ...]:
+        from lidarkit.registration.registry import OPTIONAL_VARIANTS
+
+        return tuple(OPTIONAL_VARIANTS)
+
     def validate_options(self, options: dict[str, Any]) -> None:
         options_model(OdometryOptions, options, "odometry")
         if options.get("frames") is not None:  # its syntax, before anything runs (its range is the dataset's)
