@@ -59,3 +59,18 @@ def test_quick_demo_writes_a_complete_report(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["demo", "--quick", "--out", str(out), "--executor", "serial"])
     assert f"{len(records)} already done, 0 run now" in capsys.readouterr().out
+
+
+def test_demo_refuses_quick_with_its_own_suite_and_a_typo_in_it(tmp_path, capsys):
+    """--quick beside --suite was ignored; a user suite's misspelt method read "not installed" and the demo exited 0."""
+    from conftest import cli_exit_code
+
+    suite = tmp_path / "typo.yaml"
+    suite.write_text("name: typo\nexperiments:\n  - task: selftest\n    dataset: {kind: synthetic}\n    methods: [random_walk]\n")
+    assert cli_exit_code(["demo", "--quick", "--suite", str(suite), "--out", str(tmp_path / "d")]) == 1
+    assert "--quick: --quick selects the reduced bundled suite" in capsys.readouterr().err
+    icp = tmp_path / "icp.yaml"
+    icp.write_text('name: t\nexperiments:\n  - task: icp_pair\n    dataset: {kind: folder, path: "sample:kitti_pair"}\n'
+                   "    options: {pairs: [[0, 1]], ground_truth_file: T_target_source.txt}\n    methods: [vanila]\n")
+    assert cli_exit_code(["demo", "--suite", str(icp), "--out", str(tmp_path / "d2")]) == 1
+    assert "unknown ICP method 'vanila'" in capsys.readouterr().err

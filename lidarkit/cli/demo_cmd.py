@@ -10,6 +10,7 @@ import typer
 
 from lidarkit.cli.app import app, stderr, stdout
 from lidarkit.cli.bench_cmd import EXECUTOR_HELP, print_run_summary, run_with_progress, summary_table
+from lidarkit.errors import ConfigError
 
 
 @app.command("demo")
@@ -28,6 +29,9 @@ def demo_command(
     from lidarkit.eval.demo import EVO_REFERENCE_APE_RMSE_M, run_eval_demo
 
     console, err = stdout(), stderr()
+    if quick and suite is not None:  # (--quick picks a bundled suite: with --suite it was ignored without a word)
+        raise ConfigError("--quick selects the reduced bundled suite; with --suite FILE that file runs: give one of them",
+                          source="--quick")
 
     def runner(suite_obj, out, *, executor, workers, force):
         return run_with_progress(suite_obj, out, executor=executor, workers=workers, address=None, force=force)
