@@ -235,6 +235,19 @@ def test_the_simulator_s_kitti_folder_states_its_stamp_instant(tmp_path):
     assert over_folder.metrics["effective"]["estimate_instant"].startswith("mid (the scans' stamps")
     assert over_folder.metrics["ape_translation_se3_m"]["stats"]["rmse"] == pytest.approx(
         over_spec.metrics["ape_translation_se3_m"]["stats"]["rmse"], abs=1e-6)
+    # the folder's own poses.txt named by another path (absolute, or relative to the working folder) keeps its instant:
+    # it read 'not stated' and kiss was scored against the sweep start as if it were its end
+    import os
+
+    from lidarkit.io import open_dataset
+
+    assert open_dataset("kitti", folder, poses_file=str((folder / "poses.txt").resolve())).ground_truth.meta["pose_instant"] == "mid"
+    here = os.getcwd()
+    try:
+        os.chdir(folder)
+        assert open_dataset("kitti", folder.resolve(), poses_file="poses.txt").ground_truth.meta["pose_instant"] == "mid"
+    finally:
+        os.chdir(here)
 
 
 def test_a_pipeline_reporting_the_sweep_start_tracks_as_well_as_one_reporting_its_end():

@@ -441,10 +441,16 @@ class KittiOdometry:
 
     @cached_property
     def _simulated_instant(self) -> str | None:
-        """The sweep instant of poses.txt in a folder written by lidarkit's simulator (sim.yaml), else None (unknown)."""
-        if self.poses_path != self.sequence_dir / "poses.txt":
+        """The sweep instant of poses.txt in a folder written by lidarkit's simulator (sim.yaml), else None (unknown).
+        The paths are compared resolved: the folder's own poses.txt named by another path (absolute, relative) lost its
+        instant, and kiss was scored against the wrong one without a word."""
+        if self.poses_path is None:
             return None
-        return self._simulator_pose_instant
+        try:
+            same = Path(self.poses_path).resolve() == (Path(self.sequence_dir) / "poses.txt").resolve()
+        except OSError:
+            return None
+        return self._simulator_pose_instant if same else None
 
     @cached_property
     def _simulator_pose_instant(self) -> str | None:
