@@ -61,6 +61,12 @@ def test_natural_sort_and_npy_columns(tmp_path, rng):
     assert sorted(["f10", "f9", "F1", "f1a"], key=natural_key) == ["F1", "f1a", "f9", "f10"]
     folder3, _ = _npy_folder(tmp_path / "xyz", rng, names=("a.npy",), ncols=3)
     assert ScanFolder(folder3).read_scan(0).intensity is None
+    # the same scans also saved as .bin: read as twice as many frames, every other one the same scan
+    for name, points in arrays.items():
+        points.astype(np.float32).tofile(folder / name.replace(".npy", ".bin"))
+    with pytest.raises(DataError, match=r"two files for scan 'scan1' \(scan1.bin, scan1.npy\)"):
+        ScanFolder(folder)
+    assert len(ScanFolder(folder, suffixes=".npy")) == 3
 
 
 def test_ply_round_trip_keeps_intensity(tmp_path, rng):

@@ -71,6 +71,12 @@ class ScanFolder:
         )
         if not self.scan_paths:
             raise DataError(f"no scan files ({', '.join(sorted(wanted))})", source=folder)
+        stems: dict[str, Path] = {}
+        for path in self.scan_paths:  # the same scan in two formats was read as two frames (every other step at rest)
+            if path.stem in stems:
+                raise DataError(f"two files for scan {path.stem!r} ({stems[path.stem].name}, {path.name}): keep one, or pick "
+                                "one format with suffixes=", source=folder)
+            stems[path.stem] = path
         self.poses_path = None if poses is None else Path(poses)
         self.poses_format = poses_format
         self._timestamps_s = self._load_timestamps(timestamps)
