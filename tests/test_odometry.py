@@ -371,6 +371,8 @@ def test_empty_dataset_and_empty_selection(rng):
     [
         (np.zeros((0, 3)), r"memory \(frame 2\): empty scan"),
         (DataError("truncated scan", source="000002.bin"), r"memory \(frame 2\): 000002.bin: truncated scan"),
+        # an error that names its file and frame already is not wrapped again ("kt (frame 3): kt/velodyne/... (frame 3)")
+        (DataError("truncated scan", source="000002.bin", location="frame 2"), r"^000002.bin \(frame 2\): truncated scan$"),
         (RuntimeError("boom"), r"memory \(frame 2\): RuntimeError: boom"),
     ],
 )

@@ -82,8 +82,8 @@ def _is_frame_error(err: BaseException) -> bool:
 def _frame_error(err: Exception, dataset_name: str, frame: int) -> LidarKitError:
     """Re-raise an error of frame ``frame`` so that its message names the frame."""
     if isinstance(err, LidarKitError):
-        if err.source == dataset_name and err.location == f"frame {frame}":
-            return err  # names the frame already
+        if err.location == f"frame {frame}":
+            return err  # names the frame already (and its file: wrapped, it read "kt (frame 3): kt/velodyne/000003.bin (frame 3): ...")
         try:
             return type(err)(str(err), source=dataset_name, location=f"frame {frame}")
         except TypeError:  # a subclass with another constructor
