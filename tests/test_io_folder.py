@@ -198,3 +198,18 @@ def test_cut_or_garbled_files_are_refused_not_read_as_garbage(tmp_path, rng):
     (tmp_path / "e.npy").write_bytes(b"\x93NUMPY\x01\x00")
     with pytest.raises(DataError, match=r"e.npy \(frame 0\): not a readable .npy array"):
         read_point_file(tmp_path / "e.npy")
+
+
+def test_the_run_config_records_the_folder_s_stamps_and_suffixes(tmp_path, rng):
+    """Two runs over one folder with other timestamps= files wrote the same config.yaml (only created_utc differed)."""
+    import yaml
+
+    from lidarkit.odometry.settings import reader_settings
+
+    folder, _ = _npy_folder(tmp_path, rng)
+    (tmp_path / "t.txt").write_text("0\n0.1\n0.2\n")
+    options = reader_settings(ScanFolder(folder, timestamps=tmp_path / "t.txt", suffixes=".npy"))
+    assert options["timestamps"] == str((tmp_path / "t.txt").absolute()) and options["suffixes"] == ".npy"
+    assert reader_settings(ScanFolder(folder, timestamps=[0.0, 0.1, 0.2]))["timestamps"] == "3 values given"
+    assert reader_settings(ScanFolder(folder))["timestamps"] is None
+    assert yaml.safe_dump(options)  # plain values

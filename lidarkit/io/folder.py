@@ -79,6 +79,9 @@ class ScanFolder:
             stems[path.stem] = path
         self.poses_path = None if poses is None else Path(poses)
         self.poses_format = poses_format
+        self.suffixes = sorted(wanted)
+        self._timestamps_given = (None if timestamps is None else str(Path(timestamps).absolute())
+                                  if isinstance(timestamps, (str, os.PathLike)) else f"{len(np.ravel(timestamps))} values given")
         self._timestamps_s = self._load_timestamps(timestamps)
         self._ground_truth = self._load_poses()
 
@@ -125,6 +128,13 @@ class ScanFolder:
     def frames(self) -> np.ndarray:
         """``(N,)`` frame indices ``0..N-1`` (position in the sorted file list)."""
         return np.arange(len(self.scan_paths))
+
+    @property
+    def reader_options(self) -> dict:
+        """Where the stamps came from and which files were read, for the run config (two runs over one folder with
+        other timestamps= files had the same config.yaml)."""
+        return {"kind": "folder", "path": str(self.path.absolute()), "timestamps": self._timestamps_given,
+                "suffixes": ",".join(self.suffixes)}
 
     @property
     def timestamps_s(self) -> np.ndarray | None:
