@@ -81,7 +81,7 @@ if _small_gicp is not None:
             assessment (:func:`voxel_order`; None with ``assess=False``); and the local origin the cloud was prepared
             around (None: the origin, see :mod:`lidarkit.registration.local_origin`)."""
             c = self.config
-            settings = (c.downsampling_resolution_m, c.assess)
+            settings = (c.downsampling_resolution_m, c.assess, c.registration_type)
             cached = self._cache.get(points, settings)
             if cached is not None:
                 return cached
@@ -93,7 +93,11 @@ if _small_gicp is not None:
             offset = local_origin.local_offset(points)
             cloud = _small_gicp.voxelgrid_sampling(local_origin.shift(points, offset), c.downsampling_resolution_m, num_threads=c.num_threads)
             tree = _small_gicp.KdTree(cloud, num_threads=c.num_threads)
-            _small_gicp.estimate_covariances(cloud, tree, num_neighbors=10, num_threads=c.num_threads)
+            if c.registration_type == "PLANE_ICP":  # its factor reads normals: with covariances only it had none, and
+                # returned the identity "converged" in 0 iterations (small_gicp.align(points...) estimates both)
+                _small_gicp.estimate_normals_covariances(cloud, tree, num_neighbors=10, num_threads=c.num_threads)
+            else:
+                _small_gicp.estimate_covariances(cloud, tree, num_neighbors=10, num_threads=c.num_threads)
             ordered = rank = None  # only the assessment needs them
             if c.assess:
                 xyz = cloud.points()[:, :3]
