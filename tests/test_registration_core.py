@@ -616,6 +616,19 @@ def test_scipy_tree_settings_for_another_search_are_refused():
     assert get_icp("vanilla", nn_backend="scipy", leafsize=1).config.leafsize == 1
 
 
+def test_exact_search_over_a_full_scan_pair_is_refused_at_once():
+    """knn exact=true on the bundled KITTI pair (3.0e9 point pairs a pass, 41 s each) ran for ten minutes and more."""
+    from lidarkit.errors import RegistrationError
+    from lidarkit.registration.knn import MAX_BRUTE_FORCE_PAIRS
+    from lidarkit.samples import sample_path
+
+    pair = sample_path("kitti_pair")
+    src, dst = np.load(pair / "000095.npy")[:, :3], np.load(pair / "000094.npy")[:, :3]
+    assert float(len(src)) * len(dst) > MAX_BRUTE_FORCE_PAIRS == 2e8
+    with pytest.raises(RegistrationError, match="exact search over .* points is too slow; set voxel_size_m to subsample"):
+        get_icp("knn", exact=True).align(src, dst)
+
+
 def test_a_variant_whose_extra_is_missing_names_the_pip_line(monkeypatch):
     """Without small_gicp installed, '-m small_gicp' read as a typo ("unknown ICP method 'small_gicp'; available: ...")."""
     monkeypatch.delitem(registry_module._VARIANTS, "small_gicp", raising=False)
