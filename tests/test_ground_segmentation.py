@@ -227,6 +227,14 @@ def test_segmenters_are_deterministic_stateless_and_refuse_bad_input(hilly_scans
     from lidarkit.registration.ground_filtered import ground_segmenter
 
     assert ground_segmenter(icp.config).config.sensor_height_m == 2.5  # (it kept 1.73)
+    # a legacy field the chosen method does not read, or given twice, changed nothing without a word
+    with pytest.raises(ConfigError, match=r"sensor_height_m set\(s\) the height / patchworkpp / ransac ground method, not 'local_plane'"):
+        get_icp("ground_filtered", sensor_height_m=5.0)
+    with pytest.raises(ConfigError, match="seed set"):
+        get_icp("ground_filtered", ground_method="height", seed=3)
+    with pytest.raises(ConfigError, match=r"sensor_height_m given both as a field and in ground_params"):
+        get_icp("ground_filtered", ground_method="height", ground_params={"sensor_height_m": 1.73}, sensor_height_m=5.0)
+    assert ground_segmenter(get_icp("ground_filtered", ground_method="ransac", seed=3).config).config.seed == 3
 
 
 def test_planar_ground_filtered_keeps_z_roll_and_pitch_of_the_guess():

@@ -60,6 +60,15 @@ SKIPPED_2D_NOTE = "skipped: 2D scan (all points at one z), no ground to remove"
 TOO_LITTLE_REASON = "too little left after ground removal"
 
 
+#: The legacy fields each ground method reads (field -> its parameter name in ground_params).
+LEGACY_FIELDS_READ = {
+    "height": {"sensor_height_m": "sensor_height_m", "ground_threshold_m": "ground_threshold_m"},
+    "patchworkpp": {"sensor_height_m": "sensor_height_m"},
+    "ransac": {"sensor_height_m": "sensor_height_m", "ransac_distance_m": "distance_threshold_m",
+               "ransac_iterations": "num_iterations", "seed": "seed"},
+}
+
+
 class GroundFilteredConfig(VanillaConfig):
     max_correspondence_distance_m: float | None = Field(
         1.5, gt=0, description="ignore pairs farther apart than this (m): what is left after ground removal can be sparse, and "
@@ -98,22 +107,27 @@ class GroundFilteredConfig(VanillaConfig):
     def _check_segmenter(self) -> GroundFilteredConfig:
         if self.ground_method not in available_ground_segmenters():
             raise ValueError(f"unknown ground_method {self.ground_method!r}; available: {', '.join(available_ground_segmenters())}")
+        # a legacy field the method does not read, or one that ground_params overrides, changed nothing without a word
+        # (sensor_height_m=5 gave the default's pose under local_plane; with ground_params' own it kept 1.73)
+        reads = LEGACY_FIELDS_READ.get(self.ground_method, {})
+        given = sorted(self.model_fields_set & {f for fields in LEGACY_FIELDS_READ.values() for f in fields})
+        unread = [f for f in given if f not in reads]
+        if unread:
+            users = sorted({m for m, fields in LEGACY_FIELDS_READ.items() if set(unread) & set(fields)})
+            raise ValueError(f"{', '.join(unread)} set(s) the {' / '.join(users)} ground method, not {self.ground_method!r} "
+                             f"(its settings go in ground_params)")
+        both = [f for f in given if reads.get(f) in self.ground_params]
+        if both:
+            raise ValueError(f"{', '.join(both)} given both as a field and in ground_params "
+                             f"({', '.join(reads[f] for f in both)}): give it once")
         return self
 
 
 def ground_segmenter(config: GroundFilteredConfig) -> GroundSegmenter:
     """The configured segmenter; the legacy fields fill in the ``height`` / ``ransac`` parameters not given."""
     params = dict(config.ground_params)
-    if config.ground_method == "height":
-        params.setdefault("sensor_height_m", config.sensor_height_m)
-        params.setdefault("ground_threshold_m", config.ground_threshold_m)
-    elif config.ground_method == "patchworkpp":  # (sensor_height_m was not passed on: it kept its 1.73 m)
-        params.setdefault("sensor_height_m", config.sensor_height_m)
-    elif config.ground_method == "ransac":
-        params.setdefault("sensor_height_m", config.sensor_height_m)
-        params.setdefault("distance_threshold_m", config.ransac_distance_m)
-        params.setdefault("num_iterations", config.ransac_iterations)
-        params.setdefault("seed", config.seed)
+    for field, name in LEGACY_FIELDS_READ.get(config.ground_method, {}).items():  # (patchworkpp kept its 1.73 m without)
+        params.setdefault(name, getattr(config, field))
     return get_ground_segmenter(config.ground_method, **params)
 
 
