@@ -28,7 +28,8 @@ def refuse_2d(method: str, source_xyz: np.ndarray, target_xyz: np.ndarray, why: 
         if is_2d_scan(pts):
             raise ConfigError(
                 f"not applicable to 2D scans ({name} cloud has all points at one z): {why}; "
-                "use a point-to-point variant (vanilla, knn, open3d_point_to_point, kiss) or planar=True",
+                "use a point-to-point variant (vanilla or knn, with planar=True for x, y and yaw only; open3d_point_to_point; "
+                "small_gicp with registration_type=ICP; kiss)",
                 source=f"method {method!r}",
             )
 
