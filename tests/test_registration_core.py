@@ -173,6 +173,30 @@ def test_broken_plugin_is_left_out_and_named_when_asked_for(tmp_path, monkeypatc
         reload_plugins()
 
 
+def test_a_plugin_named_like_a_built_in_is_said_to_be_left_out(tmp_path, monkeypatch, caplog):
+    """An entry point named 'vanilla' was dropped without a word (nor listed by --list among the plugins left out);
+    the built-in keeps answering to the name."""
+    from lidarkit.registration.registry import broken_plugins
+
+    site = tmp_path / "site"
+    site.mkdir()
+    (site / "lk_shadow_plugin.py").write_text(PLUGIN_SOURCE)
+    dist = site / "lk-shadow-plugin-0.1.dist-info"
+    dist.mkdir()
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: lk-shadow-plugin\nVersion: 0.1\n")
+    (dist / "entry_points.txt").write_text(f"[{ENTRY_POINT_GROUP}]\nvanilla = lk_shadow_plugin:IdentityICP\n")
+    monkeypatch.syspath_prepend(str(site))
+    try:
+        with caplog.at_level("WARNING", logger="lidarkit.registration.registry"):
+            reload_plugins()
+        assert "ICP plugin 'vanilla' left out: its name is a built-in variant's" in caplog.text
+        assert "rename the entry point" in broken_plugins()["vanilla"]
+        assert type(get_icp("vanilla")).__module__ == "lidarkit.registration.vanilla"
+    finally:
+        monkeypatch.undo()
+        reload_plugins()
+
+
 def test_a_plugin_returning_a_bare_pose_or_a_plain_config_is_refused_naming_it():
     """``_align`` returning a 4x4 array was an AttributeError from lidarkit's internals; a Config that is a plain
     pydantic model was accepted, then failed on its first use."""

@@ -60,6 +60,10 @@ def _load_plugins() -> None:
     _BROKEN.clear()
     for ep in entry_points(group=ENTRY_POINT_GROUP):
         if ep.name in _VARIANTS:
+            builtin = getattr(_VARIANTS[ep.name], "__module__", "").startswith("lidarkit.")
+            if builtin and not ep.value.startswith("lidarkit."):  # (it was dropped without a word, nor listed as left out)
+                _BROKEN[ep.name] = f"its name is a built-in variant's: {ep.value!r} left out (rename the entry point)"
+                log.warning("ICP plugin %r left out: %s", ep.name, _BROKEN[ep.name])
             continue
         try:
             obj = ep.load()
@@ -98,7 +102,7 @@ def get_icp_class(name: str) -> type[Registration]:
     """The class registered as ``name``; unknown names raise ConfigError listing the known ones."""
     if name not in _VARIANTS:
         _load_plugins()
-    if name in _BROKEN:
+    if name in _BROKEN and name not in _VARIANTS:  # (a plugin named like a built-in: the built-in answers)
         raise ConfigError(f"this plugin is installed but could not be loaded: {_BROKEN[name]}", source=f"ICP plugin {name!r}")
     if name in OPTIONAL_VARIANTS and name not in _VARIANTS:  # (it read as a typo: "unknown ICP method 'small_gicp'")
         package, extra = OPTIONAL_VARIANTS[name]
