@@ -812,3 +812,20 @@ def test_nees_and_the_covariance_about_the_local_origin_are_exact_at_utm_coordin
     local_ratio = far.nees(T_true_far) / reference  # (a calibrated covariance moves within 1.3x: NEES within ~1.7x)
     frame_ratio = nees(se3_log(T_true_far @ se3_inverse(far.T_target_source)), far.covariance) / reference
     assert 0.6 < local_ratio < 1.7 and frame_ratio < 0.5  # the frame-origin route: 0.26x (vanilla), 0.39x (small_gicp)
+
+
+def test_nees_and_covariance_about_refuse_what_is_not_a_pose_or_a_point(rng):
+    """A 3x3 raised numpy's matmul error, a NaN pose "SVD did not converge", a scaled pose gave a number, and a NaN
+    origin a NaN matrix without a word."""
+    from lidarkit.errors import ConfigError
+
+    pts = rng.uniform(-10, 10, (400, 3))
+    result = get_icp("vanilla").align(pts + [0.1, 0.0, 0.0], pts)
+    assert result.covariance is not None and np.isfinite(result.nees(np.eye(4)))
+    scaled = np.diag([2.0, 2.0, 2.0, 1.0])
+    for bad in (np.eye(3), np.full((4, 4), np.nan), scaled):
+        with pytest.raises(ConfigError, match="T_target_source_true must be a finite 4x4 rigid transform"):
+            result.nees(bad)
+    for bad in ([np.nan, 0, 0], [1, 2], "abc"):
+        with pytest.raises(ConfigError, match="origin_m must be 3 finite numbers"):
+            result.covariance_about(bad)

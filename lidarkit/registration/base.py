@@ -215,7 +215,12 @@ class RegistrationResult:
         from lidarkit.registration.assessment import COVARIANCE_ORIGIN_KEY
         from lidarkit.registration.covariance import adjoint
 
-        c = np.asarray(origin_m, dtype=np.float64).reshape(3)
+        try:
+            c = np.asarray(origin_m, dtype=np.float64).reshape(3)
+        except (TypeError, ValueError):
+            c = np.full(3, np.nan)
+        if not np.isfinite(c).all():  # (a NaN origin gave a NaN matrix without a word)
+            raise ConfigError(f"origin_m must be 3 finite numbers (m), got {origin_m!r}", source="covariance_about")
         local = self.extra.get(LOCAL_COVARIANCE_KEY)
         at = self.extra.get(COVARIANCE_ORIGIN_KEY)
         if local is not None and at is not None and np.array_equal(c, np.asarray(at, dtype=np.float64)):
@@ -236,10 +241,18 @@ class RegistrationResult:
         from lidarkit.registration.assessment import COVARIANCE_ORIGIN_KEY
         from lidarkit.registration.covariance import nees
 
+        from lidarkit.geometry import is_rotation
+
+        true = np.asarray(T_target_source_true, dtype=np.float64)
+        if true.shape != (4, 4) or not np.isfinite(true).all() or not is_rotation(true[:3, :3]) or not np.allclose(true[3], [0, 0, 0, 1]):
+            # (a 3x3 gave numpy's matmul error, NaN an SVD that did not converge, a scaled pose a number)
+            raise ConfigError(f"T_target_source_true must be a finite 4x4 rigid transform, got shape {true.shape}"
+                              + ("" if true.shape != (4, 4) else " (not finite, or not a rotation with a [0 0 0 1] last row)"),
+                              source="nees")
         c = np.asarray(self.extra.get(COVARIANCE_ORIGIN_KEY, (0.0, 0.0, 0.0)), dtype=np.float64)
         S = np.eye(4)
         S[:3, 3] = c
-        error = se3_inverse(S) @ np.asarray(T_target_source_true, dtype=np.float64) @ se3_inverse(self.T_target_source) @ S
+        error = se3_inverse(S) @ true @ se3_inverse(self.T_target_source) @ S
         return nees(se3_log(error), self.covariance_about(c))
 
     @property
