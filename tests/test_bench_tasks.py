@@ -152,6 +152,29 @@ def test_pf_job_validates_with_the_filter_config_and_sweeps_particles(tmp_path):
     assert a["status"] == "ok", a["error"]
     assert a["metrics"]["mse_m2"] == b["metrics"]["mse_m2"]  # seeded
     assert a["metrics"]["mse_m2"] < 0.2 * a["metrics"]["mse_dead_reckoning_m2"]
+    # the error-over-time plot counts the filter's steps, not seconds (its axis read "time [s]")
+    assert a["series"]["error_over_time"]["t_label"] == "step"
+    import matplotlib.axes
+
+    from lidarkit.bench.report import build_report
+    from lidarkit.bench.results import make_record, write_result
+
+    out = tmp_path / "results"
+    job = Job("pf", "e", "fr", spec, "particle_filter", {"n_particles": 200}, seed=1)
+    write_result(out, make_record(job, job.key(), "test", a))
+    labels = []
+    original = matplotlib.axes.Axes.set_xlabel
+
+    def record(self, label, *args, **kwargs):
+        labels.append(label)
+        return original(self, label, *args, **kwargs)
+
+    matplotlib.axes.Axes.set_xlabel = record
+    try:
+        build_report(out)
+    finally:
+        matplotlib.axes.Axes.set_xlabel = original
+    assert "step" in labels and "time [s]" not in labels
 
 
 def test_vo_job_validates_presets_and_matches_a_direct_run(tmp_path):

@@ -278,12 +278,13 @@ def make_plots(records: list[dict[str, Any]]) -> list[Plot]:
         chosen, left_out = _first_ok_per_method(items, "error_over_time")
         if chosen:
             fig, ax = plt.subplots(figsize=(6, 3.2))
-            ylabel = "error"
+            ylabel, xlabel = "error", "time [s]"
             for label, r in chosen.items():
                 s = r["series"]["error_over_time"]
                 ax.plot(s["t"], s["error"], lw=1.2, label=label)
                 ylabel = s.get("label", ylabel)
-            ax.set_xlabel("time [s]")
+                xlabel = s.get("t_label", xlabel)  # (a particle filter's steps were labelled seconds)
+            ax.set_xlabel(xlabel)
             ax.set_ylabel(ylabel)
             ax.legend(fontsize=7)
             ax.set_title(f"error over time: {where}", fontsize=9)

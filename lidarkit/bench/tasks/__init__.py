@@ -43,7 +43,7 @@ class TaskOutput:
     ``metrics``: scalar floats (names from ``Task.metrics``, extra ones allowed);
     ``series``: small JSON-ready arrays for plots, by convention
     ``trajectory_xy`` = ``{"ref": [[x, y], ...], "est": [[x, y], ...]}`` (metres),
-    ``error_over_time`` = ``{"t": [...], "error": [...], "label": str}``,
+    ``error_over_time`` = ``{"t": [...], "error": [...], "label": str}`` (and ``"t_label"`` when ``t`` is not seconds),
     ``rmse_history`` = ``[...]`` (one value per ICP iteration);
     ``info``: anything else worth recording (resolved config, counts).
     """

@@ -98,6 +98,7 @@ class ParticleFilterTask(Task):
         errors = np.linalg.norm(est_xy - gt_xy, axis=1)
         series = {
             "trajectory_xy": {"ref": gt_xy.round(4).tolist(), "est": est_xy.round(4).tolist()},
-            "error_over_time": {"t": np.arange(len(errors), dtype=float).tolist(), "error": errors.round(6).tolist(), "label": "position error [m] (t = step)"},
+            "error_over_time": {"t": np.arange(len(errors), dtype=float).tolist(), "error": errors.round(6).tolist(), "label": "position error [m]",
+                                "t_label": "step"},
         }
         return TaskOutput(metrics=metrics, series=series, info={"run": result.to_dict(), "metric_alignment": {"ape_rmse_m": "unaligned"}})

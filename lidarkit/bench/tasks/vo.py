@@ -112,7 +112,7 @@ class VisualOdometryTask(Task):
             series = {
                 "trajectory_xy": {"ref": ref_xz.round(4).tolist(), "est": est_xz.round(4).tolist()},
                 "error_over_time": {"t": np.round(t, 4).tolist(), "error": np.round(ape.errors, 6).tolist(),
-                                    "label": f"APE ({align} aligned) [m]"},
+                                    "label": f"APE ({align} aligned) [m]", **({"t_label": "frame"} if timestamps is None else {})},
             }
             info_align = align
         else:
