@@ -319,6 +319,8 @@ def test_innovation_gate_config():
         PFConfig.make(innovation_gate=-1.0)
     with pytest.raises(ConfigError, match="init_mean: values must be finite"):  # (331 weight resets, then an error on the estimate)
         PFConfig.make(init_mean=(float("nan"), 0.0, 0.0))
+    with pytest.raises(ConfigError, match="unknown setting 'n_particle'; valid: .*n_particles"):  # (no valid name was listed)
+        PFConfig.make(n_particle=10)
 
 
 def test_kld_with_augmented_mcl_counts_the_belief_not_the_injections(stachniss):

@@ -208,6 +208,9 @@ class PFConfig(BaseModel):
         except ValidationError as err:
             first = err.errors()[0]
             field = ".".join(str(p) for p in first.get("loc", ()))
+            if first.get("type") == "extra_forbidden":  # (it said "Extra inputs are not permitted", naming no valid one)
+                raise ConfigError(f"unknown setting {field!r}; valid: {', '.join(sorted(cls.model_fields))}",
+                                  source="pf config") from None
             msg = str(first.get("msg", "invalid value")).removeprefix("Value error, ")
             if field and "got" not in msg:  # (a rule across fields names its values itself: no dump of the config)
                 msg = f"{msg} (got {first.get('input')!r})"
