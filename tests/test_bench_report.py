@@ -147,6 +147,9 @@ def test_report_cli(results_dir, capsys):
 def test_report_on_a_folder_without_results(tmp_path):
     with pytest.raises(DataError, match="not a bench results folder"):
         build_report(tmp_path)
+    (tmp_path / "suite.json").write_text("{}")  # a run stopped before its first job finished: not "not a results folder"
+    with pytest.raises(DataError, match="no job has finished in this results folder yet .* run the suite again to resume"):
+        build_report(tmp_path)
     (tmp_path / "jobs").mkdir()
     (tmp_path / "jobs" / "broken.json").write_text("{not json")
     with pytest.raises(DataError, match="no readable job results"):

@@ -697,7 +697,7 @@ def build_report(
         records = [r for r in records if r["key"] in only_keys]
     records = latest_per_job(records)
     if not records:
-        raise DataError("no readable job results in jobs/" + (" for the jobs of suite.json (every_result: all of them)" if suite_jobs else ""),
+        raise DataError("no readable job results in jobs/" + (" for the jobs of suite.json (--all, or every_result=True: all of them)" if suite_jobs else ""),
                         source=out_dir)
     if title is None:
         title = _suite_title(manifest)

@@ -23,6 +23,9 @@ def results_folder(path: str | os.PathLike) -> Path:
 
     path = Path(path)
     if not (path / JOBS_DIR).is_dir():
+        if (path / "suite.json").is_file():  # a run stopped before its first job finished: a results folder all the same
+            raise DataError("no job has finished in this results folder yet (its run stopped before the first): run the "
+                            "suite again to resume", source=path)
         raise DataError("not a bench results folder (no jobs/ inside)" if path.exists() else "folder not found", source=path)
     return path
 
