@@ -415,3 +415,27 @@ def test_one_seed_has_no_spread_and_an_unreported_count_is_not_zero(tmp_path):
     assert rows[("kiss", "iterations")]["mean"] == "" and rows[("kiss", "iterations")]["median"] == ""
     vanilla = rows[("vanilla", "iterations")]
     assert float(vanilla["mean"]) > 0 and vanilla["std"] == "" and vanilla["ci95_low"] == "" and vanilla["n"] == "1"
+
+
+def test_lists_cut_short_say_how_many_more(tmp_path, capsys):
+    """130 job warnings showed the first 100 and 25 failed jobs the first 20, each without a word of the rest."""
+    from conftest import cli_exit_code
+
+    suite = tmp_path / "many.yaml"
+    suite.write_text(textwrap.dedent("""
+        name: many
+        seeds: 25
+        experiments:
+          - task: selftest
+            dataset: {kind: synthetic}
+            methods: [{name: fail}]
+          - task: selftest
+            dataset: {kind: synthetic}
+            methods: [{name: sleep, params: {seconds: 0.0, log_warning: careful}}]
+            seeds: 110
+    """))
+    assert cli_exit_code(["bench", str(suite), "--out", str(tmp_path / "r"), "--executor", "serial"]) == 0
+    out = " ".join(capsys.readouterr().out.split())
+    assert "... and 5 more failed jobs (the report lists every one)" in out
+    text = (tmp_path / "r" / "report.md").read_text()
+    assert "and 10 more job warnings" in text

@@ -32,6 +32,9 @@ from lidarkit.eval.statistics import summarize
 
 log = logging.getLogger(__name__)
 
+#: Job warnings listed in a report (the rest are counted).
+MAX_LISTED_WARNINGS = 100
+
 MAX_LINES_PER_PLOT = 8
 
 
@@ -709,13 +712,17 @@ def build_report(
                     skipped=_skipped(manifest), n_expected=len(expected), n_left_out=n_all - len(records),
                     not_run=[_label({"job": spec}) + (" (its result file cannot be read: see the log)" if k in unreadable else "")
                              for k, spec in missing.items()], n_unreadable=len(unreadable))
+    n_warnings = 0
     for r in records:
         for message in r.get("warnings") or []:
-            if len(report.warnings) < 100:
+            n_warnings += 1
+            if len(report.warnings) < MAX_LISTED_WARNINGS:
                 report.warnings.append((_label(r), message))
         if r.get("status") != "ok":
             err = r.get("error") or {}
             report.failures.append({"key": r["key"], "label": _label(r), "error": f"{err.get('type')}: {err.get('message')}"})
+    if n_warnings > MAX_LISTED_WARNINGS:  # (the list stopped at 100 without a word)
+        report.warnings.append(("...", f"and {n_warnings - MAX_LISTED_WARNINGS} more job warnings (each job's in jobs/<key>.json)"))
     if plots:
         report.plots = make_plots(records)
         for p in report.plots:

@@ -106,6 +106,8 @@ def print_run_summary(summary) -> None:
               f"({summary.ok} ok, {summary.failed} failed) in {summary.wall_s:.1f} s", soft_wrap=True)
     for key, label, error in summary.failures[:20]:
         out.print(f"  failed {key}: {label}: {error}", soft_wrap=True)
+    if len(summary.failures) > 20:  # (the list stopped at 20 without a word)
+        out.print(f"  ... and {len(summary.failures) - 20} more failed jobs (the report lists every one)", soft_wrap=True)
 
 
 def summary_table(report, max_metrics: int = 2) -> list[Table]:
