@@ -204,6 +204,10 @@ def test_spec_string():
         open_sim("sim:forest")
     with pytest.raises(ConfigError, match="n_frames"):
         open_sim("sim:street?frames=-1")
+    with pytest.raises(ConfigError, match=r"n_frames is given twice \(as frames and n_frames\)"):  # ("(as n_frames)")
+        open_sim("sim:street?frames=4&n_frames=5")
+    with pytest.raises(ConfigError, match=r"scene is given twice \(as sim:street and scene\)"):
+        open_sim("sim:street?scene=open")
 
 
 def test_export_kitti_round_trip(tmp_path):

@@ -660,11 +660,13 @@ def open_sim(spec: str) -> SimulatedLidarSequence:
         "instant": "pose_instant",
         "speed": "speed_mps",
     }
+    given_as: dict[str, str] = {"scene": f"sim:{params['scene']}"}
     for key, value in parse_kv(query, option="simulator option").items():
         name = aliases.get(key, key)
-        if name in params:
-            raise ConfigError(f"{name} is given twice (as {key})", source=spec)
+        if name in params:  # (it named the second spelling only: "n_frames is given twice (as n_frames)")
+            raise ConfigError(f"{name} is given twice (as {given_as[name]} and {key})", source=spec)
         params[name] = value
+        given_as[name] = key
     try:
         return SimulatedLidarSequence(**params)
     except ConfigError as err:
