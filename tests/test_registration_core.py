@@ -126,11 +126,11 @@ PLUGIN_SOURCE = textwrap.dedent(
 )
 
 
-def _install_dist_info(site, monkeypatch, name, target):
+def _install_dist_info(site, monkeypatch, name, target, entry_name=None):
     dist = site / f"{name}-0.1.dist-info"
     dist.mkdir(parents=True)
     (dist / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {name}\nVersion: 0.1\n")
-    (dist / "entry_points.txt").write_text(f"[{ENTRY_POINT_GROUP}]\n{name.replace('-', '_')} = {target}\n")
+    (dist / "entry_points.txt").write_text(f"[{ENTRY_POINT_GROUP}]\n{entry_name or name.replace('-', '_')} = {target}\n")
     monkeypatch.syspath_prepend(str(site))
 
 
@@ -181,11 +181,7 @@ def test_a_plugin_named_like_a_built_in_is_said_to_be_left_out(tmp_path, monkeyp
     site = tmp_path / "site"
     site.mkdir()
     (site / "lk_shadow_plugin.py").write_text(PLUGIN_SOURCE)
-    dist = site / "lk-shadow-plugin-0.1.dist-info"
-    dist.mkdir()
-    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: lk-shadow-plugin\nVersion: 0.1\n")
-    (dist / "entry_points.txt").write_text(f"[{ENTRY_POINT_GROUP}]\nvanilla = lk_shadow_plugin:IdentityICP\n")
-    monkeypatch.syspath_prepend(str(site))
+    _install_dist_info(site, monkeypatch, "lk-shadow-plugin", "lk_shadow_plugin:IdentityICP", entry_name="vanilla")
     try:
         with caplog.at_level("WARNING", logger="lidarkit.registration.registry"):
             reload_plugins()
