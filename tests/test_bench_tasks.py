@@ -249,3 +249,18 @@ def test_icp_pair_on_the_bundled_pair_with_seeded_initial_perturbation(tmp_path)
     with pytest.raises(DataError, match="missing.txt") as info:
         load_suite(bad)
     assert "experiments[0].dataset" in str(info.value)
+
+
+def test_a_kitti_sequence_without_the_data_a_task_reads_is_refused_before_running(tmp_path):
+    """Odometry on an image-only sequence, VO on a scan-only one: the dry run passed and every job then failed."""
+    images, scans = shared_path("kitti_images", "sequences", "06"), shared_path("kitti_odometry", "sequences", "00")
+    for task, folder, method, what in (("odometry", images, "vanilla", "scans"), ("vo", scans, "lidarkit", "images")):
+        path = write(tmp_path, f"""
+            experiments:
+              - task: {task}
+                dataset: {{kind: kitti, path: "{folder}"}}
+                methods: [{method}]
+            """)
+        with pytest.raises(ConfigError, match=f"the KITTI sequence .* has no {what}") as info:
+            load_suite(path)
+        assert "experiments[0].dataset" in str(info.value)

@@ -106,3 +106,16 @@ def seeded_dataset(job: Job) -> dict[str, Any]:
     if job.dataset.get("kind") == "sim_lidar" and "seed" not in job.dataset:
         return {**job.dataset, "seed": int(job.seed)}
     return job.dataset
+
+
+def require_kitti_data(dataset: dict[str, Any], what: str) -> None:
+    """A KITTI dataset spec whose sequence lacks the ``what`` (``"scans"`` or ``"images"``) a task reads is a ConfigError
+    before anything runs (every job failed with "sequence has no scans", exit 0). Other kinds are left to their run:
+    opening them can cost (a simulator builds its scene, a bag is indexed)."""
+    if dataset.get("kind") != "kitti":
+        return
+    sequence = open_dataset_spec(dataset)
+    paths = getattr(sequence, "scan_paths" if what == "scans" else "image_paths", None)
+    if paths is not None and not paths:
+        folder = getattr(sequence, "sequence_dir", dataset.get("path"))
+        raise ConfigError(f"the KITTI sequence {folder} has no {what} (velodyne/ for scans, image_0/ for images)", source="dataset")

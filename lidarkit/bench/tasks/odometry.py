@@ -15,7 +15,7 @@ from pydantic import BaseModel, ConfigDict
 
 from lidarkit.bench.jobs import Job
 from lidarkit.bench.tasks import Metric, Task, TaskOutput, import_module_for_task
-from lidarkit.bench.tasks._datasets import check_reader_options, open_dataset_spec, options_model, seeded_dataset
+from lidarkit.bench.tasks._datasets import check_reader_options, open_dataset_spec, options_model, require_kitti_data, seeded_dataset
 from lidarkit.errors import ConfigError
 
 MAX_SERIES_POINTS = 2000
@@ -115,6 +115,7 @@ class OdometryTask(Task):
 
     def validate_dataset(self, dataset: dict[str, Any], options: dict[str, Any]) -> None:
         check_reader_options(dataset)
+        require_kitti_data(dataset, "scans")
 
     def validate(self, method: str, params: dict[str, Any], dataset: dict[str, Any], options: dict[str, Any]) -> None:
         from lidarkit.registration import get_icp

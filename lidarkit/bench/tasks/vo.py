@@ -19,7 +19,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from lidarkit.bench.jobs import Job
 from lidarkit.bench.tasks import Metric, Task, TaskOutput, import_module_for_task
-from lidarkit.bench.tasks._datasets import check_reader_options, open_dataset_spec, options_model
+from lidarkit.bench.tasks._datasets import check_reader_options, open_dataset_spec, options_model, require_kitti_data
 from lidarkit.errors import ConfigError
 
 
@@ -73,6 +73,7 @@ class VisualOdometryTask(Task):
 
     def validate_dataset(self, dataset: dict[str, Any], options: dict[str, Any]) -> None:
         check_reader_options(dataset)
+        require_kitti_data(dataset, "images")
 
     def run(self, job: Job) -> TaskOutput:
         vo = _vo_api()
