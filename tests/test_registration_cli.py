@@ -148,3 +148,22 @@ def test_a_folder_given_as_a_cloud_and_a_missing_results_folder_say_so(tmp_path,
 
     assert cli_exit_code(["report", str(tmp_path / "nope")]) == 1
     assert "nope: folder not found" in capsys.readouterr().err  # was "not a bench results folder (no jobs/ inside)"
+
+
+def test_the_sigma_row_of_a_georeferenced_pair_is_about_the_target_s_sensor(tmp_path, capsys):
+    """The bundled pair moved to UTM coordinates: the row showed the covariance about the frame's origin, where a
+    rotation's lever arm is kilometres (t 355 / 39.5 / 1740 m); it is the one about the target's sensor, and says so."""
+    pair = sample_path("kitti_pair")
+    offset = np.array([500000.0, 4500000.0, 100.0])
+    for name in ("000094", "000095"):
+        points = np.load(pair / f"{name}.npy")
+        points[:, :3] += offset
+        np.save(tmp_path / f"{name}.npy", points)
+    code, out, err = run_cli(capsys, str(tmp_path / "000095.npy"), str(tmp_path / "000094.npy"), "-m", "vanilla")
+    assert code == 0, err
+    text = " ".join(out.replace("│", " ").split())
+    assert "1-sigma (m / deg, about 5000" in text
+    t_sigma = [float(v) for v in text.split(" t ")[1].split(" r ")[0].split()[:3]]
+    assert max(t_sigma) < 0.05  # centimetres, not the frame-origin kilometres
+    code, out, _ = run_cli(capsys, str(pair / "000095.npy"), str(pair / "000094.npy"), "-m", "vanilla")
+    assert "1-sigma (m / deg) " in " ".join(out.replace("│", " ").split()) + " "

@@ -129,8 +129,15 @@ def _result_table(result, source: Path, target: Path) -> Table:
     if deg.weak_directions:
         table.add_row("degenerate directions", "; ".join(deg.weak_directions) + " (sensor frame of the target)")
     if result.covariance is not None:
-        sigma = np.sqrt(np.clip(np.diag(result.covariance), 0, None))
-        table.add_row("1-sigma (m / deg)", "t " + " ".join(f"{v:.3g}" for v in sigma[:3]) + "  r " + " ".join(f"{np.degrees(v):.3g}" for v in sigma[3:]))
+        from lidarkit.registration.assessment import COVARIANCE_ORIGIN_KEY
+
+        origin = result.extra.get(COVARIANCE_ORIGIN_KEY)
+        # clouds far from their frame's origin (UTM): about that origin a rotation's lever arm is kilometres and the
+        # translation sigmas read 355 / 39.5 / 1740 m; about the target's sensor they are the registration's own
+        covariance = result.covariance if origin is None else result.covariance_about(origin)
+        sigma = np.sqrt(np.clip(np.diag(covariance), 0, None))
+        label = "1-sigma (m / deg)" if origin is None else "1-sigma (m / deg, about " + " ".join(f"{v:.1f}" for v in origin) + ")"
+        table.add_row(label, "t " + " ".join(f"{v:.3g}" for v in sigma[:3]) + "  r " + " ".join(f"{np.degrees(v):.3g}" for v in sigma[3:]))
     return table
 
 
