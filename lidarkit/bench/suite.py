@@ -213,14 +213,20 @@ def _count_jobs(model: SuiteModel) -> int:
     return total
 
 
-def _same_value(value: Any) -> Any:
-    """``value`` with whole floats as ints (``100.0`` and ``100`` make one job), recursively."""
+def _same_value(value: Any, strings: bool = False) -> Any:
+    """``value`` with whole floats as ints (``100.0`` and ``100`` make one job), recursively; ``strings``: numeric strings
+    as numbers too (``"50"`` and ``50``: what the validators make of them)."""
+    if strings and isinstance(value, str):
+        try:
+            value = float(value)
+        except ValueError:
+            return value
     if isinstance(value, float) and value.is_integer():
         return int(value)
     if isinstance(value, dict):
-        return {k: _same_value(v) for k, v in value.items()}
+        return {k: _same_value(v, strings) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_same_value(v) for v in value]
+        return [_same_value(v, strings) for v in value]
     return value
 
 
@@ -370,7 +376,7 @@ def load_suite(path: str | Path, *, skip_unavailable: bool = False, only_tasks: 
                                               source=path, location=locator.location(m_loc)) from None
                         if key in seen:
                             continue
-                        same = canonical_json({**job.spec(), "params": _plain_numbers(params)})
+                        same = canonical_json({**job.spec(), "params": _same_value(params, strings=True)})
                         if same in alike:  # 1 and 1.0 (or "50" and 50): one job under two keys, and one report row dropped
                             raise ConfigError(f"{job.method_label} runs the same job as experiments[{alike[same][0]}].methods"
                                               f"[{alike[same][1]}] (a value written two ways, e.g. 1 and 1.0): give it once",
@@ -379,22 +385,6 @@ def load_suite(path: str | Path, *, skip_unavailable: bool = False, only_tasks: 
                         seen.add(key)
                         jobs.append(job)
     return Suite(name=model.name, path=path, jobs=jobs, description=model.description, skipped=skipped)
-
-
-def _plain_numbers(value: Any) -> Any:
-    """``value`` with every number written one way (1.0 -> 1, "50" -> 50): what the validators make of them."""
-    if isinstance(value, dict):
-        return {k: _plain_numbers(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_plain_numbers(v) for v in value]
-    if isinstance(value, str):
-        try:
-            value = float(value)
-        except ValueError:
-            return value
-    if isinstance(value, float) and value.is_integer():
-        return int(value)
-    return value
 
 
 def _check(locator: _Locator, loc: tuple[Any, ...], fn: Any, *args: Any) -> None:
