@@ -81,7 +81,8 @@ def vo_command(
         "features.max_features": features, "scale.mode": scale, "sanity.enabled": sanity, "geometry.refine": refine,
         "seed": seed,
     }
-    changes.update(parse_params(set_ or [], option="--set"))
+    settings = parse_params(set_ or [], option="--set")
+    changes.update(settings)
     if matcher in ("bf_cross", "knn_ratio") and changes.get("features.detector") is None:
         # descriptor matching needs a detector with descriptors: the preset's own if it has them (report_sift keeps
         # SIFT), else ORB, said
@@ -91,7 +92,7 @@ def vo_command(
             stderr().print(f"note: --matcher {matcher} needs descriptors, which {kept} has none of: detector orb "
                            "(--detector sift or akaze for another)", soft_wrap=True, markup=False)
     cfg = make_preset(preset, **{k: v for k, v in changes.items() if v is not None})
-    for key, why in inert_settings(cfg, parse_params(set_ or [], option="--set")):
+    for key, why in inert_settings(cfg, settings):
         stderr().print(f"note: --set {key} not used: {why}", soft_wrap=True, markup=False)
     vo_input = open_vo_input(data, kind=kind, calib=calib, timestamps=timestamps, poses=poses,
                              poses_format=poses_format, focal_factor=focal_factor)
