@@ -233,8 +233,8 @@ def motion_deviation(poses_se3: np.ndarray, times_s: np.ndarray | None, config: 
     dev_r[2:] = np.degrees((predicted_r.inv() * Rotation.from_matrix(rel[1:, :3, :3])).magnitude())
     # intervals that cannot time the motion (stamps of delivery, not capture: Intel's CARMEN log has 109 frames 0.1-5 ms
     # after the previous one, and scaled the prediction 483-fold after one): not checked for motion
-    untimed = ~((dt[2:] >= MIN_INTERVAL_FRACTION * np.median(dt[1:])) & (dt[1:-1] >= MIN_INTERVAL_FRACTION * np.median(dt[1:]))
-                & (scale <= MAX_INTERVAL_RATIO) & (scale >= 1.0 / MAX_INTERVAL_RATIO))
+    shortest = MIN_INTERVAL_FRACTION * np.median(dt[1:])
+    untimed = ~((dt[2:] >= shortest) & (dt[1:-1] >= shortest) & (scale <= MAX_INTERVAL_RATIO) & (scale >= 1.0 / MAX_INTERVAL_RATIO))
     dev_t[2:][untimed] = np.nan
     dev_r[2:][untimed] = np.nan
     return dev_t, dev_r, dt
