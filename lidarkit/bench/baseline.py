@@ -428,7 +428,7 @@ def _pinned_job_problem(job: Any) -> str:
     for metric in job["checked"]:
         for where in ("metrics", "bands"):
             value = job[where].get(metric) if isinstance(metric, str) else None
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            if not _finite_number(value):
                 return f"checks {metric!r} but its {where[:-1]} is {value!r}, not a finite number"
         if job["bands"][metric] < 0:
             return f"band of {metric!r} is negative ({job['bands'][metric]!r})"
