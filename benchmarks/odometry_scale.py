@@ -1,7 +1,7 @@
 """KITTI-length odometry: frame rate and peak memory over a 4541-sweep simulated sequence read from disk.
 
-The benchmark writes the sequence itself (KITTI layout, lidarkit's simulator: street scene, 32 beams x 360
-columns, ~0.15 MB per sweep, under 1 GB in all; never committed) and runs each of these in its own process,
+The benchmark writes the sequence itself (KITTI layout, lidarkit's simulator: street scene, by default 32 beams x 360
+columns, ~0.15 MB per sweep, under 1 GB in all; ``--beams``/``--azimuths`` for another sensor; never committed) and runs each of these in its own process,
 one after the other, on the same files:
 
 * ``lidarkit:kiss``: ``lidarkit.odometry.run`` (reader thread + kiss through lidarkit);
@@ -19,7 +19,7 @@ at the end (4541, after the run's own end work: metrics, trajectory). Ratios are
 same run. Acceptance (issue 10): peak RSS at 4541 within 1.2x of 500 (plus the trajectory's size), lidarkit
 kiss >= 0.95x kiss-icp's pipeline, lidarkit small_gicp >= 0.9x small_gicp's own loop.
 
-    nice -n 10 .venv/bin/python benchmarks/odometry_scale.py [--frames 4541] [--data /tmp/lidarkit_scale] [--keep-data]
+    nice -n 10 .venv/bin/python benchmarks/odometry_scale.py [--frames 4541] [--beams 32 --azimuths 360] [--data /tmp/lidarkit_scale] [--keep-data]
 
 Writes ``benchmarks/results/odometry/odometry_scale[_TAG].{md,json}`` (after every runner, so an interrupted run
 keeps the runners it finished).
@@ -157,12 +157,20 @@ def make_data(data: Path, n: int) -> float:
     from lidarkit.sim.lidar import SimulatedLidarSequence, export_kitti
 
     done = data / "velodyne" / f"{n - 1:06d}.bin"
-    if not (done.is_file() and (data / "sim.yaml").is_file()):
+    if not (done.is_file() and (data / "sim.yaml").is_file() and _same_sensor(data / "sim.yaml")):
         shutil.rmtree(data, ignore_errors=True)
         t0 = time.perf_counter()
         export_kitti(SimulatedLidarSequence(n_frames=n, **SIM), data)
         print(f"wrote {n} sweeps to {data} in {time.perf_counter() - t0:.0f} s", flush=True)
     return sum(p.stat().st_size for p in data.rglob("*") if p.is_file()) / 1e9
+
+
+def _same_sensor(sim_yaml: Path) -> bool:
+    """Whether the sequence there was written with this run's sensor (a folder of another size is written again)."""
+    import yaml
+
+    written = yaml.safe_load(sim_yaml.read_text()) or {}
+    return all(written.get(key) == SIM[key] for key in ("n_beams", "n_azimuths", "scene", "seed"))
 
 
 def main() -> None:
@@ -175,8 +183,11 @@ def main() -> None:
     parser.add_argument("--interleaved", type=int, default=0, metavar="N",
                         help="instead: frame-rate ratios from N-frame runs, lidarkit and library alternately (--repeats each)")
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--beams", type=int, default=SIM["n_beams"], help="the simulated sensor's rows (default %(default)s)")
+    parser.add_argument("--azimuths", type=int, default=SIM["n_azimuths"], help="its columns, rays a row per sweep (default %(default)s)")
     parser.add_argument("--child", help=argparse.SUPPRESS)
     args = parser.parse_args()
+    SIM.update(n_beams=args.beams, n_azimuths=args.azimuths)
     if args.child:
         print(json.dumps(child(args.child, args.data, args.frames)))
         return
@@ -228,13 +239,15 @@ def interleaved(args, size_gb: float) -> None:
         ratios[f"{a} / {b}"] = {"median_ratio": float(np.median(np.divide(side[a], side[b]))), "ratios": list(np.divide(side[a], side[b]))}
     command = _command(args)
     payload = {"date_utc": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"), "machine": describe_machine(machine_info()),
-               "command": command, "frames_per_run": args.interleaved, "repeats": args.repeats, "loop_fps": fps, "ratios": ratios}
+               "command": command, "sim": SIM, "data_size_gb": size_gb, "frames_per_run": args.interleaved, "repeats": args.repeats,
+               "loop_fps": fps, "ratios": ratios}
     stem = "odometry_scale_interleaved" + (f"_{args.tag}" if args.tag else "")
     RESULTS.mkdir(parents=True, exist_ok=True)
     atomic.write_text(RESULTS / f"{stem}.json", json.dumps(payload, indent=2) + "\n")
     lines = ["# Odometry frame rate, lidarkit / library, interleaved short runs (issue 10)", "",
              f"{payload['date_utc']} on {payload['machine']}; `{command}`", "",
-             f"{args.interleaved}-frame runs from disk (the sequence of odometry_scale.md), each in its own process, lidarkit "
+             f"{args.interleaved}-frame runs from disk ({SIM['n_beams']}x{SIM['n_azimuths']}-ray simulated street sweeps, "
+             f"{size_gb / args.frames * 1e3:.2f} MB each), each in its own process, lidarkit "
              f"and the library alternately, {args.repeats} times; loop frame rate (reading + registration).", "",
              "| ratio | median | per repeat |", "|---|---|---|"]
     for name, v in ratios.items():
