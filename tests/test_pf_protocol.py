@@ -263,3 +263,27 @@ def test_a_long_single_run_shows_its_progress(monkeypatch, capsys):
     with pytest.raises(SystemExit):
         main(["pf", str(data), "-n", "49"])
     assert "pf run" not in capsys.readouterr().err  # a short run stays quiet
+
+
+def test_cli_pf_memory_estimate_counts_the_clouds_a_gif_keeps(tmp_path, monkeypatch, capsys):
+    """The estimate counted 1000 kept particle clouds for --gif, where the run keeps every other step of its 331
+    (refusing runs that fit): it counts the steps the run keeps."""
+    import lidarkit.resources
+    from lidarkit.errors import ConfigError
+
+    asked = []
+
+    def stop(needed_bytes, what, source, fraction=0.8):
+        asked.append((needed_bytes, source))
+        raise ConfigError("stopped by the test", source=source)
+
+    monkeypatch.setattr(lidarkit.resources, "check_memory", stop)
+    data = str(shared_path("pf", "burgard_particle_filter"))
+    for args, kept in ((["--gif", "--snapshots", "0,5,331"], 166 + 2), ([], 6), (["--snapshots", "7"], 1)):  # (default: 6 steps)
+        with pytest.raises(SystemExit):
+            main(["pf", data, "--particles", "1000", "--out", str(tmp_path / "run"), *args])
+        assert "stopped by the test" in capsys.readouterr().err
+        assert asked[-1] == (pytest.approx(1000 * (320.0 + 24.0 * kept)), "--particles")
+    with pytest.raises(SystemExit):  # no run folder: no clouds kept
+        main(["pf", data, "--particles", "1000"])
+    assert asked[-1][0] == pytest.approx(1000 * 320.0)

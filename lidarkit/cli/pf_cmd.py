@@ -125,11 +125,7 @@ def pf_command(
                 raise ConfigError(f"must be <= {MAX_PARTICLES}, got {value}", source=name)
             if value > largest:
                 largest, option = value, name
-    # snapshots are kept for the figures of a run folder only
     snapshot_steps = _steps(snapshots)  # checked whether or not there is a run folder to draw them in
-    n_snapshots = (len(snapshot_steps) + (1000 if gif else 0)) if out is not None else 0
-    # state, weights, resampling copies and per-reading likelihoods (~40 float64 per particle), plus the snapshots
-    check_memory(largest * (320.0 + 24.0 * n_snapshots), f"a filter of {largest:,} particles", option)
     if gif and out is None:
         raise ConfigError("--gif needs --out DIR", source="--gif")
     if _given(ctx, "snapshots") and out is None:  # (they are figures of the run folder: without one, ignored in silence)
@@ -162,6 +158,10 @@ def pf_command(
     dx, dy, dth = _floats(kidnap_offset, 3, "--kidnap-offset")
     scenario = dict(visible=visible, kidnap_at_step=kidnap_at, kidnap_offset=(dx, dy, math.radians(dth)))
     data = open_dataset("landmarks", data_dir)  # loaded once: its warnings (negative range) appear once per command
+    # state, weights, resampling copies and per-reading likelihoods (~40 float64 per particle), plus the particle clouds
+    # kept for the figures (the run's steps are known now: a GIF keeps every other one)
+    n_snapshots = len(_kept_steps(snapshot_steps, gif, len(data), out))
+    check_memory(largest * (320.0 + 24.0 * n_snapshots), f"a filter of {largest:,} particles", option)
     seed_list = list(range(seed, seed + seeds))
     if recorded:
         if len(counts) > 1 or seeds > 1:
@@ -170,7 +170,7 @@ def pf_command(
                           if _given(ctx, name)]
         if simulated_only:
             raise ConfigError(f"{', '.join(simulated_only)} applies to the simulated readings, not to --recorded", source="--recorded")
-        _recorded(data, cfg, seed, fit_q, out, _steps(snapshots), gif)
+        _recorded(data, cfg, seed, fit_q, out, snapshot_steps, gif)
         return
     if len(counts) > 1 or seeds > 1:
         if gif:  # (it was ignored)
@@ -187,16 +187,13 @@ def pf_command(
             _write_study(rows, cfg, protocol, {**scenario, **data_files(data), "n_particles": counts, "seeds": seed_list}, out)
             stderr().print(f"results written to {out}")
         return
-    snap = set(_steps(snapshots)) if out is not None else set()  # the particle clouds are kept for the figures only
-    if gif:
-        snap |= set(range(0, len(data) + 1, 2))
-    snap = tuple(sorted(s for s in snap if 0 <= s <= len(data)))
+    snap = _kept_steps(snapshot_steps, gif, len(data), out)
     with _step_progress(cfg, len(data), "pf run") as on_step:
         result = run_protocol(data, counts[0], seed, config=cfg, estimators=tuple(dict.fromkeys((cfg.estimator, "mean", "best"))),
                               snapshot_steps=snap, on_step=on_step, **scenario)
     _print(result)
     if out is not None:
-        _write(result, out, snap_steps=_steps(snapshots), gif=gif)
+        _write(result, out, snap_steps=snapshot_steps, gif=gif)
         stderr().print(f"results written to {out}")
 
 
@@ -263,11 +260,19 @@ def _step_progress(cfg: PFConfig, n_steps: int, label: str, runs: int = 1):
         bar.stop()
 
 
+def _kept_steps(snap_steps: tuple[int, ...], gif: bool, n_steps: int, out: Path | None) -> tuple[int, ...]:
+    """Steps whose particle clouds a run keeps: those of the snapshot figure and, for ``--gif``, every other step; none
+    without a run folder (they are its figures only)."""
+    if out is None:
+        return ()
+    kept = set(snap_steps) | (set(range(0, n_steps + 1, 2)) if gif else set())
+    return tuple(sorted(s for s in kept if 0 <= s <= n_steps))
+
+
 def _recorded(data, cfg: PFConfig, seed: int, fit_q: bool, out: Path | None, snap_steps: tuple[int, ...], gif: bool) -> None:
     from lidarkit.pf.protocol import fit_q_recorded, run_recorded
 
-    kept = set(snap_steps) if out is not None else set()  # the particle clouds are kept for the figures only
-    snap = tuple(sorted(s for s in kept | (set(range(0, len(data) + 1, 2)) if gif else set()) if 0 <= s <= len(data)))
+    snap = _kept_steps(snap_steps, gif, len(data), out)
     if not fit_q:
         with _step_progress(cfg, len(data), "pf run") as on_step:
             result = run_recorded(data, None, seed, config=cfg, snapshot_steps=snap, on_step=on_step)
