@@ -145,6 +145,19 @@ def test_time_field_with_nan(tmp_path):
         open_dataset("rosbag", holes).read_scan(0)
 
 
+def test_time_field_that_is_not_times(tmp_path):
+    """A field that spans more than a sweep in one message (an intensity, 0-255, named by time_field=, or read as
+    seconds where it holds microseconds) deskewed every sweep by it without a word: a DataError naming it."""
+    fields, step, data = _cloud_bytes(64, np.linspace(0.0, 255.0, 64))
+    bag = write_ros1_bag(tmp_path / "intensity.bag", [good(0), (1000.1, fields, step, data, 64)])
+    ds = open_dataset("rosbag", bag)
+    assert ds.read_scan(0).point_times_s is not None  # a sweep's times: read
+    with pytest.raises(DataError, match=r"intensity\.bag \(message 1 on /points\): per-point time field 'time' spans 255 s within one "
+                                        r"message \(read as seconds; a sweep lasts at most 1 s\): not the points' times"):
+        ds.read_scan(1)
+    assert open_dataset("rosbag", bag, time_field="none").read_scan(1).point_times_s is None  # the way out it names
+
+
 def test_time_going_backwards(tmp_path):
     bag = write_ros1_bag(tmp_path / "back.bag", [good(0), good(1), (good(1)[0] - 0.05, *good(2)[1:])])
     ds = open_dataset("rosbag", bag)

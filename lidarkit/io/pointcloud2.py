@@ -11,7 +11,9 @@ Per-point time fields (the first present of :data:`TIME_FIELDS`, or the one aske
   sweep end), ``t`` uint32 nanoseconds from the sweep start (Ouster drivers), ``timestamp(s)`` as either;
 * integer fields are nanoseconds; float fields are seconds, or nanoseconds when larger than 1e15;
 * values beyond 1e5 s are absolute time (``point_time_convention="absolute_s"``), otherwise relative to the
-  message stamp (``"relative_s"``).
+  message stamp (``"relative_s"``);
+* a field whose values span more than :data:`MAX_SWEEP_S` in one message is not the points' times (e.g. an
+  intensity named by ``time_field=``): a DataError, where it would have deskewed every sweep by nonsense.
 """
 
 from __future__ import annotations
@@ -26,6 +28,8 @@ from lidarkit.errors import DataError
 TIME_FIELDS = ("time", "t", "timestamp", "timestamps")
 _ABSOLUTE_AFTER_S = 1e5
 _NANOSECONDS_AFTER = 1e15
+#: Longest plausible sweep (s): spinning LiDARs turn at 5-20 Hz, solid-state ones integrate ~0.1 s.
+MAX_SWEEP_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -109,6 +113,14 @@ def decode_pointcloud2(msg: Any, *, source: str, location: str, time_field: str 
             )
         if len(times) and float(np.abs(times).max()) > _NANOSECONDS_AFTER:
             times = times * 1e-9
+    span = float(np.ptp(times)) if len(times) else 0.0
+    if span > MAX_SWEEP_S:
+        unit = "integer nanoseconds" if np.issubdtype(raw.dtype, np.integer) else "seconds"
+        raise DataError(
+            f"per-point time field {field!r} spans {span:.6g} s within one message (read as {unit}; a sweep lasts at most "
+            f"{MAX_SWEEP_S:g} s): not the points' times (time_field= names the right field, none reads no times)",
+            source=source, location=location,
+        )
     convention = "absolute_s" if len(times) and float(np.abs(times).max()) > _ABSOLUTE_AFTER_S else "relative_s"
     return DecodedCloud(xyz, intensity, times, convention, field)
 
@@ -149,4 +161,4 @@ def _time_field(names: list[str], wanted: str | None, source: str, location: str
     return wanted
 
 
-__all__ = ["TIME_FIELDS", "DecodedCloud", "decode_pointcloud2", "fields_dtype", "stamp_seconds"]
+__all__ = ["MAX_SWEEP_S", "TIME_FIELDS", "DecodedCloud", "decode_pointcloud2", "fields_dtype", "stamp_seconds"]
