@@ -264,3 +264,18 @@ def test_a_kitti_sequence_without_the_data_a_task_reads_is_refused_before_runnin
         with pytest.raises(ConfigError, match=f"the KITTI sequence .* has no {what}") as info:
             load_suite(path)
         assert "experiments[0].dataset" in str(info.value)
+
+
+def test_a_scan_folder_without_scans_is_refused_with_the_suite(tmp_path):
+    """A folder (or TUM) dataset that holds none of its reader's files passed the dry run; every job then failed."""
+    (tmp_path / "empty").mkdir()
+    for kind, task, method, reason in (("folder", "odometry", "vanilla", "no scan files"), ("tum", "vo", "lidarkit", "rgb.txt: file not found")):
+        path = write(tmp_path, f"""
+            experiments:
+              - task: {task}
+                dataset: {{kind: {kind}, path: empty}}
+                methods: [{method}]
+            """)
+        with pytest.raises(DataError, match=reason) as info:
+            load_suite(path)
+        assert "experiments[0].dataset" in str(info.value)

@@ -41,8 +41,9 @@ def check_reader_options(spec: dict[str, Any]) -> None:
         reader(dataset_path(spec), **options)
 
 
-#: readers cheap to open (a folder listing) whose options name what must exist, e.g. KITTI's ``sequence``
-OPENED_AT_LOAD = frozenset({"kitti"})
+#: readers cheap to open (a folder listing, a list file) whose path or options name what must exist, e.g. KITTI's ``sequence``,
+#: a scan folder's files: a dataset without them is refused with the suite (its jobs each failed), not when they run
+OPENED_AT_LOAD = frozenset({"kitti", "kitti_raw", "folder", "tum"})
 
 
 class _Warnings(logging.Handler):
