@@ -116,8 +116,8 @@ def assess_alignment(
         if covariance_model is not None:
             # around the target's sensor (its frame's origin, or where its points say it is: see sensor_proxy), where
             # the calibration was learned; the source's rays run from its own sensor
-            origin = local_origin.sensor_proxy(target_xyz)
-            source_sensor = local_origin.sensor_proxy(source_xyz)
+            given = local_origin.given_sensors()  # of the clouds as given to align (these may be voxelized)
+            origin, source_sensor = given if given is not None else (local_origin.sensor_proxy(target_xyz), local_origin.sensor_proxy(source_xyz))
             T_local = local_origin.into(T_target_source, origin, None)
             source_origin = None if source_sensor is None else T_local[:3, :3] @ source_sensor + T_local[:3, 3]
             p, q = local_origin.shift(matched[pick], origin), local_origin.shift(target_xyz[matched_index[pick]], origin)

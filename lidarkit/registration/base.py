@@ -22,6 +22,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from lidarkit.errors import ConfigError, DataError, LidarKitError, RegistrationError
 from lidarkit.geometry import as_points, is_rotation, orthonormalize_se3
+from lidarkit.registration import local_origin
 from lidarkit.registration.covariance import use_model
 
 #: A result is flagged ``degenerate`` when min/max eigenvalue of the normalised normal matrix is below this
@@ -510,7 +511,8 @@ class Registration:
         start = time.perf_counter()
         # a subclass that overrides _align below the class that split it (e.g. to post-process the result) gets its _align
         register = self._register if assessed_apart(type(self)) else functools.partial(Registration._register, self)
-        with use_backend(self.name, source), use_model(model):
+        sensors = local_origin.sensors_of(dst, src) if self._config.assess else None
+        with use_backend(self.name, source), use_model(model), local_origin.use_sensors(sensors):
             T, likely_converged, assess = register(src, dst, T0)
         T = np.asarray(T, dtype=np.float64)
         if T.shape != (4, 4) or not np.isfinite(T).all():  # a backend (or a plugin) that returns garbage instead of raising
@@ -522,7 +524,7 @@ class Registration:
 
         def finish() -> RegistrationResult:
             start = time.perf_counter()
-            with use_backend(self.name, source), use_model(model):
+            with use_backend(self.name, source), use_model(model), local_origin.use_sensors(sensors):
                 result = assess()
             if not np.allclose(result.T_target_source, T, rtol=0.0, atol=1e-9):
                 # a subclass's _register that moves the pose but returns its parent's assess(): which pose is the result's?
