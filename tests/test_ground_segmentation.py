@@ -247,3 +247,32 @@ def test_planar_ground_filtered_keeps_z_roll_and_pitch_of_the_guess():
     seq = KittiOdometry(shared_path("kitti_odometry", "sequences", "00"))
     T = get_icp("ground_filtered", planar=True).align(seq.read_scan(1).points_xyz, seq.read_scan(0).points_xyz).T_target_source
     assert T[2, 3] == 0.0 and np.allclose(T[2, :3], [0.0, 0.0, 1.0], atol=1e-12) and T[0, 3] > 0.6
+
+
+def test_ground_filtered_on_a_georeferenced_pair_removes_the_ground_and_refines_it_around_the_sensor():
+    """Both KITTI scans moved 300 m out or to UTM coordinates: the segmenter kept all ground (every point beyond its
+    150 m range) and the ground refinement found nothing within 30 m of the far origin (kept: 124k correspondences,
+    z 7 cm off). Segmented and refined around the scans' likely sensor, the pose is the sensor frame's, moved; a
+    method that measures heights from the sensor is refused by name."""
+    from conftest import shared_path
+    from registration_helpers import kitti_pair
+
+    from lidarkit.errors import DataError
+    from lidarkit.geometry import se3_inverse
+
+    source, target, _ = kitti_pair(shared_path, 94, 95)
+    icp = get_icp("ground_filtered")
+    at_origin = icp.align(source, target)
+    for offset in (np.array([300.0, 0.0, 0.0]), np.array([500432.7, 4500217.3, 35.2])):
+        C = np.eye(4)
+        C[:3, 3] = offset
+        far = icp.align(source + offset, target + offset)
+        assert far.extra["target_points_kept"] == pytest.approx(at_origin.extra["target_points_kept"], rel=0.05)  # (its grid moved)
+        assert far.extra.get("ground_refined") is True
+        T = se3_inverse(C) @ far.T_target_source @ C
+        assert np.abs(T[:3, 3] - at_origin.T_target_source[:3, 3]).max() < 0.01  # (6 mm in x: the segmentation's grid moved)
+        assert abs(T[2, 3] - at_origin.T_target_source[2, 3]) < 0.002  # the ground refinement's z
+        assert np.degrees(np.abs(T[:3, :3] - at_origin.T_target_source[:3, :3]).max()) < 0.02
+    with pytest.raises(DataError, match=r"ground method 'height' measures heights from the sensor: give scans in their sensor frame, "
+                                        r"or use a method that does not \(csf, local_plane\)"):
+        get_icp("ground_filtered", ground_method="height").align(source + offset, target + offset)

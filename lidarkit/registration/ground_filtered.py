@@ -37,6 +37,7 @@ from pydantic import Field, model_validator
 
 from lidarkit.errors import DataError
 from lidarkit.geometry import make_se3, se3_log, so3_exp
+from lidarkit.registration import local_origin
 from lidarkit.registration.base import Degeneracy, RegistrationResult
 from lidarkit.registration.components.motion import exp_scaled_twist_apply
 from lidarkit.registration.ground import (
@@ -316,7 +317,13 @@ class GroundFilteredICP(VanillaICP):
             # raw ground points: the sweep's motion mostly slides them along the ground, which a plane residual ignores,
             # and deskewing them with a motion that carries the last frame's tilt error would feed that error back
             grounds = [pts[g] for pts, g in zip((source_xyz, target_xyz), self._ground)]
-            refined = refine_on_ground(grounds[0], grounds[1], result.T_target_source)
+            # clouds far from their frame's origin (georeferenced, a map frame) are refined around the target's likely
+            # sensor: the ground's range and the tilt's lever arms are the sensor's (about the far origin nothing lay
+            # within range and the pose came back unrefined)
+            centre = local_origin.sensor_proxy(target_xyz)
+            refined = refine_on_ground(local_origin.shift(grounds[0], centre), local_origin.shift(grounds[1], centre),
+                                       local_origin.into(result.T_target_source, centre, centre))
+            refined = local_origin.out_of(refined, centre, centre)
             # the covariance and surface_step stay those of the non-ground alignment: the calibration was learned so
             result = dataclasses.replace(result, T_target_source=refined, extra={**result.extra, "ground_refined": True})
         return result
@@ -327,7 +334,8 @@ class GroundFilteredICP(VanillaICP):
         c = self.config
         extra = {**kept, "ground_removal_flagged": True, "fallback": c.fallback}
         if c.fallback == "thinned_ground":
-            masks = [~g | thin_ground(pts, g, c.fallback_ground_share, c.fallback_ground_range_m) for pts, g in zip((source_xyz, target_xyz), self._ground)]
+            masks = [~g | thin_ground(local_origin.shift(pts, local_origin.sensor_proxy(pts)), g, c.fallback_ground_share, c.fallback_ground_range_m)
+                     for pts, g in zip((source_xyz, target_xyz), self._ground)]  # (ranges from the likely sensor, see _solve)
             result = self._solve(source_xyz, target_xyz, init_T, masks)
             if result.converged:
                 reason = f"{why}; solved with {c.fallback_ground_share:g} of the ground points added back"

@@ -16,6 +16,7 @@ from pydantic import BaseModel, ConfigDict
 
 from lidarkit.errors import ConfigError, DataError, validation_problems
 from lidarkit.geometry import as_points
+from lidarkit.registration import local_origin
 
 #: Mounting height of KITTI's Velodyne HDL-64E above the road (m).
 KITTI_SENSOR_HEIGHT_M = 1.73
@@ -32,6 +33,11 @@ class GroundSegmenter:
 
     name: ClassVar[str] = ""
     Config: ClassVar[type[GroundConfig]] = GroundConfig
+    #: Whether the segmenter measures heights from the sensor (``z = 0`` at the sensor, e.g. a fixed level below it).
+    #: A cloud that is not in its sensor frame (georeferenced, a map frame: see
+    #: :func:`lidarkit.registration.local_origin.sensor_proxy`) is then refused; one that judges heights against the
+    #: points themselves (False) gets the cloud moved to where its sensor likely is, so that its ranges are the sensor's.
+    heights_from_sensor: ClassVar[bool] = True
 
     def __init__(self, config: GroundConfig | None = None, **params: Any):
         if config is not None and params:
@@ -44,6 +50,16 @@ class GroundSegmenter:
         pts = as_points(points_xyz, f"ground segmenter {self.name!r}")
         if len(pts) == 0:
             return np.zeros(0, dtype=bool)
+        sensor = local_origin.sensor_proxy(pts)
+        if sensor is not None:  # (segmented as given, a cloud 300 m out kept all its ground: every point beyond max range)
+            if self.heights_from_sensor:
+                raise DataError(
+                    f"the cloud lies {float(np.linalg.norm(sensor)):.3g} m from its frame's origin (georeferenced or a map frame) and "
+                    f"ground method {self.name!r} measures heights from the sensor: give scans in their sensor frame, or "
+                    f"use a method that does not ({', '.join(n for n, k in sorted(_REGISTRY.items()) if not k.heights_from_sensor)})",
+                    source=f"ground segmenter {self.name!r}",
+                )
+            pts = pts - sensor
         mask = np.asarray(self._segment(pts), dtype=bool)
         if mask.shape != (len(pts),):
             raise DataError(f"segmenter returned a mask of shape {mask.shape} for {len(pts)} points", source=self.name)

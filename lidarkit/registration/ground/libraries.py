@@ -112,6 +112,7 @@ class ClothSegmenter(GroundSegmenter):
     """Cloth simulation filter (cloth-simulation-filter): a cloth dropped on the upside-down cloud settles on the ground."""
 
     Config = ClothConfig
+    heights_from_sensor = False  # heights against the points themselves
 
     def __init__(self, config: GroundConfig | None = None, **params: Any):
         super().__init__(config, **params)

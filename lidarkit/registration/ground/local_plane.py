@@ -141,6 +141,7 @@ class LocalPlaneSegmenter(GroundSegmenter):
     """Grid of local plane fits under a slope-limited envelope: height above the local ground (slopes, hills)."""
 
     Config = LocalPlaneConfig
+    heights_from_sensor = False  # heights against the points themselves
 
     def _segment(self, points_xyz: np.ndarray) -> np.ndarray:
         return local_plane_ground_mask(points_xyz, self.config)
