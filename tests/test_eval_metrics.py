@@ -77,6 +77,34 @@ def test_rpe_reproduces_evo_stored_result_with_legacy_pairs(kitti_gt, est_name, 
     np.testing.assert_allclose(result.errors, errors, rtol=1e-6, atol=1e-9)
 
 
+def test_evaluate_with_legacy_pairs_scores_rotation_on_the_translation_pairs(kitti_gt):
+    """evaluate() hands the translation RPE's pairs to the rotation RPE, which dropped the first legacy pair again: 352
+    rotation errors (from pair [26, 37]) beside 353 translation errors, rmse 0.65080 instead of 0.64994."""
+    from lidarkit.eval import evaluate
+
+    est = kitti("ORB")
+    result = evaluate(kitti_gt, est, align="none", delta=10, delta_unit="meters", legacy_pairs=True, drift=False)
+    direct = rpe(kitti_gt, est, delta=10, delta_unit="meters", align="none", legacy_pairs=True, relation="rotation_angle_deg")
+    assert result.rpe.n_errors == result.rpe_rotation.n_errors == direct.n_errors == 353
+    np.testing.assert_array_equal(result.rpe_rotation.pairs, direct.pairs)
+    np.testing.assert_allclose(result.rpe_rotation.errors, direct.errors, rtol=1e-12)
+    assert result.rpe_rotation.rmse == pytest.approx(0.64994, abs=1e-5)
+
+
+def test_rpe_given_pairs_are_checked_and_scored_as_given(kitti_gt):
+    """Pairs handed to rpe(pairs=...) out of range raised a bare IndexError; with consecutive pairs they were ignored
+    (13 errors for 2 pairs given)."""
+    est = kitti("ORB")
+    with pytest.raises(ConfigError, match=r"pairs: pair 1 \(5, 9999\) is not two poses i < j of the 4541"):
+        rpe(kitti_gt, est, pairs=[[0, 1], [5, 9999]], all_pairs=True, delta=10, delta_unit="meters")
+    given = rpe(kitti_gt, est, pairs=[[0, 5], [100, 130]], align="none")
+    assert given.n_errors == 2
+    np.testing.assert_array_equal(given.pairs, [[0, 5], [100, 130]])
+    for k, (i, j) in enumerate(given.pairs):
+        one = rpe(kitti_gt[[int(i), int(j)]], est[[int(i), int(j)]], align="none")
+        assert given.errors[k] == pytest.approx(one.errors[0], rel=1e-9)
+
+
 def test_rpe_default_pairs_match_current_evo_and_differ_from_stored(kitti_gt):
     """Today's evo starts the first 10 m pair at pose 0: one pair more than the stored 2018 result."""
     from evo.core.metrics import PoseRelation

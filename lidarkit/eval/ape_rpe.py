@@ -278,6 +278,20 @@ def alignment_label(align: str) -> str:
     return ALIGNMENT_LABELS.get(align, align)
 
 
+def _checked_pairs(pairs, n_poses: int, source: str) -> np.ndarray:
+    """``(m, 2)`` int pose pairs ``(i, j)``, ``0 <= i < j < n_poses``; ConfigError otherwise (an IndexError or, with
+    consecutive pairs, silently other pairs than the ones named)."""
+    try:
+        out = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    except (TypeError, ValueError):
+        raise ConfigError(f"pairs must be (i, j) pose index pairs, got {type(pairs).__name__}", source="pairs") from None
+    bad = np.flatnonzero((out[:, 0] < 0) | (out[:, 1] >= n_poses) | (out[:, 0] >= out[:, 1]))
+    if len(bad):
+        i, j = out[bad[0]]
+        raise ConfigError(f"pair {int(bad[0])} ({int(i)}, {int(j)}) is not two poses i < j of the {n_poses} ({source})", source="pairs")
+    return out
+
+
 def _title(metric, align: str, align_origin: bool, n: int) -> str:
     suffix = {
         "none": "not aligned",
@@ -423,6 +437,9 @@ def rpe(
     ref_evo, est_evo, transform = _aligned_copies(ref, est, align, align_origin, n, source)
 
     evo_delta: float = int(delta) if unit is Unit.frames else delta
+    given = pairs is not None
+    if given:
+        pairs = _checked_pairs(pairs, len(ref), source)
     try:
         if pairs is None:
             pair_poses = ref_evo.poses_se3 if pairs_from_reference else est_evo.poses_se3
@@ -430,10 +447,10 @@ def rpe(
             with contextlib.redirect_stdout(sys.stderr):
                 found = metrics.id_pairs_from_delta(pair_poses, evo_delta, unit, rel_delta_tol, all_pairs=all_pairs)
             pairs = np.array(found, dtype=np.int64).reshape(-1, 2)
-        else:
-            pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
-        laid_out = (all_pairs and unit is not Unit.frames and len(pairs) > 0
-                    and relation not in ("point_distance", "point_distance_error_ratio"))
+        # given pairs are compared as given (an earlier call's selection: its first legacy pair already dropped; the
+        # second drop left the rotation RPE of `lidarkit eval --legacy-pairs` a pair short of the translation's)
+        laid_out = ((all_pairs and unit is not Unit.frames) or given) and len(pairs) > 0 and relation not in (
+            "point_distance", "point_distance_error_ratio")
         if laid_out:
             # evo would search the pairs again (quadratic): it compares consecutive poses of copies laid out as
             # i0, j0, i1, j1, ... instead, and every second error is one of the pairs
@@ -447,7 +464,7 @@ def rpe(
         elif legacy_pairs:
             # Consecutive pairs form a chain; reduce both copies to the chain without its first pair and
             # let evo compare consecutive poses of the reduced copies.
-            pairs = pairs[1:]
+            pairs = pairs if given else pairs[1:]
             if len(pairs) == 0:
                 raise EvaluationError(
                     f"delta = {delta:g} ({delta_unit}) leaves no pair after dropping the first one", source=source
