@@ -164,3 +164,20 @@ def test_sim3_tables_name_the_scale_the_estimate_was_given(tmp_path):
     assert "**RPE translation RMSE (m per frame, estimate scaled by 2)**" in (tmp_path / "s" / "rpe_rmse.md").read_text()
     assert "estimate scaled by 2" in (tmp_path / "s" / "ape_rmse.tex").read_text()
     assert "scaled" not in (tmp_path / "e" / "ape_rmse.md").read_text() + (tmp_path / "e" / "rpe_rmse.md").read_text()
+
+
+def test_speeds_of_the_tables_are_those_of_the_associated_poses(tmp_path):
+    """An estimate at every other stamp of a denser reference, --associate: speeds were taken with the raw reference's
+    frame period (0.1 s) over the associated poses (0.2 s apart), every speed doubled (24 m/s for a 12 m/s drive)."""
+    from lidarkit.cli import main
+
+    ref = straight(800, 1.2)  # 1.2 m a 0.1 s frame: 12 m/s
+    est = straight(800, 1.2 * 1.03)[np.arange(0, 800, 2)]
+    ref.to_tum(tmp_path / "ref.txt")
+    est.to_tum(tmp_path / "est.txt")
+    with pytest.raises(SystemExit) as exc:
+        main(["eval", str(tmp_path / "ref.txt"), str(tmp_path / "est.txt"), "-f", "tum", "--align", "none", "--associate",
+              "--tables", str(tmp_path / "t")])
+    assert exc.value.code in (0, None)
+    rows = (tmp_path / "t" / "kitti_translation_pct_per_speed.csv").read_text().splitlines()
+    assert len(rows) == 2 and rows[1].startswith("10-15 m/s,"), rows

@@ -131,7 +131,7 @@ def eval_command(
         from lidarkit.eval.tables import SegmentErrors, frame_period_s, publication_tables
 
         key = (ref_traj.name or ref.stem, est_traj.name or est.stem)
-        segments = ({key: SegmentErrors.from_drift(evaluation.drift, frame_period_s=frame_period_s(ref_traj))}
+        segments = ({key: SegmentErrors.from_drift(evaluation.drift, frame_period_s=frame_period_s(evaluation.ape.ref))}  # (as paired)
                     if evaluation.drift is not None else None)
         from lidarkit.eval.ape_rpe import DELTA_UNITS, alignment_label
 
