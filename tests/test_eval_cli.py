@@ -172,3 +172,23 @@ def test_associating_kitti_files_without_times_points_to_them(capsys):
     gt, orb = (str(shared_path("evo_testdata", f)) for f in ("KITTI_00_gt.txt", "KITTI_00_ORB.txt"))
     assert cli_exit_code(["eval", gt, orb, "--associate"]) == 1
     assert "has no timestamps (a KITTI pose file has none: give its times.txt, --ref-times / --est-times" in capsys.readouterr().err
+
+
+def test_tum_files_paired_by_index_whose_stamps_disagree_are_said_to_be(tmp_path, capsys, caplog):
+    """Two TUM files of equal length, the estimate starting 1 s later: scored pose by pose without a word (APE 0.27 m,
+    where evo associates TUM files by time and gives ~0); --max-diff without --associate was recorded and ignored."""
+    from conftest import cli_exit_code
+
+    lines = [ln for ln in shared_path("evo_testdata", "freiburg1_xyz-groundtruth.txt").read_text().splitlines() if not ln.startswith("#")]
+    (tmp_path / "a.txt").write_text("\n".join(lines[:300]) + "\n")
+    (tmp_path / "b.txt").write_text("\n".join(lines[100:400]) + "\n")
+    a, b = str(tmp_path / "a.txt"), str(tmp_path / "b.txt")
+    with caplog.at_level("WARNING"):
+        assert cli_exit_code(["eval", "-f", "tum", a, b, "--align", "none"]) == 0
+    assert "poses paired by index, but their stamps differ by up to 1.0" in caplog.text and "--associate" in caplog.text
+    caplog.clear()
+    with caplog.at_level("WARNING"):
+        assert cli_exit_code(["eval", "-f", "tum", a, a, "--align", "none"]) == 0  # the same stamps: nothing to say
+    assert "paired by index" not in caplog.text
+    assert cli_exit_code(["eval", "-f", "tum", a, b, "--max-diff", "3"]) == 1
+    assert "error: --max-diff: --max-diff is the time window of --associate" in capsys.readouterr().err

@@ -95,6 +95,8 @@ def eval_command(
                           source="--relation-max-diff")
     if est is None:
         raise ConfigError("missing EST (the estimated trajectory file): lidarkit eval REF EST", source="EST")
+    if max_diff != _D.max_diff_s and not associate:  # (accepted, recorded in the JSON as if applied, and ignored)
+        raise ConfigError("--max-diff is the time window of --associate; without it poses are paired by index", source="--max-diff")
     atomic.check_target(markdown, "file")
     atomic.check_target(plot, "figure")
     atomic.check_target(tables, "folder")

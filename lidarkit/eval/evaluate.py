@@ -15,7 +15,7 @@ from lidarkit.eval.kitti_drift import (
     drift_segments_possible,
     kitti_drift,
 )
-from lidarkit.eval.pairing import paired
+from lidarkit.eval.pairing import pair_name, paired, stamps_disagree
 from lidarkit.trajectory import Trajectory
 
 logger = logging.getLogger(__name__)
@@ -92,6 +92,8 @@ def evaluate(ref: Trajectory, est: Trajectory, settings: EvaluationSettings | No
     s = settings
     # pair (and, with ``associate``, match timestamps) once; the metrics then get equal-length trajectories
     ref_paired, est_paired = paired(ref, est, associate=s.associate, max_diff_s=s.max_diff_s)
+    if not s.associate and (disagree := stamps_disagree(ref, est, s.max_diff_s)):
+        logger.warning("%s: %s", pair_name(ref, est), disagree)
     rpe_kw = dict(
         delta=s.delta,
         delta_unit=s.delta_unit,

@@ -59,6 +59,22 @@ def paired(
     return ref_out, est_out
 
 
+def stamps_disagree(ref: Trajectory, est: Trajectory, max_diff_s: float) -> str:
+    """Why pairing two equally long trajectories pose by pose compares poses of other times ("" when it does not):
+    both have stamps and some pose's differ by more than ``max_diff_s`` (a TUM estimate that starts a second later
+    than its reference was scored pose by pose without a word, where evo associates TUM files by time)."""
+    import numpy as np
+
+    if ref.timestamps_s is None or est.timestamps_s is None or len(ref) != len(est) or len(ref) == 0:
+        return ""
+    gap = np.abs(np.asarray(est.timestamps_s, dtype=np.float64) - np.asarray(ref.timestamps_s, dtype=np.float64))
+    k = int(np.argmax(gap))
+    if not gap[k] > max_diff_s:
+        return ""
+    return (f"poses paired by index, but their stamps differ by up to {gap[k]:.6g} s (pose {k}: reference {ref.timestamps_s[k]:.6f} s, "
+            f"estimate {est.timestamps_s[k]:.6f} s; more than {max_diff_s:g} s): --associate (associate=True) pairs them by time")
+
+
 def _matched(traj, partner, name: str) -> Trajectory:
     """One side of evo's association as a Trajectory. A window wider than half a pose interval can match one pose to
     two of the other side (evo scores both pairs, and so does lidarkit): that side then takes its partner's stamps,
