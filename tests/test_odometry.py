@@ -505,3 +505,51 @@ def test_equal_time_stamps_are_refused_before_the_run(rng):
     with pytest.raises(DataError, match=r"memory \(frame 3\): time stamps are not strictly increasing: 100.2 s after 100.2 s of frame 2"):
         run(seq, "vanilla")
     assert seq.reads == []  # refused before reading a scan
+
+
+def test_a_callers_kitti_reader_reads_the_points_as_stored_after_a_kiss_run():
+    """run() configured the caller's own reader for kiss (KITTI's vertical-angle correction), and the points read from it
+    afterwards came back corrected (0.285 m off)."""
+    from lidarkit.io import open_dataset
+
+    ds = open_dataset("kitti", shared_path("kitti_odometry", "sequences", "00"))
+    before = ds.read_scan(0).points_xyz
+    result = run(ds, "kiss", frames="0:2", progress=False)
+    assert result.config["run"]["dataset_options"]["vertical_correction_applied"] is True  # the run itself read them corrected
+    np.testing.assert_array_equal(ds.read_scan(0).points_xyz, before)
+    assert ds.reader_options["vertical_correction_applied"] is False
+
+
+def test_a_sequence_of_the_callers_own_needs_only_len_and_read_scan():
+    """A class with __len__ and read_scan (all open_sequence asks for) failed with AttributeError on timestamps_s; a
+    read_scan returning an array, a ground truth that is an array, and a reader's own RuntimeError (reported as a
+    registration error) are one-line errors naming what is wrong."""
+    pts = np.random.default_rng(0).normal(size=(2000, 3)) * 10
+
+    class Seq:
+        def __len__(self):
+            return 3
+
+        def read_scan(self, i):
+            return Scan(pts, frame=i)
+
+    class Arrays(Seq):
+        def read_scan(self, i):
+            return pts
+
+    class Failing(Seq):
+        def read_scan(self, i):
+            if i == 2:
+                raise RuntimeError("disk on fire")
+            return Scan(pts, frame=i)
+
+    class ArrayTruth(Seq):
+        ground_truth = np.tile(np.eye(4), (3, 1, 1))
+
+    assert len(run(Seq(), "vanilla", progress=False).trajectory) == 3
+    with pytest.raises(ConfigError, match=r"dataset \(frame 0\): read_scan\(0\) returned a ndarray, not a lidarkit Scan"):
+        run(Arrays(), "vanilla", progress=False)
+    with pytest.raises(DataError, match=r"dataset \(frame 2\): cannot read the scan \(RuntimeError: disk on fire\)"):
+        run(Failing(), "vanilla", progress=False)
+    with pytest.raises(ConfigError, match="the dataset's ground truth is a ndarray, not a lidarkit Trajectory"):
+        run(ArrayTruth(), "vanilla", progress=False)

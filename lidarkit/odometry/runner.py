@@ -68,8 +68,17 @@ _FRAME_ERRORS = (LidarKitError, ArithmeticError, *BACKEND_ERRORS)
 
 
 def _read_nonempty_scan(sequence: ScanSequence, index: int) -> Scan:
-    """Frame ``index`` of the sequence; a scan without points is a DataError (named by the caller)."""
-    scan = sequence.read_scan(index)
+    """Frame ``index`` of the sequence; a scan without points is a DataError (named by the caller), and so is a reader's
+    own failure (a user's sequence raising RuntimeError was reported as a registration error); a reader that returns
+    no :class:`Scan` is a ConfigError (an AttributeError deep in the loop)."""
+    try:
+        scan = sequence.read_scan(index)
+    except LidarKitError:
+        raise
+    except (OSError, *_FRAME_ERRORS) as err:
+        raise DataError(f"cannot read the scan ({type(err).__name__}: {err})") from err
+    if not isinstance(getattr(scan, "points_xyz", None), np.ndarray):
+        raise ConfigError(f"read_scan({index}) returned a {type(scan).__name__}, not a lidarkit Scan (Scan(points_xyz) wraps an (N, 3) array)")
     if len(scan.points_xyz) == 0:
         raise DataError("empty scan (0 points)")
     return scan
@@ -330,7 +339,12 @@ def run(
     title = name or dataset_name
     name = method_name
     if callable(getattr(sequence, "configure_for_method", None)):  # e.g. KITTI's vertical-angle correction for kiss
-        # (recorded below); a variant that stands for another (pipeline's kiss_like) gets that one's data
+        # (recorded below); a variant that stands for another (pipeline's kiss_like) gets that one's data. The caller's
+        # own reader is configured on a copy: read directly after the run, its points came back corrected
+        if sequence is dataset:
+            import copy
+
+            sequence = copy.copy(sequence)
         sequence.configure_for_method(getattr(registration, "reads_data_as", None) or method_name)
     n_total = len(sequence)
     if n_total == 0:
@@ -367,7 +381,8 @@ def run(
     checker = FrameChecker(n, frame_check)
     # the ground truth is read before the run: a problem with it (too few poses in a bag, a bad pose file) is reported
     # now, not after registering every frame
-    _check_stamps(sequence.timestamps_s, indices, dataset_name)  # now, not after registering every frame
+    # (a sequence of the caller's own may have no stamps or ground truth: ScanSequence's other members are optional)
+    _check_stamps(getattr(sequence, "timestamps_s", None), indices, dataset_name)  # now, not after registering every frame
     reference = _reference(sequence, ground_truth, indices, dataset_name)
     need_times = strict and bool(deskew_requested(registration)) and (stateful or getattr(registration, "accepts_point_times", False))
     if strict and not stateful and deskew_requested(registration) and not getattr(registration, "accepts_point_times", False):
@@ -468,7 +483,7 @@ def run(
             bar[0].stop()
     total, total_cpu = clock() - loop_start, time.process_time() - loop_cpu_start
 
-    all_stamps = sequence.timestamps_s
+    all_stamps = getattr(sequence, "timestamps_s", None)
     timestamps = None if all_stamps is None else np.asarray(all_stamps, dtype=np.float64)[indices]
     # where in the sweep the scans are stamped: the recording's word over the first scan's (a recording begun
     # mid-rotation holds part of a sweep in its first message, which says no instant or a wrong one)
@@ -594,9 +609,11 @@ def _reference(sequence: ScanSequence, ground_truth: Trajectory | None, indices:
     elif callable(getattr(sequence, "ground_truth_of", None)):  # a recording's odometry paired with the selected scans only
         gt = sequence.ground_truth_of(indices)
     else:
-        gt = sequence.ground_truth
+        gt = getattr(sequence, "ground_truth", None)
     if gt is None:
         return None
+    if not isinstance(gt, Trajectory):
+        raise ConfigError(f"the dataset's ground truth is a {type(gt).__name__}, not a lidarkit Trajectory", source=dataset_name)
     if len(gt) == len(sequence):
         gt = gt[indices]
     elif len(gt) != len(indices):
