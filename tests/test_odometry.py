@@ -373,7 +373,7 @@ def test_empty_dataset_and_empty_selection(rng):
         (DataError("truncated scan", source="000002.bin"), r"memory \(frame 2\): 000002.bin: truncated scan"),
         # an error that names its file and frame already is not wrapped again ("kt (frame 3): kt/velodyne/... (frame 3)")
         (DataError("truncated scan", source="000002.bin", location="frame 2"), r"^000002.bin \(frame 2\): truncated scan$"),
-        (RuntimeError("boom"), r"memory \(frame 2\): RuntimeError: boom"),
+        (RuntimeError("boom"), r"memory \(frame 2\): cannot read the scan \(RuntimeError: boom\)"),  # (a read, not a registration, error)
     ],
 )
 def test_error_in_a_frame_names_the_frame(rng, bad, match):
@@ -553,3 +553,28 @@ def test_a_sequence_of_the_callers_own_needs_only_len_and_read_scan():
         run(Failing(), "vanilla", progress=False)
     with pytest.raises(ConfigError, match="the dataset's ground truth is a ndarray, not a lidarkit Trajectory"):
         run(ArrayTruth(), "vanilla", progress=False)
+
+
+def test_a_stateful_variants_frame_covariance_honours_its_covariance_settings():
+    """kiss's --pose-covariance was calibrated whatever calibrated_covariance said and always the censi model, while
+    config.yaml recorded the settings as given (end-pose sigma 0.220 m for all three runs)."""
+    from lidarkit.odometry.runner import VoxelizedScans, frame_covariance
+    from lidarkit.registration import get_icp
+    from lidarkit.registration.covariance import calibrate
+
+    kitti = shared_path("kitti_odometry", "sequences", "00")
+    runs = [run(kitti, get_icp("kiss", **setting), frames="0:3", pose_covariance=True, progress=False)
+            for setting in ({}, {"calibrated_covariance": False}, {"covariance": "gauss_newton"})]
+    calibrated, raw, gauss_newton = (r.relative_covariance[1:] for r in runs)
+    assert not np.allclose(raw, calibrated, rtol=0.05) and not np.allclose(gauss_newton, raw, rtol=0.05)
+    np.testing.assert_allclose(np.array([calibrate(c, "kiss") for c in raw]), calibrated, rtol=1e-9)
+    from lidarkit.io import open_dataset
+
+    r = runs[2]
+
+    ds = open_dataset("kitti", kitti, vertical_correction=True)
+    scans = [ds.read_scan(i).points_xyz for i in range(2)]
+    poses = r.trajectory.poses_se3
+    model = get_icp("kiss", covariance="gauss_newton").config.covariance_model()
+    expected, _ = frame_covariance(scans[0], scans[1], poses[0], poses[1], None, VoxelizedScans(), model=model)
+    np.testing.assert_allclose(gauss_newton[0], expected, rtol=1e-6)
