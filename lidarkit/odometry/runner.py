@@ -107,14 +107,26 @@ def _calibration_of(registration: Any, name: str) -> str | None:
     return lookup() if callable(lookup) else name
 
 
+def _stateful_covariance_settings(registration: Any, name: str) -> tuple[str | None, Any]:
+    """``(calibration variant or None, covariance model)`` of a stateful variant's after-the-fact frame covariance, as
+    its pairwise results take them: calibrated only with ``calibrated_covariance`` and the ``censi`` model the
+    calibration was learned on (kiss and genz ignored both settings and config.yaml recorded them as given)."""
+    config = getattr(registration, "config", None)
+    make_model = getattr(config, "covariance_model", None)
+    model = make_model() if callable(make_model) else "active"
+    calibrated = bool(getattr(config, "calibrated_covariance", True)) and getattr(config, "covariance", "censi") == "censi"
+    return (_calibration_of(registration, name) if calibrated else None), model
+
+
 def _stateful_after(k: int, frame: int, previous: np.ndarray | None, scan: Scan, prepared: tuple, poses: np.ndarray,
                     checker: FrameChecker, want_covariance: bool, relative_cov: np.ndarray, min_eigenvalue: np.ndarray,
-                    calibration: str | None, dataset_name: str, voxelized: VoxelizedScans) -> None:
-    """A stateful variant's frame k once its pose is known: the after-the-fact covariance (calibrated as the variant
-    ``calibration``), then the frame check."""
+                    calibration: str | None, model: Any, dataset_name: str, voxelized: VoxelizedScans) -> None:
+    """A stateful variant's frame k once its pose is known: the after-the-fact covariance (of ``model``, calibrated as
+    the variant ``calibration``), then the frame check."""
     if want_covariance and k > 0:
         try:
-            relative_cov[k], min_eigenvalue[k] = frame_covariance(previous, scan.points_xyz, poses[k - 1], poses[k], calibration, voxelized)
+            relative_cov[k], min_eigenvalue[k] = frame_covariance(previous, scan.points_xyz, poses[k - 1], poses[k], calibration, voxelized,
+                                                                  model=model)
         except Exception as err:
             if not _is_frame_error(err):
                 raise
@@ -426,7 +438,7 @@ def run(
                 registration.reset()
                 previous = None
                 voxelized = VoxelizedScans()  # used by the worker thread only, one frame after another
-                calibration = _calibration_of(registration, name)
+                calibration, model = _stateful_covariance_settings(registration, name)
                 inflight = None  # frame k-1's after-the-fact task
                 for k, (idx, payload, read_time, read_error) in enumerate(stream):
                     raise_if_interrupted()  # (a Ctrl-C a library swallowed while it loaded: the run stops here)
@@ -460,7 +472,7 @@ def run(
                         inflight.result()
                     inflight = worker.submit(functools.partial(
                         _stateful_after, k, int(idx), previous, scan, prepared, poses, checker, want_covariance, relative_cov,
-                        min_eigenvalue, calibration, dataset_name, voxelized,
+                        min_eigenvalue, calibration, model, dataset_name, voxelized,
                     ))
                     validated.pop(id(points), None)  # registered: not passed to the backend again
                     previous = points
@@ -645,9 +657,10 @@ class VoxelizedScans:
 
 
 def frame_covariance(previous_xyz: np.ndarray, points_xyz: np.ndarray, T_world_prev: np.ndarray, T_world_cur: np.ndarray,
-                     variant: str | None, voxelized: VoxelizedScans | None = None) -> tuple[np.ndarray, float]:
+                     variant: str | None, voxelized: VoxelizedScans | None = None, model: Any = "active") -> tuple[np.ndarray, float]:
     """Covariance (and smallest normal-matrix eigenvalue) of a stateful variant's frame-to-frame motion, assessed
     after the fact on the two voxelized scans at the motion it estimated (the variant itself exposes no Hessian),
+    of the :class:`~lidarkit.registration.covariance.CovarianceModel` ``model`` (``"active"``: the default one),
     calibrated as ``variant``'s (None: as computed). ``voxelized``: the run's :class:`VoxelizedScans`, which has the previous scan voxelized already."""
     from lidarkit.geometry import se3_inverse
     from lidarkit.registration.assessment import assess_alignment
@@ -657,8 +670,9 @@ def frame_covariance(previous_xyz: np.ndarray, points_xyz: np.ndarray, T_world_p
     T_rel = se3_inverse(T_world_prev) @ T_world_cur
     target = voxelized(previous_xyz)
     source = voxelized(points_xyz)
-    assessment = assess_alignment(source, target, T_rel, FRAME_COVARIANCE_INLIER_M)
+    assessment = assess_alignment(source, target, T_rel, FRAME_COVARIANCE_INLIER_M, covariance_model=model)
     if assessment.covariance is None:
         return np.full((6, 6), np.nan), float("nan")
     # without the step (CALIBRATION_WITHOUT_STEP): the step of this pair of voxelized scans is not the variant's own
-    return calibrate(assessment.covariance, variant), float(assessment.degeneracy.eigenvalues[0])
+    covariance = assessment.covariance if variant is None else calibrate(assessment.covariance, variant)
+    return covariance, float(assessment.degeneracy.eigenvalues[0])
