@@ -236,6 +236,13 @@ def test_scans_far_apart_in_time_are_named_in_a_warning():
     assert time_gap_warning(times, frames).endswith("odometry takes the motion between consecutive scans as small")
     guided = time_gap_warning(times, frames, odometry_guess=True)
     assert guided.startswith("1 gap(s) in time") and guided.endswith("the dataset's odometry gives the guess across them; the scans on either side overlap less")
+    # the same scans as a folder without times.txt: named from the file numbers (it ran without a word)
+    bare = run(kitti / "extra_frames" / "00", "open3d_point_to_plane", progress=False)
+    assert any(w.startswith("1 gap(s) in the frame numbers (no time stamps) between consecutive scans, the largest 103 frames "
+                            "between frames 95 and 198") for w in bare.metrics["warnings"])
+    numbers = np.array([10, 12, 14, 16, 40])  # a stepped selection (every 2nd frame) is no gap; its jump to 40 is
+    assert time_gap_warning(None, numbers[:4], indices=np.array([0, 2, 4, 6])) is None
+    assert "between frames 16 and 40" in time_gap_warning(None, numbers, indices=np.array([0, 2, 4, 6, 8]))
 
 
 def test_a_variant_returning_a_non_finite_pose_is_a_registration_error_naming_the_frame(rng):

@@ -78,20 +78,32 @@ def frames_past_the_end(frames: FrameSelection, n_frames: int) -> str | None:
     return None
 
 
-def time_gap_warning(times_s: np.ndarray | None, frames: np.ndarray, odometry_guess: bool = False) -> str | None:
+def time_gap_warning(times_s: np.ndarray | None, frames: np.ndarray, odometry_guess: bool = False,
+                     indices: np.ndarray | None = None) -> str | None:
     """A warning when consecutive scans of a run lie far apart in time (more than 3x the median interval: scans
     missing from a recording, a folder of non-consecutive scans), or None. ``frames``: their numbers, as the warning
-    names them; ``odometry_guess``: the run takes the dataset's odometry as its guess (which bridges the gaps)."""
-    if times_s is None or len(times_s) < 3:
-        return None
-    dt = np.diff(np.asarray(times_s, dtype=np.float64))
-    median = float(np.median(dt))
+    names them; ``odometry_guess``: the run takes the dataset's odometry as its guess (which bridges the gaps).
+    Without stamps, ``indices`` (the selected dataset indices, when ``frames`` are the recording's own numbers, e.g.
+    KITTI's file names) stand in: numbers that jump by more than 3x the median step of the selection are a gap (KITTI
+    scans 94, 95, 198, 199 ran without a word)."""
+    if times_s is None:
+        if indices is None or len(indices) < 2:
+            return None
+        dt = np.diff(np.asarray(frames, dtype=np.float64)) / np.maximum(np.diff(np.asarray(indices, dtype=np.float64)), 1.0)
+        unit, what = "frames", "in the frame numbers (no time stamps)"
+        median = 1.0  # a step of one frame a selected scan
+    else:
+        if len(times_s) < 3:
+            return None
+        dt = np.diff(np.asarray(times_s, dtype=np.float64))
+        unit, what = "s", "in time"
+        median = float(np.median(dt))
     gaps = np.flatnonzero(dt > 3.0 * median) if median > 0 else np.zeros(0, dtype=np.int64)
     if not gaps.size:
         return None
     k = int(gaps[np.argmax(dt[gaps])])
-    return (f"{gaps.size} gap(s) in time between consecutive scans, the largest {dt[k]:.3g} s between frames {int(frames[k])} "
-            f"and {int(frames[k + 1])} (median interval {median:.3g} s): "
+    return (f"{gaps.size} gap(s) {what} between consecutive scans, the largest {dt[k]:.3g} {unit} between frames {int(frames[k])} "
+            f"and {int(frames[k + 1])} (median interval {median:.3g} {unit}): "
             + ("the dataset's odometry gives the guess across them; the scans on either side overlap less" if odometry_guess
                else "odometry takes the motion between consecutive scans as small"))
 

@@ -525,12 +525,14 @@ def run(
     effective, warnings = effective_settings(sequence, registration, name, stateful, checker.has_point_times, reference,
                                              stamp_instant=getattr(first_scan, "stamp_instant", None), n_flat_times=len(flat_times))
     numbers = getattr(sequence, "scan_frames", None)  # the recording's own frame numbers (KITTI's file names), if any
-    numbers = np.asarray(numbers)[indices] if numbers is not None and len(numbers) == n_total else indices
+    own_numbers = numbers is not None and len(numbers) == n_total
+    numbers = np.asarray(numbers)[indices] if own_numbers else indices
     if want_covariance and n > 1 and not np.isfinite(relative_cov[1:]).all(axis=(1, 2)).any():
         # (a plugin whose results carry no covariance): no all-NaN pose covariance is written
         warnings.append(f"no frame's registration gave a covariance ({name} returns none): no pose covariance")
         want_covariance = False
-    warnings = [w for w in (past_the_end, time_gap_warning(timestamps, numbers, odometry_poses is not None)) if w] + warnings
+    warnings = [w for w in (past_the_end, time_gap_warning(timestamps, numbers, odometry_poses is not None,
+                                                                indices if own_numbers else None)) if w] + warnings
     for message in warnings:
         log.warning("%s: %s", title, message)
     covariances = (relative_cov, propagate(poses, relative_cov)) if want_covariance else None
