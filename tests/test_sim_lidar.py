@@ -259,3 +259,18 @@ def test_export_kitti_is_all_or_nothing_and_never_mixes_two_exports(tmp_path):
     assert len(list((tmp_path / "seq" / "velodyne").iterdir())) == 5
     (tmp_path / "empty").mkdir()
     assert len(list((export_kitti(seq, tmp_path / "empty") / "velodyne").iterdir())) == 5  # an empty folder is used
+
+
+def test_scenes_and_images_too_large_for_memory_are_refused_before_building(monkeypatch):
+    """Hills over a long drive mesh the path's bounding box (3000 sweeps of 10 m hills: 37.5 M vertices, 11.5 GB) and
+    a camera image allocates ~300 B a pixel (8192 x 8192 allowed: 19 GB): both ended in MemoryError tracebacks."""
+    import lidarkit.resources
+    from lidarkit.sim.street_camera import SimulatedCameraSequence
+
+    monkeypatch.setattr(lidarkit.resources, "available_memory_bytes", lambda: 2 * 2**30)
+    with pytest.raises(ConfigError, match=r"terrain_amplitude_m / terrain_wavelength_m / n_frames: the hills' ground mesh \(3.75e\+07 "
+                                          r"vertices every 0.4 m over 4 x 1.5 km around the path\) needs about 10.5 GiB"):
+        SimulatedLidarSequence(n_frames=3000, terrain_amplitude_m=1.0, terrain_wavelength_m=10.0)
+    with pytest.raises(ConfigError, match=r"width / height: a 4096x4096 image needs about 4.69 GiB of memory, more than the 2 GiB"):
+        SimulatedCameraSequence(width=4096, height=4096, n_frames=2)
+    assert len(SimulatedLidarSequence(n_frames=20, terrain_amplitude_m=1.0)) == 20  # what fits is built
