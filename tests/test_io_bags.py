@@ -240,3 +240,27 @@ def test_sim_spec_memory_bag_t_field_and_odometry_frame(tmp_path):
         conn = next(c for c in reader.connections if c.topic == "/ground_truth")
         msg = reader.deserialize(next(reader.messages(connections=[conn]))[2], conn.msgtype)
     assert msg.header.frame_id == "world" and msg.child_frame_id == "lidar"
+
+
+def test_a_snapshot_export_has_no_point_times_and_its_stamp_is_its_instant(tmp_path):
+    """motion_distortion=false: the bag's clouds carried all-zero time fields (read as a sweep's times) stamped at the
+    sweep start, 0.1 s before their ground truth; the KITTI folder got an empty point_times/ that warned."""
+
+    sim = SimulatedLidarSequence(n_frames=3, n_beams=8, n_azimuths=90, motion_distortion=False, seed=1)
+    bag = open_dataset("mcap", export_bag(sim, tmp_path / "snap.mcap", "mcap"))
+    scan = bag.read_scan(2)
+    assert scan.point_times_s is None
+    np.testing.assert_allclose(bag.timestamps_s, sim.timestamps_s, atol=1e-9)
+    np.testing.assert_allclose(bag.ground_truth.timestamps_s, bag.timestamps_s, atol=1e-9)
+    np.testing.assert_array_equal(scan.points_xyz, sim.read_scan(2).points_xyz.astype(np.float32))  # (float32 fields)
+    folder = export_kitti(sim, tmp_path / "snap")
+    assert not (folder / "point_times").exists()
+
+
+def test_a_sensor_that_sees_nothing_is_refused_before_an_export_is_written(tmp_path):
+    """Beams above the horizon over the ground scene: 0-byte sweeps were exported (exit 0) that every reader refused."""
+    sim = SimulatedLidarSequence(n_frames=3, n_beams=8, n_azimuths=90, scene="ground", elevation_min_deg=0.0, elevation_max_deg=10.0)
+    with pytest.raises(DataError, match=r"sweep 0 has no return within 1-80 m: the beams \(0 to 10 deg, the sensor 1.73 m up\) see "
+                                        r"nothing of the ground scene"):
+        export_bag(sim, tmp_path / "up.bag", "rosbag1")
+    assert not (tmp_path / "up.bag").exists()

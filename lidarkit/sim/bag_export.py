@@ -117,8 +117,12 @@ def _write_messages(sequence, writer, typestore, serialize, *, ros1: bool, on_fr
 
     T = typestore.types
     pc2, odom = "sensor_msgs/msg/PointCloud2", "nav_msgs/msg/Odometry"
-    # without per-point times (point_times=false) the clouds have no time fields, as a driver that writes none
-    dtype = _POINT_DTYPE if sequence.config.point_times else _POINT_DTYPE_NO_TIMES
+    # without per-point times (point_times=false) the clouds have no time fields, as a driver that writes none; nor
+    # does a snapshot (motion_distortion=false: every point at one instant, zeros would read as a sweep's times),
+    # whose header is stamped at that instant (the sweep start read 0.1 s before its ground truth)
+    snapshot = not sequence.config.motion_distortion
+    dtype = _POINT_DTYPE if sequence.config.point_times and not snapshot else _POINT_DTYPE_NO_TIMES
+    stamps = sequence.timestamps_s
     fields = [T["sensor_msgs/msg/PointField"](name=n, offset=dtype.fields[n][1], datatype=_PF_UINT32 if n == "t" else _PF_FLOAT32, count=1)
               for n in dtype.names]
     gt = sequence.ground_truth
@@ -146,7 +150,7 @@ def _write_messages(sequence, writer, typestore, serialize, *, ros1: bool, on_fr
             if scan.point_times_s is not None:
                 cloud["time"] = scan.point_times_s
                 cloud["t"] = np.round(scan.point_times_s * 1e9).astype(np.uint32)
-            start_s = i * period
+            start_s = float(stamps[i]) if snapshot else i * period
             msg = T[pc2](header=header(i, start_s), height=1, width=len(cloud), fields=fields, is_bigendian=False,
                          point_step=dtype.itemsize, row_step=dtype.itemsize * len(cloud),
                          data=cloud.view(np.uint8).ravel(), is_dense=True)

@@ -624,6 +624,12 @@ class SimulatedLidarSequence:
             noise_rng = np.random.default_rng([cfg.seed, 1, index])
             range_m = range_m + noise_rng.normal(0.0, cfg.range_noise_std_m, size=range_m.shape)
         keep = np.isfinite(range_m) & (range_m >= cfg.min_range_m) & (range_m <= cfg.max_range_m)
+        if not keep.any():  # (exported as 0-byte scans that lidarkit's own readers then refused)
+            raise DataError(
+                f"sweep {index} has no return within {cfg.min_range_m:g}-{cfg.max_range_m:g} m: the beams "
+                f"({cfg.elevation_min_deg:g} to {cfg.elevation_max_deg:g} deg, the sensor {cfg.sensor_height_m:g} m up) see nothing "
+                f"of the {cfg.scene} scene", source=self.name,
+            )
         dirs = self.directions_sensor.reshape(-1, 3)[keep]
         points = dirs * range_m[keep, None]
         # intensity: reflectivity of the hit triangle times the cosine of the incidence angle
@@ -710,7 +716,7 @@ def _write_kitti(sequence: SimulatedLidarSequence, out: Path, on_frame: Callable
     from lidarkit import atomic
 
     atomic.ensure_dir(out / "velodyne")
-    if sequence.config.point_times:
+    if sequence.config.point_times and sequence.config.motion_distortion:  # (a snapshot has none: an empty folder warned)
         atomic.ensure_dir(out / "point_times")
     for i in range(len(sequence)):
         scan = sequence.read_scan(i)
