@@ -180,7 +180,7 @@ def check_target(path: str | os.PathLike | None, kind: str = "file") -> None:
 
 
 @contextlib.contextmanager
-def run_folder(path: str | os.PathLike, replaces: Iterable[str] = ()) -> Iterator[Path]:
+def run_folder(path: str | os.PathLike, replaces: Iterable[str] = (), exclusive: bool = False) -> Iterator[Path]:
     """Yield a temporary folder to write a run into; on success it becomes ``path``, on failure it is removed.
 
     A new ``path`` appears in one rename, complete. An existing folder keeps its other files: the run's files are
@@ -188,6 +188,8 @@ def run_folder(path: str | os.PathLike, replaces: Iterable[str] = ()) -> Iterato
     ``replaces``: the names a run of this kind can write; those this run did not write are removed from an existing
     folder that held an earlier run (its ``config.yaml`` names a lidarkit version: its ground truth or plots are never
     read as this run's); a folder that held no run keeps every file (a user's own ``trajectory.png`` went).
+    ``exclusive``: ``path`` must be missing or empty when the run is moved in (one rename, which the file system refuses
+    onto a folder that holds files: two exports to one folder at once merged before).
     """
     path = Path(path)
     if path.exists() and not path.is_dir():
@@ -207,7 +209,7 @@ def run_folder(path: str | os.PathLike, replaces: Iterable[str] = ()) -> Iterato
             raise
         written = {p.name for p in tmp.iterdir()}
         with output_errors(path, "cannot complete the run folder"):
-            _move_into_place(tmp, path)
+            _move_into_place(tmp, path, exclusive)
         for name in sorted(set(replaces) - written) if held_a_run else ():
             with output_errors(path / name, "cannot remove an earlier run's file"):
                 (path / name).unlink(missing_ok=True)
@@ -231,17 +233,20 @@ def export_folder(path: str | os.PathLike, what: str) -> Iterator[Path]:
     if path.is_dir() and any(path.iterdir()):
         raise OutputError(f"the folder already holds files: an export never mixes its {what} with another's (remove it "
                           "or choose a new folder)", source=path)
-    with run_folder(path) as tmp:
+    with run_folder(path, exclusive=True) as tmp:
         yield tmp
 
 
-def _move_into_place(tmp: Path, path: Path) -> None:
+def _move_into_place(tmp: Path, path: Path, exclusive: bool = False) -> None:
     try:
         os.rename(tmp, path)  # a missing or empty ``path``: one rename
         return
     except OSError as err:
         if err.errno not in (errno.EEXIST, errno.ENOTEMPTY, errno.EISDIR, errno.ENOTDIR, errno.EBUSY):  # EBUSY: "." itself
             raise
+        if exclusive:
+            raise OutputError("the folder filled while this export was written (another export to it?): its files are kept, "
+                              "this export is not written", source=path) from None
     moves = [(src, path / src.relative_to(tmp)) for src in sorted(tmp.rglob("*"))]
     # everything in the way is found before the first file moves: a folder where a file goes (or a file where a folder
     # goes) found half-way left the folder half the earlier run's, half this one's

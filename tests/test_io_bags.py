@@ -264,3 +264,35 @@ def test_a_sensor_that_sees_nothing_is_refused_before_an_export_is_written(tmp_p
                                         r"nothing of the ground scene"):
         export_bag(sim, tmp_path / "up.bag", "rosbag1")
     assert not (tmp_path / "up.bag").exists()
+
+
+def test_an_export_never_replaces_or_mixes_with_one_that_finished_while_it_ran(tmp_path):
+    """Two exports to one target at once: the bag finishing second replaced the first, and the KITTI folder of the one
+    finishing second was merged into the first's (30 sweeps beside 10 poses). The second is refused; the first stays."""
+    from lidarkit.errors import OutputError
+
+    sim = SimulatedLidarSequence(n_frames=2, n_beams=8, n_azimuths=90)
+    for fmt, name in (("rosbag1", "run.bag"), ("mcap", "run.mcap"), ("rosbag2", "run_ros2")):
+        out = tmp_path / name
+
+        written_by_the_other = out / "metadata.yaml" if fmt == "rosbag2" else out
+
+        def other_export_finishes(i, written=written_by_the_other):
+            if i == 1:
+                written.parent.mkdir(exist_ok=True)
+                written.write_text("the other export")
+
+        with pytest.raises(OutputError, match="a bag appeared there while this one was written"):
+            export_bag(sim, out, fmt, on_frame=other_export_finishes)
+        assert written_by_the_other.read_text() == "the other export"
+    folder = tmp_path / "kitti"
+
+    def other_folder_export_finishes(i):
+        if i == 1:
+            folder.mkdir()
+            (folder / "poses.txt").write_text("the other export")
+
+    with pytest.raises(OutputError, match=r"kitti: the folder filled while this export was written \(another export to it\?\)"):
+        export_kitti(sim, folder, on_frame=other_folder_export_finishes)
+    assert sorted(p.name for p in folder.iterdir()) == ["poses.txt"]
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no partial output left

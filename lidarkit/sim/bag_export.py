@@ -10,6 +10,7 @@ bag and the KITTI-layout export hold the same sweeps. Written with the ``rosbags
 
 from __future__ import annotations
 
+import errno
 import os
 import shutil
 import sqlite3
@@ -106,10 +107,28 @@ def export_bag(sequence, out: str | os.PathLike, fmt: str = "rosbag2", *, storag
         if fmt == "mcap":
             target = next(target.glob("*.mcap"))
         with atomic.output_errors(out):
-            os.replace(target, out)
+            _claim(target, out)
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
     return out
+
+
+def _claim(written: Path, out: Path) -> None:
+    """Move the written bag to ``out`` unless something got there while it was written (another export: it replaced
+    that one before): a file is linked (refused when ``out`` exists), a ROS 2 bag folder renamed (refused onto a
+    folder that holds files)."""
+    try:
+        if written.is_dir():
+            os.rename(written, out)
+        else:
+            os.link(written, out)
+    except OSError as err:
+        if err.errno in (errno.EEXIST, errno.ENOTEMPTY, errno.EISDIR, errno.ENOTDIR):
+            raise OutputError("a bag appeared there while this one was written (another export?): it is kept, this one is "
+                              "not written", source=out) from None
+        if err.errno not in (errno.EPERM, errno.ENOTSUP, errno.EXDEV) or out.exists():
+            raise
+        os.replace(written, out)  # a file system without hard links: the check above is as close as it gets
 
 
 def _write_messages(sequence, writer, typestore, serialize, *, ros1: bool, on_frame) -> None:
