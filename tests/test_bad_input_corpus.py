@@ -392,6 +392,8 @@ def test_backend_exception_becomes_a_registration_error():
     (["sim", "lidar", "-o", "{tmp}/s", "-p", "frame_rate_hz=1e-9"], ["frame_rate_hz", "greater than or equal to 0.1"]),
     (["sim", "lidar", "-o", "{tmp}/s", "-p", "n_beams=100000", "-p", "n_azimuths=100000"], ["n_azimuths", "GiB of memory"]),
     (["sim", "lidar", "-o", "{tmp}/s", "--seed", "-1"], ["seed", "greater than or equal to 0"]),
+    # a bag's name without -f: a KITTI folder named s.bag was written
+    (["sim", "lidar", "-o", "{tmp}/s.bag"], ["--out", "s.bag is named like a ROS 1 bag, but --format is kitti", "-f rosbag1"]),
     (["odometry", "sim:open?frames=3&speed_mps=1e6", "--no-progress"], ["speed_mps", "less than or equal to 100"]),
     (["pf", str(FREIBURG), "-n", "1000000000000"], ["--particles", "n_particles must be >= 1 and <="]),
     (["pf", str(FREIBURG), "--seed", "-1"], ["--seed", "must be >= 0, got -1"]),
@@ -400,7 +402,7 @@ def test_backend_exception_becomes_a_registration_error():
 def test_unbounded_parameters_are_refused(tmp_path, capsys, args, names):
     code, _, err = run_cli([a.replace("{tmp}", str(tmp_path)) for a in args], capsys)
     assert_one_line_error(code, err, *names)
-    assert not (tmp_path / "s").exists()
+    assert not (tmp_path / "s").exists() and not (tmp_path / "s.bag").exists()
 
 
 def test_pf_recorded_without_sensor_readings(tmp_path, capsys):

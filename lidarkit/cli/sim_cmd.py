@@ -45,6 +45,9 @@ def sim_lidar(
 
     if fmt != "kitti":  # before the simulation: a bag's name and that it is not there yet
         check_bag_target(out, fmt, option="--out")
+    elif out.suffix.lower() in (".bag", ".mcap"):  # (a KITTI folder named run.bag was written)
+        raise ConfigError(f"{out.name} is named like a {'ROS 1 bag' if out.suffix.lower() == '.bag' else 'MCAP file'}, but --format is "
+                          f"kitti (a folder): add -f {'rosbag1' if out.suffix.lower() == '.bag' else 'mcap'}, or name a folder", source="--out")
     check_target(out, "file" if fmt in ("rosbag1", "mcap") else "folder")
     params = parse_params(param)
     own = {"scene": "--scene", "n_frames": "--frames", "seed": "--seed"}
