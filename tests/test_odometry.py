@@ -585,3 +585,16 @@ def test_a_stateful_variants_frame_covariance_honours_its_covariance_settings():
     model = get_icp("kiss", covariance="gauss_newton").config.covariance_model()
     expected, _ = frame_covariance(scans[0], scans[1], poses[0], poses[1], None, VoxelizedScans(), model=model)
     np.testing.assert_allclose(gauss_newton[0], expected, rtol=1e-6)
+
+
+def test_pairwise_acceptance_gates_given_to_a_stateful_variant_are_said_to_be_unused():
+    """kiss with min_fitness=0.99: the same poses as without, config.yaml recording the setting, and not a word."""
+    from lidarkit.registration import get_icp
+
+    kitti = shared_path("kitti_odometry", "sequences", "00")
+    gated = run(kitti, get_icp("kiss", min_fitness=0.99, min_correspondences=10**8), frames="0:3", progress=False)
+    plain = run(kitti, "kiss", frames="0:3", progress=False)
+    np.testing.assert_allclose(gated.trajectory.poses_se3, plain.trajectory.poses_se3, atol=1e-9)
+    assert ("min_fitness, min_correspondences: acceptance gates of a pairwise alignment (align); kiss's odometry "
+            "(register_frame, its own local map) does not use them") in gated.metrics["warnings"]
+    assert not any("acceptance gates" in w for w in plain.metrics["warnings"])

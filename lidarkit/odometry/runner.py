@@ -533,6 +533,11 @@ def run(
         want_covariance = False
     warnings = [w for w in (past_the_end, time_gap_warning(timestamps, numbers, odometry_poses is not None,
                                                                 indices if own_numbers else None)) if w] + warnings
+    if stateful:  # (accepted, recorded in config.yaml as given, and without effect on the run)
+        gates = [f for f in ("min_fitness", "min_correspondences") if f in getattr(config, "model_fields_set", ())]
+        if gates:
+            warnings.append(f"{', '.join(gates)}: acceptance gates of a pairwise alignment (align); {name}'s odometry "
+                            "(register_frame, its own local map) does not use them")
     for message in warnings:
         log.warning("%s: %s", title, message)
     covariances = (relative_cov, propagate(poses, relative_cov)) if want_covariance else None
