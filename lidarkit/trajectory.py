@@ -73,6 +73,11 @@ class Trajectory:
     def __len__(self) -> int:
         return int(self.poses_se3.shape[0])
 
+    def __repr__(self) -> str:
+        """One line (the generated one printed every pose: 7,200 characters for 20)."""
+        stamps = "no stamps" if self.timestamps_s is None or not len(self) else f"{self.timestamps_s[0]:.6g}-{self.timestamps_s[-1]:.6g} s"
+        return f"Trajectory({self.name!r}, {len(self)} poses, {stamps}, path {self.length_m:.4g} m)"
+
     def __getitem__(self, index: slice | np.ndarray | list[int]) -> Trajectory:
         """Sub-trajectory by slice or index array (an int index is not supported: use ``poses_se3[i]``)."""
         if isinstance(index, (int, np.integer)):
@@ -94,7 +99,7 @@ class Trajectory:
     def distances_m(self) -> np.ndarray:
         """``(N,)`` cumulative path length from the first pose."""
         steps = np.linalg.norm(np.diff(self.poses_se3[:, :3, 3], axis=0), axis=1)
-        return np.concatenate([[0.0], np.cumsum(steps)])
+        return np.concatenate([[0.0], np.cumsum(steps)])[: len(self)]  # (none for no pose)
 
     @property
     def length_m(self) -> float:

@@ -139,3 +139,16 @@ def test_interpolated_poses_between_and_just_beyond_the_stamps():
     assert len(traj.interpolated(np.array([]))) == 0
     with pytest.raises(DataError, match="two poses with time stamps"):
         Trajectory(truth(stamps)).interpolated(times)
+
+
+def test_reprs_are_one_line_and_an_empty_trajectory_has_no_distances():
+    """repr(Trajectory) printed every pose (7,200 characters for 20) and repr(OdometryResult) every array (57,000);
+    an empty trajectory's distances_m had one entry."""
+    from lidarkit.odometry import run
+
+    result = run("sim:street?frames=4&beams=8&azimuths=180", "vanilla", progress=False)
+    assert repr(result).startswith("OdometryResult('vanilla', 4 frames in ") and "end error" in repr(result) and "\n" not in repr(result)
+    assert repr(result.trajectory) == f"Trajectory('vanilla on sim:street?seed=0', 4 poses, 0.1-0.4 s, path {result.trajectory.length_m:.4g} m)"
+    empty = Trajectory(np.zeros((0, 4, 4)))
+    assert empty.distances_m.shape == (0,) and empty.length_m == 0.0
+    assert repr(empty) == "Trajectory('', 0 poses, no stamps, path 0 m)"

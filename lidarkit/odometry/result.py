@@ -110,6 +110,13 @@ class OdometryResult:
     total_cpu_s: float | None = None
     """Process CPU time (all threads: reading, the backend's, the assessment's) of the same loop as ``total_time_s``."""
 
+    def __repr__(self) -> str:
+        """One line (the generated one printed every array: 57,000 characters for 20 frames)."""
+        end = (self.metrics.get("final_error") or {}).get("translation_m")
+        scored = f", end error {end:.4g} m" if isinstance(end, (int, float)) else ", not scored"
+        where = f", written to {str(self.out_dir)!r}" if self.out_dir is not None else ""
+        return f"OdometryResult({self.method!r}, {len(self.frames)} frames in {self.total_time_s:.3g} s{scored}{where})"
+
     @property
     def relative_covariance(self) -> np.ndarray | None:
         """``(n, 6, 6)`` covariance of each frame's relative motion (NaN where none; row 0 unused), or None."""
