@@ -152,3 +152,9 @@ def test_reprs_are_one_line_and_an_empty_trajectory_has_no_distances():
     empty = Trajectory(np.zeros((0, 4, 4)))
     assert empty.distances_m.shape == (0,) and empty.length_m == 0.0
     assert repr(empty) == "Trajectory('', 0 poses, no stamps, path 0 m)"
+    from lidarkit.io import open_dataset
+    from lidarkit.sim.lidar import SimulatedLidarSequence
+
+    assert repr(SimulatedLidarSequence(n_frames=3, n_beams=8, n_azimuths=90)) == "SimulatedLidarSequence('sim:street?seed=0', 3 sweeps of 8x90 rays)"
+    aces = shared_path("carmen_2d", "aces.clf.bz2")
+    assert repr(open_dataset("carmen", aces)) == f"CarmenLog({str(aces)!r}, 7374 scans)"  # (<... object at 0x...> before)

@@ -367,6 +367,9 @@ class CarmenLog:
     def __len__(self) -> int:
         return int(len(self._timestamps_s))
 
+    def __repr__(self) -> str:
+        return f"CarmenLog({str(self.path)!r}, {len(self)} scans)"
+
     @property
     def timestamps_s(self) -> np.ndarray:
         """``(S,)`` float64 ipc time stamps of the scans (s) in file order, strictly increasing (``n_restamped`` of them

@@ -590,6 +590,10 @@ class SimulatedLidarSequence:
     def __len__(self) -> int:
         return self.config.n_frames
 
+    def __repr__(self) -> str:
+        c = self.config
+        return f"SimulatedLidarSequence({self.name!r}, {c.n_frames} sweeps of {c.n_beams}x{c.n_azimuths} rays)"
+
     def read_scan(self, index: int) -> Scan:
         """Cast sweep ``index``; points ``(N, 3)`` in the sensor frame, ordered by firing time."""
         return self._cast(index)[0]

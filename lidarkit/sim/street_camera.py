@@ -583,6 +583,10 @@ class SimulatedCameraSequence:
     def __len__(self) -> int:
         return self.config.n_frames
 
+    def __repr__(self) -> str:
+        c = self.config
+        return f"SimulatedCameraSequence({self.name!r}, {c.n_frames} images of {c.width}x{c.height})"
+
     # ---- rendering --------------------------------------------------------------------------------
     @property
     def scene(self):
