@@ -34,8 +34,11 @@ class Trajectory:
     meta: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        poses = np.array(self.poses_se3, dtype=np.float64)
         source = self.name or "trajectory"
+        try:
+            poses = np.array(self.poses_se3, dtype=np.float64)
+        except (TypeError, ValueError):  # (numpy's "could not convert string to float")
+            raise DataError(f"poses must be numbers, an (N, 4, 4) array, got {type(self.poses_se3).__name__}", source=source) from None
         if poses.ndim != 3 or poses.shape[1:] != (4, 4):
             raise DataError(f"poses must have shape (N, 4, 4), got {poses.shape}", source=source)
         if not np.isfinite(poses).all():
@@ -59,7 +62,10 @@ class Trajectory:
             raise DataError(reason, source=source, location=f"frame {k}")
         object.__setattr__(self, "poses_se3", poses)
         if self.timestamps_s is not None:
-            ts = np.array(self.timestamps_s, dtype=np.float64).reshape(-1)
+            try:
+                ts = np.array(self.timestamps_s, dtype=np.float64).reshape(-1)
+            except (TypeError, ValueError):
+                raise DataError("timestamps must be numbers (seconds)", source=source) from None
             if ts.shape[0] != poses.shape[0]:
                 raise DataError(f"{ts.shape[0]} timestamps for {poses.shape[0]} poses", source=source)
             if not np.isfinite(ts).all():

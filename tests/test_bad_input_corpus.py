@@ -499,3 +499,30 @@ def test_bad_vo_timestamps_named_before_the_run(tmp_path, capsys):
     code, out, err = run_cli(["vo", sample_path("kitti_vo", "06"), "--timestamps", times], capsys)
     assert_one_line_error(code, err, "stamps.txt (line 4", "not strictly increasing")
     assert out == ""  # refused before any frame was processed
+
+
+def test_library_arguments_of_the_wrong_kind_are_one_clear_error():
+    """Wrong argument types were TypeErrors and ValueErrors from deep inside (or, for strings that are true, taken as
+    True: align_origin="no" aligned the origin); each is a LidarKitError naming the argument."""
+    from lidarkit.errors import LidarKitError
+    from lidarkit.eval import ape
+    from lidarkit.odometry import run
+    from lidarkit.registration.vanilla import VanillaICP
+    from lidarkit.trajectory import Trajectory
+
+    still = Trajectory(np.tile(np.eye(4), (5, 1, 1)))
+    spec = "sim:street?frames=3&beams=8&azimuths=90"
+    for call, message in (
+        (lambda: Trajectory("abc"), "poses must be numbers, an (N, 4, 4) array, got str"),
+        (lambda: Trajectory(still.poses_se3, ["a"] * 5), "timestamps must be numbers (seconds)"),
+        (lambda: run(spec, "vanilla", prefetch="2"), "prefetch must be a whole number of scans >= 0"),
+        (lambda: run(spec, "vanilla", prefetch=-1), "prefetch must be a whole number of scans >= 0"),
+        (lambda: run(spec, "vanilla", pose_covariance="yes"), "pose_covariance must be True or False, got 'yes'"),
+        (lambda: run(spec, "vanilla", params=[("max_iterations", 5)]), "params must be a mapping"),
+        (lambda: ape(still, still, align="se3", n_to_align="5"), "n_to_align must be a whole number of poses, got '5'"),
+        (lambda: ape(still, still, align_origin="no"), "align_origin must be True or False, got 'no'"),
+        (lambda: VanillaICP(max_iterations=-1), "vanilla: invalid parameters (max_iterations: Input should be greater than or equal to 1)"),
+    ):
+        with pytest.raises(LidarKitError) as info:
+            call()
+        assert message in str(info.value)

@@ -199,14 +199,18 @@ def _check_align(align: str, align_origin: bool, n_to_align: int | None, n_poses
     """Validate the alignment settings; return evo's ``n`` (-1 = all poses)."""
     if align not in ALIGNMENTS:
         raise ConfigError(f"unknown alignment {align!r}; known: {', '.join(ALIGNMENTS)}", source="align")
+    if not isinstance(align_origin, (bool, np.bool_)):  # ("no" is a true string: it aligned the origin)
+        raise ConfigError(f"align_origin must be True or False, got {align_origin!r}", source="align_origin")
     if align_origin and align != "none":
         raise ConfigError("align_origin cannot be combined with align != 'none'", source="align_origin")
     if n_to_align is None:
         return -1
     if align == "none":
         raise ConfigError("n_to_align needs align = se3, sim3 or scale", source="n_to_align")
+    if isinstance(n_to_align, bool) or not isinstance(n_to_align, (int, np.integer)):  # ("5" read "must be in [1, 5], got 5")
+        raise ConfigError(f"n_to_align must be a whole number of poses, got {n_to_align!r}", source="n_to_align")
     n = int(n_to_align)
-    if n != n_to_align or not 1 <= n <= n_poses:
+    if not 1 <= n <= n_poses:
         raise EvaluationError(f"n_to_align must be an integer in [1, {n_poses}], got {n_to_align}", source=source)
     return n
 

@@ -35,6 +35,8 @@ log = logging.getLogger(__name__)
 
 
 def _resolve_method(method: Any, params: dict[str, Any] | None) -> Any:
+    if params is not None and not isinstance(params, dict):
+        raise ConfigError(f"params must be a mapping of parameter names to values, got {type(params).__name__}", source="params")
     if isinstance(method, str):
         from lidarkit.registration import get_icp
 
@@ -344,6 +346,11 @@ def run(
     the next frame registers (:class:`lidarkit.threads.Overlap`; the same results as ``overlap=False``, which runs it in
     line). A variant whose backend holds the GIL (``overlap_assessment = False``: small_gicp, kiss) is assessed in line.
     """
+    if isinstance(prefetch, bool) or not isinstance(prefetch, (int, np.integer)) or prefetch < 0:
+        raise ConfigError(f"prefetch must be a whole number of scans >= 0 (0: read in line), got {prefetch!r}", source="prefetch")
+    for flag, value in (("pose_covariance", pose_covariance), ("strict", strict), ("progress", progress), ("overlap", overlap)):
+        if value is not None and not isinstance(value, (bool, np.bool_)):  # ("yes", "no": true strings)
+            raise ConfigError(f"{flag} must be True or False, got {value!r}", source=flag)
     sequence = open_sequence(dataset)
     registration = _resolve_method(method, params)
     method_name = getattr(registration, "name", type(registration).__name__) or type(registration).__name__

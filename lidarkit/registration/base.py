@@ -18,9 +18,10 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar, Literal
 
 import numpy as np
+import pydantic
 from pydantic import BaseModel, ConfigDict, Field
 
-from lidarkit.errors import ConfigError, DataError, LidarKitError, RegistrationError
+from lidarkit.errors import ConfigError, DataError, LidarKitError, RegistrationError, validation_problems
 from lidarkit.geometry import as_points, is_rotation, orthonormalize_se3
 from lidarkit.registration import local_origin
 from lidarkit.registration.covariance import use_model
@@ -470,7 +471,13 @@ class Registration:
     def __init__(self, config: RegistrationConfig | None = None, **params: Any):
         if config is not None and params:
             raise TypeError("pass either a config object or keyword parameters, not both")
-        self._config = config if config is not None else self.Config(**params)
+        if config is None:
+            try:
+                config = self.Config(**params)
+            except pydantic.ValidationError as err:  # (a pydantic traceback where get_icp says it in one line)
+                raise ConfigError(f"invalid parameters ({validation_problems(err, unnamed='')})",
+                                  source=self.name or type(self).__name__) from None
+        self._config = config
         if not self._config.assess and not assessed_apart(type(self)):
             from lidarkit.registration.registry import available_icp, get_icp_class
 
