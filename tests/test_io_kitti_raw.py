@@ -122,6 +122,8 @@ def test_missing_inputs(raw_copy):
         KittiRaw(raw_copy, DATE, "0002")
     with pytest.raises(DataError, match="give date= and drive="):
         KittiRaw(raw_copy)
+    with pytest.raises(DataError, match=r"nowhere: not found"):  # (it asked for date= and drive=)
+        KittiRaw(raw_copy / "nowhere")
     (raw_copy / DATE / "calib_imu_to_velo.txt").unlink()
     with pytest.raises(DataError, match=r"calib_imu_to_velo\.txt: calibration file not found"):
         KittiRaw(raw_copy, DATE, DRIVE)

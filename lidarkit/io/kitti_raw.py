@@ -98,6 +98,8 @@ class KittiRaw:
         self.point_times = point_times
         self._correct = vertical_correction is True
         base = Path(base_dir)
+        if not base.exists():  # (it asked for date= and drive= of a folder that is not there)
+            raise DataError("not found", source=base)
         m = _DRIVE_DIR.match(base.name)
         if m and date is None and drive is None:
             date, drive, dataset = m.group(1), m.group(2), m.group(3)
