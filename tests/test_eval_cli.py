@@ -192,3 +192,13 @@ def test_tum_files_paired_by_index_whose_stamps_disagree_are_said_to_be(tmp_path
     assert "paired by index" not in caplog.text
     assert cli_exit_code(["eval", "-f", "tum", a, b, "--max-diff", "3"]) == 1
     assert "error: --max-diff: --max-diff is the time window of --associate" in capsys.readouterr().err
+    # bad values name the option (it was "b vs a: max_diff_s must be > 0", an EvaluationError of the file pair)
+    assert cli_exit_code(["eval", "-f", "tum", a, b, "--associate", "--max-diff", "0"]) == 1
+    assert capsys.readouterr().err.strip() == "error: --max-diff: must be a finite number of seconds > 0, got 0"
+    assert cli_exit_code(["eval", "-f", "tum", a, b, "--delta", "0"]) == 1
+    assert capsys.readouterr().err.strip() == "error: --delta: must be a number > 0, got 0"
+    from lidarkit.errors import ConfigError
+    from lidarkit.eval.pairing import paired
+
+    with pytest.raises(ConfigError, match=r"max_diff_s: max_diff_s must be a finite number of seconds > 0, got 0"):
+        paired(Trajectory.from_tum(a), Trajectory.from_tum(b), associate=True, max_diff_s=0)

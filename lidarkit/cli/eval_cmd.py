@@ -97,6 +97,10 @@ def eval_command(
         raise ConfigError("missing EST (the estimated trajectory file): lidarkit eval REF EST", source="EST")
     if max_diff != _D.max_diff_s and not associate:  # (accepted, recorded in the JSON as if applied, and ignored)
         raise ConfigError("--max-diff is the time window of --associate; without it poses are paired by index", source="--max-diff")
+    if not (math.isfinite(max_diff) and max_diff > 0):  # (the library's error named the file pair and max_diff_s)
+        raise ConfigError(f"must be a finite number of seconds > 0, got {max_diff:g}", source="--max-diff")
+    if not (math.isfinite(delta) and delta > 0):
+        raise ConfigError(f"must be a number > 0, got {delta:g}", source="--delta")
     atomic.check_target(markdown, "file")
     atomic.check_target(plot, "figure")
     atomic.check_target(tables, "folder")

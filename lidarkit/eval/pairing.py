@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import logging
+import math
 
-from lidarkit.errors import EvaluationError
+from lidarkit.errors import ConfigError, EvaluationError
 from lidarkit.trajectory import Trajectory
 
 logger = logging.getLogger(__name__)
@@ -45,8 +46,8 @@ def paired(
         missing = "reference" if ref.timestamps_s is None else "estimate"
         raise EvaluationError(f"cannot associate by time: the {missing} has no timestamps (a KITTI pose file has none: "
                               "give its times.txt, --ref-times / --est-times, or a TUM file)", source=source)
-    if not max_diff_s > 0:
-        raise EvaluationError(f"max_diff_s must be > 0, got {max_diff_s}", source=source)
+    if not (isinstance(max_diff_s, (int, float)) and math.isfinite(max_diff_s) and max_diff_s > 0):  # a setting, not the pair's fault
+        raise ConfigError(f"max_diff_s must be a finite number of seconds > 0, got {max_diff_s!r}", source="max_diff_s")
     from evo import EvoException
     from evo.core import sync
 
