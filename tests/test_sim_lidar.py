@@ -274,3 +274,14 @@ def test_scenes_and_images_too_large_for_memory_are_refused_before_building(monk
     with pytest.raises(ConfigError, match=r"width / height: a 4096x4096 image needs about 4.69 GiB of memory, more than the 2 GiB"):
         SimulatedCameraSequence(width=4096, height=4096, n_frames=2)
     assert len(SimulatedLidarSequence(n_frames=20, terrain_amplitude_m=1.0)) == 20  # what fits is built
+
+
+def test_settings_of_scene_parts_that_are_not_drawn_are_refused():
+    """open_object_lateral_m on the street scene and occluder_start without occluder=true were accepted and ignored."""
+    from lidarkit.sim.street_camera import make_camera_config
+
+    with pytest.raises(ConfigError, match="open_object_lateral_m places the open scene's objects; the street scene has none of them"):
+        make_config(scene="street", open_object_lateral_m=(6.0, 9.0))
+    with pytest.raises(ConfigError, match="occluder_start / occluder_frames place the occluder, and occluder=false draws none"):
+        make_camera_config(occluder_start=10)
+    assert make_camera_config(occluder=True, occluder_start=1, n_frames=5).occluder_start == 1

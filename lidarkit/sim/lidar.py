@@ -106,6 +106,8 @@ class LidarSimConfig(BaseModel):
         if self.min_range_m >= self.max_range_m:
             raise ValueError("min_range_m must be below max_range_m")
         lateral = self.open_object_lateral_m
+        if lateral is not None and self.scene != "open":  # (accepted and ignored)
+            raise ValueError(f"open_object_lateral_m places the open scene's objects; the {self.scene} scene has none of them")
         if lateral is not None and not 0.0 <= lateral[0] < lateral[1]:
             raise ValueError("open_object_lateral_m must be (min, max) with 0 <= min < max")
         if lateral is not None and lateral[0] < OPEN_OBJECT_CLEARANCE_M:

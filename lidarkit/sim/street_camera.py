@@ -118,6 +118,8 @@ class CameraSimConfig(BaseModel):
         if longest > MAX_CAMERA_DRIVE_M:  # (100 frames at 0.05 Hz built a 13 km street first, a billion frames 112 GiB)
             raise ValueError(f"the drive may reach {longest / 1000:.4g} km (speed_max_mps x n_frames / frame_rate_hz); at most "
                              f"{MAX_CAMERA_DRIVE_M / 1000:g} km: fewer frames, a higher frame rate or a lower speed")
+        if not self.occluder and {"occluder_start", "occluder_frames"} & self.model_fields_set:  # (accepted and ignored)
+            raise ValueError("occluder_start / occluder_frames place the occluder, and occluder=false draws none")
         if self.occluder and self.occluder_start is not None and self.occluder_start >= self.n_frames:
             raise ValueError(f"occluder_start {self.occluder_start} is beyond the {self.n_frames} frames: no frame is occluded")
         if not self.corners and self.first_corner_m is not None:
