@@ -258,6 +258,14 @@ def test_a_variant_returning_a_non_finite_pose_is_a_registration_error_naming_th
     with pytest.raises(RegistrationError, match=r"memory \(frame 2\): map_stand_in returned a pose with NaN or infinite entries"):
         run(MemorySequence(poses, _room_points(rng, 50)), MapStandIn(bad))
 
+    class ReturnsNothing(MapStandIn):
+        def register_frame(self, points_xyz, point_times_s=None):
+            return None if len(self.got_times) == 2 else super().register_frame(points_xyz, point_times_s)
+
+    # (None was stored as NaN and read "a pose with NaN or infinite entries")
+    with pytest.raises(RegistrationError, match=r"memory \(frame 2\): map_stand_in.register_frame returned NoneType, not a 4x4 pose"):
+        run(MemorySequence(poses, _room_points(rng, 50)), ReturnsNothing(poses))
+
 
 def test_a_frame_slice_past_the_end_is_cut_with_a_warning(rng, caplog):
     """'0:50' on 10 scans runs the 10 and says so (in the log and metrics.json), instead of silently."""

@@ -462,9 +462,13 @@ def run(
                         t1 = clock()
                         if odometry_poses is not None and k > 0:
                             guess = orthonormalize_se3(np.linalg.solve(odometry_poses[indices[k - 1]], odometry_poses[idx]))
-                            poses[k] = registration.register_frame(points, scan.point_times_s, motion_guess=guess)
+                            pose = registration.register_frame(points, scan.point_times_s, motion_guess=guess)
                         else:
-                            poses[k] = registration.register_frame(points, scan.point_times_s)
+                            pose = registration.register_frame(points, scan.point_times_s)
+                        if pose is None or np.shape(pose) != (4, 4):  # (None read as "a pose with NaN entries")
+                            raise RegistrationError(f"{name}.register_frame returned {type(pose).__name__}"
+                                                    f"{'' if pose is None else f' of shape {np.shape(pose)}'}, not a 4x4 pose")
+                        poses[k] = pose
                         if not np.isfinite(poses[k]).all():  # a variant (or plugin) returning garbage instead of raising
                             raise RegistrationError(f"{name} returned a pose with NaN or infinite entries")
                         t2 = clock()  # the variant's own time: the after-the-fact covariance below is not part of it
