@@ -655,3 +655,21 @@ def test_a_variant_whose_extra_is_missing_names_the_pip_line(monkeypatch):
     with pytest.raises(ConfigError, match=r"the 'small_gicp' variant needs the Python package 'small_gicp', not installed here: "
                                           r"pip install 'lidarkit\[gicp\]'"):
         get_icp("small_gicp")
+
+
+def test_an_unregistered_plugin_is_named_by_its_class():
+    """The docs' plugin class used without @register_icp: result.method was '' and the calibration note read
+    "none learned for : ..."."""
+    from lidarkit.registration import Registration, RegistrationConfig
+    from lidarkit.registration.assessment import assess_alignment
+
+    class MyICP(Registration):
+        Config = RegistrationConfig
+
+        def _align(self, source_xyz, target_xyz, init_T):
+            return assess_alignment(source_xyz, target_xyz, init_T, 1.0).to_result(init_T, iterations=1)
+
+    cloud = np.random.default_rng(0).normal(size=(500, 3)) * 5
+    result = MyICP().align(cloud, cloud)
+    assert result.method == "MyICP"
+    assert result.extra["covariance_calibration"].startswith("none learned for MyICP: the closed form")

@@ -471,6 +471,8 @@ class Registration:
     def __init__(self, config: RegistrationConfig | None = None, **params: Any):
         if config is not None and params:
             raise TypeError("pass either a config object or keyword parameters, not both")
+        if not self.name:  # a subclass used without @register_icp: its results and messages read method ''
+            self.name = type(self).__name__
         if config is None:
             try:
                 config = self.Config(**params)
