@@ -376,3 +376,54 @@ def _register_metric_task(name: str, metric, value) -> None:
             return TaskOutput(metrics={metric: value(job)} if one else value(job), series={}, info={})
 
     register_task(name)(MetricTask)
+
+
+def test_compare_counts_units_not_copies_and_asks_which_task(tmp_path, monkeypatch):
+    """A fixed dataset beside a seeded one counted its one value once per seed (12 units, p = 0.0005, from 7
+    measurements); a metric two tasks report was pooled into one test (icp_pair pairs/s with odometry frames/s); the
+    direction of a task's metric was lost to a process without the task; a null metric read "unknown"; a method whose
+    jobs all failed read "not found"."""
+    from lidarkit.bench import Metric, load_suite, run_suite
+    from lidarkit.bench import tasks as bench_tasks
+
+    def value(job):
+        seeded = job.dataset_name == "seeded"
+        noise = 0.01 * np.random.default_rng(job.seed).random() if seeded else 0.0
+        return (0.1 if job.method == "good" else 0.5) + noise
+
+    _register_metric_task("mixed_data_test_task", "error_m", value)
+    _register_metric_task("other_rate_test_task", "error_m", value)
+    def recall(job):
+        if job.method == "broken":
+            raise RuntimeError("broken on purpose")
+        return {"recall_x": (0.9 if job.method == "good" else 0.5) + 0.01 * np.random.default_rng(job.seed).random(), "unreported": None}
+
+    _register_metric_task("recall_test_task", (Metric("recall_x", "recall", better="higher"), Metric("unreported", "unreported")), recall)
+    (tmp_path / "s.yaml").write_text(textwrap.dedent("""
+        seeds: 6
+        experiments:
+          - {name: e, task: mixed_data_test_task, datasets: [{kind: synthetic, name: fixed}, {kind: synthetic, name: seeded}], methods: [good, bad]}
+          - {name: o, task: other_rate_test_task, dataset: {kind: synthetic, name: seeded}, methods: [good, bad]}
+          - {name: r, task: recall_test_task, dataset: {kind: synthetic, name: seeded}, methods: [good, bad, broken]}
+    """))
+    out = tmp_path / "out"
+    run_suite(load_suite(tmp_path / "s.yaml"), out, executor="serial")
+    with pytest.raises(ConfigError, match="metric 'error_m' is reported by tasks mixed_data_test_task, other_rate_test_task of "
+                                          "these results, each its own experiment: --task picks one"):
+        compare(out, out, method_a="good", method_b="bad", metric="error_m")
+    mixed = compare(out, out, method_a="good", method_b="bad", metric="error_m", task="mixed_data_test_task")
+    assert mixed.n_pairs == 7 and mixed.pairing == "unit" and mixed.p_value == pytest.approx(1 / 64)
+    assert "count as one unit" in mixed.note
+    with pytest.raises(EvaluationError, match="metric 'unreported' has no value \\(null\\) in any result of good and bad"):
+        compare(out, out, method_a="good", method_b="bad", metric="unreported", task="recall_test_task")
+    with pytest.raises(DataError, match="method 'broken' has no successful result: its 6 job\\(s\\) here failed"):
+        compare(out, out, method_a="good", method_b="broken", metric="recall_x")
+    monkeypatch.delitem(bench_tasks._REGISTERED, "recall_test_task")  # read by a process that does not have the task
+    monkeypatch.delitem(bench_tasks._INSTANCES, "recall_test_task", raising=False)
+    assert not bench_tasks.higher_is_better("recall_x")
+    verdict = compare(out, out, method_a="good", method_b="bad", metric="recall_x", task="recall_test_task").verdict()
+    assert verdict.startswith("good is better than bad"), verdict
+    from lidarkit.bench.report import build_report, summary_rows
+
+    _, rows = summary_rows(build_report(out, plots=False))
+    assert next(r for r in rows if r[0] == "recall_test_task")[3] == "good"  # the report's best method too

@@ -65,6 +65,8 @@ class TaskTable:
     task: str
     metrics: list[MetricInfo]
     rows: list[Row]
+    higher_is_better: frozenset[str] = frozenset()
+    """Metrics the results say are better higher (as their task declared them when it ran)."""
 
 
 @dataclass
@@ -161,7 +163,8 @@ def aggregate(records: list[dict[str, Any]], missing: list[dict[str, Any]] = ())
                 summaries[m.name] = summarize([v for v in values if v is not None and math.isfinite(v)], seed=0)
             rows.append(Row(task, experiment, dataset, method, len(ok), len(items) - len(ok), stats, summaries,
                             n_missing=missing_per_row.get(ident, 0)))
-        tables.append(TaskTable(task, metrics, rows))
+        higher = frozenset(name for r in recs for name in (r.get("higher_is_better") or ()))
+        tables.append(TaskTable(task, metrics, rows, higher))
     return tables
 
 
@@ -523,7 +526,7 @@ def summary_rows(report: Report) -> tuple[list[str], list[list[str]]]:
         metric = next((m for m in table.metrics if m.kind == "accuracy"), None)
         if metric is None:
             continue
-        better_higher = _better_higher(table.task, metric.name)
+        better_higher = metric.name in table.higher_is_better or _better_higher(table.task, metric.name)
         for dataset in sorted({r.dataset for r in table.rows}):
             candidates = [r for r in table.rows if r.dataset == dataset and r.stats[metric.name][2] > 0]
             if not candidates:

@@ -44,8 +44,12 @@ def execute_job(spec: dict[str, Any]) -> dict[str, Any]:
     package_logger.propagate = False  # a job's warnings go into its result, not over the progress bar
     try:
         job = Job.from_spec(spec)
-        output = get_task(job.task).run(job)
+        task = get_task(job.task)
+        output = task.run(job)
         record["metrics"] = json_safe(output.metrics)
+        # the direction of each metric as the task declares it, kept with the result: a process that reads the results
+        # without the task (a task registered in the script that ran the suite) took every metric as lower-is-better
+        record["higher_is_better"] = sorted(m.name for m in task.metrics if m.better == "higher")
         record["series"] = json_safe(output.series)
         record["info"] = json_safe(output.info)
     except Exception as err:  # a job's failure is data, not a crash of the suite

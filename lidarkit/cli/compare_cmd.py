@@ -28,20 +28,22 @@ def compare_command(
     seed: int = typer.Option(0, "--seed", help="Seed of the bootstrap CI of the difference."),
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write the comparison as JSON here."),
     every_result: bool = typer.Option(False, "--all", help="Bench folders: every result in the folder, not only the jobs of its suite.json (as its report)."),
+    task: Optional[str] = typer.Option(None, "--task", help="Bench folders: compare the units of this task (needed when several tasks report the metric)."),
 ) -> None:
     """Pair RUN_A and RUN_B on the same units (KITTI segments, frames or seeds) and test the difference (Wilcoxon)."""
     from lidarkit.eval.compare import compare
 
     result = compare(run_a, run_b, metric=metric, method_a=method_a, method_b=method_b, alpha=alpha, noise=noise,
-                     noise_from=noise_from, seed=seed, every_result=every_result)
+                     noise_from=noise_from, seed=seed, every_result=every_result, task=task)
     console = stdout()
     console.print(f"A: {result.name_a}   B: {result.name_b}   metric: {result.metric} ({result.n_pairs} paired "
                   f"{result.pairing}s, {result.n_ties} ties)", soft_wrap=True)
     console.print(f"mean A {result.mean_a:.6g}   mean B {result.mean_b:.6g}   A - B: mean {result.mean_diff:+.4g}, "
                   f"median {result.median_diff:+.4g}, 95% CI [{result.diff_ci_low:+.4g}, {result.diff_ci_high:+.4g}]",
                   soft_wrap=True)
-    console.print(f"Wilcoxon signed-rank: statistic {result.statistic:g}, p = {result.p_value:.3g}; "
-                  f"effect size (rank-biserial) {result.effect_size:+.3f}", soft_wrap=True)
+    if not result.repeated:  # (one measurement repeated: no test is made, and a p-value printed read as one)
+        console.print(f"Wilcoxon signed-rank: statistic {result.statistic:g}, p = {result.p_value:.3g}; "
+                      f"effect size (rank-biserial) {result.effect_size:+.3f}", soft_wrap=True)
     console.print(result.verdict(), soft_wrap=True, markup=False)
     if result.note:
         console.print(f"note: {result.note}", soft_wrap=True, markup=False)

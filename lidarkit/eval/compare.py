@@ -47,6 +47,7 @@ class BenchRuns:
     values: dict[str, dict[str, Any]] = field(default_factory=dict)  # pair key -> metrics
     labels: dict[str, str] = field(default_factory=dict)  # pair key -> "dataset, seed N"
     n_left_out: int = 0  # results of jobs outside the folder's suite.json (an earlier suite) not compared
+    higher_is_better: set[str] = field(default_factory=set)  # metrics the results say are better higher (their task's word)
 
 
 def load_odometry_run(path: str | os.PathLike) -> OdometryRun:
@@ -86,7 +87,8 @@ def load_bench_runs(path: str | os.PathLike, method: str | None = None, every_re
     from lidarkit.bench.results import load_results, results_folder
 
     path = results_folder(path)
-    records = [r for r in latest_per_job(load_results(path)) if r.get("status") == "ok"]
+    latest = latest_per_job(load_results(path))
+    records = [r for r in latest if r.get("status") == "ok"]
     suite = set() if every_result else suite_job_keys(path)
     n_all = len(records)
     if suite:
@@ -103,6 +105,10 @@ def load_bench_runs(path: str | os.PathLike, method: str | None = None, every_re
         chosen = method
     else:
         named = sorted({Job.from_spec(r["job"]).method_label for r in records if r["job"]["method"] == method})
+        failed = [r for r in latest if r.get("status") != "ok" and method in (r["job"]["method"], Job.from_spec(r["job"]).method_label)]
+        if not named and failed:  # (it read "not found")
+            raise DataError(f"method {method!r} has no successful result: its {len(failed)} job(s) here failed "
+                            "(lidarkit report lists why)", source=path)
         if len(named) != 1:
             known = ", ".join(labels)
             raise ConfigError(f"method {method!r} {'is ambiguous' if named else 'not found'}; this folder has: {known}",
@@ -116,6 +122,7 @@ def load_bench_runs(path: str | os.PathLike, method: str | None = None, every_re
         key = canonical_json({"task": job.task, "dataset": job.dataset, "options": job.options, "seed": job.seed})
         runs.values[key] = dict(r.get("metrics") or {})
         runs.labels[key] = f"{job.dataset_name}, seed {job.seed}"
+        runs.higher_is_better.update(r.get("higher_is_better") or ())
     return runs
 
 
@@ -175,6 +182,7 @@ def compare(
     noise_from: str | os.PathLike | None = None,
     seed: int = 0,
     every_result: bool = False,
+    task: str | None = None,
 ) -> PairedComparison:
     """Paired Wilcoxon comparison of run ``a`` against run ``b`` (``diff = a - b``).
 
@@ -231,12 +239,24 @@ def compare(
         if metric is None:
             raise EvaluationError(f"no default metric in these results; pass one of: {', '.join(sorted(present))}",
                                   source="compare")
+    if task is not None:
+        tasks = sorted({_task_of(k) for k in common})
+        if task not in tasks:
+            raise ConfigError(f"no unit of task {task!r} in both; these results hold: {', '.join(tasks)}", source="task")
+        common = [k for k in common if _task_of(k) == task]
     if not any(has(k, metric) for k in common):  # in no unit: a misspelt metric, not results that lack it
         present = set.union(*(set(side_a.values[k]) & set(side_b.values[k]) for k in common))
+        if metric in present:  # (it read "unknown metric 'iterations'; these results have: ..., iterations, ...")
+            silent = [side.name for side in (side_a, side_b) if all(side.values[k].get(metric) is None for k in common)]
+            raise EvaluationError(f"metric {metric!r} has no value (null) in any result of {' and '.join(silent)}: "
+                                  "the method reports none", source="compare")
         raise ConfigError(f"unknown metric {metric!r}; these results have: {', '.join(sorted(present))}", source="metric")
     # units of a task that never reports the metric (an icp_pair experiment beside an odometry one) are another
     # experiment: left out, said; a unit of a task that reports it elsewhere lacks it: an error
     tasks_with = {_task_of(k) for k in common if has(k, metric)}
+    if len(tasks_with) > 1:  # (pooled into one test: icp_pair pairs/s and odometry frames/s as 6 units of "hz")
+        raise ConfigError(f"metric {metric!r} is reported by tasks {', '.join(sorted(tasks_with))} of these results, each its own "
+                          "experiment: --task picks one", source="metric")
     other_task = [k for k in common if _task_of(k) not in tasks_with]
     common = [k for k in common if _task_of(k) in tasks_with]
     missing = [side_a.labels.get(k) or side_b.labels[k] for k in common if not has(k, metric)]
@@ -247,12 +267,15 @@ def compare(
     va = np.array([side_a.values[k][metric] for k in common], dtype=np.float64)
     vb = np.array([side_b.values[k][metric] for k in common], dtype=np.float64)
     pairing, collapsed = "seed", _one_unit_per_dataset(common, va, vb)
-    if collapsed is not None:  # the seeds change nothing within each dataset: its seeds are one measurement
-        (va, vb), pairing = collapsed, "dataset"
+    if collapsed is not None:  # the seeds change nothing within a dataset: its seeds are one measurement
+        va, vb, pairing = collapsed
     result = paired_test(va, vb, name_a=name_a, name_b=name_b, metric=metric, pairing=pairing,
-                         lower_is_better=not higher_is_better(metric), alpha=alpha,
+                         lower_is_better=not (metric in side_a.higher_is_better | side_b.higher_is_better or higher_is_better(metric)),
+                         alpha=alpha,
                          noise=_with_measured_noise(noise, noise_from, metric), seed=seed)
     notes = []
+    if pairing == "unit":  # (a fixed dataset beside seeded ones)
+        notes.append("the seeds of a dataset that gives each side one value whatever the seed count as one unit")
     if other_task:
         left = sorted({_task_of(k) for k in other_task})
         notes.append(f"{len(other_task)} (dataset, seed) units of {', '.join(left)} (no {metric}) left out: {len(common)} paired")
@@ -266,10 +289,12 @@ def compare(
     return dataclasses.replace(result, note="; ".join(notes)) if notes else result
 
 
-def _one_unit_per_dataset(keys: list[str], va: np.ndarray, vb: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    """``(one value per dataset on each side)`` when several datasets each give both sides one value whatever the seed
+def _one_unit_per_dataset(keys: list[str], va: np.ndarray, vb: np.ndarray) -> tuple[np.ndarray, np.ndarray, str] | None:
+    """``(values a, values b, pairing)`` with one unit per dataset whose seeds give both sides one value whatever the seed
     (a simulated dataset the task does not seed: 5 seeds of 2 datasets were tested as 10 independent units, p = 0.002,
-    from 2 measurements); None otherwise (one dataset repeated is :func:`paired_test`'s "one measurement")."""
+    from 2 measurements), the seeds of the others kept (one fixed dataset beside a seeded one counted its one value 6
+    times); pairing ``"dataset"`` when every dataset collapsed, else ``"unit"``. None when there are not several
+    datasets or none collapses (one dataset repeated is :func:`paired_test`'s "one measurement")."""
     from lidarkit.eval.statistics import tie_tolerance
 
     groups: dict[str, list[int]] = {}
@@ -280,10 +305,11 @@ def _one_unit_per_dataset(keys: list[str], va: np.ndarray, vb: np.ndarray) -> tu
     if len(groups) < 2 or all(len(g) == 1 for g in groups.values()):
         return None
     tol = tie_tolerance(va, vb)
-    if not all(np.ptp(va[g]) <= tol and np.ptp(vb[g]) <= tol for g in groups.values()):
+    fixed = [len(g) > 1 and np.ptp(va[g]) <= tol and np.ptp(vb[g]) <= tol for g in groups.values()]
+    if not any(fixed):
         return None
-    first = [g[0] for g in groups.values()]
-    return va[first], vb[first]
+    keep = sorted(i for g, one in zip(groups.values(), fixed) for i in (g[:1] if one else g))
+    return va[keep], vb[keep], "dataset" if all(fixed) else "unit"
 
 
 def _task_of(unit_key: str) -> str:
