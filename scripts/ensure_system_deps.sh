@@ -22,8 +22,10 @@ if [ "$(id -u)" = "0" ] && command -v apt-get >/dev/null 2>&1; then
     echo "lidarkit setup: installing$(printf ' %s' $missing) with apt-get"
     export DEBIAN_FRONTEND=noninteractive
     apt-get update -qq >/dev/null
-    # shellcheck disable=SC2086
-    apt-get install -y -qq $missing >/dev/null || true
+    # one package a call: apt installs nothing of a list with one name it does not know (Ubuntu has no "chromium"
+    # package, and libusb stayed missing with it); the browser under its other name where "chromium" is unknown
+    have_libusb || apt-get install -y -qq libusb-1.0-0 >/dev/null || true
+    have_chromium || apt-get install -y -qq chromium >/dev/null 2>&1 || apt-get install -y -qq chromium-browser >/dev/null 2>&1 || true
 fi
 if ! have_chromium; then
     echo "lidarkit setup: chromium (headless browser for the report test) is missing; that test will fail." >&2
