@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import re
 
+import pytest
+
 from conftest import cli_exit_code
 
 
@@ -32,3 +34,24 @@ def test_every_help_is_free_of_rest_markup(capsys):
         assert cli_exit_code([*path, "--help"]) == 0, path
         text = capsys.readouterr().out
         assert not markup.search(text), (path, markup.search(text).group(0))
+
+
+def test_version_is_an_option_too_and_the_package_runs_as_a_module(tmp_path, capsys):
+    """`lidarkit --version` was "No such option" and `python -m lidarkit` "cannot be directly executed"; `lidarkit demo
+    --out FILE` said "cannot write the results folder (File exists)" where every other command names the file in the way."""
+    import subprocess
+    import sys
+
+    from lidarkit import __version__
+    from lidarkit.cli import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(["--version"])
+    assert exc.value.code in (0, None) and capsys.readouterr().out.strip() == __version__
+    proc = subprocess.run([sys.executable, "-m", "lidarkit", "version"], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0 and proc.stdout.strip() == __version__
+    (tmp_path / "f").write_text("")
+    with pytest.raises(SystemExit) as exc:
+        main(["demo", "--quick", "--out", str(tmp_path / "f")])
+    assert exc.value.code == 1
+    assert "f: cannot write the run folder: a file is in the way (a folder is needed here)" in capsys.readouterr().err

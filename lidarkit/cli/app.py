@@ -45,8 +45,19 @@ def print_error(err: BaseException) -> None:
     stderr().print(line, soft_wrap=True)
 
 
+def _print_version(value: bool) -> None:
+    if value:
+        from lidarkit import __version__
+
+        typer.echo(__version__)
+        raise typer.Exit()
+
+
 @app.callback()
-def _root(verbose: bool = typer.Option(False, "--verbose", "-v", help="Log diagnostics (INFO level).")) -> None:
+def _root(
+    verbose: bool = typer.Option(False, "--verbose", "-v", help="Log diagnostics (INFO level)."),
+    show_version: bool = typer.Option(False, "--version", callback=_print_version, is_eager=True, help="Print the lidarkit version and exit."),
+) -> None:
     """LiDAR registration, particle-filter localization and monocular VO, scored by one evaluation layer."""
     import logging
 

@@ -29,6 +29,9 @@ def demo_command(
     from lidarkit.eval.demo import EVO_REFERENCE_APE_RMSE_M, run_eval_demo
 
     console, err = stdout(), stderr()
+    from lidarkit.atomic import check_target
+
+    check_target(out_dir, "folder")  # (a file there failed later: "cannot write the results folder (File exists)")
     if quick and suite is not None:  # (--quick picks a bundled suite: with --suite it was ignored without a word)
         raise ConfigError("--quick selects the reduced bundled suite; with --suite FILE that file runs: give one of them",
                           source="--quick")
