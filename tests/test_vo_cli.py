@@ -479,3 +479,17 @@ def test_scale_settings_the_pipeline_does_not_use_are_said(capsys):
     assert "note: --set scale.min_common_points not used: scale mode gt: the scale settings act with relative" in err
     code, _, err = _run(["vo", seq, "--detector", "orb", "--set", "scale.corner_pose=corners"], capsys)
     assert "note: --set" not in err  # ORB + KLT builds the corner path: the setting acts
+
+
+def test_a_bad_value_of_an_option_names_the_option(capsys):
+    """--scale relatve read "vo config scale.mode: ..." (the config field, not the option given); --set keeps the field."""
+    data = str(sample_path("kitti_vo", "06"))
+    for args, line in (
+        (["--scale", "relatve"], "error: --scale: Input should be 'gt', 'none' or 'relative' (got 'relatve')"),
+        (["--detector", "orbb"], "error: --detector: Input should be 'gftt', 'fast', 'orb', 'sift' or 'akaze' (got 'orbb')"),
+        (["--estimator", "magsacc"], "error: --estimator: Input should be 'ransac', 'magsac' or 'lmeds' (got 'magsacc')"),
+        (["--set", "scale.mode=x"], "error: vo config scale.mode: Input should be 'gt', 'none' or 'relative' (got 'x')"),
+    ):
+        with pytest.raises(SystemExit) as exc:
+            main(["vo", data, *args])
+        assert exc.value.code == 1 and capsys.readouterr().err.strip() == line

@@ -20,6 +20,11 @@ _TOP_REASONS = 3  # rejection kinds shown in the summary table
 _LISTED_REJECTIONS = 10  # rejected frames listed one per line
 
 
+#: config fields the command's own options set (their errors name the option)
+_OPTION_OF = {"features.detector": "--detector", "matching.method": "--matcher", "geometry.estimators": "--estimator",
+              "preprocess.method": "--preprocess", "features.max_features": "--features", "scale.mode": "--scale"}
+
+
 @app.command("vo")
 def vo_command(
     data: Path = typer.Argument(..., help="KITTI sequence folder (image_0/, calib.txt), TUM folder (rgb.txt), image folder, or the camera simulator: 'simcam:street?frames=500&seed=0' (exact K and ground truth; --kind images hides its K)."),
@@ -91,7 +96,14 @@ def vo_command(
             changes["features.detector"] = "orb"
             stderr().print(f"note: --matcher {matcher} needs descriptors, which {kept} has none of: detector orb "
                            "(--detector sift or akaze for another)", soft_wrap=True, markup=False)
-    cfg = make_preset(preset, **{k: v for k, v in changes.items() if v is not None})
+    try:
+        cfg = make_preset(preset, **{k: v for k, v in changes.items() if v is not None})
+    except ConfigError as err:  # a setting given by its option names the option, not the config field ("vo config scale.mode")
+        field = str(err.source or "").removeprefix("vo config").strip()
+        option = next((o for f, o in _OPTION_OF.items() if (field == f or field.startswith(f + ".")) and f not in settings), None)
+        if option is None:
+            raise
+        raise ConfigError(err.reason, source=option) from None
     for key, why in inert_settings(cfg, settings):
         stderr().print(f"note: --set {key} not used: {why}", soft_wrap=True, markup=False)
     vo_input = open_vo_input(data, kind=kind, calib=calib, timestamps=timestamps, poses=poses,
