@@ -208,6 +208,9 @@ def test_spec_string():
         open_sim("sim:street?frames=4&n_frames=5")
     with pytest.raises(ConfigError, match=r"scene is given twice \(as sim:street and scene\)"):
         open_sim("sim:street?scene=open")
+    # a typo lists the short keys the help gives too (the config's list had only the long names)
+    with pytest.raises(ConfigError, match=r"unknown key 'frame'; short keys: frames \(n_frames\), beams \(n_beams\).*; or any of: scene, n_frames"):
+        open_sim("sim:street?frame=3")
 
 
 def test_export_kitti_round_trip(tmp_path):

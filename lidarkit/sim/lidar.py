@@ -683,6 +683,9 @@ def open_sim(spec: str) -> SimulatedLidarSequence:
     given_as: dict[str, str] = {"scene": f"sim:{params['scene']}"}
     for key, value in parse_kv(query, option="simulator option").items():
         name = aliases.get(key, key)
+        if name not in LidarSimConfig.model_fields:  # (the config's list left out the short keys the help gives)
+            raise ConfigError(f"unknown key {key!r}; short keys: {', '.join(f'{a} ({f})' for a, f in aliases.items())}; or any of: "
+                              f"{', '.join(LidarSimConfig.model_fields)}", source=spec)
         if name in params:  # (it named the second spelling only: "n_frames is given twice (as n_frames)")
             raise ConfigError(f"{name} is given twice (as {given_as[name]} and {key})", source=spec)
         params[name] = value
