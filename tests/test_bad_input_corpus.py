@@ -504,7 +504,6 @@ def test_bad_vo_timestamps_named_before_the_run(tmp_path, capsys):
 def test_library_arguments_of_the_wrong_kind_are_one_clear_error():
     """Wrong argument types were TypeErrors and ValueErrors from deep inside (or, for strings that are true, taken as
     True: align_origin="no" aligned the origin); each is a LidarKitError naming the argument."""
-    from lidarkit.errors import LidarKitError
     from lidarkit.eval import ape
     from lidarkit.odometry import run
     from lidarkit.registration.vanilla import VanillaICP
