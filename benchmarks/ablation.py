@@ -157,6 +157,10 @@ def run_genz(cache: Path, n: int, repeats: int) -> dict[str, tuple[np.ndarray, f
 def run_dataset(name: str, seed: int, frames: int, data: Path, out: Path, genz: bool, variants: list[str] | None = None) -> Path:
     from lidarkit.registration import available_icp, get_icp
 
+    if not genz:  # (it replaced the record silently, and the next report lost the genz rows)
+        earlier = _path(out, name, seed, frames if name != "kitti" else 10, variants)
+        if earlier.is_file() and "genz" in json.loads(earlier.read_text()).get("rows", {}):
+            raise SystemExit(f"--no-genz would replace {earlier}, which holds genz rows: run with genz, or give another --out")
     log(f"{name}: opening the data (a simulated sequence is ray-cast first)")
     label, n, read, gt = open_dataset(name, seed, frames, data)
     log(f"{label}: {n} frames, {1 + len(ABLATIONS if variants is None else [k for k in ABLATIONS if k in variants])} methods")

@@ -23,6 +23,7 @@ import argparse
 import datetime as dt
 import json
 import logging
+import shlex
 import sys
 import time
 from pathlib import Path
@@ -175,7 +176,7 @@ def main(argv: list[str] | None = None) -> int:
         log(f"{log_name}: {drift_rows[-1]}")
 
     data = {
-        "command": "benchmarks/carmen_2d.py" + (" --quick" if args.quick else ""),
+        "command": " ".join(["benchmarks/carmen_2d.py", *(shlex.quote(a) for a in sys.argv[1:])]),  # as run (--data, --out too)
         "date_utc": started.isoformat(timespec="seconds"),
         "machine": info,
         "aces_read_s": read_s,

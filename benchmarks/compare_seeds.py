@@ -12,8 +12,6 @@ from __future__ import annotations
 import argparse
 import datetime as dt
 import json
-import os
-import platform
 import sys
 import tempfile
 from pathlib import Path
@@ -40,13 +38,23 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=Path("benchmarks/results/statistics"))
     ap.add_argument("--workers", type=int, default=1)
     args = ap.parse_args()
+    work = Path(tempfile.mkdtemp(prefix="compare_seeds_"))
+    try:
+        _run(args, work)
+    finally:  # (the bench runs, ~0.2 MB, stayed in /tmp after every run)
+        import shutil
+
+        shutil.rmtree(work, ignore_errors=True)
+
+
+def _run(args, work: Path) -> None:
     from lidarkit import atomic
+    from lidarkit.bench.machine import describe_machine, machine_info
     from lidarkit.bench.runner import run_suite
     from lidarkit.bench.suite import load_suite
     from lidarkit.eval import compare, summarize
     from lidarkit.eval.compare import load_bench_runs
 
-    work = Path(tempfile.mkdtemp(prefix="compare_seeds_"))
     folders = {}
     for run_name, methods in (("main", list(METHODS.values())), ("kiss_again", ["kiss"])):
         path = work / f"{run_name}.yaml"
@@ -68,7 +76,7 @@ def main() -> None:
                                | {"run_b": fb})
     cmd = "python benchmarks/compare_seeds.py " + " ".join(sys.argv[1:])
     meta = {"command": cmd.strip(), "date_utc": dt.datetime.now(dt.timezone.utc).isoformat(timespec="minutes"),
-            "machine": f"{platform.machine()}, {os.cpu_count()} cpus, Python {platform.python_version()}",
+            "machine": describe_machine(machine_info()),
             "frames": args.frames, "seeds": args.seeds}
     lines = [f"# Paired comparisons over {args.seeds} simulated drives ({args.frames} sweeps each)", "",
              f"Command: `{meta['command']}`; {meta['date_utc']}; {meta['machine']}.", "",

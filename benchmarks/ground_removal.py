@@ -290,6 +290,9 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
     args = parser.parse_args()
     sections = args.sections.split(",")
+    unknown = sorted(set(sections) - {"seg", "odo", "two", "kitti", "report"})
+    if unknown:  # (a typo ran nothing and exited 0)
+        parser.error(f"unknown section(s) {', '.join(unknown)}; known: seg, odo, two, kitti, report")
     scenes = args.scenes.split(",")
     seeds = [int(s) for s in args.seeds.split(",")]
     methods = args.methods.split(",")

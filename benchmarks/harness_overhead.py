@@ -117,6 +117,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=RESULTS)
     parser.add_argument("--cold-start-child", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    if args.jobs < 1 or args.repeats < 1:  # (0 jobs wrote ratios of x1e6 and exited 0)
+        parser.error("--jobs and --repeats must be >= 1")
     if args.cold_start_child:
         _cold_start_child()
         return 0

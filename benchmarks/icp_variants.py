@@ -309,6 +309,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--repeats", type=int, default=5, help="interleaved repeats of the speed comparison")
     parser.add_argument("--leaf-repeats", type=int, default=2)
     args = parser.parse_args(argv)
+    if args.repeats < 1 or args.leaf_repeats < 1:  # (a numpy traceback on an empty minimum)
+        parser.error("--repeats and --leaf-repeats must be >= 1")
 
     report: dict = {"machine": machine_info(), "command": " ".join([Path(sys.executable).name, *sys.argv])}
     pairs = kitti_pairs(args.data)
