@@ -316,7 +316,7 @@ def markdown(p: dict) -> str:
         "localized: error < 0.5 m at >= 95 % of the steps from 50 on; strict: at every step from 50 on.",
         "",
         "converged: the error below 0.5 m for good (never again >= 1 m) by step 50; step: median over the seeds "
-        "(331 = never).",
+        "(332, the number of error samples = never).",
         "",
         "| filter | localized | strict | converged by 50 | converged at step (median) | median fraction of steps >= 50 under 0.5 m "
         "| mean error from 50 [m] | MSE from 10 [m²] | mean N | s/run |",
@@ -359,8 +359,8 @@ def markdown(p: dict) -> str:
                      f"+{100 * s['overhead_per_step_first_30']:.0f} %, after: +{100 * s['overhead_per_step_after_30']:.0f} %)")
         lines.append(f"- KLD bookkeeping, whole runs ({s['init']} init, mean N {s['mean_count']:.0f}, {s['repeats']} interleaved pairs): KLD run "
                      f"median {s['kld_s_median']:.4f} s vs the same filter replaying the same per-step counts without bookkeeping "
-                     f"{s['replay_s_median']:.4f} s: +{100 * s['overhead_median']:.0f} % (median of the paired ratios "
-                     f"+{100 * s['overhead_paired_median']:.0f} %; minima +{100 * s['overhead']:.0f} %)")
+                     f"{s['replay_s_median']:.4f} s: {100 * s['overhead_median']:+.0f} % (median of the paired ratios "
+                     f"{100 * s['overhead_paired_median']:+.0f} %; minima {100 * s['overhead']:+.0f} %)")
     lines += ["", "![particles per step](kld_particles_per_step.png)", ""]
     return "\n".join(lines)
 
