@@ -261,4 +261,6 @@ def report(d: dict) -> str:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from lidarkit.cli import run_script
+
+    run_script(main)

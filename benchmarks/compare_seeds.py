@@ -98,4 +98,6 @@ def _run(args, work: Path) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from lidarkit.cli import run_script
+
+    run_script(main)

@@ -467,4 +467,6 @@ def render(results: dict) -> str:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from lidarkit.cli import run_script
+
+    run_script(main)

@@ -316,4 +316,6 @@ def write_results(rows: list[dict], args, size_gb: float) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from lidarkit.cli import run_script
+
+    run_script(main)

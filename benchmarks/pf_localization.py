@@ -366,4 +366,6 @@ def markdown(p: dict) -> str:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from lidarkit.cli import run_script
+
+    run_script(main)

@@ -333,4 +333,6 @@ def markdown(p: dict, n_values: list[int]) -> str:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from lidarkit.cli import run_script
+
+    run_script(main)

@@ -152,4 +152,6 @@ def profile(frames, out: Path, repeats: int) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from lidarkit.cli import run_script
+
+    run_script(main)

@@ -290,4 +290,6 @@ def markdown(res: dict) -> str:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from lidarkit.cli import run_script
+
+    run_script(main)

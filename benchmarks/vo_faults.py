@@ -138,4 +138,6 @@ def markdown(results: dict) -> str:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from lidarkit.cli import run_script
+
+    run_script(main)

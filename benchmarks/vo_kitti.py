@@ -250,4 +250,6 @@ def plot(trajectories: dict, path: Path) -> None:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from lidarkit.cli import run_script
+
+    run_script(main)

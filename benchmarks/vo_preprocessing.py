@@ -174,4 +174,6 @@ def write_results(out: Path, name_stem: str, cmd: str, results: dict, skipped: l
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from lidarkit.cli import run_script
+
+    run_script(main)

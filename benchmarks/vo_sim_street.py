@@ -207,4 +207,6 @@ def write(args, command: str, info_start: dict, speed: dict, rows: dict, geometr
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from lidarkit.cli import run_script
+
+    run_script(main)

@@ -423,4 +423,6 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from lidarkit.cli import run_script
+
+    run_script(main)

@@ -75,4 +75,6 @@ def relative_paths(text: str) -> str:
 
 
 if __name__ == "__main__":
-    main()
+    from lidarkit.cli import run_script
+
+    run_script(main)

@@ -55,3 +55,17 @@ def test_version_is_an_option_too_and_the_package_runs_as_a_module(tmp_path, cap
         main(["demo", "--quick", "--out", str(tmp_path / "f")])
     assert exc.value.code == 1
     assert "f: cannot write the run folder: a file is in the way (a folder is needed here)" in capsys.readouterr().err
+
+
+def test_a_benchmark_script_missing_its_data_says_so_in_one_line(tmp_path):
+    """The benchmark scripts printed a traceback ending in the LidarKitError's line; they run their main() as the CLI
+    runs a command."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = Path(__file__).resolve().parents[1] / "benchmarks" / "pf_particles.py"
+    proc = subprocess.run([sys.executable, str(script), "--data", str(tmp_path / "nowhere"), "--out", str(tmp_path / "out")],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 1
+    assert proc.stderr.strip().splitlines() == [f"error: {tmp_path / 'nowhere' / 'pf' / 'robot_mapping_stachniss'}: landmark dataset not found"]

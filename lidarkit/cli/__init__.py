@@ -30,7 +30,7 @@ from lidarkit.cli import icp_cmd  # noqa: E402,F401
 from lidarkit.cli import compare_cmd  # noqa: E402,F401
 from lidarkit.cli import baseline_cmd  # noqa: E402,F401
 
-__all__ = ["app", "main"]
+__all__ = ["app", "main", "run_script"]
 
 
 def _interrupt_behind(err: BaseException) -> Interrupted | None:
@@ -83,3 +83,17 @@ def main(argv: list[str] | None = None) -> None:
         os._exit(code)
     if code:
         sys.exit(code)
+
+
+def run_script(script_main) -> None:
+    """Run a script's ``main()`` (the benchmarks') as the CLI runs a command: a LidarKitError is one line on stderr and
+    exit code 1 (a missing data folder printed a traceback ending in that line); ``main``'s return value is the exit
+    code."""
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    try:
+        code = script_main()
+    except LidarKitError as err:
+        print_error(err)
+        code = 1
+    sys.exit(code)
+
