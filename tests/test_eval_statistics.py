@@ -169,6 +169,8 @@ def test_compare_run_folders_per_frame_and_bad_input(tmp_path, capsys):
     assert res.mean_a < res.mean_b
     code, out, _ = run_cli(["compare", str(tmp_path / "kiss"), str(tmp_path / "kiss")], capsys)
     assert code == 0 and "no significant difference" in out
+    with pytest.raises(ConfigError, match="a task applies to bench results folders only"):  # (it was ignored)
+        compare(tmp_path / "kiss", tmp_path / "vanilla", task="odometry")
     other = SimulatedLidarSequence(scene="street", n_frames=10, n_beams=32, n_azimuths=720, seed=5)
     run(other, "kiss", out_dir=tmp_path / "kiss_other")
     with pytest.raises(EvaluationError, match="runs over different data"):

@@ -192,7 +192,8 @@ def compare(
     path allows 100 m segments) or per frame (``rpe_translation_m``, the default otherwise). Bench results
     folders pair per (dataset, seed) on a job metric (default: KITTI drift, else APE RMSE); ``method_a`` /
     ``method_b`` pick a method when a folder holds several (the same folder may be given twice); only the jobs of each
-    folder's ``suite.json`` are compared, as its report holds them (``every_result``: every result in the folder).
+    folder's ``suite.json`` are compared, as its report holds them (``every_result``: every result in the folder);
+    ``task``: the units of that task (needed when several tasks of the folders report the metric).
     Runs over different data raise EvaluationError; two runs over the same dataset and frames, each scored against the
     ground truth at its own instant of the sweep, are compared with a ``note`` saying so.
     """
@@ -205,6 +206,8 @@ def compare(
     if name_a == name_b:
         name_a, name_b = f"{name_a} (A)", f"{name_b} (B)"
     if isinstance(side_a, OdometryRun):
+        if task is not None:  # (it would be ignored)
+            raise ConfigError("a task applies to bench results folders only", source="task")
         note = _same_ground_truth(side_a, side_b)
         if metric is None:
             from lidarkit.eval import drift_segments_possible
