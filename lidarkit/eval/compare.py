@@ -334,6 +334,8 @@ def _load(side: Any, method: str | None, every_result: bool = False) -> Odometry
     path = Path(side)
     if not path.exists():
         raise DataError("does not exist", source=path)
+    if not path.is_dir():  # (report.csv given: it read "run folder does not exist")
+        raise DataError("is a file: compare takes an odometry run folder or a bench results folder", source=path)
     if (path / "jobs").is_dir():
         return load_bench_runs(path, method, every_result)
     if method is not None:
