@@ -140,7 +140,7 @@ def _write_messages(sequence, writer, typestore, serialize, *, ros1: bool, on_fr
     # does a snapshot (motion_distortion=false: every point at one instant, zeros would read as a sweep's times),
     # whose header is stamped at that instant (the sweep start read 0.1 s before its ground truth)
     snapshot = not sequence.config.motion_distortion
-    dtype = _POINT_DTYPE if sequence.config.point_times and not snapshot else _POINT_DTYPE_NO_TIMES
+    dtype = _POINT_DTYPE if sequence.config.sweeps_carry_point_times else _POINT_DTYPE_NO_TIMES
     stamps = sequence.timestamps_s
     fields = [T["sensor_msgs/msg/PointField"](name=n, offset=dtype.fields[n][1], datatype=_PF_UINT32 if n == "t" else _PF_FLOAT32, count=1)
               for n in dtype.names]

@@ -125,6 +125,12 @@ class LidarSimConfig(BaseModel):
         return self.speed_mps * (self.n_frames + 1) / self.frame_rate_hz + 2.0 * (self.max_range_m + 40.0)
 
     @property
+    def sweeps_carry_point_times(self) -> bool:
+        """Whether each sweep carries per-point times: asked for, and spread over the sweep (a snapshot, no motion
+        distortion, has every point at one instant: zeros would read as a sweep's times)."""
+        return self.point_times and self.motion_distortion
+
+    @property
     def sweep_period_s(self) -> float:
         return 1.0 / self.frame_rate_hz
 
@@ -644,7 +650,7 @@ class SimulatedLidarSequence:
         hit = hits["primitive_ids"].numpy()[keep].astype(np.int64)
         intensity = (self.reflectivity[hit] * cos_inc).astype(np.float32)
         # a snapshot (no motion distortion) has no time spread to deskew: its column times would add one
-        times = np.repeat(self.column_times_s, n_beams)[keep] if cfg.point_times and cfg.motion_distortion else None
+        times = np.repeat(self.column_times_s, n_beams)[keep] if cfg.sweeps_carry_point_times else None
         scan = Scan(
             points_xyz=points,
             intensity=intensity,
@@ -725,7 +731,7 @@ def _write_kitti(sequence: SimulatedLidarSequence, out: Path, on_frame: Callable
     from lidarkit import atomic
 
     atomic.ensure_dir(out / "velodyne")
-    if sequence.config.point_times and sequence.config.motion_distortion:  # (a snapshot has none: an empty folder warned)
+    if sequence.config.sweeps_carry_point_times:  # (a snapshot has none: an empty folder warned)
         atomic.ensure_dir(out / "point_times")
     for i in range(len(sequence)):
         scan = sequence.read_scan(i)
