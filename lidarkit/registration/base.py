@@ -477,15 +477,14 @@ class Registration:
             try:
                 config = self.Config(**params)
             except pydantic.ValidationError as err:  # (a pydantic traceback where get_icp says it in one line)
-                raise ConfigError(f"invalid parameters ({validation_problems(err, unnamed='')})",
-                                  source=self.name or type(self).__name__) from None
+                raise ConfigError(f"invalid parameters ({validation_problems(err, unnamed='')})", source=self.name) from None
         self._config = config
         if not self._config.assess and not assessed_apart(type(self)):
             from lidarkit.registration.registry import available_icp, get_icp_class
 
             split = [n for n in available_icp() if assessed_apart(get_icp_class(n))]
             raise ConfigError(f"assess=False is for the variants that register apart from their assessment ({', '.join(split)}); "
-                              f"{self.name} scores its result within its own iterations", source=self.name or type(self).__name__)
+                              f"{self.name} scores its result within its own iterations", source=self.name)
 
     @property
     def config(self) -> RegistrationConfig:
