@@ -38,7 +38,7 @@ def check_reader_options(spec: dict[str, Any]) -> None:
             source="dataset",
         )
     if kind in OPENED_AT_LOAD:  # a sequence that is not there is refused with the suite, not when its jobs run
-        reader(dataset_path(spec), **options)
+        open_dataset_spec(spec)  # (cached: require_kitti_data's look at the same sequence opens it once)
 
 
 #: readers cheap to open (a folder listing, a list file) whose path or options name what must exist, e.g. KITTI's ``sequence``,
