@@ -2,7 +2,8 @@
 ``vanilla``), ``open3d_point_to_plane`` and ``open3d_gicp`` (normals / covariances estimated inside).
 
 Open3D's legacy pipeline reports neither iteration counts nor per-iteration RMSE: ``iterations`` is 0
-and ``rmse_history`` holds the final RMSE only (``extra["iterations_reported"] = False``).
+and ``rmse_history`` holds the final RMSE only (``extra["iterations_reported"] = False``). Nor does it say whether
+it stopped on its criteria or at ``max_iterations``: ``converged`` is True whenever correspondences were found.
 """
 
 from __future__ import annotations
