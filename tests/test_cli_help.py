@@ -69,3 +69,19 @@ def test_a_benchmark_script_missing_its_data_says_so_in_one_line(tmp_path):
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 1
     assert proc.stderr.strip().splitlines() == [f"error: {tmp_path / 'nowhere' / 'pf' / 'robot_mapping_stachniss'}: landmark dataset not found"]
+
+
+def test_an_empty_argument_is_refused_not_read_as_the_current_folder(tmp_path, monkeypatch, capsys):
+    """`lidarkit odometry SEQ -o ""` (an unset shell variable) wrote the run into the current folder: typer reads "" as
+    "."; every empty argument is refused, naming its option or position, before anything runs."""
+    from lidarkit.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    for argv, named in ((["odometry", "kitti:x", "-o", ""], "-o:"), (["odometry", "kitti:x", "--out="], "--out:"),
+                        (["odometry", ""], "argument 2 (after odometry):")):
+        with pytest.raises(SystemExit) as exc:
+            main(argv)
+        assert exc.value.code == 1
+        err = capsys.readouterr().err
+        assert f"{named} empty value (an unset shell variable?)" in err and len(err.strip().splitlines()) == 1, err
+    assert list(tmp_path.iterdir()) == []

@@ -44,6 +44,20 @@ def _interrupt_behind(err: BaseException) -> Interrupted | None:
     return None
 
 
+def _refuse_empty_arguments(argv: list[str]) -> None:
+    """ConfigError for an empty argument: typer reads ``-o ""`` (an unset shell variable) as the current folder, and a
+    run was written there; no lidarkit option or argument takes an empty value."""
+    from lidarkit.errors import ConfigError
+
+    for i, arg in enumerate(argv):
+        if arg == "":
+            option = argv[i - 1] if i > 0 and argv[i - 1].startswith("-") else None
+            where = option or f"argument {i + 1}" + (f" (after {argv[i - 1]})" if i > 0 else "")
+            raise ConfigError("empty value (an unset shell variable?): give a path or a value", source=where)
+        if arg.startswith("--") and arg.endswith("=") and arg.count("=") == 1:
+            raise ConfigError("empty value (an unset shell variable?): give a path or a value", source=arg[:-1])
+
+
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``lidarkit`` console script.
 
@@ -55,6 +69,7 @@ def main(argv: list[str] | None = None) -> None:
     try:
         try:
             with handle_signals():
+                _refuse_empty_arguments(sys.argv[1:] if argv is None else list(argv))
                 app(args=argv, prog_name="lidarkit")
         except Exception as err:  # an interrupt that a library turned into its own error (open3d's import: ImportError)
             raise _interrupt_behind(err) or err
