@@ -397,21 +397,24 @@ def test_an_unreadable_first_frame_is_not_scored_as_an_estimate(tmp_path, capsys
         assert bad[variant]["ape_rmse_m"] == pytest.approx(clean[variant]["ape_rmse_m"], rel=1e-6), variant
 
 
-def test_a_ground_truth_that_cannot_align_leaves_the_run_unscored_not_lost(tmp_path, capsys):
+@pytest.mark.parametrize("scale, alignment", [("gt", "se3"), ("relative", "sim3")])
+def test_a_ground_truth_that_cannot_align_leaves_the_run_unscored_not_lost(tmp_path, capsys, scale, alignment):
     """Ground truth on a straight line (Umeyama's rotation undefined): the finished run ended in an error and --out
-    wrote nothing; its poses are written, and the output says why it is not scored."""
+    wrote nothing; its poses are written, and the output says why it is not scored. Relative scale failed again in
+    its plot (aligned to the ground truth by Sim(3)): the plot is drawn unaligned."""
     seq = tmp_path / "06"
     shutil.copytree(sample_path("kitti_vo", "06"), seq)
     n = len(list((seq / "image_0").glob("*.png")))
     line = "\n".join(f"1 0 0 0 0 1 0 0 0 0 1 {0.85 * i}" for i in range(n)) + "\n"
     (tmp_path / "line.txt").write_text(line)
     out = tmp_path / "run"
-    code, stdout, err = _run(["vo", str(seq), "--poses", str(tmp_path / "line.txt"), "--scale", "gt", "--out", str(out)], capsys)
+    code, stdout, err = _run(["vo", str(seq), "--poses", str(tmp_path / "line.txt"), "--scale", scale, "--out", str(out)], capsys)
     assert code in (0, None), err
-    assert "not scored against the ground truth: se3 alignment failed" in stdout
+    assert f"not scored against the ground truth: {alignment} alignment failed" in stdout
     metrics = json.loads((out / "metrics.json").read_text())
-    assert metrics["not_scored"].startswith("se3 alignment failed") and "raw" not in metrics
+    assert metrics["not_scored"].startswith(f"{alignment} alignment failed") and "raw" not in metrics
     assert len(Trajectory.from_kitti(out / "poses_kitti.txt")) == n
+    assert (out / "trajectory.png").stat().st_size > 10_000
 
 
 @pytest.mark.parametrize("detector", ["orb", "akaze"])

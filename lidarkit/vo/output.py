@@ -131,11 +131,15 @@ def _write_files(result: VOResult, out: Path, *, ground_truth: Trajectory | None
         trajs = {"ground truth": ground_truth} if ground_truth is not None else {}
         trajs.update({"VO raw": result.trajectory, "VO smoothed": smoothed})
         if ground_truth is not None and result.config.scale.mode != "gt":
+            from lidarkit.errors import EvaluationError
             from lidarkit.eval import align_trajectory
 
-            trajs = {"ground truth": ground_truth,
-                     "VO raw (Sim3-aligned)": align_trajectory(ground_truth, result.trajectory, "sim3")[0],
-                     "VO smoothed (Sim3-aligned)": align_trajectory(ground_truth, smoothed, "sim3")[0]}
+            try:  # a ground truth on a straight line has no Sim(3) alignment: the run is unscored, its plot unaligned
+                trajs = {"ground truth": ground_truth,
+                         "VO raw (Sim3-aligned)": align_trajectory(ground_truth, result.trajectory, "sim3")[0],
+                         "VO smoothed (Sim3-aligned)": align_trajectory(ground_truth, smoothed, "sim3")[0]}
+            except EvaluationError as err:
+                log.warning("trajectory plot not aligned to the ground truth: %s", err.reason)
         paths["plot"] = plot_vo_trajectories(out / "trajectory.png", {k: v for k, v in trajs.items() if v is not None},
                                              title=result.trajectory.name)
     if gif_images is not None and result.tracks:
