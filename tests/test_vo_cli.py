@@ -484,6 +484,27 @@ def test_scale_settings_the_pipeline_does_not_use_are_said(capsys):
     assert "note: --set" not in err  # ORB + KLT builds the corner path: the setting acts
 
 
+def test_settings_of_a_stage_choice_not_taken_are_said_and_options_set_twice_refused(capsys):
+    """--set matching.ratio=0.1 (knn_ratio's), features.fast_threshold=200 (fast's) and preprocess.clahe_clip_limit=40
+    (clahe's) gave the default pipeline's poses byte for byte without a word; --scale relative --set scale.mode=gt ran
+    gt (the --set value replaced the option's silently)."""
+    seq = str(sample_path("kitti_vo", "06"))
+    code, _, err = _run(["vo", seq, "--max-frames", "3", "--set", "matching.ratio=0.1", "--set", "features.fast_threshold=200",
+                         "--set", "preprocess.clahe_clip_limit=40"], capsys)
+    assert code in (0, None) and err.count("note: --set") == 3, err
+    assert "note: --set matching.ratio not used: matching.method is klt: the setting acts with knn_ratio" in err
+    assert "note: --set preprocess.clahe_clip_limit not used: preprocess.method is none: the setting acts with clahe" in err
+    code, _, err = _run(["vo", seq, "--max-frames", "3", "--detector", "fast", "--preprocess", "gaussian",
+                         "--set", "features.fast_threshold=30", "--set", "preprocess.blur_kernel_px=3"], capsys)
+    assert code in (0, None) and "note: --set" not in err, err
+    for option, named, setting in ((["--scale", "relative"], "--scale", "scale.mode=gt"),
+                                   (["--no-sanity"], "--sanity/--no-sanity", "sanity.enabled=true"),
+                                   (["--features", "900"], "--features", "features.max_features=500")):
+        code, _, err = _run(["vo", seq, "--max-frames", "3", *option, "--set", setting], capsys)
+        key = setting.split("=")[0]
+        assert code == 1 and f"error: --set {key}: given twice, by {named} and by --set {key}=...: give it once" in err, err
+
+
 def test_a_bad_value_of_an_option_names_the_option(capsys):
     """--scale relatve read "vo config scale.mode: ..." (the config field, not the option given); --set keeps the field."""
     data = str(sample_path("kitti_vo", "06"))

@@ -22,7 +22,8 @@ _LISTED_REJECTIONS = 10  # rejected frames listed one per line
 
 #: config fields the command's own options set (their errors name the option)
 _OPTION_OF = {"features.detector": "--detector", "matching.method": "--matcher", "geometry.estimators": "--estimator",
-              "preprocess.method": "--preprocess", "features.max_features": "--features", "scale.mode": "--scale"}
+              "preprocess.method": "--preprocess", "features.max_features": "--features", "scale.mode": "--scale",
+              "sanity.enabled": "--sanity/--no-sanity", "geometry.refine": "--refine/--no-refine", "seed": "--seed"}
 
 
 @app.command("vo")
@@ -87,6 +88,9 @@ def vo_command(
         "seed": seed,
     }
     settings = parse_params(set_ or [], option="--set")
+    for key in settings:  # (the --set value replaced the option's silently)
+        if changes.get(key) is not None:
+            raise ConfigError(f"given twice, by {_OPTION_OF[key]} and by --set {key}=...: give it once", source=f"--set {key}")
     changes.update(settings)
     if matcher in ("bf_cross", "knn_ratio") and changes.get("features.detector") is None:
         # descriptor matching needs a detector with descriptors: the preset's own if it has them (report_sift keeps

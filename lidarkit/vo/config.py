@@ -244,12 +244,33 @@ def preset(name: str, **changes: Any) -> VOConfig:
 CORNER_PATH_SETTINGS = ("points", "max_depth_views", "corner_min_angle_deg", "corner_pose")
 
 
+#: Settings of one choice of a stage: ``setting -> (the choosing field, the choices that use the setting)``.
+CHOICE_SETTINGS = {
+    "preprocess.clahe_clip_limit": ("preprocess.method", ("clahe",)),
+    "preprocess.clahe_tile_grid": ("preprocess.method", ("clahe",)),
+    "preprocess.blur_kernel_px": ("preprocess.method", ("gaussian", "bilateral")),
+    "features.gftt_quality": ("features.detector", ("gftt",)),
+    "features.min_distance_px": ("features.detector", ("gftt",)),
+    "features.fast_threshold": ("features.detector", ("fast",)),
+    "features.akaze_threshold": ("features.detector", ("akaze",)),
+    "matching.ratio": ("matching.method", ("knn_ratio",)),
+}
+
+
 def inert_settings(cfg: VOConfig, keys: Any) -> list[tuple[str, str]]:
     """``(setting, why)`` for the dotted settings among ``keys`` that ``cfg`` does not use (``--set
-    scale.corner_pose=corners`` left the default pipeline's poses byte-identical without a word)."""
+    scale.corner_pose=corners`` or ``--set matching.ratio=0.1`` left the default pipeline's poses byte-identical
+    without a word)."""
     own = cfg.matching.method == "klt" and cfg.features.detector == "gftt"
     notes = []
     for key in keys:
+        if str(key) in CHOICE_SETTINGS:
+            chooser, users = CHOICE_SETTINGS[str(key)]
+            stage, _, field = chooser.partition(".")
+            chosen = getattr(getattr(cfg, stage), field)
+            if chosen not in users:
+                notes.append((str(key), f"{chooser} is {chosen}: the setting acts with {' or '.join(users)}"))
+            continue
         section, _, field = str(key).partition(".")
         if section != "scale" or field == "mode":
             continue
