@@ -55,3 +55,23 @@ def test_seq01_relative_scale_follows_the_speed_up(seq01):
     est_ratio = steps[-10:].mean() / steps[:10].mean()
     true_ratio = true_steps[-10:].mean() / true_steps[:10].mean()
     assert true_ratio > 1.15 and abs(est_ratio - true_ratio) < 0.1
+
+
+def test_an_unknown_scale_mode_is_refused_not_scored_with_sim3():
+    """evaluate_vo(est, gt, "GT") aligned by Sim(3): a trajectory twice too long scored an APE of 0."""
+    from lidarkit.errors import ConfigError
+    from lidarkit.trajectory import Trajectory
+
+    poses = np.tile(np.eye(4), (6, 1, 1))
+    poses[:, 0, 3] = np.arange(6.0)
+    poses[:, 1, 3] = np.arange(6.0) ** 2 / 5  # a curve: Umeyama's rotation is defined
+    doubled = poses.copy()
+    doubled[:, :3, 3] *= 2
+    gt, est = Trajectory(poses, name="gt"), Trajectory(doubled, name="vo")
+    assert evaluate_vo(est, gt, "gt")["ape_rmse_m"] > 1.0
+    assert evaluate_vo(est, gt, "relative")["ape_rmse_m"] < 1e-9
+    for mode in ("GT", "ground_truth", ""):
+        with pytest.raises(ConfigError, match=f"scale_mode: unknown scale mode '{mode}'; known: gt, none, relative"):
+            evaluate_vo(est, gt, mode)
+        with pytest.raises(ConfigError, match="unknown scale mode"):
+            evaluate_vo(est, gt, mode, align="se3")

@@ -15,7 +15,12 @@ from lidarkit.trajectory import Trajectory
 
 
 def alignment_for(scale_mode: str) -> str:
-    """``se3`` for ground-truth scale, ``sim3`` for ``none`` / ``relative``."""
+    """``se3`` for ground-truth scale, ``sim3`` for ``none`` / ``relative``; ConfigError for any other (``"GT"`` was
+    scored with Sim(3), an APE of 0 for a trajectory twice too long)."""
+    if scale_mode not in ("gt", "none", "relative"):
+        from lidarkit.errors import ConfigError
+
+        raise ConfigError(f"unknown scale mode {scale_mode!r}; known: gt, none, relative", source="scale_mode")
     return "se3" if scale_mode == "gt" else "sim3"
 
 
@@ -32,7 +37,8 @@ def score_vo(est: Trajectory, ref: Trajectory, scale_mode: str, align: str | Non
     :func:`alignment_for` for APE and RPE. ``final_error_m`` keeps its definition (it depends on the scale mode only)."""
     from lidarkit.eval import ape, rpe
 
-    align = alignment_for(scale_mode) if align is None else align
+    by_scale = alignment_for(scale_mode)  # (checks the mode, which final_error_m depends on, whatever align says)
+    align = by_scale if align is None else align
     a = ape(ref, est, align=align)
     r_t = rpe(ref, est, delta=1, delta_unit="frames", align=align)
     r_r = rpe(ref, est, delta=1, delta_unit="frames", align=align, relation="rotation_angle_deg")
