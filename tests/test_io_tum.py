@@ -57,6 +57,26 @@ def test_association_and_drop_policy(tum_folder):
     assert image.mean() == pytest.approx(0.587 * 120, abs=1.0)
 
 
+def test_a_frame_dropped_inside_the_sequence_is_warned_about(tum_folder, caplog):
+    """A gap in the ground truth dropped the frames inside it at INFO level (hidden by the CLI): the images jumped
+    over them unseen. Frames after the ground truth's end stay an INFO line."""
+    import logging
+
+    with caplog.at_level(logging.INFO, logger="lidarkit.io.tum"):
+        assert len(TumRGBD(tum_folder)) == 4
+    assert not [r for r in caplog.records if r.levelno >= logging.WARNING]
+    gt = tum_folder / "groundtruth.txt"
+    lines = gt.read_text().splitlines()
+    header = sum(line.startswith("#") for line in lines)
+    gt.write_text("\n".join(lines[: header + 15] + lines[header + 26 :]) + "\n")  # rows 15-25 gone: frame 2 has none
+    caplog.clear()
+    with caplog.at_level(logging.INFO, logger="lidarkit.io.tum"):
+        ds = TumRGBD(tum_folder)
+    assert len(ds) == 3
+    warned = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    assert len(warned) == 1 and "1 rgb frame(s) inside the sequence have no ground-truth pose" in warned[0], warned
+
+
 def test_keep_and_error_policies(tum_folder):
     kept = TumRGBD(tum_folder, unmatched="keep")
     assert len(kept) == 5 and kept.ground_truth is None

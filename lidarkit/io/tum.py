@@ -133,6 +133,12 @@ class TumRGBD:
                     )
                 log.info("%s: %d of %d rgb frames have no ground truth within %.3f s (%s)",
                          self.rgb_list_path, int((~matched).sum()), len(stamps), self.max_dt_s, unmatched)
+                inside = np.flatnonzero(~matched)
+                inside = inside[(inside > np.argmax(matched)) & (inside < len(matched) - 1 - np.argmax(matched[::-1]))]
+                if len(inside) and unmatched == "drop":  # a gap in the ground truth: the sequence jumps over frames
+                    log.warning("%s: %d rgb frame(s) inside the sequence have no ground-truth pose within %.3f s and are "
+                                "left out, the first at t=%.6f s (%s): the images jump there", self.rgb_list_path,
+                                len(inside), self.max_dt_s, stamps[inside[0]], names[inside[0]])
             if unmatched == "drop":
                 keep = np.flatnonzero(matched)
                 if not len(keep):
