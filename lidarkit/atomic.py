@@ -20,6 +20,11 @@ from pathlib import Path
 
 from lidarkit.errors import OutputError
 
+try:  # advisory locks mark the temporary folders of outputs being written (POSIX)
+    import fcntl
+except ImportError:
+    fcntl = None
+
 __all__ = ["OutputError", "atomic_path", "ensure_dir", "output_errors", "run_folder", "save_figure", "write_bytes",
            "write_text"]
 
@@ -195,12 +200,8 @@ def run_folder(path: str | os.PathLike, replaces: Iterable[str] = (), exclusive:
     if path.exists() and not path.is_dir():
         raise OutputError("cannot write the run folder: a file is in the way (a folder is needed here)", source=path)
     held_a_run = _holds_a_run(path)
-    ensure_dir(path.parent)
-    with output_errors(path, "cannot create the run folder"):
-        tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}{PARTIAL_MARK}", dir=path.parent))
+    with partial_folder(path, "cannot create the run folder") as tmp:
         os.chmod(tmp, 0o777 & ~_UMASK)
-    remove_stale_partials(path)
-    try:
         try:
             yield tmp
         except OutputError as err:
@@ -213,8 +214,26 @@ def run_folder(path: str | os.PathLike, replaces: Iterable[str] = (), exclusive:
         for name in sorted(set(replaces) - written) if held_a_run else ():
             with output_errors(path / name, "cannot remove an earlier run's file"):
                 (path / name).unlink(missing_ok=True)
+
+
+@contextlib.contextmanager
+def partial_folder(path: str | os.PathLike, reason: str = "cannot write") -> Iterator[Path]:
+    """A temporary folder beside ``path`` (``.<name>.partial-XXXX``) to write ``path`` in, removed at the end (when it
+    was not renamed into place). It is held (an advisory lock) while this process writes, so that another output's
+    clean-up of killed runs' folders never takes it for one (an export writing for over an hour lost its folder to a
+    second export and then reported success with half its sweeps)."""
+    path = Path(path)
+    ensure_dir(path.parent)
+    with output_errors(path, reason):
+        tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}{PARTIAL_MARK}", dir=path.parent))
+    held = _hold(tmp)
+    try:
+        remove_stale_partials(path)
+        yield tmp
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+        if held is not None:
+            os.close(held)
 
 
 def _holds_a_run(path: Path) -> bool:
@@ -263,13 +282,39 @@ def _move_into_place(tmp: Path, path: Path, exclusive: bool = False) -> None:
             os.replace(src, dst)
 
 
+def _hold(folder: Path, wait: bool = True) -> int | None:
+    """An open descriptor of ``folder`` holding an exclusive advisory lock on it (released when closed, or when the
+    process ends however it ends); None without locks (not POSIX), or when another process holds it (``wait=False``)."""
+    if fcntl is None:
+        return None
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX if wait else fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        os.close(fd)
+        return None
+    return fd
+
+
 def remove_stale_partials(path: str | os.PathLike, older_than_s: float = 3600.0) -> int:
-    """Remove temporary run folders of ``path`` a killed run left behind (older than ``older_than_s``)."""
+    """Remove temporary run folders of ``path`` a killed run left behind: older than ``older_than_s`` and held by no
+    running process (a folder's own time stamp does not change while files are written inside it)."""
     path = Path(path)
     removed = 0
     with contextlib.suppress(OSError):
         for stale in path.parent.glob(f".{path.name}{PARTIAL_MARK}*"):
-            if stale.is_dir() and time.time() - stale.stat().st_mtime > older_than_s:
+            if not (stale.is_dir() and time.time() - stale.stat().st_mtime > older_than_s):
+                continue
+            held = _hold(stale, wait=False)
+            if held is None and fcntl is not None:
+                continue  # a running output's folder (or one this process cannot open: left alone)
+            try:
                 shutil.rmtree(stale, ignore_errors=True)
                 removed += 1
+            finally:
+                if held is not None:
+                    os.close(held)
     return removed

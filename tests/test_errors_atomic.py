@@ -67,3 +67,31 @@ def test_cli_params_are_yaml_scalars_and_bad_ones_name_the_option():
     }
     with pytest.raises(ConfigError, match=r"--set 'novalue'.*expected KEY=VALUE"):
         parse_params(["novalue"], option="--set")
+
+
+def test_a_running_outputs_temporary_folder_is_never_taken_for_a_killed_ones(tmp_path):
+    """An export writing for over an hour lost its temporary folder to a second export's clean-up (the folder's own
+    time stamp does not change while files are written inside it) and then said it wrote every sweep (2567 of 3000):
+    a folder held by a running output is kept, one a killed run left behind is removed."""
+    import subprocess
+    import sys
+    import time
+
+    target = tmp_path / "run"
+    two_hours_ago = time.time() - 7200
+    with atomic.partial_folder(target) as writing:
+        (writing / "velodyne").mkdir()
+        os.utime(writing, (two_hours_ago, two_hours_ago))
+        left = tmp_path / f".run{atomic.PARTIAL_MARK}killed"
+        left.mkdir()
+        os.utime(left, (two_hours_ago, two_hours_ago))
+        cleanup = ("import sys; from lidarkit.atomic import remove_stale_partials; "
+                   f"sys.exit(remove_stale_partials({str(target)!r}))")
+        removed = subprocess.run([sys.executable, "-c", cleanup], timeout=120).returncode  # another process's clean-up
+        assert removed == 1 and writing.is_dir() and (writing / "velodyne").is_dir() and not left.exists()
+    assert not writing.exists()  # removed at the end (not renamed into place)
+    with atomic.run_folder(target) as tmp:  # a run folder is held the same way while written
+        os.utime(tmp, (two_hours_ago, two_hours_ago))
+        assert atomic.remove_stale_partials(target) == 0 and tmp.is_dir()
+        (tmp / "poses.txt").write_text("1\n")
+    assert (target / "poses.txt").read_text() == "1\n"

@@ -12,9 +12,7 @@ from __future__ import annotations
 
 import errno
 import os
-import shutil
 import sqlite3
-import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
@@ -76,12 +74,8 @@ def export_bag(sequence, out: str | os.PathLike, fmt: str = "rosbag2", *, storag
                           source="frame_rate_hz")
     from lidarkit import atomic
 
-    atomic.ensure_dir(out.parent)
-    with atomic.output_errors(out):
-        # marked as a partial output: one left by a killed export (kill -9) is removed by the next one after an hour
-        scratch = Path(tempfile.mkdtemp(prefix=f".{out.name}{atomic.PARTIAL_MARK}", dir=out.parent))
-    atomic.remove_stale_partials(out)
-    try:
+    # a partial output: one left by a killed export (kill -9) is removed by the next one after an hour
+    with atomic.partial_folder(out) as scratch:
         if fmt == "rosbag1":
             from rosbags.rosbag1 import Writer
 
@@ -108,8 +102,6 @@ def export_bag(sequence, out: str | os.PathLike, fmt: str = "rosbag2", *, storag
             target = next(target.glob("*.mcap"))
         with atomic.output_errors(out):
             _claim(target, out)
-    finally:
-        shutil.rmtree(scratch, ignore_errors=True)
     return out
 
 
