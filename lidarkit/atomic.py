@@ -199,36 +199,46 @@ def run_folder(path: str | os.PathLike, replaces: Iterable[str] = (), exclusive:
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise OutputError("cannot write the run folder: a file is in the way (a folder is needed here)", source=path)
+    named = path
+    if path.is_symlink():  # written beside the folder it names (a rename onto the link itself fails)
+        path = path.resolve()
     held_a_run = _holds_a_run(path)
-    with partial_folder(path, "cannot create the run folder") as tmp:
+    # a writable folder in a parent this user cannot write to (a mount point): written inside it, moved file by file
+    inside = path.is_dir() and not _writable(path.parent) and _writable(path)
+    with partial_folder(path, "cannot create the run folder", inside=inside) as tmp:
         os.chmod(tmp, 0o777 & ~_UMASK)
         try:
             yield tmp
         except OutputError as err:
             if err.source and err.source.startswith(str(tmp)):  # name the final path, not the temporary one
-                raise OutputError(err.reason, source=path / os.path.relpath(err.source, tmp), location=err.location) from err
+                raise OutputError(err.reason, source=named / os.path.relpath(err.source, tmp), location=err.location) from err
             raise
         written = {p.name for p in tmp.iterdir()}
-        with output_errors(path, "cannot complete the run folder"):
-            _move_into_place(tmp, path, exclusive)
+        with output_errors(named, "cannot complete the run folder"):
+            _move_into_place(tmp, path, exclusive, named, inside)
         for name in sorted(set(replaces) - written) if held_a_run else ():
-            with output_errors(path / name, "cannot remove an earlier run's file"):
+            with output_errors(named / name, "cannot remove an earlier run's file"):
                 (path / name).unlink(missing_ok=True)
 
 
+def _writable(folder: Path) -> bool:
+    return os.access(folder, os.W_OK | os.X_OK)
+
+
 @contextlib.contextmanager
-def partial_folder(path: str | os.PathLike, reason: str = "cannot write") -> Iterator[Path]:
-    """A temporary folder beside ``path`` (``.<name>.partial-XXXX``) to write ``path`` in, removed at the end (when it
-    was not renamed into place). It is held (an advisory lock) while this process writes, so that another output's
-    clean-up of killed runs' folders never takes it for one (an export writing for over an hour lost its folder to a
-    second export and then reported success with half its sweeps)."""
+def partial_folder(path: str | os.PathLike, reason: str = "cannot write", inside: bool = False) -> Iterator[Path]:
+    """A temporary folder beside ``path`` (``.<name>.partial-XXXX``; in it with ``inside``) to write ``path`` in,
+    removed at the end (when it was not renamed into place). It is held (an advisory lock) while this process writes,
+    so that another output's clean-up of killed runs' folders never takes it for one (an export writing for over an
+    hour lost its folder to a second export and then reported success with half its sweeps)."""
     path = Path(path)
-    ensure_dir(path.parent)
+    home = path if inside else path.parent
+    ensure_dir(home)
     with output_errors(path, reason):
-        tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}{PARTIAL_MARK}", dir=path.parent))
+        tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}{PARTIAL_MARK}", dir=home))
     held = _hold(tmp)
     try:
-        remove_stale_partials(path)
+        remove_stale_partials(path, home=home)
         yield tmp
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -256,24 +266,33 @@ def export_folder(path: str | os.PathLike, what: str) -> Iterator[Path]:
         yield tmp
 
 
-def _move_into_place(tmp: Path, path: Path, exclusive: bool = False) -> None:
-    try:
-        os.rename(tmp, path)  # a missing or empty ``path``: one rename
-        return
-    except OSError as err:
-        if err.errno not in (errno.EEXIST, errno.ENOTEMPTY, errno.EISDIR, errno.ENOTDIR, errno.EBUSY):  # EBUSY: "." itself
-            raise
-        if exclusive:
-            raise OutputError("the folder filled while this export was written (another export to it?): its files are kept, "
-                              "this export is not written", source=path) from None
+def _move_into_place(tmp: Path, path: Path, exclusive: bool = False, named: Path | None = None, inside: bool = False) -> None:
+    """``tmp`` becomes ``path`` (``named``: the path as the user gave it, for messages); ``inside``: ``tmp`` is in
+    ``path``, its files are moved up one rename each."""
+    named = path if named is None else named
+    filled = OutputError("the folder filled while this export was written (another export to it?): its files are kept, "
+                         "this export is not written", source=named)
+    if inside:
+        if exclusive and any(p != tmp for p in path.iterdir()):
+            raise filled
+    else:
+        try:
+            os.rename(tmp, path)  # a missing or empty ``path``: one rename
+            return
+        except OSError as err:
+            if err.errno not in (errno.EEXIST, errno.ENOTEMPTY, errno.EISDIR, errno.ENOTDIR, errno.EBUSY):  # EBUSY: "." itself
+                raise
+            if exclusive:
+                raise filled from None
     moves = [(src, path / src.relative_to(tmp)) for src in sorted(tmp.rglob("*"))]
     # everything in the way is found before the first file moves: a folder where a file goes (or a file where a folder
     # goes) found half-way left the folder half the earlier run's, half this one's
     for src, dst in moves:
         if not src.is_dir() and dst.is_dir():
-            raise OutputError("cannot write: is a folder (a file name is needed here)", source=dst)
+            raise OutputError("cannot write: is a folder (a file name is needed here)", source=named / src.relative_to(tmp))
         if src.is_dir() and dst.exists() and not dst.is_dir():
-            raise OutputError("cannot create the folder: a file is in the way (a folder is needed here)", source=dst)
+            raise OutputError("cannot create the folder: a file is in the way (a folder is needed here)",
+                              source=named / src.relative_to(tmp))
     for src, dst in moves:
         if src.is_dir():
             ensure_dir(dst)
@@ -299,13 +318,14 @@ def _hold(folder: Path, wait: bool = True) -> int | None:
     return fd
 
 
-def remove_stale_partials(path: str | os.PathLike, older_than_s: float = 3600.0) -> int:
-    """Remove temporary run folders of ``path`` a killed run left behind: older than ``older_than_s`` and held by no
-    running process (a folder's own time stamp does not change while files are written inside it)."""
+def remove_stale_partials(path: str | os.PathLike, older_than_s: float = 3600.0, home: str | os.PathLike | None = None) -> int:
+    """Remove temporary run folders of ``path`` a killed run left behind in ``home`` (default: beside ``path``): older
+    than ``older_than_s`` and held by no running process (a folder's own time stamp does not change while files are
+    written inside it)."""
     path = Path(path)
     removed = 0
     with contextlib.suppress(OSError):
-        for stale in path.parent.glob(f".{path.name}{PARTIAL_MARK}*"):
+        for stale in Path(path.parent if home is None else home).glob(f".{path.name}{PARTIAL_MARK}*"):
             if not (stale.is_dir() and time.time() - stale.stat().st_mtime > older_than_s):
                 continue
             held = _hold(stale, wait=False)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
 import pytest
 
@@ -95,3 +96,40 @@ def test_a_running_outputs_temporary_folder_is_never_taken_for_a_killed_ones(tmp
         assert atomic.remove_stale_partials(target) == 0 and tmp.is_dir()
         (tmp / "poses.txt").write_text("1\n")
     assert (target / "poses.txt").read_text() == "1\n"
+
+
+def test_a_run_folder_through_a_link_or_in_a_parent_it_cannot_write(tmp_path, monkeypatch):
+    """--out LINK renamed the run onto the link (a cross-device error after the work, or "the folder filled while this
+    export was written" for an export into an empty folder); a writable folder in a parent the user cannot write to (a
+    mount point) failed after the work: written beside the folder the link names, or inside the folder, file by file."""
+    real = tmp_path / "real"
+    real.mkdir()
+    link = tmp_path / "link"
+    link.symlink_to(real)
+    with atomic.export_folder(link, "sweeps") as tmp:
+        (tmp / "velodyne").mkdir()
+        (tmp / "velodyne" / "000000.bin").write_bytes(b"1234")
+    assert link.is_symlink() and (real / "velodyne" / "000000.bin").read_bytes() == b"1234"
+    with atomic.run_folder(link) as tmp:  # a link to a folder that holds a run: files moved in
+        (tmp / "poses.txt").write_text("p\n")
+    assert sorted(p.name for p in real.iterdir()) == ["poses.txt", "velodyne"]
+
+    mount = tmp_path / "mount"
+    mount.mkdir()
+    (mount / "mine.txt").write_text("kept\n")
+    monkeypatch.setattr(atomic, "_writable", lambda folder: Path(folder) != tmp_path)  # the parent is not writable
+    with atomic.run_folder(mount) as tmp:
+        assert tmp.parent == mount
+        (tmp / "plots").mkdir()
+        (tmp / "plots" / "a.png").write_bytes(b"png")
+        (tmp / "config.yaml").write_text("lidarkit_version: x\n")
+    assert sorted(p.name for p in mount.iterdir()) == ["config.yaml", "mine.txt", "plots"]
+    assert (mount / "plots" / "a.png").read_bytes() == b"png"
+    empty = tmp_path / "empty_mount"
+    empty.mkdir()
+    with pytest.raises(LidarKitError, match="the folder filled while this export was written"):
+        with atomic.export_folder(empty, "sweeps") as tmp:
+            assert tmp.parent == empty
+            (empty / "other.bin").write_bytes(b"x")  # another export's file arrived meanwhile
+            (tmp / "mine.bin").write_bytes(b"y")
+    assert sorted(p.name for p in empty.iterdir()) == ["other.bin"]
