@@ -248,6 +248,17 @@ def test_the_simulator_s_kitti_folder_states_its_stamp_instant(tmp_path):
         assert open_dataset("kitti", folder.resolve(), poses_file="poses.txt").ground_truth.meta["pose_instant"] == "mid"
     finally:
         os.chdir(here)
+    # the simulator's poses_start.txt named: its own instant and stamps (it read 'not stated' with times.txt's mid
+    # stamps, and kiss's sweep-end poses were scored against the sweep start: 0.435 m where the end gives 1.044 m)
+    stamps = KittiOdometry(folder).timestamps_s
+    for instant, shift in (("start", -0.05), ("mid", 0.0), ("end", 0.05)):
+        gt = open_dataset("kitti", folder, poses_file=f"poses_{instant}.txt").ground_truth
+        assert gt.meta["pose_instant"] == instant
+        np.testing.assert_allclose(gt.timestamps_s, stamps + shift, atol=1e-9)
+    named, spec = run(open_dataset("kitti", folder, poses_file="poses_start.txt"), "kiss"), run(sim, "kiss")
+    assert named.metrics["effective"]["ground_truth_instant"].startswith("end")
+    assert named.metrics["ape_translation_se3_m"]["stats"]["rmse"] == pytest.approx(
+        spec.metrics["ape_translation_se3_m"]["stats"]["rmse"], abs=1e-6)
 
 
 def test_a_pipeline_reporting_the_sweep_start_tracks_as_well_as_one_reporting_its_end():

@@ -403,6 +403,8 @@ class KittiOdometry:
         elif self._times_all is not None:
             n = min(len(gt), len(self._times_all))  # an excerpt may trim one of the files to the frames present
             gt = gt[:n].with_timestamps(self._times_all[:n])
+        if gt.timestamps_s is not None and self._poses_shift_s:  # the simulator's poses_start.txt named: its own instant
+            gt = gt.with_timestamps(gt.timestamps_s + self._poses_shift_s)
         if frame == "camera":
             return gt
         if frame != "lidar":
@@ -416,14 +418,13 @@ class KittiOdometry:
         simulator keeps ``poses_{instant}.txt`` beside ``poses.txt``; DataError for any other folder, which has only the
         one instant of ``poses.txt``."""
         path = self.sequence_dir / f"poses_{instant}.txt"
-        if instant not in INSTANT_FRACTION or self._simulated_instant is None or not path.is_file():
+        if instant not in INSTANT_FRACTION or self._simulator_pose_instant is None or not path.is_file():
             raise DataError(f"no ground truth at the sweep {instant} (only the simulator's folders keep poses_{instant}.txt)",
                             source=self.sequence_dir)
         gt = self._in_lidar_frame(self._rows(Trajectory.from_kitti(path, name=f"{self.name}_gt"), self.frames, path))
         times = gt.timestamps_s
-        if times is not None and len(self._times_all) > 1:  # times.txt is at poses.txt's instant: moved by the period
-            period = float(np.median(np.diff(self._times_all)))
-            times = times + (INSTANT_FRACTION[instant] - INSTANT_FRACTION[self._simulated_instant]) * period
+        if times is not None:  # times.txt is at poses.txt's instant: moved by the fraction of the period
+            times = times + self._instant_shift_s(instant)
         return Trajectory(gt.poses_se3, times, gt.name, meta={"pose_instant": instant, "retimed": f"the simulator's poses_{instant}.txt"})
 
     def _rows(self, gt: Trajectory, frames: np.ndarray | list[int], source: Path) -> Trajectory:
@@ -441,16 +442,32 @@ class KittiOdometry:
 
     @cached_property
     def _simulated_instant(self) -> str | None:
-        """The sweep instant of poses.txt in a folder written by lidarkit's simulator (sim.yaml), else None (unknown).
-        The paths are compared resolved: the folder's own poses.txt named by another path (absolute, relative) lost its
-        instant, and kiss was scored against the wrong one without a word."""
-        if self.poses_path is None:
+        """The sweep instant of the pose file in a folder written by lidarkit's simulator (sim.yaml): its poses.txt's,
+        or ``X`` for its ``poses_X.txt``; else None (unknown). The paths are compared resolved: the folder's own
+        poses.txt named by another path (absolute, relative) lost its instant, and kiss was scored against the wrong
+        one without a word, as it was when poses_start.txt was named."""
+        if self.poses_path is None or self._simulator_pose_instant is None:
             return None
         try:
-            same = Path(self.poses_path).resolve() == (Path(self.sequence_dir) / "poses.txt").resolve()
+            named = Path(self.poses_path).resolve()
+            if named == (Path(self.sequence_dir) / "poses.txt").resolve():
+                return self._simulator_pose_instant
+            return next((i for i in INSTANT_FRACTION if named == (Path(self.sequence_dir) / f"poses_{i}.txt").resolve()), None)
         except OSError:
             return None
-        return self._simulator_pose_instant if same else None
+
+    @property
+    def _poses_shift_s(self) -> float:
+        """Seconds from times.txt's instant (poses.txt's) to the named pose file's (0 unless a poses_X.txt is named)."""
+        instant = self._simulated_instant
+        return 0.0 if instant is None else self._instant_shift_s(instant)
+
+    def _instant_shift_s(self, instant: str) -> float:
+        """Seconds from the simulator's poses.txt instant to sweep ``instant`` (a fraction of the median period)."""
+        if self._times_all is None or len(self._times_all) < 2:
+            return 0.0
+        period = float(np.median(np.diff(self._times_all)))
+        return (INSTANT_FRACTION[instant] - INSTANT_FRACTION[self._simulator_pose_instant]) * period
 
     @cached_property
     def _simulator_pose_instant(self) -> str | None:
