@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -28,6 +30,35 @@ def test_cli_odometry_unknown_dataset_option_is_one_error_line(tmp_path, capsys)
     assert _cli(["odometry", f"folder:{tmp_path}?foo=1", "-m", "vanilla", "--no-progress"]) == 1
     err = capsys.readouterr().err
     assert err.startswith("error:") and "foo" in err and "valid options" in err and "Traceback" not in err
+
+
+def test_spec_option_values_read_as_numbers_or_nothing_are_paths_again_or_refused(tmp_path):
+    """A spec's value parser reads ``velodyne_dir=2`` as the number 2 and ``suffixes=`` as nothing: TypeError
+    tracebacks in the readers ('NoneType' object is not iterable; expected str, bytes or os.PathLike object, not int),
+    and ``kiss_kitti_raw``'s ``sequence=abc`` a ValueError. A number is a folder name again; nothing, a boolean or a
+    sequence that is no number is refused naming the option."""
+    from conftest import shared_path
+
+    from lidarkit.io.kitti import KittiOdometry
+
+    np.save(tmp_path / "000000.npy", np.zeros((5, 3)))
+    for query, line in (("suffixes=", "folder dataset option suffixes: needs a value"),
+                        ("suffixes=true", "folder dataset option suffixes: expected a path or text, got True"),
+                        ("suffixes=5", "suffixes: unsupported scan suffix '5'")):
+        with pytest.raises(ConfigError, match=re.escape(line)):
+            open_sequence(f"folder:{tmp_path}?{query}")
+    root = shared_path("kitti_odometry")
+    with pytest.raises(ConfigError, match="kitti dataset option times_file: expected a path or text, got True"):
+        open_sequence(f"kitti:{root}?times_file=true")
+    seq = tmp_path / "seq"
+    (seq / "2").mkdir(parents=True)  # a velodyne folder named "2"
+    for name in ("000000.bin", "000001.bin"):
+        (seq / "2" / name).write_bytes((root / "sequences" / "00" / "velodyne" / name).read_bytes())
+    (seq / "calib.txt").write_bytes((root / "sequences" / "00" / "calib.txt").read_bytes())
+    opened = open_sequence(f"kitti:{seq}?velodyne_dir=2")
+    assert isinstance(opened, KittiOdometry) and len(opened) == 2
+    with pytest.raises(ConfigError, match=r"kiss_kitti_raw dataset option sequence: a KITTI odometry sequence number \(0-10\), got 'abc'"):
+        open_sequence(f"kiss_kitti_raw:{root}?sequence=abc")
 
 
 def test_cli_sim_param_duplicating_an_option_is_a_config_error(tmp_path, capsys):

@@ -10,6 +10,7 @@ import importlib
 import inspect
 import os
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 from lidarkit.errors import ConfigError
@@ -146,7 +147,11 @@ def _typed_options(reader: Any, kind: str, options: dict[str, Any]) -> dict[str,
     out = dict(options)
     for name, value in options.items():
         hint = hints.get(name)
-        if hint is None or not set(typing.get_args(hint) or (hint,)) <= plain:
+        if hint is None:
+            continue
+        kinds = set(typing.get_args(hint) or (hint,))
+        if not kinds <= plain:
+            out[name] = _text_option(kind, name, value, kinds)
             continue
         try:
             out[name] = TypeAdapter(hint).validate_python(value)
@@ -154,6 +159,24 @@ def _typed_options(reader: Any, kind: str, options: dict[str, Any]) -> dict[str,
             reason = err.errors()[0].get("msg", "invalid value")
             raise ConfigError(f"{reason}, got {value!r}", source=f"{kind} dataset option {name}") from None
     return out
+
+
+def _text_option(kind: str, name: str, value: Any, kinds: set) -> Any:
+    """A path or list option (``str | os.PathLike``, ``tuple[str, ...] | str``) whose text a spec's value parser read
+    as a number, a boolean or nothing (``velodyne_dir=2``, ``suffixes=``): the number back as its text (a folder named
+    ``2``), nothing or a boolean refused naming the option (TypeError tracebacks inside the readers)."""
+    takes_text = str in kinds or any(getattr(k, "__origin__", k) in (os.PathLike, Path) for k in kinds)
+    if not takes_text or isinstance(value, (str, os.PathLike)):
+        return value
+    if value is None:
+        if type(None) in kinds:
+            return value
+        raise ConfigError("needs a value", source=f"{kind} dataset option {name}")
+    if isinstance(value, bool):
+        raise ConfigError(f"expected a path or text, got {value!r}", source=f"{kind} dataset option {name}")
+    if isinstance(value, (int, float)):
+        return str(value)
+    return value
 
 
 __all__ = ["NOT_SCANS", "available_datasets", "detect_kind", "get_reader", "open_dataset", "register_dataset"]

@@ -200,6 +200,8 @@ class KissKittiRawScans(KissLoaderScans):
     requires = {"pykitti": "pip install pykitti"}
 
     def __init__(self, path: str | os.PathLike, sequence: str | int = "00"):
+        if isinstance(sequence, bool) or not str(sequence).strip().isdigit():
+            raise ConfigError(f"a KITTI odometry sequence number (0-10), got {sequence!r}", source="kiss_kitti_raw dataset option sequence")
         super().__init__(path, sequence=f"{int(sequence):02d}")
 
 
