@@ -158,6 +158,20 @@ def test_time_field_that_is_not_times(tmp_path):
     assert open_dataset("rosbag", bag, time_field="none").read_scan(1).point_times_s is None  # the way out it names
 
 
+def test_a_ring_number_named_as_time_field_is_refused(tmp_path):
+    """time_field=ring (a uint16 beam number, 0-15) read as 0-15 ns of per-point times: kiss 'deskewed' every sweep by
+    ring number; an 8- or 16-bit integer field cannot hold times, refused naming it."""
+    fields, step, data = _cloud_bytes(64)
+    rec = np.zeros(64, dtype=[("p", "V16"), ("ring", "<u2"), ("pad", "V2")])
+    rec["p"] = np.frombuffer(data, dtype="V16")
+    rec["ring"] = np.arange(64) % 16
+    bag = write_ros1_bag(tmp_path / "ring.bag", [(1000.0, [*fields, ("ring", 16, 4)], 20, rec.tobytes(), 64)])
+    assert open_dataset("rosbag", bag).read_scan(0).point_times_s is not None  # its own 'time' field: read
+    with pytest.raises(DataError, match=r"ring\.bag \(message 0 on /points\): per-point time field 'ring' is a 16-bit integer: "
+                                        r"too small for times"):
+        open_dataset("rosbag", bag, time_field="ring").read_scan(0)
+
+
 def test_time_going_backwards(tmp_path):
     bag = write_ros1_bag(tmp_path / "back.bag", [good(0), good(1), (good(1)[0] - 0.05, *good(2)[1:])])
     ds = open_dataset("rosbag", bag)

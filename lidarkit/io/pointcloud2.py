@@ -13,7 +13,8 @@ Per-point time fields (the first present of :data:`TIME_FIELDS`, or the one aske
 * values beyond 1e5 s are absolute time (``point_time_convention="absolute_s"``), otherwise relative to the
   message stamp (``"relative_s"``);
 * a field whose values span more than :data:`MAX_SWEEP_S` in one message is not the points' times (e.g. an
-  intensity named by ``time_field=``): a DataError, where it would have deskewed every sweep by nonsense.
+  intensity named by ``time_field=``), nor is an 8- or 16-bit integer field (a ``ring``): a DataError, where it would
+  have deskewed every sweep by nonsense.
 """
 
 from __future__ import annotations
@@ -100,6 +101,12 @@ def decode_pointcloud2(msg: Any, *, source: str, location: str, time_field: str 
     if field is None:
         return DecodedCloud(xyz, intensity, None, "relative_s", None)
     raw = cloud[field] if all_kept else cloud[field][keep]
+    if np.issubdtype(raw.dtype, np.integer) and raw.dtype.itemsize < 4:  # (ring numbers read as times deskewed by them)
+        raise DataError(
+            f"per-point time field {field!r} is a {8 * raw.dtype.itemsize}-bit integer: too small for times (drivers write "
+            "float seconds or 32/64-bit integer nanoseconds); time_field= names the right field, none reads no times",
+            source=source, location=location,
+        )
     if np.issubdtype(raw.dtype, np.integer):
         times = raw.astype(np.float64) * 1e-9
     else:
