@@ -328,3 +328,24 @@ def test_a_selection_within_partial_odometry_is_re_timed_alone(tmp_path):
     retimed, note = like_with_like(gt, "end", sequence=bag, own_ground_truth=True, method="kiss", frames=frames)
     assert len(retimed) == 4 and "re-timed from the sweep mid to the sweep end" in note
     np.testing.assert_allclose(retimed.poses_se3[:, 0, 3], [0.5, 1.5, 2.5, 3.5], atol=1e-6)  # half a sweep on
+
+
+def test_odometry_stamped_at_no_clear_instant_is_re_timed_where_the_recording_can(tmp_path):
+    """Odometry at 30 Hz, the pose paired with each scan 13 ms into its sweep: the instant read as none, and kiss's
+    sweep-end poses were scored against it as they were (0.41 m where 0.61 m is right, on a 5 m/s drive). Now re-timed
+    to the estimate's instant by the recording, with a note; a reader that cannot re-time compares as before."""
+    from test_io_bad_bags import good, write_ros1_bag
+
+    from lidarkit.io import open_dataset
+    from lidarkit.odometry.instants import like_with_like
+
+    poses = [(1000.0 + 0.013 + k / 30, (5.0 * (0.013 + k / 30), 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)) for k in range(31)]
+    bag = open_dataset("rosbag", write_ros1_bag(tmp_path / "gt30.bag", [good(k) for k in range(10)], odometry=poses))
+    gt = bag.ground_truth
+    assert gt.meta["pose_instant"] is None
+    np.testing.assert_allclose(gt.poses_se3[:, 0, 3], 5.0 * (0.013 + 0.1 * np.arange(10)), atol=1e-6)
+    retimed, note = like_with_like(gt, "end", sequence=bag, own_ground_truth=True, method="kiss")
+    assert note.startswith("ground truth re-timed from stamps at no clear instant of the sweep to the sweep end")
+    np.testing.assert_allclose(retimed.poses_se3[:, 0, 3], 5.0 * 0.1 * np.arange(1, 11), atol=1e-3)  # each sweep's end
+    kept, note = like_with_like(gt, "end", sequence=object(), own_ground_truth=True, method="kiss")
+    assert kept is gt and note is None
