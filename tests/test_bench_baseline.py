@@ -327,3 +327,105 @@ def test_the_checksums_cover_the_files_a_job_reads_and_only_those(tmp_path, stre
     root.rename(tmp_path / "moved")
     lines = check(out).lines()
     assert len(lines) == 1 and "dataset not readable" in lines[0] and "kdata: dataset path does not exist" in lines[0], lines
+
+
+TWO_WALKS = """
+name: walks
+experiments:
+  - name: walk
+    task: selftest
+    dataset: {kind: synthetic, name: synth}
+    methods: [random_walk, {name: random_walk, params: {noise_m: 0.1}}]
+"""
+
+
+@pytest.fixture()
+def two_walks(tmp_path):
+    """``random_walk`` and ``random_walk(noise_m=0.1)`` pinned: a label equal to the other job's method name."""
+    (tmp_path / "walks.yaml").write_text(textwrap.dedent(TWO_WALKS))
+    return record(tmp_path / "walks.yaml", tmp_path / "baseline", repeats=1)
+
+
+def test_a_job_that_fails_is_a_finding_and_the_other_jobs_are_still_reported(two_walks, capsys):
+    """check() raised at the first job that failed: the regression of the job checked before it was never printed,
+    only "error: ... the job failed"."""
+    manifest = json.loads((two_walks.path / "manifest.json").read_text())
+    pinned_ape = manifest["jobs"][0]["metrics"]["ape_rmse_m"]
+    manifest["jobs"][0]["metrics"]["ape_rmse_m"] = pinned_ape - 0.5  # the first job now regresses
+    manifest["jobs"][1]["spec"].update(method="fail", params={})  # the second raises when run
+    (two_walks.path / "manifest.json").write_text(json.dumps(manifest))
+    result = check(two_walks.path)
+    assert not result.passed
+    assert [line for line in result.lines() if not line.startswith("note:")] == [
+        "failed: fail on synth (seed 0): the job failed: RuntimeError: selftest failure",
+        f"regression: random_walk on synth (seed 0): ape_rmse_m = {pinned_ape:.6g}, baseline {pinned_ape - 0.5:.6g} ± 0.01 "
+        "(change +0.5)",
+    ]
+    code, text, err = run_cli(["baseline", "check", str(two_walks.path)], capsys)
+    assert code == 1 and "error:" not in err
+    assert "failed: fail on synth" in text and "regression: random_walk on synth" in text and "baseline check FAILED" in text
+
+
+def test_a_label_equal_to_another_jobs_method_name_picks_that_job(two_walks):
+    """``job("random_walk")`` matched both ``random_walk`` and ``random_walk(noise_m=0.1)``: "2 pinned jobs match",
+    so the plain job could not be picked at all. An exact label wins, as in ``compare``."""
+    assert two_walks.job("random_walk")["label"] == "random_walk"
+    assert two_walks.job("random_walk(noise_m=0.1)")["spec"]["params"] == {"noise_m": 0.1}
+    assert two_walks.metrics("random_walk") == two_walks.jobs[0]["metrics"]
+
+
+def test_a_file_given_as_the_baseline_folder_and_a_bad_seed_are_named(two_walks, tmp_path, capsys):
+    """A file given read "baseline folder does not exist"; a pinned seed edited to "x" read as the job failing
+    ("the job failed: TypeError: ...") instead of a corrupt manifest."""
+    given = two_walks.path / "manifest.json"
+    code, _, err = run_cli(["baseline", "check", str(given)], capsys)
+    assert code == 1
+    assert " ".join(err.split()) == (f"error: {given}: a file, not a baseline folder (give the folder `lidarkit baseline "
+                                     "record --out` wrote)")
+    manifest = json.loads(given.read_text())
+    manifest["jobs"][1]["spec"]["seed"] = "x"
+    (tmp_path / "edited").mkdir()
+    (tmp_path / "edited" / "manifest.json").write_text(json.dumps(manifest))
+    with pytest.raises(DataError, match="corrupt manifest: job 1 spec seed is 'x', not an integer"):
+        check(tmp_path / "edited")
+
+
+def test_sequence_given_as_an_integer_hashes_that_sequence_only(tmp_path):
+    """``sequence: 0`` (a YAML integer the reader reads as "00") looked for ``sequences/0`` and hashed the whole
+    KITTI root: a note beside the data or another sequence read as changed data."""
+    from lidarkit.bench.baseline import dataset_checksums
+
+    root = tmp_path / "kdata"
+    write_fake_kitti_sequence(root, "00", 3, step_m=2.0, seed=0)
+    write_fake_kitti_sequence(root, "01", 2, step_m=2.0, seed=1)
+    (root / "NOTES.txt").write_text("about the data")
+    files = sorted(dataset_checksums({"kind": "kitti", "path": str(root), "sequence": 0, "name": "K00"}))
+    assert files == ["kdata/poses/00.txt", "kdata/sequences/00/calib.txt", "kdata/sequences/00/times.txt",
+                     *(f"kdata/sequences/00/velodyne/00000{i}.bin" for i in range(3))]
+
+
+def test_the_manifest_pins_the_angle_correction_and_deskew_the_run_applied(tmp_path, monkeypatch):
+    """kiss on KITTI's own scans: the manifest pinned the correction of a freshly opened reader (off) and the deskew kiss
+    asks for (on), while the run applied the correction and no deskew (no per-point times). A lidarkit that stopped
+    applying the correction then read as a regression, not as a changed protocol."""
+    from conftest import shared_path
+
+    import lidarkit.io.kitti as kitti_module
+
+    suite = tmp_path / "kiss.yaml"
+    suite.write_text(textwrap.dedent(f"""
+        name: kiss-kitti
+        experiments:
+          - task: odometry
+            dataset: {{kind: kitti, path: "{shared_path('kitti_odometry')}", sequence: "00", name: K00}}
+            options: {{frames: "0:5"}}
+            methods: [kiss]
+    """))
+    baseline = record(suite, tmp_path / "baseline", repeats=1)
+    protocol = baseline.jobs[0]["protocol"]
+    assert (protocol["kitti_angle_correction"], protocol["deskew"]) == (True, False)
+    assert check(baseline.path).passed
+    monkeypatch.setattr(kitti_module, "CORRECTED_BY_DEFAULT", ())  # a lidarkit that no longer corrects kiss's scans
+    lines = check(baseline.path).lines()
+    assert lines[0] == "protocol changed: kiss on K00 (seed 0): kitti_angle_correction: true -> false", lines
+    assert not any(line.startswith("regression") for line in lines)

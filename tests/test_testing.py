@@ -225,3 +225,32 @@ def test_compare_holds_a_difference_against_the_noise_a_baseline_measured(tiny_b
         main([*argv, "--noise-from", str(tiny_baseline.path)])
     out = capsys.readouterr().out
     assert "no significant difference" in out and "within the run-to-run noise" in out
+
+
+def test_a_kitti_root_pinned_with_its_sequence_accepts_a_run_on_that_sequence(tmp_path):
+    """Pinned as a KITTI root + ``sequence: "00"`` (as docs/benchmarks.md shows), a run on exactly that data was refused:
+    "path '.../sequences/00' (pinned '...')": the reader records the sequence folder, the spec names the root. A run
+    without the angle correction the pinned job applied passed as the pinned data."""
+    from conftest import shared_path
+
+    from lidarkit.bench.tasks._datasets import open_dataset_spec
+    from lidarkit.io.kitti import KittiOdometry
+    from lidarkit.odometry import run
+
+    root = shared_path("kitti_odometry")
+    (tmp_path / "suite.yaml").write_text(textwrap.dedent(f"""
+        name: kitti-root
+        experiments:
+          - task: odometry
+            dataset: {{kind: kitti, path: "{root}", sequence: "00", name: K00}}
+            options: {{frames: "0:5"}}
+            methods: [kiss]
+    """))
+    baseline = record(tmp_path / "suite.yaml", tmp_path / "baseline", repeats=1)
+    pick = dict(method="kiss", metric="ape_rmse_m", tolerance=0.05)
+    assert_no_worse_than(run(open_dataset_spec(baseline.job("kiss")["spec"]["dataset"]), "kiss", frames="0:5"), baseline, **pick)
+    assert_no_worse_than(run(KittiOdometry(root / "sequences" / "00"), "kiss", frames="0:5"), baseline, **pick)
+    uncorrected = run(KittiOdometry(root, sequence="00", vertical_correction=False), "kiss", frames="0:5")
+    with pytest.raises(EvaluationError, match=r"dataset differs from the pinned job 'kiss': vertical_correction_applied False "
+                                              r"\(pinned True\)"):
+        assert_no_worse_than(uncorrected, baseline, **pick)

@@ -3,12 +3,13 @@
 ``record(suite, out)`` runs every job ``repeats`` times (in this process, one after the other), keeps the
 first run's trajectory and metrics, and measures the run-to-run spread (kiss-icp is not bit-reproducible
 across thread schedules) to set each metric's band. The manifest pins what makes a number reproducible:
-library versions, the method's resolved config, checksums of the dataset files, the KITTI angle correction,
-the instant poses refer to (deskew reference), the evaluation settings and the platform.
+library versions, the method's resolved config, checksums of the dataset files, the KITTI angle correction and
+deskew as the run applied them, the instant poses refer to, the evaluation settings and the platform.
 
 ``check(folder)`` re-runs the pinned jobs. A job whose protocol differs reports ``protocol changed: ...``
 (its numbers are not comparable, whatever they are); otherwise a metric outside its band on the worse side
-is ``regression: ...``; outside on the better side ``improved: ...`` (passes; re-record to tighten).
+is ``regression: ...``; outside on the better side ``improved: ...`` (passes; re-record to tighten). A job that
+raises is ``failed: ...`` with its error, and the other jobs are still checked.
 
 Layout: ``DIR/manifest.json``, ``DIR/suite.yaml`` (the suite as recorded), ``DIR/jobs/<key>/metrics.json``
 and, for odometry jobs, ``DIR/jobs/<key>/poses_kitti.txt``.
@@ -104,17 +105,11 @@ def dataset_files(spec: Mapping[str, Any]) -> list[Path]:
     """The files a dataset spec reads: every file under its path, or under ``sequences/NN`` of a KITTI root given
     with ``sequence: NN`` (not the other sequences); a KITTI sequence also its ``poses/NN.txt``; and the files of
     options that name an existing path (a ``poses`` file kept elsewhere). DataError when the path does not exist."""
-    from lidarkit.bench.datasets import PATHLESS_KINDS, dataset_options, dataset_path
+    from lidarkit.bench.datasets import PATHLESS_KINDS, dataset_options
 
     if spec.get("kind") in PATHLESS_KINDS:
         return []
-    root = Path(dataset_path(dict(spec)))
-    if not root.exists():
-        raise DataError("dataset path does not exist (a baseline pins the paths it was recorded with: put the data back "
-                        "there or record again)", source=root)
-    sequence = spec.get("sequence")
-    if sequence is not None and (root / "sequences" / str(sequence)).is_dir():
-        root = root / "sequences" / str(sequence)
+    root = dataset_folder(spec)
     files = _files_under(root)
     if root.is_dir() and root.parent.name == "sequences":
         poses = root.parent.parent / "poses" / f"{root.name}.txt"
@@ -127,6 +122,22 @@ def dataset_files(spec: Mapping[str, Any]) -> list[Path]:
             files += extra
             seen.update(extra)
     return files
+
+
+def dataset_folder(spec: Mapping[str, Any]) -> Path:
+    """The folder (or file) a dataset spec reads: its path, or for a root given with ``sequence:`` the sequence folder
+    the reader itself resolves (``sequence: 0`` is ``sequences/00``: ``str(0)`` hashed the whole root). DataError
+    when the path does not exist."""
+    from lidarkit.bench.datasets import dataset_path
+    from lidarkit.bench.tasks._datasets import open_dataset_spec
+
+    root = Path(dataset_path(dict(spec)))
+    if not root.exists():
+        raise DataError("dataset path does not exist (a baseline pins the paths it was recorded with: put the data back "
+                        "there or record again)", source=root)
+    if spec.get("sequence") is None:
+        return root
+    return Path(getattr(open_dataset_spec(dict(spec)), "sequence_dir", root))
 
 
 def _files_under(path: Path) -> list[Path]:
@@ -152,14 +163,6 @@ def dataset_checksums(spec: Mapping[str, Any], cache: dict[str, str] | None = No
                 cache[key] = digest
         out[str(path.relative_to(base)) if path.is_relative_to(base) else str(path)] = digest
     return out
-
-
-def _angle_correction(dataset: Any) -> Any:
-    for attr in ("angle_correction", "correct_angle", "correct_vertical_angle", "_correct"):
-        value = getattr(dataset, attr, None)
-        if isinstance(value, (bool, str)):
-            return value
-    return None
 
 
 def _pose_instant(dataset: Any, result: Any) -> Any:
@@ -216,11 +219,15 @@ def _run_job(job: Job, checksum_cache: dict[str, str] | None) -> JobRun:
         result, output = run_odometry_job(job)
         dataset = open_dataset_spec(seeded_dataset(job))
         config = dict(result.config.get("method_config", result.config)) if isinstance(result.config, dict) else {}
+        # what the run applied, not what an unconfigured reader or the method's config asks for (kiss on KITTI: the
+        # correction "auto" is applied; deskew requested, not applied without per-point times)
+        run_config = result.config.get("run") if isinstance(result.config, dict) else None
+        effective = (run_config or {}).get("effective") or {}
         protocol.update(
             method_config=_jsonable(config),
-            kitti_angle_correction=_angle_correction(dataset),
+            kitti_angle_correction=(effective.get("corrections") or {}).get("vertical_correction_applied"),
             pose_instant=_pose_instant(dataset, result),
-            deskew=_jsonable(_find_key(result.config, "deskew")),
+            deskew=(effective.get("deskew") or {}).get("applied"),
         )
         return JobRun(dict(output.metrics), result.trajectory, protocol)
     output = get_task(job.task).run(job)
@@ -228,17 +235,6 @@ def _run_job(job: Job, checksum_cache: dict[str, str] | None) -> JobRun:
     run_info = output.info.get("run") if isinstance(output.info.get("run"), dict) else {}
     protocol["method_config"] = _jsonable(output.info.get("method_config") or output.info.get("config") or run_info.get("config") or {})
     return JobRun(dict(output.metrics), None, protocol)
-
-
-def _find_key(data: Any, key: str) -> Any:
-    if isinstance(data, dict):
-        if key in data:
-            return data[key]
-        for value in data.values():
-            found = _find_key(value, key)
-            if found is not None:
-                return found
-    return None
 
 
 def _band(metric: str, value: float, std: float) -> float:
@@ -282,6 +278,9 @@ class Baseline:
         """The one pinned job with this method label (or name), dataset name and seed; DataError if none or several."""
         found = [j for j in self.jobs if (method is None or method in (j["label"], j["spec"]["method"]))
                  and (dataset is None or j["spec"]["dataset_name"] == dataset) and (seed is None or j["spec"].get("seed") == seed)]
+        exact = [j for j in found if j["label"] == method]
+        if exact:  # "vanilla" beside "vanilla(voxel_size_m=0.5)": the label, not every job of the method (as compare)
+            found = exact
         if len(found) != 1:
             labels = ", ".join(f"{j['label']} on {j['spec']['dataset_name']} (seed {j['spec'].get('seed')})" for j in self.jobs)
             raise DataError(f"{len(found)} pinned jobs match method={method!r} dataset={dataset!r} seed={seed!r}"
@@ -378,6 +377,8 @@ def _is_baseline_manifest(path: Path) -> bool:
 def load_baseline(path: str | os.PathLike) -> Baseline:
     """A baseline folder; DataError when the folder, its manifest or a field of it is missing or corrupt."""
     path = Path(path)
+    if path.is_file():
+        raise DataError("a file, not a baseline folder (give the folder `lidarkit baseline record --out` wrote)", source=path)
     if not path.is_dir():
         raise DataError("baseline folder does not exist", source=path)
     manifest_path = path / MANIFEST
@@ -420,6 +421,8 @@ def _pinned_job_problem(job: Any) -> str:
     for key, kind in (("dataset", dict), ("params", dict), ("options", dict), ("method", str), ("task", str)):
         if key in spec and not isinstance(spec[key], kind):  # (a string dataset failed later, an AttributeError traceback)
             return f"spec {key} is {spec[key]!r}, not a {'mapping' if kind is dict else 'string'}"
+    if "seed" in spec and (not isinstance(spec["seed"], int) or isinstance(spec["seed"], bool)):  # (read as the job failing)
+        return f"spec seed is {spec['seed']!r}, not an integer"
     for key in ("protocol", "metrics", "bands"):
         if not isinstance(job[key], dict):
             return f"{key} is {job[key]!r}, not a mapping"
@@ -452,7 +455,7 @@ def measured_noise(path: str | os.PathLike, metric: str | None) -> float:
 
 @dataclass
 class Finding:
-    kind: str  # "protocol changed" | "regression" | "improved" | "note"
+    kind: str  # "protocol changed" | "failed" | "regression" | "improved" | "note"
     job: str
     message: str
 
@@ -462,7 +465,7 @@ class Finding:
 
 @dataclass
 class CheckResult:
-    """Findings of a check; ``passed`` unless a protocol changed or a metric regressed."""
+    """Findings of a check; ``passed`` unless a protocol changed, a job failed or a metric regressed."""
 
     path: Path
     findings: list[Finding] = field(default_factory=list)
@@ -471,10 +474,10 @@ class CheckResult:
 
     @property
     def passed(self) -> bool:
-        return not any(f.kind in ("protocol changed", "regression") for f in self.findings)
+        return not any(f.kind in ("protocol changed", "failed", "regression") for f in self.findings)
 
     def lines(self) -> list[str]:
-        order = {"protocol changed": 0, "regression": 1, "improved": 2, "note": 3}
+        order = {"protocol changed": 0, "failed": 1, "regression": 2, "improved": 3, "note": 4}
         return [f.line() for f in sorted(self.findings, key=lambda f: order[f.kind])]
 
 
@@ -554,7 +557,7 @@ def check(
             on_job(job)
         try:
             checksums_now = dataset_checksums(job.dataset, cache)
-        except DataError as err:
+        except (DataError, ConfigError) as err:
             result.findings.append(Finding("protocol changed", name, f"dataset not readable: {err}"))
             continue
         data_changes = _diff("data", pinned["protocol"].get("checksums", {}), checksums_now)
@@ -566,9 +569,15 @@ def check(
             continue
         if env_changes or eval_changes:
             continue  # numbers under another environment or evaluation are not comparable: do not spend the run
-        run = run_job(job, cache)
+        try:
+            run = run_job(job, cache)
+        except LidarKitError as err:  # one job failing is its finding: the others are still checked and reported
+            result.findings.append(Finding("failed", name, err.reason))
+            continue
         result.measured[pinned["key"]] = run.metrics
         then = {k: v for k, v in pinned["protocol"].items() if k not in ("checksums", "method_config")}
+        if isinstance(then.get("deskew"), dict):  # (recorded before the applied deskew was pinned: the run's deskew record)
+            then["deskew"] = then["deskew"].get("applied")
         now = {k: v for k, v in run.protocol.items() if k not in ("checksums", "method_config")}
         protocol_changes = _diff("", then, now)
         for line in protocol_changes:

@@ -40,7 +40,7 @@ def check_command(
     tolerance: Optional[list[str]] = typer.Option(
         None, "--tolerance", "-t", help="METRIC=BAND: absolute band of a metric instead of the recorded one (repeatable)."),
 ) -> None:
-    """Re-run the pinned jobs; exit 1 on a regression or a changed protocol (reported distinctly)."""
+    """Re-run the pinned jobs; exit 1 on a regression, a changed protocol or a failed job (each reported distinctly)."""
     from lidarkit.bench.baseline import check
 
     err = stderr()

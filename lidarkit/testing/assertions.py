@@ -122,7 +122,8 @@ def assert_no_worse_than(
 
 def _check_same_data(result: Any, now_metrics: dict[str, float], job: Mapping[str, Any], ref_metrics: dict[str, float]) -> None:
     """EvaluationError when ``result`` did not run on the pinned job's data: another number of frames, other frames,
-    another dataset kind or path, (a simulated run) another simulator setting, or (a bench record) another dataset,
+    another dataset kind or path (a KITTI root and ``sequence:`` compared as the sequence folder they resolve to), another
+    applied KITTI angle correction, (a simulated run) another simulator setting, or (a bench record) another dataset,
     task options or seed than the pinned job's spec. A metric is comparable on the same data only: 3 sweeps of the
     pinned 8-sweep drive, the sweeps 4-12 of it, or a simulated run against a pinned KITTI job passed against it."""
     label = job.get("label", "")
@@ -161,8 +162,15 @@ def _check_same_data(result: Any, now_metrics: dict[str, float], job: Mapping[st
     if expected is not None:  # every setting, those left at their defaults too (a noisier sensor is other data)
         differ = [f"{k} {ran.get(k)!r} (pinned {v!r})" for k, v in expected.items() if ran.get(k) != v]
     else:
+        if pinned.get("sequence") is not None and "path" in ran:  # the reader records the sequence folder it resolved
+            from lidarkit.bench.baseline import dataset_folder
+
+            pinned = {**pinned, "path": str(dataset_folder(pinned))}
         differ = [f"{k} {ran[k]!r} (pinned {v!r})" for k, v in pinned.items()
                   if k not in ("kind", "name") and k in ran and not _same_value(k, ran[k], v)]
+        applied = (job.get("protocol") or {}).get("kitti_angle_correction")
+        if isinstance(applied, bool) and ran.get("vertical_correction_applied", applied) != applied:
+            differ.append(f"vertical_correction_applied {ran['vertical_correction_applied']!r} (pinned {applied!r})")
     if differ:
         refuse("dataset", ", ".join(differ))
 
