@@ -831,6 +831,12 @@ def test_nees_and_the_covariance_about_the_local_origin_are_exact_at_utm_coordin
     local_ratio = far.nees(T_true_far) / reference  # (a calibrated covariance moves within 1.3x: NEES within ~1.7x)
     frame_ratio = nees(se3_log(T_true_far @ se3_inverse(far.T_target_source)), far.covariance) / reference
     assert 0.6 < local_ratio < 1.7 and frame_ratio < 0.5  # the frame-origin route: 0.26x (vanilla), 0.39x (small_gicp)
+    # information is the inverse about that origin, moved: its quadratic form on the error in the frame's convention is
+    # the NEES (the floored inverse of the stored matrix, conditioned ~1e25, kept ~1e-14 of it in some directions)
+    xi = se3_log(T_true_far @ se3_inverse(far.T_target_source))
+    assert float(xi @ far.information @ xi) == pytest.approx(far.nees(T_true_far), rel=1e-3)
+    xi = se3_log(pair.T_target_source @ se3_inverse(at_origin.T_target_source))
+    assert float(xi @ at_origin.information @ xi) == pytest.approx(reference, rel=1e-6)
 
 
 def test_nees_and_covariance_about_refuse_what_is_not_a_pose_or_a_point(rng):

@@ -200,12 +200,21 @@ class RegistrationResult:
 
     @property
     def information(self) -> np.ndarray | None:
-        """Inverse of ``covariance`` (eigenvalues floored, so unconstrained directions get ~0 information)."""
+        """Inverse of ``covariance`` (eigenvalues floored, so unconstrained directions get ~0 information), inverted
+        about ``extra["covariance_origin_m"]`` where there is one: the stored matrix of a target at UTM coordinates is
+        conditioned ~1e25, and its floored inverse lost the z and yaw information (2e-4 where 5.9e5 is exact)."""
         if self.covariance is None:
             return None
-        from lidarkit.registration.covariance import safe_inverse
+        from lidarkit.registration.assessment import COVARIANCE_ORIGIN_KEY
+        from lidarkit.registration.covariance import adjoint, safe_inverse
 
-        return safe_inverse(self.covariance)
+        at = self.extra.get(COVARIANCE_ORIGIN_KEY)
+        if at is None:
+            return safe_inverse(self.covariance)
+        S_inv = np.eye(4)
+        S_inv[:3, 3] = -np.asarray(at, dtype=np.float64)
+        Ad = adjoint(S_inv)  # covariance_about(c) = Ad covariance Ad^T, so its inverse is Ad^T information_c Ad
+        return Ad.T @ safe_inverse(self.covariance_about(at)) @ Ad
 
     def covariance_about(self, origin_m: np.ndarray | list[float]) -> np.ndarray | None:
         """``covariance`` with the perturbation taken about the point ``origin_m`` (m, target frame) instead of the
