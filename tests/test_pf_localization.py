@@ -241,7 +241,7 @@ def test_cli_bad_study_and_kidnap_options(capsys):
         (["--particles", "50,x"], "n_particles"),
         (["--seeds", "0"], "--seeds"),
         (["--fit-q"], "--fit-q needs --recorded"),
-        (["--kidnap-at", "5000"], "kidnap step"),
+        (["--kidnap-at", "5000"], "--kidnap-at: must be a step in 1..331 of the data, got 5000"),
         (["--kidnap-offset", "1,2"], "--kidnap-offset"),
         (["--protocol", "paper"], "unknown protocol"),
         # an option the protocol sets otherwise, and simulation options with the recorded readings, are refused
@@ -336,13 +336,35 @@ def test_kld_with_augmented_mcl_counts_the_belief_not_the_injections(stachniss):
 def test_cli_list_and_kld_options_are_checked(capsys):
     data = shared_path("pf", "burgard_particle_filter")
     for args, message in ((["-n", "20,,50"], "n_particles must be >= 1"), (["-n", "50,50"], "a particle count is listed twice"),
-                          (["--kld", "--kld-max", "10"], "error: pf config: kld_min_n 200 > kld_max_n 10"),
-                          (["--kld", "--kld-unconverged", "100000"], "kld_unconverged_n 100000 > kld_max_n 5000"),
+                          (["--kld", "--kld-max", "10"], "error: --kld-max: --kld-min 200 is above --kld-max 10"),
+                          (["--kld", "--kld-unconverged", "100000"], "error: --kld-unconverged: --kld-unconverged 100000 is above --kld-max 5000"),
                           (["--snapshots", "-1"], "snapshot steps must be >= 0")):
         with pytest.raises(SystemExit) as exc:
             main(["pf", str(data), *args])
         err = capsys.readouterr().err
         assert exc.value.code == 1 and message in err and "{" not in err, (args, err)
+
+
+def test_cli_option_errors_name_the_option_given(capsys):
+    """These named internal fields ("kidnap_at_step:", "visible:", "pf config: kld_min_n 6000 > kld_max_n 5000") and
+    the kidnap turn in radians, where the option takes degrees; --protocol report's Q was checked as variances."""
+    data = shared_path("pf", "burgard_particle_filter")
+    for args, line in (
+        (["--kidnap-at", "0"], "--kidnap-at: must be a step >= 1 (the robot is moved after that motion), got 0"),
+        (["--kidnap-at", "150", "--kidnap-offset", "0,0,nan"],
+         "--kidnap-offset: 'dx_m,dy_m,dtheta_deg' must be finite with |dx|, |dy| <= 1e+06 m and |dtheta| <= 360 deg, got '0,0,nan'"),
+        (["--visible", "foo"], "--visible: must be one of recorded, all, got 'foo'"),
+        (["--protocol", "report", "--q", "1e-16,0.1"], "--q: q (1e-16, 0.1) (std) gives a measurement variance of 1e-32: "
+                                                        "each must be >= 1e-30 (Q positive definite, its inverse finite in float32)"),
+        (["--protocol", "paper"], "--protocol: unknown protocol 'paper'; known: default, report"),
+        (["--kld", "--kld-min", "6000"], "--kld-min: --kld-min 6000 is above --kld-max 5000"),
+        (["--augmented", "--alpha-slow", "0.5", "--alpha-fast", "0.1"], "--alpha-slow: must be below --alpha-fast 0.1, got 0.5"),
+        (["--kld", "--kernel", "kalman"], "--kld: KLD-sampling and augmented MCL need point particles (--kernel point)"),
+    ):
+        with pytest.raises(SystemExit) as exc:
+            main(["pf", str(data), *args])
+        assert exc.value.code == 1, args
+        assert capsys.readouterr().err == f"error: {line}\n"
 
 
 def test_cli_options_that_would_change_nothing_are_refused(capsys):

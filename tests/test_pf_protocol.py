@@ -287,3 +287,89 @@ def test_cli_pf_memory_estimate_counts_the_clouds_a_gif_keeps(tmp_path, monkeypa
     with pytest.raises(SystemExit):  # no run folder: no clouds kept
         main(["pf", data, "--particles", "1000"])
     assert asked[-1][0] == pytest.approx(1000 * 320.0)
+
+
+def test_q_and_kidnap_offsets_that_overflow_float32_are_refused_up_front(stachniss, capsys):
+    """`--q 1e40,0.1` ran 331 weight resets and `--kidnap-offset 0,1e30,0` an MSE of 5.6e58, both exit 0 (float32
+    squares overflowed); `--q 1e200,0.1 --q-as std` printed RuntimeWarnings, then named `Q` with a value never typed."""
+    from lidarkit.errors import ConfigError
+    from lidarkit.pf.config import q_problem
+    from lidarkit.pf.protocol import kidnapped_ground_truth
+
+    data = shared_path("pf", "burgard_particle_filter")
+    bound = "each must be <= 1e+12 (a std of 1e6 m or rad is no sensor; far noisier readings overflow the filter's float32)"
+    for args, line in (
+        (["--q", "1e40,0.1"], f"--q: q (1e+40, 0.1) (variance) gives a measurement variance of 1e+40: {bound}"),
+        (["--q", "1e200,0.1", "--q-as", "std"], f"--q: q (1e+200, 0.1) (std) gives a measurement variance of inf: {bound}"),
+        (["--kidnap-at", "150", "--kidnap-offset", "0,1e30,0"],
+         "--kidnap-offset: 'dx_m,dy_m,dtheta_deg' must be finite with |dx|, |dy| <= 1e+06 m and |dtheta| <= 360 deg, got '0,1e30,0'"),
+        (["--kidnap-at", "150", "--kidnap-offset", "0,0,400"],
+         "--kidnap-offset: 'dx_m,dy_m,dtheta_deg' must be finite with |dx|, |dy| <= 1e+06 m and |dtheta| <= 360 deg, got '0,0,400'"),
+    ):
+        with pytest.raises(SystemExit) as exc:
+            main(["pf", str(data), "-n", "20", *args])
+        assert exc.value.code == 1, args
+        assert capsys.readouterr().err == f"error: {line}\n"
+    # the library holds the same bounds; the largest values allowed run without a weight reset
+    with pytest.raises(ConfigError, match=r"gives a measurement variance of 1e\+40: each must be <= 1e\+12"):
+        PFConfig.make(q=(1e40, 0.1))
+    with pytest.raises(ConfigError, match=r"\|dx\|, \|dy\| <= 1e\+06 m and \|dtheta\| <= 2 pi"):
+        kidnapped_ground_truth(stachniss.odometry, 150, (0.0, 1e30, 0.0))
+    assert q_problem((1e6, 1e6), "std") is None
+    far = run_protocol(stachniss, 50, 0, q=(1e12, 0.1), kidnap_at_step=150, kidnap_offset=(1e6, -1e6, -2 * np.pi),
+                       with_ape_rpe=False, warn_lost=False)
+    assert far.n_weight_resets == 0 and np.isfinite(far.metrics["mse_m2"]["mean"])
+
+
+def test_a_kld_run_and_the_fit_q_snapshot_run_show_their_progress(monkeypatch, capsys, tmp_path):
+    """A KLD run was judged by its initial --particles (no progress at 100,000 particles, titled "N=100"), and the
+    re-run of --recorded --fit-q --out for the snapshots drew no progress."""
+    from lidarkit.cli import pf_cmd
+
+    data = str(shared_path("pf", "burgard_particle_filter"))
+    monkeypatch.setattr(pf_cmd, "PROGRESS_FROM_PARTICLES", 50)  # (the path of 100,000 particles, in a second)
+    with pytest.raises(SystemExit) as exc:
+        main(["pf", data, "-n", "10", "--kld", "--kld-min", "20", "--kld-max", "60", "--kld-unconverged", "30"])
+    assert exc.value.code in (0, None)
+    captured = capsys.readouterr()
+    assert "pf run, 20..60 (KLD) particles: 331/331 steps" in captured.err
+    assert "particle filter (protocol), N=20..60 (KLD), seed 0" in captured.out
+    with pytest.raises(SystemExit) as exc:
+        main(["pf", data, "-n", "50", "--recorded", "--fit-q", "--out", str(tmp_path / "run")])
+    assert exc.value.code in (0, None)
+    assert "pf run for the snapshots, 50 particles: 331/331 steps" in capsys.readouterr().err
+    assert (tmp_path / "run" / "particles.png").stat().st_size > 0
+
+
+def test_default_snapshots_past_a_short_recording_are_dropped_silently(tmp_path, caplog):
+    """A 12-step recording warned "--snapshots 50,150,250,331: past the last step (12)" though --snapshots was not
+    given; steps given still get the warning."""
+    import logging
+
+    source = shared_path("pf", "robot_mapping_stachniss")
+    short = tmp_path / "short12"
+    short.mkdir()
+    (short / "world.dat").write_text((source / "world.dat").read_text())
+    lines = (source / "sensor_data.dat").read_text().splitlines()
+    cut = [i for i, line in enumerate(lines) if line.startswith("ODOMETRY")][12]
+    (short / "sensor_data.dat").write_text("\n".join(lines[:cut]) + "\n")
+    with caplog.at_level(logging.WARNING):
+        with pytest.raises(SystemExit) as exc:
+            main(["pf", str(short), "-n", "30", "--out", str(tmp_path / "run")])
+        assert exc.value.code in (0, None)
+        assert [r.getMessage() for r in caplog.records if "snapshots" in r.getMessage()] == []
+        assert (tmp_path / "run" / "particles.png").stat().st_size > 0  # steps 0 and 10 drawn
+        with pytest.raises(SystemExit):
+            main(["pf", str(short), "-n", "30", "--snapshots", "5,50", "--out", str(tmp_path / "given")])
+    assert [r.getMessage() for r in caplog.records if "snapshots" in r.getMessage()] == [
+        "--snapshots 50: past the last step (12), left out of particles.png"]
+
+
+def test_a_world_file_given_as_the_data_says_what_is_expected(capsys):
+    """world.dat given in place of the folder said "unknown record type '1' (expected ODOMETRY or SENSOR)"."""
+    world = shared_path("pf", "burgard_ekf") / "world.dat"
+    with pytest.raises(SystemExit) as exc:
+        main(["pf", str(world), "--recorded"])
+    assert exc.value.code == 1
+    assert capsys.readouterr().err == (f"error: {world} (line 1): an 'id x y' line of a world (landmark) file, not sensor data: "
+                                       "expected a data folder or its sensor_data.dat\n")

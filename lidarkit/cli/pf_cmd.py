@@ -118,6 +118,10 @@ def pf_command(
     study = len(counts) > 1 or seeds > 1
     _refuse_unused_options(ctx, kld=kld, augmented=augmented, kernel=kernel, kidnap_at=kidnap_at, study=study,
                            likelihood=PROTOCOLS.get(protocol, {}).get("likelihood", likelihood))  # (the report protocol's is nearest)
+    if augmented and not alpha_slow < alpha_fast:  # (these rules across options named "pf config")
+        raise ConfigError(f"must be below --alpha-fast {alpha_fast:g}, got {alpha_slow:g}", source="--alpha-slow")
+    if (kld or augmented) and kernel == "kalman":
+        raise ConfigError("KLD-sampling and augmented MCL need point particles (--kernel point)", source="--kld" if kld else "--augmented")
     largest, option = max(counts), "--particles"
     if kld:  # KLD-sampling grows the set up to these counts
         for name, value in (("--kld-max", kld_max), ("--kld-unconverged", kld_unconverged)):
@@ -125,6 +129,10 @@ def pf_command(
                 raise ConfigError(f"must be <= {MAX_PARTICLES}, got {value}", source=name)
             if value > largest:
                 largest, option = value, name
+        for name, value in (("kld_min", kld_min), ("kld_unconverged", kld_unconverged)):
+            if value > kld_max:  # (it said "pf config: kld_min_n 6000 > kld_max_n 5000"); named: the one given
+                raise ConfigError(f"--{name.replace('_', '-')} {value} is above --kld-max {kld_max}",
+                                  source=f"--{name.replace('_', '-')}" if _given(ctx, name) else "--kld-max")
     snapshot_steps = _steps(snapshots)  # checked whether or not there is a run folder to draw them in
     if gif and out is None:
         raise ConfigError("--gif needs --out DIR", source="--gif")
@@ -136,7 +144,7 @@ def pf_command(
     if not (bin_m > 0 and bin_deg > 0):
         raise ConfigError(f"both bin sizes must be > 0 (metres, degrees), got {kld_bin!r}", source="--kld-bin")
     q_values = _floats(q, 2, "--q")
-    problem = q_problem(q_values, q_as) if all(math.isfinite(v) and v >= 0 for v in q_values) else None
+    problem = q_problem(q_values, PROTOCOLS.get(protocol, {}).get("q_as", q_as))  # (--protocol report reads Q as std)
     if problem:
         raise ConfigError(problem, source="--q")
     settings = dict(
@@ -154,10 +162,15 @@ def pf_command(
         raise ConfigError(err.reason, source=option) from None
     _refuse_protocol_clashes(ctx, protocol, dict(likelihood=likelihood, nearest_association=nearest_association,
                                                  estimator=estimator, q_as=q_as))
+    if protocol not in PROTOCOLS:
+        raise ConfigError(f"unknown protocol {protocol!r}; known: {', '.join(PROTOCOLS)}", source="--protocol")
     cfg = protocol_config(cfg, protocol)
-    dx, dy, dth = _floats(kidnap_offset, 3, "--kidnap-offset")
-    scenario = dict(visible=visible, kidnap_at_step=kidnap_at, kidnap_offset=(dx, dy, math.radians(dth)))
+    scenario = _scenario(visible, kidnap_at, kidnap_offset)
     data = open_dataset("landmarks", data_dir)  # loaded once: its warnings (negative range) appear once per command
+    if kidnap_at is not None and kidnap_at > len(data):
+        raise ConfigError(f"must be a step in 1..{len(data)} of the data, got {kidnap_at}", source="--kidnap-at")
+    if not _given(ctx, "snapshots"):  # the default steps past a short recording's end are dropped without a word
+        snapshot_steps = tuple(s for s in snapshot_steps if s <= len(data))
     # state, weights, resampling copies and per-reading likelihoods (~40 float64 per particle), plus the particle clouds
     # kept for the figures (the run's steps are known now: a GIF keeps every other one)
     n_snapshots = len(_kept_steps(snapshot_steps, gif, len(data), out))
@@ -195,6 +208,22 @@ def pf_command(
     if out is not None:
         _write(result, out, snap_steps=snapshot_steps, gif=gif)
         stderr().print(f"results written to {out}")
+
+
+def _scenario(visible: str, kidnap_at: int | None, kidnap_offset: str) -> dict:
+    """The simulated scenario of ``run_protocol`` from its options, each refused naming its option (the protocol named
+    its parameters: "kidnap_offset: ... dtheta_rad" for an option given in degrees)."""
+    from lidarkit.pf.protocol import MAX_KIDNAP_OFFSET_M, VISIBILITY
+
+    if visible not in VISIBILITY:
+        raise ConfigError(f"must be one of {', '.join(VISIBILITY)}, got {visible!r}", source="--visible")
+    if kidnap_at is not None and kidnap_at < 1:
+        raise ConfigError(f"must be a step >= 1 (the robot is moved after that motion), got {kidnap_at}", source="--kidnap-at")
+    dx, dy, dth = _floats(kidnap_offset, 3, "--kidnap-offset")
+    if not all(math.isfinite(v) for v in (dx, dy, dth)) or max(abs(dx), abs(dy)) > MAX_KIDNAP_OFFSET_M or abs(dth) > 360:
+        raise ConfigError(f"'dx_m,dy_m,dtheta_deg' must be finite with |dx|, |dy| <= {MAX_KIDNAP_OFFSET_M:g} m and "
+                          f"|dtheta| <= 360 deg, got {kidnap_offset!r}", source="--kidnap-offset")
+    return dict(visible=visible, kidnap_at_step=kidnap_at, kidnap_offset=(dx, dy, math.radians(dth)))
 
 
 def _given(ctx: typer.Context, name: str) -> bool:
@@ -247,13 +276,14 @@ PROGRESS_FROM_PARTICLES = 100_000
 @contextlib.contextmanager
 def _step_progress(cfg: PFConfig, n_steps: int, label: str, runs: int = 1):
     """An ``on_step`` callback drawing the steps of ``runs`` filter runs on stderr, or None for a run too short to need
-    it (a million particles ran 2 minutes without a line)."""
-    if cfg.n_particles < PROGRESS_FROM_PARTICLES:
+    it (a million particles ran 2 minutes without a line). A KLD run is judged by the most particles it may reach (its
+    --particles is only the start)."""
+    if max(cfg.n_particles, cfg.kld_max_n if cfg.kld else 0) < PROGRESS_FROM_PARTICLES:
         yield None
         return
     from lidarkit.progress import progress_bar
 
-    bar, task = progress_bar(n_steps * runs, f"{label}, {cfg.n_particles:,} particles", unit="steps")
+    bar, task = progress_bar(n_steps * runs, f"{label}, {cfg.particle_count_label()} particles", unit="steps")
     try:
         yield lambda _done, _total: bar.advance(task)
     finally:
@@ -281,7 +311,10 @@ def _recorded(data, cfg: PFConfig, seed: int, fit_q: bool, out: Path | None, sna
     else:
         with _step_progress(cfg, len(data), "pf --fit-q (up to 6 runs)", runs=6) as on_step:
             first, runs = fit_q_recorded(data, None, seed, config=cfg, on_step=on_step)
-        result = run_recorded(data, None, seed, config=runs[-1].config, snapshot_steps=snap) if snap else runs[-1]
+        result = runs[-1]
+        if snap:  # a re-run of the last fit that keeps the particle clouds of the figures
+            with _step_progress(cfg, len(data), "pf run for the snapshots") as on_step:
+                result = run_recorded(data, None, seed, config=runs[-1].config, snapshot_steps=snap, on_step=on_step)
         for key in ("q_verdict", "q_fit_settled"):  # (a re-run for the snapshots: the fit's own verdict)
             if key in runs[-1].metrics:
                 result.metrics[key] = runs[-1].metrics[key]
@@ -354,7 +387,7 @@ def _row(table: Table, label: str, value: str) -> None:
 
 def _print(result) -> None:
     m = result.metrics
-    table = Table(title=f"particle filter ({result.settings['mode']}), N={result.config.n_particles}, seed {result.settings['seed']}")
+    table = Table(title=f"particle filter ({result.settings['mode']}), N={result.config.particle_count_label()}, seed {result.settings['seed']}")
     table.add_column("metric")
     table.add_column("value", justify="right")
     if result.ground_truth is not None:

@@ -159,6 +159,9 @@ class LandmarkData:
                 m_bearing.append(bearing)
                 m_line.append(lineno)
             else:
+                if not odometry and len(fields) == 3 and all(_is_number(f) for f in fields):  # (it called the id '1' a record type)
+                    raise DataError("an 'id x y' line of a world (landmark) file, not sensor data: expected a data folder or its "
+                                    f"{SENSOR_FILE}", source=path, location=where)
                 raise DataError(f"unknown record type {_shown(fields[0])} (expected ODOMETRY or SENSOR)", source=path, location=where)
         if not odometry:
             raise DataError("no ODOMETRY records (empty file)", source=path)
@@ -210,6 +213,14 @@ def _parse_float(text: str, path: Path | str | os.PathLike, where: str) -> float
 
 
 MAX_ABS_VALUE = 1e7  # landmark coordinates, odometry, ranges and bearings: metres and radians of a planar robot
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
 
 
 def _parse_int(text: str, path: Path | str | os.PathLike, where: str) -> int:

@@ -16,18 +16,27 @@ INITS = ("gaussian", "uniform")
 
 #: Smallest measurement variance (m^2, rad^2) Q may hold: below it the filter's float32 information matrix overflows.
 MIN_Q_VARIANCE = 1e-30
+#: Largest measurement variance (m^2, rad^2): a std of 1e6 (1000 km in range; a bearing is an angle) is no sensor, and
+#: readings simulated with far more overflow the filter's float32 squares (1e40 ran 331 weight resets, exit 0).
+MAX_Q_VARIANCE = 1e12
 #: Largest roughening constant K (jitter std = K x spread x N^(-1/3); Gordon et al. use ~0.2).
 MAX_ROUGHENING = 10.0
 
 
 def q_problem(q: tuple[float, ...], q_as: str) -> str | None:
-    """Why ``q`` (read as ``q_as``) cannot be the measurement noise, or None: each variance must be >= MIN_Q_VARIANCE
-    (0 failed later as "Q must be symmetric positive definite"; 1e-40 ran a filter whose float32 information overflowed,
-    no particle keeping a finite likelihood, one warning a step)."""
-    variances = tuple(q) if q_as == "variance" else tuple(x * x for x in q)
-    if all(math.isfinite(v) for v in variances) and min(variances) < MIN_Q_VARIANCE:
+    """Why ``q`` (read as ``q_as``) cannot be the measurement noise, or None: each variance must be in
+    [MIN_Q_VARIANCE, MAX_Q_VARIANCE] (0 failed later as "Q must be symmetric positive definite"; 1e-40 ran a filter
+    whose float32 information overflowed, no particle keeping a finite likelihood, one warning a step). A q that is
+    not finite and >= 0 is left to the field's own check."""
+    if not all(math.isfinite(x) and x >= 0 for x in q):
+        return None
+    variances = tuple(q) if q_as == "variance" else tuple(x * x for x in q)  # (1e200 squared is inf: above the bound)
+    if min(variances) < MIN_Q_VARIANCE:
         return (f"q {tuple(q)} ({q_as}) gives a measurement variance of {min(variances):.3g}: each must be >= {MIN_Q_VARIANCE:g} "
                 "(Q positive definite, its inverse finite in float32)")
+    if max(variances) > MAX_Q_VARIANCE:
+        return (f"q {tuple(q)} ({q_as}) gives a measurement variance of {max(variances):.3g}: each must be <= {MAX_Q_VARIANCE:g} "
+                "(a std of 1e6 m or rad is no sensor; far noisier readings overflow the filter's float32)")
     return None
 
 
@@ -216,8 +225,12 @@ class PFConfig(BaseModel):
                 msg = f"{msg} (got {first.get('input')!r})"
             raise ConfigError(msg, source=f"pf config {field}" if field else "pf config") from None
 
+    def particle_count_label(self) -> str:
+        """The particle count as titles say it: KLD-sampling's range (``n_particles`` is only its start), else N."""
+        return f"{self.kld_min_n:,}..{self.kld_max_n:,} (KLD)" if self.kld else f"{self.n_particles:,}"
+
     def replace(self, **changes) -> PFConfig:
         return PFConfig.make(**{**self.model_dump(), **changes})
 
 
-__all__ = ["ESTIMATORS", "INITS", "LIKELIHOODS", "MAX_ROUGHENING", "MIN_Q_VARIANCE", "PFConfig", "q_problem"]
+__all__ = ["ESTIMATORS", "INITS", "LIKELIHOODS", "MAX_Q_VARIANCE", "MAX_ROUGHENING", "MIN_Q_VARIANCE", "PFConfig", "q_problem"]

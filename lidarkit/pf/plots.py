@@ -43,7 +43,7 @@ def plot_trajectory(result, path: str | os.PathLike, title: str | None = None) -
     _draw_scene(ax, result)
     mse = result.metrics.get("mse_m2", {})
     subtitle = ", ".join(f"MSE {k} {v:.3f} m²" for k, v in mse.items())
-    ax.set_title(title or f"particle filter, N={result.config.n_particles}" + (f"\n{subtitle}" if subtitle else ""))
+    ax.set_title(title or f"particle filter, N={result.config.particle_count_label()}" + (f"\n{subtitle}" if subtitle else ""))
     ax.legend(loc="best", fontsize=8)
     return _save(fig, path)
 

@@ -38,6 +38,9 @@ VISIBILITY = ("recorded", "all")
 CHI2_2DOF_95 = 5.991464547107979  # chi-square(2) 95% quantile
 CHI2_2DOF_999 = 13.815510557964274  # chi-square(2) 99.9% quantile: "lost" threshold per reading
 KIDNAP_OFFSET = (0.0, -5.0, -np.pi / 2)  # 5 m and 90 deg; from step 150 on the robot stays inside the map box
+#: Largest kidnap jump (m per axis): 1000 km is past any landmark map; 1e30 m overflowed the filter's float32 squares
+#: (MSE 5.6e58, exit 0). The turn is at most a full circle (2 pi).
+MAX_KIDNAP_OFFSET_M = 1e6
 
 
 @dataclass(frozen=True, eq=False)
@@ -70,8 +73,10 @@ def kidnapped_ground_truth(odometry: np.ndarray, kidnap_at_step: int | None, kid
     offset = np.asarray(kidnap_offset, dtype=np.float64).reshape(-1)
     if not 1 <= k <= T:
         raise ConfigError(f"kidnap step must be in 1..{T}, got {k}", source="kidnap_at_step")
-    if offset.shape != (3,) or not np.isfinite(offset).all():
-        raise ConfigError(f"kidnap offset must be 3 finite values (dx_m, dy_m, dtheta_rad), got {kidnap_offset!r}", source="kidnap_offset")
+    if (offset.shape != (3,) or not np.isfinite(offset).all() or np.abs(offset[:2]).max() > MAX_KIDNAP_OFFSET_M
+            or abs(offset[2]) > 2 * np.pi):
+        raise ConfigError(f"kidnap offset must be 3 finite values (dx_m, dy_m, dtheta_rad), |dx|, |dy| <= {MAX_KIDNAP_OFFSET_M:g} m "
+                          f"and |dtheta| <= 2 pi, got {kidnap_offset!r}", source="kidnap_offset")
     before = integrate_odometry(odometry[:k])
     after = integrate_odometry(odometry[k:], before[-1] + offset)
     return np.concatenate([before[:-1], after])
@@ -559,6 +564,7 @@ def consistency_metrics(nis: np.ndarray, estimate: np.ndarray, dead_reckoning: n
 
 
 __all__ = [
+    "MAX_KIDNAP_OFFSET_M",
     "MSE_START_STEP",
     "ODOMETRY_NOISE_STD",
     "PFRunResult",
