@@ -237,6 +237,33 @@ def test_segmenters_are_deterministic_stateless_and_refuse_bad_input(hilly_scans
     assert ground_segmenter(get_icp("ground_filtered", ground_method="ransac", seed=3).config).config.seed == 3
 
 
+def test_csf_runs_its_cloth_on_one_thread(hilly_scans):
+    """The cloth simulation's OpenMP threads changed its ground mask from run to run on a busy machine (the KITTI pair's
+    ground_filtered pose by 6 mm over six runs; with OMP_NUM_THREADS=1 it repeated): its own OpenMP runtime runs it on
+    one thread, in whichever thread segments, and the same scan gives the same mask."""
+    import ctypes
+    import threading
+    from pathlib import Path
+
+    import CSF
+
+    segmenter = get_ground_segmenter("csf")
+    assert segmenter._omp_threads  # the wheel ships its own libgomp
+    gomp = ctypes.CDLL(str(next(Path(CSF.__file__).parent.glob("cloth_simulation_filter.libs/libgomp*.so*"))))
+    points = hilly_scans[0][1].points_xyz
+    seen = {}
+
+    def segment() -> None:
+        seen["mask"] = segmenter.segment(points)
+        seen["threads"] = gomp.omp_get_max_threads()
+
+    worker = threading.Thread(target=segment)
+    worker.start()
+    worker.join()
+    assert seen["threads"] == 1
+    assert all(np.array_equal(segmenter.segment(points), seen["mask"]) for _ in range(3))
+
+
 def test_planar_ground_filtered_keeps_z_roll_and_pitch_of_the_guess():
     """planar=True solves x, y and yaw only: the ground refinement re-estimated z, roll and pitch after it (z 5 mm,
     tilted rotation on a KITTI pair)."""

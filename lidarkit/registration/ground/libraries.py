@@ -31,6 +31,20 @@ def _import(module: str, package: str) -> Any:
         ) from None
 
 
+def _own_openmp_thread_setters(module: Any) -> list[Any]:
+    """``omp_set_num_threads`` of the OpenMP runtime a library's wheel ships for itself (``<package>.libs/libgomp*``),
+    none when it has none. The cloth simulation's threads changed its ground mask from run to run (the KITTI pair's
+    pose by 6 mm across six runs); on one thread it repeats, and the other libraries' runtimes keep their threads."""
+    import ctypes
+    from pathlib import Path
+
+    setters = []
+    for lib in sorted(Path(module.__file__).parent.glob("cloth_simulation_filter.libs/libgomp*.so*")):
+        with contextlib.suppress(OSError, AttributeError):
+            setters.append(ctypes.CDLL(str(lib)).omp_set_num_threads)
+    return setters
+
+
 @contextlib.contextmanager
 def _quiet_stdout():
     """Silence C/C++ writes to stdout (fd 1) for the duration of a library call."""
@@ -117,9 +131,12 @@ class ClothSegmenter(GroundSegmenter):
     def __init__(self, config: GroundConfig | None = None, **params: Any):
         super().__init__(config, **params)
         self._csf = _import("CSF", "cloth-simulation-filter")
+        self._omp_threads = _own_openmp_thread_setters(self._csf)
 
     def _segment(self, points_xyz: np.ndarray) -> np.ndarray:
         c = self.config
+        for set_threads in self._omp_threads:  # (per calling thread: OpenMP keeps the setting per thread)
+            set_threads(1)
         engine = self._csf.CSF()
         engine.params.bSloopSmooth = bool(c.slope_smooth)
         engine.params.cloth_resolution = float(c.cloth_resolution_m)
