@@ -174,7 +174,7 @@ class RegistrationResult:
     ``T_target_source``: ``(4, 4)`` float64; ``rmse_history``: RMSE (m) of the correspondences as the variant's
     loop measured them, oldest first (lidarkit's point-to-point loops: at the initial guess and after each iteration,
     ``iterations + 1`` values, the first ``extra["coarse_iterations"] + 1`` of a coarse-to-fine run over every
-    ``extra["coarse_stride"]``-th source point, the rest over all of them; ``pipeline``: at the start of each iteration; the final RMSE alone where the library
+    ``extra["coarse_stride"]``-th source point, the rest over all of them; ``pipeline``: at the start of each iteration over its own pairs, then at the final pose over the assessment's pairs (those of ``fitness``, as kiss reports it); the final RMSE alone where the library
     reports no RMSE per iteration: small_gicp, Open3D, kiss, genz); ``fitness``: fraction of source points with a
     correspondence within the inlier distance at the solution; ``reason``: why it did not converge or was flagged ("" if all is well);
     ``covariance``: ``(6, 6)`` uncertainty of ``T_target_source`` (left perturbation in the target frame,

@@ -309,7 +309,9 @@ class PipelineRegistration(Registration):
             reason="" if info["converged"] else info.get("reason") or f"no convergence within {info['iterations']} iterations "
                                                                               f"({info['n_correspondences']} correspondences)",
             iterations=int(info["iterations"]),
-            rmse_history=info["rmse_history"] or None,
+            # ends with the RMSE at the final pose over the assessment's pairs (the fitness's, and kiss's RMSE): the loop's
+            # own voxel-neighbourhood pairs alone read 0.012 m beside a fitness of 0.999 for a pose 0.46 m off
+            rmse_history=(*info["rmse_history"], assessment.rmse_m),
             extra={"threshold_sigma_m": threshold.sigma_m, "source_points": len(source), "components": self.describe()},
         )
         if assessment.n_correspondences < 3:
