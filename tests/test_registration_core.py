@@ -97,6 +97,20 @@ def test_config_is_resolved_frozen_and_described():
     assert config_fields("pipeline")["preprocess"][0] == "list[str | dict[str, Any]]"
 
 
+def test_a_variant_given_another_variants_config_or_a_dict_is_refused_naming_it():
+    """vanilla built with small_gicp's Config, or with a dict, failed at its first align with an AttributeError
+    traceback; a config and keyword parameters together were a plain TypeError."""
+    from lidarkit.registration import get_icp_class
+
+    V, G = get_icp_class("vanilla"), get_icp_class("small_gicp")
+    for config, got in ((G.Config(), G.Config.__name__), ({"max_iterations": 5}, "dict")):
+        with pytest.raises(ConfigError, match=f"vanilla: config must be a {V.Config.__name__}, got {got}"):
+            V(config)
+    with pytest.raises(ConfigError, match="vanilla: pass either a config object or keyword parameters, not both"):
+        V(V.Config(), max_iterations=3)
+    assert V(V.Config(max_iterations=3)).config.max_iterations == 3
+
+
 def test_register_icp_rejects_non_registration_and_name_clash():
     with pytest.raises(ConfigError):
         register_icp("bogus")(object)

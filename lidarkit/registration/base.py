@@ -478,10 +478,14 @@ class Registration:
     overlap_assessment: ClassVar[bool] = True
 
     def __init__(self, config: RegistrationConfig | None = None, **params: Any):
-        if config is not None and params:
-            raise TypeError("pass either a config object or keyword parameters, not both")
         if not self.name:  # a subclass used without @register_icp: its results and messages read method ''
             self.name = type(self).__name__
+        if config is not None and params:
+            raise ConfigError("pass either a config object or keyword parameters, not both", source=self.name)
+        if config is not None and not isinstance(config, self.Config):  # (another variant's config, or a dict: an
+            # AttributeError traceback at the first align)
+            raise ConfigError(f"config must be a {self.Config.__name__}, got {type(config).__name__} (or pass the settings "
+                              "as keyword parameters)", source=self.name)
         if config is None:
             try:
                 config = self.Config(**params)
