@@ -234,6 +234,26 @@ def test_a_plugin_returning_a_bare_pose_or_a_plain_config_is_refused_naming_it()
     with pytest.raises(ConfigError, match="PlainConfig.Config must derive from lidarkit.registration.RegistrationConfig"):
         register_icp("plain_config")(PlainConfig)
     assert "plain_config" not in available_icp()
+    # a scaled rotation was accepted ("converged"); register_icp(None) broke every later unknown-name error (sorting)
+    scaled = get_icp("vanilla").align(np.eye(3) * 2 + 1, np.eye(3) * 3)
+
+    class Scaled(Registration):
+        name = "scaled"
+        Config = RegistrationConfig
+
+        def _align(self, source_xyz, target_xyz, init_T):
+            import dataclasses
+
+            T = np.eye(4)
+            T[:3, :3] *= 2
+            return dataclasses.replace(scaled, T_target_source=T)
+
+    with pytest.raises(RegistrationError, match=r"scaled .*: scaled returned a pose that is not a rigid transform"):
+        Scaled().align(np.eye(3) * 2 + 1, np.eye(3) * 3)
+    for bad in (None, "", " vanilla"):
+        with pytest.raises(ConfigError, match="register_icp: a variant name must be a non-empty word"):
+            register_icp(bad)
+    assert all(isinstance(n, str) for n in available_icp())
 
 
 # ---------------------------------------------------------------- result contract and synthetic accuracy

@@ -539,6 +539,9 @@ class Registration:
         if T.shape != (4, 4) or not np.isfinite(T).all():  # a backend (or a plugin) that returns garbage instead of raising
             what = "NaN or infinite entries" if T.shape == (4, 4) else f"shape {T.shape}"
             raise RegistrationError(f"{self.name} returned a pose with {what}, not a finite 4x4 matrix", source=source)
+        if not (is_rotation(T[:3, :3]) and np.allclose(T[3], (0.0, 0.0, 0.0, 1.0))):  # (a scaled rotation: "converged")
+            raise RegistrationError(f"{self.name} returned a pose that is not a rigid transform (its 3x3 block is no rotation, "
+                                    "or its last row is not 0 0 0 1)", source=source)
         register_s = time.perf_counter() - start
         if not self._config.assess:
             return PendingAlignment.done(unassessed_result(T, bool(likely_converged), self.name, register_s))

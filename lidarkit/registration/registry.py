@@ -32,6 +32,8 @@ _BROKEN: dict[str, str] = {}
 
 def register_icp(name: str) -> Callable[[type[Registration]], type[Registration]]:
     """Class decorator: register a :class:`Registration` subclass under ``name`` (sets ``cls.name``)."""
+    if not isinstance(name, str) or not name.strip() or name != name.strip():  # (None broke available_icp's sorting)
+        raise ConfigError(f"a variant name must be a non-empty word, got {name!r}", source="register_icp")
 
     def decorator(cls: type[Registration]) -> type[Registration]:
         if not (isinstance(cls, type) and issubclass(cls, Registration)):
