@@ -26,7 +26,7 @@ except ImportError:
     fcntl = None
 
 __all__ = ["OutputError", "atomic_path", "ensure_dir", "output_errors", "run_folder", "save_figure", "write_bytes",
-           "write_text"]
+           "write_text", "write_texts"]
 
 _UMASK = os.umask(0o022)
 os.umask(_UMASK)  # read once at import: os.umask can only be read by setting it
@@ -115,11 +115,24 @@ def write_text(path: str | os.PathLike, text: str) -> Path:
 def write_bytes(path: str | os.PathLike, data: bytes) -> Path:
     """Write ``data`` to ``path`` atomically; return the path."""
     with atomic_path(path) as tmp:
-        with open(tmp, "wb") as fh:
-            fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
+        _write_synced(tmp, data)
     return Path(path)
+
+
+def write_texts(texts: dict[str | os.PathLike, str]) -> list[Path]:
+    """Write files that belong together (a report's .md, .csv and .html): every one is written in full first, then
+    each renamed into place, so a failure while writing any of them (a full disk) replaces none; return the paths."""
+    with contextlib.ExitStack() as stack:
+        for path, text in texts.items():
+            _write_synced(stack.enter_context(atomic_path(path)), text.encode("utf-8"))
+    return [Path(p) for p in texts]
+
+
+def _write_synced(path: Path, data: bytes) -> None:
+    with open(path, "wb") as fh:
+        fh.write(data)
+        fh.flush()
+        os.fsync(fh.fileno())
 
 
 def figure_format(fig, path: str | os.PathLike) -> str:

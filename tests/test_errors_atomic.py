@@ -133,3 +133,19 @@ def test_a_run_folder_through_a_link_or_in_a_parent_it_cannot_write(tmp_path, mo
             (empty / "other.bin").write_bytes(b"x")  # another export's file arrived meanwhile
             (tmp / "mine.bin").write_bytes(b"y")
     assert sorted(p.name for p in empty.iterdir()) == ["other.bin"]
+
+
+def test_files_written_together_replace_none_when_one_fails(tmp_path):
+    """A bench report's report.md and report.csv were replaced by the new suite's while report.html, which failed (a
+    full disk, a folder in the way), stayed the old one: files that belong together are all replaced or none."""
+    for name in ("report.md", "report.csv"):
+        (tmp_path / name).write_text("old\n")
+    (tmp_path / "report.html").mkdir()  # in the way
+    with pytest.raises(LidarKitError, match="report.html: cannot write: is a folder"):
+        atomic.write_texts({tmp_path / "report.md": "new\n", tmp_path / "report.csv": "new\n", tmp_path / "report.html": "new\n"})
+    assert [(tmp_path / n).read_text() for n in ("report.md", "report.csv")] == ["old\n", "old\n"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["report.csv", "report.html", "report.md"]  # no temporary left
+    (tmp_path / "report.html").rmdir()
+    written = atomic.write_texts({tmp_path / "report.md": "new\n", tmp_path / "report.html": "<p>new</p>\n"})
+    assert written == [tmp_path / "report.md", tmp_path / "report.html"]
+    assert (tmp_path / "report.md").read_text() == "new\n" and (tmp_path / "report.html").read_text() == "<p>new</p>\n"

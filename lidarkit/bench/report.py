@@ -739,9 +739,10 @@ def build_report(
         if stale.name not in drawn:
             stale.unlink()
 
-    report.markdown_path = atomic.write_text(out_dir / "report.md", _markdown(report, title))
-    report.csv_path = atomic.write_text(out_dir / "report.csv", _csv(report))
-    report.html_path = atomic.write_text(out_dir / "report.html", _html(report, title))
+    # the three describe one suite: all replaced or none (a full disk at report.html left .md and .csv of the new one)
+    report.markdown_path, report.csv_path, report.html_path = atomic.write_texts({
+        out_dir / "report.md": _markdown(report, title), out_dir / "report.csv": _csv(report),
+        out_dir / "report.html": _html(report, title)})
     return report
 
 
