@@ -159,3 +159,30 @@ def test_an_interrupt_a_library_wraps_in_its_own_error_is_still_an_interrupt(mon
     monkeypatch.setattr(cli, "app", lambda *a, **k: (_ for _ in ()).throw(ImportError("not an interrupt")))
     with pytest.raises(ImportError, match="not an interrupt"):
         cli.main(["version"])
+
+
+def test_an_interrupted_forced_run_says_to_resume_without_force(tmp_path, monkeypatch, capsys):
+    """`lidarkit bench SUITE --force` stopped half-way said "run the same command again to resume": run again, --force
+    ran every job again (12 jobs: 0 already done, 12 run now)."""
+    from lidarkit import cli
+    from lidarkit.bench import runner
+
+    suite = tmp_path / "suite.yaml"
+    suite.write_text(textwrap.dedent(bench_kill.SUITE.format(n_jobs=3, job_s=0.01)))
+    out = tmp_path / "out"
+    real = runner.run_suite
+
+    def stopped_after_one_job(*args, on_result=None, **kwargs):
+        def result(*a, **k):
+            on_result(*a, **k)
+            raise KeyboardInterrupt  # Ctrl-C once the first job is kept
+
+        return real(*args, on_result=result, **kwargs)
+
+    monkeypatch.setattr(runner, "run_suite", stopped_after_one_job)
+    for force, line in ((True, "run the command again without --force to resume (with it, every job runs again)"),
+                        (False, "run the same command again to resume")):
+        with pytest.raises(SystemExit) as exc:
+            cli.main(["bench", str(suite), "--out", str(out), "--executor", "serial", "--no-report", *(["--force"] if force else [])])
+        err = " ".join(capsys.readouterr().err.split())
+        assert exc.value.code == 130 and f"finished results are kept in {out}/jobs; {line}" in err, err

@@ -95,7 +95,9 @@ def run_with_progress(suite, out: Path, *, executor: str, workers: int | None, a
             progress.stop()
             what = f"by {stop}" if isinstance(stop, Interrupted) else "by SIGINT"
             stale = f"; {out}/report.html is from before this run (`lidarkit report {out}` rebuilds it from the finished jobs)"
-            err.print(f"interrupted {what}: finished results are kept in {out}/jobs; run the same command again to resume"
+            again = ("run the command again without --force to resume (with it, every job runs again)" if force
+                     else "run the same command again to resume")
+            err.print(f"interrupted {what}: finished results are kept in {out}/jobs; {again}"
                       + (stale if (out / "report.html").exists() else ""), soft_wrap=True)
             raise typer.Exit(getattr(stop, "exit_code", 130)) from None
 
