@@ -449,3 +449,27 @@ def test_ground_truth_given_as_an_array_is_refused_before_the_run():
 
     with pytest.raises(ConfigError, match="ground_truth must be a lidarkit Trajectory .* got ndarray"):
         run("sim:open?frames=3&beams=16&azimuths=360", "vanilla", ground_truth=np.tile(np.eye(4), (3, 1, 1)))
+
+
+def test_the_library_checks_its_run_folder_before_the_work(tmp_path):
+    """run(out_dir=...) with a file in the way ran the whole sequence and then failed, its result lost; it is refused
+    before the first frame, as the CLI's --out."""
+    from lidarkit.errors import OutputError
+    from lidarkit.odometry import run
+
+    (tmp_path / "afile").write_text("x")
+    calls = []
+
+    class Counted:
+        name = "counted"
+
+        def __len__(self):
+            return 3
+
+        def read_scan(self, index):
+            calls.append(index)
+            raise AssertionError("read before the output was checked")
+
+    with pytest.raises(OutputError, match="afile: cannot create the folder: a file is in the way"):
+        run(Counted(), "vanilla", out_dir=tmp_path / "afile" / "run")
+    assert calls == []

@@ -351,6 +351,10 @@ def run(
     for flag, value in (("pose_covariance", pose_covariance), ("strict", strict), ("progress", progress), ("overlap", overlap)):
         if value is not None and not isinstance(value, (bool, np.bool_)):  # ("yes", "no": true strings)
             raise ConfigError(f"{flag} must be True or False, got {value!r}", source=flag)
+    if out_dir is not None:  # before the work, as the CLI does (a file in the way was found after the whole run)
+        from lidarkit.atomic import check_target
+
+        check_target(out_dir, "folder")
     sequence = open_sequence(dataset)
     registration = _resolve_method(method, params)
     method_name = getattr(registration, "name", type(registration).__name__) or type(registration).__name__
