@@ -172,6 +172,17 @@ def test_a_ring_number_named_as_time_field_is_refused(tmp_path):
         open_dataset("rosbag", bag, time_field="ring").read_scan(0)
 
 
+def test_a_kitti_folder_given_as_a_bag_is_called_what_it_is(tmp_path):
+    """rosbag:KITTI_FOLDER said "not a readable ROS bag (FileNotFoundError: Expected metadata file ...; truncated or
+    damaged?)": it is a folder that holds no bag, and the kind it reads as is named."""
+    from lidarkit.sim.lidar import SimulatedLidarSequence, export_kitti
+
+    folder = export_kitti(SimulatedLidarSequence(n_frames=2, n_beams=8, n_azimuths=90), tmp_path / "run")
+    with pytest.raises(DataError, match=r"run: a folder that is no ROS bag \(no \.bag files, no metadata\.yaml\): it reads as "
+                                        r"'kitti' data \(kitti:PATH\)"):
+        open_dataset("rosbag", folder, topic="/points").read_scan(0)
+
+
 def test_time_going_backwards(tmp_path):
     bag = write_ros1_bag(tmp_path / "back.bag", [good(0), good(1), (good(1)[0] - 0.05, *good(2)[1:])])
     ds = open_dataset("rosbag", bag)

@@ -409,6 +409,12 @@ class RosbagScans(_BagScans):
             from lidarkit.io import ros2_storage_problem
 
             problem = ros2_storage_problem(self.path)
+            if problem is None and self.path.is_dir() and not (self.path / "metadata.yaml").exists():
+                from lidarkit.io import detect_kind
+
+                kind = detect_kind(self.path)  # (a KITTI folder was "a truncated or damaged bag")
+                problem = ("a folder that is no ROS bag (no .bag files, no metadata.yaml)"
+                           + (f": it reads as {kind!r} data ({kind}:PATH)" if kind and kind != "rosbag" else ""))
             raise DataError(problem or f"not a readable ROS bag ({type(err).__name__}: {err}; truncated or damaged?)",
                             source=self.path) from None
 
