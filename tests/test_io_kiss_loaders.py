@@ -125,3 +125,17 @@ def test_newer_college_binary_pcd_without_pyntcloud(tmp_path):
     dataset = open_dataset("ncd", tmp_path)
     np.testing.assert_allclose(dataset.read_scan(1).points_xyz, RING.astype(np.float32), atol=1e-6)
     assert len(dataset.ground_truth) == 2
+
+
+def test_a_file_the_generic_loader_cannot_read_is_named_once(tmp_path):
+    """A .pcd among .bin scans read as KITTI .bin: "generic:mixed (frame 1): mixed (frame 1): kiss-icp's generic
+    loader failed" named the folder twice and not the file."""
+    from lidarkit.errors import LidarKitError
+    from lidarkit.odometry import run
+
+    rng = np.random.default_rng(0)
+    rng.uniform(-10, 10, (500, 4)).astype(np.float32).tofile(tmp_path / "scan1.bin")
+    (tmp_path / "scan2.pcd").write_bytes(b"# .PCD v0.7\nVERSION 0.7\nFIELDS x y z\n" + b"\0" * 37)
+    with pytest.raises(LidarKitError) as err:
+        run(f"generic:{tmp_path}", "vanilla")
+    assert str(err.value).startswith(f"{tmp_path / 'scan2.pcd'} (frame 1): kiss-icp's generic loader failed: ValueError")

@@ -105,7 +105,9 @@ class KissLoaderScans:
         n = len(self)
         if not 0 <= index < n:
             raise DataError(f"scan index {index} out of range for {n} scans", source=self.path)
-        with guarded_loader(self.loader_name, f"{self.path} (frame {index})"):
+        files = getattr(self.loader, "scan_files", None)  # (the generic loader's: the file, not the folder, is named)
+        source = files[index] if isinstance(files, (list, tuple, np.ndarray)) and len(files) == n else self.path
+        with guarded_loader(self.loader_name, str(source), location=f"frame {index}"):
             item = self.loader[index]
         points, times = item if isinstance(item, tuple) else (item, None)
         points = np.asarray(points, dtype=np.float64).reshape(-1, 3)

@@ -54,7 +54,7 @@ def require_modules(modules: dict[str, str], kind: str) -> None:
 
 
 @contextlib.contextmanager
-def guarded_loader(kind: str, source: str) -> Iterator[None]:
+def guarded_loader(kind: str, source: str, location: str | None = None) -> Iterator[None]:
     """Run a kiss-icp loader call so that it can neither print to stdout nor end the process.
 
     kiss-icp's loaders print and call ``exit()`` on problems they find; lidarkit checks first, and anything left
@@ -66,9 +66,9 @@ def guarded_loader(kind: str, source: str) -> Iterator[None]:
             yield
     except SystemExit:
         said = " ".join(out.getvalue().split()) or "no message"
-        raise DataError(f"kiss-icp's {kind} loader gave up: {said}", source=source) from None
+        raise DataError(f"kiss-icp's {kind} loader gave up: {said}", source=source, location=location) from None
     except (AssertionError, OSError, IndexError, KeyError, ValueError, StopIteration) as err:
-        raise DataError(f"kiss-icp's {kind} loader failed: {type(err).__name__}: {err}", source=source) from None
+        raise DataError(f"kiss-icp's {kind} loader failed: {type(err).__name__}: {err}", source=source, location=location) from None
     finally:
         if out.getvalue().strip():
             log.debug("%s loader said: %s", kind, out.getvalue().strip())
