@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import shutil
 from datetime import datetime, timezone
 
@@ -10,7 +11,7 @@ import pytest
 from conftest import shared_path
 from scipy.spatial.transform import Rotation
 
-from lidarkit.errors import DataError
+from lidarkit.errors import ConfigError, DataError
 from lidarkit.io import open_dataset
 from lidarkit.io.kitti_raw import KittiRaw
 
@@ -127,6 +128,19 @@ def test_missing_inputs(raw_copy):
     (raw_copy / DATE / "calib_imu_to_velo.txt").unlink()
     with pytest.raises(DataError, match=r"calib_imu_to_velo\.txt: calibration file not found"):
         KittiRaw(raw_copy, DATE, DRIVE)
+
+
+def test_a_drive_folder_with_options_that_agree_or_not(raw_root):
+    """The drive folder given with drive= or date= was refused ("give date= and drive= ... or the drive folder itself",
+    which was given); dataset=extract on a _sync folder was ignored without a word."""
+    drive = _drive(raw_root)
+    for options in ({"drive": DRIVE}, {"drive": 1}, {"date": DATE}, {"date": DATE, "drive": DRIVE}, {}):
+        assert KittiRaw(drive, **options).drive_dir == drive
+    for options, named in (({"dataset": "extract"}, "dataset='extract', but the drive folder given is 'sync'"),
+                           ({"drive": "0002"}, "drive='0002', but the drive folder given is '0001'"),
+                           ({"date": "2011_09_28"}, "date='2011_09_28', but the drive folder given is '2011_09_26'")):
+        with pytest.raises(ConfigError, match=re.escape(named)):
+            KittiRaw(drive, **options)
 
 
 def test_malformed_oxts_and_timestamps(raw_copy):

@@ -101,7 +101,12 @@ class KittiRaw:
         if not base.exists():  # (it asked for date= and drive= of a folder that is not there)
             raise DataError("not found", source=base)
         m = _DRIVE_DIR.match(base.name)
-        if m and date is None and drive is None:
+        if m:  # the drive folder itself names its date, drive and kind (options that say otherwise were ignored or refused)
+            named = {"date": (date, m.group(1)), "drive": (drive, m.group(2)), "dataset": (dataset, m.group(3))}
+            for option, (given, own) in named.items():
+                if given is not None and not (option == "dataset" and given == "sync") and str(given).lstrip("0") != own.lstrip("0"):
+                    raise ConfigError(f"{option}={given!r}, but the drive folder given is {own!r} ({base.name}): give the "
+                                      "base folder with date= and drive=, or the drive folder alone", source=f"kitti_raw option {option}")
             date, drive, dataset = m.group(1), m.group(2), m.group(3)
             base = base.parent.parent
         if date is None or drive is None:
