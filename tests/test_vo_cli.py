@@ -163,6 +163,34 @@ def test_image_folder_checks_counts(tmp_path):
     assert isinstance(ds, ImageSequence)
 
 
+def test_tum_poses_for_an_image_folder_give_their_stamps_or_say_they_disagree(tmp_path, caplog):
+    """--poses-format tum: without --timestamps the images were stamped 0, 1, 2 ... s though the poses carry their
+    times; with stamps 100 s from the poses' they were paired pose by pose without a word."""
+    import logging
+
+    from lidarkit.io import open_dataset
+    from lidarkit.io.images import ImageFolder  # noqa: F401  (registers kind "images")
+
+    folder = tmp_path / "imgs"
+    folder.mkdir()
+    for i in range(3):
+        cv2.imwrite(str(folder / f"f{i}.png"), np.full((10, 12), i * 50, np.uint8))
+    rows = [f"{t:.2f} {t:.1f} 0 0 0 0 0 1" for t in (5.0, 5.1, 5.2)]
+    (tmp_path / "gt.txt").write_text("\n".join(rows) + "\n")
+    ds = open_dataset("images", folder, poses=tmp_path / "gt.txt", poses_format="tum")
+    np.testing.assert_allclose(ds.timestamps_s, [5.0, 5.1, 5.2])
+    (tmp_path / "t.txt").write_text("0\n0.1\n0.2\n")
+    with caplog.at_level(logging.WARNING, logger="lidarkit.io.images"):
+        ds = open_dataset("images", folder, poses=tmp_path / "gt.txt", poses_format="tum", timestamps=tmp_path / "t.txt")
+    np.testing.assert_allclose(ds.timestamps_s, [0.0, 0.1, 0.2])
+    assert any("pose 0 is stamped 5.000 s from its image (half a frame is 0.050 s)" in r.getMessage() for r in caplog.records)
+    caplog.clear()
+    (tmp_path / "t.txt").write_text("5.01\n5.1\n5.2\n")
+    with caplog.at_level(logging.WARNING, logger="lidarkit.io.images"):
+        open_dataset("images", folder, poses=tmp_path / "gt.txt", poses_format="tum", timestamps=tmp_path / "t.txt")
+    assert not caplog.records  # within half a frame: paired as given
+
+
 def test_vo_on_synthetic_tum_folder_with_calib_file(tmp_path, capsys):
     """A TUM-layout folder (rgb.txt, rgb/*.png, groundtruth.txt) rendered by the synthetic camera."""
     from lidarkit.sim.camera import default_K, forward_trajectory, make_plane_scene, render_sequence

@@ -7,8 +7,10 @@ must match the number of images. Registered as dataset kind ``"images"``.
 
 from __future__ import annotations
 
+import logging
 import os
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -18,6 +20,8 @@ from lidarkit.io.folder import natural_key
 from lidarkit.io.kitti import read_gray_image, read_kitti_calib
 from lidarkit.textfile import read_lines
 from lidarkit.trajectory import Trajectory
+
+log = logging.getLogger(__name__)
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm")
 
@@ -69,6 +73,18 @@ def read_image_timestamps(path: str | os.PathLike) -> np.ndarray:
     return np.asarray(stamps, dtype=np.float64)
 
 
+def _warn_stamps_apart(pose_stamps: np.ndarray, image_stamps: np.ndarray, poses: Any) -> None:
+    """Poses and images are paired one to one by order: say so when their stamps disagree by more than half a frame
+    (a ground truth 100 s late was scored pose by pose without a word)."""
+    steps = np.diff(image_stamps)
+    half_frame = 0.5 * float(np.median(steps)) if len(steps) else 0.0
+    apart = np.abs(np.asarray(pose_stamps, dtype=np.float64) - image_stamps)
+    if half_frame > 0 and float(apart.max()) > half_frame:
+        k = int(np.argmax(apart))
+        log.warning("%s: pose %d is stamped %.3f s from its image (half a frame is %.3f s); poses and images are paired "
+                    "by order, one each, not by time", poses, k, float(apart[k]), half_frame)
+
+
 @register_dataset("images")
 class ImageFolder:
     """Images of one folder as an ``ImageSequence``.
@@ -110,6 +126,11 @@ class ImageFolder:
                 raise DataError(f"{len(gt)} poses for {n} images", source=poses)
             if self._timestamps is not None and poses_format == "kitti":
                 gt = gt.with_timestamps(self._timestamps)
+            elif poses_format == "tum" and gt.timestamps_s is not None:  # paired one pose per image, by order
+                if self._timestamps is None:  # the poses' stamps are the images' (the TUM output said 0, 1, 2 ... s)
+                    self._timestamps = np.asarray(gt.timestamps_s, dtype=np.float64)
+                else:
+                    _warn_stamps_apart(gt.timestamps_s, self._timestamps, poses)
             self._gt = gt
 
     def __len__(self) -> int:
