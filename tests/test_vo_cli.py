@@ -137,12 +137,34 @@ def test_vo_cli_errors_are_one_line(tmp_path, capsys):
     # options checked before anything runs, whether or not this input would use them
     seq = str(sample_path("kitti_vo", "06"))
     for args, message in ((["--gif"], "--gif: --gif needs --out DIR"), (["--poses-format", "foo"], "--poses-format: unknown format 'foo'"),
-                          (["--focal-factor", "0"], "--focal-factor: must be a finite number > 0, got 0.0")):
+                          (["--focal-factor", "0"], "--focal-factor: must be a finite number > 0, got 0.0"),
+                          (["--start", "-1"], "--start: must be >= 0, got -1")):  # (it named the sequence)
         code, _, err = _run(["vo", seq, "--max-frames", "3", *args], capsys)
         assert code == 1 and message in err, args
     # options an input has no use for are refused, not dropped
     code, _, err = _run(["vo", seq, "--poses", str(sample_path("kitti_vo", "06", "poses.txt")), "--poses-format", "tum"], capsys)
     assert code == 1 and "a KITTI folder's poses are KITTI rows" in err
+
+
+def test_library_inputs_are_checked_before_the_frames():
+    """MonoVO({...}, K) was an AttributeError traceback; a NaN in K read "got shape (3, 3)"; time stamps of another
+    length, NaN or decreasing failed only after every frame was processed."""
+    from lidarkit.errors import ConfigError
+    from lidarkit.vo import MonoVO, preset
+    from lidarkit.vo.inputs import open_vo_input
+
+    vo_input = open_vo_input(str(sample_path("kitti_vo", "06")))
+    K, images = vo_input.K, vo_input.images
+    with pytest.raises(ConfigError, match="MonoVO: config must be a VOConfig .*, got dict"):
+        MonoVO({"scale": {"mode": "none"}}, K)
+    with pytest.raises(DataError, match=r"K must be finite, got 1 NaN or infinite entries"):
+        MonoVO(preset("lidarkit", **{"scale.mode": "none"}), K * np.array([[np.nan, 1, 1], [1, 1, 1], [1, 1, 1]]))
+    vo = MonoVO(preset("lidarkit", **{"scale.mode": "none"}), K)
+    seen = []
+    for stamps in (np.arange(3.0), np.r_[0.0, np.nan, np.arange(2.0, len(images))], np.arange(len(images))[::-1] * 0.1):
+        with pytest.raises(DataError, match="vo timestamps_s: .* time stamps for .* images, which must be finite and increasing"):
+            vo.run(images, timestamps_s=stamps, on_frame=seen.append)
+    assert seen == []  # refused before the first frame
 
 
 def test_image_folder_checks_counts(tmp_path):

@@ -75,6 +75,8 @@ def vo_command(
         raise ConfigError(f"must be >= 0, got {seed}", source="--seed")
     if max_frames is not None and max_frames < 1:
         raise ConfigError(f"must be >= 1, got {max_frames}", source="--max-frames")
+    if start < 0:  # (named the sequence: "kitti_06_image_0: start frame -1 outside 0..50")
+        raise ConfigError(f"must be >= 0, got {start}", source="--start")
     if gif and out is None:
         raise ConfigError("--gif needs --out DIR", source="--gif")
     if poses_format not in ("kitti", "tum"):

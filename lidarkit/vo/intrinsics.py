@@ -31,8 +31,10 @@ def K_from_image_size(width: int, height: int, focal_factor: float = DEFAULT_FOC
 def validate_K(K: np.ndarray, source: str = "intrinsics") -> np.ndarray:
     """Check a ``(3, 3)`` upper-triangular intrinsics matrix with positive focal lengths; returns float64 copy."""
     K = np.asarray(K, dtype=np.float64)
-    if K.shape != (3, 3) or not np.all(np.isfinite(K)):
-        raise DataError(f"K must be a finite 3x3 matrix, got shape {K.shape}", source=source)
+    if K.shape != (3, 3):
+        raise DataError(f"K must be a 3x3 matrix, got shape {K.shape}", source=source)
+    if not np.all(np.isfinite(K)):
+        raise DataError(f"K must be finite, got {int((~np.isfinite(K)).sum())} NaN or infinite entries", source=source)
     if K[0, 0] <= 0 or K[1, 1] <= 0 or not np.allclose(K[2], [0, 0, 1]) or K[1, 0] != 0 or K[2, 0] != 0:
         raise DataError("K must be [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0", source=source)
     return K.copy()

@@ -206,6 +206,9 @@ class MonoVO:
 
     def __init__(self, config: VOConfig | None = None, K: np.ndarray | None = None,
                  ground_truth: Trajectory | None = None):
+        if config is not None and not isinstance(config, VOConfig):  # (a dict: an AttributeError traceback)
+            raise ConfigError(f"config must be a VOConfig (lidarkit.vo.preset(...) or VOConfig(...)), got {type(config).__name__}",
+                              source="MonoVO")
         self.config = config or VOConfig()
         if K is None:
             raise ConfigError("intrinsics K are required (use lidarkit.vo.intrinsics.K_from_image_size to guess them)",
@@ -241,6 +244,11 @@ class MonoVO:
                             source="vo ground_truth")
         if timestamps_s is None:
             timestamps_s = getattr(images, "timestamps_s", None)
+        if timestamps_s is not None:  # checked before the frames (a wrong length failed after all of them)
+            stamps = np.asarray(timestamps_s, dtype=np.float64).reshape(-1)
+            if len(stamps) != n or not np.isfinite(stamps).all() or not (np.diff(stamps) > 0).all():
+                raise DataError(f"{len(stamps)} time stamps for {n} images, which must be finite and increasing",
+                                source="vo timestamps_s")
         read = images.read_image if hasattr(images, "read_image") else (lambda i: images[i])
 
         cfg = self.config
