@@ -32,8 +32,8 @@ def check_memory(needed_bytes: float, what: str, source: str, fraction: float = 
     available = available_memory_bytes()
     if available is None or needed_bytes <= fraction * available:
         return
-    raise ConfigError(f"{what} needs about {_gib(needed_bytes)} of memory, more than the {_gib(available)} available",
-                      source=source)
+    raise ConfigError(f"{what} needs about {_gib(needed_bytes)} of memory, more than {fraction:.0%} of the "
+                      f"{_gib(available)} available", source=source)
 
 
 __all__ = ["available_memory_bytes", "check_memory"]

@@ -235,6 +235,13 @@ def test_sim_spec_memory_bag_t_field_and_odometry_frame(tmp_path):
     slow = SimulatedLidarSequence(n_frames=2, n_beams=8, n_azimuths=90, frame_rate_hz=0.2)
     with pytest.raises(ConfigError, match=r"frame_rate_hz: a sweep of 5 s overflows the uint32 nanosecond 't' field"):
         export_bag(slow, tmp_path / "slow.bag", "rosbag1")
+    # clouds without per-point times have no 't' field to overflow (they were refused the same way); a file named
+    # run.MCAP, which the CLI and the readers take as MCAP, was refused by the writer
+    for settings in ({"point_times": False}, {"motion_distortion": False}):
+        slow = SimulatedLidarSequence(n_frames=2, n_beams=8, n_azimuths=90, frame_rate_hz=0.2, **settings)
+        assert export_bag(slow, tmp_path / f"slow{len(settings)}{sorted(settings)[0]}.mcap", "mcap").is_file()
+    upper = export_bag(SimulatedLidarSequence(n_frames=2, n_beams=8, n_azimuths=90), tmp_path / "run.MCAP", "mcap")
+    assert len(open_dataset("mcap", upper)) == 2
     bag = export_bag(SimulatedLidarSequence(n_frames=2, n_beams=8, n_azimuths=90), tmp_path / "ok.bag", "rosbag1")
     with AnyReader([bag]) as reader:
         conn = next(c for c in reader.connections if c.topic == "/ground_truth")
@@ -260,8 +267,8 @@ def test_a_snapshot_export_has_no_point_times_and_its_stamp_is_its_instant(tmp_p
 def test_a_sensor_that_sees_nothing_is_refused_before_an_export_is_written(tmp_path):
     """Beams above the horizon over the ground scene: 0-byte sweeps were exported (exit 0) that every reader refused."""
     sim = SimulatedLidarSequence(n_frames=3, n_beams=8, n_azimuths=90, scene="ground", elevation_min_deg=0.0, elevation_max_deg=10.0)
-    with pytest.raises(DataError, match=r"sweep 0 has no return within 1-80 m: the beams \(0 to 10 deg, the sensor 1.73 m up\) see "
-                                        r"nothing of the ground scene"):
+    with pytest.raises(DataError, match=r"sweep 0 has no return within 1-80 m: from where it is taken the beams \(0 to 10 deg, the "
+                                        r"sensor 1.73 m up\) see nothing of the ground scene, and an empty sweep is no scan"):
         export_bag(sim, tmp_path / "up.bag", "rosbag1")
     assert not (tmp_path / "up.bag").exists()
 

@@ -55,9 +55,9 @@ def sim_lidar(
         raise ConfigError(f"{key} has its own option: use {own[key]} instead of --param {key}=...", source=f"--param {key}")
     config = make_config(scene=scene, n_frames=frames, seed=seed, **params)
     from lidarkit.resources import check_memory
+    from lidarkit.sim.lidar import SWEEP_BYTES_PER_RAY
 
-    # per sweep: the ray directions and hits (float64) and the exported float32 records, a few copies each
-    check_memory(config.n_beams * config.n_azimuths * 160.0, f"a sweep of {config.n_beams}x{config.n_azimuths} rays",
+    check_memory(config.n_beams * config.n_azimuths * SWEEP_BYTES_PER_RAY, f"a sweep of {config.n_beams}x{config.n_azimuths} rays",
                  "--param n_beams / n_azimuths")
     sequence = SimulatedLidarSequence(config)
     def export(on_frame=None):

@@ -41,9 +41,9 @@ def check_bag_target(out: str | os.PathLike, fmt: str, option: str | None = None
     :func:`export_bag`; the CLI calls it before simulating."""
     out = Path(out)
     suffix = {"rosbag1": ".bag", "mcap": ".mcap"}.get(fmt)
-    if suffix is not None and out.suffix != suffix:
+    if suffix is not None and out.suffix.lower() != suffix:  # (as the CLI and the readers' detection: run.MCAP is one)
         raise ConfigError(f"a {fmt} file is named *{suffix}, got {out.name!r}", source=option or out)
-    if fmt == "rosbag2" and out.suffix in (".bag", ".mcap"):  # a ROS 2 bag is a folder: read as a file by that name
+    if fmt == "rosbag2" and out.suffix.lower() in (".bag", ".mcap"):  # a ROS 2 bag is a folder: read as a file by that name
         raise ConfigError(f"a rosbag2 bag is a folder: name it without {out.suffix}, got {out.name!r}", source=option or out)
     if out.exists():
         raise DataError("exists already; bags are never overwritten", source=out)
@@ -68,7 +68,8 @@ def export_bag(sequence, out: str | os.PathLike, fmt: str = "rosbag2", *, storag
         raise ConfigError("writing bags needs the Python package 'rosbags': pip install 'lidarkit[ros]'", source=f"format {fmt}") from None
     out = check_bag_target(out, fmt)
     period = sequence.config.sweep_period_s
-    if period > MAX_T_FIELD_SWEEP_S:  # (a 5 s sweep wrapped its t values past 4.29 s back to 0)
+    if period > MAX_T_FIELD_SWEEP_S and sequence.config.sweeps_carry_point_times:  # (a 5 s sweep wrapped its t values past
+        # 4.29 s back to 0; clouds without per-point times have no t field to overflow)
         raise ConfigError(f"a sweep of {period:g} s overflows the uint32 nanosecond 't' field drivers write (at most "
                           f"{MAX_T_FIELD_SWEEP_S:.3g} s): frame_rate_hz must be at least {1 / MAX_T_FIELD_SWEEP_S:.3g} for a bag",
                           source="frame_rate_hz")
