@@ -87,7 +87,9 @@ class LidarSimConfig(BaseModel):
     accel_time_s: float = Field(
         2.0, ge=0.0, description="the drive starts at rest and reaches speed_mps after this (smooth ramp); 0: moving from t = 0"
     )
-    max_curvature_per_m: float = Field(1.0 / 150.0, ge=0.0, description="bound of the path curvature (gentle curves)")
+    max_curvature_per_m: float = Field(1.0 / 150.0, ge=0.0, le=1.0 / 30.0, description="bound of the path curvature "
+                                       "(gentle curves; at most 1/30: the street's facades stand 9-13 m from the path, and "
+                                       "tighter turns drove the sensor through them)")
     sway_deg: float = Field(0.3, ge=0.0, le=10.0, description="amplitude of the body's pitch and roll oscillation (suspension)")
     heave_m: float = Field(0.02, ge=0.0, le=1.0, description="amplitude of the body's vertical oscillation")
     # terrain (0: the flat ground plane; > 0: rolling hills the vehicle and every object follow)
