@@ -394,10 +394,30 @@ class CarmenLog:
 
     @property
     def relations(self) -> Relations | None:
-        """The relation ground truth (``.relations`` file), or None if there is none."""
+        """The relation ground truth (``.relations`` file), or None if there is none. Its times are the log's, as
+        logged; on a log whose stamps were moved to increase (Intel) each is moved with the scan logged at it, so that
+        it finds that scan's pose (matched by the logged times, 428 of 2000 found none and others the wrong scan)."""
         if self._relations is None and self._relations_path is not None:
-            self._relations = Relations.read(self._relations_path)
+            self._relations = self._on_own_clock(Relations.read(self._relations_path))
         return self._relations
+
+    def _on_own_clock(self, relations: Relations) -> Relations:
+        """``relations`` with every time that is a scan's logged stamp moved as that scan's stamp was."""
+        if not self.n_restamped:
+            return relations
+        import dataclasses
+
+        logged = self._log.timestamps_s
+        order = np.argsort(logged, kind="stable")
+        shift = (self._timestamps_s - logged)[order]
+
+        def moved(times: np.ndarray) -> np.ndarray:
+            at = np.clip(np.searchsorted(logged[order], times), 1, len(order) - 1)
+            at = np.where(np.abs(logged[order][at - 1] - times) <= np.abs(logged[order][at] - times), at - 1, at)
+            near = np.abs(logged[order][at] - times) <= MIN_STAMP_STEP_S  # a scan's own stamp (to 0.1 ms)
+            return np.where(near, times + shift[at], times)
+
+        return dataclasses.replace(relations, t1_s=moved(relations.t1_s), t2_s=moved(relations.t2_s))
 
     def ranges_m(self, index: int) -> np.ndarray:
         """All range readings of scan ``index`` as logged ``(n,)`` (nothing dropped)."""
