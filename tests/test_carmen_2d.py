@@ -263,6 +263,11 @@ def test_relation_time_tolerance(carmen_logs, caplog):
         relation_error(odo[50:], late)
     with pytest.raises(EvaluationError, match="timestamps"):
         relation_error(odo.with_timestamps(None), late)
+    # a log without relations (None) and a tolerance given as text were TypeErrors
+    with pytest.raises(EvaluationError, match="no relations to score against .* got NoneType"):
+        relation_error(odo, carmen_logs["fr079"].relations)
+    with pytest.raises(EvaluationError, match="max_time_diff_s must be a number of seconds, got '0.1'"):
+        relation_error(odo, late, max_time_diff_s="0.1")
 
 
 def test_aces_odometry_relation_error(carmen_logs):

@@ -113,8 +113,13 @@ def relation_error(
     result); none matching at all is an EvaluationError.
     """
     source = estimate.name or "estimate"
+    if relations is None or not isinstance(relations, Relations):  # (a log without a relations file: a TypeError)
+        raise EvaluationError("no relations to score against (a CARMEN log has them when NAME.relations lies beside it, "
+                              f"or with relations=FILE), got {type(relations).__name__}", source=source)
     if estimate.timestamps_s is None:
         raise EvaluationError("the relations metric needs the estimate's timestamps (e.g. a TUM-format file)", source=source)
+    if isinstance(max_time_diff_s, bool) or not isinstance(max_time_diff_s, (int, float, np.integer, np.floating)):
+        raise EvaluationError(f"max_time_diff_s must be a number of seconds, got {max_time_diff_s!r}", source="max_time_diff_s")
     if not (np.isfinite(max_time_diff_s) and max_time_diff_s >= 0):
         raise EvaluationError(f"max_time_diff_s must be a finite number >= 0, got {max_time_diff_s!r}", source="max_time_diff_s")
     if len(estimate) == 0 or len(relations) == 0:
