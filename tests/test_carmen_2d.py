@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import bz2
 import gzip
+import json
 import logging
 
 import numpy as np
@@ -428,6 +429,9 @@ def test_odometry_cli_on_a_carmen_log(tmp_path, capsys):
     assert cli_exit_code(argv) == 0
     est = Trajectory.read(out / "poses_tum.txt", "tum")
     assert len(est) == 40 and np.abs(est.poses_se3[:, 2, 3]).max() < 1e-6
+    # its fallbacks take the odometry's motion, and say so (they read "constant-velocity fallbacks")
+    assert "fallbacks (dataset odometry motion)" in " ".join(capsys.readouterr().out.split())
+    assert json.loads((out / "metrics.json").read_text())["fallback_motion"] == "dataset odometry"
     bad = tmp_path / "bad.clf"
     bad.write_text("FLASER 3 1.0 2.0 x 0 0 0 0 0 0 1.0 host 1.0\n")
     capsys.readouterr()

@@ -153,6 +153,7 @@ def test_stateless_chain_with_constant_velocity_guess(rng, caplog):
     assert result.stats.fallback.tolist() == [False, False, True, False, False, False]
     assert result.stats.reason[2] == "test flag" and result.n_not_converged == 1 and result.n_fallback == 1
     assert result.metrics["n_not_converged"] == 1 and result.metrics["n_constant_velocity_fallback"] == 1
+    assert result.metrics["fallback_motion"] == "constant velocity"
     warnings = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
     assert any("frame 2" in w and "test flag" in w and "constant-velocity" in w for w in warnings), warnings
 

@@ -61,7 +61,7 @@ def odometry(
     strict: bool = typer.Option(
         False, "--strict",
         help="Fail on the first frame whose registration does not converge, and when a requested deskew cannot happen "
-        "(default: warn; non-converged frames use constant velocity).",
+        "(default: warn; non-converged frames use constant velocity, or the odometry motion with --init odometry).",
     ),
     init: str = typer.Option(
         "constant_velocity", "--init",
@@ -99,7 +99,7 @@ def odometry(
     table.add_row("reader corrections", ", ".join(f"{k}={v}" for k, v in corrections.items()) or "none reported by the reader")
     if m.get("convergence_measured", True):
         table.add_row("not converged / degenerate (variant's verdict)", f"{m['n_not_converged']} / {m['n_degenerate']}")
-        table.add_row("constant-velocity fallbacks", str(m.get("n_constant_velocity_fallback", 0)))
+        table.add_row(f"fallbacks ({m.get('fallback_motion', 'constant velocity')} motion)", str(m.get("n_constant_velocity_fallback", 0)))
     else:
         table.add_row("not converged / degenerate (variant's verdict)", "n/a (a stateful method gives no verdict)")
     check = m.get("frame_check")
