@@ -192,3 +192,19 @@ def test_a_sequence_with_nothing_left_to_register_is_an_error():
 
     with pytest.raises(RegistrationError, match="no point of the sweep is left after preprocessing"):
         run(f"kitti:{shared_path('kitti_odometry')}?sequence=00", "pipeline", params={"preset": "kiss_like", "max_range_m": 1.0})
+
+
+def test_a_pipeline_without_deskew_is_recorded_as_such():
+    """pipeline's deskew field is a component spec, always truthy: deskew=none (or the vanilla_seq preset) was recorded
+    "requested" (and "applied" over a simulator that has point times), and --strict refused scans without times."""
+    from lidarkit.odometry import run
+
+    spec = "sim:street?frames=4&beams=16&azimuths=360"
+    for params in ({"deskew": "none"}, {"deskew": {"name": "constant_velocity", "deskew": False}}, {"preset": "vanilla_seq"}):
+        deskew = run(spec, "pipeline", params=params).metrics["effective"]["deskew"]
+        assert deskew["requested"] is False and deskew["applied"] is False, (params, deskew)
+    assert run(spec, "pipeline").metrics["effective"]["deskew"]["applied"] is True
+    from lidarkit.sim.lidar import SimulatedLidarSequence
+
+    snapshots = SimulatedLidarSequence(n_frames=3, n_beams=16, n_azimuths=360, point_times=False)
+    assert len(run(snapshots, "pipeline", params={"deskew": "none"}, strict=True).trajectory) == 3

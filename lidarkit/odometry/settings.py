@@ -29,7 +29,13 @@ def deskew_requested(registration: Any) -> bool | None:
     """True/False when the variant's config has a ``deskew`` switch, None when the variant does not deskew at all."""
     config = getattr(registration, "config", None)
     value = getattr(config, "deskew", None) if config is not None else None
-    return None if value is None else bool(value)
+    if value is None:
+        return None
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    # a component spec (pipeline's "none" or {name: constant_velocity, deskew: false}) is always truthy: whether the
+    # variant deskews is whether it names an instant to deskew to (it read "requested" with deskew off)
+    return getattr(registration, "deskew_instant", None) is not None
 
 
 def point_time_source(sequence: Any) -> str:
