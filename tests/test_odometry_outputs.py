@@ -473,3 +473,18 @@ def test_the_library_checks_its_run_folder_before_the_work(tmp_path):
     with pytest.raises(OutputError, match="afile: cannot create the folder: a file is in the way"):
         run(Counted(), "vanilla", out_dir=tmp_path / "afile" / "run")
     assert calls == []
+
+
+def test_poses_without_stamps_are_stamped_with_their_frame_numbers(tmp_path):
+    """Scans without stamps: poses_tum.txt was stamped 0, 1, 2 for --frames 4:10:2 while timing.csv said frames 4, 6, 8
+    (the docs: frame numbers when there are none)."""
+    from conftest import shared_path
+
+    from lidarkit.odometry import run
+    from lidarkit.trajectory import Trajectory
+
+    run(shared_path("kitti_odometry", "sequences", "00", "velodyne"), "small_gicp", frames="4:10:2", out_dir=tmp_path / "run")
+    tum = Trajectory.from_tum(tmp_path / "run" / "poses_tum.txt")
+    frames = np.loadtxt(tmp_path / "run" / "timing.csv", delimiter=",", skiprows=1, usecols=0)
+    np.testing.assert_array_equal(tum.timestamps_s, [4.0, 6.0, 8.0])
+    np.testing.assert_array_equal(frames, [4, 6, 8])

@@ -33,7 +33,8 @@ def _write_files(result: OdometryResult, out: Path) -> None:
 
     traj = result.trajectory
     traj.to_kitti(out / "poses_kitti.txt")
-    tum = traj if traj.timestamps_s is not None else traj.with_timestamps(np.arange(len(traj), dtype=np.float64))
+    # without stamps, the frame numbers of timing.csv (rows 0, 1, 2 for --frames 4:10:2 read as frames 0-2)
+    tum = traj if traj.timestamps_s is not None else traj.with_timestamps(np.asarray(result.frames, dtype=np.float64))
     tum.to_tum(out / "poses_tum.txt")
     if result.ground_truth is not None:
         result.ground_truth.to_kitti(out / "ground_truth_kitti.txt")
