@@ -66,12 +66,11 @@ def as_points(points_xyz: np.ndarray, name: str = "points", min_points: int = 0)
     arr = arr.astype(np.float64, copy=False)
     if len(arr) < min_points:
         raise DataError(f"needs at least {min_points} points, got {len(arr)}", source=name)
-    if len(arr):  # the common case in two flat reductions (NaN fails them: details below); see _within_limits
-        hi, lo = float(arr.max()), float(arr.min())
-        if hi <= MAX_ABS_COORDINATE_M and lo >= -MAX_ABS_COORDINATE_M:
-            if max(hi, -lo) > FLOAT32_CM_LIMIT_M:
-                _say_if_float32_far_out(arr, name, max(hi, -lo))
-            return arr
+    reach = _reach_within_limits(arr) if len(arr) else None  # the common case in two flat reductions (NaN fails them)
+    if reach is not None:
+        if reach > FLOAT32_CM_LIMIT_M:
+            _say_if_float32_far_out(arr, name, reach)
+        return arr
     if not np.isfinite(arr).all():
         bad = int((~np.isfinite(arr).all(axis=1)).sum())
         raise DataError(f"{bad} of {len(arr)} points are NaN or infinite", source=name)
@@ -100,11 +99,17 @@ def _say_if_float32_far_out(arr: np.ndarray, name: str, far: float) -> None:
 
 
 def _within_limits(arr: np.ndarray) -> bool:
-    """All coordinates finite and within ``MAX_ABS_COORDINATE_M``: a flat max and min (NaN propagates through both),
-    ~20x faster than a per-row test on an ``(N, 3)`` array. (A sum of squares by ``np.dot`` would take one pass
-    instead of two, but wakes OpenBLAS's threads, which then spin on the cores the wrapped libraries need.)"""
+    """All coordinates finite and within ``MAX_ABS_COORDINATE_M`` (see :func:`_reach_within_limits`)."""
+    return _reach_within_limits(arr) is not None
+
+
+def _reach_within_limits(arr: np.ndarray) -> float | None:
+    """The largest coordinate magnitude when all are finite and within ``MAX_ABS_COORDINATE_M``, else None: a flat max
+    and min (NaN propagates through both), ~20x faster than a per-row test on an ``(N, 3)`` array. (A sum of squares
+    by ``np.dot`` would take one pass instead of two, but wakes OpenBLAS's threads, which then spin on the cores the
+    wrapped libraries need.)"""
     hi, lo = float(arr.max()), float(arr.min())
-    return bool(hi <= MAX_ABS_COORDINATE_M and lo >= -MAX_ABS_COORDINATE_M)
+    return max(hi, -lo) if hi <= MAX_ABS_COORDINATE_M and lo >= -MAX_ABS_COORDINATE_M else None
 
 
 def check_magnitude(points_xyz: np.ndarray, source: str, location: str | None = None) -> None:

@@ -239,13 +239,13 @@ def test_the_run_checks_each_scan_in_its_reading_thread_not_again_in_the_registr
     import lidarkit.geometry as geometry
 
     calls = []
-    original = geometry._within_limits
+    original = geometry._reach_within_limits
 
     def counting(arr):
         calls.append(threading.current_thread().name)
         return original(arr)
 
-    monkeypatch.setattr(geometry, "_within_limits", counting)
+    monkeypatch.setattr(geometry, "_reach_within_limits", counting)
     run(SPEC, "open3d_point_to_plane")
     in_main = [name for name in calls if name == threading.main_thread().name]
     assert len(calls) >= 10 and not in_main  # the reader's and the run's checks, all in the reading thread
