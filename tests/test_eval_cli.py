@@ -202,3 +202,45 @@ def test_tum_files_paired_by_index_whose_stamps_disagree_are_said_to_be(tmp_path
 
     with pytest.raises(ConfigError, match=r"max_diff_s: max_diff_s must be a finite number of seconds > 0, got 0"):
         paired(Trajectory.from_tum(a), Trajectory.from_tum(b), associate=True, max_diff_s=0)
+
+
+def test_outputs_never_replace_inputs_and_settings_are_named_by_their_options(tmp_path, capsys):
+    """`--markdown EST` overwrote the estimate and `--json X --markdown X` the JSON (exit 0); --delta 1.5 read
+    "delta: ..." and --est-format TUM "format: ...", the library's names."""
+    gt = shared_path("evo_testdata", "KITTI_00_gt.txt")
+    est = tmp_path / "est.txt"
+    est.write_bytes(shared_path("evo_testdata", "KITTI_00_ORB.txt").read_bytes())
+    before = est.read_bytes()
+    for args, line in ((["--markdown", str(est)], f"--markdown: {est} is also EST (an input)"),
+                       (["--json", str(tmp_path / "x"), "--markdown", str(tmp_path / "x")], f"--markdown: {tmp_path / 'x'} is also --json"),
+                       (["--tables", str(gt)], f"--tables: {gt} is also REF (an input)"),
+                       (["--delta", "1.5"], "--delta: delta in frames must be an integer, got 1.5"),
+                       (["--delta-unit", "km"], "--delta-unit: unknown delta unit 'km'"),
+                       (["--est-format", "TUM"], "--est-format: unknown trajectory format 'TUM'")):
+        with pytest.raises(SystemExit) as exc:
+            main(["eval", str(gt), str(est), *args])
+        err = " ".join(capsys.readouterr().err.split())
+        assert exc.value.code == 1 and f"error: {line}" in err, (args, err)
+    assert est.read_bytes() == before and not (tmp_path / "x").exists()
+
+
+def test_library_settings_that_cannot_apply_are_refused():
+    """rpe(pairs=...) with point_distance scored evo's own 199 pairs and reported the 3 given; evaluate() with no drift
+    lengths or a single number was a traceback; "no" / "false" switches were taken as true."""
+    from lidarkit.errors import ConfigError
+    from lidarkit.eval import rpe
+
+    ref = Trajectory.from_kitti(shared_path("evo_testdata", "KITTI_00_gt.txt"))[:200]
+    est = Trajectory.from_kitti(shared_path("evo_testdata", "KITTI_00_ORB.txt"))[:200]
+    with pytest.raises(ConfigError, match="pairs: pairs= is not supported for the point_distance relation"):
+        rpe(ref, est, relation="point_distance", pairs=[(0, 5), (3, 9), (10, 50)])
+    assert rpe(ref, est, pairs=[(0, 5), (3, 9), (10, 50)]).n_errors == 3
+    for lengths in ((), 100.0, (100.0, -5.0), ("a",)):
+        with pytest.raises(ConfigError, match="drift_lengths_m: drift segment lengths must be a non-empty list of positive numbers"):
+            evaluate(ref, est, drift_lengths_m=lengths)
+    for setting in ("all_pairs", "associate", "drift"):
+        with pytest.raises(ConfigError, match=f"{setting}: {setting} must be True or False, got 'no'"):
+            evaluate(ref, est, **{setting: "no"})
+    with pytest.raises(ConfigError, match="all_pairs: all_pairs must be True or False"):
+        rpe(ref, est, 5, all_pairs="no")
+    assert rpe(ref, est, 5, all_pairs=False).n_errors == 39

@@ -70,8 +70,16 @@ def eval_command(
         kwargs = {"timestamps_s": times} if times is not None and kind == "kitti" else {}
         if times is not None and kind != "kitti":
             raise ConfigError("times files apply to KITTI-format trajectories only", source="--ref-times/--est-times")
-        return Trajectory.read(path, kind, **kwargs)
+        try:
+            return Trajectory.read(path, kind, **kwargs)
+        except ConfigError as err:
+            if err.source != "format":
+                raise
+            raise ConfigError(err.reason, source="--ref-format" if path == ref and ref_format else
+                              "--est-format" if path == est and est_format else "--format") from None
 
+    _distinct_outputs({"REF": ref, "EST": est, "--ref-times": ref_times, "--est-times": est_times, "--relations": relations},
+                      {"--json": json_out, "--markdown": markdown, "--plot": plot, "--tables": tables})
     atomic.check_target(json_out, "file")
     if relations is not None:
         if est is not None:
@@ -116,7 +124,13 @@ def eval_command(
         max_diff_s=max_diff,
         drift=drift,
     )
-    evaluation = evaluate(ref_traj, est_traj, settings)
+    try:
+        evaluation = evaluate(ref_traj, est_traj, settings)
+    except ConfigError as err:  # a setting named as the library calls it ("delta: ..."): named by its option
+        option = _OPTION_OF_SETTING.get(err.source or "")
+        if option is None:
+            raise
+        raise ConfigError(err.reason, source=option) from None
     console = stdout()
     console.print(report.evaluation_table(evaluation))
     if evaluation.drift is not None:
@@ -190,3 +204,23 @@ def _relations_report(est_traj, relations_path: Path, max_diff_s: float, json_ou
     if json_out is not None:
         report.write_json({**result.to_dict(), "relations_path": str(relations_path)}, json_out)
         console.print(f"wrote {json_out}")
+
+
+#: evaluation settings -> the option that sets them (a library error names the setting)
+_OPTION_OF_SETTING = {"delta": "--delta", "delta_unit": "--delta-unit", "legacy_pairs": "--legacy-pairs", "align": "--align",
+                      "all_pairs": "--all-pairs", "max_diff_s": "--max-diff", "drift_lengths_m": "--no-drift"}
+
+
+def _distinct_outputs(inputs: dict[str, Path | None], outputs: dict[str, Path | None]) -> None:
+    """ConfigError when an output would replace an input or another output (`--markdown EST` overwrote the estimate,
+    `--json X --markdown X` the JSON, both with exit 0)."""
+    seen: dict[Path, str] = {Path(p).resolve(): name for name, p in inputs.items() if p is not None}
+    for option, path in outputs.items():
+        if path is None:
+            continue
+        resolved = Path(path).resolve()
+        if resolved in seen:
+            kind = "an input" if seen[resolved] in inputs else "another output"
+            raise ConfigError(f"{path} is also {seen[resolved]} ({kind}): an output never replaces it", source=option)
+        seen[resolved] = option
+

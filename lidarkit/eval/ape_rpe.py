@@ -195,6 +195,13 @@ def _relation(name: str, allowed: tuple[str, ...]):
     return PoseRelation[RELATIONS[name]]
 
 
+def check_flags(**flags: Any) -> None:
+    """ConfigError for a switch that is not True or False (``all_pairs="no"``, a true string, scored every pair)."""
+    for name, value in flags.items():
+        if not isinstance(value, (bool, np.bool_)):
+            raise ConfigError(f"{name} must be True or False, got {value!r}", source=name)
+
+
 def _check_align(align: str, align_origin: bool, n_to_align: int | None, n_poses: int, source: str) -> int:
     """Validate the alignment settings; return evo's ``n`` (-1 = all poses)."""
     if align not in ALIGNMENTS:
@@ -353,6 +360,7 @@ def ape(
     from evo.core import metrics
 
     source = pair_name(ref, est)
+    check_flags(associate=associate)
     pose_relation = _relation(relation, APE_RELATIONS)
     ref, est = paired(ref, est, associate=associate, max_diff_s=max_diff_s)
     n = _check_align(align, align_origin, n_to_align, len(ref), source)
@@ -417,6 +425,7 @@ def rpe(
     from evo.core.units import Unit
 
     source = pair_name(ref, est)
+    check_flags(all_pairs=all_pairs, pairs_from_reference=pairs_from_reference, legacy_pairs=legacy_pairs, associate=associate)
     pose_relation = _relation(relation, RPE_RELATIONS)
     if delta_unit not in DELTA_UNITS:
         raise ConfigError(f"unknown delta unit {delta_unit!r}; known: {', '.join(DELTA_UNITS)}", source="delta_unit")
@@ -442,6 +451,10 @@ def rpe(
 
     evo_delta: float = int(delta) if unit is Unit.frames else delta
     given = pairs is not None
+    if given and not legacy_pairs and relation in ("point_distance", "point_distance_error_ratio"):
+        # (evo found its own pairs from the delta for these: 199 errors for the 3 pairs given, reported as those 3)
+        raise ConfigError(f"pairs= is not supported for the {relation} relation (evo pairs the poses itself); use delta",
+                          source="pairs")
     if given:
         pairs = _checked_pairs(pairs, len(ref), source)
     try:

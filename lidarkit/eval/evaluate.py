@@ -6,8 +6,10 @@ import logging
 from dataclasses import asdict, dataclass, replace
 from typing import Any
 
+import numpy as np
+
 from lidarkit.errors import ConfigError
-from lidarkit.eval.ape_rpe import APEResult, RPEResult, ape, rpe
+from lidarkit.eval.ape_rpe import APEResult, RPEResult, ape, check_flags, rpe
 from lidarkit.eval.kitti_drift import (
     KITTI_LENGTHS_M,
     KITTI_STEP_FRAMES,
@@ -40,6 +42,20 @@ class EvaluationSettings:
     drift: bool = True
     drift_lengths_m: tuple[float, ...] = KITTI_LENGTHS_M
     drift_step_frames: int = KITTI_STEP_FRAMES
+
+    def __post_init__(self) -> None:
+        """Switches that are True or False, and drift segment lengths that are positive numbers (an empty tuple or a
+        single number was a traceback; "false" computed the drift)."""
+        check_flags(all_pairs=self.all_pairs, pairs_from_reference=self.pairs_from_reference, legacy_pairs=self.legacy_pairs,
+                    associate=self.associate, drift=self.drift)
+        lengths = self.drift_lengths_m
+        try:
+            ok = len(lengths) > 0 and all(not isinstance(x, bool) and np.isfinite(float(x)) and float(x) > 0 for x in lengths)
+        except (TypeError, ValueError):
+            ok = False
+        if not ok:
+            raise ConfigError(f"drift segment lengths must be a non-empty list of positive numbers (m), got {lengths!r}",
+                              source="drift_lengths_m")
 
     def to_dict(self) -> dict[str, Any]:
         out = asdict(self)
