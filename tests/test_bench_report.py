@@ -278,6 +278,77 @@ def test_a_method_that_failed_on_most_seeds_is_not_the_best_and_its_cells_say_so
     assert cells[0][1] == "0.1 (4 of 5 failed)"
 
 
+def test_a_seed_without_a_value_is_counted_in_its_cell_and_such_a_row_is_not_the_best(tmp_path):
+    """A seed whose metric was NaN / inf / null was dropped from its cell without a word (``0.001`` as if all seeds
+    counted), and that row was named the best over its one finite seed."""
+    from lidarkit.bench.jobs import Job
+    from lidarkit.bench.report import _table_rows, pivot, summary_rows
+    from lidarkit.bench.results import make_record, write_result
+    from lidarkit.eval.report import json_safe
+
+    for seed, nanny in enumerate((float("nan"), float("inf"), 0.001)):
+        for noise_m, ape in ((0.1, nanny), (0.2, 0.2 + 0.01 * seed)):
+            job = Job("selftest", "e", "synth", {"kind": "synthetic"}, "random_walk", {"noise_m": noise_m}, seed=seed)
+            metrics = json_safe({"ape_rmse_m": ape})  # (as the worker stores them: NaN and inf become null)
+            write_result(tmp_path, make_record(job, job.key(), "1", {"status": "ok", "metrics": metrics,
+                                                                      "error": None, "runtime_s": 0.1}))
+    report = build_report(tmp_path, plots=False)
+    _, cells = pivot(report.tables[0], "ape_rmse_m")
+    assert cells == [["random_walk(noise_m=0.1)", "0.001 (2 of 3 no value)"], ["random_walk(noise_m=0.2)", "0.21 ± 0.01"]]
+    _, summary = summary_rows(report)
+    assert summary[0][3:5] == ["random_walk(noise_m=0.2)", "0.21 ± 0.01"]
+    _, rows = _table_rows(report.tables[0])
+    assert rows[0][3:5] == ["3/0", "0.001 (2 of 3 no value)"]
+
+
+def test_rows_of_different_alignments_say_theirs_and_are_not_ranked_together(tmp_path):
+    """VO rows with SE(3)-aligned (GT scale) and Sim(3)-aligned APE shared one column "(SE(3)-aligned / Sim(3)-aligned)"
+    with nothing per row, and the summary named one best method across the two alignments."""
+    from lidarkit.bench.jobs import Job
+    from lidarkit.bench.report import _table_rows, pivot, summary_rows
+    from lidarkit.bench.results import make_record, write_result
+
+    for method, ape, alignment in (("gt_scale", 0.005, "SE(3)-aligned"), ("mono", 0.015, "Sim(3)-aligned"),
+                                   ("mono_fast", 0.02, "Sim(3)-aligned")):
+        job = Job("selftest", "e", "synth", {"kind": "synthetic"}, method, {}, seed=0)
+        write_result(tmp_path, make_record(job, job.key(), "1", {
+            "status": "ok", "metrics": {"ape_rmse_m": ape}, "error": None, "runtime_s": 0.1,
+            "info": {"metric_alignment": {"ape_rmse_m": alignment}}}))
+    report = build_report(tmp_path, plots=False)
+    _, summary = summary_rows(report)
+    assert [row[2:6] for row in summary] == [["APE RMSE (SE(3)-aligned) [m]", "gt_scale", "0.005", "1"],
+                                             ["APE RMSE (Sim(3)-aligned) [m]", "mono", "0.015", "2"]]
+    _, cells = pivot(report.tables[0], "ape_rmse_m")
+    assert cells == [["gt_scale", "0.005 [SE(3)-aligned]"], ["mono", "0.015 [Sim(3)-aligned]"], ["mono_fast", "0.02 [Sim(3)-aligned]"]]
+    header, rows = _table_rows(report.tables[0])
+    assert header[4] == "APE RMSE (SE(3)-aligned / Sim(3)-aligned) [m]" and rows[1][4] == "0.015 [Sim(3)-aligned]"
+
+
+def test_each_trajectory_is_drawn_with_the_reference_of_its_own_seed(tmp_path):
+    """The trajectory plot drew every method against the reference of the first chosen record: a method whose first
+    good seed was 1 (another simulated drive) was drawn against seed 0's path."""
+    from lidarkit.bench.jobs import Job
+    from lidarkit.bench.report import _first_ok_per_method, _references
+    from lidarkit.bench.results import make_record, write_result
+
+    def path(seed):
+        return [[0.0, 0.0], [10.0, 8.0 * seed]]
+
+    for method, seed, ok in (("a_good", 0, True), ("a_good", 1, True), ("b_flaky", 0, False), ("b_flaky", 1, True)):
+        job = Job("selftest", "d", "sim", {"kind": "synthetic"}, method, {}, seed=seed)
+        series = {"trajectory_xy": {"ref": path(seed), "est": [[x, y + 0.2] for x, y in path(seed)]}}
+        outcome = ({"status": "ok", "metrics": {"ape_rmse_m": 0.28}, "series": series, "error": None, "runtime_s": 0.1} if ok
+                   else {"status": "failed", "metrics": {}, "error": {"type": "RuntimeError", "message": "diverged"}, "runtime_s": 0.1})
+        write_result(tmp_path, make_record(job, job.key(), "1", outcome))
+    chosen, _ = _first_ok_per_method(load_results(tmp_path), "trajectory_xy")
+    assert {label: r["job"]["seed"] for label, r in chosen.items()} == {"a_good": 0, "b_flaky": 1}
+    refs = _references(chosen)
+    assert list(refs) == ["0", "1"]
+    assert refs["0"].tolist() == path(0) and refs["1"].tolist() == path(1)
+    plot = next(p for p in build_report(tmp_path).plots if p.title.startswith("Trajectories"))
+    assert "against the reference of that seed" in plot.caption
+
+
 def test_a_pipe_in_a_name_does_not_break_the_markdown_tables(tmp_path):
     from lidarkit.bench.jobs import Job
     from lidarkit.bench.results import make_record, write_result
@@ -343,6 +414,32 @@ def test_an_earlier_reports_plots_and_tables_do_not_stay_beside_the_new_ones(res
     report = build_report(folder)
     assert sorted(p.name for p in (folder / "plots").iterdir()) == sorted(p.filename for p in report.plots)
     assert sorted(p.name for p in (folder / "tables").iterdir()) == ["my_notes.md"]
+
+
+def test_a_report_that_cannot_be_written_leaves_the_earlier_plots_and_tables(results_dir, tmp_path):
+    """report.html in the way (a folder): the report failed only after it had removed the earlier report's plots/ and
+    tables/, so neither the old report nor a new one had its figures."""
+    import shutil
+
+    from lidarkit.errors import OutputError
+
+    folder = tmp_path / "reused"
+    shutil.copytree(results_dir, folder)
+    build_report(folder)
+    (folder / "tables").mkdir(exist_ok=True)
+    (folder / "tables" / "ape_rmse.md").write_text("an earlier report's table")
+    before = {p.name: p.read_bytes() for p in (folder / "plots").iterdir()}
+    assert len(before) >= 3
+    (folder / "report.html").unlink()
+    (folder / "report.html").mkdir()
+    with pytest.raises(OutputError) as info:
+        build_report(folder, plots=False)
+    assert str(info.value) == f"{folder / 'report.html'}: cannot write: is a folder (a file name is needed here)"
+    assert {p.name: p.read_bytes() for p in (folder / "plots").iterdir()} == before
+    assert (folder / "tables" / "ape_rmse.md").read_text() == "an earlier report's table"
+    (folder / "report.html").rmdir()
+    build_report(folder, plots=False)  # written: now the earlier figures and tables go
+    assert not list((folder / "plots").iterdir()) and not list((folder / "tables").iterdir())
 
 
 def test_a_suite_job_whose_result_cannot_be_read_is_not_called_not_run(tmp_path):

@@ -88,6 +88,37 @@ def test_failing_job_is_recorded_and_the_suite_completes(tmp_path):
     assert (forced.skipped, forced.ran) == (0, 8)
 
 
+def test_a_metric_that_is_not_a_number_fails_its_job_naming_the_metric(tmp_path, monkeypatch):
+    """A custom task's text metric was recorded "ok" though no reader takes it: the result was never read back and
+    the job ran again on every resume."""
+    from lidarkit.bench import tasks as bench_tasks
+    from lidarkit.bench.tasks import Metric, Task, TaskOutput, register_task
+
+    monkeypatch.setattr(bench_tasks, "_REGISTERED", {})
+    monkeypatch.setattr(bench_tasks, "_INSTANCES", {})
+
+    @register_task("text_metric_test_task")
+    class TextMetric(Task):
+        dataset_kinds = ("synthetic",)
+        metrics = (Metric("v", "value"),)
+
+        def run(self, job):
+            return TaskOutput(metrics={"v": "abc" if job.method == "text" else 1.5})
+
+    suite = load_suite(suite_file(tmp_path, """
+        experiments:
+          - {task: text_metric_test_task, dataset: {kind: synthetic}, methods: [text, number]}
+        """))
+    summary = run_suite(suite, tmp_path / "out", executor="serial")
+    assert (summary.ok, summary.failed) == (1, 1)
+    failed = next(r for r in load_results(tmp_path / "out") if r["status"] == "failed")
+    assert failed["metrics"] == {} and failed["error"]["type"] == "DataError"
+    assert failed["error"]["message"] == ("task text_metric_test_task: metric v is 'abc', not a number "
+                                          "(a task's metrics are numbers, or None where not defined)")
+    again = run_suite(suite, tmp_path / "out", executor="serial")
+    assert (again.skipped, again.failed) == (1, 1)  # the number job is read back as done
+
+
 def test_result_file_records_key_version_and_resolved_job(tmp_path):
     from lidarkit import __version__
     from lidarkit.provenance import code_version
@@ -312,6 +343,21 @@ def test_bench_dry_run_lists_jobs_and_runs_nothing(tmp_path, capsys):
     suite = load_suite(path)
     assert all(job.key() in out for job in suite.jobs)
     assert not (tmp_path / "out").exists()
+
+
+def test_a_forced_dry_run_does_not_call_the_jobs_it_would_rerun_done(tmp_path, capsys):
+    """``--dry-run --force`` showed done=yes for the finished jobs, which --force runs again."""
+    from lidarkit.cli import main
+
+    path = suite_file(tmp_path, TINY)
+    run_suite(load_suite(path), tmp_path / "out", executor="serial")  # 6 ok, 2 failed (retried anyway)
+    for flags, done in (([], "yes"), (["--force"], "rerun")):
+        with pytest.raises(SystemExit) as exc:
+            main(["bench", str(path), "--out", str(tmp_path / "out"), "--dry-run", *flags])
+        assert exc.value.code == 0
+        rows = [line.split("│") for line in capsys.readouterr().out.splitlines() if line.count("│") == 7]
+        cells = [row[-2].strip() for row in rows if row[1].strip()]  # (a job's first line: its key; then wrapped lines)
+        assert sorted(cells) == ["", ""] + [done] * 6
 
 
 def test_a_dataset_warning_reaches_every_job_that_uses_the_dataset(tmp_path):

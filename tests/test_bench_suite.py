@@ -222,6 +222,20 @@ def test_cli_refuses_bad_suite_before_running_anything(tmp_path, capsys, case):
     assert not out.exists()  # nothing ran, nothing written
 
 
+def test_options_for_a_builtin_task_without_options_name_the_task(tmp_path):
+    """A built-in task (loaded by module, not registered by name) had no name: "task '' takes no options, got foo"."""
+    path = write(tmp_path, """
+        experiments:
+          - task: selftest
+            dataset: {kind: synthetic}
+            methods: [random_walk]
+            options: {foo: 1}
+        """)
+    with pytest.raises(ConfigError) as info:
+        load_suite(path)
+    assert str(info.value) == f"{path} (experiments[0].options, line 6): task 'selftest' takes no options, got foo"
+
+
 def test_missing_suite_file(tmp_path):
     with pytest.raises(DataError, match="suite file not found"):
         load_suite(tmp_path / "absent.yaml")
@@ -326,7 +340,7 @@ def test_a_pf_suite_scoring_past_the_end_of_its_data_is_refused_before_running(t
             options: {{mse_start: 100000}}
             methods: [particle_filter]
     """))
-    with pytest.raises(ConfigError, match=r"pf.yaml \(experiments\[0\].dataset, line 6\): mse_start 100000 is not below the data's 331 steps"):
+    with pytest.raises(ConfigError, match=r"pf.yaml \(experiments\[0\].options, line 7\): mse_start 100000 is not below the data's 331 steps"):
         load_suite(path)
     path.write_text(path.read_text().replace("100000", "10"))
     assert len(load_suite(path).jobs) == 1

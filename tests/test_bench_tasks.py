@@ -279,3 +279,32 @@ def test_a_scan_folder_without_scans_is_refused_with_the_suite(tmp_path):
         with pytest.raises(DataError, match=reason) as info:
             load_suite(path)
         assert "experiments[0].dataset" in str(info.value)
+
+
+def test_pairs_and_frames_outside_the_kitti_sequence_are_refused_with_the_suite(tmp_path):
+    """``pairs: [[94, 95]]`` and ``frames: [50, 51, 52]`` on the 10-scan KITTI 00 passed the dry run (pairs were never
+    checked, frames only against a stand-in length); every job then failed and the run exited 0."""
+    kitti = shared_path("kitti_odometry")
+    for task, options, reason in (
+        ("icp_pair", "{pairs: [[8, 9], [94, 95]]}", "pairs name frames the dataset lacks: 94, 95 (it has frames 0..9)"),
+        ("odometry", "{frames: [50, 51, 52]}", "frames: frame indices must lie in 0..9 (the dataset has 10 scans)"),
+        ("odometry", '{frames: "50:60"}', "frames: '50:60' selects no scan of the dataset's 10"),
+    ):
+        path = write(tmp_path, f"""
+            experiments:
+              - task: {task}
+                dataset: {{kind: kitti, path: "{kitti}", sequence: "00"}}
+                options: {options}
+                methods: [vanilla]
+            """)
+        with pytest.raises(ConfigError) as info:
+            load_suite(path)
+        assert str(info.value) == f"{path} (experiments[0].options, line 5): {reason}"
+    path = write(tmp_path, f"""
+        experiments:
+          - task: icp_pair
+            dataset: {{kind: kitti, path: "{kitti}", sequence: "00"}}
+            options: {{pairs: [[8, 9]]}}
+            methods: [vanilla]
+        """)
+    assert len(load_suite(path).jobs) == 1  # frames inside the sequence still pass

@@ -104,6 +104,19 @@ def reference_comparisons(records: list[dict[str, Any]], reference: str = REFERE
     return out
 
 
+def remove_stale_tables(out_dir: Path, pub: Publication) -> None:
+    """Remove an earlier report's tables that ``pub`` does not hold (a run over shorter sequences has no drift tables),
+    so that tables/ never mixes two reports; called once the report files are written (other files are left)."""
+    from lidarkit.eval.tables import TABLE_NAMES, TABLE_SUFFIXES
+
+    keep = {path.name for path in pub.files}
+    for stem in TABLE_NAMES:
+        for suffix in TABLE_SUFFIXES:
+            stale = out_dir / TABLES_DIR / f"{stem}{suffix}"
+            if stale.name not in keep and stale.is_file():
+                stale.unlink()
+
+
 def build_publication(records: list[dict[str, Any]], out_dir: Path, *, plots: bool = True) -> Publication:
     """Tables (and box plots with ``plots``) of the odometry records, written under ``out_dir``; paired
     comparisons with the reference (kiss)."""
@@ -114,8 +127,8 @@ def build_publication(records: list[dict[str, Any]], out_dir: Path, *, plots: bo
                                 rpe_delta="frame")
     pub = Publication(tables.tables)
     pub.comparisons = reference_comparisons(records)
-    if pub.tables or (out_dir / TABLES_DIR).is_dir():  # (an earlier report's tables that these replace are removed)
-        pub.files += tables.write(out_dir / TABLES_DIR)
+    # (an earlier report's tables that these do not replace are removed by remove_stale_tables, after the report files)
+    pub.files += [path for t in pub.tables for path in t.write(out_dir / TABLES_DIR)]
     if not pub.tables:
         return pub
     if plots and segments:

@@ -43,6 +43,9 @@ class MetricInfo:
     name: str
     label: str
     kind: str = "accuracy"
+    by_alignment: dict[str, str] = field(default_factory=dict)
+    """Where rows state different alignments of this metric (VO: SE(3) for GT scale, else Sim(3)): alignment -> the
+    label naming it alone. Such rows are not ranked against each other."""
 
 
 @dataclass
@@ -58,6 +61,7 @@ class Row:
     stats: dict[str, tuple[float, float, int]]  # metric -> (mean, std, n)
     summaries: dict[str, Any] = field(default_factory=dict)  # metric -> lidarkit.eval.Summary (median, bootstrap CI)
     n_missing: int = 0  # seeds of the suite with no result yet (an interrupted run)
+    alignment: dict[str, str] = field(default_factory=dict)  # metric -> the alignment its records state
 
 
 @dataclass
@@ -162,7 +166,7 @@ def aggregate(records: list[dict[str, Any]], missing: list[dict[str, Any]] = ())
                 stats[m.name] = _stats(values)
                 summaries[m.name] = summarize([v for v in values if v is not None and math.isfinite(v)], seed=0)
             rows.append(Row(task, experiment, dataset, method, len(ok), len(items) - len(ok), stats, summaries,
-                            n_missing=missing_per_row.get(ident, 0)))
+                            n_missing=missing_per_row.get(ident, 0), alignment=_stated_alignment(ok)))
         higher = frozenset(name for r in recs for name in (r.get("higher_is_better") or ()))
         tables.append(TaskTable(task, metrics, rows, higher))
     return tables
@@ -170,15 +174,34 @@ def aggregate(records: list[dict[str, Any]], missing: list[dict[str, Any]] = ())
 
 def label_alignment(metric: MetricInfo, records: list[dict[str, Any]]) -> MetricInfo:
     """The metric's label naming the alignment its records state (``info["metric_alignment"][name]``), e.g.
-    "APE RMSE [m]" -> "APE RMSE (sim3-aligned) [m]"; several alignments are all named; a label that already
-    names it, or records that state none, keep the label."""
+    "APE RMSE [m]" -> "APE RMSE (sim3-aligned) [m]"; several alignments are all named (and ``by_alignment`` set);
+    a label that already names it, or records that state none, keep the label."""
     stated = sorted({str(a) for r in records if (a := ((r.get("info") or {}).get("metric_alignment") or {}).get(metric.name))})
-    text = " / ".join(stated)
     if not stated or all(a in metric.label for a in stated):
         return metric
-    head, sep, unit = metric.label.rpartition(" [")
-    label = f"{head} ({text}){sep}{unit}" if sep and metric.label.endswith("]") else f"{metric.label} ({text})"
-    return MetricInfo(metric.name, label, metric.kind)
+    by_alignment = {a: _label_naming(metric.label, a) for a in stated} if len(stated) > 1 else {}
+    return MetricInfo(metric.name, _label_naming(metric.label, " / ".join(stated)), metric.kind, by_alignment)
+
+
+def _label_naming(label: str, text: str) -> str:
+    """``label`` with ``text`` before its unit: "APE RMSE [m]" -> "APE RMSE (Sim(3)-aligned) [m]"."""
+    head, sep, unit = label.rpartition(" [")
+    return f"{head} ({text}){sep}{unit}" if sep and label.endswith("]") else f"{label} ({text})"
+
+
+def _stated_alignment(records: list[dict[str, Any]]) -> dict[str, str]:
+    """Metric -> the alignment the records of one row state (seeds stating several: all of them named)."""
+    stated: dict[str, set[str]] = defaultdict(set)
+    for r in records:
+        for name, a in (((r.get("info") or {}).get("metric_alignment")) or {}).items():
+            stated[name].add(str(a))
+    return {name: " / ".join(sorted(a)) for name, a in stated.items()}
+
+
+def _alignment_note(row: Row, metric: MetricInfo) -> str:
+    """`` [Sim(3)-aligned]`` in a cell of a column whose rows state different alignments, else ''."""
+    a = row.alignment.get(metric.name)
+    return f" [{a}]" if metric.by_alignment and a else ""
 
 
 def _natural(params: dict[str, Any]) -> tuple:
@@ -241,6 +264,19 @@ def _first_ok_per_method(items: list[dict[str, Any]], series: str) -> tuple[dict
     return _capped(dict(sorted(out.items())))
 
 
+def _references(chosen: dict[str, dict[str, Any]]) -> dict[str, np.ndarray]:
+    """The reference drawn with each chosen record, one per distinct path: ``{"0, 2": (N, 2) xy}`` by the seeds that
+    have it. Each estimate is drawn with its own seed's reference (a seeded simulation drives another path per seed:
+    a method whose first good seed was 1 was drawn against seed 0's path)."""
+    by_path: dict[str, tuple[list[int], np.ndarray]] = {}
+    for r in chosen.values():
+        ref = r["series"]["trajectory_xy"].get("ref") or []
+        if ref:
+            seeds, _ = by_path.setdefault(canonical_json(ref), ([], np.asarray(ref, dtype=float)))
+            seeds.append(int(r["job"]["seed"]))
+    return {", ".join(map(str, sorted(set(seeds)))): xy for seeds, xy in by_path.values()}
+
+
 def _capped(lines: dict[str, Any]) -> tuple[dict[str, Any], str]:
     """At most :data:`MAX_LINES_PER_PLOT` of ``lines`` (a legend beyond that is unreadable) and a note naming the rest
     (12 methods were drawn as 8, the rest left out without a word)."""
@@ -267,9 +303,10 @@ def make_plots(records: list[dict[str, Any]]) -> list[Plot]:
         chosen, left_out = _first_ok_per_method(items, "trajectory_xy")
         if chosen:
             fig, ax = plt.subplots(figsize=(6, 4.5))
-            ref = np.asarray(next(iter(chosen.values()))["series"]["trajectory_xy"]["ref"], dtype=float)
-            if ref.size:
-                ax.plot(ref[:, 0], ref[:, 1], "k--", lw=2, label="reference")
+            refs = _references(chosen)
+            for k, (seeds, ref) in enumerate(refs.items()):
+                ax.plot(ref[:, 0], ref[:, 1], ("--", ":", "-.")[k % 3], color="k", lw=2,
+                        label="reference" if len(refs) == 1 else f"reference (seed {seeds})")
             for label, r in chosen.items():
                 est = np.asarray(r["series"]["trajectory_xy"]["est"], dtype=float)
                 ax.plot(est[:, 0], est[:, 1], lw=1.2, label=f"{label} (seed {r['job']['seed']})")
@@ -280,7 +317,7 @@ def make_plots(records: list[dict[str, Any]]) -> list[Plot]:
             ax.set_title(f"trajectories: {where}", fontsize=9)
             plots.append(Plot(f"Trajectories — {where}", f"traj_{_file_slug(where)}.png", _png(fig), task,
                               f"Top view of the estimated trajectories (first seed of each method) against the "
-                              f"reference (dashed): {experiment}, {dataset}.{left_out}"))
+                              f"reference of that seed (black): {experiment}, {dataset}.{left_out}"))
         chosen, left_out = _first_ok_per_method(items, "error_over_time")
         if chosen:
             fig, ax = plt.subplots(figsize=(6, 3.2))
@@ -364,7 +401,8 @@ def _sweep_plots(records: list[dict[str, Any]]) -> list[Plot]:
 def _table_rows(table: TaskTable) -> tuple[list[str], list[list[str]]]:
     header = ["experiment", "dataset", "method", "ok/failed"] + [m.label for m in table.metrics]
     rows = [
-        [r.experiment, r.dataset, r.method, f"{r.n_ok}/{r.n_failed}"] + [format_stat(r.stats[m.name]) for m in table.metrics]
+        [r.experiment, r.dataset, r.method, f"{r.n_ok}/{r.n_failed}"]
+        + [format_stat(r.stats[m.name]) + _no_value_note(r, m.name) + _alignment_note(r, m) for m in table.metrics]
         for r in table.rows
     ]
     return header, rows
@@ -372,12 +410,13 @@ def _table_rows(table: TaskTable) -> tuple[list[str], list[list[str]]]:
 
 def pivot(table: TaskTable, metric: str) -> tuple[list[str], list[list[str]]]:
     """Methods x datasets for one metric (``experiment: method`` rows, dataset columns, mean ± std cells)."""
+    info = next((m for m in table.metrics if m.name == metric), MetricInfo(metric, metric))
     datasets = sorted({r.dataset for r in table.rows})
     cells: dict[str, dict[str, str]] = {}
     one_experiment = len({r.experiment for r in table.rows}) == 1  # no prefix repeated on every row
     for r in table.rows:
         label = r.method if one_experiment else f"{r.experiment}: {r.method}"
-        cells.setdefault(label, {})[r.dataset] = format_stat(r.stats[metric]) + _failed_note(r)
+        cells.setdefault(label, {})[r.dataset] = format_stat(r.stats[metric]) + _failed_note(r, metric) + _alignment_note(r, info)
     header = ["method"] + datasets
     return header, [[label] + [row.get(d, "") for d in datasets] for label, row in cells.items()]
 
@@ -519,7 +558,8 @@ def _figure_html(png: bytes, alt: str, caption: str) -> str:
 
 
 def summary_rows(report: Report) -> tuple[list[str], list[list[str]]]:
-    """The page's first table: per task and dataset, the best method on the task's headline accuracy metric."""
+    """The page's first table: per task and dataset, the best method on the task's headline accuracy metric (per
+    alignment where the rows state different ones: an SE(3)- and a Sim(3)-aligned APE are not ranked together)."""
     header = ["section", "dataset", "headline metric", "best method", "value (mean ± std)", "methods"]
     rows = []
     for table in report.tables:
@@ -527,25 +567,44 @@ def summary_rows(report: Report) -> tuple[list[str], list[list[str]]]:
         if metric is None:
             continue
         better_higher = metric.name in table.higher_is_better or _better_higher(table.task, metric.name)
-        for dataset in sorted({r.dataset for r in table.rows}):
-            candidates = [r for r in table.rows if r.dataset == dataset and r.stats[metric.name][2] > 0]
-            if not candidates:
-                continue
+        groups: dict[tuple[str, str], list[Row]] = defaultdict(list)
+        for r in table.rows:
+            if r.stats[metric.name][2] > 0:
+                groups[(r.dataset, r.alignment.get(metric.name, "") if metric.by_alignment else "")].append(r)
+        for (dataset, alignment), candidates in sorted(groups.items()):
             # a method that failed on some seeds is not the best over one lucky seed: complete rows come first
             sign = -1.0 if better_higher else 1.0
-            best = min(candidates, key=lambda r: (r.n_failed > 0 or r.n_missing > 0, sign * r.stats[metric.name][0]))
-            rows.append([table.task, dataset, metric.label, _short_label(best, table),
-                         format_stat(best.stats[metric.name]) + _failed_note(best),
-                         str(len({r.method for r in table.rows if r.dataset == dataset}))])
+            # (a seed with no value, NaN, counts as a failed one)
+            best = min(candidates, key=lambda r: (r.n_failed > 0 or r.n_missing > 0 or _n_no_value(r, metric.name) > 0,
+                                                  sign * r.stats[metric.name][0]))
+            rows.append([table.task, dataset, metric.by_alignment.get(alignment, metric.label), _short_label(best, table),
+                         format_stat(best.stats[metric.name]) + _failed_note(best, metric.name),
+                         str(len({r.method for r in table.rows if r.dataset == dataset
+                                  and (not alignment or r.alignment.get(metric.name) == alignment)}))])
     return header, rows
 
 
-def _failed_note(row: Row) -> str:
-    """`` (3 of 5 failed)`` / `` (4 of 12 not run)`` for a row some of whose seeds failed or have no result yet (its
-    numbers are over the others), else ''."""
+def _n_no_value(row: Row, metric: str) -> int:
+    """Seeds that ran but gave ``metric`` no finite value (NaN, inf, null): left out of the cell's numbers. 0 when no
+    seed has one (the cell is a dash: a metric the method does not report)."""
+    n = row.stats[metric][2]
+    return row.n_ok - n if n > 0 else 0
+
+
+def _failed_note(row: Row, metric: str | None = None) -> str:
+    """`` (3 of 5 failed)`` / `` (4 of 12 not run)`` / `` (2 of 3 no value)`` for a row some of whose seeds failed, have
+    no result yet or gave ``metric`` no finite value (its numbers are over the others), else ''."""
     total = row.n_ok + row.n_failed + row.n_missing
-    notes = [f"{row.n_failed} of {total} failed"] * bool(row.n_failed) + [f"{row.n_missing} of {total} not run"] * bool(row.n_missing)
+    n_no_value = 0 if metric is None else _n_no_value(row, metric)
+    notes = ([f"{row.n_failed} of {total} failed"] * bool(row.n_failed) + [f"{row.n_missing} of {total} not run"] * bool(row.n_missing)
+             + [f"{n_no_value} of {total} no value"] * bool(n_no_value))
     return f" ({', '.join(notes)})" if notes else ""
+
+
+def _no_value_note(row: Row, metric: str) -> str:
+    """`` (2 of 3 no value)`` where some of the row's seeds gave ``metric`` no finite value, else ''."""
+    n = _n_no_value(row, metric)
+    return f" ({n} of {row.n_ok + row.n_failed + row.n_missing} no value)" if n else ""
 
 
 def _better_higher(task: str, metric: str) -> bool:
@@ -726,23 +785,26 @@ def build_report(
             report.failures.append({"key": r["key"], "label": _label(r), "error": f"{err.get('type')}: {err.get('message')}"})
     if n_warnings > MAX_LISTED_WARNINGS:  # (the list stopped at 100 without a word)
         report.warnings.append(("...", f"and {n_warnings - MAX_LISTED_WARNINGS} more job warnings (each job's in jobs/<key>.json)"))
+    texts = [out_dir / "report.md", out_dir / "report.csv", out_dir / "report.html"]
+    for path in texts:  # (a report file that cannot be written is refused before any figure or table is)
+        atomic.check_target(path)
     if plots:
         report.plots = make_plots(records)
         for p in report.plots:
             atomic.write_bytes(out_dir / "plots" / p.filename, p.png)
-    from lidarkit.bench.publication import build_publication
+    from lidarkit.bench.publication import build_publication, remove_stale_tables
 
     report.publication = build_publication(records, out_dir, plots=plots)
-    # plots/ is the report's own: an earlier report's figures this one does not draw go (all of them with plots=False)
+    # the three describe one suite: all replaced or none (a full disk at report.html left .md and .csv of the new one)
+    report.markdown_path, report.csv_path, report.html_path = atomic.write_texts(
+        dict(zip(texts, (_markdown(report, title), _csv(report), _html(report, title)))))
+    # plots/ and tables/ are the report's own: an earlier report's figures and tables this one does not draw go (all
+    # figures with plots=False), once its report files are in place (a report that failed to write had removed them)
     drawn = {p.filename for p in report.plots} | {path.name for _, path in report.publication.boxplots}
     for stale in (out_dir / "plots").glob("*.png"):
         if stale.name not in drawn:
             stale.unlink()
-
-    # the three describe one suite: all replaced or none (a full disk at report.html left .md and .csv of the new one)
-    report.markdown_path, report.csv_path, report.html_path = atomic.write_texts({
-        out_dir / "report.md": _markdown(report, title), out_dir / "report.csv": _csv(report),
-        out_dir / "report.html": _html(report, title)})
+    remove_stale_tables(out_dir, report.publication)
     return report
 
 

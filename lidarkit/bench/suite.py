@@ -322,7 +322,7 @@ def load_suite(path: str | Path, *, skip_unavailable: bool = False, only_tasks: 
                         f"task {exp.task!r} does not take dataset kind {spec['kind']!r}; it takes: {', '.join(task.dataset_kinds)}",
                         source="dataset",
                     )
-                _check(locator, loc, task.validate_dataset, spec, options)
+                _check(locator, loc, task.validate_dataset, spec, options, options_loc=(*exp_loc, "options"))
             except DataError as err:
                 if skip_unavailable and str(spec.get("path", "")).startswith(SAMPLE_PREFIX):
                     missing_sample = f"bundled sample {spec['path']} is not installed ({err.reason})"
@@ -387,12 +387,13 @@ def load_suite(path: str | Path, *, skip_unavailable: bool = False, only_tasks: 
     return Suite(name=model.name, path=path, jobs=jobs, description=model.description, skipped=skipped)
 
 
-def _check(locator: _Locator, loc: tuple[Any, ...], fn: Any, *args: Any) -> None:
-    """Call a task validator; its errors (and a validator bug) become errors naming file, key and line."""
+def _check(locator: _Locator, loc: tuple[Any, ...], fn: Any, *args: Any, options_loc: tuple[Any, ...] | None = None) -> None:
+    """Call a task validator; its errors (and a validator bug) become errors naming file, key and line (``options_loc``
+    for an error about the options, e.g. a dataset check of ``pairs`` against the dataset's scans)."""
     try:
         fn(*args)
     except LidarKitError as err:
-        raise locator.error(err, loc) from None
+        raise locator.error(err, options_loc if options_loc is not None and err.source == "options" else loc) from None
     except Exception as err:  # noqa: BLE001 - a validator bug must still name the place
         raise ConfigError(f"{type(err).__name__}: {err}", source=locator.path, location=locator.location(loc)) from None
 

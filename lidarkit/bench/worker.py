@@ -31,7 +31,9 @@ class _WarningCapture(logging.Handler):
 
 def execute_job(spec: dict[str, Any]) -> dict[str, Any]:
     """Run the job described by ``spec`` (``Job.spec()``); a raising job gives ``status="failed"`` with its error."""
+    from lidarkit.bench.results import malformed
     from lidarkit.bench.tasks import get_task
+    from lidarkit.errors import DataError
     from lidarkit.eval.report import json_safe
 
     started = _utc_now()
@@ -46,7 +48,13 @@ def execute_job(spec: dict[str, Any]) -> dict[str, Any]:
         job = Job.from_spec(spec)
         task = get_task(job.task)
         output = task.run(job)
-        record["metrics"] = json_safe(output.metrics)
+        metrics = json_safe(output.metrics)
+        # a metric no reader takes (text, an array) fails the job: recorded "ok", it was never read back and the job
+        # ran again on every resume
+        problem = malformed({"job": job.spec(), "status": "ok", "metrics": metrics})
+        if problem:
+            raise DataError(f"{problem} (a task's metrics are numbers, or None where not defined)", source=f"task {job.task}")
+        record["metrics"] = metrics
         # the direction of each metric as the task declares it, kept with the result: a process that reads the results
         # without the task (a task registered in the script that ran the suite) took every metric as lower-is-better
         record["higher_is_better"] = sorted(m.name for m in task.metrics if m.better == "higher")

@@ -182,13 +182,15 @@ def bench(
     if dry_run:
         from lidarkit.bench.results import is_finished
 
-        table = Table(title=f"{suite.name}: {len(suite.jobs)} jobs")
+        # done: a result is there and the run skips the job; with --force it runs again ("rerun", not "yes")
+        table = Table(title=f"{suite.name}: {len(suite.jobs)} jobs" + (" (--force: every job runs)" if force else ""))
         table.add_column("key", no_wrap=True, min_width=20)
         for col in ("task", "dataset", "method", "seed", "done"):
             table.add_column(col, overflow="fold")
         for job in suite.jobs:
             key = job.key()
-            table.add_row(key, job.task, job.dataset_name, job.method_label, str(job.seed), "yes" if is_finished(out, key) else "")
+            done = ("rerun" if force else "yes") if is_finished(out, key) else ""
+            table.add_row(key, job.task, job.dataset_name, job.method_label, str(job.seed), done)
         stdout().print(table)
         return
     summary = run_with_progress(suite, out, executor=executor, workers=workers, address=address, force=force)

@@ -117,6 +117,7 @@ def get_task(name: str) -> Task:
     elif name in _BUILTIN:
         module_name, attr = _BUILTIN[name].split(":")
         cls = getattr(importlib.import_module(module_name), attr)
+        cls.name = cls.name or name  # (a built-in class is not registered by name: its messages read "task ''")
     else:
         raise ConfigError(f"unknown task {name!r}; known: {', '.join(available_tasks())}", source="task")
     _INSTANCES[name] = cls()

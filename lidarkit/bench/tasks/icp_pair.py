@@ -18,7 +18,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from lidarkit.bench.jobs import Job
 from lidarkit.bench.tasks import Metric, Task, TaskOutput, import_module_for_task
-from lidarkit.bench.tasks._datasets import check_reader_options, open_dataset_spec, options_model, seeded_dataset
+from lidarkit.bench.tasks._datasets import OPENED_AT_LOAD, check_reader_options, open_dataset_spec, options_model, seeded_dataset
 from lidarkit.bench.datasets import dataset_path
 from lidarkit.errors import ConfigError, DataError
 
@@ -75,6 +75,25 @@ def _pairs(options: IcpPairOptions, dataset: Any) -> list[tuple[int, int]]:
     return [(k, k + 1) for k in range(min(options.max_pairs, len(dataset) - 1))]
 
 
+def check_pairs(options: IcpPairOptions, spec: dict[str, Any]) -> None:
+    """Pairs naming a scan the dataset lacks are a ConfigError with the suite (each job failed "no scan for frame 95",
+    exit 0); checked for the datasets opened at suite load anyway (KITTI: frame numbers, else scan indices)."""
+    if not options.pairs or spec["kind"] not in OPENED_AT_LOAD:
+        return
+    dataset = open_dataset_spec(spec)
+    if options.ground_truth_file is None and hasattr(dataset, "read_scan_by_frame"):
+        frames = [int(f) for f in dataset.frames]
+        missing = sorted({i for pair in options.pairs for i in pair} - set(frames))
+        have = f"frames {frames[0]}..{frames[-1]}" if frames else "no scans"
+        what = "frames"
+    else:
+        missing = sorted({i for pair in options.pairs for i in pair if not 0 <= i < len(dataset)})
+        have = f"scan indices 0..{len(dataset) - 1}"
+        what = "scan indices"
+    if missing:
+        raise ConfigError(f"pairs name {what} the dataset lacks: {', '.join(map(str, missing))} (it has {have})", source="options")
+
+
 class IcpPairTask(Task):
     description = "pairwise ICP on scan pairs with ground truth (final error, iterations, runtime, RMSE history)"
     dataset_kinds = ("kitti", "folder", "sim_lidar", "kitti_raw")
@@ -111,6 +130,7 @@ class IcpPairTask(Task):
         opts = IcpPairOptions(**options)
         if opts.ground_truth_file is not None:
             read_T_target_source(dataset_path(dataset) / opts.ground_truth_file)
+        check_pairs(opts, dataset)
 
     def validate(self, method: str, params: dict[str, Any], dataset: dict[str, Any], options: dict[str, Any]) -> None:
         from lidarkit.registration import get_icp

@@ -15,7 +15,7 @@ from pydantic import BaseModel, ConfigDict
 
 from lidarkit.bench.jobs import Job
 from lidarkit.bench.tasks import Metric, Task, TaskOutput, import_module_for_task
-from lidarkit.bench.tasks._datasets import check_reader_options, open_dataset_spec, options_model, require_kitti_data, seeded_dataset
+from lidarkit.bench.tasks._datasets import OPENED_AT_LOAD, check_reader_options, open_dataset_spec, options_model, require_kitti_data, seeded_dataset
 from lidarkit.errors import ConfigError
 
 MAX_SERIES_POINTS = 2000
@@ -116,6 +116,7 @@ class OdometryTask(Task):
     def validate_dataset(self, dataset: dict[str, Any], options: dict[str, Any]) -> None:
         check_reader_options(dataset)
         require_kitti_data(dataset, "scans")
+        check_frames(options.get("frames"), dataset)
 
     def validate(self, method: str, params: dict[str, Any], dataset: dict[str, Any], options: dict[str, Any]) -> None:
         from lidarkit.registration import get_icp
@@ -124,6 +125,22 @@ class OdometryTask(Task):
 
     def run(self, job: Job) -> TaskOutput:
         return run_odometry_job(job)[1]
+
+
+def check_frames(frames: Any, spec: dict[str, Any]) -> None:
+    """``frames`` checked against the length of a dataset opened at suite load (a stand-in length let [50, 51, 52]
+    through on a 10-scan sequence, and every job failed, exit 0); a ConfigError naming the options."""
+    if frames is None or spec["kind"] not in OPENED_AT_LOAD:
+        return
+    from lidarkit.odometry.inputs import parse_frames
+
+    n_scans = len(open_dataset_spec(spec))
+    try:
+        selected = parse_frames(frames, n_scans)
+    except ConfigError as err:
+        raise ConfigError(f"frames: {err.reason} (the dataset has {n_scans} scans)", source="options") from None
+    if len(selected) == 0:
+        raise ConfigError(f"frames: {frames!r} selects no scan of the dataset's {n_scans}", source="options")
 
 
 def scalar_metrics(result: Any) -> dict[str, float]:
