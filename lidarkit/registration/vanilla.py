@@ -25,7 +25,8 @@ DEFAULT_INLIER_DISTANCE_M = 1.0
 
 
 class VanillaConfig(RegistrationConfig):
-    max_iterations: int = Field(100, ge=1, description="maximum number of ICP iterations")
+    max_iterations: int = Field(100, ge=1, description="maximum number of ICP iterations of each stage (with coarse_stride > "
+                                "1 the coarse and the full-resolution stage each get as many: iterations reports both)")
     epsilon_m2: float = Field(1e-6, ge=0, description="stop when |MSE_k - MSE_k-1| < epsilon (m^2)")
     max_correspondence_distance_m: float | None = Field(
         None, gt=0, description="ignore pairs farther apart than this (m); None uses every nearest neighbour (the report's ICP)"
