@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 import textwrap
@@ -729,3 +730,22 @@ def test_a_georeferenced_cloud_held_at_float32_precision_is_said_once(caplog):
     said = [r.getMessage() for r in caplog.records]
     assert said == ["far cloud: coordinates up to 4.5e+06 m held at float32 precision (steps of 0.5 m there): store "
                     "georeferenced clouds as float64, or shift them to a local origin before storing them"]
+
+
+def test_settings_the_chosen_configuration_does_not_read_are_refused():
+    """small_gicp's voxel_resolution_m with GICP, kiss's initial_threshold_m beside fixed_threshold_m, and min_fitness /
+    covariance with assess=False were accepted and changed nothing (vanilla already refused leafsize off scipy)."""
+    for method, params, named in (
+        ("small_gicp", {"voxel_resolution_m": 5.0}, "voxel_resolution_m is VGICP's voxel size; registration_type GICP has none"),
+        ("kiss", {"fixed_threshold_m": 1.0, "initial_threshold_m": 5.0}, "initial_threshold_m / min_motion_th_m set the adaptive"),
+        ("small_gicp", {"assess": False, "min_fitness": 0.99}, "min_fitness set(s) the assessment, which assess=False leaves out"),
+        ("kiss", {"assess": False, "covariance": "gauss_newton"}, "covariance set(s) the assessment"),
+    ):
+        if method not in available_icp():
+            continue
+        with pytest.raises(ConfigError, match=re.escape(named)):
+            get_icp(method, **params)
+    if "small_gicp" in available_icp():
+        assert get_icp("small_gicp", registration_type="VGICP", voxel_resolution_m=2.0).config.voxel_resolution_m == 2.0
+        assert get_icp("small_gicp", assess=False).config.assess is False
+    assert get_icp("kiss", fixed_threshold_m=1.0).config.fixed_threshold_m == 1.0

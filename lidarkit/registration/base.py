@@ -19,7 +19,7 @@ from typing import Any, ClassVar, Literal
 
 import numpy as np
 import pydantic
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from lidarkit.errors import ConfigError, DataError, LidarKitError, RegistrationError, validation_problems
 from lidarkit.geometry import as_points, is_rotation, orthonormalize_se3
@@ -74,6 +74,14 @@ class RegistrationConfig(BaseModel):
         "covariance, acceptance gate (False: the backend's pose and its own verdict only, near the library's speed; for the "
         "variants that register apart from their assessment: kiss, small_gicp, the Open3D ones)"
     )
+
+    @model_validator(mode="after")
+    def _assessment_settings_need_the_assessment(self) -> "RegistrationConfig":
+        """Settings of the assessment given with ``assess=False`` (accepted and ignored: no gate, no covariance)."""
+        given = sorted({"min_fitness", "min_correspondences", "covariance", "calibrated_covariance"} & self.model_fields_set)
+        if not self.assess and given:
+            raise ValueError(f"{', '.join(given)} set(s) the assessment, which assess=False leaves out")
+        return self
 
     def covariance_model(self):
         """The :class:`~lidarkit.registration.covariance.CovarianceModel` this config asks for (None: no covariance)."""

@@ -54,6 +54,8 @@ class KissConfig(RegistrationConfig):
     def _ranges(self) -> "KissConfig":
         if self.max_range_m <= self.min_range_m:
             raise ValueError(f"max_range_m ({self.max_range_m}) must exceed min_range_m ({self.min_range_m})")
+        if self.fixed_threshold_m is not None and {"initial_threshold_m", "min_motion_th_m"} & self.model_fields_set:
+            raise ValueError("initial_threshold_m / min_motion_th_m set the adaptive threshold, which fixed_threshold_m replaces")
         return self
 
     @property

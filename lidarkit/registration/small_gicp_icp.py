@@ -11,7 +11,7 @@ import logging
 from typing import Literal
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from lidarkit.geometry import transform_points
 from lidarkit.registration.assessment import assess_alignment
@@ -55,6 +55,12 @@ class SmallGICPConfig(RegistrationConfig):
     voxel_resolution_m: float = Field(1.0, gt=0, description="VGICP voxel size (m)")
     max_iterations: int = Field(50, ge=1, description="maximum Gauss-Newton iterations")
     num_threads: int = Field(2, ge=1, description="threads")
+
+    @model_validator(mode="after")
+    def _voxels_are_vgicps(self) -> "SmallGICPConfig":
+        if "voxel_resolution_m" in self.model_fields_set and self.registration_type != "VGICP":  # (accepted and ignored)
+            raise ValueError(f"voxel_resolution_m is VGICP's voxel size; registration_type {self.registration_type} has none")
+        return self
 
 
 if _small_gicp is not None:
