@@ -32,6 +32,7 @@ import numpy as np
 
 from lidarkit.atomic import write_text
 from lidarkit.bench.machine import describe_machine, machine_info
+from lidarkit.errors import DataError
 from lidarkit.eval.relations import relation_error
 from lidarkit.io import open_dataset
 from lidarkit.odometry import run
@@ -125,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--report-only", action="store_true", help="rewrite README.md from the results.json in --out")
     args = parser.parse_args(argv)
     if args.report_only:
-        write_text(args.out / "README.md", report(json.loads((args.out / "results.json").read_text())))
+        write_text(args.out / "README.md", report(read_results(args.out / "results.json")))
         return 0
     logging.getLogger("lidarkit").setLevel(logging.ERROR)  # one warning per degenerate corridor frame otherwise
     frames = "0:800" if args.quick else None
@@ -149,7 +150,7 @@ def main(argv: list[str] | None = None) -> int:
         results[name] = (result, seconds)
         extra = {
             "variant": variant, "params": params, "init": init,
-            "n_not_converged": int(result.metrics.get("n_not_converged", 0) or 0),
+            "n_not_converged": result.metrics.get("n_not_converged"),  # None: the variant gives no verdict (kiss)
         }
         rows.append(relation_row(name, result.trajectory, aces.relations, seconds, n, extra))
         log(f"{name}: {rows[-1]['trans_mean_m']:.3f} m, {rows[-1]['fps']:.0f} fps")
@@ -196,6 +197,32 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
+REPORT_KEYS = ("command", "date_utc", "machine", "aces_read_s", "aces_rows", "best", "improvement_over_odometry",
+               "whole_aces_best_s", "whole_aces_ratio_to_open3d_point_to_point", "drift_vs_odometry",
+               "published_aces_2009", "not_applicable")
+
+
+def read_results(path: Path) -> dict:
+    """An earlier run's results.json for --report-only: a DataError naming it when it is missing, unreadable or lacks
+    what the report shows (a FileNotFoundError or KeyError traceback before)."""
+    if not path.is_file():
+        raise DataError("no results.json: run the benchmark without --report-only first", source=path)
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+        raise DataError(f"not a readable JSON file ({err})", source=path) from None
+    missing = [k for k in REPORT_KEYS if k not in data] if isinstance(data, dict) else list(REPORT_KEYS)
+    if missing:
+        raise DataError(f"not a results.json of this benchmark: no {', '.join(missing)}", source=path)
+    return data
+
+
+def not_converged(r: dict) -> str:
+    """The row's count of frames not converged: '-' for the odometry row, 'n/a' where the variant gives no verdict."""
+    n = r.get("n_not_converged", "-")
+    return "n/a" if n is None else str(n)
+
+
 def report(d: dict) -> str:
     rows = d["aces_rows"]
     lines = [
@@ -216,7 +243,7 @@ def report(d: dict) -> str:
         lines.append(
             f"| {r['name']} | {fmt(r['trans_mean_m'])} ± {fmt(r['trans_std_m'])} | {fmt(r['trans_max_m'])} | {fmt(r['trans_sq_mean_m2'])} "
             f"| {fmt(r['rot_mean_deg'], 2)} ± {fmt(r['rot_std_deg'], 2)} | {fmt(r['rot_max_deg'], 1)} | {fmt(r['rot_sq_mean_deg2'], 1)} "
-            f"| {fmt(r['fps'], 0)} | {r.get('n_not_converged', '-')} |"
+            f"| {fmt(r['fps'], 0)} | {not_converged(r)} |"
         )
     lines += ["", "Not applicable to 2D scans (refused with ConfigError; never a degenerate 3D result), or reducing to another variant on them:", ""]
     lines += [f"- {k}: {v}" for k, v in d["not_applicable"].items()]

@@ -376,3 +376,18 @@ def test_per_point_times_files_integer_or_unreadable(tmp_path):
         write()
         with pytest.raises(DataError, match=rf"000001.npy \(frame 1\): {message}"):
             KittiOdometry(folder).read_scan(1)
+
+
+def test_one_sweep_simulator_export_is_retimed_by_its_frame_rate(tmp_path):
+    """A one-sweep export has one stamp, so no period to take from times.txt: the sweep start and mid read the end's
+    0.1 s before (and so did poses_start.txt named as the pose file); sim.yaml's frame_rate_hz gives the period."""
+    from lidarkit.sim.lidar import SimulatedLidarSequence, export_kitti
+
+    folder = export_kitti(SimulatedLidarSequence(n_frames=1, n_beams=8, n_azimuths=90, frame_rate_hz=10.0), tmp_path / "one")
+    ds = open_dataset("kitti", folder)
+    assert ds.ground_truth.timestamps_s.tolist() == pytest.approx([0.1])
+    for instant, stamp in (("start", 0.0), ("mid", 0.05), ("end", 0.1)):
+        assert ds.ground_truth_at_instant(instant).timestamps_s.tolist() == pytest.approx([stamp], abs=1e-12)
+    named = open_dataset("kitti", folder, poses_file="poses_start.txt").ground_truth
+    assert named.timestamps_s.tolist() == pytest.approx([0.0], abs=1e-12)
+    assert named.meta["pose_instant"] == "start"

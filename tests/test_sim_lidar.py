@@ -298,3 +298,16 @@ def test_a_path_curving_through_the_facades_is_refused():
     seq = SimulatedLidarSequence(n_frames=41, n_beams=16, n_azimuths=360, max_curvature_per_m=1.0 / 30.0, seed=0)
     ranges = np.linalg.norm(seq.read_scan(40).points_xyz, axis=1)
     assert np.mean(ranges < 3.0) < 0.05  # the tightest curve allowed keeps the street around the sensor
+
+
+def test_read_scan_refuses_a_non_integer_index():
+    """read_scan(2.7) cast frame 2 without a word (int() truncated it); an index that is no integer is a DataError
+    naming it, while numpy integers still read."""
+    seq = SimulatedLidarSequence(n_frames=4, n_beams=8, n_azimuths=90)
+    for index in (2.7, 2.0, "1", True):
+        with pytest.raises(DataError) as err:
+            seq.read_scan(index)
+        assert (err.value.source, err.value.reason) == ("sim:street?seed=0", f"frame index {index!r} is not an integer")
+    with pytest.raises(DataError, match=r"frame index 0.5 is not an integer"):
+        seq.read_scan_labels(0.5)
+    assert np.array_equal(seq.read_scan(np.int64(2)).points_xyz, seq.read_scan(2).points_xyz)

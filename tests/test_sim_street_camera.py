@@ -155,12 +155,24 @@ def test_nuisances_change_images_not_poses():
     assert np.array_equal(again.read_image(2), spoilt.read_image(2))
 
 
+def test_the_camera_heaves_without_sway_and_its_images_depend_on_n_frames():
+    """Documented in docs/simulator.md (the docs said neither): sway_deg=0 keeps the 2 cm heave, and a shorter
+    sequence of the same seed has the same poses but not the same images (its scene ends 150 m past its drive)."""
+    short = SimulatedCameraSequence(n_frames=5, seed=1, sway_deg=0.0, terrain_amplitude_m=0.0, **SMALL)
+    longer = SimulatedCameraSequence(n_frames=200, seed=1, sway_deg=0.0, terrain_amplitude_m=0.0, **SMALL)
+    height = short.world_poses[:, 2, 3] - short.world_poses[0, 2, 3]
+    assert 0.005 < np.abs(height).max() <= 0.04
+    assert np.array_equal(short.world_poses, longer.world_poses[:5])
+    differ = (short.read_image(0) != longer.read_image(0)).mean()
+    assert 0.001 < differ < 0.02
+
+
 def test_bad_input_is_a_clear_error():
     with pytest.raises(ConfigError, match="n_frame"):
         make_camera_config(n_frames=1)
     with pytest.raises(ConfigError, match="speed_min_mps"):
         make_camera_config(speed_min_mps=10.0, speed_max_mps=5.0)
-    with pytest.raises(ConfigError, match="valid:"):
+    with pytest.raises(ConfigError, match="unknown key 'bogus'"):
         open_simcam("simcam:street?frames=5&bogus=1")
     with pytest.raises(ConfigError, match="simcam:"):
         open_simcam("sim:street")
@@ -177,6 +189,20 @@ def test_bad_input_is_a_clear_error():
         make_camera_config(n_frames=10, occluder=True, occluder_start=1000)
     with pytest.raises(ConfigError, match="first_corner_m places the first corner, and corners=false draws none"):
         make_camera_config(corners=False, first_corner_m=50.0)
+
+
+def test_simcam_spec_errors_name_both_spellings_and_the_short_keys():
+    """A key given twice named only its second spelling ("n_frames is given twice (as n_frames)"), and a typo listed the
+    config's fields but not the short keys frames/noise/blur/gain: now as ``sim:`` specs say them."""
+    with pytest.raises(ConfigError, match=r"n_frames is given twice \(as frames and n_frames\)$"):
+        open_simcam("simcam:street?frames=5&n_frames=6")
+    with pytest.raises(ConfigError, match=r"scene is given twice \(as simcam:street and scene\)$"):
+        open_simcam("simcam:street?scene=street")
+    with pytest.raises(ConfigError) as err:
+        open_simcam("simcam:street?blurr=0.1")
+    assert err.value.source == "simcam:street?blurr=0.1"
+    assert err.value.reason.startswith("unknown key 'blurr'; short keys: frames (n_frames), noise (noise_std), "
+                                       "blur (motion_blur_s), gain (gain_std); or any of: scene, n_frames, seed, width")
 
 
 def test_vo_input_and_kitti_export(tmp_path):

@@ -463,10 +463,19 @@ class KittiOdometry:
         return 0.0 if instant is None else self._instant_shift_s(instant)
 
     def _instant_shift_s(self, instant: str) -> float:
-        """Seconds from the simulator's poses.txt instant to sweep ``instant`` (a fraction of the median period)."""
-        if self._times_all is None or len(self._times_all) < 2:
+        """Seconds from the simulator's poses.txt instant to sweep ``instant`` (a fraction of the median period; with
+        one stamp, the period of sim.yaml's ``frame_rate_hz``, so a one-sweep export is re-timed too)."""
+        if self._times_all is None:
             return 0.0
-        period = float(np.median(np.diff(self._times_all)))
+        if len(self._times_all) >= 2:
+            period = float(np.median(np.diff(self._times_all)))
+        else:
+            import yaml
+
+            try:
+                period = 1.0 / float(yaml.safe_load((self.sequence_dir / "sim.yaml").read_text())["frame_rate_hz"])
+            except (OSError, yaml.YAMLError, TypeError, KeyError, ValueError, ZeroDivisionError):
+                return 0.0
         return (INSTANT_FRACTION[instant] - INSTANT_FRACTION[self._simulator_pose_instant]) * period
 
     @cached_property

@@ -620,6 +620,8 @@ class SimulatedLidarSequence:
     def _cast(self, index: int) -> tuple[Scan, np.ndarray]:
         """The scan of sweep ``index`` and the scene triangle index ``(N,)`` of each point."""
         cfg = self.config
+        if isinstance(index, bool) or not isinstance(index, (int, np.integer)):  # (2.7 read frame 2 without a word)
+            raise DataError(f"frame index {index!r} is not an integer", source=self.name)
         if not 0 <= int(index) < cfg.n_frames:
             raise DataError(f"frame {index} out of range 0..{cfg.n_frames - 1}", source=self.name)
         index = int(index)

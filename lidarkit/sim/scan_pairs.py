@@ -45,7 +45,15 @@ class ScanPairs:
         from lidarkit.sim.lidar import SimulatedLidarSequence
 
         self.scene, self.seed, self.n_frames = scene, int(seed), int(n_frames)
-        self.range_noise_m, self.init_sigma = float(range_noise_m), init_sigma
+        self.range_noise_m, self.init_sigma = float(range_noise_m), tuple(float(s) for s in init_sigma)
+        # checked here, not at the first draw (ZeroDivisionError or numpy's bare "scale < 0" came from draw)
+        if self.n_frames < 2:
+            raise ConfigError(f"n_frames must be at least 2 (a pair is two frames), got {self.n_frames}", source="scan pairs")
+        if not np.isfinite(self.range_noise_m) or self.range_noise_m < 0:
+            raise ConfigError(f"range_noise_m must be a finite std >= 0, got {self.range_noise_m:g}", source="scan pairs")
+        if len(self.init_sigma) != 2 or not all(np.isfinite(s) and s >= 0 for s in self.init_sigma):
+            raise ConfigError(f"init_sigma must be two finite stds >= 0 (translation m, rotation rad), got {init_sigma}",
+                              source="scan pairs")
         sim_scene = "street" if scene == "corridor" else scene
         self._sim = SimulatedLidarSequence(
             scene=sim_scene, seed=self.seed, n_frames=self.n_frames, motion_distortion=False, range_noise_std_m=0.0,

@@ -818,11 +818,16 @@ def open_simcam(spec: str) -> SimulatedCameraSequence:
     scene, _, query = spec[len("simcam:"):].partition("?")
     params: dict[str, object] = {"scene": scene or "street"}
     aliases = {"frames": "n_frames", "noise": "noise_std", "blur": "motion_blur_s", "gain": "gain_std"}
+    given_as: dict[str, str] = {"scene": f"simcam:{params['scene']}"}
     for key, value in parse_kv(query, option="camera simulator option").items():
         name = aliases.get(key, key)
-        if name in params:
-            raise ConfigError(f"{name} is given twice (as {key})", source=spec)
+        if name not in CameraSimConfig.model_fields:  # (the config's list left out the short keys the docstring gives)
+            raise ConfigError(f"unknown key {key!r}; short keys: {', '.join(f'{a} ({f})' for a, f in aliases.items())}; or any of: "
+                              f"{', '.join(CameraSimConfig.model_fields)}", source=spec)
+        if name in params:  # (it named the second spelling only: "n_frames is given twice (as n_frames)")
+            raise ConfigError(f"{name} is given twice (as {given_as[name]} and {key})", source=spec)
         params[name] = value
+        given_as[name] = key
     try:
         return SimulatedCameraSequence(**params)
     except ConfigError as err:

@@ -1,0 +1,60 @@
+"""benchmarks/carmen_2d.py's report: --report-only without a results.json, and the "not conv." column."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from lidarkit.errors import DataError
+
+SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "carmen_2d.py"
+COMMITTED = SCRIPT.parent / "results" / "carmen_2d" / "results.json"
+
+
+@pytest.fixture(scope="module")
+def carmen_2d():
+    spec = importlib.util.spec_from_file_location("carmen_2d_script", SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_report_only_without_results_is_one_error_line(tmp_path):
+    """--report-only on a folder without results.json ended in a FileNotFoundError traceback: one line, exit 1."""
+    done = subprocess.run([sys.executable, str(SCRIPT), "--report-only", "--out", str(tmp_path)],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 1
+    assert done.stderr.strip().splitlines() == [
+        f"error: {tmp_path / 'results.json'}: no results.json: run the benchmark without --report-only first"]
+    assert not (tmp_path / "README.md").exists()
+
+
+def test_results_without_the_report_keys_are_a_data_error(tmp_path, carmen_2d):
+    """A results.json of `{}` raised KeyError 'aces_rows'; one not JSON raised JSONDecodeError."""
+    path = tmp_path / "results.json"
+    path.write_text("{}\n")
+    with pytest.raises(DataError) as err:
+        carmen_2d.read_results(path)
+    assert (err.value.source, err.value.reason) == (str(path), "not a results.json of this benchmark: no "
+                                                    + ", ".join(carmen_2d.REPORT_KEYS))
+    path.write_text("x{")
+    with pytest.raises(DataError, match=r"results.json: not a readable JSON file \(Expecting value: line 1 column 1"):
+        carmen_2d.read_results(path)
+
+
+def test_a_variant_without_a_convergence_verdict_reads_n_a(carmen_2d):
+    """kiss gives no verdict (metrics n_not_converged None), and `int(... or 0)` printed it as "not conv. 0"."""
+    data = json.loads(COMMITTED.read_text())
+    for row in data["aces_rows"]:
+        if row["name"].startswith("kiss"):
+            row["n_not_converged"] = None
+    table = {line.split(" | ")[0][2:]: line for line in carmen_2d.report(data).splitlines() if line.startswith("| ")}
+    assert table["kiss voxel 0.05 m, odometry guess"].endswith("| 64 | n/a |")
+    assert table["kiss voxel 0.1 m, constant velocity"].endswith("| 83 | n/a |")
+    assert table["vanilla planar"].endswith("| 94 | 0 |")
+    assert table["raw odometry (baseline)"].endswith("| - | - |")
