@@ -145,12 +145,18 @@ class Trajectory:
     def from_relative_motions(
         cls, motions: np.ndarray, T_first: np.ndarray | None = None, timestamps_s: np.ndarray | None = None, name: str = ""
     ) -> Trajectory:
-        """Chain ``(N-1, 4, 4)`` motions from ``T_first`` (identity by default) into N poses."""
+        """Chain ``(N-1, 4, 4)`` motions from ``T_first`` (identity by default) into N poses, each re-orthonormalized
+        once its rotation drifts (the rounding of a file's rotations, chained over 481 of KITTI 00's motions, made a
+        pose no rotation and the trajectory was refused)."""
+        from lidarkit.geometry import is_rotation, orthonormalize_se3
+
         motions = np.asarray(motions, dtype=np.float64).reshape(-1, 4, 4)
         poses = np.empty((len(motions) + 1, 4, 4))
         poses[0] = np.eye(4) if T_first is None else T_first
         for i, M in enumerate(motions):
             poses[i + 1] = poses[i] @ M
+            if not is_rotation(poses[i + 1, :3, :3], 1e-9):
+                poses[i + 1] = orthonormalize_se3(poses[i + 1])
         return cls(poses, timestamps_s, name)
 
     def interpolated(self, times_s: np.ndarray, *, max_extrapolation_s: float = 0.0) -> Trajectory:

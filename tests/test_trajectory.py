@@ -158,3 +158,11 @@ def test_reprs_are_one_line_and_an_empty_trajectory_has_no_distances():
     assert repr(SimulatedLidarSequence(n_frames=3, n_beams=8, n_azimuths=90)) == "SimulatedLidarSequence('sim:street?seed=0', 3 sweeps of 8x90 rays)"
     aces = shared_path("carmen_2d", "aces.clf.bz2")
     assert repr(open_dataset("carmen", aces)) == f"CarmenLog({str(aces)!r}, 7374 scans)"  # (<... object at 0x...> before)
+
+
+def test_chaining_a_real_trajectorys_own_motions_gives_it_back():
+    """KITTI 00's ground truth chained from its own relative motions was refused at frame 481 ("rotation is not
+    orthonormal"): the file's rounding, accumulated. Each chained pose is re-orthonormalized once it drifts."""
+    gt = Trajectory.from_kitti(shared_path("evo_testdata", "KITTI_00_gt.txt"))
+    chained = Trajectory.from_relative_motions(gt.relative_motions())
+    assert len(chained) == len(gt) and np.abs(chained.positions_xyz - gt.positions_xyz).max() < 1e-3
