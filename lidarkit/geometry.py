@@ -57,6 +57,8 @@ def as_points(points_xyz: np.ndarray, name: str = "points", min_points: int = 0)
     if known is not None and known.get(id(points_xyz)) is points_xyz and len(points_xyz) >= min_points:
         return points_xyz  # checked once already (validated_points)
     arr = np.asarray(points_xyz)
+    if arr.ndim == 0:  # (a file name or None read "got shape ()")
+        raise DataError(f"expected an (N, 3) point array, got {type(points_xyz).__name__} {points_xyz!r:.60}", source=name)
     if arr.ndim != 2 or arr.shape[1] != 3:
         raise DataError(f"expected an (N, 3) point array, got shape {arr.shape}", source=name)
     if np.issubdtype(arr.dtype, np.complexfloating):

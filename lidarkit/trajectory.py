@@ -81,7 +81,9 @@ class Trajectory:
 
     def __repr__(self) -> str:
         """One line (the generated one printed every pose: 7,200 characters for 20)."""
-        stamps = "no stamps" if self.timestamps_s is None or not len(self) else f"{self.timestamps_s[0]:.6g}-{self.timestamps_s[-1]:.6g} s"
+        t = self.timestamps_s
+        # (TUM epoch stamps read "1.30503e+09-1.30503e+09 s": the span hidden)
+        stamps = "no stamps" if t is None or not len(self) else f"{t[0]:.6f}-{t[-1]:.6f} s ({t[-1] - t[0]:.4g} s)"
         return f"Trajectory({self.name!r}, {len(self)} poses, {stamps}, path {self.length_m:.4g} m)"
 
     def __getitem__(self, index: slice | np.ndarray | list[int]) -> Trajectory:
@@ -124,7 +126,12 @@ class Trajectory:
 
         E.g. KITTI camera-frame poses to the LiDAR frame: ``T_left = Tr^-1``, ``T_right = Tr``.
         """
+        from lidarkit.errors import ConfigError
+
         poses = self.poses_se3
+        for side, T in (("T_left", T_left), ("T_right", T_right)):
+            if T is not None and np.shape(T) != (4, 4):  # (numpy's matmul error for a 3x3)
+                raise ConfigError(f"{side} must be a 4x4 transform, got shape {np.shape(T)}", source=side)
         if T_left is not None:
             poses = np.asarray(T_left, dtype=np.float64) @ poses
         if T_right is not None:

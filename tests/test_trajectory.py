@@ -148,7 +148,12 @@ def test_reprs_are_one_line_and_an_empty_trajectory_has_no_distances():
 
     result = run("sim:street?frames=4&beams=8&azimuths=180", "vanilla", progress=False)
     assert repr(result).startswith("OdometryResult('vanilla', 4 frames in ") and "end error" in repr(result) and "\n" not in repr(result)
-    assert repr(result.trajectory) == f"Trajectory('vanilla on sim:street?seed=0', 4 poses, 0.1-0.4 s, path {result.trajectory.length_m:.4g} m)"
+    assert repr(result.trajectory) == (f"Trajectory('vanilla on sim:street?seed=0', 4 poses, 0.100000-0.400000 s (0.3 s), "
+                                       f"path {result.trajectory.length_m:.4g} m)")
+    tum = Trajectory.from_tum(shared_path("evo_testdata", "freiburg1_xyz-groundtruth.txt"))
+    assert "3000 poses, 1305031098.665900-1305031128.755500 s (30.09 s)" in repr(tum)  # (read "1.30503e+09-1.30503e+09 s")
+    with pytest.raises(ConfigError, match=r"T_left: T_left must be a 4x4 transform, got shape \(3, 3\)"):
+        tum.transformed(np.eye(3))
     empty = Trajectory(np.zeros((0, 4, 4)))
     assert empty.distances_m.shape == (0,) and empty.length_m == 0.0
     assert repr(empty) == "Trajectory('', 0 poses, no stamps, path 0 m)"
@@ -166,3 +171,25 @@ def test_chaining_a_real_trajectorys_own_motions_gives_it_back():
     gt = Trajectory.from_kitti(shared_path("evo_testdata", "KITTI_00_gt.txt"))
     chained = Trajectory.from_relative_motions(gt.relative_motions())
     assert len(chained) == len(gt) and np.abs(chained.positions_xyz - gt.positions_xyz).max() < 1e-3
+
+
+def test_wrong_kinds_of_arguments_are_one_line_errors(tmp_path):
+    """A file name given to align() read "got shape ()"; open_dataset(kind, None), read_scan(1.5) and
+    evaluate(settings={...}) were TypeErrors, IndexErrors or AttributeErrors from inside."""
+    from lidarkit.eval import evaluate
+    from lidarkit.io import open_dataset
+    from lidarkit.registration import get_icp
+
+    with pytest.raises(DataError, match="source cloud: expected an \\(N, 3\\) point array, got str 'a.bin'"):
+        get_icp("vanilla").align("a.bin", np.zeros((5, 3)))
+    for path in (None, 5):
+        with pytest.raises(ConfigError, match=f"kitti dataset: the dataset path must be a path, got {type(path).__name__}"):
+            open_dataset("kitti", path)
+    kitti = open_dataset("kitti", shared_path("kitti_odometry", "sequences", "00"))
+    for index in (1.5, "1", True):
+        with pytest.raises(DataError, match=f"scan index {index!r} is not an integer"):
+            kitti.read_scan(index)
+    assert kitti.read_scan(np.int64(1)).frame == 1
+    gt = Trajectory.from_kitti(shared_path("evo_testdata", "KITTI_00_gt.txt"))[:50]
+    with pytest.raises(ConfigError, match="evaluate: settings must be an EvaluationSettings .*, got dict"):
+        evaluate(gt, gt, settings={"align": "none"})

@@ -105,6 +105,9 @@ def evaluate(ref: Trajectory, est: Trajectory, settings: EvaluationSettings | No
             raise ConfigError(f"unknown evaluation setting: {err}", source="evaluate") from None
     elif overrides:
         raise ConfigError("pass either settings or keyword overrides, not both", source="evaluate")
+    elif not isinstance(settings, EvaluationSettings):  # (a dict: an AttributeError deep inside)
+        raise ConfigError(f"settings must be an EvaluationSettings (or pass them as keywords), got {type(settings).__name__}",
+                          source="evaluate")
     s = settings
     # pair (and, with ``associate``, match timestamps) once; the metrics then get equal-length trajectories
     ref_paired, est_paired = paired(ref, est, associate=s.associate, max_diff_s=s.max_diff_s)

@@ -114,6 +114,8 @@ def open_dataset(kind: str, path: str | os.PathLike, **options: Any) -> Any:
 
     Options the reader does not take (or a missing required one) raise ConfigError listing the valid ones.
     """
+    if not isinstance(path, (str, os.PathLike)):  # (None or a number: a TypeError from pathlib)
+        raise ConfigError(f"the dataset path must be a path, got {type(path).__name__} {path!r}", source=f"{kind} dataset")
     reader = get_reader(kind)
     try:
         signature = inspect.signature(reader)

@@ -527,6 +527,8 @@ class KittiOdometry:
         """
         if not self.scan_paths:
             raise DataError("sequence has no scans", source=self.velodyne_dir)
+        if isinstance(index, bool) or not isinstance(index, (int, np.integer)):  # (numpy's IndexError / a TypeError)
+            raise DataError(f"scan index {index!r} is not an integer", source=f"{self.name} ({self.sequence_dir})")
         if not -len(self.scan_paths) <= index < len(self.scan_paths):
             raise DataError(f"scan index {index} out of range for {len(self.scan_paths)} scans", source=f"{self.name} ({self.sequence_dir})")
         frame = int(self.scan_frames[index])
