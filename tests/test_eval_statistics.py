@@ -431,3 +431,37 @@ def test_compare_counts_units_not_copies_and_asks_which_task(tmp_path, monkeypat
 
     _, rows = summary_rows(build_report(out, plots=False))
     assert next(r for r in rows if r[0] == "recall_test_task")[3] == "good"  # the report's best method too
+
+
+def test_a_count_flat_on_every_seed_of_seeded_data_is_tested(tmp_path):
+    """6 seeds, each another drive: one method failed on no frame, the other on all 7 of every drive. Flat on both sides,
+    the count was taken for "one measurement repeated" (no test) though the drives' errors differ by seed; a seed that
+    changes another accuracy metric is other data, and the count is tested over the 6 seeds."""
+    from lidarkit.bench import Metric, load_suite, run_suite
+    from lidarkit.eval import compare
+
+    def metrics(job):
+        return {"error_m": 0.1 * (job.method == "good") + 0.2 + 0.05 * np.random.default_rng(job.seed).random(),
+                "n_failed_frames": 0 if job.method == "good" else 7, "runtime_s": 0.01}
+
+    _register_metric_task("count_test_task", (Metric("error_m", "error"), Metric("n_failed_frames", "failed frames"),
+                                              Metric("runtime_s", "runtime")), metrics)
+    (tmp_path / "s.yaml").write_text(textwrap.dedent("""
+        seeds: 6
+        experiments:
+          - {name: e, task: count_test_task, dataset: {kind: synthetic, name: drives}, methods: [good, bad]}
+    """))
+    run_suite(load_suite(tmp_path / "s.yaml"), tmp_path / "out", executor="serial")
+    count = compare(tmp_path / "out", tmp_path / "out", method_a="good", method_b="bad", metric="n_failed_frames")
+    assert not count.repeated and count.n_pairs == 6 and count.better == "a" and count.p_value == pytest.approx(1 / 32)
+
+    _register_metric_task("flat_test_task", (Metric("error_m", "error"), Metric("runtime_s", "runtime")),
+                          lambda job: {"error_m": 0.1 if job.method == "good" else 0.5, "runtime_s": 0.01 * job.seed})
+    (tmp_path / "f.yaml").write_text(textwrap.dedent("""
+        seeds: 6
+        experiments:
+          - {name: e, task: flat_test_task, dataset: {kind: synthetic, name: fixed}, methods: [good, bad]}
+    """))
+    run_suite(load_suite(tmp_path / "f.yaml"), tmp_path / "flat", executor="serial")
+    flat = compare(tmp_path / "flat", tmp_path / "flat", method_a="good", method_b="bad", metric="error_m")
+    assert flat.repeated and not flat.significant  # a time that varies is no other data

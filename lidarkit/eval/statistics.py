@@ -212,6 +212,7 @@ def paired_test(
     alpha: float = DEFAULT_ALPHA,
     noise: float = 0.0,
     seed: int = 0,
+    repeated: bool | None = None,
 ) -> PairedComparison:
     """Compare matched values ``a[i]`` and ``b[i]`` (same seed / segment / frame) with the Wilcoxon signed-rank test.
 
@@ -250,8 +251,10 @@ def paired_test(
     median_diff = float(np.median(diff))
     better = ""
     # seeds that change nothing on either side are one measurement repeated: any constant difference would rank as
-    # "significant" (6 copies of one value gave p = 0.031)
-    repeated = pairing == "seed" and bool(np.ptp(va) <= tol and np.ptp(vb) <= tol)
+    # "significant" (6 copies of one value gave p = 0.031); ``repeated`` given by a caller that knows the seeds ran
+    # other data (a count that is 0 and 7 on every one of 6 drives is six measurements, not one)
+    if repeated is None:
+        repeated = pairing == "seed" and bool(np.ptp(va) <= tol and np.ptp(vb) <= tol)
     # the direction is the ranks' (what the test tested); the median must agree with it, exceed the noise, and its
     # bootstrap CI must not reach across 0 (a verdict beside a CI of [-0.0006, +0.0044] read as a contradiction)
     ci_clear = not lo < 0 < hi
