@@ -171,6 +171,8 @@ def test_compare_run_folders_per_frame_and_bad_input(tmp_path, capsys):
     assert code == 0 and "no significant difference" in out
     with pytest.raises(ConfigError, match="a task applies to bench results folders only"):  # (it was ignored)
         compare(tmp_path / "kiss", tmp_path / "vanilla", task="odometry")
+    with pytest.raises(ConfigError, match=r"all: every result \(--all\) applies to bench results folders only"):
+        compare(tmp_path / "kiss", tmp_path / "vanilla", every_result=True)
     with pytest.raises(DataError, match=r"metrics.json: is a file: compare takes an odometry run folder or a bench results folder"):
         compare(tmp_path / "kiss" / "metrics.json", tmp_path / "vanilla")  # (it read "does not exist")
     other = SimulatedLidarSequence(scene="street", n_frames=10, n_beams=32, n_azimuths=720, seed=5)

@@ -209,6 +209,8 @@ def compare(
     if isinstance(side_a, OdometryRun):
         if task is not None:  # (it would be ignored)
             raise ConfigError("a task applies to bench results folders only", source="task")
+        if every_result:  # (--all was ignored without a word)
+            raise ConfigError("every result (--all) applies to bench results folders only", source="all")
         note = _same_ground_truth(side_a, side_b)
         if metric is None:
             from lidarkit.eval import drift_segments_possible
