@@ -453,3 +453,46 @@ def test_a_2d_scan_s_degeneracy_and_covariance_come_from_its_wall_lines(carmen_l
         sigma = np.sqrt(np.diag(r.covariance))
         assert r.converged and not r.degeneracy.degenerate, (k, r.reason)
         assert 0 < sigma[:2].max() < most_m and 0 < sigma[5] < np.radians(2), (k, sigma)
+
+
+def test_a_carmen_run_records_its_options_and_the_restamping(carmen_logs):
+    """config.yaml of a run with max_range_m=30 was that of a run without (CarmenLog reported no reader_options), and
+    Intel's run said "reader corrections: none reported by the reader" though 2042 stamps were moved."""
+    from lidarkit.odometry import run
+
+    aces = shared_path("carmen_2d", "aces.clf.bz2")
+    options = run(f"carmen:{aces}?max_range_m=30", "vanilla", params={"planar": True}, frames="0:2").config["run"]["dataset_options"]
+    assert options == {"kind": "carmen", "path": str(aces), "laser": "FLASER", "min_range_m": 0.0, "max_range_m": 30.0,
+                       "relations": str(aces.with_name("aces.relations"))}
+    plain = run(carmen_logs["aces"], "vanilla", params={"planar": True}, frames="0:2")
+    assert plain.config["run"]["dataset_options"]["max_range_m"] == "the log's largest reading"
+    assert plain.metrics["effective"]["corrections"] == {}
+    intel = run(carmen_logs["intel"], "vanilla", params={"planar": True}, frames="0:2").metrics["effective"]["corrections"]
+    assert intel == {"stamps_corrected": "2042 scan stamps moved by up to 0.752 s to increase (they go back in file order)"}
+
+
+def test_a_robotlaser_maximum_range_of_zero_is_not_stated(tmp_path):
+    """A ROBOTLASER1 maximum range of 0 dropped every reading ("empty scan (0 points)"): taken as not stated, it is the
+    log's largest reading, as for FLASER."""
+    robot = "ROBOTLASER1 0 -0.785398 1.570796 0.392699 {max} 0.01 0 5 1.0 2.0 10.0 3.0 0.0 0 1.0 2.0 0.5 1.0 2.0 0.5 0 0 0 0 0 1.0 host 1.0"
+    stated, unstated = tmp_path / "stated.clf", tmp_path / "zero.clf"
+    stated.write_text(robot.format(max="10.0") + "\n")
+    unstated.write_text(robot.format(max="0.0") + "\n")
+    points = CarmenLog(unstated).read_scan(0).points_xyz
+    assert len(points) == 3
+    np.testing.assert_array_equal(points, CarmenLog(stated).read_scan(0).points_xyz)
+
+
+def test_a_run_over_a_log_with_relations_says_how_to_score_it(tmp_path, capsys, monkeypatch):
+    """The ACES odometry run said "ground truth: none: no scores", with no word of the relations beside the log."""
+    from lidarkit.odometry import run
+
+    monkeypatch.setenv("COLUMNS", "300")
+    aces = shared_path("carmen_2d", "aces.clf.bz2")
+    out = tmp_path / "run"
+    argv = ["odometry", f"carmen:{aces}", "-m", "vanilla", "-p", "planar=true", "--frames", "0:2", "--no-progress", "--out", str(out)]
+    assert cli_exit_code(argv) == 0
+    note = f"none: no scores here; the dataset has relation ground truth: lidarkit eval --relations {aces.with_name('aces.relations')} {out / 'poses_tum.txt'}"
+    assert json.loads((out / "metrics.json").read_text())["ground_truth_note"] == note
+    assert f"ground truth │ {note}" in " ".join(capsys.readouterr().out.split())
+    assert "ground_truth_note" not in run(f"carmen:{aces}?relations=none", "vanilla", params={"planar": True}, frames="0:2").metrics

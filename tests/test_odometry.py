@@ -246,6 +246,43 @@ def test_scans_far_apart_in_time_are_named_in_a_warning():
     assert "between frames 16 and 40" in time_gap_warning(None, numbers, indices=np.array([0, 2, 4, 6, 8]))
 
 
+def test_a_plain_folder_and_a_skipping_selection_get_the_gap_warning(tmp_path):
+    """A plain folder of KITTI files 94, 95, 198, 199 ran without a gap warning (only a reader's scan_frames were
+    used), so did frames 0, 1, 2, 9 of a folder; with stamps, frames 0, 1, 9 hid their gap in the median of two."""
+    import shutil
+
+    kitti = shared_path("kitti_odometry")
+    for path in sorted((kitti / "extra_frames" / "00" / "velodyne").glob("*.bin")):
+        shutil.copy(path, tmp_path / path.name)
+    gaps = [w for w in run(tmp_path, "small_gicp").metrics["warnings"] if "gap" in w]
+    assert gaps == ["1 gap(s) in the frame numbers (no time stamps) between consecutive scans, the largest 103 frames between "
+                    "frames 95 and 198 (expected interval 1 frames): odometry takes the motion between consecutive scans as small"]
+    folder = run(kitti / "sequences" / "00" / "velodyne", "small_gicp", frames=[0, 1, 2, 9]).metrics["warnings"]
+    assert any(w.startswith("1 gap(s) in the frame numbers (no time stamps) between consecutive scans, the largest 7 frames "
+                            "between frames 2 and 9 (expected interval 1 frames)") for w in folder)
+    stamped = run(kitti / "sequences" / "00", "small_gicp", frames=[0, 1, 9]).metrics["warnings"]
+    assert any(w.startswith("1 gap(s) in time between consecutive scans, the largest 0.829 s between frames 1 and 9 "
+                            "(expected interval 0.104 s)") for w in stamped)
+    # a stepped selection is no gap, with stamps or without
+    assert not any("gap" in w for w in run(kitti / "sequences" / "00", "small_gicp", frames="0:10:3").metrics["warnings"])
+    assert not any("gap" in w for w in run(kitti / "sequences" / "00" / "velodyne", "small_gicp", frames="0:10:3").metrics["warnings"])
+
+
+def test_no_covariance_because_every_frame_fell_back_says_so():
+    """Every frame turned down (min_fitness=0.99) read "no frame's registration gave a covariance (small_gicp returns
+    none)" though small_gicp gives them; and --strict quoted ground_filtered's "; constant-velocity fallback" although
+    it falls back to nothing."""
+    kitti = shared_path("kitti_odometry") / "sequences" / "00"
+    result = run(kitti, "small_gicp", params={"min_fitness": 0.99}, frames="0:3")
+    assert result.metrics["n_constant_velocity_fallback"] == 2
+    assert "no frame's registration gave a covariance (every frame fell back to the constant-velocity motion): no pose " \
+           "covariance" in result.metrics["warnings"]
+    with pytest.raises(RegistrationError) as err:
+        run("sim:ground?frames=2", "ground_filtered", strict=True)
+    assert str(err.value) == ("sim:ground?seed=0 (frame 1): registration did not converge (too little left after ground removal: "
+                              "0 points (min_points_kept=100, local_plane))")
+
+
 def test_a_variant_returning_a_non_finite_pose_is_a_registration_error_naming_the_frame(rng):
     """A backend or plugin returning NaN instead of raising: one RegistrationError naming the method and the frame
     (numpy's LinAlgError 'SVD did not converge' escaped before), stateless and stateful alike."""

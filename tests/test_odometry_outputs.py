@@ -488,3 +488,26 @@ def test_poses_without_stamps_are_stamped_with_their_frame_numbers(tmp_path):
     frames = np.loadtxt(tmp_path / "run" / "timing.csv", delimiter=",", skiprows=1, usecols=0)
     np.testing.assert_array_equal(tum.timestamps_s, [4.0, 6.0, 8.0])
     np.testing.assert_array_equal(frames, [4, 6, 8])
+
+
+def test_bad_frames_cut_at_100_in_metrics_says_how_many_it_left_out():
+    """metrics.json listed the first 100 bad frames only, with nothing to say the list was cut."""
+    result = run("sim:open?frames=104&beams=16&azimuths=180", "vanilla", frame_check={"min_fitness": 1.0})
+    check = result.metrics["frame_check"]
+    assert check["n_bad_frames"] == 101
+    assert len(check["bad_frames"]) == 100 and check["bad_frames"][-1] == 102
+    assert check["n_bad_frames_not_listed"] == 1
+    assert run("sim:open?frames=4&beams=16&azimuths=180", "vanilla").metrics["frame_check"]["n_bad_frames_not_listed"] == 0
+
+
+def test_a_two_frame_run_says_motion_not_checked_and_why_there_is_no_se3_ape(capsys):
+    """With 2 frames the table read "motion 0" though no motion was checked, and the SE(3)-aligned APE row "-" without
+    the reason (metrics.json had none either)."""
+    from conftest import shared_path
+
+    kitti = shared_path("kitti_odometry", "sequences", "00")
+    code, text, _ = _cli(["odometry", str(kitti), "-m", "small_gicp", "--frames", "0:2", "--no-progress"], capsys)
+    assert code == 0
+    flat = " ".join(text.split())
+    assert "bad frames (independent check) │ 0 of 2 (motion not checked, fitness 0)" in flat
+    assert "APE translation RMSE, SE(3)-aligned (m) │ no SE(3)-aligned APE: a rigid fit needs 3 poses, the run has 2" in flat

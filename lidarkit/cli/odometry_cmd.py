@@ -106,9 +106,11 @@ def odometry(
     if check:
         table.add_row(
             "bad frames (independent check)",
-            f"{check['n_bad_frames']} of {m['n_frames']} (motion {check['n_bad_motion']}"
-            # frames whose stamps cannot time the motion are not checked for it: said when they are more than a few
-            + (f" of {check['n_motion_checked']} checked" if check.get("n_motion_checked", m["n_frames"]) < 0.9 * (m["n_frames"] - 2) else "")
+            f"{check['n_bad_frames']} of {m['n_frames']} (motion "
+            # frames whose stamps cannot time the motion are not checked for it: said when they are more than a few, and
+            # "not checked" when none is (1-2 frames read "motion 0")
+            + ("not checked" if check.get("n_motion_checked", m["n_frames"]) == 0 else f"{check['n_bad_motion']}"
+               + (f" of {check['n_motion_checked']} checked" if check.get("n_motion_checked", m["n_frames"]) < 0.9 * (m["n_frames"] - 2) else ""))
             + ", fitness " + (f"{check['n_bad_fitness']})" if check.get("n_fitness_checked", 1) else "not checked)"),
         )
         said = check["n_said_converged_but_bad"]
@@ -122,7 +124,7 @@ def odometry(
         table.add_row("ground-truth path (m)", f"{m['ground_truth_length_m']:.2f}")
         table.add_row("final error, unaligned (m / deg)", f"{m['final_error']['translation_m']:.3f} / {m['final_error']['rotation_deg']:.3f}")
         if "ape_translation_m" in m:
-            table.add_row("APE translation RMSE, SE(3)-aligned (m)", _stat(m, "ape_translation_se3_m"))
+            table.add_row("APE translation RMSE, SE(3)-aligned (m)", m.get("ape_translation_se3_note") or _stat(m, "ape_translation_se3_m"))
             table.add_row("APE translation RMSE, unaligned, first pose anchored (m)", _stat(m, "ape_translation_m"))
             table.add_row("RPE 1 frame RMSE, alignment-free (m / deg)", f"{_stat(m, 'rpe_translation_m', '.4f')} / {_stat(m, 'rpe_rotation_deg', '.4f')}")
         drift = m.get("kitti_drift")
@@ -131,7 +133,7 @@ def odometry(
         else:
             table.add_row("KITTI drift", m.get("kitti_drift_note", "-"))
     else:
-        table.add_row("ground truth", "none: no scores")
+        table.add_row("ground truth", m.get("ground_truth_note") or "none: no scores")
     cov = m.get("pose_covariance")
     if cov and cov.get("final_position_sigma_m") is not None:
         table.add_row("propagated end-pose 1-sigma (m / deg)", f"{cov['final_position_sigma_m']:.3f} / {cov['final_heading_sigma_deg']:.3f}")

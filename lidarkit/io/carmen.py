@@ -13,7 +13,8 @@ line. The laser messages become scans with ``z = 0``, in the laser frame (x forw
 
 Readings at or above the maximum range (no return) and at or below ``min_range_m`` are dropped. The maximum range
 of FLASER logs is not written down and differs per log (ACES saturates at 50 m, Intel and FR079 at ~81.9 m): by
-default it is the largest reading of the log, the value the driver writes for "no return".
+default it is the largest reading of the log, the value the driver writes for "no return"; so is a ROBOTLASER1 or
+RAWLASER1 maximum of 0 or less (not stated: taken as it is, it dropped every reading).
 
 Parsing is vectorized: each line is split once, the numbers of all scans are converted by one ``numpy`` call, and
 the points of a scan are computed on request from its ranges and precomputed beam directions. Any malformed line
@@ -30,7 +31,7 @@ import os
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -293,8 +294,9 @@ class CarmenLog:
     ``open_dataset("carmen", "aces.clf.bz2")``. Options: ``laser`` (which message: ``"auto"``, ``"FLASER"``,
     ``"ROBOTLASER1"``, ``"RAWLASER1"``); ``min_range_m`` (readings at or below are dropped); ``max_range_m``
     (readings at or above are dropped as "no return"; None: the message's own maximum for ROBOTLASER1/RAWLASER1,
-    the log's largest reading for FLASER); ``relations`` (a ``.relations`` file; ``"auto"``: ``NAME.relations``
-    beside the log if present; None: none).
+    the log's largest reading for FLASER and for a message whose maximum is 0 or less); ``relations`` (a
+    ``.relations`` file; ``"auto"``: ``NAME.relations`` beside the log if present; None: none). ``reader_options``
+    records them as applied.
 
     ``odometry``: the laser pose by odometry per scan (a Trajectory with the scan timestamps); ``ground_truth`` is
     None (these logs have relative ground truth only: ``relations``).
@@ -319,12 +321,14 @@ class CarmenLog:
         self.laser = self._log.message
         self.min_range_m = float(min_range_m)
         log = self._log
+        largest = float(log.ranges_m.max())
         if max_range_m is not None:
             self.max_range_m = np.full(len(log.timestamps_s), float(max_range_m))
         elif self.laser == "FLASER":
-            self.max_range_m = np.full(len(log.timestamps_s), float(log.ranges_m.max()))
-        else:
-            self.max_range_m = log.max_range_m.copy()
+            self.max_range_m = np.full(len(log.timestamps_s), largest)
+        else:  # a maximum of 0 (or less) is not stated: as FLASER's (it dropped every reading: "empty scan (0 points)")
+            self.max_range_m = np.where(log.max_range_m > 0, log.max_range_m, largest)
+        self._max_range_given = max_range_m
         # scans in file order, the order their poses follow: Intel's stamps are delivery times that go back up to 0.9 s
         # at 631 lines (sorted by them, the robot jumped back and forth: 94 odometry steps > 0.3 m in 18 ms, none in
         # file order); stamps that do are made increasing with the least change (see _increasing_stamps)
@@ -362,6 +366,21 @@ class CarmenLog:
         if not path.is_file():
             raise DataError("relations file not found", source=path)
         return path
+
+    @property
+    def reader_options(self) -> dict[str, Any]:
+        """The options as applied, for the run config (max_range_m=30 gave the config.yaml of a run without), and the
+        stamps moved to increase as a correction (an Intel run said "reader corrections: none")."""
+        stated = "the log's largest reading" if self.laser == "FLASER" else "the message's own"
+        options: dict[str, Any] = {
+            "kind": "carmen", "path": str(self.path.absolute()), "laser": self.laser, "min_range_m": self.min_range_m,
+            "max_range_m": stated if self._max_range_given is None else float(self._max_range_given),
+            "relations": None if self._relations_path is None else str(self._relations_path.absolute()),
+        }
+        if self.n_restamped:
+            options["stamps_corrected"] = (f"{self.n_restamped} scan stamps moved by up to {self.max_restamp_s:.3f} s to increase "
+                                           "(they go back in file order)")
+        return options
 
     # ---- ScanSequence ------------------------------------------------------------------------
     def __len__(self) -> int:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -78,32 +79,49 @@ def frames_past_the_end(frames: FrameSelection, n_frames: int) -> str | None:
     return None
 
 
+def frame_numbers(sequence: Any) -> np.ndarray | None:
+    """``(N,)`` int64 the recording's own number of every scan, or None: a reader's ``scan_frames`` (KITTI's file
+    names), else the last number in each file name of a folder reader's ``scan_paths`` when they increase in its order
+    (a plain folder of KITTI files 94, 95, 198, 199 ran without a gap warning)."""
+    numbers = getattr(sequence, "scan_frames", None)
+    if numbers is None and getattr(sequence, "scan_paths", None) is not None:
+        found = [re.findall(r"\d+", Path(p).stem) for p in sequence.scan_paths]
+        numbers = [int(f[-1]) for f in found] if found and all(found) else None
+    if numbers is None or len(numbers) != len(sequence):
+        return None
+    numbers = np.asarray(numbers, dtype=np.int64)
+    return numbers if (np.diff(numbers) > 0).all() else None
+
+
+def typical_interval(values: np.ndarray | None) -> float | None:
+    """The median step between consecutive entries of a whole dataset's stamps or frame numbers (None: fewer than 2)."""
+    return float(np.median(np.diff(np.asarray(values, dtype=np.float64)))) if values is not None and len(values) > 1 else None
+
+
 def time_gap_warning(times_s: np.ndarray | None, frames: np.ndarray, odometry_guess: bool = False,
-                     indices: np.ndarray | None = None) -> str | None:
-    """A warning when consecutive scans of a run lie far apart in time (more than 3x the median interval: scans
-    missing from a recording, a folder of non-consecutive scans), or None. ``frames``: their numbers, as the warning
-    names them; ``odometry_guess``: the run takes the dataset's odometry as its guess (which bridges the gaps).
-    Without stamps, ``indices`` (the selected dataset indices, when ``frames`` are the recording's own numbers, e.g.
-    KITTI's file names) stand in: numbers that jump by more than 3x the median step of the selection are a gap (KITTI
-    scans 94, 95, 198, 199 ran without a word)."""
-    if times_s is None:
-        if indices is None or len(indices) < 2:
+                     indices: np.ndarray | None = None, typical: float | None = None) -> str | None:
+    """A warning when consecutive scans of a run lie far apart in time (more than 3x the expected interval: scans
+    missing from a recording, a folder of non-consecutive scans, a selection that skips frames), or None. ``frames``:
+    their numbers, as the warning names them; ``odometry_guess``: the run takes the dataset's odometry as its guess
+    (which bridges the gaps). Without stamps the jumps in ``frames`` are the gaps (KITTI scans 94, 95, 198, 199).
+    The expected interval is ``typical`` (the dataset's own, :func:`typical_interval`; 1 frame without stamps, else
+    the median of the run's) times the smallest step of the selected dataset ``indices``, so that a stepped selection
+    is no gap (the median of the run's own two intervals hid frames 0, 1, 9)."""
+    values = np.asarray(frames if times_s is None else times_s, dtype=np.float64)
+    dt = np.diff(values)
+    unit, what = ("frames", "in the frame numbers (no time stamps)") if times_s is None else ("s", "in time")
+    if typical is None:
+        if times_s is not None and len(values) < 3:
             return None
-        dt = np.diff(np.asarray(frames, dtype=np.float64)) / np.maximum(np.diff(np.asarray(indices, dtype=np.float64)), 1.0)
-        unit, what = "frames", "in the frame numbers (no time stamps)"
-        median = 1.0  # a step of one frame a selected scan
-    else:
-        if len(times_s) < 3:
-            return None
-        dt = np.diff(np.asarray(times_s, dtype=np.float64))
-        unit, what = "s", "in time"
-        median = float(np.median(dt))
-    gaps = np.flatnonzero(dt > 3.0 * median) if median > 0 else np.zeros(0, dtype=np.int64)
+        typical = 1.0 if times_s is None else float(np.median(dt))
+    step = int(np.diff(indices).min()) if indices is not None and len(indices) > 1 else 1
+    expected = typical * step
+    gaps = np.flatnonzero(dt > 3.0 * expected) if expected > 0 else np.zeros(0, dtype=np.int64)
     if not gaps.size:
         return None
     k = int(gaps[np.argmax(dt[gaps])])
     return (f"{gaps.size} gap(s) {what} between consecutive scans, the largest {dt[k]:.3g} {unit} between frames {int(frames[k])} "
-            f"and {int(frames[k + 1])} (median interval {median:.3g} {unit}): "
+            f"and {int(frames[k + 1])} (expected interval {expected:.3g} {unit}): "
             + ("the dataset's odometry gives the guess across them; the scans on either side overlap less" if odometry_guess
                else "odometry takes the motion between consecutive scans as small"))
 

@@ -57,6 +57,8 @@ def odometry_metrics(result: OdometryResult) -> dict[str, Any]:
             out["pose_covariance"]["distortion_floor"] = run["covariance_distortion_floor"]
     ref = result.ground_truth
     if ref is None:
+        if run.get("ground_truth_note"):
+            out["ground_truth_note"] = run["ground_truth_note"]
         return out
     ref, est = paired(ref, result.trajectory)
     from lidarkit import eval as leval
@@ -72,6 +74,8 @@ def odometry_metrics(result: OdometryResult) -> dict[str, Any]:
                 out["ape_translation_se3_m"] = leval.ape(ref, est, align="se3", relation="translation").to_dict(include_errors=False)
             except EvaluationError as err:
                 out["ape_translation_se3_note"] = f"no SE(3)-aligned APE: {err.reason}"
+        else:  # (the CLI's row read "-" without a reason)
+            out["ape_translation_se3_note"] = f"no SE(3)-aligned APE: a rigid fit needs 3 poses, the run has {len(ref)}"
         out["rpe_translation_m"] = leval.rpe(ref, est, delta=1, delta_unit="frames", relation="translation").to_dict(include_errors=False)
         out["rpe_rotation_deg"] = leval.rpe(ref, est, delta=1, delta_unit="frames", relation="rotation_angle_deg").to_dict(include_errors=False)
         for key in ("ape_translation_m", "ape_translation_se3_m", "rpe_translation_m", "rpe_rotation_deg"):
@@ -84,6 +88,10 @@ def odometry_metrics(result: OdometryResult) -> dict[str, Any]:
         out["kitti_drift"] = None
         out["kitti_drift_note"] = f"path {ref.length_m:.1f} m is shorter than the shortest devkit segment (100 m)"
     return out
+
+
+#: bad frames listed by index in metrics.json (all of them are in timing.csv)
+MAX_BAD_FRAMES_LISTED = 100
 
 
 def frame_check_summary(result: OdometryResult) -> dict[str, Any] | None:
@@ -104,7 +112,9 @@ def frame_check_summary(result: OdometryResult) -> dict[str, Any] | None:
         "n_fitness_checked": int(np.isfinite(stats.fitness).sum()),
         "n_said_converged_but_bad": converged_but_bad,
         "variant_verdict": "per-frame converged flag" if verdict else "none (stateful variant: no per-frame verdict)",
-        "bad_frames": [int(f) for f in stats.frame[failed][:100]],
+        "bad_frames": [int(f) for f in stats.frame[failed][:MAX_BAD_FRAMES_LISTED]],
+        # (the list was cut at 100 without a word)
+        "n_bad_frames_not_listed": max(int(failed.sum()) - MAX_BAD_FRAMES_LISTED, 0),
         "fitness_median": float(np.nanmedian(stats.fitness)) if np.isfinite(stats.fitness).any() else None,
         "check_time_s_mean": float(stats.check_s.mean()) if stats.check_s is not None and len(stats.check_s) else None,
         "thresholds": result.config.get("run", {}).get("frame_check"),

@@ -19,7 +19,8 @@ from lidarkit.lifetime import raise_if_interrupted
 from lidarkit.odometry.covariance import propagate
 from lidarkit.odometry.frame_check import FrameChecker, FrameCheckConfig
 from lidarkit.progress import progress_bar
-from lidarkit.odometry.inputs import FrameSelection, frames_past_the_end, frames_repr, open_sequence, parse_frames, time_gap_warning
+from lidarkit.odometry.inputs import (FrameSelection, frame_numbers, frames_past_the_end, frames_repr, open_sequence, parse_frames,
+                                      time_gap_warning, typical_interval)
 from lidarkit.odometry.instants import deskews, estimate_instant, like_with_like, stamps_at_instant
 from lidarkit.odometry.metrics import odometry_metrics
 from lidarkit.odometry.prefetch import DEFAULT_DEPTH, prefetched
@@ -219,7 +220,9 @@ def _run_stateless(stream, registration: Any, worker: Overlap, indices: np.ndarr
             motion = item["guess"]
         poses[k] = poses[k - 1] @ motion
         if not converged[k]:
-            why = reasons[k] or "no reason given"
+            # (a variant's own "; constant-velocity fallback" is the runner's to say: none under --strict, the odometry
+            # motion with init="odometry")
+            why = reasons[k].removesuffix("; constant-velocity fallback") or "no reason given"
             if strict:
                 raise RegistrationError(f"registration did not converge ({why})", source=dataset_name, location=f"frame {idx}")
             fallback[k] = True
@@ -539,15 +542,17 @@ def run(
     past_the_end = frames_past_the_end(frames, n_total)
     effective, warnings = effective_settings(sequence, registration, name, stateful, checker.has_point_times, reference,
                                              stamp_instant=getattr(first_scan, "stamp_instant", None), n_flat_times=len(flat_times))
-    numbers = getattr(sequence, "scan_frames", None)  # the recording's own frame numbers (KITTI's file names), if any
-    own_numbers = numbers is not None and len(numbers) == n_total
-    numbers = np.asarray(numbers)[indices] if own_numbers else indices
+    all_numbers = frame_numbers(sequence)  # the recording's own frame numbers (KITTI's or a folder's file names), if any
+    numbers = indices if all_numbers is None else all_numbers[indices]
+    # the gaps are judged against the dataset's own interval (stamps, else file numbers): the run's may hold only two
+    typical = typical_interval(all_stamps if timestamps is not None else all_numbers if all_numbers is not None else np.arange(n_total))
     if want_covariance and n > 1 and not np.isfinite(relative_cov[1:]).all(axis=(1, 2)).any():
-        # (a plugin whose results carry no covariance): no all-NaN pose covariance is written
-        warnings.append(f"no frame's registration gave a covariance ({name} returns none): no pose covariance")
+        # (a plugin whose results carry no covariance, or no frame converged): no all-NaN pose covariance is written
+        why = (f"every frame fell back to the {'odometry' if odometry_poses is not None else 'constant-velocity'} motion"
+               if fallback[1:].all() else f"{name} returns none")
+        warnings.append(f"no frame's registration gave a covariance ({why}): no pose covariance")
         want_covariance = False
-    warnings = [w for w in (past_the_end, time_gap_warning(timestamps, numbers, odometry_poses is not None,
-                                                                indices if own_numbers else None)) if w] + warnings
+    warnings = [w for w in (past_the_end, time_gap_warning(timestamps, numbers, odometry_poses is not None, indices, typical)) if w] + warnings
     if stateful:  # (accepted, recorded in config.yaml as given, and without effect on the run)
         gates = [f for f in ("min_fitness", "min_correspondences") if f in getattr(config, "model_fields_set", ())]
         if gates:
@@ -573,6 +578,7 @@ def run(
             ),
             "ground_truth": None if reference is None else reference.name,
             "ground_truth_meta": None if reference is None else _plain(reference.meta),
+            "ground_truth_note": _relations_note(sequence, out_dir) if reference is None else None,
             "effective": effective,
             "warnings": warnings,
             "frame_check": check.config.describe(),
@@ -614,6 +620,16 @@ def _odometry_guess(sequence: ScanSequence, init: str, registration: Any, n_tota
     if len(odometry) != n_total:
         raise DataError(f"odometry has {len(odometry)} poses for {n_total} scans", source=dataset_name)
     return np.asarray(odometry.poses_se3, dtype=np.float64)
+
+
+def _relations_note(sequence: ScanSequence, out_dir: str | os.PathLike | None) -> str | None:
+    """How to score a run without ground truth over a log with relation ground truth (a CARMEN log's ``.relations``;
+    the ACES run said "none: no scores" with relations beside the log), or None."""
+    relations = (getattr(sequence, "reader_options", None) or {}).get("relations")
+    if not relations:
+        return None
+    poses = Path(out_dir) / "poses_tum.txt" if out_dir is not None else "POSES_TUM (the run's poses_tum.txt, --out)"
+    return f"none: no scores here; the dataset has relation ground truth: lidarkit eval --relations {relations} {poses}"
 
 
 def _plain(meta: dict) -> dict:
