@@ -349,3 +349,23 @@ def test_odometry_stamped_at_no_clear_instant_is_re_timed_where_the_recording_ca
     np.testing.assert_allclose(retimed.poses_se3[:, 0, 3], 5.0 * 0.1 * np.arange(1, 11), atol=1e-3)  # each sweep's end
     kept, note = like_with_like(gt, "end", sequence=object(), own_ground_truth=True, method="kiss")
     assert kept is gt and note is None
+
+
+def test_a_callers_ground_truth_of_another_instant_is_refused_before_the_frames():
+    """run(seq, "vanilla", ground_truth=seq.ground_truth_at("mid")) over sweeps stamped at their end registered every
+    frame and then refused the comparison (docs gave it as the example); it is refused from the first scan."""
+    from lidarkit.odometry import run
+
+    seq = SimulatedLidarSequence(n_frames=6, n_beams=16, n_azimuths=360)
+    read = []
+    original = seq.read_scan
+
+    def counted(index):
+        read.append(index)
+        return original(index)
+
+    seq.read_scan = counted
+    with pytest.raises(EvaluationError, match="vanilla's poses refer to the sweep end but the ground truth to the sweep mid"):
+        run(seq, "vanilla", ground_truth=seq.ground_truth_at("mid"))
+    assert read == [0]
+    assert run(seq, "vanilla", ground_truth=seq.ground_truth_at("end")).metrics["final_error"]["translation_m"] >= 0

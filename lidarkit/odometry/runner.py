@@ -410,6 +410,15 @@ def run(
     # (a sequence of the caller's own may have no stamps or ground truth: ScanSequence's other members are optional)
     _check_stamps(getattr(sequence, "timestamps_s", None), indices, dataset_name)  # now, not after registering every frame
     reference = _reference(sequence, ground_truth, indices, dataset_name)
+    if ground_truth is not None and reference is not None and (reference.meta or {}).get("pose_instant"):
+        # a caller's ground truth of another instant of the sweep than the estimate's is refused (it cannot be re-timed):
+        # before the frames, from the first scan, not after registering all of them
+        probe = sequence.read_scan(int(indices[0]))
+        stamped_at = getattr(sequence, "stamp_instant", None)
+        if stamped_at is not None and stamped_at != probe.stamp_instant:
+            probe = dataclasses.replace(probe, stamp_instant=stamped_at)
+        like_with_like(reference, estimate_instant(registration, probe), sequence=sequence, frames=indices,
+                       own_ground_truth=False, method=name, deskewed=deskews(registration, probe))
     need_times = strict and bool(deskew_requested(registration)) and (stateful or getattr(registration, "accepts_point_times", False))
     if strict and not stateful and deskew_requested(registration) and not getattr(registration, "accepts_point_times", False):
         raise ConfigError(f"deskew requested, but {name} runs scan-to-scan through align(), which takes no per-point times", source=name)
