@@ -7,8 +7,8 @@ evo aligns, transforms and scales its trajectories in place, so every call works
 from __future__ import annotations
 
 import contextlib
+import io
 import logging
-import sys
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -460,8 +460,9 @@ def rpe(
     try:
         if pairs is None:
             pair_poses = ref_evo.poses_se3 if pairs_from_reference else est_evo.poses_se3
-            # (evo prints the all-pairs search's progress: to stderr, not into the tables on stdout)
-            with contextlib.redirect_stdout(sys.stderr):
+            # (evo prints the all-pairs search's progress, "0 %12 %25 %..." without a line end: it went into the tables
+            # on stdout, then onto their title line on stderr; kept out of both)
+            with contextlib.redirect_stdout(io.StringIO()):
                 found = metrics.id_pairs_from_delta(pair_poses, evo_delta, unit, rel_delta_tol, all_pairs=all_pairs)
             pairs = np.array(found, dtype=np.int64).reshape(-1, 2)
         # given pairs are compared as given (an earlier call's selection: its first legacy pair already dropped; the
