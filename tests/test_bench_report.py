@@ -536,3 +536,28 @@ def test_lists_cut_short_say_how_many_more(tmp_path, capsys):
     assert "... and 5 more failed jobs (the report lists every one)" in out
     text = (tmp_path / "r" / "report.md").read_text()
     assert "and 10 more job warnings" in text
+
+
+def test_reference_comparisons_pair_seeds_as_compare_does_and_say_when_segments_overlap():
+    """The demo's report said "kiss better, p = 0.002 over 10 paired segments" (5 overlapping segments of each of 2
+    drives) where `lidarkit compare` on the same folder said no difference over 2 seeds. With 5 or more seeds the
+    report pairs seeds (their drift, as compare); with fewer, its segment test says the segments overlap."""
+    from lidarkit.bench.jobs import Job
+    from lidarkit.bench.publication import OVERLAPPING_SEGMENTS, reference_comparisons
+    from lidarkit.bench.report import comparison_rows
+
+    def record(method, seed, drift, segments):
+        job = Job("odometry", "e", "drive", {"kind": "sim_lidar", "scene": "street"}, method, seed=seed)
+        return {"status": "ok", "job": job.spec(), "metrics": {"drift_translation_pct": drift, "ape_rmse_m": drift / 10},
+                "series": {"drift_segments": {"translation_pct": segments}}}
+
+    rng = np.random.default_rng(0)
+    def records(n_seeds):
+        return [record(m, s, d + 0.1 * rng.random(), list(d + 0.01 * rng.random(5)))
+                for s in range(n_seeds) for m, d in (("kiss", 0.5), ("small_gicp", 1.5))]
+
+    (dataset, few), = reference_comparisons(records(2))
+    assert few.pairing == "segment" and few.n_pairs == 10 and few.note == OVERLAPPING_SEGMENTS
+    assert comparison_rows([(dataset, few)])[1][0][-1] == "kiss better (overlapping segments: p optimistic)"
+    (_, many), = reference_comparisons(records(6))
+    assert many.pairing == "seed" and many.n_pairs == 6 and many.metric == "KITTI drift %" and many.better == "a"

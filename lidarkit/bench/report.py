@@ -714,6 +714,8 @@ def comparison_rows(comparisons: list[Any]) -> tuple[list[str], list[list[str]]]
     rows = []
     for dataset, c in comparisons:
         verdict = (f"{c.name_a if c.better == 'a' else c.name_b} better" if c.better else "no significant difference")
+        if c.pairing == "segment":  # (overlapping KITTI segments of few seeds: see publication.OVERLAPPING_SEGMENTS)
+            verdict += " (overlapping segments: p optimistic)"
         rows.append([dataset, c.name_a, c.name_b, f"{c.n_pairs} {c.pairing}s ({c.metric})", _fmt(c.mean_a),
                      _fmt(c.mean_b), f"{c.p_value:.2g}", f"{c.effect_size:+.2f}", verdict])
     return header, rows
