@@ -85,3 +85,10 @@ def test_an_empty_argument_is_refused_not_read_as_the_current_folder(tmp_path, m
         err = capsys.readouterr().err
         assert f"{named} empty value (an unset shell variable?)" in err and len(err.strip().splitlines()) == 1, err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_demo_help_offers_only_its_own_options(capsys):
+    """`lidarkit demo --help` said "dask (--address, or a local Dask cluster)"; demo has no --address."""
+    assert cli_exit_code(["demo", "--help"]) == 0
+    text = " ".join(capsys.readouterr().out.split())
+    assert "--address" not in text and "dask (a local Dask cluster)" in text

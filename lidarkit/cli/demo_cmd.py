@@ -9,7 +9,7 @@ from typing import Optional
 import typer
 
 from lidarkit.cli.app import app, stderr, stdout
-from lidarkit.cli.bench_cmd import EXECUTOR_HELP, print_run_summary, run_with_progress, summary_table
+from lidarkit.cli.bench_cmd import print_run_summary, run_with_progress, summary_table
 from lidarkit.errors import ConfigError
 
 
@@ -17,7 +17,8 @@ from lidarkit.errors import ConfigError
 def demo_command(
     out_dir: Path = typer.Option(Path("results/demo"), "--out", "-o", help="Results folder (resumable: finished jobs are kept)."),
     quick: bool = typer.Option(False, "--quick", help="The reduced suite (seconds instead of minutes)."),
-    executor: str = typer.Option("process", "--executor", "-e", help=EXECUTOR_HELP),
+    executor: str = typer.Option("process", "--executor", "-e",  # (no --address: bench's help sent users to it)
+                                 help="serial | process (local process pool sized to the machine) | dask (a local Dask cluster)"),
     workers: Optional[int] = typer.Option(None, "--workers", "-j", help="Worker processes (default: CPUs available)."),
     force: bool = typer.Option(False, "--force", help="Rerun jobs that already have a result."),
     suite: Optional[Path] = typer.Option(None, "--suite", help="Run this suite instead of the bundled demo suite."),
