@@ -214,7 +214,7 @@ class Trajectory:
         try:
             rows = read_numeric_table(path, 12)
         except DataError as err:  # a TUM file (8 numbers a row: time, x y z, qx qy qz qw) read as KITTI: say so
-            if "expected 12 numbers, found 8" in err.reason:
+            if "expected 12 numbers, found 8" in err.reason and err.location == _first_data_line(path):  # (not a cut-off line)
                 raise DataError(err.reason + " (a TUM trajectory? read it as tum: --format tum, Trajectory.from_tum)",
                                 source=err.source, location=err.location) from None
             raise
@@ -329,3 +329,16 @@ class Trajectory:
 
     def copy(self) -> Trajectory:
         return copy.deepcopy(self)
+
+
+def _first_data_line(path: str | os.PathLike) -> str | None:
+    """``"line N"`` of a text file's first line that is neither blank nor a comment (None when unreadable)."""
+    from lidarkit.textfile import read_lines
+
+    try:
+        for n, raw in enumerate(read_lines(path), start=1):
+            if raw.strip() and not raw.strip().startswith("#"):
+                return f"line {n}"
+    except (DataError, OSError):
+        return None
+    return None

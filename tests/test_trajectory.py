@@ -193,3 +193,15 @@ def test_wrong_kinds_of_arguments_are_one_line_errors(tmp_path):
     gt = Trajectory.from_kitti(shared_path("evo_testdata", "KITTI_00_gt.txt"))[:50]
     with pytest.raises(ConfigError, match="evaluate: settings must be an EvaluationSettings .*, got dict"):
         evaluate(gt, gt, settings={"align": "none"})
+
+
+def test_a_cut_off_kitti_file_is_not_called_a_tum_trajectory(tmp_path):
+    """A KITTI pose file cut off in line 19 read "(a TUM trajectory? ...)" after 18 full rows; only a file whose first
+    row has TUM's 8 numbers gets the hint."""
+    text = shared_path("evo_testdata", "KITTI_00_gt.txt").read_text()
+    (tmp_path / "cut.txt").write_text(text[:3000])
+    with pytest.raises(DataError) as err:
+        Trajectory.from_kitti(tmp_path / "cut.txt")
+    assert str(err.value).endswith("(line 19): expected 12 numbers, found 8")
+    with pytest.raises(DataError, match=r"\\(a TUM trajectory\\? read it as tum"):
+        Trajectory.from_kitti(shared_path("evo_testdata", "freiburg1_xyz-groundtruth.txt"))
