@@ -203,5 +203,5 @@ def test_a_cut_off_kitti_file_is_not_called_a_tum_trajectory(tmp_path):
     with pytest.raises(DataError) as err:
         Trajectory.from_kitti(tmp_path / "cut.txt")
     assert str(err.value).endswith("(line 19): expected 12 numbers, found 8")
-    with pytest.raises(DataError, match=r"\\(a TUM trajectory\\? read it as tum"):
+    with pytest.raises(DataError, match=r"\(a TUM trajectory\? read it as tum"):
         Trajectory.from_kitti(shared_path("evo_testdata", "freiburg1_xyz-groundtruth.txt"))
