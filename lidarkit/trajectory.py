@@ -333,12 +333,10 @@ class Trajectory:
 
 def _first_data_line(path: str | os.PathLike) -> str | None:
     """``"line N"`` of a text file's first line that is neither blank nor a comment (None when unreadable)."""
-    from lidarkit.textfile import read_lines
+    from lidarkit.textfile import data_line_numbers
 
     try:
-        for n, raw in enumerate(read_lines(path), start=1):
-            if raw.strip() and not raw.strip().startswith("#"):
-                return f"line {n}"
+        lines = data_line_numbers(path)
     except (DataError, OSError):
         return None
-    return None
+    return f"line {lines[0]}" if lines else None

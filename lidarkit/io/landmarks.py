@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
-from lidarkit.textfile import read_lines
+from lidarkit.textfile import is_number, read_lines
 
 log = logging.getLogger(__name__)
 
@@ -159,7 +159,7 @@ class LandmarkData:
                 m_bearing.append(bearing)
                 m_line.append(lineno)
             else:
-                if not odometry and len(fields) == 3 and all(_is_number(f) for f in fields):  # (it called the id '1' a record type)
+                if not odometry and len(fields) == 3 and all(is_number(f) for f in fields):  # (it called the id '1' a record type)
                     raise DataError("an 'id x y' line of a world (landmark) file, not sensor data: expected a data folder or its "
                                     f"{SENSOR_FILE}", source=path, location=where)
                 raise DataError(f"unknown record type {_shown(fields[0])} (expected ODOMETRY or SENSOR)", source=path, location=where)
@@ -213,14 +213,6 @@ def _parse_float(text: str, path: Path | str | os.PathLike, where: str) -> float
 
 
 MAX_ABS_VALUE = 1e7  # landmark coordinates, odometry, ranges and bearings: metres and radians of a planar robot
-
-
-def _is_number(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
 
 
 def _parse_int(text: str, path: Path | str | os.PathLike, where: str) -> int:
