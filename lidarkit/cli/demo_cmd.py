@@ -58,8 +58,9 @@ def demo_command(
         for table in summary_table(result.report):
             console.print(table)
         publication = getattr(result.report, "publication", None)
-        for dataset, comparison in getattr(publication, "comparisons", []) or []:
-            console.print(f"{dataset}: {comparison.verdict()}", soft_wrap=True, markup=False)
+        for dataset, comparison in getattr(publication, "comparisons", []) or []:  # (with its note: segments overlap)
+            note = f" (note: {comparison.note})" if comparison.note else ""
+            console.print(f"{dataset}: {comparison.verdict()}{note}", soft_wrap=True, markup=False)
         console.print(f"report: {result.report.html_path}  (also report.md, report.csv)", soft_wrap=True)
     else:
         console.print("no benchmark experiment could run (see the skipped list above)")
