@@ -470,25 +470,29 @@ class KittiOdometry:
         if len(self._times_all) >= 2:
             period = float(np.median(np.diff(self._times_all)))
         else:
-            import yaml
-
             try:
-                period = 1.0 / float(yaml.safe_load((self.sequence_dir / "sim.yaml").read_text())["frame_rate_hz"])
-            except (OSError, yaml.YAMLError, TypeError, KeyError, ValueError, ZeroDivisionError):
+                period = 1.0 / float(self._sim_config["frame_rate_hz"])
+            except (TypeError, KeyError, ValueError, ZeroDivisionError):
                 return 0.0
         return (INSTANT_FRACTION[instant] - INSTANT_FRACTION[self._simulator_pose_instant]) * period
 
     @cached_property
-    def _simulator_pose_instant(self) -> str | None:
-        """``pose_instant`` of the simulator's ``sim.yaml`` (its poses.txt and times.txt refer to it), else None."""
+    def _sim_config(self) -> dict[str, Any]:
+        """The simulator's ``sim.yaml`` beside the scans (read once), {} for any other folder or an unreadable file."""
         if not self.simulated:
-            return None
+            return {}
         import yaml
 
         try:
-            instant = yaml.safe_load((self.sequence_dir / "sim.yaml").read_text()).get("pose_instant")
-        except (OSError, yaml.YAMLError, AttributeError):
-            return None
+            config = yaml.safe_load((self.sequence_dir / "sim.yaml").read_text())
+        except (OSError, yaml.YAMLError):
+            return {}
+        return config if isinstance(config, dict) else {}
+
+    @cached_property
+    def _simulator_pose_instant(self) -> str | None:
+        """``pose_instant`` of the simulator's ``sim.yaml`` (its poses.txt and times.txt refer to it), else None."""
+        instant = self._sim_config.get("pose_instant")
         return instant if instant in ("start", "mid", "end") else None
 
     def relative_pose(self, frame_a: int, frame_b: int, *, frame: str = "lidar") -> np.ndarray:
