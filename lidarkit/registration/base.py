@@ -175,6 +175,16 @@ def calibration_note(variant: str, learned: str | None) -> str:
     return learned if learned == variant else f"{learned}'s (inherited by {variant})"
 
 
+def _adjoint_about(c: np.ndarray) -> np.ndarray:
+    """``Ad(S)^-1``, ``S`` the translation to the point ``c``: takes a covariance's perturbation from the frame's origin
+    to ``c`` (``Ad Sigma Ad^T``)."""
+    from lidarkit.registration.covariance import adjoint
+
+    S_inv = np.eye(4)
+    S_inv[:3, 3] = -c
+    return adjoint(S_inv)
+
+
 @dataclass(frozen=True)
 class RegistrationResult:
     """Outcome of one pairwise registration.
@@ -214,15 +224,13 @@ class RegistrationResult:
         if self.covariance is None:
             return None
         from lidarkit.registration.assessment import COVARIANCE_ORIGIN_KEY
-        from lidarkit.registration.covariance import adjoint, safe_inverse
+        from lidarkit.registration.covariance import safe_inverse
 
         at = self.extra.get(COVARIANCE_ORIGIN_KEY)
         if at is None:
             return safe_inverse(self.covariance)
-        S_inv = np.eye(4)
-        S_inv[:3, 3] = -np.asarray(at, dtype=np.float64)
-        Ad = adjoint(S_inv)  # covariance_about(c) = Ad covariance Ad^T, so its inverse is Ad^T information_c Ad
-        return Ad.T @ safe_inverse(self.covariance_about(at)) @ Ad
+        Ad = _adjoint_about(np.asarray(at, dtype=np.float64))  # covariance_about(c) = Ad covariance Ad^T: its inverse
+        return Ad.T @ safe_inverse(self.covariance_about(at)) @ Ad  # is Ad^T information_c Ad
 
     def covariance_about(self, origin_m: np.ndarray | list[float]) -> np.ndarray | None:
         """``covariance`` with the perturbation taken about the point ``origin_m`` (m, target frame) instead of the
@@ -232,7 +240,6 @@ class RegistrationResult:
         if self.covariance is None:
             return None
         from lidarkit.registration.assessment import COVARIANCE_ORIGIN_KEY
-        from lidarkit.registration.covariance import adjoint
 
         try:
             c = np.asarray(origin_m, dtype=np.float64).reshape(3)
@@ -244,9 +251,7 @@ class RegistrationResult:
         at = self.extra.get(COVARIANCE_ORIGIN_KEY)
         if local is not None and at is not None and np.array_equal(c, np.asarray(at, dtype=np.float64)):
             return np.array(local, dtype=np.float64)
-        S_inv = np.eye(4)
-        S_inv[:3, 3] = -c
-        Ad = adjoint(S_inv)
+        Ad = _adjoint_about(c)
         return Ad @ self.covariance @ Ad.T
 
     def nees(self, T_target_source_true: np.ndarray) -> float:
