@@ -6,7 +6,7 @@ normalized coordinates, Sampson refinement); ``preset(name)`` gives the two repo
 
 from __future__ import annotations
 
-from typing import Any, Literal, Optional
+from typing import Any, Literal, Optional, get_args
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
@@ -102,6 +102,11 @@ class SanityConfig(_Stage):
     max_rotation_homography_px: float = Field(1.0, ge=0)
 
 
+#: How the VO trajectory gets its scale (``ScaleConfig.mode``); also what the evaluation aligns by.
+ScaleMode = Literal["gt", "none", "relative"]
+SCALE_MODES = get_args(ScaleMode)
+
+
 class ScaleConfig(_Stage):
     """Translation scale: ``gt`` (per-step norm of the ground truth), ``none`` (unit steps) or ``relative`` (one global
     unknown scale propagated through depths of points triangulated in consecutive pairs).
@@ -121,7 +126,7 @@ class ScaleConfig(_Stage):
     ``report_orb`` sets ``corners``: its unrefined ORB + MAGSAC translation direction (~2 deg off) biases the corner
     depths and its scale drifted; poses that explain the corners about as well (SIFT, ORB + KLT) keep ``pair``."""
 
-    mode: Literal["gt", "none", "relative"] = "relative"
+    mode: ScaleMode = "relative"
     min_triangulation_angle_deg: float = Field(1.0, gt=0)
     min_common_points: int = Field(15, ge=3)
     max_carried_points: int = Field(1500, ge=10)

@@ -17,10 +17,12 @@ from lidarkit.trajectory import Trajectory
 def alignment_for(scale_mode: str) -> str:
     """``se3`` for ground-truth scale, ``sim3`` for ``none`` / ``relative``; ConfigError for any other (``"GT"`` was
     scored with Sim(3), an APE of 0 for a trajectory twice too long)."""
-    if scale_mode not in ("gt", "none", "relative"):
+    from lidarkit.vo.config import SCALE_MODES
+
+    if scale_mode not in SCALE_MODES:
         from lidarkit.errors import ConfigError
 
-        raise ConfigError(f"unknown scale mode {scale_mode!r}; known: gt, none, relative", source="scale_mode")
+        raise ConfigError(f"unknown scale mode {scale_mode!r}; known: {', '.join(SCALE_MODES)}", source="scale_mode")
     return "se3" if scale_mode == "gt" else "sim3"
 
 
