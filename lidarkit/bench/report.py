@@ -402,7 +402,7 @@ def _table_rows(table: TaskTable) -> tuple[list[str], list[list[str]]]:
     header = ["experiment", "dataset", "method", "ok/failed"] + [m.label for m in table.metrics]
     rows = [
         [r.experiment, r.dataset, r.method, f"{r.n_ok}/{r.n_failed}"]
-        + [format_stat(r.stats[m.name]) + _no_value_note(r, m.name) + _alignment_note(r, m) for m in table.metrics]
+        + [format_stat(r.stats[m.name]) + _failed_note(r, m.name, failures=False) + _alignment_note(r, m) for m in table.metrics]
         for r in table.rows
     ]
     return header, rows
@@ -591,20 +591,16 @@ def _n_no_value(row: Row, metric: str) -> int:
     return row.n_ok - n if n > 0 else 0
 
 
-def _failed_note(row: Row, metric: str | None = None) -> str:
+def _failed_note(row: Row, metric: str, failures: bool = True) -> str:
     """`` (3 of 5 failed)`` / `` (4 of 12 not run)`` / `` (2 of 3 no value)`` for a row some of whose seeds failed, have
-    no result yet or gave ``metric`` no finite value (its numbers are over the others), else ''."""
+    no result yet or gave ``metric`` no finite value (its numbers are over the others), else ''; ``failures=False``:
+    the seeds without a value only (a table whose ok/failed column says the rest)."""
     total = row.n_ok + row.n_failed + row.n_missing
-    n_no_value = 0 if metric is None else _n_no_value(row, metric)
-    notes = ([f"{row.n_failed} of {total} failed"] * bool(row.n_failed) + [f"{row.n_missing} of {total} not run"] * bool(row.n_missing)
+    n_no_value = _n_no_value(row, metric)
+    notes = ([f"{row.n_failed} of {total} failed"] * bool(failures and row.n_failed)
+             + [f"{row.n_missing} of {total} not run"] * bool(failures and row.n_missing)
              + [f"{n_no_value} of {total} no value"] * bool(n_no_value))
     return f" ({', '.join(notes)})" if notes else ""
-
-
-def _no_value_note(row: Row, metric: str) -> str:
-    """`` (2 of 3 no value)`` where some of the row's seeds gave ``metric`` no finite value, else ''."""
-    n = _n_no_value(row, metric)
-    return f" ({n} of {row.n_ok + row.n_failed + row.n_missing} no value)" if n else ""
 
 
 def _better_higher(task: str, metric: str) -> bool:
