@@ -114,6 +114,9 @@ def test_nan_points_refused_with_advice_the_cli_can_follow(capsys, tmp_path):
     np.save(path, source)
     code, _, err = run_cli(capsys, str(path), str(TARGET), "-m", "small_gicp")
     assert code == 1 and "holes.npy" in err and "NaN" in err and "--drop-nonfinite" in err
+    assert "frame 0" not in err  # (both clouds were "frame 0", the target included: two files are no sequence)
+    code, _, err = run_cli(capsys, str(TARGET), str(path), "-m", "small_gicp")
+    assert code == 1 and err.strip().startswith(f"error: {path}: ") and "frame" not in err
     code, _, err = run_cli(capsys, str(path), str(TARGET), "-m", "small_gicp", "--drop-nonfinite", "--out", str(tmp_path / "run"))
     assert code == 0, err
     result = json.loads((tmp_path / "run" / "result.json").read_text())

@@ -23,9 +23,14 @@ KITTI_BIN_RECORD_BYTES = 16  # float32 x, y, z, intensity
 POINT_FILE_SUFFIXES = (".bin", ".npy", ".pcd", ".ply")
 
 
+def _where(frame: int | None) -> str | None:
+    """An error's location: the frame of a sequence, none for a file read on its own (``lidarkit icp``'s two clouds)."""
+    return None if frame is None else f"frame {frame}"
+
+
 def _require_file(path: Path, frame: int | None) -> int:
     """Size in bytes of an existing, non-empty regular file."""
-    where = None if frame is None else f"frame {frame}"
+    where = _where(frame)
     if not path.exists():
         raise DataError("scan file not found", source=path, location=where)
     if not path.is_file():
@@ -64,7 +69,7 @@ def finite_points(
 
     if len(points_xyz) and _within_limits(points_xyz) and (intensity is None or bool(np.isfinite(intensity).all())):
         return points_xyz, intensity  # the common case in flat reductions (NaN fails them); the per-row test below is ~20x slower
-    where = None if frame is None else f"frame {frame}"
+    where = _where(frame)
     ok = np.isfinite(points_xyz).all(axis=1)
     if intensity is not None:
         ok &= np.isfinite(intensity)
@@ -90,7 +95,7 @@ def finite_points(
 def read_kitti_bin(
     path: str | os.PathLike,
     *,
-    frame: int = 0,
+    frame: int | None = None,
     timestamp_s: float | None = None,
     drop_nonfinite: bool = False,
 ) -> Scan:
@@ -106,7 +111,7 @@ def read_kitti_bin(
             f"truncated: {size} bytes is not a multiple of {KITTI_BIN_RECORD_BYTES} "
             f"(float32 x, y, z, intensity per point); {size % KITTI_BIN_RECORD_BYTES} trailing bytes",
             source=path,
-            location=f"frame {frame}",
+            location=_where(frame),
         )
     data = np.fromfile(path, dtype="<f4").reshape(-1, 4)
     if len(data) and _within_limits(data):
@@ -115,32 +120,32 @@ def read_kitti_bin(
         points, intensity = data[:, :3], data[:, 3]
     else:
         points, intensity = finite_points(data[:, :3], data[:, 3], source=path, frame=frame, drop_nonfinite=drop_nonfinite)
-    return Scan(points.astype(np.float64), np.ascontiguousarray(intensity), None, timestamp_s, frame, str(path))
+    return Scan(points.astype(np.float64), np.ascontiguousarray(intensity), None, timestamp_s, frame or 0, str(path))
 
 
 def read_npy_scan(
-    path: str | os.PathLike, *, frame: int = 0, timestamp_s: float | None = None, drop_nonfinite: bool = False
+    path: str | os.PathLike, *, frame: int | None = None, timestamp_s: float | None = None, drop_nonfinite: bool = False
 ) -> Scan:
     """Read a ``.npy`` array of shape ``(N, 3)`` (x, y, z) or ``(N, 4)`` (x, y, z, intensity)."""
     path = Path(path)
     _require_file(path, frame)
-    data = load_npy(path, f"frame {frame}")
+    data = load_npy(path, _where(frame))
     if data.ndim != 2 or data.shape[1] not in (3, 4) or not np.issubdtype(data.dtype, np.number) \
             or np.issubdtype(data.dtype, np.complexfloating) or data.dtype == np.bool_:
         raise DataError(
             f"expected a numeric (N, 3) or (N, 4) array, got shape {data.shape} dtype {data.dtype}",
             source=path,
-            location=f"frame {frame}",
+            location=_where(frame),
         )
     intensity = data[:, 3].astype(np.float32) if data.shape[1] == 4 else None
     points, intensity = finite_points(
         data[:, :3].astype(np.float64), intensity, source=path, frame=frame, drop_nonfinite=drop_nonfinite
     )
-    return Scan(points, intensity, None, timestamp_s, frame, str(path))
+    return Scan(points, intensity, None, timestamp_s, frame or 0, str(path))
 
 
 def read_open3d_scan(
-    path: str | os.PathLike, *, frame: int = 0, timestamp_s: float | None = None, drop_nonfinite: bool = False
+    path: str | os.PathLike, *, frame: int | None = None, timestamp_s: float | None = None, drop_nonfinite: bool = False
 ) -> Scan:
     """Read a ``.pcd`` or ``.ply`` with Open3D's tensor reader, keeping an ``intensity`` field if present.
 
@@ -157,9 +162,9 @@ def read_open3d_scan(
     try:
         cloud = o3d.t.io.read_point_cloud(str(path), remove_nan_points=False, remove_infinite_points=False)
     except RuntimeError as err:
-        raise DataError(f"Open3D cannot read it ({err})", source=path, location=f"frame {frame}") from err
+        raise DataError(f"Open3D cannot read it ({err})", source=path, location=_where(frame)) from err
     if "positions" not in cloud.point or len(cloud.point.positions) == 0:
-        raise DataError("no points read (unreadable, corrupt or empty point cloud)", source=path, location=f"frame {frame}")
+        raise DataError("no points read (unreadable, corrupt or empty point cloud)", source=path, location=_where(frame))
     points = cloud.point.positions.numpy().astype(np.float64)
     intensity = None
     for key in ("intensity", "intensities", "reflectance"):
@@ -167,7 +172,7 @@ def read_open3d_scan(
             intensity = cloud.point[key].numpy().reshape(len(points), -1)[:, 0].astype(np.float32)
             break
     points, intensity = finite_points(points, intensity, source=path, frame=frame, drop_nonfinite=drop_nonfinite)
-    return Scan(points, intensity, None, timestamp_s, frame, str(path))
+    return Scan(points, intensity, None, timestamp_s, frame or 0, str(path))
 
 
 _PCD_HEADER_KEYS = ("VERSION", "FIELDS", "SIZE", "TYPE", "COUNT", "WIDTH", "HEIGHT", "VIEWPOINT", "POINTS", "DATA")
@@ -176,7 +181,7 @@ _PCD_HEADER_KEYS = ("VERSION", "FIELDS", "SIZE", "TYPE", "COUNT", "WIDTH", "HEIG
 def check_pcd_counts(path: Path, frame: int | None = None) -> None:
     """Check a ``.pcd`` body against its header before Open3D reads it: Open3D fills a short body with zeros (or
     fails deep inside), so a header declaring more points than the body holds is a DataError here."""
-    where = None if frame is None else f"frame {frame}"
+    where = _where(frame)
     try:
         fh = open(path, "rb")
     except OSError as err:
@@ -239,7 +244,7 @@ _PLY_TYPE_BYTES = {"char": 1, "int8": 1, "uchar": 1, "uint8": 1, "short": 2, "in
 def check_ply_counts(path: Path, frame: int | None = None) -> None:
     """Check a ``.ply`` body against the vertex count of its header before Open3D reads it: Open3D returns a cut
     file's full vertex count with whatever memory held for the missing tail, so a short body is a DataError here."""
-    where = None if frame is None else f"frame {frame}"
+    where = _where(frame)
     try:
         with open(path, "rb") as fh:
             head = fh.read(65536)
@@ -277,7 +282,7 @@ def check_ply_counts(path: Path, frame: int | None = None) -> None:
 
 
 def read_point_file(
-    path: str | os.PathLike, *, frame: int = 0, timestamp_s: float | None = None, drop_nonfinite: bool = False
+    path: str | os.PathLike, *, frame: int | None = None, timestamp_s: float | None = None, drop_nonfinite: bool = False
 ) -> Scan:
     """Read any supported point file, chosen by suffix (``.bin``, ``.npy``, ``.pcd``, ``.ply``)."""
     path = Path(path)
@@ -289,7 +294,7 @@ def read_point_file(
         raise DataError(
             f"unsupported point file type {suffix!r}; supported: {', '.join(POINT_FILE_SUFFIXES)}",
             source=path,
-            location=f"frame {frame}",
+            location=_where(frame),
         )
     return readers[suffix](path, frame=frame, timestamp_s=timestamp_s, drop_nonfinite=drop_nonfinite)
 
