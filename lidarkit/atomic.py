@@ -170,7 +170,7 @@ def check_target(path: str | os.PathLike | None, kind: str = "file") -> None:
     path = Path(path)
     if kind == "folder":
         if path.exists() and not path.is_dir():
-            raise OutputError("cannot write the run folder: a file is in the way (a folder is needed here)", source=path)
+            raise OutputError("cannot write the folder: a file is in the way (a folder is needed here)", source=path)
     else:
         if path.is_dir():
             raise OutputError("cannot write: is a folder (a file name is needed here)", source=path)
@@ -211,14 +211,14 @@ def run_folder(path: str | os.PathLike, replaces: Iterable[str] = (), exclusive:
     """
     path = Path(path)
     if path.exists() and not path.is_dir():
-        raise OutputError("cannot write the run folder: a file is in the way (a folder is needed here)", source=path)
+        raise OutputError("cannot write the folder: a file is in the way (a folder is needed here)", source=path)
     named = path
     if path.is_symlink():  # written beside the folder it names (a rename onto the link itself fails)
         path = path.resolve()
     held_a_run = _holds_a_run(path)
     # a writable folder in a parent this user cannot write to (a mount point): written inside it, moved file by file
     inside = path.is_dir() and not _writable(path.parent) and _writable(path)
-    with partial_folder(path, "cannot create the run folder", inside=inside) as tmp:
+    with partial_folder(path, "cannot create the folder", inside=inside) as tmp:
         os.chmod(tmp, 0o777 & ~_UMASK)
         try:
             yield tmp
@@ -227,7 +227,7 @@ def run_folder(path: str | os.PathLike, replaces: Iterable[str] = (), exclusive:
                 raise OutputError(err.reason, source=named / os.path.relpath(err.source, tmp), location=err.location) from err
             raise
         written = {p.name for p in tmp.iterdir()}
-        with output_errors(named, "cannot complete the run folder"):
+        with output_errors(named, "cannot complete the folder"):
             _move_into_place(tmp, path, exclusive, named, inside)
         for name in sorted(set(replaces) - written) if held_a_run else ():
             with output_errors(named / name, "cannot remove an earlier run's file"):

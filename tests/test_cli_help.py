@@ -54,7 +54,7 @@ def test_version_is_an_option_too_and_the_package_runs_as_a_module(tmp_path, cap
     with pytest.raises(SystemExit) as exc:
         main(["demo", "--quick", "--out", str(tmp_path / "f")])
     assert exc.value.code == 1
-    assert "f: cannot write the run folder: a file is in the way (a folder is needed here)" in capsys.readouterr().err
+    assert "f: cannot write the folder: a file is in the way (a folder is needed here)" in capsys.readouterr().err
 
 
 def test_a_benchmark_script_missing_its_data_says_so_in_one_line(tmp_path):

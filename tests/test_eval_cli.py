@@ -224,6 +224,18 @@ def test_outputs_never_replace_inputs_and_settings_are_named_by_their_options(tm
     assert est.read_bytes() == before and not (tmp_path / "x").exists()
 
 
+def test_tables_given_a_file_say_a_folder_is_needed_not_a_run_folder(tmp_path, capsys):
+    """`--tables FILE` said "cannot write the run folder" though eval writes no run: the tables' folder is meant."""
+    gt = shared_path("evo_testdata", "KITTI_00_gt.txt")
+    in_the_way = tmp_path / "tables"
+    in_the_way.write_text("notes\n")
+    with pytest.raises(SystemExit) as exc:
+        main(["eval", str(gt), str(shared_path("evo_testdata", "KITTI_00_ORB.txt")), "--tables", str(in_the_way)])
+    err = " ".join(capsys.readouterr().err.split())
+    assert exc.value.code == 1 and f"error: {in_the_way}: cannot write the folder: a file is in the way" in err, err
+    assert in_the_way.read_text() == "notes\n"
+
+
 def test_library_settings_that_cannot_apply_are_refused():
     """rpe(pairs=...) with point_distance scored evo's own 199 pairs and reported the 3 given; evaluate() with no drift
     lengths or a single number was a traceback; "no" / "false" switches were taken as true."""
