@@ -41,3 +41,24 @@ def test_plots_are_png_files_without_leftovers(tmp_path):
         image = matplotlib.image.imread(png)
         assert image.ndim == 3 and image.shape[0] > 200 and image.shape[1] > 400
     assert sorted(p.name for p in tmp_path.rglob("*") if p.is_file()) == ["ape.png", "rpe.png", "traj.png"]
+
+
+def test_a_long_evo_title_is_wrapped_to_its_panel():
+    """evo's RPE title (~100 characters with the alignment) ran past its panel of the evaluation figure into the
+    next one; it is wrapped to the panel's width."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    from lidarkit.eval.plots import _draw_errors
+
+    ref = circle(name="ref")
+    result = rpe(ref, ref.transformed(T_left=make_se3(translation=[0.5, 0.0, 0.0])), delta=1, align="sim3")
+    assert len(result.title) > 90  # the title evo gives, on one line
+    fig = Figure(figsize=(12.0, 9.0))  # the evaluation figure's size and grid (plot_evaluation)
+    FigureCanvasAgg(fig)
+    ax = fig.subplots(2, 2)[1, 0]
+    _draw_errors(ax, result)
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    title, panel = ax.title.get_window_extent(renderer), ax.get_window_extent(renderer)
+    assert title.width <= panel.width and "\n" in ax.get_title()

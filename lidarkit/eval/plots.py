@@ -6,6 +6,7 @@ Only this module imports matplotlib; every file is written atomically.
 from __future__ import annotations
 
 import os
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -73,7 +74,9 @@ def _draw_errors(ax, result: APEResult | RPEResult) -> None:
     kind = "APE" if isinstance(result, APEResult) else "RPE"
     ax.set_xlabel(xlabel)
     ax.set_ylabel(f"{kind} {result.relation} ({result.unit})")
-    ax.set_title(result.title, fontsize=8)
+    # evo's RPE title runs to ~100 characters ("... for delta = 1 (frames) using consecutive pairs (with SE(3) Umeyama
+    # alignment)"), wider than a panel of the evaluation figure: wrapped to the panel's width, not cut at the figure's edge
+    ax.set_title(textwrap.fill(result.title, 70), fontsize=8)
     ax.grid(True, lw=0.3)
     ax.legend(fontsize=8, loc="upper left")
 
