@@ -79,3 +79,39 @@ def test_from_kitti_accepts_a_list_of_timestamps(tmp_path):
     np.testing.assert_allclose(Trajectory.from_kitti(path, times).timestamps_s, [0, 1, 2])
     with pytest.raises(DataError):
         Trajectory.from_kitti(path, [0.0, 0.1])
+
+
+def test_every_reader_refuses_an_index_that_is_not_an_integer_or_out_of_range(tmp_path):
+    """Only the KITTI and simulator readers checked an index's type: a scan folder read scan 1 for 1.5 (Python's own
+    error for a float list index, then) and image readers answered 2.7 or 99 with numpy / list tracebacks, a
+    simulated camera read frame 2 for 2.7 without a word."""
+    import bz2
+
+    import cv2
+
+    from lidarkit.io.carmen import CarmenLog
+    from lidarkit.io.images import ImageFolder
+    from lidarkit.sim.street_camera import SimulatedCameraSequence
+
+    scans = tmp_path / "scans"
+    scans.mkdir()
+    for i in range(2):
+        np.save(scans / f"{i}.npy", np.full((5, 3), float(i)))
+    images = tmp_path / "images"
+    images.mkdir()
+    for i in range(2):
+        cv2.imwrite(str(images / f"{i:06d}.png"), np.full((8, 8), 10 * i, dtype=np.uint8))
+    head = bz2.decompress(shared_path("carmen_2d", "aces.clf.bz2").read_bytes()).decode().splitlines()[:60]
+    (tmp_path / "head.clf").write_text("\n".join(head) + "\n")
+    log = CarmenLog(tmp_path / "head.clf")
+    camera = SimulatedCameraSequence(n_frames=3, width=32, height=24)
+    cases = ((ScanFolder(scans).read_scan, "scan", 2), (ImageFolder(images).read_image, "image", 2),
+             (log.read_scan, "scan", len(log)), (camera.read_image, "frame", 3))
+    for read, what, n in cases:
+        for index in (1.5, 2.0, "1", True):
+            with pytest.raises(DataError, match=f"{what} index {index!r} is not an integer"):
+                read(index)
+        with pytest.raises(DataError, match=f"{what} index {n} out of range for {n} {what}s"):
+            read(n)
+    assert ScanFolder(scans).read_scan(np.int64(-1)).points_xyz[0, 0] == 1.0  # from the end, as a list counts
+    assert ImageFolder(images).read_image(np.int32(1))[0, 0] == 10

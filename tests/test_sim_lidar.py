@@ -168,7 +168,7 @@ def test_is_a_scan_sequence_and_checks_input():
     seq = SimulatedLidarSequence(scene="open", **SMALL)
     assert isinstance(seq, ScanSequence)
     assert len(seq) == 6 and len(seq.ground_truth) == 6
-    with pytest.raises(DataError, match="frame 6 out of range"):
+    with pytest.raises(DataError, match="frame index 6 out of range for 6 frames"):
         seq.read_scan(6)
     with pytest.raises(ConfigError, match="n_beams"):
         make_config(n_beams=0)

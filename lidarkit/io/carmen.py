@@ -36,7 +36,7 @@ from typing import Any, Literal
 import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
-from lidarkit.io.base import Scan
+from lidarkit.io.base import Scan, checked_index
 from lidarkit.textfile import read_lines, read_numeric_table
 from lidarkit.trajectory import Trajectory
 
@@ -453,9 +453,7 @@ class CarmenLog:
 
     def read_scan(self, index: int) -> Scan:
         """Scan ``index`` as ``(N, 3)`` points in the laser frame, z = 0, invalid readings dropped."""
-        if not -len(self) <= index < len(self):
-            raise DataError(f"scan index {index} out of range 0..{len(self) - 1}", source=self.path)
-        index = int(index) % len(self)
+        index = checked_index(index, len(self), self.path)
         ranges = self.ranges_m(index)
         keep = ranges > self.min_range_m
         max_range = self.max_range_m[index]

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
-from lidarkit.io.base import Scan
+from lidarkit.io.base import Scan, checked_index
 from lidarkit.io.pointfile import POINT_FILE_SUFFIXES, read_point_file
 from lidarkit.textfile import read_numeric_table
 from lidarkit.trajectory import Trajectory
@@ -147,9 +147,7 @@ class ScanFolder:
 
     def read_scan(self, index: int) -> Scan:
         """The ``index``-th scan in name order (``Scan.frame`` = ``index``)."""
-        if not -len(self) <= index < len(self):
-            raise DataError(f"scan index {index} out of range for {len(self)} scans", source=f"{self.name} ({self.path})")
-        index = index % len(self)
+        index = checked_index(index, len(self), f"{self.name} ({self.path})")
         ts = None if self._timestamps_s is None else float(self._timestamps_s[index])
         return read_point_file(self.scan_paths[index], frame=index, timestamp_s=ts, drop_nonfinite=self.drop_nonfinite)
 

@@ -16,6 +16,7 @@ import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.io import register_dataset
+from lidarkit.io.base import checked_index
 from lidarkit.io.folder import natural_key
 from lidarkit.io.kitti import read_gray_image, read_kitti_calib
 from lidarkit.textfile import read_lines
@@ -141,6 +142,7 @@ class ImageFolder:
 
     def read_image(self, index: int) -> np.ndarray:
         """The ``index``-th image as ``(H, W)`` uint8 grayscale; unreadable files raise DataError."""
+        index = checked_index(index, len(self.image_paths), f"{self.name} ({self.path})", "image")
         return read_gray_image(self.image_paths[index], frame=index)
 
     @property

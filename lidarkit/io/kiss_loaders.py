@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
-from lidarkit.io.base import Scan
+from lidarkit.io.base import Scan, checked_index
 from lidarkit.io.rosbag import guarded_loader, require_modules
 from lidarkit.trajectory import Trajectory
 
@@ -103,8 +103,7 @@ class KissLoaderScans:
 
     def read_scan(self, index: int) -> Scan:
         n = len(self)
-        if not 0 <= index < n:
-            raise DataError(f"scan index {index} out of range for {n} scans", source=self.path)
+        index = checked_index(index, n, self.path, from_end=False)
         files = getattr(self.loader, "scan_files", None)  # (the generic loader's: the file, not the folder, is named)
         source = files[index] if isinstance(files, (list, tuple, np.ndarray)) and len(files) == n else self.path
         with guarded_loader(self.loader_name, str(source), location=f"frame {index}"):

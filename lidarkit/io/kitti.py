@@ -33,7 +33,7 @@ import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.geometry import se3_inverse
-from lidarkit.io.base import INSTANT_FRACTION, Scan
+from lidarkit.io.base import INSTANT_FRACTION, Scan, checked_index
 from lidarkit.io.pointfile import load_npy, read_kitti_bin
 from lidarkit.textfile import file_line, is_number, read_lines, read_numeric_table
 from lidarkit.trajectory import Trajectory
@@ -531,10 +531,7 @@ class KittiOdometry:
         """
         if not self.scan_paths:
             raise DataError("sequence has no scans", source=self.velodyne_dir)
-        if isinstance(index, bool) or not isinstance(index, (int, np.integer)):  # (numpy's IndexError / a TypeError)
-            raise DataError(f"scan index {index!r} is not an integer", source=f"{self.name} ({self.sequence_dir})")
-        if not -len(self.scan_paths) <= index < len(self.scan_paths):
-            raise DataError(f"scan index {index} out of range for {len(self.scan_paths)} scans", source=f"{self.name} ({self.sequence_dir})")
+        index = checked_index(index, len(self.scan_paths), f"{self.name} ({self.sequence_dir})")
         frame = int(self.scan_frames[index])
         ts = None if self._times_all is None else float(self._times_all[frame])
         scan = read_kitti_bin(self.scan_paths[index], frame=frame, timestamp_s=ts, drop_nonfinite=self.drop_nonfinite)
@@ -579,6 +576,7 @@ class KittiOdometry:
         """The ``index``-th image of ``image_paths`` as ``(H, W)`` uint8 grayscale."""
         if not self.image_paths:
             raise DataError("sequence has no images", source=self.image_dir)
+        index = checked_index(index, len(self.image_paths), f"{self.name} ({self.sequence_dir})", "image")
         return read_gray_image(self.image_paths[index], frame=int(self.image_frames[index]))
 
     def as_image_sequence(self) -> KittiImages:
@@ -639,6 +637,7 @@ class KittiImages:
         return self._paths
 
     def read_image(self, index: int) -> np.ndarray:
+        index = checked_index(index, len(self._paths), self.name, "image")
         return read_gray_image(self._paths[index], frame=int(self._frames[index]))
 
     @property

@@ -32,7 +32,7 @@ import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.geometry import se3_inverse
-from lidarkit.io.base import INSTANT_FRACTION, Scan
+from lidarkit.io.base import INSTANT_FRACTION, Scan, checked_index
 from lidarkit.io.kitti import (
     CORRECTED_BY_DEFAULT, check_vertical_correction, correct_vertical_angle, correction_options, indexed_files, read_gray_image,
 )
@@ -281,8 +281,7 @@ class KittiRaw:
         """The ``index``-th Velodyne scan (float32 x, y, z, reflectance)."""
         if not self.scan_paths:
             raise DataError("no Velodyne scans (velodyne_points/data/*.bin) in this drive", source=self.velodyne_dir)
-        if not -len(self) <= index < len(self):
-            raise DataError(f"scan index {index} out of range for {len(self)} scans", source=f"{self.name} ({self.drive_dir})")
+        index = checked_index(index, len(self), f"{self.name} ({self.drive_dir})")
         frame = int(self.scan_frames[index])
         times = self.timestamps_s  # (a timestamps.txt that does not cover the scans is an error, not a missing stamp)
         ts = None if times is None else float(times[index])
@@ -296,6 +295,7 @@ class KittiRaw:
         """The ``index``-th image of camera 0 (gray left) as uint8."""
         if not self.image_paths:
             raise DataError("no images (image_00/data/*.png) in this drive", source=self.drive_dir / "image_00")
+        index = checked_index(index, len(self.image_paths), f"{self.name} ({self.drive_dir})", "image")
         return read_gray_image(self.image_paths[index], frame=int(self.image_frames[index]))
 
 

@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
-from lidarkit.io.base import INSTANT_FRACTION, Scan, classify_instant
+from lidarkit.io.base import INSTANT_FRACTION, Scan, checked_index, classify_instant
 from lidarkit.io.pointcloud2 import decode_pointcloud2, stamp_seconds
 from lidarkit.trajectory import Trajectory
 
@@ -161,8 +161,7 @@ class _BagScans:
 
     def read_scan(self, index: int) -> Scan:
         """Scan ``index`` (messages are read in order; an earlier index restarts the stream)."""
-        if not 0 <= index < self.n_scans:
-            raise DataError(f"scan index {index} out of range for {self.n_scans} messages on {self.topic}", source=self.path)
+        index = checked_index(index, self.n_scans, f"{self.path} ({self.topic})", from_end=False)
         if self._stream is None or index < self._next:
             self._stream = self._read_all(self.topic)
             self._next = 0

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
+from lidarkit.io.base import checked_index
 from lidarkit.io.kitti import read_gray_image
 from lidarkit.textfile import read_lines
 from lidarkit.trajectory import Trajectory
@@ -177,7 +178,8 @@ class TumRGBD:
 
     def read_image(self, index: int) -> np.ndarray:
         """The ``index``-th rgb image as ``(H, W)`` uint8 grayscale."""
-        return read_gray_image(self.image_paths[index], frame=index % len(self))
+        index = checked_index(index, len(self.image_paths), self.path, "image")
+        return read_gray_image(self.image_paths[index], frame=index)
 
 
 __all__ = ["TUM_INTRINSICS", "TumRGBD", "associate_nearest", "read_tum_file_list", "tum_intrinsics_for"]

@@ -36,7 +36,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from lidarkit.errors import ConfigError, DataError, validation_problems
-from lidarkit.io.base import Scan
+from lidarkit.io.base import Scan, checked_index
 from lidarkit.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
@@ -620,11 +620,7 @@ class SimulatedLidarSequence:
     def _cast(self, index: int) -> tuple[Scan, np.ndarray]:
         """The scan of sweep ``index`` and the scene triangle index ``(N,)`` of each point."""
         cfg = self.config
-        if isinstance(index, bool) or not isinstance(index, (int, np.integer)):  # (2.7 read frame 2 without a word)
-            raise DataError(f"frame index {index!r} is not an integer", source=self.name)
-        if not 0 <= int(index) < cfg.n_frames:
-            raise DataError(f"frame {index} out of range 0..{cfg.n_frames - 1}", source=self.name)
-        index = int(index)
+        index = checked_index(index, cfg.n_frames, self.name, "frame", from_end=False)
         n_az, n_beams = cfg.n_azimuths, cfg.n_beams
         sweep_start = index * cfg.sweep_period_s
         if cfg.motion_distortion:

@@ -35,6 +35,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from lidarkit.errors import ConfigError, DataError, validation_problems
+from lidarkit.io.base import checked_index
 from lidarkit.sim.lidar import PlanarPath, Terrain, make_terrain
 from lidarkit.sim.textures import TextureAtlas, mip_levels, natural_texture
 from lidarkit.trajectory import Trajectory
@@ -754,9 +755,7 @@ class SimulatedCameraSequence:
     def read_image(self, index: int) -> np.ndarray:
         """Frame ``index`` as ``(h, w)`` uint8, with the configured nuisances."""
         cfg = self.config
-        if not 0 <= int(index) < cfg.n_frames:
-            raise DataError(f"frame {index} out of range 0..{cfg.n_frames - 1}", source=self.name)
-        index = int(index)
+        index = checked_index(index, cfg.n_frames, self.name, "frame", from_end=False)
         if index in self._cache:
             return self._cache[index].copy()
         t = self.frame_times_s[index]
