@@ -168,6 +168,32 @@ def check_target(path: str | os.PathLike | None, kind: str = "file") -> None:
     if path is None:
         return
     path = Path(path)
+    try:
+        _check_target(path, kind)
+    except OSError as err:  # pathlib re-raises what a stat of the path itself meets (a name too long: ENAMETOOLONG)
+        raise OutputError(f"cannot write: {(err.strerror or str(err)).lower()}", source=path) from None
+
+
+def _longest_name(path: Path) -> tuple[int, int]:
+    """Bytes of the longest name in ``path`` and the most the file system takes (NAME_MAX of the nearest existing
+    folder, 255 where it cannot tell): a name too long for the disk failed only when the file was written, after the work."""
+    longest = max((len(os.fsencode(part)) for part in path.parts), default=0)
+    limit = 255
+    for folder in path.absolute().parents:
+        try:
+            if folder.is_dir():
+                limit = os.pathconf(folder, "PC_NAME_MAX")
+                break
+        except (OSError, ValueError):
+            continue
+    return longest, limit
+
+
+def _check_target(path: Path, kind: str) -> None:
+    longest, limit = _longest_name(path)
+    if longest > limit:
+        raise OutputError(f"cannot write: file name too long (a name of {longest} bytes; the file system takes at most {limit})",
+                          source=path)
     if kind == "folder":
         if path.exists() and not path.is_dir():
             raise OutputError("cannot write the folder: a file is in the way (a folder is needed here)", source=path)

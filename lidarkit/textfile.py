@@ -14,11 +14,13 @@ def read_lines(path: str | os.PathLike) -> list[str]:
     """All lines of a text file (a UTF-8 byte-order mark, as some editors save, left out); a missing or unreadable
     file is a DataError naming it."""
     path = Path(path)
-    if not path.is_file():
-        raise DataError("file not found" if not path.exists() else "not a regular file", source=path)
     try:
+        if not path.is_file():
+            raise DataError("file not found" if not path.exists() else "not a regular file", source=path)
         return path.read_text(encoding="utf-8-sig").splitlines()
-    except (OSError, UnicodeDecodeError) as err:
+    except OSError as err:  # (its own text repeats the path the message names already)
+        raise DataError(f"cannot read it: {(err.strerror or type(err).__name__).lower()}", source=path) from err
+    except UnicodeDecodeError as err:
         raise DataError(f"cannot read as text ({err.__class__.__name__}: {err})", source=path) from err
 
 

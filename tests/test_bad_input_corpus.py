@@ -90,6 +90,20 @@ def test_plot_with_an_unknown_suffix(tmp_path, gt_file, capsys):
     assert not (tmp_path / "e.json").exists()  # refused before anything was written
 
 
+def test_a_name_too_long_for_the_disk_is_one_line_before_any_work(tmp_path, gt_file, capsys):
+    """A 300-byte name (the disk takes 255) was an OSError traceback: for outputs from the path check, for inputs
+    from a reader; a tables folder below it passed the check and failed after the evaluation, leaving its parent."""
+    long = "a" * 300
+    for args in (["eval", gt_file, gt_file, "--json", tmp_path / f"{long}.json"],
+                 ["eval", gt_file, gt_file, "--tables", tmp_path / "x" / long / "y"]):
+        code, _, err = run_cli(args, capsys)
+        assert_one_line_error(code, err, long, "cannot write: file name too long (a name of 30")
+    assert list(tmp_path.iterdir()) == [gt_file]
+    for args in (["eval", tmp_path / f"{long}.txt", gt_file], ["icp", tmp_path / f"{long}.bin", PAIR / "000095.npy"]):
+        code, _, err = run_cli(args, capsys)
+        assert_one_line_error(code, err, long, "file name too long")
+
+
 def test_odometry_out_is_an_existing_file(tmp_path, capsys):
     blocker = tmp_path / "run"
     blocker.write_text("x")

@@ -76,6 +76,13 @@ def main(argv: list[str] | None = None) -> None:
     except LidarKitError as err:
         print_error(err)
         code = 1
+    except OSError as err:
+        if err.filename is None:  # not about a path the user gave: a defect, shown with its traceback
+            raise
+        # a path the system refused where no check of lidarkit's came first (a name too long for the disk, a loop of
+        # links): one line, as for the errors lidarkit raises itself
+        print_error(LidarKitError((err.strerror or type(err).__name__).lower(), source=err.filename))
+        code = 1
     except Interrupted as err:
         interrupt_handled()
         stderr().print(f"interrupted by {err}: stopped; no file is left half-written (each is complete or absent)",
