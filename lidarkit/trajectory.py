@@ -12,13 +12,37 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from lidarkit import atomic
-from lidarkit.errors import DataError
+from lidarkit.errors import ConfigError, DataError
 from lidarkit.geometry import ORTHONORMAL_TOL, orthonormalize_se3, se3_inverse
 from lidarkit.textfile import data_line_numbers, file_line, read_numeric_table
 
 log = logging.getLogger(__name__)
 
 FORMATS = ("kitti", "tum")
+
+
+def _check_rigid(poses: np.ndarray, source: str, item: str) -> None:
+    """DataError naming the first of ``(N, 4, 4)`` matrices that is no rigid transform (``item`` k: a pose's frame, a
+    motion): a non-finite value, a last row other than [0, 0, 0, 1], a rotation not orthonormal or a reflection."""
+    if not np.isfinite(poses).all():
+        frame = int(np.argmax(~np.isfinite(poses).all(axis=(1, 2))))
+        raise DataError("pose is NaN or infinite", source=source, location=f"{item} {frame}")
+    if len(poses) and not np.allclose(poses[:, 3, :], [0.0, 0.0, 0.0, 1.0]):
+        frame = int(np.argmax(~np.isclose(poses[:, 3, :], [0.0, 0.0, 0.0, 1.0]).all(axis=1)))
+        raise DataError("last row of the pose is not [0, 0, 0, 1]", source=source, location=f"{item} {frame}")
+    R = poses[:, :3, :3]
+    err = np.abs(np.swapaxes(R, 1, 2) @ R - np.eye(3)).max(axis=(1, 2)) if len(poses) else np.zeros(0)
+    det = np.linalg.det(R) if len(poses) else np.zeros(0)
+    bad = np.flatnonzero((err > ORTHONORMAL_TOL) | (det <= 0)) if len(poses) else []
+    if len(bad):
+        k = int(bad[0])
+        if err[k] <= ORTHONORMAL_TOL:
+            reason = f"rotation is a reflection (det R = {det[k]:.3g}, a proper rotation has det R = +1)"
+        else:
+            reason = (f"rotation is not orthonormal (max |R^T R - I| = {err[k]:.2e}); "
+                      "if it is a file's rounding, write more digits (or, in Python, lidarkit.geometry.orthonormalize_se3 "
+                      "the poses before making the Trajectory)")
+        raise DataError(reason, source=source, location=f"{item} {k}")
 
 
 @dataclass(frozen=True, eq=False)
@@ -41,25 +65,7 @@ class Trajectory:
             raise DataError(f"poses must be numbers, an (N, 4, 4) array, got {type(self.poses_se3).__name__}", source=source) from None
         if poses.ndim != 3 or poses.shape[1:] != (4, 4):
             raise DataError(f"poses must have shape (N, 4, 4), got {poses.shape}", source=source)
-        if not np.isfinite(poses).all():
-            frame = int(np.argmax(~np.isfinite(poses).all(axis=(1, 2))))
-            raise DataError("pose is NaN or infinite", source=source, location=f"frame {frame}")
-        if len(poses) and not np.allclose(poses[:, 3, :], [0.0, 0.0, 0.0, 1.0]):
-            frame = int(np.argmax(~np.isclose(poses[:, 3, :], [0.0, 0.0, 0.0, 1.0]).all(axis=1)))
-            raise DataError("last row of the pose is not [0, 0, 0, 1]", source=source, location=f"frame {frame}")
-        R = poses[:, :3, :3]
-        err = np.abs(np.swapaxes(R, 1, 2) @ R - np.eye(3)).max(axis=(1, 2)) if len(poses) else np.zeros(0)
-        det = np.linalg.det(R) if len(poses) else np.zeros(0)
-        bad = np.flatnonzero((err > ORTHONORMAL_TOL) | (det <= 0)) if len(poses) else []
-        if len(bad):
-            k = int(bad[0])
-            if err[k] <= ORTHONORMAL_TOL:
-                reason = f"rotation is a reflection (det R = {det[k]:.3g}, a proper rotation has det R = +1)"
-            else:
-                reason = (f"rotation is not orthonormal (max |R^T R - I| = {err[k]:.2e}); "
-                          "if it is a file's rounding, write more digits (or, in Python, lidarkit.geometry.orthonormalize_se3 "
-                          "the poses before making the Trajectory)")
-            raise DataError(reason, source=source, location=f"frame {k}")
+        _check_rigid(poses, source, "frame")
         object.__setattr__(self, "poses_se3", poses)
         if self.timestamps_s is not None:
             try:
@@ -158,6 +164,8 @@ class Trajectory:
         from lidarkit.geometry import is_rotation, orthonormalize_se3
 
         motions = np.asarray(motions, dtype=np.float64).reshape(-1, 4, 4)
+        # each motion must be rigid itself (zeros chained into identity poses, a Sim(3) motion lost its scale)
+        _check_rigid(motions, f"{name or 'trajectory'}: relative motions", "motion")
         poses = np.empty((len(motions) + 1, 4, 4))
         poses[0] = np.eye(4) if T_first is None else T_first
         for i, M in enumerate(motions):
@@ -171,6 +179,8 @@ class Trajectory:
         up to ``max_extrapolation_s`` before the first or after the last stamp, the first or last interval's motion
         continued at constant velocity. Times farther out raise DataError naming the first of them."""
         source = self.name or "trajectory"
+        if not max_extrapolation_s >= 0:  # (a negative bound refused every time, inside the stamps too)
+            raise ConfigError(f"max_extrapolation_s must be >= 0 s, got {max_extrapolation_s!r}", source=source)
         if self.timestamps_s is None or len(self) < 2:
             raise DataError("interpolating needs at least two poses with time stamps", source=source)
         t = np.asarray(times_s, dtype=np.float64).reshape(-1)

@@ -205,3 +205,25 @@ def test_a_cut_off_kitti_file_is_not_called_a_tum_trajectory(tmp_path):
     assert str(err.value).endswith("(line 19): expected 12 numbers, found 8")
     with pytest.raises(DataError, match=r"\(a TUM trajectory\? read it as tum"):
         Trajectory.from_kitti(shared_path("evo_testdata", "freiburg1_xyz-groundtruth.txt"))
+
+
+def test_relative_motions_must_be_rigid_and_extrapolation_non_negative():
+    """from_relative_motions chained all-zero motions into identity poses and dropped a Sim(3) motion's scale (the
+    constructor refuses both poses); NaN motions were an SVD traceback; interpolated(max_extrapolation_s=-1) refused a
+    time inside the stamps as "-0.500 s outside"."""
+    from lidarkit.errors import ConfigError
+
+    scaled = np.tile(np.diag([1.1, 1.1, 1.1, 1.0]), (3, 1, 1))
+    nan = np.tile(np.eye(4), (3, 1, 1))
+    nan[2, 0, 3] = np.nan
+    for motions, reason in ((np.zeros((3, 4, 4)), r"\(motion 0\): last row of the pose is not \[0, 0, 0, 1\]"),
+                            (scaled, r"\(motion 0\): rotation is not orthonormal"),
+                            (nan, r"\(motion 2\): pose is NaN or infinite")):
+        with pytest.raises(DataError, match=r"^odo: relative motions " + reason):
+            Trajectory.from_relative_motions(motions, name="odo")
+    steps = np.tile(make_se3(translation=[1.0, 0.0, 0.0]), (3, 1, 1))
+    assert Trajectory.from_relative_motions(steps).poses_se3[-1, 0, 3] == 3.0
+    two = Trajectory(np.tile(np.eye(4), (2, 1, 1)), np.array([0.0, 1.0]), name="t")
+    with pytest.raises(ConfigError, match=r"^t: max_extrapolation_s must be >= 0 s, got -1"):
+        two.interpolated(np.array([0.5]), max_extrapolation_s=-1)
+    assert len(two.interpolated(np.array([0.5, 1.2]), max_extrapolation_s=0.5)) == 2
