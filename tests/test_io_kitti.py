@@ -157,6 +157,7 @@ def test_image_only_sequence_with_bare_calib():
         ds.read_scan(0)
     images = ds.as_image_sequence()
     assert isinstance(images, ImageSequence)
+    assert repr(images) == f"KittiImages({str(ds.image_dir)!r}, images={len(images)})"  # (was "<... object at 0x...>")
     np.testing.assert_allclose(images.ground_truth.poses_se3[0], np.eye(4), atol=1e-6)
     step = images.ground_truth.relative_motions()[0][:3, 3]
     assert step[2] > 0.9 and abs(step[0]) < 0.1

@@ -628,6 +628,9 @@ class KittiImages:
     def __len__(self) -> int:
         return len(self._frames)
 
+    def __repr__(self) -> str:
+        return f"KittiImages({str(self.odometry.image_dir)!r}, images={len(self)})"
+
     @property
     def frames(self) -> np.ndarray:
         return self._frames
