@@ -427,6 +427,9 @@ def test_empty_dataset_and_empty_selection(rng):
         # an error that names its file and frame already is not wrapped again ("kt (frame 3): kt/velodyne/... (frame 3)")
         (DataError("truncated scan", source="000002.bin", location="frame 2"), r"^000002.bin \(frame 2\): truncated scan$"),
         (RuntimeError("boom"), r"memory \(frame 2\): cannot read the scan \(RuntimeError: boom\)"),  # (a read, not a registration, error)
+        # a reader keeping its scans in a dict, or reading a cut gzip file: these were tracebacks
+        (KeyError(2), r"memory \(frame 2\): cannot read the scan \(KeyError: 2\)"),
+        (EOFError("Compressed file ended"), r"memory \(frame 2\): cannot read the scan \(EOFError: Compressed file ended\)"),
     ],
 )
 def test_error_in_a_frame_names_the_frame(rng, bad, match):
@@ -436,6 +439,15 @@ def test_error_in_a_frame_names_the_frame(rng, bad, match):
         run(seq, OracleICP(se3_inverse(poses[:-1]) @ poses[1:]))
     with pytest.raises(LidarKitError, match=match):
         run(seq, MapStandIn(poses))
+
+
+def test_time_stamps_that_are_not_one_per_scan_are_refused_before_the_run(rng):
+    """A caller's sequence with one stamp fewer than scans was an IndexError traceback."""
+    seq = MemorySequence(_drive(4), _room_points(rng, 50))
+    seq._timestamps = seq._timestamps[:3]
+    with pytest.raises(DataError, match=r"^memory: 3 time stamps for 4 scans \(timestamps_s needs one per scan\)$"):
+        run(seq, OracleICP([]), frames="0:2")
+    assert seq.reads == []
 
 
 def test_nan_points_in_a_frame_name_the_frame(rng):

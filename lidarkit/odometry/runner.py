@@ -78,7 +78,7 @@ def _read_nonempty_scan(sequence: ScanSequence, index: int) -> Scan:
         scan = sequence.read_scan(index)
     except LidarKitError:
         raise
-    except (OSError, *_FRAME_ERRORS) as err:
+    except (OSError, EOFError, LookupError, *_FRAME_ERRORS) as err:  # (a reader's dict without the frame: KeyError; a cut gzip)
         raise DataError(f"cannot read the scan ({type(err).__name__}: {err})") from err
     if not isinstance(getattr(scan, "points_xyz", None), np.ndarray):
         raise ConfigError(f"read_scan({index}) returned a {type(scan).__name__}, not a lidarkit Scan (Scan(points_xyz) wraps an (N, 3) array)")
@@ -408,7 +408,7 @@ def run(
     # the ground truth is read before the run: a problem with it (too few poses in a bag, a bad pose file) is reported
     # now, not after registering every frame
     # (a sequence of the caller's own may have no stamps or ground truth: ScanSequence's other members are optional)
-    _check_stamps(getattr(sequence, "timestamps_s", None), indices, dataset_name)  # now, not after registering every frame
+    _check_stamps(getattr(sequence, "timestamps_s", None), indices, dataset_name, len(sequence))  # now, not after every frame
     reference = _reference(sequence, ground_truth, indices, dataset_name)
     if ground_truth is not None and reference is not None and (reference.meta or {}).get("pose_instant"):
         # a caller's ground truth of another instant of the sweep than the estimate's is refused (it cannot be re-timed):
@@ -645,12 +645,18 @@ def _plain(meta: dict) -> dict:
     return {str(k): (v if isinstance(v, (str, int, float, bool, type(None))) else str(v)) for k, v in meta.items()}
 
 
-def _check_stamps(stamps: np.ndarray | None, indices: np.ndarray, dataset_name: str) -> None:
-    """DataError naming the first selected frame whose time stamp does not come after the previous one's (a scan
-    recorded twice, unset stamps): the trajectory could not be written after the run."""
-    if stamps is None or len(indices) < 2:
+def _check_stamps(stamps: np.ndarray | None, indices: np.ndarray, dataset_name: str, n_scans: int) -> None:
+    """DataError for stamps that are not one per scan (a caller's sequence one short was an IndexError), or naming the
+    first selected frame whose time stamp does not come after the previous one's (a scan recorded twice, unset stamps):
+    the trajectory could not be written after the run."""
+    if stamps is None:
         return
-    selected = np.asarray(stamps, dtype=np.float64)[indices]
+    stamps = np.asarray(stamps, dtype=np.float64).reshape(-1)
+    if len(stamps) != n_scans:
+        raise DataError(f"{len(stamps)} time stamps for {n_scans} scans (timestamps_s needs one per scan)", source=dataset_name)
+    if len(indices) < 2:
+        return
+    selected = stamps[indices]
     bad = np.flatnonzero(~(np.diff(selected) > 0))
     if len(bad):
         k = int(bad[0])
