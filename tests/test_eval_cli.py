@@ -224,6 +224,60 @@ def test_outputs_never_replace_inputs_and_settings_are_named_by_their_options(tm
     assert est.read_bytes() == before and not (tmp_path / "x").exists()
 
 
+def test_outputs_and_inputs_named_like_a_tables_file_are_refused(tmp_path, capsys):
+    """`--tables T --markdown T/ape_rmse.md` (or --json T/kitti_translation_pct.md, --plot T/segments_translation_pct.png)
+    was reported written, then replaced (or removed) by the tables; an estimate T/rpe_rmse.csv was replaced too."""
+    gt = shared_path("evo_testdata", "KITTI_00_gt.txt")
+    folder = tmp_path / "T"
+    folder.mkdir()
+    est = folder / "rpe_rmse.csv"
+    est.write_bytes(shared_path("evo_testdata", "KITTI_00_ORB.txt").read_bytes())
+    for args, option, name in ((["--markdown", str(folder / "ape_rmse.md")], "--markdown", "ape_rmse.md"),
+                               (["--json", str(folder / "kitti_translation_pct.md")], "--json", "kitti_translation_pct.md"),
+                               (["--plot", str(folder / "segments_translation_pct.png")], "--plot", "segments_translation_pct.png")):
+        with pytest.raises(SystemExit) as exc:
+            main(["eval", str(gt), str(gt), "--tables", str(folder), *args])
+        err = " ".join(capsys.readouterr().err.split())
+        assert exc.value.code == 1 and err == (f"error: {option}: {folder / name} is one of the files --tables writes or "
+                                               f"removes in {folder}: an output never replaces it"), err
+    with pytest.raises(SystemExit) as exc:
+        main(["eval", str(gt), str(est), "--tables", str(folder)])
+    err = " ".join(capsys.readouterr().err.split())
+    assert exc.value.code == 1 and err.startswith(f"error: EST: {est} is one of the files --tables writes or removes"), err
+    assert [p.name for p in folder.iterdir()] == ["rpe_rmse.csv"]
+
+
+def test_an_angle_delta_beyond_half_a_turn_is_refused_before_any_work(tmp_path, capsys):
+    """`--delta 200 --delta-unit deg` computed the KITTI drift, then failed as "orb50 vs gt50: RPE failed: delta angle
+    must be within [0.0, 180.0]" (evo's words); it is now refused with the settings, before the files are read."""
+    from lidarkit.errors import ConfigError
+    from lidarkit.eval import EvaluationSettings
+
+    gt = shared_path("evo_testdata", "KITTI_00_gt.txt")
+    for delta, unit, line in (("200", "deg", "delta in degrees must be at most 180 (a rotation angle), got 200"),
+                              ("3.2", "rad", "delta in radians must be at most 3.14159 (a rotation angle), got 3.2")):
+        with pytest.raises(SystemExit) as exc:
+            main(["eval", str(gt), str(tmp_path / "not_read.txt"), "--delta", delta, "--delta-unit", unit])
+        assert exc.value.code == 1 and capsys.readouterr().err.strip() == f"error: --delta: {line}"
+    with pytest.raises(ConfigError, match=r"^delta: delta in degrees must be at most 180 \(a rotation angle\), got 181$"):
+        EvaluationSettings(delta=181, delta_unit="degrees")
+    assert EvaluationSettings(delta=180, delta_unit="deg").delta == 180  # evo's own bound is inclusive
+
+
+def test_association_without_overlap_in_time_states_both_spans(tmp_path, capsys):
+    """A TUM estimate stamped from 0 s failed in evo's words: "found no matching timestamps between first trajectory
+    and second trajectory with max. time diff 0.01 (s) and time offset 0.0 (s)", naming neither file nor time."""
+    gt = shared_path("evo_testdata", "freiburg1_xyz-groundtruth.txt")
+    est = Trajectory.from_tum(shared_path("evo_testdata", "freiburg1_xyz-rgbdslam.txt"))
+    from_zero = tmp_path / "est_from0.txt"
+    est.with_timestamps(est.timestamps_s - est.timestamps_s[0]).to_tum(from_zero)
+    with pytest.raises(SystemExit) as exc:
+        main(["eval", "-f", "tum", str(gt), str(from_zero), "--associate"])
+    assert exc.value.code == 1 and capsys.readouterr().err.strip() == (
+        "error: est_from0 vs freiburg1_xyz-groundtruth: timestamp association failed: no pose has a partner within 0.01 s "
+        "(reference spans 1305031098.666..1305031128.756 s, estimate spans 0.000..26.563 s): are both stamped by the same clock?")
+
+
 def test_tables_given_a_file_say_a_folder_is_needed_not_a_run_folder(tmp_path, capsys):
     """`--tables FILE` said "cannot write the run folder" though eval writes no run: the tables' folder is meant."""
     gt = shared_path("evo_testdata", "KITTI_00_gt.txt")

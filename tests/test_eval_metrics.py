@@ -105,6 +105,28 @@ def test_rpe_given_pairs_are_checked_and_scored_as_given(kitti_gt):
         assert given.errors[k] == pytest.approx(one.errors[0], rel=1e-9)
 
 
+def test_rpe_given_pairs_are_refused_for_point_distance_with_legacy_pairs_too(kitti_gt):
+    """With legacy_pairs, pairs= for point_distance was read as a chain: [[0, 50], [100, 200], [300, 400]] were reported
+    but (0, 50), (50, 200), (200, 400) scored (errors 1.875, 0.184, 0.633)."""
+    for relation in ("point_distance", "point_distance_error_ratio"):
+        with pytest.raises(ConfigError, match=rf"^pairs: pairs= is not supported for the {relation} relation "):
+            rpe(kitti_gt, kitti("ORB"), 10, "m", relation=relation, legacy_pairs=True, pairs=[[0, 50], [100, 200], [300, 400]])
+
+
+def test_rpe_given_pairs_that_are_empty_or_fractional_are_refused(kitti_gt):
+    """pairs=np.zeros((0, 2)) scored evo's 4540 default pairs and reported none; [[0, 1.5]] was scored as [[0, 1]]."""
+    est = kitti("ORB")
+    with pytest.raises(ConfigError) as empty:
+        rpe(kitti_gt, est, pairs=np.zeros((0, 2)))
+    assert str(empty.value) == ("pairs: pairs is empty: give at least one (i, j) pose index pair, "
+                                "or pairs=None to select them by delta")
+    for bad, shown in (([[0, 1.5]], "pair 0 (0, 1.5)"), ([[0, 1], [2, float("nan")]], "pair 1 (2, nan)")):
+        with pytest.raises(ConfigError) as fractional:
+            rpe(kitti_gt, est, pairs=bad)
+        assert str(fractional.value) == f"pairs: {shown} is not two whole pose indices"
+    assert rpe(kitti_gt, est, pairs=np.array([[0.0, 2.0]])).pairs.tolist() == [[0, 2]]  # whole floats are indices
+
+
 def test_rpe_default_pairs_match_current_evo_and_differ_from_stored(kitti_gt):
     """Today's evo starts the first 10 m pair at pose 0: one pair more than the stored 2018 result."""
     from evo.core.metrics import PoseRelation
@@ -212,6 +234,19 @@ def test_associate_by_timestamps(rng):
         ape(ref, est, associate=True, max_diff_s=0.001)
 
 
+def test_align_trajectory_associates_by_time_as_its_error_hint_says():
+    """align_trajectory on TUM files of other lengths hinted "pass associate=True", which it did not take (TypeError)."""
+    ref = Trajectory.from_tum(shared_path("evo_testdata", "freiburg1_xyz-groundtruth.txt"))
+    est = Trajectory.from_tum(shared_path("evo_testdata", "freiburg1_xyz-rgbdslam.txt"))
+    with pytest.raises(EvaluationError, match=r"3000 reference vs 788 estimated poses\); both have timestamps: pass associate=True"):
+        align_trajectory(ref, est)
+    aligned, transform = align_trajectory(ref, est, associate=True, max_diff_s=0.01)
+    scored = ape(ref, est, "se3", associate=True, max_diff_s=0.01)
+    assert len(aligned) == scored.n_errors == 785 and transform.method == "se3"
+    np.testing.assert_allclose(aligned.positions_xyz, scored.est_aligned.positions_xyz, atol=1e-12)
+    assert scored.rmse == pytest.approx(0.0134701, abs=1e-7)
+
+
 @pytest.mark.parametrize("gt, est, max_diff_s, align", [
     ("freiburg1_xyz-groundtruth", "freiburg1_xyz-rgbdslam", 0.05, "se3"),  # a window that matches ground-truth poses twice
     ("fr2_desk_groundtruth", "fr2_desk_ORB_kf_mono", 0.01, "sim3"),  # TUM's own ground truth repeats one timestamp
@@ -282,6 +317,38 @@ def test_bad_input_raises_named_errors(rng):
         ape(ref, Trajectory(ref.poses_se3), associate=True)
     with pytest.raises(EvaluationError, match="Trajectory"):
         ape(ref.poses_se3, ref)
+
+
+def test_relation_error_given_a_path_names_the_argument():
+    """relation_error("poses_tum.txt", relations) raised AttributeError 'str' object has no attribute 'name'."""
+    from lidarkit.eval import relation_error
+    from lidarkit.io.carmen import Relations
+
+    relations = Relations.read(shared_path("carmen_2d", "aces.relations"))
+    with pytest.raises(EvaluationError) as exc:
+        relation_error("runs/aces/poses_tum.txt", relations)
+    assert str(exc.value) == "estimate: the estimate must be a lidarkit Trajectory (e.g. Trajectory.from_tum(path)), got str"
+
+
+def test_settings_given_as_text_are_named_errors_that_show_the_text(rng):
+    """rpe(rel_delta_tol="x") raised a bare TypeError; EvaluationSettings(drift_step_frames="10") and
+    position_mse(start="5") said "got 10" / "got 5", as if the numbers had been refused."""
+    from lidarkit.eval import EvaluationSettings, kitti_drift
+
+    ref = synthetic(rng, 20, "ref")
+    for call, line in (
+        (lambda: rpe(ref, ref, rel_delta_tol="x"), "rel_delta_tol: rel_delta_tol must be a number in [0, 1), got 'x'"),
+        (lambda: rpe(ref, ref, rel_delta_tol=1.0), "rel_delta_tol: rel_delta_tol must be a number in [0, 1), got 1.0"),
+        (lambda: EvaluationSettings(drift_step_frames="10"),
+         "drift_step_frames: drift_step_frames must be a positive integer number of frames, got '10'"),
+        (lambda: kitti_drift(ref, ref, step="x"), "step: step must be a positive integer number of frames, got 'x'"),
+        (lambda: position_mse(ref, ref, start="5"), "start: start must be a frame index, got '5'"),
+        (lambda: position_mse(ref, ref, dims="3"), "dims: dims must be 2 or 3, got '3'"),
+    ):
+        with pytest.raises(ConfigError) as exc:
+            call()
+        assert str(exc.value) == line
+    assert position_mse(ref, ref, start=np.int64(5)) == 0.0 and EvaluationSettings(drift_step_frames=5).drift_step_frames == 5
 
 
 def test_degenerate_alignment_is_an_error():

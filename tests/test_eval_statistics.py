@@ -62,6 +62,15 @@ def test_bad_statistics_input_raises():
             bootstrap_ci([1.0, 2.0], seed=seed)
 
 
+def test_values_that_are_text_are_one_named_error():
+    """summarize(["a"]) raised numpy's ValueError "could not convert string to float: 'a'"."""
+    for values, shown in ((["a"], "['a']"), ([1.0, "x"], "[1.0, 'x']")):
+        with pytest.raises(EvaluationError) as exc:
+            summarize(values)
+        assert str(exc.value) == f"summarize: values must be numbers, got {shown}"
+    assert summarize(["1.5", 2.5]).mean == pytest.approx(2.0)  # numeric text is a number, as numpy reads it
+
+
 def test_paired_test_agrees_with_scipy_and_reads_plainly():
     rng = np.random.default_rng(1)
     b = rng.uniform(1.0, 2.0, 15)

@@ -112,19 +112,19 @@ def eval_command(
     atomic.check_target(markdown, "file")
     atomic.check_target(plot, "figure")
     atomic.check_target(tables, "folder")
-    ref_traj = load(ref, ref_format, ref_times)
-    est_traj = load(est, est_format, est_times)
-    settings = EvaluationSettings(
-        align=align,
-        delta=delta,
-        delta_unit=delta_unit,
-        all_pairs=all_pairs,
-        legacy_pairs=legacy_pairs,
-        associate=associate,
-        max_diff_s=max_diff,
-        drift=drift,
-    )
     try:
+        settings = EvaluationSettings(  # (checked before any work: --delta 200 --delta-unit deg failed after the drift)
+            align=align,
+            delta=delta,
+            delta_unit=delta_unit,
+            all_pairs=all_pairs,
+            legacy_pairs=legacy_pairs,
+            associate=associate,
+            max_diff_s=max_diff,
+            drift=drift,
+        )
+        ref_traj = load(ref, ref_format, ref_times)
+        est_traj = load(est, est_format, est_times)
         evaluation = evaluate(ref_traj, est_traj, settings)
     except ConfigError as err:  # a setting named as the library calls it ("delta: ..."): named by its option
         option = _OPTION_OF_SETTING.get(err.source or "")
@@ -165,7 +165,7 @@ def eval_command(
         pub = publication_tables(segments, {key: evaluation.ape.rmse}, {key: evaluation.rpe.rmse}, ape_alignment=aligned,
                                  rpe_delta=per + scaled(evaluation.rpe))
         written = pub.write(tables)
-        boxplot = tables / "segments_translation_pct.png"
+        boxplot = tables / _BOXPLOT_NAME
         if segments:
             from lidarkit.eval.plots import plot_segment_boxplots
 
@@ -206,6 +206,9 @@ def _relations_report(est_traj, relations_path: Path, max_diff_s: float, json_ou
         console.print(f"wrote {json_out}")
 
 
+#: the per-segment box plot ``--tables`` writes beside its tables (and removes when there is no drift)
+_BOXPLOT_NAME = "segments_translation_pct.png"
+
 #: evaluation settings -> the option that sets them (a library error names the setting)
 _OPTION_OF_SETTING = {"delta": "--delta", "delta_unit": "--delta-unit", "legacy_pairs": "--legacy-pairs", "align": "--align",
                       "all_pairs": "--all-pairs", "max_diff_s": "--max-diff", "drift_lengths_m": "--no-drift"}
@@ -213,14 +216,22 @@ _OPTION_OF_SETTING = {"delta": "--delta", "delta_unit": "--delta-unit", "legacy_
 
 def _distinct_outputs(inputs: dict[str, Path | None], outputs: dict[str, Path | None]) -> None:
     """ConfigError when an output would replace an input or another output (`--markdown EST` overwrote the estimate,
-    `--json X --markdown X` the JSON, both with exit 0)."""
-    seen: dict[Path, str] = {Path(p).resolve(): name for name, p in inputs.items() if p is not None}
-    for option, path in outputs.items():
+    `--json X --markdown X` the JSON, both with exit 0), also where a file is one the ``--tables`` folder writes or
+    removes (`--markdown T/ape_rmse.md` was reported written, then replaced by the table)."""
+    from lidarkit.eval.tables import TABLE_NAMES, TABLE_SUFFIXES
+
+    tables = outputs.get("--tables")
+    folder = Path(tables).resolve() if tables is not None else None
+    tables_own = {f"{stem}{suffix}" for stem in TABLE_NAMES for suffix in TABLE_SUFFIXES} | {_BOXPLOT_NAME}
+    seen: dict[Path, str] = {}
+    for name, path in {**inputs, **outputs}.items():
         if path is None:
             continue
         resolved = Path(path).resolve()
-        if resolved in seen:
+        if resolved in seen and name in outputs:  # (REF and EST may be one file)
             kind = "an input" if seen[resolved] in inputs else "another output"
-            raise ConfigError(f"{path} is also {seen[resolved]} ({kind}): an output never replaces it", source=option)
-        seen[resolved] = option
-
+            raise ConfigError(f"{path} is also {seen[resolved]} ({kind}): an output never replaces it", source=name)
+        if resolved.parent == folder and resolved.name in tables_own:
+            raise ConfigError(f"{path} is one of the files --tables writes or removes in {tables}: an output never "
+                              "replaces it", source=name)
+        seen[resolved] = name

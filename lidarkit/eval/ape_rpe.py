@@ -195,6 +195,11 @@ def _relation(name: str, allowed: tuple[str, ...]):
     return PoseRelation[RELATIONS[name]]
 
 
+def _is_number(value: Any) -> bool:
+    """A real number, not a bool nor text ("0.1" compared as text raised TypeError)."""
+    return not isinstance(value, bool) and isinstance(value, (int, float, np.integer, np.floating))
+
+
 def check_flags(**flags: Any) -> None:
     """ConfigError for a switch that is not True or False (``all_pairs="no"``, a true string, scored every pair)."""
     for name, value in flags.items():
@@ -289,13 +294,45 @@ def alignment_label(align: str) -> str:
     return ALIGNMENT_LABELS.get(align, align)
 
 
+#: the largest angle delta evo accepts: a rotation angle is at most half a turn
+MAX_ANGLE_DELTA = {"degrees": 180.0, "radians": float(np.pi)}
+
+
+def checked_delta(delta: float, delta_unit: str) -> tuple[float, str]:
+    """``(delta, evo's unit name)`` of an RPE delta; ConfigError naming ``delta`` or ``delta_unit`` otherwise (checked
+    with the settings: 200 deg was refused by evo only after the KITTI drift had been computed)."""
+    if delta_unit not in DELTA_UNITS:
+        raise ConfigError(f"unknown delta unit {delta_unit!r}; known: {', '.join(DELTA_UNITS)}", source="delta_unit")
+    unit = DELTA_UNITS[delta_unit]
+    try:
+        delta = float(delta)
+    except (TypeError, ValueError):
+        raise ConfigError(f"delta must be a number, got {delta!r}", source="delta") from None
+    if not np.isfinite(delta) or delta <= 0:
+        raise ConfigError(f"delta must be > 0, got {delta}", source="delta")
+    if unit == "frames" and not delta.is_integer():
+        raise ConfigError(f"delta in frames must be an integer, got {delta}", source="delta")
+    if unit in MAX_ANGLE_DELTA and delta > MAX_ANGLE_DELTA[unit]:
+        raise ConfigError(f"delta in {unit} must be at most {MAX_ANGLE_DELTA[unit]:.6g} (a rotation angle), got {delta:g}",
+                          source="delta")
+    return delta, unit
+
+
 def _checked_pairs(pairs, n_poses: int, source: str) -> np.ndarray:
     """``(m, 2)`` int pose pairs ``(i, j)``, ``0 <= i < j < n_poses``; ConfigError otherwise (an IndexError or, with
-    consecutive pairs, silently other pairs than the ones named)."""
+    consecutive pairs, silently other pairs than the ones named; no pairs scored evo's own, 1.5 was read as 1)."""
     try:
-        out = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+        given = np.asarray(pairs, dtype=np.float64).reshape(-1, 2)
     except (TypeError, ValueError):
         raise ConfigError(f"pairs must be (i, j) pose index pairs, got {type(pairs).__name__}", source="pairs") from None
+    if len(given) == 0:
+        raise ConfigError("pairs is empty: give at least one (i, j) pose index pair, or pairs=None to select them by delta",
+                          source="pairs")
+    fractional = np.flatnonzero(~np.isfinite(given).all(axis=1) | (given != np.round(given)).any(axis=1))
+    if len(fractional):
+        i, j = given[fractional[0]]
+        raise ConfigError(f"pair {int(fractional[0])} ({i:g}, {j:g}) is not two whole pose indices", source="pairs")
+    out = given.astype(np.int64)
     bad = np.flatnonzero((out[:, 0] < 0) | (out[:, 1] >= n_poses) | (out[:, 0] >= out[:, 1]))
     if len(bad):
         i, j = out[bad[0]]
@@ -327,11 +364,19 @@ def _stats(metric, source: str) -> dict[str, float]:
 
 # ---- public API ------------------------------------------------------------------------------------
 def align_trajectory(
-    ref: Trajectory, est: Trajectory, align: str = "se3", *, n_to_align: int | None = None
+    ref: Trajectory,
+    est: Trajectory,
+    align: str = "se3",
+    *,
+    n_to_align: int | None = None,
+    associate: bool = False,
+    max_diff_s: float = 0.01,
 ) -> tuple[Trajectory, AlignmentTransform | None]:
-    """Copy of ``est`` aligned onto ``ref`` (equal length) with evo's Umeyama alignment, and the transform."""
+    """Copy of ``est`` aligned onto ``ref`` with evo's Umeyama alignment, and the transform. Trajectories must have
+    equal length unless ``associate`` (as in :func:`ape`; the copy then holds the matched poses only)."""
     source = pair_name(ref, est)
-    ref, est = paired(ref, est)
+    check_flags(associate=associate)
+    ref, est = paired(ref, est, associate=associate, max_diff_s=max_diff_s)
     n = _check_align(align, False, n_to_align, len(ref), source)
     _, est_evo, transform = _aligned_copies(ref, est, align, False, n, source)
     return Trajectory.from_evo(est_evo, name=est.name), transform
@@ -427,22 +472,12 @@ def rpe(
     source = pair_name(ref, est)
     check_flags(all_pairs=all_pairs, pairs_from_reference=pairs_from_reference, legacy_pairs=legacy_pairs, associate=associate)
     pose_relation = _relation(relation, RPE_RELATIONS)
-    if delta_unit not in DELTA_UNITS:
-        raise ConfigError(f"unknown delta unit {delta_unit!r}; known: {', '.join(DELTA_UNITS)}", source="delta_unit")
-    unit = Unit[DELTA_UNITS[delta_unit]]
-    delta_unit = DELTA_UNITS[delta_unit]
-    try:
-        delta = float(delta)
-    except (TypeError, ValueError):
-        raise ConfigError(f"delta must be a number, got {delta!r}", source="delta") from None
-    if not np.isfinite(delta) or delta <= 0:
-        raise ConfigError(f"delta must be > 0, got {delta}", source="delta")
-    if unit is Unit.frames and not delta.is_integer():
-        raise ConfigError(f"delta in frames must be an integer, got {delta}", source="delta")
+    delta, delta_unit = checked_delta(delta, delta_unit)
+    unit = Unit[delta_unit]
     if legacy_pairs and (unit is Unit.frames or all_pairs):
         raise ConfigError("legacy_pairs applies to consecutive pairs with a path or angle delta", source="legacy_pairs")
-    if not 0 <= rel_delta_tol < 1:
-        raise ConfigError(f"rel_delta_tol must be in [0, 1), got {rel_delta_tol}", source="rel_delta_tol")
+    if not (_is_number(rel_delta_tol) and 0 <= rel_delta_tol < 1):  # ("x": a bare TypeError)
+        raise ConfigError(f"rel_delta_tol must be a number in [0, 1), got {rel_delta_tol!r}", source="rel_delta_tol")
     ref, est = paired(ref, est, associate=associate, max_diff_s=max_diff_s)
     n = _check_align(align, align_origin, n_to_align, len(ref), source)
     if unit is Unit.frames and int(delta) >= len(ref):
@@ -451,8 +486,9 @@ def rpe(
 
     evo_delta: float = int(delta) if unit is Unit.frames else delta
     given = pairs is not None
-    if given and not legacy_pairs and relation in ("point_distance", "point_distance_error_ratio"):
-        # (evo found its own pairs from the delta for these: 199 errors for the 3 pairs given, reported as those 3)
+    if given and relation in ("point_distance", "point_distance_error_ratio"):
+        # (evo found its own pairs from the delta for these: 199 errors for the 3 pairs given, reported as those 3;
+        # with legacy_pairs the given pairs were read as a chain: (0, 50), (100, 200) scored as (0, 50), (50, 200))
         raise ConfigError(f"pairs= is not supported for the {relation} relation (evo pairs the poses itself); use delta",
                           source="pairs")
     if given:
@@ -482,7 +518,7 @@ def rpe(
         elif legacy_pairs:
             # Consecutive pairs form a chain; reduce both copies to the chain without its first pair and
             # let evo compare consecutive poses of the reduced copies.
-            pairs = pairs if given else pairs[1:]
+            pairs = pairs[1:]  # (given pairs were laid out above)
             if len(pairs) == 0:
                 raise EvaluationError(
                     f"delta = {delta:g} ({delta_unit}) leaves no pair after dropping the first one", source=source

@@ -9,11 +9,12 @@ from typing import Any
 import numpy as np
 
 from lidarkit.errors import ConfigError
-from lidarkit.eval.ape_rpe import APEResult, RPEResult, ape, check_flags, rpe
+from lidarkit.eval.ape_rpe import APEResult, RPEResult, ape, check_flags, checked_delta, rpe
 from lidarkit.eval.kitti_drift import (
     KITTI_LENGTHS_M,
     KITTI_STEP_FRAMES,
     DriftResult,
+    checked_step,
     drift_segments_possible,
     kitti_drift,
 )
@@ -44,8 +45,10 @@ class EvaluationSettings:
     drift_step_frames: int = KITTI_STEP_FRAMES
 
     def __post_init__(self) -> None:
-        """Switches that are True or False, and drift segment lengths that are positive numbers (an empty tuple or a
-        single number was a traceback; "false" computed the drift)."""
+        """Switches that are True or False, an RPE delta evo accepts (200 deg failed after the drift), and drift segment
+        lengths that are positive numbers (an empty tuple or a single number was a traceback; "false" computed the drift)."""
+        checked_delta(self.delta, self.delta_unit)
+        checked_step(self.drift_step_frames, "drift_step_frames")
         check_flags(all_pairs=self.all_pairs, pairs_from_reference=self.pairs_from_reference, legacy_pairs=self.legacy_pairs,
                     associate=self.associate, drift=self.drift)
         lengths = self.drift_lengths_m

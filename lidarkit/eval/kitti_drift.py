@@ -98,6 +98,14 @@ def drift_segments_possible(ref: Trajectory, lengths: tuple[float, ...] = KITTI_
     return len(ref) > 1 and ref.length_m > min(lengths)
 
 
+def checked_step(step: int, source: str) -> int:
+    """``step`` as an int; ConfigError unless a whole number >= 1 ("10" read "got 10", "x" raised a ValueError)."""
+    if isinstance(step, bool) or not isinstance(step, (int, float, np.integer, np.floating)) or not (
+            float(step).is_integer() and step >= 1):
+        raise ConfigError(f"{source} must be a positive integer number of frames, got {step!r}", source=source)
+    return int(step)
+
+
 def kitti_drift(
     ref: Trajectory,
     est: Trajectory,
@@ -120,9 +128,7 @@ def kitti_drift(
         raise ConfigError(f"segment lengths must be positive numbers, got {list(lengths)}", source="lengths")
     if len(np.unique(lengths_arr)) != lengths_arr.size:  # (a repeated length counted its segments twice in the mean)
         raise ConfigError(f"segment lengths must differ, got {list(lengths)}", source="lengths")
-    if int(step) != step or step < 1:
-        raise ConfigError(f"step must be a positive integer number of frames, got {step}", source="step")
-    step = int(step)
+    step = checked_step(step, "step")
     ref, est = paired(ref, est, associate=associate, max_diff_s=max_diff_s)
 
     ref_poses, est_poses = ref.poses_se3, est.poses_se3

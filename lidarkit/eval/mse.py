@@ -16,8 +16,10 @@ def position_mse(ref: Trajectory, est: Trajectory, start: int = 0, *, dims: int 
     Trajectories must have equal length; ``start`` skips the filter's convergence phase.
     """
     source = pair_name(ref, est)
-    if dims not in (2, 3):
-        raise ConfigError(f"dims must be 2 or 3, got {dims}", source="dims")
+    if isinstance(dims, bool) or dims not in (2, 3):
+        raise ConfigError(f"dims must be 2 or 3, got {dims!r}", source="dims")
+    if isinstance(start, bool) or not isinstance(start, (int, float, np.integer, np.floating)):  # ("5": "got 5")
+        raise ConfigError(f"start must be a frame index, got {start!r}", source="start")
     ref, est = paired(ref, est)
     if int(start) == start and start >= len(ref) >= 0 and start >= 0:
         raise EvaluationError(f"needs more than {int(start)} steps for the MSE from step {int(start)}; has {len(ref)}",

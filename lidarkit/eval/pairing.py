@@ -51,10 +51,15 @@ def paired(
     from evo import EvoException
     from evo.core import sync
 
+    if len(ref) == 0 or len(est) == 0:
+        raise EvaluationError(f"the {'reference' if len(ref) == 0 else 'estimate'} has no poses to associate", source=source)
+    ref_in, est_in = ref.to_evo(), est.to_evo()
     try:
-        ref_evo, est_evo = sync.associate_trajectories(ref.to_evo(), est.to_evo(), max_diff=float(max_diff_s))
-    except EvoException as err:
-        raise EvaluationError(f"timestamp association failed: {err}", source=source) from err
+        ref_evo, est_evo = sync.associate_trajectories(ref_in, est_in, max_diff=float(max_diff_s))
+    except EvoException as err:  # (evo's only one: no match; in its words, "between first trajectory and second ...")
+        raise EvaluationError(
+            f"timestamp association failed: no pose has a partner within {max_diff_s:g} s (reference spans "
+            f"{_span(ref)}, estimate spans {_span(est)}): are both stamped by the same clock?", source=source) from err
     ref_out, est_out = _matched(ref_evo, est_evo, ref.name), _matched(est_evo, ref_evo, est.name)
     logger.info("associated %d of %d/%d poses (max diff %.3g s)", len(ref_out), len(ref), len(est), max_diff_s)
     return ref_out, est_out
@@ -74,6 +79,11 @@ def stamps_disagree(ref: Trajectory, est: Trajectory, max_diff_s: float) -> str:
         return ""
     return (f"poses paired by index, but their stamps differ by up to {gap[k]:.6g} s (pose {k}: reference {ref.timestamps_s[k]:.6f} s, "
             f"estimate {est.timestamps_s[k]:.6f} s; more than {max_diff_s:g} s): --associate (associate=True) pairs them by time")
+
+
+def _span(traj: Trajectory) -> str:
+    """``"first..last s"`` of a trajectory's timestamps."""
+    return f"{float(traj.timestamps_s[0]):.3f}..{float(traj.timestamps_s[-1]):.3f} s"
 
 
 def _matched(traj, partner, name: str) -> Trajectory:

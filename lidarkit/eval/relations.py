@@ -112,6 +112,9 @@ def relation_error(
     Relations whose time stamps have no estimated pose within ``max_time_diff_s`` are left out (counted in the
     result); none matching at all is an EvaluationError.
     """
+    if not isinstance(estimate, Trajectory):  # (a path: AttributeError 'str' object has no attribute 'name')
+        raise EvaluationError("the estimate must be a lidarkit Trajectory (e.g. Trajectory.from_tum(path)), got "
+                              f"{type(estimate).__name__}", source="estimate")
     source = estimate.name or "estimate"
     if relations is None or not isinstance(relations, Relations):  # (a log without a relations file: a TypeError)
         raise EvaluationError("no relations to score against (a CARMEN log has them when NAME.relations lies beside it, "

@@ -10,6 +10,7 @@ per-unit differences are rarely normal and one bad seed should not decide the ve
 from __future__ import annotations
 
 import math
+import reprlib
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -25,7 +26,11 @@ RELATIVE_TIE_TOLERANCE = 1e-9
 
 
 def _finite(values: Any, source: str) -> np.ndarray:
-    arr = np.asarray(values, dtype=np.float64).reshape(-1)
+    """``values`` as a flat float array; EvaluationError for text or non-finite values (["a"]: a numpy ValueError)."""
+    try:
+        arr = np.asarray(values, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        raise EvaluationError(f"values must be numbers, got {reprlib.repr(values)}", source=source) from None
     if arr.size and not np.isfinite(arr).all():
         raise EvaluationError(f"{int((~np.isfinite(arr)).sum())} non-finite value(s) among {arr.size}", source=source)
     return arr
