@@ -32,6 +32,8 @@ _UMASK = os.umask(0o022)
 os.umask(_UMASK)  # read once at import: os.umask can only be read by setting it
 
 PARTIAL_MARK = ".partial-"  # temporary run folders: ``.<name>.partial-XXXX`` beside the final one
+_RANDOM_CHARS = 8  # tempfile's random part of a name
+_NAME_MAX = 255  # bytes in one name on the file systems lidarkit writes to (ext4, xfs, btrfs, tmpfs)
 
 _REASONS = {
     errno.EEXIST: "a file is in the way (a folder is needed here)",
@@ -94,7 +96,8 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
         raise OutputError("cannot write: is a folder (a file name is needed here)", source=path)
     ensure_dir(path.parent)
     with output_errors(path):
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
+        extra = 2 + _RANDOM_CHARS + len(os.fsencode(path.suffix))  # ".<stem>.XXXXXXXX<suffix>"
+        fd, tmp = tempfile.mkstemp(prefix=f".{temporary_stem(path.stem, extra)}.", suffix=path.suffix, dir=path.parent)
         os.close(fd)
     tmp_path = Path(tmp)
     try:
@@ -264,6 +267,24 @@ def _writable(folder: Path) -> bool:
     return os.access(folder, os.W_OK | os.X_OK)
 
 
+def temporary_stem(name: str, extra: int) -> str:
+    """``name`` as the stem of a temporary name ``extra`` bytes longer: as it is when that fits in a name, else cut, with a
+    digest of the whole name so that long names sharing their start keep apart (a legal 250-byte --out failed
+    only after the run, when its ``.<name>.partial-XXXXXXXX`` folder could not be made)."""
+    encoded = os.fsencode(name)
+    if len(encoded) + extra <= _NAME_MAX:
+        return name
+    import hashlib
+
+    cut = encoded[: _NAME_MAX - extra - 9].decode("utf-8", errors="ignore")  # (a multi-byte character is not split)
+    return f"{cut}~{hashlib.sha1(encoded).hexdigest()[:8]}"
+
+
+def _partial_prefix(path: Path) -> str:
+    """``.<name>.partial-`` of ``path``'s temporary folders (the name cut to fit, see :func:`temporary_stem`)."""
+    return f".{temporary_stem(path.name, 1 + len(PARTIAL_MARK) + _RANDOM_CHARS)}{PARTIAL_MARK}"
+
+
 @contextlib.contextmanager
 def partial_folder(path: str | os.PathLike, reason: str = "cannot write", inside: bool = False) -> Iterator[Path]:
     """A temporary folder beside ``path`` (``.<name>.partial-XXXX``; in it with ``inside``) to write ``path`` in,
@@ -274,7 +295,7 @@ def partial_folder(path: str | os.PathLike, reason: str = "cannot write", inside
     home = path if inside else path.parent
     ensure_dir(home)
     with output_errors(path, reason):
-        tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}{PARTIAL_MARK}", dir=home))
+        tmp = Path(tempfile.mkdtemp(prefix=_partial_prefix(path), dir=home))
     held = _hold(tmp)
     try:
         remove_stale_partials(path, home=home)
@@ -364,7 +385,7 @@ def remove_stale_partials(path: str | os.PathLike, older_than_s: float = 3600.0,
     path = Path(path)
     removed = 0
     with contextlib.suppress(OSError):
-        for stale in Path(path.parent if home is None else home).glob(f".{path.name}{PARTIAL_MARK}*"):
+        for stale in Path(path.parent if home is None else home).glob(f"{_partial_prefix(path)}*"):
             if not (stale.is_dir() and time.time() - stale.stat().st_mtime > older_than_s):
                 continue
             held = _hold(stale, wait=False)

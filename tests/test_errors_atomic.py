@@ -98,6 +98,31 @@ def test_a_running_outputs_temporary_folder_is_never_taken_for_a_killed_ones(tmp
     assert (target / "poses.txt").read_text() == "1\n"
 
 
+def test_a_long_legal_name_is_written_through_a_temporary_name_that_fits(tmp_path):
+    """A 250-byte name is legal (the disk takes 255), but its temporary ``.NAME.partial-XXXXXXXX`` folder (or
+    ``.STEM.XXXXXXXX.json`` file) is not: `--out` of that length failed only after the run had done its work."""
+    import time
+
+    name = "y" * 250
+    folder = tmp_path / name
+    atomic.check_target(folder, "folder")
+    with atomic.run_folder(folder) as tmp:
+        assert len(tmp.name) <= 255 and atomic.PARTIAL_MARK in tmp.name
+        (tmp / "poses.txt").write_text("1\n")
+    assert (folder / "poses.txt").read_text() == "1\n"
+    two_hours_ago = time.time() - 7200
+    with atomic.partial_folder(tmp_path / ("y" * 249 + "z")) as other:  # shares the long start: another run's folder
+        os.utime(other, (two_hours_ago, two_hours_ago))
+        left = tmp_path / other.name.replace(other.name[-8:], "killed!!")  # a killed run of the same name
+        left.mkdir()
+        os.utime(left, (two_hours_ago, two_hours_ago))
+        assert atomic.remove_stale_partials(folder) == 0 and left.is_dir()  # not this name's
+        assert atomic.remove_stale_partials(tmp_path / ("y" * 249 + "z")) == 1 and other.is_dir() and not left.exists()
+    atomic.write_text(tmp_path / f"{'z' * 250}.json", "{}")
+    assert (tmp_path / f"{'z' * 250}.json").read_text() == "{}"
+    assert sorted(p.name for p in tmp_path.iterdir()) == [name, f"{'z' * 250}.json"]
+
+
 def test_a_run_folder_through_a_link_or_in_a_parent_it_cannot_write(tmp_path, monkeypatch):
     """--out LINK renamed the run onto the link (a cross-device error after the work, or "the folder filled while this
     export was written" for an export into an empty folder); a writable folder in a parent the user cannot write to (a
