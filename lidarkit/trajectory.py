@@ -257,7 +257,8 @@ class Trajectory:
         """Read a TUM trajectory: ``timestamp tx ty tz qx qy qz qw`` per line, ``#`` comments.
 
         A pose stamped like the one before it is left out (with a warning naming the lines): TUM RGB-D's own ground
-        truth of ``fr2/desk`` has one. Timestamps that go backwards are a DataError naming the line."""
+        truth of ``fr2/desk`` has one; more than half of them repeating is a DataError (stamps written with too few
+        digits). Timestamps that go backwards are a DataError naming the line."""
         rows = read_numeric_table(path, 8)
         quat_xyzw = rows[:, 4:8]
         norms = np.linalg.norm(quat_xyzw, axis=1)
@@ -270,6 +271,9 @@ class Trajectory:
             raise DataError(f"timestamp {rows[k, 0]:.6f} is earlier than the one before it ({rows[k - 1, 0]:.6f})",
                             source=path, location=file_line(path, f"frame {k}"))
         repeated = np.flatnonzero(step == 0) + 1
+        if repeated.size > len(rows) / 2:  # no recorder's glitch: the file's stamps lost their digits (90 % left out, scored)
+            raise DataError(f"{repeated.size} of {len(rows)} poses repeat the timestamp of the pose before them: were the "
+                            "stamps written with too few decimals (TUM stamps need sub-millisecond digits)?", source=path)
         if repeated.size:
             numbers = data_line_numbers(path)  # (the file is read once for all the lines named)
             lines = ", ".join(f"line {numbers[k]}" for k in repeated[:5])
