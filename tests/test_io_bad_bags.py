@@ -158,6 +158,29 @@ def test_time_field_that_is_not_times(tmp_path):
     assert open_dataset("rosbag", bag, time_field="none").read_scan(1).point_times_s is None  # the way out it names
 
 
+def test_a_time_field_is_checked_against_the_point_order_and_the_azimuth(tmp_path):
+    """A per-point value within 1 s named as time_field= (an intensity) was read as the points' times. Times that rise
+    along the point order (a solid-state sensor in any direction) or that go back once per row but turn with the
+    azimuth (an organized cloud, 16 rows of 128) are read; an intensity on either cloud is refused."""
+    rng = np.random.default_rng(0)
+    n = 2048
+    rec = np.zeros(n, dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("time", "<f4"), ("intensity", "<f4")])
+    fields = [("x", 0, F32), ("y", 4, F32), ("z", 8, F32), ("time", 12, F32), ("intensity", 16, F32)]
+    rec["intensity"] = rng.uniform(0.0, 0.9, n)
+    rec["x"], rec["y"], rec["z"] = rng.normal(size=(3, n)) + [[10.0], [0.0], [0.0]]  # a forward view
+    rec["time"] = np.linspace(0.0, 0.1, n)
+    solid = rec.tobytes()
+    azimuth = np.tile(np.linspace(0, 2 * np.pi, 128, endpoint=False), 16)
+    rec["x"], rec["y"], rec["z"] = 10 * np.cos(azimuth), 10 * np.sin(azimuth), np.repeat(np.linspace(-1, 1, 16), 128)
+    rec["time"] = np.tile(np.linspace(0.0, 0.1, 128, endpoint=False), 16)  # goes back 15 times in 2048 points
+    bag = write_ros1_bag(tmp_path / "orders.bag", [(1000.0, fields, 20, solid, n), (1000.1, fields, 20, rec.tobytes(), n)])
+    for k in (0, 1):
+        assert open_dataset("rosbag", bag).read_scan(k).point_times_s.max() == pytest.approx(0.1, abs=1e-3)
+        with pytest.raises(DataError, match=rf"orders\.bag \(message {k} on /points\): per-point time field 'intensity' does not "
+                                            r"follow the sweep: its values go back 987 times in 2048 points"):
+            open_dataset("rosbag", bag, time_field="intensity").read_scan(k)
+
+
 def test_a_ring_number_named_as_time_field_is_refused(tmp_path):
     """time_field=ring (a uint16 beam number, 0-15) read as 0-15 ns of per-point times: kiss 'deskewed' every sweep by
     ring number; an 8- or 16-bit integer field cannot hold times, refused naming it."""
@@ -181,6 +204,22 @@ def test_a_kitti_folder_given_as_a_bag_is_called_what_it_is(tmp_path):
     with pytest.raises(DataError, match=r"run: a folder that is no ROS bag \(no \.bag files, no metadata\.yaml\): it reads as "
                                         r"'kitti' data \(kitti:PATH\)"):
         open_dataset("rosbag", folder, topic="/points").read_scan(0)
+
+
+def test_a_folder_of_split_bags_with_an_unreadable_part_names_that_part(tmp_path):
+    """A folder of split bags whose part is truncated said "a folder that is no ROS bag (no .bag files, no
+    metadata.yaml)": the unreadable part is named with the reader's reason, as when it is opened on its own."""
+    folder = tmp_path / "parts"
+    folder.mkdir()
+    write_ros1_bag(folder / "run_0.bag", [good(k, 2000) for k in range(2)])
+    whole = write_ros1_bag(tmp_path / "run_1.bag", [good(k, 2000) for k in range(2, 4)])
+    (folder / "run_1.bag").write_bytes(whole.read_bytes()[: whole.stat().st_size // 2])
+    reason = r"not a readable ROS bag \(AnyReaderError: Bag index looks damaged: .*; truncated or damaged\?\)"
+    with pytest.raises(DataError, match=rf"parts/run_1\.bag: {reason}$"):
+        open_dataset("rosbag", folder)
+    (folder / "run_0.bag").unlink()  # the only part unreadable
+    with pytest.raises(DataError, match=rf"parts/run_1\.bag: {reason}$"):
+        open_dataset("rosbag", folder)
 
 
 def test_time_going_backwards(tmp_path):

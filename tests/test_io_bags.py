@@ -90,6 +90,17 @@ def test_bag_round_trip_points_times_and_ground_truth(sim, exports, fmt, storage
     np.testing.assert_allclose(gt.timestamps_s, sim.timestamps_s, rtol=0, atol=1e-9)
 
 
+def test_an_intensity_named_as_time_field_is_refused(exports):
+    """time_field=intensity (0.007-0.696, within the 1 s a sweep may span) was read as each point's seconds and
+    deskewed every sweep by it: values that neither follow the point order nor turn with the azimuth are refused."""
+    bag = exports[("rosbag1", "sqlite3")]
+    with pytest.raises(DataError, match=r"run\.bag \(message 0 on /points\): per-point time field 'intensity' does not follow the "
+                                        r"sweep: its values go back 808 times in 11368 points and do not turn with the azimuth "
+                                        r"\(an intensity or another per-point value\): not the points' times \(time_field= names"):
+        open_dataset("rosbag", bag, time_field="intensity").read_scan(0)
+    assert open_dataset("rosbag", bag, time_field="time").read_scan(0).point_times_s.max() == pytest.approx(0.1, abs=1e-3)
+
+
 def test_odometry_over_bags_equals_the_kitti_export(exports, tmp_path):
     """kiss through every bag format gives the KITTI-layout export's trajectory (1e-9 m); one via the CLI."""
     from lidarkit.odometry import run

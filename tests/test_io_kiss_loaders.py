@@ -128,14 +128,38 @@ def test_newer_college_binary_pcd_without_pyntcloud(tmp_path):
 
 
 def test_a_file_the_generic_loader_cannot_read_is_named_once(tmp_path):
-    """A .pcd among .bin scans read as KITTI .bin: "generic:mixed (frame 1): mixed (frame 1): kiss-icp's generic
-    loader failed" named the folder twice and not the file."""
+    """A scan the loader cannot read: "generic:mixed (frame 1): mixed (frame 1): kiss-icp's generic loader failed"
+    named the folder twice and not the file."""
     from lidarkit.errors import LidarKitError
     from lidarkit.odometry import run
 
-    rng = np.random.default_rng(0)
-    rng.uniform(-10, 10, (500, 4)).astype(np.float32).tofile(tmp_path / "scan1.bin")
-    (tmp_path / "scan2.pcd").write_bytes(b"# .PCD v0.7\nVERSION 0.7\nFIELDS x y z\n" + b"\0" * 37)
+    import open3d as o3d
+
+    o3d.t.io.write_point_cloud(str(tmp_path / "scan1.pcd"), o3d.t.geometry.PointCloud(o3d.core.Tensor(RING.astype(np.float32))))
+    (tmp_path / "scan2.pcd").write_bytes(b"not a point cloud\n")
     with pytest.raises(LidarKitError) as err:
         run(f"generic:{tmp_path}", "vanilla")
-    assert str(err.value).startswith(f"{tmp_path / 'scan2.pcd'} (frame 1): kiss-icp's generic loader failed: ValueError")
+    assert str(err.value).startswith(f"{tmp_path / 'scan2.pcd'} (frame 1): kiss-icp's generic loader failed: KeyError")
+
+
+def test_a_generic_folder_of_several_formats_is_refused_and_skipped_files_are_named(tmp_path, caplog):
+    """kiss-icp's generic loader reads every file as the first one's format (.pcd read as .bin: a reshape error or NaN
+    points) and only lower-case suffixes it knows (scan2.BIN and .npy scans were left out without a word)."""
+    import open3d as o3d
+
+    mixed, other = tmp_path / "mixed", tmp_path / "other"
+    mixed.mkdir()
+    other.mkdir()
+    for k in range(2):
+        RING.astype(np.float32).tofile(mixed / f"a{k}.bin")
+        o3d.t.io.write_point_cloud(str(mixed / f"a{k + 2}.pcd"), o3d.t.geometry.PointCloud(o3d.core.Tensor(RING.astype(np.float32))))
+    with pytest.raises(DataError, match=r"mixed: point-cloud files of 2 formats \(2 \.bin, 2 \.pcd\): kiss-icp's generic loader reads "
+                                        r"every file as the first one's format; keep one format, or read the folder as folder:PATH$"):
+        open_dataset("generic", mixed)
+    np.column_stack([RING, np.zeros(len(RING))]).astype(np.float32).tofile(other / "scan1.bin")
+    for name in ("scan2.BIN", "scan3.npy", "notes.txt"):
+        (other / name).write_bytes(b"")
+    with caplog.at_level(logging.WARNING):
+        assert len(open_dataset("generic", other)) == 1
+    assert f"{other}: 2 point-cloud files that kiss-icp's generic loader does not read are skipped (scan2.BIN, scan3.npy); " \
+           "folder:PATH reads them" in caplog.text

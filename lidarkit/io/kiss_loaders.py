@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import logging
 import os
+from collections import Counter
 from pathlib import Path
 from typing import Any
 
@@ -431,11 +432,26 @@ class GenericScans(KissLoaderScans):
     def __init__(self, path: str | os.PathLike):
         from kiss_icp.datasets import supported_file_extensions
 
+        from lidarkit.io.pointfile import POINT_FILE_SUFFIXES
+
         folder = Path(path)
         if not folder.is_dir():
             raise DataError("the generic reader takes a folder of point-cloud files", source=folder)
-        if not any(p.suffix.lstrip(".") in supported_file_extensions() for p in folder.iterdir()):
-            raise DataError(f"no point-cloud files ({', '.join(supported_file_extensions())})", source=folder)
+        extensions = supported_file_extensions()
+        files = sorted(p for p in folder.iterdir() if p.is_file())
+        read = [p for p in files if p.name.endswith(tuple(extensions))]  # the files kiss-icp's loader picks
+        if not read:
+            raise DataError(f"no point-cloud files ({', '.join(extensions)})", source=folder)
+        formats = Counter(p.suffix for p in read)
+        if len(formats) > 1:  # (the loader read every file as the first one's format: reshape errors or NaN points)
+            counts = ", ".join(f"{n} {suffix}" for suffix, n in sorted(formats.items()))
+            raise DataError(f"point-cloud files of {len(formats)} formats ({counts}): kiss-icp's generic loader reads every "
+                            "file as the first one's format; keep one format, or read the folder as folder:PATH", source=folder)
+        point_suffixes = {*POINT_FILE_SUFFIXES, *(f".{e}" for e in extensions)}
+        skipped = [p.name for p in files if p not in read and p.suffix.lower() in point_suffixes]
+        if skipped:  # (scan2.BIN and .npy scans were left out without a word)
+            log.warning("%s: %d point-cloud files that kiss-icp's generic loader does not read are skipped (%s); folder:PATH "
+                        "reads them", folder, len(skipped), ", ".join(skipped))
         super().__init__(folder)
 
 

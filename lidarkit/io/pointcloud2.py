@@ -13,8 +13,9 @@ Per-point time fields (the first present of :data:`TIME_FIELDS`, or the one aske
 * values beyond 1e5 s are absolute time (``point_time_convention="absolute_s"``), otherwise relative to the
   message stamp (``"relative_s"``);
 * a field whose values span more than :data:`MAX_SWEEP_S` in one message is not the points' times (e.g. an
-  intensity named by ``time_field=``), nor is an 8- or 16-bit integer field (a ``ring``): a DataError, where it would
-  have deskewed every sweep by nonsense.
+  intensity named by ``time_field=``), nor is an 8- or 16-bit integer field (a ``ring``), nor one that neither follows
+  the point order nor turns with the azimuth (an intensity within 1 s): a DataError, where it would have deskewed
+  every sweep by nonsense.
 """
 
 from __future__ import annotations
@@ -31,6 +32,9 @@ _ABSOLUTE_AFTER_S = 1e5
 _NANOSECONDS_AFTER = 1e15
 #: Longest plausible sweep (s): spinning LiDARs turn at 5-20 Hz, solid-state ones integrate ~0.1 s.
 MAX_SWEEP_S = 1.0
+#: Largest share of steps along the point order where a sweep's times go back (one per row: 128 rows of 1024 is 0.1 %).
+_MAX_REVERSALS = 0.005
+_MIN_POINTS_TO_JUDGE = 100
 
 
 @dataclass(frozen=True)
@@ -128,8 +132,36 @@ def decode_pointcloud2(msg: Any, *, source: str, location: str, time_field: str 
             f"{MAX_SWEEP_S:g} s): not the points' times (time_field= names the right field, none reads no times)",
             source=source, location=location,
         )
+    reversals = _time_order_reversals(times, xyz)
+    if reversals is not None:
+        raise DataError(
+            f"per-point time field {field!r} does not follow the sweep: its values go back {reversals} times in "
+            f"{len(times)} points and do not turn with the azimuth (an intensity or another per-point value): not the "
+            "points' times (time_field= names the right field, none reads no times)", source=source, location=location,
+        )
     convention = "absolute_s" if len(times) and float(np.abs(times).max()) > _ABSOLUTE_AFTER_S else "relative_s"
     return DecodedCloud(xyz, intensity, times, convention, field)
+
+
+def _time_order_reversals(times: np.ndarray, xyz: np.ndarray) -> int | None:
+    """How often ``times`` (N,) go back along the point order, when they are no sweep's times; None when they are.
+
+    A sweep's times rise (or fall) along the firing order, going back only at each row of an organized cloud
+    (:data:`_MAX_REVERSALS` of the steps at most), or turn with the azimuth of a spinning sensor (points
+    ``xyz`` (N, 3)); an intensity within 1 s does neither (it passed as times, deskewing every sweep by it).
+    """
+    span = float(np.ptp(times)) if len(times) else 0.0
+    if len(times) < _MIN_POINTS_TO_JUDGE or span == 0.0:
+        return None
+    steps = np.diff(times)
+    big = np.abs(steps) > 0.01 * span  # (a firing block's per-channel offsets are microseconds)
+    reversals = min(np.count_nonzero(big & (steps > 0)), np.count_nonzero(big & (steps < 0)))
+    if reversals <= _MAX_REVERSALS * len(steps):
+        return None
+    azimuth = np.arctan2(xyz[:, 1], xyz[:, 0])
+    phase = 2 * np.pi * (times - times.min()) / span  # one turn per sweep, either way round
+    turning = max(abs(np.exp(1j * (azimuth - phase)).mean()), abs(np.exp(1j * (azimuth + phase)).mean()))
+    return None if turning > 0.5 else int(reversals)
 
 
 #: sensor_msgs/PointField datatype codes

@@ -401,14 +401,23 @@ class RosbagScans(_BagScans):
     def _list_topics(self) -> dict[str, str]:
         from rosbags.highlevel import AnyReader
 
+        paths = self._reader_paths()
         try:
-            with AnyReader(self._reader_paths()) as reader:
+            with AnyReader(paths) as reader:
                 return {t: info.msgtype for t, info in reader.topics.items()}
         except Exception as err:  # noqa: BLE001 - rosbags raises its own error types for damaged files
             from lidarkit.io import ros2_storage_problem
 
+            if paths != [self.path]:  # split parts: name the unreadable one (it said "no .bag files")
+                for part in paths:
+                    try:
+                        with AnyReader([part]):
+                            pass
+                    except Exception as part_err:  # noqa: BLE001
+                        raise DataError(f"not a readable ROS bag ({type(part_err).__name__}: {part_err}; truncated or "
+                                        f"damaged?)", source=part) from None
             problem = ros2_storage_problem(self.path)
-            if problem is None and self.path.is_dir() and not (self.path / "metadata.yaml").exists():
+            if problem is None and paths == [self.path] and self.path.is_dir() and not (self.path / "metadata.yaml").exists():
                 from lidarkit.io import detect_kind
 
                 kind = detect_kind(self.path)  # (a KITTI folder was "a truncated or damaged bag")
