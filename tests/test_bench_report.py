@@ -561,3 +561,116 @@ def test_reference_comparisons_pair_seeds_as_compare_does_and_say_when_segments_
     assert comparison_rows([(dataset, few)])[1][0][-1] == "kiss better (overlapping segments: p optimistic)"
     (_, many), = reference_comparisons(records(6))
     assert many.pairing == "seed" and many.n_pairs == 6 and many.metric == "KITTI drift %" and many.better == "a"
+
+
+ODOMETRY_AND_PAIRS = """
+name: odometry-and-pairs
+experiments:
+  - name: odo
+    task: odometry
+    dataset: {{kind: kitti, path: "{root}", sequence: "00", name: K00}}
+    options: {{frames: "0:3"}}
+    methods: [kiss]
+  - name: pair
+    task: icp_pair
+    dataset: {{kind: kitti, path: "{root}", sequence: "00", name: K00}}
+    methods: [vanilla]
+"""
+
+
+@pytest.fixture(scope="module")
+def odometry_dir(tmp_path_factory):
+    """Odometry (3 real KITTI frames: publication tables) and an ICP pair on the same dataset name, K00."""
+    from conftest import shared_path
+
+    tmp = tmp_path_factory.mktemp("odometry")
+    (tmp / "suite.yaml").write_text(ODOMETRY_AND_PAIRS.format(root=shared_path("kitti_odometry")))
+    run_suite(load_suite(tmp / "suite.yaml"), tmp / "out", executor="serial")
+    return tmp / "out"
+
+
+def test_a_figure_a_user_put_in_plots_is_kept(results_dir, tmp_path):
+    """The next report deleted every PNG of plots/ it did not draw, a user's own figure1.png too: only figures of the
+    names a report draws go."""
+    import shutil
+
+    folder = tmp_path / "reused"
+    shutil.copytree(results_dir, folder)
+    (folder / "plots").mkdir(exist_ok=True)
+    (folder / "plots" / "figure1.png").write_bytes(b"mine")
+    (folder / "plots" / "traj_selftest_e_synth_0123abcd.png").write_bytes(b"an earlier report's")
+    report = build_report(folder)
+    assert sorted(p.name for p in (folder / "plots").iterdir()) == sorted([p.filename for p in report.plots] + ["figure1.png"])
+    assert (folder / "plots" / "figure1.png").read_bytes() == b"mine"
+
+
+def test_a_report_that_fails_after_its_figures_keeps_the_earlier_report_whole(odometry_dir, tmp_path):
+    """tables/ a file: the report failed after it had written its figures to plots/, beside the earlier report.md.
+    Figures, tables and texts are moved in together, once all are written."""
+    import shutil
+
+    from lidarkit.errors import OutputError
+
+    folder = tmp_path / "reused"
+    shutil.copytree(odometry_dir, folder)
+    build_report(folder)
+    texts = {name: (folder / name).read_bytes() for name in ("report.md", "report.csv", "report.html")}
+    drawn = sorted(p.name for p in (folder / "plots").iterdir())
+    assert len(drawn) == 3  # trajectory and error over time of the odometry, RMSE per iteration of the pair
+    (folder / "plots" / drawn[0]).unlink()
+    shutil.rmtree(folder / "tables")
+    (folder / "tables").write_text("in the way")
+    with pytest.raises(OutputError) as info:
+        build_report(folder)
+    assert str(info.value) == f"{folder / 'tables'}: cannot create the folder: a file is in the way (a folder is needed here)"
+    assert sorted(p.name for p in (folder / "plots").iterdir()) == drawn[1:]  # no new figure beside the earlier report
+    assert {name: (folder / name).read_bytes() for name in texts} == texts
+    assert [p.name for p in folder.parent.iterdir() if ".partial-" in p.name] == []
+
+
+def test_publication_tables_label_odometry_datasets_as_its_section_does(odometry_dir):
+    """With an icp_pair experiment on K00 too, the publication tables said K00(frames=0:3) (the labels were told apart
+    over every task's records) where the odometry section said K00."""
+    report = build_report(odometry_dir, plots=False)
+    odometry = next(t for t in report.tables if t.task == "odometry")
+    assert [row.dataset for row in odometry.rows] == ["K00"]
+    ape = next(t for t in report.publication.tables if t.name == "ape_rmse")
+    assert ape.row_labels[0] == "K00"
+    assert "frames=" not in (odometry_dir / "tables" / "ape_rmse.md").read_text()
+
+
+def test_all_metrics_and_the_csv_say_the_seeds_not_run(results_dir, tmp_path):
+    """After an interrupted run the methods x datasets table said "(1 of 3 not run)" but the All metrics table and
+    report.csv gave the numbers over the seeds that ran without a word."""
+    import shutil
+
+    from lidarkit.bench.report import _table_rows
+
+    folder = tmp_path / "interrupted"
+    shutil.copytree(results_dir, folder)
+    walk = next(r for r in load_results(folder) if r["job"]["params"].get("noise_m") == 0.03 and r["job"]["seed"] == 2)
+    (folder / "jobs" / f"{walk['key']}.json").unlink()
+    report = build_report(folder, plots=False)
+    header, rows = _table_rows(report.tables[0])
+    row = next(row for row in rows if row[2] == "random_walk(noise_m=0.03, steps=40)")
+    assert row[3] == "2/0" and row[header.index("APE RMSE [m]")].endswith(" (1 of 3 not run)")
+    with open(report.csv_path, newline="") as fh:
+        lines = [r for r in csv.DictReader(fh) if r["metric"] == "ape_rmse_m"]
+    assert {r["method"]: (r["n_ok"], r["n_failed"], r["n_not_run"]) for r in lines} == {
+        "random_walk(noise_m=0.01, steps=40)": ("3", "0", "0"), "random_walk(noise_m=0.03, steps=40)": ("2", "0", "1"),
+        "random_walk(noise_m=0.1, steps=40)": ("3", "0", "0"), "fail": ("0", "3", "0")}
+
+
+def test_names_the_font_cannot_draw_warn_of_no_missing_glyph(tmp_path):
+    """A dataset named "d 名前" printed matplotlib's "Glyph ... missing from font" UserWarning on stderr for each
+    character, twice per run (the title shows boxes: that is kept)."""
+    import warnings
+
+    suite = tmp_path / "suite.yaml"
+    suite.write_text(SUITE.replace("name: synth", 'name: "d 名前"'), encoding="utf-8")
+    run_suite(load_suite(suite), tmp_path / "out", executor="serial")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        report = build_report(tmp_path / "out")
+    assert [str(w.message) for w in caught if "Glyph" in str(w.message)] == []
+    assert len(report.plots) == 4 and all(p.png.startswith(PNG_MAGIC) for p in report.plots)  # (with the noise sweep)

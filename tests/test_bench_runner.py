@@ -276,12 +276,12 @@ def test_unknown_executor_and_misplaced_address_are_config_errors(tmp_path):
     suite = load_suite(suite_file(tmp_path, TINY))
     with pytest.raises(ConfigError, match="unknown executor 'threads'"):
         run_suite(suite, tmp_path / "a", executor="threads")
-    with pytest.raises(ConfigError, match="--address only applies to the dask executor"):
+    with pytest.raises(ConfigError, match="^address: only applies to the dask executor"):
         run_suite(suite, tmp_path / "b", executor="process", address="tcp://127.0.0.1:8786")
-    with pytest.raises(ConfigError, match="the serial executor runs one job at a time; --workers 2"):  # it was ignored
+    with pytest.raises(ConfigError, match="^workers: the serial executor runs one job at a time; 2 workers"):  # it was ignored
         run_suite(suite, tmp_path / "b", executor="serial", workers=2)
     for address in ("notanaddress", "tcp://127.0.0.1", "tls://host:99999"):  # distributed's ValueError traceback, after suite.json
-        with pytest.raises(ConfigError, match=rf"--address: '{address}' is not a scheduler address"):
+        with pytest.raises(ConfigError, match=rf"^address: '{address}' is not a scheduler address"):
             run_suite(suite, tmp_path / "b", executor="dask", address=address)
     assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()  # refused before writing anything
 
@@ -439,3 +439,57 @@ def test_bench_progress_lines_where_no_bar_can_be_drawn(tmp_path, capsys):
     assert exc.value.code in (0, None)
     err = capsys.readouterr().err
     assert "2/20 jobs (10 %)" in err and "20/20 jobs (100 %)" in err
+
+
+def test_library_arguments_are_named_as_the_caller_wrote_them(tmp_path, capsys):
+    """A suite file name for the suite raised AttributeError, None for a path TypeError, and workers=0 in the library
+    was called "--workers" (the CLI's name): each is a one-line ConfigError naming the argument."""
+    from lidarkit.bench.report import build_report
+    from lidarkit.errors import ConfigError
+    from conftest import cli_exit_code
+
+    path = suite_file(tmp_path, TINY)
+    calls = {
+        "suite: must be a Suite (load_suite(path) reads one), got str 'suite.yaml'":
+            lambda: run_suite("suite.yaml", tmp_path / "a", executor="serial"),
+        "out_dir: must be a path, got NoneType None": lambda: run_suite(load_suite(path), None, executor="serial"),
+        "path: must be a path, got NoneType None": lambda: load_suite(None),
+        "out_dir: must be a path, got int 3": lambda: build_report(3),
+        "workers: must be >= 1, got 0": lambda: run_suite(load_suite(path), tmp_path / "a", executor="serial", workers=0),
+    }
+    for message, call in calls.items():
+        with pytest.raises(ConfigError) as info:
+            call()
+        assert str(info.value) == message
+    assert not (tmp_path / "a").exists()
+    capsys.readouterr()
+    assert cli_exit_code(["bench", str(path), "--out", str(tmp_path / "a"), "--workers", "0"]) == 1
+    assert capsys.readouterr().err.strip() == "error: --workers: must be >= 1, got 0"
+
+
+def test_a_folder_of_other_files_is_refused_and_kept(tmp_path, capsys):
+    """`lidarkit bench s.yaml --out P` into a folder of the user's own files (no suite.json, no jobs/) replaced its
+    report.md and removed plots/figure1.png and tables/ape_rmse.md, exit 0. Such a folder is refused, untouched; a
+    new, an empty or an earlier run's folder is taken."""
+    from lidarkit.errors import OutputError
+    from conftest import cli_exit_code
+
+    path = suite_file(tmp_path, TINY)
+    mine = tmp_path / "mine"
+    for name in ("report.md", "plots/figure1.png", "tables/ape_rmse.md"):
+        (mine / name).parent.mkdir(parents=True, exist_ok=True)
+        (mine / name).write_text(f"my {name}")
+    before = sorted(str(p.relative_to(mine)) for p in mine.rglob("*"))
+    message = f"{mine}: holds other files (plots, report.md, tables) and no results of an earlier run (suite.json, jobs/): give a new or empty folder"
+    with pytest.raises(OutputError) as info:
+        run_suite(load_suite(path), mine, executor="serial")
+    assert str(info.value) == message
+    capsys.readouterr()
+    assert cli_exit_code(["bench", str(path), "--out", str(mine), "--executor", "serial"]) == 1
+    assert capsys.readouterr().err.strip() == f"error: {message}"
+    assert sorted(str(p.relative_to(mine)) for p in mine.rglob("*")) == before
+    assert all((mine / name).read_text() == f"my {name}" for name in before if (mine / name).is_file())
+
+    (tmp_path / "empty").mkdir()
+    assert run_suite(load_suite(path), tmp_path / "empty", executor="serial").ran == 8
+    assert run_suite(load_suite(path), tmp_path / "empty", executor="serial").skipped == 6  # (the 2 failed run again)

@@ -308,3 +308,24 @@ def test_pairs_and_frames_outside_the_kitti_sequence_are_refused_with_the_suite(
             methods: [vanilla]
         """)
     assert len(load_suite(path).jobs) == 1  # frames inside the sequence still pass
+
+
+def test_rpe_over_a_frame_selection_that_skips_frames_is_labelled_per_selected_frame(tmp_path):
+    """``frames: [0, 2, 3]`` (steps of 2 and 1 frames) was labelled "RPE trans. (1 frame, alignment-free)
+    [m/frame]", and its publication table "m per frame": the RPE is over one selected frame there."""
+    from lidarkit.bench.report import build_report
+    from lidarkit.bench.results import make_record, write_result
+
+    for name, frames in (("all", None), ("skipping", [0, 2, 3])):
+        job = Job("odometry", name, "sim", SIM, "ground_filtered", {"voxel_size_m": 0.5}, seed=0, options={"frames": frames})
+        outcome = execute_job(job.spec())
+        assert outcome["status"] == "ok", outcome["error"]
+        write_result(tmp_path / name, make_record(job, job.key(), "1", outcome))
+    alignment = {name: build_report(tmp_path / name, plots=False) for name in ("all", "skipping")}
+    labels = {name: {m.name: m.label for m in report.tables[0].metrics} for name, report in alignment.items()}
+    assert labels["all"]["rpe_trans_rmse_m"] == "RPE trans. (1 frame, alignment-free) [m/frame]"
+    assert labels["all"]["rpe_rot_rmse_deg"] == "RPE rot. (1 frame, alignment-free) [deg/frame]"
+    assert labels["skipping"]["rpe_trans_rmse_m"] == "RPE trans. (1 selected frame, alignment-free) [m/frame]"
+    assert labels["skipping"]["rpe_rot_rmse_deg"] == "RPE rot. (1 selected frame, alignment-free) [deg/frame]"
+    titles = {name: next(t.title for t in report.publication.tables if t.name == "rpe_rmse") for name, report in alignment.items()}
+    assert titles == {"all": "RPE translation RMSE (m per frame)", "skipping": "RPE translation RMSE (m per selected frame)"}

@@ -254,21 +254,24 @@ class DaskExecutor:
         self._client_log.setLevel(self._client_level)
 
 
-def check_executor_args(name: str, workers: int | None = None, address: str | None = None) -> None:
-    """ConfigError for an unknown executor, a worker count < 1, or an address without the dask executor."""
+def check_executor_args(name: str, workers: int | None = None, address: str | None = None, *, cli: bool = False) -> None:
+    """ConfigError for an unknown executor, a worker count < 1, or an address without the dask executor, naming the
+    argument as the caller wrote it: ``workers`` in the library, ``--workers`` with ``cli``."""
+    arg = (lambda flag: f"--{flag}") if cli else str
     if name not in EXECUTORS:
-        raise ConfigError(f"unknown executor {name!r}; known: {', '.join(EXECUTORS)}", source="--executor")
+        raise ConfigError(f"unknown executor {name!r}; known: {', '.join(EXECUTORS)}", source=arg("executor"))
     if address and name != "dask":
-        raise ConfigError("--address only applies to the dask executor", source="--address")
+        raise ConfigError("only applies to the dask executor", source=arg("address"))
     if address:
-        _check_address(address)
+        _check_address(address, arg("address"))
     if workers is not None and workers < 1:
-        raise ConfigError(f"workers must be >= 1, got {workers}", source="--workers")
+        raise ConfigError(f"must be >= 1, got {workers}", source=arg("workers"))
     if workers is not None and workers > 1 and name == "serial":  # (it was ignored: one job at a time)
-        raise ConfigError(f"the serial executor runs one job at a time; --workers {workers} is for process or dask", source="--workers")
+        raise ConfigError(f"the serial executor runs one job at a time; {workers} workers are for process or dask",
+                          source=arg("workers"))
 
 
-def _check_address(address: str) -> None:
+def _check_address(address: str, source: str = "address") -> None:
     """A Dask scheduler address is ``[protocol://]host:port`` (``inproc://`` needs no port); anything else is a
     ConfigError before a folder is written (distributed raised a ValueError traceback after the run had started)."""
     scheme, sep, rest = address.partition("://")
@@ -280,7 +283,7 @@ def _check_address(address: str) -> None:
     known = ("tcp", "tls", "ws", "wss", "ucx")
     if scheme not in known or not colon or not host.strip("[]") or not port.isdigit() or not 0 < int(port) < 65536:
         raise ConfigError(f"{address!r} is not a scheduler address: [{'|'.join(known)}://]host:port, e.g. tcp://127.0.0.1:8786",
-                          source="--address")
+                          source=source)
 
 
 def make_executor(name: str, *, workers: int | None = None, address: str | None = None):

@@ -34,11 +34,17 @@ class Publication:
     comparisons: list[tuple[str, Any]] = field(default_factory=list)  # (dataset, PairedComparison) vs the reference
 
 
+def odometry_labels(records: list[dict[str, Any]]) -> dict[int, str]:
+    """Dataset labels of the odometry records, told apart among those alone as the report's odometry section does
+    (another task's options on the same dataset labelled them "K00(frames=0:3)" where the section said K00)."""
+    return dataset_labels([r for r in records if r["job"]["task"] == "odometry"])
+
+
 def _grids(records: list[dict[str, Any]]):
     segments: dict[tuple[str, str], list[SegmentErrors]] = defaultdict(list)
     ape: dict[tuple[str, str], list[float]] = defaultdict(list)
     rpe: dict[tuple[str, str], list[float]] = defaultdict(list)
-    label = dataset_labels(records)
+    label = odometry_labels(records)
     for r in records:
         if r.get("status") != "ok" or r["job"]["task"] != "odometry":
             continue
@@ -76,7 +82,7 @@ def reference_comparisons(records: list[dict[str, Any]], reference: str = REFERE
     from lidarkit.eval.statistics import paired_test
 
     per: dict[str, dict[str, dict[int, dict[str, Any]]]] = defaultdict(lambda: defaultdict(dict))
-    label = dataset_labels(records)
+    label = odometry_labels(records)
     for r in records:
         if r.get("status") != "ok" or r["job"]["task"] != "odometry":
             continue
@@ -130,10 +136,13 @@ def build_publication(records: list[dict[str, Any]], out_dir: Path, *, plots: bo
     """Tables (and box plots with ``plots``) of the odometry records, written under ``out_dir``; paired
     comparisons with the reference (kiss)."""
     segments, ape, rpe = _grids(records)
-    from lidarkit.bench.tasks.odometry import METRIC_ALIGNMENT_BY_NAME
+    from lidarkit.bench.tasks.odometry import METRIC_ALIGNMENT_BY_NAME, SELECTED_FRAME
 
+    # (the RPE of a run over a frame selection that skips frames is per selected frame)
+    steps = {"selected frame" if ((r.get("info") or {}).get("metric_alignment") or {}).get("rpe_trans_rmse_m") == SELECTED_FRAME
+             else "frame" for r in records if r.get("status") == "ok" and r["job"]["task"] == "odometry"}
     tables = publication_tables(segments or None, ape or None, rpe or None, ape_alignment=METRIC_ALIGNMENT_BY_NAME["ape_rmse_m"],
-                                rpe_delta="frame")
+                                rpe_delta=" / ".join(sorted(steps)) or "frame")
     pub = Publication(tables.tables)
     pub.comparisons = reference_comparisons(records)
     # (an earlier report's tables that these do not replace are removed by remove_stale_tables, after the report files)

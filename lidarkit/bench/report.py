@@ -15,6 +15,7 @@ import json
 import logging
 import math
 import re
+import warnings
 from collections import defaultdict
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
@@ -25,7 +26,7 @@ import numpy as np
 
 from lidarkit import atomic
 from lidarkit.bench.jobs import Job, canonical_json
-from lidarkit.bench.results import dataset_labels, load_results, result_path, results_folder
+from lidarkit.bench.results import dataset_labels, load_results, path_argument, result_path, results_folder
 from lidarkit.errors import DataError
 from lidarkit.eval.report import markdown_table
 from lidarkit.eval.statistics import summarize
@@ -232,12 +233,21 @@ def _fmt(x: float, digits: int = 4) -> str:
 
 
 def _png(fig) -> bytes:
+    """The figure as PNG; a name the font cannot draw (CJK) is drawn as boxes, and matplotlib's warning of each missing
+    glyph is silenced (it printed on stderr over the progress of a bench run)."""
     import matplotlib.pyplot as plt
 
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="Glyph .* missing from font", category=UserWarning)
+        fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
     plt.close(fig)
     return buf.getvalue()
+
+
+#: the names of the figures a report draws (``traj_<slug>_<digest>.png``, ..., ``segments_<quantity>.png``): the only
+#: files of plots/ an earlier report's clean-up removes
+_OWN_FIGURE = re.compile(r"(traj|err|rmse|sweep)_.*_[0-9a-f]{8}\.png|segments_(translation_pct|rotation_deg_per_100m)\.png")
 
 
 def _slug(text: str) -> str:
@@ -493,7 +503,7 @@ def _csv(report: Report) -> str:
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
     writer.writerow(["task", "experiment", "dataset", "method", "metric", "mean", "std", "n", "n_ok", "n_failed",
-                     "median", "ci95_low", "ci95_high"])
+                     "n_not_run", "median", "ci95_low", "ci95_high"])
     for table in report.tables:
         for r in table.rows:
             for m in table.metrics:
@@ -502,7 +512,7 @@ def _csv(report: Report) -> str:
                 # one value has no spread: empty cells, not a std of 0 and a CI [v, v] of zero width
                 extra = [_csv_number(s.median), repr(s.ci_low) if s.n > 1 else "", repr(s.ci_high) if s.n > 1 else ""] if s is not None else ["", "", ""]
                 writer.writerow([r.task, r.experiment, r.dataset, r.method, m.name, _csv_number(mean), repr(std) if n > 1 else "",
-                                 n, r.n_ok, r.n_failed, *extra])
+                                 n, r.n_ok, r.n_failed, r.n_missing, *extra])
     return buf.getvalue()
 
 
@@ -594,11 +604,11 @@ def _n_no_value(row: Row, metric: str) -> int:
 def _failed_note(row: Row, metric: str, failures: bool = True) -> str:
     """`` (3 of 5 failed)`` / `` (4 of 12 not run)`` / `` (2 of 3 no value)`` for a row some of whose seeds failed, have
     no result yet or gave ``metric`` no finite value (its numbers are over the others), else ''; ``failures=False``:
-    the seeds without a value only (a table whose ok/failed column says the rest)."""
+    not the failed seeds (a table whose ok/failed column says them; the seeds not run it does not)."""
     total = row.n_ok + row.n_failed + row.n_missing
     n_no_value = _n_no_value(row, metric)
     notes = ([f"{row.n_failed} of {total} failed"] * bool(failures and row.n_failed)
-             + [f"{row.n_missing} of {total} not run"] * bool(failures and row.n_missing)
+             + [f"{row.n_missing} of {total} not run"] * bool(row.n_missing)
              + [f"{n_no_value} of {total} no value"] * bool(n_no_value))
     return f" ({', '.join(notes)})" if notes else ""
 
@@ -749,7 +759,7 @@ def build_report(
     folder's ``suite.json`` (the last suite run there: results an earlier suite left in the folder are counted as
     left out, and the suite's jobs without a result as not run); ``every_result``: every result in the folder.
     """
-    out_dir = results_folder(out_dir)
+    out_dir = results_folder(path_argument(out_dir, "out_dir"))
     records = load_results(out_dir)
     manifest = _suite_manifest(out_dir)
     suite_jobs = {} if every_result else _suite_jobs(manifest)
@@ -786,23 +796,29 @@ def build_report(
     texts = [out_dir / "report.md", out_dir / "report.csv", out_dir / "report.html"]
     for path in texts:  # (a report file that cannot be written is refused before any figure or table is)
         atomic.check_target(path)
-    if plots:
-        report.plots = make_plots(records)
-        for p in report.plots:
-            atomic.write_bytes(out_dir / "plots" / p.filename, p.png)
     from lidarkit.bench.publication import build_publication, remove_stale_tables
 
-    report.publication = build_publication(records, out_dir, plots=plots)
-    # the three describe one suite: all replaced or none (a full disk at report.html left .md and .csv of the new one)
-    report.markdown_path, report.csv_path, report.html_path = atomic.write_texts(
-        dict(zip(texts, (_markdown(report, title), _csv(report), _html(report, title)))))
-    # plots/ and tables/ are the report's own: an earlier report's figures and tables this one does not draw go (all
-    # figures with plots=False), once its report files are in place (a report that failed to write had removed them)
-    drawn = {p.filename for p in report.plots} | {path.name for _, path in report.publication.boxplots}
+    # figures, tables and texts are written aside and moved in together: a report that fails keeps the earlier one
+    # whole (its texts stayed beside this one's new figures when tables/ could not be written)
+    with atomic.run_folder(out_dir) as tmp:
+        if plots:
+            report.plots = make_plots(records)
+            for p in report.plots:
+                atomic.write_bytes(tmp / "plots" / p.filename, p.png)
+        report.publication = build_publication(records, tmp, plots=plots)
+        for path, text in zip(texts, (_markdown(report, title), _csv(report), _html(report, title))):
+            atomic.write_text(tmp / path.name, text)
+    report.markdown_path, report.csv_path, report.html_path = texts
+    pub = report.publication
+    pub.files = [out_dir / path.relative_to(tmp) for path in pub.files]
+    pub.boxplots = [(caption, out_dir / path.relative_to(tmp)) for caption, path in pub.boxplots]
+    # an earlier report's figures and tables this one does not draw go (all figures with plots=False); only files of
+    # the names a report writes (a figure a user put in plots/ is kept), as run folders remove an earlier run's
+    drawn = {p.filename for p in report.plots} | {path.name for _, path in pub.boxplots}
     for stale in (out_dir / "plots").glob("*.png"):
-        if stale.name not in drawn:
+        if stale.name not in drawn and _OWN_FIGURE.fullmatch(stale.name):
             stale.unlink()
-    remove_stale_tables(out_dir, report.publication)
+    remove_stale_tables(out_dir, pub)
     return report
 
 

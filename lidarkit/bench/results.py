@@ -17,6 +17,15 @@ SCHEMA_VERSION = 1
 JOBS_DIR = "jobs"
 
 
+def path_argument(value: Any, argument: str) -> Path:
+    """``value`` as a path; a ConfigError naming ``argument`` for anything else (None gave a TypeError from pathlib)."""
+    from lidarkit.errors import ConfigError
+
+    if not isinstance(value, (str, os.PathLike)):
+        raise ConfigError(f"must be a path, got {type(value).__name__} {value!r}", source=argument)
+    return Path(value)
+
+
 def results_folder(path: str | os.PathLike) -> Path:
     """``path`` as a bench results folder (one with ``jobs/``); DataError saying it is missing or is another folder."""
     from lidarkit.errors import DataError

@@ -16,11 +16,11 @@ from typing import Any
 from lidarkit import atomic
 from lidarkit.bench.executors import check_executor_args, make_executor
 from lidarkit.bench.jobs import Job
-from lidarkit.bench.results import is_finished, make_record, remove_stale_temp_files, write_result
+from lidarkit.bench.results import JOBS_DIR, is_finished, make_record, path_argument, remove_stale_temp_files, write_result
 from lidarkit.lifetime import raise_if_interrupted
 from lidarkit.bench.suite import Suite
 from lidarkit.bench.worker import execute_job
-from lidarkit.errors import OutputError
+from lidarkit.errors import ConfigError, OutputError
 
 log = logging.getLogger(__name__)
 
@@ -63,8 +63,11 @@ def run_suite(
     from lidarkit.provenance import code_version
 
     version = code_version()
+    if not isinstance(suite, Suite):
+        raise ConfigError(f"must be a Suite (load_suite(path) reads one), got {type(suite).__name__} {suite!r}", source="suite")
+    out_dir = path_argument(out_dir, "out_dir")
     check_executor_args(executor, workers, address)
-    out_dir = Path(out_dir)
+    check_results_folder(out_dir)
     t0 = time.perf_counter()
     keyed = [(job.key(version), job) for job in suite.jobs]
     with folder_lock(out_dir):
@@ -99,6 +102,19 @@ def run_suite(
 
 
 LOCK_FILE = ".lidarkit-bench.lock"
+#: what a run writes before its suite.json (``lidarkit bench kitti`` its suite first): a folder of these is a new one
+RUN_FILES = (LOCK_FILE, "kitti_suite.yaml")
+
+
+def check_results_folder(out_dir: Path) -> None:
+    """OutputError unless ``out_dir`` is missing, empty or a results folder (``suite.json`` or ``jobs/``): a run into a
+    folder of other files replaced its report.md and removed its plots/*.png and tables/ of a report's names."""
+    if not out_dir.is_dir() or (out_dir / "suite.json").is_file() or (out_dir / JOBS_DIR).is_dir():
+        return
+    others = sorted(p.name for p in out_dir.iterdir() if p.name not in RUN_FILES)
+    if others:
+        raise OutputError(f"holds other files ({', '.join(others[:3])}{', ...' if len(others) > 3 else ''}) and no "
+                          "results of an earlier run (suite.json, jobs/): give a new or empty folder", source=out_dir)
 
 
 @contextlib.contextmanager

@@ -280,7 +280,9 @@ def load_suite(path: str | Path, *, skip_unavailable: bool = False, only_tasks: 
     ``Suite.skipped``) instead of refused — what ``lidarkit demo`` does. ``only_tasks`` keeps only those tasks.
     A suite expanding to more than ``max_jobs`` jobs is refused before expansion.
     """
-    path = Path(path).resolve()
+    from lidarkit.bench.results import path_argument
+
+    path = path_argument(path, "path").resolve()
     model, locator = read_suite_file(path)
     _refuse_duplicates(model, locator)
     n_jobs = _count_jobs(model)

@@ -65,9 +65,11 @@ def progress_bar():
 
 def run_with_progress(suite, out: Path, *, executor: str, workers: int | None, address: str | None, force: bool):
     """Run ``suite`` into ``out`` showing a progress bar; Ctrl-C / SIGTERM say how to resume and exit 130 / 143."""
+    from lidarkit.bench.executors import check_executor_args
     from lidarkit.lifetime import Interrupted, interrupt_handled
     from lidarkit.bench.runner import run_suite
 
+    check_executor_args(executor, workers, address, cli=True)  # (named as `lidarkit demo` takes them, too)
     err = stderr()
     with progress_bar() as progress:
         bar = progress.add_task(suite.name, total=None, failed=0)
@@ -161,8 +163,9 @@ def bench(
 
     from lidarkit.atomic import check_target
     from lidarkit.bench.executors import check_executor_args
+    from lidarkit.bench.runner import check_results_folder
 
-    check_executor_args(executor, workers, address)  # before anything, a dry run included
+    check_executor_args(executor, workers, address, cli=True)  # before anything, a dry run included
     kitti = str(suite_file) == "kitti" and not suite_file.exists()
     if kitti:
         from lidarkit.bench.kitti import kitti_suite
@@ -171,6 +174,7 @@ def bench(
             raise ConfigError("`lidarkit bench kitti` needs --data /path/to/kitti/dataset", source="--data")
         out = out or Path("results") / "kitti"
         check_target(out, "folder")
+        check_results_folder(out)  # before the suite is written there
         split = (lambda text: [x.strip() for x in text.split(",") if x.strip()] if text else None)
         suite = kitti_suite(data, None if dry_run else out, methods=split(methods), sequences=split(sequences))
     else:
@@ -179,6 +183,7 @@ def bench(
         suite = load_suite(suite_file, max_jobs=max_jobs)
     out = out or Path("results") / suite_file.stem
     check_target(out, "folder")
+    check_results_folder(out)  # (a dry run included)
     if dry_run:
         from lidarkit.bench.results import is_finished
 
