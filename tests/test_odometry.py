@@ -401,6 +401,19 @@ def test_ground_truth_override_and_mismatch(rng):
         run(seq, OracleICP(se3_inverse(poses[:-1]) @ poses[1:]), ground_truth=Trajectory(_drive(3)))
 
 
+def test_ground_truth_stamped_apart_from_the_scans_is_a_warning(rng):
+    """A caller's ground truth stamped 0, 5, 10, 15 s after the scans' start (scans 0.1 s apart) was paired with them by
+    order without a word; more than half a frame apart is now a warning, as for an image folder's poses."""
+    poses = _drive(4)
+    seq = MemorySequence(poses, _room_points(rng, 50))  # scans stamped 100.0, 100.1, 100.2, 100.3 s
+    motions = se3_inverse(poses[:-1]) @ poses[1:]
+    far = run(seq, OracleICP(motions), ground_truth=Trajectory(poses, 100.0 + 5.0 * np.arange(4)), pose_covariance=False)
+    assert far.metrics["warnings"] == ["the ground-truth pose of frame 3 is stamped 14.700 s from its scan's pose (half a frame "
+                                       "is 0.050 s): the given ground truth is paired with the scans by order, one pose each, not by time"]
+    for near in (Trajectory(poses, 100.02 + 0.1 * np.arange(4)), Trajectory(poses)):  # within half a frame; no stamps
+        assert run(seq, OracleICP(motions), ground_truth=near, pose_covariance=False).metrics["warnings"] == []
+
+
 # ---- bad input -----------------------------------------------------------------------------------------------------
 def test_unknown_method_lists_the_known_ones(rng):
     seq = MemorySequence(_drive(3), _room_points(rng, 50))

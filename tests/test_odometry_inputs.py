@@ -84,3 +84,15 @@ def test_cli_odometry_prints_n_a_for_stateful_convergence(capsys):
     assert _cli(["odometry", "sim:street?frames=3&beams=8&azimuths=90", "-m", "kiss", "--no-progress"]) == 0
     out = " ".join(capsys.readouterr().out.split())
     assert "not converged / degenerate │ n/a" in out
+
+
+def test_spec_with_an_empty_path_is_refused(tmp_path, monkeypatch):
+    """``KIND:`` with nothing after the colon passed "" to the reader, which read the current folder (a run over
+    whatever scans lay there); refused naming the spec."""
+    np.save(tmp_path / "000000.npy", np.zeros((5, 3)))
+    monkeypatch.chdir(tmp_path)
+    for spec, kind in (("folder:", "folder"), ("kitti:?sequence=00", "kitti"), ("rosbag:", "rosbag")):
+        with pytest.raises(ConfigError) as refused:
+            open_sequence(spec)
+        assert str(refused.value) == f"{spec}: {kind}: with no path (expected {kind}:PATH[?key=value&...])"
+    assert len(open_sequence(f"folder:{tmp_path}")) == 1

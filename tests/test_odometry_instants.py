@@ -369,3 +369,19 @@ def test_a_callers_ground_truth_of_another_instant_is_refused_before_the_frames(
         run(seq, "vanilla", ground_truth=seq.ground_truth_at("mid"))
     assert read == [0]
     assert run(seq, "vanilla", ground_truth=seq.ground_truth_at("end")).metrics["final_error"]["translation_m"] >= 0
+
+
+def test_a_one_sweep_recording_runs_unscored_when_its_ground_truth_cannot_be_re_timed(tmp_path):
+    """A one-sweep bag (ground truth at the sweep end, one pose) under a variant that does not deskew: re-timing one pose
+    fails, and the whole run was refused ("interpolating needs two or more poses"), though one frame scores nothing.
+    It runs unscored with a note."""
+    from lidarkit.io import open_dataset
+    from lidarkit.sim.bag_export import export_bag
+
+    sim = SimulatedLidarSequence(pose_instant="end", **{**SIM, "n_frames": 1})
+    bag = open_dataset("rosbag", export_bag(sim, tmp_path / "one.bag", "rosbag1"))
+    result = run(bag, "vanilla", out_dir=tmp_path / "run")
+    assert result.ground_truth is None and "final_error" not in result.metrics
+    note = "none: one frame, nothing to score (the ground truth, of another instant of the sweep, left out)"
+    assert result.metrics["ground_truth_note"] == note and result.config["run"]["ground_truth_note"] == note
+    np.testing.assert_array_equal(result.trajectory.poses_se3, np.eye(4)[None])

@@ -105,3 +105,17 @@ def test_vanilla_deviation_is_reported(seq00):
     assert result.trajectory.length_m < result.ground_truth.length_m - 0.1  # under-estimated forward motion
     assert result.metrics["ape_translation_m"]["stats"]["max"] >= error - 1e-9
     assert result.n_not_converged == 0  # it converges: to the wrong answer, which only the metrics show
+
+
+def test_camera_frame_ground_truth_is_refused():
+    """``ground_truth_frame=camera`` scored the LiDAR poses against camera poses without a word (final error 10.5 m
+    where the LiDAR-frame ground truth gives 0.998 m); refused before the first frame, naming the option."""
+    from lidarkit.errors import ConfigError
+
+    root = shared_path("kitti_odometry")
+    with pytest.raises(ConfigError) as refused:
+        run(f"kitti:{root}?ground_truth_frame=camera", "vanilla")
+    assert refused.value.source == "ground_truth_frame=camera"
+    assert refused.value.reason == ("the ground truth is in the camera frame but the estimate in the LiDAR frame; use "
+                                    "ground_truth_frame=lidar, the default for scans")
+    assert run(f"kitti:{root}?ground_truth_frame=lidar", "vanilla", frames="0:2").ground_truth.length_m == pytest.approx(0.860, abs=1e-3)

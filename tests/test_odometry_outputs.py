@@ -22,6 +22,7 @@ from lidarkit.io.kitti import POINT_TIME_FOLDERS, KittiOdometry
 from lidarkit.odometry import run
 from lidarkit.errors import ConfigError
 from lidarkit.registration import get_icp
+from lidarkit.params import parse_kv
 from lidarkit.odometry.frame_check import FrameCheckConfig, make_frame_check, motion_deviation, motion_limits
 from lidarkit.sim.lidar import SimulatedLidarSequence, export_kitti
 
@@ -300,6 +301,17 @@ def test_motion_prediction_follows_irregular_frame_intervals():
     assert make_frame_check(n_sample="0", max_target_points="10") == FrameCheckConfig(n_sample=0, max_target_points=10)
 
 
+def test_frame_check_booleans_are_refused_not_read_as_1(capsys):
+    """``--check n_sample=true`` was read as 1 (True is 1 to float) and then refused as "n_sample 1 is below
+    min_points"; a boolean is no number, refused as text is."""
+    for text, value in (("true", "True"), ("false", "False")):
+        with pytest.raises(ConfigError) as refused:
+            make_frame_check(**parse_kv([f"n_sample={text}"], option="--check"))
+        assert str(refused.value) == f"frame check: n_sample must be a number, got {value}"
+    code, _, err = _cli(["odometry", "sim:open?frames=2", "-m", "vanilla", "--no-progress", "--check", "min_fitness=true"], capsys)
+    assert code == 1 and err.strip() == "error: frame check: min_fitness must be a number, got True"
+
+
 def test_frame_check_settings_given_to_run_are_checked_as_the_cli_checks_them():
     """``run(frame_check=FrameCheckConfig(...))`` skipped the CLI's checks: n_sample=-5 was a numpy traceback,
     min_fitness=2 failed every frame, a NaN limit turned its test off, all in silence."""
@@ -475,6 +487,17 @@ def test_the_library_checks_its_run_folder_before_the_work(tmp_path):
     assert calls == []
 
 
+def test_an_empty_run_folder_is_refused(tmp_path, monkeypatch):
+    """run(out_dir="") wrote the run into the current folder (Path("") is "."; the CLI refuses -o ""): refused before
+    the first frame, naming out_dir."""
+    monkeypatch.chdir(tmp_path)
+    for empty in ("", "  "):
+        with pytest.raises(ConfigError) as refused:
+            run("sim:open?frames=3&beams=16&azimuths=360", "vanilla", out_dir=empty)
+        assert str(refused.value) == "out_dir: empty path: give a folder ('.' for the current one)"
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_poses_without_stamps_are_stamped_with_their_frame_numbers(tmp_path):
     """Scans without stamps: poses_tum.txt was stamped 0, 1, 2 for --frames 4:10:2 while timing.csv said frames 4, 6, 8
     (the docs: frame numbers when there are none)."""
@@ -488,6 +511,23 @@ def test_poses_without_stamps_are_stamped_with_their_frame_numbers(tmp_path):
     frames = np.loadtxt(tmp_path / "run" / "timing.csv", delimiter=",", skiprows=1, usecols=0)
     np.testing.assert_array_equal(tum.timestamps_s, [4.0, 6.0, 8.0])
     np.testing.assert_array_equal(frames, [4, 6, 8])
+
+
+def test_scans_without_stamps_time_the_motion_check_by_their_frame_numbers(tmp_path):
+    """KITTI scans 0, 1, 2, 9 without stamps: the check timed every interval as one nominal period, so frame 9, registered
+    right (fitness 0.85), failed for motion (4.64 m off the prediction of a 0.1 s step). Timed by the frame numbers it is
+    7 periods after frame 2, too unlike the previous interval to time the motion: left unchecked, as with stamps."""
+    from conftest import shared_path
+
+    velodyne = tmp_path / "gap" / "velodyne"
+    velodyne.mkdir(parents=True)
+    for frame in (0, 1, 2, 9):
+        shutil.copy(shared_path("kitti_odometry", "sequences", "00", "velodyne", f"{frame:06d}.bin"), velodyne)
+    result = run(tmp_path / "gap", "small_gicp")
+    assert result.metrics["n_bad_frames"] == 0
+    assert np.isfinite(result.stats.motion_dev_m[2]) and np.isnan(result.stats.motion_dev_m[3])
+    assert result.stats.fitness[3] > 0.8
+    assert "largest 7 frames between frames 2 and 9" in result.metrics["warnings"][0]
 
 
 def test_bad_frames_cut_at_100_in_metrics_says_how_many_it_left_out(monkeypatch):

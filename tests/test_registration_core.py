@@ -326,6 +326,20 @@ def test_vanilla_rmse_history_and_stop_rule(synthetic_pair):
     assert capped.iterations == 2 and not capped.converged and "max_iterations" in capped.reason
 
 
+def test_small_gicp_counts_the_updates_it_ran(synthetic_pair):
+    """small_gicp reports the 0-based index of its last Gauss-Newton update: max_iterations=1 said "did not converge
+    in 0 iterations" and timing.csv gave 0, 1, 2 for max_iterations 1, 2, 3; the count is now the updates run."""
+    if "small_gicp" not in available_icp():
+        pytest.skip("small_gicp not installed")
+    source, target, _ = synthetic_pair
+    for cap in (1, 2):
+        res = get_icp("small_gicp", max_iterations=cap, **SYNTH_PARAMS["small_gicp"]).align(source, target)
+        assert res.iterations == cap and not res.converged
+        assert res.reason == f"small_gicp did not converge in {cap} iterations"
+    free = get_icp("small_gicp", **SYNTH_PARAMS["small_gicp"]).align(source, target)
+    assert free.converged and 1 <= free.iterations < 50
+
+
 def test_nn_backends_agree(rng):
     target = structured_cloud(rng, n=4000)
     source = transform_points(make_se3(so3_exp([0, 0, 0.03]), [0.3, 0.1, 0]), structured_cloud(rng, n=4000))

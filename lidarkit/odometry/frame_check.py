@@ -56,7 +56,8 @@ class FrameCheckConfig:
     """Largest plausible change of turn rate per second (deg/s^2): an indoor robot starting to turn in place reaches
     ~200 (the ACES CARMEN log: 100 flagged 11 of 300 correctly registered frames, 200 none)."""
     nominal_period_s: float = 0.1
-    """Frame interval used when the dataset has no time stamps."""
+    """Frame interval used when the dataset has no time stamps, per step of its frame numbers (the odometry runner
+    passes them as times: a frame after a gap in the numbers is timed across the gap)."""
     min_fitness: float = 0.3
     inlier_min_m: float = 0.2
     inlier_range_fraction: float = 0.02
@@ -95,6 +96,8 @@ def make_frame_check(**params: Any) -> FrameCheckConfig:
     values: dict[str, Any] = {}
     for key, value in params.items():
         try:
+            if isinstance(value, bool):  # (the CLI reads "true" as True, which float() took for 1)
+                raise TypeError
             number = float(value)
         except (TypeError, ValueError):
             raise ConfigError(f"{key} must be a number, got {value!r}", source="frame check") from None

@@ -41,6 +41,8 @@ def open_sequence(spec: str | os.PathLike | ScanSequence) -> ScanSequence:
     kind, sep, rest = text.partition(":")
     if sep and kind in lio.available_datasets() and len(kind) > 1:
         path, _, query = rest.partition("?")
+        if not path.strip():  # ("" reached the reader, which read the current folder)
+            raise ConfigError(f"{kind}: with no path (expected {kind}:PATH[?key=value&...])", source=text)
         path = os.path.expanduser(path)  # the shell leaves ~ after "kind:" as it is
         from lidarkit.params import parse_kv
 

@@ -160,10 +160,13 @@ if _small_gicp is not None:
 
         def _result(self, out, T: np.ndarray, assessment) -> RegistrationResult:
             native = np.linalg.eigvalsh(0.5 * (np.asarray(out.H) + np.asarray(out.H).T))
+            # small_gicp records the index of its last Gauss-Newton update (0-based; every pass, the converging one
+            # included, applies its update): max_iterations=1 read "did not converge in 0 iterations"
+            iterations = int(out.iterations) + 1
             return assessment.to_result(
                 T,
                 converged=bool(out.converged),
-                reason="" if out.converged else f"small_gicp did not converge in {out.iterations} iterations",
-                iterations=int(out.iterations),
+                reason="" if out.converged else f"small_gicp did not converge in {iterations} iterations",
+                iterations=iterations,
                 extra={"native_hessian_eigenvalues": [float(x) for x in native], "num_inliers": int(out.num_inliers)},
             )
