@@ -220,9 +220,7 @@ def _run_stateless(stream, registration: Any, worker: Overlap, indices: np.ndarr
             motion = item["guess"]
         poses[k] = poses[k - 1] @ motion
         if not converged[k]:
-            # (a variant's own "; constant-velocity fallback" is the runner's to say: none under --strict, the odometry
-            # motion with init="odometry")
-            why = reasons[k].removesuffix("; constant-velocity fallback") or "no reason given"
+            why = reasons[k] or "no reason given"
             if strict:
                 raise RegistrationError(f"registration did not converge ({why})", source=dataset_name, location=f"frame {idx}")
             fallback[k] = True

@@ -355,6 +355,6 @@ class GroundFilteredICP(VanillaICP):
             runtime_s=0.0,
             fitness=0.0,
             degeneracy=degeneracy if degeneracy is not None else Degeneracy.unknown("too few points after ground removal"),
-            reason=f"{why}; constant-velocity fallback",
+            reason=why,  # (the motion that replaces the pose is the odometry runner's to say, not a pairwise alignment's)
             extra=extra,
         )
