@@ -39,7 +39,7 @@ def odometry_metrics(result: OdometryResult) -> dict[str, Any]:
         "n_not_converged": result.n_not_converged if result.convergence_measured else None,
         "n_constant_velocity_fallback": result.n_fallback,
         # (with init="odometry" a refused frame takes the dataset's odometry motion, not constant velocity)
-        "fallback_motion": "dataset odometry" if str(run.get("initial_guess", "")).startswith("dataset odometry") else "constant velocity",
+        "fallback_motion": run.get("fallback_motion", "constant velocity"),
         "n_degenerate": int(stats.degenerate.sum()) if result.convergence_measured else None,
         "n_ground_removal_flagged": sum("too little left after ground removal" in r for r in stats.reason),
         "estimated_length_m": result.trajectory.length_m,

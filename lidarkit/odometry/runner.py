@@ -601,6 +601,8 @@ def run(
             "initial_guess": "dataset odometry (relative motion)" if odometry_poses is not None else (
                 "register_frame (own map and motion model)" if stateful else "constant velocity (previous relative motion)"
             ),
+            # the motion a frame the registration turned down takes (metrics read it: the guess's wording is for people)
+            "fallback_motion": "dataset odometry" if odometry_poses is not None else "constant velocity",
             "ground_truth": None if reference is None else reference.name,
             "ground_truth_meta": None if reference is None else _plain(reference.meta),
             "ground_truth_note": unscored_note or (_relations_note(sequence, out_dir) if reference is None else None),
