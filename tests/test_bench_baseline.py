@@ -429,3 +429,53 @@ def test_the_manifest_pins_the_angle_correction_and_deskew_the_run_applied(tmp_p
     lines = check(baseline.path).lines()
     assert lines[0] == "protocol changed: kiss on K00 (seed 0): kitti_angle_correction: true -> false", lines
     assert not any(line.startswith("regression") for line in lines)
+
+
+def test_two_experiments_are_named_and_round_off_is_no_regression(tmp_path, capsys):
+    """Two experiments of random_walk on one dataset read alike in record's summary and check's lines ("random_walk on
+    synth"); ``-t ape_rmse_m=0`` reported a round-off change (+1.11e-16) as a regression."""
+    suite = tmp_path / "two.yaml"
+    suite.write_text(textwrap.dedent("""
+        name: two
+        experiments:
+          - {name: short, task: selftest, dataset: {kind: synthetic, name: synth}, methods: [{name: random_walk, params: {steps: 10}}]}
+          - {name: long, task: selftest, dataset: {kind: synthetic, name: synth}, methods: [{name: random_walk, params: {steps: 10}}]}
+    """))
+    code, text, _ = run_cli(["baseline", "record", str(suite), "--out", str(tmp_path / "bl"), "--repeats", "1"], capsys)
+    assert code == 0
+    label = "random_walk(steps=10) on synth"
+    assert [line.split(":")[0] for line in text.splitlines()[:2]] == [f"{label} (seed 0, experiment short)",
+                                                                      f"{label} (seed 0, experiment long)"]
+    manifest = json.loads((tmp_path / "bl" / "manifest.json").read_text())
+    ape = manifest["jobs"][0]["metrics"]["ape_rmse_m"]
+    manifest["jobs"][0]["metrics"]["ape_rmse_m"] = ape * (1 - 1e-12)  # round-off
+    manifest["jobs"][1]["metrics"]["ape_rmse_m"] = ape - 0.5
+    (tmp_path / "bl" / "manifest.json").write_text(json.dumps(manifest))
+    code, text, _ = run_cli(["baseline", "check", str(tmp_path / "bl"), "-t", "ape_rmse_m=0"], capsys)
+    assert code == 1
+    assert [line for line in text.splitlines() if line.startswith(("regression", "improved"))] == [
+        f"regression: {label} (seed 0, experiment long): ape_rmse_m = {ape:.6g}, baseline {ape - 0.5:.6g} ± 0 (change +0.5)"]
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["-t", "ape_rmse_m=0.1", "-t", "ape_rmse_m=0.2"], "error: --tolerance: 'ape_rmse_m' given twice: one band per metric"),
+    (["-t", "=0.1"], "error: --tolerance: expected METRIC=BAND, got '=0.1'"),
+])
+def test_a_repeated_or_nameless_tolerance_is_named(two_walks, capsys, argv, message):
+    """``-t m=0.1 -t m=0.2`` kept the last band silently; ``-t =0.1`` read "no pinned job checks ;"."""
+    code, _, err = run_cli(["baseline", "check", str(two_walks.path), *argv], capsys)
+    assert code == 1 and " ".join(err.split()) == message
+
+
+def test_zero_repeats_names_the_option_and_noise_from_names_no_flag(two_walks, tmp_path, capsys):
+    """``--repeats 0`` read "error: repeats: ..." (no such flag); a --noise-from baseline without the compared metric
+    said "name the metric with --metric" when it had been named."""
+    from lidarkit.bench.baseline import measured_noise
+
+    (tmp_path / "walks.yaml").write_text(textwrap.dedent(TWO_WALKS))
+    code, _, err = run_cli(["baseline", "record", str(tmp_path / "walks.yaml"), "--out", str(tmp_path / "b"), "--repeats", "0"],
+                           capsys)
+    assert code == 1 and " ".join(err.split()) == "error: --repeats: must be a positive integer, got 0"
+    with pytest.raises(ConfigError, match=r"no band for metric 'drift_translation_pct' in this baseline \(it has: "
+                                          r"ape_rmse_m, final_error_m\): it did not check that metric$"):
+        measured_noise(two_walks.path, "drift_translation_pct")

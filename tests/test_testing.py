@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 import textwrap
@@ -254,3 +255,133 @@ def test_a_kitti_root_pinned_with_its_sequence_accepts_a_run_on_that_sequence(tm
     with pytest.raises(EvaluationError, match=r"dataset differs from the pinned job 'kiss': vertical_correction_applied False "
                                               r"\(pinned True\)"):
         assert_no_worse_than(uncorrected, baseline, **pick)
+
+
+@pytest.fixture(scope="module")
+def kitti_selections(tmp_path_factory):
+    """kiss pinned on the 10 KITTI 00 scans with ``frames: ":-2"`` and, in another baseline, ``"-3:"``."""
+    from conftest import shared_path
+
+    root = tmp_path_factory.mktemp("kitti_frames")
+    baselines = {}
+    for frames in (":-2", "-3:"):
+        (root / "suite.yaml").write_text(textwrap.dedent(f"""
+            name: selection
+            experiments:
+              - task: odometry
+                dataset: {{kind: kitti, path: "{shared_path('kitti_odometry')}", sequence: "00", name: K00}}
+                options: {{frames: "{frames}"}}
+                methods: [kiss]
+        """))
+        baselines[frames] = record(root / "suite.yaml", root / frames.replace(":", "_"), repeats=1)
+    return baselines
+
+
+def test_negative_and_open_ended_frames_resolve_on_the_pinned_dataset(kitti_selections):
+    """The pinned selection was resolved on max(frames the result ran) + 1 frames, not the dataset's 10: ``":-2"``
+    refused the identical run ("[0..5] (pinned :-2: [0..5])") and ``"-3:"`` accepted frames 0:3 (the last 3 of 0:3)."""
+    from conftest import shared_path
+
+    from lidarkit.io.kitti import KittiOdometry
+    from lidarkit.odometry import run
+
+    sequence = KittiOdometry(shared_path("kitti_odometry"), sequence="00")
+    pick = dict(method="kiss", metric="ape_rmse_m", tolerance=1.0)
+    assert_no_worse_than(run(sequence, "kiss", frames=":-2"), kitti_selections[":-2"], **pick)
+    assert_no_worse_than(run(sequence, "kiss", frames="7:10"), kitti_selections["-3:"], **pick)
+    with pytest.raises(EvaluationError, match=r"the result's frames differs from the pinned job 'kiss': \[0, 1, 2\] "
+                                              r"\(pinned -3:: \[7, 8, 9\]\)"):
+        assert_no_worse_than(run(sequence, "kiss", frames="0:3"), kitti_selections["-3:"], **pick)
+
+
+def test_a_run_scored_against_another_ground_truth_file_is_refused(kitti_selections):
+    """KITTI 00 scored against poses_semantickitti.txt (APE 0.064 m) passed against the job pinned with poses/00.txt
+    (0.673 m): only the options both the spec and the run named were compared, and neither names the poses file."""
+    from conftest import shared_path
+
+    from lidarkit.io.kitti import KittiOdometry
+    from lidarkit.odometry import run
+
+    root = shared_path("kitti_odometry")
+    other = root / "sequences" / "00" / "poses_semantickitti.txt"
+    result = run(KittiOdometry(root, sequence="00", poses_file=other), "kiss", frames="7:10")
+    with pytest.raises(EvaluationError, match=rf"the result's dataset differs from the pinned job 'kiss': poses_path "
+                                              rf"'{other}' \(pinned '{root / 'poses' / '00.txt'}'\)"):
+        assert_no_worse_than(result, kitti_selections["-3:"], method="kiss", metric="ape_rmse_m", tolerance=1.0)
+
+
+def test_two_experiments_of_one_method_on_one_dataset_are_told_apart(tmp_path):
+    """``job("random_walk", "synth", 0)`` over two experiments raised "2 pinned jobs match" with no way to name the
+    experiment (in assert_no_worse_than neither)."""
+    (tmp_path / "suite.yaml").write_text(textwrap.dedent("""
+        name: two
+        experiments:
+          - {name: walk, task: selftest, dataset: {kind: synthetic, name: synth}, methods: [{name: random_walk, params: {steps: 40}}]}
+          - {name: long, task: selftest, dataset: {kind: synthetic, name: synth}, methods: [{name: random_walk, params: {steps: 40}}]}
+    """))
+    baseline = record(tmp_path / "suite.yaml", tmp_path / "baseline", repeats=1)
+    label = "random_walk(steps=40)"
+    with pytest.raises(DataError, match=rf"2 pinned jobs match method='random_walk', dataset='synth', seed=0; pinned: "
+                                        rf"{re.escape(label)} on synth \(seed 0, experiment walk\), .* \(seed 0, experiment long\)"):
+        baseline.job("random_walk", "synth", 0)
+    assert baseline.job("random_walk", experiment="long", task="selftest")["spec"]["experiment"] == "long"
+    ape = baseline.metrics("random_walk", experiment="walk")["ape_rmse_m"]
+    assert_no_worse_than({"ape_rmse_m": ape}, baseline, metric="ape_rmse_m", experiment="walk", tolerance=0.0)
+    with pytest.raises(DataError, match="0 pinned jobs match method='random_walk', task='icp_pair'"):
+        baseline.job("random_walk", task="icp_pair")
+
+
+def test_the_wrong_kind_of_arguments_are_refused(tiny_baseline, tmp_path):
+    """A plain mapping as the baseline ignored ``method='no-such', seed=42``; ``atol_m=True`` was taken as 1 m; a failed
+    bench record read as "metric 'ape_rmse_m' not in the result (it has: )"."""
+    from lidarkit.bench.results import load_results
+    from lidarkit.bench.runner import run_suite
+    from lidarkit.bench.suite import load_suite
+
+    with pytest.raises(ConfigError, match="method, seed pick a job of a baseline folder; the baseline given is a plain dict"):
+        assert_no_worse_than({"ape_rmse_m": 0.1}, {"ape_rmse_m": 0.2}, metric="ape_rmse_m", method="no-such", seed=42)
+    with pytest.raises(ConfigError, match="atol_m must be a finite number >= 0, got True"):
+        assert_trajectory_close(walk(), walk(), atol_m=True)
+    (tmp_path / "fails.yaml").write_text(textwrap.dedent(SUITE).replace("- {name: random_walk, params: {steps: 40, noise_m: 0.05}}",
+                                                                         "- fail"))
+    run_suite(load_suite(tmp_path / "fails.yaml"), tmp_path / "results", executor="serial")
+    failed = load_results(tmp_path / "results")[0]
+    with pytest.raises(EvaluationError, match="^assert_no_worse_than: the job failed: RuntimeError: selftest failure$"):
+        assert_no_worse_than(failed, tiny_baseline, metric="ape_rmse_m")
+
+
+def test_a_changed_simulator_default_is_a_changed_protocol_not_a_regression(tmp_path, monkeypatch):
+    """The manifest hashed the suite's simulator settings only and assert_no_worse_than rebuilt the rest from today's
+    defaults: a lidarkit whose default range noise became 0.05 m read as "regression: ... ape_rmse_m" in check, and
+    a run on the noisier sensor passed assert_no_worse_than as the pinned data."""
+    from collections import OrderedDict
+
+    import lidarkit.sim.lidar as lidar_module
+    from lidarkit.bench import baseline as baseline_module
+    from lidarkit.bench.tasks import _datasets
+    from lidarkit.odometry import run
+
+    (tmp_path / "suite.yaml").write_text(textwrap.dedent("""
+        name: seeded
+        experiments:
+          - name: sim
+            task: odometry
+            dataset: {kind: sim_lidar, scene: street, n_frames: 8, n_beams: 16, n_azimuths: 360, name: sim}
+            seeds: [3]
+            methods: [kiss]
+    """))
+    baseline = record(tmp_path / "suite.yaml", tmp_path / "baseline", repeats=1)
+    pinned = baseline.job("kiss")["protocol"]["simulation"]
+    assert (pinned["range_noise_std_m"], pinned["seed"], pinned["n_beams"]) == (0.0, 3, 16)
+    drive = dict(scene="street", n_frames=8, n_beams=16, n_azimuths=360, seed=3)
+    same = run(lidar_module.SimulatedLidarSequence(**drive), "kiss")
+    assert_no_worse_than(same, baseline, method="kiss", metric="ape_rmse_m", tolerance=1e-9)
+    make_config = lidar_module.make_config
+    monkeypatch.setattr(lidar_module, "make_config", lambda **p: make_config(**{"range_noise_std_m": 0.05, **p}))
+    monkeypatch.setattr(_datasets, "_CACHE", OrderedDict())  # (the simulator record opened, with the old default)
+    result = baseline_module.check(baseline.path)
+    assert [line for line in result.lines() if not line.startswith("note:")] == [
+        "protocol changed: kiss on sim (seed 3): simulation.range_noise_std_m: 0.0 -> 0.05"]
+    noisier = run(lidar_module.SimulatedLidarSequence(**drive), "kiss")
+    with pytest.raises(EvaluationError, match=r"dataset differs from the pinned job 'kiss': range_noise_std_m 0.05 \(pinned 0.0\)"):
+        assert_no_worse_than(noisier, baseline, method="kiss", metric="ape_rmse_m", tolerance=1.0)

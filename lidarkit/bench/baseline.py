@@ -3,7 +3,8 @@
 ``record(suite, out)`` runs every job ``repeats`` times (in this process, one after the other), keeps the
 first run's trajectory and metrics, and measures the run-to-run spread (kiss-icp is not bit-reproducible
 across thread schedules) to set each metric's band. The manifest pins what makes a number reproducible:
-library versions, the method's resolved config, checksums of the dataset files, the KITTI angle correction and
+library versions, the method's resolved config, checksums of the dataset files (a simulated one: its whole simulator
+config), the KITTI angle correction and
 deskew as the run applied them, the instant poses refer to, the evaluation settings and the platform.
 
 ``check(folder)`` re-runs the pinned jobs. A job whose protocol differs reports ``protocol changed: ...``
@@ -56,6 +57,8 @@ ABSOLUTE_FLOOR = {
     "rpe_rot_rmse_deg": 0.001,
 }
 DEFAULT_FLOOR = 1e-9
+#: differences within this fraction of the value are floating-point round-off: ties, whatever the band (as compare)
+ROUND_OFF = 1e-9
 
 
 def _utc() -> str:
@@ -165,6 +168,17 @@ def dataset_checksums(spec: Mapping[str, Any], cache: dict[str, str] | None = No
     return out
 
 
+def simulation_config(job: Job) -> dict[str, Any]:
+    """The whole simulator configuration a ``sim_lidar`` job runs on: its spec's settings, today's defaults for the
+    rest, its seed (as a run records it in ``config["run"]["dataset_config"]``)."""
+    from lidarkit.bench.datasets import dataset_options
+    from lidarkit.bench.tasks._datasets import seeded_dataset
+    from lidarkit.odometry import config_dict
+    from lidarkit.sim.lidar import make_config
+
+    return _jsonable(config_dict(make_config(**dataset_options(seeded_dataset(job)))))
+
+
 def _pose_instant(dataset: Any, result: Any) -> Any:
     gt = getattr(result, "ground_truth", None)
     if gt is not None and isinstance(getattr(gt, "meta", None), dict) and gt.meta.get("pose_instant"):
@@ -211,6 +225,8 @@ def _run_job(job: Job, checksum_cache: dict[str, str] | None) -> JobRun:
     from lidarkit.bench.tasks import get_task
 
     protocol: dict[str, Any] = {"dataset": dict(job.dataset), "checksums": dataset_checksums(job.dataset, checksum_cache)}
+    if job.dataset.get("kind") == "sim_lidar":  # every setting (its checksum hashes the suite's only: a changed default)
+        protocol["simulation"] = simulation_config(job)
     if job.task == "odometry":
         from lidarkit.bench.tasks._datasets import open_dataset_spec
         from lidarkit.bench.tasks._datasets import seeded_dataset
@@ -274,32 +290,49 @@ class Baseline:
     def jobs(self) -> list[dict[str, Any]]:
         return self.manifest["jobs"]
 
-    def job(self, method: str | None = None, dataset: str | None = None, seed: int | None = None) -> dict[str, Any]:
-        """The one pinned job with this method label (or name), dataset name and seed; DataError if none or several."""
+    def job(self, method: str | None = None, dataset: str | None = None, seed: int | None = None, *,
+            experiment: str | None = None, task: str | None = None) -> dict[str, Any]:
+        """The one pinned job with this method label (or name), dataset name, seed, experiment and task; DataError if
+        none or several (two experiments of one method on one dataset, e.g. over other frames: ``experiment=``)."""
         found = [j for j in self.jobs if (method is None or method in (j["label"], j["spec"]["method"]))
-                 and (dataset is None or j["spec"]["dataset_name"] == dataset) and (seed is None or j["spec"].get("seed") == seed)]
+                 and (dataset is None or j["spec"]["dataset_name"] == dataset) and (seed is None or j["spec"].get("seed") == seed)
+                 and (experiment is None or j["spec"].get("experiment") == experiment)
+                 and (task is None or j["spec"].get("task") == task)]
         exact = [j for j in found if j["label"] == method]
         if exact:  # "vanilla" beside "vanilla(voxel_size_m=0.5)": the label, not every job of the method (as compare)
             found = exact
         if len(found) != 1:
-            labels = ", ".join(f"{j['label']} on {j['spec']['dataset_name']} (seed {j['spec'].get('seed')})" for j in self.jobs)
-            raise DataError(f"{len(found)} pinned jobs match method={method!r} dataset={dataset!r} seed={seed!r}"
-                            f"; pinned: {labels}", source=self.path)
+            labels = ", ".join(job_name(j, self.jobs) for j in self.jobs)
+            asked = ", ".join(f"{k}={v!r}" for k, v in (("method", method), ("dataset", dataset), ("seed", seed),
+                                                         ("experiment", experiment), ("task", task)) if v is not None)
+            raise DataError(f"{len(found)} pinned jobs match {asked or 'no choice'}; pinned: {labels}", source=self.path)
         return found[0]
 
-    def metrics(self, method: str | None = None, dataset: str | None = None, seed: int | None = None) -> dict[str, float]:
-        return dict(self.job(method, dataset, seed)["metrics"])
+    def metrics(self, method: str | None = None, dataset: str | None = None, seed: int | None = None, **pick: str | None
+                ) -> dict[str, float]:
+        """The pinned job's metrics (``pick``: ``experiment=``, ``task=`` as :meth:`job`)."""
+        return dict(self.job(method, dataset, seed, **pick)["metrics"])
 
-    def trajectory(self, method: str | None = None, dataset: str | None = None, seed: int | None = None):
+    def trajectory(self, method: str | None = None, dataset: str | None = None, seed: int | None = None, **pick: str | None):
         from lidarkit.trajectory import Trajectory
 
-        job = self.job(method, dataset, seed)
+        job = self.job(method, dataset, seed, **pick)
         path = self.path / "jobs" / job["key"] / "poses_kitti.txt"
         if not path.is_file():
             why = ("not an odometry job" if job["spec"].get("task") != "odometry"
                    else "its poses_kitti.txt is missing from the baseline folder: record it again")
             raise DataError(f"this pinned job has no trajectory ({why})", source=path)
         return Trajectory.from_kitti(path, name=job["label"])
+
+
+def job_name(pinned: Mapping[str, Any], jobs: list[dict[str, Any]]) -> str:
+    """``kiss on k00 (seed 0)``, naming the experiment when another experiment pins the same method on the same dataset
+    (``kiss on k00 (seed 0, experiment short)``): the two read alike."""
+    spec, label = pinned["spec"], Job.from_spec(pinned["spec"]).method_label  # (as its spec says now)
+    twin = any(j["label"] == pinned["label"] and j["spec"]["dataset_name"] == spec["dataset_name"]
+               and j["spec"].get("experiment") != spec.get("experiment") for j in jobs)
+    return f"{label} on {spec['dataset_name']} (seed {spec.get('seed')}" + (
+        f", experiment {spec.get('experiment')})" if twin else ")")
 
 
 def record(
@@ -445,8 +478,8 @@ def measured_noise(path: str | os.PathLike, metric: str | None) -> float:
     bands = [float(job["bands"][metric]) for job in baseline.jobs if metric in job.get("bands", {})]
     if not bands:
         known = sorted({m for job in baseline.jobs for m in job.get("bands", {})})
-        raise ConfigError(f"no band for metric {metric!r} in this baseline (it has: {', '.join(known)}); "
-                          "name the metric with --metric", source=baseline.path)
+        raise ConfigError(f"no band for metric {metric!r} in this baseline (it has: {', '.join(known)}): it did not "
+                          "check that metric", source=baseline.path)
     return max(bands)
 
 
@@ -507,11 +540,13 @@ def parse_tolerances(items: list[str] | Mapping[str, float] | None) -> dict[str,
         pairs = []
         for item in items:
             name, sep, value = str(item).partition("=")
-            if not sep:
+            if not sep or not name.strip():
                 raise ConfigError(f"expected METRIC=BAND, got {item!r}", source="--tolerance")
             pairs.append((name.strip(), value))
     out = {}
     for name, value in pairs:
+        if name in out:  # (the last one was kept silently)
+            raise ConfigError(f"{name!r} given twice: one band per metric", source="--tolerance")
         try:
             band = float(value)
         except (TypeError, ValueError):
@@ -552,7 +587,7 @@ def check(
     cache: dict[str, str] = {}
     for pinned in baseline.jobs:
         job = Job.from_spec(pinned["spec"])
-        name = f"{job.method_label} on {job.dataset_name} (seed {job.seed})"
+        name = job_name(pinned, baseline.jobs)
         if on_job is not None:
             on_job(job)
         try:
@@ -578,7 +613,9 @@ def check(
         then = {k: v for k, v in pinned["protocol"].items() if k not in ("checksums", "method_config")}
         if isinstance(then.get("deskew"), dict):  # (recorded before the applied deskew was pinned: the run's deskew record)
             then["deskew"] = then["deskew"].get("applied")
-        now = {k: v for k, v in run.protocol.items() if k not in ("checksums", "method_config")}
+        # (a baseline recorded before lidarkit pinned the whole simulator config: not a change)
+        now = {k: v for k, v in run.protocol.items() if k not in ("checksums", "method_config")
+               and (k in then or k != "simulation")}
         protocol_changes = _diff("", then, now)
         for line in protocol_changes:
             result.findings.append(Finding("protocol changed", name, line))
@@ -599,7 +636,7 @@ def check(
                 result.findings.append(Finding("regression", name, f"{metric} is missing now (baseline {ref:.6g})"))
                 continue
             delta = float(value) - ref
-            if abs(delta) <= band:
+            if abs(delta) <= band or math.isclose(float(value), ref, rel_tol=ROUND_OFF):  # (-t M=0: round-off a regression)
                 continue
             worse = (delta < 0) if higher_is_better(metric, pinned["spec"]["task"]) else (delta > 0)
             text = f"{metric} = {float(value):.6g}, baseline {ref:.6g} ± {band:.3g} (change {delta:+.3g})"

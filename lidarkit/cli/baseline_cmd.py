@@ -21,8 +21,11 @@ def record_command(
     repeats: int = typer.Option(3, help="Runs per job; their spread sets each metric's default band."),
 ) -> None:
     """Run SUITE_FILE REPEATS times and pin trajectories, metrics, bands and the protocol manifest in --out."""
-    from lidarkit.bench.baseline import record
+    from lidarkit.bench.baseline import job_name, record
+    from lidarkit.errors import ConfigError
 
+    if repeats < 1:  # (the library's error named `repeats`)
+        raise ConfigError(f"must be a positive integer, got {repeats}", source="--repeats")
     err = stderr()
     baseline = record(suite_file, out, repeats=repeats,
                       on_job=lambda job, r: err.print(f"run {r + 1}/{repeats}: {job.method_label} on {job.dataset_name}",
@@ -30,7 +33,7 @@ def record_command(
     console = stdout()
     for job in baseline.jobs:
         bands = ", ".join(f"{m} {job['metrics'][m]:.4g} ± {job['bands'][m]:.2g}" for m in job["checked"])
-        console.print(f"{job['label']} on {job['spec']['dataset_name']}: {bands}", soft_wrap=True, markup=False)
+        console.print(f"{job_name(job, baseline.jobs)}: {bands}", soft_wrap=True, markup=False)
     console.print(f"baseline: {baseline.path} ({len(baseline.jobs)} jobs)", soft_wrap=True)
 
 

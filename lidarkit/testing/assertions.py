@@ -28,8 +28,8 @@ def assert_trajectory_close(
     ``align`` ("none", "se3", "sim3") first aligns ``actual`` onto ``expected`` (evo's Umeyama); the message
     names the worst frame. Different lengths fail as an AssertionError too.
     """
-    for name, value in (("atol_m", atol_m), ("atol_deg", atol_deg)):
-        if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+    for name, value in (("atol_m", atol_m), ("atol_deg", atol_deg)):  # (True read as 1 m)
+        if isinstance(value, bool) or not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
             raise ConfigError(f"{name} must be a finite number >= 0, got {value!r}", source="assert_trajectory_close")
     for name, value in (("actual", actual), ("expected", expected)):
         if not isinstance(value, Trajectory):  # (an (N, 4, 4) array: Trajectory(poses) makes one)
@@ -54,7 +54,8 @@ def assert_trajectory_close(
 
 
 def metrics_of(result: Any) -> dict[str, float]:
-    """Scalar metrics of an odometry result, a bench record, a baseline job or a plain mapping."""
+    """Scalar metrics of an odometry result, a bench record, a baseline job or a plain mapping. A failed bench record
+    is an EvaluationError with its error (it read as a record without the metric: "it has: ")."""
     from lidarkit.odometry.result import OdometryResult
 
     if isinstance(result, OdometryResult):
@@ -62,6 +63,10 @@ def metrics_of(result: Any) -> dict[str, float]:
 
         return scalar_metrics(result)
     if isinstance(result, Mapping):
+        if isinstance(result.get("status"), str) and result["status"] != "ok":
+            error = result.get("error") if isinstance(result.get("error"), Mapping) else {}
+            raise EvaluationError(f"the job {result['status']}: {error.get('type', '?')}: {error.get('message', '')}",
+                                  source="assert_no_worse_than")
         inner = result.get("metrics") if isinstance(result.get("metrics"), Mapping) else result
         return {k: float(v) for k, v in inner.items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
     raise ConfigError(f"cannot read metrics from a {type(result).__name__}", source="assert_no_worse_than")
@@ -76,13 +81,16 @@ def assert_no_worse_than(
     method: str | None = None,
     dataset: str | None = None,
     seed: int | None = None,
+    experiment: str | None = None,
+    task: str | None = None,
 ) -> None:
     """``result``'s ``metric`` is at most ``tolerance`` worse than ``baseline``'s (lower is better unless the metric
     is a rate).
 
     ``result``: an OdometryResult, a bench record or a metrics mapping. ``baseline``: a baseline folder (path or
-    :class:`lidarkit.bench.baseline.Baseline`; ``method`` / ``dataset`` / ``seed`` pick the pinned job) or a metrics
-    mapping. A result over other data than the pinned job's (frames, dataset, seed) is an EvaluationError.
+    :class:`lidarkit.bench.baseline.Baseline`; ``method`` / ``dataset`` / ``seed`` / ``experiment`` / ``task`` pick the
+    pinned job) or a metrics mapping (which takes none of them: ConfigError). A result over other data than the pinned
+    job's (frames, dataset, seed) is an EvaluationError.
     ``tolerance`` None uses the baseline's recorded band (from its run-to-run noise); with a plain mapping it is 0.
     """
     from lidarkit.bench.baseline import Baseline, load_baseline
@@ -92,11 +100,16 @@ def assert_no_worse_than(
         baseline = load_baseline(Path(baseline))
     now_metrics = metrics_of(result)
     if isinstance(baseline, Baseline):
-        job = baseline.job(method, dataset, seed)
+        job = baseline.job(method, dataset, seed, experiment=experiment, task=task)
         ref_metrics = {k: float(v) for k, v in job["metrics"].items() if isinstance(v, (int, float))}
         band = float(job.get("bands", {}).get(metric, 0.0))
         _check_same_data(result, now_metrics, job, ref_metrics)
     else:
+        picks = {k: v for k, v in (("method", method), ("dataset", dataset), ("seed", seed), ("experiment", experiment),
+                                   ("task", task)) if v is not None}
+        if picks:  # (ignored: a wrong method name passed against the plain mapping)
+            raise ConfigError(f"{', '.join(picks)} pick a job of a baseline folder; the baseline given is a plain "
+                              f"{type(baseline).__name__}", source="assert_no_worse_than")
         ref_metrics = metrics_of(baseline)
     for name, source in ((metric, now_metrics), (metric, ref_metrics)):
         if name not in source:
@@ -122,9 +135,9 @@ def assert_no_worse_than(
 
 def _check_same_data(result: Any, now_metrics: dict[str, float], job: Mapping[str, Any], ref_metrics: dict[str, float]) -> None:
     """EvaluationError when ``result`` did not run on the pinned job's data: another number of frames, other frames,
-    another dataset kind or path (a KITTI root and ``sequence:`` compared as the sequence folder they resolve to), another
-    applied KITTI angle correction, (a simulated run) another simulator setting, or (a bench record) another dataset,
-    task options or seed than the pinned job's spec. A metric is comparable on the same data only: 3 sweeps of the
+    another dataset kind or path (a KITTI root and ``sequence:`` compared as the sequence folder they resolve to), other
+    files the reader read (ground truth, calibration, times), another applied KITTI angle correction, (a simulated run)
+    another simulator setting, or (a bench record) another dataset, task options or seed than the pinned job's spec. A metric is comparable on the same data only: 3 sweeps of the
     pinned 8-sweep drive, the sweeps 4-12 of it, or a simulated run against a pinned KITTI job passed against it."""
     label = job.get("label", "")
 
@@ -156,9 +169,13 @@ def _check_same_data(result: Any, now_metrics: dict[str, float], job: Mapping[st
     ran_kind = options.get("kind") or ("sim_lidar" if sim is not None else None)
     if ran_kind is not None and pinned.get("kind") is not None and ran_kind != pinned["kind"]:
         refuse("dataset", f"kind {ran_kind} (pinned {pinned['kind']})")
-    _check_same_frames(getattr(result, "frames", None), spec, sim, refuse)
+    opened = _pinned_dataset(spec) if sim is None else None
+    n_total = sim.get("n_frames") if sim is not None else len(opened) if hasattr(opened, "__len__") else None
+    _check_same_frames(getattr(result, "frames", None), spec, n_total, refuse)
     ran = sim if sim is not None else options
-    expected = _pinned_simulation(job) if pinned.get("kind") == "sim_lidar" else None
+    expected = None
+    if pinned.get("kind") == "sim_lidar":  # as recorded (a later default is other data); older baselines: rebuilt
+        expected = (job.get("protocol") or {}).get("simulation") or _pinned_simulation(job)
     if expected is not None:  # every setting, those left at their defaults too (a noisier sensor is other data)
         differ = [f"{k} {ran.get(k)!r} (pinned {v!r})" for k, v in expected.items() if ran.get(k) != v]
     else:
@@ -171,6 +188,7 @@ def _check_same_data(result: Any, now_metrics: dict[str, float], job: Mapping[st
         applied = (job.get("protocol") or {}).get("kitti_angle_correction")
         if isinstance(applied, bool) and ran.get("vertical_correction_applied", applied) != applied:
             differ.append(f"vertical_correction_applied {ran['vertical_correction_applied']!r} (pinned {applied!r})")
+        differ += _other_files(run, opened)
     if differ:
         refuse("dataset", ", ".join(differ))
 
@@ -184,16 +202,43 @@ def _same_value(key: str, ran: Any, pinned: Any) -> bool:
     return ran == pinned
 
 
-def _check_same_frames(frames: Any, spec: Mapping[str, Any], sim: Mapping[str, Any] | None, refuse) -> None:
+def _pinned_dataset(spec: Mapping[str, Any]) -> Any:
+    """The pinned job's dataset opened (its length resolves ``frames: ":-2"``, its reader names the files it reads);
+    None for a generated one."""
+    from lidarkit.bench.datasets import PATHLESS_KINDS
+    from lidarkit.bench.jobs import Job
+    from lidarkit.bench.tasks._datasets import open_dataset_spec, seeded_dataset
+
+    if not isinstance(spec.get("dataset"), Mapping) or spec["dataset"].get("kind") in PATHLESS_KINDS:
+        return None
+    return open_dataset_spec(dict(seeded_dataset(Job.from_spec(dict(spec)))))
+
+
+def _other_files(run: Mapping[str, Any], opened: Any) -> list[str]:
+    """The files and folders the run's reader read (its ground truth, calibration, times, scans) that are not the pinned
+    dataset's: another ``poses_file`` scored the run against another truth."""
+    from lidarkit.odometry.settings import reader_settings
+
+    effective = run.get("effective") if isinstance(run.get("effective"), Mapping) else {}
+    ran = effective.get("reader")
+    if opened is None or not isinstance(ran, Mapping):
+        return []
+    pinned = reader_settings(opened)
+    return [f"{k} {ran[k]!r} (pinned {v!r})" for k, v in pinned.items()
+            if k.endswith(("_path", "_file", "_dir")) and k in ran and not _same_value(k, ran[k], v)]
+
+
+def _check_same_frames(frames: Any, spec: Mapping[str, Any], n_total: int | None, refuse) -> None:
     """The dataset frames the result ran over (``OdometryResult.frames``) against the pinned job's ``frames`` option
-    (all frames when it has none)."""
+    (all frames when it has none) resolved on the pinned dataset's ``n_total`` frames (resolved on the frames the
+    result ran, ``":-2"`` refused the pinned run itself)."""
     from lidarkit.odometry.inputs import parse_frames
 
     if frames is None or not len(frames):
         return
     ran = [int(f) for f in np.asarray(frames).reshape(-1)]
     selection = (spec.get("options") or {}).get("frames") if isinstance(spec.get("options"), Mapping) else None
-    n_total = int(sim["n_frames"]) if sim is not None and "n_frames" in sim else int(max(ran)) + 1
+    n_total = int(max(ran)) + 1 if n_total is None else int(n_total)  # (a dataset with no length)
     try:
         expected = parse_frames(selection, n_total).tolist()
     except LidarKitError:
@@ -204,16 +249,12 @@ def _check_same_frames(frames: Any, spec: Mapping[str, Any], sim: Mapping[str, A
 
 
 def _pinned_simulation(job: Mapping[str, Any]) -> dict[str, Any] | None:
-    """The whole simulator configuration the pinned job ran on (its spec's settings, the defaults for the rest, its
-    seed), as a run records it in ``config["run"]["dataset_config"]``; None when it cannot be rebuilt."""
-    from lidarkit.bench.datasets import dataset_options
+    """The whole simulator configuration a pinned job recorded before lidarkit pinned it, rebuilt (its spec's settings,
+    today's defaults for the rest, its seed); None when it cannot be rebuilt."""
+    from lidarkit.bench.baseline import simulation_config
     from lidarkit.bench.jobs import Job
-    from lidarkit.bench.tasks._datasets import seeded_dataset
-    from lidarkit.odometry import config_dict
-    from lidarkit.sim.lidar import make_config
 
     try:
-        return config_dict(make_config(**dataset_options(seeded_dataset(Job.from_spec(dict(job["spec"]))))))
+        return simulation_config(Job.from_spec(dict(job["spec"])))
     except (LidarKitError, KeyError, TypeError, ValueError):
         return None
-
