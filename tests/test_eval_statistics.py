@@ -286,12 +286,12 @@ def test_verdicts_with_tied_units_and_a_median_ci_across_zero():
     ranks and the median 'disagree in direction'. A verdict beside a median CI reaching across 0 read as a contradiction."""
     tied = paired_test([1.0] * 10 + [2.0] * 8, [1.0] * 18, name_a="A", name_b="B")
     assert tied.better == "" and "the median difference is 0: 10 of 18 seeds are tied" in tied.verdict()
-    clear = paired_test([1.0] * 8 + [2.0] * 10, [1.0] * 18, name_a="A", name_b="B")
-    assert clear.better == "b" and clear.diff_ci_low == 0.0  # a CI that touches 0 without crossing it still decides
+    touching = paired_test([1.0] * 8 + [2.0] * 10, [1.0] * 18, name_a="A", name_b="B")  # a CI of [+0, +1] includes 0
+    assert touching.better == "" and touching.diff_ci_low == 0.0 and "[+0, +1] includes 0" in touching.verdict()
     diffs = np.random.default_rng(16).normal(0.3, 1.0, 25)  # Wilcoxon p = 0.048, median +0.44, its CI [-0.07, +0.87]
     mixed = paired_test(diffs, np.zeros(25), name_a="A", name_b="B")
     assert mixed.p_value < mixed.alpha and mixed.diff_ci_low < 0 < mixed.diff_ci_high
-    assert mixed.better == "" and "reaches across 0" in mixed.verdict()
+    assert mixed.better == "" and "includes 0" in mixed.verdict()
 
 
 def test_seeds_that_change_nothing_are_one_measurement_and_few_seeds_say_so():
@@ -359,7 +359,7 @@ def test_compare_counts_a_dataset_whose_seeds_change_nothing_once(tmp_path):
     (tmp_path / "s.yaml").write_text(textwrap.dedent("""
         seeds: 5
         experiments:
-          - {name: e, task: fixed_data_test_task, datasets: [{kind: synthetic, name: a}, {kind: synthetic, name: bb}], methods: [good, bad]}
+          - {name: e, task: fixed_data_test_task, datasets: [{kind: synthetic, name: a, variant: 1}, {kind: synthetic, name: bb, variant: 2}], methods: [good, bad]}
     """))
     run_suite(load_suite(tmp_path / "s.yaml"), tmp_path / "out", executor="serial")
     result = compare(tmp_path / "out", tmp_path / "out", method_a="good", method_b="bad", metric="error_m")
@@ -417,7 +417,7 @@ def test_compare_counts_units_not_copies_and_asks_which_task(tmp_path, monkeypat
     (tmp_path / "s.yaml").write_text(textwrap.dedent("""
         seeds: 6
         experiments:
-          - {name: e, task: mixed_data_test_task, datasets: [{kind: synthetic, name: fixed}, {kind: synthetic, name: seeded}], methods: [good, bad]}
+          - {name: e, task: mixed_data_test_task, datasets: [{kind: synthetic, name: fixed, variant: fixed}, {kind: synthetic, name: seeded}], methods: [good, bad]}
           - {name: o, task: other_rate_test_task, dataset: {kind: synthetic, name: seeded}, methods: [good, bad]}
           - {name: r, task: recall_test_task, dataset: {kind: synthetic, name: seeded}, methods: [good, bad, broken]}
     """))
@@ -476,3 +476,51 @@ def test_a_count_flat_on_every_seed_of_seeded_data_is_tested(tmp_path):
     run_suite(load_suite(tmp_path / "f.yaml"), tmp_path / "flat", executor="serial")
     flat = compare(tmp_path / "flat", tmp_path / "flat", method_a="good", method_b="bad", metric="error_m")
     assert flat.repeated and not flat.significant  # a time that varies is no other data
+
+
+def test_a_median_ci_with_a_bound_at_0_names_no_winner():
+    """5 of 12 seeds tied, 7 worse for A: "b is better ... (95% CI [+0, +2])", a winner beside a CI that includes 0."""
+    res = paired_test([3.0] * 5 + [4, 5, 6, 4, 5, 6, 4], [3.0] * 12, name_a="A", name_b="B")
+    assert res.p_value < 0.05 and (res.diff_ci_low, res.diff_ci_high) == (0.0, 2.0) and res.better == ""
+    assert res.verdict().startswith("no significant difference between A and B on error: the 95% CI of the median "
+                                    "difference [+0, +2] includes 0")
+
+
+def test_the_units_needed_and_p_read_against_alpha():
+    """At alpha 0.25, 3 seeds were told "the smallest p is 0.25: at least 3 are needed to reach p < 0.25"; a p of 0.0497
+    was printed "p = 0.05" beside a winner at alpha 0.05; one seed per dataset of fixed data was told to add seeds."""
+    from lidarkit.eval.statistics import _format_p, min_units
+
+    three = paired_test([1.0, 2.0, 3.0], [0.0] * 3, alpha=0.25)
+    assert "smallest p this test can give is 0.25: at least 4 are needed to reach p < 0.25" in three.verdict()
+    assert [min_units(a) for a in (0.25, 0.125, 0.05, 0.01)] == [4, 5, 6, 8]
+    assert (_format_p(0.0497, 0.05), _format_p(0.04997, 0.05), _format_p(0.0312, 0.05), _format_p(0.5, 0.05)) == (
+        "0.0497", "0.04997", "0.031", "0.5")
+    with pytest.raises(EvaluationError) as exc:
+        paired_test([1.0], [2.0], pairing="dataset")
+    assert str(exc.value) == ("error: a paired test needs at least 2 matched datasets, got 1 (more datasets or sequences: "
+                              "2 or more, 6 or more for p < 0.05)")
+    assert "more datasets or sequences make one, not more seeds" in paired_test([1.0] * 6, [2.0] * 6).verdict()
+
+
+def test_arguments_of_the_wrong_kind_are_named_errors():
+    """alpha="0.05", noise="0.1" or None, confidence="0.9" were TypeError tracebacks; lower_is_better="no" was read as
+    true; n_boot=10**12 a MemoryError; n_boot="100" said "got 100"; summarize(None) "1 non-finite value(s)"."""
+    a, b = [1.0, 2.0, 3.0], [2.0, 3.0, 4.5]
+    for kwargs, text in (({"alpha": "0.05"}, "alpha: alpha must be a number, got '0.05'"),
+                         ({"noise": "0.1"}, "noise: noise must be a number, got '0.1'"),
+                         ({"noise": None}, "noise: noise must be a number, got None"),
+                         ({"lower_is_better": "no"}, "lower_is_better: lower_is_better must be True or False, got 'no'")):
+        with pytest.raises(ConfigError) as exc:
+            paired_test(a, b, **kwargs)
+        assert str(exc.value) == text
+    for kwargs, text in (({"confidence": "0.9"}, "confidence: confidence must be a number, got '0.9'"),
+                         ({"n_boot": 10**12}, "n_boot: n_boot must be an integer in [1, 1000000], got 1000000000000"),
+                         ({"n_boot": "100"}, "n_boot: n_boot must be an integer in [1, 1000000], got '100'")):
+        with pytest.raises(ConfigError) as exc:
+            summarize(a, **kwargs)
+        assert str(exc.value) == text
+    with pytest.raises(EvaluationError) as exc:
+        summarize(None)
+    assert str(exc.value) == "summarize: values must be numbers, got None"
+    assert not paired_test(a, b, lower_is_better=np.bool_(False)).lower_is_better  # numpy booleans are booleans

@@ -7,7 +7,9 @@ from typing import Optional
 
 import typer
 
+from lidarkit import atomic
 from lidarkit.cli.app import app, stdout
+from lidarkit.errors import ConfigError
 from lidarkit.eval.statistics import DEFAULT_ALPHA
 
 
@@ -33,6 +35,8 @@ def compare_command(
     """Pair RUN_A and RUN_B on the same units (KITTI segments, frames or seeds) and test the difference (Wilcoxon)."""
     from lidarkit.eval.compare import compare
 
+    _outside_inputs(json_out, {"RUN_A": run_a, "RUN_B": run_b, "--noise-from": noise_from})
+    atomic.check_target(json_out, "file")  # (--json FOLDER failed after the comparison)
     result = compare(run_a, run_b, metric=metric, method_a=method_a, method_b=method_b, alpha=alpha, noise=noise,
                      noise_from=noise_from, seed=seed, every_result=every_result, task=task)
     console = stdout()
@@ -52,3 +56,14 @@ def compare_command(
 
         write_json(result.to_dict(), json_out)
         console.print(f"wrote {json_out}", soft_wrap=True)
+
+
+def _outside_inputs(out: Optional[Path], folders: dict[str, Optional[Path]]) -> None:
+    """ConfigError when ``--json`` lies in a folder compare reads: `--json A/suite.json` replaced A's manifest with exit 0
+    (the next compare pooled an earlier suite's results), `A/metrics.json` a run's metrics, `BASELINE/manifest.json` a baseline."""
+    if out is None:
+        return
+    target = out.resolve()
+    for name, folder in folders.items():
+        if folder is not None and (target == folder.resolve() or folder.resolve() in target.parents):
+            raise ConfigError(f"{out} is inside {folder} ({name}): compare never writes into a folder it reads", source="--json")

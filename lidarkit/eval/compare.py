@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from lidarkit.errors import ConfigError, DataError, EvaluationError
-from lidarkit.eval.statistics import DEFAULT_ALPHA, PairedComparison, paired_test, tie_tolerance
+from lidarkit.eval.statistics import DEFAULT_ALPHA, PairedComparison, check_number, paired_test, tie_tolerance
 from lidarkit.trajectory import Trajectory
 
 #: the default bench metric, first present wins
@@ -49,6 +49,9 @@ class BenchRuns:
     labels: dict[str, str] = field(default_factory=dict)  # pair key -> "dataset, seed N"
     n_left_out: int = 0  # results of jobs outside the folder's suite.json (an earlier suite) not compared
     higher_is_better: set[str] = field(default_factory=set)  # metrics the results say are better higher (their task's word)
+    alignments: dict[str, dict[str, str]] = field(default_factory=dict)  # pair key -> metric -> alignment its job states
+    failed: set[str] = field(default_factory=set)  # pair keys whose job failed
+    records: list[dict[str, Any]] = field(default_factory=list, repr=False)  # the folder's latest records, read once
 
 
 def load_odometry_run(path: str | os.PathLike) -> OdometryRun:
@@ -78,20 +81,25 @@ def load_odometry_run(path: str | os.PathLike) -> OdometryRun:
     )
 
 
-def load_bench_runs(path: str | os.PathLike, method: str | None = None, every_result: bool = False) -> BenchRuns:
+def load_bench_runs(path: str | os.PathLike, method: str | None = None, every_result: bool = False,
+                    records: list[dict[str, Any]] | None = None) -> BenchRuns:
     """The successful results of one method of a bench folder; ``method`` is a method label (``kiss``,
     ``vanilla(voxel_size_m=0.5)``) or a bare method name when only one label has it. ConfigError lists the
     labels when the choice is ambiguous. As the report, only the jobs of the folder's ``suite.json`` (results an
-    earlier suite left in a reused folder are counted in ``n_left_out``); ``every_result``: all of them."""
+    earlier suite left in a reused folder are counted in ``n_left_out``); ``every_result``: all of them. ``records``:
+    the folder's latest records when already read (the same folder given twice warned of each bad result twice)."""
     from lidarkit.bench.jobs import Job, canonical_json
     from lidarkit.bench.report import latest_per_job, suite_job_keys
     from lidarkit.bench.results import load_results, results_folder
 
     path = results_folder(path)
-    latest = latest_per_job(load_results(path))
+    latest = latest_per_job(load_results(path)) if records is None else records
     records = [r for r in latest if r.get("status") == "ok"]
     suite = set() if every_result else suite_job_keys(path)
-    n_all = len(records)
+    if not every_result and not suite and (path / "suite.json").exists():  # (it read as "every result", without a word)
+        raise DataError("unreadable, or without a job list: which results are this suite's is unknown (--all: every result)",
+                        source=path / "suite.json")
+    n_all, every_ok = len(records), records
     if suite:
         records = [r for r in records if r["key"] in suite]
     if not records:
@@ -106,25 +114,42 @@ def load_bench_runs(path: str | os.PathLike, method: str | None = None, every_re
         chosen = method
     else:
         named = sorted({Job.from_spec(r["job"]).method_label for r in records if r["job"]["method"] == method})
-        failed = [r for r in latest if r.get("status") != "ok" and method in (r["job"]["method"], Job.from_spec(r["job"]).method_label)]
+        failed = [r for r in latest if r.get("status") != "ok" and (not suite or r["key"] in suite)
+                  and method in (r["job"]["method"], Job.from_spec(r["job"]).method_label)]
         if not named and failed:  # (it read "not found")
             raise DataError(f"method {method!r} has no successful result: its {len(failed)} job(s) here failed "
                             "(lidarkit report lists why)", source=path)
         if len(named) != 1:
             known = ", ".join(labels)
-            raise ConfigError(f"method {method!r} {'is ambiguous' if named else 'not found'}; this folder has: {known}",
+            earlier = not named and any(method in (r["job"]["method"], Job.from_spec(r["job"]).method_label) for r in every_ok)
+            raise ConfigError(f"method {method!r} {'is ambiguous' if named else 'not found'}; this folder has: {known}"
+                              + (" (it is in results of an earlier suite here: --all compares every result)" if earlier else ""),
                               source=path)
         chosen = named[0]
-    runs = BenchRuns(path, chosen, n_left_out=n_all - len(records))
-    for r in records:
+    runs = BenchRuns(path, chosen, n_left_out=n_all - len(records), records=latest)
+    for r in latest:
         job = Job.from_spec(r["job"])
-        if job.method_label != chosen:
+        if job.method_label != chosen or (suite and r["key"] not in suite):
             continue
-        key = canonical_json({"task": job.task, "dataset": job.dataset, "options": job.options, "seed": job.seed})
-        runs.values[key] = dict(r.get("metrics") or {})
-        runs.labels[key] = f"{job.dataset_name}, seed {job.seed}"
-        runs.higher_is_better.update(r.get("higher_is_better") or ())
+        # the dataset's ``name`` is a label, not data (as its readers take it): "sim street" and "street" over one spec
+        # pair; two entries of one suite that differ by name only are one dataset, counted once
+        dataset = {k: v for k, v in job.dataset.items() if k != "name"}
+        key = canonical_json({"task": job.task, "dataset": dataset, "options": job.options, "seed": job.seed})
+        if r.get("status") != "ok":
+            runs.failed.add(key)
+        elif key not in runs.values:
+            runs.values[key] = dict(r.get("metrics") or {})
+            runs.labels[key] = f"{job.dataset_name}, seed {job.seed}"
+            runs.alignments[key] = dict(((r.get("info") or {}).get("metric_alignment")) or {})
+            runs.higher_is_better.update(r.get("higher_is_better") or ())
+    runs.failed -= set(runs.values)
     return runs
+
+
+def _few(labels: list[str], n: int = 3) -> str:
+    """The first ``n`` of ``labels`` and how many there are (every seed of a 10-seed suite was listed)."""
+    text = "; ".join(labels[:n])
+    return f"{text}; ... ({len(labels)} in all)" if len(labels) > n else text
 
 
 def _same_ground_truth(a: OdometryRun, b: OdometryRun) -> str:
@@ -198,8 +223,10 @@ def compare(
     Runs over different data raise EvaluationError; two runs over the same dataset and frames, each scored against the
     ground truth at its own instant of the sweep, are compared with a ``note`` saying so.
     """
+    alpha, noise = check_number(alpha, "alpha"), check_number(noise, "noise")  # (before any work)
     side_a = _load(a, method_a, every_result)
-    side_b = _load(b, method_b, every_result)
+    same = isinstance(side_a, BenchRuns) and isinstance(b, (str, os.PathLike)) and Path(b).resolve() == side_a.path.resolve()
+    side_b = load_bench_runs(b, method_b, every_result, side_a.records) if same else _load(b, method_b, every_result)
     if type(side_a) is not type(side_b):
         raise EvaluationError("compare an odometry run folder with another run folder, a bench folder with a bench folder",
                               source="compare")
@@ -232,8 +259,8 @@ def compare(
     if not common:
         raise EvaluationError(
             f"runs over different data: no (dataset, seed) in common between {side_a.path} ({side_a.name}: "
-            f"{', '.join(sorted(set(side_a.labels.values())))}) and {side_b.path} ({side_b.name}: "
-            f"{', '.join(sorted(set(side_b.labels.values())))})",
+            f"{_few(sorted(set(side_a.labels.values())))}) and {side_b.path} ({side_b.name}: "
+            f"{_few(sorted(set(side_b.labels.values())))})",
             source="compare",
         )
     def has(k: str, name: str) -> bool:
@@ -265,15 +292,22 @@ def compare(
                           "experiment: --task picks one", source="metric")
     other_task = [k for k in common if _task_of(k) not in tasks_with]
     common = [k for k in common if _task_of(k) in tasks_with]
-    missing = [side_a.labels.get(k) or side_b.labels[k] for k in common if not has(k, metric)]
-    if missing:
-        raise EvaluationError(f"metric {metric!r} missing for {', '.join(missing[:5])}", source="compare")
+    missing = [k for k in common if not has(k, metric)]
+    if missing:  # (it named neither the side nor the count, nor why KITTI drift is missing)
+        lacking = " and ".join(s.name for s in (side_a, side_b) if any(s.values[k].get(metric) is None for k in missing))
+        why = ": KITTI drift needs 100 m of path" if metric.startswith("drift_") else ""
+        ape = metric != "ape_rmse_m" and all(has(k, "ape_rmse_m") for k in common)
+        raise EvaluationError(f"metric {metric!r} missing in {lacking} for {len(missing)} of {len(common)} units "
+                              f"({_few([side_a.labels[k] for k in missing])}){why}"
+                              + ("; --metric ape_rmse_m compares every unit" if ape else ""), source="compare")
+    _same_alignment(side_a, side_b, common, metric)
     from lidarkit.bench.tasks import higher_is_better  # (as the task that wrote the results declares it)
 
     va = np.array([side_a.values[k][metric] for k in common], dtype=np.float64)
     vb = np.array([side_b.values[k][metric] for k in common], dtype=np.float64)
     varies = _seeds_vary(common, side_a, side_b, metric)
-    pairing, collapsed = "seed", _one_unit_per_dataset(common, va, vb, varies)
+    one_each = len(varies) > 1 and len(varies) == len(common)  # one seed per dataset: the units are datasets
+    pairing, collapsed = "dataset" if one_each else "seed", _one_unit_per_dataset(common, va, vb, varies)
     if collapsed is not None:  # the seeds change nothing within a dataset: its seeds are one measurement
         va, vb, pairing = collapsed
     result = paired_test(va, vb, name_a=name_a, name_b=name_b, metric=metric, pairing=pairing,
@@ -286,9 +320,13 @@ def compare(
     if other_task:
         left = sorted({_task_of(k) for k in other_task})
         notes.append(f"{len(other_task)} (dataset, seed) units of {', '.join(left)} (no {metric}) left out: {len(common)} paired")
-    only_a, only_b = len(keys_a - keys_b), len(keys_b - keys_a)
+    failed_a, failed_b = len(keys_b & side_a.failed), len(keys_a & side_b.failed)  # (read "only in A" when B failed there)
+    only_a, only_b = len(keys_a - keys_b) - failed_b, len(keys_b - keys_a) - failed_a
     if only_a or only_b:  # the pairs are those both have: say what was left out
         notes.append(f"{only_a} (dataset, seed) units only in A and {only_b} only in B are left out: {len(common)} paired")
+    for n, side in ((failed_a, "A"), (failed_b, "B")):
+        if n:
+            notes.append(f"{n} (dataset, seed) unit(s) where {side}'s job failed are left out (lidarkit report lists why)")
     stale = {side_a.path: side_a.n_left_out, side_b.path: side_b.n_left_out}
     for folder, n in stale.items():
         if n:
@@ -349,6 +387,15 @@ def _one_unit_per_dataset(keys: list[str], va: np.ndarray, vb: np.ndarray,
     return va[keep], vb[keep], "dataset" if all(fixed) else "unit"
 
 
+def _same_alignment(side_a: BenchRuns, side_b: BenchRuns, keys: list[str], metric: str) -> None:
+    """ConfigError when the two sides' jobs state different alignments of the metric (a Sim(3)-aligned APE against an
+    SE(3)-aligned one was ranked without a word; the report never ranks across them)."""
+    stated = [sorted({str(a) for k in keys if (a := side.alignments.get(k, {}).get(metric))}) for side in (side_a, side_b)]
+    if all(stated) and stated[0] != stated[1]:
+        raise ConfigError(f"{side_a.name} states {metric} {' / '.join(stated[0])}, {side_b.name} {' / '.join(stated[1])}: "
+                          "values under different alignments are not compared", source="metric")
+
+
 def _task_of(unit_key: str) -> str:
     """The bench task of a (task, dataset, options, seed) unit key."""
     return str(json.loads(unit_key).get("task", ""))
@@ -365,11 +412,16 @@ def _with_measured_noise(noise: float, noise_from: str | os.PathLike | None, met
 def _load(side: Any, method: str | None, every_result: bool = False) -> OdometryRun | BenchRuns:
     if isinstance(side, (OdometryRun, BenchRuns)):
         return side
+    if not isinstance(side, (str, os.PathLike)):  # (None: a TypeError traceback)
+        raise ConfigError(f"a run folder path is needed, got {side!r}", source="compare")
     path = Path(side)
     if not path.exists():
         raise DataError("does not exist", source=path)
     if not path.is_dir():  # (report.csv given: it read "run folder does not exist")
         raise DataError("is a file: compare takes an odometry run folder or a bench results folder", source=path)
+    if (path / "manifest.json").is_file() and not (path / "suite.json").exists():  # (read "no successful job results")
+        raise DataError("a baseline folder (lidarkit baseline record): compare takes bench results folders or odometry run "
+                        "folders (a baseline gives its noise: --noise-from)", source=path)
     if (path / "jobs").is_dir():
         return load_bench_runs(path, method, every_result)
     if method is not None:

@@ -26,7 +26,10 @@ RELATIVE_TIE_TOLERANCE = 1e-9
 
 
 def _finite(values: Any, source: str) -> np.ndarray:
-    """``values`` as a flat float array; EvaluationError for text or non-finite values (["a"]: a numpy ValueError)."""
+    """``values`` as a flat float array; EvaluationError for text or non-finite values (["a"]: a numpy ValueError;
+    None: "1 non-finite value(s)")."""
+    if values is None:
+        raise EvaluationError("values must be numbers, got None", source=source)
     try:
         arr = np.asarray(values, dtype=np.float64).reshape(-1)
     except (TypeError, ValueError):
@@ -34,6 +37,18 @@ def _finite(values: Any, source: str) -> np.ndarray:
     if arr.size and not np.isfinite(arr).all():
         raise EvaluationError(f"{int((~np.isfinite(arr)).sum())} non-finite value(s) among {arr.size}", source=source)
     return arr
+
+
+#: the most bootstrap resamples drawn (all at once: 10**12 was a MemoryError)
+MAX_N_BOOT = 1_000_000
+
+
+def check_number(value: object, name: str) -> float:
+    """``value`` as a float when it is a real number (not text, None or a bool: alpha="0.05" was a TypeError
+    traceback); ConfigError naming ``name`` otherwise."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ConfigError(f"{name} must be a number, got {value!r}", source=name)
+    return float(value)
 
 
 def check_seed(seed: object) -> None:
@@ -55,10 +70,10 @@ def bootstrap_ci(
     All resamples are drawn at once from ``numpy.random.default_rng(seed)``: the same values and seed give
     bit-identical bounds. One value gives a zero-width interval at that value.
     """
-    if not 0.0 < confidence < 1.0:
+    if not 0.0 < check_number(confidence, "confidence") < 1.0:
         raise ConfigError(f"confidence must be in (0, 1), got {confidence}", source="confidence")
-    if int(n_boot) != n_boot or n_boot < 1:
-        raise ConfigError(f"n_boot must be a positive integer, got {n_boot}", source="n_boot")
+    if isinstance(n_boot, bool) or not isinstance(n_boot, (int, np.integer)) or not 1 <= n_boot <= MAX_N_BOOT:
+        raise ConfigError(f"n_boot must be an integer in [1, {MAX_N_BOOT}], got {n_boot!r}", source="n_boot")
     if statistic not in ("mean", "median"):
         raise ConfigError(f"statistic must be 'mean' or 'median', got {statistic!r}", source="statistic")
     check_seed(seed)
@@ -158,7 +173,7 @@ class PairedComparison:
     def verdict(self) -> str:
         """One plain sentence for a reader: who is better and how sure, or that no difference shows."""
         m, unit = self.metric, f"over {self.n_pairs} paired {self.pairing}s"
-        p = "p = 1" if self.p_value >= 1 else f"p = {self.p_value:.2g}"
+        p = "p = 1" if self.p_value >= 1 else f"p = {_format_p(self.p_value, self.alpha)}"
         if self.better:
             win, lose = (self.name_a, self.name_b) if self.better == "a" else (self.name_b, self.name_a)
             text = (f"{win} is better than {lose} on {m}: median difference {self.median_diff:+.3g} "
@@ -176,19 +191,19 @@ class PairedComparison:
         elif self.p_value < self.alpha and self.median_diff * self.effect_size < 0:
             why = (f"the ranks (effect size {self.effect_size:+.2f}) and the median difference ({self.median_diff:+.3g}) "
                    "disagree in direction")
-        elif self.p_value < self.alpha and self.diff_ci_low < 0 < self.diff_ci_high:
-            why = f"the 95% CI of the median difference [{self.diff_ci_low:+.3g}, {self.diff_ci_high:+.3g}] reaches across 0"
+        elif self.p_value < self.alpha and self.diff_ci_low <= 0 <= self.diff_ci_high:
+            why = f"the 95% CI of the median difference [{self.diff_ci_low:+.3g}, {self.diff_ci_high:+.3g}] includes 0"
         n_ranked = self.n_pairs - self.n_ties
         smallest_p = 2.0 ** (1 - n_ranked) if n_ranked > 0 else 1.0  # exact two-sided: every unit on one side
         if self.p_value >= self.alpha and smallest_p >= self.alpha and n_ranked > 0:
             why += (f"; with {n_ranked} differing {self.pairing}s the smallest p this test can give is {smallest_p:.3g}: "
-                    f"at least {math.ceil(1 - math.log2(self.alpha))} are needed to reach p < {self.alpha:g}")
+                    f"at least {min_units(self.alpha)} are needed to reach p < {self.alpha:g}")
         if self.n_ties == self.n_pairs:
             why = "every paired difference is zero (within floating-point noise)"
         if self.repeated:
             why = (f"each side gave the same value for every one of the {self.n_pairs} {self.pairing}s: the {self.pairing}s change "
                    "nothing here (deterministic methods on fixed data), so they are one measurement repeated, not "
-                   f"{self.n_pairs} independent ones, and no test is made")
+                   f"{self.n_pairs} independent ones, and no test is made: more datasets or sequences make one, not more seeds")
         return (f"no significant difference between {self.name_a} and {self.name_b} on {m}: {why}; "
                 f"mean {self.mean_a:.4g} vs {self.mean_b:.4g}, {unit}")
 
@@ -197,6 +212,22 @@ class PairedComparison:
         out["significant"] = self.significant
         out["verdict"] = self.verdict()
         return out
+
+
+def _format_p(p: float, alpha: float) -> str:
+    """``p`` with the fewest digits (2 or more) that still compare with ``alpha`` as ``p`` does (0.0497 printed as
+    "0.05" beside a winner at alpha 0.05)."""
+    for digits in (2, 3, 4, 6):
+        text = f"{p:.{digits}g}"
+        if (float(text) < alpha) == (p < alpha):
+            break
+    return text
+
+
+def min_units(alpha: float) -> int:
+    """The fewest differing units whose smallest two-sided exact Wilcoxon p (``2 ** (1 - n)``, every unit on one side)
+    is strictly below ``alpha`` (alpha 0.25 needs 4: 3 units give p = 0.25 at best)."""
+    return math.floor(1 - math.log2(alpha)) + 1
 
 
 def tie_tolerance(a: np.ndarray, b: np.ndarray) -> float:
@@ -228,12 +259,17 @@ def paired_test(
     """
     from scipy import stats as sstats
 
+    alpha, noise = check_number(alpha, "alpha"), check_number(noise, "noise")
+    if not isinstance(lower_is_better, (bool, np.bool_)):  # ("no" was read as true)
+        raise ConfigError(f"lower_is_better must be True or False, got {lower_is_better!r}", source="lower_is_better")
     va, vb = _finite(a, name_a), _finite(b, name_b)
     if va.shape != vb.shape:
         raise EvaluationError(f"paired values differ in count: {va.size} for {name_a}, {vb.size} for {name_b}",
                               source=metric)
     if va.size < 2:
-        more = " (a suite's `seeds: N`: 2 or more, 6 or more for p < 0.05)" if pairing == "seed" else ""
+        more = {"seed": " (a suite's `seeds: N` over seeded data, more datasets or sequences over fixed data such as KITTI: "
+                        "2 or more, 6 or more for p < 0.05)",
+                "dataset": " (more datasets or sequences: 2 or more, 6 or more for p < 0.05)"}.get(pairing, "")
         raise EvaluationError(f"a paired test needs at least 2 matched {pairing}s, got {va.size}{more}", source=metric)
     if not 0.0 < alpha < 1.0:
         raise ConfigError(f"alpha must be in (0, 1), got {alpha}", source="alpha")
@@ -261,8 +297,8 @@ def paired_test(
     if repeated is None:
         repeated = pairing == "seed" and bool(np.ptp(va) <= tol and np.ptp(vb) <= tol)
     # the direction is the ranks' (what the test tested); the median must agree with it, exceed the noise, and its
-    # bootstrap CI must not reach across 0 (a verdict beside a CI of [-0.0006, +0.0044] read as a contradiction)
-    ci_clear = not lo < 0 < hi
+    # bootstrap CI must not include 0 (a verdict beside a CI of [-0.0006, +0.0044], or of [+0, +2], read as a contradiction)
+    ci_clear = not lo <= 0 <= hi
     if p_value < alpha and effect * median_diff > 0 and abs(median_diff) > noise and ci_clear and not repeated:
         a_lower = effect < 0
         better = "a" if a_lower == lower_is_better else "b"

@@ -1,0 +1,194 @@
+"""`lidarkit compare` over real bench folders of small synthetic tasks: what it refuses, pairs and says."""
+
+from __future__ import annotations
+
+import json
+import logging
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from lidarkit.cli import main
+from lidarkit.errors import ConfigError, DataError, EvaluationError
+from lidarkit.eval import compare
+
+
+def run_cli(argv: list[str], capsys) -> tuple[int, str, str]:
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    out, err = capsys.readouterr()
+    return int(exc.value.code or 0), out, err
+
+
+def _task(name: str, metrics, info=lambda job: {}) -> None:
+    """A bench task on synthetic data reporting ``metrics(job)`` (a dict) and ``info(job)``."""
+    from lidarkit.bench import Metric, Task, TaskOutput, register_task
+
+    class SyntheticTask(Task):
+        dataset_kinds = ("synthetic",)
+        metrics = tuple(Metric(m, m) for m in ("error_m", "ape_rmse_m", "drift_translation_pct"))
+
+        def validate_options(self, options):
+            pass
+
+        def validate_dataset(self, dataset, options):
+            pass
+
+        def validate(self, method, params, dataset, options):
+            pass
+
+        def run(self, job):
+            return TaskOutput(metrics=metrics(job), series={}, info=info(job))
+
+    register_task(name)(SyntheticTask)
+
+
+def _error(job) -> dict[str, float]:
+    """good beats bad by 0.4 on every seed, each seed another draw."""
+    noise = 0.01 * np.random.default_rng(job.seed).random()
+    return {"ape_rmse_m": (0.1 if job.method == "good" else 0.5) + noise}
+
+
+def _bench(tmp_path: Path, name: str, suite: str, out: str | None = None) -> Path:
+    from lidarkit.bench import load_suite, run_suite
+
+    (tmp_path / f"{name}.yaml").write_text(textwrap.dedent(suite))
+    folder = tmp_path / (out or name)
+    run_suite(load_suite(tmp_path / f"{name}.yaml"), folder, executor="serial")
+    return folder
+
+
+def test_json_into_a_compared_folder_is_refused_and_checked_before_the_work(tmp_path, capsys):
+    """`compare A A --json A/suite.json` replaced A's suite manifest and exited 0 (the next compare then pooled an
+    earlier suite's results), and `--json FOLDER` failed only after the comparison was printed."""
+    _task("json_test_task", _error)
+    out = _bench(tmp_path, "s", "seeds: 6\nexperiments:\n  - {task: json_test_task, dataset: {kind: synthetic}, methods: [good, bad]}\n")
+    manifest = (out / "suite.json").read_bytes()
+    pick = ["--method-a", "good", "--method-b", "bad"]
+    code, stdout, err = run_cli(["compare", str(out), str(out), *pick, "--json", str(out / "suite.json")], capsys)
+    assert (code, stdout) == (1, "")
+    assert err == f"error: --json: {out}/suite.json is inside {out} (RUN_A): compare never writes into a folder it reads\n"
+    assert (out / "suite.json").read_bytes() == manifest
+    base = tmp_path / "baseline"
+    code, stdout, err = run_cli(["compare", str(out), str(out), *pick, "--noise-from", str(base), "--json",
+                                 str(base / "manifest.json")], capsys)
+    assert (code, stdout) == (1, "") and "is inside " + str(base) + " (--noise-from)" in err
+    code, stdout, err = run_cli(["compare", str(out), str(out), *pick, "--json", str(tmp_path)], capsys)
+    assert (code, stdout) == (1, "") and err == f"error: {tmp_path}: cannot write: is a folder (a file name is needed here)\n"
+    code, stdout, _ = run_cli(["compare", str(out), str(out), *pick, "--json", str(tmp_path / "cmp.json")], capsys)
+    assert code == 0 and json.loads((tmp_path / "cmp.json").read_text())["n_pairs"] == 6
+
+
+def test_an_unreadable_suite_json_is_an_error_not_every_result(tmp_path):
+    """A corrupt suite.json read as "no suite": every result of the folder, an earlier suite's too, was compared."""
+    _task("corrupt_test_task", _error)
+    out = _bench(tmp_path, "s", "seeds: 6\nexperiments:\n  - {task: corrupt_test_task, dataset: {kind: synthetic}, methods: [good, bad]}\n")
+    (out / "suite.json").write_text("{not json")
+    with pytest.raises(DataError) as exc:
+        compare(out, out, method_a="good", method_b="bad")
+    assert str(exc.value) == (f"{out}/suite.json: unreadable, or without a job list: which results are this suite's is "
+                              "unknown (--all: every result)")
+    assert compare(out, out, method_a="good", method_b="bad", every_result=True).n_pairs == 6
+
+
+def test_metrics_under_different_alignments_are_not_compared(tmp_path):
+    """A Sim(3)-aligned APE (monocular VO) was ranked against an SE(3)-aligned one (scale from ground truth) without a
+    word; the report labels such cells apart and never ranks across them."""
+    _task("aligned_test_task", lambda job: {"ape_rmse_m": 0.1 + 0.01 * job.seed},
+          lambda job: {"metric_alignment": {"ape_rmse_m": "SE(3)-aligned" if job.method == "gt_scale" else "Sim(3)-aligned"}})
+    out = _bench(tmp_path, "s", "seeds: 6\nexperiments:\n  - {task: aligned_test_task, dataset: {kind: synthetic}, "
+                 "methods: [gt_scale, mono, mono2]}\n")
+    with pytest.raises(ConfigError) as exc:
+        compare(out, out, method_a="gt_scale", method_b="mono", metric="ape_rmse_m")
+    assert str(exc.value) == ("metric: gt_scale states ape_rmse_m SE(3)-aligned, mono Sim(3)-aligned: values under different "
+                              "alignments are not compared")
+    assert compare(out, out, method_a="mono", method_b="mono2", metric="ape_rmse_m").n_pairs == 6
+
+
+def test_dataset_names_are_labels_not_data(tmp_path):
+    """One spec named "sim street" in one suite and "street" in another was "runs over different data", and the error
+    listed every seed of both sides; two entries of one suite differing by name only are one dataset (counted once)."""
+    _task("named_test_task", _error)
+    suite = "seeds: 10\nexperiments:\n  - {{task: named_test_task, datasets: [{datasets}], methods: [{method}]}}\n"
+    a = _bench(tmp_path, "a", suite.format(datasets="{kind: synthetic, size: 3, name: sim street}", method="good"))
+    b = _bench(tmp_path, "b", suite.format(datasets="{kind: synthetic, size: 3, name: street}, {kind: synthetic, size: 3, "
+                                           "name: street again}", method="bad"))
+    result = compare(a, b)
+    assert (result.n_pairs, result.pairing, result.better, result.note) == (10, "seed", "a", "")
+    other = _bench(tmp_path, "c", suite.format(datasets="{kind: synthetic, size: 4, name: street}", method="bad"))
+    with pytest.raises(EvaluationError) as exc:
+        compare(a, other)
+    assert str(exc.value) == (f"compare: runs over different data: no (dataset, seed) in common between {a} (good: sim street, "
+                              f"seed 0; sim street, seed 1; sim street, seed 2; ... (10 in all)) and {other} (bad: street, "
+                              "seed 0; street, seed 1; street, seed 2; ... (10 in all))")
+
+
+def test_one_seed_per_dataset_pairs_datasets_and_says_so(tmp_path, capsys):
+    """With one seed per dataset the units are the datasets, but compare called them seeds ("2 paired seeds ... at least 6
+    are needed"), advice to add seeds that over fixed data (KITTI) would change nothing."""
+    _task("per_dataset_test_task", lambda job: {"ape_rmse_m": (0.1 if job.method == "good" else 0.5) + job.dataset["size"]})
+    out = _bench(tmp_path, "s", "seeds: 1\nexperiments:\n  - {task: per_dataset_test_task, datasets: [{kind: synthetic, "
+                 "size: 1}, {kind: synthetic, size: 2}, {kind: synthetic, size: 3}], methods: [good, bad]}\n")
+    result = compare(out, out, method_a="good", method_b="bad")
+    assert (result.pairing, result.n_pairs, result.better) == ("dataset", 3, "")
+    assert ("with 3 differing datasets the smallest p this test can give is 0.25: at least 6 are needed to reach p < 0.05"
+            in result.verdict())
+    code, stdout, _ = run_cli(["compare", str(out), str(out), "--method-a", "good", "--method-b", "bad"], capsys)
+    assert code == 0 and "(3 paired datasets, 0 ties)" in stdout
+
+
+def test_a_missing_metric_says_which_side_lacks_it_and_why(tmp_path):
+    """"metric 'drift_translation_pct' missing for short, seed 0" named neither the side, nor how many units, nor that
+    KITTI drift needs 100 m of path, nor the metric that would compare."""
+    def drift(job):
+        metrics = {"ape_rmse_m": 0.2 + 0.01 * job.seed, "drift_translation_pct": 1.0 + 0.1 * job.seed}
+        if job.method == "stopper" and job.seed < 2:
+            metrics["drift_translation_pct"] = None  # (a path under 100 m: no KITTI segment)
+        return metrics
+
+    _task("drift_test_task", drift)
+    out = _bench(tmp_path, "s", "seeds: 6\nexperiments:\n  - {task: drift_test_task, dataset: {kind: synthetic, name: short}, "
+                 "methods: [walker, stopper]}\n")
+    with pytest.raises(EvaluationError) as exc:
+        compare(out, out, method_a="walker", method_b="stopper")
+    assert str(exc.value) == ("compare: metric 'drift_translation_pct' missing in stopper for 2 of 6 units (short, seed 0; "
+                              "short, seed 1): KITTI drift needs 100 m of path; --metric ape_rmse_m compares every unit")
+
+
+def test_failed_jobs_earlier_suites_baselines_and_one_folder_twice_are_said_plainly(tmp_path, caplog):
+    """B's failed seeds were "units only in A"; a method of an earlier suite was "not found" with no word of --all; a
+    baseline folder read "no successful job results in jobs/"; one folder given twice warned of each bad result twice;
+    compare(None, ...) was a TypeError traceback."""
+    def flaky(job):
+        if job.method == "bad" and job.seed < 2:
+            raise RuntimeError("failed on purpose")
+        return _error(job)
+
+    _task("flaky_test_task", flaky)
+    out = _bench(tmp_path, "s", "seeds: 8\nexperiments:\n  - {task: flaky_test_task, dataset: {kind: synthetic}, methods: [good, bad]}\n")
+    result = compare(out, out, method_a="good", method_b="bad")
+    assert result.n_pairs == 6 and result.note == "2 (dataset, seed) unit(s) where B's job failed are left out (lidarkit report lists why)"
+    (out / "jobs" / "broken.json").write_text("{")
+    with caplog.at_level(logging.WARNING):
+        compare(out, out, method_a="good", method_b="bad")
+    assert sum("ignoring unreadable result" in r.getMessage() for r in caplog.records) == 1
+    _bench(tmp_path, "only_good", "seeds: 8\nexperiments:\n  - {task: flaky_test_task, dataset: {kind: synthetic}, methods: [good]}\n",
+           out="s")
+    with pytest.raises(ConfigError) as exc:
+        compare(out, out, method_a="good", method_b="bad")
+    assert str(exc.value) == (f"{out}: method 'bad' not found; this folder has: good (it is in results of an earlier suite "
+                              "here: --all compares every result)")
+    baseline = tmp_path / "baseline"
+    (baseline / "jobs").mkdir(parents=True)
+    (baseline / "manifest.json").write_text(json.dumps({"schema": "lidarkit-baseline/1"}))
+    with pytest.raises(DataError) as exc:
+        compare(baseline, out)
+    assert str(exc.value) == (f"{baseline}: a baseline folder (lidarkit baseline record): compare takes bench results folders "
+                              "or odometry run folders (a baseline gives its noise: --noise-from)")
+    with pytest.raises(ConfigError, match=r"^compare: a run folder path is needed, got None$"):
+        compare(None, out)
+    for kwargs, shown in (({"alpha": "x"}, "alpha must be a number, got 'x'"), ({"noise": None}, "noise must be a number, got None")):
+        with pytest.raises(ConfigError, match=f": {shown}$"):
+            compare(out, out, method_a="good", method_b="bad", **kwargs)
