@@ -165,14 +165,18 @@ def save_figure(fig, path: str | os.PathLike, *, dpi: float | None = None) -> Pa
     return path
 
 
-def check_target(path: str | os.PathLike | None, kind: str = "file") -> None:
+def check_target(path: str | os.PathLike | None, kind: str = "file", files: Iterable[str] = ()) -> None:
     """Refuse an output path before any work is done: ``kind`` is ``"file"``, ``"figure"`` (a known plot suffix
-    too) or ``"folder"``. Checks what is in the way and whether the nearest existing folder is writable."""
+    too) or ``"folder"``. Checks what is in the way and whether the nearest existing folder is writable; ``files``: the
+    names a run writes into (or replaces in) the folder, none of which may be a folder (one was found after the run)."""
     if path is None:
         return
     path = Path(path)
     try:
         _check_target(path, kind)
+        for name in files if kind == "folder" else ():
+            if (path / name).is_dir():
+                raise OutputError("cannot write: is a folder (a file name is needed here)", source=path / name)
     except OSError as err:  # pathlib re-raises what a stat of the path itself meets (a name too long: ENAMETOOLONG)
         raise OutputError(f"cannot write: {(err.strerror or str(err)).lower()}", source=path) from None
 
@@ -244,6 +248,7 @@ def run_folder(path: str | os.PathLike, replaces: Iterable[str] = (), exclusive:
     named = path
     if path.is_symlink():  # written beside the folder it names (a rename onto the link itself fails)
         path = path.resolve()
+    path = Path(os.path.abspath(path))  # ("." has itself as parent: its temporary folder was made inside it)
     held_a_run = _holds_a_run(path)
     # a writable folder in a parent this user cannot write to (a mount point): written inside it, moved file by file
     inside = path.is_dir() and not _writable(path.parent) and _writable(path)
@@ -335,12 +340,16 @@ def _move_into_place(tmp: Path, path: Path, exclusive: bool = False, named: Path
     if inside:
         if exclusive and any(p != tmp for p in path.iterdir()):
             raise filled
+    elif path.is_dir():  # an existing folder is filled, never renamed over: it may be a shell's working folder (-o . was
+        # "filled while written"; -o $PWD left the shell in a deleted folder)
+        if exclusive and any(path.iterdir()):
+            raise filled
     else:
         try:
-            os.rename(tmp, path)  # a missing or empty ``path``: one rename
+            os.rename(tmp, path)  # a missing ``path``: one rename
             return
         except OSError as err:
-            if err.errno not in (errno.EEXIST, errno.ENOTEMPTY, errno.EISDIR, errno.ENOTDIR, errno.EBUSY):  # EBUSY: "." itself
+            if err.errno not in (errno.EEXIST, errno.ENOTEMPTY, errno.EISDIR, errno.ENOTDIR, errno.EBUSY):
                 raise
             if exclusive:
                 raise filled from None

@@ -79,7 +79,9 @@ def odometry(
     from lidarkit.odometry import run
     from lidarkit.odometry.frame_check import make_frame_check
 
-    check_target(out, "folder")
+    from lidarkit.run_files import RUN_FILES
+
+    check_target(out, "folder", files=RUN_FILES)
     frame_check = make_frame_check(**parse_params(check, option="--check"))
     result = run(
         data, method, params=parse_params(param), frames=frames, out_dir=out, progress=progress, strict=strict, name=name, init=init,

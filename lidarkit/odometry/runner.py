@@ -358,7 +358,9 @@ def run(
         if isinstance(out_dir, str) and not out_dir.strip():  # (Path("") is ".": the run went into the current folder)
             raise ConfigError("empty path: give a folder ('.' for the current one)", source="out_dir")
 
-        check_target(out_dir, "folder")
+        from lidarkit.run_files import RUN_FILES
+
+        check_target(out_dir, "folder", files=RUN_FILES)
     sequence = open_sequence(dataset)
     registration = _resolve_method(method, params)
     method_name = getattr(registration, "name", type(registration).__name__) or type(registration).__name__
