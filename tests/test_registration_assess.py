@@ -9,7 +9,7 @@ from registration_helpers import kitti_pair
 
 from lidarkit.errors import ConfigError
 from lidarkit.odometry import run
-from lidarkit.registration import get_icp
+from lidarkit.registration import available_icp, get_icp
 
 SPLIT = ["kiss", "small_gicp", "open3d_point_to_plane", "open3d_gicp"]
 
@@ -115,3 +115,39 @@ def test_the_variant_list_offers_assess_only_where_it_is_taken(capsys):
     apart = [n for n in available_icp() if assessed_apart(get_icp_class(n))]
     assert set(SPLIT) <= set(apart) and "vanilla" not in apart and "genz" not in apart
     assert out.count("assess: bool = True") == len(apart)
+
+
+def test_an_unassessed_run_keeps_what_the_backend_reports_and_claims_nothing_else(tmp_path, capsys):
+    """With assess=False small_gicp's own iteration count was dropped (0, "not recorded") though small_gicp reports it,
+    result.json gave degeneracy.ratio 0.0 beside null eigenvalues and degenerate false, and rmse.png was an empty plot
+    labelled "final RMSE only". Now: the backend's count, ratio null, and a figure that says there is no RMSE."""
+    import json
+
+    from lidarkit.registration.plots import save_rmse_history
+    from lidarkit.samples import sample_path
+
+    if "small_gicp" not in available_icp():
+        pytest.skip("small_gicp not installed")
+    pair = sample_path("kitti_pair")
+    source, target = np.load(pair / "000095.npy").astype(np.float64), np.load(pair / "000094.npy").astype(np.float64)
+    assessed = get_icp("small_gicp").align(source, target)
+    code = cli_exit_code(["icp", str(pair / "000095.npy"), str(pair / "000094.npy"), "-m", "small_gicp", "-p", "assess=false",
+                          "--out", str(tmp_path / "run")])
+    out = " ".join(capsys.readouterr().out.replace("│", " ").split())
+    assert code == 0 and f"iterations {assessed.iterations} " in out and "not recorded" not in out
+    result = json.loads((tmp_path / "run" / "result.json").read_text())
+    assert result["iterations"] == assessed.iterations >= 1 and result["extra"]["iterations_reported"] is True
+    assert result["degeneracy"]["ratio"] is None and result["degeneracy"]["eigenvalues"] == [None] * 6
+    stopped = get_icp("small_gicp", assess=False, max_iterations=1).align(source, target)
+    assert (stopped.converged, stopped.iterations, stopped.reason) == (False, 1, "small_gicp reports no convergence in 1 iterations")
+
+    def drawn(png):
+        import matplotlib.image
+
+        return int((np.abs(matplotlib.image.imread(png)[..., :3] - 1.0).sum(axis=2) > 0.3).sum())
+
+    title = "small_gicp: 000095.npy -> 000094.npy"  # the CLI's
+    save_rmse_history(tmp_path / "axes.png", {}, title=title, empty_note="")
+    save_rmse_history(tmp_path / "unassessed.png", {"small_gicp": ()}, title=title, empty_note="")
+    assert drawn(tmp_path / "unassessed.png") == drawn(tmp_path / "axes.png")  # no marker, no "final RMSE only" legend
+    assert drawn(tmp_path / "run" / "rmse.png") > drawn(tmp_path / "axes.png") + 500  # the note: no RMSE, assess=False

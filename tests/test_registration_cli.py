@@ -170,3 +170,37 @@ def test_the_sigma_row_of_a_georeferenced_pair_is_about_the_target_s_sensor(tmp_
     assert max(t_sigma) < 0.05  # centimetres, not the frame-origin kilometres
     code, out, _ = run_cli(capsys, str(pair / "000095.npy"), str(pair / "000094.npy"), "-m", "vanilla")
     assert "1-sigma (m / deg) " in " ".join(out.replace("│", " ").split()) + " "
+
+
+def test_a_yes_or_no_word_for_a_number_setting_is_refused(capsys, tmp_path):
+    """`-p max_iterations=yes` (YAML reads yes / on / true as True) ran 1 iteration, and get_icp("vanilla",
+    max_iterations=True) was accepted: pydantic turned the bool into 1. A number setting now refuses it, by name;
+    numbers still parse."""
+    from lidarkit.errors import ConfigError
+    from lidarkit.registration import get_icp
+
+    code, _, err = run_cli(capsys, str(SOURCE), str(TARGET), "-p", "max_iterations=yes")
+    assert code == 1 and "max_iterations (True): takes a number, not a yes/no value" in " ".join(err.split())
+    for params in ({"max_iterations": True}, {"min_fitness": False}, {"max_correspondence_distance_m": np.True_}):
+        with pytest.raises(ConfigError, match=f"{next(iter(params))} \\((True|False)\\): takes a number, not a yes/no value"):
+            get_icp("vanilla", **params)
+    code, _, err = run_cli(capsys, str(SOURCE), str(TARGET), "-p", "max_iterations=3", "-p", "coarse_stride=1",
+                           "-p", "min_fitness=0.5", "-p", "planar=no", "--out", str(tmp_path))
+    assert code == 0, err
+    params = json.loads((tmp_path / "config.json").read_text())["params"]
+    assert (params["max_iterations"], params["min_fitness"], params["planar"]) == (3, 0.5, False)
+    assert json.loads((tmp_path / "result.json").read_text())["iterations"] == 3
+
+
+def test_an_init_file_that_holds_json_or_words_says_so(capsys, tmp_path):
+    """`--init run1/result.json` read "(line 1): expected 4 or 12 or 16 numbers, found 1" (its "{"), a line of words
+    "found 2": the message now says the file holds JSON, or no numbers, and what --init takes."""
+    code, _, _ = run_cli(capsys, str(SOURCE), str(TARGET), "--out", str(tmp_path / "run1"))
+    assert code == 0
+    words = tmp_path / "words.txt"
+    words.write_text("# my guess\nhello world\n")
+    takes = "--init takes a 4x4 or 3x4 text matrix, or one row of 12 (KITTI) or 16 numbers"
+    for init, said in ((tmp_path / "run1" / "result.json", "holds JSON (a run's result.json?), not a text matrix"),
+                       (words, "its first line holds no numbers ('hello world')")):
+        code, _, err = run_cli(capsys, str(SOURCE), str(TARGET), "--init", str(init))
+        assert code == 1 and " ".join(err.split()) == f"error: {init}: {said}: {takes}"

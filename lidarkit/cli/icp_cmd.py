@@ -17,9 +17,16 @@ from lidarkit.errors import ConfigError, DataError
 
 
 def read_init_pose(path: Path) -> np.ndarray:
-    """A 4x4 pose from a text file: 4 (or 3) rows of 4 numbers, or one row of 12 (KITTI) or 16 numbers."""
-    from lidarkit.textfile import read_numeric_table
+    """A 4x4 pose from a text file: 4 (or 3) rows of 4 numbers, or one row of 12 (KITTI) or 16 numbers. A JSON file (a
+    run's result.json) or a first line of words is said to be one ("expected 4 or 12 or 16 numbers, found 1" did not)."""
+    from lidarkit.textfile import is_number, read_lines, read_numeric_table
 
+    first = next((line.strip() for line in read_lines(path) if line.strip() and not line.strip().startswith("#")), "")
+    wanted = "--init takes a 4x4 or 3x4 text matrix, or one row of 12 (KITTI) or 16 numbers"
+    if first.startswith(("{", "[")):
+        raise DataError(f"holds JSON (a run's result.json?), not a text matrix: {wanted}", source=path)
+    if first and not any(is_number(field) for field in first.replace(",", " ").split()):
+        raise DataError(f"its first line holds no numbers ({first[:40]!r}): {wanted}", source=path)
     table = read_numeric_table(path, (4, 12, 16))
     T = np.eye(4)
     if table.shape[1] == 4 and len(table) in (3, 4):
@@ -112,7 +119,7 @@ def _result_table(result, source: Path, target: Path) -> Table:
     table.add_row("converged", str(result.converged) + (f" ({result.reason})" if result.reason else ""))
     reported = result.extra.get("iterations_reported", True)
     unassessed = not result.extra.get("assessed", True)
-    table.add_row("iterations", "not recorded (assess=False)" if unassessed else str(result.iterations) if reported
+    table.add_row("iterations", str(result.iterations) if reported else "not recorded (assess=False)" if unassessed
                   else "not reported by the backend")
     if not result.extra.get("assessed", True):
         table.add_row("runtime (s)", f"{result.runtime_s:.3f}")
@@ -194,5 +201,6 @@ def icp(
             # the report's RMSE-per-iteration figure (one point for a backend that reports its final RMSE only)
             coarse = result.extra.get("coarse_iterations")
             save_rmse_history(tmp / "rmse.png", {method: result.rmse_history}, title=f"{method}: {source.name} -> {target.name}",
-                              coarse_iterations={method: coarse} if coarse else None)
+                              coarse_iterations={method: coarse} if coarse else None,
+                              empty_note="no RMSE: the assessment was left out (assess=False)")
         stdout().print(f"wrote {', '.join(str(out / name) for name in ('result.json', 'config.json', 'bev.png', 'rmse.png'))}")

@@ -46,6 +46,22 @@ INIT_ROTATION_TOL = 1e-3
 DEFAULT_MIN_CORRESPONDENCES = 10
 
 
+def _number_field(annotation: Any) -> bool:
+    """Whether a field annotated ``annotation`` holds an int or a float (``float | None`` too; ``bool`` not)."""
+    import typing
+
+    return annotation in (int, float) or any(_number_field(a) for a in typing.get_args(annotation) if a is not bool)
+
+
+def changed_fields(config: BaseModel, names: Any) -> list[str]:
+    """The fields among ``names`` (sorted) given with a value other than their default: what a check of settings the
+    configuration does not read may refuse. A value equal to the default changes nothing, and a full dump of a config
+    (the config.json ``lidarkit icp --out`` writes) gives every field, so it must load again."""
+    fields = type(config).model_fields
+    return sorted(n for n in names if n in config.model_fields_set
+                  and getattr(config, n) != fields[n].get_default(call_default_factory=True))
+
+
 class RegistrationConfig(BaseModel):
     """Base of every variant's typed config: frozen, unknown keys rejected.
 
@@ -75,12 +91,27 @@ class RegistrationConfig(BaseModel):
         "variants that register apart from their assessment: kiss, small_gicp, the Open3D ones)"
     )
 
+    @model_validator(mode="before")
+    @classmethod
+    def _numbers_are_not_yes_or_no(cls, data: Any) -> Any:
+        """A yes/no value (``True``, or ``-p max_iterations=yes``, which YAML reads as True) for a number field read as
+        1 or 0: pydantic's lax mode turns a bool into an int or a float without a word (1 iteration ran)."""
+        if isinstance(data, dict):
+            named = [f"{k} ({v})" for k, v in data.items() if isinstance(v, (bool, np.bool_)) and k in cls.model_fields
+                     and _number_field(cls.model_fields[k].annotation)]
+            if named:
+                raise ValueError(f"{', '.join(named)}: takes a number, not a yes/no value")
+        return data
+
     @model_validator(mode="after")
     def _assessment_settings_need_the_assessment(self) -> "RegistrationConfig":
         """Settings of the assessment given with ``assess=False`` (accepted and ignored: no gate, no covariance)."""
-        given = sorted({"min_fitness", "min_correspondences", "covariance", "calibrated_covariance"} & self.model_fields_set)
+        given = changed_fields(self, ("min_fitness", "min_correspondences", "covariance", "calibrated_covariance"))
         if not self.assess and given:
             raise ValueError(f"{', '.join(given)} set(s) the assessment, which assess=False leaves out")
+        if self.covariance != "censi" and changed_fields(self, ("calibrated_covariance",)):  # (accepted and ignored)
+            raise ValueError(f"calibrated_covariance sets the calibration of covariance='censi' (learned on it), "
+                             f"not {self.covariance!r}")
         return self
 
     def covariance_model(self):
@@ -133,8 +164,11 @@ class Degeneracy:
 
     @property
     def ratio(self) -> float:
-        """min/max eigenvalue (0 for a fully degenerate problem)."""
+        """min/max eigenvalue (0 for a fully degenerate problem; NaN where nothing was assessed, not 0 beside
+        ``degenerate=False``)."""
         top = self.eigenvalues[-1]
+        if np.isnan(top):
+            return float("nan")
         return float(self.eigenvalues[0] / top) if top > 0 else 0.0
 
     def to_dict(self) -> dict[str, Any]:
@@ -317,6 +351,18 @@ def finite_4x4(T: np.ndarray, source: str, what: str = "matrix") -> np.ndarray:
     return T
 
 
+def check_point_times(point_times_s: np.ndarray, n_points: int, source: str = "point_times_s") -> np.ndarray:
+    """``(N,)`` float64 per-point times of a sweep of ``n_points``; DataError naming ``source`` for another count or for
+    NaN / infinite times, saying which (both read "need 54850 finite per-point times, got 54850")."""
+    times = np.asarray(point_times_s, dtype=np.float64).ravel()
+    if len(times) != n_points:
+        raise DataError(f"{len(times)} per-point times for {n_points} points: one per point is needed", source=source)
+    bad = int((~np.isfinite(times)).sum())
+    if bad:
+        raise DataError(f"{bad} of the {n_points} per-point times are NaN or infinite", source=source)
+    return times
+
+
 def check_init_T(init_T: np.ndarray, source: str = "init_T") -> np.ndarray:
     """A validated initial guess with an exactly orthonormal rotation (see :func:`check_pair`)."""
     T0 = finite_4x4(init_T, source)
@@ -393,14 +439,17 @@ def no_overlap_result(T0: np.ndarray, gap_m: float, method: str) -> Registration
     )
 
 
-def unassessed_result(T_target_source: np.ndarray, converged: bool, method: str, runtime_s: float) -> RegistrationResult:
-    """The result of an alignment with ``assess=False``: the backend's pose and verdict, nothing counted or scored
-    (no correspondences: -1, fitness and RMSE unknown, no covariance, no acceptance gate)."""
+def unassessed_result(T_target_source: np.ndarray, converged: bool, method: str, runtime_s: float,
+                      iterations: int | None = None) -> RegistrationResult:
+    """The result of an alignment with ``assess=False``: the backend's pose and verdict, and its iteration count where
+    it reports one (``iterations``), nothing counted or scored (no correspondences: -1, fitness and RMSE unknown, no
+    covariance, no acceptance gate)."""
+    within = "" if iterations is None else f" in {iterations} iterations"
     return RegistrationResult(
-        T_target_source=np.asarray(T_target_source, dtype=np.float64), converged=converged, iterations=0, rmse_history=(),
-        n_correspondences=-1, runtime_s=runtime_s, fitness=float("nan"), degeneracy=Degeneracy.not_assessed(),
-        reason="" if converged else f"{method} reports no convergence", method=method,
-        extra={"assessed": False, "iterations_reported": False},
+        T_target_source=np.asarray(T_target_source, dtype=np.float64), converged=converged, iterations=iterations or 0,
+        rmse_history=(), n_correspondences=-1, runtime_s=runtime_s, fitness=float("nan"), degeneracy=Degeneracy.not_assessed(),
+        reason="" if converged else f"{method} reports no convergence{within}", method=method,
+        extra={"assessed": False, "iterations_reported": iterations is not None},
     )
 
 
@@ -557,7 +606,8 @@ class Registration:
                                     "or its last row is not 0 0 0 1)", source=source)
         register_s = time.perf_counter() - start
         if not self._config.assess:
-            return PendingAlignment.done(unassessed_result(T, bool(likely_converged), self.name, register_s))
+            reported = getattr(assess, "backend_reported", {})  # e.g. small_gicp's own iteration count
+            return PendingAlignment.done(unassessed_result(T, bool(likely_converged), self.name, register_s, **reported))
 
         def finish() -> RegistrationResult:
             start = time.perf_counter()
@@ -618,7 +668,9 @@ class Registration:
         self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray
     ) -> tuple[np.ndarray, bool, Callable[[], RegistrationResult]]:
         """The backend's part of an alignment: ``(pose, the backend's own convergence verdict, the assessment still to
-        do)``. Variants whose assessment can run apart override it; by default the whole :meth:`_align` runs now."""
+        do)``; what the backend itself reported, kept with ``assess=False``, may ride on the assessment as its
+        ``backend_reported`` attribute (``{"iterations": n}``). Variants whose assessment can run apart override it; by
+        default the whole :meth:`_align` runs now."""
         result = self._align(source_xyz, target_xyz, init_T)
         if not isinstance(result, RegistrationResult):  # (a bare 4x4 pose, None: a plugin's easy mistake)
             raise RegistrationError(f"{type(self).__name__}._align returned {type(result).__name__}, not a RegistrationResult "

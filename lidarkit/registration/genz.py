@@ -12,8 +12,9 @@ Conventions:
   i.e. to the MIDDLE of the sweep, reading ``s`` as given; lidarkit passes ``point_times_s`` normalised to
   ``[0, 1]`` by the sweep's first and last point time, so the returned poses refer to mid-sweep (kiss-icp 1.3 and
   the ``pipeline`` default: the sweep end).
-* Orthonormal motions only: genz-icp takes no pose from outside (it has no initial-pose API), and every pose
-  it returns is checked to be a rotation to 1e-9; one that is not is re-orthonormalised (and logged).
+* Orthonormal motions only: genz-icp takes no pose from outside (it has no initial-pose API; it starts at the
+  identity, and the poses of a sequence started by ``reset(T_world_lidar_initial)`` are returned moved by that pose),
+  and every pose it returns is checked to be a rotation to 1e-9; one that is not is re-orthonormalised (and logged).
 * Pairwise mode (:meth:`align`) registers the target, then the source moved by ``init_T``, in a fresh odometry;
   genz-icp's range filter then applies around the moved origin.
 """
@@ -25,10 +26,10 @@ import logging
 import numpy as np
 from pydantic import Field, model_validator
 
-from lidarkit.errors import DataError, RegistrationError
+from lidarkit.errors import RegistrationError
 from lidarkit.geometry import as_points, is_rotation, orthonormalize_se3, transform_points
 from lidarkit.registration.assessment import assess_alignment
-from lidarkit.registration.base import Registration, RegistrationConfig, RegistrationResult
+from lidarkit.registration.base import Registration, RegistrationConfig, RegistrationResult, check_init_T, check_point_times
 from lidarkit.registration.registry import register_icp
 
 log = logging.getLogger(__name__)
@@ -94,8 +95,7 @@ def normalized_times(point_times_s: np.ndarray | None, n_points: int) -> np.ndar
     times = np.asarray(point_times_s, dtype=np.float64).ravel()
     if len(times) == 0:
         return None
-    if len(times) != n_points or not np.isfinite(times).all():
-        raise DataError(f"need {n_points} finite per-point times, got {len(times)}", source="point_times_s")
+    times = check_point_times(times, n_points)
     t0, t1 = float(times.min()), float(times.max())
     return (times - t0) / (t1 - t0) if t1 > t0 else np.zeros_like(times)
 
@@ -109,6 +109,7 @@ class GenzRegistration(Registration):
     def __init__(self, config: GenzConfig | None = None, **params):
         super().__init__(config, **params)
         self._genz = None
+        self._start = np.eye(4)  # T_world_lidar_initial: genz-icp's own poses start at the identity
 
     @property
     def pipeline(self):
@@ -122,11 +123,14 @@ class GenzRegistration(Registration):
         """The instant of the sweep deskewed poses refer to: genz-icp deskews to mid-sweep (its scan's time 0.5)."""
         return "mid" if self.config.deskew else None
 
-    def reset(self) -> None:
-        """Start a new sequence (genz-icp always starts at the identity)."""
+    def reset(self, T_world_lidar_initial: np.ndarray | None = None) -> None:
+        """Start a new sequence at ``T_world_lidar_initial`` (identity), checked as ``align``'s ``init_T``, as kiss and
+        pipeline take it: genz-icp always starts at the identity, so its poses are returned moved by this one."""
         from genz_icp.genz_icp import GenZICP
 
+        start = np.eye(4) if T_world_lidar_initial is None else check_init_T(T_world_lidar_initial, "T_world_lidar_initial")
         self._genz = GenZICP(self.config.to_genz_config())
+        self._start = start
 
     def register_frame(self, points_xyz: np.ndarray, point_times_s: np.ndarray | None = None) -> np.ndarray:
         """Register one sweep; returns ``T_world_lidar`` (4x4; at mid-sweep when deskewed)."""
@@ -145,15 +149,15 @@ class GenzRegistration(Registration):
             log.warning("genz-icp returned a rotation that is not orthonormal to %g; re-orthonormalized", GENZ_ORTHONORMAL_TOL)
             T = orthonormalize_se3(T)
         genz.last_pose = T
-        return T.copy()
+        return self._start @ T
 
     def _align(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray) -> RegistrationResult:
         from genz_icp.genz_icp import GenZICP
 
         c = self.config
-        saved = self._genz
+        saved = self._genz, self._start
         try:
-            self._genz = GenZICP(c.to_genz_config())
+            self._genz, self._start = GenZICP(c.to_genz_config()), np.eye(4)
             self.register_frame(target_xyz)
             # the map of the target alone: after the source's frame it holds the source too, which then matches itself
             # (fitness 1 and "converged" for any cloud)
@@ -161,7 +165,7 @@ class GenzRegistration(Registration):
             moved = transform_points(init_T, source_xyz)
             T_rel = self.register_frame(moved)
         finally:
-            self._genz = saved
+            self._genz, self._start = saved
         if len(map_points) < 3:
             raise RegistrationError(f"genz-icp kept only {len(map_points)} map points of the target", source="target cloud")
         T = T_rel @ init_T

@@ -35,10 +35,9 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import Field, model_validator
 
-from lidarkit.errors import DataError
 from lidarkit.geometry import make_se3, se3_log, so3_exp
 from lidarkit.registration import local_origin
-from lidarkit.registration.base import Degeneracy, RegistrationResult
+from lidarkit.registration.base import Degeneracy, RegistrationResult, changed_fields, check_point_times
 from lidarkit.registration.components.motion import exp_scaled_twist_apply
 from lidarkit.registration.ground import (
     DEFAULT_GROUND_SEGMENTER,
@@ -111,12 +110,15 @@ class GroundFilteredConfig(VanillaConfig):
         # a legacy field the method does not read, or one that ground_params overrides, changed nothing without a word
         # (sensor_height_m=5 gave the default's pose under local_plane; with ground_params' own it kept 1.73)
         reads = LEGACY_FIELDS_READ.get(self.ground_method, {})
-        given = sorted(self.model_fields_set & {f for fields in LEGACY_FIELDS_READ.values() for f in fields})
+        given = changed_fields(self, {f for fields in LEGACY_FIELDS_READ.values() for f in fields})
         unread = [f for f in given if f not in reads]
         if unread:
             users = sorted({m for m, fields in LEGACY_FIELDS_READ.items() if set(unread) & set(fields)})
             raise ValueError(f"{', '.join(unread)} set(s) the {' / '.join(users)} ground method, not {self.ground_method!r} "
                              f"(its settings go in ground_params)")
+        thinning = changed_fields(self, ("fallback_ground_share", "fallback_ground_range_m"))
+        if thinning and self.fallback != "thinned_ground":  # (accepted and ignored)
+            raise ValueError(f"{', '.join(thinning)} set(s) the 'thinned_ground' fallback, not {self.fallback!r}")
         both = [f for f in given if reads.get(f) in self.ground_params]
         if both:
             raise ValueError(f"{', '.join(both)} given both as a field and in ground_params "
@@ -263,10 +265,7 @@ class GroundFilteredICP(VanillaICP):
         fractions: list[np.ndarray | None] = [None, None]
         if self.config.deskew and source_times_s is not None and target_times_s is not None:
             for k, (name, pts, times) in enumerate((("source", source_xyz, source_times_s), ("target", target_xyz, target_times_s))):
-                times = np.asarray(times, dtype=np.float64).reshape(-1)
-                if len(times) != len(pts) or not np.isfinite(times).all():
-                    raise DataError(f"{len(times)} finite per-point times expected for {len(pts)} points", source=f"{name} times")
-                fractions[k] = sweep_fraction(times)
+                fractions[k] = sweep_fraction(check_point_times(times, len(pts), f"{name} times"))
         self._fractions = (fractions[0], fractions[1]) if fractions[0] is not None and fractions[1] is not None else (None, None)
         try:
             return super().align(source_xyz, target_xyz, init_T)

@@ -17,10 +17,12 @@ from __future__ import annotations
 import numpy as np
 from pydantic import Field, model_validator
 
-from lidarkit.errors import DataError, RegistrationError
+from lidarkit.errors import RegistrationError
 from lidarkit.geometry import as_points, is_rotation, orthonormalize_se3
 from lidarkit.registration.assessment import assess_alignment
-from lidarkit.registration.base import Registration, RegistrationConfig, RegistrationResult, finite_4x4
+from lidarkit.registration.base import (
+    Registration, RegistrationConfig, RegistrationResult, changed_fields, check_init_T, check_point_times, finite_4x4,
+)
 from lidarkit.registration.registry import register_icp
 
 #: Rotations passed to kiss-icp must be orthonormal to this (Sophus checks ~1e-10).
@@ -54,7 +56,7 @@ class KissConfig(RegistrationConfig):
     def _ranges(self) -> "KissConfig":
         if self.max_range_m <= self.min_range_m:
             raise ValueError(f"max_range_m ({self.max_range_m}) must exceed min_range_m ({self.min_range_m})")
-        if self.fixed_threshold_m is not None and {"initial_threshold_m", "min_motion_th_m"} & self.model_fields_set:
+        if self.fixed_threshold_m is not None and changed_fields(self, ("initial_threshold_m", "min_motion_th_m")):
             raise ValueError("initial_threshold_m / min_motion_th_m set the adaptive threshold, which fixed_threshold_m replaces")
         return self
 
@@ -119,12 +121,14 @@ class KissRegistration(Registration):
         return self._kiss
 
     def reset(self, T_world_lidar_initial: np.ndarray | None = None) -> None:
-        """Start a new sequence: empty map, zero velocity, first pose ``T_world_lidar_initial`` (identity)."""
+        """Start a new sequence: empty map, zero velocity, first pose ``T_world_lidar_initial`` (identity), checked as
+        ``align``'s ``init_T`` (a reflection or a scaled matrix was re-orthonormalized into another pose)."""
         from kiss_icp.kiss_icp import KissICP
 
+        start = None if T_world_lidar_initial is None else check_init_T(T_world_lidar_initial, "T_world_lidar_initial")
         self._kiss = KissICP(self.kiss_config)
-        if T_world_lidar_initial is not None:
-            self._kiss.last_pose = kiss_safe_pose(T_world_lidar_initial, "T_world_lidar_initial")
+        if start is not None:
+            self._kiss.last_pose = kiss_safe_pose(start, "T_world_lidar_initial")
 
     def register_frame(
         self, points_xyz: np.ndarray, point_times_s: np.ndarray | None = None, motion_guess: np.ndarray | None = None
@@ -139,9 +143,7 @@ class KissRegistration(Registration):
         if point_times_s is None:
             times = np.array([])
         else:
-            times = np.asarray(point_times_s, dtype=np.float64).ravel()
-            if len(times) != len(frame) or not np.isfinite(times).all():
-                raise DataError(f"need {len(frame)} finite per-point times, got {len(times)}", source="point_times_s")
+            times = check_point_times(point_times_s, len(frame))
             if np.ptp(times) <= 0.0:  # all equal: kiss-icp would divide by their zero span and abort the process
                 times = np.array([])
         kiss.last_pose = kiss_safe_pose(kiss.last_pose, "last_pose")

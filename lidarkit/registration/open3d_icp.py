@@ -11,7 +11,7 @@ from __future__ import annotations
 import contextlib
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from lidarkit.geometry import transform_points
 from lidarkit.registration.assessment import assess_alignment
@@ -37,6 +37,15 @@ class Open3DSurfaceConfig(Open3DPointToPointConfig):
     voxel_size_m: float | None = Field(0.5, gt=0, description="Open3D voxel downsampling first (m); None keeps all points")
     normal_radius_m: float = Field(1.5, gt=0, description="radius of the neighbourhood for normals/covariances (m)")
     normal_max_nn: int = Field(20, ge=3, description="max neighbours for normals/covariances")
+
+    @model_validator(mode="after")
+    def _normals_need_neighbours(self) -> "Open3DSurfaceConfig":
+        """A radius below the voxel spacing finds no neighbour for most downsampled points (KITTI, 0.1 m at 0.5 m: all
+        of them), whose normals Open3D then leaves at its default: point_to_plane stayed at the guess, "converged"."""
+        if self.voxel_size_m is not None and self.normal_radius_m < self.voxel_size_m:
+            raise ValueError(f"normal_radius_m ({self.normal_radius_m:g}) is below voxel_size_m ({self.voxel_size_m:g}): after "
+                             "downsampling most points have no neighbour within it to estimate a normal from")
+        return self
 
 
 class _Open3DBase(Registration):

@@ -29,10 +29,12 @@ import numpy as np
 from pydantic import Field, model_validator
 from scipy.spatial import cKDTree
 
-from lidarkit.errors import DataError, RegistrationError
+from lidarkit.errors import RegistrationError
 from lidarkit.geometry import as_points, orthonormalize_se3, se3_inverse, transform_points
 from lidarkit.registration.assessment import assess_alignment
-from lidarkit.registration.base import Degeneracy, Registration, RegistrationConfig, RegistrationResult, use_backend
+from lidarkit.registration.base import (
+    Degeneracy, Registration, RegistrationConfig, RegistrationResult, check_init_T, check_point_times, use_backend,
+)
 from lidarkit.registration.components import make_component
 from lidarkit.registration.planar import refuse_2d
 from lidarkit.registration.components.maps import first_per_voxel, pca_geometry
@@ -160,9 +162,10 @@ class PipelineRegistration(Registration):
 
     # ------------------------------------------------------------------ sequence mode
     def reset(self, T_world_lidar_initial: np.ndarray | None = None) -> None:
-        """Start a new sequence: empty map, zero velocity, first pose ``T_world_lidar_initial`` (identity)."""
+        """Start a new sequence: empty map, zero velocity, first pose ``T_world_lidar_initial`` (identity), checked as
+        ``align``'s ``init_T`` (a reflection or a scaled matrix was projected onto the identity without a word)."""
         self._components = build_components(self.config)
-        self.last_pose = np.eye(4) if T_world_lidar_initial is None else orthonormalize_se3(np.asarray(T_world_lidar_initial, float))
+        self.last_pose = np.eye(4) if T_world_lidar_initial is None else check_init_T(T_world_lidar_initial, "T_world_lidar_initial")
         self.last_delta = np.eye(4)
         self.last_frame: dict[str, Any] = {}
 
@@ -177,10 +180,7 @@ class PipelineRegistration(Registration):
         frame = as_points(points_xyz, "frame", min_points=1)
         if point_times_s is not None:
             point_times_s = np.asarray(point_times_s, dtype=np.float64).ravel()
-            if len(point_times_s) == 0:
-                point_times_s = None
-            elif len(point_times_s) != len(frame) or not np.isfinite(point_times_s).all():
-                raise DataError(f"need {len(frame)} finite per-point times, got {len(point_times_s)}", source="point_times_s")
+            point_times_s = None if len(point_times_s) == 0 else check_point_times(point_times_s, len(frame))
         if c["map"].empty:  # the first frame says what the sequence is
             self._refuse_2d(frame, frame)
         raw = frame

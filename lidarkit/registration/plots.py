@@ -71,16 +71,21 @@ def save_bev_before_after(
 
 
 def save_rmse_history(path: str | os.PathLike, histories: dict[str, Sequence[float]], title: str = "",
-                      coarse_iterations: dict[str, int] | None = None) -> Path:
+                      coarse_iterations: dict[str, int] | None = None, empty_note: str = "no RMSE recorded") -> Path:
     """RMSE of the correspondences (m) against iteration, one line per labelled run. ``coarse_iterations``: per run
     with a coarse-to-fine schedule (``result.extra["coarse_iterations"]``), where its history passes from every k-th
     source point to all of them: drawn dashed up to there and marked, since the two stages' RMSE are of other points
-    (the full cloud's is higher at the same pose: the curve steps up at the switch)."""
+    (the full cloud's is higher at the same pose: the curve steps up at the switch). A run without any RMSE (not
+    assessed) draws nothing; with none at all the figure says ``empty_note`` (an empty plot read "final RMSE only")."""
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(7, 4.5))
+    if not any(len(hist) for hist in histories.values()):
+        ax.text(0.5, 0.5, empty_note, ha="center", va="center", transform=ax.transAxes)
     for label, hist in histories.items():
         hist = np.asarray(hist, dtype=float)
-        if len(hist) <= 1:  # a backend that reports its final RMSE only
+        if len(hist) == 0:
+            continue
+        if len(hist) == 1:  # a backend that reports its final RMSE only
             ax.plot(np.arange(len(hist)), hist, marker="o", linestyle="none", label=f"{label} (final RMSE only)")
             continue
         switch = (coarse_iterations or {}).get(label)
@@ -93,7 +98,8 @@ def save_rmse_history(path: str | os.PathLike, histories: dict[str, Sequence[flo
     ax.set_xlabel("iteration")
     ax.set_ylabel("correspondence RMSE (m)")
     ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8)
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=8)
     if title:
         ax.set_title(title)
     return _save(plt, fig, path)

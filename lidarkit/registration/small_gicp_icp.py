@@ -15,7 +15,7 @@ from pydantic import Field, model_validator
 
 from lidarkit.geometry import transform_points
 from lidarkit.registration.assessment import assess_alignment
-from lidarkit.registration.base import Registration, RegistrationConfig, RegistrationResult
+from lidarkit.registration.base import Registration, RegistrationConfig, RegistrationResult, changed_fields
 from lidarkit.registration.cloud_cache import CloudCache
 from lidarkit.registration import local_origin
 from lidarkit.registration.planar import refuse_2d
@@ -58,7 +58,7 @@ class SmallGICPConfig(RegistrationConfig):
 
     @model_validator(mode="after")
     def _voxels_are_vgicps(self) -> "SmallGICPConfig":
-        if "voxel_resolution_m" in self.model_fields_set and self.registration_type != "VGICP":  # (accepted and ignored)
+        if changed_fields(self, ["voxel_resolution_m"]) and self.registration_type != "VGICP":  # (accepted and ignored)
             raise ValueError(f"voxel_resolution_m is VGICP's voxel size; registration_type {self.registration_type} has none")
         return self
 
@@ -135,6 +135,7 @@ if _small_gicp is not None:
                     src, dst = voxelized(source_xyz, so), voxelized(target_xyz, to)
                     return self._result(out, T, assess_alignment(src, dst, T, c.max_correspondence_distance_m))
 
+                assess.backend_reported = {"iterations": self._iterations(out)}
                 return T, bool(out.converged), assess
             # the same computation as small_gicp.align(points...) (identical poses), with the preprocessed clouds and
             # the target's KdTree kept for the assessment instead of voxelizing and indexing both clouds again
@@ -156,13 +157,18 @@ if _small_gicp is not None:
                 assessment = assess_alignment(given_src, given_dst, T, c.max_correspondence_distance_m, dist2=np.asarray(dist2), index=index)
                 return self._result(out, T, assessment)
 
+            assess.backend_reported = {"iterations": self._iterations(out)}  # kept with assess=False
             return T, bool(out.converged), assess
+
+        @staticmethod
+        def _iterations(out) -> int:
+            """small_gicp records the index of its last Gauss-Newton update (0-based; every pass, the converging one
+            included, applies its update): max_iterations=1 read "did not converge in 0 iterations"."""
+            return int(out.iterations) + 1
 
         def _result(self, out, T: np.ndarray, assessment) -> RegistrationResult:
             native = np.linalg.eigvalsh(0.5 * (np.asarray(out.H) + np.asarray(out.H).T))
-            # small_gicp records the index of its last Gauss-Newton update (0-based; every pass, the converging one
-            # included, applies its update): max_iterations=1 read "did not converge in 0 iterations"
-            iterations = int(out.iterations) + 1
+            iterations = self._iterations(out)
             return assessment.to_result(
                 T,
                 converged=bool(out.converged),

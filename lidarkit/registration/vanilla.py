@@ -14,7 +14,7 @@ from pydantic import Field, model_validator
 
 from lidarkit.geometry import kabsch_umeyama, make_se3
 from lidarkit.registration.assessment import assess_alignment
-from lidarkit.registration.base import Degeneracy, Registration, RegistrationConfig, RegistrationResult
+from lidarkit.registration.base import Degeneracy, Registration, RegistrationConfig, RegistrationResult, changed_fields
 from lidarkit.registration.neighbors import NearestNeighbors, ScipyWorkers, resolved_backend
 from lidarkit.registration.planar import planar_kabsch
 from lidarkit.registration.preprocess import voxel_downsample
@@ -46,7 +46,7 @@ class VanillaConfig(RegistrationConfig):
     def _scipy_settings_need_scipy(self):
         """``leafsize`` / ``workers`` set for a search that is not scipy's were recorded and did nothing (the report's
         leaf-size experiment under the default backend, Open3D, compared identical runs)."""
-        given = [k for k in ("leafsize", "workers") if k in self.model_fields_set and getattr(self, k) != type(self).model_fields[k].default]
+        given = changed_fields(self, ("leafsize", "workers"))
         exact = bool(getattr(self, "exact", False))
         backend = "brute" if exact else self.nn_backend
         if backend == "auto":
