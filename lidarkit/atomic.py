@@ -125,10 +125,26 @@ def write_bytes(path: str | os.PathLike, data: bytes) -> Path:
 def write_texts(texts: dict[str | os.PathLike, str]) -> list[Path]:
     """Write files that belong together (a report's .md, .csv and .html): every one is written in full first, then
     each renamed into place, so a failure while writing any of them (a full disk) replaces none; return the paths."""
-    with contextlib.ExitStack() as stack:
+    with paths_together(texts) as aside:
         for path, text in texts.items():
-            _write_synced(stack.enter_context(atomic_path(path)), text.encode("utf-8"))
+            _write_synced(aside[Path(path)], text.encode("utf-8"))
     return [Path(p) for p in texts]
+
+
+@contextlib.contextmanager
+def paths_together(paths: Iterable[str | os.PathLike]) -> Iterator[dict[Path, Path]]:
+    """Temporary paths (``{final: temporary}``) for outputs that belong together: the block writes each to its
+    temporary path, and every one is renamed into place only after the block ended, so a failure or an interrupt in it
+    replaces none (an evaluation's JSON was replaced and its figure, failing, kept the earlier run's)."""
+    with contextlib.ExitStack() as stack:
+        aside = {Path(p): stack.enter_context(atomic_path(p)) for p in paths}
+        try:
+            yield aside
+        except OutputError as err:  # named by its final path, not the temporary one it was written to
+            final = {tmp.resolve(): path for path, tmp in aside.items()}.get(Path(err.source or "").resolve())
+            if final is None:
+                raise
+            raise OutputError(err.reason, source=final, location=err.location) from err
 
 
 def _write_synced(path: Path, data: bytes) -> None:

@@ -310,3 +310,28 @@ def test_library_settings_that_cannot_apply_are_refused():
     with pytest.raises(ConfigError, match="all_pairs: all_pairs must be True or False"):
         rpe(ref, est, 5, all_pairs="no")
     assert rpe(ref, est, 5, all_pairs=False).n_errors == 39
+
+
+def test_outputs_of_one_evaluation_are_replaced_together_or_not_at_all(tmp_path):
+    """A full disk at the figure (a file-size limit here) left the new JSON, Markdown and tables beside the earlier
+    evaluation's figure, exit 1 after "wrote r.json": every output is written aside and moved in together."""
+    import resource
+    import subprocess
+    import sys
+
+    gt = shared_path("evo_testdata", "KITTI_00_gt.txt")
+    outputs = ["--json", tmp_path / "r.json", "--markdown", tmp_path / "r.md", "--plot", tmp_path / "r.png",
+               "--tables", tmp_path / "t"]
+
+    def evaluate(est, limit=None):
+        limits = (lambda: resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))) if limit else None
+        return subprocess.run([sys.executable, "-m", "lidarkit", "eval", str(gt), str(shared_path("evo_testdata", est)),
+                               *map(str, outputs)], capture_output=True, text=True, timeout=600, preexec_fn=limits)
+
+    assert evaluate("KITTI_00_ORB.txt").returncode == 0
+    before = {p.relative_to(tmp_path): p.read_bytes() for p in sorted(tmp_path.rglob("*")) if p.is_file()}
+    assert (tmp_path / "r.png").stat().st_size > 120_000 > (tmp_path / "r.json").stat().st_size
+    failed = evaluate("KITTI_00_SPTAM.txt", limit=120_000)  # the figure cannot be written, the rest can
+    assert failed.returncode == 1 and f"error: {tmp_path / 'r.png'}: cannot write: file too large" in " ".join(failed.stderr.split())
+    after = {p.relative_to(tmp_path): p.read_bytes() for p in sorted(tmp_path.rglob("*")) if p.is_file()}
+    assert after == before  # the ORB evaluation whole: no SPTAM JSON, tables or Markdown beside its figure, no leftovers

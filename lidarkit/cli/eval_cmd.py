@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
 from pathlib import Path
 from typing import Optional
@@ -139,15 +140,47 @@ def eval_command(
         console.print(f"KITTI drift not computed: {evaluation.drift_note}")
     for note in report.evaluation_notes(evaluation):
         console.print(f"note: {note}", soft_wrap=True, markup=False, highlight=False)
+    # the outputs of one evaluation are written aside and moved in together: a failure (a full disk at the plot) or an
+    # interrupt leaves every earlier output as it was, never one new beside one old
+    files = {path: None for path in (json_out, markdown, plot) if path is not None}
+    with contextlib.ExitStack() as stack:
+        aside = stack.enter_context(atomic.paths_together(files))
+        folder = stack.enter_context(atomic.run_folder(tables)) if tables is not None else None
+        written = _write_outputs(evaluation, ref, est, ref_traj, est_traj, aside, json_out, markdown, plot, folder, align,
+                                 delta, delta_unit)
+    if tables is not None:  # an earlier evaluation's tables (and box plot) this one does not hold
+        from lidarkit.eval.tables import TABLE_NAMES, TABLE_SUFFIXES
+
+        own = {p.name for p in written}
+        for name in [f"{stem}{suffix}" for stem in TABLE_NAMES for suffix in TABLE_SUFFIXES] + [_BOXPLOT_NAME]:
+            if name not in own and (tables / name).is_file():
+                (tables / name).unlink()
+    for path in files:
+        console.print(f"wrote {path}")
+    if tables is not None:
+        console.print(f"wrote {len(written)} table/plot files to {tables}", soft_wrap=True)
+
+
+def _write_outputs(evaluation, ref: Path, est: Path, ref_traj, est_traj, aside: dict[Path, Path], json_out: Path | None,
+                   markdown: Path | None, plot: Path | None, folder: Path | None, align: str, delta: float,
+                   delta_unit: str) -> list[Path]:
+    """Each requested output written to its temporary path (``aside``) or into the tables' temporary ``folder``; the
+    names written there."""
+    from lidarkit import atomic
+    from lidarkit.eval import report
+
     if json_out is not None:
         data = evaluation.to_dict()
         data.update(ref_path=str(ref), est_path=str(est))
-        report.write_json(data, json_out)
-        console.print(f"wrote {json_out}")
+        report.write_json(data, aside[Path(json_out)])
     if markdown is not None:
-        atomic.write_text(markdown, report.evaluation_markdown(evaluation))
-        console.print(f"wrote {markdown}")
-    if tables is not None:
+        atomic.write_text(aside[Path(markdown)], report.evaluation_markdown(evaluation))
+    if plot is not None:
+        from lidarkit.eval import plots
+
+        plots.plot_evaluation(evaluation, aside[Path(plot)])
+    written: list[Path] = []
+    if folder is not None:
         from lidarkit.eval.tables import SegmentErrors, frame_period_s, publication_tables
 
         key = (ref_traj.name or ref.stem, est_traj.name or est.stem)
@@ -164,20 +197,12 @@ def eval_command(
         per = "frame" if (delta, unit) == (1, "frames") else f"{delta:g} {unit}"
         pub = publication_tables(segments, {key: evaluation.ape.rmse}, {key: evaluation.rpe.rmse}, ape_alignment=aligned,
                                  rpe_delta=per + scaled(evaluation.rpe))
-        written = pub.write(tables)
-        boxplot = tables / _BOXPLOT_NAME
+        written = pub.write(folder)
         if segments:
             from lidarkit.eval.plots import plot_segment_boxplots
 
-            written.append(plot_segment_boxplots(segments, boxplot))
-        else:  # an earlier evaluation's, beside tables without drift
-            boxplot.unlink(missing_ok=True)
-        console.print(f"wrote {len(written)} table/plot files to {tables}", soft_wrap=True)
-    if plot is not None:
-        from lidarkit.eval import plots
-
-        plots.plot_evaluation(evaluation, plot)
-        console.print(f"wrote {plot}")
+            written.append(plot_segment_boxplots(segments, folder / _BOXPLOT_NAME))
+    return written
 
 
 def _relations_report(est_traj, relations_path: Path, max_diff_s: float, json_out: Path | None) -> None:
