@@ -186,3 +186,9 @@ def test_an_interrupted_forced_run_says_to_resume_without_force(tmp_path, monkey
             cli.main(["bench", str(suite), "--out", str(out), "--executor", "serial", "--no-report", *(["--force"] if force else [])])
         err = " ".join(capsys.readouterr().err.split())
         assert exc.value.code == 130 and f"finished results are kept in {out}/jobs; {line}" in err, err
+    # stopped before any job finished: no jobs/ folder to point to (it was named all the same)
+    monkeypatch.setattr(runner, "run_suite", lambda *a, **k: (_ for _ in ()).throw(KeyboardInterrupt()))
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["bench", str(suite), "--out", str(tmp_path / "new"), "--executor", "serial", "--no-report"])
+    err = " ".join(capsys.readouterr().err.split())
+    assert exc.value.code == 130 and "interrupted by SIGINT: no job had finished yet; run the same command again" in err, err

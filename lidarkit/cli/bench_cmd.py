@@ -99,7 +99,12 @@ def run_with_progress(suite, out: Path, *, executor: str, workers: int | None, a
             stale = f"; {out}/report.html is from before this run (`lidarkit report {out}` rebuilds it from the finished jobs)"
             again = ("run the command again without --force to resume (with it, every job runs again)" if force
                      else "run the same command again to resume")
-            err.print(f"interrupted {what}: finished results are kept in {out}/jobs; {again}"
+            from lidarkit.bench.results import JOBS_DIR
+
+            jobs = out / JOBS_DIR  # (it named a jobs/ folder that did not exist when no job had finished yet)
+            kept = jobs.is_dir() and any(not p.name.startswith(".") for p in jobs.glob("*.json"))
+            err.print(f"interrupted {what}: " + (f"finished results are kept in {out}/jobs" if kept else "no job had finished yet")
+                      + f"; {again}"
                       + (stale if (out / "report.html").exists() else ""), soft_wrap=True)
             raise typer.Exit(getattr(stop, "exit_code", 130)) from None
 
