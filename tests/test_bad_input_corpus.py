@@ -494,7 +494,7 @@ def test_too_few_steps_for_the_mse(tmp_path, capsys):
         text.append(line)
     (tmp_path / "sensor_data.dat").write_text("\n".join(text) + "\n")
     code, _, err = run_cli(["pf", tmp_path, "-n", "20"], capsys)
-    assert_one_line_error(code, err, "needs more than 10 steps for the MSE from step 10")
+    assert_one_line_error(code, err, "3 steps: the protocol scores the position MSE from step 10 on, so it needs at least 10")
 
 
 def test_zero_focal_length(tmp_path, capsys):

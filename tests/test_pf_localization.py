@@ -78,6 +78,18 @@ def test_kld_bound_values():
     assert kld_bound(1, 0.05, 2.326) == 1.0
 
 
+def test_an_absurd_kld_z_or_epsilon_asks_for_the_maximum_count(stachniss):
+    """Fox's bound overflowed a float for z = 1e200 or 1e103 or epsilon = 1e-320: the run died at its first resampling
+    with an OverflowError traceback (the cube, or ceil of inf). A bound that large is kld_max_n."""
+    assert kld_count(10, 0.05, 1e200, 200, 5000) == 5000
+    assert kld_count(10, 0.05, 1e103, 200, 5000) == 5000
+    assert kld_count(10, 1e-320, 2.326, 200, 5000) == 5000
+    assert kld_count(10, 0.05, 2.326, 1, 5000) == 217  # the usual bound is unchanged: 90 / 0.1 * (1 - 2/81 + ...)^3
+    assert kld_bound(10, 0.05, 1e200) == np.inf
+    r = run_protocol(stachniss, 300, 0, kld=True, kld_z=1e200, with_ape_rpe=False)
+    assert r.n_particles[0] == 300 and (r.n_particles[1:] == 5000).all()
+
+
 def test_global_localization_all_converges_and_without_ids_a_single_ekf_does_not(stachniss):
     for s in SEEDS:
         pf = run_protocol(stachniss, 3000, s, init="uniform", with_ape_rpe=False)
@@ -101,6 +113,25 @@ def test_kidnapped_robot_is_recovered_with_augmented_mcl_only(stachniss):
         plain = run_protocol(stachniss, 1000, s, kidnap_at_step=150, visible="all", with_ape_rpe=False)
         k = steps_to_recover(plain.position_error_m(), 150)
         assert plain.injected.sum() == 0 and (k is None or k > 40), (s, k)
+
+
+def test_a_single_kidnap_run_reports_its_recovery(stachniss, tmp_path, capsys):
+    """A single --kidnap-at run printed and wrote no recovery figure (only a study's table had "recovered"): the steps
+    to recover and whether within 40 (the study's definition) are in its table and metrics.json."""
+    import json
+
+    data = shared_path("pf", "robot_mapping_stachniss")
+    with pytest.raises(SystemExit) as exc:
+        main(["pf", str(data), "--kidnap-at", "150", "--visible", "all", "--augmented", "--out", str(tmp_path / "kid")])
+    assert exc.value.code in (0, None)
+    assert "│ kidnap recovered (< 0.5 m for good, <= 40 steps)  │ yes, 4 steps │" in capsys.readouterr().out
+    metrics = json.loads((tmp_path / "kid" / "metrics.json").read_text())["metrics"]
+    assert metrics["kidnap_recovery"] == {"steps_to_recover": 4, "recovered": True, "within_steps": 40}
+    plain = run_protocol(stachniss, 1000, 0, kidnap_at_step=150, visible="all", with_ape_rpe=False)
+    assert plain.metrics["kidnap_recovery"] == {"steps_to_recover": steps_to_recover(plain.position_error_m(), 150),
+                                                "recovered": False, "within_steps": 40}
+    assert plain.metrics["kidnap_recovery"]["steps_to_recover"] == 113
+    assert "kidnap_recovery" not in run_protocol(stachniss, 100, 0, with_ape_rpe=False).metrics
 
 
 def test_kidnapped_ground_truth_jumps_by_the_offset(stachniss):
@@ -193,6 +224,23 @@ def test_cli_recorded_prints_the_verdict_and_fit_q_makes_nis_consistent(capsys, 
     assert fits[0]["run"] == "given Q" and fits[0]["q_cov"] == [[1.0, 0.0], [0.0, 0.1]] and fits[0]["nis_mean"] < 0.1
     assert fits[-1]["nis_mean"] == pytest.approx(nis_after, abs=1e-3)
     assert json.loads((tmp_path / "run" / "metrics.json").read_text())["metrics"]["q_fit_settled"] is True
+
+
+def test_fit_q_warns_of_a_lost_filter_only_for_the_runs_it_reports(caplog):
+    """Every round of the fit warned: burgard_particle_filter printed "filter lost on 119 of 331 steps" from fit 1 (too
+    small a Q, discarded) while the reported run (fit 3) lost no step. A lost reported run is still said, named."""
+    from lidarkit.pf.protocol import fit_q_recorded
+
+    data = LandmarkData(shared_path("pf", "burgard_particle_filter"))
+    with caplog.at_level(logging.WARNING, logger="lidarkit.pf.protocol"):
+        first, runs = fit_q_recorded(data, 1000, 0)
+    assert [len(r.lost_steps) for r in [first, *runs]] == [0, 119, 0, 0]
+    assert [r.message for r in caplog.records if "filter lost" in r.message] == []
+    with caplog.at_level(logging.WARNING, logger="lidarkit.pf.protocol"):
+        first, runs = fit_q_recorded(data, 10, 0)
+    lost = [r.message for r in caplog.records if "filter lost" in r.message]
+    assert lost == [f"filter lost on {len(runs[-1].lost_steps)} of 331 steps with the fitted Q (fit {len(runs)}) (first at step "
+                    f"{runs[-1].lost_steps[0] + 1}): even the best particle is beyond the chi-square 99.9% gate"]
 
 
 def test_a_fit_that_does_not_settle_says_so(capsys, tmp_path):
@@ -367,6 +415,20 @@ def test_cli_option_errors_name_the_option_given(capsys):
         assert capsys.readouterr().err == f"error: {line}\n"
 
 
+def test_cli_alpha_rates_are_checked_before_they_are_compared(capsys):
+    """--alpha-fast nan said "--alpha-slow: must be below --alpha-fast nan, got 0.001": the option at fault was the
+    other one, and its own rule (a rate in (0, 1]) was never stated."""
+    data = shared_path("pf", "burgard_particle_filter")
+    for args, line in ((["--alpha-fast", "nan"], "--alpha-fast: must be in (0, 1], got nan"),
+                       (["--alpha-slow", "nan"], "--alpha-slow: must be in (0, 1], got nan"),
+                       (["--alpha-fast", "2"], "--alpha-fast: must be in (0, 1], got 2.0"),
+                       (["--alpha-slow", "0.5"], "--alpha-slow: must be below --alpha-fast 0.1, got 0.5")):
+        with pytest.raises(SystemExit) as exc:
+            main(["pf", str(data), "--augmented", *args])
+        assert exc.value.code == 1
+        assert capsys.readouterr().err == f"error: {line}\n"
+
+
 def test_cli_options_that_would_change_nothing_are_refused(capsys):
     """Each of these changed nothing, without a word (identical results); and KLD's counts reached past the particle
     limit and the memory check (a MemoryError traceback at 1e10)."""
@@ -428,3 +490,31 @@ def test_resampling_and_step_access_refuse_what_they_cannot_use(stachniss):
         stachniss.readings(331)
     with pytest.raises(DataError, match="step -1 out of range"):
         stachniss.readings(-1)
+
+
+def test_odd_counts_steps_and_snapshots_are_refused(stachniss, capsys, tmp_path):
+    """run_protocol ran kidnap_at_step=1.5 as step 1 (recording 1.5), took "150", ran n_particles=True as one particle
+    and left snapshot steps -1 and 1000 out without a word; --snapshots 0,0,5 drew step 0 twice, --snapshots , drew
+    no particles.png in silence, and -n 20000 --kld started above the --kld-max 5000 of its title."""
+    for kw, line in ((dict(kidnap_at_step=1.5), "kidnap_at_step: kidnap step must be an integer in 1..331, got 1.5"),
+                     (dict(kidnap_at_step="150"), "kidnap_at_step: kidnap step must be an integer in 1..331, got '150'"),
+                     (dict(snapshot_steps=(-1,)), "snapshot_steps: snapshot steps must be integers in 0..331 (the run's steps), got -1"),
+                     (dict(snapshot_steps=(0, 1000)), "snapshot_steps: snapshot steps must be integers in 0..331 (the run's steps), got 1000"),
+                     (dict(n_particles=True), "pf config n_particles: n_particles must be an integer >= 1, got True"),
+                     (dict(kld=True, n_particles=20000), "pf config: n_particles 20000 > kld_max_n 5000: KLD-sampling starts from "
+                                                         "n_particles and holds at most kld_max_n")):
+        with pytest.raises(ConfigError) as err:
+            run_protocol(stachniss, **{"n_particles": 50, "seed": 0, **kw})
+        assert f"{err.value.source}: {err.value.reason}" == line
+    r = run_protocol(stachniss, np.int64(50), 0, kidnap_at_step=np.int64(150), snapshot_steps=(0, 331), with_ape_rpe=False)
+    assert r.settings["kidnap_at_step"] == 150 and type(r.settings["kidnap_at_step"]) is int and sorted(r.snapshots) == [0, 331]
+    data = shared_path("pf", "burgard_particle_filter")
+    for args, line in ((["--snapshots", "0,0,5", "--out", str(tmp_path / "a")], "--snapshots: a snapshot step is listed twice: '0,0,5'"),
+                       (["--snapshots", ",", "--out", str(tmp_path / "b")], "--snapshots: no snapshot step in ','"),
+                       (["-n", "20000", "--kld"], "--particles: --particles 20000 (KLD-sampling's first count) is above --kld-max 5000"),
+                       (["--kld", "--kld-min", "100", "--kld-unconverged", "500", "--kld-max", "600"],
+                        "--kld-max: --particles 1000 (KLD-sampling's first count) is above --kld-max 600")):
+        with pytest.raises(SystemExit) as exc:
+            main(["pf", str(data), *args])
+        assert exc.value.code == 1
+        assert capsys.readouterr().err == f"error: {line}\n"

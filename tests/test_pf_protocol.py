@@ -373,3 +373,25 @@ def test_a_world_file_given_as_the_data_says_what_is_expected(capsys):
     assert exc.value.code == 1
     assert capsys.readouterr().err == (f"error: {world} (line 1): an 'id x y' line of a world (landmark) file, not sensor data: "
                                        "expected a data folder or its sensor_data.dat\n")
+
+
+def test_a_recording_shorter_than_the_mse_start_is_refused_before_the_filter_runs(tmp_path, capsys):
+    """9 steps ran the whole filter, then failed "dead_reckoning vs ground_truth: needs more than 10 steps for the MSE
+    from step 10; has 10" (poses counted as steps, the file not named). 10 steps score the MSE on step 10."""
+    source = shared_path("pf", "robot_mapping_stachniss")
+    lines = (source / "sensor_data.dat").read_text().splitlines()
+    odometry = [i for i, line in enumerate(lines) if line.startswith("ODOMETRY")]
+    for steps in (9, 10):
+        (tmp_path / f"s{steps}").mkdir()
+        (tmp_path / f"s{steps}" / "world.dat").write_text((source / "world.dat").read_text())
+        (tmp_path / f"s{steps}" / "sensor_data.dat").write_text("\n".join(lines[:odometry[steps]]) + "\n")
+    sensor = tmp_path / "s9" / "sensor_data.dat"
+    with pytest.raises(SystemExit) as exc:
+        main(["pf", str(tmp_path / "s9"), "-n", "50"])
+    assert exc.value.code == 1
+    assert capsys.readouterr().err == (f"error: {sensor}: 9 steps: the protocol scores the position MSE from step 10 on, "
+                                       "so it needs at least 10\n")
+    with pytest.raises(DataError, match="9 steps: the protocol scores the position MSE from step 10 on"):
+        run_protocol(LandmarkData(tmp_path / "s9"), 50, 0, on_step=lambda *_: pytest.fail("the filter ran"))
+    assert run_protocol(LandmarkData(tmp_path / "s9"), 50, 0, mse_start=9).metrics["mse_start"] == 9
+    assert np.isfinite(run_protocol(LandmarkData(tmp_path / "s10"), 50, 0).metrics["mse_m2"]["mean"])

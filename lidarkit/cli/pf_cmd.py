@@ -39,6 +39,10 @@ def _steps(text: str) -> tuple[int, ...]:
         raise ConfigError(f"snapshot steps must be comma-separated integers, got {text!r}", source="--snapshots") from None
     if any(s < 0 for s in steps):
         raise ConfigError(f"snapshot steps must be >= 0, got {text!r}", source="--snapshots")
+    if not steps:  # (',' drew no particles.png, without a word)
+        raise ConfigError(f"no snapshot step in {text!r}", source="--snapshots")
+    if len(set(steps)) != len(steps):  # (step 0 was drawn twice)
+        raise ConfigError(f"a snapshot step is listed twice: {text!r}", source="--snapshots")
     return steps
 
 
@@ -118,7 +122,9 @@ def pf_command(
     study = len(counts) > 1 or seeds > 1
     _refuse_unused_options(ctx, kld=kld, augmented=augmented, kernel=kernel, kidnap_at=kidnap_at, study=study,
                            likelihood=PROTOCOLS.get(protocol, {}).get("likelihood", likelihood))  # (the report protocol's is nearest)
-    if augmented and not alpha_slow < alpha_fast:  # (these rules across options named "pf config")
+    # (these rules across options named "pf config"); each rate's own range is checked first, by the config: a NaN rate
+    # was named in the other's error ("--alpha-slow: must be below --alpha-fast nan")
+    if augmented and all(0 < a <= 1 for a in (alpha_slow, alpha_fast)) and not alpha_slow < alpha_fast:
         raise ConfigError(f"must be below --alpha-fast {alpha_fast:g}, got {alpha_slow:g}", source="--alpha-slow")
     if (kld or augmented) and kernel == "kalman":
         raise ConfigError("KLD-sampling and augmented MCL need point particles (--kernel point)", source="--kld" if kld else "--augmented")
@@ -133,6 +139,9 @@ def pf_command(
             if value > kld_max:  # (it said "pf config: kld_min_n 6000 > kld_max_n 5000"); named: the one given
                 raise ConfigError(f"--{name.replace('_', '-')} {value} is above --kld-max {kld_max}",
                                   source=f"--{name.replace('_', '-')}" if _given(ctx, name) else "--kld-max")
+        if max(counts) > kld_max:  # (KLD-sampling's first count: 20000 ran above the 5000 of its title, without a word)
+            raise ConfigError(f"--particles {max(counts)} (KLD-sampling's first count) is above --kld-max {kld_max}",
+                              source="--particles" if _given(ctx, "particles") else "--kld-max")
     snapshot_steps = _steps(snapshots)  # checked whether or not there is a run folder to draw them in
     if gif and out is None:
         raise ConfigError("--gif needs --out DIR", source="--gif")
@@ -314,7 +323,8 @@ def _recorded(data, cfg: PFConfig, seed: int, fit_q: bool, out: Path | None, sna
         result = runs[-1]
         if snap:  # a re-run of the last fit that keeps the particle clouds of the figures
             with _step_progress(cfg, len(data), "pf run for the snapshots") as on_step:
-                result = run_recorded(data, None, seed, config=runs[-1].config, snapshot_steps=snap, on_step=on_step)
+                result = run_recorded(data, None, seed, config=runs[-1].config, snapshot_steps=snap, warn_lost=False,  # (the fit's own warned)
+                                      on_step=on_step)
         for key in ("q_verdict", "q_fit_settled"):  # (a re-run for the snapshots: the fit's own verdict)
             if key in runs[-1].metrics:
                 result.metrics[key] = runs[-1].metrics[key]
@@ -338,6 +348,8 @@ def _recorded(data, cfg: PFConfig, seed: int, fit_q: bool, out: Path | None, sna
 
 
 def _print_study(rows, cfg: PFConfig, protocol: str, kidnap_at: int | None) -> None:
+    from lidarkit.pf.study import RECOVERED_WITHIN_STEPS
+
     seeds = rows[0].seeds
     title = (f"particle filter study ({protocol} protocol, {cfg.likelihood}"
              f"{'/' + cfg.nearest_association if cfg.likelihood == 'nearest' else ''}, estimator {cfg.estimator}, "
@@ -349,15 +361,15 @@ def _print_study(rows, cfg: PFConfig, protocol: str, kidnap_at: int | None) -> N
         table.add_column("recovered", justify="right")
     table.caption = (f"MSE: position, from step 10, over {len(seeds)} seeds (std ddof=0); mean N: particles per step; "
                      "localized: seeds with error < 0.5 m at >= 95% of the steps from 50 on; lost: seeds with a step beyond "
-                     "the chi-square 99.9% gate" + ("; recovered: seeds back below 0.5 m for good within 40 steps of the kidnap"
-                                                    if kidnap_at is not None else ""))
+                     "the chi-square 99.9% gate" + (f"; recovered: seeds back below 0.5 m for good within {RECOVERED_WITHIN_STEPS} "
+                                                    "steps of the kidnap" if kidnap_at is not None else ""))
     for r in rows:
         judged = [f for f in r.localized if np.isfinite(f)]  # NaN: no step from 50 on to judge (a shorter recording)
         localized = f"{sum(f >= 0.95 for f in judged)} / {len(judged)}" if judged else "n/a"
         cells = [str(r.n_particles), f"{r.mse_mean:.4g} ± {r.mse_std:.3g}", f"{np.mean(r.mean_count):.0f}",
                  localized, f"{r.lost_seeds} / {len(seeds)}", f"{np.mean(r.runtime_s):.3f}"]
         if kidnap_at is not None:
-            cells.append(f"{sum(k is not None and k <= 40 for k in r.recovered_in)} / {len(seeds)}")
+            cells.append(f"{sum(k is not None and k <= RECOVERED_WITHIN_STEPS for k in r.recovered_in)} / {len(seeds)}")
         table.add_row(*cells)
     stdout().print(table)
 
@@ -414,6 +426,10 @@ def _print(result) -> None:
     if result.ground_truth is not None:
         err = result.position_error_m()
         _row(table, "position error at the last step [m]", f"{err[-1]:.3f}")
+    if "kidnap_recovery" in m:  # the study's "recovered", for one run
+        k, within = m["kidnap_recovery"]["steps_to_recover"], m["kidnap_recovery"]["within_steps"]
+        _row(table, f"kidnap recovered (< 0.5 m for good, <= {within} steps)",
+             "no, never" if k is None else f"{'yes' if k <= within else 'no'}, {k} steps")
     _row(table, "filter runtime [s]", f"{result.runtime_s:.3f}")
     _row(table, "resamples / steps", f"{int(result.resampled.sum())} / {result.n_steps}")
     if result.n_weight_resets:

@@ -117,6 +117,13 @@ class PFConfig(BaseModel):
     dtype: Literal["float32", "float64"] = "float32"
     noise_block_elements: int = 1 << 17  # motion noise drawn for this many numbers at once (cache-sized)
 
+    @field_validator("n_particles", mode="before")
+    @classmethod
+    def _not_a_bool(cls, v):
+        if isinstance(v, bool):  # (True was read as 1: a one-particle filter)
+            raise ValueError(f"n_particles must be an integer >= 1, got {v!r}")
+        return v
+
     @field_validator("n_particles")
     @classmethod
     def _positive_n(cls, v: int) -> int:
@@ -154,6 +161,9 @@ class PFConfig(BaseModel):
             raise ValueError(f"augmented MCL needs alpha_slow < alpha_fast, got {self.alpha_slow} and {self.alpha_fast}")
         if self.kld and self.kld_min_n > self.kld_max_n:
             raise ValueError(f"kld_min_n {self.kld_min_n} > kld_max_n {self.kld_max_n}")
+        if self.kld and self.n_particles > self.kld_max_n:  # (20000 ran above the 5000 its title said, without a word)
+            raise ValueError(f"n_particles {self.n_particles} > kld_max_n {self.kld_max_n}: KLD-sampling starts from n_particles "
+                             "and holds at most kld_max_n")
         if self.kld and self.kld_unconverged_n > self.kld_max_n:
             raise ValueError(f"kld_unconverged_n {self.kld_unconverged_n} > kld_max_n {self.kld_max_n}")
         if (self.kld or self.augmented) and self.kernel == "kalman":

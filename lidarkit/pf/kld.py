@@ -26,11 +26,12 @@ _KEY_WEIGHTS = np.array([KEY_STRIDE * KEY_STRIDE, KEY_STRIDE, 1.0])
 
 
 def kld_bound(k: np.ndarray | int, epsilon: float, z: float) -> np.ndarray:
-    """Fox's sample count for ``k`` occupied bins (float; 1 for k <= 1)."""
+    """Fox's sample count for ``k`` occupied bins (float; 1 for k <= 1; inf where it exceeds a float)."""
     k = np.asarray(k, dtype=np.float64)
     km1 = np.maximum(k - 1.0, 1.0)
     a = 2.0 / (9.0 * km1)
-    n = km1 / (2.0 * epsilon) * (1.0 - a + np.sqrt(a) * z) ** 3
+    with np.errstate(over="ignore"):
+        n = km1 / (2.0 * epsilon) * (1.0 - a + np.sqrt(a) * z) ** 3
     return np.where(k > 1, n, 1.0)
 
 
@@ -40,7 +41,12 @@ def kld_count(k: int, epsilon: float, z: float, n_min: int, n_max: int) -> int:
         n = 1.0
     else:
         a = 2.0 / (9.0 * (k - 1))
-        n = (k - 1) / (2.0 * epsilon) * (1.0 - a + math.sqrt(a) * z) ** 3
+        base = 1.0 - a + math.sqrt(a) * z
+        # compared in logs first: an absurd z or epsilon (1e200, 1e-320) overflowed the cube (OverflowError) or gave
+        # inf (ceil failed) at the first resampling; a bound that large is n_max
+        if base > 0 and math.log(k - 1) - math.log(2.0 * epsilon) + 3.0 * math.log(base) >= math.log(n_max):
+            return int(n_max)
+        n = (k - 1) / (2.0 * epsilon) * base ** 3
     return int(min(max(math.ceil(n - 1e-9), n_min), n_max))
 
 

@@ -69,6 +69,8 @@ def kidnapped_ground_truth(odometry: np.ndarray, kidnap_at_step: int | None, kid
     T = len(odometry)
     if kidnap_at_step is None:
         return integrate_odometry(odometry)
+    if isinstance(kidnap_at_step, bool) or not isinstance(kidnap_at_step, (int, np.integer)):  # (1.5 ran as step 1, "150" as 150)
+        raise ConfigError(f"kidnap step must be an integer in 1..{T}, got {kidnap_at_step!r}", source="kidnap_at_step")
     k = int(kidnap_at_step)
     offset = np.asarray(kidnap_offset, dtype=np.float64).reshape(-1)
     if not 1 <= k <= T:
@@ -239,10 +241,14 @@ def run_filter(
         raise DataError(f"non-finite reading {int(np.argmax(bad))}", source="readings")
     if len(readings.offsets) != len(odometry) + 1:
         raise DataError(f"{len(readings.offsets) - 1} reading steps for {len(odometry)} odometry steps", source="readings")
+    T = len(odometry)
+    odd = [s for s in snapshot_steps if isinstance(s, bool) or not isinstance(s, (int, np.integer)) or not 0 <= s <= T]
+    if odd:  # (-1 and steps past the end were left out without a word)
+        raise ConfigError(f"snapshot steps must be integers in 0..{T} (the run's steps), got {', '.join(map(str, odd))}",
+                          source="snapshot_steps")
     odometry_rows = [tuple(float(v) for v in row) for row in odometry]
     lm_index = readings.landmark_index.astype(np.int64)
     z_all = readings.z.astype(pf.states.dtype)
-    T = len(odometry)
     est = {k: np.empty((T + 1, 3)) for k in estimators}
     for k in estimators:
         est[k][0] = pf.estimate(k)
@@ -343,6 +349,11 @@ def data_files(data: Any) -> dict[str, str]:
     return out
 
 
+def _sensor_source(data: Any) -> str:
+    """The file an error about the recording names: its sensor file (else its folder)."""
+    return str(getattr(data, "sensor_path", None) or getattr(data, "root", None) or "recorded data")
+
+
 def checked_seed(seed: Any) -> int:
     """``seed`` as the integer >= 0 a reproducible run needs (None would draw fresh entropy: refused)."""
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
@@ -378,11 +389,15 @@ def run_protocol(
     the same Q the filter uses (``q``/``q_as`` of the config). ``n_particles`` (if given) overrides the
     config's. ``estimators`` (default: the config's)
     are all recorded; MSE uses ``lidarkit.eval.position_mse`` from step ``mse_start`` on.
-    ``kidnap_at_step`` / ``kidnap_offset``: teleport the simulated robot (see :func:`simulate`).
+    ``kidnap_at_step`` / ``kidnap_offset``: teleport the simulated robot (see :func:`simulate`); the steps it took to
+    recover are ``metrics["kidnap_recovery"]``.
     """
     overrides = {k: v for k, v in dict(likelihood=likelihood, estimator=estimator, resampler=resampler, q_as=q_as).items() if v is not None}
     cfg = _resolve_config(config, n_particles, {**overrides, **config_overrides})
     seed = checked_seed(seed)
+    if len(data.odometry) < mse_start:  # (the whole filter ran first, then the MSE failed counting poses: "has 10" for 9 steps)
+        raise DataError(f"{len(data.odometry)} steps: the protocol scores the position MSE from step {mse_start} on, so it needs "
+                        f"at least {mse_start}", source=_sensor_source(data))
     data_seq, filter_seq = np.random.SeedSequence(seed).spawn(2)
     q_cov = resolve_q(cfg.q, cfg.q_as)
     sim = simulate(data, np.random.default_rng(data_seq), q_cov, visible=visible, kidnap_at_step=kidnap_at_step, kidnap_offset=kidnap_offset)
@@ -397,7 +412,7 @@ def run_protocol(
             "seed": seed,
             "visible": visible,
             "mse_start": mse_start,
-            "kidnap_at_step": kidnap_at_step,
+            "kidnap_at_step": int(kidnap_at_step) if kidnap_at_step is not None else None,
             "kidnap_offset": list(kidnap_offset) if kidnap_at_step is not None else None,
             "odometry_noise_std": list(ODOMETRY_NOISE_STD),
             "q_cov": q_cov.tolist(),
@@ -410,16 +425,21 @@ def run_protocol(
         **_filter_outputs(out, pf),
     )
     result.metrics = score_against_ground_truth(result, mse_start=mse_start, with_ape_rpe=with_ape_rpe)
+    if kidnap_at_step is not None:  # (only a study's table said whether a kidnap was recovered from)
+        from lidarkit.pf.study import kidnap_recovery
+
+        result.metrics["kidnap_recovery"] = kidnap_recovery(result.position_error_m(), int(kidnap_at_step))
     if warn_lost:
         _warn_lost(result)
     return result
 
 
-def _warn_lost(result: PFRunResult) -> None:
+def _warn_lost(result: PFRunResult, which: str = "") -> None:
+    """One warning if ``result`` lost track; ``which`` names the run among several (" with the given Q")."""
     if len(result.lost_steps):
         log.warning(
-            "filter lost on %d of %d steps (first at step %d): even the best particle is beyond the chi-square 99.9%% gate",
-            len(result.lost_steps), result.n_steps, int(result.lost_steps[0]) + 1,
+            "filter lost on %d of %d steps%s (first at step %d): even the best particle is beyond the chi-square 99.9%% gate",
+            len(result.lost_steps), result.n_steps, which, int(result.lost_steps[0]) + 1,
         )
 
 
@@ -447,13 +467,14 @@ def run_recorded(
     *,
     config: PFConfig | None = None,
     snapshot_steps: tuple[int, ...] = (),
+    warn_lost: bool = True,
     on_step: Callable[[int, int], None] | None = None,
     **config_overrides: Any,
 ) -> PFRunResult:
     """Run on the data's own odometry and SENSOR readings; report NIS consistency and distance to dead reckoning."""
     if len(data.meas_range_m) < 2:
         raise DataError(f"{len(data.meas_range_m)} SENSOR readings: the recorded mode needs at least 2 to judge Q by",
-                        source=str(getattr(data, "sensor_path", None) or getattr(data, "root", "recorded data")))
+                        source=_sensor_source(data))
     seed = checked_seed(seed)
     cfg = _resolve_config(config, n_particles, config_overrides)
     pf = make_filter(data.landmarks.positions_xy, cfg, np.random.default_rng(seed))
@@ -483,23 +504,25 @@ def run_recorded(
         verdict = q_verdict(result.metrics["nis_mean"], q_cov)
         result.metrics["q_fit_ml"] = q_fit.tolist()
         result.metrics["q_verdict"] = {"status": verdict.status, "factor": verdict.factor, "text": verdict.text}
-    _warn_lost(result)
+    if warn_lost:
+        _warn_lost(result)
     return result
 
 
 def fit_q_recorded(data, n_particles: int | None = None, seed: int = 0, *, config: PFConfig | None = None,
-                   max_rounds: int = 5, on_step: Callable[[int, int], None] | None = None,
+                   max_rounds: int = 5, warn_lost: bool = True, on_step: Callable[[int, int], None] | None = None,
                    **config_overrides: Any) -> tuple[PFRunResult, list[PFRunResult]]:
     """``--fit-q``: run on the recorded readings, take the ML Q of the innovations, run again with it; repeat
     (the particle spread changes with Q) until the NIS mean is within [1.5, 2.5], the fit repeats itself, or
     ``max_rounds`` re-runs. The last run's ``metrics["q_fit_settled"]`` says whether it got there (its verdict says so
-    when not).
+    when not). ``warn_lost``: warn if the run with the given Q or the last fit lost track, naming which (a discarded
+    round between them, often lost with its too small Q, says nothing).
 
     Returns the first run and the re-runs (the last one is the answer; its config holds the fitted Q as variances).
     """
     from lidarkit.pf.consistency import NIS_CONSISTENT, at_lower_bound, scale_fit
 
-    first = run_recorded(data, n_particles, seed, config=config, on_step=on_step, **config_overrides)
+    first = run_recorded(data, n_particles, seed, config=config, warn_lost=False, on_step=on_step, **config_overrides)
     runs: list[PFRunResult] = []
     current = first
     for _ in range(max_rounds):
@@ -512,7 +535,7 @@ def fit_q_recorded(data, n_particles: int | None = None, seed: int = 0, *, confi
         if runs and np.allclose(q_fit, current.settings["q_cov"], rtol=1e-9, atol=0.0):
             break  # the fit gives the Q it ran with: another re-run would repeat this one
         cfg = current.config.replace(q=(float(q_diag[0]), float(q_diag[1])), q_as="variance")
-        current = run_recorded(data, None, seed, config=cfg, on_step=on_step)
+        current = run_recorded(data, None, seed, config=cfg, warn_lost=False, on_step=on_step)
         runs.append(current)
         lo, hi = NIS_CONSISTENT
         if lo <= current.metrics["nis_mean"] <= hi:
@@ -521,6 +544,10 @@ def fit_q_recorded(data, n_particles: int | None = None, seed: int = 0, *, confi
     lo, hi = NIS_CONSISTENT
     settled = lo <= last.metrics["nis_mean"] <= hi
     last.metrics["q_fit_settled"] = settled
+    if warn_lost:
+        _warn_lost(first, " with the given Q")
+        if runs:
+            _warn_lost(last, f" with the fitted Q (fit {len(runs)})")
     if not settled and "q_verdict" in last.metrics:  # said, and not "--fit-q estimates Q" after --fit-q has run
         history = " -> ".join(f"{r.metrics['nis_mean']:.3g}" for r in [first, *runs])
         text = last.metrics["q_verdict"]["text"].replace("; --fit-q estimates Q", "")

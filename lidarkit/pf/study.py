@@ -26,6 +26,7 @@ PROTOCOLS: dict[str, dict[str, Any]] = {
 }
 LOCALIZED_TOL_M = 0.5  # a step counts as localized when the position error is below this
 LOCALIZED_FROM_STEP = 50
+RECOVERED_WITHIN_STEPS = 40  # a kidnapped filter counts as recovered when it gets back within this many steps
 
 
 def protocol_config(config: PFConfig, protocol: str) -> PFConfig:
@@ -49,6 +50,13 @@ def steps_to_recover(error_m: np.ndarray, kidnap_step: int, tol_m: float = LOCAL
     first_ok_region = kidnap_step + (int(bad[-1]) + 1 if len(bad) else 0)
     ok = np.flatnonzero(e[first_ok_region:] < tol_m)
     return int(first_ok_region + ok[0] - kidnap_step) if len(ok) else None
+
+
+def kidnap_recovery(error_m: np.ndarray, kidnap_step: int) -> dict[str, Any]:
+    """One run's kidnap figures: ``steps_to_recover`` (None: never) and ``recovered`` (within RECOVERED_WITHIN_STEPS,
+    the study's count)."""
+    k = steps_to_recover(error_m, kidnap_step)
+    return {"steps_to_recover": k, "recovered": k is not None and k <= RECOVERED_WITHIN_STEPS, "within_steps": RECOVERED_WITHIN_STEPS}
 
 
 @dataclass
@@ -111,4 +119,4 @@ def run_study(data, particles: list[int], seeds: list[int], *, config: PFConfig 
     return rows
 
 
-__all__ = ["PROTOCOLS", "StudyRow", "localized_fraction", "protocol_config", "run_study", "steps_to_recover"]
+__all__ = ["PROTOCOLS", "RECOVERED_WITHIN_STEPS", "StudyRow", "kidnap_recovery", "localized_fraction", "protocol_config", "run_study", "steps_to_recover"]
