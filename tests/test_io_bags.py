@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from conftest import cli_exit_code
-from lidarkit.errors import ConfigError, DataError
+from lidarkit.errors import ConfigError, DataError, OutputError
 from lidarkit.io import available_datasets, detect_kind, open_dataset
 from lidarkit.sim.bag_export import export_bag
 from lidarkit.sim.lidar import SimulatedLidarSequence, export_kitti
@@ -314,3 +314,57 @@ def test_an_export_never_replaces_or_mixes_with_one_that_finished_while_it_ran(t
         export_kitti(sim, folder, on_frame=other_folder_export_finishes)
     assert sorted(p.name for p in folder.iterdir()) == ["poses.txt"]
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no partial output left
+
+
+def test_a_ros1_bag_named_with_an_upper_case_suffix_is_refused_by_name(tmp_path, capsys):
+    """X.Bag was written (exit 0), then every reader said "not a readable ROS bag (AnyReaderError: Unrecognized storage
+    format '.Bag'; truncated or damaged?)": rosbags opens a ROS 1 bag only by a lower-case .bag name."""
+    from lidarkit.cli import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(["sim", "lidar", "--out", str(tmp_path / "X.Bag"), "--frames", "2", "--format", "rosbag1", "--no-progress"])
+    assert (exc.value.code, capsys.readouterr().err) == (
+        1, "error: --out: a ROS 1 bag is read back only by a lower-case .bag name: name it X.bag, got 'X.Bag'\n")
+    sim = SimulatedLidarSequence(n_frames=2, n_beams=8, n_azimuths=90)
+    with pytest.raises(ConfigError, match=r"read back only by a lower-case \.bag name: name it lib\.bag, got 'lib\.BAG'"):
+        export_bag(sim, tmp_path / "lib.BAG", "rosbag1")
+    assert not list(tmp_path.iterdir())
+    renamed = export_bag(sim, tmp_path / "ok.bag", "rosbag1").rename(tmp_path / "Y.Bag")
+    with pytest.raises(DataError, match=r"Y\.Bag: a ROS 1 bag is read only by a lower-case \.bag name: rename it to Y\.bag$"):
+        open_dataset(detect_kind(renamed), renamed)
+
+
+def test_a_dangling_symbolic_link_as_a_bag_is_refused_before_the_simulation(tmp_path, capsys):
+    """--out l.bag -> gone.bag: the sweeps were simulated, then the bag was refused as if "a bag appeared there while this
+    one was written (another export?)" (the link does not exist() but takes the name); the same for mcap and rosbag2."""
+    from lidarkit.cli import main
+
+    sim = SimulatedLidarSequence(n_frames=2, n_beams=8, n_azimuths=90)
+    for fmt, name, what in (("rosbag1", "l.bag", "file"), ("mcap", "l.mcap", "file"), ("rosbag2", "l2", "folder")):
+        (tmp_path / name).symlink_to(f"gone_{name}")
+        with pytest.raises(SystemExit) as exc:
+            main(["sim", "lidar", "--out", str(tmp_path / name), "--frames", "2", "--format", fmt, "--no-progress"])
+        assert (exc.value.code, capsys.readouterr().err) == (1, f"error: {tmp_path / name}: a symbolic link to a missing file is in "
+                                                                f"the way (-> gone_{name}): remove it or name another {what}\n")
+        frames = []
+        with pytest.raises(OutputError, match="a symbolic link to a missing file is in the way"):
+            export_bag(sim, tmp_path / name, fmt, on_frame=frames.append)
+        assert frames == []  # refused before the first sweep
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["l.bag", "l.mcap", "l2"]
+
+
+def test_a_scan_and_a_bag_reader_print_as_one_line(exports):
+    """repr(scan) printed every point array (thousands of lines for a sweep); a bag reader printed as
+    <lidarkit.io.rosbag.RosbagScans object at 0x...>."""
+    from lidarkit.io.base import Scan
+
+    bag = open_dataset("rosbag", exports[("rosbag1", "sqlite3")])
+    scan = bag.read_scan(1)  # (the last of 720 columns fires 719 / 7200 s after the sweep start)
+    assert repr(scan) == (f"Scan(frame 1, {len(scan.points_xyz)} points, point times relative_s 0-0.0998611 s, stamp 0.100000 s at "
+                          f"the sweep start, '{bag.path} message 1 on /points')")
+    assert repr(bag) == f"RosbagScans('{bag.path}', topic '/points', {N_FRAMES} scans, ground truth /ground_truth)"
+    mcap = open_dataset("mcap", exports[("mcap", "sqlite3")], ground_truth_topic="none")
+    assert repr(mcap) == f"McapScans('{mcap.path}', topic '/points', {N_FRAMES} scans, ground truth none)"
+    assert repr(Scan(np.zeros((0, 3)))) == "Scan(frame 0, 0 points, no point times, no stamp)"
+    assert repr(Scan(np.zeros((2, 3)), point_times_s=np.array([0.0, 1.0]), point_time_convention="fraction")) == (
+        "Scan(frame 0, 2 points, point times fraction 0-1, no stamp)")

@@ -273,7 +273,7 @@ def test_scenes_and_images_too_large_for_memory_are_refused_before_building(monk
     monkeypatch.setattr(lidarkit.resources, "available_memory_bytes", lambda: 2 * 2**30)
     with pytest.raises(ConfigError, match=r"terrain_amplitude_m / terrain_wavelength_m / n_frames: the hills' ground mesh \(3.75e\+07 "
                                           r"vertices every 0.4 m over 4 x 1.5 km around the path\) needs about 10.5 GiB"):
-        SimulatedLidarSequence(n_frames=3000, terrain_amplitude_m=1.0, terrain_wavelength_m=10.0)
+        SimulatedLidarSequence(n_frames=3000, terrain_amplitude_m=0.5, terrain_wavelength_m=10.0)
     with pytest.raises(ConfigError, match=r"width / height: a 4096x4096 image needs about 4.69 GiB of memory, more than 80% of the 2 GiB available"):
         SimulatedCameraSequence(width=4096, height=4096, n_frames=2)
     assert len(SimulatedLidarSequence(n_frames=20, terrain_amplitude_m=1.0)) == 20  # what fits is built
@@ -311,3 +311,89 @@ def test_read_scan_refuses_a_non_integer_index():
     with pytest.raises(DataError, match=r"frame index 0.5 is not an integer"):
         seq.read_scan_labels(0.5)
     assert np.array_equal(seq.read_scan(np.int64(2)).points_xyz, seq.read_scan(2).points_xyz)
+
+
+def test_a_yes_or_no_value_for_a_number_is_refused_in_both_simulators():
+    """true/yes/on/off read as 1 or 0 without a word: -p n_beams=true cast one beam, speed=off stood still, seed=yes was
+    seed 1, the camera's noise_std=true added noise of 1 grey level. Booleans stay booleans."""
+    from lidarkit.sim.street_camera import make_camera_config
+
+    with pytest.raises(ConfigError) as err:
+        open_sim("sim:street?beams=true&speed=off&seed=yes&frames=2")
+    assert err.value.reason == ("seed: takes a number, not a yes/no value (True); n_beams: takes a number, not a yes/no value "
+                                "(True); speed_mps: takes a number, not a yes/no value (False)")
+    with pytest.raises(ConfigError) as err:
+        make_camera_config(noise_std=True, threads=True)
+    assert (err.value.source, err.value.reason) == ("camera simulator", "threads: takes a number, not a yes/no value (True); "
+                                                    "noise_std: takes a number, not a yes/no value (True)")
+    with pytest.raises(ConfigError, match=r"^camera simulator: cx: takes a number, not a yes/no value \(False\)$"):  # (float | None too)
+        make_camera_config(cx=False)
+    with pytest.raises(ConfigError, match=r"^lidar simulator: open_object_lateral_m: takes a number, not a yes/no value \(True\)$"):
+        make_config(scene="open", open_object_lateral_m=[True, 10])  # (read as 1 m, refused as too near the path)
+    assert open_sim("sim:street?distortion=off&frames=2").config.motion_distortion is False
+    assert make_camera_config(occluder=True, cx=None).occluder is True and make_config(n_beams=np.int64(8)).n_beams == 8
+
+
+def test_cli_errors_name_the_option_and_list_the_valid_keys_for_an_unknown_one_only(tmp_path, capsys):
+    """-n 0 said "lidar simulator: n_frames: Input should be greater than or equal to 1 (valid: scene, ... 23 names)":
+    the option is named and the valid keys listed for an unknown key only; --storage MCAP said "storage: ..." after the
+    scene was built; a tuple given as 5,10 was "Input should be a valid tuple" with no hint of [5,10]."""
+    from lidarkit.cli import main
+
+    def err(*args):
+        with pytest.raises(SystemExit) as exc:
+            main(["sim", *args, "--out", str(tmp_path / "x"), "--no-progress"])
+        assert exc.value.code == 1
+        return capsys.readouterr().err
+
+    assert err("lidar", "-n", "0") == "error: --frames/-n: Input should be greater than or equal to 1\n"
+    assert err("lidar", "--seed", "-1") == "error: --seed: Input should be greater than or equal to 0\n"
+    assert err("lidar", "--scene", "forest") == "error: --scene: Input should be 'street', 'open' or 'ground'\n"
+    assert err("camera", "-n", "0") == "error: --frames/-n: Input should be greater than or equal to 2\n"
+    assert err("lidar", "-f", "rosbag2", "--storage", "MCAP") == "error: --storage: unknown ROS 2 storage 'MCAP'; known: sqlite3, mcap\n"
+    assert err("lidar", "--scene", "open", "-p", "open_object_lateral_m=5,10") == (
+        "error: lidar simulator: open_object_lateral_m: Input should be a valid tuple (write it as [5,10])\n")
+    assert err("lidar", "-n", "0", "-p", "n_beams=0") == ("error: lidar simulator: --frames/-n: Input should be greater than or "
+                                                          "equal to 1; n_beams: Input should be greater than or equal to 1\n")
+    assert err("lidar", "-p", "beamz=2").startswith("error: lidar simulator: beamz: Extra inputs are not permitted (valid: scene, "
+                                                    "n_frames, seed, n_beams,")
+    assert not (tmp_path / "x").exists()
+
+
+def test_a_wrong_kind_of_argument_is_a_config_error_naming_it(tmp_path):
+    """A dict for the config, a LiDAR config for the camera, a spec string for a sequence or None for a spec ended in an
+    AttributeError (or a TypeError) deep inside the simulators and exports."""
+    from lidarkit.sim.bag_export import export_bag
+    from lidarkit.sim.lidar import LidarSimConfig
+    from lidarkit.sim.street_camera import SimulatedCameraSequence, export_kitti_images, open_simcam
+
+    calls = [
+        (lambda: SimulatedLidarSequence({"n_frames": 3}), "config: takes a LidarSimConfig (or keyword parameters), got dict {'n_frames': 3}"),
+        (lambda: SimulatedCameraSequence(LidarSimConfig(n_frames=3)), "config: takes a CameraSimConfig (or keyword parameters), got LidarSimConfig"),
+        (lambda: export_kitti("sim:street", tmp_path / "zz"), "sequence: takes a SimulatedLidarSequence, got str 'sim:street'"),
+        (lambda: open_sim(None), "spec: takes a 'sim:SCENE?key=value' string, got NoneType None"),
+        (lambda: open_simcam(3), "spec: takes a 'simcam:SCENE?key=value' string, got int 3"),
+        (lambda: export_bag(None, tmp_path / "q.bag", "rosbag1"), "sequence: takes a SimulatedLidarSequence, got NoneType None"),
+        (lambda: export_kitti_images(None, tmp_path / "qq"), "sequence: takes a SimulatedCameraSequence, got NoneType None"),
+    ]
+    for call, message in calls:
+        with pytest.raises(ConfigError) as err:
+            call()
+        assert str(err.value) == message
+    assert not list(tmp_path.iterdir())
+
+
+def test_hills_steeper_than_a_slope_of_one_half_are_refused_in_both_simulators():
+    """terrain_amplitude_m=20 with terrain_wavelength_m=60, each within its own bound, made cliffs: the body tilted
+    65 deg (seed 0). amplitude x 2 pi / wavelength is bounded at 0.5 (the body tilts at most 15-27 deg)."""
+    from lidarkit.sim.street_camera import make_camera_config
+
+    message = ("config: terrain_amplitude_m 20 m every terrain_wavelength_m 60 m makes slopes of 2.09 (amplitude x 2 pi / "
+               "wavelength; at most 0.5, ~27 deg): a lower amplitude or a wavelength of at least 251 m")
+    for make in (make_config, make_camera_config):
+        with pytest.raises(ConfigError) as err:
+            make(terrain_amplitude_m=20.0, terrain_wavelength_m=60.0)
+        assert err.value.reason == message
+    steepest = SimulatedLidarSequence(n_frames=300, n_beams=4, n_azimuths=64, terrain_amplitude_m=4.77, terrain_wavelength_m=60.0)
+    tilt_deg = np.degrees(np.arccos(steepest.ground_truth.poses_se3[:, 2, 2]))
+    assert 20.0 < tilt_deg.max() < 27.0

@@ -32,3 +32,18 @@ def test_two_frames_give_one_pair_between_them():
     step_m = np.linalg.norm(pairs.poses[1][:3, 3] - pairs.poses[0][:3, 3])
     assert step_m > 0.1 and np.linalg.norm(a.T_target_source[:3, 3]) == pytest.approx(step_m, abs=1e-9)
     assert (a.init_T == a.T_target_source).all()
+
+
+def test_the_corridor_reaches_past_every_frame_and_n_frames_is_an_integer():
+    """The corridor was a fixed tunnel ending at x = 300 m: ScanPairs('corridor', n_frames=500).draw(400) returned
+    empty clouds (frames 1 m apart); n_frames=2.7 was truncated to 2 without a word."""
+    pairs = ScanPairs("corridor", n_frames=500, range_noise_m=0.0, **SMALL)
+    first, last = pairs.draw(0), pairs.draw(498)
+    assert last.frame == 498 and len(last.source_xyz) == len(last.target_xyz) == len(first.source_xyz) == 720
+    pose = pairs.poses[499]
+    world_x = last.source_xyz @ pose[0, :3] + pose[0, 3]
+    assert 499.0 - 80.0 <= world_x.min() and world_x.max() <= 499.0 + 80.0  # walls around frame 499, 200 m past the old end
+    for value in (2.7, True):
+        with pytest.raises(ConfigError) as err:
+            ScanPairs("corridor", n_frames=value, **SMALL)
+        assert (err.value.source, err.value.reason) == ("scan pairs", f"n_frames must be an integer, got {value!r}")

@@ -14,6 +14,9 @@ import typer
 
 from lidarkit.cli.app import app, stdout
 
+#: simulator fields with an option of their own (named in their errors; refused as --param)
+OWN_OPTIONS = {"scene": "--scene", "n_frames": "--frames/-n", "seed": "--seed"}
+
 sim_app = typer.Typer(help="Ground-truth simulators.", no_args_is_help=True)
 app.add_typer(sim_app, name="sim")
 
@@ -32,13 +35,15 @@ def sim_lidar(
     """Simulate a spinning LiDAR driving through a procedural scene; poses are T_world_lidar at the sweep end by default."""
     from lidarkit.cli.app import parse_params
     from lidarkit.errors import ConfigError
-    from lidarkit.sim.bag_export import BAG_FORMATS, check_bag_target, export_bag
-    from lidarkit.sim.lidar import SimulatedLidarSequence, export_kitti, make_config
+    from lidarkit.sim.bag_export import BAG_FORMATS, STORAGES, check_bag_target, export_bag
+    from lidarkit.sim.lidar import LidarSimConfig, SimulatedLidarSequence, checked_config, export_kitti
 
     if fmt not in ("kitti", *BAG_FORMATS):
         raise ConfigError(f"unknown format {fmt!r}; known: kitti, {', '.join(BAG_FORMATS)}", source="--format")
     if storage is not None and fmt != "rosbag2":  # (given at its default value too: it would say nothing)
         raise ConfigError("--storage applies to --format rosbag2 only", source="--storage")
+    if storage is not None and storage not in STORAGES:  # (the library's message named "storage", after the scene was built)
+        raise ConfigError(f"unknown ROS 2 storage {storage!r}; known: {', '.join(STORAGES)}", source="--storage")
     storage = storage or "sqlite3"
 
     from lidarkit.atomic import check_target
@@ -50,10 +55,9 @@ def sim_lidar(
                           f"kitti (a folder): add -f {'rosbag1' if out.suffix.lower() == '.bag' else 'mcap'}, or name a folder", source="--out")
     check_target(out, "file" if fmt in ("rosbag1", "mcap") else "folder")
     params = parse_params(param)
-    own = {"scene": "--scene", "n_frames": "--frames", "seed": "--seed"}
-    for key in sorted(own.keys() & params.keys()):
-        raise ConfigError(f"{key} has its own option: use {own[key]} instead of --param {key}=...", source=f"--param {key}")
-    config = make_config(scene=scene, n_frames=frames, seed=seed, **params)
+    for key in sorted(OWN_OPTIONS.keys() & params.keys()):
+        raise ConfigError(f"{key} has its own option: use {OWN_OPTIONS[key]} instead of --param {key}=...", source=f"--param {key}")
+    config = checked_config(LidarSimConfig, dict(scene=scene, n_frames=frames, seed=seed, **params), "lidar simulator", OWN_OPTIONS)
     from lidarkit.resources import check_memory
     from lidarkit.sim.lidar import SWEEP_BYTES_PER_RAY
 
@@ -88,14 +92,15 @@ def sim_camera(
     from lidarkit.atomic import check_target
     from lidarkit.cli.app import parse_params
     from lidarkit.errors import ConfigError
-    from lidarkit.sim.street_camera import SimulatedCameraSequence, export_kitti_images, make_camera_config
+    from lidarkit.sim.lidar import checked_config
+    from lidarkit.sim.street_camera import CameraSimConfig, SimulatedCameraSequence, export_kitti_images
 
     check_target(out, "folder")
     params = parse_params(param)
-    own = {"scene": "--scene", "n_frames": "--frames", "seed": "--seed"}
-    for key in sorted(own.keys() & params.keys()):
-        raise ConfigError(f"{key} has its own option: use {own[key]} instead of --param {key}=...", source=f"--param {key}")
-    sequence = SimulatedCameraSequence(make_camera_config(scene=scene, n_frames=frames, seed=seed, **params))
+    for key in sorted(OWN_OPTIONS.keys() & params.keys()):
+        raise ConfigError(f"{key} has its own option: use {OWN_OPTIONS[key]} instead of --param {key}=...", source=f"--param {key}")
+    config = checked_config(CameraSimConfig, dict(scene=scene, n_frames=frames, seed=seed, **params), "camera simulator", OWN_OPTIONS)
+    sequence = SimulatedCameraSequence(config)
     export = functools.partial(export_kitti_images, sequence, out)
     folder = _with_progress(export, frames, f"simcam {scene}", "images") if progress else export()
     cfg = sequence.config

@@ -64,6 +64,21 @@ class Scan:
     point_time_convention: PointTimeConvention = "relative_s"
     stamp_instant: PoseInstant | None = None
 
+    def __repr__(self) -> str:
+        """One line (the generated one printed every point array)."""
+        n = len(self.points_xyz)
+        t = self.point_times_s
+        times = "no point times"
+        if t is not None:
+            unit = "" if self.point_time_convention == "fraction" else " s"
+            span = f" {float(np.min(t)):.6g}-{float(np.max(t)):.6g}{unit}" if len(t) else ""
+            times = f"point times {self.point_time_convention}{span}"
+        stamp = "no stamp" if self.timestamp_s is None else f"stamp {self.timestamp_s:.6f} s"
+        if self.stamp_instant is not None:
+            stamp += f" at the sweep {self.stamp_instant}"
+        source = f", {self.source!r}" if self.source else ""
+        return f"Scan(frame {self.frame}, {n} points, {times}, {stamp}{source})"
+
     def point_fractions(self) -> np.ndarray | None:
         """Per-point position within the sweep in [0, 1] (first point 0, last point 1), whatever the convention."""
         if self.point_times_s is None or len(self.point_times_s) == 0:

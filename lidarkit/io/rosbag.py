@@ -118,6 +118,12 @@ class _BagScans:
         self.name = f"{self.kind}:{self.path.name}{self.topic}"
         self._open_loader()
 
+    def __repr__(self) -> str:
+        """One line naming the recording (it was ``<... object at 0x...>``)."""
+        scans = getattr(self, "n_scans", None)
+        return (f"{type(self).__name__}({str(self.path)!r}, topic {getattr(self, 'topic', None)!r}, "
+                f"{'?' if scans is None else scans} scans, ground truth {getattr(self, 'ground_truth_topic', None) or 'none'})")
+
     # ---- subclasses ----------------------------------------------------------------------------
     def _list_topics(self) -> dict[str, str]:
         raise NotImplementedError
@@ -402,6 +408,8 @@ class RosbagScans(_BagScans):
         from rosbags.highlevel import AnyReader
 
         paths = self._reader_paths()
+        if self.path.is_file() and self.path.suffix.lower() == ".bag" != self.path.suffix:  # (rosbags: "unknown storage format")
+            raise DataError(f"a ROS 1 bag is read only by a lower-case .bag name: rename it to {self.path.stem}.bag", source=self.path)
         try:
             with AnyReader(paths) as reader:
                 return {t: info.msgtype for t, info in reader.topics.items()}

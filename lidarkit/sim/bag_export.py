@@ -37,16 +37,22 @@ _PF_FLOAT32, _PF_UINT32 = 7, 6  # sensor_msgs/PointField datatype codes
 
 def check_bag_target(out: str | os.PathLike, fmt: str, option: str | None = None) -> Path:
     """``out`` as a bag of ``fmt`` may be named (as the readers and their detection recognise it) and is not there yet;
-    ConfigError naming ``option`` (default: the path) for a name, DataError for an existing bag. Checked again by
-    :func:`export_bag`; the CLI calls it before simulating."""
+    ConfigError naming ``option`` (default: the path) for a name, DataError for an existing bag, OutputError for a
+    dangling symbolic link. Checked again by :func:`export_bag`; the CLI calls it before simulating."""
     out = Path(out)
     suffix = {"rosbag1": ".bag", "mcap": ".mcap"}.get(fmt)
     if suffix is not None and out.suffix.lower() != suffix:  # (as the CLI and the readers' detection: run.MCAP is one)
         raise ConfigError(f"a {fmt} file is named *{suffix}, got {out.name!r}", source=option or out)
+    if fmt == "rosbag1" and out.suffix != ".bag":  # (rosbags' reader opens X.Bag as an unknown storage format)
+        raise ConfigError(f"a ROS 1 bag is read back only by a lower-case .bag name: name it {out.stem}.bag, got {out.name!r}",
+                          source=option or out)
     if fmt == "rosbag2" and out.suffix.lower() in (".bag", ".mcap"):  # a ROS 2 bag is a folder: read as a file by that name
         raise ConfigError(f"a rosbag2 bag is a folder: name it without {out.suffix}, got {out.name!r}", source=option or out)
     if out.exists():
         raise DataError("exists already; bags are never overwritten", source=out)
+    if out.is_symlink():  # (a dangling link: refused only after the simulation, as if another export had written it)
+        raise OutputError(f"a symbolic link to a missing file is in the way (-> {os.readlink(out)}): remove it or name another "
+                          f"{'folder' if fmt == 'rosbag2' else 'file'}", source=out)
     return out
 
 
@@ -58,6 +64,9 @@ def export_bag(sequence, out: str | os.PathLike, fmt: str = "rosbag2", *, storag
     ``"sqlite3"`` or ``"mcap"``) or ``"mcap"`` (``out`` is a ``.mcap`` file). The result appears only when
     complete (written beside it, then renamed); an existing ``out`` is an error, as with the ROS tools.
     """
+    from lidarkit.sim.lidar import SimulatedLidarSequence, check_argument
+
+    check_argument(sequence, SimulatedLidarSequence, "sequence")
     if fmt not in BAG_FORMATS:
         raise ConfigError(f"unknown bag format {fmt!r}; known: {', '.join(BAG_FORMATS)}", source="format")
     if storage not in STORAGES:

@@ -33,9 +33,9 @@ from pathlib import Path
 from typing import Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator, model_validator
 
-from lidarkit.errors import ConfigError, DataError, validation_problems
+from lidarkit.errors import ConfigError, DataError
 from lidarkit.io.base import Scan, checked_index
 from lidarkit.trajectory import Trajectory
 
@@ -60,8 +60,26 @@ _INSTANT_FRACTION = {"start": 0.0, "mid": 0.5, "end": 1.0}
 OPEN_OBJECT_CLEARANCE_M = 5.0
 #: Longest drive the simulator builds a scene along (m): ~5 MB of scene mesh per km.
 MAX_DRIVE_M = 200_000.0
+#: Steepest hills: ``terrain_amplitude_m x 2 pi / terrain_wavelength_m``, their typical steepest rise over run (at 0.5 the
+#: body tilted at most 15-27 deg over 300 sweeps of seeds 0-3; 20 m hills every 60 m, 2.1, tilted it 48-66 deg).
+MAX_TERRAIN_SLOPE = 0.5
 #: Most sweeps of one sequence: its ground truth and stamps take ~0.7 KB a sweep (0.7 GB for a million).
 MAX_FRAMES = 1_000_000
+
+
+def number_not_yes_or_no(model: type[BaseModel], value: object, info: ValidationInfo) -> object:
+    """``value`` of a simulator setting, refused when it is a yes/no value for a number: pydantic's lax mode reads True as
+    1 without a word (``-p n_beams=true`` cast one beam, ``speed=off`` stood still, ``seed=yes`` was seed 1)."""
+    import typing
+
+    def number(annotation: object) -> bool:  # int or float (``float | None`` too; ``bool`` not)
+        return annotation in (int, float) or any(number(a) for a in typing.get_args(annotation) if a is not bool)
+
+    items = value if isinstance(value, (list, tuple)) else [value]  # (a range: open_object_lateral_m=[true,10])
+    yes_no = [v for v in items if isinstance(v, (bool, np.bool_))]
+    if yes_no and number(model.model_fields[info.field_name].annotation):
+        raise ValueError(f"takes a number, not a yes/no value ({yes_no[0]})")
+    return value
 
 
 class LidarSimConfig(BaseModel):
@@ -104,12 +122,18 @@ class LidarSimConfig(BaseModel):
     point_times: bool = Field(True, description="attach per-point times to each Scan")
     pose_instant: PoseInstant = "end"
 
+    @field_validator("*", mode="before")
+    @classmethod
+    def _numbers_are_not_yes_or_no(cls, value: object, info: ValidationInfo) -> object:
+        return number_not_yes_or_no(cls, value, info)
+
     @model_validator(mode="after")
     def _check(self) -> LidarSimConfig:
         if self.elevation_min_deg > self.elevation_max_deg:
             raise ValueError("elevation_min_deg must not exceed elevation_max_deg")
         if self.min_range_m >= self.max_range_m:
             raise ValueError("min_range_m must be below max_range_m")
+        check_terrain_slope(self.terrain_amplitude_m, self.terrain_wavelength_m)
         lateral = self.open_object_lateral_m
         if lateral is not None and self.scene != "open":  # (accepted and ignored)
             raise ValueError(f"open_object_lateral_m places the open scene's objects; the {self.scene} scene has none of them")
@@ -140,13 +164,47 @@ class LidarSimConfig(BaseModel):
         return 1.0 / self.frame_rate_hz
 
 
-def make_config(**params: object) -> LidarSimConfig:
-    """Validated :class:`LidarSimConfig`; bad or unknown parameters raise ConfigError listing the valid ones."""
+def check_terrain_slope(amplitude_m: float, wavelength_m: float) -> None:
+    """ValueError for hills that are cliffs (amplitude and wavelength were bounded apart: 20 m every 60 m were allowed)."""
+    slope = amplitude_m * 2.0 * np.pi / wavelength_m
+    if slope > MAX_TERRAIN_SLOPE:
+        raise ValueError(f"terrain_amplitude_m {amplitude_m:g} m every terrain_wavelength_m {wavelength_m:g} m makes slopes of "
+                         f"{slope:.2f} (amplitude x 2 pi / wavelength; at most {MAX_TERRAIN_SLOPE:g}, ~27 deg): a lower amplitude "
+                         f"or a wavelength of at least {amplitude_m * 2.0 * np.pi / MAX_TERRAIN_SLOPE:.3g} m")
+
+
+def check_argument(value: object, kind: type, name: str, what: str | None = None) -> None:
+    """ConfigError naming the argument ``name`` when ``value`` is no ``kind`` (a wrong kind of argument ended in an
+    AttributeError deep inside)."""
+    if not isinstance(value, kind):
+        shown = f" {value!r}" if len(repr(value)) <= 40 else ""
+        raise ConfigError(f"takes {what or 'a ' + kind.__name__}, got {type(value).__name__}{shown}", source=name)
+
+
+def checked_config(model: type[BaseModel], params: dict, source: str, options: dict[str, str] | None = None) -> BaseModel:
+    """``model(**params)`` or one ConfigError naming ``source``: each problem by its field, or by the CLI option
+    ``options`` maps it to (``{"n_frames": "--frames/-n"}``; a problem of one option alone is that option's error); the
+    valid names are listed for an unknown key only (a bound listed all 23 of them), a tuple given as ``5,10`` is hinted
+    as ``[5,10]``."""
     try:
-        return LidarSimConfig(**params)
+        return model(**params)
     except ValidationError as err:
-        problems = validation_problems(err, unnamed="config")
-        raise ConfigError(f"{problems} (valid: {', '.join(LidarSimConfig.model_fields)})", source="lidar simulator") from None
+        options = options or {}
+        named = []  # (the field, its option or "config"; what is wrong)
+        for e in err.errors():
+            field = str(e["loc"][0]) if e["loc"] else ""
+            hint = f" (write it as [{e['input']}])" if e["type"] == "tuple_type" and isinstance(e["input"], str) else ""
+            where = options.get(field) or ".".join(map(str, e["loc"])) or "config"
+            named.append((where, e["msg"].removeprefix("Value error, ") + hint))
+        valid = f" (valid: {', '.join(model.model_fields)})" if any(e["type"] == "extra_forbidden" for e in err.errors()) else ""
+        if len(named) == 1 and named[0][0] in options.values():  # "--frames/-n: Input should be greater than or equal to 1"
+            raise ConfigError(named[0][1], source=named[0][0]) from None
+        raise ConfigError("; ".join(f"{where}: {what}" for where, what in named) + valid, source=source) from None
+
+
+def make_config(**params: object) -> LidarSimConfig:
+    """Validated :class:`LidarSimConfig`; bad or unknown parameters raise ConfigError (see :func:`checked_config`)."""
+    return checked_config(LidarSimConfig, params, "lidar simulator")
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -488,6 +546,8 @@ class SimulatedLidarSequence:
     def __init__(self, config: LidarSimConfig | None = None, **params: object):
         if config is not None and params:
             raise ConfigError("pass either a LidarSimConfig or keyword parameters, not both", source="lidar simulator")
+        if config is not None:
+            check_argument(config, LidarSimConfig, "config", "a LidarSimConfig (or keyword parameters)")
         self.config = config if config is not None else make_config(**params)
         cfg = self.config
         from lidarkit.resources import check_memory
@@ -677,6 +737,7 @@ def open_sim(spec: str) -> SimulatedLidarSequence:
     """
     from lidarkit.params import parse_kv
 
+    check_argument(spec, str, "spec", "a 'sim:SCENE?key=value' string")
     if not spec.startswith("sim:"):
         raise ConfigError("a simulator spec starts with 'sim:'", source=spec)
     body = spec[len("sim:") :]
@@ -724,6 +785,7 @@ def export_kitti(
     """
     from lidarkit import atomic
 
+    check_argument(sequence, SimulatedLidarSequence, "sequence")
     out = Path(out_dir)
     with atomic.export_folder(out, "sweeps") as tmp:
         _write_kitti(sequence, tmp, on_frame)
@@ -772,11 +834,16 @@ __all__ = [
     "make_terrain",
     "scene_terrain",
     "LidarSimConfig",
+    "MAX_TERRAIN_SLOPE",
     "PlanarPath",
     "SimulatedLidarSequence",
     "build_scene_mesh",
+    "check_argument",
+    "check_terrain_slope",
+    "checked_config",
     "export_kitti",
     "make_config",
     "make_path",
+    "number_not_yes_or_no",
     "open_sim",
 ]

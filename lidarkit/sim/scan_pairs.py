@@ -34,7 +34,8 @@ class ScanPair:
 class ScanPairs:
     """Pairs ``(frame k+1 -> frame k)`` of one scene; :meth:`draw` adds noise and an initial-guess perturbation.
 
-    ``spacing_m``: distance between the two sensor poses of a pair; ``init_sigma``: std of the guess perturbation
+    The two sensor poses of a pair are about 1 m apart (the corridor's frames 1 m along x; the street and open scenes
+    the simulator's drive at its default 10 m/s and 10 Hz); ``init_sigma``: std of the guess perturbation
     ``(translation m, rotation rad)``.
     """
 
@@ -44,6 +45,9 @@ class ScanPairs:
             raise ConfigError(f"unknown pair scene {scene!r}; valid: {', '.join(PAIR_SCENES)}", source="scan pairs")
         from lidarkit.sim.lidar import SimulatedLidarSequence
 
+        for name, value in (("n_frames", n_frames), ("seed", seed)):  # (n_frames=2.7 was truncated to 2 without a word)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+                raise ConfigError(f"{name} must be an integer, got {value!r}", source="scan pairs")
         self.scene, self.seed, self.n_frames = scene, int(seed), int(n_frames)
         self.range_noise_m, self.init_sigma = float(range_noise_m), tuple(float(s) for s in init_sigma)
         # checked here, not at the first draw (ZeroDivisionError or numpy's bare "scale < 0" came from draw)
@@ -78,8 +82,10 @@ class ScanPairs:
     def _corridor_scene(self):
         import open3d as o3d
 
-        length, half_width, floor, ceiling = 400.0, 2.0, -1.73, 1.5
-        x0, x1 = -100.0, length - 100.0
+        # 100 m beyond the path's ends, past the 80 m the rays reach (a fixed 400 m tunnel ended at x = 300: frames past
+        # it drew empty clouds)
+        half_width, floor, ceiling = 2.0, -1.73, 1.5
+        x0, x1 = -100.0, float(self.poses[:, 0, 3].max()) + 100.0
         quads = [  # floor, ceiling, left wall, right wall
             [(x0, -half_width, floor), (x1, -half_width, floor), (x1, half_width, floor), (x0, half_width, floor)],
             [(x0, -half_width, ceiling), (x1, -half_width, ceiling), (x1, half_width, ceiling), (x0, half_width, ceiling)],

@@ -32,11 +32,12 @@ from pathlib import Path
 from typing import Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator, model_validator
 
-from lidarkit.errors import ConfigError, DataError, validation_problems
+from lidarkit.errors import ConfigError, DataError
 from lidarkit.io.base import checked_index
-from lidarkit.sim.lidar import PlanarPath, Terrain, make_terrain
+from lidarkit.sim.lidar import (PlanarPath, Terrain, check_argument, check_terrain_slope, checked_config, make_terrain,
+                                number_not_yes_or_no)
 from lidarkit.sim.textures import TextureAtlas, mip_levels, natural_texture
 from lidarkit.trajectory import Trajectory
 
@@ -107,6 +108,11 @@ class CameraSimConfig(BaseModel):
     occluder_start: int | None = Field(None, ge=0, description="first occluded frame (None: the middle)")
     occluder_frames: int = Field(15, ge=1, description="frames the occluder takes to cross")
 
+    @field_validator("*", mode="before")
+    @classmethod
+    def _numbers_are_not_yes_or_no(cls, value: object, info: ValidationInfo) -> object:
+        return number_not_yes_or_no(cls, value, info)
+
     @model_validator(mode="after")
     def _check(self) -> CameraSimConfig:
         if self.speed_min_mps > self.speed_max_mps:
@@ -115,6 +121,7 @@ class CameraSimConfig(BaseModel):
             raise ValueError("corner_spacing_m must be (min, max) with 20 <= min <= max")
         if self.speed_max_mps <= 0.0:
             raise ValueError("speed_max_mps must be > 0 (the camera must move)")
+        check_terrain_slope(self.terrain_amplitude_m, self.terrain_wavelength_m)
         longest = self.speed_max_mps * (self.n_frames - 1) / self.frame_rate_hz
         if longest > MAX_CAMERA_DRIVE_M:  # (100 frames at 0.05 Hz built a 13 km street first, a billion frames 112 GiB)
             raise ValueError(f"the drive may reach {longest / 1000:.4g} km (speed_max_mps x n_frames / frame_rate_hz); at most "
@@ -135,13 +142,9 @@ class CameraSimConfig(BaseModel):
 
 
 def make_camera_config(**params: object) -> CameraSimConfig:
-    """Validated :class:`CameraSimConfig`; bad or unknown parameters raise ConfigError listing the valid ones."""
-    try:
-        return CameraSimConfig(**params)
-    except ValidationError as err:
-        problems = validation_problems(err, unnamed="config")
-        raise ConfigError(f"{problems} (valid: {', '.join(CameraSimConfig.model_fields)})",
-                          source="camera simulator") from None
+    """Validated :class:`CameraSimConfig`; bad or unknown parameters raise ConfigError (see
+    :func:`~lidarkit.sim.lidar.checked_config`)."""
+    return checked_config(CameraSimConfig, params, "camera simulator")
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -486,6 +489,8 @@ class SimulatedCameraSequence:
     def __init__(self, config: CameraSimConfig | None = None, **params: object):
         if config is not None and params:
             raise ConfigError("pass either a CameraSimConfig or keyword parameters, not both", source="camera simulator")
+        if config is not None:
+            check_argument(config, CameraSimConfig, "config", "a CameraSimConfig (or keyword parameters)")
         self.config = cfg = config if config is not None else make_camera_config(**params)
         from lidarkit.resources import check_memory
 
@@ -812,6 +817,7 @@ def open_simcam(spec: str) -> SimulatedCameraSequence:
     """
     from lidarkit.params import parse_kv
 
+    check_argument(spec, str, "spec", "a 'simcam:SCENE?key=value' string")
     if not spec.startswith("simcam:"):
         raise ConfigError("a camera simulator spec starts with 'simcam:'", source=spec)
     scene, _, query = spec[len("simcam:"):].partition("?")
@@ -842,6 +848,7 @@ def export_kitti_images(sequence: SimulatedCameraSequence, out_dir: str | os.Pat
     files is refused (an earlier export's images were left beside a shorter one's poses)."""
     from lidarkit import atomic
 
+    check_argument(sequence, SimulatedCameraSequence, "sequence")
     out = Path(out_dir)
     with atomic.export_folder(out, "images") as tmp:
         _write_kitti_images(sequence, tmp, on_frame)
