@@ -133,7 +133,7 @@ def test_vo_cli_errors_are_one_line(tmp_path, capsys):
     assert code == 1 and "no images" in err
     code, _, err = _run(["vo", str(sample_path("kitti_vo", "06", "image_0")), "--kind", "images", "--scale", "gt"],
                         capsys)
-    assert code == 1 and "needs a ground-truth" in err
+    assert code == 1 and "error: --scale: scale gt needs ground-truth poses" in err
     # options checked before anything runs, whether or not this input would use them
     seq = str(sample_path("kitti_vo", "06"))
     for args, message in ((["--gif"], "--gif: --gif needs --out DIR"), (["--poses-format", "foo"], "--poses-format: unknown format 'foo'"),
@@ -304,6 +304,42 @@ def test_timestamps_file_is_used_and_checked(tmp_path, capsys):
     stamps.write_text("".join(f"{100.0 + 0.1 * k:.3f}\n" for k in (0, 1, 2, 1, 4, 5, 6, 7)))
     code, _, err = _run(["vo", str(seq), "--timestamps", str(stamps)], capsys)
     assert code == 1 and "stamps.txt (line 4 (frame 3)): time stamps are not strictly increasing" in err and len(err.strip().splitlines()) == 1
+
+
+def test_a_non_finite_time_stamp_of_an_image_folder_names_its_line(tmp_path, capsys):
+    """nan on line 5 of an image folder's --timestamps read "not strictly increasing (nan after 3)", inf there
+    blamed line 6, and inf on the last line "vo timestamps_s: 8 time stamps for 8 images, which must be finite and
+    increasing" (neither file nor line)."""
+    folder = tmp_path / "imgs"
+    shutil.copytree(sample_path("kitti_vo", "06") / "image_0", folder)
+    stamps = tmp_path / "stamps.txt"
+    for bad, line in (("nan", 5), ("inf", 5), ("inf", 8)):
+        stamps.write_text("".join(f"{bad if k == line - 1 else k}\n" for k in range(8)))
+        code, _, err = _run(["vo", str(folder), "--timestamps", str(stamps)], capsys)
+        assert code == 1 and err.strip().splitlines()[-1] == f"error: {stamps} (line {line}): NaN or infinite value", err
+
+
+def test_a_run_folder_that_is_the_image_folder_is_refused(tmp_path, capsys):
+    """lidarkit vo imgs -o imgs wrote trajectory.png among the images, and the next run read it as a frame."""
+    folder = tmp_path / "imgs"
+    shutil.copytree(sample_path("kitti_vo", "06") / "image_0", folder)
+    code, _, err = _run(["vo", str(folder), "-o", str(folder / ".." / "imgs")], capsys)
+    assert code == 1 and err.strip().splitlines()[-1] == (
+        f"error: --out: the run folder is the image folder {folder.resolve()}: the next run would read its "
+        "trajectory.png as a frame; give another folder")
+    assert sorted(p.name for p in folder.iterdir()) == [f"{i:06d}.png" for i in range(8)]
+
+
+def test_a_kitti_root_with_several_sequences_is_refused(tmp_path, capsys):
+    """--kind kitti on a root holding sequences 00 and 06 ran sequence 00 without saying so."""
+    for number in ("00", "06"):
+        shutil.copytree(sample_path("kitti_vo", "06"), tmp_path / "sequences" / number)
+    code, _, err = _run(["vo", str(tmp_path), "--kind", "kitti"], capsys)
+    assert code == 1 and err.strip().splitlines()[-1] == (
+        f"error: {tmp_path}: a KITTI root with 2 sequences (00, 06): give one sequence's folder, e.g. "
+        f"{tmp_path / 'sequences' / '00'}")
+    code, stdout, err = _run(["vo", str(tmp_path / "sequences" / "06"), "--scale", "gt"], capsys)
+    assert code in (0, None) and "APE raw" in stdout, err
 
 
 def test_a_missing_image_is_a_rejected_frame_not_a_frame_left_out(tmp_path, capsys):
@@ -555,6 +591,57 @@ def test_settings_of_a_stage_choice_not_taken_are_said_and_options_set_twice_ref
         assert code == 1 and f"error: --set {key}: given twice, by {named} and by --set {key}=...: give it once" in err, err
 
 
+def test_sanity_and_klt_settings_the_pipeline_does_not_use_are_said(capsys):
+    """--no-sanity --set sanity.min_parallax_px=50 and --preset report_sift --set matching.klt_levels=0 (descriptor
+    matching, gt scale: no KLT anywhere) gave byte-identical poses without the "not used" note."""
+    seq = str(sample_path("kitti_vo", "06"))
+    code, _, err = _run(["vo", seq, "--max-frames", "3", "--no-sanity", "--set", "sanity.min_parallax_px=50",
+                         "--set", "sanity.min_inliers=40"], capsys)
+    assert code in (0, None) and err.count("note: --set") == 1, err  # the inlier count gates every pair
+    assert "note: --set sanity.min_parallax_px not used: sanity.enabled is false: the pose checks are off" in err
+    code, _, err = _run(["vo", seq, "--max-frames", "3", "--preset", "report_sift", "--set", "matching.klt_levels=0"],
+                        capsys)
+    assert code in (0, None) and ("note: --set matching.klt_levels not used: matching.method is bf_cross: the setting "
+                                  "acts with klt or with the relative scale's corners (scale.points corners)") in err, err
+    code, _, err = _run(["vo", seq, "--max-frames", "3", "--preset", "report_sift", "--scale", "relative",
+                         "--set", "matching.klt_levels=2"], capsys)
+    assert code in (0, None) and "note: --set" not in err, err  # the relative scale tracks its corners by KLT
+
+
+def test_gt_scale_without_ground_truth_is_refused_before_self_calibration(tmp_path, capsys, caplog):
+    """--scale gt on an image folder without poses was refused by MonoVO ("vo scale.mode: scale mode 'gt' needs a
+    ground-truth trajectory") only after --self-calibrate had run (46 s on 50 frames)."""
+    from conftest import shared_path
+
+    folder = tmp_path / "imgs"
+    folder.mkdir()
+    for i in range(8):
+        shutil.copy(shared_path("kitti_images", "sequences", "06", "image_0", f"{i:06d}.png"), folder / f"{i:06d}.png")
+    import logging
+
+    with caplog.at_level(logging.INFO):
+        code, _, err = _run(["vo", str(folder), "--scale", "gt", "--self-calibrate"], capsys)
+    assert code == 1 and err.strip().splitlines()[-1] == (
+        f"error: --scale: scale gt needs ground-truth poses and the input {folder} has none: give --poses FILE or "
+        "--scale none|relative")
+    assert not any("self-calibration" in r.getMessage() for r in caplog.records)
+
+
+def test_start_kind_and_a_bare_list_value_are_named_in_their_errors(capsys):
+    """--start 8 on the 8-frame sample read "kitti_06_image_0: start frame 8 outside 0..7" and --kind bogus "vo input
+    kind: ..." (neither named the option); --set geometry.estimators=magsac read "Input should be a valid tuple"
+    without the [magsac] form that works."""
+    data = str(sample_path("kitti_vo", "06"))
+    for args, line in (
+        (["--start", "8"], f"error: --start: frame 8 is past the last frame 7 of {data}"),
+        (["--kind", "bogus"], "error: --kind: unknown input kind 'bogus'; known: auto, kitti, tum, images"),
+        (["--set", "geometry.estimators=magsac"],
+         "error: vo config geometry.estimators: Input should be a valid tuple (got 'magsac'); give a list: [magsac]"),
+    ):
+        code, _, err = _run(["vo", data, *args], capsys)
+        assert code == 1 and err.strip() == line, err
+
+
 def test_a_bad_value_of_an_option_names_the_option(capsys):
     """--scale relatve read "vo config scale.mode: ..." (the config field, not the option given); --set keeps the field."""
     data = str(sample_path("kitti_vo", "06"))
@@ -567,3 +654,24 @@ def test_a_bad_value_of_an_option_names_the_option(capsys):
         with pytest.raises(SystemExit) as exc:
             main(["vo", data, *args])
         assert exc.value.code == 1 and capsys.readouterr().err.strip() == line
+
+
+def test_every_plotted_trajectory_ends_in_a_dot_of_its_colour():
+    """The end marker was derived from the line style: "C0-"[:2] is "C0", so the VO curves' ends had no marker
+    (only the ground truth's "k-" became "ko")."""
+    from matplotlib.figure import Figure
+
+    from lidarkit.vo.output import draw_top_view
+
+    poses = np.repeat(np.eye(4)[None], 3, axis=0)
+    poses[:, 2, 3] = [0.0, 1.0, 2.5]
+    trajs = {name: Trajectory(poses) for name in ("ground truth", "VO raw", "VO smoothed")}
+    ax = Figure().add_subplot(1, 1, 1)
+    draw_top_view(ax, trajs)
+    curves, ends = ax.lines[0::2], ax.lines[1::2]
+    assert [e.get_marker() for e in ends] == ["o", "o", "o"]
+    from matplotlib.colors import to_hex
+
+    assert [to_hex(e.get_color()) for e in ends] == [to_hex(c.get_color()) for c in curves]
+    assert [to_hex(c.get_color()) for c in curves] == [to_hex(c) for c in ("k", "C0", "C1")]
+    assert [float(e.get_ydata()[0]) for e in ends] == [2.5, 2.5, 2.5]

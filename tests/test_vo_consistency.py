@@ -66,6 +66,20 @@ def test_a_ground_truth_with_wrong_rotations_is_caught(synthetic_run):
     assert all(abs(abs(p.rotation_diff_deg[1]) - 0.1) < 0.03 for p in pairs)
 
 
+def test_consistency_pairs_tracks_with_their_frames_after_an_unreadable_first_frame():
+    """With frame 0 unreadable the start frame's row is row 1, not row 0: the tracks were zipped with the rows by
+    position and the check raised "zip() argument 2 is longer than argument 1"."""
+    traj = forward_trajectory(6)
+    K = default_K()
+    images = render_sequence(make_plane_scene(np.random.default_rng(7)), traj, K)
+    images[0] = None
+    result = MonoVO(preset("lidarkit", **{"scale.mode": "gt"}), K, traj).run(images, keep_tracks=True)
+    assert result.meta["start_frame"] == 1
+    pairs = ground_truth_consistency(result, traj)
+    assert [(p.frame, p.ref_frame) for p in pairs] == [(2, 1), (3, 2), (4, 3), (5, 4)]
+    assert all(p.sampson_gt_px < 0.1 for p in pairs)
+
+
 def test_consistency_needs_tracks_and_matching_length(synthetic_run):
     traj, result = synthetic_run
     no_tracks = MonoVO(preset("lidarkit", **{"scale.mode": "none"}), result.K).run(

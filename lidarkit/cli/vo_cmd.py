@@ -112,10 +112,21 @@ def vo_command(
         raise ConfigError(err.reason, source=option) from None
     for key, why in inert_settings(cfg, settings):
         stderr().print(f"note: --set {key} not used: {why}", soft_wrap=True, markup=False)
-    vo_input = open_vo_input(data, kind=kind, calib=calib, timestamps=timestamps, poses=poses,
-                             poses_format=poses_format, focal_factor=focal_factor)
+    try:
+        vo_input = open_vo_input(data, kind=kind, calib=calib, timestamps=timestamps, poses=poses,
+                                 poses_format=poses_format, focal_factor=focal_factor)
+    except ConfigError as err:  # (the library's name for it: "vo input kind: unknown input kind 'bogus'")
+        if err.source != "vo input kind":
+            raise
+        raise ConfigError(err.reason, source="--kind") from None
+    _check_out_beside_images(out, vo_input.images)
     numbers = getattr(vo_input.images, "frames", None)  # the input's own frame numbers (KITTI's file names), if any
+    if start >= len(vo_input.images):  # (named the sequence only: "kitti_06_image_0: start frame 51 outside 0..50")
+        raise ConfigError(f"frame {start} is past the last frame {len(vo_input.images) - 1} of {data}", source="--start")
     vo_input = frame_range(vo_input, start, max_frames)
+    if cfg.scale.mode == "gt" and vo_input.ground_truth is None:  # (MonoVO refused it after --self-calibrate's 46 s)
+        raise ConfigError(f"scale gt needs ground-truth poses and the input {data} has none: give --poses FILE or "
+                          "--scale none|relative", source="--scale")
     if not vo_input.K_source.startswith("guess"):  # intrinsics known: the options that replace a guess do nothing
         unused = [name for name, given in (("--self-calibrate", self_calibrate), ("--focal-factor", focal_factor != DEFAULT_FOCAL_FACTOR))
                   if given]
@@ -217,6 +228,17 @@ def vo_command(
         paths = write_run(result, out, ground_truth=gt, metrics={**metrics, **({"not_scored": not_scored} if not_scored else {})},
                           extra_config=extra_config, gif_images=vo_input.images if gif else None)
         console.print(f"wrote {len(paths)} files to {out}")
+
+
+def _check_out_beside_images(out: Optional[Path], images) -> None:
+    """Refuse a run folder that is the folder of the input's images: the next run read its trajectory.png as a frame
+    (a subfolder is not listed as images, so a run folder inside it is left alone)."""
+    if out is None:
+        return
+    folders = {p.parent.resolve() for p in getattr(images, "image_paths", ())}
+    if out.resolve() in folders:
+        raise ConfigError(f"the run folder is the image folder {out.resolve()}: the next run would read its "
+                          "trajectory.png as a frame; give another folder", source="--out")
 
 
 def _scores(result, gt, scale_mode: str) -> tuple[dict, str | None]:

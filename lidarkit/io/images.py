@@ -59,7 +59,8 @@ def read_intrinsics(path: str | os.PathLike) -> np.ndarray:
 
 
 def read_image_timestamps(path: str | os.PathLike) -> np.ndarray:
-    """Timestamps in seconds: one number per line, or ``stamp name`` lines (TUM ``rgb.txt``); first column used."""
+    """Timestamps in seconds: one number per line, or ``stamp name`` lines (TUM ``rgb.txt``); first column used.
+    NaN or infinity is refused at its line (it failed later as "not strictly increasing", blaming the next line)."""
     stamps = []
     for lineno, raw in enumerate(read_lines(path), start=1):
         line = raw.strip()
@@ -69,6 +70,8 @@ def read_image_timestamps(path: str | os.PathLike) -> np.ndarray:
             stamps.append(float(line.replace(",", " ").split()[0]))
         except ValueError:
             raise DataError(f"not a time stamp: {line.split()[0]!r}", source=path, location=f"line {lineno}") from None
+        if not np.isfinite(stamps[-1]):
+            raise DataError("NaN or infinite value", source=path, location=f"line {lineno}")
     if not stamps:
         raise DataError("no time stamps", source=path)
     return np.asarray(stamps, dtype=np.float64)

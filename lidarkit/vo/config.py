@@ -201,8 +201,11 @@ def make_config(data: dict[str, Any] | None = None) -> VOConfig:
         where = " ".join(["vo config", *(".".join(str(p) for p in first["loc"]),)]).strip()
         message = first["msg"].removeprefix("Value error, ")
         value = first.get("input")
+        # (--set geometry.estimators=magsac said only "Input should be a valid tuple")
+        hint = f"; give a list: [{value}]" if first["type"] == "tuple_type" and isinstance(value, str) else ""
         # a field's value is shown; a whole section's (a check across its fields) would repeat every setting
-        raise ConfigError(message if isinstance(value, dict) else f"{message} (got {value!r})", source=where) from err
+        raise ConfigError((message if isinstance(value, dict) else f"{message} (got {value!r})") + hint,
+                          source=where) from err
 
 
 _PRESETS: dict[str, dict[str, Any]] = {
@@ -249,6 +252,13 @@ def preset(name: str, **changes: Any) -> VOConfig:
 CORNER_PATH_SETTINGS = ("points", "max_depth_views", "corner_min_angle_deg", "corner_pose")
 
 
+#: Sanity settings of the checks ``sanity.enabled`` switches off (the feature, match and inlier counts gate every pair).
+SANITY_CHECK_SETTINGS = ("max_rotation_deg", "min_parallax_px", "max_homography_share", "max_rotation_homography_px")
+
+#: KLT settings: used by KLT matching and by the relative scale's corner path, which tracks its corners by KLT.
+KLT_SETTINGS = ("klt_window_px", "klt_levels", "klt_fb_max_px")
+
+
 #: Settings of one choice of a stage: ``setting -> (the choosing field, the choices that use the setting)``.
 CHOICE_SETTINGS = {
     "preprocess.clahe_clip_limit": ("preprocess.method", ("clahe",)),
@@ -265,8 +275,10 @@ CHOICE_SETTINGS = {
 def inert_settings(cfg: VOConfig, keys: Any) -> list[tuple[str, str]]:
     """``(setting, why)`` for the dotted settings among ``keys`` that ``cfg`` does not use (``--set
     scale.corner_pose=corners`` or ``--set matching.ratio=0.1`` left the default pipeline's poses byte-identical
-    without a word)."""
+    without a word, as did ``--no-sanity --set sanity.min_parallax_px=50`` and ``matching.klt_levels`` with
+    descriptor matching)."""
     own = cfg.matching.method == "klt" and cfg.features.detector == "gftt"
+    corner_path = cfg.scale.mode == "relative" and cfg.scale.points == "corners" and not own
     notes = []
     for key in keys:
         if str(key) in CHOICE_SETTINGS:
@@ -277,6 +289,11 @@ def inert_settings(cfg: VOConfig, keys: Any) -> list[tuple[str, str]]:
                 notes.append((str(key), f"{chooser} is {chosen}: the setting acts with {' or '.join(users)}"))
             continue
         section, _, field = str(key).partition(".")
+        if section == "sanity" and field in SANITY_CHECK_SETTINGS and not cfg.sanity.enabled:
+            notes.append((str(key), "sanity.enabled is false: the pose checks are off"))
+        elif section == "matching" and field in KLT_SETTINGS and cfg.matching.method != "klt" and not corner_path:
+            notes.append((str(key), f"matching.method is {cfg.matching.method}: the setting acts with klt or with the "
+                                    "relative scale's corners (scale.points corners)"))
         if section != "scale" or field == "mode":
             continue
         if cfg.scale.mode != "relative":

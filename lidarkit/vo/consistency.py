@@ -72,10 +72,11 @@ def ground_truth_consistency(result: VOResult, ground_truth: Trajectory) -> list
                         source="ground_truth_consistency")
     K, focal = result.K, float(result.K[0, 0])
     gt, est = ground_truth.poses_se3, result.trajectory.poses_se3
-    accepted = [d for d in result.diagnostics[1:] if d.accepted]
+    # by frame, not by position: unreadable frames before the start frame have rows of their own
+    ref_frame = {d.frame: d.ref_frame for d in result.diagnostics if d.accepted}
     out = []
-    for (j, pts_ref, pts_cur), diag in zip(result.tracks, accepted, strict=True):
-        i = diag.ref_frame
+    for j, pts_ref, pts_cur in result.tracks:
+        i = ref_frame[j]
         a, b = normalize_points(pts_ref, K), normalize_points(pts_cur, K)
         if len(a) < 16:
             continue

@@ -88,6 +88,10 @@ def open_vo_input(path: str | os.PathLike, *, kind: str = "auto", calib: str | o
         from lidarkit.io.kitti import KittiOdometry
 
         root = path.parent if path.name == "image_0" else path
+        held = sorted(p.name for p in (root / "sequences").glob("*") if (p / "image_0").is_dir())
+        if not (root / "image_0").is_dir() and len(held) > 1:  # (sequence 00 of them ran without a word)
+            raise ConfigError(f"a KITTI root with {len(held)} sequences ({', '.join(held)}): give one sequence's "
+                              f"folder, e.g. {root / 'sequences' / held[0]}", source=str(path))
         options = {} if timestamps is None else {"times_file": timestamps}
         if poses is not None:
             options["poses_file"] = poses

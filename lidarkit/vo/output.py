@@ -45,11 +45,7 @@ def plot_vo_trajectories(path: str | os.PathLike, trajectories: dict[str, Trajec
     fig = Figure(figsize=(6.5, 5.0), dpi=100, layout="constrained")
     FigureCanvasAgg(fig)
     ax = fig.add_subplot(1, 1, 1)
-    styles = ["k-", "C0-", "C1--", "C2-", "C3-.", "C4:"]
-    for (label, traj), style in zip(trajectories.items(), styles * 3):
-        xyz = traj.positions_xyz
-        ax.plot(xyz[:, 0], xyz[:, 2], style, lw=1.4, label=label)
-        ax.plot(xyz[-1, 0], xyz[-1, 2], style[:2].replace("-", "o"), ms=4)
+    draw_top_view(ax, trajectories)
     ax.set_xlabel("x [m]")
     ax.set_ylabel("z (forward) [m]")
     ax.set_aspect("equal", adjustable="datalim")
@@ -58,6 +54,16 @@ def plot_vo_trajectories(path: str | os.PathLike, trajectories: dict[str, Trajec
     if title:
         ax.set_title(title, fontsize=9)
     return atomic.save_figure(fig, path)
+
+
+def draw_top_view(ax: Any, trajectories: dict[str, Trajectory]) -> None:
+    """One curve per trajectory on the matplotlib axes ``ax`` (x against z), its end marked by a dot of its colour
+    (the marker was derived from the line style, and "C0-" gave none)."""
+    styles = ["k-", "C0-", "C1--", "C2-", "C3-.", "C4:"]
+    for (label, traj), style in zip(trajectories.items(), styles * 3):
+        xyz = traj.positions_xyz
+        (line,) = ax.plot(xyz[:, 0], xyz[:, 2], style, lw=1.4, label=label)
+        ax.plot(xyz[-1, 0], xyz[-1, 2], "o", color=line.get_color(), ms=4)
 
 
 def write_feature_gif(path: str | os.PathLike, images: Any, tracks: list[tuple[int, np.ndarray, np.ndarray]],
