@@ -17,5 +17,7 @@ PF = ("config.yaml", "metrics.json", "study.json", "poses_kitti.txt", "poses_tum
 
 #: every name above: what a run into a folder replaces
 RUN_FILES = tuple(sorted(set(ODOMETRY) | set(VO) | set(PF)))
+#: what `lidarkit icp --out` writes (it replaces nothing else)
+ICP = ("result.json", "config.json", "bev.png", "rmse.png")
 
-__all__ = ["ODOMETRY", "PF", "RUN_FILES", "VO"]
+__all__ = ["ICP", "ODOMETRY", "PF", "RUN_FILES", "VO"]

@@ -149,9 +149,19 @@ def test_a_folder_where_a_run_file_goes_is_refused_before_the_work(tmp_path, cap
     (out / "ape.png").mkdir(parents=True)
     with pytest.raises(OutputError, match=r"run/ape.png: cannot write: is a folder"):
         atomic.check_target(out, "folder", files=("poses_kitti.txt", "ape.png"))
-    with pytest.raises(SystemExit):
-        main(["odometry", "sim:street?frames=2", "-m", "vanilla", "--no-progress", "-o", str(out)])
-    assert "run/ape.png: cannot write: is a folder" in " ".join(capsys.readouterr().err.split())
+    from lidarkit.samples import sample_path
+
+    pair = sample_path("kitti_pair")
+    for blocked, command in (("ape.png", ["odometry", "sim:street?frames=2", "-m", "vanilla", "--no-progress"]),
+                             ("bev.png", ["icp", str(pair / "000095.npy"), str(pair / "000094.npy")]),
+                             ("trajectory.png", ["vo", "simcam:street?frames=3", "--no-progress"])):
+        (out / blocked).mkdir(exist_ok=True)
+        with pytest.raises(SystemExit):
+            main([*command, "-o", str(out)])
+        printed, err = capsys.readouterr()
+        assert f"run/{blocked}: cannot write: is a folder" in " ".join(err.split()), command
+        assert printed == "", command  # refused before the work: no result table printed
+        (out / blocked).rmdir()
 
 
 def test_a_run_folder_through_a_link_or_in_a_parent_it_cannot_write(tmp_path, monkeypatch):

@@ -180,7 +180,9 @@ def icp(
 
     from lidarkit.atomic import check_target
 
-    check_target(out, "folder")
+    from lidarkit.run_files import ICP
+
+    check_target(out, "folder", files=ICP)
     registration = get_icp(method, **parse_params(param))
     source_xyz = read_point_file(source, drop_nonfinite=drop_nonfinite).points_xyz
     target_xyz = read_point_file(target, drop_nonfinite=drop_nonfinite).points_xyz

@@ -70,7 +70,9 @@ def vo_command(
 
     from lidarkit.atomic import check_target
 
-    check_target(out, "folder")
+    from lidarkit.run_files import RUN_FILES
+
+    check_target(out, "folder", files=RUN_FILES)  # (a folder named trajectory.png in it was found after the run)
     if seed is not None and seed < 0:
         raise ConfigError(f"must be >= 0, got {seed}", source="--seed")
     if max_frames is not None and max_frames < 1:
