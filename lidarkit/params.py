@@ -68,3 +68,13 @@ def parse_kv(items: Iterable[str] | str, option: str = "option") -> dict[str, An
 
 
 __all__ = ["parse_kv", "parse_value"]
+
+
+def number_field(annotation: Any) -> bool:
+    """Whether a config field annotated ``annotation`` holds an int or a float (``float | None`` too; ``bool`` not):
+    such a field refuses a yes/no value, which YAML reads from ``true``/``yes``/``on`` and pydantic's lax mode would
+    take as 1 or 0 without a word."""
+    import typing
+
+    return annotation in (int, float) or any(number_field(a) for a in typing.get_args(annotation) if a is not bool)
+

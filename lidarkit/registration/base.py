@@ -23,6 +23,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from lidarkit.errors import ConfigError, DataError, LidarKitError, RegistrationError, validation_problems
 from lidarkit.geometry import as_points, is_rotation, orthonormalize_se3
+from lidarkit.params import number_field
 from lidarkit.registration import local_origin
 from lidarkit.registration.covariance import use_model
 
@@ -44,13 +45,6 @@ INIT_ROTATION_TOL = 1e-3
 
 #: Default minimum number of final correspondences for a result to count as converged.
 DEFAULT_MIN_CORRESPONDENCES = 10
-
-
-def _number_field(annotation: Any) -> bool:
-    """Whether a field annotated ``annotation`` holds an int or a float (``float | None`` too; ``bool`` not)."""
-    import typing
-
-    return annotation in (int, float) or any(_number_field(a) for a in typing.get_args(annotation) if a is not bool)
 
 
 def changed_fields(config: BaseModel, names: Any) -> list[str]:
@@ -98,7 +92,7 @@ class RegistrationConfig(BaseModel):
         1 or 0: pydantic's lax mode turns a bool into an int or a float without a word (1 iteration ran)."""
         if isinstance(data, dict):
             named = [f"{k} ({v})" for k, v in data.items() if isinstance(v, (bool, np.bool_)) and k in cls.model_fields
-                     and _number_field(cls.model_fields[k].annotation)]
+                     and number_field(cls.model_fields[k].annotation)]
             if named:
                 raise ValueError(f"{', '.join(named)}: takes a number, not a yes/no value")
         return data

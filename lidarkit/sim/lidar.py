@@ -37,6 +37,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationIn
 
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.io.base import Scan, checked_index
+from lidarkit.params import number_field
 from lidarkit.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
@@ -70,14 +71,9 @@ MAX_FRAMES = 1_000_000
 def number_not_yes_or_no(model: type[BaseModel], value: object, info: ValidationInfo) -> object:
     """``value`` of a simulator setting, refused when it is a yes/no value for a number: pydantic's lax mode reads True as
     1 without a word (``-p n_beams=true`` cast one beam, ``speed=off`` stood still, ``seed=yes`` was seed 1)."""
-    import typing
-
-    def number(annotation: object) -> bool:  # int or float (``float | None`` too; ``bool`` not)
-        return annotation in (int, float) or any(number(a) for a in typing.get_args(annotation) if a is not bool)
-
     items = value if isinstance(value, (list, tuple)) else [value]  # (a range: open_object_lateral_m=[true,10])
     yes_no = [v for v in items if isinstance(v, (bool, np.bool_))]
-    if yes_no and number(model.model_fields[info.field_name].annotation):
+    if yes_no and number_field(model.model_fields[info.field_name].annotation):
         raise ValueError(f"takes a number, not a yes/no value ({yes_no[0]})")
     return value
 
