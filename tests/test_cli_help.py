@@ -92,3 +92,20 @@ def test_demo_help_offers_only_its_own_options(capsys):
     assert cli_exit_code(["demo", "--help"]) == 0
     text = " ".join(capsys.readouterr().out.split())
     assert "--address" not in text and "dask (a local Dask cluster)" in text
+
+
+def test_every_out_option_has_the_short_form():
+    """`lidarkit pf ... -o DIR` was typer's "No such option: -o" while every other command took it."""
+    import typer
+
+    from lidarkit.cli import app
+
+    def options(command, path):
+        for param in getattr(command, "params", []):
+            yield path, list(param.opts)
+        for name, sub in (getattr(command, "commands", None) or {}).items():
+            yield from options(sub, [*path, name])
+
+    outs = [(path, opts) for path, opts in options(typer.main.get_command(app), []) if "--out" in opts]
+    assert len(outs) >= 8 and ["pf"] in [path for path, _ in outs]
+    assert [(path, opts) for path, opts in outs if "-o" not in opts] == []

@@ -98,7 +98,7 @@ def pf_command(
     seed: int = typer.Option(0, help="First seed for the simulated data and the filter."),
     recorded: bool = typer.Option(False, "--recorded", help="Run on the recorded SENSOR readings (no ground truth); prints the NIS verdict on Q."),
     fit_q: bool = typer.Option(False, "--fit-q", help="With --recorded: fit Q to the innovations (maximum likelihood), re-run, show the NIS after."),
-    out: Path | None = typer.Option(None, "--out", help="Write poses, config, metrics and plots into this folder."),
+    out: Path | None = typer.Option(None, "--out", "-o", help="Write poses, config, metrics and plots into this folder."),
     snapshots: str = typer.Option("0,10,50,150,250,331", help="Steps for the particle-snapshot figure."),
     gif: bool = typer.Option(False, "--gif", help="Also write animation.gif (needs --out)."),
 ) -> None:
