@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_eval_statistics import _register_metric_task
 
 from lidarkit.cli import main
 from lidarkit.errors import ConfigError, DataError, EvaluationError
@@ -24,25 +25,9 @@ def run_cli(argv: list[str], capsys) -> tuple[int, str, str]:
 
 def _task(name: str, metrics, info=lambda job: {}) -> None:
     """A bench task on synthetic data reporting ``metrics(job)`` (a dict) and ``info(job)``."""
-    from lidarkit.bench import Metric, Task, TaskOutput, register_task
+    from lidarkit.bench import Metric
 
-    class SyntheticTask(Task):
-        dataset_kinds = ("synthetic",)
-        metrics = tuple(Metric(m, m) for m in ("error_m", "ape_rmse_m", "drift_translation_pct"))
-
-        def validate_options(self, options):
-            pass
-
-        def validate_dataset(self, dataset, options):
-            pass
-
-        def validate(self, method, params, dataset, options):
-            pass
-
-        def run(self, job):
-            return TaskOutput(metrics=metrics(job), series={}, info=info(job))
-
-    register_task(name)(SyntheticTask)
+    _register_metric_task(name, tuple(Metric(m, m) for m in ("error_m", "ape_rmse_m", "drift_translation_pct")), metrics, info)
 
 
 def _error(job) -> dict[str, float]:

@@ -367,9 +367,9 @@ def test_compare_counts_a_dataset_whose_seeds_change_nothing_once(tmp_path):
     assert "with 2 differing datasets the smallest p this test can give is 0.5" in result.verdict()
 
 
-def _register_metric_task(name: str, metric, value) -> None:
+def _register_metric_task(name: str, metric, value, info=lambda job: {}) -> None:
     """A bench task on synthetic data (for compare over real bench folders): ``metric`` a name, reported as
-    ``value(job)``, or a tuple of ``Metric`` reported as the dict ``value(job)`` returns."""
+    ``value(job)``, or a tuple of ``Metric`` reported as the dict ``value(job)`` returns; ``info(job)`` its info."""
     from lidarkit.bench import Metric, Task, TaskOutput, register_task
 
     one = isinstance(metric, str)
@@ -388,7 +388,7 @@ def _register_metric_task(name: str, metric, value) -> None:
             pass
 
         def run(self, job):
-            return TaskOutput(metrics={metric: value(job)} if one else value(job), series={}, info={})
+            return TaskOutput(metrics={metric: value(job)} if one else value(job), series={}, info=info(job))
 
     register_task(name)(MetricTask)
 
