@@ -122,14 +122,9 @@ def reference_comparisons(records: list[dict[str, Any]], reference: str = REFERE
 def remove_stale_tables(out_dir: Path, pub: Publication) -> None:
     """Remove an earlier report's tables that ``pub`` does not hold (a run over shorter sequences has no drift tables),
     so that tables/ never mixes two reports; called once the report files are written (other files are left)."""
-    from lidarkit.eval.tables import TABLE_NAMES, TABLE_SUFFIXES
+    from lidarkit.eval import tables
 
-    keep = {path.name for path in pub.files}
-    for stem in TABLE_NAMES:
-        for suffix in TABLE_SUFFIXES:
-            stale = out_dir / TABLES_DIR / f"{stem}{suffix}"
-            if stale.name not in keep and stale.is_file():
-                stale.unlink()
+    tables.remove_stale_tables(out_dir / TABLES_DIR, (path.name for path in pub.files))
 
 
 def build_publication(records: list[dict[str, Any]], out_dir: Path, *, plots: bool = True) -> Publication:

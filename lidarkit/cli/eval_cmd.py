@@ -142,19 +142,16 @@ def eval_command(
         console.print(f"note: {note}", soft_wrap=True, markup=False, highlight=False)
     # the outputs of one evaluation are written aside and moved in together: a failure (a full disk at the plot) or an
     # interrupt leaves every earlier output as it was, never one new beside one old
-    files = {path: None for path in (json_out, markdown, plot) if path is not None}
+    files = [path for path in (json_out, markdown, plot) if path is not None]
     with contextlib.ExitStack() as stack:
         aside = stack.enter_context(atomic.paths_together(files))
         folder = stack.enter_context(atomic.run_folder(tables)) if tables is not None else None
         written = _write_outputs(evaluation, ref, est, ref_traj, est_traj, aside, json_out, markdown, plot, folder, align,
                                  delta, delta_unit)
     if tables is not None:  # an earlier evaluation's tables (and box plot) this one does not hold
-        from lidarkit.eval.tables import TABLE_NAMES, TABLE_SUFFIXES
+        from lidarkit.eval.tables import TABLE_FILES, remove_stale_tables
 
-        own = {p.name for p in written}
-        for name in [f"{stem}{suffix}" for stem in TABLE_NAMES for suffix in TABLE_SUFFIXES] + [_BOXPLOT_NAME]:
-            if name not in own and (tables / name).is_file():
-                (tables / name).unlink()
+        remove_stale_tables(tables, (p.name for p in written), names=(*TABLE_FILES, _BOXPLOT_NAME))
     for path in files:
         console.print(f"wrote {path}")
     if tables is not None:
@@ -243,11 +240,11 @@ def _distinct_outputs(inputs: dict[str, Path | None], outputs: dict[str, Path | 
     """ConfigError when an output would replace an input or another output (`--markdown EST` overwrote the estimate,
     `--json X --markdown X` the JSON, both with exit 0), also where a file is one the ``--tables`` folder writes or
     removes (`--markdown T/ape_rmse.md` was reported written, then replaced by the table)."""
-    from lidarkit.eval.tables import TABLE_NAMES, TABLE_SUFFIXES
+    from lidarkit.eval.tables import TABLE_FILES
 
     tables = outputs.get("--tables")
     folder = Path(tables).resolve() if tables is not None else None
-    tables_own = {f"{stem}{suffix}" for stem in TABLE_NAMES for suffix in TABLE_SUFFIXES} | {_BOXPLOT_NAME}
+    tables_own = {*TABLE_FILES, _BOXPLOT_NAME}
     seen: dict[Path, str] = {}
     for name, path in {**inputs, **outputs}.items():
         if path is None:

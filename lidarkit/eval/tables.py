@@ -12,7 +12,7 @@ import csv
 import io
 import math
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -304,6 +304,18 @@ def short_method_labels(labels: Sequence[str]) -> dict[str, str]:
 #: every table a :class:`PublicationTables` can hold, by file stem
 TABLE_NAMES = (*(f"kitti_{q}{part}" for q in QUANTITIES for part in ("", "_per_length", "_per_speed")), "ape_rmse", "rpe_rmse")
 TABLE_SUFFIXES = (".md", ".csv", ".tex")
+#: every file a set of publication tables can write
+TABLE_FILES = tuple(f"{stem}{suffix}" for stem in TABLE_NAMES for suffix in TABLE_SUFFIXES)
+
+
+def remove_stale_tables(folder: str | os.PathLike, keep: Iterable[str], names: Iterable[str] = TABLE_FILES) -> None:
+    """Remove from ``folder`` the files of ``names`` (an earlier set's tables) not in ``keep`` (the names just written), so
+    that the folder never mixes two sets (a run over shorter sequences has no drift tables); other files stay."""
+    keep = set(keep)
+    for name in names:
+        stale = Path(folder) / name
+        if name not in keep and stale.is_file():
+            stale.unlink()
 
 
 @dataclass
@@ -316,12 +328,7 @@ class PublicationTables:
         """Each table's .md/.csv/.tex in ``out_dir``; an earlier set's tables that this one does not hold (a run over
         shorter sequences has no drift tables) are removed, so the folder never mixes two sets."""
         written = [p for t in self.tables for p in t.write(out_dir)]
-        keep = {p.name for p in written}
-        for stem in TABLE_NAMES:
-            for suffix in TABLE_SUFFIXES:
-                stale = Path(out_dir) / f"{stem}{suffix}"
-                if stale.name not in keep and stale.is_file():
-                    stale.unlink()
+        remove_stale_tables(out_dir, (p.name for p in written))
         return written
 
     def markdown(self) -> str:
