@@ -78,3 +78,10 @@ def number_field(annotation: Any) -> bool:
 
     return annotation in (int, float) or any(number_field(a) for a in typing.get_args(annotation) if a is not bool)
 
+
+def is_real_number(value: Any) -> bool:
+    """A real number given as one (Python's or numpy's int or float), not a bool nor text: a setting of text compared as
+    a number raised a TypeError, and True read as 1."""
+    import numpy as np
+
+    return not isinstance(value, bool) and isinstance(value, (int, float, np.integer, np.floating))

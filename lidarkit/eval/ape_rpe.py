@@ -16,6 +16,7 @@ import numpy as np
 
 from lidarkit.errors import ConfigError, EvaluationError
 from lidarkit.eval.pairing import pair_name, paired
+from lidarkit.params import is_real_number
 from lidarkit.trajectory import Trajectory
 
 logger = logging.getLogger(__name__)
@@ -193,11 +194,6 @@ def _relation(name: str, allowed: tuple[str, ...]):
     if name not in allowed:
         raise ConfigError(f"unknown pose relation {name!r}; known: {', '.join(allowed)}", source="relation")
     return PoseRelation[RELATIONS[name]]
-
-
-def _is_number(value: Any) -> bool:
-    """A real number, not a bool nor text ("0.1" compared as text raised TypeError)."""
-    return not isinstance(value, bool) and isinstance(value, (int, float, np.integer, np.floating))
 
 
 def check_flags(**flags: Any) -> None:
@@ -476,7 +472,7 @@ def rpe(
     unit = Unit[delta_unit]
     if legacy_pairs and (unit is Unit.frames or all_pairs):
         raise ConfigError("legacy_pairs applies to consecutive pairs with a path or angle delta", source="legacy_pairs")
-    if not (_is_number(rel_delta_tol) and 0 <= rel_delta_tol < 1):  # ("x": a bare TypeError)
+    if not (is_real_number(rel_delta_tol) and 0 <= rel_delta_tol < 1):  # ("x": a bare TypeError)
         raise ConfigError(f"rel_delta_tol must be a number in [0, 1), got {rel_delta_tol!r}", source="rel_delta_tol")
     ref, est = paired(ref, est, associate=associate, max_diff_s=max_diff_s)
     n = _check_align(align, align_origin, n_to_align, len(ref), source)

@@ -18,6 +18,7 @@ import numpy as np
 
 from lidarkit.errors import ConfigError, EvaluationError
 from lidarkit.eval.pairing import pair_name, paired
+from lidarkit.params import is_real_number
 from lidarkit.trajectory import Trajectory
 
 KITTI_LENGTHS_M = (100.0, 200.0, 300.0, 400.0, 500.0, 600.0, 700.0, 800.0)
@@ -100,7 +101,7 @@ def drift_segments_possible(ref: Trajectory, lengths: tuple[float, ...] = KITTI_
 
 def checked_step(step: int, source: str) -> int:
     """``step`` as an int; ConfigError unless a whole number >= 1 ("10" read "got 10", "x" raised a ValueError)."""
-    if isinstance(step, bool) or not isinstance(step, (int, float, np.integer, np.floating)) or not (
+    if not is_real_number(step) or not (
             float(step).is_integer() and step >= 1):
         raise ConfigError(f"{source} must be a positive integer number of frames, got {step!r}", source=source)
     return int(step)

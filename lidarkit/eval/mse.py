@@ -6,6 +6,7 @@ import numpy as np
 
 from lidarkit.errors import ConfigError, EvaluationError
 from lidarkit.eval.pairing import pair_name, paired
+from lidarkit.params import is_real_number
 from lidarkit.trajectory import Trajectory
 
 
@@ -18,7 +19,7 @@ def position_mse(ref: Trajectory, est: Trajectory, start: int = 0, *, dims: int 
     source = pair_name(ref, est)
     if isinstance(dims, bool) or dims not in (2, 3):
         raise ConfigError(f"dims must be 2 or 3, got {dims!r}", source="dims")
-    if isinstance(start, bool) or not isinstance(start, (int, float, np.integer, np.floating)):  # ("5": "got 5")
+    if not is_real_number(start):  # ("5": "got 5")
         raise ConfigError(f"start must be a frame index, got {start!r}", source="start")
     ref, est = paired(ref, est)
     if int(start) == start and start >= len(ref) >= 0 and start >= 0:

@@ -22,6 +22,7 @@ import numpy as np
 
 from lidarkit.errors import EvaluationError
 from lidarkit.io.carmen import Relations
+from lidarkit.params import is_real_number
 from lidarkit.trajectory import Trajectory
 
 logger = logging.getLogger(__name__)
@@ -121,7 +122,7 @@ def relation_error(
                               f"or with relations=FILE), got {type(relations).__name__}", source=source)
     if estimate.timestamps_s is None:
         raise EvaluationError("the relations metric needs the estimate's timestamps (e.g. a TUM-format file)", source=source)
-    if isinstance(max_time_diff_s, bool) or not isinstance(max_time_diff_s, (int, float, np.integer, np.floating)):
+    if not is_real_number(max_time_diff_s):
         raise EvaluationError(f"max_time_diff_s must be a number of seconds, got {max_time_diff_s!r}", source="max_time_diff_s")
     if not (np.isfinite(max_time_diff_s) and max_time_diff_s >= 0):
         raise EvaluationError(f"max_time_diff_s must be a finite number >= 0, got {max_time_diff_s!r}", source="max_time_diff_s")

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from lidarkit.errors import ConfigError, EvaluationError
+from lidarkit.params import is_real_number
 
 DEFAULT_CONFIDENCE = 0.95
 DEFAULT_N_BOOT = 2000
@@ -46,7 +47,7 @@ MAX_N_BOOT = 1_000_000
 def check_number(value: object, name: str) -> float:
     """``value`` as a float when it is a real number (not text, None or a bool: alpha="0.05" was a TypeError
     traceback); ConfigError naming ``name`` otherwise."""
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+    if not is_real_number(value):
         raise ConfigError(f"{name} must be a number, got {value!r}", source=name)
     return float(value)
 

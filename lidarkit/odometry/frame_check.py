@@ -30,6 +30,8 @@ from typing import Any
 
 import numpy as np
 
+from lidarkit.params import is_real_number
+
 try:  # optional (extra ``gicp``): a faster exact nearest-neighbour search
     import small_gicp as _small_gicp
 except ImportError:
@@ -111,7 +113,7 @@ def _check_config(config: FrameCheckConfig) -> None:
 
     for f in fields(config):
         value = getattr(config, f.name)
-        if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        if not is_real_number(value):
             raise ConfigError(f"{f.name} must be a number, got {value!r}", source="frame check")
         if not np.isfinite(value):
             raise ConfigError(f"{f.name} must be a finite number, got {value!r}", source="frame check")
