@@ -37,6 +37,7 @@ from lidarkit import atomic
 from lidarkit.bench.jobs import Job, canonical_json
 from lidarkit.bench.tasks import higher_is_better
 from lidarkit.errors import ConfigError, DataError, LidarKitError, OutputError, RegistrationError
+from lidarkit.eval.statistics import tie_tolerance
 
 log = logging.getLogger(__name__)
 
@@ -57,8 +58,6 @@ ABSOLUTE_FLOOR = {
     "rpe_rot_rmse_deg": 0.001,
 }
 DEFAULT_FLOOR = 1e-9
-#: differences within this fraction of the value are floating-point round-off: ties, whatever the band (as compare)
-ROUND_OFF = 1e-9
 
 
 def _utc() -> str:
@@ -636,7 +635,8 @@ def check(
                 result.findings.append(Finding("regression", name, f"{metric} is missing now (baseline {ref:.6g})"))
                 continue
             delta = float(value) - ref
-            if abs(delta) <= band or math.isclose(float(value), ref, rel_tol=ROUND_OFF):  # (-t M=0: round-off a regression)
+            # round-off is a tie whatever the band, as compare takes it (-t M=0 made 1e-16 a regression)
+            if abs(delta) <= max(band, tie_tolerance(np.array([float(value)]), np.array([ref]))):
                 continue
             worse = (delta < 0) if higher_is_better(metric, pinned["spec"]["task"]) else (delta > 0)
             text = f"{metric} = {float(value):.6g}, baseline {ref:.6g} ± {band:.3g} (change {delta:+.3g})"
