@@ -201,7 +201,7 @@ def _longest_name(path: Path) -> tuple[int, int]:
     """Bytes of the longest name in ``path`` and the most the file system takes (NAME_MAX of the nearest existing
     folder, 255 where it cannot tell): a name too long for the disk failed only when the file was written, after the work."""
     longest = max((len(os.fsencode(part)) for part in path.parts), default=0)
-    limit = 255
+    limit = _NAME_MAX
     for folder in path.absolute().parents:
         try:
             if folder.is_dir():

@@ -132,8 +132,6 @@ class Trajectory:
 
         E.g. KITTI camera-frame poses to the LiDAR frame: ``T_left = Tr^-1``, ``T_right = Tr``.
         """
-        from lidarkit.errors import ConfigError
-
         poses = self.poses_se3
         for side, T in (("T_left", T_left), ("T_right", T_right)):
             if T is not None and np.shape(T) != (4, 4):  # (numpy's matmul error for a 3x3)
@@ -292,8 +290,6 @@ class Trajectory:
             return cls.from_kitti(path, **kwargs)
         if fmt == "tum":
             return cls.from_tum(path, **kwargs)
-        from lidarkit.errors import ConfigError
-
         raise ConfigError(f"unknown trajectory format {fmt!r}; known: {', '.join(FORMATS)}", source="format")
 
     def to_kitti(self, path: str | os.PathLike) -> Path:
@@ -317,8 +313,6 @@ class Trajectory:
             return self.to_kitti(path)
         if fmt == "tum":
             return self.to_tum(path)
-        from lidarkit.errors import ConfigError
-
         raise ConfigError(f"unknown trajectory format {fmt!r}; known: {', '.join(FORMATS)}", source="format")
 
     # ---- evo -------------------------------------------------------------------------------------

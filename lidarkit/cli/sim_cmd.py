@@ -17,6 +17,17 @@ from lidarkit.cli.app import app, stdout
 #: simulator fields with an option of their own (named in their errors; refused as --param)
 OWN_OPTIONS = {"scene": "--scene", "n_frames": "--frames/-n", "seed": "--seed"}
 
+
+def _config(model, scene: str, frames: int, seed: int, params: dict, source: str):
+    """Both simulators' config from their options and ``--param`` settings (those with an option of their own refused)."""
+    from lidarkit.errors import ConfigError
+    from lidarkit.sim.lidar import checked_config
+
+    for key in sorted(OWN_OPTIONS.keys() & params.keys()):
+        raise ConfigError(f"{key} has its own option: use {OWN_OPTIONS[key]} instead of --param {key}=...", source=f"--param {key}")
+    return checked_config(model, dict(scene=scene, n_frames=frames, seed=seed, **params), source, OWN_OPTIONS)
+
+
 sim_app = typer.Typer(help="Ground-truth simulators.", no_args_is_help=True)
 app.add_typer(sim_app, name="sim")
 
@@ -36,7 +47,7 @@ def sim_lidar(
     from lidarkit.cli.app import parse_params
     from lidarkit.errors import ConfigError
     from lidarkit.sim.bag_export import BAG_FORMATS, STORAGES, check_bag_target, export_bag
-    from lidarkit.sim.lidar import LidarSimConfig, SimulatedLidarSequence, checked_config, export_kitti
+    from lidarkit.sim.lidar import LidarSimConfig, SimulatedLidarSequence, export_kitti
 
     if fmt not in ("kitti", *BAG_FORMATS):
         raise ConfigError(f"unknown format {fmt!r}; known: kitti, {', '.join(BAG_FORMATS)}", source="--format")
@@ -55,9 +66,7 @@ def sim_lidar(
                           f"kitti (a folder): add -f {'rosbag1' if out.suffix.lower() == '.bag' else 'mcap'}, or name a folder", source="--out")
     check_target(out, "file" if fmt in ("rosbag1", "mcap") else "folder")
     params = parse_params(param)
-    for key in sorted(OWN_OPTIONS.keys() & params.keys()):
-        raise ConfigError(f"{key} has its own option: use {OWN_OPTIONS[key]} instead of --param {key}=...", source=f"--param {key}")
-    config = checked_config(LidarSimConfig, dict(scene=scene, n_frames=frames, seed=seed, **params), "lidar simulator", OWN_OPTIONS)
+    config = _config(LidarSimConfig, scene, frames, seed, params, "lidar simulator")
     from lidarkit.resources import check_memory
     from lidarkit.sim.lidar import SWEEP_BYTES_PER_RAY
 
@@ -91,15 +100,11 @@ def sim_camera(
     read the folder back with `lidarkit vo OUT` (or skip the files: `lidarkit vo 'simcam:street?frames=500&seed=0'`)."""
     from lidarkit.atomic import check_target
     from lidarkit.cli.app import parse_params
-    from lidarkit.errors import ConfigError
-    from lidarkit.sim.lidar import checked_config
     from lidarkit.sim.street_camera import CameraSimConfig, SimulatedCameraSequence, export_kitti_images
 
     check_target(out, "folder")
     params = parse_params(param)
-    for key in sorted(OWN_OPTIONS.keys() & params.keys()):
-        raise ConfigError(f"{key} has its own option: use {OWN_OPTIONS[key]} instead of --param {key}=...", source=f"--param {key}")
-    config = checked_config(CameraSimConfig, dict(scene=scene, n_frames=frames, seed=seed, **params), "camera simulator", OWN_OPTIONS)
+    config = _config(CameraSimConfig, scene, frames, seed, params, "camera simulator")
     sequence = SimulatedCameraSequence(config)
     export = functools.partial(export_kitti_images, sequence, out)
     folder = _with_progress(export, frames, f"simcam {scene}", "images") if progress else export()

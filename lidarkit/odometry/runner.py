@@ -554,11 +554,11 @@ def run(
             reference = _reference(sequence, retimed, indices, dataset_name)
     all_numbers = frame_numbers(sequence)  # the recording's own frame numbers (KITTI's or a folder's file names), if any
     numbers = indices if all_numbers is None else all_numbers[indices]
+    number_step = typical_interval(all_numbers if all_numbers is not None else np.arange(n_total))
     check_times = timestamps
     if timestamps is None:  # the frame numbers time the motion, a nominal period a step of the dataset's numbering (the
         # frame after a gap of 7 was checked as one period after the previous one, and failed though registered right)
-        step = typical_interval(all_numbers if all_numbers is not None else np.arange(n_total))
-        check_times = None if not step else (numbers - numbers[0]) / step * checker.config.nominal_period_s
+        check_times = None if not number_step else (numbers - numbers[0]) / number_step * checker.config.nominal_period_s
     check = checker.finish(poses, check_times)
     why = tuple("+".join(w for w, bad in (("motion", m), ("fitness", f)) if bad) for m, f in zip(check.failed_motion, check.failed_fitness))
     stats = FrameStats(
@@ -570,7 +570,7 @@ def run(
     effective, warnings = effective_settings(sequence, registration, name, stateful, checker.has_point_times, reference,
                                              stamp_instant=getattr(first_scan, "stamp_instant", None), n_flat_times=len(flat_times))
     # the gaps are judged against the dataset's own interval (stamps, else file numbers): the run's may hold only two
-    typical = typical_interval(all_stamps if timestamps is not None else all_numbers if all_numbers is not None else np.arange(n_total))
+    typical = typical_interval(all_stamps) if timestamps is not None else number_step
     if want_covariance and n > 1 and not np.isfinite(relative_cov[1:]).all(axis=(1, 2)).any():
         # (a plugin whose results carry no covariance, or no frame converged): no all-NaN pose covariance is written
         why = (f"every frame fell back to the {'odometry' if odometry_poses is not None else 'constant-velocity'} motion"
