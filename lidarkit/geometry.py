@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import contextvars
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -47,11 +47,15 @@ def is_validated(points_xyz: np.ndarray) -> bool:
     return known is not None and known.get(id(points_xyz)) is points_xyz
 
 
-def as_points(points_xyz: np.ndarray, name: str = "points", min_points: int = 0) -> np.ndarray:
+def as_points(
+    points_xyz: np.ndarray, name: str = "points", min_points: int = 0, on_float32_far: Callable[[float, float], None] | None = None,
+) -> np.ndarray:
     """Validate an ``(N, 3)`` real, finite point array within ``MAX_ABS_COORDINATE_M`` and return it as float64.
 
     This is the boundary before every backend (Open3D, kiss-icp, small_gicp, scipy): nothing they would reject
     with an internal error, or accept silently (a complex array losing its imaginary part), gets past it.
+    A cloud far from its origin held at float32 precision is logged once per ``name``, or, given ``on_float32_far``,
+    passed to it as ``(reach_m, step_m)`` every time (a caller that reports it itself, e.g. per frame of a run).
     """
     known = _VALIDATED.get()
     if known is not None and known.get(id(points_xyz)) is points_xyz and len(points_xyz) >= min_points:
@@ -71,7 +75,11 @@ def as_points(points_xyz: np.ndarray, name: str = "points", min_points: int = 0)
     reach = _reach_within_limits(arr) if len(arr) else None  # the common case in two flat reductions (NaN fails them)
     if reach is not None:
         if reach > FLOAT32_CM_LIMIT_M:
-            _say_if_float32_far_out(arr, name, reach)
+            if on_float32_far is not None:
+                if float32_held(arr):
+                    on_float32_far(reach, float32_step(reach))
+            else:
+                _say_if_float32_far_out(arr, name, reach)
         return arr
     if not np.isfinite(arr).all():
         bad = int((~np.isfinite(arr).all(axis=1)).sum())
@@ -91,13 +99,27 @@ def _say_if_float32_far_out(arr: np.ndarray, name: str, far: float) -> None:
     "converged" with a 1 mm sigma while 4.5 cm off. One comparison pass, for far clouds only."""
     if name in _SAID_FLOAT32:
         return
-    if np.array_equal(arr.astype(np.float32).astype(np.float64), arr):
+    if float32_held(arr):
         import logging
 
         _SAID_FLOAT32.add(name)
-        logging.getLogger(__name__).warning(
-            "%s: coordinates up to %.3g m held at float32 precision (steps of %.3g m there): store georeferenced clouds "
-            "as float64, or shift them to a local origin before storing them", name, far, float(np.spacing(np.float32(far))))
+        logging.getLogger(__name__).warning("%s: %s", name, float32_far_message(far))
+
+
+def float32_held(arr: np.ndarray) -> bool:
+    """Whether every coordinate of ``arr`` is a float32 value (the cloud was stored at float32 precision)."""
+    return bool(np.array_equal(arr.astype(np.float32).astype(np.float64), arr))
+
+
+def float32_step(far: float) -> float:
+    """The step (m) between float32 values at ``far`` metres."""
+    return float(np.spacing(np.float32(far)))
+
+
+def float32_far_message(far: float) -> str:
+    """What a cloud reaching ``far`` metres at float32 precision means, and what to do."""
+    return (f"coordinates up to {far:.3g} m held at float32 precision (steps of {float32_step(far):.3g} m there): store "
+            "georeferenced clouds as float64, or shift them to a local origin before storing them")
 
 
 def _within_limits(arr: np.ndarray) -> bool:

@@ -669,3 +669,25 @@ def test_pairwise_acceptance_gates_given_to_a_stateful_variant_are_said_to_be_un
     assert ("min_fitness, min_correspondences: acceptance gates of a pairwise alignment (align); kiss's odometry "
             "(register_frame, its own local map) does not use them") in gated.metrics["warnings"]
     assert not any("acceptance gates" in w for w in plain.metrics["warnings"])
+
+
+def test_a_georeferenced_run_held_at_float32_names_its_first_frame_in_the_run_warnings(tmp_path, caplog):
+    """Scans stored as float32 at a UTM northing (0.5 m steps) were said once per process as "scan: ...", naming no
+    frame, and not in metrics["warnings"]: a second run in the same process said nothing at all."""
+    import logging
+
+    rng = np.random.default_rng(5)
+    offset = np.array([500000.0, 4500000.0, 100.0])
+    room = _room_points(rng)
+    for k in range(4):
+        points = room + offset if k else room  # frame 0 near its origin: the first far frame is frame 1
+        np.save(tmp_path / f"{k:06d}.npy", (points + [0.1 * k, 0.0, 0.0]).astype(np.float32))
+    expected = ("3 of 4 scans, first frame 1: coordinates up to 4.5e+06 m held at float32 precision (steps of 0.5 m there): "
+                "store georeferenced clouds as float64, or shift them to a local origin before storing them")
+    for _ in range(2):  # said by every run, not once per process
+        with caplog.at_level(logging.WARNING):
+            caplog.clear()
+            warnings = run(tmp_path, "small_gicp", progress=False).metrics["warnings"]
+        assert expected in warnings
+        assert any(expected in r.getMessage() for r in caplog.records)
+        assert not any(r.getMessage().startswith("scan: ") for r in caplog.records)

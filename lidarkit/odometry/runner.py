@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from lidarkit.errors import ConfigError, DataError, EvaluationError, LidarKitError, RegistrationError
-from lidarkit.geometry import as_points, orthonormalize_se3, validated_points
+from lidarkit.geometry import as_points, float32_far_message, orthonormalize_se3, validated_points
 from lidarkit.io.base import Scan, ScanSequence
 from lidarkit.lifetime import raise_if_interrupted
 from lidarkit.odometry.covariance import propagate
@@ -438,6 +438,7 @@ def run(
 
     flat_times: list[int] = []  # frames whose per-point times are all equal: nothing to deskew with (kiss-icp would
     # normalize them by their zero span and abort the process), so they are read as scans without per-point times
+    far_float32: list[tuple[int, float]] = []  # (frame, reach m) of scans far from their origin held at float32 precision
 
     def read(i: int) -> tuple[Scan, tuple]:
         scan = _read_nonempty_scan(sequence, i)
@@ -445,7 +446,7 @@ def run(
             flat_times.append(i)
             scan = dataclasses.replace(scan, point_times_s=None)
         try:
-            points = as_points(scan.points_xyz, "scan")
+            points = as_points(scan.points_xyz, "scan", on_float32_far=lambda reach, _step: far_float32.append((i, reach)))
         except LidarKitError:
             points = None  # left to the registration, which refuses it naming the frame, as without this check
         if points is None:  # the check's histogram would fail first, on what the registration refuses by name
@@ -578,7 +579,8 @@ def run(
         warnings.append(f"no frame's registration gave a covariance ({why}): no pose covariance")
         want_covariance = False
     apart = _stamps_apart(reference, timestamps, all_stamps, numbers) if ground_truth is not None else None
-    warnings = [w for w in (past_the_end, time_gap_warning(timestamps, numbers, odometry_poses is not None, indices, typical), apart)
+    far = _far_float32_warning(far_float32, n)
+    warnings = [w for w in (past_the_end, time_gap_warning(timestamps, numbers, odometry_poses is not None, indices, typical), apart, far)
                 if w] + warnings
     if stateful:  # (accepted, recorded in config.yaml as given, and without effect on the run)
         gates = [f for f in ("min_fitness", "min_correspondences") if f in getattr(config, "model_fields_set", ())]
@@ -682,6 +684,17 @@ def _check_stamps(stamps: np.ndarray | None, indices: np.ndarray, dataset_name: 
         k = int(bad[0])
         raise DataError(f"time stamps are not strictly increasing: {selected[k + 1]:.9g} s after {selected[k]:.9g} s of frame "
                         f"{int(indices[k])}", source=dataset_name, location=f"frame {int(indices[k + 1])}")
+
+
+def _far_float32_warning(frames_reach: list[tuple[int, float]], n: int) -> str | None:
+    """The run's one warning for scans far from their origin held at float32 precision (naming the first such frame),
+    or None; a georeferenced recording repeats it every frame, which the log would drown in."""
+    if not frames_reach:
+        return None
+    first = min(frames_reach)[0]
+    reach = max(r for _, r in frames_reach)
+    count = f"{len(frames_reach)} of {n} scans" if len(frames_reach) > 1 else "1 scan"
+    return f"{count}, first frame {first}: {float32_far_message(reach)}"
 
 
 def _stamps_apart(reference: Trajectory | None, stamps_s: np.ndarray | None, all_stamps_s: np.ndarray | None,
