@@ -449,3 +449,18 @@ def test_all_pairs_over_an_angle_delta_search_once_and_equal_evo(capsys):
     assert sum(map(bool, calls)) == 1  # one all-pairs search (evo then compares consecutive copies: linear)
     said = capsys.readouterr()
     assert "%" not in said.out and "%" not in said.err  # evo's progress, without a line end, is kept out of both
+
+
+def test_an_evaluation_prints_as_one_line_of_its_headline_figures(kitti_gt):
+    """``print(evaluate(...))`` printed every field of every result (~4900 characters); now one line whose figures are
+    the results' own."""
+    from lidarkit.eval import evaluate
+
+    ref, est = kitti_gt[:300], kitti("ORB")[:300]  # 300 poses, 216 m: drift on 100-200 m segments
+    result = evaluate(ref, est)
+    text = repr(result)
+    assert "\n" not in text and len(text) < 400, text
+    assert f"APE rmse {result.ape.rmse:.4g} m" in text and f"RPE rmse {result.rpe.rmse:.4g} m" in text
+    assert f"drift {result.drift.translation_pct:.4g} %" in text
+    assert f"{result.n_poses} poses" in text
+    assert "no drift (not requested)" in repr(evaluate(ref, est, drift=False))

@@ -82,6 +82,14 @@ class Evaluation:
     drift: DriftResult | None
     drift_note: str = ""
 
+    def __repr__(self) -> str:
+        """One line of the headline figures (the generated one printed every field of every result: ~4900 characters)."""
+        drift = (f"drift {self.drift.translation_pct:.4g} % / {self.drift.rotation_deg_per_100m:.4g} deg/100m"
+                 if self.drift is not None else f"no drift ({self.drift_note})")
+        return (f"Evaluation({self.est_name!r} against {self.ref_name!r}, {self.n_poses} poses over {self.ref_length_m:.4g} m: "
+                f"APE rmse {self.ape.rmse:.4g} m / {self.ape_rotation.rmse:.4g} deg ({self.ape.align}), RPE rmse "
+                f"{self.rpe.rmse:.4g} m / {self.rpe_rotation.rmse:.4g} deg per {self.rpe.delta:g} {self.rpe.delta_unit}, {drift})")
+
     def to_dict(self, include_errors: bool = False) -> dict[str, Any]:
         """JSON-safe dict; per-pose error arrays only with ``include_errors``."""
         return {
