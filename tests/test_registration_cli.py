@@ -83,6 +83,20 @@ def test_list_shows_every_method_and_its_defaults(capsys):
     assert "cell_size_m" in flat and "cloth_resolution_m" in flat
 
 
+
+def test_a_listing_refuses_the_options_of_a_run(capsys, tmp_path):
+    """`icp SOURCE TARGET -m vanilla -o DIR --list-components` printed the table and exited 0 (no registration, no
+    DIR), `--list -m nosuch -p bogus=1` every variant: the run's arguments given with a listing are now refused, named."""
+    out_dir = tmp_path / "newdir"
+    code, out, err = run_cli(capsys, str(SOURCE), str(TARGET), "-m", "vanilla", "-o", str(out_dir), "--list-components")
+    assert (code, out) == (1, "") and not out_dir.exists()
+    assert " ".join(err.split()) == "error: --list-components: lists and exits, registering nothing: SOURCE, TARGET, --method, --out do not apply"
+    code, out, err = run_cli(capsys, "--list", "-m", "nosuch", "-p", "bogus=1", "--init", "/nonexistent", "--drop-nonfinite")
+    assert (code, out) == (1, "")
+    assert " ".join(err.split()) == "error: --list: lists and exits, registering nothing: --method, --param, --init, --drop-nonfinite do not apply"
+    code, out, _ = run_cli(capsys, "--list", "--list-components")  # both flags: both listings
+    assert code == 0 and "ICP variants" in out and "pipeline components" in out
+
 @pytest.mark.parametrize(
     "args, fragment",
     [

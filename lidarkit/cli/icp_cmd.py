@@ -148,8 +148,24 @@ def _result_table(result, source: Path, target: Path) -> Table:
     return table
 
 
+#: The flag (or argument) of each of icp's parameters that a run reads and a listing does not.
+RUN_OPTIONS = {"source": "SOURCE", "target": "TARGET", "method": "--method", "param": "--param", "init": "--init", "out": "--out",
+               "drop_nonfinite": "--drop-nonfinite"}
+
+
+def _refuse_run_options(ctx: typer.Context, listing: str) -> None:
+    """A run's argument or option given with a listing is a ConfigError (the listing ignored them and exited 0: no
+    registration, no --out folder, an unknown --method said nothing)."""
+    given = [flag for name, flag in RUN_OPTIONS.items()
+             if (src := ctx.get_parameter_source(name)) is not None and src.name == "COMMANDLINE"]
+    if given:
+        raise ConfigError(f"lists and exits, registering nothing: {', '.join(given)} {'do' if len(given) > 1 else 'does'} not apply",
+                          source=listing)
+
+
 @app.command("icp")
 def icp(
+    ctx: typer.Context,
     source: Optional[Path] = typer.Argument(None, help="Source scan (.bin KITTI, .pcd, .ply, .npy); moved onto the target."),
     target: Optional[Path] = typer.Argument(None, help="Target scan (same formats)."),
     method: str = typer.Option("vanilla", "--method", "-m", help="Registered ICP variant (see --list)."),
@@ -165,11 +181,12 @@ def icp(
     ),
 ) -> None:
     """Register SOURCE onto TARGET with one ICP variant; prints T_target_source, iterations, RMSE, degeneracy."""
-    if list_methods:
-        _list_methods()
-        return
-    if list_components:
-        _list_components()
+    if list_methods or list_components:
+        _refuse_run_options(ctx, " ".join(flag for flag, on in (("--list", list_methods), ("--list-components", list_components)) if on))
+        if list_methods:
+            _list_methods()
+        if list_components:  # (both flags print both listings)
+            _list_components()
         return
     if source is None or target is None:
         raise ConfigError("give SOURCE and TARGET scan files (or --list)", source="lidarkit icp")
