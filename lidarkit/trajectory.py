@@ -257,7 +257,13 @@ class Trajectory:
         A pose stamped like the one before it is left out (with a warning naming the lines): TUM RGB-D's own ground
         truth of ``fr2/desk`` has one; more than half of them repeating is a DataError (stamps written with too few
         digits). Timestamps that go backwards are a DataError naming the line."""
-        rows = read_numeric_table(path, 8)
+        try:
+            rows = read_numeric_table(path, 8)
+        except DataError as err:  # a KITTI file (12 numbers a row, a 3x4 [R|t]) read as TUM: say so, as from_kitti does
+            if "expected 8 numbers, found 12" in err.reason and err.location == _first_data_line(path):  # (not a cut-off line)
+                raise DataError(err.reason + " (a KITTI trajectory? read it as kitti: --format kitti, Trajectory.from_kitti)",
+                                source=err.source, location=err.location) from None
+            raise
         quat_xyzw = rows[:, 4:8]
         norms = np.linalg.norm(quat_xyzw, axis=1)
         if (np.abs(norms - 1.0) > 1e-2).any():

@@ -207,6 +207,20 @@ def test_a_cut_off_kitti_file_is_not_called_a_tum_trajectory(tmp_path):
         Trajectory.from_kitti(shared_path("evo_testdata", "freiburg1_xyz-groundtruth.txt"))
 
 
+def test_a_kitti_file_read_as_tum_is_hinted(tmp_path):
+    """`eval KITTI_00_gt.txt KITTI_00_ORB.txt --format tum` read "(line 1): expected 8 numbers, found 12" with no hint
+    (the reverse mistake had one): a file whose first row has KITTI's 12 numbers now says so; a later such row does not."""
+    gt = shared_path("evo_testdata", "KITTI_00_gt.txt")
+    with pytest.raises(DataError) as err:
+        Trajectory.from_tum(gt)
+    assert str(err.value) == (f"{gt} (line 1): expected 8 numbers, found 12 "
+                              "(a KITTI trajectory? read it as kitti: --format kitti, Trajectory.from_kitti)")
+    tum = shared_path("evo_testdata", "freiburg1_xyz-groundtruth.txt").read_text().splitlines()
+    (tmp_path / "mixed.txt").write_text("\n".join(tum[:10]) + "\n" + gt.read_text().splitlines()[0] + "\n")
+    with pytest.raises(DataError) as err:
+        Trajectory.from_tum(tmp_path / "mixed.txt")
+    assert str(err.value).endswith("mixed.txt (line 11): expected 8 numbers, found 12")
+
 def test_relative_motions_must_be_rigid_and_extrapolation_non_negative():
     """from_relative_motions chained all-zero motions into identity poses and dropped a Sim(3) motion's scale (the
     constructor refuses both poses); NaN motions were an SVD traceback; interpolated(max_extrapolation_s=-1) refused a
