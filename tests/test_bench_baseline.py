@@ -390,6 +390,24 @@ def test_a_file_given_as_the_baseline_folder_and_a_bad_seed_are_named(two_walks,
         check(tmp_path / "edited")
 
 
+def test_the_progress_lines_name_the_seed_and_experiment_where_jobs_share_a_method_and_dataset(tmp_path, capsys):
+    """`baseline record` and `check` printed "checking kiss on street8" once per seed, alike: each line now names the
+    seed, and the experiment, where the suite runs that method on that dataset with several (and only there)."""
+    (tmp_path / "s.yaml").write_text(textwrap.dedent("""
+        name: seeds
+        seeds: [0, 1]
+        experiments:
+          - {name: walk, task: selftest, dataset: {kind: synthetic, name: synth}, methods: [random_walk]}
+          - {name: again, task: selftest, dataset: {kind: synthetic, name: synth}, seeds: [0], methods: [random_walk]}
+          - {name: single, task: selftest, dataset: {kind: synthetic, name: other}, seeds: [0], methods: [random_walk]}
+        """))
+    code, _, err = run_cli(["baseline", "record", str(tmp_path / "s.yaml"), "--out", str(tmp_path / "bl"), "--repeats", "1"], capsys)
+    names = ["random_walk on synth (seed 0, experiment walk)", "random_walk on synth (seed 1, experiment walk)",
+             "random_walk on synth (seed 0, experiment again)", "random_walk on other"]
+    assert code == 0 and err.splitlines() == [f"run 1/1: {name}" for name in names]
+    code, _, err = run_cli(["baseline", "check", str(tmp_path / "bl")], capsys)
+    assert code == 0 and err.splitlines() == [f"checking {name}" for name in names]
+
 def test_sequence_given_as_an_integer_hashes_that_sequence_only(tmp_path):
     """``sequence: 0`` (a YAML integer the reader reads as "00") looked for ``sequences/0`` and hashed the whole
     KITTI root: a note beside the data or another sequence read as changed data."""

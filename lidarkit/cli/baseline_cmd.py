@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional
+from typing import TYPE_CHECKING, Optional
 
 import typer
 
@@ -12,6 +12,17 @@ from lidarkit.cli.app import app, stderr, stdout
 baseline_app = typer.Typer(help="Pin a suite's results under a protocol manifest and check later runs against them.",
                            no_args_is_help=True)
 app.add_typer(baseline_app, name="baseline")
+
+if TYPE_CHECKING:
+    from lidarkit.bench.jobs import Job
+
+
+def _progress_name(job: Job, jobs: list[Job]) -> str:
+    """``kiss on street8``, with the seed and the experiment where the suite runs that method on that dataset in several
+    (``kiss on street8 (seed 3)``): the lines of a suite with seeds 0-4 read as one line printed five times."""
+    alike = [j for j in jobs if (j.method_label, j.dataset_name) == (job.method_label, job.dataset_name)]
+    differ = [f"{field} {getattr(job, field)}" for field in ("seed", "experiment") if len({getattr(j, field) for j in alike}) > 1]
+    return f"{job.method_label} on {job.dataset_name}" + (f" ({', '.join(differ)})" if differ else "")
 
 
 @baseline_app.command("record")
@@ -22,13 +33,15 @@ def record_command(
 ) -> None:
     """Run SUITE_FILE REPEATS times and pin trajectories, metrics, bands and the protocol manifest in --out."""
     from lidarkit.bench.baseline import job_name, record
+    from lidarkit.bench.suite import load_suite
     from lidarkit.errors import ConfigError
 
     if repeats < 1:  # (the library's error named `repeats`)
         raise ConfigError(f"must be a positive integer, got {repeats}", source="--repeats")
     err = stderr()
+    jobs = load_suite(suite_file).jobs  # (record reads it again; the progress lines need all the jobs to name them apart)
     baseline = record(suite_file, out, repeats=repeats,
-                      on_job=lambda job, r: err.print(f"run {r + 1}/{repeats}: {job.method_label} on {job.dataset_name}",
+                      on_job=lambda job, r: err.print(f"run {r + 1}/{repeats}: {_progress_name(job, jobs)}",
                                                       soft_wrap=True, markup=False))
     console = stdout()
     for job in baseline.jobs:
@@ -44,12 +57,13 @@ def check_command(
         None, "--tolerance", "-t", help="METRIC=BAND: absolute band of a metric instead of the recorded one (repeatable)."),
 ) -> None:
     """Re-run the pinned jobs; exit 1 on a regression, a changed protocol or a failed job (each reported distinctly)."""
-    from lidarkit.bench.baseline import check
+    from lidarkit.bench.baseline import check, load_baseline
+    from lidarkit.bench.jobs import Job
 
     err = stderr()
+    jobs = [Job.from_spec(pinned["spec"]) for pinned in load_baseline(baseline_dir).jobs]
     result = check(baseline_dir, tolerances=tolerance or None,
-                   on_job=lambda job: err.print(f"checking {job.method_label} on {job.dataset_name}", soft_wrap=True,
-                                                markup=False))
+                   on_job=lambda job: err.print(f"checking {_progress_name(job, jobs)}", soft_wrap=True, markup=False))
     console = stdout()
     for line in result.lines():
         console.print(line, soft_wrap=True, markup=False)
