@@ -6,7 +6,8 @@ dataset specs ``KIND:PATH?key=value&...`` (:func:`lidarkit.odometry.open_sequenc
 
 Values are read as YAML scalars (``1`` -> int, ``0.5`` -> float, ``true``/``false`` -> bool,
 ``null`` or empty -> None, anything else a string), except text YAML 1.1 would mangle: numbers with a
-leading zero or underscores (``05``, ``2011_09_26``) and dates stay strings.
+leading zero or underscores (``05``, ``2011_09_26``) and dates stay strings. A spec's empty value (``?time_field=``)
+is refused: read as None, it silently meant "auto", "no per-point times" or the default file.
 """
 
 from __future__ import annotations
@@ -46,7 +47,8 @@ def parse_value(text: str) -> Any:
 def parse_kv(items: Iterable[str] | str, option: str = "option") -> dict[str, Any]:
     """``["k=v", ...]`` or a query string ``"k=v&k2=v2"`` (URL-encoded) -> ``{key: value}``.
 
-    A missing ``=``, an empty key or a key given twice raises ConfigError naming ``option`` and the item.
+    A missing ``=``, an empty key, a key given twice or (in a query string) an empty value raises ConfigError naming
+    ``option`` and the item.
     """
     if isinstance(items, str):
         pairs = []
@@ -63,6 +65,8 @@ def parse_kv(items: Iterable[str] | str, option: str = "option") -> dict[str, An
             raise ConfigError("expected KEY=VALUE", source=f"{option} {raw!r}")
         if key in out:
             raise ConfigError(f"{key!r} is given twice", source=f"{option} {raw!r}")
+        if isinstance(items, str) and not value.strip():  # (an unset shell variable in a spec)
+            raise ConfigError(f"{key}= has no value; give one, or leave {key} out for its default", source=option)
         out[key] = parse_value(value)
     return out
 

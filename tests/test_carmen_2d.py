@@ -115,6 +115,18 @@ def test_first_aces_scan_matches_the_log_line(carmen_logs, aces_text):
     np.testing.assert_allclose([T[0, 3], T[1, 3], np.arctan2(T[1, 0], T[0, 0])], [x, y, theta], atol=1e-12)
 
 
+def test_scan_accessors_check_the_index(carmen_logs):
+    """line_of(7374) raised IndexError and line_of(1.5) numpy's IndexError (ranges_m, beam_angles_rad the same):
+    each checks its index as read_scan does."""
+    aces = carmen_logs["aces"]
+    for accessor in (aces.line_of, aces.ranges_m, aces.beam_angles_rad):
+        for index, reason in ((7374, "scan index 7374 out of range for 7374 scans"), (1.5, "scan index 1.5 is not an integer")):
+            with pytest.raises(DataError) as err:
+                accessor(index)
+            assert str(err.value) == f"{aces.path}: {reason}"
+    assert aces.line_of(-1) == aces.line_of(7373) and len(aces.ranges_m(-1)) == len(aces.beam_angles_rad(7373)) == 180
+
+
 def test_plain_and_gzip_copies_read_the_same(tmp_path, aces_text, carmen_logs):
     head = "\n".join(aces_text[:400]) + "\n"
     plain = tmp_path / "head.clf"
@@ -465,7 +477,7 @@ def test_a_carmen_run_records_its_options_and_the_restamping(carmen_logs):
     assert options == {"kind": "carmen", "path": str(aces), "laser": "FLASER", "min_range_m": 0.0, "max_range_m": 30.0,
                        "relations": str(aces.with_name("aces.relations"))}
     plain = run(carmen_logs["aces"], "vanilla", params={"planar": True}, frames="0:2")
-    assert plain.config["run"]["dataset_options"]["max_range_m"] == "the log's largest reading"
+    assert plain.config["run"]["dataset_options"]["max_range_m"] == "the log's largest reading (50 m)"
     assert plain.metrics["effective"]["corrections"] == {}
     intel = run(carmen_logs["intel"], "vanilla", params={"planar": True}, frames="0:2").metrics["effective"]["corrections"]
     assert intel == {"stamps_corrected": "2042 scan stamps moved by up to 0.752 s to increase (they go back in file order)"}
@@ -481,6 +493,23 @@ def test_a_robotlaser_maximum_range_of_zero_is_not_stated(tmp_path):
     points = CarmenLog(unstated).read_scan(0).points_xyz
     assert len(points) == 3
     np.testing.assert_array_equal(points, CarmenLog(stated).read_scan(0).points_xyz)
+
+
+def test_the_maximum_range_taken_for_an_unstated_one_is_recorded_and_an_infinite_one_refused(tmp_path):
+    """A ROBOTLASER1 log stating a maximum of 0 recorded max_range_m "the message's own" while its largest reading
+    (10 m) was used; max_range_m=inf said "must exceed min_range_m", which inf does."""
+    robot = "ROBOTLASER1 0 -0.785398 1.570796 0.392699 {max} 0.01 0 5 1.0 2.0 10.0 3.0 0.0 0 1.0 2.0 0.5 1.0 2.0 0.5 0 0 0 0 0 {t} host {t}"
+    log = tmp_path / "r.clf"
+    log.write_text(robot.format(max="0.0", t=1.0) + "\n")
+    assert CarmenLog(log).reader_options["max_range_m"] == "the log's largest reading (10 m)"
+    log.write_text("\n".join([robot.format(max="0.0", t=1.0), robot.format(max="80.0", t=2.0), robot.format(max="80.0", t=3.0)]) + "\n")
+    assert CarmenLog(log).reader_options["max_range_m"] == "the message's own; the log's largest reading (10 m) for the 1 messages stating 0"
+    log.write_text(robot.format(max="80.0", t=1.0) + "\n")
+    assert CarmenLog(log).reader_options["max_range_m"] == "the message's own"
+    for bad in (np.inf, np.nan):
+        with pytest.raises(ConfigError) as err:
+            CarmenLog(log, max_range_m=bad)
+        assert str(err.value) == f"carmen dataset options: max_range_m must be a finite number above min_range_m (0.0), got {bad!r}"
 
 
 def test_a_run_over_a_log_with_relations_says_how_to_score_it(tmp_path, capsys, monkeypatch):

@@ -68,6 +68,16 @@ def test_detect_kind(exports, tmp_path):
     assert detect_kind(tmp_path / "x.bz2") is None
 
 
+def test_the_files_detected_by_name_are_listed_from_the_detection_table(tmp_path):
+    """"dataset not found (a folder, a .bag/.mcap/.pcap file, ...)" left CARMEN logs out: the list written apart from
+    detect_kind's rules drifted; detected_files() is made from the same table."""
+    from lidarkit.io import DETECTED_SUFFIXES, detected_files
+
+    assert detected_files() == "a .bag/.mcap/.pcap/.clf file (also .clf.bz2/.clf.gz/.clf.xz)"
+    for suffix in (*DETECTED_SUFFIXES, ".clf.bz2", ".clf.gz", ".clf.xz"):
+        assert suffix in detected_files() and detect_kind(tmp_path / f"nonexist{suffix}") is not None, suffix
+
+
 @pytest.mark.parametrize("fmt,storage,name,kind", FORMATS)
 def test_bag_round_trip_points_times_and_ground_truth(sim, exports, fmt, storage, name, kind):
     ds = open_dataset(kind, exports[(fmt, storage)])
@@ -88,6 +98,19 @@ def test_bag_round_trip_points_times_and_ground_truth(sim, exports, fmt, storage
     assert gt.meta["pose_instant"] == "end"
     np.testing.assert_allclose(gt.poses_se3, sim.ground_truth.poses_se3, rtol=0, atol=1e-12)
     np.testing.assert_allclose(gt.timestamps_s, sim.timestamps_s, rtol=0, atol=1e-9)
+
+
+def test_ground_truth_of_checks_the_scan_numbers(exports):
+    """ground_truth_of([99]) raised numpy's IndexError, [] its "zero-size array" ValueError, and [1.5] gave scan 1's
+    pose: each is checked as read_scan checks its index."""
+    bag = open_dataset("rosbag", exports[("rosbag1", "sqlite3")])
+    source = f"{bag.path}{bag.ground_truth_topic}"
+    for scans, reason in (([99], "scan index 99 out of range for 8 scans"), ([], "no scans selected"),
+                          ([1.5], "scan index 1.5 is not an integer"), ([-1], "scan index -1 out of range for 8 scans")):
+        with pytest.raises(DataError) as err:
+            bag.ground_truth_of(scans)
+        assert str(err.value) == f"{source}: {reason}"
+    np.testing.assert_array_equal(bag.ground_truth_of(np.array([1, 2])).poses_se3, bag.ground_truth.poses_se3[1:3])
 
 
 def test_an_intensity_named_as_time_field_is_refused(exports):

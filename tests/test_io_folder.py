@@ -69,6 +69,19 @@ def test_natural_sort_and_npy_columns(tmp_path, rng):
     assert len(ScanFolder(folder, suffixes=".npy")) == 3
 
 
+def test_files_named_by_decimal_time_stamps_are_read_in_time_order(tmp_path, rng):
+    """The digits after a stamp's dot were compared as a number (1000.1, 1000.2, 1000.05, 1000.15: 5 > 1), so sweeps
+    named by 20 Hz stamps were read out of order without a word; nanosecond stamps must not be rounded as floats."""
+    names = ("1000.2.npy", "1000.05.npy", "1000.15.npy", "1000.1.npy", "999.95.npy", "1000.npy")
+    folder, arrays = _npy_folder(tmp_path, rng, names=names)
+    ds = ScanFolder(folder)
+    assert [p.name for p in ds.scan_paths] == ["999.95.npy", "1000.npy", "1000.05.npy", "1000.1.npy", "1000.15.npy", "1000.2.npy"]
+    np.testing.assert_array_equal(ds.read_scan(2).points_xyz, arrays["1000.05.npy"][:, :3].astype(np.float64))
+    stamps = ["1317354879.12345679.bin", "1317354879.123456789.bin", "1317354879.1234567889.bin"]
+    assert sorted(stamps, key=natural_key) == [stamps[2], stamps[1], stamps[0]]
+    assert sorted(["scan10.npy", "scan2.npy", "1.5.npy"], key=natural_key) == ["1.5.npy", "scan2.npy", "scan10.npy"]
+
+
 def test_ply_round_trip_keeps_intensity(tmp_path, rng):
     import open3d as o3d
 
@@ -168,6 +181,19 @@ def test_missing_or_empty_folder_and_bad_options(tmp_path):
     assert len(open_dataset("folder", tmp_path, suffixes=".npy")) == 1
     with pytest.raises(ConfigError, match="unsupported scan suffix '.las'"):
         open_sequence(f"folder:{tmp_path}?suffixes=.npy,.las")
+
+
+def test_a_kitti_raw_drive_folder_read_as_a_scan_folder_names_kitti_raw(tmp_path):
+    """lidarkit odometry raw/2011_09_26/2011_09_26_drive_0002_sync said "no scan files (.bin, ...)" with no word of
+    kitti_raw:PATH, though the folder's name is a drive's."""
+    drive = tmp_path / "2011_09_26" / "2011_09_26_drive_0002_sync"
+    (drive / "velodyne_points" / "data").mkdir(parents=True)
+    with pytest.raises(DataError) as err:
+        open_dataset("folder", drive)
+    assert str(err.value) == f"{drive}: no scan files (.bin, .npy, .pcd, .ply); a KITTI raw drive folder: read it as kitti_raw:PATH"
+    with pytest.raises(DataError) as err:
+        open_dataset("folder", drive.parent)
+    assert str(err.value) == f"{drive.parent}: no scan files (.bin, .npy, .pcd, .ply)"
 
 
 def test_cut_or_garbled_files_are_refused_not_read_as_garbage(tmp_path, rng):

@@ -163,3 +163,13 @@ def test_a_generic_folder_of_several_formats_is_refused_and_skipped_files_are_na
         assert len(open_dataset("generic", other)) == 1
     assert f"{other}: 2 point-cloud files that kiss-icp's generic loader does not read are skipped (scan2.BIN, scan3.npy); " \
            "folder:PATH reads them" in caplog.text
+
+
+def test_generic_reads_files_named_by_decimal_time_stamps_in_time_order(tmp_path):
+    """kiss-icp's natsort read 1000.1 before 1000.05 (the digits after the dot as a number): 20 Hz sweeps out of order;
+    generic: now reads the files in folder:PATH's order."""
+    for k, stamp in enumerate(("1000.05", "1000.1", "1000.15", "1000.2")):
+        np.column_stack([RING + k, np.zeros(len(RING))]).astype(np.float32).tofile(tmp_path / f"{stamp}.bin")
+    dataset = open_dataset("generic", tmp_path)
+    assert [p.split("/")[-1] for p in dataset.loader.scan_files] == ["1000.05.bin", "1000.1.bin", "1000.15.bin", "1000.2.bin"]
+    np.testing.assert_allclose(dataset.read_scan(1).points_xyz, (RING + 1).astype(np.float32))

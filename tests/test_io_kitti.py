@@ -102,6 +102,19 @@ def test_noncontiguous_frames_index_gt_rows(odo_root, extra):
         extra.read_scan_by_frame(96)
 
 
+def test_ground_truth_at_checks_the_frame_numbers(odo_root):
+    """ground_truth_at([1.5]) gave frame 1's pose and [] an empty trajectory: frame numbers are checked as read_scan
+    checks its index."""
+    ds = KittiOdometry(odo_root, "00")
+    source = odo_root / "poses" / "00.txt"
+    for frames, reason in (([1.5], "frame index 1.5 is not an integer"), ([4541], "frame index 4541 out of range for 4541 frames"),
+                           ([-1], "frame index -1 out of range for 4541 frames"), ([], "no frames selected")):
+        with pytest.raises(DataError) as err:
+            ds.ground_truth_at(frames)
+        assert str(err.value) == f"{source}: {reason}"
+    assert len(ds.ground_truth_at([4540], frame="camera")) == 1
+
+
 def test_gt_lidar_motion_agrees_with_icp_on_the_scans(extra):
     """Independent check of the Tr direction: Open3D ICP on scans 94/95 reproduces the LiDAR-frame GT."""
     import open3d as o3d

@@ -74,6 +74,18 @@ def test_oxts_frame_zero_pose(raw_root):
     np.testing.assert_allclose(lidar[:3, :3] @ ds.T_velo_imu[:3, :3], pose[:3, :3], atol=1e-7)
 
 
+def test_ground_truth_at_checks_the_frame_numbers(raw_root):
+    """ground_truth_at([0.5]) gave frame 0's pose (as ground_truth_at([1.5]) gave frame 1's) and [] failed inside
+    numpy: frame numbers are checked as read_scan checks its index."""
+    ds = KittiRaw(raw_root, DATE, DRIVE)
+    source = _drive(raw_root) / "oxts"
+    for frames, reason in (([0.5], "frame index 0.5 is not an integer"), ([108], "frame index 108 out of range for 108 frames"),
+                           ([], "no frames selected")):
+        with pytest.raises(DataError) as err:
+            ds.ground_truth_at(frames)
+        assert str(err.value) == f"{source}: {reason}"
+
+
 def test_mercator_translation_of_a_second_packet(raw_copy):
     """A packet 1e-4 deg north-east and 1 m up lands where a local spherical approximation puts it."""
     oxts = _drive(raw_copy) / "oxts" / "data"

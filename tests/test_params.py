@@ -10,9 +10,9 @@ from lidarkit.params import parse_kv
 
 
 def test_values_are_yaml_scalars_with_safe_exceptions():
-    got = parse_kv("a=1&b=x&c=true&d=&e=null&f=0.5&g=1e-3&seq=05&date=2011_09_26&day=2011-09-26&amp=a%26b&plus=1+2")
+    got = parse_kv("a=1&b=x&c=true&e=null&f=0.5&g=1e-3&seq=05&date=2011_09_26&day=2011-09-26&amp=a%26b&plus=1+2")
     assert got == {
-        "a": 1, "b": "x", "c": True, "d": None, "e": None, "f": 0.5, "g": 0.001,
+        "a": 1, "b": "x", "c": True, "e": None, "f": 0.5, "g": 0.001,
         "seq": "05", "date": "2011_09_26", "day": "2011-09-26", "amp": "a&b", "plus": "1+2",
     }
     assert parse_kv(["n_beams=32", "pose_instant=mid", "flag=false"]) == {"n_beams": 32, "pose_instant": "mid", "flag": False}
@@ -42,3 +42,18 @@ def test_dataset_and_simulator_specs_use_it(tmp_path):
     assert sim.config.n_beams == 8 and sim.config.motion_distortion is False and sim.config.range_noise_std_m == 0
     with pytest.raises(ConfigError, match="given twice"):
         open_sim("sim:street?frames=2&n_frames=3")
+
+
+def test_an_empty_value_in_a_spec_is_refused_naming_the_option(tmp_path):
+    """rosbag:r1.bag?time_field= read no per-point times (config.yaml time_field: null), ?topic= meant auto,
+    kitti:...?poses_file= the default poses and ?sequence= "Input should be a valid string, got None": an empty value
+    read as None without a word."""
+    from lidarkit.odometry import open_sequence
+
+    with pytest.raises(ConfigError) as err:
+        parse_kv("topic=/points&time_field=", option="rosbag dataset option")
+    assert str(err.value) == "rosbag dataset option: time_field= has no value; give one, or leave time_field out for its default"
+    with pytest.raises(ConfigError) as err:
+        open_sequence(f"kitti:{tmp_path}?sequence=%20")
+    assert str(err.value) == "kitti dataset option: sequence= has no value; give one, or leave sequence out for its default"
+    assert parse_kv("time_field=null&topic=%2Fpoints") == {"time_field": None, "topic": "/points"}

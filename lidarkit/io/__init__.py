@@ -42,6 +42,14 @@ _BUILTIN: dict[str, str] = {
 _REGISTERED: dict[str, Callable[..., Any]] = {}
 #: Built-in kinds whose readers hold other data than LiDAR scans (TUM RGB-D images, a landmark map)
 NOT_SCANS = frozenset({"tum", "landmarks"})
+#: what :func:`detect_kind` recognises a file by: its suffix -> kind; a CARMEN log (``.clf``) also compressed
+DETECTED_SUFFIXES = {".bag": "rosbag", ".mcap": "mcap", ".pcap": "ouster", ".clf": "carmen"}
+CARMEN_COMPRESSED = (".bz2", ".gz", ".xz")
+
+
+def detected_files() -> str:
+    """The files :func:`detect_kind` recognises, for messages (a list written out apart left CARMEN logs out)."""
+    return f"a {'/'.join(DETECTED_SUFFIXES)} file (also {'/'.join(f'.clf{s}' for s in CARMEN_COMPRESSED)})"
 
 
 def register_dataset(kind: str) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
@@ -73,7 +81,7 @@ def detect_kind(path: str | os.PathLike) -> str | None:
     if p.is_file() or not p.exists():
         if ".clf" in [s.lower() for s in p.suffixes[-2:]]:
             return "carmen"
-        return {".bag": "rosbag", ".mcap": "mcap", ".pcap": "ouster"}.get(suffix)
+        return DETECTED_SUFFIXES.get(suffix)
     if (p / "metadata.yaml").is_file() or any(p.glob("*.bag")):
         return "rosbag"
     if (p / "velodyne").is_dir() or (p / "sequences").is_dir():
@@ -181,4 +189,7 @@ def _text_option(kind: str, name: str, value: Any, kinds: set) -> Any:
     return value
 
 
-__all__ = ["NOT_SCANS", "available_datasets", "detect_kind", "get_reader", "open_dataset", "register_dataset"]
+__all__ = [
+    "DETECTED_SUFFIXES", "NOT_SCANS", "available_datasets", "detect_kind", "detected_files", "get_reader", "open_dataset",
+    "register_dataset",
+]

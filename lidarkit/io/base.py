@@ -41,6 +41,15 @@ def checked_index(index: object, n: int, source: object, what: str = "scan", *, 
     return int(index) % n
 
 
+def checked_indices(indices: object, n: int, source: object, what: str = "scan", *, from_end: bool = True) -> np.ndarray:
+    """``(k,) int64`` positions, each checked by :func:`checked_index` (a list of them: 1.5 picked item 1, 99 raised
+    numpy's IndexError); DataError for none (numpy's "zero-size array" ValueError)."""
+    values = np.asarray(indices).ravel().tolist()
+    if not values:
+        raise DataError(f"no {what}s selected", source=source)
+    return np.array([checked_index(value, n, source, what, from_end=from_end) for value in values], dtype=np.int64)
+
+
 @dataclass(frozen=True)
 class Scan:
     """One LiDAR sweep.

@@ -314,7 +314,8 @@ class CarmenLog:
         if not (np.isfinite(min_range_m) and min_range_m >= 0):
             raise ConfigError(f"min_range_m must be a finite number >= 0, got {min_range_m!r}", source="carmen dataset options")
         if max_range_m is not None and not (np.isfinite(max_range_m) and max_range_m > min_range_m):
-            raise ConfigError(f"max_range_m must exceed min_range_m ({min_range_m}), got {max_range_m!r}", source="carmen dataset options")
+            raise ConfigError(f"max_range_m must be a finite number above min_range_m ({min_range_m}), got {max_range_m!r}",
+                              source="carmen dataset options")
         self._log = parse_log(self.path, laser)
         stem = self.path.name.split(".")[0]
         self.name = stem
@@ -370,8 +371,12 @@ class CarmenLog:
     @property
     def reader_options(self) -> dict[str, Any]:
         """The options as applied, for the run config (max_range_m=30 gave the config.yaml of a run without), and the
-        stamps moved to increase as a correction (an Intel run said "reader corrections: none")."""
-        stated = "the log's largest reading" if self.laser == "FLASER" else "the message's own"
+        stamps moved to increase as a correction (an Intel run said "reader corrections: none"). The maximum range says
+        the value taken for messages that state none (a ROBOTLASER1 log stating 0 was recorded as "the message's own")."""
+        unstated = len(self) if self.laser == "FLASER" else int((~(self._log.max_range_m > 0)).sum())
+        largest = f"the log's largest reading ({float(self._log.ranges_m.max()):g} m)"
+        stated = (largest if unstated == len(self) else f"the message's own; {largest} for the {unstated} messages stating 0"
+                  if unstated else "the message's own")
         options: dict[str, Any] = {
             "kind": "carmen", "path": str(self.path.absolute()), "laser": self.laser, "min_range_m": self.min_range_m,
             "max_range_m": stated if self._max_range_given is None else float(self._max_range_given),
@@ -440,16 +445,18 @@ class CarmenLog:
 
     def ranges_m(self, index: int) -> np.ndarray:
         """All range readings of scan ``index`` as logged ``(n,)`` (nothing dropped)."""
+        index = checked_index(index, len(self), self.path)
         start = int(self._starts[index])
         return self._log.ranges_m[start : start + int(self._lengths[index])]
 
     def beam_angles_rad(self, index: int) -> np.ndarray:
         """Bearing of every beam of scan ``index`` in the laser frame ``(n,)`` (0 = forward, counter-clockwise)."""
+        index = checked_index(index, len(self), self.path)
         return self._log.start_rad[index] + self._log.step_rad[index] * np.arange(int(self._lengths[index]))
 
     def line_of(self, index: int) -> int:
         """The 1-based line of the log that holds scan ``index``."""
-        return int(self._log.lines[index])
+        return int(self._log.lines[checked_index(index, len(self), self.path)])
 
     def read_scan(self, index: int) -> Scan:
         """Scan ``index`` as ``(N, 3)`` points in the laser frame, z = 0, invalid readings dropped."""

@@ -1,8 +1,9 @@
 """A folder of scan files (``.bin``, ``.pcd``, ``.ply``, ``.npy``) as a ``ScanSequence``.
 
-Files are ordered by natural sort of their names (``scan2`` before ``scan10``). An optional poses
-file (KITTI or TUM format, poses of the LiDAR in a world frame) must have exactly one pose per
-scan; optional timestamps (array or a text file with one number per line) likewise.
+Files are ordered by natural sort of their names (``scan2`` before ``scan10``; names that are decimal time stamps by
+their value, ``1000.05`` before ``1000.1``). An optional poses file (KITTI or TUM format, poses of the LiDAR in a world
+frame) must have exactly one pose per scan; optional timestamps (array or a text file with one number per line)
+likewise.
 """
 
 from __future__ import annotations
@@ -24,7 +25,13 @@ POSE_FORMATS = ("kitti", "tum")
 
 
 def natural_key(name: str) -> tuple:
-    """Sort key treating digit runs as numbers: ``frame2`` < ``frame10``."""
+    """Sort key treating digit runs as numbers: ``frame2`` < ``frame10``. A name whose stem is a decimal number (a time
+    stamp) sorts by its value: the digits after the dot are a fraction (``1000.05`` < ``1000.1``; as numbers, 5 > 1 put
+    20 Hz sweeps out of order), compared as text so nanosecond stamps keep their order (floats would round them)."""
+    stem, suffix = os.path.splitext(name)
+    whole, dot, fraction = stem.partition(".")
+    if whole.isdigit() and (not dot or fraction.isdigit()):
+        return (0, int(whole), ""), (0, 0, fraction.rstrip("0")), (1, 0, suffix.lower())
     return tuple((0, int(part), "") if part.isdigit() else (1, 0, part.lower()) for part in re.split(r"(\d+)", name) if part)
 
 
@@ -70,7 +77,10 @@ class ScanFolder:
             (p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in wanted), key=lambda p: natural_key(p.name)
         )
         if not self.scan_paths:
-            raise DataError(f"no scan files ({', '.join(sorted(wanted))})", source=folder)
+            from lidarkit.io.kitti_raw import is_drive_folder
+
+            hint = "; a KITTI raw drive folder: read it as kitti_raw:PATH" if is_drive_folder(folder) else ""
+            raise DataError(f"no scan files ({', '.join(sorted(wanted))}){hint}", source=folder)
         stems: dict[str, Path] = {}
         for path in self.scan_paths:  # the same scan in two formats was read as two frames (every other step at rest)
             if path.stem in stems:

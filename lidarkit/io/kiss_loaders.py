@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
-from lidarkit.io.base import Scan, checked_index
+from lidarkit.io.base import Scan, checked_index, checked_indices
 from lidarkit.io.rosbag import guarded_loader, require_modules
 from lidarkit.trajectory import Trajectory
 
@@ -290,7 +290,7 @@ class MulranScans(KissLoaderScans):
         covers part of its scans is scored on that part (``--frames``)."""
         stamps_ns = np.loadtxt(self.path / "global_pose.csv", delimiter=",", usecols=0, ndmin=1)
         scans_ns = np.asarray(self.loader.scan_timestamps, dtype=np.float64)
-        numbers = np.arange(len(scans_ns)) if scans is None else np.asarray(scans, dtype=np.int64)
+        numbers = np.arange(len(scans_ns)) if scans is None else checked_indices(scans, len(scans_ns), self.path, from_end=False)
         picked = scans_ns[numbers]
         outside = numbers[(picked < stamps_ns.min() - 5e7) | (picked > stamps_ns.max() + 5e7)]  # half a 10 Hz sweep
         if len(outside):
@@ -432,6 +432,7 @@ class GenericScans(KissLoaderScans):
     def __init__(self, path: str | os.PathLike):
         from kiss_icp.datasets import supported_file_extensions
 
+        from lidarkit.io.folder import natural_key
         from lidarkit.io.pointfile import POINT_FILE_SUFFIXES
 
         folder = Path(path)
@@ -453,6 +454,8 @@ class GenericScans(KissLoaderScans):
             log.warning("%s: %d point-cloud files that kiss-icp's generic loader does not read are skipped (%s); folder:PATH "
                         "reads them", folder, len(skipped), ", ".join(skipped))
         super().__init__(folder)
+        # in folder:PATH's order (natsort read time-stamp names 1000.1 before 1000.05: sweeps out of order, no word)
+        self.loader.scan_files = np.array(sorted(self.loader.scan_files, key=lambda f: natural_key(Path(f).name)), dtype=str)
 
 
 __all__ = [

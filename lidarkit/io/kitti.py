@@ -33,7 +33,7 @@ import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.geometry import se3_inverse
-from lidarkit.io.base import INSTANT_FRACTION, Scan, checked_index
+from lidarkit.io.base import INSTANT_FRACTION, Scan, checked_index, checked_indices
 from lidarkit.io.pointfile import load_npy, read_kitti_bin
 from lidarkit.textfile import file_line, is_number, read_lines, read_numeric_table
 from lidarkit.trajectory import Trajectory
@@ -429,9 +429,7 @@ class KittiOdometry:
 
     def _rows(self, gt: Trajectory, frames: np.ndarray | list[int], source: Path) -> Trajectory:
         """The poses of KITTI frame numbers ``frames`` of a whole-sequence pose file, with their times.txt stamps."""
-        frames = np.asarray(frames, dtype=np.int64)
-        if len(frames) and (frames.min() < 0 or frames.max() >= len(gt)):
-            raise DataError(f"frame {int(frames.max())} outside the {len(gt)} poses", source=source)
+        frames = checked_indices(frames, len(gt), source, "frame", from_end=False)  # (1.5 read frame 1)
         ts = None if self._times_all is None else self._times_all[frames]
         return Trajectory(gt.poses_se3[frames], ts, gt.name)
 

@@ -32,7 +32,7 @@ import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.geometry import se3_inverse
-from lidarkit.io.base import INSTANT_FRACTION, Scan, checked_index
+from lidarkit.io.base import INSTANT_FRACTION, Scan, checked_index, checked_indices
 from lidarkit.io.kitti import (
     CORRECTED_BY_DEFAULT, check_vertical_correction, correct_vertical_angle, correction_options, indexed_files, read_gray_image,
 )
@@ -45,6 +45,12 @@ OXTS_FIELDS = 30
 #: the per-point times a drive's scans are given (``"azimuth"``: each point's sweep fraction, as kiss-icp's loader)
 POINT_TIMES = ("azimuth", "none")
 _DRIVE_DIR = re.compile(r"^(\d{4}_\d{2}_\d{2})_drive_(\d{4})_(\w+)$")
+
+
+def is_drive_folder(path: str | os.PathLike) -> bool:
+    """Whether ``path`` is named as a KITTI raw drive folder (``2011_09_26_drive_0002_sync``): read as a folder of
+    scans it said "no scan files" without naming ``kitti_raw:``."""
+    return _DRIVE_DIR.match(Path(path).name) is not None
 
 
 def read_kitti_raw_timestamps(path: str | os.PathLike) -> np.ndarray:
@@ -231,7 +237,7 @@ class KittiRaw:
 
     def ground_truth_at(self, frames: np.ndarray | list[int]) -> Trajectory:
         """LiDAR poses ``T_enu_velo`` of the given frame numbers (DataError if a frame has no OXTS packet)."""
-        frames = np.asarray(frames, dtype=np.int64)
+        frames = checked_indices(frames, len(self._oxts_times_all), self.drive_dir / "oxts", "frame", from_end=False)
         lookup = {int(f): i for i, f in enumerate(self.oxts_frames)}
         missing = [int(f) for f in frames if int(f) not in lookup]
         if missing:
@@ -305,4 +311,4 @@ def sweep_fraction_from_azimuth(points_xyz: np.ndarray) -> np.ndarray:
     return 0.5 * (1.0 - np.arctan2(points_xyz[:, 1], points_xyz[:, 0]) / np.pi)
 
 
-__all__ = ["KittiRaw", "read_kitti_raw_timestamps", "sweep_fraction_from_azimuth"]
+__all__ = ["KittiRaw", "is_drive_folder", "read_kitti_raw_timestamps", "sweep_fraction_from_azimuth"]

@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
-from lidarkit.io.base import INSTANT_FRACTION, Scan, checked_index, classify_instant
+from lidarkit.io.base import INSTANT_FRACTION, Scan, checked_index, checked_indices, classify_instant
 from lidarkit.io.pointcloud2 import decode_pointcloud2, stamp_seconds
 from lidarkit.trajectory import Trajectory
 
@@ -102,7 +102,7 @@ class _BagScans:
             raise DataError(f"several {POINTCLOUD2} topics ({', '.join(clouds)}): choose one with topic=...", source=self.path)
         self.topic = topic or clouds[0]
         odometry = sorted(t for t, m in topics.items() if m == ODOMETRY)
-        if ground_truth_topic == "none":  # (a spec's empty value reads as "auto": none is named)
+        if ground_truth_topic == "none":  # no ground truth (None: the one odometry topic, if there is one)
             ground_truth_topic = ""
         if ground_truth_topic:
             if topics.get(ground_truth_topic) != ODOMETRY:
@@ -226,9 +226,9 @@ class _BagScans:
             return None
         gt_stamps, gt_poses = self._recorded_ground_truth
         all_stamps = self.timestamps_s
-        numbers = np.arange(self.n_scans) if scans is None else np.asarray(scans, dtype=np.int64)
-        scan_stamps = all_stamps[numbers]
         source = f"{self.path}{self.ground_truth_topic}"
+        numbers = np.arange(self.n_scans) if scans is None else checked_indices(scans, self.n_scans, source, from_end=False)
+        scan_stamps = all_stamps[numbers]
         if len(gt_stamps) == self.n_scans:  # one pose per scan: paired by count, whichever scans are selected
             gt_stamps, gt_poses = gt_stamps[numbers], gt_poses[numbers]
         else:
