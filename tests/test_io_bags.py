@@ -76,6 +76,10 @@ def test_the_files_detected_by_name_are_listed_from_the_detection_table(tmp_path
     assert detected_files() == "a .bag/.mcap/.pcap/.clf file (also .clf.bz2/.clf.gz/.clf.xz)"
     for suffix in (*DETECTED_SUFFIXES, ".clf.bz2", ".clf.gz", ".clf.xz"):
         assert suffix in detected_files() and detect_kind(tmp_path / f"nonexist{suffix}") is not None, suffix
+    from lidarkit.odometry import open_sequence
+
+    with pytest.raises(DataError, match=r"dataset not found \(a folder, a \.bag/\.mcap/\.pcap/\.clf file \(also \.clf\.bz2"):
+        open_sequence(str(tmp_path / "nonexist.clf.bz2"))
 
 
 @pytest.mark.parametrize("fmt,storage,name,kind", FORMATS)

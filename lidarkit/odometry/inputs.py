@@ -51,7 +51,7 @@ def open_sequence(spec: str | os.PathLike | ScanSequence) -> ScanSequence:
     if not path.exists():
         if sep and len(kind) > 1 and "/" not in kind and "\\" not in kind:  # KIND:PATH with a kind no reader has
             raise ConfigError(f"unknown dataset kind {kind!r}; known: sim, {', '.join(lio.available_datasets())}", source=text)
-        raise DataError("dataset not found (a folder, a .bag/.mcap/.pcap file, KIND:PATH or sim:SCENE?...)", source=text)
+        raise DataError(f"dataset not found (a folder, {lio.detected_files()}, KIND:PATH or sim:SCENE?...)", source=text)
     kind = lio.detect_kind(path)
     problem = lio.ros2_storage_problem(path) if kind is None else None
     if problem:
