@@ -42,7 +42,7 @@ def test_spec_option_values_read_as_numbers_or_nothing_are_paths_again_or_refuse
     from lidarkit.io.kitti import KittiOdometry
 
     np.save(tmp_path / "000000.npy", np.zeros((5, 3)))
-    for query, line in (("suffixes=", "folder dataset option suffixes: needs a value"),
+    for query, line in (("suffixes=", "folder dataset option: suffixes= has no value; give one, or leave suffixes out for its default"),
                         ("suffixes=true", "folder dataset option suffixes: expected a path or text, got True"),
                         ("suffixes=5", "suffixes: unsupported scan suffix '5'")):
         with pytest.raises(ConfigError, match=re.escape(line)):
@@ -96,3 +96,83 @@ def test_spec_with_an_empty_path_is_refused(tmp_path, monkeypatch):
             open_sequence(spec)
         assert str(refused.value) == f"{spec}: {kind}: with no path (expected {kind}:PATH[?key=value&...])"
     assert len(open_sequence(f"folder:{tmp_path}")) == 1
+
+
+# ---- CARMEN logs ----------------------------------------------------------------------------------
+
+
+def test_a_run_over_a_restamped_log_scores_its_relations_through_the_reader(tmp_path):
+    """The Intel run's note sent users to `lidarkit eval --relations FILE poses_tum.txt`, which matches the file's
+    times as logged against the stamps the reader moved (364 of 499 relations scored, some on the wrong scan). A log
+    whose stamps were moved is now scored in the run, through the reader, whose relations move with its scans."""
+    import bz2
+
+    from conftest import shared_path
+
+    from lidarkit.eval.relations import relation_error
+    from lidarkit.io.carmen import parse_log
+    from lidarkit.odometry import run
+
+    text = bz2.decompress(shared_path("carmen_2d", "intel.clf.bz2").read_bytes()).decode()
+    lines = text.splitlines(keepends=True)
+    last = [k for k, line in enumerate(lines) if line.startswith("FLASER")][39]
+    log = tmp_path / "intel.clf"  # Intel's first 40 scans: the reader moves the stamps of scans 26 and 27
+    log.write_text("".join(lines[:last + 1]))
+    logged = parse_log(log).timestamps_s  # the file's own times, which a .relations file holds
+    odometry = open_dataset("carmen", log).odometry.poses_se3
+    rows = []
+    for i in range(20, 39):
+        T = np.linalg.solve(odometry[i], odometry[i + 1])
+        rows.append(f"{logged[i]:.6f} {logged[i + 1]:.6f} {T[0, 3]:.6f} {T[1, 3]:.6f} 0 0 0 {np.arctan2(T[1, 0], T[0, 0]):.6f}")
+    (tmp_path / "intel.relations").write_text("\n".join(rows) + "\n")
+    result = run(f"carmen:{log}", "vanilla", params={"planar": True, "max_correspondence_distance_m": 0.5}, init="odometry",
+                 frames="20:40")
+    scored = relation_error(result.trajectory, open_dataset("carmen", log).relations)
+    assert scored.n_used == 19 and scored.translation_abs["max"] < 0.05
+    assert result.metrics["relations"] == scored.to_dict()
+    assert result.metrics["ground_truth_note"] == (
+        f"relations only, scored through the reader (metrics \"relations\"): 19 of 19, mean error "
+        f"{scored.translation_abs['mean']:.4f} m / {scored.rotation_abs['mean']:.4f} deg; the reader moved 2 scan stamps and the "
+        "relations' times with them (lidarkit eval --relations matches the file's times as logged: not for this log)")
+
+
+def test_an_empty_scan_of_a_log_names_its_line_and_why(tmp_path, capsys):
+    """A CARMEN scan whose readings were all 0.00 stopped the run with "error: blank (frame 10): empty scan (0 points)",
+    naming neither the file's line nor why; the scan's own source and the reader's valid range now say both."""
+    import bz2
+
+    from conftest import shared_path
+
+    lines = bz2.decompress(shared_path("carmen_2d", "aces.clf.bz2").read_bytes()).decode().splitlines(keepends=True)
+    scans = [k for k, line in enumerate(lines) if line.startswith("FLASER")][:12]
+    fields = lines[scans[10]].split(" ")
+    fields[2:182] = ["0.00"] * 180  # FLASER 180 r1..r180 x y theta ...
+    lines[scans[10]] = " ".join(fields)
+    log = tmp_path / "blank.clf"
+    log.write_text("".join(lines[:scans[-1] + 1]))
+    assert _cli(["odometry", str(log), "-m", "vanilla", "-p", "planar=true", "--no-progress"]) == 1
+    assert capsys.readouterr().err.strip().splitlines()[-1] == (
+        f"error: {log}:{scans[10] + 1} (frame 10): empty scan (0 points): all 180 readings (0.00 m) lie outside the valid "
+        "range, above min_range_m 0 m and below the maximum range 50 m")
+
+
+def test_relations_whose_ends_meet_one_pose_are_left_out_and_counted(caplog):
+    """With a loose tolerance (--relation-max-diff 2000 on a 600-scan estimate) relations past the estimate's end had
+    both ends on its last pose and scored as no motion: 1279 of 1279 "matched", without a word. They are left out,
+    counted in ``n_same_pose`` and in a warning."""
+    from conftest import shared_path
+
+    from lidarkit.eval.relations import relation_error
+    from lidarkit.io.carmen import Relations
+
+    aces = open_dataset("carmen", shared_path("carmen_2d", "aces.clf.bz2"))
+    estimate = aces.odometry[:600]
+    relations = Relations.read(shared_path("carmen_2d", "aces.relations"))
+    loose = relation_error(estimate, relations, max_time_diff_s=2000)
+    assert (loose.n_relations, loose.n_used, loose.n_same_pose) == (1279, 117, 1162)
+    assert loose.to_dict()["n_same_pose"] == 1162
+    assert "aces odometry: 1162 of 1279 relations have the same estimated pose nearest both their time stamps (within " \
+           "2000 s; estimate spans 70.290..168.060 s): left out, they would score as no motion" in caplog.text
+    tight = relation_error(estimate, relations)  # the default 0.01 s: none meets one pose
+    assert (tight.n_used, tight.n_same_pose) == (103, 0)
+    assert set(loose.used) > set(tight.used)  # the 103 scored at 0.01 s are among the 117

@@ -385,3 +385,24 @@ def test_a_one_sweep_recording_runs_unscored_when_its_ground_truth_cannot_be_re_
     note = "none: one frame, nothing to score (the ground truth, of another instant of the sweep, left out)"
     assert result.metrics["ground_truth_note"] == note and result.config["run"]["ground_truth_note"] == note
     np.testing.assert_array_equal(result.trajectory.poses_se3, np.eye(4)[None])
+
+
+def test_a_bag_s_own_ground_truth_of_no_stated_instant_a_sweep_off_is_said(tmp_path):
+    """A bag read without per-point times (time_field=none): scans stamped 0.0-0.5 s, its recorded poses 0.1-0.6 s at no
+    stated instant of the sweep, paired by order and scored a sweep out of step without a word. A warning names the
+    median offset; with the times the instant is known, the poses are re-timed, and no such warning is given."""
+    from lidarkit.io import open_dataset
+    from lidarkit.sim.bag_export import export_bag
+
+    sim = SimulatedLidarSequence(pose_instant="end", **{**SIM, "n_frames": 6})
+    path = export_bag(sim, tmp_path / "run.bag", "rosbag1")
+    bag = open_dataset("rosbag", path, time_field="none")
+    assert bag.ground_truth.meta["pose_instant"] is None
+    result = run(bag, "vanilla")
+    warning = ("the ground-truth poses are stamped a median 0.100 s after their scans (a quarter of a frame is 0.025 s) at "
+               "an instant of the sweep the reader does not state: they are paired with the scans by order, one pose each, "
+               "and scored as they are")
+    assert warning in result.metrics["warnings"] and "final_error" in result.metrics
+    timed = run(open_dataset("rosbag", path), "vanilla")
+    assert timed.metrics["ground_truth_instant_note"] is not None
+    assert not [w for w in timed.metrics["warnings"] if "ground-truth poses are stamped" in w]

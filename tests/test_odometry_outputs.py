@@ -554,3 +554,17 @@ def test_a_two_frame_run_says_motion_not_checked_and_why_there_is_no_se3_ape(cap
     flat = " ".join(text.split())
     assert "bad frames (independent check) │ 0 of 2 (motion not checked, fitness 0)" in flat
     assert "APE translation RMSE, SE(3)-aligned (m) │ no SE(3)-aligned APE: a rigid fit needs 3 poses, the run has 2" in flat
+
+
+def test_a_one_frame_run_is_unscored_with_a_note(tmp_path, capsys):
+    """A one-frame run over a recording with ground truth printed "final error, unaligned 0.000 / 0.000" as if scored:
+    its one pose is the start of both trajectories. It runs unscored with a note, as a one-sweep recording did."""
+    note = "none: one frame, nothing to score (its pose is the start, where the estimate and the ground truth both begin)"
+    single = run("sim:open?frames=3&beams=16&azimuths=360", "vanilla", frames="2:3")
+    assert single.ground_truth is None and "final_error" not in single.metrics and "ape_translation_m" not in single.metrics
+    assert single.metrics["ground_truth_note"] == note and single.config["run"]["ground_truth"] is None
+    code, out, _ = _cli(["odometry", "sim:open?frames=3&beams=16&azimuths=360", "-m", "vanilla", "--frames", "2:3",
+                         "--no-progress", "--out", str(tmp_path / "run")], capsys)
+    assert code == 0 and f"ground truth │ {note}" in " ".join(out.split()) and "final error" not in out
+    assert not (tmp_path / "run" / "ground_truth_kitti.txt").exists()
+    assert "final_error" in run("sim:open?frames=3&beams=16&azimuths=360", "vanilla", frames="1:3").metrics  # two frames: scored

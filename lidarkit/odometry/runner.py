@@ -82,9 +82,26 @@ def _read_nonempty_scan(sequence: ScanSequence, index: int) -> Scan:
         raise DataError(f"cannot read the scan ({type(err).__name__}: {err})") from err
     if not isinstance(getattr(scan, "points_xyz", None), np.ndarray):
         raise ConfigError(f"read_scan({index}) returned a {type(scan).__name__}, not a lidarkit Scan (Scan(points_xyz) wraps an (N, 3) array)")
-    if len(scan.points_xyz) == 0:
-        raise DataError("empty scan (0 points)")
+    if len(scan.points_xyz) == 0:  # named by its file and line where the reader gives them (a CARMEN log's blank scan
+        # read "blank11 (frame 10): empty scan (0 points)"), else by the caller
+        raise DataError("empty scan (0 points)" + _why_empty(sequence, index), source=scan.source or None,
+                        location=f"frame {index}" if scan.source else None)
     return scan
+
+
+def _why_empty(sequence: ScanSequence, index: int) -> str:
+    """Why scan ``index`` holds no point, where a 2D log's reader can tell (``ranges_m``: its readings as logged), or ""."""
+    ranges_of, low = getattr(sequence, "ranges_m", None), getattr(sequence, "min_range_m", None)
+    if not callable(ranges_of) or low is None:
+        return ""
+    ranges = np.asarray(ranges_of(index), dtype=np.float64)
+    if not len(ranges):
+        return ": the message holds no readings"
+    high = np.asarray(getattr(sequence, "max_range_m", np.nan), dtype=np.float64)
+    high = float(high[index] if high.ndim else high)
+    span = f"{ranges.min():.2f} m" if ranges.min() == ranges.max() else f"{ranges.min():.2f}..{ranges.max():.2f} m"
+    return (f": all {len(ranges)} readings ({span}) lie outside the valid range, above min_range_m {low:g} m "
+            f"and below the maximum range {high:g} m")
 
 
 def _is_frame_error(err: BaseException) -> bool:
@@ -553,6 +570,9 @@ def run(
             unscored_note = "none: one frame, nothing to score (the ground truth, of another instant of the sweep, left out)"
         if instant_note is not None:
             reference = _reference(sequence, retimed, indices, dataset_name)
+    if reference is not None and n == 1:  # (it printed "final error, unaligned 0.000 / 0.000" as if scored)
+        reference, instant_note = None, None
+        unscored_note = "none: one frame, nothing to score (its pose is the start, where the estimate and the ground truth both begin)"
     all_numbers = frame_numbers(sequence)  # the recording's own frame numbers (KITTI's or a folder's file names), if any
     numbers = indices if all_numbers is None else all_numbers[indices]
     number_step = typical_interval(all_numbers if all_numbers is not None else np.arange(n_total))
@@ -578,7 +598,8 @@ def run(
                if fallback[1:].all() else f"{name} returns none")
         warnings.append(f"no frame's registration gave a covariance ({why}): no pose covariance")
         want_covariance = False
-    apart = _stamps_apart(reference, timestamps, all_stamps, numbers) if ground_truth is not None else None
+    apart = (_stamps_apart(reference, timestamps, all_stamps, numbers) if ground_truth is not None
+             else _own_stamps_apart(reference, timestamps, all_stamps) if instant_note is None else None)
     far = _far_float32_warning(far_float32, n)
     warnings = [w for w in (past_the_end, time_gap_warning(timestamps, numbers, odometry_poses is not None, indices, typical), apart, far)
                 if w] + warnings
@@ -590,6 +611,7 @@ def run(
     for message in warnings:
         log.warning("%s: %s", title, message)
     covariances = (relative_cov, propagate(poses, relative_cov)) if want_covariance else None
+    relations_note, relation_scores = _relations_note(sequence, out_dir, trajectory) if reference is None else (None, None)
     config = {
         "method": name,
         "method_config": config_dict(getattr(registration, "config", None)),
@@ -609,7 +631,7 @@ def run(
             "fallback_motion": "dataset odometry" if odometry_poses is not None else "constant velocity",
             "ground_truth": None if reference is None else reference.name,
             "ground_truth_meta": None if reference is None else _plain(reference.meta),
-            "ground_truth_note": unscored_note or (_relations_note(sequence, out_dir) if reference is None else None),
+            "ground_truth_note": unscored_note or relations_note,
             "effective": effective,
             "warnings": warnings,
             "frame_check": check.config.describe(),
@@ -626,6 +648,8 @@ def run(
     metrics = odometry_metrics(result)
     if instant_note is not None:
         metrics["ground_truth_instant_note"] = instant_note
+    if relation_scores is not None:
+        metrics["relations"] = relation_scores
     result = dataclasses.replace(result, metrics=metrics)
     if out_dir is not None:
         write_run(result, out_dir)
@@ -653,14 +677,30 @@ def _odometry_guess(sequence: ScanSequence, init: str, registration: Any, n_tota
     return np.asarray(odometry.poses_se3, dtype=np.float64)
 
 
-def _relations_note(sequence: ScanSequence, out_dir: str | os.PathLike | None) -> str | None:
-    """How to score a run without ground truth over a log with relation ground truth (a CARMEN log's ``.relations``;
-    the ACES run said "none: no scores" with relations beside the log), or None."""
+def _relations_note(sequence: ScanSequence, out_dir: str | os.PathLike | None,
+                    trajectory: Trajectory) -> tuple[str | None, dict[str, Any] | None]:
+    """``(note, relation scores or None)`` of a run without ground truth over a log with relation ground truth (a
+    CARMEN log's ``.relations``; the ACES run said "none: no scores" with relations beside the log), or ``(None, None)``.
+    The note gives the ``lidarkit eval --relations`` command; a log whose stamps the reader moved (Intel: 2042) is scored
+    here instead, through the reader, whose relations move with the scans (that command matches the file's times as
+    logged: 364 of Intel's 499 relations, some on the wrong scan)."""
     relations = (getattr(sequence, "reader_options", None) or {}).get("relations")
     if not relations:
-        return None
-    poses = Path(out_dir) / "poses_tum.txt" if out_dir is not None else "POSES_TUM (the run's poses_tum.txt, --out)"
-    return f"none: no scores here; the dataset has relation ground truth: lidarkit eval --relations {relations} {poses}"
+        return None, None
+    n_moved = int(getattr(sequence, "n_restamped", 0) or 0)
+    if not n_moved:
+        poses = Path(out_dir) / "poses_tum.txt" if out_dir is not None else "POSES_TUM (the run's poses_tum.txt, --out)"
+        return f"none: no scores here; the dataset has relation ground truth: lidarkit eval --relations {relations} {poses}", None
+    from lidarkit.eval.relations import relation_error
+
+    why = (f"the reader moved {n_moved} scan stamps and the relations' times with them (lidarkit eval --relations "
+           "matches the file's times as logged: not for this log)")
+    try:
+        scored = relation_error(trajectory, sequence.relations)
+    except EvaluationError as err:
+        return f"none: no scores here; the relation ground truth scores nothing of this run ({err.reason}); {why}", None
+    return (f"relations only, scored through the reader (metrics \"relations\"): {scored.n_used} of {scored.n_relations}, "
+            f"mean error {scored.translation_abs['mean']:.4f} m / {scored.rotation_abs['mean']:.4f} deg; {why}"), scored.to_dict()
 
 
 def _plain(meta: dict) -> dict:
@@ -711,6 +751,22 @@ def _stamps_apart(reference: Trajectory | None, stamps_s: np.ndarray | None, all
         return None
     return (f"the ground-truth pose of frame {int(frames[k])} is stamped {apart[k]:.3f} s from its scan's pose (half a frame "
             f"is {0.5 * interval:.3f} s): the given ground truth is paired with the scans by order, one pose each, not by time")
+
+
+def _own_stamps_apart(reference: Trajectory | None, stamps_s: np.ndarray | None, all_stamps_s: np.ndarray | None) -> str | None:
+    """The dataset's own ground truth of an instant of the sweep it does not state, compared as it is: a warning when
+    its stamps lie systematically more than a quarter of a frame from the estimate's ``stamps_s``, or None (a bag
+    without per-point times, its poses a sweep after the scans, was scored one sweep out of step without a word)."""
+    interval = typical_interval(all_stamps_s)
+    if (reference is None or (reference.meta or {}).get("pose_instant") is not None or reference.timestamps_s is None
+            or stamps_s is None or not interval):
+        return None
+    offset = float(np.median(np.asarray(reference.timestamps_s, dtype=np.float64) - stamps_s))
+    if abs(offset) <= 0.25 * interval:
+        return None
+    return (f"the ground-truth poses are stamped a median {abs(offset):.3f} s {'after' if offset > 0 else 'before'} their scans "
+            f"(a quarter of a frame is {0.25 * interval:.3f} s) at an instant of the sweep the reader does not state: they are "
+            "paired with the scans by order, one pose each, and scored as they are")
 
 
 def _reference(sequence: ScanSequence, ground_truth: Trajectory | None, indices: np.ndarray, dataset_name: str) -> Trajectory | None:
