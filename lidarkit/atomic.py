@@ -2,7 +2,8 @@
 
 - Files are written atomically (a temporary file beside the target, fsync, one rename): complete or absent.
 - Run folders are all-or-nothing (:func:`run_folder`): written under a temporary hidden name and renamed into
-  place only once every file is there, so a failed or killed run never leaves a folder that looks finished.
+  place only once every file is there, so a failed or killed run never leaves a folder that looks finished; into an
+  existing folder the files are moved one rename each with SIGINT / SIGTERM held until the last is in.
 - Any ``OSError`` (a file where a folder is needed, a folder where a file is needed, read-only file system,
   disk full, permission denied) and an unknown plot format become :class:`OutputError` naming the path.
 """
@@ -13,7 +14,9 @@ import contextlib
 import errno
 import os
 import shutil
+import signal
 import tempfile
+import threading
 import time
 from collections.abc import Iterable, Iterator
 from pathlib import Path
@@ -34,6 +37,8 @@ os.umask(_UMASK)  # read once at import: os.umask can only be read by setting it
 PARTIAL_MARK = ".partial-"  # temporary run folders: ``.<name>.partial-XXXX`` beside the final one
 _RANDOM_CHARS = 8  # tempfile's random part of a name
 _NAME_MAX = 255  # bytes in one name on the file systems lidarkit writes to (ext4, xfs, btrfs, tmpfs)
+#: the files that say a folder holds a finished run or export: moved into an existing folder last
+_FINISHING = ("config.yaml", "config.json", "sim.yaml", "manifest.json")
 
 _REASONS = {
     errno.EEXIST: "a file is in the way (a folder is needed here)",
@@ -89,19 +94,21 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
 
     The temporary name keeps the suffix so writers that pick a format by extension
     (matplotlib, numpy, Open3D) still work. An ``OSError`` inside the block or while
-    renaming becomes an OutputError naming ``path``.
+    renaming becomes an OutputError naming ``path``. A ``path`` that is a symbolic link is written where it points (the
+    rename replaced the link with a plain file and left the file it names as it was).
     """
-    path = Path(path)
+    named = Path(path)
+    path = Path(os.path.realpath(named)) if named.is_symlink() else named
     if path.is_dir():
-        raise OutputError("cannot write: is a folder (a file name is needed here)", source=path)
+        raise OutputError("cannot write: is a folder (a file name is needed here)", source=named)
     ensure_dir(path.parent)
-    with output_errors(path):
+    with output_errors(named):
         extra = 2 + _RANDOM_CHARS + len(os.fsencode(path.suffix))  # ".<stem>.XXXXXXXX<suffix>"
         fd, tmp = tempfile.mkstemp(prefix=f".{temporary_stem(path.stem, extra)}.", suffix=path.suffix, dir=path.parent)
         os.close(fd)
     tmp_path = Path(tmp)
     try:
-        with output_errors(path):
+        with output_errors(named):
             os.chmod(tmp_path, 0o666 & ~_UMASK)  # mkstemp creates 0600; results should get the usual permissions
             yield tmp_path
             os.replace(tmp_path, path)
@@ -135,7 +142,8 @@ def write_texts(texts: dict[str | os.PathLike, str]) -> list[Path]:
 def paths_together(paths: Iterable[str | os.PathLike]) -> Iterator[dict[Path, Path]]:
     """Temporary paths (``{final: temporary}``) for outputs that belong together: the block writes each to its
     temporary path, and every one is renamed into place only after the block ended, so a failure or an interrupt in it
-    replaces none (an evaluation's JSON was replaced and its figure, failing, kept the earlier run's)."""
+    replaces none (an evaluation's JSON was replaced and its figure, failing, kept the earlier run's); an interrupt
+    during the renames takes effect after the last."""
     with contextlib.ExitStack() as stack:
         aside = {Path(p): stack.enter_context(atomic_path(p)) for p in paths}
         try:
@@ -145,6 +153,8 @@ def paths_together(paths: Iterable[str | os.PathLike]) -> Iterator[dict[Path, Pa
             if final is None:
                 raise
             raise OutputError(err.reason, source=final, location=err.location) from err
+        with interrupts_deferred():  # renamed in one after the other: all of them, never the first few
+            stack.close()
 
 
 def _write_synced(path: Path, data: bytes) -> None:
@@ -277,11 +287,34 @@ def run_folder(path: str | os.PathLike, replaces: Iterable[str] = (), exclusive:
                 raise OutputError(err.reason, source=named / os.path.relpath(err.source, tmp), location=err.location) from err
             raise
         written = {p.name for p in tmp.iterdir()}
-        with output_errors(named, "cannot complete the folder"):
-            _move_into_place(tmp, path, exclusive, named, inside)
-        for name in sorted(set(replaces) - written) if held_a_run else ():
-            with output_errors(named / name, "cannot remove an earlier run's file"):
-                (path / name).unlink(missing_ok=True)
+        with interrupts_deferred():  # moved in file by file: a folder cut off half-way looked finished
+            with output_errors(named, "cannot complete the folder"):
+                _move_into_place(tmp, path, exclusive, named, inside)
+            for name in sorted(set(replaces) - written) if held_a_run else ():
+                with output_errors(named / name, "cannot remove an earlier run's file"):
+                    (path / name).unlink(missing_ok=True)
+
+
+@contextlib.contextmanager
+def interrupts_deferred() -> Iterator[None]:
+    """SIGINT / SIGTERM received in the block take effect when it ends, through the handlers in force before it (the
+    CLI's: one line, exit 130 / 143). Main thread only (elsewhere the block runs as it is): a SIGTERM while an export's
+    files were moved into an existing folder left sim.yaml, poses.txt and 327 of its 1000 sweeps."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    received: list[int] = []
+    previous = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    for s, handler in previous.items():
+        if handler is not signal.SIG_IGN:
+            signal.signal(s, lambda signum, _frame: received.append(signum))
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler if handler is not None else signal.SIG_DFL)
+        for signum in dict.fromkeys(received):
+            signal.raise_signal(signum)
 
 
 def _writable(folder: Path) -> bool:
@@ -322,9 +355,12 @@ def partial_folder(path: str | os.PathLike, reason: str = "cannot write", inside
         remove_stale_partials(path, home=home)
         yield tmp
     finally:
-        shutil.rmtree(tmp, ignore_errors=True)
-        if held is not None:
-            os.close(held)
+        try:
+            with interrupts_deferred():  # (a SIGTERM in it left the folder behind)
+                shutil.rmtree(tmp, ignore_errors=True)
+        finally:
+            if held is not None:
+                os.close(held)
 
 
 def _holds_a_run(path: Path) -> bool:
@@ -369,7 +405,8 @@ def _move_into_place(tmp: Path, path: Path, exclusive: bool = False, named: Path
                 raise
             if exclusive:
                 raise filled from None
-    moves = [(src, path / src.relative_to(tmp)) for src in sorted(tmp.rglob("*"))]
+    finishing = [tmp / name for name in _FINISHING]  # last: a folder a kill cut off half-way lacks them
+    moves = [(src, path / src.relative_to(tmp)) for src in sorted(tmp.rglob("*"), key=lambda p: (p in finishing, p))]
     # everything in the way is found before the first file moves: a folder where a file goes (or a file where a folder
     # goes) found half-way left the folder half the earlier run's, half this one's
     for src, dst in moves:

@@ -215,3 +215,75 @@ def test_files_written_together_replace_none_when_one_fails(tmp_path):
     written = atomic.write_texts({tmp_path / "report.md": "new\n", tmp_path / "report.html": "<p>new</p>\n"})
     assert written == [tmp_path / "report.md", tmp_path / "report.html"]
     assert (tmp_path / "report.md").read_text() == "new\n" and (tmp_path / "report.html").read_text() == "<p>new</p>\n"
+
+
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="needs /dev/full (a device that is always full)")
+def test_a_full_disk_on_stdout_is_one_line_and_the_files_asked_for_are_still_written(tmp_path):
+    """`lidarkit version > /dev/full` (so `--version`, `icp --list`, `eval ... --json m.json`) ended in a 70-line
+    traceback ("OSError: [Errno 28] No space left on device"), and eval, which printed its table before writing its
+    outputs, wrote no m.json. A closed pipe (`| head -1`) stays quiet, as before."""
+    import json
+    import subprocess
+    import sys
+
+    from conftest import shared_path
+
+    gt, est = (str(shared_path("evo_testdata", name)) for name in ("KITTI_00_gt.txt", "KITTI_00_ORB.txt"))
+
+    def run(args, stdout):
+        return subprocess.run([sys.executable, "-m", "lidarkit", *map(str, args)], stdout=stdout, stderr=subprocess.PIPE,
+                              text=True, timeout=300)
+
+    with open("/dev/full", "w") as full:
+        for args in (["version"], ["--version"], ["icp", "--list"], ["eval", gt, est, "--no-drift", "--json", tmp_path / "m.json"]):
+            done = run(args, full)
+            assert (done.returncode, done.stderr) == (1, "error: stdout: cannot write: no space left on the device\n"), args
+    written = json.loads((tmp_path / "m.json").read_text())
+    assert written["ape"]["stats"]["rmse"] == pytest.approx(1.30345, abs=1e-5) and written["est_path"] == est
+    read, write = os.pipe()
+    os.close(read)  # the reader is gone: a broken pipe
+    done = run(["version"], write)
+    os.close(write)
+    assert (done.returncode, done.stderr) == (1, "")
+
+
+def test_a_file_output_given_as_a_link_is_written_where_the_link_points(tmp_path, capsys):
+    """`--json LINK` renamed the result onto the link: the link became a plain file and the file it named kept the
+    earlier result (exit 0). A run folder given as a link was already written where it points; a file now is too."""
+    import json
+
+    from conftest import shared_path
+
+    real = tmp_path / "real.json"
+    real.write_text('{"old": 1}\n')
+    (tmp_path / "sub").mkdir()
+    link = tmp_path / "sub" / "lj"
+    link.symlink_to("../real.json")  # relative to the link's folder, as `ln -s ../real.json sub/lj` makes it
+    atomic.write_text(link, "new\n")
+    assert link.is_symlink() and real.read_text() == "new\n"
+    gt, est = (str(shared_path("evo_testdata", name)) for name in ("KITTI_00_gt.txt", "KITTI_00_ORB.txt"))
+    with pytest.raises(SystemExit) as exc:
+        main(["eval", gt, est, "--no-drift", "--json", str(link)])
+    assert exc.value.code in (0, None) and f"wrote {link}" in capsys.readouterr().out
+    assert link.is_symlink() and json.loads(real.read_text())["ape"]["stats"]["rmse"] == pytest.approx(1.30345, abs=1e-5)
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ["lj", "real.json", "sub"]  # no temporary file left
+
+
+def test_files_written_together_are_all_renamed_in_when_interrupted_between_renames(tmp_path, monkeypatch):
+    """Ctrl-C between the renames of files that belong together (an evaluation's JSON and Markdown) left the first one
+    new beside the other one old: the renames finish, then the interrupt is raised."""
+    import signal
+
+    for name in ("r.json", "r.md"):
+        (tmp_path / name).write_text("old\n")
+    real_replace = os.replace
+
+    def replace(src, dst):  # a real SIGINT right after each rename
+        real_replace(src, dst)
+        os.kill(os.getpid(), signal.SIGINT)
+
+    monkeypatch.setattr(os, "replace", replace)
+    with pytest.raises(KeyboardInterrupt):
+        atomic.write_texts({tmp_path / "r.json": "new\n", tmp_path / "r.md": "new\n"})
+    assert [(tmp_path / n).read_text() for n in ("r.json", "r.md")] == ["new\n", "new\n"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.json", "r.md"]

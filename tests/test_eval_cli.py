@@ -335,3 +335,14 @@ def test_outputs_of_one_evaluation_are_replaced_together_or_not_at_all(tmp_path)
     assert failed.returncode == 1 and f"error: {tmp_path / 'r.png'}: cannot write: file too large" in " ".join(failed.stderr.split())
     after = {p.relative_to(tmp_path): p.read_bytes() for p in sorted(tmp_path.rglob("*")) if p.is_file()}
     assert after == before  # the ORB evaluation whole: no SPTAM JSON, tables or Markdown beside its figure, no leftovers
+
+
+def test_an_output_onto_the_trajectory_scored_by_relations_names_it_est(tmp_path, capsys):
+    """`eval --relations R EST --json EST` said "is also REF (an input)": with --relations the one trajectory given
+    is EST, as the help says."""
+    est = tmp_path / "poses_tum.txt"
+    est.write_bytes(shared_path("evo_testdata", "freiburg1_xyz-groundtruth.txt").read_bytes())
+    code, out, err = run_cli(["eval", "--relations", str(shared_path("carmen_2d", "aces.relations")), str(est),
+                              "--json", str(est)], capsys)
+    assert (code, out) == (1, "")
+    assert " ".join(err.split()) == f"error: --json: {est} is also EST (an input): an output never replaces it"

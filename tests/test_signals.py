@@ -192,3 +192,44 @@ def test_an_interrupted_forced_run_says_to_resume_without_force(tmp_path, monkey
         cli.main(["bench", str(suite), "--out", str(tmp_path / "new"), "--executor", "serial", "--no-report"])
     err = " ".join(capsys.readouterr().err.split())
     assert exc.value.code == 130 and "interrupted by SIGINT: no job had finished yet; run the same command again" in err, err
+
+
+def test_an_interrupt_while_a_run_is_moved_into_its_folder_takes_effect_once_every_file_is_in(tmp_path):
+    """SIGTERM while an export's files were moved into an existing folder (one rename each) stopped the move half-way:
+    the folder kept sim.yaml, poses.txt (1000 lines) and only 327 of 1000 sweeps, and read as a finished sequence of
+    327 frames. The move finishes first (the files that mark a run finished last), then the interrupt ends the
+    command with its usual line and exit code."""
+    import subprocess
+
+    code = textwrap.dedent("""
+        import os, signal, sys
+        from lidarkit import atomic
+        from lidarkit.cli import main
+
+        real_replace, moved = os.replace, []
+
+        def replace(src, dst):  # a real SIGTERM right after the 3rd file is moved into the folder
+            real_replace(src, dst)
+            if atomic.PARTIAL_MARK not in str(dst):
+                moved.append(os.path.basename(dst))
+                if len(moved) == 3:
+                    os.kill(os.getpid(), signal.SIGTERM)
+
+        os.replace = replace
+        try:
+            main(sys.argv[1:])
+        finally:
+            print(" ".join(moved))
+    """)
+    out = tmp_path / "ex1"
+    out.mkdir()  # an existing (empty) folder: the files are moved in one by one
+    done = subprocess.run([sys.executable, "-c", code, "sim", "lidar", "-n", "5", "-p", "n_beams=4", "-p",
+                           "n_azimuths=50", "-o", str(out)], capture_output=True, text=True, timeout=300,
+                          cwd=Path(__file__).resolve().parents[1])
+    assert done.returncode == 128 + signal.SIGTERM, done.stderr
+    assert done.stderr.strip().splitlines()[-1].startswith("interrupted by SIGTERM: stopped"), done.stderr
+    moved = done.stdout.split()
+    assert len(moved) == 5 + 5 + 7 and moved[-1] == "sim.yaml"  # every file moved, the one naming the run last
+    assert sorted(p.name for p in (out / "velodyne").iterdir()) == [f"{i:06d}.bin" for i in range(5)]
+    assert len((out / "poses.txt").read_text().splitlines()) == 5 and (out / "sim.yaml").is_file()
+    assert [p.name for p in tmp_path.iterdir()] == ["ex1"]  # no temporary folder left beside it

@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
+import os
+import sys
+
 import typer
 from rich.console import Console
 
@@ -28,7 +32,37 @@ def stdout() -> Console:
     Markup is off: file names, method labels and messages are user strings (``scan[v2].bin``, ``[/red]``) and must
     print as they are; styling goes through ``rich.text.Text`` or an explicit ``markup=True`` with ``escape``.
     """
-    return Console(highlight=False, markup=False)
+    return Console(file=_Stdout(), highlight=False, markup=False)
+
+
+class _Stdout:
+    """``sys.stdout`` as it is at each write; a write it refuses is an OutputError naming stdout (`lidarkit version >
+    /dev/full` ended in a 70-line traceback). A broken pipe (`| head -1`) is left to rich: a quiet exit."""
+
+    def write(self, text: str) -> int:
+        with _stdout_errors():
+            return sys.stdout.write(text)
+
+    def flush(self) -> None:
+        with _stdout_errors():
+            sys.stdout.flush()
+
+    def __getattr__(self, name: str):
+        return getattr(sys.stdout, name)
+
+
+@contextlib.contextmanager
+def _stdout_errors():
+    from lidarkit.atomic import error_for
+
+    try:
+        yield
+    except BrokenPipeError:
+        raise
+    except OSError as err:
+        with contextlib.suppress(OSError, ValueError):  # what stays buffered is dropped, not flushed again at exit
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        raise error_for("stdout", err) from err
 
 
 def stderr() -> Console:
@@ -49,7 +83,7 @@ def _print_version(value: bool) -> None:
     if value:
         from lidarkit import __version__
 
-        typer.echo(__version__)
+        stdout().print(__version__)
         raise typer.Exit()
 
 

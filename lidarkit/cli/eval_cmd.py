@@ -79,7 +79,8 @@ def eval_command(
             raise ConfigError(err.reason, source="--ref-format" if path == ref and ref_format else
                               "--est-format" if path == est and est_format else "--format") from None
 
-    _distinct_outputs({"REF": ref, "EST": est, "--ref-times": ref_times, "--est-times": est_times, "--relations": relations},
+    given = {"EST": ref} if relations is not None else {"REF": ref, "EST": est}  # (with --relations the one given is EST)
+    _distinct_outputs({**given, "--ref-times": ref_times, "--est-times": est_times, "--relations": relations},
                       {"--json": json_out, "--markdown": markdown, "--plot": plot, "--tables": tables})
     atomic.check_target(json_out, "file")
     if relations is not None:
@@ -132,16 +133,9 @@ def eval_command(
         if option is None:
             raise
         raise ConfigError(err.reason, source=option) from None
-    console = stdout()
-    console.print(report.evaluation_table(evaluation))
-    if evaluation.drift is not None:
-        console.print(report.drift_table(evaluation))
-    elif evaluation.drift_note:
-        console.print(f"KITTI drift not computed: {evaluation.drift_note}")
-    for note in report.evaluation_notes(evaluation):
-        console.print(f"note: {note}", soft_wrap=True, markup=False, highlight=False)
     # the outputs of one evaluation are written aside and moved in together: a failure (a full disk at the plot) or an
-    # interrupt leaves every earlier output as it was, never one new beside one old
+    # interrupt leaves every earlier output as it was, never one new beside one old; and before anything is printed (a
+    # full disk on stdout lost them)
     files = [path for path in (json_out, markdown, plot) if path is not None]
     with contextlib.ExitStack() as stack:
         aside = stack.enter_context(atomic.paths_together(files))
@@ -152,6 +146,14 @@ def eval_command(
         from lidarkit.eval.tables import TABLE_FILES, remove_stale_tables
 
         remove_stale_tables(tables, (p.name for p in written), names=(*TABLE_FILES, _BOXPLOT_NAME))
+    console = stdout()
+    console.print(report.evaluation_table(evaluation))
+    if evaluation.drift is not None:
+        console.print(report.drift_table(evaluation))
+    elif evaluation.drift_note:
+        console.print(f"KITTI drift not computed: {evaluation.drift_note}")
+    for note in report.evaluation_notes(evaluation):
+        console.print(f"note: {note}", soft_wrap=True, markup=False, highlight=False)
     for path in files:
         console.print(f"wrote {path}")
     if tables is not None:
@@ -221,10 +223,11 @@ def _relations_report(est_traj, relations_path: Path, max_diff_s: float, json_ou
         ("rotational e^2 (deg^2)", result.rotation_sq),
     ):
         table.add_row(label, *(f"{stats[k]:.4f}" for k in ("mean", "std", "max")))
+    if json_out is not None:  # (before the table: a full disk on stdout lost it)
+        report.write_json({**result.to_dict(), "relations_path": str(relations_path)}, json_out)
     console = stdout()
     console.print(table)
     if json_out is not None:
-        report.write_json({**result.to_dict(), "relations_path": str(relations_path)}, json_out)
         console.print(f"wrote {json_out}")
 
 
