@@ -401,6 +401,37 @@ def test_the_report_holds_the_suite_last_run_in_the_folder_and_says_what_is_miss
     assert "3 job results of the suite's 4 jobs (1 not run yet)" in text and "## Jobs of the suite without a result" in text
 
 
+def test_results_of_an_earlier_lidarkit_version_are_counted_and_named_as_such(tmp_path, capsys):
+    """After a source change the report said "47 results in jobs/ of jobs not in the folder's suite.json (an earlier
+    suite) left out" of the same suite's 59 older results: counted after one result per job was kept, and named as
+    an earlier suite's though only the lidarkit version (and so the key) differed."""
+    from lidarkit.bench.jobs import Job
+    from lidarkit.bench.results import make_record, result_path, write_result
+
+    (tmp_path / "a.yaml").write_text(textwrap.dedent(SUITE))  # 12 jobs
+    suite = load_suite(tmp_path / "a.yaml")
+    run_suite(suite, tmp_path / "out", executor="serial")
+    for record in load_results(tmp_path / "out"):  # the same jobs as an earlier version ran them
+        job = Job.from_spec(record["job"])
+        old = {k: v for k, v in record.items() if k not in ("schema", "key", "lidarkit_version", "job")}
+        write_result(tmp_path / "out", make_record(job, job.key("0.0.9"), "0.0.9", {**old, "finished_utc": "2026-01-01"}))
+    for job in suite.jobs[4:]:  # this version ran 4 of them so far
+        result_path(tmp_path / "out", job.key()).unlink()
+    other = Job("selftest", "gone", "synth", {"kind": "synthetic"}, "random_walk", {"steps": 5})  # an earlier suite's
+    write_result(tmp_path / "out", make_record(other, other.key("0.0.9"), "0.0.9", {"status": "ok", "metrics": {}}))
+    from conftest import cli_exit_code
+
+    assert cli_exit_code(["report", str(tmp_path / "out"), "--no-plots"]) == 0
+    assert ("4 results of the suite's 12 jobs (8 not run yet); 12 results in jobs/ of these jobs from an earlier lidarkit "
+            "version left out; 1 results in jobs/ of jobs not in the folder's suite.json (an earlier suite) left out, ") in (
+        " ".join(capsys.readouterr().out.split()))
+    report = build_report(tmp_path / "out", plots=False)
+    assert (report.n_records, report.n_expected, len(report.not_run), report.n_left_out, report.n_earlier_version) == (4, 12, 8, 13, 12)
+    # --all: the most recent result of each job (8 of the earlier version); the 4 it superseded are left out
+    report = build_report(tmp_path / "out", plots=False, every_result=True)
+    assert (report.n_records, report.n_left_out, report.n_earlier_version) == (13, 4, 4)
+
+
 def test_an_earlier_reports_plots_and_tables_do_not_stay_beside_the_new_ones(results_dir, tmp_path):
     import shutil
 
@@ -561,6 +592,31 @@ def test_reference_comparisons_pair_seeds_as_compare_does_and_say_when_segments_
     assert comparison_rows([(dataset, few)])[1][0][-1] == "kiss better (overlapping segments: p optimistic)"
     (_, many), = reference_comparisons(records(6))
     assert many.pairing == "seed" and many.n_pairs == 6 and many.metric == "KITTI drift %" and many.better == "a"
+
+
+
+def test_a_comparison_with_p_below_alpha_and_no_verdict_says_its_ci_includes_0(tmp_path):
+    """The demo's report.md and report.html showed p = 0.049 beside "no significant difference" without the reason the
+    terminal gave: the 95 % CI of the median difference includes 0 (compare's rule). The row shows the CI and says so."""
+    import html
+
+    from lidarkit.bench.jobs import Job
+    from lidarkit.bench.results import make_record, write_result
+
+    diffs = (0.05, 0.1, -1.0, -2.0, -3.0, -4.0, -5.0, -6.0)  # Wilcoxon p = 0.039; the median's CI [-5, +0.05]
+    for seed, diff in enumerate(diffs):
+        for method, drift in (("kiss", 10.0 + diff), ("small_gicp", 10.0)):
+            job = Job("odometry", "e", "drive", {"kind": "sim_lidar", "scene": "street"}, method, seed=seed)
+            outcome = {"status": "ok", "metrics": {"drift_translation_pct": drift}, "error": None, "runtime_s": 0.1}
+            write_result(tmp_path, make_record(job, job.key(), "1", outcome))
+    build_report(tmp_path, plots=False)
+    row = ("| drive | kiss | small_gicp | 8 seeds (KITTI drift %) | 7.394 | 10 | 0.039 | -0.83 | -2.5 [-5, +0.05] "
+           "| no significant difference (CI includes 0) |")
+    assert row in (tmp_path / "report.md").read_text().splitlines()
+    page = (tmp_path / "report.html").read_text()
+    assert "<th>median A - B (95 % CI)</th>" in page
+    cells = "".join(f"<td>{html.escape(c)}</td>" for c in ("-2.5 [-5, +0.05]", "no significant difference (CI includes 0)"))
+    assert cells in page
 
 
 ODOMETRY_AND_PAIRS = """

@@ -326,6 +326,29 @@ def test_uninstalled_methods_are_skipped_only_when_asked(tmp_path, monkeypatch):
     assert {"small_gicp", "genz"} <= set(get_task("odometry").optional_methods()) | set(get_task("icp_pair").optional_methods())
 
 
+def test_a_demo_skipping_an_absent_extra_gives_the_pip_line_bench_gives(tmp_path, monkeypatch):
+    """Without small_gicp, a demo said "method 'small_gicp' is not installed (available: ...)" where `lidarkit bench` on
+    the same suite said "... not installed here: pip install 'lidarkit[gicp]'": the demo now gives bench's line."""
+    from lidarkit.registration import registry as registry_module
+
+    monkeypatch.delitem(registry_module._VARIANTS, "small_gicp", raising=False)  # as if the extra were not installed
+    path = write(tmp_path, """
+        experiments:
+          - name: icp_kitti_pair
+            task: icp_pair
+            dataset: {kind: folder, path: "sample:kitti_pair"}
+            options: {pairs: [[0, 1]], ground_truth_file: T_target_source.txt}
+            methods: [vanilla, small_gicp]
+        """)
+    pip_line = "the 'small_gicp' variant needs the Python package 'small_gicp', not installed here: pip install 'lidarkit[gicp]'"
+    suite = load_suite(path, skip_unavailable=True)
+    assert [j.method for j in suite.jobs] == ["vanilla"]
+    assert suite.skipped == [("icp_kitti_pair: small_gicp", pip_line)]
+    with pytest.raises(ConfigError) as err:  # what bench says of the same file
+        load_suite(path)
+    assert str(err.value) == f"{path} (experiments[0].methods[1], line 7): {pip_line}"
+
+
 def test_a_pf_suite_scoring_past_the_end_of_its_data_is_refused_before_running(tmp_path):
     """mse_start beyond the Freiburg data's steps passed validation (and --dry-run); every job then failed at its end."""
     from conftest import shared_path

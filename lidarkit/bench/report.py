@@ -29,7 +29,7 @@ from lidarkit.bench.jobs import Job, canonical_json
 from lidarkit.bench.results import dataset_labels, load_results, path_argument, result_path, results_folder
 from lidarkit.errors import DataError
 from lidarkit.eval.report import markdown_table
-from lidarkit.eval.statistics import summarize
+from lidarkit.eval.statistics import _format_p, summarize
 
 log = logging.getLogger(__name__)
 
@@ -95,7 +95,8 @@ class Report:
     skipped: list[tuple[str, str]] = field(default_factory=list)  # experiments the last run skipped (name, reason)
     n_records: int = 0
     n_expected: int = 0  # jobs of the suite (suite.json) the report is restricted to; 0: every result in the folder
-    n_left_out: int = 0  # results in jobs/ from jobs not in the suite (an earlier suite in the same folder)
+    n_left_out: int = 0  # results in jobs/ the report does not hold (an earlier suite's, or an earlier version's)
+    n_earlier_version: int = 0  # of those, results of the report's own jobs from another lidarkit version (another key)
     not_run: list[str] = field(default_factory=list)  # labels of the suite's jobs with no result
     n_unreadable: int = 0  # of those, the jobs whose result file is there but cannot be read
     publication: Any = None  # lidarkit.bench.publication.Publication (odometry tables, box plots)
@@ -440,14 +441,18 @@ def _pivot_metrics(table: TaskTable) -> list[MetricInfo]:
 
 def coverage_text(report: Report) -> str:
     """What the report holds against the suite: `` of the suite's 24 jobs (17 not run yet); 9 results of jobs not in
-    suite.json left out`` ('' when it holds every job of the suite and nothing was left out)."""
+    suite.json left out`` ('' when it holds every job of the suite and nothing was left out). Results of the same jobs
+    from an earlier lidarkit version (after a source change) are said to be that, not an earlier suite's."""
     text = ""
     if report.n_expected and report.n_records < report.n_expected:
         text += f" of the suite's {report.n_expected} jobs ({len(report.not_run) - report.n_unreadable} not run yet"
         text += f", {report.n_unreadable} with a result file that cannot be read)" if report.n_unreadable else ")"
-    if report.n_left_out:
-        text += (f"; {report.n_left_out} results in jobs/ of jobs not in the folder's suite.json (an earlier suite) left out"
-                 if report.n_expected else f"; {report.n_left_out} results of jobs not in this run's suite left out")
+    if report.n_earlier_version:
+        text += f"; {report.n_earlier_version} results in jobs/ of these jobs from an earlier lidarkit version left out"
+    n_other_jobs = report.n_left_out - report.n_earlier_version
+    if n_other_jobs:
+        text += (f"; {n_other_jobs} results in jobs/ of jobs not in the folder's suite.json (an earlier suite) left out"
+                 if report.n_expected else f"; {n_other_jobs} results of jobs not in this run's suite left out")
     return text
 
 
@@ -715,15 +720,20 @@ def _html(report: Report, title: str) -> str:
 
 
 def comparison_rows(comparisons: list[Any]) -> tuple[list[str], list[list[str]]]:
-    """Rows of paired comparisons ``(dataset, PairedComparison)``: who, units, means, p, effect, verdict."""
-    header = ["dataset", "A", "B", "paired units", "mean A", "mean B", "p", "effect", "verdict"]
+    """Rows of paired comparisons ``(dataset, PairedComparison)``: who, units, means, p, effect, the median difference
+    with its 95 % CI, verdict. A p below alpha beside "no significant difference" says why when the CI includes 0
+    (compare's rule: p = 0.049 read as a contradiction without it); p is printed as compare prints it."""
+    header = ["dataset", "A", "B", "paired units", "mean A", "mean B", "p", "effect", "median A - B (95 % CI)", "verdict"]
     rows = []
     for dataset, c in comparisons:
         verdict = (f"{c.name_a if c.better == 'a' else c.name_b} better" if c.better else "no significant difference")
+        if not c.better and c.p_value < c.alpha and c.diff_ci_low <= 0 <= c.diff_ci_high:
+            verdict += " (CI includes 0)"
         if c.pairing == "segment":  # (overlapping KITTI segments of few seeds: see publication.OVERLAPPING_SEGMENTS)
             verdict += " (overlapping segments: p optimistic)"
         rows.append([dataset, c.name_a, c.name_b, f"{c.n_pairs} {c.pairing}s ({c.metric})", _fmt(c.mean_a),
-                     _fmt(c.mean_b), f"{c.p_value:.2g}", f"{c.effect_size:+.2f}", verdict])
+                     _fmt(c.mean_b), _format_p(c.p_value, c.alpha), f"{c.effect_size:+.2f}",
+                     f"{c.median_diff:+.3g} [{c.diff_ci_low:+.3g}, {c.diff_ci_high:+.3g}]", verdict])
     return header, rows
 
 
@@ -765,7 +775,7 @@ def build_report(
     suite_jobs = {} if every_result else _suite_jobs(manifest)
     if only_keys is None and suite_jobs:
         only_keys = set(suite_jobs)
-    n_all = len(latest_per_job(records))
+    every_record = records
     if only_keys is not None:
         records = [r for r in records if r["key"] in only_keys]
     records = latest_per_job(records)
@@ -778,8 +788,14 @@ def build_report(
     expected = {k: spec for k, spec in suite_jobs.items() if only_keys is None or k in only_keys}
     missing = {k: spec for k, spec in expected.items() if k not in done}
     unreadable = {k for k in missing if result_path(out_dir, k).exists()}  # (load_results logged why)
+    # a job's key hashes its spec and the code's version: a result left out with the spec of a job held here is that
+    # job run by another lidarkit version (they were called an earlier suite's, and counted once per spec: too few)
+    held = {id(r) for r in records}
+    own_specs = {canonical_json(r["job"]) for r in records} | {canonical_json(spec) for spec in expected.values()}
+    left_out = [r for r in every_record if id(r) not in held]
     report = Report(out_dir=out_dir, tables=aggregate(records, list(missing.values())), n_records=len(records),
-                    skipped=_skipped(manifest), n_expected=len(expected), n_left_out=n_all - len(records),
+                    skipped=_skipped(manifest), n_expected=len(expected), n_left_out=len(left_out),
+                    n_earlier_version=sum(canonical_json(r["job"]) in own_specs for r in left_out),
                     not_run=[_label({"job": spec}) + (" (its result file cannot be read: see the log)" if k in unreadable else "")
                              for k, spec in missing.items()], n_unreadable=len(unreadable))
     n_warnings = 0

@@ -347,7 +347,7 @@ def load_suite(path: str | Path, *, skip_unavailable: bool = False, only_tasks: 
             m_loc = (*exp_loc, "methods", j)
             if installed is not None and method.name not in installed and method.name in task.optional_methods():
                 # (an optional extra absent here; any other name is validated below: a typo was "not installed", exit 0)
-                reason = f"method {method.name!r} is not installed (available: {', '.join(installed)})"
+                reason = _not_installed(task, method, resolved[0], options, installed)
                 skipped.append((f"{exp_name}: {method.name}", reason))
                 log.info("skipping %s in %s: %s", method.name, exp_name, reason)
                 continue
@@ -398,6 +398,18 @@ def _check(locator: _Locator, loc: tuple[Any, ...], fn: Any, *args: Any, options
         raise locator.error(err, options_loc if options_loc is not None and err.source == "options" else loc) from None
     except Exception as err:  # noqa: BLE001 - a validator bug must still name the place
         raise ConfigError(f"{type(err).__name__}: {err}", source=locator.path, location=locator.location(loc)) from None
+
+
+def _not_installed(task: Any, method: MethodSpec, dataset: dict[str, Any], options: dict[str, Any], installed: list[str]) -> str:
+    """Why an optional method is skipped: the task's own refusal (the line ``lidarkit bench`` prints, with its
+    ``pip install 'lidarkit[gicp]'``), else that it is not installed with the methods that are."""
+    try:
+        task.validate(method.name, dict(method.params), dataset, options)
+    except LidarKitError as err:
+        return err.reason
+    except Exception:  # noqa: BLE001 - a validator bug: the plain reason below
+        pass
+    return f"method {method.name!r} is not installed (available: {', '.join(installed)})"
 
 
 def _known_tasks() -> set[str]:
