@@ -124,7 +124,7 @@ def section_odo(out: Path, scenes: list[str], seeds: list[int], variants: list[s
                 result = run(seq, method, params=params)
                 rec = {"section": "odo", "scene": scene, "seed": seed, "method": f"ground_filtered[{variant}]", "sweeps": len(seq), **odometry_row(result)}
                 append(out, rec)
-                log(f"  drift {rec['drift_pct']:.2f} % APE {rec['ape_rmse_m']:.2f} m flagged {rec['n_ground_removal_flagged']}")
+                log(f"  drift {_fmt(rec['drift_pct'], 2, 'n/a')} % APE {_fmt(rec['ape_rmse_m'], 2, 'n/a')} m flagged {rec['n_ground_removal_flagged']}")
 
 
 def section_two(out: Path, scenes: list[str], seeds: list[int], methods: list[str], full: bool) -> None:
@@ -139,7 +139,7 @@ def section_two(out: Path, scenes: list[str], seeds: list[int], methods: list[st
                 rec = {"section": "two", "scene": scene, "seed": seed, "method": method, "resolution": resolution, "sweeps": len(seq),
                        "load": os.getloadavg()[0], **odometry_row(result)}
                 append(out, rec)
-                log(f"  drift {rec['drift_pct']:.2f} % APE {rec['ape_rmse_m']:.2f} m")
+                log(f"  drift {_fmt(rec['drift_pct'], 2, 'n/a')} % APE {_fmt(rec['ape_rmse_m'], 2, 'n/a')} m")
 
 
 def section_kitti(out: Path, data: Path, methods: list[str]) -> None:
@@ -172,9 +172,10 @@ def section_kitti(out: Path, data: Path, methods: list[str]) -> None:
 
 
 # ---------------------------------------------------------------------------------------------------------------
-def _fmt(value, digits: int = 2) -> str:
+def _fmt(value, digits: int = 2, none: str = "-") -> str:
+    """A table cell or log figure; a run under 100 m has no KITTI drift (None), which crashed the log line."""
     if value is None:
-        return "-"
+        return none
     if isinstance(value, float):
         return f"{value:.{digits}f}"
     return str(value)
@@ -275,11 +276,27 @@ def section_report(out: Path, command: str) -> None:
     write_text(out / "results.json", json.dumps(rows, indent=1))
 
 
+def _scenes(text: str) -> list[str]:
+    """``--scenes``: comma-separated names of SCENES (an unknown one was a KeyError traceback)."""
+    unknown = [s for s in text.split(",") if s not in SCENES]
+    if unknown:
+        raise argparse.ArgumentTypeError(f"unknown scene(s) {', '.join(map(repr, unknown))}; known: {', '.join(SCENES)}")
+    return text.split(",")
+
+
+def _seeds(text: str) -> list[int]:
+    """``--seeds``: comma-separated integers (a ValueError traceback before)."""
+    try:
+        return [int(s) for s in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"comma-separated integers, not {text!r}") from None
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--sections", default="seg,odo,two,kitti,report")
-    parser.add_argument("--scenes", default="open_hills,street_hills,street_flat")
-    parser.add_argument("--seeds", default="0,1,2")
+    parser.add_argument("--scenes", type=_scenes, default="open_hills,street_hills,street_flat")
+    parser.add_argument("--seeds", type=_seeds, default="0,1,2")
     parser.add_argument("--variants", default=DEFAULT_GROUND_SEGMENTER, help="odo: segmenters of ground_filtered to run")
     parser.add_argument("--methods", default=",".join(available_ground_segmenters()), help="seg / kitti: segmenters")
     parser.add_argument("--two-methods", default="ground_filtered,vanilla", help="two: odometry variants (defaults) compared")
@@ -293,8 +310,11 @@ def main() -> None:
     unknown = sorted(set(sections) - {"seg", "odo", "two", "kitti", "report"})
     if unknown:  # (a typo ran nothing and exited 0)
         parser.error(f"unknown section(s) {', '.join(unknown)}; known: seg, odo, two, kitti, report")
-    scenes = args.scenes.split(",")
-    seeds = [int(s) for s in args.seeds.split(",")]
+    if args.seg_step < 1 or args.frames < 1:  # (range() arg 3 must not be zero)
+        parser.error("--seg-step and --frames must be >= 1")
+    if sections == ["report"] and not (args.out / "records.jsonl").is_file():  # (a FileNotFoundError traceback)
+        parser.error(f"--sections report: no {args.out / 'records.jsonl'}: run a section (seg, odo, two, kitti) into --out first")
+    scenes, seeds = args.scenes, args.seeds
     methods = args.methods.split(",")
     N_FRAMES["odo"] = args.frames
     if "seg" in sections:

@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from lidarkit.atomic import write_text
+
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "benchmarks"))
 from ablation import log, open_dataset, score  # noqa: E402
@@ -75,9 +77,19 @@ def run(scene: str, seed: int, frames: int, runs: list[str], perturbation_m: flo
     }
     out.mkdir(parents=True, exist_ok=True)
     path = out / f"{scene}_seed{seed}_{n}.json"
-    path.write_text(json.dumps(record, indent=1) + "\n")
+    write_text(path, json.dumps(record, indent=1) + "\n")
     log(f"wrote {path}")
     return path
+
+
+def _cell(x, spec: str) -> str:
+    """A table figure; '-' where the run has none (a run under 100 m has no KITTI drift: a KeyError before)."""
+    return "-" if x is None else format(x, spec)
+
+
+def _pair(pairs: dict, a: str, b: str) -> dict:
+    """The two runs' pair record in either order (``--runs kiss_like kiss`` names it 'kiss_like vs kiss': NaN columns before)."""
+    return pairs.get(f"{a} vs {b}") or pairs.get(f"{b} vs {a}") or {}
 
 
 def report(out: Path) -> str:
@@ -85,14 +97,16 @@ def report(out: Path) -> str:
              "|---|---|---|---|---|---|"]
     for path in sorted(out.glob("*.json")):
         r = json.loads(path.read_text())
-        k, kl = r["runs"]["kiss"], r["runs"].get("kiss_like", {})
-        pair = r["pairs"].get("kiss vs kiss_like", {})
-        pert = next((v for key, v in r["pairs"].items() if "perturbed" in key), {})
-        rel = abs(kl.get("drift_pct", np.nan) - k["drift_pct"]) / k["drift_pct"]
-        lines.append(f"| {r['scene']} seed {r['seed']} ({r['n_frames']}) | {k['drift_pct']:.3f} | {kl.get('drift_pct', float('nan')):.3f} | "
-                     f"{rel:.1e} | {pair.get('max_translation_difference_m', float('nan')):.1e} | {pert.get('first_frame_above_0.001', '-')} |")
+        k, kl = r["runs"].get("kiss", {}).get("drift_pct"), r["runs"].get("kiss_like", {}).get("drift_pct")
+        rel = abs(kl - k) / k if k and kl is not None else None
+        pair = _pair(r["pairs"], "kiss", "kiss_like")
+        pert = _pair(r["pairs"], "kiss", "kiss_perturbed")
+        first = pert.get("first_frame_above_0.001", "-") if pert else "-"
+        first = f"never in {r['n_frames']}" if first is None else first  # (printed "None")
+        lines.append(f"| {r['scene']} seed {r['seed']} ({r['n_frames']}) | {_cell(k, '.3f')} | {_cell(kl, '.3f')} | {_cell(rel, '.1e')} | "
+                     f"{_cell(pair.get('max_translation_difference_m'), '.1e')} | {first} |")
     text = "\n".join(lines)
-    (out / "README.md").write_text("# kiss_like vs kiss-icp on simulated sequences\n\n" + text + "\n")
+    write_text(out / "README.md", "# kiss_like vs kiss-icp on simulated sequences\n\n" + text + "\n")
     return text
 
 

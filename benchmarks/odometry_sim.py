@@ -23,12 +23,14 @@ import importlib.util
 import json
 import sys
 import time
+from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
 
 from lidarkit.atomic import write_text
 from lidarkit.bench.machine import describe_machine, machine_info
+from lidarkit.errors import DataError
 from lidarkit.io.base import Scan
 from lidarkit.odometry import run
 from lidarkit.registration import available_icp, get_icp
@@ -36,6 +38,8 @@ from lidarkit.registration import available_icp, get_icp
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT_DATA = REPO.parent / "shared" / "data"
 DEFAULT_OUT = REPO / "benchmarks" / "results" / "odometry"
+#: section letter -> its key in results.json
+SECTIONS = {"A": "kitti", "B": "overhead", "C": "deskew", "D": "ground", "E": "pairs"}
 
 
 def log(msg: str) -> None:
@@ -184,8 +188,8 @@ def section_pairs(sequences: dict) -> list[dict]:
     return rows
 
 
-def _f(x, spec=".3f") -> str:
-    return "-" if x is None else format(x, spec)
+def _f(x, spec=".3f", none="-") -> str:
+    return none if x is None else format(x, spec)
 
 
 def markdown(report: dict) -> str:
@@ -220,7 +224,7 @@ def markdown(report: dict) -> str:
     lines += ["", "## C. kiss with vs without deskew, scored at the sweep end and mid-sweep", "",
               "| scene | deskew | scored at | KITTI drift % | deg/100 m | APE RMSE m (unaligned, first pose anchored) | frame rate Hz |", "|---|---|---|---:|---:|---:|---:|"]
     for r in report["deskew"]:
-        lines.append(f"| {r['scene']} | {r['deskew']} | {r['scored_at']} | {r['drift_pct']:.3f} | {r['drift_deg_per_100m']:.4f} | "
+        lines.append(f"| {r['scene']} | {r['deskew']} | {r['scored_at']} | {_f(r['drift_pct'])} | {_f(r['drift_deg_per_100m'], '.4f')} | "
                      f"{r['ape_rmse_m']:.3f} | {r['fps']:.1f} |")
     voxel = report["settings"]["voxel_m"]
     lines += ["", f"## D. vanilla vs ground_filtered ({'full clouds' if voxel is None else f'both voxel {voxel} m'}), street vs open, "
@@ -238,6 +242,10 @@ def markdown(report: dict) -> str:
             lines.append(f"| {r['pair']} | {r['variant']} | {r['error_m']:.3f} | {r['error_deg']:.3f} | {r['iterations'] if r['iterations'] is not None else '-'} | "
                          f"{r['runtime_s']:.2f} | {r['degenerate']} |")
     lines += ["", "## Findings", ""] + findings(report)
+    again = [f"- section {letter} measured again on {m['date']}: `{m['command']}`"
+             for letter, key in SECTIONS.items() if (m := report.get(f"{key}_measured"))]
+    if again:
+        lines += ["", "## Sections run later (merged into this report)", ""] + again
     lines += ["", "Raw numbers: `results.json`. Plots: `kiss_street_deskew.png` (top view, deskewed kiss vs GT at the sweep end)."]
     return "\n".join(lines) + "\n"
 
@@ -256,18 +264,48 @@ def findings(report: dict) -> list[str]:
     d = {(r["scene"], r["deskew"], r["scored_at"]): r["drift_pct"] for r in report.get("deskew", [])}
     for scene in ("street", "open"):
         if (scene, True, "end") in d:
-            out.append(f"- {scene}: kiss with deskew scored at the sweep end drifts {d[(scene, True, 'end')]:.3f} % vs "
-                       f"{d[(scene, False, 'end')]:.3f} % without deskew; the same deskewed estimate scored against mid-sweep poses "
-                       f"reads {d[(scene, True, 'mid')]:.3f} %{' (a mismatched instant inflates it)' if d[(scene, True, 'mid')] > 1.1 * d[(scene, True, 'end')] else ''}; without deskew the mid-sweep score is "
-                       f"{d[(scene, False, 'mid')]:.3f} %.")
+            end, mid = d[(scene, True, "end")], d[(scene, True, "mid")]
+            inflated = end is not None and mid is not None and mid > 1.1 * end
+            out.append(f"- {scene}: kiss with deskew scored at the sweep end drifts {_f(end, none='n/a')} % vs "
+                       f"{_f(d[(scene, False, 'end')], none='n/a')} % without deskew; the same deskewed estimate scored against mid-sweep poses "
+                       f"reads {_f(mid, none='n/a')} %{' (a mismatched instant inflates it)' if inflated else ''}; without deskew the mid-sweep score is "
+                       f"{_f(d[(scene, False, 'mid')], none='n/a')} %.")
     g = {(r["scene"], r["method"]): r for r in report.get("ground", [])}
     for scene in ("street", "open"):
         if (scene, "vanilla") in g:
             v, f = g[(scene, "vanilla")], g[(scene, "ground_filtered")]
-            out.append(f"- {scene}: full-cloud vanilla drifts {v['drift_pct']:.1f} % (path {v['estimated_length_m']:.0f} m of "
-                       f"{v['gt_length_m']:.0f} m, {v['n_not_converged']} frames not converged); ground_filtered {f['drift_pct']:.1f} % "
+            out.append(f"- {scene}: full-cloud vanilla drifts {_f(v['drift_pct'], '.1f', 'n/a')} % (path {v['estimated_length_m']:.0f} m of "
+                       f"{v['gt_length_m']:.0f} m, {v['n_not_converged']} frames not converged); ground_filtered {_f(f['drift_pct'], '.1f', 'n/a')} % "
                        f"(path {f['estimated_length_m']:.0f} m).")
     return [line for line in out if line]
+
+
+def read_results(path: Path) -> dict:
+    """An earlier run's results.json (for --rerender and to merge into): a DataError naming it when it is missing or
+    unreadable (a FileNotFoundError traceback before)."""
+    if not path.is_file():
+        raise DataError("not found: run the benchmark into this --out first", source=path)
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+        raise DataError(f"not a readable JSON file ({err})", source=path) from None
+    if not isinstance(data, dict) or "settings" not in data:
+        raise DataError("not a results.json of this benchmark: no settings", source=path)
+    return data
+
+
+def merged(report: dict, previous: dict, sections: Iterable[str]) -> dict:
+    """``previous`` with this run's sections put in (a --sections run rewrote results.json with the others emptied);
+    refused when the settings differ, as one header would then describe numbers of other sequences."""
+    if previous["settings"] != report["settings"]:
+        diff = ", ".join(f"{k} {previous['settings'].get(k)} there, {v} here" for k, v in report["settings"].items()
+                         if previous["settings"].get(k) != v)
+        raise DataError(f"holds results of other settings ({diff}): use another --out or the same settings", source="--out")
+    out = dict(previous)
+    for letter in sections:
+        out[SECTIONS[letter]] = report[SECTIONS[letter]]
+        out[f"{SECTIONS[letter]}_measured"] = {k: report[k] for k in ("date", "machine", "command")}
+    return out
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -284,11 +322,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--d-azimuths", type=int, default=720, help="azimuths of the section-D sequences")
     parser.add_argument("--repeats", type=int, default=5, help="interleaved repeats of the overhead measurement")
     parser.add_argument("--quick", action="store_true", help="120 sweeps of 32 x 720 rays")
-    parser.add_argument("--sections", default="ABCDE")
+    parser.add_argument("--sections", default="ABCDE", help="letters of the sections to run; the others are kept from an "
+                        "existing --out/results.json")
     parser.add_argument("--rerender", action="store_true", help="only rewrite README.md from --out/results.json")
     args = parser.parse_args(argv)
+    if not args.sections or set(args.sections) - set(SECTIONS):  # (--sections xyz ran nothing and exited 0)
+        parser.error(f"--sections takes letters of {''.join(SECTIONS)}, not {args.sections!r}")
     if args.rerender:
-        write_text(args.out / "README.md", markdown(json.loads((args.out / "results.json").read_text())))
+        write_text(args.out / "README.md", markdown(read_results(args.out / "results.json")))
         return 0
     if args.quick:
         args.frames, args.beams, args.azimuths = 120, 32, 720
@@ -307,21 +348,28 @@ def main(argv: list[str] | None = None) -> int:
                      "voxel_m": args.voxel, "d_beams": args.d_beams, "d_azimuths": args.d_azimuths},
         "kitti": [], "overhead": [], "deskew": [], "ground": [], "pairs": [],
     }
+    every = set(args.sections) == set(SECTIONS)
+    previous = None if every or not (args.out / "results.json").exists() else read_results(args.out / "results.json")
+    if previous is not None:
+        merged(report, previous, ())  # (refuses other settings before hours of work)
     args.out.mkdir(parents=True, exist_ok=True)
+    ran: list[str] = []
 
-    def save() -> None:
-        write_text(args.out / "results.json", json.dumps(report, indent=2, default=float) + "\n")
-        write_text(args.out / "README.md", markdown(report))
+    def save(section: str | None = None) -> None:
+        ran.extend([section] if section else [])
+        whole = report if previous is None else merged(report, previous, ran)
+        write_text(args.out / "results.json", json.dumps(whole, indent=2, default=float) + "\n")
+        write_text(args.out / "README.md", markdown(whole))
 
     if "A" in args.sections:
         report["kitti"] = section_kitti(args.data)
-        save()
+        save("A")
     if "B" in args.sections:
         report["overhead"] = section_overhead(args.data, InMemory(sims["street"], min(100, args.frames)), args.repeats)
-        save()
+        save("B")
     if "C" in args.sections:
         report["deskew"] = section_deskew(sims)
-        save()
+        save("C")
         from lidarkit.eval import plots
 
         result = run(sims["street"], "kiss", params={"voxel_size_m": 1.0})
@@ -334,10 +382,10 @@ def main(argv: list[str] | None = None) -> int:
             for scene in ("street", "open")
         }
         report["ground"] = section_ground(d_sims, args.voxel)
-        save()
+        save("D")
     if "E" in args.sections:
         report["pairs"] = section_pairs(sims)
-    save()
+        save("E")
     log(f"wrote {args.out / 'README.md'}")
     return 0
 

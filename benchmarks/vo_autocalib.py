@@ -26,6 +26,9 @@ from lidarkit.vo.evaluation import evaluate_vo
 from lidarkit.vo.inputs import open_vo_input
 from lidarkit.vo.intrinsics import K_from_image_size
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from vo_kitti import command_line  # noqa: E402
+
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT_DATA = REPO.parent / "shared" / "data" / "kitti_images" / "sequences"
 
@@ -72,7 +75,7 @@ def main(argv: list[str] | None = None) -> int:
         print(seq, row, file=sys.stderr)
         rows[name] = row
     stamp = dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-    cmd = "nice -n 5 python benchmarks/vo_autocalib.py " + " ".join(argv if argv is not None else sys.argv[1:])
+    cmd = command_line("vo_autocalib.py", argv)
     lines = ["# Focal length self-calibration", "", f"Command: `{cmd.strip()}`  ", f"Date: {stamp}  ",
              f"Machine: {describe_machine(machine_info())}", "",
              "APE: relative-scale trajectory of the default pipeline, Sim(3)-aligned translation RMSE. "

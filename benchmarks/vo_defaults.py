@@ -44,6 +44,7 @@ from lidarkit.vo.evaluation import evaluate_vo
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from vo_heading_bias import fit_constant_rotation, pairs_of  # noqa: E402  (the GT-consistency fits)
+from vo_kitti import command_line  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT_DATA = REPO.parent / "shared" / "data"
@@ -226,7 +227,7 @@ def main(argv: list[str] | None = None) -> int:
         if r["pipeline"] != REFERENCE[0]:
             r["holds"] = holds(r, refs[r["sequence"]], args.min_ratio)
     loo = leave_one_out(rows, refs, args.min_ratio)
-    cmd = "nice -n 5 python benchmarks/vo_defaults.py " + " ".join(argv if argv is not None else sys.argv[1:])
+    cmd = command_line("vo_defaults.py", argv)
     result = {"command": cmd.strip(), "date": started, "load_start": load_start, "load_end": os.getloadavg(),
               "machine": machine_info(), "frames": frames, "gt_fills": fills, "relative_scale": drift,
               "min_ratio": args.min_ratio, "rows": rows,

@@ -16,6 +16,8 @@ from __future__ import annotations
 import argparse
 import datetime as dt
 import json
+import os
+import shlex
 import sys
 from pathlib import Path
 
@@ -93,6 +95,14 @@ def fmt(x, digits=3):
     return "-" if x is None else f"{x:.{digits}f}"
 
 
+def command_line(script: str, argv: list[str] | None = None) -> str:
+    """The command as run, for a results file: the process's real niceness and shell-quoted arguments (the VO scripts
+    recorded a hard-coded ``nice -n 5/10`` and bare ``simcam:street?frames=51&seed=0`` specs a shell splits at '&')."""
+    niceness = os.nice(0)
+    words = [shlex.quote(a) for a in (sys.argv[1:] if argv is None else argv)]
+    return " ".join([f"nice -n {niceness}"] * bool(niceness) + ["python", f"benchmarks/{script}", *words])
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", type=Path, default=DEFAULT_DATA, help="folder holding sequences/06 and 01")
@@ -100,10 +110,12 @@ def main(argv=None) -> int:
     parser.add_argument("--sequences", nargs="+", default=["06", "01"])
     parser.add_argument("--repeats", type=int, default=3, help="timing repeats (best kept)")
     args = parser.parse_args(argv)
+    if args.repeats < 1:  # (an AttributeError on the missing timed result, after --out was created)
+        parser.error("--repeats must be >= 1")
     args.out.mkdir(parents=True, exist_ok=True)
 
     started = dt.datetime.now(dt.timezone.utc)
-    results = {"command": " ".join(["python", "benchmarks/vo_kitti.py", *(argv if argv is not None else sys.argv[1:])]),
+    results = {"command": command_line("vo_kitti.py", argv),
                "date_utc": started.strftime("%Y-%m-%d %H:%M UTC"),
                "machine": machine_info(),
                "pipelines": [], "intrinsics": [], "seeds": []}

@@ -34,6 +34,9 @@ from lidarkit.vo.evaluation import evaluate_vo
 from lidarkit.vo.features import PREPROCESSORS, _akaze_factory
 from lidarkit.vo.inputs import open_vo_input
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from vo_kitti import command_line  # noqa: E402
+
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT_DATA = REPO.parent / "shared" / "data" / "kitti_images" / "sequences"
 
@@ -141,7 +144,7 @@ def main(argv: list[str] | None = None) -> int:
                 row["inliers_change_pct"] = 100.0 * (row["inliers_mean"] / base["inliers_mean"] - 1.0)
                 row["speed_ratio_vs_none"] = row["frames_per_s"] / base["frames_per_s"]
             results[name][label] = rows
-        cmd = "nice -n 10 python benchmarks/vo_preprocessing.py " + " ".join(argv if argv is not None else sys.argv[1:])
+        cmd = command_line("vo_preprocessing.py", argv)
         write_results(args.out, args.name, cmd, results, skipped, args.repeats)  # after every sequence: long runs
     return 0
 

@@ -140,7 +140,7 @@ def geometry_checks(seed: int, frames: int, every: int) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", nargs="*", type=int, default=[0])
+    ap.add_argument("--seeds", nargs="+", type=int, default=[0])  # (none given: an IndexError)
     ap.add_argument("--frames", type=int, default=1000)
     ap.add_argument("--modes", nargs="*", default=["gt", "relative"], help="scale modes (none given: speed only)")
     ap.add_argument("--speed-frames", type=int, default=60)
@@ -177,7 +177,7 @@ def write(args, command: str, info_start: dict, speed: dict, rows: dict, geometr
         {"command": command, "machine_start": info_start, "machine_end": info_end, "render_speed": speed,
          "runs": rows, "geometry_checks": geometry}, indent=1))
     lines = [f"# VO on simulated street runs ({args.frames} frames, KITTI size and intrinsics)", "",
-             f"Command: `{command}`", "", f"Start: {describe_machine(info_start)}", "",
+             f"Command: `{command}`", "", f"Date: {info_start['date_utc']}", "", f"Start: {describe_machine(info_start)}", "",
              f"End: {describe_machine(info_end)}", ""]
     if rows:
         lines += ["| run | path m | accepted pairs | APE m (align) | final error m | KITTI drift % / deg per 100 m "
