@@ -191,10 +191,13 @@ def save_figure(fig, path: str | os.PathLike, *, dpi: float | None = None) -> Pa
     return path
 
 
-def check_target(path: str | os.PathLike | None, kind: str = "file", files: Iterable[str] = ()) -> None:
+def check_target(path: str | os.PathLike | None, kind: str = "file", files: Iterable[str] = (),
+                 replaces: Iterable[str] = ()) -> None:
     """Refuse an output path before any work is done: ``kind`` is ``"file"``, ``"figure"`` (a known plot suffix
     too) or ``"folder"``. Checks what is in the way and whether the nearest existing folder is writable; ``files``: the
-    names a run writes into (or replaces in) the folder, none of which may be a folder (one was found after the run)."""
+    names a run writes into (or replaces in) the folder, none of which may be a folder (one was found after the run);
+    ``replaces``: :func:`run_folder`'s, a folder that holds files of these names but never held a run is refused (a
+    user's own config.yaml and metrics.json were replaced)."""
     if path is None:
         return
     path = Path(path)
@@ -203,6 +206,10 @@ def check_target(path: str | os.PathLike | None, kind: str = "file", files: Iter
         for name in files if kind == "folder" else ():
             if (path / name).is_dir():
                 raise OutputError("cannot write: is a folder (a file name is needed here)", source=path / name)
+        own = sorted(n for n in set(replaces) if os.path.lexists(path / n)) if path.is_dir() and not _holds_a_run(path) else []
+        if own:
+            raise OutputError(f"holds files named like a run's ({', '.join(own)}) but no earlier run (no config.yaml written "
+                              "by lidarkit): a run would replace them; give a new or empty folder", source=path)
     except OSError as err:  # pathlib re-raises what a stat of the path itself meets (a name too long: ENAMETOOLONG)
         raise OutputError(f"cannot write: {(err.strerror or str(err)).lower()}", source=path) from None
 

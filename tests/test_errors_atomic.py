@@ -164,6 +164,25 @@ def test_a_folder_where_a_run_file_goes_is_refused_before_the_work(tmp_path, cap
         (out / blocked).rmdir()
 
 
+def test_a_folder_of_a_users_own_files_under_run_file_names_is_refused_before_the_work(tmp_path):
+    """A user's own config.yaml and metrics.json in a folder that never held a run were replaced by an odometry run
+    (exit 0; the docs said other files stay). A folder that held a run (its config.yaml names the lidarkit version)
+    or a command that replaces nothing (``icp``: no ``replaces``) is not refused."""
+    out = tmp_path / "proj"
+    out.mkdir()
+    (out / "config.yaml").write_text("lr: 0.1\n")
+    (out / "metrics.json").write_text("notes\n")
+    (out / "notes.txt").write_text("mine\n")
+    with pytest.raises(OutputError) as refused:
+        atomic.check_target(out, "folder", files=("config.yaml",), replaces=("poses_kitti.txt", "metrics.json", "config.yaml"))
+    assert str(refused.value) == (f"{out}: holds files named like a run's (config.yaml, metrics.json) but no earlier run (no "
+                                  "config.yaml written by lidarkit): a run would replace them; give a new or empty folder")
+    atomic.check_target(out, "folder", files=("config.yaml", "metrics.json"))
+    (out / "config.yaml").write_text("lidarkit_version: 0.1\n")
+    atomic.check_target(out, "folder", replaces=("metrics.json", "config.yaml"))
+    assert (out / "metrics.json").read_text() == "notes\n"
+
+
 def test_a_run_folder_through_a_link_or_in_a_parent_it_cannot_write(tmp_path, monkeypatch):
     """--out LINK renamed the run onto the link (a cross-device error after the work, or "the folder filled while this
     export was written" for an export into an empty folder); a writable folder in a parent the user cannot write to (a

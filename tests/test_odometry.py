@@ -11,7 +11,7 @@ import yaml
 
 from conftest import cli_exit_code, shared_path
 
-from lidarkit.errors import ConfigError, DataError, EvaluationError, LidarKitError, RegistrationError
+from lidarkit.errors import ConfigError, DataError, EvaluationError, LidarKitError, OutputError, RegistrationError
 from lidarkit.geometry import make_se3, se3_inverse, so3_exp
 from lidarkit.io.base import Scan
 from lidarkit.odometry import open_sequence, parse_frames, run
@@ -357,12 +357,14 @@ def test_run_folder(tmp_path, rng):
     finally:
         os.chdir(here)
     assert (out / "ape.png").is_file() and (out / "notes.txt").read_text() == "mine"
-    # a folder that never held a run keeps the user's own files, even those named like a run's (they went)
+    # a folder that never held a run but holds the user's own files named like a run's is refused (the next run into
+    # it removed those this one did not replace)
     own = tmp_path / "own"
     own.mkdir()
     for name in ("trajectory.png", "ape.png", "ground_truth_kitti.txt"):
         (own / name).write_text("mine")
-    run(no_truth, OracleICP(noisy), out_dir=own)
+    with pytest.raises(OutputError, match=r"holds files named like a run's \(ape.png, ground_truth_kitti.txt, trajectory.png\)"):
+        run(no_truth, OracleICP(noisy), out_dir=own)
     assert all((own / name).read_text() == "mine" for name in ("trajectory.png", "ape.png", "ground_truth_kitti.txt"))
 
 
@@ -370,7 +372,6 @@ def test_a_run_that_cannot_complete_its_folder_leaves_the_earlier_run_whole(tmp_
     """A folder where the new run's ground_truth_kitti.txt goes: the error came after config.yaml and ape.png were
     already the new run's while metrics.json was still the earlier one's (half of each). Everything in the way is
     found before the first file moves: the earlier run stays as it was."""
-    from lidarkit.errors import OutputError
 
     poses = _drive(12)
     seq = MemorySequence(poses, _room_points(rng, 50))

@@ -568,3 +568,105 @@ def test_a_one_frame_run_is_unscored_with_a_note(tmp_path, capsys):
     assert code == 0 and f"ground truth │ {note}" in " ".join(out.split()) and "final error" not in out
     assert not (tmp_path / "run" / "ground_truth_kitti.txt").exists()
     assert "final_error" in run("sim:open?frames=3&beams=16&azimuths=360", "vanilla", frames="1:3").metrics  # two frames: scored
+
+
+def _kitti_scans(folder: Path, n: int = 3) -> Path:
+    """``folder`` holding KITTI sequence 00's first ``n`` scans and, as poses_kitti.txt, their ground truth."""
+    from conftest import shared_path
+
+    folder.mkdir(parents=True)
+    for frame in range(n):
+        shutil.copy(shared_path("kitti_odometry", "sequences", "00", "velodyne", f"{frame:06d}.bin"), folder)
+    lines = shared_path("kitti_odometry", "poses", "00.txt").read_text().splitlines()[:n]
+    (folder / "poses_kitti.txt").write_text("\n".join(lines) + "\n")
+    return folder
+
+
+def test_a_run_folder_that_would_replace_an_input_of_the_dataset_is_refused(tmp_path, capsys, monkeypatch):
+    """`-o g` over `folder:g?poses=g/poses_kitti.txt` replaced the ground truth with the estimate (exit 0) and the next
+    run scored "final error 0.000 / 0.000"; a KITTI layout's poses_file= went the same way. Refused before the work,
+    naming the file (a folder that never held a run, as a folder of other files named like a run's); the library
+    names out_dir."""
+    monkeypatch.chdir(tmp_path)
+    g = _kitti_scans(tmp_path / "g")
+    truth = (g / "poses_kitti.txt").read_bytes()
+    code, printed, err = _cli(["odometry", "folder:g?poses=g/poses_kitti.txt", "-m", "small_gicp", "-o", "g", "--no-progress"], capsys)
+    assert code == 1 and printed == "" and "error: g: holds files named like a run's (poses_kitti.txt)" in err
+    assert (g / "poses_kitti.txt").read_bytes() == truth
+    # a folder that holds a run, its poses scored against: r/poses_kitti.txt is an input
+    code, _, _ = _cli(["odometry", "folder:g?poses=g/poses_kitti.txt", "-m", "small_gicp", "-o", "r", "--no-progress"], capsys)
+    estimate = (tmp_path / "r" / "poses_kitti.txt").read_bytes()
+    assert code == 0 and estimate != truth
+    code, printed, err = _cli(["odometry", "folder:g?poses=r/poses_kitti.txt", "-m", "small_gicp", "-o", "r", "--no-progress"], capsys)
+    assert code == 1 and printed == ""
+    assert err == ("error: --out: r/poses_kitti.txt is an input of the dataset (its poses_path): a run never replaces it; "
+                   "give another folder\n")
+    kt = tmp_path / "kt"
+    (kt / "velodyne").mkdir(parents=True)
+    for scan in g.glob("*.bin"):
+        shutil.copy(scan, kt / "velodyne")
+    code, _, err = _cli(["odometry", "kitti:kt?poses_file=r/poses_kitti.txt", "-m", "small_gicp", "-o", "r", "--no-progress"], capsys)
+    assert code == 1 and err == ("error: --out: r/poses_kitti.txt is an input of the dataset (its poses_path): a run never "
+                                 "replaces it; give another folder\n")
+    with pytest.raises(ConfigError) as refused:
+        run("folder:g?poses=r/poses_kitti.txt", "small_gicp", out_dir=tmp_path / "r")
+    assert str(refused.value) == (f"out_dir: {tmp_path}/r/poses_kitti.txt is an input of the dataset (its poses_path): a "
+                                  "run never replaces it; give another folder")
+    assert (tmp_path / "r" / "poses_kitti.txt").read_bytes() == estimate
+
+
+def test_an_unknown_initial_guess_names_the_option(capsys):
+    """`--init odom` said "error: init: unknown initial guess 'odom'", the library's name, where other commands name
+    their option."""
+    code, _, err = _cli(["odometry", "sim:open?frames=3&beams=16&azimuths=360", "--init", "odom", "--no-progress"], capsys)
+    assert code == 1 and err == "error: --init: unknown initial guess 'odom'; known: constant_velocity, odometry\n"
+
+
+def test_a_folder_of_a_users_own_files_under_run_file_names_is_refused(tmp_path, capsys):
+    """`lidarkit odometry SEQ -o proj` into a folder holding the user's own config.yaml and metrics.json (never a run)
+    replaced both with exit 0, where the docs said other files stay. Refused before the work, naming them."""
+    from conftest import shared_path
+
+    proj = tmp_path / "proj"
+    proj.mkdir()
+    (proj / "config.yaml").write_text("lr: 0.1\n")
+    (proj / "metrics.json").write_text("notes\n")
+    kitti = str(shared_path("kitti_odometry", "sequences", "00"))
+    code, printed, err = _cli(["odometry", kitti, "-m", "small_gicp", "--frames", "0:3", "-o", str(proj), "--no-progress"], capsys)
+    assert code == 1 and printed == ""
+    assert err == (f"error: {proj}: holds files named like a run's (config.yaml, metrics.json) but no earlier run (no "
+                   "config.yaml written by lidarkit): a run would replace them; give a new or empty folder\n")
+    assert (proj / "config.yaml").read_text() == "lr: 0.1\n" and (proj / "metrics.json").read_text() == "notes\n"
+    (proj / "config.yaml").unlink()
+    (proj / "metrics.json").unlink()
+    for _ in range(2):  # an empty folder, then the run it holds: written
+        code, _, _ = _cli(["odometry", kitti, "-m", "small_gicp", "--frames", "0:3", "-o", str(proj), "--no-progress"], capsys)
+        assert code == 0 and "lidarkit_version" in (proj / "config.yaml").read_text()
+
+
+def test_a_long_run_name_keeps_the_trajectory_plot_laid_out(tmp_path):
+    """A 300-character --name ran trajectory.png's title off the figure, laid the legend (the name again) over the plot
+    and printed matplotlib's "constrained_layout not applied" UserWarning; the title is wrapped and cut at 4 lines."""
+    import warnings
+
+    name = "long run name " * 22
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the layout warning fails the test
+        result = run("sim:open?frames=3&beams=16&azimuths=360", "vanilla", name=name, out_dir=tmp_path / "run")
+    assert result.trajectory.name == f"vanilla on {name}"  # the run keeps its full title; the figure a wrapped one
+    assert (tmp_path / "run" / "trajectory.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_a_nominal_period_unused_for_a_dataset_with_stamps_is_a_warning():
+    """`--check nominal_period_s=1` was accepted and recorded but did nothing on a dataset with time stamps, without a
+    word (stateful variants get one for their unused min_fitness). Scans without stamps use it: no warning there."""
+    from conftest import shared_path
+
+    stamped = run("sim:open?frames=3&beams=16&azimuths=360", "vanilla", frame_check={"nominal_period_s": 1})
+    assert stamped.config["run"]["frame_check"]["nominal_period_s"] == 1.0
+    assert stamped.metrics["warnings"] == ["nominal_period_s=1: the frame check's period for scans without time stamps; "
+                                           "this dataset has them, so it is not used"]
+    assert run("sim:open?frames=3&beams=16&azimuths=360", "vanilla").metrics["warnings"] == []
+    unstamped = run(shared_path("kitti_odometry", "sequences", "00", "velodyne"), "small_gicp", frames="0:3",
+                    frame_check={"nominal_period_s": 1})
+    assert not any("nominal_period_s" in w for w in unstamped.metrics["warnings"])

@@ -10,6 +10,7 @@ from rich.table import Table
 from rich.text import Text
 
 from lidarkit.cli.app import app, parse_params, stdout
+from lidarkit.errors import ConfigError
 
 def _kinds() -> str:
     from lidarkit.io import NOT_SCANS, available_datasets
@@ -24,6 +25,10 @@ DATA_HELP = (
     "(scenes street|open|ground; keys: frames, seed, beams, azimuths, noise, distortion, instant, speed or any "
     "simulator config field)."
 )
+
+
+#: run() settings -> the option that sets them (a library error names the setting)
+_OPTION_OF_SETTING = {"init": "--init", "out_dir": "--out"}
 
 
 def _fmt(value: object, spec: str = ".3f") -> str:
@@ -81,12 +86,18 @@ def odometry(
 
     from lidarkit.run_files import RUN_FILES
 
-    check_target(out, "folder", files=RUN_FILES)
+    check_target(out, "folder", files=RUN_FILES, replaces=RUN_FILES)
     frame_check = make_frame_check(**parse_params(check, option="--check"))
-    result = run(
-        data, method, params=parse_params(param), frames=frames, out_dir=out, progress=progress, strict=strict, name=name, init=init,
-        pose_covariance=pose_covariance, frame_check=frame_check,
-    )
+    try:
+        result = run(
+            data, method, params=parse_params(param), frames=frames, out_dir=out, progress=progress, strict=strict, name=name,
+            init=init, pose_covariance=pose_covariance, frame_check=frame_check,
+        )
+    except ConfigError as err:  # a setting named as the library calls it ("init: unknown initial guess"): by its option
+        option = _OPTION_OF_SETTING.get(err.source or "")
+        if option is None:
+            raise
+        raise ConfigError(err.reason, source=option, location=err.location) from None
     m = result.metrics
     effective = m.get("effective") or {}
     table = Table(title=result.trajectory.name, show_header=True)

@@ -5,12 +5,14 @@ from __future__ import annotations
 import datetime as _dt
 import os
 import platform
+import textwrap
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from lidarkit import atomic
+from lidarkit.errors import ConfigError
 from lidarkit.odometry.metrics import paired
 from lidarkit.odometry.result import OdometryResult
 from lidarkit.run_files import RUN_FILES
@@ -24,6 +26,31 @@ def write_run(result: OdometryResult, out_dir: str | os.PathLike) -> Path:
     with atomic.run_folder(out, replaces=RUN_FILES) as tmp:
         _write_files(result, tmp)
     return out
+
+
+def refuse_replacing_inputs(sequence: Any, out_dir: str | os.PathLike) -> None:
+    """ConfigError (naming ``out_dir``) when a file a run writes or removes in ``out_dir`` is one the dataset reads:
+    ``-o g`` over ``folder:g?poses=g/poses_kitti.txt`` replaced the ground truth with the estimate (the next run scored
+    0.000). As eval refuses an output that is one of its inputs."""
+    inputs = _input_paths(sequence)
+    for name in RUN_FILES:
+        setting = inputs.get((Path(out_dir) / name).resolve())
+        if setting is not None:
+            raise ConfigError(f"{Path(out_dir) / name} is an input of the dataset (its {setting}): a run never replaces it; "
+                              "give another folder", source="out_dir")
+
+
+def _input_paths(sequence: Any) -> dict[Path, str]:
+    """``{resolved path: setting}`` of the files a reader names in its settings (poses, time stamps, ...): the absolute
+    paths of its ``reader_options``, then its public path attributes (``poses_path``, ``times_path``)."""
+    reported = getattr(sequence, "reader_options", None)
+    items = list(reported.items()) if isinstance(reported, dict) else []
+    items += [(k, v) for k, v in (vars(sequence).items() if hasattr(sequence, "__dict__") else ()) if not k.startswith("_")]
+    paths: dict[Path, str] = {}
+    for key, value in items:
+        if isinstance(value, os.PathLike) or (isinstance(value, str) and os.path.isabs(value)):
+            paths.setdefault(Path(value).resolve(), key)
+    return paths
 
 
 def _write_files(result: OdometryResult, out: Path) -> None:
@@ -73,5 +100,8 @@ def _write_plots(result: OdometryResult, out: Path) -> None:
     from lidarkit.eval import plots
 
     ref, est = paired(result.ground_truth, result.trajectory)
-    plots.plot_trajectories(ref.with_name("ground truth"), est, out / "trajectory.png", title=result.trajectory.name)
+    # a long --name (300 characters) ran the title off the figure and the legend over the plot ("constrained_layout not
+    # applied"): the title wrapped, as eval wraps evo's long titles, and cut at 4 lines; the legend names the method
+    title = textwrap.fill(result.trajectory.name, 70, max_lines=4, placeholder=" ...")
+    plots.plot_trajectories(ref.with_name("ground truth"), est.with_name(result.method), out / "trajectory.png", title=title)
     plots.plot_errors(leval.ape(ref, est, align="none", relation="translation"), out / "ape.png")

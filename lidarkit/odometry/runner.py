@@ -25,7 +25,7 @@ from lidarkit.odometry.instants import deskews, estimate_instant, like_with_like
 from lidarkit.odometry.metrics import odometry_metrics
 from lidarkit.odometry.prefetch import DEFAULT_DEPTH, prefetched
 from lidarkit.odometry.result import FrameStats, OdometryResult
-from lidarkit.odometry.run_folder import write_run
+from lidarkit.odometry.run_folder import refuse_replacing_inputs, write_run
 from lidarkit.odometry.settings import deskew_requested, effective_settings, require_point_times
 from lidarkit.registration.base import BACKEND_ERRORS, PendingAlignment
 from lidarkit.registration.covariance import widen_for_distortion
@@ -377,8 +377,10 @@ def run(
 
         from lidarkit.run_files import RUN_FILES
 
-        check_target(out_dir, "folder", files=RUN_FILES)
+        check_target(out_dir, "folder", files=RUN_FILES, replaces=RUN_FILES)
     sequence = open_sequence(dataset)
+    if out_dir is not None:  # (its ground truth was replaced by the estimate: the next run scored 0.000)
+        refuse_replacing_inputs(sequence, out_dir)
     registration = _resolve_method(method, params)
     method_name = getattr(registration, "name", type(registration).__name__) or type(registration).__name__
     dataset_name = str(getattr(sequence, "name", "dataset"))
@@ -608,6 +610,10 @@ def run(
         if gates:
             warnings.append(f"{', '.join(gates)}: acceptance gates of a pairwise alignment (align); {name}'s odometry "
                             "(register_frame, its own local map) does not use them")
+    if timestamps is not None and checker.config.nominal_period_s != FrameCheckConfig.nominal_period_s:
+        # (accepted and recorded in config.yaml; the stamps time the motion check)
+        warnings.append(f"nominal_period_s={checker.config.nominal_period_s:g}: the frame check's period for scans without time "
+                        "stamps; this dataset has them, so it is not used")
     for message in warnings:
         log.warning("%s: %s", title, message)
     covariances = (relative_cov, propagate(poses, relative_cov)) if want_covariance else None
