@@ -306,3 +306,19 @@ def test_files_written_together_are_all_renamed_in_when_interrupted_between_rena
         atomic.write_texts({tmp_path / "r.json": "new\n", tmp_path / "r.md": "new\n"})
     assert [(tmp_path / n).read_text() for n in ("r.json", "r.md")] == ["new\n", "new\n"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["r.json", "r.md"]
+
+
+@pytest.mark.parametrize("argv", [["vo", "/nonexistent-images"], ["pf", "/nonexistent-landmarks"]])
+def test_vo_and_pf_refuse_a_folder_of_a_users_own_files_under_run_file_names(tmp_path, capsys, argv):
+    """As odometry: `lidarkit vo ... -o proj` and `lidarkit pf ... -o proj` replaced a user's own config.yaml in a
+    folder that never held a run. Refused before the data is opened, naming the files; the files are kept."""
+    from conftest import cli_exit_code
+
+    proj = tmp_path / "proj"
+    proj.mkdir()
+    (proj / "config.yaml").write_text("lr: 0.1\n")
+    assert cli_exit_code([*argv, "-o", str(proj)]) == 1
+    assert capsys.readouterr().err.strip().splitlines() == [
+        f"error: {proj}: holds files named like a run's (config.yaml) but no earlier run (no config.yaml written by "
+        "lidarkit): a run would replace them; give a new or empty folder"]
+    assert (proj / "config.yaml").read_text() == "lr: 0.1\n"

@@ -109,7 +109,7 @@ def pf_command(
 
     from lidarkit.atomic import check_target
 
-    check_target(out, "folder", files=RUN_FILES)
+    check_target(out, "folder", files=RUN_FILES, replaces=RUN_FILES)
     counts = _counts(particles)
     if not 1 <= seeds <= MAX_SEEDS:
         raise ConfigError(f"--seeds must be in 1..{MAX_SEEDS}, got {seeds}", source="--seeds")

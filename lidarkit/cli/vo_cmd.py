@@ -72,7 +72,7 @@ def vo_command(
 
     from lidarkit.run_files import RUN_FILES
 
-    check_target(out, "folder", files=RUN_FILES)  # (a folder named trajectory.png in it was found after the run)
+    check_target(out, "folder", files=RUN_FILES, replaces=RUN_FILES)  # (a folder named trajectory.png in it was found after the run)
     if seed is not None and seed < 0:
         raise ConfigError(f"must be >= 0, got {seed}", source="--seed")
     if max_frames is not None and max_frames < 1:
