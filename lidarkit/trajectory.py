@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import inspect
 import logging
 import os
 from dataclasses import dataclass, field
@@ -13,7 +14,7 @@ from scipy.spatial.transform import Rotation
 
 from lidarkit import atomic
 from lidarkit.errors import ConfigError, DataError
-from lidarkit.geometry import ORTHONORMAL_TOL, orthonormalize_se3, se3_inverse
+from lidarkit.geometry import ORTHONORMAL_TOL, is_rotation, orthonormalize_se3, se3_inverse
 from lidarkit.textfile import data_line_numbers, file_line, read_numeric_table
 
 log = logging.getLogger(__name__)
@@ -43,6 +44,26 @@ def _check_rigid(poses: np.ndarray, source: str, item: str) -> None:
                       "if it is a file's rounding, write more digits (or, in Python, lidarkit.geometry.orthonormalize_se3 "
                       "the poses before making the Trajectory)")
         raise DataError(reason, source=source, location=f"{item} {k}")
+
+
+def _rigid_argument(T: np.ndarray, name: str) -> np.ndarray:
+    """``T`` (an argument such as ``T_left``) as a float64 4x4 rigid transform, else a ConfigError naming it (a scaled
+    or NaN one was blamed on the trajectory's frame 0, with advice about a file's rounding)."""
+    if np.shape(T) != (4, 4):  # (numpy's matmul or broadcast error for a 3x3)
+        raise ConfigError(f"{name} must be a 4x4 transform, got shape {np.shape(T)}", source=name)
+    try:
+        T = np.asarray(T, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{name} must be a 4x4 array of numbers", source=name) from None
+    if not np.isfinite(T).all():
+        why = "it has NaN or infinite entries"
+    elif not np.allclose(T[3], [0.0, 0.0, 0.0, 1.0]):
+        why = f"its last row is {T[3].tolist()}, not [0, 0, 0, 1]"
+    elif not is_rotation(T[:3, :3]):
+        why = f"its 3x3 block is no rotation (R^T R = I within {ORTHONORMAL_TOL:g}, det R > 0; a scale is not rigid)"
+    else:
+        return T
+    raise ConfigError(f"{name} is not a rigid transform: {why}", source=name)
 
 
 @dataclass(frozen=True, eq=False)
@@ -133,13 +154,10 @@ class Trajectory:
         E.g. KITTI camera-frame poses to the LiDAR frame: ``T_left = Tr^-1``, ``T_right = Tr``.
         """
         poses = self.poses_se3
-        for side, T in (("T_left", T_left), ("T_right", T_right)):
-            if T is not None and np.shape(T) != (4, 4):  # (numpy's matmul error for a 3x3)
-                raise ConfigError(f"{side} must be a 4x4 transform, got shape {np.shape(T)}", source=side)
         if T_left is not None:
-            poses = np.asarray(T_left, dtype=np.float64) @ poses
+            poses = _rigid_argument(T_left, "T_left") @ poses
         if T_right is not None:
-            poses = poses @ np.asarray(T_right, dtype=np.float64)
+            poses = poses @ _rigid_argument(T_right, "T_right")
         return Trajectory(poses, self.timestamps_s, self.name, dict(self.meta))
 
     def relative_to_first(self) -> Trajectory:
@@ -159,13 +177,15 @@ class Trajectory:
         """Chain ``(N-1, 4, 4)`` motions from ``T_first`` (identity by default) into N poses, each re-orthonormalized
         once its rotation drifts (the rounding of a file's rotations, chained over 481 of KITTI 00's motions, made a
         pose no rotation and the trajectory was refused)."""
-        from lidarkit.geometry import is_rotation, orthonormalize_se3
-
-        motions = np.asarray(motions, dtype=np.float64).reshape(-1, 4, 4)
+        motions = np.asarray(motions, dtype=np.float64)
+        if motions.size == 0:  # (a one-pose trajectory's relative_motions())
+            motions = motions.reshape(0, 4, 4)
+        if motions.ndim != 3 or motions.shape[1:] != (4, 4):  # (48 numbers were 3 motions, 3x3 ones a reshape error)
+            raise ConfigError(f"motions must have shape (n, 4, 4), got {motions.shape}", source="motions")
         # each motion must be rigid itself (zeros chained into identity poses, a Sim(3) motion lost its scale)
         _check_rigid(motions, f"{name or 'trajectory'}: relative motions", "motion")
         poses = np.empty((len(motions) + 1, 4, 4))
-        poses[0] = np.eye(4) if T_first is None else T_first
+        poses[0] = np.eye(4) if T_first is None else _rigid_argument(T_first, "T_first")
         for i, M in enumerate(motions):
             poses[i + 1] = poses[i] @ M
             if not is_rotation(poses[i + 1, :3, :3], 1e-9):
@@ -291,12 +311,18 @@ class Trajectory:
 
     @classmethod
     def read(cls, path: str | os.PathLike, fmt: str = "kitti", **kwargs) -> Trajectory:
-        """Read ``path`` in ``fmt`` (``kitti`` or ``tum``)."""
-        if fmt == "kitti":
-            return cls.from_kitti(path, **kwargs)
-        if fmt == "tum":
-            return cls.from_tum(path, **kwargs)
-        raise ConfigError(f"unknown trajectory format {fmt!r}; known: {', '.join(FORMATS)}", source="format")
+        """Read ``path`` in ``fmt`` (``kitti`` or ``tum``); ``kwargs`` are the reader's options (an option of the other
+        format, e.g. ``timestamps_s`` for tum, was a TypeError)."""
+        readers = {"kitti": cls.from_kitti, "tum": cls.from_tum}
+        if fmt not in readers:
+            raise ConfigError(f"unknown trajectory format {fmt!r}; known: {', '.join(FORMATS)}", source="format")
+        options = {f: [p for p in inspect.signature(r).parameters if p != "path"] for f, r in readers.items()}
+        for key in kwargs:
+            if key not in options[fmt]:
+                applies = [f for f in FORMATS if key in options[f]]
+                reason = f"applies to the {applies[0]} format, not {fmt}" if applies else f"is no option of the {fmt} format"
+                raise ConfigError(f"{key} {reason} ({fmt} options: {', '.join(options[fmt])})", source=key)
+        return readers[fmt](path, **kwargs)
 
     def to_kitti(self, path: str | os.PathLike) -> Path:
         """Write the KITTI pose format atomically."""

@@ -253,3 +253,55 @@ def test_a_tum_file_whose_stamps_lost_their_digits_is_refused(tmp_path):
     with pytest.raises(DataError, match=rf"gt_1f.txt: {n_repeated} of {len(gt)} poses repeat the timestamp .*too few decimals"):
         Trajectory.from_tum(coarse)
     assert len(Trajectory.from_tum(shared_path("evo_testdata", "freiburg1_xyz-groundtruth.txt"))) == len(gt)
+
+
+def test_transform_arguments_must_be_rigid():
+    """transformed() and from_relative_motions() checked only the shape of T_left / T_right / T_first: a scaled, a
+    2*eye(4) or a NaN one was blamed on the trajectory's own "(frame 0)" as a DataError advising to write a file with
+    more digits."""
+    gt = Trajectory.from_kitti(shared_path("evo_testdata", "KITTI_00_gt.txt"))
+    nan = np.eye(4)
+    nan[0, 3] = np.nan
+    for kwargs, message in (
+        (dict(T_left=np.diag([2.0, 2.0, 2.0, 1.0])), "T_left: T_left is not a rigid transform: its 3x3 block is no rotation "
+                                                       "(R^T R = I within 0.0001, det R > 0; a scale is not rigid)"),
+        (dict(T_left=2 * np.eye(4)), "T_left: T_left is not a rigid transform: its last row is [0.0, 0.0, 0.0, 2.0], not [0, 0, 0, 1]"),
+        (dict(T_right=nan), "T_right: T_right is not a rigid transform: it has NaN or infinite entries"),
+    ):
+        with pytest.raises(ConfigError) as err:
+            gt.transformed(**kwargs)
+        assert str(err.value) == message
+    motions = gt.relative_motions()[:5]
+    with pytest.raises(ConfigError) as err:
+        Trajectory.from_relative_motions(motions, T_first=2 * np.eye(4))
+    assert str(err.value) == "T_first: T_first is not a rigid transform: its last row is [0.0, 0.0, 0.0, 2.0], not [0, 0, 0, 1]"
+    Tr = make_se3(so3_exp(np.array([0.1, -0.2, 0.3])), np.array([1.0, 2.0, 3.0]))
+    moved = gt.transformed(T_left=Tr)
+    np.testing.assert_allclose(moved.poses_se3[10], Tr @ gt.poses_se3[10], atol=1e-12)
+
+
+def test_relative_motions_shapes_are_checked():
+    """from_relative_motions(T_first=np.eye(3)) was numpy's broadcast ValueError, (n, 3, 3) motions "cannot reshape
+    array of size 27 into shape (4,4)", and a flat array of 48 numbers was silently taken as 3 motions."""
+    with pytest.raises(ConfigError) as err:
+        Trajectory.from_relative_motions(np.tile(np.eye(4), (3, 1, 1)), T_first=np.eye(3))
+    assert str(err.value) == "T_first: T_first must be a 4x4 transform, got shape (3, 3)"
+    for motions, shape in ((np.tile(np.eye(3), (3, 1, 1)), "(3, 3, 3)"), (np.tile(np.eye(4), (3, 1, 1)).reshape(-1), "(48,)")):
+        with pytest.raises(ConfigError) as err:
+            Trajectory.from_relative_motions(motions)
+        assert str(err.value) == f"motions: motions must have shape (n, 4, 4), got {shape}"
+    one = Trajectory(make_se3(translation=[1.0, 2.0, 3.0])[None])
+    rebuilt = Trajectory.from_relative_motions(one.relative_motions(), T_first=one.poses_se3[0])
+    assert len(rebuilt) == 1 and rebuilt.poses_se3[0, 2, 3] == 3.0
+
+
+def test_read_refuses_an_option_of_the_other_format():
+    """Trajectory.read(path, fmt="tum", timestamps_s=...) was a TypeError "unexpected keyword argument" from from_tum."""
+    tum = shared_path("evo_testdata", "freiburg1_xyz-groundtruth.txt")
+    with pytest.raises(ConfigError) as err:
+        Trajectory.read(tum, fmt="tum", timestamps_s=None)
+    assert str(err.value) == "timestamps_s: timestamps_s applies to the kitti format, not tum (tum options: name)"
+    with pytest.raises(ConfigError) as err:
+        Trajectory.read(tum, fmt="kitti", stamps=None)
+    assert str(err.value) == "stamps: stamps is no option of the kitti format (kitti options: timestamps_s, name)"
+    assert len(Trajectory.read(tum, fmt="tum", name="fr1")) == 3000
