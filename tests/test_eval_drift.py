@@ -112,3 +112,20 @@ def test_bad_arguments():
         kitti_drift(ref, ref, step=0)
     with pytest.raises(EvaluationError, match="differ in length"):
         kitti_drift(ref, ref[:200])
+
+
+def test_lengths_must_be_a_list_of_positive_numbers():
+    """lengths="100,200" and ["a"] were numpy ValueErrors, None a TypeError raised while writing the message, and
+    lengths="200" or lengths=100 ran silently with one length (the docs describe a list of lengths only)."""
+    ref = kitti("gt")
+    for lengths in ("100,200", None, ["a"], "200", 100, [True], (100.0, float("nan"))):
+        with pytest.raises(ConfigError) as err:
+            kitti_drift(ref, ref, lengths=lengths)
+        assert str(err.value) == f"lengths: segment lengths must be a non-empty list of positive numbers (m), got {lengths!r}"
+    with pytest.raises(ConfigError) as err:
+        kitti_drift(ref, ref, lengths=np.array([100.0, 100.0]))
+    assert str(err.value) == "lengths: segment lengths must differ, got [100.0, 100.0]"
+    est = kitti("ORB")
+    pooled = kitti_drift(ref, est, lengths=np.array(KITTI_LENGTHS_M))
+    assert pooled.translation_pct == pytest.approx(0.699729, abs=1e-6)
+    assert kitti_drift(ref, est, lengths=range(100, 900, 100)).translation_pct == pooled.translation_pct

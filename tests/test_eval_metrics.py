@@ -464,3 +464,14 @@ def test_an_evaluation_prints_as_one_line_of_its_headline_figures(kitti_gt):
     assert f"drift {result.drift.translation_pct:.4g} %" in text
     assert f"{result.n_poses} poses" in text
     assert "no drift (not requested)" in repr(evaluate(ref, est, drift=False))
+
+
+def test_evaluation_settings_refuse_an_unknown_alignment_when_made():
+    """EvaluationSettings(align="xyz") was made without complaint and refused only by evaluate(), after the pairing."""
+    from lidarkit.eval import EvaluationSettings
+
+    for align in ("xyz", None):
+        with pytest.raises(ConfigError) as exc:
+            EvaluationSettings(align=align)
+        assert str(exc.value) == f"align: unknown alignment {align!r}; known: none, se3, sim3, scale"
+    assert EvaluationSettings(align="sim3").align == "sim3"

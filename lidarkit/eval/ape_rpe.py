@@ -203,10 +203,15 @@ def check_flags(**flags: Any) -> None:
             raise ConfigError(f"{name} must be True or False, got {value!r}", source=name)
 
 
+def check_align_name(align: str) -> None:
+    """ConfigError unless ``align`` is one of ``ALIGNMENTS`` (also checked by EvaluationSettings when it is made)."""
+    if not isinstance(align, str) or align not in ALIGNMENTS:
+        raise ConfigError(f"unknown alignment {align!r}; known: {', '.join(ALIGNMENTS)}", source="align")
+
+
 def _check_align(align: str, align_origin: bool, n_to_align: int | None, n_poses: int, source: str) -> int:
     """Validate the alignment settings; return evo's ``n`` (-1 = all poses)."""
-    if align not in ALIGNMENTS:
-        raise ConfigError(f"unknown alignment {align!r}; known: {', '.join(ALIGNMENTS)}", source="align")
+    check_align_name(align)
     if not isinstance(align_origin, (bool, np.bool_)):  # ("no" is a true string: it aligned the origin)
         raise ConfigError(f"align_origin must be True or False, got {align_origin!r}", source="align_origin")
     if align_origin and align != "none":

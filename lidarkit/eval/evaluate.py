@@ -6,14 +6,13 @@ import logging
 from dataclasses import asdict, dataclass, replace
 from typing import Any
 
-import numpy as np
-
 from lidarkit.errors import ConfigError
-from lidarkit.eval.ape_rpe import APEResult, RPEResult, ape, check_flags, checked_delta, rpe
+from lidarkit.eval.ape_rpe import APEResult, RPEResult, ape, check_align_name, check_flags, checked_delta, rpe
 from lidarkit.eval.kitti_drift import (
     KITTI_LENGTHS_M,
     KITTI_STEP_FRAMES,
     DriftResult,
+    checked_lengths,
     checked_step,
     drift_segments_possible,
     kitti_drift,
@@ -47,18 +46,12 @@ class EvaluationSettings:
     def __post_init__(self) -> None:
         """Switches that are True or False, an RPE delta evo accepts (200 deg failed after the drift), and drift segment
         lengths that are positive numbers (an empty tuple or a single number was a traceback; "false" computed the drift)."""
+        check_align_name(self.align)  # (align="xyz" was refused only by evaluate())
         checked_delta(self.delta, self.delta_unit)
         checked_step(self.drift_step_frames, "drift_step_frames")
         check_flags(all_pairs=self.all_pairs, pairs_from_reference=self.pairs_from_reference, legacy_pairs=self.legacy_pairs,
                     associate=self.associate, drift=self.drift)
-        lengths = self.drift_lengths_m
-        try:
-            ok = len(lengths) > 0 and all(not isinstance(x, bool) and np.isfinite(float(x)) and float(x) > 0 for x in lengths)
-        except (TypeError, ValueError):
-            ok = False
-        if not ok:
-            raise ConfigError(f"drift segment lengths must be a non-empty list of positive numbers (m), got {lengths!r}",
-                              source="drift_lengths_m")
+        checked_lengths(self.drift_lengths_m, "drift_lengths_m", "drift segment lengths")
 
     def to_dict(self) -> dict[str, Any]:
         out = asdict(self)

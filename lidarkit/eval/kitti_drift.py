@@ -11,6 +11,7 @@ gives the mean per length.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -107,6 +108,19 @@ def checked_step(step: int, source: str) -> int:
     return int(step)
 
 
+def checked_lengths(lengths: Sequence[float], source: str, what: str = "segment lengths") -> np.ndarray:
+    """``lengths`` (m) as a float64 array; ConfigError unless a non-empty sequence of distinct positive numbers ("100,200"
+    was a ValueError, None a TypeError, "200" or a single number ran with one length, a repeated length counted twice)."""
+    if isinstance(lengths, np.ndarray):
+        lengths = lengths.tolist() if lengths.ndim == 1 else None
+    items = list(lengths) if isinstance(lengths, Sequence) and not isinstance(lengths, (str, bytes)) else []
+    if not items or not all(is_real_number(x) and np.isfinite(x) and x > 0 for x in items):
+        raise ConfigError(f"{what} must be a non-empty list of positive numbers (m), got {lengths!r}", source=source)
+    if len(set(items)) != len(items):
+        raise ConfigError(f"{what} must differ, got {lengths!r}", source=source)
+    return np.array(items, dtype=np.float64)
+
+
 def kitti_drift(
     ref: Trajectory,
     est: Trajectory,
@@ -124,11 +138,7 @@ def kitti_drift(
     than the shortest length raises EvaluationError, unless ``allow_empty`` (then ``result.valid`` is False).
     """
     source = pair_name(ref, est)
-    lengths_arr = np.asarray(lengths, dtype=np.float64).reshape(-1)
-    if lengths_arr.size == 0 or not np.isfinite(lengths_arr).all() or (lengths_arr <= 0).any():
-        raise ConfigError(f"segment lengths must be positive numbers, got {list(lengths)}", source="lengths")
-    if len(np.unique(lengths_arr)) != lengths_arr.size:  # (a repeated length counted its segments twice in the mean)
-        raise ConfigError(f"segment lengths must differ, got {list(lengths)}", source="lengths")
+    lengths_arr = checked_lengths(lengths, "lengths")
     step = checked_step(step, "step")
     ref, est = paired(ref, est, associate=associate, max_diff_s=max_diff_s)
 
