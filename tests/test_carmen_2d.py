@@ -525,3 +525,14 @@ def test_a_run_over_a_log_with_relations_says_how_to_score_it(tmp_path, capsys, 
     assert json.loads((out / "metrics.json").read_text())["ground_truth_note"] == note
     assert f"ground truth │ {note}" in " ".join(capsys.readouterr().out.split())
     assert "ground_truth_note" not in run(f"carmen:{aces}?relations=none", "vanilla", params={"planar": True}, frames="0:2").metrics
+
+
+def test_relations_and_their_errors_print_as_one_line(carmen_logs):
+    """repr(relation_error(...)) and repr(log.relations) printed numpy arrays (~450 and ~600 characters); now one line
+    of headline figures each."""
+    aces = carmen_logs["aces"]
+    path = str(shared_path("carmen_2d", "aces.relations"))
+    assert repr(aces.relations) == f"Relations({path!r}, 1279 relations, 90.239599-1410.779999 s)"
+    err = relation_error(aces.odometry, aces.relations)
+    assert repr(err) == ("RelationError('aces odometry', 1279 of 1279 relations: translation 0.5493 +- 2.674 m (max 18.9), "
+                         "rotation 2.328 +- 6.503 deg (max 46.05))")

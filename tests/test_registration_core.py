@@ -873,3 +873,16 @@ def test_per_point_times_say_what_is_wrong_with_them(method):
         run(times)
     with pytest.raises(DataError, match=re.escape(f"{where}: 5 per-point times for 1664 points: one per point is needed")):
         run(times[:5])
+
+
+def test_a_result_prints_as_one_line_of_its_headline_figures(synthetic_pair):
+    """repr(RegistrationResult) printed the whole rmse_history, the 6x6 covariance and the degeneracy (~2000
+    characters); now one line whose figures are the result's own."""
+    source, target, _ = synthetic_pair
+    res = get_icp("vanilla", max_iterations=2, epsilon_m2=0.0, coarse_stride=1).align(source, target)
+    t = ", ".join(f"{v:.4g}" for v in res.T_target_source[:3, 3])
+    angle = pose_error(res.T_target_source, np.eye(4))[1]
+    assert repr(res) == (f"RegistrationResult('vanilla', not converged in 2 iterations, t [{t}] m, rotation {angle:.4g} deg, "
+                         f"rmse {res.rmse:.4g} m, fitness {res.fitness:.3g}, {res.n_correspondences} correspondences, "
+                         f"{res.runtime_s:.3g} s, reason {res.reason!r})")
+    assert len(repr(res)) < 300 and "max_iterations" in repr(res)

@@ -55,6 +55,14 @@ class RelationError:
     n_same_pose: int = 0
     """Relations left out because one estimated pose is nearest both their time stamps (no motion to compare)."""
 
+    def __repr__(self) -> str:
+        """One line of the paper's figures, mean +- std (max) of the absolute errors (the generated one printed the
+        arrays)."""
+        t, r = self.translation_abs, self.rotation_abs
+        return (f"RelationError({self.name!r}, {self.n_used} of {self.n_relations} relations: translation "
+                f"{t['mean']:.4g} +- {t['std']:.4g} m (max {t['max']:.4g}), rotation {r['mean']:.4g} +- {r['std']:.4g} deg "
+                f"(max {r['max']:.4g}))")
+
     @property
     def n_used(self) -> int:
         return int(len(self.used))

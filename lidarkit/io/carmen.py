@@ -108,6 +108,11 @@ class Relations:
     def __len__(self) -> int:
         return int(len(self.t1_s))
 
+    def __repr__(self) -> str:
+        """One line (the generated one printed five arrays: ~600 characters)."""
+        span = f", {min(self.t1_s.min(), self.t2_s.min()):.6f}-{max(self.t1_s.max(), self.t2_s.max()):.6f} s" if len(self) else ""
+        return f"Relations({self.source!r}, {len(self)} relations{span})"
+
     @classmethod
     def read(cls, path: str | os.PathLike) -> "Relations":
         """Parse a ``.relations`` file: ``t1 t2 x y z roll pitch yaw`` per line (z, roll, pitch must be 0)."""

@@ -307,6 +307,21 @@ class RegistrationResult:
         error = se3_inverse(S) @ true @ se3_inverse(self.T_target_source) @ S
         return nees(se3_log(error), self.covariance_about(c))
 
+    def __repr__(self) -> str:
+        """One line of the headline figures (the generated one printed the whole rmse_history, the 6x6 covariance and
+        the degeneracy: ~2000 characters)."""
+        from lidarkit.geometry import rotation_angle_deg
+
+        T = np.asarray(self.T_target_source)
+        state = "converged" if self.converged else "not converged"
+        weak = f", degenerate: {', '.join(self.degeneracy.weak_directions)}" if self.degeneracy.degenerate else ""
+        why = f", reason {self.reason!r}" if self.reason else ""
+        # (without the assessment, assess=False, there are no correspondences to count: no rmse, fitness, count)
+        fit = (f", rmse {self.rmse:.4g} m, fitness {self.fitness:.3g}, {self.n_correspondences} correspondences"
+               if self.n_correspondences >= 0 else ", not assessed")
+        return (f"RegistrationResult({self.method!r}, {state} in {self.iterations} iterations, t [{', '.join(f'{v:.4g}' for v in T[:3, 3])}] m, "
+                f"rotation {float(rotation_angle_deg(T[:3, :3])):.4g} deg{fit}, {self.runtime_s:.3g} s{weak}{why})")
+
     @property
     def rmse(self) -> float:
         """Final RMSE (m) of the correspondences, NaN if there was none."""
