@@ -397,3 +397,24 @@ def test_hills_steeper_than_a_slope_of_one_half_are_refused_in_both_simulators()
     steepest = SimulatedLidarSequence(n_frames=300, n_beams=4, n_azimuths=64, terrain_amplitude_m=4.77, terrain_wavelength_m=60.0)
     tilt_deg = np.degrees(np.arccos(steepest.ground_truth.poses_se3[:, 2, 2]))
     assert 20.0 < tilt_deg.max() < 27.0
+
+
+@pytest.mark.parametrize("scene", ["street", "open"])
+def test_an_exports_sim_yaml_loads_back(tmp_path, scene):
+    """The camera export's sim.yaml could not be loaded back (its default occluder fields were refused); the LiDAR
+    one's loads back to the same config."""
+    import yaml
+
+    seq = SimulatedLidarSequence(scene=scene, n_beams=8, n_azimuths=180, n_frames=2, seed=3)
+    written = yaml.safe_load((export_kitti(seq, tmp_path / "seq") / "sim.yaml").read_text())
+    assert written.pop("note").startswith("poses are T_world_lidar")
+    assert make_config(**written) == seq.config
+
+
+@pytest.mark.parametrize(("field", "bound"), [("accel_time_s", "600"), ("sensor_height_m", "1000"), ("range_noise_std_m", "10")])
+def test_huge_ramp_height_or_noise_is_refused_naming_the_field(field, bound):
+    """1e308 was accepted: numpy overflow warnings, then an error blaming the sensor ("sweep 0 has no return")."""
+    with pytest.raises(ConfigError) as err:
+        make_config(**{field: 1e308})
+    assert str(err.value) == f"lidar simulator: {field}: Input should be less than or equal to {bound}"
+    assert getattr(make_config(**{field: float(bound)}), field) == float(bound)

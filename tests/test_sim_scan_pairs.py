@@ -47,3 +47,14 @@ def test_the_corridor_reaches_past_every_frame_and_n_frames_is_an_integer():
         with pytest.raises(ConfigError) as err:
             ScanPairs("corridor", n_frames=value, **SMALL)
         assert (err.value.source, err.value.reason) == ("scan pairs", f"n_frames must be an integer, got {value!r}")
+
+
+def test_draw_index_must_be_an_integer_at_least_zero():
+    """draw(-1) raised numpy's bare "expected non-negative integer" ValueError, draw(2.7) drew pair 2 and draw('1')
+    pair 1, naming nothing: a ConfigError naming the index, as the constructor's for n_frames and seed."""
+    pairs = ScanPairs(n_frames=3, range_noise_m=0.0, **SMALL)
+    for value in (-1, 2.7, "1", True):
+        with pytest.raises(ConfigError) as err:
+            pairs.draw(value)
+        assert (err.value.source, err.value.reason) == ("scan pairs", f"index must be an integer >= 0, got {value!r}")
+    assert pairs.draw(np.int64(3)).frame == 1  # numpy integers are integers; pairs repeat every n_frames - 1 draws

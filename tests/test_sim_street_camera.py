@@ -275,3 +275,66 @@ def test_first_corner_m_puts_a_corner_close_ahead_and_the_drive_brakes_for_it():
     assert v[1] <= np.sqrt(near.corner_speed_mps**2 + 2 * near.accel_mps2 * 15.0) + 0.05
     in_corner = (s >= s_near.corners[0, 0]) & (s <= s_near.corners[0, 1])
     assert in_corner.any() and v[in_corner].max() <= near.corner_speed_mps + 0.1
+
+
+def _steps_through_geometry(seq: SimulatedCameraSequence) -> int:
+    """Number of 20 ms steps of the drive whose straight segment hits a scene triangle (the camera drove through it)."""
+    import open3d as o3d
+
+    P = seq.poses_at(np.arange(0.0, seq.frame_times_s[-1], 0.02))[:, :3, 3]
+    step = P[1:] - P[:-1]
+    length = np.linalg.norm(step, axis=1)
+    moving = length > 1e-6
+    rays = np.c_[P[:-1][moving], step[moving] / length[moving, None]].astype(np.float32)
+    t_hit = seq.scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy()
+    return int((t_hit < length[moving]).sum())
+
+
+TINY = dict(width=16, height=16, fx=10.0, fy=10.0, cx=None, cy=None)
+
+
+def test_corners_false_builds_a_drive_of_several_stretches_clear_of_buildings():
+    """``corners=false`` was an IndexError traceback on any drive longer than one stretch (the buildings of every
+    stretch after the first looked up the corner before it, and there is none)."""
+    seq = SimulatedCameraSequence(n_frames=400, seed=1, corners=False, **TINY)
+    assert len(seq.street.corners) == 0 and len(seq.street.stretches) >= 3
+    assert _steps_through_geometry(seq) == 0
+    headings = np.degrees(seq.street.path.heading_rad)
+    assert np.abs(headings).max() < 12.0  # gentle curves only
+    assert SimulatedCameraSequence(n_frames=40, corners=False, width=64, height=32).read_image(39).shape == (32, 64)
+
+
+@pytest.mark.parametrize("spacing", [(20.0, 20.0), (30.0, 40.0), (50.0, 60.0)])
+def test_short_corner_spacing_keeps_the_drive_out_of_buildings(spacing):
+    """The buildings lining the straight-on streets past a crossing ran 80 m along them and, with short corner
+    spacings, across the next-but-one stretch: the camera drove through facades (old code: 2, 2 and 10 steps through
+    geometry for (20, 20) at seeds 0, 2 and 4; 2 for (50, 60) at seed 5). They now stop short of any street."""
+    for seed in (0, 2, 4, 5):
+        seq = SimulatedCameraSequence(n_frames=400, seed=seed, corner_spacing_m=spacing, **TINY)
+        assert len(seq.street.corners) >= 4
+        assert _steps_through_geometry(seq) == 0, (spacing, seed)
+
+
+def test_an_exports_sim_yaml_loads_back_and_default_occluder_fields_pass(tmp_path):
+    """sim.yaml always holds ``occluder_start: null, occluder_frames: 15``, and the check refused any occluder field
+    *given* with ``occluder=false``: an export's own sim.yaml could not be loaded back, nor ``-p occluder_frames=15``
+    passed. Only values other than the defaults are refused now."""
+    import yaml
+    from typer.testing import CliRunner
+
+    from lidarkit.cli import app
+    from lidarkit.sim.street_camera import export_kitti_images
+
+    seq = SimulatedCameraSequence(n_frames=2, seed=1, **SMALL)
+    out = export_kitti_images(seq, tmp_path / "c1")
+    written = yaml.safe_load((out / "sim.yaml").read_text())
+    assert written.pop("note").startswith("poses are T_cam0_camk")
+    assert (written["occluder"], written["occluder_start"], written["occluder_frames"]) == (False, None, 15)
+    assert make_camera_config(**written) == seq.config
+    args = ["sim", "camera", "-o", str(tmp_path / "c2"), "-n", "2", "--no-progress", "-p", "occluder_frames=15"]
+    result = CliRunner().invoke(app, args + ["-p", "width=32", "-p", "height=16"])
+    assert result.exit_code == 0, result.output
+    for placed in ({"occluder_frames": 14}, {"occluder_start": 0}):
+        with pytest.raises(ConfigError, match="^camera simulator: config: occluder_start / occluder_frames place the "
+                                              "occluder, and occluder=false draws none$"):
+            make_camera_config(**placed)

@@ -93,13 +93,16 @@ class LidarSimConfig(BaseModel):
     elevation_min_deg: float = Field(-24.8, ge=-89.0, le=89.0)
     max_range_m: float = Field(80.0, gt=0.0, le=1000.0, description="longest range measured (m; a kilometre at most)")
     min_range_m: float = Field(1.0, ge=0.0)
-    sensor_height_m: float = Field(1.73, gt=0.0, description="sensor above the ground plane")
-    range_noise_std_m: float = Field(0.0, ge=0.0, description="Gaussian noise along each ray")
+    sensor_height_m: float = Field(1.73, gt=0.0, le=1000.0, description="sensor above the ground plane (m; at most a "
+                                   "kilometre, the longest max_range_m: 1e308 overflowed the float32 scene)")
+    range_noise_std_m: float = Field(0.0, ge=0.0, le=10.0, description="Gaussian noise along each ray (m; at most 10: "
+                                     "1e308 overflowed to NaN ranges, reported as a sweep with no return)")
     # motion
     frame_rate_hz: float = Field(10.0, ge=0.1, le=1000.0)
     speed_mps: float = Field(10.0, ge=0.0, le=100.0, description="cruise speed (at most 100 m/s = 360 km/h)")
     accel_time_s: float = Field(
-        2.0, ge=0.0, description="the drive starts at rest and reaches speed_mps after this (smooth ramp); 0: moving from t = 0"
+        2.0, ge=0.0, le=600.0, description="the drive starts at rest and reaches speed_mps after this (smooth ramp); 0: moving "
+        "from t = 0; at most 10 minutes (1e308 overflowed the ramp to NaN poses, reported as a sweep with no return)"
     )
     max_curvature_per_m: float = Field(1.0 / 150.0, ge=0.0, le=1.0 / 30.0, description="bound of the path curvature "
                                        "(gentle curves; at most 1/30: the street's facades stand 9-13 m from the path, and "

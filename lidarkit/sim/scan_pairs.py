@@ -123,7 +123,10 @@ class ScanPairs:
 
     def draw(self, index: int) -> ScanPair:
         """Pair number ``index``: frames ``(k + 1 -> k)`` with ``k = index % (n_frames - 1)``, fresh noise on both
-        scans and a perturbed initial guess, all from ``(seed, index)``."""
+        scans and a perturbed initial guess, all from ``(seed, index)``. Any integer ``index >= 0``: it seeds the draw
+        (-1 raised numpy's bare ValueError, 2.7 was truncated and '1' read as 1)."""
+        if isinstance(index, bool) or not isinstance(index, (int, np.integer)) or index < 0:
+            raise ConfigError(f"index must be an integer >= 0, got {index!r}", source="scan pairs")
         k = int(index) % (self.n_frames - 1)
         rng = np.random.default_rng([self.seed, 11, int(index)])
         target, source = self.noisy(k, rng), self.noisy(k + 1, rng)

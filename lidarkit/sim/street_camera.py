@@ -126,7 +126,9 @@ class CameraSimConfig(BaseModel):
         if longest > MAX_CAMERA_DRIVE_M:  # (100 frames at 0.05 Hz built a 13 km street first, a billion frames 112 GiB)
             raise ValueError(f"the drive may reach {longest / 1000:.4g} km (speed_max_mps x n_frames / frame_rate_hz); at most "
                              f"{MAX_CAMERA_DRIVE_M / 1000:g} km: fewer frames, a higher frame rate or a lower speed")
-        if not self.occluder and {"occluder_start", "occluder_frames"} & self.model_fields_set:  # (accepted and ignored)
+        fields = type(self).model_fields
+        placed = [name for name in ("occluder_start", "occluder_frames") if getattr(self, name) != fields[name].default]
+        if not self.occluder and placed:  # (accepted and ignored); defaults pass: sim.yaml writes them back
             raise ValueError("occluder_start / occluder_frames place the occluder, and occluder=false draws none")
         if self.occluder and self.occluder_start is not None and self.occluder_start >= self.n_frames:
             raise ValueError(f"occluder_start {self.occluder_start} is beyond the {self.n_frames} frames: no frame is occluded")
@@ -357,10 +359,11 @@ def build_street_scene(cfg: CameraSimConfig, street: StreetPath, terrain: Terrai
     def along_path(d: np.ndarray, lateral: float) -> np.ndarray:
         return _frame_at(street, d, lateral)
 
+    path_xy = _frame_at(street, np.arange(s_lo, s_hi, 1.0), 0.0)  # where crossing blocks must not reach
     for side, sign in ((0, 1.0), (1, -1.0)):
         rng = np.random.default_rng([cfg.seed, 10 + side])
         for j, (a_s, b_s) in enumerate(street.stretches):
-            if j > 0:  # after a corner: start clear of the crossing
+            if 0 < j <= len(street.corners):  # after a corner: start clear of the crossing (corners=false has none)
                 a_s = street.corners[j - 1, 1] - _corner_radius(street.corners[j - 1]) + _CROSSING_CLEAR_M
             if j < len(street.corners):
                 b_s = street.corners[j, 0] + _corner_radius(street.corners[j]) - _CROSSING_CLEAR_M
@@ -375,7 +378,8 @@ def build_street_scene(cfg: CameraSimConfig, street: StreetPath, terrain: Terrai
                     d = np.atleast_1d(d)
                     return centre + d[:, None] * u + lateral * np.array([-u[1], u[0]])
 
-                _place_blocks(b, rng, along_line, _CROSSING_CLEAR_M, 80.0, sign, ground_z, (7, side, j, k))
+                reach = _clear_reach(path_xy, centre, direction)
+                _place_blocks(b, rng, along_line, _CROSSING_CLEAR_M, reach, sign, ground_z, (7, side, j, k))
 
     # poles and parked cars along both sides (not inside corners)
     for side, sign in ((0, 1.0), (1, -1.0)):
@@ -435,6 +439,17 @@ def _crossing(street: StreetPath, s_a: float, s_b: float) -> tuple[np.ndarray, n
     u_a = np.array([np.cos(heading[0]), np.sin(heading[0])])
     u_b = np.array([np.cos(heading[1]), np.sin(heading[1])])
     return xy[0] + radius * u_a, u_a, -u_b
+
+
+def _clear_reach(path_xy: np.ndarray, centre: np.ndarray, u: np.ndarray) -> float:
+    """How far (at most 80 m) blocks may line the straight street ``centre + d u`` past a crossing: they stop short
+    of any part of the path ``path_xy`` (K, 2) passing near it (with short corner spacings the next-but-one stretch
+    crossed them and the camera drove through buildings)."""
+    rel = path_xy - centre
+    along, lateral = rel @ u, rel @ np.array([-u[1], u[0]])
+    band = _SETBACK_M[1] + _DEPTH_M[1] + _ROAD_HALF_M + 1.0  # block depth plus the other street's half width
+    near = (along > 10.0) & (np.abs(lateral) < band)  # (the crossing's own streets and corner lie at along <= 0)
+    return min(80.0, float(along[near].min(initial=np.inf)) - _ROAD_HALF_M - 1.0)
 
 
 def _place_blocks(b: _SceneBuilder, rng: np.random.Generator, frame: Callable, d0: float, d1: float, sign: float,
