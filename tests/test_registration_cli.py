@@ -218,3 +218,31 @@ def test_an_init_file_that_holds_json_or_words_says_so(capsys, tmp_path):
                        (words, "its first line holds no numbers ('hello world')")):
         code, _, err = run_cli(capsys, str(SOURCE), str(TARGET), "--init", str(init))
         assert code == 1 and " ".join(err.split()) == f"error: {init}: {said}: {takes}"
+
+
+@pytest.mark.parametrize("fault, said", [
+    (lambda: 1 / 0, "ZeroDivisionError: division by zero"),
+    (lambda: {}["x"], "KeyError: 'x'"),
+    (lambda: "".foo, "AttributeError: 'str' object has no attribute 'foo'"),
+])
+def test_a_plugin_failing_with_any_plain_error_is_one_line(capsys, fault, said):
+    """A plugin whose _align raised ZeroDivisionError, KeyError or AttributeError gave a 70-line traceback (the
+    odometry runner said a ZeroDivisionError in one line; a RuntimeError was one line here too)."""
+    from lidarkit.registration import Registration, RegistrationConfig, register_icp
+    from lidarkit.registration import registry as registry_module
+
+    class SlipICP(Registration):
+        """Fails inside its own code."""
+        Config = RegistrationConfig
+
+        def _align(self, source_xyz, target_xyz, init_T):
+            return fault()
+
+    register_icp("slip_test")(SlipICP)
+    try:
+        code, _, err = run_cli(capsys, str(SOURCE), str(TARGET), "-m", "slip_test")
+    finally:
+        registry_module._VARIANTS.pop("slip_test", None)
+    assert code == 1 and "Traceback" not in err
+    assert " ".join(err.split()) == (
+        f"error: slip_test (54850 source / 54478 target points): the slip_test backend failed on this pair: {said}")

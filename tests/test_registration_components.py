@@ -234,6 +234,35 @@ def test_broken_component_plugin_is_left_out_and_names_itself(tmp_path, monkeypa
         reload_component_plugins()
 
 
+def test_a_component_plugin_named_like_a_built_in_is_said_to_be_left_out(tmp_path, monkeypatch, caplog, capsys):
+    """An entry point named 'kernel.huber' was dropped without a word (nor listed by --list-components among the
+    plugins left out), as ICP plugins named like a built-in variant were; the built-in keeps answering to the name."""
+    from lidarkit.registration.components.kernels import HuberKernel
+    from lidarkit.registration.components.registry import broken_component_plugins, get_component_class
+
+    site = tmp_path / "site"
+    site.mkdir()
+    (site / "lk_shadow_kernel.py").write_text(PLUGIN_SOURCE)
+    dist = site / "lk_shadow_kernel-0.1.dist-info"
+    dist.mkdir()
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: lk-shadow-kernel\nVersion: 0.1\n")
+    (dist / "entry_points.txt").write_text(f"[{ENTRY_POINT_GROUP}]\nkernel.huber = lk_shadow_kernel:HalfKernel\n")
+    monkeypatch.syspath_prepend(str(site))
+    try:
+        with caplog.at_level("WARNING", logger="lidarkit.registration.components.registry"):
+            reload_component_plugins()
+        assert "component plugin 'kernel.huber' left out: its name is a built-in kernel's" in caplog.text
+        assert broken_component_plugins() == {
+            "kernel.huber": "its name is a built-in kernel's: 'lk_shadow_kernel:HalfKernel' left out (rename the entry point)"
+        }
+        assert get_component_class("kernel", "huber") is HuberKernel
+        assert cli_exit_code(["icp", "--list-components"]) == 0
+        assert "plugin 'kernel.huber' left out" in capsys.readouterr().out
+    finally:
+        monkeypatch.undo()
+        reload_component_plugins()
+
+
 def test_voxel_hash_nearest_follows_kiss_icps_27_voxel_rule(rng):
     # kiss-icp answers a query with the closest map point of the 3 x 3 x 3 voxels around the query's voxel, even
     # when a closer point lies outside them; a plain KD-tree answer would differ (the open scene diverged so)
@@ -350,3 +379,38 @@ def test_a_component_failing_inside_register_frame_is_a_registration_error():
             icp.register_frame(cloud + [0.3, 0.0, 0.0])
     finally:
         component_registry._COMPONENTS["kernel"].pop("nan_test", None)
+
+
+def test_a_component_returning_the_wrong_shape_is_named():
+    """A kernel plugin returning 3 weights for 2365 residuals was "the pipeline backend failed on this pair:
+    ValueError: matmul: ... mismatch ...", naming no component; so was a preprocess step dropping a column."""
+    from lidarkit.errors import RegistrationError
+    from lidarkit.registration.components import Kernel, Preprocess, register_component
+    from lidarkit.registration.components.kernels import KernelConfig
+
+    class ShortKernel(Kernel):
+        """Three weights whatever the residuals."""
+        Config = KernelConfig
+
+        def _weights(self, r2, c):
+            return np.ones(3)
+
+    class FlatStep(Preprocess):
+        """Drops z."""
+
+        def apply(self, points_xyz):
+            return points_xyz[:, :2]
+
+    register_component("kernel", "short_test")(ShortKernel)
+    register_component("preprocess", "flat_test")(FlatStep)
+    try:
+        cloud = np.random.default_rng(0).uniform(-20, 20, size=(3000, 3))
+        with pytest.raises(RegistrationError) as err:
+            get_icp("pipeline", kernel="short_test").align(cloud + [0.3, 0.0, 0.0], cloud)
+        assert str(err.value) == "pipeline: kernel 'short_test' returned 3 weights for 2779 residuals (one per residual expected)"
+        with pytest.raises(RegistrationError) as err:
+            get_icp("pipeline", preprocess=["flat_test"]).align(cloud, cloud)
+        assert str(err.value) == "pipeline: preprocess 'flat_test' returned ndarray of shape (3000, 2), not (M, 3) points"
+    finally:
+        component_registry._COMPONENTS["kernel"].pop("short_test", None)
+        component_registry._COMPONENTS["preprocess"].pop("flat_test", None)

@@ -429,6 +429,20 @@ def test_flat_ground_patch_is_flagged_degenerate(name, rng):
     assert sum(e < 1e-3 * res.degeneracy.eigenvalues[-1] for e in res.degeneracy.eigenvalues) == 3
 
 
+@pytest.mark.parametrize("name", ["vanilla", "small_gicp", "open3d_gicp", "knn"])
+def test_a_flat_grounds_weak_directions_are_named_as_one_subspace(name):
+    """On a flat ground the three weak eigenvalues are near-equal (6e-6, 6e-6, 7e-6) and their eigenvectors an
+    arbitrary mix of x, y and yaw: small_gicp named three "translation along (0.52, 0.86, 0.00) coupled with
+    rotation" and no yaw, vanilla "rotation about z (yaw) coupled with translation", ...; the subspace is named now."""
+    if name not in available_icp():
+        pytest.skip(f"{name} not installed")
+    rng = np.random.default_rng(0)
+    ground, other = (np.c_[rng.uniform(-20, 20, (5000, 2)), rng.normal(0, 0.01, 5000) - 1.7] for _ in range(2))
+    deg = get_icp(name).align(ground, other).degeneracy
+    assert deg.weak_directions == ("translation along x and y, rotation about z (yaw)",)
+    assert sum(e < 1e-4 for e in deg.eigenvalues) == 3
+
+
 def test_points_on_a_line_are_flagged_degenerate(rng):
     line = np.c_[rng.uniform(-10, 10, 3000), np.zeros(3000), np.zeros(3000)] + rng.normal(0, 1e-3, (3000, 3))
     res = get_icp("vanilla").align(line + [0.05, 0.02, 0.0], line)

@@ -62,12 +62,10 @@ def config_dict(config: Any) -> dict[str, Any]:
     return dict(config)
 
 
-#: Errors re-raised naming the frame: lidarkit's own and the RuntimeErrors that backends (Open3D, kiss-icp,
-#: small_gicp) raise for bad input. Programming errors (AttributeError, TypeError, NotImplementedError, ...)
-#: propagate unchanged.
-#: what a variant raises on a frame it cannot register (its backend's refusals, a plugin's NaN in scipy) and is
-#: reported as that frame's error; the same kinds a pairwise alignment reports (``use_backend``)
-_FRAME_ERRORS = (LidarKitError, ArithmeticError, *BACKEND_ERRORS)
+#: Errors re-raised naming the frame: lidarkit's own and what a variant raises on a frame it cannot register (its
+#: backend's refusals, a plugin's NaN in scipy or division by zero): the kinds a pairwise alignment reports
+#: (``BACKEND_ERRORS``). Programming errors (AttributeError, NotImplementedError, ...) propagate unchanged.
+_FRAME_ERRORS = (LidarKitError, *BACKEND_ERRORS)
 
 
 def _read_nonempty_scan(sequence: ScanSequence, index: int) -> Scan:

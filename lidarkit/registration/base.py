@@ -143,7 +143,8 @@ class Degeneracy:
     ``threshold``; ``weakest_direction``: unit eigenvector of the smallest eigenvalue in
     ``TWIST_ORDER`` (tx, ty, tz, rx, ry, rz); ``kind``: which residual the normal matrix models;
     ``weak_directions``: the eigen-directions below ``threshold`` in words, in the target sensor frame
-    (e.g. ``"translation along x"``), empty when nothing is degenerate; ``weakest_name``: the weakest direction in
+    (e.g. ``"translation along x"``; near-equal weak eigenvalues named once by the axes they span, e.g.
+    ``"translation along x and y, rotation about z (yaw)"``), empty when nothing is degenerate; ``weakest_name``: the weakest direction in
     words, whether or not it is below ``threshold``.
     """
 
@@ -314,7 +315,7 @@ class RegistrationResult:
 
         T = np.asarray(self.T_target_source)
         state = "converged" if self.converged else "not converged"
-        weak = f", degenerate: {', '.join(self.degeneracy.weak_directions)}" if self.degeneracy.degenerate else ""
+        weak = f", degenerate: {'; '.join(self.degeneracy.weak_directions)}" if self.degeneracy.degenerate else ""
         why = f", reason {self.reason!r}" if self.reason else ""
         # (without the assessment, assess=False, there are no correspondences to count: no rmse, fitness, count)
         fit = (f", rmse {self.rmse:.4g} m, fitness {self.fitness:.3g}, {self.n_correspondences} correspondences"
@@ -476,19 +477,23 @@ def accept(result: RegistrationResult, config: RegistrationConfig) -> Registrati
     return dataclasses.replace(result, converged=False, reason="; ".join([result.reason, *problems] if result.reason else problems))
 
 
-#: what a backend (Open3D, kiss-icp, small_gicp, scipy under a plugin) raises when it refuses its input
-BACKEND_ERRORS = (RuntimeError, ValueError, MemoryError, IndexError, TypeError)
+#: what a backend (Open3D, kiss-icp, small_gicp, scipy under a plugin, a plugin's own arithmetic) raises when it fails on
+#: a pair; shared with the odometry runner, which reports them as the frame's error (a ZeroDivisionError or KeyError
+#: in a plugin's ``_align`` was one line there, a traceback from ``lidarkit icp``)
+BACKEND_ERRORS = (RuntimeError, ValueError, MemoryError, IndexError, KeyError, TypeError, ArithmeticError)
 
 
 @contextlib.contextmanager
 def use_backend(name: str, source: str) -> Iterator[None]:
     """A backend's own refusal (RuntimeError, ValueError, ... from Open3D, kiss-icp, small_gicp) becomes a
-    :class:`RegistrationError` naming the variant and the clouds; lidarkit's own errors pass unchanged."""
+    :class:`RegistrationError` naming the variant and the clouds; lidarkit's own errors pass unchanged. An
+    AttributeError in the block (a plugin's slip in ``_align``) becomes one too; outside it, the odometry runner lets
+    an AttributeError through as the programming error it is."""
     try:
         yield
     except LidarKitError:
         raise
-    except BACKEND_ERRORS as err:
+    except (*BACKEND_ERRORS, AttributeError) as err:
         raise RegistrationError(f"the {name} backend failed on this pair: {type(err).__name__}: {err}", source=source) from err
 
 

@@ -30,6 +30,10 @@ THIN_RATIO = 0.1
 #: The lever arm of a rotation in the normal matrix is at least this fraction of the RMS radius of the points.
 MIN_ARM_FRACTION = 0.05
 
+#: Weak eigenvalues within this factor of each other are named as one subspace (their eigenvectors are an arbitrary
+#: mix of its axes).
+SUBSPACE_FACTOR = 10.0
+
 #: Neighbours of a local line in a 2D scan (a laser scan: its surfaces are walls seen as lines).
 PLANAR_NEIGHBOURS = 5
 
@@ -94,7 +98,7 @@ def summarize(H: np.ndarray, threshold: float = DEGENERACY_RATIO_THRESHOLD, kind
     ratio = evals[0] / top if top > 0 else 0.0
     weakest = evecs[:, 0]
     weakest = weakest * (1.0 if weakest[np.argmax(np.abs(weakest))] >= 0 else -1.0)
-    weak = [describe_direction(evecs[:, i]) for i in range(6) if top > 0 and evals[i] / top < threshold] if top > 0 else ["all six"]
+    weak = _weak_names(evals, evecs, int(np.sum(evals < threshold * top))) if top > 0 else ["all six"]
     return Degeneracy(
         eigenvalues=tuple(float(x) for x in evals),
         condition_number=float(top / evals[0]) if evals[0] > 0 else float("inf"),
@@ -108,6 +112,32 @@ def summarize(H: np.ndarray, threshold: float = DEGENERACY_RATIO_THRESHOLD, kind
 
 
 _AXES = ("x", "y", "z")
+
+
+def _and(words: list[str]) -> str:
+    return words[0] if len(words) == 1 else f"{', '.join(words[:-1])} and {words[-1]}"
+
+
+def _weak_names(evals: np.ndarray, evecs: np.ndarray, n_weak: int) -> list[str]:
+    """Names of the ``n_weak`` smallest eigen-directions. Eigenvalues within :data:`SUBSPACE_FACTOR` of each other are
+    named once, by the axes their subspace spans (a flat ground's x, y and yaw were three arbitrary mixes, "translation
+    along (0.52, 0.86, 0.00) coupled with rotation", differing from variant to variant)."""
+    names, start = [], 0
+    while start < n_weak:
+        end = start + 1
+        while end < n_weak and evals[end] <= SUBSPACE_FACTOR * max(evals[start], 1e-12 * evals[-1]):
+            end += 1
+        span = np.sum(evecs[:, start:end] ** 2, axis=1)  # how much of each axis lies in the subspace (sums to its size)
+        axes = np.sort(np.argsort(span)[::-1][: end - start])
+        if end - start == 1 or span[axes].min() < 0.9:  # a single direction, or a subspace not along axes
+            names += [describe_direction(evecs[:, i]) for i in range(start, end)]
+        else:
+            moves = [_AXES[a] for a in axes if a < 3]
+            turns = [f"{_AXES[a - 3]} ({('roll', 'pitch', 'yaw')[a - 3]})" for a in axes if a >= 3]
+            names.append(", ".join(([f"translation along {_and(moves)}"] if moves else [])
+                                   + ([f"rotation about {_and(turns)}"] if turns else [])))
+        start = end
+    return names
 
 
 def describe_direction(direction: np.ndarray) -> str:

@@ -36,6 +36,7 @@ from lidarkit.registration.base import (
     Degeneracy, Registration, RegistrationConfig, RegistrationResult, check_init_T, check_point_times, use_backend,
 )
 from lidarkit.registration.components import make_component
+from lidarkit.registration.components.registry import output_error
 from lidarkit.registration.planar import refuse_2d
 from lidarkit.registration.components.maps import first_per_voxel, pca_geometry
 from lidarkit.registration.components.motion import se3_exp_batch
@@ -127,6 +128,15 @@ def build_components(config: PipelineConfig) -> dict[str, Any]:
     }
 
 
+def _applied(step: Any, points_xyz: np.ndarray) -> np.ndarray:
+    """A preprocess step's output, checked to be ``(M, 3)`` points (a plugin's other shape failed further on in numpy,
+    naming no step)."""
+    out = step.apply(points_xyz)
+    if not isinstance(out, np.ndarray) or out.ndim != 2 or out.shape[1] != 3:
+        raise output_error(step, f"{type(out).__name__} of shape {np.shape(out)}, not (M, 3) points")
+    return out
+
+
 @register_icp("pipeline")
 class PipelineRegistration(Registration):
     """Composable ICP: residual, kernel, threshold, deskew, map and preprocessing components (presets kiss_like, vanilla_seq)."""
@@ -215,7 +225,7 @@ class PipelineRegistration(Registration):
 
     def _preprocess(self, points_xyz: np.ndarray) -> np.ndarray:
         for step in self._components["preprocess"]:
-            points_xyz = step.apply(points_xyz)
+            points_xyz = _applied(step, points_xyz)
         return points_xyz
 
     def _voxelize(self, frame: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -259,6 +269,9 @@ class PipelineRegistration(Registration):
             JTJ, JTr, r2 = residual.normal_equations(
                 moved[valid], local_map.points_xyz[index[valid]], index[valid], local_map, cov, kernel, sigma_m
             )
+            if np.shape(JTJ) != (6, 6) or np.shape(JTr) != (6,) or np.shape(r2) != (n,):
+                raise output_error(residual, f"normal equations of shapes {np.shape(JTJ)}, {np.shape(JTr)} and {np.shape(r2)} "
+                                             f"for {n} correspondences, not (6, 6), (6,) and ({n},)")
             history.append(float(np.sqrt(r2.mean())))
             if not np.any(JTJ):  # the kernel gave every correspondence zero weight: there is nothing to solve for
                 reason = f"no correspondence carried weight ({n} matched; the kernel's scale rejects them all)"
@@ -287,7 +300,7 @@ class PipelineRegistration(Registration):
         self._refuse_2d(source_xyz, target_xyz, c)
         steps = c["preprocess"]
         for step in steps:
-            source_xyz, target_xyz = step.apply(source_xyz), step.apply(target_xyz)
+            source_xyz, target_xyz = _applied(step, source_xyz), _applied(step, target_xyz)
         for name, cloud in (("source cloud", source_xyz), ("target cloud", target_xyz)):
             if len(cloud) < 3:
                 raise RegistrationError(f"only {len(cloud)} points left after preprocessing", source=name)

@@ -13,7 +13,9 @@ from typing import Literal
 import numpy as np
 from pydantic import Field, field_validator
 
-from lidarkit.registration.components.registry import Component, ComponentConfig, component_base, register_component
+from lidarkit.registration.components.registry import (
+    Component, ComponentConfig, component_base, output_error, register_component,
+)
 
 
 class KernelConfig(ComponentConfig):
@@ -52,6 +54,15 @@ class Kernel(Component):
 
     def _weights(self, r2: np.ndarray, c: float) -> np.ndarray:
         raise NotImplementedError
+
+
+def checked_weights(kernel: Kernel, residual2: np.ndarray, sigma_m: float) -> np.ndarray:
+    """``kernel.weights``, checked to give one weight per residual (a plugin's 3 weights for 2365 residuals was
+    numpy's "matmul: ... mismatch", naming no kernel)."""
+    w = np.asarray(kernel.weights(residual2, sigma_m))
+    if w.shape != residual2.shape:
+        raise output_error(kernel, f"{w.size} weights for {len(residual2)} residuals (one per residual expected)")
+    return w
 
 
 class NoKernelConfig(ComponentConfig):

@@ -16,7 +16,7 @@ from typing import Any, ClassVar
 import pydantic
 from pydantic import BaseModel, ConfigDict
 
-from lidarkit.errors import ConfigError, validation_problems
+from lidarkit.errors import ConfigError, RegistrationError, validation_problems
 
 log = logging.getLogger(__name__)
 
@@ -50,6 +50,12 @@ class Component:
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.config!r})"
+
+
+def output_error(component: Component, returned: str) -> RegistrationError:
+    """The error for a component (a plugin) whose output does not fit: numpy's shape mismatch further on named none."""
+    return RegistrationError(f"{component.kind} {component.name or type(component).__name__!r} returned {returned}",
+                             source="pipeline")
 
 
 _COMPONENTS: dict[str, dict[str, type[Component]]] = {kind: {} for kind in KINDS}
@@ -112,6 +118,10 @@ def _load_plugins() -> None:
                 raise ConfigError(f"entry point names must read KIND.NAME with KIND one of {', '.join(KINDS)}",
                                   source=f"component plugin {ep.name!r}")
             if name in _COMPONENTS[kind]:
+                builtin = _COMPONENTS[kind][name].__module__.startswith("lidarkit.")
+                if builtin and not ep.value.startswith("lidarkit."):  # (it was dropped without a word, nor listed as left out)
+                    raise ConfigError(f"its name is a built-in {kind}'s: {ep.value!r} left out (rename the entry point)",
+                                      source=f"component plugin {ep.name!r}")
                 continue
             obj = ep.load()
             if name not in _COMPONENTS[kind]:
@@ -151,7 +161,7 @@ def get_component_class(kind: str, name: str) -> type[Component]:
     _check_kind(kind)
     if name not in _COMPONENTS[kind]:
         _load_plugins()
-    if (kind, name) in _BROKEN:
+    if (kind, name) in _BROKEN and name not in _COMPONENTS[kind]:  # (a plugin named like a built-in: the built-in answers)
         raise ConfigError(f"this plugin is installed but could not be loaded: {_BROKEN[(kind, name)]}",
                           source=f"component plugin {kind}.{name}")
     if name not in _COMPONENTS[kind]:
@@ -217,6 +227,7 @@ __all__ = [
     "component_fields",
     "get_component_class",
     "make_component",
+    "output_error",
     "register_component",
     "reload_component_plugins",
     "split_spec",

@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 from pydantic import Field
 
+from lidarkit.registration.components.kernels import checked_weights
 from lidarkit.registration.components.registry import Component, ComponentConfig, component_base, register_component
 
 
@@ -67,7 +68,7 @@ class PointToPoint(Residual):
         p = source_xyz
         r = p - target_xyz
         r2 = np.einsum("ni,ni->n", r, r)
-        w = kernel.weights(r2, sigma_m)
+        w = checked_weights(kernel, r2, sigma_m)
         s = w @ p
         S = np.einsum("n,ni,nj->ij", w, p, p)
         hat = np.array([[0.0, -s[2], s[1]], [s[2], 0.0, -s[0]], [-s[1], s[0], 0.0]])
@@ -95,7 +96,7 @@ class PointToPlane(Residual):
         n = local_map.normals(map_index)
         r = np.einsum("ni,ni->n", n, source_xyz - target_xyz)
         r2 = r * r
-        w = kernel.weights(r2, sigma_m)
+        w = checked_weights(kernel, r2, sigma_m)
         J = np.concatenate([n, np.cross(source_xyz, n)], axis=1)
         Jw = J * w[:, None]
         return Jw.T @ J, Jw.T @ r, r2
@@ -119,7 +120,7 @@ class PlaneToPlane(Residual):
         r = source_xyz - target_xyz
         Mr = np.einsum("nij,nj->ni", M, r)
         r2 = np.einsum("ni,ni->n", r, Mr)
-        w = kernel.weights(r2, sigma_m)
+        w = checked_weights(kernel, r2, sigma_m)
         J = _point_jacobians(source_xyz)
         MJ = np.einsum("nij,njk->nik", M, J) * w[:, None, None]
         return np.einsum("nki,nkj->ij", J, MJ), np.einsum("nki,nk->i", J, Mr * w[:, None]), r2
