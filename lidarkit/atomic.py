@@ -173,10 +173,26 @@ def figure_format(fig, path: str | os.PathLike) -> str:
         known = FigureCanvasBase.get_supported_filetypes()
     else:
         known = fig.canvas.get_supported_filetypes()
+    missing = _missing_program(fmt)
+    if missing:
+        raise OutputError(f"cannot write the plot: the .{fmt} format needs {missing!r} (matplotlib's "
+                          "rcParams['pgf.texsystem']), which is not installed; use .pdf or .svg", source=path)
     if fmt not in known:
-        raise OutputError(f"unknown plot format {'.' + fmt!r}; use one of: {', '.join('.' + k for k in sorted(known))}",
+        usable = sorted(k for k in known if not _missing_program(k))
+        raise OutputError(f"unknown plot format {'.' + fmt!r}; use one of: {', '.join('.' + k for k in usable)}",
                           source=path)
     return fmt
+
+
+def _missing_program(fmt: str) -> str:
+    """The program a plot format's backend runs that is not installed ("" when none is missing): .pgf runs
+    rcParams['pgf.texsystem'] (xelatex, lualatex or pdflatex), whose absence was a traceback after all the work."""
+    if fmt != "pgf":
+        return ""
+    import matplotlib
+
+    program = str(matplotlib.rcParams["pgf.texsystem"])
+    return "" if shutil.which(program) else program
 
 
 def save_figure(fig, path: str | os.PathLike, *, dpi: float | None = None) -> Path:
@@ -186,8 +202,9 @@ def save_figure(fig, path: str | os.PathLike, *, dpi: float | None = None) -> Pa
     with atomic_path(path) as tmp:
         try:
             fig.savefig(tmp, format=fmt, dpi=dpi)
-        except ValueError as err:  # matplotlib's own refusal of a format or size
-            raise OutputError(f"cannot write the plot: {err}", source=path) from err
+        except (ValueError, RuntimeError) as err:  # matplotlib's own refusal of a format or size; a backend's
+            # program that fails to start (pgf's TeX, found by the check but not runnable) raises RuntimeError
+            raise OutputError(f"cannot write the plot: {' '.join(str(err).split())}", source=path) from err
     return path
 
 

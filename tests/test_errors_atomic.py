@@ -322,3 +322,34 @@ def test_vo_and_pf_refuse_a_folder_of_a_users_own_files_under_run_file_names(tmp
         f"error: {proj}: holds files named like a run's (config.yaml) but no earlier run (no config.yaml written by "
         "lidarkit): a run would replace them; give a new or empty folder"]
     assert (proj / "config.yaml").read_text() == "lr: 0.1\n"
+
+
+def test_a_pgf_plot_without_its_tex_program_is_refused_before_the_work(tmp_path, capsys, monkeypatch):
+    """--plot out.pgf passed the pre-check and, after all the work, ended in a traceback "RuntimeError: 'xelatex' not
+    found"; save_figure caught only ValueError."""
+    from conftest import shared_path
+    from matplotlib.figure import Figure
+
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    monkeypatch.setenv("PATH", str(bin_dir))  # no TeX on the path
+    gt = str(shared_path("evo_testdata", "KITTI_00_gt.txt"))
+    with pytest.raises(SystemExit) as exc:
+        main(["eval", gt, gt, "--json", str(tmp_path / "e.json"), "--plot", str(tmp_path / "e.pgf")])
+    printed, err = capsys.readouterr()
+    assert exc.value.code == 1 and printed == "" and sorted(os.listdir(tmp_path)) == ["bin"]
+    assert err == (f"error: {tmp_path / 'e.pgf'}: cannot write the plot: the .pgf format needs 'xelatex' (matplotlib's "
+                   "rcParams['pgf.texsystem']), which is not installed; use .pdf or .svg\n")
+    with pytest.raises(OutputError, match=r"unknown plot format '\.txt'; use one of: .*\.pdf, \.png, \.ps, \.raw"):
+        atomic.check_target(tmp_path / "e.txt", "figure")  # (.pgf no longer offered)
+    # a TeX program that is found but cannot start (its interpreter is gone) fails inside savefig
+    (bin_dir / "xelatex").write_text("#!/nonexistent/interpreter\n")
+    (bin_dir / "xelatex").chmod(0o755)
+    atomic.check_target(tmp_path / "e.pgf", "figure")
+    fig = Figure()
+    fig.add_subplot(1, 1, 1).plot([0, 1], [0, 1])
+    with pytest.raises(OutputError) as caught:
+        atomic.save_figure(fig, tmp_path / "e.pgf")
+    assert str(caught.value) == (f"{tmp_path / 'e.pgf'}: cannot write the plot: 'xelatex' not found; install it or change "
+                                 "rcParams['pgf.texsystem'] to an available TeX implementation")
+    assert sorted(os.listdir(tmp_path)) == ["bin"]

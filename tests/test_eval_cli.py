@@ -99,7 +99,8 @@ def test_cli_bad_files_are_one_line_errors(tmp_path, capsys, copy_of):
     # misused options: one line and exit code 1 as every other error (not a usage box and exit code 2)
     tum = shared_path("evo_testdata", "freiburg1_xyz-groundtruth.txt")
     code, _, err = run_cli(["eval", str(tum), str(tum), "--format", "tum", "--ref-times", str(gt)], capsys)
-    assert code == 1 and err.strip() == "error: --ref-times/--est-times: times files apply to KITTI-format trajectories only"
+    assert code == 1 and err.strip() == ("error: --ref-times: times files apply to KITTI-format trajectories only (this one "
+                                         "is read as tum)")
     code, _, err = run_cli(["eval", str(gt)], capsys)
     assert code == 1 and "missing EST" in err and len(err.strip().splitlines()) == 1
 
@@ -196,7 +197,7 @@ def test_tum_files_paired_by_index_whose_stamps_disagree_are_said_to_be(tmp_path
     assert cli_exit_code(["eval", "-f", "tum", a, b, "--associate", "--max-diff", "0"]) == 1
     assert capsys.readouterr().err.strip() == "error: --max-diff: must be a finite number of seconds > 0, got 0"
     assert cli_exit_code(["eval", "-f", "tum", a, b, "--delta", "0"]) == 1
-    assert capsys.readouterr().err.strip() == "error: --delta: must be a number > 0, got 0"
+    assert capsys.readouterr().err.strip() == "error: --delta: must be a finite number > 0, got 0"
     from lidarkit.errors import ConfigError
     from lidarkit.eval.pairing import paired
 
@@ -346,3 +347,42 @@ def test_an_output_onto_the_trajectory_scored_by_relations_names_it_est(tmp_path
                               "--json", str(est)], capsys)
     assert (code, out) == (1, "")
     assert " ".join(err.split()) == f"error: --json: {est} is also EST (an input): an output never replaces it"
+
+
+def test_association_that_pairs_a_small_part_of_the_trajectories_is_said_to(tmp_path, capsys, caplog):
+    """--associate scoring the first 454 of 4541 reference poses (or 96 pairs of frame numbers read as seconds) said
+    nothing: only the table's title showed the count (logged at INFO). A reference denser than the estimate (100 Hz
+    truth, every third pose estimated) is covered and says nothing."""
+    lines = [ln for ln in shared_path("evo_testdata", "freiburg1_xyz-groundtruth.txt").read_text().splitlines() if not ln.startswith("#")]
+    ref = shared_path("evo_testdata", "freiburg1_xyz-groundtruth.txt")
+    (tmp_path / "first.txt").write_text("\n".join(lines[:300]) + "\n")
+    (tmp_path / "third.txt").write_text("\n".join(lines[::3]) + "\n")
+    with caplog.at_level("WARNING"):
+        code, _, _ = run_cli(["eval", "-f", "tum", str(ref), str(tmp_path / "first.txt"), "--associate", "--json",
+                              str(tmp_path / "first.json")], capsys)
+    said = ("only 300 pose pairs associated within 0.01 s (over 1305031098.666..1305031101.656 s), of 3000 reference poses "
+            "over 1305031098.666..1305031128.756 s and 300 estimated poses over 1305031098.666..1305031101.656 s: the "
+            "scores cover those only")
+    assert code == 0 and [(r.levelname, r.getMessage()) for r in caplog.records] == [
+        ("WARNING", f"first vs freiburg1_xyz-groundtruth: {said}")]
+    data = json.loads((tmp_path / "first.json").read_text())
+    assert (data["n_poses"], data["n_ref_poses"], data["n_est_poses"], data["warnings"]) == (300, 3000, 300, [said])
+    caplog.clear()
+    with caplog.at_level("WARNING"):
+        code, _, _ = run_cli(["eval", "-f", "tum", str(ref), str(tmp_path / "third.txt"), "--associate", "--json",
+                              str(tmp_path / "third.json")], capsys)
+    data = json.loads((tmp_path / "third.json").read_text())
+    assert code == 0 and caplog.records == []
+    assert (data["n_poses"], data["n_ref_poses"], data["n_est_poses"], data["warnings"]) == (1000, 3000, 1000, [])
+
+
+def test_option_messages_name_the_option_given_and_the_finite_bound(tmp_path, capsys):
+    """--delta inf said "must be a number > 0, got inf"; --est-times with a TUM estimate was named
+    "--ref-times/--est-times" together."""
+    tum = str(shared_path("evo_testdata", "freiburg1_xyz-groundtruth.txt"))
+    times = str(shared_path("evo_testdata", "KITTI_00_gt_times.txt"))
+    code, _, err = run_cli(["eval", tum, tum, "-f", "tum", "--delta", "inf"], capsys)
+    assert code == 1 and err == "error: --delta: must be a finite number > 0, got inf\n"
+    code, _, err = run_cli(["eval", tum, tum, "-f", "tum", "--est-times", times], capsys)
+    assert code == 1 and err == ("error: --est-times: times files apply to KITTI-format trajectories only (this one is "
+                                 "read as tum)\n")

@@ -303,7 +303,7 @@ def test_bad_input_raises_named_errors(rng):
         rpe(ref, ref, delta=0)
     with pytest.raises(EvaluationError, match="delta of 20 frames needs more than 20 poses"):
         rpe(ref, ref, delta=20)
-    with pytest.raises(EvaluationError, match="empty index list"):
+    with pytest.raises(EvaluationError, match="delta = 500 m exceeds the path length of the estimate"):
         rpe(ref, ref, delta=500, delta_unit="meters")
     with pytest.raises(ConfigError, match="align_origin"):
         ape(ref, ref, align="se3", align_origin=True)
@@ -475,3 +475,37 @@ def test_evaluation_settings_refuse_an_unknown_alignment_when_made():
             EvaluationSettings(align=align)
         assert str(exc.value) == f"align: unknown alignment {align!r}; known: none, se3, sim3, scale"
     assert EvaluationSettings(align="sim3").align == "sim3"
+
+
+def test_rpe_title_names_the_delta_and_pair_mode_that_were_scored(kitti_gt):
+    """All-pairs RPE and RPE over given pairs (every evaluate() hands its pairs to the rotation RPE) were titled
+    "for delta = 1 (frames) using consecutive pairs": evo's metric that compared the laid-out copies was read."""
+    from evo.core import metrics as evo_metrics
+    from evo.core.units import Unit
+
+    from lidarkit.eval import evaluate
+
+    g, o = kitti_gt[:400], kitti("ORB")[:400]
+    ours = rpe(g, o, delta=5.0, delta_unit="degrees", all_pairs=True)
+    theirs = evo_metrics.RPE(evo_metrics.PoseRelation.translation_part, 5.0, Unit.degrees, 0.1, True)
+    assert ours.title == f"{theirs} (not aligned)".replace("\n", " ")
+    assert ours.title == "RPE w.r.t. translation part (m) for delta = 5.0 (deg) using all pairs (not aligned)"
+    result = evaluate(g, o, align="none", delta=20, delta_unit="m", drift=False)
+    assert result.rpe_rotation.title == ("RPE w.r.t. rotation angle in degrees (deg) for delta = 20.0 (m) "
+                                         "using consecutive pairs (not aligned)")
+    legacy = rpe(g, o, delta=20, delta_unit="m", legacy_pairs=True, pairs=result.rpe.pairs[1:])
+    assert legacy.title == ("RPE w.r.t. translation part (m) for delta = 20.0 (m), legacy pairs "
+                            "using consecutive pairs (not aligned)")
+
+
+def test_a_path_delta_longer_than_the_path_says_so():
+    """A path delta longer than the path failed with evo's "delta = 100.0 (m) produced an empty index list - try lower
+    values or a less strict tolerance" (lidarkit eval has no tolerance option): the reason is stated now."""
+    gt = kitti("gt")[:3]
+    assert gt.length_m == pytest.approx(1.720, abs=1e-3)
+    for all_pairs in (False, True):
+        with pytest.raises(EvaluationError) as caught:
+            rpe(gt, gt, delta=100, delta_unit="m", all_pairs=all_pairs)
+        assert str(caught.value) == ("KITTI_00_gt vs KITTI_00_gt: delta = 100 m exceeds the path length of the estimate "
+                                     "(1.72 m): no two poses are that far apart along it")
+    assert rpe(gt, gt, delta=1.5, delta_unit="m").n_errors == 1  # (within the path: scored)

@@ -62,3 +62,22 @@ def test_a_long_evo_title_is_wrapped_to_its_panel():
     renderer = fig.canvas.get_renderer()
     title, panel = ax.title.get_window_extent(renderer), ax.get_window_extent(renderer)
     assert title.width <= panel.width and "\n" in ax.get_title()
+
+
+def test_the_segment_box_plot_title_of_one_method_is_wrapped_inside_the_figure(tmp_path):
+    """``--tables``' box plot of one method is 4 in wide: its title "per-segment KITTI translational drift (%) (3283
+    segments)" was cut at the image's edge ("... (3283 segment"); it is wrapped like the RPE panel titles."""
+    import matplotlib.image
+
+    from lidarkit.eval.plots import plot_segment_boxplots
+    from lidarkit.eval.tables import SegmentErrors
+
+    rng = np.random.default_rng(3)
+    n = 3283
+    segments = SegmentErrors(np.full(n, 100.0), rng.gamma(2.0, 0.4, n), rng.gamma(2.0, 0.1, n), np.full(n, 8.0))
+    png = plot_segment_boxplots({("00", "KITTI_00_ORB"): segments}, tmp_path / "box.png")
+    image = matplotlib.image.imread(png)[..., :3]
+    assert image.shape[:2] == (360, 400)
+    band = image[:40]  # the title's rows: ink (dark pixels) in the middle, none at either edge of the image
+    assert band[:, 150:250].min() < 0.5
+    assert band[:, :4].min() == 1.0 and band[:, -4:].min() == 1.0

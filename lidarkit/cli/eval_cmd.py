@@ -66,11 +66,12 @@ def eval_command(
 
     fmt = fmt or ("tum" if relations is not None else "kitti")
 
-    def load(path: Path, kind: str | None, times: Path | None) -> Trajectory:
+    def load(path: Path, kind: str | None, times: Path | None, times_option: str) -> Trajectory:
         kind = kind or fmt
         kwargs = {"timestamps_s": times} if times is not None and kind == "kitti" else {}
-        if times is not None and kind != "kitti":
-            raise ConfigError("times files apply to KITTI-format trajectories only", source="--ref-times/--est-times")
+        if times is not None and kind != "kitti":  # (named "--ref-times/--est-times" whichever was given)
+            raise ConfigError(f"times files apply to KITTI-format trajectories only (this one is read as {kind})",
+                              source=times_option)
         try:
             return Trajectory.read(path, kind, **kwargs)
         except ConfigError as err:
@@ -98,7 +99,7 @@ def eval_command(
                               "--relation-max-diff, --format/--est-format and --est-times)", source="--relations")
         if not (math.isfinite(relation_max_diff) and relation_max_diff >= 0):  # (named the library's max_time_diff_s)
             raise ConfigError(f"must be a finite number of seconds >= 0, got {relation_max_diff:g}", source="--relation-max-diff")
-        _relations_report(load(ref, est_format, est_times), relations, relation_max_diff, json_out)
+        _relations_report(load(ref, est_format, est_times, "--est-times"), relations, relation_max_diff, json_out)
         return
     if relation_max_diff != DEFAULT_MAX_TIME_DIFF_S:  # (accepted and ignored without --relations)
         raise ConfigError("--relation-max-diff applies to --relations only (pose-by-pose matching by time: --associate --max-diff)",
@@ -110,7 +111,7 @@ def eval_command(
     if not (math.isfinite(max_diff) and max_diff > 0):  # (the library's error named the file pair and max_diff_s)
         raise ConfigError(f"must be a finite number of seconds > 0, got {max_diff:g}", source="--max-diff")
     if not (math.isfinite(delta) and delta > 0):
-        raise ConfigError(f"must be a number > 0, got {delta:g}", source="--delta")
+        raise ConfigError(f"must be a finite number > 0, got {delta:g}", source="--delta")
     atomic.check_target(markdown, "file")
     atomic.check_target(plot, "figure")
     atomic.check_target(tables, "folder")
@@ -125,8 +126,8 @@ def eval_command(
             max_diff_s=max_diff,
             drift=drift,
         )
-        ref_traj = load(ref, ref_format, ref_times)
-        est_traj = load(est, est_format, est_times)
+        ref_traj = load(ref, ref_format, ref_times, "--ref-times")
+        est_traj = load(est, est_format, est_times, "--est-times")
         evaluation = evaluate(ref_traj, est_traj, settings)
     except ConfigError as err:  # a setting named as the library calls it ("delta: ..."): named by its option
         option = _OPTION_OF_SETTING.get(err.source or "")
@@ -170,7 +171,9 @@ def _write_outputs(evaluation, ref: Path, est: Path, ref_traj, est_traj, aside: 
 
     if json_out is not None:
         data = evaluation.to_dict()
-        data.update(ref_path=str(ref), est_path=str(est))
+        # the poses read beside the pairs scored (``n_poses``), and what the CLI warned of on stderr
+        data.update(ref_path=str(ref), est_path=str(est), n_ref_poses=len(ref_traj), n_est_poses=len(est_traj),
+                    warnings=_pairing_warnings(evaluation, ref_traj, est_traj))
         report.write_json(data, aside[Path(json_out)])
     if markdown is not None:
         atomic.write_text(aside[Path(markdown)], report.evaluation_markdown(evaluation))
@@ -202,6 +205,17 @@ def _write_outputs(evaluation, ref: Path, est: Path, ref_traj, est_traj, aside: 
 
             written.append(plot_segment_boxplots(segments, folder / _BOXPLOT_NAME))
     return written
+
+
+def _pairing_warnings(evaluation, ref_traj, est_traj) -> list[str]:
+    """The pairing's warnings (logged by the library), for the JSON: few poses associated, or stamps paired by index
+    that disagree."""
+    from lidarkit.eval.pairing import association_warning, stamps_disagree
+
+    s = evaluation.settings
+    said = (association_warning(ref_traj, est_traj, evaluation.ape.ref, s.max_diff_s) if s.associate
+            else stamps_disagree(ref_traj, est_traj, s.max_diff_s))
+    return [said] if said else []
 
 
 def _relations_report(est_traj, relations_path: Path, max_diff_s: float, json_out: Path | None) -> None:

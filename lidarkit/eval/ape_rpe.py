@@ -496,11 +496,19 @@ def rpe(
         pairs = _checked_pairs(pairs, len(ref), source)
     try:
         if pairs is None:
-            pair_poses = ref_evo.poses_se3 if pairs_from_reference else est_evo.poses_se3
+            paired_on = ref_evo if pairs_from_reference else est_evo
             # (evo prints the all-pairs search's progress, "0 %12 %25 %..." without a line end: it went into the tables
             # on stdout, then onto their title line on stderr; kept out of both)
-            with contextlib.redirect_stdout(io.StringIO()):
-                found = metrics.id_pairs_from_delta(pair_poses, evo_delta, unit, rel_delta_tol, all_pairs=all_pairs)
+            try:
+                with contextlib.redirect_stdout(io.StringIO()):
+                    found = metrics.id_pairs_from_delta(paired_on.poses_se3, evo_delta, unit, rel_delta_tol, all_pairs=all_pairs)
+            except EvoException:
+                # (evo's "produced an empty index list - try ... a less strict tolerance" hid the reason)
+                if unit is Unit.meters and delta > paired_on.path_length:
+                    side = "reference" if pairs_from_reference else "estimate" + (" as aligned" if transform and transform.rescaled else "")
+                    raise EvaluationError(f"delta = {delta:g} m exceeds the path length of the {side} ({paired_on.path_length:.4g} m): "
+                                          "no two poses are that far apart along it", source=source) from None
+                raise
             pairs = np.array(found, dtype=np.int64).reshape(-1, 2)
         # given pairs are compared as given (an earlier call's selection: its first legacy pair already dropped; the
         # second drop left the rotation RPE of `lidarkit eval --legacy-pairs` a pair short of the translation's)
@@ -538,9 +546,12 @@ def rpe(
     if relation == "point_distance_error_ratio" and len(metric.error) != len(pairs):
         keep = np.isin(pairs[:, 1], np.asarray(metric.delta_ids)) if not legacy_pairs else slice(None)
         pairs = pairs[keep]
+    # the laid-out and legacy copies were compared as consecutive frames: title the selection that was scored (all-pairs
+    # and given pairs read "delta = 1 (frames) using consecutive pairs")
+    metric.delta, metric.delta_unit, metric.all_pairs = evo_delta, unit, all_pairs
     title = _title(metric, align, align_origin, n)
     if legacy_pairs:
-        title = title.replace("delta = 1 (frames)", f"delta = {delta:g} ({Unit[delta_unit].value}), legacy pairs")
+        title = title.replace(" using consecutive pairs", ", legacy pairs using consecutive pairs")
     return RPEResult(
         relation=relation,
         unit=metric.unit.value,

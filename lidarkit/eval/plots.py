@@ -30,6 +30,12 @@ def _figure(width_in: float, height_in: float):
     return fig
 
 
+def _wrapped(title: str, width_in: float, fontsize: float) -> str:
+    """``title`` broken into lines that fit ``width_in`` inches at ``fontsize`` pt (~0.8 em a character): a long title
+    is cut at the figure's edge otherwise."""
+    return textwrap.fill(title, max(20, int(width_in * 72 / (0.8 * fontsize))))
+
+
 def choose_plane(ref: Trajectory, plane: str = "auto") -> str:
     """The two axes to draw: as given, or (``auto``) the two along which the reference spreads most.
 
@@ -75,8 +81,8 @@ def _draw_errors(ax, result: APEResult | RPEResult) -> None:
     ax.set_xlabel(xlabel)
     ax.set_ylabel(f"{kind} {result.relation} ({result.unit})")
     # evo's RPE title runs to ~100 characters ("... for delta = 1 (frames) using consecutive pairs (with SE(3) Umeyama
-    # alignment)"), wider than a panel of the evaluation figure: wrapped to the panel's width, not cut at the figure's edge
-    ax.set_title(textwrap.fill(result.title, 70), fontsize=8)
+    # alignment)"), wider than a panel of the evaluation figure: wrapped to the panel's width (6 in), not cut at its edge
+    ax.set_title(_wrapped(result.title, 6.0, 8), fontsize=8)
     ax.grid(True, lw=0.3)
     ax.legend(fontsize=8, loc="upper left")
 
@@ -152,12 +158,13 @@ def plot_segment_boxplots(grid, path: str | os.PathLike, quantity: str = "transl
     methods = list(dict.fromkeys(m for _, m in grid))
     data = [np.concatenate([getattr(s, quantity) for (_, m), s in grid.items() if m == method] or [np.zeros(0)])
             for method in methods]
-    fig = _figure(max(4.0, 0.9 * len(methods) + 2.0), 3.6)
+    width_in = max(4.0, 0.9 * len(methods) + 2.0)
+    fig = _figure(width_in, 3.6)
     ax = fig.add_subplot(1, 1, 1)
     ax.boxplot([d if d.size else [np.nan] for d in data], showfliers=True, flierprops={"markersize": 2})
     ax.set_xticks(range(1, len(methods) + 1), methods, rotation=20, ha="right", fontsize=8)
     ax.set_ylabel(QUANTITIES.get(quantity, quantity))
-    ax.set_title(f"per-segment KITTI {QUANTITIES.get(quantity, quantity)} ({sum(d.size for d in data)} segments)",
-                 fontsize=9)
+    title = f"per-segment KITTI {QUANTITIES.get(quantity, quantity)} ({sum(d.size for d in data)} segments)"
+    ax.set_title(_wrapped(title, width_in, 9), fontsize=9)  # (cut at the edge of the 4 in figure of one method)
     ax.grid(axis="y", alpha=0.3)
     return save_figure(fig, path)
