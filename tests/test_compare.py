@@ -177,3 +177,80 @@ def test_failed_jobs_earlier_suites_baselines_and_one_folder_twice_are_said_plai
     for kwargs, shown in (({"alpha": "x"}, "alpha must be a number, got 'x'"), ({"noise": None}, "noise must be a number, got None")):
         with pytest.raises(ConfigError, match=f": {shown}$"):
             compare(out, out, method_a="good", method_b="bad", **kwargs)
+
+
+def test_results_of_an_earlier_lidarkit_version_are_named_and_a_mix_of_versions_is_said(tmp_path):
+    """A folder reused after a source change: compare called the old code's results "an earlier suite" and counted 2 of
+    its 12 (as the report does not), and --all paired seeds 0-4 of the new code with seed 5 of the old without a word."""
+    from lidarkit.bench.jobs import Job
+    from lidarkit.bench.results import load_results, make_record, result_path, write_result
+    from lidarkit.provenance import code_version
+
+    _task("version_test_task", _error)
+    out = _bench(tmp_path, "s", "seeds: 6\nexperiments:\n  - {task: version_test_task, dataset: {kind: synthetic}, methods: [good, bad]}\n")
+    for record in load_results(out):  # the same jobs as an earlier version ran them
+        job = Job.from_spec(record["job"])
+        old = {k: v for k, v in record.items() if k not in ("schema", "key", "lidarkit_version", "job")}
+        write_result(out, make_record(job, job.key("0.0.9"), "0.0.9", {**old, "finished_utc": "2026-01-01"}))
+        if job.seed == 5:  # this version has not run seed 5 yet
+            result_path(out, record["key"]).unlink()
+    result = compare(out, out, method_a="good", method_b="bad")
+    assert (result.n_pairs, result.note) == (5, f"12 result(s) in {out} of these jobs from an earlier lidarkit version left out")
+    every = compare(out, out, method_a="good", method_b="bad", every_result=True)
+    assert (every.n_pairs, every.note) == (6, f"the 6 pairs mix lidarkit versions (A: 5 of {code_version()}, 1 of 0.0.9; "
+                                              f"B: the same); 10 result(s) in {out} of these jobs from an earlier lidarkit version left out")
+
+
+def test_noise_from_a_baseline_of_another_task_is_refused_and_the_noise_is_printed(tmp_path, capsys):
+    """--noise-from took the widest band of any job of the baseline (random_walk's on a self-test held a particle filter's
+    APE, another method's band on the same task too) without a word: the noise the verdict was held against was never
+    printed."""
+    from lidarkit.bench.baseline import record
+
+    def error(job):
+        return {"ape_rmse_m": {"good": 0.1, "bad": 0.5}.get(job.method, 10.0) + 0.01 * np.random.default_rng(job.seed).random()}
+
+    _task("noise_test_task", error)
+    suite = "seeds: {seeds}\nexperiments:\n  - {{task: noise_test_task, dataset: {{kind: synthetic}}, methods: [{methods}]}}\n"
+    out = _bench(tmp_path, "s", suite.format(seeds=6, methods="good, bad"))
+    (tmp_path / "base.yaml").write_text(suite.format(seeds=1, methods="good, bad, far"))
+    bands = {job["label"]: job["bands"]["ape_rmse_m"] for job in record(tmp_path / "base.yaml", tmp_path / "base", repeats=2).jobs}
+    assert bands["far"] > max(bands["good"], bands["bad"])
+    result = compare(out, out, method_a="good", method_b="bad", noise_from=tmp_path / "base")
+    assert result.noise == max(bands["good"], bands["bad"])  # (it was far's)
+    (tmp_path / "walk.yaml").write_text("seeds: 1\nexperiments:\n  - {task: selftest, dataset: {kind: synthetic}, "
+                                        "methods: [{name: random_walk, params: {steps: 20}}]}\n")
+    record(tmp_path / "walk.yaml", tmp_path / "walk", repeats=2)
+    pick = ["--method-a", "good", "--method-b", "bad"]
+    code, stdout, err = run_cli(["compare", str(out), str(out), *pick, "--noise-from", str(tmp_path / "walk")], capsys)
+    assert (code, stdout) == (1, "")
+    assert " ".join(err.split()) == (f"error: {tmp_path / 'walk'}: no band for metric 'ape_rmse_m' of task 'noise_test_task' in "
+                                     "this baseline (it has: selftest: ape_rmse_m, selftest: final_error_m): it did not check "
+                                     "that metric on that task (--noise-from)")
+    code, stdout, _ = run_cli(["compare", str(out), str(out), *pick, "--noise-from", str(tmp_path / "base")], capsys)
+    assert code == 0 and (f"noise: differences within ±{result.noise:.4g} are run-to-run noise (the band {tmp_path / 'base'} "
+                          "recorded)\n") in stdout
+    code, stdout, _ = run_cli(["compare", str(out), str(out), *pick, "--noise", "0.25"], capsys)
+    assert code == 0 and "noise: differences within ±0.25 are run-to-run noise (--noise)\n" in stdout
+
+
+def test_options_a_loaded_run_ignores_and_bad_option_types_are_named_before_loading(tmp_path):
+    """compare(BenchRuns, BenchRuns, method_a=...) ignored method_a / method_b / every_result; every_result="no" was read as
+    true; noise_from=5 was a bare TypeError after both folders were loaded."""
+    from lidarkit.eval.compare import load_bench_runs
+
+    _task("loaded_test_task", _error)
+    out = _bench(tmp_path, "s", "seeds: 6\nexperiments:\n  - {task: loaded_test_task, dataset: {kind: synthetic}, methods: [good, bad]}\n")
+    good, bad = load_bench_runs(out, "good"), load_bench_runs(out, "bad")
+    assert compare(good, bad).n_pairs == 6
+    loaded = ("applies to paths only: a loaded BenchRuns is compared as loaded (load_bench_runs picks a method, and every result)")
+    for kwargs, source in (({"method_a": "bad"}, "method_a"), ({"method_b": "good"}, "method_b"), ({"every_result": True}, "every_result")):
+        with pytest.raises(ConfigError) as exc:
+            compare(good, bad, **kwargs)
+        assert str(exc.value) == f"{source}: {loaded}"
+    missing = tmp_path / "missing"  # (checked before any loading: not "does not exist")
+    for kwargs, shown in (({"every_result": "no"}, "every_result: every_result must be True or False, got 'no'"),
+                          ({"noise_from": 5}, "noise_from: must be a path, got int 5")):
+        with pytest.raises(ConfigError) as exc:
+            compare(missing, missing, **kwargs)
+        assert str(exc.value) == shown

@@ -470,16 +470,20 @@ def _pinned_job_problem(job: Any) -> str:
     return ""
 
 
-def measured_noise(path: str | os.PathLike, metric: str | None) -> float:
-    """The widest band a baseline folder recorded for ``metric`` (its run-to-run noise allowance, metric unit);
-    ConfigError when no pinned job checks that metric."""
+def measured_noise(path: str | os.PathLike, metric: str | None, task: str | None = None,
+                   methods: tuple[str, ...] = ()) -> float:
+    """The widest band a baseline folder recorded for ``metric`` (its run-to-run noise allowance, metric unit) over its
+    jobs of ``task``, and of ``methods`` (labels or names) when it pinned any; ConfigError when no such job checks that
+    metric (random_walk's band of a self-test was taken as the noise of a particle filter's APE)."""
     baseline = load_baseline(path)
-    bands = [float(job["bands"][metric]) for job in baseline.jobs if metric in job.get("bands", {})]
-    if not bands:
-        known = sorted({m for job in baseline.jobs for m in job.get("bands", {})})
-        raise ConfigError(f"no band for metric {metric!r} in this baseline (it has: {', '.join(known)}): it did not "
-                          "check that metric", source=baseline.path)
-    return max(bands)
+    jobs = [job for job in baseline.jobs if metric in job.get("bands", {}) and task in (None, job["spec"]["task"])]
+    if not jobs:
+        known = sorted({f"{job['spec']['task']}: {m}" if task else m for job in baseline.jobs for m in job.get("bands", {})})
+        of_task = f" of task {task!r}" if task else ""
+        raise ConfigError(f"no band for metric {metric!r}{of_task} in this baseline (it has: {', '.join(known)}): it did not "
+                          "check that metric" + (" on that task (--noise-from)" if task else ""), source=baseline.path)
+    mine = [job for job in jobs if {job["label"], job["spec"]["method"]} & set(methods)]
+    return max(float(job["bands"][metric]) for job in mine or jobs)
 
 
 # ---------------------------------------------------------------- check

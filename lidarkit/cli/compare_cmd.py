@@ -26,7 +26,7 @@ def compare_command(
     noise: float = typer.Option(0.0, help="Run-to-run noise of the metric (its unit): smaller differences are not called."),
     noise_from: Optional[Path] = typer.Option(
         None, "--noise-from", help="Bench result folders only: a baseline folder (lidarkit baseline record) to take --noise from, the band it measured "
-        "for the metric (the widest over its jobs; with --noise too, the larger of the two)."),
+        "for the metric (the widest over its jobs of the compared task, and methods when pinned; with --noise too, the larger)."),
     seed: int = typer.Option(0, "--seed", help="Seed of the bootstrap CI of the difference."),
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write the comparison as JSON here."),
     every_result: bool = typer.Option(False, "--all", help="Bench folders: every result in the folder, not only the jobs of its suite.json (as its report)."),
@@ -49,6 +49,9 @@ def compare_command(
         console.print(f"Wilcoxon signed-rank: statistic {result.statistic:g}, p = {result.p_value:.3g}; "
                       f"effect size (rank-biserial) {result.effect_size:+.3f}", soft_wrap=True)
     console.print(result.verdict(), soft_wrap=True, markup=False)
+    if noise_from is not None or result.noise:  # (a baseline's band was applied without a word, deciding or not)
+        source = "--noise" if noise_from is None else f"the band {noise_from} recorded" + (" or --noise, the larger" if noise else "")
+        console.print(f"noise: differences within ±{result.noise:.4g} are run-to-run noise ({source})", soft_wrap=True, markup=False)
     if result.note:
         console.print(f"note: {result.note}", soft_wrap=True, markup=False)
     if json_out is not None:

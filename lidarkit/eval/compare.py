@@ -11,6 +11,7 @@ import dataclasses
 import json
 import os
 import re
+from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -47,7 +48,9 @@ class BenchRuns:
     name: str
     values: dict[str, dict[str, Any]] = field(default_factory=dict)  # pair key -> metrics
     labels: dict[str, str] = field(default_factory=dict)  # pair key -> "dataset, seed N"
-    n_left_out: int = 0  # results of jobs outside the folder's suite.json (an earlier suite) not compared
+    n_left_out: int = 0  # results in jobs/ not compared: of jobs outside the folder's suite.json (an earlier suite) ...
+    n_earlier_version: int = 0  # ... or, of those, of the compared jobs run by another lidarkit version (as the report counts)
+    versions: dict[str, str] = field(default_factory=dict)  # pair key -> lidarkit version of its result
     higher_is_better: set[str] = field(default_factory=set)  # metrics the results say are better higher (their task's word)
     alignments: dict[str, dict[str, str]] = field(default_factory=dict)  # pair key -> metric -> alignment its job states
     failed: set[str] = field(default_factory=set)  # pair keys whose job failed
@@ -86,22 +89,27 @@ def load_bench_runs(path: str | os.PathLike, method: str | None = None, every_re
     """The successful results of one method of a bench folder; ``method`` is a method label (``kiss``,
     ``vanilla(voxel_size_m=0.5)``) or a bare method name when only one label has it. ConfigError lists the
     labels when the choice is ambiguous. As the report, only the jobs of the folder's ``suite.json`` (results an
-    earlier suite left in a reused folder are counted in ``n_left_out``); ``every_result``: all of them. ``records``:
-    the folder's latest records when already read (the same folder given twice warned of each bad result twice)."""
+    earlier suite, or an earlier lidarkit version, left in a reused folder are counted in ``n_left_out``, the latter in
+    ``n_earlier_version`` too); ``every_result``: all of them, the latest of each job. ``records``:
+    the folder's records when already read (the same folder given twice warned of each bad result twice)."""
     from lidarkit.bench.jobs import Job, canonical_json
-    from lidarkit.bench.report import latest_per_job, suite_job_keys
+    from lidarkit.bench.report import _suite_jobs, _suite_manifest, latest_per_job
     from lidarkit.bench.results import load_results, results_folder
 
     path = results_folder(path)
-    latest = latest_per_job(load_results(path)) if records is None else records
-    records = [r for r in latest if r.get("status") == "ok"]
-    suite = set() if every_result else suite_job_keys(path)
+    every = load_results(path) if records is None else records
+    suite_jobs = {} if every_result else _suite_jobs(_suite_manifest(path))
+    suite = set(suite_jobs)
     if not every_result and not suite and (path / "suite.json").exists():  # (it read as "every result", without a word)
         raise DataError("unreadable, or without a job list: which results are this suite's is unknown (--all: every result)",
                         source=path / "suite.json")
-    n_all, every_ok = len(records), records
-    if suite:
-        records = [r for r in records if r["key"] in suite]
+    # as build_report: the suite's jobs, the latest result of each; a result left out with the spec of a job held here
+    # is that job run by another lidarkit version (they were called "an earlier suite"'s, and counted after one per spec)
+    latest = latest_per_job([r for r in every if not suite or r["key"] in suite])
+    held, own_specs = {id(r) for r in latest}, {canonical_json(r["job"]) for r in latest} | set(map(canonical_json, suite_jobs.values()))
+    left_out = [r for r in every if id(r) not in held]
+    records = [r for r in latest if r.get("status") == "ok"]
+    every_ok = [r for r in every if r.get("status") == "ok"]
     if not records:
         raise DataError("no successful job results in jobs/" + (" for the jobs of suite.json (--all: every result)" if suite else ""),
                         source=path)
@@ -126,7 +134,8 @@ def load_bench_runs(path: str | os.PathLike, method: str | None = None, every_re
                               + (" (it is in results of an earlier suite here: --all compares every result)" if earlier else ""),
                               source=path)
         chosen = named[0]
-    runs = BenchRuns(path, chosen, n_left_out=n_all - len(records), records=latest)
+    runs = BenchRuns(path, chosen, n_left_out=len(left_out), records=every,
+                     n_earlier_version=sum(canonical_json(r["job"]) in own_specs for r in left_out))
     for r in latest:
         job = Job.from_spec(r["job"])
         if job.method_label != chosen or (suite and r["key"] not in suite):
@@ -141,6 +150,7 @@ def load_bench_runs(path: str | os.PathLike, method: str | None = None, every_re
             runs.values[key] = dict(r.get("metrics") or {})
             runs.labels[key] = f"{job.dataset_name}, seed {job.seed}"
             runs.alignments[key] = dict(((r.get("info") or {}).get("metric_alignment")) or {})
+            runs.versions[key] = str(r.get("lidarkit_version") or "unknown")
             runs.higher_is_better.update(r.get("higher_is_better") or ())
     runs.failed -= set(runs.values)
     return runs
@@ -212,7 +222,8 @@ def compare(
 ) -> PairedComparison:
     """Paired Wilcoxon comparison of run ``a`` against run ``b`` (``diff = a - b``).
 
-    ``noise_from``: a baseline folder whose band for the compared metric (the default one too) raises ``noise``.
+    ``noise_from``: a baseline folder whose band for the compared metric (the default one too) raises ``noise``: its
+    widest over the jobs of the compared task (and methods, when it pinned them); ConfigError when it has none.
 
     Odometry run folders pair per KITTI segment (``metric="segment_translation_pct"``, the default when the
     path allows 100 m segments) or per frame (``rpe_translation_m``, the default otherwise). Bench results
@@ -224,6 +235,16 @@ def compare(
     ground truth at its own instant of the sweep, are compared with a ``note`` saying so.
     """
     alpha, noise = check_number(alpha, "alpha"), check_number(noise, "noise")  # (before any work)
+    from lidarkit.bench.results import path_argument
+    from lidarkit.eval.ape_rpe import check_flags
+
+    check_flags(every_result=every_result)  # ("no" was read as true)
+    if noise_from is not None:  # (5 was a TypeError after both folders were loaded)
+        path_argument(noise_from, "noise_from")
+    for side, method, name in ((a, method_a, "method_a"), (b, method_b, "method_b")):  # (they were ignored without a word)
+        if isinstance(side, (OdometryRun, BenchRuns)) and (method is not None or every_result):
+            raise ConfigError(f"applies to paths only: a loaded {type(side).__name__} is compared as loaded (load_bench_runs "
+                              "picks a method, and every result)", source=name if method is not None else "every_result")
     side_a = _load(a, method_a, every_result)
     same = isinstance(side_a, BenchRuns) and isinstance(b, (str, os.PathLike)) and Path(b).resolve() == side_a.path.resolve()
     side_b = load_bench_runs(b, method_b, every_result, side_a.records) if same else _load(b, method_b, every_result)
@@ -312,7 +333,8 @@ def compare(
         va, vb, pairing = collapsed
     result = paired_test(va, vb, name_a=name_a, name_b=name_b, metric=metric, pairing=pairing,
                          lower_is_better=not (metric in side_a.higher_is_better | side_b.higher_is_better or higher_is_better(metric)),
-                         alpha=alpha, noise=_with_measured_noise(noise, noise_from, metric), seed=seed,
+                         alpha=alpha, seed=seed,
+                         noise=_with_measured_noise(noise, noise_from, metric, next(iter(tasks_with)), (side_a.name, side_b.name)),
                          repeated=False if pairing == "seed" and any(varies.values()) else None)
     notes = []
     if pairing == "unit":  # (a fixed dataset beside seeded ones)
@@ -327,10 +349,13 @@ def compare(
     for n, side in ((failed_a, "A"), (failed_b, "B")):
         if n:
             notes.append(f"{n} (dataset, seed) unit(s) where {side}'s job failed are left out (lidarkit report lists why)")
-    stale = {side_a.path: side_a.n_left_out, side_b.path: side_b.n_left_out}
-    for folder, n in stale.items():
-        if n:
-            notes.append(f"{n} result(s) in {folder} of jobs not in its suite.json (an earlier suite) left out (--all: every result)")
+    notes += _mixed_versions(side_a, side_b, common)
+    for folder, side in {side_a.path: side_a, side_b.path: side_b}.items():  # (worded as the report words them)
+        if side.n_earlier_version:
+            notes.append(f"{side.n_earlier_version} result(s) in {folder} of these jobs from an earlier lidarkit version left out")
+        if side.n_left_out - side.n_earlier_version:
+            notes.append(f"{side.n_left_out - side.n_earlier_version} result(s) in {folder} of jobs not in its suite.json "
+                         "(an earlier suite) left out (--all: every result)")
     return dataclasses.replace(result, note="; ".join(notes)) if notes else result
 
 
@@ -396,17 +421,35 @@ def _same_alignment(side_a: BenchRuns, side_b: BenchRuns, keys: list[str], metri
                           "values under different alignments are not compared", source="metric")
 
 
+def _mixed_versions(side_a: BenchRuns, side_b: BenchRuns, keys: list[str]) -> list[str]:
+    """A note when a side's paired results come from several lidarkit versions (--all over a folder reused after a
+    source change paired seeds 0-4 of the new code with seed 5 of the old, without a word)."""
+    mixes = {}
+    for name, side in (("A", side_a), ("B", side_b)):
+        counts = Counter(side.versions.get(k, "unknown") for k in keys)
+        if len(counts) > 1:
+            mixes[name] = ", ".join(f"{n} of {v}" for v, n in counts.most_common())
+    if not mixes:
+        return []
+    text = "; ".join(f"{name}: {mix}" for name, mix in mixes.items())
+    if len(mixes) == 2 and mixes["A"] == mixes["B"]:
+        text = f"A: {mixes['A']}; B: the same"
+    return [f"the {len(keys)} pairs mix lidarkit versions ({text})"]
+
+
 def _task_of(unit_key: str) -> str:
     """The bench task of a (task, dataset, options, seed) unit key."""
     return str(json.loads(unit_key).get("task", ""))
 
 
-def _with_measured_noise(noise: float, noise_from: str | os.PathLike | None, metric: str) -> float:
+def _with_measured_noise(noise: float, noise_from: str | os.PathLike | None, metric: str, task: str,
+                         methods: tuple[str, ...]) -> float:
+    """``noise``, or the baseline's band for the compared task, metric (and methods, when it pinned them) if larger."""
     if noise_from is None:
         return noise
     from lidarkit.bench.baseline import measured_noise
 
-    return max(noise, measured_noise(noise_from, metric))
+    return max(noise, measured_noise(noise_from, metric, task, methods))
 
 
 def _load(side: Any, method: str | None, every_result: bool = False) -> OdometryRun | BenchRuns:
