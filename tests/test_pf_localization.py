@@ -518,3 +518,20 @@ def test_odd_counts_steps_and_snapshots_are_refused(stachniss, capsys, tmp_path)
             main(["pf", str(data), *args])
         assert exc.value.code == 1
         assert capsys.readouterr().err == f"error: {line}\n"
+
+
+def test_a_lost_run_gets_no_q_verdict_and_no_fit(stachniss):
+    """50 particles from a uniform start lose track on 308 of 331 steps (6.3 m from dead reckoning): the verdict read its
+    NIS as "Q too small by about 15x" and --fit-q settled on a range std of 5.2 m (q_fit_settled true); a KLD run lost
+    on 8 steps read "Q consistent". Their innovations are localization error, not Q."""
+    from lidarkit.pf.protocol import fit_q_recorded, run_recorded
+
+    first, runs = fit_q_recorded(stachniss, 50, 0, init="uniform", warn_lost=False)
+    assert runs == [] and first.metrics["q_fit_settled"] is False
+    assert first.metrics["q_verdict"] == {"status": "lost", "factor": None, "text": (
+        "no verdict on Q: the filter lost track on 308 of 331 steps, so the NIS (NIS mean 29.831, chi-square(2) expects 2.0) "
+        "reflects localization error, not Q; no Q fit")}
+    kld = run_recorded(stachniss, 100, 0, init="uniform", kld=True, warn_lost=False)
+    assert len(kld.lost_steps) == 8 and kld.metrics["q_verdict"]["status"] == "lost"
+    assert q_verdict(1.0, np.diag([1.0, 0.1]), lost="the estimate is 6.29 m from dead reckoning on average").text.startswith(
+        "no verdict on Q: the estimate is 6.29 m from dead reckoning on average, so the NIS (NIS mean 1.000")

@@ -310,3 +310,22 @@ def test_headings_stay_wrapped_and_precise_over_many_turning_steps(sequence):
     assert -np.pi <= best[2] < np.pi
     assert abs(wrap_angle(best[2] - truth[-1, 2])) < 1e-3
     np.testing.assert_allclose(best[:2], truth[-1, :2], atol=1e-3)
+
+
+@pytest.mark.parametrize("field, value", [("init_mean", (1e20, 0.0, 0.0)), ("init_mean", (1e39, 0.0, 0.0)), ("init_std", (1.0, 1e20, 1.0)),
+                                          ("uniform_margin_m", 1e30), ("motion_noise_std", (0.0, 1e20, 0.0))])
+def test_pose_scales_beyond_any_map_are_refused(field, value):
+    """init_mean / init_std / uniform_margin_m / motion_noise_std 1e20 ran 331 weight resets (MSE 1e40, exit 0); init_mean
+    1e39 overflowed float32 and failed later as "pose is NaN". Refused up front naming the field, as Q is."""
+    with pytest.raises(ConfigError) as exc:
+        PFConfig.make(**{field: value})
+    assert exc.value.source == f"pf config {field}"
+    assert str(exc.value) == (f"pf config {field}: values must be at most 1e+06 in magnitude (m or rad: 1000 km is past any map), "
+                              f"got {value}")
+    assert PFConfig.make(init_mean=(1e6, -1e6, 0.1), uniform_margin_m=1e6).init_mean == (1e6, -1e6, 0.1)  # the bound itself is fine
+
+
+def test_kld_title_range_includes_a_first_count_below_kld_min():
+    """-n 100 --kld: the title read "N=200..5,000 (KLD)" while the run started with 100 particles."""
+    assert PFConfig.make(n_particles=100, kld=True).particle_count_label() == "100..5,000 (KLD)"
+    assert PFConfig.make(n_particles=1000, kld=True).particle_count_label() == "200..5,000 (KLD)"

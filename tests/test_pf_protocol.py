@@ -332,8 +332,8 @@ def test_a_kld_run_and_the_fit_q_snapshot_run_show_their_progress(monkeypatch, c
         main(["pf", data, "-n", "10", "--kld", "--kld-min", "20", "--kld-max", "60", "--kld-unconverged", "30"])
     assert exc.value.code in (0, None)
     captured = capsys.readouterr()
-    assert "pf run, 20..60 (KLD) particles: 331/331 steps" in captured.err
-    assert "particle filter (protocol), N=20..60 (KLD), seed 0" in captured.out
+    assert "pf run, 10..60 (KLD) particles: 331/331 steps" in captured.err
+    assert "particle filter (protocol), N=10..60 (KLD), seed 0" in captured.out
     with pytest.raises(SystemExit) as exc:
         main(["pf", data, "-n", "50", "--recorded", "--fit-q", "--out", str(tmp_path / "run")])
     assert exc.value.code in (0, None)
@@ -395,3 +395,38 @@ def test_a_recording_shorter_than_the_mse_start_is_refused_before_the_filter_run
         run_protocol(LandmarkData(tmp_path / "s9"), 50, 0, on_step=lambda *_: pytest.fail("the filter ran"))
     assert run_protocol(LandmarkData(tmp_path / "s9"), 50, 0, mse_start=9).metrics["mse_start"] == 9
     assert np.isfinite(run_protocol(LandmarkData(tmp_path / "s10"), 50, 0).metrics["mse_m2"]["mean"])
+
+
+def test_bad_mse_start_max_rounds_and_repeated_study_values_are_refused_up_front(stachniss):
+    """mse_start -3 / 2.5 ran the filter, then failed naming "dead_reckoning vs ground_truth: start" (True: "start");
+    max_rounds 2.5 was a TypeError and 0 fitted nothing; a study over seeds [0, 0] gave mse_std 0.0 over one run twice."""
+    from lidarkit.errors import ConfigError
+    from lidarkit.pf.protocol import fit_q_recorded
+    from lidarkit.pf.study import run_study
+
+    for value in (-3, 2.5, True):
+        with pytest.raises(ConfigError) as exc:
+            run_protocol(stachniss, 10, 0, mse_start=value)
+        assert str(exc.value) == f"mse_start: mse_start must be an integer step >= 0, got {value!r}"
+    for value in (2.5, 0, -1):
+        with pytest.raises(ConfigError) as exc:
+            fit_q_recorded(stachniss, 10, 0, max_rounds=value)
+        assert str(exc.value) == f"max_rounds: max_rounds must be an integer >= 1 (re-runs with a fitted Q), got {value!r}"
+    for particles, seeds, line in (([50], [0, 0], "seeds: each value must be listed once, got [0, 0]"),
+                                   ([50, 50], [0], "particles: each value must be listed once, got [50, 50]")):
+        with pytest.raises(ConfigError) as exc:
+            run_study(stachniss, particles, seeds)
+        assert str(exc.value) == line
+
+
+def test_snapshots_all_past_the_end_are_refused_before_the_run(capsys, tmp_path):
+    """--snapshots 400 on 331 steps ran, warned "past the last step (331), left out of particles.png" and exited 0
+    with no particles.png; one step within 0..331 still draws (the rest is warned of)."""
+    data = shared_path("pf", "robot_mapping_stachniss")
+    with pytest.raises(SystemExit) as exc:
+        main(["pf", str(data), "-n", "100", "--snapshots", "400", "--out", str(tmp_path / "a")])
+    assert exc.value.code == 1 and not (tmp_path / "a").exists()
+    assert capsys.readouterr().err.strip().splitlines()[-1] == "error: --snapshots: no snapshot step within 0..331 (the data's steps), got '400'"
+    with pytest.raises(SystemExit) as exc:
+        main(["pf", str(data), "-n", "100", "--snapshots", "300,400", "--out", str(tmp_path / "b")])
+    assert exc.value.code in (0, None) and (tmp_path / "b" / "particles.png").exists()

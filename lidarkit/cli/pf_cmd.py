@@ -180,6 +180,8 @@ def pf_command(
         raise ConfigError(f"must be a step in 1..{len(data)} of the data, got {kidnap_at}", source="--kidnap-at")
     if not _given(ctx, "snapshots"):  # the default steps past a short recording's end are dropped without a word
         snapshot_steps = tuple(s for s in snapshot_steps if s <= len(data))
+    elif min(snapshot_steps) > len(data):  # (the run went ahead and wrote no particles.png, exit 0)
+        raise ConfigError(f"no snapshot step within 0..{len(data)} (the data's steps), got {snapshots!r}", source="--snapshots")
     # state, weights, resampling copies and per-reading likelihoods (~40 float64 per particle), plus the particle clouds
     # kept for the figures (the run's steps are known now: a GIF keeps every other one)
     n_snapshots = len(_kept_steps(snapshot_steps, gif, len(data), out))
@@ -320,16 +322,17 @@ def _recorded(data, cfg: PFConfig, seed: int, fit_q: bool, out: Path | None, sna
     else:
         with _step_progress(cfg, len(data), "pf --fit-q (up to 6 runs)", runs=6) as on_step:
             first, runs = fit_q_recorded(data, None, seed, config=cfg, on_step=on_step)
-        result = runs[-1]
+        last = runs[-1] if runs else first  # (none: the run with the given Q lost track and was not fitted)
+        result = last
         if snap:  # a re-run of the last fit that keeps the particle clouds of the figures
             with _step_progress(cfg, len(data), "pf run for the snapshots") as on_step:
-                result = run_recorded(data, None, seed, config=runs[-1].config, snapshot_steps=snap, warn_lost=False,  # (the fit's own warned)
+                result = run_recorded(data, None, seed, config=last.config, snapshot_steps=snap, warn_lost=False,  # (the fit's own warned)
                                       on_step=on_step)
         for key in ("q_verdict", "q_fit_settled"):  # (a re-run for the snapshots: the fit's own verdict)
-            if key in runs[-1].metrics:
-                result.metrics[key] = runs[-1].metrics[key]
+            if key in last.metrics:
+                result.metrics[key] = last.metrics[key]
         _print(first)
-        stdout().print("before: " + first.metrics["q_verdict"]["text"])
+        stdout().print(("before: " if runs else "") + first.metrics["q_verdict"]["text"])
         table = Table(title="--fit-q: maximum-likelihood Q from the innovations, filter re-run")
         for col in ("run", "Q range variance [m²]", "Q bearing variance [rad²]", "NIS mean", "NIS < 5.99"):
             table.add_column(col, justify="right")
@@ -338,7 +341,8 @@ def _recorded(data, cfg: PFConfig, seed: int, fit_q: bool, out: Path | None, sna
             table.add_row("given Q" if i == 0 else f"fit {i}", f"{qc[0][0]:.4g}", f"{qc[1][1]:.4g}", f"{r.metrics['nis_mean']:.3f}",
                           f"{r.metrics['nis_fraction_below_chi2_95']:.3f}")
         stdout().print(table)
-        stdout().print("after: " + runs[-1].metrics["q_verdict"]["text"])
+        if runs:
+            stdout().print("after: " + last.metrics["q_verdict"]["text"])
         # the run folder holds the last fit's run: the Q given and each fit are kept beside it (metrics.json, "fit_q")
         result.metrics["fit_q"] = [{"run": "given Q" if i == 0 else f"fit {i}", "q_cov": r.settings["q_cov"], "nis_mean": r.metrics["nis_mean"],
                                     "nis_fraction_below_chi2_95": r.metrics["nis_fraction_below_chi2_95"]} for i, r in enumerate([first, *runs])]

@@ -19,6 +19,9 @@ MIN_Q_VARIANCE = 1e-30
 #: Largest measurement variance (m^2, rad^2): a std of 1e6 (1000 km in range; a bearing is an angle) is no sensor, and
 #: readings simulated with far more overflow the filter's float32 squares (1e40 ran 331 weight resets, exit 0).
 MAX_Q_VARIANCE = 1e12
+#: Largest magnitude of init_mean, init_std, uniform_margin_m and motion_noise_std (m or rad): 1000 km is past any landmark
+#: map, like the kidnap offset's bound; 1e20 ran 331 weight resets (MSE 1e40, exit 0), 1e39 overflowed float32 to NaN.
+MAX_POSE_SCALE = 1e6
 #: Largest roughening constant K (jitter std = K x spread x N^(-1/3); Gordon et al. use ~0.2).
 MAX_ROUGHENING = 10.0
 
@@ -212,6 +215,13 @@ class PFConfig(BaseModel):
             raise ValueError(f"values must be finite, got {v}")
         return v
 
+    @field_validator("init_mean", "init_std", "motion_noise_std", "uniform_margin_m")
+    @classmethod
+    def _pose_scale(cls, v):
+        if any(abs(x) > MAX_POSE_SCALE for x in (v if isinstance(v, tuple) else (v,))):
+            raise ValueError(f"values must be at most {MAX_POSE_SCALE:g} in magnitude (m or rad: 1000 km is past any map), got {v}")
+        return v
+
     @field_validator("q", "motion_noise_std", "init_std")
     @classmethod
     def _finite_non_negative(cls, v: tuple[float, ...]) -> tuple[float, ...]:
@@ -236,11 +246,12 @@ class PFConfig(BaseModel):
             raise ConfigError(msg, source=f"pf config {field}" if field else "pf config") from None
 
     def particle_count_label(self) -> str:
-        """The particle count as titles say it: KLD-sampling's range (``n_particles`` is only its start), else N."""
-        return f"{self.kld_min_n:,}..{self.kld_max_n:,} (KLD)" if self.kld else f"{self.n_particles:,}"
+        """The particle count as titles say it: KLD-sampling's range (``n_particles`` is only its start, which may be
+        below ``kld_min_n``: the range then starts there), else N."""
+        return f"{min(self.n_particles, self.kld_min_n):,}..{self.kld_max_n:,} (KLD)" if self.kld else f"{self.n_particles:,}"
 
     def replace(self, **changes) -> PFConfig:
         return PFConfig.make(**{**self.model_dump(), **changes})
 
 
-__all__ = ["ESTIMATORS", "INITS", "LIKELIHOODS", "MAX_Q_VARIANCE", "MAX_ROUGHENING", "MIN_Q_VARIANCE", "PFConfig", "q_problem"]
+__all__ = ["ESTIMATORS", "INITS", "LIKELIHOODS", "MAX_POSE_SCALE", "MAX_Q_VARIANCE", "MAX_ROUGHENING", "MIN_Q_VARIANCE", "PFConfig", "q_problem"]

@@ -25,7 +25,7 @@ import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.pf.config import PFConfig
-from lidarkit.pf.consistency import fit_q, q_verdict
+from lidarkit.pf.consistency import fit_q, localization_problem, q_verdict
 from lidarkit.pf.filter import ParticleFilter, make_filter, nis_values
 from lidarkit.pf.models import integrate_odometry, resolve_q, wrap_angle
 from lidarkit.trajectory import Trajectory
@@ -395,6 +395,8 @@ def run_protocol(
     overrides = {k: v for k, v in dict(likelihood=likelihood, estimator=estimator, resampler=resampler, q_as=q_as).items() if v is not None}
     cfg = _resolve_config(config, n_particles, {**overrides, **config_overrides})
     seed = checked_seed(seed)
+    if isinstance(mse_start, bool) or not isinstance(mse_start, (int, np.integer)) or mse_start < 0:  # (checked after the run)
+        raise ConfigError(f"mse_start must be an integer step >= 0, got {mse_start!r}", source="mse_start")
     if len(data.odometry) < mse_start:  # (the whole filter ran first, then the MSE failed counting poses: "has 10" for 9 steps)
         raise DataError(f"{len(data.odometry)} steps: the protocol scores the position MSE from step {mse_start} on, so it needs "
                         f"at least {mse_start}", source=_sensor_source(data))
@@ -501,7 +503,8 @@ def run_recorded(
     result.metrics = consistency_metrics(nis, result.estimate, dr, data, q_cov)
     if len(nis) >= 2:
         q_fit = fit_q(out["innovations"], out["innovation_spread"], q_cov)
-        verdict = q_verdict(result.metrics["nis_mean"], q_cov)
+        lost = localization_problem(len(result.lost_steps), result.n_steps, result.metrics["estimate_vs_dead_reckoning_m"]["mean"])
+        verdict = q_verdict(result.metrics["nis_mean"], q_cov, lost=lost)
         result.metrics["q_fit_ml"] = q_fit.tolist()
         result.metrics["q_verdict"] = {"status": verdict.status, "factor": verdict.factor, "text": verdict.text}
     if warn_lost:
@@ -514,7 +517,8 @@ def fit_q_recorded(data, n_particles: int | None = None, seed: int = 0, *, confi
                    **config_overrides: Any) -> tuple[PFRunResult, list[PFRunResult]]:
     """``--fit-q``: run on the recorded readings, take the ML Q of the innovations, run again with it; repeat
     (the particle spread changes with Q) until the NIS mean is within [1.5, 2.5], the fit repeats itself, or
-    ``max_rounds`` re-runs. The last run's ``metrics["q_fit_settled"]`` says whether it got there (its verdict says so
+    ``max_rounds`` re-runs. A first run that lost track is not fitted (no verdict on Q; a last run that did is not
+    settled). The last run's ``metrics["q_fit_settled"]`` says whether it got there (its verdict says so
     when not). ``warn_lost``: warn if the run with the given Q or the last fit lost track, naming which (a discarded
     round between them, often lost with its too small Q, says nothing).
 
@@ -522,10 +526,13 @@ def fit_q_recorded(data, n_particles: int | None = None, seed: int = 0, *, confi
     """
     from lidarkit.pf.consistency import NIS_CONSISTENT, at_lower_bound, scale_fit
 
+    if isinstance(max_rounds, bool) or not isinstance(max_rounds, (int, np.integer)) or max_rounds < 1:  # (0 fitted nothing)
+        raise ConfigError(f"max_rounds must be an integer >= 1 (re-runs with a fitted Q), got {max_rounds!r}", source="max_rounds")
     first = run_recorded(data, n_particles, seed, config=config, warn_lost=False, on_step=on_step, **config_overrides)
     runs: list[PFRunResult] = []
     current = first
-    for _ in range(max_rounds):
+    # a lost first run: its innovations are localization error, and a Q fitted to them only widens the cloud
+    for _ in range(0 if _lost(first) else max_rounds):
         if "q_fit_ml" not in current.metrics:
             raise DataError("no readings to fit Q on", source="fit_q")
         q_fit = np.asarray(current.metrics["q_fit_ml"])
@@ -538,22 +545,29 @@ def fit_q_recorded(data, n_particles: int | None = None, seed: int = 0, *, confi
         current = run_recorded(data, None, seed, config=cfg, warn_lost=False, on_step=on_step)
         runs.append(current)
         lo, hi = NIS_CONSISTENT
-        if lo <= current.metrics["nis_mean"] <= hi:
+        if lo <= current.metrics["nis_mean"] <= hi and not _lost(current):
             break
     last = runs[-1] if runs else first
     lo, hi = NIS_CONSISTENT
-    settled = lo <= last.metrics["nis_mean"] <= hi
+    settled = lo <= last.metrics["nis_mean"] <= hi and not _lost(last)
     last.metrics["q_fit_settled"] = settled
     if warn_lost:
         _warn_lost(first, " with the given Q")
         if runs:
             _warn_lost(last, f" with the fitted Q (fit {len(runs)})")
-    if not settled and "q_verdict" in last.metrics:  # said, and not "--fit-q estimates Q" after --fit-q has run
+    if _lost(last):
+        last.metrics["q_verdict"]["text"] += (f"; the fit stopped after {len(runs)} re-run(s)" if runs else "; no Q fit")
+    elif not settled and "q_verdict" in last.metrics:  # said, and not "--fit-q estimates Q" after --fit-q has run
         history = " -> ".join(f"{r.metrics['nis_mean']:.3g}" for r in [first, *runs])
         text = last.metrics["q_verdict"]["text"].replace("; --fit-q estimates Q", "")
         last.metrics["q_verdict"]["text"] = (f"{text}; the fit did not settle within [{lo:g}, {hi:g}] in {len(runs)} re-run(s) "
                                              f"(NIS mean {history}): Q is not all that the innovations say")
     return first, runs
+
+
+def _lost(result: PFRunResult) -> bool:
+    """True when ``result``'s verdict is none: it lost track (see :func:`lidarkit.pf.consistency.localization_problem`)."""
+    return result.metrics.get("q_verdict", {}).get("status") == "lost"
 
 
 def consistency_metrics(nis: np.ndarray, estimate: np.ndarray, dead_reckoning: np.ndarray, data, q_cov: np.ndarray) -> dict[str, Any]:

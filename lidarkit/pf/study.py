@@ -95,6 +95,9 @@ def run_study(data, particles: list[int], seeds: list[int], *, config: PFConfig 
 
     if not particles or not seeds:
         raise ConfigError("a study needs at least one particle count and one seed", source="study")
+    for name, values in (("particles", particles), ("seeds", seeds)):  # (a repeated seed gave mse_std 0.0 over one run twice)
+        if len(set(values)) != len(values):
+            raise ConfigError(f"each value must be listed once, got {list(values)}", source=name)
     cfg = config if config is not None else PFConfig.make()
     kidnap = protocol_kwargs.get("kidnap_at_step")
     rows = []
