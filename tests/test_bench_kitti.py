@@ -61,3 +61,29 @@ def test_bench_kitti_names_what_it_cannot_run_and_a_dry_run_writes_nothing(tmp_p
     code, io = bench("--methods", "vanilla", "--out", str(tmp_path / "c"), "--dry-run")
     assert code in (0, None) and "vanilla" in io.out
     assert not any((tmp_path / name).exists() for name in ("a", "b", "c"))
+
+
+def test_bench_kitti_names_the_option_that_repeats_a_sequence_or_method(tmp_path, capsys):
+    """`--sequences 00,00` (or `--methods kiss,kiss`) said "error: /tmp/tmpb7hxy8o4/kitti_suite.yaml
+    (experiments[0].datasets[1], line 17): duplicate dataset", naming a temporary file already deleted."""
+    root = write_fake_kitti_root(tmp_path / "kitti", {"00": 8})
+    for args, line in ((["--sequences", "00,00"], "error: --sequences: 00 given twice"),
+                       (["--methods", "kiss,vanilla,kiss,kiss"], "error: --methods: kiss given 3 times")):
+        with pytest.raises(SystemExit) as exc:
+            main(["bench", "kitti", "--data", str(root), "--out", str(tmp_path / "o"), "--dry-run", *args])
+        assert exc.value.code == 1 and capsys.readouterr().err.strip() == line
+    assert not (tmp_path / "o").exists()
+
+
+def test_kitti_options_on_a_suite_file_name_the_options_given(tmp_path, capsys):
+    """`lidarkit bench s.yaml --methods kiss` said "error: --data: --data/--methods/--sequences apply to `lidarkit
+    bench kitti` only" though --data was not given."""
+    suite = tmp_path / "s.yaml"
+    suite.write_text("name: s\nseeds: 1\nexperiments:\n"
+                     "  - {task: selftest, dataset: {kind: synthetic}, methods: [random_walk]}\n")
+    for args, line in ((["--methods", "kiss"], "error: --methods: applies to `lidarkit bench kitti` only"),
+                       (["--sequences", "00", "--data", str(tmp_path)],
+                        "error: --data, --sequences: apply to `lidarkit bench kitti` only")):
+        with pytest.raises(SystemExit) as exc:
+            main(["bench", str(suite), "--out", str(tmp_path / "o"), "--dry-run", *args])
+        assert exc.value.code == 1 and capsys.readouterr().err.strip() == line

@@ -717,6 +717,30 @@ def test_all_metrics_and_the_csv_say_the_seeds_not_run(results_dir, tmp_path):
         "random_walk(noise_m=0.1, steps=40)": ("3", "0", "0"), "fail": ("0", "3", "0")}
 
 
+def test_a_method_none_of_whose_seeds_ran_has_its_row_saying_so(results_dir, tmp_path):
+    """A method with no result on any seed yet (an interrupted run) had no row in any table nor in report.csv: it was
+    named only under "Jobs of the suite without a result"."""
+    import shutil
+
+    from lidarkit.bench.report import _table_rows, pivot
+
+    folder = tmp_path / "interrupted"
+    shutil.copytree(results_dir, folder)
+    for r in load_results(folder):
+        if r["job"]["params"].get("noise_m") == 0.1:
+            (folder / "jobs" / f"{r['key']}.json").unlink()
+    report = build_report(folder, plots=False)
+    header, rows = _table_rows(report.tables[0])
+    row = next(row for row in rows if row[2] == "random_walk(noise_m=0.1, steps=40)")
+    assert row[3] == "0/0" and row[header.index("APE RMSE [m]")] == "– (3 of 3 not run)"
+    _, cells = pivot(report.tables[0], "ape_rmse_m")
+    assert ["random_walk(noise_m=0.1, steps=40)", "– (3 of 3 not run)"] in cells
+    with open(report.csv_path, newline="") as fh:
+        lines = [r for r in csv.DictReader(fh) if r["method"] == "random_walk(noise_m=0.1, steps=40)"]
+    assert [(r["metric"], r["mean"], r["n"], r["n_ok"], r["n_failed"], r["n_not_run"]) for r in lines] == [
+        (m, "", "0", "0", "0", "3") for m in ("ape_rmse_m", "final_error_m", "runtime_s")]
+
+
 def test_names_the_font_cannot_draw_warn_of_no_missing_glyph(tmp_path):
     """A dataset named "d 名前" printed matplotlib's "Glyph ... missing from font" UserWarning on stderr for each
     character, twice per run (the title shows boxes: that is kept)."""

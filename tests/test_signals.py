@@ -233,3 +233,52 @@ def test_an_interrupt_while_a_run_is_moved_into_its_folder_takes_effect_once_eve
     assert sorted(p.name for p in (out / "velodyne").iterdir()) == [f"{i:06d}.bin" for i in range(5)]
     assert len((out / "poses.txt").read_text().splitlines()) == 5 and (out / "sim.yaml").is_file()
     assert [p.name for p in tmp_path.iterdir()] == ["ex1"]  # no temporary folder left beside it
+
+
+def test_an_interrupt_while_the_report_is_written_says_the_report_is_not_this_runs(tmp_path, monkeypatch, capsys):
+    """Ctrl-C while `lidarkit bench` wrote its end-of-run report said "stopped; no file is left half-written" and kept
+    the earlier run's report.md / report.html / plots without a word. The line says the jobs are done and the report
+    predates them (or was not written, or was: a signal during the move takes effect once the files are in)."""
+    import os
+
+    from lidarkit import atomic, cli
+    from lidarkit.bench import report
+
+    suite = tmp_path / "suite.yaml"
+    suite.write_text(textwrap.dedent(bench_kill.SUITE.format(n_jobs=2, job_s=0.01)))
+    out = tmp_path / "out"
+    bench = ["bench", str(suite), "--out", str(out), "--executor", "serial", "--force"]
+    with pytest.raises(SystemExit) as exc:
+        cli.main(bench)
+    assert exc.value.code == 0
+    earlier = (out / "report.html").read_bytes()
+    capsys.readouterr()
+
+    def signalled(real):
+        def call(*args, **kwargs):
+            os.kill(os.getpid(), signal.SIGINT)  # a real Ctrl-C while the report is drawn, or moved into the folder
+            return real(*args, **kwargs)
+
+        return call
+
+    monkeypatch.setattr(report, "make_plots", signalled(report.make_plots))
+    done = f"interrupted by SIGINT while the report was written: every job of the run is done (results in {out}/jobs); "
+    for folder, then in ((out, f"{out}/report.html is from before this run (`lidarkit report {out}` rebuilds it "
+                               "from the finished jobs)"),
+                         (tmp_path / "new", f"no report was written (`lidarkit report {tmp_path / 'new'}` writes it "
+                                            "from the finished jobs)")):
+        bench[3] = str(folder)
+        with pytest.raises(SystemExit) as exc:
+            cli.main(bench)
+        err = " ".join(capsys.readouterr().err.split())
+        assert exc.value.code == 130 and err.endswith(done.replace(str(out), str(folder)) + then), err
+    assert (out / "report.html").read_bytes() == earlier and not (tmp_path / "new" / "report.html").exists()
+    inode = (out / "report.html").stat().st_ino
+    monkeypatch.undo()
+    monkeypatch.setattr(atomic, "_move_into_place", signalled(atomic._move_into_place))
+    bench[3] = str(out)
+    with pytest.raises(SystemExit) as exc:
+        cli.main(bench)
+    err = " ".join(capsys.readouterr().err.split())
+    assert exc.value.code == 130 and err.endswith(f"{done}the report was written ({out}/report.html)"), err
+    assert (out / "report.html").stat().st_ino != inode  # (its text may equal the earlier one's)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import os
+from collections import Counter
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -61,6 +62,8 @@ def kitti_suite(
     from lidarkit.errors import ConfigError
     from lidarkit.registration import available_icp
 
+    _refuse_repeats(sequences or (), "--sequences")
+    _refuse_repeats(methods or (), "--methods")
     root = Path(root).expanduser().resolve()
     spec = yaml.safe_load(Path(suite_path).read_text(encoding="utf-8"))
     wanted = list(sequences) if sequences else [str(s) for s in spec.pop("sequences")]
@@ -86,6 +89,17 @@ def kitti_suite(
         path = atomic.write_text(Path(out_dir) / "kitti_suite.yaml", text)
         suite = dataclasses.replace(suite, path=path)
     return suite
+
+
+def _refuse_repeats(values: Sequence[str], option: str) -> None:
+    """A name given twice is a ConfigError naming the option (it was the generated suite's "duplicate dataset" in a
+    temporary file already deleted)."""
+    from lidarkit.errors import ConfigError
+
+    counts = Counter(values)
+    repeated = [f"{v} given " + ("twice" if n == 2 else f"{n} times") for v, n in counts.items() if n > 1]
+    if repeated:
+        raise ConfigError(", ".join(repeated), source=option)
 
 
 def paper_table(report) -> str:

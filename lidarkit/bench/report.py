@@ -128,8 +128,11 @@ def aggregate(records: list[dict[str, Any]], missing: list[dict[str, Any]] = ())
     """Group records per task and job (all but the seed); mean ± std (sample std) over seeds. ``missing``: specs of
     the suite's jobs with no result (their rows say how many seeds were not run)."""
     missing_per_row: dict[str, int] = defaultdict(int)
+    unrun: dict[str, dict[str, dict[str, Any]]] = defaultdict(dict)  # task -> row -> a record holding only the job
     for spec in missing:
-        missing_per_row[canonical_json({k: v for k, v in spec.items() if k != "seed"})] += 1
+        ident = canonical_json({k: v for k, v in spec.items() if k != "seed"})
+        missing_per_row[ident] += 1
+        unrun[spec["task"]][ident] = {"job": spec}
     by_task: dict[str, list[dict[str, Any]]] = defaultdict(list)
     for r in records:
         by_task[r["job"]["task"]].append(r)
@@ -150,9 +153,12 @@ def aggregate(records: list[dict[str, Any]], missing: list[dict[str, Any]] = ())
         for r in recs:
             job = r["job"]
             groups[canonical_json({k: v for k, v in job.items() if k != "seed"})].append(r)
-        jobs = {ident: Job.from_spec(items[0]["job"]) for ident, items in groups.items()}
-        label_of = dataset_labels(recs)
-        dataset_of = {ident: label_of[id(items[0])] for ident, items in groups.items()}
+        # a row none of whose seeds has a result yet says so ("– (3 of 3 not run)"): it was in no table nor the CSV
+        no_result = {ident: r for ident, r in unrun[task].items() if ident not in groups}
+        first = {ident: items[0] for ident, items in groups.items()} | no_result
+        jobs = {ident: Job.from_spec(r["job"]) for ident, r in first.items()}
+        label_of = dataset_labels(recs + list(no_result.values()))
+        dataset_of = {ident: label_of[id(r)] for ident, r in first.items()}
         order = {i: (jobs[i].experiment, dataset_of[i], jobs[i].method, _natural(jobs[i].params)) for i in jobs}
         rows = []
         for ident in sorted(jobs, key=lambda i: order[i]):

@@ -96,7 +96,7 @@ def run_with_progress(suite, out: Path, *, executor: str, workers: int | None, a
             interrupt_handled()
             progress.stop()
             what = f"by {stop}" if isinstance(stop, Interrupted) else "by SIGINT"
-            stale = f"; {out}/report.html is from before this run (`lidarkit report {out}` rebuilds it from the finished jobs)"
+            stale = f"; {_stale_report(out)}"
             again = ("run the command again without --force to resume (with it, every job runs again)" if force
                      else "run the same command again to resume")
             from lidarkit.bench.results import JOBS_DIR
@@ -107,6 +107,38 @@ def run_with_progress(suite, out: Path, *, executor: str, workers: int | None, a
                       + f"; {again}"
                       + (stale if (out / "report.html").exists() else ""), soft_wrap=True)
             raise typer.Exit(getattr(stop, "exit_code", 130)) from None
+
+
+def _stale_report(out: Path) -> str:
+    return f"{out}/report.html is from before this run (`lidarkit report {out}` rebuilds it from the finished jobs)"
+
+
+def write_report(out: Path, only_keys: set[str]):
+    """``build_report`` of the run just ended; Ctrl-C / SIGTERM while it writes say the jobs are done but the report
+    is not this run's (the earlier one stayed without a word) and exit 130 / 143."""
+    from lidarkit.bench.report import build_report
+    from lidarkit.lifetime import Interrupted, interrupt_handled
+
+    html = out / "report.html"
+
+    def version() -> tuple[int, int] | None:  # a report moved in is a new file (another inode)
+        return (html.stat().st_ino, html.stat().st_mtime_ns) if html.exists() else None
+
+    before = version()
+    try:
+        return build_report(out, only_keys=only_keys)
+    except (KeyboardInterrupt, Interrupted) as stop:
+        interrupt_handled()
+        what = f"by {stop}" if isinstance(stop, Interrupted) else "by SIGINT"
+        if version() != before:  # the signal came while the report was moved in: that finished first
+            state = f"the report was written ({html})"
+        elif before is not None:
+            state = _stale_report(out)
+        else:
+            state = f"no report was written (`lidarkit report {out}` writes it from the finished jobs)"
+        stderr().print(f"interrupted {what} while the report was written: every job of the run is done "
+                       f"(results in {out}/jobs); {state}", soft_wrap=True)
+        raise typer.Exit(getattr(stop, "exit_code", 130)) from None
 
 
 def print_run_summary(summary) -> None:
@@ -163,7 +195,6 @@ def bench(
 
     `lidarkit bench kitti --data ROOT` runs the bundled KITTI suite (sequences 00-10 x strong variants) and prints
     the KISS-ICP-paper table (drift per sequence with the devkit average row)."""
-    from lidarkit.bench.report import build_report
     from lidarkit.bench.suite import load_suite
 
     from lidarkit.atomic import check_target
@@ -183,8 +214,11 @@ def bench(
         split = (lambda text: [x.strip() for x in text.split(",") if x.strip()] if text else None)
         suite = kitti_suite(data, None if dry_run else out, methods=split(methods), sequences=split(sequences))
     else:
-        if data is not None or methods is not None or sequences is not None:
-            raise ConfigError("--data/--methods/--sequences apply to `lidarkit bench kitti` only", source="--data")
+        given = [name for name, value in (("--data", data), ("--methods", methods), ("--sequences", sequences))
+                 if value is not None]  # (it blamed --data when only --methods was given)
+        if given:
+            raise ConfigError(("applies" if len(given) == 1 else "apply") + " to `lidarkit bench kitti` only",
+                              source=", ".join(given))
         suite = load_suite(suite_file, max_jobs=max_jobs)
     out = out or Path("results") / suite_file.stem
     check_target(out, "folder")
@@ -206,7 +240,7 @@ def bench(
     summary = run_with_progress(suite, out, executor=executor, workers=workers, address=address, force=force)
     print_run_summary(summary)
     if report:
-        built = build_report(out, only_keys={job.key() for job in suite.jobs})
+        built = write_report(out, {job.key() for job in suite.jobs})
         if kitti:
             from lidarkit.bench.kitti import paper_table
 
