@@ -866,10 +866,11 @@ def _suite_jobs(manifest: dict[str, Any]) -> dict[str, dict[str, Any]]:
         return {}
 
 
-def suite_job_keys(out_dir: str | Path) -> set[str]:
-    """The job keys of the folder's ``suite.json`` (the last suite run there); empty without a readable one. What a
+def suite_jobs(out_dir: str | Path) -> dict[str, dict[str, Any]]:
+    """``{key: job spec}`` of the folder's ``suite.json`` (the last suite run there); {} without a readable one. What a
     report, and a comparison of the folder, is restricted to by default."""
-    return set(_suite_jobs(_suite_manifest(Path(out_dir))))
+    return _suite_jobs(_suite_manifest(Path(out_dir)))
+
 
 
 def _skipped(manifest: dict[str, Any]) -> list[tuple[str, str]]:

@@ -93,12 +93,12 @@ def load_bench_runs(path: str | os.PathLike, method: str | None = None, every_re
     ``n_earlier_version`` too); ``every_result``: all of them, the latest of each job. ``records``:
     the folder's records when already read (the same folder given twice warned of each bad result twice)."""
     from lidarkit.bench.jobs import Job, canonical_json
-    from lidarkit.bench.report import _suite_jobs, _suite_manifest, latest_per_job
+    from lidarkit.bench.report import latest_per_job, suite_jobs as read_suite_jobs
     from lidarkit.bench.results import load_results, results_folder
 
     path = results_folder(path)
     every = load_results(path) if records is None else records
-    suite_jobs = {} if every_result else _suite_jobs(_suite_manifest(path))
+    suite_jobs = {} if every_result else read_suite_jobs(path)
     suite = set(suite_jobs)
     if not every_result and not suite and (path / "suite.json").exists():  # (it read as "every result", without a word)
         raise DataError("unreadable, or without a job list: which results are this suite's is unknown (--all: every result)",
