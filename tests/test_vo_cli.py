@@ -213,6 +213,22 @@ def test_tum_poses_for_an_image_folder_give_their_stamps_or_say_they_disagree(tm
     assert not caplog.records  # within half a frame: paired as given
 
 
+def test_poses_of_the_other_format_name_the_poses_format_option(tmp_path, capsys):
+    """KITTI poses given as --poses-format tum (and TUM poses as kitti) advised "--format kitti, Trajectory.from_kitti",
+    options of eval, not of vo: the hint names --poses-format (and the library's poses_format)."""
+    seq = sample_path("kitti_vo", "06")
+    tum = Trajectory.from_kitti(seq / "poses.txt").with_timestamps(np.arange(8) * 0.1).to_tum(tmp_path / "gt.tum")
+    for poses, fmt, line in (
+        (seq / "poses.txt", "tum", f"error: {seq / 'poses.txt'} (line 1): expected 8 numbers, found 12 (a KITTI "
+                                   "trajectory? read it as kitti: --poses-format kitti (poses_format='kitti'))"),
+        (tum, "kitti", f"error: {tum} (line 2): expected 12 numbers, found 8 (a TUM trajectory? read it as tum: "
+                       "--poses-format tum (poses_format='tum'))"),
+    ):
+        code, _, err = _run(["vo", str(seq / "image_0"), "--kind", "images", "--calib", str(seq / "calib.txt"), "--poses", str(poses),
+                             "--poses-format", fmt], capsys)
+        assert code == 1 and err.strip() == line, err
+
+
 def test_vo_on_synthetic_tum_folder_with_calib_file(tmp_path, capsys):
     """A TUM-layout folder (rgb.txt, rgb/*.png, groundtruth.txt) rendered by the synthetic camera."""
     from lidarkit.sim.camera import default_K, forward_trajectory, make_plane_scene, render_sequence
@@ -304,6 +320,25 @@ def test_timestamps_file_is_used_and_checked(tmp_path, capsys):
     stamps.write_text("".join(f"{100.0 + 0.1 * k:.3f}\n" for k in (0, 1, 2, 1, 4, 5, 6, 7)))
     code, _, err = _run(["vo", str(seq), "--timestamps", str(stamps)], capsys)
     assert code == 1 and "stamps.txt (line 4 (frame 3)): time stamps are not strictly increasing" in err and len(err.strip().splitlines()) == 1
+
+
+def test_too_few_time_stamps_for_a_kitti_image_sequence_say_how_many_images_need_them(tmp_path, capsys):
+    """5 stamps for KITTI 06's 51 images read "1101 poses in .../poses/06.txt but 5 time stamps (and the shorter file
+    does not end at the last frame present, 50)": never that the images need 51 (an image folder says "5 time stamps
+    for 12 images"). Without poses it read "5 time stamps but image 000050.png is frame 50"."""
+    from conftest import shared_path
+
+    stamps = tmp_path / "t5.txt"
+    stamps.write_text("".join(f"{0.1 * k:.1f}\n" for k in range(5)))
+    seq = shared_path("kitti_images", "sequences", "06")
+    code, _, err = _run(["vo", str(seq), "--timestamps", str(stamps)], capsys)
+    assert code == 1 and err.strip() == f"error: {stamps}: 5 time stamps for 51 images (frames 0-50: 51 needed, one per frame from 0)"
+    no_poses = tmp_path / "06"
+    shutil.copytree(sample_path("kitti_vo", "06"), no_poses)
+    (no_poses / "poses.txt").unlink()
+    (no_poses / "image_0" / "000003.png").unlink()  # frames 0-2, 4-7: 8 stamps needed for 7 images
+    code, _, err = _run(["vo", str(no_poses), "--timestamps", str(stamps)], capsys)
+    assert code == 1 and err.strip() == f"error: {stamps}: 5 time stamps for 7 images (frames 0-7: 8 needed, one per frame from 0)"
 
 
 def test_a_non_finite_time_stamp_of_an_image_folder_names_its_line(tmp_path, capsys):
@@ -483,6 +518,25 @@ def test_an_unreadable_first_frame_is_not_scored_as_an_estimate(tmp_path, capsys
         assert bad[variant]["ape_rmse_m"] == pytest.approx(clean[variant]["ape_rmse_m"], rel=1e-6), variant
 
 
+@pytest.mark.parametrize("scale", ["gt", "relative"])
+def test_an_unreadable_frame_before_the_first_pair_is_placed_on_its_motion(tmp_path, capsys, scale):
+    """000001.png corrupt: frame 1 had no velocity to predict from and kept frame 0's pose (1.2 m off); scored, it
+    raised the APE of the 8-frame sample ~100-fold (gt 0.0036 -> 0.40 m, relative 0.0050 -> 0.34 m). It is now
+    placed on the motion of the first accepted pair (0 -> 2), in gt mode with the ground-truth step length."""
+    seq = tmp_path / "06"
+    shutil.copytree(sample_path("kitti_vo", "06"), seq)
+    (seq / "image_0" / "000001.png").write_bytes(b"not a png")
+    runs = {}
+    for name, data in (("clean", sample_path("kitti_vo", "06")), ("bad", seq)):
+        code, _, err = _run(["vo", str(data), "--scale", scale, "--out", str(tmp_path / name)], capsys)
+        assert code in (0, None), err
+        runs[name] = json.loads((tmp_path / name / "metrics.json").read_text())
+    assert runs["bad"]["rejected"] == 1 and runs["bad"]["accepted_pairs"] == 6
+    assert runs["bad"]["raw"]["ape_rmse_m"] < 1.5 * runs["clean"]["raw"]["ape_rmse_m"] < 0.01
+    rows = (tmp_path / "bad" / "diagnostics.csv").read_text().splitlines()
+    assert "placed on the first accepted motion" in rows[2]
+
+
 @pytest.mark.parametrize("scale, alignment", [("gt", "se3"), ("relative", "sim3")])
 def test_a_ground_truth_that_cannot_align_leaves_the_run_unscored_not_lost(tmp_path, capsys, scale, alignment):
     """Ground truth on a straight line (Umeyama's rotation undefined): the finished run ended in an error and --out
@@ -654,6 +708,29 @@ def test_a_bad_value_of_an_option_names_the_option(capsys):
         with pytest.raises(SystemExit) as exc:
             main(["vo", data, *args])
         assert exc.value.code == 1 and capsys.readouterr().err.strip() == line
+
+
+def test_kind_preset_and_a_matcher_without_descriptors_are_named_as_given(tmp_path, capsys):
+    """--kind kitti on an image folder read "sequence 00 not found" (00 was never asked for), --matcher knn_ratio
+    --detector gftt "vo config: ..." and --preset ORB "preset: ..." (the library's names, not the options)."""
+    folder = tmp_path / "plain"
+    shutil.copytree(sample_path("kitti_vo", "06", "image_0"), folder)
+    for args, line in (
+        (["--kind", "kitti"], f"error: {folder}: not a KITTI sequence folder (no image_0/) nor a KITTI root (no "
+                              "sequences/NN/image_0/)"),
+        (["--matcher", "knn_ratio", "--detector", "gftt"], "error: --matcher and --detector: matching 'knn_ratio' needs "
+         "descriptors; detector 'gftt' has none (use orb, sift or akaze, or matching 'klt')"),
+        (["--preset", "report_orb", "--detector", "fast"], "error: --detector: matching 'knn_ratio' needs descriptors; "
+         "detector 'fast' has none (use orb, sift or akaze, or matching 'klt')"),
+        (["--preset", "ORB"], "error: --preset: unknown VO preset 'ORB'; known: lidarkit, report_orb, report_sift"),
+    ):
+        code, _, err = _run(["vo", str(folder), *args], capsys)
+        assert code == 1 and err.strip() == line, err
+    # a KITTI root holding one sequence opens that one (it looked for sequence 00 too)
+    root = tmp_path / "root"
+    shutil.copytree(sample_path("kitti_vo", "06"), root / "sequences" / "06")
+    code, stdout, err = _run(["vo", str(root), "--kind", "kitti", "--scale", "gt"], capsys)
+    assert code in (0, None) and "7 of 7" in stdout, err
 
 
 def test_every_plotted_trajectory_ends_in_a_dot_of_its_colour():

@@ -75,3 +75,25 @@ def test_an_unknown_scale_mode_is_refused_not_scored_with_sim3():
             evaluate_vo(est, gt, mode)
         with pytest.raises(ConfigError, match="unknown scale mode"):
             evaluate_vo(est, gt, mode, align="se3")
+
+
+def test_trajectories_of_other_lengths_are_associated_as_the_error_advises():
+    """evaluate_vo(est, gt, "gt") with one pose fewer advised "pass associate=True", which evaluate_vo did not take
+    (a TypeError); it now pairs the poses by time stamp as ape()/rpe() do."""
+    from lidarkit.errors import EvaluationError
+    from lidarkit.trajectory import Trajectory
+
+    poses = np.tile(np.eye(4), (6, 1, 1))
+    poses[:, 0, 3] = np.arange(6.0)
+    poses[:, 1, 3] = np.arange(6.0) ** 2 / 5
+    gt = Trajectory(poses, np.arange(6.0), name="gt")
+    shifted = poses[1:].copy()
+    shifted[:, 2, 3] = 0.5  # 0.5 m off, every pose
+    est = Trajectory(shifted, np.arange(1.0, 6.0), name="vo")
+    with pytest.raises(EvaluationError, match=r"vo vs gt: trajectories differ in length \(6 reference vs 5 estimated "
+                                              r"poses\); both have timestamps: pass associate=True"):
+        evaluate_vo(est, gt, "gt")
+    m = evaluate_vo(est, gt, "gt", align="none", associate=True)
+    assert m["ape_rmse_m"] == pytest.approx(0.5) and m["final_error_m"] == pytest.approx(0.5)
+    assert m["rpe_trans_rmse_m"] == pytest.approx(0.0, abs=1e-12)
+    assert evaluate_vo(est, gt, "relative", associate=True)["ape_rmse_m"] == pytest.approx(0.0, abs=1e-9)

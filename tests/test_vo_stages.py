@@ -91,6 +91,26 @@ def test_bad_config_raises_config_error(bad, match):
         make_config(bad)
 
 
+def test_building_a_config_directly_raises_config_error_naming_the_field():
+    """VOConfig(features={"detector": "surf"}) raised pydantic's ValidationError (a multi-line traceback), where
+    preset() and make_config() give a ConfigError for the same value; a stage built on its own names its section."""
+    from lidarkit.vo import FeatureConfig
+
+    for build, line in (
+        (lambda: VOConfig(features={"detector": "surf"}),
+         "vo config features.detector: Input should be 'gftt', 'fast', 'orb', 'sift' or 'akaze' (got 'surf')"),
+        (lambda: FeatureConfig(max_features=3), "vo config features.max_features: Input should be greater than or equal "
+                                                "to 8 (got 3)"),
+        (lambda: VOConfig(matching={"method": "knn_ratio"}), "vo config: matching 'knn_ratio' needs descriptors; "
+                                                            "detector 'gftt' has none (use orb, sift or akaze, or matching 'klt')"),
+        (lambda: VOConfig(seed=-1), "vo config seed: Input should be greater than or equal to 0 (got -1)"),
+    ):
+        with pytest.raises(ConfigError) as err:
+            build()
+        assert str(err.value) == line
+    assert VOConfig(features={"detector": "orb"}).features.detector == "orb"
+
+
 def test_unknown_names_list_the_known_ones():
     with pytest.raises(ConfigError, match="known: .*lidarkit"):
         preset("best")

@@ -83,6 +83,8 @@ def vo_command(
         raise ConfigError("--gif needs --out DIR", source="--gif")
     if poses_format not in ("kitti", "tum"):
         raise ConfigError(f"unknown format {poses_format!r}; known: kitti, tum", source="--poses-format")
+    if preset not in available_presets():  # (named the library's argument: "preset: unknown VO preset 'ORB'")
+        raise ConfigError(f"unknown VO preset {preset!r}; known: {', '.join(available_presets())}", source="--preset")
     if not (math.isfinite(focal_factor) and focal_factor > 0):
         raise ConfigError(f"must be a finite number > 0, got {focal_factor}", source="--focal-factor")
     changes = {
@@ -109,6 +111,10 @@ def vo_command(
     except ConfigError as err:  # a setting given by its option names the option, not the config field ("vo config scale.mode")
         field = str(err.source or "").removeprefix("vo config").strip()
         option = next((o for f, o in _OPTION_OF.items() if (field == f or field.startswith(f + ".")) and f not in settings), None)
+        if not field:  # the check across fields (descriptor matching needs descriptors): the options that set them
+            given = {"matching.method": matcher, "features.detector": detector}
+            option = " and ".join(f"--set {f}" if f in settings else _OPTION_OF[f] for f, value in given.items()
+                                  if f in settings or value is not None) or None
         if option is None:
             raise
         raise ConfigError(err.reason, source=option) from None

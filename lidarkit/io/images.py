@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 import os
+import re
 from pathlib import Path
 from typing import Any
 
@@ -125,7 +126,12 @@ class ImageFolder:
         if poses is not None:
             if poses_format not in ("kitti", "tum"):
                 raise ConfigError(f"unknown poses format {poses_format!r}; known: kitti, tum", source="poses_format")
-            gt = Trajectory.read(poses, poses_format)
+            try:
+                gt = Trajectory.read(poses, poses_format)
+            except DataError as err:  # the reader's hint names eval's --format: name the option that sets it here
+                reason = re.sub(r"--format (\w+), Trajectory\.from_\w+", r"--poses-format \1 (poses_format='\1')",
+                                err.reason)
+                raise DataError(reason, source=err.source, location=err.location) from None
             if len(gt) != n:
                 raise DataError(f"{len(gt)} poses for {n} images", source=poses)
             if self._timestamps is not None and poses_format == "kitti":

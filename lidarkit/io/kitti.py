@@ -309,6 +309,11 @@ class KittiOdometry:
         with a trimmed poses.txt beside the full times.txt); otherwise they are taken to be from different runs."""
         n_poses = len(self._poses_camera_all) if self.poses_path is not None else None
         n_times = len(self._times_all) if self._times_all is not None else None
+        images = self.image_frames
+        if n_times is not None and not len(self.scan_frames) and len(images) and n_times <= images[-1]:
+            # an image sequence's stamps said as an image folder's are (it compared them with the 1101 poses)
+            raise DataError(f"{n_times} time stamps for {len(images)} images (frames {images[0]}-{images[-1]}: "
+                            f"{images[-1] + 1} needed, one per frame from 0)", source=self.times_path)
         if n_poses is not None and n_times is not None and n_poses != n_times:
             last = max((int(f[-1]) for f in (self.scan_frames, self.image_frames) if len(f)), default=-1)
             if min(n_poses, n_times) != last + 1:

@@ -16,6 +16,15 @@ from lidarkit.errors import ConfigError
 class _Stage(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
+    def __init__(self, **data: Any) -> None:
+        """Invalid values raise ConfigError naming the field, as every lidarkit config's do (``VOConfig(features=
+        {"detector": "surf"})`` raised pydantic's ValidationError, where ``preset()`` gave a ConfigError)."""
+        try:
+            super().__init__(**data)
+        except ValidationError as err:
+            section = next((name for name, f in VOConfig.model_fields.items() if f.annotation is type(self)), "")
+            raise _config_error(err, section) from None
+
 
 class PreprocessConfig(_Stage):
     """Image filter applied before detection: none, CLAHE (contrast), Gaussian or bilateral blur."""
@@ -193,19 +202,22 @@ class VOConfig(_Stage):
 
 
 def make_config(data: dict[str, Any] | None = None) -> VOConfig:
-    """Validate a (nested) dict into a VOConfig; invalid values raise ConfigError naming the field."""
-    try:
-        return VOConfig.model_validate(data or {})
-    except ValidationError as err:
-        first = err.errors()[0]
-        where = " ".join(["vo config", *(".".join(str(p) for p in first["loc"]),)]).strip()
-        message = first["msg"].removeprefix("Value error, ")
-        value = first.get("input")
-        # (--set geometry.estimators=magsac said only "Input should be a valid tuple")
-        hint = f"; give a list: [{value}]" if first["type"] == "tuple_type" and isinstance(value, str) else ""
-        # a field's value is shown; a whole section's (a check across its fields) would repeat every setting
-        raise ConfigError((message if isinstance(value, dict) else f"{message} (got {value!r})") + hint,
-                          source=where) from err
+    """Validate a (nested) dict into a VOConfig; invalid values raise ConfigError naming the field (every stage's
+    construction does, also for the dicts pydantic validates nested)."""
+    return VOConfig.model_validate(data or {})
+
+
+def _config_error(err: ValidationError, section: str = "") -> ConfigError:
+    """The ConfigError of a config's first problem, its source ``vo config SECTION.FIELD``."""
+    first = err.errors()[0]
+    field = ".".join([*([section] if section else []), *(str(p) for p in first["loc"])])
+    where = f"vo config {field}".strip()
+    message = first["msg"].removeprefix("Value error, ")
+    value = first.get("input")
+    # (--set geometry.estimators=magsac said only "Input should be a valid tuple")
+    hint = f"; give a list: [{value}]" if first["type"] == "tuple_type" and isinstance(value, str) else ""
+    # a field's value is shown; a whole section's (a check across its fields) would repeat every setting
+    return ConfigError((message if isinstance(value, dict) else f"{message} (got {value!r})") + hint, source=where)
 
 
 _PRESETS: dict[str, dict[str, Any]] = {

@@ -34,13 +34,20 @@ class VOScores:
     ape: Any
 
 
-def score_vo(est: Trajectory, ref: Trajectory, scale_mode: str, align: str | None = None) -> VOScores:
+def score_vo(est: Trajectory, ref: Trajectory, scale_mode: str, align: str | None = None, *,
+             associate: bool = False, max_diff_s: float = 0.01) -> VOScores:
     """:func:`evaluate_vo` keeping the APE result; ``align`` (``none``/``se3``/``sim3``) overrides
-    :func:`alignment_for` for APE and RPE. ``final_error_m`` keeps its definition (it depends on the scale mode only)."""
+    :func:`alignment_for` for APE and RPE. ``final_error_m`` keeps its definition (it depends on the scale mode only).
+    ``associate``: match the poses by time stamp within ``max_diff_s`` s first (the length error advised it, but
+    neither function took it); the final errors are then those of the last matched pair."""
     from lidarkit.eval import ape, rpe
+    from lidarkit.eval.ape_rpe import check_flags
+    from lidarkit.eval.pairing import paired
 
     by_scale = alignment_for(scale_mode)  # (checks the mode, which final_error_m depends on, whatever align says)
     align = by_scale if align is None else align
+    check_flags(associate=associate)
+    ref, est = paired(ref, est, associate=associate, max_diff_s=max_diff_s)
     a = ape(ref, est, align=align)
     r_t = rpe(ref, est, delta=1, delta_unit="frames", align=align)
     r_r = rpe(ref, est, delta=1, delta_unit="frames", align=align, relation="rotation_angle_deg")
@@ -60,11 +67,12 @@ def score_vo(est: Trajectory, ref: Trajectory, scale_mode: str, align: str | Non
     return VOScores(metrics, a)
 
 
-def evaluate_vo(est: Trajectory, ref: Trajectory, scale_mode: str, align: str | None = None) -> dict[str, Any]:
+def evaluate_vo(est: Trajectory, ref: Trajectory, scale_mode: str, align: str | None = None, *,
+                associate: bool = False, max_diff_s: float = 0.01) -> dict[str, Any]:
     """APE (translation, m), RPE over 1 frame (translation m, rotation deg) and final-frame errors.
 
     ``final_error_m`` is the raw distance of the last positions for ``gt`` scale (both start at the same pose) and
-    the distance after alignment otherwise; both variants are also reported separately. ``align``: see
-    :func:`score_vo`.
+    the distance after alignment otherwise; both variants are also reported separately. ``align``, ``associate``,
+    ``max_diff_s``: see :func:`score_vo`.
     """
-    return score_vo(est, ref, scale_mode, align).metrics
+    return score_vo(est, ref, scale_mode, align, associate=associate, max_diff_s=max_diff_s).metrics

@@ -11,9 +11,8 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from pydantic import ValidationError
 
-from lidarkit.errors import ConfigError, validation_problems
+from lidarkit.errors import ConfigError
 from lidarkit.vo.config import FeatureConfig, PreprocessConfig
 
 _SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 0.01)
@@ -159,8 +158,5 @@ def get_detector(cfg: FeatureConfig | str, **params) -> Detector:
     if isinstance(cfg, str):
         if cfg not in DETECTORS:
             raise ConfigError(f"unknown detector {cfg!r}; known: {', '.join(DETECTORS)}", source="detector")
-        try:
-            cfg = FeatureConfig(detector=cfg, **params)
-        except ValidationError as err:
-            raise ConfigError(validation_problems(err, unnamed="features"), source=f"detector {cfg}") from err
+        cfg = FeatureConfig(detector=cfg, **params)  # (a bad parameter: ConfigError naming the field)
     return Detector(cfg)

@@ -92,9 +92,14 @@ def open_vo_input(path: str | os.PathLike, *, kind: str = "auto", calib: str | o
         if not (root / "image_0").is_dir() and len(held) > 1:  # (sequence 00 of them ran without a word)
             raise ConfigError(f"a KITTI root with {len(held)} sequences ({', '.join(held)}): give one sequence's "
                               f"folder, e.g. {root / 'sequences' / held[0]}", source=str(path))
+        if not (root / "image_0").is_dir() and not held:  # (it read "sequence 00 not found": 00 was never asked for)
+            raise DataError("not a KITTI sequence folder (no image_0/) nor a KITTI root (no sequences/NN/image_0/)",
+                            source=str(path))
         options = {} if timestamps is None else {"times_file": timestamps}
         if poses is not None:
             options["poses_file"] = poses
+        if not (root / "image_0").is_dir():  # a root with one sequence: that one (it looked for 00)
+            options["sequence"] = held[0]
         images = KittiOdometry(root, **options).as_image_sequence()
         ground_truth = images.ground_truth
     elif kind == "tum":

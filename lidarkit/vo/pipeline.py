@@ -5,8 +5,9 @@ input frame, camera frame, start pose = identity or its ground-truth pose), per-
 the reason for every rejected frame, and the smoothed trajectory on demand. A rejected frame never yields a NaN
 pose: a frame without parallax w.r.t. the reference (standstill, pure rotation) stays at the reference position
 (with the estimated rotation when there is one); any other rejected frame gets a constant-velocity (or identity)
-motion. The next frame is matched against the last accepted one. The image size of the sequence is the majority
-size of its first readable frames, so an odd-sized first frame is rejected like any other odd frame.
+motion, and one before the first accepted pair the motion of that pair. The next frame is matched against the last
+accepted one. The image size of the sequence is the majority size of its first readable frames, so an odd-sized
+first frame is rejected like any other odd frame.
 """
 
 from __future__ import annotations
@@ -313,6 +314,12 @@ class MonoVO:
                 moving = j - ref_index - n_still  # frame steps with motion (standstill frames excluded)
                 step_motion = _per_frame_motion(T_ref_cur, moving)
                 last_scale = scale / moving
+                if n_accepted == 0 and n_still == 0:
+                    # frames rejected before the first pair had no velocity to predict from and kept the start
+                    # pose (1.2 m off after one unreadable frame 1 of KITTI 06: APE x65): place them on its motion
+                    for k in range(ref_index + 1, j):
+                        poses[k] = poses[k - 1] @ self._predicted_motion(step_motion, k)
+                        diags[k].note = diags[k].note or "placed on the first accepted motion"
                 diag.accepted = True
                 n_accepted += 1
                 if tracks is not None:
