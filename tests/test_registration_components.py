@@ -184,15 +184,21 @@ PLUGIN_SOURCE = textwrap.dedent(
 )
 
 
-def test_component_plugin_from_an_installed_package_is_discovered(tmp_path, monkeypatch, capsys):
+def _install_plugin(tmp_path, monkeypatch, package: str, entry_points: str, source: str | None = None) -> None:
+    """A package with ``entry_points`` (lines of the lidarkit components group) found on sys.path, as pip installs one."""
     site = tmp_path / "site"
     site.mkdir()
-    (site / "lk_kernel_plugin.py").write_text(PLUGIN_SOURCE)
-    dist = site / "lk_kernel_plugin-0.1.dist-info"
+    if source is not None:
+        (site / f"{package}.py").write_text(source)
+    dist = site / f"{package}-0.1.dist-info"
     dist.mkdir()
-    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: lk-kernel-plugin\nVersion: 0.1\n")
-    (dist / "entry_points.txt").write_text(f"[{ENTRY_POINT_GROUP}]\nkernel.half = lk_kernel_plugin:HalfKernel\n")
+    (dist / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {package.replace('_', '-')}\nVersion: 0.1\n")
+    (dist / "entry_points.txt").write_text(f"[{ENTRY_POINT_GROUP}]\n{entry_points}\n")
     monkeypatch.syspath_prepend(str(site))
+
+
+def test_component_plugin_from_an_installed_package_is_discovered(tmp_path, monkeypatch, capsys):
+    _install_plugin(tmp_path, monkeypatch, "lk_kernel_plugin", "kernel.half = lk_kernel_plugin:HalfKernel", PLUGIN_SOURCE)
     try:
         reload_component_plugins()
         assert "half" in available_components("kernel")
@@ -211,13 +217,7 @@ def test_component_plugin_from_an_installed_package_is_discovered(tmp_path, monk
 def test_broken_component_plugin_is_left_out_and_names_itself(tmp_path, monkeypatch, caplog, capsys):
     """A broken component plugin made --list-components, available_components and a kernel name's typo fail with its
     error: it is left out with a warning now, and named when asked for."""
-    site = tmp_path / "site"
-    site.mkdir()
-    dist = site / "lk_bad_components-0.1.dist-info"
-    dist.mkdir()
-    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: lk-bad-components\nVersion: 0.1\n")
-    (dist / "entry_points.txt").write_text(f"[{ENTRY_POINT_GROUP}]\nsolver.fast = os:getcwd\nkernel.broken = nosuchmodule:K\n")
-    monkeypatch.syspath_prepend(str(site))
+    _install_plugin(tmp_path, monkeypatch, "lk_bad_components", "solver.fast = os:getcwd\nkernel.broken = nosuchmodule:K")
     try:
         with caplog.at_level("WARNING", logger="lidarkit.registration.components.registry"):
             reload_component_plugins()
@@ -240,14 +240,7 @@ def test_a_component_plugin_named_like_a_built_in_is_said_to_be_left_out(tmp_pat
     from lidarkit.registration.components.kernels import HuberKernel
     from lidarkit.registration.components.registry import broken_component_plugins, get_component_class
 
-    site = tmp_path / "site"
-    site.mkdir()
-    (site / "lk_shadow_kernel.py").write_text(PLUGIN_SOURCE)
-    dist = site / "lk_shadow_kernel-0.1.dist-info"
-    dist.mkdir()
-    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: lk-shadow-kernel\nVersion: 0.1\n")
-    (dist / "entry_points.txt").write_text(f"[{ENTRY_POINT_GROUP}]\nkernel.huber = lk_shadow_kernel:HalfKernel\n")
-    monkeypatch.syspath_prepend(str(site))
+    _install_plugin(tmp_path, monkeypatch, "lk_shadow_kernel", "kernel.huber = lk_shadow_kernel:HalfKernel", PLUGIN_SOURCE)
     try:
         with caplog.at_level("WARNING", logger="lidarkit.registration.components.registry"):
             reload_component_plugins()
