@@ -18,7 +18,7 @@ from lidarkit.errors import ConfigError
 from lidarkit.io.landmarks import LandmarkData
 from lidarkit.pf import PFConfig
 from lidarkit.pf.augmented import LikelihoodAverages
-from lidarkit.pf.consistency import fit_q, q_verdict
+from lidarkit.pf.consistency import fit_q, localization_problem, q_verdict
 from lidarkit.pf.kld import bins_and_spread, kld_bound, kld_count, kld_sample_count, occupied_bins
 from lidarkit.pf.protocol import kidnapped_ground_truth, run_protocol
 from lidarkit.pf.study import localized_fraction, steps_to_recover
@@ -533,5 +533,6 @@ def test_a_lost_run_gets_no_q_verdict_and_no_fit(stachniss):
         "reflects localization error, not Q; no Q fit")}
     kld = run_recorded(stachniss, 100, 0, init="uniform", kld=True, warn_lost=False)
     assert len(kld.lost_steps) == 8 and kld.metrics["q_verdict"]["status"] == "lost"
-    assert q_verdict(1.0, np.diag([1.0, 0.1]), lost="the estimate is 6.29 m from dead reckoning on average").text.startswith(
-        "no verdict on Q: the estimate is 6.29 m from dead reckoning on average, so the NIS (NIS mean 1.000")
+    assert localization_problem(3, 331) is None and localization_problem(4, 331) == "the filter lost track on 4 of 331 steps"
+    assert q_verdict(1.0, np.diag([1.0, 0.1]), lost="the filter lost track on 4 of 331 steps").text.startswith(
+        "no verdict on Q: the filter lost track on 4 of 331 steps, so the NIS (NIS mean 1.000")

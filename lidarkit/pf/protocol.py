@@ -503,7 +503,7 @@ def run_recorded(
     result.metrics = consistency_metrics(nis, result.estimate, dr, data, q_cov)
     if len(nis) >= 2:
         q_fit = fit_q(out["innovations"], out["innovation_spread"], q_cov)
-        lost = localization_problem(len(result.lost_steps), result.n_steps, result.metrics["estimate_vs_dead_reckoning_m"]["mean"])
+        lost = localization_problem(len(result.lost_steps), result.n_steps)
         verdict = q_verdict(result.metrics["nis_mean"], q_cov, lost=lost)
         result.metrics["q_fit_ml"] = q_fit.tolist()
         result.metrics["q_verdict"] = {"status": verdict.status, "factor": verdict.factor, "text": verdict.text}
