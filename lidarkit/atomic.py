@@ -225,8 +225,10 @@ def check_target(path: str | os.PathLike | None, kind: str = "file", files: Iter
                 raise OutputError("cannot write: is a folder (a file name is needed here)", source=path / name)
         own = sorted(n for n in set(replaces) if os.path.lexists(path / n)) if path.is_dir() and not _holds_a_run(path) else []
         if own:
-            raise OutputError(f"holds files named like a run's ({', '.join(own)}) but no earlier run (no config.yaml written "
-                              "by lidarkit): a run would replace them; give a new or empty folder", source=path)
+            # (a run a SIGKILL cut off before its config.yaml moved in looks the same: the message covers both)
+            raise OutputError(f"holds files named like a run's ({', '.join(own)}) but no config.yaml written by lidarkit (the "
+                              "user's own, or a run cut off before it was complete): a run would replace them; remove them or "
+                              "give a new or empty folder", source=path)
     except OSError as err:  # pathlib re-raises what a stat of the path itself meets (a name too long: ENAMETOOLONG)
         raise OutputError(f"cannot write: {(err.strerror or str(err)).lower()}", source=path) from None
 

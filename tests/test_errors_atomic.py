@@ -175,8 +175,9 @@ def test_a_folder_of_a_users_own_files_under_run_file_names_is_refused_before_th
     (out / "notes.txt").write_text("mine\n")
     with pytest.raises(OutputError) as refused:
         atomic.check_target(out, "folder", files=("config.yaml",), replaces=("poses_kitti.txt", "metrics.json", "config.yaml"))
-    assert str(refused.value) == (f"{out}: holds files named like a run's (config.yaml, metrics.json) but no earlier run (no "
-                                  "config.yaml written by lidarkit): a run would replace them; give a new or empty folder")
+    assert str(refused.value) == (f"{out}: holds files named like a run's (config.yaml, metrics.json) but no config.yaml "
+                                  "written by lidarkit (the user's own, or a run cut off before it was complete): a run would "
+                                  "replace them; remove them or give a new or empty folder")
     atomic.check_target(out, "folder", files=("config.yaml", "metrics.json"))
     (out / "config.yaml").write_text("lidarkit_version: 0.1\n")
     atomic.check_target(out, "folder", replaces=("metrics.json", "config.yaml"))
@@ -319,8 +320,9 @@ def test_vo_and_pf_refuse_a_folder_of_a_users_own_files_under_run_file_names(tmp
     (proj / "config.yaml").write_text("lr: 0.1\n")
     assert cli_exit_code([*argv, "-o", str(proj)]) == 1
     assert capsys.readouterr().err.strip().splitlines() == [
-        f"error: {proj}: holds files named like a run's (config.yaml) but no earlier run (no config.yaml written by "
-        "lidarkit): a run would replace them; give a new or empty folder"]
+        f"error: {proj}: holds files named like a run's (config.yaml) but no config.yaml written by lidarkit (the "
+        "user's own, or a run cut off before it was complete): a run would replace them; remove them or give a new or "
+        "empty folder"]
     assert (proj / "config.yaml").read_text() == "lr: 0.1\n"
 
 

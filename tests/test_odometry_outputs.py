@@ -634,8 +634,9 @@ def test_a_folder_of_a_users_own_files_under_run_file_names_is_refused(tmp_path,
     kitti = str(shared_path("kitti_odometry", "sequences", "00"))
     code, printed, err = _cli(["odometry", kitti, "-m", "small_gicp", "--frames", "0:3", "-o", str(proj), "--no-progress"], capsys)
     assert code == 1 and printed == ""
-    assert err == (f"error: {proj}: holds files named like a run's (config.yaml, metrics.json) but no earlier run (no "
-                   "config.yaml written by lidarkit): a run would replace them; give a new or empty folder\n")
+    assert err == (f"error: {proj}: holds files named like a run's (config.yaml, metrics.json) but no config.yaml "
+                   "written by lidarkit (the user's own, or a run cut off before it was complete): a run would replace "
+                   "them; remove them or give a new or empty folder\n")
     assert (proj / "config.yaml").read_text() == "lr: 0.1\n" and (proj / "metrics.json").read_text() == "notes\n"
     (proj / "config.yaml").unlink()
     (proj / "metrics.json").unlink()
