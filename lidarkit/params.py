@@ -71,9 +71,6 @@ def parse_kv(items: Iterable[str] | str, option: str = "option") -> dict[str, An
     return out
 
 
-__all__ = ["parse_kv", "parse_value"]
-
-
 def number_field(annotation: Any) -> bool:
     """Whether a config field annotated ``annotation`` holds an int or a float (``float | None`` too; ``bool`` not):
     such a field refuses a yes/no value, which YAML reads from ``true``/``yes``/``on`` and pydantic's lax mode would
@@ -89,3 +86,23 @@ def is_real_number(value: Any) -> bool:
     import numpy as np
 
     return not isinstance(value, bool) and isinstance(value, (int, float, np.integer, np.floating))
+
+
+def is_integer(value: Any) -> bool:
+    """An integer given as one (Python's or numpy's), not a bool, a float nor text: 1.5 read as step 1, True as 1."""
+    import numpy as np
+
+    return not isinstance(value, bool) and isinstance(value, (int, np.integer))
+
+
+def changed_fields(config: Any, names: Any) -> list[str]:
+    """The fields among ``names`` (sorted) of a pydantic ``config`` given with a value other than their default: what a
+    check of settings the configuration does not read may refuse. A value equal to the default changes nothing, and a
+    full dump of a config (the config.json ``lidarkit icp --out`` writes, a simulator's sim.yaml) gives every field, so
+    it must load again."""
+    fields = type(config).model_fields
+    return sorted(n for n in names if n in config.model_fields_set
+                  and getattr(config, n) != fields[n].get_default(call_default_factory=True))
+
+
+__all__ = ["changed_fields", "is_integer", "is_real_number", "number_field", "parse_kv", "parse_value"]

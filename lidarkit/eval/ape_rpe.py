@@ -16,7 +16,7 @@ import numpy as np
 
 from lidarkit.errors import ConfigError, EvaluationError
 from lidarkit.eval.pairing import pair_name, paired
-from lidarkit.params import is_real_number
+from lidarkit.params import is_integer, is_real_number
 from lidarkit.trajectory import Trajectory
 
 logger = logging.getLogger(__name__)
@@ -220,7 +220,7 @@ def _check_align(align: str, align_origin: bool, n_to_align: int | None, n_poses
         return -1
     if align == "none":
         raise ConfigError("n_to_align needs align = se3, sim3 or scale", source="n_to_align")
-    if isinstance(n_to_align, bool) or not isinstance(n_to_align, (int, np.integer)):  # ("5" read "must be in [1, 5], got 5")
+    if not is_integer(n_to_align):  # ("5" read "must be in [1, 5], got 5")
         raise ConfigError(f"n_to_align must be a whole number of poses, got {n_to_align!r}", source="n_to_align")
     n = int(n_to_align)
     if not 1 <= n <= n_poses:

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from lidarkit.errors import ConfigError, EvaluationError
-from lidarkit.params import is_real_number
+from lidarkit.params import is_integer, is_real_number
 
 DEFAULT_CONFIDENCE = 0.95
 DEFAULT_N_BOOT = 2000
@@ -54,7 +54,7 @@ def check_number(value: object, name: str) -> float:
 
 def check_seed(seed: object) -> None:
     """A bootstrap seed: an integer >= 0 (numpy's generator took -1 as a ValueError traceback, 1.5 as a TypeError)."""
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+    if not is_integer(seed) or seed < 0:
         raise ConfigError(f"seed must be an integer >= 0, got {seed!r}", source="seed")
 
 
@@ -73,7 +73,7 @@ def bootstrap_ci(
     """
     if not 0.0 < check_number(confidence, "confidence") < 1.0:
         raise ConfigError(f"confidence must be in (0, 1), got {confidence}", source="confidence")
-    if isinstance(n_boot, bool) or not isinstance(n_boot, (int, np.integer)) or not 1 <= n_boot <= MAX_N_BOOT:
+    if not is_integer(n_boot) or not 1 <= n_boot <= MAX_N_BOOT:
         raise ConfigError(f"n_boot must be an integer in [1, {MAX_N_BOOT}], got {n_boot!r}", source="n_boot")
     if statistic not in ("mean", "median"):
         raise ConfigError(f"statistic must be 'mean' or 'median', got {statistic!r}", source="statistic")

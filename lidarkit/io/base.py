@@ -8,6 +8,7 @@ from typing import Literal, Protocol, runtime_checkable
 import numpy as np
 
 from lidarkit.errors import DataError
+from lidarkit.params import is_integer
 from lidarkit.trajectory import Trajectory
 
 
@@ -34,7 +35,7 @@ def checked_index(index: object, n: int, source: object, what: str = "scan", *, 
     """The position ``index`` names among a reader's ``n`` scans or images (counted from the end when negative, as a
     list does, where ``from_end``); DataError naming ``source`` otherwise: a float (2.7 read item 2 without a word, or
     raised numpy's IndexError), a bool or an index out of range."""
-    if isinstance(index, bool) or not isinstance(index, (int, np.integer)):
+    if not is_integer(index):
         raise DataError(f"{what} index {index!r} is not an integer", source=source)
     if not (-n if from_end else 0) <= index < n:
         raise DataError(f"{what} index {index} out of range for {n} {what}s", source=source)

@@ -27,6 +27,7 @@ from lidarkit.odometry.prefetch import DEFAULT_DEPTH, prefetched
 from lidarkit.odometry.result import FrameStats, OdometryResult
 from lidarkit.odometry.run_folder import refuse_replacing_inputs, write_run
 from lidarkit.odometry.settings import deskew_requested, effective_settings, require_point_times
+from lidarkit.params import is_integer
 from lidarkit.registration.base import BACKEND_ERRORS, PendingAlignment
 from lidarkit.registration.covariance import widen_for_distortion
 from lidarkit.threads import Overlap
@@ -362,7 +363,7 @@ def run(
     the next frame registers (:class:`lidarkit.threads.Overlap`; the same results as ``overlap=False``, which runs it in
     line). A variant whose backend holds the GIL (``overlap_assessment = False``: small_gicp, kiss) is assessed in line.
     """
-    if isinstance(prefetch, bool) or not isinstance(prefetch, (int, np.integer)) or prefetch < 0:
+    if not is_integer(prefetch) or prefetch < 0:
         raise ConfigError(f"prefetch must be a whole number of scans >= 0 (0: read in line), got {prefetch!r}", source="prefetch")
     for flag, value in (("pose_covariance", pose_covariance), ("strict", strict), ("progress", progress), ("overlap", overlap)):
         if value is not None and not isinstance(value, (bool, np.bool_)):  # ("yes", "no": true strings)

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
+from lidarkit.params import is_integer
 from lidarkit.pf.config import PFConfig
 from lidarkit.pf.consistency import fit_q, localization_problem, q_verdict
 from lidarkit.pf.filter import ParticleFilter, make_filter, nis_values
@@ -69,7 +70,7 @@ def kidnapped_ground_truth(odometry: np.ndarray, kidnap_at_step: int | None, kid
     T = len(odometry)
     if kidnap_at_step is None:
         return integrate_odometry(odometry)
-    if isinstance(kidnap_at_step, bool) or not isinstance(kidnap_at_step, (int, np.integer)):  # (1.5 ran as step 1, "150" as 150)
+    if not is_integer(kidnap_at_step):  # (1.5 ran as step 1, "150" as 150)
         raise ConfigError(f"kidnap step must be an integer in 1..{T}, got {kidnap_at_step!r}", source="kidnap_at_step")
     k = int(kidnap_at_step)
     offset = np.asarray(kidnap_offset, dtype=np.float64).reshape(-1)
@@ -242,7 +243,7 @@ def run_filter(
     if len(readings.offsets) != len(odometry) + 1:
         raise DataError(f"{len(readings.offsets) - 1} reading steps for {len(odometry)} odometry steps", source="readings")
     T = len(odometry)
-    odd = [s for s in snapshot_steps if isinstance(s, bool) or not isinstance(s, (int, np.integer)) or not 0 <= s <= T]
+    odd = [s for s in snapshot_steps if not is_integer(s) or not 0 <= s <= T]
     if odd:  # (-1 and steps past the end were left out without a word)
         raise ConfigError(f"snapshot steps must be integers in 0..{T} (the run's steps), got {', '.join(map(str, odd))}",
                           source="snapshot_steps")
@@ -356,7 +357,7 @@ def _sensor_source(data: Any) -> str:
 
 def checked_seed(seed: Any) -> int:
     """``seed`` as the integer >= 0 a reproducible run needs (None would draw fresh entropy: refused)."""
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+    if not is_integer(seed) or seed < 0:
         raise ConfigError(f"seed must be an integer >= 0 (the same seed gives the same run), got {seed!r}", source="seed")
     return int(seed)
 
@@ -395,7 +396,7 @@ def run_protocol(
     overrides = {k: v for k, v in dict(likelihood=likelihood, estimator=estimator, resampler=resampler, q_as=q_as).items() if v is not None}
     cfg = _resolve_config(config, n_particles, {**overrides, **config_overrides})
     seed = checked_seed(seed)
-    if isinstance(mse_start, bool) or not isinstance(mse_start, (int, np.integer)) or mse_start < 0:  # (checked after the run)
+    if not is_integer(mse_start) or mse_start < 0:  # (checked after the run)
         raise ConfigError(f"mse_start must be an integer step >= 0, got {mse_start!r}", source="mse_start")
     if len(data.odometry) < mse_start:  # (the whole filter ran first, then the MSE failed counting poses: "has 10" for 9 steps)
         raise DataError(f"{len(data.odometry)} steps: the protocol scores the position MSE from step {mse_start} on, so it needs "
@@ -526,7 +527,7 @@ def fit_q_recorded(data, n_particles: int | None = None, seed: int = 0, *, confi
     """
     from lidarkit.pf.consistency import NIS_CONSISTENT, at_lower_bound, scale_fit
 
-    if isinstance(max_rounds, bool) or not isinstance(max_rounds, (int, np.integer)) or max_rounds < 1:  # (0 fitted nothing)
+    if not is_integer(max_rounds) or max_rounds < 1:  # (0 fitted nothing)
         raise ConfigError(f"max_rounds must be an integer >= 1 (re-runs with a fitted Q), got {max_rounds!r}", source="max_rounds")
     first = run_recorded(data, n_particles, seed, config=config, warn_lost=False, on_step=on_step, **config_overrides)
     runs: list[PFRunResult] = []

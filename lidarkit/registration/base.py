@@ -23,7 +23,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from lidarkit.errors import ConfigError, DataError, LidarKitError, RegistrationError, validation_problems
 from lidarkit.geometry import as_points, is_rotation, orthonormalize_se3
-from lidarkit.params import number_field
+from lidarkit.params import changed_fields, number_field
 from lidarkit.registration import local_origin
 from lidarkit.registration.covariance import use_model
 
@@ -45,15 +45,6 @@ INIT_ROTATION_TOL = 1e-3
 
 #: Default minimum number of final correspondences for a result to count as converged.
 DEFAULT_MIN_CORRESPONDENCES = 10
-
-
-def changed_fields(config: BaseModel, names: Any) -> list[str]:
-    """The fields among ``names`` (sorted) given with a value other than their default: what a check of settings the
-    configuration does not read may refuse. A value equal to the default changes nothing, and a full dump of a config
-    (the config.json ``lidarkit icp --out`` writes) gives every field, so it must load again."""
-    fields = type(config).model_fields
-    return sorted(n for n in names if n in config.model_fields_set
-                  and getattr(config, n) != fields[n].get_default(call_default_factory=True))
 
 
 class RegistrationConfig(BaseModel):

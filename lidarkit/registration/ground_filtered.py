@@ -36,8 +36,9 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from lidarkit.geometry import make_se3, se3_log, so3_exp
+from lidarkit.params import changed_fields
 from lidarkit.registration import local_origin
-from lidarkit.registration.base import Degeneracy, RegistrationResult, changed_fields, check_point_times
+from lidarkit.registration.base import Degeneracy, RegistrationResult, check_point_times
 from lidarkit.registration.components.motion import exp_scaled_twist_apply
 from lidarkit.registration.ground import (
     DEFAULT_GROUND_SEGMENTER,

@@ -19,9 +19,10 @@ from pydantic import Field, model_validator
 
 from lidarkit.errors import RegistrationError
 from lidarkit.geometry import as_points, is_rotation, orthonormalize_se3
+from lidarkit.params import changed_fields
 from lidarkit.registration.assessment import assess_alignment
 from lidarkit.registration.base import (
-    Registration, RegistrationConfig, RegistrationResult, changed_fields, check_init_T, check_point_times, finite_4x4,
+    Registration, RegistrationConfig, RegistrationResult, check_init_T, check_point_times, finite_4x4,
 )
 from lidarkit.registration.registry import register_icp
 

@@ -14,8 +14,9 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from lidarkit.geometry import transform_points
+from lidarkit.params import changed_fields
 from lidarkit.registration.assessment import assess_alignment
-from lidarkit.registration.base import Registration, RegistrationConfig, RegistrationResult, changed_fields
+from lidarkit.registration.base import Registration, RegistrationConfig, RegistrationResult
 from lidarkit.registration.cloud_cache import CloudCache
 from lidarkit.registration import local_origin
 from lidarkit.registration.planar import refuse_2d

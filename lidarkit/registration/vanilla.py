@@ -13,8 +13,9 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from lidarkit.geometry import kabsch_umeyama, make_se3
+from lidarkit.params import changed_fields
 from lidarkit.registration.assessment import assess_alignment
-from lidarkit.registration.base import Degeneracy, Registration, RegistrationConfig, RegistrationResult, changed_fields
+from lidarkit.registration.base import Degeneracy, Registration, RegistrationConfig, RegistrationResult
 from lidarkit.registration.neighbors import NearestNeighbors, ScipyWorkers, resolved_backend
 from lidarkit.registration.planar import planar_kabsch
 from lidarkit.registration.preprocess import voxel_downsample

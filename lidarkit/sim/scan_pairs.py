@@ -16,6 +16,7 @@ import numpy as np
 
 from lidarkit.errors import ConfigError
 from lidarkit.geometry import make_se3, se3_exp, se3_inverse
+from lidarkit.params import is_integer
 
 PAIR_SCENES = ("street", "open", "corridor")
 
@@ -46,7 +47,7 @@ class ScanPairs:
         from lidarkit.sim.lidar import SimulatedLidarSequence
 
         for name, value in (("n_frames", n_frames), ("seed", seed)):  # (n_frames=2.7 was truncated to 2 without a word)
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+            if not is_integer(value):
                 raise ConfigError(f"{name} must be an integer, got {value!r}", source="scan pairs")
         self.scene, self.seed, self.n_frames = scene, int(seed), int(n_frames)
         self.range_noise_m, self.init_sigma = float(range_noise_m), tuple(float(s) for s in init_sigma)
@@ -125,7 +126,7 @@ class ScanPairs:
         """Pair number ``index``: frames ``(k + 1 -> k)`` with ``k = index % (n_frames - 1)``, fresh noise on both
         scans and a perturbed initial guess, all from ``(seed, index)``. Any integer ``index >= 0``: it seeds the draw
         (-1 raised numpy's bare ValueError, 2.7 was truncated and '1' read as 1)."""
-        if isinstance(index, bool) or not isinstance(index, (int, np.integer)) or index < 0:
+        if not is_integer(index) or index < 0:
             raise ConfigError(f"index must be an integer >= 0, got {index!r}", source="scan pairs")
         k = int(index) % (self.n_frames - 1)
         rng = np.random.default_rng([self.seed, 11, int(index)])

@@ -36,6 +36,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validat
 
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.io.base import checked_index
+from lidarkit.params import changed_fields
 from lidarkit.sim.lidar import (PlanarPath, Terrain, check_argument, check_terrain_slope, checked_config, make_terrain,
                                 number_not_yes_or_no)
 from lidarkit.sim.textures import TextureAtlas, mip_levels, natural_texture
@@ -126,8 +127,7 @@ class CameraSimConfig(BaseModel):
         if longest > MAX_CAMERA_DRIVE_M:  # (100 frames at 0.05 Hz built a 13 km street first, a billion frames 112 GiB)
             raise ValueError(f"the drive may reach {longest / 1000:.4g} km (speed_max_mps x n_frames / frame_rate_hz); at most "
                              f"{MAX_CAMERA_DRIVE_M / 1000:g} km: fewer frames, a higher frame rate or a lower speed")
-        fields = type(self).model_fields
-        placed = [name for name in ("occluder_start", "occluder_frames") if getattr(self, name) != fields[name].default]
+        placed = changed_fields(self, ("occluder_start", "occluder_frames"))
         if not self.occluder and placed:  # (accepted and ignored); defaults pass: sim.yaml writes them back
             raise ValueError("occluder_start / occluder_frames place the occluder, and occluder=false draws none")
         if self.occluder and self.occluder_start is not None and self.occluder_start >= self.n_frames:
