@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import os
 import sys
+from collections.abc import Iterator, Mapping
 
 import typer
 from rich.console import Console
@@ -17,6 +18,21 @@ app = typer.Typer(
     add_completion=False,
     pretty_exceptions_show_locals=False,
 )
+
+
+@contextlib.contextmanager
+def named_by_option(options: Mapping[str, str]) -> Iterator[None]:
+    """A library ConfigError whose source is a setting (``init``, ``delta``) re-raised naming the option that sets it
+    (``--init``, ``--delta``); any other error as it is."""
+    from lidarkit.errors import ConfigError
+
+    try:
+        yield
+    except ConfigError as err:
+        option = options.get(err.source or "")
+        if option is None:
+            raise
+        raise ConfigError(err.reason, source=option, location=err.location) from None
 
 
 def parse_params(items: list[str], option: str = "--param") -> dict:

@@ -9,7 +9,7 @@ from typing import Optional
 
 import typer
 
-from lidarkit.cli.app import app, stdout
+from lidarkit.cli.app import app, named_by_option, stdout
 from lidarkit.errors import ConfigError
 from lidarkit.eval.ape_rpe import ALIGNMENTS, DELTA_UNITS
 from lidarkit.eval.evaluate import EvaluationSettings
@@ -115,7 +115,7 @@ def eval_command(
     atomic.check_target(markdown, "file")
     atomic.check_target(plot, "figure")
     atomic.check_target(tables, "folder")
-    try:
+    with named_by_option(_OPTION_OF_SETTING):  # a setting named as the library calls it ("delta: ..."): by its option
         settings = EvaluationSettings(  # (checked before any work: --delta 200 --delta-unit deg failed after the drift)
             align=align,
             delta=delta,
@@ -129,11 +129,6 @@ def eval_command(
         ref_traj = load(ref, ref_format, ref_times, "--ref-times")
         est_traj = load(est, est_format, est_times, "--est-times")
         evaluation = evaluate(ref_traj, est_traj, settings)
-    except ConfigError as err:  # a setting named as the library calls it ("delta: ..."): named by its option
-        option = _OPTION_OF_SETTING.get(err.source or "")
-        if option is None:
-            raise
-        raise ConfigError(err.reason, source=option) from None
     # the outputs of one evaluation are written aside and moved in together: a failure (a full disk at the plot) or an
     # interrupt leaves every earlier output as it was, never one new beside one old; and before anything is printed (a
     # full disk on stdout lost them)

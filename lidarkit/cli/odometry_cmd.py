@@ -9,8 +9,8 @@ import typer
 from rich.table import Table
 from rich.text import Text
 
-from lidarkit.cli.app import app, parse_params, stdout
-from lidarkit.errors import ConfigError
+from lidarkit.cli.app import app, named_by_option, parse_params, stdout
+
 
 def _kinds() -> str:
     from lidarkit.io import NOT_SCANS, available_datasets
@@ -88,16 +88,11 @@ def odometry(
 
     check_target(out, "folder", files=RUN_FILES, replaces=RUN_FILES)
     frame_check = make_frame_check(**parse_params(check, option="--check"))
-    try:
+    with named_by_option(_OPTION_OF_SETTING):  # a setting named as the library calls it ("init: unknown initial guess")
         result = run(
             data, method, params=parse_params(param), frames=frames, out_dir=out, progress=progress, strict=strict, name=name,
             init=init, pose_covariance=pose_covariance, frame_check=frame_check,
         )
-    except ConfigError as err:  # a setting named as the library calls it ("init: unknown initial guess"): by its option
-        option = _OPTION_OF_SETTING.get(err.source or "")
-        if option is None:
-            raise
-        raise ConfigError(err.reason, source=option, location=err.location) from None
     m = result.metrics
     effective = m.get("effective") or {}
     table = Table(title=result.trajectory.name, show_header=True)

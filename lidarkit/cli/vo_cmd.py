@@ -10,7 +10,7 @@ from typing import Optional
 import numpy as np
 import typer
 
-from lidarkit.cli.app import app, parse_params, stderr, stdout
+from lidarkit.cli.app import app, named_by_option, parse_params, stderr, stdout
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.vo.config import VOConfig, available_presets
 from lidarkit.vo.intrinsics import DEFAULT_FOCAL_FACTOR
@@ -120,13 +120,9 @@ def vo_command(
         raise ConfigError(err.reason, source=option) from None
     for key, why in inert_settings(cfg, settings):
         stderr().print(f"note: --set {key} not used: {why}", soft_wrap=True, markup=False)
-    try:
+    with named_by_option({"vo input kind": "--kind"}):  # (the library's name for it: "vo input kind: unknown input kind")
         vo_input = open_vo_input(data, kind=kind, calib=calib, timestamps=timestamps, poses=poses,
                                  poses_format=poses_format, focal_factor=focal_factor)
-    except ConfigError as err:  # (the library's name for it: "vo input kind: unknown input kind 'bogus'")
-        if err.source != "vo input kind":
-            raise
-        raise ConfigError(err.reason, source="--kind") from None
     _check_out_beside_images(out, vo_input.images)
     numbers = getattr(vo_input.images, "frames", None)  # the input's own frame numbers (KITTI's file names), if any
     if start >= len(vo_input.images):  # (named the sequence only: "kitti_06_image_0: start frame 51 outside 0..50")
