@@ -168,7 +168,7 @@ def _write_outputs(evaluation, ref: Path, est: Path, ref_traj, est_traj, aside: 
         data = evaluation.to_dict()
         # the poses read beside the pairs scored (``n_poses``), and what the CLI warned of on stderr
         data.update(ref_path=str(ref), est_path=str(est), n_ref_poses=len(ref_traj), n_est_poses=len(est_traj),
-                    warnings=_pairing_warnings(evaluation, ref_traj, est_traj))
+                    warnings=list(evaluation.warnings))
         report.write_json(data, aside[Path(json_out)])
     if markdown is not None:
         atomic.write_text(aside[Path(markdown)], report.evaluation_markdown(evaluation))
@@ -200,17 +200,6 @@ def _write_outputs(evaluation, ref: Path, est: Path, ref_traj, est_traj, aside: 
 
             written.append(plot_segment_boxplots(segments, folder / _BOXPLOT_NAME))
     return written
-
-
-def _pairing_warnings(evaluation, ref_traj, est_traj) -> list[str]:
-    """The pairing's warnings (logged by the library), for the JSON: few poses associated, or stamps paired by index
-    that disagree."""
-    from lidarkit.eval.pairing import association_warning, stamps_disagree
-
-    s = evaluation.settings
-    said = (association_warning(ref_traj, est_traj, evaluation.ape.ref, s.max_diff_s) if s.associate
-            else stamps_disagree(ref_traj, est_traj, s.max_diff_s))
-    return [said] if said else []
 
 
 def _relations_report(est_traj, relations_path: Path, max_diff_s: float, json_out: Path | None) -> None:

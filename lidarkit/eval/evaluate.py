@@ -17,7 +17,7 @@ from lidarkit.eval.kitti_drift import (
     drift_segments_possible,
     kitti_drift,
 )
-from lidarkit.eval.pairing import pair_name, paired, stamps_disagree
+from lidarkit.eval.pairing import association_warning, pair_name, paired, stamps_disagree
 from lidarkit.trajectory import Trajectory
 
 logger = logging.getLogger(__name__)
@@ -74,6 +74,8 @@ class Evaluation:
     rpe_rotation: RPEResult
     drift: DriftResult | None
     drift_note: str = ""
+    warnings: tuple[str, ...] = ()
+    """What the pairing warned of (few poses associated, or stamps paired by index that disagree), as logged."""
 
     def __repr__(self) -> str:
         """One line of the headline figures (the generated one printed every field of every result: ~4900 characters)."""
@@ -115,8 +117,10 @@ def evaluate(ref: Trajectory, est: Trajectory, settings: EvaluationSettings | No
     s = settings
     # pair (and, with ``associate``, match timestamps) once; the metrics then get equal-length trajectories
     ref_paired, est_paired = paired(ref, est, associate=s.associate, max_diff_s=s.max_diff_s)
-    if not s.associate and (disagree := stamps_disagree(ref, est, s.max_diff_s)):
-        logger.warning("%s: %s", pair_name(ref, est), disagree)
+    if s.associate:  # (paired() logged it)
+        warned = association_warning(ref, est, ref_paired, s.max_diff_s)
+    elif warned := stamps_disagree(ref, est, s.max_diff_s):
+        logger.warning("%s: %s", pair_name(ref, est), warned)
     rpe_kw = dict(
         delta=s.delta,
         delta_unit=s.delta_unit,
@@ -148,6 +152,7 @@ def evaluate(ref: Trajectory, est: Trajectory, settings: EvaluationSettings | No
         rpe_rotation=_marked(rpe(ref_paired, est_paired, relation="rotation_angle_deg", pairs=translation.pairs, **rpe_kw), s.associate),
         drift=drift,
         drift_note=note,
+        warnings=(warned,) if warned else (),
     )
 
 
