@@ -489,12 +489,12 @@ def test_a_median_ci_with_a_bound_at_0_names_no_winner():
 def test_the_units_needed_and_p_read_against_alpha():
     """At alpha 0.25, 3 seeds were told "the smallest p is 0.25: at least 3 are needed to reach p < 0.25"; a p of 0.0497
     was printed "p = 0.05" beside a winner at alpha 0.05; one seed per dataset of fixed data was told to add seeds."""
-    from lidarkit.eval.statistics import _format_p, min_units
+    from lidarkit.eval.statistics import format_p, min_units
 
     three = paired_test([1.0, 2.0, 3.0], [0.0] * 3, alpha=0.25)
     assert "smallest p this test can give is 0.25: at least 4 are needed to reach p < 0.25" in three.verdict()
     assert [min_units(a) for a in (0.25, 0.125, 0.05, 0.01)] == [4, 5, 6, 8]
-    assert (_format_p(0.0497, 0.05), _format_p(0.04997, 0.05), _format_p(0.0312, 0.05), _format_p(0.5, 0.05)) == (
+    assert (format_p(0.0497, 0.05), format_p(0.04997, 0.05), format_p(0.0312, 0.05), format_p(0.5, 0.05)) == (
         "0.0497", "0.04997", "0.031", "0.5")
     with pytest.raises(EvaluationError) as exc:
         paired_test([1.0], [2.0], pairing="dataset")

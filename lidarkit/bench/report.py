@@ -29,7 +29,7 @@ from lidarkit.bench.jobs import Job, canonical_json
 from lidarkit.bench.results import dataset_labels, load_results, path_argument, result_path, results_folder
 from lidarkit.errors import DataError
 from lidarkit.eval.report import markdown_table
-from lidarkit.eval.statistics import _format_p, summarize
+from lidarkit.eval.statistics import format_p, summarize
 
 log = logging.getLogger(__name__)
 
@@ -738,7 +738,7 @@ def comparison_rows(comparisons: list[Any]) -> tuple[list[str], list[list[str]]]
         if c.pairing == "segment":  # (overlapping KITTI segments of few seeds: see publication.OVERLAPPING_SEGMENTS)
             verdict += " (overlapping segments: p optimistic)"
         rows.append([dataset, c.name_a, c.name_b, f"{c.n_pairs} {c.pairing}s ({c.metric})", _fmt(c.mean_a),
-                     _fmt(c.mean_b), _format_p(c.p_value, c.alpha), f"{c.effect_size:+.2f}",
+                     _fmt(c.mean_b), format_p(c.p_value, c.alpha), f"{c.effect_size:+.2f}",
                      f"{c.median_diff:+.3g} [{c.diff_ci_low:+.3g}, {c.diff_ci_high:+.3g}]", verdict])
     return header, rows
 
@@ -794,14 +794,10 @@ def build_report(
     expected = {k: spec for k, spec in suite_jobs.items() if only_keys is None or k in only_keys}
     missing = {k: spec for k, spec in expected.items() if k not in done}
     unreadable = {k for k in missing if result_path(out_dir, k).exists()}  # (load_results logged why)
-    # a job's key hashes its spec and the code's version: a result left out with the spec of a job held here is that
-    # job run by another lidarkit version (they were called an earlier suite's, and counted once per spec: too few)
-    held = {id(r) for r in records}
-    own_specs = {canonical_json(r["job"]) for r in records} | {canonical_json(spec) for spec in expected.values()}
-    left_out = [r for r in every_record if id(r) not in held]
+    n_left_out, n_earlier_version = left_out_counts(every_record, records, expected.values())
     report = Report(out_dir=out_dir, tables=aggregate(records, list(missing.values())), n_records=len(records),
-                    skipped=_skipped(manifest), n_expected=len(expected), n_left_out=len(left_out),
-                    n_earlier_version=sum(canonical_json(r["job"]) in own_specs for r in left_out),
+                    skipped=_skipped(manifest), n_expected=len(expected), n_left_out=n_left_out,
+                    n_earlier_version=n_earlier_version,
                     not_run=[_label({"job": spec}) + (" (its result file cannot be read: see the log)" if k in unreadable else "")
                              for k, spec in missing.items()], n_unreadable=len(unreadable))
     n_warnings = 0
@@ -866,11 +862,21 @@ def _suite_jobs(manifest: dict[str, Any]) -> dict[str, dict[str, Any]]:
         return {}
 
 
+def left_out_counts(every: list[dict[str, Any]], held: list[dict[str, Any]], specs: Any = ()) -> tuple[int, int]:
+    """``(results of every not held, of those the results of a held job or a suite's ``specs`` from another lidarkit
+    version)``: a job's key hashes its spec and the code's version, so a result left out with the spec of a job held
+    here is that job run by another version (they were called an earlier suite's, and counted once per spec: too few).
+    What the report and a comparison of the folder say they left out."""
+    kept = {id(r) for r in held}
+    own = {canonical_json(r["job"]) for r in held} | {canonical_json(spec) for spec in specs}
+    left_out = [r for r in every if id(r) not in kept]
+    return len(left_out), sum(canonical_json(r["job"]) in own for r in left_out)
+
+
 def suite_jobs(out_dir: str | Path) -> dict[str, dict[str, Any]]:
     """``{key: job spec}`` of the folder's ``suite.json`` (the last suite run there); {} without a readable one. What a
     report, and a comparison of the folder, is restricted to by default."""
     return _suite_jobs(_suite_manifest(Path(out_dir)))
-
 
 
 def _skipped(manifest: dict[str, Any]) -> list[tuple[str, str]]:

@@ -93,7 +93,7 @@ def load_bench_runs(path: str | os.PathLike, method: str | None = None, every_re
     ``n_earlier_version`` too); ``every_result``: all of them, the latest of each job. ``records``:
     the folder's records when already read (the same folder given twice warned of each bad result twice)."""
     from lidarkit.bench.jobs import Job, canonical_json
-    from lidarkit.bench.report import latest_per_job, suite_jobs as read_suite_jobs
+    from lidarkit.bench.report import latest_per_job, left_out_counts, suite_jobs as read_suite_jobs
     from lidarkit.bench.results import load_results, results_folder
 
     path = results_folder(path)
@@ -106,8 +106,7 @@ def load_bench_runs(path: str | os.PathLike, method: str | None = None, every_re
     # as build_report: the suite's jobs, the latest result of each; a result left out with the spec of a job held here
     # is that job run by another lidarkit version (they were called "an earlier suite"'s, and counted after one per spec)
     latest = latest_per_job([r for r in every if not suite or r["key"] in suite])
-    held, own_specs = {id(r) for r in latest}, {canonical_json(r["job"]) for r in latest} | set(map(canonical_json, suite_jobs.values()))
-    left_out = [r for r in every if id(r) not in held]
+    n_left_out, n_earlier_version = left_out_counts(every, latest, suite_jobs.values())
     records = [r for r in latest if r.get("status") == "ok"]
     every_ok = [r for r in every if r.get("status") == "ok"]
     if not records:
@@ -134,8 +133,7 @@ def load_bench_runs(path: str | os.PathLike, method: str | None = None, every_re
                               + (" (it is in results of an earlier suite here: --all compares every result)" if earlier else ""),
                               source=path)
         chosen = named[0]
-    runs = BenchRuns(path, chosen, n_left_out=len(left_out), records=every,
-                     n_earlier_version=sum(canonical_json(r["job"]) in own_specs for r in left_out))
+    runs = BenchRuns(path, chosen, n_left_out=n_left_out, records=every, n_earlier_version=n_earlier_version)
     for r in latest:
         job = Job.from_spec(r["job"])
         if job.method_label != chosen or (suite and r["key"] not in suite):

@@ -174,7 +174,7 @@ class PairedComparison:
     def verdict(self) -> str:
         """One plain sentence for a reader: who is better and how sure, or that no difference shows."""
         m, unit = self.metric, f"over {self.n_pairs} paired {self.pairing}s"
-        p = "p = 1" if self.p_value >= 1 else f"p = {_format_p(self.p_value, self.alpha)}"
+        p = "p = 1" if self.p_value >= 1 else f"p = {format_p(self.p_value, self.alpha)}"
         if self.better:
             win, lose = (self.name_a, self.name_b) if self.better == "a" else (self.name_b, self.name_a)
             text = (f"{win} is better than {lose} on {m}: median difference {self.median_diff:+.3g} "
@@ -215,7 +215,7 @@ class PairedComparison:
         return out
 
 
-def _format_p(p: float, alpha: float) -> str:
+def format_p(p: float, alpha: float) -> str:
     """``p`` with the fewest digits (2 or more) that still compare with ``alpha`` as ``p`` does (0.0497 printed as
     "0.05" beside a winner at alpha 0.05)."""
     for digits in (2, 3, 4, 6):
