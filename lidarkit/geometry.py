@@ -48,14 +48,14 @@ def is_validated(points_xyz: np.ndarray) -> bool:
 
 
 def as_points(
-    points_xyz: np.ndarray, name: str = "points", min_points: int = 0, on_float32_far: Callable[[float, float], None] | None = None,
+    points_xyz: np.ndarray, name: str = "points", min_points: int = 0, on_float32_far: Callable[[float], None] | None = None,
 ) -> np.ndarray:
     """Validate an ``(N, 3)`` real, finite point array within ``MAX_ABS_COORDINATE_M`` and return it as float64.
 
     This is the boundary before every backend (Open3D, kiss-icp, small_gicp, scipy): nothing they would reject
     with an internal error, or accept silently (a complex array losing its imaginary part), gets past it.
     A cloud far from its origin held at float32 precision is logged once per ``name``, or, given ``on_float32_far``,
-    passed to it as ``(reach_m, step_m)`` every time (a caller that reports it itself, e.g. per frame of a run).
+    passed to it as ``reach_m`` every time (a caller that reports it itself, e.g. per frame of a run).
     """
     known = _VALIDATED.get()
     if known is not None and known.get(id(points_xyz)) is points_xyz and len(points_xyz) >= min_points:
@@ -77,7 +77,7 @@ def as_points(
         if reach > FLOAT32_CM_LIMIT_M:
             if on_float32_far is not None:
                 if float32_held(arr):
-                    on_float32_far(reach, float32_step(reach))
+                    on_float32_far(reach)
             else:
                 _say_if_float32_far_out(arr, name, reach)
         return arr

@@ -431,9 +431,9 @@ def _print(result) -> None:
         err = result.position_error_m()
         _row(table, "position error at the last step [m]", f"{err[-1]:.3f}")
     if "kidnap_recovery" in m:  # the study's "recovered", for one run
-        k, within = m["kidnap_recovery"]["steps_to_recover"], m["kidnap_recovery"]["within_steps"]
-        _row(table, f"kidnap recovered (< 0.5 m for good, <= {within} steps)",
-             "no, never" if k is None else f"{'yes' if k <= within else 'no'}, {k} steps")
+        kr = m["kidnap_recovery"]
+        _row(table, f"kidnap recovered (< 0.5 m for good, <= {kr['within_steps']} steps)",
+             "no, never" if kr["steps_to_recover"] is None else f"{'yes' if kr['recovered'] else 'no'}, {kr['steps_to_recover']} steps")
     _row(table, "filter runtime [s]", f"{result.runtime_s:.3f}")
     _row(table, "resamples / steps", f"{int(result.resampled.sum())} / {result.n_steps}")
     if result.n_weight_resets:

@@ -464,7 +464,7 @@ def run(
             flat_times.append(i)
             scan = dataclasses.replace(scan, point_times_s=None)
         try:
-            points = as_points(scan.points_xyz, "scan", on_float32_far=lambda reach, _step: far_float32.append((i, reach)))
+            points = as_points(scan.points_xyz, "scan", on_float32_far=lambda reach: far_float32.append((i, reach)))
         except LidarKitError:
             points = None  # left to the registration, which refuses it naming the frame, as without this check
         if points is None:  # the check's histogram would fail first, on what the registration refuses by name
