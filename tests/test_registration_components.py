@@ -407,3 +407,80 @@ def test_a_component_returning_the_wrong_shape_is_named():
     finally:
         component_registry._COMPONENTS["kernel"].pop("short_test", None)
         component_registry._COMPONENTS["preprocess"].pop("flat_test", None)
+
+
+def test_map_threshold_and_motion_components_returning_the_wrong_shape_are_named():
+    """A map plugin's nearest points, a threshold's distances and a motion model's poses and deskewed sweep were not
+    checked: a 3x3 prediction or a map returning two arrays failed in numpy further on ("the pipeline backend failed
+    ...: ValueError: matmul ...") or, a threshold of sigma 0, ran ICP with NaN weights, naming no component."""
+    from lidarkit.errors import RegistrationError
+    from lidarkit.registration.components import register_component
+    from lidarkit.registration.components.maps import ScanToScanMap
+    from lidarkit.registration.components.motion import ConstantVelocity
+    from lidarkit.registration.components.thresholds import FixedThreshold
+
+    class PairMap(ScanToScanMap):
+        """Returns (index, valid) only."""
+
+        def nearest(self, query_xyz, max_distance_m, state=None):
+            return super().nearest(query_xyz, max_distance_m)[1:]
+
+    class FarMap(ScanToScanMap):
+        """Indices past its points."""
+
+        def nearest(self, query_xyz, max_distance_m, state=None):
+            dist, index, valid = super().nearest(query_xyz, max_distance_m)
+            return dist, index + len(self.points_xyz), valid
+
+    class ZeroThreshold(FixedThreshold):
+        @property
+        def sigma_m(self):
+            return 0.0
+
+    class FlatMotion(ConstantVelocity):
+        """A 3x3 prediction; a deskew dropping the last point."""
+
+        def predict(self, last_pose, last_delta):
+            return np.eye(3)
+
+    class ShortDeskew(ConstantVelocity):
+        def deskew(self, points_xyz, point_times_s, delta):
+            return points_xyz[:-1]
+
+    added = {"map": ["pair_test", "far_test"], "threshold": ["zero_test"], "motion": ["flat_test", "short_test"]}
+    register_component("map", "pair_test")(PairMap)
+    register_component("map", "far_test")(FarMap)
+    register_component("threshold", "zero_test")(ZeroThreshold)
+    register_component("motion", "flat_test")(FlatMotion)
+    register_component("motion", "short_test")(ShortDeskew)
+    try:
+        cloud = np.random.default_rng(0).uniform(-20, 20, size=(3000, 3))
+        moved = cloud + [0.3, 0.0, 0.0]
+
+        def error_of(make, run):
+            with pytest.raises(RegistrationError) as err:
+                run(make())
+            return str(err.value)
+
+        def sequence(icp):
+            icp.register_frame(cloud)
+            icp.register_frame(moved, np.linspace(0.0, 0.1, len(moved)))
+
+        def pairwise(icp):
+            icp.align(moved, cloud)
+
+        assert error_of(lambda: get_icp("pipeline", map="pair_test"), pairwise) == (
+            "pipeline: map 'pair_test' returned nearest points [(2779,), (2779,)] for 2779 queries, not (dist, index, "
+            "valid) of (2779,) each (integer indices)")
+        assert error_of(lambda: get_icp("pipeline", map="far_test"), pairwise).startswith(
+            "pipeline: map 'far_test' returned indices up to ")
+        assert error_of(lambda: get_icp("pipeline", threshold="zero_test"), pairwise) == (
+            "pipeline: threshold 'zero_test' returned sigma_m 0 and max_distance_m 1, not both > 0")
+        assert error_of(lambda: get_icp("pipeline", deskew="flat_test"), sequence) == (
+            "pipeline: motion 'flat_test' returned a predicted pose of shape (3, 3), not a 4x4 pose")
+        assert error_of(lambda: get_icp("pipeline", deskew="short_test"), sequence) == (
+            "pipeline: motion 'short_test' returned a deskewed sweep of shape (2999, 3) for 3000 points, not (3000, 3)")
+    finally:
+        for kind, names in added.items():
+            for name in names:
+                component_registry._COMPONENTS[kind].pop(name, None)

@@ -137,6 +137,56 @@ def _applied(step: Any, points_xyz: np.ndarray) -> np.ndarray:
     return out
 
 
+def _pose(component: Any, T: Any, what: str) -> np.ndarray:
+    """A motion component's pose ``what``, checked to be a finite 4x4 matrix (a plugin's 3x3 failed in numpy further
+    on, naming no component)."""
+    if not isinstance(T, np.ndarray) or T.shape != (4, 4):
+        raise output_error(component, f"a {what} of shape {np.shape(T)}, not a 4x4 pose")
+    if not np.all(np.isfinite(T)):
+        raise output_error(component, f"a {what} with non-finite entries")
+    return T
+
+
+def _deskewed(motion: Any, frame: np.ndarray, point_times_s: np.ndarray | None, delta: np.ndarray) -> np.ndarray:
+    """The deskewed sweep, checked to keep every point (``(N, 3)`` for N points in)."""
+    out = motion.deskew(frame, point_times_s, delta)
+    if not isinstance(out, np.ndarray) or out.shape != frame.shape:
+        raise output_error(motion, f"a deskewed sweep of shape {np.shape(out)} for {len(frame)} points, not {frame.shape}")
+    return out
+
+
+def _distances(threshold: Any) -> tuple[float, float]:
+    """``(sigma_m, max_distance_m)`` of a threshold component, checked to be > 0 (inf: no kernel scale / no gate)."""
+    sigma, gate = threshold.sigma_m, threshold.max_distance_m
+    try:
+        sigma, gate = float(sigma), float(gate)
+    except (TypeError, ValueError):
+        raise output_error(threshold, f"sigma_m {sigma!r} and max_distance_m {gate!r}, not numbers") from None
+    if not sigma > 0 or not gate > 0:
+        raise output_error(threshold, f"sigma_m {sigma:g} and max_distance_m {gate:g}, not both > 0")
+    return sigma, gate
+
+
+def _matches(local_map: Any, moved: np.ndarray, max_distance_m: float, track: dict | None) -> tuple[np.ndarray, np.ndarray]:
+    """``(index, valid)`` of a map component's nearest points, checked: one entry per query, indices into its points."""
+    out = local_map.nearest(moved, max_distance_m) if track is None else local_map.nearest(moved, max_distance_m, state=track)
+    n = len(moved)
+    try:
+        _, index, valid = out
+        index, valid = np.asarray(index), np.asarray(valid, dtype=bool)
+        fits = index.shape == (n,) and valid.shape == (n,) and np.issubdtype(index.dtype, np.integer)
+    except (TypeError, ValueError):
+        fits = False
+    if not fits:
+        shapes = [np.shape(x) for x in out] if isinstance(out, tuple) else type(out).__name__
+        raise output_error(local_map, f"nearest points {shapes} for {n} queries, not (dist, index, valid) of ({n},) each (integer indices)")
+    if valid.any():
+        picked = index[valid]
+        if picked.min() < 0 or picked.max() >= len(local_map.points_xyz):
+            raise output_error(local_map, f"indices up to {int(picked.max())} into a map of {len(local_map.points_xyz)} points")
+    return index, valid
+
+
 @register_icp("pipeline")
 class PipelineRegistration(Registration):
     """Composable ICP: residual, kernel, threshold, deskew, map and preprocessing components (presets kiss_like, vanilla_seq)."""
@@ -194,25 +244,25 @@ class PipelineRegistration(Registration):
         if c["map"].empty:  # the first frame says what the sequence is
             self._refuse_2d(frame, frame)
         raw = frame
-        frame = c["deskew"].deskew(frame, point_times_s, self.last_delta)
+        frame = _deskewed(c["deskew"], frame, point_times_s, self.last_delta)
         map_points, source = self._voxelize(self._preprocess(frame))
-        guess = c["deskew"].predict(self.last_pose, self.last_delta)
+        guess = _pose(c["deskew"], c["deskew"].predict(self.last_pose, self.last_delta), "predicted pose")
         threshold = c["threshold"]
-        sigma = threshold.sigma_m
+        sigma, gate = _distances(threshold)
         if len(source) == 0 and c["map"].empty:  # (every frame returned the prediction: a 0 m path, no warning)
             raise RegistrationError("no point of the sweep is left after preprocessing (max_range_m / min_range_m, the "
                                     "preprocess steps): there is nothing to register", source="pipeline")
         if c["map"].empty or len(source) == 0:
             T, info = guess, {"iterations": 0, "n_correspondences": 0, "rmse_history": ()}
         else:
-            T, info = self._icp(source, map_points, guess, sigma, threshold.max_distance_m)
+            T, info = self._icp(source, map_points, guess, sigma, gate)
         threshold.update(se3_inverse(guess) @ T)
         c["map"].update(map_points, T)
         self.last_delta = se3_inverse(self.last_pose) @ T
         self.last_pose = T
         self.last_frame = {**info, "sigma_m": sigma, "source_points": len(source), "map_points": len(c["map"].points_xyz)}
         # the pose at the reference instant (the deskew component may register at another one; undeskewed: as is)
-        return T.copy() if frame is raw else c["deskew"].reported(T, self.last_delta)
+        return T.copy() if frame is raw else _pose(c["deskew"], c["deskew"].reported(T, self.last_delta), "reported pose")
 
     # ------------------------------------------------------------------ stages
     def _refuse_2d(self, source_xyz: np.ndarray, target_xyz: np.ndarray, components: dict[str, Any] | None = None) -> None:
@@ -260,7 +310,7 @@ class PipelineRegistration(Registration):
         tracks = getattr(local_map.config, "track_neighbors", False) and "state" in inspect.signature(local_map.nearest).parameters
         track = {} if tracks else None
         for _ in range(self.config.max_iterations):
-            _, index, valid = local_map.nearest(moved, max_distance_m) if track is None else local_map.nearest(moved, max_distance_m, state=track)
+            index, valid = _matches(local_map, moved, max_distance_m, track)
             n = int(valid.sum())
             if n < 6:
                 break
@@ -311,7 +361,7 @@ class PipelineRegistration(Registration):
         try:
             c["map"].update(target_map, np.eye(4))
             threshold = c["threshold"]
-            T, info = self._icp(source, dense, init_T, threshold.sigma_m, threshold.max_distance_m)
+            T, info = self._icp(source, dense, init_T, *_distances(threshold))
         finally:
             self._components = saved
         inlier = threshold.max_distance_m if np.isfinite(threshold.max_distance_m) else UNLIMITED_INLIER_DISTANCE_M
