@@ -199,13 +199,30 @@ def save_figure(fig, path: str | os.PathLike, *, dpi: float | None = None) -> Pa
     """Save a matplotlib figure atomically, in the format its suffix names (PNG when there is none)."""
     path = Path(path)
     fmt = figure_format(fig, path)
+    if fmt == "pgf":  # its TeX may start and fail (a broken installation, a missing package)
+        from matplotlib.backends.backend_pgf import LatexError
+    else:
+        LatexError = ()  # noqa: N806 (nothing to catch)
     with atomic_path(path) as tmp:
         try:
             fig.savefig(tmp, format=fmt, dpi=dpi)
         except (ValueError, RuntimeError) as err:  # matplotlib's own refusal of a format or size; a backend's
             # program that fails to start (pgf's TeX, found by the check but not runnable) raises RuntimeError
             raise OutputError(f"cannot write the plot: {' '.join(str(err).split())}", source=path) from err
+        except LatexError as err:
+            raise OutputError(f"cannot write the plot: LaTeX errored: {_tex_complaint(err)}", source=path) from err
     return path
+
+
+def _tex_complaint(err: Exception) -> str:
+    """The line of a LatexError's TeX output that says what went wrong (TeX marks it with "!"), else its last line:
+    the error itself quotes the whole preamble."""
+    import matplotlib
+
+    lines = [line.strip() for line in str(getattr(err, "latex_output", "")).splitlines() if line.strip()]
+    marked = [line for line in lines if line.startswith("!")]
+    said = marked[0] if marked else lines[-1] if lines else "no output"
+    return f"{said} ({matplotlib.rcParams['pgf.texsystem']}, rcParams['pgf.texsystem']); use .pdf or .svg"
 
 
 def check_target(path: str | os.PathLike | None, kind: str = "file", files: Iterable[str] = (),

@@ -355,3 +355,9 @@ def test_a_pgf_plot_without_its_tex_program_is_refused_before_the_work(tmp_path,
     assert str(caught.value) == (f"{tmp_path / 'e.pgf'}: cannot write the plot: 'xelatex' not found; install it or change "
                                  "rcParams['pgf.texsystem'] to an available TeX implementation")
     assert sorted(os.listdir(tmp_path)) == ["bin"]
+    # one that starts and fails (a broken TeX installation, a missing package) raised matplotlib's LatexError: a traceback
+    (bin_dir / "xelatex").write_text("#!/bin/sh\necho '! LaTeX Error: File `fontspec.sty' not found.'\nexit 1\n")
+    with pytest.raises(OutputError) as caught:
+        atomic.save_figure(fig, tmp_path / "e.pgf")
+    assert str(caught.value).startswith(f"{tmp_path / 'e.pgf'}: cannot write the plot: LaTeX errored")
+    assert "\n" not in str(caught.value) and sorted(os.listdir(tmp_path)) == ["bin"]
