@@ -754,3 +754,27 @@ def test_names_the_font_cannot_draw_warn_of_no_missing_glyph(tmp_path):
         report = build_report(tmp_path / "out")
     assert [str(w.message) for w in caught if "Glyph" in str(w.message)] == []
     assert len(report.plots) == 4 and all(p.png.startswith(PNG_MAGIC) for p in report.plots)  # (with the noise sweep)
+
+
+def test_a_task_none_of_whose_jobs_ran_has_its_table_saying_so(odometry_dir, tmp_path):
+    """A task with no result on any job yet (an interrupted run, its jobs last) had no table at all, nor a line in
+    report.csv: only "Jobs of the suite without a result" named its jobs."""
+    import shutil
+
+    from lidarkit.bench.report import _table_rows
+
+    folder = tmp_path / "interrupted"
+    shutil.copytree(odometry_dir, folder)
+    for r in load_results(folder):
+        if r["job"]["task"] == "icp_pair":
+            (folder / "jobs" / f"{r['key']}.json").unlink()
+    report = build_report(folder, plots=False)
+    assert [t.task for t in report.tables] == ["icp_pair", "odometry"]
+    header, rows = _table_rows(report.tables[0])
+    assert len(rows) == 1 and rows[0][header.index("ok/failed")] == "0/0"
+    assert {row[i] for row in rows for i in range(len(header)) if header[i] not in ("experiment", "dataset", "method", "ok/failed")} == {"– (1 of 1 not run)"}
+    with open(report.csv_path, newline="") as fh:
+        lines = [r for r in csv.DictReader(fh) if r["task"] == "icp_pair"]
+    assert lines and {(r["n"], r["n_ok"], r["n_not_run"]) for r in lines} == {("0", "0", "1")}
+    assert "translation_error_m" in {r["metric"] for r in lines}
+    assert "icp_pair" in report.markdown_path.read_text()

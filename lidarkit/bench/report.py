@@ -137,13 +137,14 @@ def aggregate(records: list[dict[str, Any]], missing: list[dict[str, Any]] = ())
     for r in records:
         by_task[r["job"]["task"]].append(r)
     tables = []
-    for task in sorted(by_task):
+    # a task none of whose jobs has a result yet has its table too, of rows saying so (it had none: the task was absent)
+    for task in sorted(set(by_task) | set(unrun)):
         declared, _ = _task_meta(task)
         recs = by_task[task]
         present = set()
         for r in recs:
             present.update(k for k, v in r.get("metrics", {}).items() if isinstance(v, (int, float)) or v is None)
-        metrics = [m for m in declared if m.name in present]
+        metrics = [m for m in declared if m.name in present or not recs]
         metrics += [MetricInfo(name, name) for name in sorted(present - {m.name for m in metrics})]
         metrics = [label_alignment(m, recs) for m in metrics]
         metrics.append(MetricInfo("runtime_s", "runtime [s]", "speed"))
