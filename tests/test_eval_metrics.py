@@ -509,3 +509,21 @@ def test_a_path_delta_longer_than_the_path_says_so():
         assert str(caught.value) == ("KITTI_00_gt vs KITTI_00_gt: delta = 100 m exceeds the path length of the estimate "
                                      "(1.72 m): no two poses are that far apart along it")
     assert rpe(gt, gt, delta=1.5, delta_unit="m").n_errors == 1  # (within the path: scored)
+
+
+def test_an_angle_delta_beyond_the_rotation_along_the_path_says_so():
+    """An angle delta larger than the rotation accumulated along the path failed with evo's "delta = 170.0 (deg)
+    produced an empty index list - try lower values or a less strict tolerance", as path deltas did."""
+    from scipy.spatial.transform import Rotation
+
+    gt = kitti("gt")[:200]
+    R = gt.poses_se3[:, :3, :3]
+    turned = np.degrees(np.linalg.norm(Rotation.from_matrix(np.einsum("nji,njk->nik", R[:-1], R[1:])).as_rotvec(), axis=1).sum())
+    assert turned == pytest.approx(146.03, abs=0.01)  # (the first corner)
+    with pytest.raises(EvaluationError) as caught:
+        rpe(gt, gt, delta=170, delta_unit="deg")
+    assert str(caught.value) == ("KITTI_00_gt vs KITTI_00_gt: delta = 170 degrees exceeds the rotation accumulated along the "
+                                 f"estimate ({turned:.4g} degrees): no two poses are that far apart in orientation along it")
+    with pytest.raises(EvaluationError, match=r"delta = 3 radians exceeds the rotation accumulated along the estimate \(2\.549 radians\)"):
+        rpe(gt, gt, delta=3, delta_unit="rad")
+    assert rpe(gt, gt, delta=140, delta_unit="deg").n_errors == 1  # (within the rotation: scored)

@@ -319,6 +319,19 @@ def checked_delta(delta: float, delta_unit: str) -> tuple[float, str]:
     return delta, unit
 
 
+def _accumulated_angle(poses_se3: np.ndarray, degrees: bool) -> float:
+    """The rotation angle summed over consecutive poses: what an angle delta of consecutive pairs is measured along."""
+    poses = np.asarray(poses_se3, dtype=np.float64)
+    if len(poses) < 2:
+        return 0.0
+    from scipy.spatial.transform import Rotation
+
+    # (as evo measures it: scipy's nearest rotation; the trace's arccos read 146.1 deg for 146.0 on 6-digit KITTI poses)
+    relative = np.einsum("nji,njk->nik", poses[:-1, :3, :3], poses[1:, :3, :3])  # R_i^T R_{i+1}
+    total = float(Rotation.from_matrix(relative).magnitude().sum())
+    return float(np.degrees(total)) if degrees else total
+
+
 def _checked_pairs(pairs, n_poses: int, source: str) -> np.ndarray:
     """``(m, 2)`` int pose pairs ``(i, j)``, ``0 <= i < j < n_poses``; ConfigError otherwise (an IndexError or, with
     consecutive pairs, silently other pairs than the ones named; no pairs scored evo's own, 1.5 was read as 1)."""
@@ -504,10 +517,17 @@ def rpe(
                     found = metrics.id_pairs_from_delta(paired_on.poses_se3, evo_delta, unit, rel_delta_tol, all_pairs=all_pairs)
             except EvoException:
                 # (evo's "produced an empty index list - try ... a less strict tolerance" hid the reason)
+                side = "reference" if pairs_from_reference else "estimate"
                 if unit is Unit.meters and delta > paired_on.path_length:
-                    side = "reference" if pairs_from_reference else "estimate" + (" as aligned" if transform and transform.rescaled else "")
+                    side += " as aligned" if transform and transform.rescaled else ""
                     raise EvaluationError(f"delta = {delta:g} m exceeds the path length of the {side} ({paired_on.path_length:.4g} m): "
                                           "no two poses are that far apart along it", source=source) from None
+                if unit in (Unit.degrees, Unit.radians) and not all_pairs:
+                    turned = _accumulated_angle(paired_on.poses_se3, unit is Unit.degrees)
+                    if delta > turned:
+                        raise EvaluationError(f"delta = {delta:g} {delta_unit} exceeds the rotation accumulated along the {side} "
+                                              f"({turned:.4g} {delta_unit}): no two poses are that far apart in orientation along it",
+                                              source=source) from None
                 raise
             pairs = np.array(found, dtype=np.int64).reshape(-1, 2)
         # given pairs are compared as given (an earlier call's selection: its first legacy pair already dropped; the
