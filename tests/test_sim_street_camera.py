@@ -191,6 +191,35 @@ def test_bad_input_is_a_clear_error():
         make_camera_config(corners=False, first_corner_m=50.0)
 
 
+def test_a_curvature_that_bends_a_stretch_back_on_itself_is_refused():
+    """curve_curvature_per_m was accepted up to 0.05 per m: over a stretch of up to 360 m that turned the street by up to
+    211 deg within a stretch (measured below), back through its own buildings. At most 45 deg now; the default turns
+    it by 8 deg at most."""
+    from lidarkit.sim.street_camera import CameraSimConfig, make_street_path
+
+    def widest_turn_deg(curvature: float) -> float:  # of 20 seeds' streets, within their stretches
+        cfg = CameraSimConfig.model_construct(**{**make_camera_config().model_dump(), "curve_curvature_per_m": curvature})
+        worst = 0.0
+        for seed in range(20):
+            street = make_street_path(np.random.default_rng([seed, 0]), -40.0, 1500.0, cfg)
+            path = street.path
+            for a, b in street.stretches:
+                inside = (path.s_m >= a + 3.0) & (path.s_m < b - 3.0)  # (the corners' 3 m ramps left out)
+                worst = max(worst, float(np.degrees(np.ptp(path.heading_rad[inside]))))
+        return worst
+
+    assert widest_turn_deg(0.05) > 180.0
+    assert widest_turn_deg(0.0068) < 45.0 and widest_turn_deg(1 / 500) < 9.0
+    with pytest.raises(ConfigError) as caught:
+        make_camera_config(curve_curvature_per_m=0.05)
+    assert str(caught.value) == (
+        "camera simulator: config: curve_curvature_per_m 0.05 turns the street by up to 328.3 deg within a stretch of 360 m "
+        "(curvature x length / pi); at most 45 deg: at most 0.00685 with these corner_spacing_m / first_corner_m")
+    assert make_camera_config(curve_curvature_per_m=0.0068).curve_curvature_per_m == 0.0068
+    with pytest.raises(ConfigError, match="within a stretch of 1040 m"):
+        make_camera_config(curve_curvature_per_m=0.004, first_corner_m=1000.0)
+
+
 def test_simcam_spec_errors_name_both_spellings_and_the_short_keys():
     """A key given twice named only its second spelling ("n_frames is given twice (as n_frames)"), and a typo listed the
     config's fields but not the short keys frames/noise/blur/gain: now as ``sim:`` specs say them."""

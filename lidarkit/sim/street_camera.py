@@ -61,6 +61,9 @@ _R_BODY_CAM = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 
 #: the longest drive a camera sequence may reach (m): its street is built before the first image
 MAX_CAMERA_DRIVE_M = 50_000.0
+#: the most a stretch's gentle curve may turn the heading away from the street's direction (deg): more bent a
+#: stretch back on itself (curvature 0.05 per m over 360 m: up to 330 deg), the street through its own buildings
+MAX_CURVE_TURN_DEG = 45.0
 
 
 class CameraSimConfig(BaseModel):
@@ -134,6 +137,15 @@ class CameraSimConfig(BaseModel):
             raise ValueError(f"occluder_start {self.occluder_start} is beyond the {self.n_frames} frames: no frame is occluded")
         if not self.corners and self.first_corner_m is not None:
             raise ValueError("first_corner_m places the first corner, and corners=false draws none")
+        # a stretch of length L curves by curve_curvature_per_m x sin over one or two periods: the heading turns by up to
+        # curvature x L / pi (one period); the first stretch starts 40 m behind the origin and reaches 40 m further
+        longest = max(self.corner_spacing_m[1] + 80.0, (self.first_corner_m or 0.0) + 40.0)
+        turn_deg = math.degrees(self.curve_curvature_per_m * longest / math.pi)
+        if turn_deg > MAX_CURVE_TURN_DEG:
+            most = math.radians(MAX_CURVE_TURN_DEG) * math.pi / longest
+            raise ValueError(f"curve_curvature_per_m {self.curve_curvature_per_m:g} turns the street by up to {turn_deg:.1f} deg "
+                             f"within a stretch of {longest:g} m (curvature x length / pi); at most {MAX_CURVE_TURN_DEG:g} deg: "
+                             f"at most {most:.3g} with these corner_spacing_m / first_corner_m")
         return self
 
     @property
