@@ -104,7 +104,10 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     ensure_dir(path.parent)
     with output_errors(named):
         extra = 2 + _RANDOM_CHARS + len(os.fsencode(path.suffix))  # ".<stem>.XXXXXXXX<suffix>"
-        fd, tmp = tempfile.mkstemp(prefix=f".{temporary_stem(path.stem, extra)}.", suffix=path.suffix, dir=path.parent)
+        # without a suffix, ".<stem>-XXXXXXXX": a dot before the random part read as one (a plot path "fig" was refused
+        # after the work as of format ".nrp562oi")
+        stem, dot = (path.stem, ".") if path.suffix else (path.stem.lstrip("."), "-")
+        fd, tmp = tempfile.mkstemp(prefix=f".{temporary_stem(stem, extra)}{dot}", suffix=path.suffix, dir=path.parent)
         os.close(fd)
     tmp_path = Path(tmp)
     try:

@@ -165,6 +165,14 @@ def test_relations_settings_without_relations_and_a_tum_file_read_as_kitti_say_s
     assert capsys.readouterr().err.strip() == "error: --relation-max-diff: must be a finite number of seconds >= 0, got -1"
     assert cli_exit_code(["eval", tum, tum]) == 1
     assert "expected 12 numbers, found 8 (a TUM trajectory? read it as tum" in capsys.readouterr().err
+    # of a KITTI / TUM pair, the option that reads the one file as its format (--format tum then failed on the other,
+    # whose hint said --format kitti: round in a loop)
+    assert cli_exit_code(["eval", gt, tum]) == 1
+    assert capsys.readouterr().err.strip() == (f"error: {tum} (line 1): expected 12 numbers, found 8 (a TUM trajectory? "
+                                                "read it as tum: --est-format tum, Trajectory.from_tum)")
+    assert cli_exit_code(["eval", tum, gt, "--format", "tum"]) == 1
+    assert capsys.readouterr().err.strip() == (f"error: {gt} (line 1): expected 8 numbers, found 12 (a KITTI trajectory? "
+                                                "read it as kitti: --est-format kitti, Trajectory.from_kitti)")
 
 
 def test_associating_kitti_files_without_times_points_to_them(capsys):
@@ -313,6 +321,22 @@ def test_library_settings_that_cannot_apply_are_refused():
     assert rpe(ref, est, 5, all_pairs=False).n_errors == 39
 
 
+def test_evaluation_settings_check_max_diff_and_a_delta_given_as_a_switch():
+    """EvaluationSettings left max_diff_s unchecked: without associate, "x" and None were numpy/Python TypeErrors in
+    the stamp check, -1 warned "stamps differ by up to 0 s (more than -1 s)" and NaN never warned; delta=True was a
+    delta of 1."""
+    from lidarkit.errors import ConfigError
+    from lidarkit.eval import EvaluationSettings
+
+    for value in ("x", None, -1.0, 0.0, float("nan"), float("inf"), True):
+        with pytest.raises(ConfigError) as caught:
+            EvaluationSettings(max_diff_s=value)
+        assert str(caught.value) == f"max_diff_s: max_diff_s must be a finite number of seconds > 0, got {value!r}"
+    assert EvaluationSettings(max_diff_s=np.float64(0.02)).max_diff_s == 0.02
+    with pytest.raises(ConfigError, match=r"^delta: delta must be a number, got True$"):
+        EvaluationSettings(delta=True)
+
+
 def test_outputs_of_one_evaluation_are_replaced_together_or_not_at_all(tmp_path):
     """A full disk at the figure (a file-size limit here) left the new JSON, Markdown and tables beside the earlier
     evaluation's figure, exit 1 after "wrote r.json": every output is written aside and moved in together."""
@@ -336,6 +360,22 @@ def test_outputs_of_one_evaluation_are_replaced_together_or_not_at_all(tmp_path)
     assert failed.returncode == 1 and f"error: {tmp_path / 'r.png'}: cannot write: file too large" in " ".join(failed.stderr.split())
     after = {p.relative_to(tmp_path): p.read_bytes() for p in sorted(tmp_path.rglob("*")) if p.is_file()}
     assert after == before  # the ORB evaluation whole: no SPTAM JSON, tables or Markdown beside its figure, no leftovers
+
+
+def test_a_plot_path_without_a_suffix_is_written_as_png(tmp_path, capsys):
+    """`--plot fig` (the docs: no suffix is PNG) failed after the work with "unknown plot format '.nrp562oi'" (the
+    temporary name's random part read as a suffix), and the JSON and Markdown written with it were lost."""
+    from lidarkit import atomic
+
+    gt, orb = shared_path("evo_testdata", "KITTI_00_gt.txt"), shared_path("evo_testdata", "KITTI_00_ORB.txt")
+    code, _, err = run_cli(["eval", str(gt), str(orb), "--plot", str(tmp_path / "fig"), "--markdown", str(tmp_path / "r.md"),
+                            "--no-drift"], capsys)
+    assert code == 0, err
+    assert (tmp_path / "fig").read_bytes().startswith(b"\x89PNG\r\n\x1a\n") and (tmp_path / "r.md").is_file()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fig", "r.md"]  # (no temporary left)
+    for name in ("notes", ".hidden"):  # the temporary name has no suffix either
+        with atomic.atomic_path(tmp_path / name) as tmp:
+            assert tmp.suffix == "" and tmp.name.startswith(f".{name.lstrip('.')}-")
 
 
 def test_an_output_onto_the_trajectory_scored_by_relations_names_it_est(tmp_path, capsys):

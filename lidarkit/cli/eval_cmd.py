@@ -10,7 +10,7 @@ from typing import Optional
 import typer
 
 from lidarkit.cli.app import app, named_by_option, stdout
-from lidarkit.errors import ConfigError
+from lidarkit.errors import ConfigError, DataError
 from lidarkit.eval.ape_rpe import ALIGNMENTS, DELTA_UNITS
 from lidarkit.eval.evaluate import EvaluationSettings
 from lidarkit.eval.relations import DEFAULT_MAX_TIME_DIFF_S
@@ -79,6 +79,11 @@ def eval_command(
                 raise
             raise ConfigError(err.reason, source="--ref-format" if path == ref and ref_format else
                               "--est-format" if path == est and est_format else "--format") from None
+        except DataError as err:  # "read it as tum: --format tum" read the other file of a KITTI/TUM pair as TUM
+            if relations is not None or ": --format " not in err.reason:
+                raise
+            side = "--ref-format" if path == ref else "--est-format"
+            raise DataError(err.reason.replace(": --format ", f": {side} "), source=err.source, location=err.location) from None
 
     given = {"EST": ref} if relations is not None else {"REF": ref, "EST": est}  # (with --relations the one given is EST)
     _distinct_outputs({**given, "--ref-times": ref_times, "--est-times": est_times, "--relations": relations},

@@ -305,6 +305,8 @@ def checked_delta(delta: float, delta_unit: str) -> tuple[float, str]:
     if delta_unit not in DELTA_UNITS:
         raise ConfigError(f"unknown delta unit {delta_unit!r}; known: {', '.join(DELTA_UNITS)}", source="delta_unit")
     unit = DELTA_UNITS[delta_unit]
+    if isinstance(delta, bool):  # (True read as a delta of 1)
+        raise ConfigError(f"delta must be a number, got {delta!r}", source="delta")
     try:
         delta = float(delta)
     except (TypeError, ValueError):

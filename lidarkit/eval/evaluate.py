@@ -17,7 +17,7 @@ from lidarkit.eval.kitti_drift import (
     drift_segments_possible,
     kitti_drift,
 )
-from lidarkit.eval.pairing import association_warning, pair_name, paired, stamps_disagree
+from lidarkit.eval.pairing import association_warning, check_max_diff, pair_name, paired, stamps_disagree
 from lidarkit.trajectory import Trajectory
 
 logger = logging.getLogger(__name__)
@@ -51,6 +51,7 @@ class EvaluationSettings:
         checked_step(self.drift_step_frames, "drift_step_frames")
         check_flags(all_pairs=self.all_pairs, pairs_from_reference=self.pairs_from_reference, legacy_pairs=self.legacy_pairs,
                     associate=self.associate, drift=self.drift)
+        check_max_diff(self.max_diff_s)  # (also bounds the stamp check without associate: None was a TypeError there)
         checked_lengths(self.drift_lengths_m, "drift_lengths_m", "drift segment lengths")
 
     def to_dict(self) -> dict[str, Any]:

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import logging
 import math
+from typing import Any
 
 from lidarkit.errors import ConfigError, EvaluationError
+from lidarkit.params import is_real_number
 from lidarkit.trajectory import Trajectory
 
 logger = logging.getLogger(__name__)
@@ -46,8 +48,7 @@ def paired(
         missing = "reference" if ref.timestamps_s is None else "estimate"
         raise EvaluationError(f"cannot associate by time: the {missing} has no timestamps (a KITTI pose file has none: "
                               "give its times.txt, --ref-times / --est-times, or a TUM file)", source=source)
-    if not (isinstance(max_diff_s, (int, float)) and math.isfinite(max_diff_s) and max_diff_s > 0):  # a setting, not the pair's fault
-        raise ConfigError(f"max_diff_s must be a finite number of seconds > 0, got {max_diff_s!r}", source="max_diff_s")
+    check_max_diff(max_diff_s)
     from evo import EvoException
     from evo.core import sync
 
@@ -65,6 +66,12 @@ def paired(
     if few := association_warning(ref, est, ref_out, max_diff_s):
         logger.warning("%s: %s", source, few)
     return ref_out, est_out
+
+
+def check_max_diff(max_diff_s: Any) -> None:
+    """A setting, not the pair's fault: ConfigError naming ``max_diff_s`` unless a finite number of seconds > 0."""
+    if not (is_real_number(max_diff_s) and math.isfinite(max_diff_s) and max_diff_s > 0):
+        raise ConfigError(f"max_diff_s must be a finite number of seconds > 0, got {max_diff_s!r}", source="max_diff_s")
 
 
 def association_warning(ref: Trajectory, est: Trajectory, ref_paired: Trajectory, max_diff_s: float) -> str:
