@@ -130,6 +130,19 @@ def test_mcap_with_unknown_schema(tmp_path):
         open_dataset("mcap", path, topic="/blob")
 
 
+def test_a_ros1_bag_read_as_mcap_says_what_it_is(tmp_path):
+    """mcap:run.bag (a ROS 1 bag) said "not a readable MCAP file (InvalidMagic: ... invalid magic: (35, 82, 79, 83, 66,
+    65, 71, 32); truncated or damaged?)": those bytes are "#ROSBAG ", and the reader that opens it is named."""
+    bag = write_ros1_bag(tmp_path / "run.bag", [good(k) for k in range(2)])
+    with pytest.raises(DataError) as err:
+        open_dataset("mcap", bag)
+    assert str(err.value) == f"{bag}: a ROS 1 bag, not an MCAP file: read it with rosbag:{bag}"
+    assert len(open_dataset("rosbag", bag)) == 2
+    (tmp_path / "cut.mcap").write_bytes(b"#ROSBA")  # no whole ROS 1 magic: damaged, as before
+    with pytest.raises(DataError, match=r"cut\.mcap: not a readable MCAP file \(.*; truncated or damaged\?\)"):
+        open_dataset("mcap", tmp_path / "cut.mcap")
+
+
 def test_time_field_with_nan(tmp_path):
     times = np.linspace(0, 0.1, 64)
     times[17] = np.nan

@@ -68,6 +68,27 @@ def test_detect_kind(exports, tmp_path):
     assert detect_kind(tmp_path / "x.bz2") is None
 
 
+def test_a_kitti_folder_holding_a_bag_is_refused_naming_both_readings(exports, tmp_path, capsys):
+    """A KITTI folder (velodyne/ or sequences/) that also held a .bag was read as the bag, without a word: odometry ran
+    on the bag's sweeps and scored them on its ground truth. It is both: the user names the reading."""
+    import shutil
+
+    from lidarkit.odometry import open_sequence
+
+    both = shutil.copytree(exports["kitti"], tmp_path / "seq")
+    shutil.copy(exports[("rosbag1", "sqlite3")], both / "recording.bag")
+    with pytest.raises(ConfigError) as err:
+        detect_kind(both)
+    assert str(err.value) == f"{both}: both a KITTI dataset (velodyne/) and a ROS bag (recording.bag): give kitti:{both} or rosbag:{both}"
+    (tmp_path / "root" / "sequences").mkdir(parents=True)
+    (tmp_path / "root" / "metadata.yaml").write_text("")
+    with pytest.raises(ConfigError, match=r"both a KITTI dataset \(sequences/\) and a ROS bag \(metadata\.yaml\)"):
+        detect_kind(tmp_path / "root")
+    assert cli_exit_code(["odometry", str(both), "--method", "kiss", "--no-progress", "--out", str(tmp_path / "o")]) == 1
+    assert f"error: {both}: both a KITTI dataset" in capsys.readouterr().err
+    assert len(open_sequence(f"kitti:{both}")) == len(open_sequence(f"rosbag:{both}")) == N_FRAMES
+
+
 def test_the_files_detected_by_name_are_listed_from_the_detection_table(tmp_path):
     """"dataset not found (a folder, a .bag/.mcap/.pcap file, ...)" left CARMEN logs out: the list written apart from
     detect_kind's rules drifted; detected_files() is made from the same table."""
@@ -115,6 +136,23 @@ def test_ground_truth_of_checks_the_scan_numbers(exports):
             bag.ground_truth_of(scans)
         assert str(err.value) == f"{source}: {reason}"
     np.testing.assert_array_equal(bag.ground_truth_of(np.array([1, 2])).poses_se3, bag.ground_truth.poses_se3[1:3])
+
+
+def test_the_run_config_records_the_time_field_read(exports, tmp_path):
+    """config.yaml recorded time_field: auto, not the field read: the simulator's bags carry both time (float32 s) and
+    t (uint32 ns). time_field_used names it once scans were read; none when times are ignored."""
+    import yaml
+
+    bag = exports[("rosbag1", "sqlite3")]
+    ds = open_dataset("rosbag", bag)
+    assert "time_field_used" not in ds.reader_options  # nothing read: not known yet
+    ds.read_scan(0)
+    assert ds.reader_options["time_field"] == "auto" and ds.reader_options["time_field_used"] == "time"
+    for spec, used in ((str(bag), "time"), (f"rosbag:{bag}?time_field=t", "t"), (f"rosbag:{bag}?time_field=none", "none")):
+        out = tmp_path / used
+        assert cli_exit_code(["odometry", spec, "-m", "kiss", "--frames", "0:3", "--out", str(out), "--no-progress"]) == 0
+        options = yaml.safe_load((out / "config.yaml").read_text())["run"]["dataset_options"]
+        assert options["time_field_used"] == used, spec
 
 
 def test_an_intensity_named_as_time_field_is_refused(exports):

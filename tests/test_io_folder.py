@@ -129,6 +129,42 @@ def test_malformed_poses_line(tmp_path, rng):
         ScanFolder(folder, poses=poses)
 
 
+def test_a_poses_file_of_the_other_format_names_the_poses_format_option(tmp_path, rng):
+    """A KITTI poses file read as TUM (and the reverse) said "read it as kitti: --format kitti, Trajectory.from_kitti":
+    options odometry does not have. Inside a dataset spec the option is poses_format=."""
+    folder, _ = _npy_folder(tmp_path, rng)
+    traj = Trajectory(np.tile(np.eye(4), (3, 1, 1)), np.array([10.0, 10.1, 10.2]))
+    traj.to_kitti(tmp_path / "poses.txt")
+    traj.to_tum(tmp_path / "poses.tum")
+    with pytest.raises(DataError) as err:
+        ScanFolder(folder, poses=tmp_path / "poses.txt", poses_format="tum")
+    assert str(err.value) == (f"{tmp_path / 'poses.txt'} (line 1): expected 8 numbers, found 12 (a KITTI trajectory? read it "
+                              "as kitti: poses_format=kitti)")
+    with pytest.raises(DataError) as err:
+        ScanFolder(folder, poses=tmp_path / "poses.tum")
+    assert str(err.value).endswith("(a TUM trajectory? read it as tum: poses_format=tum)")
+
+
+def test_relative_poses_and_timestamps_are_looked_up_in_the_scan_folder(tmp_path, rng, monkeypatch):
+    """poses=poses.txt with the file beside the scans was "poses.txt: file not found": only the working directory was
+    looked in. As the kitti reader does, the working directory comes first, then the scan folder; neither is named."""
+    folder, _ = _npy_folder(tmp_path, rng)
+    rows = np.tile(np.eye(4)[:3].reshape(1, 12), (3, 1))
+    rows[:, 3] = [0.0, 1.0, 2.0]
+    np.savetxt(folder / "poses.txt", rows)
+    (folder / "times.txt").write_text("0\n0.1\n0.2\n")
+    monkeypatch.chdir(tmp_path)
+    ds = open_dataset("folder", "scans", poses="poses.txt", timestamps="times.txt")
+    assert ds.poses_path == folder.relative_to(tmp_path) / "poses.txt"
+    np.testing.assert_array_equal(ds.ground_truth.poses_se3[:, 0, 3], [0.0, 1.0, 2.0])
+    np.testing.assert_array_equal(ds.timestamps_s, [0.0, 0.1, 0.2])
+    np.savetxt(tmp_path / "poses.txt", rows * 0 + np.eye(4)[:3].reshape(1, 12))  # the working directory's comes first
+    assert ScanFolder("scans", poses="poses.txt").ground_truth.poses_se3[:, 0, 3].tolist() == [0.0, 0.0, 0.0]
+    with pytest.raises(DataError) as err:
+        ScanFolder("scans", poses="nope.txt")
+    assert str(err.value) == "nope.txt: file not found, neither from the working directory nor in the scan folder scans"
+
+
 def test_nonfinite_pcd_points(tmp_path, caplog):
     folder = tmp_path / "pcd"
     folder.mkdir()

@@ -72,7 +72,8 @@ def detect_kind(path: str | os.PathLike) -> str | None:
 
     ``.bag`` (or a folder of ``.bag`` files) and a ROS 2 bag folder (``metadata.yaml``): ``rosbag``;
     ``.mcap``: ``mcap``; ``.pcap``: ``ouster``; a CARMEN log (``.clf``, also ``.clf.bz2`` / ``.gz`` / ``.xz``):
-    ``carmen``; a folder with ``velodyne/`` or ``sequences/``: ``kitti``.
+    ``carmen``; a folder with ``velodyne/`` or ``sequences/``: ``kitti``. A folder that is both a bag and KITTI
+    raises ConfigError naming both readings (it was read as the bag, without a word).
     """
     from pathlib import Path
 
@@ -82,11 +83,12 @@ def detect_kind(path: str | os.PathLike) -> str | None:
         if ".clf" in [s.lower() for s in p.suffixes[-2:]]:
             return "carmen"
         return DETECTED_SUFFIXES.get(suffix)
-    if (p / "metadata.yaml").is_file() or any(p.glob("*.bag")):
-        return "rosbag"
-    if (p / "velodyne").is_dir() or (p / "sequences").is_dir():
-        return "kitti"
-    return None
+    bags = sorted(b.name for b in p.glob("*.bag"))
+    bag = "metadata.yaml" if (p / "metadata.yaml").is_file() else bags[0] if bags else None
+    kitti = next((name for name in ("velodyne", "sequences") if (p / name).is_dir()), None)
+    if bag and kitti:
+        raise ConfigError(f"both a KITTI dataset ({kitti}/) and a ROS bag ({bag}): give kitti:{p} or rosbag:{p}", source=p)
+    return "rosbag" if bag else "kitti" if kitti else None
 
 
 def ros2_storage_problem(path: str | os.PathLike) -> str | None:

@@ -87,13 +87,25 @@ class ScanFolder:
                 raise DataError(f"two files for scan {path.stem!r} ({stems[path.stem].name}, {path.name}): keep one, or pick "
                                 "one format with suffixes=", source=folder)
             stems[path.stem] = path
-        self.poses_path = None if poses is None else Path(poses)
+        self.poses_path = None if poses is None else self._option_path(poses)
         self.poses_format = poses_format
         self.suffixes = sorted(wanted)
+        if isinstance(timestamps, (str, os.PathLike)):
+            timestamps = self._option_path(timestamps)
         self._timestamps_given = (None if timestamps is None else str(Path(timestamps).absolute())
                                   if isinstance(timestamps, (str, os.PathLike)) else f"{len(np.ravel(timestamps))} values given")
         self._timestamps_s = self._load_timestamps(timestamps)
         self._ground_truth = self._load_poses()
+
+    def _option_path(self, given: str | os.PathLike) -> Path:
+        """A path option as given or, when it is relative and not found from the working directory, in the scan folder
+        (``poses=poses.txt`` beside the scans), as the kitti reader looks; found in neither: both places named."""
+        path = Path(given)
+        if path.is_absolute() or path.exists():
+            return path
+        if (self.path / path).exists():
+            return self.path / path
+        raise DataError(f"file not found, neither from the working directory nor in the scan folder {self.path}", source=path)
 
     def _load_timestamps(self, timestamps) -> np.ndarray | None:
         if timestamps is None:
@@ -116,10 +128,11 @@ class ScanFolder:
     def _load_poses(self) -> Trajectory | None:
         if self.poses_path is None:
             return None
-        if self.poses_format == "kitti":
-            gt = Trajectory.from_kitti(self.poses_path)
-        else:
-            gt = Trajectory.from_tum(self.poses_path)
+        try:
+            gt = Trajectory.read(self.poses_path, self.poses_format)
+        except DataError as err:  # the reader's hint names eval's --format: name the option that sets it here
+            reason = re.sub(r": --format (\w+), Trajectory\.from_\w+", r": poses_format=\1", err.reason)
+            raise DataError(reason, source=err.source, location=err.location) from None
         if len(gt) != len(self.scan_paths):
             raise DataError(f"{len(gt)} poses for {len(self.scan_paths)} scans in {self.path}", source=self.poses_path)
         if self._timestamps_s is not None:

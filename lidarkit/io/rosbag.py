@@ -84,6 +84,7 @@ class _BagScans:
         if not self.path.exists():
             raise DataError("bag not found", source=self.path)
         self.time_field = time_field
+        self._time_fields_read: set[str] = set()  # the fields time_field resolved to in the messages decoded
         self._next = 0
         self._stream: Iterator[tuple[int, Any]] | None = None
         self._stamps: dict[int, float] = {}
@@ -141,8 +142,13 @@ class _BagScans:
 
     @property
     def reader_options(self) -> dict[str, Any]:
-        return {"kind": self.kind, "path": str(self.path.absolute()), "topic": self.topic, "ground_truth_topic": self.ground_truth_topic,
-                "time_field": self.time_field}
+        """The options as given and, once scans were read, ``time_field_used``: the field ``time_field`` resolved to
+        (``auto`` alone did not say which of ``time`` and ``t`` a simulator bag's times came from; ``none``: no times)."""
+        options = {"kind": self.kind, "path": str(self.path.absolute()), "topic": self.topic,
+                   "ground_truth_topic": self.ground_truth_topic, "time_field": self.time_field}
+        if self._time_fields_read:
+            options["time_field_used"] = ", ".join(sorted(self._time_fields_read))
+        return options
 
     def _location(self, index: int) -> str:
         return f"message {index} on {self.topic}"
@@ -189,6 +195,7 @@ class _BagScans:
             self._last_stamp = (k, stamp)
             self._stamps[k] = stamp
         decoded = decode_pointcloud2(msg, source=str(self.path), location=self._location(index), time_field=self.time_field)
+        self._time_fields_read.add(decoded.time_field or "none")
         stamp = self._stamps[index]
         instant = None
         if decoded.point_times_s is not None and len(decoded.point_times_s):
@@ -484,10 +491,15 @@ class McapScans(_BagScans):
     def _summary(self):
         from mcap.reader import make_reader
 
+        head = b""
         try:
             with open(self.path, "rb") as fh:
+                head = fh.read(8)
+                fh.seek(0)
                 summary = make_reader(fh).get_summary()
         except Exception as err:  # noqa: BLE001 - mcap raises its own error types for damaged files
+            if head == b"#ROSBAG ":  # (a ROS 1 bag was "invalid magic: (35, 82, 79, ...); truncated or damaged?")
+                raise DataError(f"a ROS 1 bag, not an MCAP file: read it with rosbag:{self.path}", source=self.path) from None
             raise DataError(f"not a readable MCAP file ({type(err).__name__}: {err}; truncated or damaged?)", source=self.path) from None
         if summary is None:
             raise DataError("MCAP file has no summary section (truncated, or written without one)", source=self.path)
