@@ -497,3 +497,13 @@ def test_zero_repeats_names_the_option_and_noise_from_names_no_flag(two_walks, t
     with pytest.raises(ConfigError, match=r"no band for metric 'drift_translation_pct' in this baseline \(it has: "
                                           r"ape_rmse_m, final_error_m\): it did not check that metric$"):
         measured_noise(two_walks.path, "drift_translation_pct")
+
+
+def test_report_on_a_baseline_folder_names_it_as_compare_does(two_walks, capsys):
+    """`lidarkit report BASELINE_DIR` said "no readable job results in jobs/" (its jobs/ read as a bench folder's);
+    `compare` named the case: report now does too."""
+    code, out, err = run_cli(["report", str(two_walks.path)], capsys)
+    assert (code, out) == (1, "")
+    assert " ".join(err.split()) == (f"error: {two_walks.path}: a baseline folder (lidarkit baseline record): report takes "
+                                     "bench results folders (`lidarkit baseline check` re-runs a baseline's jobs against it)")
+    assert not (two_walks.path / "report.md").exists()

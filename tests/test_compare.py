@@ -254,3 +254,20 @@ def test_options_a_loaded_run_ignores_and_bad_option_types_are_named_before_load
         with pytest.raises(ConfigError) as exc:
             compare(missing, missing, **kwargs)
         assert str(exc.value) == shown
+
+
+def test_a_run_folder_against_a_bench_folder_of_several_methods_names_the_real_reason(tmp_path, capsys):
+    """`compare RUN_FOLDER BENCH_FOLDER` (two methods in it) said "2 methods in this folder; choose one of: good, bad";
+    choosing one then gave the real reason: the two folders are of different kinds."""
+    from lidarkit.odometry import run
+    from lidarkit.odometry.run_folder import write_run
+    from lidarkit.sim.lidar import SimulatedLidarSequence
+
+    _task("kinds_test_task", _error)
+    bench = _bench(tmp_path, "s", "seeds: 2\nexperiments:\n  - {task: kinds_test_task, dataset: {kind: synthetic}, methods: [good, bad]}\n")
+    folder = write_run(run(SimulatedLidarSequence(scene="street", n_frames=3, n_beams=16, n_azimuths=360), "kiss"), tmp_path / "run")
+    reason = "error: compare: compare an odometry run folder with another run folder, a bench folder with a bench folder\n"
+    for argv in ([str(folder), str(bench)], [str(bench), str(folder)], [str(bench), str(folder), "--method-a", "good"]):
+        assert run_cli(["compare", *argv], capsys) == (1, "", reason)
+    with pytest.raises(ConfigError, match=r"2 methods in this folder; choose one of: bad, good$"):  # (bench with bench: still asked)
+        compare(bench, bench)

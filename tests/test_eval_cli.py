@@ -426,3 +426,22 @@ def test_option_messages_name_the_option_given_and_the_finite_bound(tmp_path, ca
     code, _, err = run_cli(["eval", tum, tum, "-f", "tum", "--est-times", times], capsys)
     assert code == 1 and err == ("error: --est-times: times files apply to KITTI-format trajectories only (this one is "
                                  "read as tum)\n")
+
+
+def test_frame_numbers_against_seconds_are_not_told_to_associate(tmp_path, caplog):
+    """KITTI_00_ORB written as TUM with stamps 0, 1, 2 (frame numbers) against the ground truth's seconds: the warning
+    advised --associate, which then paired 96 poses of 4541 and misaligned them."""
+    from conftest import cli_exit_code
+
+    orb = Trajectory.from_kitti(shared_path("evo_testdata", "KITTI_00_ORB.txt"))
+    frames = Trajectory(orb.poses_se3, np.arange(len(orb), dtype=np.float64))
+    frames.to_tum(tmp_path / "orb_frames_tum.txt")
+    gt, times = (str(shared_path("evo_testdata", f)) for f in ("KITTI_00_gt.txt", "KITTI_00_gt_times.txt"))
+    with caplog.at_level("WARNING"):
+        assert cli_exit_code(["eval", gt, str(tmp_path / "orb_frames_tum.txt"), "--ref-times", times, "--est-format", "tum",
+                              "--no-drift"]) == 0
+    assert [r.getMessage() for r in caplog.records if r.levelname == "WARNING"] == [
+        "orb_frames_tum vs KITTI_00_gt: poses paired by index, but their stamps differ by up to 4069.42 s (pose 4540: "
+        "reference 470.581600 s, estimate 4540.000000 s; more than 0.01 s), and the estimate's stamps step by 1 s against "
+        "the reference's 0.1036 s (median): the two clocks or units differ (frame numbers against seconds?); pairing by "
+        "index, as here, is right when pose i of each is the same frame; --associate would pair the wrong poses"]

@@ -130,3 +130,15 @@ def test_bundled_sample_opens_without_shared_data():
     data = open_dataset("landmarks", sample_path("freiburg_pf"))
     assert len(data) == 331 and data.n_readings == 1212 and not data.negative_range_mask.any()
     assert data.odometry[0].tolist() == [0.100068080139, 0.100249642432, -0.000326992241362]
+
+
+def test_the_parent_folder_of_several_datasets_lists_them(tmp_path):
+    """`lidarkit pf DATA/pf` (the parent of the three Freiburg copies) said "DATA/pf/world.dat: file not found"."""
+    parent = shared_path("pf")
+    with pytest.raises(DataError) as exc:
+        LandmarkData(parent)
+    assert str(exc.value) == (f"{parent}: no world.dat + sensor_data.dat in this folder; its subfolders burgard_ekf, "
+                              "burgard_particle_filter, robot_mapping_stachniss hold them: give one of those")
+    (tmp_path / "empty").mkdir()  # no subfolder holds one: the missing file is named, as before
+    with pytest.raises(DataError, match=r"world.dat: file not found"):
+        LandmarkData(tmp_path)

@@ -386,3 +386,45 @@ def test_a_changed_simulator_default_is_a_changed_protocol_not_a_regression(tmp_
     noisier = run(lidar_module.SimulatedLidarSequence(**drive), "kiss")
     with pytest.raises(EvaluationError, match=r"dataset differs from the pinned job 'kiss': range_noise_std_m 0.05 \(pinned 0.0\)"):
         assert_no_worse_than(noisier, baseline, method="kiss", metric="ape_rmse_m", tolerance=1.0)
+
+
+def test_round_off_is_a_tie_at_tolerance_zero(tiny_baseline):
+    """0.1 + 0.2 against 0.3 failed at tolerance 0 with "ape_rmse_m = 0.3, baseline 0.3 (worse by 5.551e-17, tolerance
+    0)" (kiss rerun against its own pinned job: "worse by 2.082e-16"); ``baseline check`` counts round-off as a tie."""
+    assert_no_worse_than({"ape_rmse_m": 0.1 + 0.2}, {"ape_rmse_m": 0.3}, metric="ape_rmse_m")
+    ape = tiny_baseline.metrics("random_walk")["ape_rmse_m"]
+    assert_no_worse_than({"ape_rmse_m": ape * (1 + 1e-15)}, tiny_baseline, metric="ape_rmse_m", tolerance=0)
+    with pytest.raises(AssertionError, match=r"^regression: ape_rmse_m = 0.3003, baseline 0.3 \(worse by 0.0003, tolerance 0\)$"):
+        assert_no_worse_than({"ape_rmse_m": 0.3003}, {"ape_rmse_m": 0.3}, metric="ape_rmse_m")
+    with pytest.raises(AssertionError, match=r"^regression: hz = 9.99999, baseline 10"):  # (higher is better)
+        assert_no_worse_than({"hz": 9.99999}, {"hz": 10.0}, metric="hz")
+
+
+def test_a_seed_given_as_text_is_refused(tiny_baseline):
+    """``seed="1"`` matched no job and read "0 pinned jobs match method='random_walk', seed='1'; pinned: ... (seed 1)"."""
+    assert tiny_baseline.job("random_walk", seed=0)["spec"]["seed"] == 0
+    assert tiny_baseline.job("random_walk", seed=np.int64(0))["spec"]["seed"] == 0
+    for bad in ("0", 0.0, True):
+        with pytest.raises(ConfigError, match=rf"^seed: seed must be an integer, got {re.escape(repr(bad))}$"):
+            tiny_baseline.job("random_walk", seed=bad)
+    with pytest.raises(ConfigError, match="^seed: seed must be an integer, got '0'$"):
+        assert_no_worse_than({"ape_rmse_m": 0.1}, tiny_baseline, metric="ape_rmse_m", method="random_walk", seed="0")
+
+
+def test_a_missing_baseline_folder_in_pytest_ini_is_one_line_per_test(tmp_path):
+    """``lidarkit_baseline = nothere`` in pytest.ini printed a 51-line traceback through the plugin for each test
+    using the fixture; now one line names the folder, the reason and where it was set."""
+    (tmp_path / "pytest.ini").write_text("[pytest]\nlidarkit_baseline = nothere\n")
+    (tmp_path / "test_user.py").write_text("def test_a(lidarkit_baseline):\n    pass\n")
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])}
+    from importlib.metadata import entry_points
+
+    installed = any(ep.value == "lidarkit.testing.plugin" for ep in entry_points(group="pytest11"))
+    load = [] if installed else ["-p", "lidarkit.testing.plugin"]
+    proc = subprocess.run([sys.executable, "-m", "pytest", "-q", *load, "-p", "no:cacheprovider", "-W", "ignore", "test_user.py"],
+                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
+    assert "1 error" in proc.stdout, proc.stdout + proc.stderr
+    errors = proc.stdout.split("ERROR at setup of test_a")[1].split("short test summary")[0]
+    assert errors.strip().splitlines()[1:-1] == [
+        f"{tmp_path / 'nothere'}: baseline folder does not exist (set by lidarkit_baseline in {tmp_path / 'pytest.ini'})"]
+    assert "Traceback" not in proc.stdout and "baseline.py" not in proc.stdout

@@ -38,6 +38,7 @@ from lidarkit.bench.jobs import Job, canonical_json
 from lidarkit.bench.tasks import higher_is_better
 from lidarkit.errors import ConfigError, DataError, LidarKitError, OutputError, RegistrationError
 from lidarkit.eval.statistics import tie_tolerance
+from lidarkit.params import is_integer
 
 log = logging.getLogger(__name__)
 
@@ -293,6 +294,8 @@ class Baseline:
             experiment: str | None = None, task: str | None = None) -> dict[str, Any]:
         """The one pinned job with this method label (or name), dataset name, seed, experiment and task; DataError if
         none or several (two experiments of one method on one dataset, e.g. over other frames: ``experiment=``)."""
+        if seed is not None and not is_integer(seed):  # ("1" matched no job: "0 pinned jobs match ...; pinned: (seed 1)")
+            raise ConfigError(f"seed must be an integer, got {seed!r}", source="seed")
         found = [j for j in self.jobs if (method is None or method in (j["label"], j["spec"]["method"]))
                  and (dataset is None or j["spec"]["dataset_name"] == dataset) and (seed is None or j["spec"].get("seed") == seed)
                  and (experiment is None or j["spec"].get("experiment") == experiment)
@@ -404,6 +407,12 @@ def _is_baseline_manifest(path: Path) -> bool:
     except (OSError, UnicodeDecodeError, ValueError):
         return False
     return isinstance(manifest, dict) and manifest.get("schema") == SCHEMA
+
+
+def is_baseline_folder(path: str | os.PathLike) -> bool:
+    """A folder ``record`` wrote (manifest.json, no suite.json): compare and report name it (its jobs/ read as a bench
+    folder's, "no readable job results")."""
+    return (Path(path) / MANIFEST).is_file() and not (Path(path) / "suite.json").exists()
 
 
 def load_baseline(path: str | os.PathLike) -> Baseline:

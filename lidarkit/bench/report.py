@@ -776,7 +776,13 @@ def build_report(
     folder's ``suite.json`` (the last suite run there: results an earlier suite left in the folder are counted as
     left out, and the suite's jobs without a result as not run); ``every_result``: every result in the folder.
     """
-    out_dir = results_folder(path_argument(out_dir, "out_dir"))
+    from lidarkit.bench.baseline import is_baseline_folder
+
+    out_dir = path_argument(out_dir, "out_dir")
+    if is_baseline_folder(out_dir):  # (read "no readable job results in jobs/")
+        raise DataError("a baseline folder (lidarkit baseline record): report takes bench results folders (`lidarkit "
+                        "baseline check` re-runs a baseline's jobs against it)", source=out_dir)
+    out_dir = results_folder(out_dir)
     records = load_results(out_dir)
     manifest = _suite_manifest(out_dir)
     suite_jobs = {} if every_result else _suite_jobs(manifest)

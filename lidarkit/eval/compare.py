@@ -243,6 +243,10 @@ def compare(
         if isinstance(side, (OdometryRun, BenchRuns)) and (method is not None or every_result):
             raise ConfigError(f"applies to paths only: a loaded {type(side).__name__} is compared as loaded (load_bench_runs "
                               "picks a method, and every result)", source=name if method is not None else "every_result")
+    kinds = (_kind(a), _kind(b))  # (checked first: "2 methods in this folder; choose one" hid the real reason)
+    if None not in kinds and kinds[0] is not kinds[1]:
+        raise EvaluationError("compare an odometry run folder with another run folder, a bench folder with a bench folder",
+                              source="compare")
     side_a = _load(a, method_a, every_result)
     same = isinstance(side_a, BenchRuns) and isinstance(b, (str, os.PathLike)) and Path(b).resolve() == side_a.path.resolve()
     side_b = load_bench_runs(b, method_b, every_result, side_a.records) if same else _load(b, method_b, every_result)
@@ -450,6 +454,17 @@ def _with_measured_noise(noise: float, noise_from: str | os.PathLike | None, met
     return max(noise, measured_noise(noise_from, metric, task, methods))
 
 
+def _kind(side: Any) -> type | None:
+    """OdometryRun or BenchRuns: what ``side`` is, read before it is loaded; None when ``_load`` will refuse it."""
+    if isinstance(side, (OdometryRun, BenchRuns)):
+        return type(side)
+    from lidarkit.bench.baseline import is_baseline_folder
+
+    if not isinstance(side, (str, os.PathLike)) or not Path(side).is_dir() or is_baseline_folder(side):
+        return None
+    return BenchRuns if (Path(side) / "jobs").is_dir() else OdometryRun
+
+
 def _load(side: Any, method: str | None, every_result: bool = False) -> OdometryRun | BenchRuns:
     if isinstance(side, (OdometryRun, BenchRuns)):
         return side
@@ -460,7 +475,9 @@ def _load(side: Any, method: str | None, every_result: bool = False) -> Odometry
         raise DataError("does not exist", source=path)
     if not path.is_dir():  # (report.csv given: it read "run folder does not exist")
         raise DataError("is a file: compare takes an odometry run folder or a bench results folder", source=path)
-    if (path / "manifest.json").is_file() and not (path / "suite.json").exists():  # (read "no successful job results")
+    from lidarkit.bench.baseline import is_baseline_folder
+
+    if is_baseline_folder(path):  # (read "no successful job results")
         raise DataError("a baseline folder (lidarkit baseline record): compare takes bench results folders or odometry run "
                         "folders (a baseline gives its noise: --noise-from)", source=path)
     if (path / "jobs").is_dir():

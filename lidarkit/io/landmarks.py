@@ -103,6 +103,8 @@ class LandmarkData:
             sensor_path = folder / sensor_path
         if not world_path.is_absolute() and world is not None:
             world_path = folder / world_path
+        if base.is_dir() and world is None and sensor is None and not (world_path.is_file() and sensor_path.is_file()):
+            _refuse_a_parent_folder(base)
         self.root = folder
         self.world_path = world_path
         self.sensor_path = sensor_path
@@ -213,6 +215,15 @@ def _parse_float(text: str, path: Path | str | os.PathLike, where: str) -> float
 
 
 MAX_ABS_VALUE = 1e7  # landmark coordinates, odometry, ranges and bearings: metres and radians of a planar robot
+
+
+def _refuse_a_parent_folder(folder: Path) -> None:
+    """DataError listing the subfolders holding a dataset when ``folder`` holds none itself (the parent of the three
+    Freiburg copies read "world.dat: file not found")."""
+    held = sorted(p.name for p in folder.iterdir() if p.is_dir() and (p / WORLD_FILE).is_file() and (p / SENSOR_FILE).is_file())
+    if held:
+        raise DataError(f"no {WORLD_FILE} + {SENSOR_FILE} in this folder; its subfolders {', '.join(held)} hold them: "
+                        "give one of those", source=folder)
 
 
 def _parse_int(text: str, path: Path | str | os.PathLike, where: str) -> int:

@@ -92,6 +92,7 @@ def assert_no_worse_than(
     pinned job) or a metrics mapping (which takes none of them: ConfigError). A result over other data than the pinned
     job's (frames, dataset, seed) is an EvaluationError.
     ``tolerance`` None uses the baseline's recorded band (from its run-to-run noise); with a plain mapping it is 0.
+    A difference within floating-point round-off (1e-9 of the value) is a tie, as in ``lidarkit baseline check``.
     """
     from lidarkit.bench.baseline import Baseline, load_baseline
 
@@ -126,9 +127,11 @@ def assert_no_worse_than(
     if not math.isfinite(ref):  # (every result passed against a NaN baseline: no comparison is false)
         raise EvaluationError(f"the baseline's {metric} is {ref}: nothing to hold the result against", source="assert_no_worse_than")
     from lidarkit.bench.tasks import higher_is_better
+    from lidarkit.eval.statistics import tie_tolerance
 
     worse_by = (ref - now) if higher_is_better(metric) else (now - ref)
-    if not math.isfinite(now) or worse_by > tol:
+    # round-off is a tie whatever the tolerance, as `baseline check` takes it (0.1 + 0.2 against 0.3 failed at 0)
+    if not math.isfinite(now) or worse_by > max(tol, tie_tolerance(np.array([now]), np.array([ref]))):
         raise AssertionError(f"regression: {metric} = {now:.6g}, baseline {ref:.6g} (worse by {worse_by:.4g}, "
                              f"tolerance {tol:.4g})")
 

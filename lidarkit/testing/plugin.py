@@ -3,7 +3,8 @@
 - ``--lidarkit-baseline DIR`` (relative to the directory pytest runs in, as pytest's own path options) or the ini
   option ``lidarkit_baseline`` (relative to the ini file's directory): the default baseline folder.
 - ``lidarkit_baseline``: that folder loaded as a :class:`lidarkit.bench.baseline.Baseline` (skips the test with
-  a reason when none is configured).
+  a reason when none is configured; a folder that is missing or not a baseline errors each test using it with one
+  line naming the folder and where it was set).
 - ``load_lidarkit_baseline``: a function loading any baseline folder (relative paths from the rootdir).
 """
 
@@ -36,11 +37,19 @@ def load_lidarkit_baseline(pytestconfig):
 @pytest.fixture(scope="session")
 def lidarkit_baseline(pytestconfig, load_lidarkit_baseline):
     """The configured baseline folder (``--lidarkit-baseline`` or ini ``lidarkit_baseline``)."""
+    from lidarkit.errors import LidarKitError
+
     given = pytestconfig.getoption("--lidarkit-baseline")
     if given:  # a command-line path: from where pytest was started
-        return load_lidarkit_baseline(Path(pytestconfig.invocation_params.dir) / given)
-    path = pytestconfig.getini("lidarkit_baseline")
-    if not path:
-        pytest.skip("no baseline configured: pass --lidarkit-baseline DIR or set lidarkit_baseline in pytest.ini")
-    base = Path(pytestconfig.inipath).parent if pytestconfig.inipath else Path(pytestconfig.rootpath)
-    return load_lidarkit_baseline(base / path)
+        path, where = Path(pytestconfig.invocation_params.dir) / given, "--lidarkit-baseline"
+    else:
+        ini = pytestconfig.getini("lidarkit_baseline")
+        if not ini:
+            pytest.skip("no baseline configured: pass --lidarkit-baseline DIR or set lidarkit_baseline in pytest.ini")
+        base = Path(pytestconfig.inipath).parent if pytestconfig.inipath else Path(pytestconfig.rootpath)
+        path, where = base / ini, f"lidarkit_baseline in {pytestconfig.inipath or 'the ini file'}"
+    try:
+        return load_lidarkit_baseline(path)
+    except LidarKitError as err:  # one line naming the folder, not a traceback through the plugin per test
+        problem = f"{err} (set by {where})"
+    pytest.fail(problem, pytrace=False)  # (outside the except: else pytest shows the DataError it replaces too)
