@@ -493,3 +493,36 @@ def test_a_folder_of_other_files_is_refused_and_kept(tmp_path, capsys):
     (tmp_path / "empty").mkdir()
     assert run_suite(load_suite(path), tmp_path / "empty", executor="serial").ran == 8
     assert run_suite(load_suite(path), tmp_path / "empty", executor="serial").skipped == 6  # (the 2 failed run again)
+
+
+def test_a_report_that_cannot_be_written_says_the_jobs_are_done_and_how_to_rebuild_it(tmp_path):
+    """Every job finished but report.html could not be written (`ulimit -f 50`): the one line named the file only,
+    not that the results are kept nor that `lidarkit report OUT` rebuilds the report (an interrupt says both)."""
+    import resource
+
+    path = tmp_path / "s.yaml"
+    path.write_text(textwrap.dedent("""
+        name: tiny
+        seeds: 2
+        experiments:
+          - {name: st, task: selftest, dataset: {kind: synthetic, name: syn}, methods: [random_walk]}
+    """))
+    out = tmp_path / "b1"
+
+    def bench(*extra: str) -> subprocess.CompletedProcess:  # files up to 50 kB: the jobs' results fit, the report does not
+        return subprocess.run([sys.executable, "-m", "lidarkit", "bench", str(path), "--out", str(out), "-e", "serial", *extra],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, timeout=300,
+                              preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_FSIZE, (50_000, 50_000)))
+
+    done = bench()
+    assert done.returncode == 1 and "2 jobs: 0 already done, 2 run now (2 ok, 0 failed)" in done.stdout
+    assert done.stderr.splitlines()[-1] == (
+        f"error: {out}/report.html: cannot write: file too large for the file system; every job of the run is done "
+        f"(results in {out}/jobs); no report was written (`lidarkit report {out}` writes it from the finished jobs)")
+    assert len(load_results(out)) == 2 and not (out / "report.html").exists()
+    rebuilt = subprocess.run([sys.executable, "-m", "lidarkit", "report", str(out)], stdout=subprocess.PIPE, text=True, timeout=300)
+    assert rebuilt.returncode == 0 and (out / "report.html").stat().st_size > 50_000
+    done = bench("--force")  # an earlier report stays: said to be from before this run
+    assert done.returncode == 1 and done.stderr.splitlines()[-1].endswith(
+        f"(results in {out}/jobs); {out}/report.html is from before this run (`lidarkit report {out}` rebuilds it from the "
+        "finished jobs)")

@@ -536,3 +536,30 @@ def test_a_lost_run_gets_no_q_verdict_and_no_fit(stachniss):
     assert localization_problem(3, 331) is None and localization_problem(4, 331) == "the filter lost track on 4 of 331 steps"
     assert q_verdict(1.0, np.diag([1.0, 0.1]), lost="the filter lost track on 4 of 331 steps").text.startswith(
         "no verdict on Q: the filter lost track on 4 of 331 steps, so the NIS (NIS mean 1.000")
+
+
+@pytest.mark.skipif(not __import__("os").path.exists("/dev/full"), reason="needs /dev/full (a device that is always full)")
+def test_a_stdout_that_refuses_the_table_still_gets_the_run_folder_written(tmp_path, capsys):
+    """`lidarkit pf DATA -n 50 -o fp > /dev/full` (so --recorded and a study) printed the table before writing the run
+    folder: the print failed (one line, exit 1) and no fp/ was left, the whole run lost. The folder is written first,
+    the same as with a working stdout."""
+    import json
+    import subprocess
+    import sys
+
+    data = str(shared_path("pf", "burgard_particle_filter"))
+    for name, args in (("run", []), ("recorded", ["--recorded", "--fit-q"]), ("study", ["--seeds", "2"])):
+        with open("/dev/full", "w") as full:
+            done = subprocess.run([sys.executable, "-m", "lidarkit", "pf", data, "-n", "50", *args, "-o", str(tmp_path / name)],
+                                  stdout=full, stderr=subprocess.PIPE, text=True, timeout=300)
+        assert (done.returncode, done.stderr.splitlines()[-1]) == (1, "error: stdout: cannot write: no space left on the device"), name
+        with pytest.raises(SystemExit) as exc:
+            main(["pf", data, "-n", "50", *args, "-o", str(tmp_path / f"{name}_printed")])
+        assert exc.value.code in (0, None)
+        capsys.readouterr()
+        if name != "study":
+            assert (tmp_path / name / "poses_kitti.txt").read_text() == (tmp_path / f"{name}_printed" / "poses_kitti.txt").read_text()
+    rows, printed = (json.loads((tmp_path / name / "study.json").read_text())["rows"] for name in ("study", "study_printed"))
+    assert [(r["seeds"], r["mse_m2"]) for r in rows] == [([0, 1], printed[0]["mse_m2"])]
+    fits = json.loads((tmp_path / "recorded" / "metrics.json").read_text())["metrics"]["fit_q"]
+    assert fits[0]["run"] == "given Q" and len(fits) >= 2

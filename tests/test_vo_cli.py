@@ -752,3 +752,22 @@ def test_every_plotted_trajectory_ends_in_a_dot_of_its_colour():
     assert [to_hex(e.get_color()) for e in ends] == [to_hex(c.get_color()) for c in curves]
     assert [to_hex(c.get_color()) for c in curves] == [to_hex(c) for c in ("k", "C0", "C1")]
     assert [float(e.get_ydata()[0]) for e in ends] == [2.5, 2.5, 2.5]
+
+
+@pytest.mark.skipif(not __import__("os").path.exists("/dev/full"), reason="needs /dev/full (a device that is always full)")
+def test_a_stdout_that_refuses_the_table_still_gets_the_run_folder_written(tmp_path):
+    """`lidarkit vo SEQ -o fv > /dev/full` printed the table before writing the run folder: the print failed (one line,
+    exit 1) and no fv/ was left, the whole run lost. The folder is written first, as odometry's is."""
+    import subprocess
+    import sys
+
+    out = tmp_path / "fv"
+    with open("/dev/full", "w") as full:
+        done = subprocess.run([sys.executable, "-m", "lidarkit", "vo", str(sample_path("kitti_vo", "06")), "--scale", "gt",
+                               "--max-frames", "4", "-o", str(out), "--no-progress"], stdout=full, stderr=subprocess.PIPE,
+                              text=True, timeout=300)
+    assert (done.returncode, done.stderr) == (1, "error: stdout: cannot write: no space left on the device\n")
+    assert len(Trajectory.from_kitti(out / "poses_kitti.txt")) == 4
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert (metrics["frames"], metrics["accepted_pairs"]) == (4, 3) and metrics["raw"]["ape_rmse_m"] < 0.03
+    assert yaml.safe_load((out / "config.yaml").read_text())["max_frames"] == 4 and (out / "trajectory.png").is_file()

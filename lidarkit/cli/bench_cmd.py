@@ -115,8 +115,10 @@ def _stale_report(out: Path) -> str:
 
 def write_report(out: Path, only_keys: set[str]):
     """``build_report`` of the run just ended; Ctrl-C / SIGTERM while it writes say the jobs are done but the report
-    is not this run's (the earlier one stayed without a word) and exit 130 / 143."""
+    is not this run's (the earlier one stayed without a word) and exit 130 / 143; a report that cannot be written (a
+    full disk) says the same in its one line (it named the file only)."""
     from lidarkit.bench.report import build_report
+    from lidarkit.errors import OutputError
     from lidarkit.lifetime import Interrupted, interrupt_handled
 
     html = out / "report.html"
@@ -124,20 +126,24 @@ def write_report(out: Path, only_keys: set[str]):
     def version() -> tuple[int, int] | None:  # a report moved in is a new file (another inode)
         return (html.stat().st_ino, html.stat().st_mtime_ns) if html.exists() else None
 
+    def state() -> str:
+        if version() != before:  # moved in before the signal or failure came: that finished first
+            return f"the report was written ({html})"
+        if before is not None:
+            return _stale_report(out)
+        return f"no report was written (`lidarkit report {out}` writes it from the finished jobs)"
+
     before = version()
     try:
         return build_report(out, only_keys=only_keys)
+    except OutputError as err:
+        raise OutputError(f"{err.reason}; every job of the run is done (results in {out}/jobs); {state()}",
+                          source=err.source, location=err.location) from None
     except (KeyboardInterrupt, Interrupted) as stop:
         interrupt_handled()
         what = f"by {stop}" if isinstance(stop, Interrupted) else "by SIGINT"
-        if version() != before:  # the signal came while the report was moved in: that finished first
-            state = f"the report was written ({html})"
-        elif before is not None:
-            state = _stale_report(out)
-        else:
-            state = f"no report was written (`lidarkit report {out}` writes it from the finished jobs)"
         stderr().print(f"interrupted {what} while the report was written: every job of the run is done "
-                       f"(results in {out}/jobs); {state}", soft_wrap=True)
+                       f"(results in {out}/jobs); {state()}", soft_wrap=True)
         raise typer.Exit(getattr(stop, "exit_code", 130)) from None
 
 

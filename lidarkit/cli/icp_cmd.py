@@ -163,6 +163,32 @@ def _refuse_run_options(ctx: typer.Context, listing: str) -> None:
                           source=listing)
 
 
+def _refuse_others_files(out: Optional[Path]) -> None:
+    """OutputError when ``out`` holds files named like an icp run's but never held one (no config.json of an icp run):
+    the run replaced a user's own result.json and bev.png; odometry, vo and pf refuse such a folder by its config.yaml."""
+    import os
+
+    from lidarkit.errors import OutputError
+    from lidarkit.run_files import ICP
+
+    if out is None or not out.is_dir() or _holds_an_icp_run(out):
+        return
+    own = sorted(name for name in ICP if os.path.lexists(out / name))
+    if own:  # (config.json is moved in last: a run a SIGKILL cut off looks the same, the message says either)
+        raise OutputError(f"holds files named like an icp run's ({', '.join(own)}) but no config.json written by lidarkit icp "
+                          "(the user's own, or a run cut off before it was complete): a run would replace them; remove them "
+                          "or give a new or empty folder", source=out)
+
+
+def _holds_an_icp_run(out: Path) -> bool:
+    """Whether ``out`` holds the config.json an icp run writes (a JSON object with its method and params)."""
+    try:
+        config = json.loads((out / "config.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    return isinstance(config, dict) and {"method", "params"} <= config.keys()
+
+
 @app.command("icp")
 def icp(
     ctx: typer.Context,
@@ -200,6 +226,7 @@ def icp(
     from lidarkit.run_files import ICP
 
     check_target(out, "folder", files=ICP)
+    _refuse_others_files(out)
     registration = get_icp(method, **parse_params(param))
     source_xyz = read_point_file(source, drop_nonfinite=drop_nonfinite).points_xyz
     target_xyz = read_point_file(target, drop_nonfinite=drop_nonfinite).points_xyz
@@ -211,7 +238,7 @@ def icp(
 
         payload = {"source": str(source), "target": str(target), "init": None if init is None else str(init),
                    "drop_nonfinite": drop_nonfinite, **result.to_dict()}
-        with run_folder(out) as tmp:
+        with run_folder(out, replaces=ICP) as tmp:
             write_text(tmp / "result.json", json.dumps(payload, indent=2, allow_nan=False) + "\n")
             write_text(tmp / "config.json", json.dumps({"method": method, "params": registration.config.model_dump(mode="json")}, indent=2, allow_nan=False) + "\n")
             save_bev_before_after(

@@ -206,18 +206,20 @@ def pf_command(
             rows = run_study(data, counts, seed_list, config=cfg, on_run=lambda: bar.advance(task), **scenario)
         finally:
             bar.stop()
+        if out is not None:  # the run folder before the table: a stdout that refuses it (> /dev/full) lost the run
+            _write_study(rows, cfg, protocol, {**scenario, **data_files(data), "n_particles": counts, "seeds": seed_list}, out)
         _print_study(rows, cfg, protocol, kidnap_at)
         if out is not None:
-            _write_study(rows, cfg, protocol, {**scenario, **data_files(data), "n_particles": counts, "seeds": seed_list}, out)
             stderr().print(f"results written to {out}")
         return
     snap = _kept_steps(snapshot_steps, gif, len(data), out)
     with _step_progress(cfg, len(data), "pf run") as on_step:
         result = run_protocol(data, counts[0], seed, config=cfg, estimators=tuple(dict.fromkeys((cfg.estimator, "mean", "best"))),
                               snapshot_steps=snap, on_step=on_step, **scenario)
+    if out is not None:  # the run folder before the table: a stdout that refuses it (> /dev/full) lost the run
+        _write(result, out, snap_steps=snapshot_steps, gif=gif)
     _print(result)
     if out is not None:
-        _write(result, out, snap_steps=snapshot_steps, gif=gif)
         stderr().print(f"results written to {out}")
 
 
@@ -317,8 +319,6 @@ def _recorded(data, cfg: PFConfig, seed: int, fit_q: bool, out: Path | None, sna
     if not fit_q:
         with _step_progress(cfg, len(data), "pf run") as on_step:
             result = run_recorded(data, None, seed, config=cfg, snapshot_steps=snap, on_step=on_step)
-        _print(result)
-        stdout().print(result.metrics["q_verdict"]["text"])
     else:
         with _step_progress(cfg, len(data), "pf --fit-q (up to 6 runs)", runs=6) as on_step:
             first, runs = fit_q_recorded(data, None, seed, config=cfg, on_step=on_step)
@@ -331,6 +331,15 @@ def _recorded(data, cfg: PFConfig, seed: int, fit_q: bool, out: Path | None, sna
         for key in ("q_verdict", "q_fit_settled"):  # (a re-run for the snapshots: the fit's own verdict)
             if key in last.metrics:
                 result.metrics[key] = last.metrics[key]
+        # the run folder holds the last fit's run: the Q given and each fit are kept beside it (metrics.json, "fit_q")
+        result.metrics["fit_q"] = [{"run": "given Q" if i == 0 else f"fit {i}", "q_cov": r.settings["q_cov"], "nis_mean": r.metrics["nis_mean"],
+                                    "nis_fraction_below_chi2_95": r.metrics["nis_fraction_below_chi2_95"]} for i, r in enumerate([first, *runs])]
+    if out is not None:  # the run folder before the tables: a stdout that refuses them (> /dev/full) lost the run
+        _write(result, out, snap_steps=snap_steps, gif=gif)
+    if not fit_q:
+        _print(result)
+        stdout().print(result.metrics["q_verdict"]["text"])
+    else:
         _print(first)
         stdout().print(("before: " if runs else "") + first.metrics["q_verdict"]["text"])
         table = Table(title="--fit-q: maximum-likelihood Q from the innovations, filter re-run")
@@ -343,11 +352,7 @@ def _recorded(data, cfg: PFConfig, seed: int, fit_q: bool, out: Path | None, sna
         stdout().print(table)
         if runs:
             stdout().print("after: " + last.metrics["q_verdict"]["text"])
-        # the run folder holds the last fit's run: the Q given and each fit are kept beside it (metrics.json, "fit_q")
-        result.metrics["fit_q"] = [{"run": "given Q" if i == 0 else f"fit {i}", "q_cov": r.settings["q_cov"], "nis_mean": r.metrics["nis_mean"],
-                                    "nis_fraction_below_chi2_95": r.metrics["nis_fraction_below_chi2_95"]} for i, r in enumerate([first, *runs])]
     if out is not None:
-        _write(result, out, snap_steps=snap_steps, gif=gif)
         stderr().print(f"results written to {out}")
 
 

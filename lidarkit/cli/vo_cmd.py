@@ -187,6 +187,14 @@ def vo_command(
         result.trajectory = result.trajectory.transformed(T_left=gt.poses_se3[result.meta["start_frame"]])
 
     metrics, not_scored = _scores(result, gt, cfg.scale.mode)
+    if "scored_from_frame" in metrics:  # (the input's own frame number)
+        first = metrics["scored_from_frame"]
+        metrics["scored_from_frame"] = int(numbers[start + first]) if numbers is not None else start + first
+    if out is not None:  # the run folder before the table: a stdout that refuses it (> /dev/full) lost the whole run
+        from lidarkit.vo.output import write_run
+
+        paths = write_run(result, out, ground_truth=gt, metrics={**metrics, **({"not_scored": not_scored} if not_scored else {})},
+                          extra_config=extra_config, gif_images=vo_input.images if gif else None)
     console = stdout()
     summary = result.summary()
     table = Table(title=f"lidarkit vo: {data} ({vo_input.kind}, {cfg.features.detector} + {cfg.matching.method}, "
@@ -207,9 +215,7 @@ def vo_command(
         table.add_row("self-calibration", f"not constrained: {focal.reason}")
     if metrics and not metrics["smoothed"]["smoothing"].startswith(f"window {cfg.smoothing.window},"):
         table.add_row("smoothing", metrics["smoothed"]["smoothing"])  # not the configured window: said
-    if "scored_from_frame" in metrics:  # (the input's own frame number)
-        first = metrics["scored_from_frame"]
-        metrics["scored_from_frame"] = int(numbers[start + first]) if numbers is not None else start + first
+    if "scored_from_frame" in metrics:
         table.add_row("scored from frame", f"{metrics['scored_from_frame']} (the frames before it unreadable: not estimates)")
     for variant, m in ((v, metrics[v]) for v in ("raw", "smoothed") if v in metrics):
         table.add_row(f"APE {variant} ({alignment_label(m['align'])}) [m]", f"{m['ape_rmse_m']:.4f}")
@@ -227,10 +233,6 @@ def vo_command(
         console.print(f"... and {len(result.rejected) - _LISTED_REJECTIONS} more rejected frames (see diagnostics.csv "
                       "with --out)")
     if out is not None:
-        from lidarkit.vo.output import write_run
-
-        paths = write_run(result, out, ground_truth=gt, metrics={**metrics, **({"not_scored": not_scored} if not_scored else {})},
-                          extra_config=extra_config, gif_images=vo_input.images if gif else None)
         console.print(f"wrote {len(paths)} files to {out}")
 
 

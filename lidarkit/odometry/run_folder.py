@@ -21,8 +21,11 @@ from lidarkit.run_files import RUN_FILES
 def write_run(result: OdometryResult, out_dir: str | os.PathLike) -> Path:
     """Write the run folder: poses_kitti.txt, poses_tum.txt, config.yaml, metrics.json, timing.csv, and with
     ground truth ground_truth_kitti.txt, trajectory.png and ape.png; the folder all-or-nothing (``atomic.run_folder``).
-    An earlier run's files in the folder that this run does not write are removed (other files are left alone)."""
+    An earlier run's files in the folder that this run does not write are removed (other files are left alone); a folder
+    that never held a run but holds files named like a run's is refused, as ``run(out_dir=...)`` refuses it (a user's
+    own metrics.json was replaced)."""
     out = Path(out_dir)
+    atomic.check_target(out, "folder", files=RUN_FILES, replaces=RUN_FILES)
     with atomic.run_folder(out, replaces=RUN_FILES) as tmp:
         _write_files(result, tmp)
     return out

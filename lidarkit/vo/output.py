@@ -102,8 +102,11 @@ def write_run(result: VOResult, out_dir: str | os.PathLike, *, ground_truth: Tra
     ``diagnostics.csv``, ``config.yaml`` (resolved config + intrinsics + ``extra_config``), ``metrics.json``
     (summary + ``metrics``), ``trajectory.png`` (if ``plot``), ``features.gif`` (if ``gif_images`` and tracks).
     Without time stamps the TUM files count frames as seconds: logged once and noted in config and metrics.
+    A folder that never held a run but holds files named like a run's is refused, as ``lidarkit vo --out`` refuses it
+    (a user's own metrics.json was replaced).
     """
     final = Path(out_dir)
+    atomic.check_target(final, "folder", files=RUN_FILES, replaces=RUN_FILES)
     with atomic.run_folder(final, replaces=RUN_FILES) as tmp:
         paths = _write_files(result, tmp, ground_truth=ground_truth, metrics=metrics, extra_config=extra_config,
                              plot=plot, gif_images=gif_images)
