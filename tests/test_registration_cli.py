@@ -220,14 +220,22 @@ def test_an_init_file_that_holds_json_or_words_says_so(capsys, tmp_path):
         assert code == 1 and " ".join(err.split()) == f"error: {init}: {said}: {takes}"
 
 
+def _asserts():
+    raise AssertionError("my assert")  # (an assert statement here would be rewritten by pytest)
+
+
 @pytest.mark.parametrize("fault, said", [
     (lambda: 1 / 0, "ZeroDivisionError: division by zero"),
     (lambda: {}["x"], "KeyError: 'x'"),
     (lambda: "".foo, "AttributeError: 'str' object has no attribute 'foo'"),
+    (_asserts, "AssertionError: my assert"),
+    (lambda: open("/nonexistent/lidarkit.txt"), "FileNotFoundError: [Errno 2] No such file or directory: '/nonexistent/lidarkit.txt'"),
+    (lambda: "a".encode("no-such-codec"), "LookupError: unknown encoding: no-such-codec"),
 ])
 def test_a_plugin_failing_with_any_plain_error_is_one_line(capsys, fault, said):
     """A plugin whose _align raised ZeroDivisionError, KeyError or AttributeError gave a 70-line traceback (the
-    odometry runner said a ZeroDivisionError in one line; a RuntimeError was one line here too)."""
+    odometry runner said a ZeroDivisionError in one line; a RuntimeError was one line here too); an AssertionError,
+    an OSError or a LookupError still did."""
     from lidarkit.registration import Registration, RegistrationConfig, register_icp
     from lidarkit.registration import registry as registry_module
 
@@ -246,3 +254,24 @@ def test_a_plugin_failing_with_any_plain_error_is_one_line(capsys, fault, said):
     assert code == 1 and "Traceback" not in err
     assert " ".join(err.split()) == (
         f"error: slip_test (54850 source / 54478 target points): the slip_test backend failed on this pair: {said}")
+
+
+def test_a_folder_of_the_users_own_files_named_like_an_icp_runs_is_refused_and_kept(tmp_path, capsys):
+    """`lidarkit icp SRC TGT -o ui` replaced the user's own ui/result.json and bev.png (exit 0), in a folder that never
+    held an icp run; odometry, vo and pf refuse such a folder. It is refused before the work, untouched; an icp run's
+    own folder is written again."""
+    mine = tmp_path / "ui"
+    mine.mkdir()
+    (mine / "result.json").write_text("mine\n")
+    (mine / "bev.png").write_text("my figure\n")
+    code, out, err = run_cli(capsys, str(SOURCE), str(TARGET), "-m", "vanilla", "-o", str(mine))
+    assert (code, out) == (1, "")
+    assert err == (f"error: {mine}: holds files named like an icp run's (bev.png, result.json) but no config.json written by "
+                   "lidarkit icp (the user's own, or a run cut off before it was complete): a run would replace them; remove "
+                   "them or give a new or empty folder\n")
+    assert sorted(p.name for p in mine.iterdir()) == ["bev.png", "result.json"] and (mine / "result.json").read_text() == "mine\n"
+    run = tmp_path / "run"
+    for _ in range(2):  # a new folder, then the folder of that run
+        code, _, err = run_cli(capsys, str(SOURCE), str(TARGET), "-m", "vanilla", "-p", "max_iterations=3", "-o", str(run))
+        assert code == 0, err
+    assert json.loads((run / "config.json").read_text())["params"]["max_iterations"] == 3

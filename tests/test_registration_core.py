@@ -397,7 +397,48 @@ def test_too_few_correspondences_is_not_converged_with_reason(rng):
     res = get_icp("vanilla", max_correspondence_distance_m=1.0).align(far, target)
     # 500 m apart the bounding boxes do not even overlap: flagged before any iteration
     assert not res.converged and "no initial overlap" in res.reason and res.n_correspondences == 0
-    assert res.degeneracy.degenerate
+    assert not res.degeneracy.degenerate and res.degeneracy.kind == "unknown (no initial overlap)"  # (nothing to judge)
+
+
+def test_no_correspondences_is_said_first_and_not_flagged_degenerate():
+    """A KITTI scan scaled x100 onto itself (0 correspondences) read "degenerate geometry: min/max eigenvalue 0.00e+00
+    < 0.01; only 0 correspondences ..." and was counted DEGENERATE: without correspondences there is no geometry to
+    judge; the count comes first and the degeneracy is unknown (NaN eigenvalues), not flagged."""
+    from conftest import shared_path
+    from registration_helpers import read_kitti_bin
+
+    target = read_kitti_bin(shared_path("kitti_odometry", "sequences", "00", "velodyne", "000000.bin"))
+    res = get_icp("vanilla").align(100.0 * target, target)
+    assert not res.converged and res.n_correspondences == 0
+    assert res.reason == "only 0 correspondences (min_correspondences=10); fitness 0.000 below min_fitness=0.3"
+    assert not res.degeneracy.degenerate and res.degeneracy.kind == "unknown (too few correspondences)"
+    assert np.isnan(res.degeneracy.ratio) and res.to_dict()["degeneracy"]["eigenvalues"] == [None] * 6
+
+
+def test_an_os_error_in_a_plugin_is_a_registration_error_and_lidarkits_own_pass_unchanged(rng):
+    """An OSError raised in a plugin's _align ended in a traceback (not in the backend errors); lidarkit's own errors,
+    an OutputError among them, are no OSError and still pass unchanged."""
+    from lidarkit.errors import OutputError
+
+    raised = {"os": OSError("disk gone"), "own": OutputError("disk full", source="my.txt")}
+
+    class FailICP(Registration):
+        name = "fail_test"
+
+        def _align(self, source_xyz, target_xyz, init_T):
+            raise raised[self.which]
+
+    pts = structured_cloud(rng, n=500)
+    icp = FailICP()
+    icp.which = "os"
+    with pytest.raises(RegistrationError) as err:
+        icp.align(pts, pts)
+    n = len(pts)
+    assert str(err.value) == f"fail_test ({n} source / {n} target points): the fail_test backend failed on this pair: OSError: disk gone"
+    icp.which = "own"
+    with pytest.raises(OutputError) as err:
+        icp.align(pts, pts)
+    assert err.value is raised["own"] and str(err.value) == "my.txt: disk full"
 
 
 def test_ground_filter_with_nothing_left_is_flagged_not_converged(rng):

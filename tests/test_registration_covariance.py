@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from lidarkit.errors import ConfigError
 from lidarkit.geometry import se3_exp, se3_inverse, se3_log, transform_points
 from lidarkit.odometry.covariance import propagate, relative_errors
-from lidarkit.registration import get_icp
+from lidarkit.registration import available_icp, get_icp
 from lidarkit.registration.covariance import (
     CALIBRATION, CALIBRATION_WITHOUT_STEP, AxisCalibration, CovarianceModel, adjoint, apply_calibration, calibrate, covariance_and_step, effective_observations,
     left_jacobians, nees, principal_turn, registration_covariance, safe_inverse,
@@ -854,3 +854,54 @@ def test_nees_and_covariance_about_refuse_what_is_not_a_pose_or_a_point(rng):
     for bad in ([np.nan, 0, 0], [1, 2], "abc"):
         with pytest.raises(ConfigError, match="origin_m must be 3 finite numbers"):
             result.covariance_about(bad)
+
+
+@pytest.fixture(scope="module")
+def street_pair():
+    """Frames 5 -> 4 of a simulated street (seed 1, a held-out seed): ``(source, target, T_target_source true)``."""
+    from lidarkit.sim.lidar import SimulatedLidarSequence
+
+    sim = SimulatedLidarSequence(scene="street", seed=1, n_frames=6, n_beams=32, n_azimuths=1024, range_noise_std_m=0.02,
+                                 motion_distortion=False, point_times=False)
+    poses = sim.ground_truth.poses_se3
+    return sim.read_scan(5).points_xyz, sim.read_scan(4).points_xyz, se3_inverse(poses[4]) @ poses[5]
+
+
+def test_a_calibration_applies_only_to_the_configuration_it_was_learned_at(street_pair):
+    """small_gicp's ICP and PLANE_ICP took GICP's calibration (the variant was picked by class name): ICP 4.8 cm off
+    with a 1.3 mm sigma, NEES 1716; a pipeline composition other than kiss's took kiss's entry. They get the closed
+    form now, and the note names the setting."""
+    if "small_gicp" not in available_icp():
+        pytest.skip("small_gicp not installed")
+    source, target, T_true = street_pair
+    gicp, icp = (get_icp("small_gicp", registration_type=kind) for kind in ("GICP", "ICP"))
+    assert (gicp.calibration_variant(), icp.calibration_variant()) == ("small_gicp", None)
+    learned, point_to_point = gicp.align(source, target), icp.align(source, target)
+    assert learned.extra["covariance_calibration"] == "small_gicp" and learned.nees(T_true) == pytest.approx(4.7, abs=0.1)
+    assert point_to_point.extra["covariance_calibration"] == (
+        "none learned for small_gicp (registration_type=ICP): the closed form as computed (typically over-confident)")
+    raw = get_icp("small_gicp", registration_type="ICP", calibrated_covariance=False).align(source, target)
+    np.testing.assert_allclose(point_to_point.covariance, raw.covariance, rtol=1e-9, atol=1e-18)
+    assert point_to_point.nees(T_true) == pytest.approx(15.0, abs=0.5)  # (1716 under GICP's entry)
+
+    kiss_like, vanilla_seq = (get_icp("pipeline", preset=p) for p in ("kiss_like", "vanilla_seq"))
+    assert (kiss_like.calibration_variant(), vanilla_seq.calibration_variant()) == ("pipeline", None)
+    note = vanilla_seq.align(source, target).extra["covariance_calibration"]
+    assert note.startswith("none learned for pipeline (kernel=none, threshold={'name': 'fixed', 'max_distance_m': None}, ")
+
+
+def test_nees_and_covariance_about_say_what_they_got_in_one_line(rng):
+    """``nees("x")`` raised numpy's bare ValueError ("could not convert string to float"); ``covariance_about`` of a
+    3x3 or a NaN 4x4 put numpy's multi-line repr of the array in its message (one line from the CLI)."""
+    pts = rng.uniform(-10, 10, (400, 3))
+    result = get_icp("vanilla").align(pts + [0.1, 0.0, 0.0], pts)
+    with pytest.raises(ConfigError) as err:
+        result.nees("x")
+    assert str(err.value) == "nees: T_target_source_true must be a finite 4x4 rigid transform, got 'x'"
+    said = {}
+    for name, bad in (("eye", np.eye(3)), ("nan", np.full((4, 4), np.nan)), ("long", "x" * 100)):
+        with pytest.raises(ConfigError) as err:
+            result.covariance_about(bad)
+        said[name] = str(err.value).removeprefix("covariance_about: origin_m must be 3 finite numbers (m), got ")
+    assert said == {"eye": "an array of shape (3, 3)", "nan": "an array of shape (4, 4) with 16 NaN or infinite entries",
+                    "long": "'" + "x" * 56 + "..."}

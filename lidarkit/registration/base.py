@@ -173,14 +173,12 @@ class Degeneracy:
 
     @staticmethod
     def unknown(reason: str = "not computed") -> "Degeneracy":
-        """A placeholder for results where no correspondences exist: flagged degenerate."""
-        return Degeneracy(
-            eigenvalues=(0.0,) * 6,
-            condition_number=float("inf"),
-            degenerate=True,
-            weakest_direction=(0.0,) * 6,
-            kind=f"unknown ({reason})",
-        )
+        """A placeholder for results where no correspondences exist: no geometry to judge, so nothing is known or
+        flagged (flagged degenerate, with eigenvalues 0, a pair 100x apart read "degenerate geometry" before "only 0
+        correspondences")."""
+        nan = float("nan")
+        return Degeneracy(eigenvalues=(nan,) * 6, condition_number=nan, degenerate=False, weakest_direction=(nan,) * 6,
+                          kind=f"unknown ({reason})")
 
 
 #: ``extra`` key of the covariance as calibrated about ``extra["covariance_origin_m"]`` (before it was moved to the
@@ -193,6 +191,15 @@ def calibration_note(variant: str, learned: str | None) -> str:
     if learned is None:
         return f"none learned for {variant}: the closed form as computed (typically over-confident)"
     return learned if learned == variant else f"{learned}'s (inherited by {variant})"
+
+
+def _briefly(value: Any) -> str:
+    """``value`` for a one-line message: an array by its shape (its repr spans lines), anything else by its repr, cut."""
+    if isinstance(value, np.ndarray):
+        bad = int((~np.isfinite(value)).sum()) if value.dtype.kind in "fc" else 0
+        return f"an array of shape {value.shape}" + (f" with {bad} NaN or infinite entries" if bad else "")
+    text = " ".join(repr(value).split())
+    return text if len(text) <= 60 else text[:57] + "..."
 
 
 def _adjoint_about(c: np.ndarray) -> np.ndarray:
@@ -266,7 +273,7 @@ class RegistrationResult:
         except (TypeError, ValueError):
             c = np.full(3, np.nan)
         if not np.isfinite(c).all():  # (a NaN origin gave a NaN matrix without a word)
-            raise ConfigError(f"origin_m must be 3 finite numbers (m), got {origin_m!r}", source="covariance_about")
+            raise ConfigError(f"origin_m must be 3 finite numbers (m), got {_briefly(origin_m)}", source="covariance_about")
         local = self.extra.get(LOCAL_COVARIANCE_KEY)
         at = self.extra.get(COVARIANCE_ORIGIN_KEY)
         if local is not None and at is not None and np.array_equal(c, np.asarray(at, dtype=np.float64)):
@@ -287,7 +294,11 @@ class RegistrationResult:
 
         from lidarkit.geometry import is_rotation
 
-        true = np.asarray(T_target_source_true, dtype=np.float64)
+        try:
+            true = np.asarray(T_target_source_true, dtype=np.float64)
+        except (TypeError, ValueError):  # (a string: numpy's ValueError)
+            raise ConfigError(f"T_target_source_true must be a finite 4x4 rigid transform, got {_briefly(T_target_source_true)}",
+                              source="nees") from None
         if true.shape != (4, 4) or not np.isfinite(true).all() or not is_rotation(true[:3, :3]) or not np.allclose(true[3], [0, 0, 0, 1]):
             # (a 3x3 gave numpy's matmul error, NaN an SVD that did not converge, a scaled pose a number)
             raise ConfigError(f"T_target_source_true must be a finite 4x4 rigid transform, got shape {true.shape}"
@@ -470,8 +481,9 @@ def accept(result: RegistrationResult, config: RegistrationConfig) -> Registrati
 
 #: what a backend (Open3D, kiss-icp, small_gicp, scipy under a plugin, a plugin's own arithmetic) raises when it fails on
 #: a pair; shared with the odometry runner, which reports them as the frame's error (a ZeroDivisionError or KeyError
-#: in a plugin's ``_align`` was one line there, a traceback from ``lidarkit icp``)
-BACKEND_ERRORS = (RuntimeError, ValueError, MemoryError, IndexError, KeyError, TypeError, ArithmeticError)
+#: in a plugin's ``_align`` was one line there, a traceback from ``lidarkit icp``; so were an AssertionError, an OSError and
+#: a LookupError). lidarkit's own errors are no OSError: they pass :func:`use_backend` unchanged
+BACKEND_ERRORS = (RuntimeError, ValueError, MemoryError, LookupError, TypeError, ArithmeticError, AssertionError, OSError)
 
 
 @contextlib.contextmanager
@@ -626,18 +638,26 @@ class Registration:
 
         return PendingAlignment(T, bool(likely_converged), finish)
 
-    @classmethod
-    def calibration_variant(cls) -> str | None:
+    def calibration_variant(self) -> str | None:
         """The variant whose learned covariance calibration applies: this one's, else that of the nearest registered
-        variant it derives from (a plugin subclassing ``vanilla``), None where there is none (the closed form is then
-        returned as computed; ``extra["covariance_calibration"]`` says so)."""
-        from lidarkit.registration.covariance import CALIBRATION
+        variant it derives from (a plugin subclassing ``vanilla``), None where there is none or where this config is not
+        the one it was learned at (the closed form is then returned as computed; ``extra["covariance_calibration"]``
+        says so)."""
+        learned, unlearned = self._calibration()
+        return None if unlearned else learned
 
-        for klass in cls.__mro__:
+    def _calibration(self) -> tuple[str | None, list[str]]:
+        """``(variant whose entry applies, this config's settings that differ from those it was learned at as
+        "name=value")``: small_gicp's ICP under GICP's entry gave a 1.3 mm sigma for a 4.8 cm error (NEES 1716)."""
+        from lidarkit.registration.covariance import CALIBRATED_SETTINGS, CALIBRATION
+
+        for klass in type(self).__mro__:
             name = vars(klass).get("name")
             if name and name in CALIBRATION:
-                return str(name)
-        return None
+                fields = klass.Config.model_fields
+                learned_at = {k: fields[k].get_default(call_default_factory=True) for k in CALIBRATED_SETTINGS.get(name, ())}
+                return str(name), [f"{k}={getattr(self._config, k)}" for k, v in learned_at.items() if getattr(self._config, k, v) != v]
+        return None, []
 
     def _finish(self, result: RegistrationResult, runtime: float) -> RegistrationResult:
         """The config's calibration and acceptance gate applied to the variant's assessed result; a covariance computed
@@ -648,10 +668,11 @@ class Registration:
 
         covariance, step, extra = result.covariance, result.surface_step, result.extra
         if covariance is not None and self._config.calibrated_covariance and self._config.covariance == "censi":
-            learned = self.calibration_variant()
-            if learned is not None:
+            learned, unlearned = self._calibration()
+            if learned is not None and not unlearned:
                 covariance = calibrate(covariance, learned, step)
-            extra = {**extra, "covariance_calibration": calibration_note(self.name, learned)}
+            configured = f"{self.name} ({', '.join(unlearned)})" if unlearned else self.name
+            extra = {**extra, "covariance_calibration": calibration_note(configured, None if unlearned else learned)}
         if covariance is not None and getattr(self._config, "planar", False):
             # a planar solve keeps z, roll and pitch of the guess: they are not estimated, and carry no variance here
             covariance = covariance.copy()
