@@ -275,3 +275,19 @@ def test_a_folder_of_the_users_own_files_named_like_an_icp_runs_is_refused_and_k
         code, _, err = run_cli(capsys, str(SOURCE), str(TARGET), "-m", "vanilla", "-p", "max_iterations=3", "-o", str(run))
         assert code == 0, err
     assert json.loads((run / "config.json").read_text())["params"]["max_iterations"] == 3
+
+
+def test_a_pair_without_correspondences_has_no_degeneracy_verdict_in_the_table(capsys, tmp_path):
+    """A scan scaled x100 onto itself (0 correspondences): the table read "nan (ok, threshold 0.01)" as if the geometry
+    had been judged sound; it says the degeneracy is unknown and why."""
+    from conftest import shared_path
+    from registration_helpers import read_kitti_bin
+
+    target = read_kitti_bin(shared_path("kitti_odometry", "sequences", "00", "velodyne", "000000.bin"))
+    np.save(tmp_path / "big.npy", 100.0 * target)
+    np.save(tmp_path / "t.npy", target)
+    assert cli_exit_code(["icp", str(tmp_path / "big.npy"), str(tmp_path / "t.npy"), "-m", "vanilla"]) == 0
+    rows = {line.split("│")[1].strip(): line.split("│")[2].strip() for line in capsys.readouterr().out.splitlines()
+            if line.count("│") >= 3}
+    assert rows["degeneracy min/max eig"] == "unknown (too few correspondences)"
+    assert "eigenvalues" not in rows and "weakest direction" not in rows

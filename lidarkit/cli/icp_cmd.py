@@ -129,10 +129,13 @@ def _result_table(result, source: Path, target: Path) -> Table:
     table.add_row("correspondences / fitness", f"{result.n_correspondences} / {result.fitness:.3f}")
     table.add_row("runtime (s)", f"{result.runtime_s:.3f}")
     deg = result.degeneracy
-    table.add_row("degeneracy min/max eig", f"{deg.ratio:.2e} ({'DEGENERATE' if deg.degenerate else 'ok'}, threshold {deg.threshold:g})")
-    table.add_row("eigenvalues", " ".join(f"{e:.3g}" for e in deg.eigenvalues))
-    weakest = ", ".join(f"{n}={v:+.2f}" for n, v in zip(("tx", "ty", "tz", "rx", "ry", "rz"), deg.weakest_direction) if abs(v) > 0.1)
-    table.add_row("weakest direction", (f"{deg.weakest_name} ({weakest})" if deg.weakest_name else weakest) or "-")
+    if not np.isfinite(deg.ratio):  # no correspondences: nothing to judge ("nan (ok, ...)" read as a verdict)
+        table.add_row("degeneracy min/max eig", deg.kind)  # "unknown (too few correspondences)"
+    else:
+        table.add_row("degeneracy min/max eig", f"{deg.ratio:.2e} ({'DEGENERATE' if deg.degenerate else 'ok'}, threshold {deg.threshold:g})")
+        table.add_row("eigenvalues", " ".join(f"{e:.3g}" for e in deg.eigenvalues))
+        weakest = ", ".join(f"{n}={v:+.2f}" for n, v in zip(("tx", "ty", "tz", "rx", "ry", "rz"), deg.weakest_direction) if abs(v) > 0.1)
+        table.add_row("weakest direction", (f"{deg.weakest_name} ({weakest})" if deg.weakest_name else weakest) or "-")
     if deg.weak_directions:
         table.add_row("degenerate directions", "; ".join(deg.weak_directions) + " (sensor frame of the target)")
     if result.covariance is not None:
