@@ -15,6 +15,7 @@ from scipy.spatial.transform import Rotation
 from lidarkit import atomic
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.geometry import ORTHONORMAL_TOL, is_rotation, orthonormalize_se3, se3_inverse
+from lidarkit.params import is_real_number
 from lidarkit.textfile import data_line_numbers, file_line, read_numeric_table
 
 log = logging.getLogger(__name__)
@@ -197,15 +198,24 @@ class Trajectory:
         up to ``max_extrapolation_s`` before the first or after the last stamp, the first or last interval's motion
         continued at constant velocity. Times farther out raise DataError naming the first of them."""
         source = self.name or "trajectory"
-        if not max_extrapolation_s >= 0:  # (a negative bound refused every time, inside the stamps too)
-            raise ConfigError(f"max_extrapolation_s must be >= 0 s, got {max_extrapolation_s!r}", source=source)
+        # (a negative bound refused every time, inside the stamps too; None or text was a bare TypeError)
+        if not (is_real_number(max_extrapolation_s) and max_extrapolation_s >= 0):
+            raise ConfigError(f"max_extrapolation_s must be a number of seconds >= 0, got {max_extrapolation_s!r}",
+                              source="max_extrapolation_s")
         if self.timestamps_s is None or len(self) < 2:
             raise DataError("interpolating needs at least two poses with time stamps", source=source)
-        t = np.asarray(times_s, dtype=np.float64).reshape(-1)
+        try:
+            t = np.asarray(times_s, dtype=np.float64).reshape(-1)
+        except (TypeError, ValueError):
+            raise ConfigError(f"times_s must be numbers (s), got {times_s!r:.60}", source="times_s") from None
         stamps = self.timestamps_s
         if not np.isfinite(t).all():
             k = int(np.argmax(~np.isfinite(t)))
             raise DataError(f"time {t[k]} is not a finite number", source=source, location=f"time {k}")
+        if len(t) > 1 and not np.all(np.diff(t) > 0):  # (read "<name> (frame 1): timestamps are not strictly increasing")
+            k = int(np.argmax(~(np.diff(t) > 0))) + 1
+            raise ConfigError(f"times_s must be strictly increasing: time {k} ({t[k]:.6f} s) is not after time {k - 1} "
+                              f"({t[k - 1]:.6f} s)", source="times_s")
         outside = np.maximum(stamps[0] - t, t - stamps[-1])
         if len(t) and outside.max() > max_extrapolation_s:
             k = int(np.argmax(outside > max_extrapolation_s))

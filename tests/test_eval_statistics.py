@@ -211,7 +211,7 @@ def test_compare_runs_over_one_bag_scored_at_their_own_sweep_instants(tmp_path, 
     run(bag, other_method, out_dir=tmp_path / "other")
     res = compare(tmp_path / "kiss", tmp_path / "other")
     assert res.n_pairs == 5
-    assert f"(kiss: end, {other_method}: start), over the same dataset and frames" in res.note
+    assert f"(kiss: end, {other_method}: mid), over the same dataset and frames" in res.note
     code, out, _ = run_cli(["compare", str(tmp_path / "kiss"), str(tmp_path / "other"), "--json", str(tmp_path / "c.json")], capsys)
     assert code == 0 and "note: each run is scored against the ground truth at its own instant" in " ".join(out.split())
     assert json.loads((tmp_path / "c.json").read_text())["note"] == res.note

@@ -672,6 +672,25 @@ def test_pairwise_acceptance_gates_given_to_a_stateful_variant_are_said_to_be_un
     assert not any("acceptance gates" in w for w in plain.metrics["warnings"])
 
 
+def test_covariance_settings_of_a_run_without_pose_covariance_are_said_to_have_no_effect():
+    """kiss with covariance=gauss_newton or assess=false, small_gicp with them and --no-pose-covariance: the poses and
+    metrics of a default run, config.yaml recording the setting as if applied, and not a word."""
+    kitti = shared_path("kitti_odometry", "sequences", "00")
+    kiss = run(kitti, "kiss", params={"covariance": "gauss_newton"}, frames="0:3", progress=False)
+    assert ("covariance: shapes each frame's covariance, which this run does not compute (--pose-covariance / "
+            "pose_covariance=True asks for it): no effect") in kiss.metrics["warnings"]
+    lean = run(kitti, "kiss", params={"assess": False}, frames="0:3", progress=False)
+    assert "assess: shapes each frame's covariance, which this run does not compute" in " ".join(lean.metrics["warnings"])
+    np.testing.assert_allclose(kiss.trajectory.poses_se3, run(kitti, "kiss", frames="0:3", progress=False).trajectory.poses_se3, atol=1e-9)
+    stateless = run(kitti, "vanilla", params={"calibrated_covariance": False}, frames="0:3", progress=False, pose_covariance=False)
+    assert ("calibrated_covariance: shapes each frame's covariance, which this run does not compute: no effect"
+            in stateless.metrics["warnings"])
+    asked = run(kitti, "kiss", params={"covariance": "gauss_newton"}, frames="0:3", progress=False, pose_covariance=True)
+    assert not any("no effect" in w for w in asked.metrics["warnings"])
+    assert not any("no effect" in w for w in run(kitti, "vanilla", params={"covariance": "gauss_newton"}, frames="0:3",
+                                                     progress=False).metrics["warnings"])
+
+
 def test_a_georeferenced_run_held_at_float32_names_its_first_frame_in_the_run_warnings(tmp_path, caplog):
     """Scans stored as float32 at a UTM northing (0.5 m steps) were said once per process as "scan: ...", naming no
     frame, and not in metrics["warnings"]: a second run in the same process said nothing at all."""

@@ -166,11 +166,13 @@ def test_what_the_reader_reports_applying_is_recorded_and_printed(exported, tmp_
 
 # ---- alignment of every score ---------------------------------------------------------------------------------
 def _yawed_first_pose(seq: Path, yaw_deg: float) -> None:
-    """Rotate the ground truth of frame 0 about z: anchoring at the first pose turns the whole reference."""
-    poses = np.loadtxt(seq / "poses.txt").reshape(-1, 3, 4)
+    """Rotate the ground truth of frame 0 about z: anchoring at the first pose turns the whole reference (at every
+    instant of the sweep the folder holds: a run re-timed to another reads its poses_{instant}.txt)."""
     c, s = np.cos(np.radians(yaw_deg)), np.sin(np.radians(yaw_deg))
-    poses[0, :, :3] = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ poses[0, :, :3]
-    np.savetxt(seq / "poses.txt", poses.reshape(-1, 12), fmt="%.12e")
+    for name in ("poses.txt", *(p.name for p in seq.glob("poses_*.txt"))):
+        poses = np.loadtxt(seq / name).reshape(-1, 3, 4)
+        poses[0, :, :3] = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ poses[0, :, :3]
+        np.savetxt(seq / name, poses.reshape(-1, 12), fmt="%.12e")
 
 
 def test_every_score_names_its_alignment_in_cli_metrics_bench_table_and_report(exported, tmp_path, capsys):

@@ -141,6 +141,25 @@ def test_interpolated_poses_between_and_just_beyond_the_stamps():
         Trajectory(truth(stamps)).interpolated(times)
 
 
+
+def test_interpolation_times_and_bound_of_the_wrong_kind_are_named():
+    """Times asked out of order read "gt (frame 1): timestamps are not strictly increasing", blaming the trajectory;
+    a bound of None or text was a bare TypeError, times of text numpy's ValueError."""
+    from lidarkit.errors import ConfigError
+
+    traj = Trajectory(np.tile(np.eye(4), (3, 1, 1)), np.array([0.0, 1.0, 2.0]), name="gt")
+    for times in ([1.0, 0.5], [0.5, 0.5]):
+        with pytest.raises(ConfigError, match=r"^times_s: times_s must be strictly increasing: time 1 \(0\.500000 s\) "
+                                              r"is not after time 0"):
+            traj.interpolated(times)
+    for bound in (None, "0.1", -1.0, True):
+        with pytest.raises(ConfigError, match=r"^max_extrapolation_s: max_extrapolation_s must be a number of seconds >= 0"):
+            traj.interpolated([0.5], max_extrapolation_s=bound)
+    with pytest.raises(ConfigError, match=r"^times_s: times_s must be numbers \(s\), got 'abc'"):
+        traj.interpolated("abc")
+    assert traj.interpolated([0.5, 1.5], max_extrapolation_s=np.float64(0.0)).timestamps_s.tolist() == [0.5, 1.5]
+
+
 def test_reprs_are_one_line_and_an_empty_trajectory_has_no_distances():
     """repr(Trajectory) printed every pose (7,200 characters for 20) and repr(OdometryResult) every array (57,000);
     an empty trajectory's distances_m had one entry."""
@@ -148,7 +167,8 @@ def test_reprs_are_one_line_and_an_empty_trajectory_has_no_distances():
 
     result = run("sim:street?frames=4&beams=8&azimuths=180", "vanilla", progress=False)
     assert repr(result).startswith("OdometryResult('vanilla', 4 frames in ") and "end error" in repr(result) and "\n" not in repr(result)
-    assert repr(result.trajectory) == (f"Trajectory('vanilla on sim:street?seed=0', 4 poses, 0.100000-0.400000 s (0.3 s), "
+    # (stamped at the sweep middles, where a non-deskewed estimate refers to: the scans' sweep-end stamps less 0.05 s)
+    assert repr(result.trajectory) == (f"Trajectory('vanilla on sim:street?seed=0', 4 poses, 0.050000-0.350000 s (0.3 s), "
                                        f"path {result.trajectory.length_m:.4g} m)")
     tum = Trajectory.from_tum(shared_path("evo_testdata", "freiburg1_xyz-groundtruth.txt"))
     assert "3000 poses, 1305031098.665900-1305031128.755500 s (30.09 s)" in repr(tum)  # (read "1.30503e+09-1.30503e+09 s")
@@ -238,7 +258,7 @@ def test_relative_motions_must_be_rigid_and_extrapolation_non_negative():
     steps = np.tile(make_se3(translation=[1.0, 0.0, 0.0]), (3, 1, 1))
     assert Trajectory.from_relative_motions(steps).poses_se3[-1, 0, 3] == 3.0
     two = Trajectory(np.tile(np.eye(4), (2, 1, 1)), np.array([0.0, 1.0]), name="t")
-    with pytest.raises(ConfigError, match=r"^t: max_extrapolation_s must be >= 0 s, got -1"):
+    with pytest.raises(ConfigError, match=r"^max_extrapolation_s: max_extrapolation_s must be a number of seconds >= 0, got -1"):
         two.interpolated(np.array([0.5]), max_extrapolation_s=-1)
     assert len(two.interpolated(np.array([0.5, 1.2]), max_extrapolation_s=0.5)) == 2
 

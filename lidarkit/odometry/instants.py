@@ -1,12 +1,17 @@
 """Which instant of a sweep an estimate and its ground truth refer to, and the rule that scores like with like.
 
 A deskewing variant moves every point to one instant of the sweep and reports the pose there: kiss-icp 1.x
-deskews to the latest point, the sweep END (``Registration.deskew_instant``). Without per-point times (or
-without deskewing) the pose refers to the instant the scan's stamp refers to (``Scan.stamp_instant``, as the
-reader labels it). Ground truth states its instant in ``meta["pose_instant"]``. When both are known and differ,
-the run re-times the ground truth to the estimate's instant when the dataset can give it
+deskews to the latest point, the sweep END (``Registration.deskew_instant``). A variant that does not deskew a
+sweep measured while the sensor moved (per-point times spanning part of a sweep) fits the distorted clouds where
+they agree on average, the sweep MIDDLE: measured in ``benchmarks/sweep_instant.py`` (small_gicp and open3d_gicp
+on simulated streets, 20 of 20 runs: start and end 1.9-4.1x the RPE of mid, fitted instant 0.40-0.55 of the
+sweep; kiss without deskew half a sweep before kiss deskewed to the end). Scans without a time span (a
+snapshot, or no per-point times) are taken at the instant their stamp refers to (``Scan.stamp_instant``, as
+the reader labels it). Ground truth states its instant in ``meta["pose_instant"]``. When both are known and
+differ, the run re-times the ground truth to the estimate's instant when the dataset can give it
 (``ground_truth_at_instant(instant)``: the simulator, bags, the simulator's KITTI folders) and says so in a note;
-otherwise it refuses (EvaluationError).
+otherwise it refuses a deskewed estimate (EvaluationError) and compares a non-deskewed one as it is, with a note
+(its instant is a measured tendency, not a rule the variant applies).
 Ground truth of an unknown instant (None) is re-timed to the estimate's instant where the dataset can give it (a
 bag whose poses are stamped at no clear instant of the sweep), else compared as it is: the reader could not tell.
 """
@@ -31,11 +36,14 @@ def deskews(registration: Any, scan: Scan | None) -> bool:
 
 
 def estimate_instant(registration: Any, scan: Scan | None) -> str | None:
-    """The instant of the sweep the poses of ``registration`` over scans like ``scan`` refer to (None: unknown)."""
+    """The instant of the sweep the poses of ``registration`` over scans like ``scan`` refer to (None: unknown):
+    the one it deskews to; the sweep middle for a sweep it does not deskew (see the module doc); else the stamp's."""
     if scan is None:
         return None
     if deskews(registration, scan):
         return str(registration.deskew_instant)
+    if scan.has_time_span():
+        return "mid"
     return scan.stamp_instant
 
 
@@ -86,10 +94,16 @@ def like_with_like(reference: Trajectory, estimate_at: str | None, *, sequence: 
             return retimed, note
     if truth_at is None:  # the reader could not tell, nor give another instant: compared as it is
         return reference, None
+    if not deskewed:  # (a measured tendency of scan matching: no reason to refuse the run)
+        held = ("which this dataset cannot re-time" + why_not if own_ground_truth else
+                f"given with the run (not re-timed: give it at the sweep {estimate_at} to score like with like)")
+        return reference, (f"{method}'s poses of sweeps it does not deskew refer to about the sweep {estimate_at} "
+                           f"(benchmarks/sweep_instant.py), the ground truth to the sweep {truth_at}, {held}: compared as "
+                           "it is (the motion between the two instants counts as error)")
     raise EvaluationError(
         f"{method}'s poses refer to the sweep {estimate_at} but the ground truth to the sweep {truth_at}; comparing them "
-        f"would score the motion within a sweep as error{why_not}. Give ground truth at the sweep {estimate_at}"
-        + (" (or run without deskewing)" if deskewed else f" (the scans are stamped at the sweep {estimate_at})"),
+        f"would score the motion within a sweep as error{why_not}. Give ground truth at the sweep {estimate_at} (or run "
+        "without deskewing)",
         source=reference.name or "ground truth",
     )
 

@@ -569,7 +569,7 @@ def run(
             # instant cannot be re-timed (one pose) refused the whole run
             reference = None
             unscored_note = "none: one frame, nothing to score (the ground truth, of another instant of the sweep, left out)"
-        if instant_note is not None:
+        if instant_note is not None and retimed is not reference:
             reference = _reference(sequence, retimed, indices, dataset_name)
     if reference is not None and n == 1:  # (it printed "final error, unaligned 0.000 / 0.000" as if scored)
         reference, instant_note = None, None
@@ -599,7 +599,9 @@ def run(
                if fallback[1:].all() else f"{name} returns none")
         warnings.append(f"no frame's registration gave a covariance ({why}): no pose covariance")
         want_covariance = False
-    apart = (_stamps_apart(reference, timestamps, all_stamps, numbers) if ground_truth is not None
+    # (ground truth of another instant compared as it is: its note says so, its stamps are that instant's)
+    kept_as_is = instant_note is not None and retimed is reference
+    apart = (None if kept_as_is else _stamps_apart(reference, timestamps, all_stamps, numbers) if ground_truth is not None
              else _own_stamps_apart(reference, timestamps, all_stamps) if instant_note is None else None)
     far = _far_float32_warning(far_float32, n)
     warnings = [w for w in (past_the_end, time_gap_warning(timestamps, numbers, odometry_poses is not None, indices, typical), apart, far)
@@ -609,6 +611,12 @@ def run(
         if gates:
             warnings.append(f"{', '.join(gates)}: acceptance gates of a pairwise alignment (align); {name}'s odometry "
                             "(register_frame, its own local map) does not use them")
+    unused = [f for f in ("covariance", "calibrated_covariance", *(("assess",) if stateful else ()))
+              if f in getattr(config, "model_fields_set", ()) and not want_covariance]
+    if unused:  # (recorded in config.yaml as if applied: the poses and metrics were those of a default run)
+        ask = " (--pose-covariance / pose_covariance=True asks for it)" if pose_covariance is None else ""
+        warnings.append(f"{', '.join(unused)}: {'shapes' if len(unused) == 1 else 'shape'} each frame's covariance, which "
+                        f"this run does not compute{ask}: no effect")
     if timestamps is not None and checker.config.nominal_period_s != FrameCheckConfig.nominal_period_s:
         # (accepted and recorded in config.yaml; the stamps time the motion check)
         warnings.append(f"nominal_period_s={checker.config.nominal_period_s:g}: the frame check's period for scans without time "

@@ -110,7 +110,7 @@ def effective_settings(
     stamp_instant: str | None = None, n_flat_times: int = 0,
 ) -> tuple[dict[str, Any], list[str]]:
     """(settings really applied, warnings) of a finished run; ``has_point_times`` (n,) bool per processed frame;
-    ``stamp_instant``: the instant of the sweep the scans' stamps refer to (what an estimate without deskew refers to);
+    ``stamp_instant``: the instant of the sweep the scans' stamps refer to (what an estimate over snapshots refers to);
     ``n_flat_times``: frames whose per-point times were all equal (read as frames without per-point times)."""
     warnings: list[str] = []
     requested = deskew_requested(registration)
@@ -138,6 +138,8 @@ def effective_settings(
     if deskew["applied"]:
         stated = getattr(registration, "deskew_instant", None)
         estimate_instant = str(stated) if stated else "end" if method == "kiss" else "the instant the variant deskews to (not stated)"
+    elif n_times:  # (as estimate_instant in instants.py decides it)
+        estimate_instant = "mid (sweeps not deskewed: a scan-to-scan fit of distorted sweeps, benchmarks/sweep_instant.py)"
     elif stamp_instant is not None:
         estimate_instant = f"{stamp_instant} (the scans' stamps: each scan taken as one snapshot)"
     else:
