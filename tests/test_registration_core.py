@@ -941,3 +941,6 @@ def test_a_result_prints_as_one_line_of_its_headline_figures(synthetic_pair):
                          f"rmse {res.rmse:.4g} m, fitness {res.fitness:.3g}, {res.n_correspondences} correspondences, "
                          f"{res.runtime_s:.3g} s, reason {res.reason!r})")
     assert len(repr(res)) < 300 and "max_iterations" in repr(res)
+    # a backend that reports no iteration count (Open3D, kiss, genz) read "converged in 0 iterations"
+    o3d = get_icp("open3d_point_to_plane").align(source, target)
+    assert repr(o3d).startswith("RegistrationResult('open3d_point_to_plane', converged (iterations not reported), t [")

@@ -167,6 +167,11 @@ def test_reprs_are_one_line_and_an_empty_trajectory_has_no_distances():
 
     result = run("sim:street?frames=4&beams=8&azimuths=180", "vanilla", progress=False)
     assert repr(result).startswith("OdometryResult('vanilla', 4 frames in ") and "end error" in repr(result) and "\n" not in repr(result)
+    # (repr(result.stats) printed every per-frame array: 11,600 characters for 60 frames)
+    stats = result.stats
+    assert repr(stats) == (f"FrameStats(4 frames: {int(stats.fallback.sum())} fallback, {int((stats.degenerate & stats.measured).sum())} "
+                           f"degenerate, {int(stats.check_failed.sum())} failing the check, registration "
+                           f"{stats.register_s.mean():.3g} s a frame; to_csv() for every frame)")
     # (stamped at the sweep middles, where a non-deskewed estimate refers to: the scans' sweep-end stamps less 0.05 s)
     assert repr(result.trajectory) == (f"Trajectory('vanilla on sim:street?seed=0', 4 poses, 0.050000-0.350000 s (0.3 s), "
                                        f"path {result.trajectory.length_m:.4g} m)")

@@ -54,6 +54,15 @@ class FrameStats:
     check_s: np.ndarray | None = None
     min_eigenvalue: np.ndarray | None = None
 
+    def __repr__(self) -> str:
+        """One line of counts (the generated one printed every array: 11,600 characters for 60 frames)."""
+        n = len(self.frame)
+        counts = [f"{int(np.count_nonzero(flags))} {what}" for flags, what in (
+            (self.fallback, "fallback"), (self.degenerate & self.measured, "degenerate"),
+            (self.check_failed if self.check_failed is not None else (), "failing the check"))]
+        mean = f", registration {float(np.mean(self.register_s)):.3g} s a frame" if n else ""
+        return f"FrameStats({n} frames: {', '.join(counts)}{mean}; to_csv() for every frame)"
+
     def to_csv(self) -> str:
         buf = io.StringIO()
         writer = csv.writer(buf, lineterminator="\n")

@@ -322,7 +322,9 @@ class RegistrationResult:
         # (without the assessment, assess=False, there are no correspondences to count: no rmse, fitness, count)
         fit = (f", rmse {self.rmse:.4g} m, fitness {self.fitness:.3g}, {self.n_correspondences} correspondences"
                if self.n_correspondences >= 0 else ", not assessed")
-        return (f"RegistrationResult({self.method!r}, {state} in {self.iterations} iterations, t [{', '.join(f'{v:.4g}' for v in T[:3, 3])}] m, "
+        # (Open3D reports no iteration count: "converged in 0 iterations" read as a count)
+        steps = f" in {self.iterations} iterations" if self.extra.get("iterations_reported", True) else " (iterations not reported)"
+        return (f"RegistrationResult({self.method!r}, {state}{steps}, t [{', '.join(f'{v:.4g}' for v in T[:3, 3])}] m, "
                 f"rotation {float(rotation_angle_deg(T[:3, :3])):.4g} deg{fit}, {self.runtime_s:.3g} s{weak}{why})")
 
     @property
