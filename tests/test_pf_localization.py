@@ -180,6 +180,17 @@ def test_likelihood_averages_inject_after_a_drop_only():
     assert 0.35 < avg.injection_probability() < 0.42
 
 
+def test_a_tiny_averaging_rate_is_corrected_without_dividing_by_zero():
+    """--augmented --alpha-slow 1e-17 ended in a ZeroDivisionError traceback at the first resampling: 1 - alpha rounds
+    to 1 below ~5.5e-17, and the bias correction 1 - (1 - alpha)^n was 0. A constant likelihood is its own average."""
+    for alpha in (1e-17, 1e-300, 1e-3, 1.0):
+        avg = LikelihoodAverages(alpha, 0.1)
+        for _ in range(3):
+            avg.update(np.log(0.5))
+        assert avg._corrected(avg.w_slow, alpha) == pytest.approx(0.5, rel=1e-9)
+        assert avg.injection_probability() == pytest.approx(0.0, abs=1e-9)
+
+
 def test_augmented_and_kld_config_errors():
     with pytest.raises(ConfigError, match="alpha_slow < alpha_fast"):
         PFConfig.make(augmented=True, alpha_slow=0.2, alpha_fast=0.1)

@@ -35,7 +35,11 @@ class LikelihoodAverages:
         self.n_updates += 1
 
     def _corrected(self, value: float, alpha: float) -> float:
-        return value / (1.0 - (1.0 - alpha) ** self.n_updates)
+        # 1 - (1 - alpha)^n, exact for tiny rates: below ~5.5e-17 1 - alpha rounds to 1 and the divisor was 0
+        # (ZeroDivisionError at the first resampling of --augmented --alpha-slow 1e-17)
+        if alpha >= 1.0:  # (the latest value alone: nothing to correct; log1p(-1) is undefined)
+            return value
+        return value / -math.expm1(self.n_updates * math.log1p(-alpha))
 
     def injection_probability(self) -> float:
         """max(0, 1 - w_fast / w_slow) with bias-corrected averages; 0 before the first update."""
