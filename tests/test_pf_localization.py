@@ -574,3 +574,38 @@ def test_a_stdout_that_refuses_the_table_still_gets_the_run_folder_written(tmp_p
     assert [(r["seeds"], r["mse_m2"]) for r in rows] == [([0, 1], printed[0]["mse_m2"])]
     fits = json.loads((tmp_path / "recorded" / "metrics.json").read_text())["metrics"]["fit_q"]
     assert fits[0]["run"] == "given Q" and len(fits) >= 2
+
+
+def test_a_kidnap_too_close_to_the_end_is_not_judged(stachniss, tmp_path, capsys, monkeypatch):
+    """`--kidnap-at 331` (the last step) and `--kidnap-at 300` (31 steps left, fewer than the 40-step window, the error
+    still falling) read "no, never" with recovered False, and a study counted such runs 0 / 3: recovery could not be
+    judged. Such a run is recovered None ("n/a: only k steps after the kidnap"), left out of a study's count, which
+    says how many it left out; a recovery seen within the short window still counts."""
+    import json
+
+    from lidarkit.pf.study import kidnap_recovery
+
+    monkeypatch.setenv("COLUMNS", "300")  # (one line per table row)
+    data = str(shared_path("pf", "robot_mapping_stachniss"))
+    for step, left in ((331, 0), (300, 31)):
+        with pytest.raises(SystemExit) as exc:
+            main(["pf", data, "--kidnap-at", str(step), "--visible", "all", "--augmented", "-n", "500", "--out", str(tmp_path / str(step))])
+        assert exc.value.code in (0, None)
+        out = capsys.readouterr().out
+        assert f"│ n/a: only {left} steps after the kidnap (the window is 40) │" in out, out
+        metrics = json.loads((tmp_path / str(step) / "metrics.json").read_text())["metrics"]
+        assert metrics["kidnap_recovery"] == {"steps_to_recover": None, "recovered": None, "within_steps": 40}
+    with pytest.raises(SystemExit) as exc:
+        main(["pf", data, "--kidnap-at", "331", "--visible", "all", "--augmented", "-n", "500", "--seeds", "3", "--out", str(tmp_path / "study")])
+    assert exc.value.code in (0, None)
+    out = capsys.readouterr().out
+    row = next(line for line in out.splitlines() if line.startswith("│ 500"))
+    assert [cell.strip() for cell in row.split("│")[4:8:3]] == ["3 / 3", "n/a"], row  # localized; recovered (none judged)
+    assert ("3 run(s) left out of recovered: not back by the last step, only 0 steps after the kidnap (the window is 40)"
+            in " ".join(out.split())), out
+    assert json.loads((tmp_path / "study" / "study.json").read_text())["rows"][0]["recovered"] == [None, None, None]
+    # the three answers on a known error curve (332 poses, kidnap at 300: 31 steps after it)
+    recovering = np.r_[np.full(300, 0.1), np.full(3, 5.0), np.full(29, 0.2)]
+    assert kidnap_recovery(recovering, 300) == {"steps_to_recover": 3, "recovered": True, "within_steps": 40}
+    assert kidnap_recovery(np.r_[np.full(300, 0.1), np.full(32, 5.0)], 300)["recovered"] is None
+    assert kidnap_recovery(np.r_[np.full(291, 0.1), np.full(41, 5.0)], 291)["recovered"] is False  # 40 steps after: judged

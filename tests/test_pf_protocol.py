@@ -430,3 +430,35 @@ def test_snapshots_all_past_the_end_are_refused_before_the_run(capsys, tmp_path)
     with pytest.raises(SystemExit) as exc:
         main(["pf", str(data), "-n", "100", "--snapshots", "300,400", "--out", str(tmp_path / "b")])
     assert exc.value.code in (0, None) and (tmp_path / "b" / "particles.png").exists()
+
+
+def test_the_fit_q_progress_ends_at_the_runs_done(monkeypatch, capsys, tmp_path):
+    """The --fit-q progress counted 6 runs up front and stopped at "993/1986 steps (50 %), ~110 s left" when the fit
+    settled after 3: it ends at 100 % of the runs it did."""
+    from lidarkit.cli import pf_cmd
+
+    data = str(shared_path("pf", "robot_mapping_stachniss"))
+    monkeypatch.setattr(pf_cmd, "PROGRESS_FROM_PARTICLES", 50)  # (the path of 100,000 particles, in seconds)
+    with pytest.raises(SystemExit) as exc:
+        main(["pf", data, "-n", "2000", "--recorded", "--fit-q", "--out", str(tmp_path / "run"), "--snapshots", "331"])
+    assert exc.value.code in (0, None)
+    lines = [line for line in capsys.readouterr().err.splitlines() if line.startswith("pf --fit-q")]
+    runs = len(json.loads((tmp_path / "run" / "metrics.json").read_text())["metrics"]["fit_q"])
+    assert runs == 3
+    assert lines[-1].startswith("pf --fit-q (up to 6 runs), 2,000 particles: 993/993 steps (100 %),"), lines
+    assert lines[-1].endswith("~0 s left") and "(50 %)" in lines[-2], lines
+
+
+def test_a_trajectory_the_run_did_not_record_names_those_it_did(stachniss):
+    """`run_protocol(...).trajectory("best")` said only "no trajectory 'best' in this run": the error lists the
+    trajectories the run has and points to estimators=."""
+    from lidarkit.errors import ConfigError
+
+    result = run_protocol(stachniss, 20, 0, with_ape_rpe=False)
+    with pytest.raises(ConfigError) as err:
+        result.trajectory("best")
+    assert str(err.value) == ("trajectory: no trajectory 'best' in this run; it has estimate, ground_truth, dead_reckoning, mean "
+                              "(run_protocol records the estimators= it is given, by default the config's estimator only: "
+                              "estimators=('mean', 'best') keeps both)")
+    both = run_protocol(stachniss, 20, 0, with_ape_rpe=False, estimators=("mean", "best"))
+    assert len(both.trajectory("best")) == 332

@@ -208,7 +208,7 @@ def pf_command(
             bar.stop()
         if out is not None:  # the run folder before the table: a stdout that refuses it (> /dev/full) lost the run
             _write_study(rows, cfg, protocol, {**scenario, **data_files(data), "n_particles": counts, "seeds": seed_list}, out)
-        _print_study(rows, cfg, protocol, kidnap_at)
+        _print_study(rows, cfg, protocol, kidnap_at, len(data))
         if out is not None:
             stderr().print(f"results written to {out}")
         return
@@ -297,10 +297,30 @@ def _step_progress(cfg: PFConfig, n_steps: int, label: str, runs: int = 1):
     from lidarkit.progress import progress_bar
 
     bar, task = progress_bar(n_steps * runs, f"{label}, {cfg.particle_count_label()} particles", unit="steps")
+    done = 0
+
+    def on_step(_done: int, _total: int) -> None:
+        nonlocal done
+        done += 1
+        bar.advance(task)
+
     try:
-        yield lambda _done, _total: bar.advance(task)
+        yield on_step
+        if done < n_steps * runs:  # fewer runs than it may take (--fit-q settled early): end at 100 %, not at "50 %, ~110 s left"
+            _resize(bar, task, done)
     finally:
         bar.stop()
+
+
+def _resize(bar, task: int, total: int) -> None:
+    """Set a progress bar's total to ``total`` and draw it (rich's bar or the lines drawn off a terminal)."""
+    from lidarkit.progress import ProgressLines
+
+    if isinstance(bar, ProgressLines):
+        bar.total = total
+        bar.advance(task, 0)  # (draws its last line: done == total)
+    else:
+        bar.update(task, total=total, refresh=True)
 
 
 def _kept_steps(snap_steps: tuple[int, ...], gif: bool, n_steps: int, out: Path | None) -> tuple[int, ...]:
@@ -356,7 +376,7 @@ def _recorded(data, cfg: PFConfig, seed: int, fit_q: bool, out: Path | None, sna
         stderr().print(f"results written to {out}")
 
 
-def _print_study(rows, cfg: PFConfig, protocol: str, kidnap_at: int | None) -> None:
+def _print_study(rows, cfg: PFConfig, protocol: str, kidnap_at: int | None, n_steps: int) -> None:
     from lidarkit.pf.study import RECOVERED_WITHIN_STEPS
 
     seeds = rows[0].seeds
@@ -372,13 +392,18 @@ def _print_study(rows, cfg: PFConfig, protocol: str, kidnap_at: int | None) -> N
                      "localized: seeds with error < 0.5 m at >= 95% of the steps from 50 on; lost: seeds with a step beyond "
                      "the chi-square 99.9% gate" + (f"; recovered: seeds back below 0.5 m for good within {RECOVERED_WITHIN_STEPS} "
                                                     "steps of the kidnap" if kidnap_at is not None else ""))
+    not_judged = sum(k is None for r in rows for k in r.recovered)
+    if not_judged:  # (they counted as not recovered: a kidnap at the last step gave "0 / 3")
+        table.caption += (f"; {not_judged} run(s) left out of recovered: not back by the last step, only {n_steps - kidnap_at} "
+                          f"steps after the kidnap (the window is {RECOVERED_WITHIN_STEPS})")
     for r in rows:
         judged = [f for f in r.localized if np.isfinite(f)]  # NaN: no step from 50 on to judge (a shorter recording)
         localized = f"{sum(f >= 0.95 for f in judged)} / {len(judged)}" if judged else "n/a"
         cells = [str(r.n_particles), f"{r.mse_mean:.4g} ± {r.mse_std:.3g}", f"{np.mean(r.mean_count):.0f}",
                  localized, f"{r.lost_seeds} / {len(seeds)}", f"{np.mean(r.runtime_s):.3f}"]
         if kidnap_at is not None:
-            cells.append(f"{sum(k is not None and k <= RECOVERED_WITHIN_STEPS for k in r.recovered_in)} / {len(seeds)}")
+            recovered = [k for k in r.recovered if k is not None]
+            cells.append(f"{sum(recovered)} / {len(recovered)}" if recovered else "n/a")
         table.add_row(*cells)
     stdout().print(table)
 
@@ -437,8 +462,13 @@ def _print(result) -> None:
         _row(table, "position error at the last step [m]", f"{err[-1]:.3f}")
     if "kidnap_recovery" in m:  # the study's "recovered", for one run
         kr = m["kidnap_recovery"]
-        _row(table, f"kidnap recovered (< 0.5 m for good, <= {kr['within_steps']} steps)",
-             "no, never" if kr["steps_to_recover"] is None else f"{'yes' if kr['recovered'] else 'no'}, {kr['steps_to_recover']} steps")
+        if kr["recovered"] is None:  # (a kidnap at the last step read "no, never")
+            verdict = f"n/a: only {result.n_steps - result.settings['kidnap_at_step']} steps after the kidnap (the window is {kr['within_steps']})"
+        elif kr["steps_to_recover"] is None:
+            verdict = "no, never"
+        else:
+            verdict = f"{'yes' if kr['recovered'] else 'no'}, {kr['steps_to_recover']} steps"
+        _row(table, f"kidnap recovered (< 0.5 m for good, <= {kr['within_steps']} steps)", verdict)
     _row(table, "filter runtime [s]", f"{result.runtime_s:.3f}")
     _row(table, "resamples / steps", f"{int(result.resampled.sum())} / {result.n_steps}")
     if result.n_weight_resets:

@@ -182,9 +182,13 @@ class PFRunResult:
 
     def trajectory(self, which: str = "estimate") -> Trajectory:
         """``estimate`` / ``mean`` / ``best`` / ``ground_truth`` / ``dead_reckoning`` as an SE(3) Trajectory (z = 0)."""
-        poses = {"estimate": self.estimate, "ground_truth": self.ground_truth, "dead_reckoning": self.dead_reckoning, **self.estimates}.get(which)
-        if poses is None:
-            raise ConfigError(f"no trajectory {which!r} in this run", source="trajectory")
+        kept = {"estimate": self.estimate, "ground_truth": self.ground_truth, "dead_reckoning": self.dead_reckoning, **self.estimates}
+        poses = kept.get(which)
+        if poses is None:  # (it said only "no trajectory 'best' in this run": a run records only the estimators asked for)
+            available = ", ".join(k for k, v in kept.items() if v is not None)
+            raise ConfigError(f"no trajectory {which!r} in this run; it has {available} (run_protocol records the estimators= "
+                              "it is given, by default the config's estimator only: estimators=('mean', 'best') keeps both)",
+                              source="trajectory")
         return poses_to_trajectory(poses, name=which)
 
     def to_dict(self) -> dict[str, Any]:

@@ -53,10 +53,17 @@ def steps_to_recover(error_m: np.ndarray, kidnap_step: int, tol_m: float = LOCAL
 
 
 def kidnap_recovery(error_m: np.ndarray, kidnap_step: int) -> dict[str, Any]:
-    """One run's kidnap figures: ``steps_to_recover`` (None: never) and ``recovered`` (within RECOVERED_WITHIN_STEPS,
-    the study's count)."""
+    """One run's kidnap figures: ``steps_to_recover`` (None: not by the last step) and ``recovered`` (within
+    RECOVERED_WITHIN_STEPS, the study's count). ``recovered`` is None, not judged, for a run that ends less than the
+    window after the kidnap without having recovered (a kidnap at the last step read "no, never")."""
     k = steps_to_recover(error_m, kidnap_step)
-    return {"steps_to_recover": k, "recovered": k is not None and k <= RECOVERED_WITHIN_STEPS, "within_steps": RECOVERED_WITHIN_STEPS}
+    if k is not None and k <= RECOVERED_WITHIN_STEPS:
+        recovered: bool | None = True
+    elif len(error_m) - 1 - kidnap_step < RECOVERED_WITHIN_STEPS:  # the window runs past the last step
+        recovered = None
+    else:
+        recovered = False
+    return {"steps_to_recover": k, "recovered": recovered, "within_steps": RECOVERED_WITHIN_STEPS}
 
 
 @dataclass
@@ -71,6 +78,7 @@ class StudyRow:
     lost_seeds: int = 0
     localized: list[float] = field(default_factory=list)  # fraction of steps >= 50 with error < 0.5 m, per seed
     recovered_in: list[int | None] = field(default_factory=list)  # kidnap runs: steps to recover per seed
+    recovered: list[bool | None] = field(default_factory=list)  # kidnap runs: kidnap_recovery's "recovered" per seed
 
     @property
     def mse_mean(self) -> float:
@@ -84,7 +92,8 @@ class StudyRow:
     def to_dict(self) -> dict[str, Any]:
         return {"n_particles": self.n_particles, "seeds": self.seeds, "mse_m2": self.mse_m2, "mse_mean": self.mse_mean,
                 "mse_std": self.mse_std, "mean_count": self.mean_count, "runtime_s": self.runtime_s,
-                "lost_seeds": self.lost_seeds, "localized_fraction": self.localized, "recovered_in_steps": self.recovered_in}
+                "lost_seeds": self.lost_seeds, "localized_fraction": self.localized, "recovered_in_steps": self.recovered_in,
+                "recovered": self.recovered}
 
 
 def run_study(data, particles: list[int], seeds: list[int], *, config: PFConfig | None = None,
@@ -112,7 +121,9 @@ def run_study(data, particles: list[int], seeds: list[int], *, config: PFConfig 
             err = r.position_error_m()
             row.localized.append(localized_fraction(err))
             if kidnap is not None:
-                row.recovered_in.append(steps_to_recover(err, int(kidnap)))
+                kr = r.metrics["kidnap_recovery"]
+                row.recovered_in.append(kr["steps_to_recover"])
+                row.recovered.append(kr["recovered"])
             if on_run is not None:
                 on_run()
         rows.append(row)
