@@ -271,3 +271,98 @@ def test_a_run_folder_against_a_bench_folder_of_several_methods_names_the_real_r
         assert run_cli(["compare", *argv], capsys) == (1, "", reason)
     with pytest.raises(ConfigError, match=r"2 methods in this folder; choose one of: bad, good$"):  # (bench with bench: still asked)
         compare(bench, bench)
+
+
+def test_two_experiments_of_one_task_are_not_pooled_as_seeds(tmp_path, capsys):
+    """Two pf experiments differing only in mse_start, 3 seeds each: compare paired "6 seeds" (p = 0.031, a winner) from
+    3 seeds whose APE each experiment repeats. A method's results over several experiments of the task are refused now,
+    --experiment picks one, and the labels name the experiment."""
+    _task("experiments_test_task", lambda job: {"ape_rmse_m": (0.1 if job.method == "good" else 0.5) + 0.01 * job.seed,
+                                                "drift_translation_pct": None if job.seed == 0 else 1.0})
+    out = _bench(tmp_path, "s", "seeds: 3\nexperiments:\n"
+                 "  - {name: early, task: experiments_test_task, dataset: {kind: synthetic, name: syn}, options: {start: 10}, methods: [good, bad]}\n"
+                 "  - {name: late, task: experiments_test_task, dataset: {kind: synthetic, name: syn}, options: {start: 100}, methods: [good, bad]}\n")
+    pick = {"method_a": "good", "method_b": "bad", "metric": "ape_rmse_m"}
+    with pytest.raises(ConfigError) as exc:
+        compare(out, out, **pick)
+    assert str(exc.value) == (f"{out}: good has results in 2 experiments of task experiments_test_task (early, late), each its "
+                              "own: --experiment picks one")
+    early = compare(out, out, **pick, experiment="early")
+    assert (early.n_pairs, early.pairing, early.p_value, early.better, early.note) == (3, "seed", 0.25, "", "")
+    with pytest.raises(ConfigError) as exc:
+        compare(out, out, **pick, experiment="nope")
+    assert str(exc.value) == f"{out}: no result of good in experiment 'nope'; it has results in: early, late"
+    with pytest.raises(EvaluationError) as exc:
+        compare(out, out, **{**pick, "metric": "drift_translation_pct"}, experiment="late")
+    assert str(exc.value) == ("compare: metric 'drift_translation_pct' missing in good and bad for 1 of 3 units (late: syn, "
+                              "seed 0): KITTI drift needs 100 m of path; --metric ape_rmse_m compares every unit")
+    code, stdout, _ = run_cli(["compare", str(out), str(out), "--method-a", "good", "--method-b", "bad", "--metric", "ape_rmse_m",
+                               "--experiment", "late"], capsys)
+    assert code == 0 and "(3 paired seeds, 0 ties)" in stdout
+    # one experiment per suite: its name is a label, two suites that name it apart still pair
+    a = _bench(tmp_path, "a", "seeds: 3\nexperiments:\n  - {name: x, task: experiments_test_task, dataset: {kind: synthetic}, methods: [good]}\n")
+    b = _bench(tmp_path, "b", "seeds: 3\nexperiments:\n  - {name: y, task: experiments_test_task, dataset: {kind: synthetic}, methods: [bad]}\n")
+    assert compare(a, b, metric="ape_rmse_m").n_pairs == 3
+
+
+def test_a_non_finite_metric_value_is_named_like_a_missing_one(tmp_path):
+    """A NaN in one job result read "error: bad: 1 non-finite value(s) among 6", naming neither the metric nor the
+    seed, where a null named both."""
+    _task("nan_test_task", _error)
+    out = _bench(tmp_path, "s", "seeds: 6\nexperiments:\n  - {task: nan_test_task, dataset: {kind: synthetic, name: syn}, methods: [good, bad]}\n")
+    path = next(p for p in (out / "jobs").glob("*.json")
+                if (r := json.loads(p.read_text()))["job"]["method"] == "bad" and r["job"]["seed"] == 3)
+    record = json.loads(path.read_text())
+    record["metrics"]["ape_rmse_m"] = float("nan")
+    path.write_text(json.dumps(record))  # (json writes NaN, as a hand edit would)
+    with pytest.raises(EvaluationError) as exc:
+        compare(out, out, method_a="good", method_b="bad")
+    assert str(exc.value) == "compare: metric 'ape_rmse_m' missing (null or not finite) in bad for 1 of 6 units (syn, seed 3)"
+
+
+def test_bench_pairs_scored_at_different_sweep_instants_are_said(tmp_path):
+    """Bench results of kiss (ground truth at the sweep end) and kiss deskew=False (mid) were paired without a word,
+    though two run folders of the same runs say so in the note."""
+    _task("instant_test_task", _error, lambda job: {"odometry_metrics": {"effective": {
+        "ground_truth_instant": "end" if job.method == "good" else "mid"}}})
+    out = _bench(tmp_path, "s", "seeds: 6\nexperiments:\n  - {task: instant_test_task, dataset: {kind: synthetic}, methods: [good, bad, worse]}\n")
+    result = compare(out, out, method_a="good", method_b="bad")
+    assert result.note == "each side is scored against the ground truth at its own instant of the sweep (good: end, bad: mid)"
+    assert compare(out, out, method_a="bad", method_b="worse").note == ""
+
+
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="needs /dev/full (a device that is always full)")
+def test_the_json_is_written_before_stdout_refuses_the_comparison(tmp_path):
+    """`lidarkit compare A B --json out.json > /dev/full` (or `| head -1`) failed printing, exit 1, and no JSON was
+    written: it is written first now, as vo, pf and eval write theirs."""
+    import subprocess
+    import sys
+
+    methods = "[{name: random_walk, params: {steps: 20, noise_m: 0.05}}, {name: random_walk, params: {steps: 20, noise_m: 0.5}}]"
+    out = _bench(tmp_path, "s", f"seeds: 6\nexperiments:\n  - {{task: selftest, dataset: {{kind: synthetic}}, methods: {methods}}}\n")
+    with open("/dev/full", "w") as full:
+        done = subprocess.run([sys.executable, "-m", "lidarkit", "compare", str(out), str(out), "--method-a",
+                               "random_walk(noise_m=0.05, steps=20)", "--method-b", "random_walk(noise_m=0.5, steps=20)",
+                               "--metric", "ape_rmse_m", "--json", str(tmp_path / "c.json")],
+                              stdout=full, stderr=subprocess.PIPE, text=True, timeout=300)
+    assert (done.returncode, done.stderr) == (1, "error: stdout: cannot write: no space left on the device\n")
+    data = json.loads((tmp_path / "c.json").read_text())
+    assert (data["n_pairs"], data["better"]) == (6, "a")
+
+
+def test_a_particle_filter_run_folder_is_named_as_one(tmp_path, capsys):
+    """`compare PF_RUN PF_RUN` said "no ground_truth_kitti.txt: a paired comparison needs the estimate and its ground
+    truth" (the folder holds it as TUM), and against a bench folder called it an odometry run folder."""
+    from conftest import cli_exit_code, shared_path
+
+    data = str(shared_path("pf", "robot_mapping_stachniss"))
+    for name, n in (("one", "50"), ("two", "60")):
+        assert cli_exit_code(["pf", data, "-n", n, "-o", str(tmp_path / name)]) == 0
+    capsys.readouterr()
+    assert cli_exit_code(["compare", str(tmp_path / "one"), str(tmp_path / "two")]) == 1
+    assert capsys.readouterr().err.strip() == (
+        f"error: {tmp_path / 'one'}: a particle-filter run folder: compare pairs odometry run folders, or bench results "
+        "folders (the seeds of a suite: lidarkit bench)")
+    (tmp_path / "bench" / "jobs").mkdir(parents=True)
+    assert cli_exit_code(["compare", str(tmp_path / "one"), str(tmp_path / "bench")]) == 1
+    assert "a particle-filter run folder" in capsys.readouterr().err

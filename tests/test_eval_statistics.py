@@ -322,7 +322,8 @@ def test_compare_holds_the_jobs_of_the_folder_s_suite_as_its_report(tmp_path, ca
     now = compare(folder, folder, method_a="kiss", method_b="vanilla", metric="ape_rmse_m")
     assert now.n_pairs == 3 and "14 result(s) in" in now.note and "not in its suite.json (an earlier suite) left out" in now.note
     every = compare(folder, folder, method_a="kiss", method_b="vanilla", metric="ape_rmse_m", every_result=True)
-    assert every.n_pairs == 10 and every.note == ""
+    assert every.n_pairs == 10 and every.note == ("each side is scored against the ground truth at its own instant of the "
+                                                  "sweep (kiss: end, vanilla(voxel_size_m=0.5): mid)")
     with pytest.raises(ConfigError, match=r"unknown metric 'ape_rmse'; these results have: .*ape_rmse_m"):  # it listed the seeds
         compare(folder, folder, method_a="kiss", method_b="vanilla", metric="ape_rmse")
     code, out, _ = run_cli(["compare", str(folder), str(folder), "--method-a", "kiss", "--method-b", "vanilla", "--metric", "ape_rmse_m",
@@ -524,3 +525,20 @@ def test_arguments_of_the_wrong_kind_are_named_errors():
         summarize(None)
     assert str(exc.value) == "summarize: values must be numbers, got None"
     assert not paired_test(a, b, lower_is_better=np.bool_(False)).lower_is_better  # numpy booleans are booleans
+
+
+def test_two_kiss_run_folders_at_different_sweep_instants_are_named_as_the_header(tmp_path):
+    """kiss (deskewed: the sweep end) against kiss deskew=False (mid) over one bag: the header said "kiss (A)" and
+    "kiss (B)", the note "(kiss: end, kiss: mid)", which could not tell which run was scored at which instant."""
+    from lidarkit.odometry import run
+    from lidarkit.sim.bag_export import export_bag
+    from lidarkit.sim.lidar import SimulatedLidarSequence
+
+    sim = dict(scene="street", n_frames=6, n_beams=16, n_azimuths=720, speed_mps=5.0, accel_time_s=0.0)
+    bag = export_bag(SimulatedLidarSequence(pose_instant="mid", seed=4, **sim), tmp_path / "run.bag", "rosbag1")
+    run(bag, "kiss", out_dir=tmp_path / "kiss")
+    run(bag, "kiss", params={"deskew": False}, out_dir=tmp_path / "flat")
+    res = compare(tmp_path / "kiss", tmp_path / "flat")
+    assert (res.name_a, res.name_b, res.n_pairs) == ("kiss (A)", "kiss (B)", 5)
+    assert res.note.startswith("each run is scored against the ground truth at its own instant of the sweep (kiss (A): end, "
+                               "kiss (B): mid), over the same dataset and frames")

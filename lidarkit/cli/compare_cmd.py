@@ -31,6 +31,8 @@ def compare_command(
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write the comparison as JSON here."),
     every_result: bool = typer.Option(False, "--all", help="Bench folders: every result in the folder, not only the jobs of its suite.json (as its report)."),
     task: Optional[str] = typer.Option(None, "--task", help="Bench folders: compare the units of this task (needed when several tasks report the metric)."),
+    experiment: Optional[str] = typer.Option(
+        None, "--experiment", help="Bench folders: compare the units of this experiment (needed when a method's results of the task span several)."),
 ) -> None:
     """Pair RUN_A and RUN_B on the same units (KITTI segments, frames or seeds) and test the difference (Wilcoxon)."""
     from lidarkit.eval.compare import compare
@@ -38,7 +40,12 @@ def compare_command(
     _outside_inputs(json_out, {"RUN_A": run_a, "RUN_B": run_b, "--noise-from": noise_from})
     atomic.check_target(json_out, "file")  # (--json FOLDER failed after the comparison)
     result = compare(run_a, run_b, metric=metric, method_a=method_a, method_b=method_b, alpha=alpha, noise=noise,
-                     noise_from=noise_from, seed=seed, every_result=every_result, task=task)
+                     noise_from=noise_from, seed=seed, every_result=every_result, task=task,
+                     experiment=experiment)
+    if json_out is not None:  # (before printing: `| head -1` or a full disk on stdout lost it, exit 1)
+        from lidarkit.eval.report import write_json
+
+        write_json(result.to_dict(), json_out)
     console = stdout()
     console.print(f"A: {result.name_a}   B: {result.name_b}   metric: {result.metric} ({result.n_pairs} paired "
                   f"{result.pairing}s, {result.n_ties} ties)", soft_wrap=True)
@@ -55,9 +62,6 @@ def compare_command(
     if result.note:
         console.print(f"note: {result.note}", soft_wrap=True, markup=False)
     if json_out is not None:
-        from lidarkit.eval.report import write_json
-
-        write_json(result.to_dict(), json_out)
         console.print(f"wrote {json_out}", soft_wrap=True)
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import os
 import re
 from collections import Counter
@@ -42,7 +43,7 @@ class OdometryRun:
 
 @dataclass
 class BenchRuns:
-    """Successful bench results of one method label, keyed by (dataset spec, task options, seed)."""
+    """Successful bench results of one method label, keyed by (task, experiment, dataset spec, task options, seed)."""
 
     path: Path
     name: str
@@ -54,6 +55,7 @@ class BenchRuns:
     higher_is_better: set[str] = field(default_factory=set)  # metrics the results say are better higher (their task's word)
     alignments: dict[str, dict[str, str]] = field(default_factory=dict)  # pair key -> metric -> alignment its job states
     failed: set[str] = field(default_factory=set)  # pair keys whose job failed
+    instants: dict[str, str] = field(default_factory=dict)  # pair key -> sweep instant of the ground truth it was scored against
     records: list[dict[str, Any]] = field(default_factory=list, repr=False)  # the folder's latest records, read once
 
 
@@ -72,6 +74,10 @@ def load_odometry_run(path: str | os.PathLike) -> OdometryRun:
         raise DataError(f"unreadable metrics.json ({err})", source=metrics_file) from None
     if not isinstance(metrics, dict):
         raise DataError("metrics.json is not a JSON object", source=metrics_file)
+    other = _other_run_kind(path)
+    if other:  # ("no ground_truth_kitti.txt" for a pf run folder, which holds its ground truth as TUM)
+        raise DataError(f"a {other} run folder: compare pairs odometry run folders, or bench results folders (the seeds of "
+                        f"a suite: lidarkit bench)", source=path)
     for name in ("poses_kitti.txt", "ground_truth_kitti.txt"):
         if not (path / name).is_file():
             raise DataError(f"no {name}: a paired comparison needs the estimate and its ground truth", source=path)
@@ -134,21 +140,26 @@ def load_bench_runs(path: str | os.PathLike, method: str | None = None, every_re
                               source=path)
         chosen = named[0]
     runs = BenchRuns(path, chosen, n_left_out=n_left_out, records=every, n_earlier_version=n_earlier_version)
-    for r in latest:
-        job = Job.from_spec(r["job"])
-        if job.method_label != chosen or (suite and r["key"] not in suite):
-            continue
+    jobs = [(r, job) for r in latest
+            if (job := Job.from_spec(r["job"])).method_label == chosen and (not suite or r["key"] in suite)]
+    several = len({job.experiment for _, job in jobs}) > 1  # (labels name the experiment then)
+    for r, job in jobs:
         # the dataset's ``name`` is a label, not data (as its readers take it): "sim street" and "street" over one spec
-        # pair; two entries of one suite that differ by name only are one dataset, counted once
+        # pair; two entries of one suite that differ by name only are one dataset, counted once. The experiment is
+        # part of the unit: two experiments of one task were pooled, their units counted as seeds of one
         dataset = {k: v for k, v in job.dataset.items() if k != "name"}
-        key = canonical_json({"task": job.task, "dataset": dataset, "options": job.options, "seed": job.seed})
+        key = canonical_json({"task": job.task, "experiment": job.experiment, "dataset": dataset, "options": job.options,
+                              "seed": job.seed})
         if r.get("status") != "ok":
             runs.failed.add(key)
         elif key not in runs.values:
             runs.values[key] = dict(r.get("metrics") or {})
-            runs.labels[key] = f"{job.dataset_name}, seed {job.seed}"
+            runs.labels[key] = f"{job.experiment + ': ' if several else ''}{job.dataset_name}, seed {job.seed}"
             runs.alignments[key] = dict(((r.get("info") or {}).get("metric_alignment")) or {})
             runs.versions[key] = str(r.get("lidarkit_version") or "unknown")
+            effective = (((r.get("info") or {}).get("odometry_metrics") or {}).get("effective")) or {}
+            if effective.get("ground_truth_instant"):
+                runs.instants[key] = str(effective["ground_truth_instant"])
             runs.higher_is_better.update(r.get("higher_is_better") or ())
     runs.failed -= set(runs.values)
     return runs
@@ -160,18 +171,19 @@ def _few(labels: list[str], n: int = 3) -> str:
     return f"{text}; ... ({len(labels)} in all)" if len(labels) > n else text
 
 
-def _same_ground_truth(a: OdometryRun, b: OdometryRun) -> str:
+def _same_ground_truth(a: OdometryRun, b: OdometryRun, names: tuple[str, str]) -> str:
     """"" when both runs were scored against the same ground truth; a note when they ran over the same dataset and
     frames but each against the truth at its own instant of the sweep (the run re-timed it: e.g. kiss deskews to the
-    sweep end, small_gicp refers to the scans' stamps); EvaluationError otherwise."""
+    sweep end, small_gicp refers to the scans' stamps), the runs called by ``names`` (as the header: "kiss (A)", "kiss
+    (B)" when both are kiss); EvaluationError otherwise."""
     ga, gb = a.ground_truth, b.ground_truth
     if len(ga) == len(gb) and np.allclose(ga.poses_se3, gb.poses_se3, atol=1e-6):
         return ""
     instants = [(run.metrics.get("effective") or {}).get("ground_truth_instant") for run in (a, b)]
     data = [_data_of(run) for run in (a, b)]
     if len(ga) == len(gb) and None not in instants and instants[0] != instants[1] and None not in data and data[0] == data[1]:
-        return (f"each run is scored against the ground truth at its own instant of the sweep ({a.name}: {instants[0]}, "
-                f"{b.name}: {instants[1]}), over the same dataset and frames ({data[0][0]}, frames {data[0][1]})")
+        return (f"each run is scored against the ground truth at its own instant of the sweep ({names[0]}: {instants[0]}, "
+                f"{names[1]}: {instants[1]}), over the same dataset and frames ({data[0][0]}, frames {data[0][1]})")
     raise EvaluationError(
         f"runs over different data: {a.path} has {len(ga)} ground-truth poses, {b.path} has {len(gb)}"
         + (" with other values" if len(ga) == len(gb) else ""),
@@ -217,6 +229,7 @@ def compare(
     seed: int = 0,
     every_result: bool = False,
     task: str | None = None,
+    experiment: str | None = None,
 ) -> PairedComparison:
     """Paired Wilcoxon comparison of run ``a`` against run ``b`` (``diff = a - b``).
 
@@ -228,7 +241,8 @@ def compare(
     folders pair per (dataset, seed) on a job metric (default: KITTI drift, else APE RMSE); ``method_a`` /
     ``method_b`` pick a method when a folder holds several (the same folder may be given twice); only the jobs of each
     folder's ``suite.json`` are compared, as its report holds them (``every_result``: every result in the folder);
-    ``task``: the units of that task (needed when several tasks of the folders report the metric).
+    ``task``: the units of that task (needed when several tasks of the folders report the metric); ``experiment``: the
+    units of that experiment (needed when a side's results of the task span several: their units are not seeds of one).
     Runs over different data raise EvaluationError; two runs over the same dataset and frames, each scored against the
     ground truth at its own instant of the sweep, are compared with a ``note`` saying so.
     """
@@ -257,11 +271,12 @@ def compare(
     if name_a == name_b:
         name_a, name_b = f"{name_a} (A)", f"{name_b} (B)"
     if isinstance(side_a, OdometryRun):
-        if task is not None:  # (it would be ignored)
-            raise ConfigError("a task applies to bench results folders only", source="task")
+        for given, what, name in ((task, "a task", "task"), (experiment, "an experiment", "experiment")):  # (it would be ignored)
+            if given is not None:
+                raise ConfigError(f"{what} applies to bench results folders only", source=name)
         if every_result:  # (--all was ignored without a word)
             raise ConfigError("every result (--all) applies to bench results folders only", source="all")
-        note = _same_ground_truth(side_a, side_b)
+        note = _same_ground_truth(side_a, side_b, (name_a, name_b))
         if metric is None:
             from lidarkit.eval import drift_segments_possible
 
@@ -277,6 +292,7 @@ def compare(
         result = paired_test(va, vb, name_a=name_a, name_b=name_b, metric=metric, pairing=pairing,
                              alpha=alpha, noise=noise, seed=seed)
         return dataclasses.replace(result, note=note) if note else result
+    side_a, side_b = _by_experiment(side_a, side_b, experiment)
     keys_a, keys_b = set(side_a.values), set(side_b.values)
     common = sorted(keys_a & keys_b)
     if not common:
@@ -287,7 +303,7 @@ def compare(
             source="compare",
         )
     def has(k: str, name: str) -> bool:
-        return side_a.values[k].get(name) is not None and side_b.values[k].get(name) is not None
+        return _usable(side_a.values[k].get(name)) and _usable(side_b.values[k].get(name))
 
     if metric is None:  # the first default metric any unit has (a suite of several tasks: the units of its task)
         present = set.union(*(set(side_a.values[k]) & set(side_b.values[k]) for k in common))
@@ -303,7 +319,7 @@ def compare(
     if not any(has(k, metric) for k in common):  # in no unit: a misspelt metric, not results that lack it
         present = set.union(*(set(side_a.values[k]) & set(side_b.values[k]) for k in common))
         if metric in present:  # (it read "unknown metric 'iterations'; these results have: ..., iterations, ...")
-            silent = [side.name for side in (side_a, side_b) if all(side.values[k].get(metric) is None for k in common)]
+            silent = [side.name for side in (side_a, side_b) if not any(_usable(side.values[k].get(metric)) for k in common)]
             raise EvaluationError(f"metric {metric!r} has no value (null) in any result of {' and '.join(silent)}: "
                                   "the method reports none", source="compare")
         raise ConfigError(f"unknown metric {metric!r}; these results have: {', '.join(sorted(present))}", source="metric")
@@ -313,14 +329,17 @@ def compare(
     if len(tasks_with) > 1:  # (pooled into one test: icp_pair pairs/s and odometry frames/s as 6 units of "hz")
         raise ConfigError(f"metric {metric!r} is reported by tasks {', '.join(sorted(tasks_with))} of these results, each its own "
                           "experiment: --task picks one", source="metric")
+    _one_experiment(side_a, side_b, next(iter(tasks_with)))
     other_task = [k for k in common if _task_of(k) not in tasks_with]
     common = [k for k in common if _task_of(k) in tasks_with]
     missing = [k for k in common if not has(k, metric)]
     if missing:  # (it named neither the side nor the count, nor why KITTI drift is missing)
-        lacking = " and ".join(s.name for s in (side_a, side_b) if any(s.values[k].get(metric) is None for k in missing))
+        lacking = " and ".join(s.name for s in (side_a, side_b) if not all(_usable(s.values[k].get(metric)) for k in missing))
         why = ": KITTI drift needs 100 m of path" if metric.startswith("drift_") else ""
         ape = metric != "ape_rmse_m" and all(has(k, "ape_rmse_m") for k in common)
-        raise EvaluationError(f"metric {metric!r} missing in {lacking} for {len(missing)} of {len(common)} units "
+        nan = any((v := s.values[k].get(metric)) is not None and not _usable(v) for s in (side_a, side_b) for k in missing)
+        what = "missing (null or not finite)" if nan else "missing"  # (a NaN read "1 non-finite value(s) among 8")
+        raise EvaluationError(f"metric {metric!r} {what} in {lacking} for {len(missing)} of {len(common)} units "
                               f"({_few([side_a.labels[k] for k in missing])}){why}"
                               + ("; --metric ape_rmse_m compares every unit" if ape else ""), source="compare")
     _same_alignment(side_a, side_b, common, metric)
@@ -352,6 +371,10 @@ def compare(
         if n:
             notes.append(f"{n} (dataset, seed) unit(s) where {side}'s job failed are left out (lidarkit report lists why)")
     notes += _mixed_versions(side_a, side_b, common)
+    instants = [sorted({side.instants[k] for k in common if k in side.instants}) for side in (side_a, side_b)]
+    if all(instants) and instants[0] != instants[1]:  # (said for run folders, not for bench pairs: kiss end, deskew=False mid)
+        notes.append(f"each side is scored against the ground truth at its own instant of the sweep ({name_a}: "
+                     f"{' / '.join(instants[0])}, {name_b}: {' / '.join(instants[1])})")
     for folder, side in {side_a.path: side_a, side_b.path: side_b}.items():  # (worded as the report words them)
         if side.n_earlier_version:
             notes.append(f"{side.n_earlier_version} result(s) in {folder} of these jobs from an earlier lidarkit version left out")
@@ -364,6 +387,12 @@ def compare(
 #: metrics that vary from run to run on the same data (times, rates): they say nothing about whether the seeds ran
 #: other data
 _TIMING_METRIC = re.compile(r"(_s|hz|fps)$|time|speed")
+
+
+def _usable(value: Any) -> bool:
+    """A finite number: a NaN or an infinity in a job result is a missing value (a NaN read "1 non-finite value(s)
+    among 8", naming neither the metric nor the unit)."""
+    return isinstance(value, (int, float)) and math.isfinite(value)
 
 
 def _dataset_of(key: str) -> str:
@@ -440,8 +469,58 @@ def _mixed_versions(side_a: BenchRuns, side_b: BenchRuns, keys: list[str]) -> li
 
 
 def _task_of(unit_key: str) -> str:
-    """The bench task of a (task, dataset, options, seed) unit key."""
+    """The bench task of a (task, experiment, dataset, options, seed) unit key."""
     return str(json.loads(unit_key).get("task", ""))
+
+
+def _experiments(side: BenchRuns) -> dict[str, set[str]]:
+    """Task -> the experiments ``side``'s units (failed ones too) are of."""
+    out: dict[str, set[str]] = {}
+    for key in set(side.values) | side.failed:
+        unit = json.loads(key)
+        out.setdefault(str(unit.get("task", "")), set()).add(str(unit.get("experiment", "")))
+    return out
+
+
+def _by_experiment(side_a: BenchRuns, side_b: BenchRuns, experiment: str | None) -> tuple[BenchRuns, BenchRuns]:
+    """Both sides keyed for pairing: the units of ``experiment`` only, when given (ConfigError when a side has none);
+    the experiment's name left out of the keys of a task each side ran in one experiment (two suites name it apart)."""
+    from lidarkit.bench.jobs import canonical_json
+
+    if experiment is not None:
+        for side in (side_a, side_b):
+            if not any(experiment in names for names in _experiments(side).values()):
+                names = sorted(set().union(*_experiments(side).values()))
+                raise ConfigError(f"no result of {side.name} in experiment {experiment!r}; it has results in: "
+                                  f"{', '.join(names)}", source=side.path)
+    spans = [_experiments(side) for side in (side_a, side_b)]
+    one = {t for t in spans[0].keys() | spans[1].keys() if all(len(s.get(t, ())) <= 1 for s in spans)}
+
+    def rekeyed(side: BenchRuns) -> BenchRuns:
+        new = {}
+        for key in set(side.values) | side.failed:
+            unit = json.loads(key)
+            if experiment is None or unit.get("experiment") == experiment:
+                new[key] = canonical_json({**unit, "experiment": ""}) if unit.get("task") in one else key
+
+        def kept(by_key: dict[str, Any]) -> dict[str, Any]:
+            return {new[k]: v for k, v in by_key.items() if k in new}
+
+        return dataclasses.replace(side, values=kept(side.values), labels=kept(side.labels), versions=kept(side.versions),
+                                   alignments=kept(side.alignments), instants=kept(side.instants),
+                                   failed={new[k] for k in side.failed if k in new})
+
+    return rekeyed(side_a), rekeyed(side_b)
+
+
+def _one_experiment(side_a: BenchRuns, side_b: BenchRuns, task: str) -> None:
+    """ConfigError when a side's results of ``task`` span several experiments: two pf experiments differing in
+    ``mse_start`` only were paired as 6 seeds of one (p = 0.031, a winner), over 3 seeds giving one APE each."""
+    for side in (side_a, side_b):
+        names = sorted(_experiments(side).get(task, ()))
+        if len(names) > 1:
+            raise ConfigError(f"{side.name} has results in {len(names)} experiments of task {task} ({', '.join(names)}), "
+                              "each its own: --experiment picks one", source=side.path)
 
 
 def _with_measured_noise(noise: float, noise_from: str | os.PathLike | None, metric: str, task: str,
@@ -454,13 +533,23 @@ def _with_measured_noise(noise: float, noise_from: str | os.PathLike | None, met
     return max(noise, measured_noise(noise_from, metric, task, methods))
 
 
+def _other_run_kind(path: Path) -> str | None:
+    """``"particle-filter"`` / ``"visual odometry"`` for a run folder of ``lidarkit pf`` / ``lidarkit vo`` (by the files
+    only they write), else None."""
+    if (path / "dead_reckoning_tum.txt").is_file() or (path / "study.json").is_file():
+        return "particle-filter"
+    if (path / "poses_smoothed_kitti.txt").is_file() or (path / "diagnostics.csv").is_file():
+        return "visual odometry"
+    return None
+
+
 def _kind(side: Any) -> type | None:
     """OdometryRun or BenchRuns: what ``side`` is, read before it is loaded; None when ``_load`` will refuse it."""
     if isinstance(side, (OdometryRun, BenchRuns)):
         return type(side)
     from lidarkit.bench.baseline import is_baseline_folder
 
-    if not isinstance(side, (str, os.PathLike)) or not Path(side).is_dir() or is_baseline_folder(side):
+    if not isinstance(side, (str, os.PathLike)) or not Path(side).is_dir() or is_baseline_folder(side) or _other_run_kind(Path(side)):
         return None
     return BenchRuns if (Path(side) / "jobs").is_dir() else OdometryRun
 
