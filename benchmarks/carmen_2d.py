@@ -56,6 +56,7 @@ NOT_APPLICABLE = {
     "open3d_point_to_plane": "ConfigError: normals of a 2D scan's line-like neighbourhoods are undefined in 3D",
     "open3d_gicp": "ConfigError: covariances undefined on 2D scans",
     "small_gicp (GICP / VGICP / PLANE_ICP)": "ConfigError: covariances / normals undefined on 2D scans",
+    "genz": "ConfigError: its point-to-plane residuals on planar neighbourhoods need normals, undefined on 2D scans",
     "ground_filtered (any ground_method)": "not run separately: a 2D scan holds no ground, so it is passed through unsegmented to the "
     "vanilla solve (the same figures as vanilla with the same parameters; extra['ground_removal'] says so)",
 }

@@ -144,3 +144,12 @@ def test_missing_files(tum_folder, tmp_path):
         TumRGBD(tum_folder)
     with pytest.raises(DataError, match="TUM sequence folder not found"):
         TumRGBD(tmp_path / "nope")
+
+
+def test_a_bool_given_as_the_number_option_max_dt_s_is_refused(tum_folder):
+    """``open_dataset``'s option typing (pydantic's lax float) read ``max_dt_s=True`` as a 1 s tolerance: frames 0.5 s
+    from any GT row were matched; every reader's int / float option now refuses a bool, naming the option."""
+    with pytest.raises(ConfigError) as err:
+        open_dataset("tum", tum_folder, max_dt_s=True)
+    assert str(err.value) == "tum dataset option max_dt_s: must be a number, not a bool, got True"
+    assert len(open_dataset("tum", tum_folder, max_dt_s=1)) == len(RGB_FRAMES) + 1  # the number 1 still reads as 1 s

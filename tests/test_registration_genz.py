@@ -18,7 +18,7 @@ import pytest
 
 from conftest import shared_path
 
-from lidarkit.errors import DataError
+from lidarkit.errors import ConfigError, DataError
 from lidarkit.registration import available_icp, get_icp
 
 pytestmark = pytest.mark.skipif("genz" not in available_icp(), reason="genz-icp not installed (extra 'genz')")
@@ -103,3 +103,20 @@ def test_genz_pairwise_scores_the_source_against_the_target_alone():
     assert unrelated.fitness < 0.75  # 0.51: the random points within 3 m of a target point (was 1.000)
     right = get_icp("genz").align(source, target)
     assert right.fitness > 0.95 and right.rmse_history[-1] < unrelated.rmse_history[-1] / 2
+
+
+def test_genz_refuses_2d_scans_pairwise_and_in_a_sequence():
+    """GenZ-ICP fits point-to-plane residuals on planar neighbourhoods, whose normals a 2D scan lacks: it ran on the
+    ACES log without a word (``lidarkit odometry carmen:aces.clf.bz2 --method genz``); now it refuses, as open3d_gicp."""
+    from lidarkit.io import open_dataset
+    from lidarkit.odometry import run
+
+    aces = open_dataset("carmen", shared_path("carmen_2d", "aces.clf.bz2"))
+    target, source = aces.read_scan(2000).points_xyz, aces.read_scan(2003).points_xyz
+    with pytest.raises(ConfigError, match="not applicable to 2D scans .*point-to-plane residuals on planar neighbourhoods") as err:
+        get_icp("genz").align(source, target)
+    assert err.value.source == "method 'genz'" and "vanilla or knn, with planar=True" in str(err.value)
+    with pytest.raises(ConfigError, match="not applicable to 2D scans"):
+        run(aces, "genz", frames=slice(0, 3))
+    lifted = source + np.array([0.0, 0.0, 0.5]) * np.random.default_rng(0).random((len(source), 1))
+    assert get_icp("genz").align(lifted, lifted).fitness > 0.9  # a cloud off the plane still registers

@@ -54,6 +54,8 @@ class RelationError:
     name: str = ""
     n_same_pose: int = 0
     """Relations left out because one estimated pose is nearest both their time stamps (no motion to compare)."""
+    warnings: tuple[str, ...] = ()
+    """What the matching warned of (relations left out, most of them unmatched), as logged: the --json keeps them."""
 
     def __repr__(self) -> str:
         """One line of the paper's figures, mean +- std (max) of the absolute errors (the generated one printed the
@@ -97,6 +99,7 @@ class RelationError:
             "n_relations": self.n_relations,
             "n_used": self.n_used,
             "n_same_pose": self.n_same_pose,
+            "warnings": list(self.warnings),
             "max_time_diff_s": self.max_time_diff_s,
             "translation_abs_m": self.translation_abs,
             "translation_sq_m2": self.translation_sq,
@@ -148,10 +151,16 @@ def relation_error(
     same = int((near & (i == j)).sum())
     used = np.flatnonzero(near & (i != j))
     span = (float(estimate.timestamps_s[0]), float(estimate.timestamps_s[-1]))
+    warnings: list[str] = []
+
+    def warn(message: str) -> None:  # logged as it happens, and kept for the result (the --json)
+        warnings.append(message)
+        logger.warning("%s: %s", source, message)
+
     if same:
-        logger.warning("%s: %d of %d relations have the same estimated pose nearest both their time stamps (within %g s; "
-                       "estimate spans %.3f..%.3f s): left out, they would score as no motion", source, same, len(relations),
-                       max_time_diff_s, span[0], span[1])
+        warn(f"{same} of {len(relations)} relations have the same estimated pose nearest both their time stamps "
+             f"(within {max_time_diff_s:g} s; estimate spans {span[0]:.3f}..{span[1]:.3f} s): left out, they would score as "
+             "no motion")
     if len(used) == 0:
         raise EvaluationError(
             f"no relation has estimated poses within {max_time_diff_s:g} s of both its time stamps "
@@ -160,9 +169,9 @@ def relation_error(
             source=source,
         )
     if len(used) + same < 0.5 * len(relations):  # most relations left out: the estimate's clock or its span does not match
-        logger.warning("%s: only %d of %d relations have estimated poses within %g s of both their time stamps (estimate "
-                       "spans %.3f..%.3f s, relations %.3f..%.3f s): the score covers those only", source, len(used), len(relations),
-                       max_time_diff_s, span[0], span[1], relations.t1_s.min(), relations.t2_s.max())
+        warn(f"only {len(used)} of {len(relations)} relations have estimated poses within {max_time_diff_s:g} s of both "
+             f"their time stamps (estimate spans {span[0]:.3f}..{span[1]:.3f} s, relations {relations.t1_s.min():.3f}.."
+             f"{relations.t2_s.max():.3f} s): the score covers those only")
     P = estimate.poses_se3
     Ti, Tj = P[i[used]], P[j[used]]
     # delta_ij = inv(Ti) @ Tj, planar part: R_i^T (t_j - t_i) and yaw_j - yaw_i
@@ -174,7 +183,8 @@ def relation_error(
     trans = np.hypot(dx - relations.dx_m[used], dy - relations.dy_m[used])
     dyaw = (yaw_j - yaw_i) - relations.dyaw_rad[used]
     rot = np.degrees(np.abs(np.arctan2(np.sin(dyaw), np.cos(dyaw))))
-    return RelationError(trans, rot, used, len(relations), float(max_time_diff_s), name=source, n_same_pose=same)
+    return RelationError(trans, rot, used, len(relations), float(max_time_diff_s), name=source, n_same_pose=same,
+                         warnings=tuple(warnings))
 
 
 __all__ = ["DEFAULT_MAX_TIME_DIFF_S", "RelationError", "nearest_pose_index", "relation_error"]

@@ -146,7 +146,8 @@ def open_dataset(kind: str, path: str | os.PathLike, **options: Any) -> Any:
 
 def _typed_options(reader: Any, kind: str, options: dict[str, Any]) -> dict[str, Any]:
     """Options checked against the reader's annotations where those are plain (bool, int, float, str, None and their
-    unions): ``drop_nonfinite=flase`` (a typo, truthy as text) or ``min_range_m=abc`` is a ConfigError naming it."""
+    unions): ``drop_nonfinite=flase`` (a typo, truthy as text), ``min_range_m=abc`` or ``min_range_m=true`` (pydantic
+    read True as 1.0) is a ConfigError naming it."""
     import typing
 
     from pydantic import TypeAdapter, ValidationError
@@ -165,6 +166,9 @@ def _typed_options(reader: Any, kind: str, options: dict[str, Any]) -> dict[str,
         if not kinds <= plain:
             out[name] = _text_option(kind, name, value, kinds)
             continue
+        if isinstance(value, bool) and bool not in kinds and kinds & {int, float}:
+            expected = "a number or text" if str in kinds else "a number"
+            raise ConfigError(f"must be {expected}, not a bool, got {value!r}", source=f"{kind} dataset option {name}")
         try:
             out[name] = TypeAdapter(hint).validate_python(value)
         except ValidationError as err:

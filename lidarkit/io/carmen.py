@@ -37,6 +37,7 @@ import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.io.base import Scan, checked_index
+from lidarkit.params import is_real_number
 from lidarkit.textfile import read_lines, read_numeric_table
 from lidarkit.trajectory import Trajectory
 
@@ -115,15 +116,18 @@ class Relations:
 
     @classmethod
     def read(cls, path: str | os.PathLike) -> "Relations":
-        """Parse a ``.relations`` file: ``t1 t2 x y z roll pitch yaw`` per line (z, roll, pitch must be 0)."""
+        """Parse a ``.relations`` file: ``t1 t2 x y z roll pitch yaw`` per line (z, roll, pitch must be 0; t1 != t2)."""
         table = read_numeric_table(path, (8,))
         if len(table) == 0:
             raise DataError("no relations in the file", source=path)
+        # a row that fails is named by its line, as every other error of the file (the row number misled past comments)
         off_plane = np.flatnonzero(np.abs(table[:, 4:7]).max(axis=1) > 1e-9)
-        if len(off_plane):  # named by its line, as every other error of the file (the row number misled past comments)
-            rows = [n for n, raw in enumerate(read_lines(path), start=1) if raw.strip() and not raw.strip().startswith("#")]
-            raise DataError(f"z, roll and pitch of a planar relation must be 0 (relation {off_plane[0] + 1})", source=path,
-                            location=f"line {rows[off_plane[0]]}")
+        # t1 == t2 relates a pose to itself: scored, it was blamed on the estimate ("the same estimated pose nearest both")
+        same_time = np.flatnonzero(table[:, 0] == table[:, 1])
+        for bad, reason in ((off_plane, "z, roll and pitch of a planar relation must be 0"), (same_time, "t1 equals t2")):
+            if len(bad):
+                rows = [n for n, raw in enumerate(read_lines(path), start=1) if raw.strip() and not raw.strip().startswith("#")]
+                raise DataError(f"{reason} (relation {bad[0] + 1})", source=path, location=f"line {rows[bad[0]]}")
         return cls(table[:, 0], table[:, 1], table[:, 2], table[:, 3], table[:, 7], source=str(path))
 
 
@@ -316,9 +320,10 @@ class CarmenLog:
         relations: str | os.PathLike | None = "auto",
     ):
         self.path = Path(path)
-        if not (np.isfinite(min_range_m) and min_range_m >= 0):
+        # is_real_number first: True passed np.isfinite as 1 m, text raised a TypeError
+        if not (is_real_number(min_range_m) and np.isfinite(min_range_m) and min_range_m >= 0):
             raise ConfigError(f"min_range_m must be a finite number >= 0, got {min_range_m!r}", source="carmen dataset options")
-        if max_range_m is not None and not (np.isfinite(max_range_m) and max_range_m > min_range_m):
+        if max_range_m is not None and not (is_real_number(max_range_m) and np.isfinite(max_range_m) and max_range_m > min_range_m):
             raise ConfigError(f"max_range_m must be a finite number above min_range_m ({min_range_m}), got {max_range_m!r}",
                               source="carmen dataset options")
         self._log = parse_log(self.path, laser)

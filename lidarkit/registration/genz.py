@@ -17,6 +17,8 @@ Conventions:
   and every pose it returns is checked to be a rotation to 1e-9; one that is not is re-orthonormalised (and logged).
 * Pairwise mode (:meth:`align`) registers the target, then the source moved by ``init_T``, in a fresh odometry;
   genz-icp's range filter then applies around the moved origin.
+* 2D scans (all points at one z) are refused (ConfigError), as by the other point-to-plane variants: the planarity
+  test and the normals of a scan's line-like neighbourhoods are undefined in 3D.
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ from lidarkit.errors import RegistrationError
 from lidarkit.geometry import as_points, is_rotation, orthonormalize_se3, transform_points
 from lidarkit.registration.assessment import assess_alignment
 from lidarkit.registration.base import Registration, RegistrationConfig, RegistrationResult, check_init_T, check_point_times
+from lidarkit.registration.planar import refuse_2d
 from lidarkit.registration.registry import register_icp
 
 log = logging.getLogger(__name__)
@@ -42,6 +45,8 @@ except ImportError as err:  # optional extra "genz"
 
 #: Returned rotations must be orthonormal to this.
 GENZ_ORTHONORMAL_TOL = 1e-9
+#: Why genz refuses a 2D scan (it ran on one without a word).
+GENZ_2D_REASON = "its point-to-plane residuals on planar neighbourhoods need normals, undefined on a 2D scan"
 
 
 class GenzConfig(RegistrationConfig):
@@ -138,6 +143,7 @@ class GenzRegistration(Registration):
 
         genz = self.pipeline
         frame = np.ascontiguousarray(as_points(points_xyz, "frame", min_points=1))
+        refuse_2d(self.name, frame, frame, GENZ_2D_REASON)
         times = normalized_times(point_times_s, len(frame))
         # the native call GenZICP.register_frame makes, without its visualiser-only frame conversions
         if times is not None:
@@ -155,6 +161,7 @@ class GenzRegistration(Registration):
         from genz_icp.genz_icp import GenZICP
 
         c = self.config
+        refuse_2d(self.name, source_xyz, target_xyz, GENZ_2D_REASON)
         saved = self._genz, self._start
         try:
             self._genz, self._start = GenZICP(c.to_genz_config()), np.eye(4)
