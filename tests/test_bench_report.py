@@ -342,9 +342,10 @@ def test_each_trajectory_is_drawn_with_the_reference_of_its_own_seed(tmp_path):
         write_result(tmp_path, make_record(job, job.key(), "1", outcome))
     chosen, _ = _first_ok_per_method(load_results(tmp_path), "trajectory_xy")
     assert {label: r["job"]["seed"] for label, r in chosen.items()} == {"a_good": 0, "b_flaky": 1}
-    refs = _references(chosen)
-    assert list(refs) == ["0", "1"]
-    assert refs["0"].tolist() == path(0) and refs["1"].tolist() == path(1)
+    refs, ref_of = _references(chosen)
+    assert list(refs) == ["reference (seed 0)", "reference (seed 1)"]
+    assert refs["reference (seed 0)"].tolist() == path(0) and refs["reference (seed 1)"].tolist() == path(1)
+    assert ref_of == {"a_good": "reference (seed 0)", "b_flaky": "reference (seed 1)"}
     plot = next(p for p in build_report(tmp_path).plots if p.title.startswith("Trajectories"))
     assert "against the reference of that seed" in plot.caption
 
@@ -778,3 +779,53 @@ def test_a_task_none_of_whose_jobs_ran_has_its_table_saying_so(odometry_dir, tmp
     assert lines and {(r["n"], r["n_ok"], r["n_not_run"]) for r in lines} == {("0", "0", "1")}
     assert "translation_error_m" in {r["metric"] for r in lines}
     assert "icp_pair" in report.markdown_path.read_text()
+
+
+def test_methods_scored_against_truths_of_different_sweep_instants_are_each_drawn_with_their_own(tmp_path):
+    """kiss (poses at the sweep end) and small_gicp (re-timed to the sweep mid) on one simulated drive: the references
+    were keyed by seed, the two truths of seed 0 became one ("0"), and kiss was drawn against the mid-sweep truth."""
+    pytest.importorskip("small_gicp")
+    from lidarkit.bench.report import _first_ok_per_method, _references
+    from lidarkit.bench.tasks._datasets import open_dataset_spec
+
+    dataset = {"kind": "sim_lidar", "scene": "street", "n_frames": 5, "n_beams": 16, "n_azimuths": 300, "seed": 0}
+    (tmp_path / "suite.yaml").write_text(textwrap.dedent("""
+        seeds: [0]
+        experiments:
+          - name: odo
+            task: odometry
+            dataset: {kind: sim_lidar, scene: street, n_frames: 5, n_beams: 16, n_azimuths: 300, seed: 0, name: street}
+            methods: [kiss, small_gicp]
+        """))
+    run_suite(load_suite(tmp_path / "suite.yaml"), tmp_path / "out", executor="serial")
+    chosen, _ = _first_ok_per_method(load_results(tmp_path / "out"), "trajectory_xy")
+    refs, ref_of = _references(chosen)
+    assert ref_of == {"kiss": "reference (sweep end)", "small_gicp": "reference (sweep mid)"}
+    sequence = open_dataset_spec(dataset)
+    for instant in ("end", "mid"):
+        poses = sequence.ground_truth_at_instant(instant).poses_se3
+        truth_xy = (np.linalg.inv(poses[0]) @ poses)[:, :2, 3]  # the reference starts at the first pose
+        assert np.allclose(refs[f"reference (sweep {instant})"], truth_xy, atol=1e-4)
+    assert not np.allclose(refs["reference (sweep end)"], refs["reference (sweep mid)"], atol=1e-3)
+    plot = next(p for p in build_report(tmp_path / "out").plots if p.title.startswith("Trajectories"))
+    assert "against the reference of that seed and sweep instant" in plot.caption
+
+
+def test_a_paired_comparison_over_ape_names_the_apes_alignment(tmp_path):
+    """Over short drives (no KITTI drift) the paired comparisons were labelled "APE RMSE m" beside headline tables of
+    SE(3)-aligned APE, though they pair the unaligned, first-pose-anchored APE."""
+    from lidarkit.bench.jobs import Job
+    from lidarkit.bench.report import comparison_rows
+    from lidarkit.bench.results import make_record, write_result
+
+    for seed in range(5):
+        for method, ape in (("kiss", 0.2 + 0.01 * seed), ("small_gicp", 0.5 + 0.02 * seed)):
+            job = Job("odometry", "e", "drive", {"kind": "sim_lidar", "scene": "street"}, method, seed=seed)
+            outcome = {"status": "ok", "metrics": {"ape_rmse_m": ape, "ape_se3_rmse_m": ape / 4}, "error": None,
+                       "runtime_s": 0.1}
+            write_result(tmp_path, make_record(job, job.key(), "1", outcome))
+    report = build_report(tmp_path, plots=False)
+    (dataset, comparison), = report.publication.comparisons
+    assert comparison.metric == "APE RMSE (unaligned, first pose anchored) m"
+    assert comparison.mean_a == pytest.approx(0.22) and comparison.mean_b == pytest.approx(0.54)
+    assert comparison_rows([(dataset, comparison)])[1][0][3] == "5 seeds (APE RMSE (unaligned, first pose anchored) m)"

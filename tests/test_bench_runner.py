@@ -526,3 +526,25 @@ def test_a_report_that_cannot_be_written_says_the_jobs_are_done_and_how_to_rebui
     assert done.returncode == 1 and done.stderr.splitlines()[-1].endswith(
         f"(results in {out}/jobs); {out}/report.html is from before this run (`lidarkit report {out}` rebuilds it from the "
         "finished jobs)")
+
+
+def test_library_arguments_of_a_wrong_type_are_config_errors_naming_them(tmp_path):
+    """run_suite(force="no") counted as true (every finished job ran again) and workers="2" raised a bare TypeError
+    ('<' not supported between 'str' and 'int'): each is a one-line ConfigError naming the argument, before a run."""
+    from lidarkit.errors import ConfigError
+
+    suite = load_suite(suite_file(tmp_path, TINY))
+    done = run_suite(suite, tmp_path / "out", executor="serial")
+    assert (done.skipped, done.ran) == (0, 8)
+    calls = {
+        "force: must be True or False, got str 'no'": {"executor": "serial", "force": "no"},
+        "force: must be True or False, got int 1": {"executor": "serial", "force": 1},
+        "workers: must be an integer, got str '2'": {"executor": "process", "workers": "2"},
+        "workers: must be an integer, got float 2.0": {"executor": "process", "workers": 2.0},
+    }
+    for message, kwargs in calls.items():
+        with pytest.raises(ConfigError) as info:
+            run_suite(suite, tmp_path / "out", **kwargs)
+        assert str(info.value) == message
+    again = run_suite(suite, tmp_path / "out", executor="serial", force=False)
+    assert (again.skipped, again.ran) == (6, 2)  # (the 2 failed jobs are retried, the 6 finished ones kept)

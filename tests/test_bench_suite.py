@@ -385,3 +385,31 @@ def test_a_kitti_sequence_that_is_not_there_is_refused_with_the_suite(tmp_path):
         load_suite(path)
     path.write_text(path.read_text().replace('"05"', '"00"'))
     assert len(load_suite(path).jobs) == 1
+
+
+def test_a_validator_message_is_given_alone_without_pydantics_prefix(tmp_path):
+    """``grid: {seconds: []}`` read "...grid: Value error, grid values of 'seconds' are empty; experiments[0].methods[0]:
+    Input should be a valid string": pydantic's prefix, and the other branch of a method (a name) that a mapping is not."""
+    path = write(tmp_path, """
+        experiments:
+          - task: selftest
+            dataset: {kind: synthetic}
+            methods:
+              - name: sleep
+                grid: {seconds: []}
+        """)
+    with pytest.raises(ConfigError) as info:
+        load_suite(path)
+    assert str(info.value) == (f"{path} (experiments[0].methods[0].grid, line 7): "
+                               "experiments[0].methods[0].grid: grid values of 'seconds' are empty")
+    path = write(tmp_path, """
+        experiments:
+          - task: selftest
+            dataset: {kind: synthetic}
+            methods: [3]
+        """)
+    with pytest.raises(ConfigError) as info:  # neither a mapping nor a name: both branches say what they take
+        load_suite(path)
+    assert str(info.value) == (f"{path} (experiments[0].methods[0], line 5): experiments[0].methods[0]: Input should be "
+                               "a valid dictionary or instance of MethodSpec; experiments[0].methods[0]: Input should be "
+                               "a valid string")

@@ -354,3 +354,38 @@ def test_rpe_over_a_frame_selection_that_skips_frames_is_labelled_per_selected_f
     assert labels["skipping"]["rpe_rot_rmse_deg"] == "RPE rot. (1 selected frame, alignment-free) [deg/frame]"
     titles = {name: next(t.title for t in report.publication.tables if t.name == "rpe_rmse") for name, report in alignment.items()}
     assert titles == {"all": "RPE translation RMSE (m per frame)", "skipping": "RPE translation RMSE (m per selected frame)"}
+
+
+def test_icp_pair_refuses_max_pairs_beside_pairs_and_a_scan_paired_with_itself(tmp_path):
+    """``pairs: [[1, 0]]`` with ``max_pairs: 5`` passed and max_pairs was ignored without a word; ``pairs: [[1, 1]]``
+    (a scan registered to itself) was accepted."""
+    from lidarkit.bench.tasks._datasets import open_dataset_spec
+    from lidarkit.bench.tasks.icp_pair import IcpPairOptions, _pairs
+
+    kitti = shared_path("kitti_odometry")
+    for options, reason in (
+        ("{pairs: [[1, 0]], max_pairs: 5}", "max_pairs: only applies without 'pairs' (the first max_pairs consecutive "
+                                             "pairs): give one of them"),
+        ("{pairs: [[0, 1], [1, 1], [2, 2]]}", "pairs: [1, 1], [2, 2] registers a scan with itself: give two different scans"),
+    ):
+        path = write(tmp_path, f"""
+            experiments:
+              - task: icp_pair
+                dataset: {{kind: kitti, path: "{kitti}", sequence: "00"}}
+                options: {options}
+                methods: [vanilla]
+            """)
+        with pytest.raises(ConfigError) as info:
+            load_suite(path)
+        assert str(info.value) == (f"{path} (experiments[0].options, line 5): {reason} (options of task 'icp_pair': "
+                                   "pairs, ground_truth_file, max_pairs, init_noise_m, init_noise_deg)")
+    for options, n_pairs in (("{max_pairs: 3}", 3), ("{pairs: [[1, 0]]}", 1)):  # each alone still passes
+        path = write(tmp_path, f"""
+            experiments:
+              - task: icp_pair
+                dataset: {{kind: kitti, path: "{kitti}", sequence: "00"}}
+                options: {options}
+                methods: [vanilla]
+            """)
+        job, = load_suite(path).jobs
+        assert len(_pairs(IcpPairOptions(**job.options), open_dataset_spec(job.dataset))) == n_pairs

@@ -78,8 +78,12 @@ def reference_comparisons(records: list[dict[str, Any]], reference: str = REFERE
     with a note that they overlap (one starts every 10 frames: not independent, the p-value is optimistic; the report
     said "kiss better" where compare, over the 2 seeds, said no difference); a dataset without enough units is left out.
     """
+    from lidarkit.bench.tasks.odometry import METRIC_ALIGNMENT_BY_NAME
     from lidarkit.errors import LidarKitError
     from lidarkit.eval.statistics import paired_test
+
+    # the label names the APE's alignment as every APE label does ("APE RMSE m" read as the headline SE(3)-aligned APE)
+    ape_name = f"APE RMSE ({METRIC_ALIGNMENT_BY_NAME['ape_rmse_m']}) m"
 
     per: dict[str, dict[str, dict[int, dict[str, Any]]]] = defaultdict(lambda: defaultdict(dict))
     label = odometry_labels(records)
@@ -101,7 +105,7 @@ def reference_comparisons(records: list[dict[str, Any]], reference: str = REFERE
                     for s in seeds]
             try:
                 per_seed = next(((metric, name) for metric, name in (("drift_translation_pct", "KITTI drift %"),
-                                                                      ("ape_rmse_m", "APE RMSE m"))
+                                                                      ("ape_rmse_m", ape_name))
                                  if all(ref[s]["metrics"].get(metric) is not None and runs[s]["metrics"].get(metric) is not None
                                         for s in seeds)), None)
                 if len(seeds) >= 5 and per_seed is not None:

@@ -282,17 +282,39 @@ def _first_ok_per_method(items: list[dict[str, Any]], series: str) -> tuple[dict
     return _capped(dict(sorted(out.items())))
 
 
-def _references(chosen: dict[str, dict[str, Any]]) -> dict[str, np.ndarray]:
-    """The reference drawn with each chosen record, one per distinct path: ``{"0, 2": (N, 2) xy}`` by the seeds that
-    have it. Each estimate is drawn with its own seed's reference (a seeded simulation drives another path per seed:
-    a method whose first good seed was 1 was drawn against seed 0's path)."""
-    by_path: dict[str, tuple[list[int], np.ndarray]] = {}
-    for r in chosen.values():
+def _references(chosen: dict[str, dict[str, Any]]) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+    """The references drawn with the chosen records, one per distinct path, by legend label, and each method's
+    reference label. Each estimate is drawn with its own reference: a seeded simulation drives another path per seed,
+    and a method whose poses refer to the sweep mid is scored against the truth re-timed to it. Labels name what tells
+    the references apart ("reference (seed 1)", "reference (sweep mid)"); keyed by seed alone, the sweep-end and
+    sweep-mid references of one seed were one, and kiss was drawn against small_gicp's mid-sweep truth."""
+    by_path: dict[str, tuple[set[int], set[str], np.ndarray]] = {}
+    path_of: dict[str, str] = {}
+    for method, r in chosen.items():
         ref = r["series"]["trajectory_xy"].get("ref") or []
         if ref:
-            seeds, _ = by_path.setdefault(canonical_json(ref), ([], np.asarray(ref, dtype=float)))
-            seeds.append(int(r["job"]["seed"]))
-    return {", ".join(map(str, sorted(set(seeds)))): xy for seeds, xy in by_path.values()}
+            path_of[method] = canonical_json(ref)
+            seeds, instants, _ = by_path.setdefault(path_of[method], (set(), set(), np.asarray(ref, dtype=float)))
+            seeds.add(int(r["job"]["seed"]))
+            instants.add(_ground_truth_instant(r))
+    several_seeds = len({frozenset(seeds) for seeds, _, _ in by_path.values()}) > 1
+    several_instants = len({frozenset(instants) for _, instants, _ in by_path.values()}) > 1
+    label_of: dict[str, str] = {}
+    for path, (seeds, instants, _) in by_path.items():
+        told = [f"seed {', '.join(map(str, sorted(seeds)))}"] if several_seeds else []
+        told += [" / ".join(sorted(i for i in instants if i))] if several_instants and any(instants) else []
+        label = f"reference ({', '.join(told)})" if told else "reference"
+        if len(by_path) > 1 and label in label_of.values():  # paths differing in nothing the records state
+            label = f"{label} #{len(label_of) + 1}"
+        label_of[path] = label
+    return {label_of[path]: xy for path, (_, _, xy) in by_path.items()}, {m: label_of[p] for m, p in path_of.items()}
+
+
+def _ground_truth_instant(record: dict[str, Any]) -> str:
+    """The sweep instant a record's reference refers to ("sweep end"), as its odometry run stated it; '' if none."""
+    effective = (((record.get("info") or {}).get("odometry_metrics") or {}).get("effective") or {})
+    instant = str(effective.get("ground_truth_instant") or "")
+    return f"sweep {instant}" if instant in ("start", "mid", "end") else instant
 
 
 def _capped(lines: dict[str, Any]) -> tuple[dict[str, Any], str]:
@@ -321,13 +343,13 @@ def make_plots(records: list[dict[str, Any]]) -> list[Plot]:
         chosen, left_out = _first_ok_per_method(items, "trajectory_xy")
         if chosen:
             fig, ax = plt.subplots(figsize=(6, 4.5))
-            refs = _references(chosen)
-            for k, (seeds, ref) in enumerate(refs.items()):
-                ax.plot(ref[:, 0], ref[:, 1], ("--", ":", "-.")[k % 3], color="k", lw=2,
-                        label="reference" if len(refs) == 1 else f"reference (seed {seeds})")
+            refs, ref_of = _references(chosen)
+            for k, (ref_label, ref) in enumerate(refs.items()):
+                ax.plot(ref[:, 0], ref[:, 1], ("--", ":", "-.")[k % 3], color="k", lw=2, label=ref_label)
             for label, r in chosen.items():
                 est = np.asarray(r["series"]["trajectory_xy"]["est"], dtype=float)
-                ax.plot(est[:, 0], est[:, 1], lw=1.2, label=f"{label} (seed {r['job']['seed']})")
+                against = f" vs {ref_of[label]}" if len(refs) > 1 and label in ref_of else ""
+                ax.plot(est[:, 0], est[:, 1], lw=1.2, label=f"{label} (seed {r['job']['seed']}){against}")
             ax.set_xlabel("x [m]")
             ax.set_ylabel("y [m]")
             ax.set_aspect("equal", adjustable="datalim")
@@ -335,7 +357,7 @@ def make_plots(records: list[dict[str, Any]]) -> list[Plot]:
             ax.set_title(f"trajectories: {where}", fontsize=9)
             plots.append(Plot(f"Trajectories — {where}", f"traj_{_file_slug(where)}.png", _png(fig), task,
                               f"Top view of the estimated trajectories (first seed of each method) against the "
-                              f"reference of that seed (black): {experiment}, {dataset}.{left_out}"))
+                              f"reference of that seed and sweep instant (black): {experiment}, {dataset}.{left_out}"))
         chosen, left_out = _first_ok_per_method(items, "error_over_time")
         if chosen:
             fig, ax = plt.subplots(figsize=(6, 3.2))

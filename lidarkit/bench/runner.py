@@ -18,6 +18,7 @@ from lidarkit.bench.executors import check_executor_args, make_executor
 from lidarkit.bench.jobs import Job
 from lidarkit.bench.results import JOBS_DIR, is_finished, make_record, path_argument, remove_stale_temp_files, write_result
 from lidarkit.lifetime import raise_if_interrupted
+from lidarkit.params import is_integer
 from lidarkit.bench.suite import Suite
 from lidarkit.bench.worker import execute_job
 from lidarkit.errors import ConfigError, OutputError
@@ -66,6 +67,7 @@ def run_suite(
     if not isinstance(suite, Suite):
         raise ConfigError(f"must be a Suite (load_suite(path) reads one), got {type(suite).__name__} {suite!r}", source="suite")
     out_dir = path_argument(out_dir, "out_dir")
+    _check_types(workers, force)
     check_executor_args(executor, workers, address)
     check_results_folder(out_dir)
     t0 = time.perf_counter()
@@ -99,6 +101,15 @@ def run_suite(
                 runner.close()
         summary.wall_s = time.perf_counter() - t0
         return summary
+
+
+def _check_types(workers: Any, force: Any) -> None:
+    """ConfigError naming the argument of a wrong type: force="no" was true (every job ran again), workers="2" a bare
+    TypeError."""
+    if workers is not None and not is_integer(workers):
+        raise ConfigError(f"must be an integer, got {type(workers).__name__} {workers!r}", source="workers")
+    if not isinstance(force, bool):
+        raise ConfigError(f"must be True or False, got {type(force).__name__} {force!r}", source="force")
 
 
 LOCK_FILE = ".lidarkit-bench.lock"

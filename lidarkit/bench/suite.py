@@ -162,7 +162,10 @@ def read_suite_file(path: str | Path) -> tuple[SuiteModel, _Locator]:
     try:
         model = SuiteModel.model_validate(raw)
     except ValidationError as err:
-        errors = sorted(err.errors(), key=lambda e: e["type"] != "extra_forbidden")  # a typo explains a "missing"
+        # a mapping given where a mapping or a name fits: its mapping branch explains it ("Input should be a valid
+        # string" of the name branch was added to "grid values of 'seconds' are empty")
+        errors = [e for e in err.errors() if e["loc"][-1:] != ("str",) or not isinstance(e["input"], dict)] or err.errors()
+        errors = sorted(errors, key=lambda e: e["type"] != "extra_forbidden")  # a typo explains a "missing"
         first = errors[0]
         messages = []
         for e in errors[:3]:
@@ -171,7 +174,7 @@ def read_suite_file(path: str | Path) -> tuple[SuiteModel, _Locator]:
             elif e["type"] == "missing":
                 msg = f"missing key {e['loc'][-1]!r}"
             else:
-                msg = f"{_loc_text(tuple(e['loc']))}: {e['msg']}"
+                msg = f"{_loc_text(tuple(e['loc']))}: {e['msg'].removeprefix('Value error, ')}"  # (a validator's own)
             messages.append(msg)
         more = f" (+{len(errors) - 3} more)" if len(errors) > 3 else ""
         raise ConfigError("; ".join(messages) + more, source=path, location=locator.location(tuple(first["loc"]))) from None

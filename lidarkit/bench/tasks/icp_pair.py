@@ -1,7 +1,8 @@
 """``icp_pair``: pairwise registration of chosen scan pairs against ground truth, any registered ICP variant.
 
 Options (per experiment): ``pairs`` — ``[[target, source], ...]`` (KITTI: frame numbers, e.g.
-``[[94, 95]]``; other datasets: scan indices); default: the first ``max_pairs`` consecutive pairs.
+``[[94, 95]]``; other datasets: scan indices; two different scans); default, and only without ``pairs``: the first
+``max_pairs`` consecutive pairs.
 ``init_noise_m`` / ``init_noise_deg`` — start from the ground-truth motion perturbed by a seeded random
 motion of that size (0 = start from identity, the default). ``ground_truth_file`` — a 4x4 ``T_target_source``
 text file (relative to the dataset folder) for a dataset without poses holding one pair, e.g. the bundled
@@ -15,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator
 
 from lidarkit.bench.jobs import Job
 from lidarkit.bench.tasks import Metric, Task, TaskOutput, import_module_for_task
@@ -33,6 +34,24 @@ class IcpPairOptions(BaseModel):
     max_pairs: int = Field(1, ge=1)
     init_noise_m: float = Field(0.0, ge=0.0)
     init_noise_deg: float = Field(0.0, ge=0.0)
+
+    @field_validator("pairs")
+    @classmethod
+    def _no_scan_with_itself(cls, pairs: list[tuple[int, int]] | None) -> list[tuple[int, int]] | None:
+        """A scan registered to itself measures nothing about a method (``[[1, 1]]`` was accepted)."""
+        same = [list(p) for p in pairs or () if p[0] == p[1]]
+        if same:
+            raise ValueError(f"{', '.join(map(str, same))} registers a scan with itself: give two different scans")
+        return pairs
+
+    @field_validator("max_pairs")
+    @classmethod
+    def _max_pairs_without_pairs(cls, max_pairs: int, info: ValidationInfo) -> int:
+        """``max_pairs`` only counts the default consecutive pairs: beside ``pairs`` it was ignored without a word.
+        (A validator of a field: a model-level one has no name for the error to point at.)"""
+        if info.data.get("pairs"):
+            raise ValueError("only applies without 'pairs' (the first max_pairs consecutive pairs): give one of them")
+        return max_pairs
 
 
 def read_T_target_source(path: Path) -> np.ndarray:
