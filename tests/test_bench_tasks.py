@@ -363,29 +363,26 @@ def test_icp_pair_refuses_max_pairs_beside_pairs_and_a_scan_paired_with_itself(t
     from lidarkit.bench.tasks.icp_pair import IcpPairOptions, _pairs
 
     kitti = shared_path("kitti_odometry")
+
+    def suite_with(options: str):
+        return write(tmp_path, f"""
+            experiments:
+              - task: icp_pair
+                dataset: {{kind: kitti, path: "{kitti}", sequence: "00"}}
+                options: {options}
+                methods: [vanilla]
+            """)
+
     for options, reason in (
         ("{pairs: [[1, 0]], max_pairs: 5}", "max_pairs: only applies without 'pairs' (the first max_pairs consecutive "
                                              "pairs): give one of them"),
         ("{pairs: [[0, 1], [1, 1], [2, 2]]}", "pairs: [1, 1], [2, 2] registers a scan with itself: give two different scans"),
     ):
-        path = write(tmp_path, f"""
-            experiments:
-              - task: icp_pair
-                dataset: {{kind: kitti, path: "{kitti}", sequence: "00"}}
-                options: {options}
-                methods: [vanilla]
-            """)
+        path = suite_with(options)
         with pytest.raises(ConfigError) as info:
             load_suite(path)
         assert str(info.value) == (f"{path} (experiments[0].options, line 5): {reason} (options of task 'icp_pair': "
                                    "pairs, ground_truth_file, max_pairs, init_noise_m, init_noise_deg)")
     for options, n_pairs in (("{max_pairs: 3}", 3), ("{pairs: [[1, 0]]}", 1)):  # each alone still passes
-        path = write(tmp_path, f"""
-            experiments:
-              - task: icp_pair
-                dataset: {{kind: kitti, path: "{kitti}", sequence: "00"}}
-                options: {options}
-                methods: [vanilla]
-            """)
-        job, = load_suite(path).jobs
+        job, = load_suite(suite_with(options)).jobs
         assert len(_pairs(IcpPairOptions(**job.options), open_dataset_spec(job.dataset))) == n_pairs
