@@ -174,7 +174,7 @@ def _few(labels: list[str], n: int = 3) -> str:
 def _same_ground_truth(a: OdometryRun, b: OdometryRun, names: tuple[str, str]) -> str:
     """"" when both runs were scored against the same ground truth; a note when they ran over the same dataset and
     frames but each against the truth at its own instant of the sweep (the run re-timed it: e.g. kiss deskews to the
-    sweep end, small_gicp refers to the scans' stamps), the runs called by ``names`` (as the header: "kiss (A)", "kiss
+    sweep end, small_gicp lands mid-sweep), the runs called by ``names`` (as the header: "kiss (A)", "kiss
     (B)" when both are kiss); EvaluationError otherwise."""
     ga, gb = a.ground_truth, b.ground_truth
     if len(ga) == len(gb) and np.allclose(ga.poses_se3, gb.poses_se3, atol=1e-6):
@@ -204,16 +204,48 @@ def _data_of(run: OdometryRun) -> tuple[str, str] | None:
 
 def run_units(run: OdometryRun, metric: str) -> np.ndarray:
     """Per-unit errors of a run folder: per KITTI segment (``segment_*``) or per frame pair (``rpe_*``)."""
+    return _run_units(run, metric)[1]
+
+
+def _run_units(run: OdometryRun, metric: str) -> tuple[list[tuple[int, float]] | None, np.ndarray]:
+    """``(each segment's (first frame, length) or None per frame, errors)`` of a run folder."""
     from lidarkit import eval as leval
 
     ref, est = run.ground_truth, run.estimate
     if len(ref) != len(est):
         raise DataError(f"{len(est)} estimated poses for {len(ref)} ground-truth poses", source=run.path)
     if metric.startswith("segment_"):
-        drift = leval.kitti_drift(ref, est)
-        return drift.segment_translation_pct if metric == "segment_translation_pct" else drift.segment_rotation_deg_per_100m
+        drift = leval.kitti_drift(ref, est, allow_empty=True)
+        keys = list(zip(drift.segment_first_frame.tolist(), drift.segment_length_m.tolist()))
+        return keys, drift.segment_translation_pct if metric == "segment_translation_pct" else drift.segment_rotation_deg_per_100m
     relation = "translation" if metric == "rpe_translation_m" else "rotation_angle_deg"
-    return np.asarray(leval.rpe(ref, est, delta=1, delta_unit="frames", relation=relation).errors, dtype=np.float64)
+    return None, np.asarray(leval.rpe(ref, est, delta=1, delta_unit="frames", relation=relation).errors, dtype=np.float64)
+
+
+def _paired_segments(a: OdometryRun, b: OdometryRun, metric: str) -> tuple[np.ndarray, np.ndarray, str]:
+    """The two runs' errors over the units both have, and a note when some were left out: segments pair by their first
+    frame and length (two runs scored at other instants of the sweep measure the path on other truths: 200.0 m against
+    199.5 m gave one run a 200 m segment the other lacks, and segments paired by position covered other frames)."""
+    keys_a, va = _run_units(a, metric)
+    keys_b, vb = _run_units(b, metric)
+    if keys_a is None or keys_a == keys_b:
+        if len(va) != len(vb):
+            raise EvaluationError(f"{len(va)} frame pairs in one run, {len(vb)} in the other", source="compare")
+        if not len(va):
+            raise EvaluationError(f"no KITTI segment on either run's ground truth ({a.ground_truth.length_m:.1f} m; "
+                                  "segments need more than 100 m): compare per frame (--metric rpe_translation_m)",
+                                  source="compare")
+        return va, vb, ""
+    index_b = {key: k for k, key in enumerate(keys_b)}
+    common = [(k, index_b[key]) for k, key in enumerate(keys_a) if key in index_b]
+    if not common:
+        raise EvaluationError("no KITTI segment (first frame, length) in common between the two runs' ground truths: "
+                              "compare per frame (--metric rpe_translation_m)", source="compare")
+    ia, ib = (np.array(i, dtype=np.int64) for i in zip(*common))
+    left = len(keys_a) + len(keys_b) - 2 * len(common)
+    note = (f"{left} KITTI segment(s) on only one run's ground truth left out (paired by first frame and length)"
+            if left else "")
+    return va[ia], vb[ib], note
 
 
 def compare(
@@ -277,17 +309,19 @@ def compare(
         if every_result:  # (--all was ignored without a word)
             raise ConfigError("every result (--all) applies to bench results folders only", source="all")
         note = _same_ground_truth(side_a, side_b, (name_a, name_b))
-        if metric is None:
+        if metric is None:  # (segments on both truths: A's alone made the default depend on the order given)
             from lidarkit.eval import drift_segments_possible
 
-            metric = "segment_translation_pct" if drift_segments_possible(side_a.ground_truth) else "rpe_translation_m"
+            both = all(drift_segments_possible(side.ground_truth) for side in (side_a, side_b))
+            metric = "segment_translation_pct" if both else "rpe_translation_m"
         if metric not in RUN_METRICS:
             raise ConfigError(f"unknown run metric {metric!r}; choose one of: {', '.join(RUN_METRICS)}", source="metric")
         if noise_from is not None:  # a baseline's bands are of whole-run metrics, not of one segment or frame
             raise ConfigError("a baseline's bands are of bench metrics (one value per run); two run folders are compared "
                               f"per {'segment' if metric.startswith('segment_') else 'frame'}: give that noise with --noise",
                               source="--noise-from")
-        va, vb = run_units(side_a, metric), run_units(side_b, metric)
+        va, vb, left_out = _paired_segments(side_a, side_b, metric)
+        note = "; ".join(n for n in (note, left_out) if n)
         pairing = "segment" if metric.startswith("segment_") else "frame"
         result = paired_test(va, vb, name_a=name_a, name_b=name_b, metric=metric, pairing=pairing,
                              alpha=alpha, noise=noise, seed=seed)
