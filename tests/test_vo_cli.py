@@ -771,3 +771,82 @@ def test_a_stdout_that_refuses_the_table_still_gets_the_run_folder_written(tmp_p
     metrics = json.loads((out / "metrics.json").read_text())
     assert (metrics["frames"], metrics["accepted_pairs"]) == (4, 3) and metrics["raw"]["ape_rmse_m"] < 0.03
     assert yaml.safe_load((out / "config.yaml").read_text())["max_frames"] == 4 and (out / "trajectory.png").is_file()
+
+
+def test_the_plot_is_aligned_on_the_frames_the_scores_use(tmp_path, capsys):
+    """Frames 0-1 unreadable (they only hold frame 2's pose): the plot's Sim(3) fit used every pose, so its VO curve was
+    not the one scored (on 20 KITTI frames with 6 bad its end lay 1.15 m beyond the GT end, APE 0.014 m). The plotted
+    curves are fitted from the first scored frame on, and labelled as the table ("Sim(3)-aligned", not "Sim3")."""
+    from lidarkit.eval import align_trajectory, ape
+    from lidarkit.vo.output import aligned_to_ground_truth
+
+    seq = tmp_path / "06"
+    shutil.copytree(sample_path("kitti_vo", "06"), seq)
+    for name in ("000000.png", "000001.png"):
+        (seq / "image_0" / name).write_bytes(b"not a png")
+    code, _, err = _run(["vo", str(seq), "--out", str(tmp_path / "run")], capsys)
+    assert code in (0, None), err
+    metrics = json.loads((tmp_path / "run" / "metrics.json").read_text())
+    first = metrics["scored_from_frame"]
+    assert first == 2
+    gt = Trajectory.from_kitti(seq / "poses.txt")
+    raw, smoothed = (Trajectory.from_kitti(tmp_path / "run" / f) for f in ("poses_kitti.txt", "poses_smoothed_kitti.txt"))
+    curves = aligned_to_ground_truth(gt, {"VO raw": raw, "VO smoothed": smoothed}, first_frame=first)
+    assert list(curves) == ["ground truth", "VO raw (Sim(3)-aligned)", "VO smoothed (Sim(3)-aligned)"]
+    for variant in ("raw", "smoothed"):
+        plotted = curves[f"VO {variant} (Sim(3)-aligned)"]
+        assert len(plotted) == len(gt)  # the whole trajectory, frames before the first scored one too
+        assert ape(gt[first:], plotted[first:]).rmse == pytest.approx(metrics[variant]["ape_rmse_m"], rel=1e-4)
+    fitted_on_all = align_trajectory(gt, raw, "sim3")[0]  # (the old plot's fit: scored frames much further off)
+    assert ape(gt[first:], fitted_on_all[first:]).rmse > 3 * metrics["raw"]["ape_rmse_m"]
+
+
+def test_calib_reads_a_kitti_raw_calibration_and_a_k_label_and_says_what_it_reads(tmp_path, capsys):
+    """--calib calib_cam_to_cam.txt (KITTI raw) was read as an odometry calib.txt: "(line 1): calib_time: not a number";
+    "K: 9 numbers" read "no P0 projection matrix" though --help offers 9 numbers (K). The raw file gives the left 3x3
+    of P_rect_00 (the kitti_raw reader's K), "K:" its 9 numbers, and other labels one line saying what is read."""
+    from conftest import shared_path
+
+    from lidarkit.io.images import read_intrinsics
+    from lidarkit.io.kitti_raw import KittiRaw
+
+    date = shared_path("kitti_raw", "2011_09_26")
+    K = read_intrinsics(date / "calib_cam_to_cam.txt")
+    np.testing.assert_array_equal(K, KittiRaw(date.parent, "2011_09_26", "0001").K)
+    assert (K[0, 0], K[0, 2], K[1, 2]) == (721.5377, 609.5593, 172.854)
+    (tmp_path / "k.txt").write_text("K: 707.0912 0 601.8873 0 707.0912 183.1104 0 0 1\n")
+    np.testing.assert_array_equal(read_intrinsics(tmp_path / "k.txt"),
+                                  [[707.0912, 0, 601.8873], [0, 707.0912, 183.1104], [0, 0, 1]])
+    (tmp_path / "c.yaml").write_text("fx: 707\nfy: 707\n")
+    code, _, err = _run(["vo", str(sample_path("kitti_vo", "06")), "--calib", str(tmp_path / "c.yaml")], capsys)
+    assert code == 1 and err == (f"error: {tmp_path / 'c.yaml'}: no P0:, P_rect_00: or K: line; intrinsics files hold 9 numbers "
+                                 "(K row-major, bare or after 'K:'), 4 (fx fy cx cy), a KITTI odometry calib.txt (P0) or a "
+                                 "KITTI raw calib_cam_to_cam.txt (P_rect_00)\n")
+
+
+def test_tum_poses_for_an_image_0_folder_name_the_kind_that_reads_it_as_images(tmp_path, capsys):
+    """`lidarkit vo SEQ/image_0 --poses-format tum` said "--poses-format tum is for image folders" to a user who had
+    given an image folder (an image_0/ beside calib.txt is read as its sequence): the error names --kind images."""
+    seq = sample_path("kitti_vo", "06")
+    tum = Trajectory.from_kitti(seq / "poses.txt").with_timestamps(np.arange(8) * 0.1).to_tum(tmp_path / "gt.tum")
+    code, _, err = _run(["vo", str(seq / "image_0"), "--poses", str(tum), "--poses-format", "tum"], capsys)
+    assert code == 1 and err == (f"error: {seq / 'image_0'}: read as its KITTI sequence (an image_0/ beside calib.txt), whose "
+                                 "poses are KITTI rows (12 numbers, one per image): --poses-format tum is for image folders: "
+                                 "add --kind images (kind='images')\n")
+    code, stdout, err = _run(["vo", str(seq / "image_0"), "--poses", str(tum), "--poses-format", "tum", "--kind", "images",
+                              "--calib", str(seq / "calib.txt")], capsys)
+    assert code in (0, None) and "APE raw (Sim(3)-aligned)" in stdout, err
+
+
+def test_poses_shorter_than_the_image_folder_say_they_pair_before_the_frames_are_picked(tmp_path, capsys):
+    """15 poses for a 51-image folder run with --max-frames 10 read "15 poses for 51 images": the user, who asked for
+    10 frames, could not tell why 15 were too few. The error says poses pair one per image of the folder, in order,
+    before --start/--max-frames pick frames (time stamps alike)."""
+    seq = sample_path("kitti_vo", "06")
+    (tmp_path / "p5.txt").write_text("".join((seq / "poses.txt").read_text().splitlines(keepends=True)[:5]))
+    (tmp_path / "t5.txt").write_text("0\n0.1\n0.2\n0.3\n0.4\n")
+    why = "(one per image of the folder, in order from its first: --start and --max-frames pick frames after pairing)"
+    for option, short, what in (("--poses", "p5.txt", "poses"), ("--timestamps", "t5.txt", "time stamps")):
+        code, _, err = _run(["vo", str(seq / "image_0"), "--kind", "images", "--calib", str(seq / "calib.txt"), option,
+                             str(tmp_path / short), "--max-frames", "3"], capsys)
+        assert code == 1 and err == f"error: {tmp_path / short}: 5 {what} for 8 images {why}\n", err

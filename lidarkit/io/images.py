@@ -28,30 +28,46 @@ log = logging.getLogger(__name__)
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm")
 
 
+#: what an intrinsics file (``lidarkit vo --calib``) may hold, for its docstring and errors
+INTRINSICS_FILES = ("9 numbers (K row-major, bare or after 'K:'), 4 (fx fy cx cy), a KITTI odometry calib.txt (P0) or "
+                    "a KITTI raw calib_cam_to_cam.txt (P_rect_00)")
+
+
 def read_intrinsics(path: str | os.PathLike) -> np.ndarray:
-    """``(3, 3)`` K from a text file holding 9 numbers (K row-major), 4 numbers (``fx fy cx cy``), or a KITTI
-    ``calib.txt`` (``P0: ...`` or bare rows of 12 numbers: K is the left 3x3 of P0)."""
+    """``(3, 3)`` K from a text file holding 9 numbers (K row-major, bare or after ``K:``), 4 numbers (``fx fy cx cy``),
+    a KITTI odometry ``calib.txt`` (``P0: ...`` or bare rows of 12 numbers: K is the left 3x3 of P0) or a KITTI raw
+    ``calib_cam_to_cam.txt`` (the left 3x3 of ``P_rect_00``, the kitti_raw reader's K; it was read as an odometry
+    calib.txt and refused at its ``calib_time`` line)."""
     tokens: list[str] = []
-    labelled = False
+    labels: dict[str, list[str]] = {}
     for raw in read_lines(path):
         line = raw.split("#")[0].strip()
         if not line:
             continue
-        labelled |= ":" in line
+        key, labelled, rest = line.partition(":")
+        if labelled:
+            labels[key.strip()] = rest.replace(",", " ").split()
         tokens.extend(line.replace(",", " ").split())
-    if labelled or len(tokens) % 12 == 0 and len(tokens) >= 12:
+    if "P0" in labels or not labels and len(tokens) % 12 == 0 and len(tokens) >= 12:
         return read_kitti_calib(path)["P0"][:, :3].copy()
+    if "P_rect_00" in labels:  # 12 numbers: its left 3x3 (another count is refused below, as found)
+        p_rect = labels["P_rect_00"]
+        tokens = [t for i, t in enumerate(p_rect) if i % 4 != 3] if len(p_rect) == 12 else p_rect
+    elif "K" in labels:
+        tokens = labels["K"]
+    elif labels:  # ("K: 9 numbers" read "no P0 projection matrix")
+        raise DataError(f"no P0:, P_rect_00: or K: line; intrinsics files hold {INTRINSICS_FILES}", source=path)
     try:
         values = np.array([float(t) for t in tokens])
     except ValueError:
-        raise DataError("intrinsics must be numbers (9 for K, 4 for fx fy cx cy, or KITTI P0)", source=path) from None
+        raise DataError(f"intrinsics must be numbers: {INTRINSICS_FILES}", source=path) from None
     if values.size == 9:
         K = values.reshape(3, 3)
     elif values.size == 4:
         fx, fy, cx, cy = values
         K = np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1.0]])
     else:
-        raise DataError(f"expected 9 numbers (K), 4 (fx fy cx cy) or KITTI P rows; found {values.size}", source=path)
+        raise DataError(f"expected {INTRINSICS_FILES}; found {values.size} numbers", source=path)
     if np.all(np.isfinite(K)) and (K[0, 0] <= 0 or K[1, 1] <= 0):
         raise DataError(f"focal lengths must be > 0 pixels, got fx = {K[0, 0]:g}, fy = {K[1, 1]:g}", source=path)
     if not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0 or not np.allclose(K[2], [0, 0, 1]):
@@ -90,6 +106,11 @@ def _warn_stamps_apart(pose_stamps: np.ndarray, image_stamps: np.ndarray, poses:
                     "by order, one each, not by time", poses, k, float(apart[k]), half_frame)
 
 
+#: why a file shorter than the folder is refused though ``lidarkit vo --max-frames`` uses fewer images ("15 poses for
+#: 51 images" with --max-frames 10): rows pair with images by order, from the folder's first
+_ONE_PER_IMAGE = "(one per image of the folder, in order from its first: --start and --max-frames pick frames after pairing)"
+
+
 @register_dataset("images")
 class ImageFolder:
     """Images of one folder as an ``ImageSequence``.
@@ -117,7 +138,7 @@ class ImageFolder:
             stamps = (read_image_timestamps(timestamps) if isinstance(timestamps, (str, os.PathLike))
                       else np.asarray(timestamps, dtype=np.float64))
             if len(stamps) != n:
-                raise DataError(f"{len(stamps)} time stamps for {n} images", source=str(timestamps)[:200])
+                raise DataError(f"{len(stamps)} time stamps for {n} images {_ONE_PER_IMAGE}", source=str(timestamps)[:200])
             self._timestamps = stamps
         self._K = None
         if calib is not None:
@@ -133,7 +154,7 @@ class ImageFolder:
                                 err.reason)
                 raise DataError(reason, source=err.source, location=err.location) from None
             if len(gt) != n:
-                raise DataError(f"{len(gt)} poses for {n} images", source=poses)
+                raise DataError(f"{len(gt)} poses for {n} images {_ONE_PER_IMAGE}", source=poses)
             if self._timestamps is not None and poses_format == "kitti":
                 gt = gt.with_timestamps(self._timestamps)
             elif poses_format == "tum" and gt.timestamps_s is not None:  # paired one pose per image, by order

@@ -76,9 +76,12 @@ def open_vo_input(path: str | os.PathLike, *, kind: str = "auto", calib: str | o
     if kind not in INPUT_KINDS:
         raise ConfigError(f"unknown input kind {kind!r}; known: {', '.join(INPUT_KINDS)}", source="vo input kind")
     kind = detect_kind(path) if kind == "auto" else kind
-    if kind == "kitti" and poses_format != "kitti":
-        raise ConfigError(f"a KITTI folder's poses are KITTI rows (12 numbers, one per image): --poses-format {poses_format} is for "
-                          "image folders", source=str(path))
+    if kind == "kitti" and poses_format != "kitti":  # (an image_0/ given, read as its sequence, was told to be an image folder)
+        what = ("read as its KITTI sequence (an image_0/ beside calib.txt), whose poses" if path.name == "image_0"
+                else "a KITTI folder's poses")
+        raise ConfigError(f"{what} are KITTI rows (12 numbers, one per image): --poses-format {poses_format} is for image "
+                          f"folders: {'add' if path.name == 'image_0' else 'give its image_0/ with'} --kind images (kind='images')",
+                          source=str(path))
     if kind == "tum":  # its own stamps (rgb.txt) and ground truth (groundtruth.txt)
         for given, option in ((timestamps, "timestamps"), (poses, "poses")):
             if given is not None:
