@@ -685,6 +685,11 @@ def test_covariance_settings_of_a_run_without_pose_covariance_are_said_to_have_n
     stateless = run(kitti, "vanilla", params={"calibrated_covariance": False}, frames="0:3", progress=False, pose_covariance=False)
     assert ("calibrated_covariance: shapes each frame's covariance, which this run does not compute: no effect"
             in stateless.metrics["warnings"])
+    # covariance='none' turns a stateless run's pose covariance off (an effect), and advice run() would refuse is not given
+    off = run(kitti, "vanilla", params={"covariance": "none"}, frames="0:3", progress=False)
+    assert not any("no effect" in w for w in off.metrics["warnings"]) and off.covariances is None
+    lean = run(kitti, "kiss", params={"assess": False}, frames="0:3", progress=False)
+    assert ("assess: shapes each frame's covariance, which this run does not compute: no effect" in lean.metrics["warnings"])
     asked = run(kitti, "kiss", params={"covariance": "gauss_newton"}, frames="0:3", progress=False, pose_covariance=True)
     assert not any("no effect" in w for w in asked.metrics["warnings"])
     assert not any("no effect" in w for w in run(kitti, "vanilla", params={"covariance": "gauss_newton"}, frames="0:3",

@@ -87,6 +87,10 @@ def test_without_deskew_a_distorted_sweep_is_scored_at_its_middle(sims):
         "truth to the sweep end, given with the run (not re-timed: give it at the sweep mid to score like with like): "
         "compared as it is (the motion between the two instants counts as error)")
     assert not any("stamped" in w for w in kept.metrics["warnings"])  # (the note says it: no half-frame stamp warning)
+    # its stamps are still held against the scans' (at its own instant): 2 s off was scored without a word
+    end = sims["mid"].ground_truth_at("end")
+    late = run(sims["mid"], "kiss", params={"deskew": False}, ground_truth=end.with_timestamps(end.timestamps_s + 2.0))
+    assert any("is stamped 2.000 s from its scan's pose" in w for w in late.metrics["warnings"])
     method = "small_gicp" if "small_gicp" in available_icp() else "open3d_point_to_plane"
     at_mid = run(sims["start"], method, frames="0:6")
     assert "ground truth re-timed from the sweep start to the sweep mid" in at_mid.metrics["ground_truth_instant_note"]

@@ -348,7 +348,8 @@ def run(
     (``frame_check`` sets its thresholds: a FrameCheckConfig or a mapping of its settings, checked as the CLI checks
     them). ``name`` titles the run (default: the dataset's name, e.g. its folder). ``prefetch``: scans read
     ahead in a background thread (0: read inline). Ground truth whose instant of the sweep differs from the
-    estimate's is re-timed with a note or refused (:mod:`lidarkit.odometry.instants`).
+    estimate's is re-timed with a note, else refused (deskewed) or compared as it is with a note (not deskewed; see
+    :mod:`lidarkit.odometry.instants`).
     ``init``: the initial guess of each frame, ``"constant_velocity"`` (the previous relative motion; stateful
     variants: their own model) or ``"odometry"`` (the relative motion of the dataset's own ``odometry`` trajectory,
     e.g. a CARMEN log's wheel odometry; for a stateless variant it also replaces a non-converged registration; a
@@ -553,6 +554,7 @@ def run(
         first_scan = dataclasses.replace(first_scan, stamp_instant=recorded_instant)
     estimate_at = estimate_instant(registration, first_scan)
     # the poses are stamped at the instant they refer to (a deskewing variant's), not at the one the scans' stamps do
+    scan_stamps = timestamps
     timestamps, stamp_note = stamps_at_instant(timestamps, first_scan, estimate_at, all_stamps)
     trajectory = Trajectory(poses, timestamps, name=f"{name} on {title}",
                             meta={"method": name, "dataset": dataset_name, **({"stamps": stamp_note} if stamp_note else {})})
@@ -599,10 +601,13 @@ def run(
                if fallback[1:].all() else f"{name} returns none")
         warnings.append(f"no frame's registration gave a covariance ({why}): no pose covariance")
         want_covariance = False
-    # (ground truth of another instant compared as it is: its note says so, its stamps are that instant's)
+    # ground truth of another instant compared as it is (its note says so): its stamps are held against the scans'
+    # moved to its own instant (against the estimate's, a half-sweep gap was named; skipped, a 2 s offset was not)
     kept_as_is = instant_note is not None and retimed is reference
-    apart = (None if kept_as_is else _stamps_apart(reference, timestamps, all_stamps, numbers) if ground_truth is not None
-             else _own_stamps_apart(reference, timestamps, all_stamps) if instant_note is None else None)
+    truth_at = (reference.meta or {}).get("pose_instant") if kept_as_is else None
+    at_truth = stamps_at_instant(scan_stamps, first_scan, truth_at, all_stamps)[0] if kept_as_is else timestamps
+    apart = (_stamps_apart(reference, at_truth, all_stamps, numbers) if ground_truth is not None
+             else _own_stamps_apart(reference, at_truth, all_stamps) if instant_note is None or kept_as_is else None)
     far = _far_float32_warning(far_float32, n)
     warnings = [w for w in (past_the_end, time_gap_warning(timestamps, numbers, odometry_poses is not None, indices, typical), apart, far)
                 if w] + warnings
@@ -611,10 +616,12 @@ def run(
         if gates:
             warnings.append(f"{', '.join(gates)}: acceptance gates of a pairwise alignment (align); {name}'s odometry "
                             "(register_frame, its own local map) does not use them")
+    # (covariance='none' is what turned it off, when it is: that has its effect)
     unused = [f for f in ("covariance", "calibrated_covariance", *(("assess",) if stateful else ()))
-              if f in getattr(config, "model_fields_set", ()) and not want_covariance]
+              if f in getattr(config, "model_fields_set", ()) and not want_covariance and not (f == "covariance" and no_covariance)]
     if unused:  # (recorded in config.yaml as if applied: the poses and metrics were those of a default run)
-        ask = " (--pose-covariance / pose_covariance=True asks for it)" if pose_covariance is None else ""
+        asked = pose_covariance is None and assessed and not no_covariance  # (advice run() would refuse is not given)
+        ask = " (--pose-covariance / pose_covariance=True asks for it)" if asked else ""
         warnings.append(f"{', '.join(unused)}: {'shapes' if len(unused) == 1 else 'shape'} each frame's covariance, which "
                         f"this run does not compute{ask}: no effect")
     if timestamps is not None and checker.config.nominal_period_s != FrameCheckConfig.nominal_period_s:

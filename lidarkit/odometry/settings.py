@@ -139,7 +139,7 @@ def effective_settings(
         stated = getattr(registration, "deskew_instant", None)
         estimate_instant = str(stated) if stated else "end" if method == "kiss" else "the instant the variant deskews to (not stated)"
     elif n_times:  # (as estimate_instant in instants.py decides it)
-        estimate_instant = "mid (sweeps not deskewed: a scan-to-scan fit of distorted sweeps, benchmarks/sweep_instant.py)"
+        estimate_instant = "mid (sweeps not deskewed: a fit of distorted sweeps lands about mid-sweep, benchmarks/sweep_instant.py)"
     elif stamp_instant is not None:
         estimate_instant = f"{stamp_instant} (the scans' stamps: each scan taken as one snapshot)"
     else:
