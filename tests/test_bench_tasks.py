@@ -111,7 +111,7 @@ def test_odometry_job_equals_a_direct_odometry_run():
     assert np.sqrt(np.mean(np.square(errors))) == pytest.approx(ape, rel=1e-4)
 
 
-def test_icp_pair_on_distorted_simulated_sweeps_is_scored_at_the_sweep_middle():
+def test_icp_pair_on_distorted_simulated_sweeps_is_scored_at_the_sweep_middle(tmp_path):
     """Pairs of distorted simulated sweeps were scored against the sweep-end ground truth while a pairwise alignment
     (no per-point times) lands about mid-sweep, as the odometry task scores it: small_gicp read ~7x its error. kiss's
     deskew, which a pair cannot apply, gave rows identical to deskew=false without a word."""
@@ -134,6 +134,14 @@ def test_icp_pair_on_distorted_simulated_sweeps_is_scored_at_the_sweep_middle():
     assert errors["end"] > 3 * errors["mid"]
     kiss = execute_job(Job("icp_pair", "exp", "sim", spec, "kiss", {}, seed=0, options={"pairs": [[0, 1]]}).spec())
     assert any("deskew has no effect on a pair" in w for w in kiss["warnings"])
+    # the simulator's KITTI-layout export of the same sweeps is scored there too (it read ~9x the error at the sweep end)
+    from lidarkit.sim.lidar import export_kitti
+
+    folder = export_kitti(sim, tmp_path / "seq")
+    exported = execute_job(Job("icp_pair", "exp", "kitti", {"kind": "kitti", "path": str(folder)}, method, {}, seed=0,
+                               options={"pairs": [[k, k + 1] for k in range(7)]}).spec())
+    assert exported["status"] == "ok", exported["error"]
+    assert exported["metrics"]["translation_error_m"] == pytest.approx(errors["mid"], rel=1e-6)
 
 
 def test_icp_pair_job_on_the_real_kitti_pair_matches_ground_truth_scoring():

@@ -71,12 +71,15 @@ def pairs_truth(dataset: Any) -> Any:
     """The dataset's ground truth at the instant a pairwise alignment of its sweeps refers to: ``align`` takes no
     per-point times, so over sweeps measured while moving the pose lands about mid-sweep
     (:mod:`lidarkit.odometry.instants`); re-timed there where the dataset can (a simulated street pair scored
-    against sweep-end truth read 0.031 m for small_gicp where mid gives 0.004), else as the dataset gives it."""
-    gt = dataset.ground_truth
+    against sweep-end truth read 0.031 m for small_gicp where mid gives 0.004; so did the simulator's KITTI-layout
+    export), else None: the dataset's own, as it gives it."""
     retime = getattr(dataset, "ground_truth_at_instant", None)
-    if gt is None or not callable(retime) or (gt.meta or {}).get("pose_instant") in (None, "mid") or len(dataset) == 0:
-        return gt
-    return retime("mid") if dataset.read_scan(0).has_time_span() else gt
+    if not callable(retime) or len(dataset) == 0:
+        return None
+    gt = dataset.ground_truth
+    if gt is None or (gt.meta or {}).get("pose_instant") in (None, "mid"):
+        return None
+    return retime("mid") if dataset.read_scan(0).has_time_span() else None
 
 
 def _pair_data(dataset: Any, target: int, source: int, T_gt_file: np.ndarray | None = None,
@@ -86,7 +89,13 @@ def _pair_data(dataset: Any, target: int, source: int, T_gt_file: np.ndarray | N
     if T_gt_file is not None:
         return dataset.read_scan(source).points_xyz, dataset.read_scan(target).points_xyz, T_gt_file
     if hasattr(dataset, "relative_pose") and hasattr(dataset, "read_scan_by_frame"):  # KITTI: frame numbers
-        T_gt = np.asarray(dataset.relative_pose(target, source), dtype=np.float64)
+        if truth is None:
+            T_gt = np.asarray(dataset.relative_pose(target, source), dtype=np.float64)
+        else:  # (its rows follow the folder's frames)
+            from lidarkit.geometry import se3_inverse
+
+            row = {int(f): k for k, f in enumerate(dataset.frames)}
+            T_gt = se3_inverse(truth.poses_se3[row[target]]) @ truth.poses_se3[row[source]]
         return dataset.read_scan_by_frame(source).points_xyz, dataset.read_scan_by_frame(target).points_xyz, T_gt
     gt = dataset.ground_truth if truth is None else truth
     name = getattr(dataset, "name", "dataset")
@@ -191,7 +200,7 @@ class IcpPairTask(Task):
         if deskew_requested(registration):  # (kiss and kiss deskew=false gave bit-identical rows, without a word)
             log.warning("%s: deskew has no effect on a pair (align takes no per-point times): the sweeps are registered "
                         "as they are", job.method)
-        truth = None if T_gt_file is not None or hasattr(dataset, "relative_pose") else pairs_truth(dataset)
+        truth = None if T_gt_file is not None else pairs_truth(dataset)
         rows, histories = [], []
         for target, source in _pairs(options, dataset):
             source_xyz, target_xyz, T_gt = _pair_data(dataset, target, source, T_gt_file, truth)
