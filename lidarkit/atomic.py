@@ -1,6 +1,7 @@
 """The output layer: every file and folder lidarkit writes goes through here.
 
-- Files are written atomically (a temporary file beside the target, fsync, one rename): complete or absent.
+- Files are written atomically (a temporary file beside the target, fsync, one rename): complete or absent. A target
+  that is a stream (``/dev/null``, ``/dev/stdout``, a FIFO) is written into once the output is complete, not replaced.
 - Run folders are all-or-nothing (:func:`run_folder`): written under a temporary hidden name and renamed into
   place only once every file is there, so a failed or killed run never leaves a folder that looks finished; into an
   existing folder the files are moved one rename each with SIGINT / SIGTERM held until the last is in.
@@ -98,6 +99,9 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     rename replaced the link with a plain file and left the file it names as it was).
     """
     named = Path(path)
+    if _stream_kind(named):  # a stream has no contents to keep: the output is copied into it when complete (renamed
+        yield from _through_temporary(named)  # over, /dev/null became a plain file; a PNG writer needs to seek)
+        return
     path = Path(os.path.realpath(named)) if named.is_symlink() else named
     if path.is_dir():
         raise OutputError("cannot write: is a folder (a file name is needed here)", source=named)
@@ -118,6 +122,43 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     finally:
         with contextlib.suppress(OSError):
             tmp_path.unlink()
+
+
+def _through_temporary(stream: Path) -> Iterator[Path]:
+    """Yield a temporary file (the system's temporary folder, ``stream``'s suffix); when the block ends, copy it into
+    ``stream`` (opened by its name: /dev/stdout reaches the pipe it stands for)."""
+    import shutil
+
+    with output_errors(stream):
+        fd, tmp = tempfile.mkstemp(prefix=".lidarkit-", suffix=stream.suffix)
+        os.close(fd)
+    try:
+        with output_errors(stream):
+            yield Path(tmp)
+            with open(tmp, "rb") as src, open(stream, "wb") as dst:
+                shutil.copyfileobj(src, dst)
+    finally:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+
+
+def _stream_kind(path: Path) -> str:
+    """"a character device" / "a FIFO" for an existing ``path`` that is one, through any links (written into: ``--json
+    /dev/null``, ``/dev/stdout``), "" for a regular file or nothing; an OutputError for other special files (a block
+    device, a socket): not outputs."""
+    import stat
+
+    try:
+        mode = path.stat().st_mode
+    except OSError:
+        return ""
+    if stat.S_ISCHR(mode):
+        return "a character device"
+    if stat.S_ISFIFO(mode):
+        return "a FIFO"
+    if not (stat.S_ISREG(mode) or stat.S_ISDIR(mode)):
+        raise OutputError("cannot write: not a regular file (a block device or a socket)", source=path)
+    return ""
 
 
 def write_text(path: str | os.PathLike, text: str) -> Path:
@@ -281,6 +322,10 @@ def _check_target(path: Path, kind: str) -> None:
             raise OutputError("cannot write: is a folder (a file name is needed here)", source=path)
         if kind == "figure":
             figure_format(None, path)
+        if _stream_kind(path):  # written into, not beside (/dev/null, a FIFO): its own permission counts
+            if not os.access(path, os.W_OK):
+                raise OutputError("cannot write: permission denied", source=path)
+            return
     candidates = (path.absolute(), *path.absolute().parents) if kind == "folder" else path.absolute().parents
     parent = next((p for p in candidates if p.exists()), None)
     if parent is not None and not parent.is_dir():

@@ -289,6 +289,34 @@ def test_a_file_output_given_as_a_link_is_written_where_the_link_points(tmp_path
     assert sorted(p.name for p in tmp_path.rglob("*")) == ["lj", "real.json", "sub"]  # no temporary file left
 
 
+def test_an_output_that_is_a_device_or_a_fifo_is_written_into_not_replaced(tmp_path, capsys):
+    """`--json mynull --plot f.png` on a character device and a FIFO renamed plain files over both (as root, `--json
+    /dev/null` replaced the system's /dev/null), and a reader of the FIFO hung on the unlinked pipe. A stream is written
+    into, once the output is complete (a PNG writer needs to seek, a FIFO cannot)."""
+    import stat
+    import threading
+
+    from conftest import shared_path
+
+    null, fifo = tmp_path / "mynull", tmp_path / "f.png"
+    try:
+        os.mknod(null, 0o666 | stat.S_IFCHR, os.makedev(1, 3))  # (the device /dev/null is)
+    except PermissionError:  # (not root: the system's own)
+        null = Path("/dev/null")
+    os.mkfifo(fifo)
+    received = []
+    reader = threading.Thread(target=lambda: received.append(fifo.read_bytes()), daemon=True)
+    reader.start()
+    gt, est = (str(shared_path("evo_testdata", name)) for name in ("freiburg1_xyz-groundtruth.txt", "freiburg1_xyz-rgbdslam.txt"))
+    with pytest.raises(SystemExit) as exc:
+        main(["eval", gt, est, "-f", "tum", "--associate", "--no-drift", "--json", str(null), "--plot", str(fifo)])
+    reader.join(timeout=30)
+    assert exc.value.code in (0, None), capsys.readouterr().err
+    assert stat.S_ISCHR(null.stat().st_mode) and stat.S_ISFIFO(fifo.stat().st_mode)  # still what they were
+    assert received and received[0].startswith(b"\x89PNG\r\n\x1a\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(p.name for p in (null, fifo) if p.parent == tmp_path)
+
+
 def test_files_written_together_are_all_renamed_in_when_interrupted_between_renames(tmp_path, monkeypatch):
     """Ctrl-C between the renames of files that belong together (an evaluation's JSON and Markdown) left the first one
     new beside the other one old: the renames finish, then the interrupt is raised."""
