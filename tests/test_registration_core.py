@@ -420,7 +420,10 @@ def test_an_os_error_in_a_plugin_is_a_registration_error_and_lidarkits_own_pass_
     an OutputError among them, are no OSError and still pass unchanged."""
     from lidarkit.errors import OutputError
 
-    raised = {"os": OSError("disk gone"), "own": OutputError("disk full", source="my.txt")}
+    raised = {"os": OSError("disk gone"), "own": OutputError("disk full", source="my.txt"),
+              # (a plugin importing its backend lazily, a typo, a generator run dry: tracebacks from `lidarkit icp`)
+              "import": ModuleNotFoundError("No module named 'optional_backend'"), "name": NameError("name 'x' is not defined"),
+              "stop": StopIteration("x")}
 
     class FailICP(Registration):
         name = "fail_test"
@@ -435,6 +438,12 @@ def test_an_os_error_in_a_plugin_is_a_registration_error_and_lidarkits_own_pass_
         icp.align(pts, pts)
     n = len(pts)
     assert str(err.value) == f"fail_test ({n} source / {n} target points): the fail_test backend failed on this pair: OSError: disk gone"
+    for which, said in (("import", "ModuleNotFoundError: No module named 'optional_backend'"),
+                        ("name", "NameError: name 'x' is not defined"), ("stop", "StopIteration: x")):
+        icp.which = which
+        with pytest.raises(RegistrationError) as err:
+            icp.align(pts, pts)
+        assert str(err.value).endswith(f"the fail_test backend failed on this pair: {said}")
     icp.which = "own"
     with pytest.raises(OutputError) as err:
         icp.align(pts, pts)

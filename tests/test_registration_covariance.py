@@ -888,6 +888,12 @@ def test_a_calibration_applies_only_to_the_configuration_it_was_learned_at(stree
     assert (kiss_like.calibration_variant(), vanilla_seq.calibration_variant()) == ("pipeline", None)
     note = vanilla_seq.align(source, target).extra["covariance_calibration"]
     assert note.startswith("none learned for pipeline (kernel=none, threshold={'name': 'fixed', 'max_distance_m': None}, ")
+    # kiss's own composition written as specs, or with another range crop or voxel size, is the one it was learned at
+    # (a dict spec of the default threshold read "none learned": sigmas 0.028 m where the calibration gives 0.061 m)
+    for params in ({"threshold": {"name": "adaptive"}}, {"map": {"name": "voxel_hash"}}, {"max_range_m": 50.0},
+                   {"voxel_size_m": 0.5}):
+        assert get_icp("pipeline", **params).calibration_variant() == "pipeline", params
+    assert get_icp("pipeline", kernel="none").calibration_variant() is None
 
 
 def test_nees_and_covariance_about_say_what_they_got_in_one_line(rng):

@@ -481,11 +481,29 @@ def accept(result: RegistrationResult, config: RegistrationConfig) -> Registrati
     return dataclasses.replace(result, converged=False, reason="; ".join([result.reason, *problems] if result.reason else problems))
 
 
+@functools.lru_cache(maxsize=None)
+def _learned_composition(klass: type) -> dict[str, Any]:
+    """What a variant built with its defaults (where its calibration was learned) resolves its components to."""
+    return klass().describe()
+
+
+#: a composition's settings every component is handed (the range crop, the voxel size): not the residual model
+_SHARED_SETTINGS = ("max_range_m", "min_range_m", "voxel_size_m")
+
+
+def _own_settings(described: Any) -> Any:
+    """A component's description (or a list of them) without the shared settings it was handed."""
+    if isinstance(described, list):
+        return [_own_settings(d) for d in described]
+    return {k: v for k, v in described.items() if k not in _SHARED_SETTINGS} if isinstance(described, dict) else described
+
+
 #: what a backend (Open3D, kiss-icp, small_gicp, scipy under a plugin, a plugin's own arithmetic) raises when it fails on
 #: a pair; shared with the odometry runner, which reports them as the frame's error (a ZeroDivisionError or KeyError
 #: in a plugin's ``_align`` was one line there, a traceback from ``lidarkit icp``; so were an AssertionError, an OSError and
 #: a LookupError). lidarkit's own errors are no OSError: they pass :func:`use_backend` unchanged
-BACKEND_ERRORS = (RuntimeError, ValueError, MemoryError, LookupError, TypeError, ArithmeticError, AssertionError, OSError)
+BACKEND_ERRORS = (RuntimeError, ValueError, MemoryError, LookupError, TypeError, ArithmeticError, AssertionError, OSError,
+                  ImportError, NameError, StopIteration)
 
 
 @contextlib.contextmanager
@@ -656,8 +674,14 @@ class Registration:
         for klass in type(self).__mro__:
             name = vars(klass).get("name")
             if name and name in CALIBRATION:
+                settings = CALIBRATED_SETTINGS.get(name, ())
+                mine = self.describe() if settings and callable(getattr(self, "describe", None)) else {}
+                if settings and set(settings) <= set(mine):  # compared as resolved: kiss's own threshold written as
+                    learned = _learned_composition(klass)    # {"name": "adaptive"} is the setting it was learned at
+                    return str(name), [f"{k}={getattr(self._config, k)}" for k in settings
+                                       if _own_settings(mine[k]) != _own_settings(learned[k])]
                 fields = klass.Config.model_fields
-                learned_at = {k: fields[k].get_default(call_default_factory=True) for k in CALIBRATED_SETTINGS.get(name, ())}
+                learned_at = {k: fields[k].get_default(call_default_factory=True) for k in settings}
                 return str(name), [f"{k}={getattr(self._config, k)}" for k, v in learned_at.items() if getattr(self._config, k, v) != v]
         return None, []
 

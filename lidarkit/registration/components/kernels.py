@@ -62,6 +62,9 @@ def checked_weights(kernel: Kernel, residual2: np.ndarray, sigma_m: float) -> np
     w = np.asarray(kernel.weights(residual2, sigma_m))
     if w.shape != residual2.shape:
         raise output_error(kernel, f"{w.size} weights for {len(residual2)} residuals (one per residual expected)")
+    bad = ~(np.isfinite(w) & (w >= 0))  # (NaN weights were scipy's "'x' must be finite", naming no kernel)
+    if bad.any():
+        raise output_error(kernel, f"{int(bad.sum())} of {w.size} weights that are not finite numbers >= 0")
     return w
 
 
