@@ -527,3 +527,10 @@ def test_an_angle_delta_beyond_the_rotation_along_the_path_says_so():
     with pytest.raises(EvaluationError, match=r"delta = 3 radians exceeds the rotation accumulated along the estimate \(2\.549 radians\)"):
         rpe(gt, gt, delta=3, delta_unit="rad")
     assert rpe(gt, gt, delta=140, delta_unit="deg").n_errors == 1  # (within the rotation: scored)
+    # all pairs take the direct angle between two poses: the widest, checked against every pair by scipy
+    rotations = Rotation.from_matrix(R)
+    widest = max(float(np.degrees((rotations[i].inv() * rotations).magnitude().max())) for i in range(len(R)))
+    with pytest.raises(EvaluationError) as caught:
+        rpe(gt, gt, delta=170, delta_unit="deg", all_pairs=True)
+    assert str(caught.value) == ("KITTI_00_gt vs KITTI_00_gt: delta = 170 degrees: no two poses of the estimate are that far "
+                                 f"apart in orientation (the widest is {widest:.4g} degrees)")

@@ -334,6 +334,17 @@ def _accumulated_angle(poses_se3: np.ndarray, degrees: bool) -> float:
     return float(np.degrees(total)) if degrees else total
 
 
+def _widest_angle(poses_se3: np.ndarray, degrees: bool) -> float:
+    """The largest rotation angle between any two poses (all pairs' angle deltas are direct); in blocks, not n x n."""
+    from scipy.spatial.transform import Rotation
+
+    q = Rotation.from_matrix(np.asarray(poses_se3, dtype=np.float64)[:, :3, :3]).as_quat()
+    # the angle between two unit quaternions is 2 acos |q_i . q_j|: the widest has the smallest |dot| (rows in blocks)
+    smallest = min(float(np.abs(q[start:start + 512] @ q.T).min()) for start in range(0, len(q), 512))
+    widest = 2.0 * float(np.arccos(min(smallest, 1.0)))
+    return float(np.degrees(widest)) if degrees else widest
+
+
 def _checked_pairs(pairs, n_poses: int, source: str) -> np.ndarray:
     """``(m, 2)`` int pose pairs ``(i, j)``, ``0 <= i < j < n_poses``; ConfigError otherwise (an IndexError or, with
     consecutive pairs, silently other pairs than the ones named; no pairs scored evo's own, 1.5 was read as 1)."""
@@ -530,6 +541,11 @@ def rpe(
                         raise EvaluationError(f"delta = {delta:g} {delta_unit} exceeds the rotation accumulated along the {side} "
                                               f"({turned:.4g} {delta_unit}): no two poses are that far apart in orientation along it",
                                               source=source) from None
+                if unit in (Unit.degrees, Unit.radians) and all_pairs:  # (the direct angle between two poses)
+                    widest = _widest_angle(paired_on.poses_se3, unit is Unit.degrees)
+                    if delta > widest + rel_delta_tol * delta:
+                        raise EvaluationError(f"delta = {delta:g} {delta_unit}: no two poses of the {side} are that far apart "
+                                              f"in orientation (the widest is {widest:.4g} {delta_unit})", source=source) from None
                 raise
             pairs = np.array(found, dtype=np.int64).reshape(-1, 2)
         # given pairs are compared as given (an earlier call's selection: its first legacy pair already dropped; the
