@@ -67,7 +67,7 @@ def _grids(records: list[dict[str, Any]]):
 REFERENCE_METHOD = "kiss"
 #: said of a comparison over KITTI segments (fewer than 5 seeds)
 OVERLAPPING_SEGMENTS = ("the segments overlap (one starts every 10 frames): they are not independent units and the p-value "
-                        "is optimistic; 5 or more seeds are compared per seed (lidarkit compare)")
+                        "is optimistic; with 5 or more seeds the units are the seeds (lidarkit compare)")
 
 
 def reference_comparisons(records: list[dict[str, Any]], reference: str = REFERENCE_METHOD) -> list[tuple[str, Any]]:
