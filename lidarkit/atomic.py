@@ -506,12 +506,37 @@ def _move_into_place(tmp: Path, path: Path, exclusive: bool = False, named: Path
         if src.is_dir() and dst.exists() and not dst.is_dir():
             raise OutputError("cannot create the folder: a file is in the way (a folder is needed here)",
                               source=named / src.relative_to(tmp))
-    for src, dst in moves:
-        if src.is_dir():
-            ensure_dir(dst)
-        else:
+    # each file replaced is kept aside until the last is in: one that cannot be replaced (owned by another user in a
+    # shared folder, immutable) puts the earlier ones back (the folder was left half the earlier run's, half this one's)
+    aside = tmp / ".replaced"
+    done: list[tuple[Path, Path, Path | None]] = []
+    src = tmp
+    try:
+        for src, dst in moves:
+            if src.is_dir():
+                ensure_dir(dst)
+                continue
             ensure_dir(dst.parent)
-            os.replace(src, dst)
+            kept = None
+            if dst.exists() or dst.is_symlink():
+                aside.mkdir(exist_ok=True)
+                kept = aside / str(len(done))
+                os.rename(dst, kept)
+            try:
+                os.replace(src, dst)
+            except OSError:
+                if kept is not None:
+                    os.rename(kept, dst)
+                raise
+            done.append((src, dst, kept))
+    except OSError as err:
+        for moved, into, kept in reversed(done):
+            with contextlib.suppress(OSError):
+                os.replace(into, moved)  # (this run's file back where it was written)
+                if kept is not None:
+                    os.rename(kept, into)
+        raise OutputError(f"cannot replace it ({_reason(err)}): the folder is left as it was",
+                          source=named / src.relative_to(tmp)) from err
 
 
 def _hold(folder: Path, wait: bool = True) -> int | None:

@@ -317,6 +317,31 @@ def test_an_output_that_is_a_device_or_a_fifo_is_written_into_not_replaced(tmp_p
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(p.name for p in (null, fifo) if p.parent == tmp_path)
 
 
+def test_a_run_file_that_cannot_be_replaced_leaves_the_earlier_run_whole(tmp_path, monkeypatch):
+    """Moving a run into a folder holding an earlier one, a file that could not be replaced (owned by another user in a
+    shared sticky folder, immutable) stopped the move half-way: the folder held the new metrics.json beside the earlier
+    config.yaml, and read as a finished run. The files replaced before it are put back, and the message names the file."""
+    run = tmp_path / "run"
+    with atomic.run_folder(run) as tmp:
+        for name in ("metrics.json", "poses_tum.txt", "timing.csv", "config.yaml"):
+            (tmp / name).write_text(f"earlier {name}\n")
+    before = {p.name: p.read_text() for p in run.iterdir()}
+    real_replace = os.replace
+
+    def refusing(src, dst, *args, **kwargs):  # (what the file system says of a file this user may not replace)
+        if Path(dst).name == "poses_tum.txt" and Path(dst).parent == run:
+            raise PermissionError(1, "Operation not permitted")
+        return real_replace(src, dst, *args, **kwargs)
+
+    monkeypatch.setattr(os, "replace", refusing)
+    with pytest.raises(OutputError) as caught:
+        with atomic.run_folder(run) as tmp:
+            for name in ("metrics.json", "poses_tum.txt", "timing.csv", "config.yaml"):
+                (tmp / name).write_text(f"new {name}\n")
+    assert str(caught.value) == f"{run / 'poses_tum.txt'}: cannot replace it (permission denied): the folder is left as it was"
+    assert {p.name: p.read_text() for p in run.iterdir()} == before  # (no temporary left either)
+
+
 def test_files_written_together_are_all_renamed_in_when_interrupted_between_renames(tmp_path, monkeypatch):
     """Ctrl-C between the renames of files that belong together (an evaluation's JSON and Markdown) left the first one
     new beside the other one old: the renames finish, then the interrupt is raised."""
