@@ -614,11 +614,24 @@ def test_small_gicp_missing_is_unlisted_with_a_logged_note():
             get_icp("small_gicp")
         except ConfigError as err:
             print("config error:", err)
+        try:
+            get_icp("smal_gicp")
+        except ConfigError as err:
+            print("typo:", err)
+        from lidarkit.cli import main
+        try:
+            main(["icp", "--list"])
+        except SystemExit:
+            pass
         """
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert "small_gicp not installed" in out.stderr
+    # a typo and the listing say the variant exists and how to install it (neither said a word of it)
+    assert "unknown ICP method 'smal_gicp'; available: " in out.stdout
+    assert "(not installed: small_gicp, pip install 'lidarkit[gicp]'" in out.stdout
+    assert "'small_gicp' not installed: pip install 'lidarkit[gicp]'" in out.stdout
     # named with its pip line (it read as a typo: "unknown ICP method 'small_gicp'")
     assert "the 'small_gicp' variant needs the Python package 'small_gicp', not installed here: pip install 'lidarkit[gicp]'" in out.stdout
 

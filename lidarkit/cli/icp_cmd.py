@@ -59,6 +59,10 @@ def _list_methods() -> None:
         table.add_row(name + (" (stateful)" if cls.stateful else ""), cell)
     stdout().print(table)
     _print_left_out(broken_plugins())
+    from lidarkit.registration.registry import missing_optional_variants
+
+    for name, pip in missing_optional_variants().items():  # (left out without a word)
+        stdout().print(f"{name!r} not installed: {pip}", style="yellow", markup=False, highlight=False)
     _list_ground_segmenters()
 
 

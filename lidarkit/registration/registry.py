@@ -100,6 +100,12 @@ def available_icp() -> list[str]:
     return sorted(_VARIANTS)
 
 
+def missing_optional_variants() -> dict[str, str]:
+    """Built-in variants whose optional library is not installed: name -> the pip line that installs it."""
+    _load_plugins()
+    return {name: f"pip install 'lidarkit[{extra}]'" for name, (_, extra) in OPTIONAL_VARIANTS.items() if name not in _VARIANTS}
+
+
 def get_icp_class(name: str) -> type[Registration]:
     """The class registered as ``name``; unknown names raise ConfigError listing the known ones."""
     if name not in _VARIANTS:
@@ -111,7 +117,9 @@ def get_icp_class(name: str) -> type[Registration]:
         raise ConfigError(f"the {name!r} variant needs the Python package {package!r}, not installed here: "
                           f"pip install 'lidarkit[{extra}]'", source="method")
     if name not in _VARIANTS:
-        raise ConfigError(f"unknown ICP method {name!r}; available: {', '.join(available_icp())}", source="method")
+        missing = missing_optional_variants()  # (a typo of small_gicp never said it existed)
+        also = f" (not installed: {', '.join(f'{m}, {pip}' for m, pip in missing.items())})" if missing else ""
+        raise ConfigError(f"unknown ICP method {name!r}; available: {', '.join(available_icp())}{also}", source="method")
     return _VARIANTS[name]
 
 
