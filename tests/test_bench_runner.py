@@ -528,6 +528,29 @@ def test_a_report_that_cannot_be_written_says_the_jobs_are_done_and_how_to_rebui
         "finished jobs)")
 
 
+def test_a_report_path_in_the_way_is_refused_before_the_jobs(tmp_path, capsys):
+    """A folder named report.html (or a file named plots) was found after every job had run, and the message called the
+    folder "report.html ... from before this run"."""
+    from conftest import cli_exit_code
+
+    import shutil
+
+    path = suite_file(tmp_path, TINY)
+    done = tmp_path / "done"
+    assert cli_exit_code(["bench", str(path), "--out", str(done), "--executor", "serial"]) == 0
+    for name, kind in (("report.html", "folder"), ("plots", "file")):
+        out = tmp_path / f"out_{kind}"
+        shutil.copytree(done, out)
+        shutil.rmtree(out / name) if (out / name).is_dir() else (out / name).unlink()
+        (out / name).mkdir() if kind == "folder" else (out / name).write_text("mine\n")
+        before = {p.name: p.stat().st_mtime_ns for p in (out / "jobs").iterdir()}
+        capsys.readouterr()
+        assert cli_exit_code(["bench", str(path), "--out", str(out), "--executor", "serial", "--force"]) == 1
+        err = capsys.readouterr().err.strip()
+        assert err.startswith(f"error: {out / name}: cannot ") and len(err.splitlines()) == 1
+        assert {p.name: p.stat().st_mtime_ns for p in (out / "jobs").iterdir()} == before  # (no job ran again)
+
+
 def test_library_arguments_of_a_wrong_type_are_config_errors_naming_them(tmp_path):
     """run_suite(force="no") counted as true (every finished job ran again) and workers="2" raised a bare TypeError
     ('<' not supported between 'str' and 'int'): each is a one-line ConfigError naming the argument, before a run."""

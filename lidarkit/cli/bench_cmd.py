@@ -110,6 +110,8 @@ def run_with_progress(suite, out: Path, *, executor: str, workers: int | None, a
 
 
 def _stale_report(out: Path) -> str:
+    if not (out / "report.html").is_file():  # (a folder of that name is not a report)
+        return f"no report was written (`lidarkit report {out}` writes it from the finished jobs)"
     return f"{out}/report.html is from before this run (`lidarkit report {out}` rebuilds it from the finished jobs)"
 
 
@@ -229,6 +231,10 @@ def bench(
     out = out or Path("results") / suite_file.stem
     check_target(out, "folder")
     check_results_folder(out)  # (a dry run included)
+    # the report's paths too, before the jobs (a folder named report.html was found after every job had run)
+    for name in ("report.html", "report.md", "report.csv"):
+        check_target(out / name, "file")
+    check_target(out / "plots", "folder")
     if dry_run:
         from lidarkit.bench.results import is_finished
 
