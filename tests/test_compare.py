@@ -318,6 +318,14 @@ def test_a_non_finite_metric_value_is_named_like_a_missing_one(tmp_path):
     with pytest.raises(EvaluationError) as exc:
         compare(out, out, method_a="good", method_b="bad")
     assert str(exc.value) == "compare: metric 'ape_rmse_m' missing (null or not finite) in bad for 1 of 6 units (syn, seed 3)"
+    for job in (out / "jobs").glob("*.json"):  # NaN in every result of bad: said so (it read "(null) ... reports none")
+        record = json.loads(job.read_text())
+        if record["job"]["method"] == "bad":
+            record["metrics"]["ape_rmse_m"] = float("nan")
+            job.write_text(json.dumps(record))
+    with pytest.raises(EvaluationError) as exc:
+        compare(out, out, method_a="good", method_b="bad", metric="ape_rmse_m")
+    assert str(exc.value) == "compare: metric 'ape_rmse_m' has no finite value (null, NaN or infinite) in any result of bad"
 
 
 def test_bench_pairs_scored_at_different_sweep_instants_are_said(tmp_path):

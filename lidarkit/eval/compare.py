@@ -353,9 +353,12 @@ def compare(
     if not any(has(k, metric) for k in common):  # in no unit: a misspelt metric, not results that lack it
         present = set.union(*(set(side_a.values[k]) & set(side_b.values[k]) for k in common))
         if metric in present:  # (it read "unknown metric 'iterations'; these results have: ..., iterations, ...")
-            silent = [side.name for side in (side_a, side_b) if not any(_usable(side.values[k].get(metric)) for k in common)]
-            raise EvaluationError(f"metric {metric!r} has no value (null) in any result of {' and '.join(silent)}: "
-                                  "the method reports none", source="compare")
+            silent = [side for side in (side_a, side_b) if not any(_usable(side.values[k].get(metric)) for k in common)]
+            # (values present but NaN or infinite read "(null) ... the method reports none")
+            stated = any(side.values[k].get(metric) is not None for side in silent for k in common)
+            what = "no finite value (null, NaN or infinite)" if stated else "no value (null)"
+            raise EvaluationError(f"metric {metric!r} has {what} in any result of {' and '.join(s.name for s in silent)}"
+                                  + ("" if stated else ": the method reports none"), source="compare")
         raise ConfigError(f"unknown metric {metric!r}; these results have: {', '.join(sorted(present))}", source="metric")
     # units of a task that never reports the metric (an icp_pair experiment beside an odometry one) are another
     # experiment: left out, said; a unit of a task that reports it elsewhere lacks it: an error
