@@ -71,8 +71,9 @@ def stamps_at_instant(stamps_s: np.ndarray | None, scan: Scan | None, instant: s
 
 def like_with_like(reference: Trajectory, estimate_at: str | None, *, sequence: Any, own_ground_truth: bool,
                    method: str, deskewed: bool = True, frames: np.ndarray | None = None) -> tuple[Trajectory, str | None]:
-    """``(reference at the estimate's instant, note or None)``; EvaluationError when it cannot be re-timed.
-    ``deskewed``: the estimate's instant is the one the variant deskews to (else the scans' stamp instant)."""
+    """``(reference at the estimate's instant, note or None)``; when it cannot be re-timed, EvaluationError for a
+    deskewed estimate, the reference as it is with a note for one that is not. ``deskewed``: the estimate's instant is
+    the one the variant deskews to (else the sweep middle or the scans' stamp instant, see :func:`estimate_instant`)."""
     truth_at = reference.meta.get("pose_instant") if reference.meta else None
     if estimate_at is None or estimate_at == truth_at:
         return reference, None
