@@ -202,13 +202,9 @@ def _data_of(run: OdometryRun) -> tuple[str, str] | None:
         return None
 
 
-def run_units(run: OdometryRun, metric: str) -> np.ndarray:
-    """Per-unit errors of a run folder: per KITTI segment (``segment_*``) or per frame pair (``rpe_*``)."""
-    return _run_units(run, metric)[1]
-
-
 def _run_units(run: OdometryRun, metric: str) -> tuple[list[tuple[int, float]] | None, np.ndarray]:
-    """``(each segment's (first frame, length) or None per frame, errors)`` of a run folder."""
+    """Per-unit errors of a run folder, per KITTI segment (``segment_*``) or per frame pair (``rpe_*``):
+    ``(each segment's (first frame, length), or None per frame, errors)``."""
     from lidarkit import eval as leval
 
     ref, est = run.ground_truth, run.estimate
