@@ -99,7 +99,7 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     rename replaced the link with a plain file and left the file it names as it was).
     """
     named = Path(path)
-    if _stream_kind(named):  # a stream has no contents to keep: the output is copied into it when complete (renamed
+    if _is_stream(named):  # a stream has no contents to keep: the output is copied into it when complete (renamed
         yield from _through_temporary(named)  # over, /dev/null became a plain file; a PNG writer needs to seek)
         return
     path = Path(os.path.realpath(named)) if named.is_symlink() else named
@@ -142,23 +142,20 @@ def _through_temporary(stream: Path) -> Iterator[Path]:
             os.unlink(tmp)
 
 
-def _stream_kind(path: Path) -> str:
-    """"a character device" / "a FIFO" for an existing ``path`` that is one, through any links (written into: ``--json
-    /dev/null``, ``/dev/stdout``), "" for a regular file or nothing; an OutputError for other special files (a block
-    device, a socket): not outputs."""
+def _is_stream(path: Path) -> bool:
+    """Whether ``path`` is an existing character device or FIFO, through any links (written into: ``--json
+    /dev/null``, ``/dev/stdout``); an OutputError for other special files (a block device, a socket): not outputs."""
     import stat
 
     try:
         mode = path.stat().st_mode
     except OSError:
-        return ""
-    if stat.S_ISCHR(mode):
-        return "a character device"
-    if stat.S_ISFIFO(mode):
-        return "a FIFO"
+        return False
+    if stat.S_ISCHR(mode) or stat.S_ISFIFO(mode):
+        return True
     if not (stat.S_ISREG(mode) or stat.S_ISDIR(mode)):
         raise OutputError("cannot write: not a regular file (a block device or a socket)", source=path)
-    return ""
+    return False
 
 
 def write_text(path: str | os.PathLike, text: str) -> Path:
@@ -322,7 +319,7 @@ def _check_target(path: Path, kind: str) -> None:
             raise OutputError("cannot write: is a folder (a file name is needed here)", source=path)
         if kind == "figure":
             figure_format(None, path)
-        if _stream_kind(path):  # written into, not beside (/dev/null, a FIFO): its own permission counts
+        if _is_stream(path):  # written into, not beside (/dev/null, a FIFO): its own permission counts
             if not os.access(path, os.W_OK):
                 raise OutputError("cannot write: permission denied", source=path)
             return
