@@ -31,6 +31,14 @@ class ProgressLines:
         print(f"{self.label}: {self.done}/{self.total} {self.unit} ({100 * self.done / max(self.total, 1):.0f} %), {rate:.1f} {self.unit}/s, "
               f"~{left:.0f} s left", file=sys.stderr, flush=True)
 
+    def update(self, _task: int, *, total: int | None = None, refresh: bool = False) -> None:
+        """The part of rich's ``Progress.update`` lidarkit uses: a new ``total`` (a loop that ended early), drawn when
+        ``refresh``."""
+        if total is not None:
+            self.total = total
+        if refresh:
+            self.advance(_task, 0)
+
     def stop(self) -> None:
         pass
 

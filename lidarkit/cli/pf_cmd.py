@@ -307,20 +307,9 @@ def _step_progress(cfg: PFConfig, n_steps: int, label: str, runs: int = 1):
     try:
         yield on_step
         if done < n_steps * runs:  # fewer runs than it may take (--fit-q settled early): end at 100 %, not at "50 %, ~110 s left"
-            _resize(bar, task, done)
+            bar.update(task, total=done, refresh=True)
     finally:
         bar.stop()
-
-
-def _resize(bar, task: int, total: int) -> None:
-    """Set a progress bar's total to ``total`` and draw it (rich's bar or the lines drawn off a terminal)."""
-    from lidarkit.progress import ProgressLines
-
-    if isinstance(bar, ProgressLines):
-        bar.total = total
-        bar.advance(task, 0)  # (draws its last line: done == total)
-    else:
-        bar.update(task, total=total, refresh=True)
 
 
 def _kept_steps(snap_steps: tuple[int, ...], gif: bool, n_steps: int, out: Path | None) -> tuple[int, ...]:
