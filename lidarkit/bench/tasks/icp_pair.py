@@ -67,19 +67,24 @@ def read_T_target_source(path: Path) -> np.ndarray:
     return table
 
 
-def pairs_truth(dataset: Any) -> Any:
-    """The dataset's ground truth at the instant a pairwise alignment of its sweeps refers to: ``align`` takes no
-    per-point times, so over sweeps measured while moving the pose lands about mid-sweep
-    (:mod:`lidarkit.odometry.instants`); re-timed there where the dataset can (a simulated street pair scored
-    against sweep-end truth read 0.031 m for small_gicp where mid gives 0.004; so did the simulator's KITTI-layout
-    export), else None: the dataset's own, as it gives it."""
-    retime = getattr(dataset, "ground_truth_at_instant", None)
-    if not callable(retime) or len(dataset) == 0:
-        return None
+def pairs_truth(dataset: Any, method: str) -> Any:
+    """The dataset's ground truth at the instant a pairwise alignment of its sweeps refers to, by the rule odometry
+    scores with (:mod:`lidarkit.odometry.instants`: ``align`` deskews nothing, so over sweeps measured while moving
+    the pose lands about mid-sweep): re-timed where the dataset can (a simulated street pair scored against sweep-end
+    truth read 0.031 m for small_gicp where mid gives 0.004; so did the simulator's KITTI-layout export), else None:
+    the dataset's own, as it gives it (a note logged when its instant is another)."""
+    from lidarkit.odometry.instants import estimate_instant, like_with_like
+
     gt = dataset.ground_truth
-    if gt is None or (gt.meta or {}).get("pose_instant") in (None, "mid"):
+    if gt is None or len(dataset) == 0:
         return None
-    return retime("mid") if dataset.read_scan(0).has_time_span() else None
+    truth, note = like_with_like(gt, estimate_instant(None, dataset.read_scan(0)), sequence=dataset, own_ground_truth=True,
+                                 method=method, deskewed=False)
+    if truth is gt:
+        if note:
+            log.warning("%s", note)
+        return None
+    return truth
 
 
 def _pair_data(dataset: Any, target: int, source: int, T_gt_file: np.ndarray | None = None,
@@ -200,7 +205,7 @@ class IcpPairTask(Task):
         if deskew_requested(registration):  # (kiss and kiss deskew=false gave bit-identical rows, without a word)
             log.warning("%s: deskew has no effect on a pair (align takes no per-point times): the sweeps are registered "
                         "as they are", job.method)
-        truth = None if T_gt_file is not None else pairs_truth(dataset)
+        truth = None if T_gt_file is not None else pairs_truth(dataset, job.method)
         rows, histories = [], []
         for target, source in _pairs(options, dataset):
             source_xyz, target_xyz, T_gt = _pair_data(dataset, target, source, T_gt_file, truth)
