@@ -82,6 +82,17 @@ class AlignmentTransform:
         T[:3, 3] = self.translation
         return T
 
+    def applied_to(self, est: Trajectory) -> Trajectory:
+        """``est`` aligned as the estimate was: positions ``scale * rotation @ p + translation``, orientations turned by
+        ``rotation``."""
+        if self.method == "origin":
+            return est.transformed(T_left=self.sim3)
+        poses = est.poses_se3.copy()
+        poses[:, :3, 3] = self.scale * poses[:, :3, 3]
+        T = np.eye(4)
+        T[:3, :3], T[:3, 3] = self.rotation, self.translation
+        return Trajectory(T @ poses, est.timestamps_s, est.name, dict(est.meta))
+
     def to_dict(self) -> dict[str, Any]:
         return {
             "method": self.method,
@@ -616,12 +627,4 @@ def rpe(
 
 def _est_from_evo_unreduced(est: Trajectory, transform: AlignmentTransform | None, align_origin: bool) -> Trajectory:
     """The full estimate with the applied alignment (the evo copy may have been reduced to pair ids)."""
-    if transform is None:
-        return est
-    poses = est.poses_se3.copy()
-    if transform.method == "origin":
-        return est.transformed(T_left=transform.sim3)
-    poses[:, :3, 3] = transform.scale * poses[:, :3, 3]
-    T = np.eye(4)
-    T[:3, :3], T[:3, 3] = transform.rotation, transform.translation
-    return Trajectory(T @ poses, est.timestamps_s, est.name, dict(est.meta))
+    return est if transform is None else transform.applied_to(est)

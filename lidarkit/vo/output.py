@@ -78,10 +78,7 @@ def aligned_to_ground_truth(ground_truth: Trajectory, trajectories: dict[str, Tr
     curves = {"ground truth": ground_truth}
     for label, traj in trajectories.items():
         _, T = align_trajectory(ground_truth[first_frame:], traj[first_frame:], align)
-        poses = traj.poses_se3.copy()  # p -> scale * R p + t, orientations rotated by R (as evo aligns)
-        poses[:, :3, 3] = T.scale * poses[:, :3, 3] @ T.rotation.T + T.translation
-        poses[:, :3, :3] = T.rotation @ poses[:, :3, :3]
-        curves[f"{label} ({alignment_label(align)})"] = Trajectory(poses, traj.timestamps_s, traj.name, dict(traj.meta))
+        curves[f"{label} ({alignment_label(align)})"] = T.applied_to(traj)
     return curves
 
 
