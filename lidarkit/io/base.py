@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Literal, Protocol, runtime_checkable
 
 import numpy as np
@@ -29,6 +31,15 @@ def classify_instant(fraction: float, tol: float = 0.05) -> str | None:
         if abs(fraction - value) <= tol:
             return name
     return None
+
+
+def option_path(given: str | os.PathLike, *folders: Path) -> Path:
+    """A reader's path option as given or, when it is relative and not found from the working directory, in the first
+    of the dataset's ``folders`` that holds it (``poses=poses.txt`` beside the scans); as given when none does."""
+    path = Path(given)
+    if path.is_absolute() or path.exists():
+        return path
+    return next((folder / path for folder in folders if (folder / path).exists()), path)
 
 
 def checked_index(index: object, n: int, source: object, what: str = "scan", *, from_end: bool = True) -> int:

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
-from lidarkit.io.base import Scan, checked_index
+from lidarkit.io.base import Scan, checked_index, option_path
 from lidarkit.io.pointfile import POINT_FILE_SUFFIXES, read_point_file
 from lidarkit.textfile import read_numeric_table
 from lidarkit.trajectory import Trajectory
@@ -98,14 +98,12 @@ class ScanFolder:
         self._ground_truth = self._load_poses()
 
     def _option_path(self, given: str | os.PathLike) -> Path:
-        """A path option as given or, when it is relative and not found from the working directory, in the scan folder
-        (``poses=poses.txt`` beside the scans), as the kitti reader looks; found in neither: both places named."""
-        path = Path(given)
-        if path.is_absolute() or path.exists():
-            return path
-        if (self.path / path).exists():
-            return self.path / path
-        raise DataError(f"file not found, neither from the working directory nor in the scan folder {self.path}", source=path)
+        """A path option as given or in the scan folder (``poses=poses.txt`` beside the scans), as the kitti reader
+        looks (:func:`lidarkit.io.base.option_path`); found in neither: both places named."""
+        path = option_path(given, self.path)
+        if not path.exists():
+            raise DataError(f"file not found, neither from the working directory nor in the scan folder {self.path}", source=path)
+        return path
 
     def _load_timestamps(self, timestamps) -> np.ndarray | None:
         if timestamps is None:

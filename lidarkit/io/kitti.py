@@ -33,7 +33,7 @@ import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.geometry import se3_inverse
-from lidarkit.io.base import INSTANT_FRACTION, Scan, checked_index, checked_indices
+from lidarkit.io.base import INSTANT_FRACTION, Scan, checked_index, checked_indices, option_path
 from lidarkit.io.pointfile import load_npy, read_kitti_bin
 from lidarkit.textfile import file_line, is_number, read_lines, read_numeric_table
 from lidarkit.trajectory import Trajectory
@@ -285,12 +285,9 @@ class KittiOdometry:
         )
 
     def _option_path(self, given: str | os.PathLike) -> Path:
-        """A path option as given, or, when it is relative and not found from the working directory, inside the
-        dataset folder or the sequence folder (``poses_file=sequences/00/poses_semantickitti.txt`` with the root)."""
-        path = Path(given)
-        if path.is_absolute() or path.exists():
-            return path
-        return next((base / path for base in (self.root, self.sequence_dir) if (base / path).exists()), path)
+        """A path option as given, or inside the dataset folder or the sequence folder
+        (``poses_file=sequences/00/poses_semantickitti.txt`` with the root): :func:`lidarkit.io.base.option_path`."""
+        return option_path(given, self.root, self.sequence_dir)
 
     def _locate_poses(self, poses_file: str | os.PathLike | None, odometry_root: Path | None) -> Path | None:
         if poses_file is not None:
