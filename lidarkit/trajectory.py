@@ -6,6 +6,7 @@ import copy
 import inspect
 import logging
 import os
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -21,6 +22,12 @@ from lidarkit.textfile import data_line_numbers, file_line, read_numeric_table
 log = logging.getLogger(__name__)
 
 FORMATS = ("kitti", "tum")
+
+
+def default_format_hint(fmt: str) -> str:
+    """How to read a file as ``fmt`` with eval's option and the library (a reader's message for a file in the other
+    format); a caller whose users choose the format otherwise passes its own (e.g. a dataset's ``poses_format=``)."""
+    return f"--format {fmt}, Trajectory.from_{fmt}"
 
 
 def _check_rigid(poses: np.ndarray, source: str, item: str) -> None:
@@ -242,18 +249,20 @@ class Trajectory:
     # ---- KITTI / TUM files -----------------------------------------------------------------------
     @classmethod
     def from_kitti(
-        cls, path: str | os.PathLike, timestamps_s: np.ndarray | list[float] | str | os.PathLike | None = None, name: str | None = None
+        cls, path: str | os.PathLike, timestamps_s: np.ndarray | list[float] | str | os.PathLike | None = None, name: str | None = None,
+        *, format_hint: Callable[[str], str] = default_format_hint,
     ) -> Trajectory:
         """Read a KITTI pose file: one row of 12 numbers (a row-major 3x4 ``[R|t]``) per pose.
 
         ``timestamps_s`` may be a ``times.txt`` path (``str`` / ``os.PathLike``, one number per line) or
-        anything ``np.asarray`` turns into ``(N,)`` seconds (array, list, tuple).
+        anything ``np.asarray`` turns into ``(N,)`` seconds (array, list, tuple). ``format_hint``: how a caller's
+        users choose the format (:func:`default_format_hint`), named when the file is a TUM trajectory.
         """
         try:
             rows = read_numeric_table(path, 12)
         except DataError as err:  # a TUM file (8 numbers a row: time, x y z, qx qy qz qw) read as KITTI: say so
             if "expected 12 numbers, found 8" in err.reason and err.location == _first_data_line(path):  # (not a cut-off line)
-                raise DataError(err.reason + " (a TUM trajectory? read it as tum: --format tum, Trajectory.from_tum)",
+                raise DataError(err.reason + f" (a TUM trajectory? read it as tum: {format_hint('tum')})",
                                 source=err.source, location=err.location) from None
             raise
         poses = np.tile(np.eye(4), (len(rows), 1, 1))
@@ -281,7 +290,8 @@ class Trajectory:
             raise
 
     @classmethod
-    def from_tum(cls, path: str | os.PathLike, name: str | None = None) -> Trajectory:
+    def from_tum(cls, path: str | os.PathLike, name: str | None = None, *,
+                 format_hint: Callable[[str], str] = default_format_hint) -> Trajectory:
         """Read a TUM trajectory: ``timestamp tx ty tz qx qy qz qw`` per line, ``#`` comments.
 
         A pose stamped like the one before it is left out (with a warning naming the lines): TUM RGB-D's own ground
@@ -291,7 +301,7 @@ class Trajectory:
             rows = read_numeric_table(path, 8)
         except DataError as err:  # a KITTI file (12 numbers a row, a 3x4 [R|t]) read as TUM: say so, as from_kitti does
             if "expected 8 numbers, found 12" in err.reason and err.location == _first_data_line(path):  # (not a cut-off line)
-                raise DataError(err.reason + " (a KITTI trajectory? read it as kitti: --format kitti, Trajectory.from_kitti)",
+                raise DataError(err.reason + f" (a KITTI trajectory? read it as kitti: {format_hint('kitti')})",
                                 source=err.source, location=err.location) from None
             raise
         quat_xyzw = rows[:, 4:8]
@@ -320,19 +330,21 @@ class Trajectory:
         return cls(poses, rows[:, 0], Path(path).stem if name is None else name)
 
     @classmethod
-    def read(cls, path: str | os.PathLike, fmt: str = "kitti", **kwargs) -> Trajectory:
+    def read(cls, path: str | os.PathLike, fmt: str = "kitti", *, format_hint: Callable[[str], str] = default_format_hint,
+             **kwargs) -> Trajectory:
         """Read ``path`` in ``fmt`` (``kitti`` or ``tum``); ``kwargs`` are the reader's options (an option of the other
-        format, e.g. ``timestamps_s`` for tum, was a TypeError)."""
+        format, e.g. ``timestamps_s`` for tum, was a TypeError); ``format_hint`` names how the caller's users pick the
+        format, for the message of a file in the other one (``poses_format=tum`` for a dataset option)."""
         readers = {"kitti": cls.from_kitti, "tum": cls.from_tum}
         if fmt not in readers:
             raise ConfigError(f"unknown trajectory format {fmt!r}; known: {', '.join(FORMATS)}", source="format")
-        options = {f: [p for p in inspect.signature(r).parameters if p != "path"] for f, r in readers.items()}
+        options = {f: [p for p in inspect.signature(r).parameters if p not in ("path", "format_hint")] for f, r in readers.items()}
         for key in kwargs:
             if key not in options[fmt]:
                 applies = [f for f in FORMATS if key in options[f]]
                 reason = f"applies to the {applies[0]} format, not {fmt}" if applies else f"is no option of the {fmt} format"
                 raise ConfigError(f"{key} {reason} ({fmt} options: {', '.join(options[fmt])})", source=key)
-        return readers[fmt](path, **kwargs)
+        return readers[fmt](path, **kwargs, format_hint=format_hint)
 
     def to_kitti(self, path: str | os.PathLike) -> Path:
         """Write the KITTI pose format atomically."""

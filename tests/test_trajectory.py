@@ -246,6 +246,23 @@ def test_a_kitti_file_read_as_tum_is_hinted(tmp_path):
         Trajectory.from_tum(tmp_path / "mixed.txt")
     assert str(err.value).endswith("mixed.txt (line 11): expected 8 numbers, found 12")
 
+
+def test_a_caller_names_its_own_format_option_in_the_hint():
+    """Readers that choose the format by another option (a scan folder's ``poses_format=``, vo's ``--poses-format``)
+    rewrote the fixed "--format tum, Trajectory.from_tum" by string replacement; ``format_hint`` names it directly,
+    through ``Trajectory.read`` too, and is no format option in read's listing."""
+    gt, tum = shared_path("evo_testdata", "KITTI_00_gt.txt"), shared_path("evo_testdata", "freiburg1_xyz-groundtruth.txt")
+    hint = lambda other: f"fmt={other!r}"  # noqa: E731
+    with pytest.raises(DataError) as err:
+        Trajectory.read(gt, "tum", format_hint=hint)
+    assert str(err.value).endswith("(a KITTI trajectory? read it as kitti: fmt='kitti')")
+    with pytest.raises(DataError) as err:
+        Trajectory.from_kitti(tum, format_hint=hint)
+    assert str(err.value).endswith("(a TUM trajectory? read it as tum: fmt='tum')")
+    with pytest.raises(ConfigError) as err:
+        Trajectory.read(tum, "tum", stamps=1, format_hint=hint)
+    assert str(err.value) == "stamps: stamps is no option of the tum format (tum options: name)"
+
 def test_relative_motions_must_be_rigid_and_extrapolation_non_negative():
     """from_relative_motions chained all-zero motions into identity poses and dropped a Sim(3) motion's scale (the
     constructor refuses both poses); NaN motions were an SVD traceback; interpolated(max_extrapolation_s=-1) refused a

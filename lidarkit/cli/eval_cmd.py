@@ -10,7 +10,7 @@ from typing import Optional
 import typer
 
 from lidarkit.cli.app import app, named_by_option, stdout
-from lidarkit.errors import ConfigError, DataError
+from lidarkit.errors import ConfigError
 from lidarkit.eval.ape_rpe import ALIGNMENTS, DELTA_UNITS
 from lidarkit.eval.evaluate import EvaluationSettings
 from lidarkit.eval.relations import DEFAULT_MAX_TIME_DIFF_S
@@ -72,6 +72,9 @@ def eval_command(
         if times is not None and kind != "kitti":  # (named "--ref-times/--est-times" whichever was given)
             raise ConfigError(f"times files apply to KITTI-format trajectories only (this one is read as {kind})",
                               source=times_option)
+        if relations is None:  # one file of a KITTI/TUM pair in the other format: its own option reads it so
+            side = "--ref-format" if path == ref else "--est-format"
+            kwargs["format_hint"] = lambda other: f"{side} {other}, Trajectory.from_{other}"
         try:
             return Trajectory.read(path, kind, **kwargs)
         except ConfigError as err:
@@ -79,11 +82,6 @@ def eval_command(
                 raise
             raise ConfigError(err.reason, source="--ref-format" if path == ref and ref_format else
                               "--est-format" if path == est and est_format else "--format") from None
-        except DataError as err:  # "read it as tum: --format tum" read the other file of a KITTI/TUM pair as TUM
-            if relations is not None or ": --format " not in err.reason:
-                raise
-            side = "--ref-format" if path == ref else "--est-format"
-            raise DataError(err.reason.replace(": --format ", f": {side} "), source=err.source, location=err.location) from None
 
     given = {"EST": ref} if relations is not None else {"REF": ref, "EST": est}  # (with --relations the one given is EST)
     _distinct_outputs({**given, "--ref-times": ref_times, "--est-times": est_times, "--relations": relations},

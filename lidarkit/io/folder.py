@@ -126,11 +126,7 @@ class ScanFolder:
     def _load_poses(self) -> Trajectory | None:
         if self.poses_path is None:
             return None
-        try:
-            gt = Trajectory.read(self.poses_path, self.poses_format)
-        except DataError as err:  # the reader's hint names eval's --format: name the option that sets it here
-            reason = re.sub(r": --format (\w+), Trajectory\.from_\w+", r": poses_format=\1", err.reason)
-            raise DataError(reason, source=err.source, location=err.location) from None
+        gt = Trajectory.read(self.poses_path, self.poses_format, format_hint=lambda other: f"poses_format={other}")
         if len(gt) != len(self.scan_paths):
             raise DataError(f"{len(gt)} poses for {len(self.scan_paths)} scans in {self.path}", source=self.poses_path)
         if self._timestamps_s is not None:

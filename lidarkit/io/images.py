@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import logging
 import os
-import re
 from pathlib import Path
 from typing import Any
 
@@ -147,12 +146,7 @@ class ImageFolder:
         if poses is not None:
             if poses_format not in ("kitti", "tum"):
                 raise ConfigError(f"unknown poses format {poses_format!r}; known: kitti, tum", source="poses_format")
-            try:
-                gt = Trajectory.read(poses, poses_format)
-            except DataError as err:  # the reader's hint names eval's --format: name the option that sets it here
-                reason = re.sub(r"--format (\w+), Trajectory\.from_\w+", r"--poses-format \1 (poses_format='\1')",
-                                err.reason)
-                raise DataError(reason, source=err.source, location=err.location) from None
+            gt = Trajectory.read(poses, poses_format, format_hint=lambda other: f"--poses-format {other} (poses_format='{other}')")
             if len(gt) != n:
                 raise DataError(f"{len(gt)} poses for {n} images {_ONE_PER_IMAGE}", source=poses)
             if self._timestamps is not None and poses_format == "kitti":
