@@ -595,6 +595,48 @@ def test_reference_comparisons_pair_seeds_as_compare_does_and_say_when_segments_
     assert many.pairing == "seed" and many.n_pairs == 6 and many.metric == "KITTI drift %" and many.better == "a"
 
 
+def test_reference_comparisons_pair_segments_by_first_frame_and_length_and_note_other_instants():
+    """The report paired two methods' KITTI segments by position and dropped the comparison without a word when their
+    counts differed (kiss scored at the sweep end, small_gicp at its middle: a 200 m segment on one truth only), and
+    did not say the sides were scored at other instants (``lidarkit compare`` did). Segments now pair by first frame
+    and length as compare pairs them, the ones left out and the instants are noted under the table."""
+    from types import SimpleNamespace
+
+    from lidarkit.bench.jobs import Job
+    from lidarkit.bench.publication import OVERLAPPING_SEGMENTS, reference_comparisons
+    from lidarkit.bench.report import comparison_notes
+    from lidarkit.bench.tasks.odometry import drift_segments
+    from lidarkit.eval.tables import SegmentErrors
+    from lidarkit.trajectory import Trajectory
+
+    # a record's series keeps each segment's first frame (a 150 m straight drive at 1 m a frame: 100 m segments)
+    poses = np.tile(np.eye(4), (151, 1, 1))
+    poses[:, 0, 3] = np.arange(151.0)
+    truth = Trajectory(poses, np.arange(151) * 0.1, "gt")
+    series = drift_segments(SimpleNamespace(ground_truth=truth, trajectory=truth))
+    assert series["first_frame"] == list(range(0, 41, 10)) and series["length_m"] == [100.0] * 5
+    assert SegmentErrors.from_dict(series).keys() == [(f, 100.0) for f in range(0, 41, 10)]
+
+    def record(method, seed, instant, keys, drift):
+        job = Job("odometry", "e", "drive", {"kind": "sim_lidar", "scene": "street"}, method, seed=seed)
+        first, length = zip(*keys)
+        return {"status": "ok", "job": job.spec(), "metrics": {"drift_translation_pct": float(np.mean(drift))},
+                "info": {"odometry_metrics": {"effective": {"ground_truth_instant": instant}}},
+                "series": {"drift_segments": {"first_frame": list(first), "length_m": list(length),
+                                              "translation_pct": list(drift)}}}
+
+    kiss_keys = [(0, 100.0), (10, 100.0), (20, 100.0), (0, 200.0)]
+    gicp_keys = [(0, 100.0), (10, 100.0), (20, 100.0), (30, 100.0)]  # no 200 m segment on the mid-sweep truth
+    records = [record("kiss", s, "end", kiss_keys, [0.5, 0.6, 0.7, 9.0]) for s in (0, 1)]
+    records += [record("small_gicp", s, "mid", gicp_keys, [1.5, 1.6, 1.7, 1.8]) for s in (0, 1)]
+    (dataset, c), = reference_comparisons(records)
+    assert c.pairing == "segment" and c.n_pairs == 6 and c.mean_a == pytest.approx(0.6) and c.mean_b == pytest.approx(1.6)
+    assert c.note == (f"{OVERLAPPING_SEGMENTS}; 4 KITTI segment(s) on only one side's ground truth left out (paired by "
+                      "first frame and length); each side is scored against the ground truth at its own instant of the "
+                      "sweep (kiss: sweep end, small_gicp: sweep mid)")
+    assert comparison_notes([(dataset, c)]) == [f"{dataset}, kiss vs small_gicp: {c.note}"]
+
+
 
 def test_a_comparison_with_p_below_alpha_and_no_verdict_says_its_ci_includes_0(tmp_path):
     """The demo's report.md and report.html showed p = 0.049 beside "no significant difference" without the reason the

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from lidarkit.bench.jobs import Job
-from lidarkit.bench.results import dataset_labels
+from lidarkit.bench.results import dataset_labels, ground_truth_instant
 from lidarkit.eval.tables import PubTable, SegmentErrors, publication_tables
 
 log = logging.getLogger(__name__)
@@ -111,16 +111,54 @@ def reference_comparisons(records: list[dict[str, Any]], reference: str = REFERE
                 if len(seeds) >= 5 and per_seed is not None:
                     va = [ref[s]["metrics"][per_seed[0]] for s in seeds]
                     vb = [runs[s]["metrics"][per_seed[0]] for s in seeds]
-                    out.append((dataset, paired_test(va, vb, name_a=reference, name_b=label, metric=per_seed[1],
-                                                     pairing="seed")))
-                elif seeds and all(a and b and len(a["translation_pct"]) == len(b["translation_pct"]) for a, b in segs):
-                    va = np.concatenate([a["translation_pct"] for a, _ in segs])
-                    vb = np.concatenate([b["translation_pct"] for _, b in segs])
+                    result = paired_test(va, vb, name_a=reference, name_b=label, metric=per_seed[1], pairing="seed")
+                    notes = []
+                elif seeds and (paired := _paired_segments(segs)) is not None:
+                    va, vb, left = paired
                     result = paired_test(va, vb, name_a=reference, name_b=label, metric="KITTI drift %", pairing="segment")
-                    out.append((dataset, dataclasses.replace(result, note=OVERLAPPING_SEGMENTS)))
+                    notes = [OVERLAPPING_SEGMENTS] + ([f"{left} KITTI segment(s) on only one side's ground truth left out "
+                                                        "(paired by first frame and length)"] if left else [])
+                else:
+                    log.info("no paired comparison %s vs %s on %s: %d common seed(s) and their segments do not pair",
+                             reference, label, dataset, len(seeds))
+                    continue
+                instants = [sorted({ground_truth_instant(side[s]) for s in seeds} - {""}) for side in (ref, runs)]
+                if all(instants) and instants[0] != instants[1]:  # (as lidarkit compare notes it)
+                    notes.append(f"each side is scored against the ground truth at its own instant of the sweep ({reference}: "
+                                 f"{' / '.join(instants[0])}, {label}: {' / '.join(instants[1])})")
+                out.append((dataset, dataclasses.replace(result, note="; ".join(notes))))
             except LidarKitError as err:
                 log.info("no paired comparison %s vs %s on %s: %s", reference, label, dataset, err)
     return out
+
+
+def _paired_segments(segs: list[tuple[Any, Any]]) -> tuple[np.ndarray, np.ndarray, int] | None:
+    """Two methods' per-segment drift over the segments both have, seed by seed, and how many were on one side only.
+    Segments pair by first frame and length (two runs scored at other sweep instants measure the path on other truths:
+    one has a 200 m segment the other lacks, and by position they covered other frames); records written before the
+    first frames were kept pair by position when their counts agree. None: a seed without segments, or none pair."""
+    va, vb, left = [], [], 0
+    for a, b in segs:
+        if not a or not b:
+            return None
+        ta, tb = np.asarray(a["translation_pct"], dtype=np.float64), np.asarray(b["translation_pct"], dtype=np.float64)
+        if any(side.get(k) is None for side in (a, b) for k in ("first_frame", "length_m")):
+            if len(ta) != len(tb):
+                return None
+            va.append(ta)
+            vb.append(tb)
+            continue
+        keys_a, keys_b = (list(zip(side["first_frame"], side["length_m"])) for side in (a, b))
+        index_b = {key: k for k, key in enumerate(keys_b)}
+        common = [(k, index_b[key]) for k, key in enumerate(keys_a) if key in index_b]
+        left += len(keys_a) + len(keys_b) - 2 * len(common)
+        if common:
+            ia, ib = (list(i) for i in zip(*common))
+            va.append(ta[ia])
+            vb.append(tb[ib])
+    if not va:
+        return None
+    return np.concatenate(va), np.concatenate(vb), left
 
 
 def remove_stale_tables(out_dir: Path, pub: Publication) -> None:

@@ -26,7 +26,7 @@ import numpy as np
 
 from lidarkit import atomic
 from lidarkit.bench.jobs import Job, canonical_json
-from lidarkit.bench.results import dataset_labels, load_results, path_argument, result_path, results_folder
+from lidarkit.bench.results import dataset_labels, ground_truth_instant, load_results, path_argument, result_path, results_folder
 from lidarkit.errors import DataError
 from lidarkit.eval.report import markdown_table
 from lidarkit.eval.statistics import format_p, summarize
@@ -296,7 +296,7 @@ def _references(chosen: dict[str, dict[str, Any]]) -> tuple[dict[str, np.ndarray
             path_of[method] = canonical_json(ref)
             seeds, instants, _ = by_path.setdefault(path_of[method], (set(), set(), np.asarray(ref, dtype=float)))
             seeds.add(int(r["job"]["seed"]))
-            instants.add(_ground_truth_instant(r))
+            instants.add(ground_truth_instant(r))
     several_seeds = len({frozenset(seeds) for seeds, _, _ in by_path.values()}) > 1
     several_instants = len({frozenset(instants) for _, instants, _ in by_path.values()}) > 1
     label_of: dict[str, str] = {}
@@ -308,13 +308,6 @@ def _references(chosen: dict[str, dict[str, Any]]) -> tuple[dict[str, np.ndarray
             label = f"{label} #{len(label_of) + 1}"
         label_of[path] = label
     return {label_of[path]: xy for path, (_, _, xy) in by_path.items()}, {m: label_of[p] for m, p in path_of.items()}
-
-
-def _ground_truth_instant(record: dict[str, Any]) -> str:
-    """The sweep instant a record's reference refers to ("sweep end"), as its odometry run stated it; '' if none."""
-    effective = (((record.get("info") or {}).get("odometry_metrics") or {}).get("effective") or {})
-    instant = str(effective.get("ground_truth_instant") or "")
-    return f"sweep {instant}" if instant in ("start", "mid", "end") else instant
 
 
 def _capped(lines: dict[str, Any]) -> tuple[dict[str, Any], str]:
@@ -511,6 +504,8 @@ def _markdown(report: Report, title: str) -> str:
     if pub is not None and pub.comparisons:
         header, rows = comparison_rows(pub.comparisons)
         out += ["## Paired comparisons with the reference", "", markdown_table(header, rows)]
+        notes = comparison_notes(pub.comparisons)
+        out += [f"- {line}" for line in notes] + ([""] if notes else [])
     if report.plots:
         out += ["## Plots", ""] + [f"![{p.title}](plots/{p.filename})" for p in report.plots] + [""]
     if report.skipped:
@@ -716,6 +711,9 @@ def _html(report: Report, title: str) -> str:
             if pub.comparisons:
                 parts.append(_table_html(*comparison_rows(pub.comparisons), n_left=3,
                                          caption="Paired comparisons with the reference (Wilcoxon signed-rank)"))
+                notes = comparison_notes(pub.comparisons)
+                if notes:
+                    parts += ["<ul>", *(f"<li>{e(line)}</li>" for line in notes), "</ul>"]
             if pub.tables:
                 parts.append("<h3>Publication tables</h3>")
                 parts.append("<p>Also as Markdown, CSV and LaTeX (booktabs) in <code>tables/</code>. "
@@ -764,6 +762,12 @@ def comparison_rows(comparisons: list[Any]) -> tuple[list[str], list[list[str]]]
                      _fmt(c.mean_b), format_p(c.p_value, c.alpha), f"{c.effect_size:+.2f}",
                      f"{c.median_diff:+.3g} [{c.diff_ci_low:+.3g}, {c.diff_ci_high:+.3g}]", verdict])
     return header, rows
+
+
+def comparison_notes(comparisons: list[Any]) -> list[str]:
+    """What each paired comparison's table row cannot say ("dataset, A vs B: note"): segments that overlap or were left
+    out, sides scored against the ground truth at other instants of the sweep."""
+    return [f"{dataset}, {c.name_a} vs {c.name_b}: {c.note}" for dataset, c in comparisons if c.note]
 
 
 def _task_description(task: str) -> str:

@@ -139,6 +139,13 @@ def dataset_labels(records: list[dict[str, Any]]) -> dict[int, str]:
     return dict(zip(map(id, records), distinct_labels(labels, specs)))
 
 
+def ground_truth_instant(record: dict[str, Any]) -> str:
+    """The sweep instant an odometry record's reference refers to ("sweep end"), as its run stated it; '' if none."""
+    effective = (((record.get("info") or {}).get("odometry_metrics") or {}).get("effective") or {})
+    instant = str(effective.get("ground_truth_instant") or "")
+    return f"sweep {instant}" if instant in ("start", "mid", "end") else instant
+
+
 def remove_stale_temp_files(out_dir: Path, older_than_s: float = 600.0) -> int:
     """Delete temp files a killed run left in ``jobs/`` (``.<key>.*.json``, never read as results); return the count."""
     import time

@@ -52,6 +52,9 @@ class SegmentErrors:
     translation_pct: np.ndarray
     rotation_deg_per_100m: np.ndarray
     speed_mps: np.ndarray
+    first_frame: np.ndarray | None = None
+    """Each segment's first frame (int): with ``length_m`` it names the segment, so two runs scored on other truths
+    (other sweep instants) pair the same segments; None in records written before it was kept."""
 
     @classmethod
     def from_drift(cls, drift: DriftResult, frame_period_s: float = KITTI_FRAME_PERIOD_S) -> SegmentErrors:
@@ -60,7 +63,8 @@ class SegmentErrors:
         n_frames = (np.asarray(drift.segment_last_frame) - np.asarray(drift.segment_first_frame) + 1).astype(np.float64)
         speed = drift.segment_length_m / np.maximum(n_frames * frame_period_s, 1e-12)
         return cls(np.asarray(drift.segment_length_m, float), np.asarray(drift.segment_translation_pct, float),
-                   np.asarray(drift.segment_rotation_deg_per_100m, float), speed)
+                   np.asarray(drift.segment_rotation_deg_per_100m, float), speed,
+                   np.asarray(drift.segment_first_frame, dtype=np.int64))
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> SegmentErrors:
@@ -69,14 +73,24 @@ class SegmentErrors:
                       for k in ("length_m", "translation_pct", "rotation_deg_per_100m", "speed_mps")]
         except (KeyError, TypeError, ValueError) as err:
             raise EvaluationError(f"not a per-segment error record ({err})", source="segments") from None
+        if data.get("first_frame") is not None:
+            try:
+                arrays.append(np.asarray(data["first_frame"], dtype=np.int64).reshape(-1))
+            except (TypeError, ValueError) as err:
+                raise EvaluationError(f"not a per-segment error record ({err})", source="segments") from None
         if len({a.size for a in arrays}) != 1:
             raise EvaluationError("per-segment arrays differ in length", source="segments")
         return cls(*arrays)
 
     def to_dict(self) -> dict[str, list[float]]:
-        return {"length_m": self.length_m.tolist(), "translation_pct": np.round(self.translation_pct, 6).tolist(),
-                "rotation_deg_per_100m": np.round(self.rotation_deg_per_100m, 6).tolist(),
-                "speed_mps": np.round(self.speed_mps, 4).tolist()}
+        out = {"length_m": self.length_m.tolist(), "translation_pct": np.round(self.translation_pct, 6).tolist(),
+               "rotation_deg_per_100m": np.round(self.rotation_deg_per_100m, 6).tolist(),
+               "speed_mps": np.round(self.speed_mps, 4).tolist()}
+        return out if self.first_frame is None else {**out, "first_frame": self.first_frame.tolist()}
+
+    def keys(self) -> list[tuple[int, float]] | None:
+        """``(first frame, length)`` of each segment, as ``lidarkit compare`` pairs segments; None without first frames."""
+        return None if self.first_frame is None else list(zip(self.first_frame.tolist(), self.length_m.tolist()))
 
     def __len__(self) -> int:
         return int(self.length_m.size)
