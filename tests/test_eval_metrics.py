@@ -311,6 +311,8 @@ def test_bad_input_raises_named_errors(rng):
         rpe(ref, ref, delta=2, legacy_pairs=True)
     with pytest.raises(EvaluationError, match="n_to_align"):
         ape(ref, ref, align="se3", n_to_align=99)
+    with pytest.raises(ConfigError, match="n_to_align must be at least 1 pose, got 0"):  # a setting: was an EvaluationError
+        ape(ref, ref, align="se3", n_to_align=0)
     with pytest.raises(EvaluationError, match="at least 3 poses"):
         ape(ref[:2], ref[:2], align="se3")
     with pytest.raises(EvaluationError, match="no timestamps"):

@@ -234,7 +234,9 @@ def _check_align(align: str, align_origin: bool, n_to_align: int | None, n_poses
     if not is_integer(n_to_align):  # ("5" read "must be in [1, 5], got 5")
         raise ConfigError(f"n_to_align must be a whole number of poses, got {n_to_align!r}", source="n_to_align")
     n = int(n_to_align)
-    if not 1 <= n <= n_poses:
+    if n < 1:  # wrong for any trajectory: a setting, not the data (5.5 was a ConfigError, 0 an EvaluationError)
+        raise ConfigError(f"n_to_align must be at least 1 pose, got {n_to_align}", source="n_to_align")
+    if n > n_poses:
         raise EvaluationError(f"n_to_align must be an integer in [1, {n_poses}], got {n_to_align}", source=source)
     return n
 
