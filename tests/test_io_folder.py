@@ -275,3 +275,7 @@ def test_the_run_config_records_the_folder_s_stamps_and_suffixes(tmp_path, rng):
     assert reader_settings(ScanFolder(folder, timestamps=[0.0, 0.1, 0.2]))["timestamps"] == "3 values given"
     assert reader_settings(ScanFolder(folder))["timestamps"] is None
     assert yaml.safe_dump(options)  # plain values
+    # the run's dataset_options name the poses file too (two runs with other poses= files had the same options)
+    (tmp_path / "gt.txt").write_text("1 0 0 0 0 1 0 0 0 0 1 0\n" * 3)
+    named = ScanFolder(folder, poses=tmp_path / "gt.txt").reader_options
+    assert (named["poses_path"], named["poses_format"]) == (str((tmp_path / "gt.txt").absolute()), "kitti")

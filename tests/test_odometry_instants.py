@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lidarkit.errors import EvaluationError
+from lidarkit.errors import DataError, EvaluationError
 from lidarkit.geometry import pose_error, se3_inverse
 from lidarkit.odometry import run
 from lidarkit.registration import available_icp
@@ -205,7 +205,6 @@ def test_poses_are_stamped_at_the_instant_they_refer_to(tmp_path):
 
 
 def test_a_ground_truth_that_cannot_be_re_timed_is_refused_with_the_reason(sims):
-    from lidarkit.errors import DataError
     from lidarkit.odometry.instants import like_with_like
 
     class Recording:
@@ -245,6 +244,33 @@ def test_a_kitti_folder_written_by_the_simulator_is_re_timed_from_its_other_pose
     with pytest.raises(EvaluationError, match="re-timing it failed: no ground truth at the sweep end"):
         run(folder, "kiss")
     shutil.rmtree(folder)
+
+
+def test_a_poses_file_of_the_user_s_own_in_a_simulator_folder_is_scored_as_given(tmp_path):
+    """``poses_file=`` naming a file of the user's own in a folder the simulator wrote was "re-timed" by reading the
+    simulator's poses_end.txt instead: the file named was never read (a 1.5x scaled truth scored as the simulator's,
+    written as the run's ground truth). It is now compared as it is (its instant unknown), and config.yaml names it."""
+    import yaml
+
+    from lidarkit.io import open_dataset
+    from lidarkit.odometry import write_run
+    from lidarkit.sim.lidar import export_kitti
+
+    sim = SimulatedLidarSequence(pose_instant="start", **{**SIM, "n_frames": 5})
+    folder = export_kitti(sim, tmp_path / "seq")
+    rows = np.loadtxt(folder / "poses_end.txt")
+    rows[:, [3, 7, 11]] *= 1.5
+    np.savetxt(folder / "gt_mine.txt", rows)
+    dataset = open_dataset("kitti", folder, poses_file="gt_mine.txt")
+    with pytest.raises(DataError, match="the poses file named is not one of the simulator's"):
+        dataset.ground_truth_at_instant("end")
+    result = run(dataset, "kiss")
+    mine = open_dataset("kitti", folder, poses_file="gt_mine.txt").ground_truth
+    np.testing.assert_allclose(result.ground_truth.poses_se3, mine.relative_to_first().poses_se3, atol=1e-9)
+    assert result.ground_truth.length_m == pytest.approx(1.5 * sim.ground_truth_at("end").length_m, rel=1e-6)
+    write_run(result, tmp_path / "out")
+    options = yaml.safe_load((tmp_path / "out" / "config.yaml").read_text())["run"]["dataset_options"]
+    assert options["poses_path"] == str((folder / "gt_mine.txt").absolute())
 
 
 def test_the_simulator_s_kitti_folder_states_its_stamp_instant(tmp_path):
@@ -342,7 +368,6 @@ def test_a_selection_within_partial_odometry_is_re_timed_alone(tmp_path):
     re-timed and failed on scans 5-9, which the run never used ("time ... lies outside the stamps")."""
     from test_io_bad_bags import good, write_ros1_bag
 
-    from lidarkit.errors import DataError
     from lidarkit.io import open_dataset
     from lidarkit.odometry.instants import like_with_like
 

@@ -148,10 +148,13 @@ class ScanFolder:
 
     @property
     def reader_options(self) -> dict:
-        """Where the stamps came from and which files were read, for the run config (two runs over one folder with
-        other timestamps= files had the same config.yaml)."""
+        """Where the stamps and poses came from and which files were read, for the run config (two runs over one
+        folder with other timestamps= or poses= files had the same config.yaml)."""
         return {"kind": "folder", "path": str(self.path.absolute()), "timestamps": self._timestamps_given,
-                "suffixes": ",".join(self.suffixes)}
+                "suffixes": ",".join(self.suffixes),
+                # (named as the attribute, not as the option: regression checks compare a pinned spec's options by name)
+                "poses_path": None if self.poses_path is None else str(Path(self.poses_path).absolute()),
+                "poses_format": self.poses_format}
 
     @property
     def timestamps_s(self) -> np.ndarray | None:

@@ -259,6 +259,8 @@ class KittiOdometry:
     def reader_options(self) -> dict:
         """What the reader did to the data, for the run config."""
         return {"kind": "kitti", "path": str(self.sequence_dir.absolute()),
+                # (named as the attribute, not as the option: regression checks compare a pinned spec's options by name)
+                "poses_path": None if self.poses_path is None else str(Path(self.poses_path).absolute()),
                 **correction_options(self.vertical_correction, self._correct)}
 
     # ---- layout ------------------------------------------------------------------------------------
@@ -418,11 +420,15 @@ class KittiOdometry:
     def ground_truth_at_instant(self, instant: str) -> Trajectory:
         """Ground truth of ``frames`` (LiDAR frame) at another instant of each sweep: a folder written by lidarkit's
         simulator keeps ``poses_{instant}.txt`` beside ``poses.txt``; DataError for any other folder, which has only the
-        one instant of ``poses.txt``."""
+        one instant of ``poses.txt``, and for a pose file of the user's own named by ``poses_file`` (it stood in for the
+        simulator's and the file named was never read)."""
         path = self.sequence_dir / f"poses_{instant}.txt"
         if instant not in INSTANT_FRACTION or self._simulator_pose_instant is None or not path.is_file():
             raise DataError(f"no ground truth at the sweep {instant} (only the simulator's folders keep poses_{instant}.txt)",
                             source=self.sequence_dir)
+        if self._simulated_instant is None:
+            raise DataError(f"no ground truth at the sweep {instant}: the poses file named is not one of the simulator's "
+                            "(poses.txt, poses_start/mid/end.txt), whose other instants are known", source=self.poses_path)
         gt = self._in_lidar_frame(self._rows(Trajectory.from_kitti(path, name=f"{self.name}_gt"), self.frames, path))
         times = gt.timestamps_s
         if times is not None:  # times.txt is at poses.txt's instant: moved by the fraction of the period
