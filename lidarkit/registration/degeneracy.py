@@ -9,7 +9,7 @@ scaled by the RMS distance ``r`` of the points from that axis, so that all six c
 matrix is
 ``H = (1/n) sum J_i^T M_i J_i``. A plane leaves 3 zero eigenvalues, a line 2; the result is
 flagged ``degenerate`` when ``min(eig) / max(eig) < DEGENERACY_RATIO_THRESHOLD`` (1e-2). Measured on
-KITTI seq 00: full scans ~0.3, road-only patches (z < -1.5 m, 8-40 m around the car) 5e-4 to 6e-3.
+KITTI seq 00: full scans ~0.3, road-only patches (z < -1.5 m, 8-40 m around the car) 5e-4 to 8e-3.
 """
 
 from __future__ import annotations
@@ -124,12 +124,19 @@ def _weak_names(evals: np.ndarray, evecs: np.ndarray, n_weak: int) -> list[str]:
     along (0.52, 0.86, 0.00) coupled with rotation", differing from variant to variant)."""
     names, start = [], 0
     while start < n_weak:
+        near = SUBSPACE_FACTOR * max(evals[start], 1e-12 * evals[-1])
         end = start + 1
-        while end < n_weak and evals[end] <= SUBSPACE_FACTOR * max(evals[start], 1e-12 * evals[-1]):
+        while end < n_weak and evals[end] <= near:
             end += 1
-        span = np.sum(evecs[:, start:end] ** 2, axis=1)  # how much of each axis lies in the subspace (sums to its size)
-        axes = np.sort(np.argsort(span)[::-1][: end - start])
-        if end - start == 1 or span[axes].min() < 0.9:  # a single direction, or a subspace not along axes
+        wide = end
+        while wide < len(evals) and evals[wide] <= near:  # near-equal directions just above the threshold
+            wide += 1
+        if wide > end and _subspace_axes(evecs[:, start:end]) is None and _subspace_axes(evecs[:, start:wide]) is not None:
+            # they span one subspace with the weak ones, which alone are an arbitrary mix of its axes (a road's x and y
+            # below the threshold, its yaw 2.7x above: two raw vectors, one or two from pair to pair): named whole
+            end = wide
+        axes = _subspace_axes(evecs[:, start:end])
+        if end - start == 1 or axes is None:  # a single direction, or a subspace not along axes
             names += [describe_direction(evecs[:, i]) for i in range(start, end)]
         else:
             moves = [_AXES[a] for a in axes if a < 3]
@@ -138,6 +145,13 @@ def _weak_names(evals: np.ndarray, evecs: np.ndarray, n_weak: int) -> list[str]:
                                    + ([f"rotation about {_and(turns)}"] if turns else [])))
         start = end
     return names
+
+
+def _subspace_axes(vectors: np.ndarray) -> np.ndarray | None:
+    """The axes (indices, sorted) the columns of ``vectors`` span, or None when the subspace does not lie along axes."""
+    span = np.sum(vectors**2, axis=1)  # how much of each axis lies in the subspace (sums to its size)
+    axes = np.sort(np.argsort(span)[::-1][: vectors.shape[1]])
+    return axes if span[axes].min() >= 0.9 else None
 
 
 def describe_direction(direction: np.ndarray) -> str:
