@@ -7,6 +7,7 @@ evo aligns, transforms and scales its trajectories in place, so every call works
 from __future__ import annotations
 
 import contextlib
+import functools
 import io
 import logging
 from dataclasses import dataclass, field
@@ -422,6 +423,26 @@ def align_trajectory(
     return Trajectory.from_evo(est_evo, name=est.name), transform
 
 
+def _orthonormalized_if_evo_refuses(metric):
+    """Score again on orthonormalized copies when evo refuses a rotation this project's reader accepts: evo's SO(3)
+    check of a relative rotation allows 1e-6, the reader 1e-4 (SemanticKITTI's poses of KITTI 00, 1.6e-6, and a KITTI
+    file written with 6 decimals could not be scored at all: "matrix is not a valid SO(3) group element"). Tried as
+    given first, so that a pair evo takes is scored exactly as evo scores it."""
+
+    @functools.wraps(metric)
+    def scored(ref: Trajectory, est: Trajectory, *args, **kwargs):
+        try:
+            return metric(ref, est, *args, **kwargs)
+        except EvaluationError as err:
+            if "not a valid SO(3) group element" not in err.reason:
+                raise
+            logger.info("%s: rotations orthonormalized for evo (%s)", err.source, err.reason)
+            return metric(ref.orthonormalized(), est.orthonormalized(), *args, **kwargs)
+
+    return scored
+
+
+@_orthonormalized_if_evo_refuses
 def ape(
     ref: Trajectory,
     est: Trajectory,
@@ -475,6 +496,7 @@ def ape(
     )
 
 
+@_orthonormalized_if_evo_refuses
 def rpe(
     ref: Trajectory,
     est: Trajectory,
