@@ -414,6 +414,10 @@ def test_orientation_errors_after_an_alignment_the_positions_hardly_fix_are_flag
     markdown = evaluation_markdown(ev)
     assert "align=sim3 (scale 2.0" in markdown and "KITTI drift is the devkit's, on the estimate as given (unscaled)" in markdown
     assert evaluation_notes(evaluate(short_gt, short_orb))[0] == aligned.warning
+    # what the pairing warned of is in the filed report too (it was logged and in --json only)
+    stamps = np.arange(len(gt)) * 0.1
+    timed = evaluate(Trajectory(gt.poses_se3, stamps), Trajectory(orb.poses_se3, stamps + 1.0), drift=False)
+    assert timed.warnings and f"Warning: {timed.warnings[0]}." in evaluation_markdown(timed)
 
 
 def test_all_pairs_over_an_angle_delta_search_once_and_equal_evo(capsys):

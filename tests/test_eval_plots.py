@@ -64,6 +64,32 @@ def test_a_long_evo_title_is_wrapped_to_its_panel():
     assert title.width <= panel.width and "\n" in ax.get_title()
 
 
+def test_the_drift_panel_draws_each_length_in_its_own_slot_in_ascending_order():
+    """Bars were placed at the lengths themselves, 0.4x the first gap wide: lengths given as (800, 100) gave -280 m
+    bars (the 100 m one drawn over 100-380 m, the axis from -200 m), and (100, 110, 800) 4 m bars. One slot a length
+    now, labelled, ascending whatever the order given."""
+    from conftest import shared_path
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    from lidarkit.eval import evaluate
+    from lidarkit.eval.plots import _draw_drift
+
+    gt = Trajectory.from_kitti(shared_path("evo_testdata", "KITTI_00_gt.txt"))
+    orb = Trajectory.from_kitti(shared_path("evo_testdata", "KITTI_00_ORB.txt"))
+    ev = evaluate(gt, orb, drift_lengths_m=(800, 100))
+    fig = Figure()
+    FigureCanvasAgg(fig)
+    ax = fig.subplots()
+    _draw_drift(ax, ev, scaled=False)
+    bars = ax.patches
+    assert [round(b.get_x() + b.get_width() / 2, 6) for b in bars] == [-0.2, 0.8]
+    assert min(b.get_width() for b in bars) == pytest.approx(0.4)
+    assert [t.get_text() for t in ax.get_xticklabels()] == ["100", "800"]
+    by_length = {r.length_m: r.translation_pct for r in ev.drift.per_length}
+    assert [b.get_height() for b in bars] == pytest.approx([by_length[100.0], by_length[800.0]])
+
+
 def test_the_segment_box_plot_title_of_one_method_is_wrapped_inside_the_figure(tmp_path):
     """``--tables``' box plot of one method is 4 in wide: its title "per-segment KITTI translational drift (%) (3283
     segments)" was cut at the image's edge ("... (3283 segment"); it is wrapped like the RPE panel titles."""

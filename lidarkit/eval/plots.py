@@ -122,19 +122,26 @@ def plot_evaluation(evaluation: Evaluation, path: str | os.PathLike, *, plane: s
     axes[0, 0].set_title(f"{evaluation.est_name} vs {evaluation.ref_name}", fontsize=9)
     _draw_errors(axes[0, 1], ape_res)
     _draw_errors(axes[1, 0], evaluation.rpe)
-    ax = axes[1, 1]
+    _draw_drift(axes[1, 1], evaluation, scaled)
+    return save_figure(fig, path)
+
+
+def _draw_drift(ax, evaluation: Evaluation, scaled: bool) -> None:
+    """KITTI drift per segment length, translation and rotation side by side (or why it was not computed)."""
     drift = evaluation.drift
     if drift is None or not drift.valid:
         ax.text(0.5, 0.5, f"KITTI drift not computed:\n{evaluation.drift_note}", ha="center", va="center", fontsize=9)
         ax.set_axis_off()
     else:
-        rows = [r for r in drift.per_length if r.n_segments]
-        lengths = np.array([r.length_m for r in rows])
-        width = 0.4 * (lengths[1] - lengths[0] if len(lengths) > 1 else 100.0)
-        ax.bar(lengths - width / 2, [r.translation_pct for r in rows], width, color="tab:blue", label="translation (%)")
+        # one slot per length, in ascending order (bars placed at the lengths themselves were 4 m wide for lengths
+        # 100, 110, 800, and lengths given as (800, 100) drew each bar at the other's length)
+        rows = sorted((r for r in drift.per_length if r.n_segments), key=lambda r: r.length_m)
+        slots = np.arange(len(rows), dtype=np.float64)
+        ax.bar(slots - 0.2, [r.translation_pct for r in rows], 0.4, color="tab:blue", label="translation (%)")
         ax2 = ax.twinx()
-        ax2.bar(lengths + width / 2, [r.rotation_deg_per_100m for r in rows], width, color="tab:orange",
+        ax2.bar(slots + 0.2, [r.rotation_deg_per_100m for r in rows], 0.4, color="tab:orange",
                 label="rotation (deg/100 m)")
+        ax.set_xticks(slots, [f"{r.length_m:g}" for r in rows])
         ax.set_xlabel("segment length (m)")
         ax.set_ylabel("translational error (%)")
         ax2.set_ylabel("rotational error (deg/100 m)")
@@ -145,7 +152,6 @@ def plot_evaluation(evaluation: Evaluation, path: str | os.PathLike, *, plane: s
         )
         handles = ax.get_legend_handles_labels()[0] + ax2.get_legend_handles_labels()[0]
         ax.legend(handles, [h.get_label() for h in handles], fontsize=8, loc="upper right")
-    return save_figure(fig, path)
 
 
 def plot_segment_boxplots(grid, path: str | os.PathLike, quantity: str = "translation_pct") -> Path:

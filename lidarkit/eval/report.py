@@ -122,6 +122,8 @@ def evaluation_markdown(evaluation: Evaluation) -> str:
         f"{evaluation.n_poses} poses, reference path {evaluation.ref_length_m:.1f} m; {_settings_line(evaluation)}.\n",
         markdown_table(*metric_rows(evaluation)),
         *(f"\nNote: {note}.\n" for note in evaluation_notes(evaluation)),
+        # what the pairing warned of (logged on the terminal; the JSON holds it too): the filed report read clean
+        *(f"\nWarning: {warning}.\n" for warning in evaluation.warnings),
     ]
     if evaluation.drift is not None:
         parts += ["\nKITTI drift (devkit metric) per segment length:\n", markdown_table(*drift_rows(evaluation))]
