@@ -445,3 +445,18 @@ def test_frame_numbers_against_seconds_are_not_told_to_associate(tmp_path, caplo
         "reference 470.581600 s, estimate 4540.000000 s; more than 0.01 s), and the estimate's stamps step by 1 s against "
         "the reference's 0.1036 s (median): the two clocks or units differ (frame numbers against seconds?); pairing by "
         "index, as here, is right when pose i of each is the same frame; --associate would pair the wrong poses"]
+
+
+def test_an_alignment_of_collinear_positions_names_the_command_line_option(tmp_path, capsys):
+    """A straight-line path cannot be aligned; the message said "use align='none'", the library's words, to a command
+    line user who needs --align none."""
+    poses = np.tile(np.eye(4), (20, 1, 1))
+    poses[:, 0, 3] = np.arange(20.0)
+    line = Trajectory(poses).to_kitti(tmp_path / "line.txt")
+    with pytest.raises(SystemExit) as exc:
+        main(["eval", str(line), str(line)])
+    err = " ".join(capsys.readouterr().err.split())
+    assert exc.value.code == 1 and err.endswith("(positions collinear or constant? use align='none', --align none)")
+    with pytest.raises(SystemExit) as exc:
+        main(["eval", str(line), str(line), "--align", "none"])
+    assert exc.value.code == 0

@@ -268,7 +268,7 @@ def _aligned_copies(ref: Trajectory, est: Trajectory, align: str, align_origin: 
     except EvoException as err:
         raise EvaluationError(
             f"{align if align != 'none' else 'origin'} alignment failed: {err} "
-            "(positions collinear or constant? use align='none')",
+            "(positions collinear or constant? use align='none', --align none)",
             source=source,
         ) from err
     if transform is not None and not (np.isfinite(transform.sim3).all() and transform.scale > 0):
