@@ -103,6 +103,20 @@ def test_the_files_detected_by_name_are_listed_from_the_detection_table(tmp_path
         open_sequence(str(tmp_path / "nonexist.clf.bz2"))
 
 
+def test_options_on_a_path_without_its_kind_say_the_kind_goes_first(exports):
+    """`lidarkit odometry 'r1.bag?topic=/points'` read "dataset not found" of a file that exists (the docs show both
+    `run.bag` and `rosbag:run.bag?topic=...`): the message now says options need the kind, and which one."""
+    from lidarkit.errors import ConfigError
+    from lidarkit.odometry import open_sequence
+
+    bag, folder = exports[("rosbag1", "sqlite3")], exports["kitti"]
+    with pytest.raises(ConfigError) as err:
+        open_sequence(f"{bag}?topic=/points")
+    assert str(err.value).endswith(f"options need the dataset kind before the path: rosbag:{bag}?topic=/points")
+    with pytest.raises(ConfigError, match=f"kitti:{folder}\\?drop_nonfinite=true$"):
+        open_sequence(f"{folder}?drop_nonfinite=true")
+
+
 @pytest.mark.parametrize("fmt,storage,name,kind", FORMATS)
 def test_bag_round_trip_points_times_and_ground_truth(sim, exports, fmt, storage, name, kind):
     ds = open_dataset(kind, exports[(fmt, storage)])

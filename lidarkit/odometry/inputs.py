@@ -51,6 +51,11 @@ def open_sequence(spec: str | os.PathLike | ScanSequence) -> ScanSequence:
     if not path.exists():
         if sep and len(kind) > 1 and "/" not in kind and "\\" not in kind:  # KIND:PATH with a kind no reader has
             raise ConfigError(f"unknown dataset kind {kind!r}; known: sim, {', '.join(lio.available_datasets())}", source=text)
+        bare, _, query = text.partition("?")
+        if query and Path(os.path.expanduser(bare)).exists():  # options on a path whose kind was to be detected
+            found = Path(os.path.expanduser(bare))
+            detected = lio.detect_kind(found) or ("folder" if found.is_dir() else "KIND")
+            raise ConfigError(f"options need the dataset kind before the path: {detected}:{bare}?{query}", source=text)
         raise DataError(f"dataset not found (a folder, {lio.detected_files()}, KIND:PATH or sim:SCENE?...)", source=text)
     kind = lio.detect_kind(path)
     problem = lio.ros2_storage_problem(path) if kind is None else None
