@@ -63,6 +63,7 @@ class Row:
     summaries: dict[str, Any] = field(default_factory=dict)  # metric -> lidarkit.eval.Summary (median, bootstrap CI)
     n_missing: int = 0  # seeds of the suite with no result yet (an interrupted run)
     alignment: dict[str, str] = field(default_factory=dict)  # metric -> the alignment its records state
+    seeds: tuple[int, ...] = ()  # the seeds of its ok results (the ones its numbers are over)
 
 
 @dataclass
@@ -175,7 +176,8 @@ def aggregate(records: list[dict[str, Any]], missing: list[dict[str, Any]] = ())
                 stats[m.name] = _stats(values)
                 summaries[m.name] = summarize([v for v in values if v is not None and math.isfinite(v)], seed=0)
             rows.append(Row(task, experiment, dataset, method, len(ok), len(items) - len(ok), stats, summaries,
-                            n_missing=missing_per_row.get(ident, 0), alignment=_stated_alignment(ok)))
+                            n_missing=missing_per_row.get(ident, 0), alignment=_stated_alignment(ok),
+                            seeds=tuple(sorted(int(r["job"]["seed"]) for r in ok))))
         higher = frozenset(name for r in recs for name in (r.get("higher_is_better") or ()))
         tables.append(TaskTable(task, metrics, rows, higher))
     return tables
@@ -617,10 +619,18 @@ def summary_rows(report: Report) -> tuple[list[str], list[list[str]]]:
             best = min(candidates, key=lambda r: (r.n_failed > 0 or r.n_missing > 0 or _n_no_value(r, metric.name) > 0,
                                                   sign * r.stats[metric.name][0]))
             rows.append([table.task, dataset, metric.by_alignment.get(alignment, metric.label), _short_label(best, table),
-                         format_stat(best.stats[metric.name]) + _failed_note(best, metric.name),
+                         format_stat(best.stats[metric.name]) + _failed_note(best, metric.name) + _seeds_note(best, candidates),
                          str(len({r.method for r in table.rows if r.dataset == dataset
                                   and (not alignment or r.alignment.get(metric.name) == alignment)}))])
     return header, rows
+
+
+def _seeds_note(best: Row, candidates: list[Row]) -> str:
+    """`` (seeds 1, 3; others ran other seeds: compare them on common seeds)`` when the rows ranked ran other seeds (a
+    method over seeds 1 and 3 was named best against kiss over 0-4, where on seeds 1 and 3 kiss was better), else ''."""
+    if len({r.seeds for r in candidates}) < 2:
+        return ""
+    return f" (seeds {', '.join(map(str, best.seeds))}; others ran other seeds: compare them on common seeds)"
 
 
 def _n_no_value(row: Row, metric: str) -> int:
