@@ -683,6 +683,9 @@ def test_publication_tables_average_over_common_seeds_and_the_summary_says_when_
     assert "seeds 1, 3 of every method" in (tmp_path / "tables" / "ape_rmse.tex").read_text()
     summary = next(line for line in (tmp_path / "report.md").read_text().splitlines() if line.startswith("| odometry | drive"))
     assert "(seeds 1, 3; others ran other seeds: compare them on common seeds)" in summary, summary
+    # and no comparison with the reference is said, not left out without a word
+    assert ("- no comparison: drive, kiss vs ground_filtered: 2 common seed(s) (a comparison over seeds needs 5) and no "
+            "KITTI segments to pair (a path under 100 m)") in (tmp_path / "report.md").read_text().splitlines()
 
 
 ODOMETRY_AND_PAIRS = """

@@ -32,6 +32,7 @@ class Publication:
     files: list[Path] = field(default_factory=list)
     boxplots: list[tuple[str, Path]] = field(default_factory=list)  # (caption, png path)
     comparisons: list[tuple[str, Any]] = field(default_factory=list)  # (dataset, PairedComparison) vs the reference
+    not_compared: list[str] = field(default_factory=list)  # "dataset, kiss vs X: why no comparison was made"
 
 
 def odometry_labels(records: list[dict[str, Any]]) -> dict[int, str]:
@@ -87,13 +88,15 @@ OVERLAPPING_SEGMENTS = ("the segments overlap (one starts every 10 frames): they
                         "is optimistic; with 5 or more seeds the units are the seeds (lidarkit compare)")
 
 
-def reference_comparisons(records: list[dict[str, Any]], reference: str = REFERENCE_METHOD) -> list[tuple[str, Any]]:
+def reference_comparisons(records: list[dict[str, Any]], reference: str = REFERENCE_METHOD, *,
+                          not_compared: list[str] | None = None) -> list[tuple[str, Any]]:
     """Paired Wilcoxon comparisons of the reference method with every other method, per dataset.
 
     Units: the common seeds when there are at least 5 (their KITTI drift, else APE RMSE: as ``lidarkit compare`` pairs
     bench results); with fewer, the KITTI segments of every common seed (same ground truth, so the same segments),
     with a note that they overlap (one starts every 10 frames: not independent, the p-value is optimistic; the report
-    said "kiss better" where compare, over the 2 seeds, said no difference); a dataset without enough units is left out.
+    said "kiss better" where compare, over the 2 seeds, said no difference); a dataset without enough units is left out,
+    and why is appended to ``not_compared`` (the section had vanished without a word).
     """
     from lidarkit.bench.tasks.odometry import METRIC_ALIGNMENT_BY_NAME
     from lidarkit.errors import LidarKitError
@@ -136,8 +139,11 @@ def reference_comparisons(records: list[dict[str, Any]], reference: str = REFERE
                     notes = [OVERLAPPING_SEGMENTS] + ([f"{left} KITTI segment(s) on only one side's ground truth left out "
                                                         "(paired by first frame and length)"] if left else [])
                 else:
-                    log.info("no paired comparison %s vs %s on %s: %d common seed(s) and their segments do not pair",
-                             reference, label, dataset, len(seeds))
+                    why = (f"{len(seeds)} common seed(s) (a comparison over seeds needs 5)"
+                           + (" and no KITTI segments to pair (a path under 100 m)" if seeds else ""))
+                    log.info("no paired comparison %s vs %s on %s: %s", reference, label, dataset, why)
+                    if not_compared is not None:
+                        not_compared.append(f"{dataset}, {reference} vs {label}: {why}")
                     continue
                 instants = [sorted({ground_truth_instant(side[s]) for s in seeds} - {""}) for side in (ref, runs)]
                 if all(instants) and instants[0] != instants[1]:  # (as lidarkit compare notes it)
@@ -201,7 +207,7 @@ def build_publication(records: list[dict[str, Any]], out_dir: Path, *, plots: bo
         tables.tables = [dataclasses.replace(t, note=f"{t.note} Means over common seeds, {seeds_note}.".strip())
                          for t in tables.tables]
     pub = Publication(tables.tables)
-    pub.comparisons = reference_comparisons(records)
+    pub.comparisons = reference_comparisons(records, not_compared=pub.not_compared)
     # (an earlier report's tables that these do not replace are removed by remove_stale_tables, after the report files)
     pub.files += [path for t in pub.tables for path in t.write(out_dir / TABLES_DIR)]
     if not pub.tables:

@@ -503,10 +503,11 @@ def _markdown(report: Report, title: str) -> str:
         out += ["## Publication tables", "", f"Also as CSV and LaTeX (booktabs) in `{out_dir_name(report)}/tables/`.", ""]
         out += [t.to_markdown() for t in pub.tables]
         out += [f"![{caption}](plots/{path.name})\n\n{caption}\n" for caption, path in pub.boxplots]
-    if pub is not None and pub.comparisons:
-        header, rows = comparison_rows(pub.comparisons)
-        out += ["## Paired comparisons with the reference", "", markdown_table(header, rows)]
-        notes = comparison_notes(pub.comparisons)
+    if pub is not None and (pub.comparisons or pub.not_compared):
+        out += ["## Paired comparisons with the reference", ""]
+        if pub.comparisons:
+            out.append(markdown_table(*comparison_rows(pub.comparisons)))
+        notes = comparison_notes(pub.comparisons) + [f"no comparison: {line}" for line in pub.not_compared]
         out += [f"- {line}" for line in notes] + ([""] if notes else [])
     if report.plots:
         out += ["## Plots", ""] + [f"![{p.title}](plots/{p.filename})" for p in report.plots] + [""]
@@ -721,9 +722,9 @@ def _html(report: Report, title: str) -> str:
             if pub.comparisons:
                 parts.append(_table_html(*comparison_rows(pub.comparisons), n_left=3,
                                          caption="Paired comparisons with the reference (Wilcoxon signed-rank)"))
-                notes = comparison_notes(pub.comparisons)
-                if notes:
-                    parts += ["<ul>", *(f"<li>{e(line)}</li>" for line in notes), "</ul>"]
+            notes = comparison_notes(pub.comparisons) + [f"no comparison: {line}" for line in pub.not_compared]
+            if notes:
+                parts += ["<ul>", *(f"<li>{e(line)}</li>" for line in notes), "</ul>"]
             if pub.tables:
                 parts.append("<h3>Publication tables</h3>")
                 parts.append("<p>Also as Markdown, CSV and LaTeX (booktabs) in <code>tables/</code>. "
