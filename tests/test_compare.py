@@ -374,3 +374,8 @@ def test_a_particle_filter_run_folder_is_named_as_one(tmp_path, capsys):
     (tmp_path / "bench" / "jobs").mkdir(parents=True)
     assert cli_exit_code(["compare", str(tmp_path / "one"), str(tmp_path / "bench")]) == 1
     assert "a particle-filter run folder" in capsys.readouterr().err
+    # a study folder (-n 50,60: study.json, no metrics.json) read "no metrics.json: not a finished odometry run folder"
+    assert cli_exit_code(["pf", data, "-n", "50,60", "--seeds", "2", "-o", str(tmp_path / "study")]) == 0
+    capsys.readouterr()
+    assert cli_exit_code(["compare", str(tmp_path / "study"), str(tmp_path / "one")]) == 1
+    assert f"error: {tmp_path / 'study'}: a particle-filter run folder" in capsys.readouterr().err

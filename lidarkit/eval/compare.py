@@ -65,6 +65,11 @@ def load_odometry_run(path: str | os.PathLike) -> OdometryRun:
     path = Path(path)
     if not path.is_dir():
         raise DataError("run folder does not exist", source=path)
+    other = _other_run_kind(path)
+    if other:  # ("no ground_truth_kitti.txt" for a pf run folder, which holds its ground truth as TUM; "no metrics.json"
+        # for a pf study folder, read as an unfinished odometry run)
+        raise DataError(f"a {other} run folder: compare pairs odometry run folders, or bench results folders (the seeds of "
+                        f"a suite: lidarkit bench)", source=path)
     metrics_file = path / "metrics.json"
     if not metrics_file.is_file():
         raise DataError("no metrics.json: not a finished odometry run folder", source=path)
@@ -74,10 +79,6 @@ def load_odometry_run(path: str | os.PathLike) -> OdometryRun:
         raise DataError(f"unreadable metrics.json ({err})", source=metrics_file) from None
     if not isinstance(metrics, dict):
         raise DataError("metrics.json is not a JSON object", source=metrics_file)
-    other = _other_run_kind(path)
-    if other:  # ("no ground_truth_kitti.txt" for a pf run folder, which holds its ground truth as TUM)
-        raise DataError(f"a {other} run folder: compare pairs odometry run folders, or bench results folders (the seeds of "
-                        f"a suite: lidarkit bench)", source=path)
     for name in ("poses_kitti.txt", "ground_truth_kitti.txt"):
         if not (path / name).is_file():
             raise DataError(f"no {name}: a paired comparison needs the estimate and its ground truth", source=path)
