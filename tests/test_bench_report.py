@@ -627,10 +627,10 @@ def test_reference_comparisons_pair_segments_by_first_frame_and_length_and_note_
 
     kiss_keys = [(0, 100.0), (10, 100.0), (20, 100.0), (0, 200.0)]
     gicp_keys = [(0, 100.0), (10, 100.0), (20, 100.0), (30, 100.0)]  # no 200 m segment on the mid-sweep truth
-    records = [record("kiss", s, "end", kiss_keys, [0.5, 0.6, 0.7, 9.0]) for s in (0, 1)]
-    records += [record("small_gicp", s, "mid", gicp_keys, [1.5, 1.6, 1.7, 1.8]) for s in (0, 1)]
+    records = [record("kiss", s, "end", kiss_keys, [0.5 + s, 0.6 + s, 0.7 + s, 9.0]) for s in (0, 1)]
+    records += [record("small_gicp", s, "mid", gicp_keys, [1.5 + s, 1.6 + s, 1.7 + s, 1.8]) for s in (0, 1)]
     (dataset, c), = reference_comparisons(records)
-    assert c.pairing == "segment" and c.n_pairs == 6 and c.mean_a == pytest.approx(0.6) and c.mean_b == pytest.approx(1.6)
+    assert c.pairing == "segment" and c.n_pairs == 6 and c.mean_a == pytest.approx(1.1) and c.mean_b == pytest.approx(2.1)
     assert c.note == (f"{OVERLAPPING_SEGMENTS}; 4 KITTI segment(s) on only one side's ground truth left out (paired by "
                       "first frame and length); each side is scored against the ground truth at its own instant of the "
                       "sweep (kiss: sweep end, small_gicp: sweep mid)")
@@ -660,6 +660,30 @@ def test_a_comparison_with_p_below_alpha_and_no_verdict_says_its_ci_includes_0(t
     assert "<th>median A - B (95 % CI)</th>" in page
     cells = "".join(f"<td>{html.escape(c)}</td>" for c in ("-2.5 [-5, +0.05]", "no significant difference (CI includes 0)"))
     assert cells in page
+
+
+def test_reference_comparisons_count_seeds_that_ran_the_same_data_once():
+    """An unseeded dataset (its own seed fixed) run with 3 seeds: the report pooled the same 2 segments once per seed,
+    6 units, "kiss better, p = 0.031", where one seed's 2 give p = 0.5; with 6 such seeds it printed p = 0.031 and
+    effect -1.00 beside "no significant difference". Seeds alike on both sides count once, and a repeated measurement
+    is said to be one, with no p (as lidarkit compare says it)."""
+    from lidarkit.bench.jobs import Job
+    from lidarkit.bench.publication import reference_comparisons
+    from lidarkit.bench.report import comparison_rows
+
+    def record(method, seed, drift, ape):
+        job = Job("odometry", "e", "fixed", {"kind": "sim_lidar", "scene": "street", "seed": 3}, method, seed=seed)
+        return {"status": "ok", "job": job.spec(), "metrics": {"ape_rmse_m": ape},
+                "series": {"drift_segments": {"first_frame": [0, 10], "length_m": [100.0, 100.0], "translation_pct": drift}}}
+
+    few = [record(m, s, d, a) for s in range(3) for m, d, a in (("kiss", [0.40, 0.41], 0.12), ("small_gicp", [0.50, 0.52], 0.23))]
+    (_, c), = reference_comparisons(few)
+    assert c.n_pairs == 2 and not c.better and "the 3 seeds ran the same data" in c.note
+    many = [record(m, s, d, a) for s in range(6) for m, d, a in (("kiss", [0.40, 0.41], 0.12), ("small_gicp", [0.50, 0.52], 0.23))]
+    (dataset, c), = reference_comparisons(many)
+    assert c.pairing == "seed" and c.repeated
+    row = comparison_rows([(dataset, c)])[1][0]
+    assert (row[6], row[7], row[-1]) == ("–", "–", "one measurement repeated (every seed gave each side the same value): no test")
 
 
 def test_publication_tables_average_over_common_seeds_and_the_summary_says_when_seeds_differ(tmp_path):

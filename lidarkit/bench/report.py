@@ -769,8 +769,11 @@ def comparison_rows(comparisons: list[Any]) -> tuple[list[str], list[list[str]]]
             verdict += " (CI includes 0)"
         if c.pairing == "segment":  # (overlapping KITTI segments of few seeds: see publication.OVERLAPPING_SEGMENTS)
             verdict += " (overlapping segments: p optimistic)"
+        if c.repeated:  # (p = 0.031 and effect -1.00 beside "no significant difference"; compare prints no test)
+            verdict = "one measurement repeated (every seed gave each side the same value): no test"
         rows.append([dataset, c.name_a, c.name_b, f"{c.n_pairs} {c.pairing}s ({c.metric})", _fmt(c.mean_a),
-                     _fmt(c.mean_b), format_p(c.p_value, c.alpha), f"{c.effect_size:+.2f}",
+                     _fmt(c.mean_b), "–" if c.repeated else format_p(c.p_value, c.alpha),
+                     "–" if c.repeated else f"{c.effect_size:+.2f}",
                      f"{c.median_diff:+.3g} [{c.diff_ci_low:+.3g}, {c.diff_ci_high:+.3g}]", verdict])
     return header, rows
 
