@@ -176,6 +176,14 @@ def test_compare_run_folders_per_frame_and_bad_input(tmp_path, capsys):
     res = compare(tmp_path / "kiss", tmp_path / "vanilla")
     assert res.pairing == "frame" and res.metric == "rpe_translation_m" and res.n_pairs == 9
     assert res.mean_a < res.mean_b
+    # runs are named with their settings away from the defaults, as bench labels them (two kiss runs read "kiss (A)",
+    # "kiss (B)"), and the JSON names the folders
+    run(seq, "kiss", params={"deskew": False}, out_dir=tmp_path / "kiss_nd")
+    code, _, _ = run_cli(["compare", str(tmp_path / "kiss"), str(tmp_path / "kiss_nd"), "--json", str(tmp_path / "c.json")], capsys)
+    saved = json.loads((tmp_path / "c.json").read_text())
+    assert code == 0 and (saved["name_a"], saved["name_b"]) == ("kiss", "kiss(deskew=False)")
+    assert (saved["run_a"], saved["run_b"]) == (str(tmp_path / "kiss"), str(tmp_path / "kiss_nd"))
+    assert res.name_b == "vanilla(voxel_size_m=0.5)"
     code, out, _ = run_cli(["compare", str(tmp_path / "kiss"), str(tmp_path / "kiss")], capsys)
     assert code == 0 and "no significant difference" in out
     with pytest.raises(ConfigError, match="a task applies to bench results folders only"):  # (it was ignored)
@@ -566,6 +574,10 @@ def test_two_kiss_run_folders_at_different_sweep_instants_are_named_as_the_heade
     run(bag, "kiss", out_dir=tmp_path / "kiss")
     run(bag, "kiss", params={"deskew": False}, out_dir=tmp_path / "flat")
     res = compare(tmp_path / "kiss", tmp_path / "flat")
-    assert (res.name_a, res.name_b, res.n_pairs) == ("kiss (A)", "kiss (B)", 5)
-    assert res.note.startswith("each run is scored against the ground truth at its own instant of the sweep (kiss (A): end, "
-                               "kiss (B): mid), over the same dataset and frames")
+    assert (res.name_a, res.name_b, res.n_pairs) == ("kiss", "kiss(deskew=False)", 5)
+    assert res.note.startswith("each run is scored against the ground truth at its own instant of the sweep (kiss: end, "
+                               "kiss(deskew=False): mid), over the same dataset and frames")
+    # runs that differ in nothing config.yaml records are told apart as A and B
+    run(bag, "kiss", out_dir=tmp_path / "again")
+    assert (compare(tmp_path / "kiss", tmp_path / "again").name_a, compare(tmp_path / "kiss", tmp_path / "again").name_b) == (
+        "kiss (A)", "kiss (B)")

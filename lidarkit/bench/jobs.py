@@ -51,10 +51,15 @@ class Job:
     @property
     def method_label(self) -> str:
         """``method(p=v, ...)`` with params sorted: the row label in reports."""
-        if not self.params:
-            return self.method
-        inner = ", ".join(f"{k}={_short(v)}" for k, v in sorted(self.params.items()))
-        return f"{self.method}({inner})"
+        return method_label(self.method, self.params)
+
+
+def method_label(method: str, params: dict[str, Any]) -> str:
+    """``method(p=v, ...)`` with ``params`` sorted (``method`` alone without any)."""
+    if not params:
+        return method
+    inner = ", ".join(f"{k}={_short(v)}" for k, v in sorted(params.items()))
+    return f"{method}({inner})"
 
 
 def _short(value: Any) -> str:

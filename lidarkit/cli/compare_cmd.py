@@ -45,7 +45,8 @@ def compare_command(
     if json_out is not None:  # (before printing: `| head -1` or a full disk on stdout lost it, exit 1)
         from lidarkit.eval.report import write_json
 
-        write_json(result.to_dict(), json_out)
+        # (the folders compared: a saved comparison of two runs of one method could not say which was which)
+        write_json({"run_a": str(Path(run_a).absolute()), "run_b": str(Path(run_b).absolute()), **result.to_dict()}, json_out)
     console = stdout()
     console.print(f"A: {result.name_a}   B: {result.name_b}   metric: {result.metric} ({result.n_pairs} paired "
                   f"{result.pairing}s, {result.n_ties} ties)", soft_wrap=True)

@@ -82,7 +82,7 @@ def load_odometry_run(path: str | os.PathLike) -> OdometryRun:
     for name in ("poses_kitti.txt", "ground_truth_kitti.txt"):
         if not (path / name).is_file():
             raise DataError(f"no {name}: a paired comparison needs the estimate and its ground truth", source=path)
-    name = str(metrics.get("method") or path.name)
+    name = _run_label(path, str(metrics.get("method") or path.name))
     return OdometryRun(
         path, name,
         Trajectory.from_kitti(path / "poses_kitti.txt", name=name),
@@ -565,6 +565,23 @@ def _with_measured_noise(noise: float, noise_from: str | os.PathLike | None, met
     from lidarkit.bench.baseline import measured_noise
 
     return max(noise, measured_noise(noise_from, metric, task, methods))
+
+
+def _run_label(path: Path, method: str) -> str:
+    """``method(p=v, ...)`` with the settings config.yaml records away from the variant's defaults, as bench labels its
+    rows (two kiss runs, one without deskew, read "kiss (A)" vs "kiss (B)"); ``method`` when they cannot be read."""
+    try:
+        import yaml
+
+        from lidarkit.bench.jobs import method_label
+        from lidarkit.registration import get_icp_class
+
+        given = (yaml.safe_load((path / "config.yaml").read_text(encoding="utf-8")) or {}).get("method_config") or {}
+        defaults = get_icp_class(method).Config().model_dump()
+        changed = {k: v for k, v in given.items() if k in defaults and v != defaults[k]}
+        return method_label(method, changed)
+    except Exception:  # noqa: BLE001 - a label only: an older folder, a plugin not installed, a hand-written config
+        return method
 
 
 def _other_run_kind(path: Path) -> str | None:
