@@ -609,3 +609,24 @@ def test_a_kidnap_too_close_to_the_end_is_not_judged(stachniss, tmp_path, capsys
     assert kidnap_recovery(recovering, 300) == {"steps_to_recover": 3, "recovered": True, "within_steps": 40}
     assert kidnap_recovery(np.r_[np.full(300, 0.1), np.full(32, 5.0)], 300)["recovered"] is None
     assert kidnap_recovery(np.r_[np.full(291, 0.1), np.full(41, 5.0)], 291)["recovered"] is False  # 40 steps after: judged
+
+
+def test_a_run_folder_records_the_kidnap_offset_with_its_units_in_degrees(stachniss, tmp_path):
+    """config.yaml recorded the kidnap offset as a bare list in radians ([0.0, -5.0, -1.5707963]) while --kidnap-offset
+    takes degrees: copied back into the option, the 90 deg turn became 1.57 deg. It names its units now, the turn in
+    degrees."""
+    r = run_protocol(stachniss, 50, 0, kidnap_at_step=150, with_ape_rpe=False, warn_lost=False)
+    assert r.settings["kidnap_offset"] == {"dx_m": 0.0, "dy_m": -5.0, "dtheta_deg": -90.0}
+    assert run_protocol(stachniss, 50, 0, with_ape_rpe=False).settings["kidnap_offset"] is None
+    with pytest.raises(SystemExit) as exc:
+        main(["pf", str(shared_path("pf", "robot_mapping_stachniss")), "-n", "50", "--kidnap-at", "150",
+              "--kidnap-offset", "1,-2,45", "--out", str(tmp_path / "kid")])
+    assert exc.value.code in (0, None)
+    run = yaml.safe_load((tmp_path / "kid" / "config.yaml").read_text())["run"]
+    assert run["kidnap_offset"] == {"dx_m": 1.0, "dy_m": -2.0, "dtheta_deg": 45.0}
+    with pytest.raises(SystemExit) as exc:  # a study's config.yaml alike
+        main(["pf", str(shared_path("pf", "robot_mapping_stachniss")), "-n", "50,60", "--seeds", "1", "--kidnap-at", "150",
+              "--kidnap-offset", "1,-2,45", "--out", str(tmp_path / "study")])
+    assert exc.value.code in (0, None)
+    scenario = yaml.safe_load((tmp_path / "study" / "config.yaml").read_text())["scenario"]
+    assert scenario["kidnap_offset"] == {"dx_m": 1.0, "dy_m": -2.0, "dtheta_deg": 45.0}

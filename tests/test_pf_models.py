@@ -329,3 +329,50 @@ def test_kld_title_range_includes_a_first_count_below_kld_min():
     """-n 100 --kld: the title read "N=200..5,000 (KLD)" while the run started with 100 particles."""
     assert PFConfig.make(n_particles=100, kld=True).particle_count_label() == "100..5,000 (KLD)"
     assert PFConfig.make(n_particles=1000, kld=True).particle_count_label() == "200..5,000 (KLD)"
+
+
+def test_innovation_nis_and_stats_check_their_readings_as_update_does():
+    """innovation_nis / innovation_stats took index -1 as the last landmark (the same NIS as index 4), index 9 was a
+    bare IndexError, a NaN reading gave NIS nan and a count mismatch went unseen: they now check as update() does."""
+    z = np.array([[2.0, 0.3]])
+    for kernel in ("point", "kalman"):
+        pf = make_filter(LANDMARKS, PFConfig.make(n_particles=50, kernel=kernel), 1)
+        for call, line in (
+            (lambda: pf.innovation_nis([-1], z), "innovation_nis: landmark index -1 outside 0..4 (reading 0)"),
+            (lambda: pf.innovation_nis([9], z), "innovation_nis: landmark index 9 outside 0..4 (reading 0)"),
+            (lambda: pf.innovation_nis([0], [[np.nan, 0.3]]), "innovation_nis: non-finite measurement"),
+            (lambda: pf.innovation_stats([0, 1.5], [[1.0, 0.1], [2.0, 0.2]]),
+             "innovation_stats: landmark index must be an integer, got 1.5 (reading 1)"),
+            (lambda: pf.innovation_stats([0, 1], z), "innovation_stats: 2 landmark indices for 1 readings"),
+        ):
+            with pytest.raises(DataError) as exc:
+                call()
+            assert str(exc.value) == line, kernel
+        nis = pf.innovation_nis([4], z)
+        assert nis.shape == (1,) and np.isfinite(nis).all() and nis[0] > 0.0
+
+
+def test_update_refuses_a_landmark_index_that_is_no_integer():
+    """update([1.9], z) weighed landmark 1 (the int64 cast cut 1.9 to 1), True read as 1: both are refused; a whole
+    number given as a float (2.0, as a text file reads it) is still index 2."""
+    z = np.array([[2.0, 0.3]])
+    for kernel in ("point", "kalman"):
+        for bad in (1.9, True, np.inf, "a"):
+            pf = make_filter(LANDMARKS, PFConfig.make(n_particles=50, kernel=kernel), 1)
+            with pytest.raises(DataError) as exc:
+                pf.update(np.array([bad]), z)
+            assert str(exc.value) == f"update: landmark index must be an integer, got {bad!r} (reading 0)", kernel
+            assert pf.n_updates == 0
+        a = make_filter(LANDMARKS, PFConfig.make(n_particles=50, kernel=kernel), 1)
+        b = make_filter(LANDMARKS, PFConfig.make(n_particles=50, kernel=kernel), 1)
+        assert a.update(np.array([2.0]), z) and b.update(np.array([2]), z)
+        np.testing.assert_array_equal(a.weights, b.weights)
+
+
+def test_noise_block_elements_must_be_an_integer_of_at_least_one():
+    """noise_block_elements -5, 0 and True were taken (written to config.yaml; the filter drew blocks of 1 instead)."""
+    for value in (-5, 0, True, 2.5):
+        with pytest.raises(ConfigError) as exc:
+            PFConfig.make(noise_block_elements=value)
+        assert str(exc.value) == f"pf config noise_block_elements: must be an integer >= 1, got {value!r}"
+    assert PFConfig.make(noise_block_elements=np.int64(3000)).noise_block_elements == 3000

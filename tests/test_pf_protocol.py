@@ -462,3 +462,41 @@ def test_a_trajectory_the_run_did_not_record_names_those_it_did(stachniss):
                               "estimators=('mean', 'best') keeps both)")
     both = run_protocol(stachniss, 20, 0, with_ape_rpe=False, estimators=("mean", "best"))
     assert len(both.trajectory("best")) == 332
+
+
+def test_run_filter_checks_the_landmark_indices_once_naming_the_step():
+    """run_filter updates unchecked: index -1 was weighed against the last landmark without a word and index 7 of 3
+    landmarks was a bare IndexError; both (and 1.5) are now a DataError naming the step, before the first prediction."""
+    landmarks = np.array([[2.0, 1.0], [0.0, 4.0], [5.0, 5.0]])
+    odo = np.tile([0.0, 0.1, 0.0], (5, 1))
+    z = np.array([[2.0, 0.3], [3.0, 0.2], [4.0, 1.0]])
+    offsets = np.array([0, 1, 2, 3, 3, 3])  # readings at steps 0, 1 and 2
+    for kernel in ("point", "kalman"):
+        for bad, reason in ((-1, "landmark index -1 outside 0..2"), (7, "landmark index 7 outside 0..2"),
+                            (1.5, "landmark index must be an integer, got 1.5")):
+            pf = make_filter(landmarks, PFConfig.make(n_particles=50, kernel=kernel), 0)
+            with pytest.raises(DataError) as exc:
+                run_filter(pf, odo, StepReadings(np.array([0, bad, 1]), z, offsets), nis=True)
+            assert str(exc.value) == f"readings: {reason} (step 1, reading 1)", kernel
+            assert pf.n_updates == 0
+        pf = make_filter(landmarks, PFConfig.make(n_particles=50, kernel=kernel), 0)
+        out = run_filter(pf, odo, StepReadings(np.array([0, 2, 1]), z, offsets), nis=True)
+        assert pf.n_updates == 3 and out["innovations"].shape == (3, 2)
+
+
+def test_a_study_refuses_particle_counts_and_seeds_that_are_no_integers(stachniss):
+    """run_study(data, [50, 50.5], [1, 1.5]) ran seed 1 at N=50 four times (the repeat check compared the values before
+    they were cut to integers): two rows "N=50", seeds [1, 1.5], MSE std 0. Fractions and bools are refused, as
+    run_protocol refuses them."""
+    from lidarkit.errors import ConfigError
+    from lidarkit.pf.study import run_study
+
+    for particles, seeds, line in (([50, 50.5], [1], "particles: each value must be an integer, got 50.5"),
+                                   ([50], [1, 1.5], "seeds: each value must be an integer, got 1.5"),
+                                   ([True], [1], "particles: each value must be an integer, got True"),
+                                   ([50], [False, 1], "seeds: each value must be an integer, got False")):
+        with pytest.raises(ConfigError) as exc:
+            run_study(stachniss, particles, seeds)
+        assert str(exc.value) == line
+    (row,) = run_study(stachniss, [np.int64(20)], [np.int64(2)])
+    assert row.n_particles == 20 and row.seeds == [2] and type(row.seeds[0]) is int

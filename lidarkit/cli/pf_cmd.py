@@ -104,7 +104,7 @@ def pf_command(
 ) -> None:
     """Localize with a particle filter on Freiburg landmark data and score it (MSE from step 10, APE, RPE), or run a study."""
     from lidarkit.io import open_dataset
-    from lidarkit.pf.protocol import data_files, run_protocol
+    from lidarkit.pf.protocol import data_files, kidnap_offset_record, run_protocol
     from lidarkit.pf.study import protocol_config, run_study
 
     from lidarkit.atomic import check_target
@@ -207,7 +207,8 @@ def pf_command(
         finally:
             bar.stop()
         if out is not None:  # the run folder before the table: a stdout that refuses it (> /dev/full) lost the run
-            _write_study(rows, cfg, protocol, {**scenario, **data_files(data), "n_particles": counts, "seeds": seed_list}, out)
+            recorded = {**scenario, "kidnap_offset": kidnap_offset_record(scenario["kidnap_offset"]) if kidnap_at is not None else None}
+            _write_study(rows, cfg, protocol, {**recorded, **data_files(data), "n_particles": counts, "seeds": seed_list}, out)
         _print_study(rows, cfg, protocol, kidnap_at, len(data))
         if out is not None:
             stderr().print(f"results written to {out}")

@@ -20,14 +20,32 @@ from lidarkit.pf.kld import bins_and_spread, kld_sample_count, occupied_bins
 from lidarkit.pf.resampling import effective_sample_size, get_resampler
 
 
-def check_landmark_index(landmark_index: np.ndarray, n_landmarks: int, source: str = "update") -> None:
-    """DataError naming the first index of ``landmark_index`` ``(M,)`` outside ``0 .. n_landmarks - 1``."""
-    bad = (landmark_index < 0) | (landmark_index >= n_landmarks)
-    if bad.any():
-        raise DataError(
-            f"landmark index {int(landmark_index[np.argmax(bad)])} outside 0..{n_landmarks - 1} (reading {int(np.argmax(bad))})",
-            source=source,
-        )
+def check_landmark_index(landmark_index: np.ndarray, n_landmarks: int, source: str = "update",
+                         step_offsets: np.ndarray | None = None) -> np.ndarray:
+    """``landmark_index`` as ``(M,)`` int64, or a DataError naming the first reading (and its step, given the ``(T+1,)``
+    ``step_offsets``) whose index is no integer (1.9 was read as 1) or is outside ``0 .. n_landmarks - 1`` (-1 weighed
+    the last landmark)."""
+    raw = np.asarray(landmark_index).reshape(-1)
+    if raw.dtype.kind == "f":  # whole numbers given as floats are indices
+        not_whole = ~(np.isfinite(raw) & (raw == np.round(raw)))
+    else:  # bools, text and objects are none
+        not_whole = np.full(len(raw), raw.dtype.kind not in "iu")
+    if not_whole.any():
+        i = int(np.argmax(not_whole))
+        raise DataError(f"landmark index must be an integer, got {raw[i : i + 1].tolist()[0]!r} ({_reading(i, step_offsets)})",
+                        source=source)
+    outside = (raw < 0) | (raw >= n_landmarks)
+    if outside.any():
+        i = int(np.argmax(outside))
+        raise DataError(f"landmark index {int(raw[i])} outside 0..{n_landmarks - 1} ({_reading(i, step_offsets)})", source=source)
+    return raw.astype(np.int64)
+
+
+def _reading(i: int, step_offsets: np.ndarray | None) -> str:
+    """The words "reading i", with its step when the readings are grouped by step (rows ``step_offsets[t]:step_offsets[t+1]``)."""
+    if step_offsets is None:
+        return f"reading {i}"
+    return f"step {int(np.searchsorted(step_offsets, i, side='right')) - 1}, reading {i}"
 
 
 class LandmarkFilterBase:
@@ -187,16 +205,18 @@ class LandmarkFilterBase:
         self.n_updates += 1
 
     # ---- update -------------------------------------------------------------------------------------
-    def _checked_readings(self, landmark_index: np.ndarray, z: np.ndarray, check_index: bool = True) -> tuple[np.ndarray, np.ndarray]:
-        """``(M,)`` int64 landmark indices and ``(M, 2)`` float64 finite readings; with ``check_index`` also counts and index range."""
+    def _checked_readings(self, landmark_index: np.ndarray, z: np.ndarray, check_index: bool = True,
+                          source: str = "update") -> tuple[np.ndarray, np.ndarray]:
+        """``(M,)`` int64 landmark indices and ``(M, 2)`` float64 finite readings; with ``check_index`` also counts and
+        indices (integers in range); errors name ``source``, the method called."""
         z = np.asarray(z, dtype=np.float64).reshape(-1, 2)
-        idx = np.asarray(landmark_index, dtype=np.int64).reshape(-1)
         if not np.isfinite(z).all():
-            raise DataError("non-finite measurement", source="update")
-        if check_index:
-            if len(idx) != len(z):
-                raise DataError(f"{len(idx)} landmark indices for {len(z)} readings", source="update")
-            check_landmark_index(idx, len(self.landmarks_xy))
+            raise DataError("non-finite measurement", source=source)
+        if not check_index:
+            return np.asarray(landmark_index, dtype=np.int64).reshape(-1), z
+        idx = check_landmark_index(landmark_index, len(self.landmarks_xy), source)
+        if len(idx) != len(z):
+            raise DataError(f"{len(idx)} landmark indices for {len(z)} readings", source=source)
         return idx, z
 
     # ---- resample -----------------------------------------------------------------------------------

@@ -8,6 +8,7 @@ from typing import Literal
 from pydantic import BaseModel, ConfigDict, ValidationError, field_validator, model_validator
 
 from lidarkit.errors import ConfigError
+from lidarkit.params import is_integer
 
 LIKELIHOODS = ("all", "nearest")
 ESTIMATORS = ("mean", "best")
@@ -125,6 +126,13 @@ class PFConfig(BaseModel):
     def _not_a_bool(cls, v):
         if isinstance(v, bool):  # (True was read as 1: a one-particle filter)
             raise ValueError(f"n_particles must be an integer >= 1, got {v!r}")
+        return v
+
+    @field_validator("noise_block_elements", mode="before")
+    @classmethod
+    def _block_size(cls, v):
+        if not is_integer(v) or v < 1:  # (-5, 0 and True were written to config.yaml; the filter drew blocks of 1)
+            raise ValueError(f"must be an integer >= 1, got {v!r}")
         return v
 
     @field_validator("n_particles")

@@ -278,13 +278,15 @@ class ParticleFilter(LandmarkFilterBase):
         return np.array([x, y, np.arctan2(s, c)], dtype=np.float64)
 
     # ---- consistency ------------------------------------------------------------------------------
-    def innovation_stats(self, landmark_index: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def innovation_stats(self, landmark_index: np.ndarray, z: np.ndarray, *, check: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """Innovations ``(M, 2)`` (weighted mean of the per-particle residuals) and the particle set's own
-        predictive spread ``(M, 2, 2)`` (their weighted covariance); S = spread + Q."""
-        z = np.asarray(z, dtype=np.float64).reshape(-1, 2)
+        predictive spread ``(M, 2, 2)`` (their weighted covariance); S = spread + Q. ``check``: the readings as
+        :meth:`update` checks them (index -1 was read as the last landmark; ``check=False`` for a loop that checked them
+        all up front)."""
+        idx, z = self._checked_readings(landmark_index, z, check_index=check, source="innovation_stats")
         if len(z) == 0:
             return np.zeros((0, 2)), np.zeros((0, 2, 2))
-        lm = self.landmarks_xy[np.asarray(landmark_index, dtype=np.int64)]
+        lm = self.landmarks_xy[idx]
         e_r, e_b = self.sensor.residuals(self.states.astype(np.float64), lm, z)
         w = self.weights.astype(np.float64)
         nu = np.stack([e_r @ w, e_b @ w], axis=1)  # (M, 2)
@@ -300,7 +302,8 @@ class ParticleFilter(LandmarkFilterBase):
         Innovation = weighted mean of the per-particle residuals; S = their weighted covariance + Q.
         For a consistent filter each value is chi-square distributed with 2 degrees of freedom.
         """
-        nu, P = self.innovation_stats(landmark_index, z)
+        idx, z = self._checked_readings(landmark_index, z, source="innovation_nis")
+        nu, P = self.innovation_stats(idx, z, check=False)
         return nis_values(nu, P + self.sensor.q_cov)
 
 

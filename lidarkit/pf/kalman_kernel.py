@@ -159,12 +159,13 @@ class KalmanParticleFilter(LandmarkFilterBase):
         theta = np.arctan2(np.sin(self.states[2]) @ w, np.cos(self.states[2]) @ w)
         return np.array([self.states[0] @ w, self.states[1] @ w, theta])
 
-    def innovation_stats(self, landmark_index: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Innovations ``(M, 2)`` against the mixture and its predictive spread without Q ``(M, 2, 2)``."""
-        z = np.asarray(z, dtype=np.float64).reshape(-1, 2)
+    def innovation_stats(self, landmark_index: np.ndarray, z: np.ndarray, *, check: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """Innovations ``(M, 2)`` against the mixture and its predictive spread without Q ``(M, 2, 2)``; ``check`` as
+        :meth:`lidarkit.pf.filter.ParticleFilter.innovation_stats`."""
+        idx, z = self._checked_readings(landmark_index, z, check_index=check, source="innovation_stats")
         nu_all, P_all = np.zeros((len(z), 2)), np.zeros((len(z), 2, 2))
         w = self.weights
-        for m, k in enumerate(np.asarray(landmark_index, dtype=np.int64).reshape(-1)):
+        for m, k in enumerate(idx):
             e, H = self._innovation(self.landmarks_xy[k], z[m])
             HPHt = H @ self.cov @ H.transpose(0, 2, 1)
             nu = w @ e
@@ -177,7 +178,8 @@ class KalmanParticleFilter(LandmarkFilterBase):
         """NIS ``(M,)`` of each reading against the mixture's predictive distribution (chi-square(2) if consistent)."""
         from lidarkit.pf.filter import nis_values
 
-        nu, P = self.innovation_stats(landmark_index, z)
+        idx, z = self._checked_readings(landmark_index, z, source="innovation_nis")
+        nu, P = self.innovation_stats(idx, z, check=False)
         return nis_values(nu, P + self.q_cov)
 
 

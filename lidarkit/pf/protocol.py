@@ -25,6 +25,7 @@ import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.params import is_integer
+from lidarkit.pf.base import check_landmark_index
 from lidarkit.pf.config import PFConfig
 from lidarkit.pf.consistency import fit_q, localization_problem, q_verdict
 from lidarkit.pf.filter import ParticleFilter, make_filter, nis_values
@@ -83,6 +84,13 @@ def kidnapped_ground_truth(odometry: np.ndarray, kidnap_at_step: int | None, kid
     before = integrate_odometry(odometry[:k])
     after = integrate_odometry(odometry[k:], before[-1] + offset)
     return np.concatenate([before[:-1], after])
+
+
+def kidnap_offset_record(kidnap_offset: tuple[float, float, float]) -> dict[str, float]:
+    """``(dx_m, dy_m, dtheta_rad)`` as a run folder records it: units in the names, the turn in degrees as
+    ``--kidnap-offset`` takes it (a bare list in radians, copied back into the option, turned 1.57 deg)."""
+    dx, dy, dtheta = (float(v) for v in np.asarray(kidnap_offset, dtype=np.float64).reshape(3))
+    return {"dx_m": dx, "dy_m": dy, "dtheta_deg": float(np.degrees(dtheta))}
 
 
 @dataclass(frozen=True, eq=False)
@@ -246,13 +254,14 @@ def run_filter(
         raise DataError(f"non-finite reading {int(np.argmax(bad))}", source="readings")
     if len(readings.offsets) != len(odometry) + 1:
         raise DataError(f"{len(readings.offsets) - 1} reading steps for {len(odometry)} odometry steps", source="readings")
+    # once here: the loop updates unchecked (-1 weighed the last landmark, 7 of 3 was a bare IndexError)
+    lm_index = check_landmark_index(readings.landmark_index, len(pf.landmarks_xy), "readings", readings.offsets)
     T = len(odometry)
     odd = [s for s in snapshot_steps if not is_integer(s) or not 0 <= s <= T]
     if odd:  # (-1 and steps past the end were left out without a word)
         raise ConfigError(f"snapshot steps must be integers in 0..{T} (the run's steps), got {', '.join(map(str, odd))}",
                           source="snapshot_steps")
     odometry_rows = [tuple(float(v) for v in row) for row in odometry]
-    lm_index = readings.landmark_index.astype(np.int64)
     z_all = readings.z.astype(pf.states.dtype)
     est = {k: np.empty((T + 1, 3)) for k in estimators}
     for k in estimators:
@@ -286,7 +295,7 @@ def run_filter(
         if b > a:
             idx, z = lm_index[a:b], z_all[a:b]
             if nis:
-                nu, P = pf.innovation_stats(idx, readings.z[a:b])
+                nu, P = pf.innovation_stats(idx, readings.z[a:b], check=False)
                 innovations.append(nu)
                 spreads.append(P)
             pf.update(idx, z, check=False)
@@ -420,7 +429,7 @@ def run_protocol(
             "visible": visible,
             "mse_start": mse_start,
             "kidnap_at_step": int(kidnap_at_step) if kidnap_at_step is not None else None,
-            "kidnap_offset": list(kidnap_offset) if kidnap_at_step is not None else None,
+            "kidnap_offset": kidnap_offset_record(kidnap_offset) if kidnap_at_step is not None else None,
             "odometry_noise_std": list(ODOMETRY_NOISE_STD),
             "q_cov": q_cov.tolist(),
             **data_files(data),
@@ -618,6 +627,7 @@ __all__ = [
     "StepReadings",
     "consistency_metrics",
     "fit_q_recorded",
+    "kidnap_offset_record",
     "poses_to_trajectory",
     "run_filter",
     "run_protocol",

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from lidarkit.errors import ConfigError
+from lidarkit.params import is_integer
 from lidarkit.pf.config import PFConfig
 
 log = logging.getLogger(__name__)
@@ -105,13 +106,16 @@ def run_study(data, particles: list[int], seeds: list[int], *, config: PFConfig 
     if not particles or not seeds:
         raise ConfigError("a study needs at least one particle count and one seed", source="study")
     for name, values in (("particles", particles), ("seeds", seeds)):  # (a repeated seed gave mse_std 0.0 over one run twice)
+        odd = [v for v in values if not is_integer(v)]
+        if odd:  # (50.5 ran as 50 and seed 1.5 as 1: one run four times, after the repeat check had passed)
+            raise ConfigError(f"each value must be an integer, got {odd[0]!r}", source=name)
         if len(set(values)) != len(values):
             raise ConfigError(f"each value must be listed once, got {list(values)}", source=name)
     cfg = config if config is not None else PFConfig.make()
     kidnap = protocol_kwargs.get("kidnap_at_step")
     rows = []
     for n in particles:
-        row = StudyRow(int(n), list(seeds), [], [], [], 0)
+        row = StudyRow(int(n), [int(s) for s in seeds], [], [], [], 0)
         for s in seeds:
             r = run_protocol(data, int(n), int(s), config=cfg, with_ape_rpe=False, warn_lost=False, **protocol_kwargs)
             row.mse_m2.append(float(r.metrics["mse_m2"][cfg.estimator]))
