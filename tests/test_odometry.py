@@ -315,6 +315,10 @@ def test_a_frame_slice_past_the_end_is_cut_with_a_warning(rng, caplog):
     early = run(MemorySequence(poses, _room_points(rng, 50)), OracleICP(se3_inverse(poses[:-1]) @ poses[1:]), frames="-5000:5")
     assert len(early.trajectory) == 5  # (counted from the end, before the first frame: it was cut in silence)
     assert "frames -5000:5 start 5000 frames from the end, before the first of 10: ran from it" in early.metrics["warnings"]
+    both = run(MemorySequence(poses, _room_points(rng, 50)), OracleICP(se3_inverse(poses[:-1]) @ poses[1:]), frames="-19:50")
+    assert len(both.trajectory) == 10  # (both ends cut: only the end was said)
+    assert ("frames -19:50 start 19 frames from the end, before the first of 10: ran from it; and end after the last frame "
+            "(9): ran up to it") in both.metrics["warnings"]
 
 
 # ---- run folder ---------------------------------------------------------------------------------------------------

@@ -79,11 +79,14 @@ def frames_past_the_end(frames: FrameSelection, n_frames: int) -> str | None:
             frames = slice(*(int(p) if p.strip() else None for p in frames.split(":")))
         except ValueError:
             return None
-    if isinstance(frames, slice) and frames.stop is not None and frames.stop > n_frames:
-        return f"frames {frames_repr(frames, np.arange(0))} end after the last frame ({n_frames - 1}): ran up to it"
-    if isinstance(frames, slice) and frames.start is not None and frames.start < -n_frames:
-        return f"frames {frames_repr(frames, np.arange(0))} start {-frames.start} frames from the end, before the first of {n_frames}: ran from it"
-    return None
+    if not isinstance(frames, slice):
+        return None
+    cuts = []  # both ends said when both are cut (-9:50 of 5 frames named the end only)
+    if frames.start is not None and frames.start < -n_frames:
+        cuts.append(f"start {-frames.start} frames from the end, before the first of {n_frames}: ran from it")
+    if frames.stop is not None and frames.stop > n_frames:
+        cuts.append(f"end after the last frame ({n_frames - 1}): ran up to it")
+    return f"frames {frames_repr(frames, np.arange(0))} {'; and '.join(cuts)}" if cuts else None
 
 
 def frame_numbers(sequence: Any) -> np.ndarray | None:
