@@ -150,7 +150,8 @@ def odometry(
             z = cov.get("per_frame_bias_z")
             if z is not None:  # the share the mean frame error rebuilds says nothing unless that mean is a bias
                 table.add_row("per-frame bias (mean error / its standard error)",
-                              f"z = {z:.1f}: " + (f"rebuilds {100 * min(cov['end_error_bias_share'], 1.0):.0f} % of the end error" if z > 3
+                              f"z = {z:.1f}: " + (f"rebuilds {100 * min(cov['end_error_bias_share'], 1.0):.0f} % of the end error as a world-frame twist "
+                                                  f"({cov['end_error_m']:.3f} m; the final error is the distance of the end positions)" if z > 3
                                                   else "none shows (noise)"))
         if cov.get("distortion_floor"):
             table.add_row("covariance distortion floor", cov["distortion_floor"])
