@@ -81,17 +81,19 @@ def _fixtures(folder: Path) -> None:
     export_bag(SimulatedLidarSequence(scene="street", n_frames=3, n_beams=16, n_azimuths=360, seed=0), folder / "run.bag", "rosbag1")
 
 
+# (guarded: a process pool's worker, e.g. estimate_focal's, imports the main script again, and ran every block)
 _RUNNER = textwrap.dedent("""
     import json, sys, traceback
-    blocks = json.load(open(sys.argv[1]))
-    namespace = {"__name__": "__docs__"}
-    for line, code in blocks:
-        try:
-            exec(compile(code, f"{sys.argv[2]}:{line}", "exec"), namespace)
-        except BaseException:
-            print(f"FAILED at {sys.argv[2]}:{line}", file=sys.stderr)
-            traceback.print_exc()
-            sys.exit(1)
+    if __name__ == "__main__":
+        blocks = json.load(open(sys.argv[1]))
+        namespace = {"__name__": "__docs__"}
+        for line, code in blocks:
+            try:
+                exec(compile(code, f"{sys.argv[2]}:{line}", "exec"), namespace)
+            except BaseException:
+                print(f"FAILED at {sys.argv[2]}:{line}", file=sys.stderr)
+                traceback.print_exc()
+                sys.exit(1)
 """)
 
 

@@ -52,7 +52,7 @@ def test_kitti_focal_within_5_percent(kitti_vo_frames, sequence):
     calibration (measured -2.7 % / +3.6 %); before the plain-then-robust adjustment it was -5.9 % on 01 and a
     fallback on 06, so the tolerance can fail."""
     images, K, _ = kitti_vo_frames(sequence)
-    est = estimate_focal(images)
+    est = estimate_focal(images, workers=2)  # (the pool: the same estimate as one process, in less time)
     assert est.constrained, est.reason
     assert est.focal_px == pytest.approx(K[0, 0], rel=0.05)
     assert 0 < est.sigma_px < 0.1 * est.focal_px and est.windows >= 3
@@ -75,7 +75,64 @@ def test_simulated_street_corner_focal_within_5_percent():
     seq = SimulatedCameraSequence(n_frames=51, seed=1, first_corner_m=15.0, cx=None, cy=None)
     heading = np.degrees(np.arccos(np.clip(seq.ground_truth.poses_se3[-1][2, 2], -1.0, 1.0)))
     assert heading > 30.0  # the drive really turns
-    est = estimate_focal(seq)
+    est = estimate_focal(seq, workers=2)
     assert est.constrained, est.reason
     assert est.focal_px == pytest.approx(seq.K[0, 0], rel=0.05)
     assert 0 < est.sigma_px < 0.1 * est.focal_px
+
+
+def _exit_in_a_worker(parent_pid: int) -> str:
+    """A pool job that kills the worker it runs in (not the test process)."""
+    import os
+
+    if os.getpid() != parent_pid:
+        os._exit(1)
+    return "ran in the parent"
+
+
+@pytest.mark.slow
+def test_the_windows_adjusted_by_workers_give_the_in_process_estimate(kitti_vo_frames):
+    """The windows' grid sweeps run on a process pool as the next windows are tracked: the same profile, window minima
+    and estimate bit for bit as in this process (KITTI 06 frames 0-9: two windows, each adjusted)."""
+    images = kitti_vo_frames("06")[0][:10]
+    cfg = AutocalibConfig(grid_steps=3)
+    alone, pooled = (estimate_focal(images, cfg, workers=w) for w in (1, 2))
+    assert alone.windows == 2 and len(alone.profile) == 3 and np.all(np.isfinite(list(alone.profile.values())))
+    assert pooled == alone
+
+
+def test_a_bad_worker_count_is_refused():
+    with pytest.raises(ConfigError, match="workers: must be >= 1, got 0"):
+        estimate_focal(_render([np.eye(4)] * 8), workers=0)
+
+
+@pytest.mark.slow
+def test_an_interrupt_stops_the_workers(kitti_vo_frames):
+    """Ctrl-C while the workers adjust the windows: it reaches the caller and no worker outlives the call."""
+    import multiprocessing
+
+    images = kitti_vo_frames("06")[0][:10]
+    running = []
+
+    def on_step(done: int, total: int) -> None:
+        if done == total // 2:  # every window tracked, its adjustment queued
+            running.extend(multiprocessing.active_children())
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        estimate_focal(images, AutocalibConfig(grid_steps=3), on_step=on_step, workers=2)
+    assert running and not any(p.is_alive() for p in running) and not multiprocessing.active_children()
+
+
+def test_a_broken_pool_leaves_its_jobs_to_this_process(caplog):
+    """A worker that dies (killed, or a script without ``if __name__ == "__main__":`` whose workers cannot start)
+    breaks the pool: its jobs run in this process instead, with a warning."""
+    import os
+
+    from lidarkit.vo.autocalib import _WindowPool
+
+    with _WindowPool(workers=2, jobs=2) as pool:
+        pool.submit(_exit_in_a_worker, os.getpid())
+        pool.submit(_exit_in_a_worker, os.getpid())
+        assert sorted(pool.results()) == [(0, "ran in the parent"), (1, "ran in the parent")]
+    assert any("a worker process died or could not start" in r.getMessage() for r in caplog.records)

@@ -488,14 +488,15 @@ def test_smoothing_settings_that_cannot_apply_are_refused_or_said(tmp_path, caps
 
 @pytest.mark.slow
 def test_self_calibration_shows_progress(tmp_path, capsys):
-    """--self-calibrate took 20-45 s per 50 frames before the first progress line."""
+    """--self-calibrate took 20-45 s per 50 frames before the first progress line. (10 frames: two windows, both
+    tracked and adjusted, the fewest that do.)"""
     import shutil
 
     from conftest import shared_path
 
     folder = tmp_path / "imgs"
     folder.mkdir()
-    for png in sorted(shared_path("kitti_images", "sequences", "06", "image_0").glob("*.png"))[:16]:
+    for png in sorted(shared_path("kitti_images", "sequences", "06", "image_0").glob("*.png"))[:10]:
         shutil.copy2(png, folder / png.name)
     code, _, err = _run(["vo", str(folder), "--self-calibrate", "--progress"], capsys)
     assert code in (0, None) and "self-calibrating the focal length:" in err

@@ -141,7 +141,7 @@ def vo_command(
     from lidarkit.progress import progress_bar
 
     focal = None
-    if self_calibrate:  # 20-45 s per 50 frames: progress as its windows are tracked and adjusted
+    if self_calibrate:  # 15-45 s per 50 frames: progress as its windows are tracked and adjusted
         calib_bar: list = []  # (bar, task, steps shown), made at the first step, when the number of steps is known
 
         def on_step(done: int, total: int) -> None:
@@ -154,7 +154,7 @@ def vo_command(
                 calib_bar[2] = done
 
         try:
-            vo_input, focal = calibrate(vo_input, on_step=on_step)
+            vo_input, focal = calibrate(vo_input, on_step=on_step, workers=None)  # (a worker a CPU: the command is guarded)
         finally:
             if calib_bar:
                 calib_bar[0].stop()

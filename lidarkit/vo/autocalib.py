@@ -23,6 +23,8 @@ the estimate falls back.
 
 from __future__ import annotations
 
+import logging
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -38,6 +40,8 @@ from lidarkit.vo.features import get_detector
 from lidarkit.vo.intrinsics import DEFAULT_FOCAL_FACTOR, K_from_image_size, K_matrix
 from lidarkit.vo.matching import track_klt
 from lidarkit.vo.two_view import degeneracy_measures, estimate_two_view, normalize_points
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -128,6 +132,7 @@ class _WindowBA:
         self.W, self.N = obs_px.shape[:2]
         self.huber = huber_px
         self.x: np.ndarray | None = None
+        self._fresh: dict[float, Any] = {}  # focal -> solution from the fresh two-view start (None: no start)
         n_pose = 6 * (self.W - 1)
         rows = 2 * self.N * (self.W - 1) + 1
         S = lil_matrix((rows, n_pose + self.N), dtype=np.int8)
@@ -159,19 +164,19 @@ class _WindowBA:
         return np.concatenate(poses + [inv])
 
     def residuals(self, x: np.ndarray, f: float) -> np.ndarray:
+        """All frames at once: the finite-difference Jacobian calls this once per column group at every step, and a
+        loop over frames, one rotation each, spent over half of it in scipy's per-call overhead. (A stacked matmul
+        gives the same bits as the per-frame one; einsum sums in another order.)"""
         n_pose = 6 * (self.W - 1)
+        poses = x[:n_pose].reshape(self.W - 1, 6)
         inv = x[n_pose:]
         rays = np.column_stack([(self.obs[0] - self.c) / f, np.ones(self.N)])
-        out = []
-        for k in range(1, self.W):
-            p = x[6 * (k - 1):6 * k]
-            X = rays @ so3_exp(p[:3]).T + np.outer(inv, p[3:])  # (R ray + rho t) / rho, scaled by rho
-            z = np.where(np.abs(X[:, 2]) < 1e-9, 1e-9, X[:, 2])
-            proj = f * X[:, :2] / z[:, None] + self.c
-            out.append((proj - self.obs[k]).ravel())
+        # (R ray + rho t) / rho, scaled by rho: (W-1, N, 3)
+        X = rays @ so3_exp(poses[:, :3]).transpose(0, 2, 1) + inv[None, :, None] * poses[:, None, 3:]
+        z = np.where(np.abs(X[..., 2]) < 1e-9, 1e-9, X[..., 2])
+        proj = f * X[..., :2] / z[..., None] + self.c
         t_last = x[n_pose - 3:n_pose]
-        out.append([100.0 * (float(t_last @ t_last) - 1.0)])
-        return np.concatenate(out)
+        return np.concatenate([(proj - self.obs[1:]).ravel(), [100.0 * (float(t_last @ t_last) - 1.0)]])
 
     def solve(self, x0: np.ndarray, f: float):
         """Plain least squares first, then the robust (Huber) adjustment from its solution. Started far from the
@@ -200,18 +205,117 @@ class _WindowBA:
         self.__init__(self.obs[:, keep], self.c, self.huber)
 
     def cost(self, f: float) -> float:
-        """Robust reprojection cost at focal ``f`` (warm-started from the previous solution); inf if it fails."""
-        best = None
-        for x0 in (self.x, self.initial(f)):  # warm start and a fresh two-view start: the lower cost wins
-            if x0 is None:
-                continue
-            sol = self.solve(x0, f)
-            if best is None or sol.cost < best.cost:
-                best = sol
+        """Robust reprojection cost at focal ``f`` (warm-started from the previous solution); inf if it fails. The
+        fresh two-view start's solution at ``f`` is kept: the other sweep would solve the same start again."""
+        best = None if self.x is None else self.solve(self.x, f)
+        if f not in self._fresh:
+            x0 = self.initial(f)
+            self._fresh[f] = None if x0 is None else self.solve(x0, f)
+        fresh = self._fresh[f]  # (warm start and fresh two-view start: the lower cost wins)
+        if fresh is not None and (best is None or fresh.cost < best.cost):
+            best = fresh
         if best is None:
             return float("inf")
         self.x = best.x
         return float(2.0 * best.cost)
+
+
+def _grid_costs(ba: _WindowBA, grid: np.ndarray) -> np.ndarray:
+    """``(len(grid),)`` lower envelope over basins of one window's cost: at every grid focal the adjustment starts
+    from a fresh two-view estimate and from the neighbouring grid focal's solution, in an upward and a downward
+    sweep; the lowest cost counts. (A pool worker's job: the windows are independent.)"""
+    costs = np.full(len(grid), np.inf)
+    for sweep in (range(len(grid)), range(len(grid) - 1, -1, -1)):
+        ba.x = None
+        for gi in sweep:
+            costs[gi] = min(costs[gi], ba.cost(grid[gi]))
+    return costs
+
+
+class _WindowPool:
+    """The windows' grid sweeps on ``workers`` processes (None: the CPUs available), at most ``jobs``, started at
+    the first job (forkserver on Linux, as :class:`lidarkit.bench.executors.ProcessExecutor`; each worker loads
+    lidarkit once); with one worker, in this process when the results are asked for (never, if the estimate falls
+    back first). The workers ignore Ctrl-C and die with this process; leaving the block (an error, an interrupt, a
+    fallback) stops them and drops the jobs not yet run. A pool that breaks (a worker killed, or one that could not
+    start: a script that calls this without ``if __name__ == "__main__":``) leaves its jobs to this process. Every job
+    is the same computation wherever it runs, so the estimate does not depend on ``workers``."""
+
+    def __init__(self, workers: int | None, jobs: int):
+        from lidarkit.bench.executors import default_workers
+
+        self.workers = min(default_workers() if workers is None else workers, jobs)
+        self.jobs: list[tuple[Any, tuple]] = []
+        self._futures: list[Any] = []
+        self._pool: Any = None
+        self._in_process = self.workers <= 1  # (and once a pool broke)
+
+    def __enter__(self) -> "_WindowPool":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self._stop()
+
+    def submit(self, fn: Any, *args: Any) -> None:
+        """Queue ``fn(*args)``; a pool starts on it now."""
+        from concurrent.futures.process import BrokenProcessPool
+
+        self.jobs.append((fn, args))
+        if not self._in_process:
+            if self._pool is None:
+                self._pool = self._start()
+            try:
+                self._futures.append(self._pool.submit(fn, *args))
+            except BrokenProcessPool:
+                self._broken()
+
+    def results(self) -> Iterator[tuple[int, Any]]:
+        """``(job index, result)`` of every job as it ends."""
+        from concurrent.futures import as_completed
+        from concurrent.futures.process import BrokenProcessPool
+
+        left = set(range(len(self.jobs)))
+        if not self._in_process:
+            index = {future: i for i, future in enumerate(self._futures)}
+            try:
+                for future in as_completed(self._futures):
+                    yield index[future], future.result()
+                    left.discard(index[future])
+            except BrokenProcessPool:
+                self._broken()
+        for i in sorted(left):
+            fn, args = self.jobs[i]
+            yield i, fn(*args)
+
+    def _broken(self) -> None:
+        log.warning("focal length self-calibration: a worker process died or could not start (a script needs "
+                    "`if __name__ == \"__main__\":`); adjusting the windows left in this process")
+        self._in_process = True
+        self._stop()
+
+    def _stop(self) -> None:
+        if self._pool is not None:
+            from lidarkit.bench.executors import stop_pool
+
+            stop_pool(self._pool)
+            self._pool = None
+
+    def _start(self) -> Any:
+        import multiprocessing
+        import os
+        from concurrent.futures import ProcessPoolExecutor
+
+        from lidarkit.lifetime import ignored_sigint, init_worker
+
+        method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
+        context = multiprocessing.get_context(method)
+        with ignored_sigint():  # (the fork server, started here if no pool has started it, must not see Ctrl-C)
+            if method == "forkserver":
+                from multiprocessing import forkserver
+
+                forkserver.ensure_running()
+            return ProcessPoolExecutor(max_workers=self.workers, mp_context=context, initializer=init_worker,
+                                       initargs=(os.getpid(),))
 
 
 def _has_parallax(obs: np.ndarray, guess_K: np.ndarray, cfg: AutocalibConfig) -> bool:
@@ -226,13 +330,18 @@ def _parabola_min(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
     return (-b / (2 * a) if a > 0 else float(x[1])), 2 * a
 
 
-def estimate_focal(images: Any, cfg: AutocalibConfig | None = None,
-                   focal_factor: float = DEFAULT_FOCAL_FACTOR, on_step: Any = None) -> FocalEstimate:
+def estimate_focal(images: Any, cfg: AutocalibConfig | None = None, focal_factor: float = DEFAULT_FOCAL_FACTOR,
+                   on_step: Any = None, workers: int | None = 1) -> FocalEstimate:
     """Estimate ``fx = fy`` of an uncalibrated image sequence (``len`` + ``read_image(i)``, or a list of uint8
     ``(H, W)`` arrays). Falls back to ``focal_factor * max(w, h)`` with the reason when the motion does not
     constrain it; never raises for degenerate motion. ``on_step(done, total)``: called as the windows are tracked
-    and adjusted (two steps a window), for progress."""
+    and adjusted (two steps a window), for progress. ``workers``: processes adjusting the windows while the next ones
+    are tracked (1, the default: all in this process; None: the CPUs available, as ``lidarkit vo`` runs it); the
+    estimate is the same for any number. More than one needs the calling script guarded by
+    ``if __name__ == "__main__":`` (the workers import it again), as any process pool does."""
     cfg = cfg or AutocalibConfig()
+    if workers is not None and workers < 1:
+        raise ConfigError(f"must be >= 1, got {workers}", source="workers")
     if cfg.window < 3:
         raise ConfigError(f"window must be >= 3 frames, got {cfg.window}", source="autocalib")
     from lidarkit.vo.pipeline import MonoVO, sequence_image_shape
@@ -255,50 +364,46 @@ def estimate_focal(images: Any, cfg: AutocalibConfig | None = None,
     starts = list(range(0, n - cfg.window + 1, cfg.stride))
     if len(starts) > cfg.max_windows:
         starts = [starts[i] for i in np.linspace(0, len(starts) - 1, cfg.max_windows).astype(int)]
-    windows = []
     steps = 2 * len(starts)
 
     def step(done: int) -> None:
         if on_step is not None:
             on_step(done, steps)
 
-    unusable = 0  # windows with an unreadable or odd-sized frame among the frames they track
-    for k, s in enumerate(starts):
-        step(k)
-        frames = [MonoVO._load(read, i)[0] for i in range(s, min(s + max(cfg.long_window, cfg.window), n))]
-        good = [f is not None and f.shape[:2] == (h, w) for f in frames]
-        if not all(good[:cfg.window]):
-            unusable += 1  # (a bad frame beyond the window only bars the longer window: it dropped clean windows)
-            continue
-        frames = frames[:next((i for i, g in enumerate(good) if not g), len(frames))]  # the longer window ends before it
-        obs = _window_tracks(frames[:cfg.window], cfg)
-        if obs is not None and obs.shape[1] >= cfg.max_tracks and len(frames) > cfg.window:
-            # every corner survived: the image moves slowly, and a longer window adds baseline and rotation
-            long_obs = _window_tracks(frames, cfg)
-            if long_obs is not None and long_obs.shape[1] >= cfg.long_min_tracks:
-                obs = long_obs
-        if obs is not None and _has_parallax(obs, guess_K, cfg):
-            ba = _WindowBA(obs, center, cfg.huber_px)
-            ba.drop_outliers(guess, cfg.outlier_px)
-            if ba.N >= cfg.min_tracks:
-                windows.append(ba)
-    if len(windows) < 2:
-        skipped = f", {unusable} more hold an unreadable or odd-sized frame" if unusable else ""
-        return fallback(f"{len(windows)} of {len(starts) - unusable} windows show translation parallax (no motion or pure "
-                        f"rotation){skipped}; at least 2 are needed")
-
     side = max(w, h)
     grid = side * np.geomspace(cfg.focal_range[0], cfg.focal_range[1], cfg.grid_steps)
-    # lower envelope over basins: at every grid focal the adjustment starts from a fresh two-view estimate and from
-    # the neighbouring grid focal's solution, in an upward and a downward sweep; the lowest cost counts
-    costs = np.full((len(windows), len(grid)), np.inf)
-    for wi, ba in enumerate(windows):
-        step(len(starts) + round(wi * len(starts) / len(windows)))
-        for sweep in (range(len(grid)), range(len(grid) - 1, -1, -1)):
-            ba.x = None
-            for gi in sweep:
-                costs[wi, gi] = min(costs[wi, gi], ba.cost(grid[gi]))
-    step(steps)
+    unusable = 0  # windows with an unreadable or odd-sized frame among the frames they track
+    with _WindowPool(workers, len(starts)) as pool:  # each window's costs on the grid: a worker adjusts one as the next is tracked
+        for k, s in enumerate(starts):
+            step(k)
+            frames = [MonoVO._load(read, i)[0] for i in range(s, min(s + max(cfg.long_window, cfg.window), n))]
+            good = [f is not None and f.shape[:2] == (h, w) for f in frames]
+            if not all(good[:cfg.window]):
+                unusable += 1  # (a bad frame beyond the window only bars the longer window: it dropped clean windows)
+                continue
+            frames = frames[:next((i for i, g in enumerate(good) if not g), len(frames))]  # the longer window ends before it
+            obs = _window_tracks(frames[:cfg.window], cfg)
+            if obs is not None and obs.shape[1] >= cfg.max_tracks and len(frames) > cfg.window:
+                # every corner survived: the image moves slowly, and a longer window adds baseline and rotation
+                long_obs = _window_tracks(frames, cfg)
+                if long_obs is not None and long_obs.shape[1] >= cfg.long_min_tracks:
+                    obs = long_obs
+            if obs is not None and _has_parallax(obs, guess_K, cfg):
+                ba = _WindowBA(obs, center, cfg.huber_px)
+                ba.drop_outliers(guess, cfg.outlier_px)
+                if ba.N >= cfg.min_tracks:
+                    pool.submit(_grid_costs, ba, grid)
+        if len(pool.jobs) < 2:
+            skipped = f", {unusable} more hold an unreadable or odd-sized frame" if unusable else ""
+            return fallback(f"{len(pool.jobs)} of {len(starts) - unusable} windows show translation parallax (no motion or pure "
+                            f"rotation){skipped}; at least 2 are needed")
+        # lower envelope over basins (see _grid_costs); progress as the windows' adjustments end
+        step(len(starts))
+        rows = {}
+        for i, row in pool.results():
+            rows[i] = row
+            step(len(starts) + round(len(rows) * len(starts) / len(pool.jobs)))
+        costs = np.array([rows[i] for i in range(len(rows))])
     usable = np.all(np.isfinite(costs), axis=1)
     costs = costs[usable]
     if len(costs) < 2:

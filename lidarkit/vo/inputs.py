@@ -200,16 +200,16 @@ def frame_range(vo_input: VOInput, start: int = 0, count: int | None = None) -> 
     return VOInput(images, vo_input.K, vo_input.K_source, images.ground_truth, vo_input.kind)
 
 
-def self_calibrate(vo_input: VOInput, config: Any = None, on_step: Any = None) -> tuple[VOInput, Any]:
+def self_calibrate(vo_input: VOInput, config: Any = None, on_step: Any = None, workers: int | None = 1) -> tuple[VOInput, Any]:
     """Replace a size-based K guess by the focal length self-calibrated from the sequence
-    (:func:`lidarkit.vo.autocalib.estimate_focal`); when the motion does not constrain it the guess stays and a
-    warning names the reason. Inputs with given intrinsics are returned unchanged (estimate None)."""
+    (:func:`lidarkit.vo.autocalib.estimate_focal`, its ``workers``); when the motion does not constrain it the guess
+    stays and a warning names the reason. Inputs with given intrinsics are returned unchanged (estimate None)."""
     from lidarkit.vo.autocalib import estimate_focal
 
     if not vo_input.K_source.startswith("guess"):
         return vo_input, None
     guess_factor = vo_input.K[0, 0] / max(vo_input.K[0, 2] * 2 + 1, vo_input.K[1, 2] * 2 + 1)
-    est = estimate_focal(vo_input.images, config, focal_factor=float(guess_factor), on_step=on_step)
+    est = estimate_focal(vo_input.images, config, focal_factor=float(guess_factor), on_step=on_step, workers=workers)
     if not est.constrained:
         log.warning("focal length self-calibration: %s; keeping the %s", est.reason, vo_input.K_source)
         return vo_input, est
