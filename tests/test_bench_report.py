@@ -324,6 +324,28 @@ def test_rows_of_different_alignments_say_theirs_and_are_not_ranked_together(tmp
     assert header[4] == "APE RMSE (SE(3)-aligned / Sim(3)-aligned) [m]" and rows[1][4] == "0.015 [Sim(3)-aligned]"
 
 
+def test_report_csv_names_the_alignment_of_each_row(tmp_path):
+    """report.csv gave a VO suite's SE(3)-aligned (GT scale) and Sim(3)-aligned APE two rows ``metric=ape_rmse_m``
+    with nothing telling them apart, while report.md and report.html named each cell's alignment."""
+    from lidarkit.bench.jobs import Job
+    from lidarkit.bench.results import make_record, write_result
+
+    for method, ape, alignment in (("gt_scale", 0.00222, "SE(3)-aligned"), ("mono", 0.0039, "Sim(3)-aligned")):
+        job = Job("selftest", "e", "synth", {"kind": "synthetic"}, method, {}, seed=0)
+        write_result(tmp_path, make_record(job, job.key(), "1", {
+            "status": "ok", "metrics": {"ape_rmse_m": ape, "hz": 8.0}, "error": None, "runtime_s": 0.1,
+            "info": {"metric_alignment": {"ape_rmse_m": alignment}}}))
+    report = build_report(tmp_path, plots=False)
+    with open(report.csv_path, newline="") as fh:
+        header, *lines = list(csv.reader(fh))
+    # the columns readers index keep their places; the new one is last
+    assert header == ["task", "experiment", "dataset", "method", "metric", "mean", "std", "n", "n_ok", "n_failed",
+                      "n_not_run", "median", "ci95_low", "ci95_high", "alignment"]
+    assert [(r[3], r[4], float(r[5]), r[14]) for r in lines] == [
+        ("gt_scale", "ape_rmse_m", 0.00222, "SE(3)-aligned"), ("gt_scale", "hz", 8.0, ""), ("gt_scale", "runtime_s", 0.1, ""),
+        ("mono", "ape_rmse_m", 0.0039, "Sim(3)-aligned"), ("mono", "hz", 8.0, ""), ("mono", "runtime_s", 0.1, "")]
+
+
 def test_each_trajectory_is_drawn_with_the_reference_of_its_own_seed(tmp_path):
     """The trajectory plot drew every method against the reference of the first chosen record: a method whose first
     good seed was 1 (another simulated drive) was drawn against seed 0's path."""
@@ -520,6 +542,37 @@ def test_plots_say_which_methods_they_leave_out_and_sweeps_keep_experiments_apar
     assert "8 of 10 shown; left out: random_walk(steps=18), random_walk(steps=19)." in traj.caption
     sweep = next(p for p in report.plots if p.filename.startswith("sweep_"))
     assert "one line per experiment, dataset and method" in sweep.caption and "left out" not in sweep.caption
+
+
+def test_a_sweep_over_zero_draws_every_point(tmp_path):
+    """A sweep plot took a log x axis where its values spanned a factor of 10, the smallest clamped to 1e-12: a grid
+    noise_m [0, 0.1, 1, 2] was drawn without its 0 point, and nothing said so."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from lidarkit.bench.jobs import Job
+    from lidarkit.bench.results import make_record, write_result
+
+    grid = [0.0, 0.1, 1.0, 2.0]
+    for noise in grid:
+        job = Job("selftest", "e", "synth", {"kind": "synthetic"}, "random_walk", {"noise_m": noise}, seed=0)
+        write_result(tmp_path, make_record(job, job.key(), "1", {
+            "status": "ok", "metrics": {"ape_rmse_m": 0.01 + noise}, "error": None, "runtime_s": 0.1}))
+    (sweep,) = [p for p in build_report(tmp_path).plots if p.filename.startswith("sweep_")]
+    assert sweep.caption == ("ape_rmse_m against noise_m: mean ± std over seeds, one line per experiment, dataset and "
+                             "method; symmetric log x axis, linear within ±0.1.")
+    from lidarkit.bench.report import sweep_x_scale
+
+    scale, args, _ = sweep_x_scale(grid)
+    assert (scale, args) == ("symlog", {"linthresh": 0.1})
+    fig, ax = plt.subplots()
+    ax.set_xscale(scale, **args)
+    assert np.isfinite(ax.xaxis.get_transform().transform(np.asarray(grid))).all()  # (a log axis maps 0 to -inf)
+    plt.close(fig)
+    assert sweep_x_scale([0.1, 1.0, 2.0]) == ("log", {}, "; log x axis")  # positive values alone: log as before
+    assert sweep_x_scale([0.0, 1.0, 2.0]) == ("linear", {}, "")  # a span of less than 10 above 0: linear
 
 
 def test_one_seed_has_no_spread_and_an_unreported_count_is_not_zero(tmp_path):

@@ -272,16 +272,39 @@ def test_icp_pair_on_the_bundled_pair_with_seeded_initial_perturbation(tmp_path)
     assert again["metrics"]["translation_error_m"] == pytest.approx(a["metrics"]["translation_error_m"], rel=1e-9)
     assert a["metrics"]["translation_error_m"] != b["metrics"]["translation_error_m"]  # different seeds, starts
     assert max(a["metrics"]["translation_error_m"], b["metrics"]["translation_error_m"]) < 0.05
-    bad = write(tmp_path, """
+
+
+def test_an_icp_pair_ground_truth_file_that_is_not_there_is_an_error_of_the_option(tmp_path):
+    """A ground_truth_file beside the suite (looked up in the dataset folder only) read "(experiments[0].dataset, line
+    3): .../samples/kitti_pair/mygt.txt: file not found", blaming the dataset; and the demo, loading with
+    skip_unavailable, skipped the experiment as "bundled sample sample:kitti_pair is not installed" and exited 0."""
+    import shutil
+
+    from lidarkit.samples import sample_path
+
+    folder = sample_path("kitti_pair")
+    shutil.copy(folder / "T_target_source.txt", tmp_path / "mygt.txt")
+    (tmp_path / "bad.txt").write_text("1 0 0 0\n0 1 0 0\n")
+    suite = """
         experiments:
           - task: icp_pair
             dataset: {kind: folder, path: "sample:kitti_pair"}
-            options: {pairs: [[0, 1]], ground_truth_file: missing.txt}
+            options: {pairs: [[0, 1]], ground_truth_file: GT}
             methods: [vanilla]
-        """)
-    with pytest.raises(DataError, match="missing.txt") as info:
-        load_suite(bad)
-    assert "experiments[0].dataset" in str(info.value)
+        """
+    path = write(tmp_path, suite.replace("GT", "mygt.txt"))
+    for skip_unavailable in (False, True):
+        with pytest.raises(ConfigError) as info:
+            load_suite(path, skip_unavailable=skip_unavailable)
+        assert str(info.value) == (
+            f"{path} (experiments[0].options, line 5): ground_truth_file {folder / 'mygt.txt'}: file not found (a "
+            "relative path is looked up in the dataset folder, not beside the suite file: give an absolute path for a "
+            "file elsewhere)")
+    with pytest.raises(ConfigError, match=r"\(experiments\[0\]\.options, line 5\): ground_truth_file .*bad.txt: expected "
+                                          r"a 4x4 rigid transform, found a 2x4 table"):
+        load_suite(write(tmp_path, suite.replace("GT", str(tmp_path / "bad.txt"))))
+    (job,) = load_suite(write(tmp_path, suite.replace("GT", str(tmp_path / "mygt.txt")))).jobs  # as documented
+    assert job.options["ground_truth_file"] == str(tmp_path / "mygt.txt")
 
 
 def test_a_kitti_sequence_without_the_data_a_task_reads_is_refused_before_running(tmp_path):

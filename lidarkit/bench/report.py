@@ -421,13 +421,26 @@ def _sweep_plots(records: list[dict[str, Any]]) -> list[Plot]:
                 ax.errorbar(xs, means, yerr=stds, marker="o", capsize=3, lw=1.2, label=label)
             ax.set_xlabel(param)
             ax.set_ylabel(metric)
-            ax.set_xscale("log" if max(max(p) for p in lines.values()) / max(min(min(p) for p in lines.values()), 1e-12) >= 10 else "linear")
+            scale, scale_args, scale_note = sweep_x_scale([x for points in lines.values() for x in points])
+            ax.set_xscale(scale, **scale_args)
             ax.legend(fontsize=7)
             ax.set_title(f"{task}: {metric} vs {param} (mean ± std over seeds)", fontsize=9)
             plots.append(Plot(f"{metric} vs {param} — {task}", f"sweep_{_file_slug(task + '_' + metric + '_' + param)}.png", _png(fig),
                               task, f"{metric} against {param}: mean ± std over seeds, one line per experiment, dataset and "
-                              f"method.{left_out}"))
+                              f"method{scale_note}.{left_out}"))
     return plots
+
+
+def sweep_x_scale(xs: list[float]) -> tuple[str, dict[str, float], str]:
+    """A sweep's x axis (matplotlib scale, its arguments, the caption's note): log where the values span a factor of
+    10 or more; with a value <= 0 among them, symlog, linear up to the smallest positive value (a log axis dropped a
+    noise_m of 0 without a word)."""
+    positive = [x for x in xs if x > 0]
+    if not positive or max(positive) / min(positive) < 10:
+        return "linear", {}, ""
+    if len(positive) == len(xs):
+        return "log", {}, "; log x axis"
+    return "symlog", {"linthresh": min(positive)}, f"; symmetric log x axis, linear within ±{min(positive):g}"
 
 
 # ---------------------------------------------------------------- writers
@@ -532,10 +545,12 @@ def _csv_number(x: Any) -> str:
 
 
 def _csv(report: Report) -> str:
+    """Long format, one row per (row, metric); ``alignment``: the one its records state (two ``ape_rmse_m`` rows of a VO
+    suite, SE(3)- and Sim(3)-aligned, were told apart by nothing), empty where they state none."""
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
     writer.writerow(["task", "experiment", "dataset", "method", "metric", "mean", "std", "n", "n_ok", "n_failed",
-                     "n_not_run", "median", "ci95_low", "ci95_high"])
+                     "n_not_run", "median", "ci95_low", "ci95_high", "alignment"])  # (new columns go last: readers index them)
     for table in report.tables:
         for r in table.rows:
             for m in table.metrics:
@@ -544,7 +559,7 @@ def _csv(report: Report) -> str:
                 # one value has no spread: empty cells, not a std of 0 and a CI [v, v] of zero width
                 extra = [_csv_number(s.median), repr(s.ci_low) if s.n > 1 else "", repr(s.ci_high) if s.n > 1 else ""] if s is not None else ["", "", ""]
                 writer.writerow([r.task, r.experiment, r.dataset, r.method, m.name, _csv_number(mean), repr(std) if n > 1 else "",
-                                 n, r.n_ok, r.n_failed, r.n_missing, *extra])
+                                 n, r.n_ok, r.n_failed, r.n_missing, *extra, r.alignment.get(m.name, "")])
     return buf.getvalue()
 
 

@@ -5,8 +5,9 @@ Options (per experiment): ``pairs`` — ``[[target, source], ...]`` (KITTI: fram
 ``max_pairs`` consecutive pairs.
 ``init_noise_m`` / ``init_noise_deg`` — start from the ground-truth motion perturbed by a seeded random
 motion of that size (0 = start from identity, the default). ``ground_truth_file`` — a 4x4 ``T_target_source``
-text file (relative to the dataset folder) for a dataset without poses holding one pair, e.g. the bundled
-``sample:kitti_pair`` folder with ``pairs: [[0, 1]]``.
+text file for a dataset without poses holding one pair, e.g. the bundled ``sample:kitti_pair`` folder with
+``pairs: [[0, 1]]``; a relative path is looked up in the dataset folder only (not beside the suite file, as reader
+path options are): give an absolute path for a file elsewhere.
 """
 
 from __future__ import annotations
@@ -65,6 +66,12 @@ def read_T_target_source(path: Path) -> np.ndarray:
     if table.shape != (4, 4) or not np.allclose(table[3], [0, 0, 0, 1]) or not is_rotation(table[:3, :3], tol=1e-6):
         raise DataError(f"expected a 4x4 rigid transform, found a {table.shape[0]}x4 table that is not one", source=path)
     return table
+
+
+def ground_truth_path(dataset: dict[str, Any], options: IcpPairOptions) -> Path:
+    """``options.ground_truth_file``, relative to the dataset folder (a task option: the suite resolves reader path
+    options beside the suite file too, task options it does not)."""
+    return dataset_path(dataset) / Path(options.ground_truth_file).expanduser()
 
 
 def pairs_truth(dataset: Any, method: str) -> Any:
@@ -179,7 +186,16 @@ class IcpPairTask(Task):
         check_reader_options(dataset)
         opts = IcpPairOptions(**options)
         if opts.ground_truth_file is not None:
-            read_T_target_source(dataset_path(dataset) / opts.ground_truth_file)
+            path = ground_truth_path(dataset, opts)
+            # an error of the option, not of the dataset: it blamed experiments[0].dataset, and under the demo's
+            # skip_unavailable a DataError on a bundled sample read "bundled sample ... is not installed" (exit 0)
+            if not path.is_file():
+                raise ConfigError(f"ground_truth_file {path}: file not found (a relative path is looked up in the dataset "
+                                  "folder, not beside the suite file: give an absolute path for a file elsewhere)", source="options")
+            try:
+                read_T_target_source(path)
+            except DataError as err:
+                raise ConfigError(f"ground_truth_file {err}", source="options") from None
         check_pairs(opts, dataset)
 
     def validate(self, method: str, params: dict[str, Any], dataset: dict[str, Any], options: dict[str, Any]) -> None:
@@ -199,7 +215,7 @@ class IcpPairTask(Task):
         rng = np.random.default_rng(job.seed)
         T_gt_file = None
         if options.ground_truth_file is not None:
-            T_gt_file = read_T_target_source(dataset_path(job.dataset) / options.ground_truth_file)
+            T_gt_file = read_T_target_source(ground_truth_path(job.dataset, options))
         from lidarkit.odometry.settings import deskew_requested
 
         if deskew_requested(registration):  # (kiss and kiss deskew=false gave bit-identical rows, without a word)
