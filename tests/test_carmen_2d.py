@@ -210,6 +210,20 @@ def test_relations_file_and_bad_relations(tmp_path, carmen_logs):
         Relations.read(bad)
     with pytest.raises(DataError, match="relations file not found"):
         CarmenLog(shared_path("carmen_2d", "aces.clf.bz2"), relations=tmp_path / "none.relations")
+    # a bad file is refused when the log is opened: found after a whole run's registration, it failed the run with
+    # nothing written (Intel's full log: 3 minutes lost)
+    with pytest.raises(DataError, match=r"bad.relations \(line 6\): z, roll and pitch"):
+        CarmenLog(shared_path("carmen_2d", "aces.clf.bz2"), relations=bad)
+    # a relative relations= path is found beside the log, as the other readers' path options are
+    import os
+
+    here = os.getcwd()
+    try:
+        os.chdir(tmp_path)
+        log = CarmenLog(shared_path("carmen_2d", "aces.clf.bz2"), relations="aces.relations")
+    finally:
+        os.chdir(here)
+    assert len(log.relations) == 1279
 
 
 def test_robotlaser_and_rawlaser_messages(tmp_path):

@@ -36,7 +36,7 @@ from typing import Any, Literal
 import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
-from lidarkit.io.base import Scan, checked_index
+from lidarkit.io.base import Scan, checked_index, option_path
 from lidarkit.params import is_real_number
 from lidarkit.textfile import read_lines, read_numeric_table
 from lidarkit.trajectory import Trajectory
@@ -364,6 +364,8 @@ class CarmenLog:
         self._starts = log.offsets[:-1]
         self._lengths = np.diff(log.offsets)
         self._relations_path = self._find_relations(relations)
+        # read and checked now: a bad file found after a whole run's registration failed it, with nothing written
+        self._logged_relations = None if self._relations_path is None else Relations.read(self._relations_path)
         self._relations: Relations | None = None
         self._odometry: Trajectory | None = None
 
@@ -373,9 +375,9 @@ class CarmenLog:
         if isinstance(relations, str) and relations == "auto":
             candidate = self.path.with_name(self.name + ".relations")
             return candidate if candidate.is_file() else None
-        path = Path(relations)
+        path = option_path(relations, self.path.parent)  # (beside the log too, as the other readers' path options)
         if not path.is_file():
-            raise DataError("relations file not found", source=path)
+            raise DataError("relations file not found (neither from the working directory nor beside the log)", source=path)
         return path
 
     @property
@@ -431,8 +433,8 @@ class CarmenLog:
         """The relation ground truth (``.relations`` file), or None if there is none. Its times are the log's, as
         logged; on a log whose stamps were moved to increase (Intel) each is moved with the scan logged at it, so that
         it finds that scan's pose (matched by the logged times, 428 of 2000 found none and others the wrong scan)."""
-        if self._relations is None and self._relations_path is not None:
-            self._relations = self._on_own_clock(Relations.read(self._relations_path))
+        if self._relations is None and self._logged_relations is not None:
+            self._relations = self._on_own_clock(self._logged_relations)
         return self._relations
 
     def _on_own_clock(self, relations: Relations) -> Relations:
