@@ -460,3 +460,14 @@ def test_an_alignment_of_collinear_positions_names_the_command_line_option(tmp_p
     with pytest.raises(SystemExit) as exc:
         main(["eval", str(line), str(line), "--align", "none"])
     assert exc.value.code == 0
+
+
+def test_a_missing_trajectory_is_one_line_with_relations_too(capsys):
+    """`lidarkit eval --relations R` with no trajectory printed a usage box "Missing argument 'ref'" (exit 2), though
+    with --relations the one file given is EST; `lidarkit eval REF` alone already gave one line."""
+    for args, line in ((["--relations", str(shared_path("carmen_2d", "aces.relations"))],
+                        "error: EST: missing EST (the trajectory to score): lidarkit eval --relations FILE EST"),
+                       ([], "error: REF: missing REF and EST (the trajectory files): lidarkit eval REF EST")):
+        with pytest.raises(SystemExit) as exc:
+            main(["eval", *args])
+        assert exc.value.code == 1 and capsys.readouterr().err.strip() == line

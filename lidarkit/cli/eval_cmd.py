@@ -21,7 +21,7 @@ _D = EvaluationSettings()
 
 @app.command("eval")
 def eval_command(
-    ref: Path = typer.Argument(..., help="Reference (ground-truth) trajectory file (with --relations: EST)."),
+    ref: Optional[Path] = typer.Argument(None, help="Reference (ground-truth) trajectory file (with --relations: EST)."),
     est: Optional[Path] = typer.Argument(None, help="Estimated trajectory file."),
     fmt: Optional[str] = typer.Option(
         None, "--format", "-f", help=f"Format of both files: {' | '.join(FORMATS)} (default kitti; tum with --relations)."
@@ -64,6 +64,10 @@ def eval_command(
     from lidarkit.eval import evaluate, report
     from lidarkit.trajectory import Trajectory
 
+    if ref is None:  # (a usage box "Missing argument 'ref'", exit 2: with --relations the one file given is EST)
+        raise ConfigError("missing EST (the trajectory to score): lidarkit eval --relations FILE EST" if relations is not None
+                          else "missing REF and EST (the trajectory files): lidarkit eval REF EST",
+                          source="EST" if relations is not None else "REF")
     fmt = fmt or ("tum" if relations is not None else "kitti")
 
     def load(path: Path, kind: str | None, times: Path | None, times_option: str) -> Trajectory:
