@@ -454,6 +454,25 @@ def test_a_carmen_log_is_found_by_its_name_and_relations_none_in_a_spec(carmen_l
     assert carmen_logs["aces"].relations is not None
 
 
+
+def test_a_log_named_with_dots_finds_its_relations_and_a_log_of_another_suffix_is_told_its_kind(tmp_path):
+    """aces.v2.clf.bz2 looked for aces.relations (the name up to the first dot) and had no relations without a word;
+    a log named x.log read "not a folder" with no hint that carmen:x.log reads it."""
+    import shutil
+
+    from lidarkit.io import open_dataset
+    from lidarkit.odometry.inputs import open_sequence
+
+    log = tmp_path / "aces.v2.clf.bz2"
+    shutil.copy(shared_path("carmen_2d", "aces.clf.bz2"), log)
+    shutil.copy(shared_path("carmen_2d", "aces.relations"), tmp_path / "aces.v2.relations")
+    opened = open_dataset("carmen", log)
+    assert opened.name == "aces.v2" and len(opened.relations) == 1279
+    (tmp_path / "x.log").write_text("# a CARMEN log\n")
+    with pytest.raises(DataError, match=r"a file of no kind detected by its name .*: give its kind, KIND:PATH \(e.g. carmen:"):
+        open_sequence(str(tmp_path / "x.log"))
+
+
 def test_odometry_cli_on_a_carmen_log(tmp_path, capsys):
     log_path = shared_path("carmen_2d", "aces.clf.bz2")
     out = tmp_path / "run"

@@ -327,7 +327,10 @@ class CarmenLog:
             raise ConfigError(f"max_range_m must be a finite number above min_range_m ({min_range_m}), got {max_range_m!r}",
                               source="carmen dataset options")
         self._log = parse_log(self.path, laser)
-        stem = self.path.name.split(".")[0]
+        # the name without the log's suffixes: aces.v2.clf.bz2 is "aces.v2" (its aces.v2.relations went unfound)
+        stem = self.path.name
+        for suffix in (".bz2", ".gz", ".xz", ".clf", ".log", ".txt"):
+            stem = stem[: -len(suffix)] if stem.lower().endswith(suffix) and len(stem) > len(suffix) else stem
         self.name = stem
         self.laser = self._log.message
         self.min_range_m = float(min_range_m)

@@ -61,6 +61,9 @@ def open_sequence(spec: str | os.PathLike | ScanSequence) -> ScanSequence:
     problem = lio.ros2_storage_problem(path) if kind is None else None
     if problem:
         raise DataError(problem, source=text)
+    if kind is None and path.is_file():  # (a CARMEN log named x.log read "not a folder")
+        raise DataError(f"a file of no kind detected by its name ({lio.detected_files()}): give its kind, KIND:PATH "
+                        f"(e.g. carmen:{text} for a CARMEN log; known: {', '.join(lio.available_datasets())})", source=text)
     return _scans(lio.open_dataset(kind or "folder", path), text)
 
 
