@@ -232,6 +232,19 @@ def test_relations_file_and_bad_relations(tmp_path, carmen_logs):
     assert len(log.relations) == 1279
 
 
+def test_relations_built_in_code_are_checked_as_a_file_s_are():
+    """Relations built in code were never checked: a NaN dx scored "translation nan +- nan m", plain lists failed
+    inside the metric with a TypeError and unequal lengths with an IndexError."""
+    ok = Relations([1.0, 2.0], [2.0, 3.0], [0.1, 0.2], [0.0, 0.0], [0.0, 0.01])
+    assert isinstance(ok.t1_s, np.ndarray) and ok.t1_s.dtype == np.float64 and len(ok) == 2
+    for kwargs, message in (({"dx_m": [np.nan, 0.2]}, "dx_m must be a 1-D array of finite numbers"),
+                            ({"dy_m": [0.0]}, r"t1_s, t2_s, dx_m, dy_m, dyaw_rad differ in length \(2, 2, 2, 1, 2\)"),
+                            ({"t1_s": ["a", "b"]}, "t1_s must be numbers")):
+        fields = {"t1_s": [1.0, 2.0], "t2_s": [2.0, 3.0], "dx_m": [0.1, 0.2], "dy_m": [0.0, 0.0], "dyaw_rad": [0.0, 0.01]}
+        with pytest.raises(DataError, match=message):
+            Relations(**{**fields, **kwargs})
+
+
 def test_robotlaser_and_rawlaser_messages(tmp_path):
     # 5 beams from -45 deg every 22.5 deg, max range 10 m (the 10.0 reading is "no return")
     robot = "ROBOTLASER1 0 -0.785398 1.570796 0.392699 10.0 0.01 0 5 1.0 2.0 10.0 3.0 0.0 0 1.0 2.0 0.5 1.0 2.0 0.5 0 0 0 0 0 {t} host {t}"

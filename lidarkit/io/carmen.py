@@ -106,6 +106,25 @@ class Relations:
     dyaw_rad: np.ndarray
     source: str = ""
 
+    def __post_init__(self) -> None:
+        """Relations built in code are checked as a file's are: (K,) finite numbers of one length (a NaN scored "nan +-
+        nan m", lists and unequal lengths failed inside the metric with a TypeError / IndexError)."""
+        names = ("t1_s", "t2_s", "dx_m", "dy_m", "dyaw_rad")
+        arrays = []
+        for name in names:
+            try:
+                value = np.asarray(getattr(self, name), dtype=np.float64)
+            except (TypeError, ValueError):
+                raise DataError(f"{name} must be numbers", source=self.source or "relations") from None
+            if value.ndim != 1 or not np.isfinite(value).all():
+                raise DataError(f"{name} must be a 1-D array of finite numbers", source=self.source or "relations")
+            arrays.append(value)
+        if len({len(a) for a in arrays}) != 1:
+            raise DataError(f"{', '.join(names)} differ in length ({', '.join(str(len(a)) for a in arrays)})",
+                            source=self.source or "relations")
+        for name, value in zip(names, arrays):
+            object.__setattr__(self, name, value)
+
     def __len__(self) -> int:
         return int(len(self.t1_s))
 
