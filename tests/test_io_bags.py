@@ -339,6 +339,20 @@ def test_sim_spec_memory_bag_t_field_and_odometry_frame(tmp_path):
     assert msg.header.frame_id == "world" and msg.child_frame_id == "lidar"
 
 
+def test_a_bag_export_refuses_a_sweep_longer_than_its_readers_accept(tmp_path):
+    """At 0.9 Hz a bag was written whose 1.11 s sweeps lidarkit's own bag readers then refused ("per-point time field
+    'time' spans 1.10889 s"): the export refuses it before writing anything; at 1 Hz the bag reads back."""
+    slow = SimulatedLidarSequence(n_frames=2, n_beams=8, n_azimuths=500, frame_rate_hz=0.9)
+    with pytest.raises(ConfigError) as err:
+        export_bag(slow, tmp_path / "r09.mcap", "mcap")
+    assert str(err.value) == ("frame_rate_hz: a sweep of 1.11111 s is longer than the 1 s lidarkit's bag readers accept (they "
+                              "would refuse its per-point times): frame_rate_hz must be at least 1 for a bag")
+    assert list(tmp_path.iterdir()) == []
+    one_hz = SimulatedLidarSequence(n_frames=2, n_beams=8, n_azimuths=500, frame_rate_hz=1.0)
+    scan = open_dataset("mcap", export_bag(one_hz, tmp_path / "r1.mcap", "mcap")).read_scan(1)
+    assert scan.point_times_s.max() == pytest.approx(0.998, abs=1e-6)
+
+
 def test_a_snapshot_export_has_no_point_times_and_its_stamp_is_its_instant(tmp_path):
     """motion_distortion=false: the bag's clouds carried all-zero time fields (read as a sweep's times) stamped at the
     sweep start, 0.1 s before their ground truth; the KITTI folder got an empty point_times/ that warned."""

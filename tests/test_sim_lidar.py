@@ -399,6 +399,24 @@ def test_hills_steeper_than_a_slope_of_one_half_are_refused_in_both_simulators()
     assert 20.0 < tilt_deg.max() < 27.0
 
 
+@pytest.mark.parametrize(("height", "heave", "lowest"), [(0.01, 0.02, "0.09"), (0.3, 0.5, "1.05")])
+def test_a_sensor_the_heave_takes_below_the_ground_is_refused(height, heave, lowest):
+    """sensor_height_m=0.01 (with the default 2 cm heave) or 0.3 with heave_m=0.5 put the sensor below the ground (z = -0.038
+    over ground at -0.01) and sweeps returned the ground's underside: the heave lowers it by up to 2 x heave_m."""
+    with pytest.raises(ConfigError) as err:
+        make_config(sensor_height_m=height, heave_m=heave)
+    assert str(err.value) == (f"lidar simulator: config: sensor_height_m {height:g} m with heave_m {heave:g} m can take the sensor "
+                              f"below the ground (the heave lowers it by up to 2 x heave_m, and it must stay 0.05 m above the "
+                              f"ground): sensor_height_m at least {lowest} m or a smaller heave_m")
+    # the lowest height allowed keeps the sensor above the ground mesh, also on the steepest hills
+    seq = SimulatedLidarSequence(scene="ground", n_frames=100, n_beams=4, n_azimuths=36, sensor_height_m=float(lowest),
+                                 heave_m=heave, terrain_amplitude_m=4.77, terrain_wavelength_m=60.0)
+    origins = seq.poses_at(np.linspace(0.0, 10.0, 2001))[:, :3, 3]
+    down = np.c_[origins + [0.0, 0.0, 50.0], np.tile([0.0, 0.0, -1.0], (len(origins), 1))].astype(np.float32)
+    clearance_m = seq.scene.cast_rays(o3d.core.Tensor(down))["t_hit"].numpy() - 50.0
+    assert 0.02 < clearance_m.min() < float(lowest)  # (0.037 m for seed 0 at 0.09 m: the mesh lies up to 2 cm above the hills)
+
+
 @pytest.mark.parametrize("scene", ["street", "open"])
 def test_an_exports_sim_yaml_loads_back(tmp_path, scene):
     """The camera export's sim.yaml could not be loaded back (its default occluder fields were refused); the LiDAR

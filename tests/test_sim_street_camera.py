@@ -191,6 +191,20 @@ def test_bad_input_is_a_clear_error():
         make_camera_config(corners=False, first_corner_m=50.0)
 
 
+def test_cast_pixels_checks_its_frame_index_as_read_image_does():
+    """cast_pixels took any index numpy took: -1 cast from the last frame, 1.7 from frame 1, 5 of 3 frames was a bare
+    IndexError."""
+    seq = SimulatedCameraSequence(n_frames=3, **SMALL)
+    uv = np.array([[160.0, 56.0]])
+    for index, reason in [(-1, "frame index -1 out of range for 3 frames"), (1.7, "frame index 1.7 is not an integer"),
+                          (5, "frame index 5 out of range for 3 frames")]:
+        with pytest.raises(DataError) as err:
+            seq.cast_pixels(index, uv)
+        assert str(err.value) == f"simcam:street?seed=0: {reason}"
+    np.testing.assert_allclose(seq.cast_pixels(np.int64(2), uv), seq.cast_pixels(2, uv))
+    assert np.isfinite(seq.cast_pixels(2, uv)).all()
+
+
 def test_a_curvature_that_bends_a_stretch_back_on_itself_is_refused():
     """curve_curvature_per_m was accepted up to 0.05 per m: over a stretch of up to 360 m that turned the street by up to
     211 deg within a stretch (measured below), back through its own buildings. At most 45 deg now; the default turns

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from lidarkit.errors import ConfigError, DataError, OutputError
+from lidarkit.io.pointcloud2 import MAX_SWEEP_S
 
 BAG_FORMATS = ("rosbag1", "rosbag2", "mcap")
 STORAGES = ("sqlite3", "mcap")
@@ -81,6 +82,11 @@ def export_bag(sequence, out: str | os.PathLike, fmt: str = "rosbag2", *, storag
         # 4.29 s back to 0; clouds without per-point times have no t field to overflow)
         raise ConfigError(f"a sweep of {period:g} s overflows the uint32 nanosecond 't' field drivers write (at most "
                           f"{MAX_T_FIELD_SWEEP_S:.3g} s): frame_rate_hz must be at least {1 / MAX_T_FIELD_SWEEP_S:.3g} for a bag",
+                          source="frame_rate_hz")
+    if period > MAX_SWEEP_S and sequence.config.sweeps_carry_point_times:  # (a 1.1 s sweep was written, then refused by
+        # lidarkit's own bag readers: its times spanned more than a sweep lasts)
+        raise ConfigError(f"a sweep of {period:g} s is longer than the {MAX_SWEEP_S:g} s lidarkit's bag readers accept (they "
+                          f"would refuse its per-point times): frame_rate_hz must be at least {1 / MAX_SWEEP_S:g} for a bag",
                           source="frame_rate_hz")
     from lidarkit import atomic
 

@@ -64,6 +64,10 @@ MAX_DRIVE_M = 200_000.0
 #: Steepest hills: ``terrain_amplitude_m x 2 pi / terrain_wavelength_m``, their typical steepest rise over run (at 0.5 the
 #: body tilted at most 15-27 deg over 300 sweeps of seeds 0-3; 20 m hills every 60 m, 2.1, tilted it 48-66 deg).
 MAX_TERRAIN_SLOPE = 0.5
+#: Least height of the sensor above the ground at the bottom of its heave (m): the hills' mesh lies up to 2 cm above
+#: the true terrain under the path (measured at the steepest hills allowed), and a sensor below the ground mesh
+#: returned the underside of the ground.
+MIN_GROUND_CLEARANCE_M = 0.05
 #: Most sweeps of one sequence: its ground truth and stamps take ~0.7 KB a sweep (0.7 GB for a million).
 MAX_FRAMES = 1_000_000
 
@@ -133,6 +137,11 @@ class LidarSimConfig(BaseModel):
         if self.min_range_m >= self.max_range_m:
             raise ValueError("min_range_m must be below max_range_m")
         check_terrain_slope(self.terrain_amplitude_m, self.terrain_wavelength_m)
+        lowest_m = 2.0 * self.heave_m + MIN_GROUND_CLEARANCE_M  # the heave swings up to 2 x heave_m from its start
+        if self.sensor_height_m < lowest_m - 1e-9:  # (0.01 m with the default 2 cm heave swept from below the ground)
+            raise ValueError(f"sensor_height_m {self.sensor_height_m:g} m with heave_m {self.heave_m:g} m can take the sensor below "
+                             f"the ground (the heave lowers it by up to 2 x heave_m, and it must stay {MIN_GROUND_CLEARANCE_M:g} m "
+                             f"above the ground): sensor_height_m at least {lowest_m:g} m or a smaller heave_m")
         lateral = self.open_object_lateral_m
         if lateral is not None and self.scene != "open":  # (accepted and ignored)
             raise ValueError(f"open_object_lateral_m places the open scene's objects; the {self.scene} scene has none of them")

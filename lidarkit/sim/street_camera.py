@@ -644,10 +644,11 @@ class SimulatedCameraSequence:
         return np.c_[(uv[:, 0] - K[0, 2]) / K[0, 0], (uv[:, 1] - K[1, 2]) / K[1, 1], np.ones(len(uv))].astype(np.float32)
 
     def cast_pixels(self, index: int, uv: np.ndarray) -> np.ndarray:
-        """World points ``(M, 3)`` seen at pixel coordinates ``uv`` (M, 2) of frame ``index`` (NaN: sky)."""
+        """World points ``(M, 3)`` seen at pixel coordinates ``uv`` (M, 2) of frame ``index`` (NaN: sky); ``index`` is
+        checked as :meth:`read_image` checks it (-1 cast from the last frame, 1.7 from frame 1)."""
         import open3d as o3d
 
-        T = self._T_world_cam[int(index)]
+        T = self._T_world_cam[checked_index(index, self.config.n_frames, self.name, "frame", from_end=False)]
         dirs = self.pixel_directions(uv) @ T[:3, :3].T.astype(np.float32)
         rays = np.c_[np.broadcast_to(T[:3, 3], dirs.shape), dirs].astype(np.float32)
         t_hit = self.scene.cast_rays(o3d.core.Tensor(rays), nthreads=self.config.threads)["t_hit"].numpy()
