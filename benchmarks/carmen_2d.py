@@ -129,6 +129,12 @@ def main(argv: list[str] | None = None) -> int:
     if args.report_only:
         write_text(args.out / "README.md", report(read_results(args.out / "results.json")))
         return 0
+    # inputs and the output folder checked before the work (a file in --out's way, or a log missing, failed after it all)
+    missing = [str(args.data / f"{name}.clf.bz2") for name in ("aces", "intel", "fr079") if not (args.data / f"{name}.clf.bz2").is_file()]
+    if missing:
+        parser.error(f"logs not found: {', '.join(missing)}")
+    if args.out.exists() and not args.out.is_dir():
+        parser.error(f"--out {args.out} is a file, not a folder")
     logging.getLogger("lidarkit").setLevel(logging.ERROR)  # one warning per degenerate corridor frame otherwise
     frames = "0:800" if args.quick else None
     info = machine_info()
