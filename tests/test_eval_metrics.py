@@ -379,6 +379,23 @@ def test_position_mse_hand_computed():
         position_mse(ref, est[:2])
 
 
+def test_position_mse_associates_by_time_as_its_length_error_says():
+    """position_mse(gt, rgbdslam) on TUM fr1_xyz said "pass associate=True (--associate)", but position_mse took no
+    associate (a TypeError): now it pairs by timestamps as ape does, over the same 785 pose pairs."""
+    ref = Trajectory.from_tum(shared_path("evo_testdata", "freiburg1_xyz-groundtruth.txt"))
+    est = Trajectory.from_tum(shared_path("evo_testdata", "freiburg1_xyz-rgbdslam.txt"))
+    with pytest.raises(EvaluationError, match=r"pass associate=True \(--associate\)"):
+        position_mse(ref, est)
+    mse = position_mse(ref, est, associate=True)
+    assert mse == pytest.approx(4.0318304e-4, rel=1e-6)
+    by_ape = ape(ref, est, associate=True)
+    assert len(by_ape.errors) == 785 and mse == pytest.approx(by_ape.rmse ** 2, rel=1e-12)
+    assert position_mse(ref, est, associate=True, max_diff_s=0.005) == pytest.approx(4.0172069e-4, rel=1e-6)
+    with pytest.raises(ConfigError) as exc:
+        position_mse(ref, est, associate="yes")
+    assert str(exc.value) == "associate: associate must be True or False, got 'yes'"
+
+
 def test_results_to_dict_is_json_safe(rng):
     ref = synthetic(rng, 30, "ref")
     est = ref.transformed(T_left=random_se3(rng, max_translation=1.0))

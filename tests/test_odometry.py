@@ -390,6 +390,17 @@ def test_a_run_that_cannot_complete_its_folder_leaves_the_earlier_run_whole(tmp_
     assert after == before
 
 
+def test_a_run_folder_that_is_not_a_path_is_a_config_error(tmp_path, monkeypatch):
+    """run(out_dir=5) or out_dir=b"x" ended in a raw pathlib TypeError ("expected str, bytes or os.PathLike object");
+    now a ConfigError naming out_dir, as the other run() arguments, before anything is written."""
+    monkeypatch.chdir(tmp_path)
+    for value, shown in ((5, "int 5"), (b"x", "bytes b'x'")):
+        with pytest.raises(ConfigError) as refused:
+            run("sim:open?frames=3&beams=16&azimuths=360", "vanilla", out_dir=value)
+        assert str(refused.value) == f"out_dir: out_dir must be a folder path (str or Path), got {shown}"
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_short_path_reports_no_drift(rng):
     poses = _drive(4)
     result = run(MemorySequence(poses, _room_points(rng, 50)), OracleICP(se3_inverse(poses[:-1]) @ poses[1:]))

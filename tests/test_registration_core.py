@@ -590,6 +590,45 @@ def test_kiss_sequence_mode_matches_kiss_icp_directly(rng):
     assert pose_error(ours, make_se3(so3_exp([0, 0, 0.03]), [1.5, 0, 0]))[0] < 0.05
 
 
+def test_kiss_motion_guess_is_checked_as_init_T():
+    """register_frame(motion_guess=...) re-orthonormalized any 4x4: a reflection diag(-1, 1, 1, 1) on KITTI 00 scans 0/1
+    gave t = [0.247, 0.033, -3.129] (true ~[0.697, 0.008, 0.018]), diag(2, 1, 1, 1) and a zero matrix were quietly
+    replaced, and a 3x3 read "last_delta: expected a 4x4 pose". Now refused as align's init_T, naming motion_guess;
+    a guess rounded to 4 decimals (kiss_safe_pose's job) still registers."""
+    from conftest import shared_path
+    from registration_helpers import read_kitti_bin
+
+    scans = [read_kitti_bin(shared_path("kitti_odometry", "sequences", "00", "velodyne", f"{k:06d}.bin")) for k in (0, 1)]
+    not_rotation = "motion_guess: the 3x3 block is not a rotation (R^T R = I within 0.001, det > 0)"
+    for guess, line in (
+        (np.diag([-1.0, 1, 1, 1]), not_rotation),
+        (np.diag([2.0, 1, 1, 1]), not_rotation),
+        (np.zeros((4, 4)), "motion_guess: last row must be [0, 0, 0, 1], got [0.0, 0.0, 0.0, 0.0]"),
+        (np.eye(3), "motion_guess: expected a 4x4 matrix, got shape (3, 3)"),
+    ):
+        icp = get_icp("kiss")
+        icp.register_frame(scans[0])
+        with pytest.raises(DataError) as exc:
+            icp.register_frame(scans[1], motion_guess=guess)
+        assert str(exc.value) == line
+    rounded = np.round(make_se3(so3_exp([0.0, 0.0, 0.001]), [0.7, 0.0, 0.0]), 4)
+    icp = get_icp("kiss")
+    icp.register_frame(scans[0])
+    t = icp.register_frame(scans[1], motion_guess=rounded)[:3, 3]
+    assert np.abs(t - [0.697, 0.008, 0.018]).max() < 0.01, t
+
+
+@pytest.mark.parametrize("method", ["kiss", "genz", "pipeline"])
+def test_per_point_times_that_are_not_numbers_are_a_named_error(method):
+    """register_frame(points, "abc") raised a raw ValueError "could not convert string to float: 'abc'"."""
+    if method not in available_icp():
+        pytest.skip(f"{method} not installed")
+    scan = structured_cloud(np.random.default_rng(0), n=2000)
+    with pytest.raises(DataError) as exc:
+        get_icp(method).register_frame(scan, "abc")
+    assert str(exc.value) == "point_times_s: expected per-point times in seconds (numbers), got str 'abc'"
+
+
 # ---------------------------------------------------------------- preprocessing
 
 

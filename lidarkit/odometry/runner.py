@@ -372,6 +372,9 @@ def run(
     if out_dir is not None:  # before the work, as the CLI does (a file in the way was found after the whole run)
         from lidarkit.atomic import check_target
 
+        if not isinstance(out_dir, (str, os.PathLike)):  # (5, b"x": a raw TypeError from pathlib)
+            raise ConfigError(f"out_dir must be a folder path (str or Path), got {type(out_dir).__name__} {out_dir!r}",
+                              source="out_dir")
         if isinstance(out_dir, str) and not out_dir.strip():  # (Path("") is ".": the run went into the current folder)
             raise ConfigError("empty path: give a folder ('.' for the current one)", source="out_dir")
 

@@ -365,10 +365,20 @@ def finite_4x4(T: np.ndarray, source: str, what: str = "matrix") -> np.ndarray:
     return T
 
 
+def as_point_times(point_times_s: np.ndarray, source: str = "point_times_s") -> np.ndarray:
+    """Per-point times as a flat float64 array; DataError naming ``source`` for something that is not numbers (a string
+    ended the run in a raw ValueError "could not convert string to float")."""
+    try:
+        return np.asarray(point_times_s, dtype=np.float64).ravel()
+    except (TypeError, ValueError):
+        raise DataError(f"expected per-point times in seconds (numbers), got {type(point_times_s).__name__} "
+                        f"{str(point_times_s)[:40]!r}", source=source) from None
+
+
 def check_point_times(point_times_s: np.ndarray, n_points: int, source: str = "point_times_s") -> np.ndarray:
     """``(N,)`` float64 per-point times of a sweep of ``n_points``; DataError naming ``source`` for another count or for
     NaN / infinite times, saying which (both read "need 54850 finite per-point times, got 54850")."""
-    times = np.asarray(point_times_s, dtype=np.float64).ravel()
+    times = as_point_times(point_times_s, source)
     if len(times) != n_points:
         raise DataError(f"{len(times)} per-point times for {n_points} points: one per point is needed", source=source)
     bad = int((~np.isfinite(times)).sum())

@@ -31,7 +31,9 @@ from pydantic import Field, model_validator
 from lidarkit.errors import RegistrationError
 from lidarkit.geometry import as_points, is_rotation, orthonormalize_se3, transform_points
 from lidarkit.registration.assessment import assess_alignment
-from lidarkit.registration.base import Registration, RegistrationConfig, RegistrationResult, check_init_T, check_point_times
+from lidarkit.registration.base import (
+    Registration, RegistrationConfig, RegistrationResult, as_point_times, check_init_T, check_point_times,
+)
 from lidarkit.registration.planar import refuse_2d
 from lidarkit.registration.registry import register_icp
 
@@ -97,7 +99,7 @@ def normalized_times(point_times_s: np.ndarray | None, n_points: int) -> np.ndar
     """Per-point times scaled to ``[0, 1]`` over the sweep (what genz-icp's deskew reads), None if absent."""
     if point_times_s is None:
         return None
-    times = np.asarray(point_times_s, dtype=np.float64).ravel()
+    times = as_point_times(point_times_s)
     if len(times) == 0:
         return None
     times = check_point_times(times, n_points)

@@ -137,7 +137,8 @@ class KissRegistration(Registration):
         """Register one sweep; returns ``T_world_lidar`` (4x4) of this frame (at the end of the sweep when deskewed).
 
         ``motion_guess``: the previous-to-this-frame motion to start from (and deskew with), e.g. from wheel
-        odometry, in place of kiss-icp's constant-velocity prediction (``last_delta``).
+        odometry, in place of kiss-icp's constant-velocity prediction (``last_delta``); checked as ``align``'s
+        ``init_T`` (a reflection or a scaled matrix was re-orthonormalized into another motion).
         """
         kiss = self.pipeline
         frame = np.ascontiguousarray(as_points(points_xyz, "frame", min_points=1))
@@ -148,7 +149,8 @@ class KissRegistration(Registration):
             if np.ptp(times) <= 0.0:  # all equal: kiss-icp would divide by their zero span and abort the process
                 times = np.array([])
         kiss.last_pose = kiss_safe_pose(kiss.last_pose, "last_pose")
-        kiss.last_delta = kiss_safe_pose(kiss.last_delta if motion_guess is None else motion_guess, "last_delta")
+        delta = kiss.last_delta if motion_guess is None else check_init_T(motion_guess, "motion_guess")
+        kiss.last_delta = kiss_safe_pose(delta, "last_delta")
         _, source = kiss.register_frame(frame, times)
         if len(source) == 0 and kiss.local_map.empty():  # nothing registered yet and nothing to register with
             c = self.config

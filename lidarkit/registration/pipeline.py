@@ -33,7 +33,7 @@ from lidarkit.errors import RegistrationError
 from lidarkit.geometry import as_points, orthonormalize_se3, se3_inverse, transform_points
 from lidarkit.registration.assessment import assess_alignment
 from lidarkit.registration.base import (
-    Degeneracy, Registration, RegistrationConfig, RegistrationResult, check_init_T, check_point_times, use_backend,
+    Degeneracy, Registration, RegistrationConfig, RegistrationResult, as_point_times, check_init_T, check_point_times, use_backend,
 )
 from lidarkit.registration.components import make_component
 from lidarkit.registration.components.registry import output_error
@@ -239,7 +239,7 @@ class PipelineRegistration(Registration):
         c = self._components
         frame = as_points(points_xyz, "frame", min_points=1)
         if point_times_s is not None:
-            point_times_s = np.asarray(point_times_s, dtype=np.float64).ravel()
+            point_times_s = as_point_times(point_times_s)
             point_times_s = None if len(point_times_s) == 0 else check_point_times(point_times_s, len(frame))
         if c["map"].empty:  # the first frame says what the sequence is
             self._refuse_2d(frame, frame)
