@@ -77,10 +77,17 @@ def test_vo_on_plain_image_folder_guesses_intrinsics(tmp_path, capsys, caplog):
     # each assumption is said once (a log warning), not also printed by the command
     said = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"] + err.splitlines()
     assert sum("no intrinsics given" in line for line in said) == 1
-    assert sum("frame indices as seconds" in line for line in said) == 1
-    note = "no time stamps given: poses_tum.txt and poses_smoothed_tum.txt use frame indices as seconds"
+    assert sum("frame numbers as seconds" in line for line in said) == 1
+    note = "no time stamps given: poses_tum.txt and poses_smoothed_tum.txt use frame numbers as seconds"
     assert json.loads((out / "metrics.json").read_text())["timestamps"] == note
     assert yaml.safe_load((out / "config.yaml").read_text())["timestamps"] == note
+    # from --start 3 the stamps are the input's frame numbers, as diagnostics.csv's (they began at 0: another run's
+    # frame 0 was paired with this run's frame 3 when the two were associated by time)
+    code, _, _ = _run(["vo", str(folder), "--scale", "none", "--preset", "report_orb", "--start", "3", "--out", str(tmp_path / "late")], capsys)
+    stamps = np.loadtxt(tmp_path / "late" / "poses_tum.txt", comments="#")[:, 0]
+    first = int((tmp_path / "late" / "diagnostics.csv").read_text().splitlines()[1].split(",")[0])
+    assert code in (0, None) and first == 3 and stamps.tolist() == [3.0, 4.0, 5.0, 6.0, 7.0]
+    assert np.loadtxt(tmp_path / "late" / "poses_smoothed_tum.txt", comments="#")[0, 0] == 3.0
     # an odd-sized first image neither rejects the others nor sets the guessed intrinsics
     cv2.imwrite(str(folder / "000000.png"), cv2.resize(cv2.imread(str(src / "000000.png"), 0), (640, 200)))
     assert open_vo_input(folder).K[0, 0] == pytest.approx(0.9 * 1226)  # not 0.9 * 640

@@ -195,7 +195,9 @@ def vo_command(
         from lidarkit.vo.output import write_run
 
         paths = write_run(result, out, ground_truth=gt, metrics={**metrics, **({"not_scored": not_scored} if not_scored else {})},
-                          extra_config=extra_config, gif_images=vo_input.images if gif else None)
+                          extra_config=extra_config, gif_images=vo_input.images if gif else None,
+                          frame_numbers=[int(numbers[start + k]) if numbers is not None else start + k
+                                         for k in range(len(result.trajectory))])
     console = stdout()
     summary = result.summary()
     table = Table(title=f"lidarkit vo: {data} ({vo_input.kind}, {cfg.features.detector} + {cfg.matching.method}, "

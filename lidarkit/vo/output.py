@@ -23,7 +23,7 @@ from lidarkit.vo.pipeline import FrameDiagnostics, VOResult
 
 log = logging.getLogger(__name__)
 
-NO_TIMESTAMPS_NOTE = "no time stamps given: poses_tum.txt and poses_smoothed_tum.txt use frame indices as seconds"
+NO_TIMESTAMPS_NOTE = "no time stamps given: poses_tum.txt and poses_smoothed_tum.txt use frame numbers as seconds"
 
 
 def diagnostics_csv(rows: list[FrameDiagnostics]) -> str:
@@ -111,8 +111,9 @@ def write_feature_gif(path: str | os.PathLike, images: Any, tracks: list[tuple[i
 
 def write_run(result: VOResult, out_dir: str | os.PathLike, *, ground_truth: Trajectory | None = None,
               metrics: dict[str, Any] | None = None, extra_config: dict[str, Any] | None = None,
-              plot: bool = True, gif_images: Any = None) -> dict[str, Path]:
-    """Write the run folder and return ``{name: path}``.
+              plot: bool = True, gif_images: Any = None, frame_numbers: Any = None) -> dict[str, Path]:
+    """Write the run folder and return ``{name: path}``; ``frame_numbers``: the input's number of each frame (a run
+    from ``--start 10`` is frames 10, 11, ...), the TUM files' stamps when the input has no time stamps (else 0, 1, ...).
 
     Files: ``poses_kitti.txt``, ``poses_tum.txt``, ``poses_smoothed_kitti.txt``, ``poses_smoothed_tum.txt``,
     ``diagnostics.csv``, ``config.yaml`` (resolved config + intrinsics + ``extra_config``), ``metrics.json``
@@ -125,20 +126,23 @@ def write_run(result: VOResult, out_dir: str | os.PathLike, *, ground_truth: Tra
     atomic.check_target(final, "folder", files=RUN_FILES, replaces=RUN_FILES)
     with atomic.run_folder(final, replaces=RUN_FILES) as tmp:
         paths = _write_files(result, tmp, ground_truth=ground_truth, metrics=metrics, extra_config=extra_config,
-                             plot=plot, gif_images=gif_images)
+                             plot=plot, gif_images=gif_images, frame_numbers=frame_numbers)
     return {name: final / path.relative_to(tmp) for name, path in paths.items()}
 
 
 def _write_files(result: VOResult, out: Path, *, ground_truth: Trajectory | None, metrics: dict[str, Any] | None,
-                 extra_config: dict[str, Any] | None, plot: bool, gif_images: Any) -> dict[str, Path]:
+                 extra_config: dict[str, Any] | None, plot: bool, gif_images: Any, frame_numbers: Any = None) -> dict[str, Path]:
     notes = {}
-    if result.trajectory.timestamps_s is None:
+    trajectory, smoothed = result.trajectory, result.smoothed()
+    if trajectory.timestamps_s is None:
         log.warning(NO_TIMESTAMPS_NOTE)
         notes["timestamps"] = NO_TIMESTAMPS_NOTE
-    smoothed = result.smoothed()
+        if frame_numbers is not None:  # (a run from --start 10 was stamped 0, 1, ...: paired with another run's frame 0)
+            stamps = np.asarray(frame_numbers, dtype=np.float64)
+            trajectory, smoothed = trajectory.with_timestamps(stamps), smoothed.with_timestamps(stamps)
     paths = {
-        "poses_kitti": result.trajectory.to_kitti(out / "poses_kitti.txt"),
-        "poses_tum": result.trajectory.to_tum(out / "poses_tum.txt"),
+        "poses_kitti": trajectory.to_kitti(out / "poses_kitti.txt"),
+        "poses_tum": trajectory.to_tum(out / "poses_tum.txt"),
         "poses_smoothed_kitti": smoothed.to_kitti(out / "poses_smoothed_kitti.txt"),
         "poses_smoothed_tum": smoothed.to_tum(out / "poses_smoothed_tum.txt"),
         "diagnostics": atomic.write_text(out / "diagnostics.csv", diagnostics_csv(result.diagnostics)),
