@@ -858,3 +858,13 @@ def test_poses_shorter_than_the_image_folder_say_they_pair_before_the_frames_are
         code, _, err = _run(["vo", str(seq / "image_0"), "--kind", "images", "--calib", str(seq / "calib.txt"), option,
                              str(tmp_path / short), "--max-frames", "3"], capsys)
         assert code == 1 and err == f"error: {tmp_path / short}: 5 {what} for 8 images {why}\n", err
+
+
+def test_max_frames_past_the_end_says_how_many_ran(tmp_path, capsys):
+    """--start 6 --max-frames 5 on 8 frames ran 2 without a word, config.yaml recording max_frames 5 (odometry says a
+    frame slice past the end); it is said on stderr and recorded."""
+    code, _, err = _run(["vo", str(sample_path("kitti_vo", "06")), "--start", "6", "--max-frames", "5", "--no-progress",
+                         "--out", str(tmp_path / "run")], capsys)
+    said = "--max-frames 5 from frame 6 ends after the last frame (7): ran 2"
+    assert code in (0, None) and f"warning: {said}" in " ".join(err.split())
+    assert yaml.safe_load((tmp_path / "run" / "config.yaml").read_text())["frames_cut"] == said

@@ -128,6 +128,12 @@ def vo_command(
     numbers = getattr(vo_input.images, "frames", None)  # the input's own frame numbers (KITTI's file names), if any
     if start >= len(vo_input.images):  # (named the sequence only: "kitti_06_image_0: start frame 51 outside 0..50")
         raise ConfigError(f"frame {start} is past the last frame {len(vo_input.images) - 1} of {data}", source="--start")
+    n_all = len(vo_input.images)
+    # (cut without a word: 2 frames ran of --start 6 --max-frames 5, config.yaml recording the 5; odometry says it)
+    frames_cut = (f"--max-frames {max_frames} from frame {start} ends after the last frame ({n_all - 1}): ran {n_all - start}"
+                  if max_frames is not None and start + max_frames > n_all else None)
+    if frames_cut:
+        stderr().print(f"warning: {frames_cut}", soft_wrap=True, markup=False)
     vo_input = frame_range(vo_input, start, max_frames)
     if cfg.scale.mode == "gt" and vo_input.ground_truth is None:  # (MonoVO refused it after --self-calibrate's 46 s)
         raise ConfigError(f"scale gt needs ground-truth poses and the input {data} has none: give --poses FILE or "
@@ -176,7 +182,7 @@ def vo_command(
 
         result.diagnostics = [dataclasses.replace(d, frame=number(d.frame), ref_frame=number(d.ref_frame)) for d in result.diagnostics]
     extra_config = {"input": str(data), "kind": vo_input.kind, "K_source": vo_input.K_source, "start": start,
-                    "max_frames": max_frames}
+                    "max_frames": max_frames, **({"frames_cut": frames_cut} if frames_cut else {})}
     if focal is not None:
         extra_config["self_calibration"] = {"focal_px": focal.focal_px, "sigma_px": focal.sigma_px if focal.constrained else None,
                                             "constrained": focal.constrained, "reason": focal.reason,
