@@ -24,6 +24,12 @@ _KEEP_AS_TEXT = re.compile(r"^[-+]?(0\d|\d*_)")
 _EXPONENT_FLOAT = re.compile(r"^[-+]?(\d+\.?\d*|\.\d+)[eE][-+]?\d+$")  # 1e-3: a string to YAML 1.1
 
 
+def shown_default(value: Any) -> str:
+    """A parameter's value as it is typed back into ``-p KEY=VALUE`` (None as ``null``: "None", copied from a listing,
+    was refused as "not a valid number")."""
+    return "null" if value is None else repr(value)
+
+
 def parse_value(text: str) -> Any:
     """One value: a YAML scalar, or the text itself when YAML would change its meaning or fails."""
     import yaml

@@ -82,6 +82,20 @@ def test_bad_params_raise_config_error_listing_valid_params(params, fragment):
     assert fragment in msg and "epsilon_m2=" in msg and "max_correspondence_distance_m=" in msg
 
 
+def test_listed_defaults_are_written_as_they_are_typed_back(capsys):
+    """The listing showed voxel_size_m=None, and `-p voxel_size_m=None` copied from it was refused as "not a valid
+    number"; a None default is listed as null, which -p reads as None."""
+    from lidarkit.params import parse_value
+
+    with pytest.raises(ConfigError) as err:
+        get_icp("vanilla", max_iterations=0)
+    assert "voxel_size_m=null" in str(err.value) and "=None" not in str(err.value)
+    assert get_icp("vanilla", voxel_size_m=parse_value("null")).config.voxel_size_m is None
+    assert cli_exit_code(["icp", "--list"]) == 0
+    listed = capsys.readouterr().out
+    assert "voxel_size_m: float | None = null" in " ".join(listed.split()) or "= null" in listed
+
+
 def test_config_is_resolved_frozen_and_described():
     icp = get_icp("vanilla", max_iterations=7)
     assert icp.config.max_iterations == 7 and icp.config.epsilon_m2 == 1e-6

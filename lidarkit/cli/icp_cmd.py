@@ -14,6 +14,7 @@ from rich.text import Text
 
 from lidarkit.cli.app import app, stdout
 from lidarkit.errors import ConfigError, DataError
+from lidarkit.params import shown_default
 
 
 def read_init_pose(path: Path) -> np.ndarray:
@@ -55,7 +56,7 @@ def _list_methods() -> None:
         for key, (type_name, default, desc) in config_fields(name).items():
             if key == "assess" and not assessed_apart(cls):
                 continue  # refused by the variants that score their result within their own iterations
-            cell.append(("\n" if cell else "") + f"{key}: {type_name} = {default!r} — {desc}")
+            cell.append(("\n" if cell else "") + f"{key}: {type_name} = {shown_default(default)} — {desc}")
         table.add_row(name + (" (stateful)" if cls.stateful else ""), cell)
     stdout().print(table)
     _print_left_out(broken_plugins())
@@ -74,7 +75,7 @@ def _list_ground_segmenters() -> None:
     table.add_column("parameters (default) — description")
     for name in available_ground_segmenters():
         doc = (get_ground_segmenter_class(name).__doc__ or "").strip().splitlines()
-        lines = [f"{key}: {type_name} = {default!r} — {desc}" for key, (type_name, default, desc) in ground_config_fields(name).items()]
+        lines = [f"{key}: {type_name} = {shown_default(default)} — {desc}" for key, (type_name, default, desc) in ground_config_fields(name).items()]
         table.add_row(name, _described(doc[0] if doc else "", lines))
     stdout().print(table)
 
@@ -89,7 +90,7 @@ def _list_components() -> None:
         for name in available_components(kind):
             cls = get_component_class(kind, name)
             doc = (cls.__doc__ or "").strip().splitlines()[0] if cls.__doc__ else ""
-            lines = [f"{key}: {type_name} = {default!r} — {desc}" for key, (type_name, default, desc) in component_fields(kind, name).items()]
+            lines = [f"{key}: {type_name} = {shown_default(default)} — {desc}" for key, (type_name, default, desc) in component_fields(kind, name).items()]
             table.add_row(f"{kind} / {name}", _described(doc, lines))
     stdout().print(table)
     from lidarkit.registration.components.registry import broken_component_plugins

@@ -16,6 +16,7 @@ from typing import Any, Literal, Union, get_args, get_origin
 import pydantic
 
 from lidarkit.errors import ConfigError, validation_problems
+from lidarkit.params import shown_default
 from lidarkit.registration.base import Registration, RegistrationConfig
 
 log = logging.getLogger(__name__)
@@ -152,7 +153,7 @@ def config_fields(name: str) -> dict[str, tuple[str, Any, str]]:
 def get_icp(name: str, **params: Any) -> Registration:
     """A configured instance of variant ``name``; bad or unknown params raise ConfigError listing valid ones."""
     cls = get_icp_class(name)
-    valid = ", ".join(f"{k}={v[1]!r}" for k, v in config_fields(name).items()) or "(none)"
+    valid = ", ".join(f"{k}={shown_default(v[1])}" for k, v in config_fields(name).items()) or "(none)"
     try:
         config = cls.Config(**params)
     except pydantic.ValidationError as err:

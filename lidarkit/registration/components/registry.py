@@ -17,6 +17,7 @@ import pydantic
 from pydantic import BaseModel, ConfigDict
 
 from lidarkit.errors import ConfigError, RegistrationError, validation_problems
+from lidarkit.params import shown_default
 
 log = logging.getLogger(__name__)
 
@@ -204,7 +205,7 @@ def make_component(kind: str, spec: ComponentSpec, **defaults: Any) -> Component
     known = cls.Config.model_fields
     merged = {k: v for k, v in defaults.items() if k in known and v is not None}
     merged.update(params)
-    valid = ", ".join(f"{k}={v[1]!r}" for k, v in component_fields(kind, name).items()) or "(none)"
+    valid = ", ".join(f"{k}={shown_default(v[1])}" for k, v in component_fields(kind, name).items()) or "(none)"
     try:
         config = cls.Config(**merged)
     except pydantic.ValidationError as err:

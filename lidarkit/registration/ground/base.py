@@ -16,6 +16,7 @@ from pydantic import BaseModel, ConfigDict
 
 from lidarkit.errors import ConfigError, DataError, validation_problems
 from lidarkit.geometry import as_points
+from lidarkit.params import shown_default
 from lidarkit.registration import local_origin
 
 #: Mounting height of KITTI's Velodyne HDL-64E above the road (m).
@@ -122,6 +123,6 @@ def get_ground_segmenter(name: str, **params: Any) -> GroundSegmenter:
     try:
         config = cls.Config(**params)
     except pydantic.ValidationError as err:
-        valid = ", ".join(f"{k}={v[1]!r}" for k, v in ground_config_fields(name).items()) or "(none)"
+        valid = ", ".join(f"{k}={shown_default(v[1])}" for k, v in ground_config_fields(name).items()) or "(none)"
         raise ConfigError(f"invalid parameters ({validation_problems(err)}); valid parameters: {valid}", source=f"ground segmenter {name!r}") from None
     return cls(config=config)
