@@ -97,14 +97,17 @@ def setup_fork_server() -> None:
 
 @contextlib.contextmanager
 def handle_signals() -> Iterator[None]:
-    """Within the block SIGINT and SIGTERM raise :class:`Interrupted` (main thread only); handlers restored after."""
+    """Within the block SIGINT and SIGTERM raise :class:`Interrupted` (main thread only); handlers restored after. A
+    signal the process was started ignoring stays ignored, as at startup: a job started in the background (``cmd &`` in
+    a script), which a Ctrl-C at the terminal is to leave alone, was stopped by one arriving after its first seconds."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     previous = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
     _received.clear()
-    for s in previous:
-        signal.signal(s, _raise_interrupted)
+    for s, handler in previous.items():
+        if handler is not signal.SIG_IGN:
+            signal.signal(s, _raise_interrupted)
     try:
         yield
     finally:

@@ -282,3 +282,25 @@ def test_an_interrupt_while_the_report_is_written_says_the_report_is_not_this_ru
     err = " ".join(capsys.readouterr().err.split())
     assert exc.value.code == 130 and err.endswith(f"{done}the report was written ({out}/report.html)"), err
     assert (out / "report.html").stat().st_ino != inode  # (its text may equal the earlier one's)
+
+
+def test_an_ignored_sigint_stays_ignored_for_the_whole_command(tmp_path):
+    """A command started with SIGINT ignored (a background job of a script, which a Ctrl-C at the terminal is to leave
+    alone) ignored it while starting, then was stopped by one after its first seconds ("interrupted by SIGINT", the run
+    lost): it stays ignored throughout, and the run completes."""
+    import subprocess
+    import time
+
+    out = tmp_path / "run"
+    proc = subprocess.Popen([sys.executable, "-m", "lidarkit", "odometry", "sim:street?frames=60&beams=16&azimuths=360", "-m", "vanilla",
+                             "--out", str(out), "--no-progress"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            cwd=Path(__file__).resolve().parents[1], preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+    sent = 0
+    while proc.poll() is None:  # one every 0.2 s, from startup to the end of the run
+        time.sleep(0.2)
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+            sent += 1
+    err = proc.stderr.read().decode()
+    assert sent > 10 and proc.returncode == 0 and "interrupted" not in err, err
+    assert (out / "metrics.json").is_file()
