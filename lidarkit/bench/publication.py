@@ -56,9 +56,11 @@ def _grids(records: list[dict[str, Any]]):
     common = {dataset: set.intersection(*methods.values()) for dataset, methods in seeds.items()}
     left = {dataset: {method: sorted(s - common[dataset]) for method, s in methods.items() if s - common[dataset]}
             for dataset, methods in seeds.items() if common[dataset]}
-    note = "; ".join(f"{dataset}: seeds {_seed_list(common[dataset])} of every method (left out: "
-                     + ", ".join(f"{method} {_seed_list(s)}" for method, s in sorted(methods.items())) + ")"
-                     for dataset, methods in sorted(left.items()) if methods)
+    note = "; ".join([f"{dataset}: seeds {_seed_list(common[dataset])} of every method (left out: "
+                      + ", ".join(f"{method} {_seed_list(s)}" for method, s in sorted(methods.items())) + ")"
+                      for dataset, methods in sorted(left.items()) if methods]
+                     + [f"{dataset}: no seed common to every method (each over its own seeds)"
+                        for dataset in sorted(common) if not common[dataset]])
     for r in ok:
         job = Job.from_spec(r["job"])
         key = (label[id(r)], job.method_label)
@@ -185,13 +187,15 @@ def _paired_segments(segs: list[tuple[Any, Any]]) -> tuple[np.ndarray, np.ndarra
             vb.append(tb[ib])
     if not va:
         return None
-    def alike(values: list[np.ndarray]) -> bool:
-        return all(v.shape == values[0].shape and np.allclose(v, values[0], rtol=1e-9, atol=1e-12) for v in values[1:])
-
-    once = len(va) > 1 and alike(va) and alike(vb)
+    once = len(va) > 1 and _alike(va) and _alike(vb)
     if once:
         va, vb = va[:1], vb[:1]
     return np.concatenate(va), np.concatenate(vb), left, once
+
+
+def _alike(values: list[np.ndarray]) -> bool:
+    """Every array equal to the first (to rounding): one measurement, whatever the seed."""
+    return all(v.shape == values[0].shape and np.allclose(v, values[0], rtol=1e-9, atol=1e-12) for v in values[1:])
 
 
 def remove_stale_tables(out_dir: Path, pub: Publication) -> None:
