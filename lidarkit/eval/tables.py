@@ -88,10 +88,6 @@ class SegmentErrors:
                "speed_mps": np.round(self.speed_mps, 4).tolist()}
         return out if self.first_frame is None else {**out, "first_frame": self.first_frame.tolist()}
 
-    def keys(self) -> list[tuple[int, float]] | None:
-        """``(first frame, length)`` of each segment, as ``lidarkit compare`` pairs segments; None without first frames."""
-        return None if self.first_frame is None else list(zip(self.first_frame.tolist(), self.length_m.tolist()))
-
     def __len__(self) -> int:
         return int(self.length_m.size)
 
