@@ -118,6 +118,11 @@ def test_a_result_over_other_data_than_the_pinned_job_is_refused(tmp_path):
     with pytest.raises(EvaluationError, match=r"dataset differs from the pinned job 'kiss': range_noise_std_m 0.05 \(pinned 0.0\)"):
         assert_no_worse_than(run(SimulatedLidarSequence(n_frames=8, seed=0, range_noise_std_m=0.05, **drive), "kiss"), baseline,
                              method="kiss", metric="ape_rmse_m", tolerance=10.0)
+    # a ground truth passed to run() by the caller (here the method's own estimate: APE 0) is not the pinned data's
+    own = run(SimulatedLidarSequence(n_frames=8, seed=0, **drive), "kiss", ground_truth=same.trajectory)
+    with pytest.raises(EvaluationError, match=r"the result's ground truth differs from the pinned job 'kiss': .*given to run\(\) by "
+                                              r"the caller, not the dataset's"):
+        assert_no_worse_than(own, baseline, method="kiss", metric="ape_rmse_m", tolerance=1.0)
 
 
 def test_a_result_over_other_frames_another_dataset_or_another_seed_is_refused(tmp_path):

@@ -653,6 +653,7 @@ def run(
             # the motion a frame the registration turned down takes (metrics read it: the guess's wording is for people)
             "fallback_motion": "dataset odometry" if odometry_poses is not None else "constant velocity",
             "ground_truth": None if reference is None else reference.name,
+            "ground_truth_given": ground_truth is not None,  # by the caller (run(ground_truth=...)), not the dataset's
             "ground_truth_meta": None if reference is None else _plain(reference.meta),
             "ground_truth_note": unscored_note or relations_note,
             "effective": effective,

@@ -167,6 +167,8 @@ def _check_same_data(result: Any, now_metrics: dict[str, float], job: Mapping[st
     run = (config or {}).get("run") if isinstance(config, Mapping) else None
     if not isinstance(run, Mapping) or not pinned:
         return
+    if run.get("ground_truth_given"):  # (a method scored against its own estimate passed against kiss's pinned drift)
+        refuse("ground truth", f"{run.get('ground_truth')!r}, given to run() by the caller, not the dataset's")
     sim = run.get("dataset_config") if isinstance(run.get("dataset_config"), Mapping) else None
     options = run.get("dataset_options") if isinstance(run.get("dataset_options"), Mapping) else {}
     ran_kind = options.get("kind") or ("sim_lidar" if sim is not None else None)
