@@ -129,7 +129,9 @@ def test_a_run_over_a_restamped_log_scores_its_relations_through_the_reader(tmp_
                  frames="20:40")
     scored = relation_error(result.trajectory, open_dataset("carmen", log).relations)
     assert scored.n_used == 19 and scored.translation_abs["max"] < 0.05
-    assert result.metrics["relations"] == scored.to_dict()
+    recorded = dict(result.metrics["relations"])  # (matched within half the log's smallest stamp gap: Intel's pool)
+    assert recorded.pop("max_time_diff_s") < 0.01
+    assert recorded == {k: v for k, v in scored.to_dict().items() if k != "max_time_diff_s"}
     assert result.metrics["ground_truth_note"] == (
         f"relations only, scored through the reader (metrics \"relations\"): 19 of 19, mean error "
         f"{scored.translation_abs['mean']:.4f} m / {scored.rotation_abs['mean']:.4f} deg; the reader moved 2 scan stamps and the "
