@@ -90,6 +90,16 @@ def test_assert_no_worse_than_against_a_baseline_and_a_mapping(tiny_baseline):
             assert_no_worse_than({"ape_rmse_m": ape}, tiny_baseline, metric="ape_rmse_m", tolerance=bad)
     with pytest.raises(EvaluationError, match="the baseline's ape_rmse_m is nan: nothing to hold the result against"):
         assert_no_worse_than({"ape_rmse_m": 0.3}, {"ape_rmse_m": float("nan")}, metric="ape_rmse_m")  # (it passed)
+    # a pinned job's mapping (another baseline's) is held on its spec's data too: over another seed it passed on its
+    # frame count alone
+    import copy
+
+    job = tiny_baseline.job("random_walk")
+    assert_no_worse_than(job, tiny_baseline, method="random_walk", metric="ape_rmse_m", tolerance=0.0)
+    other = copy.deepcopy(dict(job))
+    other["spec"]["seed"] = int(other["spec"].get("seed") or 0) + 7
+    with pytest.raises(EvaluationError, match="the result's job seed differs from the pinned job"):
+        assert_no_worse_than(other, tiny_baseline, method="random_walk", metric="ape_rmse_m", tolerance=1.0)
 
 
 def test_a_result_over_other_data_than_the_pinned_job_is_refused(tmp_path):

@@ -152,10 +152,12 @@ def _check_same_data(result: Any, now_metrics: dict[str, float], job: Mapping[st
                               f"{ref_metrics['n_frames']:g}: not the pinned data", source="assert_no_worse_than")
     spec = job.get("spec") if isinstance(job.get("spec"), Mapping) else {}
     pinned = spec.get("dataset") if isinstance(spec.get("dataset"), Mapping) else {}
-    if isinstance(result, Mapping) and isinstance(result.get("job"), Mapping):  # a bench record: its own job spec
+    # a bench record: its own job spec; a pinned job's mapping (load_baseline(...).job(...)): its spec (another
+    # baseline's job over other data passed on its frame count alone)
+    ran_job = next((result[key] for key in ("job", "spec") if isinstance(result, Mapping) and isinstance(result.get(key), Mapping)), None)
+    if ran_job is not None:
         from lidarkit.bench.jobs import canonical_json
 
-        ran_job = result["job"]
         for key in ("task", "dataset", "options", "seed"):
             a, b = ran_job.get(key), spec.get(key)
             if key == "dataset" and isinstance(a, Mapping) and isinstance(b, Mapping):
