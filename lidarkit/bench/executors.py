@@ -73,17 +73,8 @@ class ProcessExecutor:
 
     def __init__(self, workers: int | None = None, start_method: str | None = None):
         self.workers = workers or default_workers()
-        if start_method is None:
-            start_method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
-        self.context = multiprocessing.get_context(start_method)
-        if start_method == "forkserver":
-            self.context.set_forkserver_preload(["lidarkit.bench._forkserver", "lidarkit.bench.worker", "lidarkit.bench.tasks", "numpy"])
-            # Start the fork server (and Python's resource tracker) with SIGINT ignored from birth: a Ctrl-C to the
-            # process group while they load would print their KeyboardInterrupt tracebacks; workers inherit it.
-            from multiprocessing import forkserver
-
-            with ignored_sigint():
-                forkserver.ensure_running()
+        self.context = pool_context(start_method, preload=("lidarkit.bench._forkserver", "lidarkit.bench.worker",
+                                                           "lidarkit.bench.tasks", "numpy"))
 
     def run(self, fn: JobFn, items: list[Item]) -> Iterator[tuple[str, dict[str, Any]]]:
         queue = list(items)
@@ -135,11 +126,33 @@ class ProcessExecutor:
             stop_pool(pool)
 
     def _pool(self, workers: int) -> ProcessPoolExecutor:
-        return ProcessPoolExecutor(max_workers=workers, mp_context=self.context, initializer=init_worker,
-                                   initargs=(os.getpid(),))
+        return worker_pool(workers, self.context)
 
     def close(self) -> None:
         pass
+
+
+def pool_context(start_method: str | None = None, preload: tuple[str, ...] = ()) -> Any:
+    """The multiprocessing context of lidarkit's process pools: forkserver on Linux (``preload`` loaded once in the
+    server, if it starts here), spawn elsewhere. The fork server (and Python's resource tracker) starts with SIGINT
+    ignored from birth: a Ctrl-C to the process group while they load would print their KeyboardInterrupt tracebacks;
+    workers inherit it."""
+    if start_method is None:
+        start_method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
+    context = multiprocessing.get_context(start_method)
+    if start_method == "forkserver":
+        if preload:
+            context.set_forkserver_preload(list(preload))
+        from multiprocessing import forkserver
+
+        with ignored_sigint():
+            forkserver.ensure_running()
+    return context
+
+
+def worker_pool(workers: int, context: Any) -> ProcessPoolExecutor:
+    """A pool of ``workers`` processes in ``context`` that die with this process (:func:`lidarkit.lifetime.init_worker`)."""
+    return ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=init_worker, initargs=(os.getpid(),))
 
 
 def stop_pool(pool: ProcessPoolExecutor) -> None:

@@ -301,21 +301,9 @@ class _WindowPool:
             self._pool = None
 
     def _start(self) -> Any:
-        import multiprocessing
-        import os
-        from concurrent.futures import ProcessPoolExecutor
+        from lidarkit.bench.executors import pool_context, worker_pool
 
-        from lidarkit.lifetime import ignored_sigint, init_worker
-
-        method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
-        context = multiprocessing.get_context(method)
-        with ignored_sigint():  # (the fork server, started here if no pool has started it, must not see Ctrl-C)
-            if method == "forkserver":
-                from multiprocessing import forkserver
-
-                forkserver.ensure_running()
-            return ProcessPoolExecutor(max_workers=self.workers, mp_context=context, initializer=init_worker,
-                                       initargs=(os.getpid(),))
+        return worker_pool(self.workers, pool_context())
 
 
 def _has_parallax(obs: np.ndarray, guess_K: np.ndarray, cfg: AutocalibConfig) -> bool:
