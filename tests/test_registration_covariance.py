@@ -911,3 +911,19 @@ def test_nees_and_covariance_about_say_what_they_got_in_one_line(rng):
         said[name] = str(err.value).removeprefix("covariance_about: origin_m must be 3 finite numbers (m), got ")
     assert said == {"eye": "an array of shape (3, 3)", "nan": "an array of shape (4, 4) with 16 NaN or infinite entries",
                     "long": "'" + "x" * 56 + "..."}
+
+
+def test_ground_filtered_without_its_ground_refinement_is_not_calibrated(street_pair):
+    """ground_filtered's entry was learned with the ground refinement on (z, roll and pitch factors of 4.5e-6 to 3.8e-5):
+    ``ground_refine=False`` took it as well and stated a 0.3 mm z sigma for a 1.5 cm error (mean NEES ~7500 on a street).
+    It gets the closed form now, and the note names the setting."""
+    source, target, T_true = street_pair
+    refined, unrefined = (get_icp("ground_filtered", ground_refine=flag) for flag in (True, False))
+    assert (refined.calibration_variant(), unrefined.calibration_variant()) == ("ground_filtered", None)
+    result = unrefined.align(source, target)
+    assert result.extra["covariance_calibration"] == (
+        "none learned for ground_filtered (ground_refine=False): the closed form as computed (typically over-confident)")
+    raw = get_icp("ground_filtered", ground_refine=False, calibrated_covariance=False).align(source, target)
+    np.testing.assert_allclose(result.covariance, raw.covariance, rtol=1e-9, atol=1e-18)
+    assert result.nees(T_true) < 50  # (thousands under the refined fit's entry)
+    assert refined.align(source, target).extra["covariance_calibration"] == "ground_filtered"
