@@ -507,11 +507,13 @@ def test_a_flat_grounds_weak_directions_are_named_as_one_subspace(name):
     assert sum(e < 1e-4 for e in deg.eigenvalues) == 3
 
 
-@pytest.mark.parametrize("name", ["kiss", "small_gicp", "vanilla"])
+@pytest.mark.parametrize("name", ["kiss", "small_gicp", "vanilla", "open3d_gicp"])
 def test_the_kitti_road_s_weak_directions_are_named_as_one_subspace(name):
     """The road alone (KITTI 00, z < -1.5 m, 8-40 m around the car): x and y below the threshold, yaw 2-6x above it.
     The two weak ones alone are a mix of x, y and yaw, and were named as one or two raw vectors ("translation along
-    (-0.68, 0.73, -0.00) coupled with rotation"), other ones on every pair and variant; with yaw they are one subspace."""
+    (-0.68, 0.73, -0.00) coupled with rotation"), other ones on every pair and variant; with yaw they are one subspace.
+    open3d_gicp on 7 -> 6: yaw 3.1x above the larger weak eigenvalue but 10.1x above the smaller was left out (two raw
+    vectors): the directions above the threshold are joined within a factor of the weak ones' largest."""
     if name not in available_icp():
         pytest.skip(f"{name} not installed")
     from conftest import shared_path
@@ -522,8 +524,8 @@ def test_the_kitti_road_s_weak_directions_are_named_as_one_subspace(name):
         r = np.hypot(p[:, 0], p[:, 1])
         return p[(p[:, 2] < -1.5) & (r > 8) & (r < 40)]
 
-    scans = [road(frame) for frame in range(5)]
-    for k in range(4):
+    scans = [road(frame) for frame in range(10)]
+    for k in range(9):
         deg = get_icp(name).align(scans[k + 1], scans[k]).degeneracy
         assert deg.degenerate and deg.weak_directions == ("translation along x and y, rotation about z (yaw)",), (k, deg)
 

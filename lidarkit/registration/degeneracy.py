@@ -128,9 +128,9 @@ def _weak_names(evals: np.ndarray, evecs: np.ndarray, n_weak: int) -> list[str]:
         end = start + 1
         while end < n_weak and evals[end] <= near:
             end += 1
-        wide = end
-        while wide < len(evals) and evals[wide] <= near:  # near-equal directions just above the threshold
-            wide += 1
+        wide, reach = end, SUBSPACE_FACTOR * max(evals[end - 1], 1e-12 * evals[-1])  # (from the weak ones' largest: a
+        while wide < len(evals) and evals[wide] <= reach:  # yaw 3.1x above a road's y but 10.1x above its x was left out)
+            wide += 1  # near-equal directions just above the threshold
         if wide > end and _subspace_axes(evecs[:, start:end]) is None and _subspace_axes(evecs[:, start:wide]) is not None:
             # they span one subspace with the weak ones, which alone are an arbitrary mix of its axes (a road's x and y
             # below the threshold, its yaw 2.7x above: two raw vectors, one or two from pair to pair): named whole
