@@ -347,9 +347,10 @@ class Trajectory:
         return readers[fmt](path, **kwargs, format_hint=format_hint)
 
     def to_kitti(self, path: str | os.PathLike) -> Path:
-        """Write the KITTI pose format atomically."""
+        """Write the KITTI pose format atomically, every number to the digits that read back the same double (10
+        significant digits rounded georeferenced positions, ~5e6 m, by up to 0.5 mm)."""
         rows = self.poses_se3[:, :3, :4].reshape(-1, 12)
-        text = "\n".join(" ".join(f"{v:.9e}" for v in row) for row in rows) + "\n"
+        text = "\n".join(" ".join(f"{v:.16e}" for v in row) for row in rows) + "\n"
         return atomic.write_text(path, text)
 
     def to_tum(self, path: str | os.PathLike) -> Path:

@@ -307,13 +307,16 @@ def test_relation_time_tolerance(carmen_logs, caplog):
     assert relation_error(odo, late, max_time_diff_s=0.03).n_used == 3
     with pytest.raises(EvaluationError, match="no relation has estimated poses"):
         relation_error(odo[50:], late)
-    with pytest.raises(EvaluationError, match="timestamps"):
-        relation_error(odo.with_timestamps(None), late)
+    with pytest.raises(EvaluationError, match=r"timestamps \(e.g. a TUM-format file, or a KITTI file with --est-times"):
+        relation_error(odo.with_timestamps(None), late)  # (a KITTI file's way out, --est-times, was not named)
     # a log without relations (None) and a tolerance given as text were TypeErrors
     with pytest.raises(EvaluationError, match="no relations to score against .* got NoneType"):
         relation_error(odo, carmen_logs["fr079"].relations)
-    with pytest.raises(EvaluationError, match="max_time_diff_s must be a number of seconds, got '0.1'"):
+    # a bad setting is a ConfigError, as pairing's max_diff_s (it was an EvaluationError)
+    with pytest.raises(ConfigError, match="max_time_diff_s must be a number of seconds, got '0.1'"):
         relation_error(odo, late, max_time_diff_s="0.1")
+    with pytest.raises(ConfigError, match="max_time_diff_s must be a finite number >= 0, got -1.0"):
+        relation_error(odo, late, max_time_diff_s=-1.0)
 
 
 def test_aces_odometry_relation_error(carmen_logs):

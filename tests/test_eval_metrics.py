@@ -419,6 +419,7 @@ def test_orientation_errors_after_an_alignment_the_positions_hardly_fix_are_flag
     aligned = ape(short_gt, short_orb, "se3", "rotation_angle_deg")
     assert aligned.rmse > 100 and aligned.alignment.axis_sigma_deg > 1e4
     assert "not meaningful" in aligned.warning and aligned.to_dict(False)["warning"] == aligned.warning
+    assert aligned.warning.endswith("align='none' (--align none) compares orientations as estimated")  # (the CLI's option unnamed)
     assert ape(short_gt, short_orb, "se3", "translation").warning == ""  # positions are what the fit fits
     assert ape(short_gt, short_orb, "none", "rotation_angle_deg").warning == ""
     whole = ape(gt, orb, "se3", "rotation_angle_deg")

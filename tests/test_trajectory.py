@@ -28,6 +28,15 @@ def test_kitti_real_file_and_round_trip(tmp_path):
     np.testing.assert_allclose(back.poses_se3, traj.poses_se3, atol=1e-8)
 
 
+def test_kitti_file_keeps_georeferenced_positions(tmp_path):
+    """to_kitti wrote 10 significant digits: UTM positions (~5e6 m) came back up to 0.5 mm off (to_tum kept 1e-9 m)."""
+    traj = Trajectory.from_tum(shared_path("evo_testdata", "georeferenced.tum"))
+    assert np.abs(traj.positions_xyz).max() > 1e6
+    back = Trajectory.from_kitti(traj.to_kitti(tmp_path / "poses.txt"))
+    np.testing.assert_array_equal(back.positions_xyz, traj.positions_xyz)
+    np.testing.assert_allclose(back.poses_se3, traj.poses_se3, rtol=0, atol=1e-15)
+
+
 def test_tum_real_file_and_round_trip(tmp_path):
     traj = Trajectory.from_tum(shared_path("evo_testdata", "freiburg1_xyz-groundtruth.txt"))
     assert len(traj) == 3000

@@ -296,7 +296,7 @@ def alignment_warning(transform: AlignmentTransform | None) -> str:
     how = f"only to ~{transform.axis_sigma_deg:.2g} deg" if transform.axis_sigma_deg < 90 else "not at all"
     return (f"the positions fix the {transform.method} alignment's rotation about the path's main direction {how} (a "
             "nearly straight path, or residuals as large as its spread across it): orientation errors after this alignment "
-            "are not meaningful; align='none' compares orientations as estimated")
+            "are not meaningful; align='none' (--align none) compares orientations as estimated")
 
 
 #: How an estimate was aligned, in the words of labels and table titles (``alignment_label``)

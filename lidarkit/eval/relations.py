@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from lidarkit.errors import EvaluationError
+from lidarkit.errors import ConfigError, EvaluationError
 from lidarkit.io.carmen import Relations
 from lidarkit.params import is_real_number
 from lidarkit.trajectory import Trajectory
@@ -136,11 +136,12 @@ def relation_error(
         raise EvaluationError("no relations to score against (a CARMEN log has them when NAME.relations lies beside it, "
                               f"or with relations=FILE), got {type(relations).__name__}", source=source)
     if estimate.timestamps_s is None:
-        raise EvaluationError("the relations metric needs the estimate's timestamps (e.g. a TUM-format file)", source=source)
+        raise EvaluationError("the relations metric needs the estimate's timestamps (e.g. a TUM-format file, or a KITTI file "
+                              "with --est-times TIMES.txt)", source=source)
     if not is_real_number(max_time_diff_s):
-        raise EvaluationError(f"max_time_diff_s must be a number of seconds, got {max_time_diff_s!r}", source="max_time_diff_s")
+        raise ConfigError(f"max_time_diff_s must be a number of seconds, got {max_time_diff_s!r}", source="max_time_diff_s")
     if not (np.isfinite(max_time_diff_s) and max_time_diff_s >= 0):
-        raise EvaluationError(f"max_time_diff_s must be a finite number >= 0, got {max_time_diff_s!r}", source="max_time_diff_s")
+        raise ConfigError(f"max_time_diff_s must be a finite number >= 0, got {max_time_diff_s!r}", source="max_time_diff_s")
     if len(estimate) == 0 or len(relations) == 0:
         raise EvaluationError(f"nothing to score ({len(estimate)} poses, {len(relations)} relations)", source=source)
     i, di = nearest_pose_index(estimate.timestamps_s, relations.t1_s)
