@@ -518,7 +518,9 @@ def test_bad_vo_timestamps_named_before_the_run(tmp_path, capsys):
 def test_library_arguments_of_the_wrong_kind_are_one_clear_error():
     """Wrong argument types were TypeErrors and ValueErrors from deep inside (or, for strings that are true, taken as
     True: align_origin="no" aligned the origin); each is a LidarKitError naming the argument."""
+    from conftest import shared_path
     from lidarkit.eval import ape
+    from lidarkit.io import open_dataset
     from lidarkit.odometry import run
     from lidarkit.registration.vanilla import VanillaICP
     from lidarkit.trajectory import Trajectory
@@ -535,6 +537,9 @@ def test_library_arguments_of_the_wrong_kind_are_one_clear_error():
         (lambda: ape(still, still, align="se3", n_to_align="5"), "n_to_align must be a whole number of poses, got '5'"),
         (lambda: ape(still, still, align_origin="no"), "align_origin must be True or False, got 'no'"),
         (lambda: VanillaICP(max_iterations=-1), "vanilla: invalid parameters (max_iterations: Input should be greater than or equal to 1)"),
+        # (Python's words: "got an unexpected keyword argument 'max_range_m'", naming one of the two)
+        (lambda: open_dataset("kitti", shared_path("kitti_odometry", "sequences", "00"), max_range_m=50, foo=1),
+         "kitti dataset options: unknown options 'max_range_m', 'foo'; valid options: sequence, "),
     ):
         with pytest.raises(LidarKitError) as info:
             call()

@@ -137,9 +137,10 @@ def open_dataset(kind: str, path: str | os.PathLike, **options: Any) -> Any:
         except TypeError as err:
             params = list(signature.parameters.values())[1:]
             valid = [p.name for p in params if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)]
-            raise ConfigError(
-                f"{err}; valid options: {', '.join(valid) or 'none'}", source=f"{kind} dataset options"
-            ) from None
+            unknown = [name for name in options if name not in valid]
+            # (Python's own words read "got an unexpected keyword argument 'min_range_m'")
+            why = f"unknown option{'s' if len(unknown) > 1 else ''} {', '.join(map(repr, unknown))}" if unknown else str(err)
+            raise ConfigError(f"{why}; valid options: {', '.join(valid) or 'none'}", source=f"{kind} dataset options") from None
         options = _typed_options(reader, kind, options)
     return reader(path, **options)
 
