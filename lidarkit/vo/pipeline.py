@@ -300,7 +300,8 @@ class MonoVO:
         for j in range(s + 1, n):
             image, reason = load(j)
             start = time.perf_counter()
-            cv2.setRNGSeed(int(cfg.seed or 0) * 1_000_003 + j)  # for OpenCV calls that do use its RNG
+            # for OpenCV calls that do use its RNG; a C int (seed 2148 overflowed it: "integer won't fit into a C int")
+            cv2.setRNGSeed((int(cfg.seed or 0) * 1_000_003 + j) % 2**31)
             diag = FrameDiagnostics(frame=j, ref_frame=ref_index, n_features=len(ref_feats.points_px))
             result = None
             cur_image = None
