@@ -193,6 +193,10 @@ def test_propagated_covariance_grows_along_the_path():
     # a missing frame reuses the previous covariance
     rel[10] = np.nan
     np.testing.assert_allclose(propagate(poses, rel), cov)
+    # missing from frame 1 (a fallback there: every pose after was NaN): the first frame's that has one
+    rel[1:3] = np.nan
+    np.testing.assert_allclose(propagate(poses, rel), cov)
+    assert np.isnan(propagate(poses, np.full_like(rel, np.nan))[1:]).all()  # none at all: NaN, as the runner says
     # relative errors in the same convention recover a known perturbation
     noisy = poses.copy()
     for k in range(1, 30):

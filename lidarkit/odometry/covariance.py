@@ -42,11 +42,13 @@ def with_motion_prior(covariance: np.ndarray, prior_sigma: tuple[float, float] =
 def propagate(poses: np.ndarray, relative_covariances: np.ndarray) -> np.ndarray:
     """``(n, 6, 6)`` world-frame pose covariances from ``(n, 4, 4)`` poses and the ``(n, 6, 6)`` covariance of each
     frame's relative motion (row 0 unused). A frame without one (NaN: a fallback, or a variant that gives none)
-    takes the previous frame's: the motion it reused is no better known. Each frame's covariance is first fused
-    with the motion prior (:func:`with_motion_prior`)."""
+    takes the previous frame's: the motion it reused is no better known; one before any frame has one takes the
+    first that does (a fallback at frame 1 left every pose NaN). Each frame's covariance is first fused with the
+    motion prior (:func:`with_motion_prior`). All NaN when no frame has one."""
     n = len(poses)
     out = np.zeros((n, 6, 6))
-    last = None
+    given = [k for k in range(1, n) if np.all(np.isfinite(relative_covariances[k]))]
+    last = with_motion_prior(relative_covariances[given[0]]) if given else None
     for k in range(1, n):  # a running sum over frames: each step needs the previous one
         rel = relative_covariances[k]
         if np.all(np.isfinite(rel)):
