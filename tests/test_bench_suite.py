@@ -304,6 +304,76 @@ def test_reader_path_options_resolve_against_dataset_then_suite_folder(tmp_path)
     assert resolve_option_paths(sample, tmp_path) == sample
 
 
+def test_a_reader_path_option_is_never_found_from_the_working_directory(tmp_path, monkeypatch):
+    """``poses: lidar_poses.txt`` found neither in the scan folder nor beside the suite was kept relative: each run read
+    it from its own working directory, so one job key stood for two poses files (resumed with the other's APE)."""
+    import shutil
+
+    from lidarkit.bench.datasets import sample_path
+
+    shutil.copytree(sample_path("kitti_pair"), tmp_path / "data" / "scans", ignore=shutil.ignore_patterns("*.md", "*.txt"))
+    (tmp_path / "suites").mkdir()
+    (tmp_path / "run").mkdir()
+    identity = "1 0 0 0 0 1 0 0 0 0 1 0\n"
+    (tmp_path / "run" / "lidar_poses.txt").write_text(identity * 2)  # only in the working directory
+    monkeypatch.chdir(tmp_path / "run")
+    path = write(tmp_path / "suites", """
+        experiments:
+          - task: odometry
+            dataset: {kind: folder, path: ../data/scans, poses: lidar_poses.txt}
+            methods: [vanilla]
+        """)
+    with pytest.raises(DataError) as info:
+        load_suite(path)
+    assert str(info.value) == (f"{path} (experiments[0].dataset, line 4): poses 'lidar_poses.txt' is found only from the "
+                               f"working directory, neither in the dataset folder {tmp_path / 'data' / 'scans'} nor beside the "
+                               f"suite file (in {tmp_path / 'suites'}): give it from the suite file's folder or absolute")
+    (tmp_path / "suites" / "lidar_poses.txt").write_text(identity * 2)
+    job = load_suite(path).jobs[0]
+    assert job.dataset["poses"] == str(tmp_path / "suites" / "lidar_poses.txt")  # absolute: the key names the file
+    monkeypatch.chdir(tmp_path)
+    assert load_suite(path).jobs[0].key("0") == job.key("0")
+
+
+def test_text_params_that_read_as_numbers_stay_text(tmp_path):
+    """A string param "nan" / "Infinity" became a float at load (a ValueError traceback: "Out of range float values are
+    not JSON compliant"), and log_warning "1" and "1.0" were refused as one job written two ways: they are two texts."""
+    path = write(tmp_path, """
+        experiments:
+          - task: selftest
+            dataset: {kind: synthetic}
+            methods:
+              - {name: fail, params: {message: "nan"}}
+              - {name: sleep, params: {log_warning: "Infinity"}}
+              - {name: sleep, params: {log_warning: "1"}}
+              - {name: sleep, params: {log_warning: "1.0"}}
+        """)
+    assert [j.params for j in load_suite(path).jobs] == [
+        {"message": "nan"}, {"log_warning": "Infinity"}, {"log_warning": "1"}, {"log_warning": "1.0"}]
+    path.write_text(path.read_text().replace('log_warning: "1.0"', 'seconds: 1').replace('log_warning: "1"', 'seconds: "1.0"'))
+    with pytest.raises(ConfigError, match=r"methods\[3\], line 9\): sleep\(seconds=1\) runs the same job as experiments\[0\]"
+                       r".methods\[2\] \(a value written two ways"):
+        load_suite(path)  # a number and a numeric string are still one value
+
+
+def test_an_empty_suite_seed_list_is_named_where_it_is_written(tmp_path):
+    """``seeds: []`` on line 2 read "(experiments[0].seeds, line 4): no seeds", blaming an experiment without seeds."""
+    path = write(tmp_path, """
+        seeds: []
+        experiments:
+          - task: selftest
+            dataset: {kind: synthetic}
+            methods: [sleep]
+        """)
+    with pytest.raises(ConfigError) as info:
+        load_suite(path)
+    assert str(info.value) == f"{path} (seeds, line 2): no seeds"
+    path.write_text(path.read_text().replace("seeds: []", "seeds: [1]") + "    seeds: []\n")
+    with pytest.raises(ConfigError) as info:
+        load_suite(path)
+    assert str(info.value) == f"{path} (experiments[0].seeds, line 7): no seeds"
+
+
 def test_uninstalled_methods_are_skipped_only_when_asked(tmp_path, monkeypatch):
     from lidarkit.bench.tasks.selftest import SelfTestTask
 

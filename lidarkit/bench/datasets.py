@@ -61,8 +61,10 @@ def resolve_option_paths(spec: dict[str, Any], base_dir: Path) -> dict[str, Any]
     """Make relative path options of a reader absolute (e.g. ``velodyne_dir``, ``poses``).
 
     Options the reader's signature types as ``os.PathLike`` are looked up first inside the dataset folder,
-    then beside the suite file; the first that exists becomes an absolute path (anything else is left to
-    the reader). Bundled samples and generated kinds are left alone.
+    then beside the suite file; the first that exists becomes an absolute path. Found in neither but from the working
+    directory: DataError (left relative, each run read the file of its own working directory: one job key, different
+    files); found nowhere: left to the reader, which looks in its own folders (KITTI's sequence folder) and names them.
+    The reader's own default (TUM's ``groundtruth.txt``), bundled samples and generated kinds are left alone.
     """
     kind, path = spec.get("kind"), spec.get("path")
     if kind in PATHLESS_KINDS or not path or str(path).startswith(SAMPLE_PREFIX):
@@ -82,11 +84,15 @@ def resolve_option_paths(spec: dict[str, Any], base_dir: Path) -> dict[str, Any]
             continue
         if "PathLike" not in str(params[key].annotation):
             continue
-        for root in (data_dir, base_dir):
-            candidate = (root / value).resolve()
-            if candidate.exists():
-                out[key] = str(candidate)
-                break
+        if value == params[key].default:
+            continue
+        found = [root / value for root in (data_dir, base_dir) if (root / value).exists()]
+        if found:
+            out[key] = str(found[0].resolve())
+        elif Path(value).exists():
+            raise DataError(f"{key} {value!r} is found only from the working directory, neither in the dataset folder {data_dir} "
+                            f"nor beside the suite file (in {base_dir}): give it from the suite file's folder or absolute",
+                            source="dataset")
     return out
 
 

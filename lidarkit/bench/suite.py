@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import itertools
 import logging
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -218,12 +219,15 @@ def _count_jobs(model: SuiteModel) -> int:
 
 def _same_value(value: Any, strings: bool = False) -> Any:
     """``value`` with whole floats as ints (``100.0`` and ``100`` make one job), recursively; ``strings``: numeric strings
-    as numbers too (``"50"`` and ``50``: what the validators make of them)."""
+    as numbers too (``"50"`` and ``50``: what the validators make of them), but not "nan" / "inf" (no JSON number)."""
     if strings and isinstance(value, str):
         try:
-            value = float(value)
+            number = float(value)
         except ValueError:
             return value
+        if not math.isfinite(number):
+            return value
+        value = number
     if isinstance(value, float) and value.is_integer():
         return int(value)
     if isinstance(value, dict):
@@ -231,6 +235,18 @@ def _same_value(value: Any, strings: bool = False) -> Any:
     if isinstance(value, (list, tuple)):
         return [_same_value(v, strings) for v in value]
     return value
+
+
+def _written_two_ways(a: Any, b: Any) -> bool:
+    """True when ``a`` and ``b`` are one value with its numbers written differently (1 and 1.0, 50 and "50"), recursively.
+    Two strings are one value only when equal: "1" and "1.0" are two texts to a text parameter (they were refused)."""
+    if isinstance(a, str) and isinstance(b, str):
+        return a == b
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(_written_two_ways(a[k], b[k]) for k in a)
+    if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
+        return len(a) == len(b) and all(map(_written_two_ways, a, b))
+    return canonical_json(_same_value(a, strings=True)) == canonical_json(_same_value(b, strings=True))
 
 
 def _refuse_duplicates(model: SuiteModel, locator: _Locator) -> None:
@@ -268,6 +284,8 @@ def _refuse_duplicates(model: SuiteModel, locator: _Locator) -> None:
             if isinstance(seeds, list) and len(set(seeds)) != len(seeds):
                 dup = sorted({s for s in seeds if seeds.count(s) > 1})
                 fail(f"duplicate seeds {dup}", loc)
+            if seeds == []:  # (named here, where it is written: a suite's [] was blamed on the experiment using it)
+                fail("no seeds", loc)
             if isinstance(seeds, int) and seeds < 1:
                 fail(f"seeds must be >= 1 (a count) or a list, got {seeds}", loc)
             if isinstance(seeds, list) and any(s < 0 for s in seeds):
@@ -295,7 +313,8 @@ def load_suite(path: str | Path, *, skip_unavailable: bool = False, only_tasks: 
     base_dir = path.parent
     jobs: list[Job] = []
     seen: set[str] = set()
-    alike: dict[str, tuple[int, int]] = {}  # a job's spec with its numbers written one way -> (experiment, method) first
+    # a job's spec with its numbers written one way -> (experiment, method, params) of the jobs so far
+    alike: dict[str, list[tuple[int, int, dict[str, Any]]]] = {}
     skipped: list[tuple[str, str]] = []
     validated: set[str] = set()
     for i, exp in enumerate(model.experiments):
@@ -342,8 +361,6 @@ def load_suite(path: str | Path, *, skip_unavailable: bool = False, only_tasks: 
             continue
 
         seeds = _seeds(exp.seeds if exp.seeds is not None else model.seeds)
-        if not seeds:
-            raise ConfigError("no seeds", source=path, location=locator.location((*exp_loc, "seeds")))
         installed = task.available_methods() if skip_unavailable else None
         for j, method in enumerate(exp.methods):
             method = MethodSpec(name=method) if isinstance(method, str) else method
@@ -382,11 +399,12 @@ def load_suite(path: str | Path, *, skip_unavailable: bool = False, only_tasks: 
                         if key in seen:
                             continue
                         same = canonical_json({**job.spec(), "params": _same_value(params, strings=True)})
-                        if same in alike:  # 1 and 1.0 (or "50" and 50): one job under two keys, and one report row dropped
-                            raise ConfigError(f"{job.method_label} runs the same job as experiments[{alike[same][0]}].methods"
-                                              f"[{alike[same][1]}] (a value written two ways, e.g. 1 and 1.0): give it once",
-                                              source=path, location=locator.location(m_loc))
-                        alike[same] = (i, j)
+                        for first_i, first_j, first in alike.get(same, []):
+                            if _written_two_ways(params, first):  # 1 and 1.0 (or "50" and 50): one job under two keys
+                                raise ConfigError(f"{job.method_label} runs the same job as experiments[{first_i}].methods"
+                                                  f"[{first_j}] (a value written two ways, e.g. 1 and 1.0): give it once",
+                                                  source=path, location=locator.location(m_loc))
+                        alike.setdefault(same, []).append((i, j, params))
                         seen.add(key)
                         jobs.append(job)
     return Suite(name=model.name, path=path, jobs=jobs, description=model.description, skipped=skipped)
