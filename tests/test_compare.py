@@ -379,3 +379,63 @@ def test_a_particle_filter_run_folder_is_named_as_one(tmp_path, capsys):
     capsys.readouterr()
     assert cli_exit_code(["compare", str(tmp_path / "study"), str(tmp_path / "one")]) == 1
     assert f"error: {tmp_path / 'study'}: a particle-filter run folder" in capsys.readouterr().err
+
+
+def test_task_without_metric_takes_the_default_metric_of_that_task(tmp_path):
+    """`--task icp_pair` without `--metric` took its default (ape_rmse_m) from the suite's other task, then refused it:
+    "unknown metric 'ape_rmse_m'; these results have: ..., translation_error_m"."""
+    _task("odo_default_test_task", _error)
+    _task("pair_default_test_task", lambda job: {"translation_error_m": (0.1 if job.method == "good" else 0.5) + 0.01 * job.seed})
+    out = _bench(tmp_path, "s", "seeds: 6\nexperiments:\n"
+                 "  - {name: pairs, task: pair_default_test_task, dataset: {kind: synthetic}, methods: [good, bad]}\n"
+                 "  - {name: odo, task: odo_default_test_task, dataset: {kind: synthetic}, methods: [good, bad]}\n")
+    result = compare(out, out, method_a="good", method_b="bad", task="pair_default_test_task")
+    assert (result.metric, result.n_pairs, result.better) == ("translation_error_m", 6, "a")
+    assert compare(out, out, method_a="good", method_b="bad", task="odo_default_test_task").metric == "ape_rmse_m"
+
+
+def test_units_that_differ_only_in_task_options_are_named_so(tmp_path):
+    """An option written out at its default value in one suite only (pf `mse_start: 10`) read "runs over different data:
+    no (dataset, seed) in common", with the same labels ("F, seed 0; ...") on both sides."""
+    _task("options_test_task", _error)
+    suite = "seeds: 3\nexperiments:\n  - {{task: options_test_task, dataset: {{kind: synthetic, name: F}}, {options}methods: [{method}]}}\n"
+    a = _bench(tmp_path, "a", suite.format(options="", method="good"))
+    b = _bench(tmp_path, "b", suite.format(options="options: {start: 10}, ", method="bad"))
+    with pytest.raises(EvaluationError) as exc:
+        compare(a, b)
+    assert str(exc.value) == (f"compare: runs with different task options over the same (dataset, seed) units: {{}} in {a} "
+                              f"(good), {{start: 10}} in {b} (bad): units pair only when their options are written alike (an "
+                              "option set to its default value is not one left out)")
+
+
+def test_too_few_pairs_say_which_units_were_left_out(tmp_path):
+    """With B's job failed on 7 of 8 seeds the error read "needs at least 2 matched seeds, got 1 (a suite's `seeds: N`
+    ...)", as if the suite had one seed: the note on the failed jobs was built after the test refused."""
+    def flaky(job):
+        if job.method == "bad" and job.seed < 7:
+            raise RuntimeError("failed on purpose")
+        return _error(job)
+
+    _task("few_pairs_test_task", flaky)
+    out = _bench(tmp_path, "s", "seeds: 8\nexperiments:\n  - {task: few_pairs_test_task, dataset: {kind: synthetic}, methods: [good, bad]}\n")
+    with pytest.raises(EvaluationError) as exc:
+        compare(out, out, method_a="good", method_b="bad")
+    assert str(exc.value) == ("ape_rmse_m: a paired test needs at least 2 matched seeds, got 1 (a suite's `seeds: N` over "
+                              "seeded data, more datasets or sequences over fixed data such as KITTI: 2 or more, 6 or more "
+                              "for p < 0.05); 7 (dataset, seed) unit(s) where B's job failed are left out (lidarkit report "
+                              "lists why)")
+
+
+def test_run_folders_with_one_kitti_segment_compare_per_frame_by_default(tmp_path):
+    """A path just over 100 m has one KITTI segment: the default metric (segment drift, chosen on length alone) failed
+    with "needs at least 2 matched segments, got 1" and no hint of the per-frame metric."""
+    from lidarkit.odometry import run
+
+    run("sim:street?frames=112&beams=8&azimuths=360&seed=0", "kiss", out_dir=tmp_path / "kiss")  # (102.0 m: one segment)
+    result = compare(tmp_path / "kiss", tmp_path / "kiss")
+    assert (result.metric, result.pairing, result.n_pairs) == ("rpe_translation_m", "frame", 111)
+    assert result.note == "1 KITTI segment in common (a paired test needs 2): compared per frame (rpe_translation_m)"
+    with pytest.raises(EvaluationError) as exc:
+        compare(tmp_path / "kiss", tmp_path / "kiss", metric="segment_translation_pct")
+    assert str(exc.value) == ("segment_translation_pct: a paired test needs at least 2 matched segments, got 1 (longer paths, "
+                              "or compare per frame: --metric rpe_translation_m)")

@@ -265,8 +265,8 @@ def compare(
     ``noise_from``: a baseline folder whose band for the compared metric (the default one too) raises ``noise``: its
     widest over the jobs of the compared task (and methods, when it pinned them); ConfigError when it has none.
 
-    Odometry run folders pair per KITTI segment (``metric="segment_translation_pct"``, the default when the
-    path allows 100 m segments) or per frame (``rpe_translation_m``, the default otherwise). Bench results
+    Odometry run folders pair per KITTI segment (``metric="segment_translation_pct"``, the default when both
+    paths share 2 segments of 100 m or more) or per frame (``rpe_translation_m``, the default otherwise). Bench results
     folders pair per (dataset, seed) on a job metric (default: KITTI drift, else APE RMSE); ``method_a`` /
     ``method_b`` pick a method when a folder holds several (the same folder may be given twice); only the jobs of each
     folder's ``suite.json`` are compared, as its report holds them (``every_result``: every result in the folder);
@@ -306,6 +306,7 @@ def compare(
         if every_result:  # (--all was ignored without a word)
             raise ConfigError("every result (--all) applies to bench results folders only", source="all")
         note = _same_ground_truth(side_a, side_b, (name_a, name_b))
+        given_metric = metric
         if metric is None:  # (segments on both truths: A's alone made the default depend on the order given)
             from lidarkit.eval import drift_segments_possible
 
@@ -318,6 +319,10 @@ def compare(
                               f"per {'segment' if metric.startswith('segment_') else 'frame'}: give that noise with --noise",
                               source="--noise-from")
         va, vb, left_out = _paired_segments(side_a, side_b, metric)
+        if given_metric is None and len(va) < 2 and metric.startswith("segment_"):  # (paths just over 100 m: one segment)
+            left_out = f"{len(va)} KITTI segment in common (a paired test needs 2): compared per frame (rpe_translation_m)"
+            metric = "rpe_translation_m"
+            va, vb, _ = _paired_segments(side_a, side_b, metric)
         note = "; ".join(n for n in (note, left_out) if n)
         pairing = "segment" if metric.startswith("segment_") else "frame"
         result = paired_test(va, vb, name_a=name_a, name_b=name_b, metric=metric, pairing=pairing,
@@ -327,6 +332,7 @@ def compare(
     keys_a, keys_b = set(side_a.values), set(side_b.values)
     common = sorted(keys_a & keys_b)
     if not common:
+        _other_options(side_a, side_b)
         raise EvaluationError(
             f"runs over different data: no (dataset, seed) in common between {side_a.path} ({side_a.name}: "
             f"{_few(sorted(set(side_a.labels.values())))}) and {side_b.path} ({side_b.name}: "
@@ -336,17 +342,17 @@ def compare(
     def has(k: str, name: str) -> bool:
         return _usable(side_a.values[k].get(name)) and _usable(side_b.values[k].get(name))
 
+    if task is not None:  # (first: the default metric was another task's, then refused as unknown)
+        tasks = sorted({_task_of(k) for k in common})
+        if task not in tasks:
+            raise ConfigError(f"no unit of task {task!r} in both; these results hold: {', '.join(tasks)}", source="task")
+        common = [k for k in common if _task_of(k) == task]
     if metric is None:  # the first default metric any unit has (a suite of several tasks: the units of its task)
         present = set.union(*(set(side_a.values[k]) & set(side_b.values[k]) for k in common))
         metric = next((m for m in DEFAULT_BENCH_METRICS if m in present), None)
         if metric is None:
             raise EvaluationError(f"no default metric in these results; pass one of: {', '.join(sorted(present))}",
                                   source="compare")
-    if task is not None:
-        tasks = sorted({_task_of(k) for k in common})
-        if task not in tasks:
-            raise ConfigError(f"no unit of task {task!r} in both; these results hold: {', '.join(tasks)}", source="task")
-        common = [k for k in common if _task_of(k) == task]
     if not any(has(k, metric) for k in common):  # in no unit: a misspelt metric, not results that lack it
         present = set.union(*(set(side_a.values[k]) & set(side_b.values[k]) for k in common))
         if metric in present:  # (it read "unknown metric 'iterations'; these results have: ..., iterations, ...")
@@ -386,11 +392,6 @@ def compare(
     pairing, collapsed = "dataset" if one_each else "seed", _one_unit_per_dataset(common, va, vb, varies)
     if collapsed is not None:  # the seeds change nothing within a dataset: its seeds are one measurement
         va, vb, pairing = collapsed
-    result = paired_test(va, vb, name_a=name_a, name_b=name_b, metric=metric, pairing=pairing,
-                         lower_is_better=not (metric in side_a.higher_is_better | side_b.higher_is_better or higher_is_better(metric)),
-                         alpha=alpha, seed=seed,
-                         noise=_with_measured_noise(noise, noise_from, metric, next(iter(tasks_with)), (side_a.name, side_b.name)),
-                         repeated=False if pairing == "seed" and any(varies.values()) else None)
     notes = []
     if pairing == "unit":  # (a fixed dataset beside seeded ones)
         notes.append("the seeds of a dataset that gives each side one value whatever the seed count as one unit")
@@ -415,6 +416,16 @@ def compare(
         if side.n_left_out - side.n_earlier_version:
             notes.append(f"{side.n_left_out - side.n_earlier_version} result(s) in {folder} of jobs not in its suite.json "
                          "(an earlier suite) left out (--all: every result)")
+    try:
+        result = paired_test(va, vb, name_a=name_a, name_b=name_b, metric=metric, pairing=pairing,
+                             lower_is_better=not (metric in side_a.higher_is_better | side_b.higher_is_better or higher_is_better(metric)),
+                             alpha=alpha, seed=seed,
+                             noise=_with_measured_noise(noise, noise_from, metric, next(iter(tasks_with)), (side_a.name, side_b.name)),
+                             repeated=False if pairing == "seed" and any(varies.values()) else None)
+    except EvaluationError as err:  # too few pairs: the notes say why ("got 1" of a suite of 8 seeds, 7 of B's jobs failed)
+        if notes and va.size < 2:
+            raise EvaluationError(f"{err.reason}; {'; '.join(notes)}", source=err.source) from None
+        raise
     return dataclasses.replace(result, note="; ".join(notes)) if notes else result
 
 
@@ -427,6 +438,26 @@ def _usable(value: Any) -> bool:
     """A finite number: a NaN or an infinity in a job result is a missing value (a NaN read "1 non-finite value(s)
     among 8", naming neither the metric nor the unit)."""
     return isinstance(value, (int, float)) and math.isfinite(value)
+
+
+def _other_options(side_a: BenchRuns, side_b: BenchRuns) -> None:
+    """EvaluationError naming each side's task options when the units would pair but for them (``mse_start: 10``, the
+    pf task's default, written in one suite only read "runs over different data" with the same labels on both sides)."""
+    import yaml
+
+    def by_unit(side: BenchRuns) -> dict[str, dict[str, Any]]:
+        return {json.dumps({k: v for k, v in json.loads(key).items() if k != "options"}, sort_keys=True):
+                json.loads(key).get("options") or {} for key in side.values}
+
+    units_a, units_b = by_unit(side_a), by_unit(side_b)
+    both = units_a.keys() & units_b.keys()
+    if both:
+        shown = [" / ".join(sorted({yaml.safe_dump(units[k], default_flow_style=True).strip() for k in both}))
+                 for units in (units_a, units_b)]
+        raise EvaluationError(f"runs with different task options over the same (dataset, seed) units: {shown[0]} in "
+                              f"{side_a.path} ({side_a.name}), {shown[1]} in {side_b.path} ({side_b.name}): units pair only when "
+                              "their options are written alike (an option set to its default value is not one left out)",
+                              source="compare")
 
 
 def _dataset_of(key: str) -> str:

@@ -270,7 +270,8 @@ def paired_test(
     if va.size < 2:
         more = {"seed": " (a suite's `seeds: N` over seeded data, more datasets or sequences over fixed data such as KITTI: "
                         "2 or more, 6 or more for p < 0.05)",
-                "dataset": " (more datasets or sequences: 2 or more, 6 or more for p < 0.05)"}.get(pairing, "")
+                "dataset": " (more datasets or sequences: 2 or more, 6 or more for p < 0.05)",
+                "segment": " (longer paths, or compare per frame: --metric rpe_translation_m)"}.get(pairing, "")
         raise EvaluationError(f"a paired test needs at least 2 matched {pairing}s, got {va.size}{more}", source=metric)
     if not 0.0 < alpha < 1.0:
         raise ConfigError(f"alpha must be in (0, 1), got {alpha}", source="alpha")
