@@ -117,6 +117,19 @@ def test_options_on_a_path_without_its_kind_say_the_kind_goes_first(exports):
         open_sequence(f"{folder}?drop_nonfinite=true")
 
 
+def test_a_bag_named_with_a_question_mark_is_read_whole_after_its_kind(exports, tmp_path):
+    """``rosbag:q?x.bag`` was cut at the name's own '?' and refused "rosbag dataset option 'x.bag': expected KEY=VALUE"
+    (without the kind it ran): a path that exists is read whole, options after the last '?' that leaves one."""
+    import shutil
+
+    from lidarkit.odometry import open_sequence
+
+    bag = shutil.copy(exports[("rosbag1", "sqlite3")], tmp_path / "q?x.bag")
+    assert len(open_sequence(f"rosbag:{bag}")) == len(open_sequence(f"rosbag:{bag}?topic=/points")) == N_FRAMES
+    with pytest.raises(ConfigError, match="rosbag dataset options: unknown option 'foo'"):
+        open_sequence(f"rosbag:{bag}?foo=1")
+
+
 @pytest.mark.parametrize("fmt,storage,name,kind", FORMATS)
 def test_bag_round_trip_points_times_and_ground_truth(sim, exports, fmt, storage, name, kind):
     ds = open_dataset(kind, exports[(fmt, storage)])

@@ -106,6 +106,23 @@ def test_tum_poses_give_timestamps(tmp_path, rng):
     assert ds.read_scan(1).timestamp_s == pytest.approx(10.1)
 
 
+def test_tum_stamps_replaced_by_timestamps_far_apart_are_a_warning(tmp_path, rng, caplog):
+    """A TUM ground truth stamped 10.0, 10.1, 10.2 s took ``timestamps=`` 110.0, 110.1, 110.2 s without a word (an image
+    folder warns); more than half a frame apart is now a logged warning, within it none."""
+    folder, _ = _npy_folder(tmp_path, rng)
+    Trajectory(np.tile(np.eye(4), (3, 1, 1)), np.array([10.0, 10.1, 10.2])).to_tum(tmp_path / "poses.tum")
+    with caplog.at_level(logging.WARNING, logger="lidarkit.io.folder"):
+        ds = ScanFolder(folder, poses=tmp_path / "poses.tum", poses_format="tum", timestamps=[110.0, 110.1, 110.2])
+    np.testing.assert_allclose(ds.ground_truth.timestamps_s, [110.0, 110.1, 110.2])
+    assert [r.getMessage() for r in caplog.records] == [
+        f"{tmp_path / 'poses.tum'}: pose 0 is stamped 100.000 s from its scan's time stamp (half a frame is 0.050 s); "
+        "poses and scans are paired by order, one each, and the poses take the stamps of timestamps="]
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="lidarkit.io.folder"):
+        ScanFolder(folder, poses=tmp_path / "poses.tum", poses_format="tum", timestamps=[10.02, 10.12, 10.22])
+    assert not caplog.records
+
+
 # ---- errors -----------------------------------------------------------------------------------------------
 def test_poses_count_must_match_scans(tmp_path, rng):
     folder, _ = _npy_folder(tmp_path, rng)

@@ -405,3 +405,27 @@ def test_one_sweep_simulator_export_is_retimed_by_its_frame_rate(tmp_path):
     named = open_dataset("kitti", folder, poses_file="poses_start.txt").ground_truth
     assert named.timestamps_s.tolist() == pytest.approx([0.0], abs=1e-12)
     assert named.meta["pose_instant"] == "start"
+
+
+def test_an_explicit_00_or_a_name_asked_of_a_sequence_folder_is_refused(tmp_path):
+    """``sequence=00`` (the default, so taken for no choice) or ``sequence=xyz`` on ``sequences/06`` read sequence 06
+    without a word, and ``?sequence=abc`` on ``sequences/00`` read 00; only another number was refused."""
+    from lidarkit.odometry.inputs import open_sequence
+
+    seq06 = shared_path("kitti_images", "sequences", "06")
+    for asked in ("00", 0, "xyz"):
+        with pytest.raises(ConfigError) as err:
+            KittiOdometry(seq06, sequence=asked)
+        assert str(err.value) == (f"{seq06}: the folder is sequence 06 itself; sequence={asked} names another "
+                                  "(give the odometry root that holds sequences/)")
+    assert KittiOdometry(seq06, sequence="6").name == KittiOdometry(seq06, sequence="06").name == "kitti_06"
+    seq00 = shared_path("kitti_odometry", "sequences", "00")
+    with pytest.raises(ConfigError, match="the folder is sequence 00 itself; sequence=abc names another"):
+        open_sequence(f"kitti:{seq00}?sequence=abc")
+    assert len(open_sequence(f"kitti:{seq00}?sequence=00")) == len(open_sequence(f"kitti:{seq00}")) == 10
+    renamed = tmp_path / "drive_a"  # a folder of one sequence under a name: that name is its own, another is not
+    shutil.copytree(seq00, renamed)
+    assert len(KittiOdometry(renamed, sequence="drive_a")) == 10
+    with pytest.raises(ConfigError, match=r"one sequence itself \(no sequences/ inside\); sequence=00 names another"):
+        KittiOdometry(renamed, sequence="00")
+    assert KittiOdometry(shared_path("kitti_odometry"), sequence="00").name == "kitti_00"  # a root: 00 is a choice

@@ -8,6 +8,7 @@ likewise.
 
 from __future__ import annotations
 
+import logging
 import os
 import re
 from functools import cached_property
@@ -22,6 +23,7 @@ from lidarkit.textfile import read_numeric_table
 from lidarkit.trajectory import Trajectory
 
 POSE_FORMATS = ("kitti", "tum")
+log = logging.getLogger(__name__)
 
 
 def natural_key(name: str) -> tuple:
@@ -130,10 +132,24 @@ class ScanFolder:
         if len(gt) != len(self.scan_paths):
             raise DataError(f"{len(gt)} poses for {len(self.scan_paths)} scans in {self.path}", source=self.poses_path)
         if self._timestamps_s is not None:
+            if gt.timestamps_s is not None:
+                self._warn_stamps_apart(gt.timestamps_s)
             gt = gt.with_timestamps(self._timestamps_s)
         elif gt.timestamps_s is not None:
             self._timestamps_s = gt.timestamps_s.copy()
         return gt.with_name(f"{self.name}_gt")
+
+    def _warn_stamps_apart(self, pose_stamps: np.ndarray) -> None:
+        """A TUM file's own stamps give way to ``timestamps``: say so when they disagree by more than half a frame
+        (stamps 100 s apart were replaced without a word), as an image folder does."""
+        steps = np.diff(self._timestamps_s)
+        half_frame = 0.5 * float(np.median(steps)) if len(steps) else 0.0
+        apart = np.abs(pose_stamps - self._timestamps_s)
+        k = int(np.argmax(apart))
+        if half_frame > 0 and apart[k] > half_frame:
+            log.warning("%s: pose %d is stamped %.3f s from its scan's time stamp (half a frame is %.3f s); poses and "
+                        "scans are paired by order, one each, and the poses take the stamps of timestamps=",
+                        self.poses_path, k, float(apart[k]), half_frame)
 
     def __len__(self) -> int:
         return len(self.scan_paths)

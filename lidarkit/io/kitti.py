@@ -170,7 +170,7 @@ class KittiOdometry:
     def __init__(
         self,
         root: str | os.PathLike,
-        sequence: str | int = "00",
+        sequence: str | int | None = None,
         *,
         drop_nonfinite: bool = False,
         velodyne_dir: str | os.PathLike | None = None,
@@ -187,13 +187,15 @@ class KittiOdometry:
             raise ConfigError(
                 f"unknown ground_truth_frame {ground_truth_frame!r}; known: auto, lidar, camera", source="ground_truth_frame"
             )
-        self.sequence = f"{int(sequence):02d}" if str(sequence).isdigit() else str(sequence)
+        # None: 00, or the sequence folder given (a sequence asked of a sequence folder must be its own, 00 too)
+        asked = None if sequence is None else str(sequence)
+        self.sequence = "00" if asked is None else f"{int(asked):02d}" if asked.isdigit() else asked
         self.drop_nonfinite = drop_nonfinite
         root = Path(root)
         if not root.is_dir():
             raise DataError("dataset folder not found" if not root.exists() else "not a folder", source=root)
         self.root = root
-        self.sequence_dir, odometry_root = self._locate_sequence(root)
+        self.sequence_dir, odometry_root = self._locate_sequence(root, asked)
         # titled after the folder: kitti_NN for a numbered KITTI sequence, the folder's own name otherwise
         folder = self.sequence_dir.name
         self.name = f"kitti_{self.sequence}" if folder.isdigit() or folder == self.sequence else folder
@@ -264,21 +266,22 @@ class KittiOdometry:
                 **correction_options(self.vertical_correction, self._correct)}
 
     # ---- layout ------------------------------------------------------------------------------------
-    def _locate_sequence(self, root: Path) -> tuple[Path, Path | None]:
-        """(sequence folder, odometry root or None when ``root`` is the sequence folder itself)."""
+    def _locate_sequence(self, root: Path, asked: str | None) -> tuple[Path, Path | None]:
+        """(sequence folder, odometry root or None when ``root`` is the sequence folder itself). ``asked``: the
+        ``sequence`` given, or None; on a sequence folder one other than the folder's own is refused (an explicit 00
+        or a name such as ``xyz`` read sequence 05 without a word)."""
         candidate = root / "sequences" / self.sequence
         if candidate.is_dir():
             return candidate, root
         if (root / "velodyne").is_dir() or (root / "image_0").is_dir() or (root / "calib.txt").is_file():
-            asked = str(self.sequence)
-            if root.name.isdigit():
-                if asked.isdigit() and int(asked) not in (0, int(root.name)):  # (00 is the default: not a choice)
-                    raise ConfigError(f"the folder is sequence {root.name} itself; sequence={asked} names another (give the "
-                                      "odometry root that holds sequences/)", source=root)
+            numbered = root.name.isdigit()
+            same_number = numbered and asked is not None and asked.isdigit() and int(asked) == int(root.name)
+            if asked is not None and asked != root.name and not same_number:
+                itself = f"sequence {root.name} itself" if numbered else "one sequence itself (no sequences/ inside)"
+                raise ConfigError(f"the folder is {itself}; sequence={asked} names another (give the odometry root that "
+                                  "holds sequences/)", source=root)
+            if numbered:
                 self.sequence = root.name
-            elif asked.isdigit() and int(asked) != 0:  # one sequence under another name: no other to choose
-                raise ConfigError(f"the folder is one sequence itself (no sequences/ inside); sequence={asked} names another "
-                                  "(give the odometry root that holds sequences/)", source=root)
             parent = root.parent.parent if root.parent.name == "sequences" else None
             return root, parent
         raise DataError(

@@ -40,7 +40,7 @@ def open_sequence(spec: str | os.PathLike | ScanSequence) -> ScanSequence:
         return open_sim(text)
     kind, sep, rest = text.partition(":")
     if sep and kind in lio.available_datasets() and len(kind) > 1:
-        path, _, query = rest.partition("?")
+        path, query = _path_and_options(rest)
         if not path.strip():  # ("" reached the reader, which read the current folder)
             raise ConfigError(f"{kind}: with no path (expected {kind}:PATH[?key=value&...])", source=text)
         path = os.path.expanduser(path)  # the shell leaves ~ after "kind:" as it is
@@ -65,6 +65,17 @@ def open_sequence(spec: str | os.PathLike | ScanSequence) -> ScanSequence:
         raise DataError(f"a file of no kind detected by its name ({lio.detected_files()}): give its kind, KIND:PATH "
                         f"(e.g. carmen:{text} for a CARMEN log; known: {', '.join(lio.available_datasets())})", source=text)
     return _scans(lio.open_dataset(kind or "folder", path), text)
+
+
+def _path_and_options(rest: str) -> tuple[str, str]:
+    """PATH and options of the ``PATH?key=value&...`` after ``KIND:``, cut at the last '?' that leaves an existing path
+    before it (a bag named ``q?x.bag`` was cut at its own '?', ``x.bag`` refused as an option), else at the first."""
+    marks = [i for i, char in enumerate(rest) if char == "?"]
+    for cut in [len(rest), *reversed(marks)]:
+        if os.path.exists(os.path.expanduser(rest[:cut])):
+            return rest[:cut], rest[cut + 1:]
+    path, _, query = rest.partition("?")
+    return path, query
 
 
 def _scans(dataset: Any, spec: str) -> Any:
