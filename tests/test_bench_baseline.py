@@ -449,6 +449,43 @@ def test_the_manifest_pins_the_angle_correction_and_deskew_the_run_applied(tmp_p
     assert not any(line.startswith("regression") for line in lines)
 
 
+def test_the_frame_check_thresholds_are_pinned_and_a_changed_default_is_a_protocol_change(tmp_path, monkeypatch):
+    """The manifest did not pin the frame-check thresholds: a lidarkit whose default min_fitness became 0.99 read
+    "regression: kiss on K00 (seed 0): n_bad_frames = 5, baseline 0" instead of a changed protocol."""
+    from conftest import shared_path
+
+    import lidarkit.odometry.frame_check as frame_check_module
+
+    suite = tmp_path / "kiss.yaml"
+    suite.write_text(textwrap.dedent(f"""
+        name: kiss-kitti
+        experiments:
+          - task: odometry
+            dataset: {{kind: kitti, path: "{shared_path('kitti_odometry')}", sequence: "00", name: K00}}
+            options: {{frames: "2:8"}}
+            methods: [kiss]
+    """))
+    baseline = record(suite, tmp_path / "baseline", repeats=1)
+    pinned = json.loads((baseline.path / "manifest.json").read_text())["jobs"][0]
+    assert (pinned["protocol"]["frame_check"]["min_fitness"], pinned["protocol"]["frame_check"]["max_accel_mps2"]) == (0.3, 15.0)
+    assert "motion_rule" not in pinned["protocol"]["frame_check"] and pinned["metrics"]["n_bad_frames"] == 0
+    as_frame_check = frame_check_module.as_frame_check
+    monkeypatch.setattr(frame_check_module, "as_frame_check",  # a later lidarkit whose default changed
+                        lambda value: frame_check_module.FrameCheckConfig(min_fitness=0.99) if value is None else as_frame_check(value))
+    lines = check(baseline.path).lines()
+    assert [line for line in lines if not line.startswith("note:")] == [
+        "protocol changed: kiss on K00 (seed 0): frame_check.min_fitness: 0.3 -> 0.99"]
+    monkeypatch.undo()
+    # a baseline recorded before the thresholds were pinned reads back, held under today's defaults (and says so)
+    del pinned["protocol"]["frame_check"]
+    manifest = json.loads((baseline.path / "manifest.json").read_text())
+    manifest["jobs"][0] = pinned
+    (baseline.path / "manifest.json").write_text(json.dumps(manifest))
+    result = check(baseline.path)
+    assert result.passed and "note: kiss on K00 (seed 0): the baseline pinned no frame-check thresholds (recorded before " \
+                             "lidarkit pinned them): held under today's defaults" in result.lines()
+
+
 def test_two_experiments_are_named_and_round_off_is_no_regression(tmp_path, capsys):
     """Two experiments of random_walk on one dataset read alike in record's summary and check's lines ("random_walk on
     synth"); ``-t ape_rmse_m=0`` reported a round-off change (+1.11e-16) as a regression."""

@@ -403,6 +403,51 @@ def test_a_changed_simulator_default_is_a_changed_protocol_not_a_regression(tmp_
         assert_no_worse_than(noisier, baseline, method="kiss", metric="ape_rmse_m", tolerance=1.0)
 
 
+def test_a_frame_check_count_under_other_thresholds_is_refused(tmp_path):
+    """kiss (voxel 4 m) with 3 bad frames failed against the pinned 0 under the default frame check, and passed once
+    its thresholds were loosened; kiss itself under min_fitness 0.99 read "regression: n_bad_frames = 5, baseline 0"."""
+    import json
+
+    from conftest import shared_path
+
+    from lidarkit.io.kitti import KittiOdometry
+    from lidarkit.odometry import run
+
+    (tmp_path / "suite.yaml").write_text(textwrap.dedent(f"""
+        name: kiss-kitti
+        experiments:
+          - task: odometry
+            dataset: {{kind: kitti, path: "{shared_path('kitti_odometry')}", sequence: "00", name: k00}}
+            options: {{frames: "2:8"}}
+            methods: [kiss]
+    """))
+    baseline = record(tmp_path / "suite.yaml", tmp_path / "baseline", repeats=1)
+    sequence = KittiOdometry(shared_path("kitti_odometry"), sequence="00")
+    pick = dict(method="kiss", metric="n_bad_frames")
+    with pytest.raises(AssertionError, match=r"^regression: n_bad_frames = 3, baseline 0 "):
+        assert_no_worse_than(run(sequence, "kiss", params={"voxel_size_m": 4.0}, frames="2:8"), baseline, **pick)
+    loose = {"max_accel_mps2": 1e6, "max_angular_accel_dps2": 1e6, "min_fitness": 0.01}
+    worse = run(sequence, "kiss", params={"voxel_size_m": 4.0}, frames="2:8", frame_check=loose)
+    assert worse.n_bad_frames == 0 and worse.config["run"]["frame_check"]["min_fitness"] == 0.01
+    with pytest.raises(EvaluationError, match=r"^assert_no_worse_than: the result's frame check differs from the pinned job "
+                                              r"'kiss': max_accel_mps2 1000000.0 \(pinned 15.0\), max_angular_accel_dps2 1000000.0 "
+                                              r"\(pinned 300.0\), min_fitness 0.01 \(pinned 0.3\) \(n_bad_frames counts under other "
+                                              r"thresholds\)$"):
+        assert_no_worse_than(worse, baseline, **pick)
+    strict = run(sequence, "kiss", frames="2:8", frame_check={"min_fitness": 0.99})
+    with pytest.raises(EvaluationError, match=r"'kiss': min_fitness 0.99 \(pinned 0.3\) \(n_bad_frames counts"):
+        assert_no_worse_than(strict, baseline, **pick)
+    assert_no_worse_than(strict, baseline, method="kiss", metric="ape_rmse_m")  # the poses do not depend on the check
+    assert_no_worse_than(baseline.job("kiss"), baseline, **pick)  # a pinned job's mapping: its own thresholds
+    # a baseline recorded before the thresholds were pinned is held under today's defaults
+    manifest = json.loads((baseline.path / "manifest.json").read_text())
+    del manifest["jobs"][0]["protocol"]["frame_check"]
+    (baseline.path / "manifest.json").write_text(json.dumps(manifest))
+    with pytest.raises(EvaluationError, match=r"'kiss': min_fitness 0.99 \(pinned 0.3\)"):
+        assert_no_worse_than(strict, baseline.path, **pick)
+    assert_no_worse_than(run(sequence, "kiss", frames="2:8"), baseline.path, **pick)
+
+
 def test_round_off_is_a_tie_at_tolerance_zero(tiny_baseline):
     """0.1 + 0.2 against 0.3 failed at tolerance 0 with "ape_rmse_m = 0.3, baseline 0.3 (worse by 5.551e-17, tolerance
     0)" (kiss rerun against its own pinned job: "worse by 2.082e-16"); ``baseline check`` counts round-off as a tie."""

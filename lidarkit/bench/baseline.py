@@ -5,7 +5,8 @@ first run's trajectory and metrics, and measures the run-to-run spread (kiss-icp
 across thread schedules) to set each metric's band. The manifest pins what makes a number reproducible:
 library versions, the method's resolved config, checksums of the dataset files (a simulated one: its whole simulator
 config), the KITTI angle correction and
-deskew as the run applied them, the instant poses refer to, the evaluation settings and the platform.
+deskew as the run applied them, the instant poses refer to, the frame-check thresholds (``n_bad_frames`` counts
+under them), the evaluation settings and the platform.
 
 ``check(folder)`` re-runs the pinned jobs. A job whose protocol differs reports ``protocol changed: ...``
 (its numbers are not comparable, whatever they are); otherwise a metric outside its band on the worse side
@@ -91,6 +92,23 @@ def evaluation_settings() -> dict[str, Any]:
 
     return {"kitti_segment_lengths_m": list(KITTI_LENGTHS_M), "kitti_step_frames": KITTI_STEP_FRAMES,
             "ape_alignment": "none", "rpe_delta": "1 frame", "frame_pairing": "by index"}
+
+
+#: counts of the independent per-frame check (lidarkit.odometry.frame_check): comparable under the same thresholds only
+FRAME_CHECK_METRICS = ("n_bad_frames", "n_bad_motion", "n_bad_fitness", "n_motion_checked", "n_fitness_checked",
+                       "n_said_converged_but_bad")
+
+
+def frame_check_thresholds(described: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """The frame-check thresholds a run recorded (``config["run"]["frame_check"]``, its rules in words left out), or
+    today's defaults (what a bench job runs under) when None."""
+    if described is None:
+        from dataclasses import asdict
+
+        from lidarkit.odometry.frame_check import FrameCheckConfig
+
+        return asdict(FrameCheckConfig())
+    return {k: v for k, v in described.items() if not k.endswith("_rule")}
 
 
 # ---------------------------------------------------------------- protocol of one job
@@ -244,6 +262,8 @@ def _run_job(job: Job, checksum_cache: dict[str, str] | None) -> JobRun:
             kitti_angle_correction=(effective.get("corrections") or {}).get("vertical_correction_applied"),
             pose_instant=_pose_instant(dataset, result),
             deskew=(effective.get("deskew") or {}).get("applied"),
+            # (n_bad_frames under loosened thresholds passed as no regression)
+            frame_check=_jsonable(frame_check_thresholds((run_config or {}).get("frame_check"))),
         )
         return JobRun(dict(output.metrics), result.trajectory, protocol)
     output = get_task(job.task).run(job)
@@ -628,6 +648,10 @@ def check(
         # (a baseline recorded before lidarkit pinned the whole simulator config: not a change)
         now = {k: v for k, v in run.protocol.items() if k not in ("checksums", "method_config")
                and (k in then or k != "simulation")}
+        if "frame_check" in now and "frame_check" not in then:  # (recorded before lidarkit pinned them: today's defaults)
+            then["frame_check"] = frame_check_thresholds()
+            result.findings.append(Finding("note", name, "the baseline pinned no frame-check thresholds (recorded before "
+                                                          "lidarkit pinned them): held under today's defaults"))
         protocol_changes = _diff("", then, now)
         for line in protocol_changes:
             result.findings.append(Finding("protocol changed", name, line))

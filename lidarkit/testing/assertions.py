@@ -90,7 +90,8 @@ def assert_no_worse_than(
     ``result``: an OdometryResult, a bench record or a metrics mapping. ``baseline``: a baseline folder (path or
     :class:`lidarkit.bench.baseline.Baseline`; ``method`` / ``dataset`` / ``seed`` / ``experiment`` / ``task`` pick the
     pinned job) or a metrics mapping (which takes none of them: ConfigError). A result over other data than the pinned
-    job's (frames, dataset, seed) is an EvaluationError.
+    job's (frames, dataset, seed) is an EvaluationError; so is a frame-check count (``n_bad_frames``) counted under
+    other frame-check thresholds.
     ``tolerance`` None uses the baseline's recorded band (from its run-to-run noise); with a plain mapping it is 0.
     A difference within floating-point round-off (1e-9 of the value) is a tie, as in ``lidarkit baseline check``.
     """
@@ -105,6 +106,7 @@ def assert_no_worse_than(
         ref_metrics = {k: float(v) for k, v in job["metrics"].items() if isinstance(v, (int, float))}
         band = float(job.get("bands", {}).get(metric, 0.0))
         _check_same_data(result, now_metrics, job, ref_metrics)
+        _check_same_frame_check(result, job, metric)
     else:
         picks = {k: v for k, v in (("method", method), ("dataset", dataset), ("seed", seed), ("experiment", experiment),
                                    ("task", task)) if v is not None}
@@ -198,6 +200,32 @@ def _check_same_data(result: Any, now_metrics: dict[str, float], job: Mapping[st
         differ += _other_files(run, opened)
     if differ:
         refuse("dataset", ", ".join(differ))
+
+
+def _check_same_frame_check(result: Any, job: Mapping[str, Any], metric: str) -> None:
+    """EvaluationError when ``metric`` counts frames of the per-frame check and ``result`` ran it under other thresholds
+    than the pinned job (a baseline recorded before they were pinned: today's defaults, which bench jobs run under):
+    3 bad frames passed against 0 once the thresholds were loosened. A plain metrics mapping records none: not held."""
+    from lidarkit.bench.baseline import FRAME_CHECK_METRICS, frame_check_thresholds
+
+    if metric not in FRAME_CHECK_METRICS:
+        return
+    if isinstance(result, Mapping) and isinstance(result.get("protocol"), Mapping):  # a pinned job's mapping
+        ran = result["protocol"].get("frame_check") or frame_check_thresholds()
+    else:  # an OdometryResult's run config, or a bench record's (in its info)
+        info = result.get("info") if isinstance(result, Mapping) else None
+        config = info.get("config") if isinstance(info, Mapping) else getattr(result, "config", None)
+        run = config.get("run") if isinstance(config, Mapping) else None
+        ran = run.get("frame_check") if isinstance(run, Mapping) else None
+    if not isinstance(ran, Mapping):
+        return
+    ran = frame_check_thresholds(ran)
+    pinned = frame_check_thresholds((job.get("protocol") or {}).get("frame_check") or None)
+    differ = [f"{k} {ran.get(k, '<absent>')!r} (pinned {pinned.get(k, '<absent>')!r})"
+              for k in [*pinned, *(k for k in ran if k not in pinned)] if ran.get(k) != pinned.get(k)]
+    if differ:
+        raise EvaluationError(f"the result's frame check differs from the pinned job {job.get('label', '')!r}: "
+                              f"{', '.join(differ)} ({metric} counts under other thresholds)", source="assert_no_worse_than")
 
 
 def _same_value(key: str, ran: Any, pinned: Any) -> bool:
