@@ -212,9 +212,12 @@ class Trajectory:
         if self.timestamps_s is None or len(self) < 2:
             raise DataError("interpolating needs at least two poses with time stamps", source=source)
         try:
-            t = np.asarray(times_s, dtype=np.float64).reshape(-1)
+            t = np.asarray(times_s)
         except (TypeError, ValueError):
-            raise ConfigError(f"times_s must be numbers (s), got {times_s!r:.60}", source="times_s") from None
+            t = None
+        if t is None or t.dtype.kind not in "biuf":  # (None, [0, None] as float64: NaN, "(time 0): time nan is not a finite number")
+            raise ConfigError(f"times_s must be numbers (s), got {times_s!r:.60}", source="times_s")
+        t = t.astype(np.float64).reshape(-1)
         stamps = self.timestamps_s
         if not np.isfinite(t).all():
             k = int(np.argmax(~np.isfinite(t)))

@@ -30,6 +30,8 @@ def test_nclt_points_are_unsigned_and_scans_outside_the_ground_truth_are_counted
     with caplog.at_level(logging.WARNING):
         dataset = open_dataset("nclt", sequence)
     assert len(dataset) == 3 and "1 of 4 scans lie outside the ground truth's time span" in caplog.text
+    assert dataset.reader_warnings == ["1 of 4 scans lie outside the ground truth's time span and are left out (kiss-icp's "
+                                       "NCLT loader reads only scans with ground truth)"]  # (for the run's warnings)
     np.testing.assert_allclose(dataset.read_scan(0).points_xyz, points, atol=0.003)  # x = 70 m read as -257.68 m before
     np.testing.assert_allclose(dataset.timestamps_s, utimes[:3] * 1e-6)
     assert dataset.read_scan(1).timestamp_s == pytest.approx(utimes[1] * 1e-6)
@@ -163,6 +165,32 @@ def test_a_generic_folder_of_several_formats_is_refused_and_skipped_files_are_na
         assert len(open_dataset("generic", other)) == 1
     assert f"{other}: 2 point-cloud files that kiss-icp's generic loader does not read are skipped (scan2.BIN, scan3.npy); " \
            "folder:PATH reads them" in caplog.text
+
+
+def test_files_the_generic_loader_leaves_out_are_in_the_run_folders_warnings(tmp_path):
+    """The generic reader only logged the point-cloud files kiss-icp's loader does not read: a run over 000000-2.bin
+    with 000003.npy and 000004.BIN beside them wrote 3 frames and no warning about the other two to metrics.json or
+    config.yaml."""
+    import json
+
+    import yaml
+    from registration_helpers import structured_cloud
+
+    from lidarkit.odometry import run
+
+    folder = tmp_path / "mixed"
+    folder.mkdir()
+    cloud = structured_cloud(np.random.default_rng(0), 3000)
+    for k in range(3):
+        np.column_stack([cloud + [0.3 * k, 0.0, 0.0], np.zeros(len(cloud))]).astype(np.float32).tofile(folder / f"00000{k}.bin")
+    np.save(folder / "000003.npy", cloud)
+    np.column_stack([cloud, np.zeros(len(cloud))]).astype(np.float32).tofile(folder / "000004.BIN")
+    result = run(f"generic:{folder}", "vanilla", out_dir=tmp_path / "out")
+    said = ("2 point-cloud files that kiss-icp's generic loader does not read are skipped (000003.npy, 000004.BIN); "
+            "folder:PATH reads them")
+    assert len(result.trajectory) == 3 and result.metrics["warnings"][0] == said
+    assert json.loads((tmp_path / "out" / "metrics.json").read_text())["warnings"][0] == said
+    assert yaml.safe_load((tmp_path / "out" / "config.yaml").read_text())["run"]["warnings"][0] == said
 
 
 def test_generic_reads_files_named_by_decimal_time_stamps_in_time_order(tmp_path):

@@ -649,6 +649,54 @@ def test_a_sequence_of_the_callers_own_needs_only_len_and_read_scan():
         run(ArrayTruth(), "vanilla", progress=False)
 
 
+@pytest.mark.parametrize("method", ["kiss", "small_gicp"])
+def test_per_point_times_not_one_per_point_are_refused_for_every_variant_whatever_their_values(method):
+    """Times of the wrong count were refused by kiss only when they varied: all equal (zeros(3) for ~1400 points), the
+    run dropped them as flat times and ran "without deskew"; small_gicp, which does not deskew, took [0, 0.1] as a
+    sweep with times and scored its poses as mid-sweep against end-of-sweep truth. The run's reading now refuses them."""
+    import dataclasses
+
+    from lidarkit.sim.lidar import SimulatedLidarSequence
+
+    sim = SimulatedLidarSequence(scene="street", n_frames=3, seed=1, n_beams=8, n_azimuths=180)
+    n = len(sim.read_scan(0).points_xyz)
+
+    class Mine:
+        name = "mine"
+
+        def __init__(self, times):
+            self.times = times  # the times of a scan of n points
+
+        def __len__(self):
+            return 3
+
+        def read_scan(self, i):
+            scan = sim.read_scan(i)
+            return dataclasses.replace(scan, point_times_s=self.times(len(scan.points_xyz)))
+
+    for times in (np.zeros(3), np.array([0.0, 0.1]), np.array([0.0, 0.05, 0.1])):
+        with pytest.raises(DataError) as err:
+            run(Mine(lambda _: times), method)
+        assert str(err.value) == f"mine (frame 0): point_times_s: {len(times)} per-point times for {n} points: one per point is needed"
+    with pytest.raises(DataError) as err:
+        run(Mine(lambda k: np.zeros((k, 1))), method)
+    assert str(err.value) == f"mine (frame 0): point_times_s: per-point times of shape ({n}, 1): a 1-D array, one per point, is needed"
+    flat = run(Mine(np.zeros), method)  # one per point, all equal: read as a scan without times, as before
+    assert flat.metrics["effective"]["deskew"]["frames_with_point_times"] == 0
+
+
+def test_none_for_a_yes_no_flag_of_run_is_refused(rng):
+    """overlap=None (strict, progress) was read as False while overlap='no' was refused: only pose_covariance gives None
+    a meaning (for stateless variants only)."""
+    seq = MemorySequence(_drive(3), _room_points(rng, 50))
+    for flag in ("overlap", "strict", "progress"):
+        with pytest.raises(ConfigError) as err:
+            run(seq, OracleICP([]), **{flag: None})
+        assert str(err.value) == f"{flag}: {flag} must be True or False, got None"
+    assert seq.reads == []
+    assert len(run(seq, OracleICP(se3_inverse(_drive(3)[:-1]) @ _drive(3)[1:]), pose_covariance=None).trajectory) == 3
+
+
 def test_a_stateful_variants_frame_covariance_honours_its_covariance_settings():
     """kiss's --pose-covariance was calibrated whatever calibrated_covariance said and always the censi model, while
     config.yaml recorded the settings as given (end-pose sigma 0.220 m for all three runs)."""

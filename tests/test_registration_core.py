@@ -1042,3 +1042,15 @@ def test_a_result_prints_as_one_line_of_its_headline_figures(synthetic_pair):
     # a backend that reports no iteration count (Open3D, kiss, genz) read "converged in 0 iterations"
     o3d = get_icp("open3d_point_to_plane").align(source, target)
     assert repr(o3d).startswith("RegistrationResult('open3d_point_to_plane', converged (iterations not reported), t [")
+
+
+def test_the_stateful_calls_of_a_stateless_variant_are_one_line_config_errors(capsys):
+    """get_icp('vanilla').register_frame(points) raised a bare NotImplementedError "vanilla is stateless", which said
+    neither what to call instead nor, through a script, in one line."""
+    vanilla = get_icp("vanilla")
+    for call in (lambda: vanilla.register_frame(np.random.default_rng(0).random((100, 3))), vanilla.reset):
+        with pytest.raises(ConfigError) as err:
+            call()
+        assert err.value.source == "vanilla"
+    assert str(err.value) == ("vanilla: reset() needs a stateful variant (one with a map of its own); vanilla is stateless: "
+                              "align a pair of scans with align(), or run odometry with lidarkit.odometry.run()")

@@ -169,6 +169,19 @@ def test_interpolation_times_and_bound_of_the_wrong_kind_are_named():
     assert traj.interpolated([0.5, 1.5], max_extrapolation_s=np.float64(0.0)).timestamps_s.tolist() == [0.5, 1.5]
 
 
+def test_interpolation_times_of_none_are_refused_as_not_numbers():
+    """interpolated(None) read None as NaN: "DataError trajectory (time 0): time nan is not a finite number", blaming
+    the trajectory for the caller's argument; now the ConfigError of times that are not numbers, as for 'abc'."""
+    from lidarkit.errors import ConfigError
+
+    traj = Trajectory(np.tile(np.eye(4), (3, 1, 1)), [0, 1, 2])
+    for times, shown in ((None, "None"), ([0.5, None], "[0.5, None]")):
+        with pytest.raises(ConfigError) as err:
+            traj.interpolated(times)
+        assert str(err.value) == f"times_s: times_s must be numbers (s), got {shown}"
+    assert traj.interpolated(np.array([0.5, 1.5], dtype=np.float32)).timestamps_s.tolist() == [0.5, 1.5]
+
+
 def test_reprs_are_one_line_and_an_empty_trajectory_has_no_distances():
     """repr(Trajectory) printed every pose (7,200 characters for 20) and repr(OdometryResult) every array (57,000);
     an empty trajectory's distances_m had one entry."""

@@ -121,7 +121,9 @@ class ScanSequence(Protocol):
     Readers that know which instant of each sweep their ground truth refers to say so in
     ``ground_truth.meta["pose_instant"]`` (``"start"``, ``"mid"`` or ``"end"``); a reader that can give other
     instants offers ``ground_truth_at_instant(instant)``, one pose per frame as ``ground_truth``, or a LidarKitError
-    saying why not (the simulator, bags, KITTI-layout folders the simulator wrote).
+    saying why not (the simulator, bags, KITTI-layout folders the simulator wrote). A reader that leaves out part of
+    what it was given (files, scans) may say so in ``reader_warnings`` (a list of one-line messages), which the
+    odometry runner records among the run's warnings.
     """
 
     name: str

@@ -57,6 +57,8 @@ class KissLoaderScans:
 
     def __init__(self, path: str | os.PathLike, **loader_options: Any):
         self.path = Path(path)
+        #: what the reader found and left out, for the run's warnings (metrics.json, config.yaml) as well as the log
+        self.reader_warnings: list[str] = []
         require_modules(self.requires, self.kind)
         if not self.path.exists():
             raise DataError(f"{self.kind} dataset not found", source=self.path)
@@ -261,8 +263,9 @@ class NcltScans(KissLoaderScans):
         self.loader.read_point_cloud = nclt_points
         on_disk = len([p for p in (self.path / "velodyne_sync").iterdir() if p.is_file()])
         if on_disk > len(self.loader):
-            log.warning("%s: %d of %d scans lie outside the ground truth's time span and are left out (kiss-icp's NCLT "
-                        "loader reads only scans with ground truth)", self.path, on_disk - len(self.loader), on_disk)
+            self.reader_warnings.append(f"{on_disk - len(self.loader)} of {on_disk} scans lie outside the ground truth's time "
+                                        "span and are left out (kiss-icp's NCLT loader reads only scans with ground truth)")
+            log.warning("%s: %s", self.path, self.reader_warnings[-1])
 
     def _stamps(self) -> np.ndarray | None:
         return np.asarray(self.loader.timestamps, dtype=np.float64) * 1e-6
@@ -450,10 +453,13 @@ class GenericScans(KissLoaderScans):
                             "file as the first one's format; keep one format, or read the folder as folder:PATH", source=folder)
         point_suffixes = {*POINT_FILE_SUFFIXES, *(f".{e}" for e in extensions)}
         skipped = [p.name for p in files if p not in read and p.suffix.lower() in point_suffixes]
+        left_out = (f"{len(skipped)} point-cloud files that kiss-icp's generic loader does not read are skipped "
+                    f"({', '.join(skipped)}); folder:PATH reads them")
         if skipped:  # (scan2.BIN and .npy scans were left out without a word)
-            log.warning("%s: %d point-cloud files that kiss-icp's generic loader does not read are skipped (%s); folder:PATH "
-                        "reads them", folder, len(skipped), ", ".join(skipped))
+            log.warning("%s: %s", folder, left_out)
         super().__init__(folder)
+        if skipped:  # (then only logged: the run's warnings did not say it)
+            self.reader_warnings.append(left_out)
         # in folder:PATH's order (natsort read time-stamp names 1000.1 before 1000.05: sweeps out of order, no word)
         self.loader.scan_files = np.array(sorted(self.loader.scan_files, key=lambda f: natural_key(Path(f).name)), dtype=str)
 

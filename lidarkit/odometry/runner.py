@@ -28,7 +28,7 @@ from lidarkit.odometry.result import FrameStats, OdometryResult
 from lidarkit.odometry.run_folder import refuse_replacing_inputs, write_run
 from lidarkit.odometry.settings import deskew_requested, effective_settings, require_point_times
 from lidarkit.params import is_integer
-from lidarkit.registration.base import BACKEND_ERRORS, PendingAlignment
+from lidarkit.registration.base import BACKEND_ERRORS, PendingAlignment, check_point_times
 from lidarkit.registration.covariance import widen_for_distortion
 from lidarkit.threads import Overlap
 from lidarkit.trajectory import Trajectory
@@ -86,6 +86,18 @@ def _read_nonempty_scan(sequence: ScanSequence, index: int) -> Scan:
         raise DataError("empty scan (0 points)" + _why_empty(sequence, index), source=scan.source or None,
                         location=f"frame {index}" if scan.source else None)
     return scan
+
+
+def _check_scan_times(scan: Scan) -> None:
+    """DataError for per-point times that are not one number per point (1-D, finite), checked here where every variant
+    passes: kiss refused a wrong count, but flat times of the wrong count were dropped unchecked, and a variant that
+    does not deskew took them as a sweep with times (its poses then scored as mid-sweep). An empty array: no times."""
+    times = scan.point_times_s
+    if times is None or np.size(times) == 0:
+        return
+    if np.ndim(times) != 1:
+        raise DataError(f"per-point times of shape {np.shape(times)}: a 1-D array, one per point, is needed", source="point_times_s")
+    check_point_times(times, len(scan.points_xyz))
 
 
 def _why_empty(sequence: ScanSequence, index: int) -> str:
@@ -367,7 +379,8 @@ def run(
     if not is_integer(prefetch) or prefetch < 0:
         raise ConfigError(f"prefetch must be a whole number of scans >= 0 (0: read in line), got {prefetch!r}", source="prefetch")
     for flag, value in (("pose_covariance", pose_covariance), ("strict", strict), ("progress", progress), ("overlap", overlap)):
-        if value is not None and not isinstance(value, (bool, np.bool_)):  # ("yes", "no": true strings)
+        if not isinstance(value, (bool, np.bool_)) and not (flag == "pose_covariance" and value is None):
+            # ("yes", "no": true strings; None, which only pose_covariance gives a meaning, was read as False)
             raise ConfigError(f"{flag} must be True or False, got {value!r}", source=flag)
     if out_dir is not None:  # before the work, as the CLI does (a file in the way was found after the whole run)
         from lidarkit.atomic import check_target
@@ -464,6 +477,7 @@ def run(
 
     def read(i: int) -> tuple[Scan, tuple]:
         scan = _read_nonempty_scan(sequence, i)
+        _check_scan_times(scan)
         if scan.point_times_s is not None and not scan.has_time_span():
             flat_times.append(i)
             scan = dataclasses.replace(scan, point_times_s=None)
@@ -612,8 +626,10 @@ def run(
     apart = (_stamps_apart(reference, at_truth, all_stamps, numbers) if ground_truth is not None
              else _own_stamps_apart(reference, at_truth, all_stamps) if instant_note is None or kept_as_is else None)
     far = _far_float32_warning(far_float32, n)
-    warnings = [w for w in (past_the_end, time_gap_warning(timestamps, numbers, odometry_poses is not None, indices, typical), apart, far)
-                if w] + warnings
+    # what the reader found and left out (files it does not read, scans without ground truth): only logged before
+    reader_warnings = [str(w) for w in getattr(sequence, "reader_warnings", None) or ()]
+    warnings = reader_warnings + [w for w in (past_the_end, time_gap_warning(timestamps, numbers, odometry_poses is not None, indices,
+                                                                             typical), apart, far) if w] + warnings
     if stateful:  # (accepted, recorded in config.yaml as given, and without effect on the run)
         gates = [f for f in ("min_fitness", "min_correspondences") if f in getattr(config, "model_fields_set", ())]
         if gates:
@@ -632,7 +648,8 @@ def run(
         warnings.append(f"nominal_period_s={checker.config.nominal_period_s:g}: the frame check's period for scans without time "
                         "stamps; this dataset has them, so it is not used")
     for message in warnings:
-        log.warning("%s: %s", title, message)
+        if message not in reader_warnings:  # (logged by the reader when it opened)
+            log.warning("%s: %s", title, message)
     covariances = (relative_cov, propagate(poses, relative_cov)) if want_covariance else None
     relations_note, relation_scores = _relations_note(sequence, out_dir, trajectory) if reference is None else (None, None)
     config = {

@@ -746,14 +746,19 @@ class Registration:
             raise NotImplementedError
         return self._register(source_xyz, target_xyz, init_T)[2]()
 
-    # stateful API (kiss); stateless variants refuse it so the odometry runner can tell them apart
+    # stateful API (kiss); stateless variants refuse it as a caller's mistake (a bare NotImplementedError "vanilla is
+    # stateless" said neither what to call instead nor, through the CLI, in one line)
     def reset(self) -> None:
         """Forget the map and motion history (stateful variants only)."""
-        raise NotImplementedError(f"{self.name} is stateless")
+        raise self._stateless("reset")
 
     def register_frame(self, points_xyz: np.ndarray, point_times_s: np.ndarray | None = None) -> np.ndarray:
         """Register one frame into the variant's own map; return ``T_world_lidar`` (stateful only)."""
-        raise NotImplementedError(f"{self.name} is stateless")
+        raise self._stateless("register_frame")
+
+    def _stateless(self, call: str) -> ConfigError:
+        return ConfigError(f"{call}() needs a stateful variant (one with a map of its own); {self.name} is stateless: "
+                           "align a pair of scans with align(), or run odometry with lidarkit.odometry.run()", source=self.name)
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self._config!r})"
