@@ -974,3 +974,41 @@ def test_a_paired_comparison_over_ape_names_the_apes_alignment(tmp_path):
     assert comparison.metric == "APE RMSE (unaligned, first pose anchored) m"
     assert comparison.mean_a == pytest.approx(0.22) and comparison.mean_b == pytest.approx(0.54)
     assert comparison_rows([(dataset, comparison)])[1][0][3] == "5 seeds (APE RMSE (unaligned, first pose anchored) m)"
+
+
+def test_a_seed_without_a_value_is_left_out_of_the_publication_tables_and_the_comparison_says_so(tmp_path):
+    """One NaN APE of small_gicp (a record edited by hand) made its mean NaN: the APE table showed it as "–" and set
+    kiss bold though small_gicp was ~30x better on every other seed, and the paired comparison vanished without a word
+    (the reason only logged). A NaN is now no value, as in report.csv, and a comparison not made is said."""
+    import json
+
+    from lidarkit.bench.jobs import Job
+    from lidarkit.bench.results import make_record, result_path
+
+    def write(method, seed, metrics, series=None):  # (by hand: write_result refuses NaN)
+        job = Job("odometry", "e", "drive", {"kind": "sim_lidar", "scene": "street"}, method, seed=seed)
+        record = make_record(job, job.key(), "1", {"status": "ok", "metrics": metrics, "series": series or {},
+                                                   "error": None, "runtime_s": 0.1})
+        result_path(tmp_path, job.key()).parent.mkdir(exist_ok=True)
+        result_path(tmp_path, job.key()).write_text(json.dumps(record))
+
+    for seed in range(8):
+        write("kiss", seed, {"ape_rmse_m": 0.3 + 0.01 * seed})
+        write("small_gicp", seed, {"ape_rmse_m": float("nan") if seed == 3 else 0.01 + 0.001 * seed})
+    report = build_report(tmp_path, plots=False)
+    assert "| drive | 0.335 | **0.014** |" in (tmp_path / "tables" / "ape_rmse.md").read_text()
+    (_, c), = report.publication.comparisons
+    assert (c.n_pairs, c.better) == (7, "b")
+    assert c.note == "seed(s) 3 left out: no value (NaN, inf) on one side"
+    # a comparison the statistics refuse (a NaN drift of a KITTI segment) is said in the report, not only logged
+    (tmp_path / "jobs").rename(tmp_path / "seeds")
+    def segments(drift):
+        return {"drift_segments": {"first_frame": [0, 10], "length_m": [100.0, 100.0], "translation_pct": drift,
+                                   "rotation_deg_per_100m": [0.1, 0.1], "speed_mps": [10.0, 10.0]}}
+
+    for seed in range(2):
+        write("kiss", seed, {}, segments([0.5, 0.6]))
+        write("small_gicp", seed, {}, segments([1.5, float("nan") if seed else 1.6]))
+    build_report(tmp_path, plots=False)
+    assert ("- no comparison: drive, kiss vs small_gicp: small_gicp: 1 non-finite value(s) among 4"
+            in (tmp_path / "report.md").read_text().splitlines())

@@ -119,6 +119,102 @@ def test_a_metric_that_is_not_a_number_fails_its_job_naming_the_metric(tmp_path,
     assert (again.skipped, again.failed) == (1, 1)  # the number job is read back as done
 
 
+def test_a_forced_rerun_that_fails_keeps_the_earlier_ok_result(tmp_path, monkeypatch):
+    """A ``--force`` rerun hit by a transient error replaced each job's ok result with the failure: the good results
+    were lost. Now the ok result stays (a later resume skips it) with the failure beside it, and the summary says so."""
+    from lidarkit.bench import tasks as bench_tasks
+    from lidarkit.bench.tasks import Metric, Task, TaskOutput, register_task
+
+    monkeypatch.setattr(bench_tasks, "_REGISTERED", {})
+    monkeypatch.setattr(bench_tasks, "_INSTANCES", {})
+
+    @register_task("flaky_test_task")
+    class Flaky(Task):
+        dataset_kinds = ("synthetic",)
+        metrics = (Metric("err_m", "error [m]"),)
+
+        def run(self, job):
+            if os.environ.get("FLAKY_TEST_FAIL"):
+                raise RuntimeError("transient: data disk not mounted")
+            return TaskOutput(metrics={"err_m": 0.5 + job.seed})
+
+    suite = load_suite(suite_file(tmp_path, """
+        seeds: 2
+        experiments:
+          - {task: flaky_test_task, dataset: {kind: synthetic}, methods: [a]}
+        """))
+    assert run_suite(suite, tmp_path / "out", executor="serial").ok == 2
+    monkeypatch.setenv("FLAKY_TEST_FAIL", "1")
+    forced = run_suite(suite, tmp_path / "out", executor="serial", force=True)
+    assert (forced.ran, forced.ok, forced.failed) == (2, 0, 2)
+    assert forced.failures[0][2] == "RuntimeError: transient: data disk not mounted (the earlier ok result is kept)"
+    records = load_results(tmp_path / "out")
+    assert [(r["status"], r["metrics"]["err_m"]) for r in records] == [("ok", 0.5), ("ok", 1.5)]
+    assert [r["rerun_failed"]["error"]["message"] for r in records] == ["transient: data disk not mounted"] * 2
+    monkeypatch.delenv("FLAKY_TEST_FAIL")
+    again = run_suite(suite, tmp_path / "out", executor="serial")
+    assert (again.skipped, again.ran) == (2, 0)
+
+
+CUSTOM_TASK = """
+from lidarkit.bench import Metric, Task, TaskOutput, register_task
+
+@register_task("module_test_task")
+class ModuleTask(Task):
+    dataset_kinds = ("synthetic",)
+    metrics = (Metric("err_m", "error [m]"),)
+
+    def run(self, job):
+        return TaskOutput(metrics={"err_m": 0.5 + job.seed})
+"""
+
+
+def test_a_task_registered_in_a_module_runs_in_worker_processes(tmp_path, monkeypatch):
+    """The docs said a task registered in code runs, but on the process executor every job failed with "unknown task
+    'module_test_task'": a worker knew only the built-in tasks. Now it imports the module the task was registered in."""
+    import importlib
+
+    from lidarkit.bench import tasks as bench_tasks
+
+    monkeypatch.setattr(bench_tasks, "_REGISTERED", {})
+    monkeypatch.setattr(bench_tasks, "_INSTANCES", {})
+    (tmp_path / "lidarkit_module_test_task.py").write_text(CUSTOM_TASK)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.delitem(sys.modules, "lidarkit_module_test_task", raising=False)
+    importlib.import_module("lidarkit_module_test_task")
+    suite = load_suite(suite_file(tmp_path, """
+        seeds: 2
+        experiments:
+          - {task: module_test_task, dataset: {kind: synthetic}, methods: [a]}
+        """))
+    summary = run_suite(suite, tmp_path / "out", executor="process", workers=2)
+    assert (summary.ok, summary.failures) == (2, [])
+    assert [r["metrics"]["err_m"] for r in load_results(tmp_path / "out")] == [0.5, 1.5]
+    assert [r["job"] for r in load_results(tmp_path / "out")] == [job.spec() for job in suite.jobs]
+
+
+def test_a_task_registered_where_no_file_holds_it_is_refused_before_any_job(tmp_path):
+    """A task defined in ``python -c`` (or a notebook) cannot be imported by a worker process: every job failed with
+    "unknown task". Now the run is refused, in one line saying what to do, before anything is written."""
+    suite = suite_file(tmp_path, """
+        experiments:
+          - {task: module_test_task, dataset: {kind: synthetic}, methods: [a]}
+        """)
+    code = CUSTOM_TASK + textwrap.dedent(f"""
+        from lidarkit.bench import load_suite, run_suite
+        from lidarkit.errors import ConfigError
+        try:
+            run_suite(load_suite({str(suite)!r}), {str(tmp_path / "out")!r}, workers=1)
+        except ConfigError as err:
+            print(err)
+        """)
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert proc.stdout.strip() == ("task: 'module_test_task' is registered in __main__ with no file (python -c, a "
+                                   "notebook), which worker processes cannot import: define it in a module they can "
+                                   'import and import that, or run with executor="serial"'), proc.stderr
+    assert not (tmp_path / "out").exists()
+
+
 def test_result_file_records_key_version_and_resolved_job(tmp_path):
     from lidarkit import __version__
     from lidarkit.provenance import code_version

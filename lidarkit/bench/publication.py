@@ -70,14 +70,20 @@ def _grids(records: list[dict[str, Any]]):
         if seg:
             segments[key].append(SegmentErrors.from_dict(seg))
         metrics = r.get("metrics") or {}
-        if metrics.get("ape_rmse_m") is not None:
+        if _has_value(metrics.get("ape_rmse_m")):
             ape[key].append(float(metrics["ape_rmse_m"]))
-        if metrics.get("rpe_trans_rmse_m") is not None:
+        if _has_value(metrics.get("rpe_trans_rmse_m")):
             rpe[key].append(float(metrics["rpe_trans_rmse_m"]))
     merged = {k: SegmentErrors(*(np.concatenate([getattr(s, f) for s in v]) for f in
                                  ("length_m", "translation_pct", "rotation_deg_per_100m", "speed_mps")))
               for k, v in segments.items()}
     return merged, {k: float(np.mean(v)) for k, v in ape.items()}, {k: float(np.mean(v)) for k, v in rpe.items()}, note
+
+
+def _has_value(x: Any) -> bool:
+    """A finite number: NaN and inf are no value, as in report.csv (one NaN seed made a method's mean NaN, shown as
+    "–", and the other method bold)."""
+    return x is not None and np.isfinite(float(x))
 
 
 def _seed_list(seeds: Any) -> str:
@@ -130,11 +136,14 @@ def reference_comparisons(records: list[dict[str, Any]], reference: str = REFERE
                                                                       ("ape_rmse_m", ape_name))
                                  if all(ref[s]["metrics"].get(metric) is not None and runs[s]["metrics"].get(metric) is not None
                                         for s in seeds)), None)
-                if len(seeds) >= 5 and per_seed is not None:
-                    va = [ref[s]["metrics"][per_seed[0]] for s in seeds]
-                    vb = [runs[s]["metrics"][per_seed[0]] for s in seeds]
+                valued = [s for s in seeds if per_seed is not None
+                          and all(_has_value(side[s]["metrics"][per_seed[0]]) for side in (ref, runs))]
+                if len(valued) >= 5:
+                    va = [ref[s]["metrics"][per_seed[0]] for s in valued]
+                    vb = [runs[s]["metrics"][per_seed[0]] for s in valued]
                     result = paired_test(va, vb, name_a=reference, name_b=label, metric=per_seed[1], pairing="seed")
-                    notes = []
+                    notes = [f"seed(s) {_seed_list(set(seeds) - set(valued))} left out: no value (NaN, inf) on one side"
+                             ] if len(valued) < len(seeds) else []
                 elif seeds and (paired := _paired_segments(segs)) is not None:
                     va, vb, left, once = paired
                     result = paired_test(va, vb, name_a=reference, name_b=label, metric="KITTI drift %", pairing="segment")
@@ -154,8 +163,10 @@ def reference_comparisons(records: list[dict[str, Any]], reference: str = REFERE
                     notes.append(f"each side is scored against the ground truth at its own instant of the sweep ({reference}: "
                                  f"{' / '.join(instants[0])}, {label}: {' / '.join(instants[1])})")
                 out.append((dataset, dataclasses.replace(result, note="; ".join(notes))))
-            except LidarKitError as err:
+            except LidarKitError as err:  # (said in the report: the section had vanished, the reason only logged)
                 log.info("no paired comparison %s vs %s on %s: %s", reference, label, dataset, err)
+                if not_compared is not None:
+                    not_compared.append(f"{dataset}, {reference} vs {label}: {err}")
     return out
 
 

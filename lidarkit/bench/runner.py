@@ -7,6 +7,7 @@ import fcntl
 import json
 import logging
 import os
+import sys
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -16,10 +17,12 @@ from typing import Any
 from lidarkit import atomic
 from lidarkit.bench.executors import check_executor_args, make_executor
 from lidarkit.bench.jobs import Job
-from lidarkit.bench.results import JOBS_DIR, is_finished, make_record, path_argument, remove_stale_temp_files, write_result
+from lidarkit.bench.results import (JOBS_DIR, is_finished, make_record, path_argument, read_result, remove_stale_temp_files,
+                                    result_path, write_result)
 from lidarkit.lifetime import raise_if_interrupted
 from lidarkit.params import is_integer
 from lidarkit.bench.suite import Suite
+from lidarkit.bench.tasks import task_module
 from lidarkit.bench.worker import execute_job
 from lidarkit.errors import ConfigError, OutputError
 
@@ -59,7 +62,8 @@ def run_suite(
     """Run every unfinished job of ``suite`` and write ``out_dir/jobs/<key>.json`` for each, atomically.
 
     ``on_start(n_to_run, n_skipped)`` and ``on_result(job, record)`` let a CLI drive a progress bar.
-    Failed jobs are recorded (status "failed", error type and message) and retried on the next run.
+    Failed jobs are recorded (status "failed", error type and message) and retried on the next run; with ``force``, a
+    job that fails where an ok result exists keeps that result, the failure noted in it as ``rerun_failed``.
     """
     from lidarkit.provenance import code_version
 
@@ -69,6 +73,7 @@ def run_suite(
     out_dir = path_argument(out_dir, "out_dir")
     _check_types(workers, force)
     check_executor_args(executor, workers, address)
+    _check_task_modules(suite, executor)
     check_results_folder(out_dir)
     t0 = time.perf_counter()
     keyed = [(job.key(version), job) for job in suite.jobs]
@@ -83,10 +88,11 @@ def run_suite(
         if todo:
             runner = make_executor(executor, workers=workers, address=address)
             try:
-                for key, outcome in runner.run(job_fn, [(key, job.spec()) for key, job in todo]):
+                for key, outcome in runner.run(job_fn, [(key, _worker_spec(job)) for key, job in todo]):
                     job = by_key[key]
                     record = make_record(job, key, version, outcome)
-                    write_result(out_dir, record)
+                    kept = _earlier_ok(out_dir, key) if force and record["status"] != "ok" else None
+                    write_result(out_dir, record if kept is None else {**kept, "rerun_failed": _failure_note(record)})
                     raise_if_interrupted()  # (a Ctrl-C a library swallowed while it loaded: the run stops here, this job kept)
                     summary.ran += 1
                     if record["status"] == "ok":
@@ -94,13 +100,46 @@ def run_suite(
                     else:
                         summary.failed += 1
                         err = record.get("error") or {}
-                        summary.failures.append((key, job_label(job), f"{err.get('type')}: {err.get('message')}"))
+                        kept_note = " (the earlier ok result is kept)" if kept is not None else ""
+                        summary.failures.append((key, job_label(job), f"{err.get('type')}: {err.get('message')}{kept_note}"))
                     if on_result is not None:
                         on_result(job, record)
             finally:
                 runner.close()
         summary.wall_s = time.perf_counter() - t0
         return summary
+
+
+def _worker_spec(job: Job) -> dict[str, Any]:
+    """The spec a worker runs: with the module of a task registered in code, which a worker process imports (it knew
+    only the built-in tasks: every job of a custom task failed with "unknown task" on the process executor)."""
+    module = task_module(job.task)
+    return job.spec() if module is None else {**job.spec(), "task_module": module}
+
+
+def _check_task_modules(suite: Suite, executor: str) -> None:
+    """ConfigError before any job starts for a task registered where no file holds it (``python -c``, a notebook):
+    worker processes cannot import it, and every job failed with "unknown task"."""
+    if executor == "serial" or getattr(sys.modules.get("__main__"), "__file__", None):
+        return
+    for name in sorted({job.task for job in suite.jobs}):
+        if task_module(name) == "__main__":
+            raise ConfigError(f"{name!r} is registered in __main__ with no file (python -c, a notebook), which worker "
+                              "processes cannot import: define it in a module they can import and import that, or "
+                              "run with executor=\"serial\"", source="task")
+
+
+def _earlier_ok(out_dir: Path, key: str) -> dict[str, Any] | None:
+    """The ok result already written for ``key``, or None: a ``--force`` rerun that fails (a transient error) replaced
+    it with the failure, and the good result was lost."""
+    path = result_path(out_dir, key)
+    record = read_result(path) if path.exists() else None
+    return record if record is not None and record.get("status") == "ok" else None
+
+
+def _failure_note(record: dict[str, Any]) -> dict[str, Any]:
+    """What a failed forced rerun left beside the kept result: its error and when it ran."""
+    return {"error": record.get("error"), "started_utc": record.get("started_utc"), "finished_utc": record.get("finished_utc")}
 
 
 def _check_types(workers: Any, force: Any) -> None:

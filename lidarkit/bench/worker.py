@@ -30,7 +30,8 @@ class _WarningCapture(logging.Handler):
 
 
 def execute_job(spec: dict[str, Any]) -> dict[str, Any]:
-    """Run the job described by ``spec`` (``Job.spec()``); a raising job gives ``status="failed"`` with its error."""
+    """Run the job described by ``spec`` (``Job.spec()``, plus ``task_module`` for a task registered in code: the
+    module this process imports to know the task); a raising job gives ``status="failed"`` with its error."""
     from lidarkit.bench.results import malformed
     from lidarkit.bench.tasks import get_task
     from lidarkit.errors import DataError
@@ -45,8 +46,8 @@ def execute_job(spec: dict[str, Any]) -> dict[str, Any]:
     package_logger.addHandler(capture)
     package_logger.propagate = False  # a job's warnings go into its result, not over the progress bar
     try:
-        job = Job.from_spec(spec)
-        task = get_task(job.task)
+        job = Job.from_spec({k: v for k, v in spec.items() if k != "task_module"})
+        task = get_task(job.task, module=spec.get("task_module"))
         output = task.run(job)
         metrics = json_safe(output.metrics)
         # a metric no reader takes (text, an array) fails the job: recorded "ok", it was never read back and the job

@@ -108,10 +108,20 @@ def available_tasks() -> list[str]:
     return sorted(set(_BUILTIN) | set(_REGISTERED))
 
 
-def get_task(name: str) -> Task:
-    """The task instance for ``name``; unknown names raise ConfigError listing the known ones."""
+def task_module(name: str) -> str | None:
+    """The module the task registered as ``name`` is defined in (None for a built-in or unknown name): a worker process
+    knows only the built-ins and what it imported, so it imports this module before resolving the name."""
+    cls = _REGISTERED.get(name)
+    return cls.__module__ if cls is not None else None
+
+
+def get_task(name: str, module: str | None = None) -> Task:
+    """The task instance for ``name``, importing ``module`` first (see :func:`task_module`) when ``name`` is not known
+    yet; unknown names raise ConfigError listing the known ones."""
     if name in _INSTANCES:
         return _INSTANCES[name]
+    if module and module != "__main__" and name not in _REGISTERED:  # (a script's own __main__ is loaded already)
+        import_module_for_task(name, module)  # (the task registers itself as its module loads)
     if name in _REGISTERED:
         cls = _REGISTERED[name]
     elif name in _BUILTIN:
@@ -153,4 +163,4 @@ def import_module_for_task(task: str, module: str) -> Any:
 
 
 __all__ = ["HIGHER_IS_BETTER", "Metric", "Task", "TaskOutput", "available_tasks", "get_task", "higher_is_better", "import_module_for_task",
-           "register_task"]
+           "register_task", "task_module"]
