@@ -763,6 +763,8 @@ def test_publication_tables_average_over_common_seeds_and_the_summary_says_when_
     # and no comparison with the reference is said, not left out without a word
     assert ("- no comparison: drive, kiss vs ground_filtered: 2 common seed(s) (a comparison over seeds needs 5) and no "
             "KITTI segments to pair (a path under 100 m)") in (tmp_path / "report.md").read_text().splitlines()
+    # where the tables are, from the report (it named the folder's last name only: `suite/tables/` for runs/suite)
+    assert "Also as CSV and LaTeX (booktabs) in `tables/` beside this report." in (tmp_path / "report.md").read_text()
 
 
 ODOMETRY_AND_PAIRS = """

@@ -513,7 +513,7 @@ def _markdown(report: Report, title: str) -> str:
         out += ["All metrics:", "", markdown_table(header, rows)]
     pub = report.publication
     if pub is not None and pub.tables:
-        out += ["## Publication tables", "", f"Also as CSV and LaTeX (booktabs) in `{out_dir_name(report)}/tables/`.", ""]
+        out += ["## Publication tables", "", "Also as CSV and LaTeX (booktabs) in `tables/` beside this report.", ""]  # (its folder's last name read as a path)
         out += [t.to_markdown() for t in pub.tables]
         out += [f"![{caption}](plots/{path.name})\n\n{caption}\n" for caption, path in pub.boxplots]
     if pub is not None and (pub.comparisons or pub.not_compared):
@@ -533,10 +533,6 @@ def _markdown(report: Report, title: str) -> str:
     if report.failures:
         out += ["## Failed jobs", ""] + [f"- `{f['key']}` {f['label']}: {f['error']}" for f in report.failures] + [""]
     return "\n".join(out)
-
-
-def out_dir_name(report: Report) -> str:
-    return report.out_dir.name
 
 
 def _csv_number(x: Any) -> str:
