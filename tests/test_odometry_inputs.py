@@ -178,3 +178,14 @@ def test_relations_whose_ends_meet_one_pose_are_left_out_and_counted(caplog):
     tight = relation_error(estimate, relations)  # the default 0.01 s: none meets one pose
     assert (tight.n_used, tight.n_same_pose) == (103, 0)
     assert set(loose.used) > set(tight.used)  # the 103 scored at 0.01 s are among the 117
+
+
+@pytest.mark.parametrize("frames, shown", [(slice(0.5, 3), "0.5:3"), (slice(None, None, 2.0), "::2.0"), (slice(True, 3), "True:3"),
+                                           ("1:4:1.5", "1:4:1.5")])
+def test_a_frame_slice_of_non_integers_is_a_config_error(frames, shown):
+    """run(frames=slice(0.5, 3)) and slice(None, None, 2.0) raised numpy's bare "TypeError: slice indices must be
+    integers..." (and slice(True, 3) ran from frame 1), where the string "1:4:1.5" was refused naming frames."""
+    with pytest.raises(ConfigError) as info:
+        parse_frames(frames, 10)
+    assert str(info.value) == f"frames {shown!r}: frame bounds must be integers"
+    assert list(parse_frames(slice(np.int64(1), np.int64(4)), 10)) == [1, 2, 3]  # numpy's integers are integers

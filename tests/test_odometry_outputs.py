@@ -673,3 +673,26 @@ def test_a_nominal_period_unused_for_a_dataset_with_stamps_is_a_warning():
     unstamped = run(shared_path("kitti_odometry", "sequences", "00", "velodyne"), "small_gicp", frames="0:3",
                     frame_check={"nominal_period_s": 1})
     assert not any("nominal_period_s" in w for w in unstamped.metrics["warnings"])
+
+
+@pytest.mark.parametrize("method", ["small_gicp", "open3d_gicp"])
+def test_a_run_without_assessment_says_degeneracy_not_assessed(method, tmp_path, capsys):
+    """With assess=False the table read "not converged / degenerate │ 0 / 0", metrics.json n_degenerate 0 and timing.csv
+    degenerate 0 (beside correspondences -1, RMSE nan) on every frame, though no frame's degeneracy was assessed; now
+    "n/a" / null, as for a stateful variant (kiss) that gives no verdict."""
+    out = tmp_path / "run"
+    code, text, _ = _cli(["odometry", "sim:street?frames=4&beams=16&azimuths=360", "-m", method, "-p", "assess=false",
+                          "--out", str(out), "--no-progress"], capsys)
+    assert code == 0
+    assert re.search(r"not converged / degenerate \(variant's verdict\) +│ 0 / n/a \(not assessed: assess=False\)", text)
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["n_degenerate"] is None and metrics["n_not_converged"] == 0 and metrics["convergence_measured"] is True
+    rows = [line.split(",") for line in (out / "timing.csv").read_text().splitlines()]
+    columns = {name: [row[i] for row in rows[1:]] for i, name in enumerate(rows[0])}
+    assert columns["converged"] == ["n/a", "1", "1", "1"]  # the backend's own verdict, kept
+    for name in ("rmse_m", "n_correspondences", "degenerate", "min_eigenvalue"):
+        assert columns[name] == ["n/a"] * 4
+    stateful = run("sim:street?frames=4&beams=16&azimuths=360", "kiss", params={"assess": False})
+    assert stateful.metrics["n_degenerate"] is None  # the same word for the same lack of verdict
+    assessed = run("sim:street?frames=4&beams=16&azimuths=360", method)
+    assert assessed.metrics["n_degenerate"] == 0 and "n/a" not in assessed.stats.to_csv().splitlines()[2].split(",")[6:10]

@@ -106,7 +106,8 @@ def odometry(
     corrections = effective.get("corrections") or {}
     table.add_row("reader corrections", ", ".join(f"{k}={v}" for k, v in corrections.items()) or "none reported by the reader")
     if m.get("convergence_measured", True):
-        table.add_row("not converged / degenerate (variant's verdict)", f"{m['n_not_converged']} / {m['n_degenerate']}")
+        degenerate = "n/a (not assessed: assess=False)" if m["n_degenerate"] is None else m["n_degenerate"]
+        table.add_row("not converged / degenerate (variant's verdict)", f"{m['n_not_converged']} / {degenerate}")
         table.add_row(f"fallbacks ({m.get('fallback_motion', 'constant velocity')} motion)", str(m.get("n_constant_velocity_fallback", 0)))
     else:
         table.add_row("not converged / degenerate (variant's verdict)", "n/a (a stateful method gives no verdict)")

@@ -12,6 +12,7 @@ import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.io.base import ScanSequence
+from lidarkit.params import is_integer
 
 FrameSelection = slice | range | Sequence[int] | np.ndarray | str | None
 
@@ -164,6 +165,9 @@ def parse_frames(frames: FrameSelection, n_frames: int) -> np.ndarray:
         except ValueError:
             raise ConfigError("frame bounds must be integers", source=f"frames {frames!r}") from None
     if isinstance(frames, slice):
+        if not all(v is None or is_integer(v) for v in (frames.start, frames.stop, frames.step)):
+            # (slice(0.5, 3) raised a bare TypeError from numpy; True read as 1)
+            raise ConfigError("frame bounds must be integers", source=f"frames {frames_repr(frames, np.arange(0))!r}")
         if frames.step == 0:
             raise ConfigError("the step of a frame slice must not be zero", source=f"frames {frames_repr(frames, np.arange(0))!r}")
         if frames.step is not None and frames.step < 0:

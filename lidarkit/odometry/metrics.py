@@ -40,7 +40,8 @@ def odometry_metrics(result: OdometryResult) -> dict[str, Any]:
         "n_constant_velocity_fallback": result.n_fallback,
         # (with init="odometry" a refused frame takes the dataset's odometry motion, not constant velocity)
         "fallback_motion": run.get("fallback_motion", "constant velocity"),
-        "n_degenerate": int(stats.degenerate.sum()) if result.convergence_measured else None,
+        # (None, not 0, where the variant gives no verdict: a stateful one, or a run with assess=False)
+        "n_degenerate": int(stats.degenerate.sum()) if result.degeneracy_assessed else None,
         "n_ground_removal_flagged": sum("too little left after ground removal" in r for r in stats.reason),
         "estimated_length_m": result.trajectory.length_m,
         "n_bad_frames": result.n_bad_frames if stats.check_failed is not None else None,

@@ -24,7 +24,9 @@ class FrameStats:
     ``measured``: False where the runner has no convergence verdict (frame 0 of a stateless chain, every
     frame of a stateful variant such as kiss, which reports none): there ``converged`` is True only as a
     placeholder, iterations -1, rmse NaN, and the CSV / CLI show "n/a"; ``fallback``: the registration was
-    rejected (not converged) and the frame's pose uses the previous relative motion (constant velocity).
+    rejected (not converged) and the frame's pose uses the previous relative motion (constant velocity);
+    ``assessed``: False where a measured frame's result was not assessed (``assess=False``: no RMSE, correspondences
+    or degeneracy, shown "n/a" as for a frame without a verdict, not as 0 / not degenerate); None: all were.
 
     The independent check (:mod:`lidarkit.odometry.frame_check`, every variant): ``motion_dev_m`` /
     ``rotation_dev_deg`` (deviation from the constant-velocity prediction, NaN for frames 0-1), ``fitness``
@@ -53,6 +55,7 @@ class FrameStats:
     check_why: tuple[str, ...] = ()
     check_s: np.ndarray | None = None
     min_eigenvalue: np.ndarray | None = None
+    assessed: np.ndarray | None = None
 
     def __repr__(self) -> str:
         """One line of counts (the generated one printed every array: 11,600 characters for 60 frames)."""
@@ -80,13 +83,15 @@ class FrameStats:
         failed = self.check_failed if self.check_failed is not None else np.zeros(n, dtype=bool)
         why = self.check_why or ("",) * n
         min_eig = self.min_eigenvalue if self.min_eigenvalue is not None else nan
+        assessed = self.assessed if self.assessed is not None else np.ones(n, dtype=bool)
         for k in range(n):
             measured = bool(self.measured[k])
+            scored = measured and bool(assessed[k])
             writer.writerow([
                 int(self.frame[k]), f"{self.read_s[k]:.6f}", f"{self.register_s[k]:.6f}", int(self.n_points[k]),
                 int(self.converged[k]) if measured else "n/a", int(self.iterations[k]) if measured else "n/a",
-                f"{self.rmse_m[k]:.6g}" if measured else "n/a", int(self.n_correspondences[k]) if measured else "n/a",
-                int(self.degenerate[k]) if measured else "n/a", f"{min_eig[k]:.6g}" if np.isfinite(min_eig[k]) else "n/a",
+                f"{self.rmse_m[k]:.6g}" if scored else "n/a", int(self.n_correspondences[k]) if scored else "n/a",
+                int(self.degenerate[k]) if scored else "n/a", f"{min_eig[k]:.6g}" if np.isfinite(min_eig[k]) else "n/a",
                 int(self.fallback[k]), self.reason[k],
                 int(has_times[k]), _opt(dev_t[k], ".4f"), _opt(dev_r[k], ".4f"), _opt(fitness[k], ".3f"), int(failed[k]), why[k],
             ])
@@ -160,3 +165,10 @@ class OdometryResult:
     def convergence_measured(self) -> bool:
         """False for stateful variants (kiss): they report no per-frame convergence verdict."""
         return not self.config.get("run", {}).get("stateful", False)
+
+    @property
+    def degeneracy_assessed(self) -> bool:
+        """False for stateful variants and for results registered with ``assess=False``: frames whose degeneracy is
+        not known are not counted as "not degenerate" (the run read "0 degenerate")."""
+        stats = self.stats
+        return self.convergence_measured and (stats.assessed is None or bool(stats.assessed[stats.measured].all()))

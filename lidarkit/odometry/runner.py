@@ -169,7 +169,7 @@ def _run_stateless(stream, registration: Any, worker: Overlap, indices: np.ndarr
                    poses: np.ndarray, checker: FrameChecker, strict: bool, name: str, dataset_name: str, bar,
                    validated: dict[int, np.ndarray], *,
                    read_s, register_s, n_points, converged, measured, fallback, iterations, rmse_m, n_corr, degenerate,
-                   min_eigenvalue, relative_cov, reasons, widened: list[int], require_times=None) -> Scan | None:
+                   assessed, min_eigenvalue, relative_cov, reasons, widened: list[int], require_times=None) -> Scan | None:
     """Scan-to-scan chaining, frame k's assessment overlapped with frame k+1's registration (``require_times``: the
     ``--strict`` refusal of a scan without per-point times, for a variant that deskews with them).
 
@@ -228,6 +228,7 @@ def _run_stateless(stream, registration: Any, worker: Overlap, indices: np.ndarr
         n_corr[k] = int(result.n_correspondences)
         deg = getattr(result, "degeneracy", None)
         degenerate[k] = bool(getattr(deg, "degenerate", False))
+        assessed[k] = (getattr(result, "extra", None) or {}).get("assessed", True) is not False  # (assess=False: no verdict)
         min_eigenvalue[k] = float(deg.eigenvalues[0]) if deg is not None else np.nan
         if relative_cov is not None and getattr(result, "covariance", None) is not None and converged[k]:
             relative_cov[k] = result.covariance
@@ -430,6 +431,7 @@ def run(
     rmse_m = np.full(n, np.nan)
     n_corr = np.full(n, -1, dtype=np.int64)
     degenerate = np.zeros(n, dtype=bool)
+    frame_assessed = np.ones(n, dtype=bool)
     min_eigenvalue = np.full(n, np.nan)
     relative_cov = np.full((n, 6, 6), np.nan)
     reasons = [""] * n
@@ -552,7 +554,8 @@ def run(
                     stream, registration, worker, indices, odometry_poses, poses, checker, strict, name, dataset_name, bar, validated,
                     require_times=functools.partial(require_point_times, sequence=sequence, dataset_name=dataset_name) if need_times else None,
                     read_s=read_s, register_s=register_s, n_points=n_points, converged=converged, measured=measured, fallback=fallback,
-                    iterations=iterations, rmse_m=rmse_m, n_corr=n_corr, degenerate=degenerate, min_eigenvalue=min_eigenvalue,
+                    iterations=iterations, rmse_m=rmse_m, n_corr=n_corr, degenerate=degenerate, assessed=frame_assessed,
+                    min_eigenvalue=min_eigenvalue,
                     relative_cov=relative_cov if want_covariance else None, reasons=reasons, widened=widened,
                 )
     finally:
@@ -605,7 +608,7 @@ def run(
     stats = FrameStats(
         indices.copy(), read_s, register_s, n_points, converged, iterations, rmse_m, n_corr, degenerate, tuple(reasons), measured, fallback,
         checker.has_point_times, check.motion_dev_m, check.rotation_dev_deg, check.fitness, check.failed, why, checker.check_s,
-        min_eigenvalue,
+        min_eigenvalue, frame_assessed,
     )
     past_the_end = frames_past_the_end(frames, n_total)
     effective, warnings = effective_settings(sequence, registration, name, stateful, checker.has_point_times, reference,
