@@ -224,6 +224,24 @@ def test_every_score_names_its_alignment_in_cli_metrics_bench_table_and_report(e
     assert "APE RMSE (SE(3)-aligned) [m], methods x datasets" in markdown  # the aligned APE is the headline view
 
 
+def test_the_rpe_of_a_frame_selection_that_skips_frames_is_labelled_over_one_selected_frame(tmp_path, capsys):
+    """``--frames 1:10:3``: an RPE over 3 KITTI frames was labelled "1 frame" in the table, metrics.json and config.yaml
+    (the bench task already said "1 selected frame")."""
+    from conftest import shared_path
+
+    out = tmp_path / "run"
+    code, text, _ = _cli(["odometry", str(shared_path("kitti_odometry")), "--frames", "1:10:3", "-m", "small_gicp",
+                          "--no-progress", "--out", str(out)], capsys)
+    assert code == 0
+    m = json.loads((out / "metrics.json").read_text())
+    for key in ("rpe_translation_m", "rpe_rotation_deg"):
+        assert m[key]["alignment"] == "relative over 1 selected frame, alignment-free"
+    assert "rpe_translation_m: relative over 1 selected frame, alignment-free" in (out / "config.yaml").read_text()
+    assert "RPE 1 selected frame RMSE" in " ".join(text.split())
+    whole = run(f"kitti:{shared_path('kitti_odometry')}", "small_gicp", frames="1:5", progress=False)
+    assert whole.metrics["rpe_translation_m"]["alignment"] == "relative over 1 frame, alignment-free"
+
+
 def test_report_labels_metrics_with_the_alignment_their_records_state():
     from lidarkit.bench.report import MetricInfo, label_alignment
 

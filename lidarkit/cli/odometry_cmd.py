@@ -135,7 +135,8 @@ def odometry(
         if "ape_translation_m" in m:
             table.add_row("APE translation RMSE, SE(3)-aligned (m)", m.get("ape_translation_se3_note") or _stat(m, "ape_translation_se3_m"))
             table.add_row("APE translation RMSE, unaligned, first pose anchored (m)", _stat(m, "ape_translation_m"))
-            table.add_row("RPE 1 frame RMSE, alignment-free (m / deg)", f"{_stat(m, 'rpe_translation_m', '.4f')} / {_stat(m, 'rpe_rotation_deg', '.4f')}")
+            step = "1 selected frame" if "selected" in str((m.get("rpe_translation_m") or {}).get("alignment")) else "1 frame"
+            table.add_row(f"RPE {step} RMSE, alignment-free (m / deg)", f"{_stat(m, 'rpe_translation_m', '.4f')} / {_stat(m, 'rpe_rotation_deg', '.4f')}")
         drift = m.get("kitti_drift")
         if drift:
             table.add_row("KITTI drift, alignment-free (% / deg per 100 m)", f"{drift['translation_pct']:.3f} / {drift['rotation_deg_per_100m']:.4f}")

@@ -9,7 +9,7 @@ import numpy as np
 from lidarkit.errors import EvaluationError
 from lidarkit.geometry import pose_error
 from lidarkit.odometry.result import OdometryResult
-from lidarkit.odometry.settings import METRIC_ALIGNMENT
+from lidarkit.odometry.settings import METRIC_ALIGNMENT, metric_alignment
 from lidarkit.trajectory import Trajectory
 
 
@@ -79,9 +79,10 @@ def odometry_metrics(result: OdometryResult) -> dict[str, Any]:
             out["ape_translation_se3_note"] = f"no SE(3)-aligned APE: a rigid fit needs 3 poses, the run has {len(ref)}"
         out["rpe_translation_m"] = leval.rpe(ref, est, delta=1, delta_unit="frames", relation="translation").to_dict(include_errors=False)
         out["rpe_rotation_deg"] = leval.rpe(ref, est, delta=1, delta_unit="frames", relation="rotation_angle_deg").to_dict(include_errors=False)
+        alignment = metric_alignment(result.stats.frame)
         for key in ("ape_translation_m", "ape_translation_se3_m", "rpe_translation_m", "rpe_rotation_deg"):
             if key in out:
-                out[key]["alignment"] = METRIC_ALIGNMENT[key]
+                out[key]["alignment"] = alignment[key]
     if leval.drift_segments_possible(ref):
         out["kitti_drift"] = leval.kitti_drift(ref, est).to_dict()
         out["kitti_drift"]["alignment"] = METRIC_ALIGNMENT["kitti_drift"]

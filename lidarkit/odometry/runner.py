@@ -612,7 +612,8 @@ def run(
     )
     past_the_end = frames_past_the_end(frames, n_total)
     effective, warnings = effective_settings(sequence, registration, name, stateful, checker.has_point_times, reference,
-                                             stamp_instant=getattr(first_scan, "stamp_instant", None), n_flat_times=len(flat_times))
+                                             stamp_instant=getattr(first_scan, "stamp_instant", None), n_flat_times=len(flat_times),
+                                             frames=indices)
     # the gaps are judged against the dataset's own interval (stamps, else file numbers): the run's may hold only two
     typical = typical_interval(all_stamps) if timestamps is not None else number_step
     if want_covariance and n > 1 and not np.isfinite(relative_cov[1:]).all(axis=(1, 2)).any():

@@ -23,6 +23,16 @@ METRIC_ALIGNMENT = {
     "final_error": "unaligned, first pose anchored",
     "kitti_drift": "KITTI devkit segments, alignment-free",
 }
+#: the RPE's step where the run's frames skip dataset frames (``--frames 1:10:3``): one selected frame, not one frame
+SELECTED_FRAME = "relative over 1 selected frame, alignment-free"
+
+
+def metric_alignment(frames: np.ndarray | None = None) -> dict[str, str]:
+    """:data:`METRIC_ALIGNMENT` of a run over dataset ``frames``: a selection that skips frames has its RPE over one
+    selected frame (``--frames 1:10:3``, an RPE over 3 KITTI frames, was labelled "over 1 frame")."""
+    if frames is None or np.all(np.diff(frames) == 1):
+        return dict(METRIC_ALIGNMENT)
+    return {**METRIC_ALIGNMENT, "rpe_translation_m": SELECTED_FRAME, "rpe_rotation_deg": SELECTED_FRAME}
 
 
 def deskew_requested(registration: Any) -> bool | None:
@@ -107,7 +117,7 @@ def ground_truth_instant(sequence: Any, reference: Any) -> str:
 
 def effective_settings(
     sequence: Any, registration: Any, method: str, stateful: bool, has_point_times: np.ndarray, reference: Any,
-    stamp_instant: str | None = None, n_flat_times: int = 0,
+    stamp_instant: str | None = None, n_flat_times: int = 0, frames: np.ndarray | None = None,
 ) -> tuple[dict[str, Any], list[str]]:
     """(settings really applied, warnings) of a finished run; ``has_point_times`` (n,) bool per processed frame;
     ``stamp_instant``: the instant of the sweep the scans' stamps refer to (what an estimate over snapshots refers to);
@@ -156,6 +166,6 @@ def effective_settings(
         "ground_truth_instant": gt_instant,
         "reader": reader,
         "corrections": corrections(reader),
-        "metric_alignment": dict(METRIC_ALIGNMENT),
+        "metric_alignment": metric_alignment(frames),
     }
     return settings, warnings
