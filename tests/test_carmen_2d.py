@@ -216,6 +216,8 @@ def test_relations_file_and_bad_relations(tmp_path, carmen_logs):
         Relations.read(bad)
     with pytest.raises(DataError, match="relations file not found"):
         CarmenLog(shared_path("carmen_2d", "aces.clf.bz2"), relations=tmp_path / "none.relations")
+    with pytest.raises(DataError, match=f"{tmp_path}: a folder, not a relations file"):  # (it read "not found")
+        CarmenLog(shared_path("carmen_2d", "aces.clf.bz2"), relations=tmp_path)
     # a bad file is refused when the log is opened: found after a whole run's registration, it failed the run with
     # nothing written (Intel's full log: 3 minutes lost)
     with pytest.raises(DataError, match=r"bad.relations \(line 6\): z, roll and pitch"):
@@ -234,12 +236,14 @@ def test_relations_file_and_bad_relations(tmp_path, carmen_logs):
 
 def test_relations_built_in_code_are_checked_as_a_file_s_are():
     """Relations built in code were never checked: a NaN dx scored "translation nan +- nan m", plain lists failed
-    inside the metric with a TypeError and unequal lengths with an IndexError."""
+    inside the metric with a TypeError and unequal lengths with an IndexError; a relation from a time to itself, which a
+    file may not hold, was scored and blamed on the estimate."""
     ok = Relations([1.0, 2.0], [2.0, 3.0], [0.1, 0.2], [0.0, 0.0], [0.0, 0.01])
     assert isinstance(ok.t1_s, np.ndarray) and ok.t1_s.dtype == np.float64 and len(ok) == 2
     for kwargs, message in (({"dx_m": [np.nan, 0.2]}, "dx_m must be a 1-D array of finite numbers"),
                             ({"dy_m": [0.0]}, r"t1_s, t2_s, dx_m, dy_m, dyaw_rad differ in length \(2, 2, 2, 1, 2\)"),
-                            ({"t1_s": ["a", "b"]}, "t1_s must be numbers")):
+                            ({"t1_s": ["a", "b"]}, "t1_s must be numbers"),
+                            ({"t2_s": [2.0, 2.0]}, r"t1 equals t2 \(relation 2\)")):
         fields = {"t1_s": [1.0, 2.0], "t2_s": [2.0, 3.0], "dx_m": [0.1, 0.2], "dy_m": [0.0, 0.0], "dyaw_rad": [0.0, 0.01]}
         with pytest.raises(DataError, match=message):
             Relations(**{**fields, **kwargs})

@@ -122,6 +122,9 @@ class Relations:
         if len({len(a) for a in arrays}) != 1:
             raise DataError(f"{', '.join(names)} differ in length ({', '.join(str(len(a)) for a in arrays)})",
                             source=self.source or "relations")
+        same_time = np.flatnonzero(arrays[0] == arrays[1])
+        if len(same_time):  # (as read() refuses it: scored, it was blamed on the estimate)
+            raise DataError(f"t1 equals t2 (relation {same_time[0] + 1})", source=self.source or "relations")
         for name, value in zip(names, arrays):
             object.__setattr__(self, name, value)
 
@@ -398,6 +401,8 @@ class CarmenLog:
             candidate = self.path.with_name(self.name + ".relations")
             return candidate if candidate.is_file() else None
         path = option_path(relations, self.path.parent)  # (beside the log too, as the other readers' path options)
+        if path.is_dir():  # (read "not found")
+            raise DataError("a folder, not a relations file", source=path)
         if not path.is_file():
             raise DataError("relations file not found (neither from the working directory nor beside the log)", source=path)
         return path
