@@ -53,6 +53,30 @@ def test_kld_bin_count_equals_a_reference_count(spread):
     assert sd == pytest.approx(np.sqrt((((xy - mean[:, None]) ** 2) @ wd).sum()), rel=1e-6)
 
 
+@pytest.mark.parametrize("offset_m", [0.0, 1e4, 1e5])
+def test_kld_bin_count_does_not_depend_on_where_the_map_lies(offset_m):
+    """Bin keys packed absolute cells (x * 2^40 + y * 2^20 + theta): past 2^12 bins from the origin neighbouring cells
+    shared a key, so 200k particles 100 km out counted 2183 bins of 26192 and KLD ran too few particles."""
+    rng = np.random.default_rng(0)
+    states = np.stack([rng.uniform(-2, 12, 200_000) + offset_m, rng.uniform(-2, 11, 200_000), rng.uniform(-np.pi, np.pi, 200_000)])
+    w = np.full(200_000, 1.0 / 200_000)
+    assert _reference_bins(states, 0.5, np.radians(10)) == 26192  # as many as at the origin
+    assert occupied_bins(states, 0.5, np.radians(10)) == 26192
+    assert bins_and_spread(states, w, 0.5, np.radians(10))[0] == 26192
+
+
+def test_kld_bin_count_with_more_cells_than_a_packed_key_holds():
+    """With 1 um / 1 nrad bins, 100 headings 1.5 nrad apart at x = 30 m (3e7 cells) shared one packed key before (the
+    key's float64 step there is 4096 cells); with a far particle the box holds more cells than a key tells apart
+    and is counted by np.unique."""
+    cluster = np.stack([np.full(100, 30.0), np.zeros(100), np.arange(100) * 1.5e-9])
+    states = np.concatenate([cluster, [[-30.0], [-30.0], [-3.0]]], axis=1)
+    assert occupied_bins(states, 1e-6, 1e-9) == _reference_bins(states, 1e-6, 1e-9) == 101
+    # 100 km out at 1 um bins (1e11 cells from the origin): keys are counted from the box's lowest cell
+    far = np.random.default_rng(6).random((3, 2000)) * [[1e-4], [1e-4], [1e-6]] + [[1e5], [0.0], [0.0]]
+    assert occupied_bins(far, 1e-6, 1e-9) == _reference_bins(far, 1e-6, 1e-9) == 2000
+
+
 def test_kld_sample_count_reaches_the_fixed_point_of_the_bound():
     kw = dict(epsilon=0.05, z=2.326, bin_m=0.5, bin_rad=np.radians(10), n_min=50, n_max=5000)
     rng = np.random.default_rng(4)

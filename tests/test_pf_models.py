@@ -376,3 +376,40 @@ def test_noise_block_elements_must_be_an_integer_of_at_least_one():
             PFConfig.make(noise_block_elements=value)
         assert str(exc.value) == f"pf config noise_block_elements: must be an integer >= 1, got {value!r}"
     assert PFConfig.make(noise_block_elements=np.int64(3000)).noise_block_elements == 3000
+
+
+def test_initialize_gaussian_refuses_a_mean_or_std_that_config_would_refuse():
+    """initialize_gaussian([nan, 0, 0]) and std [-1, -1, -1] were taken: the next update logged "no particle has a
+    finite log-likelihood" and the estimate was NaN; a mean of 2 values was numpy's "cannot reshape"."""
+    for kernel in ("point", "kalman"):
+        pf = make_filter(LANDMARKS, PFConfig.make(n_particles=50, kernel=kernel), 1)
+        for call, line in (
+            (lambda: pf.initialize_gaussian(np.array([np.nan, 0, 0])),
+             "initialize_gaussian: mean must be 3 finite values [x_m, y_m, theta_rad], got [nan, 0.0, 0.0]"),
+            (lambda: pf.initialize_gaussian(std=[-1, -1, -1]),
+             "initialize_gaussian: std must be 3 finite values >= 0 [x_m, y_m, theta_rad], got [-1, -1, -1]"),
+            (lambda: pf.initialize_gaussian([1.0, 2.0]),
+             "initialize_gaussian: mean must be 3 finite values [x_m, y_m, theta_rad], got [1.0, 2.0]"),
+        ):
+            with pytest.raises(ConfigError) as exc:
+                call()
+            assert str(exc.value) == line, kernel
+        pf.initialize_gaussian([1.0, 2.0, 0.0], [0.0, 0.0, 0.0])
+        np.testing.assert_allclose(pf.estimate("mean"), [1.0, 2.0, 0.0], atol=1e-6)
+
+
+def test_readings_of_the_wrong_shape_or_text_are_a_data_error_naming_the_method():
+    """update([0], [1.0, 0.1, 0.3]) (or [[1.0, 0.1, 0.3]], or text) failed with numpy's "cannot reshape array of size 3
+    into shape (2)" / "could not convert string to float", not a DataError as a count mismatch gets."""
+    for kernel in ("point", "kalman"):
+        pf = make_filter(LANDMARKS, PFConfig.make(n_particles=50, kernel=kernel), 1)
+        for method in ("update", "innovation_nis", "innovation_stats"):
+            for z, reason in (([1.0, 0.1, 0.3], "readings must be an (M, 2) array [range_m, bearing_rad], got shape (3,)"),
+                              ([[1.0, 0.1, 0.3]], "readings must be an (M, 2) array [range_m, bearing_rad], got shape (1, 3)"),
+                              ([["a", "b"]], "readings must be numbers [range_m, bearing_rad], got ['a', 'b']")):
+                with pytest.raises(DataError) as exc:
+                    getattr(pf, method)(np.array([0]), z)
+                assert str(exc.value) == f"{method}: {reason}", kernel
+        assert pf.n_updates == 0
+        assert pf.update(np.array([0]), [2.0, 0.3]) is True  # one reading as (2,) is still one reading
+        assert pf.update(np.array([], dtype=np.int64), []) is False

@@ -41,6 +41,28 @@ def check_landmark_index(landmark_index: np.ndarray, n_landmarks: int, source: s
     return raw.astype(np.int64)
 
 
+def readings_array(z: np.ndarray, source: str) -> np.ndarray:
+    """Readings ``z`` as ``(M, 2)`` float64 [range_m, bearing_rad] (one reading may come as ``(2,)``, none as an empty
+    array), or a DataError naming ``source`` (the wrong shape or text failed in numpy's reshape or float conversion)."""
+    try:
+        arr = np.asarray(z, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise DataError(f"readings must be numbers [range_m, bearing_rad], got {_listed(z)}", source=source) from None
+    if arr.size == 0:
+        return arr.reshape(0, 2)
+    if arr.shape != (2,) and (arr.ndim != 2 or arr.shape[1] != 2):
+        raise DataError(f"readings must be an (M, 2) array [range_m, bearing_rad], got shape {arr.shape}", source=source)
+    return arr.reshape(-1, 2)
+
+
+def _listed(value) -> str:
+    """``value`` for an error message: a list of its elements where it is array-like, else its repr."""
+    try:
+        return repr(np.asarray(value).reshape(-1).tolist())
+    except (TypeError, ValueError):  # ragged
+        return repr(value)
+
+
 def _reading(i: int, step_offsets: np.ndarray | None) -> str:
     """The words "reading i", with its step when the readings are grouped by step (rows ``step_offsets[t]:step_offsets[t+1]``)."""
     if step_offsets is None:
@@ -101,10 +123,20 @@ class LandmarkFilterBase:
         raise NotImplementedError
 
     def _gaussian_prior(self, mean: np.ndarray | None, std: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
-        """Mean ``(3,)`` and standard deviations ``(3,)`` float64 (defaults from the config)."""
-        mean = np.asarray(self.config.init_mean if mean is None else mean, dtype=np.float64).reshape(3)
-        std = np.asarray(self.config.init_std if std is None else std, dtype=np.float64).reshape(3)
-        return mean, std
+        """Mean ``(3,)`` and standard deviations ``(3,)`` float64 (defaults from the config), checked as PFConfig checks
+        ``init_mean`` / ``init_std`` (a NaN mean was taken: every weight reset at the next update, a NaN estimate)."""
+        checked = []
+        for name, value in (("mean", self.config.init_mean if mean is None else mean),
+                            ("std", self.config.init_std if std is None else std)):
+            try:
+                v = np.asarray(value, dtype=np.float64).reshape(-1)
+            except (TypeError, ValueError):  # text
+                v = np.empty(0)
+            if v.shape != (3,) or not np.isfinite(v).all() or (name == "std" and (v < 0).any()):
+                rule = "3 finite values >= 0" if name == "std" else "3 finite values"
+                raise ConfigError(f"{name} must be {rule} [x_m, y_m, theta_rad], got {_listed(value)}", source="initialize_gaussian")
+            checked.append(v)
+        return checked[0], checked[1]
 
     def initialize_uniform(self, bounds_xy: tuple[float, float, float, float] | None = None) -> None:
         """Global localization: x, y uniform over ``(xmin, xmax, ymin, ymax)`` (default: landmarks +- margin), theta uniform."""
@@ -209,7 +241,7 @@ class LandmarkFilterBase:
                           source: str = "update") -> tuple[np.ndarray, np.ndarray]:
         """``(M,)`` int64 landmark indices and ``(M, 2)`` float64 finite readings; with ``check_index`` also counts and
         indices (integers in range); errors name ``source``, the method called."""
-        z = np.asarray(z, dtype=np.float64).reshape(-1, 2)
+        z = readings_array(z, source)
         if not np.isfinite(z).all():
             raise DataError("non-finite measurement", source=source)
         if not check_index:
@@ -321,4 +353,4 @@ class LandmarkFilterBase:
         raise NotImplementedError
 
 
-__all__ = ["LandmarkFilterBase", "check_landmark_index"]
+__all__ = ["LandmarkFilterBase", "check_landmark_index", "readings_array"]

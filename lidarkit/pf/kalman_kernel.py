@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
-from lidarkit.pf.base import LandmarkFilterBase
+from lidarkit.pf.base import LandmarkFilterBase, readings_array
 from lidarkit.pf.config import PFConfig
 from lidarkit.pf.models import resolve_q, wrap_angle
 
@@ -95,8 +95,7 @@ class KalmanParticleFilter(LandmarkFilterBase):
 
         With ``innovation_gate`` > 0 a reading whose Mahalanobis distance exceeds it does not correct the kernel
         (K = 0: mean and covariance unchanged) but still enters the kernel's weight."""
-        z = np.asarray(z, dtype=np.float64).reshape(-1, 2)
-        if len(z) == 0:
+        if readings_array(z, "update").size == 0:
             return False
         idx, z = self._checked_readings(landmark_index, z, check_index=check)
         if self.config.likelihood == "nearest":

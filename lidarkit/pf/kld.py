@@ -19,10 +19,9 @@ import math
 
 import numpy as np
 
-KEY_STRIDE = float(1 << 20)  # cells per axis in a bin key (see bin_keys)
+_EXACT_KEYS = float(1 << 53)  # float64 holds every integer below this: the most cells a packed key may tell apart
 
 _SCALES: dict[tuple[float, float], np.ndarray] = {}
-_KEY_WEIGHTS = np.array([KEY_STRIDE * KEY_STRIDE, KEY_STRIDE, 1.0])
 
 
 def kld_bound(k: np.ndarray | int, epsilon: float, z: float) -> np.ndarray:
@@ -63,14 +62,31 @@ def _scale(bin_m: float, bin_rad: float) -> np.ndarray:
 def bin_keys(states: np.ndarray, bin_m: float, bin_rad: float) -> np.ndarray:
     """Bin key ``(N,)`` float64 of every particle: one integer-valued number per (x, y, theta) cell (only compared).
 
-    key = (floor(x / bin_m) * S + floor(y / bin_m)) * S + floor(theta / bin_rad), S = 2^20: distinct cells get
-    distinct keys while |y| / bin_m and |theta| / bin_rad stay below 2^19 and |x| / bin_m below 2^12 (2 km at
-    0.5 m bins; beyond that, far-apart cells may share a key, which only lowers k). Headings are binned as stored
-    (the filter wraps them every few steps): a wrap moves a particle to another cell like crossing a border would.
+    Headings are binned as stored (the filter wraps them every few steps): a wrap moves a particle to another cell
+    like crossing a border would. Keys are relative to the set's own lowest cell, so they compare within one call only.
     """
     cells = np.multiply(states, _scale(bin_m, bin_rad))  # float64 (3, N)
+    return _cell_keys(cells)
+
+
+def _cell_keys(cells: np.ndarray) -> np.ndarray:
+    """Keys ``(N,)`` of the cells ``(3, N)`` float64 (positions in bin units; floored in place), distinct per cell.
+
+    Mixed radix over the box the set spans: key = x * (ny * nt) + y * nt + theta, distinct for distinct cells of the
+    box, exact in float64 while the sum of |terms| stays below 2^53 (else counted from the box's lowest cell). Packed
+    with fixed strides (x * 2^40 + y * 2^20 + theta), cells past 2^12 bins from the origin (2 km at 0.5 m) shared keys:
+    the same cloud 100 km out counted 2183 bins instead of 26192. A box of 2^53 cells or more (no map at any sensible
+    bin size) is numbered by np.unique, exact but slower.
+    """
     np.floor(cells, out=cells)
-    return _KEY_WEIGHTS @ cells
+    lo = cells.min(axis=1)
+    (x0, y0, t0), (x1, y1, t1) = lo.tolist(), cells.max(axis=1).tolist()
+    ny, nt = y1 - y0 + 1.0, t1 - t0 + 1.0
+    if (x1 - x0 + 1.0) * ny * nt >= _EXACT_KEYS:
+        return np.unique(cells, axis=1, return_inverse=True)[1].reshape(-1).astype(np.float64)
+    if ny * nt * max(-x0, x1) + nt * max(-y0, y1) + max(-t0, t1) >= _EXACT_KEYS:  # far out: count from the lowest cell
+        cells -= lo[:, None]
+    return np.array([ny * nt, nt, 1.0]) @ cells
 
 
 def occupied_bins(states: np.ndarray, bin_m: float, bin_rad: float) -> int:
@@ -95,8 +111,7 @@ def bins_and_spread(states: np.ndarray, weights: np.ndarray, bin_m: float, bin_r
     mx, my = (xy @ w).tolist()
     sx, sy = ((xy * xy) @ w).tolist()
     var = (sx + sy) / total - (mx * mx + my * my) / (total * total)
-    np.floor(cells, out=cells)
-    keys = _KEY_WEIGHTS @ cells
+    keys = _cell_keys(cells)
     keys.sort()
     return int(np.count_nonzero(keys[1:] != keys[:-1])) + 1, bin_m * math.sqrt(max(var, 0.0))
 
