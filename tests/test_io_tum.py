@@ -98,6 +98,25 @@ def test_intrinsics_from_folder_name_or_option(tum_folder, tmp_path):
     np.testing.assert_array_equal(TumRGBD(tum_folder, K=K).K, K)
 
 
+def test_the_built_in_fr1_fr2_intrinsics_say_once_that_distortion_is_not_corrected(tum_folder, caplog):
+    """The freiburg1/2 default K was used without a word, though those colour images are distorted (k1 0.26 / 0.23)
+    and lidarkit does not undistort them. Said once, at the first use of K; not for a given K nor for freiburg3."""
+    import logging
+    import shutil
+
+    ds = TumRGBD(tum_folder)
+    with caplog.at_level(logging.WARNING, logger="lidarkit.io.tum"):
+        assert ds.K[0, 0] == ds.K[0, 0] == 517.3
+    assert [r.getMessage() for r in caplog.records] == [
+        f"{tum_folder}: the built-in freiburg1 intrinsics have no lens distortion model: its colour images are distorted "
+        "(k1 = 0.26) and are used uncorrected (undistort them, and give their K, for exact geometry)"]
+    caplog.clear()
+    fr3 = shutil.copytree(tum_folder, tum_folder.parent / "rgbd_dataset_freiburg3_office")
+    with caplog.at_level(logging.WARNING, logger="lidarkit.io.tum"):
+        assert TumRGBD(tum_folder, K=np.eye(3)).K[0, 0] == 1.0 and TumRGBD(fr3).K[0, 0] == 535.4
+    assert not caplog.records
+
+
 def test_associate_nearest_edges():
     ref = np.array([0.0, 0.01, 0.02, 0.03])
     np.testing.assert_array_equal(associate_nearest(np.array([-0.5, -0.001, 0.014, 0.016, 0.031, 0.06]), ref, 0.02), [-1, 0, 1, 2, 3, -1])

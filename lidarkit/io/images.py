@@ -74,9 +74,14 @@ def read_intrinsics(path: str | os.PathLike) -> np.ndarray:
     return K
 
 
+#: stamps above this are nanoseconds (EuRoC ``data.csv``: 1403636579763555584), as ``lidarkit.io.pointcloud2`` reads them
+_NANOSECONDS_AFTER = 1e15
+
+
 def read_image_timestamps(path: str | os.PathLike) -> np.ndarray:
-    """Timestamps in seconds: one number per line, or ``stamp name`` lines (TUM ``rgb.txt``); first column used.
-    NaN or infinity is refused at its line (it failed later as "not strictly increasing", blaming the next line)."""
+    """Timestamps in seconds: one number per line, or ``stamp name`` lines (TUM ``rgb.txt``, EuRoC ``data.csv``); first
+    column used. NaN or infinity is refused at its line (it failed later as "not strictly increasing", blaming the next
+    line). Stamps above 1e15 are nanoseconds, converted with a logged warning (they were written out as seconds)."""
     stamps = []
     for lineno, raw in enumerate(read_lines(path), start=1):
         line = raw.strip()
@@ -90,7 +95,12 @@ def read_image_timestamps(path: str | os.PathLike) -> np.ndarray:
             raise DataError("NaN or infinite value", source=path, location=f"line {lineno}")
     if not stamps:
         raise DataError("no time stamps", source=path)
-    return np.asarray(stamps, dtype=np.float64)
+    stamps_s = np.asarray(stamps, dtype=np.float64)
+    if float(np.abs(stamps_s).max()) > _NANOSECONDS_AFTER:
+        stamps_s = stamps_s * 1e-9
+        log.warning("%s: time stamps above %.0e read as nanoseconds (the first is %.6f s)", path, _NANOSECONDS_AFTER,
+                    stamps_s[0])
+    return stamps_s
 
 
 def _warn_stamps_apart(pose_stamps: np.ndarray, image_stamps: np.ndarray, poses: Any) -> None:

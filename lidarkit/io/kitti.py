@@ -667,14 +667,22 @@ class KittiImages:
 
 
 def read_gray_image(path: str | os.PathLike, *, frame: int | None = None) -> np.ndarray:
-    """Read an image file as ``(H, W)`` uint8 grayscale with OpenCV; unreadable files raise DataError."""
+    """Read an image file as ``(H, W)`` uint8 grayscale with OpenCV; unreadable files raise DataError.
+
+    A 16-bit image is scaled to 8 bits by the bits its values use (its top used bit becomes bit 7): OpenCV divides
+    by 256, which left a 12-bit image 16 grey levels and a 10-bit one 4 (VO then found too few matches)."""
     import cv2
 
     path = Path(path)
     where = None if frame is None else f"frame {frame}"
     if not path.is_file():
         raise DataError("image file not found", source=path, location=where)
-    image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+    image = cv2.imread(str(path), cv2.IMREAD_ANYDEPTH)  # grayscale, depth kept
+    if image is not None and image.dtype == np.uint16 and image.size:
+        bits = max(8, int(image.max()).bit_length())
+        image = (image >> (bits - 8)).astype(np.uint8)  # full-range 16-bit: >> 8, as IMREAD_GRAYSCALE reads it
+    elif image is not None and image.dtype != np.uint8:  # (float TIFF...) read as before
+        image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
     if image is None or image.size == 0:
         raise DataError("cannot decode image (corrupt or unsupported format)", source=path, location=where)
     return image

@@ -31,17 +31,27 @@ TUM_INTRINSICS = {
     "freiburg2": (520.9, 521.0, 325.1, 249.7),
     "freiburg3": (535.4, 539.2, 320.1, 247.6),
 }
+#: first radial distortion coefficient of the freiburg1/2 colour images (same page); freiburg3's are undistorted
+TUM_DISTORTION_K1 = {"freiburg1": 0.262383, "freiburg2": 0.231222}
 UNMATCHED_POLICIES = ("drop", "keep", "error")
+
+
+def tum_camera_for(path: str | os.PathLike) -> str | None:
+    """The freiburg camera (``"freiburg1"``...) named in the folder name (``freiburg1`` or ``fr1``...), else None."""
+    name = Path(path).resolve().name.lower()
+    for key in TUM_INTRINSICS:
+        if key in name or any(part == "fr" + key[-1] for part in name.replace("-", "_").split("_")):
+            return key
+    return None
 
 
 def tum_intrinsics_for(path: str | os.PathLike) -> np.ndarray | None:
     """(3, 3) K of the freiburg camera named in the folder name (``freiburg1`` or ``fr1``...), else None."""
-    name = Path(path).resolve().name.lower()
-    for key, (fx, fy, cx, cy) in TUM_INTRINSICS.items():
-        short = "fr" + key[-1]
-        if key in name or any(part == short for part in name.replace("-", "_").split("_")):
-            return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
-    return None
+    camera = tum_camera_for(path)
+    if camera is None:
+        return None
+    fx, fy, cx, cy = TUM_INTRINSICS[camera]
+    return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
 
 
 def read_tum_file_list(path: str | os.PathLike) -> tuple[np.ndarray, list[str]]:
@@ -155,6 +165,8 @@ class TumRGBD:
         self.has_ground_truth = matched
         self._ground_truth = gt_poses
         self._K = tum_intrinsics_for(folder) if K is None else np.asarray(K, dtype=np.float64).reshape(3, 3)
+        camera = tum_camera_for(folder) if K is None else None
+        self._distorted_camera = camera if camera in TUM_DISTORTION_K1 else None  # said at the first use of K
 
     def __len__(self) -> int:
         return len(self.image_paths)
@@ -164,7 +176,13 @@ class TumRGBD:
 
     @property
     def K(self) -> np.ndarray | None:
-        """(3, 3) intrinsics (given, or the freiburg default from the folder name), or None if unknown."""
+        """(3, 3) intrinsics (given, or the freiburg default from the folder name), or None if unknown. The first use of
+        the freiburg1/2 default logs that their distortion is not corrected (it was used without a word)."""
+        if self._distorted_camera is not None:
+            log.warning("%s: the built-in %s intrinsics have no lens distortion model: its colour images are distorted "
+                        "(k1 = %.2f) and are used uncorrected (undistort them, and give their K, for exact geometry)",
+                        self.path, self._distorted_camera, TUM_DISTORTION_K1[self._distorted_camera])
+            self._distorted_camera = None
         return None if self._K is None else self._K.copy()
 
     @property
@@ -182,4 +200,5 @@ class TumRGBD:
         return read_gray_image(self.image_paths[index], frame=index)
 
 
-__all__ = ["TUM_INTRINSICS", "TumRGBD", "associate_nearest", "read_tum_file_list", "tum_intrinsics_for"]
+__all__ = ["TUM_DISTORTION_K1", "TUM_INTRINSICS", "TumRGBD", "associate_nearest", "read_tum_file_list", "tum_camera_for",
+           "tum_intrinsics_for"]

@@ -82,6 +82,15 @@ def aligned_to_ground_truth(ground_truth: Trajectory, trajectories: dict[str, Tr
     return curves
 
 
+def _drawable(image: np.ndarray) -> np.ndarray:
+    """A BGR copy of a frame MonoVO accepts, grey or colour (BGR / BGRA): colour frames crashed the GIF
+    (cv2 "Bad number of channels") and the whole run folder was lost."""
+    image = np.asarray(image)
+    if image.ndim == 2:
+        return cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
+    return cv2.cvtColor(image, cv2.COLOR_BGRA2BGR) if image.shape[2] == 4 else image.copy()
+
+
 def write_feature_gif(path: str | os.PathLike, images: Any, tracks: list[tuple[int, np.ndarray, np.ndarray]],
                       max_frames: int = 60, width_px: int = 640, fps: float = 8.0) -> Path:
     """Animated GIF of the inlier tracks (reference -> current position) drawn on the first ``max_frames`` accepted
@@ -94,7 +103,7 @@ def write_feature_gif(path: str | os.PathLike, images: Any, tracks: list[tuple[i
     read = images.read_image if hasattr(images, "read_image") else (lambda i: images[i])
     frames = []
     for frame, pts_ref, pts_cur in tracks[:max_frames]:
-        image = cv2.cvtColor(read(frame), cv2.COLOR_GRAY2BGR)
+        image = _drawable(read(frame))
         for (x0, y0), (x1, y1) in zip(pts_ref.astype(int), pts_cur.astype(int)):
             cv2.line(image, (x0, y0), (x1, y1), (0, 200, 0), 1)
             cv2.circle(image, (x1, y1), 2, (0, 0, 255), -1)
