@@ -304,8 +304,9 @@ def test_malformed_poses_and_times(tmp_path, copy_of, odo_root):
 def test_times_and_poses_count_mismatch(tmp_path, copy_of, odo_root):
     times = copy_of(odo_root / "sequences" / "00" / "times.txt")
     times.write_text("\n".join(times.read_text().splitlines()[:4000]) + "\n")
-    with pytest.raises(DataError, match=r"4541 poses in .*00\.txt but 4000 time stamps"):
+    with pytest.raises(DataError, match=r"4541 poses in .*00\.txt but 4000 time stamps") as info:
         KittiOdometry(odo_root, "00", times_file=times)
+    assert str(info.value).startswith(f"{times}: ")  # the shorter file is the source
 
 
 def test_copied_sequence_folder_with_trimmed_poses_and_full_times(tmp_path):
@@ -321,8 +322,9 @@ def test_copied_sequence_folder_with_trimmed_poses_and_full_times(tmp_path):
     # files of different lengths where the shorter does not end at the last frame present: still an error
     poses = shared_path("kitti_images", "poses", "06.txt").read_text().splitlines()
     (seq / "poses.txt").write_text("\n".join(poses[:60]) + "\n")
-    with pytest.raises(DataError, match=r"60 poses in .*poses\.txt but 1101 time stamps"):
+    with pytest.raises(DataError, match=r"60 poses in .*poses\.txt but 1101 time stamps") as info:
         KittiOdometry(seq)
+    assert str(info.value).startswith(f"{seq / 'poses.txt'}: ")  # the short file, not times.txt, is the source
 
 
 def test_poses_must_cover_every_frame(tmp_path, copy_of, odo_root):

@@ -319,8 +319,9 @@ class KittiOdometry:
         if n_poses is not None and n_times is not None and n_poses != n_times:
             last = max((int(f[-1]) for f in (self.scan_frames, self.image_frames) if len(f)), default=-1)
             if min(n_poses, n_times) != last + 1:
+                shorter = self.poses_path if n_poses < n_times else self.times_path  # (the times named a short poses file)
                 raise DataError(f"{n_poses} poses in {self.poses_path} but {n_times} time stamps (and the shorter "
-                                f"file does not end at the last frame present, {last})", source=self.times_path)
+                                f"file does not end at the last frame present, {last})", source=shorter)
             log.info("%s: %d poses and %d time stamps; using the first %d frames", self.sequence_dir, n_poses,
                      n_times, last + 1)
         for kind, paths, frames in (("scan", self.scan_paths, self.scan_frames), ("image", self.image_paths, self.image_frames)):
