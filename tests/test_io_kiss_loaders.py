@@ -35,6 +35,7 @@ def test_nclt_points_are_unsigned_and_scans_outside_the_ground_truth_are_counted
     np.testing.assert_allclose(dataset.read_scan(0).points_xyz, points, atol=0.003)  # x = 70 m read as -257.68 m before
     np.testing.assert_allclose(dataset.timestamps_s, utimes[:3] * 1e-6)
     assert dataset.read_scan(1).timestamp_s == pytest.approx(utimes[1] * 1e-6)
+    assert repr(dataset) == f"NcltScans({str(sequence)!r}, kind='nclt', scans=3)"  # (Python's <... object at 0x...>)
 
 
 def _mulran(root, n_scans: int, n_poses: int):

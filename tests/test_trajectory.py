@@ -35,6 +35,9 @@ def test_kitti_file_keeps_georeferenced_positions(tmp_path):
     back = Trajectory.from_kitti(traj.to_kitti(tmp_path / "poses.txt"))
     np.testing.assert_array_equal(back.positions_xyz, traj.positions_xyz)
     np.testing.assert_allclose(back.poses_se3, traj.poses_se3, rtol=0, atol=1e-15)
+    # TUM stamps to 1e-9 s (6 decimals came back 0.48 us off: 1706282470.98386502 written as ...98387)
+    tum = Trajectory.from_tum(traj.to_tum(tmp_path / "poses.tum"))
+    assert np.abs(tum.timestamps_s - traj.timestamps_s).max() < 1e-8
 
 
 def test_tum_real_file_and_round_trip(tmp_path):

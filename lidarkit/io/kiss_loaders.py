@@ -104,6 +104,10 @@ class KissLoaderScans:
     def __len__(self) -> int:
         return len(self.loader)
 
+    def __repr__(self) -> str:
+        """One line, as the other readers' (it was Python's ``<... object at 0x...>``)."""
+        return f"{type(self).__name__}({str(self.path)!r}, kind={self.kind!r}, scans={len(self)})"
+
     def read_scan(self, index: int) -> Scan:
         n = len(self)
         index = checked_index(index, n, self.path, from_end=False)
