@@ -211,13 +211,13 @@ def test_datasets_and_params_that_print_alike_are_separate_rows(tmp_path):
         experiments:
           - name: walk
             task: selftest
-            datasets: [{kind: synthetic}, {kind: synthetic, name: synthetic, note: b}]
+            datasets: [{kind: synthetic}, {kind: synthetic, name: synthetic}]
             methods:
               - name: random_walk
                 grid: {noise_m: [0.5000001, 0.5000002]}
     """))
     loaded = load_suite(suite)
-    assert sorted({job.dataset_name for job in loaded.jobs}) == ["synthetic(name=None, note=None)", "synthetic(name=synthetic, note=b)"]
+    assert sorted({job.dataset_name for job in loaded.jobs}) == ["synthetic", "synthetic(name=synthetic)"]
     assert sorted({job.method_label for job in loaded.jobs}) == ["random_walk(noise_m=0.5000001)", "random_walk(noise_m=0.5000002)"]
     run_suite(loaded, tmp_path / "out", executor="serial")
     rows = build_report(tmp_path / "out", plots=False).tables[0].rows
@@ -232,6 +232,21 @@ def test_datasets_and_params_that_print_alike_are_separate_rows(tmp_path):
         write_result(tmp_path / "reused", make_record(job, job.key(), "1", outcome))
     rows = build_report(tmp_path / "reused", plots=False).tables[0].rows
     assert [row.dataset for row in rows] == ["synth(steps=10)", "synth(steps=20)"] and all(row.n_ok == 1 for row in rows)
+
+
+def test_a_dataset_label_leaves_out_an_option_one_experiment_does_not_set(tmp_path):
+    """Two experiments on one dataset, one with ``init_noise_m: 2.0``: the other's rows read
+    ``k00(init_noise_m=None)`` where the option's default is 0; unset, it is left out, as a method label leaves out
+    params it does not set."""
+    from lidarkit.bench.jobs import Job
+    from lidarkit.bench.results import make_record, write_result
+
+    outcome = {"status": "ok", "metrics": {"ape_rmse_m": 1.0}, "series": {}, "info": {}, "error": None, "runtime_s": 0.1}
+    for experiment, options in (("clean", {}), ("noisy", {"init_noise_m": 2.0, "init_noise_deg": 10.0})):
+        job = Job("selftest", experiment, "k00", {"kind": "synthetic"}, "random_walk", {}, seed=0, options=options)
+        write_result(tmp_path, make_record(job, job.key(), "1", outcome))
+    rows = build_report(tmp_path, plots=False).tables[0].rows
+    assert [(row.experiment, row.dataset) for row in rows] == [("clean", "k00"), ("noisy", "k00(init_noise_deg=10, init_noise_m=2)")]
 
 
 def test_every_plot_has_its_own_file(tmp_path):
@@ -1014,3 +1029,25 @@ def test_a_seed_without_a_value_is_left_out_of_the_publication_tables_and_the_co
     build_report(tmp_path, plots=False)
     assert ("- no comparison: drive, kiss vs small_gicp: small_gicp: 1 non-finite value(s) among 4"
             in (tmp_path / "report.md").read_text().splitlines())
+
+
+def test_the_summary_counts_only_the_methods_it_ranked(tmp_path):
+    """sleep, fail and random_walk over a 2-value grid: the Summary's "methods" read 4 where 2 had an APE to rank."""
+    from lidarkit.bench.report import summary_rows
+
+    suite = tmp_path / "suite.yaml"
+    suite.write_text(textwrap.dedent("""
+        seeds: 2
+        experiments:
+          - name: sl
+            task: selftest
+            dataset: {kind: synthetic}
+            methods:
+              - {name: sleep, params: {seconds: 0.0}}
+              - {name: fail, params: {message: boom}}
+              - {name: random_walk, grid: {noise_m: [0.01, 0.1]}}
+    """))
+    run_suite(load_suite(suite), tmp_path / "out", executor="serial")
+    header, rows = summary_rows(build_report(tmp_path / "out", plots=False))
+    assert header[5] == "methods ranked"
+    assert [row[1:4] + row[5:] for row in rows] == [["synthetic", "APE RMSE [m]", "random_walk(noise_m=0.01)", "2"]]

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from lidarkit.bench import Metric, Task, TaskOutput, register_task
 from lidarkit.bench.datasets import resolve_dataset
 from lidarkit.bench.suite import load_suite
 from lidarkit.cli import main
@@ -186,7 +187,7 @@ BAD = {
     "not_plain_json": (
         """
         experiments:
-          - task: selftest
+          - task: dataset_options_test_task
             dataset: {kind: synthetic, recorded: 2024-01-01}
             methods: [fail]
         """,
@@ -194,6 +195,17 @@ BAD = {
         ["values must be plain numbers", "date", "experiments[0].methods[0]"],
     ),
 }
+
+
+@register_task("dataset_options_test_task")
+class DatasetOptionsTask(Task):
+    """A task on ``synthetic`` datasets that takes any dataset option (a third party's own, as in test_compare)."""
+
+    dataset_kinds = ("synthetic",)
+    metrics = (Metric("err_m", "error [m]"),)
+
+    def run(self, job):
+        return TaskOutput(metrics={"err_m": 0.0})
 
 
 @pytest.mark.parametrize("case", sorted(BAD))
@@ -483,3 +495,26 @@ def test_a_validator_message_is_given_alone_without_pydantics_prefix(tmp_path):
     assert str(info.value) == (f"{path} (experiments[0].methods[0], line 5): experiments[0].methods[0]: Input should be "
                                "a valid dictionary or instance of MethodSpec; experiments[0].methods[0]: Input should be "
                                "a valid string")
+
+
+def test_an_option_in_a_selftest_dataset_is_refused_naming_file_and_line(tmp_path):
+    """``dataset: {kind: synthetic, foo: 1}`` with the selftest task passed (``--dry-run`` exit 0): selftest reads
+    nothing of its dataset, so the key was a typo accepted without a word. A task of its own on ``synthetic`` data may
+    still read options there (``dataset_options_test_task`` above)."""
+    path = write(tmp_path, """
+        experiments:
+          - task: selftest
+            dataset: {kind: synthetic, foo: 1}
+            methods: [random_walk]
+        """)
+    with pytest.raises(ConfigError) as info:
+        load_suite(path)
+    assert str(info.value) == (f"{path} (experiments[0].dataset, line 4): unknown option(s) foo for dataset kind "
+                               "'synthetic' of task 'selftest'; it takes none (only a name)")
+    path = write(tmp_path, """
+        experiments:
+          - task: dataset_options_test_task
+            dataset: {kind: synthetic, size: 3}
+            methods: [good]
+        """)
+    assert [job.dataset for job in load_suite(path).jobs] == [{"kind": "synthetic", "size": 3}]

@@ -417,3 +417,24 @@ def test_icp_pair_refuses_max_pairs_beside_pairs_and_a_scan_paired_with_itself(t
     for options, n_pairs in (("{max_pairs: 3}", 3), ("{pairs: [[1, 0]]}", 1)):  # each alone still passes
         job, = load_suite(suite_with(options)).jobs
         assert len(_pairs(IcpPairOptions(**job.options), open_dataset_spec(job.dataset))) == n_pairs
+
+
+def test_icp_pair_default_pairs_are_consecutive_frame_numbers_not_neighbours_across_a_gap():
+    """Without ``pairs``, KITTI's extra frames 94, 95, 198, 199 with ``max_pairs: 3`` scored 95 -> 198, a pair 103 frames
+    apart (21.7 m mean error), without a word: the pairs were neighbours in the file list, not in frame number."""
+    from lidarkit.bench.tasks._datasets import open_dataset_spec
+    from lidarkit.bench.tasks.icp_pair import IcpPairOptions, _pairs
+
+    root = shared_path("kitti_odometry")
+    velodyne = shared_path("kitti_odometry", "extra_frames", "00", "velodyne")
+    spec = {"kind": "kitti", "path": str(root), "sequence": "00", "velodyne_dir": str(velodyne)}
+    job = Job("icp_pair", "exp", "extra", spec, "vanilla", {"voxel_size_m": 1.0}, seed=0, options={"max_pairs": 3})
+    record = execute_job(job.spec())
+    assert record["status"] == "ok", record["error"]
+    assert [(p["target"], p["source"]) for p in record["info"]["pairs"]] == [(94, 95), (198, 199)]
+    assert record["metrics"]["translation_error_m"] < 0.1
+    assert record["warnings"] == ["WARNING lidarkit.bench.tasks.icp_pair: kitti_00: max_pairs 3, but it has 2 pair(s) of "
+                                  "consecutive frames (frames 94-95, 198-199)"]
+    dataset = open_dataset_spec(spec)
+    assert _pairs(IcpPairOptions(pairs=[[95, 198]]), dataset) == [(95, 198)]  # given pairs stay as given
+    assert _pairs(IcpPairOptions(max_pairs=2), open_dataset_spec({**SIM, "n_frames": 4})) == [(0, 1), (1, 2)]  # (0..N-1)

@@ -72,7 +72,9 @@ def _short(value: Any) -> str:
 
 def distinct_labels(labels: list[str], specs: list[dict[str, Any]]) -> list[str]:
     """``labels`` made unique: labels shared by different ``specs`` get the fields those specs differ in,
-    ``sim_lidar(scene=open)``, so that a report never pools two datasets as if they were seeds of one."""
+    ``sim_lidar(scene=open)``, so that a report never pools two datasets as if they were seeds of one. A field a spec
+    does not set is left out of its label, as :func:`method_label` leaves out unset params (it read ``init_noise_m=None``
+    where the option's default is 0)."""
     def text(value: Any) -> str:  # (values that are not plain JSON are refused later, naming the suite's line)
         return json.dumps(value, sort_keys=True, default=repr)
 
@@ -86,5 +88,6 @@ def distinct_labels(labels: list[str], specs: list[dict[str, Any]]) -> list[str]
         keys = sorted({k for i in group for k in specs[i]})
         differing = [k for k in keys if len({text(specs[i].get(k)) for i in group}) > 1]
         for i in group:
-            out[i] = f"{label}({', '.join(f'{k}={_short(specs[i].get(k))}' for k in differing)})"
+            inner = ", ".join(f"{k}={_short(specs[i][k])}" for k in differing if k in specs[i])
+            out[i] = f"{label}({inner})" if inner else label
     return out

@@ -612,8 +612,9 @@ def _figure_html(png: bytes, alt: str, caption: str) -> str:
 
 def summary_rows(report: Report) -> tuple[list[str], list[list[str]]]:
     """The page's first table: per task and dataset, the best method on the task's headline accuracy metric (per
-    alignment where the rows state different ones: an SE(3)- and a Sim(3)-aligned APE are not ranked together)."""
-    header = ["section", "dataset", "headline metric", "best method", "value (mean ± std)", "methods"]
+    alignment where the rows state different ones: an SE(3)- and a Sim(3)-aligned APE are not ranked together), and how
+    many methods were ranked: those with a value (it counted a sleep and a failing method with none)."""
+    header = ["section", "dataset", "headline metric", "best method", "value (mean ± std)", "methods ranked"]
     rows = []
     for table in report.tables:
         metric = next((m for m in table.metrics if m.kind == "accuracy"), None)
@@ -632,8 +633,7 @@ def summary_rows(report: Report) -> tuple[list[str], list[list[str]]]:
                                                   sign * r.stats[metric.name][0]))
             rows.append([table.task, dataset, metric.by_alignment.get(alignment, metric.label), _short_label(best, table),
                          format_stat(best.stats[metric.name]) + _failed_note(best, metric.name) + _seeds_note(best, candidates),
-                         str(len({r.method for r in table.rows if r.dataset == dataset
-                                  and (not alignment or r.alignment.get(metric.name) == alignment)}))])
+                         str(len({r.method for r in candidates}))])
     return header, rows
 
 

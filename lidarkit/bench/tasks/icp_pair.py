@@ -2,7 +2,7 @@
 
 Options (per experiment): ``pairs`` — ``[[target, source], ...]`` (KITTI: frame numbers, e.g.
 ``[[94, 95]]``; other datasets: scan indices; two different scans); default, and only without ``pairs``: the first
-``max_pairs`` consecutive pairs.
+``max_pairs`` pairs of consecutive frame numbers (never across a gap in the files; fewer: a warning).
 ``init_noise_m`` / ``init_noise_deg`` — start from the ground-truth motion perturbed by a seeded random
 motion of that size (0 = start from identity, the default). ``ground_truth_file`` — a 4x4 ``T_target_source``
 text file for a dataset without poses holding one pair, e.g. the bundled ``sample:kitti_pair`` folder with
@@ -124,12 +124,30 @@ def _pair_data(dataset: Any, target: int, source: int, T_gt_file: np.ndarray | N
 
 
 def _pairs(options: IcpPairOptions, dataset: Any) -> list[tuple[int, int]]:
+    """``pairs`` as given, else the first ``max_pairs`` scans followed by the next frame number (frame numbers for KITTI,
+    else scan indices): the next file across a gap was paired (KITTI frames 94, 95, 198, 199 scored 95 -> 198, 103
+    frames apart, without a word). Fewer than asked is a warning in the job's record."""
     if options.pairs:
         return [tuple(p) for p in options.pairs]
-    frames = list(getattr(dataset, "frames", range(len(dataset))))
-    if hasattr(dataset, "read_scan_by_frame"):
-        return [(int(frames[k]), int(frames[k + 1])) for k in range(min(options.max_pairs, len(frames) - 1))]
-    return [(k, k + 1) for k in range(min(options.max_pairs, len(dataset) - 1))]
+    frames = [int(f) for f in getattr(dataset, "frames", range(len(dataset)))]  # (folders, sims: 0..N-1)
+    by_frame = hasattr(dataset, "read_scan_by_frame")
+    pairs = [(frames[k], frames[k + 1]) if by_frame else (k, k + 1)
+             for k in range(len(frames) - 1) if frames[k + 1] == frames[k] + 1][:options.max_pairs]
+    if len(pairs) < options.max_pairs:
+        log.warning("%s: max_pairs %d, but it has %d pair(s) of consecutive frames (frames %s)",
+                    getattr(dataset, "name", "dataset"), options.max_pairs, len(pairs), _ranges(frames))
+    return pairs
+
+
+def _ranges(frames: list[int]) -> str:
+    """``94-95, 198-199``: sorted frame numbers as runs of consecutive ones."""
+    runs: list[list[int]] = []
+    for f in frames:
+        if runs and f == runs[-1][-1] + 1:
+            runs[-1].append(f)
+        else:
+            runs.append([f])
+    return ", ".join(f"{r[0]}-{r[-1]}" if len(r) > 1 else str(r[0]) for r in runs)
 
 
 def check_pairs(options: IcpPairOptions, spec: dict[str, Any]) -> None:

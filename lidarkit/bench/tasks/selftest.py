@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from lidarkit.bench.datasets import dataset_options
 from lidarkit.bench.jobs import Job
 from lidarkit.bench.tasks import Metric, Task, TaskOutput
 from lidarkit.errors import ConfigError, validation_problems
@@ -122,6 +123,14 @@ class SelfTestTask(Task):
 
     def available_methods(self) -> list[str] | None:
         return sorted(METHODS)
+
+    def validate_dataset(self, dataset: dict[str, Any], options: dict[str, Any]) -> None:
+        """Its jobs read nothing of the dataset: an option in it is a typo (``foo: 1`` passed; other tasks taking
+        ``synthetic`` may read theirs, so the kind itself takes any)."""
+        unknown = sorted(dataset_options(dataset))
+        if unknown:
+            raise ConfigError(f"unknown option(s) {', '.join(unknown)} for dataset kind 'synthetic' of task 'selftest'; "
+                              "it takes none (only a name)", source="dataset")
 
     def validate(self, method: str, params: dict[str, Any], dataset: dict[str, Any], options: dict[str, Any]) -> None:
         selftest_config(method, **params)
