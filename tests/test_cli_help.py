@@ -87,6 +87,18 @@ def test_an_empty_argument_is_refused_not_read_as_the_current_folder(tmp_path, m
     assert list(tmp_path.iterdir()) == []
 
 
+def test_an_empty_title_is_not_asked_for_as_a_path(tmp_path, monkeypatch, capsys):
+    """`lidarkit odometry SEQ --name ""` said "give a path or a value", though --name takes a title: the wording
+    fits every option and argument."""
+    from lidarkit.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    for argv, named in ((["odometry", "kitti:x", "-m", "vanilla", "--name", ""], "--name"), (["odometry", "kitti:x", "--name="], "--name")):
+        with pytest.raises(SystemExit) as exc:
+            main(argv)
+        assert exc.value.code == 1
+        assert capsys.readouterr().err == f"error: {named}: empty value (an unset shell variable?): give a non-empty value\n"
+
 def test_demo_help_offers_only_its_own_options(capsys):
     """`lidarkit demo --help` said "dask (--address, or a local Dask cluster)"; demo has no --address."""
     assert cli_exit_code(["demo", "--help"]) == 0

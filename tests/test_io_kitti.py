@@ -431,3 +431,67 @@ def test_an_explicit_00_or_a_name_asked_of_a_sequence_folder_is_refused(tmp_path
     with pytest.raises(ConfigError, match=r"one sequence itself \(no sequences/ inside\); sequence=00 names another"):
         KittiOdometry(renamed, sequence="00")
     assert KittiOdometry(shared_path("kitti_odometry"), sequence="00").name == "kitti_00"  # a root: 00 is a choice
+
+
+def test_per_point_times_that_are_not_times_are_refused_as_in_a_bag(tmp_path):
+    """point_times/ took any numeric array as times, without the bag reader's checks: ring numbers (uint8 0-15, read
+    as nanoseconds: a 15 ns sweep), an intensity of 0-0.7 s and float32 absolute times 128 s apart in one scan were
+    deskewed by without a word. Each is now a DataError naming the file and frame; the simulator's own times still
+    read, a 2 s sweep too (frame_rate_hz 0.5: a sweep lasts the spacing of times.txt when that exceeds 1 s)."""
+    from lidarkit.sim.lidar import SimulatedLidarSequence, export_kitti
+
+    folder = export_kitti(SimulatedLidarSequence(n_frames=2, n_beams=16, n_azimuths=360), tmp_path / "k")
+    target = folder / "point_times" / "000001.npy"
+    n = len(np.load(target))
+    assert open_dataset("kitti", folder).read_scan(1).point_times_s.max() == pytest.approx(0.1, abs=1e-3)
+    hint = "rename point_times/ to read the scans without them"
+    for values, message in (
+        ((np.arange(n) % 16).astype(np.uint8), "per-point time array is a 8-bit integer: too small for times (drivers "
+         f"write float seconds or 32/64-bit integer nanoseconds); {hint}"),
+        # absolute float32 times about a rounding step of float32 (128 s apart near 1.7e9 s)
+        ((1699999808.0 - 0.05 + np.linspace(0, 0.1, n)).astype(np.float32), "per-point time array spans 128 s within one "
+         f"scan (read as seconds; a sweep lasts at most 1 s): not the points' times ({hint})"),
+    ):
+        np.save(target, values)
+        with pytest.raises(DataError) as err:
+            open_dataset("kitti", folder).read_scan(1)
+        assert str(err.value) == f"{target} (frame 1): {message}"
+    for values in ((np.arange(n) % 16).astype(np.int64), np.random.default_rng(0).uniform(0, 0.7, n).astype(np.float32)):
+        np.save(target, values)
+        with pytest.raises(DataError, match=r"000001\.npy \(frame 1\): per-point time array does not follow the sweep: "
+                                            r"its values go back \d+ times in \d+ points and do not turn with the azimuth"):
+            open_dataset("kitti", folder).read_scan(1)
+
+    slow = export_kitti(SimulatedLidarSequence(n_frames=2, n_beams=8, n_azimuths=90, frame_rate_hz=0.5), tmp_path / "slow")
+    assert np.ptp(open_dataset("kitti", slow).read_scan(1).point_times_s) == pytest.approx(2.0, abs=0.05)
+
+
+def test_absolute_per_point_times_say_so(tmp_path):
+    """Times above 1e5 s in point_times/ are absolute (as in a bag); the reader labelled them "relative_s"."""
+    from lidarkit.sim.lidar import SimulatedLidarSequence, export_kitti
+
+    folder = export_kitti(SimulatedLidarSequence(n_frames=2, n_beams=8, n_azimuths=90), tmp_path / "k")
+    relative = np.load(folder / "point_times" / "000001.npy").astype(np.float64)
+    np.save(folder / "point_times" / "000001.npy", 1.7e9 + 0.1 + relative)
+    scan = open_dataset("kitti", folder).read_scan(1)
+    assert scan.point_time_convention == "absolute_s"
+    np.testing.assert_allclose(scan.point_times_s - 1.7e9, 0.1 + relative, rtol=0, atol=1e-6)
+    assert open_dataset("kitti", folder).read_scan(0).point_time_convention == "relative_s"
+
+
+def test_point_times_of_points_left_out_are_left_out_too(tmp_path):
+    """Points the scan reader leaves out (non-finite with drop_nonfinite, missing returns at (0, 0, 0)) had their
+    times dropped only when non-finite: the others shifted every time onto another point, or the lengths differed."""
+    from lidarkit.sim.lidar import SimulatedLidarSequence, export_kitti
+
+    folder = export_kitti(SimulatedLidarSequence(n_frames=2, n_beams=8, n_azimuths=90), tmp_path / "k")
+    bin_path = folder / "velodyne" / "000001.bin"
+    points = np.fromfile(bin_path, dtype="<f4").reshape(-1, 4)
+    points[:3, :3], points[5, 0] = 0.0, np.nan
+    points.tofile(bin_path)
+    times = np.load(folder / "point_times" / "000001.npy").astype(np.float64)
+    scan = KittiOdometry(folder, drop_nonfinite=True).read_scan(1)
+    kept = np.isfinite(points).all(axis=1) & (points[:, :3] != 0).any(axis=1)
+    assert len(scan.points_xyz) == len(points) - 4
+    np.testing.assert_array_equal(scan.points_xyz, points[kept, :3].astype(np.float64))
+    np.testing.assert_allclose(scan.point_times_s, times[kept], rtol=0, atol=1e-9)

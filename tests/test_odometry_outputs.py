@@ -714,3 +714,15 @@ def test_a_run_without_assessment_says_degeneracy_not_assessed(method, tmp_path,
     assert stateful.metrics["n_degenerate"] is None  # the same word for the same lack of verdict
     assessed = run("sim:street?frames=4&beams=16&azimuths=360", method)
     assert assessed.metrics["n_degenerate"] == 0 and "n/a" not in assessed.stats.to_csv().splitlines()[2].split(",")[6:10]
+
+
+def test_pose_covariance_file_states_only_the_per_pose_convention(tmp_path):
+    """pose_covariance.txt's header also gave the "per frame (relative): ..." convention, though the file holds one
+    row per pose and no per-frame covariance."""
+    from lidarkit.odometry import run
+
+    run("sim:street?frames=3&seed=4&n_beams=16&n_azimuths=512", "vanilla", out_dir=tmp_path / "run")
+    lines = (tmp_path / "run" / "pose_covariance.txt").read_text().splitlines()
+    assert lines[0] == ("# one row per pose: its 6x6 covariance, row-major; left perturbation in the world frame, "
+                        "T_true = se3_exp(xi) @ T_world_lidar, xi = (tx, ty, tz, rx, ry, rz) in m and rad")
+    assert len(lines) == 1 + 3 and all(len(line.split()) == 36 for line in lines[1:])

@@ -44,6 +44,10 @@ def _interrupt_behind(err: BaseException) -> Interrupted | None:
     return None
 
 
+#: (it said "give a path or a value" for --name too, which takes a title: a wording for every option and argument)
+_EMPTY_VALUE = "empty value (an unset shell variable?): give a non-empty value"
+
+
 def _refuse_empty_arguments(argv: list[str]) -> None:
     """ConfigError for an empty argument: typer reads ``-o ""`` (an unset shell variable) as the current folder, and a
     run was written there; no lidarkit option or argument takes an empty value."""
@@ -53,9 +57,9 @@ def _refuse_empty_arguments(argv: list[str]) -> None:
         if arg == "":
             option = argv[i - 1] if i > 0 and argv[i - 1].startswith("-") else None
             where = option or f"argument {i + 1}" + (f" (after {argv[i - 1]})" if i > 0 else "")
-            raise ConfigError("empty value (an unset shell variable?): give a path or a value", source=where)
+            raise ConfigError(_EMPTY_VALUE, source=where)
         if arg.startswith("--") and arg.endswith("=") and arg.count("=") == 1:
-            raise ConfigError("empty value (an unset shell variable?): give a path or a value", source=arg[:-1])
+            raise ConfigError(_EMPTY_VALUE, source=arg[:-1])
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -40,9 +40,9 @@ def natural_key(name: str) -> tuple:
 class ScanFolder:
     """Scans in one folder, naturally sorted; ``ground_truth`` from ``poses`` (LiDAR frame) if given.
 
-    ``poses_format`` is ``"kitti"`` (12 numbers per row) or ``"tum"`` (``t x y z qx qy qz qw``; its
-    time stamps become ``timestamps_s`` unless ``timestamps`` is given). ``suffixes`` restricts the
-    file types read (a sequence, or text such as ``".npy,.bin"`` as a spec writes it); a folder mixing several types
+    ``poses_format`` is ``"kitti"`` (12 numbers per row, the default) or ``"tum"`` (``t x y z qx qy qz qw``; its
+    time stamps become ``timestamps_s`` unless ``timestamps`` is given); without ``poses`` it is a ConfigError (it
+    would have no effect). ``suffixes`` restricts the file types read (a sequence, or text such as ``".npy,.bin"`` as a spec writes it); a folder mixing several types
     is read as one sequence in name order.
     ``drop_nonfinite`` drops NaN/inf points with a logged warning instead of raising DataError.
     """
@@ -52,7 +52,7 @@ class ScanFolder:
         path: str | os.PathLike,
         *,
         poses: str | os.PathLike | None = None,
-        poses_format: str = "kitti",
+        poses_format: str | None = None,
         timestamps: str | os.PathLike | np.ndarray | list[float] | None = None,
         drop_nonfinite: bool = False,
         suffixes: tuple[str, ...] | str = POINT_FILE_SUFFIXES,
@@ -63,8 +63,10 @@ class ScanFolder:
         folder = Path(path)
         if not folder.is_dir():
             raise DataError("scan folder not found" if not folder.exists() else "not a folder", source=folder)
-        if poses_format not in POSE_FORMATS:
+        if poses_format is not None and poses_format not in POSE_FORMATS:
             raise ConfigError(f"unknown poses format {poses_format!r}; known: {', '.join(POSE_FORMATS)}", source="poses_format")
+        if poses_format is not None and poses is None:  # (folder:scans?poses_format=tum ran without a word, and without poses)
+            raise ConfigError("has no effect without poses= (the poses file whose format it names)", source="poses_format")
         unknown = [s for s in suffixes if s.lower() not in POINT_FILE_SUFFIXES]
         if unknown:
             raise ConfigError(f"unsupported scan suffix {unknown[0]!r}; supported: {', '.join(POINT_FILE_SUFFIXES)}", source="suffixes")
@@ -90,7 +92,7 @@ class ScanFolder:
                                 "one format with suffixes=", source=folder)
             stems[path.stem] = path
         self.poses_path = None if poses is None else self._option_path(poses)
-        self.poses_format = poses_format
+        self.poses_format = poses_format or "kitti"
         self.suffixes = sorted(wanted)
         if isinstance(timestamps, (str, os.PathLike)):
             timestamps = self._option_path(timestamps)

@@ -34,6 +34,7 @@ import numpy as np
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.geometry import se3_inverse
 from lidarkit.io.base import INSTANT_FRACTION, Scan, checked_index, checked_indices, option_path
+from lidarkit.io.pointcloud2 import MAX_SWEEP_S, checked_point_times
 from lidarkit.io.pointfile import load_npy, read_kitti_bin
 from lidarkit.textfile import file_line, is_number, read_lines, read_numeric_table
 from lidarkit.trajectory import Trajectory
@@ -473,18 +474,23 @@ class KittiOdometry:
         return 0.0 if instant is None else self._instant_shift_s(instant)
 
     def _instant_shift_s(self, instant: str) -> float:
-        """Seconds from the simulator's poses.txt instant to sweep ``instant`` (a fraction of the median period; with
-        one stamp, the period of sim.yaml's ``frame_rate_hz``, so a one-sweep export is re-timed too)."""
-        if self._times_all is None:
+        """Seconds from the simulator's poses.txt instant to sweep ``instant`` (a fraction of :attr:`_period_s`)."""
+        if self._period_s is None:
             return 0.0
+        return (INSTANT_FRACTION[instant] - INSTANT_FRACTION[self._simulator_pose_instant]) * self._period_s
+
+    @cached_property
+    def _period_s(self) -> float | None:
+        """The median spacing of times.txt; with one stamp, the period of sim.yaml's ``frame_rate_hz`` (so a one-sweep
+        export is re-timed too); None without times.txt or either."""
+        if self._times_all is None:
+            return None
         if len(self._times_all) >= 2:
-            period = float(np.median(np.diff(self._times_all)))
-        else:
-            try:
-                period = 1.0 / float(self._sim_config["frame_rate_hz"])
-            except (TypeError, KeyError, ValueError, ZeroDivisionError):
-                return 0.0
-        return (INSTANT_FRACTION[instant] - INSTANT_FRACTION[self._simulator_pose_instant]) * period
+            return float(np.median(np.diff(self._times_all)))
+        try:
+            return 1.0 / float(self._sim_config["frame_rate_hz"])
+        except (TypeError, KeyError, ValueError, ZeroDivisionError):
+            return None
 
     @cached_property
     def _sim_config(self) -> dict[str, Any]:
@@ -537,7 +543,8 @@ class KittiOdometry:
         When ``point_times_dir`` (the first of :data:`POINT_TIME_FOLDERS` beside ``velodyne/``, e.g. ``point_times/``
         as written by :func:`lidarkit.sim.lidar.export_kitti`) holds ``{frame:06d}.npy`` (one time per point,
         seconds from the sweep start) it becomes ``Scan.point_times_s`` (float64); a length that does not match
-        the scan is a DataError; a frame without its file has no per-point times.
+        the scan, or values that cannot be the points' times (:func:`~lidarkit.io.pointcloud2.checked_point_times`, as
+        in a bag), is a DataError; a frame without its file has no per-point times.
         """
         if not self.scan_paths:
             raise DataError("sequence has no scans", source=self.velodyne_dir)
@@ -554,26 +561,34 @@ class KittiOdometry:
         times_path = self.point_times_dir / f"{frame:06d}.npy"
         if not times_path.is_file():
             return scan
-        return dataclasses.replace(scan, point_times_s=self._read_point_times(times_path, self.scan_paths[index], scan, frame))
+        # a sweep lasts at most MAX_SWEEP_S, or the spacing of the scans when longer (the simulator at 0.5 Hz)
+        longest_s = max(MAX_SWEEP_S, self._period_s or 0.0)
+        times, convention = self._read_point_times(times_path, self.scan_paths[index], scan, frame, longest_s)
+        return dataclasses.replace(scan, point_times_s=times, point_time_convention=convention)
 
     @staticmethod
-    def _read_point_times(times_path: Path, scan_path: Path, scan: Scan, frame: int) -> np.ndarray:
-        """Per-point times of ``scan`` from ``times_path``, with the points dropped as non-finite dropped too."""
-        times = load_npy(times_path, f"frame {frame}")
-        if times.ndim != 1 or not np.issubdtype(times.dtype, np.number) or np.issubdtype(times.dtype, np.complexfloating):
-            raise DataError(f"expected a 1-D numeric array, got shape {times.shape} dtype {times.dtype}", source=times_path, location=f"frame {frame}")
-        # integers are nanoseconds, as drivers write them (Ouster's uint32 't') and as the bag reader reads them
-        times = times * 1e-9 if np.issubdtype(times.dtype, np.integer) else times.astype(np.float64)
+    def _read_point_times(times_path: Path, scan_path: Path, scan: Scan, frame: int, longest_s: float) -> tuple[np.ndarray, str]:
+        """``(times (N,) float64 s, convention)`` of ``scan`` from ``times_path``, with the points dropped as non-finite
+        dropped too, judged as a bag's time field is (ring numbers or an intensity were deskewed by without a word)."""
+        raw = load_npy(times_path, f"frame {frame}")
+        if raw.ndim != 1 or not np.issubdtype(raw.dtype, np.number) or np.issubdtype(raw.dtype, np.complexfloating):
+            raise DataError(f"expected a 1-D numeric array, got shape {raw.shape} dtype {raw.dtype}", source=times_path, location=f"frame {frame}")
         n_points = len(scan.points_xyz)
-        if len(times) != n_points:
-            raw = np.fromfile(scan_path, dtype="<f4").reshape(-1, 4)
-            if len(times) == len(raw) and n_points < len(raw):  # points were dropped as non-finite: drop their times
-                times = times[np.isfinite(raw).all(axis=1)]
-            else:
-                raise DataError(f"{len(times)} point times for {n_points} points of {scan_path.name}", source=times_path, location=f"frame {frame}")
-        if not np.isfinite(times).all():
+        if len(raw) != n_points:
+            points = np.fromfile(scan_path, dtype="<f4").reshape(-1, 4)
+            if len(raw) == len(points) and n_points < len(points):  # points left out as non-finite: leave out their times
+                keep = np.isfinite(points).all(axis=1)
+                if np.count_nonzero(keep) != n_points:  # and those at (0, 0, 0), missing returns the reader leaves out
+                    keep &= (points[:, :3] != 0).any(axis=1)
+                raw = raw[keep]
+            if len(raw) != n_points:  # (times of other points were paired with these)
+                raise DataError(f"{len(raw)} point times for {n_points} points of {scan_path.name}", source=times_path, location=f"frame {frame}")
+        if not np.isfinite(raw).all():
             raise DataError("point times contain NaN or infinite values", source=times_path, location=f"frame {frame}")
-        return times
+        # integers are nanoseconds, as drivers write them (Ouster's uint32 't') and as the bag reader reads them
+        return checked_point_times(raw, scan.points_xyz, what="per-point time array", within="one scan", longest_s=longest_s,
+                                   hint=f"rename {times_path.parent.name}/ to read the scans without them",
+                                   source=times_path, location=f"frame {frame}")
 
     def read_scan_by_frame(self, frame: int) -> Scan:
         """The scan of KITTI frame number ``frame`` (file ``{frame:06d}.bin``)."""

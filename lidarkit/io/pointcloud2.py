@@ -16,6 +16,9 @@ Per-point time fields (the first present of :data:`TIME_FIELDS`, or the one aske
   intensity named by ``time_field=``), nor is an 8- or 16-bit integer field (a ``ring``), nor one that neither follows
   the point order nor turns with the azimuth (an intensity within 1 s): a DataError, where it would have deskewed
   every sweep by nonsense.
+
+:func:`checked_point_times` applies the same rules to per-point times read from other files (the kitti reader's
+``point_times/``).
 """
 
 from __future__ import annotations
@@ -105,42 +108,52 @@ def decode_pointcloud2(msg: Any, *, source: str, location: str, time_field: str 
     if field is None:
         return DecodedCloud(xyz, intensity, None, "relative_s", None)
     raw = cloud[field] if all_kept else cloud[field][keep]
-    if np.issubdtype(raw.dtype, np.integer) and raw.dtype.itemsize < 4:  # (ring numbers read as times deskewed by them)
-        raise DataError(
-            f"per-point time field {field!r} is a {8 * raw.dtype.itemsize}-bit integer: too small for times (drivers write "
-            "float seconds or 32/64-bit integer nanoseconds); time_field= names the right field, none reads no times",
-            source=source, location=location,
-        )
-    if np.issubdtype(raw.dtype, np.integer):
-        times = raw.astype(np.float64) * 1e-9
-    else:
-        times = raw.astype(np.float64)
-        bad = np.flatnonzero(~np.isfinite(times))
+    if not np.issubdtype(raw.dtype, np.integer):
+        bad = np.flatnonzero(~np.isfinite(raw))
         if len(bad):
             first = int(bad[0]) if all_kept else int(np.flatnonzero(keep)[bad[0]])  # numbered in the message, missing returns included
             raise DataError(
                 f"per-point time field {field!r} has {len(bad)} NaN or infinite values (first at point {first})",
                 source=source, location=location,
             )
+    times, convention = checked_point_times(raw, xyz, what=f"per-point time field {field!r}", within="one message",
+                                            hint="time_field= names the right field, none reads no times",
+                                            source=source, location=location)
+    return DecodedCloud(xyz, intensity, times, convention, field)
+
+
+def checked_point_times(raw: np.ndarray, xyz: np.ndarray, *, what: str, within: str, hint: str, source: object,
+                        location: str, longest_s: float = MAX_SWEEP_S) -> tuple[np.ndarray, str]:
+    """``(times (N,) float64 seconds, convention)`` of finite per-point values ``raw`` (N,) of points ``xyz`` (N, 3), by
+    the rules of the module doc (a sweep lasting ``longest_s`` at most); a DataError naming ``what`` and saying ``hint``
+    when they cannot be the points' times (shared: the kitti reader's ``point_times/`` took ring numbers as times)."""
+    if np.issubdtype(raw.dtype, np.integer) and raw.dtype.itemsize < 4:  # (ring numbers read as times deskewed by them)
+        raise DataError(
+            f"{what} is a {8 * raw.dtype.itemsize}-bit integer: too small for times (drivers write "
+            f"float seconds or 32/64-bit integer nanoseconds); {hint}", source=source, location=location,
+        )
+    if np.issubdtype(raw.dtype, np.integer):
+        times = raw.astype(np.float64) * 1e-9
+    else:
+        times = raw.astype(np.float64)
         if len(times) and float(np.abs(times).max()) > _NANOSECONDS_AFTER:
             times = times * 1e-9
     span = float(np.ptp(times)) if len(times) else 0.0
-    if span > MAX_SWEEP_S:
+    if span > longest_s:
         unit = "integer nanoseconds" if np.issubdtype(raw.dtype, np.integer) else "seconds"
         raise DataError(
-            f"per-point time field {field!r} spans {span:.6g} s within one message (read as {unit}; a sweep lasts at most "
-            f"{MAX_SWEEP_S:g} s): not the points' times (time_field= names the right field, none reads no times)",
-            source=source, location=location,
+            f"{what} spans {span:.6g} s within {within} (read as {unit}; a sweep lasts at most "
+            f"{longest_s:g} s): not the points' times ({hint})", source=source, location=location,
         )
     reversals = _time_order_reversals(times, xyz)
     if reversals is not None:
         raise DataError(
-            f"per-point time field {field!r} does not follow the sweep: its values go back {reversals} times in "
+            f"{what} does not follow the sweep: its values go back {reversals} times in "
             f"{len(times)} points and do not turn with the azimuth (an intensity or another per-point value): not the "
-            "points' times (time_field= names the right field, none reads no times)", source=source, location=location,
+            f"points' times ({hint})", source=source, location=location,
         )
     convention = "absolute_s" if len(times) and float(np.abs(times).max()) > _ABSOLUTE_AFTER_S else "relative_s"
-    return DecodedCloud(xyz, intensity, times, convention, field)
+    return times, convention
 
 
 def _time_order_reversals(times: np.ndarray, xyz: np.ndarray) -> int | None:
@@ -200,4 +213,4 @@ def _time_field(names: list[str], wanted: str | None, source: str, location: str
     return wanted
 
 
-__all__ = ["MAX_SWEEP_S", "TIME_FIELDS", "DecodedCloud", "decode_pointcloud2", "fields_dtype", "stamp_seconds"]
+__all__ = ["MAX_SWEEP_S", "TIME_FIELDS", "DecodedCloud", "checked_point_times", "decode_pointcloud2", "fields_dtype", "stamp_seconds"]

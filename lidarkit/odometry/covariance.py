@@ -18,10 +18,11 @@ from lidarkit.registration.covariance import COVARIANCE_CONVENTION, adjoint, mak
 #: chi-square(6) 95 % bound for the NEES of a 6-DOF pose
 CHI2_6_95 = 12.5916
 
-POSE_COVARIANCE_CONVENTION = (
-    "per pose: left perturbation in the world frame, T_true = se3_exp(xi) @ T_world_lidar, "
-    "xi = (tx, ty, tz, rx, ry, rz) in m and rad; per frame (relative): " + COVARIANCE_CONVENTION
+#: A pose's covariance alone, as pose_covariance.txt holds it (one row per pose, no per-frame covariances)
+POSE_COVARIANCE_PER_POSE = (
+    "left perturbation in the world frame, T_true = se3_exp(xi) @ T_world_lidar, xi = (tx, ty, tz, rx, ry, rz) in m and rad"
 )
+POSE_COVARIANCE_CONVENTION = "per pose: " + POSE_COVARIANCE_PER_POSE + "; per frame (relative): " + COVARIANCE_CONVENTION
 
 
 #: What a frame's motion is known to without its registration (the constant-velocity or odometry guess it started
@@ -116,4 +117,4 @@ def covariance_metrics(poses: np.ndarray, relative_covariances: np.ndarray, pose
     return out
 
 
-__all__ = ["CHI2_6_95", "MOTION_PRIOR_SIGMA", "POSE_COVARIANCE_CONVENTION", "with_motion_prior", "covariance_metrics", "propagate", "relative_errors"]
+__all__ = ["CHI2_6_95", "MOTION_PRIOR_SIGMA", "POSE_COVARIANCE_CONVENTION", "POSE_COVARIANCE_PER_POSE", "with_motion_prior", "covariance_metrics", "propagate", "relative_errors"]

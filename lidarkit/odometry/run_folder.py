@@ -78,10 +78,10 @@ def _write_files(result: OdometryResult, out: Path) -> None:
     atomic.write_text(out / "metrics.json", json.dumps(result.metrics, indent=2, default=_json_default) + "\n")
     atomic.write_text(out / "timing.csv", result.stats.to_csv())
     if result.pose_covariance is not None:
-        from lidarkit.odometry.covariance import POSE_COVARIANCE_CONVENTION
+        from lidarkit.odometry.covariance import POSE_COVARIANCE_PER_POSE  # (not the per-frame one: no such rows here)
 
         rows = result.pose_covariance.reshape(len(result.pose_covariance), 36)
-        header = f"one row per pose: its 6x6 covariance, row-major; {POSE_COVARIANCE_CONVENTION}"
+        header = f"one row per pose: its 6x6 covariance, row-major; {POSE_COVARIANCE_PER_POSE}"
         atomic.write_text(out / "pose_covariance.txt", "# " + header + "\n" + "\n".join(" ".join(f"{v:.9g}" for v in row) for row in rows) + "\n")
     _write_plots(result, out)
 

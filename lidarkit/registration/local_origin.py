@@ -34,7 +34,8 @@ def local_offset(points_xyz: np.ndarray, far_m: float = FAR_M) -> np.ndarray | N
 
 def sensor_proxy(points_xyz: np.ndarray, near_m: float = SENSOR_NEAR_M) -> np.ndarray | None:
     """Where the sensor of a scan given in another frame is likely to be: the median of its points (a scan's returns
-    crowd around its sensor: within 2 m of it on the streets and the KITTI pairs), or None when that lies within
+    crowd around its sensor: within 2 m of it on the streets and the KITTI pairs; on a small indoor scene 1 m is far,
+    see docs/registration.md: the LiDAR pair's sigmas moved 300 m came out up to 2.2x), or None when that lies within
     ``near_m`` of the frame's origin (the scan is in its sensor frame, where the covariance calibration was learned).
 
     The covariance is computed and calibrated around it and moved to the frame's origin with the adjoint: calibrated
