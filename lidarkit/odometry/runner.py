@@ -26,7 +26,7 @@ from lidarkit.odometry.metrics import odometry_metrics
 from lidarkit.odometry.prefetch import DEFAULT_DEPTH, prefetched
 from lidarkit.odometry.result import FrameStats, OdometryResult
 from lidarkit.odometry.run_folder import refuse_replacing_inputs, write_run
-from lidarkit.odometry.settings import deskew_requested, effective_settings, require_point_times
+from lidarkit.odometry.settings import deskew_requested, effective_settings, require_point_times, sweeps_apart
 from lidarkit.params import is_integer
 from lidarkit.registration.base import BACKEND_ERRORS, PendingAlignment, check_point_times
 from lidarkit.registration.covariance import widen_for_distortion
@@ -169,9 +169,11 @@ def _run_stateless(stream, registration: Any, worker: Overlap, indices: np.ndarr
                    poses: np.ndarray, checker: FrameChecker, strict: bool, name: str, dataset_name: str, bar,
                    validated: dict[int, np.ndarray], *,
                    read_s, register_s, n_points, converged, measured, fallback, iterations, rmse_m, n_corr, degenerate,
-                   assessed, min_eigenvalue, relative_cov, reasons, widened: list[int], require_times=None) -> Scan | None:
+                   assessed, min_eigenvalue, relative_cov, reasons, widened: list[int], require_times=None,
+                   sweeps: np.ndarray | None = None) -> Scan | None:
     """Scan-to-scan chaining, frame k's assessment overlapped with frame k+1's registration (``require_times``: the
-    ``--strict`` refusal of a scan without per-point times, for a variant that deskews with them).
+    ``--strict`` refusal of a scan without per-point times, for a variant that deskews with them; ``sweeps``: each
+    frame's sweeps since the previous one, for a variant that ``accepts_sweeps_apart``).
 
     The only thing frame k+1 needs from frame k's assessment is its verdict: a result the acceptance gate turns down
     (too few correspondences, too low a fitness) is not converged, and the next guess is then the previous motion.
@@ -192,7 +194,9 @@ def _run_stateless(stream, registration: Any, worker: Overlap, indices: np.ndarr
             if deferred:
                 out = registration.align_deferred(points, previous, init_T=guess)
             elif getattr(registration, "accepts_point_times", False):  # e.g. ground_filtered deskews with them
-                out = PendingAlignment.done(registration.align(points, previous, init_T=guess, source_times_s=times, target_times_s=previous_times))
+                apart = {"sweeps_apart": float(sweeps[k])} if sweeps is not None else {}
+                out = PendingAlignment.done(registration.align(points, previous, init_T=guess, source_times_s=times,
+                                                               target_times_s=previous_times, **apart))
             else:
                 out = PendingAlignment.done(registration.align(points, previous, init_T=guess))
             if not np.isfinite(np.asarray(out.T_target_source, dtype=np.float64)).all():  # garbage instead of an error
@@ -459,6 +463,10 @@ def run(
             probe = dataclasses.replace(probe, stamp_instant=stamped_at)
         like_with_like(reference, estimate_instant(registration, probe), sequence=sequence, frames=indices,
                        own_ground_truth=False, method=name, deskewed=deskews(registration, probe))
+    # sweeps between each frame and the previous one (a stepped selection, dropped scans): what a deskewing variant
+    # that accepts it scales its motion between frames by, to one sweep's
+    sweeps = sweeps_apart(getattr(sequence, "timestamps_s", None), frame_numbers(sequence), indices, n_total)
+    sweeps_given = sweeps if getattr(registration, "accepts_sweeps_apart", False) else None
     need_times = strict and bool(deskew_requested(registration)) and (stateful or getattr(registration, "accepts_point_times", False))
     if strict and not stateful and deskew_requested(registration) and not getattr(registration, "accepts_point_times", False):
         raise ConfigError(f"deskew requested, but {name} runs scan-to-scan through align(), which takes no per-point times", source=name)
@@ -518,11 +526,12 @@ def run(
                         if need_times:
                             require_point_times(scan, sequence, dataset_name, int(idx))
                         t1 = clock()
+                        apart = {"sweeps_apart": float(sweeps_given[k])} if sweeps_given is not None else {}
                         if odometry_poses is not None and k > 0:
                             guess = orthonormalize_se3(np.linalg.solve(odometry_poses[indices[k - 1]], odometry_poses[idx]))
-                            pose = registration.register_frame(points, scan.point_times_s, motion_guess=guess)
+                            pose = registration.register_frame(points, scan.point_times_s, motion_guess=guess, **apart)
                         else:
-                            pose = registration.register_frame(points, scan.point_times_s)
+                            pose = registration.register_frame(points, scan.point_times_s, **apart)
                         if pose is None or np.shape(pose) != (4, 4):  # (None read as "a pose with NaN entries")
                             raise RegistrationError(f"{name}.register_frame returned {type(pose).__name__}"
                                                     f"{'' if pose is None else f' of shape {np.shape(pose)}'}, not a 4x4 pose")
@@ -556,7 +565,7 @@ def run(
                     read_s=read_s, register_s=register_s, n_points=n_points, converged=converged, measured=measured, fallback=fallback,
                     iterations=iterations, rmse_m=rmse_m, n_corr=n_corr, degenerate=degenerate, assessed=frame_assessed,
                     min_eigenvalue=min_eigenvalue,
-                    relative_cov=relative_cov if want_covariance else None, reasons=reasons, widened=widened,
+                    relative_cov=relative_cov if want_covariance else None, reasons=reasons, widened=widened, sweeps=sweeps_given,
                 )
     finally:
         worker.close()  # cancels what has not started, joins the worker thread, also on error
@@ -613,7 +622,7 @@ def run(
     past_the_end = frames_past_the_end(frames, n_total)
     effective, warnings = effective_settings(sequence, registration, name, stateful, checker.has_point_times, reference,
                                              stamp_instant=getattr(first_scan, "stamp_instant", None), n_flat_times=len(flat_times),
-                                             frames=indices)
+                                             frames=indices, sweeps_apart=sweeps)
     # the gaps are judged against the dataset's own interval (stamps, else file numbers): the run's may hold only two
     typical = typical_interval(all_stamps) if timestamps is not None else number_step
     if want_covariance and n > 1 and not np.isfinite(relative_cov[1:]).all(axis=(1, 2)).any():

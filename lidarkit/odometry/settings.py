@@ -48,6 +48,28 @@ def deskew_requested(registration: Any) -> bool | None:
     return getattr(registration, "deskew_instant", None) is not None
 
 
+#: sweeps between frames within this of 1 count as consecutive (jittered stamps): their deskew is left as it was
+SWEEPS_APART_TOLERANCE = 0.25
+
+
+def sweeps_apart(stamps_s: np.ndarray | None, numbers: np.ndarray | None, indices: np.ndarray, n_total: int) -> np.ndarray:
+    """``(n,)`` float64 sweeps between each selected frame and the previous one (1 for the first): the pair's time
+    interval over the dataset's typical one (its stamps; else its frame numbers, else its indices), 1 where within
+    :data:`SWEEPS_APART_TOLERANCE` of 1. A deskew that takes the motion between frames as one sweep's needs it
+    (``--frames 0:60:3`` deskewed with three sweeps' motion: 0.26 m RPE against 0.10 m without deskew)."""
+    from lidarkit.odometry.inputs import typical_interval
+
+    values = np.arange(n_total, dtype=np.float64) if numbers is None else np.asarray(numbers, dtype=np.float64)
+    if stamps_s is not None and len(stamps_s) == n_total and (typical_interval(stamps_s) or 0.0) > 0:
+        values = np.asarray(stamps_s, dtype=np.float64)
+    typical = typical_interval(values)
+    out = np.ones(len(indices))
+    if len(indices) > 1 and typical:
+        out[1:] = np.diff(values[indices]) / typical
+    out[np.abs(out - 1.0) <= SWEEPS_APART_TOLERANCE] = 1.0
+    return out
+
+
 def point_time_source(sequence: Any) -> str:
     """Where the reader takes per-point times from, in words (the folder for a KITTI layout)."""
     folder = getattr(sequence, "point_times_dir", None)
@@ -118,10 +140,12 @@ def ground_truth_instant(sequence: Any, reference: Any) -> str:
 def effective_settings(
     sequence: Any, registration: Any, method: str, stateful: bool, has_point_times: np.ndarray, reference: Any,
     stamp_instant: str | None = None, n_flat_times: int = 0, frames: np.ndarray | None = None,
+    sweeps_apart: np.ndarray | None = None,
 ) -> tuple[dict[str, Any], list[str]]:
     """(settings really applied, warnings) of a finished run; ``has_point_times`` (n,) bool per processed frame;
     ``stamp_instant``: the instant of the sweep the scans' stamps refer to (what an estimate over snapshots refers to);
-    ``n_flat_times``: frames whose per-point times were all equal (read as frames without per-point times)."""
+    ``n_flat_times``: frames whose per-point times were all equal (read as frames without per-point times);
+    ``sweeps_apart``: (n,) sweeps since the previous frame (:func:`sweeps_apart`)."""
     warnings: list[str] = []
     requested = deskew_requested(registration)
     n, n_times = len(has_point_times), int(np.count_nonzero(has_point_times))
@@ -145,6 +169,18 @@ def effective_settings(
         if n_times < n:
             deskew["reason"] += f" for {n_times} of {n} frames"
             warnings.append(f"deskew applied to {n_times} of {n} frames only: {missing}")
+        apart = np.asarray(sweeps_apart if sweeps_apart is not None else [], dtype=np.float64)[1:]
+        skipped = apart[apart != 1.0]
+        if skipped.size:  # a stepped selection or dropped scans: the motion between frames spans several sweeps
+            low, high = f"{skipped.min():.3g}", f"{skipped.max():.3g}"
+            span = low if low == high else f"{low} to {high}"
+            what = f"{skipped.size} of {n - 1} frames {span} sweeps apart"
+            if getattr(registration, "accepts_sweeps_apart", False):
+                deskew["motion"] = f"the motion between frames scaled to one sweep ({what})"
+            else:
+                deskew["motion"] = f"the motion between frames taken as one sweep's ({what})"
+                warnings.append(f"{what} were deskewed with {span} sweeps' motion ({method} takes no sweeps_apart): "
+                                "the deskew is that many times too large; run consecutive frames, or deskew=false")
     if deskew["applied"]:
         stated = getattr(registration, "deskew_instant", None)
         estimate_instant = str(stated) if stated else "end" if method == "kiss" else "the instant the variant deskews to (not stated)"

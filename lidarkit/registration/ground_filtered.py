@@ -35,10 +35,10 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import Field, model_validator
 
-from lidarkit.geometry import make_se3, se3_log, so3_exp
+from lidarkit.geometry import make_se3, se3_exp, se3_log, so3_exp
 from lidarkit.params import changed_fields
 from lidarkit.registration import local_origin
-from lidarkit.registration.base import Degeneracy, RegistrationResult, check_point_times
+from lidarkit.registration.base import Degeneracy, RegistrationResult, check_point_times, check_sweeps_apart
 from lidarkit.registration.components.motion import exp_scaled_twist_apply
 from lidarkit.registration.ground import (
     DEFAULT_GROUND_SEGMENTER,
@@ -246,11 +246,14 @@ class GroundFilteredICP(VanillaICP):
     Config = GroundFilteredConfig
     #: the odometry runner passes ``source_times_s`` / ``target_times_s`` (per-point times) to :meth:`align`
     accepts_point_times = True
+    #: ... and ``sweeps_apart`` (a pair that skips sweeps: the deskew motion is scaled to one sweep)
+    accepts_sweeps_apart = True
 
     def __init__(self, config: GroundFilteredConfig | None = None, **params: Any):
         super().__init__(config, **params)
         self.segmenter = ground_segmenter(self.config)
         self._fractions: tuple[np.ndarray | None, np.ndarray | None] = (None, None)
+        self._sweeps_apart = 1.0
         self._told_2d = False
 
     @property
@@ -260,18 +263,21 @@ class GroundFilteredICP(VanillaICP):
 
     def align(
         self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray | None = None, *,
-        source_times_s: np.ndarray | None = None, target_times_s: np.ndarray | None = None,
+        source_times_s: np.ndarray | None = None, target_times_s: np.ndarray | None = None, sweeps_apart: float = 1.0,
     ) -> RegistrationResult:
-        """As :meth:`Registration.align`; with both clouds' per-point times (s) and ``deskew`` the clouds are deskewed."""
+        """As :meth:`Registration.align`; with both clouds' per-point times (s) and ``deskew`` the clouds are deskewed.
+        ``sweeps_apart``: sweeps between target and source; their motion, taken as one sweep's, deskewed a pair 3
+        sweeps apart (``--frames 0:60:3``) three times too much (worse than no deskew): it is scaled to one sweep."""
         fractions: list[np.ndarray | None] = [None, None]
         if self.config.deskew and source_times_s is not None and target_times_s is not None:
             for k, (name, pts, times) in enumerate((("source", source_xyz, source_times_s), ("target", target_xyz, target_times_s))):
                 fractions[k] = sweep_fraction(check_point_times(times, len(pts), f"{name} times"))
         self._fractions = (fractions[0], fractions[1]) if fractions[0] is not None and fractions[1] is not None else (None, None)
+        self._sweeps_apart = check_sweeps_apart(sweeps_apart)
         try:
             return super().align(source_xyz, target_xyz, init_T)
         finally:
-            self._fractions = (None, None)
+            self._fractions, self._sweeps_apart = (None, None), 1.0
 
     def _align(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray) -> RegistrationResult:
         c = self.config
@@ -304,12 +310,13 @@ class GroundFilteredICP(VanillaICP):
         if deskew:
             frac_src, frac_dst = frac_src[masks[0]], frac_dst[masks[1]]
             raw_source = clouds[0]
-            clouds = [deskew_to_sweep_end(clouds[0], frac_src, init_T), deskew_to_sweep_end(clouds[1], frac_dst, init_T)]
+            sweep = self._one_sweep(init_T)
+            clouds = [deskew_to_sweep_end(clouds[0], frac_src, sweep), deskew_to_sweep_end(clouds[1], frac_dst, sweep)]
         src, dst = prepare(clouds[0], clouds[1], c.voxel_size_m)
         neighbors = NearestNeighbors(dst, backend=c.nn_backend, leafsize=c.leafsize, workers=c.workers)
         result = staged_icp(src, dst, init_T, neighbors, c)
         if deskew and result.converged:  # once more with the source deskewed by the estimated motion
-            src = prepare(deskew_to_sweep_end(raw_source, frac_src, result.T_target_source), clouds[1], c.voxel_size_m)[0]
+            src = prepare(deskew_to_sweep_end(raw_source, frac_src, self._one_sweep(result.T_target_source)), clouds[1], c.voxel_size_m)[0]
             first = result
             result = staged_icp(src, dst, result.T_target_source, neighbors, c)
             result = dataclasses.replace(result, iterations=first.iterations + result.iterations, extra={**result.extra, "deskewed": True})
@@ -327,6 +334,12 @@ class GroundFilteredICP(VanillaICP):
             # the covariance and surface_step stay those of the non-ground alignment: the calibration was learned so
             result = dataclasses.replace(result, T_target_source=refined, extra={**result.extra, "ground_refined": True})
         return result
+
+    def _one_sweep(self, T_target_source: np.ndarray) -> np.ndarray:
+        """The pair's motion scaled to one sweep (itself, the same array, for consecutive sweeps)."""
+        if self._sweeps_apart == 1.0:
+            return T_target_source
+        return se3_exp(se3_log(T_target_source) / self._sweeps_apart)
 
     def _fallback(
         self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray, why: str, kept: dict, degeneracy: Degeneracy | None = None

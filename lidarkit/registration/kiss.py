@@ -18,11 +18,11 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from lidarkit.errors import RegistrationError
-from lidarkit.geometry import as_points, is_rotation, orthonormalize_se3
+from lidarkit.geometry import as_points, is_rotation, orthonormalize_se3, se3_exp, se3_log
 from lidarkit.params import changed_fields
 from lidarkit.registration.assessment import assess_alignment
 from lidarkit.registration.base import (
-    Registration, RegistrationConfig, RegistrationResult, check_init_T, check_point_times, finite_4x4,
+    Registration, RegistrationConfig, RegistrationResult, check_init_T, check_point_times, check_sweeps_apart, finite_4x4,
 )
 from lidarkit.registration.registry import register_icp
 
@@ -87,6 +87,18 @@ class KissConfig(RegistrationConfig):
         )
 
 
+class _OneSweepDeskew:
+    """kiss-icp's preprocessor deskewing with ``delta`` scaled to one sweep: ``exp(log(delta) / sweeps)`` (kiss-icp's
+    register_frame hands its preprocessor the motion since the last frame, and reads that motion itself for its guess)."""
+
+    def __init__(self, preprocessor, sweeps: float):
+        self.preprocessor, self.sweeps = preprocessor, float(sweeps)
+
+    def preprocess(self, frame, timestamps, delta):
+        one_sweep = kiss_safe_pose(se3_exp(se3_log(np.asarray(delta, dtype=np.float64)) / self.sweeps), "deskew motion")
+        return self.preprocessor.preprocess(frame, timestamps, one_sweep)
+
+
 @register_icp("kiss")
 class KissRegistration(Registration):
     """KISS-ICP: stateful odometry (``register_frame``) or pairwise scan-to-map alignment (``align``)."""
@@ -99,10 +111,13 @@ class KissRegistration(Registration):
     overlap_assessment = False
     #: ``register_frame`` takes ``motion_guess`` (e.g. wheel odometry) instead of kiss-icp's constant velocity
     accepts_motion_guess = True
+    #: ``register_frame`` takes ``sweeps_apart`` (frames that skip sweeps: its deskew motion is scaled to one sweep)
+    accepts_sweeps_apart = True
 
     def __init__(self, config: KissConfig | None = None, **params):
         super().__init__(config, **params)
         self._kiss = None
+        self._delta_sweeps = 1.0  # sweeps spanned by last_delta (the previous frame's sweeps_apart)
 
     @property
     def deskew_instant(self) -> str | None:
@@ -128,17 +143,22 @@ class KissRegistration(Registration):
 
         start = None if T_world_lidar_initial is None else check_init_T(T_world_lidar_initial, "T_world_lidar_initial")
         self._kiss = KissICP(self.kiss_config)
+        self._delta_sweeps = 1.0
         if start is not None:
             self._kiss.last_pose = kiss_safe_pose(start, "T_world_lidar_initial")
 
     def register_frame(
-        self, points_xyz: np.ndarray, point_times_s: np.ndarray | None = None, motion_guess: np.ndarray | None = None
+        self, points_xyz: np.ndarray, point_times_s: np.ndarray | None = None, motion_guess: np.ndarray | None = None,
+        sweeps_apart: float = 1.0,
     ) -> np.ndarray:
         """Register one sweep; returns ``T_world_lidar`` (4x4) of this frame (at the end of the sweep when deskewed).
 
         ``motion_guess``: the previous-to-this-frame motion to start from (and deskew with), e.g. from wheel
         odometry, in place of kiss-icp's constant-velocity prediction (``last_delta``); checked as ``align``'s
         ``init_T`` (a reflection or a scaled matrix was re-orthonormalized into another motion).
+        ``sweeps_apart``: sweeps between the previous frame and this one (frames that skip scans). kiss-icp deskews
+        with the motion between registered frames as one sweep's: N sweeps apart, the correction was N times too
+        large (worse than none). The deskew then takes that motion scaled to one sweep; the initial guess the whole.
         """
         kiss = self.pipeline
         frame = np.ascontiguousarray(as_points(points_xyz, "frame", min_points=1))
@@ -151,7 +171,17 @@ class KissRegistration(Registration):
         kiss.last_pose = kiss_safe_pose(kiss.last_pose, "last_pose")
         delta = kiss.last_delta if motion_guess is None else check_init_T(motion_guess, "motion_guess")
         kiss.last_delta = kiss_safe_pose(delta, "last_delta")
-        _, source = kiss.register_frame(frame, times)
+        sweeps_apart = check_sweeps_apart(sweeps_apart)
+        spans = sweeps_apart if motion_guess is not None else self._delta_sweeps  # the sweeps the deskew motion spans
+        self._delta_sweeps = sweeps_apart
+        if spans == 1.0 or len(times) == 0 or not self.config.deskew:
+            _, source = kiss.register_frame(frame, times)
+        else:
+            kiss.preprocessor, own = _OneSweepDeskew(kiss.preprocessor, spans), kiss.preprocessor
+            try:
+                _, source = kiss.register_frame(frame, times)
+            finally:
+                kiss.preprocessor = own
         if len(source) == 0 and kiss.local_map.empty():  # nothing registered yet and nothing to register with
             c = self.config
             raise RegistrationError(f"no point of the sweep lies within [{c.min_range_m:g}, {c.max_range_m:g}] m of the sensor "

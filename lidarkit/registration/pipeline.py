@@ -30,10 +30,11 @@ from pydantic import Field, model_validator
 from scipy.spatial import cKDTree
 
 from lidarkit.errors import RegistrationError
-from lidarkit.geometry import as_points, orthonormalize_se3, se3_inverse, transform_points
+from lidarkit.geometry import as_points, orthonormalize_se3, se3_exp, se3_inverse, se3_log, transform_points
 from lidarkit.registration.assessment import assess_alignment
 from lidarkit.registration.base import (
-    Degeneracy, Registration, RegistrationConfig, RegistrationResult, as_point_times, check_init_T, check_point_times, use_backend,
+    Degeneracy, Registration, RegistrationConfig, RegistrationResult, as_point_times, check_init_T, check_point_times,
+    check_sweeps_apart, use_backend,
 )
 from lidarkit.registration.components import make_component
 from lidarkit.registration.components.registry import output_error
@@ -187,12 +188,19 @@ def _matches(local_map: Any, moved: np.ndarray, max_distance_m: float, track: di
     return index, valid
 
 
+def _one_sweep(delta: np.ndarray, sweeps: float) -> np.ndarray:
+    """The motion ``delta`` over ``sweeps`` sweeps scaled to one (the same array for 1)."""
+    return delta if sweeps == 1.0 else se3_exp(se3_log(delta) / sweeps)
+
+
 @register_icp("pipeline")
 class PipelineRegistration(Registration):
     """Composable ICP: residual, kernel, threshold, deskew, map and preprocessing components (presets kiss_like, vanilla_seq)."""
 
     Config = PipelineConfig
     stateful = True
+    #: ``register_frame`` takes ``sweeps_apart`` (frames that skip sweeps: its deskew motion is scaled to one sweep)
+    accepts_sweeps_apart = True
 
     def __init__(self, config: PipelineConfig | None = None, **params):
         super().__init__(config, **params)
@@ -227,15 +235,18 @@ class PipelineRegistration(Registration):
         self._components = build_components(self.config)
         self.last_pose = np.eye(4) if T_world_lidar_initial is None else check_init_T(T_world_lidar_initial, "T_world_lidar_initial")
         self.last_delta = np.eye(4)
+        self._delta_sweeps = 1.0  # sweeps spanned by last_delta (the previous frame's sweeps_apart)
         self.last_frame: dict[str, Any] = {}
 
-    def register_frame(self, points_xyz: np.ndarray, point_times_s: np.ndarray | None = None) -> np.ndarray:
+    def register_frame(self, points_xyz: np.ndarray, point_times_s: np.ndarray | None = None, sweeps_apart: float = 1.0) -> np.ndarray:
         """Register one sweep into the map; returns ``T_world_lidar`` at the deskew reference instant. A component's
-        failure (a plugin kernel's NaN weights in scipy) is a RegistrationError naming the variant, as in ``align``."""
+        failure (a plugin kernel's NaN weights in scipy) is a RegistrationError naming the variant, as in ``align``.
+        ``sweeps_apart``: sweeps since the previous frame (frames that skip scans): the deskew takes the motion between
+        frames scaled to one sweep (taken whole, N sweeps apart deskewed N times too much); the prediction the whole."""
         with use_backend(self.name, f"{self.name} (frame of {len(points_xyz)} points)"):
-            return self._register_frame(points_xyz, point_times_s)
+            return self._register_frame(points_xyz, point_times_s, check_sweeps_apart(sweeps_apart))
 
-    def _register_frame(self, points_xyz: np.ndarray, point_times_s: np.ndarray | None = None) -> np.ndarray:
+    def _register_frame(self, points_xyz: np.ndarray, point_times_s: np.ndarray | None = None, sweeps_apart: float = 1.0) -> np.ndarray:
         c = self._components
         frame = as_points(points_xyz, "frame", min_points=1)
         if point_times_s is not None:
@@ -244,7 +255,7 @@ class PipelineRegistration(Registration):
         if c["map"].empty:  # the first frame says what the sequence is
             self._refuse_2d(frame, frame)
         raw = frame
-        frame = _deskewed(c["deskew"], frame, point_times_s, self.last_delta)
+        frame = _deskewed(c["deskew"], frame, point_times_s, _one_sweep(self.last_delta, self._delta_sweeps))
         map_points, source = self._voxelize(self._preprocess(frame))
         guess = _pose(c["deskew"], c["deskew"].predict(self.last_pose, self.last_delta), "predicted pose")
         threshold = c["threshold"]
@@ -259,10 +270,12 @@ class PipelineRegistration(Registration):
         threshold.update(se3_inverse(guess) @ T)
         c["map"].update(map_points, T)
         self.last_delta = se3_inverse(self.last_pose) @ T
+        self._delta_sweeps = sweeps_apart
         self.last_pose = T
         self.last_frame = {**info, "sigma_m": sigma, "source_points": len(source), "map_points": len(c["map"].points_xyz)}
         # the pose at the reference instant (the deskew component may register at another one; undeskewed: as is)
-        return T.copy() if frame is raw else _pose(c["deskew"], c["deskew"].reported(T, self.last_delta), "reported pose")
+        return T.copy() if frame is raw else _pose(c["deskew"], c["deskew"].reported(T, _one_sweep(self.last_delta, sweeps_apart)),
+                                                   "reported pose")
 
     # ------------------------------------------------------------------ stages
     def _refuse_2d(self, source_xyz: np.ndarray, target_xyz: np.ndarray, components: dict[str, Any] | None = None) -> None:
