@@ -225,6 +225,12 @@ def se3_log(T: np.ndarray) -> np.ndarray:
     return np.concatenate([V_inv @ T[:3, 3], phi])
 
 
+def se3_fraction(T: np.ndarray, parts: float) -> np.ndarray:
+    """One of ``parts`` equal steps of the motion ``T`` along its geodesic, ``exp(log(T) / parts)``; ``T`` itself (the
+    same array) for one part (a deskew's motion over several sweeps scaled to one, VO's motion over a gap per frame)."""
+    return T if parts == 1 else se3_exp(se3_log(T) / parts)
+
+
 def rotation_angle_rad(R: np.ndarray) -> np.ndarray | float:
     """Rotation angle in [0, pi] of ``(3, 3)`` or ``(N, 3, 3)`` matrices, robust near 0 and pi."""
     R = np.asarray(R, dtype=np.float64)

@@ -375,16 +375,6 @@ def as_point_times(point_times_s: np.ndarray, source: str = "point_times_s") -> 
                         f"{str(point_times_s)[:40]!r}", source=source) from None
 
 
-def check_sweeps_apart(value: object) -> float:
-    """``sweeps_apart`` (sweeps between two frames, which a deskew scales its motion by) as a float; ConfigError for
-    anything but a finite number > 0 (0 divided the motion by zero)."""
-    from lidarkit.params import is_real_number
-
-    if not is_real_number(value) or not np.isfinite(value) or value <= 0:
-        raise ConfigError(f"sweeps_apart must be a finite number of sweeps > 0, got {value!r}", source="sweeps_apart")
-    return float(value)
-
-
 def check_point_times(point_times_s: np.ndarray, n_points: int, source: str = "point_times_s") -> np.ndarray:
     """``(N,)`` float64 per-point times of a sweep of ``n_points``; DataError naming ``source`` for another count or for
     NaN / infinite times, saying which (both read "need 54850 finite per-point times, got 54850")."""
@@ -395,6 +385,16 @@ def check_point_times(point_times_s: np.ndarray, n_points: int, source: str = "p
     if bad:
         raise DataError(f"{bad} of the {n_points} per-point times are NaN or infinite", source=source)
     return times
+
+
+def check_sweeps_apart(value: object) -> float:
+    """``sweeps_apart`` (sweeps between two frames, which a deskew scales its motion by) as a float; ConfigError for
+    anything but a finite number > 0 (0 divided the motion by zero)."""
+    from lidarkit.params import is_real_number
+
+    if not is_real_number(value) or not np.isfinite(value) or value <= 0:
+        raise ConfigError(f"sweeps_apart must be a finite number of sweeps > 0, got {value!r}", source="sweeps_apart")
+    return float(value)
 
 
 def check_init_T(init_T: np.ndarray, source: str = "init_T") -> np.ndarray:

@@ -35,7 +35,7 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import Field, model_validator
 
-from lidarkit.geometry import make_se3, se3_exp, se3_log, so3_exp
+from lidarkit.geometry import make_se3, se3_fraction, se3_log, so3_exp
 from lidarkit.params import changed_fields
 from lidarkit.registration import local_origin
 from lidarkit.registration.base import Degeneracy, RegistrationResult, check_point_times, check_sweeps_apart
@@ -310,13 +310,13 @@ class GroundFilteredICP(VanillaICP):
         if deskew:
             frac_src, frac_dst = frac_src[masks[0]], frac_dst[masks[1]]
             raw_source = clouds[0]
-            sweep = self._one_sweep(init_T)
+            sweep = se3_fraction(init_T, self._sweeps_apart)
             clouds = [deskew_to_sweep_end(clouds[0], frac_src, sweep), deskew_to_sweep_end(clouds[1], frac_dst, sweep)]
         src, dst = prepare(clouds[0], clouds[1], c.voxel_size_m)
         neighbors = NearestNeighbors(dst, backend=c.nn_backend, leafsize=c.leafsize, workers=c.workers)
         result = staged_icp(src, dst, init_T, neighbors, c)
         if deskew and result.converged:  # once more with the source deskewed by the estimated motion
-            src = prepare(deskew_to_sweep_end(raw_source, frac_src, self._one_sweep(result.T_target_source)), clouds[1], c.voxel_size_m)[0]
+            src = prepare(deskew_to_sweep_end(raw_source, frac_src, se3_fraction(result.T_target_source, self._sweeps_apart)), clouds[1], c.voxel_size_m)[0]
             first = result
             result = staged_icp(src, dst, result.T_target_source, neighbors, c)
             result = dataclasses.replace(result, iterations=first.iterations + result.iterations, extra={**result.extra, "deskewed": True})
@@ -334,12 +334,6 @@ class GroundFilteredICP(VanillaICP):
             # the covariance and surface_step stay those of the non-ground alignment: the calibration was learned so
             result = dataclasses.replace(result, T_target_source=refined, extra={**result.extra, "ground_refined": True})
         return result
-
-    def _one_sweep(self, T_target_source: np.ndarray) -> np.ndarray:
-        """The pair's motion scaled to one sweep (itself, the same array, for consecutive sweeps)."""
-        if self._sweeps_apart == 1.0:
-            return T_target_source
-        return se3_exp(se3_log(T_target_source) / self._sweeps_apart)
 
     def _fallback(
         self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray, why: str, kept: dict, degeneracy: Degeneracy | None = None

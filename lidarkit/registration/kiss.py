@@ -18,7 +18,7 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from lidarkit.errors import RegistrationError
-from lidarkit.geometry import as_points, is_rotation, orthonormalize_se3, se3_exp, se3_log
+from lidarkit.geometry import as_points, is_rotation, orthonormalize_se3, se3_fraction
 from lidarkit.params import changed_fields
 from lidarkit.registration.assessment import assess_alignment
 from lidarkit.registration.base import (
@@ -95,7 +95,7 @@ class _OneSweepDeskew:
         self.preprocessor, self.sweeps = preprocessor, float(sweeps)
 
     def preprocess(self, frame, timestamps, delta):
-        one_sweep = kiss_safe_pose(se3_exp(se3_log(np.asarray(delta, dtype=np.float64)) / self.sweeps), "deskew motion")
+        one_sweep = kiss_safe_pose(se3_fraction(np.asarray(delta, dtype=np.float64), self.sweeps), "deskew motion")
         return self.preprocessor.preprocess(frame, timestamps, one_sweep)
 
 

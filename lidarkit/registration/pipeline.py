@@ -30,7 +30,7 @@ from pydantic import Field, model_validator
 from scipy.spatial import cKDTree
 
 from lidarkit.errors import RegistrationError
-from lidarkit.geometry import as_points, orthonormalize_se3, se3_exp, se3_inverse, se3_log, transform_points
+from lidarkit.geometry import as_points, orthonormalize_se3, se3_fraction, se3_inverse, transform_points
 from lidarkit.registration.assessment import assess_alignment
 from lidarkit.registration.base import (
     Degeneracy, Registration, RegistrationConfig, RegistrationResult, as_point_times, check_init_T, check_point_times,
@@ -188,11 +188,6 @@ def _matches(local_map: Any, moved: np.ndarray, max_distance_m: float, track: di
     return index, valid
 
 
-def _one_sweep(delta: np.ndarray, sweeps: float) -> np.ndarray:
-    """The motion ``delta`` over ``sweeps`` sweeps scaled to one (the same array for 1)."""
-    return delta if sweeps == 1.0 else se3_exp(se3_log(delta) / sweeps)
-
-
 @register_icp("pipeline")
 class PipelineRegistration(Registration):
     """Composable ICP: residual, kernel, threshold, deskew, map and preprocessing components (presets kiss_like, vanilla_seq)."""
@@ -255,7 +250,7 @@ class PipelineRegistration(Registration):
         if c["map"].empty:  # the first frame says what the sequence is
             self._refuse_2d(frame, frame)
         raw = frame
-        frame = _deskewed(c["deskew"], frame, point_times_s, _one_sweep(self.last_delta, self._delta_sweeps))
+        frame = _deskewed(c["deskew"], frame, point_times_s, se3_fraction(self.last_delta, self._delta_sweeps))
         map_points, source = self._voxelize(self._preprocess(frame))
         guess = _pose(c["deskew"], c["deskew"].predict(self.last_pose, self.last_delta), "predicted pose")
         threshold = c["threshold"]
@@ -274,7 +269,7 @@ class PipelineRegistration(Registration):
         self.last_pose = T
         self.last_frame = {**info, "sigma_m": sigma, "source_points": len(source), "map_points": len(c["map"].points_xyz)}
         # the pose at the reference instant (the deskew component may register at another one; undeskewed: as is)
-        return T.copy() if frame is raw else _pose(c["deskew"], c["deskew"].reported(T, _one_sweep(self.last_delta, sweeps_apart)),
+        return T.copy() if frame is raw else _pose(c["deskew"], c["deskew"].reported(T, se3_fraction(self.last_delta, sweeps_apart)),
                                                    "reported pose")
 
     # ------------------------------------------------------------------ stages

@@ -24,7 +24,7 @@ import cv2
 import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
-from lidarkit.geometry import is_rotation, rotation_angle_deg, se3_exp, se3_inverse, se3_log, skew
+from lidarkit.geometry import is_rotation, rotation_angle_deg, se3_fraction, se3_inverse, skew
 from lidarkit.trajectory import Trajectory
 from lidarkit.vo.config import FeatureConfig, GeometryConfig, VOConfig
 from lidarkit.vo.features import get_detector, get_preprocessor
@@ -610,7 +610,7 @@ def _per_frame_motion(T_ref_cur: np.ndarray, gap: int) -> np.ndarray:
     """``T_ref_cur`` spread evenly over ``gap`` frames (geodesic fraction)."""
     if gap <= 1:
         return T_ref_cur.copy()
-    return se3_exp(se3_log(T_ref_cur) / gap)
+    return se3_fraction(T_ref_cur, gap)
 
 
 def _is_valid_rotation(R: np.ndarray, max_deg: float) -> bool:
