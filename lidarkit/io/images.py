@@ -19,6 +19,7 @@ from lidarkit.io import register_dataset
 from lidarkit.io.base import checked_index
 from lidarkit.io.folder import natural_key
 from lidarkit.io.kitti import read_gray_image, read_kitti_calib
+from lidarkit.io.pointcloud2 import NANOSECONDS_AFTER
 from lidarkit.textfile import read_lines
 from lidarkit.trajectory import Trajectory
 
@@ -74,10 +75,6 @@ def read_intrinsics(path: str | os.PathLike) -> np.ndarray:
     return K
 
 
-#: stamps above this are nanoseconds (EuRoC ``data.csv``: 1403636579763555584), as ``lidarkit.io.pointcloud2`` reads them
-_NANOSECONDS_AFTER = 1e15
-
-
 def read_image_timestamps(path: str | os.PathLike) -> np.ndarray:
     """Timestamps in seconds: one number per line, or ``stamp name`` lines (TUM ``rgb.txt``, EuRoC ``data.csv``); first
     column used. NaN or infinity is refused at its line (it failed later as "not strictly increasing", blaming the next
@@ -96,9 +93,9 @@ def read_image_timestamps(path: str | os.PathLike) -> np.ndarray:
     if not stamps:
         raise DataError("no time stamps", source=path)
     stamps_s = np.asarray(stamps, dtype=np.float64)
-    if float(np.abs(stamps_s).max()) > _NANOSECONDS_AFTER:
+    if float(np.abs(stamps_s).max()) > NANOSECONDS_AFTER:  # nanoseconds (EuRoC data.csv), as in a bag
         stamps_s = stamps_s * 1e-9
-        log.warning("%s: time stamps above %.0e read as nanoseconds (the first is %.6f s)", path, _NANOSECONDS_AFTER,
+        log.warning("%s: time stamps above %.0e read as nanoseconds (the first is %.6f s)", path, NANOSECONDS_AFTER,
                     stamps_s[0])
     return stamps_s
 

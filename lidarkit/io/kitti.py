@@ -35,7 +35,7 @@ from lidarkit.errors import ConfigError, DataError
 from lidarkit.geometry import se3_inverse
 from lidarkit.io.base import INSTANT_FRACTION, Scan, checked_index, checked_indices, option_path
 from lidarkit.io.pointcloud2 import MAX_SWEEP_S, checked_point_times
-from lidarkit.io.pointfile import load_npy, read_kitti_bin
+from lidarkit.io.pointfile import at_sensor_origin, load_npy, read_kitti_bin
 from lidarkit.textfile import file_line, is_number, read_lines, read_numeric_table
 from lidarkit.trajectory import Trajectory
 
@@ -579,7 +579,7 @@ class KittiOdometry:
             if len(raw) == len(points) and n_points < len(points):  # points left out as non-finite: leave out their times
                 keep = np.isfinite(points).all(axis=1)
                 if np.count_nonzero(keep) != n_points:  # and those at (0, 0, 0), missing returns the reader leaves out
-                    keep &= (points[:, :3] != 0).any(axis=1)
+                    keep &= ~at_sensor_origin(points)
                 raw = raw[keep]
             if len(raw) != n_points:  # (times of other points were paired with these)
                 raise DataError(f"{len(raw)} point times for {n_points} points of {scan_path.name}", source=times_path, location=f"frame {frame}")

@@ -32,7 +32,8 @@ from lidarkit.errors import DataError
 
 TIME_FIELDS = ("time", "t", "timestamp", "timestamps")
 _ABSOLUTE_AFTER_S = 1e5
-_NANOSECONDS_AFTER = 1e15
+#: Float time stamps above this are nanoseconds (seconds since 1970 stay below it for 30 million years)
+NANOSECONDS_AFTER = 1e15
 #: Longest plausible sweep (s): spinning LiDARs turn at 5-20 Hz, solid-state ones integrate ~0.1 s.
 MAX_SWEEP_S = 1.0
 #: Largest share of steps along the point order where a sweep's times go back (one per row: 128 rows of 1024 is 0.1 %).
@@ -136,7 +137,7 @@ def checked_point_times(raw: np.ndarray, xyz: np.ndarray, *, what: str, within: 
         times = raw.astype(np.float64) * 1e-9
     else:
         times = raw.astype(np.float64)
-        if len(times) and float(np.abs(times).max()) > _NANOSECONDS_AFTER:
+        if len(times) and float(np.abs(times).max()) > NANOSECONDS_AFTER:
             times = times * 1e-9
     span = float(np.ptp(times)) if len(times) else 0.0
     if span > longest_s:
@@ -213,4 +214,4 @@ def _time_field(names: list[str], wanted: str | None, source: str, location: str
     return wanted
 
 
-__all__ = ["MAX_SWEEP_S", "TIME_FIELDS", "DecodedCloud", "checked_point_times", "decode_pointcloud2", "fields_dtype", "stamp_seconds"]
+__all__ = ["MAX_SWEEP_S", "NANOSECONDS_AFTER", "TIME_FIELDS", "DecodedCloud", "checked_point_times", "decode_pointcloud2", "fields_dtype", "stamp_seconds"]

@@ -93,6 +93,11 @@ def finite_points(
     return points_xyz, intensity
 
 
+def at_sensor_origin(points_xyz: np.ndarray) -> np.ndarray:
+    """``(N,)`` bool: the points exactly at (0, 0, 0), where an organized cloud stores its missing returns."""
+    return (points_xyz[:, 0] == 0) & (points_xyz[:, 1] == 0) & (points_xyz[:, 2] == 0)  # 10x faster than any(axis=1)
+
+
 _ORIGIN_WARNED: set[str] = set()  # folders whose scans' points at (0, 0, 0) were reported: once per folder, not per frame
 
 
@@ -103,10 +108,9 @@ def drop_origin_points(
     missing returns there (5032 of 69088 points of the shared LiDAR pair) and registration took them for points
     moving with the sensor (t 0.31 m where the reference has 0.49 m). Logged once for a file read on its own
     (``frame`` None), once per folder for a sequence's frames (a folder of thousands of scans says it once)."""
-    on_x = points_xyz[:, 0] == 0  # (the common case, no x exactly 0, in a third of the time: 0.1 ms a KITTI scan)
-    if not on_x.any():
+    if not (points_xyz[:, 0] == 0).any():  # (the common case, no x exactly 0, in a third of the time: 0.1 ms a KITTI scan)
         return points_xyz, intensity
-    at_origin = on_x & (points_xyz[:, 1] == 0) & (points_xyz[:, 2] == 0)  # 10x faster than any(axis=1)
+    at_origin = at_sensor_origin(points_xyz)
     n_zero = int(np.count_nonzero(at_origin))
     if not n_zero:
         return points_xyz, intensity
@@ -338,6 +342,7 @@ def read_point_file(
 
 __all__ = [
     "POINT_FILE_SUFFIXES",
+    "at_sensor_origin",
     "check_pcd_counts",
     "check_ply_counts",
     "drop_origin_points",
