@@ -27,10 +27,15 @@ METRIC_ALIGNMENT = {
 SELECTED_FRAME = "relative over 1 selected frame, alignment-free"
 
 
+def skips_frames(frames: np.ndarray | None) -> bool:
+    """Whether a run over dataset ``frames`` skips some: its 1-frame RPE is then over one selected frame."""
+    return frames is not None and not np.all(np.diff(frames) == 1)
+
+
 def metric_alignment(frames: np.ndarray | None = None) -> dict[str, str]:
     """:data:`METRIC_ALIGNMENT` of a run over dataset ``frames``: a selection that skips frames has its RPE over one
     selected frame (``--frames 1:10:3``, an RPE over 3 KITTI frames, was labelled "over 1 frame")."""
-    if frames is None or np.all(np.diff(frames) == 1):
+    if not skips_frames(frames):
         return dict(METRIC_ALIGNMENT)
     return {**METRIC_ALIGNMENT, "rpe_translation_m": SELECTED_FRAME, "rpe_rotation_deg": SELECTED_FRAME}
 
