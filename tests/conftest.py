@@ -23,6 +23,23 @@ def shared_path(*parts: str) -> Path:
     return path
 
 
+def kiss_on_kitti_00_suite(folder: Path, frames: str) -> Path:
+    """``folder/suite.yaml``: one odometry experiment, kiss on the bundled KITTI 00 scans ``frames`` (the root and
+    ``sequence: "00"``, as docs/benchmarks.md writes it), dataset named K00."""
+    import textwrap
+
+    suite = folder / "suite.yaml"
+    suite.write_text(textwrap.dedent(f"""
+        name: kiss-kitti
+        experiments:
+          - task: odometry
+            dataset: {{kind: kitti, path: "{shared_path('kitti_odometry')}", sequence: "00", name: K00}}
+            options: {{frames: "{frames}"}}
+            methods: [kiss]
+    """))
+    return suite
+
+
 def cli_exit_code(argv: list[str]) -> int:
     """Run ``lidarkit ARGV`` in-process; its exit code (0 when it returns normally)."""
     from lidarkit.cli import main

@@ -426,9 +426,11 @@ def test_the_manifest_pins_the_angle_correction_and_deskew_the_run_applied(tmp_p
     """kiss on KITTI's own scans: the manifest pinned the correction of a freshly opened reader (off) and the deskew kiss
     asks for (on), while the run applied the correction and no deskew (no per-point times). A lidarkit that stopped
     applying the correction then read as a regression, not as a changed protocol."""
+    from conftest import kiss_on_kitti_00_suite
+
     import lidarkit.io.kitti as kitti_module
 
-    suite = _kiss_on_kitti_00(tmp_path, "0:5")
+    suite = kiss_on_kitti_00_suite(tmp_path, "0:5")
     baseline = record(suite, tmp_path / "baseline", repeats=1)
     protocol = baseline.jobs[0]["protocol"]
     assert (protocol["kitti_angle_correction"], protocol["deskew"]) == (True, False)
@@ -442,9 +444,11 @@ def test_the_manifest_pins_the_angle_correction_and_deskew_the_run_applied(tmp_p
 def test_the_frame_check_thresholds_are_pinned_and_a_changed_default_is_a_protocol_change(tmp_path, monkeypatch):
     """The manifest did not pin the frame-check thresholds: a lidarkit whose default min_fitness became 0.99 read
     "regression: kiss on K00 (seed 0): n_bad_frames = 5, baseline 0" instead of a changed protocol."""
+    from conftest import kiss_on_kitti_00_suite
+
     import lidarkit.odometry.frame_check as frame_check_module
 
-    suite = _kiss_on_kitti_00(tmp_path, "2:8")
+    suite = kiss_on_kitti_00_suite(tmp_path, "2:8")
     baseline = record(suite, tmp_path / "baseline", repeats=1)
     pinned = json.loads((baseline.path / "manifest.json").read_text())["jobs"][0]
     assert (pinned["protocol"]["frame_check"]["min_fitness"], pinned["protocol"]["frame_check"]["max_accel_mps2"]) == (0.3, 15.0)
@@ -524,19 +528,3 @@ def test_report_on_a_baseline_folder_names_it_as_compare_does(two_walks, capsys)
     assert " ".join(err.split()) == (f"error: {two_walks.path}: a baseline folder (lidarkit baseline record): report takes "
                                      "bench results folders (`lidarkit baseline check` re-runs a baseline's jobs against it)")
     assert not (two_walks.path / "report.md").exists()
-
-
-def _kiss_on_kitti_00(tmp_path, frames: str):
-    """A suite of kiss on the bundled KITTI 00 scans ``frames``, written in ``tmp_path``."""
-    from conftest import shared_path
-
-    suite = tmp_path / "kiss.yaml"
-    suite.write_text(textwrap.dedent(f"""
-        name: kiss-kitti
-        experiments:
-          - task: odometry
-            dataset: {{kind: kitti, path: "{shared_path('kitti_odometry')}", sequence: "00", name: K00}}
-            options: {{frames: "{frames}"}}
-            methods: [kiss]
-    """))
-    return suite

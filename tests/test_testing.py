@@ -247,22 +247,14 @@ def test_a_kitti_root_pinned_with_its_sequence_accepts_a_run_on_that_sequence(tm
     """Pinned as a KITTI root + ``sequence: "00"`` (as docs/benchmarks.md shows), a run on exactly that data was refused:
     "path '.../sequences/00' (pinned '...')": the reader records the sequence folder, the spec names the root. A run
     without the angle correction the pinned job applied passed as the pinned data."""
-    from conftest import shared_path
+    from conftest import kiss_on_kitti_00_suite, shared_path
 
     from lidarkit.bench.tasks._datasets import open_dataset_spec
     from lidarkit.io.kitti import KittiOdometry
     from lidarkit.odometry import run
 
     root = shared_path("kitti_odometry")
-    (tmp_path / "suite.yaml").write_text(textwrap.dedent(f"""
-        name: kitti-root
-        experiments:
-          - task: odometry
-            dataset: {{kind: kitti, path: "{root}", sequence: "00", name: K00}}
-            options: {{frames: "0:5"}}
-            methods: [kiss]
-    """))
-    baseline = record(tmp_path / "suite.yaml", tmp_path / "baseline", repeats=1)
+    baseline = record(kiss_on_kitti_00_suite(tmp_path, "0:5"), tmp_path / "baseline", repeats=1)
     pick = dict(method="kiss", metric="ape_rmse_m", tolerance=0.05)
     assert_no_worse_than(run(open_dataset_spec(baseline.job("kiss")["spec"]["dataset"]), "kiss", frames="0:5"), baseline, **pick)
     assert_no_worse_than(run(KittiOdometry(root / "sequences" / "00"), "kiss", frames="0:5"), baseline, **pick)
@@ -408,20 +400,12 @@ def test_a_frame_check_count_under_other_thresholds_is_refused(tmp_path):
     its thresholds were loosened; kiss itself under min_fitness 0.99 read "regression: n_bad_frames = 5, baseline 0"."""
     import json
 
-    from conftest import shared_path
+    from conftest import kiss_on_kitti_00_suite, shared_path
 
     from lidarkit.io.kitti import KittiOdometry
     from lidarkit.odometry import run
 
-    (tmp_path / "suite.yaml").write_text(textwrap.dedent(f"""
-        name: kiss-kitti
-        experiments:
-          - task: odometry
-            dataset: {{kind: kitti, path: "{shared_path('kitti_odometry')}", sequence: "00", name: k00}}
-            options: {{frames: "2:8"}}
-            methods: [kiss]
-    """))
-    baseline = record(tmp_path / "suite.yaml", tmp_path / "baseline", repeats=1)
+    baseline = record(kiss_on_kitti_00_suite(tmp_path, "2:8"), tmp_path / "baseline", repeats=1)
     sequence = KittiOdometry(shared_path("kitti_odometry"), sequence="00")
     pick = dict(method="kiss", metric="n_bad_frames")
     with pytest.raises(AssertionError, match=r"^regression: n_bad_frames = 3, baseline 0 "):
