@@ -123,12 +123,13 @@ def typical_interval(values: np.ndarray | None) -> float | None:
     return float(np.median(np.diff(np.asarray(values, dtype=np.float64)))) if values is not None and len(values) > 1 else None
 
 
-def time_gap_warning(times_s: np.ndarray | None, frames: np.ndarray, odometry_guess: bool = False,
+def time_gap_warning(times_s: np.ndarray | None, frames: np.ndarray, guess: str = "constant velocity",
                      indices: np.ndarray | None = None, typical: float | None = None) -> str | None:
     """A warning when consecutive scans of a run lie far apart in time (more than 3x the expected interval: scans
     missing from a recording, a folder of non-consecutive scans, a selection that skips frames), or None. ``frames``:
-    their numbers, as the warning names them; ``odometry_guess``: the run takes the dataset's odometry as its guess
-    (which bridges the gaps). Without stamps the jumps in ``frames`` are the gaps (KITTI scans 94, 95, 198, 199).
+    their numbers, as the warning names them; ``guess``: what the run starts a frame after a gap from,
+    ``"constant velocity"`` (the motion before the gap at its rate over the gap), ``"odometry"`` (the dataset's own) or
+    ``"one sweep"`` (a variant whose own prediction does not know the gap: one sweep's motion). Without stamps the jumps in ``frames`` are the gaps (KITTI scans 94, 95, 198, 199).
     The expected interval is ``typical`` (the dataset's own, :func:`typical_interval`; 1 frame without stamps, else
     the median of the run's) times the smallest step of the selected dataset ``indices``, so that a stepped selection
     is no gap (the median of the run's own two intervals hid frames 0, 1, 9)."""
@@ -147,8 +148,15 @@ def time_gap_warning(times_s: np.ndarray | None, frames: np.ndarray, odometry_gu
     k = int(gaps[np.argmax(dt[gaps])])
     return (f"{gaps.size} gap(s) {what} between consecutive scans, the largest {dt[k]:.3g} {unit} between frames {int(frames[k])} "
             f"and {int(frames[k + 1])} (expected interval {expected:.3g} {unit}): "
-            + ("the dataset's odometry gives the guess across them; the scans on either side overlap less" if odometry_guess
-               else "odometry takes the motion between consecutive scans as small"))
+            + _GAP_GUESS[guess])
+
+
+#: What a gap warning says of the guess across the gap, by the run's kind of guess.
+_GAP_GUESS = {
+    "constant velocity": "the guess across them is the motion before at constant velocity; the scans on either side overlap less",
+    "odometry": "the dataset's odometry gives the guess across them; the scans on either side overlap less",
+    "one sweep": "odometry takes the motion between consecutive scans as small (one sweep's motion as the guess across them)",
+}
 
 
 def parse_frames(frames: FrameSelection, n_frames: int) -> np.ndarray:

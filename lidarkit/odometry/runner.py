@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from lidarkit.errors import ConfigError, DataError, EvaluationError, LidarKitError, RegistrationError
-from lidarkit.geometry import as_points, float32_far_message, orthonormalize_se3, validated_points
+from lidarkit.geometry import as_points, float32_far_message, orthonormalize_se3, se3_fraction, validated_points
 from lidarkit.io.base import Scan, ScanSequence
 from lidarkit.lifetime import raise_if_interrupted
 from lidarkit.odometry.covariance import propagate
@@ -170,10 +170,12 @@ def _run_stateless(stream, registration: Any, worker: Overlap, indices: np.ndarr
                    validated: dict[int, np.ndarray], *,
                    read_s, register_s, n_points, converged, measured, fallback, iterations, rmse_m, n_corr, degenerate,
                    assessed, min_eigenvalue, relative_cov, reasons, widened: list[int], require_times=None,
-                   sweeps: np.ndarray | None = None) -> Scan | None:
+                   sweeps: np.ndarray | None = None, frame_sweeps: np.ndarray | None = None) -> Scan | None:
     """Scan-to-scan chaining, frame k's assessment overlapped with frame k+1's registration (``require_times``: the
     ``--strict`` refusal of a scan without per-point times, for a variant that deskews with them; ``sweeps``: each
-    frame's sweeps since the previous one, for a variant that ``accepts_sweeps_apart``).
+    frame's sweeps since the previous one, for a variant that ``accepts_sweeps_apart``; ``frame_sweeps``: the same for
+    every variant, which the constant-velocity guess and fallback are scaled by: a frame after a gap of dropped scans
+    is predicted to have moved over the whole gap, the one after it over one sweep again).
 
     The only thing frame k+1 needs from frame k's assessment is its verdict: a result the acceptance gate turns down
     (too few correspondences, too low a fitness) is not converged, and the next guess is then the previous motion.
@@ -184,6 +186,15 @@ def _run_stateless(stream, registration: Any, worker: Overlap, indices: np.ndarr
     clock = time.perf_counter
     deferred = callable(getattr(registration, "align_deferred", None)) and not getattr(registration, "accepts_point_times", False)
     motion = np.eye(4)  # the motion of the last resolved frame (the in-line loop's `motion`)
+    motion_sweeps = 1.0  # the sweeps `motion` spans
+
+    def apart(k: int) -> float:
+        return 1.0 if frame_sweeps is None else float(frame_sweeps[k])
+
+    def predicted(k: int) -> np.ndarray:
+        """Frame k's constant-velocity motion: the last resolved motion at its rate over frame k's sweeps (the same
+        array for as many sweeps)."""
+        return se3_fraction(motion, motion_sweeps / apart(k))
     pending = None  # the frame registered last, not resolved yet: dict(k, idx, out, future, register_s, guess, scan, prepared)
     first_scan = None
     previous = previous_times = None
@@ -220,7 +231,7 @@ def _run_stateless(stream, registration: Any, worker: Overlap, indices: np.ndarr
 
     def resolve(item: dict) -> None:
         """Frame item["k"]: its result, its pose, the next guess; then its frame check (in the worker)."""
-        nonlocal motion
+        nonlocal motion, motion_sweeps
         k, idx = item["k"], item["idx"]
         result, assess_s = item["future"].result()
         register_s[k] = item["register_s"] + assess_s
@@ -251,6 +262,9 @@ def _run_stateless(stream, registration: Any, worker: Overlap, indices: np.ndarr
             motion = orthonormalize_se3(np.asarray(result.T_target_source, dtype=np.float64))
         elif odometry_poses is not None:
             motion = item["guess"]
+        else:
+            motion = predicted(k)
+        motion_sweeps = apart(k)
         poses[k] = poses[k - 1] @ motion
         if not converged[k]:
             why = reasons[k] or "no reason given"
@@ -297,10 +311,11 @@ def _run_stateless(stream, registration: Any, worker: Overlap, indices: np.ndarr
         else:
             if odometry_poses is not None:
                 guess = orthonormalize_se3(np.linalg.solve(odometry_poses[indices[k - 1]], odometry_poses[idx]))
-            elif pending is not None and pending["out"].likely_converged:
-                guess = orthonormalize_se3(np.asarray(pending["out"].T_target_source, dtype=np.float64))  # speculative
+            elif pending is not None and pending["out"].likely_converged:  # speculative: frame k-1's motion, at its rate
+                guess = se3_fraction(orthonormalize_se3(np.asarray(pending["out"].T_target_source, dtype=np.float64)),
+                                     apart(k - 1) / apart(k))
             else:
-                guess = motion
+                guess = predicted(k)
             try:
                 out, reg_s = register(k, idx, points, scan.point_times_s, guess)
             except BaseException:
@@ -310,9 +325,10 @@ def _run_stateless(stream, registration: Any, worker: Overlap, indices: np.ndarr
             if pending is not None:
                 resolve(pending)
                 check(pending["k"], pending["idx"], pending["scan"], pending["prepared"])
-                if odometry_poses is None and guess is not motion and not np.array_equal(guess, motion):
+                expected = predicted(k)
+                if odometry_poses is None and guess is not expected and not np.array_equal(guess, expected):
                     # frame k-1 was turned down after all: register frame k again from the previous motion
-                    guess = motion
+                    guess = expected
                     out, again_s = register(k, idx, points, scan.point_times_s, guess)
                     reg_s += again_s
             pending = {"k": k, "idx": idx, "out": out, "future": assess(out, idx), "register_s": reg_s, "guess": guess,
@@ -566,6 +582,7 @@ def run(
                     iterations=iterations, rmse_m=rmse_m, n_corr=n_corr, degenerate=degenerate, assessed=frame_assessed,
                     min_eigenvalue=min_eigenvalue,
                     relative_cov=relative_cov if want_covariance else None, reasons=reasons, widened=widened, sweeps=sweeps_given,
+                    frame_sweeps=sweeps,
                 )
     finally:
         worker.close()  # cancels what has not started, joins the worker thread, also on error
@@ -641,8 +658,12 @@ def run(
     far = _far_float32_warning(far_float32, n)
     # what the reader found and left out (files it does not read, scans without ground truth): only logged before
     reader_warnings = [str(w) for w in getattr(sequence, "reader_warnings", None) or ()]
-    warnings = reader_warnings + [w for w in (past_the_end, time_gap_warning(timestamps, numbers, odometry_poses is not None, indices,
-                                                                             typical), apart, far) if w] + warnings
+    # the guess across a gap: the dataset's odometry, the motion before it at constant velocity, or (a stateful variant
+    # whose own model predicts without the sweeps apart: genz) one sweep's motion
+    across = ("odometry" if odometry_poses is not None
+              else "one sweep" if stateful and not getattr(registration, "accepts_sweeps_apart", False) else "constant velocity")
+    warnings = reader_warnings + [w for w in (past_the_end, time_gap_warning(timestamps, numbers, across, indices, typical),
+                                              apart, far) if w] + warnings
     if stateful:  # (accepted, recorded in config.yaml as given, and without effect on the run)
         gates = [f for f in ("min_fitness", "min_correspondences") if f in getattr(config, "model_fields_set", ())]
         if gates:

@@ -159,6 +159,9 @@ class KissRegistration(Registration):
         ``sweeps_apart``: sweeps between the previous frame and this one (frames that skip scans). kiss-icp deskews
         with the motion between registered frames as one sweep's: N sweeps apart, the correction was N times too
         large (worse than none). The deskew then takes that motion scaled to one sweep; the initial guess the whole.
+        kiss-icp's constant-velocity guess (``last_delta``, the motion over the previous frame's sweeps) is taken at
+        its rate over this frame's sweeps: after a gap of dropped scans it predicted one sweep's motion (6.6 m off
+        across 8 sweeps on a simulated street), and the frame after the gap the gap's.
         """
         kiss = self.pipeline
         frame = np.ascontiguousarray(as_points(points_xyz, "frame", min_points=1))
@@ -169,10 +172,13 @@ class KissRegistration(Registration):
             if np.ptp(times) <= 0.0:  # all equal: kiss-icp would divide by their zero span and abort the process
                 times = np.array([])
         kiss.last_pose = kiss_safe_pose(kiss.last_pose, "last_pose")
-        delta = kiss.last_delta if motion_guess is None else check_init_T(motion_guess, "motion_guess")
-        kiss.last_delta = kiss_safe_pose(delta, "last_delta")
         sweeps_apart = check_sweeps_apart(sweeps_apart)
-        spans = sweeps_apart if motion_guess is not None else self._delta_sweeps  # the sweeps the deskew motion spans
+        if motion_guess is None:  # the previous motion at its rate (the same array for as many sweeps as before)
+            delta = se3_fraction(kiss.last_delta, self._delta_sweeps / sweeps_apart)
+        else:
+            delta = check_init_T(motion_guess, "motion_guess")
+        kiss.last_delta = kiss_safe_pose(delta, "last_delta")
+        spans = sweeps_apart  # the sweeps the deskew motion (last_delta) spans
         self._delta_sweeps = sweeps_apart
         if spans == 1.0 or len(times) == 0 or not self.config.deskew:
             _, source = kiss.register_frame(frame, times)

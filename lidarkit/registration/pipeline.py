@@ -237,7 +237,8 @@ class PipelineRegistration(Registration):
         """Register one sweep into the map; returns ``T_world_lidar`` at the deskew reference instant. A component's
         failure (a plugin kernel's NaN weights in scipy) is a RegistrationError naming the variant, as in ``align``.
         ``sweeps_apart``: sweeps since the previous frame (frames that skip scans): the deskew takes the motion between
-        frames scaled to one sweep (taken whole, N sweeps apart deskewed N times too much); the prediction the whole."""
+        frames scaled to one sweep (taken whole, N sweeps apart deskewed N times too much); the prediction the previous
+        motion at its rate over this frame's sweeps."""
         with use_backend(self.name, f"{self.name} (frame of {len(points_xyz)} points)"):
             return self._register_frame(points_xyz, point_times_s, check_sweeps_apart(sweeps_apart))
 
@@ -252,7 +253,9 @@ class PipelineRegistration(Registration):
         raw = frame
         frame = _deskewed(c["deskew"], frame, point_times_s, se3_fraction(self.last_delta, self._delta_sweeps))
         map_points, source = self._voxelize(self._preprocess(frame))
-        guess = _pose(c["deskew"], c["deskew"].predict(self.last_pose, self.last_delta), "predicted pose")
+        # the previous motion at its rate over this frame's sweeps (after a gap of dropped scans, the whole gap's)
+        velocity = se3_fraction(self.last_delta, self._delta_sweeps / sweeps_apart)
+        guess = _pose(c["deskew"], c["deskew"].predict(self.last_pose, velocity), "predicted pose")
         threshold = c["threshold"]
         sigma, gate = _distances(threshold)
         if len(source) == 0 and c["map"].empty:  # (every frame returned the prediction: a 0 m path, no warning)
