@@ -189,3 +189,42 @@ def test_a_frame_slice_of_non_integers_is_a_config_error(frames, shown):
         parse_frames(frames, 10)
     assert str(info.value) == f"frames {shown!r}: frame bounds must be integers"
     assert list(parse_frames(slice(np.int64(1), np.int64(4)), 10)) == [1, 2, 3]  # numpy's integers are integers
+
+
+class _OneBuffer:
+    """A reader filling one array for every scan (``reuse``), or returning one unchanged array every time."""
+
+    name = "one_buffer"
+
+    def __init__(self, scans: list[np.ndarray], reuse: bool):
+        self.scans, self.reuse, self.buffer = scans, reuse, np.array(scans[0])
+
+    def __len__(self) -> int:
+        return len(self.scans)
+
+    def read_scan(self, i: int):
+        from lidarkit.io.base import Scan
+
+        if self.reuse:
+            self.buffer[:] = self.scans[i]
+        return Scan(self.buffer, frame=i, timestamp_s=0.1 * i)
+
+
+@pytest.mark.parametrize("prefetch", [0, 4])
+def test_a_reader_filling_one_buffer_for_every_scan_is_refused(prefetch):
+    """Each read overwrote the scans still in use (read ahead, or kept as the next target): vanilla registered every
+    scan against itself (final x 0.000 m for 1.9 m, the frame check passing), kiss lost 2 m of 4.9. A reader returning
+    one unchanged array each time (a static scene) overwrites nothing and runs."""
+    from lidarkit.errors import DataError
+    from lidarkit.odometry import run
+    from lidarkit.sim.lidar import SimulatedLidarSequence
+
+    sim = SimulatedLidarSequence(scene="street", n_frames=4, seed=1, n_beams=16, n_azimuths=90)
+    scans = [sim.read_scan(i).points_xyz[:1000] for i in range(4)]
+    with pytest.raises(DataError) as err:
+        run(_OneBuffer(scans, reuse=True), "vanilla", prefetch=prefetch)
+    assert str(err.value) == ("one_buffer (frame 1): read_scan returned frame 1 in the array it returned for frame 0, which now "
+                              "holds the new scan: each scan must be an array of its own (a reader that fills one buffer must "
+                              "return a copy of it)")
+    static = run(_OneBuffer(scans, reuse=False), "vanilla", prefetch=prefetch)
+    assert np.abs(static.trajectory.poses_se3[:, :3, 3]).max() < 1e-6  # the same scan four times: no motion

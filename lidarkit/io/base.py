@@ -123,7 +123,8 @@ class ScanSequence(Protocol):
     instants offers ``ground_truth_at_instant(instant)``, one pose per frame as ``ground_truth``, or a LidarKitError
     saying why not (the simulator, bags, KITTI-layout folders the simulator wrote). A reader that leaves out part of
     what it was given (files, scans) may say so in ``reader_warnings`` (a list of one-line messages), which the
-    odometry runner records among the run's warnings.
+    odometry runner records among the run's warnings. Each ``read_scan`` returns arrays of its own: the runner reads
+    ahead and keeps the previous scan, and refuses a reader that fills one buffer for every scan.
     """
 
     name: str

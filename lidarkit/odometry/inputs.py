@@ -203,3 +203,30 @@ def frames_repr(frames: FrameSelection, indices: np.ndarray) -> Any:
             "" if frames.step is None else f":{frames.step}"
         )
     return [int(i) for i in indices]
+
+
+class ReusedBufferCheck:
+    """Refuses a reader that fills one array for every scan: the runner reads ahead and keeps the previous scan as
+    the next one's target, so each read overwrote scans still in use (a scan registered against itself: zero motion,
+    a frame check that passes). Keeps the last ``depth`` scans' arrays with a sample of their values; a new scan's
+    array sharing memory with one of them whose values changed is the reuse (the same unchanged array is harmless)."""
+
+    def __init__(self, depth: int):
+        from collections import deque
+
+        self._recent: deque = deque(maxlen=depth)  # (frame, arrays, their sampled values)
+
+    @staticmethod
+    def _sample(array: np.ndarray) -> np.ndarray:
+        return np.array(array[:: max(1, len(array) // 32)])
+
+    def check(self, frame: int, arrays: Sequence[np.ndarray | None], source: str) -> None:
+        """DataError when one of ``arrays`` (frame ``frame``'s points, per-point times) overwrote an earlier scan's."""
+        new = [a for a in arrays if a is not None]
+        for earlier, olds, samples in self._recent:
+            for old, sample in zip(olds, samples):
+                if any(np.may_share_memory(a, old) for a in new) and not np.array_equal(self._sample(old), sample, equal_nan=True):
+                    raise DataError(f"read_scan returned frame {frame} in the array it returned for frame {earlier}, which now "
+                                    "holds the new scan: each scan must be an array of its own (a reader that fills one buffer "
+                                    "must return a copy of it)", source=source, location=f"frame {frame}")
+        self._recent.append((frame, new, [self._sample(a) for a in new]))

@@ -19,7 +19,7 @@ from lidarkit.lifetime import raise_if_interrupted
 from lidarkit.odometry.covariance import propagate
 from lidarkit.odometry.frame_check import FrameChecker, FrameCheckConfig
 from lidarkit.progress import progress_bar
-from lidarkit.odometry.inputs import (FrameSelection, frame_numbers, frames_past_the_end, frames_repr, open_sequence, parse_frames,
+from lidarkit.odometry.inputs import (FrameSelection, ReusedBufferCheck, frame_numbers, frames_past_the_end, frames_repr, open_sequence, parse_frames,
                                       time_gap_warning, typical_interval)
 from lidarkit.odometry.instants import deskews, estimate_instant, like_with_like, stamps_at_instant
 from lidarkit.odometry.metrics import odometry_metrics
@@ -500,6 +500,8 @@ def run(
     flat_times: list[int] = []  # frames whose per-point times are all equal: nothing to deskew with (kiss-icp would
     # normalize them by their zero span and abort the process), so they are read as scans without per-point times
     far_float32: list[tuple[int, float]] = []  # (frame, reach m) of scans far from their origin held at float32 precision
+    # the scans a reused reader buffer would overwrite: those read ahead, and the ones registering and kept as a target
+    reused = ReusedBufferCheck(depth=prefetch + 4)
 
     def read(i: int) -> tuple[Scan, tuple]:
         scan = _read_nonempty_scan(sequence, i)
@@ -514,6 +516,7 @@ def run(
         if points is None:  # the check's histogram would fail first, on what the registration refuses by name
             return scan, (None, 0.0)
         scan = scan if points is scan.points_xyz else dataclasses.replace(scan, points_xyz=points)
+        reused.check(i, (points, scan.point_times_s), dataset_name)  # (the arrays kept: a float32 buffer was converted)
         validated[id(points)] = points
         return scan, checker.prepare(i, scan.points_xyz)
 
