@@ -20,7 +20,7 @@ import pytest
 from lidarkit.cli import main
 from lidarkit.io.kitti import POINT_TIME_FOLDERS, KittiOdometry
 from lidarkit.odometry import run
-from lidarkit.errors import ConfigError
+from lidarkit.errors import ConfigError, DataError
 from lidarkit.registration import get_icp
 from lidarkit.params import parse_kv
 from lidarkit.odometry.frame_check import FrameCheckConfig, make_frame_check, motion_deviation, motion_limits
@@ -117,6 +117,12 @@ def test_per_point_times_that_are_all_equal_are_not_deskewed_with(exported, tmp_
     deskew = flat.metrics["effective"]["deskew"]
     assert deskew["applied"] is False and deskew["frames_with_point_times"] == 0
     assert deskew["reason"] == "the per-point times of 4 of 4 frames are all equal (nothing to deskew with)"
+    # strict: refused naming what the frame has (the times were there; "no per-point times found in point_times" sent the
+    # user looking for missing files), for kiss and for ground_filtered (deskewing through align)
+    for method in ("kiss", "ground_filtered"):
+        with pytest.raises(DataError) as err:
+            run(seq, method, frames="0:4", strict=True)
+        assert str(err.value) == "street_seq (frame 0): deskew requested, its per-point times are all equal (nothing to deskew with)"
     # kiss called directly with such times: no deskew rather than an aborted process
     scan = KittiOdometry(seq).read_scan(1)
     direct = get_icp("kiss")

@@ -543,7 +543,7 @@ def run(
                         first_scan = scan if k == 0 else first_scan
                         points = scan.points_xyz
                         if need_times:
-                            require_point_times(scan, sequence, dataset_name, int(idx))
+                            require_point_times(scan, sequence, dataset_name, int(idx), flat_times)
                         t1 = clock()
                         apart = {"sweeps_apart": float(sweeps_given[k])} if sweeps_given is not None else {}
                         if odometry_poses is not None and k > 0:
@@ -580,7 +580,8 @@ def run(
             else:
                 first_scan = _run_stateless(
                     stream, registration, worker, indices, odometry_poses, poses, checker, strict, name, dataset_name, bar, validated,
-                    require_times=functools.partial(require_point_times, sequence=sequence, dataset_name=dataset_name) if need_times else None,
+                    require_times=functools.partial(require_point_times, sequence=sequence, dataset_name=dataset_name,
+                                                    flat=flat_times) if need_times else None,
                     read_s=read_s, register_s=register_s, n_points=n_points, converged=converged, measured=measured, fallback=fallback,
                     iterations=iterations, rmse_m=rmse_m, n_corr=n_corr, degenerate=degenerate, assessed=frame_assessed,
                     min_eigenvalue=min_eigenvalue,

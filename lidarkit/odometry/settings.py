@@ -7,6 +7,7 @@ reader's settings (e.g. a KITTI correction) and the alignment of every metric.
 from __future__ import annotations
 
 import os
+from collections.abc import Collection
 from pathlib import Path
 from typing import Any
 
@@ -97,10 +98,13 @@ def point_times_not_found(sequence: Any) -> str:
     return f"no per-point times found ({type(sequence).__name__} gives none)"
 
 
-def require_point_times(scan: Any, sequence: Any, dataset_name: str, frame: int) -> None:
-    """``--strict`` with deskew requested: a scan without per-point times is an error naming the frame."""
+def require_point_times(scan: Any, sequence: Any, dataset_name: str, frame: int, flat: Collection[int] = ()) -> None:
+    """``--strict`` with deskew requested: a scan without per-point times is an error naming the frame (``flat``: the
+    frames whose times the reading dropped as all equal, which were there)."""
     if scan.point_times_s is None:
-        raise DataError(f"deskew requested, {point_times_not_found(sequence)}", source=dataset_name, location=f"frame {frame}")
+        why = ("its per-point times are all equal (nothing to deskew with)" if frame in flat
+               else point_times_not_found(sequence))
+        raise DataError(f"deskew requested, {why}", source=dataset_name, location=f"frame {frame}")
 
 
 def reader_settings(sequence: Any) -> dict[str, Any]:
