@@ -228,3 +228,19 @@ def test_a_reader_filling_one_buffer_for_every_scan_is_refused(prefetch):
                               "return a copy of it)")
     static = run(_OneBuffer(scans, reuse=False), "vanilla", prefetch=prefetch)
     assert np.abs(static.trajectory.poses_se3[:, :3, 3]).max() < 1e-6  # the same scan four times: no motion
+
+
+def test_a_single_scan_file_is_pointed_to_its_folder(capsys):
+    """A scan file as the dataset was told to name its kind, "e.g. carmen:000000.bin for a CARMEN log"."""
+    from conftest import shared_path
+
+    from lidarkit.errors import DataError
+
+    velodyne = shared_path("kitti_odometry", "sequences", "00", "velodyne")
+    for scan in (velodyne / "000000.bin", shared_path("lidar_pairs", "251370668.pcd")):
+        with pytest.raises(DataError) as err:
+            open_sequence(str(scan))
+        assert str(err.value) == (f"{scan}: a single scan file: odometry needs a sequence of scans, e.g. the folder holding it "
+                                  f"(folder:{scan.parent})")
+    assert cli_exit_code(["odometry", str(velodyne / "000000.bin"), "-m", "kiss", "--no-progress"]) == 1
+    assert capsys.readouterr().err.strip().endswith(f"(folder:{velodyne})")

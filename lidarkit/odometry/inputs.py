@@ -33,6 +33,7 @@ def open_sequence(spec: str | os.PathLike | ScanSequence) -> ScanSequence:
             return spec
         raise ConfigError(f"expected a ScanSequence or a dataset spec, got {type(spec).__name__}", source="dataset")
     from lidarkit import io as lio
+    from lidarkit.io.pointfile import POINT_FILE_SUFFIXES
 
     text = os.fspath(spec)
     if text.startswith("sim:"):
@@ -62,6 +63,9 @@ def open_sequence(spec: str | os.PathLike | ScanSequence) -> ScanSequence:
     problem = lio.ros2_storage_problem(path) if kind is None else None
     if problem:
         raise DataError(problem, source=text)
+    if kind is None and path.is_file() and path.suffix.lower() in POINT_FILE_SUFFIXES:  # (told to name its kind: carmen)
+        raise DataError(f"a single scan file: odometry needs a sequence of scans, e.g. the folder holding it "
+                        f"(folder:{path.parent})", source=text)
     if kind is None and path.is_file():  # (a CARMEN log named x.log read "not a folder")
         raise DataError(f"a file of no kind detected by its name ({lio.detected_files()}): give its kind, KIND:PATH "
                         f"(e.g. carmen:{text} for a CARMEN log; known: {', '.join(lio.available_datasets())})", source=text)
