@@ -189,7 +189,7 @@ def bench(
     suite_file: Path = typer.Argument(..., help="Suite YAML file (see docs/benchmarks.md)."),
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="Results folder (default: results/<suite file stem>)."),
     executor: str = typer.Option("process", "--executor", "-e", help=EXECUTOR_HELP),
-    workers: Optional[int] = typer.Option(None, "--workers", "-j", help="Worker processes (default: CPUs available)."),
+    workers: Optional[int] = typer.Option(None, "--workers", "-j", help="Worker processes (default: CPUs available; a local Dask cluster: at most 2)."),
     address: Optional[str] = typer.Option(None, "--address", help="Dask scheduler address, e.g. tcp://HOST:8786."),
     force: bool = typer.Option(False, "--force", help="Rerun jobs that already have a result."),
     report: bool = typer.Option(True, "--report/--no-report", help="Write the report when the run ends."),
