@@ -250,17 +250,15 @@ def test_scans_far_apart_in_time_are_named_in_a_warning():
     assert "between frames 16 and 40" in time_gap_warning(None, numbers, indices=np.array([0, 2, 4, 6, 8]))
 
 
-@pytest.mark.parametrize("method", ["kiss", "pipeline", "small_gicp"])
-def test_a_gap_of_dropped_scans_is_bridged_at_constant_velocity(method):
+@pytest.mark.parametrize("method, params, ape_m", [("kiss", None, 0.2), ("pipeline", None, 0.2), ("small_gicp", {"assess": False}, 0.05)])
+def test_a_gap_of_dropped_scans_is_bridged_at_constant_velocity(method, params, ape_m):
     """Scans dropped at 10 m/s (frames 31 -> 38 of a simulated street, 0.7 s): the guess across the gap was one sweep's
     motion (kiss's own constant velocity, the runner's previous motion), 6 m short, and the frame after it was guessed
-    the whole gap's motion (APE 4.07 m kiss and pipeline, 2.85 m small_gicp, against 0.14 / 0.02 m without the gap).
-    The previous motion at its rate over the frame's sweeps bridges it, the consecutive frames stay as they were."""
+    the whole gap's motion (APE 4.07 m kiss and pipeline, 2.85 m small_gicp). The previous motion at its rate over the
+    frame's sweeps bridges it: 0.158 m (0.137 m over the same frames without the gap), small_gicp 0.020 m (0.018 m)."""
     spec = "sim:street?frames=46&beams=32&azimuths=360&seed=1"
-    with_gap = run(spec, method, frames=list(range(22, 32)) + list(range(38, 46)))
-    whole = run(spec, method, frames=list(range(22, 46)))
-    ape = [r.metrics["ape_translation_m"]["stats"]["rmse"] for r in (with_gap, whole)]
-    assert ape[0] < ape[1] + 0.05, ape  # kiss, pipeline 0.158 vs 0.137 m; small_gicp 0.020 vs 0.018 m
+    with_gap = run(spec, method, params=params, frames=list(range(22, 32)) + list(range(38, 46)))
+    assert with_gap.metrics["ape_translation_m"]["stats"]["rmse"] < ape_m
     assert with_gap.metrics["rpe_translation_m"]["stats"]["max"] < 0.5  # (6.0 m across the gap before)
     gaps = [w for w in with_gap.metrics["warnings"] if "gap" in w]
     assert len(gaps) == 1 and gaps[0].endswith("the guess across them is the motion before at constant velocity; the scans on "
