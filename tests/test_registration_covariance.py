@@ -190,12 +190,13 @@ def test_propagated_covariance_grows_along_the_path():
     assert trace[0] == 0 and np.all(np.diff(trace) > 0)
     # heading uncertainty turns into lateral uncertainty: growth faster than linear in the number of steps
     assert trace[-1] > 29 * 3e-4 * 1.5
-    # a missing frame reuses the previous covariance
+    # a frame missing one that did not fall back (a stateful variant's, unassessed) reuses the previous covariance
+    none_fell_back = np.zeros(30, dtype=bool)
     rel[10] = np.nan
-    np.testing.assert_allclose(propagate(poses, rel), cov)
-    # missing from frame 1 (a fallback there: every pose after was NaN): the first frame's that has one
+    np.testing.assert_allclose(propagate(poses, rel, fell_back=none_fell_back), cov)
+    # missing from frame 1 (every pose after was NaN): the first frame's that has one
     rel[1:3] = np.nan
-    np.testing.assert_allclose(propagate(poses, rel), cov)
+    np.testing.assert_allclose(propagate(poses, rel, fell_back=none_fell_back), cov)
     assert np.isnan(propagate(poses, np.full_like(rel, np.nan))[1:]).all()  # none at all: NaN, as the runner says
     # relative errors in the same convention recover a known perturbation
     noisy = poses.copy()

@@ -148,13 +148,17 @@ def odometry(
     if cov and cov.get("final_position_sigma_m") is not None:
         table.add_row("propagated end-pose 1-sigma (m / deg)", f"{cov['final_position_sigma_m']:.3f} / {cov['final_heading_sigma_deg']:.3f}")
         if "relative_nees_mean" in cov:
-            table.add_row("NEES of 1-frame motions (6 = calibrated)", f"{cov['relative_nees_mean']:.2f} ({100 * cov['relative_inside_95']:.0f} % inside 95 %)")
+            left_out = cov.get("relative_nees_frames_left_out", 0)
+            table.add_row("NEES of 1-frame motions (6 = calibrated)", f"{cov['relative_nees_mean']:.2f} ({100 * cov['relative_inside_95']:.0f} % inside 95 %)"
+                          + (f"; {left_out} frames left out (no registration covariance)" if left_out else ""))
             z = cov.get("per_frame_bias_z")
             if z is not None:  # the share the mean frame error rebuilds says nothing unless that mean is a bias
+                threshold = cov.get("per_frame_bias_z_threshold", 3.0)
                 table.add_row("per-frame bias (mean error / its standard error)",
-                              f"z = {z:.1f}: " + (f"rebuilds {100 * min(cov['end_error_bias_share'], 1.0):.0f} % of the end error as a world-frame twist "
-                                                  f"({cov['end_error_m']:.3f} m; the final error is the distance of the end positions)" if z > 3
-                                                  else "none shows (noise)"))
+                              f"z = {z:.1f} (a bias above {threshold:.1f}): "
+                              + (f"rebuilds {100 * min(cov['end_error_bias_share'], 1.0):.0f} % of the end error as a world-frame twist "
+                                 f"({cov['end_error_m']:.3f} m; the final error is the distance of the end positions)" if z > threshold
+                                 else "none shows (noise)"))
         if cov.get("distortion_floor"):
             table.add_row("covariance distortion floor", cov["distortion_floor"])
     for message in m.get("warnings") or []:  # also logged (stderr) by the runner

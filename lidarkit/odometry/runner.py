@@ -688,7 +688,7 @@ def run(
     for message in warnings:
         if message not in reader_warnings:  # (logged by the reader when it opened)
             log.warning("%s: %s", title, message)
-    covariances = (relative_cov, propagate(poses, relative_cov)) if want_covariance else None
+    covariances = (relative_cov, propagate(poses, relative_cov, fell_back=fallback, sweeps_apart=sweeps)) if want_covariance else None
     relations_note, relation_scores = _relations_note(sequence, out_dir, trajectory) if reference is None else (None, None)
     config = {
         "method": name,
