@@ -56,7 +56,7 @@ def odometry(
     param: list[str] = typer.Option([], "--param", "-p", help="Method parameter KEY=VALUE (repeatable)."),
     frames: Optional[str] = typer.Option(None, "--frames", help="Frames START:STOP[:STEP] (Python slice, dataset indices)."),
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="Run folder: poses (KITTI, TUM), config.yaml, metrics.json, timing.csv, plot."),
-    name: Optional[str] = typer.Option(None, "--name", help="Title of the run (default: the dataset's folder name)."),
+    name: Optional[str] = typer.Option(None, "--name", help="Title of the run (default: the dataset's name: kitti_NN, a folder's name, sim:SCENE?seed=N, rosbag:FILE/TOPIC)."),
     progress: bool = typer.Option(True, "--progress/--no-progress", help="Progress bar on stderr."),
     pose_covariance: Optional[bool] = typer.Option(
         None, "--pose-covariance/--no-pose-covariance",
