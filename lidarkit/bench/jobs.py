@@ -13,6 +13,19 @@ def canonical_json(value: Any) -> str:
     return json.dumps(value, sort_keys=True, separators=(",", ":"), ensure_ascii=True, allow_nan=False)
 
 
+def whole_floats_as_ints(value: Any) -> Any:
+    """``value`` with every whole float an int (``1.0`` -> ``1``), through mappings and lists: one number written two
+    ways is one job. Ints, other floats, text and booleans are left as they are, so a spec without a whole float keys
+    as it always did; text stays text ("1" and "1.0" are two values of a text parameter)."""
+    if isinstance(value, float) and value.is_integer():
+        return int(value)
+    if isinstance(value, dict):
+        return {k: whole_floats_as_ints(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [whole_floats_as_ints(v) for v in value]
+    return value
+
+
 @dataclass(frozen=True)
 class Job:
     """Everything a worker needs to run one experiment instance; plain data so it pickles cheaply.
@@ -40,12 +53,14 @@ class Job:
 
     def key(self, version: str | None = None) -> str:
         """Hex key from the canonical spec and the code's version (:func:`lidarkit.provenance.code_version`: the
-        release and a digest of the source): same job, same code -> same key."""
+        release and a digest of the source): same job, same code -> same key. Whole floats count as ints
+        (``noise_m: 1.0`` and ``noise_m: 1`` are one job: an edited suite reran every job, two report rows with one
+        label); a spec without one keys as before, its results kept on resume."""
         if version is None:
             from lidarkit.provenance import code_version
 
             version = code_version()
-        payload = canonical_json({"job": self.spec(), "lidarkit_version": version})
+        payload = canonical_json({"job": whole_floats_as_ints(self.spec()), "lidarkit_version": version})
         return hashlib.sha256(payload.encode("ascii")).hexdigest()[:20]
 
     @property

@@ -396,14 +396,15 @@ def load_suite(path: str | Path, *, skip_unavailable: bool = False, only_tasks: 
                         except (TypeError, ValueError) as err:  # a YAML date, .nan, ...: not plain JSON
                             raise ConfigError(f"values must be plain numbers, strings, lists and mappings ({err})",
                                               source=path, location=locator.location(m_loc)) from None
-                        if key in seen:
-                            continue
                         same = canonical_json({**job.spec(), "params": _same_value(params, strings=True)})
                         for first_i, first_j, first in alike.get(same, []):
-                            if _written_two_ways(params, first):  # 1 and 1.0 (or "50" and 50): one job under two keys
+                            # 1 and 1.0 (one key), "50" and 50 (two keys): one job written two ways
+                            if canonical_json(params) != canonical_json(first) and _written_two_ways(params, first):
                                 raise ConfigError(f"{job.method_label} runs the same job as experiments[{first_i}].methods"
                                                   f"[{first_j}] (a value written two ways, e.g. 1 and 1.0): give it once",
                                                   source=path, location=locator.location(m_loc))
+                        if key in seen:
+                            continue
                         alike.setdefault(same, []).append((i, j, params))
                         seen.add(key)
                         jobs.append(job)

@@ -46,6 +46,19 @@ def check_reader_options(spec: dict[str, Any]) -> None:
 OPENED_AT_LOAD = frozenset({"kitti", "kitti_raw", "folder", "tum"})
 
 
+def scan_count_at_load(spec: dict[str, Any]) -> int | None:
+    """The number of scans of a dataset known when the suite loads: a simulated drive's ``n_frames`` (default 300) read
+    from its spec without simulating, a reader in :data:`OPENED_AT_LOAD`'s length; None for the others (known when their
+    jobs run). Pairs and frames out of range are refused against it (on a simulated drive every job failed, exit 0)."""
+    if spec["kind"] == "sim_lidar":
+        from lidarkit.sim.lidar import make_config
+
+        return int(make_config(**dataset_options(spec)).n_frames)
+    if spec["kind"] in OPENED_AT_LOAD:
+        return len(open_dataset_spec(spec))
+    return None
+
+
 class _Warnings(logging.Handler):
     """The warnings logged while a dataset opens (to log again for every job that uses the cached dataset)."""
 

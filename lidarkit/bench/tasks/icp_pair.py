@@ -21,7 +21,8 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validat
 
 from lidarkit.bench.jobs import Job
 from lidarkit.bench.tasks import Metric, Task, TaskOutput, import_module_for_task
-from lidarkit.bench.tasks._datasets import OPENED_AT_LOAD, check_reader_options, open_dataset_spec, options_model, seeded_dataset
+from lidarkit.bench.tasks._datasets import (OPENED_AT_LOAD, check_reader_options, open_dataset_spec, options_model,
+                                             scan_count_at_load, seeded_dataset)
 from lidarkit.bench.datasets import dataset_path
 from lidarkit.errors import ConfigError, DataError
 
@@ -152,18 +153,20 @@ def _ranges(frames: list[int]) -> str:
 
 def check_pairs(options: IcpPairOptions, spec: dict[str, Any]) -> None:
     """Pairs naming a scan the dataset lacks are a ConfigError with the suite (each job failed "no scan for frame 95",
-    exit 0); checked for the datasets opened at suite load anyway (KITTI: frame numbers, else scan indices)."""
-    if not options.pairs or spec["kind"] not in OPENED_AT_LOAD:
+    exit 0); checked for the datasets whose length is known at suite load (:func:`scan_count_at_load`: those opened
+    then, and simulated drives by their ``n_frames``; KITTI: frame numbers, else scan indices)."""
+    n_scans = scan_count_at_load(spec) if options.pairs else None
+    if n_scans is None:
         return
-    dataset = open_dataset_spec(spec)
+    dataset = open_dataset_spec(spec) if spec["kind"] in OPENED_AT_LOAD else None
     if options.ground_truth_file is None and hasattr(dataset, "read_scan_by_frame"):
         frames = [int(f) for f in dataset.frames]
         missing = sorted({i for pair in options.pairs for i in pair} - set(frames))
         have = f"frames {frames[0]}..{frames[-1]}" if frames else "no scans"
         what = "frames"
     else:
-        missing = sorted({i for pair in options.pairs for i in pair if not 0 <= i < len(dataset)})
-        have = f"scan indices 0..{len(dataset) - 1}"
+        missing = sorted({i for pair in options.pairs for i in pair if not 0 <= i < n_scans})
+        have = f"scan indices 0..{n_scans - 1}"
         what = "scan indices"
     if missing:
         raise ConfigError(f"pairs name {what} the dataset lacks: {', '.join(map(str, missing))} (it has {have})", source="options")
@@ -214,6 +217,13 @@ class IcpPairTask(Task):
                 read_T_target_source(path)
             except DataError as err:
                 raise ConfigError(f"ground_truth_file {err}", source="options") from None
+        elif dataset["kind"] in OPENED_AT_LOAD:  # (opened anyway: a dataset without poses failed every job, exit 0)
+            opened = open_dataset_spec(dataset)
+            if len(opened) and opened.ground_truth is None:
+                name = getattr(opened, "name", "the dataset")
+                raise ConfigError(f"icp_pair scores against ground-truth poses and {name} has none: give the dataset its "
+                                  "poses (a folder's `poses` option, a KITTI sequence's poses/NN.txt), or one pair's "
+                                  "motion as the task option ground_truth_file", source="dataset")
         check_pairs(opts, dataset)
 
     def validate(self, method: str, params: dict[str, Any], dataset: dict[str, Any], options: dict[str, Any]) -> None:

@@ -15,7 +15,8 @@ from pydantic import BaseModel, ConfigDict
 
 from lidarkit.bench.jobs import Job
 from lidarkit.bench.tasks import Metric, Task, TaskOutput, import_module_for_task
-from lidarkit.bench.tasks._datasets import OPENED_AT_LOAD, check_reader_options, open_dataset_spec, options_model, require_kitti_data, seeded_dataset
+from lidarkit.bench.tasks._datasets import (check_reader_options, open_dataset_spec, options_model, require_kitti_data,
+                                             scan_count_at_load, seeded_dataset)
 from lidarkit.errors import ConfigError
 
 MAX_SERIES_POINTS = 2000
@@ -140,13 +141,14 @@ class OdometryTask(Task):
 
 
 def check_frames(frames: Any, spec: dict[str, Any]) -> None:
-    """``frames`` checked against the length of a dataset opened at suite load (a stand-in length let [50, 51, 52]
-    through on a 10-scan sequence, and every job failed, exit 0); a ConfigError naming the options."""
-    if frames is None or spec["kind"] not in OPENED_AT_LOAD:
+    """``frames`` checked against the length of a dataset known at suite load (:func:`scan_count_at_load`: a stand-in
+    length let [50, 51, 52] through on a 10-scan sequence, and [0, 2, 20] on a 5-sweep simulated drive, and every job
+    failed, exit 0); a ConfigError naming the options."""
+    n_scans = None if frames is None else scan_count_at_load(spec)
+    if n_scans is None:
         return
     from lidarkit.odometry.inputs import parse_frames
 
-    n_scans = len(open_dataset_spec(spec))
     try:
         selected = parse_frames(frames, n_scans)
     except ConfigError as err:
