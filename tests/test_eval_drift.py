@@ -129,3 +129,20 @@ def test_lengths_must_be_a_list_of_positive_numbers():
     pooled = kitti_drift(ref, est, lengths=np.array(KITTI_LENGTHS_M))
     assert pooled.translation_pct == pytest.approx(0.699729, abs=1e-6)
     assert kitti_drift(ref, est, lengths=range(100, 900, 100)).translation_pct == pooled.translation_pct
+
+
+def test_an_array_of_lengths_that_is_no_list_is_quoted_by_its_shape():
+    """np.array(100.0) and a 2-D array were refused as "got None": the check quoted the value it had replaced them with."""
+    from lidarkit.eval import EvaluationSettings
+
+    ref = straight_line(300)
+    for lengths, shape in ((np.array(100.0), "()"), (np.array([[100.0, 200.0]]), "(1, 2)")):
+        with pytest.raises(ConfigError) as err:
+            kitti_drift(ref, ref, lengths=lengths)
+        assert str(err.value) == f"lengths: segment lengths must be a non-empty list of positive numbers (m), got an array of shape {shape}"
+        with pytest.raises(ConfigError) as err:
+            EvaluationSettings(drift_lengths_m=lengths)
+        assert str(err.value).endswith(f"drift segment lengths must be a non-empty list of positive numbers (m), got an array of shape {shape}")
+    with pytest.raises(ConfigError) as err:  # a 1-D array is quoted by its values
+        kitti_drift(ref, ref, lengths=np.array([100.0, -5.0]))
+    assert str(err.value).endswith("got [100.0, -5.0]")

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import logging
 import math
+import re
 
 import numpy as np
 import pytest
@@ -148,13 +149,16 @@ def test_a_single_kidnap_run_reports_its_recovery(stachniss, tmp_path, capsys):
     with pytest.raises(SystemExit) as exc:
         main(["pf", str(data), "--kidnap-at", "150", "--visible", "all", "--augmented", "--out", str(tmp_path / "kid")])
     assert exc.value.code in (0, None)
-    assert "│ kidnap recovered (< 0.5 m for good, <= 40 steps)  │ yes, 4 steps │" in capsys.readouterr().out
+    # (the step counts differ between numpy's AVX2 and AVX-512 kernels, whose last-bit differences the resampling turns
+    # into other draws: augmented 4 or 18 steps, plain 113 or 121; the verdicts hold on both)
+    printed = re.search(r"│ kidnap recovered \(< 0\.5 m for good, <= 40 steps\)  │ yes, (\d+) steps │", capsys.readouterr().out)
+    assert printed and int(printed.group(1)) <= 40
     metrics = json.loads((tmp_path / "kid" / "metrics.json").read_text())["metrics"]
-    assert metrics["kidnap_recovery"] == {"steps_to_recover": 4, "recovered": True, "within_steps": 40}
+    assert metrics["kidnap_recovery"] == {"steps_to_recover": int(printed.group(1)), "recovered": True, "within_steps": 40}
     plain = run_protocol(stachniss, 1000, 0, kidnap_at_step=150, visible="all", with_ape_rpe=False)
     assert plain.metrics["kidnap_recovery"] == {"steps_to_recover": steps_to_recover(plain.position_error_m(), 150),
                                                 "recovered": False, "within_steps": 40}
-    assert plain.metrics["kidnap_recovery"]["steps_to_recover"] == 113
+    assert plain.metrics["kidnap_recovery"]["steps_to_recover"] > 100
     assert "kidnap_recovery" not in run_protocol(stachniss, 100, 0, with_ape_rpe=False).metrics
 
 
@@ -269,7 +273,8 @@ def test_fit_q_warns_of_a_lost_filter_only_for_the_runs_it_reports(caplog):
     data = LandmarkData(shared_path("pf", "burgard_particle_filter"))
     with caplog.at_level(logging.WARNING, logger="lidarkit.pf.protocol"):
         first, runs = fit_q_recorded(data, 1000, 0)
-    assert [len(r.lost_steps) for r in [first, *runs]] == [0, 119, 0, 0]
+    lost_steps = [len(r.lost_steps) for r in [first, *runs]]  # [0, 119, 0, 0] (numpy's AVX2 kernels) or [0, 225, 0, 0] (AVX-512)
+    assert len(lost_steps) == 4 and lost_steps[1] > 100 and lost_steps[0] == lost_steps[-1] == 0, lost_steps
     assert [r.message for r in caplog.records if "filter lost" in r.message] == []
     with caplog.at_level(logging.WARNING, logger="lidarkit.pf.protocol"):
         first, runs = fit_q_recorded(data, 10, 0)

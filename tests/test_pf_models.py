@@ -413,3 +413,95 @@ def test_readings_of_the_wrong_shape_or_text_are_a_data_error_naming_the_method(
         assert pf.n_updates == 0
         assert pf.update(np.array([0]), [2.0, 0.3]) is True  # one reading as (2,) is still one reading
         assert pf.update(np.array([], dtype=np.int64), []) is False
+
+
+# ---- bad arguments ------------------------------------------------------------------------------------
+def test_pf_config_built_directly_is_the_one_line_config_error_make_gives():
+    """docs/particle_filter.md builds PFConfig(...) directly: PFConfig(kernel="kalmann") raised pydantic's ValidationError
+    (lines long, with a URL) where PFConfig.make said it in one line."""
+    for values, message in (
+        ({"kernel": "kalmann"}, "pf config kernel: Input should be 'point' or 'kalman' (got 'kalmann')"),
+        ({"n_particles": 0}, "pf config n_particles: n_particles must be >= 1, got 0"),
+        ({"kld": True, "kld_min_n": 10, "kld_max_n": 5}, "pf config: kld_min_n 10 > kld_max_n 5"),
+    ):
+        for build in (PFConfig, PFConfig.make, lambda **v: PFConfig.model_validate(v), PFConfig().replace):
+            with pytest.raises(ConfigError) as err:
+                build(**values)
+            assert str(err.value) == message
+    with pytest.raises(ConfigError, match=r"^pf config: unknown setting 'n_partcles'; valid: alpha_fast, alpha_slow, "):
+        PFConfig(n_partcles=10)
+    assert PFConfig(n_particles=7) == PFConfig.make(n_particles=7)
+
+
+def test_particle_filter_arguments_of_the_wrong_kind_are_one_line_errors_naming_them():
+    """rng="x" was numpy's TypeError, rng=-1 its ValueError, a dict config an AttributeError (MonoVO and the ICP
+    variants refuse a dict config too) and predict("abc") a ValueError."""
+    rng_rule = "rng: rng must be a numpy.random.Generator, an integer seed >= 0 or None, got"
+    for call, error, message in (
+        (lambda: ParticleFilter(LANDMARKS, rng="x"), ConfigError, f"{rng_rule} 'x'"),
+        (lambda: ParticleFilter(LANDMARKS, rng=-1), ConfigError, f"{rng_rule} -1"),
+        (lambda: ParticleFilter(LANDMARKS, rng=1.5), ConfigError, f"{rng_rule} 1.5"),
+        (lambda: ParticleFilter(LANDMARKS, rng=True), ConfigError, f"{rng_rule} True"),
+        (lambda: ParticleFilter(LANDMARKS, config={"n_particles": 10}), ConfigError,
+         "ParticleFilter: config must be a PFConfig (PFConfig(...) or PFConfig.make(...)), got dict"),
+        (lambda: KalmanParticleFilter(LANDMARKS, config={"n_particles": 10}), ConfigError,
+         "KalmanParticleFilter: config must be a PFConfig (PFConfig(...) or PFConfig.make(...)), got dict"),
+        (lambda: ParticleFilter(LANDMARKS, PFConfig.make(n_particles=10)).predict("abc"), DataError,
+         "predict: odometry must be numbers [r1, t, r2], got 'abc'"),
+        (lambda: ParticleFilter(LANDMARKS, PFConfig.make(n_particles=10)).predict([1.0, 2.0]), DataError,
+         "predict: odometry must be [r1, t, r2], got shape (2,)"),
+        (lambda: ParticleFilter("abc"), DataError, "landmarks: landmarks must be numbers, an (L, 2) array, got 'abc'"),
+    ):
+        with pytest.raises(error) as err:
+            call()
+        assert str(err.value) == message
+    # a seed given as numpy's integer and the Generator it seeds give the same particles; None draws fresh entropy
+    cfg = PFConfig.make(n_particles=20)
+    seeded = ParticleFilter(LANDMARKS, cfg, np.int64(4))
+    np.testing.assert_array_equal(seeded.states, ParticleFilter(LANDMARKS, cfg, np.random.default_rng(4)).states)
+    assert ParticleFilter(LANDMARKS, cfg, None).states.shape == (3, 20)
+
+
+def test_ess_takes_array_likes_and_refuses_weights_that_are_none():
+    """A list was an AttributeError, an empty array inf (with a RuntimeWarning), negative weights a number."""
+    import warnings
+
+    assert effective_sample_size([0.25] * 4) == pytest.approx(4)
+    assert effective_sample_size([1, 1, 1, 1]) == pytest.approx(4)  # Kish's (sum w)^2 / sum w^2: normalized or not
+    assert effective_sample_size(np.float32([0.5, 0.5, 0.0])) == pytest.approx(2)
+    for weights, message in (
+        (np.array([]), "weights: the effective sample size needs weights of shape (N,) with N >= 1, got shape (0,)"),
+        ([[0.5, 0.5]], "weights: the effective sample size needs weights of shape (N,) with N >= 1, got shape (1, 2)"),
+        ([-1.0, 2.0], "weights: the effective sample size needs finite weights >= 0 that are not all zero (sum 1, smallest -1)"),
+        ([np.nan, 1.0], "weights: the effective sample size needs finite weights >= 0 that are not all zero (sum nan, smallest nan)"),
+        ("abc", "weights: weights must be numbers, got 'abc'"),
+    ):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            with pytest.raises(DataError) as err:
+                effective_sample_size(weights)
+        assert str(err.value) == message
+    # the resamplers take a list too, and name an empty one (it failed in numpy's min)
+    assert get_resampler("systematic")([0.0, 1.0], np.random.default_rng(0)).tolist() == [1, 1]
+    with pytest.raises(DataError, match=r"^weights: resampling needs weights of shape \(N,\) with N >= 1, got shape \(0,\)$"):
+        get_resampler("multinomial")([], np.random.default_rng(0))
+
+
+def test_integrate_odometry_checks_shapes_and_values():
+    """A (1, 6) array was read as two steps without a word; start_pose=(1, 2) failed in numpy's reshape."""
+    for odometry, start, error in (
+        (np.array([[0, 1, 0, 0, 1, 0]]), (0, 0, 0),
+         "odometry: odometry must be a (T, 3) array [r1_rad, t_m, r2_rad], got shape (1, 6)"),
+        (np.zeros((2, 3, 1)), (0, 0, 0), "odometry: odometry must be a (T, 3) array [r1_rad, t_m, r2_rad], got shape (2, 3, 1)"),
+        ([[0, 1, 0], [0, np.nan, 0]], (0, 0, 0), "odometry: non-finite odometry at step 1: [0.0, nan, 0.0]"),
+        ("abc", (0, 0, 0), "odometry: odometry must be numbers, a (T, 3) array [r1_rad, t_m, r2_rad], got 'abc'"),
+        (np.zeros((2, 3)), (1, 2), "start_pose: start_pose must be 3 finite values [x_m, y_m, theta_rad], got [1.0, 2.0]"),
+        (np.zeros((2, 3)), (0, 0, np.inf), "start_pose: start_pose must be 3 finite values [x_m, y_m, theta_rad], got [0.0, 0.0, inf]"),
+    ):
+        with pytest.raises(DataError) as err:
+            integrate_odometry(odometry, start)
+        assert str(err.value) == error
+    # lists, one step given as (3,), no steps at all
+    np.testing.assert_allclose(integrate_odometry([[0, 1, 0]], [1, 2, 0]), [[1, 2, 0], [2, 2, 0]])
+    np.testing.assert_allclose(integrate_odometry([0, 1, 0]), [[0, 0, 0], [1, 0, 0]])
+    np.testing.assert_allclose(integrate_odometry(np.zeros((0, 3)), (1, 2, 0.5)), [[1, 2, 0.5]])

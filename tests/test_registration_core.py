@@ -126,6 +126,31 @@ def test_a_variant_given_another_variants_config_or_a_dict_is_refused_naming_it(
     assert V(V.Config(max_iterations=3)).config.max_iterations == 3
 
 
+def test_a_variant_config_built_directly_is_one_config_error_saying_what_get_icp_says():
+    """get_icp_class("vanilla").Config(max_iterations=0) raised pydantic's ValidationError (lines long, with a URL)
+    where get_icp and the variant's constructor each said the problem in one line; the three say the same problem."""
+    from lidarkit.registration import get_icp_class
+
+    for name, params, problem in (
+        ("vanilla", {"max_iterations": 0}, "max_iterations: Input should be greater than or equal to 1"),
+        ("kiss", {"voxel_size_m": -1}, "voxel_size_m: Input should be greater than 0"),
+        ("vanilla", {"max_iterations": 0, "voxel_size_m": -1},
+         "max_iterations: Input should be greater than or equal to 1; voxel_size_m: Input should be greater than 0"),
+        ("kiss", {"assess": False, "min_fitness": 0.5}, "min_fitness set(s) the assessment, which assess=False leaves out"),
+    ):
+        cls = get_icp_class(name)
+        with pytest.raises(ConfigError) as direct:
+            cls.Config(**params)
+        assert str(direct.value) == problem
+        if name == "vanilla":  # (kiss registers apart from its assessment: its constructor takes assess=False)
+            with pytest.raises(ConfigError) as built:
+                cls(**params)
+            assert str(built.value) == f"{name}: invalid parameters ({problem})"
+        with pytest.raises(ConfigError) as named:
+            get_icp(name, **params)
+        assert str(named.value).startswith(f"method {name!r}: invalid parameters ({problem}); valid parameters: min_fitness=0.3, ")
+
+
 def test_register_icp_rejects_non_registration_and_name_clash():
     with pytest.raises(ConfigError):
         register_icp("bogus")(object)

@@ -53,6 +53,24 @@ def test_assert_trajectory_close_on_a_text_copy_and_bad_arguments(tmp_path):
         assert_trajectory_close(poses, original)
 
 
+
+def test_numpy_tolerances_and_metrics_are_numbers(tmp_path):
+    """atol_m=np.float32(0.01) was refused ("must be a finite number >= 0, got np.float32(0.01)"), and a float32 metric
+    of a mapping was left out ("metric not in the result"); bools stay refused."""
+    original = walk()
+    original.to_kitti(tmp_path / "poses.txt")
+    copy = Trajectory.from_kitti(tmp_path / "poses.txt")
+    assert_trajectory_close(copy, original, atol_m=np.float32(0.01), atol_deg=np.float64(0.05))
+    assert_trajectory_close(copy, original, atol_m=np.int64(1))
+    with pytest.raises(AssertionError, match=r"1 of 20 poses differ: worst at frame 7"):
+        assert_trajectory_close(walk(offset_m=0.01), original, atol_m=np.float32(0.005))
+    for bad in (True, np.bool_(True), "0.01", np.float32("nan")):
+        with pytest.raises(ConfigError, match="atol_m must be a finite number >= 0"):
+            assert_trajectory_close(copy, original, atol_m=bad)
+    assert_no_worse_than({"ape_rmse_m": np.float32(0.5)}, {"ape_rmse_m": 0.5}, metric="ape_rmse_m")
+    with pytest.raises(AssertionError, match="regression: ape_rmse_m = 0.75"):
+        assert_no_worse_than({"ape_rmse_m": np.float32(0.75)}, {"ape_rmse_m": 0.5}, metric="ape_rmse_m")
+
 SUITE = """
 name: tiny-golden
 experiments:

@@ -360,3 +360,13 @@ def test_subpixel_refines_orb_corners_and_is_refused_for_blob_detectors():
             VOConfig().updated(**{"features.detector": detector, "features.subpixel": True})
         with pytest.raises(ConfigError, match="subpixel"):
             get_detector(detector, subpixel=True)
+
+
+def test_a_result_reads_as_one_line_of_counts(sim):
+    """repr printed every frame's diagnostics (~550 characters a frame): one line of counts now, whatever the length."""
+    traj, K, images = sim
+    result = MonoVO(_cfg("none"), K).run(images)
+    name = result.trajectory.name
+    assert repr(result) == (f"VOResult({name!r}, 7 frames in {result.runtime_s:.3g} s, 6 of 6 pairs accepted, scale none)")
+    shorter = MonoVO(_cfg("none"), K).run(images[:3])
+    assert repr(shorter) == (f"VOResult({name!r}, 3 frames in {shorter.runtime_s:.3g} s, 2 of 2 pairs accepted, scale none)")

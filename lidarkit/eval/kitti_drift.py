@@ -112,12 +112,16 @@ def checked_lengths(lengths: Sequence[float], source: str, what: str = "segment 
     """``lengths`` (m) as a float64 array; ConfigError unless a non-empty sequence of distinct positive numbers ("100,200"
     was a ValueError, None a TypeError, "200" or a single number ran with one length, a repeated length counted twice)."""
     if isinstance(lengths, np.ndarray):
-        lengths = lengths.tolist() if lengths.ndim == 1 else None
-    items = list(lengths) if isinstance(lengths, Sequence) and not isinstance(lengths, (str, bytes)) else []
+        # (a 0-d or 2-D array was quoted as "got None": the value it had been replaced with)
+        shown = f"an array of shape {lengths.shape}" if lengths.ndim != 1 else repr(lengths.tolist())
+        items = lengths.tolist() if lengths.ndim == 1 else []
+    else:
+        shown = repr(lengths)
+        items = list(lengths) if isinstance(lengths, Sequence) and not isinstance(lengths, (str, bytes)) else []
     if not items or not all(is_real_number(x) and np.isfinite(x) and x > 0 for x in items):
-        raise ConfigError(f"{what} must be a non-empty list of positive numbers (m), got {lengths!r}", source=source)
+        raise ConfigError(f"{what} must be a non-empty list of positive numbers (m), got {shown}", source=source)
     if len(set(items)) != len(items):
-        raise ConfigError(f"{what} must differ, got {lengths!r}", source=source)
+        raise ConfigError(f"{what} must differ, got {shown}", source=source)
     return np.array(items, dtype=np.float64)
 
 

@@ -14,10 +14,11 @@ import logging
 import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
+from lidarkit.params import is_integer
 from lidarkit.pf.augmented import LikelihoodAverages
 from lidarkit.pf.config import PFConfig
 from lidarkit.pf.kld import bins_and_spread, kld_sample_count, occupied_bins
-from lidarkit.pf.resampling import effective_sample_size, get_resampler
+from lidarkit.pf.resampling import ess_of_normalized, get_resampler
 
 
 def check_landmark_index(landmark_index: np.ndarray, n_landmarks: int, source: str = "update",
@@ -55,6 +56,30 @@ def readings_array(z: np.ndarray, source: str) -> np.ndarray:
     return arr.reshape(-1, 2)
 
 
+def checked_odometry(odometry, source: str = "predict") -> np.ndarray:
+    """One step's odometry as ``(3,)`` float64 finite [r1_rad, t_m, r2_rad], or a DataError naming ``source`` ("abc"
+    was numpy's ValueError)."""
+    try:
+        u = np.asarray(odometry, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):  # text, ragged rows
+        raise DataError(f"odometry must be numbers [r1, t, r2], got {odometry!r}", source=source) from None
+    if u.shape != (3,):
+        raise DataError(f"odometry must be [r1, t, r2], got shape {u.shape}", source=source)
+    if not np.isfinite(u).all():
+        raise DataError(f"non-finite odometry {u.tolist()}", source=source)
+    return u
+
+
+def _generator(rng) -> np.random.Generator:
+    """``rng`` as a Generator: one given, or seeded by an integer >= 0 (None: fresh entropy); "x" was numpy's TypeError,
+    -1 its ValueError."""
+    if isinstance(rng, np.random.Generator):
+        return rng
+    if rng is not None and not (is_integer(rng) and rng >= 0):
+        raise ConfigError(f"rng must be a numpy.random.Generator, an integer seed >= 0 or None, got {rng!r}", source="rng")
+    return np.random.default_rng(rng)
+
+
 def _listed(value) -> str:
     """``value`` for an error message: a list of its elements where it is array-like, else its repr."""
     try:
@@ -82,12 +107,19 @@ class LandmarkFilterBase:
     skip_uniform_prior = True  # uniform weights: take ll as the new log-weights without adding the constant -log N
 
     def __init__(self, landmarks_xy: np.ndarray, config: PFConfig | None = None, rng: np.random.Generator | int | None = 0) -> None:
+        if config is not None and not isinstance(config, PFConfig):  # (a dict: an AttributeError on n_particles)
+            raise ConfigError(f"config must be a PFConfig (PFConfig(...) or PFConfig.make(...)), got {type(config).__name__}",
+                              source=type(self).__name__)
         self.config = config if config is not None else self._default_config()
-        lm = np.asarray(landmarks_xy, dtype=np.float64)
+        self.rng = _generator(rng)
+        try:
+            lm = np.asarray(landmarks_xy, dtype=np.float64)
+        except (TypeError, ValueError):  # text, ragged rows
+            shown = repr(landmarks_xy) if isinstance(landmarks_xy, str) else _listed(landmarks_xy)
+            raise DataError(f"landmarks must be numbers, an (L, 2) array, got {shown}", source="landmarks") from None
         if lm.ndim != 2 or lm.shape[1] != 2 or len(lm) == 0 or not np.isfinite(lm).all():
             raise DataError(f"landmarks must be a finite (L, 2) array with L >= 1, got shape {lm.shape}", source="landmarks")
         self.landmarks_xy = lm
-        self.rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
         self.n = int(self.config.n_particles)
         self.resampler = get_resampler(self.config.resampler)
         self._uniform_w: np.ndarray | None = None
@@ -204,7 +236,7 @@ class LandmarkFilterBase:
 
     @property
     def ess(self) -> float:
-        return effective_sample_size(self.weights)
+        return ess_of_normalized(self.weights)
 
     def apply_log_likelihood(self, ll: np.ndarray) -> None:
         """Add ``ll`` ``(N,)`` to the log-weights and renormalize with log-sum-exp (never underflows to all zero).
@@ -267,7 +299,7 @@ class LandmarkFilterBase:
         thr = self.config.ess_threshold
         if thr >= 1.0 or self.injection_probability() > 0.0:
             return True
-        return effective_sample_size(self.weights) < thr * self.n
+        return ess_of_normalized(self.weights) < thr * self.n
 
     @property
     def kld_converged(self) -> bool:
@@ -353,4 +385,4 @@ class LandmarkFilterBase:
         raise NotImplementedError
 
 
-__all__ = ["LandmarkFilterBase", "check_landmark_index", "readings_array"]
+__all__ = ["LandmarkFilterBase", "check_landmark_index", "checked_odometry", "readings_array"]

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from typing import Literal
+from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, ValidationError, field_validator, model_validator
 
@@ -237,21 +237,18 @@ class PFConfig(BaseModel):
             raise ValueError(f"values must be finite and >= 0, got {v}")
         return v
 
+    def __init__(self, /, **values: Any) -> None:
+        """Invalid values raise ConfigError naming the setting (docs/particle_filter.md constructs PFConfig directly,
+        where pydantic's ValidationError spanned lines and a URL)."""
+        try:
+            super().__init__(**values)
+        except ValidationError as err:
+            raise _config_error(err) from None
+
     @classmethod
     def make(cls, **values) -> PFConfig:
-        """Validated config; invalid values raise ConfigError (not pydantic's ValidationError)."""
-        try:
-            return cls(**values)
-        except ValidationError as err:
-            first = err.errors()[0]
-            field = ".".join(str(p) for p in first.get("loc", ()))
-            if first.get("type") == "extra_forbidden":  # (it said "Extra inputs are not permitted", naming no valid one)
-                raise ConfigError(f"unknown setting {field!r}; valid: {', '.join(sorted(cls.model_fields))}",
-                                  source="pf config") from None
-            msg = str(first.get("msg", "invalid value")).removeprefix("Value error, ")
-            if field and "got" not in msg:  # (a rule across fields names its values itself: no dump of the config)
-                msg = f"{msg} (got {first.get('input')!r})"
-            raise ConfigError(msg, source=f"pf config {field}" if field else "pf config") from None
+        """Validated config; invalid values raise ConfigError (as ``PFConfig(**values)`` does)."""
+        return cls(**values)
 
     def particle_count_label(self) -> str:
         """The particle count as titles say it: KLD-sampling's range (``n_particles`` is only its start, which may be
@@ -260,6 +257,19 @@ class PFConfig(BaseModel):
 
     def replace(self, **changes) -> PFConfig:
         return PFConfig.make(**{**self.model_dump(), **changes})
+
+
+def _config_error(err: ValidationError) -> ConfigError:
+    """The ConfigError of a PFConfig's first problem: an unknown setting with the valid ones, else the setting, the
+    reason and the value given."""
+    first = err.errors()[0]
+    field = ".".join(str(p) for p in first.get("loc", ()))
+    if first.get("type") == "extra_forbidden":  # (it said "Extra inputs are not permitted", naming no valid one)
+        return ConfigError(f"unknown setting {field!r}; valid: {', '.join(sorted(PFConfig.model_fields))}", source="pf config")
+    msg = str(first.get("msg", "invalid value")).removeprefix("Value error, ")
+    if field and "got" not in msg:  # (a rule across fields names its values itself: no dump of the config)
+        msg = f"{msg} (got {first.get('input')!r})"
+    return ConfigError(msg, source=f"pf config {field}" if field else "pf config")
 
 
 __all__ = ["ESTIMATORS", "INITS", "LIKELIHOODS", "MAX_POSE_SCALE", "MAX_Q_VARIANCE", "MAX_ROUGHENING", "MIN_Q_VARIANCE", "PFConfig", "q_problem"]

@@ -7,7 +7,7 @@ import logging
 import numpy as np
 
 from lidarkit.errors import DataError
-from lidarkit.pf.base import LandmarkFilterBase
+from lidarkit.pf.base import LandmarkFilterBase, checked_odometry
 from lidarkit.pf.config import PFConfig
 from lidarkit.pf.models import OdometryMotionModel, RangeBearingModel, _wrap_inplace, resolve_q, standard_normal, wrap_angle
 
@@ -107,12 +107,7 @@ class ParticleFilter(LandmarkFilterBase):
     def predict(self, odometry: np.ndarray, *, check: bool = True) -> None:
         """Move every particle by the odometry ``[r1_rad, t_m, r2_rad]`` with sampled motion noise."""
         if check:
-            u = np.asarray(odometry, dtype=np.float64).reshape(-1)
-            if u.shape != (3,):
-                raise DataError(f"odometry must be [r1, t, r2], got shape {u.shape}", source="predict")
-            if not np.isfinite(u).all():
-                raise DataError(f"non-finite odometry {u.tolist()}", source="predict")
-            odometry = u
+            odometry = checked_odometry(odometry)
         r1, t, r2 = (self.dtype.type(v) for v in odometry)
         c = self._controls
         if self._has_motion_noise:

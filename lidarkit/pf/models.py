@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lidarkit.errors import ConfigError
+from lidarkit.errors import ConfigError, DataError
 
 TWO_PI = 2.0 * np.pi
 
@@ -19,13 +19,31 @@ def wrap_angle(angle_rad: np.ndarray | float) -> np.ndarray | float:
     return a - TWO_PI * np.floor((a + np.pi) / TWO_PI)
 
 
+def _numbers(value, name: str, expected: str) -> np.ndarray:
+    """``value`` as a float64 array, or a DataError naming ``name`` (text and ragged rows failed in numpy)."""
+    try:
+        return np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise DataError(f"{name} must be numbers, {expected}, got {value!r}", source=name) from None
+
+
 def integrate_odometry(odometry: np.ndarray, start_pose: np.ndarray | tuple = (0.0, 0.0, 0.0)) -> np.ndarray:
-    """Compose ``(T, 3)`` odometry ``[r1, t, r2]`` from ``start_pose`` -> ``(T+1, 3)`` poses ``[x, y, theta]``.
+    """Compose ``(T, 3)`` odometry ``[r1, t, r2]`` (one step may come as ``(3,)``) from ``start_pose`` ``(3,)`` ->
+    ``(T+1, 3)`` poses ``[x, y, theta]``; a DataError names a wrong shape or a non-finite value.
 
     The report's model: x += t cos(theta + r1), y += t sin(theta + r1), theta += r1 + r2.
     """
-    u = np.asarray(odometry, dtype=np.float64).reshape(-1, 3)
-    start = np.asarray(start_pose, dtype=np.float64).reshape(3)
+    u = _numbers(odometry, "odometry", "a (T, 3) array [r1_rad, t_m, r2_rad]")
+    if u.shape == (3,) or u.shape == (0,):  # one step, or none
+        u = u.reshape(-1, 3)
+    if u.ndim != 2 or u.shape[1] != 3:  # ((1, 6) was read as 2 steps)
+        raise DataError(f"odometry must be a (T, 3) array [r1_rad, t_m, r2_rad], got shape {u.shape}", source="odometry")
+    bad = ~np.isfinite(u).all(axis=1)
+    if bad.any():
+        raise DataError(f"non-finite odometry at step {int(np.argmax(bad))}: {u[int(np.argmax(bad))].tolist()}", source="odometry")
+    start = _numbers(start_pose, "start_pose", "3 finite values [x_m, y_m, theta_rad]")
+    if start.shape != (3,) or not np.isfinite(start).all():  # ((1, 2) failed in numpy's reshape)
+        raise DataError(f"start_pose must be 3 finite values [x_m, y_m, theta_rad], got {start.tolist()}", source="start_pose")
     heading_after = start[2] + np.concatenate([[0.0], np.cumsum(u[:, 0] + u[:, 2])])
     travel_heading = heading_after[:-1] + u[:, 0]
     poses = np.empty((len(u) + 1, 3))

@@ -16,18 +16,33 @@ Resampler = Callable[[np.ndarray, np.random.Generator, "int | None"], np.ndarray
 
 
 def effective_sample_size(weights: np.ndarray) -> float:
-    """Kish ESS ``1 / sum(w^2)`` of normalized weights (N for uniform, 1 for a single particle)."""
+    """Kish ESS ``(sum w)^2 / sum(w^2)`` of weights ``(N,)`` (N for uniform, 1 for a single particle; normalized or not).
+    Array-likes are taken; weights that are not finite, >= 0 and not all zero raise DataError (a list was an
+    AttributeError, an empty array inf with a warning, negative weights a number)."""
+    try:
+        w = np.asarray(weights, dtype=np.float64)
+    except (TypeError, ValueError):  # text, ragged rows
+        raise DataError(f"weights must be numbers, got {weights!r}", source="weights") from None
+    total = _check_weights(w, "the effective sample size")
+    return total * total / float(np.dot(w, w))
+
+
+def ess_of_normalized(weights: np.ndarray) -> float:
+    """``1 / sum(w^2)`` of weights ``(N,)`` the filter keeps normalized, unchecked: its ESS test at every step."""
     if weights.shape[0] <= 16384:  # single-threaded BLAS dot is fastest here
         return float(1.0 / np.dot(weights, weights))
     # multiply + sum, not np.dot: BLAS thread start-up dominates for large N on a busy machine
     return float(1.0 / np.add.reduce(weights * weights))
 
 
-def _check_weights(weights: np.ndarray) -> float:
-    """The weights' sum; DataError unless they are finite, >= 0 and not all zero (one reduction each)."""
+def _check_weights(weights: np.ndarray, needed_by: str = "resampling") -> float:
+    """The weights' sum; DataError unless they are an (N,) array of finite values >= 0, not all zero (one reduction
+    each)."""
+    if weights.ndim != 1 or weights.shape[0] == 0:  # (an empty array failed in numpy's min)
+        raise DataError(f"{needed_by} needs weights of shape (N,) with N >= 1, got shape {weights.shape}", source="weights")
     total = float(np.sum(weights, dtype=np.float64))
     if not (np.isfinite(total) and total > 0.0) or float(np.min(weights)) < 0.0:
-        raise DataError(f"resampling needs finite weights >= 0 that are not all zero (sum {total:g}, smallest "
+        raise DataError(f"{needed_by} needs finite weights >= 0 that are not all zero (sum {total:g}, smallest "
                         f"{float(np.min(weights)):g})", source="weights")
     return total
 
@@ -59,6 +74,7 @@ def _indices_from_counts(counts: np.ndarray) -> np.ndarray:
 
 def multinomial(weights: np.ndarray, rng: np.random.Generator, n: int | None = None) -> np.ndarray:
     """n independent draws from the categorical distribution ``weights``."""
+    weights = np.asarray(weights)  # (a list: an AttributeError; O(1) for the filter's arrays)
     n = weights.shape[0] if n is None else n
     cdf = _scaled_cdf(weights, n)
     idx = np.searchsorted(cdf, rng.random(n) * n, side="right")
@@ -67,6 +83,7 @@ def multinomial(weights: np.ndarray, rng: np.random.Generator, n: int | None = N
 
 def systematic(weights: np.ndarray, rng: np.random.Generator, n: int | None = None) -> np.ndarray:
     """One uniform offset, n evenly spaced pointers; counts computed from the scaled CDF (no search)."""
+    weights = np.asarray(weights)  # (a list: an AttributeError; O(1) for the filter's arrays)
     n = weights.shape[0] if n is None else n
     cdf = _scaled_cdf(weights, n)
     u0 = rng.random() or 0.5 / n  # u0 in (0, 1)
@@ -84,6 +101,7 @@ def systematic(weights: np.ndarray, rng: np.random.Generator, n: int | None = No
 
 def stratified(weights: np.ndarray, rng: np.random.Generator, n: int | None = None) -> np.ndarray:
     """One independent uniform pointer in each of the n strata [k, k+1)."""
+    weights = np.asarray(weights)  # (a list: an AttributeError; O(1) for the filter's arrays)
     n = weights.shape[0] if n is None else n
     cdf = _scaled_cdf(weights, n)
     pointers = rng.random(n)

@@ -47,6 +47,11 @@ INIT_ROTATION_TOL = 1e-3
 DEFAULT_MIN_CORRESPONDENCES = 10
 
 
+class InvalidParameters(ConfigError, ValueError):
+    """A variant config's invalid values in one line (``"max_iterations: Input should be ..."``). A ValueError too: a
+    caller that names the variant around a config's ValueError (``get_icp``) keeps its message."""
+
+
 class RegistrationConfig(BaseModel):
     """Base of every variant's typed config: frozen, unknown keys rejected.
 
@@ -75,6 +80,14 @@ class RegistrationConfig(BaseModel):
         "covariance, acceptance gate (False: the backend's pose and its own verdict only, near the library's speed; for the "
         "variants that register apart from their assessment: kiss, small_gicp, the Open3D ones)"
     )
+
+    def __init__(self, /, **data: Any) -> None:
+        """Invalid values raise :class:`InvalidParameters` naming each field (``VanillaConfig(max_iterations=0)``
+        raised pydantic's ValidationError, lines long with a URL, where ``get_icp`` said it in one line)."""
+        try:
+            super().__init__(**data)
+        except pydantic.ValidationError as err:
+            raise InvalidParameters(validation_problems(err, unnamed="")) from None
 
     @model_validator(mode="before")
     @classmethod
@@ -608,8 +621,8 @@ class Registration:
         if config is None:
             try:
                 config = self.Config(**params)
-            except pydantic.ValidationError as err:  # (a pydantic traceback where get_icp says it in one line)
-                raise ConfigError(f"invalid parameters ({validation_problems(err, unnamed='')})", source=self.name) from None
+            except InvalidParameters as err:  # (named by the variant, as get_icp names it)
+                raise ConfigError(f"invalid parameters ({err})", source=self.name) from None
         self._config = config
         if not self._config.assess and not assessed_apart(type(self)):
             from lidarkit.registration.registry import available_icp, get_icp_class

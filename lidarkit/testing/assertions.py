@@ -12,6 +12,7 @@ import numpy as np
 
 from lidarkit.errors import ConfigError, EvaluationError, LidarKitError
 from lidarkit.geometry import rotation_angle_deg
+from lidarkit.params import is_real_number
 from lidarkit.trajectory import Trajectory
 
 
@@ -28,8 +29,8 @@ def assert_trajectory_close(
     ``align`` ("none", "se3", "sim3") first aligns ``actual`` onto ``expected`` (evo's Umeyama); the message
     names the worst frame. Different lengths fail as an AssertionError too.
     """
-    for name, value in (("atol_m", atol_m), ("atol_deg", atol_deg)):  # (True read as 1 m)
-        if isinstance(value, bool) or not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+    for name, value in (("atol_m", atol_m), ("atol_deg", atol_deg)):  # (True read as 1 m; numpy's float32 was refused)
+        if not (is_real_number(value) and math.isfinite(value) and value >= 0):
             raise ConfigError(f"{name} must be a finite number >= 0, got {value!r}", source="assert_trajectory_close")
     for name, value in (("actual", actual), ("expected", expected)):
         if not isinstance(value, Trajectory):  # (an (N, 4, 4) array: Trajectory(poses) makes one)
@@ -68,7 +69,8 @@ def metrics_of(result: Any) -> dict[str, float]:
             raise EvaluationError(f"the job {result['status']}: {error.get('type', '?')}: {error.get('message', '')}",
                                   source="assert_no_worse_than")
         inner = result.get("metrics") if isinstance(result.get("metrics"), Mapping) else result
-        return {k: float(v) for k, v in inner.items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
+        # (numpy's float32 was left out: "metric not in the result")
+        return {k: float(v) for k, v in inner.items() if is_real_number(v)}
     raise ConfigError(f"cannot read metrics from a {type(result).__name__}", source="assert_no_worse_than")
 
 

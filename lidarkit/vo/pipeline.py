@@ -131,6 +131,13 @@ class VOResult:
     tracks: list[tuple[int, np.ndarray, np.ndarray]] | None = None
     meta: dict[str, Any] = field(default_factory=dict)
 
+    def __repr__(self) -> str:
+        """One line of counts (the generated one printed every frame's diagnostics: ~550 characters a frame)."""
+        name = f"{self.trajectory.name!r}, " if self.trajectory.name else ""
+        pairs = max(self.n_frames - 1 - int(self.meta.get("start_frame", 0)), 0)
+        return (f"VOResult({name}{self.n_frames} frames in {self.runtime_s:.3g} s, {max(self.accepted_pairs, 0)} of {pairs} pairs "
+                f"accepted, scale {self.config.scale.mode})")
+
     @property
     def n_frames(self) -> int:
         return len(self.trajectory)
