@@ -202,3 +202,31 @@ def test_generic_reads_files_named_by_decimal_time_stamps_in_time_order(tmp_path
     dataset = open_dataset("generic", tmp_path)
     assert [p.split("/")[-1] for p in dataset.loader.scan_files] == ["1000.05.bin", "1000.1.bin", "1000.15.bin", "1000.2.bin"]
     np.testing.assert_allclose(dataset.read_scan(1).points_xyz, (RING + 1).astype(np.float32))
+
+
+def test_generic_leaves_out_points_at_the_sensor_origin_with_their_times(tmp_path):
+    """kiss-icp's generic loader kept points at exactly (0, 0, 0) (an organized cloud's missing returns), which every
+    point-file reader leaves out: registered, they are points moving with the sensor. They are left out with their
+    per-point times, said once per reader; a scan of nothing else is a DataError naming the file."""
+    import open3d as o3d
+
+    times = np.linspace(0.0, 0.1, len(RING))
+    missing = np.arange(len(RING)) % 4 == 0  # 50 of 200
+    for k in range(2):
+        points = RING + [k, 0.0, 0.0]
+        points[missing] = 0.0
+        cloud = o3d.t.geometry.PointCloud(o3d.core.Tensor(points.astype(np.float32)))
+        cloud.point["t"] = o3d.core.Tensor(times.astype(np.float32)[:, None])
+        o3d.t.io.write_point_cloud(str(tmp_path / f"{k:06d}.pcd"), cloud)
+    dataset = open_dataset("generic", tmp_path)
+    for k in range(2):
+        scan = dataset.read_scan(k)
+        np.testing.assert_array_equal(scan.points_xyz, (RING + [k, 0.0, 0.0])[~missing].astype(np.float32))
+        np.testing.assert_array_equal(scan.point_times_s, times[~missing].astype(np.float32))
+    assert dataset.reader_warnings == [f"left out 50 of 200 points at (0, 0, 0) (missing returns) in frame 0 ({tmp_path / '000000.pcd'}); "
+                                       "in later frames without another warning"]
+    cloud = o3d.t.geometry.PointCloud(o3d.core.Tensor(np.zeros((10, 3), dtype=np.float32)))
+    cloud.point["t"] = o3d.core.Tensor(np.linspace(0, 0.1, 10, dtype=np.float32)[:, None])
+    o3d.t.io.write_point_cloud(str(tmp_path / "000002.pcd"), cloud)
+    with pytest.raises(DataError, match=r"000002\.pcd \(frame 2\): all 10 points are at \(0, 0, 0\) \(missing returns\): no point left$"):
+        open_dataset("generic", tmp_path).read_scan(2)

@@ -59,6 +59,7 @@ class KissLoaderScans:
         self.path = Path(path)
         #: what the reader found and left out, for the run's warnings (metrics.json, config.yaml) as well as the log
         self.reader_warnings: list[str] = []
+        self._origin_warned = False  # (points at (0, 0, 0) are said once, not for every frame)
         require_modules(self.requires, self.kind)
         if not self.path.exists():
             raise DataError(f"{self.kind} dataset not found", source=self.path)
@@ -122,9 +123,33 @@ class KissLoaderScans:
             raise DataError(f"{len(times)} per-point times for {len(points)} points", source=self.path, location=f"frame {index}")
         if times is not None and not np.isfinite(times).all():
             raise DataError("per-point times contain NaN or infinite values", source=self.path, location=f"frame {index}")
+        if len(points) and (points[:, 0] == 0).any():  # (x alone first, as the point-file readers: most scans have none)
+            points, times = self._without_origin_points(points, times, source, index)
         stamps = self.timestamps_s
         stamp = None if stamps is None or index >= len(stamps) else float(stamps[index])
         return Scan(points, None, times, stamp, index, f"{self.path} frame {index}", self.point_time_convention, None)
+
+    def _without_origin_points(self, points: np.ndarray, times: np.ndarray | None, source: Any,
+                               index: int) -> tuple[np.ndarray, np.ndarray | None]:
+        """``points`` (N, 3) and their ``times`` (N,) without the points exactly at (0, 0, 0), an organized cloud's
+        missing returns, which every point-file reader leaves out (registered, they are points moving with the
+        sensor); said once per reader in :attr:`reader_warnings`, a DataError when no point is left."""
+        from lidarkit.io.pointfile import at_sensor_origin
+
+        at_origin = at_sensor_origin(points)
+        n_zero = int(np.count_nonzero(at_origin))
+        if not n_zero:
+            return points, times
+        if n_zero == len(points):
+            raise DataError(f"all {n_zero} points are at (0, 0, 0) (missing returns): no point left", source=source,
+                            location=f"frame {index}")
+        if not self._origin_warned:
+            self._origin_warned = True
+            self.reader_warnings.append(f"left out {n_zero} of {len(points)} points at (0, 0, 0) (missing returns) in frame "
+                                        f"{index} ({source}); in later frames without another warning")
+            log.warning("%s: %s", self.path, self.reader_warnings[-1])
+        keep = ~at_origin
+        return points[keep], None if times is None else times[keep]
 
     def _stamps(self) -> np.ndarray | None:
         get = getattr(self.loader, "get_frames_timestamps", None)

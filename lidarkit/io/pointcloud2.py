@@ -3,9 +3,11 @@
 kiss-icp's bag loaders read the field layout from the ``PointField`` constants (``FLOAT32 = 7`` ...), which
 messages decoded from MCAP schemas without constants lack; lidarkit reads the datatype codes of the ROS
 definition directly and adds what kiss-icp leaves out: missing x/y/z fields, a data buffer shorter than the
-header says, non-finite per-point times, and the unit of the time field.
+header says, non-finite per-point times, the unit of the time field, and missing returns at (0, 0, 0), left out as
+the point-file readers leave them out.
 
-Per-point time fields (the first present of :data:`TIME_FIELDS`, or the one asked for):
+Per-point time fields (the first present of :data:`TIME_FIELDS` whose values differ within the message, or the one
+asked for):
 
 * ``time`` float32 seconds relative to the message stamp (Velodyne drivers; negative when the stamp is the
   sweep end), ``t`` uint32 nanoseconds from the sweep start (Ouster drivers), ``timestamp(s)`` as either;
@@ -29,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from lidarkit.errors import DataError
+from lidarkit.io.pointfile import at_sensor_origin
 
 TIME_FIELDS = ("time", "t", "timestamp", "timestamps")
 _ABSOLUTE_AFTER_S = 1e5
@@ -43,14 +46,18 @@ _MIN_POINTS_TO_JUDGE = 100
 
 @dataclass(frozen=True)
 class DecodedCloud:
-    """One decoded message: ``points_xyz`` (N, 3) float64 without non-finite points, ``intensity`` (N,) float32
-    or None, ``point_times_s`` (N,) float64 or None in ``point_time_convention``, ``time_field`` its source."""
+    """One decoded message: ``points_xyz`` (N, 3) float64 without non-finite points nor points at (0, 0, 0),
+    ``intensity`` (N,) float32 or None, ``point_times_s`` (N,) float64 or None in ``point_time_convention``,
+    ``time_field`` its source; ``n_at_origin`` points at (0, 0, 0) left out and ``flat_time_fields`` the time fields
+    ``time_field="auto"`` passed over (one value for every point), for the reader to say once."""
 
     points_xyz: np.ndarray
     intensity: np.ndarray | None
     point_times_s: np.ndarray | None
     point_time_convention: str
     time_field: str | None
+    n_at_origin: int = 0
+    flat_time_fields: tuple[str, ...] = ()
 
 
 def stamp_seconds(stamp: Any) -> float:
@@ -61,8 +68,10 @@ def stamp_seconds(stamp: Any) -> float:
 def decode_pointcloud2(msg: Any, *, source: str, location: str, time_field: str | None = "auto") -> DecodedCloud:
     """Points, intensity and per-point times of a PointCloud2 ``msg`` (any object with its fields).
 
-    ``time_field``: ``"auto"`` (first of :data:`TIME_FIELDS`), a field name, or None to ignore times.
-    Every problem raises DataError naming ``source`` (the file) and ``location`` (topic and message index).
+    ``time_field``: ``"auto"`` (the first of :data:`TIME_FIELDS` whose values differ, the first present when none
+    does), a field name, or None to ignore times. Missing returns (NaN, or exactly (0, 0, 0) as Ouster drivers
+    write them) are left out with their times and intensities. Every problem raises DataError naming ``source``
+    (the file) and ``location`` (topic and message index).
     """
     names = [f.name for f in msg.fields]
     missing = [axis for axis in ("x", "y", "z") if axis not in names]
@@ -96,7 +105,12 @@ def decode_pointcloud2(msg: Any, *, source: str, location: str, time_field: str 
     if msg.is_bigendian:
         cloud = cloud.view(cloud.dtype.newbyteorder(">"))
     xyz = np.column_stack([cloud["x"], cloud["y"], cloud["z"]]).astype(np.float64)
-    keep = np.isfinite(xyz).all(axis=1)  # organized clouds mark missing returns with NaN
+    keep = np.isfinite(xyz).all(axis=1)  # organized clouds mark missing returns with NaN, or with (0, 0, 0)
+    n_at_origin = 0
+    if (xyz[:, 0] == 0).any():  # (x alone first, as the point-file readers: most messages have no x exactly 0)
+        at_origin = at_sensor_origin(xyz)
+        n_at_origin = int(np.count_nonzero(at_origin))
+        keep &= ~at_origin  # (kept in the registration, they were points moving with the sensor: 0.45 m of 2.73 m)
     all_kept = bool(keep.all())
     if not all_kept:
         xyz = xyz[keep]
@@ -106,8 +120,12 @@ def decode_pointcloud2(msg: Any, *, source: str, location: str, time_field: str 
         intensity = intensity if all_kept else intensity[keep]
 
     field = _time_field(names, time_field, source, location)
+    flat: tuple[str, ...] = ()
+    candidates = [f for f in TIME_FIELDS if f in cloud.dtype.names] if time_field == "auto" else []
+    if len(candidates) > 1:
+        field, flat = _varying_time_field(candidates, cloud, None if all_kept else keep)
     if field is None:
-        return DecodedCloud(xyz, intensity, None, "relative_s", None)
+        return DecodedCloud(xyz, intensity, None, "relative_s", None, n_at_origin)
     raw = cloud[field] if all_kept else cloud[field][keep]
     if not np.issubdtype(raw.dtype, np.integer):
         bad = np.flatnonzero(~np.isfinite(raw))
@@ -120,7 +138,17 @@ def decode_pointcloud2(msg: Any, *, source: str, location: str, time_field: str 
     times, convention = checked_point_times(raw, xyz, what=f"per-point time field {field!r}", within="one message",
                                             hint="time_field= names the right field, none reads no times",
                                             source=source, location=location)
-    return DecodedCloud(xyz, intensity, times, convention, field)
+    return DecodedCloud(xyz, intensity, times, convention, field, n_at_origin, flat)
+
+
+def _varying_time_field(present: list[str], cloud: np.ndarray, keep: np.ndarray | None) -> tuple[str, tuple[str, ...]]:
+    """``(field, the ones before it passed over)``: the first of the time fields ``present`` whose values over the kept
+    points differ (a driver leaving ``time`` at 0 beside a valid ``t`` gave every sweep zero times), else the first."""
+    for k, name in enumerate(present):
+        values = cloud[name] if keep is None else cloud[name][keep]
+        if len(values) < 2 or not (values == values[0]).all():  # (NaN differs from itself: refused as before)
+            return name, tuple(present[:k])
+    return present[0], ()
 
 
 def checked_point_times(raw: np.ndarray, xyz: np.ndarray, *, what: str, within: str, hint: str, source: object,

@@ -1,14 +1,14 @@
 """ROS bags and MCAP files as scan sequences, through kiss-icp's ``rosbag`` and ``mcap`` dataloaders.
 
-``open_dataset("rosbag", path, topic=...)`` reads a ROS 1 ``.bag`` (or a folder of split ``.bag`` files) or a
-ROS 2 bag folder (``metadata.yaml``, sqlite3 or mcap storage); ``open_dataset("mcap", path, topic=...)`` a
+``open_dataset("rosbag", path, topic=...)`` reads a ROS 1 ``.bag`` (or a folder of split ``.bag`` files, each part
+beginning where the one before ends: separate recordings in one folder are refused) or a ROS 2 bag folder (``metadata.yaml``, sqlite3 or mcap storage); ``open_dataset("mcap", path, topic=...)`` a
 standalone ``.mcap`` file. kiss-icp's loaders open the files; lidarkit checks the topic first (kiss-icp prints
 and exits on a missing one) and decodes each message with :func:`lidarkit.io.pointcloud2.decode_pointcloud2`.
 
 Per scan: ``timestamp_s`` is the message header stamp; ``stamp_instant`` says which instant of the sweep that
 stamp is, read from the per-point times (relative times starting at 0: the sweep start; ending at 0: the end).
-Ground truth: a ``nav_msgs/Odometry`` topic (``ground_truth_topic``; found automatically when there is one),
-one pose per scan (by count, also for a selection of scans; else the pose nearest the place in the sweep where the
+Ground truth: a ``nav_msgs/Odometry`` topic (``ground_truth_topic``; found automatically when there is one), read
+in header-stamp order, one pose per scan (by count, also for a selection of scans; else the pose nearest the place in the sweep where the
 poses are stamped), expressed relative to nothing (as recorded); its
 ``meta["pose_instant"]`` is read from its stamps against the sweep's point times.
 
@@ -30,7 +30,7 @@ import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.io.base import INSTANT_FRACTION, Scan, checked_index, checked_indices, classify_instant
-from lidarkit.io.pointcloud2 import decode_pointcloud2, stamp_seconds
+from lidarkit.io.pointcloud2 import MAX_SWEEP_S, decode_pointcloud2, stamp_seconds
 from lidarkit.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
@@ -81,6 +81,11 @@ class _BagScans:
 
     def __init__(self, path: str | os.PathLike, topic: str | None, ground_truth_topic: str | None, time_field: str | None):
         self.path = Path(path)
+        #: what the reader found and left out or could not place, for the run's warnings as well as the log (once each)
+        self.reader_warnings: list[str] = []
+        self._warned: set[str] = set()
+        #: why the sweeps cannot be placed against the stamps although the scans carry point times (another clock)
+        self._timing_problem: str | None = None
         if not self.path.exists():
             raise DataError("bag not found", source=self.path)
         self.time_field = time_field
@@ -153,6 +158,13 @@ class _BagScans:
     def _location(self, index: int) -> str:
         return f"message {index} on {self.topic}"
 
+    def _warn_once(self, key: str, message: str) -> None:
+        """Keep ``message`` in :attr:`reader_warnings` and log it, the first time only (every message may have it)."""
+        if key not in self._warned:
+            self._warned.add(key)
+            self.reader_warnings.append(message)
+            log.warning("%s: %s", self.path, message)
+
     def _read_all(self, topic: str) -> Iterator[tuple[int, Any]]:
         """:meth:`_messages` of ``topic`` with a damaged file's reader failure as a DataError naming the message (the
         passes for the stamps and the ground truth read the whole topic, as :meth:`read_scan` reads up to a scan)."""
@@ -196,6 +208,13 @@ class _BagScans:
             self._stamps[k] = stamp
         decoded = decode_pointcloud2(msg, source=str(self.path), location=self._location(index), time_field=self.time_field)
         self._time_fields_read.add(decoded.time_field or "none")
+        if decoded.n_at_origin:
+            self._warn_once("origin", f"left out {decoded.n_at_origin} of {int(msg.width) * int(msg.height)} points at (0, 0, 0) "
+                                      f"(missing returns) in {self._location(index)}; in later messages without another warning")
+        if decoded.flat_time_fields:
+            flat = ", ".join(repr(f) for f in decoded.flat_time_fields)
+            self._warn_once("flat_time", f"per-point time field {flat} holds one value for every point of {self._location(index)}: "
+                                         f"the times are read from {decoded.time_field!r} (time_field= names the field to read)")
         stamp = self._stamps[index]
         instant = None
         if decoded.point_times_s is not None and len(decoded.point_times_s):
@@ -271,16 +290,16 @@ class _BagScans:
         ``--frames`` selection within what the recording covers): interpolated between the recorded poses (rotation
         slerped, position linear), or continued at constant velocity for at most 1.5 recording intervals beyond the
         first or last one (e.g. the start of sweep 0 when the poses are stamped at sweep ends). The instants are placed
-        by the first scans' point times and the scans' stamp spacing; DataError when the scans carry no point times or
-        the recording does not reach."""
+        by the first scans' point times and the scans' stamp spacing; DataError when the scans carry no point times (or
+        times on another clock than their stamps) or the recording does not reach."""
         if instant not in INSTANT_FRACTION:
             raise DataError(f"unknown instant {instant!r}; valid: {', '.join(INSTANT_FRACTION)}", source=self.path)
         if self.ground_truth_topic is None:
             raise DataError("no ground-truth topic", source=self.path)
         timing = self._sweep_timing
         if timing is None:
-            raise DataError("the scans carry no per-point times, so where a sweep starts and ends is unknown", source=self.path,
-                            location=self._location(0))
+            raise DataError(self._timing_problem or "the scans carry no per-point times, so where a sweep starts and ends is unknown",
+                            source=self.path, location=self._location(0))
         start, period = timing
         all_stamps = self.timestamps_s
         scan_stamps = all_stamps if scans is None else all_stamps[np.asarray(scans, dtype=np.int64)]
@@ -292,7 +311,9 @@ class _BagScans:
         recorded = Trajectory(poses, stamps, name=f"{self.path.name}{self.ground_truth_topic}")
         reach = 1.5 * float(np.median(np.diff(stamps)))
         out = recorded.interpolated(times, max_extrapolation_s=reach)
-        n_out = int(((times < stamps[0]) | (times > stamps[-1])).sum())
+        # (an instant equal to a recorded stamp but for rounding, 1e-16 s beyond it, was counted as continued)
+        tolerance = 1e-6 * (period if period > 0 else float(np.median(np.diff(stamps))))
+        n_out = int(((times < stamps[0] - tolerance) | (times > stamps[-1] + tolerance)).sum())
         how = f"interpolated between the {len(stamps)} poses recorded on {self.ground_truth_topic}"
         if n_out:
             how += f", {n_out} frame(s) continued at constant velocity beyond them"
@@ -301,8 +322,9 @@ class _BagScans:
 
     @cached_property
     def _recorded_ground_truth(self) -> tuple[np.ndarray, np.ndarray]:
-        """Stamps (s) and poses ``(n, 4, 4)`` of every message on the ground-truth topic (read once: the ground truth
-        and its re-timing both use them)."""
+        """Stamps (s) and poses ``(n, 4, 4)`` of every message on the ground-truth topic in header-stamp order, exact
+        repeats (same stamp and pose) once (read once: the ground truth and its re-timing both use them). One message
+        logged out of order stopped the re-timing: it needs increasing stamps."""
         stamps, poses = [], []
         for k, (_, msg) in enumerate(self._read_all(self.ground_truth_topic)):
             p, q = msg.pose.pose.position, msg.pose.pose.orientation
@@ -314,7 +336,20 @@ class _BagScans:
             poses.append(_pose_matrix(xyz, quat))
         if not poses:
             raise DataError(f"ground-truth topic {self.ground_truth_topic} has no messages", source=self.path)
-        return np.array(stamps), np.stack(poses)
+        stamps, poses = np.array(stamps), np.stack(poses)
+        n_back = int(np.count_nonzero(np.diff(stamps) < 0))
+        if n_back:
+            order = np.argsort(stamps, kind="stable")
+            stamps, poses = stamps[order], poses[order]
+        repeated = np.flatnonzero((np.diff(stamps) == 0) & (poses[1:] == poses[:-1]).all(axis=(1, 2))) + 1
+        if len(repeated):
+            stamps, poses = np.delete(stamps, repeated), np.delete(poses, repeated, axis=0)
+        if n_back or len(repeated):
+            said = [f"{n_back} logged before an earlier stamp: read in header-stamp order"] if n_back else []
+            said += [f"{len(repeated)} repeating the message before (same stamp and pose): read once"] if len(repeated) else []
+            self._warn_once("ground_truth_order", f"ground-truth topic {self.ground_truth_topic}: of {len(stamps) + len(repeated)} "
+                                                  f"poses, {' and '.join(said)}")
+        return stamps, poses
 
     def _ground_truth_instant(self, gt_stamps: np.ndarray, scan_stamps: np.ndarray) -> str | None:
         """Which instant of its scan's sweep each pose is stamped at (``gt_stamps[j]`` paired with the scan stamped
@@ -342,8 +377,9 @@ class _BagScans:
         """(absolute time sweep 0 starts, the nominal sweep period) from the point times of the first few scans (where
         a sweep's first point fires after its stamp: the median, so that a recording begun mid-rotation, whose first
         message holds part of a sweep, does not place every sweep by that part) and the spacing of the stamps (one
-        scan: its own time span); None when the scans carry no point times."""
-        offsets, span = [], 0.0
+        scan: its own time span); None when the scans carry no point times, or times on another clock than the stamps
+        (a sweep more than a period from its stamp: :attr:`reader_warnings` says so, with the field and the offset)."""
+        offsets, ends, span = [], [], 0.0
         for k in range(min(self.n_scans, SWEEP_TIMING_SCANS)):
             scan = self.read_scan(k)
             if scan.point_times_s is None or len(scan.point_times_s) < 2:
@@ -352,15 +388,30 @@ class _BagScans:
             lo, hi = float(t.min()), float(t.max())
             if hi > lo:
                 offsets.append(lo - scan.timestamp_s)
+                ends.append(hi - scan.timestamp_s)
                 span = max(span, hi - lo)
         if not offsets:
             return None
         stamps = self.timestamps_s
-        return float(stamps[0] + np.median(offsets)), float(np.median(np.diff(stamps))) if len(stamps) > 1 else span
+        period = float(np.median(np.diff(stamps))) if len(stamps) > 1 else span
+        # a sweep lies around its stamp (from it, up to it, or across it); one a period or more away is timed by
+        # another clock (GPS time against UTC stamps, seconds since the sensor booted): its instant cannot be placed
+        first, last = float(np.median(offsets)), float(np.median(ends))
+        apart = first if first > 0 else last if last < 0 else 0.0
+        if abs(apart) > max(period, span):
+            fields = ", ".join(repr(f) for f in sorted(self._time_fields_read))
+            self._timing_problem = (f"the point times (field {fields}) lie {abs(apart):.6g} s {'after' if apart > 0 else 'before'} "
+                                    f"the header stamps (a median over the first scans; the stamps are {period:.4g} s apart): "
+                                    "another clock? where each sweep lies against the stamps cannot be placed")
+            self._warn_once("clock", f"{self._timing_problem}: the sweep instant of the scans and of the ground truth is unknown")
+            return None
+        return float(stamps[0] + first), period
 
 
 #: scans whose point times place the sweeps in the stamps (the median over them)
 SWEEP_TIMING_SCANS = 5
+#: most scan periods between one part of a split ROS 1 recording and the next (further apart: separate recordings)
+SPLIT_GAP_PERIODS = 3
 
 
 def _pose_phase(gt_stamps: np.ndarray, scan_stamps: np.ndarray) -> float:
@@ -419,7 +470,13 @@ class RosbagScans(_BagScans):
             raise DataError(f"a ROS 1 bag is read only by a lower-case .bag name: rename it to {self.path.stem}.bag", source=self.path)
         try:
             with AnyReader(paths) as reader:
-                return {t: info.msgtype for t, info in reader.topics.items()}
+                topics = {t: info.msgtype for t, info in reader.topics.items()}
+            if len(paths) > 1:
+                spans = []  # (first, last receive time ns, scan messages) of each part
+                for part in paths:
+                    with AnyReader([part]) as reader:
+                        scans = max((info.msgcount for info in reader.topics.values() if info.msgtype == POINTCLOUD2), default=0)
+                        spans.append((reader.start_time, reader.end_time, scans) if reader.message_count else None)
         except Exception as err:  # noqa: BLE001 - rosbags raises its own error types for damaged files
             from lidarkit.io import ros2_storage_problem
 
@@ -440,6 +497,25 @@ class RosbagScans(_BagScans):
                            + (f": it reads as {kind!r} data ({kind}:PATH)" if kind and kind != "rosbag" else ""))
             raise DataError(problem or f"not a readable ROS bag ({type(err).__name__}: {err}; truncated or damaged?)",
                             source=self.path) from None
+        if len(paths) > 1:
+            self._check_split_parts(paths, spans)
+        return topics
+
+    def _check_split_parts(self, paths: list[Path], spans: list[tuple[int, int, int] | None]) -> None:
+        """DataError unless the bags of the folder are parts of one recording, each beginning where the one before ends
+        (within :data:`SPLIT_GAP_PERIODS` scan periods): two recordings were read as one, 24 frames with a 98.9 s gap
+        (RPE 107 m), and two copies of one bag failed on stamps "not strictly increasing"."""
+        parts = sorted((span[0], span[1], span[2], path) for path, span in zip(paths, spans) if span is not None)
+        periods = [(end - start) / (n - 1) for start, end, n, _ in parts if n > 1]
+        gap_ns = SPLIT_GAP_PERIODS * (float(np.median(periods)) if periods else 1e9 * MAX_SWEEP_S)
+        for (_, end, _, before), (start, _, _, after) in zip(parts, parts[1:]):
+            if start < end or start - end > gap_ns:
+                how = (f"{after.name} begins {1e-9 * (start - end):.3f} s after {before.name} ends" if start >= end else
+                       f"{after.name} begins {1e-9 * (end - start):.3f} s before {before.name} ends")
+                names = ", ".join(path.name for path in paths)
+                raise DataError(f"{len(paths)} bags ({names}) that are no parts of one recording: {how} (a split recording's "
+                                f"parts follow one another within {SPLIT_GAP_PERIODS} scan periods); read each on its own, "
+                                f"e.g. rosbag:{self.path / paths[0].name}", source=self.path)
 
     def _open_loader(self) -> None:
         from kiss_icp.datasets.rosbag import RosbagDataset

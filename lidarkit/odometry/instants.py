@@ -13,7 +13,8 @@ differ, the run re-times the ground truth to the estimate's instant when the dat
 otherwise it refuses a deskewed estimate (EvaluationError) and compares a non-deskewed one as it is, with a note
 (its instant is a measured tendency, not a rule the variant applies).
 Ground truth of an unknown instant (None) is re-timed to the estimate's instant where the dataset can give it (a
-bag whose poses are stamped at no clear instant of the sweep), else compared as it is: the reader could not tell.
+bag whose poses are stamped at no clear instant of the sweep), else compared as it is: the reader could not tell (with
+a note saying why when the dataset's re-timing failed).
 """
 
 from __future__ import annotations
@@ -94,7 +95,9 @@ def like_with_like(reference: Trajectory, estimate_at: str | None, *, sequence: 
                     + f": {method}'s poses refer to the sweep {estimate_at}")
             return retimed, note
     if truth_at is None:  # the reader could not tell, nor give another instant: compared as it is
-        return reference, None
+        # (re-timing that failed said nothing: one odometry message logged out of order, RPE 0.0165 m for 0.0079 m)
+        return reference, (f"ground truth stamped at no clear instant of the sweep compared as it is with {method}'s poses of "
+                           f"the sweep {estimate_at}{why_not}") if why_not else None
     if not deskewed:  # (a measured tendency of scan matching: no reason to refuse the run)
         held = ("which this dataset cannot re-time" + why_not if own_ground_truth else
                 f"given with the run (not re-timed: give it at the sweep {estimate_at} to score like with like)")
