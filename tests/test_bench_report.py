@@ -353,9 +353,9 @@ def test_report_csv_names_the_alignment_of_each_row(tmp_path):
     report = build_report(tmp_path, plots=False)
     with open(report.csv_path, newline="") as fh:
         header, *lines = list(csv.reader(fh))
-    # the columns readers index keep their places; the new one is last
+    # the columns readers index keep their places; new ones are last
     assert header == ["task", "experiment", "dataset", "method", "metric", "mean", "std", "n", "n_ok", "n_failed",
-                      "n_not_run", "median", "ci95_low", "ci95_high", "alignment"]
+                      "n_not_run", "median", "ci95_low", "ci95_high", "alignment", "n_rerun_failed"]
     assert [(r[3], r[4], float(r[5]), r[14]) for r in lines] == [
         ("gt_scale", "ape_rmse_m", 0.00222, "SE(3)-aligned"), ("gt_scale", "hz", 8.0, ""), ("gt_scale", "runtime_s", 0.1, ""),
         ("mono", "ape_rmse_m", 0.0039, "Sim(3)-aligned"), ("mono", "hz", 8.0, ""), ("mono", "runtime_s", 0.1, "")]
@@ -403,7 +403,7 @@ def test_a_pipe_in_a_name_does_not_break_the_markdown_tables(tmp_path):
 def test_the_report_holds_the_suite_last_run_in_the_folder_and_says_what_is_missing(tmp_path, capsys):
     """A folder reused by an edited suite keeps the earlier suite's results: the report holds the jobs of suite.json
     (the others counted as left out, ``--all`` takes them); the suite's jobs without a result are named, their rows
-    say how many seeds were not run, and such a row is not the best over fewer seeds."""
+    say how many seeds were not run, and such a row is ranked against the others on the seeds they share."""
     from lidarkit.bench.report import pivot, summary_rows
     from lidarkit.bench.results import result_path
 
@@ -434,7 +434,9 @@ def test_the_report_holds_the_suite_last_run_in_the_folder_and_says_what_is_miss
     _, cells = pivot(report.tables[0], "ape_rmse_m")
     assert cells[0][1].endswith("(1 of 2 not run)")
     _, summary = summary_rows(report)
-    assert summary[0][3] == "random_walk(noise_m=0.5, steps=40)"  # the complete row, though its mean is larger
+    # a seed not run is no failure: the better method on the seed both ran (it was the complete row, its mean larger)
+    assert summary[0][3] == "random_walk(noise_m=0.01, steps=40)"
+    assert summary[0][4].endswith("(1 of 2 not run) (ranked on the common seeds 0)"), summary[0][4]
     text = (tmp_path / "out" / "report.md").read_text()
     assert "3 job results of the suite's 4 jobs (1 not run yet)" in text and "## Jobs of the suite without a result" in text
 
@@ -758,7 +760,7 @@ def test_publication_tables_average_over_common_seeds_and_the_summary_says_when_
     """kiss over seeds 0-4 and ground_filtered over 1 and 3 (another experiment, or the rest failed): the APE table set
     ground_filtered's 0.46 bold against kiss's 0.64, where on seeds 1 and 3 kiss was better (0.33), and the Summary
     named it best, neither saying the seeds differed. The tables now average every method over the common seeds and
-    say which were left out; the Summary says the rows it ranked ran other seeds."""
+    say which were left out; the Summary ranks the rows on the common seeds too, and says so."""
     from lidarkit.bench.jobs import Job
     from lidarkit.bench.results import make_record, write_result
 
@@ -774,7 +776,8 @@ def test_publication_tables_average_over_common_seeds_and_the_summary_says_when_
     assert "Means over common seeds, drive: seeds 1, 3 of every method (left out: kiss 0, 2, 4)." in table
     assert "seeds 1, 3 of every method" in (tmp_path / "tables" / "ape_rmse.tex").read_text()
     summary = next(line for line in (tmp_path / "report.md").read_text().splitlines() if line.startswith("| odometry | drive"))
-    assert "(seeds 1, 3; others ran other seeds: compare them on common seeds)" in summary, summary
+    # ranked as the tables average: over the common seeds, where kiss is better (it named ground_filtered over its own)
+    assert "| e_kiss: kiss | 0.64 ± 0.34 (ranked on the common seeds 1, 3: 0.33 there) |" in summary, summary
     # and no comparison with the reference is said, not left out without a word
     assert ("- no comparison: drive, kiss vs ground_filtered: 2 common seed(s) (a comparison over seeds needs 5) and no "
             "KITTI segments to pair (a path under 100 m)") in (tmp_path / "report.md").read_text().splitlines()
@@ -1051,3 +1054,224 @@ def test_the_summary_counts_only_the_methods_it_ranked(tmp_path):
     header, rows = summary_rows(build_report(tmp_path / "out", plots=False))
     assert header[5] == "methods ranked"
     assert [row[1:4] + row[5:] for row in rows] == [["synthetic", "APE RMSE [m]", "random_walk(noise_m=0.01)", "2"]]
+
+
+CUSTOM_TASK_MODULE = """
+from lidarkit.bench import Metric, Task, TaskOutput, register_task
+
+@register_task("report_module_task")
+class ReportModuleTask(Task):
+    dataset_kinds = ("synthetic",)
+    metrics = (Metric("error_m", "error [m]"), Metric("hz", "frames/s", kind="speed", better="higher"))
+    sweep_plots = (("n_iterations", "error_m"),)
+
+    def run(self, job):
+        return TaskOutput(metrics={"error_m": 0.1 / job.params["n_iterations"] + 0.01 * job.seed, "hz": 20.0})
+"""
+
+
+def test_a_report_imports_the_module_of_a_custom_task_the_run_recorded(tmp_path, monkeypatch, caplog):
+    """`lidarkit report OUT` on a custom task's results (a process that never imported its module) showed bare metric
+    names, no speed table, and removed the sweep figure the run's report drew, saying so at INFO only. The run records
+    the task's module; the report imports it (from the folder it was imported from when the suite ran, when it is not
+    on sys.path), and a module that is gone is one warning, the figure kept."""
+    import importlib
+    import json
+    import sys
+
+    from lidarkit.bench import tasks as bench_tasks
+    from lidarkit.bench.report import pivot
+
+    monkeypatch.setattr(bench_tasks, "_REGISTERED", {})
+    monkeypatch.setattr(bench_tasks, "_INSTANCES", {})
+    code = tmp_path / "code"
+    code.mkdir()
+    (code / "lidarkit_report_module_task.py").write_text(CUSTOM_TASK_MODULE)
+    monkeypatch.syspath_prepend(str(code))
+    try:
+        importlib.import_module("lidarkit_report_module_task")  # (registers the task, as the user's script does)
+
+        (tmp_path / "suite.yaml").write_text(textwrap.dedent("""
+            seeds: 2
+            experiments:
+              - task: report_module_task
+                dataset: {kind: synthetic}
+                methods: [{name: m, grid: {n_iterations: [1, 10, 100]}}]
+            """))
+        run_suite(load_suite(tmp_path / "suite.yaml"), tmp_path / "out", executor="serial")
+        origin = {"module": "lidarkit_report_module_task", "folder": str(code)}
+        assert json.loads((tmp_path / "out" / "suite.json").read_text()).get("task_modules") == {"report_module_task": origin}
+        assert [r["task_module"] for r in load_results(tmp_path / "out")] == [origin] * 6
+        first = build_report(tmp_path / "out")
+        sweep = [p.filename for p in first.plots if p.filename.startswith("sweep_")]
+        assert len(sweep) == 1
+
+        # another process: the task unknown, its module neither imported nor on sys.path
+        def fresh_process():
+            monkeypatch.setattr(bench_tasks, "_REGISTERED", {})
+            monkeypatch.setattr(bench_tasks, "_INSTANCES", {})
+            sys.modules.pop("lidarkit_report_module_task", None)
+
+        fresh_process()
+        monkeypatch.setattr(sys, "path", [p for p in sys.path if p != str(code)])
+        report = build_report(tmp_path / "out")
+        table = report.tables[0]
+        assert [(m.name, m.label, m.kind) for m in table.metrics] == [
+            ("error_m", "error [m]", "accuracy"), ("hz", "frames/s", "speed"), ("runtime_s", "runtime [s]", "speed")]
+        assert pivot(table, "hz")[0] == ["method", "synthetic"]  # the speed table of the task's own speed metric
+        assert [p.filename for p in report.plots if p.filename.startswith("sweep_")] == sweep
+        assert str(code) not in sys.path  # (the folder is searched for this import alone)
+
+        # the module is gone: one warning line, and the figure this report cannot draw is kept
+        fresh_process()
+        (code / "lidarkit_report_module_task.py").unlink()
+        importlib.invalidate_caches()
+        caplog.clear()
+        report = build_report(tmp_path / "out")
+        warnings = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
+        assert warnings == ["task 'report_module_task': its module lidarkit_report_module_task cannot be imported here "
+                            "(ModuleNotFoundError: No module named 'lidarkit_report_module_task'); its metrics are shown "
+                            "by name and its sweep figures in plots/ are kept"]
+        assert report.plots == [] and (tmp_path / "out" / "plots" / sweep[0]).is_file()
+    finally:
+        sys.modules.pop("lidarkit_report_module_task", None)
+
+
+def test_a_seed_not_run_yet_does_not_make_the_worse_method_the_best(tmp_path):
+    """An interrupted run: the better method's seed 2 had no result yet, and the Summary named the complete method
+    best, 0.55 against 0.225 on the seeds both ran (complete rows came first). Rows are now ranked on their means over
+    the seeds they share, as the publication tables average them; a failed seed still puts its row behind."""
+    import json
+
+    from lidarkit.bench.jobs import Job
+    from lidarkit.bench.report import summary_rows
+    from lidarkit.bench.results import make_record, write_result
+
+    values = {"good": {0: 0.2, 1: 0.25, 2: None}, "worse": {0: 0.5, 1: 0.6, 2: 0.55}}  # None: not run yet
+    jobs = []
+    for method, per_seed in values.items():
+        for seed, ape in per_seed.items():
+            job = Job("selftest", "e", "synth", {"kind": "synthetic"}, method, seed=seed)
+            jobs.append({"key": job.key(), **job.spec()})
+            if ape is not None:
+                write_result(tmp_path, make_record(job, job.key(), "1", {"status": "ok", "metrics": {"ape_rmse_m": ape},
+                                                                         "error": None, "runtime_s": 0.1}))
+    (tmp_path / "suite.json").write_text(json.dumps({"suite": "s", "jobs": jobs}))
+    _, rows = summary_rows(build_report(tmp_path, plots=False))
+    assert rows[0][3:] == ["good", "0.225 ± 0.035 (1 of 3 not run) (ranked on the common seeds 0, 1)", "2"]
+    # a failed seed is no seed not run: that row still comes after the complete one
+    job = Job("selftest", "e", "synth", {"kind": "synthetic"}, "good", seed=2)
+    write_result(tmp_path, make_record(job, job.key(), "1", {"status": "failed", "metrics": {}, "runtime_s": 0.1,
+                                                              "error": {"type": "RuntimeError", "message": "lost"}}))
+    _, rows = summary_rows(build_report(tmp_path, plots=False))
+    assert rows[0][3:5] == ["worse", "0.55 ± 0.05"]
+
+
+def test_a_failed_forced_rerun_is_listed_and_the_rows_it_left_say_so(tmp_path, monkeypatch):
+    """A ``--force`` rerun that failed keeps the earlier ok result (``rerun_failed`` in its record), but the report never
+    said so: the rows read as fresh results. The failures section lists each such job and its cells say how many of
+    their seeds are results kept after a failed rerun (report.csv: ``n_rerun_failed``)."""
+    import os
+
+    from lidarkit.bench import tasks as bench_tasks
+    from lidarkit.bench.report import _table_rows, pivot
+    from lidarkit.bench.tasks import Metric, Task, TaskOutput, register_task
+
+    monkeypatch.setattr(bench_tasks, "_REGISTERED", {})
+    monkeypatch.setattr(bench_tasks, "_INSTANCES", {})
+
+    @register_task("flaky_report_task")
+    class Flaky(Task):
+        dataset_kinds = ("synthetic",)
+        metrics = (Metric("err_m", "error [m]"),)
+
+        def run(self, job):
+            if os.environ.get("FLAKY_REPORT_FAIL") and job.seed == 1:
+                raise RuntimeError("transient: data disk not mounted")
+            return TaskOutput(metrics={"err_m": 0.5 + job.seed})
+
+    (tmp_path / "suite.yaml").write_text(textwrap.dedent("""
+        seeds: 2
+        experiments:
+          - {task: flaky_report_task, dataset: {kind: synthetic, name: synth}, methods: [a]}
+        """))
+    suite = load_suite(tmp_path / "suite.yaml")
+    run_suite(suite, tmp_path / "out", executor="serial")
+    monkeypatch.setenv("FLAKY_REPORT_FAIL", "1")
+    run_suite(suite, tmp_path / "out", executor="serial", force=True)
+    report = build_report(tmp_path / "out", plots=False)
+    line = ("forced rerun failed: RuntimeError: transient: data disk not mounted; the earlier ok result is shown")
+    md = (tmp_path / "out" / "report.md").read_text()
+    assert f"flaky_report_task | flaky_report_task_0 | synth | a | seed 1: {line}" in md
+    assert report.failures == []  # (its result is the earlier ok one: no failed job)
+    assert [f["error"] for f in report.rerun_failures] == [line]
+    assert f"{line}</li>" in (tmp_path / "out" / "report.html").read_text()
+    assert pivot(report.tables[0], "err_m")[1] == [["a", "1 ± 0.71 (1 of 2 kept after a failed rerun)"]]
+    assert "1 ± 0.71 (1 of 2 kept after a failed rerun)" in (tmp_path / "out" / "report.html").read_text()
+    assert _table_rows(report.tables[0])[1][0][3:5] == ["2/0 (1 kept after a failed rerun)", "1 ± 0.71"]
+    with open(report.csv_path, newline="") as fh:
+        assert {r["metric"]: r["n_rerun_failed"] for r in csv.DictReader(fh)} == {"err_m": "1", "runtime_s": "1"}
+
+
+def test_the_segment_box_plots_say_how_many_segments_each_method_has_and_their_lengths(tmp_path, monkeypatch):
+    """Two methods of 4 segments of 100 m each: the caption said "8 segments (100-800 m) pooled over datasets and seeds"
+    and the title "(8 segments)". Both now say the count per method and the lengths present."""
+    from lidarkit.bench.jobs import Job
+    from lidarkit.bench.publication import build_publication
+    from lidarkit.eval import plots
+    from lidarkit.eval.tables import SegmentErrors
+
+    titles = []
+    save_figure = plots.save_figure
+    monkeypatch.setattr(plots, "save_figure", lambda fig, path: titles.append(fig.axes[0].get_title()) or save_figure(fig, path))
+
+    def record(method, lengths):
+        job = Job("odometry", "e", "drive", {"kind": "sim_lidar", "scene": "street"}, method, seed=0)
+        n = len(lengths)
+        return {"status": "ok", "job": job.spec(), "metrics": {"ape_rmse_m": 0.1},
+                "series": {"drift_segments": {"first_frame": list(range(0, 10 * n, 10)), "length_m": lengths,
+                                              "translation_pct": [1.0 + 0.1 * k for k in range(n)],
+                                              "rotation_deg_per_100m": [0.5] * n, "speed_mps": [1.0] * n}}}
+
+    grid = {("drive", method): SegmentErrors.from_dict(record(method, [100.0] * 4)["series"]["drift_segments"])
+            for method in ("kiss", "vanilla")}
+    plots.plot_segment_boxplots(grid, tmp_path / "box.png", "rotation_deg_per_100m")
+    assert [" ".join(t.split()) for t in titles] == ["per-segment KITTI rotational drift (deg/100 m): 4 segments per method (100 m)"]
+    pub = build_publication([record("kiss", [100.0] * 4), record("vanilla", [100.0] * 4)], tmp_path)
+    assert [caption for caption, _ in pub.boxplots] == [
+        f"Per-segment KITTI {what} drift per method: 4 segments per method (100 m), pooled over datasets and seeds; "
+        "box = quartiles, whiskers = 1.5 IQR." for what in ("translational", "rotational")]
+    assert " ".join(titles[1].split()) == "per-segment KITTI translational drift (%): 4 segments per method (100 m)"
+    pub = build_publication([record("kiss", [100.0, 200.0, 300.0]), record("vanilla", [100.0])], tmp_path)
+    assert pub.boxplots[0][0].startswith("Per-segment KITTI translational drift per method: kiss 3, vanilla 1 segments "
+                                         "(100-300 m), pooled")
+
+
+def test_plots_and_reports_print_in_one_short_line(results_dir, tmp_path):
+    """``repr`` of a Plot printed its PNG bytes (54,846 characters) and of a Report everything it holds (58,095)."""
+    import shutil
+
+    from lidarkit.bench.report import Plot
+
+    shutil.copytree(results_dir, tmp_path / "out")
+    report = build_report(tmp_path / "out", plots=False)
+    report.plots = [Plot("trajectories", "traj.png", PNG_MAGIC + bytes(50_000), "selftest", "Top view")]
+    assert repr(report.plots[0]) == "Plot(title='trajectories', filename='traj.png', task='selftest', caption='Top view')"
+    assert repr(report) == f"Report({str(tmp_path / 'out')!r}, 1 tables, 1 plots, 12 results, 3 failed, 0 not run)"
+
+
+def test_the_statistics_table_names_its_interval_method(tmp_path):
+    """The page's header said "95 % CI (bootstrap)" for every row: of 3 seeds the interval is Student-t's (the bootstrap
+    of a few seeds is far too narrow), its t quantile with 2 degrees of freedom, 4.30."""
+    from lidarkit.bench.jobs import Job
+    from lidarkit.bench.results import make_record, write_result
+
+    for seed in range(3):
+        for method, value in (("kiss", 1.0 + seed), ("small_gicp", 2.0 + 0.5 * seed)):
+            job = Job("odometry", "e", "drive", {"kind": "sim_lidar", "scene": "street"}, method, seed=seed)
+            outcome = {"status": "ok", "metrics": {"ape_rmse_m": value}, "error": None, "runtime_s": 0.1}
+            write_result(tmp_path, make_record(job, job.key(), "1", outcome))
+    build_report(tmp_path, plots=False)
+    page = (tmp_path / "report.html").read_text()
+    assert '<th>95 % CI (Student-t)</th></tr></thead><tbody><tr><td class="l">drive</td><td class="l">kiss</td><td>3</td>' in page
+    assert "<td>[-0.4841, 4.484]</td>" in page and "bootstrap" not in page  # kiss: 2 -+ 4.303 x 1 / sqrt(3)

@@ -238,11 +238,11 @@ def build_publication(records: list[dict[str, Any]], out_dir: Path, *, plots: bo
     if not pub.tables:
         return pub
     if plots and segments:
-        from lidarkit.eval.plots import plot_segment_boxplots
+        from lidarkit.eval.plots import plot_segment_boxplots, segment_counts_text
 
         for quantity, what in (("translation_pct", "translational"), ("rotation_deg_per_100m", "rotational")):
             path = plot_segment_boxplots(segments, out_dir / "plots" / f"segments_{quantity}.png", quantity)
-            n = sum(len(s) for s in segments.values())
-            pub.boxplots.append((f"Per-segment KITTI {what} drift per method: {n} segments (100-800 m) pooled over "
-                                 "datasets and seeds; box = quartiles, whiskers = 1.5 IQR.", path))
+            # (it said "8 segments (100-800 m)" where each of two methods had 4 of 100 m)
+            pub.boxplots.append((f"Per-segment KITTI {what} drift per method: {segment_counts_text(segments)}, pooled "
+                                 "over datasets and seeds; box = quartiles, whiskers = 1.5 IQR.", path))
     return pub

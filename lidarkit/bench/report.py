@@ -60,10 +60,12 @@ class Row:
     n_ok: int
     n_failed: int
     stats: dict[str, tuple[float, float, int]]  # metric -> (mean, std, n)
-    summaries: dict[str, Any] = field(default_factory=dict)  # metric -> lidarkit.eval.Summary (median, bootstrap CI)
+    summaries: dict[str, Any] = field(default_factory=dict)  # metric -> lidarkit.eval.Summary (median, 95 % CI)
     n_missing: int = 0  # seeds of the suite with no result yet (an interrupted run)
     alignment: dict[str, str] = field(default_factory=dict)  # metric -> the alignment its records state
     seeds: tuple[int, ...] = ()  # the seeds of its ok results (the ones its numbers are over)
+    values: dict[str, dict[int, float]] = field(default_factory=dict, repr=False)  # metric -> seed -> its finite value
+    n_rerun_failed: int = 0  # ok results kept after a --force rerun of their job failed (the record's rerun_failed)
 
 
 @dataclass
@@ -79,12 +81,12 @@ class TaskTable:
 class Plot:
     title: str
     filename: str
-    png: bytes
+    png: bytes = field(repr=False)  # (tens of kB: a repr of 54,846 characters)
     task: str = ""
     caption: str = ""
 
 
-@dataclass
+@dataclass(repr=False)
 class Report:
     """What ``build_report`` computed and wrote."""
 
@@ -92,6 +94,7 @@ class Report:
     tables: list[TaskTable]
     plots: list[Plot] = field(default_factory=list)
     failures: list[dict[str, Any]] = field(default_factory=list)
+    rerun_failures: list[dict[str, Any]] = field(default_factory=list)  # ok results kept after a failed --force rerun
     warnings: list[tuple[str, str]] = field(default_factory=list)  # (job label, message)
     skipped: list[tuple[str, str]] = field(default_factory=list)  # experiments the last run skipped (name, reason)
     n_records: int = 0
@@ -104,6 +107,68 @@ class Report:
     html_path: Path | None = None
     markdown_path: Path | None = None
     csv_path: Path | None = None
+
+    def __repr__(self) -> str:
+        """One line of counts (the tables, plots and publication in full were 58,095 characters)."""
+        return (f"Report({str(self.out_dir)!r}, {len(self.tables)} tables, {len(self.plots)} plots, {self.n_records} "
+                f"results, {len(self.failures)} failed, {len(self.not_run)} not run)")
+
+
+def import_task_modules(records: list[dict[str, Any]], manifest: dict[str, Any]) -> dict[str, str]:
+    """Import the module of each task of ``records`` registered in code (as the run recorded it, in each result or
+    ``suite.json``), by name, else from the folder it was imported from when the suite ran; ``{task: why}`` of the tasks
+    still unknown, each said in one warning. Without the module a report showed bare metric names, no speed table, and
+    removed the sweep figures an earlier report had drawn."""
+    from lidarkit.bench.tasks import available_tasks, get_task
+
+    recorded = manifest.get("task_modules") if isinstance(manifest.get("task_modules"), dict) else {}
+    origins: dict[str, Any] = {}
+    for r in records:  # (the first result that names one: results written before it was recorded name none)
+        origins[r["job"]["task"]] = origins.get(r["job"]["task"]) or r.get("task_module") or recorded.get(r["job"]["task"])
+    unknown: dict[str, str] = {}
+    for task, origin in sorted(origins.items()):
+        why = "" if task in available_tasks() else _import_task_module(task, origin if isinstance(origin, dict) else {})
+        if not why and task not in available_tasks():
+            why = f"its module {origin['module']} registers no task {task!r}"
+        if not why:
+            try:
+                get_task(task)
+            except Exception as err:  # noqa: BLE001 - (a built-in task whose own module cannot load here, too)
+                why = str(err)
+        if why:
+            unknown[task] = why
+            log.warning("task %r: %s; its metrics are shown by name and its sweep figures in plots/ are kept", task, why)
+    return unknown
+
+
+def _import_task_module(task: str, origin: dict[str, Any]) -> str:
+    """Import ``origin["module"]`` (:func:`import_task_modules`); '' once imported, else why it was not."""
+    import importlib
+    import sys
+
+    module, folder = origin.get("module"), origin.get("folder")
+    if not isinstance(module, str) or not module:
+        return "the results name no module defining it (import the module that registers it before build_report)"
+    if module == "__main__":
+        return (f"it was registered in the script that ran the suite ({origin.get('script') or '__main__'}), which a "
+                "report cannot import: define it in a module")
+    try:
+        try:
+            importlib.import_module(module)
+            return ""
+        except ModuleNotFoundError as err:  # (not on sys.path here: the folder it was imported from when the suite ran)
+            if not (err.name and (module == err.name or module.startswith(err.name + "."))):
+                raise
+            if not isinstance(folder, str) or not Path(folder).is_dir():
+                return f"its module {module} cannot be imported here ({err})"
+        sys.path.insert(0, folder)
+        try:
+            importlib.import_module(module)
+        finally:
+            sys.path.remove(folder)
+        return ""
+    except Exception as err:  # noqa: BLE001 - a module that fails to load is said, not a failed report
+        return f"its module {module} cannot be imported here ({type(err).__name__}: {err})"
 
 
 def _task_meta(task: str) -> tuple[list[MetricInfo], tuple[tuple[str, str], ...]]:
@@ -167,7 +232,7 @@ def aggregate(records: list[dict[str, Any]], missing: list[dict[str, Any]] = ())
             items = groups[ident]
             experiment, dataset, method = jobs[ident].experiment, dataset_of[ident], jobs[ident].method_label
             ok = [r for r in items if r.get("status") == "ok"]
-            stats, summaries = {}, {}
+            stats, summaries, per_seed = {}, {}, {}
             for m in metrics:
                 if m.name == "runtime_s":
                     values = [r.get("runtime_s") for r in ok]
@@ -175,9 +240,12 @@ def aggregate(records: list[dict[str, Any]], missing: list[dict[str, Any]] = ())
                     values = [r["metrics"].get(m.name) for r in ok]
                 stats[m.name] = _stats(values)
                 summaries[m.name] = summarize([v for v in values if v is not None and math.isfinite(v)], seed=0)
+                per_seed[m.name] = {int(r["job"]["seed"]): float(v) for r, v in zip(ok, values)
+                                    if v is not None and math.isfinite(v)}
             rows.append(Row(task, experiment, dataset, method, len(ok), len(items) - len(ok), stats, summaries,
                             n_missing=missing_per_row.get(ident, 0), alignment=_stated_alignment(ok),
-                            seeds=tuple(sorted(int(r["job"]["seed"]) for r in ok))))
+                            seeds=tuple(sorted(int(r["job"]["seed"]) for r in ok)), values=per_seed,
+                            n_rerun_failed=sum(bool(r.get("rerun_failed")) for r in ok)))
         higher = frozenset(name for r in recs for name in (r.get("higher_is_better") or ()))
         tables.append(TaskTable(task, metrics, rows, higher))
     return tables
@@ -449,11 +517,16 @@ def sweep_x_scale(xs: list[float]) -> tuple[str, dict[str, float], str]:
 def _table_rows(table: TaskTable) -> tuple[list[str], list[list[str]]]:
     header = ["experiment", "dataset", "method", "ok/failed"] + [m.label for m in table.metrics]
     rows = [
-        [r.experiment, r.dataset, r.method, f"{r.n_ok}/{r.n_failed}"]
+        [r.experiment, r.dataset, r.method, f"{r.n_ok}/{r.n_failed}" + _rerun_note(r)]
         + [format_stat(r.stats[m.name]) + _failed_note(r, m.name, failures=False) + _alignment_note(r, m) for m in table.metrics]
         for r in table.rows
     ]
     return header, rows
+
+
+def _rerun_note(row: Row) -> str:
+    """`` (1 kept after a failed rerun)`` beside a row's ok/failed counts (see :func:`_failed_note`), else ''."""
+    return f" ({row.n_rerun_failed} kept after a failed rerun)" if row.n_rerun_failed else ""
 
 
 def pivot(table: TaskTable, metric: str) -> tuple[list[str], list[list[str]]]:
@@ -530,8 +603,9 @@ def _markdown(report: Report, title: str) -> str:
         out += ["## Jobs of the suite without a result", ""] + [f"- {line}" for line in _not_run_lines(report)] + [""]
     if report.warnings:
         out += ["## Warnings logged by jobs", ""] + [f"- {label}: {message}" for label, message in report.warnings] + [""]
-    if report.failures:
-        out += ["## Failed jobs", ""] + [f"- `{f['key']}` {f['label']}: {f['error']}" for f in report.failures] + [""]
+    if report.failures or report.rerun_failures:
+        out += ["## Failed jobs", ""] + [f"- `{f['key']}` {f['label']}: {f['error']}"
+                                         for f in report.failures + report.rerun_failures] + [""]
     return "\n".join(out)
 
 
@@ -546,7 +620,8 @@ def _csv(report: Report) -> str:
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
     writer.writerow(["task", "experiment", "dataset", "method", "metric", "mean", "std", "n", "n_ok", "n_failed",
-                     "n_not_run", "median", "ci95_low", "ci95_high", "alignment"])  # (new columns go last: readers index them)
+                     "n_not_run", "median", "ci95_low", "ci95_high", "alignment",
+                     "n_rerun_failed"])  # (new columns go last: readers index them)
     for table in report.tables:
         for r in table.rows:
             for m in table.metrics:
@@ -555,7 +630,7 @@ def _csv(report: Report) -> str:
                 # one value has no spread: empty cells, not a std of 0 and a CI [v, v] of zero width
                 extra = [_csv_number(s.median), repr(s.ci_low) if s.n > 1 else "", repr(s.ci_high) if s.n > 1 else ""] if s is not None else ["", "", ""]
                 writer.writerow([r.task, r.experiment, r.dataset, r.method, m.name, _csv_number(mean), repr(std) if n > 1 else "",
-                                 n, r.n_ok, r.n_failed, r.n_missing, *extra, r.alignment.get(m.name, "")])
+                                 n, r.n_ok, r.n_failed, r.n_missing, *extra, r.alignment.get(m.name, ""), r.n_rerun_failed])
     return buf.getvalue()
 
 
@@ -626,23 +701,48 @@ def summary_rows(report: Report) -> tuple[list[str], list[list[str]]]:
             if r.stats[metric.name][2] > 0:
                 groups[(r.dataset, r.alignment.get(metric.name, "") if metric.by_alignment else "")].append(r)
         for (dataset, alignment), candidates in sorted(groups.items()):
-            # a method that failed on some seeds is not the best over one lucky seed: complete rows come first
+            # a method that failed on some seeds is not the best over one lucky seed: complete rows come first (a seed
+            # with no value, NaN, counts as a failed one); a seed not run yet is no failure: rows are ranked on their
+            # means over the seeds they share (a method whose best seed was not run yet lost to a worse complete one)
+            ranked = [r for r in candidates if not (r.n_failed or _n_no_value(r, metric.name))] or candidates
+            common = _common_seeds(ranked, metric.name)
             sign = -1.0 if better_higher else 1.0
-            # (a seed with no value, NaN, counts as a failed one)
-            best = min(candidates, key=lambda r: (r.n_failed > 0 or r.n_missing > 0 or _n_no_value(r, metric.name) > 0,
-                                                  sign * r.stats[metric.name][0]))
+            best = min(ranked, key=lambda r: sign * _mean_over(r, metric.name, common))
             rows.append([table.task, dataset, metric.by_alignment.get(alignment, metric.label), _short_label(best, table),
-                         format_stat(best.stats[metric.name]) + _failed_note(best, metric.name) + _seeds_note(best, candidates),
+                         format_stat(best.stats[metric.name]) + _failed_note(best, metric.name)
+                         + _seeds_note(best, ranked, common, metric.name),
                          str(len({r.method for r in candidates}))])
     return header, rows
 
 
-def _seeds_note(best: Row, candidates: list[Row]) -> str:
-    """`` (seeds 1, 3; others ran other seeds: compare them on common seeds)`` when the rows ranked ran other seeds (a
-    method over seeds 1 and 3 was named best against kiss over 0-4, where on seeds 1 and 3 kiss was better), else ''."""
-    if len({r.seeds for r in candidates}) < 2:
+def _common_seeds(rows: list[Row], metric: str) -> frozenset[int]:
+    """The seeds on which every row has a value of ``metric`` (empty when they share none)."""
+    return frozenset.intersection(*(frozenset(r.values.get(metric, ())) for r in rows)) if rows else frozenset()
+
+
+def _mean_over(row: Row, metric: str, seeds: frozenset[int]) -> float:
+    """``row``'s mean of ``metric`` over ``seeds`` (over all its seeds when ``seeds`` is empty)."""
+    if not seeds:
+        return row.stats[metric][0]
+    return float(np.mean([row.values[metric][s] for s in sorted(seeds)]))
+
+
+def _seeds_note(best: Row, ranked: list[Row], common: frozenset[int], metric: str) -> str:
+    """What the Summary's ranking was over when the rows ranked ran other seeds (a method over seeds 1 and 3 was named
+    best against kiss over 0-4, where on seeds 1 and 3 kiss was better), else '': the common seeds it ranked them on
+    (and the best row's mean over them where its cell is over more), or that they share none."""
+    seeds_of = [frozenset(r.values.get(metric, ())) for r in ranked]
+    if len(set(seeds_of)) < 2:
         return ""
-    return f" (seeds {', '.join(map(str, best.seeds))}; others ran other seeds: compare them on common seeds)"
+    if not common:
+        return (f" (seeds {_seed_list(best.values.get(metric, ()))}; the others ran other seeds, none in common: each "
+                "ranked over its own)")
+    there = "" if common == frozenset(best.values.get(metric, ())) else f": {_fmt(_mean_over(best, metric, common))} there"
+    return f" (ranked on the common seeds {_seed_list(common)}{there})"
+
+
+def _seed_list(seeds: Any) -> str:
+    return ", ".join(str(s) for s in sorted(seeds))
 
 
 def _n_no_value(row: Row, metric: str) -> int:
@@ -654,13 +754,15 @@ def _n_no_value(row: Row, metric: str) -> int:
 
 def _failed_note(row: Row, metric: str, failures: bool = True) -> str:
     """`` (3 of 5 failed)`` / `` (4 of 12 not run)`` / `` (2 of 3 no value)`` for a row some of whose seeds failed, have
-    no result yet or gave ``metric`` no finite value (its numbers are over the others), else ''; ``failures=False``:
-    not the failed seeds (a table whose ok/failed column says them; the seeds not run it does not)."""
+    no result yet or gave ``metric`` no finite value (its numbers are over the others), and `` (1 of 3 kept after a
+    failed rerun)`` for ok results a failed ``--force`` rerun left (it re-ran nothing they say), else '';
+    ``failures=False``: neither of those (a table whose ok/failed column says them; the seeds not run it does not)."""
     total = row.n_ok + row.n_failed + row.n_missing
     n_no_value = _n_no_value(row, metric)
     notes = ([f"{row.n_failed} of {total} failed"] * bool(failures and row.n_failed)
              + [f"{row.n_missing} of {total} not run"] * bool(row.n_missing)
-             + [f"{n_no_value} of {total} no value"] * bool(n_no_value))
+             + [f"{n_no_value} of {total} no value"] * bool(n_no_value)
+             + [f"{row.n_rerun_failed} of {total} kept after a failed rerun"] * bool(failures and row.n_rerun_failed))
     return f" ({', '.join(notes)})" if notes else ""
 
 
@@ -675,11 +777,16 @@ def _short_label(row: Row, table: TaskTable) -> str:
 
 
 def statistics_rows(table: TaskTable) -> tuple[list[str], list[list[str]]]:
-    """Per (dataset, method): the headline metric's n, mean, std, median and seeded 95 % bootstrap CI over seeds."""
+    """Per (dataset, method): the headline metric's n, mean, std, median and 95 % CI of the mean over seeds, the
+    header naming the interval's method (Student-t below 10 seeds, the seeded bootstrap from 10)."""
+    from lidarkit.eval.statistics import ci_methods
+
     metric = next((m for m in table.metrics if m.kind == "accuracy"), None)
-    header = ["dataset", "method", "n", "mean", "std", "median", "95 % CI (bootstrap)"]
+    header = ["dataset", "method", "n", "mean", "std", "median", "95 % CI"]
     if metric is None:
         return header, []
+    method = ci_methods(r.summaries.get(metric.name) for r in table.rows)
+    header[-1] = f"95 % CI ({method})" if method else header[-1]
     rows = []
     for r in table.rows:
         s = r.summaries.get(metric.name)
@@ -758,7 +865,8 @@ def _html(report: Report, title: str) -> str:
         ("Jobs of the suite without a result", [f"<li>{e(line)}</li>" for line in _not_run_lines(report)]),
         ("Warnings logged by jobs", [f"<li>{e(label)}: {e(message)}</li>" for label, message in report.warnings]),
         ("Failed jobs", [
-            f'<li class="failed"><code>{e(f["key"])}</code> {e(f["label"])}: {e(f["error"])}</li>' for f in report.failures
+            f'<li class="failed"><code>{e(f["key"])}</code> {e(f["label"])}: {e(f["error"])}</li>'
+            for f in report.failures + report.rerun_failures
         ]),
     )
     for heading, items in sections:
@@ -853,6 +961,7 @@ def build_report(
     missing = {k: spec for k, spec in expected.items() if k not in done}
     unreadable = {k for k in missing if result_path(out_dir, k).exists()}  # (load_results logged why)
     n_left_out, n_earlier_version = left_out_counts(every_record, records, expected.values())
+    unknown_tasks = import_task_modules(records + [{"job": spec} for spec in missing.values()], manifest)
     report = Report(out_dir=out_dir, tables=aggregate(records, list(missing.values())), n_records=len(records),
                     skipped=_skipped(manifest), n_expected=len(expected), n_left_out=n_left_out,
                     n_earlier_version=n_earlier_version,
@@ -867,6 +976,10 @@ def build_report(
         if r.get("status") != "ok":
             err = r.get("error") or {}
             report.failures.append({"key": r["key"], "label": _label(r), "error": f"{err.get('type')}: {err.get('message')}"})
+        elif isinstance(r.get("rerun_failed"), dict):  # (the report said nothing of the failed rerun)
+            err = r["rerun_failed"].get("error") or {}
+            report.rerun_failures.append({"key": r["key"], "label": _label(r), "error": (
+                f"forced rerun failed: {err.get('type')}: {err.get('message')}; the earlier ok result is shown")})
     if n_warnings > MAX_LISTED_WARNINGS:  # (the list stopped at 100 without a word)
         report.warnings.append(("...", f"and {n_warnings - MAX_LISTED_WARNINGS} more job warnings (each job's in jobs/<key>.json)"))
     texts = [out_dir / "report.md", out_dir / "report.csv", out_dir / "report.html"]
@@ -889,10 +1002,12 @@ def build_report(
     pub.files = [out_dir / path.relative_to(tmp) for path in pub.files]
     pub.boxplots = [(caption, out_dir / path.relative_to(tmp)) for caption, path in pub.boxplots]
     # an earlier report's figures and tables this one does not draw go (all figures with plots=False); only files of
-    # the names a report writes (a figure a user put in plots/ is kept), as run folders remove an earlier run's
+    # the names a report writes (a figure a user put in plots/ is kept), as run folders remove an earlier run's; the
+    # sweep figures of a task whose module is not loaded here stay (this report could not draw them)
     drawn = {p.filename for p in report.plots} | {path.name for _, path in pub.boxplots}
+    undrawable = tuple(f"sweep_{_slug(task)[:72]}_" for task in unknown_tasks)
     for stale in (out_dir / "plots").glob("*.png"):
-        if stale.name not in drawn and _OWN_FIGURE.fullmatch(stale.name):
+        if stale.name not in drawn and _OWN_FIGURE.fullmatch(stale.name) and not stale.name.startswith(undrawable):
             stale.unlink()
     remove_stale_tables(out_dir, pub)
     return report

@@ -81,7 +81,8 @@ def run_suite(
         by_key = dict(keyed)
         todo = [(key, job) for key, job in keyed if force or not is_finished(out_dir, key)]
         summary = RunSummary(out_dir=out_dir, total=len(keyed), skipped=len(keyed) - len(todo))
-        _write_manifest(suite, out_dir, keyed, version)
+        origins = {name: origin for name in sorted({job.task for job in suite.jobs}) if (origin := task_origin(name))}
+        _write_manifest(suite, out_dir, keyed, version, origins)
         remove_stale_temp_files(out_dir)
         if on_start is not None:
             on_start(len(todo), summary.skipped)
@@ -91,6 +92,8 @@ def run_suite(
                 for key, outcome in runner.run(job_fn, [(key, _worker_spec(job)) for key, job in todo]):
                     job = by_key[key]
                     record = make_record(job, key, version, outcome)
+                    if origins.get(job.task):
+                        record["task_module"] = origins[job.task]
                     kept = _earlier_ok(out_dir, key) if force and record["status"] != "ok" else None
                     write_result(out_dir, record if kept is None else {**kept, "rerun_failed": _failure_note(record)})
                     raise_if_interrupted()  # (a Ctrl-C a library swallowed while it loaded: the run stops here, this job kept)
@@ -115,6 +118,27 @@ def _worker_spec(job: Job) -> dict[str, Any]:
     only the built-in tasks: every job of a custom task failed with "unknown task" on the process executor)."""
     module = task_module(job.task)
     return job.spec() if module is None else {**job.spec(), "task_module": module}
+
+
+def task_origin(task: str) -> dict[str, str] | None:
+    """Where the task registered in code as ``task`` is defined: ``{"module": name, "folder": the folder its top-level
+    package was imported from}`` (no folder for a script's ``__main__``), None for a built-in. Kept with the results so
+    that a report, in a process that never imported the module, can import it (it showed bare metric names, and removed
+    the sweep figures an earlier report had drawn)."""
+    module = task_module(task)
+    if module is None:
+        return None
+    origin = {"module": module}
+    file = getattr(sys.modules.get(module), "__file__", None)
+    if file:
+        path = Path(os.path.abspath(file))
+        if module == "__main__":
+            origin["script"] = str(path)
+        else:
+            depth = module.count(".") + (path.stem == "__init__")
+            if depth < len(path.parents):
+                origin["folder"] = str(path.parents[depth])
+    return origin
 
 
 def _check_task_modules(suite: Suite, executor: str) -> None:
@@ -191,8 +215,10 @@ def folder_lock(out_dir: Path) -> Iterator[None]:
         os.close(fd)  # (closing the descriptor releases the lock)
 
 
-def _write_manifest(suite: Suite, out_dir: Path, keyed: list[tuple[str, Job]], version: str) -> None:
-    """``suite.json`` beside the results: the resolved, expanded suite (what was asked, job by job)."""
+def _write_manifest(suite: Suite, out_dir: Path, keyed: list[tuple[str, Job]], version: str,
+                    task_modules: dict[str, dict[str, str]]) -> None:
+    """``suite.json`` beside the results: the resolved, expanded suite (what was asked, job by job), and where its tasks
+    registered in code are defined (:func:`task_origin`)."""
     manifest = {
         "suite": suite.name,
         "description": suite.description,
@@ -200,5 +226,6 @@ def _write_manifest(suite: Suite, out_dir: Path, keyed: list[tuple[str, Job]], v
         "lidarkit_version": version,
         "skipped_experiments": [{"experiment": e, "reason": r} for e, r in suite.skipped],
         "jobs": [{"key": key, **job.spec()} for key, job in keyed],
+        "task_modules": task_modules,
     }
     atomic.write_text(out_dir / "suite.json", json.dumps(manifest, indent=1, sort_keys=True) + "\n")
