@@ -303,3 +303,107 @@ def test_ground_filtered_on_a_georeferenced_pair_removes_the_ground_and_refines_
     with pytest.raises(DataError, match=r"ground method 'height' measures heights from the sensor: give scans in their sensor frame, "
                                         r"or use a method that does not \(csf, local_plane\)"):
         get_icp("ground_filtered", ground_method="height").align(source + offset, target + offset)
+
+
+def test_segmenter_numbers_refuse_yes_no_values_and_infinity(tmp_path, capsys):
+    """``ground_params={sensor_height_m: yes}`` ran with a 1 m sensor height (pydantic read yes as 1), and ``.inf``
+    passed ``gt=0``; ground_filtered's own ``sensor_height_m=yes`` was refused. The segmenters' numbers now refuse
+    both the same way, in one line naming the setting, and no run folder is written."""
+    from conftest import cli_exit_code
+
+    from lidarkit.samples import sample_path
+
+    cases = {"height": {"sensor_height_m": True}, "local_plane": {"cell_size_m": True, "floor_rank": np.bool_(True)},
+             "csf": {"iterations": True}, "patchworkpp": {"sensor_height_m": False}, "ransac": {"num_iterations": True}}
+    for method, params in cases.items():
+        with pytest.raises(ConfigError) as err:
+            get_ground_segmenter(method, **params)
+        named = ", ".join(f"{k} ({v})" for k, v in params.items())
+        assert f"invalid parameters ({named}: takes a number, not a yes/no value);" in str(err.value), method
+    with pytest.raises(ConfigError, match=r"ground segmenter 'local_plane': invalid parameters \(max_range_m: Input should be a finite number\)"):
+        get_icp("ground_filtered", ground_params={"max_range_m": float("inf")})
+    with pytest.raises(ConfigError, match=r"invalid parameters \(step_tolerance_m: Input should be a finite number\)"):
+        get_icp("pipeline", preprocess=[{"name": "ground_filter", "method": "local_plane", "options": {"step_tolerance_m": float("nan")}}])
+    # through the CLI, as YAML reads `yes`
+    folder, out = sample_path("kitti_pair"), tmp_path / "run"
+    argv = ["icp", str(folder / "000095.npy"), str(folder / "000094.npy"), "-m", "ground_filtered", "-o", str(out),
+            "-p", "ground_method=height", "-p", "ground_params={sensor_height_m: yes}"]
+    assert cli_exit_code(argv) == 1
+    said = capsys.readouterr().err.strip()
+    assert said.startswith("error: ground segmenter 'height': invalid parameters (sensor_height_m (True): takes a number, "
+                           "not a yes/no value); valid parameters: sensor_height_m=1.73") and "\n" not in said
+    assert not out.exists()
+
+
+def test_a_segmenters_model_level_problem_is_not_named_by_a_question_mark():
+    """A problem of the whole config (patchworkpp's range order, checked by a model validator) read "(?: min_range_m 90
+    must be below ...)"."""
+    with pytest.raises(ConfigError) as err:
+        get_ground_segmenter("patchworkpp", min_range_m=90, max_range_m=80)
+    assert str(err.value).startswith("ground segmenter 'patchworkpp': invalid parameters (min_range_m 90 must be below max_range_m 80); "
+                                     "valid parameters: sensor_height_m=1.73, ")
+
+
+
+@pytest.fixture(scope="module")
+def road_only_results():
+    """KITTI 94/95 cut to the road (z below -1.5 m, 8 to 40 m out), where too little is left after ground removal and
+    the fallbacks run: ``(truth, vanilla's result at ground_filtered's 1.5 m gate, with_ground's, thinned_ground's)``."""
+    from conftest import shared_path
+    from registration_helpers import kitti_pair
+
+    source, target, T_true = kitti_pair(shared_path, 94, 95)
+
+    def road(points: np.ndarray) -> np.ndarray:
+        r = np.hypot(points[:, 0], points[:, 1])
+        return points[(points[:, 2] < -1.5) & (r > 8.0) & (r < 40.0)]
+
+    source, target = road(source), road(target)
+    vanilla = get_icp("vanilla", max_correspondence_distance_m=1.5).align(source, target)
+    return T_true, vanilla, *(get_icp("ground_filtered", fallback=f).align(source, target) for f in ("with_ground", "thinned_ground"))
+
+
+def test_a_pose_solved_with_the_ground_takes_vanillas_calibration(road_only_results):
+    """The with_ground fallback solves vanilla's ICP on the full clouds, with no ground refinement, but its covariance
+    took ground_filtered's entry (z, roll and pitch factors of 5e-6 to 4e-5, learned on refined poses assessed without
+    the ground): NEES 629 where vanilla's identical pose gets 6.4; thinned_ground (ground points in its solve): NEES 560
+    against 3.8. Both take vanilla's entry now and say so; extra["ground_refined"] records the refinement."""
+    T_true, vanilla, with_ground, thinned = road_only_results
+    assert with_ground.nees(T_true) == pytest.approx(6.37, abs=0.05)
+    assert thinned.nees(T_true) == pytest.approx(3.79, abs=0.05)
+    np.testing.assert_allclose(with_ground.T_target_source, vanilla.T_target_source, atol=1e-12)  # vanilla's solve
+    np.testing.assert_allclose(with_ground.covariance, vanilla.covariance, rtol=1e-9, atol=1e-15)
+    assert with_ground.extra["covariance_calibration"] == "vanilla's (with_ground fallback: solved as vanilla on the full clouds)"
+    assert thinned.extra["covariance_calibration"] == (
+        "vanilla's (thinned_ground fallback: solved as vanilla with a share of the ground points in)")
+    assert with_ground.extra["ground_removal_flagged"] and with_ground.extra["ground_refined"] is False
+    assert thinned.extra["ground_removal_flagged"] and thinned.extra["ground_refined"] is True
+
+
+def test_an_unrefined_pose_without_the_ground_gets_the_closed_form():
+    """A solve without the ground that stopped before converging is not refined on the ground: ground_filtered's entry
+    (tiny z, roll and pitch factors) made it over-confident; it gets the closed form, as ``ground_refine=False`` does.
+    A converged pose is refined and keeps the entry."""
+    from lidarkit.samples import sample_path
+
+    folder = sample_path("kitti_pair")
+    source, target = (np.load(folder / f"0000{k}.npy").astype(np.float64) for k in (95, 94))
+    stopped = get_icp("ground_filtered", max_iterations=2).align(source, target)
+    raw = get_icp("ground_filtered", max_iterations=2, calibrated_covariance=False).align(source, target)
+    assert not stopped.converged
+    np.testing.assert_allclose(stopped.covariance, raw.covariance, rtol=1e-9, atol=1e-18)
+    assert stopped.extra["covariance_calibration"] == (
+        "none learned for ground_filtered (pose not ground-refined): the closed form as computed (typically over-confident)")
+    assert stopped.extra["ground_refined"] is False
+    refined = get_icp("ground_filtered").align(source, target)
+    assert refined.extra["ground_refined"] is True and refined.extra["covariance_calibration"] == "ground_filtered"
+
+
+def test_thinned_ground_keeps_the_reason_of_its_solve(road_only_results):
+    """thinned_ground replaced the reason of its solve ("degenerate geometry: ...") by its own, where with_ground
+    appends it: both append it now."""
+    *_, with_ground, thinned = road_only_results
+    flagged = "too little left after ground removal: degenerate geometry (min/max eigenvalue 4.5e-03, local_plane); "
+    assert with_ground.reason.startswith(flagged + "solved with the ground included; degenerate geometry: ")
+    assert thinned.reason == (flagged + "solved with 0.1 of the ground points added back; degenerate geometry: min/max eigenvalue "
+                              f"{thinned.degeneracy.ratio:.2e} < 0.01")

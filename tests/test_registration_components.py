@@ -70,6 +70,52 @@ def test_unknown_names_and_params_raise_config_error_listing_valid_ones():
     assert icp.describe()["preprocess"][1] == {"name": "ground_filter", "method": "ransac", "options": {}}
 
 
+def test_component_numbers_refuse_yes_no_values_and_infinity(tmp_path, capsys):
+    """Inside a pipeline's components a yes/no value was read as 1 or 0 (``map={..., max_points_per_voxel: yes}`` ran
+    with 1 point per voxel) and ``.inf`` passed ``gt=0``; a variant's own numbers refused both. Now the components
+    refuse them the same way, by name, in one line, and no run folder is written."""
+    from lidarkit.samples import sample_path
+
+    yes_no = {
+        "kernel": ({"name": "huber", "scale_m": True}, "scale_m"),
+        "map": ({"name": "voxel_hash", "max_points_per_voxel": True}, "max_points_per_voxel"),
+        "threshold": ({"name": "adaptive", "initial_threshold_m": True}, "initial_threshold_m"),
+        "preprocess": ([{"name": "voxel_downsample", "voxel_size_m": True}], "voxel_size_m"),
+    }
+    for kind, (spec, field) in yes_no.items():
+        with pytest.raises(ConfigError) as err:
+            get_icp("pipeline", **{kind: spec})
+        assert f"invalid parameters ({field} (True): takes a number, not a yes/no value)" in str(err.value), kind
+    with pytest.raises(ConfigError, match=r"invalid parameters \(max_distance_m \(False\): takes a number"):
+        make_component("threshold", {"name": "fixed", "max_distance_m": np.bool_(False)})
+    for kind, spec in (("threshold", {"name": "adaptive", "initial_threshold_m": float("inf")}),
+                       ("map", {"name": "voxel_hash", "min_point_spacing_m": float("nan")}),
+                       ("preprocess", {"name": "range_crop", "max_range_m": float("inf")})):
+        with pytest.raises(ConfigError, match="should be a finite number"):
+            make_component(kind, spec)
+    # through the CLI, as YAML reads `yes`
+    folder, out = sample_path("kitti_pair"), tmp_path / "run"
+    argv = ["icp", str(folder / "000095.npy"), str(folder / "000094.npy"), "-m", "pipeline", "-o", str(out),
+            "-p", "map={name: voxel_hash, max_points_per_voxel: yes}"]
+    assert cli_exit_code(argv) == 1
+    said = capsys.readouterr().err.strip()
+    assert said.startswith("error: map component 'voxel_hash': invalid parameters (max_points_per_voxel (True): takes a number, "
+                           "not a yes/no value); valid parameters: ") and "\n" not in said
+    assert not out.exists()
+
+
+def test_a_components_model_level_problem_is_not_named_by_a_question_mark():
+    """A problem of the whole config (a validator of the model, not of one field) read "(?: unknown ground segmenter
+    'nosuch'; ...)"."""
+    with pytest.raises(ConfigError) as err:
+        get_icp("pipeline", preprocess=[{"name": "ground_filter", "method": "nosuch"}])
+    assert str(err.value).startswith("preprocess component 'ground_filter': invalid parameters (unknown ground segmenter "
+                                     "'nosuch'; available: csf, height, local_plane, patchworkpp, ransac); valid parameters: ")
+    with pytest.raises(ConfigError) as err:
+        make_component("preprocess", {"name": "range_crop", "min_range_m": 5.0, "max_range_m": 2.0})
+    assert "invalid parameters (max_range_m (2.0) must exceed min_range_m (5.0));" in str(err.value)
+
+
 def test_kernel_weights():
     r2 = np.array([0.0, 0.01, 0.25, 1.0, 4.0])
     sigma = 0.4

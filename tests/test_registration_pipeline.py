@@ -208,3 +208,18 @@ def test_a_pipeline_without_deskew_is_recorded_as_such():
 
     snapshots = SimulatedLidarSequence(n_frames=3, n_beams=16, n_azimuths=360, point_times=False)
     assert len(run(snapshots, "pipeline", params={"deskew": "none"}, strict=True).trajectory) == 3
+
+
+def test_too_few_matches_to_take_a_step_say_how_many_and_within_what():
+    """Fewer than 6 matches stopped the pairwise ICP before its first step, and the reason read "no convergence within
+    0 iterations (3 correspondences)": as if it had iterated. It names the count, the gate and the minimum now."""
+    from lidarkit.samples import sample_path
+
+    target = np.load(sample_path("kitti_pair") / "000094.npy").astype(np.float64)[::20]
+    near = target[[0, len(target) // 3, 2 * len(target) // 3]]  # three points of the target, far apart
+    source = np.vstack([near, target[3:300] + [500.0, 0.0, 0.0]])  # the rest 500 m away: no match
+    gated = get_icp("pipeline", threshold={"name": "fixed", "max_distance_m": 1.0}).align(source, target)
+    assert not gated.converged and gated.iterations == 0
+    assert gated.reason == "only 3 correspondences within 1 m (need 6)"
+    ungated = get_icp("pipeline", threshold={"name": "fixed", "max_distance_m": None}).align(near, target)
+    assert ungated.reason == "only 3 correspondences (need 6)"

@@ -47,6 +47,9 @@ from lidarkit.registration.registry import register_icp
 #: Inlier distance for fitness when the threshold is unlimited (m).
 UNLIMITED_INLIER_DISTANCE_M = 1.0
 
+#: Fewest correspondences a Gauss-Newton step is taken from (6 unknowns); fewer end the ICP, not converged.
+MIN_ICP_CORRESPONDENCES = 6
+
 #: Named compositions; a preset's values are defaults that explicit parameters override.
 PRESETS: dict[str, dict[str, Any]] = {
     "kiss_like": {
@@ -323,7 +326,10 @@ class PipelineRegistration(Registration):
         for _ in range(self.config.max_iterations):
             index, valid = _matches(local_map, moved, max_distance_m, track)
             n = int(valid.sum())
-            if n < 6:
+            if n < MIN_ICP_CORRESPONDENCES:  # (the reason said "no convergence within 0 iterations", naming neither)
+                within = f" within {max_distance_m:g} m" if np.isfinite(max_distance_m) else ""
+                after = f" after {iterations} iterations" if iterations else ""
+                reason = f"only {n} correspondences{within}{after} (need {MIN_ICP_CORRESPONDENCES})"
                 break
             R = (T_icp @ guess)[:3, :3]
             cov = None if cov_local is None else np.einsum("ij,njk,lk->nil", R, cov_local[valid], R)

@@ -13,11 +13,12 @@ from collections.abc import Callable, Mapping
 from importlib.metadata import entry_points
 from typing import Any, ClassVar
 
+import numpy as np
 import pydantic
-from pydantic import BaseModel, ConfigDict
+from pydantic import BaseModel, ConfigDict, model_validator
 
 from lidarkit.errors import ConfigError, RegistrationError, validation_problems
-from lidarkit.params import shown_default
+from lidarkit.params import number_field, shown_default
 
 log = logging.getLogger(__name__)
 
@@ -27,10 +28,29 @@ ENTRY_POINT_GROUP = "lidarkit.components"
 KINDS = ("motion", "preprocess", "map", "residual", "kernel", "threshold")
 
 
-class ComponentConfig(BaseModel):
-    """Base of every component's config: frozen, unknown keys rejected."""
+def refuse_yes_no_numbers(model: type[BaseModel], data: Any) -> Any:
+    """``data`` as given, unless a number field of ``model`` holds a yes/no value (``True``, or ``yes`` in YAML), which
+    pydantic's lax mode reads as 1 or 0 without a word (``sensor_height_m: yes`` ran with 1 m): then ValueError naming
+    it. The check :class:`~lidarkit.registration.base.RegistrationConfig` makes, shared by the component and ground
+    segmenter config bases."""
+    if isinstance(data, dict):
+        named = [f"{k} ({v})" for k, v in data.items() if isinstance(v, (bool, np.bool_)) and k in model.model_fields
+                 and number_field(model.model_fields[k].annotation)]
+        if named:
+            raise ValueError(f"{', '.join(named)}: takes a number, not a yes/no value")
+    return data
 
-    model_config = ConfigDict(frozen=True, extra="forbid")
+
+class ComponentConfig(BaseModel):
+    """Base of every component's config: frozen, unknown keys rejected, numbers finite and not given as yes/no (as a
+    variant's config: ``initial_threshold_m: .inf`` passed ``gt=0``; "no limit" is None where a field allows it)."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _numbers_are_not_yes_or_no(cls, data: Any) -> Any:
+        return refuse_yes_no_numbers(cls, data)
 
 
 class Component:
@@ -210,7 +230,7 @@ def make_component(kind: str, spec: ComponentSpec, **defaults: Any) -> Component
         config = cls.Config(**merged)
     except pydantic.ValidationError as err:
         raise ConfigError(
-            f"invalid parameters ({validation_problems(err)}); valid parameters: {valid}", source=f"{kind} component {name!r}"
+            f"invalid parameters ({validation_problems(err, unnamed='')}); valid parameters: {valid}", source=f"{kind} component {name!r}"
         ) from None
     except ValueError as err:
         raise ConfigError(f"invalid parameters ({err}); valid parameters: {valid}", source=f"{kind} component {name!r}") from None
@@ -228,6 +248,7 @@ __all__ = [
     "component_fields",
     "get_component_class",
     "make_component",
+    "refuse_yes_no_numbers",
     "output_error",
     "register_component",
     "reload_component_plugins",

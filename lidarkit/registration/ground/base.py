@@ -12,21 +12,28 @@ from typing import Any, ClassVar
 
 import numpy as np
 import pydantic
-from pydantic import BaseModel, ConfigDict
+from pydantic import BaseModel, ConfigDict, model_validator
 
 from lidarkit.errors import ConfigError, DataError, validation_problems
 from lidarkit.geometry import as_points
 from lidarkit.params import shown_default
 from lidarkit.registration import local_origin
+from lidarkit.registration.components.registry import refuse_yes_no_numbers
 
 #: Mounting height of KITTI's Velodyne HDL-64E above the road (m).
 KITTI_SENSOR_HEIGHT_M = 1.73
 
 
 class GroundConfig(BaseModel):
-    """Base of every segmenter's config: frozen, unknown keys rejected."""
+    """Base of every segmenter's config: frozen, unknown keys rejected, numbers finite and not given as yes/no
+    (``ground_params={sensor_height_m: yes}`` ran with a 1 m sensor height)."""
 
-    model_config = ConfigDict(frozen=True, extra="forbid")
+    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _numbers_are_not_yes_or_no(cls, data: Any) -> Any:
+        return refuse_yes_no_numbers(cls, data)
 
 
 class GroundSegmenter:
@@ -124,5 +131,6 @@ def get_ground_segmenter(name: str, **params: Any) -> GroundSegmenter:
         config = cls.Config(**params)
     except pydantic.ValidationError as err:
         valid = ", ".join(f"{k}={shown_default(v[1])}" for k, v in ground_config_fields(name).items()) or "(none)"
-        raise ConfigError(f"invalid parameters ({validation_problems(err)}); valid parameters: {valid}", source=f"ground segmenter {name!r}") from None
+        raise ConfigError(f"invalid parameters ({validation_problems(err, unnamed='')}); valid parameters: {valid}",
+                          source=f"ground segmenter {name!r}") from None
     return cls(config=config)
