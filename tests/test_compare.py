@@ -107,7 +107,8 @@ def test_dataset_names_are_labels_not_data(tmp_path):
         compare(a, other)
     assert str(exc.value) == (f"compare: runs over different data: no (dataset, seed) in common between {a} (good: sim street, "
                               f"seed 0; sim street, seed 1; sim street, seed 2; ... (10 in all)) and {other} (bad: street, "
-                              "seed 0; street, seed 1; street, seed 2; ... (10 in all))")
+                              "seed 0; street, seed 1; street, seed 2; ... (10 in all)): their dataset specs differ in size (3 "
+                              "in A, 4 in B)")
 
 
 def test_one_seed_per_dataset_pairs_datasets_and_says_so(tmp_path, capsys):
@@ -285,8 +286,8 @@ def test_two_experiments_of_one_task_are_not_pooled_as_seeds(tmp_path, capsys):
     pick = {"method_a": "good", "method_b": "bad", "metric": "ape_rmse_m"}
     with pytest.raises(ConfigError) as exc:
         compare(out, out, **pick)
-    assert str(exc.value) == (f"{out}: good has results in 2 experiments of task experiments_test_task (early, late), each its "
-                              "own: --experiment picks one")
+    assert str(exc.value) == (f"{out}: good has results in 2 experiments of task experiments_test_task (early, late) over the "
+                              "same (dataset, seed) units, each its own: --experiment picks one")
     early = compare(out, out, **pick, experiment="early")
     assert (early.n_pairs, early.pairing, early.p_value, early.better, early.note) == (3, "seed", 0.25, "", "")
     with pytest.raises(ConfigError) as exc:
@@ -439,3 +440,124 @@ def test_run_folders_with_one_kitti_segment_compare_per_frame_by_default(tmp_pat
         compare(tmp_path / "kiss", tmp_path / "kiss", metric="segment_translation_pct")
     assert str(exc.value) == ("segment_translation_pct: a paired test needs at least 2 matched segments, got 1 (longer paths, "
                               "or compare per frame: --metric rpe_translation_m)")
+
+
+def test_a_speed_metric_its_task_declares_is_not_read_as_seeds_running_other_data(tmp_path, capsys):
+    """A deterministic task whose speed metric is named ``latency_ms`` (no name the timing pattern knows) had its one
+    measurement, repeated on 6 seeds, tested as 6 units: "a is better ... Wilcoxon p = 0.031". Each result records its
+    task's speed metrics now, and compare leaves them out of whether the seeds ran other data."""
+    from lidarkit.bench import Metric
+    from test_eval_statistics import _register_metric_task
+
+    _register_metric_task("latency_test_task", (Metric("error_m", "error [m]"), Metric("latency_ms", "latency [ms]", kind="speed")),
+                          lambda job: {"error_m": 0.10 if job.method == "good" else 0.12, "latency_ms": 1.0 + 0.1 * job.seed})
+    out = _bench(tmp_path, "s", "seeds: 6\nexperiments:\n  - {task: latency_test_task, dataset: {kind: synthetic}, methods: [good, bad]}\n")
+    records = [json.loads(p.read_text()) for p in (out / "jobs").glob("*.json")]
+    assert [r["speed_metrics"] for r in records] == [["latency_ms"]] * 12
+    result = compare(out, out, method_a="good", method_b="bad", metric="error_m")
+    assert (result.n_pairs, result.repeated, result.better) == (6, True, "")
+    assert "one measurement repeated" in result.verdict()
+
+
+def test_experiments_of_a_task_over_other_datasets_are_pooled(tmp_path):
+    """A suite with one experiment per dataset could not be compared ("has results in 2 experiments of task pf (ds1,
+    ds2), each its own: --experiment picks one"), though the same jobs written as one experiment over two datasets
+    compare: experiments that share no (dataset, seed) are pooled now, and pair with the one-experiment suite."""
+    _task("per_experiment_test_task", lambda job: {"ape_rmse_m": (0.1 if job.method == "good" else 0.5) + job.dataset["size"]
+                                                   + 0.01 * np.random.default_rng(job.seed).random()})
+    split = _bench(tmp_path, "split", "seeds: 3\nexperiments:\n"
+                   "  - {name: ds1, task: per_experiment_test_task, dataset: {kind: synthetic, size: 1}, methods: [good, bad]}\n"
+                   "  - {name: ds2, task: per_experiment_test_task, dataset: {kind: synthetic, size: 2}, methods: [good, bad]}\n")
+    result = compare(split, split, method_a="good", method_b="bad")
+    assert (result.n_pairs, result.pairing, result.better, result.note) == (6, "seed", "a", "")
+    joint = _bench(tmp_path, "joint", "seeds: 3\nexperiments:\n  - {name: both, task: per_experiment_test_task, datasets: "
+                   "[{kind: synthetic, size: 1}, {kind: synthetic, size: 2}], methods: [good, bad]}\n")
+    assert compare(joint, joint, method_a="good", method_b="bad").mean_diff == result.mean_diff
+    across = compare(split, joint, method_a="good", method_b="bad")
+    assert (across.n_pairs, across.better, across.note) == (6, "a", "")
+
+
+def test_one_experiment_named_apart_in_two_folders_pairs(tmp_path):
+    """The same data and seeds were "runs over different data" when the folders name the experiment apart and one of
+    them holds another experiment of the task (pf_rec and pf_all in A, recorded in B), and --experiment pf_rec then found
+    nothing in B. Units pair without the experiment's name now; --experiment A_NAME,B_NAME names each side's own."""
+    _task("named_apart_test_task", _error)
+    a = _bench(tmp_path, "a", "seeds: 6\nexperiments:\n"
+               "  - {name: pf_rec, task: named_apart_test_task, dataset: {kind: synthetic}, options: {visible: recorded}, methods: [good]}\n"
+               "  - {name: pf_all, task: named_apart_test_task, dataset: {kind: synthetic}, options: {visible: all}, methods: [good]}\n")
+    b = _bench(tmp_path, "b", "seeds: 6\nexperiments:\n"
+               "  - {name: recorded, task: named_apart_test_task, dataset: {kind: synthetic}, options: {visible: recorded}, methods: [bad]}\n")
+    result = compare(a, b)
+    assert (result.n_pairs, result.better) == (6, "a")
+    assert result.note == "6 (dataset, seed) units only in A and 0 only in B are left out: 6 paired"
+    with pytest.raises(ConfigError) as exc:
+        compare(a, b, experiment="pf_rec")
+    assert str(exc.value) == (f"{b}: no result of bad in experiment 'pf_rec'; it has results in: recorded (--experiment "
+                              "pf_rec,recorded names each side's own)")
+    named = compare(a, b, experiment="pf_rec,recorded")
+    assert (named.n_pairs, named.better, named.note) == (6, "a", "")
+    with pytest.raises(ConfigError) as exc:  # (A's two experiments over one (dataset, seed) against themselves: not pooled)
+        compare(a, a)
+    assert str(exc.value) == (f"{a}: good has results in 2 experiments of task named_apart_test_task (pf_all, pf_rec) over "
+                              "the same (dataset, seed) units, each its own: --experiment picks one")
+
+
+def _spec_task(name: str) -> None:
+    """A bench task over simulated lidar and KITTI dataset specs that reads no data: the units pair by spec alone."""
+    from lidarkit.bench import Metric, Task, TaskOutput, register_task
+
+    class SpecTask(Task):
+        dataset_kinds = ("sim_lidar", "kitti")
+        metrics = (Metric("ape_rmse_m", "APE [m]"),)
+
+        def validate_options(self, options):
+            pass
+
+        def run(self, job):
+            return TaskOutput(metrics=_error(job))
+
+    register_task(name)(SpecTask)
+
+
+def test_a_simulated_dataset_written_with_a_default_setting_pairs(tmp_path):
+    """``range_noise_std_m: 0.0`` (the simulator's default) written in one suite only read "runs over different data"
+    with the same labels on both sides ("st, seed 0; st, seed 1"); the specs pair by the simulator's settings now, and
+    specs that really differ are named field by field."""
+    _spec_task("sim_spec_test_task")
+    suite = "seeds: 6\nexperiments:\n  - {{task: sim_spec_test_task, dataset: {{kind: sim_lidar, scene: street, n_beams: 16, {extra}name: st}}, methods: [{method}]}}\n"
+    a = _bench(tmp_path, "a", suite.format(extra="n_frames: 3, ", method="good"))
+    b = _bench(tmp_path, "b", suite.format(extra="n_frames: 3, range_noise_std_m: 0.0, ", method="bad"))
+    result = compare(a, b)
+    assert (result.n_pairs, result.better, result.note) == (6, "a", "")
+    c = _bench(tmp_path, "c", suite.format(extra="n_frames: 4, range_noise_std_m: 0.0, ", method="bad"))
+    with pytest.raises(EvaluationError) as exc:
+        compare(a, c)
+    assert str(exc.value).endswith("(bad: st, seed 0; st, seed 1; st, seed 2; ... (6 in all)): their dataset specs differ in n_frames (3 in A, "
+                                   "4 in B)")
+
+
+def test_a_kitti_sequence_given_by_root_or_by_its_folder_pairs(tmp_path):
+    """``path: kitti_odometry, sequence: "00"`` and ``path: kitti_odometry/sequences/00`` are one sequence: they read
+    "runs over different data" with the same labels on both sides."""
+    from conftest import shared_path
+
+    root = shared_path("kitti_odometry")
+    _spec_task("kitti_spec_test_task")
+    suite = "seeds: 6\nexperiments:\n  - {{task: kitti_spec_test_task, dataset: {{kind: kitti, {where}, name: k00}}, methods: [{method}]}}\n"
+    a = _bench(tmp_path, "a", suite.format(where=f"path: {root}, sequence: '00'", method="good"))
+    b = _bench(tmp_path, "b", suite.format(where=f"path: {root / 'sequences' / '00'}", method="bad"))
+    result = compare(a, b)
+    assert (result.n_pairs, result.better, result.note) == (6, "a", "")
+
+
+def test_compare_arguments_that_are_not_names_are_refused_by_name(tmp_path):
+    """compare(..., experiment=["pfA"]) or metric=["mse_m2"] raised a bare TypeError (unhashable type: 'list')."""
+    _task("argument_test_task", _error)
+    out = _bench(tmp_path, "s", "seeds: 3\nexperiments:\n  - {task: argument_test_task, dataset: {kind: synthetic}, methods: [good, bad]}\n")
+    pick = {"method_a": "good", "method_b": "bad"}
+    for name, given in (("experiment", ["argument_test_task_0"]), ("metric", ["ape_rmse_m"]), ("task", ("argument_test_task",)),
+                        ("method_a", ["good"]), ("method_b", 3)):
+        with pytest.raises(ConfigError) as exc:
+            compare(out, out, **{**pick, name: given})
+        assert str(exc.value) == f"{name}: must be a name (text) or None, got {type(given).__name__} {given!r}"
+    assert compare(out, out, **pick, experiment="argument_test_task_0").n_pairs == 3

@@ -59,6 +59,9 @@ def execute_job(spec: dict[str, Any]) -> dict[str, Any]:
         # the direction of each metric as the task declares it, kept with the result: a process that reads the results
         # without the task (a task registered in the script that ran the suite) took every metric as lower-is-better
         record["higher_is_better"] = sorted(m.name for m in task.metrics if m.better == "higher")
+        # its speed metrics too: they vary from run to run on the same data, and compare must not read that as seeds
+        # running other data (a task's ``latency_ms`` is no name a pattern knows)
+        record["speed_metrics"] = sorted(m.name for m in task.metrics if m.kind == "speed")
         record["series"] = json_safe(output.series)
         record["info"] = json_safe(output.info)
     except Exception as err:  # a job's failure is data, not a crash of the suite

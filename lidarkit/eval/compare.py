@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from lidarkit.errors import ConfigError, DataError, EvaluationError
+from lidarkit.errors import ConfigError, DataError, EvaluationError, LidarKitError
 from lidarkit.eval.statistics import DEFAULT_ALPHA, PairedComparison, check_number, paired_test, tie_tolerance
 from lidarkit.trajectory import Trajectory
 
@@ -43,7 +43,8 @@ class OdometryRun:
 
 @dataclass
 class BenchRuns:
-    """Successful bench results of one method label, keyed by (task, experiment, dataset spec, task options, seed)."""
+    """Successful bench results of one method label, keyed by (task, experiment, dataset spec, task options, seed); compare
+    keys them without the experiment (:func:`_by_experiment`)."""
 
     path: Path
     name: str
@@ -53,6 +54,8 @@ class BenchRuns:
     n_earlier_version: int = 0  # ... or, of those, of the compared jobs run by another lidarkit version (as the report counts)
     versions: dict[str, str] = field(default_factory=dict)  # pair key -> lidarkit version of its result
     higher_is_better: set[str] = field(default_factory=set)  # metrics the results say are better higher (their task's word)
+    speed_metrics: set[str] = field(default_factory=set)  # metrics the results say are speeds (times, rates: their task's word)
+    experiments: dict[str, set[str]] = field(default_factory=dict)  # pair key -> the experiments its results are of
     alignments: dict[str, dict[str, str]] = field(default_factory=dict)  # pair key -> metric -> alignment its job states
     failed: set[str] = field(default_factory=set)  # pair keys whose job failed
     instants: dict[str, str] = field(default_factory=dict)  # pair key -> sweep instant of the ground truth it was scored against
@@ -144,13 +147,11 @@ def load_bench_runs(path: str | os.PathLike, method: str | None = None, every_re
     jobs = [(r, job) for r in latest
             if (job := Job.from_spec(r["job"])).method_label == chosen and (not suite or r["key"] in suite)]
     several = len({job.experiment for _, job in jobs}) > 1  # (labels name the experiment then)
+    specs: dict[str, dict[str, Any]] = {}
     for r, job in jobs:
-        # the dataset's ``name`` is a label, not data (as its readers take it): "sim street" and "street" over one spec
-        # pair; two entries of one suite that differ by name only are one dataset, counted once. The experiment is
-        # part of the unit: two experiments of one task were pooled, their units counted as seeds of one
-        dataset = {k: v for k, v in job.dataset.items() if k != "name"}
-        key = canonical_json({"task": job.task, "experiment": job.experiment, "dataset": dataset, "options": job.options,
-                              "seed": job.seed})
+        key = canonical_json({"task": job.task, "experiment": job.experiment, "dataset": _dataset_unit(job.dataset, specs),
+                              "options": job.options, "seed": job.seed})
+        runs.experiments[key] = {job.experiment}
         if r.get("status") != "ok":
             runs.failed.add(key)
         elif key not in runs.values:
@@ -162,8 +163,42 @@ def load_bench_runs(path: str | os.PathLike, method: str | None = None, every_re
             if effective.get("ground_truth_instant"):
                 runs.instants[key] = str(effective["ground_truth_instant"])
             runs.higher_is_better.update(r.get("higher_is_better") or ())
+            runs.speed_metrics.update(r.get("speed_metrics") or ())
     runs.failed -= set(runs.values)
     return runs
+
+
+def _dataset_unit(spec: dict[str, Any], done: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """A job's dataset spec as the data it names, so that two suites that write one dataset apart pair: its ``name`` left
+    out (a label, as its readers take it); a simulated lidar's settings with their defaults written out
+    (``range_noise_std_m: 0.0`` in one suite only read "runs over different data" with the same labels on both sides);
+    a KITTI root given with ``sequence:`` as the sequence folder its reader opens (``path: kitti_odometry, sequence: "00"``
+    is ``path: kitti_odometry/sequences/00``). A spec this lidarkit cannot resolve (data not here, a simulator setting
+    it does not know) is kept as written. ``done``: the specs resolved so far, by their text."""
+    from lidarkit.bench.jobs import canonical_json
+
+    written = {k: v for k, v in spec.items() if k != "name"}
+    text = canonical_json(written)
+    if text not in done:
+        done[text] = written
+        try:
+            if written.get("kind") == "sim_lidar":
+                from lidarkit.bench.datasets import dataset_options
+                from lidarkit.odometry import config_dict
+                from lidarkit.sim.lidar import make_config
+
+                settings = config_dict(make_config(**dataset_options(written)))
+                if "seed" not in written:  # (the job's seed seeds it: not the simulator's default seed 0)
+                    settings.pop("seed", None)
+                done[text] = {"kind": "sim_lidar", **settings}
+            elif written.get("sequence") is not None and written.get("path") is not None:
+                from lidarkit.bench.baseline import dataset_folder
+
+                folder = dataset_folder(written)
+                done[text] = {**{k: v for k, v in written.items() if k != "sequence"}, "path": str(folder)}
+        except (LidarKitError, OSError):  # (compared as written)
+            pass
+    return done[text]
 
 
 def _few(labels: list[str], n: int = 3) -> str:
@@ -270,12 +305,18 @@ def compare(
     folders pair per (dataset, seed) on a job metric (default: KITTI drift, else APE RMSE); ``method_a`` /
     ``method_b`` pick a method when a folder holds several (the same folder may be given twice); only the jobs of each
     folder's ``suite.json`` are compared, as its report holds them (``every_result``: every result in the folder);
-    ``task``: the units of that task (needed when several tasks of the folders report the metric); ``experiment``: the
-    units of that experiment (needed when a side's results of the task span several: their units are not seeds of one).
+    ``task``: the units of that task (needed when several tasks of the folders report the metric). Units pair without
+    their experiment's name (the experiments of a task over other datasets or seeds are pooled); ``experiment``: the
+    units of that experiment, or of ``"A_NAME,B_NAME"`` each side's own (needed when several experiments of a side ran
+    the same (dataset, seed): their units are not seeds of one).
     Runs over different data raise EvaluationError; two runs over the same dataset and frames, each scored against the
     ground truth at its own instant of the sweep, are compared with a ``note`` saying so.
     """
     alpha, noise = check_number(alpha, "alpha"), check_number(noise, "noise")  # (before any work)
+    for name, given in (("metric", metric), ("task", task), ("experiment", experiment), ("method_a", method_a),
+                        ("method_b", method_b)):
+        if given is not None and not isinstance(given, str):  # (a list was a bare TypeError: unhashable type)
+            raise ConfigError(f"must be a name (text) or None, got {type(given).__name__} {given!r}", source=name)
     from lidarkit.bench.results import path_argument
     from lidarkit.eval.ape_rpe import check_flags
 
@@ -336,7 +377,7 @@ def compare(
         raise EvaluationError(
             f"runs over different data: no (dataset, seed) in common between {side_a.path} ({side_a.name}: "
             f"{_few(sorted(set(side_a.labels.values())))}) and {side_b.path} ({side_b.name}: "
-            f"{_few(sorted(set(side_b.labels.values())))})",
+            f"{_few(sorted(set(side_b.labels.values())))})" + _other_datasets(side_a, side_b),
             source="compare",
         )
     def has(k: str, name: str) -> bool:
@@ -369,7 +410,7 @@ def compare(
     if len(tasks_with) > 1:  # (pooled into one test: icp_pair pairs/s and odometry frames/s as 6 units of "hz")
         raise ConfigError(f"metric {metric!r} is reported by tasks {', '.join(sorted(tasks_with))} of these results, each its own "
                           "experiment: --task picks one", source="metric")
-    _one_experiment(side_a, side_b, next(iter(tasks_with)))
+    _one_experiment(side_a, side_b, [k for k in common if _task_of(k) in tasks_with], next(iter(tasks_with)))
     other_task = [k for k in common if _task_of(k) not in tasks_with]
     common = [k for k in common if _task_of(k) in tasks_with]
     missing = [k for k in common if not has(k, metric)]
@@ -460,6 +501,33 @@ def _other_options(side_a: BenchRuns, side_b: BenchRuns) -> None:
                               source="compare")
 
 
+def _other_datasets(side_a: BenchRuns, side_b: BenchRuns) -> str:
+    """``": their dataset specs differ in FIELD (X in A, Y in B), ..."`` when the units would pair but for their
+    datasets (the error showed the same labels on both sides: "st, seed 0; st, seed 1"), else ''."""
+    def by_unit(side: BenchRuns) -> dict[str, list[dict[str, Any]]]:
+        out: dict[str, list[dict[str, Any]]] = {}
+        for key in side.values:
+            unit = json.loads(key)
+            out.setdefault(json.dumps({k: v for k, v in unit.items() if k != "dataset"}, sort_keys=True), []).append(unit["dataset"])
+        return out
+
+    units_a, units_b = by_unit(side_a), by_unit(side_b)
+    shown: list[str] = []
+    for rest in sorted(units_a.keys() & units_b.keys()):
+        for spec_a in units_a[rest]:
+            diffs = [[k for k in sorted(spec_a.keys() | spec_b.keys()) if spec_a.get(k, ...) != spec_b.get(k, ...)]
+                     for spec_b in units_b[rest]]
+            fields, spec_b = min(zip(diffs, units_b[rest]), key=lambda d: len(d[0]))
+            text = ", ".join(f"{k} ({_field_value(spec_a, k)} in A, {_field_value(spec_b, k)} in B)" for k in fields)
+            if text not in shown:
+                shown.append(text)
+    return f": their dataset specs differ in {'; '.join(shown[:3])}" if shown else ""
+
+
+def _field_value(spec: dict[str, Any], name: str) -> str:
+    return json.dumps(spec[name]) if name in spec else "not written"
+
+
 def _dataset_of(key: str) -> str:
     unit = json.loads(key)
     unit.pop("seed", None)
@@ -478,7 +546,10 @@ def _seeds_vary(keys: list[str], side_a: BenchRuns, side_b: BenchRuns, metric: s
         varies = False
         for side in (side_a, side_b):
             names = set.intersection(*(set(side.values[k]) for k in group)) - {metric}
-            for name in sorted(n for n in names if not _TIMING_METRIC.search(n)):
+            # (a speed its task declares, ``latency_ms``, made 6 seeds of one deterministic measurement a p = 0.031
+            # winner; the name pattern catches the timings of results that do not record their task's speeds)
+            speeds = side_a.speed_metrics | side_b.speed_metrics
+            for name in sorted(n for n in names if n not in speeds and not _TIMING_METRIC.search(n)):
                 values = [side.values[k][name] for k in group]
                 if all(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) for v in values):
                     v = np.asarray(values, dtype=np.float64)
@@ -547,45 +618,75 @@ def _experiments(side: BenchRuns) -> dict[str, set[str]]:
     return out
 
 
+def _experiment_per_side(side_a: BenchRuns, side_b: BenchRuns, experiment: str | None) -> tuple[str | None, str | None]:
+    """The experiment ``experiment`` names on each side: one name both sides have, or ``A_NAME,B_NAME`` (two suites
+    that name one experiment apart); ConfigError naming a side without it and the experiments it has."""
+    if experiment is None:
+        return None, None
+    held = [set().union(*_experiments(side).values()) for side in (side_a, side_b)]
+    parts = experiment.split(",")
+    names = (experiment, experiment)
+    if len(parts) == 2 and not any(experiment in h for h in held):
+        names = (parts[0].strip(), parts[1].strip())
+    for side, name, own, other in ((side_a, names[0], held[0], held[1]), (side_b, names[1], held[1], held[0])):
+        if name not in own:
+            hint = ""
+            if names[0] == names[1] and name in other and len(own) == 1:  # (one suite calls "recorded" what another calls "pf_rec")
+                pair = (name, *own) if side is side_b else (*own, name)
+                hint = f" (--experiment {pair[0]},{pair[1]} names each side's own)"
+            raise ConfigError(f"no result of {side.name} in experiment {name!r}; it has results in: "
+                              f"{', '.join(sorted(own))}{hint}", source=side.path)
+    return names
+
+
 def _by_experiment(side_a: BenchRuns, side_b: BenchRuns, experiment: str | None) -> tuple[BenchRuns, BenchRuns]:
-    """Both sides keyed for pairing: the units of ``experiment`` only, when given (ConfigError when a side has none);
-    the experiment's name left out of the keys of a task each side ran in one experiment (two suites name it apart)."""
+    """Both sides keyed for pairing without the experiment's name (two suites name an experiment apart; one suite may run
+    a task in one experiment per dataset): the units of ``experiment`` only, when given (see
+    :func:`_experiment_per_side`). A unit two experiments of a side both ran keeps the result of the first and the names
+    of both (:func:`_one_experiment` refuses it when it is compared)."""
     from lidarkit.bench.jobs import canonical_json
 
-    if experiment is not None:
-        for side in (side_a, side_b):
-            if not any(experiment in names for names in _experiments(side).values()):
-                names = sorted(set().union(*_experiments(side).values()))
-                raise ConfigError(f"no result of {side.name} in experiment {experiment!r}; it has results in: "
-                                  f"{', '.join(names)}", source=side.path)
-    spans = [_experiments(side) for side in (side_a, side_b)]
-    one = {t for t in spans[0].keys() | spans[1].keys() if all(len(s.get(t, ())) <= 1 for s in spans)}
+    chosen = _experiment_per_side(side_a, side_b, experiment)
 
-    def rekeyed(side: BenchRuns) -> BenchRuns:
-        new = {}
-        for key in set(side.values) | side.failed:
+    def rekeyed(side: BenchRuns, name: str | None) -> BenchRuns:
+        new, experiments = {}, {}
+        for key in sorted(set(side.values) | side.failed):
             unit = json.loads(key)
-            if experiment is None or unit.get("experiment") == experiment:
-                new[key] = canonical_json({**unit, "experiment": ""}) if unit.get("task") in one else key
+            if name is None or unit.get("experiment") == name:
+                new[key] = canonical_json({k: v for k, v in unit.items() if k != "experiment"})
+                if key in side.values:
+                    experiments.setdefault(new[key], set()).update(side.experiments.get(key) or {str(unit.get("experiment", ""))})
 
         def kept(by_key: dict[str, Any]) -> dict[str, Any]:
-            return {new[k]: v for k, v in by_key.items() if k in new}
+            out: dict[str, Any] = {}
+            for k in sorted(by_key):
+                if k in new and k in side.values:
+                    out.setdefault(new[k], by_key[k])
+            return out
 
-        return dataclasses.replace(side, values=kept(side.values), labels=kept(side.labels), versions=kept(side.versions),
+        values = kept(side.values)
+        return dataclasses.replace(side, values=values, labels=kept(side.labels), versions=kept(side.versions),
                                    alignments=kept(side.alignments), instants=kept(side.instants),
-                                   failed={new[k] for k in side.failed if k in new})
+                                   failed={new[k] for k in side.failed if k in new} - set(values), experiments=experiments)
 
-    return rekeyed(side_a), rekeyed(side_b)
+    return rekeyed(side_a, chosen[0]), rekeyed(side_b, chosen[1])
 
 
-def _one_experiment(side_a: BenchRuns, side_b: BenchRuns, task: str) -> None:
-    """ConfigError when a side's results of ``task`` span several experiments: two pf experiments differing in
-    ``mse_start`` only were paired as 6 seeds of one (p = 0.031, a winner), over 3 seeds giving one APE each."""
+def _one_experiment(side_a: BenchRuns, side_b: BenchRuns, keys: list[str], task: str) -> None:
+    """ConfigError when the paired units ``keys`` of ``task`` hold one (dataset, seed) of a side from several of its
+    experiments: two pf experiments differing in ``mse_start`` only were paired as 6 seeds of one (p = 0.031, a
+    winner), over 3 seeds giving one APE each. Experiments over other datasets or seeds are pooled."""
+    by_data: dict[str, list[str]] = {}  # (task, dataset, seed) -> its units (of other options)
+    for key in keys:
+        unit = json.loads(key)
+        by_data.setdefault(json.dumps({k: v for k, v in unit.items() if k != "options"}, sort_keys=True), []).append(key)
     for side in (side_a, side_b):
-        names = sorted(_experiments(side).get(task, ()))
+        shared = [k for group in by_data.values() for k in group
+                  if len(group) > 1 or len(side.experiments.get(k, ())) > 1]
+        names = sorted(set().union(*(side.experiments.get(k, set()) for k in shared)))
         if len(names) > 1:
-            raise ConfigError(f"{side.name} has results in {len(names)} experiments of task {task} ({', '.join(names)}), "
-                              "each its own: --experiment picks one", source=side.path)
+            raise ConfigError(f"{side.name} has results in {len(names)} experiments of task {task} ({', '.join(names)}) over "
+                              "the same (dataset, seed) units, each its own: --experiment picks one", source=side.path)
 
 
 def _with_measured_noise(noise: float, noise_from: str | os.PathLike | None, metric: str, task: str,
