@@ -32,7 +32,7 @@ def compare_command(
     every_result: bool = typer.Option(False, "--all", help="Bench folders: every result in the folder, not only the jobs of its suite.json (as its report)."),
     task: Optional[str] = typer.Option(None, "--task", help="Bench folders: compare the units of this task (needed when several tasks report the metric)."),
     experiment: Optional[str] = typer.Option(
-        None, "--experiment", help="Bench folders: compare the units of this experiment (needed when a method's results of the task span several)."),
+        None, "--experiment", help="Bench folders: compare the units of this experiment, or A_NAME,B_NAME for each side's own (needed when a method's experiments of the task ran the same dataset and seed)."),
 ) -> None:
     """Pair RUN_A and RUN_B on the same units (KITTI segments, frames or seeds) and test the difference (Wilcoxon)."""
     from lidarkit.eval.compare import compare
