@@ -328,14 +328,15 @@ def test_cli_bad_study_and_kidnap_options(capsys):
     for args, pattern in (
         (["--particles", "50,x"], "n_particles"),
         (["--seeds", "0"], "--seeds"),
-        (["--fit-q"], "--fit-q needs --recorded"),
+        (["--fit-q"], "--fit-q: needs --recorded"),
         (["--kidnap-at", "5000"], "--kidnap-at: must be a step in 1..331 of the data, got 5000"),
         (["--kidnap-offset", "1,2"], "--kidnap-offset"),
         (["--protocol", "paper"], "unknown protocol"),
         # an option the protocol sets otherwise, and simulation options with the recorded readings, are refused
-        (["--protocol", "report", "--estimator", "mean"], "--estimator mean conflicts with --protocol report, which sets"),
-        (["--recorded", "--kidnap-at", "100"], "--kidnap-at applies to the simulated readings, not to --recorded"),
-        (["--recorded", "--visible", "all"], "--visible applies to the simulated readings"),
+        (["--protocol", "report", "--estimator", "mean"], "--protocol: report sets likelihood nearest, "),
+        (["--protocol", "report", "--estimator", "mean"], "; --estimator mean conflicts with it"),
+        (["--recorded", "--kidnap-at", "100"], "--kidnap-at: applies to the simulated readings, not to --recorded"),
+        (["--recorded", "--visible", "all"], "--visible: applies to the simulated readings"),
     ):
         with pytest.raises(SystemExit) as exc:
             main(["pf", str(data), *args])
@@ -424,8 +425,8 @@ def test_kld_with_augmented_mcl_counts_the_belief_not_the_injections(stachniss):
 def test_cli_list_and_kld_options_are_checked(capsys):
     data = shared_path("pf", "burgard_particle_filter")
     for args, message in ((["-n", "20,,50"], "n_particles must be >= 1"), (["-n", "50,50"], "a particle count is listed twice"),
-                          (["--kld", "--kld-max", "10"], "error: --kld-max: --kld-min 200 is above --kld-max 10"),
-                          (["--kld", "--kld-unconverged", "100000"], "error: --kld-unconverged: --kld-unconverged 100000 is above --kld-max 5000"),
+                          (["--kld", "--kld-max", "10"], "error: --kld-max: 10 is below --kld-min 200"),
+                          (["--kld", "--kld-unconverged", "100000"], "error: --kld-unconverged: 100000 is above --kld-max 5000"),
                           (["--snapshots", "-1"], "snapshot steps must be >= 0")):
         with pytest.raises(SystemExit) as exc:
             main(["pf", str(data), *args])
@@ -445,7 +446,7 @@ def test_cli_option_errors_name_the_option_given(capsys):
         (["--protocol", "report", "--q", "1e-16,0.1"], "--q: q (1e-16, 0.1) (std) gives a measurement variance of 1e-32: "
                                                         "each must be >= 1e-30 (Q positive definite, its inverse finite in float32)"),
         (["--protocol", "paper"], "--protocol: unknown protocol 'paper'; known: default, report"),
-        (["--kld", "--kld-min", "6000"], "--kld-min: --kld-min 6000 is above --kld-max 5000"),
+        (["--kld", "--kld-min", "6000"], "--kld-min: 6000 is above --kld-max 5000"),
         (["--augmented", "--alpha-slow", "0.5", "--alpha-fast", "0.1"], "--alpha-slow: must be below --alpha-fast 0.1, got 0.5"),
         (["--kld", "--kernel", "kalman"], "--kld: KLD-sampling and augmented MCL need point particles (--kernel point)"),
     ):
@@ -474,13 +475,13 @@ def test_cli_options_that_would_change_nothing_are_refused(capsys):
     limit and the memory check (a MemoryError traceback at 1e10)."""
     data = shared_path("pf", "burgard_particle_filter")
     for args, message in (
-        (["--innovation-gate", "9.21"], "--innovation-gate only acts with --kernel kalman"),
-        (["--kld-min", "500", "--kld-max", "600"], "--kld-min, --kld-max only act with --kld"),
-        (["--alpha-fast", "0.5"], "--alpha-fast only acts with --augmented"),
-        (["--nearest-association", "per_particle"], "--nearest-association only acts with --likelihood nearest"),
-        (["--kidnap-offset", "3,3,10"], "--kidnap-offset only acts with --kidnap-at"),
-        (["--kernel", "kalman", "--roughening", "0.5"], "--roughening only acts with --kernel point"),
-        (["-n", "50,100", "--snapshots", "0,10"], "--snapshots only acts with one run"),
+        (["--innovation-gate", "9.21"], "--innovation-gate: only acts with --kernel kalman"),
+        (["--kld-min", "500", "--kld-max", "600"], "--kld-min: only acts with --kld (as does --kld-max, also given)"),
+        (["--alpha-fast", "0.5"], "--alpha-fast: only acts with --augmented"),
+        (["--nearest-association", "per_particle"], "--nearest-association: only acts with --likelihood nearest"),
+        (["--kidnap-offset", "3,3,10"], "--kidnap-offset: only acts with --kidnap-at"),
+        (["--kernel", "kalman", "--roughening", "0.5"], "--roughening: only acts with --kernel point"),
+        (["-n", "50,100", "--snapshots", "0,10"], "--snapshots: only acts with one run"),
         (["--kld", "--init", "uniform", "--kld-max", "10000000000", "--kld-unconverged", "10000000000"], "--kld-max: must be <= 10000000"),
         (["--kld", "--kld-bin", "0.5,-10"], "--kld-bin: both bin sizes must be > 0"),
     ):
@@ -551,9 +552,9 @@ def test_odd_counts_steps_and_snapshots_are_refused(stachniss, capsys, tmp_path)
     data = shared_path("pf", "burgard_particle_filter")
     for args, line in ((["--snapshots", "0,0,5", "--out", str(tmp_path / "a")], "--snapshots: a snapshot step is listed twice: '0,0,5'"),
                        (["--snapshots", ",", "--out", str(tmp_path / "b")], "--snapshots: no snapshot step in ','"),
-                       (["-n", "20000", "--kld"], "--particles: --particles 20000 (KLD-sampling's first count) is above --kld-max 5000"),
+                       (["-n", "20000", "--kld"], "--particles: 20000 (KLD-sampling's first count) is above --kld-max 5000"),
                        (["--kld", "--kld-min", "100", "--kld-unconverged", "500", "--kld-max", "600"],
-                        "--kld-max: --particles 1000 (KLD-sampling's first count) is above --kld-max 600")):
+                        "--kld-max: 600 is below --particles 1000 (KLD-sampling's first count)")):
         with pytest.raises(SystemExit) as exc:
             main(["pf", str(data), *args])
         assert exc.value.code == 1
@@ -659,3 +660,66 @@ def test_a_run_folder_records_the_kidnap_offset_with_its_units_in_degrees(stachn
     assert exc.value.code in (0, None)
     scenario = yaml.safe_load((tmp_path / "study" / "config.yaml").read_text())["scenario"]
     assert scenario["kidnap_offset"] == {"dx_m": 1.0, "dy_m": -2.0, "dtheta_deg": 45.0}
+
+
+def test_a_one_round_q_fit_is_kept_only_for_a_run_that_did_not_lose_track_and_says_what_it_is(stachniss, tmp_path):
+    """metrics.json held q_fit_ml [[19.9, 0], [0, 1.03]] for a run lost on 308 of 331 steps (its verdict: "no Q fit"),
+    and a bare one-round fit in a plain --recorded run, with nothing saying it holds the particle spread fixed."""
+    import json
+
+    from lidarkit.pf.protocol import fit_q_recorded, run_recorded
+
+    data = shared_path("pf", "robot_mapping_stachniss")
+    with pytest.raises(SystemExit) as exc:
+        main(["pf", str(data), "--recorded", "-n", "50", "--init", "uniform", "--out", str(tmp_path / "lost"), "--snapshots", "331"])
+    assert exc.value.code in (0, None)
+    lost = json.loads((tmp_path / "lost" / "metrics.json").read_text())["metrics"]
+    assert lost["q_verdict"]["status"] == "lost"
+    assert [key for key in lost if "q_fit" in key] == []
+    first, runs = fit_q_recorded(stachniss, 50, 0, init="uniform", warn_lost=False)
+    assert runs == [] and first.metrics["q_fitted"] is None and "q_fit_one_round" not in first.metrics
+    tracked = run_recorded(stachniss, 200, 0, warn_lost=False).metrics
+    assert tracked["q_verdict"]["status"] != "lost" and "q_fit_ml" not in tracked
+    one_round = tracked["q_fit_one_round"]
+    assert np.asarray(one_round["q_cov"]).shape == (2, 2) and type(one_round["at_search_floor"]) is bool
+    assert "in one round, with the particle spread held fixed" in one_round["note"]
+
+
+def test_a_fit_q_run_folder_names_the_fitted_q_it_reports(tmp_path):
+    """A --fit-q folder held q_fit_ml, a one-round fit of the last run's innovations that differs from the Q that run
+    used, beside the fit_q list, with nothing saying which was the fitted Q (also in the re-run for the snapshots)."""
+    import json
+
+    data = shared_path("pf", "robot_mapping_stachniss")
+    with pytest.raises(SystemExit) as exc:
+        main(["pf", str(data), "--recorded", "-n", "300", "--fit-q", "--out", str(tmp_path / "run"), "--snapshots", "0,331"])
+    assert exc.value.code in (0, None)
+    saved = json.loads((tmp_path / "run" / "metrics.json").read_text())
+    metrics = saved["metrics"]
+    assert sorted(key for key in metrics if "q_fit" in key) == ["q_fit_settled", "q_fitted"]
+    fitted = metrics["q_fitted"]
+    assert len(metrics["fit_q"]) >= 2 and fitted["run"] == metrics["fit_q"][-1]["run"] == f"fit {len(metrics['fit_q']) - 1}"
+    assert fitted["q_cov"] == metrics["fit_q"][-1]["q_cov"] == saved["settings"]["q_cov"]
+    assert fitted["q_cov"] != metrics["fit_q"][0]["q_cov"] and "the Q this run used" in fitted["note"]
+
+
+def test_cli_errors_name_the_option_once(capsys):
+    """The option stood before the reason and again in it: "error: --seeds: --seeds must be in 1..10000, got 0"."""
+    data = shared_path("pf", "burgard_particle_filter")
+    for args, line in (
+        (["--seeds", "0"], "--seeds: must be in 1..10000, got 0"),
+        (["--kernel", "kalman", "--roughening", "0.5"], "--roughening: only acts with --kernel point (the Kalman kernels resample by "
+                                                        "splitting)"),
+        (["--innovation-gate", "9.21"], "--innovation-gate: only acts with --kernel kalman"),
+        (["--kld-min", "500", "--kld-max", "600"], "--kld-min: only acts with --kld (as does --kld-max, also given)"),
+        (["--fit-q"], "--fit-q: needs --recorded"),
+        (["--recorded", "--visible", "all"], "--visible: applies to the simulated readings, not to --recorded"),
+        (["--kld", "--kld-unconverged", "100000"], "--kld-unconverged: 100000 is above --kld-max 5000"),
+    ):
+        with pytest.raises(SystemExit) as exc:
+            main(["pf", str(data), *args])
+        assert exc.value.code == 1, args
+        err = capsys.readouterr().err
+        assert err == f"error: {line}\n"
+        option, reason = err.removeprefix("error: ").split(": ", 1)
+        assert option not in reason, err

@@ -112,9 +112,9 @@ def pf_command(
     check_target(out, "folder", files=RUN_FILES, replaces=RUN_FILES)
     counts = _counts(particles)
     if not 1 <= seeds <= MAX_SEEDS:
-        raise ConfigError(f"--seeds must be in 1..{MAX_SEEDS}, got {seeds}", source="--seeds")
+        raise ConfigError(f"must be in 1..{MAX_SEEDS}, got {seeds}", source="--seeds")
     if seed < 0:
-        raise ConfigError(f"--seed must be >= 0, got {seed}", source="--seed")
+        raise ConfigError(f"must be >= 0, got {seed}", source="--seed")
     from lidarkit.resources import check_memory
 
     from lidarkit.pf.study import PROTOCOLS
@@ -137,18 +137,21 @@ def pf_command(
                 largest, option = value, name
         for name, value in (("kld_min", kld_min), ("kld_unconverged", kld_unconverged)):
             if value > kld_max:  # (it said "pf config: kld_min_n 6000 > kld_max_n 5000"); named: the one given
-                raise ConfigError(f"--{name.replace('_', '-')} {value} is above --kld-max {kld_max}",
-                                  source=f"--{name.replace('_', '-')}" if _given(ctx, name) else "--kld-max")
+                option = f"--{name.replace('_', '-')}"
+                if _given(ctx, name):
+                    raise ConfigError(f"{value} is above --kld-max {kld_max}", source=option)
+                raise ConfigError(f"{kld_max} is below {option} {value}", source="--kld-max")
         if max(counts) > kld_max:  # (KLD-sampling's first count: 20000 ran above the 5000 of its title, without a word)
-            raise ConfigError(f"--particles {max(counts)} (KLD-sampling's first count) is above --kld-max {kld_max}",
-                              source="--particles" if _given(ctx, "particles") else "--kld-max")
+            if _given(ctx, "particles"):
+                raise ConfigError(f"{max(counts)} (KLD-sampling's first count) is above --kld-max {kld_max}", source="--particles")
+            raise ConfigError(f"{kld_max} is below --particles {max(counts)} (KLD-sampling's first count)", source="--kld-max")
     snapshot_steps = _steps(snapshots)  # checked whether or not there is a run folder to draw them in
     if gif and out is None:
-        raise ConfigError("--gif needs --out DIR", source="--gif")
+        raise ConfigError("needs --out DIR", source="--gif")
     if _given(ctx, "snapshots") and out is None:  # (they are figures of the run folder: without one, ignored in silence)
-        raise ConfigError("--snapshots needs --out DIR", source="--snapshots")
+        raise ConfigError("needs --out DIR", source="--snapshots")
     if fit_q and not recorded:
-        raise ConfigError("--fit-q needs --recorded", source="--fit-q")
+        raise ConfigError("needs --recorded", source="--fit-q")
     bin_m, bin_deg = _floats(kld_bin, 2, "--kld-bin")
     if not (bin_m > 0 and bin_deg > 0):
         raise ConfigError(f"both bin sizes must be > 0 (metres, degrees), got {kld_bin!r}", source="--kld-bin")
@@ -189,16 +192,17 @@ def pf_command(
     seed_list = list(range(seed, seed + seeds))
     if recorded:
         if len(counts) > 1 or seeds > 1:
-            raise ConfigError("--recorded runs one filter: give one --particles value and --seeds 1", source="--recorded")
+            raise ConfigError("runs one filter: give one --particles value and --seeds 1", source="--recorded")
         simulated_only = [f"--{name.replace('_', '-')}" for name in ("visible", "kidnap_at", "kidnap_offset")
                           if _given(ctx, name)]
         if simulated_only:
-            raise ConfigError(f"{', '.join(simulated_only)} applies to the simulated readings, not to --recorded", source="--recorded")
+            also = f" (as does {', '.join(simulated_only[1:])}, also given)" if len(simulated_only) > 1 else ""
+            raise ConfigError(f"applies to the simulated readings, not to --recorded{also}", source=simulated_only[0])
         _recorded(data, cfg, seed, fit_q, out, snapshot_steps, gif)
         return
     if len(counts) > 1 or seeds > 1:
         if gif:  # (it was ignored)
-            raise ConfigError("--gif animates one run; a study (several --particles or --seeds) writes its table only", source="--gif")
+            raise ConfigError("animates one run; a study (several --particles or --seeds) writes its table only", source="--gif")
         from lidarkit.progress import progress_bar
 
         bar, task = progress_bar(len(counts) * len(seed_list), "pf study", unit="runs")
@@ -266,8 +270,9 @@ def _refuse_unused_options(ctx: typer.Context, *, kld: bool, augmented: bool, ke
     )
     for names, needed, on in needs:
         given = [f"--{name.replace('_', '-')}" for name in names if _given(ctx, name)]
-        if given and not on:
-            raise ConfigError(f"{', '.join(given)} only {'act' if len(given) > 1 else 'acts'} with {needed}", source=given[0])
+        if given and not on:  # (named before the reason and in it: "--roughening: --roughening only acts with ...")
+            also = f" (as does {', '.join(given[1:])}, also given)" if len(given) > 1 else ""
+            raise ConfigError(f"only acts with {needed}{also}", source=given[0])
 
 
 def _refuse_protocol_clashes(ctx: typer.Context, protocol: str, given: dict[str, str]) -> None:
@@ -280,7 +285,7 @@ def _refuse_protocol_clashes(ctx: typer.Context, protocol: str, given: dict[str,
                and PROTOCOLS.get(protocol, {}).get(name, value) != value]
     if clashes:
         sets = ", ".join(f"{k.replace('_', '-')} {v}" for k, v in PROTOCOLS[protocol].items())
-        raise ConfigError(f"{', '.join(clashes)} conflicts with --protocol {protocol}, which sets {sets}", source="--protocol")
+        raise ConfigError(f"{protocol} sets {sets}; {', '.join(clashes)} conflicts with it", source="--protocol")
 
 
 #: Particles from which a run shows its progress (100,000 particles take ~10 s over the report's 331 steps).
@@ -338,9 +343,13 @@ def _recorded(data, cfg: PFConfig, seed: int, fit_q: bool, out: Path | None, sna
             with _step_progress(cfg, len(data), "pf run for the snapshots") as on_step:
                 result = run_recorded(data, None, seed, config=last.config, snapshot_steps=snap, warn_lost=False,  # (the fit's own warned)
                                       on_step=on_step)
-        for key in ("q_verdict", "q_fit_settled"):  # (a re-run for the snapshots: the fit's own verdict)
+        # a re-run for the snapshots: the fit's own verdict and Q (its one-round fit of its own, a Q no run used, sat
+        # beside the fitted Q with nothing saying which was the answer)
+        for key in ("q_verdict", "q_fit_settled", "q_fitted", "q_fit_one_round"):
             if key in last.metrics:
                 result.metrics[key] = last.metrics[key]
+            else:
+                result.metrics.pop(key, None)
         # the run folder holds the last fit's run: the Q given and each fit are kept beside it (metrics.json, "fit_q")
         result.metrics["fit_q"] = [{"run": "given Q" if i == 0 else f"fit {i}", "q_cov": r.settings["q_cov"], "nis_mean": r.metrics["nis_mean"],
                                     "nis_fraction_below_chi2_95": r.metrics["nis_fraction_below_chi2_95"]} for i, r in enumerate([first, *runs])]

@@ -27,7 +27,7 @@ from lidarkit.errors import ConfigError, DataError
 from lidarkit.params import is_integer, is_real_number
 from lidarkit.pf.base import check_landmark_index
 from lidarkit.pf.config import PFConfig
-from lidarkit.pf.consistency import fit_q, localization_problem, q_verdict
+from lidarkit.pf.consistency import Q_VARIANCE_BOUNDS, at_lower_bound, fit_q, localization_problem, q_verdict
 from lidarkit.pf.filter import ParticleFilter, make_filter, nis_values
 from lidarkit.pf.models import integrate_odometry, resolve_q, wrap_angle
 from lidarkit.trajectory import Trajectory
@@ -172,6 +172,9 @@ class PFRunResult:
     odometry_used: np.ndarray | None = field(default=None, repr=False)
     snapshots: dict[int, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict, repr=False)
     metrics: dict[str, Any] = field(default_factory=dict)
+    #: ``(2, 2)`` one-round ML Q of a recorded run's innovations, kept even when the run lost track (a round of
+    #: ``fit_q_recorded`` goes on from it); ``metrics`` shows it only for a run that did not
+    innovation_q_fit: np.ndarray | None = field(default=None, repr=False)
 
     def __repr__(self) -> str:
         """One line of the key figures (the generated one printed every array: 77,852 characters on the Freiburg sample)."""
@@ -186,7 +189,11 @@ class PFRunResult:
 
     @property
     def estimate(self) -> np.ndarray:
-        return self.estimates[self.config.estimator] if self.config.estimator in self.estimates else next(iter(self.estimates.values()))
+        """The config's estimator's poses (another estimator in its place was scored and labelled as it)."""
+        if self.config.estimator not in self.estimates:
+            raise ConfigError(f"the config's estimator {self.config.estimator!r} was not recorded; this run has "
+                              f"{', '.join(self.estimates) or 'none'}", source="estimate")
+        return self.estimates[self.config.estimator]
 
     @property
     def n_steps(self) -> int:
@@ -201,12 +208,14 @@ class PFRunResult:
 
     def trajectory(self, which: str = "estimate") -> Trajectory:
         """``estimate`` / ``mean`` / ``best`` / ``ground_truth`` / ``dead_reckoning`` as an SE(3) Trajectory (z = 0)."""
-        kept = {"estimate": self.estimate, "ground_truth": self.ground_truth, "dead_reckoning": self.dead_reckoning, **self.estimates}
+        if which == "estimate":
+            return poses_to_trajectory(self.estimate, name=which)
+        kept = {"ground_truth": self.ground_truth, "dead_reckoning": self.dead_reckoning, **self.estimates}
         poses = kept.get(which)
         if poses is None:  # (it said only "no trajectory 'best' in this run": a run records only the estimators asked for)
-            available = ", ".join(k for k, v in kept.items() if v is not None)
-            raise ConfigError(f"no trajectory {which!r} in this run; it has {available} (run_protocol records the estimators= "
-                              "it is given, by default the config's estimator only: estimators=('mean', 'best') keeps both)",
+            available = ", ".join(["estimate", *(k for k, v in kept.items() if v is not None)])
+            raise ConfigError(f"no trajectory {which!r} in this run; it has {available} (run_protocol records the config's "
+                              "estimator and the estimators= it is given: estimators=('mean', 'best') keeps both)",
                               source="trajectory")
         return poses_to_trajectory(poses, name=which)
 
@@ -396,7 +405,7 @@ def run_protocol(
     estimator: str | None = None,
     resampler: str | None = None,
     q_as: str | None = None,
-    estimators: tuple[str, ...] | None = None,
+    estimators: str | tuple[str, ...] | None = None,
     visible: str = "recorded",
     snapshot_steps: tuple[int, ...] = (),
     mse_start: int = MSE_START_STEP,
@@ -412,8 +421,9 @@ def run_protocol(
     ``seed`` derives two independent streams: the simulated data (noisy odometry, readings) and the
     filter; so runs with the same seed and different N see the same data. Readings are simulated with
     the same Q the filter uses (``q``/``q_as`` of the config). ``n_particles`` (if given) overrides the
-    config's. ``estimators`` (default: the config's)
-    are all recorded; MSE uses ``lidarkit.eval.position_mse`` from step ``mse_start`` on.
+    config's. ``estimators`` (one name or several) are recorded beside the config's estimator, which is always
+    recorded: it is the run's estimate, the one APE / RPE score. MSE uses ``lidarkit.eval.position_mse`` from step
+    ``mse_start`` on, for every estimator.
     ``kidnap_at_step`` / ``kidnap_offset``: teleport the simulated robot (see :func:`simulate`); the steps it took to
     recover are ``metrics["kidnap_recovery"]``.
     """
@@ -429,7 +439,10 @@ def run_protocol(
     q_cov = resolve_q(cfg.q, cfg.q_as)
     sim = simulate(data, np.random.default_rng(data_seq), q_cov, visible=visible, kidnap_at_step=kidnap_at_step, kidnap_offset=kidnap_offset)
     pf = make_filter(data.landmarks.positions_xy, cfg, np.random.default_rng(filter_seq))
-    estimators = tuple(estimators) if estimators else (cfg.estimator,)
+    if isinstance(estimators, str):  # (tuple("best") ran the estimators 'b', 'e', 's', 't')
+        estimators = (estimators,)
+    # (without the config's estimator, the first one given stood in for it: the best particle's APE filed under "mean")
+    estimators = tuple(dict.fromkeys((*(estimators or ()), cfg.estimator)))
     readings = sim.nearest if cfg.likelihood == "nearest" else sim.readings
     out = run_filter(pf, sim.odometry_noisy, readings, estimators=estimators, snapshot_steps=snapshot_steps, on_step=on_step)
     result = PFRunResult(
@@ -481,7 +494,7 @@ def score_against_ground_truth(result: PFRunResult, *, mse_start: int = MSE_STAR
     for name in result.estimates:
         metrics["mse_m2"][name] = position_mse(gt, result.trajectory(name), start=mse_start)
     if with_ape_rpe:
-        for name, traj in [(result.config.estimator, result.trajectory("estimate")), ("dead_reckoning", dr)]:
+        for name, traj in [(result.config.estimator, result.trajectory(result.config.estimator)), ("dead_reckoning", dr)]:
             metrics.setdefault("ape_translation_m", {})[name] = ape(gt, traj).to_dict()["stats"]
             metrics.setdefault("rpe_translation_m", {})[name] = rpe(gt, traj, delta=1).to_dict()["stats"]
     return metrics
@@ -527,14 +540,36 @@ def run_recorded(
     nis = nis_values(out["innovations"], out["innovation_spread"] + q_cov)
     result.metrics = consistency_metrics(nis, result.estimate, dr, data, q_cov)
     if len(nis) >= 2:
-        q_fit = fit_q(out["innovations"], out["innovation_spread"], q_cov)
+        result.innovation_q_fit = fit_q(out["innovations"], out["innovation_spread"], q_cov)
         lost = localization_problem(len(result.lost_steps), result.n_steps)
         verdict = q_verdict(result.metrics["nis_mean"], q_cov, lost=lost)
-        result.metrics["q_fit_ml"] = q_fit.tolist()
+        if not lost:  # (a lost run's fit is of localization error: 308 of 331 steps lost gave a range variance of 19.9 m^2)
+            result.metrics["q_fit_one_round"] = _one_round_fit_record(result.innovation_q_fit)
         result.metrics["q_verdict"] = {"status": verdict.status, "factor": verdict.factor, "text": verdict.text}
     if warn_lost:
         _warn_lost(result)
     return result
+
+
+def _one_round_fit_record(q_fit: np.ndarray) -> dict[str, Any]:
+    """A run's one-round ML Q as ``metrics["q_fit_one_round"]`` records it: the matrix and what it is (it was stored bare
+    as "q_fit_ml", read as the Q to use although a re-run with it has another particle spread)."""
+    floor = at_lower_bound(q_fit)
+    note = ("maximum-likelihood Q of this run's innovations in one round, with the particle spread held fixed; a re-run "
+            "with it has another spread, so it is no estimate of Q (fit_q_recorded / --fit-q iterate fit and re-run)")
+    if floor:
+        note += (f"; a variance at the search floor {Q_VARIANCE_BOUNDS[0]:g}: the particle spread alone over-explains "
+                 "the innovations")
+    return {"q_cov": np.asarray(q_fit, dtype=np.float64).tolist(), "at_search_floor": floor, "note": note}
+
+
+def _fitted_q_record(result: PFRunResult, n_fits: int) -> dict[str, Any] | None:
+    """The Q ``fit_q_recorded`` reports, as ``metrics["q_fitted"]`` records it: the Q its last run (``result``, fit
+    ``n_fits``) used; None when nothing was fitted."""
+    if not n_fits:
+        return None
+    return {"q_cov": result.settings["q_cov"], "run": f"fit {n_fits}",
+            "note": "the Q this run used, the last re-run of the fit (settled or not: q_fit_settled)"}
 
 
 def fit_q_recorded(data, n_particles: int | None = None, seed: int = 0, *, config: PFConfig | None = None,
@@ -547,9 +582,10 @@ def fit_q_recorded(data, n_particles: int | None = None, seed: int = 0, *, confi
     when not). ``warn_lost``: warn if the run with the given Q or the last fit lost track, naming which (a discarded
     round between them, often lost with its too small Q, says nothing).
 
-    Returns the first run and the re-runs (the last one is the answer; its config holds the fitted Q as variances).
+    Returns the first run and the re-runs (the last one is the answer; its config holds the fitted Q as variances, its
+    ``metrics["q_fitted"]`` too, and it has no one-round fit of its own: a further round, never run, is no answer).
     """
-    from lidarkit.pf.consistency import NIS_CONSISTENT, at_lower_bound, scale_fit
+    from lidarkit.pf.consistency import NIS_CONSISTENT, scale_fit
 
     if not is_integer(max_rounds) or max_rounds < 1:  # (0 fitted nothing)
         raise ConfigError(f"max_rounds must be an integer >= 1 (re-runs with a fitted Q), got {max_rounds!r}", source="max_rounds")
@@ -558,9 +594,9 @@ def fit_q_recorded(data, n_particles: int | None = None, seed: int = 0, *, confi
     current = first
     # a lost first run: its innovations are localization error, and a Q fitted to them only widens the cloud
     for _ in range(0 if _lost(first) else max_rounds):
-        if "q_fit_ml" not in current.metrics:
+        if current.innovation_q_fit is None:
             raise DataError("no readings to fit Q on", source="fit_q")
-        q_fit = np.asarray(current.metrics["q_fit_ml"])
+        q_fit = current.innovation_q_fit  # (a discarded round that lost track still leads to the next)
         if at_lower_bound(q_fit):  # the spread alone over-explains the innovations: scale Q by the ML scale instead
             q_fit = np.asarray(current.settings["q_cov"]) * scale_fit(current.metrics["nis_mean"])
         q_diag = np.diag(q_fit)
@@ -576,6 +612,9 @@ def fit_q_recorded(data, n_particles: int | None = None, seed: int = 0, *, confi
     lo, hi = NIS_CONSISTENT
     settled = lo <= last.metrics["nis_mean"] <= hi and not _lost(last)
     last.metrics["q_fit_settled"] = settled
+    last.metrics["q_fitted"] = _fitted_q_record(last, len(runs))
+    if runs:  # (its one-round fit, a Q no run used, sat beside the fitted Q with nothing saying which was the answer)
+        last.metrics.pop("q_fit_one_round", None)
     if warn_lost:
         _warn_lost(first, " with the given Q")
         if runs:
