@@ -291,6 +291,17 @@ def check_target(path: str | os.PathLike | None, kind: str = "file", files: Iter
         raise OutputError(f"cannot write: {(err.strerror or str(err)).lower()}", source=path) from None
 
 
+def refuse_dangling_link(path: str | os.PathLike, what: str = "folder") -> None:
+    """OutputError when ``path``, or a folder above it, is a symbolic link to something missing: an output is never
+    created where such a link points (a folder export to ``dangle -> /nonexistent/x`` made /nonexistent/x and its
+    parents), as bags are never written there; ``what``: the kind of output, for the message."""
+    path = Path(path)
+    link = next((p for p in (path, *path.parents) if p.is_symlink() and not p.exists()), None)
+    if link is not None:
+        raise OutputError(f"a symbolic link to a missing file is in the way (-> {os.readlink(link)}): remove it or name another "
+                          f"{what if link == path else 'folder'}", source=link)
+
+
 def _longest_name(path: Path) -> tuple[int, int]:
     """Bytes of the longest name in ``path`` and the most the file system takes (NAME_MAX of the nearest existing
     folder, 255 where it cannot tell): a name too long for the disk failed only when the file was written, after the work."""
@@ -314,6 +325,7 @@ def _check_target(path: Path, kind: str) -> None:
     if kind == "folder":
         if path.exists() and not path.is_dir():
             raise OutputError("cannot write the folder: a file is in the way (a folder is needed here)", source=path)
+        refuse_dangling_link(path)  # (as run_folder does: refused before the work, not after it)
     else:
         if path.is_dir():
             raise OutputError("cannot write: is a folder (a file name is needed here)", source=path)
@@ -354,11 +366,14 @@ def run_folder(path: str | os.PathLike, replaces: Iterable[str] = (), exclusive:
     folder that held an earlier run (its ``config.yaml`` names a lidarkit version: its ground truth or plots are never
     read as this run's); a folder that held no run keeps every file (a user's own ``trajectory.png`` went).
     ``exclusive``: ``path`` must be missing or empty when the run is moved in (one rename, which the file system refuses
-    onto a folder that holds files: two exports to one folder at once merged before).
+    onto a folder that holds files: two exports to one folder at once merged before). A ``path`` that is a symbolic link
+    is written where it points when that folder exists; a link to a missing folder is refused (see
+    :func:`refuse_dangling_link`).
     """
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise OutputError("cannot write the folder: a file is in the way (a folder is needed here)", source=path)
+    refuse_dangling_link(path)  # (a link to a missing folder was followed, and the folder made with all its parents)
     named = path
     if path.is_symlink():  # written beside the folder it names (a rename onto the link itself fails)
         path = path.resolve()

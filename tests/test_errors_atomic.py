@@ -414,3 +414,40 @@ def test_a_pgf_plot_without_its_tex_program_is_refused_before_the_work(tmp_path,
         atomic.save_figure(fig, tmp_path / "e.pgf")
     assert str(caught.value).startswith(f"{tmp_path / 'e.pgf'}: cannot write the plot: LaTeX errored")
     assert "\n" not in str(caught.value) and sorted(os.listdir(tmp_path)) == ["bin"]
+
+
+def test_a_folder_output_through_a_link_to_a_missing_folder_is_refused_as_a_bag_is(tmp_path, capsys):
+    """ln -s /nonexistent/x dangle; lidarkit sim lidar --out dangle made /nonexistent/x with its parents (bags refused the
+    same link); every run folder did the same: refused, before the work, and nothing is made where the link points."""
+    from lidarkit.sim.lidar import SimulatedLidarSequence, export_kitti
+
+    dangle = tmp_path / "dangle"
+    dangle.symlink_to(tmp_path / "gone" / "x")
+    said = f"{dangle}: a symbolic link to a missing file is in the way (-> {tmp_path / 'gone' / 'x'}): remove it or name another folder"
+    for argv in (["sim", "lidar", "-p", "n_beams=8", "-p", "n_azimuths=90"], ["sim", "camera", "-p", "width=64", "-p", "height=48",
+                                                                               "-p", "cx=null", "-p", "cy=null"]):
+        with pytest.raises(SystemExit) as exc:
+            main([*argv, "--frames", "2", "--out", str(dangle), "--no-progress"])
+        assert (exc.value.code, capsys.readouterr().err) == (1, f"error: {said}\n")
+    frames = []
+    with pytest.raises(OutputError) as caught:
+        export_kitti(SimulatedLidarSequence(n_frames=2, n_beams=8, n_azimuths=90), dangle, on_frame=frames.append)
+    assert str(caught.value) == said and frames == []  # refused before the first sweep
+    for refuse in (lambda: atomic.check_target(dangle, "folder"), lambda: atomic.run_folder(dangle).__enter__(),
+                   lambda: atomic.export_folder(dangle, "sweeps").__enter__()):
+        with pytest.raises(OutputError) as caught:
+            refuse()
+        assert str(caught.value) == said
+    # a link to a missing folder above the output: named, never followed
+    with pytest.raises(OutputError) as caught:
+        atomic.check_target(dangle / "run", "folder")
+    assert str(caught.value) == said
+    with pytest.raises(OutputError) as caught, atomic.run_folder(dangle / "run"):
+        pass
+    assert str(caught.value) == said
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dangle"] and dangle.is_symlink()
+    # a link to a folder that exists is written through, as before
+    (tmp_path / "gone" / "x").mkdir(parents=True)
+    with atomic.run_folder(dangle / "run") as tmp:
+        (tmp / "poses.txt").write_text("p\n")
+    assert (tmp_path / "gone" / "x" / "run" / "poses.txt").read_text() == "p\n"

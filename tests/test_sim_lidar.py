@@ -451,3 +451,20 @@ def test_a_drive_beyond_the_float32_exact_reach_is_said(caplog):
         SimulatedLidarSequence(n_frames=1001, speed_mps=100, accel_time_s=0, n_beams=8, n_azimuths=64)  # 10.01 km
     assert FLOAT32_EXACT_REACH_M == 10_000.0
     assert "the drive reaches 10 km from its start; the scene and rays are cast in float32 world coordinates" in caplog.text
+
+
+def test_a_sweep_without_a_return_names_the_dataset_once_and_its_frame(tmp_path):
+    """'sim:open?seed=4 (frame 8): sim:open?seed=4: sweep 8 has no return ...': the sweep's error named only the dataset,
+    and the odometry runner placed it at its frame by naming the dataset again."""
+    from lidarkit import odometry
+
+    blind = SimulatedLidarSequence(scene="open", seed=1, n_frames=2, n_beams=4, n_azimuths=64, elevation_min_deg=1,
+                                   elevation_max_deg=5, max_range_m=15)
+    with pytest.raises(DataError) as read:
+        blind.read_scan(1)
+    assert (read.value.source, read.value.location) == ("sim:open?seed=1", "frame 1")
+    assert str(read.value).startswith("sim:open?seed=1 (frame 1): sweep 1 has no return within 1-15 m: ")
+    with pytest.raises(DataError) as run:
+        odometry.run(blind, "kiss")
+    assert str(run.value).startswith("sim:open?seed=1 (frame 0): sweep 0 has no return within 1-15 m: ")
+    assert str(run.value).count("sim:open?seed=1") == 1

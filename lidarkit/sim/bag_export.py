@@ -3,9 +3,11 @@
 One ``sensor_msgs/PointCloud2`` per sweep on ``/points`` with fields ``x y z intensity`` (float32), ``time``
 (float32 seconds from the sweep start, as Velodyne drivers write it) and ``t`` (uint32 nanoseconds from the
 sweep start, as Ouster drivers write it); the header stamp is the sweep start. One ``nav_msgs/Odometry`` per
-sweep on ``/ground_truth`` with ``T_world_lidar`` at the config's ``pose_instant``, stamped at that instant.
-Points are in firing order, exactly as :meth:`SimulatedLidarSequence.read_scan` returns them (float32), so the
-bag and the KITTI-layout export hold the same sweeps. Written with the ``rosbags`` writers.
+sweep on ``/ground_truth`` with ``T_world_lidar`` at the config's ``pose_instant``, stamped at that instant, and the
+true velocity there as its twist (in the lidar frame, the child frame); both covariances are zero (the motion is exact).
+Points are in firing order as :meth:`SimulatedLidarSequence.read_scan` returns them, rounded to float32 (read_scan
+gives float64), so the bag and the KITTI-layout export hold the same sweeps, bit for bit, while odometry over either
+differs slightly from odometry over the ``sim:`` spec itself. Written with the ``rosbags`` writers.
 """
 
 from __future__ import annotations
@@ -51,9 +53,10 @@ def check_bag_target(out: str | os.PathLike, fmt: str, option: str | None = None
         raise ConfigError(f"a rosbag2 bag is a folder: name it without {out.suffix}, got {out.name!r}", source=option or out)
     if out.exists():
         raise DataError("exists already; bags are never overwritten", source=out)
-    if out.is_symlink():  # (a dangling link: refused only after the simulation, as if another export had written it)
-        raise OutputError(f"a symbolic link to a missing file is in the way (-> {os.readlink(out)}): remove it or name another "
-                          f"{'folder' if fmt == 'rosbag2' else 'file'}", source=out)
+    from lidarkit.atomic import refuse_dangling_link
+
+    # (a dangling link: refused only after the simulation, as if another export had written it)
+    refuse_dangling_link(out, "folder" if fmt == "rosbag2" else "file")
     return out
 
 
@@ -139,6 +142,25 @@ def _claim(written: Path, out: Path) -> None:
         os.replace(written, out)  # a file system without hard links: the check above is as close as it gets
 
 
+#: half the interval of the central differences that give the true velocity: 1 cm of a 10 m/s drive (less than the
+#: path's 0.1 m sample step); the sway (at most 1.2 Hz) differentiated to 1e-5 of its rate
+TWIST_HALF_STEP_S = 1e-3
+
+
+def true_twists(sequence, times_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Linear (m/s) and angular (rad/s) velocity ``(N, 3)`` float64 of the lidar at ``times_s`` ``(N,)``, both in the
+    lidar frame, as a nav_msgs/Odometry twist is given in its child frame: central differences of the simulated drive
+    (``poses_at``) over ``TWIST_HALF_STEP_S`` either side, the angular rate from the relative rotation's axis-angle."""
+    from scipy.spatial.transform import Rotation
+
+    times_s = np.asarray(times_s, dtype=np.float64)
+    before, at, after = (sequence.poses_at(times_s + dt) for dt in (-TWIST_HALF_STEP_S, 0.0, TWIST_HALF_STEP_S))
+    linear_mps = np.einsum("nji,nj->ni", at[:, :3, :3], after[:, :3, 3] - before[:, :3, 3]) / (2.0 * TWIST_HALF_STEP_S)
+    turn = np.einsum("nji,njk->nik", before[:, :3, :3], after[:, :3, :3])  # R(t-h)^T R(t+h) = exp(2 h [w_lidar]x)
+    angular_radps = Rotation.from_matrix(turn).as_rotvec() / (2.0 * TWIST_HALF_STEP_S)
+    return linear_mps, angular_radps
+
+
 def _write_messages(sequence, writer, typestore, serialize, *, ros1: bool, on_frame) -> None:
     from scipy.spatial.transform import Rotation
 
@@ -165,6 +187,7 @@ def _write_messages(sequence, writer, typestore, serialize, *, ros1: bool, on_fr
 
     zeros36 = np.zeros(36)
     vec = T["geometry_msgs/msg/Vector3"]
+    linear_mps, angular_radps = true_twists(sequence, gt.timestamps_s)
     with writer:
         points_conn = writer.add_connection(POINTS_TOPIC, pc2, typestore=typestore)
         gt_conn = writer.add_connection(GROUND_TRUTH_TOPIC, odom, typestore=typestore)
@@ -191,11 +214,13 @@ def _write_messages(sequence, writer, typestore, serialize, *, ros1: bool, on_fr
                                                      orientation=T["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3])),
                     covariance=zeros36),
                 twist=T["geometry_msgs/msg/TwistWithCovariance"](
-                    twist=T["geometry_msgs/msg/Twist"](linear=vec(x=0.0, y=0.0, z=0.0), angular=vec(x=0.0, y=0.0, z=0.0)), covariance=zeros36),
+                    twist=T["geometry_msgs/msg/Twist"](linear=vec(x=linear_mps[i, 0], y=linear_mps[i, 1], z=linear_mps[i, 2]),
+                                                       angular=vec(x=angular_radps[i, 0], y=angular_radps[i, 1], z=angular_radps[i, 2])),
+                    covariance=zeros36),
             )
             writer.write(gt_conn, int(round(float(gt.timestamps_s[i]) * 1e9)), serialize(odom_msg, odom))
             if on_frame is not None:
                 on_frame(i)
 
 
-__all__ = ["BAG_FORMATS", "GROUND_TRUTH_TOPIC", "POINTS_TOPIC", "STORAGES", "check_bag_target", "export_bag"]
+__all__ = ["BAG_FORMATS", "GROUND_TRUTH_TOPIC", "POINTS_TOPIC", "STORAGES", "check_bag_target", "export_bag", "true_twists"]

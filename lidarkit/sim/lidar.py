@@ -686,7 +686,8 @@ class SimulatedLidarSequence:
         return f"SimulatedLidarSequence({self.name!r}, {c.n_frames} sweeps of {c.n_beams}x{c.n_azimuths} rays)"
 
     def read_scan(self, index: int) -> Scan:
-        """Cast sweep ``index``; points ``(N, 3)`` in the sensor frame, ordered by firing time."""
+        """Cast sweep ``index``; points ``(N, 3)`` float64 in the sensor frame, ordered by firing time (exports round
+        them to float32)."""
         return self._cast(index)[0]
 
     def read_scan_labels(self, index: int) -> tuple[Scan, np.ndarray]:
@@ -724,6 +725,7 @@ class SimulatedLidarSequence:
                 f"beams ({cfg.elevation_min_deg:g} to {cfg.elevation_max_deg:g} deg, the sensor {cfg.sensor_height_m:g} m up) "
                 f"see nothing of the {cfg.scene} scene, and an empty sweep is no scan (raise max_range_m or widen the beams)",
                 source=self.name,
+                location=f"frame {index}",  # (the odometry runner passes an error placed at its frame through as it is)
             )
         dirs = self.directions_sensor.reshape(-1, 3)[keep]
         points = dirs * range_m[keep, None]
@@ -793,13 +795,16 @@ def export_kitti(
 ) -> Path:
     """Write the sequence as a KITTI-style folder and return it.
 
-    ``velodyne/NNNNNN.bin`` (float32 x, y, z, intensity), ``point_times/NNNNNN.npy`` (float32 per-point time from
-    the sweep start, s), ``times.txt`` (stamps at ``pose_instant``), ``poses.txt`` (KITTI format, LiDAR frame, at
-    ``pose_instant``), ``poses_start.txt`` / ``poses_mid.txt`` / ``poses_end.txt``, ``calib.txt`` (``Tr`` = identity:
-    poses are already in the LiDAR frame) and ``sim.yaml`` (the resolved config).
+    ``velodyne/NNNNNN.bin`` (float32 x, y, z, intensity: :meth:`~SimulatedLidarSequence.read_scan`'s float64 points
+    rounded, as in the bags, so odometry over the folder differs slightly from odometry over the sequence itself),
+    ``point_times/NNNNNN.npy`` (float32 per-point time from the sweep start, s), ``times.txt`` (stamps at
+    ``pose_instant``), ``poses.txt`` (KITTI format, LiDAR frame, at ``pose_instant``), ``poses_start.txt`` /
+    ``poses_mid.txt`` / ``poses_end.txt``, ``calib.txt`` (``Tr`` = identity: poses are already in the LiDAR frame) and
+    ``sim.yaml`` (the resolved config).
 
     All or nothing: the folder appears complete or not at all (an interrupted export leaves nothing that reads as a
-    sequence), and a folder that already holds files is refused (sweeps of two exports are never mixed).
+    sequence), and a folder that already holds files is refused (sweeps of two exports are never mixed), as is a
+    symbolic link to a missing folder (never created where it points).
     """
     from lidarkit import atomic
 
