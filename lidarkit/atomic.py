@@ -230,9 +230,7 @@ def _missing_program(fmt: str) -> str:
     rcParams['pgf.texsystem'] (xelatex, lualatex or pdflatex), whose absence was a traceback after all the work."""
     if fmt != "pgf":
         return ""
-    import matplotlib
-
-    program = str(matplotlib.rcParams["pgf.texsystem"])
+    program = _texsystem()
     return "" if shutil.which(program) else program
 
 
@@ -252,7 +250,21 @@ def save_figure(fig, path: str | os.PathLike, *, dpi: float | None = None) -> Pa
             raise OutputError(f"cannot write the plot: {' '.join(str(err).split())}", source=path) from err
         except LatexError as err:
             raise OutputError(f"cannot write the plot: LaTeX errored: {_tex_complaint(err)}", source=path) from err
+        except BrokenPipeError as err:
+            if fmt != "pgf":
+                raise
+            # (a TeX that fails at once may exit before matplotlib has written its preamble: the same failure, timed
+            # otherwise, read "cannot write: Broken pipe" as if the plot file were at fault)
+            raise OutputError("cannot write the plot: LaTeX errored: the TeX program "
+                              f"({_texsystem()}) exited before reading the figure", source=path) from err
     return path
+
+
+def _texsystem() -> str:
+    """The TeX program matplotlib's .pgf backend runs (rcParams['pgf.texsystem'])."""
+    import matplotlib
+
+    return str(matplotlib.rcParams["pgf.texsystem"])
 
 
 def _tex_complaint(err: Exception) -> str:
