@@ -390,7 +390,6 @@ def run_folder(path: str | os.PathLike, replaces: Iterable[str] = (), exclusive:
     if path.is_symlink():  # written beside the folder it names (a rename onto the link itself fails)
         path = path.resolve()
     path = Path(os.path.abspath(path))  # ("." has itself as parent: its temporary folder was made inside it)
-    held_a_run = _holds_a_run(path)
     # a writable folder in a parent this user cannot write to (a mount point): written inside it, moved file by file
     inside = path.is_dir() and not _writable(path.parent) and _writable(path)
     with partial_folder(path, "cannot create the folder", inside=inside) as tmp:
@@ -403,6 +402,9 @@ def run_folder(path: str | os.PathLike, replaces: Iterable[str] = (), exclusive:
             raise
         written = {p.name for p in tmp.iterdir()}
         with interrupts_deferred():  # moved in file by file: a folder cut off half-way looked finished
+            # (what the folder holds now, not when this run began: a run that finished into it meanwhile left its
+            # pose_covariance.txt beside this run's config.yaml)
+            held_a_run = _holds_a_run(path)
             with output_errors(named, "cannot complete the folder"):
                 _move_into_place(tmp, path, exclusive, named, inside)
             for name in sorted(set(replaces) - written) if held_a_run else ():

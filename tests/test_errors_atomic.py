@@ -451,3 +451,20 @@ def test_a_folder_output_through_a_link_to_a_missing_folder_is_refused_as_a_bag_
     with atomic.run_folder(dangle / "run") as tmp:
         (tmp / "poses.txt").write_text("p\n")
     assert (tmp_path / "gone" / "x" / "run" / "poses.txt").read_text() == "p\n"
+
+
+def test_a_run_that_finished_into_the_folder_meanwhile_is_replaced_whole(tmp_path):
+    """Two runs into one new folder: B began first, A finished first, then B. B read "no earlier run" when it began,
+    so it kept A's pose_covariance.txt beside its own config.yaml (a kiss run folder with vanilla's covariances)."""
+    from lidarkit.run_files import RUN_FILES
+
+    folder = tmp_path / "race"
+    with atomic.run_folder(folder, replaces=RUN_FILES) as b:
+        with atomic.run_folder(folder, replaces=RUN_FILES) as a:
+            atomic.write_text(a / "config.yaml", "method: vanilla\nlidarkit_version: x\n")
+            atomic.write_text(a / "poses_kitti.txt", "A\n")
+            atomic.write_text(a / "pose_covariance.txt", "A's covariances\n")
+        atomic.write_text(b / "config.yaml", "method: kiss\nlidarkit_version: x\n")
+        atomic.write_text(b / "poses_kitti.txt", "B\n")
+    assert {p.name: p.read_text() for p in folder.iterdir()} == {"config.yaml": "method: kiss\nlidarkit_version: x\n",
+                                                                 "poses_kitti.txt": "B\n"}
