@@ -29,7 +29,7 @@ import logging
 import lzma
 import os
 import zlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -105,6 +105,10 @@ class Relations:
     dy_m: np.ndarray
     dyaw_rad: np.ndarray
     source: str = ""
+    scan_gap_s: float | None = None
+    """The smallest gap between the stamps of the log's scans, whose stamps the relation times are (s); None: not known
+    (a file read on its own). The metric matches poses within half of it, so a scan the estimate skips is not stood in
+    for by its neighbour (Intel's scans lie down to 0.1 ms apart)."""
 
     def __post_init__(self) -> None:
         """Relations built in code are checked as a file's are: (K,) finite numbers of one length (a NaN scored "nan +-
@@ -127,6 +131,12 @@ class Relations:
             raise DataError(f"t1 equals t2 (relation {same_time[0] + 1})", source=self.source or "relations")
         for name, value in zip(names, arrays):
             object.__setattr__(self, name, value)
+        gap = self.scan_gap_s
+        if gap is not None and not (is_real_number(gap) and np.isfinite(gap) and gap > 0):
+            raise DataError(f"scan_gap_s must be a finite number of seconds > 0 or None, got {gap!r}",
+                            source=self.source or "relations")
+        if gap is not None:
+            object.__setattr__(self, "scan_gap_s", float(gap))
 
     def __len__(self) -> int:
         return int(len(self.t1_s))
@@ -459,9 +469,12 @@ class CarmenLog:
     def relations(self) -> Relations | None:
         """The relation ground truth (``.relations`` file), or None if there is none. Its times are the log's, as
         logged; on a log whose stamps were moved to increase (Intel) each is moved with the scan logged at it, so that
-        it finds that scan's pose (matched by the logged times, 428 of 2000 found none and others the wrong scan)."""
+        it finds that scan's pose (matched by the logged times, 428 of 2000 found none and others the wrong scan). They
+        carry the smallest gap between the scans' stamps (``scan_gap_s``), which the metric's time tolerance stays under."""
         if self._relations is None and self._logged_relations is not None:
-            self._relations = self._on_own_clock(self._logged_relations)
+            gaps = np.diff(self._timestamps_s)  # (strictly increasing)
+            on_clock = self._on_own_clock(self._logged_relations)
+            self._relations = replace(on_clock, scan_gap_s=float(gaps.min()) if gaps.size else None)
         return self._relations
 
     def _on_own_clock(self, relations: Relations) -> Relations:
