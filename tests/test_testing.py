@@ -490,3 +490,50 @@ def test_a_missing_baseline_folder_in_pytest_ini_is_one_line_per_test(tmp_path):
     assert errors.strip().splitlines()[1:-1] == [
         f"{tmp_path / 'nothere'}: baseline folder does not exist (set by lidarkit_baseline in {tmp_path / 'pytest.ini'})"]
     assert "Traceback" not in proc.stdout and "baseline.py" not in proc.stdout
+
+
+def test_a_bench_record_of_the_pinned_data_written_another_way_passes(tmp_path):
+    """Bench records that ran on exactly the pinned data were refused as another dataset: a simulated drive with
+    ``range_noise_std_m: 0.0`` (its default) written out, and KITTI 00 given as ``sequences/00`` or ``sequence: "00"``
+    against a root pinned with ``sequence: 0``; the specs were compared as written (compare pairs them)."""
+    from conftest import shared_path
+
+    from lidarkit.bench.results import load_results
+    from lidarkit.bench.runner import run_suite
+    from lidarkit.bench.suite import load_suite
+
+    root = shared_path("kitti_odometry")
+    vanilla = "methods: [{name: vanilla, params: {voxel_size_m: 1.0}}]"
+    sim = "{kind: sim_lidar, scene: street, n_frames: 4, n_beams: 16, n_azimuths: 360, seed: 0%s, name: s4}"
+    (tmp_path / "pinned.yaml").write_text(textwrap.dedent(f"""
+        name: pinned
+        experiments:
+          - {{name: sim, task: odometry, dataset: {sim % ""}, {vanilla}}}
+          - {{name: kitti, task: odometry, dataset: {{kind: kitti, path: "{root}", sequence: 0, name: K00}},
+             options: {{frames: "0:3"}}, {vanilla}}}
+    """))
+    baseline = record(tmp_path / "pinned.yaml", tmp_path / "baseline", repeats=1)
+    (tmp_path / "written.yaml").write_text(textwrap.dedent(f"""
+        name: written-another-way
+        experiments:
+          - {{name: sim, task: odometry, dataset: {sim % ", range_noise_std_m: 0.0"}, {vanilla}}}
+          - {{name: folder, task: odometry, dataset: {{kind: kitti, path: "{root / 'sequences' / '00'}", name: K00}},
+             options: {{frames: "0:3"}}, {vanilla}}}
+          - {{name: text, task: odometry, dataset: {{kind: kitti, path: "{root}", sequence: "00", name: K00}},
+             options: {{frames: "0:3"}}, {vanilla}}}
+    """))
+    run_suite(load_suite(tmp_path / "written.yaml"), tmp_path / "results", executor="serial")
+    records = {r["job"]["experiment"]: r for r in load_results(tmp_path / "results")}
+    for experiment, pinned in (("sim", "sim"), ("folder", "kitti"), ("text", "kitti")):
+        assert records[experiment]["status"] == "ok", records[experiment].get("error")
+        assert_no_worse_than(records[experiment], baseline, experiment=pinned, metric="ape_rmse_m", tolerance=1e-6)
+    # another sensor, or another sequence, is still another dataset
+    sim_job, kitti_job = records["sim"]["job"], records["text"]["job"]
+    noisier = {**records["sim"], "job": {**sim_job, "dataset": {**sim_job["dataset"], "range_noise_std_m": 0.05}}}
+    with pytest.raises(EvaluationError, match=r"the result's job dataset differs from the pinned job "
+                                              r"'vanilla\(voxel_size_m=1\)': range_noise_std_m 0\.05 \(pinned 0\.0\)$"):
+        assert_no_worse_than(noisier, baseline, experiment="sim", metric="ape_rmse_m", tolerance=1.0)
+    other_sequence = {**records["text"], "job": {**kitti_job, "dataset": {**kitti_job["dataset"], "sequence": "01"}}}
+    with pytest.raises(EvaluationError, match=r"the result's job dataset differs from the pinned job .*: path .*sequence '01' "
+                                              r"\(pinned <absent>\)"):
+        assert_no_worse_than(other_sequence, baseline, experiment="kitti", metric="ape_rmse_m", tolerance=1.0)

@@ -13,7 +13,8 @@ under them), the evaluation settings and the platform.
 is ``regression: ...``; outside on the better side ``improved: ...`` (passes; re-record to tighten). A job that
 raises is ``failed: ...`` with its error, and the other jobs are still checked.
 
-Layout: ``DIR/manifest.json``, ``DIR/suite.yaml`` (the suite as recorded), ``DIR/jobs/<key>/metrics.json``
+Layout: ``DIR/manifest.json``, ``DIR/suite.yaml`` (the suite as recorded, its relative dataset paths made absolute so
+that it records again from there), ``DIR/jobs/<key>/metrics.json``
 and, for odometry jobs, ``DIR/jobs/<key>/poses_kitti.txt``.
 """
 
@@ -235,6 +236,19 @@ def run_job(job: Job, checksum_cache: dict[str, str] | None = None) -> JobRun:
         raise RegistrationError(f"the job failed: {type(err).__name__}: {err}", source=_job_name(job)) from err
 
 
+def _validate_pinned_options(job: Job) -> None:
+    """A pinned job's task options checked as a suite file's are when it loads, before the job re-runs: an option this
+    lidarkit no longer knows is one ConfigError naming the valid ones (the task's run printed pydantic's 4-line dump)."""
+    from lidarkit.bench.tasks import get_task
+
+    try:
+        get_task(job.task).validate_options(dict(job.options))
+    except LidarKitError as err:
+        raise ConfigError(str(err), source=_job_name(job)) from None
+    except Exception as err:  # noqa: BLE001 - a plugin task's validator bug: one line naming the job, as its run's
+        raise ConfigError(f"its options could not be checked: {type(err).__name__}: {err}", source=_job_name(job)) from None
+
+
 def _job_name(job: Job) -> str:
     return f"{job.experiment}: {job.method_label} on {job.dataset_name} (seed {job.seed})"
 
@@ -405,7 +419,7 @@ def record(
                 "metrics": _jsonable(first.metrics), "checked": names, "noise_std": noise, "bands": bands,
                 "repeats": [_jsonable(run.metrics) for run in runs],
             })
-        atomic.write_text(tmp / "suite.yaml", Path(suite_path).read_text(encoding="utf-8"))
+        atomic.write_text(tmp / "suite.yaml", suite_copy_text(suite_path))
         manifest = {"schema": SCHEMA, "created_utc": _utc(), "suite": suite.name, "repeats": int(repeats),
                     "environment": environment(), "evaluation": evaluation_settings(),
                     "band_rule": f"max({NOISE_FACTOR:g} x run-to-run std, per-metric floor, {RELATIVE_FLOOR:g} x value)",
@@ -417,6 +431,80 @@ def record(
         if folder.is_dir() and folder.name not in pinned:
             shutil.rmtree(folder)
     return load_baseline(out)
+
+
+def suite_copy_text(suite_path: str | os.PathLike) -> str:
+    """The suite file's text with its dataset paths (and reader path options) written as its jobs resolved them, as the
+    manifest stores them, for the baseline folder's ``suite.yaml``: copied verbatim, a relative ``path: kd`` resolved
+    against the baseline folder ("dataset path does not exist: .../baseline/kd") and the copy could not record again.
+    Only those values change (comments and layout kept), under a header comment saying so."""
+    import yaml
+
+    from lidarkit.bench.datasets import resolve_dataset, resolve_option_paths
+
+    suite_path = Path(suite_path).resolve()
+    text = suite_path.read_text(encoding="utf-8")
+    try:
+        root, data = yaml.compose(text), yaml.safe_load(text)
+    except yaml.YAMLError:  # (load_suite read it: not reached)
+        return text
+    edits: dict[int, tuple[int, str]] = {}  # start of a value in the text -> (its end, the resolved value)
+    for node, spec in _dataset_entries(root, data):
+        try:
+            resolved = resolve_option_paths(resolve_dataset(dict(spec), suite_path.parent), suite_path.parent)
+        except (LidarKitError, TypeError, ValueError):  # (kept as written: a spec load_suite took otherwise)
+            continue
+        for key, value in spec.items():  # (the relative ones: an absolute path reads the same from here)
+            value_node = _mapping_value(node, key)
+            if (isinstance(value, str) and isinstance(resolved.get(key), str) and resolved[key] != value
+                    and not Path(value).expanduser().is_absolute() and isinstance(value_node, yaml.ScalarNode)):
+                edits[value_node.start_mark.index] = (value_node.end_mark.index, json.dumps(resolved[key]))
+    if not edits:
+        return text
+    for start in sorted(edits, reverse=True):
+        end, value = edits[start]
+        text = text[:start] + value + text[end:]
+    header = "# the suite recorded from "
+    return text if text.startswith(header) else (
+        f"{header}{suite_path}, its relative dataset paths written as the baseline resolved them (from that\n"
+        "# file's folder), so that this copy records again from here\n" + text)
+
+
+def _dataset_entries(root: Any, data: Any) -> list[tuple[Any, dict[str, Any]]]:
+    """``(YAML mapping node, its spec)`` of every dataset a suite writes out: under ``datasets:``, and an experiment's
+    ``dataset:`` or ``datasets:`` entries given as mappings (not by name)."""
+    if not isinstance(data, dict):
+        return []
+    out = []
+    named = data.get("datasets")
+    if isinstance(named, dict):
+        out += [(_mapping_value(_mapping_value(root, "datasets"), name), spec) for name, spec in named.items()]
+    experiments = data.get("experiments")
+    exp_nodes = _mapping_value(root, "experiments")
+    for i, exp in enumerate(experiments if isinstance(experiments, list) else []):
+        exp_node = exp_nodes.value[i] if exp_nodes is not None and i < len(exp_nodes.value) else None
+        if not isinstance(exp, dict):
+            continue
+        out.append((_mapping_value(exp_node, "dataset"), exp.get("dataset")))
+        listed, list_node = exp.get("datasets"), _mapping_value(exp_node, "datasets")
+        for k, spec in enumerate(listed if isinstance(listed, list) else []):
+            out.append((list_node.value[k] if list_node is not None and k < len(list_node.value) else None, spec))
+    return [(node, spec) for node, spec in out if isinstance(spec, dict) and node is not None]
+
+
+def _mapping_value(node: Any, key: str) -> Any:
+    """The value node of ``key`` in a YAML mapping node (a key merged in with ``<<:`` too); None when absent."""
+    import yaml
+
+    if not isinstance(node, yaml.MappingNode):
+        return None
+    merged = []
+    for key_node, value_node in node.value:
+        if isinstance(key_node, yaml.ScalarNode) and key_node.value == key:
+            return value_node
+        if isinstance(key_node, yaml.ScalarNode) and key_node.value == "<<":
+            merged += value_node.value if isinstance(value_node, yaml.SequenceNode) else [value_node]
+    return next((found for source in merged if (found := _mapping_value(source, key)) is not None), None)
 
 
 def _is_baseline_manifest(path: Path) -> bool:
@@ -520,9 +608,15 @@ def measured_noise(path: str | os.PathLike, metric: str | None, task: str | None
 
 @dataclass
 class Finding:
+    """One finding of a check; its job and message are kept on one line (a plugin's exception message with a newline
+    ran over several lines of the report)."""
+
     kind: str  # "protocol changed" | "failed" | "regression" | "improved" | "note"
     job: str
     message: str
+
+    def __post_init__(self) -> None:
+        self.job, self.message = (" ".join(str(text).split()) for text in (self.job, self.message))
 
     def line(self) -> str:
         return f"{self.kind}: {self.job}: {self.message}"
@@ -637,6 +731,7 @@ def check(
         if env_changes or eval_changes:
             continue  # numbers under another environment or evaluation are not comparable: do not spend the run
         try:
+            _validate_pinned_options(job)
             run = run_job(job, cache)
         except LidarKitError as err:  # one job failing is its finding: the others are still checked and reported
             result.findings.append(Finding("failed", name, err.reason))

@@ -165,7 +165,14 @@ def _check_same_data(result: Any, now_metrics: dict[str, float], job: Mapping[st
         for key in ("task", "dataset", "options", "seed"):
             a, b = ran_job.get(key), spec.get(key)
             if key == "dataset" and isinstance(a, Mapping) and isinstance(b, Mapping):
-                a, b = ({k: v for k, v in d.items() if k != "name"} for d in (a, b))
+                a, b = _data_of_spec(a, ran_job.get("seed")), _data_of_spec(b, spec.get("seed"))
+                # (named field by field: a simulator's whole configuration printed twice hid the one setting apart)
+                shown = (lambda d, k: repr(d[k]) if k in d else "<absent>")
+                differ = [f"{k} {shown(a, k)} (pinned {shown(b, k)})" for k in [*b, *(k for k in a if k not in b)]
+                          if (k in a) != (k in b) or canonical_json({"v": a[k]}) != canonical_json({"v": b[k]})]
+                if differ:
+                    refuse("job dataset", ", ".join(differ))
+                continue
             if canonical_json({"v": a}) != canonical_json({"v": b}):
                 refuse(f"job {key}", f"{a!r} (pinned {b!r})")
         return
@@ -202,6 +209,17 @@ def _check_same_data(result: Any, now_metrics: dict[str, float], job: Mapping[st
         differ += _other_files(run, opened)
     if differ:
         refuse("dataset", ", ".join(differ))
+
+
+def _data_of_spec(dataset: Mapping[str, Any], job_seed: Any) -> dict[str, Any]:
+    """A job's dataset spec as the data it names, as ``lidarkit compare`` pairs it: a simulator setting written at its
+    default, or a KITTI root with ``sequence:`` beside its sequence folder, is the same data (both were refused as
+    another dataset). A simulated drive without its own seed is the job seed's drive (the job seed is compared too)."""
+    from lidarkit.eval.compare import _dataset_unit
+
+    if dataset.get("kind") == "sim_lidar" and "seed" not in dataset and isinstance(job_seed, int):
+        dataset = {**dataset, "seed": job_seed}
+    return _dataset_unit(dict(dataset), {})
 
 
 def _check_same_frame_check(result: Any, job: Mapping[str, Any], metric: str) -> None:

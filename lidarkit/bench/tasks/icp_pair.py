@@ -235,7 +235,7 @@ class IcpPairTask(Task):
         from lidarkit.geometry import pose_error, se3_exp
         from lidarkit.registration import get_icp
 
-        options = IcpPairOptions(**job.options)
+        options = options_model(IcpPairOptions, job.options, "icp_pair")  # (a pinned spec re-run: one line, not pydantic's dump)
         # a simulated dataset without its own seed is seeded by the job's, as for odometry (the docs' "seeds: 10
         # simulates ten different drives"; each seed drew the same pair, and compare counted one value many times)
         dataset = open_dataset_spec(seeded_dataset(job))

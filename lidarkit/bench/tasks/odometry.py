@@ -182,7 +182,7 @@ def run_odometry_job(job: Job) -> tuple[Any, TaskOutput]:
     golden baselines (which also keep the trajectory)."""
     from lidarkit.odometry import run
 
-    options = OdometryOptions(**job.options)
+    options = options_model(OdometryOptions, job.options, "odometry")  # (a pinned spec re-run: one line, not pydantic's dump)
     sequence = open_dataset_spec(seeded_dataset(job))
     result = run(sequence, job.method, params=dict(job.params), frames=options.frames)
     m = result.metrics

@@ -77,7 +77,7 @@ class ParticleFilterTask(Task):
 
     def run(self, job: Job) -> TaskOutput:
         config_cls, run_protocol = _pf_api()
-        options = PFOptions(**job.options)
+        options = options_model(PFOptions, job.options, "pf")  # (a pinned spec re-run: one line, not pydantic's dump)
         config = config_cls.make(**job.params)
         data = open_dataset_spec(job.dataset)
         result = run_protocol(data, config.n_particles, job.seed, config=config, visible=options.visible, mse_start=options.mse_start)

@@ -77,7 +77,7 @@ class VisualOdometryTask(Task):
 
     def run(self, job: Job) -> TaskOutput:
         vo = _vo_api()
-        options = VOOptions(**job.options)
+        options = options_model(VOOptions, job.options, "vo")  # (a pinned spec re-run: one line, not pydantic's dump)
         config = _config(vo, job.method, job.params, job.seed)
         sequence = open_dataset_spec(job.dataset)
         if hasattr(sequence, "as_image_sequence"):

@@ -1,0 +1,122 @@
+"""Golden baselines: every finding of ``check`` is one line, a pinned spec is validated as its suite file was, and the
+baseline's own suite.yaml copy records again."""
+
+from __future__ import annotations
+
+import json
+import textwrap
+
+import pytest
+
+from lidarkit.bench.baseline import check, record
+from lidarkit.bench.jobs import Job
+from lidarkit.bench.tasks import get_task
+from lidarkit.cli import main
+from lidarkit.errors import ConfigError
+
+KINDS = ("protocol changed:", "failed:", "regression:", "improved:", "note:", "baseline check")
+
+
+def run_cli(argv: list[str], capsys) -> tuple[int, str, str]:
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    out, err = capsys.readouterr()
+    return int(exc.value.code or 0), out, err
+
+
+def test_a_failed_finding_with_a_multi_line_message_is_one_line(tmp_path, capsys):
+    """A job whose exception message holds a newline (a plugin's ``ValueError("bad\\nthing happened")``) printed its
+    finding over two lines, the second starting with no kind."""
+    (tmp_path / "walk.yaml").write_text(textwrap.dedent("""
+        name: walk
+        experiments:
+          - {name: walk, task: selftest, dataset: {kind: synthetic, name: synth}, methods: [random_walk]}
+    """))
+    baseline = record(tmp_path / "walk.yaml", tmp_path / "baseline", repeats=1)
+    manifest = json.loads((baseline.path / "manifest.json").read_text())
+    manifest["jobs"][0]["spec"].update(method="fail", params={"message": "bad\nthing  happened"})
+    (baseline.path / "manifest.json").write_text(json.dumps(manifest))
+    result = check(baseline.path)
+    assert [f.line() for f in result.findings if f.kind == "failed"] == [
+        "failed: fail(message=bad thing happened) on synth (seed 0): the job failed: RuntimeError: bad thing happened"]
+    code, out, _ = run_cli(["baseline", "check", str(baseline.path)], capsys)
+    assert code == 1
+    assert all(line.startswith(KINDS) for line in out.splitlines()), out
+
+
+def test_a_pinned_option_this_version_does_not_know_is_one_line_naming_the_valid_ones(tmp_path, capsys):
+    """A pinned icp_pair spec with an option lidarkit no longer knows failed with pydantic's 4-line dump (its URL
+    included): the task's run built its options model raw, without the check a suite file gets when it loads."""
+    (tmp_path / "pair.yaml").write_text(textwrap.dedent("""
+        name: pair
+        experiments:
+          - name: pair
+            task: icp_pair
+            dataset: {kind: folder, path: "sample:kitti_pair", name: pair}
+            options: {pairs: [[0, 1]], ground_truth_file: T_target_source.txt}
+            methods: [{name: vanilla, params: {voxel_size_m: 1.0}}]
+    """))
+    baseline = record(tmp_path / "pair.yaml", tmp_path / "baseline", repeats=1)
+    manifest = json.loads((baseline.path / "manifest.json").read_text())
+    manifest["jobs"][0]["spec"]["options"]["bogus"] = 1
+    (baseline.path / "manifest.json").write_text(json.dumps(manifest))
+    code, out, err = run_cli(["baseline", "check", str(baseline.path)], capsys)
+    assert code == 1 and "error:" not in err
+    assert [line for line in out.splitlines() if line.startswith("failed:")] == [
+        "failed: vanilla(voxel_size_m=1) on pair (seed 0): options: bogus: Extra inputs are not permitted (options of task "
+        "'icp_pair': pairs, ground_truth_file, max_pairs, init_noise_m, init_noise_deg)"]
+    assert all(line.startswith(KINDS) for line in out.splitlines()), out
+    # what the suite file's loading refuses beyond the model is refused too: a ground-truth file for two pairs
+    manifest["jobs"][0]["spec"]["options"] = {"pairs": [[0, 1], [1, 0]], "ground_truth_file": "T_target_source.txt"}
+    (baseline.path / "manifest.json").write_text(json.dumps(manifest))
+    assert [f.line() for f in check(baseline.path).findings if f.kind == "failed"] == [
+        "failed: vanilla(voxel_size_m=1) on pair (seed 0): options: ground_truth_file gives one pair's motion: set exactly "
+        "one pair in 'pairs'"]
+
+
+@pytest.mark.parametrize("task, valid", [
+    ("icp_pair", "pairs, ground_truth_file, max_pairs, init_noise_m, init_noise_deg"),
+    ("odometry", "frames"),
+    ("pf", "visible, mse_start"),
+    ("vo", "max_frames, align, smoothed"),
+])
+def test_a_task_run_names_an_unknown_option_in_one_line(task, valid):
+    """Each task's run() met an option its model forbids with pydantic's multi-line ValidationError: the same one-line
+    ConfigError a suite file gets, naming the options the task takes."""
+    job = Job.from_spec({"task": task, "experiment": "e", "dataset_name": "d", "dataset": {"kind": "folder", "path": "/nowhere"},
+                         "method": "m", "params": {}, "seed": 0, "options": {"bogus": 1}})
+    with pytest.raises(ConfigError) as caught:
+        get_task(task).run(job)
+    assert str(caught.value) == f"options: bogus: Extra inputs are not permitted (options of task {task!r}: {valid})"
+
+
+def test_the_baselines_suite_copy_records_again_with_relative_dataset_paths(tmp_path, capsys):
+    """The baseline's suite.yaml was the suite's text verbatim: a relative ``path: data/pair`` then resolved against the
+    baseline folder, and ``lidarkit baseline record BASELINE/suite.yaml --out BASELINE`` read "dataset path does not
+    exist: .../BASELINE/data/pair". The copy writes the path as the manifest pins it, the rest of the text as it was."""
+    import shutil
+
+    from lidarkit.bench.datasets import sample_path
+
+    shutil.copytree(sample_path("kitti_pair"), tmp_path / "data" / "pair")
+    (tmp_path / "suite.yaml").write_text(textwrap.dedent("""
+        name: relative
+        experiments:
+          - name: pair
+            task: icp_pair
+            dataset: {kind: folder, path: data/pair, name: pair}  # beside this file
+            options: {pairs: [[0, 1]], ground_truth_file: T_target_source.txt}
+            methods: [{name: vanilla, params: {voxel_size_m: 1.0}}]
+    """))
+    first = record(tmp_path / "suite.yaml", tmp_path / "bk", repeats=1)
+    pinned_path = first.jobs[0]["spec"]["dataset"]["path"]
+    assert pinned_path == str((tmp_path / "data" / "pair").resolve())
+    copy = (tmp_path / "bk" / "suite.yaml").read_text()
+    code, out, err = run_cli(["baseline", "record", str(tmp_path / "bk" / "suite.yaml"), "--out", str(tmp_path / "bk"),
+                              "--repeats", "1"], capsys)
+    assert code == 0 and "error" not in err, err
+    assert f'dataset: {{kind: folder, path: {json.dumps(pinned_path)}, name: pair}}  # beside this file' in copy
+    assert copy.startswith(f"# the suite recorded from {(tmp_path / 'suite.yaml').resolve()}")
+    again = json.loads((tmp_path / "bk" / "manifest.json").read_text())
+    assert [job["spec"] for job in again["jobs"]] == [job["spec"] for job in first.jobs]
+    assert (tmp_path / "bk" / "suite.yaml").read_text() == copy  # (its paths absolute already: one header, no change)
