@@ -6,7 +6,8 @@ imports, and the fork server preloads this module.
 - :func:`init_worker` runs first in every pool worker: it ignores SIGINT (Ctrl-C reaches the whole process
   group; only the parent decides what to do), asks Linux to SIGKILL the worker when its parent dies
   (``PR_SET_PDEATHSIG``) and starts a watchdog thread that ends the worker once the lidarkit process that owns the
-  pool is gone (the parent of a forkserver worker is the fork server, not lidarkit; and not every OS has prctl).
+  pool is gone (the parent of a forkserver worker is the fork server, not lidarkit; and not every OS has prctl),
+  killed-but-unreaped (a zombie) included.
 - :class:`Interrupted` is what SIGINT / SIGTERM become in the CLI (:func:`handle_signals`): a ``BaseException``
   (so ``except Exception`` in job code does not swallow it) carrying the exit code 128 + signal number.
 """
@@ -16,6 +17,7 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import os
+import select
 import signal
 import sys
 import threading
@@ -90,9 +92,24 @@ def _quiet_bootstrap_hook(exc_type, exc, tb) -> None:
 
 def setup_fork_server() -> None:
     """Run in the fork server (preloaded, before it saves the handlers its children get): children ignore SIGINT
-    from birth (Ctrl-C reaches the whole process group; the parent decides) and get the quiet bootstrap hook."""
+    from birth (Ctrl-C reaches the whole process group; the parent decides) and get the quiet bootstrap hook. The
+    server dies with the lidarkit process that started it (it also ends once that process and every worker are gone:
+    they hold its "alive" pipe)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     sys.excepthook = _quiet_bootstrap_hook
+    if _started_by_main_thread():
+        _set_parent_death_signal()
+
+
+def _started_by_main_thread() -> bool:
+    """Whether the parent's main thread started this process. ``PR_SET_PDEATHSIG`` fires when the parent *thread*
+    ends: a fork server started from a thread that then ended would die under the pools still using it."""
+    parent = os.getppid()
+    try:
+        with open(f"/proc/{parent}/task/{parent}/children") as children:
+            return str(os.getpid()) in children.read().split()
+    except OSError:
+        return False
 
 
 @contextlib.contextmanager
@@ -124,21 +141,49 @@ def _set_parent_death_signal() -> None:
         libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
 
 
+def _process_state(pid: int) -> str | None:
+    """The state letter of ``/proc/<pid>/stat`` (``R``, ``S``, ``Z``...), or None where it cannot be read."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as stat:
+            return stat.read().rpartition(b")")[2].split()[0].decode()
+    except (OSError, IndexError, UnicodeDecodeError):
+        return None
+
+
 def _alive(pid: int) -> bool:
+    """Whether ``pid`` still runs. A zombie is gone: a killed owner stays one until its parent reaps it, and a parent
+    using subprocess's ``communicate()`` reaps only after EOF on the pipes this worker holds (``os.kill(pid, 0)``
+    succeeds on a zombie: the worker and that parent waited on each other for ever)."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
         return False
     except PermissionError:  # exists, owned by someone else (pid reused): treat as gone
         return False
-    return True
+    return _process_state(pid) not in ("Z", "X")
 
 
-def _watch(owner_pid: int) -> None:
+def _exit_notice(pid: int) -> int | None:
+    """A descriptor that becomes readable the moment ``pid`` exits, zombie or not (a pidfd, Linux >= 5.3), or None."""
+    try:
+        return os.pidfd_open(pid)
+    except (AttributeError, OSError):
+        return None
+
+
+def _watch(owner_pid: int, owner_exit: int | None) -> None:
+    poller = None
+    if owner_exit is not None:
+        poller = select.poll()
+        poller.register(owner_exit, select.POLLIN)
     while True:
-        if not _alive(owner_pid) or os.getppid() == 1:
+        if poller is not None:
+            owner_gone = bool(poller.poll(WATCHDOG_PERIOD_S * 1000))
+        else:
+            time.sleep(WATCHDOG_PERIOD_S)
+            owner_gone = not _alive(owner_pid)
+        if owner_gone or os.getppid() == 1:
             os._exit(1)  # the owner is gone: nobody will read this worker's result
-        time.sleep(WATCHDOG_PERIOD_S)
 
 
 def init_worker(owner_pid: int) -> None:
@@ -146,9 +191,10 @@ def init_worker(owner_pid: int) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     _set_parent_death_signal()
+    owner_exit = _exit_notice(owner_pid)  # before the check below: an owner dying in between is noticed all the same
     if not _alive(owner_pid):
         os._exit(1)
-    threading.Thread(target=_watch, args=(owner_pid,), name="lidarkit-owner-watchdog", daemon=True).start()
+    threading.Thread(target=_watch, args=(owner_pid, owner_exit), name="lidarkit-owner-watchdog", daemon=True).start()
 
 
 @contextlib.contextmanager

@@ -471,3 +471,38 @@ def test_a_missing_trajectory_is_one_line_with_relations_too(capsys):
         with pytest.raises(SystemExit) as exc:
             main(["eval", *args])
         assert exc.value.code == 1 and capsys.readouterr().err.strip() == line
+
+
+@pytest.mark.parametrize("position", ["REF", "EST", "--json", "--markdown", "--ref-times", "--tables", "--relations"])
+def test_a_loop_of_symbolic_links_is_one_line_naming_it(tmp_path, capsys, monkeypatch, position):
+    """`ln -s loop loop` given as an input or an output printed a traceback (RuntimeError: Symlink loop, from
+    Path.resolve); it is a DataError (input) or OutputError (output) naming the path, exit 1."""
+    gt = str(shared_path("evo_testdata", "KITTI_00_gt.txt"))
+    est = str(shared_path("evo_testdata", "KITTI_00_ORB.txt"))
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "loop").symlink_to("loop")
+    argv = {"REF": ["eval", "loop", est], "EST": ["eval", gt, "loop"], "--relations": ["eval", "--relations", "loop", est]}
+    code, out, err = run_cli(argv.get(position, ["eval", gt, est, position, "loop"]), capsys)
+    verb = "cannot write" if position in ("--json", "--markdown", "--tables") else "cannot read it"
+    assert (code, out) == (1, "")
+    assert err == f"error: loop: {verb}: a loop of symbolic links (a link that leads back to itself)\n"
+
+
+def test_json_to_stdout_is_the_whole_of_stdout(tmp_path, capsys):
+    """`lidarkit eval REF EST --json /dev/stdout | jq` could not parse: the results table followed the JSON on
+    stdout. With an output on stdout the table and the `wrote` line go to stderr."""
+    import subprocess
+    import sys
+
+    gt, est = tmp_path / "gt.txt", tmp_path / "est.txt"  # the first 300 poses of KITTI 00 and of ORB-SLAM's estimate
+    for name, path in (("KITTI_00_gt.txt", gt), ("KITTI_00_ORB.txt", est)):
+        path.write_text("".join(shared_path("evo_testdata", name).read_text().splitlines(keepends=True)[:300]))
+    rmse = evaluate(Trajectory.read(gt, "kitti"), Trajectory.read(est, "kitti")).ape.rmse
+    for target in ("/dev/stdout", "/dev/fd/1"):
+        done = subprocess.run([sys.executable, "-m", "lidarkit", "eval", str(gt), str(est), "--json", target],
+                              capture_output=True, text=True, timeout=300)
+        assert done.returncode == 0, done.stderr
+        assert json.loads(done.stdout)["ape"]["stats"]["rmse"] == pytest.approx(rmse, rel=1e-9)
+        assert "APE transl. (m)" in done.stderr and done.stderr.rstrip().endswith(f"wrote {target}")
+    code, out, err = run_cli(["eval", str(gt), str(est), "--json", str(tmp_path / "m.json")], capsys)
+    assert code == 0 and "APE transl. (m)" in out and "APE" not in err  # a file: the table stays on stdout

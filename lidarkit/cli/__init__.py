@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import sys
+from collections.abc import Iterator
 
 from lidarkit import lifetime
 
@@ -15,7 +17,7 @@ if os.path.basename(sys.argv[0]) in ("lidarkit", "-m") and "multiprocessing.spaw
     lifetime.install_startup_handlers()
 
 from lidarkit.lifetime import Interrupted, abandoned, handle_signals, interrupt_handled, swallowed_interrupt  # noqa: E402
-from lidarkit.cli.app import app, print_error, stderr  # noqa: E402
+from lidarkit.cli.app import _stdout_errors, app, print_error, stderr  # noqa: E402
 from lidarkit.errors import LidarKitError  # noqa: E402
 
 # Each module registers its commands on ``app`` when imported; listed here explicitly.
@@ -62,6 +64,44 @@ def _refuse_empty_arguments(argv: list[str]) -> None:
             raise ConfigError(_EMPTY_VALUE, source=arg[:-1])
 
 
+class _NamedStdout:
+    """The command's ``sys.stdout``: a write the system refuses is the one ``stdout`` error line, whoever writes (typer
+    prints its help pages itself: `lidarkit --help > /dev/full` ended in a 133-line traceback)."""
+
+    def __init__(self, stream):
+        self._stream = stream
+
+    def write(self, text: str) -> int:
+        with _stdout_errors():
+            return self._stream.write(text)
+
+    def writelines(self, lines) -> None:
+        with _stdout_errors():
+            self._stream.writelines(lines)
+
+    def flush(self) -> None:
+        with _stdout_errors():
+            self._stream.flush()
+
+    def __getattr__(self, name: str):
+        return getattr(self._stream, name)
+
+
+@contextlib.contextmanager
+def _stdout_refusals_named() -> Iterator[None]:
+    """Within the block ``sys.stdout`` is a :class:`_NamedStdout` over the stream it was (restored after)."""
+    stream = sys.stdout
+    if stream is None or isinstance(stream, _NamedStdout):
+        yield
+        return
+    sys.stdout = _NamedStdout(stream)
+    try:
+        yield
+    finally:
+        if isinstance(sys.stdout, _NamedStdout):  # (not if the command set its own meanwhile)
+            sys.stdout = stream
+
+
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``lidarkit`` console script.
 
@@ -72,7 +112,7 @@ def main(argv: list[str] | None = None) -> None:
     code, interrupted = 0, False
     try:
         try:
-            with handle_signals():
+            with handle_signals(), _stdout_refusals_named():
                 _refuse_empty_arguments(sys.argv[1:] if argv is None else list(argv))
                 app(args=argv, prog_name="lidarkit")
         except Exception as err:  # an interrupt that a library turned into its own error (open3d's import: ImportError)

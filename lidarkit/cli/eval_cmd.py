@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import contextlib
 import math
+import os
 from pathlib import Path
 from typing import Optional
 
 import typer
 
-from lidarkit.cli.app import app, named_by_option, stdout
-from lidarkit.errors import ConfigError
+from lidarkit.cli.app import app, named_by_option, stderr, stdout
+from lidarkit.errors import ConfigError, DataError, OutputError
 from lidarkit.eval.ape_rpe import ALIGNMENTS, DELTA_UNITS
 from lidarkit.eval.evaluate import EvaluationSettings
 from lidarkit.eval.relations import DEFAULT_MAX_TIME_DIFF_S
@@ -140,6 +141,7 @@ def eval_command(
     # interrupt leaves every earlier output as it was, never one new beside one old; and before anything is printed (a
     # full disk on stdout lost them)
     files = [path for path in (json_out, markdown, plot) if path is not None]
+    console = _results_console(files)  # (before the files are written: one renamed over is no longer fd 1's)
     with contextlib.ExitStack() as stack:
         aside = stack.enter_context(atomic.paths_together(files))
         folder = stack.enter_context(atomic.run_folder(tables)) if tables is not None else None
@@ -149,7 +151,6 @@ def eval_command(
         from lidarkit.eval.tables import TABLE_FILES, remove_stale_tables
 
         remove_stale_tables(tables, (p.name for p in written), names=(*TABLE_FILES, _BOXPLOT_NAME))
-    console = stdout()
     console.print(report.evaluation_table(evaluation))
     if evaluation.drift is not None:
         console.print(report.drift_table(evaluation))
@@ -228,9 +229,9 @@ def _relations_report(est_traj, relations_path: Path, max_diff_s: float, json_ou
         ("rotational e^2 (deg^2)", result.rotation_sq),
     ):
         table.add_row(label, *(f"{stats[k]:.4f}" for k in ("mean", "std", "max")))
+    console = _results_console([json_out])
     if json_out is not None:  # (before the table: a full disk on stdout lost it)
         report.write_json({**result.to_dict(), "relations_path": str(relations_path)}, json_out)
-    console = stdout()
     console.print(table)
     if json_out is not None:
         console.print(f"wrote {json_out}")
@@ -251,13 +252,13 @@ def _distinct_outputs(inputs: dict[str, Path | None], outputs: dict[str, Path | 
     from lidarkit.eval.tables import TABLE_FILES
 
     tables = outputs.get("--tables")
-    folder = Path(tables).resolve() if tables is not None else None
+    folder = _resolved(tables, "--tables" in outputs) if tables is not None else None
     tables_own = {*TABLE_FILES, _BOXPLOT_NAME}
     seen: dict[Path, str] = {}
     for name, path in {**inputs, **outputs}.items():
         if path is None:
             continue
-        resolved = Path(path).resolve()
+        resolved = _resolved(path, name in outputs)
         if resolved in seen and name in outputs:  # (REF and EST may be one file)
             kind = "an input" if seen[resolved] in inputs else "another output"
             raise ConfigError(f"{path} is also {seen[resolved]} ({kind}): an output never replaces it", source=name)
@@ -265,3 +266,34 @@ def _distinct_outputs(inputs: dict[str, Path | None], outputs: dict[str, Path | 
             raise ConfigError(f"{path} is one of the files --tables writes or removes in {tables}: an output never "
                               "replaces it", source=name)
         seen[resolved] = name
+
+
+def _resolved(path: Path, output: bool) -> Path:
+    """``path`` with its links followed; one that cannot be (a loop of symbolic links, ``ln -s loop loop``: a
+    RuntimeError from ``Path.resolve``) is a DataError for an input, an OutputError for an output, naming it."""
+    try:
+        return Path(path).resolve()
+    except (RuntimeError, OSError) as err:
+        reason = ("a loop of symbolic links (a link that leads back to itself)" if isinstance(err, RuntimeError)
+                  else (err.strerror or type(err).__name__).lower())
+        if output:
+            raise OutputError(f"cannot write: {reason}", source=path) from None
+        raise DataError(f"cannot read it: {reason}", source=path) from None
+
+
+def _names_stdout(path: Path | None) -> bool:
+    """Whether the output ``path`` is this process's standard output (``/dev/stdout``, ``/dev/fd/1``: the file or pipe
+    of fd 1), the null device aside."""
+    if path is None:
+        return False
+    try:
+        target, out = os.stat(path), os.fstat(1)
+        return (target.st_dev, target.st_ino) == (out.st_dev, out.st_ino) and not os.path.samefile(path, os.devnull)
+    except (OSError, ValueError):
+        return False
+
+
+def _results_console(outputs: list[Path | None]):
+    """stdout for the results table and ``wrote`` lines; stderr when an output is written to stdout
+    (``--json /dev/stdout | jq``: the table printed after the JSON made it unreadable)."""
+    return stderr() if any(_names_stdout(path) for path in outputs) else stdout()
