@@ -86,6 +86,20 @@ def number_field(annotation: Any) -> bool:
     return annotation in (int, float) or any(number_field(a) for a in typing.get_args(annotation) if a is not bool)
 
 
+def refuse_yes_no_numbers(model: Any, data: Any) -> Any:
+    """``data`` as given, unless a number field of the pydantic ``model`` holds a yes/no value (``True``, or ``yes`` in
+    YAML), which pydantic's lax mode reads as 1 or 0 without a word (1 iteration ran; ``sensor_height_m: yes`` ran with
+    1 m): then ValueError naming it. The before-validator of every lidarkit config that takes numbers."""
+    import numpy as np
+
+    if isinstance(data, dict):
+        named = [f"{k} ({v})" for k, v in data.items() if isinstance(v, (bool, np.bool_)) and k in model.model_fields
+                 and number_field(model.model_fields[k].annotation)]
+        if named:
+            raise ValueError(f"{', '.join(named)}: takes a number, not a yes/no value")
+    return data
+
+
 def is_real_number(value: Any) -> bool:
     """A real number given as one (Python's or numpy's int or float), not a bool nor text: a setting of text compared as
     a number raised a TypeError, and True read as 1."""

@@ -23,7 +23,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from lidarkit.errors import ConfigError, DataError, LidarKitError, RegistrationError, validation_problems
 from lidarkit.geometry import as_points, is_rotation, orthonormalize_se3
-from lidarkit.params import changed_fields, number_field
+from lidarkit.params import changed_fields, refuse_yes_no_numbers
 from lidarkit.registration import local_origin
 from lidarkit.registration.covariance import use_model
 
@@ -92,14 +92,8 @@ class RegistrationConfig(BaseModel):
     @model_validator(mode="before")
     @classmethod
     def _numbers_are_not_yes_or_no(cls, data: Any) -> Any:
-        """A yes/no value (``True``, or ``-p max_iterations=yes``, which YAML reads as True) for a number field read as
-        1 or 0: pydantic's lax mode turns a bool into an int or a float without a word (1 iteration ran)."""
-        if isinstance(data, dict):
-            named = [f"{k} ({v})" for k, v in data.items() if isinstance(v, (bool, np.bool_)) and k in cls.model_fields
-                     and number_field(cls.model_fields[k].annotation)]
-            if named:
-                raise ValueError(f"{', '.join(named)}: takes a number, not a yes/no value")
-        return data
+        """A yes/no value for a number field (``-p max_iterations=yes``) is refused (:func:`refuse_yes_no_numbers`)."""
+        return refuse_yes_no_numbers(cls, data)
 
     @model_validator(mode="after")
     def _assessment_settings_need_the_assessment(self) -> "RegistrationConfig":

@@ -13,12 +13,11 @@ from collections.abc import Callable, Mapping
 from importlib.metadata import entry_points
 from typing import Any, ClassVar
 
-import numpy as np
 import pydantic
 from pydantic import BaseModel, ConfigDict, model_validator
 
 from lidarkit.errors import ConfigError, RegistrationError, validation_problems
-from lidarkit.params import number_field, shown_default
+from lidarkit.params import refuse_yes_no_numbers, shown_default
 
 log = logging.getLogger(__name__)
 
@@ -26,19 +25,6 @@ ENTRY_POINT_GROUP = "lidarkit.components"
 
 #: The kinds of component a pipeline is composed of, in the order a frame meets them.
 KINDS = ("motion", "preprocess", "map", "residual", "kernel", "threshold")
-
-
-def refuse_yes_no_numbers(model: type[BaseModel], data: Any) -> Any:
-    """``data`` as given, unless a number field of ``model`` holds a yes/no value (``True``, or ``yes`` in YAML), which
-    pydantic's lax mode reads as 1 or 0 without a word (``sensor_height_m: yes`` ran with 1 m): then ValueError naming
-    it. The check :class:`~lidarkit.registration.base.RegistrationConfig` makes, shared by the component and ground
-    segmenter config bases."""
-    if isinstance(data, dict):
-        named = [f"{k} ({v})" for k, v in data.items() if isinstance(v, (bool, np.bool_)) and k in model.model_fields
-                 and number_field(model.model_fields[k].annotation)]
-        if named:
-            raise ValueError(f"{', '.join(named)}: takes a number, not a yes/no value")
-    return data
 
 
 class ComponentConfig(BaseModel):
@@ -248,7 +234,6 @@ __all__ = [
     "component_fields",
     "get_component_class",
     "make_component",
-    "refuse_yes_no_numbers",
     "output_error",
     "register_component",
     "reload_component_plugins",

@@ -16,9 +16,8 @@ from pydantic import BaseModel, ConfigDict, model_validator
 
 from lidarkit.errors import ConfigError, DataError, validation_problems
 from lidarkit.geometry import as_points
-from lidarkit.params import shown_default
+from lidarkit.params import refuse_yes_no_numbers, shown_default
 from lidarkit.registration import local_origin
-from lidarkit.registration.components.registry import refuse_yes_no_numbers
 
 #: Mounting height of KITTI's Velodyne HDL-64E above the road (m).
 KITTI_SENSOR_HEIGHT_M = 1.73
