@@ -337,5 +337,8 @@ def test_an_interrupted_command_ends_with_its_code_whatever_a_library_does_at_sh
         if proc.poll() is None:
             proc.kill()
     assert proc.returncode == 143, err
-    assert err.startswith("interrupted by SIGTERM: stopped"), err
+    # (the 100 km drive's float32 warning comes first when the simulator logs it before the signal)
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert lines[-1].startswith("interrupted by SIGTERM: stopped"), err
+    assert all(line.startswith("WARNING lidarkit.sim.lidar: ") for line in lines[:-1]), err
     assert not out.exists() and not [p for p in os.listdir(tmp_path) if p.startswith(".")]  # nothing half-written
