@@ -462,6 +462,22 @@ def test_particle_filter_arguments_of_the_wrong_kind_are_one_line_errors_naming_
     assert ParticleFilter(LANDMARKS, cfg, None).states.shape == (3, 20)
 
 
+def test_kalman_kernel_predict_refuses_bad_odometry_in_one_line_as_the_particle_filter_does():
+    """KalmanParticleFilter.predict("abc") raised numpy's ValueError; it now checks its odometry with the particle
+    filter's checked_odometry, and a good step still moves the kernels."""
+    for odometry, message in (("abc", "predict: odometry must be numbers [r1, t, r2], got 'abc'"),
+                              ([1.0, 2.0], "predict: odometry must be [r1, t, r2], got shape (2,)"),
+                              ([0.0, np.nan, 0.0], "predict: non-finite odometry [0.0, nan, 0.0]")):
+        kalman = KalmanParticleFilter(LANDMARKS, PFConfig.make(kernel="kalman", n_particles=5), 0)
+        with pytest.raises(DataError) as err:
+            kalman.predict(odometry)
+        assert str(err.value) == message
+    kalman = KalmanParticleFilter(LANDMARKS, PFConfig.make(kernel="kalman", n_particles=5), 0)
+    before = kalman.states.copy()
+    kalman.predict([0.0, 2.0, 0.0])
+    np.testing.assert_allclose(kalman.states[:2], before[:2] + 2.0 * np.stack([np.cos(before[2]), np.sin(before[2])]))
+
+
 def test_ess_takes_array_likes_and_refuses_weights_that_are_none():
     """A list was an AttributeError, an empty array inf (with a RuntimeWarning), negative weights a number."""
     import warnings

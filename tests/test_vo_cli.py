@@ -440,6 +440,30 @@ def test_frames_keep_their_file_numbers_when_the_first_images_are_missing(tmp_pa
     assert [int(r.split(",")[0]) for r in (out / "diagnostics.csv").read_text().splitlines()[1:]] == [3, 4, 5, 6, 7]
 
 
+def test_start_is_an_image_index_and_messages_name_the_frame_numbers_beside_it(tmp_path, capsys):
+    """A KITTI folder whose images are 000010..000017: --start 8 said "frame 8 is past the last frame 7" (an index
+    read as a frame number, the folder's frames being 10-17) and --start 2 ran from frame 12 with config.yaml saying
+    only start: 2. Messages name the image index and its frame; config.yaml records both."""
+    sample = sample_path("kitti_vo", "06")
+    seq = tmp_path / "late"
+    (seq / "image_0").mkdir(parents=True)
+    shutil.copy(sample / "calib.txt", seq / "calib.txt")
+    for k in range(8):
+        shutil.copy(sample / "image_0" / f"{k:06d}.png", seq / "image_0" / f"{k + 10:06d}.png")
+    code, _, err = _run(["vo", str(seq), "--start", "8"], capsys)
+    assert code == 1 and err.strip() == (f"error: --start: image index 8 is past the last index 7 of {seq} (its 8 images "
+                                         "are frames 10-17; --start counts images from 0)"), err
+    code, _, err = _run(["vo", str(seq), "--start", "7"], capsys)
+    assert code == 1 and "1 frame from image index 7 (frame 17) on: VO needs two frames or more" in err, err
+    out = tmp_path / "run"
+    code, _, err = _run(["vo", str(seq), "--start", "5", "--max-frames", "4", "--scale", "none", "--out", str(out)], capsys)
+    said = "--max-frames 4 from image index 5 (frame 15) ends after the last image, index 7 (frame 17): ran 3"
+    assert code in (0, None) and f"warning: {said}" in " ".join(err.split()), err
+    config = yaml.safe_load((out / "config.yaml").read_text())
+    assert (config["start"], config["start_frame"], config["frames_cut"]) == (5, 15, said)
+    assert [int(r.split(",")[0]) for r in (out / "diagnostics.csv").read_text().splitlines()[1:]] == [15, 16, 17]
+
+
 def test_a_vo_run_into_an_odometry_run_folder_leaves_no_odometry_file(tmp_path, capsys):
     """Each command removed only its own earlier files: vo into an odometry folder kept its ape.png, timing.csv and
     ground truth beside the new poses ("wrote 8 files" beside 12)."""
@@ -670,6 +694,20 @@ def test_sanity_and_klt_settings_the_pipeline_does_not_use_are_said(capsys):
     assert code in (0, None) and "note: --set" not in err, err  # the relative scale tracks its corners by KLT
 
 
+def test_geometry_settings_of_the_pure_rotation_check_are_said_unused_without_sanity(capsys):
+    """geometry.degeneracy_threshold_px and geometry.rotation_focal_ratio feed only the sanity stage's pure-rotation
+    check: with --no-sanity they left the poses byte-identical without the "not used" note; with the checks on they act."""
+    seq = str(sample_path("kitti_vo", "06"))
+    settings = ["--set", "geometry.degeneracy_threshold_px=3", "--set", "geometry.rotation_focal_ratio=1.25"]
+    code, _, err = _run(["vo", seq, "--max-frames", "3", "--no-sanity", *settings], capsys)
+    assert code in (0, None) and err.count("note: --set") == 2, err
+    for key in ("geometry.degeneracy_threshold_px", "geometry.rotation_focal_ratio"):
+        assert (f"note: --set {key} not used: sanity.enabled is false: the setting feeds only its pure-rotation "
+                "check") in err, err
+    code, _, err = _run(["vo", seq, "--max-frames", "3", *settings], capsys)
+    assert code in (0, None) and "note: --set" not in err, err
+
+
 def test_gt_scale_without_ground_truth_is_refused_before_self_calibration(tmp_path, capsys, caplog):
     """--scale gt on an image folder without poses was refused by MonoVO ("vo scale.mode: scale mode 'gt' needs a
     ground-truth trajectory") only after --self-calibrate had run (46 s on 50 frames)."""
@@ -843,6 +881,24 @@ def test_tum_poses_for_an_image_0_folder_name_the_kind_that_reads_it_as_images(t
                                  "add --kind images (kind='images')\n")
     code, stdout, err = _run(["vo", str(seq / "image_0"), "--poses", str(tum), "--poses-format", "tum", "--kind", "images",
                               "--calib", str(seq / "calib.txt")], capsys)
+    assert code in (0, None) and "APE raw (Sim(3)-aligned)" in stdout, err
+
+
+def test_tum_poses_given_to_a_kitti_sequence_name_a_vo_command_that_reads_them(tmp_path, capsys):
+    """A TUM file as a KITTI sequence's --poses advised "read it as tum: --format tum, Trajectory.from_tum": no option
+    of lidarkit vo. The hint is a vo command (its images as an image folder with --poses-format tum), and it runs."""
+    import shlex
+
+    seq = tmp_path / "06"
+    shutil.copytree(sample_path("kitti_vo", "06"), seq)
+    tum = Trajectory.from_kitti(seq / "poses.txt").with_timestamps(np.arange(8) * 0.1).to_tum(tmp_path / "gt.tum")
+    code, _, err = _run(["vo", str(seq), "--poses", str(tum)], capsys)
+    advised = (f"lidarkit vo {seq / 'image_0'} --kind images --calib {seq / 'calib.txt'} --poses {tum} "
+               "--poses-format tum")
+    assert code == 1 and err == (f"error: {tum} (line 2): expected 12 numbers, found 8 (a TUM trajectory? read it as tum: "
+                                 "a KITTI sequence's poses are KITTI rows; give its images as an image folder: "
+                                 f"{advised} (ImageFolder(..., poses_format='tum')))\n"), err
+    code, stdout, err = _run(shlex.split(advised)[1:], capsys)
     assert code in (0, None) and "APE raw (Sim(3)-aligned)" in stdout, err
 
 

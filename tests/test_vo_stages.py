@@ -136,6 +136,21 @@ def test_clahe_raises_local_contrast():
         assert blurred.shape == low.shape and blurred.std() < low.std()
 
 
+def test_an_even_blur_kernel_is_refused_not_run_as_the_next_odd_one():
+    """preprocess.blur_kernel_px 4 ran a 5 x 5 blur (``| 1``) while config.yaml recorded 4; even sizes are refused by
+    name, as smoothing.window's are, and an odd size is the kernel run."""
+    from lidarkit.vo.config import PreprocessConfig
+
+    for method in ("gaussian", "bilateral"):
+        with pytest.raises(ConfigError) as err:
+            preset("lidarkit", **{"preprocess.method": method, "preprocess.blur_kernel_px": 4})
+        assert str(err.value) == ("vo config preprocess.blur_kernel_px: must be odd (the kernel is centred on each "
+                                  "pixel) (got 4)")
+    low = (100 + 10 * np.random.default_rng(0).random((60, 80))).astype(np.uint8)
+    blurred = get_preprocessor(PreprocessConfig(method="gaussian", blur_kernel_px=3))(low)
+    assert np.array_equal(blurred, cv2.GaussianBlur(low, (3, 3), 0))
+
+
 def test_bucket_indices_keeps_best_per_cell():
     pts = np.array([[1, 1], [2, 2], [3, 3], [90, 90], [91, 91]], np.float32)
     scores = np.array([1.0, 5.0, 3.0, 2.0, 4.0])

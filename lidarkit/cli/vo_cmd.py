@@ -51,7 +51,8 @@ def vo_command(
                                         "at the centre); falls back to the size guess when the motion does not "
                                         "constrain it. Costs 20-45 s per 50 KITTI frames."),
     kind: str = typer.Option("auto", help="Input kind: auto | kitti | tum | images (for simcam: auto | images)."),
-    start: int = typer.Option(0, help="First frame."),
+    start: int = typer.Option(0, help="First image, by its index from 0 in the input (a KITTI folder whose files "
+                              "begin at 000010.png has frame 10 at index 0)."),
     max_frames: Optional[int] = typer.Option(None, help="Number of frames to process (default: all)."),
     seed: Optional[int] = typer.Option(None, help="Shuffle the correspondences fed to RANSAC/MAGSAC/LMedS with this "
                                        "seed (same seed, same poses); default: detection order, also deterministic."),
@@ -126,11 +127,21 @@ def vo_command(
                                  poses_format=poses_format, focal_factor=focal_factor)
     _check_out_beside_images(out, vo_input.images)
     numbers = getattr(vo_input.images, "frames", None)  # the input's own frame numbers (KITTI's file names), if any
-    if start >= len(vo_input.images):  # (named the sequence only: "kitti_06_image_0: start frame 51 outside 0..50")
-        raise ConfigError(f"frame {start} is past the last frame {len(vo_input.images) - 1} of {data}", source="--start")
     n_all = len(vo_input.images)
+    # --start counts images; where the input's frame numbers are others (a KITTI folder from 000010.png) messages name
+    # both ("--start 25: frame 25 is past the last frame 20" had counted images but read as frame numbers)
+    renumbered = numbers is not None and not np.array_equal(numbers, np.arange(n_all))
+
+    def image(index: int) -> str:
+        return f"image index {index} (frame {int(numbers[index])})" if renumbered else f"frame {index}"
+
+    if start >= n_all:  # (named the sequence only: "kitti_06_image_0: start frame 51 outside 0..50")
+        raise ConfigError(f"image index {start} is past the last index {n_all - 1} of {data} (its {n_all} images are "
+                          f"frames {int(numbers[0])}-{int(numbers[-1])}; --start counts images from 0)" if renumbered
+                          else f"frame {start} is past the last frame {n_all - 1} of {data}", source="--start")
     # (cut without a word: 2 frames ran of --start 6 --max-frames 5, config.yaml recording the 5; odometry says it)
-    frames_cut = (f"--max-frames {max_frames} from frame {start} ends after the last frame ({n_all - 1}): ran {n_all - start}"
+    last = f"image, index {n_all - 1} (frame {int(numbers[-1])})" if renumbered else f"frame ({n_all - 1})"
+    frames_cut = (f"--max-frames {max_frames} from {image(start)} ends after the last {last}: ran {n_all - start}"
                   if max_frames is not None and start + max_frames > n_all else None)
     if frames_cut:
         stderr().print(f"warning: {frames_cut}", soft_wrap=True, markup=False)
@@ -166,7 +177,8 @@ def vo_command(
                 calib_bar[0].stop()
     gt = vo_input.ground_truth  # (a guessed K is logged as a warning by open_vo_input)
     if len(vo_input.images) < 2:
-        raise DataError(f"{len(vo_input.images)} frame from frame {start} on: VO needs two frames or more (no frame pair)", source=str(data))
+        raise DataError(f"{len(vo_input.images)} frame from {image(start)} on: VO needs two frames or more (no frame pair)",
+                        source=str(data))
     bar = progress_bar(len(vo_input.images), f"vo on {data}") if progress else None
     try:
         result = MonoVO(cfg, vo_input.K, gt if cfg.scale.mode == "gt" else None).run(
@@ -182,6 +194,7 @@ def vo_command(
 
         result.diagnostics = [dataclasses.replace(d, frame=number(d.frame), ref_frame=number(d.ref_frame)) for d in result.diagnostics]
     extra_config = {"input": str(data), "kind": vo_input.kind, "K_source": vo_input.K_source, "start": start,
+                    **({"start_frame": int(numbers[start])} if renumbered else {}),  # (--start is an image index)
                     "max_frames": max_frames, **({"frames_cut": frames_cut} if frames_cut else {})}
     if focal is not None:
         extra_config["self_calibration"] = {"focal_px": focal.focal_px, "sigma_px": focal.sigma_px if focal.constrained else None,

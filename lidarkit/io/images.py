@@ -1,8 +1,8 @@
 """A plain folder of images (``.png``, ``.jpg``, ...) as an ``ImageSequence``, and intrinsics files.
 
-Images are ordered by natural sort of their names; optional timestamps (one number per line, or TUM-style
-``stamp name`` lines), intrinsics (see :func:`read_intrinsics`) and ground-truth camera poses (KITTI or TUM format)
-must match the number of images. Registered as dataset kind ``"images"``.
+Images are ordered by natural sort of their names (hidden ones, named ``.*``, left out); optional timestamps (one
+number per line, or TUM-style ``stamp name`` lines), intrinsics (see :func:`read_intrinsics`) and ground-truth camera
+poses (KITTI or TUM format) must match the number of images. Registered as dataset kind ``"images"``.
 """
 
 from __future__ import annotations
@@ -134,8 +134,9 @@ class ImageFolder:
             raise DataError("image folder not found" if not folder.exists() else "not a folder", source=folder)
         self.path = folder
         self.name = name or folder.name
-        self.image_paths = sorted((p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file()),
-                                  key=lambda p: natural_key(p.name))
+        # hidden files are no frames: macOS leaves a 4-byte AppleDouble "._000000.png" beside each image it copies
+        self.image_paths = sorted((p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file()
+                                   and not p.name.startswith(".")), key=lambda p: natural_key(p.name))
         if not self.image_paths:
             raise DataError(f"no images ({', '.join(IMAGE_SUFFIXES)})", source=folder)
         n = len(self.image_paths)

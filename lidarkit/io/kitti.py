@@ -387,7 +387,20 @@ class KittiOdometry:
 
     @cached_property
     def _poses_camera_all(self) -> Trajectory:
-        return Trajectory.from_kitti(self.poses_path, name=f"{self.name}_gt")
+        return Trajectory.from_kitti(self.poses_path, name=f"{self.name}_gt",
+                                     format_hint=lambda other: self._other_format_hint(self.poses_path, other))
+
+    def _other_format_hint(self, path: Path, fmt: str) -> str:
+        """How to use the pose file ``path`` in ``fmt`` with this sequence, which reads KITTI rows only: its images as
+        an image folder, which reads either format (the reader's default named ``--format``, which ``lidarkit vo``
+        has not, and ``Trajectory.from_tum``, which pairs no pose with a frame), else the file converted."""
+        if self.image_paths:
+            calib = f" --calib {self.calib_path}" if self.calib_path.is_file() else ""
+            return (f"a KITTI sequence's poses are KITTI rows; give its images as an image folder: lidarkit vo "
+                    f"{self.image_dir} --kind images{calib} --poses {path} --poses-format {fmt} "
+                    f"(ImageFolder(..., poses_format='{fmt}'))")
+        return (f"a KITTI sequence's poses are KITTI rows; convert the file: "
+                f"Trajectory.from_{fmt}(path).to_kitti(new_path)")
 
     @property
     def sequence_timestamps_s(self) -> np.ndarray | None:
@@ -434,7 +447,8 @@ class KittiOdometry:
         if self._simulated_instant is None:
             raise DataError(f"no ground truth at the sweep {instant}: the poses file named is not one of the simulator's "
                             "(poses.txt, poses_start/mid/end.txt), whose other instants are known", source=self.poses_path)
-        gt = self._in_lidar_frame(self._rows(Trajectory.from_kitti(path, name=f"{self.name}_gt"), self.frames, path))
+        gt = Trajectory.from_kitti(path, name=f"{self.name}_gt", format_hint=lambda other: self._other_format_hint(path, other))
+        gt = self._in_lidar_frame(self._rows(gt, self.frames, path))
         times = gt.timestamps_s
         if times is not None:  # times.txt is at poses.txt's instant: moved by the fraction of the period
             times = times + self._instant_shift_s(instant)

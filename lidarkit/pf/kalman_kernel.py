@@ -14,8 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from lidarkit.errors import ConfigError, DataError
-from lidarkit.pf.base import LandmarkFilterBase, readings_array
+from lidarkit.errors import ConfigError
+from lidarkit.pf.base import LandmarkFilterBase, checked_odometry, readings_array
 from lidarkit.pf.config import PFConfig
 from lidarkit.pf.models import resolve_q, wrap_angle
 
@@ -57,10 +57,7 @@ class KalmanParticleFilter(LandmarkFilterBase):
     # ---- predict ------------------------------------------------------------------------------------
     def predict(self, odometry: np.ndarray, *, check: bool = True) -> None:
         """EKF prediction of every kernel through the odometry model (noise std on r1, t, r2 from the config)."""
-        u = np.asarray(odometry, dtype=np.float64).reshape(-1)
-        if u.shape != (3,) or not np.isfinite(u).all():
-            raise DataError(f"odometry must be 3 finite values [r1, t, r2], got {u.tolist()}", source="predict")
-        r1, t, r2 = u
+        r1, t, r2 = checked_odometry(odometry)  # ("abc" was numpy's ValueError)
         heading = self.states[2] + r1
         c, s = np.cos(heading), np.sin(heading)
         n = self.n

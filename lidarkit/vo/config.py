@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Any, Literal, Optional, get_args
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from lidarkit.errors import ConfigError
 
@@ -33,6 +33,13 @@ class PreprocessConfig(_Stage):
     clahe_clip_limit: float = Field(2.0, gt=0)
     clahe_tile_grid: int = Field(8, ge=1)
     blur_kernel_px: int = Field(5, ge=1)
+
+    @field_validator("blur_kernel_px")
+    @classmethod
+    def _odd_kernel(cls, size: int) -> int:
+        if size % 2 == 0:  # (an even size ran as the odd one above it, recorded as asked)
+            raise ValueError("must be odd (the kernel is centred on each pixel)")
+        return size
 
 
 class FeatureConfig(_Stage):
@@ -267,6 +274,10 @@ CORNER_PATH_SETTINGS = ("points", "max_depth_views", "corner_min_angle_deg", "co
 #: Sanity settings of the checks ``sanity.enabled`` switches off (the feature, match and inlier counts gate every pair).
 SANITY_CHECK_SETTINGS = ("max_rotation_deg", "min_parallax_px", "max_homography_share", "max_rotation_homography_px")
 
+#: Geometry settings that feed only the sanity stage's K-free pure-rotation check (the homography's share of the
+#: fundamental-matrix inliers and its distance from a rotation): no pose, inlier set or fallback reads them.
+SANITY_GEOMETRY_SETTINGS = ("degeneracy_threshold_px", "rotation_focal_ratio")
+
 #: KLT settings: used by KLT matching and by the relative scale's corner path, which tracks its corners by KLT.
 KLT_SETTINGS = ("klt_window_px", "klt_levels", "klt_fb_max_px")
 
@@ -287,8 +298,8 @@ CHOICE_SETTINGS = {
 def inert_settings(cfg: VOConfig, keys: Any) -> list[tuple[str, str]]:
     """``(setting, why)`` for the dotted settings among ``keys`` that ``cfg`` does not use (``--set
     scale.corner_pose=corners`` or ``--set matching.ratio=0.1`` left the default pipeline's poses byte-identical
-    without a word, as did ``--no-sanity --set sanity.min_parallax_px=50`` and ``matching.klt_levels`` with
-    descriptor matching)."""
+    without a word, as did ``--no-sanity --set sanity.min_parallax_px=50`` or ``geometry.rotation_focal_ratio`` and
+    ``matching.klt_levels`` with descriptor matching)."""
     own = cfg.matching.method == "klt" and cfg.features.detector == "gftt"
     corner_path = cfg.scale.mode == "relative" and cfg.scale.points == "corners" and not own
     notes = []
@@ -303,6 +314,8 @@ def inert_settings(cfg: VOConfig, keys: Any) -> list[tuple[str, str]]:
         section, _, field = str(key).partition(".")
         if section == "sanity" and field in SANITY_CHECK_SETTINGS and not cfg.sanity.enabled:
             notes.append((str(key), "sanity.enabled is false: the pose checks are off"))
+        elif section == "geometry" and field in SANITY_GEOMETRY_SETTINGS and not cfg.sanity.enabled:
+            notes.append((str(key), "sanity.enabled is false: the setting feeds only its pure-rotation check"))
         elif section == "matching" and field in KLT_SETTINGS and cfg.matching.method != "klt" and not corner_path:
             notes.append((str(key), f"matching.method is {cfg.matching.method}: the setting acts with klt or with the "
                                     "relative scale's corners (scale.points corners)"))

@@ -34,7 +34,7 @@ def get_preprocessor(cfg: PreprocessConfig | str = "none") -> Preprocessor:
     if cfg.method == "clahe":
         clahe = cv2.createCLAHE(clipLimit=cfg.clahe_clip_limit, tileGridSize=(cfg.clahe_tile_grid, cfg.clahe_tile_grid))
         return clahe.apply
-    k = cfg.blur_kernel_px | 1
+    k = cfg.blur_kernel_px  # odd (PreprocessConfig refuses even sizes)
     if cfg.method == "gaussian":
         return lambda image: cv2.GaussianBlur(image, (k, k), 0)
     return lambda image: cv2.bilateralFilter(image, k, 50, 50)
