@@ -17,7 +17,7 @@ if os.path.basename(sys.argv[0]) in ("lidarkit", "-m") and "multiprocessing.spaw
     lifetime.install_startup_handlers()
 
 from lidarkit.lifetime import Interrupted, abandoned, handle_signals, interrupt_handled, swallowed_interrupt  # noqa: E402
-from lidarkit.cli.app import _stdout_errors, app, print_error, stderr  # noqa: E402
+from lidarkit.cli.app import NamedStdout, app, print_error, stderr  # noqa: E402
 from lidarkit.errors import LidarKitError  # noqa: E402
 
 # Each module registers its commands on ``app`` when imported; listed here explicitly.
@@ -64,41 +64,19 @@ def _refuse_empty_arguments(argv: list[str]) -> None:
             raise ConfigError(_EMPTY_VALUE, source=arg[:-1])
 
 
-class _NamedStdout:
-    """The command's ``sys.stdout``: a write the system refuses is the one ``stdout`` error line, whoever writes (typer
-    prints its help pages itself: `lidarkit --help > /dev/full` ended in a 133-line traceback)."""
-
-    def __init__(self, stream):
-        self._stream = stream
-
-    def write(self, text: str) -> int:
-        with _stdout_errors():
-            return self._stream.write(text)
-
-    def writelines(self, lines) -> None:
-        with _stdout_errors():
-            self._stream.writelines(lines)
-
-    def flush(self) -> None:
-        with _stdout_errors():
-            self._stream.flush()
-
-    def __getattr__(self, name: str):
-        return getattr(self._stream, name)
-
-
 @contextlib.contextmanager
 def _stdout_refusals_named() -> Iterator[None]:
-    """Within the block ``sys.stdout`` is a :class:`_NamedStdout` over the stream it was (restored after)."""
+    """Within the block ``sys.stdout`` is a :class:`~lidarkit.cli.app.NamedStdout` over the stream it was (restored
+    after): typer prints its help pages itself."""
     stream = sys.stdout
-    if stream is None or isinstance(stream, _NamedStdout):
+    if stream is None or isinstance(stream, NamedStdout):
         yield
         return
-    sys.stdout = _NamedStdout(stream)
+    sys.stdout = NamedStdout(stream)
     try:
         yield
     finally:
-        if isinstance(sys.stdout, _NamedStdout):  # (not if the command set its own meanwhile)
+        if isinstance(sys.stdout, NamedStdout):  # (not if the command set its own meanwhile)
             sys.stdout = stream
 
 

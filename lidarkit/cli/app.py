@@ -48,23 +48,36 @@ def stdout() -> Console:
     Markup is off: file names, method labels and messages are user strings (``scan[v2].bin``, ``[/red]``) and must
     print as they are; styling goes through ``rich.text.Text`` or an explicit ``markup=True`` with ``escape``.
     """
-    return Console(file=_Stdout(), highlight=False, markup=False)
+    return Console(file=NamedStdout(), highlight=False, markup=False)
 
 
-class _Stdout:
-    """``sys.stdout`` as it is at each write; a write it refuses is an OutputError naming stdout (`lidarkit version >
-    /dev/full` ended in a 70-line traceback). A broken pipe (`| head -1`) is left to rich: a quiet exit."""
+class NamedStdout:
+    """A stdout whose refused writes are one OutputError naming stdout (`lidarkit version > /dev/full` ended in a
+    70-line traceback; typer's help pages in a 133-line one): over ``stream``, or over ``sys.stdout`` as it is at each
+    write (``None``, what :func:`stdout` consoles write to). A broken pipe (`| head -1`) is left to rich: a quiet
+    exit."""
+
+    def __init__(self, stream=None):
+        self._fixed = stream
+
+    @property
+    def _stream(self):
+        return sys.stdout if self._fixed is None else self._fixed
 
     def write(self, text: str) -> int:
         with _stdout_errors():
-            return sys.stdout.write(text)
+            return self._stream.write(text)
+
+    def writelines(self, lines) -> None:
+        with _stdout_errors():
+            self._stream.writelines(lines)
 
     def flush(self) -> None:
         with _stdout_errors():
-            sys.stdout.flush()
+            self._stream.flush()
 
     def __getattr__(self, name: str):
-        return getattr(sys.stdout, name)
+        return getattr(self._stream, name)
 
 
 @contextlib.contextmanager
