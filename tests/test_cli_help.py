@@ -8,6 +8,8 @@ import pytest
 
 from conftest import cli_exit_code
 
+from lidarkit.cli import main
+
 
 def _command_paths() -> list[list[str]]:
     import typer
@@ -121,3 +123,28 @@ def test_every_out_option_has_the_short_form():
     outs = [(path, opts) for path, opts in options(typer.main.get_command(app), []) if "--out" in opts]
     assert len(outs) >= 8 and ["pf"] in [path for path, _ in outs]
     assert [(path, opts) for path, opts in outs if "-o" not in opts] == []
+
+
+@pytest.mark.parametrize("argv, line", [
+    (["bench", "suite.yaml", "--no-such"],
+     "error: lidarkit bench: No such option: --no-such (see lidarkit bench --help)"),
+    (["odometry"], "error: lidarkit odometry: Missing argument 'data' (see lidarkit odometry --help)"),
+    (["odometry", "x", "--frames"],
+     "error: lidarkit odometry: Option '--frames' requires an argument (see lidarkit odometry --help)"),
+    (["no-such-command"], "error: lidarkit: No such command 'no-such-command' (see lidarkit --help)"),
+])
+def test_usage_errors_are_one_line_naming_the_command_and_its_help(capsys, argv, line):
+    """An unknown option or a missing argument printed the framework's five-line box (usage, hint, a framed error),
+    where every other bad input is one ``error:`` line; exit code 2 as before, nothing on stdout."""
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    out, err = capsys.readouterr()
+    assert exc.value.code == 2 and out == ""
+    assert " ".join(err.split()) == line
+
+
+def test_a_command_that_ends_well_still_exits_with_code_0(capsys):
+    """main(argv) ends with SystemExit(0) on success, as the framework's standalone run did (callers rely on it)."""
+    with pytest.raises(SystemExit) as exc:
+        main(["version"])
+    assert exc.value.code == 0 and capsys.readouterr().out.strip()

@@ -80,6 +80,33 @@ def _stdout_refusals_named() -> Iterator[None]:
             sys.stdout = stream
 
 
+def _run_app(argv: list[str] | None) -> int:
+    """Run the command; its exit code. The framework's usage errors (an unknown option, a missing argument) are one
+    line naming the command and its help, exit code 2, as lidarkit's own errors are one line (they printed a
+    five-line box); help pages, asked for or shown for a bare command group, stay the framework's."""
+    import typer
+
+    try:
+        from typer._click import exceptions as usage  # the copy of click that typer carries (recent typer)
+    except ImportError:  # pragma: no cover - typer built on click itself
+        from click import exceptions as usage
+
+    try:
+        code = app(args=argv, prog_name="lidarkit", standalone_mode=False)
+    except usage.NoArgsIsHelpError:  # `lidarkit sim`: the help page is printed
+        return 2
+    except typer.Abort:
+        stderr().print("aborted", soft_wrap=True)
+        return 1
+    except usage.ClickException as err:
+        args = sys.argv[1:] if argv is None else list(argv)
+        ctx = getattr(err, "ctx", None)
+        command = ctx.command_path if ctx is not None else " ".join(["lidarkit", *args[:1]]) if args and not args[0].startswith("-") else "lidarkit"
+        print_error(LidarKitError(f"{err.format_message().rstrip('.')} (see {command} --help)", source=command))
+        return err.exit_code
+    return code if isinstance(code, int) else 0  # (a command's typer.Exit(code); commands return nothing)
+
+
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``lidarkit`` console script.
 
@@ -92,7 +119,7 @@ def main(argv: list[str] | None = None) -> None:
         try:
             with handle_signals(), _stdout_refusals_named():
                 _refuse_empty_arguments(sys.argv[1:] if argv is None else list(argv))
-                app(args=argv, prog_name="lidarkit")
+                code = _run_app(argv)
         except Exception as err:  # an interrupt that a library turned into its own error (open3d's import: ImportError)
             raise _interrupt_behind(err) or err
     except LidarKitError as err:
@@ -129,8 +156,7 @@ def main(argv: list[str] | None = None) -> None:
         sys.stdout.flush()
         sys.stderr.flush()
         os._exit(code)
-    if code:
-        sys.exit(code)
+    sys.exit(code)  # (also 0: the framework's standalone run ended with SystemExit, which callers of main(argv) expect)
 
 
 def run_script(script_main) -> None:
