@@ -128,7 +128,7 @@ def test_html_is_well_formed_self_contained_and_every_image_exists(results_dir):
     assert any(t.startswith("Trajectories") for t in titles)
     assert any(t.startswith("Error over time") for t in titles)
     assert any(t.startswith("RMSE vs iteration") for t in titles)
-    assert any(t.startswith("ape_rmse_m vs noise_m") for t in titles)
+    assert any(t.startswith("APE RMSE [m] vs noise_m") for t in titles)
     images = check_html(report.html_path)
     assert len(images) == len(report.plots)
     assert all(src.startswith("data:image/png;base64,") for src in images)
@@ -578,7 +578,7 @@ def test_a_sweep_over_zero_draws_every_point(tmp_path):
         write_result(tmp_path, make_record(job, job.key(), "1", {
             "status": "ok", "metrics": {"ape_rmse_m": 0.01 + noise}, "error": None, "runtime_s": 0.1}))
     (sweep,) = [p for p in build_report(tmp_path).plots if p.filename.startswith("sweep_")]
-    assert sweep.caption == ("ape_rmse_m against noise_m: mean ± std over seeds, one line per experiment, dataset and "
+    assert sweep.caption == ("APE RMSE [m] against noise_m: mean ± std over seeds, one line per experiment, dataset and "
                              "method; symmetric log x axis, linear within ±0.1.")
     from lidarkit.bench.report import sweep_x_scale
 
@@ -1275,3 +1275,80 @@ def test_the_statistics_table_names_its_interval_method(tmp_path):
     page = (tmp_path / "report.html").read_text()
     assert '<th>95 % CI (Student-t)</th></tr></thead><tbody><tr><td class="l">drive</td><td class="l">kiss</td><td>3</td>' in page
     assert "<td>[-0.4841, 4.484]</td>" in page and "bootstrap" not in page  # kiss: 2 -+ 4.303 x 1 / sqrt(3)
+
+
+def test_error_over_time_lines_of_different_alignments_each_name_theirs(tmp_path):
+    """A VO grid over scale.mode [gt, relative]: the error-over-time axis and caption read "APE (sim3 aligned) [m]",
+    the last line's label, for the SE(3)-aligned gt line too."""
+    from lidarkit.bench.jobs import Job
+    from lidarkit.bench.results import make_record, write_result
+
+    dataset = {"kind": "kitti", "path": str(tmp_path / "06"), "name": "K06"}
+    for mode, align, stated in (("gt", "se3", "SE(3)-aligned"), ("relative", "sim3", "Sim(3)-aligned")):
+        job = Job("vo", "vo", "K06", dataset, "lidarkit", {"scale.mode": mode}, seed=0)
+        series = {"error_over_time": {"t": [0.0, 0.1, 0.2], "error": [0.01, 0.02, 0.015], "label": f"APE ({align} aligned) [m]"}}
+        write_result(tmp_path, make_record(job, job.key(), "1", {
+            "status": "ok", "metrics": {"ape_rmse_m": 0.02}, "series": series, "error": None, "runtime_s": 0.1,
+            "info": {"metric_alignment": {"ape_rmse_m": stated}}}))
+    (err,) = [p for p in build_report(tmp_path).plots if p.filename.startswith("err_")]
+    assert err.caption == ("APE [m] over time per method (lidarkit(scale.mode=gt): se3 aligned; "
+                           "lidarkit(scale.mode=relative): sim3 aligned): vo, K06.")
+    from lidarkit.bench.report import error_axis_label
+
+    # the axis label and what each legend entry adds
+    assert error_axis_label({"gt": "APE (se3 aligned) [m]", "relative": "APE (sim3 aligned) [m]"}) == (
+        "APE [m]", {"gt": "se3 aligned", "relative": "sim3 aligned"})
+    assert error_axis_label({"a": "position error [m]", "b": "position error [m]"}) == ("position error [m]", {})
+    assert error_axis_label({"a": "position error [m]", "b": "APE (sim3 aligned) [m]"}) == (
+        "error [m]", {"a": "position error [m]", "b": "APE (sim3 aligned) [m]"})
+
+
+def test_an_interrupted_run_keeps_the_declared_metrics_of_the_methods_not_run_yet(tmp_path):
+    """Stopped after the sleep jobs: the only table was "slept [s]" and the random walks' rows sat under it; APE and
+    final error, the task's headline metrics, had no column until the walks ran."""
+    from lidarkit.bench.report import _pivot_metrics
+
+    (tmp_path / "suite.yaml").write_text(textwrap.dedent("""
+        name: interrupted
+        seeds: 2
+        experiments:
+          - name: mix
+            task: selftest
+            dataset: {kind: synthetic}
+            methods:
+              - {name: sleep, params: {seconds: 0}}
+              - {name: random_walk, params: {noise_m: 0.1, steps: 10}}
+              - {name: random_walk, params: {noise_m: 0.3, steps: 10}}
+    """))
+    run_suite(load_suite(tmp_path / "suite.yaml"), tmp_path / "out", executor="serial")
+    walks = [r for r in load_results(tmp_path / "out") if r["job"]["method"] == "random_walk"]
+    for r in walks:
+        if r["job"]["params"]["noise_m"] == 0.3:  # one random walk still to run: the other says what it reports
+            (tmp_path / "out" / "jobs" / f"{r['key']}.json").unlink()
+    (table,) = build_report(tmp_path / "out", plots=False).tables
+    assert [m.name for m in table.metrics] == ["ape_rmse_m", "final_error_m", "slept_s", "runtime_s"]
+    for r in walks:  # no random walk has run yet
+        (tmp_path / "out" / "jobs" / f"{r['key']}.json").unlink(missing_ok=True)
+    (table,) = build_report(tmp_path / "out", plots=False).tables
+    assert [m.name for m in table.metrics] == ["ape_rmse_m", "final_error_m", "slept_s", "checksum", "runtime_s"]
+    assert [m.name for m in _pivot_metrics(table)] == ["ape_rmse_m", "slept_s"]  # the headline leads, as when finished
+    md = (tmp_path / "out" / "report.md").read_text()
+    assert md.index("APE RMSE [m], methods x datasets:") < md.index("slept [s], methods x datasets:")
+    assert "| random_walk(noise_m=0.3, steps=10) | – (2 of 2 not run) |" in md
+
+
+def test_a_particle_filter_sweep_plot_names_its_metric_by_its_label(tmp_path):
+    """The MSE-vs-particles figure read "mse_m2" on its axis, title and caption (the tables say "position MSE [m²]")."""
+    from lidarkit.bench.jobs import Job
+    from lidarkit.bench.results import make_record, write_result
+
+    dataset = {"kind": "landmarks", "path": str(tmp_path / "pf"), "name": "Freiburg"}
+    for n_particles in (20, 200):
+        for seed in range(2):
+            job = Job("pf", "pfx", "Freiburg", dataset, "particle_filter", {"n_particles": n_particles}, seed=seed)
+            write_result(tmp_path, make_record(job, job.key(), "1", {
+                "status": "ok", "metrics": {"mse_m2": 1.0 / n_particles + 0.01 * seed}, "error": None, "runtime_s": 0.1}))
+    (sweep,) = [p for p in build_report(tmp_path).plots if p.filename.startswith("sweep_")]
+    assert sweep.title == "position MSE [m²] vs n_particles — pf"
+    assert sweep.caption.startswith("position MSE [m²] against n_particles: mean ± std over seeds")
+    assert sweep.filename.startswith("sweep_pf_mse_m2_n_particles_")  # (the file keeps its name)

@@ -210,10 +210,6 @@ def aggregate(records: list[dict[str, Any]], missing: list[dict[str, Any]] = ())
         present = set()
         for r in recs:
             present.update(k for k, v in r.get("metrics", {}).items() if isinstance(v, (int, float)) or v is None)
-        metrics = [m for m in declared if m.name in present or not recs]
-        metrics += [MetricInfo(name, name) for name in sorted(present - {m.name for m in metrics})]
-        metrics = [label_alignment(m, recs) for m in metrics]
-        metrics.append(MetricInfo("runtime_s", "runtime [s]", "speed"))
         # rows are jobs that differ in their seed only (not rows that print alike: two datasets with one name, or a
         # folder reused after the suite's options changed); rows that would print alike are told apart by what differs
         groups: dict[str, list[dict[str, Any]]] = defaultdict(list)
@@ -222,6 +218,13 @@ def aggregate(records: list[dict[str, Any]], missing: list[dict[str, Any]] = ())
             groups[canonical_json({k: v for k, v in job.items() if k != "seed"})].append(r)
         # a row none of whose seeds has a result yet says so ("– (3 of 3 not run)"): it was in no table nor the CSV
         no_result = {ident: r for ident, r in unrun[task].items() if ident not in groups}
+        # a method with no result at all yet may report any declared metric: an interrupted run kept only the metrics
+        # of the methods that ran (a sleep's "slept [s]" led, the APE of the methods still to run was no column)
+        unknown_method = {r["job"]["method"] for r in no_result.values()} - {r["job"]["method"] for r in recs}
+        metrics = [m for m in declared if m.name in present or unknown_method or not recs]
+        metrics += [MetricInfo(name, name) for name in sorted(present - {m.name for m in metrics})]
+        metrics = [label_alignment(m, recs) for m in metrics]
+        metrics.append(MetricInfo("runtime_s", "runtime [s]", "speed"))
         first = {ident: items[0] for ident, items in groups.items()} | no_result
         jobs = {ident: Job.from_spec(r["job"]) for ident, r in first.items()}
         label_of = dataset_labels(recs + list(no_result.values()))
@@ -424,18 +427,21 @@ def make_plots(records: list[dict[str, Any]]) -> list[Plot]:
         chosen, left_out = _first_ok_per_method(items, "error_over_time")
         if chosen:
             fig, ax = plt.subplots(figsize=(6, 3.2))
-            ylabel, xlabel = "error", "time [s]"
+            xlabel = "time [s]"
+            ylabel, line_notes = error_axis_label({label: r["series"]["error_over_time"].get("label", "error")
+                                                   for label, r in chosen.items()})
             for label, r in chosen.items():
                 s = r["series"]["error_over_time"]
-                ax.plot(s["t"], s["error"], lw=1.2, label=label)
-                ylabel = s.get("label", ylabel)
+                note = f" ({line_notes[label]})" if label in line_notes else ""
+                ax.plot(s["t"], s["error"], lw=1.2, label=label + note)
                 xlabel = s.get("t_label", xlabel)  # (a particle filter's steps were labelled seconds)
             ax.set_xlabel(xlabel)
             ax.set_ylabel(ylabel)
             ax.legend(fontsize=7)
             ax.set_title(f"error over time: {where}", fontsize=9)
+            per_line = f" ({'; '.join(f'{m}: {n}' for m, n in line_notes.items())})" if line_notes else ""
             plots.append(Plot(f"Error over time — {where}", f"err_{_file_slug(where)}.png", _png(fig), task,
-                              f"{ylabel} over time per method: {experiment}, {dataset}.{left_out}"))
+                              f"{ylabel} over time per method{per_line}: {experiment}, {dataset}.{left_out}"))
         chosen, left_out = _first_ok_per_method(items, "rmse_history")
         if chosen:
             fig, ax = plt.subplots(figsize=(6, 3.2))
@@ -455,6 +461,22 @@ def make_plots(records: list[dict[str, Any]]) -> list[Plot]:
     return plots
 
 
+def error_axis_label(labels: dict[str, str]) -> tuple[str, dict[str, str]]:
+    """The y label of an error-over-time plot whose lines are labelled ``labels`` (method -> its series' label) and
+    what each line's legend entry adds: one label is the axis's; labels that differ in one bracketed part ("APE (se3
+    aligned) [m]", "APE (sim3 aligned) [m]") give the axis what they share ("APE [m]") and each line its part; other
+    differing labels give a neutral "error" (with their shared unit) and each line its whole label. (The last line's
+    label was the axis's: an SE(3)-aligned line read as Sim(3)-aligned.)"""
+    if len(set(labels.values())) <= 1:
+        return next(iter(labels.values()), "error"), {}
+    parts = {method: re.fullmatch(r"(.*?)\s*\(([^()]*)\)(.*)", label) for method, label in labels.items()}
+    shared = {" ".join(f"{m.group(1)}{m.group(3)}".split()) if m else None for m in parts.values()}
+    if None not in shared and len(shared) == 1:
+        return shared.pop(), {method: m.group(2).strip() for method, m in parts.items()}
+    units = {u.group(0) if (u := re.search(r"\[[^\[\]]*\]$", label.strip())) else None for label in labels.values()}
+    return "error" + (f" {units.pop()}" if len(units) == 1 and None not in units else ""), dict(labels)
+
+
 def _sweep_plots(records: list[dict[str, Any]]) -> list[Plot]:
     import matplotlib.pyplot as plt
 
@@ -463,9 +485,12 @@ def _sweep_plots(records: list[dict[str, Any]]) -> list[Plot]:
     for r in records:
         by_task[r["job"]["task"]].append(r)
     for task, recs in sorted(by_task.items()):
-        _, sweeps = _task_meta(task)
+        declared, sweeps = _task_meta(task)
+        label_of = {m.name: m.label for m in declared}
         experiments = {r["job"]["experiment"] for r in recs}
         for param, metric in sweeps:
+            # the metric's declared label, as the tables name it (the axis, title and caption read "mse_m2")
+            metric_label = label_alignment(MetricInfo(metric, label_of.get(metric, metric)), recs).label
             lines: dict[str, dict[float, list[float]]] = defaultdict(lambda: defaultdict(list))
             for r in recs:
                 p = r["job"]["params"]
@@ -488,13 +513,13 @@ def _sweep_plots(records: list[dict[str, Any]]) -> list[Plot]:
                 stds = [float(np.std(points[x], ddof=1)) if len(points[x]) > 1 else 0.0 for x in xs]
                 ax.errorbar(xs, means, yerr=stds, marker="o", capsize=3, lw=1.2, label=label)
             ax.set_xlabel(param)
-            ax.set_ylabel(metric)
+            ax.set_ylabel(metric_label)
             scale, scale_args, scale_note = sweep_x_scale([x for points in lines.values() for x in points])
             ax.set_xscale(scale, **scale_args)
             ax.legend(fontsize=7)
-            ax.set_title(f"{task}: {metric} vs {param} (mean ± std over seeds)", fontsize=9)
-            plots.append(Plot(f"{metric} vs {param} — {task}", f"sweep_{_file_slug(task + '_' + metric + '_' + param)}.png", _png(fig),
-                              task, f"{metric} against {param}: mean ± std over seeds, one line per experiment, dataset and "
+            ax.set_title(f"{task}: {metric_label} vs {param} (mean ± std over seeds)", fontsize=9)
+            plots.append(Plot(f"{metric_label} vs {param} — {task}", f"sweep_{_file_slug(task + '_' + metric + '_' + param)}.png", _png(fig),
+                              task, f"{metric_label} against {param}: mean ± std over seeds, one line per experiment, dataset and "
                               f"method{scale_note}.{left_out}"))
     return plots
 
