@@ -366,6 +366,26 @@ def test_dask_executor_on_an_existing_cluster_address(tmp_path):
     assert strip(comparable(tmp_path / "remote")) == strip(comparable(tmp_path / "serial"))
 
 
+def test_a_local_dask_cluster_starts_no_more_workers_than_jobs(tmp_path):
+    """``-e dask --workers 8`` on a 2-job suite started 8 worker processes; the process pool stops at the job count."""
+    pytest.importorskip("distributed")
+    from lidarkit.bench.executors import make_executor
+    from lidarkit.bench.worker import execute_job
+
+    job = load_suite(suite_file(tmp_path, TINY)).jobs[0]
+    executor = make_executor("dask", workers=8)
+    try:
+        (key, outcome), = executor.run(execute_job, [("only", job.spec())])
+        assert len(executor.cluster.workers) == 1
+    finally:
+        executor.close()
+    assert key == "only" and outcome["status"] == "ok"
+    from lidarkit.bench.executors import local_dask_workers
+
+    assert [local_dask_workers(8, 2), local_dask_workers(8, 20), local_dask_workers(3, 3)] == [2, 8, 3]
+    assert local_dask_workers(None, 1) == 1 and local_dask_workers(None, 50) <= 2  # (default: up to 2)
+
+
 def test_unknown_executor_and_misplaced_address_are_config_errors(tmp_path):
     from lidarkit.errors import ConfigError
 
@@ -535,6 +555,42 @@ def test_bench_progress_lines_where_no_bar_can_be_drawn(tmp_path, capsys):
     assert exc.value.code in (0, None)
     err = capsys.readouterr().err
     assert "2/20 jobs (10 %)" in err and "20/20 jobs (100 %)" in err
+
+
+def test_no_progress_runs_bench_and_baseline_without_progress_output(tmp_path, capsys):
+    """`lidarkit bench SUITE --no-progress` was refused with a box ("No such option"), where odometry and sim take
+    it; bench and baseline record / check now run with nothing on stderr, and say a failed job still."""
+    from conftest import cli_exit_code
+
+    suite = suite_file(tmp_path, """
+        seeds: 20
+        experiments:
+          - {name: e, task: selftest, dataset: {kind: synthetic}, methods: [{name: sleep, params: {seconds: 0.0}}]}
+        """)
+    assert cli_exit_code(["bench", str(suite), "--out", str(tmp_path / "quiet"), "-e", "serial", "--no-report",
+                          "--no-progress"]) == 0
+    out, err = capsys.readouterr()
+    assert err == "" and "20 jobs: 0 already done, 20 run now (20 ok, 0 failed)" in out
+    assert cli_exit_code(["bench", str(suite), "--out", str(tmp_path / "shown"), "-e", "serial", "--no-report",
+                          "--progress"]) == 0
+    assert "20/20 jobs (100 %)" in capsys.readouterr().err  # (the default, as before: lines where no bar is drawn)
+    failing = suite_file(tmp_path, """
+        experiments:
+          - {name: e, task: selftest, dataset: {kind: synthetic}, methods: [{name: fail, params: {message: boom 7}}]}
+        """)
+    assert cli_exit_code(["bench", str(failing), "--out", str(tmp_path / "failing"), "-e", "serial", "--no-report",
+                          "--no-progress"]) == 0
+    assert capsys.readouterr().err.splitlines() == ["failed fail(message=boom 7) on synthetic (seed 0): RuntimeError: boom 7"]
+    walk = suite_file(tmp_path, """
+        experiments:
+          - {name: walk, task: selftest, dataset: {kind: synthetic, name: synth}, methods: [random_walk]}
+        """)
+    assert cli_exit_code(["baseline", "record", str(walk), "--out", str(tmp_path / "bl"), "--repeats", "1",
+                          "--no-progress"]) == 0
+    assert capsys.readouterr().err == ""
+    assert cli_exit_code(["baseline", "check", str(tmp_path / "bl"), "--no-progress"]) == 0
+    out, err = capsys.readouterr()
+    assert err == "" and "baseline check passed: 1 pinned jobs" in out
 
 
 def test_library_arguments_are_named_as_the_caller_wrote_them(tmp_path, capsys):

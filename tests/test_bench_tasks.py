@@ -166,6 +166,42 @@ def test_icp_pair_job_on_the_real_kitti_pair_matches_ground_truth_scoring():
     assert record["series"]["rmse_history"][0] and record["info"]["pairs"][0]["source"] == 95
 
 
+def test_icp_pair_reads_kitti_as_kiss_reads_it_as_the_odometry_task_does():
+    """kiss through icp_pair scored KITTI's stored points, without the vertical-angle correction an odometry run of kiss
+    applies (198 -> 199 read 0.0085 m where kiss on kiss-icp's corrected scans gives 0.0132 m), and said nothing."""
+    from kiss_icp.pybind import kiss_icp_pybind
+
+    from lidarkit.geometry import pose_error
+    from lidarkit.io import open_dataset
+
+    root = shared_path("kitti_odometry")
+    velodyne = shared_path("kitti_odometry", "extra_frames", "00", "velodyne")
+    spec = {"kind": "kitti", "path": str(root), "sequence": "00", "velodyne_dir": str(velodyne)}
+    pairs = [[94, 95], [198, 199]]
+    record = execute_job(Job("icp_pair", "exp", "kitti", spec, "kiss", {}, seed=0, options={"pairs": pairs}).spec())
+    assert record["status"] == "ok", record["error"]
+    stored = open_dataset("kitti", root, sequence="00", velodyne_dir=velodyne)  # read as stored ("auto", not configured)
+
+    def corrected(frame):  # kiss-icp's own correction of its KITTI loader
+        points = np.ascontiguousarray(stored.read_scan_by_frame(frame).points_xyz, dtype=np.float64)
+        return np.asarray(kiss_icp_pybind._correct_kitti_scan(kiss_icp_pybind._Vector3dVector(points)))
+
+    kiss = registration.get_icp("kiss")
+    for row, (target, source) in zip(record["info"]["pairs"], pairs):
+        T_gt = stored.relative_pose(target, source)
+        expected_m, expected_deg = pose_error(kiss.align(corrected(source), corrected(target)).T_target_source, T_gt)
+        assert row["translation_error_m"] == pytest.approx(expected_m, abs=1e-9)
+        assert row["rotation_error_deg"] == pytest.approx(expected_deg, abs=1e-9)
+    assert record["info"]["pairs"][1]["translation_error_m"] == pytest.approx(0.0132, abs=5e-4)  # (as stored: 0.0085)
+    applied = record["info"]["effective"]["corrections"]
+    assert applied == {"vertical_correction": "auto", "vertical_correction_applied": True, "vertical_correction_deg": 0.205}
+    # the dataset opened for kiss is shared by the worker's other jobs: another method still reads the stored points
+    other = execute_job(Job("icp_pair", "exp", "kitti", spec, "vanilla", {"voxel_size_m": 1.0}, seed=0,
+                            options={"pairs": pairs[:1]}).spec())
+    assert other["status"] == "ok", other["error"]
+    assert other["info"]["effective"]["corrections"]["vertical_correction_applied"] is False
+
+
 def test_pf_job_validates_with_the_filter_config_and_sweeps_particles(tmp_path):
     pytest.importorskip("lidarkit.pf.protocol")
     data = shared_path("pf", "burgard_particle_filter")

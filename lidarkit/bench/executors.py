@@ -184,8 +184,15 @@ def stop_pool(pool: ProcessPoolExecutor) -> None:
             mark_abandoned()
 
 
+def local_dask_workers(workers: int | None, n_jobs: int) -> int:
+    """Worker processes of a local Dask cluster for ``n_jobs`` jobs: ``workers`` (default up to 2), never more than
+    the jobs, as the process pool is capped (``--workers 8`` on 2 jobs started 8 processes, 6 of them idle)."""
+    return max(1, min(workers or min(2, default_workers()), n_jobs))
+
+
 class DaskExecutor:
-    """Jobs as ``distributed`` futures: on the cluster at ``address`` or on a LocalCluster started (and closed) here."""
+    """Jobs as ``distributed`` futures: on the cluster at ``address`` or on a LocalCluster started when the jobs are
+    known (sized to them: :func:`local_dask_workers`) and closed here."""
 
     name = "dask"
 
@@ -196,7 +203,9 @@ class DaskExecutor:
             raise ConfigError(f"the dask executor needs dask[distributed] ({err})", source="--executor") from err
         self._distributed = distributed
         self.address = address
+        self.workers = workers
         self.cluster = None
+        self.client = None
         # the client logs each failed reconnect with its traceback: a lost scheduler is reported once, by run()
         self._client_log = logging.getLogger("distributed.client")
         self._client_level = self._client_log.level
@@ -206,24 +215,29 @@ class DaskExecutor:
                 self.client = distributed.Client(address, timeout="20s")
             except (OSError, TimeoutError) as err:
                 raise ConfigError(f"cannot connect to the Dask scheduler: {err}", source=address) from None
-        else:
-            n = workers or min(2, default_workers())
-            self._quiet = logging.getLogger("distributed")
-            self._level = self._quiet.level
-            self._quiet.setLevel(logging.ERROR)  # a local cluster's INFO lines would only bury the progress bar
-            os.environ.setdefault("DASK_LOGGING__DISTRIBUTED", "error")  # read by the worker processes at start
-            # Worker processes start with SIGINT ignored (an ignored signal stays ignored across exec, and Python
-            # keeps it so): Ctrl-C reaches the whole process group, and only this process decides how the cluster
-            # stops. A Ctrl-C in the few seconds the cluster takes to start is lost (see ignored_sigint).
-            with ignored_sigint():
-                self.cluster = distributed.LocalCluster(
-                    n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=logging.ERROR
-                )
-                self.client = distributed.Client(self.cluster)
+
+    def _start_local_cluster(self, n_jobs: int) -> None:
+        """A LocalCluster of :func:`local_dask_workers` processes and its client."""
+        distributed = self._distributed
+        self._quiet = logging.getLogger("distributed")
+        self._level = self._quiet.level
+        self._quiet.setLevel(logging.ERROR)  # a local cluster's INFO lines would only bury the progress bar
+        os.environ.setdefault("DASK_LOGGING__DISTRIBUTED", "error")  # read by the worker processes at start
+        # Worker processes start with SIGINT ignored (an ignored signal stays ignored across exec, and Python
+        # keeps it so): Ctrl-C reaches the whole process group, and only this process decides how the cluster
+        # stops. A Ctrl-C in the few seconds the cluster takes to start is lost (see ignored_sigint).
+        with ignored_sigint():
+            self.cluster = distributed.LocalCluster(
+                n_workers=local_dask_workers(self.workers, n_jobs), threads_per_worker=1, processes=True,
+                dashboard_address=None, silence_logs=logging.ERROR,
+            )
+            self.client = distributed.Client(self.cluster)
 
     def run(self, fn: JobFn, items: list[Item]) -> Iterator[tuple[str, dict[str, Any]]]:
         if not items:
             return
+        if self.client is None:
+            self._start_local_cluster(len(items))
         futures = {}
         for key, spec in items:
             futures[self.client.submit(fn, spec, pure=False)] = key
@@ -259,10 +273,12 @@ class DaskExecutor:
         level = quiet.level
         if getattr(self, "_lost", False):  # the client's reconnect attempts would log their tracebacks while it closes
             quiet.setLevel(logging.CRITICAL)
-        self.client.close()
+        if self.client is not None:
+            self.client.close()
         quiet.setLevel(level)
         if self.cluster is not None:
             self.cluster.close()
+        if hasattr(self, "_quiet"):  # (a local cluster was started, or failed to start)
             self._quiet.setLevel(self._level)
         self._client_log.setLevel(self._client_level)
 

@@ -30,6 +30,7 @@ def record_command(
     suite_file: Path = typer.Argument(..., help="Suite YAML file (see docs/benchmarks.md)."),
     out: Path = typer.Option(..., "--out", "-o", help="Baseline folder to write: an earlier baseline there is replaced whole, once the new one is complete; a folder holding anything else is refused."),
     repeats: int = typer.Option(3, help="Runs per job; their spread sets each metric's default band."),
+    progress: bool = typer.Option(True, "--progress/--no-progress", help="A line per job run on stderr."),
 ) -> None:
     """Run SUITE_FILE REPEATS times and pin trajectories, metrics, bands and the protocol manifest in --out."""
     from lidarkit.bench.baseline import job_name, record
@@ -40,9 +41,11 @@ def record_command(
         raise ConfigError(f"must be a positive integer, got {repeats}", source="--repeats")
     err = stderr()
     jobs = load_suite(suite_file).jobs  # (record reads it again; the progress lines need all the jobs to name them apart)
-    baseline = record(suite_file, out, repeats=repeats,
-                      on_job=lambda job, r: err.print(f"run {r + 1}/{repeats}: {_progress_name(job, jobs)}",
-                                                      soft_wrap=True, markup=False))
+
+    def say_run(job: Job, r: int) -> None:
+        err.print(f"run {r + 1}/{repeats}: {_progress_name(job, jobs)}", soft_wrap=True, markup=False)
+
+    baseline = record(suite_file, out, repeats=repeats, on_job=say_run if progress else None)
     console = stdout()
     for job in baseline.jobs:
         bands = ", ".join(f"{m} {job['metrics'][m]:.4g} ± {job['bands'][m]:.2g}" for m in job["checked"])
@@ -55,6 +58,7 @@ def check_command(
     baseline_dir: Path = typer.Argument(..., help="Folder written by `lidarkit baseline record`."),
     tolerance: Optional[list[str]] = typer.Option(
         None, "--tolerance", "-t", help="METRIC=BAND: absolute band of a metric instead of the recorded one (repeatable)."),
+    progress: bool = typer.Option(True, "--progress/--no-progress", help="A line per job checked on stderr."),
 ) -> None:
     """Re-run the pinned jobs; exit 1 on a regression, a changed protocol or a failed job (each reported distinctly)."""
     from lidarkit.bench.baseline import check, load_baseline
@@ -62,8 +66,11 @@ def check_command(
 
     err = stderr()
     jobs = [Job.from_spec(pinned["spec"]) for pinned in load_baseline(baseline_dir).jobs]
-    result = check(baseline_dir, tolerances=tolerance or None,
-                   on_job=lambda job: err.print(f"checking {_progress_name(job, jobs)}", soft_wrap=True, markup=False))
+
+    def say_checking(job: Job) -> None:
+        err.print(f"checking {_progress_name(job, jobs)}", soft_wrap=True, markup=False)
+
+    result = check(baseline_dir, tolerances=tolerance or None, on_job=say_checking if progress else None)
     console = stdout()
     for line in result.lines():
         console.print(line, soft_wrap=True, markup=False)

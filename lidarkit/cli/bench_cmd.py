@@ -46,8 +46,18 @@ class _LineProgress:
         pass
 
 
-def progress_bar():
-    """Rich progress bar with ETA on stderr (results go to stdout); progress lines where stderr is no terminal."""
+class _NoProgress(_LineProgress):
+    """``--no-progress``: neither bar nor progress lines; failed and skipped jobs are still said, one line each."""
+
+    def update(self, task: int, total: int | None = None, advance: int = 0, **fields) -> None:
+        pass
+
+
+def progress_bar(show: bool = True):
+    """Rich progress bar with ETA on stderr (results go to stdout); progress lines where stderr is no terminal;
+    neither with ``show=False``."""
+    if not show:
+        return _NoProgress(stderr())
     if not stderr().is_terminal:
         return _LineProgress(stderr())
     return Progress(
@@ -63,15 +73,17 @@ def progress_bar():
     )
 
 
-def run_with_progress(suite, out: Path, *, executor: str, workers: int | None, address: str | None, force: bool):
-    """Run ``suite`` into ``out`` showing a progress bar; Ctrl-C / SIGTERM say how to resume and exit 130 / 143."""
+def run_with_progress(suite, out: Path, *, executor: str, workers: int | None, address: str | None, force: bool,
+                      progress: bool = True):
+    """Run ``suite`` into ``out`` showing a progress bar (none without ``progress``); Ctrl-C / SIGTERM say how to
+    resume and exit 130 / 143."""
     from lidarkit.bench.executors import check_executor_args
     from lidarkit.lifetime import Interrupted, interrupt_handled
     from lidarkit.bench.runner import run_suite
 
     check_executor_args(executor, workers, address, cli=True)  # (named as `lidarkit demo` takes them, too)
     err = stderr()
-    with progress_bar() as progress:
+    with progress_bar(progress) as progress:
         bar = progress.add_task(suite.name, total=None, failed=0)
         failed = 0
 
@@ -189,7 +201,7 @@ def bench(
     suite_file: Path = typer.Argument(..., help="Suite YAML file (see docs/benchmarks.md)."),
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="Results folder (default: results/<suite file stem>)."),
     executor: str = typer.Option("process", "--executor", "-e", help=EXECUTOR_HELP),
-    workers: Optional[int] = typer.Option(None, "--workers", "-j", help="Worker processes (default: CPUs available; a local Dask cluster: at most 2)."),
+    workers: Optional[int] = typer.Option(None, "--workers", "-j", help="Worker processes, never more than the jobs to run (default: CPUs available; a local Dask cluster: at most 2)."),
     address: Optional[str] = typer.Option(None, "--address", help="Dask scheduler address, e.g. tcp://HOST:8786."),
     force: bool = typer.Option(False, "--force", help="Rerun jobs that already have a result."),
     report: bool = typer.Option(True, "--report/--no-report", help="Write the report when the run ends."),
@@ -198,6 +210,8 @@ def bench(
     methods: Optional[str] = typer.Option(None, "--methods", help="`bench kitti` only: comma-separated variants (default: the bundled strong ones)."),
     sequences: Optional[str] = typer.Option(None, "--sequences", help="`bench kitti` only: comma-separated sequences (default 00-10)."),
     max_jobs: int = typer.Option(100_000, "--max-jobs", min=1, help="Refuse a suite that expands to more jobs."),
+    progress: bool = typer.Option(True, "--progress/--no-progress",
+                                  help="Progress bar on stderr (a line every tenth of the jobs where stderr is no terminal)."),
 ) -> None:
     """Run a benchmark suite: validate it, expand it into jobs, run the unfinished ones, write one JSON per job.
 
@@ -249,7 +263,8 @@ def bench(
             table.add_row(key, job.task, job.dataset_name, job.method_label, str(job.seed), done)
         stdout().print(table)
         return
-    summary = run_with_progress(suite, out, executor=executor, workers=workers, address=address, force=force)
+    summary = run_with_progress(suite, out, executor=executor, workers=workers, address=address, force=force,
+                                progress=progress)
     print_run_summary(summary)
     if report:
         built = write_report(out, {job.key() for job in suite.jobs})
