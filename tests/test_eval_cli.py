@@ -273,6 +273,45 @@ def test_an_angle_delta_beyond_half_a_turn_is_refused_before_any_work(tmp_path, 
     assert EvaluationSettings(delta=180, delta_unit="deg").delta == 180  # evo's own bound is inclusive
 
 
+def test_legacy_pairs_where_they_cannot_apply_are_refused_before_any_work(tmp_path, capsys):
+    """`--legacy-pairs` with a delta in frames, or beside `--all-pairs`, was accepted with the settings and refused by
+    the RPE only after the files were read, paired and the KITTI drift computed; the settings refuse it now."""
+    from lidarkit.errors import ConfigError
+    from lidarkit.eval import EvaluationSettings
+
+    gt = shared_path("evo_testdata", "KITTI_00_gt.txt")
+    for flags, line in (([], "legacy_pairs applies to consecutive pairs with a path or angle delta, not to a delta in frames"),
+                        (["--delta", "10", "--delta-unit", "m", "--all-pairs"],
+                         "legacy_pairs applies to consecutive pairs with a path or angle delta, not to all pairs")):
+        with pytest.raises(SystemExit) as exc:  # (the estimate does not exist: the settings are refused before reading)
+            main(["eval", str(gt), str(tmp_path / "not_read.txt"), "--legacy-pairs", *flags])
+        assert exc.value.code == 1 and capsys.readouterr().err.strip() == f"error: --legacy-pairs: {line}"
+    for settings in (dict(legacy_pairs=True), dict(legacy_pairs=True, delta=5, delta_unit="frames"),
+                     dict(legacy_pairs=True, delta=10, delta_unit="deg", all_pairs=True)):
+        with pytest.raises(ConfigError, match="^legacy_pairs: legacy_pairs applies to consecutive pairs"):
+            EvaluationSettings(**settings)
+    assert EvaluationSettings(legacy_pairs=True, delta=10, delta_unit="m").legacy_pairs  # what they are for
+
+
+def test_associated_poses_are_reported_against_the_whole_reference(tmp_path, capsys):
+    """With --associate the reference length was the line through the 118 matched keyframes of fr2/desk, "118 poses,
+    15.6 m", where the reference travels 20.3 m (18.5 m of it between the first and last keyframe matched)."""
+    gt = shared_path("evo_testdata", "fr2_desk_groundtruth.txt")
+    est = shared_path("evo_testdata", "fr2_desk_ORB_kf_mono.txt")
+    code, out, _ = run_cli(["eval", str(gt), str(est), "-f", "tum", "--associate", "--align", "sim3",
+                            "--markdown", str(tmp_path / "m.md"), "--json", str(tmp_path / "m.json")], capsys)
+    assert code == 0
+    whole = Trajectory.from_tum(gt)
+    data = json.loads((tmp_path / "m.json").read_text())
+    assert data["n_poses"] == 118 and data["ref_length_m"] == pytest.approx(whole.length_m, rel=1e-12)  # 20.34 m
+    first, last = np.searchsorted(whole.timestamps_s, [1311868171.1301, 1311868262.1509])  # the keyframes matched
+    assert data["scored_path_m"] == pytest.approx(whole.distances_m[last] - whole.distances_m[first], rel=1e-12)  # 18.53 m
+    text = (tmp_path / "m.md").read_text()
+    assert "118 associated poses over 18.5 m of a 20.3 m reference; align=sim3" in text
+    assert "KITTI drift not computed: the associated poses span 18.5 m of the 20.3 m reference path, not longer than 100 m." in text
+    assert "15.6" not in text + out
+
+
 def test_association_without_overlap_in_time_states_both_spans(tmp_path, capsys):
     """A TUM estimate stamped from 0 s failed in evo's words: "found no matching timestamps between first trajectory
     and second trajectory with max. time diff 0.01 (s) and time offset 0.0 (s)", naming neither file nor time."""

@@ -146,3 +146,29 @@ def test_an_array_of_lengths_that_is_no_list_is_quoted_by_its_shape():
     with pytest.raises(ConfigError) as err:  # a 1-D array is quoted by its values
         kitti_drift(ref, ref, lengths=np.array([100.0, -5.0]))
     assert str(err.value).endswith("got [100.0, -5.0]")
+
+
+def test_associated_segments_are_measured_along_the_whole_reference():
+    """A reference zigzags (1 m ahead, 0.75 m aside: 1.25 m of path a frame); the estimate has a pose at every second
+    of its stamps, where the reference is back on its centre line. The drift measured segments along the line through
+    the matched poses (2 m apart) instead of the 2.5 m the reference travels between them: a 100 m segment spanned 51
+    matched poses, not 41, and the whole reference's path of the matched span read 398 m instead of 497.5 m."""
+    from lidarkit.eval import evaluate
+
+    n = 400
+    poses = np.tile(np.eye(4), (n, 1, 1))
+    poses[:, 0, 3] = np.arange(n)
+    poses[:, 1, 3] = 0.75 * (np.arange(n) % 2)
+    ref = Trajectory(poses, 0.1 * np.arange(n), "ref")
+    matched = poses[::2].copy()
+    matched[:, 0, 3] *= 1.03  # 3 % too long
+    est = Trajectory(matched, 0.1 * np.arange(0, n, 2), "est")
+    # along the reference: 2.5 m a matched pose, a segment of L m ends 0.4 * L + 1 poses on (2 m of it per pose apart)
+    expected_counts = [16, 12, 8, 4, 0, 0, 0, 0]  # starts 0, 10, ... whose end is among the 200 matched poses
+    for drift in (kitti_drift(ref, est, associate=True), evaluate(ref, est, associate=True, align="none").drift):
+        assert [r.n_segments for r in drift.per_length] == expected_counts
+        assert (drift.segment_last_frame - drift.segment_first_frame)[:16].tolist() == 16 * [41]
+        assert drift.per_length[0].translation_pct == pytest.approx(3.0 * 82 / 100, rel=1e-9)
+        assert drift.ref_length_m == pytest.approx(497.5, rel=1e-12)
+    # the whole reference associated with itself is scored as frame by frame (1.25 m a frame: 32 + 24 + 16 + 8 segments)
+    assert kitti_drift(ref, ref, associate=True).n_segments == kitti_drift(ref, ref).n_segments == 80

@@ -181,3 +181,29 @@ def test_speeds_of_the_tables_are_those_of_the_associated_poses(tmp_path):
     assert exc.value.code in (0, None)
     rows = (tmp_path / "t" / "kitti_translation_pct_per_speed.csv").read_text().splitlines()
     assert len(rows) == 2 and rows[1].startswith("10-15 m/s,"), rows
+
+
+def test_rpe_table_titles_name_how_the_pairs_were_chosen(tmp_path):
+    """All pairs, consecutive and legacy pairs 5 m apart gave three different RMSEs under one title
+    "RPE translation RMSE (m per 5 meters)"; the title now names the choice as the printed table does."""
+    from lidarkit.cli import main
+    from lidarkit.geometry import make_se3, so3_exp
+
+    yaw = np.linspace(0.0, np.pi, 120)  # half a circle of 20 m radius
+    ref = np.array([make_se3(so3_exp(np.array([0.0, 0.0, a])), [20.0 * np.sin(a), 20.0 * (1.0 - np.cos(a)), 0.0]) for a in yaw])
+    est = ref.copy()
+    est[:, :3, 3] += 0.05 * np.random.default_rng(0).standard_normal((120, 3))
+    Trajectory(ref, 0.1 * np.arange(120)).to_tum(tmp_path / "ref.tum")
+    Trajectory(est, 0.1 * np.arange(120)).to_tum(tmp_path / "est.tum")
+    titles, values = {}, {}
+    for folder, flags in (("c", []), ("a", ["--all-pairs"]), ("l", ["--legacy-pairs"])):
+        with pytest.raises(SystemExit) as exc:
+            main(["eval", str(tmp_path / "ref.tum"), str(tmp_path / "est.tum"), "-f", "tum", "--delta", "5",
+                  "--delta-unit", "m", *flags, "--tables", str(tmp_path / folder)])
+        assert exc.value.code in (0, None)
+        lines = (tmp_path / folder / "rpe_rmse.md").read_text().splitlines()
+        titles[folder], values[folder] = lines[0], lines[4]  # the title and the sequence's row
+    assert len(set(values.values())) == 3  # three selections, three RMSEs
+    assert titles == {"c": "**RPE translation RMSE (m per 5 meters)**",
+                      "a": "**RPE translation RMSE (m per 5 meters, all pairs)**",
+                      "l": "**RPE translation RMSE (m per 5 meters, legacy pairs)**"}

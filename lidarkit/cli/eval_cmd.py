@@ -200,8 +200,10 @@ def _write_outputs(evaluation, ref: Path, est: Path, ref_traj, est_traj, aside: 
         aligned = alignment_label(align) + scaled(evaluation.ape)
         unit = DELTA_UNITS.get(delta_unit, delta_unit)
         per = "frame" if (delta, unit) == (1, "frames") else f"{delta:g} {unit}"
+        # the pairs' choice too, as the printed table states it (all pairs and consecutive ones read the same title)
+        chosen = ", all pairs" if evaluation.rpe.all_pairs else ", legacy pairs" if evaluation.rpe.legacy_pairs else ""
         pub = publication_tables(segments, {key: evaluation.ape.rmse}, {key: evaluation.rpe.rmse}, ape_alignment=aligned,
-                                 rpe_delta=per + scaled(evaluation.rpe))
+                                 rpe_delta=per + chosen + scaled(evaluation.rpe))
         written = pub.write(folder)
         if segments:
             from lidarkit.eval.plots import plot_segment_boxplots

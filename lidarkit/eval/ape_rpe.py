@@ -215,6 +215,14 @@ def check_flags(**flags: Any) -> None:
             raise ConfigError(f"{name} must be True or False, got {value!r}", source=name)
 
 
+def check_legacy_pairs(legacy_pairs: bool, delta_unit: str, all_pairs: bool) -> None:
+    """ConfigError for ``legacy_pairs`` where the 2018 evo releases chose pairs as today's: a delta in frames, or all
+    pairs (only their first consecutive path/angle pair differs). ``delta_unit`` as :func:`checked_delta` returns it."""
+    if legacy_pairs and (delta_unit == "frames" or all_pairs):
+        raise ConfigError("legacy_pairs applies to consecutive pairs with a path or angle delta, not "
+                          + ("to all pairs" if all_pairs else "to a delta in frames"), source="legacy_pairs")
+
+
 def check_align_name(align: str) -> None:
     """ConfigError unless ``align`` is one of ``ALIGNMENTS`` (also checked by EvaluationSettings when it is made)."""
     if not isinstance(align, str) or align not in ALIGNMENTS:
@@ -536,8 +544,7 @@ def rpe(
     pose_relation = _relation(relation, RPE_RELATIONS)
     delta, delta_unit = checked_delta(delta, delta_unit)
     unit = Unit[delta_unit]
-    if legacy_pairs and (unit is Unit.frames or all_pairs):
-        raise ConfigError("legacy_pairs applies to consecutive pairs with a path or angle delta", source="legacy_pairs")
+    check_legacy_pairs(legacy_pairs, delta_unit, all_pairs)
     if not (is_real_number(rel_delta_tol) and 0 <= rel_delta_tol < 1):  # ("x": a bare TypeError)
         raise ConfigError(f"rel_delta_tol must be a number in [0, 1), got {rel_delta_tol!r}", source="rel_delta_tol")
     ref, est = paired(ref, est, associate=associate, max_diff_s=max_diff_s)

@@ -7,7 +7,16 @@ from dataclasses import asdict, dataclass, replace
 from typing import Any
 
 from lidarkit.errors import ConfigError
-from lidarkit.eval.ape_rpe import APEResult, RPEResult, ape, check_align_name, check_flags, checked_delta, rpe
+from lidarkit.eval.ape_rpe import (
+    APEResult,
+    RPEResult,
+    ape,
+    check_align_name,
+    check_flags,
+    check_legacy_pairs,
+    checked_delta,
+    rpe,
+)
 from lidarkit.eval.kitti_drift import (
     KITTI_LENGTHS_M,
     KITTI_STEP_FRAMES,
@@ -16,6 +25,7 @@ from lidarkit.eval.kitti_drift import (
     checked_step,
     drift_segments_possible,
     kitti_drift,
+    path_distances_m,
 )
 from lidarkit.eval.pairing import association_warning, check_max_diff, pair_name, paired, stamps_disagree
 from lidarkit.trajectory import Trajectory
@@ -44,13 +54,15 @@ class EvaluationSettings:
     drift_step_frames: int = KITTI_STEP_FRAMES
 
     def __post_init__(self) -> None:
-        """Switches that are True or False, an RPE delta evo accepts (200 deg failed after the drift), and drift segment
+        """Switches that are True or False, an RPE delta evo accepts (200 deg failed after the drift), legacy pairs only
+        for consecutive path/angle pairs (refused by rpe() after pairing and the drift), and drift segment
         lengths that are positive numbers (an empty tuple or a single number was a traceback; "false" computed the drift)."""
         check_align_name(self.align)  # (align="xyz" was refused only by evaluate())
-        checked_delta(self.delta, self.delta_unit)
+        _, unit = checked_delta(self.delta, self.delta_unit)
         checked_step(self.drift_step_frames, "drift_step_frames")
         check_flags(all_pairs=self.all_pairs, pairs_from_reference=self.pairs_from_reference, legacy_pairs=self.legacy_pairs,
                     associate=self.associate, drift=self.drift)
+        check_legacy_pairs(self.legacy_pairs, unit, self.all_pairs)
         check_max_diff(self.max_diff_s)  # (also bounds the stamp check without associate: None was a TypeError there)
         checked_lengths(self.drift_lengths_m, "drift_lengths_m", "drift segment lengths")
 
@@ -62,12 +74,17 @@ class EvaluationSettings:
 
 @dataclass(frozen=True, eq=False)
 class Evaluation:
-    """APE/RPE in translation (m) and rotation (deg), and KITTI drift (None with ``drift_note`` if skipped)."""
+    """APE/RPE in translation (m) and rotation (deg), and KITTI drift (None with ``drift_note`` if skipped).
+
+    ``ref_length_m`` is the whole reference's path; ``scored_path_m`` the part of it between the first and last pose
+    scored (the same without ``associate``), both measured along the whole reference.
+    """
 
     ref_name: str
     est_name: str
     n_poses: int
     ref_length_m: float
+    scored_path_m: float
     settings: EvaluationSettings
     ape: APEResult
     ape_rotation: APEResult
@@ -82,7 +99,9 @@ class Evaluation:
         """One line of the headline figures (the generated one printed every field of every result: ~4900 characters)."""
         drift = (f"drift {self.drift.translation_pct:.4g} % / {self.drift.rotation_deg_per_100m:.4g} deg/100m"
                  if self.drift is not None else f"no drift ({self.drift_note})")
-        return (f"Evaluation({self.est_name!r} against {self.ref_name!r}, {self.n_poses} poses over {self.ref_length_m:.4g} m: "
+        poses = (f"{self.n_poses} associated poses over {self.scored_path_m:.4g} m of a {self.ref_length_m:.4g} m reference"
+                 if self.settings.associate else f"{self.n_poses} poses over {self.ref_length_m:.4g} m")
+        return (f"Evaluation({self.est_name!r} against {self.ref_name!r}, {poses}: "
                 f"APE rmse {self.ape.rmse:.4g} m / {self.ape_rotation.rmse:.4g} deg ({self.ape.align}), RPE rmse "
                 f"{self.rpe.rmse:.4g} m / {self.rpe_rotation.rmse:.4g} deg per {self.rpe.delta:g} {self.rpe.delta_unit}, {drift})")
 
@@ -93,6 +112,7 @@ class Evaluation:
             "est_name": self.est_name,
             "n_poses": self.n_poses,
             "ref_length_m": self.ref_length_m,
+            "scored_path_m": self.scored_path_m,
             "settings": self.settings.to_dict(),
             "ape": self.ape.to_dict(include_errors),
             "ape_rotation": self.ape_rotation.to_dict(include_errors),
@@ -130,13 +150,20 @@ def evaluate(ref: Trajectory, est: Trajectory, settings: EvaluationSettings | No
         pairs_from_reference=s.pairs_from_reference,
         legacy_pairs=s.legacy_pairs,
     )
+    # path distances along the whole reference: the line through sparse associated poses cuts its corners
+    whole_ref = ref if s.associate else None
+    distances = path_distances_m(ref_paired, whole_ref)
+    scored_path_m = ref.length_m if whole_ref is None else float(distances[-1] - distances[0])
     drift, note = None, ""
     if not s.drift:
         note = "not requested"
-    elif drift_segments_possible(ref_paired, s.drift_lengths_m):
-        drift = kitti_drift(ref_paired, est_paired, s.drift_lengths_m, s.drift_step_frames)
+    elif drift_segments_possible(ref_paired, s.drift_lengths_m, path_along=whole_ref):
+        drift = kitti_drift(ref_paired, est_paired, s.drift_lengths_m, s.drift_step_frames, path_along=whole_ref)
+    elif s.associate:
+        note = (f"the associated poses span {scored_path_m:.1f} m of the {ref.length_m:.1f} m reference path, not longer "
+                f"than {min(s.drift_lengths_m):g} m")
     else:
-        note = f"reference path {ref_paired.length_m:.1f} m is not longer than {min(s.drift_lengths_m):g} m"
+        note = f"reference path {ref.length_m:.1f} m is not longer than {min(s.drift_lengths_m):g} m"
     if note:
         logger.info("KITTI drift skipped: %s", note)
     translation = rpe(ref_paired, est_paired, relation="translation", **rpe_kw)
@@ -144,7 +171,8 @@ def evaluate(ref: Trajectory, est: Trajectory, settings: EvaluationSettings | No
         ref_name=ref.name,
         est_name=est.name,
         n_poses=len(ref_paired),
-        ref_length_m=ref_paired.length_m,
+        ref_length_m=ref.length_m,
+        scored_path_m=scored_path_m,
         settings=s,
         ape=_marked(ape(ref_paired, est_paired, s.align, "translation"), s.associate),
         ape_rotation=_marked(ape(ref_paired, est_paired, s.align, "rotation_angle_deg"), s.associate),
