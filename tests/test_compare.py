@@ -137,8 +137,8 @@ def test_a_missing_metric_says_which_side_lacks_it_and_why(tmp_path):
     _task("drift_test_task", drift)
     out = _bench(tmp_path, "s", "seeds: 6\nexperiments:\n  - {task: drift_test_task, dataset: {kind: synthetic, name: short}, "
                  "methods: [walker, stopper]}\n")
-    with pytest.raises(EvaluationError) as exc:
-        compare(out, out, method_a="walker", method_b="stopper")
+    with pytest.raises(EvaluationError) as exc:  # (the task's headline is ape_rmse_m: drift is asked for)
+        compare(out, out, method_a="walker", method_b="stopper", metric="drift_translation_pct")
     assert str(exc.value) == ("compare: metric 'drift_translation_pct' missing in stopper for 2 of 6 units (short, seed 0; "
                               "short, seed 1): KITTI drift needs 100 m of path; --metric ape_rmse_m compares every unit")
 
@@ -561,3 +561,129 @@ def test_compare_arguments_that_are_not_names_are_refused_by_name(tmp_path):
             compare(out, out, **{**pick, name: given})
         assert str(exc.value) == f"{name}: must be a name (text) or None, got {type(given).__name__} {given!r}"
     assert compare(out, out, **pick, experiment="argument_test_task_0").n_pairs == 3
+
+
+def test_run_folders_over_the_same_frames_pair_whatever_their_selection_says(tmp_path):
+    """kiss over every frame and kiss deskew=False with --frames 0:8 over the same drive were refused as "runs over
+    different data ... with other values": config.yaml's selections ("all", "0:8") were compared as text. The frames
+    run are compared now; a drive at another speed, whose name reads alike, is still other data, and says what differs."""
+    from lidarkit.odometry import run
+
+    spec = "sim:street?frames=8&beams=8&azimuths=360&seed=0&speed={speed}"
+    run(spec.format(speed=10), "kiss", out_dir=tmp_path / "all")
+    run(spec.format(speed=10), "kiss", params={"deskew": False}, frames="0:8", out_dir=tmp_path / "sliced")
+    result = compare(tmp_path / "all", tmp_path / "sliced")
+    assert (result.n_pairs, result.pairing) == (7, "frame")
+    assert result.note == ("each run is scored against the ground truth at its own instant of the sweep (kiss: end, "
+                           "kiss(deskew=False): mid), over the same dataset and frames (sim:street?seed=0, frames 0:8)")
+    run(spec.format(speed=5), "kiss", params={"deskew": False}, out_dir=tmp_path / "slower")
+    with pytest.raises(EvaluationError) as exc:
+        compare(tmp_path / "all", tmp_path / "slower")
+    assert str(exc.value) == (f"compare: runs over different data: {tmp_path / 'all'} has 8 ground-truth poses, "
+                              f"{tmp_path / 'slower'} has 8 with other values (their dataset settings differ in speed_mps "
+                              "(10.0 in A, 5.0 in B))")
+
+
+def test_units_of_a_task_not_compared_are_not_counted_only_in_one_folder(tmp_path):
+    """A: a pair task and a run task (good), B: the run task only (bad). `compare A B --task runs` noted "8 (dataset,
+    seed) units only in A and 0 only in B are left out": A's pair-task units, which were never to be compared. They are
+    worded as in one folder now: left out without --task because of the metric, unsaid with it."""
+    _register_metric_task("pairs_only_test_task", "pair_error_m", lambda job: 0.1 + 0.01 * job.seed)
+    _task("runs_only_test_task", _error)
+    suite = "seeds: 8\nexperiments:\n{experiments}"
+    pairs = "  - {name: p, task: pairs_only_test_task, dataset: {kind: synthetic}, methods: [good]}\n"
+    runs = "  - {{name: r, task: runs_only_test_task, dataset: {{kind: synthetic}}, methods: [{method}]}}\n"
+    a = _bench(tmp_path, "a", suite.format(experiments=pairs + runs.format(method="good")))
+    b = _bench(tmp_path, "b", suite.format(experiments=runs.format(method="bad")))
+    chosen = compare(a, b, task="runs_only_test_task")
+    assert (chosen.n_pairs, chosen.better, chosen.note) == (8, "a", "")
+    default = compare(a, b)
+    assert (default.metric, default.n_pairs) == ("ape_rmse_m", 8)
+    assert default.note == "8 (dataset, seed) units of pairs_only_test_task (no ape_rmse_m) left out: 8 paired"
+
+
+def test_folders_of_other_tasks_are_named_as_such_not_as_other_data(tmp_path):
+    """An odometry folder against an icp_pair folder over the same dataset and seeds read "runs over different data: no
+    (dataset, seed) in common between A (good: syn, seed 0; ...) and B (bad: syn, seed 0; ...)"."""
+    _register_metric_task("first_kind_test_task", "error_m", lambda job: 0.1 + 0.01 * job.seed)
+    _register_metric_task("second_kind_test_task", "error_m", lambda job: 0.2 + 0.01 * job.seed)
+    suite = "seeds: 3\nexperiments:\n  - {{task: {task}, dataset: {{kind: synthetic, name: syn}}, methods: [{method}]}}\n"
+    a = _bench(tmp_path, "a", suite.format(task="first_kind_test_task", method="good"))
+    b = _bench(tmp_path, "b", suite.format(task="second_kind_test_task", method="bad"))
+    with pytest.raises(EvaluationError) as exc:
+        compare(a, b)
+    assert str(exc.value) == (f"compare: {a} (good) holds task(s) first_kind_test_task, {b} (bad) holds second_kind_test_task: "
+                              "compare units of one task")
+    with pytest.raises(ConfigError) as exc:
+        compare(a, b, task="first_kind_test_task")
+    assert str(exc.value) == (f"task: no unit of task 'first_kind_test_task' in both; {a} (good) holds first_kind_test_task, "
+                              f"{b} (bad) holds second_kind_test_task")
+
+
+def test_the_default_metric_is_the_headline_the_report_ranks_by(tmp_path, capsys):
+    """Odometry results were compared on KITTI drift, else the unaligned APE, while the report's Summary ranks them by
+    the SE(3)-aligned APE (kiss 1.71 against 0.556 m): the default is the task's first declared accuracy metric now, as
+    the report's headline, and the verdict names its label."""
+    from lidarkit.bench import Metric
+    from lidarkit.bench.report import build_report, summary_rows
+
+    def errors(job):
+        bump = 0.01 * np.random.default_rng(job.seed).random()
+        good = job.method == "good"
+        return {"drift_translation_pct": 1.0 + bump, "ape_rmse_m": (0.9 if good else 0.5) + bump,
+                "ape_se3_rmse_m": (0.1 if good else 0.3) + bump}
+
+    _register_metric_task("headline_test_task", (Metric("ape_se3_rmse_m", "APE RMSE (SE(3)-aligned) [m]"),
+                                                 Metric("ape_rmse_m", "APE RMSE (unaligned) [m]"),
+                                                 Metric("drift_translation_pct", "KITTI drift [%]")), errors)
+    out = _bench(tmp_path, "s", "seeds: 6\nexperiments:\n  - {task: headline_test_task, dataset: {kind: synthetic}, methods: [good, bad]}\n")
+    result = compare(out, out, method_a="good", method_b="bad")
+    assert (result.metric, result.metric_label, result.better) == ("ape_se3_rmse_m", "APE RMSE (SE(3)-aligned)", "a")
+    assert result.verdict().startswith("good is better than bad on ape_se3_rmse_m [APE RMSE (SE(3)-aligned)]: median")
+    _, rows = summary_rows(build_report(out, plots=False))
+    assert [(r[2], r[3]) for r in rows] == [("APE RMSE (SE(3)-aligned) [m]", "good")]  # the report's headline and best
+    asked = compare(out, out, method_a="good", method_b="bad", metric="ape_rmse_m")
+    assert (asked.metric_label, asked.better) == ("APE RMSE (unaligned)", "b")
+    code, stdout, _ = run_cli(["compare", str(out), str(out), "--method-a", "good", "--method-b", "bad"], capsys)
+    assert code == 0 and stdout.startswith("A: good   B: bad   metric: ape_se3_rmse_m [APE RMSE (SE(3)-aligned)] (6 paired seeds")
+
+
+def test_a_method_label_written_another_way_is_found(tmp_path):
+    """`--method-a "vanilla(voxel_size_m=1.0)"` read "not found; this folder has: ..., vanilla(voxel_size_m=1)", and
+    kiss(deskew=false) missed kiss(deskew=False): the label given is read as a method and its params."""
+    _task("label_test_task", lambda job: {"ape_rmse_m": (0.1 if job.params.get("size") else 0.5) + 0.01 * job.seed})
+    out = _bench(tmp_path, "s", "seeds: 3\nexperiments:\n  - {task: label_test_task, dataset: {kind: synthetic}, methods: "
+                 "[{name: m, params: {size: 1.0, flag: true}}, {name: m, params: {flag: false}}]}\n")
+    result = compare(out, out, method_a="m(size=1.0,flag=true)", method_b="m(flag=false)")
+    assert (result.name_a, result.name_b, result.n_pairs) == ("m(flag=True, size=1)", "m(flag=False)", 3)
+    with pytest.raises(ConfigError) as exc:
+        compare(out, out, method_a="m(size=2.0)", method_b="m(flag=false)")
+    assert str(exc.value) == f"{out}: method 'm(size=2.0)' not found; this folder has: m(flag=False), m(flag=True, size=1)"
+
+
+def _straight_run(folder: Path, scale_error: np.ndarray) -> Path:
+    """A run folder of a straight 1 m-a-frame drive whose estimate stretches frame k's step by ``scale_error[k]``."""
+    folder.mkdir()
+    steps = np.ones(len(scale_error) + 1)
+    for name, x in (("ground_truth_kitti.txt", np.cumsum(steps)),
+                    ("poses_kitti.txt", np.cumsum(steps * np.concatenate([[1.0], 1.0 + scale_error])))):
+        poses = np.zeros((len(x), 12))
+        poses[:, [0, 5, 10]] = 1.0
+        poses[:, 3] = x
+        np.savetxt(folder / name, poses)
+    (folder / "metrics.json").write_text(json.dumps({"method": folder.name}))
+    return folder
+
+
+def test_a_p_value_that_underflows_is_printed_below_a_bound_not_as_0(tmp_path, capsys):
+    """Two runs over 2500 frames, one worse on every frame: Wilcoxon's p underflows to 0, printed "p = 0", which no test
+    gives. The line and the verdict read "p < 1e-300"; the JSON keeps the number, 0.0."""
+    rng = np.random.default_rng(3)
+    worse = _straight_run(tmp_path / "worse", 0.02 + 0.001 * rng.random(2500))
+    better = _straight_run(tmp_path / "better", 0.01 + 0.001 * rng.random(2500))
+    code, stdout, _ = run_cli(["compare", str(worse), str(better), "--metric", "rpe_translation_m", "--json",
+                               str(tmp_path / "c.json")], capsys)
+    assert code == 0 and "Wilcoxon signed-rank: statistic 0, p < 1e-300; effect size" in stdout
+    assert "better is better than worse on rpe_translation_m: " in stdout and ", Wilcoxon p < 1e-300, " in stdout
+    saved = json.loads((tmp_path / "c.json").read_text())
+    assert saved["p_value"] == 0.0 and "p < 1e-300" in saved["verdict"] and "p = 0," not in saved["verdict"]

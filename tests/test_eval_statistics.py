@@ -581,3 +581,16 @@ def test_two_kiss_run_folders_at_different_sweep_instants_are_named_as_the_heade
     run(bag, "kiss", out_dir=tmp_path / "again")
     assert (compare(tmp_path / "kiss", tmp_path / "again").name_a, compare(tmp_path / "kiss", tmp_path / "again").name_b) == (
         "kiss (A)", "kiss (B)")
+
+
+def test_a_p_value_that_underflows_reads_below_a_bound():
+    """2500 units, A worse on each: Wilcoxon's p underflows to 0.0, and the verdict read "Wilcoxon p = 0", a p no test
+    gives; the report's p column printed "0". Both read "< 1e-300" now; the value stays 0.0."""
+    b = np.random.default_rng(2).random(2500)
+    res = paired_test(b + 0.5, b + 0.01 * np.random.default_rng(3).random(2500), name_a="A", name_b="B")
+    assert res.p_value == 0.0 and res.better == "b" and res.to_dict()["p_value"] == 0.0
+    assert ", Wilcoxon p < 1e-300, effect size +1.00, over 2500 paired seeds" in res.verdict()
+    from lidarkit.eval.statistics import format_p, p_text
+
+    assert (format_p(0.0, 0.05), format_p(0.0), p_text(0.0), p_text(0.0312, 0.05), p_text(1.0)) == (
+        "< 1e-300", "< 1e-300", "p < 1e-300", "p = 0.031", "p = 1")

@@ -100,8 +100,8 @@ def reference_comparisons(records: list[dict[str, Any]], reference: str = REFERE
                           not_compared: list[str] | None = None) -> list[tuple[str, Any]]:
     """Paired Wilcoxon comparisons of the reference method with every other method, per dataset.
 
-    Units: the common seeds when there are at least 5 (their KITTI drift, else APE RMSE: as ``lidarkit compare`` pairs
-    bench results); with fewer, the KITTI segments of every common seed (same ground truth, so the same segments),
+    Units: the common seeds when there are at least 5 (their KITTI drift, else APE RMSE; ``lidarkit compare`` pairs the
+    same units and defaults to the report's headline metric); with fewer, the KITTI segments of every common seed (same ground truth, so the same segments),
     with a note that they overlap (one starts every 10 frames: not independent, the p-value is optimistic; the report
     said "kiss better" where compare, over the 2 seeds, said no difference); a dataset without enough units is left out,
     and why is appended to ``not_compared`` (the section had vanished without a word).

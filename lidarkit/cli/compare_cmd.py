@@ -10,7 +10,7 @@ import typer
 from lidarkit import atomic
 from lidarkit.cli.app import app, stdout
 from lidarkit.errors import ConfigError
-from lidarkit.eval.statistics import DEFAULT_ALPHA
+from lidarkit.eval.statistics import DEFAULT_ALPHA, p_text
 
 
 @app.command("compare")
@@ -19,7 +19,8 @@ def compare_command(
     run_b: Path = typer.Argument(..., help="The run to compare with (same kind and same data as RUN_A)."),
     metric: Optional[str] = typer.Option(
         None, help="Run folders: segment_translation_pct | segment_rotation_deg_per_100m | rpe_translation_m | "
-        "rpe_rotation_deg; bench folders: a job metric (default: the first of drift_translation_pct, mse_m2, ape_rmse_m, translation_error_m)."),
+        "rpe_rotation_deg; bench folders: a job metric (default: the task's headline metric, the one its report ranks by: "
+        "odometry ape_se3_rmse_m, pf mse_m2, vo ape_rmse_m, icp_pair translation_error_m)."),
     method_a: Optional[str] = typer.Option(None, "--method-a", help="Method label in RUN_A when it holds several."),
     method_b: Optional[str] = typer.Option(None, "--method-b", help="Method label in RUN_B when it holds several."),
     alpha: float = typer.Option(DEFAULT_ALPHA, help="Significance level of the Wilcoxon signed-rank test."),
@@ -48,13 +49,13 @@ def compare_command(
         # (the folders compared: a saved comparison of two runs of one method could not say which was which)
         write_json({"run_a": str(Path(run_a).absolute()), "run_b": str(Path(run_b).absolute()), **result.to_dict()}, json_out)
     console = stdout()
-    console.print(f"A: {result.name_a}   B: {result.name_b}   metric: {result.metric} ({result.n_pairs} paired "
+    console.print(f"A: {result.name_a}   B: {result.name_b}   metric: {result.metric_text} ({result.n_pairs} paired "
                   f"{result.pairing}s, {result.n_ties} ties)", soft_wrap=True)
     console.print(f"mean A {result.mean_a:.6g}   mean B {result.mean_b:.6g}   A - B: mean {result.mean_diff:+.4g}, "
                   f"median {result.median_diff:+.4g}, 95% CI [{result.diff_ci_low:+.4g}, {result.diff_ci_high:+.4g}]",
                   soft_wrap=True)
     if not result.repeated:  # (one measurement repeated: no test is made, and a p-value printed read as one)
-        console.print(f"Wilcoxon signed-rank: statistic {result.statistic:g}, p = {result.p_value:.3g}; "
+        console.print(f"Wilcoxon signed-rank: statistic {result.statistic:g}, {p_text(result.p_value)}; "
                       f"effect size (rank-biserial) {result.effect_size:+.3f}", soft_wrap=True)
     console.print(result.verdict(), soft_wrap=True, markup=False)
     if noise_from is not None or result.noise:  # (a baseline's band was applied without a word, deciding or not)

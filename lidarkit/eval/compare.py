@@ -23,10 +23,10 @@ from lidarkit.errors import ConfigError, DataError, EvaluationError, LidarKitErr
 from lidarkit.eval.statistics import DEFAULT_ALPHA, PairedComparison, check_number, paired_test, tie_tolerance
 from lidarkit.trajectory import Trajectory
 
-#: the default bench metric, first present wins
-#: the first of these a bench folder's jobs have is compared by default (KITTI drift, the particle filter's MSE, APE, an
-#: ICP pair's translation error)
-DEFAULT_BENCH_METRICS = ("drift_translation_pct", "mse_m2", "ape_rmse_m", "translation_error_m")
+#: the default bench metric of a task that declares none of its metrics (a plugin not installed here), first present wins,
+#: and which task's headline is compared when the units of several tasks pair without --task; a task that declares its
+#: metrics is compared on its first accuracy metric, the report's headline (odometry: the SE(3)-aligned APE)
+DEFAULT_BENCH_METRICS = ("ape_se3_rmse_m", "drift_translation_pct", "mse_m2", "ape_rmse_m", "translation_error_m")
 RUN_METRICS = ("segment_translation_pct", "segment_rotation_deg_per_100m", "rpe_translation_m", "rpe_rotation_deg")
 
 
@@ -123,6 +123,9 @@ def load_bench_runs(path: str | os.PathLike, method: str | None = None, every_re
         raise DataError("no successful job results in jobs/" + (" for the jobs of suite.json (--all: every result)" if suite else ""),
                         source=path)
     labels = sorted({Job.from_spec(r["job"]).method_label for r in records})
+    given = method  # (named as given in messages)
+    if method is not None and method not in labels:  # ("vanilla(voxel_size_m=1.0)" was "not found" beside its label)
+        method = _as_label(method)
     if method is None:
         if len(labels) > 1:
             raise ConfigError(f"{len(labels)} methods in this folder; choose one of: {', '.join(labels)}", source=path)
@@ -134,12 +137,12 @@ def load_bench_runs(path: str | os.PathLike, method: str | None = None, every_re
         failed = [r for r in latest if r.get("status") != "ok" and (not suite or r["key"] in suite)
                   and method in (r["job"]["method"], Job.from_spec(r["job"]).method_label)]
         if not named and failed:  # (it read "not found")
-            raise DataError(f"method {method!r} has no successful result: its {len(failed)} job(s) here failed "
+            raise DataError(f"method {given!r} has no successful result: its {len(failed)} job(s) here failed "
                             "(lidarkit report lists why)", source=path)
         if len(named) != 1:
             known = ", ".join(labels)
             earlier = not named and any(method in (r["job"]["method"], Job.from_spec(r["job"]).method_label) for r in every_ok)
-            raise ConfigError(f"method {method!r} {'is ambiguous' if named else 'not found'}; this folder has: {known}"
+            raise ConfigError(f"method {given!r} {'is ambiguous' if named else 'not found'}; this folder has: {known}"
                               + (" (it is in results of an earlier suite here: --all compares every result)" if earlier else ""),
                               source=path)
         chosen = named[0]
@@ -166,6 +169,23 @@ def load_bench_runs(path: str | os.PathLike, method: str | None = None, every_re
             runs.speed_metrics.update(r.get("speed_metrics") or ())
     runs.failed -= set(runs.values)
     return runs
+
+
+def _as_label(method: str) -> str:
+    """A method label as given (``kiss(deskew=false)``, ``vanilla(voxel_size_m=1.0)``) written as bench writes its labels
+    (:func:`lidarkit.bench.jobs.method_label`: params sorted, values as their type prints them); as given when it does
+    not read as ``name(key=value, ...)``."""
+    from lidarkit.bench.jobs import method_label
+    from lidarkit.params import parse_kv
+
+    match = re.fullmatch(r"\s*([^\s()]+)\s*\((.*)\)\s*", method)
+    if match is None or not match.group(2).strip():
+        return method
+    try:
+        params = parse_kv(re.split(r",\s*(?=[^,=\s]+\s*=)", match.group(2).strip()), option="method")
+    except LidarKitError:
+        return method
+    return method_label(match.group(1), params)
 
 
 def _dataset_unit(spec: dict[str, Any], done: dict[str, dict[str, Any]]) -> dict[str, Any]:
@@ -217,25 +237,100 @@ def _same_ground_truth(a: OdometryRun, b: OdometryRun, names: tuple[str, str]) -
         return ""
     instants = [(run.metrics.get("effective") or {}).get("ground_truth_instant") for run in (a, b)]
     data = [_data_of(run) for run in (a, b)]
-    if len(ga) == len(gb) and None not in instants and instants[0] != instants[1] and None not in data and data[0] == data[1]:
+    differ = _how_data_differ(data[0], data[1]) if None not in data else None
+    if len(ga) == len(gb) and None not in instants and instants[0] != instants[1] and differ == "":
         return (f"each run is scored against the ground truth at its own instant of the sweep ({names[0]}: {instants[0]}, "
-                f"{names[1]}: {instants[1]}), over the same dataset and frames ({data[0][0]}, frames {data[0][1]})")
+                f"{names[1]}: {instants[1]}), over the same dataset and frames ({data[0].dataset}, frames "
+                f"{_frames_text(data[0].frames)})")
     raise EvaluationError(
         f"runs over different data: {a.path} has {len(ga)} ground-truth poses, {b.path} has {len(gb)}"
-        + (" with other values" if len(ga) == len(gb) else ""),
+        + (" with other values" if len(ga) == len(gb) else "") + (f" ({differ})" if differ else ""),
         source="compare",
     )
 
 
-def _data_of(run: OdometryRun) -> tuple[str, str] | None:
-    """(dataset, frame selection) of a run folder from its config.yaml, None when unreadable."""
+@dataclass(frozen=True)
+class _RunData:
+    """What a run folder ran over: the dataset as named, the reader's settings when recorded (a simulated drive's
+    speed is not in its name), and the dataset frames registered."""
+
+    dataset: str
+    settings: dict[str, Any] | None
+    frames: tuple[int, ...]
+
+
+def _data_of(run: OdometryRun) -> _RunData | None:
+    """The data a run folder ran over, from its config.yaml and timing.csv; None when they do not say."""
     import yaml
 
     try:
         cfg = yaml.safe_load((run.path / "config.yaml").read_text(encoding="utf-8"))
-        return str(cfg["run"]["dataset"]), str(cfg["run"]["frames"])
+        given = cfg["run"]
+        dataset = str(given["dataset"])
     except (OSError, yaml.YAMLError, KeyError, TypeError):
         return None
+    settings = given.get("dataset_config")
+    frames = _frames_of(run, given)
+    if frames is None:
+        return None
+    return _RunData(dataset, settings if isinstance(settings, dict) else None, frames)
+
+
+def _frames_of(run: OdometryRun, given: dict[str, Any]) -> tuple[int, ...] | None:
+    """The dataset frames a run registered: timing.csv's frame column (one row per frame), else its config.yaml
+    selection made indices ("all" and "0:160" over 160 frames are one selection: they were compared as text and refused
+    as other data); None when neither says."""
+    import csv
+
+    n_poses = len(run.ground_truth)
+    try:
+        with open(run.path / "timing.csv", newline="", encoding="utf-8") as file:
+            rows = csv.reader(file)
+            column = next(rows).index("frame")
+            frames = tuple(int(row[column]) for row in rows if row)
+        if len(frames) == n_poses:
+            return frames
+    except (OSError, ValueError, StopIteration, IndexError):
+        pass
+    from lidarkit.odometry.inputs import parse_frames
+
+    selection, n_run = given.get("frames"), given.get("n_frames")
+    if isinstance(selection, list):  # (an index list is recorded as the indices)
+        listed = tuple(i for i in selection if isinstance(i, int) and not isinstance(i, bool))
+        return listed if len(listed) == len(selection) == n_poses else None
+    settings = given.get("dataset_config") if isinstance(given.get("dataset_config"), dict) else {}
+    length = settings.get("n_frames", n_run if selection == "all" else None)
+    if not isinstance(length, int) or isinstance(length, bool):
+        return None
+    try:
+        frames = tuple(int(i) for i in parse_frames(None if selection == "all" else selection, length))
+    except (LidarKitError, TypeError, ValueError):
+        return None
+    return frames if len(frames) == n_poses else None
+
+
+def _how_data_differ(a: _RunData, b: _RunData) -> str:
+    """'' when two runs ran over the same data, else what differs (the dataset's name, a setting, the frames)."""
+    if a.dataset != b.dataset:
+        return f"datasets {a.dataset} and {b.dataset}"
+    if a.settings is not None and b.settings is not None and a.settings != b.settings:
+        fields = sorted(k for k in a.settings.keys() | b.settings.keys() if a.settings.get(k, ...) != b.settings.get(k, ...))
+        shown = ", ".join(f"{k} ({_field_value(a.settings, k)} in A, {_field_value(b.settings, k)} in B)" for k in fields[:3])
+        return f"their dataset settings differ in {shown}"
+    if a.frames != b.frames:
+        return f"they ran other frames ({_frames_text(a.frames)} in A, {_frames_text(b.frames)} in B)"
+    return ""
+
+
+def _frames_text(frames: tuple[int, ...]) -> str:
+    """Frame indices as a selection reads: ``0:160``, ``4:10:2``, or how many and their range when not evenly spaced."""
+    if len(frames) < 2:
+        return ", ".join(str(i) for i in frames) or "none"
+    steps = np.unique(np.diff(np.asarray(frames)))
+    if len(steps) == 1:
+        step = int(steps[0])
+        return f"{frames[0]}:{frames[-1] + step}" + (f":{step}" if step != 1 else "")
+    return f"{len(frames)} frames from {frames[0]} to {frames[-1]}"
 
 
 def _run_units(run: OdometryRun, metric: str) -> tuple[list[tuple[int, float]] | None, np.ndarray]:
@@ -302,8 +397,9 @@ def compare(
 
     Odometry run folders pair per KITTI segment (``metric="segment_translation_pct"``, the default when both
     paths share 2 segments of 100 m or more) or per frame (``rpe_translation_m``, the default otherwise). Bench results
-    folders pair per (dataset, seed) on a job metric (default: KITTI drift, else APE RMSE); ``method_a`` /
-    ``method_b`` pick a method when a folder holds several (the same folder may be given twice); only the jobs of each
+    folders pair per (dataset, seed) on a job metric (default: the task's headline, as its report ranks: odometry's
+    SE(3)-aligned APE); ``method_a`` / ``method_b`` pick a method when a folder holds several (the same folder may be
+    given twice); only the jobs of each
     folder's ``suite.json`` are compared, as its report holds them (``every_result``: every result in the folder);
     ``task``: the units of that task (needed when several tasks of the folders report the metric). Units pair without
     their experiment's name (the experiments of a task over other datasets or seeds are pooled); ``experiment``: the
@@ -370,9 +466,21 @@ def compare(
                              alpha=alpha, noise=noise, seed=seed)
         return dataclasses.replace(result, note=note) if note else result
     side_a, side_b = _by_experiment(side_a, side_b, experiment)
+    held = [sorted({_task_of(k) for k in side.values}) for side in (side_a, side_b)]
+    if task is not None:  # (first: the default metric was another task's, then refused as unknown; the units of other
+        # tasks were counted "only in A")
+        if task not in held[0] or task not in held[1]:
+            holds = (f"these results hold: {', '.join(held[0])}" if held[0] == held[1] else
+                     f"{side_a.path} ({side_a.name}) holds {', '.join(held[0])}, {side_b.path} ({side_b.name}) holds "
+                     f"{', '.join(held[1])}")
+            raise ConfigError(f"no unit of task {task!r} in both; {holds}", source="task")
+        side_a, side_b = _of_tasks(side_a, {task}), _of_tasks(side_b, {task})
     keys_a, keys_b = set(side_a.values), set(side_b.values)
     common = sorted(keys_a & keys_b)
     if not common:
+        if not set(held[0]) & set(held[1]):  # (it read "runs over different data", listing the same datasets and seeds)
+            raise EvaluationError(f"{side_a.path} ({side_a.name}) holds task(s) {', '.join(held[0])}, {side_b.path} "
+                                  f"({side_b.name}) holds {', '.join(held[1])}: compare units of one task", source="compare")
         _other_options(side_a, side_b)
         raise EvaluationError(
             f"runs over different data: no (dataset, seed) in common between {side_a.path} ({side_a.name}: "
@@ -383,17 +491,8 @@ def compare(
     def has(k: str, name: str) -> bool:
         return _usable(side_a.values[k].get(name)) and _usable(side_b.values[k].get(name))
 
-    if task is not None:  # (first: the default metric was another task's, then refused as unknown)
-        tasks = sorted({_task_of(k) for k in common})
-        if task not in tasks:
-            raise ConfigError(f"no unit of task {task!r} in both; these results hold: {', '.join(tasks)}", source="task")
-        common = [k for k in common if _task_of(k) == task]
-    if metric is None:  # the first default metric any unit has (a suite of several tasks: the units of its task)
-        present = set.union(*(set(side_a.values[k]) & set(side_b.values[k]) for k in common))
-        metric = next((m for m in DEFAULT_BENCH_METRICS if m in present), None)
-        if metric is None:
-            raise EvaluationError(f"no default metric in these results; pass one of: {', '.join(sorted(present))}",
-                                  source="compare")
+    if metric is None:
+        metric = _default_metric(common, side_a, side_b)
     if not any(has(k, metric) for k in common):  # in no unit: a misspelt metric, not results that lack it
         present = set.union(*(set(side_a.values[k]) & set(side_b.values[k]) for k in common))
         if metric in present:  # (it read "unknown metric 'iterations'; these results have: ..., iterations, ...")
@@ -410,8 +509,11 @@ def compare(
     if len(tasks_with) > 1:  # (pooled into one test: icp_pair pairs/s and odometry frames/s as 6 units of "hz")
         raise ConfigError(f"metric {metric!r} is reported by tasks {', '.join(sorted(tasks_with))} of these results, each its own "
                           "experiment: --task picks one", source="metric")
-    _one_experiment(side_a, side_b, [k for k in common if _task_of(k) in tasks_with], next(iter(tasks_with)))
-    other_task = [k for k in common if _task_of(k) not in tasks_with]
+    compared_task = next(iter(tasks_with))
+    _one_experiment(side_a, side_b, [k for k in common if _task_of(k) in tasks_with], compared_task)
+    other_tasks = _other_tasks_note(side_a, side_b, tasks_with, metric)
+    side_a, side_b = _of_tasks(side_a, tasks_with), _of_tasks(side_b, tasks_with)
+    keys_a, keys_b = set(side_a.values), set(side_b.values)
     common = [k for k in common if _task_of(k) in tasks_with]
     missing = [k for k in common if not has(k, metric)]
     if missing:  # (it named neither the side nor the count, nor why KITTI drift is missing)
@@ -436,9 +538,8 @@ def compare(
     notes = []
     if pairing == "unit":  # (a fixed dataset beside seeded ones)
         notes.append("the seeds of a dataset that gives each side one value whatever the seed count as one unit")
-    if other_task:
-        left = sorted({_task_of(k) for k in other_task})
-        notes.append(f"{len(other_task)} (dataset, seed) units of {', '.join(left)} (no {metric}) left out: {len(common)} paired")
+    if other_tasks:
+        notes.append(f"{other_tasks}: {len(common)} paired")
     failed_a, failed_b = len(keys_b & side_a.failed), len(keys_a & side_b.failed)  # (read "only in A" when B failed there)
     only_a, only_b = len(keys_a - keys_b) - failed_b, len(keys_b - keys_a) - failed_a
     if only_a or only_b:  # the pairs are those both have: say what was left out
@@ -461,13 +562,83 @@ def compare(
         result = paired_test(va, vb, name_a=name_a, name_b=name_b, metric=metric, pairing=pairing,
                              lower_is_better=not (metric in side_a.higher_is_better | side_b.higher_is_better or higher_is_better(metric)),
                              alpha=alpha, seed=seed,
-                             noise=_with_measured_noise(noise, noise_from, metric, next(iter(tasks_with)), (side_a.name, side_b.name)),
+                             noise=_with_measured_noise(noise, noise_from, metric, compared_task, (side_a.name, side_b.name)),
                              repeated=False if pairing == "seed" and any(varies.values()) else None)
     except EvaluationError as err:  # too few pairs: the notes say why ("got 1" of a suite of 8 seeds, 7 of B's jobs failed)
         if notes and va.size < 2:
             raise EvaluationError(f"{err.reason}; {'; '.join(notes)}", source=err.source) from None
         raise
-    return dataclasses.replace(result, note="; ".join(notes)) if notes else result
+    label = _metric_label(compared_task, metric, side_a, side_b, common)
+    return dataclasses.replace(result, note="; ".join(notes), metric_label=label)
+
+
+def _declared_metrics(task: str) -> tuple[Any, ...]:
+    """The metrics ``task`` declares, in its order (the report's columns); none for a task this lidarkit cannot load."""
+    from lidarkit.bench.tasks import get_task
+
+    try:
+        return tuple(get_task(task).metrics)
+    except Exception:  # noqa: BLE001 - results of a plugin task not installed here: compared by metric names
+        return ()
+
+
+def _default_metric(keys: list[str], side_a: BenchRuns, side_b: BenchRuns) -> str:
+    """The metric compared when none is given: the task's headline, its first declared accuracy metric the units
+    report, which the report's Summary ranks by (odometry: the SE(3)-aligned APE; it compared KITTI drift, or the
+    unaligned APE, where the report ranked by another); the first of DEFAULT_BENCH_METRICS for a task that declares none
+    of them. Of several tasks, the one whose headline comes first in DEFAULT_BENCH_METRICS."""
+    present: dict[str, set[str]] = {}
+    for key in keys:
+        present.setdefault(_task_of(key), set()).update(set(side_a.values[key]) & set(side_b.values[key]))
+    headlines = []
+    for task, names in present.items():
+        declared = [m.name for m in _declared_metrics(task) if m.kind == "accuracy"]
+        headline = next((m for m in [*declared, *DEFAULT_BENCH_METRICS] if m in names), None)
+        if headline is not None:
+            headlines.append(headline)
+    if not headlines:
+        named = sorted(set().union(*present.values()))
+        raise EvaluationError(f"no default metric in these results; pass one of: {', '.join(named)}", source="compare")
+    rank = {m: i for i, m in enumerate(DEFAULT_BENCH_METRICS)}
+    return min(headlines, key=lambda m: (rank.get(m, len(rank)), m))
+
+
+def _metric_label(task: str, metric: str, side_a: BenchRuns, side_b: BenchRuns, keys: list[str]) -> str:
+    """``metric``'s label as the report heads its column, without the unit and naming the alignment the results state
+    ("APE RMSE (SE(3)-aligned)"); '' when the task declares none beyond the name."""
+    from lidarkit.bench.report import MetricInfo, label_alignment
+
+    declared = next((m for m in _declared_metrics(task) if m.name == metric), None)
+    if declared is None or declared.label == metric:
+        return ""
+    records = [{"info": {"metric_alignment": side.alignments.get(k) or {}}} for side in (side_a, side_b) for k in keys]
+    label = label_alignment(MetricInfo(metric, declared.label), records).label
+    head, sep, _ = label.rpartition(" [")
+    return head if sep and label.endswith("]") else label
+
+
+def _of_tasks(side: BenchRuns, tasks: set[str]) -> BenchRuns:
+    """``side`` with the units (and failed units) of ``tasks`` only."""
+    return dataclasses.replace(side, values={k: v for k, v in side.values.items() if _task_of(k) in tasks},
+                               failed={k for k in side.failed if _task_of(k) in tasks})
+
+
+def _other_tasks_note(side_a: BenchRuns, side_b: BenchRuns, compared: set[str], metric: str) -> str:
+    """``"N (dataset, seed) units of icp_pair (no ape_se3_rmse_m) left out"`` for the units (of either side, paired or
+    not) of tasks other than the ``compared`` one, else '' (two folders counted them "only in A")."""
+    units: dict[str, set[str]] = {}
+    for side in (side_a, side_b):
+        for key in side.values:
+            if _task_of(key) not in compared:
+                units.setdefault(_task_of(key), set()).add(key)
+    groups: dict[str, list[str]] = {}
+    for task, keys in sorted(units.items()):
+        in_a, in_b = any(k in side_a.values for k in keys), any(k in side_b.values for k in keys)
+        reports = any(_usable(side.values[k].get(metric)) for side in (side_a, side_b) for k in keys if k in side.values)
+        why = f"no {metric}" if not reports else "only in A" if not in_b else "only in B" if not in_a else "none paired"
+        groups.setdefault(why, []).append(task)
+    return ", ".join(f"{sum(len(units[t]) for t in tasks)} (dataset, seed) units of {', '.join(tasks)} ({why}) left out"
+                     for why, tasks in groups.items())
 
 
 #: metrics that vary from run to run on the same data (times, rates): they say nothing about whether the seeds ran

@@ -215,15 +215,23 @@ class PairedComparison:
     repeated: bool = False
     """Every seed gave the same value on each side (a deterministic method on fixed data): one measurement repeated,
     not independent units, so no test is made."""
+    metric_label: str = ""
+    """What ``metric`` measures as the report labels it ("APE RMSE (SE(3)-aligned)"; two APEs of one task read alike
+    by name); "" when there is no label beyond the name."""
 
     @property
     def significant(self) -> bool:
         return bool(self.better)
 
+    @property
+    def metric_text(self) -> str:
+        """The metric's name with its label: ``ape_se3_rmse_m [APE RMSE (SE(3)-aligned)]``."""
+        return f"{self.metric} [{self.metric_label}]" if self.metric_label else self.metric
+
     def verdict(self) -> str:
         """One plain sentence for a reader: who is better and how sure, or that no difference shows."""
-        m, unit = self.metric, f"over {self.n_pairs} paired {self.pairing}s"
-        p = "p = 1" if self.p_value >= 1 else f"p = {format_p(self.p_value, self.alpha)}"
+        m, unit = self.metric_text, f"over {self.n_pairs} paired {self.pairing}s"
+        p = p_text(self.p_value, self.alpha)
         if self.better:
             win, lose = (self.name_a, self.name_b) if self.better == "a" else (self.name_b, self.name_a)
             text = (f"{win} is better than {lose} on {m}: median difference {self.median_diff:+.3g} "
@@ -264,14 +272,30 @@ class PairedComparison:
         return out
 
 
-def format_p(p: float, alpha: float) -> str:
+#: how a p-value that underflowed to 0.0 is printed: the true p is only too small for a double ("p = 0" was false)
+P_UNDERFLOW_TEXT = "< 1e-300"
+
+
+def format_p(p: float, alpha: float | None = None) -> str:
     """``p`` with the fewest digits (2 or more) that still compare with ``alpha`` as ``p`` does (0.0497 printed as
-    "0.05" beside a winner at alpha 0.05)."""
+    "0.05" beside a winner at alpha 0.05); 3 digits without ``alpha``; :data:`P_UNDERFLOW_TEXT` for a p of 0."""
+    if p <= 0:
+        return P_UNDERFLOW_TEXT
+    if alpha is None:
+        return f"{p:.3g}"
     for digits in (2, 3, 4, 6):
         text = f"{p:.{digits}g}"
         if (float(text) < alpha) == (p < alpha):
             break
     return text
+
+
+def p_text(p: float, alpha: float | None = None) -> str:
+    """``"p = 0.031"``, ``"p = 1"``, or ``"p < 1e-300"`` for a p that underflowed (see :func:`format_p`)."""
+    if p >= 1:
+        return "p = 1"
+    text = format_p(p, alpha)
+    return f"p {text}" if text.startswith("<") else f"p = {text}"
 
 
 def min_units(alpha: float) -> int:
