@@ -390,6 +390,31 @@ def test_a_file_given_as_the_baseline_folder_and_a_bad_seed_are_named(two_walks,
         check(tmp_path / "edited")
 
 
+def test_a_negative_pinned_seed_is_a_corrupt_manifest(two_walks, tmp_path):
+    """A pinned seed edited to -3 read as the job failing ("ValueError: expected non-negative integer")."""
+    manifest = json.loads((two_walks.path / "manifest.json").read_text())
+    manifest["jobs"][1]["spec"]["seed"] = -3
+    edited = tmp_path / "edited"
+    edited.mkdir()
+    (edited / "manifest.json").write_text(json.dumps(manifest))
+    with pytest.raises(DataError, match=r"corrupt manifest: job 1 spec seed is -3, not a non-negative integer$"):
+        check(edited)
+
+
+def test_a_job_listed_twice_is_a_corrupt_manifest(two_walks, tmp_path, capsys):
+    """A job entry copied twice passed as "3 pinned jobs" for 2 jobs (checked twice): a one-line error naming both."""
+    manifest = json.loads((two_walks.path / "manifest.json").read_text())
+    edited = tmp_path / "edited"
+    edited.mkdir()
+    manifest["jobs"].append(manifest["jobs"][0])
+    (edited / "manifest.json").write_text(json.dumps(manifest))
+    key = manifest["jobs"][0]["key"]
+    code, out, err = run_cli(["baseline", "check", str(edited)], capsys)
+    assert code == 1 and "passed" not in out
+    assert " ".join(err.split()) == (f"error: {edited / 'manifest.json'}: corrupt manifest: job 2 (random_walk on synth "
+                                     f"(seed 0)) repeats the key {key} of job 0")
+
+
 def test_the_progress_lines_name_the_seed_and_experiment_where_jobs_share_a_method_and_dataset(tmp_path, capsys):
     """`baseline record` and `check` printed "checking kiss on street8" once per seed, alike: each line now names the
     seed, and the experiment, where the suite runs that method on that dataset with several (and only there)."""

@@ -552,6 +552,12 @@ def load_baseline(path: str | os.PathLike) -> Baseline:
         problem = _pinned_job_problem(job)
         if problem:
             raise DataError(f"corrupt manifest: job {i} {problem}", source=manifest_path)
+    first_of_key: dict[str, int] = {}
+    for i, job in enumerate(manifest["jobs"]):  # (a job listed twice was checked twice: "5 pinned jobs" for 4 jobs)
+        if job["key"] in first_of_key:
+            raise DataError(f"corrupt manifest: job {i} ({job_name(job, manifest['jobs'])}) repeats the key "
+                            f"{job['key']} of job {first_of_key[job['key']]}", source=manifest_path)
+        first_of_key[job["key"]] = i
     return Baseline(path, manifest)
 
 
@@ -562,6 +568,8 @@ def _pinned_job_problem(job: Any) -> str:
     missing = [k for k in ("key", "label", "spec", "protocol", "metrics", "checked", "bands") if k not in job]
     if missing:
         return f"lacks {', '.join(missing)}"
+    if not isinstance(job["key"], str) or not job["key"]:  # (it names the job's folder under jobs/)
+        return f"key is {job['key']!r}, not a job key"
     try:
         Job.from_spec(job["spec"])
     except (TypeError, ValueError, AttributeError) as err:
@@ -572,6 +580,8 @@ def _pinned_job_problem(job: Any) -> str:
             return f"spec {key} is {spec[key]!r}, not a {'mapping' if kind is dict else 'string'}"
     if "seed" in spec and (not isinstance(spec["seed"], int) or isinstance(spec["seed"], bool)):  # (read as the job failing)
         return f"spec seed is {spec['seed']!r}, not an integer"
+    if spec.get("seed", 0) < 0:  # (read as the job failing: "ValueError: expected non-negative integer")
+        return f"spec seed is {spec['seed']}, not a non-negative integer"
     for key in ("protocol", "metrics", "bands"):
         if not isinstance(job[key], dict):
             return f"{key} is {job[key]!r}, not a mapping"

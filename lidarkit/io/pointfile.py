@@ -1,15 +1,20 @@
 """Single point-cloud files (KITTI ``.bin``, ``.npy``, ``.pcd``, ``.ply``) read into a validated :class:`Scan`.
 
-Every reader checks what it reads: a missing, empty or truncated file, or NaN/inf points raise
-``DataError`` naming the file, the frame and the reason; with ``drop_nonfinite=True`` non-finite
-points are dropped instead and a warning is logged. Points exactly at the sensor origin (0, 0, 0), an organized
-cloud's missing returns, are always left out (:func:`drop_origin_points`).
+Every reader checks what it reads: a missing, empty or truncated file, a ``.pcd``/``.ply`` header Open3D would
+misread (no x/y/z, a type it does not read), or NaN/inf points raise ``DataError`` naming the file, the frame and
+the reason; with ``drop_nonfinite=True`` non-finite points are dropped instead and a warning is logged. Points
+exactly at the sensor origin (0, 0, 0), an organized cloud's missing returns, are always left out
+(:func:`drop_origin_points`).
 """
 
 from __future__ import annotations
 
 import logging
 import os
+import re
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -200,9 +205,10 @@ def read_open3d_scan(
     import open3d as o3d  # slow import: only when a pcd/ply is read
 
     try:
-        cloud = o3d.t.io.read_point_cloud(str(path), remove_nan_points=False, remove_infinite_points=False)
+        with _open3d_quiet(o3d):
+            cloud = o3d.t.io.read_point_cloud(str(path), remove_nan_points=False, remove_infinite_points=False)
     except RuntimeError as err:
-        raise DataError(f"Open3D cannot read it ({err})", source=path, location=_where(frame)) from err
+        raise DataError(f"Open3D cannot read it ({open3d_reason(err)})", source=path, location=_where(frame)) from err
     if "positions" not in cloud.point or len(cloud.point.positions) == 0:
         raise DataError("no points read (unreadable, corrupt or empty point cloud)", source=path, location=_where(frame))
     points = cloud.point.positions.numpy().astype(np.float64)
@@ -214,6 +220,41 @@ def read_open3d_scan(
     points, intensity = finite_points(points, intensity, source=path, frame=frame, drop_nonfinite=drop_nonfinite)
     points, intensity = drop_origin_points(points, intensity, source=path, frame=frame)
     return Scan(points, intensity, None, timestamp_s, frame or 0, str(path))
+
+
+_QUIET = threading.Lock()
+_quiet_readers = 0  # reads in progress on all threads; the last one to finish restores the caller's level
+_loud_level = None
+
+
+@contextmanager
+def _open3d_quiet(o3d) -> Iterator[None]:
+    """Open3D's warnings off while it reads: it prints them in colour on stdout (a result's console), and the header
+    checks here name what it would warn about. Counted, so reads on two threads restore the earlier level once."""
+    global _quiet_readers, _loud_level
+    with _QUIET:
+        if _quiet_readers == 0:
+            _loud_level = o3d.utility.get_verbosity_level()
+            o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
+        _quiet_readers += 1
+    try:
+        yield
+    finally:
+        with _QUIET:
+            _quiet_readers -= 1
+            if _quiet_readers == 0:
+                o3d.utility.set_verbosity_level(_loud_level)
+
+
+_ANSI_CODE = re.compile(r"\x1b\[[0-9;]*m")
+_OPEN3D_ERROR_PREFIX = re.compile(r"\[Open3D (?:Error|WARNING)\] \(.*?\) \S+:\d+: ")
+
+
+def open3d_reason(err: BaseException) -> str:
+    """An Open3D exception's message on one line: without its colour codes, its ``[Open3D Error] (signature)
+    file:line:`` prefix and its trailing newline (it was printed whole inside a DataError)."""
+    text = _OPEN3D_ERROR_PREFIX.sub("", _ANSI_CODE.sub("", str(err)))
+    return " ".join(text.split()) or type(err).__name__
 
 
 _PCD_HEADER_KEYS = ("VERSION", "FIELDS", "SIZE", "TYPE", "COUNT", "WIDTH", "HEIGHT", "VIEWPOINT", "POINTS", "DATA")
@@ -247,13 +288,21 @@ def check_pcd_counts(path: Path, frame: int | None = None) -> None:
         body = fh.read()
     try:
         n_points = int(header["POINTS"][0]) if "POINTS" in header else int(header["WIDTH"][0]) * int(header.get("HEIGHT", ["1"])[0])
+        fields, types = header["FIELDS"], [t.upper() for t in header["TYPE"]]
         sizes = [int(v) for v in header["SIZE"]]
         counts = [int(v) for v in header.get("COUNT", ["1"] * len(sizes))]
         data = header["DATA"][0].lower()
-    except (KeyError, IndexError, ValueError) as err:
+    except KeyError as err:
+        raise DataError(f"malformed .pcd header (no {err.args[0]} line)", source=path, location=where) from None
+    except (IndexError, ValueError) as err:
         raise DataError(f"malformed .pcd header ({type(err).__name__}: {err})", source=path, location=where) from None
-    if n_points < 0 or len(counts) != len(sizes):
-        raise DataError("malformed .pcd header (negative POINTS or SIZE/COUNT lengths differ)", source=path, location=where)
+    if n_points < 0 or not len(fields) == len(types) == len(sizes) == len(counts):
+        raise DataError("malformed .pcd header (negative POINTS or FIELDS/SIZE/TYPE/COUNT lengths differ)", source=path,
+                        location=where)
+    _check_pcd_fields(path, where, fields, types, sizes)
+    if data not in ("ascii", "binary", "binary_compressed"):
+        raise DataError(f"unsupported DATA {header['DATA'][0]!r} (ascii, binary or binary_compressed)", source=path,
+                        location=where)
     if data == "ascii":
         rows = [line.split() for line in body.decode("ascii", errors="replace").splitlines() if line.strip()]
         held = len(rows)
@@ -272,19 +321,48 @@ def check_pcd_counts(path: Path, frame: int | None = None) -> None:
             raise DataError(f"the header declares {n_points} points ({n_points * record} bytes) but the binary body holds "
                             f"{len(body)} bytes ({held} points)", source=path, location=where)
         return
-    else:
-        return  # binary_compressed: Open3D checks the compressed sizes itself
+    else:  # binary_compressed: uint32 compressed and uncompressed sizes, then the compressed columns
+        record = sum(s * c for s, c in zip(sizes, counts))
+        packed, unpacked = np.frombuffer(body[:8], "<u4").tolist() if len(body) >= 8 else (None, None)
+        if packed is None or packed > len(body) - 8 or unpacked < n_points * record:
+            raise DataError(f"corrupt binary_compressed body: the header declares {n_points} points ({n_points * record} "
+                            f"bytes); the body's size fields say {packed} compressed bytes ({unpacked} unpacked) and it "
+                            f"holds {max(len(body) - 8, 0)}", source=path, location=where)
+        return
     if held != n_points:
         raise DataError(f"the header declares {n_points} points but the ascii body holds {held}", source=path, location=where)
 
 
-_PLY_TYPE_BYTES = {"char": 1, "int8": 1, "uchar": 1, "uint8": 1, "short": 2, "int16": 2, "ushort": 2, "uint16": 2,
-                   "int": 4, "int32": 4, "uint": 4, "uint32": 4, "float": 4, "float32": 4, "double": 8, "float64": 8}
+_PCD_TYPE_SIZES = {"F": (4, 8), "I": (1, 2, 4, 8), "U": (1, 2, 4, 8)}  # what Open3D reads
+
+
+def _check_pcd_fields(path: Path, where: str | None, fields: list[str], types: list[str], sizes: list[int]) -> None:
+    """The fields Open3D needs: x, y and z (lowercase, one type for the three: it reads no positions otherwise, "no
+    points read"), and a type it knows for every field (one it does not fails the whole read)."""
+    missing = [axis for axis in "xyz" if axis not in fields]
+    if missing:
+        raise DataError(f"no {' '.join(missing)} field (FIELDS {' '.join(fields)}): positions are read from fields "
+                        "named x, y and z (lowercase)", source=path, location=where)
+    for name, kind, size in zip(fields, types, sizes):
+        if size not in _PCD_TYPE_SIZES.get(kind, ()):
+            raise DataError(f"field {name} has TYPE {kind} SIZE {size}: not a type Open3D reads (F 4/8, I or U 1/2/4/8)",
+                            source=path, location=where)
+    kinds = {axis: f"{types[fields.index(axis)]}{sizes[fields.index(axis)]}" for axis in "xyz"}
+    if len(set(kinds.values())) > 1:
+        raise DataError(f"fields x, y, z differ in TYPE/SIZE ({', '.join(f'{a} {k}' for a, k in kinds.items())}): "
+                        "positions are read only as one type", source=path, location=where)
+
+
+_PLY_TYPES = {"char": "int8", "int8": "int8", "uchar": "uint8", "uint8": "uint8", "short": "int16", "int16": "int16",
+              "ushort": "uint16", "uint16": "uint16", "int": "int32", "int32": "int32", "uint": "uint32", "uint32": "uint32",
+              "float": "float32", "float32": "float32", "double": "float64", "float64": "float64"}  # RPly's names: one type
+_PLY_FORMATS = ("ascii", "binary_little_endian", "binary_big_endian")
 
 
 def check_ply_counts(path: Path, frame: int | None = None) -> None:
-    """Check a ``.ply`` body against the vertex count of its header before Open3D reads it: Open3D returns a cut
-    file's full vertex count with whatever memory held for the missing tail, so a short body is a DataError here."""
+    """Check a ``.ply`` header, and its body against the vertex count, before Open3D reads it: Open3D makes up the
+    coordinates it cannot read (z = 0 for a vertex without z, leftover memory for a list x, a cut file's tail or a
+    y typed unlike x) and prints its reasons on stdout, so each of these is a DataError here."""
     where = _where(frame)
     try:
         with open(path, "rb") as fh:
@@ -296,18 +374,36 @@ def check_ply_counts(path: Path, frame: int | None = None) -> None:
         raise DataError("not a .ply file (no 'ply' ... 'end_header' header)", source=path, location=where)
     body_start = head.find(b"\n", end) + 1
     lines = head[:end].decode("ascii", errors="replace").splitlines()
-    fmt, elements = "", []  # (name, count, [property byte sizes, None for a list])
-    for line in lines:
+    if lines[0].strip() != "ply":
+        raise DataError(f"not a .ply file (its first line is {lines[0][:40]!r}, not 'ply')", source=path, location=where)
+    fmt, elements = "", []  # (name, count, [(property name, canonical type or the whole line of a list)])
+    for line in lines[1:]:
         words = line.split()
-        if words[:1] == ["format"] and len(words) > 1:
+        if words[:1] == ["format"]:
+            if len(words) != 3 or words[1] not in _PLY_FORMATS or words[2] != "1.0":
+                raise DataError(f"unsupported .ply format line {line.strip()!r} (format ascii, binary_little_endian or "
+                                "binary_big_endian 1.0)", source=path, location=where)
             fmt = words[1]
-        elif words[:1] == ["element"] and len(words) == 3 and words[2].isdigit():
+        elif words[:1] == ["element"]:
+            if len(words) != 3 or not words[2].isdigit():
+                raise DataError(f"malformed .ply header line {line.strip()!r} (element NAME COUNT)", source=path,
+                                location=where)
             elements.append((words[1], int(words[2]), []))
-        elif words[:1] == ["property"] and elements:
-            elements[-1][2].append(None if words[1:2] == ["list"] else _PLY_TYPE_BYTES.get(words[1] if len(words) > 1 else ""))
-    if not elements or elements[0][0] != "vertex" or None in elements[0][2]:
-        return  # an unusual layout: left to Open3D
-    n_vertices, vertex_bytes = elements[0][1], sum(elements[0][2])
+        elif words[:1] == ["property"]:
+            listed = words[1:2] == ["list"]
+            kinds = words[2:4] if listed else words[1:2]
+            if not elements or len(words) != (5 if listed else 3) or any(k not in _PLY_TYPES for k in kinds):
+                raise DataError(f"malformed .ply header line {line.strip()!r} (property TYPE NAME or property list TYPE "
+                                f"TYPE NAME; types: {', '.join(_PLY_TYPES)})", source=path, location=where)
+            elements[-1][2].append((words[-1], line.strip() if listed else _PLY_TYPES[words[1]]))
+    vertex = next((e for e in elements if e[0] == "vertex"), None)
+    if vertex is None:
+        raise DataError(f"no vertex element (elements: {' '.join(e[0] for e in elements) or 'none'}): points are read from "
+                        "an element named vertex", source=path, location=where)
+    _check_ply_coordinates(path, where, dict(vertex[2]), [name for name, _ in vertex[2]])
+    if elements[0][0] != "vertex" or any(kind not in _PLY_TYPES.values() for _, kind in vertex[2]):
+        return  # a list's length varies by vertex: no byte count to check
+    n_vertices, vertex_bytes = vertex[1], sum(np.dtype(kind).itemsize for _, kind in vertex[2])
     size = path.stat().st_size - body_start
     if fmt.startswith("binary"):
         if size < n_vertices * vertex_bytes:
@@ -316,10 +412,46 @@ def check_ply_counts(path: Path, frame: int | None = None) -> None:
     elif fmt == "ascii":
         with open(path, "rb") as fh:
             fh.seek(body_start)
-            held = sum(1 for line in fh if line.strip())
+            body = fh.read()
+        held = sum(1 for line in body.splitlines() if line.strip())
         if held < n_vertices:
             raise DataError(f"truncated: the header declares {n_vertices} vertices but the ascii body holds {held} lines",
                             source=path, location=where)
+        _check_ply_ascii_numbers(path, where, body, n_vertices, [name for name, _ in vertex[2]])
+
+
+_C_NUMBER = (rb"[+-]?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?"  # what C's strtod reads whole: decimal, hexadecimal, nan
+             rb"|0[xX](?:[0-9a-fA-F]+\.?[0-9a-fA-F]*|\.[0-9a-fA-F]+)(?:[pP][+-]?\d+)?|[nN][aA][nN])")
+_NOT_A_NUMBER = re.compile(rb"(?<!\S)(?!" + _C_NUMBER + rb"(?!\S))\S+")  # a word not one whole number ("inf" fails Open3D)
+
+
+def _check_ply_ascii_numbers(path: Path, where: str | None, body: bytes, n_vertices: int, names: list[str]) -> None:
+    """The ascii vertex values are numbers Open3D reads: at a word (or "inf", or "1e"), it stops reading and returns
+    the vertex it was filling and the rest made up (1.7e22 m after ``4 x 6``). One regex pass, no per-value loop."""
+    for bad in _NOT_A_NUMBER.finditer(body):
+        index = len(body[: bad.start()].split())
+        if index >= n_vertices * len(names):
+            return  # a later element's (faces'): the vertices are read before it
+        raise DataError(f"ascii vertex {index // len(names)} property {names[index % len(names)]} is "
+                        f"{bad.group()[:30].decode('ascii', errors='replace')!r}, not a number Open3D reads (it stops "
+                        "there and makes up the rest)", source=path, location=where)
+
+
+def _check_ply_coordinates(path: Path, where: str | None, kinds: dict[str, str], names: list[str]) -> None:
+    """Scalar vertex properties x, y and z of one type: Open3D reads no other names (names are case-sensitive; ``X``
+    is not ``x``), gives z = 0 for a missing z, skips a list x (its points made up), and reads y and z as x's type
+    (a double y read as float: garbage)."""
+    missing = [axis for axis in "xyz" if axis not in kinds]
+    if missing:
+        raise DataError(f"the vertex element has no {' '.join(missing)} property (it has: {' '.join(names) or 'none'}); "
+                        "coordinates are read from properties named x, y and z (lowercase)", source=path, location=where)
+    listed = [kinds[axis] for axis in "xyz" if kinds[axis] not in _PLY_TYPES.values()]
+    if listed:
+        raise DataError(f"a vertex coordinate is a list ({listed[0]!r}): coordinates are read from scalar properties "
+                        "only", source=path, location=where)
+    if len({kinds[axis] for axis in "xyz"}) > 1:
+        raise DataError(f"vertex properties x, y, z differ in type ({', '.join(f'{a} {kinds[a]}' for a in 'xyz')}): they "
+                        "are read as one type", source=path, location=where)
 
 
 def read_point_file(
@@ -347,6 +479,7 @@ __all__ = [
     "check_ply_counts",
     "drop_origin_points",
     "finite_points",
+    "open3d_reason",
     "read_kitti_bin",
     "read_npy_scan",
     "read_open3d_scan",
