@@ -553,3 +553,33 @@ def test_report_on_a_baseline_folder_names_it_as_compare_does(two_walks, capsys)
     assert " ".join(err.split()) == (f"error: {two_walks.path}: a baseline folder (lidarkit baseline record): report takes "
                                      "bench results folders (`lidarkit baseline check` re-runs a baseline's jobs against it)")
     assert not (two_walks.path / "report.md").exists()
+
+
+def test_an_icp_pair_job_of_kiss_on_kitti_pins_the_angle_correction(tmp_path, monkeypatch):
+    """icp_pair reads KITTI as kiss does (corrected), as odometry jobs do, but its protocol did not pin it: a lidarkit
+    that stopped correcting read as a regression of the pair errors, not as a changed protocol. Other methods' icp_pair
+    protocols stay as they were (no such key)."""
+    from conftest import shared_path
+
+    import lidarkit.io.kitti as kitti_module
+
+    velodyne = shared_path("kitti_odometry", "extra_frames", "00", "velodyne")
+    suite = tmp_path / "suite.yaml"
+    suite.write_text(textwrap.dedent(f"""\
+        name: pairs
+        experiments:
+          - name: pair
+            task: icp_pair
+            dataset: {{kind: kitti, path: {shared_path("kitti_odometry")}, sequence: "00", velodyne_dir: {velodyne}, name: K00}}
+            options: {{pairs: [[94, 95]]}}
+            methods: [kiss, {{name: vanilla, params: {{voxel_size_m: 1.0}}}}]
+            seeds: [0]
+        """))
+    baseline = record(suite, tmp_path / "baseline", repeats=1)
+    protocols = {job["spec"]["method"]: job["protocol"] for job in baseline.jobs}
+    assert protocols["kiss"]["kitti_angle_correction"] is True and "kitti_angle_correction" not in protocols["vanilla"]
+    assert check(baseline.path).passed
+    monkeypatch.setattr(kitti_module, "CORRECTED_BY_DEFAULT", ())  # a lidarkit that no longer corrects kiss's scans
+    lines = check(baseline.path).lines()
+    assert any(line.startswith("protocol changed: kiss on K00 (seed 0): kitti_angle_correction") for line in lines), lines
+    assert not any(line.startswith("regression") for line in lines), lines

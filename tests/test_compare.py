@@ -687,3 +687,23 @@ def test_a_p_value_that_underflows_is_printed_below_a_bound_not_as_0(tmp_path, c
     assert "better is better than worse on rpe_translation_m: " in stdout and ", Wilcoxon p < 1e-300, " in stdout
     saved = json.loads((tmp_path / "c.json").read_text())
     assert saved["p_value"] == 0.0 and "p < 1e-300" in saved["verdict"] and "p = 0," not in saved["verdict"]
+
+
+def test_a_run_folder_without_its_config_says_so_when_the_truths_differ(tmp_path):
+    """A run folder whose config.yaml is gone (a run cut off before it finished) was "runs over different data" beside a
+    finished run of the same sweeps scored at another instant, without a word why: the refusal names the folder that
+    does not say what it ran over."""
+    from lidarkit.odometry import run as odometry_run
+    from lidarkit.odometry.run_folder import write_run
+
+    spec = "sim:street?frames=8&beams=16&azimuths=180&seed=0"
+    for name, method in (("kiss", "kiss"), ("cut", "small_gicp")):
+        write_run(odometry_run(spec, method, progress=False), tmp_path / name)
+    assert compare(tmp_path / "kiss", tmp_path / "cut").n_pairs  # finished: the instants are said, and compared
+    (tmp_path / "cut" / "config.yaml").unlink()
+    with pytest.raises(EvaluationError) as exc:
+        compare(tmp_path / "kiss", tmp_path / "cut")
+    message = str(exc.value)
+    assert message.startswith("compare: runs over different data:") and message.endswith(
+        f"; {tmp_path / 'cut'} has no readable config.yaml (a run cut off before it finished, or a folder made by hand): "
+        "the dataset, frames and sweep instant it ran over are unknown")

@@ -284,6 +284,10 @@ def _run_job(job: Job, checksum_cache: dict[str, str] | None) -> JobRun:
     # where each task keeps the resolved config of its method (the pf task: info["run"]["config"])
     run_info = output.info.get("run") if isinstance(output.info.get("run"), dict) else {}
     protocol["method_config"] = _jsonable(output.info.get("method_config") or output.info.get("config") or run_info.get("config") or {})
+    corrections = (output.info.get("effective") or {}).get("corrections") or {}
+    if corrections.get("vertical_correction_applied"):  # (icp_pair: kiss reads KITTI corrected, pinned as odometry's;
+        # absent where no correction applies, so the protocols of other methods and tasks are as they were)
+        protocol["kitti_angle_correction"] = True
     return JobRun(dict(output.metrics), None, protocol)
 
 

@@ -242,9 +242,15 @@ def _same_ground_truth(a: OdometryRun, b: OdometryRun, names: tuple[str, str]) -
         return (f"each run is scored against the ground truth at its own instant of the sweep ({names[0]}: {instants[0]}, "
                 f"{names[1]}: {instants[1]}), over the same dataset and frames ({data[0].dataset}, frames "
                 f"{_frames_text(data[0].frames)})")
+    # a folder whose config.yaml is missing or unreadable (a run cut off before it was moved in, a folder made by hand)
+    # does not say what it ran over: its truth at another instant read as "different data" without a word why
+    unknown = [str(run.path) for run, said in zip((a, b), data) if said is None]
+    why = (f"; {' and '.join(unknown)} {'has' if len(unknown) == 1 else 'have'} no readable config.yaml (a run cut off "
+           "before it finished, or a folder made by hand): the dataset, frames and sweep instant it ran over are unknown"
+           if unknown and len(ga) == len(gb) else "")
     raise EvaluationError(
         f"runs over different data: {a.path} has {len(ga)} ground-truth poses, {b.path} has {len(gb)}"
-        + (" with other values" if len(ga) == len(gb) else "") + (f" ({differ})" if differ else ""),
+        + (" with other values" if len(ga) == len(gb) else "") + (f" ({differ})" if differ else "") + why,
         source="compare",
     )
 
