@@ -22,10 +22,11 @@ def _cloud_bytes(n: int, times: np.ndarray | None = None) -> tuple[list[tuple[st
 
 
 def write_ros1_bag(path, clouds, *, extra_odometry: bool = False, topic: str = "/points", odometry=(), second_odometry: bool = False,
-                   received_from_ns: int = 10**12):
+                   received_from_ns: int = 10**12, child_frame: str = "lidar"):
     """A ROS 1 bag with one PointCloud2 per ``(stamp_s, fields, point_step, data, width)`` in ``clouds`` and one
     nav_msgs/Odometry on /ground_truth (and /ground_truth2 with ``second_odometry``) per ``(stamp_s, xyz, quat_xyzw)``
-    in ``odometry``, message k received ``received_from_ns`` + k x 0.1 s (the log order is the lists' order)."""
+    in ``odometry`` (the pose of ``child_frame``; the clouds are in frame lidar), message k received ``received_from_ns``
+    + k x 0.1 s (the log order is the lists' order)."""
     from rosbags.rosbag1 import Writer
     from rosbags.typesys import Stores, get_typestore
 
@@ -50,7 +51,7 @@ def write_ros1_bag(path, clouds, *, extra_odometry: bool = False, topic: str = "
                 pose = T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=xyz[0], y=xyz[1], z=xyz[2]),
                                                    orientation=T["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3]))
                 msg = T["nav_msgs/msg/Odometry"](
-                    header=header, child_frame_id="lidar", pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=zeros),
+                    header=header, child_frame_id=child_frame, pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=zeros),
                     twist=T["geometry_msgs/msg/TwistWithCovariance"](twist=T["geometry_msgs/msg/Twist"](
                         linear=vec(x=0.0, y=0.0, z=0.0), angular=vec(x=0.0, y=0.0, z=0.0)), covariance=zeros))
                 writer.write(odo, received_from_ns + k * 10**8 + 1, store.serialize_ros1(msg, "nav_msgs/msg/Odometry"))
@@ -125,7 +126,7 @@ def test_mcap_with_unknown_schema(tmp_path):
         writer.register_channel(topic="/points_json", message_encoding="json", schema_id=cloud_schema)
         writer.finish()
     with pytest.raises(DataError, match=r"blob\.mcap: no sensor_msgs/msg/PointCloud2 topic; topics present: /blob \(acme_msgs/msg/Blob\), "
-                                        r"/points_json \(sensor_msgs/msg/PointCloud2 \[jsonschema schema, not ros2msg\]\)"):
+                                        r"/points_json \(sensor_msgs/msg/PointCloud2 \[jsonschema schema, not ros2msg or ros1msg\]\)"):
         open_dataset("mcap", path)
     with pytest.raises(DataError, match=r"topic '/blob' carries acme_msgs/msg/Blob, not sensor_msgs/msg/PointCloud2"):
         open_dataset("mcap", path, topic="/blob")
@@ -461,3 +462,70 @@ def test_a_folder_of_separate_recordings_is_not_read_as_one_split_bag(tmp_path):
                                         r"0\.300 s before a\.bag ends .*e\.g\. rosbag:.*copies/a\.bag$"):
         open_dataset("rosbag", copies)
     assert len(open_dataset("rosbag", copies / "b.bag")) == 4  # the way out it names
+
+
+def test_one_pose_per_scan_with_a_pose_skipped_is_not_paired_by_count(tmp_path):
+    """As many poses as scans, but pose 4 missing and one more after the last scan: paired by count, scans 4-9 were
+    scored against the next sweep's pose without a word. The count pairs them only when every pose lies as far from
+    its scan as the others (a quarter of a sweep); else the nearest pairing names the gap."""
+    scans = [good(k) for k in range(10)]
+    skipped = [(1000.0 + 0.1 * k, (float(k), 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)) for k in range(11) if k != 4]
+    bag = write_ros1_bag(tmp_path / "skipped.bag", scans, odometry=skipped)
+    with pytest.raises(DataError, match=r"skipped.bag/ground_truth: 10 poses for 10 scans: scans 2 and 3 are both nearest to the pose at 1000.300 s"):
+        open_dataset("rosbag", bag).ground_truth
+    # the scans before the gap are still paired, each with the pose at its sweep's end (stamped with the next scan)
+    np.testing.assert_allclose(open_dataset("rosbag", bag).ground_truth_of([0, 1, 2]).poses_se3[:, 0, 3], [1, 2, 3])
+    # stamps a few ms apart from their scans, one pose each: paired by count as before
+    jitter = [(1000.0 + 0.1 * k + 0.01 * (-1) ** k, (float(k), 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)) for k in range(10)]
+    np.testing.assert_allclose(open_dataset("rosbag", write_ros1_bag(tmp_path / "jitter.bag", scans, odometry=jitter))
+                               .ground_truth.poses_se3[:, 0, 3], np.arange(10))
+
+
+def test_ground_truth_of_another_frame_than_the_clouds_is_said(tmp_path):
+    """Odometry giving the pose of base_link (child_frame_id) beside clouds in frame lidar was scored as the LiDAR's
+    pose without a word (the lever arm between the two counted as error). A reader warning names both frames, and the
+    run's warnings carry it; the same frame, with or without ROS 1's leading slash, says nothing."""
+    scans = [good(k) for k in range(4)]
+    poses = [(1000.0 + 0.1 * k, (float(k), 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)) for k in range(4)]
+
+    class Still:  # a registration that returns no motion: the warning is the reader's, before any pose
+        name, stateful, config = "still", True, None
+
+        def reset(self):
+            pass
+
+        def register_frame(self, points_xyz, point_times_s=None):
+            return np.eye(4)
+
+    warning = ("ground-truth topic /ground_truth gives the pose of frame 'base_link' (child_frame_id), the clouds on /points "
+               "are in frame 'lidar': the ground truth is not the LiDAR's pose and is compared as if it were (the offset "
+               "between the two frames counts as error)")
+    base = write_ros1_bag(tmp_path / "base.bag", scans, odometry=poses, child_frame="base_link")
+    bag = open_dataset("rosbag", base)
+    assert len(bag.ground_truth) == 4 and bag.reader_warnings == [warning]
+    assert warning in run(open_dataset("rosbag", base), Still()).metrics["warnings"]
+    for child in ("lidar", "/lidar", ""):  # the clouds' own frame, or none named
+        same = open_dataset("rosbag", write_ros1_bag(tmp_path / f"same{len(child)}.bag", scans, odometry=poses, child_frame=child))
+        assert len(same.ground_truth) == 4 and same.reader_warnings == [], child
+
+
+def test_a_ground_truth_topic_without_messages_names_the_way_to_run_without(tmp_path):
+    """An odometry topic holding no message was "ground-truth topic /ground_truth has no messages", without the
+    option that runs the recording unscored."""
+    from rosbags.rosbag1 import Reader, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS1_NOETIC)
+    clouds_only = write_ros1_bag(tmp_path / "clouds.bag", [good(k) for k in range(3)])
+    with Reader(clouds_only) as reader, Writer(tmp_path / "both.bag") as writer:  # the clouds and an empty odometry topic
+        clouds = {c.id: writer.add_connection(c.topic, c.msgtype, typestore=store) for c in reader.connections}
+        writer.add_connection("/ground_truth", "nav_msgs/msg/Odometry", typestore=store)
+        for conn, received_ns, raw in reader.messages():
+            writer.write(clouds[conn.id], received_ns, raw)
+    bag = open_dataset("rosbag", tmp_path / "both.bag")
+    assert bag.ground_truth_topic == "/ground_truth"
+    with pytest.raises(DataError) as err:
+        bag.ground_truth
+    assert str(err.value) == (f"{tmp_path / 'both.bag'}: ground-truth topic /ground_truth has no messages (ground_truth_topic=none "
+                              "runs without ground truth)")
+    assert open_dataset("rosbag", tmp_path / "both.bag", ground_truth_topic="none").ground_truth is None

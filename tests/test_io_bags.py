@@ -152,6 +152,51 @@ def test_bag_round_trip_points_times_and_ground_truth(sim, exports, fmt, storage
     np.testing.assert_allclose(gt.timestamps_s, sim.timestamps_s, rtol=0, atol=1e-9)
 
 
+def test_an_mcap_converted_from_a_ros1_bag_reads_as_the_bag(exports, tmp_path):
+    """An MCAP converted from a ROS 1 bag (``mcap convert``) keeps its ROS 1 messages (ros1msg schemas): it read "no
+    sensor_msgs/msg/PointCloud2 topic; topics present: /points (sensor_msgs/PointCloud2)". rosbags decodes them: the
+    same points, times, stamps and ground truth as the bag."""
+    from mcap.writer import Writer
+    from rosbags.rosbag1 import Reader
+
+    bag = exports[("rosbag1", "sqlite3")]
+    converted = tmp_path / "converted.mcap"
+    with Reader(bag) as reader, open(converted, "wb") as fh:
+        writer = Writer(fh)
+        writer.start(profile="ros1")
+        channels = {}
+        for conn in reader.connections:
+            schema = writer.register_schema(name=conn.msgtype.replace("/msg/", "/"), encoding="ros1msg", data=conn.msgdef.data.encode())
+            channels[conn.id] = writer.register_channel(topic=conn.topic, message_encoding="ros1", schema_id=schema)
+        for conn, received_ns, raw in reader.messages():
+            writer.add_message(channels[conn.id], log_time=received_ns, publish_time=received_ns, data=raw)
+        writer.finish()
+    ros1, mcap = open_dataset("rosbag", bag), open_dataset("mcap", converted)
+    assert len(mcap) == len(ros1) == N_FRAMES and mcap.topic == "/points"
+    for k in (0, N_FRAMES - 1):
+        ours, theirs = mcap.read_scan(k), ros1.read_scan(k)
+        np.testing.assert_array_equal(ours.points_xyz, theirs.points_xyz)
+        np.testing.assert_array_equal(ours.point_times_s, theirs.point_times_s)
+        assert ours.stamp_instant == theirs.stamp_instant == "start"
+    np.testing.assert_array_equal(mcap.timestamps_s, ros1.timestamps_s)
+    np.testing.assert_array_equal(mcap.ground_truth.poses_se3, ros1.ground_truth.poses_se3)
+    assert mcap.ground_truth.meta["pose_instant"] == ros1.ground_truth.meta["pose_instant"]
+    assert len(open_dataset("mcap", converted, topic="/points", ground_truth_topic="/ground_truth")) == N_FRAMES
+
+
+def test_null_is_each_options_default_and_none_turns_it_off(exports):
+    """``?time_field=null`` read no point times while ``?ground_truth_topic=null`` was the automatic default (the docs
+    gave null and none alike): null is every option's default (time_field auto), none turns the option off."""
+    from lidarkit.odometry import open_sequence
+
+    for kind, path in (("rosbag", exports[("rosbag1", "sqlite3")]), ("mcap", exports[("mcap", "sqlite3")])):
+        nulled = open_sequence(f"{kind}:{path}?time_field=null&ground_truth_topic=null")
+        assert nulled.read_scan(1).point_times_s is not None and nulled.stamp_instant == "start", kind
+        assert nulled.reader_options["time_field"] == "auto" and nulled.ground_truth_topic == "/ground_truth"
+        off = open_sequence(f"{kind}:{path}?time_field=none&ground_truth_topic=none")
+        assert off.read_scan(1).point_times_s is None and off.ground_truth is None, kind
+
+
 def test_ground_truth_of_checks_the_scan_numbers(exports):
     """ground_truth_of([99]) raised numpy's IndexError, [] its "zero-size array" ValueError, and [1.5] gave scan 1's
     pose: each is checked as read_scan checks its index."""

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from lidarkit.errors import DataError, EvaluationError
 from lidarkit.geometry import pose_error, se3_inverse
@@ -556,3 +557,90 @@ def test_instants_on_the_recorded_stamps_are_not_said_to_be_continued_beyond_the
     assert end.meta["retimed"] == "interpolated between the 12 poses recorded on /ground_truth"
     assert bag.ground_truth_at_instant("start").meta["retimed"] == ("interpolated between the 12 poses recorded on /ground_truth, "
                                                                     "1 frame(s) continued at constant velocity beyond them")
+
+
+def _sweeps_as_clouds(sim, frames, keep=lambda times: np.ones(len(times), bool), t0=1000.0):
+    """``write_ros1_bag`` clouds (x, y, z, time float32; time from the sweep start) of the simulator's sweeps
+    ``frames``, each stamped at its sweep start (``t0`` + the simulator's time), with the points ``keep`` selects."""
+    from test_io_bad_bags import F32
+
+    clouds = []
+    for k in frames:
+        scan = sim.read_scan(k)
+        kept = keep(scan.point_times_s)
+        rec = np.zeros(int(kept.sum()), dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("time", "<f4")])
+        rec["x"], rec["y"], rec["z"] = scan.points_xyz[kept].T
+        rec["time"] = scan.point_times_s[kept]
+        fields = [("x", 0, F32), ("y", 4, F32), ("z", 8, F32), ("time", 12, F32)]
+        clouds.append((t0 + float(sim.frame_times_s("start")[k]), fields, rec.dtype.itemsize, rec.tobytes(), len(rec)))
+    return clouds
+
+
+def test_a_recording_keeping_every_other_sweep_times_its_sweeps_by_their_points(tmp_path):
+    """Every other 10 Hz sweep kept (stamped 0.2 s apart, 0.1 s of points each), the odometry stamped at each kept
+    sweep's end: the sweep was taken to last the stamps' spacing, so the poses read as the sweep middle, small_gicp's
+    truth was re-timed to 0.1 s (the end) instead of 0.05 s and kiss's to 0.2 s, a whole sweep late. A sweep lasts
+    from its first to its last point when that is clearly not the stamps' spacing."""
+    from test_io_bad_bags import write_ros1_bag
+
+    from lidarkit.io import open_dataset
+    from lidarkit.odometry.instants import stamps_at_instant
+
+    sim = SimulatedLidarSequence(pose_instant="start", **{**SIM, "n_beams": 8, "n_azimuths": 360})
+    kept = np.arange(0, 10, 2)
+    clouds = _sweeps_as_clouds(sim, kept)
+    starts = np.array([c[0] for c in clouds])
+    last_point = float(sim.read_scan(0).point_times_s.max())  # 0.1 s less one azimuth step
+    ends = sim.poses_at(starts - 1000.0 + 0.1)
+    poses = [(t + 0.1, tuple(T[:3, 3]), tuple(Rotation.from_matrix(T[:3, :3]).as_quat())) for t, T in zip(starts, ends)]
+    bag = open_dataset("rosbag", write_ros1_bag(tmp_path / "every_other.bag", clouds, odometry=poses))
+    assert bag.ground_truth.meta["pose_instant"] == "end" and bag.stamp_instant == "start"
+    assert bag.sweep_duration_s == pytest.approx(last_point, abs=1e-6)
+    mid = bag.ground_truth_at_instant("mid")
+    np.testing.assert_allclose(mid.timestamps_s, starts + last_point / 2, atol=1e-6)
+    truth = sim.poses_at(starts - 1000.0 + last_point / 2)
+    # (interpolated between end poses 0.2 s apart: off by at most a dt^2 / 8 = 0.075 m at the pull-away's 15 m/s^2;
+    # the old reading, the sweep end taken for its middle, was 0.05 s of a drive at up to 10 m/s off)
+    assert np.linalg.norm(mid.poses_se3[:, :3, 3] - truth[:, :3, 3], axis=1).max() < 0.075
+    end = bag.ground_truth_at_instant("end")
+    np.testing.assert_allclose(end.timestamps_s, starts + last_point, atol=1e-6)
+    # the estimate's stamps are moved by the sweep's own length, from its first scan or as the reader gives it
+    scan = bag.read_scan(0)
+    np.testing.assert_allclose(stamps_at_instant(starts, scan, "end", starts)[0], starts + last_point, atol=1e-6)
+    moved = stamps_at_instant(starts, scan, "end", starts, sweep_s=bag.sweep_duration_s)[0]
+    np.testing.assert_allclose(moved, starts + last_point, atol=1e-6)
+    # odometry stamped with the scans, for the first 4: each sweep's own start (sweeps that follow one another would
+    # make it the end of the sweep before), not the next kept sweep's start 0.2 s on, read as the end
+    at_starts = sim.poses_at(starts[:4] - 1000.0)
+    poses = [(t, tuple(T[:3, 3]), tuple(Rotation.from_matrix(T[:3, :3]).as_quat())) for t, T in zip(starts, at_starts)]
+    starts_bag = open_dataset("rosbag", write_ros1_bag(tmp_path / "at_starts.bag", clouds, odometry=poses))
+    gt = starts_bag.ground_truth_of([0, 1, 2, 3])
+    np.testing.assert_allclose(gt.poses_se3[:, :3, 3], at_starts[:, :3, 3], atol=1e-6)
+    assert gt.meta["pose_instant"] == "start"
+    result = run(bag, "vanilla")
+    assert "re-timed from the sweep end to the sweep mid" in result.metrics["ground_truth_instant_note"]
+    assert "moved by +0.0499 s" in result.config["run"]["estimate_stamps_note"]
+
+
+def test_a_sensor_seeing_part_of_its_turn_ends_its_sweep_at_its_last_point(tmp_path):
+    """Points fired 0.025-0.075 s into a 0.1 s rotation (a sensor seeing part of its turn): the sweep end was placed
+    at 0.125 s after the stamp (its first point plus the stamps' spacing), re-timed truth 0.18-0.41 m off. It ends at
+    its last point, starts at its first, and the poses stamped at the rotation ends are at no instant of these sweeps."""
+    from test_io_bad_bags import write_ros1_bag
+
+    from lidarkit.io import open_dataset
+
+    sim = SimulatedLidarSequence(pose_instant="start", **{**SIM, "n_frames": 6, "n_beams": 8, "n_azimuths": 360})
+    clouds = _sweeps_as_clouds(sim, range(6), keep=lambda t: (t >= 0.025) & (t < 0.075))
+    starts = np.array([c[0] for c in clouds])
+    times = sim.read_scan(0).point_times_s
+    first, last = float(times[times >= 0.025].min()), float(times[times < 0.075].max())
+    ends = sim.poses_at(starts - 1000.0 + 0.1)
+    poses = [(t + 0.1, tuple(T[:3, 3]), tuple(Rotation.from_matrix(T[:3, :3]).as_quat())) for t, T in zip(starts, ends)]
+    bag = open_dataset("rosbag", write_ros1_bag(tmp_path / "part.bag", clouds, odometry=poses))
+    assert bag.ground_truth.meta["pose_instant"] is None and bag.stamp_instant is None
+    for instant, at in (("start", first), ("mid", (first + last) / 2), ("end", last)):
+        retimed = bag.ground_truth_at_instant(instant)
+        np.testing.assert_allclose(retimed.timestamps_s, starts + at, atol=1e-6, err_msg=instant)
+        truth = sim.poses_at(starts - 1000.0 + at)  # (sweep 0, before the first pose, continued at constant velocity)
+        assert np.linalg.norm(retimed.poses_se3[1:, :3, 3] - truth[1:, :3, 3], axis=1).max() < 0.02, instant

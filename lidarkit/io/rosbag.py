@@ -2,15 +2,18 @@
 
 ``open_dataset("rosbag", path, topic=...)`` reads a ROS 1 ``.bag`` (or a folder of split ``.bag`` files, each part
 beginning where the one before ends: separate recordings in one folder are refused) or a ROS 2 bag folder (``metadata.yaml``, sqlite3 or mcap storage); ``open_dataset("mcap", path, topic=...)`` a
-standalone ``.mcap`` file. kiss-icp's loaders open the files; lidarkit checks the topic first (kiss-icp prints
-and exits on a missing one) and decodes each message with :func:`lidarkit.io.pointcloud2.decode_pointcloud2`.
+standalone ``.mcap`` file (ROS 2 messages, or ROS 1 ones as an MCAP converted from a ``.bag`` holds). kiss-icp's
+loaders open the files; lidarkit checks the topic first (kiss-icp prints and exits on a missing one) and decodes
+each message with :func:`lidarkit.io.pointcloud2.decode_pointcloud2`.
 
 Per scan: ``timestamp_s`` is the message header stamp; ``stamp_instant`` says which instant of the sweep that
 stamp is, read from the per-point times (relative times starting at 0: the sweep start; ending at 0: the end).
 Ground truth: a ``nav_msgs/Odometry`` topic (``ground_truth_topic``; found automatically when there is one), read
-in header-stamp order, one pose per scan (by count, also for a selection of scans; else the pose nearest the place in the sweep where the
-poses are stamped), expressed relative to nothing (as recorded); its
-``meta["pose_instant"]`` is read from its stamps against the sweep's point times.
+in header-stamp order, one pose per scan (by count when each pose lies as far from its scan as the others, also for a
+selection of scans; else the pose nearest the place in the sweep where the poses are stamped), expressed relative to
+nothing (as recorded; odometry of another frame than the clouds' is said in ``reader_warnings``); its
+``meta["pose_instant"]`` is read from its stamps against the sweep's point times (a sweep lasting from its first to its
+last point where that is not the stamps' spacing: :func:`sweep_length`).
 
 Access is sequential (a bag is a stream); reading an earlier index reopens the bag.
 """
@@ -88,11 +91,13 @@ class _BagScans:
         self._timing_problem: str | None = None
         if not self.path.exists():
             raise DataError("bag not found", source=self.path)
-        self.time_field = time_field
+        # None (a spec's null) is the default, as for every option; "none" (or "") reads no point times
+        self.time_field = "auto" if time_field is None else time_field
         self._time_fields_read: set[str] = set()  # the fields time_field resolved to in the messages decoded
         self._next = 0
         self._stream: Iterator[tuple[int, Any]] | None = None
         self._stamps: dict[int, float] = {}
+        self._cloud_frame: str | None = None  # the first cloud's header.frame_id, once a message was read
         self._last_stamp: tuple[int, float] | None = None
         topics = self._list_topics()  # {topic: msgtype}
         clouds = sorted(t for t, m in topics.items() if m == POINTCLOUD2)
@@ -206,6 +211,8 @@ class _BagScans:
                 )
             self._last_stamp = (k, stamp)
             self._stamps[k] = stamp
+            if k == 0:
+                self._cloud_frame = str(msg.header.frame_id)
         decoded = decode_pointcloud2(msg, source=str(self.path), location=self._location(index), time_field=self.time_field)
         self._time_fields_read.add(decoded.time_field or "none")
         if decoded.n_at_origin:
@@ -237,6 +244,8 @@ class _BagScans:
                                     source=self.path, location=self._location(k))
                 last = stamp
                 self._stamps[k] = stamp
+                if k == 0:
+                    self._cloud_frame = str(msg.header.frame_id)
         return np.array([self._stamps[k] for k in range(self.n_scans)], dtype=np.float64)
 
     @property
@@ -255,14 +264,20 @@ class _BagScans:
         source = f"{self.path}{self.ground_truth_topic}"
         numbers = np.arange(self.n_scans) if scans is None else checked_indices(scans, self.n_scans, source, from_end=False)
         scan_stamps = all_stamps[numbers]
-        if len(gt_stamps) == self.n_scans:  # one pose per scan: paired by count, whichever scans are selected
+        period = float(np.median(np.diff(all_stamps))) if len(all_stamps) > 1 else 0.0
+        # one pose per scan, each as far from its scan as the others: paired by count, whichever scans are selected (a
+        # pose missing and one more after the last scan paired scans 7-14 of 15 with the next sweep's pose, 0.3-0.8 m off)
+        if len(gt_stamps) == self.n_scans and np.ptp(gt_stamps - all_stamps) <= COUNT_PAIRING_SPREAD * period:
             gt_stamps, gt_poses = gt_stamps[numbers], gt_poses[numbers]
         else:
             if len(gt_stamps) < 2:
                 raise DataError(f"{len(gt_stamps)} pose(s) for {len(scan_stamps)} scans: one pose per scan needed (--frames can pick the scans it covers; ground_truth_topic=none runs without scores)", source=source)
             # each scan's pose is the one nearest the place in the sweep where the poses are stamped (a pose stamped
-            # mid-sweep lies as near the next scan's stamp as its own)
-            target = scan_stamps + _pose_phase(gt_stamps, all_stamps)
+            # mid-sweep lies as near the next scan's stamp as its own); a pose stamped with a scan is the end of the
+            # sweep before only where each sweep ends as the next starts (taken so without point times)
+            timing = self._sweep_timing
+            following = timing is None or timing[1] == period  # (sweep_length gives the stamps' spacing itself then)
+            target = scan_stamps + _pose_phase(gt_stamps, all_stamps, following)
             pick = np.clip(np.searchsorted(gt_stamps, target), 1, len(gt_stamps) - 1)
             pick = np.where(np.abs(gt_stamps[pick - 1] - target) <= np.abs(gt_stamps[pick] - target), pick - 1, pick)
             twice = np.flatnonzero(np.diff(pick) == 0)
@@ -276,7 +291,6 @@ class _BagScans:
                          f"scans {a} and {b} are both nearest to the pose at {gt_stamps[pick[k]]:.3f} s")
                 raise DataError(f"{len(gt_stamps)} poses for {len(scan_stamps)} scans: {where}; one pose per scan needed (--frames can pick the scans it covers; ground_truth_topic=none runs without scores)", source=source)
             gt_stamps, gt_poses = gt_stamps[pick], gt_poses[pick]
-        period = float(np.median(np.diff(all_stamps))) if len(all_stamps) > 1 else 0.0
         off = np.abs(gt_stamps - scan_stamps)
         if period > 0 and off.max() > 1.5 * period:  # one pose per scan by count, but not the scan's own time
             k = int(np.flatnonzero(off > 1.5 * period)[0])
@@ -290,8 +304,9 @@ class _BagScans:
         ``--frames`` selection within what the recording covers): interpolated between the recorded poses (rotation
         slerped, position linear), or continued at constant velocity for at most 1.5 recording intervals beyond the
         first or last one (e.g. the start of sweep 0 when the poses are stamped at sweep ends). The instants are placed
-        by the first scans' point times and the scans' stamp spacing; DataError when the scans carry no point times (or
-        times on another clock than their stamps) or the recording does not reach."""
+        by the first scans' point times (where a sweep starts, how long it lasts: :attr:`sweep_duration_s`) and the
+        scans' stamps; DataError when the scans carry no point times (or times on another clock than their stamps) or
+        the recording does not reach."""
         if instant not in INSTANT_FRACTION:
             raise DataError(f"unknown instant {instant!r}; valid: {', '.join(INSTANT_FRACTION)}", source=self.path)
         if self.ground_truth_topic is None:
@@ -300,10 +315,10 @@ class _BagScans:
         if timing is None:
             raise DataError(self._timing_problem or "the scans carry no per-point times, so where a sweep starts and ends is unknown",
                             source=self.path, location=self._location(0))
-        start, period = timing
+        start, sweep_s = timing
         all_stamps = self.timestamps_s
         scan_stamps = all_stamps if scans is None else all_stamps[np.asarray(scans, dtype=np.int64)]
-        times = scan_stamps + (start - all_stamps[0]) + INSTANT_FRACTION[instant] * period
+        times = scan_stamps + (start - all_stamps[0]) + INSTANT_FRACTION[instant] * sweep_s
         stamps, poses = self._recorded_ground_truth
         if len(stamps) < 2 or not (np.diff(stamps) > 0).all():
             raise DataError(f"{self.ground_truth_topic}: interpolating needs two or more poses with increasing stamps",
@@ -312,7 +327,7 @@ class _BagScans:
         reach = 1.5 * float(np.median(np.diff(stamps)))
         out = recorded.interpolated(times, max_extrapolation_s=reach)
         # (an instant equal to a recorded stamp but for rounding, 1e-16 s beyond it, was counted as continued)
-        tolerance = 1e-6 * (period if period > 0 else float(np.median(np.diff(stamps))))
+        tolerance = 1e-6 * (sweep_s if sweep_s > 0 else float(np.median(np.diff(stamps))))
         n_out = int(((times < stamps[0] - tolerance) | (times > stamps[-1] + tolerance)).sum())
         how = f"interpolated between the {len(stamps)} poses recorded on {self.ground_truth_topic}"
         if n_out:
@@ -325,9 +340,10 @@ class _BagScans:
         """Stamps (s) and poses ``(n, 4, 4)`` of every message on the ground-truth topic in header-stamp order, exact
         repeats (same stamp and pose) once (read once: the ground truth and its re-timing both use them). One message
         logged out of order stopped the re-timing: it needs increasing stamps."""
-        stamps, poses = [], []
+        stamps, poses, child_frames = [], [], set()
         for k, (_, msg) in enumerate(self._read_all(self.ground_truth_topic)):
             p, q = msg.pose.pose.position, msg.pose.pose.orientation
+            child_frames.add(str(msg.child_frame_id))
             stamps.append(stamp_seconds(msg.header.stamp))
             xyz, quat = [p.x, p.y, p.z], [q.x, q.y, q.z, q.w]
             if not np.isfinite(xyz + quat).all() or not np.linalg.norm(quat) > 1e-6:
@@ -335,7 +351,9 @@ class _BagScans:
                                 source=f"{self.path}{self.ground_truth_topic}", location=f"message {k}")
             poses.append(_pose_matrix(xyz, quat))
         if not poses:
-            raise DataError(f"ground-truth topic {self.ground_truth_topic} has no messages", source=self.path)
+            raise DataError(f"ground-truth topic {self.ground_truth_topic} has no messages (ground_truth_topic=none runs without "
+                            "ground truth)", source=self.path)
+        self._check_ground_truth_frame(child_frames)
         stamps, poses = np.array(stamps), np.stack(poses)
         n_back = int(np.count_nonzero(np.diff(stamps) < 0))
         if n_back:
@@ -351,17 +369,34 @@ class _BagScans:
                                                   f"poses, {' and '.join(said)}")
         return stamps, poses
 
+    def _check_ground_truth_frame(self, child_frames: set[str]) -> None:
+        """Warn when the odometry is the pose of another frame than the clouds' (``child_frame_id`` against the clouds'
+        ``header.frame_id``): a base_link pose scored as the LiDAR's counts the offset between the two as error."""
+        if self._cloud_frame is None:
+            with contextlib.closing(self._read_all(self.topic)) as clouds:  # (the first message only; an open cursor locks sqlite3)
+                for _, msg in clouds:
+                    self._cloud_frame = str(msg.header.frame_id)
+                    break
+        cloud = (self._cloud_frame or "").lstrip("/")
+        others = sorted(f for f in child_frames if f.lstrip("/") and f.lstrip("/") != cloud)
+        if cloud and others:
+            named = ", ".join(repr(f) for f in others)
+            self._warn_once("ground_truth_frame", f"ground-truth topic {self.ground_truth_topic} gives the pose of frame {named} "
+                                                  f"(child_frame_id), the clouds on {self.topic} are in frame {self._cloud_frame!r}: "
+                                                  "the ground truth is not the LiDAR's pose and is compared as if it were (the "
+                                                  "offset between the two frames counts as error)")
+
     def _ground_truth_instant(self, gt_stamps: np.ndarray, scan_stamps: np.ndarray) -> str | None:
         """Which instant of its scan's sweep each pose is stamped at (``gt_stamps[j]`` paired with the scan stamped
         ``scan_stamps[j]``; the median over the pairs), None when the scans carry no point times or it is no instant."""
         timing = self._sweep_timing
         if timing is None:
             return None
-        start, period = timing
-        if period <= 0:  # the scans' stamps are all equal: no sweep period to place the poses in
+        start, sweep_s = timing
+        if sweep_s <= 0:  # the scans' stamps are all equal: no sweep period to place the poses in
             return None
         sweep_start = scan_stamps + (start - float(self.timestamps_s[0]))  # a sweep starts as far from its stamp as sweep 0
-        return classify_instant(float(np.median((gt_stamps - sweep_start) / period)))
+        return classify_instant(float(np.median((gt_stamps - sweep_start) / sweep_s)))
 
     @property
     def stamp_instant(self) -> str | None:
@@ -372,14 +407,23 @@ class _BagScans:
             return None
         return classify_instant((float(self.timestamps_s[0]) - timing[0]) / timing[1])
 
+    @property
+    def sweep_duration_s(self) -> float | None:
+        """How long a sweep lasts, from its first point to the next sweep's (the stamps' spacing) or, when the points
+        span clearly less or more than that spacing, to its last point; None without point times on the stamps' clock."""
+        timing = self._sweep_timing
+        return None if timing is None or not timing[1] > 0 else timing[1]
+
     @cached_property
     def _sweep_timing(self) -> tuple[float, float] | None:
-        """(absolute time sweep 0 starts, the nominal sweep period) from the point times of the first few scans (where
-        a sweep's first point fires after its stamp: the median, so that a recording begun mid-rotation, whose first
-        message holds part of a sweep, does not place every sweep by that part) and the spacing of the stamps (one
-        scan: its own time span); None when the scans carry no point times, or times on another clock than the stamps
-        (a sweep more than a period from its stamp: :attr:`reader_warnings` says so, with the field and the offset)."""
-        offsets, ends, span = [], [], 0.0
+        """(absolute time sweep 0 starts, how long a sweep lasts) from the point times of the first few scans (where a
+        sweep's first point fires after its stamp and how long its points span: medians, so that a recording begun
+        mid-rotation, whose first message holds part of a sweep, does not place every sweep by that part) and the
+        spacing of the stamps (:func:`sweep_length`: a recording keeping every other sweep, or a sensor seeing part of
+        its turn, lasts from first to last point, not the stamps' spacing); 0 for the length when the stamps are all
+        equal; None when the scans carry no point times, or times on another clock than the stamps (a sweep more than a
+        period from its stamp: :attr:`reader_warnings` says so, with the field and the offset)."""
+        offsets, ends, spans = [], [], []
         for k in range(min(self.n_scans, SWEEP_TIMING_SCANS)):
             scan = self.read_scan(k)
             if scan.point_times_s is None or len(scan.point_times_s) < 2:
@@ -389,34 +433,51 @@ class _BagScans:
             if hi > lo:
                 offsets.append(lo - scan.timestamp_s)
                 ends.append(hi - scan.timestamp_s)
-                span = max(span, hi - lo)
+                spans.append(hi - lo)
         if not offsets:
             return None
         stamps = self.timestamps_s
-        period = float(np.median(np.diff(stamps))) if len(stamps) > 1 else span
+        period = float(np.median(np.diff(stamps))) if len(stamps) > 1 else max(spans)
         # a sweep lies around its stamp (from it, up to it, or across it); one a period or more away is timed by
         # another clock (GPS time against UTC stamps, seconds since the sensor booted): its instant cannot be placed
         first, last = float(np.median(offsets)), float(np.median(ends))
         apart = first if first > 0 else last if last < 0 else 0.0
-        if abs(apart) > max(period, span):
+        if abs(apart) > max(period, max(spans)):
             fields = ", ".join(repr(f) for f in sorted(self._time_fields_read))
             self._timing_problem = (f"the point times (field {fields}) lie {abs(apart):.6g} s {'after' if apart > 0 else 'before'} "
                                     f"the header stamps (a median over the first scans; the stamps are {period:.4g} s apart): "
                                     "another clock? where each sweep lies against the stamps cannot be placed")
             self._warn_once("clock", f"{self._timing_problem}: the sweep instant of the scans and of the ground truth is unknown")
             return None
-        return float(stamps[0] + first), period
+        return float(stamps[0] + first), sweep_length(float(np.median(spans)), period)
+
+
+def sweep_length(span_s: float, spacing_s: float) -> float:
+    """How long a sweep whose points span ``span_s`` lasts when sweeps are stamped ``spacing_s`` apart: the spacing
+    when the span is within :data:`FULL_SWEEP_TOLERANCE` of it (sweeps follow one another, one ending where the next
+    starts, though the last point fires a step before), else the span, first to last point, which kiss deskews over
+    (every other sweep of a recording kept: 0.1 s of points stamped 0.2 s apart; a sensor seeing part of its turn);
+    0 when the spacing is (stamps all equal: the sweeps cannot be placed)."""
+    if not spacing_s > 0 or abs(span_s - spacing_s) <= FULL_SWEEP_TOLERANCE * spacing_s:
+        return spacing_s
+    return span_s
 
 
 #: scans whose point times place the sweeps in the stamps (the median over them)
 SWEEP_TIMING_SCANS = 5
+#: how far (a fraction of the stamps' spacing) the points' span may be from it for sweeps to follow one another
+FULL_SWEEP_TOLERANCE = 0.1
+#: most spread of the pose-minus-scan stamp offsets, in scan periods, for one pose per scan to be paired by count
+COUNT_PAIRING_SPREAD = 0.25
 #: most scan periods between one part of a split ROS 1 recording and the next (further apart: separate recordings)
 SPLIT_GAP_PERIODS = 3
 
 
-def _pose_phase(gt_stamps: np.ndarray, scan_stamps: np.ndarray) -> float:
+def _pose_phase(gt_stamps: np.ndarray, scan_stamps: np.ndarray, following: bool = True) -> float:
     """Where in the scan period the poses are stamped (s after a scan's stamp, in ``[0, period)``), when they keep one
-    place (one pose per sweep, stamped at its start, middle or end); 0 when they do not (odometry at its own rate)."""
+    place (one pose per sweep, stamped at its start, middle or end); 0 when they do not (odometry at its own rate).
+    ``following``: each sweep ends where the next starts (else a pose stamped with a scan is its own sweep's, not the
+    one before's: a recording keeping every other sweep)."""
     if len(scan_stamps) < 2:
         return 0.0
     period = float(np.median(np.diff(scan_stamps)))
@@ -428,7 +489,7 @@ def _pose_phase(gt_stamps: np.ndarray, scan_stamps: np.ndarray) -> float:
     phase = float(np.angle(mean) / (2 * np.pi) % 1.0)
     # poses stamped with the scans (the end of one sweep is the start of the next, the same instant): read as each
     # sweep's end, whichever side of the period rounding put them, so that the first scan keeps its pose
-    return period if min(phase, 1.0 - phase) < 0.02 else phase * period
+    return period if following and min(phase, 1.0 - phase) < 0.02 else phase * period
 
 
 def _pose_matrix(xyz: list[float], quat_xyzw: list[float]) -> np.ndarray:
@@ -445,7 +506,7 @@ class RosbagScans(_BagScans):
 
     Options: ``topic`` (the PointCloud2 topic; needed when there are several), ``ground_truth_topic`` (a
     ``nav_msgs/Odometry`` topic; default: the only one, ``""`` or ``none``: none), ``time_field`` (``auto``, a field name or
-    ``none``).
+    ``none``); None (a spec's ``null``) is each option's default.
     """
 
     kind = "rosbag"
@@ -553,7 +614,9 @@ class RosbagScans(_BagScans):
 
 
 class McapScans(_BagScans):
-    """A standalone ROS 2 ``.mcap`` file, via kiss-icp's ``McapDataloader`` (options as :class:`RosbagScans`)."""
+    """A standalone ``.mcap`` file, via kiss-icp's ``McapDataloader`` (options as :class:`RosbagScans`); channels of
+    ROS 1 messages (``ros1msg`` schemas, an MCAP converted from a ROS 1 bag) are decoded by rosbags, which kiss-icp's
+    loader does not read."""
 
     kind = "mcap"
 
@@ -584,25 +647,61 @@ class McapScans(_BagScans):
     def _list_topics(self) -> dict[str, str]:
         summary = self._summary()
         topics = {}
+        #: the ROS 2 type name and the schema of each topic whose messages are ROS 1 encoded
+        self._ros1_schemas: dict[str, tuple[str, Any]] = {}
         for channel in summary.channels.values():
             schema = summary.schemas.get(channel.schema_id)
             name = schema.name if schema is not None else "no schema"
-            if schema is not None and name == POINTCLOUD2 and schema.encoding != "ros2msg":
-                name = f"{name} [{schema.encoding} schema, not ros2msg]"
+            if schema is not None and schema.encoding == "ros1msg" and channel.message_encoding == "ros1":
+                name = _ros2_type_name(name)  # (sensor_msgs/PointCloud2 was "not sensor_msgs/msg/PointCloud2")
+                self._ros1_schemas[channel.topic] = (name, schema)
+            elif schema is not None and name == POINTCLOUD2 and schema.encoding != "ros2msg":
+                name = f"{name} [{schema.encoding} schema, not ros2msg or ros1msg]"
             topics[channel.topic] = name
         return topics
 
     def _open_loader(self) -> None:
+        if self.topic in self._ros1_schemas:  # (kiss-icp's loader reads ROS 2 messages only)
+            self.loader = None
+            summary = self._summary()
+            counts = summary.statistics.channel_message_counts if summary.statistics is not None else None
+            self.n_scans = (sum(n for c, n in counts.items() if summary.channels[c].topic == self.topic) if counts is not None
+                            else sum(1 for _ in self._mcap_messages(self.topic)))
+            return
         from kiss_icp.datasets.mcap import McapDataloader
 
         with guarded_loader("mcap", str(self.path)):
             self.loader = McapDataloader(str(self.path), topic=self.topic)
         self.n_scans = int(self.loader.n_scans)
 
+    def _mcap_messages(self, topic: str) -> Iterator[Any]:
+        """The raw MCAP messages of ``topic`` in log-time order, as kiss-icp's loader reads them."""
+        from mcap.reader import make_reader
+
+        with open(self.path, "rb") as fh:
+            for _, _, message in make_reader(fh).iter_messages(topics=[topic], log_time_order=True):
+                yield message
+
     def _messages(self, topic: str) -> Iterator[tuple[int, Any]]:
         # (a message that cannot be decoded is a DataError naming it: _read_all)
+        if topic in self._ros1_schemas:
+            from rosbags.typesys import Stores, get_typestore
+            from rosbags.typesys.msg import get_types_from_msg
+
+            msgtype, schema = self._ros1_schemas[topic]
+            store = get_typestore(Stores.EMPTY)
+            store.register(get_types_from_msg(schema.data.decode(), msgtype))
+            for k, message in enumerate(self._mcap_messages(topic)):
+                yield k, store.deserialize_ros1(message.data, msgtype)
+            return
         for k, item in enumerate(self.loader.read_ros2_messages(str(self.path), topics=[topic])):
             yield k, item.ros_msg
+
+
+def _ros2_type_name(name: str) -> str:
+    """A ROS 1 message type under its ROS 2 name (``sensor_msgs/PointCloud2``: ``sensor_msgs/msg/PointCloud2``)."""
+    package, _, message = name.rpartition("/")
+    return f"{package}/msg/{message}" if package and "/" not in package else name
 
 
 __all__ = ["McapScans", "RosbagScans", "guarded_loader", "require_modules"]

@@ -26,7 +26,8 @@ from typing import Any
 import numpy as np
 
 from lidarkit.errors import EvaluationError, LidarKitError
-from lidarkit.io.base import INSTANT_FRACTION, Scan
+from lidarkit.io.base import INSTANT_FRACTION, Scan, classify_instant
+from lidarkit.io.rosbag import sweep_length
 from lidarkit.trajectory import Trajectory
 
 
@@ -49,25 +50,44 @@ def estimate_instant(registration: Any, scan: Scan | None) -> str | None:
 
 
 def stamps_at_instant(stamps_s: np.ndarray | None, scan: Scan | None, instant: str | None,
-                      all_stamps_s: np.ndarray | None = None) -> tuple[np.ndarray | None, str | None]:
+                      all_stamps_s: np.ndarray | None = None, sweep_s: float | None = None) -> tuple[np.ndarray | None, str | None]:
     """``(the scans' stamps moved to the ``instant`` of their sweeps, note or None)``: the estimate's poses refer to
     ``instant`` (a deskewing variant's), its stamps to ``scan.stamp_instant``; stamped as they are, a pose written
     with its scan's stamp (``poses_tum.txt``) was paired with another instant's ground truth by anyone associating by
-    time. The sweep lasts the spacing of consecutive stamps of the whole sequence (``all_stamps_s``; not of a
-    selection such as ``--frames 0:300:5``, which moved them by five sweeps), else the point times' span."""
+    time. The sweep lasts ``sweep_s`` where the dataset knows it (a bag's ``sweep_duration_s``), else the spacing of
+    consecutive stamps of the whole sequence (``all_stamps_s``; not of a selection such as ``--frames 0:300:5``, which
+    moved them by five sweeps) unless ``scan``, a whole sweep, spans clearly less or more (:func:`sweep_length`: a
+    recording keeping every other sweep, 0.1 s of points stamped 0.2 s apart, was moved 0.2 s to the sweep end), else
+    the point times' span."""
     stamp_at = None if scan is None else scan.stamp_instant
     if stamps_s is None or instant is None or stamp_at is None or instant == stamp_at:
         return stamps_s, None
     stamps_s = np.asarray(stamps_s, dtype=np.float64)
     consecutive = np.asarray(stamps_s if all_stamps_s is None else all_stamps_s, dtype=np.float64)
-    if len(consecutive) > 1:
+    span = _whole_sweep_span(scan)
+    if sweep_s is not None and sweep_s > 0:
+        duration = float(sweep_s)
+    elif len(consecutive) > 1:
         duration = float(np.median(np.diff(consecutive)))
+        duration = duration if span is None else sweep_length(span, duration)
     elif scan.point_time_convention != "fraction" and scan.has_time_span():
         duration = float(np.ptp(scan.point_times_s))
     else:
         return stamps_s, None
     shift = (INSTANT_FRACTION[instant] - INSTANT_FRACTION[stamp_at]) * duration
     return stamps_s + shift, f"stamped at the sweep {instant} (the scans' stamps, at the sweep {stamp_at}, moved by {shift:+.4f} s)"
+
+
+def _whole_sweep_span(scan: Scan) -> float | None:
+    """The seconds ``scan``'s points span when they are a whole sweep: their own times place its stamp at the instant
+    it is said to be stamped at (a recording's first message, part of a sweep, is not; the reader says the
+    recording's instant); None without point times in seconds."""
+    if scan.point_time_convention == "fraction" or not scan.has_time_span() or scan.timestamp_s is None:
+        return None
+    times = np.asarray(scan.point_times_s, dtype=np.float64)
+    lo, hi = float(times.min()), float(times.max())
+    stamp = scan.timestamp_s if scan.point_time_convention == "absolute_s" else 0.0
+    return hi - lo if classify_instant((stamp - lo) / (hi - lo)) == scan.stamp_instant else None
 
 
 def like_with_like(reference: Trajectory, estimate_at: str | None, *, sequence: Any, own_ground_truth: bool,
