@@ -74,3 +74,23 @@ def test_demo_refuses_quick_with_its_own_suite_and_a_typo_in_it(tmp_path, capsys
                    "    options: {pairs: [[0, 1]], ground_truth_file: T_target_source.txt}\n    methods: [vanila]\n")
     assert cli_exit_code(["demo", "--suite", str(icp), "--out", str(tmp_path / "d2")]) == 1
     assert "unknown ICP method 'vanila'" in capsys.readouterr().err
+
+
+
+def test_demo_takes_progress_and_no_progress_as_bench_does(capsys):
+    """bench, odometry and sim take --progress/--no-progress; demo refused --no-progress as an unknown option. (A demo
+    run costs ~10 s, the bundled trajectories' evaluation included: the option is checked on the command and its help.)"""
+    import typer
+
+    from lidarkit.cli import app
+
+    demo = typer.main.get_command(app).commands["demo"]
+    bench = typer.main.get_command(app).commands["bench"]
+    flags = {param.name: (param.opts, param.secondary_opts, param.default, param.help) for param in demo.params}
+    assert flags["progress"][:3] == (["--progress"], ["--no-progress"], True)
+    assert flags["progress"][3] == next(p.help for p in bench.params if p.name == "progress")  # the same words
+    from conftest import cli_exit_code
+
+    assert cli_exit_code(["demo", "--help"]) == 0
+    text = " ".join(capsys.readouterr().out.replace("│", " ").split())
+    assert "--progress --no-progress" in text and "Progress bar on stderr" in text

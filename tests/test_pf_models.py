@@ -521,3 +521,21 @@ def test_integrate_odometry_checks_shapes_and_values():
     np.testing.assert_allclose(integrate_odometry([[0, 1, 0]], [1, 2, 0]), [[1, 2, 0], [2, 2, 0]])
     np.testing.assert_allclose(integrate_odometry([0, 1, 0]), [[0, 0, 0], [1, 0, 0]])
     np.testing.assert_allclose(integrate_odometry(np.zeros((0, 3)), (1, 2, 0.5)), [[1, 2, 0.5]])
+
+
+def test_kalman_kernels_refuse_an_explicit_float32_they_would_ignore():
+    """PFConfig(kernel="kalman", dtype="float32") was accepted and run in float64; the default dtype (unset, also through
+    replace) and an explicit float64 still build a Kalman-kernel filter, which runs float64."""
+    with pytest.raises(ConfigError) as err:
+        PFConfig(kernel="kalman", dtype="float32")
+    assert str(err.value) == ("pf config: dtype float32 is for point particles; the Kalman kernels (kernel='kalman') run "
+                              "float64 (leave dtype unset)")
+    with pytest.raises(ConfigError, match="dtype float32 is for point particles"):
+        PFConfig(dtype="float32").replace(kernel="kalman")
+    landmarks_xy = np.array([[0.0, 5.0], [5.0, 0.0]])
+    for cfg in (PFConfig(kernel="kalman"), PFConfig(kernel="kalman", dtype="float64"), PFConfig().replace(kernel="kalman"),
+                PFConfig(kernel="kalman").replace(likelihood="nearest", estimator="best", q_as="std")):
+        pf = make_filter(landmarks_xy, cfg.replace(n_particles=4), rng=0)
+        pf.initialize_gaussian()
+        assert isinstance(pf, KalmanParticleFilter) and pf.states.dtype == np.float64
+    assert PFConfig(kernel="kalman").replace(kernel="point").dtype == "float32"

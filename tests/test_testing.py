@@ -537,3 +537,30 @@ def test_a_bench_record_of_the_pinned_data_written_another_way_passes(tmp_path):
     with pytest.raises(EvaluationError, match=r"the result's job dataset differs from the pinned job .*: path .*sequence '01' "
                                               r"\(pinned <absent>\)"):
         assert_no_worse_than(other_sequence, baseline, experiment="kitti", metric="ape_rmse_m", tolerance=1.0)
+
+
+def test_a_missing_drift_metric_says_why_and_none_values_are_named_apart():
+    """A run shorter than the devkit's 100 m segments has no drift: the message said only "not in the result" though
+    the result records why; a mapping holding the metric as None read "(it has: )"."""
+    from lidarkit.odometry import run
+
+    short = run("sim:street?frames=3&beams=8&azimuths=90", "vanilla")
+    note = short.metrics["kitti_drift_note"]
+    assert "shorter than the shortest devkit segment (100 m)" in note
+    with pytest.raises(EvaluationError) as err:
+        assert_no_worse_than(short, {"drift_translation_pct": 1.0})
+    assert str(err.value).endswith(f"; KITTI drift not computed: {note}")
+    assert "metric 'drift_translation_pct' not in the result (it has: ape_rmse_m, " in str(err.value)
+    with pytest.raises(EvaluationError) as err:  # a bench record keeps the note with its odometry metrics
+        assert_no_worse_than({"status": "ok", "metrics": {"ape_rmse_m": 0.1}, "info": {"odometry_metrics": short.metrics}},
+                             {"drift_translation_pct": 1.0})
+    assert str(err.value) == ("assert_no_worse_than: metric 'drift_translation_pct' not in the result (it has: ape_rmse_m); "
+                              f"KITTI drift not computed: {note}")
+    with pytest.raises(EvaluationError) as err:
+        assert_no_worse_than({"drift_translation_pct": None}, {"drift_translation_pct": 1.0})
+    assert str(err.value) == ("assert_no_worse_than: metric 'drift_translation_pct' not in the result (it has no numeric "
+                              "metric; present but None: drift_translation_pct)")
+    with pytest.raises(EvaluationError) as err:  # (not a drift metric: no drift note)
+        assert_no_worse_than({"ape_rmse_m": 0.1}, {"ape_rmse_m": None, "hz": 10}, metric="ape_rmse_m")
+    assert str(err.value) == ("assert_no_worse_than: metric 'ape_rmse_m' not in the baseline (it has: hz; present but None: "
+                              "ape_rmse_m)")

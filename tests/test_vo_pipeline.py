@@ -370,3 +370,23 @@ def test_a_result_reads_as_one_line_of_counts(sim):
     assert repr(result) == (f"VOResult({name!r}, 7 frames in {result.runtime_s:.3g} s, 6 of 6 pairs accepted, scale none)")
     shorter = MonoVO(_cfg("none"), K).run(images[:3])
     assert repr(shorter) == (f"VOResult({name!r}, 3 frames in {shorter.runtime_s:.3g} s, 2 of 2 pairs accepted, scale none)")
+
+
+def test_a_folder_path_is_refused_with_the_reader_to_use(sim, tmp_path):
+    """A str was read one frame per character ("none of the first 10 frames can be used"), a Path failed on len():
+    both are one DataError naming ImageFolder, which then reads the same folder."""
+    from pathlib import Path
+
+    from lidarkit.io.images import ImageFolder
+
+    traj, K, images = sim
+    for i, image in enumerate(images[:3]):
+        cv2.imwrite(str(tmp_path / f"{i:06d}.png"), image)
+    for path in (str(tmp_path), Path(tmp_path)):
+        with pytest.raises(DataError) as err:
+            MonoVO(_cfg("none"), K).run(path)
+        assert str(err.value) == ("MonoVO.run images: a path is no image sequence: pass "
+                                  f"lidarkit.io.images.ImageFolder({str(tmp_path)!r})")
+    with pytest.raises(DataError, match="a generator is neither an ImageSequence"):
+        MonoVO(_cfg("none"), K).run(image for image in images)
+    assert MonoVO(_cfg("none"), K).run(ImageFolder(tmp_path)).accepted_pairs == 2

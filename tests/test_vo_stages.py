@@ -503,3 +503,24 @@ def test_intrinsics_guess_and_files(tmp_path):
         read_intrinsics(tmp_path / "bad.txt")
     with pytest.raises(DataError, match="invalid image size"):
         K_from_image_size(0, 10)
+
+
+def test_intrinsics_that_are_no_numbers_are_data_errors():
+    """A str focal length was a raw ValueError, a str image size a raw TypeError, a str focal factor was repeated
+    max(w, h) times: each is the one-line DataError of the value it names."""
+    from lidarkit.vo import K_matrix
+
+    with pytest.raises(DataError) as err:
+        K_matrix("a", 1, 2, 3)
+    assert str(err.value) == "intrinsics: invalid intrinsics fx='a', fy=1, cx=2, cy=3"
+    with pytest.raises(DataError) as err:
+        K_from_image_size("1241", "376")
+    assert str(err.value) == "intrinsics: invalid image size width='1241', height='376'"
+    with pytest.raises(DataError) as err:
+        K_from_image_size(1241, 376, focal_factor="0.9")
+    assert str(err.value) == "intrinsics: invalid focal factor '0.9': must be a finite number > 0"
+    with pytest.raises(DataError, match="invalid intrinsics"):
+        K_matrix(np.array([700.0, 710.0]), 700, 600, 180)
+    K = K_matrix(np.float32(700), np.int64(710), np.array(600.0), 180)
+    np.testing.assert_array_equal(K, [[700, 0, 600], [0, 710, 180], [0, 0, 1]])
+    assert K.dtype == np.float64 and K_from_image_size(1241.0, 376)[0, 0] == pytest.approx(0.9 * 1241)

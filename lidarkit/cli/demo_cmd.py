@@ -18,10 +18,13 @@ def demo_command(
     out_dir: Path = typer.Option(Path("results/demo"), "--out", "-o", help="Results folder (resumable: finished jobs are kept)."),
     quick: bool = typer.Option(False, "--quick", help="The reduced suite (seconds instead of minutes)."),
     executor: str = typer.Option("process", "--executor", "-e",  # (no --address: bench's help sent users to it)
-                                 help="serial | process (local process pool sized to the machine) | dask (a local Dask cluster)"),
+                                 help="serial | process (local process pool sized to the machine's CPUs) | "
+                                      "dask (a local Dask cluster)"),
     workers: Optional[int] = typer.Option(None, "--workers", "-j", help="Worker processes (default: CPUs available)."),
     force: bool = typer.Option(False, "--force", help="Rerun jobs that already have a result."),
     suite: Optional[Path] = typer.Option(None, "--suite", help="Run this suite instead of the bundled demo suite."),
+    progress: bool = typer.Option(True, "--progress/--no-progress",
+                                  help="Progress bar on stderr (a line every tenth of the jobs where stderr is no terminal)."),
 ) -> None:
     """Run the bundled demo: ICP variants (real KITTI pair, simulated sequence), particle filter MSE vs particles,
     visual odometry on the sample frames, and the evaluation of bundled trajectories; print where the report is."""
@@ -38,7 +41,8 @@ def demo_command(
                           source="--quick")
 
     def runner(suite_obj, out, *, executor, workers, force):
-        return run_with_progress(suite_obj, out, executor=executor, workers=workers, address=None, force=force)
+        return run_with_progress(suite_obj, out, executor=executor, workers=workers, address=None, force=force,
+                                 progress=progress)
 
     result = run_demo(out_dir, quick=quick, suite_path=suite, executor=executor, workers=workers, force=force, runner=runner)
     for experiment, reason in result.skipped:

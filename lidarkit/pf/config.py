@@ -184,6 +184,8 @@ class PFConfig(BaseModel):
                                            ("moment_matching", self.moment_matching != "none"), ("antithetic", self.antithetic)) if on]
             if moves:
                 raise ValueError(f"{', '.join(moves)} move point particles; the Kalman kernels (kernel='kalman') resample by splitting")
+            if "dtype" in self.model_fields_set and self.dtype == "float32":  # (accepted, then run in float64)
+                raise ValueError("dtype float32 is for point particles; the Kalman kernels (kernel='kalman') run float64 (leave dtype unset)")
         elif self.innovation_gate > 0:
             raise ValueError("innovation_gate gates the readings of the Kalman kernels (kernel='kalman'); point particles weigh every reading")
         return self
@@ -256,7 +258,9 @@ class PFConfig(BaseModel):
         return f"{min(self.n_particles, self.kld_min_n):,}..{self.kld_max_n:,} (KLD)" if self.kld else f"{self.n_particles:,}"
 
     def replace(self, **changes) -> PFConfig:
-        return PFConfig.make(**{**self.model_dump(), **changes})
+        """A copy with ``changes``; the settings left at their defaults stay unset (so kernel='kalman' is no clash with
+        the point particles' default dtype)."""
+        return PFConfig.make(**{**self.model_dump(exclude_unset=True), **changes})
 
 
 def _config_error(err: ValidationError) -> ConfigError:

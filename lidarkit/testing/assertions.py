@@ -105,6 +105,7 @@ def assert_no_worse_than(
     now_metrics = metrics_of(result)
     if isinstance(baseline, Baseline):
         job = baseline.job(method, dataset, seed, experiment=experiment, task=task)
+        ref_given: Any = job
         ref_metrics = {k: float(v) for k, v in job["metrics"].items() if isinstance(v, (int, float))}
         band = float(job.get("bands", {}).get(metric, 0.0))
         _check_same_data(result, now_metrics, job, ref_metrics)
@@ -115,12 +116,10 @@ def assert_no_worse_than(
         if picks:  # (ignored: a wrong method name passed against the plain mapping)
             raise ConfigError(f"{', '.join(picks)} pick a job of a baseline folder; the baseline given is a plain "
                               f"{type(baseline).__name__}", source="assert_no_worse_than")
-        ref_metrics = metrics_of(baseline)
-    for name, source in ((metric, now_metrics), (metric, ref_metrics)):
-        if name not in source:
-            which = "result" if source is now_metrics else "baseline"
-            raise EvaluationError(f"metric {name!r} not in the {which} (it has: {', '.join(sorted(source))})",
-                                  source="assert_no_worse_than")
+        ref_metrics, ref_given = metrics_of(baseline), baseline
+    for which, numbers, given in (("result", now_metrics, result), ("baseline", ref_metrics, ref_given)):
+        if metric not in numbers:
+            raise EvaluationError(_missing_metric(metric, which, numbers, given), source="assert_no_worse_than")
     try:
         tol = band if tolerance is None else float(tolerance)
     except (TypeError, ValueError):
@@ -138,6 +137,30 @@ def assert_no_worse_than(
     if not math.isfinite(now) or worse_by > max(tol, tie_tolerance(np.array([now]), np.array([ref]))):
         raise AssertionError(f"regression: {metric} = {now:.6g}, baseline {ref:.6g} (worse by {worse_by:.4g}, "
                              f"tolerance {tol:.4g})")
+
+
+def _missing_metric(metric: str, which: str, numbers: Mapping[str, float], given: Any) -> str:
+    """Why ``metric`` is not among the ``numbers`` read from ``given``: the keys it has, those it holds as None
+    apart (a None value read "it has: "), and for a drift metric the reason the result records for leaving it out
+    (a path shorter than the devkit's 100 m segments read as a metric missing for no reason)."""
+    from lidarkit.odometry.result import OdometryResult
+
+    inner: Mapping[str, Any] = {}
+    notes: dict[str, Any] = {}
+    if isinstance(given, OdometryResult):
+        notes = dict(given.metrics)
+    elif isinstance(given, Mapping):
+        inner = given.get("metrics") if isinstance(given.get("metrics"), Mapping) else given
+        info = given.get("info") if isinstance(given.get("info"), Mapping) else {}
+        odometry = info.get("odometry_metrics") if isinstance(info.get("odometry_metrics"), Mapping) else {}
+        notes = {**odometry, **inner}  # (a bench record keeps the run's notes with its odometry metrics)
+    has = [f"it has: {', '.join(sorted(numbers))}" if numbers else "it has no numeric metric"]
+    nones = sorted(str(k) for k, v in inner.items() if v is None)
+    if nones:
+        has.append(f"present but None: {', '.join(nones)}")
+    message = f"metric {metric!r} not in the {which} ({'; '.join(has)})"
+    note = notes.get("kitti_drift_note") if metric.startswith("drift_") else None
+    return f"{message}; KITTI drift not computed: {note}" if isinstance(note, str) and note else message
 
 
 def _check_same_data(result: Any, now_metrics: dict[str, float], job: Mapping[str, Any], ref_metrics: dict[str, float]) -> None:

@@ -13,6 +13,7 @@ first frame is rejected like any other odd frame.
 from __future__ import annotations
 
 import logging
+import os
 import re
 import time
 from collections import Counter
@@ -244,6 +245,14 @@ class MonoVO:
         correspondences of every accepted frame (for the feature GIF). ``on_frame(index)`` is called as each frame is
         done (a progress bar).
         """
+        # a path string was read as one frame per character, a Path failed on len()
+        if isinstance(images, (str, bytes, os.PathLike)):
+            folder = os.fsdecode(images)
+            raise DataError(f"a path is no image sequence: pass lidarkit.io.images.ImageFolder({folder!r})",
+                            source="MonoVO.run images")
+        if not hasattr(images, "__len__") or not (hasattr(images, "read_image") or hasattr(images, "__getitem__")):
+            raise DataError(f"a {type(images).__name__} is neither an ImageSequence (len + read_image) nor a list of "
+                            "(H, W) uint8 arrays", source="MonoVO.run images")
         n = len(images)
         if n < 1:
             raise DataError("no images to process", source=getattr(images, "name", "images"))
