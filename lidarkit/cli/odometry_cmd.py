@@ -146,7 +146,7 @@ def odometry(
         table.add_row("ground truth", m.get("ground_truth_note") or "none: no scores")
     cov = m.get("pose_covariance")
     if cov and cov.get("final_position_sigma_m") is not None:
-        table.add_row("propagated end-pose 1-sigma (m / deg)", f"{cov['final_position_sigma_m']:.3f} / {cov['final_heading_sigma_deg']:.3f}")
+        table.add_row("propagated end position / heading 1-sigma (m / deg)", f"{cov['final_position_sigma_m']:.3f} / {cov['final_heading_sigma_deg']:.3f}")
         if "relative_nees_mean" in cov:
             left_out = cov.get("relative_nees_frames_left_out", 0)
             table.add_row("NEES of 1-frame motions (6 = calibrated)", f"{cov['relative_nees_mean']:.2f} ({100 * cov['relative_inside_95']:.0f} % inside 95 %)"
