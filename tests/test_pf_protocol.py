@@ -545,3 +545,18 @@ def test_one_estimator_may_be_given_by_its_name(stachniss):
     as_tuple = run_protocol(stachniss, 50, 0, estimators=("best",), with_ape_rpe=False)
     assert list(by_name.estimates) == ["best", "mean"]
     assert by_name.metrics["mse_m2"] == as_tuple.metrics["mse_m2"]
+
+
+def test_the_best_estimate_of_uniform_weights_is_the_mean_and_one_kernel_is_never_resampled(stachniss):
+    """Before the first reading every weight is equal and "best" took particle 0, one prior draw (2.6 m from the start
+    at N=100), which set the run's "estimate vs dead reckoning" max and its APE; with uniform weights it is the mean.
+    A single Kalman kernel (a plain EKF) counted a resampling at every step (331 of 331) though it never splits."""
+    from lidarkit.pf.protocol import run_recorded
+
+    run = run_protocol(stachniss, 100, seed=0, estimators=("mean", "best"), with_ape_rpe=False)
+    best, mean = run.trajectory("best").poses_se3[0], run.trajectory("mean").poses_se3[0]
+    np.testing.assert_allclose(best, mean, atol=1e-12)
+    recorded = run_recorded(stachniss, 100, 0, estimator="best")
+    assert recorded.metrics["estimate_vs_dead_reckoning_m"]["max"] < 1.0  # (a prior draw: 2.63 m)
+    ekf = run_recorded(stachniss, 1, 0, kernel="kalman")
+    assert int(ekf.resampled.sum()) == 0

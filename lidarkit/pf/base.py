@@ -296,6 +296,8 @@ class LandmarkFilterBase:
     def needs_resampling(self) -> bool:
         if self._uniform:
             return False
+        if self.n == 1 and not self.config.kld and self.injection_probability() == 0.0:
+            return False  # one hypothesis (N=1: a plain EKF) would only copy itself: counted 331 resamplings of none
         thr = self.config.ess_threshold
         if thr >= 1.0 or self.injection_probability() > 0.0:
             return True
@@ -373,6 +375,9 @@ class LandmarkFilterBase:
         """Pose ``(3,)`` float64: weighted mean (circular mean for theta) or the highest-weight hypothesis."""
         kind = kind or self.config.estimator
         if kind == "best":
+            if self._uniform:  # no hypothesis outweighs another (before the first reading; a step without readings after
+                # a resampling): the mean, not whichever came first (a prior draw 2.6 m off read as the run's estimate)
+                return self._mean_pose()
             return self._best_pose(int(np.argmax(self.weights)))
         if kind != "mean":
             raise ConfigError(f"unknown estimator {kind!r}; known: mean, best", source="estimator")
