@@ -468,3 +468,14 @@ def test_a_sweep_without_a_return_names_the_dataset_once_and_its_frame(tmp_path)
         odometry.run(blind, "kiss")
     assert str(run.value).startswith("sim:open?seed=1 (frame 0): sweep 0 has no return within 1-15 m: ")
     assert str(run.value).count("sim:open?seed=1") == 1
+
+
+def test_a_sensor_too_low_without_heave_is_not_told_to_lower_its_heave():
+    """sensor_height_m 0.04 with heave_m 0 was told "or a smaller heave_m", which cannot be smaller."""
+    from lidarkit.sim.lidar import LidarSimConfig
+
+    with pytest.raises(Exception) as exc:
+        LidarSimConfig(sensor_height_m=0.04, heave_m=0.0)
+    message = str(exc.value)
+    assert "sensor_height_m 0.04 m is below the 0.05 m the sensor must stay above the ground" in message
+    assert "or a smaller heave_m" not in message

@@ -142,6 +142,9 @@ class LidarSimConfig(BaseModel):
             raise ValueError("min_range_m must be below max_range_m")
         check_terrain_slope(self.terrain_amplitude_m, self.terrain_wavelength_m)
         lowest_m = 2.0 * self.heave_m + MIN_GROUND_CLEARANCE_M  # the heave swings up to 2 x heave_m from its start
+        if self.sensor_height_m < lowest_m - 1e-9 and self.heave_m == 0:  # (no heave to make smaller)
+            raise ValueError(f"sensor_height_m {self.sensor_height_m:g} m is below the {MIN_GROUND_CLEARANCE_M:g} m the sensor "
+                             "must stay above the ground")
         if self.sensor_height_m < lowest_m - 1e-9:  # (0.01 m with the default 2 cm heave swept from below the ground)
             raise ValueError(f"sensor_height_m {self.sensor_height_m:g} m with heave_m {self.heave_m:g} m can take the sensor below "
                              f"the ground (the heave lowers it by up to 2 x heave_m, and it must stay {MIN_GROUND_CLEARANCE_M:g} m "
