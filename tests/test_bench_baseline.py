@@ -583,3 +583,29 @@ def test_an_icp_pair_job_of_kiss_on_kitti_pins_the_angle_correction(tmp_path, mo
     lines = check(baseline.path).lines()
     assert any(line.startswith("protocol changed: kiss on K00 (seed 0): kitti_angle_correction") for line in lines), lines
     assert not any(line.startswith("regression") for line in lines), lines
+
+
+def test_scans_reached_through_a_linked_folder_are_pinned(tmp_path):
+    """A KITTI sequence whose velodyne/ is a symbolic link to scans kept elsewhere (common for large data in CI): the
+    checksums held calib, times and poses only, so changed scans read as a regression of the code; a loop of links is
+    walked once."""
+    import shutil
+
+    from conftest import shared_path
+
+    from lidarkit.bench.baseline import dataset_checksums
+
+    sequence = tmp_path / "root" / "sequences" / "00"
+    sequence.mkdir(parents=True)
+    for name in ("calib.txt", "times.txt"):
+        shutil.copy(shared_path("kitti_odometry", "sequences", "00", name), sequence / name)
+    scans = tmp_path / "scans"
+    shutil.copytree(shared_path("kitti_odometry", "sequences", "00", "velodyne"), scans)
+    (sequence / "velodyne").symlink_to(scans, target_is_directory=True)
+    (scans / "loop").symlink_to(scans, target_is_directory=True)
+    spec = {"kind": "kitti", "path": str(sequence), "name": "k00"}
+    pinned = dataset_checksums(spec)
+    assert sorted(k for k in pinned if k.endswith(".bin")) == [f"sequences/00/velodyne/{i:06d}.bin" for i in range(10)]
+    shutil.copy(scans / "000004.bin", scans / "000005.bin")
+    changed = dataset_checksums(spec)
+    assert [k for k in pinned if changed[k] != pinned[k]] == ["sequences/00/velodyne/000005.bin"]

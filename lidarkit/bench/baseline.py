@@ -163,7 +163,21 @@ def dataset_folder(spec: Mapping[str, Any]) -> Path:
 
 
 def _files_under(path: Path) -> list[Path]:
-    return [path] if path.is_file() else sorted(p for p in path.rglob("*") if p.is_file())
+    """Every file under ``path``, through linked folders too (a sequence whose ``velodyne`` links to the scans kept
+    elsewhere: rglob left its scans out, and changed scans read as a regression of the code); a folder met again
+    through a loop of links is walked once."""
+    if path.is_file():
+        return [path]
+    files, seen = [], set()
+    for folder, subfolders, names in os.walk(path, followlinks=True):
+        real = os.path.realpath(folder)
+        if real in seen:
+            subfolders[:] = []
+            continue
+        seen.add(real)
+        subfolders.sort()
+        files += [Path(folder) / name for name in names if (Path(folder) / name).is_file()]
+    return sorted(files)
 
 
 def dataset_checksums(spec: Mapping[str, Any], cache: dict[str, str] | None = None) -> dict[str, str]:
