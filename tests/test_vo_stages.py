@@ -524,3 +524,30 @@ def test_intrinsics_that_are_no_numbers_are_data_errors():
     K = K_matrix(np.float32(700), np.int64(710), np.array(600.0), 180)
     np.testing.assert_array_equal(K, [[700, 0, 600], [0, 710, 180], [0, 0, 1]])
     assert K.dtype == np.float64 and K_from_image_size(1241.0, 376)[0, 0] == pytest.approx(0.9 * 1241)
+
+
+def test_few_pose_inliers_with_most_correspondences_explained_is_insufficient_parallax():
+    """A pair whose essential matrix explains nearly all correspondences (>= 90 %) but gives few pose inliers (at
+    walking pace, or a standstill) was "too few (pose) inliers", which moves the reference on, so the baseline never
+    grew. With the checks on it is insufficient parallax (the reference stays); with them off the estimator's failure
+    is kept, and a pair whose matrix leaves more unexplained (lost tracking, noisy matches) stays too few inliers."""
+    from dataclasses import replace
+
+    from lidarkit.vo.two_view import TwoViewEstimate
+
+    cfg = SanityConfig(min_inliers=30)
+    explained = TwoViewEstimate(np.eye(3), np.zeros(3), np.zeros(1200, bool), "none", 0, 0.0,
+                                "too few pose inliers (2) from E-ransac", epipolar_inliers=1100)
+    assert check_pose(explained, cfg) == (
+        "insufficient parallax (the essential matrix explains 1100 of 1200 correspondences; too few pose inliers (2) "
+        "from E-ransac): baseline short for the scene depth, translation direction undefined")
+    assert check_pose(explained, SanityConfig(enabled=False)) == "too few pose inliers (2) from E-ransac"
+    lost = TwoViewEstimate(np.eye(3), np.zeros(3), np.zeros(1200, bool), "none", 0, 0.0,
+                           "too few pose inliers (2) from E-ransac", epipolar_inliers=800)  # 67 %: noisy or lost
+    assert check_pose(lost, cfg) == "too few pose inliers (2) from E-ransac"
+    near_few = TwoViewEstimate(np.eye(3), np.array([0, 0, 1.0]), np.ones(1200, bool), "E-ransac", 12, 5.0,
+                               epipolar_inliers=1150)
+    assert check_pose(near_few, cfg) == (
+        "insufficient parallax (the essential matrix explains 1150 of 1200 correspondences; too few inliers (12 < 30)): "
+        "baseline short for the scene depth, translation direction undefined")
+    assert check_pose(replace(near_few, epipolar_inliers=1000), cfg) == "too few inliers (12 < 30)"

@@ -80,7 +80,8 @@ class GeometryConfig(_Stage):
     ``normalize`` estimates E on K^-1-normalized points (K = identity, threshold / fx): with OpenCV 5 USAC_MAGSAC on
     pixel coordinates returns no solution on KITTI pairs, normalized coordinates work. ``inliers``: the
     correspondences kept for refinement and scale: ``cheirality`` (recoverPose's: in front of both cameras and
-    nearer than 50 baselines) or ``epipolar`` (all RANSAC inliers, far points included).
+    nearer than 50 baselines; with the sanity checks on, at any distance when fewer than sanity.min_inliers are that
+    near and those move: walking pace) or ``epipolar`` (all RANSAC inliers, far points included).
     """
 
     estimators: tuple[Literal["ransac", "magsac", "lmeds"], ...] = ("ransac",)

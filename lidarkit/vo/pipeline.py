@@ -437,8 +437,11 @@ class MonoVO:
             return None, f"too few matches ({len(idx_ref)} < {cfg.sanity.min_matches})"
         pts_ref = ref.points_px[idx_ref]
         pts_cur = cur.points_px[idx_cur]
+        # far points stand in for too few near ones (walking pace) where the checks reject a pure rotation, which
+        # far points alone cannot tell from a translation under a guessed K
         est = estimate_two_view(pts_ref, pts_cur, self.K, cfg.geometry, min_inliers=cfg.sanity.min_inliers,
-                                rng=None if cfg.seed is None else correspondence_rng(cfg.seed, j))
+                                rng=None if cfg.seed is None else correspondence_rng(cfg.seed, j),
+                                far_points=cfg.sanity.enabled)
         diag.method = est.method
         diag.n_inliers = est.n_inliers
         if est.ok:

@@ -6,7 +6,7 @@ import numpy as np
 
 from lidarkit.geometry import rotation_angle_deg
 from lidarkit.vo.config import SanityConfig
-from lidarkit.vo.two_view import TwoViewEstimate
+from lidarkit.vo.two_view import TwoViewEstimate, few_inliers_parallax_reason
 
 
 def check_pose(estimate: TwoViewEstimate, cfg: SanityConfig | None = None) -> str | None:
@@ -22,8 +22,8 @@ def check_pose(estimate: TwoViewEstimate, cfg: SanityConfig | None = None) -> st
         par = min(estimate.rotation_only_px, estimate.parallax_px if estimate.ok else np.inf)
         return (f"insufficient parallax ({par:.2f} px < {cfg.min_parallax_px:g} px): pure rotation "
                 "or standstill, translation direction undefined")
-    if not estimate.ok:
-        return estimate.failure
+    if not estimate.ok:  # (too few pose inliers at walking pace: most correspondences explained, no parallax yet)
+        return (cfg.enabled and few_inliers_parallax_reason(estimate, cfg.min_inliers)) or estimate.failure
     R, t = estimate.R_cur_ref, estimate.t_cur_ref
     if not (np.all(np.isfinite(R)) and np.all(np.isfinite(t))):
         return "non-finite rotation or translation"
@@ -35,7 +35,8 @@ def check_pose(estimate: TwoViewEstimate, cfg: SanityConfig | None = None) -> st
     if not cfg.enabled:
         return None
     if estimate.n_inliers < cfg.min_inliers:
-        return f"too few inliers ({estimate.n_inliers} < {cfg.min_inliers})"
+        return (few_inliers_parallax_reason(estimate, cfg.min_inliers)
+                or f"too few inliers ({estimate.n_inliers} < {cfg.min_inliers})")
     angle = float(rotation_angle_deg(R))
     if angle > cfg.max_rotation_deg:
         return f"rotation flip guard ({angle:.1f} deg > {cfg.max_rotation_deg:g} deg)"

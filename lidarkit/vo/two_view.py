@@ -16,6 +16,7 @@ correspondences before they reach OpenCV, so the seed selects the samples; see :
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field, replace
+from typing import NamedTuple
 
 import cv2
 import numpy as np
@@ -32,6 +33,7 @@ class TwoViewEstimate:
     """Relative pose of the current frame w.r.t. the reference frame, with its support.
 
     ``inliers``: ``(N,) bool`` over the input correspondences (RANSAC and cheirality inliers);
+    ``epipolar_inliers``: the chosen matrix's RANSAC inliers (also of a pair failed for too few pose inliers);
     ``parallax_px``: median rotation-compensated image motion of the inliers (0 for a pure rotation);
     ``rotation_only_px``: median residual of the best pure-rotation fit with K (small: no translation; needs K right);
     ``attempts``: one line per estimator tried (inliers or why it failed);
@@ -56,6 +58,7 @@ class TwoViewEstimate:
     fundamental_inliers: int = 0
     rotation_homography_px: float = float("inf")
     rotation_focal_px: float = float("nan")
+    epipolar_inliers: int = 0
 
     @property
     def ok(self) -> bool:
@@ -81,9 +84,42 @@ class Degeneracy:
 
 
 def _failed(n: int, reason: str, attempts: list[str], rotation_only_px: float = float("inf"),
-            degeneracy: Degeneracy | None = None) -> TwoViewEstimate:
+            degeneracy: Degeneracy | None = None, epipolar_inliers: int = 0) -> TwoViewEstimate:
     return TwoViewEstimate(np.eye(3), np.zeros(3), np.zeros(n, bool), "none", 0, 0.0, reason, tuple(attempts),
-                           rotation_only_px, **asdict(degeneracy or Degeneracy()))
+                           rotation_only_px, **asdict(degeneracy or Degeneracy()), epipolar_inliers=epipolar_inliers)
+
+
+#: depth limit (in baselines, in both cameras) of the cheirality inliers: recoverPose's default; nearer points are
+#: triangulated under more than ~1 deg and fix the translation direction
+NEAR_BASELINES = 50.0
+#: rotation-compensated image motion (px, median) the points in front at any distance need to stand in for too few
+#: near ones (sanity.min_parallax_px's default), and its least ratio to their median Sampson error (the match noise):
+#: KLT tracks at walking pace move 1.2 px at 72-75x (translation direction 0.4 deg off); the ORB matches of a pure
+#: rotation "move" 0.8 px at 5x, its KLT tracks 0.04 px
+FAR_POINTS_MIN_PARALLAX_PX = 0.5
+FAR_POINTS_MIN_SIGNAL_TO_NOISE = 20.0
+#: a pair whose essential matrix explains at least this share of its correspondences but gives few pose inliers lacks
+#: parallax (a standstill, or a baseline short against the scene depth: at walking pace E-RANSAC kept 1198 of 1207 KLT
+#: tracks); lost tracking, or noisy descriptor matches (ORB on a pure rotation: 72 %), leave more unexplained
+LOW_PARALLAX_EPIPOLAR_SHARE = 0.9
+
+
+def mostly_explained(epipolar_inliers: int, n_correspondences: int, needed: int) -> bool:
+    """At least :data:`LOW_PARALLAX_EPIPOLAR_SHARE` of the correspondences, and ``needed``, fit the essential
+    matrix."""
+    return epipolar_inliers >= max(needed, LOW_PARALLAX_EPIPOLAR_SHARE * n_correspondences)
+
+
+def few_inliers_parallax_reason(estimate: TwoViewEstimate, needed: int) -> str | None:
+    """The insufficient-parallax reason of an estimate with fewer than ``needed`` cheirality inliers whose essential
+    matrix explains nearly all correspondences (:func:`mostly_explained`; the pipeline then keeps its reference, so
+    the baseline grows); None when it does not (tracking lost, noisy matches)."""
+    n = len(estimate.inliers)
+    if (estimate.ok and estimate.n_inliers >= needed) or not mostly_explained(estimate.epipolar_inliers, n, needed):
+        return None
+    few = estimate.failure or f"too few inliers ({estimate.n_inliers} < {needed})"
+    return (f"insufficient parallax (the essential matrix explains {estimate.epipolar_inliers} of {n} correspondences; "
+            f"{few}): baseline short for the scene depth, translation direction undefined")
 
 
 def correspondence_rng(seed: int, frame: int) -> np.random.Generator:
@@ -244,48 +280,78 @@ def parallax_px(R: np.ndarray, norm_ref: np.ndarray, norm_cur: np.ndarray, focal
     return float(np.median(np.linalg.norm(rotated - norm_cur[front], axis=1)) * focal_px)
 
 
+class _Decomposition(NamedTuple):
+    """The best decomposition of an essential matrix: ``n_inliers`` cheirality inliers (in front of both cameras,
+    nearer than the depth limit), ``inliers`` ``(N,) bool`` (those, or every RANSAC inlier with
+    ``inliers="epipolar"``), ``epipolar_inliers`` its RANSAC inliers."""
+
+    n_inliers: int
+    R: np.ndarray
+    t: np.ndarray
+    inliers: np.ndarray
+    epipolar_inliers: int
+
+
 def _recover(E_stack: np.ndarray, a: np.ndarray, b: np.ndarray, K_est: np.ndarray, mask: np.ndarray,
-             inlier_set: str = "cheirality"):
-    """Best (most cheirality inliers) decomposition among the 3x3 blocks of ``E_stack``."""
+             inlier_set: str = "cheirality", max_depth_baselines: float = NEAR_BASELINES) -> _Decomposition | None:
+    """Best (most cheirality inliers within ``max_depth_baselines``) decomposition among the 3x3 blocks of
+    ``E_stack``."""
     best = None
+    epipolar = mask.ravel() > 0
     for i in range(0, E_stack.shape[0] - 2, 3):
         E = E_stack[i:i + 3]
         if not np.all(np.isfinite(E)):
             continue
-        n_good, R, t, pose_mask = cv2.recoverPose(E, a, b, K_est, mask=mask.copy())
-        if best is None or n_good > best[0]:
-            # recoverPose counts only points nearer than 50 baselines in front of both cameras (cheirality);
-            # "epipolar" keeps every RANSAC inlier, including the far points it drops
-            inliers = (mask.ravel() > 0) if inlier_set == "epipolar" else (pose_mask.ravel() > 0)
-            best = (int(n_good), R, t.ravel(), inliers)
+        n_good, R, t, pose_mask, _ = cv2.recoverPose(E, a, b, K_est, distanceThresh=max_depth_baselines,
+                                                     mask=mask.copy())
+        if best is None or n_good > best.n_inliers:
+            # "epipolar" keeps every RANSAC inlier, including the far points the depth limit drops
+            inliers = epipolar if inlier_set == "epipolar" else (pose_mask.ravel() > 0)
+            best = _Decomposition(int(n_good), R, t.ravel(), inliers, int(epipolar.sum()))
     return best
+
+
+def far_points_move(R: np.ndarray, t: np.ndarray, norm_ref: np.ndarray, norm_cur: np.ndarray,
+                    focal_px: float) -> tuple[bool, float]:
+    """Whether far points fix the translation direction of ``R``, ``t`` (refined on them), and their motion: their
+    rotation-compensated motion (median, px) is at least :data:`FAR_POINTS_MIN_PARALLAX_PX` and
+    :data:`FAR_POINTS_MIN_SIGNAL_TO_NOISE` times their median Sampson error (the match noise)."""
+    motion_px = parallax_px(R, norm_ref, norm_cur, focal_px)
+    noise_px = float(np.median(np.abs(sampson_residuals(skew(t) @ R, norm_ref, norm_cur)))) * focal_px
+    return motion_px >= FAR_POINTS_MIN_PARALLAX_PX and motion_px >= FAR_POINTS_MIN_SIGNAL_TO_NOISE * noise_px, motion_px
 
 
 def estimate_two_view(points_ref_px: np.ndarray, points_cur_px: np.ndarray, K: np.ndarray,
                       cfg: GeometryConfig | None = None, min_inliers: int = 8,
-                      rng: np.random.Generator | None = None) -> TwoViewEstimate:
+                      rng: np.random.Generator | None = None, far_points: bool = False) -> TwoViewEstimate:
     """Relative pose from ``(N, 2)`` pixel correspondences and intrinsics ``K (3, 3)``.
 
-    Tries every estimator in ``cfg.estimators`` and keeps the decomposition with most inliers; falls back to the
-    fundamental matrix (E = K^T F K) when no essential matrix gives ``min_inliers``. ``rng`` shuffles the
-    correspondences before the robust estimators see them (``inliers`` is returned in the input order): the same
-    generator state gives identical results, another one other samples. Without ``rng`` the input order is used
-    (deterministic too); ``cv2.setRNGSeed`` has no effect on these OpenCV 5 estimators.
+    Tries every estimator in ``cfg.estimators`` and keeps the decomposition with most cheirality inliers (in front of
+    both cameras and nearer than :data:`NEAR_BASELINES`, recoverPose's count); falls back to the fundamental matrix
+    (E = K^T F K) when no essential matrix gives ``min_inliers``. ``far_points``: then, if the matrix explains nearly
+    all correspondences (:func:`mostly_explained`), the points in front at any distance give the pose when, refined
+    on them, they move (:func:`far_points_move`): at walking pace (4.5 cm a frame) 0-1 of 1200 tracks were that near,
+    1176 in front. Only for callers that reject a pure rotation otherwise (MonoVO with its sanity checks): under a
+    guessed K a pure rotation's far points moved 1.4 px at 126x their Sampson error, which only the K-free
+    homography test tells apart. ``rng`` shuffles the correspondences before the robust estimators see them
+    (``inliers`` is returned in the input order): the same generator state gives identical results, another one
+    other samples. Without ``rng`` the input order is used (deterministic too); ``cv2.setRNGSeed`` has no effect on
+    these OpenCV 5 estimators.
     """
     cfg = cfg or GeometryConfig()
     p0 = np.asarray(points_ref_px, dtype=np.float64).reshape(-1, 2)
     p1 = np.asarray(points_cur_px, dtype=np.float64).reshape(-1, 2)
     if rng is None:
-        return _estimate_ordered(p0, p1, K, cfg, min_inliers)
+        return _estimate_ordered(p0, p1, K, cfg, min_inliers, far_points)
     order = rng.permutation(len(p0))
-    est = _estimate_ordered(p0[order], p1[order], K, cfg, min_inliers)
+    est = _estimate_ordered(p0[order], p1[order], K, cfg, min_inliers, far_points)
     inliers = np.zeros(len(p0), bool)
     inliers[order] = est.inliers
     return replace(est, inliers=inliers)
 
 
 def _estimate_ordered(p0: np.ndarray, p1: np.ndarray, K: np.ndarray, cfg: GeometryConfig,
-                      min_inliers: int) -> TwoViewEstimate:
+                      min_inliers: int, far_points: bool = False) -> TwoViewEstimate:
     n = len(p0)
     attempts: list[str] = []
     if n < 5:
@@ -299,7 +365,8 @@ def _estimate_ordered(p0: np.ndarray, p1: np.ndarray, K: np.ndarray, cfg: Geomet
     else:
         a, b, K_est, thr = p0, p1, np.asarray(K, np.float64), cfg.threshold_px
 
-    best = None  # (n_good, R, t, inliers, method)
+    best = None  # (n_good, R, t, inliers, epipolar inliers, method)
+    matrices = []  # (E, mask, a, b, K_est, method): for the far points
     for name in cfg.estimators:
         E, mask = cv2.findEssentialMat(a, b, K_est, method=_METHODS[name], prob=cfg.confidence, threshold=thr)
         if E is None or mask is None or E.ndim != 2 or E.shape[1] != 3 or E.shape[0] < 3:
@@ -309,8 +376,9 @@ def _estimate_ordered(p0: np.ndarray, p1: np.ndarray, K: np.ndarray, cfg: Geomet
         if rec is None:
             attempts.append(f"E-{name}: non-finite E")
             continue
-        attempts.append(f"E-{name}: {rec[0]} inliers")
-        if best is None or rec[0] > best[0]:
+        matrices.append((E, mask, a, b, K_est, f"E-{name}"))
+        attempts.append(f"E-{name}: {rec.n_inliers} inliers")
+        if best is None or rec.n_inliers > best[0]:
             best = (*rec, f"E-{name}")
 
     if cfg.fundamental_fallback and (best is None or best[0] < min_inliers) and n >= 8:
@@ -323,21 +391,49 @@ def _estimate_ordered(p0: np.ndarray, p1: np.ndarray, K: np.ndarray, cfg: Geomet
             if rec is None:
                 attempts.append("F-fallback: non-finite E")
             else:
-                attempts.append(f"F-fallback: {rec[0]} inliers")
-                if best is None or rec[0] > best[0]:
+                matrices.append((E, mask, n0, n1, np.eye(3), "F-fallback"))
+                attempts.append(f"F-fallback: {rec.n_inliers} inliers")
+                if best is None or rec.n_inliers > best[0]:
                     best = (*rec, "F-fallback")
 
     if best is None:
         return _failed(n, "no essential/fundamental matrix found (" + "; ".join(attempts) + ")", attempts, rot_px,
                        degeneracy)
-    n_good, R, t, inliers, method = best
+    if far_points and best[0] < min_inliers and mostly_explained(best[4], n, min_inliers):
+        far = _far_points_estimate(matrices, n0, n1, focal, cfg, min_inliers)
+        if far is not None:
+            R, t, inliers, n_front, n_epipolar, method, motion_px = far
+            attempts.append(f"{method}: {n_front} inliers in front at any distance, moving {motion_px:.2f} px")
+            return TwoViewEstimate(R, t / max(np.linalg.norm(t), 1e-300), inliers, method, n_front, motion_px, None,
+                                   tuple(attempts), rot_px, **asdict(degeneracy), epipolar_inliers=n_epipolar)
+    n_good, R, t, inliers, n_epipolar, method = best
     if n_good < 5:
-        return _failed(n, f"too few pose inliers ({n_good}) from {method}", attempts, rot_px, degeneracy)
+        return _failed(n, f"too few pose inliers ({n_good}) from {method}", attempts, rot_px, degeneracy,
+                       epipolar_inliers=n_epipolar)
     if cfg.refine and n_good >= 8:
         R, t = refine_pose(R, t, n0[inliers], n1[inliers], focal)
     par = parallax_px(R, n0[inliers], n1[inliers], focal)
     return TwoViewEstimate(R, t / max(np.linalg.norm(t), 1e-300), inliers, method, n_good, par, None, tuple(attempts),
-                           rot_px, **asdict(degeneracy))
+                           rot_px, **asdict(degeneracy), epipolar_inliers=n_epipolar)
+
+
+def _far_points_estimate(matrices: list, n0: np.ndarray, n1: np.ndarray, focal: float, cfg: GeometryConfig,
+                         min_inliers: int) -> tuple | None:
+    """The pose from the points in front of both cameras at any distance (most of them over ``matrices``), refined on
+    them, when they number ``min_inliers`` and move (:func:`far_points_move`): ``(R, t, inliers, n_inliers,
+    epipolar_inliers, method, motion_px)``, else None."""
+    best = None
+    for E, mask, a, b, K_est, method in matrices:
+        rec = _recover(E, a, b, K_est, mask, cfg.inliers, max_depth_baselines=np.inf)
+        if rec is not None and (best is None or rec.n_inliers > best[0].n_inliers):
+            best = (rec, method)
+    if best is None or best[0].n_inliers < max(min_inliers, 8):
+        return None
+    (n_front, R, t, inliers, n_epipolar), method = best
+    if cfg.refine:
+        R, t = refine_pose(R, t, n0[inliers], n1[inliers], focal)
+    moves, motion_px = far_points_move(R, t, n0[inliers], n1[inliers], focal)
+    return (R, t, inliers, n_front, n_epipolar, method, motion_px) if moves else None
 
 
 def triangulate(R_cur_ref: np.ndarray, t_cur_ref: np.ndarray, norm_ref: np.ndarray,
