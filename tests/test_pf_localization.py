@@ -723,3 +723,16 @@ def test_cli_errors_name_the_option_once(capsys):
         assert err == f"error: {line}\n"
         option, reason = err.removeprefix("error: ").split(": ", 1)
         assert option not in reason, err
+
+
+def test_a_kalman_run_folder_records_the_float64_it_ran_and_reads_back(tmp_path):
+    """A Kalman-kernel run's config.yaml recorded the point particles' dtype float32 though the kernels run float64;
+    read back into PFConfig that is refused (an explicit float32 with kernel kalman)."""
+    from lidarkit.pf import PFConfig
+
+    with pytest.raises(SystemExit) as exc:
+        main(["pf", str(shared_path("pf", "robot_mapping_stachniss")), "-n", "1", "--kernel", "kalman", "--recorded",
+              "--out", str(tmp_path / "ekf")])
+    assert exc.value.code in (0, None)
+    recorded = yaml.safe_load((tmp_path / "ekf" / "config.yaml").read_text())["pf"]
+    assert recorded["dtype"] == "float64" and PFConfig(**recorded).kernel == "kalman"
