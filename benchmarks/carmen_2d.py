@@ -207,6 +207,9 @@ def main(argv: list[str] | None = None) -> int:
 REPORT_KEYS = ("command", "date_utc", "machine", "aces_read_s", "aces_rows", "best", "improvement_over_odometry",
                "whole_aces_best_s", "whole_aces_ratio_to_open3d_point_to_point", "drift_vs_odometry",
                "published_aces_2009", "not_applicable")
+ACES_ROW_KEYS = ("name", "trans_mean_m", "trans_std_m", "trans_max_m", "trans_sq_mean_m2", "rot_mean_deg", "rot_std_deg",
+                 "rot_max_deg", "rot_sq_mean_deg2", "fps", "n_relations_used")
+DRIFT_ROW_KEYS = ("log", "scans", "odometry_path_m", "end_separation_m", "end_heading_diff_deg", "fps")
 
 
 def read_results(path: Path) -> dict:
@@ -221,6 +224,17 @@ def read_results(path: Path) -> dict:
     missing = [k for k in REPORT_KEYS if k not in data] if isinstance(data, dict) else list(REPORT_KEYS)
     if missing:
         raise DataError(f"not a results.json of this benchmark: no {', '.join(missing)}", source=path)
+    # the rows the report reads key by key (a row without one was a KeyError traceback, an unknown best a StopIteration)
+    for what, rows, keys in (("aces_rows", data["aces_rows"], ACES_ROW_KEYS), ("drift_vs_odometry", data["drift_vs_odometry"], DRIFT_ROW_KEYS)):
+        if not isinstance(rows, list) or not rows or not all(isinstance(r, dict) for r in rows):
+            raise DataError(f"not a results.json of this benchmark: {what} is not a list of rows", source=path)
+        for i, row in enumerate(rows):
+            lacking = [k for k in keys if k not in row]
+            if lacking:
+                raise DataError(f"not a results.json of this benchmark: {what} row {row.get('name', i)!r} has no "
+                                f"{', '.join(lacking)}", source=path)
+    if data["best"] not in [r["name"] for r in data["aces_rows"]]:
+        raise DataError(f"not a results.json of this benchmark: best {data['best']!r} names none of its aces_rows", source=path)
     return data
 
 

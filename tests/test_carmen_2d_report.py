@@ -58,3 +58,22 @@ def test_a_variant_without_a_convergence_verdict_reads_n_a(carmen_2d):
     assert table["kiss voxel 0.1 m, constant velocity"].endswith("| 83 | n/a |")
     assert table["vanilla planar"].endswith("| 94 | 0 |")
     assert table["raw odometry (baseline)"].endswith("| - | - |")
+
+
+def test_rows_the_report_reads_are_checked_before_it_is_written(tmp_path, carmen_2d):
+    """A row without one of the keys the report reads was a KeyError traceback, a best naming no row a StopIteration;
+    the committed results still read."""
+    committed = json.loads(COMMITTED.read_text())
+    assert carmen_2d.read_results(COMMITTED)["best"] == committed["best"]
+    path = tmp_path / "results.json"
+    lacking = json.loads(COMMITTED.read_text())
+    del lacking["aces_rows"][0]["rot_sq_mean_deg2"]
+    path.write_text(json.dumps(lacking))
+    with pytest.raises(DataError) as err:
+        carmen_2d.read_results(path)
+    assert err.value.reason == (f"not a results.json of this benchmark: aces_rows row {committed['aces_rows'][0]['name']!r} "
+                                "has no rot_sq_mean_deg2")
+    unknown = {**committed, "best": "nonexistent"}
+    path.write_text(json.dumps(unknown))
+    with pytest.raises(DataError, match="best 'nonexistent' names none of its aces_rows"):
+        carmen_2d.read_results(path)
