@@ -355,3 +355,15 @@ def test_poses_format_without_poses_is_refused(tmp_path, rng):
     assert ScanFolder(folder, poses=tmp_path / "poses.txt").poses_format == "kitti"
     assert len(ScanFolder(folder, poses=tmp_path / "poses.txt", poses_format="kitti").ground_truth) == 3
     assert ScanFolder(folder).reader_options["poses_format"] == "kitti"
+
+
+def test_a_scan_folder_given_as_dot_is_named_after_itself(tmp_path, monkeypatch):
+    """`lidarkit odometry .` in a folder of scans titled the run "vanilla on " and recorded name ''."""
+    from lidarkit.io.folder import ScanFolder
+
+    folder = tmp_path / "drive_a"
+    folder.mkdir()
+    for i in range(3):
+        np.save(folder / f"{i:06d}.npy", np.random.default_rng(i).normal(size=(100, 3)))
+    monkeypatch.chdir(folder)
+    assert ScanFolder(".").name == "drive_a"

@@ -495,3 +495,21 @@ def test_point_times_of_points_left_out_are_left_out_too(tmp_path):
     assert len(scan.points_xyz) == len(points) - 4
     np.testing.assert_array_equal(scan.points_xyz, points[kept, :3].astype(np.float64))
     np.testing.assert_allclose(scan.point_times_s, times[kept], rtol=0, atol=1e-9)
+
+
+def test_a_sequence_given_by_a_relative_path_keeps_its_ground_truth_and_name(monkeypatch):
+    """From sequences/, "00" (or "./00", or "." inside it) had no parent named sequences/: the poses/00.txt beside
+    were not found, the run had no scores and said nothing; "." was also named ''."""
+    from conftest import shared_path
+
+    from lidarkit.io import open_dataset
+
+    sequences = shared_path("kitti_odometry", "sequences")
+    whole = open_dataset("kitti", sequences / "00")
+    monkeypatch.chdir(sequences)
+    for given in ("00", "./00"):
+        seq = open_dataset("kitti", given)
+        assert seq.name == "kitti_00" and np.array_equal(seq.ground_truth.poses_se3, whole.ground_truth.poses_se3)
+    monkeypatch.chdir(sequences / "00")
+    here = open_dataset("kitti", ".")
+    assert here.name == "kitti_00" and here.ground_truth is not None

@@ -72,7 +72,7 @@ class ScanFolder:
             raise ConfigError(f"unsupported scan suffix {unknown[0]!r}; supported: {', '.join(POINT_FILE_SUFFIXES)}", source="suffixes")
         wanted = {s.lower() for s in suffixes}
         self.path = folder
-        self.name = name or folder.name
+        self.name = name or Path(os.path.abspath(folder)).name  # ("." was named '')
         self.drop_nonfinite = drop_nonfinite
         broken = next((p for p in folder.iterdir() if p.suffix.lower() in wanted and p.is_symlink() and not p.exists()), None)
         if broken is not None:  # a scan that is not there: never skipped without a word

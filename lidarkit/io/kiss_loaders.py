@@ -56,7 +56,7 @@ class KissLoaderScans:
     ground_truth_frame = "as kiss-icp's loader gives it"
 
     def __init__(self, path: str | os.PathLike, **loader_options: Any):
-        self.path = Path(path)
+        self.path = Path(os.path.abspath(path))  # (nclt:. built its ground-truth file name from "." and found none)
         #: what the reader found and left out, for the run's warnings (metrics.json, config.yaml) as well as the log
         self.reader_warnings: list[str] = []
         self._origin_warned = False  # (points at (0, 0, 0) are said once, not for every frame)

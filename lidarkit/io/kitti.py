@@ -195,6 +195,7 @@ class KittiOdometry:
         root = Path(root)
         if not root.is_dir():
             raise DataError("dataset folder not found" if not root.exists() else "not a folder", source=root)
+        root = Path(os.path.abspath(root))  # ("00" or "." from sequences/: no parent named sequences/, no name, no truth)
         self.root = root
         self.sequence_dir, odometry_root = self._locate_sequence(root, asked)
         # titled after the folder: kitti_NN for a numbered KITTI sequence, the folder's own name otherwise

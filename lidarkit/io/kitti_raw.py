@@ -50,7 +50,7 @@ _DRIVE_DIR = re.compile(r"^(\d{4}_\d{2}_\d{2})_drive_(\d{4})_(\w+)$")
 def is_drive_folder(path: str | os.PathLike) -> bool:
     """Whether ``path`` is named as a KITTI raw drive folder (``2011_09_26_drive_0002_sync``): read as a folder of
     scans it said "no scan files" without naming ``kitti_raw:``."""
-    return _DRIVE_DIR.match(Path(path).name) is not None
+    return _DRIVE_DIR.match(Path(os.path.abspath(path)).name) is not None
 
 
 def read_kitti_raw_timestamps(path: str | os.PathLike) -> np.ndarray:
@@ -106,6 +106,7 @@ class KittiRaw:
         base = Path(base_dir)
         if not base.exists():  # (it asked for date= and drive= of a folder that is not there)
             raise DataError("not found", source=base)
+        base = Path(os.path.abspath(base))  # ("." inside the drive folder has no name to read its date and drive from)
         m = _DRIVE_DIR.match(base.name)
         if m:  # the drive folder itself names its date, drive and kind (options that say otherwise were ignored or refused)
             named = {"date": (date, m.group(1)), "drive": (drive, m.group(2)), "dataset": (dataset, m.group(3))}

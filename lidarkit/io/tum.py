@@ -118,7 +118,7 @@ class TumRGBD:
         if not max_dt_s > 0:
             raise ConfigError(f"max_dt_s must be positive, got {max_dt_s}", source="max_dt_s")
         self.path = folder
-        self.name = folder.name
+        self.name = Path(os.path.abspath(folder)).name  # ("." was named '')
         self.max_dt_s = float(max_dt_s)
         self.rgb_list_path = folder / rgb_list
         stamps, names = read_tum_file_list(self.rgb_list_path)
