@@ -220,6 +220,50 @@ def test_an_init_file_that_holds_json_or_words_says_so(capsys, tmp_path):
         assert code == 1 and " ".join(err.split()) == f"error: {init}: {said}: {takes}"
 
 
+def test_an_init_file_with_numpys_print_of_a_matrix_is_read(capsys, tmp_path):
+    """`--init` of numpy's print of a 4x4 ("[[1. 0. 0. 0.5]\\n [0. 1. ...]]") said "holds JSON (a run's result.json?)" (any
+    first line starting with "[" was JSON): it is read as the matrix now, so is a JSON list of rows, and a bracketed
+    matrix of another shape says what it holds."""
+    from lidarkit.cli.icp_cmd import read_init_pose
+
+    T = np.eye(4)
+    T[:3, 3] = (0.5, -0.25, 0.125)
+    printed, listed, three_by_four, wrong = (tmp_path / f"{name}.txt" for name in ("printed", "listed", "three_by_four", "wrong"))
+    printed.write_text(str(T) + "\n")
+    listed.write_text(json.dumps(T.tolist()))
+    three_by_four.write_text(str(T[:3]) + "\n")
+    wrong.write_text(str(np.eye(3)) + "\n")
+    for path in (printed, listed, three_by_four):
+        np.testing.assert_array_equal(read_init_pose(path), T)
+    target_xyz = np.random.default_rng(0).uniform(-10.0, 10.0, (2000, 3))
+    source, target = tmp_path / "source.npy", tmp_path / "target.npy"
+    np.save(target, target_xyz)
+    np.save(source, target_xyz - T[:3, 3])  # T_target_source is T: the guess is the answer
+    code, _, err = run_cli(capsys, str(source), str(target), "-m", "vanilla", "--init", str(printed), "--out", str(tmp_path / "run"))
+    assert code == 0, err
+    result = json.loads((tmp_path / "run" / "result.json").read_text())
+    assert result["init"] == str(printed) and np.allclose(result["T_target_source"], T, atol=1e-9)
+    code, _, err = run_cli(capsys, str(SOURCE), str(TARGET), "--init", str(wrong))
+    assert code == 1 and " ".join(err.split()) == (
+        f"error: {wrong}: holds bracketed rows of 3, 3, 3 numbers, not 4 (or 3) rows of 4 or one of 12 or 16: "
+        "--init takes a 4x4 or 3x4 text matrix, or one row of 12 (KITTI) or 16 numbers")
+
+
+def test_small_gicp_on_a_tiny_cloud_leaves_stderr_to_the_error_line(capfd, tmp_path):
+    """small_gicp's C++ "warning: source point cloud is too small. |source|=3" went raw to stderr (fd 2) beside the
+    result, which says why it failed; it is silenced as the ground segmenters' C++ output is."""
+    if "small_gicp" not in available_icp():
+        pytest.skip("small_gicp not installed")
+    target_xyz = np.random.default_rng(0).uniform(-10.0, 10.0, (2000, 3))
+    source, target = tmp_path / "source.npy", tmp_path / "target.npy"
+    np.save(target, target_xyz)
+    np.save(source, target_xyz[:3])
+    code = cli_exit_code(["icp", str(source), str(target), "-m", "small_gicp", "--out", str(tmp_path / "run")])
+    captured = capfd.readouterr()
+    assert code == 0 and captured.err == ""
+    assert json.loads((tmp_path / "run" / "result.json").read_text())["converged"] is False
+
+
 def _asserts():
     raise AssertionError("my assert")  # (an assert statement here would be rewritten by pytest)
 

@@ -901,6 +901,40 @@ def test_a_calibration_applies_only_to_the_configuration_it_was_learned_at(stree
     assert get_icp("pipeline", kernel="none").calibration_variant() is None
 
 
+def test_a_plane_based_entry_applies_only_near_the_gate_and_voxel_it_was_learned_at(street_pair):
+    """small_gicp's entry (learned at a 1 m gate and 0.25 m voxels) applied at any: at a 3 m gate mean NEES 16.5 with 47 %
+    inside the 95 % bound (its closed form 4.0 / 97 %), at 0.1 m voxels 12.0 / 63 %, and the note named the entry. Beyond
+    the band measured around the learned value the closed form is returned and the note names the setting; the default,
+    and a value within the band, keep the entry."""
+    if "small_gicp" not in available_icp():
+        pytest.skip("small_gicp not installed")
+    source, target, T_true = street_pair
+    wide = get_icp("small_gicp", max_correspondence_distance_m=3.0)
+    assert wide.calibration_variant() is None
+    result = wide.align(source, target)
+    assert result.extra["covariance_calibration"] == (
+        "none learned for small_gicp (max_correspondence_distance_m=3.0): the closed form as computed (typically over-confident)")
+    raw = get_icp("small_gicp", max_correspondence_distance_m=3.0, calibrated_covariance=False).align(source, target)
+    np.testing.assert_allclose(result.covariance, raw.covariance, rtol=1e-9, atol=1e-18)
+    default = get_icp("small_gicp").align(source, target)
+    assert default.extra["covariance_calibration"] == "small_gicp" and default.nees(T_true) == pytest.approx(4.7, abs=0.1)
+    learned_at = {(name, key, value): get_icp(name, **{key: value}).calibration_variant() for name, key, value in (
+        ("small_gicp", "downsampling_resolution_m", 0.1), ("small_gicp", "downsampling_resolution_m", 0.3),
+        ("small_gicp", "max_correspondence_distance_m", 0.75), ("open3d_point_to_plane", "max_correspondence_distance_m", 3.0),
+        ("open3d_point_to_plane", "voxel_size_m", 0.75), ("open3d_gicp", "max_correspondence_distance_m", 3.0),
+        ("open3d_gicp", "voxel_size_m", None), ("open3d_gicp", "max_correspondence_distance_m", 1.5))}
+    assert learned_at == {
+        ("small_gicp", "downsampling_resolution_m", 0.1): None, ("small_gicp", "downsampling_resolution_m", 0.3): "small_gicp",
+        ("small_gicp", "max_correspondence_distance_m", 0.75): "small_gicp",
+        ("open3d_point_to_plane", "max_correspondence_distance_m", 3.0): None,
+        ("open3d_point_to_plane", "voxel_size_m", 0.75): "open3d_point_to_plane",
+        ("open3d_gicp", "max_correspondence_distance_m", 3.0): None, ("open3d_gicp", "voxel_size_m", None): None,
+        ("open3d_gicp", "max_correspondence_distance_m", 1.5): "open3d_gicp"}
+    # the point-to-point variants' entries stay nearer the truth than their closed forms at other gates and voxel sizes
+    point_to_point = [name for name in ("vanilla", "kiss", "genz") if name in available_icp()]
+    assert [get_icp(name, voxel_size_m=0.5).calibration_variant() for name in point_to_point] == point_to_point
+
+
 def test_nees_and_covariance_about_say_what_they_got_in_one_line(rng):
     """``nees("x")`` raised numpy's bare ValueError ("could not convert string to float"); ``covariance_about`` of a
     3x3 or a NaN 4x4 put numpy's multi-line repr of the array in its message (one line from the CLI)."""

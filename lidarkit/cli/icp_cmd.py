@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 from typing import Optional
 
@@ -18,27 +19,56 @@ from lidarkit.params import shown_default
 
 
 def read_init_pose(path: Path) -> np.ndarray:
-    """A 4x4 pose from a text file: 4 (or 3) rows of 4 numbers, or one row of 12 (KITTI) or 16 numbers. A JSON file (a
-    run's result.json) or a first line of words is said to be one ("expected 4 or 12 or 16 numbers, found 1" did not)."""
+    """A 4x4 pose from a text file: 4 (or 3) rows of 4 numbers, or one row of 12 (KITTI) or 16 numbers; numpy's print of
+    a matrix (``[[1. 0. 0. 0.5] ...]``) or a JSON list of rows is read without its brackets. A JSON file of anything
+    else (a run's result.json) or a first line of words is said to be one ("expected 4 or 12 or 16 numbers, found 1"
+    did not)."""
     from lidarkit.textfile import is_number, read_lines, read_numeric_table
 
-    first = next((line.strip() for line in read_lines(path) if line.strip() and not line.strip().startswith("#")), "")
+    lines = [line.strip() for line in read_lines(path) if line.strip() and not line.strip().startswith("#")]
+    first = lines[0] if lines else ""
     wanted = "--init takes a 4x4 or 3x4 text matrix, or one row of 12 (KITTI) or 16 numbers"
-    if first.startswith(("{", "[")):
-        raise DataError(f"holds JSON (a run's result.json?), not a text matrix: {wanted}", source=path)
-    if first and not any(is_number(field) for field in first.replace(",", " ").split()):
-        raise DataError(f"its first line holds no numbers ({first[:40]!r}): {wanted}", source=path)
-    table = read_numeric_table(path, (4, 12, 16))
     T = np.eye(4)
-    if table.shape[1] == 4 and len(table) in (3, 4):
-        T[: len(table)] = table
-    elif table.shape[1] in (12, 16) and len(table) == 1:
-        T[: table.shape[1] // 4] = table.reshape(-1, 4)
+    if first.startswith(("{", "[")):
+        numbers = _bracketed_numbers(path, "\n".join(lines), wanted)
+        T[: len(numbers) // 4] = numbers.reshape(-1, 4)
     else:
-        raise DataError(f"expected a 4x4 / 3x4 matrix or one row of 12 or 16 numbers, got {table.shape}", source=path)
+        if first and not any(is_number(field) for field in first.replace(",", " ").split()):
+            raise DataError(f"its first line holds no numbers ({first[:40]!r}): {wanted}", source=path)
+        table = read_numeric_table(path, (4, 12, 16))
+        if table.shape[1] == 4 and len(table) in (3, 4):
+            T[: len(table)] = table
+        elif table.shape[1] in (12, 16) and len(table) == 1:
+            T[: table.shape[1] // 4] = table.reshape(-1, 4)
+        else:
+            raise DataError(f"expected a 4x4 / 3x4 matrix or one row of 12 or 16 numbers, got {table.shape}", source=path)
     from lidarkit.registration.base import check_init_T
 
     return check_init_T(T, source=str(path))
+
+
+def _bracketed_numbers(path: Path, text: str, wanted: str) -> np.ndarray:
+    """The numbers of a bracketed matrix, row by row: numpy's print, which is no JSON (no commas), or a JSON list of
+    rows; the innermost brackets are its rows (3 or 4 of 4 numbers, or one of 12 or 16). Only JSON that is something
+    else is called JSON: numpy's print was "holds JSON"."""
+    from lidarkit.textfile import is_number
+
+    try:
+        parsed = json.loads(text)
+    except ValueError:
+        parsed = None
+    fields = text.translate(str.maketrans("[],", "   ")).split()
+    words = [field for field in fields if not is_number(field)]
+    if text.startswith("{") or isinstance(parsed, dict) or (parsed is not None and words):
+        raise DataError(f"holds JSON (a run's result.json?), not a text matrix: {wanted}", source=path)
+    if words:
+        raise DataError(f"holds {words[0][:20]!r} within its brackets, not a matrix of numbers: {wanted}", source=path)
+    rows = [row.replace(",", " ").split() for row in re.findall(r"\[([^\[\]]*)\]", text)]
+    widths = sorted({len(row) for row in rows})
+    if not ((widths == [4] and len(rows) in (3, 4)) or (widths in ([12], [16]) and len(rows) == 1)):
+        got = ", ".join(str(len(row)) for row in rows)
+        raise DataError(f"holds bracketed rows of {got} numbers, not 4 (or 3) rows of 4 or one of 12 or 16: {wanted}", source=path)
+    return np.array([float(field) for row in rows for field in row], dtype=np.float64)
 
 
 def _list_methods() -> None:
@@ -204,7 +234,7 @@ def icp(
     target: Optional[Path] = typer.Argument(None, help="Target scan (same formats)."),
     method: str = typer.Option("vanilla", "--method", "-m", help="Registered ICP variant (see --list)."),
     param: list[str] = typer.Option([], "--param", "-p", help="Method parameter KEY=VALUE (repeatable)."),
-    init: Optional[Path] = typer.Option(None, "--init", help="Initial T_target_source: 4x4 text file or one KITTI row."),
+    init: Optional[Path] = typer.Option(None, "--init", help="Initial T_target_source: 4x4 text file (numpy's print of one too) or one KITTI row."),
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="Folder for result.json, config.json, bev.png and rmse.png (RMSE per iteration)."),
     drop_nonfinite: bool = typer.Option(
         False, "--drop-nonfinite", help="Drop NaN / infinite points (organized clouds' missing returns) instead of refusing the file."
