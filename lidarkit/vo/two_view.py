@@ -399,7 +399,10 @@ def _estimate_ordered(p0: np.ndarray, p1: np.ndarray, K: np.ndarray, cfg: Geomet
     if best is None:
         return _failed(n, "no essential/fundamental matrix found (" + "; ".join(attempts) + ")", attempts, rot_px,
                        degeneracy)
-    if far_points and best[0] < min_inliers and mostly_explained(best[4], n, min_inliers):
+    # the correspondences the matrix explaining most of them explains (the F-fallback's, chosen for its near points,
+    # had said "1109 of 1178" where E-RANSAC's explained 1171)
+    explained = max(int(np.count_nonzero(mask)) for _, mask, *_ in matrices) if matrices else best[4]
+    if far_points and best[0] < min_inliers and mostly_explained(explained, n, min_inliers):
         far = _far_points_estimate(matrices, n0, n1, focal, cfg, min_inliers)
         if far is not None:
             R, t, inliers, n_front, n_epipolar, method, motion_px = far
@@ -407,6 +410,8 @@ def _estimate_ordered(p0: np.ndarray, p1: np.ndarray, K: np.ndarray, cfg: Geomet
             return TwoViewEstimate(R, t / max(np.linalg.norm(t), 1e-300), inliers, method, n_front, motion_px, None,
                                    tuple(attempts), rot_px, **asdict(degeneracy), epipolar_inliers=n_epipolar)
     n_good, R, t, inliers, n_epipolar, method = best
+    if n_good < min_inliers:  # (the reason of too few pose inliers quotes the matrix that explains most)
+        n_epipolar = max(n_epipolar, explained)
     if n_good < 5:
         return _failed(n, f"too few pose inliers ({n_good}) from {method}", attempts, rot_px, degeneracy,
                        epipolar_inliers=n_epipolar)
@@ -419,21 +424,22 @@ def _estimate_ordered(p0: np.ndarray, p1: np.ndarray, K: np.ndarray, cfg: Geomet
 
 def _far_points_estimate(matrices: list, n0: np.ndarray, n1: np.ndarray, focal: float, cfg: GeometryConfig,
                          min_inliers: int) -> tuple | None:
-    """The pose from the points in front of both cameras at any distance (most of them over ``matrices``), refined on
-    them, when they number ``min_inliers`` and move (:func:`far_points_move`): ``(R, t, inliers, n_inliers,
-    epipolar_inliers, method, motion_px)``, else None."""
-    best = None
+    """The pose from the points in front of both cameras at any distance, refined on them, of the first of
+    ``matrices`` (most such points first) whose points number ``min_inliers`` and move (:func:`far_points_move`):
+    ``(R, t, inliers, n_inliers, epipolar_inliers, method, motion_px)``, else None. Every matrix is tried: the
+    F-fallback's had a few more points in front than E-RANSAC's but too noisy to move, and the pair was refused."""
+    decompositions = []
     for E, mask, a, b, K_est, method in matrices:
         rec = _recover(E, a, b, K_est, mask, cfg.inliers, max_depth_baselines=np.inf)
-        if rec is not None and (best is None or rec.n_inliers > best[0].n_inliers):
-            best = (rec, method)
-    if best is None or best[0].n_inliers < max(min_inliers, 8):
-        return None
-    (n_front, R, t, inliers, n_epipolar), method = best
-    if cfg.refine:
-        R, t = refine_pose(R, t, n0[inliers], n1[inliers], focal)
-    moves, motion_px = far_points_move(R, t, n0[inliers], n1[inliers], focal)
-    return (R, t, inliers, n_front, n_epipolar, method, motion_px) if moves else None
+        if rec is not None and rec.n_inliers >= max(min_inliers, 8):
+            decompositions.append((rec, method))
+    for (n_front, R, t, inliers, n_epipolar), method in sorted(decompositions, key=lambda d: -d[0].n_inliers):
+        if cfg.refine:
+            R, t = refine_pose(R, t, n0[inliers], n1[inliers], focal)
+        moves, motion_px = far_points_move(R, t, n0[inliers], n1[inliers], focal)
+        if moves:
+            return R, t, inliers, n_front, n_epipolar, method, motion_px
+    return None
 
 
 def triangulate(R_cur_ref: np.ndarray, t_cur_ref: np.ndarray, norm_ref: np.ndarray,
