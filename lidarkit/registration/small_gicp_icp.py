@@ -7,11 +7,7 @@ parameter order: rx, ry, rz, tx, ty, tz); the degeneracy flag uses lidarkit's co
 
 from __future__ import annotations
 
-import contextlib
 import logging
-import os
-import sys
-from collections.abc import Iterator
 from typing import Literal
 
 import numpy as np
@@ -19,6 +15,7 @@ from pydantic import Field, model_validator
 
 from lidarkit.geometry import transform_points
 from lidarkit.params import changed_fields
+from lidarkit.quiet import silenced
 from lidarkit.registration.assessment import assess_alignment
 from lidarkit.registration.base import Registration, RegistrationConfig, RegistrationResult
 from lidarkit.registration.cloud_cache import CloudCache
@@ -55,30 +52,6 @@ def voxel_order(points: np.ndarray, voxel_m: float) -> np.ndarray:
 
 #: small_gicp warns on std::cerr when a (downsampled) cloud holds this many points or fewer
 SMALL_GICP_WARNS_AT = 10
-
-
-@contextlib.contextmanager
-def quiet_stderr(quiet: bool) -> Iterator[None]:
-    """C++ writes to stderr (fd 2) silenced while ``quiet``: small_gicp's "warning: source point cloud is too small"
-    went raw to the terminal beside the result that says why it failed. Only then: fd 2 is the whole process's (other
-    threads' log lines and progress bars)."""
-    if not quiet:
-        yield
-        return
-    try:
-        sys.stderr.flush()
-        saved = os.dup(2)
-    except (OSError, ValueError, AttributeError):  # no real fd 2 (e.g. captured in a notebook): nothing to silence
-        yield
-        return
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(devnull, 2)
-        yield
-    finally:
-        os.dup2(saved, 2)
-        os.close(saved)
-        os.close(devnull)
 
 
 class SmallGICPConfig(RegistrationConfig):
@@ -153,7 +126,7 @@ if _small_gicp is not None:
             if c.registration_type == "VGICP":
                 to, so = local_origin.local_offset(target_xyz), local_origin.local_offset(source_xyz)
                 # (raw sizes: a larger cloud that small_gicp's own downsampling cuts to 10 points still warns)
-                with quiet_stderr(min(len(source_xyz), len(target_xyz)) <= SMALL_GICP_WARNS_AT):
+                with silenced(2, when=min(len(source_xyz), len(target_xyz)) <= SMALL_GICP_WARNS_AT):  # its C++ "too small" warning
                     out = _small_gicp.align(
                         local_origin.shift(target_xyz, to), local_origin.shift(source_xyz, so), local_origin.into(init_T, to, so),
                         registration_type="VGICP", voxel_resolution=c.voxel_resolution_m, downsampling_resolution=c.downsampling_resolution_m,
@@ -176,7 +149,7 @@ if _small_gicp is not None:
             # the target's KdTree kept for the assessment instead of voxelizing and indexing both clouds again
             target, target_tree, dst, dst_rank, to = self._preprocess(target_xyz)
             source, _, src, _, so = self._preprocess(source_xyz)  # stays cached: the next frame's target
-            with quiet_stderr(min(source.size(), target.size()) <= SMALL_GICP_WARNS_AT):
+            with silenced(2, when=min(source.size(), target.size()) <= SMALL_GICP_WARNS_AT):
                 out = _small_gicp.align(
                     target, source, target_tree, local_origin.into(init_T, to, so), registration_type=c.registration_type,
                     max_correspondence_distance=c.max_correspondence_distance_m, num_threads=c.num_threads, max_iterations=c.max_iterations,

@@ -8,14 +8,13 @@ stdout, which library code must not do: the calls run with file descriptor 1 sen
 from __future__ import annotations
 
 import contextlib
-import os
-import sys
 from typing import Any
 
 import numpy as np
 from pydantic import Field, model_validator
 
 from lidarkit.errors import ConfigError
+from lidarkit.quiet import silenced
 from lidarkit.registration.ground.base import KITTI_SENSOR_HEIGHT_M, GroundConfig, GroundSegmenter, register_ground_segmenter
 
 
@@ -43,25 +42,6 @@ def _own_openmp_thread_setters(module: Any) -> list[Any]:
         with contextlib.suppress(OSError, AttributeError):
             setters.append(ctypes.CDLL(str(lib)).omp_set_num_threads)
     return setters
-
-
-@contextlib.contextmanager
-def _quiet_stdout():
-    """Silence C/C++ writes to stdout (fd 1) for the duration of a library call."""
-    try:
-        sys.stdout.flush()
-        saved = os.dup(1)
-    except (OSError, ValueError, AttributeError):  # no real fd 1 (e.g. captured in a notebook): nothing to silence
-        yield
-        return
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(devnull, 1)
-        yield
-    finally:
-        os.dup2(saved, 1)
-        os.close(saved)
-        os.close(devnull)
 
 
 class PatchworkConfig(GroundConfig):
@@ -101,7 +81,7 @@ class PatchworkSegmenter(GroundSegmenter):
     def _segment(self, points_xyz: np.ndarray) -> np.ndarray:
         cloud = np.zeros((len(points_xyz), 4), dtype=np.float32)
         cloud[:, :3] = points_xyz
-        with _quiet_stdout():
+        with silenced(1):
             # a fresh engine per scan: one engine keeps state between calls (the same scan twice gave 72600 and then
             # 72361 ground points), which made a stateless variant's result depend on the scans it saw before
             engine = self._pw.patchworkpp(self._parameters)
@@ -145,7 +125,7 @@ class ClothSegmenter(GroundSegmenter):
         engine.params.time_step = float(c.time_step)
         engine.params.interations = int(c.iterations)
         ground, rest = self._csf.VecInt(), self._csf.VecInt()
-        with _quiet_stdout():
+        with silenced(1):
             engine.setPointCloud(np.ascontiguousarray(points_xyz, dtype=np.float64))
             engine.do_filtering(ground, rest, False)
         mask = np.zeros(len(points_xyz), dtype=bool)
