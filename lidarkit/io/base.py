@@ -33,6 +33,21 @@ def classify_instant(fraction: float, tol: float = 0.05) -> str | None:
     return None
 
 
+#: how far (a fraction of the stamps' spacing) the points' span may be from it for sweeps to follow one another
+FULL_SWEEP_TOLERANCE = 0.1
+
+
+def sweep_length(span_s: float, spacing_s: float) -> float:
+    """How long a sweep whose points span ``span_s`` lasts when sweeps are stamped ``spacing_s`` apart: the spacing
+    when the span is within :data:`FULL_SWEEP_TOLERANCE` of it (sweeps follow one another, one ending where the next
+    starts, though the last point fires a step before), else the span, first to last point, which kiss deskews over
+    (every other sweep of a recording kept: 0.1 s of points stamped 0.2 s apart; a sensor seeing part of its turn);
+    0 when the spacing is (stamps all equal: the sweeps cannot be placed)."""
+    if not spacing_s > 0 or abs(span_s - spacing_s) <= FULL_SWEEP_TOLERANCE * spacing_s:
+        return spacing_s
+    return span_s
+
+
 def option_path(given: str | os.PathLike, *folders: Path) -> Path:
     """A reader's path option as given or, when it is relative and not found from the working directory, in the first
     of the dataset's ``folders`` that holds it (``poses=poses.txt`` beside the scans); as given when none does."""

@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
-from lidarkit.io.base import INSTANT_FRACTION, Scan, checked_index, checked_indices, classify_instant
+from lidarkit.io.base import INSTANT_FRACTION, Scan, checked_index, checked_indices, classify_instant, sweep_length
 from lidarkit.io.pointcloud2 import MAX_SWEEP_S, decode_pointcloud2, stamp_seconds
 from lidarkit.trajectory import Trajectory
 
@@ -452,21 +452,8 @@ class _BagScans:
         return float(stamps[0] + first), sweep_length(float(np.median(spans)), period)
 
 
-def sweep_length(span_s: float, spacing_s: float) -> float:
-    """How long a sweep whose points span ``span_s`` lasts when sweeps are stamped ``spacing_s`` apart: the spacing
-    when the span is within :data:`FULL_SWEEP_TOLERANCE` of it (sweeps follow one another, one ending where the next
-    starts, though the last point fires a step before), else the span, first to last point, which kiss deskews over
-    (every other sweep of a recording kept: 0.1 s of points stamped 0.2 s apart; a sensor seeing part of its turn);
-    0 when the spacing is (stamps all equal: the sweeps cannot be placed)."""
-    if not spacing_s > 0 or abs(span_s - spacing_s) <= FULL_SWEEP_TOLERANCE * spacing_s:
-        return spacing_s
-    return span_s
-
-
 #: scans whose point times place the sweeps in the stamps (the median over them)
 SWEEP_TIMING_SCANS = 5
-#: how far (a fraction of the stamps' spacing) the points' span may be from it for sweeps to follow one another
-FULL_SWEEP_TOLERANCE = 0.1
 #: most spread of the pose-minus-scan stamp offsets, in scan periods, for one pose per scan to be paired by count
 COUNT_PAIRING_SPREAD = 0.25
 #: most scan periods between one part of a split ROS 1 recording and the next (further apart: separate recordings)

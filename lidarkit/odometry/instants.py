@@ -26,8 +26,7 @@ from typing import Any
 import numpy as np
 
 from lidarkit.errors import EvaluationError, LidarKitError
-from lidarkit.io.base import INSTANT_FRACTION, Scan, classify_instant
-from lidarkit.io.rosbag import sweep_length
+from lidarkit.io.base import INSTANT_FRACTION, Scan, classify_instant, sweep_length
 from lidarkit.trajectory import Trajectory
 
 
