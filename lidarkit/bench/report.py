@@ -171,7 +171,9 @@ def _import_task_module(task: str, origin: dict[str, Any]) -> str:
         return f"its module {module} cannot be imported here ({type(err).__name__}: {err})"
 
 
-def _task_meta(task: str) -> tuple[list[MetricInfo], tuple[tuple[str, str], ...]]:
+def task_meta(task: str) -> tuple[list[MetricInfo], tuple[tuple[str, str], ...]]:
+    """The metrics ``task`` declares, in its order (the report's columns), and its sweep plots; none for a task whose
+    module this lidarkit cannot load (results of a plugin not installed here: read by metric names)."""
     try:
         from lidarkit.bench.tasks import get_task
 
@@ -205,7 +207,7 @@ def aggregate(records: list[dict[str, Any]], missing: list[dict[str, Any]] = ())
     tables = []
     # a task none of whose jobs has a result yet has its table too, of rows saying so (it had none: the task was absent)
     for task in sorted(set(by_task) | set(unrun)):
-        declared, _ = _task_meta(task)
+        declared, _ = task_meta(task)
         recs = by_task[task]
         present = set()
         for r in recs:
@@ -485,7 +487,7 @@ def _sweep_plots(records: list[dict[str, Any]]) -> list[Plot]:
     for r in records:
         by_task[r["job"]["task"]].append(r)
     for task, recs in sorted(by_task.items()):
-        declared, sweeps = _task_meta(task)
+        declared, sweeps = task_meta(task)
         label_of = {m.name: m.label for m in declared}
         experiments = {r["job"]["experiment"] for r in recs}
         for param, metric in sweeps:

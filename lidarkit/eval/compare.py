@@ -578,27 +578,19 @@ def compare(
     return dataclasses.replace(result, note="; ".join(notes), metric_label=label)
 
 
-def _declared_metrics(task: str) -> tuple[Any, ...]:
-    """The metrics ``task`` declares, in its order (the report's columns); none for a task this lidarkit cannot load."""
-    from lidarkit.bench.tasks import get_task
-
-    try:
-        return tuple(get_task(task).metrics)
-    except Exception:  # noqa: BLE001 - results of a plugin task not installed here: compared by metric names
-        return ()
-
-
 def _default_metric(keys: list[str], side_a: BenchRuns, side_b: BenchRuns) -> str:
     """The metric compared when none is given: the task's headline, its first declared accuracy metric the units
     report, which the report's Summary ranks by (odometry: the SE(3)-aligned APE; it compared KITTI drift, or the
     unaligned APE, where the report ranked by another); the first of DEFAULT_BENCH_METRICS for a task that declares none
     of them. Of several tasks, the one whose headline comes first in DEFAULT_BENCH_METRICS."""
+    from lidarkit.bench.report import task_meta
+
     present: dict[str, set[str]] = {}
     for key in keys:
         present.setdefault(_task_of(key), set()).update(set(side_a.values[key]) & set(side_b.values[key]))
     headlines = []
     for task, names in present.items():
-        declared = [m.name for m in _declared_metrics(task) if m.kind == "accuracy"]
+        declared = [m.name for m in task_meta(task)[0] if m.kind == "accuracy"]
         headline = next((m for m in [*declared, *DEFAULT_BENCH_METRICS] if m in names), None)
         if headline is not None:
             headlines.append(headline)
@@ -612,9 +604,9 @@ def _default_metric(keys: list[str], side_a: BenchRuns, side_b: BenchRuns) -> st
 def _metric_label(task: str, metric: str, side_a: BenchRuns, side_b: BenchRuns, keys: list[str]) -> str:
     """``metric``'s label as the report heads its column, without the unit and naming the alignment the results state
     ("APE RMSE (SE(3)-aligned)"); '' when the task declares none beyond the name."""
-    from lidarkit.bench.report import MetricInfo, label_alignment
+    from lidarkit.bench.report import MetricInfo, label_alignment, task_meta
 
-    declared = next((m for m in _declared_metrics(task) if m.name == metric), None)
+    declared = next((m for m in task_meta(task)[0] if m.name == metric), None)
     if declared is None or declared.label == metric:
         return ""
     records = [{"info": {"metric_alignment": side.alignments.get(k) or {}}} for side in (side_a, side_b) for k in keys]
