@@ -14,6 +14,7 @@ from lidarkit.cli.app import app, stderr, stdout
 from lidarkit.errors import ConfigError
 
 EXECUTOR_HELP = "serial | process (local process pool sized to the machine) | dask (--address, or a local Dask cluster)"
+PROGRESS_HELP = "Progress bar on stderr (a line every tenth of the jobs where stderr is no terminal)."
 
 
 class _LineProgress:
@@ -210,8 +211,7 @@ def bench(
     methods: Optional[str] = typer.Option(None, "--methods", help="`bench kitti` only: comma-separated variants (default: the bundled strong ones)."),
     sequences: Optional[str] = typer.Option(None, "--sequences", help="`bench kitti` only: comma-separated sequences (default 00-10)."),
     max_jobs: int = typer.Option(100_000, "--max-jobs", min=1, help="Refuse a suite that expands to more jobs."),
-    progress: bool = typer.Option(True, "--progress/--no-progress",
-                                  help="Progress bar on stderr (a line every tenth of the jobs where stderr is no terminal)."),
+    progress: bool = typer.Option(True, "--progress/--no-progress", help=PROGRESS_HELP),
 ) -> None:
     """Run a benchmark suite: validate it, expand it into jobs, run the unfinished ones, write one JSON per job.
 

@@ -9,7 +9,7 @@ from typing import Optional
 import typer
 
 from lidarkit.cli.app import app, stderr, stdout
-from lidarkit.cli.bench_cmd import print_run_summary, run_with_progress, summary_table
+from lidarkit.cli.bench_cmd import PROGRESS_HELP, print_run_summary, run_with_progress, summary_table
 from lidarkit.errors import ConfigError
 
 
@@ -23,8 +23,7 @@ def demo_command(
     workers: Optional[int] = typer.Option(None, "--workers", "-j", help="Worker processes (default: CPUs available)."),
     force: bool = typer.Option(False, "--force", help="Rerun jobs that already have a result."),
     suite: Optional[Path] = typer.Option(None, "--suite", help="Run this suite instead of the bundled demo suite."),
-    progress: bool = typer.Option(True, "--progress/--no-progress",
-                                  help="Progress bar on stderr (a line every tenth of the jobs where stderr is no terminal)."),
+    progress: bool = typer.Option(True, "--progress/--no-progress", help=PROGRESS_HELP),
 ) -> None:
     """Run the bundled demo: ICP variants (real KITTI pair, simulated sequence), particle filter MSE vs particles,
     visual odometry on the sample frames, and the evaluation of bundled trajectories; print where the report is."""
