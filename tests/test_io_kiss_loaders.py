@@ -142,7 +142,8 @@ def test_a_file_the_generic_loader_cannot_read_is_named_once(tmp_path):
     (tmp_path / "scan2.pcd").write_bytes(b"not a point cloud\n")
     with pytest.raises(LidarKitError) as err:
         run(f"generic:{tmp_path}", "vanilla")
-    assert str(err.value).startswith(f"{tmp_path / 'scan2.pcd'} (frame 1): kiss-icp's generic loader failed: KeyError")
+    # (the point-file readers' header check speaks before the loader's KeyError)
+    assert str(err.value) == f"{tmp_path / 'scan2.pcd'} (frame 1): truncated .pcd header (no DATA line)"
 
 
 def test_a_generic_folder_of_several_formats_is_refused_and_skipped_files_are_named(tmp_path, caplog):
@@ -229,4 +230,33 @@ def test_generic_leaves_out_points_at_the_sensor_origin_with_their_times(tmp_pat
     cloud.point["t"] = o3d.core.Tensor(np.linspace(0, 0.1, 10, dtype=np.float32)[:, None])
     o3d.t.io.write_point_cloud(str(tmp_path / "000002.pcd"), cloud)
     with pytest.raises(DataError, match=r"000002\.pcd \(frame 2\): all 10 points are at \(0, 0, 0\) \(missing returns\): no point left$"):
+        open_dataset("generic", tmp_path).read_scan(2)
+
+
+def test_generic_reads_integer_time_fields_as_nanoseconds_and_checks_headers_first(tmp_path):
+    """kiss-icp's generic loader hands every field over as float64: an Ouster cloud's uint32 ``t`` (ns from the sweep
+    start) was read as seconds, a 0.1 s sweep as one of 99,500 s. Integers are nanoseconds now, as the bag reader
+    reads them. A .pcd without z failed as "pip install kiss-icp[all] is required" with Open3D's coloured warnings:
+    the point-file readers' header checks come first, naming the file."""
+    import open3d as o3d
+
+    ns = np.linspace(0, 99_500_000, len(RING)).astype(np.uint32)
+    for k in range(2):
+        cloud = o3d.t.geometry.PointCloud(o3d.core.Tensor((RING + [k, 0.0, 0.0]).astype(np.float32)))
+        cloud.point["t"] = o3d.core.Tensor(ns[:, None])
+        o3d.t.io.write_point_cloud(str(tmp_path / f"{k:06d}.pcd"), cloud)
+    scan = open_dataset("generic", tmp_path).read_scan(1)
+    np.testing.assert_allclose(scan.point_times_s, ns * 1e-9)
+    assert scan.point_time_convention == "relative_s"
+
+    no_z = tmp_path / "no_z"
+    no_z.mkdir()
+    body = RING[:, :2].astype(np.float32)
+    header = ("VERSION .7\nFIELDS x y\nSIZE 4 4\nTYPE F F\nCOUNT 1 1\nWIDTH 200\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 200\n"
+              "DATA binary\n")
+    (no_z / "000000.pcd").write_bytes(header.encode() + body.tobytes())
+    with pytest.raises(DataError, match=r"^\S+000000\.pcd: no z field \(FIELDS x y\): positions are read from fields named x, y and z"):
+        open_dataset("generic", no_z)
+    (tmp_path / "000002.pcd").write_bytes(header.encode() + body.tobytes())  # a later file: refused when read, by name
+    with pytest.raises(DataError, match=r"000002\.pcd \(frame 2\): no z field"):
         open_dataset("generic", tmp_path).read_scan(2)

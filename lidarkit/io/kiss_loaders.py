@@ -13,6 +13,7 @@ kiss-icp's ``kitti``, ``kitti_raw`` and ``tum`` loaders are the kinds ``kiss_kit
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import os
 from collections import Counter
@@ -456,7 +457,9 @@ class NuScenesScans(KissLoaderScans):
 
 class GenericScans(KissLoaderScans):
     """A folder of point-cloud files of one kind (``.bin`` KITTI format, ``.pcd``, ``.ply``, ...), kiss-icp's
-    ``generic`` loader; per-point times from a ``t``/``timestamp``/``time`` attribute of PCD/PLY files."""
+    ``generic`` loader; per-point times from a ``t``/``timestamp``/``time`` attribute of PCD/PLY files, in the
+    units the bag reader reads them (:func:`~lidarkit.io.pointcloud2.checked_point_times`: integers are nanoseconds,
+    as Ouster's uint32 ``t``; floats seconds)."""
 
     loader_name = "generic"
     point_time_convention = "relative_s"
@@ -486,11 +489,55 @@ class GenericScans(KissLoaderScans):
                     f"({', '.join(skipped)}); folder:PATH reads them")
         if skipped:  # (scan2.BIN and .npy scans were left out without a word)
             log.warning("%s: %s", folder, left_out)
+        _check_header(sorted(read, key=lambda f: natural_key(f.name))[0], None)  # the loader reads one file to pick its reader
         super().__init__(folder)
         if skipped:  # (then only logged: the run's warnings did not say it)
             self.reader_warnings.append(left_out)
         # in folder:PATH's order (natsort read time-stamp names 1000.1 before 1000.05: sweeps out of order, no word)
         self.loader.scan_files = np.array(sorted(self.loader.scan_files, key=lambda f: natural_key(Path(f).name)), dtype=str)
+        # the time field's type in the files (the loader hands every field over as float64: Ouster's uint32
+        # nanoseconds were read as seconds, a 0.1 s sweep as one of 1e8 s)
+        self._time_field = getattr(getattr(self.loader, "_read_point_cloud", None), "time_field", None)
+        self._time_dtype = None if self._time_field is None else _field_dtype(Path(self.loader.scan_files[0]), self._time_field)
+
+    def read_scan(self, index: int) -> Scan:
+        files = self.loader.scan_files
+        if 0 <= index < len(files):  # (an index out of range is refused by the base class, naming the range)
+            _check_header(Path(files[index]), index)
+        scan = super().read_scan(index)
+        if scan.point_times_s is None or self._time_dtype is None:
+            return scan
+        from lidarkit.io.pointcloud2 import checked_point_times
+
+        raw = scan.point_times_s.astype(self._time_dtype)  # (exact: the loader's float64 of the file's values)
+        times, convention = checked_point_times(
+            raw, scan.points_xyz, what=f"the {self._time_field!r} field", within="one scan",
+            hint="folder:PATH reads the scans without per-point times", source=files[index], location=f"frame {index}",
+        )
+        return dataclasses.replace(scan, point_times_s=times, point_time_convention=convention)
+
+
+def _field_dtype(path: Path, field: str) -> np.dtype | None:
+    """numpy type of the per-point attribute ``field`` of a point-cloud file as Open3D reads it (None if it has none)."""
+    import open3d as o3d
+
+    from lidarkit.io.pointfile import open3d_quiet
+
+    with open3d_quiet(o3d):
+        cloud = o3d.t.io.read_point_cloud(str(path))
+    return cloud.point[field].numpy().dtype if field in cloud.point else None
+
+
+def _check_header(path: Path, frame: int | None) -> None:
+    """The point-file readers' header checks on a ``.pcd`` / ``.ply`` before kiss-icp's generic loader hands it to
+    Open3D (a .pcd without z failed as "pip install kiss-icp[all] is required" with Open3D's coloured warnings)."""
+    from lidarkit.io.pointfile import check_pcd_counts, check_ply_counts
+
+    suffix = path.suffix.lower()
+    if suffix == ".pcd":
+        check_pcd_counts(path, frame)
+    elif suffix == ".ply":
+        check_ply_counts(path, frame)
 
 
 __all__ = [

@@ -205,7 +205,7 @@ def read_open3d_scan(
     import open3d as o3d  # slow import: only when a pcd/ply is read
 
     try:
-        with _open3d_quiet(o3d):
+        with open3d_quiet(o3d):
             cloud = o3d.t.io.read_point_cloud(str(path), remove_nan_points=False, remove_infinite_points=False)
     except RuntimeError as err:
         raise DataError(f"Open3D cannot read it ({open3d_reason(err)})", source=path, location=_where(frame)) from err
@@ -228,7 +228,7 @@ _loud_level = None
 
 
 @contextmanager
-def _open3d_quiet(o3d) -> Iterator[None]:
+def open3d_quiet(o3d) -> Iterator[None]:
     """Open3D's warnings off while it reads: it prints them in colour on stdout (a result's console), and the header
     checks here name what it would warn about. Counted, so reads on two threads restore the earlier level once."""
     global _quiet_readers, _loud_level
@@ -479,6 +479,7 @@ __all__ = [
     "check_ply_counts",
     "drop_origin_points",
     "finite_points",
+    "open3d_quiet",
     "open3d_reason",
     "read_kitti_bin",
     "read_npy_scan",
