@@ -622,6 +622,30 @@ def test_a_recording_keeping_every_other_sweep_times_its_sweeps_by_their_points(
     assert "moved by +0.0499 s" in result.config["run"]["estimate_stamps_note"]
 
 
+def test_a_throttled_recording_begun_mid_rotation_moves_the_estimate_by_the_recordings_sweep(tmp_path):
+    """Every other sweep kept and the first message half a sweep (the recording began mid-rotation): the runner timed
+    the sweep by the first scan alone, which is not a whole sweep, so it took the stamps' 0.2 s spacing and moved the
+    estimate's stamps to the sweep middle by 0.1 s. The recording's own sweep length (its first scans' median) says
+    0.05 s."""
+    from test_io_bad_bags import write_ros1_bag
+
+    from lidarkit.io import open_dataset
+
+    sim = SimulatedLidarSequence(pose_instant="start", **{**SIM, "n_beams": 8, "n_azimuths": 360})
+    kept = np.arange(0, 10, 2)
+    clouds = _sweeps_as_clouds(sim, kept)
+    clouds[0] = _sweeps_as_clouds(sim, kept[:1], keep=lambda times: times >= 0.05)[0]  # its second half only
+    starts = np.array([c[0] for c in clouds])
+    ends = sim.poses_at(starts - 1000.0 + 0.1)
+    poses = [(t + 0.1, tuple(T[:3, 3]), tuple(Rotation.from_matrix(T[:3, :3]).as_quat())) for t, T in zip(starts, ends)]
+    bag = open_dataset("rosbag", write_ros1_bag(tmp_path / "every_other.bag", clouds, odometry=poses))
+    assert bag.stamp_instant == "start" and bag.sweep_duration_s == pytest.approx(0.1, abs=0.001)
+    result = run(bag, "vanilla")
+    note = result.config["run"]["estimate_stamps_note"]
+    assert "moved by +0.0499 s" in note or "moved by +0.0500 s" in note, note  # (+0.1000 s before)
+    np.testing.assert_allclose(result.trajectory.timestamps_s, starts + bag.sweep_duration_s / 2, atol=1e-6)
+
+
 def test_a_sensor_seeing_part_of_its_turn_ends_its_sweep_at_its_last_point(tmp_path):
     """Points fired 0.025-0.075 s into a 0.1 s rotation (a sensor seeing part of its turn): the sweep end was placed
     at 0.125 s after the stamp (its first point plus the stamps' spacing), re-timed truth 0.18-0.41 m off. It ends at
