@@ -70,6 +70,8 @@ def as_points(
     if not np.issubdtype(arr.dtype, np.number) or arr.dtype == np.bool_:
         raise DataError(f"expected a numeric point array, got dtype {arr.dtype}", source=name)
     arr = arr.astype(np.float64, copy=False)
+    if not arr.flags.writeable:  # (a memory-mapped .npy: kiss-icp's and Open3D's bindings refuse a read-only buffer)
+        arr = arr.copy()
     if len(arr) < min_points:
         raise DataError(f"needs at least {min_points} points, got {len(arr)}", source=name)
     reach = _reach_within_limits(arr) if len(arr) else None  # the common case in two flat reductions (NaN fails them)
