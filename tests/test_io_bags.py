@@ -56,6 +56,8 @@ def test_odometry_help_lists_the_kinds(capsys):
 
 def test_detect_kind(exports, tmp_path):
     (tmp_path / "x.pcap").write_bytes(b"")
+    with pytest.raises(ConfigError, match=r"^path: expected a path, got int 5$"):  # (a bare TypeError before)
+        detect_kind(5)
     assert detect_kind(exports[("rosbag1", "sqlite3")]) == "rosbag"
     assert detect_kind(exports[("rosbag2", "sqlite3")]) == "rosbag"  # folder with metadata.yaml
     assert detect_kind(exports[("rosbag2", "mcap")]) == "rosbag"

@@ -56,3 +56,15 @@ def test_a_relation_of_a_time_with_itself_is_refused_naming_its_line(tmp_path):
         Relations.read(path)
     assert str(err.value) == f"{path} (line 4): t1 equals t2 (relation 2)"
     assert len(Relations.read(shared_path("carmen_2d", "aces.relations"))) == 1279  # the real file has none
+
+
+def test_the_logs_odometry_is_the_callers_own_copy(aces_head):
+    """One cached Trajectory was shared: a caller moving its poses in place moved what the next caller (a run's
+    --init odometry) read."""
+    log = open_dataset("carmen", aces_head)
+    first = log.odometry
+    kept = first.poses_se3.copy()
+    first.poses_se3[:, 0, 3] += 100.0
+    import numpy as np
+
+    np.testing.assert_array_equal(log.odometry.poses_se3, kept)

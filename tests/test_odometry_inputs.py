@@ -69,6 +69,18 @@ def test_cli_sim_param_duplicating_an_option_is_a_config_error(tmp_path, capsys)
     assert "--seed" in capsys.readouterr().err
 
 
+def test_a_run_name_that_is_no_text_is_refused_and_a_numpy_string_titles_the_run(tmp_path):
+    """name=np.str_ finished the run, then failed writing config.yaml (yaml cannot represent it: the result lost);
+    name=5 titled the run "vanilla on 5"."""
+    from lidarkit.odometry import run
+
+    spec = "sim:street?frames=3&beams=8&azimuths=180"
+    with pytest.raises(ConfigError, match=r"^name: name must be a text, got int 5$"):
+        run(spec, "vanilla", name=5)
+    result = run(spec, "vanilla", name=np.array(["street_a"])[0], out_dir=tmp_path / "run")
+    assert result.trajectory.name == "vanilla on street_a" and (tmp_path / "run" / "config.yaml").is_file()
+
+
 @pytest.mark.parametrize("frames", ["0:10:0", slice(0, 10, 0)])
 def test_zero_frame_step_is_a_config_error(frames):
     with pytest.raises(ConfigError, match="step"):

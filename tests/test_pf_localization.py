@@ -548,6 +548,14 @@ def test_odd_counts_steps_and_snapshots_are_refused(stachniss, capsys, tmp_path)
             run_protocol(stachniss, **{"n_particles": 50, "seed": 0, **kw})
         assert f"{err.value.source}: {err.value.reason}" == line
     r = run_protocol(stachniss, np.int64(50), 0, kidnap_at_step=np.int64(150), snapshot_steps=(0, 331), with_ape_rpe=False)
+    # the data as a path is read; anything else is named (a path failed "'str' object has no attribute 'odometry'")
+    by_path = run_protocol(str(shared_path("pf", "robot_mapping_stachniss")), np.int64(50), 0, kidnap_at_step=150,
+                           snapshot_steps=(0, 331), with_ape_rpe=False)
+    assert by_path.estimates.keys() == r.estimates.keys()
+    for key in r.estimates:
+        np.testing.assert_array_equal(by_path.estimates[key], r.estimates[key])
+    with pytest.raises(ConfigError, match=r"^data: data must be a LandmarkData or the path of a landmark dataset, got int 5$"):
+        run_protocol(5, 50, 0)
     assert r.settings["kidnap_at_step"] == 150 and type(r.settings["kidnap_at_step"]) is int and sorted(r.snapshots) == [0, 331]
     data = shared_path("pf", "burgard_particle_filter")
     for args, line in ((["--snapshots", "0,0,5", "--out", str(tmp_path / "a")], "--snapshots: a snapshot step is listed twice: '0,0,5'"),

@@ -77,6 +77,8 @@ def detect_kind(path: str | os.PathLike) -> str | None:
     """
     from pathlib import Path
 
+    if not isinstance(path, (str, os.PathLike)):  # (5 failed "expected str, bytes or os.PathLike object, not int")
+        raise ConfigError(f"expected a path, got {type(path).__name__} {path!r:.60}", source="path")
     p = Path(path)
     suffix = p.suffix.lower()
     if p.is_file() or not p.exists():

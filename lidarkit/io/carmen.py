@@ -463,7 +463,7 @@ class CarmenLog:
                 yaw_pose_se3(xyt[:, 0], xyt[:, 1], xyt[:, 2]), self.timestamps_s, name=f"{self.name} odometry",
                 meta={"frame": "laser", "source": "log odometry"},
             )
-        return self._odometry
+        return self._odometry.copy()  # (one shared Trajectory: a caller moving its poses in place moved everyone's)
 
     @property
     def relations(self) -> Relations | None:

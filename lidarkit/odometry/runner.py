@@ -421,7 +421,9 @@ def run(
     registration = _resolve_method(method, params)
     method_name = getattr(registration, "name", type(registration).__name__) or type(registration).__name__
     dataset_name = str(getattr(sequence, "name", "dataset"))
-    title = name or dataset_name
+    if name is not None and not isinstance(name, str):  # (a numpy string finished the run, then failed writing config.yaml)
+        raise ConfigError(f"name must be a text, got {type(name).__name__} {name!r:.60}", source="name")
+    title = str(name) if name else dataset_name
     name = method_name
     if callable(getattr(sequence, "configure_for_method", None)):  # e.g. KITTI's vertical-angle correction for kiss
         # (recorded below); a variant that stands for another (pipeline's kiss_like) gets that one's data. The caller's

@@ -14,6 +14,8 @@ and the distance between the estimate and dead reckoning.
 
 from __future__ import annotations
 
+import os
+
 import logging
 import time
 from collections.abc import Callable
@@ -427,6 +429,13 @@ def run_protocol(
     ``kidnap_at_step`` / ``kidnap_offset``: teleport the simulated robot (see :func:`simulate`); the steps it took to
     recover are ``metrics["kidnap_recovery"]``.
     """
+    from lidarkit.io.landmarks import LandmarkData
+
+    if isinstance(data, (str, os.PathLike)):  # (a path failed "'str' object has no attribute 'odometry'")
+        data = LandmarkData(data)
+    if not isinstance(data, LandmarkData):
+        raise ConfigError(f"data must be a LandmarkData or the path of a landmark dataset, got {type(data).__name__} "
+                          f"{data!r:.60}", source="data")
     overrides = {k: v for k, v in dict(likelihood=likelihood, estimator=estimator, resampler=resampler, q_as=q_as).items() if v is not None}
     cfg = _resolve_config(config, n_particles, {**overrides, **config_overrides})
     seed = checked_seed(seed)
