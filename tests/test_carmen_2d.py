@@ -584,6 +584,10 @@ def test_a_run_over_a_log_with_relations_says_how_to_score_it(tmp_path, capsys, 
     assert json.loads((out / "metrics.json").read_text())["ground_truth_note"] == note
     assert f"ground truth │ {note}" in " ".join(capsys.readouterr().out.split())
     assert "ground_truth_note" not in run(f"carmen:{aces}?relations=none", "vanilla", params={"planar": True}, frames="0:2").metrics
+    # a log given through .. (the docs' carmen:../shared/...) is named by its normalized path
+    roundabout = aces.parent / ".." / aces.parent.name / aces.name
+    said = run(f"carmen:{roundabout}", "vanilla", params={"planar": True}, frames="0:2").metrics["ground_truth_note"]
+    assert f"--relations {aces.with_name('aces.relations')} " in said, said
 
 
 def test_relations_and_their_errors_print_as_one_line(carmen_logs):

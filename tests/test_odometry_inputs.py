@@ -256,3 +256,28 @@ def test_a_single_scan_file_is_pointed_to_its_folder(capsys):
                                   f"(folder:{scan.parent})")
     assert cli_exit_code(["odometry", str(velodyne / "000000.bin"), "-m", "kiss", "--no-progress"]) == 1
     assert capsys.readouterr().err.strip().endswith(f"(folder:{velodyne})")
+
+
+def test_frame_messages_name_the_file_where_its_number_is_not_the_index(tmp_path, caplog):
+    """A folder of KITTI scans 94, 95, 198, 199: "kmix (frame 1): registration did not converge" named a scan the folder
+    has no file 000001.bin for (the index, which --frames selects), where its read errors name the file. The index
+    stays, the file beside it; a scan numbered as its index is named as before."""
+    import logging
+    import shutil
+
+    from conftest import shared_path
+
+    from lidarkit.errors import RegistrationError
+    from lidarkit.odometry import run
+    from lidarkit.odometry.runner import frame_namer
+
+    folder = tmp_path / "kmix"
+    folder.mkdir()
+    for n in (94, 95, 198):
+        shutil.copy(shared_path("kitti_odometry", "extra_frames", "00", "velodyne", f"{n:06d}.bin"), folder / f"{n:06d}.bin")
+    with pytest.raises(RegistrationError, match=r"^kmix \(frame 1, 000095\.bin\): registration did not converge \(reached max_iterations=1\)$"):
+        run(f"folder:{folder}", "vanilla", params={"max_iterations": 1}, strict=True, progress=False)
+    with caplog.at_level(logging.WARNING):
+        run(f"folder:{folder}", "vanilla", params={"max_iterations": 1}, frames="0:2", progress=False)
+    assert "kmix frame 1, 000095.bin: vanilla did not converge" in caplog.text
+    assert frame_namer(open_sequence("sim:street?frames=3"))(2) == "frame 2"

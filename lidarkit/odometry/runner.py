@@ -8,6 +8,7 @@ import logging
 import os
 import time
 from pathlib import Path
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -119,16 +120,33 @@ def _is_frame_error(err: BaseException) -> bool:
     return isinstance(err, _FRAME_ERRORS) and not isinstance(err, (NotImplementedError, RecursionError))
 
 
-def _frame_error(err: Exception, dataset_name: str, frame: int) -> LidarKitError:
-    """Re-raise an error of frame ``frame`` so that its message names the frame."""
+def _frame_error(err: Exception, dataset_name: str, frame: int, where: str | None = None) -> LidarKitError:
+    """Re-raise an error of frame ``frame`` so that its message names the frame (as ``where`` says it, see
+    :func:`frame_namer`)."""
+    where = where or f"frame {frame}"
     if isinstance(err, LidarKitError):
         if err.location == f"frame {frame}":
             return err  # names the frame already (and its file: wrapped, it read "kt (frame 3): kt/velodyne/000003.bin (frame 3): ...")
         try:
-            return type(err)(str(err), source=dataset_name, location=f"frame {frame}")
+            return type(err)(str(err), source=dataset_name, location=where)
         except TypeError:  # a subclass with another constructor
-            return LidarKitError(str(err), source=dataset_name, location=f"frame {frame}")
-    return RegistrationError(f"{type(err).__name__}: {err}", source=dataset_name, location=f"frame {frame}")
+            return LidarKitError(str(err), source=dataset_name, location=where)
+    return RegistrationError(f"{type(err).__name__}: {err}", source=dataset_name, location=where)
+
+
+def frame_namer(sequence: Any) -> Callable[[int], str]:
+    """How a run's messages name the scan at index ``idx``: ``frame idx`` (what --frames selects, timing.csv's rows and
+    metrics' bad_frames count), with the scan's file or the recording's own number beside it where that differs (a
+    folder of KITTI files 94, 95, 198: "frame 10" was file 000094.bin)."""
+    numbers = frame_numbers(sequence)
+    paths = getattr(sequence, "scan_paths", None)
+    paths = paths if paths is not None and len(paths) == len(sequence) else None
+
+    def name(idx: int) -> str:
+        if numbers is None or int(numbers[idx]) == int(idx):
+            return f"frame {idx}"
+        return f"frame {idx}, {Path(paths[idx]).name}" if paths is not None else f"frame {idx}, recording frame {int(numbers[idx])}"
+    return name
 
 
 def _calibration_of(registration: Any, name: str) -> str | None:
@@ -151,7 +169,7 @@ def _stateful_covariance_settings(registration: Any, name: str) -> tuple[str | N
 
 def _stateful_after(k: int, frame: int, previous: np.ndarray | None, scan: Scan, prepared: tuple, poses: np.ndarray,
                     checker: FrameChecker, want_covariance: bool, relative_cov: np.ndarray, min_eigenvalue: np.ndarray,
-                    calibration: str | None, model: Any, dataset_name: str, voxelized: VoxelizedScans) -> None:
+                    calibration: str | None, model: Any, dataset_name: str, voxelized: VoxelizedScans, where: str | None = None) -> None:
     """A stateful variant's frame k once its pose is known: the after-the-fact covariance (of ``model``, calibrated as
     the variant ``calibration``), then the frame check."""
     if want_covariance and k > 0:
@@ -161,7 +179,7 @@ def _stateful_after(k: int, frame: int, previous: np.ndarray | None, scan: Scan,
         except Exception as err:
             if not _is_frame_error(err):
                 raise
-            raise _frame_error(err, dataset_name, frame) from err
+            raise _frame_error(err, dataset_name, frame, where) from err
     checker.add(k, frame, scan.points_xyz, scan.point_times_s, poses, prepared)
 
 
@@ -170,7 +188,8 @@ def _run_stateless(stream, registration: Any, worker: Overlap, indices: np.ndarr
                    validated: dict[int, np.ndarray], *,
                    read_s, register_s, n_points, converged, measured, fallback, iterations, rmse_m, n_corr, degenerate,
                    assessed, min_eigenvalue, relative_cov, reasons, widened: list[int], require_times=None,
-                   sweeps: np.ndarray | None = None, frame_sweeps: np.ndarray | None = None) -> Scan | None:
+                   sweeps: np.ndarray | None = None, frame_sweeps: np.ndarray | None = None,
+                   name_frame: Callable[[int], str] = lambda idx: f"frame {idx}") -> Scan | None:
     """Scan-to-scan chaining, frame k's assessment overlapped with frame k+1's registration (``require_times``: the
     ``--strict`` refusal of a scan without per-point times, for a variant that deskews with them; ``sweeps``: each
     frame's sweeps since the previous one, for a variant that ``accepts_sweeps_apart``; ``frame_sweeps``: the same for
@@ -215,7 +234,7 @@ def _run_stateless(stream, registration: Any, worker: Overlap, indices: np.ndarr
         except Exception as err:
             if not _is_frame_error(err):
                 raise
-            raise _frame_error(err, dataset_name, idx) from err
+            raise _frame_error(err, dataset_name, idx, name_frame(idx)) from err
         return out, clock() - t0
 
     def assess(out, idx: int):
@@ -226,7 +245,7 @@ def _run_stateless(stream, registration: Any, worker: Overlap, indices: np.ndarr
             except Exception as err:
                 if not _is_frame_error(err):
                     raise
-                raise _frame_error(err, dataset_name, idx) from err
+                raise _frame_error(err, dataset_name, idx, name_frame(idx)) from err
         return worker.submit(task)
 
     def resolve(item: dict) -> None:
@@ -269,14 +288,14 @@ def _run_stateless(stream, registration: Any, worker: Overlap, indices: np.ndarr
         if not converged[k]:
             why = reasons[k] or "no reason given"
             if strict:
-                raise RegistrationError(f"registration did not converge ({why})", source=dataset_name, location=f"frame {idx}")
+                raise RegistrationError(f"registration did not converge ({why})", source=dataset_name, location=name_frame(idx))
             fallback[k] = True
             log.warning(
-                "%s frame %d: %s did not converge (%s); using the %s motion instead",
-                dataset_name, idx, name, why, "odometry" if odometry_poses is not None else "constant-velocity",
+                "%s %s: %s did not converge (%s); using the %s motion instead",
+                dataset_name, name_frame(idx), name, why, "odometry" if odometry_poses is not None else "constant-velocity",
             )
         elif degenerate[k]:
-            log.warning("%s frame %d: %s flagged degenerate geometry (%s)", dataset_name, idx, name, reasons[k] or "degenerate")
+            log.warning("%s %s: %s flagged degenerate geometry (%s)", dataset_name, name_frame(idx), name, reasons[k] or "degenerate")
 
     checks = None  # the last frame check submitted (checks run in frame order in the one worker)
 
@@ -297,7 +316,7 @@ def _run_stateless(stream, registration: Any, worker: Overlap, indices: np.ndarr
                 checks.result()
             if not _is_frame_error(read_error):
                 raise read_error
-            raise _frame_error(read_error, dataset_name, idx) from read_error
+            raise _frame_error(read_error, dataset_name, idx, name_frame(idx)) from read_error
         scan, prepared = payload
         read_s[k] = read_time - prepared[1]  # the reading alone (the check's part is in check_s)
         first_scan = scan if k == 0 else first_scan
@@ -523,6 +542,7 @@ def run(
         return scan, checker.prepare(i, scan.points_xyz)
 
     stream = prefetched(read, indices, prefetch)
+    name_frame = frame_namer(sequence)
     # frame k's after-the-fact work (assessment, covariance, frame check) runs in one worker thread while frame k+1
     # registers; results are those of the same calls in line (see _run_stateless for the one decision that waits)
     worker = Overlap(overlap and bool(getattr(registration, "overlap_assessment", True)))
@@ -565,13 +585,13 @@ def run(
                             inflight.result()  # an earlier frame's error comes first, as in line
                         if not _is_frame_error(err):
                             raise
-                        raise _frame_error(err, dataset_name, int(idx)) from err
+                        raise _frame_error(err, dataset_name, int(idx), name_frame(int(idx))) from err
                     register_s[k], n_points[k] = t2 - t1, len(points)
                     if inflight is not None:
                         inflight.result()
                     inflight = worker.submit(functools.partial(
                         _stateful_after, k, int(idx), previous, scan, prepared, poses, checker, want_covariance, relative_cov,
-                        min_eigenvalue, calibration, model, dataset_name, voxelized,
+                        min_eigenvalue, calibration, model, dataset_name, voxelized, name_frame(int(idx)),
                     ))
                     validated.pop(id(points), None)  # registered: not passed to the backend again
                     previous = points
@@ -588,7 +608,7 @@ def run(
                     iterations=iterations, rmse_m=rmse_m, n_corr=n_corr, degenerate=degenerate, assessed=frame_assessed,
                     min_eigenvalue=min_eigenvalue,
                     relative_cov=relative_cov if want_covariance else None, reasons=reasons, widened=widened, sweeps=sweeps_given,
-                    frame_sweeps=sweeps,
+                    frame_sweeps=sweeps, name_frame=name_frame,
                 )
     finally:
         worker.close()  # cancels what has not started, joins the worker thread, also on error
@@ -771,6 +791,7 @@ def _relations_note(sequence: ScanSequence, out_dir: str | os.PathLike | None,
     relations = (getattr(sequence, "reader_options", None) or {}).get("relations")
     if not relations:
         return None, None
+    relations = os.path.normpath(relations)  # (a dataset given as carmen:../shared/... printed its path with .. left in)
     n_moved = int(getattr(sequence, "n_restamped", 0) or 0)
     if not n_moved:
         poses = Path(out_dir) / "poses_tum.txt" if out_dir is not None else "POSES_TUM (the run's poses_tum.txt, --out)"
