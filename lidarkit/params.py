@@ -7,7 +7,9 @@ dataset specs ``KIND:PATH?key=value&...`` (:func:`lidarkit.odometry.open_sequenc
 Values are read as YAML scalars (``1`` -> int, ``0.5`` -> float, ``true``/``false`` -> bool,
 ``null`` or empty -> None, anything else a string), except text YAML 1.1 would mangle: numbers with a
 leading zero or underscores (``05``, ``2011_09_26``) and dates stay strings. A spec's empty value (``?time_field=``)
-is refused: read as None, it silently meant "auto", "no per-point times" or the default file.
+is refused: read as None, it silently meant "auto", "no per-point times" or the default file. So is a value in braces
+or brackets YAML cannot read (``kernel={name: huber``): kept as text, it failed later as an unknown name or "not a
+valid dictionary".
 """
 
 from __future__ import annotations
@@ -54,7 +56,7 @@ def parse_kv(items: Iterable[str] | str, option: str = "option") -> dict[str, An
     """``["k=v", ...]`` or a query string ``"k=v&k2=v2"`` (URL-encoded) -> ``{key: value}``.
 
     A missing ``=``, an empty key, a key given twice or (in a query string) an empty value raises ConfigError naming
-    ``option`` and the item.
+    ``option`` and the item; a ``{...}`` / ``[...]`` value YAML cannot read, one naming the key and YAML's reason.
     """
     if isinstance(items, str):
         pairs = []
@@ -73,8 +75,29 @@ def parse_kv(items: Iterable[str] | str, option: str = "option") -> dict[str, An
             raise ConfigError(f"{key!r} is given twice", source=f"{option} {raw!r}")
         if isinstance(items, str) and not value.strip():  # (an unset shell variable in a spec)
             raise ConfigError(f"{key}= has no value; give one, or leave {key} out for its default", source=option)
+        if value.strip().startswith(("{", "[")) and (problem := _yaml_problem(value.strip())):
+            raise ConfigError(f"{value.strip()!r} is not valid YAML ({problem})", source=f"{option} {key}")
         out[key] = parse_value(value)
     return out
+
+
+def _yaml_problem(text: str) -> str:
+    """Why YAML cannot read ``text``, in one line ("flow mapping not closed"); "" when it can."""
+    import yaml
+
+    try:
+        yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        problem = (getattr(err, "problem", None) or str(err).splitlines()[0]).replace("'<stream end>'", "the end")
+        context = (getattr(err, "context", None) or "").removeprefix("while parsing a ")
+        mark = getattr(err, "problem_mark", None)
+        at = f" at character {mark.column + 1}" if mark is not None else ""
+        if problem.endswith("the end") and context in ("flow mapping", "flow sequence"):
+            return f"{context} not closed"
+        if problem.startswith("expected '<document start>'"):  # (YAML's words for text after a complete value)
+            return f"text after the closing bracket{at}"
+        return f"{context + ': ' if context else ''}{problem}{at}"
+    return ""
 
 
 def number_field(annotation: Any) -> bool:

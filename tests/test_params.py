@@ -57,3 +57,31 @@ def test_an_empty_value_in_a_spec_is_refused_naming_the_option(tmp_path):
         open_sequence(f"kitti:{tmp_path}?sequence=%20")
     assert str(err.value) == "kitti dataset option: sequence= has no value; give one, or leave sequence out for its default"
     assert parse_kv("time_field=null&topic=%2Fpoints") == {"time_field": None, "topic": "/points"}
+
+
+@pytest.mark.parametrize("item, reason", [
+    ("kernel={name: huber", "flow mapping not closed"),
+    ("preprocess=[voxel, crop", "flow sequence not closed"),
+    ("ground_params={sensor_height_m: 1.8}}", "text after the closing bracket at character 23"),
+])
+def test_a_braced_value_yaml_cannot_read_names_the_key_and_yaml_s_reason(item, reason, capsys):
+    """Kept as text, ``kernel={name: huber`` failed later as "unknown kernel component '{name: huber'" and
+    ``ground_params={...`` as "Input should be a valid dictionary"."""
+    from conftest import cli_exit_code
+    from lidarkit.samples import sample_path
+
+    key, _, value = item.partition("=")
+    said = f"--param {key}: {value!r} is not valid YAML ({reason})"
+    with pytest.raises(ConfigError) as err:
+        parse_params([item])
+    assert str(err.value) == said
+    pair = [str(sample_path("kitti_pair", name)) for name in ("000095.npy", "000094.npy")]
+    assert cli_exit_code(["icp", *pair, "-m", "pipeline", "-p", item]) == 1
+    assert capsys.readouterr().err.strip().splitlines() == [f"error: {said}"]
+    assert parse_params(["kernel={name: huber}", "preprocess=[voxel, crop]"]) == {
+        "kernel": {"name": "huber"}, "preprocess": ["voxel", "crop"]}
+
+
+def test_a_spec_s_braced_value_yaml_cannot_read_is_refused_too():
+    with pytest.raises(ConfigError, match=r"^simulator option kernel: '\{name: huber' is not valid YAML \(flow mapping not closed\)$"):
+        parse_kv("n_beams=32&kernel=%7Bname: huber", option="simulator option")

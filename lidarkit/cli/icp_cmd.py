@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import re
 from pathlib import Path
-from typing import Optional
+from typing import TYPE_CHECKING, Optional
 
 import numpy as np
 import typer
@@ -16,6 +16,9 @@ from rich.text import Text
 from lidarkit.cli.app import app, stdout
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.params import shown_default
+
+if TYPE_CHECKING:
+    from lidarkit.registration.base import RegistrationResult
 
 
 def read_init_pose(path: Path) -> np.ndarray:
@@ -227,6 +230,16 @@ def _holds_an_icp_run(out: Path) -> bool:
     return isinstance(config, dict) and {"method", "params"} <= config.keys()
 
 
+def no_rmse_note(result: RegistrationResult) -> str:
+    """What rmse.png says when ``result`` holds no RMSE: assess=False only where the result says it
+    was not assessed, else its reason (a run without initial overlap read "assess=False" though vanilla is always assessed)."""
+    import textwrap
+
+    if result.extra.get("assessed") is False:
+        return "no RMSE: the assessment was left out (assess=False)"
+    return textwrap.fill(f"no RMSE: {result.reason}" if result.reason else "no RMSE recorded", width=70)
+
+
 @app.command("icp")
 def icp(
     ctx: typer.Context,
@@ -286,5 +299,5 @@ def icp(
             coarse = result.extra.get("coarse_iterations")
             save_rmse_history(tmp / "rmse.png", {method: result.rmse_history}, title=f"{method}: {source.name} -> {target.name}",
                               coarse_iterations={method: coarse} if coarse else None,
-                              empty_note="no RMSE: the assessment was left out (assess=False)")
+                              empty_note=no_rmse_note(result))
         stdout().print(f"wrote {', '.join(str(out / name) for name in ('result.json', 'config.json', 'bev.png', 'rmse.png'))}")

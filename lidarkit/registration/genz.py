@@ -177,14 +177,30 @@ class GenzRegistration(Registration):
         self._genz = GenZICP(self.config.to_genz_config())
         self._start = start
 
+    def _in_range(self, range_m: np.ndarray) -> np.ndarray:
+        """Which points genz-icp's range crop keeps, by their distance ``(N,)`` from the sensor."""
+        return (range_m > self.config.min_range_m) & (range_m < self.config.max_range_m)
+
+    def _crop_text(self, range_m: np.ndarray) -> str:
+        """The range crop and where the cloud lies, for the error of a cloud it leaves (nearly) empty."""
+        c = self.config
+        return (f"[{c.min_range_m:g}, {c.max_range_m:g}] m of the sensor (min_range_m / max_range_m; the cloud lies "
+                f"{range_m.min():.1f}-{range_m.max():.1f} m from it)")
+
     def register_frame(self, points_xyz: np.ndarray, point_times_s: np.ndarray | None = None) -> np.ndarray:
-        """Register one sweep; returns ``T_world_lidar`` (4x4; at mid-sweep when deskewed)."""
+        """Register one sweep; returns ``T_world_lidar`` (4x4; at mid-sweep when deskewed). A first sweep with no
+        point in the range crop is a RegistrationError, as in kiss and pipeline."""
         from genz_icp.pybind import genz_icp_pybind
 
         genz = self.pipeline
         frame = np.ascontiguousarray(as_points(points_xyz, "frame", min_points=1))
         refuse_2d(self.name, frame, frame, GENZ_2D_REASON)
         times = normalized_times(point_times_s, len(frame))
+        # nothing in range and nothing registered yet: genz-icp returns the identity as a pose (a 0 m path, no word)
+        range_m = np.linalg.norm(frame, axis=1)
+        if not self._in_range(range_m).any() and len(genz.local_map.point_cloud()) == 0:
+            raise RegistrationError(f"no point of the sweep lies within {self._crop_text(range_m)}: there is nothing to "
+                                    "register", source=self.name)
         # the native call GenZICP.register_frame makes, without its visualiser-only frame conversions
         if times is not None:
             genz._odometry._register_frame(genz_icp_pybind._Vector3dVector(frame), times)
@@ -202,6 +218,13 @@ class GenzRegistration(Registration):
 
         c = self.config
         refuse_2d(self.name, source_xyz, target_xyz, GENZ_2D_REASON)
+        # clouds the range crop leaves (nearly) empty, as kiss words it: register_frame's error would name the sweep, and
+        # a source cropped to nothing was assessed as "only 0 correspondences" on a pose thrown off by genz's empty frame
+        source_range_m, target_range_m = np.linalg.norm(source_xyz, axis=1), np.linalg.norm(target_xyz, axis=1)
+        for name, range_m in (("source cloud", source_range_m), ("target cloud", target_range_m)):
+            n_kept = int(self._in_range(range_m).sum())
+            if n_kept < 3:
+                raise RegistrationError(f"only {n_kept} points within {self._crop_text(range_m)}", source=name)
         saved = self._genz, self._start
         try:
             self._genz, self._start = GenZICP(c.to_genz_config()), np.eye(4)
@@ -214,10 +237,10 @@ class GenzRegistration(Registration):
         finally:
             self._genz, self._start = saved
         if len(map_points) < 3:
-            raise RegistrationError(f"genz-icp kept only {len(map_points)} map points of the target", source="target cloud")
+            raise RegistrationError(f"genz-icp kept only {len(map_points)} map points of the target within "
+                                    f"{self._crop_text(target_range_m)}", source="target cloud")
         T = T_rel @ init_T
-        r = np.linalg.norm(source_xyz, axis=1)
-        source = source_xyz[(r > c.min_range_m) & (r < c.max_range_m)]
+        source = source_xyz[self._in_range(source_range_m)]
         source = source[:: max(1, len(source) // 20000)]
         surfaces = SurfaceIndex(map_points)  # shared by the assessment and the verdict
         aligned = transform_points(T, source)
