@@ -529,3 +529,130 @@ def test_a_ground_truth_topic_without_messages_names_the_way_to_run_without(tmp_
     assert str(err.value) == (f"{tmp_path / 'both.bag'}: ground-truth topic /ground_truth has no messages (ground_truth_topic=none "
                               "runs without ground truth)")
     assert open_dataset("rosbag", tmp_path / "both.bag", ground_truth_topic="none").ground_truth is None
+
+
+def test_a_split_part_beginning_at_the_time_the_one_before_ends_is_read_as_one_recording(tmp_path):
+    """rosbag record --split cut between two messages logged in one nanosecond: the folder was refused "run_1.bag begins
+    0.000 s before run_0.bag ends" (rosbags' end time is the last message's + 1 ns, compared without tolerance). Parts
+    may begin up to 1 ms before the one before ends; a real overlap is refused as before."""
+    split = tmp_path / "split"
+    split.mkdir()
+    write_ros1_bag(split / "run_0.bag", [good(k) for k in range(4)])
+    last_ns = 10**12 + 3 * 10**8  # run_0's last message
+    write_ros1_bag(split / "run_1.bag", [good(k) for k in range(3, 8)], received_from_ns=last_ns)
+    ds = open_dataset("rosbag", split)
+    assert len(ds) == 9
+    np.testing.assert_allclose(ds.timestamps_s, 1000.0 + 0.1 * np.array([0, 1, 2, 3, 3, 4, 5, 6, 7]), atol=1e-9)
+    overlap = tmp_path / "overlap"
+    overlap.mkdir()
+    write_ros1_bag(overlap / "run_0.bag", [good(k) for k in range(4)])
+    write_ros1_bag(overlap / "run_1.bag", [good(k) for k in range(4, 8)], received_from_ns=last_ns - 2 * 10**6)
+    with pytest.raises(DataError, match=r"overlap: 2 bags \(run_0\.bag, run_1\.bag\) that are no parts of one recording: run_1\.bag "
+                                        r"begins 0\.002 s before run_0\.bag ends "):
+        open_dataset("rosbag", overlap)
+
+
+def _missing_returns(n: int, how: str):
+    """``good``'s cloud of ``n`` points with every return missing: all NaN, all at (0, 0, 0), or half of each."""
+    fields, step, data = _cloud_bytes(n)
+    rec = np.frombuffer(data, dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("time", "<f4")]).copy()
+    nan = {"nan": np.ones(n, bool), "zero": np.zeros(n, bool), "both": np.arange(n) % 2 == 0}[how]
+    for axis in "xyz":
+        rec[axis] = np.where(nan, np.nan, 0.0)
+    return fields, step, rec.tobytes(), n
+
+
+@pytest.mark.parametrize("how, what", [("nan", "NaN"), ("zero", "at (0, 0, 0)"), ("both", "NaN or at (0, 0, 0)")])
+def test_a_message_of_missing_returns_only_says_so(tmp_path, how, what):
+    """A message whose 5554 points were all missing returns read "empty scan (0 points)", as if it held none: it says
+    how many points it held and why none is left, as the point-file readers do, and how to leave its frame out."""
+    bag = write_ros1_bag(tmp_path / "missing.bag", [good(0), (1000.1, *_missing_returns(64, how)), good(2)])
+    ds = open_dataset("rosbag", bag)
+    assert len(ds.read_scan(0).points_xyz) == 64
+    with pytest.raises(DataError) as err:
+        ds.read_scan(1)
+    assert str(err.value) == (f"{bag} (message 1 on /points): all 64 points are {what} (missing returns): no point left "
+                              "(--frames can leave the frame out)")
+    assert len(ds.read_scan(2).points_xyz) == 64
+
+
+@pytest.mark.parametrize("first", ["empty", "all NaN", "one point"])
+def test_a_first_message_without_point_times_leaves_the_sweep_timing_to_the_others(tmp_path, first):
+    """A driver's empty start-up cloud (or one of missing returns only, or of one point) as message 0 made the whole
+    recording one without point times: no stamp instant, no sweep length, no ground-truth instant, and small_gicp was
+    scored against sweep-end poses without re-timing (RPE 0.0379 m for 0.0087 m). The sweep timing passes over scans
+    without two or more point times and takes its medians over the first ones that carry them."""
+    fields, step, data = _cloud_bytes(64)
+    head = {"empty": (1000.0, fields, step, b"", 0), "all NaN": (1000.0, *_missing_returns(64, "nan")),
+            "one point": (1000.0, fields, step, data[:step], 1)}[first]
+    clouds = [head] + [good(k) for k in range(1, 8)]
+    odometry = [(1000.1 + 0.1 * k, [0.5 * k, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]) for k in range(8)]  # stamped at sweep ends
+    ds = open_dataset("rosbag", write_ros1_bag(tmp_path / "startup.bag", clouds, odometry=odometry))
+    assert ds.stamp_instant == "start"
+    assert ds.sweep_duration_s == pytest.approx(0.1)
+    assert ds.ground_truth.meta["pose_instant"] == "end"
+    retimed = ds.ground_truth_at_instant("start", scans=[1, 2, 3])
+    np.testing.assert_allclose(retimed.poses_se3[:, 0, 3], [0.0, 0.5, 1.0], atol=1e-9)
+    from numpy.lib.recfunctions import repack_fields
+
+    xyz = repack_fields(np.frombuffer(data, dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("time", "<f4")])[["x", "y", "z"]])
+    timeless = [head] + [(1000.0 + 0.1 * k, fields[:3], 12, xyz.tobytes(), 64) for k in range(1, 4)]
+    assert open_dataset("rosbag", write_ros1_bag(tmp_path / "timeless.bag", timeless)).stamp_instant is None
+
+
+def test_a_time_field_of_another_name_is_named_with_the_option_that_reads_it(tmp_path):
+    """A Livox bag's per-point times in 'offset_time' (uint32 ns) only said "deskew requested, no per-point times found
+    (RosbagScans gives none): ran without deskew": the reader keeps its clouds' field names, and the reason lists them
+    with the time_field= option that reads one (and says so when time_field=none turned the times off)."""
+    from lidarkit.odometry.settings import point_times_not_found
+    from lidarkit.sim.lidar import SimulatedLidarSequence
+
+    sim = SimulatedLidarSequence(n_frames=4, n_beams=16, n_azimuths=360, seed=1)
+    dtype = [("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("intensity", "<f4"), ("offset_time", "<u4")]
+    fields = [("x", 0, F32), ("y", 4, F32), ("z", 8, F32), ("intensity", 12, F32), ("offset_time", 16, U32)]
+    clouds = []
+    for k in range(len(sim)):
+        scan = sim.read_scan(k)
+        rec = np.zeros(len(scan.points_xyz), dtype=dtype)
+        rec["x"], rec["y"], rec["z"] = scan.points_xyz.T
+        rec["offset_time"] = np.round(scan.point_times_s * 1e9)
+        clouds.append((1000.0 + 0.1 * k, fields, 20, rec.tobytes(), len(rec)))
+    bag = write_ros1_bag(tmp_path / "livox.bag", clouds)
+    reason = ("no per-point times found (RosbagScans: no time field among the clouds' fields x, y, z, intensity, offset_time; "
+              "time_field=auto reads one named time, t, timestamp or timestamps, time_field=NAME reads another, e.g. "
+              "time_field=offset_time)")
+    result = run(open_dataset("rosbag", bag), "kiss")
+    assert result.metrics["effective"]["deskew"]["reason"] == reason
+    assert f"deskew requested, {reason}: ran without deskew" in result.metrics["warnings"]
+    off = open_dataset("rosbag", bag, time_field="none")
+    off.read_scan(0)
+    assert point_times_not_found(off) == "no per-point times found (RosbagScans: time_field=none reads none)"
+    named = open_dataset("rosbag", bag, time_field="offset_time")
+    np.testing.assert_allclose(named.read_scan(1).point_times_s, sim.read_scan(1).point_times_s, atol=1e-9)
+
+
+def test_integer_point_times_in_microseconds_are_refused_by_the_stamps_spacing(tmp_path):
+    """A uint32 't' in microseconds was read as nanoseconds: sweeps of 1e-4 s against 0.1 s between the stamps
+    (sweep_duration_s 9.97e-05), the ground truth re-timed 50 us after each sweep start, no word. Sweeps spanning less
+    than 1 % of the stamps' spacing (a median over the first scans) are a DataError naming the field, both times and
+    the way out; a sensor seeing a quarter of its turn still reads."""
+    n = 128
+    rec = np.zeros(n, dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("t", "<u4")])
+    angle = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    rec["x"], rec["y"], rec["z"] = 10 * np.cos(angle), 10 * np.sin(angle), np.linspace(-1, 1, n)
+    fields = [("x", 0, F32), ("y", 4, F32), ("z", 8, F32), ("t", 12, U32)]
+    odometry = [(1000.1 + 0.1 * k, [0.5 * k, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]) for k in range(6)]
+    rec["t"] = np.round(np.linspace(0, 0.1, n) * 1e6)  # microseconds
+    bag = write_ros1_bag(tmp_path / "us.bag", [(1000.0 + 0.1 * k, fields, 16, rec.tobytes(), n) for k in range(6)], odometry=odometry)
+    message = (f"{bag}: per-point time field 't': sweeps of 0.0001 s (the median over the first 5 scans) while the scans are "
+               "stamped 0.1 s apart (0.1 % of it, less than 1 %): read as integer nanoseconds, the unit looks like "
+               "microseconds (or the values are 1000x too small); time_field=none reads the scans without point times")
+    for read in (lambda ds: ds.sweep_duration_s, lambda ds: ds.stamp_instant, lambda ds: ds.ground_truth):
+        with pytest.raises(DataError) as err:
+            read(open_dataset("rosbag", bag))
+        assert str(err.value) == message
+    assert open_dataset("rosbag", bag, time_field="none").ground_truth.meta["pose_instant"] is None
+    rec["t"] = np.round(np.linspace(0, 0.025, n) * 1e9)  # nanoseconds over a quarter of the turn
+    partial = open_dataset("rosbag", write_ros1_bag(tmp_path / "partial.bag", [(1000.0 + 0.1 * k, fields, 16, rec.tobytes(), n)
+                                                                               for k in range(6)]))
+    assert partial.sweep_duration_s == pytest.approx(0.025) and partial.stamp_instant == "start"

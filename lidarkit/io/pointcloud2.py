@@ -4,7 +4,7 @@ kiss-icp's bag loaders read the field layout from the ``PointField`` constants (
 messages decoded from MCAP schemas without constants lack; lidarkit reads the datatype codes of the ROS
 definition directly and adds what kiss-icp leaves out: missing x/y/z fields, a data buffer shorter than the
 header says, non-finite per-point times, the unit of the time field, and missing returns at (0, 0, 0), left out as
-the point-file readers leave them out.
+the point-file readers leave them out (a message of nothing else is refused, as they refuse such a file).
 
 Per-point time fields (the first present of :data:`TIME_FIELDS` whose values differ within the message, or the one
 asked for):
@@ -42,6 +42,9 @@ MAX_SWEEP_S = 1.0
 #: Largest share of steps along the point order where a sweep's times go back (one per row: 128 rows of 1024 is 0.1 %).
 _MAX_REVERSALS = 0.005
 _MIN_POINTS_TO_JUDGE = 100
+#: Least share of the stamps' spacing a sweep's point times span: a sensor seeing a quarter of its turn spans 25 %,
+#: microseconds read as nanoseconds span 0.1 % (a 0.1 s sweep of 1e-4 s re-timed the ground truth by 50 us)
+MIN_SWEEP_SHARE = 0.01
 
 
 @dataclass(frozen=True)
@@ -65,16 +68,20 @@ def stamp_seconds(stamp: Any) -> float:
     return float(stamp.sec) + 1e-9 * float(stamp.nanosec)
 
 
-def decode_pointcloud2(msg: Any, *, source: str, location: str, time_field: str | None = "auto") -> DecodedCloud:
+def decode_pointcloud2(msg: Any, *, source: str, location: str, time_field: str | None = "auto",
+                       all_missing_ok: bool = False) -> DecodedCloud:
     """Points, intensity and per-point times of a PointCloud2 ``msg`` (any object with its fields).
 
     ``time_field``: ``"auto"`` (the first of :data:`TIME_FIELDS` whose values differ, the first present when none
     does), a field name, or None to ignore times. Missing returns (NaN, or exactly (0, 0, 0) as Ouster drivers
-    write them) are left out with their times and intensities. Every problem raises DataError naming ``source``
-    (the file) and ``location`` (topic and message index).
+    write them) are left out with their times and intensities; a message of missing returns only is a DataError
+    (it read "empty scan (0 points)" of 5554 points) unless ``all_missing_ok`` (a pass that only looks at the
+    times). Every problem raises DataError naming ``source`` (the file) and ``location`` (topic and message index).
     """
     names = [f.name for f in msg.fields]
     missing = [axis for axis in ("x", "y", "z") if axis not in names]
+    if missing and not names and not int(msg.width) * int(msg.height):  # a default-constructed message: no points
+        return DecodedCloud(np.empty((0, 3)), None, None, "relative_s", None)
     if missing:
         raise DataError(f"PointCloud2 has no {'/'.join(missing)} field (fields: {', '.join(names) or 'none'})", source=source, location=location)
     try:
@@ -112,6 +119,11 @@ def decode_pointcloud2(msg: Any, *, source: str, location: str, time_field: str 
         n_at_origin = int(np.count_nonzero(at_origin))
         keep &= ~at_origin  # (kept in the registration, they were points moving with the sensor: 0.45 m of 2.73 m)
     all_kept = bool(keep.all())
+    if n_points and not keep.any() and not all_missing_ok:
+        n_nan = n_points - n_at_origin
+        what = "NaN" if not n_at_origin else "at (0, 0, 0)" if not n_nan else "NaN or at (0, 0, 0)"
+        raise DataError(f"all {n_points} points are {what} (missing returns): no point left (--frames can leave the frame out)",
+                        source=source, location=location)
     if not all_kept:
         xyz = xyz[keep]
     intensity = None
@@ -161,12 +173,7 @@ def checked_point_times(raw: np.ndarray, xyz: np.ndarray, *, what: str, within: 
             f"{what} is a {8 * raw.dtype.itemsize}-bit integer: too small for times (drivers write "
             f"float seconds or 32/64-bit integer nanoseconds); {hint}", source=source, location=location,
         )
-    if np.issubdtype(raw.dtype, np.integer):
-        times = raw.astype(np.float64) * 1e-9
-    else:
-        times = raw.astype(np.float64)
-        if len(times) and float(np.abs(times).max()) > NANOSECONDS_AFTER:
-            times = times * 1e-9
+    times = point_times_seconds(raw)
     span = float(np.ptp(times)) if len(times) else 0.0
     if span > longest_s:
         unit = "integer nanoseconds" if np.issubdtype(raw.dtype, np.integer) else "seconds"
@@ -183,6 +190,35 @@ def checked_point_times(raw: np.ndarray, xyz: np.ndarray, *, what: str, within: 
         )
     convention = "absolute_s" if len(times) and float(np.abs(times).max()) > _ABSOLUTE_AFTER_S else "relative_s"
     return times, convention
+
+
+def point_times_seconds(raw: np.ndarray) -> np.ndarray:
+    """``(N,)`` float64 seconds of per-point time values ``raw`` (N,): integers are nanoseconds, floats seconds (or
+    nanoseconds above :data:`NANOSECONDS_AFTER`)."""
+    if np.issubdtype(raw.dtype, np.integer):
+        return raw.astype(np.float64) * 1e-9
+    times = raw.astype(np.float64)
+    if len(times) and float(np.abs(times).max()) > NANOSECONDS_AFTER:
+        times = times * 1e-9
+    return times
+
+
+def time_unit_read(dtype: np.dtype) -> str:
+    """The unit per-point time values of ``dtype`` are read in, in words."""
+    return "integer nanoseconds" if np.issubdtype(dtype, np.integer) else "seconds"
+
+
+def check_sweep_span(span_s: float, spacing_s: float, *, what: str, unit: str, over: str, hint: str, source: object,
+                     location: str | None = None) -> None:
+    """DataError when point times spanning ``span_s`` per sweep (a median ``over`` some scans) cover less than
+    :data:`MIN_SWEEP_SHARE` of the ``spacing_s`` between the scans' stamps: microseconds read as nanoseconds (a uint32
+    ``t`` in us) gave sweeps of 1e-4 s and re-timed the ground truth without a word. ``unit``: how they were read."""
+    if span_s > 0 and spacing_s > 0 and span_s < MIN_SWEEP_SHARE * spacing_s:
+        raise DataError(
+            f"{what}: sweeps of {span_s:.3g} s ({over}) while the scans are stamped {spacing_s:.3g} s apart "
+            f"({100 * span_s / spacing_s:.2g} % of it, less than {100 * MIN_SWEEP_SHARE:g} %): read as {unit}, the unit "
+            f"looks like microseconds (or the values are 1000x too small); {hint}", source=source, location=location,
+        )
 
 
 def _time_order_reversals(times: np.ndarray, xyz: np.ndarray) -> int | None:
@@ -242,4 +278,5 @@ def _time_field(names: list[str], wanted: str | None, source: str, location: str
     return wanted
 
 
-__all__ = ["MAX_SWEEP_S", "NANOSECONDS_AFTER", "TIME_FIELDS", "DecodedCloud", "checked_point_times", "decode_pointcloud2", "fields_dtype", "stamp_seconds"]
+__all__ = ["MAX_SWEEP_S", "MIN_SWEEP_SHARE", "NANOSECONDS_AFTER", "TIME_FIELDS", "DecodedCloud", "check_sweep_span",
+           "checked_point_times", "decode_pointcloud2", "fields_dtype", "point_times_seconds", "stamp_seconds", "time_unit_read"]

@@ -33,7 +33,8 @@ import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.io.base import INSTANT_FRACTION, Scan, checked_index, checked_indices, classify_instant, sweep_length
-from lidarkit.io.pointcloud2 import MAX_SWEEP_S, decode_pointcloud2, stamp_seconds
+from lidarkit.io.pointcloud2 import (MAX_SWEEP_S, POINTFIELD_DTYPES, DecodedCloud, check_sweep_span, decode_pointcloud2,
+                                     stamp_seconds, time_unit_read)
 from lidarkit.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
@@ -98,6 +99,7 @@ class _BagScans:
         self._stream: Iterator[tuple[int, Any]] | None = None
         self._stamps: dict[int, float] = {}
         self._cloud_frame: str | None = None  # the first cloud's header.frame_id, once a message was read
+        self._cloud_field_types: dict[str, int] = {}  # the first cloud decoded's fields: their PointField datatype codes
         self._last_stamp: tuple[int, float] | None = None
         topics = self._list_topics()  # {topic: msgtype}
         clouds = sorted(t for t, m in topics.items() if m == POINTCLOUD2)
@@ -160,6 +162,11 @@ class _BagScans:
             options["time_field_used"] = ", ".join(sorted(self._time_fields_read))
         return options
 
+    @property
+    def cloud_fields(self) -> tuple[str, ...] | None:
+        """The field names of the clouds (the first one decoded; None before), for saying which ``time_field=`` can name."""
+        return tuple(self._cloud_field_types) or None
+
     def _location(self, index: int) -> str:
         return f"message {index} on {self.topic}"
 
@@ -191,6 +198,20 @@ class _BagScans:
     def read_scan(self, index: int) -> Scan:
         """Scan ``index`` (messages are read in order; an earlier index restarts the stream)."""
         index = checked_index(index, self.n_scans, f"{self.path} ({self.topic})", from_end=False)
+        decoded = self._decoded(index)
+        stamp = self._stamps[index]
+        instant = None
+        if decoded.point_times_s is not None and len(decoded.point_times_s):
+            t = decoded.point_times_s - (stamp if decoded.point_time_convention == "absolute_s" else 0.0)
+            lo, hi = float(t.min()), float(t.max())
+            if hi > lo:
+                instant = classify_instant(-lo / (hi - lo))
+        return Scan(decoded.points_xyz, decoded.intensity, decoded.point_times_s, stamp, index,
+                    f"{self.path} {self._location(index)}", decoded.point_time_convention, instant)
+
+    def _decoded(self, index: int, all_missing_ok: bool = False) -> DecodedCloud:
+        """Message ``index`` decoded (read in order; an earlier index restarts the stream), what it leaves out said once;
+        ``all_missing_ok``: a message of missing returns only decodes to no points (the sweep timing passes over it)."""
         if self._stream is None or index < self._next:
             self._stream = self._read_all(self.topic)
             self._next = 0
@@ -213,8 +234,13 @@ class _BagScans:
             self._stamps[k] = stamp
             if k == 0:
                 self._cloud_frame = str(msg.header.frame_id)
-        decoded = decode_pointcloud2(msg, source=str(self.path), location=self._location(index), time_field=self.time_field)
+        decoded = decode_pointcloud2(msg, source=str(self.path), location=self._location(index), time_field=self.time_field,
+                                     all_missing_ok=all_missing_ok)
         self._time_fields_read.add(decoded.time_field or "none")
+        if not self._cloud_field_types:
+            self._cloud_field_types = {str(f.name): int(f.datatype) for f in msg.fields}
+        if not len(decoded.points_xyz):  # (said by the run when it reads the frame; --frames may leave it out)
+            return decoded
         if decoded.n_at_origin:
             self._warn_once("origin", f"left out {decoded.n_at_origin} of {int(msg.width) * int(msg.height)} points at (0, 0, 0) "
                                       f"(missing returns) in {self._location(index)}; in later messages without another warning")
@@ -222,15 +248,7 @@ class _BagScans:
             flat = ", ".join(repr(f) for f in decoded.flat_time_fields)
             self._warn_once("flat_time", f"per-point time field {flat} holds one value for every point of {self._location(index)}: "
                                          f"the times are read from {decoded.time_field!r} (time_field= names the field to read)")
-        stamp = self._stamps[index]
-        instant = None
-        if decoded.point_times_s is not None and len(decoded.point_times_s):
-            t = decoded.point_times_s - (stamp if decoded.point_time_convention == "absolute_s" else 0.0)
-            lo, hi = float(t.min()), float(t.max())
-            if hi > lo:
-                instant = classify_instant(-lo / (hi - lo))
-        return Scan(decoded.points_xyz, decoded.intensity, decoded.point_times_s, stamp, index,
-                    f"{self.path} {self._location(index)}", decoded.point_time_convention, instant)
+        return decoded
 
     @property
     def timestamps_s(self) -> np.ndarray:
@@ -416,24 +434,34 @@ class _BagScans:
 
     @cached_property
     def _sweep_timing(self) -> tuple[float, float] | None:
-        """(absolute time sweep 0 starts, how long a sweep lasts) from the point times of the first few scans (where a
-        sweep's first point fires after its stamp and how long its points span: medians, so that a recording begun
-        mid-rotation, whose first message holds part of a sweep, does not place every sweep by that part) and the
-        spacing of the stamps (:func:`sweep_length`: a recording keeping every other sweep, or a sensor seeing part of
-        its turn, lasts from first to last point, not the stamps' spacing); 0 for the length when the stamps are all
-        equal; None when the scans carry no point times, or times on another clock than the stamps (a sweep more than a
-        period from its stamp: :attr:`reader_warnings` says so, with the field and the offset)."""
+        """(absolute time sweep 0 starts, how long a sweep lasts) from the point times of the first
+        :data:`SWEEP_TIMING_SCANS` scans that carry them (where a sweep's first point fires after its stamp and how long
+        its points span: medians, so that a recording begun mid-rotation, whose first message holds part of a sweep,
+        does not place every sweep by that part; a driver's empty start-up cloud is passed over: it made the whole
+        recording one without point times) and the spacing of the stamps (:func:`sweep_length`: a recording keeping
+        every other sweep, or a sensor seeing part of its turn, lasts from first to last point, not the stamps'
+        spacing); 0 for the length when the stamps are all equal; None when none of the first
+        :data:`SWEEP_TIMING_READ` scans carries point times, or they carry times on another clock than the stamps (a
+        sweep more than a period from its stamp: :attr:`reader_warnings` says so, with the field and the offset).
+        DataError when the sweeps span less than :data:`~lidarkit.io.pointcloud2.MIN_SWEEP_SHARE` of the stamps'
+        spacing: times in microseconds read as nanoseconds."""
         offsets, ends, spans = [], [], []
-        for k in range(min(self.n_scans, SWEEP_TIMING_SCANS)):
-            scan = self.read_scan(k)
-            if scan.point_times_s is None or len(scan.point_times_s) < 2:
-                return None
-            t = scan.point_times_s + (0.0 if scan.point_time_convention == "absolute_s" else scan.timestamp_s)
+        for k in range(min(self.n_scans, SWEEP_TIMING_READ)):
+            decoded = self._decoded(k, all_missing_ok=True)
+            if decoded.time_field is None and len(decoded.points_xyz):  # clouds without a time field: none will have one
+                break
+            times = decoded.point_times_s
+            if times is None or len(times) < 2:
+                continue
+            stamp = self._stamps[k]
+            t = times + (0.0 if decoded.point_time_convention == "absolute_s" else stamp)
             lo, hi = float(t.min()), float(t.max())
             if hi > lo:
-                offsets.append(lo - scan.timestamp_s)
-                ends.append(hi - scan.timestamp_s)
+                offsets.append(lo - stamp)
+                ends.append(hi - stamp)
                 spans.append(hi - lo)
+                if len(spans) == SWEEP_TIMING_SCANS:
+                    break
         if not offsets:
             return None
         stamps = self.timestamps_s
@@ -449,15 +477,27 @@ class _BagScans:
                                     "another clock? where each sweep lies against the stamps cannot be placed")
             self._warn_once("clock", f"{self._timing_problem}: the sweep instant of the scans and of the ground truth is unknown")
             return None
-        return float(stamps[0] + first), sweep_length(float(np.median(spans)), period)
+        span = float(np.median(spans))
+        if len(stamps) > 1:  # (microseconds read as nanoseconds: sweeps of 1e-4 s placed the ground truth by them)
+            named = sorted(self._time_fields_read - {"none"})
+            codes = {self._cloud_field_types.get(f) for f in named} - {None}
+            unit = time_unit_read(np.dtype(POINTFIELD_DTYPES[codes.pop()])) if len(codes) == 1 else "nanoseconds or seconds"
+            check_sweep_span(span, period, what=f"per-point time field {', '.join(repr(f) for f in named)}", unit=unit,
+                             over=f"the median over the first {len(spans)} scans", source=self.path,
+                             hint="time_field=none reads the scans without point times")
+        return float(stamps[0] + first), sweep_length(span, period)
 
 
 #: scans whose point times place the sweeps in the stamps (the median over them)
 SWEEP_TIMING_SCANS = 5
+#: most scans read to find :data:`SWEEP_TIMING_SCANS` with point times (empty or timeless ones are passed over)
+SWEEP_TIMING_READ = 3 * SWEEP_TIMING_SCANS
 #: most spread of the pose-minus-scan stamp offsets, in scan periods, for one pose per scan to be paired by count
 COUNT_PAIRING_SPREAD = 0.25
 #: most scan periods between one part of a split ROS 1 recording and the next (further apart: separate recordings)
 SPLIT_GAP_PERIODS = 3
+#: most time (s) a part of a split ROS 1 recording may begin before the one before ends (messages of one instant)
+SPLIT_OVERLAP_S = 1e-3
 
 
 def _pose_phase(gt_stamps: np.ndarray, scan_stamps: np.ndarray, following: bool = True) -> float:
@@ -524,7 +564,8 @@ class RosbagScans(_BagScans):
                 for part in paths:
                     with AnyReader([part]) as reader:
                         scans = max((info.msgcount for info in reader.topics.values() if info.msgtype == POINTCLOUD2), default=0)
-                        spans.append((reader.start_time, reader.end_time, scans) if reader.message_count else None)
+                        # (rosbags' end_time is exclusive: the last message's time + 1 ns)
+                        spans.append((reader.start_time, reader.end_time - 1, scans) if reader.message_count else None)
         except Exception as err:  # noqa: BLE001 - rosbags raises its own error types for damaged files
             from lidarkit.io import ros2_storage_problem
 
@@ -551,13 +592,15 @@ class RosbagScans(_BagScans):
 
     def _check_split_parts(self, paths: list[Path], spans: list[tuple[int, int, int] | None]) -> None:
         """DataError unless the bags of the folder are parts of one recording, each beginning where the one before ends
-        (within :data:`SPLIT_GAP_PERIODS` scan periods): two recordings were read as one, 24 frames with a 98.9 s gap
-        (RPE 107 m), and two copies of one bag failed on stamps "not strictly increasing"."""
+        (within :data:`SPLIT_GAP_PERIODS` scan periods; ``spans``: each part's first and last message time, ns): two
+        recordings were read as one, 24 frames with a 98.9 s gap (RPE 107 m), and two copies of one bag failed on
+        stamps "not strictly increasing". A part may begin at the time the one before ends (messages logged at one
+        instant split between them: up to :data:`SPLIT_OVERLAP_S`), which was refused as "begins 0.000 s before"."""
         parts = sorted((span[0], span[1], span[2], path) for path, span in zip(paths, spans) if span is not None)
         periods = [(end - start) / (n - 1) for start, end, n, _ in parts if n > 1]
         gap_ns = SPLIT_GAP_PERIODS * (float(np.median(periods)) if periods else 1e9 * MAX_SWEEP_S)
         for (_, end, _, before), (start, _, _, after) in zip(parts, parts[1:]):
-            if start < end or start - end > gap_ns:
+            if end - start > 1e9 * SPLIT_OVERLAP_S or start - end > gap_ns:
                 how = (f"{after.name} begins {1e-9 * (start - end):.3f} s after {before.name} ends" if start >= end else
                        f"{after.name} begins {1e-9 * (end - start):.3f} s before {before.name} ends")
                 names = ", ".join(path.name for path in paths)

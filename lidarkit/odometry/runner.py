@@ -508,6 +508,9 @@ def run(
     if strict and not stateful and deskew_requested(registration) and not getattr(registration, "accepts_point_times", False):
         raise ConfigError(f"deskew requested, but {name} runs scan-to-scan through align(), which takes no per-point times", source=name)
 
+    # where the scans are stamped in their sweeps, asked before the frames: a recording that cannot say (a bag whose
+    # point times are in another unit) stopped only after every frame registered
+    getattr(sequence, "stamp_instant", None)
     bar = progress_bar(n, f"{name} on {title}") if progress else None
     clock = time.perf_counter
     loop_start, loop_cpu_start = clock(), time.process_time()

@@ -100,7 +100,8 @@ def point_time_source(sequence: Any) -> str:
 
 
 def point_times_not_found(sequence: Any) -> str:
-    """Why a reader gave no per-point times: for a KITTI layout, the folder names it looked for."""
+    """Why a reader gave no per-point times: for a KITTI layout, the folder names it looked for; for a bag, the clouds'
+    fields and the option naming the time field (a Livox ``offset_time`` read as no times said "gives none")."""
     from lidarkit.io.kitti import POINT_TIME_FOLDERS
 
     if hasattr(sequence, "point_times_dir") and getattr(sequence, "sequence_dir", None) is not None:
@@ -108,7 +109,20 @@ def point_times_not_found(sequence: Any) -> str:
             names = ", ".join(f"{d}/" for d in POINT_TIME_FOLDERS)
             return f"no per-point times found (looked for {names} beside velodyne/ in {sequence.sequence_dir})"
         return f"no per-point times found for some frames in {sequence.point_times_dir}"
-    return f"no per-point times found ({type(sequence).__name__} gives none)"
+    from lidarkit.io.pointcloud2 import TIME_FIELDS
+
+    reader = type(sequence).__name__
+    fields = getattr(sequence, "cloud_fields", None)
+    option = getattr(sequence, "time_field", None)
+    if fields and option in ("", "none"):
+        return f"no per-point times found ({reader}: time_field={option or 'none'} reads none)"
+    if fields and option == "auto" and not set(fields) & set(TIME_FIELDS):
+        timelike = [f for f in fields if "time" in f.lower() or "stamp" in f.lower()]
+        example = f", e.g. time_field={timelike[0]}" if timelike else ""
+        return (f"no per-point times found ({reader}: no time field among the clouds' fields {', '.join(fields)}; "
+                f"time_field=auto reads one named {', '.join(TIME_FIELDS[:-1])} or {TIME_FIELDS[-1]}, time_field=NAME "
+                f"reads another{example})")
+    return f"no per-point times found ({reader} gives none)"
 
 
 def require_point_times(scan: Any, sequence: Any, dataset_name: str, frame: int, flat: Collection[int] = ()) -> None:
