@@ -29,7 +29,7 @@ def test_bench_kitti_writes_the_paper_table_with_the_average_row(tmp_path, capsy
     assert "\\toprule" in tex and "Avg. &" in tex and "\\bottomrule" in tex
     assert (out / "tables" / "kitti_translation_pct_per_length.csv").read_text().startswith("length (m),")
     csv = (out / "report.csv").read_text().splitlines()
-    assert csv[0].endswith("median,ci95_low,ci95_high,alignment,n_rerun_failed")
+    assert csv[0].endswith("median,ci95_low,ci95_high,alignment,n_rerun_failed,lidarkit_version")
     assert "Publication tables" in (out / "report.html").read_text()
 
 

@@ -355,7 +355,7 @@ def test_report_csv_names_the_alignment_of_each_row(tmp_path):
         header, *lines = list(csv.reader(fh))
     # the columns readers index keep their places; new ones are last
     assert header == ["task", "experiment", "dataset", "method", "metric", "mean", "std", "n", "n_ok", "n_failed",
-                      "n_not_run", "median", "ci95_low", "ci95_high", "alignment", "n_rerun_failed"]
+                      "n_not_run", "median", "ci95_low", "ci95_high", "alignment", "n_rerun_failed", "lidarkit_version"]
     assert [(r[3], r[4], float(r[5]), r[14]) for r in lines] == [
         ("gt_scale", "ape_rmse_m", 0.00222, "SE(3)-aligned"), ("gt_scale", "hz", 8.0, ""), ("gt_scale", "runtime_s", 0.1, ""),
         ("mono", "ape_rmse_m", 0.0039, "Sim(3)-aligned"), ("mono", "hz", 8.0, ""), ("mono", "runtime_s", 0.1, "")]
@@ -1352,3 +1352,131 @@ def test_a_particle_filter_sweep_plot_names_its_metric_by_its_label(tmp_path):
     assert sweep.title == "position MSE [m²] vs n_particles — pf"
     assert sweep.caption.startswith("position MSE [m²] against n_particles: mean ± std over seeds")
     assert sweep.filename.startswith("sweep_pf_mse_m2_n_particles_")  # (the file keeps its name)
+
+
+def _odometry_record(folder, experiment, dataset, method, metrics, *, params=None, frames=None, seed=0, version="1",
+                     finished="2026-01-01T00:00:00.000+00:00"):
+    """An odometry result as the task writes it (its metrics, the RPE step its frames give), written to ``folder``."""
+    from lidarkit.bench.jobs import Job
+    from lidarkit.bench.results import make_record, write_result
+    from lidarkit.bench.tasks.odometry import METRIC_ALIGNMENT_BY_NAME, SELECTED_FRAME
+
+    job = Job("odometry", experiment, dataset, {"kind": "kitti", "sequence": "00"}, method, params or {}, seed=seed,
+              options={} if frames is None else {"frames": frames})
+    skips = isinstance(frames, str) and frames.count(":") == 2
+    alignment = {**METRIC_ALIGNMENT_BY_NAME, **({"rpe_trans_rmse_m": SELECTED_FRAME} if skips else {})}
+    write_result(folder, make_record(job, job.key(version), version, {
+        "status": "ok", "metrics": metrics, "series": {}, "info": {"metric_alignment": alignment}, "error": None,
+        "runtime_s": 0.1, "finished_utc": finished}))
+
+
+def test_rpe_over_one_frame_and_over_one_selected_frame_are_two_tables(tmp_path):
+    """Two odometry experiments on KITTI 00, frames "0:5" and "0:10:2": the one RPE table, titled "m per frame /
+    selected frame", averaged the 1-frame and the 2-frame RPE into one bold Mean (kiss 0.1917). Each step now has its
+    own table, named by its file, the selected-frame rows marked; a later report without that step removes its files."""
+    rpe = {("0:5", "kiss"): 0.14827, ("0:5", "vanilla"): 0.24638, ("0:10:2", "kiss"): 0.23513,
+           ("0:10:2", "vanilla"): 0.22047}
+    for (frames, method), value in rpe.items():
+        _odometry_record(tmp_path, f"e{frames}", "k00", method, {"ape_rmse_m": 0.5, "rpe_trans_rmse_m": value},
+                         frames=frames)
+    report = build_report(tmp_path, plots=False)
+    with open(tmp_path / "tables" / "rpe_rmse.csv", newline="") as fh:
+        assert list(csv.reader(fh)) == [["sequence", "kiss", "vanilla"], ["k00(frames=0:5)", "0.14827", "0.24638"],
+                                        ["Mean", "0.14827", "0.24638"]]
+    with open(tmp_path / "tables" / "rpe_rmse_selected_frame.csv", newline="") as fh:
+        assert list(csv.reader(fh)) == [["sequence", "kiss", "vanilla"], ["k00(frames=0:10:2) *", "0.23513", "0.22047"],
+                                        ["Mean", "0.23513", "0.22047"]]
+    md = (tmp_path / "tables" / "rpe_rmse_selected_frame.md").read_text()
+    assert md.startswith("**RPE translation RMSE (m per selected frame)**")
+    assert "*: over one selected frame of the row's frame selection, not one dataset frame. Mean:" in md
+    assert [t.name for t in report.publication.tables] == ["ape_rmse", "rpe_rmse", "rpe_rmse_selected_frame"]
+    assert "**RPE translation RMSE (m per frame)**" in (tmp_path / "report.md").read_text()
+    # a dataset whose label does not say its selection has it named in the note
+    (tmp_path / "jobs").rename(tmp_path / "both")
+    for method in ("kiss", "vanilla"):
+        _odometry_record(tmp_path, "skip", "k00", method, {"rpe_trans_rmse_m": 0.2}, frames="0:10:2")
+    build_report(tmp_path, plots=False)
+    assert ("| k00 * |" in (tmp_path / "tables" / "rpe_rmse_selected_frame.md").read_text()
+            and "not one dataset frame (k00: frames 0:10:2)." in (tmp_path / "tables" / "rpe_rmse_selected_frame.md").read_text())
+    assert not (tmp_path / "tables" / "rpe_rmse.md").exists()
+    # and the next report over every frame removes the selected-frame table an earlier one wrote
+    (tmp_path / "jobs").rename(tmp_path / "skipping")
+    for method in ("kiss", "vanilla"):
+        _odometry_record(tmp_path, "all", "k00", method, {"rpe_trans_rmse_m": 0.1})
+    build_report(tmp_path, plots=False)
+    assert sorted(p.name for p in (tmp_path / "tables").iterdir()) == ["rpe_rmse.csv", "rpe_rmse.md", "rpe_rmse.tex"]
+
+
+def test_a_run_whose_frames_did_not_register_is_marked_and_neither_bold_nor_in_the_mean(tmp_path):
+    """ground_filtered on "sim open" (7 of its 8 frames not converged: its estimate never left the origin) was set bold
+    as the best APE and RPE, and its 0.481 made its bold Mean. Its cells now carry a mark saying why, are not bold, and
+    its sequence is left out of the Mean; a run with fewer than half its frames not registered is a result as any."""
+    runs = {("sim open", "kiss"): (1.773, 0.5155, 0), ("sim open", "ground_filtered"): (0.481, 0.1781, 7),
+            ("sim street", "kiss"): (0.424, 0.1372, 0), ("sim street", "ground_filtered"): (0.240, 0.0902, 3)}
+    for (dataset, method), (ape, rpe, failed) in runs.items():
+        _odometry_record(tmp_path, "odo", dataset, method, {"ape_rmse_m": ape, "rpe_trans_rmse_m": rpe, "n_frames": 8,
+                                                            "n_not_converged": failed})
+    build_report(tmp_path, plots=False)
+    ape = (tmp_path / "tables" / "ape_rmse.md").read_text()
+    assert "| sim open | 0.481 (a) | **1.773** |" in ape, ape
+    assert "| sim street | **0.240** | 0.424 |" in ape  # (3 of 7 not registered: a result)
+    assert "| **Mean** | **0.240** | 0.424 |" in ape
+    assert ("(a) sim open, ground_filtered: no frame registered. A frame that does not register takes the fallback "
+            "motion's pose: a marked cell is not set bold and its sequence is left out of the Mean.") in ape
+    assert "| sim open | 0.1781 (a) | **0.5155** |" in (tmp_path / "tables" / "rpe_rmse.md").read_text()
+    assert "\\textbf{1.773}" in (tmp_path / "tables" / "ape_rmse.tex").read_text()
+    assert "sim open & 0.481 (a) & " in (tmp_path / "tables" / "ape_rmse.tex").read_text()
+    assert "<td>0.481 (a)</td><td><b>1.773</b></td>" in (tmp_path / "report.html").read_text()
+    # most but not all frames, over two seeds
+    (tmp_path / "jobs").rename(tmp_path / "first")
+    for seed, failed in ((0, 5), (1, 2)):
+        _odometry_record(tmp_path, "odo", "sim open", "ground_filtered", {"ape_rmse_m": 0.5, "n_frames": 8,
+                                                                          "n_not_converged": failed}, seed=seed)
+        _odometry_record(tmp_path, "odo", "sim open", "kiss", {"ape_rmse_m": 1.7}, seed=seed)
+    build_report(tmp_path, plots=False)
+    ape = (tmp_path / "tables" / "ape_rmse.md").read_text()
+    assert "| sim open | 0.500 (a) | **1.700** |" in ape, ape
+    assert "(a) sim open, ground_filtered: 7 of the 14 frames after the first not registered (over 2 seeds)." in ape
+
+
+def test_results_shown_from_two_lidarkit_versions_are_counted_per_version(tmp_path, capsys):
+    """``lidarkit report DIR --all`` after a rerun under new code showed rows of two lidarkit versions in one table, the
+    coverage line saying only that an earlier version's results of the rerun jobs were "left out". It now says how
+    many of those shown are of which version, and report.csv names each row's."""
+    from conftest import cli_exit_code
+
+    for seed, version, day in ((0, "0.1.0+src.new", "02"), (1, "0.1.0+src.new", "02"), (1, "0.1.0+src.old", "01"),
+                               (2, "0.1.0+src.old", "01")):
+        _odometry_record(tmp_path, "odo", "k00", "kiss", {"ape_rmse_m": 0.5 + seed}, seed=seed, version=version,
+                         finished=f"2026-01-{day}T00:00:00.000+00:00")
+    _odometry_record(tmp_path, "odo", "k00", "vanilla", {"ape_rmse_m": 0.7}, version="0.1.0+src.old",
+                     finished="2026-01-01T00:00:00.000+00:00")
+    assert cli_exit_code(["report", str(tmp_path), "--all", "--no-plots"]) == 0
+    said = ("4 results; 1 results in jobs/ of these jobs from an earlier lidarkit version left out; the 4 shown are "
+            "from 2 lidarkit versions: 2 from 0.1.0+src.new (the latest), 2 from 0.1.0+src.old (report.csv's "
+            "lidarkit_version names each row's), 0 failed")
+    assert said in " ".join(capsys.readouterr().out.split())
+    assert said.replace("4 results;", "4 job results;").removesuffix(", 0 failed") in (tmp_path / "report.md").read_text()
+    with open(tmp_path / "report.csv", newline="") as fh:
+        versions = {(r["method"], r["metric"]): r["lidarkit_version"] for r in csv.DictReader(fh)}
+    assert versions[("kiss", "ape_rmse_m")] == "0.1.0+src.new / 0.1.0+src.old"
+    assert versions[("vanilla", "ape_rmse_m")] == "0.1.0+src.old"
+    # one version: nothing more said
+    assert len(build_report(tmp_path, plots=False).versions) == 2  # (no suite.json: every result, as --all)
+    one = build_report(tmp_path, plots=False, only_keys={r["key"] for r in load_results(tmp_path)
+                                                         if r["lidarkit_version"] == "0.1.0+src.old"})
+    assert one.versions == {"0.1.0+src.old": 3} and "lidarkit versions" not in (tmp_path / "report.md").read_text()
+
+
+def test_grid_values_written_as_numbers_in_text_sort_by_value(tmp_path):
+    """A grid of n_particles [20, "60", 180] listed its rows 20, 180, 60: a number written as text sorted after every
+    number. Text that reads as a finite number now sorts by its value; other text after the numbers."""
+    from lidarkit.bench.jobs import Job
+    from lidarkit.bench.results import make_record, write_result
+
+    for value in ("nan", 180, "60", "fast", 20, "1e3"):
+        job = Job("selftest", "e", "synth", {"kind": "synthetic"}, "random_walk", {"n": value}, seed=0)
+        write_result(tmp_path, make_record(job, job.key(), "1", {"status": "ok", "metrics": {"ape_rmse_m": 1.0},
+                                                                 "error": None, "runtime_s": 0.1}))
+    (table,) = build_report(tmp_path, plots=False).tables
+    assert [row.method for row in table.rows] == [f"random_walk(n={v})" for v in (20, 60, 180, "1e3", "fast", "nan")]

@@ -723,3 +723,81 @@ def test_library_arguments_of_a_wrong_type_are_config_errors_naming_them(tmp_pat
         assert str(info.value) == message
     again = run_suite(suite, tmp_path / "out", executor="serial", force=False)
     assert (again.skipped, again.ran) == (6, 2)  # (the 2 failed jobs are retried, the 6 finished ones kept)
+
+
+def test_a_job_with_many_warnings_keeps_its_first_and_last_ones_and_counts_those_between(tmp_path, monkeypatch):
+    """A job's warnings were capped at 50 without a word: an odometry run warning on each of 59 frames lost frames
+    51-59 and its closing summary. The result keeps the first 40 and the last 10, and says how many it left out
+    between them; the report lists that line too."""
+    import logging
+
+    from lidarkit.bench import tasks as bench_tasks
+    from lidarkit.bench.report import build_report
+    from lidarkit.bench.tasks import Metric, Task, TaskOutput, register_task
+
+    monkeypatch.setattr(bench_tasks, "_REGISTERED", {})
+    monkeypatch.setattr(bench_tasks, "_INSTANCES", {})
+    log = logging.getLogger("lidarkit.odometry.runner")
+
+    @register_task("many_warnings_test_task")
+    class ManyWarnings(Task):
+        dataset_kinds = ("synthetic",)
+        metrics = (Metric("err_m", "error [m]"),)
+
+        def run(self, job):
+            for frame in range(1, 60):
+                log.warning("frame %d: did not converge; using the constant-velocity motion instead", frame)
+            log.warning("59 of 59 frames did not converge")
+            return TaskOutput(metrics={"err_m": 1.0})
+
+    suite = load_suite(suite_file(tmp_path, """
+        experiments:
+          - {task: many_warnings_test_task, dataset: {kind: synthetic}, methods: [a]}
+        """))
+    run_suite(suite, tmp_path / "out", executor="serial")
+    (record,) = load_results(tmp_path / "out")
+    said = [w.removeprefix("WARNING lidarkit.odometry.runner: ") for w in record["warnings"]]
+    assert len(said) == 51
+    assert said[0] == "frame 1: did not converge; using the constant-velocity motion instead"
+    assert said[39].startswith("frame 40:")
+    assert said[40] == "... and 10 more warnings, not kept (the job's first 40 and last 10 are)"
+    assert [w.split(":")[0] for w in said[41:50]] == [f"frame {k}" for k in range(51, 60)]
+    assert said[50] == "59 of 59 frames did not converge"
+    report = (build_report(tmp_path / "out", plots=False).markdown_path).read_text()
+    assert "seed 0: ... and 10 more warnings, not kept (the job's first 40 and last 10 are)" in report
+    assert "seed 0: WARNING lidarkit.odometry.runner: 59 of 59 frames did not converge" in report
+
+
+def test_max_jobs_below_one_is_refused_as_workers_is(tmp_path, capsys):
+    """``--max-jobs 0`` exited 2 with typer's usage wording ("Invalid value for '--max-jobs': 0 is not in the range
+    x>=1") where ``--workers 0`` exits 1 with one line; load_suite(path, max_jobs="2") raised TypeError "'>' not
+    supported"."""
+    from lidarkit.errors import ConfigError
+    from conftest import cli_exit_code
+
+    path = suite_file(tmp_path, TINY)
+    for value in ("0", "-3"):
+        assert cli_exit_code(["bench", str(path), "--out", str(tmp_path / "a"), "--max-jobs", value, "--dry-run"]) == 1
+        assert capsys.readouterr().err.strip() == f"error: --max-jobs: must be >= 1, got {value}"
+    for value, message in (("2", "must be an integer, got str '2'"), (0, "must be >= 1, got 0"),
+                           (True, "must be an integer, got bool True")):
+        with pytest.raises(ConfigError) as info:
+            load_suite(path, max_jobs=value)
+        assert str(info.value) == f"max_jobs: {message}"
+    assert len(load_suite(path, max_jobs=8).jobs) == 8  # (the limit itself passes)
+    assert not (tmp_path / "a").exists()
+
+
+def test_a_progress_callback_that_is_not_a_function_is_refused_before_anything_is_written(tmp_path):
+    """``run_suite(suite, out, on_start=5)`` raised TypeError "'int' object is not callable" after suite.json had been
+    rewritten (and with ``on_result`` after the first job had run)."""
+    from lidarkit.errors import ConfigError
+
+    suite = load_suite(suite_file(tmp_path, TINY))
+    for name, value, message in (("on_start", 5, "must be a function (or None), got int 5"),
+                                 ("on_result", "print", "must be a function (or None), got str 'print'"),
+                                 ("job_fn", None, "must be a function, got NoneType None")):
+        with pytest.raises(ConfigError) as info:
+            run_suite(suite, tmp_path / "out", executor="serial", **{name: value})
+        assert str(info.value) == f"{name}: {message}"
+        assert not (tmp_path / "out").exists()

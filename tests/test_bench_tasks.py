@@ -419,7 +419,8 @@ def test_rpe_over_a_frame_selection_that_skips_frames_is_labelled_per_selected_f
     assert labels["all"]["rpe_rot_rmse_deg"] == "RPE rot. (1 frame, alignment-free) [deg/frame]"
     assert labels["skipping"]["rpe_trans_rmse_m"] == "RPE trans. (1 selected frame, alignment-free) [m/frame]"
     assert labels["skipping"]["rpe_rot_rmse_deg"] == "RPE rot. (1 selected frame, alignment-free) [deg/frame]"
-    titles = {name: next(t.title for t in report.publication.tables if t.name == "rpe_rmse") for name, report in alignment.items()}
+    titles = {name: next(t.title for t in report.publication.tables if t.name.startswith("rpe_rmse"))
+              for name, report in alignment.items()}
     assert titles == {"all": "RPE translation RMSE (m per frame)", "skipping": "RPE translation RMSE (m per selected frame)"}
 
 
@@ -474,3 +475,47 @@ def test_icp_pair_default_pairs_are_consecutive_frame_numbers_not_neighbours_acr
     dataset = open_dataset_spec(spec)
     assert _pairs(IcpPairOptions(pairs=[[95, 198]]), dataset) == [(95, 198)]  # given pairs stay as given
     assert _pairs(IcpPairOptions(max_pairs=2), open_dataset_spec({**SIM, "n_frames": 4})) == [(0, 1), (1, 2)]  # (0..N-1)
+
+
+def test_a_negative_frame_index_is_refused_as_such_not_against_a_made_up_range(tmp_path):
+    """``frames: [-2, 5]`` on the 10-scan KITTI 00 was refused as "frame indices must lie in 0..5" and ``[-1]`` as
+    "0..-1": ranges the suite's own indices made up. A negative index is now named, and a slice said to count from
+    the end; the range stays the dataset's."""
+    kitti = shared_path("kitti_odometry")
+    hint = "(a slice such as '-3:' counts from the end)"
+    for frames, reason in (("[-2, 5]", f"frames: frame indices must be >= 0, got -2 {hint}"),
+                           ("[-1]", f"frames: frame indices must be >= 0, got -1 {hint}"),
+                           ("[3, 2]", "frames: frame indices must be strictly increasing"),
+                           ("[4, 12]", "frames: frame indices must lie in 0..9 (the dataset has 10 scans)")):
+        path = write(tmp_path, f"""
+            experiments:
+              - task: odometry
+                dataset: {{kind: kitti, path: "{kitti}", sequence: "00"}}
+                options: {{frames: {frames}}}
+                methods: [kiss]
+            """)
+        with pytest.raises(ConfigError) as info:
+            load_suite(path)
+        assert str(info.value) == f"{path} (experiments[0].options, line 5): {reason}"
+    get_task("odometry").validate_options({"frames": "-3:"})  # (a slice from the end is a selection)
+
+
+def test_register_task_refuses_a_class_that_is_not_a_task(monkeypatch):
+    """``register_task("xx")(int)`` raised TypeError "cannot set 'name' attribute of immutable type 'int'"; a plain
+    class was registered and failed only when a suite used it."""
+    from lidarkit.bench import tasks as bench_tasks
+    from lidarkit.bench.tasks import register_task
+
+    monkeypatch.setattr(bench_tasks, "_REGISTERED", {})
+    monkeypatch.setattr(bench_tasks, "_INSTANCES", {})
+
+    class NotATask:
+        def run(self, job):
+            return None
+
+    for decorated, what in ((int, "the class int"), (NotATask, f"the class {NotATask.__qualname__}"), (5, "int 5")):
+        with pytest.raises(ConfigError) as info:
+            register_task("xx")(decorated)
+        assert str(info.value) == f"register_task('xx'): decorates a subclass of lidarkit.bench.tasks.Task, got {what}"
+    assert bench_tasks.available_tasks() == ["icp_pair", "odometry", "pf", "selftest", "vo"]
+    assert not hasattr(NotATask, "name")

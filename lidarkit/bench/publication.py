@@ -41,10 +41,26 @@ def odometry_labels(records: list[dict[str, Any]]) -> dict[int, str]:
     return dataset_labels([r for r in records if r["job"]["task"] == "odometry"])
 
 
-def _grids(records: list[dict[str, Any]]):
+@dataclass
+class _Grids:
+    """What the publication tables are built from, per (dataset, method) unless said otherwise."""
+
+    segments: dict[tuple[str, str], SegmentErrors]
+    ape: dict[tuple[str, str], float]
+    rpe: dict[tuple[str, str], float]
+    seeds_note: str
+    rpe_step: dict[str, str]  # dataset -> "frame" | "selected frame" (the step of its RPE)
+    selection: dict[str, str]  # dataset -> its frame selection as the suite wrote it ('' for every frame)
+    not_registered: dict[tuple[str, str], str]  # runs most of whose frames did not register -> what to say of them
+
+
+def _grids(records: list[dict[str, Any]]) -> _Grids:
     """Per (dataset, method): KITTI segments pooled over seeds, mean APE and RPE, over the seeds every method of the
     dataset has a result for (as ``lidarkit compare`` pairs them: a method over seeds 1 and 3 was set bold against
-    kiss over 0-4, where on seeds 1 and 3 kiss was better); and a note naming what was left out ('' when nothing)."""
+    kiss over 0-4, where on seeds 1 and 3 kiss was better); a note naming what was left out ('' when nothing); each
+    dataset's RPE step; and the cells whose runs mostly did not register (their poses the fallback motion's)."""
+    from lidarkit.bench.tasks.odometry import SELECTED_FRAME
+
     segments: dict[tuple[str, str], list[SegmentErrors]] = defaultdict(list)
     ape: dict[tuple[str, str], list[float]] = defaultdict(list)
     rpe: dict[tuple[str, str], list[float]] = defaultdict(list)
@@ -61,6 +77,9 @@ def _grids(records: list[dict[str, Any]]):
                       for dataset, methods in sorted(left.items()) if methods]
                      + [f"{dataset}: no seed common to every method (each over its own seeds)"
                         for dataset in sorted(common) if not common[dataset]])
+    rpe_step: dict[str, str] = {}
+    selection: dict[str, str] = {}
+    registration: dict[tuple[str, str], list[tuple[int, int]]] = defaultdict(list)  # (not registered, registrations)
     for r in ok:
         job = Job.from_spec(r["job"])
         key = (label[id(r)], job.method_label)
@@ -74,10 +93,44 @@ def _grids(records: list[dict[str, Any]]):
             ape[key].append(float(metrics["ape_rmse_m"]))
         if _has_value(metrics.get("rpe_trans_rmse_m")):
             rpe[key].append(float(metrics["rpe_trans_rmse_m"]))
+        # (the RPE of a run over a frame selection that skips frames is per selected frame)
+        skips = ((r.get("info") or {}).get("metric_alignment") or {}).get("rpe_trans_rmse_m") == SELECTED_FRAME
+        if skips or key[0] not in rpe_step:
+            rpe_step[key[0]] = "selected frame" if skips else "frame"
+        selection.setdefault(key[0], _selection_text(job.options.get("frames")))
+        if _has_value(metrics.get("n_not_converged")) and _has_value(metrics.get("n_frames")):
+            registration[key].append((int(metrics["n_not_converged"]), max(int(metrics["n_frames"]) - 1, 0)))
     merged = {k: SegmentErrors(*(np.concatenate([getattr(s, f) for s in v]) for f in
                                  ("length_m", "translation_pct", "rotation_deg_per_100m", "speed_mps")))
               for k, v in segments.items()}
-    return merged, {k: float(np.mean(v)) for k, v in ape.items()}, {k: float(np.mean(v)) for k, v in rpe.items()}, note
+    return _Grids(merged, {k: float(np.mean(v)) for k, v in ape.items()}, {k: float(np.mean(v)) for k, v in rpe.items()},
+                  note, rpe_step, selection, _not_registered(registration))
+
+
+def _not_registered(registration: dict[tuple[str, str], list[tuple[int, int]]]) -> dict[tuple[str, str], str]:
+    """The cells one of whose runs did not register more than half of its frames after the first (each such frame's
+    pose is the fallback motion's: a run that never registered stays at the origin, and on a short drive its APE was
+    set bold as the best), with what their mark says: "no frame registered" or "N of the M frames after the first not
+    registered" (over the cell's seeds)."""
+    out = {}
+    for key, runs in registration.items():
+        if not any(attempted and 2 * failed > attempted for failed, attempted in runs):
+            continue
+        failed, attempted = (sum(x) for x in zip(*runs))
+        seeds = f" (over {len(runs)} seeds)" if len(runs) > 1 else ""
+        out[key] = ("no frame registered" if failed >= attempted
+                    else f"{failed} of the {attempted} frames after the first not registered") + seeds
+    return out
+
+
+def _selection_text(frames: Any) -> str:
+    """A frame selection as the suite wrote it, short ('' for every frame)."""
+    if frames is None:
+        return ""
+    if isinstance(frames, list):
+        shown = ", ".join(str(f) for f in frames[:6])
+        return f"[{shown}{', ...' if len(frames) > 6 else ''}]"
+    return str(frames)
 
 
 def _has_value(x: Any) -> bool:
@@ -209,29 +262,110 @@ def _alike(values: list[np.ndarray]) -> bool:
     return all(v.shape == values[0].shape and np.allclose(v, values[0], rtol=1e-9, atol=1e-12) for v in values[1:])
 
 
+#: the RPE table of runs over a frame selection that skips frames: its step is one selected frame, not one frame
+RPE_SELECTED_FRAME_TABLE = "rpe_rmse_selected_frame"
+#: the step of each RPE table, by the table's name (one table per step: a mean over two steps means neither)
+RPE_TABLES = {"frame": "rpe_rmse", "selected frame": RPE_SELECTED_FRAME_TABLE}
+
+
+@dataclass
+class MarkedTable(PubTable):
+    """A publication table some of whose cells carry a footnote mark, ``marks[(i, j)]`` (``"a"``): such a cell
+    shows its value and the mark, ``0.512 (a)``, and is never set bold (a run that did not register, which stayed at
+    the origin, was the best on a short drive)."""
+
+    marks: dict[tuple[int, int], str] = field(default_factory=dict)
+
+    def best_mask(self) -> np.ndarray:
+        values = self.values.copy()
+        for i, j in self.marks:
+            values[i, j] = np.nan
+        return PubTable.best_mask(dataclasses.replace(self, values=values, marks={}))
+
+    def cell(self, i: int, j: int) -> str:
+        mark = self.marks.get((i, j))
+        return super().cell(i, j) + (f" ({mark})" if mark else "")
+
+
 def remove_stale_tables(out_dir: Path, pub: Publication) -> None:
     """Remove an earlier report's tables that ``pub`` does not hold (a run over shorter sequences has no drift tables),
     so that tables/ never mixes two reports; called once the report files are written (other files are left)."""
     from lidarkit.eval import tables
 
-    tables.remove_stale_tables(out_dir / TABLES_DIR, (path.name for path in pub.files))
+    own = (*tables.TABLE_FILES, *(f"{RPE_SELECTED_FRAME_TABLE}{suffix}" for suffix in tables.TABLE_SUFFIXES))
+    tables.remove_stale_tables(out_dir / TABLES_DIR, (path.name for path in pub.files), names=own)
+
+
+def _marked_value_table(grid: dict[tuple[str, str], float], not_registered: dict[tuple[str, str], str], title: str, *,
+                        name: str, digits: int) -> PubTable:
+    """:func:`value_table` of ``grid`` whose cells of runs that did not register carry a mark, are not set bold, and
+    leave their dataset out of the Mean (as a method without a value there does: the Mean is over the same data)."""
+    from lidarkit.eval.tables import value_table
+
+    table = value_table({k: np.nan if k in not_registered else v for k, v in grid.items()}, title, name=name, digits=digits)
+    flagged = sorted(((table.row_labels.index(d), table.col_labels.index(m)), why)
+                     for (d, m), why in not_registered.items() if (d, m) in grid)
+    if not flagged:
+        return table
+    values = table.values.copy()
+    marks, notes = {}, []
+    for k, ((i, j), why) in enumerate(flagged):
+        values[i, j] = grid[(table.row_labels[i], table.col_labels[j])]
+        marks[(i, j)] = _mark(k)
+        notes.append(f"({marks[(i, j)]}) {table.row_labels[i]}, {table.col_labels[j]}: {why}")
+    note = (f"{table.note} {'; '.join(notes)}. A frame that does not register takes the fallback motion's pose: a "
+            "marked cell is not set bold and its sequence is left out of the Mean.")
+    fields = {f.name: getattr(table, f.name) for f in dataclasses.fields(PubTable)}
+    return MarkedTable(**{**fields, "values": values, "note": note}, marks=marks)
+
+
+def _mark(k: int) -> str:
+    """The ``k``-th footnote mark: a, b, ..., z, aa, ab, ..."""
+    letters = "abcdefghijklmnopqrstuvwxyz"
+    return letters[k] if k < len(letters) else _mark(k // len(letters) - 1) + letters[k % len(letters)]
+
+
+def _rpe_tables(grids: _Grids) -> list[PubTable]:
+    """One RPE table per step (``rpe_rmse``: one frame; ``rpe_rmse_selected_frame``: one selected frame of a selection
+    that skips frames, its rows marked ``*`` and their selections named): one table averaged a 1-frame and a
+    2-frame RPE into its Mean."""
+    out = []
+    for step, name in RPE_TABLES.items():
+        rows = {d for d, s in grids.rpe_step.items() if s == step}
+        rpe = {k: v for k, v in grids.rpe.items() if k[0] in rows}
+        if not rpe:
+            continue
+        shown = {d: f"{d} *" if step == "selected frame" else d for d in rows}
+        table = _marked_value_table({(shown[d], m): v for (d, m), v in rpe.items()},
+                                    {(shown[d], m): why for (d, m), why in grids.not_registered.items() if d in rows},
+                                    f"RPE translation RMSE (m per {step})", name=name, digits=4)
+        if step == "selected frame":
+            selections = "; ".join(f"{d}: frames {grids.selection[d]}" for d in sorted(rows)
+                                   if grids.selection.get(d) and f"frames={grids.selection[d]}" not in d)  # (said once)
+            table = dataclasses.replace(table, note="*: over one selected frame of the row's frame selection, not one "
+                                                    "dataset frame" + (f" ({selections})" if selections else "")
+                                                    + f". {table.note}")
+        out.append(table)
+    return out
 
 
 def build_publication(records: list[dict[str, Any]], out_dir: Path, *, plots: bool = True) -> Publication:
     """Tables (and box plots with ``plots``) of the odometry records, written under ``out_dir``; paired
     comparisons with the reference (kiss)."""
-    segments, ape, rpe, seeds_note = _grids(records)
-    from lidarkit.bench.tasks.odometry import METRIC_ALIGNMENT_BY_NAME, SELECTED_FRAME
+    from lidarkit.bench.tasks.odometry import METRIC_ALIGNMENT_BY_NAME
 
-    # (the RPE of a run over a frame selection that skips frames is per selected frame)
-    steps = {"selected frame" if ((r.get("info") or {}).get("metric_alignment") or {}).get("rpe_trans_rmse_m") == SELECTED_FRAME
-             else "frame" for r in records if r.get("status") == "ok" and r["job"]["task"] == "odometry"}
-    tables = publication_tables(segments or None, ape or None, rpe or None, ape_alignment=METRIC_ALIGNMENT_BY_NAME["ape_rmse_m"],
-                                rpe_delta=" / ".join(sorted(steps)) or "frame")
-    if seeds_note:  # (said in every table, its .md, .csv and .tex: a table is copied into a paper alone)
-        tables.tables = [dataclasses.replace(t, note=f"{t.note} Means over common seeds, {seeds_note}.".strip())
-                         for t in tables.tables]
-    pub = Publication(tables.tables)
+    grids = _grids(records)
+    segments = grids.segments
+    tables = publication_tables(segments or None).tables
+    if grids.ape:
+        tables.append(_marked_value_table(grids.ape, grids.not_registered,
+                                          f"APE translation RMSE (m, {METRIC_ALIGNMENT_BY_NAME['ape_rmse_m']})",
+                                          name="ape_rmse", digits=3))
+    tables += _rpe_tables(grids)
+    if grids.seeds_note:  # (said in every table, its .md, .csv and .tex: a table is copied into a paper alone)
+        tables = [dataclasses.replace(t, note=f"{t.note} Means over common seeds, {grids.seeds_note}.".strip())
+                  for t in tables]
+    pub = Publication(tables)
     pub.comparisons = reference_comparisons(records, not_compared=pub.not_compared)
     # (an earlier report's tables that these do not replace are removed by remove_stale_tables, after the report files)
     pub.files += [path for t in pub.tables for path in t.write(out_dir / TABLES_DIR)]

@@ -66,6 +66,7 @@ class Row:
     seeds: tuple[int, ...] = ()  # the seeds of its ok results (the ones its numbers are over)
     values: dict[str, dict[int, float]] = field(default_factory=dict, repr=False)  # metric -> seed -> its finite value
     n_rerun_failed: int = 0  # ok results kept after a --force rerun of their job failed (the record's rerun_failed)
+    versions: tuple[str, ...] = ()  # the lidarkit versions its results were run by (two after a rerun under new code)
 
 
 @dataclass
@@ -101,6 +102,7 @@ class Report:
     n_expected: int = 0  # jobs of the suite (suite.json) the report is restricted to; 0: every result in the folder
     n_left_out: int = 0  # results in jobs/ the report does not hold (an earlier suite's, or an earlier version's)
     n_earlier_version: int = 0  # of those, results of the report's own jobs from another lidarkit version (another key)
+    versions: dict[str, int] = field(default_factory=dict)  # lidarkit version -> results held of it, the latest first
     not_run: list[str] = field(default_factory=list)  # labels of the suite's jobs with no result
     n_unreadable: int = 0  # of those, the jobs whose result file is there but cannot be read
     publication: Any = None  # lidarkit.bench.publication.Publication (odometry tables, box plots)
@@ -250,7 +252,8 @@ def aggregate(records: list[dict[str, Any]], missing: list[dict[str, Any]] = ())
             rows.append(Row(task, experiment, dataset, method, len(ok), len(items) - len(ok), stats, summaries,
                             n_missing=missing_per_row.get(ident, 0), alignment=_stated_alignment(ok),
                             seeds=tuple(sorted(int(r["job"]["seed"]) for r in ok)), values=per_seed,
-                            n_rerun_failed=sum(bool(r.get("rerun_failed")) for r in ok)))
+                            n_rerun_failed=sum(bool(r.get("rerun_failed")) for r in ok),
+                            versions=tuple(sorted({_version(r) for r in items}))))
         higher = frozenset(name for r in recs for name in (r.get("higher_is_better") or ()))
         tables.append(TaskTable(task, metrics, rows, higher))
     return tables
@@ -289,9 +292,22 @@ def _alignment_note(row: Row, metric: MetricInfo) -> str:
 
 
 def _natural(params: dict[str, Any]) -> tuple:
-    """Sort key of a param dict: numbers by value (50 < 100 < 1000), then everything else as text."""
-    return tuple((k, (0, float(v), "") if isinstance(v, (int, float)) and not isinstance(v, bool) else (1, 0.0, str(v)))
-                 for k, v in sorted(params.items()))
+    """Sort key of a param dict: numbers by value (50 < 100 < 1000), numbers written as text too (a grid of 20, "60",
+    180 sorted 20, 180, 60), then everything else as text."""
+    return tuple((k, _number_first(v)) for k, v in sorted(params.items()))
+
+
+def _number_first(value: Any) -> tuple[int, float, str]:
+    """A finite number, or text that reads as one, by its value; anything else (NaN too, which orders nothing) after."""
+    number = math.nan
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        number = float(value)
+    elif isinstance(value, str):
+        try:
+            number = float(value)
+        except ValueError:
+            pass
+    return (0, number, value if isinstance(value, str) else "") if math.isfinite(number) else (1, 0.0, str(value))
 
 
 def format_stat(stat: tuple[float, float, int], digits: int = 4) -> str:
@@ -579,7 +595,8 @@ def _pivot_metrics(table: TaskTable) -> list[MetricInfo]:
 def coverage_text(report: Report) -> str:
     """What the report holds against the suite: `` of the suite's 24 jobs (17 not run yet); 9 results of jobs not in
     suite.json left out`` ('' when it holds every job of the suite and nothing was left out). Results of the same jobs
-    from an earlier lidarkit version (after a source change) are said to be that, not an earlier suite's."""
+    from an earlier lidarkit version (after a source change) are said to be that, not an earlier suite's; results
+    shown from more than one version are counted per version."""
     text = ""
     if report.n_expected and report.n_records < report.n_expected:
         text += f" of the suite's {report.n_expected} jobs ({len(report.not_run) - report.n_unreadable} not run yet"
@@ -590,7 +607,27 @@ def coverage_text(report: Report) -> str:
     if n_other_jobs:
         text += (f"; {n_other_jobs} results in jobs/ of jobs not in the folder's suite.json (an earlier suite) left out"
                  if report.n_expected else f"; {n_other_jobs} results of jobs not in this run's suite left out")
+    if len(report.versions) > 1:  # (--all after a rerun under new code: rows of two versions, said only "left out")
+        counts = [f"{n} from {version}" + (" (the latest)" if k == 0 else "")
+                  for k, (version, n) in enumerate(report.versions.items())]
+        text += (f"; the {report.n_records} shown are from {len(report.versions)} lidarkit versions: {', '.join(counts)} "
+                 "(report.csv's lidarkit_version names each row's)")
     return text
+
+
+def _version(record: dict[str, Any]) -> str:
+    return str(record.get("lidarkit_version") or "unknown")
+
+
+def version_counts(records: list[dict[str, Any]]) -> dict[str, int]:
+    """``{lidarkit version: results}`` of ``records``, the version of the most recently finished result first."""
+    latest: dict[str, str] = {}
+    counts: dict[str, int] = defaultdict(int)
+    for r in records:
+        version = _version(r)
+        counts[version] += 1
+        latest[version] = max(latest.get(version, ""), str(r.get("finished_utc") or ""))
+    return {v: counts[v] for v in sorted(counts, key=lambda v: (latest[v], v), reverse=True)}
 
 
 def _not_run_lines(report: Report, limit: int = 50) -> list[str]:
@@ -643,12 +680,13 @@ def _csv_number(x: Any) -> str:
 
 def _csv(report: Report) -> str:
     """Long format, one row per (row, metric); ``alignment``: the one its records state (two ``ape_rmse_m`` rows of a VO
-    suite, SE(3)- and Sim(3)-aligned, were told apart by nothing), empty where they state none."""
+    suite, SE(3)- and Sim(3)-aligned, were told apart by nothing), empty where they state none; ``lidarkit_version``:
+    the versions its results were run by, `` / ``-joined (a folder reused across code versions mixes them)."""
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
     writer.writerow(["task", "experiment", "dataset", "method", "metric", "mean", "std", "n", "n_ok", "n_failed",
                      "n_not_run", "median", "ci95_low", "ci95_high", "alignment",
-                     "n_rerun_failed"])  # (new columns go last: readers index them)
+                     "n_rerun_failed", "lidarkit_version"])  # (new columns go last: readers index them)
     for table in report.tables:
         for r in table.rows:
             for m in table.metrics:
@@ -657,7 +695,8 @@ def _csv(report: Report) -> str:
                 # one value has no spread: empty cells, not a std of 0 and a CI [v, v] of zero width
                 extra = [_csv_number(s.median), repr(s.ci_low) if s.n > 1 else "", repr(s.ci_high) if s.n > 1 else ""] if s is not None else ["", "", ""]
                 writer.writerow([r.task, r.experiment, r.dataset, r.method, m.name, _csv_number(mean), repr(std) if n > 1 else "",
-                                 n, r.n_ok, r.n_failed, r.n_missing, *extra, r.alignment.get(m.name, ""), r.n_rerun_failed])
+                                 n, r.n_ok, r.n_failed, r.n_missing, *extra, r.alignment.get(m.name, ""), r.n_rerun_failed,
+                                 " / ".join(r.versions)])
     return buf.getvalue()
 
 
@@ -991,7 +1030,7 @@ def build_report(
     unknown_tasks = import_task_modules(records + [{"job": spec} for spec in missing.values()], manifest)
     report = Report(out_dir=out_dir, tables=aggregate(records, list(missing.values())), n_records=len(records),
                     skipped=_skipped(manifest), n_expected=len(expected), n_left_out=n_left_out,
-                    n_earlier_version=n_earlier_version,
+                    n_earlier_version=n_earlier_version, versions=version_counts(records),
                     not_run=[_label({"job": spec}) + (" (its result file cannot be read: see the log)" if k in unreadable else "")
                              for k, spec in missing.items()], n_unreadable=len(unreadable))
     n_warnings = 0

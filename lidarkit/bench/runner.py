@@ -71,7 +71,9 @@ def run_suite(
     if not isinstance(suite, Suite):
         raise ConfigError(f"must be a Suite (load_suite(path) reads one), got {type(suite).__name__} {suite!r}", source="suite")
     out_dir = path_argument(out_dir, "out_dir")
-    _check_types(workers, force)
+    _check_types(workers, force, on_start=on_start, on_result=on_result)
+    if not callable(job_fn):
+        raise ConfigError(f"must be a function, got {type(job_fn).__name__} {job_fn!r}", source="job_fn")
     check_executor_args(executor, workers, address)
     _check_task_modules(suite, executor)
     check_results_folder(out_dir)
@@ -166,13 +168,16 @@ def _failure_note(record: dict[str, Any]) -> dict[str, Any]:
     return {"error": record.get("error"), "started_utc": record.get("started_utc"), "finished_utc": record.get("finished_utc")}
 
 
-def _check_types(workers: Any, force: Any) -> None:
+def _check_types(workers: Any, force: Any, **callbacks: Any) -> None:
     """ConfigError naming the argument of a wrong type: force="no" was true (every job ran again), workers="2" a bare
-    TypeError."""
+    TypeError, on_start=5 a TypeError once suite.json had been rewritten."""
     if workers is not None and not is_integer(workers):
         raise ConfigError(f"must be an integer, got {type(workers).__name__} {workers!r}", source="workers")
     if not isinstance(force, bool):
         raise ConfigError(f"must be True or False, got {type(force).__name__} {force!r}", source="force")
+    for name, callback in callbacks.items():
+        if callback is not None and not callable(callback):
+            raise ConfigError(f"must be a function (or None), got {type(callback).__name__} {callback!r}", source=name)
 
 
 LOCK_FILE = ".lidarkit-bench.lock"

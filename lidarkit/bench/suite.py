@@ -302,8 +302,13 @@ def load_suite(path: str | Path, *, skip_unavailable: bool = False, only_tasks: 
     A suite expanding to more than ``max_jobs`` jobs is refused before expansion.
     """
     from lidarkit.bench.results import path_argument
+    from lidarkit.params import is_integer
 
     path = path_argument(path, "path").resolve()
+    if not is_integer(max_jobs):  # ("2" failed comparing with the job count: "'>' not supported")
+        raise ConfigError(f"must be an integer, got {type(max_jobs).__name__} {max_jobs!r}", source="max_jobs")
+    if max_jobs < 1:
+        raise ConfigError(f"must be >= 1, got {max_jobs}", source="max_jobs")
     model, locator = read_suite_file(path)
     _refuse_duplicates(model, locator)
     n_jobs = _count_jobs(model)

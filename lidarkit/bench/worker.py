@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import collections
 import logging
 import os
 import socket
@@ -17,16 +18,37 @@ def _utc_now() -> str:
     return datetime.now(timezone.utc).isoformat(timespec="milliseconds")
 
 
+#: warnings a job's result keeps: its first ones and its last ones (a run's closing summary comes last)
+FIRST_WARNINGS_KEPT = 40
+LAST_WARNINGS_KEPT = 10
+
+
 class _WarningCapture(logging.Handler):
-    """Collects the WARNING+ log messages a job emits (at most 50)."""
+    """Collects the WARNING+ log messages a job emits: the first :data:`FIRST_WARNINGS_KEPT` and the last
+    :data:`LAST_WARNINGS_KEPT`, with a line counting those between (it kept the first 50 and dropped the rest without a
+    word, a run's closing summary among them)."""
 
     def __init__(self) -> None:
         super().__init__(level=logging.WARNING)
-        self.messages: list[str] = []
+        self.first: list[str] = []
+        self.last: collections.deque[str] = collections.deque(maxlen=LAST_WARNINGS_KEPT)
+        self.n_dropped = 0
 
     def emit(self, record: logging.LogRecord) -> None:
-        if len(self.messages) < 50:
-            self.messages.append(f"{record.levelname} {record.name}: {record.getMessage()}")
+        message = f"{record.levelname} {record.name}: {record.getMessage()}"
+        if len(self.first) < FIRST_WARNINGS_KEPT:
+            self.first.append(message)
+            return
+        if len(self.last) == self.last.maxlen:
+            self.n_dropped += 1
+        self.last.append(message)
+
+    @property
+    def messages(self) -> list[str]:
+        """The kept warnings in the order they came, the count of those not kept where they were."""
+        dropped = [f"... and {self.n_dropped} more warnings, not kept (the job's first {FIRST_WARNINGS_KEPT} and last "
+                   f"{LAST_WARNINGS_KEPT} are)"] if self.n_dropped else []
+        return self.first + dropped + list(self.last)
 
 
 def execute_job(spec: dict[str, Any]) -> dict[str, Any]:

@@ -210,7 +210,7 @@ def bench(
     data: Optional[Path] = typer.Option(None, "--data", help="`bench kitti` only: the KITTI odometry root (sequences/, poses/)."),
     methods: Optional[str] = typer.Option(None, "--methods", help="`bench kitti` only: comma-separated variants (default: the bundled strong ones)."),
     sequences: Optional[str] = typer.Option(None, "--sequences", help="`bench kitti` only: comma-separated sequences (default 00-10)."),
-    max_jobs: int = typer.Option(100_000, "--max-jobs", min=1, help="Refuse a suite that expands to more jobs."),
+    max_jobs: int = typer.Option(100_000, "--max-jobs", help="Refuse a suite that expands to more jobs."),
     progress: bool = typer.Option(True, "--progress/--no-progress", help=PROGRESS_HELP),
 ) -> None:
     """Run a benchmark suite: validate it, expand it into jobs, run the unfinished ones, write one JSON per job.
@@ -224,6 +224,8 @@ def bench(
     from lidarkit.bench.runner import check_results_folder
 
     check_executor_args(executor, workers, address, cli=True)  # before anything, a dry run included
+    if max_jobs < 1:  # (as --workers: typer's min=1 exited 2 with its own usage wording)
+        raise ConfigError(f"must be >= 1, got {max_jobs}", source="--max-jobs")
     kitti = str(suite_file) == "kitti" and not suite_file.exists()
     if kitti:
         from lidarkit.bench.kitti import kitti_suite

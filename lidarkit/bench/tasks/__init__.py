@@ -95,6 +95,10 @@ def register_task(name: str) -> Callable[[type[Task]], type[Task]]:
     """Class decorator registering a ``Task`` subclass under ``name``."""
 
     def decorator(cls: type[Task]) -> type[Task]:
+        # (int was taken and failed "cannot set 'name' attribute of immutable type 'int'")
+        if not (isinstance(cls, type) and issubclass(cls, Task)):
+            what = f"the class {cls.__qualname__}" if isinstance(cls, type) else f"{type(cls).__name__} {cls!r}"
+            raise ConfigError(f"decorates a subclass of lidarkit.bench.tasks.Task, got {what}", source=f"register_task({name!r})")
         cls.name = name
         _REGISTERED[name] = cls
         _INSTANCES.pop(name, None)

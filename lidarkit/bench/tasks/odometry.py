@@ -124,6 +124,12 @@ class OdometryTask(Task):
             from lidarkit.odometry.inputs import parse_frames
 
             frames = options["frames"]
+            if isinstance(frames, list):
+                # (a stand-in length named its own range: "must lie in 0..5" for [-2, 5] on 10 scans, "0..-1" for [-1])
+                negative = next((f for f in frames if isinstance(f, int) and f < 0), None)
+                if negative is not None:
+                    raise ConfigError(f"frame indices must be >= 0, got {negative} (a slice such as '-3:' counts from "
+                                      "the end)", source="frames")
             parse_frames(frames, 1 + max((f for f in frames if isinstance(f, int)), default=0) if isinstance(frames, list) else 1)
 
     def validate_dataset(self, dataset: dict[str, Any], options: dict[str, Any]) -> None:
