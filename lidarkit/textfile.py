@@ -48,10 +48,12 @@ def read_numeric_table(
         if width is None:
             if len(fields) not in accepted:
                 want = " or ".join(str(n) for n in accepted)
-                raise DataError(f"expected {want} numbers, found {len(fields)}", source=path, location=f"line {lineno}")
+                raise DataError(f"expected {want} number{'' if accepted == (1,) else 's'}, found {len(fields)}", source=path,
+                                location=f"line {lineno}")
             width = len(fields)
         elif len(fields) != width:
-            raise DataError(f"expected {width} numbers, found {len(fields)}", source=path, location=f"line {lineno}")
+            raise DataError(f"expected {width} number{'' if width == 1 else 's'}, found {len(fields)}", source=path,
+                            location=f"line {lineno}")
         try:
             values = [float(f) for f in fields]
         except ValueError:
@@ -81,11 +83,12 @@ def data_line_numbers(path: str | os.PathLike) -> list[int]:
 
 
 def file_line(path: str | os.PathLike, location: str | None) -> str | None:
-    """``"frame K"`` of a table read by ``read_numeric_table`` -> ``"line L"`` of ``path``; other locations unchanged."""
+    """``"frame K"`` of a table read by ``read_numeric_table`` -> ``"line L, frame K"`` of ``path`` (in an error's
+    parentheses: "(line 3, frame 2)"); other locations unchanged."""
     if not location or not location.startswith("frame "):
         return location
     try:
         k = int(location.split()[1])
-        return f"line {data_line_numbers(path)[k]} ({location})"
+        return f"line {data_line_numbers(path)[k]}, {location}"
     except (ValueError, IndexError, LidarKitError):
         return location

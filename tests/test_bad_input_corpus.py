@@ -442,13 +442,13 @@ def _poses_with(tmp_path: Path, gt_file: Path, row: int, R: np.ndarray, name: st
 def test_non_orthonormal_rotation_names_file_and_line(tmp_path, gt_file, capsys):
     bad = _poses_with(tmp_path, gt_file, 2, np.diag([1.0, 1.3, 1.0]))
     code, _, err = run_cli(["eval", gt_file, bad], capsys)
-    assert_one_line_error(code, err, "bad_poses.txt (line 4 (frame 2))", "not orthonormal")
+    assert_one_line_error(code, err, "bad_poses.txt (line 4, frame 2)", "not orthonormal")
 
 
 def test_reflection_is_called_a_reflection(tmp_path, gt_file, capsys):
     bad = _poses_with(tmp_path, gt_file, 5, np.diag([1.0, 1.0, -1.0]))
     code, _, err = run_cli(["eval", gt_file, bad], capsys)
-    assert_one_line_error(code, err, "bad_poses.txt (line 7 (frame 5))", "reflection", "det R = -1")
+    assert_one_line_error(code, err, "bad_poses.txt (line 7, frame 5)", "reflection", "det R = -1")
 
 
 def test_non_monotonic_ref_times_names_the_times_file(tmp_path, gt_file, capsys):
@@ -457,7 +457,7 @@ def test_non_monotonic_ref_times_names_the_times_file(tmp_path, gt_file, capsys)
     stamps[7] = 0.05
     times.write_text("".join(f"{t:.3f}\n" for t in stamps))
     code, _, err = run_cli(["eval", gt_file, gt_file, "--ref-times", times], capsys)
-    assert_one_line_error(code, err, "ref_times.txt (line 8 (frame 7))", "not strictly increasing")
+    assert_one_line_error(code, err, "ref_times.txt (line 8, frame 7)", "not strictly increasing")
 
 
 def test_non_rigid_tr_in_calib_names_calib_and_tr(tmp_path):

@@ -545,3 +545,16 @@ def test_json_to_stdout_is_the_whole_of_stdout(tmp_path, capsys):
         assert "APE transl. (m)" in done.stderr and done.stderr.rstrip().endswith(f"wrote {target}")
     code, out, err = run_cli(["eval", str(gt), str(est), "--json", str(tmp_path / "m.json")], capsys)
     assert code == 0 and "APE transl. (m)" in out and "APE" not in err  # a file: the table stays on stdout
+
+
+def test_a_bad_times_file_is_named_by_line_in_plain_words(tmp_path, capsys):
+    """A times.txt line of two numbers read "expected 1 numbers", and a stamp going back "(line 3 (frame 2))"."""
+    poses = np.tile(np.eye(4), (3, 1, 1))
+    poses[:, 0, 3] = [0.0, 1.0, 2.0]
+    kitti = Trajectory(poses).to_kitti(tmp_path / "poses.txt")
+    (tmp_path / "two.txt").write_text("0.0\n0.1 0.2\n0.2\n")
+    (tmp_path / "back.txt").write_text("# times\n0.0\n0.2\n0.1\n")
+    code, _, err = run_cli(["eval", str(kitti), str(kitti), "--ref-times", str(tmp_path / "two.txt"), "--align", "none"], capsys)
+    assert code == 1 and err.strip() == f"error: {tmp_path / 'two.txt'} (line 2): expected 1 number, found 2"
+    code, _, err = run_cli(["eval", str(kitti), str(kitti), "--ref-times", str(tmp_path / "back.txt"), "--align", "none"], capsys)
+    assert code == 1 and err.strip().startswith(f"error: {tmp_path / 'back.txt'} (line 4, frame 2): ")

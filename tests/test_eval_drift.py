@@ -172,3 +172,19 @@ def test_associated_segments_are_measured_along_the_whole_reference():
         assert drift.ref_length_m == pytest.approx(497.5, rel=1e-12)
     # the whole reference associated with itself is scored as frame by frame (1.25 m a frame: 32 + 24 + 16 + 8 segments)
     assert kitti_drift(ref, ref, associate=True).n_segments == kitti_drift(ref, ref).n_segments == 80
+
+
+def test_switches_that_are_not_true_or_false_are_refused(tmp_path):
+    """``allow_empty="no"`` / ``associate="no"`` are true strings: a 50 m reference came back as an empty result instead
+    of the error, and "no" associated by time; ape and rpe refused them already."""
+    from lidarkit.eval.pairing import paired
+
+    ref = Trajectory.from_kitti(straight_line(51).to_kitti(tmp_path / "ref.txt"))
+    est = Trajectory.from_kitti(straight_line(51, 1.01).to_kitti(tmp_path / "est.txt"))
+    for name, call in (("allow_empty", lambda: kitti_drift(ref, est, allow_empty="no")),
+                       ("associate", lambda: kitti_drift(ref, est, associate="no")),
+                       ("associate", lambda: paired(ref, est, associate="no"))):
+        with pytest.raises(ConfigError) as exc:
+            call()
+        assert str(exc.value) == f"{name}: {name} must be True or False, got 'no'"
+    assert not kitti_drift(ref, est, allow_empty=np.bool_(True)).valid  # (numpy's bools are bools)

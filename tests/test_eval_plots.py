@@ -107,3 +107,50 @@ def test_the_segment_box_plot_title_of_one_method_is_wrapped_inside_the_figure(t
     band = image[:40]  # the title's rows: ink (dark pixels) in the middle, none at either edge of the image
     assert band[:, 150:250].min() < 0.5
     assert band[:, :4].min() == 1.0 and band[:, -4:].min() == 1.0
+
+
+def test_the_drift_panel_legend_is_drawn_over_the_rotation_bars(tmp_path):
+    """The rotation bars live on a twin axes drawn after the translation axes: the tallest bar (the longest length's,
+    under the upper-right legend) was drawn over the legend. The legend's axes is now drawn last."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.colors import to_rgba
+    from matplotlib.figure import Figure
+
+    from lidarkit.eval import evaluate
+    from lidarkit.eval.plots import _draw_drift
+
+    n = 301  # 300 m along x; the estimate turns 2 deg per 100 m: the same rotational drift at every length
+    ref_poses, est_poses = np.tile(np.eye(4), (n, 1, 1)), np.tile(np.eye(4), (n, 1, 1))
+    ref_poses[:, 0, 3] = np.arange(n, dtype=float)
+    heading = np.radians(0.02) * np.arange(n)
+    est_poses[:, :2, :2] = np.stack([np.stack([np.cos(heading), -np.sin(heading)], -1),
+                                     np.stack([np.sin(heading), np.cos(heading)], -1)], -2)
+    est_poses[:, 0, 3], est_poses[:, 1, 3] = np.cumsum(np.cos(heading)) - 1, np.cumsum(np.sin(heading))
+    ref = Trajectory.from_kitti(Trajectory(ref_poses).to_kitti(tmp_path / "ref.txt"))
+    est = Trajectory.from_kitti(Trajectory(est_poses).to_kitti(tmp_path / "est.txt"))
+    ev = evaluate(ref, est, align="none", drift_lengths_m=(50, 100, 200))
+    fig = Figure(figsize=(6, 4), dpi=100)
+    FigureCanvasAgg(fig)
+    ax = fig.subplots()
+    _draw_drift(ax, ev, scaled=False)
+    twin = next(other for other in fig.axes if other is not ax)
+    legend = ax.get_legend()
+    assert legend is not None and ax.get_zorder() > twin.get_zorder()
+    assert not ax.patch.get_visible()  # (the twin's bars show through the translation axes)
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    box, tallest = legend.get_window_extent(renderer), twin.patches[-1].get_window_extent(renderer)
+    assert box.overlaps(tallest)
+    # the legend's frame where it covers the bar: no pixel of the bar's own colour outside the legend's swatches and texts
+    rgba = np.asarray(fig.canvas.buffer_rgba())
+    height = rgba.shape[0]
+    covered = np.zeros(rgba.shape[:2], dtype=bool)
+    x0, x1 = int(max(box.x0, tallest.x0)) + 2, int(min(box.x1, tallest.x1)) - 2
+    y0, y1 = int(max(box.y0, tallest.y0)) + 2, int(min(box.y1, tallest.y1)) - 2
+    covered[height - y1:height - y0, x0:x1] = True
+    for artist in [*legend.legend_handles, *legend.get_texts()]:
+        e = artist.get_window_extent(renderer)
+        covered[max(height - int(e.y1) - 3, 0):height - int(e.y0) + 3, max(int(e.x0) - 3, 0):int(e.x1) + 3] = False
+    orange = np.round(np.array(to_rgba("tab:orange")) * 255).astype(np.uint8)
+    assert covered.sum() > 50
+    assert int((rgba[covered] == orange).all(axis=1).sum()) == 0

@@ -207,3 +207,21 @@ def test_rpe_table_titles_name_how_the_pairs_were_chosen(tmp_path):
     assert titles == {"c": "**RPE translation RMSE (m per 5 meters)**",
                       "a": "**RPE translation RMSE (m per 5 meters, all pairs)**",
                       "l": "**RPE translation RMSE (m per 5 meters, legacy pairs)**"}
+
+
+def test_the_per_length_table_has_a_row_for_each_length_the_segments_have(tmp_path):
+    """Drift over 5 and 10 m segments (a short indoor run): the per-length table held the devkit's 100-800 m rows,
+    found none of them, and kept only "all". Its rows are now the segments' own lengths."""
+    from lidarkit.eval.tables import publication_tables
+
+    ref = Trajectory.from_tum(straight(41).to_tum(tmp_path / "ref.txt"))
+    est = Trajectory.from_tum(straight(41, 1.02).to_tum(tmp_path / "est.txt"))
+    drift = kitti_drift(ref, est, lengths=(10, 5), step=1)
+    tables = {t.name: t for t in publication_tables({("00", "orb"): SegmentErrors.from_drift(drift)}).tables}
+    lengths = tables["kitti_translation_pct_per_length"]
+    assert lengths.row_labels == ["5", "10", "all"]
+    by_length = {r.length_m: r.translation_pct for r in drift.per_length}
+    np.testing.assert_allclose(lengths.values[:, 0], [by_length[5.0], by_length[10.0], drift.translation_pct])
+    # lengths asked for stay the rows (those without segments left out)
+    asked = per_length_table({("00", "orb"): SegmentErrors.from_drift(drift)}, lengths_m=(5, 100))
+    assert asked.row_labels == ["5", "all"]

@@ -170,7 +170,7 @@ def test_malformed_oxts_and_timestamps(raw_copy):
         KittiRaw(raw_copy, DATE, DRIVE)
     lines[3] = lines[1]  # back in time: named by its line, not later as a frame of some trajectory
     stamps.write_text("\n".join(lines) + "\n")
-    with pytest.raises(DataError, match=r"oxts/timestamps\.txt \(line 4 \(frame 3\)\): time stamps are not strictly increasing"):
+    with pytest.raises(DataError, match=r"oxts/timestamps\.txt \(line 4, frame 3\): time stamps are not strictly increasing"):
         KittiRaw(raw_copy, DATE, DRIVE)
 
 

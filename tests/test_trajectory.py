@@ -107,7 +107,7 @@ def test_malformed_files_name_file_and_line(tmp_path):
         Trajectory.from_kitti(kitti)
     tum = tmp_path / "bad.tum"
     tum.write_text("# c\n0 0 0 0 0 0 0 1\n1 0 0 0 0 0 0 5\n")
-    with pytest.raises(DataError, match=r"line 3 \(frame 1\)\): quaternion norm"):
+    with pytest.raises(DataError, match=r"line 3, frame 1\): quaternion norm"):
         Trajectory.from_tum(tum)
     with pytest.raises(DataError, match="file not found"):
         Trajectory.from_kitti(tmp_path / "missing.txt")

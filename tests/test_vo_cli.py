@@ -326,7 +326,7 @@ def test_timestamps_file_is_used_and_checked(tmp_path, capsys):
     np.testing.assert_allclose(est.timestamps_s, 100.0 + 0.1 * np.arange(8), atol=1e-6)
     stamps.write_text("".join(f"{100.0 + 0.1 * k:.3f}\n" for k in (0, 1, 2, 1, 4, 5, 6, 7)))
     code, _, err = _run(["vo", str(seq), "--timestamps", str(stamps)], capsys)
-    assert code == 1 and "stamps.txt (line 4 (frame 3)): time stamps are not strictly increasing" in err and len(err.strip().splitlines()) == 1
+    assert code == 1 and "stamps.txt (line 4, frame 3): time stamps are not strictly increasing" in err and len(err.strip().splitlines()) == 1
 
 
 def test_too_few_time_stamps_for_a_kitti_image_sequence_say_how_many_images_need_them(tmp_path, capsys):

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from lidarkit.errors import ConfigError, EvaluationError
-from lidarkit.eval.pairing import pair_name, paired
+from lidarkit.eval.pairing import check_flags, pair_name, paired
 from lidarkit.params import is_integer, is_real_number
 from lidarkit.trajectory import Trajectory
 
@@ -65,8 +65,9 @@ class AlignmentTransform:
     n_poses_used: int = 0
     axis_sigma_deg: float = 0.0
     """How loosely the positions fix the rotation about the reference path's main direction (deg): the aligned
-    positions' RMS residual over the reference's RMS spread across that direction. A nearly straight path (or
-    residuals as large as its spread) leaves that rotation to the noise: beyond :data:`AXIS_SIGMA_LIMIT_DEG`
+    positions' RMS residual along the way that rotation moves them (out of a flat path's plane) over the reference's
+    RMS spread across that direction. A nearly straight path (or such residuals as large as its spread) leaves that
+    rotation to the noise: beyond :data:`AXIS_SIGMA_LIMIT_DEG`
     orientation errors after the alignment are not meaningful (APE rotation of 5 poses of KITTI 00: 136 deg aligned,
     0.29 deg as estimated); 0 for alignments without a rotation."""
 
@@ -208,13 +209,6 @@ def _relation(name: str, allowed: tuple[str, ...]):
     return PoseRelation[RELATIONS[name]]
 
 
-def check_flags(**flags: Any) -> None:
-    """ConfigError for a switch that is not True or False (``all_pairs="no"``, a true string, scored every pair)."""
-    for name, value in flags.items():
-        if not isinstance(value, (bool, np.bool_)):
-            raise ConfigError(f"{name} must be True or False, got {value!r}", source=name)
-
-
 def check_legacy_pairs(legacy_pairs: bool, delta_unit: str, all_pairs: bool) -> None:
     """ConfigError for ``legacy_pairs`` where the 2018 evo releases chose pairs as today's: a delta in frames, or all
     pairs (only their first consecutive path/angle pair differs). ``delta_unit`` as :func:`checked_delta` returns it."""
@@ -285,15 +279,25 @@ def _aligned_copies(ref: Trajectory, est: Trajectory, align: str, align_origin: 
 
 
 #: Beyond this :attr:`AlignmentTransform.axis_sigma_deg`, orientation errors after an alignment get a warning (well
-#: spread paths: 0.4-1.7 deg on KITTI 00 with ORB-SLAM and S-PTAM; its first 5 or 50 poses: 7e5 and 400 deg)
+#: spread paths: 0.26-1.0 deg on KITTI 00 with ORB-SLAM and S-PTAM; its first 5 or 50 poses: 1e4-2e5 and 55 deg)
 AXIS_SIGMA_LIMIT_DEG = 10.0
 
 
 def _axis_sigma_deg(ref_xyz: np.ndarray, aligned_xyz: np.ndarray) -> float:
-    """:attr:`AlignmentTransform.axis_sigma_deg` of aligned positions (inf for a path with no spread across it)."""
-    residual = float(np.sqrt(np.mean(np.sum((ref_xyz - aligned_xyz) ** 2, axis=1))))
-    spread = np.linalg.svd(ref_xyz - ref_xyz.mean(axis=0), compute_uv=False) / np.sqrt(len(ref_xyz))
-    across = float(np.hypot(spread[1], spread[2])) if len(spread) >= 3 else 0.0
+    """:attr:`AlignmentTransform.axis_sigma_deg` of aligned positions (inf for a path with no spread across it).
+
+    Only the residual along the way a turn about the main direction moves each position counts, on a flat path the
+    part out of its plane: the in-plane drift of a 20 m loop whose heading turns 45 deg read as an 18 deg loose turn."""
+    centred = ref_xyz - ref_xyz.mean(axis=0)
+    _, spread, directions = np.linalg.svd(centred, full_matrices=False)
+    if len(spread) < 3:  # (fewer than 3 positions: no spread across the main direction)
+        residual = float(np.abs(ref_xyz - aligned_xyz).max()) if len(ref_xyz) else 0.0
+        return 0.0 if residual == 0 else float("inf")
+    moved = np.cross(directions[0], centred)  # a small turn about the main direction moves position i along moved[i]
+    lever = np.linalg.norm(moved, axis=1)
+    way = moved / np.where(lever > 0, lever, 1.0)[:, None]
+    residual = float(np.sqrt(np.mean(np.einsum("ij,ij->i", ref_xyz - aligned_xyz, way) ** 2)))
+    across = float(np.hypot(spread[1], spread[2])) / np.sqrt(len(ref_xyz))
     return float(np.degrees(residual / across)) if across > 0 else (0.0 if residual == 0 else float("inf"))
 
 
@@ -303,8 +307,8 @@ def alignment_warning(transform: AlignmentTransform | None) -> str:
         return ""
     how = f"only to ~{transform.axis_sigma_deg:.2g} deg" if transform.axis_sigma_deg < 90 else "not at all"
     return (f"the positions fix the {transform.method} alignment's rotation about the path's main direction {how} (a "
-            "nearly straight path, or residuals as large as its spread across it): orientation errors after this alignment "
-            "are not meaningful; align='none' (--align none) compares orientations as estimated")
+            "nearly straight path, or residuals out of its plane as large as its spread across it): orientation errors "
+            "after this alignment are not meaningful; align='none' (--align none) compares orientations as estimated")
 
 
 #: How an estimate was aligned, in the words of labels and table titles (``alignment_label``)
@@ -489,14 +493,14 @@ def ape(
         relation=relation,
         unit=metric.unit.value,
         align=align,
-        align_origin=align_origin,
-        n_to_align=n_to_align,
+        align_origin=bool(align_origin),  # (numpy scalars as plain values: to_dict() is for JSON)
+        n_to_align=None if n_to_align is None else int(n_to_align),
         **stats,
         errors=np.array(metric.error, dtype=float),
         alignment=transform,
         ref_name=ref.name,
         est_name=est.name,
-        associated=associate,
+        associated=bool(associate),
         title=_title(metric, align, align_origin, n),
         ref=ref,
         est_aligned=Trajectory.from_evo(est_evo, name=est.name),
@@ -636,22 +640,22 @@ def rpe(
         relation=relation,
         unit=metric.unit.value,
         align=align,
-        align_origin=align_origin,
-        n_to_align=n_to_align,
+        align_origin=bool(align_origin),  # (numpy scalars as plain values: to_dict() is for JSON)
+        n_to_align=None if n_to_align is None else int(n_to_align),
         **stats,
         errors=np.array(metric.error, dtype=float),
         alignment=transform,
         ref_name=ref.name,
         est_name=est.name,
-        associated=associate,
+        associated=bool(associate),
         title=title,
         ref=ref,
         est_aligned=_est_from_evo_unreduced(est, transform, align_origin),
         delta=int(delta) if unit is Unit.frames else delta,
         delta_unit=delta_unit,
-        all_pairs=all_pairs,
-        pairs_from_reference=pairs_from_reference,
-        legacy_pairs=legacy_pairs,
+        all_pairs=bool(all_pairs),
+        pairs_from_reference=bool(pairs_from_reference),
+        legacy_pairs=bool(legacy_pairs),
         pairs=pairs,
     )
 

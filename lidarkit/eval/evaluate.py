@@ -6,6 +6,8 @@ import logging
 from dataclasses import asdict, dataclass, replace
 from typing import Any
 
+import numpy as np
+
 from lidarkit.errors import ConfigError
 from lidarkit.eval.ape_rpe import (
     APEResult,
@@ -65,6 +67,9 @@ class EvaluationSettings:
         check_legacy_pairs(self.legacy_pairs, unit, self.all_pairs)
         check_max_diff(self.max_diff_s)  # (also bounds the stamp check without associate: None was a TypeError there)
         checked_lengths(self.drift_lengths_m, "drift_lengths_m", "drift segment lengths")
+        for name, value in vars(self).items():  # numpy scalars as plain numbers: to_dict() is for JSON (np.int64 was not)
+            if isinstance(value, np.generic):
+                object.__setattr__(self, name, value.item())
 
     def to_dict(self) -> dict[str, Any]:
         out = asdict(self)
@@ -106,7 +111,7 @@ class Evaluation:
                 f"{self.rpe.rmse:.4g} m / {self.rpe_rotation.rmse:.4g} deg per {self.rpe.delta:g} {self.rpe.delta_unit}, {drift})")
 
     def to_dict(self, include_errors: bool = False) -> dict[str, Any]:
-        """JSON-safe dict; per-pose error arrays only with ``include_errors``."""
+        """JSON-safe dict, with what the pairing warned of; per-pose error arrays only with ``include_errors``."""
         return {
             "ref_name": self.ref_name,
             "est_name": self.est_name,
@@ -120,6 +125,7 @@ class Evaluation:
             "rpe_rotation": self.rpe_rotation.to_dict(include_errors),
             "kitti_drift": None if self.drift is None else self.drift.to_dict(),
             "kitti_drift_note": self.drift_note,
+            "warnings": list(self.warnings),
         }
 
 

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from lidarkit.errors import ConfigError, EvaluationError
-from lidarkit.eval.pairing import pair_name, paired
+from lidarkit.eval.pairing import check_flags, pair_name, paired
 from lidarkit.params import is_real_number
 from lidarkit.trajectory import Trajectory
 
@@ -164,6 +164,7 @@ def kitti_drift(
     than the shortest length raises EvaluationError, unless ``allow_empty`` (then ``result.valid`` is False).
     """
     source = pair_name(ref, est)
+    check_flags(allow_empty=allow_empty, associate=associate)  # ("no" is a true string: it allowed, it associated)
     lengths_arr = checked_lengths(lengths, "lengths")
     step = checked_step(step, "step")
     if associate and path_along is not None:  # (the reference given is then the whole one)

@@ -6,6 +6,8 @@ import logging
 import math
 from typing import Any
 
+import numpy as np
+
 from lidarkit.errors import ConfigError, EvaluationError
 from lidarkit.params import is_real_number
 from lidarkit.trajectory import Trajectory
@@ -13,6 +15,13 @@ from lidarkit.trajectory import Trajectory
 logger = logging.getLogger(__name__)
 
 SPACING_RATIO = 5.0  # median stamp spacings further apart than this factor: other clocks or units, not an offset
+
+
+def check_flags(**flags: Any) -> None:
+    """ConfigError for a switch that is not True or False (``all_pairs="no"``, a true string, scored every pair)."""
+    for name, value in flags.items():
+        if not isinstance(value, (bool, np.bool_)):
+            raise ConfigError(f"{name} must be True or False, got {value!r}", source=name)
 
 
 def pair_name(ref: Trajectory, est: Trajectory) -> str:
@@ -31,6 +40,7 @@ def paired(
     """
     if not isinstance(ref, Trajectory) or not isinstance(est, Trajectory):
         raise EvaluationError("reference and estimate must be lidarkit Trajectory objects", source="evaluation")
+    check_flags(associate=associate)  # ("no" is a true string: it associated)
     source = pair_name(ref, est)
     if not associate:
         if len(ref) != len(est):
@@ -94,24 +104,53 @@ def association_warning(ref: Trajectory, est: Trajectory, ref_paired: Trajectory
 def stamps_disagree(ref: Trajectory, est: Trajectory, max_diff_s: float) -> str:
     """Why pairing two equally long trajectories pose by pose compares poses of other times ("" when it does not):
     both have stamps and some pose's differ by more than ``max_diff_s`` (a TUM estimate that starts a second later
-    than its reference was scored pose by pose without a word, where evo associates TUM files by time)."""
-    import numpy as np
-
+    than its reference was scored pose by pose without a word, where evo associates TUM files by time). Where few
+    stamps have a partner within ``max_diff_s``, the advice names a window that takes in the largest gap (stamps
+    0.02 s apart were told to --associate, which then found no partner within 0.01 s)."""
     if ref.timestamps_s is None or est.timestamps_s is None or len(ref) != len(est) or len(ref) == 0:
         return ""
-    gap = np.abs(np.asarray(est.timestamps_s, dtype=np.float64) - np.asarray(ref.timestamps_s, dtype=np.float64))
-    k = int(np.argmax(gap))
-    if not gap[k] > max_diff_s:
+    ref_stamps, est_stamps = (np.asarray(t.timestamps_s, dtype=np.float64) for t in (ref, est))
+    offset = est_stamps - ref_stamps
+    k = int(np.argmax(np.abs(offset)))
+    gap = abs(float(offset[k]))
+    if not gap > max_diff_s:
         return ""
-    said = (f"poses paired by index, but their stamps differ by up to {gap[k]:.6g} s (pose {k}: reference {ref.timestamps_s[k]:.6f} s, "
-            f"estimate {est.timestamps_s[k]:.6f} s; more than {max_diff_s:g} s)")
+    said = (f"poses paired by index, but their stamps differ by up to {gap:.6g} s (pose {k}: reference {ref_stamps[k]:.6f} s, "
+            f"estimate {est_stamps[k]:.6f} s; more than {max_diff_s:g} s)")
     # stamps 0, 1, 2 (frame numbers) against seconds: associating by time then paired 96 poses of 4541, misaligned
-    step_ref, step_est = (float(np.median(np.diff(np.asarray(t.timestamps_s, dtype=np.float64)))) for t in (ref, est))
+    step_ref, step_est = (float(np.median(np.diff(stamps))) for stamps in (ref_stamps, est_stamps))
     if step_ref > 0 and step_est > 0 and not 1 / SPACING_RATIO <= step_est / step_ref <= SPACING_RATIO:
         return (f"{said}, and the estimate's stamps step by {step_est:.4g} s against the reference's {step_ref:.4g} s "
                 "(median): the two clocks or units differ (frame numbers against seconds?); pairing by index, as here, is "
                 "right when pose i of each is the same frame; --associate would pair the wrong poses")
-    return f"{said}: --associate (associate=True) pairs them by time"
+    # the estimate's stamps within the reference's time (those an association can pair): have they a partner?
+    overlapping = (est_stamps >= ref_stamps[0] - max_diff_s) & (est_stamps <= ref_stamps[-1] + max_diff_s)
+    partnered = _nearest_gaps(est_stamps[overlapping], ref_stamps) <= max_diff_s
+    if partnered.size and partnered.mean() >= 0.9:  # (an estimate that starts later: the same stamps, other indices)
+        return f"{said}: --associate (associate=True) pairs them by time"
+    window = _window_above(gap)
+    how = f"--associate --max-diff {window:g} (associate=True, max_diff_s={window:g}) pairs them by time"
+    if np.ptp(offset) <= max_diff_s:
+        return (f"{said}; the offset is a constant {float(np.mean(offset)):+.6g} s: if pose i of each is the same frame "
+                "(clocks that far apart), pairing by index, as here, already pairs them right"
+                + (f"; if not, {how}" if partnered.size else ""))
+    if not partnered.size:
+        return (f"{said}, and the two do not overlap in time (reference {_span(ref)}, estimate {_span(est)}): --associate "
+                "pairs poses of the same time only")
+    return f"{said}: {how} (within {max_diff_s:g} s it pairs too few)"
+
+
+def _nearest_gaps(stamps: np.ndarray, others: np.ndarray) -> np.ndarray:
+    """``(N,)`` time (s) from each of ``stamps`` to the nearest of the increasing ``others``."""
+    after = np.clip(np.searchsorted(others, stamps), 1, len(others) - 1) if len(others) > 1 else np.zeros(len(stamps), int)
+    before = np.maximum(after - 1, 0)
+    return np.minimum(np.abs(stamps - others[before]), np.abs(stamps - others[after]))
+
+
+def _window_above(gap_s: float) -> float:
+    """A round time window just above ``gap_s`` (0.02 -> 0.03, 0.25 -> 0.3): one that takes in the largest gap."""
+    step = 10.0 ** math.floor(math.log10(gap_s))
+    return round((math.floor(gap_s / step * (1 + 1e-9)) + 1) * step, 12)
 
 
 def _span(traj: Trajectory) -> str:
@@ -123,8 +162,6 @@ def _matched(traj, partner, name: str) -> Trajectory:
     """One side of evo's association as a Trajectory. A window wider than half a pose interval can match one pose to
     two of the other side (evo scores both pairs, and so does lidarkit): that side then takes its partner's stamps,
     which are distinct and within ``max_diff_s`` of its own."""
-    import numpy as np
-
     stamps = np.asarray(traj.timestamps, dtype=np.float64)
     if len(stamps) > 1 and not (np.diff(stamps) > 0).all():
         logger.info("%s: %d poses matched more than once", name, int((np.diff(stamps) <= 0).sum()))

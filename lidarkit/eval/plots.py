@@ -151,6 +151,9 @@ def _draw_drift(ax, evaluation: Evaluation, scaled: bool) -> None:
             fontsize=9,
         )
         handles = ax.get_legend_handles_labels()[0] + ax2.get_legend_handles_labels()[0]
+        # the twin is drawn after ``ax``, its rotation bars over ``ax``'s legend: ``ax`` (without its background) on top
+        ax.set_zorder(ax2.get_zorder() + 1)
+        ax.patch.set_visible(False)
         ax.legend(handles, [h.get_label() for h in handles], fontsize=8, loc="upper right")
 
 

@@ -28,14 +28,17 @@ RELATIVE_TIE_TOLERANCE = 1e-9
 
 
 def _finite(values: Any, source: str) -> np.ndarray:
-    """``values`` as a flat float array; EvaluationError for text or non-finite values (["a"]: a numpy ValueError;
-    None: "1 non-finite value(s)")."""
-    if values is None:
-        raise EvaluationError("values must be numbers, got None", source=source)
+    """``values`` ``(N,)`` as a float array. ConfigError for what is not a flat sequence of numbers (numeric text was read
+    as numbers, a 2-D array flattened: its rows pooled as runs), EvaluationError for non-finite values."""
     try:
-        arr = np.asarray(values, dtype=np.float64).reshape(-1)
-    except (TypeError, ValueError):
-        raise EvaluationError(f"values must be numbers, got {reprlib.repr(values)}", source=source) from None
+        arr = np.asarray(values)
+    except (TypeError, ValueError):  # (ragged nesting)
+        arr = None
+    if arr is None or arr.dtype.kind not in "iuf":
+        raise ConfigError(f"values must be numbers, got {reprlib.repr(values)}", source=source)
+    if arr.ndim != 1:
+        raise ConfigError(f"values must be a flat sequence of numbers, got an array of shape {arr.shape}", source=source)
+    arr = arr.astype(np.float64)
     if arr.size and not np.isfinite(arr).all():
         raise EvaluationError(f"{int((~np.isfinite(arr)).sum())} non-finite value(s) among {arr.size}", source=source)
     return arr
@@ -158,17 +161,17 @@ def summarize(
     """Summary of the runs' values ``(N,)``; no values gives ``n == 0`` and NaNs. The CI of the mean is Student-t's
     below :data:`MIN_VALUES_FOR_BOOTSTRAP` values, the seeded percentile bootstrap from there on."""
     arr = _finite(values, "summarize")
+    check_bootstrap_args(confidence, n_boot, seed)
     if arr.size == 0:
         nan = float("nan")
-        return Summary(0, nan, nan, nan, nan, nan, confidence, n_boot, seed)
-    check_bootstrap_args(confidence, n_boot, seed)
+        return Summary(0, nan, nan, nan, nan, nan, float(confidence), int(n_boot), int(seed))
     if arr.size >= MIN_VALUES_FOR_BOOTSTRAP:
         (lo, hi), method = bootstrap_ci(arr, confidence=confidence, n_boot=n_boot, seed=seed), BOOTSTRAP
     else:
         (lo, hi), method = t_interval(arr, confidence=confidence), STUDENT_T if arr.size > 1 else ""
     std = float(arr.std(ddof=1)) if arr.size > 1 and np.ptp(arr) > 0 else 0.0  # equal values: 0, not numpy's 8.5e-18
-    return Summary(int(arr.size), float(arr.mean()), std, float(np.median(arr)), lo, hi, confidence, int(n_boot), seed,
-                   method)
+    return Summary(int(arr.size), float(arr.mean()), std, float(np.median(arr)), lo, hi, float(confidence), int(n_boot),
+                   int(seed), method)  # (numpy scalars as plain numbers: to_dict() is for JSON)
 
 
 def ci_methods(summaries: Any) -> str:
@@ -336,6 +339,8 @@ def paired_test(
     alpha, noise = check_number(alpha, "alpha"), check_number(noise, "noise")
     if not isinstance(lower_is_better, (bool, np.bool_)):  # ("no" was read as true)
         raise ConfigError(f"lower_is_better must be True or False, got {lower_is_better!r}", source="lower_is_better")
+    if repeated is not None and not isinstance(repeated, (bool, np.bool_)):
+        raise ConfigError(f"repeated must be True, False or None, got {repeated!r}", source="repeated")
     va, vb = _finite(a, name_a), _finite(b, name_b)
     if va.shape != vb.shape:
         raise EvaluationError(f"paired values differ in count: {va.size} for {name_a}, {vb.size} for {name_b}",
@@ -381,5 +386,5 @@ def paired_test(
         name_a=name_a, name_b=name_b, metric=metric, pairing=pairing, n_pairs=int(va.size), n_ties=int(tie.sum()),
         mean_a=float(va.mean()), mean_b=float(vb.mean()), mean_diff=float(diff.mean()), median_diff=median_diff,
         diff_ci_low=lo, diff_ci_high=hi, statistic=statistic, p_value=p_value, effect_size=effect, alpha=alpha,
-        noise=float(noise), lower_is_better=lower_is_better, better=better, repeated=repeated,
+        noise=float(noise), lower_is_better=bool(lower_is_better), better=better, repeated=bool(repeated),
     )

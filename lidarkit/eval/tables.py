@@ -21,7 +21,7 @@ import numpy as np
 
 from lidarkit import atomic
 from lidarkit.errors import EvaluationError
-from lidarkit.eval.kitti_drift import KITTI_LENGTHS_M, DriftResult
+from lidarkit.eval.kitti_drift import DriftResult
 
 #: devkit speed bins of a segment (m/s): the devkit's 2..25 m/s, in coarser steps that a table can hold
 SPEED_BINS_MPS = (0.0, 5.0, 10.0, 15.0, 20.0, 25.0, math.inf)
@@ -232,11 +232,14 @@ def drift_table(grid: Grid, quantity: str = "translation_pct", *, average_label:
     )
 
 
-def per_length_table(grid: Grid, quantity: str = "translation_pct", lengths_m: Sequence[float] = KITTI_LENGTHS_M) -> PubTable:
+def per_length_table(grid: Grid, quantity: str = "translation_pct", lengths_m: Sequence[float] | None = None) -> PubTable:
     """Segment length x method table, segments pooled over the sequences every method has segments on (those of
-    the drift table's average row), plus the all-lengths row."""
+    the drift table's average row), plus the all-lengths row. ``lengths_m``: the rows; by default every length the
+    segments have (the devkit's lengths left drift of 5 and 10 m segments with the "all" row only)."""
     _, methods = _axes(grid)
     common, left_out = _common_sequences(grid)
+    if lengths_m is None:
+        lengths_m = sorted({float(x) for s in grid.values() if s is not None for x in np.asarray(s.length_m).ravel()})
     values = np.full((len(lengths_m) + 1, len(methods)), np.nan)
     for j, method in enumerate(methods):
         segs = [grid[(seq, method)] for seq in common]
