@@ -744,3 +744,21 @@ def test_a_kalman_run_folder_records_the_float64_it_ran_and_reads_back(tmp_path)
     assert exc.value.code in (0, None)
     recorded = yaml.safe_load((tmp_path / "ekf" / "config.yaml").read_text())["pf"]
     assert recorded["dtype"] == "float64" and PFConfig(**recorded).kernel == "kalman"
+
+
+def test_a_study_config_records_every_particle_count_it_ran(tmp_path):
+    """A study's config.yaml said pf: n_particles: 20 for --particles 20,30 (the first count alone)."""
+    folder = tmp_path / "first15"
+    folder.mkdir()
+    source = shared_path("pf", "robot_mapping_stachniss")
+    (folder / "world.dat").write_text((source / "world.dat").read_text())
+    lines = (source / "sensor_data.dat").read_text().splitlines()
+    cut = [i for i, line in enumerate(lines) if line.startswith("ODOMETRY")][15]
+    (folder / "sensor_data.dat").write_text("\n".join(lines[:cut]) + "\n")
+    with pytest.raises(SystemExit) as exc:
+        main(["pf", str(folder), "-n", "20,30", "--seeds", "2", "--out", str(tmp_path / "study")])
+    assert exc.value.code in (0, None)
+    recorded = yaml.safe_load((tmp_path / "study" / "config.yaml").read_text())
+    assert recorded["pf"]["n_particles"] == [20, 30] == recorded["scenario"]["n_particles"]
+    rows = yaml.safe_load((tmp_path / "study" / "study.json").read_text())["rows"]
+    assert [row["n_particles"] for row in rows] == [20, 30]

@@ -539,3 +539,43 @@ def test_kalman_kernels_refuse_an_explicit_float32_they_would_ignore():
         pf.initialize_gaussian()
         assert isinstance(pf, KalmanParticleFilter) and pf.states.dtype == np.float64
     assert PFConfig(kernel="kalman").replace(kernel="point").dtype == "float32"
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_antithetic_noise_pairs_neighbouring_particles_and_every_step_sums_to_zero(dtype):
+    """Antithetic noise paired particle k with k + ceil(N/2), not 2k with 2k+1 as documented, and an odd N's set was not
+    zero-mean (0.0099 m for N=5 at a std of 0.1 m): the unpaired last particle now gets none."""
+    motion = OdometryMotionModel((0.1, 0.1, 0.1))
+    for n in (2, 5, 6, 101):
+        eps = motion.sample_noise(np.random.default_rng(3), 40, n, dtype, antithetic=True)
+        pairs = n // 2
+        assert eps.shape == (40, 3, n) and eps.dtype == dtype
+        np.testing.assert_array_equal(eps[:, :, 1 : 2 * pairs : 2], -eps[:, :, 0 : 2 * pairs : 2])
+        if n % 2:
+            np.testing.assert_array_equal(eps[:, :, -1], 0.0)
+        assert np.all(eps.sum(axis=2) == 0.0)
+    wide = motion.sample_noise(np.random.default_rng(3), 50, 2000, dtype, antithetic=True)
+    assert wide[:, :, 0::2].std() == pytest.approx(0.1, rel=0.02)  # the drawn half keeps the model's std
+
+
+def test_antithetic_prediction_keeps_the_mean_heading_of_an_odd_particle_set():
+    """The heading moves by r1 + r2 plus the summed noise, so an antithetic set's mean heading follows the odometry
+    exactly; with N=5 the unpaired third particle had shifted it."""
+    cfg = PFConfig.make(n_particles=5, antithetic=True, dtype="float64", motion_noise_std=(0.1, 0.1, 0.1))
+    pf = make_filter(np.array([[0.0, 5.0], [5.0, 0.0]]), cfg, rng=4)
+    pf.initialize_gaussian(mean=np.zeros(3), std=np.zeros(3))
+    pf.predict(np.array([0.2, 1.0, 0.1]))
+    assert pf.states[2].mean() == pytest.approx(0.3, abs=1e-12)
+
+
+def test_every_count_setting_of_the_config_refuses_a_bool():
+    """kld_min_n=True and kld_converged_steps=True were read as 1 while n_particles=True was refused."""
+    counts = [name for name, field in PFConfig.model_fields.items() if field.annotation is int]
+    assert {"n_particles", "kld_min_n", "kld_max_n", "kld_unconverged_n", "kld_converged_steps"} <= set(counts)
+    for name in counts:
+        for value in (True, False):
+            with pytest.raises(ConfigError) as err:
+                PFConfig(**{name: value})
+            assert str(err.value).startswith(f"pf config {name}: ") and str(err.value).endswith(f"got {value}")
+            assert "\n" not in str(err.value)
+    assert PFConfig(kld_min_n=3, kld_converged_steps=2).kld_min_n == 3  # an integer still is one

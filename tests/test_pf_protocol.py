@@ -560,3 +560,57 @@ def test_the_best_estimate_of_uniform_weights_is_the_mean_and_one_kernel_is_neve
     assert recorded.metrics["estimate_vs_dead_reckoning_m"]["max"] < 1.0  # (a prior draw: 2.63 m)
     ekf = run_recorded(stachniss, 1, 0, kernel="kalman")
     assert int(ekf.resampled.sum()) == 0
+
+
+def _first_steps(tmp_path, steps: int):
+    """A copy of the Stachniss recording cut after ``steps`` ODOMETRY records (world.dat whole)."""
+    source = shared_path("pf", "robot_mapping_stachniss")
+    lines = (source / "sensor_data.dat").read_text().splitlines()
+    cut = [i for i, line in enumerate(lines) if line.startswith("ODOMETRY")][steps]
+    folder = tmp_path / f"first{steps}"
+    folder.mkdir()
+    (folder / "world.dat").write_text((source / "world.dat").read_text())
+    (folder / "sensor_data.dat").write_text("\n".join(lines[:cut]) + "\n")
+    return folder
+
+
+def test_a_kalman_run_records_the_float64_it_runs_in_every_file(tmp_path):
+    """A Kalman-kernel run ran float64 but its PFRunResult.config, to_dict() and metrics.json said float32 (config.yaml
+    alone was corrected, by the CLI)."""
+    import yaml
+
+    folder = _first_steps(tmp_path, 15)
+    result = run_protocol(folder, 5, 0, kernel="kalman")
+    assert result.config.dtype == "float64" and result.to_dict()["config"]["dtype"] == "float64"
+    assert result.config.replace(kernel="point").dtype == "float32"  # the point particles' default is back
+    with pytest.raises(SystemExit) as exc:
+        main(["pf", str(folder), "--kernel", "kalman", "-n", "5", "--out", str(tmp_path / "kk")])
+    assert exc.value.code in (0, None)
+    metrics = json.loads((tmp_path / "kk" / "metrics.json").read_text())
+    recorded = yaml.safe_load((tmp_path / "kk" / "config.yaml").read_text())["pf"]
+    assert metrics["config"]["dtype"] == recorded["dtype"] == "float64"
+    assert PFConfig(**metrics["config"]) == result.config.replace(n_particles=5)
+
+
+def test_the_bench_pf_task_scores_from_the_last_pose_as_run_protocol_does(tmp_path):
+    """The bench pf task refused mse_start equal to the data's step count, which run_protocol scores (one pose, the
+    last); one past it is refused by both. Its stored run records the Kalman kernels' float64."""
+    from lidarkit.bench.jobs import Job
+    from lidarkit.bench.tasks import get_task
+    from lidarkit.bench.worker import execute_job
+    from lidarkit.errors import ConfigError
+
+    folder = _first_steps(tmp_path, 15)
+    spec = {"kind": "landmarks", "path": str(folder)}
+    task = get_task("pf")
+    task.validate_dataset(spec, {"mse_start": 15})
+    assert run_protocol(folder, 5, 0, mse_start=15).metrics["mse_start"] == 15
+    with pytest.raises(ConfigError) as err:
+        task.validate_dataset(spec, {"mse_start": 16})
+    assert str(err.value) == "options: mse_start 16 is not below the data's 15 steps plus one (its poses are 0..15)"
+    with pytest.raises(DataError, match="scores the position MSE from step 16 on"):
+        run_protocol(folder, 5, 0, mse_start=16)
+    job = execute_job(Job("pf", "e", "first15", spec, "particle_filter", {"n_particles": 5, "kernel": "kalman"}, seed=1,
+                          options={"mse_start": 15}).spec())
+    assert job["status"] == "ok", job["error"]
+    assert job["info"]["run"]["metrics"]["mse_start"] == 15 and job["info"]["run"]["config"]["dtype"] == "float64"

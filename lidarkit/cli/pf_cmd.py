@@ -50,15 +50,6 @@ MAX_PARTICLES = 10_000_000
 MAX_SEEDS = 10_000
 
 
-def _as_run(cfg) -> dict:
-    """The filter settings as run, for config.yaml: the Kalman kernels run float64 whatever the point particles' dtype
-    (a Kalman run recorded float32, which PFConfig refuses with that kernel)."""
-    settings = cfg.model_dump(mode="json")
-    if cfg.kernel == "kalman":
-        settings["dtype"] = "float64"
-    return settings
-
-
 def _counts(text: str) -> list[int]:
     """``--particles``: one count or a comma-separated list, each in 1..MAX_PARTICLES."""
     try:
@@ -429,7 +420,9 @@ def _write_study_files(rows, cfg: PFConfig, protocol: str, scenario: dict, out: 
 
     from lidarkit.provenance import code_version
 
-    atomic.write_text(out / "config.yaml", yaml.safe_dump({"lidarkit_version": code_version(), "pf": _as_run(cfg), "protocol": protocol,
+    # the filter settings of every row: n_particles is the study's list of counts (it said the first alone)
+    settings = {**cfg.model_dump(mode="json"), "n_particles": [r.n_particles for r in rows]}
+    atomic.write_text(out / "config.yaml", yaml.safe_dump({"lidarkit_version": code_version(), "pf": settings, "protocol": protocol,
                                                             "scenario": {k: (list(v) if isinstance(v, tuple) else v) for k, v in scenario.items()}},
                                                            sort_keys=False))
     write_json({"protocol": protocol, "rows": [r.to_dict() for r in rows]}, out / "study.json")
@@ -498,7 +491,7 @@ def _write_files(result, out: Path, *, snap_steps: tuple[int, ...], gif: bool) -
 
     from lidarkit.provenance import code_version
 
-    atomic.write_text(out / "config.yaml", yaml.safe_dump({"lidarkit_version": code_version(), "pf": _as_run(result.config),
+    atomic.write_text(out / "config.yaml", yaml.safe_dump({"lidarkit_version": code_version(), "pf": result.config.model_dump(mode="json"),
                                                             "run": result.settings}, sort_keys=False))
     write_json(result.to_dict(), out / "metrics.json")
     est = result.trajectory("estimate")

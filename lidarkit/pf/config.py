@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, ValidationError, ValidationInfo, field_validator, model_validator
 
 from lidarkit.errors import ConfigError
 from lidarkit.params import is_integer
@@ -59,7 +59,8 @@ class PFConfig(BaseModel):
     kernel move with bandwidth h after resampling (keeps mean and covariance). ``moment_matching``:
     restore the pre-resampling weighted mean (and covariance) after resampling. ``antithetic``: motion
     noise in +/- pairs. ``kernel="kalman"``: each particle is a Gaussian kernel with its own EKF
-    (:mod:`lidarkit.pf.kalman_kernel`), ``kernel_split`` = a (children get covariance a P).
+    (:mod:`lidarkit.pf.kalman_kernel`), ``kernel_split`` = a (children get covariance a P); they run float64, and
+    ``dtype`` (float32 by default, for point particles) reads float64 with them.
     ``innovation_gate`` (Kalman kernels): chi-square(2) threshold on a reading's Mahalanobis distance
     e^T S^-1 e; a kernel is not corrected by a reading beyond it (outlier rejection as EKF localization
     does it in practice; 9.21 = 99 %), the reading still enters its weight; 0 = off.
@@ -121,11 +122,11 @@ class PFConfig(BaseModel):
     dtype: Literal["float32", "float64"] = "float32"
     noise_block_elements: int = 1 << 17  # motion noise drawn for this many numbers at once (cache-sized)
 
-    @field_validator("n_particles", mode="before")
+    @field_validator("n_particles", "kld_min_n", "kld_max_n", "kld_unconverged_n", "kld_converged_steps", mode="before")
     @classmethod
-    def _not_a_bool(cls, v):
-        if isinstance(v, bool):  # (True was read as 1: a one-particle filter)
-            raise ValueError(f"n_particles must be an integer >= 1, got {v!r}")
+    def _not_a_bool(cls, v, info: ValidationInfo):
+        if isinstance(v, bool):  # (True was read as 1: a one-particle filter, a KLD floor of one particle)
+            raise ValueError(f"{info.field_name} must be an integer >= 1, got {v!r}")
         return v
 
     @field_validator("noise_block_elements", mode="before")
@@ -186,6 +187,9 @@ class PFConfig(BaseModel):
                 raise ValueError(f"{', '.join(moves)} move point particles; the Kalman kernels (kernel='kalman') resample by splitting")
             if "dtype" in self.model_fields_set and self.dtype == "float32":  # (accepted, then run in float64)
                 raise ValueError("dtype float32 is for point particles; the Kalman kernels (kernel='kalman') run float64 (leave dtype unset)")
+            # the dtype they run, so every record of the config says it (metrics.json said float32); left unset, so
+            # replace(kernel="point") returns to the point particles' default
+            self.__dict__["dtype"] = "float64"
         elif self.innovation_gate > 0:
             raise ValueError("innovation_gate gates the readings of the Kalman kernels (kernel='kalman'); point particles weigh every reading")
         return self

@@ -104,11 +104,15 @@ class OdometryMotionModel:
     ) -> np.ndarray:
         """Scaled noise for ``n_steps`` steps in one draw: ``(n_steps, 3, N)``.
 
-        ``antithetic``: particles 2k and 2k+1 get opposite noise (an exactly zero-mean sample set per step).
+        ``antithetic``: particles 2k and 2k+1 get opposite noise and an odd N's last particle none, so every step's
+        sample set is exactly zero-mean (a single particle has no partner: it is drawn as usual).
         """
         if antithetic and n_particles > 1:
-            half = standard_normal(rng, (n_steps, 3, (n_particles + 1) // 2), dtype)
-            eps = np.concatenate([half, -half], axis=2)[:, :, :n_particles]
+            pairs = n_particles // 2
+            half = standard_normal(rng, (n_steps, 3, pairs), dtype)
+            eps = np.zeros((n_steps, 3, n_particles), dtype=half.dtype)
+            eps[:, :, 0 : 2 * pairs : 2] = half
+            np.negative(half, out=eps[:, :, 1 : 2 * pairs : 2])
         else:
             eps = standard_normal(rng, (n_steps, 3, n_particles), dtype, out=out)
         eps *= self.noise_std.astype(eps.dtype)[None, :, None]

@@ -66,8 +66,11 @@ class ParticleFilterTask(Task):
         check_reader_options(dataset)
         mse_start = PFOptions(**options).mse_start
         data = open_dataset_spec(dataset)  # (a few hundred steps: read at once) the steps the MSE is taken over
-        if mse_start >= len(data):  # (every job failed at its end, after the whole filter run)
-            raise ConfigError(f"mse_start {mse_start} is not below the data's {len(data)} steps", source="options")
+        # run_protocol's rule: T steps give poses 0..T, the MSE from pose T on is one pose's (T itself was refused here);
+        # past it every job failed at its end, after the whole filter run
+        if mse_start > len(data):
+            raise ConfigError(f"mse_start {mse_start} is not below the data's {len(data)} steps plus one (its poses are 0..{len(data)})",
+                              source="options")
 
     def validate(self, method: str, params: dict[str, Any], dataset: dict[str, Any], options: dict[str, Any]) -> None:
         if method not in METHODS:
