@@ -22,14 +22,14 @@ import time
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
-from lidarkit.errors import OutputError
+from lidarkit.errors import DataError, OutputError
 
 try:  # advisory locks mark the temporary folders of outputs being written (POSIX)
     import fcntl
 except ImportError:
     fcntl = None
 
-__all__ = ["OutputError", "atomic_path", "ensure_dir", "output_errors", "run_folder", "save_figure", "write_bytes",
+__all__ = ["OutputError", "atomic_path", "ensure_dir", "output_errors", "resolved_path", "run_folder", "save_figure", "write_bytes",
            "write_text", "write_texts"]
 
 _UMASK = os.umask(0o022)
@@ -276,6 +276,19 @@ def _tex_complaint(err: Exception) -> str:
     marked = [line for line in lines if line.startswith("!")]
     said = marked[0] if marked else lines[-1] if lines else "no output"
     return f"{said} ({matplotlib.rcParams['pgf.texsystem']}, rcParams['pgf.texsystem']); use .pdf or .svg"
+
+
+def resolved_path(path: str | os.PathLike, output: bool) -> Path:
+    """``path`` with its links followed; one that cannot be (a loop of symbolic links, ``ln -s loop loop``: a
+    RuntimeError from ``Path.resolve``) is a DataError for an input, an OutputError for an output, naming it."""
+    try:
+        return Path(path).resolve()
+    except (RuntimeError, OSError) as err:
+        reason = ("a loop of symbolic links (a link that leads back to itself)" if isinstance(err, RuntimeError)
+                  else (err.strerror or type(err).__name__).lower())
+        if output:
+            raise OutputError(f"cannot write: {reason}", source=path) from None
+        raise DataError(f"cannot read it: {reason}", source=path) from None
 
 
 def check_target(path: str | os.PathLike | None, kind: str = "file", files: Iterable[str] = (),

@@ -11,7 +11,7 @@ from typing import Optional
 import typer
 
 from lidarkit.cli.app import app, named_by_option, stderr, stdout
-from lidarkit.errors import ConfigError, DataError, OutputError
+from lidarkit.errors import ConfigError
 from lidarkit.eval.ape_rpe import ALIGNMENTS, DELTA_UNITS
 from lidarkit.eval.evaluate import EvaluationSettings
 from lidarkit.eval.relations import DEFAULT_MAX_TIME_DIFF_S
@@ -251,16 +251,17 @@ def _distinct_outputs(inputs: dict[str, Path | None], outputs: dict[str, Path | 
     """ConfigError when an output would replace an input or another output (`--markdown EST` overwrote the estimate,
     `--json X --markdown X` the JSON, both with exit 0), also where a file is one the ``--tables`` folder writes or
     removes (`--markdown T/ape_rmse.md` was reported written, then replaced by the table)."""
+    from lidarkit.atomic import resolved_path
     from lidarkit.eval.tables import TABLE_FILES
 
     tables = outputs.get("--tables")
-    folder = _resolved(tables, "--tables" in outputs) if tables is not None else None
+    folder = resolved_path(tables, "--tables" in outputs) if tables is not None else None
     tables_own = {*TABLE_FILES, _BOXPLOT_NAME}
     seen: dict[Path, str] = {}
     for name, path in {**inputs, **outputs}.items():
         if path is None:
             continue
-        resolved = _resolved(path, name in outputs)
+        resolved = resolved_path(path, name in outputs)
         if resolved in seen and name in outputs:  # (REF and EST may be one file)
             kind = "an input" if seen[resolved] in inputs else "another output"
             raise ConfigError(f"{path} is also {seen[resolved]} ({kind}): an output never replaces it", source=name)
@@ -268,19 +269,6 @@ def _distinct_outputs(inputs: dict[str, Path | None], outputs: dict[str, Path | 
             raise ConfigError(f"{path} is one of the files --tables writes or removes in {tables}: an output never "
                               "replaces it", source=name)
         seen[resolved] = name
-
-
-def _resolved(path: Path, output: bool) -> Path:
-    """``path`` with its links followed; one that cannot be (a loop of symbolic links, ``ln -s loop loop``: a
-    RuntimeError from ``Path.resolve``) is a DataError for an input, an OutputError for an output, naming it."""
-    try:
-        return Path(path).resolve()
-    except (RuntimeError, OSError) as err:
-        reason = ("a loop of symbolic links (a link that leads back to itself)" if isinstance(err, RuntimeError)
-                  else (err.strerror or type(err).__name__).lower())
-        if output:
-            raise OutputError(f"cannot write: {reason}", source=path) from None
-        raise DataError(f"cannot read it: {reason}", source=path) from None
 
 
 def _names_stdout(path: Path | None) -> bool:
