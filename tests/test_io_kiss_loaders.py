@@ -128,6 +128,9 @@ def test_newer_college_binary_pcd_without_pyntcloud(tmp_path):
     dataset = open_dataset("ncd", tmp_path)
     np.testing.assert_allclose(dataset.read_scan(1).points_xyz, RING.astype(np.float32), atol=1e-6)
     assert len(dataset.ground_truth) == 2
+    # stamped by the file names' seconds and nanoseconds (kiss-icp's loader sorts by them and gave none)
+    np.testing.assert_allclose(dataset.timestamps_s, 1583836591.182590976 + np.arange(2), rtol=0, atol=1e-6)
+    np.testing.assert_allclose(dataset.ground_truth.timestamps_s, dataset.timestamps_s)
 
 
 def test_a_file_the_generic_loader_cannot_read_is_named_once(tmp_path):
@@ -260,3 +263,28 @@ def test_generic_reads_integer_time_fields_as_nanoseconds_and_checks_headers_fir
     (tmp_path / "000002.pcd").write_bytes(header.encode() + body.tobytes())  # a later file: refused when read, by name
     with pytest.raises(DataError, match=r"000002\.pcd \(frame 2\): no z field"):
         open_dataset("generic", tmp_path).read_scan(2)
+
+
+def test_generic_points_with_nan_are_refused_naming_the_file_or_dropped_when_asked(tmp_path):
+    """A .pcd whose missing returns are NaN (as PCL and Ouster write organized clouds) reached the registration, which
+    refused it naming neither the file nor a way out ("generic:... (frame 0): frame: 300 of 3000 points are NaN"), and
+    generic: had no drop_nonfinite option. Now the reader says it, as the point-file readers do, and drops them (with
+    their per-point times) when asked."""
+    import open3d as o3d
+
+    points = np.vstack([RING, RING + [0.0, 0.0, 1.0]])
+    times = np.linspace(0.0, 0.1, len(points))
+    missing = np.arange(len(points)) % 8 == 3  # 50 of 400
+    points[missing] = np.nan
+    for k in range(2):
+        cloud = o3d.t.geometry.PointCloud(o3d.core.Tensor(points.astype(np.float32)))
+        cloud.point["time"] = o3d.core.Tensor(times.astype(np.float32)[:, None])
+        o3d.t.io.write_point_cloud(str(tmp_path / f"{k:06d}.pcd"), cloud)
+    with pytest.raises(DataError, match=r"000001\.pcd \(frame 1\): 50 of 400 points are NaN or infinite \(first at point 3\); "
+                                        r"drop them with drop_nonfinite=true \(generic:PATH\?drop_nonfinite=true\)$"):
+        open_dataset("generic", tmp_path).read_scan(1)
+    dataset = open_dataset("generic", f"{tmp_path}", drop_nonfinite=True)
+    scan = dataset.read_scan(1)
+    np.testing.assert_array_equal(scan.points_xyz, points[~missing].astype(np.float32))
+    np.testing.assert_allclose(scan.point_times_s, times[~missing].astype(np.float32))
+    assert dataset.reader_warnings[0].startswith("left out 50 of 400 points with NaN or infinite coordinates in frame 1")

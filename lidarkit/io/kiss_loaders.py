@@ -16,6 +16,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import os
+import re
 from collections import Counter
 from pathlib import Path
 from typing import Any
@@ -24,6 +25,7 @@ import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.io.base import Scan, checked_index, checked_indices
+from lidarkit.geometry import _within_limits
 from lidarkit.io.rosbag import guarded_loader, require_modules
 from lidarkit.trajectory import Trajectory
 
@@ -55,12 +57,15 @@ class KissLoaderScans:
     requires: dict[str, str] = {}
     #: what the loader's gt_poses are
     ground_truth_frame = "as kiss-icp's loader gives it"
+    #: points with NaN / infinite coordinates left out (with a warning) instead of refused (the file readers' option)
+    drop_nonfinite = False
 
     def __init__(self, path: str | os.PathLike, **loader_options: Any):
         self.path = Path(os.path.abspath(path))  # (nclt:. built its ground-truth file name from "." and found none)
         #: what the reader found and left out, for the run's warnings (metrics.json, config.yaml) as well as the log
         self.reader_warnings: list[str] = []
         self._origin_warned = False  # (points at (0, 0, 0) are said once, not for every frame)
+        self._nonfinite_warned = False
         require_modules(self.requires, self.kind)
         if not self.path.exists():
             raise DataError(f"{self.kind} dataset not found", source=self.path)
@@ -124,11 +129,35 @@ class KissLoaderScans:
             raise DataError(f"{len(times)} per-point times for {len(points)} points", source=self.path, location=f"frame {index}")
         if times is not None and not np.isfinite(times).all():
             raise DataError("per-point times contain NaN or infinite values", source=self.path, location=f"frame {index}")
+        if len(points) and not _within_limits(points):  # (a flat reduction first: NaN fails it)
+            points, times = self._without_nonfinite_points(points, times, source, index)
         if len(points) and (points[:, 0] == 0).any():  # (x alone first, as the point-file readers: most scans have none)
             points, times = self._without_origin_points(points, times, source, index)
         stamps = self.timestamps_s
         stamp = None if stamps is None or index >= len(stamps) else float(stamps[index])
         return Scan(points, None, times, stamp, index, f"{self.path} frame {index}", self.point_time_convention, None)
+
+    def _without_nonfinite_points(self, points: np.ndarray, times: np.ndarray | None, source: Any,
+                                  index: int) -> tuple[np.ndarray, np.ndarray | None]:
+        """``points`` and their ``times`` without the points holding NaN or infinite coordinates (an organized cloud's
+        missing returns, as PCL and Ouster write them) when ``drop_nonfinite`` is set, said once per reader; else a
+        DataError naming the file and the option, as the point-file readers say it (the scan reached the
+        registration, whose error named neither)."""
+        ok = np.isfinite(points).all(axis=1)
+        n_bad = int(len(ok) - np.count_nonzero(ok))
+        if not n_bad:
+            return points, times
+        if not self.drop_nonfinite:
+            raise DataError(f"{n_bad} of {len(ok)} points are NaN or infinite (first at point {int(np.argmin(ok))}); drop them "
+                            f"with drop_nonfinite=true ({self.kind}:PATH?drop_nonfinite=true)", source=source, location=f"frame {index}")
+        if n_bad == len(ok):
+            raise DataError(f"all {n_bad} points are NaN or infinite: no point left", source=source, location=f"frame {index}")
+        if not self._nonfinite_warned:
+            self._nonfinite_warned = True
+            self.reader_warnings.append(f"left out {n_bad} of {len(ok)} points with NaN or infinite coordinates in frame {index} "
+                                        f"({source}); in later frames without another warning")
+            log.warning("%s: %s", self.path, self.reader_warnings[-1])
+        return points[ok], None if times is None else times[ok]
 
     def _without_origin_points(self, points: np.ndarray, times: np.ndarray | None, source: Any,
                                index: int) -> tuple[np.ndarray, np.ndarray | None]:
@@ -342,9 +371,18 @@ class NewerCollegeScans(KissLoaderScans):
 
     loader_name = "ncd"
 
-    def __init__(self, path: str | os.PathLike):
+    def __init__(self, path: str | os.PathLike, drop_nonfinite: bool = False):
         super().__init__(path)
+        self.drop_nonfinite = drop_nonfinite
         self.loader.PyntCloud = _Open3DPcd
+
+    def _stamps(self) -> np.ndarray | None:
+        """The scans' stamps from their file names, ``cloud_SECONDS_NANOSECONDS.pcd`` (the loader sorts by them and
+        gives none)."""
+        found = [re.match(r"cloud_(\d+)_(\d+)", Path(name).name) for name in self.loader.scan_files]
+        if not found or not all(found):
+            return None
+        return np.array([int(m[1]) + int(m[2]) * 1e-9 for m in found], dtype=np.float64)
 
 
 class _Open3DPcd:
@@ -464,7 +502,7 @@ class GenericScans(KissLoaderScans):
     loader_name = "generic"
     point_time_convention = "relative_s"
 
-    def __init__(self, path: str | os.PathLike):
+    def __init__(self, path: str | os.PathLike, drop_nonfinite: bool = False):
         from kiss_icp.datasets import supported_file_extensions
 
         from lidarkit.io.folder import natural_key
@@ -497,6 +535,7 @@ class GenericScans(KissLoaderScans):
         self.loader.scan_files = np.array(sorted(self.loader.scan_files, key=lambda f: natural_key(Path(f).name)), dtype=str)
         # the time field's type in the files (the loader hands every field over as float64: Ouster's uint32
         # nanoseconds were read as seconds, a 0.1 s sweep as one of 1e8 s)
+        self.drop_nonfinite = drop_nonfinite
         self._time_field = getattr(getattr(self.loader, "_read_point_cloud", None), "time_field", None)
         self._time_dtype = None if self._time_field is None else _field_dtype(Path(self.loader.scan_files[0]), self._time_field)
 
