@@ -29,9 +29,21 @@ def voxel_keys(points_xyz: np.ndarray, voxel_size_m: float) -> np.ndarray:
     return np.floor(np.asarray(points_xyz, dtype=np.float64) / voxel_size_m).astype(np.int64)
 
 
-def encode_keys(keys: np.ndarray) -> np.ndarray:
-    """One int64 per voxel (coordinates within +-2^20 voxels of the origin)."""
-    k = keys + _KEY_OFFSET
+def encode_keys(keys: np.ndarray, origin: np.ndarray | None = None) -> np.ndarray:
+    """One int64 per voxel, for voxels within +-2^20 of ``origin`` (a voxel key; default: the keys' own corner).
+
+    The fields are 21 bits: a key beyond that range would spill into the next field and give two voxels one code (a
+    map at a UTM northing, ~4.2e6 voxels of 1 m, merged neighbouring voxels), so the keys are taken relative to a
+    voxel near them; a map spanning more than 2^20 voxels from its origin is a DataError."""
+    keys = np.asarray(keys, dtype=np.int64)
+    if origin is None:
+        origin = keys.min(axis=0) + _KEY_OFFSET if len(keys) else np.zeros(3, dtype=np.int64)
+    k = keys - origin + _KEY_OFFSET
+    if len(k) and (k.min() < 0 or k.max() >= (1 << _KEY_BITS)):
+        from lidarkit.errors import DataError
+
+        raise DataError(f"voxels more than 2^{_KEY_BITS - 1} voxel edges from the map's first voxel: a map this large "
+                        "cannot be indexed (a larger voxel, or a map restarted nearer)", source="voxel map")
     return (k[:, 0] << (2 * _KEY_BITS)) | (k[:, 1] << _KEY_BITS) | k[:, 2]
 
 
@@ -258,6 +270,7 @@ class VoxelHashMap(Map):
         self._vcodes = np.zeros(0, dtype=np.int64)  # sorted voxel codes
         self._vfirst = np.zeros((0, 3))  # first point of each voxel
         self._vcount = np.zeros(0, dtype=np.int64)
+        self._key_origin: np.ndarray | None = None  # the voxel codes are relative to the first voxel inserted
 
     @property
     def spacing_m(self) -> float:
@@ -278,7 +291,9 @@ class VoxelHashMap(Map):
             return
         c = self.config
         keys = voxel_keys(new, c.voxel_size_m)
-        codes = encode_keys(keys)
+        if self._key_origin is None:
+            self._key_origin = keys[0].copy()
+        codes = encode_keys(keys, self._key_origin)
         spacing = self.spacing_m
         keep = np.ones(len(new), dtype=bool)
         if spacing > 0:
@@ -367,7 +382,7 @@ class VoxelHashMap(Map):
             self._by_code = np.argsort(self._pcodes, kind="stable")
         sorted_codes = self._pcodes[self._by_code]
         cells = (query_keys[:, None, :] + _BLOCK[None, :, :]).reshape(-1, 3)
-        codes = encode_keys(cells)
+        codes = encode_keys(cells, self._key_origin)
         lo = np.searchsorted(sorted_codes, codes, side="left")
         hi = np.searchsorted(sorted_codes, codes, side="right")
         counts = hi - lo
