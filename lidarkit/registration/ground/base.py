@@ -61,9 +61,10 @@ class GroundSegmenter:
         if sensor is not None:  # (segmented as given, a cloud 300 m out kept all its ground: every point beyond max range)
             if self.heights_from_sensor:
                 raise DataError(
-                    f"the cloud lies {float(np.linalg.norm(sensor)):.3g} m from its frame's origin (georeferenced or a map frame) and "
-                    f"ground method {self.name!r} measures heights from the sensor: give scans in their sensor frame, or "
-                    f"use a method that does not ({', '.join(n for n, k in sorted(_REGISTRY.items()) if not k.heights_from_sensor)})",
+                    f"the cloud's middle lies {float(np.linalg.norm(sensor)):.3g} m from its frame's origin (read as georeferenced or a "
+                    f"map frame; or a sensor that high above its ground) and ground method {self.name!r} measures heights from the "
+                    f"sensor: give scans in their sensor frame, or use a method that does not "
+                    f"({', '.join(n for n, k in sorted(_REGISTRY.items()) if not k.heights_from_sensor)})",
                     source=f"ground segmenter {self.name!r}",
                 )
             pts = pts - sensor
