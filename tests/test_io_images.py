@@ -4,6 +4,10 @@ from __future__ import annotations
 
 import shutil
 
+import numpy as np
+import pytest
+
+from lidarkit.errors import DataError
 from lidarkit.io.images import ImageFolder
 from lidarkit.samples import sample_path
 
@@ -23,3 +27,37 @@ def test_macos_appledouble_stubs_are_not_frames(tmp_path):
     assert [p.name for p in images.image_paths] == [f"{k:06d}.png" for k in range(8)]
     assert len(images.ground_truth) == 8
     assert images.read_image(0).shape == (370, 1226)  # (the sample keeps KITTI frames cropped to 1226 x 370)
+
+
+KITTI_K = [[718.856, 0.0, 607.1928], [0.0, 718.856, 185.2157], [0.0, 0.0, 1.0]]
+
+
+def test_a_projection_matrix_in_any_line_layout_gives_its_left_3x3(tmp_path):
+    """Three unlabelled rows of 4 (a 3x4 P as printed) were read as KITTI calib.txt rows of 12: "P34.txt (line 1): P0:
+    expected 12 numbers (3x4 matrix), found 4". Twelve unlabelled numbers are one row-major P, however split."""
+    from lidarkit.io.images import read_intrinsics
+
+    P = np.array(KITTI_K)
+    P = np.column_stack([P, [-386.1448, 0.0, 0.0]])
+    layouts = {"rows_of_4.txt": "\n".join(" ".join(f"{v:.10g}" for v in row) for row in P),
+               "one_row.txt": " ".join(f"{v:.10g}" for v in P.ravel()),
+               "rows_of_6.txt": "\n".join(" ".join(f"{v:.10g}" for v in half) for half in P.reshape(2, 6))}
+    for name, text in layouts.items():
+        (tmp_path / name).write_text(text + "\n")
+        np.testing.assert_allclose(read_intrinsics(tmp_path / name), KITTI_K, err_msg=name)
+
+
+def test_numpys_printed_matrix_is_read_without_its_brackets(tmp_path):
+    """``print(K)``, ``repr(K)`` and a list with commas: "intrinsics must be numbers" (``--init`` reads numpy's print)."""
+    from lidarkit.io.images import read_intrinsics
+
+    K = np.array(KITTI_K)
+    texts = {"commas.txt": "[[718.856, 0, 607.1928],\n [0, 718.856, 185.2157],\n [0, 0, 1]]\n",
+             "print.txt": str(K) + "\n", "repr.txt": repr(K) + "\n",
+             "labelled.txt": "K: [[718.856, 0, 607.1928], [0, 718.856, 185.2157], [0, 0, 1]]\n"}
+    for name, text in texts.items():
+        (tmp_path / name).write_text(text)
+        np.testing.assert_allclose(read_intrinsics(tmp_path / name), KITTI_K, err_msg=name)
+    (tmp_path / "short.txt").write_text("[[718.856, 0, 607.1928], [0, 718.856, 185.2157]]\n")
+    with pytest.raises(DataError, match=r"short\.txt: expected 9 numbers .*; found 6 numbers$"):
+        read_intrinsics(tmp_path / "short.txt")

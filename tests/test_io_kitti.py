@@ -205,7 +205,7 @@ def test_times_out_of_order_name_the_file_line(tmp_path, odo_root):
     lines = (seq / "times.txt").read_text().splitlines()
     lines[4] = lines[2]  # frame 4 back at frame 2's time
     (seq / "times.txt").write_text("# stamps\n\n" + "\n".join(lines) + "\n")
-    with pytest.raises(DataError, match=r"times.txt \(line 7 \(frame 4\)\): time stamps are not strictly increasing"):
+    with pytest.raises(DataError, match=r"times.txt \(line 7, frame 4\): time stamps are not strictly increasing"):
         KittiOdometry(seq).timestamps_s
 
 
@@ -301,12 +301,18 @@ def test_malformed_poses_and_times(tmp_path, copy_of, odo_root):
         KittiOdometry(odo_root, "00", times_file=times)
 
 
-def test_times_and_poses_count_mismatch(tmp_path, copy_of, odo_root):
+def test_times_and_poses_of_different_lengths_are_read_where_both_cover_the_frames(tmp_path, copy_of, odo_root):
+    """Files of different lengths are an excerpt's when both cover the frames present (4000 stamps beside 4541 poses
+    for scans 0-9 and 94-199); a file stopping short of a frame present is refused, naming the frame."""
     times = copy_of(odo_root / "sequences" / "00" / "times.txt")
-    times.write_text("\n".join(times.read_text().splitlines()[:4000]) + "\n")
-    with pytest.raises(DataError, match=r"4541 poses in .*00\.txt but 4000 time stamps") as info:
-        KittiOdometry(odo_root, "00", times_file=times)
-    assert str(info.value).startswith(f"{times}: ")  # the shorter file is the source
+    rows = times.read_text().splitlines()
+    times.write_text("\n".join(rows[:4000]) + "\n")
+    ds = KittiOdometry(odo_root, "00", times_file=times)
+    np.testing.assert_array_equal(ds.timestamps_s, np.array([float(rows[f]) for f in ds.scan_frames]))
+    times.write_text("\n".join(rows[:5]) + "\n")
+    with pytest.raises(DataError, match=r"5 time stamps") as info:
+        KittiOdometry(odo_root, "00", times_file=times).timestamps_s
+    assert str(info.value).startswith(f"{times}")  # the short file is the source
 
 
 def test_copied_sequence_folder_with_trimmed_poses_and_full_times(tmp_path):
@@ -319,12 +325,15 @@ def test_copied_sequence_folder_with_trimmed_poses_and_full_times(tmp_path):
     np.testing.assert_array_equal(ds.timestamps_s, full[:51])
     every_row = ds.ground_truth_at(None, frame="camera")
     assert len(every_row) == 51 and np.array_equal(every_row.timestamps_s, full[:51])
-    # files of different lengths where the shorter does not end at the last frame present: still an error
+    # files of different lengths that both cover the frames present (60 poses, 1101 stamps for frames 0-50): read;
+    # a poses file stopping short of the last frame present: an error naming it
     poses = shared_path("kitti_images", "poses", "06.txt").read_text().splitlines()
     (seq / "poses.txt").write_text("\n".join(poses[:60]) + "\n")
-    with pytest.raises(DataError, match=r"60 poses in .*poses\.txt but 1101 time stamps") as info:
+    assert len(KittiOdometry(seq).ground_truth_camera) == 51
+    (seq / "poses.txt").write_text("\n".join(poses[:40]) + "\n")
+    with pytest.raises(DataError, match=r"40 poses") as info:
         KittiOdometry(seq)
-    assert str(info.value).startswith(f"{seq / 'poses.txt'}: ")  # the short file, not times.txt, is the source
+    assert str(info.value).startswith(f"{seq / 'poses.txt'}")  # the short file, not times.txt, is the source
 
 
 def test_poses_must_cover_every_frame(tmp_path, copy_of, odo_root):
@@ -513,3 +522,25 @@ def test_a_sequence_given_by_a_relative_path_keeps_its_ground_truth_and_name(mon
     monkeypatch.chdir(sequences / "00")
     here = open_dataset("kitti", ".")
     assert here.name == "kitti_00" and here.ground_truth is not None
+
+
+def test_per_point_times_in_microseconds_are_refused_by_times_txt_spacing(tmp_path):
+    """uint32 per-point times in microseconds were read as nanoseconds: 0.1 s sweeps of 1e-4 s, deskewed and re-timed
+    by them without a word. Against times.txt's spacing (a median over the first frames) a sweep spanning less than
+    1 % of it is a DataError naming the folder, the span, the spacing and the unit; a sensor seeing a quarter of its
+    turn still reads."""
+    from lidarkit.sim.lidar import SimulatedLidarSequence, export_kitti
+
+    folder = export_kitti(SimulatedLidarSequence(n_frames=3, n_beams=8, n_azimuths=90), tmp_path / "k")
+    seconds = {f: np.load(f).astype(np.float64) for f in sorted((folder / "point_times").glob("*.npy"))}
+    for path, times in seconds.items():
+        np.save(path, np.round(times * 1e6).astype(np.uint32))
+    with pytest.raises(DataError) as err:
+        open_dataset("kitti", folder).read_scan(1)
+    assert str(err.value) == (f"{folder / 'point_times'}: per-point times in point_times/: sweeps of 9.89e-05 s (the median "
+                              "over 3 frames; times.txt gives the stamps) while the scans are stamped 0.1 s apart (0.099 % of "
+                              "it, less than 1 %): read as integer nanoseconds (uint32), the unit looks like microseconds (or "
+                              "the values are 1000x too small); rename point_times/ to read the scans without them")
+    for path, times in seconds.items():  # a quarter of the turn, as a sensor with a partial field of view sees it
+        np.save(path, np.round(0.25 * times * 1e9).astype(np.uint32))
+    assert np.ptp(open_dataset("kitti", folder).read_scan(1).point_times_s) == pytest.approx(0.25 * 0.0989, abs=1e-4)

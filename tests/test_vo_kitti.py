@@ -97,3 +97,34 @@ def test_trajectories_of_other_lengths_are_associated_as_the_error_advises():
     assert m["ape_rmse_m"] == pytest.approx(0.5) and m["final_error_m"] == pytest.approx(0.5)
     assert m["rpe_trans_rmse_m"] == pytest.approx(0.0, abs=1e-12)
     assert evaluate_vo(est, gt, "relative", associate=True)["ape_rmse_m"] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_an_excerpt_whose_pose_and_time_files_both_cover_its_frames_is_read(tmp_path):
+    """Frames 10-30 of the 06 excerpt beside its poses.txt (51 rows) and the full times.txt (1101) were refused: "51
+    poses ... but 1101 time stamps (and the shorter file does not end at the last frame present, 30)". Both cover the
+    frames present, so each frame takes its own row; a file that stops short is still named with the frame it misses."""
+    import shutil
+
+    from conftest import shared_path
+
+    from lidarkit.errors import DataError
+    from lidarkit.vo.inputs import open_vo_input
+
+    source = shared_path("kitti_images", "sequences", "06")
+    seq = tmp_path / "06"
+    (seq / "image_0").mkdir(parents=True)
+    for frame in range(10, 31):
+        shutil.copy(source / "image_0" / f"{frame:06d}.png", seq / "image_0")
+    for name in ("calib.txt", "poses.txt", "times.txt"):
+        shutil.copy(source / name, seq / name)
+    vo_input = open_vo_input(seq)
+    images = vo_input.images
+    assert len(images) == 21
+    times = np.loadtxt(source / "times.txt")
+    np.testing.assert_array_equal(images.timestamps_s, times[10:31])
+    poses = np.loadtxt(source / "poses.txt")
+    np.testing.assert_allclose(vo_input.ground_truth.poses_se3[:, :3, :].reshape(-1, 12), poses[10:31], atol=1e-12)
+    rows = (source / "poses.txt").read_text().splitlines()
+    (seq / "poses.txt").write_text("\n".join(rows[:25]) + "\n")
+    with pytest.raises(DataError, match=r"poses\.txt: 25 poses but image 000030\.png is frame 30$"):
+        open_vo_input(seq)

@@ -551,3 +551,25 @@ def test_few_pose_inliers_with_most_correspondences_explained_is_insufficient_pa
         "insufficient parallax (the essential matrix explains 1150 of 1200 correspondences; too few inliers (12 < 30)): "
         "baseline short for the scene depth, translation direction undefined")
     assert check_pose(replace(near_few, epipolar_inliers=1000), cfg) == "too few inliers (12 < 30)"
+
+
+def test_the_feature_budget_is_shared_over_the_grid_cells_as_documented():
+    """The budget is no upper bound: each of the grid's cells keeps up to ceil(budget / cells) (gftt on a KITTI frame:
+    32 corners for a budget of 8, 128 for 100, with the 4 x 8 grid); the detector, the config and the docs say so."""
+    from pathlib import Path
+
+    image = _kitti_pair("06", 0)[0]
+    for budget, expected in ((8, 32), (100, 128)):
+        for detector in ("gftt", "fast", "orb"):
+            det = get_detector(detector, max_features=budget)
+            assert det.per_cell_budget == -(-budget // 32)
+            found = len(det.detect(image)[0])
+            assert found <= 32 * det.per_cell_budget, (detector, budget, found)
+            if detector == "gftt":
+                assert found == expected
+    alone = get_detector("gftt", max_features=100, grid_rows=1, grid_cols=1)
+    assert alone.per_cell_budget == 100 and len(alone.detect(image)[0]) == 100
+    assert "ceil(max_features / cells)" in FeatureConfig.model_fields["max_features"].description
+    docs = (Path(__file__).resolve().parents[1] / "docs" / "visual_odometry.md").read_text()
+    row = next(line for line in docs.splitlines() if line.startswith("| detector / descriptor |"))
+    assert "ceil(budget / cells)" in row and "32 corners for a budget of 8 and 128 for 100" in row

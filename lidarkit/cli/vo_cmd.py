@@ -36,12 +36,14 @@ def vo_command(
                                                   f"ransac | magsac | lmeds (lidarkit: {', '.join(_D.geometry.estimators)})."),
     preprocess: Optional[str] = typer.Option(None, help="none | clahe | gaussian | bilateral (lidarkit: "
                                              f"{_D.preprocess.method})."),
-    features: Optional[int] = typer.Option(None, help=f"Feature budget (lidarkit: {_D.features.max_features})."),
+    features: Optional[int] = typer.Option(None, help=f"Feature budget, shared over the detector's grid cells: ceil(N / cells) each, so a frame gives up to cells x that "
+                                                         f"(lidarkit: {_D.features.max_features})."),
     scale: Optional[str] = typer.Option(None, help=f"gt | none | relative (lidarkit: {_D.scale.mode})."),
     sanity: Optional[bool] = typer.Option(None, "--sanity/--no-sanity", help="Pose sanity checks (lidarkit: on)."),
     refine: Optional[bool] = typer.Option(None, "--refine/--no-refine", help="Sampson refinement (lidarkit: on)."),
     calib: Optional[Path] = typer.Option(None, help="Intrinsics file: 9 numbers (K, bare or after 'K:'), 4 (fx fy cx cy), "
-                                        "KITTI odometry calib.txt (P0) or KITTI raw calib_cam_to_cam.txt (P_rect_00)."),
+                                        "12 (a 3x4 P, its left 3x3), numpy's printed matrix, KITTI odometry calib.txt (P0) or KITTI raw "
+                                        "calib_cam_to_cam.txt (P_rect_00)."),
     timestamps: Optional[Path] = typer.Option(None, help="Time stamps file (one per image)."),
     poses: Optional[Path] = typer.Option(None, help="Ground-truth camera poses for an image folder (or other KITTI poses)."),
     poses_format: str = typer.Option("kitti", help="Format of --poses: kitti | tum."),

@@ -35,22 +35,27 @@ INTRINSICS_FILES = ("9 numbers (K row-major, bare or after 'K:'), 4 (fx fy cx cy
 
 def read_intrinsics(path: str | os.PathLike) -> np.ndarray:
     """``(3, 3)`` K from a text file holding 9 numbers (K row-major, bare or after ``K:``), 4 numbers (``fx fy cx cy``),
-    a KITTI odometry ``calib.txt`` (``P0: ...`` or bare rows of 12 numbers: K is the left 3x3 of P0) or a KITTI raw
-    ``calib_cam_to_cam.txt`` (the left 3x3 of ``P_rect_00``, the kitti_raw reader's K; it was read as an odometry
-    calib.txt and refused at its ``calib_time`` line)."""
+    12 unlabelled numbers in any line layout (a 3x4 projection matrix P row-major: K is its left 3x3; three rows of 4
+    were read as KITTI calib.txt rows of 12 and refused), a KITTI odometry ``calib.txt`` (``P0: ...`` or bare rows of
+    12 numbers: K is the left 3x3 of P0) or a KITTI raw ``calib_cam_to_cam.txt`` (the left 3x3 of ``P_rect_00``, the
+    kitti_raw reader's K; it was read as an odometry calib.txt and refused at its ``calib_time`` line). A matrix
+    printed by numpy (``[[fx, 0, cx], ...]``, with or without commas or ``array(...)``) is read without its brackets,
+    as ``--init`` reads one."""
     tokens: list[str] = []
     labels: dict[str, list[str]] = {}
     for raw in read_lines(path):
-        line = raw.split("#")[0].strip()
+        line = _without_brackets(raw.split("#")[0]).strip()
         if not line:
             continue
         key, labelled, rest = line.partition(":")
         if labelled:
             labels[key.strip()] = rest.replace(",", " ").split()
         tokens.extend(line.replace(",", " ").split())
-    if "P0" in labels or not labels and len(tokens) % 12 == 0 and len(tokens) >= 12:
+    if not labels and len(tokens) == 12:  # one 3x4 P, whatever its line layout
+        tokens = [t for i, t in enumerate(tokens) if i % 4 != 3]
+    elif "P0" in labels or not labels and len(tokens) % 12 == 0 and len(tokens) >= 12:
         return read_kitti_calib(path)["P0"][:, :3].copy()
-    if "P_rect_00" in labels:  # 12 numbers: its left 3x3 (another count is refused below, as found)
+    elif "P_rect_00" in labels:  # 12 numbers: its left 3x3 (another count is refused below, as found)
         p_rect = labels["P_rect_00"]
         tokens = [t for i, t in enumerate(p_rect) if i % 4 != 3] if len(p_rect) == 12 else p_rect
     elif "K" in labels:
@@ -73,6 +78,11 @@ def read_intrinsics(path: str | os.PathLike) -> np.ndarray:
     if not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0 or not np.allclose(K[2], [0, 0, 1]):
         raise DataError("not a valid intrinsics matrix [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]", source=path)
     return K
+
+
+def _without_brackets(line: str) -> str:
+    """``line`` with numpy's matrix print removed around its numbers: ``array(``, ``[``, ``]`` and ``)``."""
+    return line.replace("array(", " ").translate(str.maketrans("[]()", "    "))
 
 
 def read_image_timestamps(path: str | os.PathLike) -> np.ndarray:

@@ -34,7 +34,7 @@ import numpy as np
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.geometry import se3_inverse
 from lidarkit.io.base import INSTANT_FRACTION, Scan, checked_index, checked_indices, option_path
-from lidarkit.io.pointcloud2 import MAX_SWEEP_S, checked_point_times
+from lidarkit.io.pointcloud2 import MAX_SWEEP_S, check_sweep_span, checked_point_times, point_times_seconds, time_unit_read
 from lidarkit.io.pointfile import at_sensor_origin, load_npy, read_kitti_bin
 from lidarkit.textfile import file_line, is_number, read_lines, read_numeric_table
 from lidarkit.trajectory import Trajectory
@@ -44,6 +44,8 @@ log = logging.getLogger(__name__)
 #: Folders beside ``velodyne/`` searched, in this order, for per-point times ``{frame:06d}.npy`` (1-D, one time per
 #: point of the scan, seconds from the sweep start); docs/datasets.md lists the same names (a test checks it).
 POINT_TIME_FOLDERS = ("point_times", "timestamps", "times", "point_timestamps")
+#: frames whose per-point times' median span is checked against times.txt's spacing (their unit: MIN_SWEEP_SHARE)
+POINT_TIME_SPAN_FRAMES = 5
 #: KITTI's HDL-64 vertical-angle correction, as kiss-icp's KITTI loader applies it (``_correct_kitti_scan``)
 KITTI_VERTICAL_CORRECTION_DEG = 0.205
 #: fx (px) of KITTI's rectified cameras, one per recording day (2011_09_26, _28, _29, _30, 10_03): a calib.txt with one
@@ -240,6 +242,12 @@ class KittiOdometry:
         """True for a folder written by lidarkit's simulator (``sim.yaml`` beside ``velodyne/``)."""
         return (self.sequence_dir / "sim.yaml").is_file()
 
+    @property
+    def snapshot_sweeps(self) -> bool:
+        """True for the simulator's snapshot sweeps (``motion_distortion: false`` in its ``sim.yaml``): every point of
+        a sweep taken at one instant, so there is nothing to deskew (a run says so rather than that times are missing)."""
+        return self._sim_config.get("motion_distortion") is False
+
     @cached_property
     def recorded_by_kitti(self) -> bool:
         """True for KITTI's own recordings (its HDL-64): a ``calib.txt`` whose camera focal length is one of KITTI's
@@ -308,9 +316,9 @@ class KittiOdometry:
         return next((p for p in candidates if p.is_file()), None)
 
     def _check_counts(self) -> None:
-        """Pose and time files must agree with each other and cover every frame present. Their lengths may differ
-        only for an excerpt: the shorter file ends exactly at the last frame present (e.g. a copied sequence folder
-        with a trimmed poses.txt beside the full times.txt); otherwise they are taken to be from different runs."""
+        """Pose and time files must each cover every frame present; their lengths may differ (an excerpt: a copied
+        sequence folder with a trimmed poses.txt beside the full times.txt, or frames 10-30 of it, which was refused
+        because the 51 poses did not end at frame 30)."""
         n_poses = len(self._poses_camera_all) if self.poses_path is not None else None
         n_times = len(self._times_all) if self._times_all is not None else None
         images = self.image_frames
@@ -320,12 +328,9 @@ class KittiOdometry:
                             f"{images[-1] + 1} needed, one per frame from 0)", source=self.times_path)
         if n_poses is not None and n_times is not None and n_poses != n_times:
             last = max((int(f[-1]) for f in (self.scan_frames, self.image_frames) if len(f)), default=-1)
-            if min(n_poses, n_times) != last + 1:
-                shorter = self.poses_path if n_poses < n_times else self.times_path  # (the times named a short poses file)
-                raise DataError(f"{n_poses} poses in {self.poses_path} but {n_times} time stamps (and the shorter "
-                                f"file does not end at the last frame present, {last})", source=shorter)
-            log.info("%s: %d poses and %d time stamps; using the first %d frames", self.sequence_dir, n_poses,
-                     n_times, last + 1)
+            if min(n_poses, n_times) > last:  # (a file that stops short is named below, with the frame it misses)
+                log.info("%s: %d poses and %d time stamps; both cover the frames present (up to %d)", self.sequence_dir,
+                         n_poses, n_times, last)
         for kind, paths, frames in (("scan", self.scan_paths, self.scan_frames), ("image", self.image_paths, self.image_frames)):
             if not len(frames):
                 continue
@@ -579,7 +584,43 @@ class KittiOdometry:
         # a sweep lasts at most MAX_SWEEP_S, or the spacing of the scans when longer (the simulator at 0.5 Hz)
         longest_s = max(MAX_SWEEP_S, self._period_s or 0.0)
         times, convention = self._read_point_times(times_path, self.scan_paths[index], scan, frame, longest_s)
+        self._check_point_time_unit()
         return dataclasses.replace(scan, point_times_s=times, point_time_convention=convention)
+
+    def _check_point_time_unit(self) -> None:
+        """DataError when the per-point times span a sweep of less than a small share of times.txt's spacing (their
+        median over the first frames): uint32 microseconds read as nanoseconds deskewed 0.1 s sweeps as 1e-4 s."""
+        measured = self._point_time_span_s
+        if measured is None or self._period_s is None:
+            return
+        span, n_frames, dtype = measured
+        folder = self.point_times_dir.name
+        unit = "nanoseconds or seconds" if dtype is None else f"{time_unit_read(dtype)} ({dtype})"
+        check_sweep_span(span, self._period_s, what=f"per-point times in {folder}/", unit=unit,
+                         over=f"the median over {n_frames} frames; times.txt gives the stamps", source=self.point_times_dir,
+                         hint=f"rename {folder}/ to read the scans without them")
+
+    @cached_property
+    def _point_time_span_s(self) -> tuple[float, int, np.dtype | None] | None:
+        """(median span in s, over how many frames, dtype or None when they differ) of the per-point times of the first
+        :data:`POINT_TIME_SPAN_FRAMES` frames whose times differ (of the first three times as many files), None
+        without such frames; a file that cannot be read is left to :meth:`read_scan` to name."""
+        spans, dtypes = [], set()
+        for frame in self.scan_frames[: 3 * POINT_TIME_SPAN_FRAMES]:
+            path = self.point_times_dir / f"{int(frame):06d}.npy"
+            try:
+                raw = load_npy(path, f"frame {int(frame)}") if path.is_file() else None
+            except DataError:
+                continue
+            if raw is None or raw.ndim != 1 or not np.issubdtype(raw.dtype, np.number) or np.issubdtype(raw.dtype, np.complexfloating):
+                continue
+            times = point_times_seconds(raw[np.isfinite(raw)])
+            if len(times) > 1 and np.ptp(times) > 0:
+                spans.append(float(np.ptp(times)))
+                dtypes.add(raw.dtype)
+                if len(spans) == POINT_TIME_SPAN_FRAMES:
+                    break
+        return (float(np.median(spans)), len(spans), dtypes.pop() if len(dtypes) == 1 else None) if spans else None
 
     @staticmethod
     def _read_point_times(times_path: Path, scan_path: Path, scan: Scan, frame: int, longest_s: float) -> tuple[np.ndarray, str]:

@@ -43,10 +43,15 @@ class PreprocessConfig(_Stage):
 
 
 class FeatureConfig(_Stage):
-    """Detector/descriptor, feature budget and grid bucketing (features spread over ``grid_rows x grid_cols`` cells)."""
+    """Detector/descriptor, feature budget and grid bucketing (features spread over ``grid_rows x grid_cols`` cells).
+
+    ``max_features`` is shared out, not capped: each cell keeps up to ``ceil(max_features / cells)``, so a frame can
+    give up to ``cells x`` that (gftt on a KITTI frame: 32 for a budget of 8, 128 for 100, with the 4 x 8 grid);
+    with one cell the detector's own limit applies (OpenCV's SIFT keeps a few more at equal responses)."""
 
     detector: Literal["gftt", "fast", "orb", "sift", "akaze"] = "gftt"
-    max_features: int = Field(1200, ge=8)
+    max_features: int = Field(1200, ge=8, description="feature budget: up to ceil(max_features / cells) per grid cell, "
+                              "so up to cells x that per frame")
     grid_rows: int = Field(4, ge=1)
     grid_cols: int = Field(8, ge=1)
     subpixel: bool = False
@@ -105,7 +110,9 @@ class GeometryConfig(_Stage):
 
 
 class SanityConfig(_Stage):
-    """Pose checks; every rejected frame records its reason. ``enabled=False`` keeps only the finite/det checks."""
+    """Pose checks; every rejected frame records its reason. ``enabled=False`` drops the inlier minimum, the flip guard
+    and the parallax tests; the finite/det checks, ``min_features`` and ``min_matches`` (a frame without them has
+    nothing to estimate from) always apply, and ``min_inliers`` always starts the fundamental-matrix fallback."""
 
     enabled: bool = True
     min_features: int = Field(30, ge=5)

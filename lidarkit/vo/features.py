@@ -95,10 +95,17 @@ class Detector:
             self._cv = None
             self.norm = None
 
+    @property
+    def per_cell_budget(self) -> int:
+        """Features kept per grid cell: ``ceil(max_features / cells)``. The budget is shared out, not capped: a frame
+        gives up to ``cells x`` this (32 for a budget of 8 on the 4 x 8 grid)."""
+        return max(1, -(-self.cfg.max_features // self._cells))
+
     def detect(self, image: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-        """Features of a uint8 (H, W) image: ``points_px (N, 2) float32`` and ``descriptors (N, D)`` or None."""
+        """Features of a uint8 (H, W) image: ``points_px (N, 2) float32`` and ``descriptors (N, D)`` or None; up to
+        :attr:`per_cell_budget` per grid cell (with one cell, the detector's own ``max_features`` limit)."""
         c = self.cfg
-        per_cell = max(1, -(-c.max_features // self._cells))
+        per_cell = self.per_cell_budget
         if c.detector == "gftt":
             points = self._gftt(image, per_cell)
             return self._subpixel(image, points), None

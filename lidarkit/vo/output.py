@@ -17,6 +17,7 @@ import numpy as np
 import yaml
 
 from lidarkit import atomic
+from lidarkit.geometry import se3_inverse
 from lidarkit.run_files import RUN_FILES
 from lidarkit.trajectory import Trajectory
 from lidarkit.vo.pipeline import FrameDiagnostics, VOResult
@@ -38,7 +39,8 @@ def diagnostics_csv(rows: list[FrameDiagnostics]) -> str:
 
 
 def plot_vo_trajectories(path: str | os.PathLike, trajectories: dict[str, Trajectory], title: str = "") -> Path:
-    """Top view (x-z plane of the first camera) of several trajectories, e.g. ground truth, raw and smoothed."""
+    """Top view (x-z plane of the first camera, see :func:`draw_top_view`) of several trajectories, e.g. ground truth,
+    raw and smoothed."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -57,11 +59,18 @@ def plot_vo_trajectories(path: str | os.PathLike, trajectories: dict[str, Trajec
 
 
 def draw_top_view(ax: Any, trajectories: dict[str, Trajectory]) -> None:
-    """One curve per trajectory on the matplotlib axes ``ax`` (x against z), its end marked by a dot of its colour
-    (the marker was derived from the line style, and "C0-" gave none)."""
+    """One curve per trajectory on the matplotlib axes ``ax``, its end marked by a dot of its colour (the marker was
+    derived from the line style, and "C0-" gave none). Every curve is drawn in the camera frame of the ground truth's
+    first pose (the curve labelled "ground truth...", else the first curve), x against z: a top view whatever the
+    world's axes (world x against z drew a TUM run, whose mocap world has z up, from the side)."""
     styles = ["k-", "C0-", "C1--", "C2-", "C3-.", "C4:"]
+    if not trajectories:
+        return
+    reference = next((traj for label, traj in trajectories.items() if label.startswith("ground truth")),
+                     next(iter(trajectories.values())))
+    T_first_world = se3_inverse(reference.poses_se3[0])
     for (label, traj), style in zip(trajectories.items(), styles * 3):
-        xyz = traj.positions_xyz
+        xyz = (T_first_world @ traj.poses_se3)[:, :3, 3]
         (line,) = ax.plot(xyz[:, 0], xyz[:, 2], style, lw=1.4, label=label)
         ax.plot(xyz[-1, 0], xyz[-1, 2], "o", color=line.get_color(), ms=4)
 

@@ -159,9 +159,10 @@ class VOResult:
         return sum(1 for d in self.diagnostics if d.note.startswith(SCALE_KEPT_NOTE))
 
     def smoothed(self) -> Trajectory:
-        """Translations smoothed with the configured Savitzky-Golay filter; rotations unchanged. Only from the start
-        frame on: the frames before it (unreadable) hold its pose, and smoothed with the rest they pulled the first
-        estimates back (APE 0.12 m instead of 0.004 m after one bad first frame of KITTI 06)."""
+        """Translations smoothed with the configured Savitzky-Golay filter, against the time stamps when the run has
+        them (a dropped frame is a longer step; see :func:`smooth_translations`); rotations unchanged. Only from the
+        start frame on: the frames before it (unreadable) hold its pose, and smoothed with the rest they pulled the
+        first estimates back (APE 0.12 m instead of 0.004 m after one bad first frame of KITTI 06)."""
         s = self.config.smoothing
         first = int(self.meta.get("start_frame", 0))
         if first == 0:
