@@ -707,3 +707,165 @@ def test_a_run_folder_without_its_config_says_so_when_the_truths_differ(tmp_path
     assert message.startswith("compare: runs over different data:") and message.endswith(
         f"; {tmp_path / 'cut'} has no readable config.yaml (a run cut off before it finished, or a folder made by hand): "
         "the dataset, frames and sweep instant it ran over are unknown")
+
+
+PLUGIN_TASK_MODULE = """
+from lidarkit.bench import Metric, Task, TaskOutput, register_task
+
+
+@register_task("compare_plugin_task")
+class ComparePluginTask(Task):
+    dataset_kinds = ("synthetic",)
+    metrics = (Metric("score", "match score [pts]", better="higher"), Metric("err_m", "error [m]"))
+
+    def run(self, job):
+        score = 50.0 + job.seed + (3.0 if job.method == "good" else 0.0)
+        return TaskOutput(metrics={"score": score, "err_m": 1.0 / score})
+"""
+
+
+def test_a_plugin_task_is_compared_on_its_headline_as_its_report_ranks(tmp_path, monkeypatch):
+    """A task registered in a module the suite's script imported: `compare RES RES --method-a good --method-b bad` in
+    another process said "no default metric in these results" and `--metric score` had no label, while the report
+    imports the module the results record and ranks by the task's headline. compare imports it too; a module that is
+    gone is named in the error."""
+    import importlib
+    import sys
+
+    from lidarkit.bench import tasks as bench_tasks
+
+    monkeypatch.setattr(bench_tasks, "_REGISTERED", {})
+    monkeypatch.setattr(bench_tasks, "_INSTANCES", {})
+    code = tmp_path / "code"
+    code.mkdir()
+    (code / "lidarkit_compare_plugin_task.py").write_text(PLUGIN_TASK_MODULE)
+    monkeypatch.syspath_prepend(str(code))
+    importlib.import_module("lidarkit_compare_plugin_task")
+    out = _bench(tmp_path, "s", "seeds: 6\nexperiments:\n  - {task: compare_plugin_task, dataset: {kind: synthetic}, methods: [good, bad]}\n")
+
+    def fresh_process() -> None:
+        monkeypatch.setattr(bench_tasks, "_REGISTERED", {})
+        monkeypatch.setattr(bench_tasks, "_INSTANCES", {})
+        sys.modules.pop("lidarkit_compare_plugin_task", None)
+
+    fresh_process()
+    monkeypatch.setattr(sys, "path", [p for p in sys.path if p != str(code)])
+    result = compare(out, out, method_a="good", method_b="bad")
+    assert (result.metric, result.metric_label, result.better, result.n_pairs) == ("score", "match score", "a", 6)
+    assert str(code) not in sys.path
+
+    fresh_process()
+    (code / "lidarkit_compare_plugin_task.py").unlink()
+    importlib.invalidate_caches()
+    with pytest.raises(EvaluationError) as exc:
+        compare(out, out, method_a="good", method_b="bad")
+    assert str(exc.value).startswith("compare: no default metric in these results (task compare_plugin_task: its module "
+                                     "lidarkit_compare_plugin_task cannot be imported here (")
+    assert str(exc.value).endswith("); pass one of: err_m, score")
+
+
+def test_a_declared_metric_in_no_result_and_one_only_a_side_reports_are_not_unknown(tmp_path):
+    """KITTI drift on a short drive (declared by the task, in no result) and a pair-task metric of A's extra experiment
+    (B ran no pair task) were both "unknown metric '...'": they say why now; a misspelt name is still unknown."""
+    _task("declared_runs_test_task", _error)
+    _register_metric_task("declared_pairs_test_task", "translation_error_m", lambda job: 0.1 + 0.01 * job.seed)
+    suite = "seeds: 3\nexperiments:\n{experiments}"
+    pairs = "  - {name: p, task: declared_pairs_test_task, dataset: {kind: synthetic}, methods: [good]}\n"
+    runs = "  - {{name: r, task: declared_runs_test_task, dataset: {{kind: synthetic}}, methods: [{method}]}}\n"
+    a = _bench(tmp_path, "a", suite.format(experiments=pairs + runs.format(method="good")))
+    b = _bench(tmp_path, "b", suite.format(experiments=runs.format(method="bad")))
+    with pytest.raises(EvaluationError) as exc:
+        compare(a, b, metric="drift_translation_pct")
+    assert str(exc.value) == ("compare: metric 'drift_translation_pct': declared by declared_runs_test_task but in no "
+                              "result (KITTI drift needs 100 m of path)")
+    with pytest.raises(EvaluationError) as exc:
+        compare(a, b, metric="translation_error_m")
+    assert str(exc.value) == ("compare: metric 'translation_error_m': only A (good) reports it (task "
+                              "declared_pairs_test_task, which B did not run)")
+    with pytest.raises(EvaluationError) as exc:
+        compare(b, a, metric="translation_error_m")
+    assert str(exc.value).endswith("only B (good) reports it (task declared_pairs_test_task, which A did not run)")
+    with pytest.raises(ConfigError) as exc:
+        compare(a, b, metric="ape_rmse")
+    assert str(exc.value) == "metric: unknown metric 'ape_rmse'; these results have: ape_rmse_m"
+
+
+def test_a_bench_jobs_folder_and_an_icp_run_folder_are_named_as_such(tmp_path, capsys):
+    """`compare RES/jobs RES/jobs` and `compare ICP_RUN ICP_RUN` said "no metrics.json: not a finished odometry run
+    folder"; with --method-a, the jobs/ folder read "a method applies to bench results folders only"."""
+    from conftest import cli_exit_code
+    from lidarkit.samples import sample_path
+
+    _task("jobs_folder_test_task", _error)
+    out = _bench(tmp_path, "s", "seeds: 2\nexperiments:\n  - {task: jobs_folder_test_task, dataset: {kind: synthetic}, methods: [good, bad]}\n")
+    for method in (None, "good"):
+        with pytest.raises(DataError) as exc:
+            compare(out / "jobs", out / "jobs", method_a=method)
+        assert str(exc.value) == f"{out}/jobs: the jobs/ folder of the bench results {out}: give {out}"
+    source, target = tmp_path / "source.npy", tmp_path / "target.npy"
+    np.save(source, np.load(sample_path("kitti_pair", "000095.npy"))[::20])
+    np.save(target, np.load(sample_path("kitti_pair", "000094.npy"))[::20])
+    icp = tmp_path / "icp_run"
+    assert cli_exit_code(["icp", str(source), str(target), "-m", "vanilla", "--out", str(icp)]) == 0
+    capsys.readouterr()
+    code, stdout, err = run_cli(["compare", str(icp), str(icp)], capsys)
+    assert (code, stdout) == (1, "")
+    assert err == (f"error: {icp}: an icp run folder: compare pairs odometry run folders, or bench results folders (the "
+                   "seeds of a suite: lidarkit bench)\n")
+
+
+def test_odometry_frames_written_apart_pair_as_the_frames_they_select(tmp_path):
+    """Bench odometry options "0:3" and "0:3:1" (one selection) read "runs with different task options over the same
+    (dataset, seed) units", while run folders pair "all" with "0:N": the unit holds the frames selected, over a KITTI
+    sequence (the run registered every frame of a bounded slice) and over a simulated drive of known length."""
+    from conftest import shared_path
+
+    root = shared_path("kitti_odometry")
+    suite = ("seeds: 2\nexperiments:\n  - {{task: odometry, dataset: {dataset}, {options}methods: [{method}]}}\n")
+    kitti = f"{{kind: kitti, path: {root}, sequence: '00', name: k00}}"
+    a = _bench(tmp_path, "a", suite.format(dataset=kitti, options="options: {frames: '0:3'}, ", method="kiss"))
+    b = _bench(tmp_path, "b", suite.format(dataset=kitti, options="options: {frames: '0:3:1'}, ", method="kiss"))
+    assert compare(a, b).n_pairs == 2
+    sim = "{kind: sim_lidar, scene: street, n_frames: 3, n_beams: 8, n_azimuths: 180, name: st}"
+    every = _bench(tmp_path, "every", suite.format(dataset=sim, options="", method="kiss"))
+    sliced = _bench(tmp_path, "sliced", suite.format(dataset=sim, options="options: {frames: '0:3:1'}, ", method="kiss"))
+    assert compare(every, sliced).n_pairs == 2
+    fewer = _bench(tmp_path, "fewer", suite.format(dataset=sim, options="options: {frames: '1:3'}, ", method="kiss"))
+    with pytest.raises(EvaluationError) as exc:
+        compare(every, fewer)
+    assert str(exc.value).startswith("compare: runs with different task options over the same (dataset, seed) units: "
+                                     f"{{frames: '0:3'}} in {every} (kiss), {{frames: '1:3'}} in {fewer} (kiss)")
+
+
+def test_json_to_stdout_leaves_stdout_to_the_json(tmp_path):
+    """`lidarkit compare A B --json /dev/stdout | jq` failed: the table, the verdict and "wrote /dev/stdout" followed
+    the JSON on stdout. They go to stderr then, as eval's do."""
+    import subprocess
+    import sys
+
+    rng = np.random.default_rng(5)
+    a = _straight_run(tmp_path / "a", 0.02 + 0.001 * rng.random(20))
+    b = _straight_run(tmp_path / "b", 0.01 + 0.001 * rng.random(20))
+    done = subprocess.run([sys.executable, "-m", "lidarkit", "compare", str(a), str(b), "--metric", "rpe_translation_m",
+                           "--json", "/dev/stdout"], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0
+    data = json.loads(done.stdout)
+    assert (data["n_pairs"], data["better"], data["run_a"]) == (20, "b", str(a))
+    assert "b is better than a on rpe_translation_m" in done.stderr and done.stderr.endswith("wrote /dev/stdout\n")
+
+
+def test_a_loop_of_symbolic_links_is_named_as_one(tmp_path, capsys):
+    """`compare RUN RUN --json o1.json` with o1.json -> o2.json -> o1.json ended in a RuntimeError traceback ("Symlink
+    loop"); `compare l1 l2` over such links said "does not exist"."""
+    run = _straight_run(tmp_path / "run", 0.01 * np.ones(8))
+    (tmp_path / "o1.json").symlink_to("o2.json")
+    (tmp_path / "o2.json").symlink_to("o1.json")
+    code, stdout, err = run_cli(["compare", str(run), str(run), "--json", str(tmp_path / "o1.json")], capsys)
+    assert (code, stdout) == (1, "")
+    assert err == f"error: {tmp_path / 'o1.json'}: cannot write: a loop of symbolic links (a link that leads back to itself)\n"
+    code, stdout, err = run_cli(["compare", str(tmp_path / "o1.json"), str(run)], capsys)
+    assert (code, stdout) == (1, "")
+    assert err == f"error: {tmp_path / 'o1.json'}: cannot read it: a loop of symbolic links (a link that leads back to itself)\n"
+    with pytest.raises(DataError) as exc:
+        compare(run, tmp_path / "o2.json")
+    assert str(exc.value) == f"{tmp_path / 'o2.json'}: cannot read it: a loop of symbolic links (a link that leads back to itself)"

@@ -8,7 +8,8 @@ from typing import Optional
 import typer
 
 from lidarkit import atomic
-from lidarkit.cli.app import app, stdout
+from lidarkit.cli.app import app
+from lidarkit.cli.outputs import results_console
 from lidarkit.errors import ConfigError
 from lidarkit.eval.statistics import DEFAULT_ALPHA, p_text
 
@@ -43,12 +44,14 @@ def compare_command(
     result = compare(run_a, run_b, metric=metric, method_a=method_a, method_b=method_b, alpha=alpha, noise=noise,
                      noise_from=noise_from, seed=seed, every_result=every_result, task=task,
                      experiment=experiment)
+    # (stderr when --json is stdout: `--json /dev/stdout | jq` read the table after the JSON; chosen before the JSON is
+    # written, a file renamed over being no longer fd 1's)
+    console = results_console([json_out])
     if json_out is not None:  # (before printing: `| head -1` or a full disk on stdout lost it, exit 1)
         from lidarkit.eval.report import write_json
 
         # (the folders compared: a saved comparison of two runs of one method could not say which was which)
         write_json({"run_a": str(Path(run_a).absolute()), "run_b": str(Path(run_b).absolute()), **result.to_dict()}, json_out)
-    console = stdout()
     console.print(f"A: {result.name_a}   B: {result.name_b}   metric: {result.metric_text} ({result.n_pairs} paired "
                   f"{result.pairing}s, {result.n_ties} ties)", soft_wrap=True)
     console.print(f"mean A {result.mean_a:.6g}   mean B {result.mean_b:.6g}   A - B: mean {result.mean_diff:+.4g}, "
@@ -72,7 +75,8 @@ def _outside_inputs(out: Optional[Path], folders: dict[str, Optional[Path]]) -> 
     (the next compare pooled an earlier suite's results), `A/metrics.json` a run's metrics, `BASELINE/manifest.json` a baseline."""
     if out is None:
         return
-    target = out.resolve()
+    target = atomic.resolved_path(out, output=True)  # (a loop of symbolic links was a RuntimeError traceback)
     for name, folder in folders.items():
-        if folder is not None and (target == folder.resolve() or folder.resolve() in target.parents):
+        read = None if folder is None else atomic.resolved_path(folder, output=False)
+        if read is not None and (target == read or read in target.parents):
             raise ConfigError(f"{out} is inside {folder} ({name}): compare never writes into a folder it reads", source="--json")

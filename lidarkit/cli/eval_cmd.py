@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import contextlib
 import math
-import os
 from pathlib import Path
 from typing import Optional
 
 import typer
 
-from lidarkit.cli.app import app, named_by_option, stderr, stdout
+from lidarkit.cli.app import app, named_by_option
+from lidarkit.cli.outputs import results_console
 from lidarkit.errors import ConfigError
 from lidarkit.eval.ape_rpe import ALIGNMENTS, DELTA_UNITS
 from lidarkit.eval.evaluate import EvaluationSettings
@@ -141,7 +141,7 @@ def eval_command(
     # interrupt leaves every earlier output as it was, never one new beside one old; and before anything is printed (a
     # full disk on stdout lost them)
     files = [path for path in (json_out, markdown, plot) if path is not None]
-    console = _results_console(files)  # (before the files are written: one renamed over is no longer fd 1's)
+    console = results_console(files)  # (before the files are written: one renamed over is no longer fd 1's)
     with contextlib.ExitStack() as stack:
         aside = stack.enter_context(atomic.paths_together(files))
         folder = stack.enter_context(atomic.run_folder(tables)) if tables is not None else None
@@ -231,7 +231,7 @@ def _relations_report(est_traj, relations_path: Path, max_diff_s: float, json_ou
         ("rotational e^2 (deg^2)", result.rotation_sq),
     ):
         table.add_row(label, *(f"{stats[k]:.4f}" for k in ("mean", "std", "max")))
-    console = _results_console([json_out])
+    console = results_console([json_out])
     if json_out is not None:  # (before the table: a full disk on stdout lost it)
         report.write_json({**result.to_dict(), "relations_path": str(relations_path)}, json_out)
     console.print(table)
@@ -269,21 +269,3 @@ def _distinct_outputs(inputs: dict[str, Path | None], outputs: dict[str, Path | 
             raise ConfigError(f"{path} is one of the files --tables writes or removes in {tables}: an output never "
                               "replaces it", source=name)
         seen[resolved] = name
-
-
-def _names_stdout(path: Path | None) -> bool:
-    """Whether the output ``path`` is this process's standard output (``/dev/stdout``, ``/dev/fd/1``: the file or pipe
-    of fd 1), the null device aside."""
-    if path is None:
-        return False
-    try:
-        target, out = os.stat(path), os.fstat(1)
-        return (target.st_dev, target.st_ino) == (out.st_dev, out.st_ino) and not os.path.samefile(path, os.devnull)
-    except (OSError, ValueError):
-        return False
-
-
-def _results_console(outputs: list[Path | None]):
-    """stdout for the results table and ``wrote`` lines; stderr when an output is written to stdout
-    (``--json /dev/stdout | jq``: the table printed after the JSON made it unreadable)."""
-    return stderr() if any(_names_stdout(path) for path in outputs) else stdout()

@@ -60,19 +60,22 @@ class BenchRuns:
     failed: set[str] = field(default_factory=set)  # pair keys whose job failed
     instants: dict[str, str] = field(default_factory=dict)  # pair key -> sweep instant of the ground truth it was scored against
     records: list[dict[str, Any]] = field(default_factory=list, repr=False)  # the folder's latest records, read once
+    unknown_tasks: dict[str, str] = field(default_factory=dict)  # task -> why its module (its metrics' meaning) is unknown here
 
 
 def load_odometry_run(path: str | os.PathLike) -> OdometryRun:
     """A run folder written by ``lidarkit odometry --out`` (``poses_kitti.txt``, ``ground_truth_kitti.txt``,
     ``metrics.json``); DataError naming what is missing."""
+    from lidarkit.atomic import resolved_path
+
     path = Path(path)
+    resolved_path(path, output=False)  # (a loop of symbolic links read "does not exist")
     if not path.is_dir():
         raise DataError("run folder does not exist", source=path)
-    other = _other_run_kind(path)
-    if other:  # ("no ground_truth_kitti.txt" for a pf run folder, which holds its ground truth as TUM; "no metrics.json"
-        # for a pf study folder, read as an unfinished odometry run)
-        raise DataError(f"a {other} run folder: compare pairs odometry run folders, or bench results folders (the seeds of "
-                        f"a suite: lidarkit bench)", source=path)
+    refused = _not_an_odometry_run(path)
+    if refused:  # ("no ground_truth_kitti.txt" for a pf run folder, which holds its ground truth as TUM; "no metrics.json"
+        # for a pf study folder, read as an unfinished odometry run, and for an icp run or a bench folder's jobs/)
+        raise DataError(refused, source=path)
     metrics_file = path / "metrics.json"
     if not metrics_file.is_file():
         raise DataError("no metrics.json: not a finished odometry run folder", source=path)
@@ -117,6 +120,7 @@ def load_bench_runs(path: str | os.PathLike, method: str | None = None, every_re
     # is that job run by another lidarkit version (they were called "an earlier suite"'s, and counted after one per spec)
     latest = latest_per_job([r for r in every if not suite or r["key"] in suite])
     n_left_out, n_earlier_version = left_out_counts(every, latest, suite_jobs.values())
+    unknown_tasks = _import_task_modules(path, latest)
     records = [r for r in latest if r.get("status") == "ok"]
     every_ok = [r for r in every if r.get("status") == "ok"]
     if not records:
@@ -146,14 +150,16 @@ def load_bench_runs(path: str | os.PathLike, method: str | None = None, every_re
                               + (" (it is in results of an earlier suite here: --all compares every result)" if earlier else ""),
                               source=path)
         chosen = named[0]
-    runs = BenchRuns(path, chosen, n_left_out=n_left_out, records=every, n_earlier_version=n_earlier_version)
+    runs = BenchRuns(path, chosen, n_left_out=n_left_out, records=every, n_earlier_version=n_earlier_version,
+                     unknown_tasks=unknown_tasks)
     jobs = [(r, job) for r in latest
             if (job := Job.from_spec(r["job"])).method_label == chosen and (not suite or r["key"] in suite)]
     several = len({job.experiment for _, job in jobs}) > 1  # (labels name the experiment then)
     specs: dict[str, dict[str, Any]] = {}
     for r, job in jobs:
-        key = canonical_json({"task": job.task, "experiment": job.experiment, "dataset": _dataset_unit(job.dataset, specs),
-                              "options": job.options, "seed": job.seed})
+        dataset = _dataset_unit(job.dataset, specs)
+        key = canonical_json({"task": job.task, "experiment": job.experiment, "dataset": dataset,
+                              "options": _options_unit(job.task, job.options, dataset, r), "seed": job.seed})
         runs.experiments[key] = {job.experiment}
         if r.get("status") != "ok":
             runs.failed.add(key)
@@ -186,6 +192,85 @@ def _as_label(method: str) -> str:
     except LidarKitError:
         return method
     return method_label(match.group(1), params)
+
+
+def _import_task_modules(path: Path, records: list[dict[str, Any]]) -> dict[str, str]:
+    """Import the modules of the tasks of ``records`` registered in code, as the report does
+    (:func:`lidarkit.bench.report.import_task_modules`): a plugin task's headline and labels were unknown to compare ("no
+    default metric in these results") while its report ranked by them. ``{task: why}`` of those still unknown, said in
+    the errors that need them, not in the report's warning (which speaks of its figures)."""
+    import logging
+
+    from lidarkit.bench.report import _suite_manifest, import_task_modules
+
+    report_log = logging.getLogger("lidarkit.bench.report")
+    quiet = logging.Filter("(none)")  # (passes no record: the report's warning names its plots)
+    report_log.addFilter(quiet)
+    try:
+        return import_task_modules(records, _suite_manifest(path))
+    finally:
+        report_log.removeFilter(quiet)
+
+
+def _options_unit(task: str, options: dict[str, Any], dataset: dict[str, Any], record: dict[str, Any]) -> dict[str, Any]:
+    """A job's task options as the data they select: the odometry ``frames`` as the dataset indices the run registered,
+    written as one selection ("0:10" and "0:10:1" are one, and "all" and "0:30" over 30 sweeps: they read "runs with
+    different task options"), as run folders are compared (:func:`_frames_of`); as written when the record does not
+    say which indices those are."""
+    if task != "odometry":
+        return options
+    frames = _selected_frames(options.get("frames"), dataset, record)
+    return options if frames is None else {**options, "frames": _as_selection(frames)}
+
+
+def _selected_frames(selection: Any, dataset: dict[str, Any], record: dict[str, Any]) -> np.ndarray | None:
+    """The dataset indices an odometry job's ``frames`` selected: against the dataset's length when known (a simulated
+    drive's ``n_frames``, or the run's own count for every frame), else a slice of non-negative bounds the run registered
+    all of; None when the record leaves it open (a slice counting from the end of a KITTI sequence)."""
+    from lidarkit.odometry.inputs import parse_frames
+
+    run = (((record.get("info") or {}).get("config") or {}).get("run")) or {}
+    n_run = run.get("n_frames", (record.get("metrics") or {}).get("n_frames"))
+    n_run = int(n_run) if isinstance(n_run, (int, float)) and not isinstance(n_run, bool) and float(n_run).is_integer() else None
+    settings = run.get("dataset_config") if isinstance(run.get("dataset_config"), dict) else {}
+    lengths = (settings.get("n_frames"), dataset.get("n_frames") if dataset.get("kind") == "sim_lidar" else None)
+    length = next((n for n in lengths if isinstance(n, int) and not isinstance(n, bool)), None)
+    every = selection is None or selection == "all"
+    if every and length is None:
+        length = n_run
+    try:
+        if length is not None:
+            indices = parse_frames(None if every else selection, length)
+        elif isinstance(selection, list) or (isinstance(selection, str) and _bounded_slice(selection)):
+            indices = parse_frames(selection, _bounded_slice(selection) or 1 + max(selection, default=-1))
+        else:
+            return None
+    except (LidarKitError, TypeError, ValueError):
+        return None
+    return indices if len(indices) and (n_run is None or len(indices) == n_run) else None
+
+
+def _bounded_slice(selection: Any) -> int:
+    """The stop of a ``"START:STOP[:STEP]"`` selection whose bounds are non-negative (its indices do not depend on the
+    dataset's length when the run registered them all), else 0."""
+    if not isinstance(selection, str):
+        return 0
+    try:
+        bounds = [int(part) if part.strip() else None for part in selection.split(":")]
+    except ValueError:
+        return 0
+    if len(bounds) not in (2, 3) or bounds[1] is None or any(b is not None and b < 0 for b in bounds):
+        return 0
+    return bounds[1]
+
+
+def _as_selection(frames: np.ndarray) -> str | list[int]:
+    """Dataset indices written as the one selection that reads them: ``"0:10"``, ``"4:10:2"``, else the list."""
+    steps = np.unique(np.diff(frames))
+    if len(steps) > 1:
+        return [int(i) for i in frames]
+    step = int(steps[0]) if len(steps) else 1
+    return f"{int(frames[0])}:{int(frames[-1]) + step}" + (f":{step}" if step != 1 else "")
 
 
 def _dataset_unit(spec: dict[str, Any], done: dict[str, dict[str, Any]]) -> dict[str, Any]:
@@ -419,6 +504,7 @@ def compare(
                         ("method_b", method_b)):
         if given is not None and not isinstance(given, str):  # (a list was a bare TypeError: unhashable type)
             raise ConfigError(f"must be a name (text) or None, got {type(given).__name__} {given!r}", source=name)
+    from lidarkit.atomic import resolved_path
     from lidarkit.bench.results import path_argument
     from lidarkit.eval.ape_rpe import check_flags
 
@@ -434,7 +520,8 @@ def compare(
         raise EvaluationError("compare an odometry run folder with another run folder, a bench folder with a bench folder",
                               source="compare")
     side_a = _load(a, method_a, every_result)
-    same = isinstance(side_a, BenchRuns) and isinstance(b, (str, os.PathLike)) and Path(b).resolve() == side_a.path.resolve()
+    same = (isinstance(side_a, BenchRuns) and isinstance(b, (str, os.PathLike))
+            and resolved_path(b, output=False) == side_a.path.resolve())
     side_b = load_bench_runs(b, method_b, every_result, side_a.records) if same else _load(b, method_b, every_result)
     if type(side_a) is not type(side_b):
         raise EvaluationError("compare an odometry run folder with another run folder, a bench folder with a bench folder",
@@ -508,6 +595,9 @@ def compare(
             what = "no finite value (null, NaN or infinite)" if stated else "no value (null)"
             raise EvaluationError(f"metric {metric!r} has {what} in any result of {' and '.join(s.name for s in silent)}"
                                   + ("" if stated else ": the method reports none"), source="compare")
+        held_apart = _why_no_unit_holds(metric, side_a, side_b, common)
+        if held_apart:  # (a declared metric no run reached, or one only A's extra task reports, read "unknown metric")
+            raise EvaluationError(f"metric {metric!r}: {held_apart}", source="compare")
         raise ConfigError(f"unknown metric {metric!r}; these results have: {', '.join(sorted(present))}", source="metric")
     # units of a task that never reports the metric (an icp_pair experiment beside an odometry one) are another
     # experiment: left out, said; a unit of a task that reports it elsewhere lacks it: an error
@@ -596,14 +686,48 @@ def _default_metric(keys: list[str], side_a: BenchRuns, side_b: BenchRuns) -> st
             headlines.append(headline)
     if not headlines:
         named = sorted(set().union(*present.values()))
-        raise EvaluationError(f"no default metric in these results; pass one of: {', '.join(named)}", source="compare")
+        unknown = {**side_a.unknown_tasks, **side_b.unknown_tasks}
+        why = "; ".join(f"task {t}: {unknown[t]}" for t in sorted(present) if t in unknown)
+        raise EvaluationError(f"no default metric in these results{f' ({why})' if why else ''}; pass one of: "
+                              f"{', '.join(named)}", source="compare")
     rank = {m: i for i, m in enumerate(DEFAULT_BENCH_METRICS)}
     return min(headlines, key=lambda m: (rank.get(m, len(rank)), m))
 
 
+def _why_no_unit_holds(metric: str, side_a: BenchRuns, side_b: BenchRuns, common: list[str]) -> str:
+    """Why no paired unit holds ``metric`` on both sides when it is no misspelt name: one side reports it (in a task the
+    other did not run), or a task of these results declares it but no result holds it (KITTI drift on a path under
+    100 m); '' otherwise."""
+    from lidarkit.bench.report import task_meta
+
+    sides = (("A", side_a), ("B", side_b))
+    reported = {name: sorted({_task_of(k) for k, v in side.values.items() if _usable(v.get(metric))}) for name, side in sides}
+    if bool(reported["A"]) != bool(reported["B"]):
+        (one, side), (other, other_side) = sides if reported["A"] else sides[::-1]
+        ran = {_task_of(k) for k in other_side.values}
+        paired = {_task_of(k) for k in common}
+        tasks = reported[one]
+        if not set(tasks) & ran:
+            why = f"task {', '.join(tasks)}, which {other} did not run"
+        elif set(tasks) & paired:
+            why = f"{other}'s results of task {', '.join(sorted(set(tasks) & paired))} hold no value of it"
+        else:
+            why = f"task {', '.join(tasks)}, which {other} ran over no (dataset, seed) of {one}'s"
+        return f"only {one} ({side.name}) reports it ({why})"
+    if reported["A"]:
+        return (f"A and B report it (task {', '.join(sorted(set(reported['A']) | set(reported['B'])))}) over no (dataset, "
+                "seed) in common")
+    held = sorted({_task_of(k) for _, side in sides for k in side.values})
+    declared = [task for task in held if any(m.name == metric for m in task_meta(task)[0])]
+    if not declared:
+        return ""
+    return (f"declared by {', '.join(declared)} but in no result"
+            + (" (KITTI drift needs 100 m of path)" if metric.startswith("drift_") else ""))
+
+
 def _metric_label(task: str, metric: str, side_a: BenchRuns, side_b: BenchRuns, keys: list[str]) -> str:
     """``metric``'s label as the report heads its column, without the unit and naming the alignment the results state
-    ("APE RMSE (SE(3)-aligned)"); '' when the task declares none beyond the name."""
+    ("APE RMSE (SE(3)-aligned)"); '' when the task declares none beyond the name (and its unit)."""
     from lidarkit.bench.report import MetricInfo, label_alignment, task_meta
 
     declared = next((m for m in task_meta(task)[0] if m.name == metric), None)
@@ -612,7 +736,8 @@ def _metric_label(task: str, metric: str, side_a: BenchRuns, side_b: BenchRuns, 
     records = [{"info": {"metric_alignment": side.alignments.get(k) or {}}} for side in (side_a, side_b) for k in keys]
     label = label_alignment(MetricInfo(metric, declared.label), records).label
     head, sep, _ = label.rpartition(" [")
-    return head if sep and label.endswith("]") else label
+    label = head if sep and label.endswith("]") else label
+    return "" if label == metric else label  # ("score [pts]": "score [score]" named it twice)
 
 
 def _of_tasks(side: BenchRuns, tasks: set[str]) -> BenchRuns:
@@ -886,13 +1011,28 @@ def _run_label(path: Path, method: str) -> str:
 
 
 def _other_run_kind(path: Path) -> str | None:
-    """``"particle-filter"`` / ``"visual odometry"`` for a run folder of ``lidarkit pf`` / ``lidarkit vo`` (by the files
-    only they write), else None."""
+    """``"particle-filter"`` / ``"visual odometry"`` / ``"icp"`` for a run folder of ``lidarkit pf`` / ``lidarkit vo`` /
+    ``lidarkit icp`` (by the files only they write), else None."""
     if (path / "dead_reckoning_tum.txt").is_file() or (path / "study.json").is_file():
         return "particle-filter"
     if (path / "poses_smoothed_kitti.txt").is_file() or (path / "diagnostics.csv").is_file():
         return "visual odometry"
+    if (path / "result.json").is_file() and (path / "config.json").is_file() and not (path / "metrics.json").exists():
+        return "icp"
     return None
+
+
+def _not_an_odometry_run(path: Path) -> str:
+    """Why the folder ``path`` is neither a run folder compare pairs nor a bench results folder, by the files it holds
+    (each read "no metrics.json: not a finished odometry run folder"); '' when it may be one."""
+    if path.name == "jobs" and (path.parent / "suite.json").is_file():
+        results = path.absolute().parent if path.parent == Path(".") else path.parent  # (`compare jobs jobs` read "give .")
+        return f"the jobs/ folder of the bench results {results}: give {results}"
+    other = _other_run_kind(path)
+    if other:
+        return (f"{'an' if other[0] in 'aeiou' else 'a'} {other} run folder: compare pairs odometry run folders, or bench "
+                "results folders (the seeds of a suite: lidarkit bench)")
+    return ""
 
 
 def _kind(side: Any) -> type | None:
@@ -901,7 +1041,7 @@ def _kind(side: Any) -> type | None:
         return type(side)
     from lidarkit.bench.baseline import is_baseline_folder
 
-    if not isinstance(side, (str, os.PathLike)) or not Path(side).is_dir() or is_baseline_folder(side) or _other_run_kind(Path(side)):
+    if not isinstance(side, (str, os.PathLike)) or not Path(side).is_dir() or is_baseline_folder(side) or _not_an_odometry_run(Path(side)):
         return None
     return BenchRuns if (Path(side) / "jobs").is_dir() else OdometryRun
 
@@ -911,7 +1051,10 @@ def _load(side: Any, method: str | None, every_result: bool = False) -> Odometry
         return side
     if not isinstance(side, (str, os.PathLike)):  # (None: a TypeError traceback)
         raise ConfigError(f"a run folder path is needed, got {side!r}", source="compare")
+    from lidarkit.atomic import resolved_path
+
     path = Path(side)
+    resolved_path(path, output=False)  # (a loop of symbolic links read "does not exist")
     if not path.exists():
         raise DataError("does not exist", source=path)
     if not path.is_dir():  # (report.csv given: it read "run folder does not exist")
@@ -923,6 +1066,9 @@ def _load(side: Any, method: str | None, every_result: bool = False) -> Odometry
                         "folders (a baseline gives its noise: --noise-from)", source=path)
     if (path / "jobs").is_dir():
         return load_bench_runs(path, method, every_result)
+    refused = _not_an_odometry_run(path)
+    if refused:  # (before --method: "a method applies to bench results folders only" of a bench folder's jobs/)
+        raise DataError(refused, source=path)
     if method is not None:
         raise ConfigError("a method applies to bench results folders only", source=path)
     return load_odometry_run(path)
