@@ -3,8 +3,8 @@
 ``record(suite, out)`` runs every job ``repeats`` times (in this process, one after the other), keeps the
 first run's trajectory and metrics, and measures the run-to-run spread (kiss-icp is not bit-reproducible
 across thread schedules) to set each metric's band. The manifest pins what makes a number reproducible:
-library versions, the method's resolved config, checksums of the dataset files (a simulated one: its whole simulator
-config), the KITTI angle correction and
+library versions, the method's resolved config, the task options with their defaults, checksums of the dataset files
+and of the files the task options name (a simulated dataset: its whole simulator config), the KITTI angle correction and
 deskew as the run applied them, the instant poses refer to, the frame-check thresholds (``n_bad_frames`` counts
 under them), the evaluation settings and the platform.
 
@@ -165,13 +165,15 @@ def dataset_folder(spec: Mapping[str, Any]) -> Path:
 def _files_under(path: Path) -> list[Path]:
     """Every file under ``path``, through linked folders too (a sequence whose ``velodyne`` links to the scans kept
     elsewhere: rglob left its scans out, and changed scans read as a regression of the code); a folder met again
-    through a loop of links is walked once."""
+    through a loop of links is walked once. A folder below ``path`` holding a baseline's manifest is left out: a
+    baseline written inside the data (before record refused that) pinned its own files, and its check always read
+    ``protocol changed: data.DATA/baseline/manifest.json: <absent> -> ...``."""
     if path.is_file():
         return [path]
     files, seen = [], set()
     for folder, subfolders, names in os.walk(path, followlinks=True):
         real = os.path.realpath(folder)
-        if real in seen:
+        if real in seen or (MANIFEST in names and Path(folder) != path and _is_baseline_manifest(Path(folder) / MANIFEST)):
             subfolders[:] = []
             continue
         seen.add(real)
@@ -182,14 +184,36 @@ def _files_under(path: Path) -> list[Path]:
 
 def dataset_checksums(spec: Mapping[str, Any], cache: dict[str, str] | None = None) -> dict[str, str]:
     """``{relative file: sha256}`` of a dataset spec's files; a generated dataset gives its config's hash."""
-    from lidarkit.bench.datasets import PATHLESS_KINDS, dataset_path
+    from lidarkit.bench.datasets import PATHLESS_KINDS
 
     if spec.get("kind") in PATHLESS_KINDS:
         return {"<generated>": hashlib.sha256(canonical_json(dict(spec)).encode()).hexdigest()}
+    return _checksums(dataset_files(spec), _checksum_base(spec), cache)
+
+
+def option_checksums(job: Job, cache: dict[str, str] | None = None) -> dict[str, str]:
+    """``{file: sha256}`` of the files the job's task options make it read (:meth:`lidarkit.bench.tasks.Task.option_files`:
+    an icp_pair ``ground_truth_file``), named as the dataset's files are; one missing now is left out (it reads as
+    ``<absent>``). An edited ground truth kept outside the dataset folder read as a regression of the method."""
+    from lidarkit.bench.datasets import PATHLESS_KINDS
+    from lidarkit.bench.tasks import get_task
+
+    files = [Path(os.path.abspath(f)) for f in get_task(job.task).option_files(dict(job.dataset), dict(job.options))]
+    base = None if job.dataset.get("kind") in PATHLESS_KINDS else Path(os.path.abspath(_checksum_base(job.dataset)))
+    return _checksums([f for f in files if f.is_file()], base, cache)
+
+
+def _checksum_base(spec: Mapping[str, Any]) -> Path:
+    """The folder a dataset's checksums are named from: the dataset path's parent (a KITTI sequence: its root)."""
+    from lidarkit.bench.datasets import dataset_path
+
     root = Path(dataset_path(dict(spec)))
-    base = root.parent.parent if root.parent.name == "sequences" else root.parent
+    return root.parent.parent if root.parent.name == "sequences" else root.parent
+
+
+def _checksums(files: list[Path], base: Path | None, cache: dict[str, str] | None) -> dict[str, str]:
     out = {}
-    for path in dataset_files(spec):
+    for path in files:
         key = str(path)
         if cache is not None and key in cache:
             digest = cache[key]
@@ -197,7 +221,7 @@ def dataset_checksums(spec: Mapping[str, Any], cache: dict[str, str] | None = No
             digest = _sha256(path)
             if cache is not None:
                 cache[key] = digest
-        out[str(path.relative_to(base)) if path.is_relative_to(base) else str(path)] = digest
+        out[str(path.relative_to(base)) if base is not None and path.is_relative_to(base) else str(path)] = digest
     return out
 
 
@@ -271,6 +295,11 @@ def _run_job(job: Job, checksum_cache: dict[str, str] | None) -> JobRun:
     from lidarkit.bench.tasks import get_task
 
     protocol: dict[str, Any] = {"dataset": dict(job.dataset), "checksums": dataset_checksums(job.dataset, checksum_cache)}
+    # the files its options name (a ground truth kept outside the dataset folder), those the dataset's hold apart
+    option_files = option_checksums(job, checksum_cache)
+    protocol["option_files"] = {k: v for k, v in option_files.items() if k not in protocol["checksums"]}
+    # every option with the default it ran under (a later default read as a regression of the method)
+    protocol["task_options"] = _jsonable(get_task(job.task).resolved_options(dict(job.options)))
     if job.dataset.get("kind") == "sim_lidar":  # every setting (its checksum hashes the suite's only: a changed default)
         protocol["simulation"] = simulation_config(job)
     if job.task == "odometry":
@@ -345,14 +374,24 @@ class Baseline:
     def job(self, method: str | None = None, dataset: str | None = None, seed: int | None = None, *,
             experiment: str | None = None, task: str | None = None) -> dict[str, Any]:
         """The one pinned job with this method label (or name), dataset name, seed, experiment and task; DataError if
-        none or several (two experiments of one method on one dataset, e.g. over other frames: ``experiment=``)."""
+        none or several (two experiments of one method on one dataset, e.g. over other frames: ``experiment=``). A label
+        matches as bench writes it, as in ``compare``: ``kiss(deskew=false)`` finds ``kiss(deskew=False)``."""
+        # (compare's reading of a label; private to lidarkit.eval.compare, shared here so that the two read labels alike)
+        from lidarkit.eval.compare import _as_label
+
         if seed is not None and not is_integer(seed):  # ("1" matched no job: "0 pinned jobs match ...; pinned: (seed 1)")
             raise ConfigError(f"seed must be an integer, got {seed!r}", source="seed")
-        found = [j for j in self.jobs if (method is None or method in (j["label"], j["spec"]["method"]))
+        # (written otherwise, "vanilla(voxel_size_m=0.50)" found no "vanilla(voxel_size_m=0.5)")
+        labels = {method, _as_label(method)} if isinstance(method, str) else {method}
+
+        def same_label(j: dict[str, Any]) -> bool:
+            return bool(labels & {j["label"], _as_label(j["label"])})
+
+        found = [j for j in self.jobs if (method is None or same_label(j) or method == j["spec"]["method"])
                  and (dataset is None or j["spec"]["dataset_name"] == dataset) and (seed is None or j["spec"].get("seed") == seed)
                  and (experiment is None or j["spec"].get("experiment") == experiment)
                  and (task is None or j["spec"].get("task") == task)]
-        exact = [j for j in found if j["label"] == method]
+        exact = [j for j in found if method is not None and same_label(j)]
         if exact:  # "vanilla" beside "vanilla(voxel_size_m=0.5)": the label, not every job of the method (as compare)
             found = exact
         if len(found) != 1:
@@ -400,13 +439,17 @@ def record(
     :func:`lidarkit.atomic.run_folder`: a failed run leaves no partial baseline). An earlier baseline in ``out_dir``
     is replaced whole (its pinned jobs that this one does not pin are removed); a folder holding anything else (a
     bench results folder) is refused rather than merged into."""
+    from lidarkit.bench.results import path_argument
     from lidarkit.bench.suite import load_suite
 
     if int(repeats) != repeats or repeats < 1:
         raise ConfigError(f"repeats must be a positive integer, got {repeats}", source="repeats")
+    # (a loop of symbolic links: one line naming it, not a RuntimeError traceback)
+    suite_path = atomic.resolved_path(path_argument(suite_path, "suite_path"), output=False)
     suite = load_suite(suite_path)
     out = Path(out_dir)
     atomic.check_target(out, "folder")
+    _refuse_out_inside_data(out, suite.jobs)
     if out.is_dir() and any(out.iterdir()) and not (out / MANIFEST).is_file():
         raise OutputError(f"the folder holds files but no {MANIFEST}: not a baseline to replace (a bench results folder?); "
                           "choose a new folder", source=out)
@@ -451,6 +494,29 @@ def record(
     return load_baseline(out)
 
 
+def _refuse_out_inside_data(out: Path, jobs: list[Job]) -> None:
+    """OutputError when the baseline folder ``out`` lies inside a folder a job's checksums cover (its dataset folder, or
+    a folder a reader option names): the baseline would pin its own files, and every check read ``protocol changed:
+    data.DATA/baseline/manifest.json: <absent> -> ...``."""
+    from lidarkit.bench.datasets import PATHLESS_KINDS, dataset_options
+
+    where = Path(os.path.realpath(out))
+    for job in jobs:
+        if job.dataset.get("kind") in PATHLESS_KINDS:
+            continue
+        try:
+            folders = [dataset_folder(job.dataset)]
+        except LidarKitError:  # (a dataset not there: its run says so)
+            continue
+        folders += [Path(v) for v in dataset_options(dict(job.dataset)).values()
+                    if isinstance(v, str) and os.path.isabs(v) and Path(v).is_dir()]
+        for folder in folders:
+            if folder.is_dir() and where.is_relative_to(os.path.realpath(folder)):
+                raise OutputError(f"inside the dataset folder {folder} of the job {_job_name(job)}: the baseline would pin "
+                                  "its own files as the job's data (its check always reads 'protocol changed'); choose a "
+                                  "folder outside the data", source=out)
+
+
 def suite_copy_text(suite_path: str | os.PathLike) -> str:
     """The suite file's text with its dataset paths (and reader path options) written as its jobs resolved them, as the
     manifest stores them, for the baseline folder's ``suite.yaml``: copied verbatim, a relative ``path: kd`` resolved
@@ -460,7 +526,7 @@ def suite_copy_text(suite_path: str | os.PathLike) -> str:
 
     from lidarkit.bench.datasets import resolve_dataset, resolve_option_paths
 
-    suite_path = Path(suite_path).resolve()
+    suite_path = atomic.resolved_path(suite_path, output=False)
     text = suite_path.read_text(encoding="utf-8")
     try:
         root, data = yaml.compose(text), yaml.safe_load(text)
@@ -749,7 +815,20 @@ def check(
         except (DataError, ConfigError) as err:
             result.findings.append(Finding("protocol changed", name, f"dataset not readable: {err}"))
             continue
-        data_changes = _diff("data", pinned["protocol"].get("checksums", {}), checksums_now)
+        pinned_checksums = dict(pinned["protocol"].get("checksums", {}))
+        pinned_option_files = pinned["protocol"].get("option_files")
+        try:
+            option_files_now = {k: v for k, v in option_checksums(job, cache).items() if k not in checksums_now}
+        except LidarKitError:  # (options this lidarkit refuses: the job's "failed" finding below names them)
+            option_files_now = {}
+        if isinstance(pinned_option_files, dict):
+            pinned_checksums.update(pinned_option_files)
+            checksums_now = {**checksums_now, **option_files_now}
+        elif option_files_now:  # (a baseline recorded before lidarkit hashed them: not a change)
+            result.findings.append(Finding("note", name, "the baseline pinned no checksum of the files its task options "
+                                                          f"name ({', '.join(option_files_now)}; recorded before lidarkit "
+                                                          "hashed them): not compared; record it again to pin them"))
+        data_changes = _diff("data", pinned_checksums, checksums_now)
         if data_changes:
             for line in data_changes[:10]:
                 result.findings.append(Finding("protocol changed", name, line))
@@ -765,12 +844,14 @@ def check(
             result.findings.append(Finding("failed", name, err.reason))
             continue
         result.measured[pinned["key"]] = run.metrics
-        then = {k: v for k, v in pinned["protocol"].items() if k not in ("checksums", "method_config")}
+        compared_apart = ("checksums", "option_files", "method_config")
+        then = {k: v for k, v in pinned["protocol"].items() if k not in compared_apart}
         if isinstance(then.get("deskew"), dict):  # (recorded before the applied deskew was pinned: the run's deskew record)
             then["deskew"] = then["deskew"].get("applied")
-        # (a baseline recorded before lidarkit pinned the whole simulator config: not a change)
-        now = {k: v for k, v in run.protocol.items() if k not in ("checksums", "method_config")
-               and (k in then or k != "simulation")}
+        # (a baseline recorded before lidarkit pinned the whole simulator config, or the task options with their
+        # defaults: not a change)
+        now = {k: v for k, v in run.protocol.items() if k not in compared_apart
+               and (k in then or k not in ("simulation", "task_options"))}
         if "frame_check" in now and "frame_check" not in then:  # (recorded before lidarkit pinned them: today's defaults)
             then["frame_check"] = frame_check_thresholds()
             result.findings.append(Finding("note", name, "the baseline pinned no frame-check thresholds (recorded before "

@@ -211,8 +211,6 @@ def _check_same_data(result: Any, now_metrics: dict[str, float], job: Mapping[st
     if ran_kind is not None and pinned.get("kind") is not None and ran_kind != pinned["kind"]:
         refuse("dataset", f"kind {ran_kind} (pinned {pinned['kind']})")
     opened = _pinned_dataset(spec) if sim is None else None
-    n_total = sim.get("n_frames") if sim is not None else len(opened) if hasattr(opened, "__len__") else None
-    _check_same_frames(getattr(result, "frames", None), spec, n_total, refuse)
     ran = sim if sim is not None else options
     expected = None
     if pinned.get("kind") == "sim_lidar":  # as recorded (a later default is other data); older baselines: rebuilt
@@ -230,8 +228,12 @@ def _check_same_data(result: Any, now_metrics: dict[str, float], job: Mapping[st
         if isinstance(applied, bool) and ran.get("vertical_correction_applied", applied) != applied:
             differ.append(f"vertical_correction_applied {ran['vertical_correction_applied']!r} (pinned {applied!r})")
         differ += _other_files(run, opened)
-    if differ:
+    if differ:  # (before the frames: 8 frames of a 10-frame drive against the 8-frame drive read as other frames)
         refuse("dataset", ", ".join(differ))
+    # the pinned selection resolved on the pinned data's length (a simulated drive: its pinned n_frames)
+    n_total = ((expected or {}).get("n_frames", sim.get("n_frames")) if sim is not None
+               else len(opened) if hasattr(opened, "__len__") else None)
+    _check_same_frames(getattr(result, "frames", None), spec, n_total, refuse)
 
 
 def _data_of_spec(dataset: Mapping[str, Any], job_seed: Any) -> dict[str, Any]:
@@ -322,8 +324,26 @@ def _check_same_frames(frames: Any, spec: Mapping[str, Any], n_total: int | None
     except LidarKitError:
         return
     if ran != expected:
-        shown = (lambda f: f"{f[:6]}{'...' if len(f) > 6 else ''}")
-        refuse("frames", f"{shown(ran)} (pinned {selection or 'all'}: {shown(expected)})")
+        shown, pinned_shown = _frame_ranges(ran), _frame_ranges(expected)
+        detail = f"{shown} (pinned {selection or 'all'}: {pinned_shown})"
+        if "..." in shown + pinned_shown:  # (the runs shown may read alike: name the first frame apart)
+            first = next((k for k, (a, b) in enumerate(zip(ran, expected)) if a != b), min(len(ran), len(expected)))
+            at = (lambda f: str(f[first]) if first < len(f) else "none")
+            detail += f", first apart at selected frame {first}: {at(ran)} (pinned {at(expected)})"
+        refuse("frames", detail)
+
+
+def _frame_ranges(frames: list[int], max_runs: int = 5) -> str:
+    """``0-7`` / ``0, 2, 4-11``: frame indices as runs of consecutive ones, the first ``max_runs`` of them (the first
+    six indices of two selections that differ further on read alike)."""
+    frames_arr = np.asarray(frames, dtype=np.int64)
+    if not len(frames_arr):
+        return "none"
+    starts = np.flatnonzero(np.diff(frames_arr, prepend=frames_arr[:1] - 2) != 1)
+    ends = np.append(starts[1:], len(frames_arr)) - 1
+    runs = [f"{frames_arr[a]}-{frames_arr[b]}" if b > a else str(frames_arr[a]) for a, b in zip(starts, ends)]
+    more = f", ... ({len(frames_arr)} frames)" if len(runs) > max_runs else ""
+    return ", ".join(runs[:max_runs]) + more
 
 
 def _pinned_simulation(job: Mapping[str, Any]) -> dict[str, Any] | None:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import importlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, ClassVar
 
 from lidarkit.bench.jobs import Job
@@ -80,6 +81,18 @@ class Task:
         """Raise ConfigError for bad experiment ``options``; called once per experiment before the run."""
         if options:
             raise ConfigError(f"task {self.name!r} takes no options, got {', '.join(sorted(options))}", source="options")
+
+    def resolved_options(self, options: dict[str, Any]) -> dict[str, Any]:
+        """``options`` validated, with every default the task fills in written out: what a job runs under, which a
+        baseline pins (a later default then reads as a changed protocol, not as a regression of the method). A task
+        whose options have defaults overrides it; this one returns the options as given."""
+        self.validate_options(options)
+        return dict(options)
+
+    def option_files(self, dataset: dict[str, Any], options: dict[str, Any]) -> list[Path]:
+        """The files a job's ``options`` make it read beside its dataset's (a ground-truth file an option names): a
+        baseline hashes them with the dataset's files, so an edited one reads as changed data. None by default."""
+        return []
 
     def validate_dataset(self, dataset: dict[str, Any], options: dict[str, Any]) -> None:
         """Raise ConfigError / DataError for a dataset spec this task cannot use; called once per dataset."""

@@ -219,6 +219,16 @@ class IcpPairTask(Task):
         if opts.ground_truth_file is not None and (not opts.pairs or len(opts.pairs) != 1):
             raise ConfigError("ground_truth_file gives one pair's motion: set exactly one pair in 'pairs'", source="options")
 
+    def resolved_options(self, options: dict[str, Any]) -> dict[str, Any]:
+        """The options with their defaults (``max_pairs``, ``init_noise_m``, ``init_noise_deg``) written out."""
+        self.validate_options(options)
+        return IcpPairOptions(**options).model_dump(mode="json")
+
+    def option_files(self, dataset: dict[str, Any], options: dict[str, Any]) -> list[Path]:
+        """The ``ground_truth_file`` the job scores against, resolved as its run resolves it."""
+        opts = options_model(IcpPairOptions, options, "icp_pair")
+        return [] if opts.ground_truth_file is None else [ground_truth_path(dataset, opts)]
+
     def validate_dataset(self, dataset: dict[str, Any], options: dict[str, Any]) -> None:
         check_reader_options(dataset)
         opts = IcpPairOptions(**options)

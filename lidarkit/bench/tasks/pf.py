@@ -62,6 +62,11 @@ class ParticleFilterTask(Task):
         if opts.visible not in VISIBILITY:
             raise ConfigError(f"visible must be one of {', '.join(VISIBILITY)}, got {opts.visible!r}", source="options")
 
+    def resolved_options(self, options: dict[str, Any]) -> dict[str, Any]:
+        """The options with their defaults (``visible``, ``mse_start``) written out."""
+        self.validate_options(options)
+        return PFOptions(**options).model_dump(mode="json")
+
     def validate_dataset(self, dataset: dict[str, Any], options: dict[str, Any]) -> None:
         check_reader_options(dataset)
         mse_start = PFOptions(**options).mse_start
