@@ -1009,7 +1009,7 @@ def build_report(
                         "baseline check` re-runs a baseline's jobs against it)", source=out_dir)
     out_dir = results_folder(out_dir)
     records = load_results(out_dir)
-    manifest = _suite_manifest(out_dir)
+    manifest = suite_manifest(out_dir)
     suite_jobs = {} if every_result else _suite_jobs(manifest)
     if only_keys is None and suite_jobs:
         only_keys = set(suite_jobs)
@@ -1084,7 +1084,7 @@ def _label(record: dict[str, Any]) -> str:
     return f"{job.task} | {job.experiment} | {job.dataset_name} | {job.method_label} | seed {job.seed}"
 
 
-def _suite_manifest(out_dir: Path) -> dict[str, Any]:
+def suite_manifest(out_dir: Path) -> dict[str, Any]:
     """The folder's ``suite.json`` (the last suite run there), read once per report; {} without a readable one."""
     try:
         manifest = json.loads((out_dir / "suite.json").read_text(encoding="utf-8"))
@@ -1115,7 +1115,7 @@ def left_out_counts(every: list[dict[str, Any]], held: list[dict[str, Any]], spe
 def suite_jobs(out_dir: str | Path) -> dict[str, dict[str, Any]]:
     """``{key: job spec}`` of the folder's ``suite.json`` (the last suite run there); {} without a readable one. What a
     report, and a comparison of the folder, is restricted to by default."""
-    return _suite_jobs(_suite_manifest(Path(out_dir)))
+    return _suite_jobs(suite_manifest(Path(out_dir)))
 
 
 def _skipped(manifest: dict[str, Any]) -> list[tuple[str, str]]:

@@ -201,13 +201,13 @@ def _import_task_modules(path: Path, records: list[dict[str, Any]]) -> dict[str,
     the errors that need them, not in the report's warning (which speaks of its figures)."""
     import logging
 
-    from lidarkit.bench.report import _suite_manifest, import_task_modules
+    from lidarkit.bench.report import suite_manifest, import_task_modules
 
     report_log = logging.getLogger("lidarkit.bench.report")
     quiet = logging.Filter("(none)")  # (passes no record: the report's warning names its plots)
     report_log.addFilter(quiet)
     try:
-        return import_task_modules(records, _suite_manifest(path))
+        return import_task_modules(records, suite_manifest(path))
     finally:
         report_log.removeFilter(quiet)
 
