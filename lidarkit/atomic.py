@@ -5,6 +5,8 @@
 - Run folders are all-or-nothing (:func:`run_folder`): written under a temporary hidden name and renamed into
   place only once every file is there, so a failed or killed run never leaves a folder that looks finished; into an
   existing folder the files are moved one rename each with SIGINT / SIGTERM held until the last is in.
+- Input paths that cannot be followed say why (:func:`resolved_path`, :func:`missing_reason`, :func:`stream_reason`): a loop
+  of symbolic links or a link to a missing file is not "not found", a pipe is not "not a regular file".
 - Any ``OSError`` (a file where a folder is needed, a folder where a file is needed, read-only file system,
   disk full, permission denied) and an unknown plot format become :class:`OutputError` naming the path.
 """
@@ -29,8 +31,8 @@ try:  # advisory locks mark the temporary folders of outputs being written (POSI
 except ImportError:
     fcntl = None
 
-__all__ = ["OutputError", "atomic_path", "ensure_dir", "output_errors", "resolved_path", "run_folder", "save_figure", "write_bytes",
-           "write_text", "write_texts"]
+__all__ = ["OutputError", "atomic_path", "ensure_dir", "missing_reason", "output_errors", "resolved_path", "run_folder",
+           "save_figure", "stream_reason", "write_bytes", "write_text", "write_texts"]
 
 _UMASK = os.umask(0o022)
 os.umask(_UMASK)  # read once at import: os.umask can only be read by setting it
@@ -184,9 +186,12 @@ def paths_together(paths: Iterable[str | os.PathLike]) -> Iterator[dict[Path, Pa
     """Temporary paths (``{final: temporary}``) for outputs that belong together: the block writes each to its
     temporary path, and every one is renamed into place only after the block ended, so a failure or an interrupt in it
     replaces none (an evaluation's JSON was replaced and its figure, failing, kept the earlier run's); an interrupt
-    during the renames takes effect after the last."""
-    with contextlib.ExitStack() as stack:
-        aside = {Path(p): stack.enter_context(atomic_path(p)) for p in paths}
+    during the renames takes effect after the last. Streams (a FIFO, /dev/stdout) are written into after the renames,
+    interruptible: one waits for a reader, and a SIGTERM held off meanwhile never took effect."""
+    paths = [Path(p) for p in paths]
+    streams = {p for p in paths if _is_stream(p)}
+    with contextlib.ExitStack() as stream_stack, contextlib.ExitStack() as file_stack:
+        aside = {p: (stream_stack if p in streams else file_stack).enter_context(atomic_path(p)) for p in paths}
         try:
             yield aside
         except OutputError as err:  # named by its final path, not the temporary one it was written to
@@ -195,7 +200,7 @@ def paths_together(paths: Iterable[str | os.PathLike]) -> Iterator[dict[Path, Pa
                 raise
             raise OutputError(err.reason, source=final, location=err.location) from err
         with interrupts_deferred():  # renamed in one after the other: all of them, never the first few
-            stack.close()
+            file_stack.close()
 
 
 def _write_synced(path: Path, data: bytes) -> None:
@@ -278,17 +283,48 @@ def _tex_complaint(err: Exception) -> str:
     return f"{said} ({matplotlib.rcParams['pgf.texsystem']}, rcParams['pgf.texsystem']); use .pdf or .svg"
 
 
+LINK_LOOP = "a loop of symbolic links (a link that leads back to itself)"
+
+
 def resolved_path(path: str | os.PathLike, output: bool) -> Path:
     """``path`` with its links followed; one that cannot be (a loop of symbolic links, ``ln -s loop loop``: a
     RuntimeError from ``Path.resolve``) is a DataError for an input, an OutputError for an output, naming it."""
     try:
         return Path(path).resolve()
     except (RuntimeError, OSError) as err:
-        reason = ("a loop of symbolic links (a link that leads back to itself)" if isinstance(err, RuntimeError)
-                  else (err.strerror or type(err).__name__).lower())
+        reason = LINK_LOOP if isinstance(err, RuntimeError) else (err.strerror or type(err).__name__).lower()
         if output:
             raise OutputError(f"cannot write: {reason}", source=path) from None
         raise DataError(f"cannot read it: {reason}", source=path) from None
+
+
+def missing_reason(path: str | os.PathLike, not_found: str = "not found") -> str:
+    """Why an input ``path`` that does not exist is missing: a loop of symbolic links, a link to a missing file, or
+    ``not_found`` (``Path.exists()`` is False for all three: a loop of links read "not found")."""
+    try:
+        os.stat(path)
+    except OSError as err:
+        if err.errno == errno.ELOOP:
+            return f"cannot read it: {LINK_LOOP}"
+        if err.errno == errno.ENOENT and os.path.islink(path):
+            return f"a symbolic link to a missing file (-> {os.readlink(path)})"
+    return not_found
+
+
+def stream_reason(path: str | os.PathLike) -> str | None:
+    """Why an input ``path`` that is a pipe or a device is refused where a file is read (its size or a second pass is
+    needed), or None for anything else: "not a regular file" of ``<(...)``'s /dev/fd/63 did not say what to do."""
+    import stat
+
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return None
+    if stat.S_ISFIFO(mode):
+        return "a pipe (e.g. <(...)): save it to a file first"
+    if stat.S_ISCHR(mode):
+        return "a device, not a file: save what it gives to a file first"
+    return None
 
 
 def check_target(path: str | os.PathLike | None, kind: str = "file", files: Iterable[str] = (),
@@ -414,9 +450,11 @@ def run_folder(path: str | os.PathLike, replaces: Iterable[str] = (), exclusive:
                 raise OutputError(err.reason, source=named / os.path.relpath(err.source, tmp), location=err.location) from err
             raise
         written = {p.name for p in tmp.iterdir()}
-        with interrupts_deferred():  # moved in file by file: a folder cut off half-way looked finished
-            # (what the folder holds now, not when this run began: a run that finished into it meanwhile left its
-            # pose_covariance.txt beside this run's config.yaml)
+        # one run at a time moves into a folder (waited for before the signals are held: a wait that can be stopped);
+        # two at once left 22 files of one beside 2978 of the other, or each removed the other's files
+        with _destination_held(path, inside), interrupts_deferred():  # moved in file by file: a folder cut off
+            # half-way looked finished (what the folder holds now, not when this run began: a run that finished into
+            # it meanwhile left its pose_covariance.txt beside this run's config.yaml)
             held_a_run = _holds_a_run(path)
             with output_errors(named, "cannot complete the folder"):
                 _move_into_place(tmp, path, exclusive, named, inside)
@@ -576,6 +614,57 @@ def _move_into_place(tmp: Path, path: Path, exclusive: bool = False, named: Path
                     os.rename(kept, into)
         raise OutputError(f"cannot replace it ({_reason(err)}): the folder is left as it was",
                           source=named / src.relative_to(tmp)) from err
+
+
+LOCK_SUFFIX = ".lock"  # ``.<name>.lock`` beside a folder while a run moves into it
+
+
+@contextlib.contextmanager
+def _destination_held(path: Path, inside: bool) -> Iterator[None]:
+    """Hold ``path`` against other lidarkit processes moving a run into it (waiting for one that is): an advisory lock
+    on ``.<name>.lock`` beside it, removed after; on ``path`` itself where its parent cannot be written (``inside``).
+    Without locks (not POSIX), or where neither can be opened, the block runs as it is."""
+    if inside:
+        held = _hold(path)
+        try:
+            yield
+        finally:
+            if held is not None:
+                os.close(held)
+        return
+    lock = path.parent / f".{temporary_stem(path.name, 1 + len(LOCK_SUFFIX))}{LOCK_SUFFIX}"
+    held = _hold_lock_file(lock)
+    try:
+        yield
+    finally:
+        if held is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(lock)  # (while still held: a process waiting on it sees it gone and takes a new one)
+            os.close(held)
+
+
+def _hold_lock_file(lock: Path) -> int | None:
+    """An open descriptor of ``lock`` (created if missing) holding an exclusive advisory lock on it, waiting for any
+    other holder; None without locks or where it cannot be created. A lock file its holder removed meanwhile is
+    opened anew (whoever waited on the removed one would otherwise hold a lock nobody else sees)."""
+    if fcntl is None:
+        return None
+    while True:
+        try:
+            fd = os.open(lock, os.O_RDONLY | os.O_CREAT, 0o666 & ~_UMASK)
+        except OSError:
+            return None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX)
+            held, named = os.fstat(fd), os.stat(lock)
+            if (held.st_dev, held.st_ino) == (named.st_dev, named.st_ino):
+                return fd
+        except FileNotFoundError:
+            pass
+        except BaseException:
+            os.close(fd)
+            raise
+        os.close(fd)
 
 
 def _hold(folder: Path, wait: bool = True) -> int | None:

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lidarkit.atomic import missing_reason, stream_reason
 from lidarkit.errors import DataError, LidarKitError
 
 
@@ -16,7 +17,8 @@ def read_lines(path: str | os.PathLike) -> list[str]:
     path = Path(path)
     try:
         if not path.is_file():
-            raise DataError("file not found" if not path.exists() else "not a regular file", source=path)
+            reason = missing_reason(path, "file not found") if not path.exists() else stream_reason(path)
+            raise DataError(reason or "not a regular file", source=path)
         return path.read_text(encoding="utf-8-sig").splitlines()
     except OSError as err:  # (its own text repeats the path the message names already)
         raise DataError(f"cannot read it: {(err.strerror or type(err).__name__).lower()}", source=path) from err

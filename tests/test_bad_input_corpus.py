@@ -544,3 +544,101 @@ def test_library_arguments_of_the_wrong_kind_are_one_clear_error():
         with pytest.raises(LidarKitError) as info:
             call()
         assert message in str(info.value)
+
+
+# ---------------------------------------------------------------- links that cannot be followed, pipes, far poses
+
+LINK_LOOP = "cannot read it: a loop of symbolic links (a link that leads back to itself)"
+
+
+def _broken_link(tmp_path: Path, name: str, kind: str) -> tuple[Path, str]:
+    """A symbolic link ``name`` in ``tmp_path`` that cannot be followed (``kind``: "loop" or "dangling") and the reason
+    an input given as it must read."""
+    link = tmp_path / name
+    if kind == "loop":
+        back = tmp_path / f"back-{name}"
+        link.symlink_to(back.name)
+        back.symlink_to(link.name)
+        return link, LINK_LOOP
+    link.symlink_to(tmp_path / "gone" / name)
+    return link, f"a symbolic link to a missing file (-> {tmp_path / 'gone' / name})"
+
+
+def test_a_suite_file_that_is_a_loop_of_links_is_one_line(tmp_path, capsys):
+    """`lidarkit bench l1.txt` with l1.txt -> l2.txt -> l1.txt was a "RuntimeError: Symlink loop" traceback."""
+    loop, reason = _broken_link(tmp_path, "suite.yaml", "loop")
+    code, _, err = run_cli(["bench", loop, "--out", tmp_path / "results"], capsys)
+    assert_one_line_error(code, err, f"{loop}: {reason}")
+    assert not (tmp_path / "results").exists()
+
+
+@pytest.mark.parametrize("kind", ["loop", "dangling"])
+@pytest.mark.parametrize("command", ["icp scan", "icp --init", "eval", "odometry kitti:", "pf", "vo", "report"])
+def test_an_input_that_is_a_link_going_nowhere_says_so_not_not_found(tmp_path, capsys, gt_file, command, kind):
+    """Inputs that were loops of symbolic links (or links to missing files) read "not found" (``Path.exists()`` is
+    False for both), which sent the user looking for a file that is there: the message says which."""
+    bad, reason = _broken_link(tmp_path, "scan.npy" if command.startswith("icp") else "input", kind)
+    argv = {
+        "icp scan": ["icp", bad, PAIR / "000095.npy"],
+        "icp --init": ["icp", PAIR / "000094.npy", PAIR / "000095.npy", "--init", bad],
+        "eval": ["eval", bad, gt_file],
+        "odometry kitti:": ["odometry", f"kitti:{bad}", "--no-progress"],
+        "pf": ["pf", bad],
+        "vo": ["vo", bad],
+        "report": ["report", bad],
+    }[command]
+    code, out, err = run_cli(argv, capsys)
+    assert_one_line_error(code, err, f"{bad}: {reason}")
+    assert "not found" not in err
+
+
+@pytest.mark.parametrize("command", ["eval", "icp scan", "icp --init"])
+def test_a_pipe_or_a_device_given_as_an_input_file_says_to_save_it_first(tmp_path, capsys, gt_file, command):
+    """`lidarkit eval <(zcat gt.txt.gz) est.txt` read "/dev/fd/63: not a regular file", which did not say what to do."""
+    pipe = tmp_path / "piped.npy"
+    os.mkfifo(pipe)  # (never opened: refused by what it is)
+    for given, reason in ((pipe, "a pipe (e.g. <(...)): save it to a file first"),
+                          (Path("/dev/null"), "a device, not a file: save what it gives to a file first")):
+        argv = {
+            "eval": ["eval", given, gt_file],
+            "icp scan": ["icp", given, PAIR / "000095.npy"],
+            "icp --init": ["icp", PAIR / "000094.npy", PAIR / "000095.npy", "--init", given],
+        }[command]
+        if command == "icp scan" and given == Path("/dev/null"):
+            continue  # (a scan's kind is read from its suffix: /dev/null has none)
+        code, _, err = run_cli(argv, capsys)
+        assert_one_line_error(code, err, f"{given}: {reason}")
+
+
+def test_an_init_translation_beyond_any_map_is_refused_naming_the_init(tmp_path, capsys):
+    """`icp --init` with a 1e200 m translation leaked numpy's "overflow encountered in dot" and recorded "inf m from the
+    target's bounding box": a translation beyond geometry.MAX_ABS_COORDINATE_M is refused, as such a point is."""
+    import warnings
+
+    from lidarkit.errors import DataError
+    from lidarkit.registration.base import check_init_T
+
+    far = tmp_path / "far.txt"
+    far.write_text("1 0 0 1e200\n0 1 0 0\n0 0 1 0\n0 0 0 1\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        code, out, err = run_cli(["icp", PAIR / "000094.npy", PAIR / "000095.npy", "--init", far], capsys)
+    assert_one_line_error(code, err, f"{far}: the translation has a coordinate of 1e+200 m, beyond 1e+07 m: not a metric pose")
+    T = np.eye(4)
+    T[1, 3] = -2e7
+    with pytest.raises(DataError, match=r"^init_T: the translation has a coordinate of 2e\+07 m"):
+        check_init_T(T)
+    T[1, 3] = 5.8e6  # (a UTM northing: a pose on the map)
+    assert check_init_T(T)[1, 3] == 5.8e6
+
+
+@pytest.mark.parametrize("kind", ["loop", "dangling"])
+def test_a_landmark_dataset_read_directly_through_a_broken_link_says_so(tmp_path, kind):
+    """The reader itself (not only `lidarkit pf`, which opens it through open_dataset) names a link going nowhere."""
+    from lidarkit.errors import DataError
+    from lidarkit.io.landmarks import LandmarkData
+
+    bad, reason = _broken_link(tmp_path, "freiburg", kind)
+    with pytest.raises(DataError) as caught:
+        LandmarkData(bad)
+    assert str(caught.value) == f"{bad}: {reason}"

@@ -468,3 +468,46 @@ def test_a_run_that_finished_into_the_folder_meanwhile_is_replaced_whole(tmp_pat
         atomic.write_text(b / "poses_kitti.txt", "B\n")
     assert {p.name: p.read_text() for p in folder.iterdir()} == {"config.yaml": "method: kiss\nlidarkit_version: x\n",
                                                                  "poses_kitti.txt": "B\n"}
+
+
+_RUN_INTO = """
+import sys, time
+from pathlib import Path
+from lidarkit import atomic
+
+tag, out, n = sys.argv[1], Path(sys.argv[2]), int(sys.argv[3])
+every = [f"{t}{i:04d}.txt" for t in "ab" for i in range(n)] + ["config.yaml"]
+with atomic.run_folder(out, replaces=every) as tmp:
+    for i in range(n):
+        (tmp / f"{tag}{i:04d}.txt").write_text(tag)
+    (tmp / "config.yaml").write_text(f"lidarkit_version: test\\nrun: {tag}\\n")
+    (out.parent / f"ready-{tag}").touch()
+    deadline = time.monotonic() + 30
+    while len(list(out.parent.glob("ready-*"))) < 2 and time.monotonic() < deadline:  # both move in at once
+        time.sleep(0.0005)
+"""
+
+
+def test_two_runs_moving_into_one_folder_at_once_leave_one_runs_files(tmp_path):
+    """Two runs finishing into one existing folder at the same moment moved their files in one rename each, side by
+    side: the folder held one run's config.yaml beside the other's files, or each run removed the other's files as an
+    earlier run's. The second waits for the first: the folder holds the whole of one run, nothing of the other."""
+    import subprocess
+    import sys
+
+    n = 300
+    script = tmp_path / "run_into.py"
+    script.write_text(_RUN_INTO)
+    for trial in range(3):
+        place = tmp_path / f"trial{trial}"
+        out = place / "run"
+        out.mkdir(parents=True)
+        (out / "config.yaml").write_text("lidarkit_version: test\nrun: earlier\n")
+        runs = [subprocess.Popen([sys.executable, str(script), tag, str(out), str(n)]) for tag in "ab"]
+        assert [run.wait(timeout=60) for run in runs] == [0, 0]
+        names = sorted(p.name for p in out.iterdir())
+        last = (out / "config.yaml").read_text().split("run: ")[1].strip()
+        assert last in ("a", "b")
+        assert names == sorted([f"{last}{i:04d}.txt" for i in range(n)] + ["config.yaml"])
+        assert {(out / name).read_text() for name in names if name != "config.yaml"} == {last}
+        assert sorted(p.name for p in place.iterdir()) == ["ready-a", "ready-b", "run"]  # (no lock file left)

@@ -281,3 +281,13 @@ def test_frame_messages_name_the_file_where_its_number_is_not_the_index(tmp_path
         run(f"folder:{folder}", "vanilla", params={"max_iterations": 1}, frames="0:2", progress=False)
     assert "kmix frame 1, 000095.bin: vanilla did not converge" in caplog.text
     assert frame_namer(open_sequence("sim:street?frames=3"))(2) == "frame 2"
+
+
+def test_a_bare_dataset_path_that_is_a_loop_of_links_says_so(tmp_path):
+    """`lidarkit odometry loopa` (a link leading back to itself) said "dataset not found"."""
+    from lidarkit.errors import DataError
+
+    (tmp_path / "loopa").symlink_to(tmp_path / "loopb")
+    (tmp_path / "loopb").symlink_to(tmp_path / "loopa")
+    with pytest.raises(DataError, match=r"loopa: cannot read it: a loop of symbolic links"):
+        open_sequence(str(tmp_path / "loopa"))

@@ -227,9 +227,11 @@ class DaskExecutor:
         # keeps it so): Ctrl-C reaches the whole process group, and only this process decides how the cluster
         # stops. A Ctrl-C in the few seconds the cluster takes to start is lost (see ignored_sigint).
         with ignored_sigint():
+            # no dashboard; the scheduler's own HTTP routes on a free local port (by default 8787: another cluster
+            # holding it printed distributed's 4-line "Port 8787 is already in use" warning)
             self.cluster = distributed.LocalCluster(
                 n_workers=local_dask_workers(self.workers, n_jobs), threads_per_worker=1, processes=True,
-                dashboard_address=None, silence_logs=logging.ERROR,
+                dashboard_address=None, scheduler_kwargs={"dashboard_address": "127.0.0.1:0"}, silence_logs=logging.ERROR,
             )
             self.client = distributed.Client(self.cluster)
 

@@ -28,6 +28,7 @@ def path_argument(value: Any, argument: str) -> Path:
 
 def results_folder(path: str | os.PathLike) -> Path:
     """``path`` as a bench results folder (one with ``jobs/``); DataError saying it is missing or is another folder."""
+    from lidarkit.atomic import missing_reason
     from lidarkit.errors import DataError
 
     path = Path(path)
@@ -35,7 +36,8 @@ def results_folder(path: str | os.PathLike) -> Path:
         if (path / "suite.json").is_file():  # a run stopped before its first job finished: a results folder all the same
             raise DataError("no job has finished in this results folder yet (its run stopped before the first): run the "
                             "suite again to resume", source=path)
-        raise DataError("not a bench results folder (no jobs/ inside)" if path.exists() else "folder not found", source=path)
+        missing = "not a bench results folder (no jobs/ inside)" if path.exists() else missing_reason(path, "folder not found")
+        raise DataError(missing, source=path)
     return path
 
 

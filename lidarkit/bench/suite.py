@@ -301,10 +301,11 @@ def load_suite(path: str | Path, *, skip_unavailable: bool = False, only_tasks: 
     ``Suite.skipped``) instead of refused — what ``lidarkit demo`` does. ``only_tasks`` keeps only those tasks.
     A suite expanding to more than ``max_jobs`` jobs is refused before expansion.
     """
+    from lidarkit.atomic import resolved_path
     from lidarkit.bench.results import path_argument
     from lidarkit.params import is_integer
 
-    path = path_argument(path, "path").resolve()
+    path = resolved_path(path_argument(path, "path"), output=False)  # (a loop of links was a RuntimeError traceback)
     if not is_integer(max_jobs):  # ("2" failed comparing with the job count: "'>' not supported")
         raise ConfigError(f"must be an integer, got {type(max_jobs).__name__} {max_jobs!r}", source="max_jobs")
     if max_jobs < 1:

@@ -129,6 +129,12 @@ def open_dataset(kind: str, path: str | os.PathLike, **options: Any) -> Any:
     if not isinstance(path, (str, os.PathLike)):  # (None or a number: a TypeError from pathlib)
         raise ConfigError(f"the dataset path must be a path, got {type(path).__name__} {path!r}", source=f"{kind} dataset")
     reader = get_reader(kind)
+    from lidarkit.atomic import missing_reason
+    from lidarkit.errors import DataError
+
+    link_problem = missing_reason(path, not_found="") if not os.path.exists(path) else ""
+    if link_problem:  # (a loop of links read "dataset folder not found"; a missing path is each reader's to name)
+        raise DataError(link_problem, source=path)
     try:
         signature = inspect.signature(reader)
     except (TypeError, ValueError):  # some builtins / C types have no signature: let the call decide

@@ -95,7 +95,9 @@ class LandmarkData:
             )
         base = Path(path_or_dir)
         if not base.exists():
-            raise DataError("landmark dataset not found", source=base)
+            from lidarkit.atomic import missing_reason
+
+            raise DataError(missing_reason(base, "landmark dataset not found"), source=base)
         folder = base if base.is_dir() else base.parent
         sensor_path = Path(sensor) if sensor is not None else (base if base.is_file() else folder / SENSOR_FILE)
         world_path = Path(world) if world is not None else folder / WORLD_FILE

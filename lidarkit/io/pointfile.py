@@ -36,11 +36,13 @@ def _where(frame: int | None) -> str | None:
 
 def _require_file(path: Path, frame: int | None) -> int:
     """Size in bytes of an existing, non-empty regular file."""
+    from lidarkit.atomic import missing_reason, stream_reason
+
     where = _where(frame)
     if not path.exists():
-        raise DataError("scan file not found", source=path, location=where)
+        raise DataError(missing_reason(path, "scan file not found"), source=path, location=where)
     if not path.is_file():
-        raise DataError("not a regular file", source=path, location=where)
+        raise DataError(stream_reason(path) or "not a regular file", source=path, location=where)
     size = path.stat().st_size
     if size == 0:
         raise DataError("empty scan file (0 bytes)", source=path, location=where)

@@ -58,7 +58,10 @@ def open_sequence(spec: str | os.PathLike | ScanSequence) -> ScanSequence:
             found = Path(os.path.expanduser(bare))
             detected = lio.detect_kind(found) or ("folder" if found.is_dir() else "KIND")
             raise ConfigError(f"options need the dataset kind before the path: {detected}:{bare}?{query}", source=text)
-        raise DataError(f"dataset not found (a folder, {lio.detected_files()}, KIND:PATH or sim:SCENE?...)", source=text)
+        from lidarkit.atomic import missing_reason
+
+        raise DataError(missing_reason(text, f"dataset not found (a folder, {lio.detected_files()}, KIND:PATH or sim:SCENE?...)"),
+                        source=text)
     kind = lio.detect_kind(path)
     problem = lio.ros2_storage_problem(path) if kind is None else None
     if problem:

@@ -22,7 +22,7 @@ import pydantic
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from lidarkit.errors import ConfigError, DataError, LidarKitError, RegistrationError, validation_problems
-from lidarkit.geometry import as_points, is_rotation, orthonormalize_se3
+from lidarkit.geometry import MAX_ABS_COORDINATE_M, as_points, is_rotation, orthonormalize_se3
 from lidarkit.params import changed_fields, refuse_yes_no_numbers
 from lidarkit.registration import local_origin
 from lidarkit.registration.covariance import use_model
@@ -411,6 +411,10 @@ def check_init_T(init_T: np.ndarray, source: str = "init_T") -> np.ndarray:
         raise DataError(f"last row must be [0, 0, 0, 1], got {T0[3].tolist()}", source=source)
     if not is_rotation(T0[:3, :3], tol=INIT_ROTATION_TOL):
         raise DataError(f"the 3x3 block is not a rotation (R^T R = I within {INIT_ROTATION_TOL:g}, det > 0)", source=source)
+    reach_m = float(np.abs(T0[:3, 3]).max())
+    if reach_m > MAX_ABS_COORDINATE_M:  # (as a point beyond it is refused: 1e200 m overflowed to "inf m" from the target)
+        raise DataError(f"the translation has a coordinate of {reach_m:.3g} m, beyond {MAX_ABS_COORDINATE_M:g} m: not a "
+                        "metric pose", source=source)
     return orthonormalize_se3(T0)
 
 

@@ -72,7 +72,9 @@ def open_vo_input(path: str | os.PathLike, *, kind: str = "auto", calib: str | o
         return _open_simcam(str(path), kind, calib, focal_factor)
     path = Path(path)
     if not path.exists():
-        raise DataError("input not found", source=path)
+        from lidarkit.atomic import missing_reason
+
+        raise DataError(missing_reason(path, "input not found"), source=path)
     if kind not in INPUT_KINDS:
         raise ConfigError(f"unknown input kind {kind!r}; known: {', '.join(INPUT_KINDS)}", source="vo input kind")
     kind = detect_kind(path) if kind == "auto" else kind
