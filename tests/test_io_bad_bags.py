@@ -76,7 +76,8 @@ def test_pointcloud2_without_xyz(tmp_path):
     fields, step, data = _cloud_bytes(64)
     fields = [("a" if name == "y" else name, offset, dt) for name, offset, dt in fields]
     bag = write_ros1_bag(tmp_path / "no_y.bag", [good(0), (1000.1, fields, step, data, 64)])
-    with pytest.raises(DataError, match=r"rosbag:no_y\.bag/points \(frame 1\): .*no_y\.bag \(message 1 on /points\): PointCloud2 has no y field \(fields: x, a, z, time\)"):
+    # (the run reads the recording's sweep timing before its frames: the message, named by file and topic, stops it there)
+    with pytest.raises(DataError, match=r"no_y\.bag \(message 1 on /points\): PointCloud2 has no y field \(fields: x, a, z, time\)$"):
         run(str(bag), "kiss")
     with pytest.raises(DataError, match=r"no_y\.bag \(message 1 on /points\): PointCloud2 has no y field"):
         open_dataset("rosbag", bag).read_scan(1)

@@ -287,7 +287,8 @@ def test_sim_cli_refuses_a_bag_name_the_readers_would_not_recognise_or_an_existi
 
 
 def test_unknown_topic_lists_the_topics_and_never_exits(exports):
-    with pytest.raises(DataError, match=r"no topic '/velodyne_points'; topics present: /ground_truth \(nav_msgs/msg/Odometry\), /points"):
+    with pytest.raises(DataError, match=r"no topic '/velodyne_points'; topics present: /ground_truth \(nav_msgs/msg/Odometry\), "
+                                        r"/ground_truth/sweep_end \(geometry_msgs/msg/PoseStamped\), .*, /points"):
         open_dataset("rosbag", exports[("rosbag1", "sqlite3")], topic="/velodyne_points")
     with pytest.raises(DataError, match="carries nav_msgs/msg/Odometry"):
         open_dataset("mcap", exports[("mcap", "sqlite3")], topic="/ground_truth")
@@ -521,3 +522,23 @@ def test_a_scan_and_a_bag_reader_print_as_one_line(exports):
     assert repr(Scan(np.zeros((0, 3)))) == "Scan(frame 0, 0 points, no point times, no stamp)"
     assert repr(Scan(np.zeros((2, 3)), point_times_s=np.array([0.0, 1.0]), point_time_convention="fraction")) == (
         "Scan(frame 0, 2 points, point times fraction 0-1, no stamp)")
+
+
+@pytest.mark.parametrize("fmt, name, kind", [("rosbag1", "run.bag", "rosbag"), ("mcap", "run.mcap", "mcap")])
+@pytest.mark.parametrize("pose_instant", ["start", "end"])
+def test_a_simulated_bag_gives_the_ground_truth_at_every_instant_as_the_simulator(tmp_path, fmt, name, kind, pose_instant):
+    """A drive pulling away (0 to 10 m/s in 1 s): the bag held the ground truth at pose_instant only, and the other
+    instants were interpolated (mid up to 9 mm off, the first sweep's start and the last one's end continued at constant
+    velocity, 5-50 mm off). The export keeps the poses at every instant (/ground_truth/sweep_start, _mid, _end) and the
+    reader gives those, as the simulator and the KITTI-layout export do."""
+    sim = SimulatedLidarSequence(n_frames=6, n_beams=8, n_azimuths=180, seed=5, speed_mps=10.0, accel_time_s=1.0,
+                                 pose_instant=pose_instant)
+    bag = open_dataset(kind, export_bag(sim, tmp_path / name, fmt))
+    for instant in ("start", "mid", "end"):
+        got, truth = bag.ground_truth_at_instant(instant), sim.ground_truth_at(instant)
+        assert np.abs(got.poses_se3[:, :3, 3] - truth.poses_se3[:, :3, 3]).max() <= 1e-6, instant
+        assert np.abs(got.poses_se3[:, :3, :3] - truth.poses_se3[:, :3, :3]).max() <= 1e-9, instant
+        np.testing.assert_allclose(got.timestamps_s, truth.timestamps_s, atol=1e-6, err_msg=instant)
+        assert got.meta["retimed"] == f"the poses recorded at the sweep {instant} on /ground_truth/sweep_{instant}"
+        np.testing.assert_allclose(bag.ground_truth_at_instant(instant, scans=[2, 4]).poses_se3, truth.poses_se3[[2, 4]], atol=1e-9)
+    assert bag.ground_truth_topic == "/ground_truth"  # (the poses beside it are no second odometry topic to choose from)

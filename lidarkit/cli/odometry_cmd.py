@@ -40,6 +40,8 @@ def _deskew_text(deskew: dict | None) -> str:
         return "-"
     if deskew["applied"]:
         return f"on: {deskew['reason']}"
+    if deskew.get("needed") is False:  # (snapshot sweeps: nothing to deskew, not a request left undone)
+        return f"not needed: {deskew['reason']}"
     if deskew["requested"]:
         return f"REQUESTED, NOT APPLIED: {deskew['reason']}"
     return f"off: {deskew['reason']}"

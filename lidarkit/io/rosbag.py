@@ -13,7 +13,9 @@ in header-stamp order, one pose per scan (by count when each pose lies as far fr
 selection of scans; else the pose nearest the place in the sweep where the poses are stamped), expressed relative to
 nothing (as recorded; odometry of another frame than the clouds' is said in ``reader_warnings``); its
 ``meta["pose_instant"]`` is read from its stamps against the sweep's point times (a sweep lasting from its first to its
-last point where that is not the stamps' spacing: :func:`sweep_length`).
+last point where that is not the stamps' spacing: :func:`sweep_length`). At another instant of the sweep
+(:meth:`_BagScans.ground_truth_at_instant`) it is interpolated, unless the recording keeps the poses at that instant
+beside it (:func:`sweep_instant_topic`: the simulator's bags do).
 
 Access is sequential (a bag is a stream); reading an earlier index reopens the bag.
 """
@@ -41,7 +43,14 @@ log = logging.getLogger(__name__)
 
 POINTCLOUD2 = "sensor_msgs/msg/PointCloud2"
 ODOMETRY = "nav_msgs/msg/Odometry"
+POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
 ROS_EXTRA = "pip install 'lidarkit[ros]'  (rosbags, mcap, mcap-ros2-support)"
+
+
+def sweep_instant_topic(ground_truth_topic: str, instant: str) -> str:
+    """The topic beside ``ground_truth_topic`` that holds the pose at ``instant`` (start, mid, end) of every sweep
+    (``geometry_msgs/PoseStamped``, stamped there), as the simulator's bags keep it: ``/ground_truth/sweep_mid``."""
+    return f"{ground_truth_topic.rstrip('/')}/sweep_{instant}"
 
 
 def require_modules(modules: dict[str, str], kind: str) -> None:
@@ -102,6 +111,8 @@ class _BagScans:
         self._cloud_field_types: dict[str, int] = {}  # the first cloud decoded's fields: their PointField datatype codes
         self._last_stamp: tuple[int, float] | None = None
         topics = self._list_topics()  # {topic: msgtype}
+        self._topics = topics
+        self._instant_poses: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # topic: what _poses_at_instant read
         clouds = sorted(t for t, m in topics.items() if m == POINTCLOUD2)
         listing = ", ".join(f"{t} ({m})" for t, m in sorted(topics.items())) or "none"
         if topic:
@@ -318,13 +329,16 @@ class _BagScans:
         return Trajectory(gt_poses, gt_stamps, name=f"{self.path.name}{self.ground_truth_topic}", meta=meta)
 
     def ground_truth_at_instant(self, instant: str, scans: np.ndarray | list[int] | None = None) -> Trajectory:
-        """The recorded odometry at the ``instant`` (start, mid or end) of every sweep (``scans``: of those only, e.g. a
-        ``--frames`` selection within what the recording covers): interpolated between the recorded poses (rotation
-        slerped, position linear), or continued at constant velocity for at most 1.5 recording intervals beyond the
-        first or last one (e.g. the start of sweep 0 when the poses are stamped at sweep ends). The instants are placed
-        by the first scans' point times (where a sweep starts, how long it lasts: :attr:`sweep_duration_s`) and the
-        scans' stamps; DataError when the scans carry no point times (or times on another clock than their stamps) or
-        the recording does not reach."""
+        """The ground truth at the ``instant`` (start, mid or end) of every sweep (``scans``: of those only, e.g. a
+        ``--frames`` selection within what the recording covers). A recording that keeps the poses at that instant
+        (:func:`sweep_instant_topic`, e.g. ``/ground_truth/sweep_mid``, as the simulator's bags do) gives them as
+        recorded; otherwise the recorded odometry is interpolated (rotation slerped, position linear in time: off by
+        about ``a dt^2 / 8`` where the motion accelerates by ``a`` between poses ``dt`` apart, a size the note gives from
+        the poses' second differences), or continued at constant velocity for at most 1.5 recording intervals beyond
+        the first or last pose (e.g. the start of sweep 0 when the poses are stamped at sweep ends). The instants are
+        placed by the first scans' point times (where a sweep starts, how long it lasts: :attr:`sweep_duration_s`) and
+        the scans' stamps; DataError when the scans carry no point times (or times on another clock than their stamps)
+        or the recording does not reach."""
         if instant not in INSTANT_FRACTION:
             raise DataError(f"unknown instant {instant!r}; valid: {', '.join(INSTANT_FRACTION)}", source=self.path)
         if self.ground_truth_topic is None:
@@ -337,21 +351,54 @@ class _BagScans:
         all_stamps = self.timestamps_s
         scan_stamps = all_stamps if scans is None else all_stamps[np.asarray(scans, dtype=np.int64)]
         times = scan_stamps + (start - all_stamps[0]) + INSTANT_FRACTION[instant] * sweep_s
-        stamps, poses = self._recorded_ground_truth
+        kept_topic = sweep_instant_topic(self.ground_truth_topic, instant)
+        kept = self._topics.get(kept_topic) == POSE_STAMPED
+        topic = kept_topic if kept else self.ground_truth_topic
+        stamps, poses = self._poses_at_instant(kept_topic) if kept else self._recorded_ground_truth
+        name = f"{self.path.name}{self.ground_truth_topic}"
+        meta = {"frame": f"as recorded on {self.ground_truth_topic}", "pose_instant": instant}
+        if kept and len(stamps):  # the pose recorded at each instant, as stamped (to the stamps' nanoseconds): exact
+            after = np.clip(np.searchsorted(stamps, times), 0, len(stamps) - 1)
+            before = np.maximum(after - 1, 0)
+            nearest = np.where(np.abs(stamps[before] - times) <= np.abs(stamps[after] - times), before, after)
+            if np.all(np.abs(stamps[nearest] - times) <= max(1e-6 * sweep_s, 2e-9)):
+                meta["retimed"] = f"the poses recorded at the sweep {instant} on {topic}"
+                return Trajectory(poses[nearest], times, name=name, meta=meta)
         if len(stamps) < 2 or not (np.diff(stamps) > 0).all():
-            raise DataError(f"{self.ground_truth_topic}: interpolating needs two or more poses with increasing stamps",
-                            source=self.path)
-        recorded = Trajectory(poses, stamps, name=f"{self.path.name}{self.ground_truth_topic}")
+            raise DataError(f"{topic}: interpolating needs two or more poses with increasing stamps", source=self.path)
+        recorded = Trajectory(poses, stamps, name=name)
         reach = 1.5 * float(np.median(np.diff(stamps)))
         out = recorded.interpolated(times, max_extrapolation_s=reach)
         # (an instant equal to a recorded stamp but for rounding, 1e-16 s beyond it, was counted as continued)
         tolerance = 1e-6 * (sweep_s if sweep_s > 0 else float(np.median(np.diff(stamps))))
         n_out = int(((times < stamps[0] - tolerance) | (times > stamps[-1] + tolerance)).sum())
-        how = f"interpolated between the {len(stamps)} poses recorded on {self.ground_truth_topic}"
+        how = f"interpolated between the {len(stamps)} poses recorded on {topic}"
         if n_out:
             how += f", {n_out} frame(s) continued at constant velocity beyond them"
-        meta = {"frame": f"as recorded on {self.ground_truth_topic}", "pose_instant": instant, "retimed": how}
-        return Trajectory(out.poses_se3, times, name=recorded.name, meta=meta)
+        error_m = interpolation_error_m(stamps, poses[:, :3, 3], times)
+        if error_m > EXACT_RETIMING_M:  # (the mid-sweep truth of a pulling-away drive was up to 9 mm off, unsaid)
+            size = f"{error_m * 1e3:.2g} mm" if error_m < 0.1 else f"{error_m:.2g} m"
+            how += (f"; linear in time between them, the position may be up to about {size} off where the recorded motion "
+                    "accelerates (estimated from their second differences)")
+        meta["retimed"] = how
+        return Trajectory(out.poses_se3, times, name=name, meta=meta)
+
+    def _poses_at_instant(self, topic: str) -> tuple[np.ndarray, np.ndarray]:
+        """Stamps (s) and poses ``(n, 4, 4)`` of the ``geometry_msgs/PoseStamped`` messages on ``topic`` (the poses at
+        one instant of every sweep: :func:`sweep_instant_topic`) in header-stamp order, read once."""
+        if topic not in self._instant_poses:
+            stamps, poses = [], []
+            for k, (_, msg) in enumerate(self._read_all(topic)):
+                p, q = msg.pose.position, msg.pose.orientation
+                xyz, quat = [p.x, p.y, p.z], [q.x, q.y, q.z, q.w]
+                if not np.isfinite(xyz + quat).all() or not np.linalg.norm(quat) > 1e-6:
+                    raise DataError(f"pose {xyz} with orientation {quat}: not a finite position and unit quaternion",
+                                    source=f"{self.path}{topic}", location=f"message {k}")
+                stamps.append(stamp_seconds(msg.header.stamp))
+                poses.append(_pose_matrix(xyz, quat))
+            order = np.argsort(stamps, kind="stable")
+            self._instant_poses[topic] = (np.array(stamps)[order], np.stack(poses)[order] if poses else np.zeros((0, 4, 4)))
+        return self._instant_poses[topic]
 
     @cached_property
     def _recorded_ground_truth(self) -> tuple[np.ndarray, np.ndarray]:
@@ -517,6 +564,25 @@ def _pose_phase(gt_stamps: np.ndarray, scan_stamps: np.ndarray, following: bool 
     # poses stamped with the scans (the end of one sweep is the start of the next, the same instant): read as each
     # sweep's end, whichever side of the period rounding put them, so that the first scan keeps its pose
     return period if following and min(phase, 1.0 - phase) < 0.02 else phase * period
+
+
+#: most position error (m) of re-timed ground truth left unsaid: instants on the recorded poses' stamps (or as good)
+EXACT_RETIMING_M = 1e-6
+
+
+def interpolation_error_m(stamps_s: np.ndarray, positions_m: np.ndarray, times_s: np.ndarray) -> float:
+    """About how far (m) positions linear in time between the poses at ``stamps_s`` ``(n,)`` (``positions_m`` ``(n, 3)``),
+    continued at constant velocity beyond them, lie from the path at ``times_s`` at most: half the acceleration, from
+    the poses' second differences (the larger at either end of an interval), times ``|t - t_i| |t - t_i+1|`` for the
+    interval ``i, i+1`` used (``a dt^2 / 8`` mid-way); 0 for fewer than three poses, where no acceleration is known."""
+    if len(stamps_s) < 3 or not len(times_s):
+        return 0.0
+    velocity = np.diff(positions_m, axis=0) / np.diff(stamps_s)[:, None]
+    accel = np.linalg.norm(2.0 * np.diff(velocity, axis=0) / (stamps_s[2:] - stamps_s[:-2])[:, None], axis=1)
+    at_stamp = np.concatenate([accel[:1], accel, accel[-1:]])  # the ends take their neighbour's
+    i = np.clip(np.searchsorted(stamps_s, times_s, side="right") - 1, 0, len(stamps_s) - 2)
+    spread = np.abs((times_s - stamps_s[i]) * (times_s - stamps_s[i + 1]))
+    return float(np.max(0.5 * np.maximum(at_stamp[i], at_stamp[i + 1]) * spread))
 
 
 def _pose_matrix(xyz: list[float], quat_xyzw: list[float]) -> np.ndarray:
@@ -734,4 +800,4 @@ def _ros2_type_name(name: str) -> str:
     return f"{package}/msg/{message}" if package and "/" not in package else name
 
 
-__all__ = ["McapScans", "RosbagScans", "guarded_loader", "require_modules"]
+__all__ = ["McapScans", "RosbagScans", "guarded_loader", "interpolation_error_m", "require_modules", "sweep_instant_topic"]

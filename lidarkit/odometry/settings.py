@@ -125,10 +125,20 @@ def point_times_not_found(sequence: Any) -> str:
     return f"no per-point times found ({reader} gives none)"
 
 
+#: why a snapshot's missing per-point times are no fault: every point was taken at one instant
+SNAPSHOT_SWEEPS = "snapshot sweeps (motion_distortion false): nothing to deskew"
+
+
+def snapshot_sweeps(sequence: Any) -> bool:
+    """Whether the reader says each sweep is one snapshot (the simulator's ``motion_distortion=false``, in a ``sim:``
+    spec or the ``sim.yaml`` of its KITTI-layout export): a deskew has nothing to do, rather than no times to do it with."""
+    return getattr(sequence, "snapshot_sweeps", False) is True
+
+
 def require_point_times(scan: Any, sequence: Any, dataset_name: str, frame: int, flat: Collection[int] = ()) -> None:
     """``--strict`` with deskew requested: a scan without per-point times is an error naming the frame (``flat``: the
-    frames whose times the reading dropped as all equal, which were there)."""
-    if scan.point_times_s is None:
+    frames whose times the reading dropped as all equal, which were there); a snapshot sweep has nothing to deskew."""
+    if scan.point_times_s is None and not snapshot_sweeps(sequence):
         why = ("its per-point times are all equal (nothing to deskew with)" if frame in flat
                else point_times_not_found(sequence))
         raise DataError(f"deskew requested, {why}", source=dataset_name, location=f"frame {frame}")
@@ -196,6 +206,9 @@ def effective_settings(
     elif not stateful and not getattr(registration, "accepts_point_times", False):
         deskew["reason"] = f"{method} runs scan-to-scan through align(), which takes no per-point times"
         warnings.append(f"deskew requested, not applied: {deskew['reason']}")
+    elif n_times == 0 and snapshot_sweeps(sequence):  # (it warned "no per-point times found", as if data were missing)
+        deskew["reason"] = SNAPSHOT_SWEEPS
+        deskew["needed"] = False
     elif n_times == 0:
         deskew["reason"] = missing
         warnings.append(f"deskew requested, {deskew['reason']}: ran without deskew")

@@ -5,6 +5,10 @@ One ``sensor_msgs/PointCloud2`` per sweep on ``/points`` with fields ``x y z int
 sweep start, as Ouster drivers write it); the header stamp is the sweep start. One ``nav_msgs/Odometry`` per
 sweep on ``/ground_truth`` with ``T_world_lidar`` at the config's ``pose_instant``, stamped at that instant, and the
 true velocity there as its twist (in the lidar frame, the child frame); both covariances are zero (the motion is exact).
+Beside it, one ``geometry_msgs/PoseStamped`` per sweep on each of ``/ground_truth/sweep_start``, ``/sweep_mid`` and
+``/sweep_end``: the pose at that instant of the sweep, stamped there, so that the bag readers give the ground truth at
+any instant as the simulator computes it (interpolating the one recorded instant was off by a dt^2/8 while the drive
+pulls away, and sweep 0's start or the last sweep's end was continued at constant velocity).
 Points are in firing order as :meth:`SimulatedLidarSequence.read_scan` returns them, rounded to float32 (read_scan
 gives float64), so the bag and the KITTI-layout export hold the same sweeps, bit for bit, while odometry over either
 differs slightly from odometry over the ``sim:`` spec itself. Written with the ``rosbags`` writers.
@@ -22,6 +26,7 @@ import numpy as np
 
 from lidarkit.errors import ConfigError, DataError, OutputError
 from lidarkit.io.pointcloud2 import MAX_SWEEP_S
+from lidarkit.io.rosbag import sweep_instant_topic
 
 BAG_FORMATS = ("rosbag1", "rosbag2", "mcap")
 STORAGES = ("sqlite3", "mcap")
@@ -164,8 +169,10 @@ def true_twists(sequence, times_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def _write_messages(sequence, writer, typestore, serialize, *, ros1: bool, on_frame) -> None:
     from scipy.spatial.transform import Rotation
 
+    from lidarkit.sim.lidar import POSE_INSTANTS
+
     T = typestore.types
-    pc2, odom = "sensor_msgs/msg/PointCloud2", "nav_msgs/msg/Odometry"
+    pc2, odom, stamped = "sensor_msgs/msg/PointCloud2", "nav_msgs/msg/Odometry", "geometry_msgs/msg/PoseStamped"
     # without per-point times (point_times=false) the clouds have no time fields, as a driver that writes none; nor
     # does a snapshot (motion_distortion=false: every point at one instant, zeros would read as a sweep's times),
     # whose header is stamped at that instant (the sweep start read 0.1 s before its ground truth)
@@ -176,6 +183,7 @@ def _write_messages(sequence, writer, typestore, serialize, *, ros1: bool, on_fr
               for n in dtype.names]
     gt = sequence.ground_truth
     quat_xyzw = Rotation.from_matrix(gt.poses_se3[:, :3, :3]).as_quat()
+    at_instants = {instant: sequence.ground_truth_at(instant) for instant in POSE_INSTANTS}
     period = sequence.config.sweep_period_s
 
     def header(seq: int, t_s: float, frame_id: str = FRAME_ID):
@@ -185,12 +193,19 @@ def _write_messages(sequence, writer, typestore, serialize, *, ros1: bool, on_fr
             return T["std_msgs/msg/Header"](seq=seq, stamp=stamp, frame_id=frame_id)
         return T["std_msgs/msg/Header"](stamp=stamp, frame_id=frame_id)
 
+    def pose_msg(pose: np.ndarray, q: np.ndarray):
+        return T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=pose[0, 3], y=pose[1, 3], z=pose[2, 3]),
+                                           orientation=T["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3]))
+
     zeros36 = np.zeros(36)
     vec = T["geometry_msgs/msg/Vector3"]
+    instant_quats = {instant: Rotation.from_matrix(traj.poses_se3[:, :3, :3]).as_quat() for instant, traj in at_instants.items()}
     linear_mps, angular_radps = true_twists(sequence, gt.timestamps_s)
     with writer:
         points_conn = writer.add_connection(POINTS_TOPIC, pc2, typestore=typestore)
         gt_conn = writer.add_connection(GROUND_TRUTH_TOPIC, odom, typestore=typestore)
+        instant_conns = {instant: writer.add_connection(sweep_instant_topic(GROUND_TRUTH_TOPIC, instant), stamped, typestore=typestore)
+                         for instant in POSE_INSTANTS}
         for i in range(len(sequence)):
             scan = sequence.read_scan(i)
             cloud = np.zeros(len(scan.points_xyz), dtype=dtype)
@@ -205,20 +220,19 @@ def _write_messages(sequence, writer, typestore, serialize, *, ros1: bool, on_fr
                          point_step=dtype.itemsize, row_step=dtype.itemsize * len(cloud),
                          data=cloud.view(np.uint8).ravel(), is_dense=True)
             writer.write(points_conn, int(round(start_s * 1e9)), serialize(msg, pc2))
-            pose = gt.poses_se3[i]
-            q = quat_xyzw[i]
             odom_msg = T[odom](
                 header=header(i, float(gt.timestamps_s[i]), WORLD_FRAME_ID), child_frame_id=FRAME_ID,
-                pose=T["geometry_msgs/msg/PoseWithCovariance"](
-                    pose=T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=pose[0, 3], y=pose[1, 3], z=pose[2, 3]),
-                                                     orientation=T["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3])),
-                    covariance=zeros36),
+                pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose_msg(gt.poses_se3[i], quat_xyzw[i]), covariance=zeros36),
                 twist=T["geometry_msgs/msg/TwistWithCovariance"](
                     twist=T["geometry_msgs/msg/Twist"](linear=vec(x=linear_mps[i, 0], y=linear_mps[i, 1], z=linear_mps[i, 2]),
                                                        angular=vec(x=angular_radps[i, 0], y=angular_radps[i, 1], z=angular_radps[i, 2])),
                     covariance=zeros36),
             )
             writer.write(gt_conn, int(round(float(gt.timestamps_s[i]) * 1e9)), serialize(odom_msg, odom))
+            for instant, traj in at_instants.items():
+                t_s = float(traj.timestamps_s[i])
+                msg = T[stamped](header=header(i, t_s, WORLD_FRAME_ID), pose=pose_msg(traj.poses_se3[i], instant_quats[instant][i]))
+                writer.write(instant_conns[instant], int(round(t_s * 1e9)), serialize(msg, stamped))
             if on_frame is not None:
                 on_frame(i)
 
