@@ -52,12 +52,14 @@ def parse_value(text: str) -> Any:
     return value
 
 
-def parse_kv(items: Iterable[str] | str, option: str = "option") -> dict[str, Any]:
-    """``["k=v", ...]`` or a query string ``"k=v&k2=v2"`` (URL-encoded) -> ``{key: value}``.
+def parse_kv(items: Iterable[str] | str, option: str = "option", as_text: Iterable[str] = ()) -> dict[str, Any]:
+    """``["k=v", ...]`` or a query string ``"k=v&k2=v2"`` (URL-encoded) -> ``{key: value}``; keys in ``as_text`` keep
+    their value as written (a path: ``1.50`` or ``1e3`` are file names there, not numbers).
 
     A missing ``=``, an empty key, a key given twice or (in a query string) an empty value raises ConfigError naming
     ``option`` and the item; a ``{...}`` / ``[...]`` value YAML cannot read, one naming the key and YAML's reason.
     """
+    as_text = set(as_text)
     if isinstance(items, str):
         pairs = []
         for part in items.split("&"):
@@ -77,7 +79,9 @@ def parse_kv(items: Iterable[str] | str, option: str = "option") -> dict[str, An
             raise ConfigError(f"{key}= has no value; give one, or leave {key} out for its default", source=option)
         if value.strip().startswith(("{", "[")) and (problem := _yaml_problem(value.strip())):
             raise ConfigError(f"{value.strip()!r} is not valid YAML ({problem})", source=f"{option} {key}")
-        out[key] = parse_value(value)
+        parsed = parse_value(value)
+        numeric = isinstance(parsed, (int, float)) and not isinstance(parsed, bool)
+        out[key] = value.strip() if key in as_text and numeric else parsed
     return out
 
 

@@ -291,3 +291,25 @@ def test_a_bare_dataset_path_that_is_a_loop_of_links_says_so(tmp_path):
     (tmp_path / "loopb").symlink_to(tmp_path / "loopa")
     with pytest.raises(DataError, match=r"loopa: cannot read it: a loop of symbolic links"):
         open_sequence(str(tmp_path / "loopa"))
+
+
+def test_a_spec_path_option_that_reads_as_a_number_keeps_its_text(tmp_path):
+    """velodyne_dir=1.50 looked for a folder '1.5' and timestamps=1e3 for a file '1000.0': the value parser read them as
+    numbers, and the reader got the number back as other text. Options that take a path keep their value as written;
+    a number option is still a number."""
+    import shutil
+
+    from conftest import shared_path
+
+    velodyne = tmp_path / "sequences" / "00" / "1.50"
+    velodyne.mkdir(parents=True)
+    for n in (0, 1):
+        shutil.copy(shared_path("kitti_odometry", "sequences", "00", "velodyne", f"{n:06d}.bin"), velodyne)
+    shutil.copy(shared_path("kitti_odometry", "sequences", "00", "calib.txt"), tmp_path / "sequences" / "00")
+    assert len(open_sequence(f"kitti:{tmp_path}?sequence=00&velodyne_dir=1.50")) == 2
+    scans = tmp_path / "scans"
+    shutil.copytree(velodyne, scans)
+    (scans / "1e3").write_text("0.0\n0.1\n")
+    folder = open_sequence(f"folder:{scans}?timestamps=1e3")
+    np.testing.assert_allclose(folder.timestamps_s, [0.0, 0.1])
+    assert len(open_sequence("sim:street?frames=3&beams=8&azimuths=180")) == 3  # numbers stay numbers

@@ -186,6 +186,25 @@ def _typed_options(reader: Any, kind: str, options: dict[str, Any]) -> dict[str,
     return out
 
 
+def text_options(kind: str) -> set[str]:
+    """The options of reader ``kind`` that take a path or text and no number: a spec keeps their value as written
+    (``velodyne_dir=1.50`` is a folder named 1.50, which the value parser read as the number 1.5)."""
+    import typing
+
+    reader = get_reader(kind)
+    try:
+        hints = typing.get_type_hints(reader.__init__ if inspect.isclass(reader) else reader)
+    except Exception:  # noqa: BLE001 - annotations that do not resolve: nothing known
+        return set()
+    names = set()
+    for name, hint in hints.items():
+        kinds = set(typing.get_args(hint) or (hint,))
+        takes_text = str in kinds or any(getattr(k, "__origin__", k) in (os.PathLike, Path) for k in kinds)
+        if takes_text and not kinds & {int, float}:
+            names.add(name)
+    return names
+
+
 def _text_option(kind: str, name: str, value: Any, kinds: set) -> Any:
     """A path or list option (``str | os.PathLike``, ``tuple[str, ...] | str``) whose text a spec's value parser read
     as a number, a boolean or nothing (``velodyne_dir=2``, ``suffixes=``): the number back as its text (a folder named
@@ -206,5 +225,5 @@ def _text_option(kind: str, name: str, value: Any, kinds: set) -> Any:
 
 __all__ = [
     "DETECTED_SUFFIXES", "NOT_SCANS", "available_datasets", "detect_kind", "detected_files", "get_reader", "open_dataset",
-    "register_dataset",
+    "register_dataset", "text_options",
 ]

@@ -48,7 +48,8 @@ def open_sequence(spec: str | os.PathLike | ScanSequence) -> ScanSequence:
         path = os.path.expanduser(path)  # the shell leaves ~ after "kind:" as it is
         from lidarkit.params import parse_kv
 
-        return _scans(lio.open_dataset(kind, path, **parse_kv(query, option=f"{kind} dataset option")), text)
+        options = parse_kv(query, option=f"{kind} dataset option", as_text=lio.text_options(kind))
+        return _scans(lio.open_dataset(kind, path, **options), text)
     path = Path(os.path.expanduser(text))
     if not path.exists():
         if sep and len(kind) > 1 and "/" not in kind and "\\" not in kind:  # KIND:PATH with a kind no reader has
