@@ -173,3 +173,13 @@ def test_a_suite_file_that_is_a_loop_of_links_is_one_line(tmp_path):
             call()
         assert str(caught.value) == message
     assert not (tmp_path / "bl").exists()
+
+
+def test_the_vo_and_odometry_options_are_pinned_with_their_defaults():
+    """VO's align, smoothed and max_frames (and odometry's frames) left at their defaults were pinned as written: a
+    later default read as a regression of the method."""
+    from lidarkit.bench.tasks import get_task
+
+    assert get_task("vo").resolved_options({}) == {"max_frames": None, "align": "auto", "smoothed": False}
+    assert get_task("vo").resolved_options({"smoothed": True})["smoothed"] is True
+    assert get_task("odometry").resolved_options({}) == {"frames": None}

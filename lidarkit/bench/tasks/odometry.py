@@ -118,6 +118,11 @@ class OdometryTask(Task):
 
         return tuple(OPTIONAL_VARIANTS)
 
+    def resolved_options(self, options: dict[str, Any]) -> dict[str, Any]:
+        """The options with their defaults (``frames``) written out, as a baseline pins them."""
+        self.validate_options(options)
+        return OdometryOptions(**options).model_dump(mode="json")
+
     def validate_options(self, options: dict[str, Any]) -> None:
         options_model(OdometryOptions, options, "odometry")
         if options.get("frames") is not None:  # its syntax, before anything runs (its range is the dataset's)

@@ -68,6 +68,11 @@ class VisualOdometryTask(Task):
     def available_methods(self) -> list[str] | None:
         return list(_vo_api().available_presets())
 
+    def resolved_options(self, options: dict[str, Any]) -> dict[str, Any]:
+        """The options with their defaults (``max_frames``, ``align``, ``smoothed``) written out, as a baseline pins them."""
+        self.validate_options(options)
+        return VOOptions(**options).model_dump(mode="json")
+
     def validate_options(self, options: dict[str, Any]) -> None:
         options_model(VOOptions, options, "vo")
 
