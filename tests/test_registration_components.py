@@ -550,3 +550,21 @@ def test_the_voxel_map_keeps_neighbouring_voxels_apart_at_utm_coordinates():
     assert len(voxel_map.points_xyz) == 2  # one per voxel (the second voxel's point was dropped as the first's)
     d, i = voxel_map.block_nearest(np.array([[500001.4, 4200000.5, 0.5]]), np.array([[500001, 4200000, 0]]))
     assert i[0] == 1 and d[0] == pytest.approx(0.1)
+
+
+def test_the_voxel_map_codes_follow_a_long_drive():
+    """Codes relative to the map's first voxel stopped a drive 53 km on at 5 cm voxels (2^20 voxel edges): the
+    codes move with the drive, the kept voxels encoded again, and the nearest-point search still finds them."""
+    from lidarkit.registration.components import make_component
+
+    voxel_map = make_component("map", {"name": "voxel_hash", "voxel_size_m": 0.05, "max_range_m": 100.0})
+    scan = np.random.default_rng(0).uniform(-20, 20, size=(2000, 3))
+    for x in (0.0, 30_000.0, 52_000.0, 53_000.0, 53_010.0):
+        T = np.eye(4)
+        T[0, 3] = x
+        voxel_map.update(scan, T)
+    world = scan + [53_010.0, 0.0, 0.0]
+    probe = world[:5] + 0.001
+    d, i = voxel_map.block_nearest(probe, np.floor(probe / 0.05).astype(np.int64))
+    np.testing.assert_allclose(voxel_map.points_xyz[i], world[:5])  # each probe's own point (1.7 mm away)
+    assert d.max() < 0.002

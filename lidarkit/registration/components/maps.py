@@ -29,22 +29,34 @@ def voxel_keys(points_xyz: np.ndarray, voxel_size_m: float) -> np.ndarray:
     return np.floor(np.asarray(points_xyz, dtype=np.float64) / voxel_size_m).astype(np.int64)
 
 
-def encode_keys(keys: np.ndarray, origin: np.ndarray | None = None) -> np.ndarray:
+def encode_keys(keys: np.ndarray, origin: np.ndarray | None = None, outside: int | None = None) -> np.ndarray:
     """One int64 per voxel, for voxels within +-2^20 of ``origin`` (a voxel key; default: the keys' own corner).
 
     The fields are 21 bits: a key beyond that range would spill into the next field and give two voxels one code (a
     map at a UTM northing, ~4.2e6 voxels of 1 m, merged neighbouring voxels), so the keys are taken relative to a
-    voxel near them; a map spanning more than 2^20 voxels from its origin is a DataError."""
+    voxel near them. A key outside the range gets the code ``outside`` (a query cell no map voxel can be), else
+    it is a DataError."""
     keys = np.asarray(keys, dtype=np.int64)
     if origin is None:
         origin = keys.min(axis=0) + _KEY_OFFSET if len(keys) else np.zeros(3, dtype=np.int64)
     k = keys - origin + _KEY_OFFSET
-    if len(k) and (k.min() < 0 or k.max() >= (1 << _KEY_BITS)):
-        from lidarkit.errors import DataError
+    out_of_range = ((k < 0) | (k >= (1 << _KEY_BITS))).any(axis=1) if len(k) else np.zeros(0, dtype=bool)
+    if out_of_range.any():
+        if outside is None:
+            from lidarkit.errors import DataError
 
-        raise DataError(f"voxels more than 2^{_KEY_BITS - 1} voxel edges from the map's first voxel: a map this large "
-                        "cannot be indexed (a larger voxel, or a map restarted nearer)", source="voxel map")
-    return (k[:, 0] << (2 * _KEY_BITS)) | (k[:, 1] << _KEY_BITS) | k[:, 2]
+            raise DataError(f"voxels more than 2^{_KEY_BITS - 1} voxel edges apart in one map: a map this large cannot be "
+                            "indexed (a larger voxel or a shorter max_range_m)", source="voxel map")
+        k = np.where(out_of_range[:, None], 0, k)
+    codes = (k[:, 0] << (2 * _KEY_BITS)) | (k[:, 1] << _KEY_BITS) | k[:, 2]
+    return codes if outside is None else np.where(out_of_range, outside, codes)
+
+
+def _decode_keys(codes: np.ndarray, origin: np.ndarray) -> np.ndarray:
+    """The voxel keys :func:`encode_keys` gave ``codes`` relative to ``origin``."""
+    mask = (1 << _KEY_BITS) - 1
+    k = np.stack([codes >> (2 * _KEY_BITS), (codes >> _KEY_BITS) & mask, codes & mask], axis=1)
+    return k - _KEY_OFFSET + origin
 
 
 def kiss_hash_buckets(keys: np.ndarray, n_reserved: int) -> np.ndarray:
@@ -291,8 +303,9 @@ class VoxelHashMap(Map):
             return
         c = self.config
         keys = voxel_keys(new, c.voxel_size_m)
-        if self._key_origin is None:
-            self._key_origin = keys[0].copy()
+        far = self._key_origin is None or bool((np.abs(keys - self._key_origin) >= _KEY_OFFSET).any())
+        if far:  # the codes follow the drive: relative to a voxel of this batch (the map is within max range of it)
+            self._recenter(keys[0].copy())
         codes = encode_keys(keys, self._key_origin)
         spacing = self.spacing_m
         keep = np.ones(len(new), dtype=bool)
@@ -369,6 +382,14 @@ class VoxelHashMap(Map):
         keep = ~np.isin(self._pcodes, gone)
         self.points_xyz, self._pkeys, self._pcodes = self.points_xyz[keep], self._pkeys[keep], self._pcodes[keep]
 
+    def _recenter(self, origin: np.ndarray) -> None:
+        """Voxel codes relative to ``origin`` from now on (the kept ones encoded again; their order is unchanged)."""
+        if self._key_origin is not None and len(self._vcodes):
+            self._vcodes = encode_keys(_decode_keys(self._vcodes, self._key_origin), origin)
+            self._pcodes = encode_keys(self._pkeys, origin)
+            self._by_code = None
+        self._key_origin = origin
+
     def block_nearest(self, query_xyz: np.ndarray, query_keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Exact nearest map point among the 27 voxels around each query's voxel (kiss-icp's search rule).
 
@@ -382,7 +403,7 @@ class VoxelHashMap(Map):
             self._by_code = np.argsort(self._pcodes, kind="stable")
         sorted_codes = self._pcodes[self._by_code]
         cells = (query_keys[:, None, :] + _BLOCK[None, :, :]).reshape(-1, 3)
-        codes = encode_keys(cells, self._key_origin)
+        codes = encode_keys(cells, self._key_origin, outside=-1)  # (a cell beyond the codes' range holds no map voxel)
         lo = np.searchsorted(sorted_codes, codes, side="left")
         hi = np.searchsorted(sorted_codes, codes, side="right")
         counts = hi - lo
