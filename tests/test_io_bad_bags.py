@@ -646,7 +646,7 @@ def test_integer_point_times_in_microseconds_are_refused_by_the_stamps_spacing(t
     rec["t"] = np.round(np.linspace(0, 0.1, n) * 1e6)  # microseconds
     bag = write_ros1_bag(tmp_path / "us.bag", [(1000.0 + 0.1 * k, fields, 16, rec.tobytes(), n) for k in range(6)], odometry=odometry)
     message = (f"{bag}: per-point time field 't': sweeps of 0.0001 s (the median over the first 5 scans) while the scans are "
-               "stamped 0.1 s apart (0.1 % of it, less than 1 %): read as integer nanoseconds, the unit looks like "
+               "stamped 0.1 s apart (0.1 % of it), under 0.001 s: read as integer nanoseconds, the unit looks like "
                "microseconds (or the values are 1000x too small); time_field=none reads the scans without point times")
     for read in (lambda ds: ds.sweep_duration_s, lambda ds: ds.stamp_instant, lambda ds: ds.ground_truth):
         with pytest.raises(DataError) as err:

@@ -288,3 +288,18 @@ def test_generic_points_with_nan_are_refused_naming_the_file_or_dropped_when_ask
     np.testing.assert_array_equal(scan.points_xyz, points[~missing].astype(np.float32))
     np.testing.assert_allclose(scan.point_times_s, times[~missing].astype(np.float32))
     assert dataset.reader_warnings[0].startswith("left out 50 of 400 points with NaN or infinite coordinates in frame 1")
+
+
+def test_generic_refuses_integer_times_in_microseconds(tmp_path):
+    """uint32 times in microseconds were read as nanoseconds by generic: (a 0.1 s sweep of 1e-4 s, no word), where the
+    bag and KITTI readers refuse them: with no stamps to compare, a sweep under a millisecond is refused."""
+    import open3d as o3d
+
+    us = np.linspace(0, 99_500, len(RING)).astype(np.uint32)
+    for k in range(2):
+        cloud = o3d.t.geometry.PointCloud(o3d.core.Tensor((RING + [k, 0.0, 0.0]).astype(np.float32)))
+        cloud.point["t"] = o3d.core.Tensor(us[:, None])
+        o3d.t.io.write_point_cloud(str(tmp_path / f"{k:06d}.pcd"), cloud)
+    with pytest.raises(DataError, match=r"000001\.pcd \(frame 1\): the 't' field: sweeps of 9\.95e-05 s \(this scan\), under "
+                                        r"0\.001 s: read as integer nanoseconds, the unit looks like microseconds"):
+        open_dataset("generic", tmp_path).read_scan(1)

@@ -538,8 +538,8 @@ def test_per_point_times_in_microseconds_are_refused_by_times_txt_spacing(tmp_pa
     with pytest.raises(DataError) as err:
         open_dataset("kitti", folder).read_scan(1)
     assert str(err.value) == (f"{folder / 'point_times'}: per-point times in point_times/: sweeps of 9.89e-05 s (the median "
-                              "over 3 frames; times.txt gives the stamps) while the scans are stamped 0.1 s apart (0.099 % of "
-                              "it, less than 1 %): read as integer nanoseconds (uint32), the unit looks like microseconds (or "
+                              "over 3 frames; times.txt gives the stamps) while the scans are stamped 0.1 s apart (0.0989 % of "
+                              "it), under 0.001 s: read as integer nanoseconds (uint32), the unit looks like microseconds (or "
                               "the values are 1000x too small); rename point_times/ to read the scans without them")
     for path, times in seconds.items():  # a quarter of the turn, as a sensor with a partial field of view sees it
         np.save(path, np.round(0.25 * times * 1e9).astype(np.uint32))

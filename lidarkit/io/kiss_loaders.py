@@ -546,13 +546,15 @@ class GenericScans(KissLoaderScans):
         scan = super().read_scan(index)
         if scan.point_times_s is None or self._time_dtype is None:
             return scan
-        from lidarkit.io.pointcloud2 import checked_point_times
+        from lidarkit.io.pointcloud2 import check_sweep_span, checked_point_times, time_unit_read
 
         raw = scan.point_times_s.astype(self._time_dtype)  # (exact: the loader's float64 of the file's values)
-        times, convention = checked_point_times(
-            raw, scan.points_xyz, what=f"the {self._time_field!r} field", within="one scan",
-            hint="folder:PATH reads the scans without per-point times", source=files[index], location=f"frame {index}",
-        )
+        hint = "folder:PATH reads the scans without per-point times"
+        times, convention = checked_point_times(raw, scan.points_xyz, what=f"the {self._time_field!r} field", within="one scan",
+                                                hint=hint, source=files[index], location=f"frame {index}")
+        # (no stamps to compare with: a sweep under a millisecond is another unit, as microseconds read as nanoseconds)
+        check_sweep_span(float(np.ptp(times)), None, what=f"the {self._time_field!r} field", unit=time_unit_read(raw.dtype),
+                         over="this scan", hint=hint, source=files[index], location=f"frame {index}")
         return dataclasses.replace(scan, point_times_s=times, point_time_convention=convention)
 
 

@@ -45,6 +45,9 @@ _MIN_POINTS_TO_JUDGE = 100
 #: Least share of the stamps' spacing a sweep's point times span: a sensor seeing a quarter of its turn spans 25 %,
 #: microseconds read as nanoseconds span 0.1 % (a 0.1 s sweep of 1e-4 s re-timed the ground truth by 50 us)
 MIN_SWEEP_SHARE = 0.01
+#: ... and shorter than this (s): no scanning LiDAR sweeps in under a millisecond, while a recording throttled to one
+#: 0.1 s sweep every 10 s spans 1 % of its stamps' spacing
+MIN_SWEEP_S = 1e-3
 
 
 @dataclass(frozen=True)
@@ -208,16 +211,18 @@ def time_unit_read(dtype: np.dtype) -> str:
     return "integer nanoseconds" if np.issubdtype(dtype, np.integer) else "seconds"
 
 
-def check_sweep_span(span_s: float, spacing_s: float, *, what: str, unit: str, over: str, hint: str, source: object,
+def check_sweep_span(span_s: float, spacing_s: float | None, *, what: str, unit: str, over: str, hint: str, source: object,
                      location: str | None = None) -> None:
     """DataError when point times spanning ``span_s`` per sweep (a median ``over`` some scans) cover less than
-    :data:`MIN_SWEEP_SHARE` of the ``spacing_s`` between the scans' stamps: microseconds read as nanoseconds (a uint32
-    ``t`` in us) gave sweeps of 1e-4 s and re-timed the ground truth without a word. ``unit``: how they were read."""
-    if span_s > 0 and spacing_s > 0 and span_s < MIN_SWEEP_SHARE * spacing_s:
+    :data:`MIN_SWEEP_SHARE` of the ``spacing_s`` between the scans' stamps (None: not known) and less than
+    :data:`MIN_SWEEP_S`: microseconds read as nanoseconds (a uint32 ``t`` in us) gave sweeps of 1e-4 s and re-timed the
+    ground truth without a word. ``unit``: how they were read."""
+    if 0 < span_s < MIN_SWEEP_S and (spacing_s is None or span_s < MIN_SWEEP_SHARE * spacing_s):
+        stamped = "" if spacing_s is None else (f" while the scans are stamped {spacing_s:.3g} s apart ({100 * span_s / spacing_s:.3g} % "
+                                                f"of it)")
         raise DataError(
-            f"{what}: sweeps of {span_s:.3g} s ({over}) while the scans are stamped {spacing_s:.3g} s apart "
-            f"({100 * span_s / spacing_s:.2g} % of it, less than {100 * MIN_SWEEP_SHARE:g} %): read as {unit}, the unit "
-            f"looks like microseconds (or the values are 1000x too small); {hint}", source=source, location=location,
+            f"{what}: sweeps of {span_s:.3g} s ({over}){stamped}, under {MIN_SWEEP_S:g} s: read as {unit}, the unit looks "
+            f"like microseconds (or the values are 1000x too small); {hint}", source=source, location=location,
         )
 
 
@@ -278,5 +283,5 @@ def _time_field(names: list[str], wanted: str | None, source: str, location: str
     return wanted
 
 
-__all__ = ["MAX_SWEEP_S", "MIN_SWEEP_SHARE", "NANOSECONDS_AFTER", "TIME_FIELDS", "DecodedCloud", "check_sweep_span",
+__all__ = ["MAX_SWEEP_S", "MIN_SWEEP_S", "MIN_SWEEP_SHARE", "NANOSECONDS_AFTER", "TIME_FIELDS", "DecodedCloud", "check_sweep_span",
            "checked_point_times", "decode_pointcloud2", "fields_dtype", "point_times_seconds", "stamp_seconds", "time_unit_read"]
