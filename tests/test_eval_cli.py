@@ -512,6 +512,18 @@ def test_a_missing_trajectory_is_one_line_with_relations_too(capsys):
         assert exc.value.code == 1 and capsys.readouterr().err.strip() == line
 
 
+def test_relations_and_trajectory_swapped_name_the_order(tmp_path, capsys):
+    """`eval --relations EST RELATIONS` read the relations file as a TUM trajectory: "quaternion norm 0.0173 is not 1"."""
+    relations = shared_path("carmen_2d", "aces.relations")
+    est = tmp_path / "est.tum"
+    Trajectory(np.tile(np.eye(4), (3, 1, 1)), np.array([0.0, 1.0, 2.0])).to_tum(est)
+    with pytest.raises(SystemExit) as exc:
+        main(["eval", "--relations", str(est), str(relations)])
+    assert exc.value.code == 1 and capsys.readouterr().err.strip() == (
+        f"error: --relations: {relations} is a relations file: the order is lidarkit eval --relations RELATIONS EST "
+        f"(lidarkit eval --relations {relations} {est})")
+
+
 @pytest.mark.parametrize("position", ["REF", "EST", "--json", "--markdown", "--ref-times", "--tables", "--relations"])
 def test_a_loop_of_symbolic_links_is_one_line_naming_it(tmp_path, capsys, monkeypatch, position):
     """`ln -s loop loop` given as an input or an output printed a traceback (RuntimeError: Symlink loop, from

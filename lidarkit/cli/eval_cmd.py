@@ -11,7 +11,7 @@ import typer
 
 from lidarkit.cli.app import app, named_by_option
 from lidarkit.cli.outputs import results_console
-from lidarkit.errors import ConfigError
+from lidarkit.errors import ConfigError, DataError
 from lidarkit.eval.ape_rpe import ALIGNMENTS, DELTA_UNITS
 from lidarkit.eval.evaluate import EvaluationSettings
 from lidarkit.eval.relations import DEFAULT_MAX_TIME_DIFF_S
@@ -107,7 +107,19 @@ def eval_command(
                               "--relation-max-diff, --format/--est-format and --est-times)", source="--relations")
         if not (math.isfinite(relation_max_diff) and relation_max_diff >= 0):  # (named the library's max_time_diff_s)
             raise ConfigError(f"must be a finite number of seconds >= 0, got {relation_max_diff:g}", source="--relation-max-diff")
-        _relations_report(load(ref, est_format, est_times, "--est-times"), relations, relation_max_diff, json_out)
+        try:
+            est_traj = load(ref, est_format, est_times, "--est-times")
+        except DataError as err:  # (the two files swapped read "quaternion norm 0.0173 is not 1" of the relations file)
+            from lidarkit.errors import LidarKitError
+            from lidarkit.io.carmen import Relations
+
+            try:
+                Relations.read(ref)
+            except LidarKitError:
+                raise err from None
+            raise ConfigError(f"{ref} is a relations file: the order is lidarkit eval --relations RELATIONS EST "
+                              f"(lidarkit eval --relations {ref} {relations})", source="--relations") from None
+        _relations_report(est_traj, relations, relation_max_diff, json_out)
         return
     if relation_max_diff != DEFAULT_MAX_TIME_DIFF_S:  # (accepted and ignored without --relations)
         raise ConfigError("--relation-max-diff applies to --relations only (pose-by-pose matching by time: --associate --max-diff)",
