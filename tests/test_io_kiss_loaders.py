@@ -303,3 +303,27 @@ def test_generic_refuses_integer_times_in_microseconds(tmp_path):
     with pytest.raises(DataError, match=r"000001\.pcd \(frame 1\): the 't' field: sweeps of 9\.95e-05 s \(this scan\), under "
                                         r"0\.001 s: read as integer nanoseconds, the unit looks like microseconds"):
         open_dataset("generic", tmp_path).read_scan(1)
+
+
+def test_a_kiss_kind_without_drop_nonfinite_names_a_reader_that_has_it(tmp_path):
+    """The NaN refusal told every kiss-icp kind to use drop_nonfinite=true, which only generic and ncd take
+    (kiss_kitti: 'unknown option drop_nonfinite'): it names the readers of the files themselves."""
+    import shutil
+
+    from conftest import shared_path
+
+    seq = tmp_path / "sequences" / "00"
+    (seq / "velodyne").mkdir(parents=True)
+    (tmp_path / "poses").mkdir()
+    for n in (0, 1):
+        shutil.copy(shared_path("kitti_odometry", "sequences", "00", "velodyne", f"{n:06d}.bin"), seq / "velodyne")
+    shutil.copy(shared_path("kitti_odometry", "sequences", "00", "calib.txt"), seq)
+    rows = shared_path("kitti_odometry", "poses", "00.txt").read_text().splitlines()[:2]
+    (tmp_path / "poses" / "00.txt").write_text("\n".join(rows) + "\n")
+    scan = np.fromfile(seq / "velodyne" / "000001.bin", dtype=np.float32).reshape(-1, 4)
+    scan[10, 0] = np.nan
+    scan.tofile(seq / "velodyne" / "000001.bin")
+    with pytest.raises(DataError, match=r"000001\.bin \(frame 1\): 1 of \d+ points are NaN or infinite \(first at point 10\); the "
+                                        r"kiss_kitti reader keeps every point \(kiss-icp's loader\): a reader of the files "
+                                        r"themselves \(kitti:, folder:\) drops them with drop_nonfinite=true$"):
+        open_dataset("kiss_kitti", tmp_path, sequence="00").read_scan(1)

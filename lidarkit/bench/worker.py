@@ -46,7 +46,7 @@ class _WarningCapture(logging.Handler):
     @property
     def messages(self) -> list[str]:
         """The kept warnings in the order they came, the count of those not kept where they were."""
-        dropped = [f"... and {self.n_dropped} more warnings, not kept (the job's first {FIRST_WARNINGS_KEPT} and last "
+        dropped = [f"... and {self.n_dropped} more warning{'s' if self.n_dropped != 1 else ''}, not kept (the job's first {FIRST_WARNINGS_KEPT} and last "
                    f"{LAST_WARNINGS_KEPT} are)"] if self.n_dropped else []
         return self.first + dropped + list(self.last)
 

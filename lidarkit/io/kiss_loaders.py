@@ -148,8 +148,14 @@ class KissLoaderScans:
         if not n_bad:
             return points, times
         if not self.drop_nonfinite:
-            raise DataError(f"{n_bad} of {len(ok)} points are NaN or infinite (first at point {int(np.argmin(ok))}); drop them "
-                            f"with drop_nonfinite=true ({self.kind}:PATH?drop_nonfinite=true)", source=source, location=f"frame {index}")
+            import inspect
+
+            takes_it = "drop_nonfinite" in inspect.signature(type(self)).parameters
+            way_out = (f"drop them with drop_nonfinite=true ({self.kind}:PATH?drop_nonfinite=true)" if takes_it else
+                       f"the {self.kind} reader keeps every point (kiss-icp's loader): a reader of the files themselves "
+                       "(kitti:, folder:) drops them with drop_nonfinite=true")
+            raise DataError(f"{n_bad} of {len(ok)} points are NaN or infinite (first at point {int(np.argmin(ok))}); {way_out}",
+                            source=source, location=f"frame {index}")
         if n_bad == len(ok):
             raise DataError(f"all {n_bad} points are NaN or infinite: no point left", source=source, location=f"frame {index}")
         if not self._nonfinite_warned:
