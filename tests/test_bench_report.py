@@ -1427,6 +1427,8 @@ def test_a_run_whose_frames_did_not_register_is_marked_and_neither_bold_nor_in_t
     assert "\\textbf{1.773}" in (tmp_path / "tables" / "ape_rmse.tex").read_text()
     assert "sim open & 0.481 (a) & " in (tmp_path / "tables" / "ape_rmse.tex").read_text()
     assert "<td>0.481 (a)</td><td><b>1.773</b></td>" in (tmp_path / "report.html").read_text()
+    rows = (tmp_path / "tables" / "ape_rmse.csv").read_text().splitlines()  # (the CSV gave the value without a word)
+    assert rows[0].endswith(",marks") and rows[1].startswith("sim open,0.48") and rows[1].endswith(",ground_filtered (a)")
     # most but not all frames, over two seeds
     (tmp_path / "jobs").rename(tmp_path / "first")
     for seed, failed in ((0, 5), (1, 2)):
