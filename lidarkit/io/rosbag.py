@@ -389,13 +389,8 @@ class _BagScans:
         if topic not in self._instant_poses:
             stamps, poses = [], []
             for k, (_, msg) in enumerate(self._read_all(topic)):
-                p, q = msg.pose.position, msg.pose.orientation
-                xyz, quat = [p.x, p.y, p.z], [q.x, q.y, q.z, q.w]
-                if not np.isfinite(xyz + quat).all() or not np.linalg.norm(quat) > 1e-6:
-                    raise DataError(f"pose {xyz} with orientation {quat}: not a finite position and unit quaternion",
-                                    source=f"{self.path}{topic}", location=f"message {k}")
                 stamps.append(stamp_seconds(msg.header.stamp))
-                poses.append(_pose_matrix(xyz, quat))
+                poses.append(_checked_pose(msg.pose, f"{self.path}{topic}", k))
             order = np.argsort(stamps, kind="stable")
             self._instant_poses[topic] = (np.array(stamps)[order], np.stack(poses)[order] if poses else np.zeros((0, 4, 4)))
         return self._instant_poses[topic]
@@ -407,14 +402,9 @@ class _BagScans:
         logged out of order stopped the re-timing: it needs increasing stamps."""
         stamps, poses, child_frames = [], [], set()
         for k, (_, msg) in enumerate(self._read_all(self.ground_truth_topic)):
-            p, q = msg.pose.pose.position, msg.pose.pose.orientation
             child_frames.add(str(msg.child_frame_id))
             stamps.append(stamp_seconds(msg.header.stamp))
-            xyz, quat = [p.x, p.y, p.z], [q.x, q.y, q.z, q.w]
-            if not np.isfinite(xyz + quat).all() or not np.linalg.norm(quat) > 1e-6:
-                raise DataError(f"pose {xyz} with orientation {quat}: not a finite position and unit quaternion",
-                                source=f"{self.path}{self.ground_truth_topic}", location=f"message {k}")
-            poses.append(_pose_matrix(xyz, quat))
+            poses.append(_checked_pose(msg.pose.pose, f"{self.path}{self.ground_truth_topic}", k))
         if not poses:
             raise DataError(f"ground-truth topic {self.ground_truth_topic} has no messages (ground_truth_topic=none runs without "
                             "ground truth)", source=self.path)
@@ -491,7 +481,7 @@ class _BagScans:
         :data:`SWEEP_TIMING_READ` scans carries point times, or they carry times on another clock than the stamps (a
         sweep more than a period from its stamp: :attr:`reader_warnings` says so, with the field and the offset).
         DataError when the sweeps span less than :data:`~lidarkit.io.pointcloud2.MIN_SWEEP_SHARE` of the stamps'
-        spacing: times in microseconds read as nanoseconds."""
+        spacing and under :data:`~lidarkit.io.pointcloud2.MIN_SWEEP_S`: times in microseconds read as nanoseconds."""
         offsets, ends, spans = [], [], []
         for k in range(min(self.n_scans, SWEEP_TIMING_READ)):
             decoded = self._decoded(k, all_missing_ok=True)
@@ -583,6 +573,17 @@ def interpolation_error_m(stamps_s: np.ndarray, positions_m: np.ndarray, times_s
     i = np.clip(np.searchsorted(stamps_s, times_s, side="right") - 1, 0, len(stamps_s) - 2)
     spread = np.abs((times_s - stamps_s[i]) * (times_s - stamps_s[i + 1]))
     return float(np.max(0.5 * np.maximum(at_stamp[i], at_stamp[i + 1]) * spread))
+
+
+def _checked_pose(pose: Any, source: str, k: int) -> np.ndarray:
+    """The 4x4 of a ``geometry_msgs/Pose`` (message ``k`` of ``source``); DataError for a non-finite position or a
+    quaternion that is not one."""
+    p, q = pose.position, pose.orientation
+    xyz, quat = [p.x, p.y, p.z], [q.x, q.y, q.z, q.w]
+    if not np.isfinite(xyz + quat).all() or not np.linalg.norm(quat) > 1e-6:
+        raise DataError(f"pose {xyz} with orientation {quat}: not a finite position and unit quaternion", source=source,
+                        location=f"message {k}")
+    return _pose_matrix(xyz, quat)
 
 
 def _pose_matrix(xyz: list[float], quat_xyzw: list[float]) -> np.ndarray:
