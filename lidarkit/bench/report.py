@@ -119,8 +119,8 @@ class Report:
 def import_task_modules(records: list[dict[str, Any]], manifest: dict[str, Any]) -> dict[str, str]:
     """Import the module of each task of ``records`` registered in code (as the run recorded it, in each result or
     ``suite.json``), by name, else from the folder it was imported from when the suite ran; ``{task: why}`` of the tasks
-    still unknown, each said in one warning. Without the module a report showed bare metric names, no speed table, and
-    removed the sweep figures an earlier report had drawn."""
+    still unknown (the caller says what that costs it). Without the module a report showed bare metric names, no speed
+    table, and removed the sweep figures an earlier report had drawn."""
     from lidarkit.bench.tasks import available_tasks, get_task
 
     recorded = manifest.get("task_modules") if isinstance(manifest.get("task_modules"), dict) else {}
@@ -139,7 +139,6 @@ def import_task_modules(records: list[dict[str, Any]], manifest: dict[str, Any])
                 why = str(err)
         if why:
             unknown[task] = why
-            log.warning("task %r: %s; its metrics are shown by name and its sweep figures in plots/ are kept", task, why)
     return unknown
 
 
@@ -1028,6 +1027,8 @@ def build_report(
     unreadable = {k for k in missing if result_path(out_dir, k).exists()}  # (load_results logged why)
     n_left_out, n_earlier_version = left_out_counts(every_record, records, expected.values())
     unknown_tasks = import_task_modules(records + [{"job": spec} for spec in missing.values()], manifest)
+    for task, why in unknown_tasks.items():
+        log.warning("task %r: %s; its metrics are shown by name and its sweep figures in plots/ are kept", task, why)
     report = Report(out_dir=out_dir, tables=aggregate(records, list(missing.values())), n_records=len(records),
                     skipped=_skipped(manifest), n_expected=len(expected), n_left_out=n_left_out,
                     n_earlier_version=n_earlier_version, versions=version_counts(records),

@@ -106,7 +106,8 @@ def load_bench_runs(path: str | os.PathLike, method: str | None = None, every_re
     ``n_earlier_version`` too); ``every_result``: all of them, the latest of each job. ``records``:
     the folder's records when already read (the same folder given twice warned of each bad result twice)."""
     from lidarkit.bench.jobs import Job, canonical_json
-    from lidarkit.bench.report import latest_per_job, left_out_counts, suite_jobs as read_suite_jobs
+    from lidarkit.bench.report import import_task_modules, latest_per_job, left_out_counts, suite_manifest
+    from lidarkit.bench.report import suite_jobs as read_suite_jobs
     from lidarkit.bench.results import load_results, results_folder
 
     path = results_folder(path)
@@ -120,7 +121,10 @@ def load_bench_runs(path: str | os.PathLike, method: str | None = None, every_re
     # is that job run by another lidarkit version (they were called "an earlier suite"'s, and counted after one per spec)
     latest = latest_per_job([r for r in every if not suite or r["key"] in suite])
     n_left_out, n_earlier_version = left_out_counts(every, latest, suite_jobs.values())
-    unknown_tasks = _import_task_modules(path, latest)
+    # the modules of tasks registered in code, as the report imports them (a plugin task's headline and labels were
+    # unknown to compare: "no default metric in these results" while its report ranked by them); those still unknown
+    # are said in the errors that need them
+    unknown_tasks = import_task_modules(latest, suite_manifest(path))
     records = [r for r in latest if r.get("status") == "ok"]
     every_ok = [r for r in every if r.get("status") == "ok"]
     if not records:
@@ -192,24 +196,6 @@ def _as_label(method: str) -> str:
     except LidarKitError:
         return method
     return method_label(match.group(1), params)
-
-
-def _import_task_modules(path: Path, records: list[dict[str, Any]]) -> dict[str, str]:
-    """Import the modules of the tasks of ``records`` registered in code, as the report does
-    (:func:`lidarkit.bench.report.import_task_modules`): a plugin task's headline and labels were unknown to compare ("no
-    default metric in these results") while its report ranked by them. ``{task: why}`` of those still unknown, said in
-    the errors that need them, not in the report's warning (which speaks of its figures)."""
-    import logging
-
-    from lidarkit.bench.report import suite_manifest, import_task_modules
-
-    report_log = logging.getLogger("lidarkit.bench.report")
-    quiet = logging.Filter("(none)")  # (passes no record: the report's warning names its plots)
-    report_log.addFilter(quiet)
-    try:
-        return import_task_modules(records, suite_manifest(path))
-    finally:
-        report_log.removeFilter(quiet)
 
 
 def _options_unit(task: str, options: dict[str, Any], dataset: dict[str, Any], record: dict[str, Any]) -> dict[str, Any]:
