@@ -6,9 +6,7 @@ Seeds of one (dataset, method) are pooled: their segments together, their APE/RP
 
 from __future__ import annotations
 
-import csv
 import dataclasses
-import io
 import logging
 from collections import defaultdict
 from dataclasses import dataclass, field
@@ -288,17 +286,11 @@ class MarkedTable(PubTable):
         mark = self.marks.get((i, j))
         return super().cell(i, j) + (f" ({mark})" if mark else "")
 
-    def to_csv(self) -> str:
-        """The plain values with a last ``marks`` column naming each row's marked cells (``ground_filtered (a)``): a
-        CSV reader saw the value of a run that did not register as any other."""
-        lines = super().to_csv().splitlines()
-        buf = io.StringIO()
-        writer = csv.writer(buf, lineterminator="\n")
-        writer.writerow([*next(csv.reader([lines[0]])), "marks"])
-        for i, line in enumerate(lines[1:]):
-            marked = "; ".join(f"{self.col_labels[j]} ({mark})" for (row, j), mark in sorted(self.marks.items()) if row == i)
-            writer.writerow([*next(csv.reader([line])), marked])
-        return buf.getvalue()
+    def csv_extra_columns(self) -> dict[str, list[str]]:
+        """A ``marks`` column naming each row's marked cells (``ground_filtered (a)``): a CSV reader saw the value of a
+        run that did not register as any other."""
+        return {"marks": ["; ".join(f"{self.col_labels[j]} ({mark})" for (row, j), mark in sorted(self.marks.items()) if row == i)
+                          for i in range(len(self.row_labels))]}
 
 
 def remove_stale_tables(out_dir: Path, pub: Publication) -> None:

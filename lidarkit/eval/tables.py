@@ -150,10 +150,16 @@ class PubTable:
     def to_csv(self) -> str:
         buf = io.StringIO()
         writer = csv.writer(buf, lineterminator="\n")
-        writer.writerow([self.corner, *self.col_labels])
+        extra = self.csv_extra_columns()
+        writer.writerow([self.corner, *self.col_labels, *extra])
         for i, label in enumerate(self.row_labels):
-            writer.writerow([label, *("" if not np.isfinite(x) else repr(float(x)) for x in self.values[i])])
+            writer.writerow([label, *("" if not np.isfinite(x) else repr(float(x)) for x in self.values[i]),
+                             *(extra[name][i] for name in extra)])
         return buf.getvalue()
+
+    def csv_extra_columns(self) -> dict[str, list[str]]:
+        """Columns after the values in :meth:`to_csv`, each a text per row (none here)."""
+        return {}
 
     def to_latex(self) -> str:
         """A booktabs ``tabular`` (needs ``\\usepackage{booktabs}``); the best value of each row in ``\\textbf``."""
