@@ -623,13 +623,17 @@ def rpe(
         else:
             metric = metrics.RPE(pose_relation, evo_delta, unit, rel_delta_tol, all_pairs, pairs_from_reference)
         if not laid_out:  # (the laid-out copies were compared above)
-            metric.process_data((ref_evo, est_evo))
+            # (evo searches the pairs of point_distance relations again here, printing its progress as above)
+            with contextlib.redirect_stdout(io.StringIO()):
+                metric.process_data((ref_evo, est_evo))
     except EvoException as err:
         raise EvaluationError(f"RPE failed: {err}", source=source) from err
     stats = _stats(metric, source)
-    if relation == "point_distance_error_ratio" and len(metric.error) != len(pairs):
-        keep = np.isin(pairs[:, 1], np.asarray(metric.delta_ids)) if not legacy_pairs else slice(None)
-        pairs = pairs[keep]
+    if relation == "point_distance_error_ratio":
+        # evo drops the pairs over which the reference stands still (no ratio); the same test here keeps each error at
+        # its pair (matching end indices kept a dropped pair whose end another pair shared; legacy pairs kept all)
+        ref_xyz = ref.positions_xyz
+        pairs = pairs[np.linalg.norm(ref_xyz[pairs[:, 1]] - ref_xyz[pairs[:, 0]], axis=1) > 0]
     # the laid-out and legacy copies were compared as consecutive frames: title the selection that was scored (all-pairs
     # and given pairs read "delta = 1 (frames) using consecutive pairs")
     metric.delta, metric.delta_unit, metric.all_pairs = evo_delta, unit, all_pairs
