@@ -4,7 +4,9 @@ kiss-icp's bag loaders read the field layout from the ``PointField`` constants (
 messages decoded from MCAP schemas without constants lack; lidarkit reads the datatype codes of the ROS
 definition directly and adds what kiss-icp leaves out: missing x/y/z fields, a data buffer shorter than the
 header says, non-finite per-point times, the unit of the time field, and missing returns at (0, 0, 0), left out as
-the point-file readers leave them out (a message of nothing else is refused, as they refuse such a file).
+the point-file readers leave them out (a message of nothing else is refused, as they refuse such a file). Only the
+fields read are laid out: padding (``_``) and other fields may repeat; a counted ``intensity`` is read by its first
+value, while a repeated x, y, z or intensity, or a time field with several values per point, is refused.
 
 Per-point time fields (the first present of :data:`TIME_FIELDS` whose values differ within the message, or the one
 asked for):
@@ -87,8 +89,17 @@ def decode_pointcloud2(msg: Any, *, source: str, location: str, time_field: str 
         return DecodedCloud(np.empty((0, 3)), None, None, "relative_s", None)
     if missing:
         raise DataError(f"PointCloud2 has no {'/'.join(missing)} field (fields: {', '.join(names) or 'none'})", source=source, location=location)
+    unreadable = _unreadable_fields(msg.fields)
+    for axis in ("x", "y", "z"):
+        if axis in unreadable:
+            raise DataError(f"field {axis!r} {unreadable[axis]}: a point's {axis} is not known", source=source, location=location)
+    if names.count("intensity") > 1:  # (a counted one is read by its first value)
+        raise DataError(f"field 'intensity' {unreadable['intensity']}: which is the points' intensity is not known",
+                        source=source, location=location)
+    time_fields = _readable_time_fields(names, unreadable, time_field, source, location)
+    wanted = {"x", "y", "z", "intensity", *time_fields}
     try:
-        dtype = fields_dtype(msg.fields, int(msg.point_step))
+        dtype = fields_dtype(msg.fields, int(msg.point_step), wanted)
     except (ValueError, TypeError, KeyError) as err:
         raise DataError(f"PointCloud2 field layout not readable ({err})", source=source, location=location) from None
     width, height = int(msg.width), int(msg.height)
@@ -130,15 +141,14 @@ def decode_pointcloud2(msg: Any, *, source: str, location: str, time_field: str 
     if not all_kept:
         xyz = xyz[keep]
     intensity = None
-    if "intensity" in names:
-        intensity = np.asarray(cloud["intensity"], dtype=np.float32)
+    if "intensity" in names:  # (a dual-return driver's counted intensity: the first return's)
+        intensity = np.asarray(cloud["intensity" if "intensity" in cloud.dtype.names else "intensity_0"], dtype=np.float32)
         intensity = intensity if all_kept else intensity[keep]
 
-    field = _time_field(names, time_field, source, location)
+    field = time_fields[0] if time_fields else None
     flat: tuple[str, ...] = ()
-    candidates = [f for f in TIME_FIELDS if f in cloud.dtype.names] if time_field == "auto" else []
-    if len(candidates) > 1:
-        field, flat = _varying_time_field(candidates, cloud, None if all_kept else keep)
+    if len(time_fields) > 1:
+        field, flat = _varying_time_field(time_fields, cloud, None if all_kept else keep)
     if field is None:
         return DecodedCloud(xyz, intensity, None, "relative_s", None, n_at_origin)
     raw = cloud[field] if all_kept else cloud[field][keep]
@@ -249,10 +259,17 @@ def _time_order_reversals(times: np.ndarray, xyz: np.ndarray) -> int | None:
 
 #: sensor_msgs/PointField datatype codes
 POINTFIELD_DTYPES = {1: "i1", 2: "u1", 3: "<i2", 4: "<u2", 5: "<i4", 6: "<u4", 7: "<f4", 8: "<f8"}
+#: The name PCL gives padding fields (``x y z _ intensity``), often repeated: never read
+PADDING_FIELD = "_"
 
 
-def fields_dtype(fields: Any, point_step: int) -> np.dtype:
-    """Structured little-endian dtype of a PointCloud2 point; fields with ``count > 1`` become ``name_0, name_1, ...``."""
+def fields_dtype(fields: Any, point_step: int, wanted: set[str] | None = None) -> np.dtype:
+    """Structured little-endian dtype of a PointCloud2 point; fields with ``count > 1`` become ``name_0, name_1, ...``.
+
+    ``wanted``: the field names to hold (None: all). Fields named ``_`` (padding) are left out, and so are fields not
+    wanted, so that padding or a repeated field the reader does not use cannot make the layout unreadable; a wanted
+    name given twice is a ValueError (which one is meant is not known).
+    """
     names, formats, offsets = [], [], []
     for i, field in enumerate(fields):
         code = int(field.datatype)
@@ -260,27 +277,51 @@ def fields_dtype(fields: Any, point_step: int) -> np.dtype:
             raise ValueError(f"field {field.name!r} has unknown datatype code {code}")
         base = np.dtype(POINTFIELD_DTYPES[code])
         count = int(field.count) if int(field.count) > 0 else 1
+        end = int(field.offset) + count * base.itemsize
+        if end > point_step:
+            raise ValueError(f"fields end at byte {end} but point_step is {point_step}")
+        name = field.name or f"unnamed_field_{i}"
+        if name == PADDING_FIELD or (wanted is not None and name not in wanted):
+            continue
         for a in range(count):
-            name = field.name or f"unnamed_field_{i}"
             names.append(name if count == 1 else f"{name}_{a}")
             formats.append(base)
             offsets.append(int(field.offset) + a * base.itemsize)
-    if len(set(names)) != len(names):
-        raise ValueError("duplicate field names")
-    end = max((o + f.itemsize for o, f in zip(offsets, formats)), default=0)
-    if end > point_step:
-        raise ValueError(f"fields end at byte {end} but point_step is {point_step}")
+    repeated = sorted({name for name in names if names.count(name) > 1})
+    if repeated:
+        raise ValueError(f"duplicate field names ({', '.join(repeated)})")
     return np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": point_step})
 
 
-def _time_field(names: list[str], wanted: str | None, source: str, location: str) -> str | None:
+def _unreadable_fields(fields: Any) -> dict[str, str]:
+    """Why a field cannot be read as one value per point, by name: given more than once, or with ``count > 1``."""
+    counts: dict[str, list[int]] = {}
+    for field in fields:
+        counts.setdefault(str(field.name), []).append(int(field.count))
+    why = {}
+    for name, given in counts.items():
+        if len(given) > 1:
+            why[name] = f"is given {len(given)} times in the field list"
+        elif given[0] > 1:
+            why[name] = f"has count {given[0]} ({given[0]} values per point)"
+    return why
+
+
+def _readable_time_fields(names: list[str], unreadable: dict[str, str], wanted: str | None, source: str,
+                          location: str) -> list[str]:
+    """The per-point time fields to consider: the one named, or under ``"auto"`` those of :data:`TIME_FIELDS` present
+    and read as one value per point, in that order; DataError for a named field, or the only ones present, that are
+    not (a ``t`` of count 2 may be a 64-bit time in two halves: reading either as the time would deskew by nonsense)."""
     if wanted is None or wanted in ("", "none"):
-        return None
-    if wanted == "auto":
-        return next((f for f in TIME_FIELDS if f in names), None)
-    if wanted not in names:
+        return []
+    if wanted != "auto" and wanted not in names:
         raise DataError(f"no per-point time field {wanted!r} (fields: {', '.join(names)})", source=source, location=location)
-    return wanted
+    present = [wanted] if wanted != "auto" else [f for f in TIME_FIELDS if f in names]
+    readable = [f for f in present if f not in unreadable]
+    if present and not readable:
+        raise DataError(f"per-point time field {present[0]!r} {unreadable[present[0]]}: which is the point's time is not known "
+                        "(time_field= names another field, none reads no times)", source=source, location=location)
+    return readable
 
 
 __all__ = ["MAX_SWEEP_S", "MIN_SWEEP_S", "MIN_SWEEP_SHARE", "NANOSECONDS_AFTER", "TIME_FIELDS", "DecodedCloud", "check_sweep_span",

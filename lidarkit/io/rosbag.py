@@ -107,6 +107,7 @@ class _BagScans:
         self._next = 0
         self._stream: Iterator[tuple[int, Any]] | None = None
         self._stamps: dict[int, float] = {}
+        self._stamps_checked = False  # one pass over the topic counted its messages and checked their stamps
         self._cloud_frame: str | None = None  # the first cloud's header.frame_id, once a message was read
         self._cloud_field_types: dict[str, int] = {}  # the first cloud decoded's fields: their PointField datatype codes
         self._last_stamp: tuple[int, float] | None = None
@@ -181,6 +182,21 @@ class _BagScans:
     def _location(self, index: int) -> str:
         return f"message {index} on {self.topic}"
 
+    #: what gave :attr:`n_scans`, the count of the topic's messages (said when the stream disagrees)
+    _counted_by = "the bag's index"
+
+    def _miscounted(self, n_read: int) -> DataError:
+        """The error for a topic holding ``n_read`` messages where :attr:`n_scans` were counted: fewer (a truncated bag),
+        or more (a ROS 2 bag's metadata.yaml under-counting them: only the counted ones would be read, without a word)."""
+        if n_read < self.n_scans:
+            return DataError(f"the bag ends after {n_read} of {self.n_scans} messages on {self.topic} ({self.n_scans}: the count "
+                             f"in {self._counted_by}; truncated?)", source=self.path, location=self._location(n_read))
+        return DataError(f"the bag holds {n_read} messages on {self.topic} but {self._counted_by} counts {self.n_scans}; only "
+                         f"the counted ones would be read{self._recount_hint}", source=self.path)
+
+    #: how to correct :attr:`_counted_by` when it under-counts
+    _recount_hint = ""
+
     def _warn_once(self, key: str, message: str) -> None:
         """Keep ``message`` in :attr:`reader_warnings` and log it, the first time only (every message may have it)."""
         if key not in self._warned:
@@ -232,8 +248,7 @@ class _BagScans:
             try:
                 k, msg = next(self._stream)
             except StopIteration:
-                raise DataError(f"the bag ends after {self._next} of {self.n_scans} messages (truncated?)", source=self.path,
-                                location=self._location(self._next)) from None
+                raise self._miscounted(self._next) from None
             self._next += 1
             stamp = stamp_seconds(msg.header.stamp)
             if self._last_stamp is not None and stamp < self._last_stamp[1]:
@@ -263,10 +278,15 @@ class _BagScans:
 
     @property
     def timestamps_s(self) -> np.ndarray:
-        """Header stamps of every scan (one pass over the messages not read yet)."""
-        if len(self._stamps) < self.n_scans:
+        """Header stamps of every scan. The first call reads the whole topic: it holds :attr:`n_scans` messages (a
+        ROS 2 bag's count comes from metadata.yaml, which may be wrong) whose stamps do not go back and are set."""
+        if not self._stamps_checked:
             last = None
+            n_read = 0
             for k, msg in self._read_all(self.topic):
+                n_read = k + 1
+                if k >= self.n_scans:  # (counted only)
+                    continue
                 stamp = stamp_seconds(msg.header.stamp)
                 if last is not None and stamp < last:
                     raise DataError(f"time goes backwards: header stamp {stamp:.9f} s is before {last:.9f} s",
@@ -275,6 +295,14 @@ class _BagScans:
                 self._stamps[k] = stamp
                 if k == 0:
                     self._cloud_frame = str(msg.header.frame_id)
+            if n_read != self.n_scans:
+                raise self._miscounted(n_read)
+            if self.n_scans > 1 and not any(self._stamps.values()):  # (read "0 s after 0 s of frame 0: not increasing")
+                raise DataError(f"every PointCloud2 header stamp on {self.topic} is 0 (not set by the driver): the scans have no "
+                                "time stamps to order them, pair them with ground truth and write their poses by, and the "
+                                "reader takes no other (a bag rewritten with the receive times as header stamps reads)",
+                                source=self.path)
+            self._stamps_checked = True
         return np.array([self._stamps[k] for k in range(self.n_scans)], dtype=np.float64)
 
     @property
@@ -596,7 +624,8 @@ def _pose_matrix(xyz: list[float], quat_xyzw: list[float]) -> np.ndarray:
 
 
 class RosbagScans(_BagScans):
-    """ROS 1 ``.bag`` (or a folder of split bags) or ROS 2 bag folder, via kiss-icp's ``RosbagDataset``.
+    """ROS 1 ``.bag`` (or a folder of split bags) or ROS 2 bag folder (or its ``metadata.yaml``), via kiss-icp's
+    ``RosbagDataset``.
 
     Options: ``topic`` (the PointCloud2 topic; needed when there are several), ``ground_truth_topic`` (a
     ``nav_msgs/Odometry`` topic; default: the only one, ``""`` or ``none``: none), ``time_field`` (``auto``, a field name or
@@ -608,7 +637,17 @@ class RosbagScans(_BagScans):
     def __init__(self, path: str | os.PathLike, topic: str | None = None, ground_truth_topic: str | None = None,
                  time_field: str | None = "auto"):
         require_modules({"rosbags": ROS_EXTRA}, "rosbag")
+        if Path(path).name == "metadata.yaml" and Path(path).is_file():  # (a path copied from a file browser)
+            path = Path(path).parent  # a ROS 2 bag is its folder
         super().__init__(path, topic, ground_truth_topic, time_field)
+
+    @property
+    def _counted_by(self) -> str:
+        return "metadata.yaml" if (self.path / "metadata.yaml").is_file() else "the bag's index"
+
+    @property
+    def _recount_hint(self) -> str:
+        return " ('ros2 bag reindex' rebuilds metadata.yaml from the storage)" if self._counted_by == "metadata.yaml" else ""
 
     def _reader_paths(self) -> list[Path]:
         if self.path.is_dir():
@@ -716,6 +755,7 @@ class McapScans(_BagScans):
     loader does not read."""
 
     kind = "mcap"
+    _counted_by = "the file's summary"
 
     def __init__(self, path: str | os.PathLike, topic: str | None = None, ground_truth_topic: str | None = None,
                  time_field: str | None = "auto"):
