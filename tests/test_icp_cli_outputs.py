@@ -54,3 +54,48 @@ def test_the_no_rmse_note_is_assess_false_only_for_an_unassessed_result():
         unassessed = get_icp("kiss", assess=False).align(np.load(SOURCE), np.load(TARGET))
         assert unassessed.extra["assessed"] is False
         assert no_rmse_note(unassessed) == ASSESS_FALSE_NOTE
+
+
+def _listed_descriptions(out: str) -> dict[str, str]:
+    """``{row name: its description line}`` of a listing printed wide enough not to wrap (the first line of each row)."""
+    rows = {}
+    for line in out.splitlines():
+        cells = [cell.strip() for cell in line.strip().strip("│").split("│")]
+        if len(cells) == 2 and cells[0]:
+            rows[cells[0]] = cells[1]
+    return rows
+
+
+def test_every_listed_description_is_a_whole_sentence(capsys, monkeypatch):
+    """The listings took a docstring's first physical line: plane_to_plane's row ended "... surface covariances. The
+    covariances are". Each description is now the first sentence, joined over lines."""
+    from lidarkit.registration.components import Kernel, registry
+    from lidarkit.registration.components.kernels import KernelConfig
+
+    class WrappedKernel(Kernel):
+        """A kernel whose first sentence runs
+        over two lines. Its second is left out."""
+        Config = KernelConfig
+        name = "wrapped_test"
+
+    monkeypatch.setitem(registry._COMPONENTS["kernel"], "wrapped_test", WrappedKernel)  # (gone after the test)
+    monkeypatch.setenv("COLUMNS", "400")
+    assert cli_exit_code(["icp", "--list-components"]) == 0
+    components = _listed_descriptions(capsys.readouterr().out)
+    assert components["kernel / wrapped_test"] == "A kernel whose first sentence runs over two lines."
+    assert components["residual / plane_to_plane"] == \
+        "Generalized-ICP: Mahalanobis distance under the summed source and map surface covariances."
+    assert cli_exit_code(["icp", "--list"]) == 0
+    methods = _listed_descriptions(capsys.readouterr().out)
+    assert len(components) >= 15 and "kiss (stateful)" in methods
+    unfinished = {name: text for name, text in {**components, **methods}.items() if not text.endswith(".")}
+    assert unfinished == {}
+
+
+def test_the_iterations_row_of_kiss_says_the_backend_reports_none_with_or_without_the_assessment(capsys):
+    """kiss (and Open3D) never report an iteration count, yet with assess=false the row read "not recorded
+    (assess=False)", as if the assessment would have given one."""
+    for assess in ("true", "false"):
+        code = cli_exit_code(["icp", str(SOURCE), str(TARGET), "-m", "kiss", "-p", f"assess={assess}"])
+        out = " ".join(capsys.readouterr().out.replace("│", " ").split())
+        assert code == 0 and "iterations not reported by the backend " in out and "not recorded" not in out, assess

@@ -223,3 +223,51 @@ def test_too_few_matches_to_take_a_step_say_how_many_and_within_what():
     assert gated.reason == "only 3 correspondences within 1 m (need 6)"
     ungated = get_icp("pipeline", threshold={"name": "fixed", "max_distance_m": None}).align(near, target)
     assert ungated.reason == "only 3 correspondences (need 6)"
+
+
+@pytest.mark.parametrize("params, unread", [
+    ({"preset": "vanilla_seq", "min_range_m": 5.0, "max_range_m": 20.0}, ["max_range_m", "min_range_m"]),
+    ({"preset": "vanilla_seq", "voxel_size_m": 1.0}, ["voxel_size_m"]),
+    ({"preset": "vanilla_seq", "voxel_order": "input", "voxel_backend": "numpy"}, ["voxel_backend", "voxel_order"]),
+    ({"preset": "kiss_like", "preprocess": [], "min_range_m": 5.0}, ["min_range_m"]),
+    ({"source_covariance_neighbors": 20}, ["source_covariance_neighbors"]),
+    ({"residual": "point_to_plane", "source_covariance_neighbors": 20}, ["source_covariance_neighbors"]),
+])
+def test_a_setting_the_composition_does_not_read_is_refused(params, unread):
+    """vanilla_seq (no range crop, no voxels) took min_range_m=5 / max_range_m=20 and gave the same pose, all 54850
+    source points registered, with config.json recording the crop; voxel_* likewise, source_covariance_neighbors without
+    plane_to_plane. Each is refused at a value other than its default, naming the setting and why."""
+    with pytest.raises(ConfigError) as err:
+        get_icp("pipeline", **params)
+    message = str(err.value)
+    assert "\n" not in message
+    for name in unread:
+        assert f"{name} is not read by this composition" in message
+    assert message.count("is not read by this composition") == len(unread)
+
+
+def test_the_compositions_keep_the_settings_they_read_and_a_written_config_loads_again():
+    """kiss_like reads the range crop and the voxels, plane_to_plane the source neighbours, vanilla_seq on voxelized clouds
+    the voxel settings (its voxel size derived from max_range_m); a written vanilla_seq config (every field, defaults
+    included) loads again."""
+    read = {"min_range_m": 5.0, "max_range_m": 20.0, "voxel_size_m": 1.0, "voxel_order": "input", "voxel_backend": "numpy"}
+    assert get_icp("pipeline", preset="kiss_like", **read).config.min_range_m == 5.0
+    assert get_icp("pipeline", residual="plane_to_plane", source_covariance_neighbors=20).config.source_covariance_neighbors == 20
+    voxelized = get_icp("pipeline", preset="vanilla_seq", map_voxel_factor=0.5, max_range_m=20.0, voxel_order="input")
+    assert voxelized.config.resolved_voxel_size_m == pytest.approx(0.2)
+    assert get_icp("pipeline", preset="vanilla_seq", map="voxel_hash", max_range_m=20.0).config.max_range_m == 20.0
+    for preset in ("vanilla_seq", "kiss_like"):
+        config = get_icp("pipeline", preset=preset).config
+        assert get_icp("pipeline", **json.loads(json.dumps(config.model_dump(mode="json")))).config == config
+
+
+def test_the_cli_refuses_a_range_crop_vanilla_seq_does_not_apply(tmp_path, capsys):
+    from lidarkit.samples import sample_path
+
+    pair = [str(sample_path("kitti_pair", name)) for name in ("000095.npy", "000094.npy")]
+    out = tmp_path / "out"
+    code = cli_exit_code(["icp", *pair, "-m", "pipeline", "-p", "preset=vanilla_seq", "-p", "min_range_m=5", "-p", "max_range_m=20",
+                          "-o", str(out)])
+    error = capsys.readouterr().err.strip().splitlines()
+    assert code == 1 and len(error) == 1 and not out.exists()
+    assert "min_range_m is not read by this composition: no component takes it (range_crop does)" in error[0]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import inspect
 import json
 import re
 from pathlib import Path
@@ -84,7 +85,7 @@ def _list_methods() -> None:
     table.add_column("parameters (default) — description")
     for name in available_icp():
         cls = get_icp_class(name)
-        doc = (cls.__doc__ or "").strip().splitlines()[0] if cls.__doc__ else ""
+        doc = first_sentence(cls.__doc__)
         cell = Text(doc, style="italic") if doc else Text()
         for key, (type_name, default, desc) in config_fields(name).items():
             if key == "assess" and not assessed_apart(cls):
@@ -107,9 +108,8 @@ def _list_ground_segmenters() -> None:
     table.add_column("segmenter", style="bold")
     table.add_column("parameters (default) — description")
     for name in available_ground_segmenters():
-        doc = (get_ground_segmenter_class(name).__doc__ or "").strip().splitlines()
         lines = [f"{key}: {type_name} = {shown_default(default)} — {desc}" for key, (type_name, default, desc) in ground_config_fields(name).items()]
-        table.add_row(name, _described(doc[0] if doc else "", lines))
+        table.add_row(name, _described(first_sentence(get_ground_segmenter_class(name).__doc__), lines))
     stdout().print(table)
 
 
@@ -122,9 +122,8 @@ def _list_components() -> None:
     for kind in KINDS:
         for name in available_components(kind):
             cls = get_component_class(kind, name)
-            doc = (cls.__doc__ or "").strip().splitlines()[0] if cls.__doc__ else ""
             lines = [f"{key}: {type_name} = {shown_default(default)} — {desc}" for key, (type_name, default, desc) in component_fields(kind, name).items()]
-            table.add_row(f"{kind} / {name}", _described(doc, lines))
+            table.add_row(f"{kind} / {name}", _described(first_sentence(cls.__doc__), lines))
     stdout().print(table)
     from lidarkit.registration.components.registry import broken_component_plugins
 
@@ -137,8 +136,16 @@ def _print_left_out(broken: dict[str, str]) -> None:
         stdout().print(f"plugin {name!r} left out: {reason}", style="yellow", markup=False, highlight=False)
 
 
+def first_sentence(doc: str | None) -> str:
+    """A docstring's first sentence, joined over its lines (up to ". " or the first blank line): its first physical
+    line ended mid-sentence in the listings ("... The covariances are")."""
+    paragraph = " ".join(inspect.cleandoc(doc or "").split("\n\n")[0].split())
+    end = re.search(r"(?<!e\.g)(?<!i\.e)\.(\s|$)", paragraph)
+    return paragraph[: end.start() + 1] if end else paragraph
+
+
 def _described(doc: str, lines: list[str]):
-    """A table cell: the docstring's first line in italics, then the parameter lines (plain text: the console prints
+    """A table cell: the docstring's first sentence in italics, then the parameter lines (plain text: the console prints
     no markup, so a markup tag would show as text)."""
     from rich.text import Text
 
@@ -155,10 +162,10 @@ def _result_table(result, source: Path, target: Path) -> Table:
     T = result.T_target_source
     table.add_row("T_target_source", "\n".join(" ".join(f"{v: .6f}" for v in row) for row in T))
     table.add_row("converged", str(result.converged) + (f" ({result.reason})" if result.reason else ""))
+    # with assess=False a result keeps every count its backend reports (small_gicp's): one without a count is a backend
+    # that reports none (kiss, Open3D), whatever assess is ("not recorded (assess=False)" read as if assess=true gave one)
     reported = result.extra.get("iterations_reported", True)
-    unassessed = not result.extra.get("assessed", True)
-    table.add_row("iterations", str(result.iterations) if reported else "not recorded (assess=False)" if unassessed
-                  else "not reported by the backend")
+    table.add_row("iterations", str(result.iterations) if reported else "not reported by the backend")
     if not result.extra.get("assessed", True):
         table.add_row("runtime (s)", f"{result.runtime_s:.3f}")
         table.add_row("assessment", "off (assess=False): no correspondences, fitness, RMSE, degeneracy or covariance")

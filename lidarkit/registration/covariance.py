@@ -130,7 +130,8 @@ class AxisCalibration:
     axes: str = "target"
     """The axes the per-axis terms refer to: ``"target"``, the target frame's; ``"principal"``, the target frame
     turned about z so that x runs along the weakest horizontal direction of the closed form (:func:`principal_turn`),
-    which makes the calibration independent of how the scene is turned in the frame."""
+    so the calibration's axes follow a scene however it is turned (its sigmas less closely than the closed form's: the
+    surface step is taken on voxels fixed to the frame's axes, docs/registration.md)."""
 
     def __post_init__(self) -> None:
         if self.axes not in ("target", "principal"):
@@ -141,7 +142,7 @@ class AxisCalibration:
 CALIBRATION_TRAINING = ("street:0", "street:2", "street:4", "street:6", "street:12", "street:13", "street:14", "street:15")
 
 #: Per-variant calibration of the default covariance, in the principal axes (x along the weakest horizontal direction
-#: of each closed form, :func:`principal_turn`: the same however a scene is turned in the frame), learned on street
+#: of each closed form, :func:`principal_turn`: its axes follow a scene turned in the frame), learned on street
 #: seeds 0, 2, 4, 6, 12, 13, 14 and 15 (200 draws each, one frame pair per draw along a 201-frame street) and checked
 #: on street seeds 1, 3, 5, 7, 8, 9, 10, 11, corridor seed 1 and open seed 1 (200 draws each;
 #: ``benchmarks/covariance_calibration.py``, results in ``benchmarks/results/covariance``). ``g`` (step gains) carries

@@ -18,7 +18,9 @@ Conventions:
 * Pairwise mode (:meth:`align`) registers the target, then the source moved by ``init_T``, in a fresh odometry;
   genz-icp's range filter then applies around the moved origin. genz-icp reports no convergence of its own, and at
   the 3 m gate of the assessment a pose stopped in a wrong minimum still matched 97-100 % of the source: the verdict
-  reads the pairs within 1 m and how far they lie off their target surface (:func:`wrong_minimum`).
+  reads the pairs within 1 m and how far they lie off their target surface (:func:`wrong_minimum`). Unlike kiss, a
+  lowered ``max_num_iterations`` is not checked: genz-icp exposes neither the source it registered (voxelized at a
+  size it adapts and keeps between instances) nor its native map, so one more iteration from the pose cannot be taken.
 * 2D scans (all points at one z) are refused (ConfigError), as by the other point-to-plane variants: the planarity
   test and the normals of a scan's line-like neighbourhoods are undefined in 3D.
 """

@@ -31,13 +31,14 @@ from scipy.spatial import cKDTree
 
 from lidarkit.errors import RegistrationError
 from lidarkit.geometry import as_points, orthonormalize_se3, se3_fraction, se3_inverse, transform_points
+from lidarkit.params import changed_fields
 from lidarkit.registration.assessment import assess_alignment
 from lidarkit.registration.base import (
     Degeneracy, Registration, RegistrationConfig, RegistrationResult, as_point_times, check_init_T, check_point_times,
     check_sweeps_apart, use_backend,
 )
 from lidarkit.registration.components import make_component
-from lidarkit.registration.components.registry import output_error
+from lidarkit.registration.components.registry import get_component_class, output_error, split_spec
 from lidarkit.registration.planar import refuse_2d
 from lidarkit.registration.components.maps import first_per_voxel, pca_geometry
 from lidarkit.registration.components.motion import se3_exp_batch
@@ -73,6 +74,13 @@ PRESETS: dict[str, dict[str, Any]] = {
 }
 
 Spec = str | dict[str, Any]
+
+#: The pipeline's shared settings each kind of component is handed (a component takes those its config has).
+SHARED_SETTINGS: dict[str, tuple[str, ...]] = {
+    "threshold": ("max_range_m",),
+    "map": ("max_range_m", "min_range_m", "voxel_size_m"),
+    "preprocess": ("max_range_m", "min_range_m"),
+}
 
 
 class PipelineConfig(RegistrationConfig):
@@ -112,6 +120,10 @@ class PipelineConfig(RegistrationConfig):
         if self.max_range_m <= self.min_range_m:
             raise ValueError(f"max_range_m ({self.max_range_m}) must exceed min_range_m ({self.min_range_m})")
         build_components(self)  # unknown names / params raise ConfigError listing the valid ones
+        unread = unread_settings(self)
+        given = changed_fields(self, unread)
+        if given:  # (accepted and ignored: a range crop without range_crop, config.json recording it)
+            raise ValueError("; ".join(f"{name} is not read by this composition: {unread[name]}" for name in given))
         return self
 
     @property
@@ -121,15 +133,54 @@ class PipelineConfig(RegistrationConfig):
 
 def build_components(config: PipelineConfig) -> dict[str, Any]:
     """Fresh component instances for ``config``, shared settings passed where a component takes them."""
-    shared = {"max_range_m": config.max_range_m, "min_range_m": config.min_range_m, "voxel_size_m": config.resolved_voxel_size_m}
+    values = {"max_range_m": config.max_range_m, "min_range_m": config.min_range_m, "voxel_size_m": config.resolved_voxel_size_m}
+
+    def shared(kind: str) -> dict[str, Any]:
+        return {name: values[name] for name in SHARED_SETTINGS[kind]}
+
     return {
         "residual": make_component("residual", config.residual),
         "kernel": make_component("kernel", config.kernel),
-        "threshold": make_component("threshold", config.threshold, max_range_m=config.max_range_m),
+        "threshold": make_component("threshold", config.threshold, **shared("threshold")),
         "deskew": make_component("motion", config.deskew),
-        "map": make_component("map", config.map, **shared),
-        "preprocess": [make_component("preprocess", step, max_range_m=config.max_range_m, min_range_m=config.min_range_m) for step in config.preprocess],
+        "map": make_component("map", config.map, **shared("map")),
+        "preprocess": [make_component("preprocess", step, **shared("preprocess")) for step in config.preprocess],
     }
+
+
+def _takes(kind: str, spec: Spec, setting: str) -> bool:
+    """Whether component ``spec`` takes the shared ``setting``: it is handed it, its config has it and ``spec`` does
+    not set its own."""
+    name, params = split_spec(kind, spec)
+    return setting in SHARED_SETTINGS.get(kind, ()) and setting in get_component_class(kind, name).Config.model_fields \
+        and setting not in params
+
+
+def unread_settings(config: PipelineConfig) -> dict[str, str]:
+    """The shared settings ``config``'s composition does not read, each with why (a value given for one is refused)."""
+    specs = [("threshold", config.threshold), ("map", config.map), *(("preprocess", step) for step in config.preprocess)]
+
+    def taken(setting: str) -> bool:
+        return any(_takes(kind, spec, setting) for kind, spec in specs)
+
+    voxelized = config.map_voxel_factor is not None or config.source_voxel_factor is not None
+    unread = {}
+    no_factor = "map_voxel_factor and source_voxel_factor are None (nothing is voxelized)"
+    if not voxelized:
+        unread["voxel_order"] = unread["voxel_backend"] = no_factor
+    if not (voxelized or taken("voxel_size_m")):
+        unread["voxel_size_m"] = f"{no_factor} and the map has no voxels (voxel_hash has)"
+    voxel_from_range = config.voxel_size_m is None and "voxel_size_m" not in unread
+    if not (taken("max_range_m") or voxel_from_range):
+        unread["max_range_m"] = ("no component takes it (range_crop, voxel_hash and adaptive do) and no voxel size is "
+                                 "derived from it")
+    if not taken("min_range_m"):
+        unread["min_range_m"] = "no component takes it (range_crop does)"
+    residual = split_spec("residual", config.residual)[0]
+    if not getattr(get_component_class("residual", residual), "needs_covariances", False):
+        unread["source_covariance_neighbors"] = (f"the {residual} residual uses no source covariances (plane_to_plane "
+                                                 "does)")
+    return unread
 
 
 def _applied(step: Any, points_xyz: np.ndarray) -> np.ndarray:
@@ -401,4 +452,4 @@ class PipelineRegistration(Registration):
         return result
 
 
-__all__ = ["PRESETS", "PipelineConfig", "PipelineRegistration", "build_components"]
+__all__ = ["PRESETS", "SHARED_SETTINGS", "PipelineConfig", "PipelineRegistration", "build_components", "unread_settings"]

@@ -108,9 +108,10 @@ class PlaneToPlaneConfig(ComponentConfig):
 
 @register_component("residual", "plane_to_plane")
 class PlaneToPlane(Residual):
-    """Generalized-ICP: Mahalanobis distance under the summed source and map surface covariances. The covariances are
-    plane-regularised to unit-free eigenvalues (epsilon, 1, 1), so the residual is not in metres (a normal offset d reads
-    ~d / sqrt(2 epsilon)): a kernel's scale and the ICP's RMSE history are in those units."""
+    """Generalized-ICP: Mahalanobis distance under the summed source and map surface covariances.
+
+    The covariances are plane-regularised to unit-free eigenvalues (epsilon, 1, 1), so the residual is not in metres (a
+    normal offset d reads ~d / sqrt(2 epsilon)): a kernel's scale and the ICP's RMSE history are in those units."""
 
     Config = PlaneToPlaneConfig
     needs_covariances = True
