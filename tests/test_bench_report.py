@@ -779,7 +779,7 @@ def test_publication_tables_average_over_common_seeds_and_the_summary_says_when_
     # ranked as the tables average: over the common seeds, where kiss is better (it named ground_filtered over its own)
     assert "| e_kiss: kiss | 0.64 ± 0.34 (ranked on the common seeds 1, 3: 0.33 there) |" in summary, summary
     # and no comparison with the reference is said, not left out without a word
-    assert ("- no comparison: drive, kiss vs ground_filtered: 2 common seed(s) (a comparison over seeds needs 5) and no "
+    assert ("- no comparison: drive, kiss vs ground_filtered: 2 common seed(s) (a comparison over seeds needs 6) and no "
             "KITTI segments to pair (a path under 100 m)") in (tmp_path / "report.md").read_text().splitlines()
     # where the tables are, from the report (it named the folder's last name only: `suite/tables/` for runs/suite)
     assert "Also as CSV and LaTeX (booktabs) in `tables/` beside this report." in (tmp_path / "report.md").read_text()
@@ -983,7 +983,7 @@ def test_a_paired_comparison_over_ape_names_the_apes_alignment(tmp_path):
     from lidarkit.bench.report import comparison_rows
     from lidarkit.bench.results import make_record, write_result
 
-    for seed in range(5):
+    for seed in range(6):  # (6 seeds: the fewest whose test can reach p < 0.05)
         for method, ape in (("kiss", 0.2 + 0.01 * seed), ("small_gicp", 0.5 + 0.02 * seed)):
             job = Job("odometry", "e", "drive", {"kind": "sim_lidar", "scene": "street"}, method, seed=seed)
             outcome = {"status": "ok", "metrics": {"ape_rmse_m": ape, "ape_se3_rmse_m": ape / 4}, "error": None,
@@ -992,8 +992,8 @@ def test_a_paired_comparison_over_ape_names_the_apes_alignment(tmp_path):
     report = build_report(tmp_path, plots=False)
     (dataset, comparison), = report.publication.comparisons
     assert comparison.metric == "APE RMSE (unaligned, first pose anchored) m"
-    assert comparison.mean_a == pytest.approx(0.22) and comparison.mean_b == pytest.approx(0.54)
-    assert comparison_rows([(dataset, comparison)])[1][0][3] == "5 seeds (APE RMSE (unaligned, first pose anchored) m)"
+    assert comparison.mean_a == pytest.approx(0.225) and comparison.mean_b == pytest.approx(0.55)
+    assert comparison_rows([(dataset, comparison)])[1][0][3] == "6 seeds (APE RMSE (unaligned, first pose anchored) m)"
 
 
 def test_a_seed_without_a_value_is_left_out_of_the_publication_tables_and_the_comparison_says_so(tmp_path):
@@ -1131,7 +1131,7 @@ def test_a_report_imports_the_module_of_a_custom_task_the_run_recorded(tmp_path,
         warnings = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
         assert warnings == ["task 'report_module_task': its module lidarkit_report_module_task cannot be imported here "
                             "(ModuleNotFoundError: No module named 'lidarkit_report_module_task'); its metrics are shown "
-                            "by name and its sweep figures in plots/ are kept"]
+                            "as its results declare them and its sweep figures in plots/ are kept"]
         assert report.plots == [] and (tmp_path / "out" / "plots" / sweep[0]).is_file()
     finally:
         sys.modules.pop("lidarkit_report_module_task", None)
@@ -1482,3 +1482,173 @@ def test_grid_values_written_as_numbers_in_text_sort_by_value(tmp_path):
                                                                  "error": None, "runtime_s": 0.1}))
     (table,) = build_report(tmp_path, plots=False).tables
     assert [row.method for row in table.rows] == [f"random_walk(n={v})" for v in (20, 60, 180, "1e3", "fast", "nan")]
+
+
+SCRIPT_TASK_METRICS = """
+from lidarkit.bench import Metric, Task, TaskOutput, register_task
+
+@register_task("script_task")
+class ScriptTask(Task):
+    dataset_kinds = ("synthetic",)
+    metrics = (Metric("translation_error_m", "trans. error [m]"), Metric("iterations", "iterations"),
+               Metric("align_time_s", "align time [s]", kind="speed"))
+
+    def run(self, job):  # slow_good: accurate, slow, few iterations; fast_bad: 10x the error, 10x faster
+        good = job.method == "slow_good"
+        return TaskOutput(metrics={"translation_error_m": 0.01 if good else 0.1, "iterations": 30.0 if good else 5.0,
+                                   "align_time_s": 0.5 if good else 0.05})
+"""
+
+
+def test_a_task_the_report_cannot_load_is_headed_by_its_first_declared_accuracy_metric(tmp_path, monkeypatch):
+    """A task registered in the script that ran the suite (or whose module moved) was read by metric names: every
+    metric an accuracy one, sorted by name, so the speed metric align_time_s was the Summary's headline and the fastest
+    method "best". Its results record the task's metric labels in order, its speed metrics and directions."""
+    import importlib
+    import sys
+
+    from lidarkit.bench import tasks as bench_tasks
+    from lidarkit.bench.report import summary_rows
+
+    monkeypatch.setattr(bench_tasks, "_REGISTERED", {})
+    monkeypatch.setattr(bench_tasks, "_INSTANCES", {})
+    (tmp_path / "lidarkit_script_task.py").write_text(SCRIPT_TASK_METRICS)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    try:
+        importlib.import_module("lidarkit_script_task")
+        (tmp_path / "suite.yaml").write_text("seeds: 2\nexperiments:\n  - {task: script_task, dataset: {kind: synthetic, "
+                                             "name: syn}, methods: [slow_good, fast_bad]}\n")
+        run_suite(load_suite(tmp_path / "suite.yaml"), tmp_path / "out", executor="serial")
+        assert {tuple(map(tuple, r["metric_labels"])) for r in load_results(tmp_path / "out")} == {
+            (("translation_error_m", "trans. error [m]"), ("iterations", "iterations"), ("align_time_s", "align time [s]"))}
+        # a report in another process, the module gone (moved, or the script's own __main__)
+        monkeypatch.setattr(bench_tasks, "_REGISTERED", {})
+        monkeypatch.setattr(bench_tasks, "_INSTANCES", {})
+        sys.modules.pop("lidarkit_script_task", None)
+        (tmp_path / "lidarkit_script_task.py").unlink()
+        importlib.invalidate_caches()
+        report = build_report(tmp_path / "out", plots=False)
+    finally:
+        sys.modules.pop("lidarkit_script_task", None)
+    assert [(m.name, m.label, m.kind) for m in report.tables[0].metrics] == [
+        ("translation_error_m", "trans. error [m]", "accuracy"), ("iterations", "iterations", "accuracy"),
+        ("align_time_s", "align time [s]", "speed"), ("runtime_s", "runtime [s]", "speed")]
+    assert summary_rows(report)[1] == [["script_task", "syn", "trans. error [m]", "slow_good", "0.01 ± 0", "2"]]
+
+
+def test_results_without_metric_labels_take_kind_and_direction_from_the_records(tmp_path):
+    """Results written before the labels were recorded still say which metrics are speeds and which are better higher:
+    the headline is an accuracy metric, ranked in its direction (recall, the highest best; "hz" led, the fastest best)."""
+    from lidarkit.bench.jobs import Job
+    from lidarkit.bench.report import summary_rows
+    from lidarkit.bench.results import make_record, write_result
+
+    for n in (1, 5, 9):
+        for seed in (0, 1):
+            job = Job("high_task_not_here", "h", "syn", {"kind": "synthetic"}, "m", {"n": n}, seed=seed)
+            write_result(tmp_path, make_record(job, job.key(), "1", {
+                "status": "ok", "metrics": {"recall": n / 10, "hz": 100.0 / n}, "error": None, "runtime_s": 0.1,
+                "higher_is_better": ["hz", "recall"], "speed_metrics": ["hz"],
+                "task_module": {"module": "high_task_module_moved_away"}}))
+    report = build_report(tmp_path, plots=False)
+    assert [(m.name, m.kind) for m in report.tables[0].metrics] == [("hz", "speed"), ("recall", "accuracy"),
+                                                                   ("runtime_s", "speed")]
+    assert summary_rows(report)[1] == [["high_task_not_here", "syn", "recall", "m(n=9)", "0.9 ± 0", "3"]]
+
+
+def test_the_summary_says_tie_where_the_best_means_are_equal(tmp_path):
+    """One-frame odometry runs (no APE: bad frames is the only accuracy metric) of 0 bad frames each: the Summary named
+    kiss best, by sort order. Means equal up to round-off are a tie; a worse method is not in it."""
+    from lidarkit.bench.report import summary_rows
+
+    for method in ("kiss", "small_gicp"):
+        _odometry_record(tmp_path / "one", "e", "k", method, {"n_bad_frames": 0.0, "hz": 20.0})
+    _, rows = summary_rows(build_report(tmp_path / "one", plots=False))
+    assert rows == [["odometry", "k", "bad frames (independent check)", "tie: kiss, small_gicp", "0", "2"]]
+
+    ape = 0.3
+    for method, value in (("kiss", ape), ("small_gicp", ape * (1 + 1e-14)), ("vanilla", 0.4)):
+        _odometry_record(tmp_path / "ape", "e", "k", method, {"ape_se3_rmse_m": value, "n_bad_frames": 1.0})
+    _, rows = summary_rows(build_report(tmp_path / "ape", plots=False))
+    assert [row[2:4] for row in rows] == [["APE RMSE (SE(3)-aligned) [m]", "tie: kiss, small_gicp"]]
+
+
+def test_seeds_equal_to_the_last_bits_show_no_spread(tmp_path):
+    """Seeds that agree up to round-off showed `0.06198 ± 5.7e-15`; a real spread, however small, is kept."""
+    from lidarkit.bench.report import format_stat, pivot, statistics_rows
+
+    same = 0.0619815
+    for seed, (a, b) in enumerate(((same, 1.0), (same + 7e-15, 1.0 + 1e-9), (same, 1.0))):
+        _odometry_record(tmp_path, "e", "k", "kiss", {"ape_se3_rmse_m": a, "final_error_m": b}, seed=seed)
+    table = build_report(tmp_path, plots=False).tables[0]
+    assert np.std([same, same + 7e-15, same], ddof=1) > 0  # (numpy's std of them is round-off, not zero)
+    assert pivot(table, "ape_se3_rmse_m")[1] == [["kiss", "0.06198 ± 0"]]
+    assert statistics_rows(table)[1][0][4] == "0"
+    assert table.rows[0].stats["final_error_m"][1] == pytest.approx(np.std([1.0, 1.0 + 1e-9, 1.0], ddof=1), rel=1e-6)
+    assert format_stat(table.rows[0].stats["final_error_m"]) == "1 ± 5.8e-10"
+
+
+@pytest.mark.parametrize("damaged", ['{\n "description": "",\n "jobs": [\n  {\n', "{", '{"suite": "s"}'])
+def test_a_damaged_suite_json_is_an_error_not_every_result(tmp_path, capsys, damaged):
+    """A truncated suite.json (or `{`) read as no suite: the report held every result in the folder, an earlier
+    suite's too, and lost its title, without a word. It is one error line naming the file and why; --all reports every
+    result, and compare says the same line."""
+    import json
+
+    from lidarkit.bench.report import suite_jobs
+
+    for method in ("kiss", "small_gicp"):
+        _odometry_record(tmp_path, "e", "k", method, {"ape_se3_rmse_m": 0.1})
+    (tmp_path / "suite.json").write_text(damaged)
+    try:
+        json.loads(damaged)
+        why = "lists no jobs (its 'jobs' is missing, empty or malformed)"
+    except ValueError as err:
+        why = f"not valid JSON ({err.msg}, line {err.lineno} column {err.colno})"
+    line = (f"{tmp_path}/suite.json: {why}: which results are this suite's is unknown (--all: every result in the "
+            "folder)")
+    with pytest.raises(DataError) as exc:
+        build_report(tmp_path, plots=False)
+    assert str(exc.value) == line
+    with pytest.raises(DataError) as exc:
+        suite_jobs(tmp_path)  # (what compare restricts a folder to)
+    assert str(exc.value) == line
+    for command in (["report", str(tmp_path), "--no-plots"],
+                    ["compare", str(tmp_path), str(tmp_path), "--method-a", "kiss", "--method-b", "small_gicp"]):
+        with pytest.raises(SystemExit) as exit_:
+            main(command)
+        assert (exit_.value.code, capsys.readouterr().err) == (1, f"error: {line}\n")
+    assert build_report(tmp_path, plots=False, every_result=True).n_records == 2
+    (tmp_path / "suite.json").unlink()  # no suite.json: every result is the folder's suite
+    assert build_report(tmp_path, plots=False).n_records == 2
+
+
+def test_five_seeds_are_too_few_for_a_seed_comparison_and_a_verdict_that_cannot_be_significant_says_why():
+    """With 5 seeds the exact two-sided Wilcoxon cannot go below p = 0.0625: the report tested them and said "no
+    significant difference" without why (3 seeds were told a comparison needs 5). Seeds are paired from 6 on, and a
+    verdict over too few differing units gives the smallest p they could give, as compare says it."""
+    from lidarkit.bench.jobs import Job
+    from lidarkit.bench.publication import reference_comparisons
+    from lidarkit.bench.report import comparison_rows
+    from lidarkit.eval.statistics import paired_test
+
+    def records(n_seeds, tied_seed=None):
+        out = []
+        for seed in range(n_seeds):
+            for method, ape in (("kiss", 0.5 + 0.01 * seed), ("small_gicp", 0.2 if seed != tied_seed else 0.5)):
+                job = Job("odometry", "e", "drive", {"kind": "sim_lidar", "scene": "street"}, method, seed=seed)
+                out.append({"status": "ok", "job": job.spec(), "metrics": {"ape_rmse_m": ape}, "series": {}})
+        return out
+
+    not_compared = []
+    assert reference_comparisons(records(5), not_compared=not_compared) == []
+    assert not_compared == ["drive, kiss vs small_gicp: 5 common seed(s) (a comparison over seeds needs 6) and no KITTI "
+                            "segments to pair (a path under 100 m)"]
+    (dataset, c), = reference_comparisons(records(6, tied_seed=0))  # one seed tied: 5 differ
+    assert (c.pairing, c.n_pairs, c.n_ties, c.better) == ("seed", 6, 1, "")
+    assert comparison_rows([(dataset, c)])[1][0][-1] == ("no significant difference (5 seeds of 6 differing: smallest "
+                                                         "possible p 0.0625)")
+    five = paired_test([0.5, 0.51, 0.52, 0.53, 0.54], [0.2] * 5, name_a="kiss", name_b="small_gicp", pairing="seed")
+    assert comparison_rows([("drive", five)])[1][0][-1] == "no significant difference (5 seeds: smallest possible p 0.0625)"
+    (_, six), = reference_comparisons(records(6))
+    assert six.better == "b" and comparison_rows([("drive", six)])[1][0][-1] == "small_gicp better"

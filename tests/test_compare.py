@@ -73,8 +73,8 @@ def test_an_unreadable_suite_json_is_an_error_not_every_result(tmp_path):
     (out / "suite.json").write_text("{not json")
     with pytest.raises(DataError) as exc:
         compare(out, out, method_a="good", method_b="bad")
-    assert str(exc.value) == (f"{out}/suite.json: unreadable, or without a job list: which results are this suite's is "
-                              "unknown (--all: every result)")
+    assert str(exc.value) == (f"{out}/suite.json: not valid JSON (Expecting property name enclosed in double quotes, line 1 "
+                              "column 2): which results are this suite's is unknown (--all: every result in the folder)")
     assert compare(out, out, method_a="good", method_b="bad", every_result=True).n_pairs == 6
 
 

@@ -153,15 +153,17 @@ def reference_comparisons(records: list[dict[str, Any]], reference: str = REFERE
                           not_compared: list[str] | None = None) -> list[tuple[str, Any]]:
     """Paired Wilcoxon comparisons of the reference method with every other method, per dataset.
 
-    Units: the common seeds when there are at least 5 (their KITTI drift, else APE RMSE; ``lidarkit compare`` pairs the
-    same units and defaults to the report's headline metric); with fewer, the KITTI segments of every common seed (same ground truth, so the same segments),
-    with a note that they overlap (one starts every 10 frames: not independent, the p-value is optimistic; the report
-    said "kiss better" where compare, over the 2 seeds, said no difference); a dataset without enough units is left out,
-    and why is appended to ``not_compared`` (the section had vanished without a word).
+    Units: the common seeds when they are enough for the test to reach p < 0.05 (``min_units``: 6; 5 give 0.0625 at
+    best, and their "no significant difference" could not be otherwise), their KITTI drift, else APE RMSE (``lidarkit
+    compare`` pairs the same units and defaults to the report's headline metric); with fewer, the KITTI segments of
+    every common seed (same ground truth, so the same segments), with a note that they overlap (one starts every 10
+    frames: not independent, the p-value is optimistic; the report said "kiss better" where compare, over the 2 seeds,
+    said no difference); a dataset without enough units is left out, and why is appended to ``not_compared`` (the
+    section had vanished without a word).
     """
     from lidarkit.bench.tasks.odometry import METRIC_ALIGNMENT_BY_NAME
     from lidarkit.errors import LidarKitError
-    from lidarkit.eval.statistics import paired_test
+    from lidarkit.eval.statistics import DEFAULT_ALPHA, min_units, paired_test
 
     # the label names the APE's alignment as every APE label does ("APE RMSE m" read as the headline SE(3)-aligned APE)
     ape_name = f"APE RMSE ({METRIC_ALIGNMENT_BY_NAME['ape_rmse_m']}) m"
@@ -191,7 +193,7 @@ def reference_comparisons(records: list[dict[str, Any]], reference: str = REFERE
                                         for s in seeds)), None)
                 valued = [s for s in seeds if per_seed is not None
                           and all(_has_value(side[s]["metrics"][per_seed[0]]) for side in (ref, runs))]
-                if len(valued) >= 5:
+                if len(valued) >= min_units(DEFAULT_ALPHA):
                     va = [ref[s]["metrics"][per_seed[0]] for s in valued]
                     vb = [runs[s]["metrics"][per_seed[0]] for s in valued]
                     result = paired_test(va, vb, name_a=reference, name_b=label, metric=per_seed[1], pairing="seed")
@@ -205,7 +207,7 @@ def reference_comparisons(records: list[dict[str, Any]], reference: str = REFERE
                     notes += [f"the {len(seeds)} seeds ran the same data (each side's segments alike on every seed): "
                               "their segments counted once"] if once else []
                 else:
-                    why = (f"{len(seeds)} common seed(s) (a comparison over seeds needs 5)"
+                    why = (f"{len(seeds)} common seed(s) (a comparison over seeds needs {min_units(DEFAULT_ALPHA)})"
                            + (" and no KITTI segments to pair (a path under 100 m)" if seeds else ""))
                     log.info("no paired comparison %s vs %s on %s: %s", reference, label, dataset, why)
                     if not_compared is not None:

@@ -185,11 +185,38 @@ def task_meta(task: str) -> tuple[list[MetricInfo], tuple[tuple[str, str], ...]]
         return [], ()
 
 
+def recorded_metrics(records: list[dict[str, Any]]) -> list[MetricInfo]:
+    """The metrics the task declared as its results record them (``metric_labels``: name and label in its order,
+    ``speed_metrics``), for a task whose module cannot be loaded here: read by name alone, every metric was an accuracy
+    one sorted by name, and a speed metric (``align_time_s``) was the Summary's headline, the fastest method "best"."""
+    speed = {name for r in records for name in _names(r.get("speed_metrics"))}
+    metrics: dict[str, MetricInfo] = {}
+    for r in records:
+        pairs = r.get("metric_labels")
+        for pair in pairs if isinstance(pairs, list) else ():
+            if (isinstance(pair, (list, tuple)) and len(pair) == 2 and all(isinstance(x, str) for x in pair)
+                    and pair[0] not in metrics):
+                metrics[pair[0]] = MetricInfo(pair[0], pair[1], "speed" if pair[0] in speed else "accuracy")
+    return list(metrics.values())
+
+
+def _names(value: Any) -> list[str]:
+    """The metric names of a record's list field (``speed_metrics``, ``higher_is_better``); none where it is not one."""
+    return [x for x in value if isinstance(x, str)] if isinstance(value, list) else []
+
+
+#: numbers that differ by at most this share of the larger magnitude are equal (round-off apart): a cell's seeds that
+#: agree to the last bits have no spread, and Summary rows with such means are a tie
+EQUAL_RELATIVE = 1e-12
+
+
 def _stats(values: list[float]) -> tuple[float, float, int]:
     arr = np.asarray([v for v in values if v is not None and math.isfinite(v)], dtype=float)
     if arr.size == 0:
         return (math.nan, math.nan, 0)
-    std = float(arr.std(ddof=1)) if arr.size > 1 and np.ptp(arr) > 0 else 0.0  # equal values: 0, not numpy's 8.5e-18
+    # values equal up to round-off (seeds that agree to the last bits) have no spread: 0, not "0.06198 ± 5.7e-15"
+    spread = float(np.ptp(arr)) > EQUAL_RELATIVE * float(np.max(np.abs(arr)))
+    std = float(arr.std(ddof=1)) if arr.size > 1 and spread else 0.0
     return (float(arr.mean()), std, int(arr.size))
 
 
@@ -208,8 +235,9 @@ def aggregate(records: list[dict[str, Any]], missing: list[dict[str, Any]] = ())
     tables = []
     # a task none of whose jobs has a result yet has its table too, of rows saying so (it had none: the task was absent)
     for task in sorted(set(by_task) | set(unrun)):
-        declared, _ = task_meta(task)
         recs = by_task[task]
+        declared = task_meta(task)[0] or recorded_metrics(recs)
+        recorded_speed = {name for r in recs for name in _names(r.get("speed_metrics"))}
         present = set()
         for r in recs:
             present.update(k for k, v in r.get("metrics", {}).items() if isinstance(v, (int, float)) or v is None)
@@ -225,7 +253,8 @@ def aggregate(records: list[dict[str, Any]], missing: list[dict[str, Any]] = ())
         # of the methods that ran (a sleep's "slept [s]" led, the APE of the methods still to run was no column)
         unknown_method = {r["job"]["method"] for r in no_result.values()} - {r["job"]["method"] for r in recs}
         metrics = [m for m in declared if m.name in present or unknown_method or not recs]
-        metrics += [MetricInfo(name, name) for name in sorted(present - {m.name for m in metrics})]
+        metrics += [MetricInfo(name, name, "speed" if name in recorded_speed else "accuracy")
+                    for name in sorted(present - {m.name for m in metrics})]
         metrics = [label_alignment(m, recs) for m in metrics]
         metrics.append(MetricInfo("runtime_s", "runtime [s]", "speed"))
         first = {ident: items[0] for ident, items in groups.items()} | no_result
@@ -253,7 +282,7 @@ def aggregate(records: list[dict[str, Any]], missing: list[dict[str, Any]] = ())
                             seeds=tuple(sorted(int(r["job"]["seed"]) for r in ok)), values=per_seed,
                             n_rerun_failed=sum(bool(r.get("rerun_failed")) for r in ok),
                             versions=tuple(sorted({_version(r) for r in items}))))
-        higher = frozenset(name for r in recs for name in (r.get("higher_is_better") or ()))
+        higher = frozenset(name for r in recs for name in _names(r.get("higher_is_better")))
         tables.append(TaskTable(task, metrics, rows, higher))
     return tables
 
@@ -771,11 +800,17 @@ def summary_rows(report: Report) -> tuple[list[str], list[list[str]]]:
             # means over the seeds they share (a method whose best seed was not run yet lost to a worse complete one)
             ranked = [r for r in candidates if not (r.n_failed or _n_no_value(r, metric.name))] or candidates
             common = _common_seeds(ranked, metric.name)
-            sign = -1.0 if better_higher else 1.0
-            best = min(ranked, key=lambda r: sign * _mean_over(r, metric.name, common))
-            rows.append([table.task, dataset, metric.by_alignment.get(alignment, metric.label), _short_label(best, table),
-                         format_stat(best.stats[metric.name]) + _failed_note(best, metric.name)
-                         + _seeds_note(best, ranked, common, metric.name),
+            mean_of = {id(r): _mean_over(r, metric.name, common) for r in ranked}
+            best = min(ranked, key=lambda r: -mean_of[id(r)] if better_higher else mean_of[id(r)])
+            # rows whose means equal the best's are a tie, not a win by sort order (0 vs 0 bad frames named one best)
+            tied = [r for r in ranked
+                    if math.isclose(mean_of[id(r)], mean_of[id(best)], rel_tol=EQUAL_RELATIVE, abs_tol=0.0)]
+            cells = {format_stat(r.stats[metric.name]) + _failed_note(r, metric.name) for r in tied}
+            value = cells.pop() if len(cells) == 1 else f"{_fmt(mean_of[id(best)])} (each)"
+            rows.append([table.task, dataset, metric.by_alignment.get(alignment, metric.label),
+                         _short_label(best, table) if len(tied) == 1 else
+                         "tie: " + ", ".join(_short_label(r, table) for r in tied),
+                         value + _seeds_note(best, ranked, common, metric.name),
                          str(len({r.method for r in candidates}))])
     return header, rows
 
@@ -857,7 +892,8 @@ def statistics_rows(table: TaskTable) -> tuple[list[str], list[list[str]]]:
         s = r.summaries.get(metric.name)
         if s is None or s.n == 0:
             continue
-        rows.append([r.dataset, _short_label(r, table), str(s.n), _fmt(s.mean), _fmt(s.std) if s.n > 1 else "–",
+        std = r.stats[metric.name][1]  # (the cells' std: seeds equal up to round-off have none)
+        rows.append([r.dataset, _short_label(r, table), str(s.n), _fmt(s.mean), _fmt(std) if s.n > 1 else "–",
                      _fmt(s.median), f"[{_fmt(s.ci_low)}, {_fmt(s.ci_high)}]" if s.n > 1 else "–"])
     return header, rows
 
@@ -951,6 +987,8 @@ def comparison_rows(comparisons: list[Any]) -> tuple[list[str], list[list[str]]]
         verdict = (f"{c.name_a if c.better == 'a' else c.name_b} better" if c.better else "no significant difference")
         if not c.better and c.p_value < c.alpha and c.diff_ci_low <= 0 <= c.diff_ci_high:
             verdict += " (CI includes 0)"
+        if not c.better:
+            verdict += _too_few_units(c)
         if c.pairing == "segment":  # (overlapping KITTI segments of few seeds: see publication.OVERLAPPING_SEGMENTS)
             verdict += " (overlapping segments: p optimistic)"
         if c.repeated:  # (p = 0.031 and effect -1.00 beside "no significant difference"; compare prints no test)
@@ -960,6 +998,21 @@ def comparison_rows(comparisons: list[Any]) -> tuple[list[str], list[list[str]]]
                      "–" if c.repeated else f"{c.effect_size:+.2f}",
                      f"{c.median_diff:+.3g} [{c.diff_ci_low:+.3g}, {c.diff_ci_high:+.3g}]", verdict])
     return header, rows
+
+
+def _too_few_units(c: Any) -> str:
+    """`` (5 seeds: smallest possible p 0.0625)`` where the comparison's units cannot reach p < alpha whatever they show
+    (``PairedComparison.verdict`` says it in full; the row said "no significant difference" alone), else ''."""
+    from lidarkit.eval.statistics import min_units
+
+    n_ranked = c.n_pairs - c.n_ties  # (tied units are not ranked)
+    if n_ranked == 0:
+        return " (every paired difference is zero)"
+    if n_ranked >= min_units(c.alpha):
+        return ""
+    units = f"{n_ranked} {c.pairing}{'s' * (n_ranked > 1)}"
+    units += "" if n_ranked == c.n_pairs else f" of {c.n_pairs} differing"
+    return f" ({units}: smallest possible p {2.0 ** (1 - n_ranked):.3g})"
 
 
 def comparison_notes(comparisons: list[Any]) -> list[str]:
@@ -1008,7 +1061,10 @@ def build_report(
                         "baseline check` re-runs a baseline's jobs against it)", source=out_dir)
     out_dir = results_folder(out_dir)
     records = load_results(out_dir)
-    manifest = suite_manifest(out_dir)
+    if not records:  # (said before what suite.json would restrict them to)
+        raise DataError("no readable job results in jobs/", source=out_dir)
+    # (a damaged suite.json read as none: the report widened to every result in the folder, without a word)
+    manifest = suite_manifest(out_dir) if every_result else read_suite_manifest(out_dir)
     suite_jobs = {} if every_result else _suite_jobs(manifest)
     if only_keys is None and suite_jobs:
         only_keys = set(suite_jobs)
@@ -1028,7 +1084,9 @@ def build_report(
     n_left_out, n_earlier_version = left_out_counts(every_record, records, expected.values())
     unknown_tasks = import_task_modules(records + [{"job": spec} for spec in missing.values()], manifest)
     for task, why in unknown_tasks.items():
-        log.warning("task %r: %s; its metrics are shown by name and its sweep figures in plots/ are kept", task, why)
+        declared = recorded_metrics([r for r in records if r["job"]["task"] == task])
+        log.warning("task %r: %s; its metrics are shown %s and its sweep figures in plots/ are kept", task, why,
+                    "as its results declare them" if declared else "by name")
     report = Report(out_dir=out_dir, tables=aggregate(records, list(missing.values())), n_records=len(records),
                     skipped=_skipped(manifest), n_expected=len(expected), n_left_out=n_left_out,
                     n_earlier_version=n_earlier_version, versions=version_counts(records),
@@ -1086,12 +1144,38 @@ def _label(record: dict[str, Any]) -> str:
 
 
 def suite_manifest(out_dir: Path) -> dict[str, Any]:
-    """The folder's ``suite.json`` (the last suite run there), read once per report; {} without a readable one."""
+    """The folder's ``suite.json`` (the last suite run there), read once per report; {} without a readable one (what
+    every result is read with: ``--all``, and the task modules it records)."""
     try:
-        manifest = json.loads((out_dir / "suite.json").read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+        return read_suite_manifest(out_dir)
+    except DataError:
         return {}
-    return manifest if isinstance(manifest, dict) else {}
+
+
+def read_suite_manifest(out_dir: Path) -> dict[str, Any]:
+    """The folder's ``suite.json``, {} where there is none (every result is the folder's suite); DataError naming the
+    file and why for one that cannot be read or lists no jobs (truncated, ``{``): read as none, a report widened to an
+    earlier suite's results too and lost its title. ``--all`` takes every result without it."""
+    path = Path(out_dir) / "suite.json"
+    if not path.exists() and not path.is_symlink():
+        return {}
+    try:
+        manifest = json.loads(path.read_text(encoding="utf-8"))
+    except json.JSONDecodeError as err:
+        why = f"not valid JSON ({err.msg}, line {err.lineno} column {err.colno})"
+    except UnicodeDecodeError:
+        why = "not UTF-8 text"
+    except OSError as err:
+        why = f"cannot be read ({err.strerror or err})"
+    else:
+        if not isinstance(manifest, dict):
+            why = f"holds a JSON {type(manifest).__name__}, not a suite's manifest"
+        elif not _suite_jobs(manifest):
+            why = "lists no jobs (its 'jobs' is missing, empty or malformed)"
+        else:
+            return manifest
+    raise DataError(f"{why}: which results are this suite's is unknown (--all: every result in the folder)",
+                    source=path)
 
 
 def _suite_jobs(manifest: dict[str, Any]) -> dict[str, dict[str, Any]]:
@@ -1114,9 +1198,10 @@ def left_out_counts(every: list[dict[str, Any]], held: list[dict[str, Any]], spe
 
 
 def suite_jobs(out_dir: str | Path) -> dict[str, dict[str, Any]]:
-    """``{key: job spec}`` of the folder's ``suite.json`` (the last suite run there); {} without a readable one. What a
-    report, and a comparison of the folder, is restricted to by default."""
-    return _suite_jobs(suite_manifest(Path(out_dir)))
+    """``{key: job spec}`` of the folder's ``suite.json`` (the last suite run there); {} without one, DataError for one
+    that cannot be read (:func:`read_suite_manifest`). What a report, and a comparison of the folder, is restricted to
+    by default."""
+    return _suite_jobs(read_suite_manifest(Path(out_dir)))
 
 
 def _skipped(manifest: dict[str, Any]) -> list[tuple[str, str]]:

@@ -84,6 +84,9 @@ def execute_job(spec: dict[str, Any]) -> dict[str, Any]:
         # its speed metrics too: they vary from run to run on the same data, and compare must not read that as seeds
         # running other data (a task's ``latency_ms`` is no name a pattern knows)
         record["speed_metrics"] = sorted(m.name for m in task.metrics if m.kind == "speed")
+        # and their labels in the task's order (a list: results are written with sorted keys), so that a report without
+        # the task heads its table with the task's first accuracy metric, not the first name in the alphabet
+        record["metric_labels"] = [[m.name, m.label] for m in task.metrics]
         record["series"] = json_safe(output.series)
         record["info"] = json_safe(output.info)
     except Exception as err:  # a job's failure is data, not a crash of the suite

@@ -114,9 +114,6 @@ def load_bench_runs(path: str | os.PathLike, method: str | None = None, every_re
     every = load_results(path) if records is None else records
     suite_jobs = {} if every_result else read_suite_jobs(path)
     suite = set(suite_jobs)
-    if not every_result and not suite and (path / "suite.json").exists():  # (it read as "every result", without a word)
-        raise DataError("unreadable, or without a job list: which results are this suite's is unknown (--all: every result)",
-                        source=path / "suite.json")
     # as build_report: the suite's jobs, the latest result of each; a result left out with the spec of a job held here
     # is that job run by another lidarkit version (they were called "an earlier suite"'s, and counted after one per spec)
     latest = latest_per_job([r for r in every if not suite or r["key"] in suite])
