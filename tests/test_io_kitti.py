@@ -326,13 +326,13 @@ def test_copied_sequence_folder_with_trimmed_poses_and_full_times(tmp_path):
     every_row = ds.ground_truth_at(None, frame="camera")
     assert len(every_row) == 51 and np.array_equal(every_row.timestamps_s, full[:51])
     # files of different lengths that both cover the frames present (60 poses, 1101 stamps for frames 0-50): read;
-    # a poses file stopping short of the last frame present: an error naming it
+    # a poses file stopping short of the last frame present: an error naming it where the poses are taken
     poses = shared_path("kitti_images", "poses", "06.txt").read_text().splitlines()
     (seq / "poses.txt").write_text("\n".join(poses[:60]) + "\n")
     assert len(KittiOdometry(seq).ground_truth_camera) == 51
     (seq / "poses.txt").write_text("\n".join(poses[:40]) + "\n")
-    with pytest.raises(DataError, match=r"40 poses") as info:
-        KittiOdometry(seq)
+    with pytest.raises(DataError, match=r"40 poses but image 000050\.png is frame 50$") as info:
+        KittiOdometry(seq).ground_truth_camera
     assert str(info.value).startswith(f"{seq / 'poses.txt'}")  # the short file, not times.txt, is the source
 
 
@@ -343,7 +343,7 @@ def test_poses_must_cover_every_frame(tmp_path, copy_of, odo_root):
     short = tmp_path / "short.txt"
     short.write_text("\n".join((odo_root / "poses" / "00.txt").read_text().splitlines()[:150]) + "\n")
     with pytest.raises(DataError, match=r"short\.txt: 150 poses but scan 000199\.bin is frame 199"):
-        KittiOdometry(seq, velodyne_dir=odo_root / "extra_frames" / "00" / "velodyne", poses_file=short)
+        KittiOdometry(seq, velodyne_dir=odo_root / "extra_frames" / "00" / "velodyne", poses_file=short).ground_truth
 
 
 def test_missing_paths(tmp_path, odo_root):
@@ -544,3 +544,78 @@ def test_per_point_times_in_microseconds_are_refused_by_times_txt_spacing(tmp_pa
     for path, times in seconds.items():  # a quarter of the turn, as a sensor with a partial field of view sees it
         np.save(path, np.round(0.25 * times * 1e9).astype(np.uint32))
     assert np.ptp(open_dataset("kitti", folder).read_scan(1).point_times_s) == pytest.approx(0.25 * 0.0989, abs=1e-4)
+
+
+def _sequence_with_extra_velodyne(root, odo_root):
+    """Sequence 00's calib, times and poses with scan 0 in sequences/00/velodyne, and scans 94 and 95 in a folder of
+    their own (``extra/velodyne``) whose per-point times sit beside it in ``extra/point_times``."""
+    sequence, extra = root / "sequences" / "00", root / "extra"
+    (sequence / "velodyne").mkdir(parents=True)
+    (extra / "velodyne").mkdir(parents=True)
+    (extra / "point_times").mkdir()
+    (root / "poses").mkdir()
+    for name in ("calib.txt", "times.txt"):
+        shutil.copy2(odo_root / "sequences" / "00" / name, sequence / name)
+    shutil.copy2(odo_root / "poses" / "00.txt", root / "poses" / "00.txt")
+    shutil.copy2(odo_root / "sequences" / "00" / "velodyne" / "000000.bin", sequence / "velodyne" / "000000.bin")
+    times = {}
+    for frame in (94, 95):
+        name = f"{frame:06d}"
+        shutil.copy2(odo_root / "extra_frames" / "00" / "velodyne" / f"{name}.bin", extra / "velodyne" / f"{name}.bin")
+        xy = np.fromfile(extra / "velodyne" / f"{name}.bin", dtype="<f4").reshape(-1, 4)[:, :2].astype(np.float64)
+        times[frame] = 0.05 * (1.0 - np.arctan2(xy[:, 1], xy[:, 0]) / np.pi)  # a clockwise 0.1 s sweep from behind
+        np.save(extra / "point_times" / f"{name}.npy", times[frame])
+    return extra, times
+
+
+def test_per_point_times_are_found_beside_a_velodyne_dir_given(tmp_path, odo_root):
+    """velodyne_dir=extra/velodyne read the scans without the per-point times of extra/point_times: only the sequence
+    folder was searched (and the warning named sequences/00)."""
+    extra, times = _sequence_with_extra_velodyne(tmp_path, odo_root)
+    ds = open_dataset("kitti", tmp_path, sequence="00", velodyne_dir="extra/velodyne")
+    assert list(ds.frames) == [94, 95]
+    assert ds.point_times_dir == extra / "point_times"
+    assert ds.point_time_search_dirs == (extra, tmp_path / "sequences" / "00")
+    scan = ds.read_scan(1)
+    np.testing.assert_array_equal(scan.point_times_s, times[95])
+    assert scan.point_time_convention == "relative_s"
+    # the sequence folder is still searched after the scans' own; KITTI's own layout searches the one folder
+    (extra / "point_times").rename(tmp_path / "sequences" / "00" / "point_times")
+    moved = open_dataset("kitti", tmp_path, sequence="00", velodyne_dir="extra/velodyne")
+    assert moved.point_times_dir == tmp_path / "sequences" / "00" / "point_times"
+    np.testing.assert_array_equal(moved.read_scan(0).point_times_s, times[94])
+    own = open_dataset("kitti", tmp_path, sequence="00")
+    assert own.point_time_search_dirs == (tmp_path / "sequences" / "00",)
+    assert own.point_times_dir == tmp_path / "sequences" / "00" / "point_times"
+
+
+def test_a_pose_file_that_stops_early_scores_the_frames_it_covers(tmp_path, odo_root):
+    """poses100.txt (frames 0-99) beside scans up to frame 199 refused every run at open, --frames 0:2 too: the poses
+    are checked for the frames a run selects, with the same message when one of them has none."""
+    from lidarkit.odometry import run
+
+    seq = tmp_path / "seq"
+    (seq / "velodyne").mkdir(parents=True)
+    for name in ("calib.txt", "times.txt"):
+        shutil.copy2(odo_root / "sequences" / "00" / name, seq / name)
+    for frame in (0, 1):
+        shutil.copy2(odo_root / "sequences" / "00" / "velodyne" / f"{frame:06d}.bin", seq / "velodyne" / f"{frame:06d}.bin")
+    for frame in (198, 199):
+        shutil.copy2(odo_root / "extra_frames" / "00" / "velodyne" / f"{frame:06d}.bin", seq / "velodyne" / f"{frame:06d}.bin")
+    poses = seq / "poses100.txt"
+    poses.write_text("\n".join((odo_root / "poses" / "00.txt").read_text().splitlines()[:100]) + "\n")
+    ds = KittiOdometry(seq, poses_file="poses100.txt")
+    covered = ds.ground_truth_of([0, 1])
+    np.testing.assert_array_equal(covered.poses_se3, ds.ground_truth_at([0, 1]).poses_se3)
+    np.testing.assert_array_equal(covered.timestamps_s, ds.timestamps_s[:2])
+    result = run(ds, "vanilla", params={"voxel_size_m": 1.0}, frames="0:2")
+    assert result.metrics["ground_truth_length_m"] == pytest.approx(ds.ground_truth_at([0, 1]).length_m)
+    assert 0.8 < result.metrics["ground_truth_length_m"] < 0.9  # (poses/00.txt: 0.86 m from frame 0 to 1)
+    message = f"{poses}: 100 poses but scan 000199.bin is frame 199"
+    for asked in (lambda: ds.ground_truth, lambda: ds.ground_truth_of([1, 3]), lambda: run(ds, "vanilla", frames="1:4")):
+        with pytest.raises(DataError) as err:
+            asked()
+        assert str(err.value) == message
+    with pytest.raises(DataError) as err:
+        ds.ground_truth_of([2])
+    assert str(err.value) == f"{poses}: 100 poses but scan 000198.bin is frame 198"

@@ -1,4 +1,5 @@
-"""``genz``: GenZ-ICP through lidarkit equals direct ``genz_icp.GenZICP`` calls on the 10 KITTI scans.
+"""``genz``: GenZ-ICP through lidarkit equals direct ``genz_icp.GenZICP`` calls on the 10 KITTI scans, read by
+genz-icp's own KITTI loader (with its vertical-angle correction, which lidarkit's KITTI reader applies for genz).
 
 genz-icp 0.3.2 keeps process-wide state between ``GenZICP`` instances (the second instance in a process gives
 poses a few cm off the first's, identically in every process), so each side runs as the first instance of a
@@ -29,11 +30,12 @@ EXACT_ATOL_M = 1e-9
 DIRECT = textwrap.dedent(
     """
     import sys, numpy as np
+    from pathlib import Path
+    from genz_icp.datasets.kitti import KITTIOdometryDataset
     from genz_icp.genz_icp import GenZICP
     from lidarkit.registration import get_icp
-    from lidarkit.io.kitti import KittiOdometry
-    seq = KittiOdometry(sys.argv[1])
-    frames = [np.fromfile(p, dtype=np.float32).reshape(-1, 4)[:, :3].astype(np.float64) for p in seq.scan_paths]
+    loader = KITTIOdometryDataset(Path(sys.argv[1]).parents[1], "00")  # genz-icp's own reading of KITTI (corrected)
+    frames = [loader[i][0] for i in range(len(loader))]
     odometry = GenZICP(get_icp("genz", **PARAMS).config.to_genz_config())
     poses = []
     for frame in frames:

@@ -10,8 +10,9 @@ Layout (``root`` is the odometry root, or a sequence folder itself)::
     root/sequences/NN/point_times/000000.npy   optional: one time per point [s from the sweep start]
 
 Per-point times (KITTI proper has none) are looked for in the first folder of :data:`POINT_TIME_FOLDERS`
-that exists beside ``velodyne/`` (``point_times/`` as lidarkit's simulator writes it, then the names other
-tools use); ``point_times_dir`` says which one was found (None: no per-point times).
+that exists beside the scans' folder (``point_times/`` as lidarkit's simulator writes it, then the names other
+tools use), then in the sequence folder (the same one, unless ``velodyne_dir`` names another); ``point_times_dir``
+says which one was found (None: no per-point times), ``point_time_search_dirs`` where they were looked for.
 
 Frame numbers come from the file names, so a folder holding only some scans (``000094.bin``,
 ``000095.bin``) reads poses row 94 and 95. Ground truth is given in the camera frame as stored
@@ -41,8 +42,9 @@ from lidarkit.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
 
-#: Folders beside ``velodyne/`` searched, in this order, for per-point times ``{frame:06d}.npy`` (1-D, one time per
-#: point of the scan, seconds from the sweep start); docs/datasets.md lists the same names (a test checks it).
+#: Folders searched, in this order, beside the scans' folder and then in the sequence folder, for per-point times
+#: ``{frame:06d}.npy`` (1-D, one time per point of the scan, seconds from the sweep start); docs/datasets.md lists the
+#: same names (a test checks it).
 POINT_TIME_FOLDERS = ("point_times", "timestamps", "times", "point_timestamps")
 #: frames whose per-point times' median span is checked against times.txt's spacing (their unit: MIN_SWEEP_SHARE)
 POINT_TIME_SPAN_FRAMES = 5
@@ -52,8 +54,9 @@ KITTI_VERTICAL_CORRECTION_DEG = 0.205
 #: of them is KITTI's own (its HDL-64 needs the vertical correction), not a user's recording in the KITTI layout
 KITTI_FOCAL_LENGTHS_PX = np.array([721.5377, 707.0493, 718.3351, 707.0912, 718.856])
 
-#: methods whose reference pipeline reads KITTI with the correction (``vertical_correction="auto"`` turns it on)
-CORRECTED_BY_DEFAULT = ("kiss",)
+#: methods whose reference pipeline reads KITTI with the correction (``vertical_correction="auto"`` turns it on):
+#: kiss-icp's and genz-icp's own KITTI (and KITTI raw) loaders both apply it
+CORRECTED_BY_DEFAULT = ("kiss", "genz")
 
 CALIB_KEYS_IN_ORDER = ("P0", "P1", "P2", "P3", "Tr")  # meaning of bare (prefix-less) calib lines
 _TR_ALIASES = ("Tr", "Tr_velo_to_cam", "Tr_velo_cam")
@@ -163,11 +166,10 @@ class KittiOdometry:
     ``vertical_correction``: rotate every point about the axis perpendicular to its azimuth by
     :data:`KITTI_VERTICAL_CORRECTION_DEG` (KITTI's HDL-64 calibration error, corrected exactly as kiss-icp's KITTI
     loader does, through kiss-icp's own ``_correct_kitti_scan``). ``True`` / ``False`` force it; ``"auto"``
-    (default) applies it when an odometry run of a method in :data:`CORRECTED_BY_DEFAULT` (kiss) asks through
+    (default) applies it when an odometry run of a method in :data:`CORRECTED_BY_DEFAULT` (kiss, genz) asks through
     :meth:`configure_for_method` on KITTI's own recordings (:attr:`recorded_by_kitti`), so that "kiss through
-    lidarkit" is kiss-icp's own experiment, and never to another folder in the KITTI layout (a user's recording, the
-    simulator's export: no HDL-64 behind it). Read directly, "auto" reads the
-    points as stored. ``reader_options`` records what was applied.
+    lidarkit" is kiss-icp's own experiment (and genz genz-icp's), and never to another folder in the KITTI layout (a
+    user's recording, the simulator's export: no HDL-64 behind it). Read directly, "auto" reads the points as stored. ``reader_options`` records what was applied.
     """
 
     def __init__(
@@ -228,8 +230,9 @@ class KittiOdometry:
         if times_file is not None and not self.times_path.is_file():
             raise DataError("times file not found", source=self.times_path)
         self.poses_path = self._locate_poses(poses_file, odometry_root)
+        # beside the scans first: a velodyne_dir of extra frames keeps its point_times/ next to it, not in the sequence
         self.point_times_dir = next(
-            (self.sequence_dir / d for d in POINT_TIME_FOLDERS if (self.sequence_dir / d).is_dir()), None
+            (folder / d for folder in self.point_time_search_dirs for d in POINT_TIME_FOLDERS if (folder / d).is_dir()), None
         )
         self._check_counts()
         if ground_truth_frame == "auto":
@@ -237,6 +240,12 @@ class KittiOdometry:
         self.ground_truth_frame = ground_truth_frame
 
     # ---- options -----------------------------------------------------------------------------------
+    @property
+    def point_time_search_dirs(self) -> tuple[Path, ...]:
+        """The folders searched, in order, for a per-point time folder: the one holding the scans' folder, then the
+        sequence folder (one folder in KITTI's own layout)."""
+        return tuple(dict.fromkeys((Path(os.path.abspath(self.velodyne_dir)).parent, self.sequence_dir)))
+
     @property
     def simulated(self) -> bool:
         """True for a folder written by lidarkit's simulator (``sim.yaml`` beside ``velodyne/``)."""
@@ -262,8 +271,8 @@ class KittiOdometry:
         return P0 is not None and bool(np.isclose(P0[0, 0], KITTI_FOCAL_LENGTHS_PX, atol=1e-3).any())
 
     def configure_for_method(self, method: str) -> None:
-        """Resolve ``vertical_correction="auto"`` for an odometry run of ``method`` (on for kiss on KITTI's own
-        recordings, :attr:`recorded_by_kitti`)."""
+        """Resolve ``vertical_correction="auto"`` for an odometry run of ``method`` (on for kiss and genz on KITTI's
+        own recordings, :attr:`recorded_by_kitti`)."""
         if self.vertical_correction == "auto":
             self._correct = method in CORRECTED_BY_DEFAULT and self.recorded_by_kitti
 
@@ -316,9 +325,10 @@ class KittiOdometry:
         return next((p for p in candidates if p.is_file()), None)
 
     def _check_counts(self) -> None:
-        """Pose and time files must each cover every frame present; their lengths may differ (an excerpt: a copied
-        sequence folder with a trimmed poses.txt beside the full times.txt, or frames 10-30 of it, which was refused
-        because the 51 poses did not end at frame 30)."""
+        """The pose and time files are read (a malformed line is an error at open); their lengths may differ (an
+        excerpt: a copied sequence folder with a trimmed poses.txt beside the full times.txt, or frames 10-30 of it).
+        Whether they reach the frames is checked where those frames' poses or stamps are taken (:meth:`_check_covered`):
+        a pose file that stops at frame 99 refused every run, ``--frames 0:12`` of the frames it covers too."""
         n_poses = len(self._poses_camera_all) if self.poses_path is not None else None
         n_times = len(self._times_all) if self._times_all is not None else None
         images = self.image_frames
@@ -328,18 +338,33 @@ class KittiOdometry:
                             f"{images[-1] + 1} needed, one per frame from 0)", source=self.times_path)
         if n_poses is not None and n_times is not None and n_poses != n_times:
             last = max((int(f[-1]) for f in (self.scan_frames, self.image_frames) if len(f)), default=-1)
-            if min(n_poses, n_times) > last:  # (a file that stops short is named below, with the frame it misses)
+            if min(n_poses, n_times) > last:
                 log.info("%s: %d poses and %d time stamps; both cover the frames present (up to %d)", self.sequence_dir,
                          n_poses, n_times, last)
-        for kind, paths, frames in (("scan", self.scan_paths, self.scan_frames), ("image", self.image_paths, self.image_frames)):
-            if not len(frames):
-                continue
-            for what, count, src in (("poses", n_poses, self.poses_path), ("time stamps", n_times, self.times_path)):
-                if count is not None and frames[-1] >= count:
-                    raise DataError(
-                        f"{count} {what} but {kind} {paths[-1].name} is frame {frames[-1]}",
-                        source=src,
-                    )
+
+    def _check_covered(self, frames: Any, count: int, what: str, source: Path) -> None:
+        """DataError when a file of ``count`` rows (``what``: poses, time stamps) stops before one of the KITTI frame
+        numbers ``frames`` that is a scan or image present, naming the last such file and its frame (the frames a
+        run selects: the rest of the folder may reach beyond the file); other frames are left to the caller."""
+        asked = np.asarray(frames).ravel()
+        if asked.dtype.kind not in "iuf":  # (text, None: the caller's index check names them)
+            return
+        for kind, paths, numbers in (("scan", self.scan_paths, self.scan_frames), ("image", self.image_paths, self.image_frames)):
+            short = np.flatnonzero(np.isin(numbers, asked) & (numbers >= count))
+            if len(short):
+                k = int(short[-1])
+                raise DataError(f"{count} {what} but {kind} {paths[k].name} is frame {numbers[k]}", source=source)
+
+    def _stamps_of(self, frames: np.ndarray) -> np.ndarray | None:
+        """times.txt's stamps of the KITTI frame numbers ``frames`` ((k,) int), None without times.txt; a file that
+        stops before one of them is a DataError naming the frame."""
+        if self._times_all is None:
+            return None
+        self._check_covered(frames, len(self._times_all), "time stamps", self.times_path)
+        beyond = frames[frames >= len(self._times_all)]
+        if len(beyond):  # a frame number asked of ground_truth_at that no file holds
+            raise DataError(f"{len(self._times_all)} time stamps but frame {int(beyond[0])} is asked for", source=self.times_path)
+        return self._times_all[frames]
 
     # ---- sizes and frames ----------------------------------------------------------------------------
     @property
@@ -415,8 +440,9 @@ class KittiOdometry:
 
     @property
     def timestamps_s(self) -> np.ndarray | None:
-        """``(len,)`` time stamps [s] of ``frames`` from times.txt, or None without times.txt."""
-        return None if self._times_all is None else self._times_all[self.frames]
+        """``(len,)`` time stamps [s] of ``frames`` from times.txt, or None without times.txt (a DataError naming the
+        frame when times.txt stops before one)."""
+        return self._stamps_of(self.frames)
 
     def ground_truth_at(self, frames: np.ndarray | list[int] | None = None, *, frame: str = "lidar") -> Trajectory | None:
         """GT poses of the given KITTI frame numbers (all rows when None) in the ``"lidar"`` or ``"camera"`` frame.
@@ -427,6 +453,7 @@ class KittiOdometry:
             return None
         gt = self._poses_camera_all
         if frames is not None:
+            self._check_covered(frames, len(gt), "poses", self.poses_path)  # (before the index check: it names the file)
             gt = self._rows(gt, frames, self.poses_path)
         elif self._times_all is not None:
             n = min(len(gt), len(self._times_all))  # an excerpt may trim one of the files to the frames present
@@ -463,8 +490,7 @@ class KittiOdometry:
     def _rows(self, gt: Trajectory, frames: np.ndarray | list[int], source: Path) -> Trajectory:
         """The poses of KITTI frame numbers ``frames`` of a whole-sequence pose file, with their times.txt stamps."""
         frames = checked_indices(frames, len(gt), source, "frame", from_end=False)  # (1.5 read frame 1)
-        ts = None if self._times_all is None else self._times_all[frames]
-        return Trajectory(gt.poses_se3[frames], ts, gt.name)
+        return Trajectory(gt.poses_se3[frames], self._stamps_of(frames), gt.name)
 
     def _in_lidar_frame(self, gt: Trajectory) -> Trajectory:
         """Camera-frame poses ``P`` as LiDAR-frame poses ``Tr^-1 P Tr``."""
@@ -556,13 +582,21 @@ class KittiOdometry:
         """GT of ``frames`` in ``ground_truth_frame`` (LiDAR for scan sequences, camera for image-only ones)."""
         return self.ground_truth_at(self.frames, frame=self.ground_truth_frame)
 
+    def ground_truth_of(self, scans: np.ndarray | list[int]) -> Trajectory | None:
+        """:attr:`ground_truth` of the items at positions ``scans`` of ``frames`` only, as a run selects them: a pose
+        file that stops before the folder's last scan scores a run of the frames it covers (``--frames 0:12``)."""
+        if self.poses_path is None:
+            return None
+        positions = checked_indices(scans, len(self.frames), f"{self.name} ({self.sequence_dir})", from_end=False)
+        return self.ground_truth_at(self.frames[positions], frame=self.ground_truth_frame)
+
     # ---- data ------------------------------------------------------------------------------------------
     def read_scan(self, index: int) -> Scan:
         """The ``index``-th scan (position in ``scan_paths``) with its KITTI frame number and time stamp.
 
-        When ``point_times_dir`` (the first of :data:`POINT_TIME_FOLDERS` beside ``velodyne/``, e.g. ``point_times/``
-        as written by :func:`lidarkit.sim.lidar.export_kitti`) holds ``{frame:06d}.npy`` (one time per point,
-        seconds from the sweep start) it becomes ``Scan.point_times_s`` (float64); a length that does not match
+        When ``point_times_dir`` (the first of :data:`POINT_TIME_FOLDERS` in :attr:`point_time_search_dirs`, e.g.
+        ``point_times/`` as written by :func:`lidarkit.sim.lidar.export_kitti`) holds ``{frame:06d}.npy`` (one time per
+        point, seconds from the sweep start) it becomes ``Scan.point_times_s`` (float64); a length that does not match
         the scan, or values that cannot be the points' times (:func:`~lidarkit.io.pointcloud2.checked_point_times`, as
         in a bag), is a DataError; a frame without its file has no per-point times.
         """
@@ -570,7 +604,8 @@ class KittiOdometry:
             raise DataError("sequence has no scans", source=self.velodyne_dir)
         index = checked_index(index, len(self.scan_paths), f"{self.name} ({self.sequence_dir})")
         frame = int(self.scan_frames[index])
-        ts = None if self._times_all is None else float(self._times_all[frame])
+        stamps = self._stamps_of(self.scan_frames[index:index + 1])
+        ts = None if stamps is None else float(stamps[0])
         scan = read_kitti_bin(self.scan_paths[index], frame=frame, timestamp_s=ts, drop_nonfinite=self.drop_nonfinite)
         if ts is not None and self._simulator_pose_instant is not None:  # the simulator stamps sweeps at its pose instant
             scan = dataclasses.replace(scan, stamp_instant=self._simulator_pose_instant)
@@ -730,8 +765,7 @@ class KittiImages:
 
     @property
     def timestamps_s(self) -> np.ndarray | None:
-        times = self.odometry._times_all
-        return None if times is None else times[self.frames]
+        return self.odometry._stamps_of(self.frames)
 
     @property
     def ground_truth(self) -> Trajectory | None:

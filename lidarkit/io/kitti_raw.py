@@ -8,15 +8,17 @@ Layout::
     base_dir/DATE/DATE_drive_NNNN_sync/image_00/data/0000000000.png
 
 OXTS packets become poses ``T_enu_imu`` with pykitti's Mercator projection (scale from the first
-latitude, origin at the first GPS position, x east, y north, z up). ``ground_truth`` gives the
-LiDAR poses ``T_enu_velo = T_enu_imu @ T_velo_imu^-1`` of the scanned frames.
+latitude, origin at the first GPS position, x east, y north, z up), each at its own ``oxts/timestamps.txt`` stamp.
+``ground_truth`` gives the LiDAR poses ``T_enu_velo = T_enu_imu @ T_velo_imu^-1`` of the scanned frames at their
+Velodyne stamps, interpolated between the packets: a sync drive's packet f is stamped 12-24 ms after scan f (its
+packets come 100 or 110 ms apart, the scans 103 ms), 12-24 cm along the track at 10 m/s.
 
 Raw scans are not motion-compensated: as kiss-icp's own KITTI raw loader, the reader gives each point its place in
 the sweep from its azimuth (``point_times="azimuth"``: the HDL-64 turns clockwise seen from above, a sweep starts and
 ends facing backwards and faces forward half-way, when the cameras are triggered and ``velodyne_points/timestamps.txt``
 stamps it), so deskewing variants deskew them; the stamps and the OXTS ground truth refer to the sweep middle. The
 scans get KITTI's vertical-angle correction as the ``kitti`` reader does (``vertical_correction``; under ``"auto"``
-for kiss, as kiss-icp's loader reads every drive).
+for kiss and genz, as kiss-icp's and genz-icp's loaders read every drive).
 Everything pykitti raises is turned into a DataError naming the file.
 """
 
@@ -82,7 +84,7 @@ class KittiRaw:
     raises DataError). Frame numbers come from file names, as in :class:`KittiOdometry`.
 
     ``vertical_correction``: as :class:`~lidarkit.io.kitti.KittiOdometry`'s; every raw drive is a recording of KITTI's
-    HDL-64, so ``"auto"`` corrects whenever an odometry run of a method in ``CORRECTED_BY_DEFAULT`` (kiss) asks
+    HDL-64, so ``"auto"`` corrects whenever an odometry run of a method in ``CORRECTED_BY_DEFAULT`` (kiss, genz) asks
     (:meth:`configure_for_method`), as kiss-icp's own KITTI raw loader does; read directly, the points as stored.
     ``point_times``: ``"azimuth"`` (default) gives each point its sweep fraction from its azimuth, ``"none"`` none.
     """
@@ -168,7 +170,7 @@ class KittiRaw:
         return len(self.scan_paths)
 
     def configure_for_method(self, method: str) -> None:
-        """Resolve ``vertical_correction="auto"`` for an odometry run of ``method`` (on for kiss)."""
+        """Resolve ``vertical_correction="auto"`` for an odometry run of ``method`` (on for kiss and genz)."""
         if self.vertical_correction == "auto":
             self._correct = method in CORRECTED_BY_DEFAULT
 
@@ -237,7 +239,10 @@ class KittiRaw:
         return Trajectory(poses, self._oxts_times_all[self.oxts_frames], f"{self.name}_oxts").orthonormalized()
 
     def ground_truth_at(self, frames: np.ndarray | list[int]) -> Trajectory:
-        """LiDAR poses ``T_enu_velo`` of the given frame numbers (DataError if a frame has no OXTS packet)."""
+        """LiDAR poses ``T_enu_velo`` of the given frame numbers at their Velodyne stamps (the sweep middle): the OXTS
+        poses, each at its own stamp, interpolated there (:meth:`_lidar_poses_at`). Without a Velodyne stamp of every
+        frame, or with one OXTS packet, each frame gets its own packet's pose at the packet's stamp, said in
+        ``meta["paired"]``. DataError if a frame has no OXTS packet."""
         frames = checked_indices(frames, len(self._oxts_times_all), self.drive_dir / "oxts", "frame", from_end=False)
         lookup = {int(f): i for i, f in enumerate(self.oxts_frames)}
         missing = [int(f) for f in frames if int(f) not in lookup]
@@ -246,25 +251,44 @@ class KittiRaw:
                 f"no OXTS packet for frame {missing[0]} ({len(missing)} frames missing, {len(self.oxts_paths)} OXTS files)",
                 source=self.drive_dir / "oxts" / "data",
             )
+        velo = self._velo_times_all
+        if velo is not None and frames.max() < len(velo) and len(self.oxts_paths) >= 2:
+            times = velo[frames]
+            at, back = np.unique(times, return_inverse=True)  # (frames in any order: their Trajectory says so, as before)
+            lidar = self._lidar_poses_at(at)
+            return Trajectory(lidar.poses_se3[back], times, lidar.name)
         oxts = self.oxts_poses
         rows = [lookup[int(f)] for f in frames]
-        poses = oxts.poses_se3[rows] @ se3_inverse(self.T_velo_imu)
-        return Trajectory(poses, oxts.timestamps_s[rows], f"{self.name}_gt_lidar")
+        why = "no Velodyne time stamp of every frame" if len(self.oxts_paths) >= 2 else "one OXTS packet: nothing to interpolate"
+        return Trajectory(oxts.poses_se3[rows] @ se3_inverse(self.T_velo_imu), oxts.timestamps_s[rows], f"{self.name}_gt_lidar",
+                          meta={"paired": f"OXTS packet f as the pose of frame f, at the packet's own stamp ({why})"})
+
+    def _lidar_poses_at(self, times_s: np.ndarray) -> Trajectory:
+        """LiDAR poses at ``times_s`` (s since the epoch): the IMU poses of the OXTS packets at their own stamps,
+        interpolated (slerp, linear position; at constant velocity up to 1.5 packet intervals beyond the first or last
+        packet), then moved to the Velodyne."""
+        oxts = self.oxts_poses
+        if len(oxts) < 2:
+            raise DataError("interpolating needs two or more OXTS packets", source=self.drive_dir / "oxts" / "data")
+        reach_s = 1.5 * float(np.median(np.diff(oxts.timestamps_s)))
+        imu = oxts.interpolated(times_s, max_extrapolation_s=reach_s)
+        return Trajectory(imu.poses_se3 @ se3_inverse(self.T_velo_imu), imu.timestamps_s, f"{self.name}_gt_lidar")
 
     @property
     def ground_truth(self) -> Trajectory | None:
-        """LiDAR poses of the scans in the ENU frame of the first GPS fix (at the sweep middle, when the scan is
-        stamped), or None when there are no scans."""
+        """LiDAR poses of the scans in the ENU frame of the first GPS fix at the scans' Velodyne stamps (the sweep
+        middle), interpolated between the OXTS packets (:meth:`ground_truth_at`), or None when there are no scans."""
         if not self.scan_paths:
             return None
-        gt = self.ground_truth_at(self.scan_frames).with_timestamps(self.timestamps_s)
-        return Trajectory(gt.poses_se3, gt.timestamps_s, gt.name, meta={"frame": "lidar", "pose_instant": "mid"})
+        gt = self.ground_truth_at(self.scan_frames)
+        meta = {"frame": "lidar", "pose_instant": "mid", **gt.meta}
+        stamps = self.timestamps_s  # (paired by frame: stamped as the scans, as a run pairs them; None without stamps)
+        return Trajectory(gt.poses_se3, gt.timestamps_s if "paired" not in meta else stamps, gt.name, meta=meta)
 
     def ground_truth_at_instant(self, instant: str) -> Trajectory:
-        """The scans' LiDAR poses at the ``instant`` (start, mid or end) of every sweep: the OXTS poses, each at its
-        frame's Velodyne stamp as :attr:`ground_truth` pairs them, interpolated at the scans' stamps moved by half the
-        stamps' median interval (continued at constant velocity for at most 1.5 intervals beyond the first or last
-        packet); DataError without Velodyne time stamps."""
+        """The scans' LiDAR poses at the ``instant`` (start, mid or end) of every sweep: the OXTS poses at their own
+        stamps, interpolated at the scans' stamps moved by half the stamps' median interval (:meth:`_lidar_poses_at`);
+        DataError without Velodyne time stamps."""
         if instant not in INSTANT_FRACTION:
             raise DataError(f"unknown instant {instant!r}; valid: {', '.join(INSTANT_FRACTION)}", source=self.drive_dir)
         stamps = self.timestamps_s
@@ -272,16 +296,10 @@ class KittiRaw:
             raise DataError("re-timing the ground truth needs the Velodyne time stamps of two or more scans", source=self.velodyne_dir)
         period = float(np.median(np.diff(self._velo_times_all)))
         times = stamps + (INSTANT_FRACTION[instant] - 0.5) * period
-        oxts = self.oxts_poses
-        velo_all = self._velo_times_all
-        # the sync drives pair OXTS packet f with scan f (as ground_truth does): both at the Velodyne stamp of frame f
-        at = velo_all[self.oxts_frames] if self.oxts_frames[-1] < len(velo_all) else oxts.timestamps_s
-        if len(oxts) < 2 or not (np.diff(at) > 0).all():
-            raise DataError("interpolating needs two or more OXTS packets with increasing time stamps", source=self.drive_dir / "oxts")
-        lidar = Trajectory(oxts.poses_se3 @ se3_inverse(self.T_velo_imu), at, f"{self.name}_gt_lidar")
-        out = lidar.interpolated(times, max_extrapolation_s=1.5 * float(np.median(np.diff(at))))
-        how = f"the {len(oxts)} OXTS poses interpolated {INSTANT_FRACTION[instant] - 0.5:+.1f} sweep from the scans' stamps"
-        return Trajectory(out.poses_se3, times, lidar.name, meta={"frame": "lidar", "pose_instant": instant, "retimed": how})
+        lidar = self._lidar_poses_at(times)
+        how = (f"the {len(self.oxts_paths)} OXTS poses, at their own stamps, interpolated {INSTANT_FRACTION[instant] - 0.5:+.1f} "
+               "sweep from the scans' stamps")
+        return Trajectory(lidar.poses_se3, times, lidar.name, meta={"frame": "lidar", "pose_instant": instant, "retimed": how})
 
     # ---- data -------------------------------------------------------------------------------------------
     def read_scan(self, index: int) -> Scan:
