@@ -18,11 +18,13 @@ import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.io.base import Scan, checked_index, option_path
-from lidarkit.io.pointfile import POINT_FILE_SUFFIXES, read_point_file
-from lidarkit.textfile import read_numeric_table
+from lidarkit.io.pointfile import POINT_FILE_SUFFIXES, point_file_fields, read_point_file
+from lidarkit.textfile import data_line_numbers, read_numeric_table
 from lidarkit.trajectory import Trajectory
 
 POSE_FORMATS = ("kitti", "tum")
+#: per-point time fields that kiss-icp's generic loader (generic:PATH) reads from .pcd/.ply files; this reader reads none
+GENERIC_TIME_FIELDS = ("t", "timestamp", "timestamps", "time", "stamps")
 log = logging.getLogger(__name__)
 
 
@@ -132,7 +134,8 @@ class ScanFolder:
             return None
         gt = Trajectory.read(self.poses_path, self.poses_format, format_hint=lambda other: f"poses_format={other}")
         if len(gt) != len(self.scan_paths):
-            raise DataError(f"{len(gt)} poses for {len(self.scan_paths)} scans in {self.path}", source=self.poses_path)
+            raise DataError(f"{len(gt)} poses for {len(self.scan_paths)} scans in {self.path}{self._repeats_left_out(len(gt))}",
+                            source=self.poses_path)
         if self._timestamps_s is not None:
             if gt.timestamps_s is not None:
                 self._warn_stamps_apart(gt.timestamps_s)
@@ -140,6 +143,21 @@ class ScanFolder:
         elif gt.timestamps_s is not None:
             self._timestamps_s = gt.timestamps_s.copy()
         return gt.with_name(f"{self.name}_gt")
+
+    def _repeats_left_out(self, n_read: int) -> str:
+        """What a pose count short of the scans owes to poses left out for repeating the stamp before them (a 10-row
+        TUM file for 10 scans read as "9 poses for 10 scans" beside a warning): their lines, and why that counts."""
+        if self.poses_format != "tum":
+            return ""
+        rows = read_numeric_table(self.poses_path, 8)
+        repeated = np.flatnonzero(np.diff(rows[:, 0]) == 0) + 1
+        if not repeated.size or len(rows) != len(self.scan_paths) or len(rows) - repeated.size != n_read:
+            return ""
+        numbers = data_line_numbers(self.poses_path)
+        lines = ", ".join(str(numbers[k]) for k in repeated[:5]) + (", ..." if repeated.size > 5 else "")
+        left_out = f"lines {lines} left out: each repeats" if repeated.size > 1 else f"line {lines} left out: it repeats"
+        return (f" ({len(rows)} rows, {left_out} the stamp of the pose before it); the folder reader pairs poses with scans "
+                "by order, one each: give each pose its own stamp")
 
     def _warn_stamps_apart(self, pose_stamps: np.ndarray) -> None:
         """A TUM file's own stamps give way to ``timestamps``: say so when they disagree by more than half a frame
@@ -173,6 +191,16 @@ class ScanFolder:
                 # (named as the attribute, not as the option: regression checks compare a pinned spec's options by name)
                 "poses_path": None if self.poses_path is None else str(Path(self.poses_path).absolute()),
                 "poses_format": self.poses_format}
+
+    @property
+    def unread_point_times(self) -> tuple[str, Path, bool] | None:
+        """(field, file, whether generic:PATH reads it): a per-point time field in the folder's first .pcd/.ply, which
+        this reader leaves unread; None without one. For a deskew that found no times ("ScanFolder gives none" hid
+        them). generic:PATH refuses a .pcd whose padding fields repeat (Open3D, its reader, aborts on them)."""
+        first = next((p for p in self.scan_paths if p.suffix.lower() in (".pcd", ".ply")), None)
+        fields = [] if first is None else point_file_fields(first)
+        field = next((f for f in GENERIC_TIME_FIELDS if f in fields), None)
+        return None if field is None else (field, first, len(set(fields)) == len(fields))
 
     @property
     def timestamps_s(self) -> np.ndarray | None:

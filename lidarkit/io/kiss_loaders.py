@@ -235,6 +235,14 @@ class KissKittiScans(KissLoaderScans):
         super().__init__(path, sequence=f"{number:02d}")
 
     @property
+    def reader_options(self) -> dict[str, Any]:
+        """The base's, with the vertical-angle correction kiss-icp's KITTI loaders apply to every scan (a run recorded
+        "none reported by the reader" for points each moved by 0.205 deg)."""
+        from lidarkit.io.kitti import correction_options
+
+        return {**KissLoaderScans.reader_options.fget(self), **correction_options(True, True)}  # (shared with the raw kind)
+
+    @property
     def _frames(self) -> list[int]:
         """The KITTI frame number of each scan present (its file name): an excerpt need not start at 0."""
         return [int(Path(f).stem) for f in self.loader.scan_files]
@@ -272,6 +280,8 @@ class KissKittiRawScans(KissLoaderScans):
         if isinstance(sequence, bool) or not str(sequence).strip().isdigit():
             raise ConfigError(f"a KITTI odometry sequence number (0-10), got {sequence!r}", source="kiss_kitti_raw dataset option sequence")
         super().__init__(path, sequence=f"{int(sequence):02d}")
+
+    reader_options = KissKittiScans.reader_options  # (kiss-icp's raw loader corrects every drive as its KITTI loader)
 
 
 class KissTumScans(KissLoaderScans):
@@ -577,12 +587,17 @@ def _field_dtype(path: Path, field: str) -> np.dtype | None:
 
 def _check_header(path: Path, frame: int | None) -> None:
     """The point-file readers' header checks on a ``.pcd`` / ``.ply`` before kiss-icp's generic loader hands it to
-    Open3D (a .pcd without z failed as "pip install kiss-icp[all] is required" with Open3D's coloured warnings)."""
+    Open3D (a .pcd without z failed as "pip install kiss-icp[all] is required" with Open3D's coloured warnings), and
+    a .pcd with repeated ``_`` padding fields refused: Open3D aborted the process on it (folder:PATH reads it)."""
     from lidarkit.io.pointfile import check_pcd_counts, check_ply_counts
 
     suffix = path.suffix.lower()
     if suffix == ".pcd":
-        check_pcd_counts(path, frame)
+        header = check_pcd_counts(path, frame)
+        if header.padded:
+            raise DataError(f"repeated padding fields _ (FIELDS {' '.join(header.fields)}): Open3D, which kiss-icp's generic "
+                            "loader reads with, aborts the process on repeated field names; folder:PATH reads these files "
+                            "(without per-point times)", source=path, location=None if frame is None else f"frame {frame}")
     elif suffix == ".ply":
         check_ply_counts(path, frame)
 

@@ -2,13 +2,15 @@
 
 Every reader checks what it reads: a missing, empty or truncated file, a ``.pcd``/``.ply`` header Open3D would
 misread (no x/y/z, a type it does not read), or NaN/inf points raise ``DataError`` naming the file, the frame and
-the reason; with ``drop_nonfinite=True`` non-finite points are dropped instead and a warning is logged. Points
+the reason; with ``drop_nonfinite=True`` non-finite points are dropped instead and a warning is logged. A ``.pcd``
+with PCL's repeated ``_`` padding fields, on which Open3D aborts the process, is read with numpy. Points
 exactly at the sensor origin (0, 0, 0), an organized cloud's missing returns, are always left out
 (:func:`drop_origin_points`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import os
 import re
@@ -196,12 +198,18 @@ def read_open3d_scan(
 ) -> Scan:
     """Read a ``.pcd`` or ``.ply`` with Open3D's tensor reader, keeping an ``intensity`` field if present.
 
-    Open3D is asked not to drop NaN points itself so that they are reported (or dropped) here.
+    Open3D is asked not to drop NaN points itself so that they are reported (or dropped) here. A ``.pcd`` with
+    repeated ``_`` padding fields is read with numpy instead (:func:`read_padded_pcd`): Open3D aborts on it.
     """
     path = Path(path)
     _require_file(path, frame)
     if path.suffix.lower() == ".pcd":
-        check_pcd_counts(path, frame)
+        header = check_pcd_counts(path, frame)
+        if header.padded:  # (Open3D aborted the process on it)
+            points, intensity = read_padded_pcd(path, header, frame)
+            points, intensity = finite_points(points, intensity, source=path, frame=frame, drop_nonfinite=drop_nonfinite)
+            points, intensity = drop_origin_points(points, intensity, source=path, frame=frame)
+            return Scan(points, intensity, None, timestamp_s, frame or 0, str(path))
     elif path.suffix.lower() == ".ply":
         check_ply_counts(path, frame)
     import open3d as o3d  # slow import: only when a pcd/ply is read
@@ -262,9 +270,30 @@ def open3d_reason(err: BaseException) -> str:
 _PCD_HEADER_KEYS = ("VERSION", "FIELDS", "SIZE", "TYPE", "COUNT", "WIDTH", "HEIGHT", "VIEWPOINT", "POINTS", "DATA")
 
 
-def check_pcd_counts(path: Path, frame: int | None = None) -> None:
+@dataclasses.dataclass(frozen=True)
+class PcdHeader:
+    """A checked ``.pcd`` header: its fields in file order (PCL's ``_`` padding included), the point count, the DATA
+    kind and the byte where the body starts."""
+
+    fields: tuple[str, ...]
+    types: tuple[str, ...]
+    sizes: tuple[int, ...]
+    counts: tuple[int, ...]
+    n_points: int
+    data: str
+    body_offset: int
+
+    @property
+    def padded(self) -> bool:
+        """Whether a field name repeats (only PCL's ``_`` padding may): Open3D corrupts its heap on such a file and
+        the process aborts (PCL's binary PointXYZI, ``x y z _ intensity _``), so lidarkit reads it itself."""
+        return len(set(self.fields)) < len(self.fields)
+
+
+def check_pcd_counts(path: Path, frame: int | None = None) -> PcdHeader:
     """Check a ``.pcd`` body against its header before Open3D reads it: Open3D fills a short body with zeros (or
-    fails deep inside), so a header declaring more points than the body holds is a DataError here."""
+    fails deep inside), so a header declaring more points than the body holds is a DataError here. Returns the
+    header, which says whether Open3D may read the file at all (:attr:`PcdHeader.padded`)."""
     where = _where(frame)
     try:
         fh = open(path, "rb")
@@ -302,6 +331,7 @@ def check_pcd_counts(path: Path, frame: int | None = None) -> None:
         raise DataError("malformed .pcd header (negative POINTS or FIELDS/SIZE/TYPE/COUNT lengths differ)", source=path,
                         location=where)
     _check_pcd_fields(path, where, fields, types, sizes)
+    header_read = PcdHeader(tuple(fields), tuple(types), tuple(sizes), tuple(counts), n_points, data, offset)
     if data not in ("ascii", "binary", "binary_compressed"):
         raise DataError(f"unsupported DATA {header['DATA'][0]!r} (ascii, binary or binary_compressed)", source=path,
                         location=where)
@@ -322,7 +352,7 @@ def check_pcd_counts(path: Path, frame: int | None = None) -> None:
         if record and len(body) < n_points * record:
             raise DataError(f"the header declares {n_points} points ({n_points * record} bytes) but the binary body holds "
                             f"{len(body)} bytes ({held} points)", source=path, location=where)
-        return
+        return header_read
     else:  # binary_compressed: uint32 compressed and uncompressed sizes, then the compressed columns
         record = sum(s * c for s, c in zip(sizes, counts))
         packed, unpacked = np.frombuffer(body[:8], "<u4").tolist() if len(body) >= 8 else (None, None)
@@ -330,17 +360,60 @@ def check_pcd_counts(path: Path, frame: int | None = None) -> None:
             raise DataError(f"corrupt binary_compressed body: the header declares {n_points} points ({n_points * record} "
                             f"bytes); the body's size fields say {packed} compressed bytes ({unpacked} unpacked) and it "
                             f"holds {max(len(body) - 8, 0)}", source=path, location=where)
-        return
+        return header_read
     if held != n_points:
         raise DataError(f"the header declares {n_points} points but the ascii body holds {held}", source=path, location=where)
+    return header_read
 
 
 _PCD_TYPE_SIZES = {"F": (4, 8), "I": (1, 2, 4, 8), "U": (1, 2, 4, 8)}  # what Open3D reads
+_PCD_NUMPY_KINDS = {"F": "f", "I": "i", "U": "u"}
+_INTENSITY_FIELDS = ("intensity", "intensities", "reflectance")
+
+
+def read_padded_pcd(path: Path, header: PcdHeader, frame: int | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+    """``(N, 3)`` float64 points and ``(N,)`` float32 intensity (None without one) of a checked ``.pcd`` whose field
+    names repeat (:attr:`PcdHeader.padded`), read with numpy at the header's offsets, the ``_`` padding skipped:
+    Open3D aborts the process on these files. A ``binary_compressed`` one is refused (PCL writes its padding only
+    into binary and ascii files)."""
+    where = _where(frame)
+    if header.data == "binary_compressed":
+        raise DataError(f"binary_compressed with repeated fields (FIELDS {' '.join(header.fields)}): Open3D aborts on "
+                        "repeated field names and lidarkit reads them only from binary or ascii files; save it as binary",
+                        source=path, location=where)
+    if header.n_points == 0:
+        raise DataError("no points read (unreadable, corrupt or empty point cloud)", source=path, location=where)
+    columns = [(f"{name}{k}" if name == "_" else name, size, count, kind)
+               for k, (name, kind, size, count) in enumerate(zip(header.fields, header.types, header.sizes, header.counts))]
+    if header.data == "binary":
+        record = np.dtype([(name, f"<{_PCD_NUMPY_KINDS[kind]}{size}", (count,) if count > 1 else ())
+                           for name, size, count, kind in columns])
+        table = np.fromfile(path, record, count=header.n_points, offset=header.body_offset)
+
+        def column(name: str) -> np.ndarray:
+            return table[name].reshape(header.n_points, -1)[:, 0]
+    else:  # ascii: the body was checked for numbers, one row of the header's width per point
+        with open(path, "rb") as fh:
+            fh.seek(header.body_offset)
+            values = np.array(fh.read().split(), dtype=np.float64).reshape(header.n_points, -1)
+        starts = dict(zip((name for name, *_ in columns), np.cumsum([0, *header.counts[:-1]]).tolist()))
+        kinds = {name: f"<{_PCD_NUMPY_KINDS[kind]}{size}" for name, size, _, kind in columns}
+
+        def column(name: str) -> np.ndarray:  # (in the field's type, as from a binary body: float32 x as float32)
+            return values[:, starts[name]].astype(kinds[name])
+    points = np.column_stack([column(axis) for axis in "xyz"]).astype(np.float64)
+    named = next((name for name in _INTENSITY_FIELDS if name in header.fields), None)
+    return points, None if named is None else column(named).astype(np.float32)
 
 
 def _check_pcd_fields(path: Path, where: str | None, fields: list[str], types: list[str], sizes: list[int]) -> None:
     """The fields Open3D needs: x, y and z (lowercase, one type for the three: it reads no positions otherwise, "no
-    points read"), and a type it knows for every field (one it does not fails the whole read)."""
+    points read"), a type it knows for every field (one it does not fails the whole read), and a name used once (a value
+    is read by its field's name; only PCL's ``_`` padding repeats)."""
+    repeated = next((name for name in fields if name != "_" and fields.count(name) > 1), None)
+    if repeated is not None:
+        raise DataError(f"field {repeated} appears {fields.count(repeated)} times (FIELDS {' '.join(fields)}): a field is "
+                        "read by its name, only the padding field _ may repeat", source=path, location=where)
     missing = [axis for axis in "xyz" if axis not in fields]
     if missing:
         raise DataError(f"no {' '.join(missing)} field (FIELDS {' '.join(fields)}): positions are read from fields "
@@ -403,23 +476,56 @@ def check_ply_counts(path: Path, frame: int | None = None) -> None:
         raise DataError(f"no vertex element (elements: {' '.join(e[0] for e in elements) or 'none'}): points are read from "
                         "an element named vertex", source=path, location=where)
     _check_ply_coordinates(path, where, dict(vertex[2]), [name for name, _ in vertex[2]])
-    if elements[0][0] != "vertex" or any(kind not in _PLY_TYPES.values() for _, kind in vertex[2]):
-        return  # a list's length varies by vertex: no byte count to check
-    n_vertices, vertex_bytes = vertex[1], sum(np.dtype(kind).itemsize for _, kind in vertex[2])
-    size = path.stat().st_size - body_start
-    if fmt.startswith("binary"):
-        if size < n_vertices * vertex_bytes:
-            raise DataError(f"truncated: the header declares {n_vertices} vertices ({n_vertices * vertex_bytes} bytes) but the body "
-                            f"holds {size} bytes", source=path, location=where)
-    elif fmt == "ascii":
+    if elements[0][0] != "vertex":
+        return  # the vertices come after another element's lines: no line or byte count to check
+    n_vertices, names = vertex[1], [name for name, _ in vertex[2]]
+    n_lists = sum(kind not in _PLY_TYPES.values() for _, kind in vertex[2])
+    if fmt == "ascii":
         with open(path, "rb") as fh:
             fh.seek(body_start)
             body = fh.read()
-        held = sum(1 for line in body.splitlines() if line.strip())
-        if held < n_vertices:
-            raise DataError(f"truncated: the header declares {n_vertices} vertices but the ascii body holds {held} lines",
+        widths = _ascii_line_widths(body)
+        if len(widths) < n_vertices:
+            raise DataError(f"truncated: the header declares {n_vertices} vertices but the ascii body holds {len(widths)} lines",
                             source=path, location=where)
-        _check_ply_ascii_numbers(path, where, body, n_vertices, [name for name, _ in vertex[2]])
+        # RPly reads words, not lines: a vertex line short or long by a value shifts every vertex after it
+        declared = len(names)  # a list property: its length word, then that many values (a width of at least 1)
+        off = np.flatnonzero(widths[:n_vertices] < declared if n_lists else widths[:n_vertices] != declared)
+        if off.size:
+            k = int(off[0])
+            at_least = " at least" if n_lists else ""
+            raise DataError(f"ascii vertex {k} has {widths[k]} values, the header declares{at_least} {declared}",
+                            source=path, location=where)
+        if not n_lists:
+            _check_ply_ascii_numbers(path, where, body, n_vertices, names)
+        return
+    if n_lists:
+        return  # a list's length varies by vertex: no byte count to check
+    vertex_bytes = sum(np.dtype(kind).itemsize for _, kind in vertex[2])
+    size = path.stat().st_size - body_start
+    if size < n_vertices * vertex_bytes:
+        raise DataError(f"truncated: the header declares {n_vertices} vertices ({n_vertices * vertex_bytes} bytes) but the body "
+                        f"holds {size} bytes", source=path, location=where)
+
+
+_WHITESPACE = np.zeros(256, dtype=bool)
+_WHITESPACE[list(b" \t\n\r\v\f")] = True  # the bytes C's isspace takes for whitespace
+
+
+def _ascii_line_widths(body: bytes) -> np.ndarray:
+    """``(L,)`` int64: the number of whitespace-separated values on each non-blank line of an ascii body (lines end at
+    ``\\n``; a ``\\r`` before it is whitespace), counted over the bytes with numpy (a million lines in no Python loop)."""
+    data = np.frombuffer(body, dtype=np.uint8)
+    if data.size == 0:
+        return np.zeros(0, dtype=np.int64)
+    space = _WHITESPACE[data]
+    word_start = ~space
+    word_start[1:] &= space[:-1]
+    line_end = data == ord("\n")
+    # words before each line's end, from the sorted positions (a cumulative sum over every byte took three times as long)
+    words_before = np.searchsorted(np.flatnonzero(word_start), np.flatnonzero(line_end))
+    widths = np.diff(words_before, prepend=0, append=np.count_nonzero(word_start))
+    return widths[widths > 0]
 
 
 _C_NUMBER = (rb"[+-]?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?"  # what C's strtod reads whole: decimal, hexadecimal, nan
@@ -456,6 +562,30 @@ def _check_ply_coordinates(path: Path, where: str | None, kinds: dict[str, str],
                         "are read as one type", source=path, location=where)
 
 
+def point_file_fields(path: str | os.PathLike) -> list[str]:
+    """The per-point fields a ``.pcd`` (FIELDS) or ``.ply`` (vertex properties) header names, from its first 64 kB;
+    empty for another file type or a header that cannot be read (the readers name what is wrong with it)."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in (".pcd", ".ply"):
+        return []
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(65536).split(b"end_header" if suffix == ".ply" else b"\nDATA", 1)[0]
+    except OSError:
+        return []
+    lines = [line.split() for line in head.decode("ascii", errors="replace").splitlines()]
+    if suffix == ".pcd":
+        return next((words[1:] for words in lines if words and words[0].upper() == "FIELDS"), [])
+    names, in_vertex = [], False
+    for words in lines:
+        if words[:1] == ["element"]:
+            in_vertex = words[1:2] == ["vertex"]
+        elif words[:1] == ["property"] and in_vertex and len(words) > 2:
+            names.append(words[-1])
+    return names
+
+
 def read_point_file(
     path: str | os.PathLike, *, frame: int | None = None, timestamp_s: float | None = None, drop_nonfinite: bool = False
 ) -> Scan:
@@ -483,8 +613,11 @@ __all__ = [
     "finite_points",
     "open3d_quiet",
     "open3d_reason",
+    "PcdHeader",
+    "point_file_fields",
     "read_kitti_bin",
     "read_npy_scan",
     "read_open3d_scan",
+    "read_padded_pcd",
     "read_point_file",
 ]

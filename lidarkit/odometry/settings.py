@@ -107,11 +107,20 @@ def point_times_not_found(sequence: Any) -> str:
     if hasattr(sequence, "point_times_dir") and getattr(sequence, "sequence_dir", None) is not None:
         if sequence.point_times_dir is None:
             names = ", ".join(f"{d}/" for d in POINT_TIME_FOLDERS)
-            return f"no per-point times found (looked for {names} beside velodyne/ in {sequence.sequence_dir})"
+            return f"no per-point times found (looked for {names} {_point_time_search(sequence)})"
         return f"no per-point times found for some frames in {sequence.point_times_dir}"
     from lidarkit.io.pointcloud2 import TIME_FIELDS
 
     reader = type(sequence).__name__
+    unread = getattr(sequence, "unread_point_times", None)  # (a folder: read as "ScanFolder gives none")
+    if unread:
+        field, first, generic_reads = unread
+        other = (f"generic:{sequence.path} reads them" if generic_reads
+                 else "generic:PATH, which does, refuses these files (repeated _ padding fields)")
+        return (f"no per-point times read (folder: does not read per-point times; its scans carry them in the {field!r} "
+                f"field, e.g. {Path(first).name}; {other})")
+    if reader == "SimulatedLidarSequence" and getattr(getattr(sequence, "config", None), "point_times", True) is False:
+        return f"no per-point times found ({reader}: point_times=false attaches none)"
     fields = getattr(sequence, "cloud_fields", None)
     option = getattr(sequence, "time_field", None)
     if fields and option in ("", "none"):
@@ -123,6 +132,22 @@ def point_times_not_found(sequence: Any) -> str:
                 f"time_field=auto reads one named {', '.join(TIME_FIELDS[:-1])} or {TIME_FIELDS[-1]}, time_field=NAME "
                 f"reads another{example})")
     return f"no per-point times found ({reader} gives none)"
+
+
+def _point_time_search(sequence: Any) -> str:
+    """Where a KITTI-layout reader looked for per-point time folders, in words: beside the scans' folder, then in
+    the sequence folder when that is another (a velodyne_dir elsewhere was said to be searched "beside velodyne/")."""
+    velodyne = Path(os.path.abspath(getattr(sequence, "velodyne_dir", None) or Path(sequence.sequence_dir) / "velodyne"))
+    searched = getattr(sequence, "point_time_search_dirs", None) or (velodyne.parent,)
+    later = "".join(f", then in {folder}" for folder in searched[1:])
+    return f"beside {velodyne.name}/ in {searched[0]}{later}"
+
+
+def frames_named(numbers: np.ndarray, shown: int = 5) -> str:
+    """``frame 5`` / ``frames 5, 9`` / ``frames 1, 2, 3, 4, 5 and 7 more``: the first ``shown`` frame numbers."""
+    listed = ", ".join(str(int(k)) for k in numbers[:shown])
+    more = f" and {len(numbers) - shown} more" if len(numbers) > shown else ""
+    return f"frame{'s' if len(numbers) > 1 else ''} {listed}{more}"
 
 
 #: why a snapshot's missing per-point times are no fault: every point was taken at one instant
@@ -198,6 +223,15 @@ def effective_settings(
     missing = point_times_not_found(sequence)
     if n_flat_times:
         missing = f"the per-point times of {n_flat_times} of {n} frames are all equal (nothing to deskew with)"
+    if 0 < n_times < n:  # some frames had times: the reader's word for none at all ("RosbagScans gives none") was wrong
+        numbers = np.asarray(frames if frames is not None and len(frames) == n else np.arange(n))
+        lacking = frames_named(numbers[~np.asarray(has_point_times, dtype=bool)])
+        if n_flat_times == n - n_times:
+            missing = f"the per-point times of {lacking} are all equal (nothing to deskew with)"
+        else:
+            flat = f" ({n_flat_times} of them had all-equal ones: nothing to deskew with)" if n_flat_times else ""
+            folder = getattr(sequence, "point_times_dir", None)  # (a KITTI layout's: where those frames' files are missing)
+            missing = f"{lacking} had no per-point times{'' if folder is None else f' in {folder}'}{flat}"
     deskew: dict[str, Any] = {"requested": requested, "applied": False, "frames_with_point_times": n_times, "n_frames": n}
     if requested is None:
         deskew["reason"] = f"{method} does not deskew (no deskew option)"
