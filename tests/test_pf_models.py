@@ -421,7 +421,7 @@ def test_pf_config_built_directly_is_the_one_line_config_error_make_gives():
     (lines long, with a URL) where PFConfig.make said it in one line."""
     for values, message in (
         ({"kernel": "kalmann"}, "pf config kernel: Input should be 'point' or 'kalman' (got 'kalmann')"),
-        ({"n_particles": 0}, "pf config n_particles: n_particles must be >= 1, got 0"),
+        ({"n_particles": 0}, "pf config n_particles: n_particles must be >= 1 and <= 10000000, got 0"),
         ({"kld": True, "kld_min_n": 10, "kld_max_n": 5}, "pf config: kld_min_n 10 > kld_max_n 5"),
     ):
         for build in (PFConfig, PFConfig.make, lambda **v: PFConfig.model_validate(v), PFConfig().replace):

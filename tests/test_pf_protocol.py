@@ -614,3 +614,69 @@ def test_the_bench_pf_task_scores_from_the_last_pose_as_run_protocol_does(tmp_pa
                           options={"mse_start": 15}).spec())
     assert job["status"] == "ok", job["error"]
     assert job["info"]["run"]["metrics"]["mse_start"] == 15 and job["info"]["run"]["config"]["dtype"] == "float64"
+
+
+def _pf_suite(tmp_path, params: str):
+    """A one-job pf suite file over the Freiburg data with ``params`` (YAML flow mapping)."""
+    path = tmp_path / "suite.yaml"
+    path.write_text(f"""experiments:
+  - task: pf
+    dataset: {{kind: landmarks, path: "{shared_path('pf', 'burgard_particle_filter')}"}}
+    methods: [{{name: particle_filter, params: {params}}}]
+""")
+    return path
+
+
+def test_particle_bound_of_the_cli_holds_for_the_config_the_library_and_the_bench(tmp_path):
+    """`lidarkit bench` with n_particles 3e9 started the job and failed in numpy's MemoryError (33.5 GiB); only the CLI
+    held --particles to 1e7. PFConfig holds every particle count to it, so the library and the bench refuse alike."""
+    from lidarkit.bench.suite import load_suite
+    from lidarkit.errors import ConfigError
+
+    bound = "n_particles must be >= 1 and <= 10000000, got 3000000000"
+    with pytest.raises(ConfigError) as err:
+        PFConfig(n_particles=3_000_000_000)
+    assert str(err.value) == f"pf config n_particles: {bound}"
+    with pytest.raises(ConfigError) as err:
+        run_protocol(shared_path("pf", "burgard_particle_filter"), n_particles=3_000_000_000)
+    assert str(err.value) == f"pf config n_particles: {bound}"
+    for field in ("kld_max_n", "kld_unconverged_n", "kld_min_n"):  # KLD-sampling grows the set up to these
+        with pytest.raises(ConfigError) as err:
+            PFConfig(**{field: 20_000_000})
+        assert str(err.value) == f"pf config {field}: must be <= 10000000, got 20000000"
+    assert PFConfig(n_particles=10_000_000).n_particles == 10_000_000  # the bound itself is a valid config
+    path = _pf_suite(tmp_path, "{n_particles: 3000000000}")
+    with pytest.raises(ConfigError) as err:  # refused when the suite loads, before any job starts
+        load_suite(path)
+    assert str(err.value) == f"{path} (experiments[0].methods[0], line 4): pf config n_particles: {bound}"
+
+
+def test_library_and_bench_check_the_filter_memory_as_the_cli_does(tmp_path, monkeypatch, capsys):
+    """Only `lidarkit pf` estimated a filter's memory; run_protocol, run_recorded and a bench suite went on to allocate.
+    A machine with 4 KiB free (the memory figure is the test's; nothing large is allocated) refuses 50 particles
+    (~16 KB) everywhere, each naming its input: the CLI its option, the library the config field."""
+    import lidarkit.resources
+    from lidarkit.bench.suite import load_suite
+    from lidarkit.errors import ConfigError
+
+    monkeypatch.setattr(lidarkit.resources, "available_memory_bytes", lambda: 4096)
+    data = LandmarkData(shared_path("pf", "burgard_particle_filter"))
+    tail = "needs about 0.0153 MiB of memory, more than 80% of the 0.00391 MiB available"
+    for run, line in (
+        (lambda: run_protocol(data, 50, seed=0), f"n_particles: a filter of 50 particles {tail}"),
+        (lambda: run_recorded(data, 50, seed=0), f"n_particles: a filter of 50 particles {tail}"),
+        (lambda: run_protocol(data, 50, seed=0, kld=True, kld_min_n=20, kld_max_n=50, kld_unconverged_n=20),
+         f"kld_max_n: a filter of 50 particles {tail}"),  # a KLD run by the most particles it may reach
+        (lambda: run_protocol(data, 40, seed=0, snapshot_steps=(0, 1, 2, 3, 4)),  # 40 x (320 + 5 x 24) bytes
+         "n_particles: a filter of 40 particles needs about 0.0168 MiB of memory, more than 80% of the 0.00391 MiB available"),
+    ):
+        with pytest.raises(ConfigError) as err:
+            run()
+        assert str(err.value) == line
+    path = _pf_suite(tmp_path, "{n_particles: 50}")
+    with pytest.raises(ConfigError) as err:
+        load_suite(path)
+    assert str(err.value) == f"{path} (experiments[0].methods[0], line 4): n_particles: a filter of 50 particles {tail}"
+    with pytest.raises(SystemExit):  # the CLI keeps its own line, naming the option
+        main(["pf", str(shared_path("pf", "burgard_particle_filter")), "--particles", "50"])
+    assert f"--particles: a filter of 50 particles {tail}" in capsys.readouterr().err

@@ -588,3 +588,25 @@ def test_a_missing_drift_metric_says_why_and_none_values_are_named_apart():
         assert_no_worse_than({"ape_rmse_m": 0.1}, {"ape_rmse_m": None, "hz": 10}, metric="ape_rmse_m")
     assert str(err.value) == ("assert_no_worse_than: metric 'ape_rmse_m' not in the baseline (it has: hz; present but None: "
                               "ape_rmse_m)")
+
+
+def test_the_documented_baseline_loaders_work_as_docs_regression_md_says(tiny_baseline, tmp_path):
+    """docs/regression.md presented the plugin's ``load_lidarkit_baseline`` fixture as a function, and
+    ``from lidarkit.testing import load_lidarkit_baseline`` failed: outside pytest the page now imports ``load_baseline``
+    from lidarkit.testing."""
+    from lidarkit.bench import baseline as bench_baseline
+    from lidarkit.testing import load_baseline
+
+    assert load_baseline is bench_baseline.load_baseline
+    loaded = load_baseline(tiny_baseline.path)
+    assert loaded.metrics("random_walk") == tiny_baseline.metrics("random_walk")
+    with pytest.raises(DataError, match="baseline folder does not exist"):
+        load_baseline(tmp_path / "nothere")
+    import lidarkit.testing
+
+    assert "load_baseline" in lidarkit.testing.__all__
+    page = (REPO / "docs" / "regression.md").read_text()
+    imports = set(re.findall(r"from lidarkit\.testing import \w+(?:, \w+)*", page))
+    assert "from lidarkit.testing import load_baseline" in imports
+    for statement in imports:  # every import the page writes, in prose or in an example, runs
+        exec(statement, {})

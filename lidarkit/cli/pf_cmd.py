@@ -14,7 +14,7 @@ from rich.table import Table
 
 from lidarkit.cli.app import app, stderr, stdout
 from lidarkit.errors import ConfigError
-from lidarkit.pf.config import PFConfig, q_problem
+from lidarkit.pf.config import MAX_PARTICLES, PFConfig, q_problem
 from lidarkit.run_files import RUN_FILES
 
 _D = PFConfig()
@@ -46,7 +46,6 @@ def _steps(text: str) -> tuple[int, ...]:
     return steps
 
 
-MAX_PARTICLES = 10_000_000
 MAX_SEEDS = 10_000
 
 
@@ -104,7 +103,7 @@ def pf_command(
 ) -> None:
     """Localize with a particle filter on Freiburg landmark data and score it (MSE from step 10, APE, RPE), or run a study."""
     from lidarkit.io import open_dataset
-    from lidarkit.pf.protocol import data_files, kidnap_offset_record, run_protocol
+    from lidarkit.pf.protocol import check_filter_memory, data_files, kidnap_offset_record, run_protocol
     from lidarkit.pf.study import protocol_config, run_study
 
     from lidarkit.atomic import check_target
@@ -115,8 +114,6 @@ def pf_command(
         raise ConfigError(f"must be in 1..{MAX_SEEDS}, got {seeds}", source="--seeds")
     if seed < 0:
         raise ConfigError(f"must be >= 0, got {seed}", source="--seed")
-    from lidarkit.resources import check_memory
-
     from lidarkit.pf.study import PROTOCOLS
 
     study = len(counts) > 1 or seeds > 1
@@ -185,10 +182,10 @@ def pf_command(
         snapshot_steps = tuple(s for s in snapshot_steps if s <= len(data))
     elif min(snapshot_steps) > len(data):  # (the run went ahead and wrote no particles.png, exit 0)
         raise ConfigError(f"no snapshot step within 0..{len(data)} (the data's steps), got {snapshots!r}", source="--snapshots")
-    # state, weights, resampling copies and per-reading likelihoods (~40 float64 per particle), plus the particle clouds
-    # kept for the figures (the run's steps are known now: a GIF keeps every other one)
+    # the filter plus the particle clouds kept for the figures (the run's steps are known now: a GIF keeps every other
+    # one); checked here to name the option, before the library checks it again naming the config field
     n_snapshots = len(_kept_steps(snapshot_steps, gif, len(data), out))
-    check_memory(largest * (320.0 + 24.0 * n_snapshots), f"a filter of {largest:,} particles", option)
+    check_filter_memory(largest, n_snapshots, option)
     seed_list = list(range(seed, seed + seeds))
     if recorded:
         if len(counts) > 1 or seeds > 1:

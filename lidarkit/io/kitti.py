@@ -776,13 +776,41 @@ def read_gray_image(path: str | os.PathLike, *, frame: int | None = None) -> np.
     """Read an image file as ``(H, W)`` uint8 grayscale with OpenCV; unreadable files raise DataError.
 
     A 16-bit image is scaled to 8 bits by the bits its values use (its top used bit becomes bit 7): OpenCV divides
-    by 256, which left a 12-bit image 16 grey levels and a 10-bit one 4 (VO then found too few matches)."""
-    import cv2
+    by 256, which left a 12-bit image 16 grey levels and a 10-bit one 4 (VO then found too few matches).
+    What the decoder prints on stderr is kept off the terminal (a truncated PNG printed libpng's "libpng error: Read
+    Error" between the progress lines): it ends the DataError's reason of a refused image, and is a warning naming the
+    file for an image that decoded anyway (a truncated JPEG's "Premature end of JPEG file")."""
+    from lidarkit.quiet import captured
 
     path = Path(path)
     where = None if frame is None else f"frame {frame}"
     if not path.is_file():
         raise DataError("image file not found", source=path, location=where)
+    try:
+        with captured(2) as native:
+            image = _decode_gray(path, where)
+    except DataError as err:  # (raised in the block: ``native`` holds what the decoder said)
+        said = _decoder_lines(native.text)
+        if not said:
+            raise
+        raise DataError(f"{err.reason}: {said}", source=err.source, location=err.location) from None
+    said = _decoder_lines(native.text)
+    if said:
+        log.warning("%s%s: the image decoder said: %s", path, "" if where is None else f" ({where})", said)
+    return image
+
+
+def _decoder_lines(text: str, limit: int = 300) -> str:
+    """The decoder's lines of captured stderr text as one line; a progress bar drawn meanwhile (escape sequences) is
+    left out."""
+    lines = (line.strip() for line in text.replace("\r", "\n").split("\n"))
+    said = "; ".join(line for line in lines if line and "\x1b" not in line)
+    return said if len(said) <= limit else said[: limit - 3] + "..."
+
+
+def _decode_gray(path: Path, where: str | None) -> np.ndarray:
+    import cv2
+
     image = cv2.imread(str(path), cv2.IMREAD_ANYDEPTH)  # grayscale, depth kept
     if image is not None and image.dtype == np.uint16 and image.size:
         bits = max(8, int(image.max()).bit_length())

@@ -23,6 +23,9 @@ MAX_Q_VARIANCE = 1e12
 #: Largest magnitude of init_mean, init_std, uniform_margin_m and motion_noise_std (m or rad): 1000 km is past any landmark
 #: map, like the kidnap offset's bound; 1e20 ran 331 weight resets (MSE 1e40, exit 0), 1e39 overflowed float32 to NaN.
 MAX_POSE_SCALE = 1e6
+#: Most particles a filter may hold (n_particles and the KLD counts): ~3.2 GiB at the filter's ~320 bytes a particle;
+#: 3e9 failed in numpy's allocation (33.5 GiB), near 1e9 it would have been allocated.
+MAX_PARTICLES = 10_000_000
 #: Largest roughening constant K (jitter std = K x spread x N^(-1/3); Gordon et al. use ~0.2).
 MAX_ROUGHENING = 10.0
 
@@ -139,8 +142,15 @@ class PFConfig(BaseModel):
     @field_validator("n_particles")
     @classmethod
     def _positive_n(cls, v: int) -> int:
-        if v < 1:
-            raise ValueError(f"n_particles must be >= 1, got {v}")
+        if not 1 <= v <= MAX_PARTICLES:  # (the CLI's bound: the library and the bench took 3e9 to numpy's MemoryError)
+            raise ValueError(f"n_particles must be >= 1 and <= {MAX_PARTICLES}, got {v}")
+        return v
+
+    @field_validator("kld_min_n", "kld_max_n", "kld_unconverged_n")
+    @classmethod
+    def _particle_bound(cls, v: int) -> int:
+        if v > MAX_PARTICLES:  # KLD-sampling grows the set up to these counts
+            raise ValueError(f"must be <= {MAX_PARTICLES}, got {v}")
         return v
 
     @field_validator("alpha_slow", "alpha_fast", "kld_epsilon")
@@ -280,4 +290,4 @@ def _config_error(err: ValidationError) -> ConfigError:
     return ConfigError(msg, source=f"pf config {field}" if field else "pf config")
 
 
-__all__ = ["ESTIMATORS", "INITS", "LIKELIHOODS", "MAX_POSE_SCALE", "MAX_Q_VARIANCE", "MAX_ROUGHENING", "MIN_Q_VARIANCE", "PFConfig", "q_problem"]
+__all__ = ["ESTIMATORS", "INITS", "LIKELIHOODS", "MAX_PARTICLES", "MAX_POSE_SCALE", "MAX_Q_VARIANCE", "MAX_ROUGHENING", "MIN_Q_VARIANCE", "PFConfig", "q_problem"]

@@ -45,6 +45,10 @@ KIDNAP_OFFSET = (0.0, -5.0, -np.pi / 2)  # 5 m and 90 deg; from step 150 on the 
 #: Largest kidnap jump (m per axis): 1000 km is past any landmark map; 1e30 m overflowed the filter's float32 squares
 #: (MSE 5.6e58, exit 0). The turn is at most a full circle (2 pi).
 MAX_KIDNAP_OFFSET_M = 1e6
+#: Memory a filter takes per particle (bytes): state, weights, resampling copies and per-reading likelihoods (~40 float64).
+FILTER_BYTES_PER_PARTICLE = 320.0
+#: Memory per particle of each particle cloud a run keeps for its figures (bytes: an (N, 3) float64 copy).
+CLOUD_BYTES_PER_PARTICLE = 24.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -390,6 +394,23 @@ def _sensor_source(data: Any) -> str:
     return str(getattr(data, "sensor_path", None) or getattr(data, "root", None) or "recorded data")
 
 
+def check_filter_memory(n_particles: int, n_kept_clouds: int, source: str) -> None:
+    """ConfigError naming ``source`` when a filter of ``n_particles`` keeping ``n_kept_clouds`` particle clouds would not
+    fit in the available memory: refused before the filter allocates (numpy's MemoryError, or swapping)."""
+    from lidarkit.resources import check_memory
+
+    needed_bytes = n_particles * (FILTER_BYTES_PER_PARTICLE + CLOUD_BYTES_PER_PARTICLE * n_kept_clouds)
+    check_memory(needed_bytes, f"a filter of {n_particles:,} particles", source)
+
+
+def check_config_memory(cfg: PFConfig, n_kept_clouds: int = 0) -> None:
+    """:func:`check_filter_memory` for the largest particle count of ``cfg`` (a KLD run may grow to ``kld_max_n``), naming
+    that setting: the library and the bench check a run as ``lidarkit pf`` does (3e9 particles reached numpy's
+    MemoryError)."""
+    largest, source = (cfg.kld_max_n, "kld_max_n") if cfg.kld else (cfg.n_particles, "n_particles")
+    check_filter_memory(largest, n_kept_clouds, source)
+
+
 def checked_seed(seed: Any) -> int:
     """``seed`` as the integer >= 0 a reproducible run needs (None would draw fresh entropy: refused)."""
     if not is_integer(seed) or seed < 0:
@@ -444,6 +465,7 @@ def run_protocol(
     if len(data.odometry) < mse_start:  # (the whole filter ran first, then the MSE failed counting poses: "has 10" for 9 steps)
         raise DataError(f"{len(data.odometry)} steps: the protocol scores the position MSE from step {mse_start} on, so it needs "
                         f"at least {mse_start}", source=_sensor_source(data))
+    check_config_memory(cfg, len(tuple(snapshot_steps)))
     data_seq, filter_seq = np.random.SeedSequence(seed).spawn(2)
     q_cov = resolve_q(cfg.q, cfg.q_as)
     sim = simulate(data, np.random.default_rng(data_seq), q_cov, visible=visible, kidnap_at_step=kidnap_at_step, kidnap_offset=kidnap_offset)
@@ -526,6 +548,7 @@ def run_recorded(
                         source=_sensor_source(data))
     seed = checked_seed(seed)
     cfg = _resolve_config(config, n_particles, config_overrides)
+    check_config_memory(cfg, len(tuple(snapshot_steps)))
     pf = make_filter(data.landmarks.positions_xy, cfg, np.random.default_rng(seed))
     odo = np.asarray(data.odometry, dtype=np.float64)
     readings = StepReadings(
@@ -678,12 +701,16 @@ def consistency_metrics(nis: np.ndarray, estimate: np.ndarray, dead_reckoning: n
 
 
 __all__ = [
+    "CLOUD_BYTES_PER_PARTICLE",
+    "FILTER_BYTES_PER_PARTICLE",
     "MAX_KIDNAP_OFFSET_M",
     "MSE_START_STEP",
     "ODOMETRY_NOISE_STD",
     "PFRunResult",
     "SimulatedData",
     "StepReadings",
+    "check_config_memory",
+    "check_filter_memory",
     "consistency_metrics",
     "fit_q_recorded",
     "kidnap_offset_record",

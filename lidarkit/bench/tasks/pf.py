@@ -81,7 +81,9 @@ class ParticleFilterTask(Task):
         if method not in METHODS:
             raise ConfigError(f"unknown pf method {method!r}; known: {', '.join(METHODS)}", source="method")
         config_cls, _ = _pf_api()
-        config_cls.make(**params)
+        from lidarkit.pf.protocol import check_config_memory
+
+        check_config_memory(config_cls.make(**params))  # refused when the suite loads, not in every job
 
     def run(self, job: Job) -> TaskOutput:
         config_cls, run_protocol = _pf_api()
