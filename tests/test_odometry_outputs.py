@@ -482,6 +482,27 @@ def test_registration_time_counts_the_frames_registered():
     assert odometry_metrics(single)["register_time_s"] == {"mean": None, "median": None, "max": None}
 
 
+def test_frame_stats_repr_says_what_metrics_say_of_registration_time_and_degeneracy():
+    """repr(stats) averaged frame 0's 0 s into the registration time ("0.124 s a frame" where register_time_s.mean said
+    0.165 s) and read "0 degenerate" for kiss, whose n_degenerate is null (no verdict)."""
+    spec = "sim:street?frames=3&beams=8&azimuths=180"
+
+    def expected(result, degenerate: str) -> str:
+        m = result.metrics
+        return (f"FrameStats(3 frames: {m['n_constant_velocity_fallback']} fallback, {degenerate}, {m['n_bad_frames']} failing the "
+                f"check, registration {m['register_time_s']['mean']:.3g} s a frame; to_csv() for every frame)")
+
+    chain = run(spec, "vanilla")
+    assert chain.stats.register_s[0] == 0.0 and chain.metrics["register_time_s"]["mean"] == pytest.approx(chain.stats.register_s[1:].mean())
+    assert repr(chain.stats) == expected(chain, f"{chain.metrics['n_degenerate']} degenerate")
+    stateful = run(spec, "kiss")
+    assert stateful.metrics["n_degenerate"] is None and repr(stateful.stats) == expected(stateful, "degenerate n/a")
+    unassessed = run(spec, "small_gicp", params={"assess": False})
+    assert unassessed.metrics["n_degenerate"] is None and repr(unassessed.stats) == expected(unassessed, "degenerate n/a")
+    single = run("sim:street?frames=1&beams=8&azimuths=180", "vanilla")  # nothing registered: no time, no verdict
+    assert repr(single.stats) == "FrameStats(1 frames: 0 fallback, degenerate n/a, 0 failing the check; to_csv() for every frame)"
+
+
 def test_ground_truth_given_as_an_array_is_refused_before_the_run():
     from lidarkit.odometry import run
 
