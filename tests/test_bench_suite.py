@@ -455,7 +455,8 @@ def test_a_kitti_sequence_that_is_not_there_is_refused_with_the_suite(tmp_path):
     """sequence: "05" of a root that holds 00 only passed validation and --dry-run; every job then failed."""
     root = tmp_path / "kitti"
     (root / "sequences" / "00" / "velodyne").mkdir(parents=True)
-    np.zeros((10, 4), dtype=np.float32).tofile(root / "sequences" / "00" / "velodyne" / "000000.bin")
+    for frame in ("000000", "000001"):  # (two: one scan is refused too, scoring nothing)
+        np.zeros((10, 4), dtype=np.float32).tofile(root / "sequences" / "00" / "velodyne" / f"{frame}.bin")
     path = tmp_path / "kitti.yaml"
     path.write_text(textwrap.dedent(f"""
         experiments:

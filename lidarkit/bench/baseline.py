@@ -124,9 +124,10 @@ def _sha256(path: Path) -> str:
 
 
 def dataset_files(spec: Mapping[str, Any]) -> list[Path]:
-    """The files a dataset spec reads: every file under its path, or under ``sequences/NN`` of a KITTI root given
-    with ``sequence: NN`` (not the other sequences); a KITTI sequence also its ``poses/NN.txt``; and the files of
-    options that name an existing path (a ``poses`` file kept elsewhere). DataError when the path does not exist."""
+    """The files a dataset spec reads: every file under its path (a bag or MCAP file: itself; a ROS 2 bag: its folder's
+    files), or under ``sequences/NN`` of a KITTI root given with ``sequence: NN`` (not the other sequences); a KITTI
+    sequence also its ``poses/NN.txt``; and the files of options that name an existing path (a ``poses`` file kept
+    elsewhere). DataError when the path does not exist."""
     from lidarkit.bench.datasets import PATHLESS_KINDS, dataset_options
 
     if spec.get("kind") in PATHLESS_KINDS:
@@ -159,7 +160,10 @@ def dataset_folder(spec: Mapping[str, Any]) -> Path:
                         "there or record again)", source=root)
     if spec.get("sequence") is None:
         return root
-    return Path(getattr(open_dataset_spec(dict(spec)), "sequence_dir", root))
+    folder = getattr(open_dataset_spec(dict(spec)), "sequence_dir", None)
+    if folder is None and spec.get("kind") == "kiss_kitti":  # kiss-icp's loader of the same layout (the whole root was hashed)
+        folder = root / "sequences" / f"{int(spec['sequence']):02d}"
+    return root if folder is None else Path(folder)
 
 
 def _files_under(path: Path) -> list[Path]:
@@ -302,6 +306,10 @@ def _run_job(job: Job, checksum_cache: dict[str, str] | None) -> JobRun:
     protocol["task_options"] = _jsonable(get_task(job.task).resolved_options(dict(job.options)))
     if job.dataset.get("kind") == "sim_lidar":  # every setting (its checksum hashes the suite's only: a changed default)
         protocol["simulation"] = simulation_config(job)
+    elif job.dataset.get("kind") == "sim_camera":  # (the same, for the camera simulator of the vo task)
+        from lidarkit.bench.tasks.vo import camera_config
+
+        protocol["simulation"] = _jsonable(camera_config(job).model_dump(mode="json"))
     if job.task == "odometry":
         from lidarkit.bench.tasks._datasets import open_dataset_spec
         from lidarkit.bench.tasks._datasets import seeded_dataset

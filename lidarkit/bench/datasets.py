@@ -1,7 +1,7 @@
 """Dataset specs of a suite: resolve paths (relative to the suite file, ``sample:NAME`` bundled samples).
 
 A spec is a plain dict ``{"kind": ..., "path": ..., "name": ..., **options}``. Kinds with a path are
-the reader kinds of :mod:`lidarkit.io` (``kitti``, ``folder``, ``tum``, ``landmarks``, ...); simulator
+the reader kinds of :mod:`lidarkit.io` (``kitti``, ``folder``, ``mcap``, ``tum``, ``landmarks``, ...); simulator
 kinds (``sim_lidar``, ``sim_camera``) and ``synthetic`` have none. Sample paths stay ``sample:NAME``
 in the job spec (so job keys do not depend on where the package is installed) and are resolved in the
 worker by :func:`dataset_path`.
@@ -16,7 +16,15 @@ from lidarkit.errors import ConfigError, DataError
 
 SAMPLE_PREFIX = "sample:"
 #: kinds generated in the job itself: no path
-PATHLESS_KINDS = frozenset({"synthetic", "sim_lidar", "sim_camera", "sim_landmarks"})
+PATHLESS_KINDS = frozenset({"synthetic", "sim_lidar", "sim_camera"})
+
+
+def scan_kinds() -> tuple[str, ...]:
+    """Every dataset kind that gives LiDAR scans: the LiDAR simulator and each :mod:`lidarkit.io` reader of scans (bags,
+    MCAP, pcaps, kiss-icp's loaders, and readers registered by others), as ``lidarkit.odometry.run`` opens them."""
+    from lidarkit.io import NOT_SCANS, available_datasets
+
+    return ("sim_lidar", *(kind for kind in available_datasets() if kind not in NOT_SCANS))
 
 
 def sample_path(name: str) -> Path:

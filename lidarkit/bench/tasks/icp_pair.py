@@ -1,13 +1,16 @@
 """``icp_pair``: pairwise registration of chosen scan pairs against ground truth, any registered ICP variant.
 
-Options (per experiment): ``pairs`` — ``[[target, source], ...]`` (KITTI: frame numbers, e.g.
-``[[94, 95]]``; other datasets: scan indices; two different scans); default, and only without ``pairs``: the first
-``max_pairs`` pairs of consecutive frame numbers (never across a gap in the files; fewer: a warning).
+Datasets: every kind that gives LiDAR scans, as for odometry (:func:`lidarkit.bench.datasets.scan_kinds`); one without
+ground-truth poses (a bag without its odometry topic) needs ``ground_truth_file``.
+Options (per experiment): ``pairs`` — ``[[target, source], ...]`` (KITTI, kind ``kitti``: frame numbers, e.g.
+``[[94, 95]]``, with ``ground_truth_file`` too; other kinds: scan indices; two different scans); default, and only
+without ``pairs``: the first ``max_pairs`` pairs of consecutive frame numbers (never across a gap in the files; fewer:
+a warning).
 ``init_noise_m`` / ``init_noise_deg`` — start from the ground-truth motion perturbed by a seeded random
-motion of that size (0 = start from identity, the default). ``ground_truth_file`` — a 4x4 ``T_target_source``
+motion of that size (finite, >= 0; 0 = start from identity, the default). ``ground_truth_file`` — a 4x4 ``T_target_source``
 text file for a dataset without poses holding one pair, e.g. the bundled ``sample:kitti_pair`` folder with
-``pairs: [[0, 1]]``; a relative path is looked up in the dataset folder only (not beside the suite file, as reader
-path options are): give an absolute path for a file elsewhere.
+``pairs: [[0, 1]]``; a relative path is looked up in the dataset folder only (a bag or pcap file: the folder holding
+it; not beside the suite file, as reader path options are): give an absolute path for a file elsewhere.
 
 The scans are read as the method reads them, as in the odometry task (KITTI under ``vertical_correction: auto``:
 kiss-icp's vertical-angle correction for kiss); the record's ``info["effective"]`` names the reader's corrections.
@@ -26,7 +29,7 @@ from lidarkit.bench.jobs import Job
 from lidarkit.bench.tasks import Metric, Task, TaskOutput, import_module_for_task
 from lidarkit.bench.tasks._datasets import (OPENED_AT_LOAD, check_reader_options, open_dataset_spec, options_model,
                                              scan_count_at_load, seeded_dataset)
-from lidarkit.bench.datasets import dataset_path
+from lidarkit.bench.datasets import dataset_path, scan_kinds
 from lidarkit.errors import ConfigError, DataError
 
 log = logging.getLogger(__name__)
@@ -37,8 +40,9 @@ class IcpPairOptions(BaseModel):
     pairs: list[tuple[int, int]] | None = None
     ground_truth_file: str | None = None
     max_pairs: int = Field(1, ge=1)
-    init_noise_m: float = Field(0.0, ge=0.0)
-    init_noise_deg: float = Field(0.0, ge=0.0)
+    # (.inf passed, and the suite was refused at its methods as "values must be plain numbers", naming no option)
+    init_noise_m: float = Field(0.0, ge=0.0, allow_inf_nan=False)
+    init_noise_deg: float = Field(0.0, ge=0.0, allow_inf_nan=False)
 
     @field_validator("pairs")
     @classmethod
@@ -73,9 +77,13 @@ def read_T_target_source(path: Path) -> np.ndarray:
 
 
 def ground_truth_path(dataset: dict[str, Any], options: IcpPairOptions) -> Path:
-    """``options.ground_truth_file``, relative to the dataset folder (a task option: the suite resolves reader path
-    options beside the suite file too, task options it does not)."""
-    return dataset_path(dataset) / Path(options.ground_truth_file).expanduser()
+    """``options.ground_truth_file``, relative to the dataset folder, the folder holding it for a dataset that is one file
+    (a bag: ``run.bag/T.txt`` was looked for); a task option: the suite resolves reader path options beside the suite
+    file too, task options it does not."""
+    folder = dataset_path(dataset)
+    if folder.is_file():
+        folder = folder.parent
+    return folder / Path(options.ground_truth_file).expanduser()
 
 
 def pairs_truth(dataset: Any, method: str) -> Any:
@@ -114,10 +122,13 @@ def read_as_method(dataset: Any, registration: Any, method: str) -> Any:
 def _pair_data(dataset: Any, target: int, source: int, T_gt_file: np.ndarray | None = None,
                truth: Any = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(source_xyz, target_xyz, T_target_source ground truth) of one pair; ``truth``: the dataset's ground truth to use
-    (:func:`pairs_truth`; default its own)."""
+    (:func:`pairs_truth`; default its own). KITTI's pairs are frame numbers, with a ground-truth file too (they were
+    read as scan indices there: [[94, 95]] refused on a folder of frames 94, 95, 198, 199)."""
+    by_frame = hasattr(dataset, "relative_pose") and hasattr(dataset, "read_scan_by_frame")  # KITTI: frame numbers
     if T_gt_file is not None:
-        return dataset.read_scan(source).points_xyz, dataset.read_scan(target).points_xyz, T_gt_file
-    if hasattr(dataset, "relative_pose") and hasattr(dataset, "read_scan_by_frame"):  # KITTI: frame numbers
+        read = dataset.read_scan_by_frame if by_frame else dataset.read_scan
+        return read(source).points_xyz, read(target).points_xyz, T_gt_file
+    if by_frame:
         if truth is None:
             T_gt = np.asarray(dataset.relative_pose(target, source), dtype=np.float64)
         else:  # (its rows follow the folder's frames)
@@ -175,7 +186,7 @@ def check_pairs(options: IcpPairOptions, spec: dict[str, Any]) -> None:
     if n_scans is None:
         return
     dataset = open_dataset_spec(spec) if spec["kind"] in OPENED_AT_LOAD else None
-    if options.ground_truth_file is None and hasattr(dataset, "read_scan_by_frame"):
+    if hasattr(dataset, "read_scan_by_frame"):
         frames = [int(f) for f in dataset.frames]
         missing = sorted({i for pair in options.pairs for i in pair} - set(frames))
         have = f"frames {frames[0]}..{frames[-1]}" if frames else "no scans"
@@ -190,7 +201,12 @@ def check_pairs(options: IcpPairOptions, spec: dict[str, Any]) -> None:
 
 class IcpPairTask(Task):
     description = "pairwise ICP on scan pairs with ground truth (final error, iterations, runtime, RMSE history)"
-    dataset_kinds = ("kitti", "folder", "sim_lidar", "kitti_raw")
+
+    @property
+    def dataset_kinds(self) -> tuple[str, ...]:  # type: ignore[override]
+        """Every kind that gives scans (:func:`scan_kinds`), as odometry: a pair is read with ``read_scan``."""
+        return scan_kinds()
+
     metrics = (
         Metric("translation_error_m", "trans. error [m]"),
         Metric("rotation_error_deg", "rot. error [deg]"),

@@ -1,6 +1,9 @@
 """``odometry``: any registered ICP variant over a scan sequence through ``lidarkit.odometry.run``, scored vs ground truth.
 
-Options: ``frames`` — a frame selection as ``lidarkit.odometry.run`` takes it (``"0:50"``, or a list of indices).
+Datasets: every kind that gives LiDAR scans (:func:`lidarkit.bench.datasets.scan_kinds`: the simulator and each
+``lidarkit.io`` scan reader, bags and MCAP files included), opened as ``lidarkit.odometry.run`` opens ``KIND:PATH?opt=v``.
+Options: ``frames`` — a frame selection as ``lidarkit.odometry.run`` takes it (``"0:50"``, or a list of indices), of
+2 scans or more (one scan is the start and scores nothing).
 Metrics come from the odometry run's own scoring (APE / RPE / KITTI drift through ``lidarkit.eval``); every
 label names its alignment (``info["metric_alignment"]`` too, for the report), and ``n_bad_frames`` counts the
 frames failing the independent per-frame check (:mod:`lidarkit.odometry.frame_check`).
@@ -13,11 +16,12 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel, ConfigDict
 
+from lidarkit.bench.datasets import scan_kinds
 from lidarkit.bench.jobs import Job
 from lidarkit.bench.tasks import Metric, Task, TaskOutput, import_module_for_task
 from lidarkit.bench.tasks._datasets import (check_reader_options, open_dataset_spec, options_model, require_kitti_data,
                                              scan_count_at_load, seeded_dataset)
-from lidarkit.errors import ConfigError
+from lidarkit.errors import ConfigError, DataError
 
 MAX_SERIES_POINTS = 2000
 
@@ -89,7 +93,13 @@ def drift_segments(result: Any) -> dict[str, list[float]] | None:
 
 class OdometryTask(Task):
     description = "sequence odometry with an ICP variant (APE, RPE, KITTI drift, frame rate)"
-    dataset_kinds = ("kitti", "folder", "sim_lidar", "kitti_raw")
+
+    @property
+    def dataset_kinds(self) -> tuple[str, ...]:  # type: ignore[override]
+        """Every kind ``lidarkit.odometry.run`` reads scans from (:func:`scan_kinds`; a bag or MCAP file was refused
+        though the run takes it), readers registered after this module loaded included."""
+        return scan_kinds()
+
     metrics = (
         Metric("ape_se3_rmse_m", "APE RMSE (SE(3)-aligned) [m]"),
         Metric("ape_rmse_m", "APE RMSE (unaligned, first pose anchored) [m]"),
@@ -136,6 +146,8 @@ class OdometryTask(Task):
                     raise ConfigError(f"frame indices must be >= 0, got {negative} (a slice such as '-3:' counts from "
                                       "the end)", source="frames")
             parse_frames(frames, 1 + max((f for f in frames if isinstance(f, int)), default=0) if isinstance(frames, list) else 1)
+            if isinstance(frames, list) and len(frames) == 1:  # (whatever the dataset; a slice's count is known with it)
+                raise ConfigError(f"{frames!r} selects 1 scan: {TOO_FEW_SCANS}", source="frames")
 
     def validate_dataset(self, dataset: dict[str, Any], options: dict[str, Any]) -> None:
         check_reader_options(dataset)
@@ -151,21 +163,39 @@ class OdometryTask(Task):
         return run_odometry_job(job)[1]
 
 
+#: why a run over fewer scans is refused (its one pose is the start: the job ran, "ok", and scored nothing)
+TOO_FEW_SCANS = "odometry needs 2 scans or more (the first is the start, where nothing is scored)"
+
+
+def too_few_scans(frames: Any, n_scans: int) -> str | None:
+    """Why ``frames`` of a dataset of ``n_scans`` scans selects too few to score (fewer than 2), else None; a bad
+    selection raises parse_frames' ConfigError."""
+    from lidarkit.odometry.inputs import parse_frames
+
+    n_selected = len(parse_frames(frames, n_scans))
+    if n_selected >= 2:
+        return None
+    if frames is None:
+        return f"the dataset has {n_selected or 'no'} scan{'s' if n_selected == 0 else ''}: {TOO_FEW_SCANS}"
+    if n_selected == 0:
+        return f"frames: {frames!r} selects no scan of the dataset's {n_scans}"
+    return f"frames: {frames!r} selects 1 scan of the dataset's {n_scans}: {TOO_FEW_SCANS}"
+
+
 def check_frames(frames: Any, spec: dict[str, Any]) -> None:
     """``frames`` checked against the length of a dataset known at suite load (:func:`scan_count_at_load`: a stand-in
     length let [50, 51, 52] through on a 10-scan sequence, and [0, 2, 20] on a 5-sweep simulated drive, and every job
-    failed, exit 0); a ConfigError naming the options."""
-    n_scans = None if frames is None else scan_count_at_load(spec)
+    failed, exit 0), fewer than 2 scans refused (``"0:1"`` ran and scored nothing); a ConfigError naming the options.
+    The others (bags, pcaps, logs) are checked when their jobs run."""
+    n_scans = scan_count_at_load(spec)
     if n_scans is None:
         return
-    from lidarkit.odometry.inputs import parse_frames
-
     try:
-        selected = parse_frames(frames, n_scans)
+        problem = too_few_scans(frames, n_scans)
     except ConfigError as err:
         raise ConfigError(f"frames: {err.reason} (the dataset has {n_scans} scans)", source="options") from None
-    if len(selected) == 0:
-        raise ConfigError(f"frames: {frames!r} selects no scan of the dataset's {n_scans}", source="options")
+    if problem is not None:  # (a whole dataset of one scan: an error of the dataset, not of the options)
+        raise ConfigError(problem, source="dataset" if frames is None else "options")
 
 
 def scalar_metrics(result: Any) -> dict[str, float]:
@@ -195,6 +225,9 @@ def run_odometry_job(job: Job) -> tuple[Any, TaskOutput]:
 
     options = options_model(OdometryOptions, job.options, "odometry")  # (a pinned spec re-run: one line, not pydantic's dump)
     sequence = open_dataset_spec(seeded_dataset(job))
+    problem = too_few_scans(options.frames, len(sequence))  # (a bag's length is known once opened, not at suite load)
+    if problem is not None:
+        raise DataError(problem, source=job.dataset_name)
     result = run(sequence, job.method, params=dict(job.params), frames=options.frames)
     m = result.metrics
     metrics = scalar_metrics(result)

@@ -8,6 +8,10 @@ images), ``align`` (``auto``: SE(3) for ground-truth scale, Sim(3) otherwise; or
 ``final_error_m`` is the last position's error after the row's alignment, as APE's (the CLI's final error is raw for
 ground-truth scale: in a table of methods with other scale modes, raw and aligned rows made the best method look 5x
 worse). Images are read into memory before the run, so frames/s is the pipeline's speed.
+
+Datasets: ``kitti`` (its image sequence), ``tum``, and ``sim_camera``, the camera simulator as ``lidarkit vo`` opens
+``simcam:street?key=value`` (options: ``lidarkit.sim.street_camera.CameraSimConfig`` fields; its exact K and ground
+truth); a simulated drive without its own ``seed`` is seeded by the job's, as ``sim_lidar`` is for odometry.
 """
 
 from __future__ import annotations
@@ -17,6 +21,7 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
+from lidarkit.bench.datasets import dataset_options
 from lidarkit.bench.jobs import Job
 from lidarkit.bench.tasks import Metric, Task, TaskOutput, import_module_for_task
 from lidarkit.bench.tasks._datasets import check_reader_options, open_dataset_spec, options_model, require_kitti_data
@@ -47,7 +52,7 @@ def _config(vo: Any, method: str, params: dict[str, Any], seed: int | None = Non
 
 class VisualOdometryTask(Task):
     description = "monocular visual odometry (APE, RPE, final error: raw for gt scale else aligned, frames/s)"
-    dataset_kinds = ("kitti", "tum")
+    dataset_kinds = ("kitti", "tum", "sim_camera")
     metrics = (
         Metric("ape_rmse_m", "APE RMSE [m]"),
         Metric("rpe_trans_rmse_m", "RPE trans. [m/frame]"),
@@ -77,6 +82,11 @@ class VisualOdometryTask(Task):
         options_model(VOOptions, options, "vo")
 
     def validate_dataset(self, dataset: dict[str, Any], options: dict[str, Any]) -> None:
+        if dataset["kind"] == "sim_camera":  # (no reader: its options are the simulator's config, checked without rendering)
+            from lidarkit.sim.street_camera import make_camera_config
+
+            make_camera_config(**dataset_options(dataset))
+            return
         check_reader_options(dataset)
         require_kitti_data(dataset, "images")
 
@@ -84,7 +94,7 @@ class VisualOdometryTask(Task):
         vo = _vo_api()
         options = options_model(VOOptions, job.options, "vo")  # (a pinned spec re-run: one line, not pydantic's dump)
         config = _config(vo, job.method, job.params, job.seed)
-        sequence = open_dataset_spec(job.dataset)
+        sequence = _open_images(job)
         if hasattr(sequence, "as_image_sequence"):
             sequence = sequence.as_image_sequence()
         if options.max_frames is not None:
@@ -126,6 +136,23 @@ class VisualOdometryTask(Task):
         return TaskOutput(metrics=metrics, series=series,
                           info={"summary": summary, "align": info_align, "config": config.model_dump(mode="json"),
                                 "metric_alignment": _alignment_labels(info_align)})
+
+
+def camera_config(job: Job) -> Any:
+    """The camera simulator's whole config of a ``sim_camera`` job: its spec's settings, seeded by the job's seed unless
+    the spec gives one (``seeds: 5`` drives five different streets), today's defaults for the rest."""
+    from lidarkit.sim.street_camera import make_camera_config
+
+    return make_camera_config(**{"seed": int(job.seed), **dataset_options(job.dataset)})
+
+
+def _open_images(job: Job) -> Any:
+    """The job's image sequence: a reader's, or the camera simulator's (:func:`camera_config`)."""
+    if job.dataset["kind"] != "sim_camera":
+        return open_dataset_spec(job.dataset)
+    from lidarkit.sim.street_camera import SimulatedCameraSequence
+
+    return SimulatedCameraSequence(camera_config(job))
 
 
 def _alignment_labels(align: str | None) -> dict[str, str]:
