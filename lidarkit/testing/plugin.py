@@ -5,7 +5,8 @@
 - ``lidarkit_baseline``: that folder loaded as a :class:`lidarkit.bench.baseline.Baseline` (skips the test with
   a reason when none is configured; a folder that is missing or not a baseline errors each test using it with one
   line naming the folder and where it was set).
-- ``load_lidarkit_baseline``: a function loading any baseline folder (relative paths from the rootdir).
+- ``load_lidarkit_baseline``: a fixture whose value loads any baseline folder (relative paths from the rootdir);
+  outside pytest, ``lidarkit.testing.load_baseline``.
 """
 
 from __future__ import annotations
