@@ -46,6 +46,17 @@ class CapturedText:
         self.text = ""
 
 
+def _capture_file():
+    """An anonymous file to hold captured output (a file, not a pipe: a long message cannot block the writer): in
+    memory where the system has ``memfd_create`` (Linux), needing no writable folder; else a temporary file."""
+    if hasattr(os, "memfd_create"):
+        try:
+            return os.fdopen(os.memfd_create("lidarkit-capture"), "w+b")
+        except OSError:
+            pass
+    return tempfile.TemporaryFile()
+
+
 @contextlib.contextmanager
 def captured(fd: int) -> Iterator[CapturedText]:
     """Within the block, writes to ``fd`` (1: stdout, 2: stderr) go to a temporary file whose text the yielded holder has
@@ -61,7 +72,13 @@ def captured(fd: int) -> Iterator[CapturedText]:
             yield holder
             return
         try:
-            with tempfile.TemporaryFile() as sink:  # (a file, not a pipe: a long message cannot block the writer)
+            sink = _capture_file()
+        except OSError:  # (no memfd and no writable temporary folder, e.g. a read-only container: reads went on failing)
+            os.close(saved)
+            yield holder
+            return
+        try:
+            with sink:
                 os.dup2(sink.fileno(), fd)
                 try:
                     yield holder

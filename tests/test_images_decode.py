@@ -53,3 +53,36 @@ def test_what_a_decoder_says_about_an_image_it_still_decodes_is_a_warning_naming
     assert capfd.readouterr().err == ""
     assert [r.getMessage() for r in caplog.records] == [
         f"{jpeg} (frame 0): the image decoder said: Premature end of JPEG file"]
+
+
+def test_images_are_read_where_no_temporary_folder_is_writable(monkeypatch, tmp_path):
+    """The capture needs somewhere to put the decoder's text; without memfd and a writable temporary folder (a read-only
+    container) every read raised FileNotFoundError: it now reads without capturing."""
+    import os
+    import tempfile
+
+    from lidarkit.io.kitti import read_gray_image
+
+    frame = sorted((sample_path("kitti_vo", "06") / "image_0").glob("*.png"))[0]
+    monkeypatch.delattr(os, "memfd_create", raising=False)
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path / "not_there"))
+    assert read_gray_image(frame).shape == (370, 1226)
+
+
+def test_an_image_header_claiming_too_many_pixels_is_a_data_error(tmp_path):
+    """A PNG whose header says 100000 x 100000 pixels made OpenCV raise its own cv2.error (a size assertion): the run
+    ended with a traceback and lost its folder. It is a refused image now."""
+    import struct
+    import zlib
+
+    from lidarkit.io.kitti import read_gray_image
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    ihdr = struct.pack(">IIBBBBB", 100000, 100000, 8, 0, 0, 0, 0)
+    path = tmp_path / "huge.png"
+    path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(bytes(64))) + chunk(b"IEND", b""))
+    with pytest.raises(DataError) as err:
+        read_gray_image(path, frame=6)
+    assert str(err.value).startswith(f"{path} (frame 6): cannot decode image") and "\n" not in str(err.value)

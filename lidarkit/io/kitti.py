@@ -811,12 +811,16 @@ def _decoder_lines(text: str, limit: int = 300) -> str:
 def _decode_gray(path: Path, where: str | None) -> np.ndarray:
     import cv2
 
-    image = cv2.imread(str(path), cv2.IMREAD_ANYDEPTH)  # grayscale, depth kept
-    if image is not None and image.dtype == np.uint16 and image.size:
-        bits = max(8, int(image.max()).bit_length())
-        image = (image >> (bits - 8)).astype(np.uint8)  # full-range 16-bit: >> 8, as IMREAD_GRAYSCALE reads it
-    elif image is not None and image.dtype != np.uint8:  # (float TIFF...) read as before
-        image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+    try:
+        image = cv2.imread(str(path), cv2.IMREAD_ANYDEPTH)  # grayscale, depth kept
+        if image is not None and image.dtype == np.uint16 and image.size:
+            bits = max(8, int(image.max()).bit_length())
+            image = (image >> (bits - 8)).astype(np.uint8)  # full-range 16-bit: >> 8, as IMREAD_GRAYSCALE reads it
+        elif image is not None and image.dtype != np.uint8:  # (float TIFF...) read as before
+            image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+    except cv2.error as err:  # (a header claiming 100000 x 100000 pixels: OpenCV's size assertion ended the run)
+        said = str(err).strip().splitlines()[-1] if str(err).strip() else type(err).__name__
+        raise DataError(f"cannot decode image: {said}", source=path, location=where) from None
     if image is None or image.size == 0:
         raise DataError("cannot decode image (corrupt or unsupported format)", source=path, location=where)
     return image
