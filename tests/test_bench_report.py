@@ -1652,3 +1652,27 @@ def test_five_seeds_are_too_few_for_a_seed_comparison_and_a_verdict_that_cannot_
     assert comparison_rows([("drive", five)])[1][0][-1] == "no significant difference (5 seeds: smallest possible p 0.0625)"
     (_, six), = reference_comparisons(records(6))
     assert six.better == "b" and comparison_rows([("drive", six)])[1][0][-1] == "small_gicp better"
+
+
+def test_the_report_says_how_many_seeds_a_comparison_over_seeds_needs(tmp_path):
+    """A comparison over the KITTI segments of 2 seeds said "with 5 or more seeds the units are the seeds", while seeds
+    are paired from min_units(0.05) = 6 on (5 give p = 0.0625 at best): the note names the count the report uses."""
+    from lidarkit.bench.jobs import Job
+    from lidarkit.bench.results import make_record, write_result
+    from lidarkit.eval.statistics import DEFAULT_ALPHA, min_units
+
+    first, length = list(range(0, 41, 10)), [100.0] * 5
+    for seed in (0, 1):
+        for method, drift in (("kiss", 0.5), ("small_gicp", 1.5)):
+            segments = [drift + 0.01 * seed + 0.001 * k for k in range(5)]
+            job = Job("odometry", "e", "drive", {"kind": "sim_lidar", "scene": "street"}, method, seed=seed)
+            write_result(tmp_path, make_record(job, job.key("1"), "1", {
+                "status": "ok", "metrics": {"drift_translation_pct": float(np.mean(segments)), "ape_rmse_m": drift / 10},
+                "series": {"drift_segments": {"first_frame": first, "length_m": length, "translation_pct": segments,
+                                              "rotation_deg_per_100m": [0.1] * 5, "speed_mps": [10.0] * 5}},
+                "info": {}, "error": None, "runtime_s": 0.1, "finished_utc": "2026-01-01T00:00:00.000+00:00"}))
+    build_report(tmp_path, plots=False)
+    text = " ".join((tmp_path / "report.md").read_text().split())
+    assert min_units(DEFAULT_ALPHA) == 6
+    assert ("drive, kiss vs small_gicp: the segments overlap (one starts every 10 frames): they are not independent units "
+            "and the p-value is optimistic; with 6 or more seeds the units are the seeds (lidarkit compare)") in text

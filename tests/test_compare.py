@@ -198,8 +198,34 @@ def test_results_of_an_earlier_lidarkit_version_are_named_and_a_mix_of_versions_
     result = compare(out, out, method_a="good", method_b="bad")
     assert (result.n_pairs, result.note) == (5, f"12 result(s) in {out} of these jobs from an earlier lidarkit version left out")
     every = compare(out, out, method_a="good", method_b="bad", every_result=True)
-    assert (every.n_pairs, every.note) == (6, f"the 6 pairs mix lidarkit versions (A: 5 of {code_version()}, 1 of 0.0.9; "
+    assert (every.n_pairs, every.note) == (6, f"the 6 paired results mix lidarkit versions (A: 5 of {code_version()}, 1 of 0.0.9; "
                                               f"B: the same); 10 result(s) in {out} of these jobs from an earlier lidarkit version left out")
+
+
+def test_a_mix_of_versions_counts_the_paired_results_not_the_units(tmp_path):
+    """A fixed dataset's 6 seeds count as one unit (7 paired units from 12 results), while the note said "the 12 pairs
+    mix lidarkit versions": it counts the results each side's versions are of, and says so."""
+    from lidarkit.bench.jobs import Job
+    from lidarkit.bench.results import load_results, make_record, result_path, write_result
+    from lidarkit.provenance import code_version
+
+    def value(job):
+        seeded = job.dataset_name == "seeded"
+        return (0.1 if job.method == "good" else 0.5) + (0.01 * np.random.default_rng(job.seed).random() if seeded else 0.0)
+
+    _register_metric_task("version_units_test_task", "error_m", value)
+    out = _bench(tmp_path, "s", "seeds: 6\nexperiments:\n  - {task: version_units_test_task, datasets: [{kind: synthetic, "
+                                "name: fixed, variant: fixed}, {kind: synthetic, name: seeded}], methods: [good, bad]}\n")
+    for record in load_results(out):  # the fixed dataset's results as an earlier version ran them, and only those
+        job = Job.from_spec(record["job"])
+        if job.dataset_name == "fixed":
+            old = {k: v for k, v in record.items() if k not in ("schema", "key", "lidarkit_version", "job")}
+            write_result(out, make_record(job, job.key("0.0.9"), "0.0.9", {**old, "finished_utc": "2026-01-01"}))
+            result_path(out, record["key"]).unlink()
+    result = compare(out, out, method_a="good", method_b="bad", every_result=True)
+    assert (result.n_pairs, result.pairing) == (7, "unit")
+    assert result.note == ("the seeds of a dataset that gives each side one value whatever the seed count as one unit; "
+                           f"the 12 paired results mix lidarkit versions (A: 6 of 0.0.9, 6 of {code_version()}; B: the same)")
 
 
 def test_noise_from_a_baseline_of_another_task_is_refused_and_the_noise_is_printed(tmp_path, capsys):
@@ -728,7 +754,8 @@ def test_a_plugin_task_is_compared_on_its_headline_as_its_report_ranks(tmp_path,
     """A task registered in a module the suite's script imported: `compare RES RES --method-a good --method-b bad` in
     another process said "no default metric in these results" and `--metric score` had no label, while the report
     imports the module the results record and ranks by the task's headline. compare imports it too; a module that is
-    gone is named in the error."""
+    gone leaves the metrics its results declare (as the report reads them), and results that declare none name it in
+    the error."""
     import importlib
     import sys
 
@@ -757,11 +784,73 @@ def test_a_plugin_task_is_compared_on_its_headline_as_its_report_ranks(tmp_path,
     fresh_process()
     (code / "lidarkit_compare_plugin_task.py").unlink()
     importlib.invalidate_caches()
+    gone = compare(out, out, method_a="good", method_b="bad")
+    assert (gone.metric, gone.metric_label, gone.better, gone.n_pairs) == ("score", "match score", "a", 6)
+    for job_file in (out / "jobs").glob("*.json"):  # results written before the metrics' labels were recorded
+        record = json.loads(job_file.read_text())
+        record.pop("metric_labels", None)
+        job_file.write_text(json.dumps(record))
     with pytest.raises(EvaluationError) as exc:
         compare(out, out, method_a="good", method_b="bad")
     assert str(exc.value).startswith("compare: no default metric in these results (task compare_plugin_task: its module "
                                      "lidarkit_compare_plugin_task cannot be imported here (")
     assert str(exc.value).endswith("); pass one of: err_m, score")
+
+
+RECORDED_LABELS_TASK_MODULE = """
+from lidarkit.bench import Metric, Task, TaskOutput, register_task
+
+
+@register_task("compare_recorded_labels_task")
+class CompareRecordedLabelsTask(Task):
+    dataset_kinds = ("synthetic",)
+    metrics = (Metric("final_error_m", "final error [m]"), Metric("ape_rmse_m", "APE RMSE [m]"),
+               Metric("coverage_pct", "coverage [%]"), Metric("align_time_s", "align time [s]", kind="speed"))
+
+    def run(self, job):  # good ends closer (final error), bad tracks closer on the way (APE); coverage never reported
+        good, bump = job.method == "good", 0.001 * job.seed
+        return TaskOutput(metrics={"final_error_m": (0.2 if good else 0.5) + bump, "ape_rmse_m": (0.4 if good else 0.3) + bump,
+                                   "align_time_s": 0.01})
+"""
+
+
+def test_a_task_that_cannot_be_imported_is_compared_on_the_metrics_its_results_declare(tmp_path, monkeypatch):
+    """A task whose module is gone: the report heads it with "final error [m]", the first accuracy metric its results
+    declare (``metric_labels``), while compare tested ape_rmse_m, the first of its fixed list, without a label, and a
+    declared metric no result holds read "unknown metric". compare reads the declared metrics as the report does."""
+    import importlib
+    import sys
+
+    from lidarkit.bench import tasks as bench_tasks
+    from lidarkit.bench.report import build_report, summary_rows
+
+    monkeypatch.setattr(bench_tasks, "_REGISTERED", {})
+    monkeypatch.setattr(bench_tasks, "_INSTANCES", {})
+    code = tmp_path / "code"
+    code.mkdir()
+    (code / "lidarkit_compare_recorded_labels_task.py").write_text(RECORDED_LABELS_TASK_MODULE)
+    monkeypatch.syspath_prepend(str(code))
+    try:
+        importlib.import_module("lidarkit_compare_recorded_labels_task")
+        out = _bench(tmp_path, "s", "seeds: 6\nexperiments:\n  - {task: compare_recorded_labels_task, dataset: {kind: "
+                                    "synthetic}, methods: [good, bad]}\n")
+        # another process, the module gone
+        monkeypatch.setattr(bench_tasks, "_REGISTERED", {})
+        monkeypatch.setattr(bench_tasks, "_INSTANCES", {})
+        sys.modules.pop("lidarkit_compare_recorded_labels_task", None)
+        (code / "lidarkit_compare_recorded_labels_task.py").unlink()
+        importlib.invalidate_caches()
+        _, rows = summary_rows(build_report(out, plots=False))
+        assert [(r[2], r[3]) for r in rows] == [("final error [m]", "good")]
+        result = compare(out, out, method_a="good", method_b="bad")
+        assert (result.metric, result.metric_label, result.better, result.n_pairs) == ("final_error_m", "final error", "a", 6)
+        assert result.mean_a == pytest.approx(0.2025) and result.mean_b == pytest.approx(0.5025)
+        assert compare(out, out, method_a="good", method_b="bad", metric="ape_rmse_m").metric_label == "APE RMSE"
+        with pytest.raises(EvaluationError) as exc:
+            compare(out, out, method_a="good", method_b="bad", metric="coverage_pct")
+        assert str(exc.value) == "compare: metric 'coverage_pct': declared by compare_recorded_labels_task but in no result"
+    finally:
+        sys.modules.pop("lidarkit_compare_recorded_labels_task", None)
 
 
 def test_a_declared_metric_in_no_result_and_one_only_a_side_reports_are_not_unknown(tmp_path):

@@ -17,6 +17,7 @@ import numpy as np
 
 from lidarkit.bench.jobs import Job
 from lidarkit.bench.results import dataset_labels, ground_truth_instant
+from lidarkit.eval.statistics import DEFAULT_ALPHA, min_units
 from lidarkit.eval.tables import PubTable, SegmentErrors, publication_tables
 
 log = logging.getLogger(__name__)
@@ -144,9 +145,10 @@ def _seed_list(seeds: Any) -> str:
 
 
 REFERENCE_METHOD = "kiss"
-#: said of a comparison over KITTI segments (fewer than 5 seeds)
+#: said of a comparison over KITTI segments (fewer seeds than the test needs to reach p < alpha: ``min_units``)
 OVERLAPPING_SEGMENTS = ("the segments overlap (one starts every 10 frames): they are not independent units and the p-value "
-                        "is optimistic; with 5 or more seeds the units are the seeds (lidarkit compare)")
+                        f"is optimistic; with {min_units(DEFAULT_ALPHA)} or more seeds the units are the seeds (lidarkit "
+                        "compare)")
 
 
 def reference_comparisons(records: list[dict[str, Any]], reference: str = REFERENCE_METHOD, *,
@@ -163,7 +165,7 @@ def reference_comparisons(records: list[dict[str, Any]], reference: str = REFERE
     """
     from lidarkit.bench.tasks.odometry import METRIC_ALIGNMENT_BY_NAME
     from lidarkit.errors import LidarKitError
-    from lidarkit.eval.statistics import DEFAULT_ALPHA, min_units, paired_test
+    from lidarkit.eval.statistics import paired_test
 
     # the label names the APE's alignment as every APE label does ("APE RMSE m" read as the headline SE(3)-aligned APE)
     ape_name = f"APE RMSE ({METRIC_ALIGNMENT_BY_NAME['ape_rmse_m']}) m"

@@ -15,13 +15,16 @@ import re
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from lidarkit.errors import ConfigError, DataError, EvaluationError, LidarKitError
 from lidarkit.eval.statistics import DEFAULT_ALPHA, PairedComparison, check_number, paired_test, tie_tolerance
 from lidarkit.trajectory import Trajectory
+
+if TYPE_CHECKING:
+    from lidarkit.bench.report import MetricInfo
 
 #: the default bench metric of a task that declares none of its metrics (a plugin not installed here), first present wins,
 #: and which task's headline is compared when the units of several tasks pair without --task; a task that declares its
@@ -656,14 +659,12 @@ def _default_metric(keys: list[str], side_a: BenchRuns, side_b: BenchRuns) -> st
     report, which the report's Summary ranks by (odometry: the SE(3)-aligned APE; it compared KITTI drift, or the
     unaligned APE, where the report ranked by another); the first of DEFAULT_BENCH_METRICS for a task that declares none
     of them. Of several tasks, the one whose headline comes first in DEFAULT_BENCH_METRICS."""
-    from lidarkit.bench.report import task_meta
-
     present: dict[str, set[str]] = {}
     for key in keys:
         present.setdefault(_task_of(key), set()).update(set(side_a.values[key]) & set(side_b.values[key]))
     headlines = []
     for task, names in present.items():
-        declared = [m.name for m in task_meta(task)[0] if m.kind == "accuracy"]
+        declared = [m.name for m in _declared_metrics(task, side_a, side_b) if m.kind == "accuracy"]
         headline = next((m for m in [*declared, *DEFAULT_BENCH_METRICS] if m in names), None)
         if headline is not None:
             headlines.append(headline)
@@ -681,8 +682,6 @@ def _why_no_unit_holds(metric: str, side_a: BenchRuns, side_b: BenchRuns, common
     """Why no paired unit holds ``metric`` on both sides when it is no misspelt name: one side reports it (in a task the
     other did not run), or a task of these results declares it but no result holds it (KITTI drift on a path under
     100 m); '' otherwise."""
-    from lidarkit.bench.report import task_meta
-
     sides = (("A", side_a), ("B", side_b))
     reported = {name: sorted({_task_of(k) for k, v in side.values.items() if _usable(v.get(metric))}) for name, side in sides}
     if bool(reported["A"]) != bool(reported["B"]):
@@ -701,7 +700,7 @@ def _why_no_unit_holds(metric: str, side_a: BenchRuns, side_b: BenchRuns, common
         return (f"A and B report it (task {', '.join(sorted(set(reported['A']) | set(reported['B'])))}) over no (dataset, "
                 "seed) in common")
     held = sorted({_task_of(k) for _, side in sides for k in side.values})
-    declared = [task for task in held if any(m.name == metric for m in task_meta(task)[0])]
+    declared = [task for task in held if any(m.name == metric for m in _declared_metrics(task, side_a, side_b))]
     if not declared:
         return ""
     return (f"declared by {', '.join(declared)} but in no result"
@@ -711,9 +710,9 @@ def _why_no_unit_holds(metric: str, side_a: BenchRuns, side_b: BenchRuns, common
 def _metric_label(task: str, metric: str, side_a: BenchRuns, side_b: BenchRuns, keys: list[str]) -> str:
     """``metric``'s label as the report heads its column, without the unit and naming the alignment the results state
     ("APE RMSE (SE(3)-aligned)"); '' when the task declares none beyond the name (and its unit)."""
-    from lidarkit.bench.report import MetricInfo, label_alignment, task_meta
+    from lidarkit.bench.report import MetricInfo, label_alignment
 
-    declared = next((m for m in task_meta(task)[0] if m.name == metric), None)
+    declared = next((m for m in _declared_metrics(task, side_a, side_b) if m.name == metric), None)
     if declared is None or declared.label == metric:
         return ""
     records = [{"info": {"metric_alignment": side.alignments.get(k) or {}}} for side in (side_a, side_b) for k in keys]
@@ -721,6 +720,19 @@ def _metric_label(task: str, metric: str, side_a: BenchRuns, side_b: BenchRuns, 
     head, sep, _ = label.rpartition(" [")
     label = head if sep and label.endswith("]") else label
     return "" if label == metric else label  # ("score [pts]": "score [score]" named it twice)
+
+
+def _declared_metrics(task: str, side_a: BenchRuns, side_b: BenchRuns) -> list[MetricInfo]:
+    """The metrics ``task`` declares, in its order: its module's, else as its results record them (``metric_labels``:
+    a plugin not installed here, whose report heads it by its first declared accuracy metric while compare tested
+    another and named it by its bare name)."""
+    from lidarkit.bench.report import recorded_metrics, task_meta
+
+    declared = task_meta(task)[0]
+    if declared:
+        return declared
+    records = side_a.records if side_a.records is side_b.records else [*side_a.records, *side_b.records]
+    return recorded_metrics([r for r in records if r.get("status") == "ok" and r["job"]["task"] == task])
 
 
 def _of_tasks(side: BenchRuns, tasks: set[str]) -> BenchRuns:
@@ -867,7 +879,9 @@ def _same_alignment(side_a: BenchRuns, side_b: BenchRuns, keys: list[str], metri
 
 def _mixed_versions(side_a: BenchRuns, side_b: BenchRuns, keys: list[str]) -> list[str]:
     """A note when a side's paired results come from several lidarkit versions (--all over a folder reused after a
-    source change paired seeds 0-4 of the new code with seed 5 of the old, without a word)."""
+    source change paired seeds 0-4 of the new code with seed 5 of the old, without a word). It counts results, not
+    units: the seeds of a dataset that collapse to one unit may come from several versions ("the 12 pairs" read beside
+    "7 paired units")."""
     mixes = {}
     for name, side in (("A", side_a), ("B", side_b)):
         counts = Counter(side.versions.get(k, "unknown") for k in keys)
@@ -878,7 +892,7 @@ def _mixed_versions(side_a: BenchRuns, side_b: BenchRuns, keys: list[str]) -> li
     text = "; ".join(f"{name}: {mix}" for name, mix in mixes.items())
     if len(mixes) == 2 and mixes["A"] == mixes["B"]:
         text = f"A: {mixes['A']}; B: the same"
-    return [f"the {len(keys)} pairs mix lidarkit versions ({text})"]
+    return [f"the {len(keys)} paired results mix lidarkit versions ({text})"]
 
 
 def _task_of(unit_key: str) -> str:
