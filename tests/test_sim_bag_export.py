@@ -85,3 +85,43 @@ def test_exports_hold_the_specs_points_rounded_to_float32_and_agree_bit_for_bit(
     simulator = " ".join((DOCS / "simulator.md").read_text().split())
     assert "Exports hold float32 points, the `sim:` spec float64" in simulator
     assert "kiss ends 0.0696 m off over the spec and 0.0618 m over the folder" in simulator
+
+
+def test_header_stamps_stay_within_ros_time_range(tmp_path):
+    """At 49 Hz the 49th sweep ends at 49 * (1/49) = 0.9999999999999999 s, which was written as sec 0, nanosec 1e9 (ROS
+    requires nanosec < 1e9): stamps are rounded to whole nanoseconds first."""
+    seq = SimulatedLidarSequence(n_frames=50, n_beams=8, n_azimuths=64, frame_rate_hz=49.0)
+    bag = export_bag(seq, tmp_path / "r49.bag", "rosbag1")
+    for topic in ("/points", "/ground_truth"):
+        stamps = [m.header.stamp for m in _messages(bag, topic)]
+        assert all(0 <= s.nanosec < 1_000_000_000 for s in stamps), topic
+        ns = np.array([s.sec * 1_000_000_000 + s.nanosec for s in stamps])
+        assert (np.diff(ns) > 0).all()
+
+
+def test_export_arguments_are_checked_in_one_line(tmp_path):
+    """A path that is no path raised pathlib's TypeError; a storage given for a ROS 1 bag was silently ignored (the CLI
+    refuses --storage without --format rosbag2)."""
+    from lidarkit.errors import ConfigError
+    from lidarkit.sim.street_camera import SimulatedCameraSequence, export_kitti_images
+
+    seq = SimulatedLidarSequence(n_frames=3, n_beams=8, n_azimuths=64)
+    with pytest.raises(ConfigError, match="out: takes a path, got int 5"):
+        export_bag(seq, 5, "mcap")
+    with pytest.raises(ConfigError, match="storage: a storage is chosen for ROS 2 bags only, not for rosbag1"):
+        export_bag(seq, tmp_path / "a.bag", "rosbag1", storage="mcap")
+    assert not (tmp_path / "a.bag").exists()
+    with pytest.raises(ConfigError, match="out_dir: takes a path, got float 3.5"):
+        export_kitti_images(SimulatedCameraSequence(n_frames=2), 3.5)
+
+
+def test_blur_samples_without_an_exposure_is_refused():
+    """blur_samples was accepted with motion_blur_s=0 and nothing was blurred (the occluder's settings were refused
+    alike already); with an exposure, or at its default, it is taken."""
+    from lidarkit.errors import ConfigError
+    from lidarkit.sim.street_camera import make_camera_config
+
+    assert make_camera_config(blur_samples=16, motion_blur_s=0.01).blur_samples == 16
+    assert make_camera_config().blur_samples == 4
+    with pytest.raises(ConfigError, match="motion_blur_s=0 blurs nothing"):
+        make_camera_config(blur_samples=16)

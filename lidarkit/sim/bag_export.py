@@ -76,10 +76,13 @@ def export_bag(sequence, out: str | os.PathLike, fmt: str = "rosbag2", *, storag
     from lidarkit.sim.lidar import SimulatedLidarSequence, check_argument
 
     check_argument(sequence, SimulatedLidarSequence, "sequence")
+    check_argument(out, (str, os.PathLike), "out", "a path")
     if fmt not in BAG_FORMATS:
         raise ConfigError(f"unknown bag format {fmt!r}; known: {', '.join(BAG_FORMATS)}", source="format")
     if storage not in STORAGES:
         raise ConfigError(f"unknown ROS 2 storage {storage!r}; known: {', '.join(STORAGES)}", source="storage")
+    if storage != "sqlite3" and fmt != "rosbag2":  # (as the CLI refuses --storage without --format rosbag2)
+        raise ConfigError(f"a storage is chosen for ROS 2 bags only, not for {fmt}", source="storage")
     try:
         from rosbags.typesys import Stores, get_typestore
     except ImportError:
@@ -187,8 +190,10 @@ def _write_messages(sequence, writer, typestore, serialize, *, ros1: bool, on_fr
     period = sequence.config.sweep_period_s
 
     def header(seq: int, t_s: float, frame_id: str = FRAME_ID):
-        sec = int(np.floor(t_s))
-        stamp = T["builtin_interfaces/msg/Time"](sec=sec, nanosec=int(round((t_s - sec) * 1e9)))
+        # (whole nanoseconds first: 49 sweeps at 49 Hz end at 0.9999999999999999 s, which was sec 0, nanosec 1e9, out
+        # of ROS's range)
+        sec, nanosec = divmod(int(round(t_s * 1e9)), 1_000_000_000)
+        stamp = T["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec)
         if ros1:
             return T["std_msgs/msg/Header"](seq=seq, stamp=stamp, frame_id=frame_id)
         return T["std_msgs/msg/Header"](stamp=stamp, frame_id=frame_id)

@@ -137,6 +137,8 @@ class CameraSimConfig(BaseModel):
             raise ValueError(f"occluder_start {self.occluder_start} is beyond the {self.n_frames} frames: no frame is occluded")
         if not self.corners and self.first_corner_m is not None:
             raise ValueError("first_corner_m places the first corner, and corners=false draws none")
+        if self.motion_blur_s == 0.0 and changed_fields(self, ("blur_samples",)):  # (accepted and ignored)
+            raise ValueError("blur_samples samples the exposure of motion_blur_s, and motion_blur_s=0 blurs nothing")
         # a stretch of length L curves by curve_curvature_per_m x sin over one or two periods: the heading turns by up to
         # curvature x L / pi (one period); the first stretch starts 40 m behind the origin and reaches 40 m further
         longest = max(self.corner_spacing_m[1] + 80.0, (self.first_corner_m or 0.0) + 40.0)
@@ -877,6 +879,7 @@ def export_kitti_images(sequence: SimulatedCameraSequence, out_dir: str | os.Pat
     from lidarkit import atomic
 
     check_argument(sequence, SimulatedCameraSequence, "sequence")
+    check_argument(out_dir, (str, os.PathLike), "out_dir", "a path")
     out = Path(out_dir)
     with atomic.export_folder(out, "images") as tmp:
         _write_kitti_images(sequence, tmp, on_frame)
