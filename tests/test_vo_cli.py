@@ -641,6 +641,7 @@ def test_self_calibration_counts_the_windows_a_bad_frame_bars(tmp_path, capsys, 
     said = [r.getMessage() for r in caplog.records if "focal length self-calibration" in r.getMessage()]
     assert len(said) == 1 and "1 of 1 windows show translation parallax" in said[0], said
     assert "1 more hold an unreadable or odd-sized frame" in said[0]
+    assert "no motion or pure rotation" not in said[0]  # (the usable window showed parallax: the bad frame is the cause)
 
 
 def test_scale_settings_the_pipeline_does_not_use_are_said(capsys):

@@ -383,8 +383,10 @@ def estimate_focal(images: Any, cfg: AutocalibConfig | None = None, focal_factor
                     pool.submit(_grid_costs, ba, grid)
         if len(pool.jobs) < 2:
             skipped = f", {unusable} more hold an unreadable or odd-sized frame" if unusable else ""
-            return fallback(f"{len(pool.jobs)} of {len(starts) - unusable} windows show translation parallax (no motion or pure "
-                            f"rotation){skipped}; at least 2 are needed")
+            usable = len(starts) - unusable
+            why = " (no motion or pure rotation)" if len(pool.jobs) < usable else ""  # (not when every usable one does)
+            return fallback(f"{len(pool.jobs)} of {usable} windows show translation parallax{why}{skipped}; at least 2 "
+                            "are needed")
         # lower envelope over basins (see _grid_costs); progress as the windows' adjustments end
         step(len(starts))
         rows = {}

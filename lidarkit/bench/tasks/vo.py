@@ -51,7 +51,7 @@ def _config(vo: Any, method: str, params: dict[str, Any], seed: int | None = Non
 
 
 class VisualOdometryTask(Task):
-    description = "monocular visual odometry (APE, RPE, final error: raw for gt scale else aligned, frames/s)"
+    description = "monocular visual odometry (APE, RPE, final error after alignment, frames/s)"
     dataset_kinds = ("kitti", "tum", "sim_camera")
     metrics = (
         Metric("ape_rmse_m", "APE RMSE [m]"),
