@@ -4,7 +4,8 @@ Starting from ``kiss_like`` (kiss-icp rebuilt from lidarkit components), one com
 
   no_deskew        constant-velocity prediction kept, no motion compensation
   fixed_threshold  a fixed 1 m correspondence distance instead of the adaptive threshold (kernel scale follows it)
-  unlimited_threshold  every nearest neighbour is a correspondence (vanilla's threshold; the kernel then weighs all alike)
+  unlimited_threshold  every nearest neighbour is a correspondence (vanilla's threshold; no kernel: its scale would be
+                   infinite)
   no_kernel        plain least squares instead of the Geman-McClure kernel
   scan_to_scan     the previous sweep as the map instead of the voxel-hash local map
   point_to_plane   point-to-plane residual (map normals) instead of point-to-point
@@ -53,7 +54,8 @@ ABLATIONS: dict[str, dict] = {
     "kiss_like": {},
     "no_deskew": {"deskew": {"name": "constant_velocity", "deskew": False}},
     "fixed_threshold": {"threshold": {"name": "fixed", "max_distance_m": 1.0}},
-    "unlimited_threshold": {"threshold": {"name": "fixed", "max_distance_m": None}},
+    # (the kernel's scale follows the threshold, infinite here: kernel none states what it did; the pipeline refuses the pair)
+    "unlimited_threshold": {"threshold": {"name": "fixed", "max_distance_m": None}, "kernel": "none"},
     "no_kernel": {"kernel": "none"},
     "scan_to_scan": {"map": "scan_to_scan"},
     "point_to_plane": {"residual": "point_to_plane"},

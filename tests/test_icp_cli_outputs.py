@@ -99,3 +99,27 @@ def test_the_iterations_row_of_kiss_says_the_backend_reports_none_with_or_withou
         code = cli_exit_code(["icp", str(SOURCE), str(TARGET), "-m", "kiss", "-p", f"assess={assess}"])
         out = " ".join(capsys.readouterr().out.replace("│", " ").split())
         assert code == 0 and "iterations not reported by the backend " in out and "not recorded" not in out, assess
+
+
+def test_kiss_at_a_lowered_cap_names_the_cap_with_or_without_the_assessment(capsys):
+    """``-p max_num_iterations=1 -p assess=false`` printed "converged False (kiss reports no convergence)", the cap's
+    reason being built by the assessment alone."""
+    for assess in ("true", "false"):
+        code = cli_exit_code(["icp", str(SOURCE), str(TARGET), "-m", "kiss", "-p", "max_num_iterations=1", "-p", f"assess={assess}"])
+        out = " ".join(capsys.readouterr().out.replace("│", " ").split())
+        assert code == 0 and "converged False (kiss-icp stopped at max_num_iterations=1:" in out, assess
+        assert "reports no convergence" not in out, assess
+
+
+def test_the_component_listing_names_preprocess_and_the_ranges_the_pipeline_passes_range_crop(capsys, monkeypatch):
+    """The title named residual=|kernel=|threshold=|deskew=|map= but not preprocess=[...], and range_crop's ranges read as
+    its own defaults, though the pipeline passes its min_range_m / max_range_m (as voxel_hash's voxel size said)."""
+    monkeypatch.setenv("COLUMNS", "400")
+    assert cli_exit_code(["icp", "--list-components"]) == 0
+    lines = [" ".join(line.replace("│", " ").split()) for line in capsys.readouterr().out.splitlines()]
+    title = next(line for line in lines if line.startswith("pipeline components"))
+    assert "-p 'preprocess=[NAME, ...]'" in title
+    start = next(i for i, line in enumerate(lines) if line.startswith("preprocess / range_crop"))
+    crop = [line for line in lines[start:start + 3] if line.split(":")[0].endswith("_range_m")]
+    assert crop == ["min_range_m: float = 0.0 — drop points at or closer than this (m); the pipeline passes its own",
+                    "max_range_m: float = 100.0 — drop points at or beyond this (m); the pipeline passes its own"]

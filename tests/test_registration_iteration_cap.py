@@ -56,3 +56,13 @@ def test_kiss_within_a_lowered_cap_and_at_the_default_stays_converged_with_kiss_
     assert np.linalg.norm(default.T_target_source[:3, 3] - truth[:3, 3]) < 0.1
     within = get_icp("kiss", max_num_iterations=30).align(source, target)
     assert within.converged is True and np.allclose(within.T_target_source, default.T_target_source, rtol=0.0, atol=1e-9)
+
+
+def test_kiss_stopped_at_a_lowered_cap_gives_the_cap_reason_with_and_without_the_assessment(bundled_pair):
+    """With assess=False the result read "kiss reports no convergence": the cap's reason was built inside the assessment
+    only. Both settings now give the same reason, naming the cap."""
+    source, target, _ = bundled_pair
+    reasons = {assess: get_icp("kiss", max_num_iterations=1, assess=assess).align(source, target).reason
+               for assess in (True, False)}
+    assert reasons[True] == reasons[False]
+    assert reasons[False].startswith("kiss-icp stopped at max_num_iterations=1: one more iteration moves the pose")

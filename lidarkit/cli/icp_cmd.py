@@ -116,7 +116,8 @@ def _list_ground_segmenters() -> None:
 def _list_components() -> None:
     from lidarkit.registration.components import KINDS, available_components, component_fields, get_component_class
 
-    table = Table(title="pipeline components (-m pipeline -p residual=|kernel=|threshold=|deskew=|map=NAME; motion goes in deskew=)", show_lines=True)
+    table = Table(title="pipeline components (-m pipeline -p residual=|kernel=|threshold=|deskew=|map=NAME -p 'preprocess=[NAME, ...]'; "
+                        "motion goes in deskew=)", show_lines=True)
     table.add_column("kind / name", style="bold")
     table.add_column("parameters (default) — description")
     for kind in KINDS:

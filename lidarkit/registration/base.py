@@ -485,15 +485,16 @@ def no_overlap_result(T0: np.ndarray, gap_m: float, method: str) -> Registration
 
 
 def unassessed_result(T_target_source: np.ndarray, converged: bool, method: str, runtime_s: float,
-                      iterations: int | None = None) -> RegistrationResult:
+                      iterations: int | None = None, reason: str = "") -> RegistrationResult:
     """The result of an alignment with ``assess=False``: the backend's pose and verdict, and its iteration count where
     it reports one (``iterations``), nothing counted or scored (no correspondences: -1, fitness and RMSE unknown, no
-    covariance, no acceptance gate)."""
+    covariance, no acceptance gate). ``reason``: why the backend did not converge, where it knows (kiss's cap), kept in
+    place of the generic one."""
     within = "" if iterations is None else f" in {iterations} iterations"
     return RegistrationResult(
         T_target_source=np.asarray(T_target_source, dtype=np.float64), converged=converged, iterations=iterations or 0,
         rmse_history=(), n_correspondences=-1, runtime_s=runtime_s, fitness=float("nan"), degeneracy=Degeneracy.not_assessed(),
-        reason="" if converged else f"{method} reports no convergence{within}", method=method,
+        reason="" if converged else reason or f"{method} reports no convergence{within}", method=method,
         extra={"assessed": False, "iterations_reported": iterations is not None},
     )
 
@@ -771,8 +772,8 @@ class Registration:
     ) -> tuple[np.ndarray, bool, Callable[[], RegistrationResult]]:
         """The backend's part of an alignment: ``(pose, the backend's own convergence verdict, the assessment still to
         do)``; what the backend itself reported, kept with ``assess=False``, may ride on the assessment as its
-        ``backend_reported`` attribute (``{"iterations": n}``). Variants whose assessment can run apart override it; by
-        default the whole :meth:`_align` runs now."""
+        ``backend_reported`` attribute (``{"iterations": n, "reason": why it did not converge}``). Variants whose
+        assessment can run apart override it; by default the whole :meth:`_align` runs now."""
         result = self._align(source_xyz, target_xyz, init_T)
         if not isinstance(result, RegistrationResult):  # (a bare 4x4 pose, None: a plugin's easy mistake)
             raise RegistrationError(f"{type(self).__name__}._align returned {type(result).__name__}, not a RegistrationResult "

@@ -258,4 +258,6 @@ class KissRegistration(Registration):
                 extra={"iterations_reported": False, "threshold_sigma_m": sigma, "source_keypoints": len(source_down)},
             )
 
+        if reason:  # kept with assess=False too (its generic "kiss reports no convergence" did not name the cap)
+            assess.backend_reported = {"reason": reason}
         return T, step is None, assess

@@ -13,7 +13,8 @@ One frame goes through the stages kiss-icp 1.3 runs, each stage a component chos
 
 Presets name compositions: ``kiss_like`` (kiss-icp's published choices and defaults) and ``vanilla_seq`` (the
 report's vanilla ICP, point-to-point on every nearest neighbour without kernel, chained scan to scan with a
-constant-velocity guess). Explicit parameters override the preset's.
+constant-velocity guess). Explicit parameters override the preset's. What decides how a run reads its data (on KITTI,
+kiss's vertical-angle correction) is the composition as resolved, not the preset's name (:func:`is_kiss_composition`).
 
 >>> icp = get_icp("pipeline", preset="kiss_like", kernel="none")      # kiss without its robust kernel
 >>> icp = get_icp("pipeline", residual="point_to_plane", kernel={"name": "huber", "scale_m": 0.2})
@@ -119,11 +120,17 @@ class PipelineConfig(RegistrationConfig):
     def _components(self) -> "PipelineConfig":
         if self.max_range_m <= self.min_range_m:
             raise ValueError(f"max_range_m ({self.max_range_m}) must exceed min_range_m ({self.min_range_m})")
-        build_components(self)  # unknown names / params raise ConfigError listing the valid ones
+        components = build_components(self)  # unknown names / params raise ConfigError listing the valid ones
         unread = unread_settings(self)
-        given = changed_fields(self, unread)
-        if given:  # (accepted and ignored: a range crop without range_crop, config.json recording it)
-            raise ValueError("; ".join(f"{name} is not read by this composition: {unread[name]}" for name in given))
+        # (accepted and ignored: a range crop without range_crop, config.json recording it)
+        problems = [f"{name} is not read by this composition: {unread[name]}" for name in changed_fields(self, unread)]
+        problems += [f"{name} is not read by this composition: {why}"
+                     for name, why in unread_component_parameters(self, components).items()]
+        unscaled = unscaled_kernel(components)
+        if unscaled:  # (huber, tukey, ... gave kernel=none's pose bit for bit, recorded as applied)
+            problems.append(unscaled)
+        if problems:
+            raise ValueError("; ".join(problems))
         return self
 
     @property
@@ -181,6 +188,89 @@ def unread_settings(config: PipelineConfig) -> dict[str, str]:
         unread["source_covariance_neighbors"] = (f"the {residual} residual uses no source covariances (plane_to_plane "
                                                  "does)")
     return unread
+
+
+def describe_components(components: dict[str, Any]) -> dict[str, Any]:
+    """Every component of ``components`` (:func:`build_components`) with its resolved parameters."""
+    out = {k: components[k].describe() for k in ("residual", "kernel", "threshold", "deskew", "map")}
+    out["preprocess"] = [step.describe() for step in components["preprocess"]]
+    return out
+
+
+#: Component parameters that leave a composition what it is: values kiss takes as parameters of its own (the shared
+#: ranges and voxel size, points per voxel, the adaptive threshold's start and minimum motion, deskew on or off), and
+#: choices of how a map answers the same question (its nearest-neighbour backend, threads, neighbour tracking).
+PARAMETERS_OUTSIDE_COMPOSITION = frozenset({
+    "max_range_m", "min_range_m", "voxel_size_m", "max_points_per_voxel", "initial_threshold_m", "min_motion_m", "deskew",
+    "nn_backend", "workers", "track_neighbors",
+})
+#: The pipeline's own settings that belong to its composition (kiss_like's are kiss's voxelization of each sweep).
+COMPOSITION_SETTINGS = ("map_voxel_factor", "source_voxel_factor", "voxel_order")
+
+
+def composition(config: PipelineConfig) -> dict[str, Any]:
+    """What ``config`` composes, as resolved: each component's description without
+    :data:`PARAMETERS_OUTSIDE_COMPOSITION`, and :data:`COMPOSITION_SETTINGS` (compared, not the preset's name: two
+    configs alike but for ``preset`` read KITTI two ways)."""
+    def own(described: dict[str, Any]) -> dict[str, Any]:
+        return {k: v for k, v in described.items() if k not in PARAMETERS_OUTSIDE_COMPOSITION}
+
+    described = describe_components(build_components(config))
+    out: dict[str, Any] = {kind: own(d) for kind, d in described.items() if kind != "preprocess"}
+    out["preprocess"] = [own(d) for d in described["preprocess"]]
+    return {**out, **{name: getattr(config, name) for name in COMPOSITION_SETTINGS}}
+
+
+def is_kiss_composition(config: PipelineConfig) -> bool:
+    """Whether ``config`` composes what kiss runs: :func:`composition` equal to preset kiss_like's."""
+    return composition(config) == composition(PipelineConfig(preset="kiss_like"))
+
+
+def _given(kind: str, spec: Spec, param: str) -> Any:
+    """The value ``spec`` gives its component's ``param`` when other than the component's default, else None (a value
+    equal to the default changes nothing, and a written config gives every parameter)."""
+    name, params = split_spec(kind, spec)
+    field = get_component_class(kind, name).Config.model_fields.get(param)
+    if field is None or param not in params or params[param] == field.get_default(call_default_factory=True):
+        return None
+    return params[param]
+
+
+def unread_component_parameters(config: PipelineConfig, components: dict[str, Any] | None = None) -> dict[str, str]:
+    """The component parameters ``config`` gives at a value other than their default that its composition does not
+    read, ``"KIND PARAM=VALUE"`` each with why: a map's ``neighbors`` without a residual built on normals or
+    covariances, a deskew ``reference`` with ``deskew`` false (each gave the same pose for every value).
+    ``components``: ``build_components(config)``, when built already."""
+    c = components or build_components(config)
+    residual, motion = c["residual"], c["deskew"]
+    unread = {}
+    neighbors = _given("map", config.map, "neighbors")
+    if neighbors is not None and not (getattr(residual, "needs_normals", False) or getattr(residual, "needs_covariances", False)):
+        unread[f"map neighbors={neighbors!r}"] = (f"the {residual.name} residual uses no map normals or covariances "
+                                                  "(point_to_plane and plane_to_plane do)")
+    reference = _given("motion", config.deskew, "reference")
+    if reference is not None and getattr(motion.config, "deskew", True) is False:
+        unread[f"deskew reference={reference!r}"] = (f"{motion.name} with deskew=False deskews no sweep (the reference is "
+                                                     "the instant a deskewed sweep and its pose refer to)")
+    return unread
+
+
+def unscaled_kernel(components: dict[str, Any]) -> str | None:
+    """Why the kernel cannot weigh anything, or None: one whose scale follows the threshold's sigma (``scale_m``
+    adaptive or kiss) under a threshold without a finite one (fixed, ``max_distance_m=None``) weighs every
+    correspondence 1, kernel=none's least squares under another name."""
+    kernel, threshold = components["kernel"], components["threshold"]
+    if "scale_m" not in type(kernel.config).model_fields:  # (none; a plugin kernel without a scale)
+        return None
+    try:
+        sigma = float(threshold.sigma_m)
+    except (TypeError, ValueError, NotImplementedError):  # (a plugin threshold's answer is checked when it runs)
+        return None
+    if np.isfinite(sigma) or np.isfinite(kernel.scale(sigma)):
+        return None
+    return (f"kernel={kernel.describe()} takes its scale from the threshold, and threshold={threshold.describe()} gives "
+            "an infinite sigma: every correspondence would weigh 1, as with kernel=none (give the kernel a scale_m in "
+            "metres, or the threshold a max_distance_m)")
 
 
 def _applied(step: Any, points_xyz: np.ndarray) -> np.ndarray:
@@ -266,16 +356,15 @@ class PipelineRegistration(Registration):
 
     @property
     def reads_data_as(self) -> str | None:
-        """``"kiss"`` for kiss's composition (preset kiss_like, the default): a reader prepares the data as for kiss (on
-        KITTI under ``vertical_correction=auto``, the vertical-angle correction), so the two see the same points."""
-        return "kiss" if self.config.preset in (None, "kiss_like") else None
+        """``"kiss"`` for kiss's composition (:func:`is_kiss_composition`: kiss_like's as resolved, whatever the preset's
+        name), else None: a reader prepares the data as for kiss (on KITTI under ``vertical_correction=auto``, the
+        vertical-angle correction), so the two see the same points. It followed the preset's name: vanilla_seq on kiss's
+        voxelization and kiss_like with vanilla's components, alike in every setting, read KITTI two ways (4.7 cm apart)."""
+        return "kiss" if is_kiss_composition(self.config) else None
 
     def describe(self) -> dict[str, Any]:
         """Every component with its resolved parameters."""
-        c = self._components
-        out = {k: c[k].describe() for k in ("residual", "kernel", "threshold", "deskew", "map")}
-        out["preprocess"] = [step.describe() for step in c["preprocess"]]
-        return out
+        return describe_components(self._components)
 
     # ------------------------------------------------------------------ sequence mode
     def reset(self, T_world_lidar_initial: np.ndarray | None = None) -> None:
@@ -452,4 +541,8 @@ class PipelineRegistration(Registration):
         return result
 
 
-__all__ = ["PRESETS", "SHARED_SETTINGS", "PipelineConfig", "PipelineRegistration", "build_components", "unread_settings"]
+__all__ = [
+    "COMPOSITION_SETTINGS", "PARAMETERS_OUTSIDE_COMPOSITION", "PRESETS", "SHARED_SETTINGS", "PipelineConfig",
+    "PipelineRegistration", "build_components", "composition", "describe_components", "is_kiss_composition",
+    "unread_component_parameters", "unread_settings", "unscaled_kernel",
+]

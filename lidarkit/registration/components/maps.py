@@ -252,7 +252,8 @@ class ScanToScanMap(Map):
 class VoxelHashConfig(ComponentConfig):
     voxel_size_m: float = Field(1.0, gt=0, description="map voxel edge (m); the pipeline passes its own")
     max_points_per_voxel: int = Field(20, ge=1, description="points kept per voxel (first come, first kept)")
-    max_range_m: float = Field(100.0, gt=0, description="voxels whose first point is this far from the sensor are removed (m)")
+    max_range_m: float = Field(100.0, gt=0, description="voxels whose first point is this far from the sensor are removed (m); the "
+                                                        "pipeline passes its own")
     min_point_spacing_m: float | None = Field(
         None, ge=0, description="a new point this close to one of its voxel is dropped (m); None: kiss-icp's voxel / sqrt(max points)"
     )

@@ -25,8 +25,8 @@ class Preprocess(Component):
 
 
 class RangeCropConfig(ComponentConfig):
-    min_range_m: float = Field(0.0, ge=0, description="drop points at or closer than this (m)")
-    max_range_m: float = Field(100.0, gt=0, description="drop points at or beyond this (m)")
+    min_range_m: float = Field(0.0, ge=0, description="drop points at or closer than this (m); the pipeline passes its own")
+    max_range_m: float = Field(100.0, gt=0, description="drop points at or beyond this (m); the pipeline passes its own")
 
     @model_validator(mode="after")
     def _order(self) -> "RangeCropConfig":

@@ -41,7 +41,7 @@ class FixedThresholdConfig(ComponentConfig):
 
 @register_component("threshold", "fixed")
 class FixedThreshold(Threshold):
-    """A constant distance; sigma is a third of it (infinite when unlimited: kernels then weigh all alike)."""
+    """A constant distance; sigma is a third of it (infinite when unlimited: the pipeline refuses a kernel scaled by it)."""
 
     Config = FixedThresholdConfig
 
@@ -59,7 +59,7 @@ class FixedThreshold(Threshold):
 class AdaptiveThresholdConfig(ComponentConfig):
     initial_threshold_m: float = Field(2.0, gt=0, description="sigma before any motion was seen (m)")
     min_motion_m: float = Field(0.1, ge=0, description="model deviations smaller than this are not counted (m)")
-    max_range_m: float = Field(100.0, gt=0, description="range at which a rotation error is measured (m)")
+    max_range_m: float = Field(100.0, gt=0, description="range at which a rotation error is measured (m); the pipeline passes its own")
 
 
 @register_component("threshold", "adaptive")
