@@ -7,7 +7,10 @@ plane-to-plane), ``kernel`` (none, Huber, Cauchy, Geman-McClure, Tukey) and ``th
 >>> from lidarkit.registration.components import available_components, make_component
 >>> available_components("kernel")
 ['cauchy', 'geman_mcclure', 'huber', 'none', 'tukey']
->>> make_component("kernel", {"name": "huber", "scale_m": 0.3}).weights(np.array([0.01, 1.0]), sigma_m=1.0)
+>>> import numpy as np
+>>> huber = make_component("kernel", {"name": "huber", "scale_m": 0.3})
+>>> huber.weights(np.array([0.01, 1.0]), sigma_m=1.0)  # squared residuals (m^2): residuals of 0.1 and 1 m
+array([1. , 0.3])
 
 Third-party components: subclass the kind's base (``Kernel``, ``Residual``, ...) and declare an entry point
 ``KIND.NAME = "pkg.module:Class"`` in the group ``lidarkit.components``.
