@@ -13,4 +13,10 @@ def __getattr__(name: str):
         return Trajectory
     raise AttributeError(f"module 'lidarkit' has no attribute {name!r}")
 
+
+def __dir__() -> list[str]:
+    """The names loaded on first use too (tab completion offered no ``Trajectory``), without loading them."""
+    return sorted(set(globals()) | set(__all__))
+
+
 __all__ = ["ConfigError", "DataError", "EvaluationError", "LidarKitError", "OutputError", "RegistrationError", "Trajectory", "__version__"]

@@ -352,12 +352,14 @@ class Trajectory:
     def to_kitti(self, path: str | os.PathLike) -> Path:
         """Write the KITTI pose format atomically, every number to the digits that read back the same double (10
         significant digits rounded georeferenced positions, ~5e6 m, by up to 0.5 mm)."""
+        self._refuse_empty(path)
         rows = self.poses_se3[:, :3, :4].reshape(-1, 12)
         text = "\n".join(" ".join(f"{v:.16e}" for v in row) for row in rows) + "\n"
         return atomic.write_text(path, text)
 
     def to_tum(self, path: str | os.PathLike) -> Path:
         """Write the TUM format atomically (frame index as time when there are no timestamps)."""
+        self._refuse_empty(path)
         ts = self.timestamps_s if self.timestamps_s is not None else np.arange(len(self), dtype=np.float64)
         quat = Rotation.from_matrix(self.poses_se3[:, :3, :3]).as_quat()
         data = np.column_stack([ts, self.poses_se3[:, :3, 3], quat])
@@ -365,6 +367,11 @@ class Trajectory:
             f"{row[0]:.9f} " + " ".join(f"{v:.9f}" for v in row[1:]) for row in data  # (stamps to 1e-9 s: 6 decimals lost 0.5 us)
         ) + "\n"
         return atomic.write_text(path, text)
+
+    def _refuse_empty(self, path: str | os.PathLike) -> None:
+        """DataError for a trajectory without poses: its file would be one the readers refuse ("no data rows")."""
+        if not len(self):
+            raise DataError("an empty trajectory (0 poses) is not written: the readers refuse empty files", source=path)
 
     def write(self, path: str | os.PathLike, fmt: str = "kitti") -> Path:
         if fmt == "kitti":

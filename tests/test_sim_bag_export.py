@@ -125,3 +125,10 @@ def test_blur_samples_without_an_exposure_is_refused():
     assert make_camera_config().blur_samples == 4
     with pytest.raises(ConfigError, match="motion_blur_s=0 blurs nothing"):
         make_camera_config(blur_samples=16)
+
+
+def test_the_kitti_export_names_an_out_dir_that_is_no_path():
+    from lidarkit.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="out_dir: takes a path, got NoneType None"):
+        export_kitti(SimulatedLidarSequence(n_frames=2, n_beams=8, n_azimuths=64), None)

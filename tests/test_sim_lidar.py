@@ -182,6 +182,19 @@ def test_is_a_scan_sequence_and_checks_input():
         make_config(scene="open", open_object_lateral_m=(2.0, 10.0))
 
 
+def test_a_negative_sweep_index_counts_from_the_end_as_the_file_readers_do():
+    """read_scan(-1) is the last scan of a KITTI sequence or a scan folder; the simulator refused it ("frame index -1
+    out of range for 6 frames"). The sweep read is the same one, noise and per-point times included."""
+    seq = SimulatedLidarSequence(scene="open", range_noise_std_m=0.02, n_beams=8, n_azimuths=90, n_frames=6)
+    last, first = seq.read_scan(5), seq.read_scan(0)
+    for scan, same in ((seq.read_scan(-1), last), (seq.read_scan(np.int64(-6)), first)):
+        np.testing.assert_array_equal(scan.points_xyz, same.points_xyz)
+        np.testing.assert_array_equal(scan.point_times_s, same.point_times_s)
+    np.testing.assert_array_equal(seq.read_scan_labels(-1)[1], seq.read_scan_labels(5)[1])
+    with pytest.raises(DataError, match="frame index -7 out of range for 6 frames"):
+        seq.read_scan(-7)
+
+
 def test_open_objects_at_the_nearest_allowed_band_leave_the_path_free():
     """At the clearance bound, the open scene's objects stay more than 0.75 m from the sensor's path (it never drives
     through a box; at 2 m it passes within 4 mm of one, which the config check refuses)."""

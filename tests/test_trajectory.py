@@ -372,3 +372,20 @@ def test_read_refuses_an_option_of_the_other_format():
         Trajectory.read(tum, fmt="kitti", stamps=None)
     assert str(err.value) == "stamps: stamps is no option of the kitti format (kitti options: timestamps_s, name)"
     assert len(Trajectory.read(tum, fmt="tum", name="fr1")) == 3000
+
+
+def test_an_empty_trajectory_is_not_written_since_no_reader_takes_the_file_back(tmp_path):
+    """to_kitti / to_tum wrote a file of no rows (TUM: its header alone) that from_kitti / from_tum then refused with
+    "no data rows": the write is refused instead, naming the path, and a file already there is left as it was."""
+    kept = tmp_path / "kept.txt"
+    kept.write_text("old\n")
+    for empty in (Trajectory(np.zeros((0, 4, 4))), Trajectory(np.zeros((0, 4, 4)), np.zeros(0))):
+        for write, path in ((empty.to_kitti, tmp_path / "e.kitti"), (empty.to_tum, tmp_path / "e.tum"),
+                            (lambda p: empty.write(p, "tum"), kept)):
+            with pytest.raises(DataError) as err:
+                write(path)
+            assert str(err.value) == f"{path}: an empty trajectory (0 poses) is not written: the readers refuse empty files"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["kept.txt"] and kept.read_text() == "old\n"
+    one = Trajectory(make_se3(translation=[1.0, 2.0, 3.0])[None], [5.0])  # (one pose is written and read back)
+    assert Trajectory.from_kitti(one.to_kitti(tmp_path / "one.kitti")).poses_se3[0, 2, 3] == 3.0
+    assert Trajectory.from_tum(one.to_tum(tmp_path / "one.tum")).timestamps_s.tolist() == [5.0]

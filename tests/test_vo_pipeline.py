@@ -103,6 +103,38 @@ def test_unreadable_first_frame_is_rejected_and_no_usable_frame_is_a_clear_error
         MonoVO(_cfg("none"), K).run(_Failing(images, range(len(images))))
 
 
+_FLOAT_HINT = ("convert with e.g. np.clip(img, 0, 255).astype(np.uint8) for 0-255 floats, "
+               "np.clip(img * 255, 0, 255).astype(np.uint8) for 0-1 ones")
+
+
+def test_no_usable_frame_names_each_reason_once_with_its_frames(sim):
+    """Float images repeated "frame i: image dtype float32 is not uint8" for each of the first frames (~700 characters
+    on KITTI); each reason is now said once, with the frames it applies to and how to convert."""
+    traj, K, images = sim
+    with pytest.raises(DataError) as err:
+        MonoVO(_cfg(), K, traj).run([img.astype(np.float32) for img in images])
+    assert str(err.value) == (f"images: none of the first 7 frames can be used (frames 0-6: image dtype float32 is not "
+                              f"uint8 ({_FLOAT_HINT}))")
+    colour = [np.repeat(img[:, :, None], 3, axis=2).astype(np.float64) for img in images]
+    mixed = [None, colour[1], colour[2], None, colour[4], images[5].astype(np.uint16), images[6].astype(np.uint16)]
+    with pytest.raises(DataError) as err:
+        MonoVO(_cfg(), K, traj).run(mixed)
+    assert str(err.value) == (
+        "images: none of the first 7 frames can be used (frames 0, 3: unreadable image (missing); frames 1-2, 4: image "
+        f"dtype float64 is not uint8 ({_FLOAT_HINT}); frames 5-6: image dtype uint16 is not uint8 (convert with e.g. "
+        "(img >> 8).astype(np.uint8) for 16-bit images, np.clip(img, 0, 255).astype(np.uint8) for 0-255 values))")
+
+
+def test_a_float_colour_frame_is_rejected_not_a_traceback(sim):
+    """A float64 BGR frame reached OpenCV's colour conversion, which raised cv2.error (no float64 support) out of run();
+    its dtype is checked first, so it is rejected like any unusable frame and the run goes on."""
+    traj, K, images = sim
+    frames = list(images)
+    frames[3] = np.repeat(images[3][:, :, None], 3, axis=2).astype(np.float64)
+    d = _check_rejected(MonoVO(_cfg(), K, traj).run(frames), 3, "image dtype float64 is not uint8")
+    assert _FLOAT_HINT in d.reason
+
+
 def test_odd_sized_first_frame_is_the_one_rejected(sim):
     """The sequence size is the majority of the first frames: an odd first frame cannot reject the others."""
     traj, K, images = sim

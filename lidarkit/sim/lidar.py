@@ -694,8 +694,8 @@ class SimulatedLidarSequence:
         return f"SimulatedLidarSequence({self.name!r}, {c.n_frames} sweeps of {c.n_beams}x{c.n_azimuths} rays)"
 
     def read_scan(self, index: int) -> Scan:
-        """Cast sweep ``index``; points ``(N, 3)`` float64 in the sensor frame, ordered by firing time (exports round
-        them to float32)."""
+        """Cast sweep ``index`` (negative: from the end); points ``(N, 3)`` float64 in the sensor frame, ordered by
+        firing time (exports round them to float32)."""
         return self._cast(index)[0]
 
     def read_scan_labels(self, index: int) -> tuple[Scan, np.ndarray]:
@@ -707,7 +707,7 @@ class SimulatedLidarSequence:
     def _cast(self, index: int) -> tuple[Scan, np.ndarray]:
         """The scan of sweep ``index`` and the scene triangle index ``(N,)`` of each point."""
         cfg = self.config
-        index = checked_index(index, cfg.n_frames, self.name, "frame", from_end=False)
+        index = checked_index(index, cfg.n_frames, self.name, "frame")  # (-1 is the last sweep, as the file readers count)
         n_az, n_beams = cfg.n_azimuths, cfg.n_beams
         sweep_start = index * cfg.sweep_period_s
         if cfg.motion_distortion:
@@ -817,6 +817,7 @@ def export_kitti(
     from lidarkit import atomic
 
     check_argument(sequence, SimulatedLidarSequence, "sequence")
+    check_argument(out_dir, (str, os.PathLike), "out_dir", "a path")
     out = Path(out_dir)
     with atomic.export_folder(out, "sweeps") as tmp:
         _write_kitti(sequence, tmp, on_frame)

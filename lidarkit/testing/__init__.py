@@ -23,4 +23,9 @@ def __getattr__(name: str) -> Any:
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
+def __dir__() -> list[str]:
+    """The names loaded on first use too (tab completion offered no ``load_baseline``), without loading them."""
+    return sorted(set(globals()) | set(__all__))
+
+
 __all__ = ["assert_no_worse_than", "assert_trajectory_close", "load_baseline", "metrics_of"]

@@ -390,12 +390,13 @@ class MonoVO:
         if image is None:
             return None, "unreadable image (missing)"
         image = np.asarray(image)
-        if image.ndim == 3 and image.shape[2] in (3, 4):
-            image = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY if image.shape[2] == 3 else cv2.COLOR_BGRA2GRAY)
-        if image.ndim != 2 or image.size == 0:
+        colour = image.ndim == 3 and image.shape[2] in (3, 4)
+        if image.size == 0 or not (image.ndim == 2 or colour):
             return None, f"not a grayscale image (shape {image.shape})"
-        if image.dtype != np.uint8:
-            return None, f"image dtype {image.dtype} is not uint8"
+        if image.dtype != np.uint8:  # (before the colour conversion: OpenCV's raised a traceback for float64 BGR)
+            return None, f"image dtype {image.dtype} is not uint8 ({_uint8_hint(image.dtype)})"
+        if colour:
+            image = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY if image.shape[2] == 3 else cv2.COLOR_BGRA2GRAY)
         return image, ""
 
     def _reference_features(self, image: np.ndarray, carried: Features | None) -> Features:
@@ -615,8 +616,7 @@ def sequence_image_shape(images: Any, loaded: dict[int, tuple[np.ndarray | None,
             if len(shapes) == _SIZE_VOTES:
                 break
     if not shapes:
-        reasons = "; ".join(f"frame {i}: {r}" for i, (_, r) in sorted(loaded.items()))
-        raise DataError(f"none of the first {len(loaded)} frames can be used ({reasons})",
+        raise DataError(f"none of the first {len(loaded)} frames can be used ({_frames_by_reason(loaded)})",
                         source=getattr(images, "name", "images"))
     counts = Counter(shapes)
     shape = max(counts, key=lambda shape: (counts[shape], -shapes.index(shape)))
@@ -624,6 +624,36 @@ def sequence_image_shape(images: Any, loaded: dict[int, tuple[np.ndarray | None,
         raise DataError(f"images of {shape[1]} x {shape[0]} px: too small for feature detection (at least "
                         f"{MIN_IMAGE_SIDE_PX} px a side)", source=getattr(images, "name", "images"))
     return shape
+
+
+def _uint8_hint(dtype: np.dtype) -> str:
+    """How to turn images of ``dtype`` into the uint8 ones the detectors take (lidarkit does not guess their range)."""
+    if np.issubdtype(dtype, np.floating):
+        return ("convert with e.g. np.clip(img, 0, 255).astype(np.uint8) for 0-255 floats, "
+                "np.clip(img * 255, 0, 255).astype(np.uint8) for 0-1 ones")
+    if np.issubdtype(dtype, np.integer):
+        return ("convert with e.g. (img >> 8).astype(np.uint8) for 16-bit images, "
+                "np.clip(img, 0, 255).astype(np.uint8) for 0-255 values")
+    return "convert to uint8 grey levels 0-255"
+
+
+def _frames_by_reason(loaded: dict[int, tuple[np.ndarray | None, str]]) -> str:
+    """``frames 0-9: <reason>; frame 12: <other reason>``: each reason once, with the frames it applies to (ten float
+    images repeated the same reason ten times, ~700 characters)."""
+    frames_of: dict[str, list[int]] = {}
+    for index, (_, reason) in sorted(loaded.items()):
+        frames_of.setdefault(reason, []).append(index)
+    parts = []
+    for reason, frames in frames_of.items():
+        runs: list[list[int]] = []
+        for index in frames:
+            if runs and index == runs[-1][-1] + 1:
+                runs[-1].append(index)
+            else:
+                runs.append([index])
+        listed = ", ".join(f"{run[0]}-{run[-1]}" if len(run) > 1 else str(run[0]) for run in runs)
+        parts.append(f"{'frames' if len(frames) > 1 else 'frame'} {listed}: {reason}")
+    return "; ".join(parts)
 
 
 def _per_frame_motion(T_ref_cur: np.ndarray, gap: int) -> np.ndarray:
