@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import re
 import textwrap
 from pathlib import Path
 
@@ -609,3 +610,91 @@ def test_scans_reached_through_a_linked_folder_are_pinned(tmp_path):
     shutil.copy(scans / "000004.bin", scans / "000005.bin")
     changed = dataset_checksums(spec)
     assert [k for k in pinned if changed[k] != pinned[k]] == ["sequences/00/velodyne/000005.bin"]
+
+
+def _scans_without_ground_truth(root: Path) -> Path:
+    """8 simulated sweeps (16 beams) as a folder of scan files read by ``generic:`` (no ground truth)."""
+    from lidarkit.sim.lidar import SimulatedLidarSequence, export_kitti
+
+    export_kitti(SimulatedLidarSequence(n_frames=8, n_beams=16, n_azimuths=360, seed=0), root / "sim")
+    return root / "sim" / "velodyne"
+
+
+def test_a_job_without_ground_truth_is_held_on_its_pinned_trajectory(tmp_path, stretch_registered, monkeypatch):
+    """Over data without ground truth (generic:, carmen, bags without odometry) a baseline checked n_bad_frames only:
+    kiss with one ICP iteration and 3 m voxels moved the end pose 0.18 m and passed. The rerun is held on the pinned
+    trajectory, in a band from its repeats' spread with a floor far above last-bit noise."""
+    scans = _scans_without_ground_truth(tmp_path)
+    (tmp_path / "gen.yaml").write_text(textwrap.dedent(f"""
+        name: no-truth
+        experiments:
+          - {{name: gen, task: odometry, dataset: {{kind: generic, path: "{scans}", name: gen}}, methods: [test_stretch]}}
+    """))
+    baseline = record(tmp_path / "gen.yaml", tmp_path / "baseline", repeats=2)
+    (job,) = baseline.jobs
+    band = job["trajectory_band"]
+    assert job["checked"] == ["n_bad_frames"] and band["path_length_m"] > 0.1
+    assert band["noise_position_m"] < 1e-9  # (the repeats agree to the last bits: the floor sets the band)
+    assert band["position_m"] == max(1e-6, 1e-6 * band["path_length_m"]) and band["rotation_deg"] == 1e-4
+    assert check(baseline.path).passed
+    monkeypatch.setattr(StretchedMore, "name", "test_stretch")  # translations 0.75 % longer
+    monkeypatch.setitem(registry_module._VARIANTS, "test_stretch", StretchedMore)
+    result = check(baseline.path)
+    (line,) = [line for line in result.lines() if not line.startswith("note:")]
+    found = re.fullmatch(r"regression: test_stretch on gen \(seed 0\): trajectory differs from the pinned one by (\S+) m, "
+                         r"(\S+) deg \(worst at pose (\d+); band 1e-06 m, 0.0001 deg\)", line)
+    assert found and float(found[1]) > 1e-3 and not result.passed, line
+    # a baseline recorded before such jobs pinned a trajectory band: held on the bad-frame count, and said
+    manifest = json.loads((baseline.path / "manifest.json").read_text())
+    del manifest["jobs"][0]["trajectory_band"]
+    (baseline.path / "manifest.json").write_text(json.dumps(manifest))
+    result = check(baseline.path)
+    assert result.passed and [line for line in result.lines() if "bad-frame" in line] == [
+        "note: test_stretch on gen (seed 0): no accuracy metric (no ground truth) and no trajectory band pinned (recorded "
+        "before lidarkit pinned one): held on its bad-frame count only; record it again to compare its trajectory"]
+
+
+def test_a_job_with_ground_truth_pins_no_trajectory_band(recorded):
+    """Jobs held on accuracy metrics are checked as before: no trajectory band in their manifest entry."""
+    _, _, baseline = recorded
+    assert "trajectory_band" not in baseline.jobs[0] and "ape_se3_rmse_m" in baseline.jobs[0]["checked"]
+
+
+@pytest.mark.parametrize("edit, reason", [
+    (lambda p: p.update(checksums=None), "protocol checksums is None, not a mapping"),
+    (lambda p: p.update(checksums=["a"]), "protocol checksums is ['a'], not a mapping"),
+    (lambda p: p.update(checksums={"<generated>": 7}), "protocol checksums gives '<generated>' the checksum 7, not a string"),
+    (lambda p: p.update(option_files="x"), "protocol option_files is 'x', not a mapping"),
+    (lambda p: p.update(task_options=[1]), "protocol task_options is [1], not a mapping"),
+    (lambda p: p.update(frame_check="x"), "protocol frame_check is 'x', not a mapping"),
+    (lambda p: p.update(simulation=3), "protocol simulation is 3, not a mapping"),
+])
+def test_a_corrupt_pinned_protocol_field_is_one_line(two_walks, tmp_path, capsys, edit, reason):
+    """Checksums edited to null or ["a"] gave a TypeError/ValueError traceback in check; option_files "x" read as "not
+    pinned" (the files it names never compared); a frame_check of "x" read as a changed protocol."""
+    manifest = json.loads((two_walks.path / "manifest.json").read_text())
+    edit(manifest["jobs"][0]["protocol"])
+    edited = tmp_path / "edited"
+    edited.mkdir()
+    (edited / "manifest.json").write_text(json.dumps(manifest))
+    code, out, err = run_cli(["baseline", "check", str(edited)], capsys)
+    assert code == 1 and "passed" not in out
+    assert " ".join(err.split()) == f"error: {edited / 'manifest.json'}: corrupt manifest: job 0 {reason}"
+
+
+def test_several_pinned_jobs_without_a_choice_name_the_keyword_to_pass(two_walks, tmp_path):
+    """``job()`` over two pinned jobs was a DataError ("2 pinned jobs match no choice"), as if the baseline were at
+    fault: an argument is missing, and the error names it with the values that pick one."""
+    with pytest.raises(ConfigError, match=re.escape(f"{two_walks.path}: 2 pinned jobs: pick one with method= "
+                                                    "(random_walk, random_walk(noise_m=0.1))") + "$"):
+        two_walks.job()
+    (tmp_path / "seeds.yaml").write_text(textwrap.dedent(TWO_WALKS) + "seeds: [0, 1]\n")
+    seeds = record(tmp_path / "seeds.yaml", tmp_path / "seeds", repeats=1)
+    with pytest.raises(ConfigError, match=re.escape("4 pinned jobs: pick one with method= (random_walk, "
+                                                    "random_walk(noise_m=0.1)) and seed= (0, 1)") + "$"):
+        seeds.job()
+    with pytest.raises(ConfigError, match=re.escape("2 pinned jobs match method='random_walk': pick one with seed= (0, 1)") + "$"):
+        seeds.metrics("random_walk")
+    with pytest.raises(DataError, match="0 pinned jobs match method='nosuch'; pinned: "):  # (nothing pinned of it)
+        seeds.job("nosuch")
+    assert seeds.job("random_walk", seed=1)["spec"]["seed"] == 1

@@ -120,3 +120,32 @@ def test_the_baselines_suite_copy_records_again_with_relative_dataset_paths(tmp_
     again = json.loads((tmp_path / "bk" / "manifest.json").read_text())
     assert [job["spec"] for job in again["jobs"]] == [job["spec"] for job in first.jobs]
     assert (tmp_path / "bk" / "suite.yaml").read_text() == copy  # (its paths absolute already: one header, no change)
+
+
+def test_a_job_failing_in_record_names_its_dataset_once_and_keeps_a_file_it_names(tmp_path):
+    """A job whose reader's error named the dataset read "exp1: kiss on scans (seed 0): scans: frames: ..." (the name
+    twice); an error naming a file keeps the file."""
+    from lidarkit.errors import DataError
+    from lidarkit.sim.lidar import SimulatedLidarSequence, export_kitti
+
+    scans = export_kitti(SimulatedLidarSequence(n_frames=8, n_beams=16, n_azimuths=360, seed=0), tmp_path / "sim") / "velodyne"
+
+    def suite(frames: str) -> str:
+        path = tmp_path / f"s{len(list(tmp_path.iterdir()))}.yaml"
+        path.write_text(textwrap.dedent(f"""
+            name: one
+            experiments:
+              - {{name: exp1, task: odometry, dataset: {{kind: generic, path: "{scans}", name: scans}},
+                  options: {{frames: "{frames}"}}, methods: [kiss]}}
+        """))
+        return path
+
+    with pytest.raises(DataError) as caught:
+        record(suite("7:"), tmp_path / "bl", repeats=1)
+    assert str(caught.value) == ("exp1: kiss on scans (seed 0): frames: '7:' selects 1 scan of the dataset's 8: odometry "
+                                 "needs 2 scans or more (the first is the start, where nothing is scored)")
+    broken = scans / "000001.bin"
+    broken.write_bytes(broken.read_bytes()[:-3])  # not a whole number of points
+    with pytest.raises(DataError) as caught:
+        record(suite("0:3"), tmp_path / "bl", repeats=1)
+    assert str(caught.value).startswith(f"exp1: kiss on scans (seed 0): {broken}"), str(caught.value)

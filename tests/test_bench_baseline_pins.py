@@ -183,3 +183,37 @@ def test_the_vo_and_odometry_options_are_pinned_with_their_defaults():
     assert get_task("vo").resolved_options({}) == {"max_frames": None, "align": "auto", "smoothed": False}
     assert get_task("vo").resolved_options({"smoothed": True})["smoothed"] is True
     assert get_task("odometry").resolved_options({}) == {"frames": None}
+
+
+def test_a_ros2_bag_given_as_its_metadata_file_pins_the_whole_bag(tmp_path):
+    """A ROS 2 bag given as ``BAG/metadata.yaml`` (the reader opens the folder) was hashed as metadata.yaml alone: other
+    scans in its storage file read as a regression of the method. Its folder's files are pinned, as the folder given
+    itself; --out inside the bag is refused; a run on the bag (the folder or its metadata.yaml) is the pinned data."""
+    from lidarkit.odometry import run
+    from lidarkit.sim.bag_export import export_bag
+    from lidarkit.sim.lidar import SimulatedLidarSequence
+    from lidarkit.testing import assert_no_worse_than
+
+    def bag(folder: Path, seed: int) -> Path:
+        return export_bag(SimulatedLidarSequence(n_frames=6, n_beams=16, n_azimuths=360, seed=seed), folder, "rosbag2")
+
+    pinned, other = bag(tmp_path / "drive", 0), bag(tmp_path / "other", 1)
+    suite = tmp_path / "bag.yaml"
+    suite.write_text(textwrap.dedent(f"""
+        name: bag
+        experiments:
+          - {{name: bag, task: odometry, dataset: {{kind: rosbag, path: "{pinned / 'metadata.yaml'}", name: bag}}, methods: [kiss]}}
+    """))
+    spec = {"kind": "rosbag", "path": str(pinned / "metadata.yaml")}
+    assert dataset_checksums(spec) == dataset_checksums({"kind": "rosbag", "path": str(pinned)})
+    assert sorted(dataset_checksums(spec)) == ["drive/bag.db3", "drive/metadata.yaml"]
+    with pytest.raises(OutputError, match="inside the dataset folder"):
+        record(suite, pinned / "baseline", repeats=1)
+    baseline = record(suite, tmp_path / "baseline", repeats=1)
+    assert check(baseline.path).passed
+    for given in (pinned, pinned / "metadata.yaml"):
+        assert_no_worse_than(run(f"rosbag:{given}", "kiss"), baseline, metric="ape_rmse_m")
+    shutil.copy(other / "bag.db3", pinned / "bag.db3")  # other scans, the same metadata
+    lines = check(baseline.path).lines()
+    assert [line.split(" -> ")[0].rsplit(": ", 1)[0] for line in lines if not line.startswith("note:")] == [
+        "protocol changed: kiss on bag (seed 0): data.drive/bag.db3"], lines

@@ -642,7 +642,7 @@ def test_lists_cut_short_say_how_many_more(tmp_path, capsys):
 
 def test_reference_comparisons_pair_seeds_as_compare_does_and_say_when_segments_overlap():
     """The demo's report said "kiss better, p = 0.002 over 10 paired segments" (5 overlapping segments of each of 2
-    drives) where `lidarkit compare` on the same folder said no difference over 2 seeds. With 5 or more seeds the
+    drives) where `lidarkit compare` on the same folder said no difference over 2 seeds. With 6 or more seeds the
     report pairs seeds (their drift, as compare); with fewer, its segment test says the segments overlap."""
     from lidarkit.bench.jobs import Job
     from lidarkit.bench.publication import OVERLAPPING_SEGMENTS, reference_comparisons

@@ -184,7 +184,7 @@ def test_a_result_over_other_frames_another_dataset_or_another_seed_is_refused(t
     sim = SimulatedLidarSequence(n_frames=12, seed=0, scene="street", n_beams=16, n_azimuths=360)
     pick = dict(method="kiss", metric="ape_rmse_m", tolerance=10.0)
     seed0 = {"method": "kiss", "dataset": "sim street"}
-    with pytest.raises(DataError, match="2 pinned jobs match"):  # two seeds pinned: the seed picks one
+    with pytest.raises(ConfigError, match="2 pinned jobs match .*: pick one with seed= \\(0, 1\\)$"):  # the seed picks one
         baseline.job(**seed0)
     pinned = baseline.job(**seed0, seed=0)
     assert_no_worse_than(run(sim, "kiss", frames="0:8"), baseline, dataset="sim street", seed=0, **pick)
@@ -307,6 +307,46 @@ def test_a_kitti_root_pinned_with_its_sequence_accepts_a_run_on_that_sequence(tm
         assert_no_worse_than(uncorrected, baseline, **pick)
 
 
+def test_a_kiss_kitti_root_pinned_with_its_sequence_accepts_a_run_on_that_sequence(tmp_path):
+    """kiss-icp's KITTI loader records the root and ``sequence: "00"``; the pinned root was resolved to its sequence
+    folder and the run's was not: a run over the pinned data was refused ("path '.../root' (pinned
+    '.../root/sequences/00')"), and pinned as ``sequence: 0`` it read "sequence '00' (pinned 0)". Another sequence
+    of the root is still refused."""
+    import json
+
+    from conftest import shared_path
+
+    from lidarkit.odometry import run
+
+    shared = shared_path("kitti_odometry")
+    root = tmp_path / "kitti"
+    (root / "poses").mkdir(parents=True)
+    for seq in ("00", "01"):  # (the bundled 10 scans of 00, seen as two sequences)
+        (root / "sequences" / seq).mkdir(parents=True)
+        for name in ("velodyne", "calib.txt", "times.txt"):
+            (root / "sequences" / seq / name).symlink_to(shared / "sequences" / "00" / name)
+        (root / "poses" / f"{seq}.txt").symlink_to(shared / "poses" / "00.txt")
+    (tmp_path / "suite.yaml").write_text(textwrap.dedent(f"""
+        name: kk
+        experiments:
+          - task: odometry
+            dataset: {{kind: kiss_kitti, path: "{root}", sequence: "00", name: k00}}
+            options: {{frames: "0:4"}}
+            methods: [kiss]
+    """))
+    baseline = record(tmp_path / "suite.yaml", tmp_path / "baseline", repeats=1)
+    pick = dict(method="kiss", metric="ape_se3_rmse_m")
+    result = run(f"kiss_kitti:{root}?sequence=00", "kiss", frames="0:4")
+    assert_no_worse_than(result, baseline, **pick)
+    manifest = json.loads((baseline.path / "manifest.json").read_text())
+    manifest["jobs"][0]["spec"]["dataset"]["sequence"] = 0  # (as `sequence: 0` in the suite pins it)
+    (baseline.path / "manifest.json").write_text(json.dumps(manifest))
+    assert_no_worse_than(result, baseline.path, **pick)
+    other = re.escape(f"path '{root}/sequences/01' (pinned '{root}/sequences/00'), sequence '01' (pinned 0)")
+    with pytest.raises(EvaluationError, match=f"dataset differs from the pinned job 'kiss': {other}$"):
+        assert_no_worse_than(run(f"kiss_kitti:{root}?sequence=1", "kiss", frames="0:4"), baseline.path, **pick)
+
+
 @pytest.fixture(scope="module")
 def kitti_selections(tmp_path_factory):
     """kiss pinned on the 10 KITTI 00 scans with ``frames: ":-2"`` and, in another baseline, ``"-3:"``."""
@@ -370,9 +410,8 @@ def test_two_experiments_of_one_method_on_one_dataset_are_told_apart(tmp_path):
           - {name: long, task: selftest, dataset: {kind: synthetic, name: synth}, methods: [{name: random_walk, params: {steps: 40}}]}
     """))
     baseline = record(tmp_path / "suite.yaml", tmp_path / "baseline", repeats=1)
-    label = "random_walk(steps=40)"
-    with pytest.raises(DataError, match=rf"2 pinned jobs match method='random_walk', dataset='synth', seed=0; pinned: "
-                                        rf"{re.escape(label)} on synth \(seed 0, experiment walk\), .* \(seed 0, experiment long\)"):
+    with pytest.raises(ConfigError, match=r"2 pinned jobs match method='random_walk', dataset='synth', seed=0: pick one "
+                                          r"with experiment= \(walk, long\)$"):
         baseline.job("random_walk", "synth", 0)
     assert baseline.job("random_walk", experiment="long", task="selftest")["spec"]["experiment"] == "long"
     ape = baseline.metrics("random_walk", experiment="walk")["ape_rmse_m"]

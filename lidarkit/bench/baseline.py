@@ -10,8 +10,10 @@ under them), the evaluation settings and the platform.
 
 ``check(folder)`` re-runs the pinned jobs. A job whose protocol differs reports ``protocol changed: ...``
 (its numbers are not comparable, whatever they are); otherwise a metric outside its band on the worse side
-is ``regression: ...``; outside on the better side ``improved: ...`` (passes; re-record to tighten). A job that
-raises is ``failed: ...`` with its error, and the other jobs are still checked.
+is ``regression: ...``; outside on the better side ``improved: ...`` (passes; re-record to tighten). A job with no
+accuracy metric (data without ground truth) is held on its trajectory: one differing from the pinned one by more than
+the band its repeats set is ``regression: ...``. A job that raises is ``failed: ...`` with its error, and the other jobs
+are still checked.
 
 Layout: ``DIR/manifest.json``, ``DIR/suite.yaml`` (the suite as recorded, its relative dataset paths made absolute so
 that it records again from there), ``DIR/jobs/<key>/metrics.json``
@@ -61,6 +63,14 @@ ABSOLUTE_FLOOR = {
     "rpe_rot_rmse_deg": 0.001,
 }
 DEFAULT_FLOOR = 1e-9
+#: a job with no accuracy metric (data without ground truth: its check held n_bad_frames only) is held on its trajectory:
+#: position band = max(NOISE_FACTOR * the repeats' largest difference, TRAJECTORY_RELATIVE_FLOOR * path length,
+#: TRAJECTORY_FLOOR_M); rotation band = max(NOISE_FACTOR * theirs, TRAJECTORY_FLOOR_DEG). kiss's threads sum in another
+#: order from run to run and its poses differ in the last bits (1e-15 m over 8-10 scans); a changed method (one ICP
+#: iteration, another voxel size) moves them by millimetres to decimetres: the floors lie far from both.
+TRAJECTORY_RELATIVE_FLOOR = 1e-6
+TRAJECTORY_FLOOR_M = 1e-6
+TRAJECTORY_FLOOR_DEG = 1e-4
 
 
 def _utc() -> str:
@@ -124,10 +134,10 @@ def _sha256(path: Path) -> str:
 
 
 def dataset_files(spec: Mapping[str, Any]) -> list[Path]:
-    """The files a dataset spec reads: every file under its path (a bag or MCAP file: itself; a ROS 2 bag: its folder's
-    files), or under ``sequences/NN`` of a KITTI root given with ``sequence: NN`` (not the other sequences); a KITTI
-    sequence also its ``poses/NN.txt``; and the files of options that name an existing path (a ``poses`` file kept
-    elsewhere). DataError when the path does not exist."""
+    """The files a dataset spec reads: every file under its path (a bag or MCAP file: itself; a ROS 2 bag, given as its
+    folder or its ``metadata.yaml``: its folder's files), or under ``sequences/NN`` of a KITTI root given with
+    ``sequence: NN`` (not the other sequences); a KITTI sequence also its ``poses/NN.txt``; and the files of options
+    that name an existing path (a ``poses`` file kept elsewhere). DataError when the path does not exist."""
     from lidarkit.bench.datasets import PATHLESS_KINDS, dataset_options
 
     if spec.get("kind") in PATHLESS_KINDS:
@@ -147,14 +157,28 @@ def dataset_files(spec: Mapping[str, Any]) -> list[Path]:
     return files
 
 
-def dataset_folder(spec: Mapping[str, Any]) -> Path:
-    """The folder (or file) a dataset spec reads: its path, or for a root given with ``sequence:`` the sequence folder
-    the reader itself resolves (``sequence: 0`` is ``sequences/00``: ``str(0)`` hashed the whole root). DataError
-    when the path does not exist."""
+#: kinds whose reader opens a ROS 2 bag given as its ``metadata.yaml`` as the bag's folder
+BAG_KINDS = ("rosbag", "mcap")
+
+
+def _read_path(spec: Mapping[str, Any]) -> Path:
+    """The path a dataset spec's reader opens: its path, a ROS 2 bag's ``metadata.yaml`` being its folder (hashed as
+    that one file, changed scans read as a regression of the method)."""
     from lidarkit.bench.datasets import dataset_path
+
+    path = Path(dataset_path(dict(spec)))
+    if spec.get("kind") in BAG_KINDS and path.name == "metadata.yaml" and path.is_file():
+        return path.parent
+    return path
+
+
+def dataset_folder(spec: Mapping[str, Any]) -> Path:
+    """The folder (or file) a dataset spec reads: its path (a ROS 2 bag's ``metadata.yaml``: the bag's folder), or for a
+    root given with ``sequence:`` the sequence folder the reader itself resolves (``sequence: 0`` is ``sequences/00``:
+    ``str(0)`` hashed the whole root). DataError when the path does not exist."""
     from lidarkit.bench.tasks._datasets import open_dataset_spec
 
-    root = Path(dataset_path(dict(spec)))
+    root = _read_path(spec)
     if not root.exists():
         raise DataError("dataset path does not exist (a baseline pins the paths it was recorded with: put the data back "
                         "there or record again)", source=root)
@@ -208,10 +232,9 @@ def option_checksums(job: Job, cache: dict[str, str] | None = None) -> dict[str,
 
 
 def _checksum_base(spec: Mapping[str, Any]) -> Path:
-    """The folder a dataset's checksums are named from: the dataset path's parent (a KITTI sequence: its root)."""
-    from lidarkit.bench.datasets import dataset_path
-
-    root = Path(dataset_path(dict(spec)))
+    """The folder a dataset's checksums are named from: the parent of the path its reader opens (a KITTI sequence: its
+    root; a ROS 2 bag given as its ``metadata.yaml``: the bag folder's parent, as the folder given itself)."""
+    root = _read_path(spec)
     return root.parent.parent if root.parent.name == "sequences" else root.parent
 
 
@@ -271,11 +294,19 @@ def run_job(job: Job, checksum_cache: dict[str, str] | None = None) -> JobRun:
     except LidarKitError as err:
         if str(err.source) == str(_job_name(job)):
             raise
-        raise type(err)(str(err), source=_job_name(job)) from err
+        raise type(err)(_reason_within_job(err, job), source=_job_name(job)) from err
     except (KeyboardInterrupt, SystemExit, MemoryError):
         raise
     except Exception as err:  # noqa: BLE001 - a method's or plugin's own failure: one line naming the job
         raise RegistrationError(f"the job failed: {type(err).__name__}: {err}", source=_job_name(job)) from err
+
+
+def _reason_within_job(err: LidarKitError, job: Job) -> str:
+    """``err`` as told after the job's name: its source left out where that name already says it (the dataset's name:
+    "kiss on mc (seed 0): mc: frames: ..."); a file or an option it names is kept."""
+    if err.source is not None and err.source not in (job.dataset_name, job.method_label, job.experiment):
+        return str(err)
+    return f"{err.location}: {err.reason}" if err.location else err.reason
 
 
 def _validate_pinned_options(job: Job) -> None:
@@ -347,6 +378,40 @@ def _band(metric: str, value: float, std: float) -> float:
     return float(max(NOISE_FACTOR * std, floor, RELATIVE_FLOOR * abs(value)))
 
 
+def holds_accuracy(checked: list[str]) -> bool:
+    """Whether a job's checked metrics hold its accuracy (not only the counts of the per-frame check: data without
+    ground truth)."""
+    return bool(set(checked) - set(FRAME_CHECK_METRICS))
+
+
+def trajectory_difference(actual: Any, pinned: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Per pose: position difference (m) and rotation angle between the two (deg) of two trajectories of one length."""
+    from lidarkit.geometry import rotation_angle_deg
+
+    A, P = actual.poses_se3, pinned.poses_se3
+    d_m = np.linalg.norm(A[:, :3, 3] - P[:, :3, 3], axis=1)
+    return d_m, np.asarray(rotation_angle_deg(np.einsum("nji,njk->nik", P[:, :3, :3], A[:, :3, :3])), dtype=np.float64)
+
+
+def _trajectory_band(trajectories: list[Any], source: str) -> dict[str, Any]:
+    """The band a rerun's trajectory is held in (see TRAJECTORY_RELATIVE_FLOOR), from the repeats' largest difference
+    to the first run's."""
+    first = trajectories[0]
+    spread_m = spread_deg = 0.0
+    for other in trajectories[1:]:
+        if len(other) != len(first):
+            raise RegistrationError(f"its repeats gave trajectories of {len(first)} and {len(other)} poses: no band can "
+                                    "be set on its trajectory", source=source)
+        d_m, d_deg = trajectory_difference(other, first)
+        spread_m, spread_deg = max(spread_m, float(d_m.max())), max(spread_deg, float(d_deg.max()))
+    length_m = float(np.linalg.norm(np.diff(first.poses_se3[:, :3, 3], axis=0), axis=1).sum())
+    return {"position_m": max(NOISE_FACTOR * spread_m, TRAJECTORY_RELATIVE_FLOOR * length_m, TRAJECTORY_FLOOR_M),
+            "rotation_deg": max(NOISE_FACTOR * spread_deg, TRAJECTORY_FLOOR_DEG),
+            "noise_position_m": spread_m, "noise_rotation_deg": spread_deg, "path_length_m": length_m,
+            "rule": f"max({NOISE_FACTOR:g} x the repeats' largest difference, {TRAJECTORY_RELATIVE_FLOOR:g} x path length, "
+                    f"{TRAJECTORY_FLOOR_M:g} m; {TRAJECTORY_FLOOR_DEG:g} deg)"}
+
+
 def checked_metrics(task: str, metrics: Mapping[str, Any]) -> list[str]:
     """The accuracy metrics of ``task`` present in ``metrics`` (speed depends on the machine: never checked)."""
     try:
@@ -382,7 +447,8 @@ class Baseline:
     def job(self, method: str | None = None, dataset: str | None = None, seed: int | None = None, *,
             experiment: str | None = None, task: str | None = None) -> dict[str, Any]:
         """The one pinned job with this method label (or name), dataset name, seed, experiment and task; DataError if
-        none or several (two experiments of one method on one dataset, e.g. over other frames: ``experiment=``). A label
+        none; ConfigError naming the keywords that tell them apart if several (an argument missing: two seeds,
+        ``seed=``; two experiments of one method on one dataset, e.g. over other frames, ``experiment=``). A label
         matches as bench writes it, as in ``compare``: ``kiss(deskew=false)`` finds ``kiss(deskew=False)``."""
         # (compare's reading of a label; private to lidarkit.eval.compare, shared here so that the two read labels alike)
         from lidarkit.eval.compare import _as_label
@@ -402,11 +468,14 @@ class Baseline:
         exact = [j for j in found if method is not None and same_label(j)]
         if exact:  # "vanilla" beside "vanilla(voxel_size_m=0.5)": the label, not every job of the method (as compare)
             found = exact
-        if len(found) != 1:
+        asked = ", ".join(f"{k}={v!r}" for k, v in (("method", method), ("dataset", dataset), ("seed", seed),
+                                                     ("experiment", experiment), ("task", task)) if v is not None)
+        if len(found) > 1:  # an argument missing, not a fault of the baseline
+            matching = f"{len(found)} pinned jobs match {asked}" if asked else f"{len(found)} pinned jobs"
+            raise ConfigError(f"{matching}: {_pick_hint(found)}", source=self.path)
+        if not found:
             labels = ", ".join(job_name(j, self.jobs) for j in self.jobs)
-            asked = ", ".join(f"{k}={v!r}" for k, v in (("method", method), ("dataset", dataset), ("seed", seed),
-                                                         ("experiment", experiment), ("task", task)) if v is not None)
-            raise DataError(f"{len(found)} pinned jobs match {asked or 'no choice'}; pinned: {labels}", source=self.path)
+            raise DataError(f"0 pinned jobs match {asked or 'no choice'}; pinned: {labels}", source=self.path)
         return found[0]
 
     def metrics(self, method: str | None = None, dataset: str | None = None, seed: int | None = None, **pick: str | None
@@ -424,6 +493,22 @@ class Baseline:
                    else "its poses_kitti.txt is missing from the baseline folder: record it again")
             raise DataError(f"this pinned job has no trajectory ({why})", source=path)
         return Trajectory.from_kitti(path, name=job["label"])
+
+
+def _pick_hint(found: list[dict[str, Any]]) -> str:
+    """The keywords of :meth:`Baseline.job` that tell the ``found`` jobs apart, with their values: "pick one with
+    method= (kiss, small_gicp)", "... and seed= (0, 1)"."""
+    keywords = (("method", lambda j: j["label"]), ("dataset", lambda j: j["spec"]["dataset_name"]),
+                ("seed", lambda j: j["spec"].get("seed")), ("experiment", lambda j: j["spec"].get("experiment")),
+                ("task", lambda j: j["spec"].get("task")))
+    hints = []
+    for keyword, value_of in keywords:
+        values = list(dict.fromkeys(value_of(j) for j in found))
+        if len(values) > 1:
+            hints.append(f"{keyword}= ({', '.join(map(str, values))})")
+    if not hints:  # (alike in every keyword: a manifest edited by hand)
+        return "pinned: " + ", ".join(job_name(j, found) for j in found)
+    return "pick one with " + " and ".join(hints)
 
 
 def job_name(pinned: Mapping[str, Any], jobs: list[dict[str, Any]]) -> str:
@@ -479,6 +564,13 @@ def record(
             names = [m for m in checked_metrics(job.task, first.metrics) if all(_finite_number(run.metrics.get(m)) for run in runs)]
             noise = {m: float(np.std([run.metrics[m] for run in runs], ddof=1)) if len(runs) > 1 else 0.0 for m in names}
             bands = {m: _band(m, float(first.metrics[m]), noise[m]) for m in names}
+            held_on = {}
+            if not holds_accuracy(names) and first.trajectory is not None:  # (no ground truth: the bad-frame count alone
+                # let a method regression pass)
+                held_on["trajectory_band"] = _trajectory_band([run.trajectory for run in runs], _job_name(job))
+            elif not holds_accuracy(names):
+                log.warning("%s: no accuracy metric and no trajectory to pin: its check holds only %s", _job_name(job),
+                            ", ".join(names) or "whether it runs")
             folder = tmp / "jobs" / key
             atomic.write_text(folder / "metrics.json", json.dumps(_jsonable(first.metrics), indent=1, sort_keys=True) + "\n")
             if first.trajectory is not None:
@@ -486,7 +578,7 @@ def record(
             jobs.append({
                 "key": key, "label": job.method_label, "spec": job.spec(), "protocol": first.protocol,
                 "metrics": _jsonable(first.metrics), "checked": names, "noise_std": noise, "bands": bands,
-                "repeats": [_jsonable(run.metrics) for run in runs],
+                "repeats": [_jsonable(run.metrics) for run in runs], **held_on,
             })
         atomic.write_text(tmp / "suite.yaml", suite_copy_text(suite_path))
         manifest = {"schema": SCHEMA, "created_utc": _utc(), "suite": suite.name, "repeats": int(repeats),
@@ -677,6 +769,9 @@ def _pinned_job_problem(job: Any) -> str:
     for key in ("protocol", "metrics", "bands"):
         if not isinstance(job[key], dict):
             return f"{key} is {job[key]!r}, not a mapping"
+    problem = _pinned_protocol_problem(job["protocol"])
+    if problem:
+        return problem
     if not isinstance(job["checked"], list):
         return f"checked is {job['checked']!r}, not a list"
     for metric in job["checked"]:
@@ -686,6 +781,31 @@ def _pinned_job_problem(job: Any) -> str:
                 return f"checks {metric!r} but its {where[:-1]} is {value!r}, not a finite number"
         if job["bands"][metric] < 0:
             return f"band of {metric!r} is negative ({job['bands'][metric]!r})"
+    if "trajectory_band" in job:
+        band = job["trajectory_band"]
+        if not isinstance(band, dict):
+            return f"trajectory_band is {band!r}, not a mapping"
+        for key in ("position_m", "rotation_deg"):
+            if not _finite_number(band.get(key)) or band[key] < 0:
+                return f"trajectory_band {key} is {band.get(key, '<absent>')!r}, not a finite number >= 0"
+    return ""
+
+
+def _pinned_protocol_problem(protocol: dict[str, Any]) -> str:
+    """What is wrong with the fields of a pinned protocol that check reads as mappings, or '' (checksums of None read
+    as a TypeError traceback; option_files of "x" as "not pinned", its files never compared)."""
+    for key in ("checksums", "option_files"):  # {file: sha256}
+        if key not in protocol:
+            continue
+        value = protocol[key]
+        if not isinstance(value, dict):
+            return f"protocol {key} is {value!r}, not a mapping"
+        bad = next(((k, v) for k, v in value.items() if not isinstance(v, str)), None)
+        if bad is not None:
+            return f"protocol {key} gives {bad[0]!r} the checksum {bad[1]!r}, not a string"
+    for key in ("task_options", "frame_check", "simulation", "method_config"):
+        if key in protocol and not isinstance(protocol[key], dict):
+            return f"protocol {key} is {protocol[key]!r}, not a mapping"
     return ""
 
 
@@ -890,4 +1010,34 @@ def check(
             worse = (delta < 0) if higher_is_better(metric, pinned["spec"]["task"]) else (delta > 0)
             text = f"{metric} = {float(value):.6g}, baseline {ref:.6g} ± {band:.3g} (change {delta:+.3g})"
             result.findings.append(Finding("regression" if worse else "improved", name, text))
+        result.findings += _trajectory_findings(baseline, pinned, run, name)
     return result
+
+
+def _trajectory_findings(baseline: Baseline, pinned: dict[str, Any], run: JobRun, name: str) -> list[Finding]:
+    """A job without an accuracy metric held on its trajectory: ``regression`` when the rerun's differs from the pinned
+    one by more than the recorded band (its bad-frame count alone let a method regression pass); a baseline recorded
+    before lidarkit pinned that band is said in a note."""
+    from lidarkit.trajectory import Trajectory
+
+    if run.trajectory is None or holds_accuracy(pinned["checked"]):
+        return []
+    band = pinned.get("trajectory_band")
+    if band is None:
+        return [Finding("note", name, "no accuracy metric (no ground truth) and no trajectory band pinned (recorded "
+                                      "before lidarkit pinned one): held on its bad-frame count only; record it again "
+                                      "to compare its trajectory")]
+    path = baseline.path / "jobs" / pinned["key"] / "poses_kitti.txt"
+    try:
+        then = Trajectory.from_kitti(path)
+    except LidarKitError as err:
+        return [Finding("failed", name, f"its pinned trajectory is not readable ({err}): record the baseline again")]
+    if len(then) != len(run.trajectory):
+        return [Finding("regression", name, f"trajectory has {len(run.trajectory)} poses, the pinned one {len(then)}")]
+    d_m, d_deg = trajectory_difference(run.trajectory, then)
+    band_m, band_deg = float(band["position_m"]), float(band["rotation_deg"])
+    if d_m.max() <= band_m and d_deg.max() <= band_deg:
+        return []
+    worst = int(np.argmax(d_m)) if d_m.max() > band_m else int(np.argmax(d_deg))
+    return [Finding("regression", name, f"trajectory differs from the pinned one by {d_m.max():.4g} m, {d_deg.max():.4g} "
+                                        f"deg (worst at pose {worst}; band {band_m:.2g} m, {band_deg:.2g} deg)")]

@@ -165,7 +165,8 @@ def _missing_metric(metric: str, which: str, numbers: Mapping[str, float], given
 
 def _check_same_data(result: Any, now_metrics: dict[str, float], job: Mapping[str, Any], ref_metrics: dict[str, float]) -> None:
     """EvaluationError when ``result`` did not run on the pinned job's data: another number of frames, other frames,
-    another dataset kind or path (a KITTI root and ``sequence:`` compared as the sequence folder they resolve to), other
+    another dataset kind or path (a KITTI root and ``sequence:`` compared as the sequence folder they resolve to, the
+    sequence as its number; a ROS 2 bag's ``metadata.yaml`` as its folder), other
     files the reader read (ground truth, calibration, times), another applied KITTI angle correction, (a simulated run)
     another simulator setting, or (a bench record) another dataset, task options or seed than the pinned job's spec. A metric is comparable on the same data only: 3 sweeps of the
     pinned 8-sweep drive, the sweeps 4-12 of it, or a simulated run against a pinned KITTI job passed against it."""
@@ -218,10 +219,10 @@ def _check_same_data(result: Any, now_metrics: dict[str, float], job: Mapping[st
     if expected is not None:  # every setting, those left at their defaults too (a noisier sensor is other data)
         differ = [f"{k} {ran.get(k)!r} (pinned {v!r})" for k, v in expected.items() if ran.get(k) != v]
     else:
-        if pinned.get("sequence") is not None and "path" in ran:  # the reader records the sequence folder it resolved
-            from lidarkit.bench.baseline import dataset_folder
-
-            pinned = {**pinned, "path": str(dataset_folder(pinned))}
+        if "path" in ran and "path" in pinned:  # both as the folder their reader reads (a root and its sequence)
+            pinned = {**pinned, "path": _read_folder(pinned)}
+            ran = {**ran, "path": _read_folder({"kind": ran.get("kind") or pinned.get("kind"), "path": ran["path"],
+                                                "sequence": ran.get("sequence")})}
         differ = [f"{k} {ran[k]!r} (pinned {v!r})" for k, v in pinned.items()
                   if k not in ("kind", "name") and k in ran and not _same_value(k, ran[k], v)]
         applied = (job.get("protocol") or {}).get("kitti_angle_correction")
@@ -273,13 +274,39 @@ def _check_same_frame_check(result: Any, job: Mapping[str, Any], metric: str) ->
                               f"{', '.join(differ)} ({metric} counts under other thresholds)", source="assert_no_worse_than")
 
 
+def _read_folder(spec: Mapping[str, Any]) -> Any:
+    """The folder (or file) a dataset spec's reader reads, as a baseline hashes it (a KITTI root with ``sequence:``: the
+    sequence folder, whichever reader records which; a ROS 2 bag's ``metadata.yaml``: its folder); the path as given
+    when it cannot be resolved (the data moved away: compared as written)."""
+    from lidarkit.bench.baseline import dataset_folder
+
+    try:
+        return str(dataset_folder({k: v for k, v in spec.items() if v is not None}))
+    except (LidarKitError, TypeError, ValueError):
+        return spec.get("path")
+
+
 def _same_value(key: str, ran: Any, pinned: Any) -> bool:
+    if key == "sequence":  # (0, "0" and "00" name one sequence: the readers write it as they please)
+        return _sequence_number(ran) == _sequence_number(pinned)
     if key.endswith("path") or key.endswith("_file") or key.endswith("_dir"):
         try:
             return Path(str(ran)).resolve() == Path(str(pinned)).resolve()
         except (OSError, ValueError):
             return ran == pinned
     return ran == pinned
+
+
+def _sequence_number(value: Any) -> Any:
+    """A sequence as its number when it is one (``"00"`` -> 0), else as given."""
+    if isinstance(value, int) and not isinstance(value, bool):
+        return value
+    if isinstance(value, str):
+        try:
+            return int(value)
+        except ValueError:
+            return value
+    return value
 
 
 def _pinned_dataset(spec: Mapping[str, Any]) -> Any:
