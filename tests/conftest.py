@@ -79,6 +79,31 @@ def kitti_vo_frames():
     return load
 
 
+@pytest.fixture(scope="session")
+def kitti_vo_run(kitti_vo_frames):
+    """``run("06" | "01", preset_name, seed=None, keep_tracks=False, **changes) -> VOResult``: ``MonoVO(preset(
+    preset_name, **changes), K, ground truth in scale mode gt).run(images, keep_tracks)`` on the KITTI image frames
+    0-50, each distinct run done once per session (tests in several files assert on the same run: the default
+    relative-scale run of 01, the gt-scale run of 06). The results are shared: read them, never change them. A run
+    kept with its tracks also serves the same run asked for without them."""
+    from lidarkit.vo import MonoVO, preset
+
+    done = {}
+
+    def run(sequence: str, preset_name: str, seed: int | None = None, keep_tracks: bool = False, **changes):
+        images, K, gt = kitti_vo_frames(sequence)
+        cfg = preset(preset_name, **changes, **({} if seed is None else {"seed": seed}))
+        key = (sequence, cfg.model_dump_json())
+        if (*key, True) in done:
+            return done[(*key, True)]
+        if (*key, keep_tracks) not in done:
+            vo = MonoVO(cfg, K, gt if cfg.scale.mode == "gt" else None)
+            done[(*key, keep_tracks)] = vo.run(images, keep_tracks=keep_tracks)
+        return done[(*key, keep_tracks)]
+
+    return run
+
+
 @pytest.fixture
 def seq06(kitti_vo_frames):
     """KITTI sequence 06 image frames 0-50: ``(images, K, camera ground truth)``."""

@@ -130,8 +130,16 @@ def _run(tmp_path: Path, name: str, methods: str) -> Path:
     return out
 
 
-def test_compare_tells_kiss_from_vanilla_and_kiss_from_itself_over_10_simulated_seeds(tmp_path, capsys):
-    both = _run(tmp_path, "both", "[kiss, {name: vanilla, params: {voxel_size_m: 0.5}}]")
+@pytest.fixture(scope="module")
+def kiss_and_vanilla_10_seeds(tmp_path_factory) -> Path:
+    """The folder of SUITE with kiss and vanilla(voxel_size_m=0.5) over its 10 seeds, run once for the tests that
+    compare in it: read it, never change it (a test that runs another suite into it does so in a copy)."""
+    return _run(tmp_path_factory.mktemp("suite"), "both", "[kiss, {name: vanilla, params: {voxel_size_m: 0.5}}]")
+
+
+def test_compare_tells_kiss_from_vanilla_and_kiss_from_itself_over_10_simulated_seeds(tmp_path, capsys,
+                                                                                        kiss_and_vanilla_10_seeds):
+    both = kiss_and_vanilla_10_seeds
     again = _run(tmp_path, "kiss_again", "[kiss]")
     code, out, _ = run_cli(["compare", str(both), str(both), "--method-a", "kiss", "--method-b", "vanilla",
                             "--metric", "ape_rmse_m", "--json", str(tmp_path / "cmp.json")], capsys)
@@ -343,13 +351,16 @@ def test_seeds_that_change_nothing_are_one_measurement_and_few_seeds_say_so():
     assert "with 5 differing seeds the smallest p this test can give is 0.0625: at least 6 are needed to reach p < 0.05" in few.verdict()
 
 
-def test_compare_holds_the_jobs_of_the_folder_s_suite_as_its_report(tmp_path, capsys):
+def test_compare_holds_the_jobs_of_the_folder_s_suite_as_its_report(tmp_path, capsys, kiss_and_vanilla_10_seeds):
     """A folder reused for a smaller suite still holds the earlier suite's results: compare paired them too (its
     report left them out), turning p = 0.25 over 3 seeds into a verdict over 10."""
+    import shutil
+
     from lidarkit.bench.runner import run_suite
     from lidarkit.bench.suite import load_suite
 
-    folder = _run(tmp_path, "reused", "[kiss, {name: vanilla, params: {voxel_size_m: 0.5}}]")  # 10 seeds
+    folder = tmp_path / "reused"
+    shutil.copytree(kiss_and_vanilla_10_seeds, folder)  # 10 seeds
     smaller = tmp_path / "smaller.yaml"
     smaller.write_text(textwrap.dedent(SUITE.format(methods="[kiss, {name: vanilla, params: {voxel_size_m: 0.5}}]"))
                        .replace("seeds: 10", "seeds: [0, 1, 2]"))

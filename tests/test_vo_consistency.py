@@ -104,14 +104,14 @@ def test_constant_rate_prefix():
 
 
 @pytest.mark.slow
-def test_kitti06_ground_truth_rotation_contradicts_the_images_in_its_first_frames(kitti_vo_frames):
+def test_kitti06_ground_truth_rotation_contradicts_the_images_in_its_first_frames(kitti_vo_frames, kitti_vo_run):
     """Diagnosis of the 06 heading offset (benchmarks/results/vo/heading_bias.md): the GT's rotation increments of
     frames 0-11 are identical (a constant-rate fill) and explain the inlier tracks ~7x worse than the held-out
     estimate (0.51 vs 0.07 px); afterwards ~1.7x. The yaw difference accumulated there is ~80 % of the total.
     Started at frame 11, the gt-scale run ends within 0.25 m of the GT (0.23 m)."""
     images, K, gt = kitti_vo_frames("06")
     assert constant_rate_prefix(gt) == 11
-    result = MonoVO(preset("lidarkit", **{"scale.mode": "gt"}), K, gt).run(images, keep_tracks=True)
+    result = kitti_vo_run("06", "lidarkit", keep_tracks=True, **{"scale.mode": "gt"})  # (tests/test_vo_kitti.py's too)
     pairs = ground_truth_consistency(result, gt)
     assert len(pairs) == 50
     fill = [p for p in pairs if p.frame <= 11]

@@ -10,10 +10,11 @@ from lidarkit.vo.evaluation import evaluate_vo
 
 
 @pytest.mark.slow
-def test_seq06_gt_scale_beats_sift_reference(seq06):
+def test_seq06_gt_scale_beats_sift_reference(seq06, kitti_vo_run):
     """Report 1 (SIFT + BF, RANSAC, gt scale) measured APE 0.046 m (SE3) here; acceptance: <= 0.03 m."""
-    images, K, gt = seq06
-    result = MonoVO(preset("lidarkit", **{"scale.mode": "gt"}), K, gt).run(images)
+    gt = seq06[2]
+    # (the run with its tracks: tests/test_vo_consistency.py checks them, one run for both)
+    result = kitti_vo_run("06", "lidarkit", keep_tracks=True, **{"scale.mode": "gt"})
     assert not result.rejected
     m = evaluate_vo(result.trajectory, gt, "gt")
     assert m["align"] == "se3"
@@ -42,10 +43,10 @@ def test_seq06_akaze_descriptor_pipeline(seq06):
 
 
 @pytest.mark.slow
-def test_seq01_relative_scale_follows_the_speed_up(seq01):
+def test_seq01_relative_scale_follows_the_speed_up(seq01, kitti_vo_run):
     """Unit steps give Sim(3) APE 0.92 m on 01 (the car speeds up 0.95 -> 1.27 m/frame); acceptance: <= 0.3 m."""
-    images, K, gt = seq01
-    result = MonoVO(preset("lidarkit", **{"scale.mode": "relative"}), K).run(images)
+    gt = seq01[2]
+    result = kitti_vo_run("01", "lidarkit", **{"scale.mode": "relative"})  # (tests/test_vo_scale.py's default run)
     assert not result.rejected
     m = evaluate_vo(result.trajectory, gt, "relative")
     assert m["ape_rmse_m"] <= 0.3

@@ -91,11 +91,63 @@ _PIPELINES = {
 }
 
 
-def _run(seq, name, mode="relative"):
-    images, K, gt = seq
-    base, changes = _PIPELINES[name]
-    result = MonoVO(preset(base, **{**changes, "scale.mode": mode}), K).run(images)
-    return result, evaluate_vo(result.trajectory, gt, mode)["ape_rmse_m"]
+@pytest.fixture
+def run_pipeline(kitti_vo_run, kitti_vo_frames):
+    """``run("01" | "06", name, mode="relative") -> (VOResult, APE m of its scale mode)`` of a pipeline of _PIPELINES
+    on frames 0-50, each run once per session (conftest's kitti_vo_run: tests/test_vo_kitti.py asserts on the default
+    relative run of 01 too)."""
+
+    def run(sequence, name, mode="relative"):
+        base, changes = _PIPELINES[name]
+        result = kitti_vo_run(sequence, base, **{**changes, "scale.mode": mode})
+        return result, evaluate_vo(result.trajectory, kitti_vo_frames(sequence)[2], mode)["ape_rmse_m"]
+
+    return run
+
+
+#: frames of a real run in the other scale mode that check a trajectory derived from the relative run
+_CHECKED_FRAMES = 6
+
+
+@pytest.fixture
+def in_scale_mode(kitti_vo_run, kitti_vo_frames):
+    """``trajectory(sequence, name, relative, mode) -> Trajectory`` of pipeline ``name`` in scale mode ``mode``
+    ("none": unit steps, "gt": ground-truth step lengths), given its relative-scale run ``relative``.
+
+    Where it is exact it is derived from ``relative`` instead of run again: a descriptor pipeline whose every frame
+    was accepted. Its reference features are the matched frame's detections whatever their depths, and a pair's pose
+    is estimated before its scale, so the other mode accepts the same pairs (j-1 -> j) with the same rotations and
+    translation directions: only the step lengths differ (measured on 01 for sift_bf_cross and orb_knn_ratio, none
+    and gt mode: the derived poses equal a real run's to 2e-14 m). A real run of the first frames in ``mode`` checks
+    it. A KLT pipeline carries only the tracks that got a depth into the next pair, which the relative scale alone
+    gives, so its other modes track other points (step directions up to 85 deg apart on 01): run for real, as is a
+    run with a rejected frame (placed by a prediction of the mode's own steps)."""
+
+    def trajectory(sequence, name, relative, mode):
+        base, changes = _PIPELINES[name]
+        cfg = preset(base, **{**changes, "scale.mode": mode})
+        consecutive = all(d.accepted and d.ref_frame == d.frame - 1 for d in relative.diagnostics[1:])
+        if cfg.matching.method == "klt" or relative.rejected or not consecutive:
+            return kitti_vo_run(sequence, base, **{**changes, "scale.mode": mode}).trajectory
+        images, K, gt = kitti_vo_frames(sequence)
+        poses = relative.trajectory.poses_se3
+        steps = np.linalg.solve(poses[:-1], poses[1:])  # T_prev_cur of each accepted pair
+        if mode == "none":
+            start, lengths = np.eye(4), np.ones(len(steps))
+        else:
+            start, lengths = gt.poses_se3[0], np.linalg.norm(np.diff(gt.positions_xyz, axis=0), axis=1)
+        steps[:, :3, 3] *= (lengths / np.linalg.norm(steps[:, :3, 3], axis=1))[:, None]
+        derived = [start]
+        for step in steps:
+            derived.append(derived[-1] @ step)
+        derived = np.array(derived)
+        n = _CHECKED_FRAMES
+        check = MonoVO(cfg, K, gt[:n] if mode == "gt" else None).run(images[:n])
+        np.testing.assert_allclose(derived[:n], check.trajectory.poses_se3, rtol=0, atol=1e-9)
+        return Trajectory(derived, relative.trajectory.timestamps_s,
+                          name=f"vo_{cfg.features.detector}_{cfg.matching.method}_{mode}")
+
+    return trajectory
 
 
 # Sim(3) APE on frames 0-50 in the default (detection) correspondence order, measured: relative 0.114 / 0.138 /
@@ -103,11 +155,11 @@ def _run(seq, name, mode="relative"):
 # Bounds: measured plus ~10-15 %. Across seeds the non-default pipelines spread widely (benchmarks/results/vo).
 @pytest.mark.slow
 @pytest.mark.parametrize("name,ape_max_m", [("default", 0.13), ("orb_klt", 0.16), ("sift_bf_cross", 0.11)])
-def test_seq01_relative_scale_per_pipeline_beats_unit_steps(seq01, name, ape_max_m):
-    result, ape_m = _run(seq01, name)
+def test_seq01_relative_scale_per_pipeline_beats_unit_steps(seq01, run_pipeline, in_scale_mode, name, ape_max_m):
+    result, ape_m = run_pipeline("01", name)
     assert not result.rejected and result.n_scale_kept == 0
     assert ape_m <= ape_max_m
-    _, unit_ape_m = _run(seq01, name, "none")
+    unit_ape_m = evaluate_vo(in_scale_mode("01", name, result, "none"), seq01[2], "none")["ape_rmse_m"]
     assert ape_m < 0.25 * unit_ape_m  # the car speeds up 0.95 -> 1.27 m/frame: unit steps cannot follow
 
 
@@ -122,17 +174,17 @@ def test_seq01_default_relative_scale_meets_the_target_for_any_seed(seq01):
 
 
 @pytest.mark.slow
-def test_seq01_relative_scale_orb_ratio_test_is_at_its_pose_floor(seq01):
+def test_seq01_relative_scale_orb_ratio_test_is_at_its_pose_floor(seq01, run_pipeline, in_scale_mode):
     """The second report's pipeline (CLAHE + ORB 3000 + ratio test, unrefined MAGSAC) with relative scale, its
     corners triangulated with their own pose (``scale.corner_pose: corners``): 0.632 m in the detection order
     (with the pair's MAGSAC pose 0.876 m, unit steps 0.92 m). The scale is no longer what limits it: the same poses
     with ground-truth step lengths give 0.611 m (three pairs' translation directions are 45-60 deg off)."""
-    images, K, gt = seq01
-    result, ape_m = _run(seq01, "orb_knn_ratio")
+    gt = seq01[2]
+    result, ape_m = run_pipeline("01", "orb_knn_ratio")
     assert not result.rejected and result.n_scale_kept == 0
     assert ape_m <= 0.72
-    gt_scale = MonoVO(preset("report_orb", **{"scale.mode": "gt"}), K, gt).run(images)
-    floor_m = evaluate_vo(gt_scale.trajectory, gt, "relative")["ape_rmse_m"]
+    gt_scale = in_scale_mode("01", "orb_knn_ratio", result, "gt")  # report_orb with scale.mode gt
+    floor_m = evaluate_vo(gt_scale, gt, "relative")["ape_rmse_m"]
     assert ape_m <= 1.08 * floor_m
 
 
@@ -152,8 +204,8 @@ def test_seq01_relative_scale_orb_ratio_test_meets_the_target_over_seeds(seq01):
 @pytest.mark.slow
 @pytest.mark.parametrize("name,ape_max_m", [("default", 0.05), ("orb_klt", 0.15), ("orb_knn_ratio", 0.115),
                                             ("sift_bf_cross", 0.135)])
-def test_seq06_relative_scale_per_pipeline(seq06, name, ape_max_m):
-    result, ape_m = _run(seq06, name)
+def test_seq06_relative_scale_per_pipeline(run_pipeline, name, ape_max_m):
+    result, ape_m = run_pipeline("06", name)
     assert not result.rejected and result.n_scale_kept == 0
     assert ape_m <= ape_max_m
 
