@@ -233,6 +233,16 @@ def read_results(path: Path) -> dict:
             if lacking:
                 raise DataError(f"not a results.json of this benchmark: {what} row {row.get('name', i)!r} has no "
                                 f"{', '.join(lacking)}", source=path)
+    # the numbers the report formats (a null or text value was a TypeError / ValueError traceback)
+    numbers = [(k, data[k], k == "whole_aces_ratio_to_open3d_point_to_point") for k in
+               ("aces_read_s", "improvement_over_odometry", "whole_aces_best_s", "whole_aces_ratio_to_open3d_point_to_point")]
+    for what, rows, keys in (("aces_rows", data["aces_rows"], ACES_ROW_KEYS), ("drift_vs_odometry", data["drift_vs_odometry"], DRIFT_ROW_KEYS)):
+        for i, row in enumerate(rows):
+            label = f"{what} row {row.get('name', row.get('log', i))!r} "
+            numbers += [(label + k, row[k], what == "aces_rows" and k == "fps") for k in keys if k not in ("name", "log")]
+    for name, value, may_be_null in numbers:
+        if not (value is None and may_be_null) and (isinstance(value, bool) or not isinstance(value, (int, float))):
+            raise DataError(f"not a results.json of this benchmark: {name} is {value!r}, not a number", source=path)
     if data["best"] not in [r["name"] for r in data["aces_rows"]]:
         raise DataError(f"not a results.json of this benchmark: best {data['best']!r} names none of its aces_rows", source=path)
     return data

@@ -77,3 +77,20 @@ def test_rows_the_report_reads_are_checked_before_it_is_written(tmp_path, carmen
     path.write_text(json.dumps(unknown))
     with pytest.raises(DataError, match="best 'nonexistent' names none of its aces_rows"):
         carmen_2d.read_results(path)
+
+
+def test_a_value_the_report_formats_that_is_no_number_is_a_data_error(tmp_path, carmen_2d):
+    """A null drift fps or a text improvement made the report's formatting raise TypeError / ValueError: one line naming
+    the value. The raw odometry's ACES fps is null by design and still reads."""
+    data = json.loads(COMMITTED.read_text())
+    assert data["aces_rows"][0]["fps"] is None
+    path = tmp_path / "results.json"
+    path.write_text(json.dumps(data))
+    assert carmen_2d.read_results(path)["best"] == data["best"]
+    for change, said in ((lambda d: d["drift_vs_odometry"][0].update(fps=None), "drift_vs_odometry row 'aces' fps is None"),
+                         (lambda d: d.update(improvement_over_odometry="x"), "improvement_over_odometry is 'x'")):
+        bad = json.loads(COMMITTED.read_text())
+        change(bad)
+        path.write_text(json.dumps(bad))
+        with pytest.raises(DataError, match=f"not a results.json of this benchmark: {said}, not a number"):
+            carmen_2d.read_results(path)
