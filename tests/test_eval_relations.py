@@ -120,3 +120,16 @@ def test_relations_refuse_a_scan_gap_that_is_not_a_positive_number():
     for bad in (0.0, -0.1, float("nan"), "0.1", True):
         with pytest.raises(DataError, match=f"scan_gap_s must be a finite number of seconds > 0 or None, got {bad!r}"):
             Relations(**fields, scan_gap_s=bad)
+
+
+def test_the_relations_span_is_over_both_stamps_when_relations_run_back_in_time():
+    """A relation with t1 > t2 made the "no relation ..." error read "relations 80.000..70.000 s" (t1's least to t2's
+    most)."""
+    from lidarkit.errors import EvaluationError
+    from lidarkit.trajectory import Trajectory
+
+    relations = Relations(t1_s=np.array([80.0]), t2_s=np.array([70.0]), dx_m=np.array([1.0]), dy_m=np.array([0.0]),
+                          dyaw_rad=np.array([0.0]))
+    estimate = Trajectory(np.repeat(np.eye(4)[None], 3, axis=0), np.array([0.0, 1.0, 2.0]))
+    with pytest.raises(EvaluationError, match=r"relations 70\.000\.\.80\.000 s\)"):
+        relation_error(estimate, relations)

@@ -178,11 +178,14 @@ def relation_error(
         warn(f"{same} of {len(relations)} relations have the same estimated pose nearest both their time stamps "
              f"(within {max_time_diff_s:g} s; estimate spans {span[0]:.3f}..{span[1]:.3f} s): left out, they would score as "
              "no motion")
+    # (a relation may run back in time, t1 > t2: the span is over both stamps, not t1's least to t2's most)
+    rel_lo = float(min(relations.t1_s.min(), relations.t2_s.min()))
+    rel_hi = float(max(relations.t1_s.max(), relations.t2_s.max()))
     if len(used) == 0:
         raise EvaluationError(
             f"no relation has estimated poses within {max_time_diff_s:g} s of both its time stamps "
             + (f"other than one pose for both ({same} relations) " if same else "")
-            + f"(estimate spans {span[0]:.3f}..{span[1]:.3f} s, relations {relations.t1_s.min():.3f}..{relations.t2_s.max():.3f} s)",
+            + f"(estimate spans {span[0]:.3f}..{span[1]:.3f} s, relations {rel_lo:.3f}..{rel_hi:.3f} s)",
             source=source,
         )
     ends = np.concatenate([di[used], dj[used]])  # each scored relation's two time stamps, from their poses (s)
@@ -196,8 +199,8 @@ def relation_error(
              "them out (a log's own relations, open_dataset(...).relations, know its scan spacing)")
     if len(used) + same < 0.5 * len(relations):  # most relations left out: the estimate's clock or its span does not match
         warn(f"only {len(used)} of {len(relations)} relations have estimated poses within {max_time_diff_s:g} s of both "
-             f"their time stamps (estimate spans {span[0]:.3f}..{span[1]:.3f} s, relations {relations.t1_s.min():.3f}.."
-             f"{relations.t2_s.max():.3f} s): the score covers those only")
+             f"their time stamps (estimate spans {span[0]:.3f}..{span[1]:.3f} s, relations {rel_lo:.3f}..{rel_hi:.3f} s): the "
+             "score covers those only")
     P = estimate.poses_se3
     Ti, Tj = P[i[used]], P[j[used]]
     # delta_ij = inv(Ti) @ Tj, planar part: R_i^T (t_j - t_i) and yaw_j - yaw_i
