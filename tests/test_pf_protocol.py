@@ -680,3 +680,62 @@ def test_library_and_bench_check_the_filter_memory_as_the_cli_does(tmp_path, mon
     with pytest.raises(SystemExit):  # the CLI keeps its own line, naming the option
         main(["pf", str(shared_path("pf", "burgard_particle_filter")), "--particles", "50"])
     assert f"--particles: a filter of 50 particles {tail}" in capsys.readouterr().err
+
+
+def test_snapshot_steps_given_as_a_generator_are_all_kept_and_a_non_iterable_is_refused(stachniss):
+    """The memory check counted ``snapshot_steps`` with ``len(tuple(...))``, emptying a generator before the filter ran:
+    no snapshot at all; None or 5 were a bare TypeError."""
+    from lidarkit.errors import ConfigError
+
+    first_steps = StepReadings(np.zeros(0, dtype=np.int64), np.zeros((0, 2)), np.zeros(6, dtype=np.int64))
+    assert sorted(run_protocol(stachniss, 50, 0, snapshot_steps=(s for s in (0, 10, 50)), with_ape_rpe=False).snapshots) == [0, 10, 50]
+    assert sorted(run_recorded(stachniss, 50, 0, snapshot_steps=iter([0, 10])).snapshots) == [0, 10]
+    pf = make_filter(stachniss.landmarks.positions_xy, PFConfig.make(n_particles=20), np.random.default_rng(0))
+    assert sorted(run_filter(pf, np.zeros((5, 3)), first_steps, snapshot_steps=(s for s in (1, 5)))["snapshots"]) == [1, 5]
+    for bad in (None, 5):
+        for run in (lambda: run_protocol(stachniss, 50, 0, snapshot_steps=bad),
+                    lambda: run_recorded(stachniss, 50, 0, snapshot_steps=bad),
+                    lambda: run_filter(pf, np.zeros((5, 3)), first_steps, snapshot_steps=bad)):
+            with pytest.raises(ConfigError) as err:
+                run()
+            assert str(err.value) == f"snapshot_steps: must be an iterable of step numbers, got {bad!r}"
+
+
+def _all_visible_map(tmp_path, n_landmarks: int = 100, steps: int = 30):
+    """A landmark dataset of ``n_landmarks`` on a grid and ``steps`` straight moves (every landmark visible: 100
+    readings a step)."""
+    rows = [f"{i + 1} {(i % 10) * 2.0 - 9.0:.3f} {(i // 10) * 2.0 - 9.0:.3f}" for i in range(n_landmarks)]
+    (tmp_path / "world.dat").write_text("\n".join(rows) + "\n")
+    lines = []
+    for _ in range(steps):
+        lines.append("ODOMETRY 0.0 0.1 0.0")
+        lines.append("SENSOR 1 5.0 0.1")
+    (tmp_path / "sensor_data.dat").write_text("\n".join(lines) + "\n")
+    return LandmarkData(tmp_path)
+
+
+def test_the_memory_estimate_counts_the_readings_a_step_weighs(stachniss, tmp_path, monkeypatch, capsys):
+    """A flat 320 B a particle let 300,000 particles on a 100-landmark map (every landmark visible: a likelihood
+    workspace of 100 readings, ~1,325 B a particle measured) past a 150 MiB machine; the Kalman kernels take more too.
+    The Freiburg run of 20,000 particles (7 readings a step at most) is still accepted."""
+    import lidarkit.resources
+    from lidarkit.errors import ConfigError
+
+    monkeypatch.setattr(lidarkit.resources, "available_memory_bytes", lambda: 150 * 2**20)
+    big = _all_visible_map(tmp_path)
+    with pytest.raises(ConfigError) as err:  # refused before anything is simulated
+        run_protocol(big, 300_000, 0, visible="all", with_ape_rpe=False)
+    assert str(err.value) == ("n_particles: a filter of 300,000 particles needs about 0.398 GiB of memory, more than 80% of "
+                              "the 150 MiB available")
+    with pytest.raises(SystemExit):  # the CLI counts them too, naming its option
+        main(["pf", str(tmp_path), "--visible", "all", "--particles", "300000"])
+    assert "--particles: a filter of 300,000 particles needs about 0.398 GiB" in capsys.readouterr().err
+    from lidarkit.pf.protocol import check_config_memory, filter_bytes_per_particle
+
+    assert filter_bytes_per_particle(PFConfig.make(), 100) == pytest.approx(224.0 + 12.0 * 100)
+    assert filter_bytes_per_particle(PFConfig.make(likelihood="nearest", nearest_association="per_particle"), None, 100) == 1424.0
+    assert filter_bytes_per_particle(PFConfig.make(kernel="kalman")) == 640.0
+    with pytest.raises(ConfigError):  # 200,000 kernels x 640 B = 122 MiB > 80% of 150 MiB
+        check_config_memory(PFConfig.make(n_particles=200_000, kernel="kalman"), data=stachniss)
+    result = run_protocol(stachniss, 20_000, 0, with_ape_rpe=False)  # 20,000 x 320 B: accepted and run
+    assert result.n_particles[0] == 20_000

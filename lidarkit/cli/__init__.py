@@ -107,10 +107,24 @@ def _run_app(argv: list[str] | None) -> int:
     return code if isinstance(code, int) else 0  # (a command's typer.Exit(code); commands return nothing)
 
 
+def _command_path(args: list[str]) -> str:
+    """``lidarkit`` and the (sub)command names that lead ``args`` ("lidarkit pf"), for an error that names the command."""
+    import typer
+
+    path, command = ["lidarkit"], typer.main.get_command(app)
+    for arg in args:
+        sub = (getattr(command, "commands", None) or {}).get(arg)
+        if sub is None:
+            break
+        path.append(arg)
+        command = sub
+    return " ".join(path)
+
+
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``lidarkit`` console script.
 
-    A LidarKitError becomes one line and exit code 1; SIGINT / SIGTERM stop the command through its cleanup
+    A LidarKitError or a MemoryError becomes one line and exit code 1; SIGINT / SIGTERM stop the command through its cleanup
     (temporary files and run folders removed, worker processes stopped) with one line and exit code 130 / 143.
     """
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
@@ -124,6 +138,11 @@ def main(argv: list[str] | None = None) -> None:
             raise _interrupt_behind(err) or err
     except LidarKitError as err:
         print_error(err)
+        code = 1
+    except MemoryError as err:  # (a 9,000,000-particle run under `ulimit -v` printed a 60-line traceback)
+        command = _command_path(sys.argv[1:] if argv is None else list(argv))
+        print_error(LidarKitError(f"out of memory: {err or 'an allocation failed'} (ask for less, or free memory)",
+                                  source=command))
         code = 1
     except OSError as err:
         if err.filename is None:  # not about a path the user gave: a defect, shown with its traceback

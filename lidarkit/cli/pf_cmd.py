@@ -103,7 +103,8 @@ def pf_command(
 ) -> None:
     """Localize with a particle filter on Freiburg landmark data and score it (MSE from step 10, APE, RPE), or run a study."""
     from lidarkit.io import open_dataset
-    from lidarkit.pf.protocol import check_filter_memory, data_files, kidnap_offset_record, run_protocol
+    from lidarkit.pf.protocol import (check_filter_memory, data_files, filter_bytes_per_particle, kidnap_offset_record,
+                                      most_readings_per_step, run_protocol)
     from lidarkit.pf.study import protocol_config, run_study
 
     from lidarkit.atomic import check_target
@@ -185,7 +186,9 @@ def pf_command(
     # the filter plus the particle clouds kept for the figures (the run's steps are known now: a GIF keeps every other
     # one); checked here to name the option, before the library checks it again naming the config field
     n_snapshots = len(_kept_steps(snapshot_steps, gif, len(data), out))
-    check_filter_memory(largest, n_snapshots, option)
+    per_particle = filter_bytes_per_particle(cfg, most_readings_per_step(data, "recorded" if recorded else visible),
+                                             len(data.landmarks.positions_xy))
+    check_filter_memory(largest, n_snapshots, option, per_particle)
     seed_list = list(range(seed, seed + seeds))
     if recorded:
         if len(counts) > 1 or seeds > 1:

@@ -45,8 +45,19 @@ KIDNAP_OFFSET = (0.0, -5.0, -np.pi / 2)  # 5 m and 90 deg; from step 150 on the 
 #: Largest kidnap jump (m per axis): 1000 km is past any landmark map; 1e30 m overflowed the filter's float32 squares
 #: (MSE 5.6e58, exit 0). The turn is at most a full circle (2 pi).
 MAX_KIDNAP_OFFSET_M = 1e6
-#: Memory a filter takes per particle (bytes): state, weights, resampling copies and per-reading likelihoods (~40 float64).
+#: Memory a point-particle filter takes per particle (bytes) when the readings per step are unknown (the bench validates
+#: its tasks before any data is loaded): state, weights, resampling copies and a likelihood workspace of ~16 readings.
 FILTER_BYTES_PER_PARTICLE = 320.0
+#: Point particles without their likelihood workspace (bytes a particle): tracemalloc peaks of 220 B (Freiburg, 7
+#: readings at most a step) and 1,325 B (100 landmarks all visible), 200,000 float32 particles, are ~124 B plus 3 x 4 B
+#: a workspace reading; 100 B of margin, so a workspace of 8 readings (the smallest) gives FILTER_BYTES_PER_PARTICLE.
+POINT_BASE_BYTES_PER_PARTICLE = 224.0
+#: Each reading of a step adds a (3, N) row to the likelihood workspace (per-particle nearest association: each landmark).
+WORKSPACE_ARRAYS_PER_READING = 3
+WORKSPACE_MIN_READINGS = 8  # the workspace is never allocated smaller (ParticleFilter.log_likelihood)
+#: A Kalman kernel per particle (bytes; float64 mean, covariance, Jacobians; it weighs the readings one at a time):
+#: measured ~520 B (tracemalloc peak, Freiburg, 20,000 kernels, every landmark visible).
+KALMAN_BYTES_PER_PARTICLE = 640.0
 #: Memory per particle of each particle cloud a run keeps for its figures (bytes: an (N, 3) float64 copy).
 CLOUD_BYTES_PER_PARTICLE = 24.0
 
@@ -283,6 +294,7 @@ def run_filter(
     # once here: the loop updates unchecked (-1 weighed the last landmark, 7 of 3 was a bare IndexError)
     lm_index = check_landmark_index(readings.landmark_index, len(pf.landmarks_xy), "readings", readings.offsets)
     T = len(odometry)
+    snapshot_steps = checked_snapshot_steps(snapshot_steps)
     odd = [s for s in snapshot_steps if not is_integer(s) or not 0 <= s <= T]
     if odd:  # (-1 and steps past the end were left out without a word)
         raise ConfigError(f"snapshot steps must be integers in 0..{T} (the run's steps), got {', '.join(map(str, odd))}",
@@ -394,21 +406,59 @@ def _sensor_source(data: Any) -> str:
     return str(getattr(data, "sensor_path", None) or getattr(data, "root", None) or "recorded data")
 
 
-def check_filter_memory(n_particles: int, n_kept_clouds: int, source: str) -> None:
+def most_readings_per_step(data: Any, visible: str = "recorded") -> int:
+    """The most readings any step of a run on ``data`` weighs: every landmark when all are visible, else the
+    recording's busiest step."""
+    if visible == "all":
+        return len(data.landmarks.positions_xy)
+    offsets = np.asarray(data.step_offsets)
+    return int(np.diff(offsets).max()) if len(offsets) > 1 else 0
+
+
+def filter_bytes_per_particle(cfg: PFConfig, most_readings: int | None = None, n_landmarks: int | None = None) -> float:
+    """Bytes a particle of a ``cfg`` filter takes; the likelihood workspace grows with ``most_readings`` (the most in
+    any step; None: unknown, the :data:`FILTER_BYTES_PER_PARTICLE` guess), or with ``n_landmarks`` for the per-particle
+    nearest association (a 100-landmark map took 1,325 B a particle, four times the old flat 320 B)."""
+    if cfg.kernel == "kalman":
+        return KALMAN_BYTES_PER_PARTICLE
+    if cfg.likelihood == "nearest":
+        rows = n_landmarks if cfg.nearest_association == "per_particle" else 1
+    else:
+        rows = most_readings
+    if rows is None:
+        return FILTER_BYTES_PER_PARTICLE
+    itemsize = np.dtype(cfg.dtype).itemsize
+    return POINT_BASE_BYTES_PER_PARTICLE + WORKSPACE_ARRAYS_PER_READING * itemsize * max(rows, WORKSPACE_MIN_READINGS)
+
+
+def check_filter_memory(n_particles: int, n_kept_clouds: int, source: str,
+                        bytes_per_particle: float = FILTER_BYTES_PER_PARTICLE) -> None:
     """ConfigError naming ``source`` when a filter of ``n_particles`` keeping ``n_kept_clouds`` particle clouds would not
     fit in the available memory: refused before the filter allocates (numpy's MemoryError, or swapping)."""
     from lidarkit.resources import check_memory
 
-    needed_bytes = n_particles * (FILTER_BYTES_PER_PARTICLE + CLOUD_BYTES_PER_PARTICLE * n_kept_clouds)
+    needed_bytes = n_particles * (bytes_per_particle + CLOUD_BYTES_PER_PARTICLE * n_kept_clouds)
     check_memory(needed_bytes, f"a filter of {n_particles:,} particles", source)
 
 
-def check_config_memory(cfg: PFConfig, n_kept_clouds: int = 0) -> None:
+def check_config_memory(cfg: PFConfig, n_kept_clouds: int = 0, data: Any = None, visible: str = "recorded") -> None:
     """:func:`check_filter_memory` for the largest particle count of ``cfg`` (a KLD run may grow to ``kld_max_n``), naming
     that setting: the library and the bench check a run as ``lidarkit pf`` does (3e9 particles reached numpy's
-    MemoryError)."""
+    MemoryError). With ``data`` (and ``visible``) the estimate counts its readings per step."""
     largest, source = (cfg.kld_max_n, "kld_max_n") if cfg.kld else (cfg.n_particles, "n_particles")
-    check_filter_memory(largest, n_kept_clouds, source)
+    per_particle = (filter_bytes_per_particle(cfg, most_readings_per_step(data, visible), len(data.landmarks.positions_xy))
+                    if data is not None else filter_bytes_per_particle(cfg))
+    check_filter_memory(largest, n_kept_clouds, source, per_particle)
+
+
+def checked_snapshot_steps(snapshot_steps: Any) -> tuple:
+    """``snapshot_steps`` as a tuple, read once (a generator counted for the memory check was empty for the filter)."""
+    if isinstance(snapshot_steps, (str, bytes)):
+        raise ConfigError(f"must be an iterable of step numbers, got {snapshot_steps!r:.60}", source="snapshot_steps")
+    try:
+        return tuple(snapshot_steps)
+    except TypeError:
+        raise ConfigError(f"must be an iterable of step numbers, got {snapshot_steps!r:.60}", source="snapshot_steps") from None
 
 
 def checked_seed(seed: Any) -> int:
@@ -465,7 +515,8 @@ def run_protocol(
     if len(data.odometry) < mse_start:  # (the whole filter ran first, then the MSE failed counting poses: "has 10" for 9 steps)
         raise DataError(f"{len(data.odometry)} steps: the protocol scores the position MSE from step {mse_start} on, so it needs "
                         f"at least {mse_start}", source=_sensor_source(data))
-    check_config_memory(cfg, len(tuple(snapshot_steps)))
+    snapshot_steps = checked_snapshot_steps(snapshot_steps)
+    check_config_memory(cfg, len(snapshot_steps), data, visible)
     data_seq, filter_seq = np.random.SeedSequence(seed).spawn(2)
     q_cov = resolve_q(cfg.q, cfg.q_as)
     sim = simulate(data, np.random.default_rng(data_seq), q_cov, visible=visible, kidnap_at_step=kidnap_at_step, kidnap_offset=kidnap_offset)
@@ -548,7 +599,8 @@ def run_recorded(
                         source=_sensor_source(data))
     seed = checked_seed(seed)
     cfg = _resolve_config(config, n_particles, config_overrides)
-    check_config_memory(cfg, len(tuple(snapshot_steps)))
+    snapshot_steps = checked_snapshot_steps(snapshot_steps)
+    check_config_memory(cfg, len(snapshot_steps), data)
     pf = make_filter(data.landmarks.positions_xy, cfg, np.random.default_rng(seed))
     odo = np.asarray(data.odometry, dtype=np.float64)
     readings = StepReadings(
@@ -703,17 +755,22 @@ def consistency_metrics(nis: np.ndarray, estimate: np.ndarray, dead_reckoning: n
 __all__ = [
     "CLOUD_BYTES_PER_PARTICLE",
     "FILTER_BYTES_PER_PARTICLE",
+    "KALMAN_BYTES_PER_PARTICLE",
     "MAX_KIDNAP_OFFSET_M",
     "MSE_START_STEP",
     "ODOMETRY_NOISE_STD",
+    "POINT_BASE_BYTES_PER_PARTICLE",
     "PFRunResult",
     "SimulatedData",
     "StepReadings",
     "check_config_memory",
     "check_filter_memory",
+    "checked_snapshot_steps",
     "consistency_metrics",
+    "filter_bytes_per_particle",
     "fit_q_recorded",
     "kidnap_offset_record",
+    "most_readings_per_step",
     "poses_to_trajectory",
     "run_filter",
     "run_protocol",

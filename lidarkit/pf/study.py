@@ -101,7 +101,7 @@ def run_study(data, particles: list[int], seeds: list[int], *, config: PFConfig 
               on_run: Callable[[], None] | None = None, **protocol_kwargs: Any) -> list[StudyRow]:
     """``run_protocol`` for every particle count x seed; one :class:`StudyRow` per count. ``on_run``: called after
     each run (progress)."""
-    from lidarkit.pf.protocol import run_protocol
+    from lidarkit.pf.protocol import check_config_memory, run_protocol
 
     if not particles or not seeds:
         raise ConfigError("a study needs at least one particle count and one seed", source="study")
@@ -112,6 +112,16 @@ def run_study(data, particles: list[int], seeds: list[int], *, config: PFConfig 
         if len(set(values)) != len(values):
             raise ConfigError(f"each value must be listed once, got {list(values)}", source=name)
     cfg = config if config is not None else PFConfig.make()
+    # every count checked before the first run (20,000,000 failed on the bound after every N=300 run had gone)
+    try:
+        configs = [cfg.replace(n_particles=int(n)) for n in particles]
+    except ConfigError as err:
+        raise ConfigError(err.reason, source="particles") from None
+    try:
+        check_config_memory(max(configs, key=lambda c: c.n_particles), data=data if hasattr(data, "step_offsets") else None,
+                            visible=protocol_kwargs.get("visible", "recorded"))
+    except ConfigError as err:
+        raise ConfigError(err.reason, source="particles") from None
     kidnap = protocol_kwargs.get("kidnap_at_step")
     rows = []
     for n in particles:
