@@ -76,7 +76,7 @@ def test_a_pinned_option_this_version_does_not_know_is_one_line_naming_the_valid
 
 @pytest.mark.parametrize("task, valid", [
     ("icp_pair", "pairs, ground_truth_file, max_pairs, init_noise_m, init_noise_deg"),
-    ("odometry", "frames"),
+    ("odometry", "frames, init"),
     ("pf", "visible, mse_start"),
     ("vo", "max_frames, align, smoothed"),
 ])

@@ -182,7 +182,7 @@ def test_the_vo_and_odometry_options_are_pinned_with_their_defaults():
 
     assert get_task("vo").resolved_options({}) == {"max_frames": None, "align": "auto", "smoothed": False}
     assert get_task("vo").resolved_options({"smoothed": True})["smoothed"] is True
-    assert get_task("odometry").resolved_options({}) == {"frames": None}
+    assert get_task("odometry").resolved_options({}) == {"frames": None, "init": "constant_velocity"}
 
 
 def test_a_ros2_bag_given_as_its_metadata_file_pins_the_whole_bag(tmp_path):

@@ -980,6 +980,12 @@ def check(
         # defaults: not a change)
         now = {k: v for k, v in run.protocol.items() if k not in compared_apart
                and (k in then or k not in ("simulation", "task_options"))}
+        added = sorted(set(now.get("task_options") or {}) - set(then.get("task_options") or {})) if isinstance(
+            then.get("task_options"), dict) and isinstance(now.get("task_options"), dict) else []
+        if added:  # an option the task gained since (odometry's init): the pinned job ran as its default does
+            then["task_options"] = {**then["task_options"], **{k: now["task_options"][k] for k in added}}
+            result.findings.append(Finding("note", name, f"the baseline pinned no task option {', '.join(added)} (recorded "
+                                                          "before the task had it): held under today's default"))
         if "frame_check" in now and "frame_check" not in then:  # (recorded before lidarkit pinned them: today's defaults)
             then["frame_check"] = frame_check_thresholds()
             result.findings.append(Finding("note", name, "the baseline pinned no frame-check thresholds (recorded before "

@@ -804,8 +804,11 @@ def _relations_note(sequence: ScanSequence, out_dir: str | os.PathLike | None,
     relations = os.path.normpath(relations)  # (a dataset given as carmen:../shared/... printed its path with .. left in)
     n_moved = int(getattr(sequence, "n_restamped", 0) or 0)
     if not n_moved:
-        poses = Path(out_dir) / "poses_tum.txt" if out_dir is not None else "POSES_TUM (the run's poses_tum.txt, --out)"
-        return f"none: no scores here; the dataset has relation ground truth: lidarkit eval --relations {relations} {poses}", None
+        if out_dir is None:  # (it named a poses_tum.txt this run never wrote)
+            return (f"none: no scores here; the dataset has relation ground truth: run with --out DIR (out_dir=DIR), then "
+                    f"lidarkit eval --relations {relations} DIR/poses_tum.txt"), None
+        return (f"none: no scores here; the dataset has relation ground truth: lidarkit eval --relations {relations} "
+                f"{Path(out_dir) / 'poses_tum.txt'}"), None
     from lidarkit.eval.relations import DEFAULT_MAX_TIME_DIFF_S, relation_error
 
     why = (f"the reader moved {n_moved} scan stamps and the relations' times with them (lidarkit eval --relations "

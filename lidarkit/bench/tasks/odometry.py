@@ -3,10 +3,13 @@
 Datasets: every kind that gives LiDAR scans (:func:`lidarkit.bench.datasets.scan_kinds`: the simulator and each
 ``lidarkit.io`` scan reader, bags and MCAP files included), opened as ``lidarkit.odometry.run`` opens ``KIND:PATH?opt=v``.
 Options: ``frames`` — a frame selection as ``lidarkit.odometry.run`` takes it (``"0:50"``, or a list of indices), of
-2 scans or more (one scan is the start and scores nothing).
+2 scans or more (one scan is the start and scores nothing); ``init`` — the run's initial guess (``"constant_velocity"``,
+or ``"odometry"`` on a dataset with its own odometry, e.g. a CARMEN log).
 Metrics come from the odometry run's own scoring (APE / RPE / KITTI drift through ``lidarkit.eval``); every
 label names its alignment (``info["metric_alignment"]`` too, for the report), and ``n_bad_frames`` counts the
-frames failing the independent per-frame check (:mod:`lidarkit.odometry.frame_check`).
+frames failing the independent per-frame check (:mod:`lidarkit.odometry.frame_check`). A dataset with relation ground
+truth and no poses (a CARMEN log's ``.relations``) is scored by the relations metric (:mod:`lidarkit.eval.relations`):
+``relation_trans_mean_m`` / ``relation_rot_mean_deg`` over the relations the selected frames cover.
 """
 
 from __future__ import annotations
@@ -21,7 +24,7 @@ from lidarkit.bench.jobs import Job
 from lidarkit.bench.tasks import Metric, Task, TaskOutput, import_module_for_task
 from lidarkit.bench.tasks._datasets import (check_reader_options, open_dataset_spec, options_model, require_kitti_data,
                                              scan_count_at_load, seeded_dataset)
-from lidarkit.errors import ConfigError, DataError
+from lidarkit.errors import ConfigError, DataError, EvaluationError
 
 MAX_SERIES_POINTS = 2000
 
@@ -50,6 +53,7 @@ def metric_alignment(frames: np.ndarray) -> dict[str, str]:
 class OdometryOptions(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
     frames: str | list[int] | None = None
+    init: str = "constant_velocity"
 
 
 def _get(d: dict[str, Any] | None, *keys: str) -> float | None:
@@ -108,6 +112,9 @@ class OdometryTask(Task):
         Metric("drift_translation_pct", "KITTI drift [%]"),
         Metric("drift_rotation_deg_per_100m", "KITTI rot. [deg/100m]"),
         Metric("final_error_m", "final error (unaligned) [m]"),
+        # (a log with relation ground truth only: the report's headline where no APE exists)
+        Metric("relation_trans_mean_m", "relations: mean trans. error [m]"),
+        Metric("relation_rot_mean_deg", "relations: mean rot. error [deg]"),
         Metric("n_bad_frames", "bad frames (independent check)"),
         Metric("hz", "frames/s", kind="speed", better="higher"),
     )
@@ -129,12 +136,17 @@ class OdometryTask(Task):
         return tuple(OPTIONAL_VARIANTS)
 
     def resolved_options(self, options: dict[str, Any]) -> dict[str, Any]:
-        """The options with their defaults (``frames``) written out, as a baseline pins them."""
+        """The options with their defaults (``frames``, ``init``) written out, as a baseline pins them."""
         self.validate_options(options)
         return OdometryOptions(**options).model_dump(mode="json")
 
     def validate_options(self, options: dict[str, Any]) -> None:
         options_model(OdometryOptions, options, "odometry")
+        from lidarkit.odometry.runner import INIT_GUESSES
+
+        if options.get("init", "constant_velocity") not in INIT_GUESSES:
+            raise ConfigError(f"init: unknown initial guess {options['init']!r}; known: {', '.join(INIT_GUESSES)}",
+                              source="options")
         if options.get("frames") is not None:  # its syntax, before anything runs (its range is the dataset's)
             from lidarkit.odometry.inputs import parse_frames
 
@@ -153,14 +165,56 @@ class OdometryTask(Task):
         check_reader_options(dataset)
         require_kitti_data(dataset, "scans")
         check_frames(options.get("frames"), dataset)
+        if options.get("init") == "odometry" and not kind_gives_odometry(dataset["kind"]):
+            raise ConfigError(f"init: 'odometry' needs a dataset with its own odometry (e.g. a CARMEN log); kind "
+                              f"{dataset['kind']!r} has none", source="options")
 
     def validate(self, method: str, params: dict[str, Any], dataset: dict[str, Any], options: dict[str, Any]) -> None:
         from lidarkit.registration import get_icp
 
-        get_icp(method, **params)
+        registration = get_icp(method, **params)
+        if (options.get("init") == "odometry" and getattr(registration, "stateful", False)
+                and not getattr(registration, "accepts_motion_guess", False)):  # (as run() refuses it, before any job)
+            raise ConfigError(f"init: 'odometry': {method} is stateful and keeps its own motion model (no motion_guess)",
+                              source="options")
 
     def run(self, job: Job) -> TaskOutput:
         return run_odometry_job(job)[1]
+
+
+def kind_gives_odometry(kind: str) -> bool:
+    """False for a built-in dataset kind whose reader has no ``odometry`` (``init: odometry`` refused at suite load, as
+    the CLI refuses it); True otherwise (a registered reader is left to its jobs' runs)."""
+    from lidarkit.io import get_reader
+
+    if kind == "sim_lidar":
+        from lidarkit.sim.lidar import SimulatedLidarSequence
+
+        return hasattr(SimulatedLidarSequence, "odometry")
+    reader = get_reader(kind)
+    built_in = isinstance(reader, type) and reader.__module__.startswith("lidarkit.")
+    return not built_in or hasattr(reader, "odometry")
+
+
+def relation_scores(result: Any, sequence: Any) -> tuple[dict[str, Any] | None, str | None]:
+    """``(relation scores, None)`` of a run without ground truth over a dataset with relations (the run's own when it
+    scored them, else :func:`lidarkit.eval.relations.relation_error` of its trajectory, as ``lidarkit eval --relations``
+    scores its poses_tum.txt: only the relations the selected frames cover), ``(None, why)`` when none is covered, or
+    ``(None, None)`` without relations."""
+    if result.ground_truth is not None:
+        return None, None
+    scored = (result.metrics or {}).get("relations")
+    if isinstance(scored, dict):
+        return scored, None
+    relations = getattr(sequence, "relations", None)
+    if relations is None:
+        return None, None
+    from lidarkit.eval.relations import relation_error
+
+    try:
+        return relation_error(result.trajectory, relations).to_dict(), None
+    except EvaluationError as err:
+        return None, f"relation ground truth, none scored over these frames: {err.reason}"
 
 
 #: why a run over fewer scans is refused (its one pose is the start: the job ran, "ok", and scored nothing)
@@ -228,9 +282,13 @@ def run_odometry_job(job: Job) -> tuple[Any, TaskOutput]:
     problem = too_few_scans(options.frames, len(sequence))  # (a bag's length is known once opened, not at suite load)
     if problem is not None:
         raise DataError(problem, source=job.dataset_name)
-    result = run(sequence, job.method, params=dict(job.params), frames=options.frames)
+    result = run(sequence, job.method, params=dict(job.params), frames=options.frames, init=options.init)
     m = result.metrics
     metrics = scalar_metrics(result)
+    relations, unscored = relation_scores(result, sequence)
+    if relations is not None:
+        metrics["relation_trans_mean_m"] = float(relations["translation_abs_m"]["mean"])
+        metrics["relation_rot_mean_deg"] = float(relations["rotation_abs_deg"]["mean"])
     est = result.trajectory
     times = est.timestamps_s if est.timestamps_s is not None else np.arange(len(est)) * 0.1
     ref_xyz = None if result.ground_truth is None else result.ground_truth.positions_xyz
@@ -238,5 +296,10 @@ def run_odometry_job(job: Job) -> tuple[Any, TaskOutput]:
     segments = drift_segments(result)
     if segments is not None:
         series["drift_segments"] = segments
+    if relations is not None:  # (the run's note pointed at an eval of a poses_tum.txt a job never writes)
+        m = {**m, "relations": relations, "ground_truth_note": f"relations: {relations['n_used']} of "
+             f"{relations['n_relations']} scored (metrics relation_trans_mean_m, relation_rot_mean_deg)"}
+    elif unscored is not None:
+        m = {**m, "ground_truth_note": unscored}
     info = {"odometry_metrics": m, "config": result.config, "metric_alignment": metric_alignment(np.asarray(result.frames))}
     return result, TaskOutput(metrics=metrics, series=series, info=info)
