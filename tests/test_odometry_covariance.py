@@ -255,3 +255,15 @@ def test_frames_across_a_gap_are_those_beyond_four_times_the_runs_regular_step_o
     np.testing.assert_allclose(cov[2] - cov[1], _prior_step(poses, 2, 1.0, 0.1), rtol=1e-6, atol=1e-12)
     with pytest.raises(DataError, match="failed_fitness"):
         motion_prior_frames(no_flags, failed[:-1], np.ones(6))
+
+
+def test_the_cli_table_lists_the_frames_with_the_motion_prior_alone(tmp_path, capsys):
+    """metrics.json named them; the terminal table did not, though they set the run's end 1-sigma."""
+    from conftest import cli_exit_code
+
+    folder = _kitti_folder_with_dropped_scans(tmp_path / "kg")
+    assert cli_exit_code(["odometry", f"kitti:{folder}?poses_file=poses_semantickitti.txt", "--method", "kiss",
+                          "--pose-covariance", "--frames", "8:14", "--no-progress"]) == 0
+    out = " ".join(capsys.readouterr().out.split())
+    assert "frames with the motion prior alone" in out
+    assert "2 (2 failed the fitness check, 2 across a gap): frames 10, 12" in out

@@ -161,6 +161,13 @@ def odometry(
                               + (f"rebuilds {100 * min(cov['end_error_bias_share'], 1.0):.0f} % of the end error as a world-frame twist "
                                  f"({cov['end_error_m']:.3f} m; the final error is the distance of the end positions)" if z > threshold
                                  else "none shows (noise)"))
+        prior = cov.get("motion_prior_only") or {}
+        if prior.get("n_frames"):  # (their covariance is the motion prior's: the run's end sigma is theirs)
+            reasons = ", ".join(f"{n} {why}" for why, n in prior.get("by_reason", {}).items() if n)
+            shown = ", ".join(str(f) for f in prior.get("frames", [])[:10])
+            more = prior["n_frames"] - min(len(prior.get("frames", [])), 10)
+            table.add_row("frames with the motion prior alone", f"{prior['n_frames']} ({reasons}): frames {shown}"
+                          + (f" and {more} more" if more > 0 else ""))
         if cov.get("distortion_floor"):
             table.add_row("covariance distortion floor", cov["distortion_floor"])
     for message in m.get("warnings") or []:  # also logged (stderr) by the runner
