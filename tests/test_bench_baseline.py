@@ -698,3 +698,17 @@ def test_several_pinned_jobs_without_a_choice_name_the_keyword_to_pass(two_walks
     with pytest.raises(DataError, match="0 pinned jobs match method='nosuch'; pinned: "):  # (nothing pinned of it)
         seeds.job("nosuch")
     assert seeds.job("random_walk", seed=1)["spec"]["seed"] == 1
+
+
+def test_record_says_the_trajectory_band_of_a_job_without_ground_truth(tmp_path, stretch_registered, capsys):
+    """record's summary printed "n_bad_frames 0 ± 1e-09" alone for such a job, though its check holds the trajectory."""
+    scans = _scans_without_ground_truth(tmp_path)
+    (tmp_path / "gen.yaml").write_text(textwrap.dedent(f"""
+        name: no-truth
+        experiments:
+          - {{name: gen, task: odometry, dataset: {{kind: generic, path: "{scans}", name: gen}}, methods: [test_stretch]}}
+    """))
+    code, out, _ = run_cli(["baseline", "record", str(tmp_path / "gen.yaml"), "--out", str(tmp_path / "b"), "--repeats", "2",
+                            "--no-progress"], capsys)
+    assert code == 0
+    assert "; trajectory within 1e-06 m, 0.0001 deg of the pinned one" in " ".join(out.split())

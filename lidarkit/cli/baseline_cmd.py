@@ -49,6 +49,9 @@ def record_command(
     console = stdout()
     for job in baseline.jobs:
         bands = ", ".join(f"{m} {job['metrics'][m]:.4g} ± {job['bands'][m]:.2g}" for m in job["checked"])
+        band = job.get("trajectory_band")
+        if band:  # (a job without ground truth is held on its trajectory: the counts alone said little)
+            bands += f"; trajectory within {band['position_m']:.2g} m, {band['rotation_deg']:.2g} deg of the pinned one"
         console.print(f"{job_name(job, baseline.jobs)}: {bands}", soft_wrap=True, markup=False)
     console.print(f"baseline: {baseline.path} ({len(baseline.jobs)} jobs)", soft_wrap=True)
 
