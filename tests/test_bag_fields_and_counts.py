@@ -171,3 +171,26 @@ def test_header_stamps_all_zero_are_said_to_be_unset(tmp_path):
         run(str(bag), "vanilla")
     one = _write_bag(tmp_path / "one.bag", fields, [rec], [0.0])  # (one scan: nothing to order, its 0 is read)
     assert open_dataset("rosbag", one).timestamps_s.tolist() == [0.0]
+
+
+def test_the_padding_field_named_as_the_time_field_is_one_line(tmp_path):
+    """time_field=_ on a cloud with PCL's padding: numpy's "no field of name _" traceback (padding is never laid out)."""
+    xyz, times = _ring()
+    rec = np.zeros(N_POINTS, dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("pad", "<u4"), ("t", "<u4")])
+    rec["x"], rec["y"], rec["z"] = xyz.T
+    rec["t"] = np.round(times * 1e9)
+    fields = [("x", 0, F32, 1), ("y", 4, F32, 1), ("z", 8, F32, 1), ("_", 12, U32, 1), ("t", 16, U32, 1)]
+    bag = _write_bag(tmp_path / "pad1.bag", fields, [rec], [5.0])
+    with pytest.raises(DataError, match=r"'_' is padding \(PCL's filler bytes\), not a per-point time field"):
+        open_dataset("rosbag", bag, time_field="_").read_scan(0)
+
+
+def test_a_bare_metadata_yaml_is_detected_as_the_bag_and_named_by_its_folder(ros2_bag, monkeypatch):
+    """`lidarkit odometry BAG/metadata.yaml` suggested carmen:; opened from inside the folder the run was named
+    "rosbag:/points" (the folder "." has no name)."""
+    from lidarkit.io import detect_kind
+
+    assert detect_kind(ros2_bag / "metadata.yaml") == "rosbag"
+    monkeypatch.chdir(ros2_bag)
+    assert open_dataset("rosbag", "metadata.yaml").name == open_dataset("rosbag", ros2_bag).name
+    assert open_dataset("rosbag", "metadata.yaml").name != "rosbag:/points"

@@ -266,4 +266,4 @@ def test_the_cli_table_lists_the_frames_with_the_motion_prior_alone(tmp_path, ca
                           "--pose-covariance", "--frames", "8:14", "--no-progress"]) == 0
     out = " ".join(capsys.readouterr().out.split())
     assert "frames with the motion prior alone" in out
-    assert "2 (2 failed the fitness check, 2 across a gap): frames 10, 12" in out
+    assert "2 (2 failed the fitness check, 2 across a gap): dataset indices 10, 12" in out

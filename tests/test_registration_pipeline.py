@@ -271,6 +271,7 @@ def test_the_cli_refuses_a_range_crop_vanilla_seq_does_not_apply(tmp_path, capsy
     error = capsys.readouterr().err.strip().splitlines()
     assert code == 1 and len(error) == 1 and not out.exists()
     assert "min_range_m is not read by this composition: no component takes it (range_crop does)" in error[0]
+    assert "valid parameters" not in error[0]  # (the bare pipeline's defaults, min_range_m among them, were listed)
 
 
 @pytest.mark.parametrize("kernel", ["huber", "cauchy", "geman_mcclure", "tukey", {"name": "geman_mcclure", "scale_m": "kiss"}])

@@ -166,7 +166,7 @@ def odometry(
             reasons = ", ".join(f"{n} {why}" for why, n in prior.get("by_reason", {}).items() if n)
             shown = ", ".join(str(f) for f in prior.get("frames", [])[:10])
             more = prior["n_frames"] - min(len(prior.get("frames", [])), 10)
-            table.add_row("frames with the motion prior alone", f"{prior['n_frames']} ({reasons}): frames {shown}"
+            table.add_row("frames with the motion prior alone", f"{prior['n_frames']} ({reasons}): dataset indices {shown}"
                           + (f" and {more} more" if more > 0 else ""))
         if cov.get("distortion_floor"):
             table.add_row("covariance distortion floor", cov["distortion_floor"])

@@ -84,6 +84,8 @@ def detect_kind(path: str | os.PathLike) -> str | None:
     if p.is_file() or not p.exists():
         if ".clf" in [s.lower() for s in p.suffixes[-2:]]:
             return "carmen"
+        if p.name == "metadata.yaml" and p.is_file():  # a ROS 2 bag's metadata (the reader opens its folder)
+            return "rosbag"
         return DETECTED_SUFFIXES.get(suffix)
     bags = sorted(b.name for b in p.glob("*.bag"))
     bag = "metadata.yaml" if (p / "metadata.yaml").is_file() else bags[0] if bags else None

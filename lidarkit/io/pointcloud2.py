@@ -314,6 +314,9 @@ def _readable_time_fields(names: list[str], unreadable: dict[str, str], wanted: 
     not (a ``t`` of count 2 may be a 64-bit time in two halves: reading either as the time would deskew by nonsense)."""
     if wanted is None or wanted in ("", "none"):
         return []
+    if wanted == PADDING_FIELD:  # (left out of every layout: reading it was a numpy traceback)
+        raise DataError(f"{PADDING_FIELD!r} is padding (PCL's filler bytes), not a per-point time field (fields: "
+                        f"{', '.join(names)})", source=source, location=location)
     if wanted != "auto" and wanted not in names:
         raise DataError(f"no per-point time field {wanted!r} (fields: {', '.join(names)})", source=source, location=location)
     present = [wanted] if wanted != "auto" else [f for f in TIME_FIELDS if f in names]

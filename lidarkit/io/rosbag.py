@@ -638,7 +638,7 @@ class RosbagScans(_BagScans):
                  time_field: str | None = "auto"):
         require_modules({"rosbags": ROS_EXTRA}, "rosbag")
         if Path(path).name == "metadata.yaml" and Path(path).is_file():  # (a path copied from a file browser)
-            path = Path(path).parent  # a ROS 2 bag is its folder
+            path = Path(path).absolute().parent  # a ROS 2 bag is its folder (named: "." named the run "rosbag:/points")
         super().__init__(path, topic, ground_truth_topic, time_field)
 
     @property

@@ -30,7 +30,7 @@ import numpy as np
 from pydantic import Field, model_validator
 from scipy.spatial import cKDTree
 
-from lidarkit.errors import RegistrationError
+from lidarkit.errors import ConfigError, RegistrationError
 from lidarkit.geometry import as_points, orthonormalize_se3, se3_fraction, se3_inverse, transform_points
 from lidarkit.params import changed_fields
 from lidarkit.registration.assessment import assess_alignment
@@ -129,8 +129,8 @@ class PipelineConfig(RegistrationConfig):
         unscaled = unscaled_kernel(components)
         if unscaled:  # (huber, tukey, ... gave kernel=none's pose bit for bit, recorded as applied)
             problems.append(unscaled)
-        if problems:
-            raise ValueError("; ".join(problems))
+        if problems:  # (as a ConfigError of its own: get_icp's wrapping listed the bare pipeline's defaults as "valid")
+            raise ConfigError("; ".join(problems), source="method 'pipeline'")
         return self
 
     @property
