@@ -55,3 +55,19 @@ def validation_problems(err: Any, unnamed: str = "?") -> str:
         return f"{where}: {message}" if where else message
 
     return "; ".join(line(e) for e in err.errors())
+
+
+def index_runs(indices: Any, max_runs: int | None = None) -> str:
+    """``0-7`` / ``0, 2, 4-11``: sorted indices (frames, scans) as runs of consecutive ones, for a message; the first
+    ``max_runs`` runs only, with ``, ... (N frames)`` after them, when given; ``""`` for none."""
+    values = [int(v) for v in indices]
+    runs: list[list[int]] = []
+    for value in values:
+        if runs and value == runs[-1][1] + 1:
+            runs[-1][1] = value
+        else:
+            runs.append([value, value])
+    shown = [f"{a}-{b}" if b > a else str(a) for a, b in runs]
+    if max_runs is None or len(shown) <= max_runs:
+        return ", ".join(shown)
+    return ", ".join(shown[:max_runs]) + f", ... ({len(values)} frames)"

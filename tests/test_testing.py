@@ -221,10 +221,10 @@ def test_frames_of_a_longer_drive_name_the_drive_and_frames_read_as_ranges(tmp_p
     with pytest.raises(EvaluationError, match=r"^assert_no_worse_than: the result's dataset differs from the pinned job "
                                               r"'kiss': n_frames 10 \(pinned 8\)$"):
         assert_no_worse_than(longer, baseline, method="kiss", metric="ape_rmse_m", tolerance=10.0)
-    from lidarkit.testing.assertions import _frame_ranges
+    from lidarkit.errors import index_runs
 
-    assert _frame_ranges(list(range(0, 40, 2))) == "0, 2, 4, 6, 8, ... (20 frames)"
-    assert _frame_ranges([3, 4, 5, 9]) == "3-5, 9"
+    assert index_runs(list(range(0, 40, 2)), max_runs=5) == "0, 2, 4, 6, 8, ... (20 frames)"
+    assert index_runs([3, 4, 5, 9], max_runs=5) == "3-5, 9"
 
 
 def test_pytest_plugin_fixture_in_a_user_test_run(tiny_baseline, tmp_path):

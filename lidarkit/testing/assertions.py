@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from lidarkit.errors import ConfigError, EvaluationError, LidarKitError
+from lidarkit.errors import ConfigError, EvaluationError, LidarKitError, index_runs
 from lidarkit.geometry import rotation_angle_deg
 from lidarkit.params import is_real_number
 from lidarkit.trajectory import Trajectory
@@ -351,26 +351,13 @@ def _check_same_frames(frames: Any, spec: Mapping[str, Any], n_total: int | None
     except LidarKitError:
         return
     if ran != expected:
-        shown, pinned_shown = _frame_ranges(ran), _frame_ranges(expected)
+        shown, pinned_shown = (index_runs(frames, max_runs=5) or "none" for frames in (ran, expected))
         detail = f"{shown} (pinned {selection or 'all'}: {pinned_shown})"
         if "..." in shown + pinned_shown:  # (the runs shown may read alike: name the first frame apart)
             first = next((k for k, (a, b) in enumerate(zip(ran, expected)) if a != b), min(len(ran), len(expected)))
             at = (lambda f: str(f[first]) if first < len(f) else "none")
             detail += f", first apart at selected frame {first}: {at(ran)} (pinned {at(expected)})"
         refuse("frames", detail)
-
-
-def _frame_ranges(frames: list[int], max_runs: int = 5) -> str:
-    """``0-7`` / ``0, 2, 4-11``: frame indices as runs of consecutive ones, the first ``max_runs`` of them (the first
-    six indices of two selections that differ further on read alike)."""
-    frames_arr = np.asarray(frames, dtype=np.int64)
-    if not len(frames_arr):
-        return "none"
-    starts = np.flatnonzero(np.diff(frames_arr, prepend=frames_arr[:1] - 2) != 1)
-    ends = np.append(starts[1:], len(frames_arr)) - 1
-    runs = [f"{frames_arr[a]}-{frames_arr[b]}" if b > a else str(frames_arr[a]) for a, b in zip(starts, ends)]
-    more = f", ... ({len(frames_arr)} frames)" if len(runs) > max_runs else ""
-    return ", ".join(runs[:max_runs]) + more
 
 
 def _pinned_simulation(job: Mapping[str, Any]) -> dict[str, Any] | None:

@@ -24,7 +24,7 @@ from typing import Any, NamedTuple
 import cv2
 import numpy as np
 
-from lidarkit.errors import ConfigError, DataError
+from lidarkit.errors import ConfigError, DataError, index_runs
 from lidarkit.geometry import is_rotation, rotation_angle_deg, se3_fraction, se3_inverse, skew
 from lidarkit.trajectory import Trajectory
 from lidarkit.vo.config import FeatureConfig, GeometryConfig, VOConfig
@@ -643,17 +643,8 @@ def _frames_by_reason(loaded: dict[int, tuple[np.ndarray | None, str]]) -> str:
     frames_of: dict[str, list[int]] = {}
     for index, (_, reason) in sorted(loaded.items()):
         frames_of.setdefault(reason, []).append(index)
-    parts = []
-    for reason, frames in frames_of.items():
-        runs: list[list[int]] = []
-        for index in frames:
-            if runs and index == runs[-1][-1] + 1:
-                runs[-1].append(index)
-            else:
-                runs.append([index])
-        listed = ", ".join(f"{run[0]}-{run[-1]}" if len(run) > 1 else str(run[0]) for run in runs)
-        parts.append(f"{'frames' if len(frames) > 1 else 'frame'} {listed}: {reason}")
-    return "; ".join(parts)
+    return "; ".join(f"{'frames' if len(frames) > 1 else 'frame'} {index_runs(frames)}: {reason}"
+                     for reason, frames in frames_of.items())
 
 
 def _per_frame_motion(T_ref_cur: np.ndarray, gap: int) -> np.ndarray:

@@ -30,7 +30,7 @@ from lidarkit.bench.tasks import Metric, Task, TaskOutput, import_module_for_tas
 from lidarkit.bench.tasks._datasets import (OPENED_AT_LOAD, check_reader_options, open_dataset_spec, options_model,
                                              scan_count_at_load, seeded_dataset)
 from lidarkit.bench.datasets import dataset_path, scan_kinds
-from lidarkit.errors import ConfigError, DataError
+from lidarkit.errors import ConfigError, DataError, index_runs
 
 log = logging.getLogger(__name__)
 
@@ -163,19 +163,8 @@ def _pairs(options: IcpPairOptions, dataset: Any) -> list[tuple[int, int]]:
              for k in range(len(frames) - 1) if frames[k + 1] == frames[k] + 1][:options.max_pairs]
     if len(pairs) < options.max_pairs:
         log.warning("%s: max_pairs %d, but it has %d pair(s) of consecutive frames (frames %s)",
-                    getattr(dataset, "name", "dataset"), options.max_pairs, len(pairs), _ranges(frames))
+                    getattr(dataset, "name", "dataset"), options.max_pairs, len(pairs), index_runs(frames))
     return pairs
-
-
-def _ranges(frames: list[int]) -> str:
-    """``94-95, 198-199``: sorted frame numbers as runs of consecutive ones."""
-    runs: list[list[int]] = []
-    for f in frames:
-        if runs and f == runs[-1][-1] + 1:
-            runs[-1].append(f)
-        else:
-            runs.append([f])
-    return ", ".join(f"{r[0]}-{r[-1]}" if len(r) > 1 else str(r[0]) for r in runs)
 
 
 def check_pairs(options: IcpPairOptions, spec: dict[str, Any]) -> None:
