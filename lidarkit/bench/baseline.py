@@ -165,11 +165,10 @@ def _read_path(spec: Mapping[str, Any]) -> Path:
     """The path a dataset spec's reader opens: its path, a ROS 2 bag's ``metadata.yaml`` being its folder (hashed as
     that one file, changed scans read as a regression of the method)."""
     from lidarkit.bench.datasets import dataset_path
+    from lidarkit.io.rosbag import bag_path
 
     path = Path(dataset_path(dict(spec)))
-    if spec.get("kind") in BAG_KINDS and path.name == "metadata.yaml" and path.is_file():
-        return path.parent
-    return path
+    return bag_path(path) if spec.get("kind") in BAG_KINDS else path
 
 
 def dataset_folder(spec: Mapping[str, Any]) -> Path:

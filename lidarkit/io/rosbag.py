@@ -623,6 +623,13 @@ def _pose_matrix(xyz: list[float], quat_xyzw: list[float]) -> np.ndarray:
     return T
 
 
+def bag_path(path: str | os.PathLike) -> Path:
+    """The path a bag is read from: a ROS 2 bag's ``metadata.yaml`` (a path copied from a file browser) stands for the
+    bag, its folder, taken absolute (from inside the folder, "." named the run "rosbag:/points"); other paths as given."""
+    given = Path(path)
+    return given.absolute().parent if given.name == "metadata.yaml" and given.is_file() else given
+
+
 class RosbagScans(_BagScans):
     """ROS 1 ``.bag`` (or a folder of split bags) or ROS 2 bag folder (or its ``metadata.yaml``), via kiss-icp's
     ``RosbagDataset``.
@@ -637,9 +644,7 @@ class RosbagScans(_BagScans):
     def __init__(self, path: str | os.PathLike, topic: str | None = None, ground_truth_topic: str | None = None,
                  time_field: str | None = "auto"):
         require_modules({"rosbags": ROS_EXTRA}, "rosbag")
-        if Path(path).name == "metadata.yaml" and Path(path).is_file():  # (a path copied from a file browser)
-            path = Path(path).absolute().parent  # a ROS 2 bag is its folder (named: "." named the run "rosbag:/points")
-        super().__init__(path, topic, ground_truth_topic, time_field)
+        super().__init__(bag_path(path), topic, ground_truth_topic, time_field)
 
     @property
     def _counted_by(self) -> str:
@@ -841,4 +846,4 @@ def _ros2_type_name(name: str) -> str:
     return f"{package}/msg/{message}" if package and "/" not in package else name
 
 
-__all__ = ["McapScans", "RosbagScans", "guarded_loader", "interpolation_error_m", "require_modules", "sweep_instant_topic"]
+__all__ = ["McapScans", "RosbagScans", "bag_path", "guarded_loader", "interpolation_error_m", "require_modules", "sweep_instant_topic"]
