@@ -712,3 +712,23 @@ def test_record_says_the_trajectory_band_of_a_job_without_ground_truth(tmp_path,
                             "--no-progress"], capsys)
     assert code == 0
     assert "; trajectory within 1e-06 m, 0.0001 deg of the pinned one" in " ".join(out.split())
+
+
+def test_tolerance_sets_the_trajectory_band_of_a_job_without_ground_truth(tmp_path, stretch_registered, monkeypatch):
+    """``-t METRIC=BAND`` loosened accuracy metrics only: the trajectory band of a job without ground truth could not be
+    widened (``trajectory_m`` was refused as a metric no job checks). ``trajectory_m`` / ``trajectory_deg`` set it."""
+    scans = _scans_without_ground_truth(tmp_path)
+    (tmp_path / "gen.yaml").write_text(textwrap.dedent(f"""
+        name: no-truth
+        experiments:
+          - {{name: gen, task: odometry, dataset: {{kind: generic, path: "{scans}", name: gen}}, methods: [test_stretch]}}
+    """))
+    baseline = record(tmp_path / "gen.yaml", tmp_path / "baseline", repeats=2)
+    monkeypatch.setattr(StretchedMore, "name", "test_stretch")  # translations 0.75 % longer: > 1 mm off, < 1 m
+    monkeypatch.setitem(registry_module._VARIANTS, "test_stretch", StretchedMore)
+    assert not check(baseline.path).passed
+    assert check(baseline.path, tolerances=["trajectory_m=1"]).passed  # (translations only: rotations within 1e-4 deg)
+    (line,) = [line for line in check(baseline.path, tolerances=["trajectory_deg=1"]).lines() if line.startswith("regression")]
+    assert line.endswith("band 1e-06 m, 1 deg)"), line
+    with pytest.raises(ConfigError, match="checked metrics: n_bad_frames, trajectory_m, trajectory_deg"):
+        check(baseline.path, tolerances=["trajectory_cm=1"])

@@ -917,6 +917,8 @@ def check(
     baseline = load_baseline(path)
     bands_override = parse_tolerances(tolerances)
     checked = sorted({m for job in baseline.jobs for m in job["checked"]})
+    if any("trajectory_band" in job for job in baseline.jobs):  # (jobs without ground truth: their trajectory's band)
+        checked += list(TRAJECTORY_TOLERANCES)
     unknown = sorted(set(bands_override) - set(checked))
     if unknown:
         raise ConfigError(f"no pinned job checks {', '.join(unknown)}; checked metrics: {', '.join(checked)}", source="--tolerance")
@@ -1015,14 +1017,20 @@ def check(
             worse = (delta < 0) if higher_is_better(metric, pinned["spec"]["task"]) else (delta > 0)
             text = f"{metric} = {float(value):.6g}, baseline {ref:.6g} ± {band:.3g} (change {delta:+.3g})"
             result.findings.append(Finding("regression" if worse else "improved", name, text))
-        result.findings += _trajectory_findings(baseline, pinned, run, name)
+        result.findings += _trajectory_findings(baseline, pinned, run, name, bands_override)
     return result
 
 
-def _trajectory_findings(baseline: Baseline, pinned: dict[str, Any], run: JobRun, name: str) -> list[Finding]:
+#: ``--tolerance`` names of a trajectory band (a job without ground truth): its position (m) and rotation (deg) parts
+TRAJECTORY_TOLERANCES = {"trajectory_m": "position_m", "trajectory_deg": "rotation_deg"}
+
+
+def _trajectory_findings(
+    baseline: Baseline, pinned: dict[str, Any], run: JobRun, name: str, bands_override: Mapping[str, float] | None = None,
+) -> list[Finding]:
     """A job without an accuracy metric held on its trajectory: ``regression`` when the rerun's differs from the pinned
-    one by more than the recorded band (its bad-frame count alone let a method regression pass); a baseline recorded
-    before lidarkit pinned that band is said in a note."""
+    one by more than the recorded band, or the band ``--tolerance trajectory_m=/trajectory_deg=`` give (its bad-frame
+    count alone let a method regression pass); a baseline recorded before lidarkit pinned that band is said in a note."""
     from lidarkit.trajectory import Trajectory
 
     if run.trajectory is None or holds_accuracy(pinned["checked"]):
@@ -1040,6 +1048,8 @@ def _trajectory_findings(baseline: Baseline, pinned: dict[str, Any], run: JobRun
     if len(then) != len(run.trajectory):
         return [Finding("regression", name, f"trajectory has {len(run.trajectory)} poses, the pinned one {len(then)}")]
     d_m, d_deg = trajectory_difference(run.trajectory, then)
+    override = bands_override or {}
+    band = {**band, **{key: override[option] for option, key in TRAJECTORY_TOLERANCES.items() if option in override}}
     band_m, band_deg = float(band["position_m"]), float(band["rotation_deg"])
     if d_m.max() <= band_m and d_deg.max() <= band_deg:
         return []

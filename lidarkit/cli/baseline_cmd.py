@@ -60,7 +60,8 @@ def record_command(
 def check_command(
     baseline_dir: Path = typer.Argument(..., help="Folder written by `lidarkit baseline record`."),
     tolerance: Optional[list[str]] = typer.Option(
-        None, "--tolerance", "-t", help="METRIC=BAND: absolute band of a metric instead of the recorded one (repeatable)."),
+        None, "--tolerance", "-t", help="METRIC=BAND: absolute band of a metric instead of the recorded one (repeatable; trajectory_m, trajectory_deg: "
+             "the trajectory band of jobs without ground truth)."),
     progress: bool = typer.Option(True, "--progress/--no-progress", help="A line per job checked on stderr."),
 ) -> None:
     """Re-run the pinned jobs; exit 1 on a regression, a changed protocol or a failed job (each reported distinctly)."""
