@@ -987,3 +987,19 @@ def test_nanosecond_time_stamps_are_read_as_nanoseconds_and_said(tmp_path, capsy
                                1403636579.763555584 + 0.1 * np.arange(8), rtol=0, atol=2e-6)
     said = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
     assert f"{stamps}: time stamps above 1e+15 read as nanoseconds (the first is 1403636579.763556 s)" in said
+
+
+def test_images_read_in_memory_keep_an_unreadable_frames_reason(tmp_path):
+    """A bench vo job reads its images first (images_in_memory): an unreadable file became None and its frame was
+    rejected as "unreadable image (missing)" though the file was there; now the reader's reason is kept."""
+    from lidarkit.vo import images_in_memory, preset, run_vo
+
+    seq = tmp_path / "06"
+    shutil.copytree(sample_path("kitti_vo", "06"), seq)
+    (seq / "image_0" / "000003.png").write_bytes(b"\x89PNG\r\n\x1a\n truncated")
+    sequence = open_vo_input(str(seq)).images
+    images = images_in_memory(sequence)
+    assert isinstance(images[3], DataError) and all(isinstance(image, np.ndarray) for k, image in enumerate(images) if k != 3)
+    result = run_vo(images, sequence.K, preset("lidarkit", **{"scale.mode": "gt"}), ground_truth=sequence.ground_truth)
+    reason = result.diagnostics[3].reason
+    assert not result.diagnostics[3].accepted and reason.startswith("unreadable image: ") and "000003.png" in reason, reason

@@ -387,6 +387,8 @@ class MonoVO:
             image = read(index)
         except DataError as err:
             return None, f"unreadable image: {err}"
+        if isinstance(image, DataError):  # (images_in_memory's unreadable image: its reason, not "missing")
+            return None, f"unreadable image: {image}"
         if image is None:
             return None, "unreadable image (missing)"
         image = np.asarray(image)
@@ -665,14 +667,15 @@ def run_vo(images: Any, K: np.ndarray, config: VOConfig | None = None, ground_tr
     return MonoVO(config, K, ground_truth).run(images, **kwargs)
 
 
-def images_in_memory(sequence: Any) -> list[np.ndarray | None]:
-    """Read every image of an ``ImageSequence`` (None for unreadable ones) - for timing without disk I/O."""
-    out: list[np.ndarray | None] = []
+def images_in_memory(sequence: Any) -> list[np.ndarray | DataError]:
+    """Read every image of an ``ImageSequence`` - for timing without disk I/O; an unreadable one is kept as its
+    DataError, which :class:`MonoVO` rejects with that reason (None said "missing" for a file that was there)."""
+    out: list[np.ndarray | DataError] = []
     for i in range(len(sequence)):
         try:
             out.append(sequence.read_image(i))
-        except DataError:
-            out.append(None)
+        except DataError as err:
+            out.append(err)
     return out
 
 
