@@ -57,6 +57,18 @@ def validation_problems(err: Any, unnamed: str = "?") -> str:
     return "; ".join(line(e) for e in err.errors())
 
 
+def not_increasing(later: float, earlier: float, of: str = "") -> str:
+    """Why a time stamp ``later`` may not follow ``earlier`` (s) of ``of`` (e.g. ``"frame 2"``), both to the microsecond
+    (``.9g`` printed every ROS epoch stamp as ``1.7e+09``; float64 holds an epoch stamp to ~0.2 us), saying when they
+    are equal (a message logged twice, unset stamps)."""
+    def text(t: float) -> str:
+        return f"{t:.6f}".rstrip("0").rstrip(".")
+
+    if later == earlier:
+        return f"{text(later)} s repeats the stamp of {of}" if of else f"{text(later)} s repeats the previous stamp"
+    return f"{text(later)} s after {text(earlier)} s" + (f" of {of}" if of else "")
+
+
 def index_runs(indices: Any, max_runs: int | None = None) -> str:
     """``0-7`` / ``0, 2, 4-11``: sorted indices (frames, scans) as runs of consecutive ones, for a message; the first
     ``max_runs`` runs only, with ``, ... (N frames)`` after them, when given; ``""`` for none."""

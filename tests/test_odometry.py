@@ -616,9 +616,15 @@ def test_equal_time_stamps_are_refused_before_the_run(rng):
     seq = MemorySequence(poses, _room_points(rng, 500))
     seq._timestamps = seq._timestamps.copy()
     seq._timestamps[3] = seq._timestamps[2]
-    with pytest.raises(DataError, match=r"memory \(frame 3\): time stamps are not strictly increasing: 100.2 s after 100.2 s of frame 2"):
+    with pytest.raises(DataError, match=r"memory \(frame 3\): time stamps are not strictly increasing: 100.2 s repeats the stamp "
+                                        r"of frame 2"):
         run(seq, "vanilla")
     assert seq.reads == []  # refused before reading a scan
+    # ROS epoch stamps to the nanosecond (".9g" printed both as 1.7e+09)
+    seq._timestamps = 1.7e9 + np.arange(5) * 0.1
+    seq._timestamps[3] = 1.7e9 + 0.15
+    with pytest.raises(DataError, match=r"not strictly increasing: 1700000000.15 s after 1700000000.2 s of frame 2"):
+        run(seq, "vanilla")
 
 
 def test_a_callers_kitti_reader_reads_the_points_as_stored_after_a_kiss_run():

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from lidarkit.errors import ConfigError, DataError, EvaluationError, LidarKitError, RegistrationError
+from lidarkit.errors import ConfigError, DataError, EvaluationError, LidarKitError, RegistrationError, not_increasing
 from lidarkit.geometry import as_points, float32_far_message, orthonormalize_se3, se3_fraction, validated_points
 from lidarkit.io.base import Scan, ScanSequence
 from lidarkit.lifetime import raise_if_interrupted
@@ -845,8 +845,8 @@ def _check_stamps(stamps: np.ndarray | None, indices: np.ndarray, dataset_name: 
     bad = np.flatnonzero(~(np.diff(selected) > 0))
     if len(bad):
         k = int(bad[0])
-        raise DataError(f"time stamps are not strictly increasing: {selected[k + 1]:.9g} s after {selected[k]:.9g} s of frame "
-                        f"{int(indices[k])}", source=dataset_name, location=f"frame {int(indices[k + 1])}")
+        why = not_increasing(selected[k + 1], selected[k], f"frame {int(indices[k])}")
+        raise DataError(f"time stamps are not strictly increasing: {why}", source=dataset_name, location=f"frame {int(indices[k + 1])}")
 
 
 def _far_float32_warning(frames_reach: list[tuple[int, float]], n: int) -> str | None:

@@ -47,14 +47,14 @@ def _check_timestamps(timestamps_s: Any, path: str | os.PathLike) -> None:
     strictly increasing, errors naming the file and line."""
     if timestamps_s is None:
         return
-    from lidarkit.errors import DataError
+    from lidarkit.errors import DataError, not_increasing
     from lidarkit.textfile import file_line
 
     ts = np.asarray(timestamps_s, dtype=np.float64).reshape(-1)
     steps = np.diff(ts)
     if len(steps) and not (steps > 0).all():
         k = int(np.argmax(~(steps > 0))) + 1
-        raise DataError(f"time stamps are not strictly increasing ({ts[k]:.9g} after {ts[k - 1]:.9g})", source=path,
+        raise DataError(f"time stamps are not strictly increasing ({not_increasing(ts[k], ts[k - 1])})", source=path,
                         location=file_line(path, f"frame {k}"))
 
 
