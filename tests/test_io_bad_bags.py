@@ -657,3 +657,15 @@ def test_integer_point_times_in_microseconds_are_refused_by_the_stamps_spacing(t
     partial = open_dataset("rosbag", write_ros1_bag(tmp_path / "partial.bag", [(1000.0 + 0.1 * k, fields, 16, rec.tobytes(), n)
                                                                                for k in range(6)]))
     assert partial.sweep_duration_s == pytest.approx(0.025) and partial.stamp_instant == "start"
+
+
+def test_ground_truth_stamps_all_zero_are_said_to_be_unset(tmp_path):
+    """Odometry whose header stamps are all 0 (not set) beside normally stamped clouds: "12 poses for 12 scans: scan 1
+    comes after the last pose (0.000 s); one pose per scan needed (--frames can pick ...)" contradicted itself."""
+    fields, step, data = _cloud_bytes(64)
+    scans = [(1000.0 + 0.1 * k, fields, step, data, 64) for k in range(3)]
+    bag = write_ros1_bag(tmp_path / "gtzero.bag", scans, odometry=[(0.0, (k, 0, 0), (0, 0, 0, 1)) for k in range(3)])
+    with pytest.raises(DataError, match=r"gtzero\.bag: every header stamp on the ground-truth topic /ground_truth is 0 \(not set "
+                                        r"by the driver\): .* \(ground_truth_topic=none runs without ground truth\)$"):
+        open_dataset("rosbag", bag).ground_truth
+    assert open_dataset("rosbag", bag, ground_truth_topic="none").ground_truth is None

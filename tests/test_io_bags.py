@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -484,8 +486,18 @@ def test_a_ros1_bag_named_with_an_upper_case_suffix_is_refused_by_name(tmp_path,
         export_bag(sim, tmp_path / "lib.BAG", "rosbag1")
     assert not list(tmp_path.iterdir())
     renamed = export_bag(sim, tmp_path / "ok.bag", "rosbag1").rename(tmp_path / "Y.Bag")
-    with pytest.raises(DataError, match=r"Y\.Bag: a ROS 1 bag is read only by a lower-case \.bag name: rename it to Y\.bag$"):
+    with pytest.raises(DataError, match=r"Y\.Bag: a ROS 1 bag, read only by a lower-case \.bag name: rename it to Y\.bag$"):
         open_dataset(detect_kind(renamed), renamed)
+    # any other name of a ROS 1 bag (it was "not a readable ROS bag (...); truncated or damaged?"), and what a killed
+    # `rosbag record` leaves
+    for name, hint in (("plain", "rename it to plain.bag"), ("rec.bag.active", "run rosbag reindex on it, then rename it to rec.bag")):
+        other = renamed.rename(tmp_path / name)
+        with pytest.raises(DataError, match=rf"{re.escape(name)}: a ROS 1 bag, read only by a lower-case \.bag name: {hint}$"):
+            open_dataset("rosbag", other)
+        renamed = other
+    (tmp_path / "not_a_bag").write_bytes(b"#ROSBAG")  # (not the whole magic: the reader's own words)
+    with pytest.raises(DataError, match="not a readable ROS bag"):
+        open_dataset("rosbag", tmp_path / "not_a_bag")
 
 
 def test_a_dangling_symbolic_link_as_a_bag_is_refused_before_the_simulation(tmp_path, capsys):

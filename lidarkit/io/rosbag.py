@@ -45,6 +45,8 @@ POINTCLOUD2 = "sensor_msgs/msg/PointCloud2"
 ODOMETRY = "nav_msgs/msg/Odometry"
 POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
 ROS_EXTRA = "pip install 'lidarkit[ros]'  (rosbags, mcap, mcap-ros2-support)"
+#: first bytes of a ROS 1 bag (format 2.0)
+ROS1_MAGIC = b"#ROSBAG "
 
 
 def sweep_instant_topic(ground_truth_topic: str, instant: str) -> str:
@@ -438,6 +440,10 @@ class _BagScans:
                             "ground truth)", source=self.path)
         self._check_ground_truth_frame(child_frames)
         stamps, poses = np.array(stamps), np.stack(poses)
+        if len(stamps) > 1 and not stamps.any():  # (read "12 poses for 12 scans ... one pose per scan needed")
+            raise DataError(f"every header stamp on the ground-truth topic {self.ground_truth_topic} is 0 (not set by the "
+                            "driver): its poses cannot be paired with the scans (ground_truth_topic=none runs without ground "
+                            "truth)", source=self.path)
         n_back = int(np.count_nonzero(np.diff(stamps) < 0))
         if n_back:
             order = np.argsort(stamps, kind="stable")
@@ -623,6 +629,15 @@ def _pose_matrix(xyz: list[float], quat_xyzw: list[float]) -> np.ndarray:
     return T
 
 
+def _starts_with(path: Path, head: bytes) -> bool:
+    """Whether the file at ``path`` begins with ``head`` (False when it cannot be read: the reader then says why)."""
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(len(head)) == head
+    except OSError:
+        return False
+
+
 def bag_path(path: str | os.PathLike) -> Path:
     """The path a bag is read from: a ROS 2 bag's ``metadata.yaml`` (a path copied from a file browser) stands for the
     bag, its folder, taken absolute (from inside the folder, "." named the run "rosbag:/points"); other paths as given."""
@@ -665,8 +680,11 @@ class RosbagScans(_BagScans):
         from rosbags.highlevel import AnyReader
 
         paths = self._reader_paths()
-        if self.path.is_file() and self.path.suffix.lower() == ".bag" != self.path.suffix:  # (rosbags: "unknown storage format")
-            raise DataError(f"a ROS 1 bag is read only by a lower-case .bag name: rename it to {self.path.stem}.bag", source=self.path)
+        if self.path.is_file() and self.path.suffix != ".bag" and _starts_with(self.path, ROS1_MAGIC):  # (rosbags: "unknown storage format")
+            active = self.path.name.endswith(".bag.active")  # (what a killed `rosbag record` leaves, unindexed)
+            name = self.path.name[: -len(".active")] if active else f"{self.path.stem if self.path.suffix.lower() == '.bag' else self.path.name}.bag"
+            raise DataError(f"a ROS 1 bag, read only by a lower-case .bag name: {'run rosbag reindex on it, then ' if active else ''}"
+                            f"rename it to {name}", source=self.path)
         try:
             with AnyReader(paths) as reader:
                 topics = {t: info.msgtype for t, info in reader.topics.items()}
@@ -779,7 +797,7 @@ class McapScans(_BagScans):
                 fh.seek(0)
                 summary = make_reader(fh).get_summary()
         except Exception as err:  # noqa: BLE001 - mcap raises its own error types for damaged files
-            if head == b"#ROSBAG ":  # (a ROS 1 bag was "invalid magic: (35, 82, 79, ...); truncated or damaged?")
+            if head == ROS1_MAGIC:  # (a ROS 1 bag was "invalid magic: (35, 82, 79, ...); truncated or damaged?")
                 raise DataError(f"a ROS 1 bag, not an MCAP file: read it with rosbag:{self.path}", source=self.path) from None
             raise DataError(f"not a readable MCAP file ({type(err).__name__}: {err}; truncated or damaged?)", source=self.path) from None
         if summary is None:
