@@ -292,7 +292,9 @@ class RegistrationResult:
         """Normalized estimation error squared of this pose against the true one, ``xi^T Sigma^-1 xi`` (6 on average
         for a calibrated covariance; NaN without one), with ``T_true = se3_exp(xi) T`` taken about
         ``extra["covariance_origin_m"]`` when there is one: exact at any coordinates (``nees`` of
-        :mod:`lidarkit.registration.covariance` with the stored covariance is not, far from the frame's origin)."""
+        :mod:`lidarkit.registration.covariance` with the stored covariance is not, far from the frame's origin). A planar
+        result is scored over what it estimated, x, y and yaw (3 on average): its z, roll and pitch carry no variance,
+        and their true values' error against none read as 1e10."""
         if self.covariance is None:
             return float("nan")
         from lidarkit.geometry import se3_inverse, se3_log
@@ -314,8 +316,12 @@ class RegistrationResult:
         c = np.asarray(self.extra.get(COVARIANCE_ORIGIN_KEY, (0.0, 0.0, 0.0)), dtype=np.float64)
         S = np.eye(4)
         S[:3, 3] = c
-        error = se3_inverse(S) @ true @ se3_inverse(self.T_target_source) @ S
-        return nees(se3_log(error), self.covariance_about(c))
+        error = se3_log(se3_inverse(S) @ true @ se3_inverse(self.T_target_source) @ S)
+        covariance = self.covariance_about(c)
+        estimated = np.flatnonzero(np.any(covariance != 0.0, axis=1))  # (a planar solve: rows of z, roll, pitch zero)
+        if len(estimated) < 6:
+            return float(error[estimated] @ np.linalg.pinv(covariance[np.ix_(estimated, estimated)]) @ error[estimated])
+        return nees(error, covariance)
 
     def __repr__(self) -> str:
         """One line of the headline figures (the generated one printed the whole rmse_history, the 6x6 covariance and
