@@ -511,3 +511,33 @@ def test_two_runs_moving_into_one_folder_at_once_leave_one_runs_files(tmp_path):
         assert names == sorted([f"{last}{i:04d}.txt" for i in range(n)] + ["config.yaml"])
         assert {(out / name).read_text() for name in names if name != "config.yaml"} == {last}
         assert sorted(p.name for p in place.iterdir()) == ["ready-a", "ready-b", "run"]  # (no lock file left)
+
+
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="needs /dev/full (a device that is always full)")
+def test_icp_and_bench_write_their_outputs_before_a_stdout_that_refuses_them(tmp_path):
+    """`lidarkit icp A B --out DIR > /dev/full` printed its table before writing DIR: one line, exit 1, and no folder;
+    `lidarkit bench SUITE --out OUT > /dev/full` printed its summary before the report: jobs/ only, no report.md and no
+    word of it. Both are written first now, as odometry, vo and pf do."""
+    import subprocess
+    import sys
+    import textwrap
+
+    from lidarkit.samples import sample_path
+
+    def run(args):
+        with open("/dev/full", "w") as full:
+            return subprocess.run([sys.executable, "-m", "lidarkit", *map(str, args)], stdout=full, stderr=subprocess.PIPE,
+                                  text=True, timeout=300)
+
+    pair = [sample_path("kitti_pair", "000095.npy"), sample_path("kitti_pair", "000094.npy")]
+    done = run(["icp", *pair, "-m", "small_gicp", "--out", tmp_path / "icp"])
+    assert (done.returncode, done.stderr.splitlines()[-1]) == (1, "error: stdout: cannot write: no space left on the device")
+    assert sorted(p.name for p in (tmp_path / "icp").iterdir()) == ["bev.png", "config.json", "result.json", "rmse.png"]
+    (tmp_path / "suite.yaml").write_text(textwrap.dedent("""
+        name: tiny
+        experiments:
+          - {name: s, task: odometry, dataset: {kind: sim_lidar, n_frames: 4, n_beams: 16, n_azimuths: 360}, methods: [kiss]}
+    """))
+    done = run(["bench", tmp_path / "suite.yaml", "--out", tmp_path / "bench", "-e", "serial", "--no-progress"])
+    assert (done.returncode, done.stderr.splitlines()[-1]) == (1, "error: stdout: cannot write: no space left on the device")
+    assert {"report.md", "report.csv", "report.html"} <= {p.name for p in (tmp_path / "bench").iterdir()}

@@ -267,9 +267,10 @@ def bench(
         return
     summary = run_with_progress(suite, out, executor=executor, workers=workers, address=address, force=force,
                                 progress=progress)
+    # the report is written before anything is printed (a stdout that refuses the summary lost it)
+    built = write_report(out, {job.key() for job in suite.jobs}) if report else None
     print_run_summary(summary)
-    if report:
-        built = write_report(out, {job.key() for job in suite.jobs})
+    if built is not None:
         if kitti:
             from lidarkit.bench.kitti import paper_table
 

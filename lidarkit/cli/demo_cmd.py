@@ -46,9 +46,9 @@ def demo_command(
     result = run_demo(out_dir, quick=quick, suite_path=suite, executor=executor, workers=workers, force=force, runner=runner)
     for experiment, reason in result.skipped:
         err.print(f"skipped {experiment}: {reason}", soft_wrap=True)
+    evaluation_result = run_eval_demo(out_dir / "eval")  # (written before anything is printed, as the bench's report)
     print_run_summary(result.summary)
 
-    evaluation_result = run_eval_demo(out_dir / "eval")
     for evaluation in evaluation_result.evaluations:
         console.print(eval_report.evaluation_table(evaluation))
         if evaluation.drift is not None:

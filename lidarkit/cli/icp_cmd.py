@@ -291,8 +291,7 @@ def icp(
     target_xyz = read_point_file(target, drop_nonfinite=drop_nonfinite).points_xyz
     init_T = read_init_pose(init) if init is not None else None
     result = registration.align(source_xyz, target_xyz, init_T=init_T)
-    stdout().print(_result_table(result, source, target))
-    if out is not None:
+    if out is not None:  # (written before anything is printed: a stdout that refuses it lost the folder)
         from lidarkit.registration.plots import save_bev_before_after, save_rmse_history
 
         payload = {"source": str(source), "target": str(target), "init": None if init is None else str(init),
@@ -308,4 +307,6 @@ def icp(
             save_rmse_history(tmp / "rmse.png", {method: result.rmse_history}, title=f"{method}: {source.name} -> {target.name}",
                               coarse_iterations={method: coarse} if coarse else None,
                               empty_note=no_rmse_note(result))
+    stdout().print(_result_table(result, source, target))
+    if out is not None:
         stdout().print(f"wrote {', '.join(str(out / name) for name in ('result.json', 'config.json', 'bev.png', 'rmse.png'))}")
