@@ -732,3 +732,119 @@ def test_tolerance_sets_the_trajectory_band_of_a_job_without_ground_truth(tmp_pa
     assert line.endswith("band 1e-06 m, 1 deg)"), line
     with pytest.raises(ConfigError, match="checked metrics: n_bad_frames, trajectory_m, trajectory_deg"):
         check(baseline.path, tolerances=["trajectory_cm=1"])
+
+
+@pytest.fixture(scope="module")
+def no_truth_baseline(tmp_path_factory, stretch_registered):
+    """test_stretch (deterministic) pinned over 8 simulated sweeps without ground truth: held on its trajectory."""
+    root = tmp_path_factory.mktemp("no_truth")
+    scans = _scans_without_ground_truth(root)
+    (root / "gen.yaml").write_text(textwrap.dedent(f"""
+        name: no-truth
+        experiments:
+          - {{name: gen, task: odometry, dataset: {{kind: generic, path: "{scans}", name: gen}}, methods: [test_stretch]}}
+    """))
+    return record(root / "gen.yaml", root / "baseline", repeats=1)
+
+
+def _copy_with_pinned_poses(baseline, out: Path, edit) -> Path:
+    """A copy of ``baseline`` whose pinned poses_kitti.txt holds ``edit``(its (N, 4, 4) poses) instead."""
+    import shutil
+
+    import numpy as np
+
+    from lidarkit.trajectory import Trajectory
+
+    shutil.copytree(baseline.path, out)
+    path = out / "jobs" / baseline.jobs[0]["key"] / "poses_kitti.txt"
+    poses = Trajectory.from_kitti(path).poses_se3.copy()
+    Trajectory(np.asarray(edit(poses))).to_kitti(path)
+    return out
+
+
+def test_round_off_of_a_trajectory_is_a_tie_at_a_zero_band(no_truth_baseline, tmp_path):
+    """``-t trajectory_m=0 -t trajectory_deg=0`` read kiss's thread round-off (3.7e-15 m, 2.4e-15 deg over a 5 m path)
+    as a regression, though metrics take round-off as a tie even at ``-t METRIC=0``. 1e-14 m and 1e-14 rad on the
+    pinned last pose tie; 1e-6 m or 1e-6 rad is a regression."""
+    from lidarkit.geometry import so3_exp
+
+    zero = {"trajectory_m": 0.0, "trajectory_deg": 0.0}
+
+    def moved(offset_m: float, angle_rad: float):
+        def edit(poses):
+            poses[-1, 0, 3] += offset_m
+            poses[-1, :3, :3] = poses[-1, :3, :3] @ so3_exp([0.0, 0.0, angle_rad])
+            return poses
+        return edit
+
+    assert check(no_truth_baseline.path, tolerances=zero).passed  # (a deterministic method: the rerun is the same)
+    tie = _copy_with_pinned_poses(no_truth_baseline, tmp_path / "tie", moved(1e-14, 1e-14))
+    result = check(tie, tolerances=zero)
+    assert result.passed and not [line for line in result.lines() if not line.startswith("note:")], result.lines()
+    for name, offset_m, angle_rad, shown in (("far", 1e-6, 0.0, r"1e-06 m, \S+"), ("turned", 0.0, 1e-6, r"\S+ m, 5\.73e-05")):
+        result = check(_copy_with_pinned_poses(no_truth_baseline, tmp_path / name, moved(offset_m, angle_rad)), tolerances=zero)
+        (line,) = [line for line in result.lines() if not line.startswith("note:")]
+        assert not result.passed and re.fullmatch(r"regression: test_stretch on gen \(seed 0\): trajectory differs from the "
+                                                  rf"pinned one by {shown} deg \(worst at pose 7; band 0 m, 0 deg\)", line), line
+
+
+def test_a_truncated_pinned_trajectory_is_said_damaged_not_a_regression(no_truth_baseline, tmp_path):
+    """A pinned poses_kitti.txt cut short read "regression: ... trajectory has 8 poses, the pinned one 7", as if the
+    method had changed, though the manifest pins 8 frames: the baseline is damaged."""
+    cut = _copy_with_pinned_poses(no_truth_baseline, tmp_path / "cut", lambda poses: poses[:-1])
+    result = check(cut)
+    (line,) = [line for line in result.lines() if not line.startswith("note:")]
+    assert not result.passed and line == ("failed: test_stretch on gen (seed 0): its pinned trajectory has 7 poses for the "
+                                           "pinned 8 frames (damaged): record the baseline again")
+
+
+def test_a_job_key_that_is_not_a_plain_name_is_refused(two_walks, tmp_path):
+    """A hand-edited key "../../other/jobs/x" was accepted, and the job's files were read outside the baseline folder."""
+    for i, key in enumerate(("../../other/jobs/x", "..", "a\\b")):
+        manifest = json.loads((two_walks.path / "manifest.json").read_text())
+        manifest["jobs"][0]["key"] = key
+        edited = tmp_path / f"edited{i}"
+        edited.mkdir()
+        (edited / "manifest.json").write_text(json.dumps(manifest))
+        with pytest.raises(DataError, match=re.escape(f"corrupt manifest: job 0 key {key!r} is not a plain name (it names the "
+                                                      "job's folder under jobs/)") + "$"):
+            load_baseline(edited)
+
+
+def test_the_opencv_version_is_pinned_and_an_earlier_baseline_without_it_is_a_note(two_walks):
+    """VO jobs, the camera simulator and image decoding run on OpenCV, and the protocol did not pin its version. A
+    baseline recorded before it was pinned is not a changed protocol: a note says so."""
+    import cv2
+
+    from lidarkit.bench.baseline import environment
+
+    pinned = two_walks.manifest["environment"]["packages"]["opencv"]
+    assert pinned == environment()["packages"]["opencv"] and pinned.startswith(cv2.__version__)
+    manifest_path = two_walks.path / "manifest.json"
+    manifest = json.loads(manifest_path.read_text())
+    del manifest["environment"]["packages"]["opencv"]
+    manifest_path.write_text(json.dumps(manifest))
+    result = check(two_walks.path)
+    assert result.passed and (f"note: environment: the baseline pinned no opencv version (recorded before lidarkit pinned "
+                              f"it): not compared; opencv is {pinned} now") in result.lines()
+    manifest["environment"]["packages"]["opencv"] = "3.4.0"
+    manifest_path.write_text(json.dumps(manifest))
+    result = check(two_walks.path)
+    assert not result.passed and result.lines() == [f"protocol changed: environment: packages.opencv: 3.4.0 -> {pinned}"]
+
+
+def test_a_vo_job_is_banded_on_its_own_scale_not_lidar_odometry_floors(tmp_path):
+    """A vo job on a simulated camera (APE ~1 mm) was pinned ``± 0.01`` by the LiDAR odometry floor of 1 cm, and
+    max_features=100 (APE 2.9x, final error 8.5x worse) passed. vo takes no absolute floor: 2 % of its values here
+    (it is deterministic), far below them."""
+    camera = "n_frames: 5, width: 320, height: 128, fx: 200.0, fy: 200.0, cx: 159.5, cy: 63.5"
+    (tmp_path / "vo.yaml").write_text(textwrap.dedent(f"""
+        name: vo
+        experiments:
+          - {{name: vo, task: vo, dataset: {{kind: sim_camera, name: cam, {camera}}}, methods: [lidarkit]}}
+    """))
+    (job,) = record(tmp_path / "vo.yaml", tmp_path / "baseline", repeats=1).jobs
+    for metric in ("ape_rmse_m", "final_error_m", "rpe_trans_rmse_m"):
+        value = job["metrics"][metric]
+        assert 1e-5 < value < 0.05, (metric, value)  # (mm to cm: below odometry's floors' scale)
+        assert job["bands"][metric] == pytest.approx(0.02 * value), (metric, job["bands"][metric], value)

@@ -189,7 +189,7 @@ def test_a_result_over_other_frames_another_dataset_or_another_seed_is_refused(t
     pinned = baseline.job(**seed0, seed=0)
     assert_no_worse_than(run(sim, "kiss", frames="0:8"), baseline, dataset="sim street", seed=0, **pick)
     for frames, shown in (([0, 2, 4, 6, 8, 9, 10, 11], "0, 2, 4, 6, 8-11"), ("4:12", "4-11")):
-        with pytest.raises(EvaluationError, match=rf"the result's frames differs from the pinned job 'kiss': {shown} \(pinned 0:8: 0-7\)$"):
+        with pytest.raises(EvaluationError, match=rf"the result's frames differ from the pinned job 'kiss': {shown} \(pinned 0:8: 0-7\)$"):
             assert_no_worse_than(run(sim, "kiss", frames=frames), baseline, dataset="sim street", seed=0, **pick)
     other = run(SimulatedLidarSequence(n_frames=5, seed=1, scene="street", n_beams=16, n_azimuths=360), "open3d_point_to_plane")
     with pytest.raises(EvaluationError, match="the result's dataset differs from the pinned job 'open3d_point_to_plane': kind sim_lidar \\(pinned kitti\\)"):
@@ -379,7 +379,7 @@ def test_negative_and_open_ended_frames_resolve_on_the_pinned_dataset(kitti_sele
     pick = dict(method="kiss", metric="ape_rmse_m", tolerance=1.0)
     assert_no_worse_than(run(sequence, "kiss", frames=":-2"), kitti_selections[":-2"], **pick)
     assert_no_worse_than(run(sequence, "kiss", frames="7:10"), kitti_selections["-3:"], **pick)
-    with pytest.raises(EvaluationError, match=r"the result's frames differs from the pinned job 'kiss': 0-2 \(pinned -3:: 7-9\)$"):
+    with pytest.raises(EvaluationError, match=r"the result's frames differ from the pinned job 'kiss': 0-2 \(pinned -3:: 7-9\)$"):
         assert_no_worse_than(run(sequence, "kiss", frames="0:3"), kitti_selections["-3:"], **pick)
 
 
@@ -601,6 +601,43 @@ def test_a_bench_record_of_the_pinned_data_written_another_way_passes(tmp_path):
                                               r"\(pinned <absent>\)"):
         assert_no_worse_than(other_sequence, baseline, experiment="kitti", metric="ape_rmse_m", tolerance=1.0)
 
+
+
+def test_a_bench_record_over_the_pinned_frames_written_another_way_passes(tmp_path):
+    """Pinned over frames "0:3" of KITTI 00: bench records over ":3", "0:3:1" or [0, 1, 2], the same three scans, were
+    refused ("the result's job options differs from the pinned job ...: {'frames': ':3'} (pinned {'frames': '0:3'})"):
+    the options were compared as written. They are compared as the frames they select, as compare pairs runs."""
+    from conftest import shared_path
+
+    from lidarkit.bench.results import load_results
+    from lidarkit.bench.runner import run_suite
+    from lidarkit.bench.suite import load_suite
+
+    dataset = f'{{kind: kitti, path: "{shared_path("kitti_odometry")}", sequence: 0, name: K00}}'
+    vanilla = "methods: [{name: vanilla, params: {voxel_size_m: 1.0}}]"
+    (tmp_path / "pinned.yaml").write_text(textwrap.dedent(f"""
+        name: pinned
+        experiments:
+          - {{name: kitti, task: odometry, dataset: {dataset}, options: {{frames: "0:3"}}, {vanilla}}}
+    """))
+    baseline = record(tmp_path / "pinned.yaml", tmp_path / "baseline", repeats=1)
+    (tmp_path / "written.yaml").write_text(textwrap.dedent(f"""
+        name: frames-written-another-way
+        experiments:
+          - {{name: open, task: odometry, dataset: {dataset}, options: {{frames: ":3"}}, {vanilla}}}
+          - {{name: step, task: odometry, dataset: {dataset}, options: {{frames: "0:3:1"}}, {vanilla}}}
+          - {{name: list, task: odometry, dataset: {dataset}, options: {{frames: [0, 1, 2]}}, {vanilla}}}
+          - {{name: later, task: odometry, dataset: {dataset}, options: {{frames: "1:4"}}, {vanilla}}}
+    """))
+    run_suite(load_suite(tmp_path / "written.yaml"), tmp_path / "results", executor="serial")
+    records = {r["job"]["experiment"]: r for r in load_results(tmp_path / "results")}
+    for experiment in ("open", "step", "list"):
+        assert records[experiment]["status"] == "ok", records[experiment].get("error")
+        assert_no_worse_than(records[experiment], baseline, metric="ape_rmse_m", tolerance=1e-6)
+    # three other scans of the sequence are still other data
+    with pytest.raises(EvaluationError, match=r"^assert_no_worse_than: the result's job options differ from the pinned job "
+                                              r"'vanilla\(voxel_size_m=1\)': \{'frames': '1:4'\} \(pinned \{'frames': '0:3'\}\)$"):
+        assert_no_worse_than(records["later"], baseline, metric="ape_rmse_m", tolerance=1.0)
 
 def test_a_missing_drift_metric_says_why_and_none_values_are_named_apart():
     """A run shorter than the devkit's 100 m segments has no drift: the message said only "not in the result" though

@@ -168,12 +168,13 @@ def _check_same_data(result: Any, now_metrics: dict[str, float], job: Mapping[st
     another dataset kind or path (a KITTI root and ``sequence:`` compared as the sequence folder they resolve to, the
     sequence as its number; a ROS 2 bag's ``metadata.yaml`` as its folder), other
     files the reader read (ground truth, calibration, times), another applied KITTI angle correction, (a simulated run)
-    another simulator setting, or (a bench record) another dataset, task options or seed than the pinned job's spec. A metric is comparable on the same data only: 3 sweeps of the
+    another simulator setting, or (a bench record) another dataset, task options (odometry frames as the indices they select) or seed than the pinned job's spec. A metric is comparable on the same data only: 3 sweeps of the
     pinned 8-sweep drive, the sweeps 4-12 of it, or a simulated run against a pinned KITTI job passed against it."""
     label = job.get("label", "")
 
     def refuse(what: str, detail: str) -> None:
-        raise EvaluationError(f"the result's {what} differs from the pinned job {label!r}: {detail}", source="assert_no_worse_than")
+        verb = "differ" if what in ("frames", "job options") else "differs"
+        raise EvaluationError(f"the result's {what} {verb} from the pinned job {label!r}: {detail}", source="assert_no_worse_than")
 
     if "n_frames" in now_metrics and "n_frames" in ref_metrics and now_metrics["n_frames"] != ref_metrics["n_frames"]:
         raise EvaluationError(f"the result ran over {now_metrics['n_frames']:g} frames, the pinned job {label!r} over "
@@ -186,16 +187,30 @@ def _check_same_data(result: Any, now_metrics: dict[str, float], job: Mapping[st
     if ran_job is not None:
         from lidarkit.bench.jobs import canonical_json
 
+        ran_data = pinned_data = None
         for key in ("task", "dataset", "options", "seed"):
             a, b = ran_job.get(key), spec.get(key)
             if key == "dataset" and isinstance(a, Mapping) and isinstance(b, Mapping):
-                a, b = _data_of_spec(a, ran_job.get("seed")), _data_of_spec(b, spec.get("seed"))
+                ran_data, pinned_data = _data_of_spec(a, ran_job.get("seed")), _data_of_spec(b, spec.get("seed"))
                 # (named field by field: a simulator's whole configuration printed twice hid the one setting apart)
                 shown = (lambda d, k: repr(d[k]) if k in d else "<absent>")
-                differ = [f"{k} {shown(a, k)} (pinned {shown(b, k)})" for k in [*b, *(k for k in a if k not in b)]
-                          if (k in a) != (k in b) or canonical_json({"v": a[k]}) != canonical_json({"v": b[k]})]
+                differ = [f"{k} {shown(ran_data, k)} (pinned {shown(pinned_data, k)})"
+                          for k in [*pinned_data, *(k for k in ran_data if k not in pinned_data)]
+                          if (k in ran_data) != (k in pinned_data)
+                          or canonical_json({"v": ran_data[k]}) != canonical_json({"v": pinned_data[k]})]
                 if differ:
                     refuse("job dataset", ", ".join(differ))
+                continue
+            if key == "options" and isinstance(a, Mapping) and isinstance(b, Mapping):
+                # odometry frames as the indices they select, as compare pairs runs (":6" and [0, ..., 5] select what
+                # "0:6" does: they were refused, compared as written)
+                from lidarkit.eval.compare import _options_unit
+
+                task = str(spec.get("task"))
+                a = _options_unit(task, dict(a), ran_data or {}, dict(result))
+                b = _options_unit(task, dict(b), pinned_data or {}, dict(job))
+                if canonical_json({"v": a}) != canonical_json({"v": b}):
+                    refuse("job options", f"{ran_job.get(key)!r} (pinned {spec.get(key)!r})")
                 continue
             if canonical_json({"v": a}) != canonical_json({"v": b}):
                 refuse(f"job {key}", f"{a!r} (pinned {b!r})")
