@@ -313,3 +313,16 @@ def test_a_spec_path_option_that_reads_as_a_number_keeps_its_text(tmp_path):
     folder = open_sequence(f"folder:{scans}?timestamps=1e3")
     np.testing.assert_allclose(folder.timestamps_s, [0.0, 0.1])
     assert len(open_sequence("sim:street?frames=3&beams=8&azimuths=180")) == 3  # numbers stay numbers
+
+
+def test_scans_exactly_three_sweeps_apart_are_no_gap():
+    """Frames 0, 1, 2, 3, 6 of a simulated drive are 3 sweeps apart at most, which the docs do not call a gap (more than
+    3x); the float stamps made it 0.30000000000000004 s against 3 x 0.09999999999999998 s, and it was warned of. Four
+    sweeps apart is a gap."""
+    from lidarkit.odometry import run
+
+    spec = "sim:street?frames=12&beams=8&azimuths=180&seed=1"
+    three = run(spec, "vanilla", frames=[0, 1, 2, 3, 6]).metrics["warnings"]
+    assert not [w for w in three if "gap(s)" in w]
+    four = run(spec, "vanilla", frames=[0, 1, 2, 3, 7]).metrics["warnings"]
+    assert [w for w in four if w.startswith("1 gap(s) in time between consecutive scans, the largest 0.4 s between frames 3 and 7")]

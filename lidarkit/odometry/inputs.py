@@ -131,6 +131,12 @@ def typical_interval(values: np.ndarray | None) -> float | None:
     return float(np.median(np.diff(np.asarray(values, dtype=np.float64)))) if values is not None and len(values) > 1 else None
 
 
+#: consecutive scans more than this many expected intervals apart are a gap
+GAP_SWEEPS = 3.0
+#: an interval within this fraction of GAP_SWEEPS intervals is not more than it: float stamps carry rounding noise
+GAP_RELATIVE_TOLERANCE = 1e-6
+
+
 def time_gap_warning(times_s: np.ndarray | None, frames: np.ndarray, guess: str = "constant velocity",
                      indices: np.ndarray | None = None, typical: float | None = None) -> str | None:
     """A warning when consecutive scans of a run lie far apart in time (more than 3x the expected interval: scans
@@ -150,7 +156,9 @@ def time_gap_warning(times_s: np.ndarray | None, frames: np.ndarray, guess: str 
         typical = 1.0 if times_s is None else float(np.median(dt))
     step = int(np.diff(indices).min()) if indices is not None and len(indices) > 1 else 1
     expected = typical * step
-    gaps = np.flatnonzero(dt > 3.0 * expected) if expected > 0 else np.zeros(0, dtype=np.int64)
+    # (stamps of exactly three sweeps, 0.30000000000000004 s against 3 x 0.09999999999999998, were flagged by float noise)
+    limit = GAP_SWEEPS * expected * (1.0 + GAP_RELATIVE_TOLERANCE)
+    gaps = np.flatnonzero(dt > limit) if expected > 0 else np.zeros(0, dtype=np.int64)
     if not gaps.size:
         return None
     k = int(gaps[np.argmax(dt[gaps])])

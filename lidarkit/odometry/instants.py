@@ -12,6 +12,8 @@ differ, the run re-times the ground truth to the estimate's instant when the dat
 (``ground_truth_at_instant(instant)``: the simulator, bags, the simulator's KITTI folders) and says so in a note;
 otherwise it refuses a deskewed estimate (EvaluationError) and compares a non-deskewed one as it is, with a note
 (its instant is a measured tendency, not a rule the variant applies).
+A run's poses are taken at the instant most of its frames' refer to (:func:`run_instant`): frames with per-point times
+and frames without can refer to two instants, and one scan did not decide for the rest.
 Ground truth of an unknown instant (None) is re-timed to the estimate's instant where the dataset can give it (a
 bag whose poses are stamped at no clear instant of the sweep), else compared as it is: the reader could not tell (with
 a note saying why when the dataset's re-timing failed).
@@ -46,6 +48,26 @@ def estimate_instant(registration: Any, scan: Scan | None) -> str | None:
     if scan.has_time_span():
         return "mid"
     return scan.stamp_instant
+
+
+def most_have_times(has_point_times: np.ndarray) -> bool:
+    """Whether half of a run's frames or more came with per-point times (``has_point_times``: (n,) bool): their poses
+    are the run's (deskewed, where the variant deskews)."""
+    timed = np.asarray(has_point_times, dtype=bool)
+    return bool(timed.any()) and 2 * int(np.count_nonzero(timed)) >= len(timed)
+
+
+def run_instant(registration: Any, stamp_instant: str | None, has_point_times: np.ndarray) -> tuple[str | None, bool]:
+    """``(instant, deskewed)`` of a run's poses: the instant of the sweep most of its frames' poses refer to
+    (:func:`estimate_instant` of a frame with per-point times when half of them or more have some, else of one
+    without: the scans' ``stamp_instant``), and whether that is the instant the variant deskews to.
+    ``has_point_times``: (n,) bool, the frames whose per-point times span part of the sweep. (Decided by the first
+    scan, 19 frames deskewed to the sweep end were scored at the middle, frame 0's stamp instant, for lack of frame
+    0's times.)"""
+    if most_have_times(has_point_times):
+        deskewing = getattr(registration, "deskew_instant", None) is not None
+        return (str(registration.deskew_instant) if deskewing else "mid"), deskewing
+    return stamp_instant, False
 
 
 def stamps_at_instant(stamps_s: np.ndarray | None, scan: Scan | None, instant: str | None,
@@ -131,4 +153,4 @@ def like_with_like(reference: Trajectory, estimate_at: str | None, *, sequence: 
     )
 
 
-__all__ = ["deskews", "estimate_instant", "like_with_like", "stamps_at_instant"]
+__all__ = ["deskews", "estimate_instant", "like_with_like", "most_have_times", "run_instant", "stamps_at_instant"]

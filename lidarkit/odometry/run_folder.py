@@ -95,8 +95,8 @@ def _json_default(obj: Any) -> Any:
 
 
 def _write_plots(result: OdometryResult, out: Path) -> None:
-    """``trajectory.png`` (top view, estimate vs ground truth) and ``ape.png`` (error over time), through
-    ``lidarkit.eval.plots``; only when there is ground truth to compare with."""
+    """``trajectory.png`` (top view, x-y of the LiDAR frame, estimate vs ground truth) and ``ape.png`` (error over
+    time), through ``lidarkit.eval.plots``; only when there is ground truth to compare with."""
     if result.ground_truth is None or len(result.frames) < 2:
         return
     from lidarkit import eval as leval
@@ -106,5 +106,8 @@ def _write_plots(result: OdometryResult, out: Path) -> None:
     # a long --name (300 characters) ran the title off the figure and the legend over the plot ("constrained_layout not
     # applied"): the title wrapped, as eval wraps evo's long titles, and cut at 4 lines; the legend names the method
     title = textwrap.fill(result.trajectory.name, 70, max_lines=4, placeholder=" ...")
-    plots.plot_trajectories(ref.with_name("ground truth"), est.with_name(result.method), out / "trajectory.png", title=title)
+    # the LiDAR frame has z up: seen from above (the plane the truth spreads most in was x-z on a straight, flat drive,
+    # and the estimate's sideways drift was out of view)
+    plots.plot_trajectories(ref.with_name("ground truth"), est.with_name(result.method), out / "trajectory.png", plane="xy",
+                            title=title)
     plots.plot_errors(leval.ape(ref, est, align="none", relation="translation"), out / "ape.png")

@@ -22,7 +22,7 @@ from lidarkit.odometry.frame_check import FrameChecker, FrameCheckConfig
 from lidarkit.progress import progress_bar
 from lidarkit.odometry.inputs import (FrameSelection, ReusedBufferCheck, frame_numbers, frames_past_the_end, frames_repr, open_sequence, parse_frames,
                                       time_gap_warning, typical_interval)
-from lidarkit.odometry.instants import deskews, estimate_instant, like_with_like, stamps_at_instant
+from lidarkit.odometry.instants import like_with_like, run_instant, stamps_at_instant
 from lidarkit.odometry.metrics import odometry_metrics
 from lidarkit.odometry.prefetch import DEFAULT_DEPTH, prefetched
 from lidarkit.odometry.result import FrameStats, OdometryResult
@@ -493,13 +493,13 @@ def run(
     reference = _reference(sequence, ground_truth, indices, dataset_name)
     if ground_truth is not None and reference is not None and (reference.meta or {}).get("pose_instant"):
         # a caller's ground truth of another instant of the sweep than the estimate's is refused (it cannot be re-timed):
-        # before the frames, from the first scan, not after registering all of them
+        # before the frames, from the first scan, not after registering all of them (taken for the run's frames: a run
+        # whose most frames differ from it is judged by them after the run, below)
         probe = sequence.read_scan(int(indices[0]))
-        stamped_at = getattr(sequence, "stamp_instant", None)
-        if stamped_at is not None and stamped_at != probe.stamp_instant:
-            probe = dataclasses.replace(probe, stamp_instant=stamped_at)
-        like_with_like(reference, estimate_instant(registration, probe), sequence=sequence, frames=indices,
-                       own_ground_truth=False, method=name, deskewed=deskews(registration, probe))
+        probe_at, probe_deskewed = run_instant(registration, getattr(sequence, "stamp_instant", None) or probe.stamp_instant,
+                                               [probe.has_time_span()])
+        like_with_like(reference, probe_at, sequence=sequence, frames=indices, own_ground_truth=False, method=name,
+                       deskewed=probe_deskewed)
     # sweeps between each frame and the previous one (a stepped selection, dropped scans): what a deskewing variant
     # that accepts it scales its motion between frames by, to one sweep's
     sweeps = sweeps_apart(getattr(sequence, "timestamps_s", None), frame_numbers(sequence), indices, n_total)
@@ -627,7 +627,9 @@ def run(
     recorded_instant = getattr(sequence, "stamp_instant", None)
     if first_scan is not None and recorded_instant is not None and recorded_instant != first_scan.stamp_instant:
         first_scan = dataclasses.replace(first_scan, stamp_instant=recorded_instant)
-    estimate_at = estimate_instant(registration, first_scan)
+    # the instant most frames' poses refer to (frame 0 alone without per-point times put 19 frames deskewed to the
+    # sweep end at its stamp's instant)
+    estimate_at, deskewed = run_instant(registration, getattr(first_scan, "stamp_instant", None), checker.has_point_times)
     # the poses are stamped at the instant they refer to (a deskewing variant's), not at the one the scans' stamps do
     scan_stamps = timestamps
     # (a bag knows how long its sweeps last from its first scans' point times: the first scan alone, part of a sweep when
@@ -641,7 +643,7 @@ def run(
         try:
             retimed, instant_note = like_with_like(reference, estimate_at, sequence=sequence, frames=indices,
                                                    own_ground_truth=ground_truth is None, method=name,
-                                                   deskewed=deskews(registration, first_scan))
+                                                   deskewed=deskewed)
         except EvaluationError:
             if n > 1:
                 raise

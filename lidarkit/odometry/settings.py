@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from lidarkit.errors import DataError
+from lidarkit.odometry.instants import most_have_times, run_instant
 
 #: Alignment of every score in metrics.json, the CLI table and the bench tables.
 METRIC_ALIGNMENT = {
@@ -208,6 +209,27 @@ def ground_truth_instant(sequence: Any, reference: Any) -> str:
     return "not stated by the reader"
 
 
+def _mixed_instants(registration: Any, stamp_instant: str | None, has_point_times: np.ndarray,
+                    frames: np.ndarray | None) -> str | None:
+    """A note when a run's frames with per-point times and those without refer to two instants of the sweep, naming
+    the one all are scored at (:func:`~lidarkit.odometry.instants.run_instant`: most frames'), or None."""
+    timed = np.asarray(has_point_times, dtype=bool)
+    n, n_timed = len(timed), int(np.count_nonzero(timed))
+    deskew_to = getattr(registration, "deskew_instant", None)
+    timed_at = "mid" if deskew_to is None else str(deskew_to)
+    if not 0 < n_timed < n or timed_at == stamp_instant:
+        return None
+    at, _ = run_instant(registration, stamp_instant, timed)
+    numbers = np.asarray(frames if frames is not None and len(frames) == n else np.arange(n))
+    fewer = ~timed if most_have_times(timed) else timed
+    timed_as = f"deskewed to the sweep {timed_at}" if deskew_to is not None else f"not deskewed: about the sweep {timed_at}"
+    untimed_as = f"the sweep {stamp_instant}, their stamps'" if stamp_instant else "their stamps' instant, not stated"
+    return (f"the poses of frames with per-point times ({n_timed} of {n}: {timed_as}) and without ({n - n_timed}: "
+            f"{untimed_as}) refer to different instants of the sweep: all are scored at "
+            f"{f'the sweep {at}' if at else 'the stamps'}, as most frames' (for {frames_named(numbers[fewer])} the motion "
+            "between the two instants counts as error)")
+
+
 def effective_settings(
     sequence: Any, registration: Any, method: str, stateful: bool, has_point_times: np.ndarray, reference: Any,
     stamp_instant: str | None = None, n_flat_times: int = 0, frames: np.ndarray | None = None,
@@ -247,10 +269,14 @@ def effective_settings(
         deskew["reason"] = missing
         warnings.append(f"deskew requested, {deskew['reason']}: ran without deskew")
     else:
-        deskew["applied"] = True
-        deskew["reason"] = f"per-point times from {point_time_source(sequence)}"
+        # applied when most frames were: their poses are the run's (one frame of 20 with times read "deskew on" and
+        # had the run scored at the sweep end, where 19 were not deskewed)
+        deskew["applied"] = most_have_times(has_point_times)
+        if deskew["applied"]:
+            deskew["reason"] = f"per-point times from {point_time_source(sequence)}" + (f" for {n_times} of {n} frames" if n_times < n else "")
+        else:
+            deskew["reason"] = f"most frames ran without deskew: {missing} (deskewed: {n_times} of {n} frames)"
         if n_times < n:
-            deskew["reason"] += f" for {n_times} of {n} frames"
             warnings.append(f"deskew applied to {n_times} of {n} frames only: {missing}")
         apart = np.asarray(sweeps_apart if sweeps_apart is not None else [], dtype=np.float64)[1:]
         skipped = apart[apart != 1.0]
@@ -267,12 +293,15 @@ def effective_settings(
     if deskew["applied"]:
         stated = getattr(registration, "deskew_instant", None)
         estimate_instant = str(stated) if stated else "end" if method == "kiss" else "the instant the variant deskews to (not stated)"
-    elif n_times:  # (as estimate_instant in instants.py decides it)
+    elif most_have_times(has_point_times):  # (as run_instant in instants.py decides it)
         estimate_instant = "mid (sweeps not deskewed: a fit of distorted sweeps lands about mid-sweep, benchmarks/sweep_instant.py)"
     elif stamp_instant is not None:
         estimate_instant = f"{stamp_instant} (the scans' stamps: each scan taken as one snapshot)"
     else:
         estimate_instant = "none: each scan taken as one snapshot"
+    mixed = _mixed_instants(registration, stamp_instant, has_point_times, frames)
+    if mixed:
+        warnings.append(mixed)
     gt_instant = None if reference is None else ground_truth_instant(sequence, reference)
     if deskew["applied"] and gt_instant in ("start", "mid") and estimate_instant == "end":
         warnings.append(
