@@ -376,6 +376,23 @@ def test_evaluation_settings_check_max_diff_and_a_delta_given_as_a_switch():
         EvaluationSettings(delta=True)
 
 
+def test_a_delta_given_as_text_is_refused_by_the_settings_and_by_rpe():
+    """EvaluationSettings(delta="10") was kept as text ("delta": "10" in the JSON) and the Markdown report failed on
+    it ("Unknown format code 'g'"); rpe(delta="10") scored as if 10 had been given."""
+    from lidarkit.errors import ConfigError
+    from lidarkit.eval import EvaluationSettings, rpe
+
+    ref = Trajectory(np.tile(np.eye(4), (30, 1, 1)))
+    for value in ("10", b"10", [10], None):
+        with pytest.raises(ConfigError) as caught:
+            EvaluationSettings(delta=value)
+        assert str(caught.value) == f"delta: delta must be a number, got {value!r}"
+        with pytest.raises(ConfigError) as caught:
+            rpe(ref, ref, delta=value)
+        assert str(caught.value) == f"delta: delta must be a number, got {value!r}"
+    assert EvaluationSettings(delta=np.int64(10)).to_dict()["delta"] == 10  # numbers of any kind stay numbers
+
+
 def test_outputs_of_one_evaluation_are_replaced_together_or_not_at_all(tmp_path):
     """A full disk at the figure (a file-size limit here) left the new JSON, Markdown and tables beside the earlier
     evaluation's figure, exit 1 after "wrote r.json": every output is written aside and moved in together."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from lidarkit.errors import EvaluationError
 from lidarkit.eval import kitti_drift
 from lidarkit.eval.tables import SegmentErrors, drift_table, per_length_table, per_speed_table, value_table
 from lidarkit.trajectory import Trajectory
@@ -123,7 +124,66 @@ def test_segment_speeds_follow_the_time_stamps(tmp_path, capsys):
         main(["eval", str(tmp_path / "ref.tum"), str(tmp_path / "est.tum"), "-f", "tum", "--align", "none", "--tables", str(tmp_path / "t")])
     assert exc.value.code in (0, None)
     text = (tmp_path / "t" / "kitti_translation_pct_per_speed.md").read_text()
-    assert "| 0-5 m/s |" in text and "5-10 m/s" not in text  # (just under 5 m/s: the devkit's (frames + 1) periods)
+    assert "| 0-5 m/s |" in text and "5-10 m/s" not in text  # (100 m from the first stamp to the 101st after: 4.95 m/s)
+
+
+def test_segment_speeds_of_an_estimate_with_dropped_frames_are_those_of_the_drive():
+    """ORB-SLAM2 on KITTI 00 with 40 % of its poses dropped, associated by time: the per-speed table took a segment's
+    duration as its associated poses x their median interval, so speeds read 1.65x too high (rows 15-20 and 20-25 m/s
+    on a drive never faster than 12.9 m/s over a second). Its duration is now the time between its stamps."""
+    from conftest import shared_path
+
+    from lidarkit.eval.pairing import paired
+    from lidarkit.eval.tables import scored_timestamps_s
+
+    times = shared_path("evo_testdata", "KITTI_00_gt_times.txt")
+    truth = Trajectory.from_kitti(shared_path("evo_testdata", "KITTI_00_gt.txt"), times)
+    orb = Trajectory.from_kitti(shared_path("evo_testdata", "KITTI_00_ORB.txt"), times)
+    fastest_second_mps = np.convolve(np.diff(truth.distances_m) / np.diff(truth.timestamps_s), np.ones(10) / 10, "valid").max()
+    assert 12.8 < fastest_second_mps < 12.9
+    keep = np.sort(np.random.default_rng(0).choice(len(orb), int(0.6 * len(orb)), replace=False))
+    ref, est = paired(truth, orb[keep], associate=True)
+    dropped = SegmentErrors.from_drift(kitti_drift(ref, est, path_along=truth), timestamps_s=scored_timestamps_s(ref, est))
+    every = SegmentErrors.from_drift(kitti_drift(truth, orb), timestamps_s=scored_timestamps_s(truth, orb))
+    assert 4.7 < dropped.speed_mps.min() and dropped.speed_mps.max() < fastest_second_mps  # (was 8.0 .. 23.5 m/s)
+    assert np.median(dropped.speed_mps) == pytest.approx(np.median(every.speed_mps), rel=0.01)  # (was 1.65x)
+    assert per_speed_table({("00", "orb"): dropped}).row_labels == ["0-5 m/s", "5-10 m/s", "10-15 m/s"]
+    # every frame kept: the table lidarkit eval --tables wrote before (frames x the stamps' median interval)
+    assert "| 0-5 m/s | 0.73 |\n| 5-10 m/s | 0.67 |\n| 10-15 m/s | 1.10 |" in per_speed_table({("00", "orb"): every}).to_markdown()
+    with pytest.raises(EvaluationError, match=r"^timestamps_s: 100 stamps for segments that reach pose 4540"):
+        SegmentErrors.from_drift(kitti_drift(truth, orb), timestamps_s=truth.timestamps_s[:100])
+
+
+def test_segment_speeds_of_a_reference_without_stamps_follow_the_estimates_stamps(tmp_path):
+    """A KITTI ground truth without times and a TUM estimate at 5 Hz, paired by index: the speeds took 0.1 s a frame
+    (just under 10 m/s for 1 m a frame) as only the reference's stamps were looked at; they are the estimate's."""
+    from lidarkit.cli import main
+
+    straight(400).to_kitti(tmp_path / "ref.txt")
+    Trajectory(straight(400, 1.03).poses_se3, 0.2 * np.arange(400)).to_tum(tmp_path / "est.tum")
+    with pytest.raises(SystemExit) as exc:
+        main(["eval", str(tmp_path / "ref.txt"), str(tmp_path / "est.tum"), "--est-format", "tum", "--align", "none",
+              "--tables", str(tmp_path / "t")])
+    assert exc.value.code in (0, None)
+    rows = (tmp_path / "t" / "kitti_translation_pct_per_speed.csv").read_text().splitlines()
+    assert len(rows) == 2 and rows[1].startswith("0-5 m/s,"), rows  # 100 m in 101 frames of 0.2 s: 4.95 m/s
+
+
+def test_segment_speeds_of_associated_poses_with_gaps_follow_their_stamps(tmp_path):
+    """A 12 m/s drive whose estimate lost 40 % of its frames at random, --associate: the speeds counted the associated
+    poses at their median interval (0.1 s), ~1.65x too fast (20-25 m/s); they are the time between the stamps."""
+    from lidarkit.cli import main
+
+    ref = straight(800, 1.2)  # 1.2 m a 0.1 s frame: 12 m/s
+    keep = np.sort(np.random.default_rng(0).choice(800, 480, replace=False))
+    ref.to_tum(tmp_path / "ref.txt")
+    straight(800, 1.2 * 1.03)[keep].to_tum(tmp_path / "est.txt")
+    with pytest.raises(SystemExit) as exc:
+        main(["eval", str(tmp_path / "ref.txt"), str(tmp_path / "est.txt"), "-f", "tum", "--align", "none", "--associate",
+              "--tables", str(tmp_path / "t")])
+    assert exc.value.code in (0, None)
+    rows = (tmp_path / "t" / "kitti_translation_pct_per_speed.csv").read_text().splitlines()
+    assert len(rows) == 2 and rows[1].startswith("10-15 m/s,"), rows
 
 
 def test_latex_cells_escape_what_would_break_or_misprint():
@@ -141,6 +201,33 @@ def test_only_cells_that_print_as_the_best_are_bold():
                      digits=2)
     assert table.best_mask().tolist() == [[True, False, True]]  # 1.00, 1.01, 1.00 (1.01 was bold too)
     assert "| 00 | **1.00** | 1.01 | **1.00** |" in table.to_markdown()
+
+
+def test_value_tables_show_three_significant_figures_of_their_smallest_value(tmp_path):
+    """APE tables printed 3 decimals: fr2/desk ORB-SLAM2's 0.008119 m read 0.008, and two methods at 0.0081 and 0.0084
+    both read 0.008, both bold. The decimals now show the smallest value to 3 figures (one count for the table); a
+    KITTI-scale table keeps its 3 decimals."""
+    from conftest import shared_path
+
+    from lidarkit.cli import main
+
+    tum = {"ORB": 0.008119, "other": 0.008412}
+    table = value_table({("fr2/desk", m): v for m, v in tum.items()} | {("fr1/xyz", "ORB"): 0.01347, ("fr1/xyz", "other"): 0.0210},
+                        "APE", name="ape")
+    markdown = table.to_markdown()
+    assert "| fr2/desk | **0.00812** | 0.00841 |" in markdown and "| fr1/xyz | **0.01347** | 0.02100 |" in markdown, markdown
+    assert "fr2/desk & \\textbf{0.00812} & 0.00841 \\\\" in table.to_latex()
+    kitti = value_table({("00", "orb"): 1.30345, ("00", "sptam"): 3.73849}, "APE", name="ape").to_markdown()
+    assert "| 00 | **1.303** | 3.738 |" in kitti
+    assert "| 00 | **0.0281** | 0.0470 |" in value_table({("00", "orb"): 0.02814, ("00", "sptam"): 0.04701}, "RPE", name="rpe",
+                                                           digits=4).to_markdown()
+    # lidarkit eval --tables on TUM fr2/desk (ORB-SLAM2 keyframes associated with the ground truth)
+    with pytest.raises(SystemExit) as exc:
+        main(["eval", str(shared_path("evo_testdata", "fr2_desk_groundtruth.txt")), str(shared_path("evo_testdata", "fr2_desk_ORB.txt")),
+              "-f", "tum", "--associate", "--tables", str(tmp_path / "t")])
+    assert exc.value.code in (0, None)
+    assert "| fr2_desk_groundtruth | 0.00812 |" in (tmp_path / "t" / "ape_rmse.md").read_text()
+    assert "| fr2_desk_groundtruth | 0.00349 |" in (tmp_path / "t" / "rpe_rmse.md").read_text()
 
 
 def test_sim3_tables_name_the_scale_the_estimate_was_given(tmp_path):

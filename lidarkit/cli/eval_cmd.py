@@ -198,10 +198,13 @@ def _write_outputs(evaluation, ref: Path, est: Path, ref_traj, est_traj, aside: 
         plots.plot_evaluation(evaluation, aside[Path(plot)])
     written: list[Path] = []
     if folder is not None:
-        from lidarkit.eval.tables import SegmentErrors, frame_period_s, publication_tables
+        from lidarkit.eval.tables import SegmentErrors, publication_tables, scored_timestamps_s
 
         key = (ref_traj.name or ref.stem, est_traj.name or est.stem)
-        segments = ({key: SegmentErrors.from_drift(evaluation.drift, frame_period_s=frame_period_s(evaluation.ape.ref))}  # (as paired)
+        # segment speeds from the stamps of the poses as paired: the reference's, else the estimate's (a KITTI ground
+        # truth without times took 0.1 s a frame under a 5 Hz estimate; associated poses with gaps took the median one)
+        stamps = scored_timestamps_s(evaluation.ape.ref, evaluation.ape.est_aligned)
+        segments = ({key: SegmentErrors.from_drift(evaluation.drift, timestamps_s=stamps)}
                     if evaluation.drift is not None else None)
         from lidarkit.eval.ape_rpe import DELTA_UNITS, alignment_label
 

@@ -331,12 +331,9 @@ def checked_delta(delta: float, delta_unit: str) -> tuple[float, str]:
     if delta_unit not in DELTA_UNITS:
         raise ConfigError(f"unknown delta unit {delta_unit!r}; known: {', '.join(DELTA_UNITS)}", source="delta_unit")
     unit = DELTA_UNITS[delta_unit]
-    if isinstance(delta, bool):  # (True read as a delta of 1)
+    if not is_real_number(delta):  # (True read as a delta of 1; "10" was kept as text and broke the report's format)
         raise ConfigError(f"delta must be a number, got {delta!r}", source="delta")
-    try:
-        delta = float(delta)
-    except (TypeError, ValueError):
-        raise ConfigError(f"delta must be a number, got {delta!r}", source="delta") from None
+    delta = float(delta)
     if not np.isfinite(delta) or delta <= 0:
         raise ConfigError(f"delta must be > 0, got {delta}", source="delta")
     if unit == "frames" and not delta.is_integer():

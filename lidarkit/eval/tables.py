@@ -25,7 +25,7 @@ from lidarkit.eval.kitti_drift import DriftResult
 
 #: devkit speed bins of a segment (m/s): the devkit's 2..25 m/s, in coarser steps that a table can hold
 SPEED_BINS_MPS = (0.0, 5.0, 10.0, 15.0, 20.0, 25.0, math.inf)
-#: the devkit's frame period, used to turn a segment's frame count into its duration
+#: the devkit's frame period, used to turn a segment's frame count into its duration when the poses have no stamps
 KITTI_FRAME_PERIOD_S = 0.1
 
 
@@ -36,6 +36,16 @@ def frame_period_s(reference: Any) -> float:
     if stamps is None or len(stamps) < 2:
         return KITTI_FRAME_PERIOD_S
     return float(np.median(np.diff(np.asarray(stamps, dtype=np.float64))))
+
+
+def scored_timestamps_s(*trajectories: Any) -> np.ndarray | None:
+    """``(N,)`` stamps of the poses scored: those of the first of ``trajectories`` that has them (the reference, else
+    the estimate paired with it by index: a TUM estimate against KITTI ground truth without times), None if none has."""
+    for trajectory in trajectories:
+        stamps = getattr(trajectory, "timestamps_s", None)
+        if stamps is not None:
+            return np.asarray(stamps, dtype=np.float64)
+    return None
 
 
 QUANTITIES = {
@@ -57,14 +67,24 @@ class SegmentErrors:
     (other sweep instants) pair the same segments; None in records written before it was kept."""
 
     @classmethod
-    def from_drift(cls, drift: DriftResult, frame_period_s: float = KITTI_FRAME_PERIOD_S) -> SegmentErrors:
-        """From a :class:`DriftResult`; a segment's speed is its length over its duration as the devkit takes it
-        (``(last - first + 1) * frame_period_s``)."""
-        n_frames = (np.asarray(drift.segment_last_frame) - np.asarray(drift.segment_first_frame) + 1).astype(np.float64)
-        speed = drift.segment_length_m / np.maximum(n_frames * frame_period_s, 1e-12)
+    def from_drift(cls, drift: DriftResult, frame_period_s: float = KITTI_FRAME_PERIOD_S, *,
+                   timestamps_s: np.ndarray | None = None) -> SegmentErrors:
+        """From a :class:`DriftResult`; a segment's speed is its length over its duration: with ``timestamps_s``
+        (``(N,)``, those of the poses the drift was scored on) the time from its first to its last pose, as a count of
+        poses misses the frames association left out; without, the devkit's ``(last - first + 1) * frame_period_s``."""
+        first = np.asarray(drift.segment_first_frame, dtype=np.int64)
+        last = np.asarray(drift.segment_last_frame, dtype=np.int64)
+        if timestamps_s is None:
+            duration_s = (last - first + 1).astype(np.float64) * frame_period_s
+        else:
+            stamps = np.asarray(timestamps_s, dtype=np.float64).reshape(-1)
+            if last.size and stamps.size <= last.max():
+                raise EvaluationError(f"{stamps.size} stamps for segments that reach pose {int(last.max())}: give the "
+                                      "stamps of the poses the drift was scored on", source="timestamps_s")
+            duration_s = stamps[last] - stamps[first]
+        speed = drift.segment_length_m / np.maximum(duration_s, 1e-12)
         return cls(np.asarray(drift.segment_length_m, float), np.asarray(drift.segment_translation_pct, float),
-                   np.asarray(drift.segment_rotation_deg_per_100m, float), speed,
-                   np.asarray(drift.segment_first_frame, dtype=np.int64))
+                   np.asarray(drift.segment_rotation_deg_per_100m, float), speed, first)
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> SegmentErrors:
@@ -288,14 +308,32 @@ def per_speed_table(grid: Grid, quantity: str = "translation_pct", bins_mps: Seq
         title=f"KITTI {QUANTITIES[quantity]} per segment speed", corner="speed",
         row_labels=[lab for lab, k in zip(labels, keep) if k], col_labels=methods, values=values[keep],
         digits=2 if quantity == "translation_pct" else 3, name=f"kitti_{quantity}_per_speed",
-        note=f"Segments pooled over the sequences; a segment's speed is its length over (frames + 1) x the frame period (the "
-             f"time stamps' median interval, 0.1 s without them).{left_out}",
+        note=f"Segments pooled over the sequences; a segment's speed is its length over its duration: the time from its "
+             f"first to its last pose's stamp, or without stamps its frames (first and last included) x the frame period "
+             f"(0.1 s, as the KITTI devkit).{left_out}",
     )
+
+
+#: significant figures a value table shows of its smallest value (APE 0.013470 m printed 0.013 at 3 decimals, and
+#: 0.0081 and 0.0084 both printed 0.008, both bold)
+VALUE_SIGNIFICANT_FIGURES = 3
+
+
+def decimals_for(values: np.ndarray, at_least: int, significant: int = VALUE_SIGNIFICANT_FIGURES) -> int:
+    """Decimals, at least ``at_least``, that show the smallest finite non-zero ``|value|`` with ``significant`` figures:
+    one count for the whole table, so that its columns line up."""
+    magnitudes = np.abs(np.asarray(values, dtype=np.float64))
+    magnitudes = magnitudes[np.isfinite(magnitudes) & (magnitudes > 0)]
+    if not magnitudes.size:
+        return at_least
+    needed = significant - 1 - math.floor(math.log10(float(magnitudes.min())))
+    return int(min(max(at_least, needed), 15))  # (15: what a float64 holds)
 
 
 def value_table(grid: Mapping[tuple[str, str], float], title: str, *, name: str, digits: int = 3,
                 higher_is_better: bool = False, mean_label: str = "Mean") -> PubTable:
-    """Sequences x methods table of one scalar per cell (APE RMSE, RPE RMSE, ...) with the mean over sequences."""
+    """Sequences x methods table of one scalar per cell (APE RMSE, RPE RMSE, ...) with the mean over sequences;
+    ``digits`` decimals, more where the smallest value needs them for :data:`VALUE_SIGNIFICANT_FIGURES` figures."""
     sequences, methods = _axes(grid)
     values = np.full((len(sequences) + 1, len(methods)), np.nan)
     for (seq, method), v in grid.items():
@@ -304,7 +342,8 @@ def value_table(grid: Mapping[tuple[str, str], float], title: str, *, name: str,
     complete = np.isfinite(body).all(axis=1)
     values[-1] = body[complete].mean(axis=0) if complete.any() else np.nan
     return PubTable(title=title, corner="sequence", row_labels=[*sequences, mean_label], col_labels=methods,
-                    values=values, digits=digits, n_summary_rows=1, higher_is_better=higher_is_better, name=name,
+                    values=values, digits=decimals_for(values, digits), n_summary_rows=1,
+                    higher_is_better=higher_is_better, name=name,
                     note=f"{mean_label}: unweighted mean over the sequences every method completed.")
 
 
