@@ -11,7 +11,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from lidarkit.cli.app import app, stderr, stdout
-from lidarkit.errors import ConfigError
+from lidarkit.errors import ConfigError, LidarKitError
 
 EXECUTOR_HELP = "serial | process (local process pool sized to the machine) | dask (--address, or a local Dask cluster)"
 PROGRESS_HELP = "Progress bar on stderr (a line every tenth of the jobs where stderr is no terminal)."
@@ -267,8 +267,13 @@ def bench(
         return
     summary = run_with_progress(suite, out, executor=executor, workers=workers, address=address, force=force,
                                 progress=progress)
-    # the report is written before anything is printed (a stdout that refuses the summary lost it)
-    built = write_report(out, {job.key() for job in suite.jobs}) if report else None
+    # the report is written before anything is printed (a stdout that refuses the summary lost it); one that cannot be
+    # written still leaves the jobs' summary above its error
+    try:
+        built = write_report(out, {job.key() for job in suite.jobs}) if report else None
+    except LidarKitError:
+        print_run_summary(summary)
+        raise
     print_run_summary(summary)
     if built is not None:
         if kitti:
