@@ -125,3 +125,24 @@ def test_a_baseline_pinned_before_init_existed_is_checked_under_its_default(tmp_
     assert not any(line.startswith("protocol changed") for line in lines), lines
     assert any(line.startswith("note: ") and "the baseline pinned no task option init (recorded before the task had it)"
                in line for line in lines), lines
+
+
+def test_a_carmen_job_whose_frames_cover_no_relation_warns_why_it_has_no_accuracy_metric(tmp_path):
+    """ACES frames before its first relation: the job was "ok" with no accuracy metric, and why was only in its JSON's
+    ``info.odometry_metrics.ground_truth_note``; it is now one of the job's warnings, listed in the report."""
+    from lidarkit.bench.report import build_report
+
+    suite = load_suite(write_suite(tmp_path, f'{{kind: carmen, path: "{aces_log()}", name: ACES}}', '{frames: "0:3"}'))
+    records = []
+    run_suite(suite, tmp_path / "out", executor="serial", on_result=lambda job, record: records.append(record))
+    (record,) = records
+    assert record["status"] == "ok" and "relation_trans_mean_m" not in record["metrics"]
+    note = record["info"]["odometry_metrics"]["ground_truth_note"]
+    assert note.startswith("relation ground truth, none scored over these frames: no relation has estimated poses "
+                           "within 0.01 s of both its time stamps (estimate spans ")
+    method = "vanilla(max_correspondence_distance_m=0.5, planar=True)"
+    warning = f"WARNING lidarkit.bench.tasks.odometry: {method} on ACES: {note}; the job has no accuracy metric"
+    assert warning in record["warnings"]
+    report = build_report(tmp_path / "out", plots=False)
+    assert (f"odometry | aces_odo | ACES | {method} | seed 0", warning) in report.warnings
+    assert f"- odometry | aces_odo | ACES | {method} | seed 0: {warning}" in report.markdown_path.read_text()

@@ -519,3 +519,23 @@ def test_register_task_refuses_a_class_that_is_not_a_task(monkeypatch):
         assert str(info.value) == f"register_task('xx'): decorates a subclass of lidarkit.bench.tasks.Task, got {what}"
     assert bench_tasks.available_tasks() == ["icp_pair", "odometry", "pf", "selftest", "vo"]
     assert not hasattr(NotATask, "name")
+
+
+def test_bench_kitti_takes_sequence_0_as_00_as_the_baseline_does(tmp_path, capsys):
+    """`lidarkit bench kitti --data ROOT --sequences 0` said "none of the sequences 0 has velodyne/ scans and
+    ground-truth poses" beside ROOT/sequences/00 (a suite's ``sequence: 0`` and a baseline read it as 00)."""
+    from lidarkit.bench.kitti import kitti_sequences, kitti_suite
+    from lidarkit.cli import main
+
+    root = shared_path("kitti_odometry")
+    assert kitti_sequences(root, ["0"]) == ["00"]
+    suite = kitti_suite(root, None, methods=["vanilla"], sequences=["0"])
+    assert [(job.dataset_name, job.dataset["path"]) for job in suite.jobs] == [("00", str(root.resolve() / "sequences" / "00"))]
+    with pytest.raises(ConfigError, match="00 given twice"):  # (one sequence, given twice)
+        kitti_suite(root, None, methods=["vanilla"], sequences=["0", "00"])
+    with pytest.raises(SystemExit) as exc:
+        main(["bench", "kitti", "--data", str(root), "--sequences", "0", "--methods", "vanilla", "--dry-run",
+              "--out", str(tmp_path / "o")])
+    out = capsys.readouterr()
+    assert exc.value.code in (0, None), out.err
+    assert "kitti: 1 jobs" in out.out and not (tmp_path / "o").exists()

@@ -26,12 +26,21 @@ log = logging.getLogger(__name__)
 KITTI_SUITE = Path(__file__).resolve().parent / "suites" / "kitti.yaml"
 
 
+def sequence_name(seq: str) -> str:
+    """A KITTI sequence as its folder is named: a number in two digits at least (``0`` is ``00``, as a suite's
+    ``sequence: 0`` and a baseline read it: ``--sequences 0`` found no folder ``sequences/0``); other names as given."""
+    seq = str(seq).strip()
+    return f"{int(seq):02d}" if seq.isdigit() else seq
+
+
 def kitti_sequences(root: str | os.PathLike, wanted: Sequence[str]) -> list[str]:
-    """The sequences of ``wanted`` that ``root`` holds with scans and ground truth (DataError when none)."""
+    """The sequences of ``wanted`` (:func:`sequence_name`: ``0`` is ``00``) that ``root`` holds with scans and ground
+    truth, by their folder names (DataError when none)."""
     root = Path(root)
     seq_dir = root / "sequences"
     if not seq_dir.is_dir():
         raise DataError("not a KITTI odometry root (no sequences/ folder)", source=root)
+    wanted = [sequence_name(seq) for seq in wanted]
     found = []
     for seq in wanted:
         folder = seq_dir / seq
@@ -62,11 +71,12 @@ def kitti_suite(
     from lidarkit.errors import ConfigError
     from lidarkit.registration import available_icp
 
-    _refuse_repeats(sequences or (), "--sequences")
+    sequences = [sequence_name(seq) for seq in sequences or ()]  # (--sequences 0 is 00, as the baseline reads it)
+    _refuse_repeats(sequences, "--sequences")
     _refuse_repeats(methods or (), "--methods")
     root = Path(root).expanduser().resolve()
     spec = yaml.safe_load(Path(suite_path).read_text(encoding="utf-8"))
-    wanted = list(sequences) if sequences else [str(s) for s in spec.pop("sequences")]
+    wanted = sequences or [sequence_name(s) for s in spec.pop("sequences")]
     spec.pop("sequences", None)
     present = kitti_sequences(root, wanted)
     missing = [seq for seq in wanted if seq not in present]
@@ -113,4 +123,4 @@ def paper_table(report) -> str:
     return ""
 
 
-__all__ = ["KITTI_SUITE", "kitti_sequences", "kitti_suite", "paper_table"]
+__all__ = ["KITTI_SUITE", "kitti_sequences", "kitti_suite", "paper_table", "sequence_name"]

@@ -52,6 +52,7 @@ class _Grids:
     seeds_note: str
     rpe_step: dict[str, str]  # dataset -> "frame" | "selected frame" (the step of its RPE)
     selection: dict[str, str]  # dataset -> its frame selection as the suite wrote it ('' for every frame)
+    steps: dict[str, tuple[int, ...] | None]  # dataset -> the dataset frames between its selected frames (step_pattern)
     not_registered: dict[tuple[str, str], str]  # runs most of whose frames did not register -> what to say of them
 
 
@@ -80,6 +81,7 @@ def _grids(records: list[dict[str, Any]]) -> _Grids:
                         for dataset in sorted(common) if not common[dataset]])
     rpe_step: dict[str, str] = {}
     selection: dict[str, str] = {}
+    steps: dict[str, tuple[int, ...] | None] = {}
     registration: dict[tuple[str, str], list[tuple[int, int]]] = defaultdict(list)  # (not registered, registrations)
     for r in ok:
         job = Job.from_spec(r["job"])
@@ -99,13 +101,14 @@ def _grids(records: list[dict[str, Any]]) -> _Grids:
         if skips or key[0] not in rpe_step:
             rpe_step[key[0]] = "selected frame" if skips else "frame"
         selection.setdefault(key[0], _selection_text(job.options.get("frames")))
+        steps.setdefault(key[0], step_pattern(job.options.get("frames")))
         if _has_value(metrics.get("n_not_converged")) and _has_value(metrics.get("n_frames")):
             registration[key].append((int(metrics["n_not_converged"]), max(int(metrics["n_frames"]) - 1, 0)))
     merged = {k: SegmentErrors(*(np.concatenate([getattr(s, f) for s in v]) for f in
                                  ("length_m", "translation_pct", "rotation_deg_per_100m", "speed_mps")))
               for k, v in segments.items()}
     return _Grids(merged, {k: float(np.mean(v)) for k, v in ape.items()}, {k: float(np.mean(v)) for k, v in rpe.items()},
-                  note, rpe_step, selection, _not_registered(registration))
+                  note, rpe_step, selection, steps, _not_registered(registration))
 
 
 def _not_registered(registration: dict[tuple[str, str], list[tuple[int, int]]]) -> dict[tuple[str, str], str]:
@@ -134,6 +137,36 @@ def _selection_text(frames: Any) -> str:
     return str(frames)
 
 
+def step_pattern(frames: Any) -> tuple[int, ...] | None:
+    """The dataset frames between consecutive frames of a selection as the suite wrote it: one number for a constant
+    step (``"0:10:3"`` and ``[0, 3, 6]``: ``(3,)``; every frame: ``(1,)``), each step otherwise (``[0, 3, 4, 9]``:
+    ``(3, 1, 5)``); None for a selection not read here. RPEs per selected frame of two patterns are over other steps."""
+    if frames is None:
+        return (1,)
+    if isinstance(frames, str):
+        parts = frames.split(":")
+        if len(parts) not in (2, 3):
+            return None
+        step = parts[2].strip() if len(parts) == 3 else ""
+        if not step:
+            return (1,)
+        return (int(step),) if step.isdigit() else None
+    if isinstance(frames, list) and len(frames) > 1 and all(isinstance(f, int) for f in frames):
+        diffs = tuple(int(d) for d in np.diff(frames))
+        return diffs[:1] if len(set(diffs)) == 1 else diffs
+    return None
+
+
+def _pattern_text(steps: tuple[int, ...] | None) -> str:
+    """A :func:`step_pattern` in words: "a step of 3 frames", "steps of 3, 1, 5 frames"."""
+    if steps is None:
+        return "steps not known"
+    if len(steps) == 1:
+        return f"a step of {steps[0]} frame{'s' * (steps[0] != 1)}"
+    shown = ", ".join(str(d) for d in steps[:8]) + (", ..." if len(steps) > 8 else "")
+    return f"steps of {shown} frames"
+
+
 def _has_value(x: Any) -> bool:
     """A finite number: NaN and inf are no value, as in report.csv (one NaN seed made a method's mean NaN, shown as
     "–", and the other method bold)."""
@@ -156,8 +189,9 @@ def reference_comparisons(records: list[dict[str, Any]], reference: str = REFERE
     """Paired Wilcoxon comparisons of the reference method with every other method, per dataset.
 
     Units: the common seeds when they are enough for the test to reach p < 0.05 (``min_units``: 6; 5 give 0.0625 at
-    best, and their "no significant difference" could not be otherwise), their KITTI drift, else APE RMSE (``lidarkit
-    compare`` pairs the same units and defaults to the report's headline metric); with fewer, the KITTI segments of
+    best, and their "no significant difference" could not be otherwise), their KITTI drift, else APE RMSE (the first
+    with a value on both sides of every common seed, else of enough of them; ``lidarkit compare`` pairs the same units
+    and defaults to the report's headline metric); with fewer, the KITTI segments of
     every common seed (same ground truth, so the same segments), with a note that they overlap (one starts every 10
     frames: not independent, the p-value is optimistic; the report said "kiss better" where compare, over the 2 seeds,
     said no difference); a dataset without enough units is left out, and why is appended to ``not_compared`` (the
@@ -167,8 +201,10 @@ def reference_comparisons(records: list[dict[str, Any]], reference: str = REFERE
     from lidarkit.errors import LidarKitError
     from lidarkit.eval.statistics import paired_test
 
-    # the label names the APE's alignment as every APE label does ("APE RMSE m" read as the headline SE(3)-aligned APE)
-    ape_name = f"APE RMSE ({METRIC_ALIGNMENT_BY_NAME['ape_rmse_m']}) m"
+    # the metrics a comparison over seeds pairs, in the order it prefers them, by their units' label; the label names
+    # the APE's alignment as every APE label does ("APE RMSE m" read as the headline SE(3)-aligned APE)
+    seed_metrics = {"drift_translation_pct": "KITTI drift %",
+                    "ape_rmse_m": f"APE RMSE ({METRIC_ALIGNMENT_BY_NAME['ape_rmse_m']}) m"}
 
     per: dict[str, dict[str, dict[int, dict[str, Any]]]] = defaultdict(lambda: defaultdict(dict))
     label = odometry_labels(records)
@@ -189,16 +225,18 @@ def reference_comparisons(records: list[dict[str, Any]], reference: str = REFERE
             segs = [((ref[s].get("series") or {}).get("drift_segments"), (runs[s].get("series") or {}).get("drift_segments"))
                     for s in seeds]
             try:
-                per_seed = next(((metric, name) for metric, name in (("drift_translation_pct", "KITTI drift %"),
-                                                                      ("ape_rmse_m", ape_name))
-                                 if all(ref[s]["metrics"].get(metric) is not None and runs[s]["metrics"].get(metric) is not None
-                                        for s in seeds)), None)
-                valued = [s for s in seeds if per_seed is not None
-                          and all(_has_value(side[s]["metrics"][per_seed[0]]) for side in (ref, runs))]
-                if len(valued) >= min_units(DEFAULT_ALPHA):
-                    va = [ref[s]["metrics"][per_seed[0]] for s in valued]
-                    vb = [runs[s]["metrics"][per_seed[0]] for s in valued]
-                    result = paired_test(va, vb, name_a=reference, name_b=label, metric=per_seed[1], pairing="seed")
+                # the seeds with a value on both sides, per metric (a task's NaN is written as null: no value, as a
+                # metric the run did not report); the first metric with one on every seed, else on enough of them
+                valued_of = {metric: [s for s in seeds if all(_has_value(side[s]["metrics"].get(metric))
+                                                              for side in (ref, runs))] for metric in seed_metrics}
+                enough = [m for m in seed_metrics if len(valued_of[m]) >= min_units(DEFAULT_ALPHA)]
+                metric = next((m for m in enough if len(valued_of[m]) == len(seeds)), enough[0] if enough else None)
+                if metric is not None:
+                    valued = valued_of[metric]
+                    va = [ref[s]["metrics"][metric] for s in valued]
+                    vb = [runs[s]["metrics"][metric] for s in valued]
+                    result = paired_test(va, vb, name_a=reference, name_b=label, metric=seed_metrics[metric],
+                                         pairing="seed")
                     notes = [f"seed(s) {_seed_list(set(seeds) - set(valued))} left out: no value (NaN, inf) on one side"
                              ] if len(valued) < len(seeds) else []
                 elif seeds and (paired := _paired_segments(segs)) is not None:
@@ -209,8 +247,7 @@ def reference_comparisons(records: list[dict[str, Any]], reference: str = REFERE
                     notes += [f"the {len(seeds)} seeds ran the same data (each side's segments alike on every seed): "
                               "their segments counted once"] if once else []
                 else:
-                    why = (f"{len(seeds)} common seed(s) (a comparison over seeds needs {min_units(DEFAULT_ALPHA)})"
-                           + (" and no KITTI segments to pair (a path under 100 m)" if seeds else ""))
+                    why = _no_comparison_reason(ref, runs, seeds, valued_of)
                     log.info("no paired comparison %s vs %s on %s: %s", reference, label, dataset, why)
                     if not_compared is not None:
                         not_compared.append(f"{dataset}, {reference} vs {label}: {why}")
@@ -225,6 +262,25 @@ def reference_comparisons(records: list[dict[str, Any]], reference: str = REFERE
                 if not_compared is not None:
                     not_compared.append(f"{dataset}, {reference} vs {label}: {err}")
     return out
+
+
+def _no_comparison_reason(ref: dict[int, dict[str, Any]], runs: dict[int, dict[str, Any]], seeds: list[int],
+                          valued_of: dict[str, list[int]]) -> str:
+    """Why two methods' runs on one dataset were not compared: too few common seeds with a value on both sides of a
+    metric a comparison over seeds pairs (``valued_of``: metric -> those seeds; the seeds without one named) and no
+    KITTI segments, or that the dataset has no APE nor KITTI drift (a CARMEN log scored by its relations was said to
+    have "6 common seed(s) (a comparison over seeds needs 6)")."""
+    needs = f"a comparison over seeds needs {min_units(DEFAULT_ALPHA)}"
+    if not seeds:
+        return f"0 common seed(s) ({needs})"
+    if not any(m in side[s]["metrics"] for m in valued_of for side in (ref, runs) for s in seeds):
+        relations = any("relation_trans_mean_m" in side[s]["metrics"] for side in (ref, runs) for s in seeds)
+        return "no APE or KITTI drift on this dataset" + (" (relation ground truth only)" if relations else "")
+    valued = max(valued_of.values(), key=len)  # (the metric with a value on the most seeds; the first of equals)
+    without = sorted(set(seeds) - set(valued))
+    counted = (f"{len(valued)} common seed(s) with a value (seed(s) {_seed_list(without)} without one on a side; {needs})"
+               if without else f"{len(seeds)} common seed(s) ({needs})")
+    return counted + " and no KITTI segments to pair (a path under 100 m)"
 
 
 def _paired_segments(segs: list[tuple[Any, Any]]) -> tuple[np.ndarray, np.ndarray, int, bool] | None:
@@ -307,12 +363,16 @@ def remove_stale_tables(out_dir: Path, pub: Publication) -> None:
 
 
 def _marked_value_table(grid: dict[tuple[str, str], float], not_registered: dict[tuple[str, str], str], title: str, *,
-                        name: str, digits: int) -> PubTable:
+                        name: str, digits: int, no_mean: str = "") -> PubTable:
     """:func:`value_table` of ``grid`` whose cells of runs that did not register carry a mark, are not set bold, and
-    leave their dataset out of the Mean (as a method without a value there does: the Mean is over the same data)."""
+    leave their dataset out of the Mean (as a method without a value there does: the Mean is over the same data);
+    ``no_mean``: why the table has no Mean row (its note says it instead)."""
     from lidarkit.eval.tables import value_table
 
     table = value_table({k: np.nan if k in not_registered else v for k, v in grid.items()}, title, name=name, digits=digits)
+    if no_mean:
+        table = dataclasses.replace(table, row_labels=table.row_labels[:-1], values=table.values[:-1], n_summary_rows=0,
+                                    note=f"No Mean: {no_mean}.")
     flagged = sorted(((table.row_labels.index(d), table.col_labels.index(m)), why)
                      for (d, m), why in not_registered.items() if (d, m) in grid)
     if not flagged:
@@ -324,7 +384,7 @@ def _marked_value_table(grid: dict[tuple[str, str], float], not_registered: dict
         marks[(i, j)] = _mark(k)
         notes.append(f"({marks[(i, j)]}) {table.row_labels[i]}, {table.col_labels[j]}: {why}")
     note = (f"{table.note} {'; '.join(notes)}. A frame that does not register takes the fallback motion's pose: a "
-            "marked cell is not set bold and its sequence is left out of the Mean.")
+            "marked cell is not set bold" + ("." if no_mean else " and its sequence is left out of the Mean."))
     fields = {f.name: getattr(table, f.name) for f in dataclasses.fields(PubTable)}
     return MarkedTable(**{**fields, "values": values, "note": note}, marks=marks)
 
@@ -338,7 +398,8 @@ def _mark(k: int) -> str:
 def _rpe_tables(grids: _Grids) -> list[PubTable]:
     """One RPE table per step (``rpe_rmse``: one frame; ``rpe_rmse_selected_frame``: one selected frame of a selection
     that skips frames, its rows marked ``*`` and their selections named): one table averaged a 1-frame and a
-    2-frame RPE into its Mean."""
+    2-frame RPE into its Mean. Selections that step differently (:func:`step_pattern`) have no Mean, and the note says
+    why."""
     out = []
     for step, name in RPE_TABLES.items():
         rows = {d for d, s in grids.rpe_step.items() if s == step}
@@ -346,9 +407,13 @@ def _rpe_tables(grids: _Grids) -> list[PubTable]:
         if not rpe:
             continue
         shown = {d: f"{d} *" if step == "selected frame" else d for d in rows}
+        # (selections of other steps, frames 0:10:3 and [0, 3, 4, 9], were averaged into one Mean per selected frame)
+        patterns = {d: grids.steps.get(d) for d in sorted({d for d, _ in rpe})} if step == "selected frame" else {}
+        no_mean = ("the selections step differently (" + "; ".join(f"{d}: {_pattern_text(p)}" for d, p in patterns.items())
+                   + "), and a Mean is never over two steps") if len(set(patterns.values())) > 1 else ""
         table = _marked_value_table({(shown[d], m): v for (d, m), v in rpe.items()},
                                     {(shown[d], m): why for (d, m), why in grids.not_registered.items() if d in rows},
-                                    f"RPE translation RMSE (m per {step})", name=name, digits=4)
+                                    f"RPE translation RMSE (m per {step})", name=name, digits=4, no_mean=no_mean)
         if step == "selected frame":
             selections = "; ".join(f"{d}: frames {grids.selection[d]}" for d in sorted(rows)
                                    if grids.selection.get(d) and f"frames={grids.selection[d]}" not in d)  # (said once)

@@ -600,24 +600,53 @@ def _rerun_note(row: Row) -> str:
     return f" ({row.n_rerun_failed} kept after a failed rerun)" if row.n_rerun_failed else ""
 
 
-def pivot(table: TaskTable, metric: str) -> tuple[list[str], list[list[str]]]:
-    """Methods x datasets for one metric (``experiment: method`` rows, dataset columns, mean ± std cells)."""
+def pivot(table: TaskTable, metric: str, datasets: list[str] | None = None) -> tuple[list[str], list[list[str]]]:
+    """Methods x datasets for one metric (``experiment: method`` rows, dataset columns, mean ± std cells), over
+    ``datasets`` (default: every dataset of the table)."""
     info = next((m for m in table.metrics if m.name == metric), MetricInfo(metric, metric))
-    datasets = sorted({r.dataset for r in table.rows})
+    datasets = sorted({r.dataset for r in table.rows} if datasets is None else datasets)
     cells: dict[str, dict[str, str]] = {}
     one_experiment = len({r.experiment for r in table.rows}) == 1  # no prefix repeated on every row
     for r in table.rows:
+        if r.dataset not in datasets:
+            continue
         label = r.method if one_experiment else f"{r.experiment}: {r.method}"
         cells.setdefault(label, {})[r.dataset] = format_stat(r.stats[metric]) + _failed_note(r, metric) + _alignment_note(r, info)
     header = ["method"] + datasets
     return header, [[label] + [row.get(d, "") for d in datasets] for label, row in cells.items()]
 
 
-def _pivot_metrics(table: TaskTable) -> list[MetricInfo]:
-    """The first accuracy metric and the first speed metric: the methods x datasets views."""
-    first = [m for m in table.metrics if m.kind == "accuracy"][:1]
+def headline_metrics(table: TaskTable) -> dict[str, MetricInfo]:
+    """Each dataset's headline: the first accuracy metric, in the task's order, with a value on that dataset's rows (a
+    CARMEN log scored by its relations beside a KITTI sequence scored by APE: one headline for the whole table, the
+    APE, left the log with no Summary row and a column of dashes); a dataset with no value of any takes the table's
+    first accuracy metric. {} for a task without accuracy metrics."""
+    accuracy = [m for m in table.metrics if m.kind == "accuracy"]
+    if not accuracy:
+        return {}
+    rows_of: dict[str, list[Row]] = defaultdict(list)
+    for r in table.rows:
+        rows_of[r.dataset].append(r)
+    return {dataset: next((m for m in accuracy if any(r.stats[m.name][2] > 0 for r in rows)), accuracy[0])
+            for dataset, rows in rows_of.items()}
+
+
+def _pivot_views(table: TaskTable) -> list[tuple[MetricInfo, list[str] | None]]:
+    """The methods x datasets views: the headline accuracy metric (one view per headline, over the datasets it heads,
+    where datasets have different ones; ``None``: every dataset) and the first speed metric."""
+    headlines = headline_metrics(table)
+    distinct = [m for m in table.metrics if m.name in {h.name for h in headlines.values()}]
+    if len(distinct) > 1:
+        first = [(m, sorted(d for d, h in headlines.items() if h.name == m.name)) for m in distinct]
+    else:
+        first = [(m, None) for m in [m for m in table.metrics if m.kind == "accuracy"][:1]]
     speed = [m for m in table.metrics if m.kind == "speed" and m.name != "runtime_s"][:1]
-    return first + (speed or [m for m in table.metrics if m.name == "runtime_s"])
+    return first + [(m, None) for m in (speed or [m for m in table.metrics if m.name == "runtime_s"])]
+
+
+def _pivot_metrics(table: TaskTable) -> list[MetricInfo]:
+    """The metrics of the methods x datasets views (:func:`_pivot_views`): the headline(s), then a speed metric."""
+    return [m for m, _ in _pivot_views(table)]
 
 
 def coverage_text(report: Report) -> str:
@@ -671,8 +700,8 @@ def _markdown(report: Report, title: str) -> str:
         out += ["## Summary", "", markdown_table(header, rows)]
     for table in report.tables:
         out += [f"## {table.task}", ""]
-        for m in _pivot_metrics(table):
-            header, rows = pivot(table, m.name)
+        for m, datasets in _pivot_views(table):
+            header, rows = pivot(table, m.name, datasets)
             out += [f"{m.label}, methods x datasets:", "", markdown_table(header, rows)]
         header, rows = _table_rows(table)
         out += ["All metrics:", "", markdown_table(header, rows)]
@@ -780,21 +809,22 @@ def _figure_html(png: bytes, alt: str, caption: str) -> str:
 
 
 def summary_rows(report: Report) -> tuple[list[str], list[list[str]]]:
-    """The page's first table: per task and dataset, the best method on the task's headline accuracy metric (per
-    alignment where the rows state different ones: an SE(3)- and a Sim(3)-aligned APE are not ranked together), and how
-    many methods were ranked: those with a value (it counted a sleep and a failing method with none)."""
+    """The page's first table: per task and dataset, the best method on the dataset's headline accuracy metric
+    (:func:`headline_metrics`; per alignment where the rows state different ones: an SE(3)- and a Sim(3)-aligned APE
+    are not ranked together), and how many methods were ranked: those with a value (it counted a sleep and a failing
+    method with none)."""
     header = ["section", "dataset", "headline metric", "best method", "value (mean ± std)", "methods ranked"]
     rows = []
     for table in report.tables:
-        metric = next((m for m in table.metrics if m.kind == "accuracy"), None)
-        if metric is None:
-            continue
-        better_higher = metric.name in table.higher_is_better or _better_higher(table.task, metric.name)
+        headlines = headline_metrics(table)
         groups: dict[tuple[str, str], list[Row]] = defaultdict(list)
         for r in table.rows:
-            if r.stats[metric.name][2] > 0:
+            metric = headlines.get(r.dataset)
+            if metric is not None and r.stats[metric.name][2] > 0:
                 groups[(r.dataset, r.alignment.get(metric.name, "") if metric.by_alignment else "")].append(r)
         for (dataset, alignment), candidates in sorted(groups.items()):
+            metric = headlines[dataset]
+            better_higher = metric.name in table.higher_is_better or _better_higher(table.task, metric.name)
             # a method that failed on some seeds is not the best over one lucky seed: complete rows come first (a seed
             # with no value, NaN, counts as a failed one); a seed not run yet is no failure: rows are ranked on their
             # means over the seeds they share (a method whose best seed was not run yet lost to a worse complete one)
@@ -877,24 +907,28 @@ def _short_label(row: Row, table: TaskTable) -> str:
 
 
 def statistics_rows(table: TaskTable) -> tuple[list[str], list[list[str]]]:
-    """Per (dataset, method): the headline metric's n, mean, std, median and 95 % CI of the mean over seeds, the
-    header naming the interval's method (Student-t below 10 seeds, the seeded bootstrap from 10)."""
+    """Per (dataset, method): the dataset's headline metric's n, mean, std, median and 95 % CI of the mean over seeds
+    (a ``headline metric`` column after the dataset where datasets have different ones), the header naming the
+    interval's method (Student-t below 10 seeds, the seeded bootstrap from 10)."""
     from lidarkit.eval.statistics import ci_methods
 
-    metric = next((m for m in table.metrics if m.kind == "accuracy"), None)
-    header = ["dataset", "method", "n", "mean", "std", "median", "95 % CI"]
-    if metric is None:
+    headlines = headline_metrics(table)
+    several = len({m.name for m in headlines.values()}) > 1
+    header = ["dataset", *(["headline metric"] if several else []), "method", "n", "mean", "std", "median", "95 % CI"]
+    if not headlines:
         return header, []
-    method = ci_methods(r.summaries.get(metric.name) for r in table.rows)
+    method = ci_methods(r.summaries.get(headlines[r.dataset].name) for r in table.rows)
     header[-1] = f"95 % CI ({method})" if method else header[-1]
     rows = []
     for r in table.rows:
+        metric = headlines[r.dataset]
         s = r.summaries.get(metric.name)
         if s is None or s.n == 0:
             continue
         std = r.stats[metric.name][1]  # (the cells' std: seeds equal up to round-off have none)
-        rows.append([r.dataset, _short_label(r, table), str(s.n), _fmt(s.mean), _fmt(std) if s.n > 1 else "–",
-                     _fmt(s.median), f"[{_fmt(s.ci_low)}, {_fmt(s.ci_high)}]" if s.n > 1 else "–"])
+        rows.append([r.dataset, *([metric.label] if several else []), _short_label(r, table), str(s.n), _fmt(s.mean),
+                     _fmt(std) if s.n > 1 else "–", _fmt(s.median),
+                     f"[{_fmt(s.ci_low)}, {_fmt(s.ci_high)}]" if s.n > 1 else "–"])
     return header, rows
 
 
@@ -926,12 +960,14 @@ def _html(report: Report, title: str) -> str:
         description = _task_description(table.task)
         if description:
             parts.append(f"<p>{e(description)}</p>")
-        for m in _pivot_metrics(table):
-            header, rows = pivot(table, m.name)
+        for m, datasets in _pivot_views(table):
+            header, rows = pivot(table, m.name, datasets)
             parts.append(_table_html(header, rows, caption=f"{m.label}: methods x datasets"))
         header, rows = statistics_rows(table)
-        if rows and any(r[2] not in ("0", "1") for r in rows):
-            parts.append(_table_html(header, rows, n_left=2, caption="Statistics over seeds of the headline metric"))
+        n_column = header.index("n")
+        if rows and any(r[n_column] not in ("0", "1") for r in rows):
+            parts.append(_table_html(header, rows, n_left=n_column, caption="Statistics over seeds of the headline "
+                                     + ("metric" if n_column == 2 else "metric of each dataset")))
         header, rows = _table_rows(table)
         parts.append("<details><summary>All metrics</summary>")
         parts.append(_table_html(header, rows, n_left=4))

@@ -14,6 +14,7 @@ truth and no poses (a CARMEN log's ``.relations``) is scored by the relations me
 
 from __future__ import annotations
 
+import logging
 from typing import Any
 
 import numpy as np
@@ -25,6 +26,8 @@ from lidarkit.bench.tasks import Metric, Task, TaskOutput, import_module_for_tas
 from lidarkit.bench.tasks._datasets import (check_reader_options, open_dataset_spec, options_model, require_kitti_data,
                                              scan_count_at_load, seeded_dataset)
 from lidarkit.errors import ConfigError, DataError, EvaluationError
+
+log = logging.getLogger(__name__)
 
 MAX_SERIES_POINTS = 2000
 
@@ -301,5 +304,8 @@ def run_odometry_job(job: Job) -> tuple[Any, TaskOutput]:
              f"{relations['n_relations']} scored (metrics relation_trans_mean_m, relation_rot_mean_deg)"}
     elif unscored is not None:
         m = {**m, "ground_truth_note": unscored}
+        # (said in the job's warnings and so the report's: the job was "ok" with no accuracy metric, and why was only
+        # in its JSON's info)
+        log.warning("%s on %s: %s; the job has no accuracy metric", job.method_label, job.dataset_name, unscored)
     info = {"odometry_metrics": m, "config": result.config, "metric_alignment": metric_alignment(np.asarray(result.frames))}
     return result, TaskOutput(metrics=metrics, series=series, info=info)
