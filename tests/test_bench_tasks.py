@@ -539,3 +539,21 @@ def test_bench_kitti_takes_sequence_0_as_00_as_the_baseline_does(tmp_path, capsy
     out = capsys.readouterr()
     assert exc.value.code in (0, None), out.err
     assert "kitti: 1 jobs" in out.out and not (tmp_path / "o").exists()
+
+
+def test_bench_segment_speeds_are_timed_by_the_stamps_across_a_gap():
+    """A bench odometry job's per-segment speeds counted poses x the median interval: a run whose ground truth skips
+    half its stamps (a gap) put a 10 m/s drive at ~15 m/s; they are timed by the stamps, as `lidarkit eval --tables`."""
+    from types import SimpleNamespace
+
+    from lidarkit.bench.tasks.odometry import drift_segments
+    from lidarkit.trajectory import Trajectory
+
+    stamps = np.r_[np.arange(0.0, 15.0, 0.1), np.arange(30.0, 45.0, 0.1)]  # 10 Hz, 15 s missing in the middle
+    poses = np.tile(np.eye(4), (len(stamps), 1, 1))
+    poses[:, 0, 3] = 10.0 * stamps  # 10 m/s along x
+    estimate = poses.copy()
+    estimate[:, 0, 3] *= 1.01
+    result = SimpleNamespace(ground_truth=Trajectory(poses, stamps), trajectory=Trajectory(estimate, stamps))
+    speeds = np.array(drift_segments(result)["speed_mps"])
+    assert len(speeds) and np.all(speeds <= 10.0 + 1e-6) and np.median(speeds) == pytest.approx(10.0, rel=0.02), speeds
