@@ -81,3 +81,19 @@ def test_a_section_of_one_kind_of_dataset_reports_as_before(tmp_path):
         md = report.markdown_path.read_text()
         assert md.count("methods x datasets:") == 2 and f"{label}, methods x datasets:" in md
         assert "Statistics over seeds of the headline metric</caption>" in report.html_path.read_text()
+
+
+def test_the_terminal_summary_shows_each_datasets_headline(tmp_path):
+    """`lidarkit bench`'s summary printed the section's first two accuracy metrics (APE): the ACES rows were dashes."""
+    from rich.console import Console
+
+    from lidarkit.cli.bench_cmd import summary_table
+
+    write_results(tmp_path)
+    (table,) = summary_table(build_report(tmp_path, plots=False))
+    console = Console(width=250, record=True)
+    console.print(table)
+    lines = console.export_text().splitlines()
+    assert "relations: mean trans. error" in lines[2]
+    (aces_kiss,) = [line for line in lines if "ACES" in line and "kiss" in line]
+    assert aces_kiss.split("│")[-3].strip() == "0.105"

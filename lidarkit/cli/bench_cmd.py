@@ -173,12 +173,16 @@ def print_run_summary(summary) -> None:
 
 
 def summary_table(report, max_metrics: int = 2) -> list[Table]:
-    """Short rich tables (the first accuracy metrics + one speed figure) of a built report, one per task."""
-    from lidarkit.bench.report import format_stat
+    """Short rich tables (the first accuracy metrics, each dataset's headline among them, + one speed figure) of a
+    built report, one per task."""
+    from lidarkit.bench.report import format_stat, headline_metrics
 
     tables = []
     for task_table in report.tables:
         accuracy = [m for m in task_table.metrics if m.kind == "accuracy"][:max_metrics]
+        # (a CARMEN log beside a KITTI sequence: its relations columns, not dashes under the first two APE ones)
+        headlines = {m.name for m in headline_metrics(task_table).values()}
+        accuracy += [m for m in task_table.metrics if m.name in headlines and m not in accuracy]
         speed = [m for m in task_table.metrics if m.kind == "speed"][:1]
         metrics = accuracy + speed
         table = Table(title=f"{task_table.task} (mean ± std over seeds)", title_justify="left")
