@@ -3,7 +3,10 @@
 Each call runs repeatedly in a second thread while the main thread counts loop turns of pure Python; the count per
 millisecond during the calls, against the count during ``time.sleep`` (which releases the GIL), is the share of
 the call during which other Python code can run (~1: released, ~0: held; on 2 cores a call that keeps both
-busy also lowers it). KITTI 00 94/95 (../shared/data), the variants' default settings.
+busy also lowers it). KITTI 00 94/95 (../shared/data), the variants' default settings, and the odometry frame
+check's calls (its KD-tree, its nearest-neighbour queries) on inputs large enough to last > 10 ms: the whole scan 94
+and scan 95's points as queries (a 1 ms call reads ~0 whether it releases the GIL or not, a woken thread needing a
+moment to take it; what a call does with the GIL does not depend on its input's size).
 
     .venv/bin/python benchmarks/gil_probe.py          # on a quiet machine
 
@@ -108,6 +111,19 @@ def main() -> None:
         points=down, voxel_map=local_map, initial_guess=np.eye(4), max_correspondance_distance=3.0 * kc.initial_threshold_m,
         kernel=kc.initial_threshold_m)
     calls["kiss-icp map update"] = lambda: get_voxel_hash_map(kcfg).update(voxel_down_sample(target, voxel * 0.5), np.eye(4))
+    # the odometry frame check (lidarkit.odometry.frame_check): its tree is built in the reading thread and queried in
+    # a worker while the next frame registers, so both must let the main thread run. Its calls as it makes them
+    # (cKDTree now, small_gicp's KdTree before), on the whole scans: a few ms per frame is too short to time
+    from scipy.spatial import cKDTree
+
+    queries = source[::4]
+    ck = cKDTree(target, balanced_tree=False, compact_nodes=False)
+    sg_tree = small_gicp.KdTree(target, num_threads=1)
+    calls[f"frame check: scipy cKDTree ({len(target)} points)"] = lambda: cKDTree(target, balanced_tree=False, compact_nodes=False)
+    calls[f"frame check: scipy cKDTree.query ({len(queries)} points)"] = lambda: ck.query(queries, k=1, distance_upper_bound=2.0)
+    calls[f"frame check before: small_gicp.KdTree ({len(target)} points)"] = lambda: small_gicp.KdTree(target, num_threads=1)
+    calls[f"frame check before: small_gicp batch_nearest_neighbor_search ({len(queries)} points)"] = \
+        lambda: sg_tree.batch_nearest_neighbor_search(queries, num_threads=1)
     rows = []
     load_start = os.getloadavg()[0]
     for name, fn in calls.items():
@@ -122,7 +138,9 @@ def main() -> None:
              f"{payload['date_utc']} on {payload['machine']}; load average {load_start:.1f} at the start; "
              "`.venv/bin/python benchmarks/gil_probe.py`", "",
              "Share: loop turns of pure Python in the main thread per ms while the call runs in another thread, over the same "
-             "during `time.sleep` (~1: the call releases the GIL; ~0: it holds it, nothing else in Python runs).", "",
+             "during `time.sleep` (~1: the call releases the GIL; ~0: it holds it, nothing else in Python runs). The frame check's "
+             "rows: its calls (scipy's tree now, small_gicp's before) on the whole scan 94 and a quarter of scan 95's points as "
+             "queries, to last long enough to be timed (per frame it builds a tree of <= 20000 points and makes 1500 queries).", "",
              "| call | median time (ms) | share of Python that still runs |", "|---|---|---|"]
     lines += [f"| {r['call']} | {1e3 * r['call_s']:.1f} | {r['python_runs_share']:.2f} |" for r in rows]
     atomic.write_text(RESULTS / "gil_probe.md", "\n".join(lines) + "\n")

@@ -100,6 +100,7 @@ def child(runner: str, data: Path, n: int) -> dict:
         wall = time.perf_counter() - marks.start
         final = result.trajectory.poses_se3[-1]
         loop_fps = result.fps
+        loop_cpu = result.total_cpu_s
     elif runner == "kiss-icp":
         from kiss_icp.datasets.generic import GenericDataset
         from kiss_icp.pipeline import OdometryPipeline
@@ -113,8 +114,10 @@ def child(runner: str, data: Path, n: int) -> dict:
         pipeline = OdometryPipeline(dataset, n_scans=n)
         rss_before = peak_rss_mb()
         marks = Checkpoints(time.perf_counter())
+        cpu0 = time.process_time()
         pipeline._run_pipeline()  # the odometry loop (its run() adds evaluation and result files)
         wall = time.perf_counter() - marks.start
+        loop_cpu = time.process_time() - cpu0
         final = pipeline.poses[-1]
         loop_fps = n / wall
     elif runner == "small_gicp":
@@ -125,6 +128,7 @@ def child(runner: str, data: Path, n: int) -> dict:
         c = SmallGICPConfig()
         files = sorted((data / "velodyne").glob("*.bin"))[:n]
         marks = Checkpoints(time.perf_counter())
+        cpu0 = time.process_time()
         pose, motion, previous = np.eye(4), np.eye(4), None
         poses = np.empty((n, 4, 4))
         for k, path in enumerate(files):
@@ -141,12 +145,13 @@ def child(runner: str, data: Path, n: int) -> dict:
             poses[k] = pose
             previous = (cloud, tree)
         wall = time.perf_counter() - marks.start
+        loop_cpu = time.process_time() - cpu0
         final = poses[-1]
         loop_fps = n / wall
     else:
         raise SystemExit(f"unknown runner {runner}")
     return {
-        "runner": runner, "frames": n, "wall_s": wall, "fps": n / wall, "loop_fps": loop_fps,
+        "runner": runner, "frames": n, "wall_s": wall, "fps": n / wall, "loop_fps": loop_fps, "loop_cpu_s": loop_cpu,
         "peak_rss_mb": peak_rss_mb(), "rss_before_loop_mb": rss_before, "checkpoints": marks.rows,
         "final_position_m": [float(x) for x in np.asarray(final)[:3, 3]],
     }
@@ -228,19 +233,25 @@ def interleaved(args, size_gb: float) -> None:
     runners = args.runners.split(",")
     pairs = [(a, b) for a, b in LIBRARY_OF if a in runners and b in runners]
     fps: dict[str, dict[str, list[float]]] = {f"{a} / {b}": {a: [], b: []} for a, b in pairs}  # a library run per pair
+    cpu: dict[str, dict[str, list[float]]] = {f"{a} / {b}": {a: [], b: []} for a, b in pairs}  # loop CPU s (all threads)
+    load_start = os.getloadavg()[0]
     for _ in range(args.repeats):
         for a, b in pairs:
             for runner in (a, b):
-                fps[f"{a} / {b}"][runner].append(run_child(runner, args.data, args.interleaved)["loop_fps"])
-                print(f"{runner}: {fps[f'{a} / {b}'][runner][-1]:.2f} fps", flush=True)
+                row = run_child(runner, args.data, args.interleaved)
+                fps[f"{a} / {b}"][runner].append(row["loop_fps"])
+                cpu[f"{a} / {b}"][runner].append(row["loop_cpu_s"])
+                print(f"{runner}: {row['loop_fps']:.2f} fps, {row['loop_cpu_s']:.2f} CPU-s", flush=True)
     ratios = {}
     for a, b in pairs:
-        side = fps[f"{a} / {b}"]
-        ratios[f"{a} / {b}"] = {"median_ratio": float(np.median(np.divide(side[a], side[b]))), "ratios": list(np.divide(side[a], side[b]))}
+        side, used = fps[f"{a} / {b}"], cpu[f"{a} / {b}"]
+        cpu_ratios = np.divide(used[b], used[a])  # library CPU / lidarkit CPU: the same sense as the frame rates
+        ratios[f"{a} / {b}"] = {"median_ratio": float(np.median(np.divide(side[a], side[b]))), "ratios": list(np.divide(side[a], side[b])),
+                                "median_cpu_ratio": float(np.median(cpu_ratios)), "cpu_ratios": list(cpu_ratios)}
     command = _command(args)
     payload = {"date_utc": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"), "machine": describe_machine(machine_info()),
                "command": command, "sim": SIM, "data_size_gb": size_gb, "frames_per_run": args.interleaved, "repeats": args.repeats,
-               "loop_fps": fps, "ratios": ratios}
+               "load_average_start_end": [load_start, os.getloadavg()[0]], "loop_fps": fps, "loop_cpu_s": cpu, "ratios": ratios}
     stem = "odometry_scale_interleaved" + (f"_{args.tag}" if args.tag else "")
     RESULTS.mkdir(parents=True, exist_ok=True)
     atomic.write_text(RESULTS / f"{stem}.json", json.dumps(payload, indent=2) + "\n")
@@ -248,10 +259,14 @@ def interleaved(args, size_gb: float) -> None:
              f"{payload['date_utc']} on {payload['machine']}; `{command}`", "",
              f"{args.interleaved}-frame runs from disk ({SIM['n_beams']}x{SIM['n_azimuths']}-ray simulated street sweeps, "
              f"{size_gb / args.frames * 1e3:.2f} MB each), each in its own process, lidarkit "
-             f"and the library alternately, {args.repeats} times; loop frame rate (reading + registration).", "",
-             "| ratio | median | per repeat |", "|---|---|---|"]
+             f"and the library alternately, {args.repeats} times; loop frame rate (reading + registration); load average "
+             f"{load_start:.1f} at the start, {payload['load_average_start_end'][1]:.1f} at the end. CPU: the library loop's "
+             "process CPU time (all threads) over lidarkit's, the steadier figure on a loaded machine (it does not credit "
+             "work done beside the registration on an idle core).", "",
+             "| ratio | median | per repeat | CPU median | CPU per repeat |", "|---|---|---|---|---|"]
     for name, v in ratios.items():
-        lines.append(f"| {name} | {v['median_ratio']:.3f} | {', '.join(f'{x:.3f}' for x in v['ratios'])} |")
+        lines.append(f"| {name} | {v['median_ratio']:.3f} | {', '.join(f'{x:.3f}' for x in v['ratios'])} | {v['median_cpu_ratio']:.3f} | "
+                     f"{', '.join(f'{x:.3f}' for x in v['cpu_ratios'])} |")
     atomic.write_text(RESULTS / f"{stem}.md", "\n".join(lines) + "\n")
 
 

@@ -249,3 +249,133 @@ def test_the_run_checks_each_scan_in_its_reading_thread_not_again_in_the_registr
     run(SPEC, "open3d_point_to_plane")
     in_main = [name for name in calls if name == threading.main_thread().name]
     assert len(calls) >= 10 and not in_main  # the reader's and the run's checks, all in the reading thread
+
+
+def _spy_on_fitness(monkeypatch, fail_at: int | None = None, error: BaseException | None = None) -> list[str]:
+    """The names of the threads the check's fitness queries run in, one per call; the ``fail_at``-th call raises ``error``."""
+    from lidarkit.odometry import frame_check
+
+    real, where = frame_check.scan_fitness, []
+
+    def spy(*args, **kwargs):
+        where.append(threading.current_thread().name)
+        if len(where) == fail_at:
+            raise error
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(frame_check, "scan_fitness", spy)
+    return where
+
+
+def test_the_checks_queries_run_beside_a_variant_kept_in_line_with_the_fitness_of_the_check_in_line(monkeypatch):
+    """kiss keeps its after-the-fact work in line (overlap_assessment=False): the frame check's nearest-neighbour
+    queries run in a thread of the checker's own while the next frame registers, and on the 10 real KITTI scans give
+    exactly the fitness (and flagged frames) of the check made in line, and the same poses."""
+    from lidarkit.odometry.inputs import open_sequence
+
+    sequence = open_sequence(SPEC)
+    sequence.configure_for_method("kiss")  # the scans as the run reads them for kiss (KITTI's vertical-angle correction)
+    scans = [sequence.read_scan(i).points_xyz for i in range(len(sequence))]
+    where = _spy_on_fitness(monkeypatch)
+    out = run(SPEC, "kiss")
+    assert len(where) == len(scans) - 1 and threading.main_thread().name not in where
+    assert not _our_threads()
+    where.clear()
+    inline = run(SPEC, "kiss", overlap=False)
+    assert where == [threading.main_thread().name] * (len(scans) - 1)
+    # (kiss-icp's threads are not bit-reproducible: the two runs' poses agree to rounding)
+    np.testing.assert_allclose(out.trajectory.poses_se3, inline.trajectory.poses_se3, rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(out.stats.check_failed, inline.stats.check_failed)
+    for result in (out, inline):
+        checker = FrameChecker(len(scans))  # the definition: frame after frame, in line, at the run's poses
+        for k, points in enumerate(scans):
+            checker.add(k, k, points, None, result.trajectory.poses_se3)
+        np.testing.assert_array_equal(result.stats.fitness, checker.fitness)
+    assert np.isfinite(out.stats.fitness[1:]).all() and (out.stats.check_s[1:] > 0).all()
+
+
+def test_an_overlapped_checker_gives_the_in_line_fitness_and_joins_its_thread(scans):
+    """FrameChecker(overlap=True) as the runner drives it (prepare, then add once the pose is known): the fitness of
+    the in-line checker on the real KITTI scans, a wrong motion included, and no thread once finished."""
+    poses = np.stack([np.eye(4)] * len(scans))
+    poses[:, 0, 3] = 0.8 * np.arange(len(scans))  # ~the right motion, then 2 m off at frame 5
+    poses[5:, 0, 3] += 2.0
+    inline, beside = FrameChecker(len(scans)), FrameChecker(len(scans), overlap=True)
+    for k, points in enumerate(scans):
+        inline.add(k, k, points, None, poses)
+        beside.add(k, k, points, None, poses, beside.prepare(k, points))
+    assert _our_threads()  # its worker, until finished
+    np.testing.assert_array_equal(beside.finish(poses, None).fitness, inline.finish(poses, None).fitness)
+    assert not _our_threads()
+    assert inline.fitness[5] < inline.fitness[4]
+
+
+@pytest.mark.parametrize("fail_at", [1, 9])  # the first frame's queries, and the last frame's (waited for at the end)
+def test_an_error_in_the_checks_thread_is_the_runs_one_line_error_and_leaves_no_thread(monkeypatch, capsys, tmp_path, fail_at):
+    from lidarkit.cli import main
+    from lidarkit.errors import DataError
+
+    where = _spy_on_fitness(monkeypatch, fail_at, DataError("no nearest neighbour", source="frame check"))
+    with pytest.raises(DataError, match="no nearest neighbour"):
+        run(SPEC, "kiss")
+    assert len(where) == fail_at and where[-1] != threading.main_thread().name
+    assert not _our_threads()
+    where.clear()
+    with pytest.raises(SystemExit) as exc:
+        main(["odometry", SPEC, "-m", "kiss", "--no-progress", "--out", str(tmp_path / "run")])
+    assert exc.value.code == 1
+    assert capsys.readouterr().err.strip().splitlines() == ["error: frame check: no nearest neighbour"]
+    assert not _our_threads() and not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize("where", ["register", "check"])
+def test_an_interrupt_while_the_checks_thread_runs_leaves_no_thread_and_writes_nothing(monkeypatch, tmp_path, where):
+    """Ctrl-C in the main thread (kiss registering frame 4) or in the check's thread (frame 4's queries)."""
+    from lidarkit.registration.kiss import KissRegistration
+
+    class Interrupted(KissRegistration):
+        frames = 0
+
+        def register_frame(self, *args, **kwargs):
+            self.frames += 1
+            if where == "register" and self.frames == 5:
+                raise KeyboardInterrupt
+            return super().register_frame(*args, **kwargs)
+
+    spied = _spy_on_fitness(monkeypatch, 4 if where == "check" else None, KeyboardInterrupt())
+    with pytest.raises(KeyboardInterrupt):
+        run(SPEC, Interrupted(), out_dir=tmp_path / "run")
+    assert len(spied) == (4 if where == "check" else 3) and threading.main_thread().name not in spied  # frames 1-3 (and 4)
+    assert not _our_threads()
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_sigterm_during_a_kiss_run_stops_it_with_one_line(tmp_path):
+    """SIGTERM while kiss registers and the check's thread runs: exit 143 with the one interrupted line (a thread
+    left waiting would keep the process from exiting), no run folder."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    command = [sys.executable, "-m", "lidarkit", "odometry", "sim:street?frames=600&beams=16&azimuths=360", "-m", "kiss",
+               "--progress", "--out", str(tmp_path / "run")]
+    err_path = tmp_path / "stderr.txt"
+    with err_path.open("w") as err:
+        proc = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=err, env={**os.environ}, cwd=tmp_path)
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and proc.poll() is None and " frames (" not in err_path.read_text():
+            time.sleep(0.05)  # until the first progress line: the loop runs
+        assert proc.poll() is None, err_path.read_text()[-2000:]
+        proc.send_signal(signal.SIGTERM)
+        proc.wait(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 143
+    lines = [line for line in err_path.read_text().splitlines() if " frames (" not in line]
+    assert lines == ["interrupted by SIGTERM: stopped; no file is left half-written (each is complete or absent)"]
+    assert not (tmp_path / "run").exists()

@@ -18,9 +18,18 @@ check uses only the estimated poses and the raw scans, never the variant's verdi
   ``min_points`` points above it is not checked for fitness.
 
 Cost: each scan is subsampled to ``max_target_points`` (seeded), split at the ground, one KD-tree over its
-above-ground points (small_gicp's when installed, else scipy's) and ``n_sample`` queries, ~2.5 ms a KITTI scan (a
-tenth of kiss-icp's frame); the motion part is vectorized over the whole run afterwards and costs nothing per frame.
-``n_sample=0`` leaves the fitness part out (every frame "not checked" for fitness) and keeps the motion part.
+above-ground points and ``n_sample`` queries, ~2.5 ms of CPU a KITTI scan (a tenth of kiss-icp's frame); the motion
+part is vectorized over the whole run afterwards and costs nothing per frame. ``n_sample=0`` leaves the fitness part
+out (every frame "not checked" for fitness) and keeps the motion part.
+
+Where it runs: the pose-free part (:meth:`FrameChecker.prepare`) in the odometry run's reading thread, the queries
+(:meth:`FrameChecker.add`) in a thread of the checker's own (``overlap=True``) while the next frame registers. The
+tree is scipy's ``cKDTree``, whose build and queries let other Python threads run (``benchmarks/gil_probe.py``
+probes both): small_gicp's ``KdTree``, used before, answered the queries in half the time but held the GIL while it
+was built (``gil_probe.md``), and the registration in the main thread waited for it (kiss through lidarkit 0.79x
+kiss-icp's pipeline with the check, 0.96x without). Both trees are exact: the same nearest distances, so the same fitness (scipy takes
+the square root of the squared distance as small_gicp's caller did; a distance within rounding of a point's
+tolerance is the only case the two could tell apart).
 """
 
 from __future__ import annotations
@@ -31,11 +40,6 @@ from typing import Any
 import numpy as np
 
 from lidarkit.params import is_real_number
-
-try:  # optional (extra ``gicp``): a faster exact nearest-neighbour search
-    import small_gicp as _small_gicp
-except ImportError:
-    _small_gicp = None
 
 #: The motion test skips a frame whose interval, or the previous one, is below this fraction of the run's median
 #: interval, or whose interval differs from the previous one by more than this ratio: such stamps do not time the motion
@@ -181,23 +185,20 @@ def scan_geometry(points_xyz: np.ndarray, config: FrameCheckConfig, frame: int) 
     rng = np.random.default_rng([config.seed, int(frame)])
     points = points_xyz[:: -(-len(points_xyz) // config.max_target_points)]  # every k-th point: spread over the sweep
     g = ground_height(points)
-    z = points[:, 2]
-    target = points if g is None else points[z > g + 0.5 * config.ground_clearance_m]
-    candidates = points if g is None else points[z > g + config.ground_clearance_m]
+    target = points if g is None else points[points[:, 2] > g + 0.5 * config.ground_clearance_m]
+    # (above g + clearance is above g + clearance / 2, in floating point too: the same rows as from `points`, fewer to scan)
+    candidates = target if g is None else target[target[:, 2] > g + config.ground_clearance_m]
     if len(candidates) > config.n_sample:
         candidates = candidates[rng.choice(len(candidates), size=config.n_sample, replace=False)]
     tree = None
     if len(target) >= config.min_points:
-        # small_gicp's KdTree (when installed) answers the 1500 nearest-neighbour queries in half scipy's time, exactly
-        tree = _small_gicp.KdTree(target, num_threads=1) if _small_gicp is not None else cKDTree(target, balanced_tree=False, compact_nodes=False)
+        # scipy's tree: built and queried with the GIL released, beside the registration (small_gicp's held it)
+        tree = cKDTree(target, balanced_tree=False, compact_nodes=False)
     return ScanGeometry(target, tree, candidates)
 
 
 def _nearest_distance(tree: Any, queries_xyz: np.ndarray, upper_m: float) -> np.ndarray:
-    """Distance (m) from each query to its nearest point of ``tree`` (inf or any value above ``upper_m`` when farther)."""
-    if _small_gicp is not None and isinstance(tree, _small_gicp.KdTree):
-        _, dist2 = tree.batch_nearest_neighbor_search(queries_xyz, num_threads=1)
-        return np.sqrt(np.asarray(dist2, dtype=np.float64))
+    """Distance (m) from each query to its nearest point of ``tree`` (inf when farther than ``upper_m``)."""
     dist, _ = tree.query(queries_xyz, k=1, distance_upper_bound=upper_m)
     return dist
 
@@ -279,14 +280,26 @@ class FrameCheck:
 
 
 class FrameChecker:
-    """Runs the check frame by frame inside the odometry loop (fitness needs both scans); motion at the end."""
+    """Runs the check frame by frame inside the odometry loop (fitness needs both scans); motion at the end.
 
-    def __init__(self, n_frames: int, config: FrameCheckConfig | None = None):
+    ``overlap=True``: frame k's nearest-neighbour queries run in a worker thread of the checker's own while the caller
+    goes on (the next frame registers); :meth:`add` first waits for the previous frame's (raising its error, if any),
+    :meth:`finish` for the last, and :meth:`close` (also on error or interrupt) joins the thread. The values are those
+    of the same calls in line (``overlap=False``, the default: ``fitness`` is complete after each :meth:`add`).
+    """
+
+    def __init__(self, n_frames: int, config: FrameCheckConfig | None = None, *, overlap: bool = False):
+        from lidarkit.threads import Overlap
+
         self.config = as_frame_check(config)
         self.fitness = np.full(n_frames, np.nan)
         self.has_point_times = np.zeros(n_frames, dtype=bool)
         self.check_s = np.zeros(n_frames)
         self._previous: ScanGeometry | None = None
+        # (no thread when there are no queries to run: n_sample=0)
+        self._overlap = bool(overlap) and self.config.n_sample > 0
+        self._worker = Overlap(self._overlap)
+        self._pending = None  # the last frame's queries, submitted to the worker
 
     def prepare(self, frame: int, points_xyz: np.ndarray) -> tuple[ScanGeometry | None, float]:
         """The scan's part of the check, which needs no pose (``(geometry, seconds)``): the odometry runner calls it
@@ -315,14 +328,47 @@ class FrameChecker:
         if geometry is None:  # points the reading refused (left to the registration): not checked, nor the next frame
             self._previous = None
             return
-        if k > 0 and self._previous is not None:
-            T = _relative(poses_se3[k - 1 : k + 1])[0]
-            self.fitness[k] = scan_fitness(self._previous, geometry, T, self.config)
-        self._previous = geometry
-        self.check_s[k] = time.perf_counter() - t0 + prepare_s
+        previous, self._previous = self._previous, geometry
+        self._wait()  # the previous frame's queries (done by now: they ran while this frame registered)
+        before_s = time.perf_counter() - t0 + prepare_s
+        if k > 0 and previous is not None:
+            self._pending = self._worker.submit(lambda: self._fitness(k, previous, geometry, poses_se3, before_s))
+            if not self._overlap:
+                self._wait()  # in line: its error now, as before
+        else:
+            self.check_s[k] = before_s
+
+    def _fitness(self, k: int, previous: ScanGeometry, current: ScanGeometry, poses_se3: np.ndarray, before_s: float) -> None:
+        """Frame k's fitness (in the worker thread when overlapped: ``poses_se3[k - 1 : k + 1]`` are final, the caller
+        only writes later frames'); ``before_s``: the check's time spent before."""
+        import time
+
+        t0 = time.perf_counter()
+        T = _relative(poses_se3[k - 1 : k + 1])[0]
+        self.fitness[k] = scan_fitness(previous, current, T, self.config)
+        self.check_s[k] = before_s + time.perf_counter() - t0
+
+    def _wait(self) -> None:
+        """Wait for the queries submitted last; raises their error."""
+        pending, self._pending = self._pending, None
+        if pending is not None:
+            pending.result()
+
+    def close(self) -> None:
+        """Join the worker thread, the run's ``finally`` (also on error or interrupt): the last frame's queries, at most
+        one frame's, finish first; their result or error stays for :meth:`finish`."""
+        from concurrent.futures import wait
+
+        if self._pending is not None:
+            wait([self._pending])
+        self._worker.close()
 
     def finish(self, poses_se3: np.ndarray, times_s: np.ndarray | None) -> FrameCheck:
         cfg = self.config
+        try:
+            self._wait()
+        finally:
+            self.close()
         dev_t, dev_r, dt = motion_deviation(poses_se3, times_s, cfg)
         lim_t, lim_r = motion_limits(dt, cfg)
         with np.errstate(invalid="ignore"):

@@ -485,7 +485,11 @@ def run(
         raise ConfigError("pose_covariance needs each frame's covariance, which covariance='none' leaves out", source=name)
     want_covariance = (not stateful and assessed and not no_covariance) if pose_covariance is None else bool(pose_covariance)
     widened: list[int] = []  # frames whose covariance got the distortion floor
-    checker = FrameChecker(n, frame_check)
+    # frame k's after-the-fact work (assessment, covariance, frame check) runs in the worker below when the variant allows;
+    # else the check's queries get a thread of their own (the registration holds the GIL for part of its calls, the
+    # check's tree lets it run: kiss through lidarkit 0.79x kiss-icp's pipeline with the check in line)
+    overlapped = overlap and bool(getattr(registration, "overlap_assessment", True))
+    checker = FrameChecker(n, frame_check, overlap=overlap and not overlapped)
     # the ground truth is read before the run: a problem with it (too few poses in a bag, a bad pose file) is reported
     # now, not after registering every frame
     # (a sequence of the caller's own may have no stamps or ground truth: ScanSequence's other members are optional)
@@ -548,7 +552,7 @@ def run(
     name_frame = frame_namer(sequence)
     # frame k's after-the-fact work (assessment, covariance, frame check) runs in one worker thread while frame k+1
     # registers; results are those of the same calls in line (see _run_stateless for the one decision that waits)
-    worker = Overlap(overlap and bool(getattr(registration, "overlap_assessment", True)))
+    worker = Overlap(overlapped)
     try:
         with validated_points(validated):
             if stateful:
@@ -615,6 +619,7 @@ def run(
                 )
     finally:
         worker.close()  # cancels what has not started, joins the worker thread, also on error
+        checker.close()  # the same for the check's own thread
         stream.close()  # stops and joins the reading thread, also on error
         if bar is not None:
             bar[0].stop()

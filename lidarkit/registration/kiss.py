@@ -124,8 +124,9 @@ class KissRegistration(Registration):
     Config = KissConfig
     stateful = True
     # kiss-icp's registration and map update hold the GIL through most of their C++ work
-    # (benchmarks/results/icp/gil_probe.md): a frame's after-the-fact work (frame check, covariance) in a worker thread
-    # only waits for it (300 simulated 32 x 360 sweeps: 0.78x kiss-icp's pipeline overlapped, 0.81x in line)
+    # (benchmarks/results/icp/gil_probe.md): a frame's covariance in a worker thread only waits for it (300 simulated
+    # 32 x 360 sweeps: 0.78x kiss-icp's pipeline overlapped, 0.81x in line); the frame check's queries, which release
+    # the GIL, get a thread of the check's own (FrameChecker overlap)
     overlap_assessment = False
     #: ``register_frame`` takes ``motion_guess`` (e.g. wheel odometry) instead of kiss-icp's constant velocity
     accepts_motion_guess = True
