@@ -80,6 +80,7 @@ def assess_alignment(
     index: np.ndarray | None = None,
     covariance_model: CovarianceModel | None | str = "active",
     surfaces: SurfaceIndex | None = None,
+    aligned_xyz: np.ndarray | None = None,
 ) -> Assessment:
     """Score a pose: pass ``dist2``/``index`` of the final correspondences if already known.
 
@@ -87,7 +88,8 @@ def assess_alignment(
     local surfaces around at most 2000 of the matched pairs; ``"active"`` takes the model of the registration that
     is running (:func:`lidarkit.registration.covariance.use_model`); ``surfaces``: the target's
     :class:`~lidarkit.registration.degeneracy.SurfaceIndex` if already built (e.g. by :class:`lidarkit.threads.background`
-    while the registration ran).
+    while the registration ran); ``aligned_xyz``: ``source_xyz`` mapped by ``T_target_source``, if the caller has it
+    (e.g. from the final nearest-neighbour search).
 
     Clouds not in their sensor frame (a map frame, georeferenced; :func:`lidarkit.registration.local_origin.sensor_proxy`):
     the covariance and step are computed around the target's likely sensor ``c``, where the calibration was learned and
@@ -97,7 +99,7 @@ def assess_alignment(
     frame (``Ad(c) Sigma Ad(c)^T``)."""
     if isinstance(covariance_model, str):
         covariance_model = active_model()
-    aligned = transform_points(T_target_source, source_xyz)
+    aligned = transform_points(T_target_source, source_xyz) if aligned_xyz is None else aligned_xyz
     if dist2 is None or index is None:
         if neighbors is None:
             # one query pass: scipy's worker threads (Python threads started per call) cost more than they save here

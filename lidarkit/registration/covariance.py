@@ -452,6 +452,10 @@ def safe_inverse(A: np.ndarray, floor: float = EIGEN_FLOOR) -> np.ndarray:
     return (V / w) @ V.T
 
 
+#: :func:`effective_observations` counts the voxels on a grid of flags up to this many cells (1 byte each)
+_OCCUPANCY_CELLS = 1 << 22
+
+
 def effective_observations(points_xyz: np.ndarray, voxel_m: float | None) -> int:
     """Number of distinct ``voxel_m`` voxels holding a point (``len(points)`` when ``voxel_m`` is None)."""
     if voxel_m is None or len(points_xyz) == 0:
@@ -462,7 +466,13 @@ def effective_observations(points_xyz: np.ndarray, voxel_m: float | None) -> int
     if float(span[0]) * span[1] * span[2] >= 2.0**62:  # no room for one packed integer key: compare rows
         return int(len(np.unique(keys, axis=0)))
     # one integer per voxel: a 1-D unique, ~5x faster than np.unique(axis=0) on rows
-    return int(len(np.unique((cols[0] * span[1] + cols[1]) * span[2] + cols[2])))
+    flat = (cols[0] * span[1] + cols[1]) * span[2] + cols[2]
+    cells = span[0] * span[1] * span[2]
+    if cells <= max(_OCCUPANCY_CELLS, 8 * len(flat)):  # a grid of flags: the same count without np.unique's sort (a
+        occupied = np.zeros(cells, dtype=bool)  # KITTI scan in 1 m voxels: ~1e6 cells, 0.15 ms where the sort took 0.5)
+        occupied[flat] = True
+        return int(np.count_nonzero(occupied))
+    return int(len(np.unique(flat)))
 
 
 def registration_covariance(
@@ -540,7 +550,8 @@ def covariance_and_step(
         B = sigma2 * (gs.T @ gs + gt.T @ gt)
         if model.surface_noise and surface_variance is not None:
             # the target surface itself is known only to its thickness across the plane (curvature, sparse rings)
-            B = B + np.einsum("n,nki,nkj->ij", np.asarray(surface_variance, dtype=np.float64), J, J)
+            # (the weights multiplied in first: the same products and sums as the three-operand einsum, 2.5x faster)
+            B = B + np.einsum("nki,nkj->ij", np.asarray(surface_variance, dtype=np.float64)[:, None, None] * J, J)
         # the sandwich vanishes where A does (B has no noise there either): directions the data do not constrain
         # get the Gauss-Newton variance on the floored eigenvalue instead, i.e. a large one
         w, V = np.linalg.eigh(0.5 * (A + A.T))
