@@ -1098,3 +1098,23 @@ def test_the_stateful_calls_of_a_stateless_variant_are_one_line_config_errors(ca
         assert err.value.source == "vanilla"
     assert str(err.value) == ("vanilla: reset() needs a stateful variant (one with a map of its own); vanilla is stateless: "
                               "align a pair of scans with align(), or run odometry with lidarkit.odometry.run()")
+
+
+def test_voxel_downsample_refuses_what_it_cannot_average():
+    """The documented voxel_downsample let a NaN point through as an all-NaN centroid (with numpy's cast warning), an
+    infinite one as an infinite centroid, and met (3, N) points or a size given as text with numpy's or Python's own
+    errors: each is one line naming the argument now."""
+    from lidarkit.errors import ConfigError, DataError
+    from lidarkit.registration.preprocess import voxel_downsample
+
+    points = np.random.default_rng(0).normal(size=(100, 3))
+    assert np.isfinite(voxel_downsample(points, 0.5)).all()
+    for bad in (np.r_[points, [[np.nan, 0, 0]]], np.r_[points, [[np.inf, 0, 0]]]):
+        with pytest.raises(DataError, match=r"^points: 1 point\(s\) with NaN or infinite coordinates$"):
+            voxel_downsample(bad, 0.5)
+    for bad in (points.T, np.c_[points, points[:, 0]]):
+        with pytest.raises(DataError, match=r"^points: expected an \(N, 3\) point array, got shape"):
+            voxel_downsample(bad, 0.5)
+    for size in ("0.5", None, float("inf"), True, 0):
+        with pytest.raises(ConfigError, match=r"^voxel_size_m: voxel size must be a finite number > 0"):
+            voxel_downsample(points, size)

@@ -10,7 +10,8 @@ import logging
 
 import numpy as np
 
-from lidarkit.errors import ConfigError
+from lidarkit.errors import ConfigError, DataError
+from lidarkit.params import is_real_number
 
 # ground segmentation lives in registration.ground; these names stay importable from here
 from lidarkit.registration.ground.base import KITTI_SENSOR_HEIGHT_M
@@ -23,13 +24,23 @@ log = logging.getLogger(__name__)
 def voxel_downsample(points_xyz: np.ndarray, voxel_size_m: float) -> np.ndarray:
     """Centroid of the points in each occupied cubic voxel of edge ``voxel_size_m`` -> ``(K, 3)`` float64.
 
-    Output order follows the sorted voxel keys, so the result is deterministic.
+    Output order follows the sorted voxel keys, so the result is deterministic. ConfigError for a size that is not a
+    finite positive number, DataError for points that are not ``(N, 3)`` finite numbers (a NaN point became an all-NaN
+    centroid, a (3, N) array numpy's broadcast error).
     """
-    if not voxel_size_m > 0:
-        raise ConfigError(f"voxel size must be > 0, got {voxel_size_m}", source="voxel_size_m")
-    pts = np.asarray(points_xyz, dtype=np.float64)
+    if not is_real_number(voxel_size_m) or not 0 < voxel_size_m < np.inf:
+        raise ConfigError(f"voxel size must be a finite number > 0, got {voxel_size_m!r}", source="voxel_size_m")
+    try:
+        pts = np.asarray(points_xyz, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise DataError(f"expected an (N, 3) point array, got {type(points_xyz).__name__}", source="points") from None
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise DataError(f"expected an (N, 3) point array, got shape {pts.shape}", source="points")
     if len(pts) == 0:
         return pts.reshape(0, 3)
+    if not np.isfinite(pts.sum()):  # (one pass: a NaN or infinite coordinate makes the sum so)
+        raise DataError(f"{int(np.count_nonzero(~np.isfinite(pts).all(axis=1)))} point(s) with NaN or infinite coordinates",
+                        source="points")
     keys = np.floor(pts / voxel_size_m).astype(np.int64)
     keys -= np.array([keys[:, i].min() for i in range(3)])  # per column: an axis=0 reduction is ~20x slower
     span = np.array([keys[:, i].max() for i in range(3)]) + 1
