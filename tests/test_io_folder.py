@@ -125,6 +125,28 @@ def test_files_named_by_decimal_time_stamps_are_read_in_time_order(tmp_path, rng
     assert sorted(["scan10.npy", "scan2.npy", "1.5.npy"], key=natural_key) == ["1.5.npy", "scan2.npy", "scan10.npy"]
 
 
+def test_decimal_time_stamps_after_a_prefix_are_read_in_time_order(tmp_path, rng):
+    """scan_1000.05 ... scan_1000.2 were read 1000.1, 1000.2, 1000.05, 1000.15 (only a name that was a stamp alone
+    compared its fraction as a decimal), and a TUM file stamped 1000.05 ... paired its poses with shuffled scans."""
+    stamps = ("1000.05", "1000.1", "1000.15", "1000.2")
+    names = tuple(f"scan_{stamp}.npy" for stamp in stamps[::-1])
+    folder, arrays = _npy_folder(tmp_path, rng, names=names)
+    (folder / "gt.tum").write_text("".join(f"{stamp} {k} 0 0 0 0 0 1\n" for k, stamp in enumerate(stamps)))
+    ds = ScanFolder(folder, poses="gt.tum", poses_format="tum")
+    assert [p.name for p in ds.scan_paths] == [f"scan_{stamp}.npy" for stamp in stamps]
+    np.testing.assert_array_equal(ds.read_scan(1).points_xyz, arrays["scan_1000.1.npy"][:, :3].astype(np.float64))
+    np.testing.assert_allclose(ds.timestamps_s, [1000.05, 1000.1, 1000.15, 1000.2])
+    assert ds.read_scan(2).timestamp_s == pytest.approx(1000.15)  # (its own stamp, and the pose written beside it)
+    np.testing.assert_allclose(ds.ground_truth.poses_se3[:, 0, 3], [0, 1, 2, 3])
+    # names with other numbers keep their order: numbers by value, a version's digits as before
+    assert sorted(["frame_10.bin", "frame_2.bin", "frame_1.bin"], key=natural_key) == ["frame_1.bin", "frame_2.bin", "frame_10.bin"]
+    assert sorted(["000010.bin", "000002.bin", "000001.bin"], key=natural_key) == ["000001.bin", "000002.bin", "000010.bin"]
+    assert sorted(["scan_v1.2_10.bin", "scan_v1.3_1.bin", "scan_v1.2_3.bin"], key=natural_key) == [
+        "scan_v1.2_3.bin", "scan_v1.2_10.bin", "scan_v1.3_1.bin"]
+    assert sorted(["scan_1000.05.bin", "scan_1000.bin", "scan_999.95.bin"], key=natural_key) == [
+        "scan_999.95.bin", "scan_1000.bin", "scan_1000.05.bin"]
+
+
 def test_ply_round_trip_keeps_intensity(tmp_path, rng):
     import open3d as o3d
 

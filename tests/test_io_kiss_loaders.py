@@ -4,6 +4,7 @@ dataset stores them, stamps from the file names, and ground truth that cannot st
 from __future__ import annotations
 
 import logging
+import re
 
 import numpy as np
 import pytest
@@ -36,6 +37,29 @@ def test_nclt_points_are_unsigned_and_scans_outside_the_ground_truth_are_counted
     np.testing.assert_allclose(dataset.timestamps_s, utimes[:3] * 1e-6)
     assert dataset.read_scan(1).timestamp_s == pytest.approx(utimes[1] * 1e-6)
     assert repr(dataset) == f"NcltScans({str(sequence)!r}, kind='nclt', scans=3)"  # (Python's <... object at 0x...>)
+
+
+def test_a_truncated_or_empty_nclt_scan_is_refused_naming_the_file(tmp_path):
+    """A velodyne_sync file cut 3 bytes into a point (427 bytes) was read as its 53 whole points, without a word."""
+    sequence = tmp_path / "2012-01-08"
+    (sequence / "velodyne_sync").mkdir(parents=True)
+    (tmp_path / "ground_truth").mkdir()
+    utimes = 1326031000000000 + np.arange(3) * 100000
+    record = np.zeros(len(RING), dtype=[("xyz", "<u2", 3), ("i", "u1"), ("l", "u1")])
+    record["xyz"] = np.round((RING * [1.0, -1.0, -1.0] + 100.0) / 0.005).astype(np.uint16)
+    for ut in utimes:
+        record.tofile(sequence / "velodyne_sync" / f"{ut}.bin")
+    gt = [[ut, k, 0, 0, 0, 0, 0] for k, ut in enumerate([utimes[0] - 50000, *utimes, utimes[-1] + 50000])]
+    np.savetxt(tmp_path / "ground_truth" / "groundtruth_2012-01-08.csv", gt, delimiter=",", fmt="%d")
+    cut = sequence / "velodyne_sync" / f"{utimes[1]}.bin"
+    cut.write_bytes(record.tobytes()[:427])
+    (sequence / "velodyne_sync" / f"{utimes[2]}.bin").write_bytes(b"")
+    dataset = open_dataset("nclt", sequence)
+    assert len(dataset.read_scan(0).points_xyz) == len(RING)
+    with pytest.raises(DataError, match=rf"{utimes[1]}.bin: 427 bytes is not a whole number of 8-byte points$"):
+        dataset.read_scan(1)
+    with pytest.raises(DataError, match=rf"{utimes[2]}.bin: no points \(an empty file\)$"):
+        dataset.read_scan(2)
 
 
 def _mulran(root, n_scans: int, n_poses: int):
@@ -99,6 +123,51 @@ def test_helipr_reads_every_point_and_checks_the_pose_rows(tmp_path):
         open_dataset("helipr", tmp_path, sequence="Ouster")
 
 
+def _helipr_velodyne(root, sweep_times):
+    """A HeLiPR Velodyne recording (x y z intensity float32, ring uint16, time float32) of one scan per row of
+    ``sweep_times`` (the time field of each of its points), with one ground-truth pose per scan."""
+    folder = root / "LiDAR" / "Velodyne"
+    folder.mkdir(parents=True)
+    (root / "LiDAR_GT").mkdir()
+    dtype = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("i", "<f4"), ("ring", "<u2"), ("t", "<f4")])
+    ns = 1_690_000_000_000_000_000 + np.arange(len(sweep_times)) * 100_000_000
+    for stamp, times in zip(ns, sweep_times):
+        record = np.zeros(len(RING), dtype=dtype)
+        record["x"], record["y"], record["z"] = RING.T
+        record["t"] = times
+        record.tofile(folder / f"{stamp}.bin")
+    (root / "LiDAR_GT" / "global_Velodyne_gt.txt").write_text("".join(f"{s} {k} 0 0 0 0 0 1\n" for k, s in enumerate(ns)))
+    return [folder / f"{stamp}.bin" for stamp in ns]
+
+
+def test_a_helipr_time_field_of_one_value_reads_as_a_bags_and_nan_times_name_the_file(tmp_path):
+    """kiss-icp's HeLiPR loader divided a time field of one value by its zero span (numpy's RuntimeWarning, then NaN
+    times refused naming the recording's folder): the scan is read as a bag's, its times all equal, which the run
+    reads as no per-point times and says so. NaN times are refused naming the scan file, not the folder."""
+    import warnings
+
+    from lidarkit.odometry import run
+
+    _helipr_velodyne(tmp_path / "flat", [np.zeros(len(RING))] * 3)
+    dataset = open_dataset("helipr", tmp_path / "flat", sequence="Velodyne")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        scan = dataset.read_scan(0)
+    np.testing.assert_array_equal(scan.point_times_s, np.zeros(len(RING)))
+    assert not scan.has_time_span()
+    result = run(dataset, "kiss")
+    said = "deskew requested, the per-point times of 3 of 3 frames are all equal (nothing to deskew with): ran without deskew"
+    assert said in result.metrics["warnings"]
+    sweep = np.linspace(0.0, 0.1, len(RING))
+    with_nan = sweep.copy()
+    with_nan[7] = np.nan
+    files = _helipr_velodyne(tmp_path / "nan", [sweep, with_nan])
+    dataset = open_dataset("helipr", tmp_path / "nan", sequence="Velodyne")
+    np.testing.assert_allclose(dataset.read_scan(0).point_times_s, np.linspace(0, 1, len(RING)), atol=1e-6)
+    with pytest.raises(DataError, match=rf"^{re.escape(str(files[1]))} \(frame 1\): per-point times contain NaN or infinite values$"):
+        dataset.read_scan(1)
+
+
 def test_boreas_pose_rows_are_checked_before_the_loader_asserts(tmp_path):
     (tmp_path / "lidar").mkdir()
     (tmp_path / "applanix").mkdir()
@@ -131,6 +200,30 @@ def test_newer_college_binary_pcd_without_pyntcloud(tmp_path):
     # stamped by the file names' seconds and nanoseconds (kiss-icp's loader sorts by them and gave none)
     np.testing.assert_allclose(dataset.timestamps_s, 1583836591.182590976 + np.arange(2), rtol=0, atol=1e-6)
     np.testing.assert_allclose(dataset.ground_truth.timestamps_s, dataset.timestamps_s)
+
+
+def test_apollo_scans_and_ground_truth_take_the_stamps_of_the_pose_file(tmp_path):
+    """poses/gt_poses.txt holds each scan's time (its second column), yet the scans and the ground truth had none;
+    stamps that go back are refused naming the line."""
+    import open3d as o3d
+
+    (tmp_path / "pcds").mkdir()
+    (tmp_path / "poses").mkdir()
+    stamps = 1537574000.6 + 0.1 * np.arange(3)
+    for k in range(3):
+        cloud = o3d.t.geometry.PointCloud(o3d.core.Tensor((RING + k).astype(np.float32)))
+        o3d.t.io.write_point_cloud(str(tmp_path / "pcds" / f"{k + 1}.pcd"), cloud)
+    rows = [f"{k + 1} {stamp:.6f} {587001 + k} 4140000 100 0 0 0 1" for k, stamp in enumerate(stamps)]
+    (tmp_path / "poses" / "gt_poses.txt").write_text("\n".join(rows) + "\n")
+    dataset = open_dataset("apollo", tmp_path)
+    np.testing.assert_allclose(dataset.timestamps_s, stamps, rtol=0, atol=1e-6)
+    assert dataset.read_scan(1).timestamp_s == pytest.approx(stamps[1], abs=1e-6)
+    np.testing.assert_allclose(dataset.ground_truth.timestamps_s, stamps, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(dataset.ground_truth.poses_se3[:, 0, 3], [0, 1, 2])  # (kiss-icp's: from the first pose)
+    rows[2] = rows[2].replace(f"{stamps[2]:.6f}", f"{stamps[0]:.6f}")
+    (tmp_path / "poses" / "gt_poses.txt").write_text("\n".join(rows) + "\n")
+    with pytest.raises(DataError, match=r"gt_poses.txt \(line 3\): time stamps \(column 2\) are not strictly increasing"):
+        open_dataset("apollo", tmp_path).timestamps_s
 
 
 def test_a_file_the_generic_loader_cannot_read_is_named_once(tmp_path):
@@ -205,6 +298,17 @@ def test_generic_reads_files_named_by_decimal_time_stamps_in_time_order(tmp_path
         np.column_stack([RING + k, np.zeros(len(RING))]).astype(np.float32).tofile(tmp_path / f"{stamp}.bin")
     dataset = open_dataset("generic", tmp_path)
     assert [p.split("/")[-1] for p in dataset.loader.scan_files] == ["1000.05.bin", "1000.1.bin", "1000.15.bin", "1000.2.bin"]
+    np.testing.assert_allclose(dataset.read_scan(1).points_xyz, (RING + 1).astype(np.float32))
+
+
+def test_generic_reads_prefixed_decimal_time_stamps_in_time_order(tmp_path):
+    """scan_1000.05 ... scan_1000.2: the fraction after a prefix was compared as a second number (scan_1000.1 read
+    before scan_1000.05), as folder:PATH did."""
+    stamps = ("1000.05", "1000.1", "1000.15", "1000.2")
+    for k, stamp in enumerate(stamps):
+        np.column_stack([RING + k, np.zeros(len(RING))]).astype(np.float32).tofile(tmp_path / f"scan_{stamp}.bin")
+    dataset = open_dataset("generic", tmp_path)
+    assert [p.split("/")[-1] for p in dataset.loader.scan_files] == [f"scan_{stamp}.bin" for stamp in stamps]
     np.testing.assert_allclose(dataset.read_scan(1).points_xyz, (RING + 1).astype(np.float32))
 
 
@@ -303,6 +407,29 @@ def test_generic_refuses_integer_times_in_microseconds(tmp_path):
     with pytest.raises(DataError, match=r"000001\.pcd \(frame 1\): the 't' field: sweeps of 9\.95e-05 s \(this scan\), under "
                                         r"0\.001 s: read as integer nanoseconds, the unit looks like microseconds"):
         open_dataset("generic", tmp_path).read_scan(1)
+
+
+def test_kiss_kitti_ground_truth_is_stamped_by_the_scans_times(tmp_path):
+    """times.txt stamps the scans, yet the ground truth had no stamps: it takes those of the scans present (frames 5
+    and 6 of an excerpt: their own rows of times.txt, not the first two)."""
+    import shutil
+
+    from conftest import shared_path
+
+    seq = tmp_path / "sequences" / "00"
+    (seq / "velodyne").mkdir(parents=True)
+    (tmp_path / "poses").mkdir()
+    for n in (5, 6):
+        shutil.copy(shared_path("kitti_odometry", "sequences", "00", "velodyne", f"{n:06d}.bin"), seq / "velodyne")
+    shutil.copy(shared_path("kitti_odometry", "sequences", "00", "calib.txt"), seq)
+    shutil.copy(shared_path("kitti_odometry", "sequences", "00", "times.txt"), seq)
+    rows = shared_path("kitti_odometry", "poses", "00.txt").read_text().splitlines()[:7]
+    (tmp_path / "poses" / "00.txt").write_text("\n".join(rows) + "\n")
+    times = np.loadtxt(seq / "times.txt")[[5, 6]]
+    dataset = open_dataset("kiss_kitti", tmp_path, sequence="00")
+    np.testing.assert_array_equal(dataset.timestamps_s, times)
+    np.testing.assert_array_equal(dataset.ground_truth.timestamps_s, times)
+    np.testing.assert_allclose(dataset.ground_truth.poses_se3, open_dataset("kitti", tmp_path).ground_truth.poses_se3, atol=1e-5)
 
 
 def test_a_kiss_kind_without_drop_nonfinite_names_a_reader_that_has_it(tmp_path):

@@ -1,9 +1,9 @@
 """A folder of scan files (``.bin``, ``.pcd``, ``.ply``, ``.npy``) as a ``ScanSequence``.
 
-Files are ordered by natural sort of their names (``scan2`` before ``scan10``; names that are decimal time stamps by
-their value, ``1000.05`` before ``1000.1``). An optional poses file (KITTI or TUM format, poses of the LiDAR in a world
-frame) must have exactly one pose per scan; optional timestamps (array or a text file with one number per line)
-likewise.
+Files are ordered by natural sort of their names (``scan2`` before ``scan10``; decimal time stamps in names by
+their value, ``scan_1000.05`` before ``scan_1000.1``). An optional poses file (KITTI or TUM format, poses of the
+LiDAR in a world frame) must have exactly one pose per scan; optional timestamps (array or a text file with one
+number per line) likewise.
 """
 
 from __future__ import annotations
@@ -28,15 +28,21 @@ GENERIC_TIME_FIELDS = ("t", "timestamp", "timestamps", "time", "stamps")
 log = logging.getLogger(__name__)
 
 
+#: a run of digits, with the digits after a dot when a number follows it (``1000.05`` in ``scan_1000.05.bin``)
+_NUMBER = re.compile(r"(\d+(?:\.\d+)?)")
+
+
 def natural_key(name: str) -> tuple:
-    """Sort key treating digit runs as numbers: ``frame2`` < ``frame10``. A name whose stem is a decimal number (a time
-    stamp) sorts by its value: the digits after the dot are a fraction (``1000.05`` < ``1000.1``; as numbers, 5 > 1 put
-    20 Hz sweeps out of order), compared as text so nanosecond stamps keep their order (floats would round them)."""
-    stem, suffix = os.path.splitext(name)
-    whole, dot, fraction = stem.partition(".")
-    if whole.isdigit() and (not dot or fraction.isdigit()):
-        return (0, int(whole), ""), (0, 0, fraction.rstrip("0")), (1, 0, suffix.lower())
-    return tuple((0, int(part), "") if part.isdigit() else (1, 0, part.lower()) for part in re.split(r"(\d+)", name) if part)
+    """Sort key treating numbers in a name as numbers: ``frame2`` < ``frame10``. A number with a dot and digits after
+    it (a time stamp, alone or after a prefix: ``scan_1000.05``) is a decimal whose fraction is compared as text
+    (``1000.05`` < ``1000.1``; as a second number, 5 > 1 put 20 Hz sweeps out of order), so nanosecond stamps keep
+    their order (floats would round them)."""
+    return tuple(_number_key(part) if part[0].isdigit() else (1, 0, part.lower()) for part in _NUMBER.split(name) if part)
+
+
+def _number_key(number: str) -> tuple[int, int, str]:
+    whole, _, fraction = number.partition(".")
+    return 0, int(whole), fraction.rstrip("0")
 
 
 class ScanFolder:

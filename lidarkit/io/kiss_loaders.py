@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from lidarkit.errors import ConfigError, DataError
+from lidarkit.errors import ConfigError, DataError, not_increasing
 from lidarkit.io.base import Scan, checked_index, checked_indices
 from lidarkit.geometry import _within_limits
 from lidarkit.io.rosbag import guarded_loader, require_modules
@@ -118,17 +118,16 @@ class KissLoaderScans:
     def read_scan(self, index: int) -> Scan:
         n = len(self)
         index = checked_index(index, n, self.path, from_end=False)
-        files = getattr(self.loader, "scan_files", None)  # (the generic loader's: the file, not the folder, is named)
-        source = files[index] if isinstance(files, (list, tuple, np.ndarray)) and len(files) == n else self.path
+        source = self._scan_file(index)
         with guarded_loader(self.loader_name, str(source), location=f"frame {index}"):
             item = self.loader[index]
         points, times = item if isinstance(item, tuple) else (item, None)
         points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         times = None if times is None or np.size(times) == 0 else np.asarray(times, dtype=np.float64).ravel()
         if times is not None and len(times) != len(points):
-            raise DataError(f"{len(times)} per-point times for {len(points)} points", source=self.path, location=f"frame {index}")
+            raise DataError(f"{len(times)} per-point times for {len(points)} points", source=source, location=f"frame {index}")
         if times is not None and not np.isfinite(times).all():
-            raise DataError("per-point times contain NaN or infinite values", source=self.path, location=f"frame {index}")
+            raise DataError("per-point times contain NaN or infinite values", source=source, location=f"frame {index}")
         if len(points) and not _within_limits(points):  # (a flat reduction first: NaN fails it)
             points, times = self._without_nonfinite_points(points, times, source, index)
         if len(points) and (points[:, 0] == 0).any():  # (x alone first, as the point-file readers: most scans have none)
@@ -136,6 +135,16 @@ class KissLoaderScans:
         stamps = self.timestamps_s
         stamp = None if stamps is None or index >= len(stamps) else float(stamps[index])
         return Scan(points, None, times, stamp, index, f"{self.path} frame {index}", self.point_time_convention, None)
+
+    def _scan_file(self, index: int) -> str | Path:
+        """The file of scan ``index`` where the loader lists its scans (a message names the file, not the folder);
+        NCLT's and Newer College's loaders list bare names, read from their scan folders. Else the dataset path."""
+        files = getattr(self.loader, "scan_files", None)
+        if not isinstance(files, (list, tuple, np.ndarray)) or len(files) != len(self):
+            return self.path
+        name = str(files[index])
+        folder = getattr(self.loader, "scans_dir", None) or getattr(self.loader, "scan_folder", None)
+        return os.path.join(folder, name) if folder and not os.path.isabs(name) else name
 
     def _without_nonfinite_points(self, points: np.ndarray, times: np.ndarray | None, source: Any,
                                   index: int) -> tuple[np.ndarray, np.ndarray | None]:
@@ -266,8 +275,10 @@ class KissKittiScans(KissLoaderScans):
         frames = self._frames
         if frames and max(frames) >= len(gt):
             raise DataError(f"{len(gt)} ground-truth poses, but the scans reach frame {max(frames)}", source=self.path)
-        # the rows of the scans present, by frame number (an excerpt from frame 5 on is not frames 0, 1, ...)
-        return Trajectory(gt[frames], None, name=f"{self.name}_gt", meta={"frame": self.ground_truth_frame, "pose_instant": None})
+        # the rows of the scans present, by frame number (an excerpt from frame 5 on is not frames 0, 1, ...), stamped
+        # by their times.txt rows (it had no stamps)
+        return Trajectory(gt[frames], self.timestamps_s, name=f"{self.name}_gt",
+                          meta={"frame": self.ground_truth_frame, "pose_instant": None})
 
 
 class KissKittiRawScans(KissLoaderScans):
@@ -319,8 +330,15 @@ class OusterScans(KissLoaderScans):
 def nclt_points(path: str | os.PathLike) -> np.ndarray:
     """One NCLT ``velodyne_sync`` file: x, y, z as little-endian uint16 at 5 mm from -100 m, then intensity and laser
     id bytes (NCLT's own ``read_vel_sync.py``: ``'<HHHBB'``), turned to z up as kiss-icp does (x, -y, -z). kiss-icp's
-    loader reads them as int16: every coordinate beyond 63.835 m came back 327.68 m short."""
-    raw = np.fromfile(path, dtype=np.dtype([("xyz", "<u2", 3), ("intensity", "u1"), ("laser", "u1")]))
+    loader reads them as int16: every coordinate beyond 63.835 m came back 327.68 m short. A file cut short, or
+    empty, is a DataError naming it (numpy read the whole points in it, without a word)."""
+    dtype = np.dtype([("xyz", "<u2", 3), ("intensity", "u1"), ("laser", "u1")])
+    size = os.path.getsize(path)
+    if size % dtype.itemsize:
+        raise DataError(f"{size} bytes is not a whole number of {dtype.itemsize}-byte points", source=path)
+    if size == 0:
+        raise DataError("no points (an empty file)", source=path)
+    raw = np.fromfile(path, dtype=dtype)
     xyz = raw["xyz"].astype(np.float64) * 0.005 - 100.0
     return xyz * np.array([1.0, -1.0, -1.0])
 
@@ -442,6 +460,7 @@ class HeliprScans(KissLoaderScans):
             raise ConfigError(f"unknown HeLiPR sensor {sequence!r}; known: {', '.join(self.SENSORS)}", source="helipr sequence")
         super().__init__(path, sequence=sequence)
         self.loader.get_data = self._records
+        self.loader.read_timestamps = self._sweep_fractions
 
     def _pose_file(self) -> tuple[Path, int, list[Path]] | None:
         sensor = self.loader_options["sequence"]
@@ -461,6 +480,14 @@ class HeliprScans(KissLoaderScans):
         if len(raw) == 0:
             raise DataError("no points", source=path)
         return np.column_stack([raw[name].astype(np.float64) for name in dtype.names])
+
+    def _sweep_fractions(self, records: np.ndarray) -> np.ndarray:
+        """``(N,)`` each point's place in its sweep, 0 to 1, from the time column of ``records`` (N, columns); zeros for a
+        time column of one value, as a bag's: the run reads such a scan without per-point times, with a warning
+        (kiss-icp's loader divided by the zero span: NaN times, refused)."""
+        times = records[:, self.loader.time_channel]
+        span = np.ptp(times)
+        return np.zeros(len(times)) if span == 0 else (times - times.min()) / span
 
     def _stamps(self) -> np.ndarray | None:
         return np.asarray(self.loader.scan_timestamps, dtype=np.float64) * 1e-9
@@ -496,6 +523,20 @@ class ApolloScans(KissLoaderScans):
 
     def _pose_file(self) -> tuple[Path, int, list[Path]] | None:
         return self.path / "poses" / "gt_poses.txt", 0, sorted((self.path / "pcds").glob("*.pcd"))
+
+    def _stamps(self) -> np.ndarray | None:
+        """The second column of ``poses/gt_poses.txt`` (number, time in s, x y z, quaternion): its rows are the scans'
+        in order, as kiss-icp pairs the poses with them (the scans had no stamps, the ground truth none)."""
+        from lidarkit.textfile import data_line_numbers, read_numeric_table
+
+        path = self.path / "poses" / "gt_poses.txt"
+        stamps = read_numeric_table(path, 9)[:, 1]
+        back = np.flatnonzero(np.diff(stamps) <= 0)
+        if len(back):
+            k = int(back[0]) + 1
+            raise DataError(f"time stamps (column 2) are not strictly increasing ({not_increasing(stamps[k], stamps[k - 1])})",
+                            source=path, location=f"line {data_line_numbers(path)[k]}")
+        return stamps if len(stamps) == len(self) else None
 
 
 class NuScenesScans(KissLoaderScans):
