@@ -59,6 +59,15 @@ def test_good_suite_expands_grid_datasets_and_seeds(tmp_path):
     assert len(set(keys)) == len(keys)
 
 
+
+def test_suite_repr_is_one_line_of_counts(tmp_path):
+    """The generated repr printed every Job (2,300 characters for 9 jobs; a suite of hundreds flooded a notebook)."""
+    path = write(tmp_path, GOOD)
+    suite = load_suite(path)
+    assert repr(suite) == f"Suite('tiny', 20 jobs, 2 experiments, {str(path)!r})"
+    one = load_suite(write(tmp_path, "experiments: [{task: selftest, dataset: {kind: synthetic}, methods: [sleep]}]\n", "one.yaml"))
+    assert repr(one) == f"Suite('suite', 1 job, 1 experiment, {str(tmp_path / 'one.yaml')!r})"
+
 def test_job_key_depends_on_spec_and_version(tmp_path):
     job = load_suite(write(tmp_path, GOOD)).jobs[0]
     assert job.key("0.1.0") == job.key("0.1.0")

@@ -669,6 +669,25 @@ def test_a_run_folder_that_would_replace_an_input_of_the_dataset_is_refused(tmp_
     assert (tmp_path / "r" / "poses_kitti.txt").read_bytes() == estimate
 
 
+
+def test_write_run_refuses_to_replace_an_input_the_result_records(tmp_path, monkeypatch):
+    """run(out_dir="r") over folder:g?poses=r/poses_kitti.txt was refused, but write_run(result, "r") of the same run
+    replaced r/poses_kitti.txt (the reference) with the estimate, and the next run scored 3e-16 against itself. The
+    result's recorded reader settings are refused the same way; another folder is written."""
+    from lidarkit.odometry import write_run
+
+    monkeypatch.chdir(tmp_path)
+    _kitti_scans(tmp_path / "g", n=2)
+    write_run(run("folder:g", "small_gicp"), "r")  # (unscored: no plots to draw)
+    reference = (tmp_path / "r" / "poses_kitti.txt").read_bytes()
+    scored_against_r = run("folder:g?poses=r/poses_kitti.txt", "small_gicp")
+    with pytest.raises(ConfigError) as refused:
+        write_run(scored_against_r, "r")
+    assert str(refused.value) == ("out_dir: r/poses_kitti.txt is an input of the dataset (its poses_path): a run never "
+                                  "replaces it; give another folder")
+    assert (tmp_path / "r" / "poses_kitti.txt").read_bytes() == reference
+    assert write_run(scored_against_r, "r2") == Path("r2") and (tmp_path / "r2" / "poses_kitti.txt").read_bytes() != reference
+
 def test_an_unknown_initial_guess_names_the_option(capsys):
     """`--init odom` said "error: init: unknown initial guess 'odom'", the library's name, where other commands name
     their option."""

@@ -226,6 +226,24 @@ def test_config_particle_count_is_used_unless_n_particles_is_given(stachniss):
     assert run_recorded(stachniss, config=cfg).config.n_particles == 30
 
 
+
+def test_a_config_that_is_no_pfconfig_is_refused_by_every_entry_point(stachniss):
+    """make_filter, run_protocol and run_recorded given a dict raised AttributeError ('dict' object has no attribute
+    'kernel' / 'kld' / 'replace'), where ParticleFilter said what to give; each says it, naming itself."""
+    from lidarkit.errors import ConfigError
+
+    expected = "config must be a PFConfig (PFConfig(...) or PFConfig.make(...)), got dict"
+    calls = {
+        "make_filter": lambda: make_filter(stachniss.landmarks.positions_xy, {"n_particles": 10}),
+        "run_protocol": lambda: run_protocol(stachniss, config={"n_particles": 10}),
+        "run_recorded": lambda: run_recorded(stachniss, config={"n_particles": 10}),
+    }
+    for name, call in calls.items():
+        with pytest.raises(ConfigError) as refused:
+            call()
+        assert str(refused.value) == f"{name}: {expected}"
+    assert make_filter(stachniss.landmarks.positions_xy, PFConfig.make(n_particles=10)).config.n_particles == 10
+
 def _strict_json(text: str):
     def refuse(name):
         raise ValueError(f"invalid JSON constant {name}")

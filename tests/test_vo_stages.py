@@ -227,6 +227,32 @@ def test_two_view_reports_failures_instead_of_raising():
     assert check_pose(noise, SanityConfig()) is not None
 
 
+
+def test_two_view_takes_opencv_shaped_points_and_names_each_bad_input():
+    """(2, N) points (p0.T, p1.T) were flattened into N scrambled pairs and gave a wrong pose marked ok; unequal
+    lengths, NaN points and a bad K were raw IndexError / ValueError / LinAlgError. (N, 1, 2) gives the (N, 2) pose."""
+    R = so3_exp(np.radians([0.0, 2.0, 0.0]))
+    t = np.array([0.05, 0.0, 1.0])
+    x0, x1, K = _synthetic_correspondences(np.random.default_rng(0), n=200, R=R, t=t)
+    flat = estimate_two_view(x0, x1, K)
+    column = estimate_two_view(x0[:, None], x1[:, None], K.tolist())
+    assert flat.ok and column.ok and np.allclose(column.R_cur_ref, flat.R_cur_ref) and np.allclose(column.R_cur_ref, R, atol=1e-6)
+    bad = {
+        "transposed": ((x0.T, x1.T, K), DataError, "points_ref_px: must be (N, 2) or (N, 1, 2) pixel coordinates, got "
+                       "shape (2, 200) (one point per column: give its transpose)"),
+        "unequal": ((x0, x1[:-5], K), DataError, "points_cur_px: 195 points for the 200 of points_ref_px: one per correspondence"),
+        "odd count": ((x0.ravel()[:-1], x1.ravel()[:-1], K), DataError,
+                      "points_ref_px: must be (N, 2) or (N, 1, 2) pixel coordinates, got shape (399,)"),
+        "nan point": ((x0, np.r_[x1[:-1], [[np.nan, 1.0]]], K), DataError,
+                      "points_cur_px: NaN or infinite coordinates in 1 of 200 points (first: row 199)"),
+        "K 3x4": ((x0, x1, np.c_[K, np.zeros(3)]), DataError, "K: K must be a 3x3 matrix, got shape (3, 4)"),
+        "K nan": ((x0, x1, K * np.nan), DataError, "K: K must be finite, got 9 NaN or infinite entries"),
+    }
+    for case, (args, kind, message) in bad.items():
+        with pytest.raises(kind) as refused:
+            estimate_two_view(*args)
+        assert str(refused.value) == message, case
+
 def test_sanity_checks_each_reason():
     good = TwoViewEstimate(np.eye(3), np.array([0, 0, 1.0]), np.ones(100, bool), "E-ransac", 100, 5.0)
     cfg = SanityConfig(min_inliers=30, max_rotation_deg=30, min_parallax_px=0.5)
@@ -486,6 +512,33 @@ def test_smoothing_changes_translations_only():
     short = smooth_translations(traj[:3], 9, 2)
     np.testing.assert_allclose(short.poses_se3, traj[:3].poses_se3, atol=1e-12)
 
+
+
+def test_smoothing_settings_follow_the_smoothing_config_rules():
+    """smooth_translations checked nothing: polyorder 2.5 fitted a cubic while its note said 2.5, window 8 ran with 7
+    and blamed the pose count, window 0 said "30 poses leave no odd window", polyorder -1 was an IndexError. Each is the
+    ConfigError SmoothingConfig gives, naming the argument; a valid window longer than the trajectory still shrinks."""
+    rng = np.random.default_rng(0)
+    poses = np.tile(np.eye(4), (30, 1, 1))
+    poses[:, :3, 3] = np.cumsum(rng.normal(size=(30, 3)), axis=0)
+    traj = Trajectory(poses, 0.1 * np.arange(30))
+    refusals = {
+        (9, 2.5): "polyorder: Input should be a valid integer, got a number with a fractional part (got 2.5)",
+        (8, 2): "smooth_translations: window must be odd (the filter is centred on each pose), got 8",
+        (0, 2): "window: Input should be greater than or equal to 3 (got 0)",
+        (-3, 2): "window: Input should be greater than or equal to 3 (got -3)",
+        (9, -1): "polyorder: Input should be greater than or equal to 1 (got -1)",
+        (9, 8): "smooth_translations: polyorder (8) must be below window - 1 (8): a polynomial of that order passes "
+                "through every pose of the window and smooths nothing",
+    }
+    for (window, polyorder), message in refusals.items():
+        with pytest.raises(ConfigError) as refused:
+            smooth_translations(traj, window, polyorder)
+        assert str(refused.value) == message
+    assert smooth_translations(traj, 31, 2).meta["smoothing"] == "window 29, polyorder 2 (window 31 shrunk to fit 30 poses)"
+    whole = smooth_translations(traj, 9.0, 2)  # (a whole number, as SmoothingConfig takes it)
+    assert whole.meta["smoothing"] == "window 9, polyorder 2"
+    np.testing.assert_array_equal(whole.positions_xyz, smooth_translations(traj, 9, 2).positions_xyz)
 
 def test_intrinsics_guess_and_files(tmp_path):
     K = K_from_image_size(1241, 376)

@@ -87,6 +87,16 @@ class Suite:
     description: str = ""
     skipped: list[tuple[str, str]] = field(default_factory=list)
 
+    def __repr__(self) -> str:
+        """One line of counts (the generated one printed every job: 2,300 characters for 9 jobs)."""
+        def count(n: int, what: str) -> str:
+            return f"{n:,} {what}" + ("" if n == 1 else "s")
+
+        experiments = len({job.experiment for job in self.jobs})
+        skipped = f", {len(self.skipped)} skipped" if self.skipped else ""
+        where = f", {str(self.path)!r}" if self.path is not None else ""
+        return f"Suite({self.name!r}, {count(len(self.jobs), 'job')}, {count(experiments, 'experiment')}{skipped}{where})"
+
 
 def _seeds(value: list[int] | int) -> list[int]:
     return list(range(value)) if isinstance(value, int) else list(value)

@@ -23,9 +23,11 @@ def write_run(result: OdometryResult, out_dir: str | os.PathLike) -> Path:
     ground truth ground_truth_kitti.txt, trajectory.png and ape.png; the folder all-or-nothing (``atomic.run_folder``).
     An earlier run's files in the folder that this run does not write are removed (other files are left alone); a folder
     that never held a run but holds files named like a run's is refused, as ``run(out_dir=...)`` refuses it (a user's
-    own metrics.json was replaced)."""
+    own metrics.json was replaced); so is a folder where the run would replace a file its dataset read, as recorded in
+    ``result.config`` (its ground truth replaced by the estimate: the next run scored 3e-16 against itself)."""
     out = Path(out_dir)
     atomic.check_target(out, "folder", files=RUN_FILES, replaces=RUN_FILES)
+    _refuse_inputs(_recorded_input_paths(result.config), out)
     with atomic.run_folder(out, replaces=RUN_FILES) as tmp:
         _write_files(result, tmp)
     return out
@@ -35,7 +37,10 @@ def refuse_replacing_inputs(sequence: Any, out_dir: str | os.PathLike) -> None:
     """ConfigError (naming ``out_dir``) when a file a run writes or removes in ``out_dir`` is one the dataset reads:
     ``-o g`` over ``folder:g?poses=g/poses_kitti.txt`` replaced the ground truth with the estimate (the next run scored
     0.000). As eval refuses an output that is one of its inputs."""
-    inputs = _input_paths(sequence)
+    _refuse_inputs(_input_paths(sequence), out_dir)
+
+
+def _refuse_inputs(inputs: dict[Path, str], out_dir: str | os.PathLike) -> None:
     for name in RUN_FILES:
         setting = inputs.get((Path(out_dir) / name).resolve())
         if setting is not None:
@@ -49,6 +54,23 @@ def _input_paths(sequence: Any) -> dict[Path, str]:
     reported = getattr(sequence, "reader_options", None)
     items = list(reported.items()) if isinstance(reported, dict) else []
     items += [(k, v) for k, v in (vars(sequence).items() if hasattr(sequence, "__dict__") else ()) if not k.startswith("_")]
+    return _absolute_paths(items)
+
+
+def _recorded_input_paths(config: dict[str, Any]) -> dict[Path, str]:
+    """``{resolved path: setting}`` of the files a run's config records its reader read: ``run.dataset_options`` (the
+    reader's ``reader_options``) and ``run.effective.reader`` (its settings as applied); a result built without them
+    names none."""
+    run_config = config.get("run") if isinstance(config, dict) else None
+    run_config = run_config if isinstance(run_config, dict) else {}
+    effective = run_config.get("effective") if isinstance(run_config.get("effective"), dict) else {}
+    items: list[tuple[str, Any]] = []
+    for recorded in (run_config.get("dataset_options"), effective.get("reader")):
+        items += list(recorded.items()) if isinstance(recorded, dict) else []
+    return _absolute_paths(items)
+
+
+def _absolute_paths(items: list[tuple[str, Any]]) -> dict[Path, str]:
     paths: dict[Path, str] = {}
     for key, value in items:
         if isinstance(value, os.PathLike) or (isinstance(value, str) and os.path.isabs(value)):

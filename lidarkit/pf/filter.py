@@ -6,7 +6,7 @@ import logging
 
 import numpy as np
 
-from lidarkit.errors import DataError
+from lidarkit.errors import ConfigError, DataError
 from lidarkit.pf.base import LandmarkFilterBase, checked_odometry
 from lidarkit.pf.config import PFConfig
 from lidarkit.pf.models import OdometryMotionModel, RangeBearingModel, _wrap_inplace, resolve_q, standard_normal, wrap_angle
@@ -309,8 +309,17 @@ def nis_values(nu: np.ndarray, S: np.ndarray) -> np.ndarray:
     return np.einsum("mi,mij,mj->m", nu, np.linalg.inv(S), nu)
 
 
+def check_config_type(config: object, source: str) -> None:
+    """ConfigError naming ``source`` for a ``config`` that is neither None nor a PFConfig, as the filters say it (a dict
+    was an AttributeError on the first setting read: 'dict' object has no attribute 'kernel')."""
+    if config is not None and not isinstance(config, PFConfig):
+        raise ConfigError(f"config must be a PFConfig (PFConfig(...) or PFConfig.make(...)), got {type(config).__name__}",
+                          source=source)
+
+
 def make_filter(landmarks_xy: np.ndarray, config: PFConfig | None = None, rng: np.random.Generator | int | None = 0):
     """The filter the config asks for: point particles (:class:`ParticleFilter`) or Kalman kernels."""
+    check_config_type(config, "make_filter")
     config = config if config is not None else PFConfig()
     if config.kernel == "kalman":
         from lidarkit.pf.kalman_kernel import KalmanParticleFilter

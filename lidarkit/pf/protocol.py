@@ -30,7 +30,7 @@ from lidarkit.params import is_integer, is_real_number
 from lidarkit.pf.base import check_landmark_index
 from lidarkit.pf.config import PFConfig
 from lidarkit.pf.consistency import Q_VARIANCE_BOUNDS, at_lower_bound, fit_q, localization_problem, q_verdict
-from lidarkit.pf.filter import ParticleFilter, make_filter, nis_values
+from lidarkit.pf.filter import ParticleFilter, check_config_type, make_filter, nis_values
 from lidarkit.pf.models import integrate_odometry, resolve_q, wrap_angle
 from lidarkit.trajectory import Trajectory
 
@@ -377,8 +377,10 @@ def _is_lost(max_loglik, n_readings):
         return np.asarray(-2.0 * np.asarray(max_loglik) / np.maximum(n_readings, 1) > CHI2_2DOF_999)
 
 
-def _resolve_config(config: PFConfig | None, n_particles: int | None, changes: dict[str, Any]) -> PFConfig:
-    """``config`` (default ``PFConfig()``) with ``changes``; ``n_particles`` overrides the config's only when given."""
+def _resolve_config(config: PFConfig | None, n_particles: int | None, changes: dict[str, Any], source: str) -> PFConfig:
+    """``config`` (default ``PFConfig()``) with ``changes``; ``n_particles`` overrides the config's only when given.
+    Anything but a PFConfig is a ConfigError naming ``source``, the calling function."""
+    check_config_type(config, source)
     if n_particles is not None:
         changes = {**changes, "n_particles": n_particles}
     base = config if config is not None else PFConfig.make()
@@ -508,7 +510,7 @@ def run_protocol(
         raise ConfigError(f"data must be a LandmarkData or the path of a landmark dataset, got {type(data).__name__} "
                           f"{data!r:.60}", source="data")
     overrides = {k: v for k, v in dict(likelihood=likelihood, estimator=estimator, resampler=resampler, q_as=q_as).items() if v is not None}
-    cfg = _resolve_config(config, n_particles, {**overrides, **config_overrides})
+    cfg = _resolve_config(config, n_particles, {**overrides, **config_overrides}, "run_protocol")
     seed = checked_seed(seed)
     if not is_integer(mse_start) or mse_start < 0:  # (checked after the run)
         raise ConfigError(f"mse_start must be an integer step >= 0, got {mse_start!r}", source="mse_start")
@@ -598,7 +600,7 @@ def run_recorded(
         raise DataError(f"{len(data.meas_range_m)} SENSOR readings: the recorded mode needs at least 2 to judge Q by",
                         source=_sensor_source(data))
     seed = checked_seed(seed)
-    cfg = _resolve_config(config, n_particles, config_overrides)
+    cfg = _resolve_config(config, n_particles, config_overrides, "run_recorded")
     snapshot_steps = checked_snapshot_steps(snapshot_steps)
     check_config_memory(cfg, len(snapshot_steps), data)
     pf = make_filter(data.landmarks.positions_xy, cfg, np.random.default_rng(seed))

@@ -5,7 +5,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.signal import savgol_filter
 
+from lidarkit.errors import ConfigError
 from lidarkit.trajectory import Trajectory
+from lidarkit.vo.config import SmoothingConfig
 
 
 def smooth_translations(trajectory: Trajectory, window: int = 9, polyorder: int = 2) -> Trajectory:
@@ -15,8 +17,10 @@ def smooth_translations(trajectory: Trajectory, window: int = 9, polyorder: int 
     (fitted over the frame index, one frame missing from a simulated drive raised the APE 26-fold); without them
     ``savgol_filter`` runs over the frame index. The window shrinks to the largest odd length that fits; a trajectory
     too short for a window above ``polyorder + 1`` (which a polynomial of that order fits exactly) is returned
-    unchanged. ``meta["smoothing"]`` says what was applied (the window used, or why nothing was).
+    unchanged. ``meta["smoothing"]`` says what was applied (the window used, or why nothing was). ``window`` and
+    ``polyorder`` follow :class:`SmoothingConfig`'s rules (ConfigError otherwise: polyorder 2.5 fitted a cubic).
     """
+    window, polyorder = _checked(window, polyorder)
     n = len(trajectory)
     win = min(window, n if n % 2 else n - 1)
     if win % 2 == 0:
@@ -32,6 +36,16 @@ def smooth_translations(trajectory: Trajectory, window: int = 9, polyorder: int 
         poses[:, :3, 3] = _savgol_over_time(poses[:, :3, 3], trajectory.timestamps_s, win, polyorder)
     note = f"window {win}, polyorder {polyorder}" + (f" (window {window} shrunk to fit {n} poses)" if win != window else "")
     return Trajectory(poses, trajectory.timestamps_s, name=name, meta={**trajectory.meta, "smoothing": note})
+
+
+def _checked(window: int, polyorder: int) -> tuple[int, int]:
+    """``window``, ``polyorder`` as :class:`SmoothingConfig` accepts them; its ConfigError, naming the argument."""
+    try:
+        cfg = SmoothingConfig(window=window, polyorder=polyorder)
+    except ConfigError as err:
+        field = (err.source or "").removeprefix("vo config smoothing").removeprefix(".")
+        raise ConfigError(err.reason, source=field or "smooth_translations") from None
+    return cfg.window, cfg.polyorder
 
 
 def _savgol_over_time(values: np.ndarray, timestamps_s: np.ndarray, window: int, polyorder: int) -> np.ndarray:

@@ -22,8 +22,10 @@ import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
+from lidarkit.errors import DataError
 from lidarkit.geometry import skew, so3_exp, so3_log
 from lidarkit.vo.config import GeometryConfig
+from lidarkit.vo.intrinsics import validate_K
 
 _METHODS = {"ransac": cv2.RANSAC, "magsac": cv2.USAC_MAGSAC, "lmeds": cv2.LMEDS}
 
@@ -324,7 +326,8 @@ def far_points_move(R: np.ndarray, t: np.ndarray, norm_ref: np.ndarray, norm_cur
 def estimate_two_view(points_ref_px: np.ndarray, points_cur_px: np.ndarray, K: np.ndarray,
                       cfg: GeometryConfig | None = None, min_inliers: int = 8,
                       rng: np.random.Generator | None = None, far_points: bool = False) -> TwoViewEstimate:
-    """Relative pose from ``(N, 2)`` pixel correspondences and intrinsics ``K (3, 3)``.
+    """Relative pose from ``(N, 2)`` (or OpenCV's ``(N, 1, 2)``) pixel correspondences and intrinsics ``K (3, 3)``;
+    points of another shape, unequal counts, NaN, or a K :func:`validate_K` refuses are a DataError naming the argument.
 
     Tries every estimator in ``cfg.estimators`` and keeps the decomposition with most cheirality inliers (in front of
     both cameras and nearer than :data:`NEAR_BASELINES`, recoverPose's count); falls back to the fundamental matrix
@@ -339,8 +342,14 @@ def estimate_two_view(points_ref_px: np.ndarray, points_cur_px: np.ndarray, K: n
     these OpenCV 5 estimators.
     """
     cfg = cfg or GeometryConfig()
-    p0 = np.asarray(points_ref_px, dtype=np.float64).reshape(-1, 2)
-    p1 = np.asarray(points_cur_px, dtype=np.float64).reshape(-1, 2)
+    p0 = _pixel_points(points_ref_px, "points_ref_px")
+    p1 = _pixel_points(points_cur_px, "points_cur_px")
+    if len(p1) != len(p0):
+        raise DataError(f"{len(p1)} points for the {len(p0)} of points_ref_px: one per correspondence", source="points_cur_px")
+    try:
+        K = validate_K(K, source="K")
+    except (TypeError, ValueError):
+        raise DataError("K must be a 3x3 matrix of numbers", source="K") from None
     if rng is None:
         return _estimate_ordered(p0, p1, K, cfg, min_inliers, far_points)
     order = rng.permutation(len(p0))
@@ -348,6 +357,24 @@ def estimate_two_view(points_ref_px: np.ndarray, points_cur_px: np.ndarray, K: n
     inliers = np.zeros(len(p0), bool)
     inliers[order] = est.inliers
     return replace(est, inliers=inliers)
+
+
+def _pixel_points(points: np.ndarray, name: str) -> np.ndarray:
+    """``(N, 2)`` float64 of ``(N, 2)`` or OpenCV's ``(N, 1, 2)`` finite pixel coordinates; DataError naming ``name``
+    otherwise (a transposed ``(2, N)`` was flattened into N pairs of scrambled x and y, and a wrong pose marked ok)."""
+    try:
+        xy = np.asarray(points, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise DataError("must be (N, 2) pixel coordinates (numbers)", source=name) from None
+    if xy.ndim == 3 and xy.shape[1:] == (1, 2):
+        xy = xy[:, 0]
+    if xy.ndim != 2 or xy.shape[1] != 2:
+        transposed = " (one point per column: give its transpose)" if xy.ndim == 2 and xy.shape[0] == 2 else ""
+        raise DataError(f"must be (N, 2) or (N, 1, 2) pixel coordinates, got shape {xy.shape}{transposed}", source=name)
+    bad = np.flatnonzero(~np.isfinite(xy).all(axis=1))
+    if len(bad):
+        raise DataError(f"NaN or infinite coordinates in {len(bad)} of {len(xy)} points (first: row {bad[0]})", source=name)
+    return xy
 
 
 def _estimate_ordered(p0: np.ndarray, p1: np.ndarray, K: np.ndarray, cfg: GeometryConfig,
