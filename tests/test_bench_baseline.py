@@ -620,16 +620,22 @@ def _scans_without_ground_truth(root: Path) -> Path:
     return root / "sim" / "velodyne"
 
 
-def test_a_job_without_ground_truth_is_held_on_its_pinned_trajectory(tmp_path, stretch_registered, monkeypatch):
-    """Over data without ground truth (generic:, carmen, bags without odometry) a baseline checked n_bad_frames only:
-    kiss with one ICP iteration and 3 m voxels moved the end pose 0.18 m and passed. The rerun is held on the pinned
-    trajectory, in a band from its repeats' spread with a floor far above last-bit noise."""
-    scans = _scans_without_ground_truth(tmp_path)
-    (tmp_path / "gen.yaml").write_text(textwrap.dedent(f"""
+def _suite_without_ground_truth(root: Path) -> Path:
+    """``root/gen.yaml``: test_stretch's odometry over :func:`_scans_without_ground_truth`."""
+    scans = _scans_without_ground_truth(root)
+    (root / "gen.yaml").write_text(textwrap.dedent(f"""
         name: no-truth
         experiments:
           - {{name: gen, task: odometry, dataset: {{kind: generic, path: "{scans}", name: gen}}, methods: [test_stretch]}}
     """))
+    return root / "gen.yaml"
+
+
+def test_a_job_without_ground_truth_is_held_on_its_pinned_trajectory(tmp_path, stretch_registered, monkeypatch):
+    """Over data without ground truth (generic:, carmen, bags without odometry) a baseline checked n_bad_frames only:
+    kiss with one ICP iteration and 3 m voxels moved the end pose 0.18 m and passed. The rerun is held on the pinned
+    trajectory, in a band from its repeats' spread with a floor far above last-bit noise."""
+    _suite_without_ground_truth(tmp_path)
     baseline = record(tmp_path / "gen.yaml", tmp_path / "baseline", repeats=2)
     (job,) = baseline.jobs
     band = job["trajectory_band"]
@@ -702,12 +708,7 @@ def test_several_pinned_jobs_without_a_choice_name_the_keyword_to_pass(two_walks
 
 def test_record_says_the_trajectory_band_of_a_job_without_ground_truth(tmp_path, stretch_registered, capsys):
     """record's summary printed "n_bad_frames 0 ± 1e-09" alone for such a job, though its check holds the trajectory."""
-    scans = _scans_without_ground_truth(tmp_path)
-    (tmp_path / "gen.yaml").write_text(textwrap.dedent(f"""
-        name: no-truth
-        experiments:
-          - {{name: gen, task: odometry, dataset: {{kind: generic, path: "{scans}", name: gen}}, methods: [test_stretch]}}
-    """))
+    _suite_without_ground_truth(tmp_path)
     code, out, _ = run_cli(["baseline", "record", str(tmp_path / "gen.yaml"), "--out", str(tmp_path / "b"), "--repeats", "2",
                             "--no-progress"], capsys)
     assert code == 0
@@ -717,12 +718,7 @@ def test_record_says_the_trajectory_band_of_a_job_without_ground_truth(tmp_path,
 def test_tolerance_sets_the_trajectory_band_of_a_job_without_ground_truth(tmp_path, stretch_registered, monkeypatch):
     """``-t METRIC=BAND`` loosened accuracy metrics only: the trajectory band of a job without ground truth could not be
     widened (``trajectory_m`` was refused as a metric no job checks). ``trajectory_m`` / ``trajectory_deg`` set it."""
-    scans = _scans_without_ground_truth(tmp_path)
-    (tmp_path / "gen.yaml").write_text(textwrap.dedent(f"""
-        name: no-truth
-        experiments:
-          - {{name: gen, task: odometry, dataset: {{kind: generic, path: "{scans}", name: gen}}, methods: [test_stretch]}}
-    """))
+    _suite_without_ground_truth(tmp_path)
     baseline = record(tmp_path / "gen.yaml", tmp_path / "baseline", repeats=2)
     monkeypatch.setattr(StretchedMore, "name", "test_stretch")  # translations 0.75 % longer: > 1 mm off, < 1 m
     monkeypatch.setitem(registry_module._VARIANTS, "test_stretch", StretchedMore)
@@ -738,12 +734,7 @@ def test_tolerance_sets_the_trajectory_band_of_a_job_without_ground_truth(tmp_pa
 def no_truth_baseline(tmp_path_factory, stretch_registered):
     """test_stretch (deterministic) pinned over 8 simulated sweeps without ground truth: held on its trajectory."""
     root = tmp_path_factory.mktemp("no_truth")
-    scans = _scans_without_ground_truth(root)
-    (root / "gen.yaml").write_text(textwrap.dedent(f"""
-        name: no-truth
-        experiments:
-          - {{name: gen, task: odometry, dataset: {{kind: generic, path: "{scans}", name: gen}}, methods: [test_stretch]}}
-    """))
+    _suite_without_ground_truth(root)
     return record(root / "gen.yaml", root / "baseline", repeats=1)
 
 
