@@ -227,13 +227,28 @@ def test_poses_of_the_other_format_name_the_poses_format_option(tmp_path, capsys
     tum = Trajectory.from_kitti(seq / "poses.txt").with_timestamps(np.arange(8) * 0.1).to_tum(tmp_path / "gt.tum")
     for poses, fmt, line in (
         (seq / "poses.txt", "tum", f"error: {seq / 'poses.txt'} (line 1): expected 8 numbers, found 12 (a KITTI "
-                                   "trajectory? read it as kitti: --poses-format kitti (poses_format='kitti'))"),
+                                   "trajectory? read it as kitti: --poses-format kitti)"),
         (tum, "kitti", f"error: {tum} (line 2): expected 12 numbers, found 8 (a TUM trajectory? read it as tum: "
-                       "--poses-format tum (poses_format='tum'))"),
+                       "--poses-format tum)"),
     ):
         code, _, err = _run(["vo", str(seq / "image_0"), "--kind", "images", "--calib", str(seq / "calib.txt"), "--poses", str(poses),
                              "--poses-format", fmt], capsys)
         assert code == 1 and err.strip() == line, err
+
+
+def test_poses_of_the_other_format_name_the_option_in_the_cli_and_the_keyword_in_the_library(tmp_path, capsys):
+    """The command's hint repeated itself in Python ("--poses-format kitti (poses_format='kitti')"): the command names
+    its option only (a relative --poses path too), the library's ImageFolder its keyword only."""
+    from lidarkit.io.images import ImageFolder
+
+    seq = sample_path("kitti_vo", "06")
+    shutil.copy(seq / "poses.txt", tmp_path / "gt.txt")
+    with pytest.raises(DataError) as caught:
+        ImageFolder(seq / "image_0", poses=tmp_path / "gt.txt", poses_format="tum")
+    assert caught.value.reason.endswith("(a KITTI trajectory? read it as kitti: poses_format='kitti')"), caught.value
+    code, _, err = _run(["vo", str(seq / "image_0"), "--kind", "images", "--calib", str(seq / "calib.txt"),
+                         "--poses", str(tmp_path / "gt.txt"), "--poses-format", "tum"], capsys)
+    assert code == 1 and err.endswith("(a KITTI trajectory? read it as kitti: --poses-format kitti)\n"), err
 
 
 def test_vo_on_synthetic_tum_folder_with_calib_file(tmp_path, capsys):
@@ -707,6 +722,70 @@ def test_geometry_settings_of_the_pure_rotation_check_are_said_unused_without_sa
                 "check") in err, err
     code, _, err = _run(["vo", seq, "--max-frames", "3", *settings], capsys)
     assert code in (0, None) and "note: --set" not in err, err
+
+
+def test_triangulation_angle_and_threshold_settings_the_pipeline_does_not_use_are_said(capsys):
+    """--set scale.min_triangulation_angle_deg gave byte-identical poses without a note wherever the relative scale
+    tracks corners (they use scale.corner_min_angle_deg), as did geometry.threshold_px with LMedS alone (OpenCV's LMedS
+    takes no threshold) and neither the fundamental-matrix fallback nor the scale's corners."""
+    seq = str(sample_path("kitti_vo", "06"))
+    code, _, err = _run(["vo", seq, "--preset", "report_orb", "--scale", "relative", "--max-frames", "3",
+                         "--set", "scale.min_triangulation_angle_deg=5"], capsys)
+    assert code in (0, None) and err.count("note: --set") == 1, err
+    assert ("note: --set scale.min_triangulation_angle_deg not used: scale.points is corners: the corners use "
+            "scale.corner_min_angle_deg") in err, err
+    lmeds = ["--estimator", "lmeds", "--set", "geometry.fundamental_fallback=false", "--set", "geometry.threshold_px=3"]
+    code, _, err = _run(["vo", seq, "--max-frames", "3", *lmeds, "--set", "scale.min_triangulation_angle_deg=2"], capsys)
+    assert code in (0, None) and err.count("note: --set") == 1, err  # KLT on corners: its own tracks use the angle
+    assert ("note: --set geometry.threshold_px not used: geometry.estimators is lmeds (it sets its own threshold from "
+            "the median error), geometry.fundamental_fallback is false and the relative scale tracks no corners") in err
+
+
+def test_threshold_and_scale_settings_are_said_unused_exactly_where_no_stage_reads_them():
+    """inert_settings names geometry.threshold_px only where no F fallback or corner filter reads it, and the corner
+    path's settings (and the carried-depth limit with descriptor matches) where scale.points is features."""
+    from lidarkit.vo.config import inert_settings, preset
+
+    def unused(name, *keys, **changes):
+        return [key for key, _ in inert_settings(preset(name, **changes), keys)]
+
+    lmeds = {"geometry.estimators": ("lmeds",)}
+    assert unused("lidarkit", "geometry.threshold_px", **lmeds) == []  # the F fallback reads it
+    assert unused("report_sift", "geometry.threshold_px", **lmeds) == ["geometry.threshold_px"]  # no fallback
+    assert unused("report_sift", "geometry.threshold_px", **lmeds, **{"scale.mode": "relative"}) == []  # corner filter
+    assert unused("report_sift", "geometry.threshold_px") == []  # RANSAC reads it
+    orb_features = {"features.detector": "orb", "scale.points": "features"}
+    assert unused("lidarkit", "scale.points", "scale.corner_pose", "scale.max_depth_views", "scale.corner_min_angle_deg",
+                  "scale.min_triangulation_angle_deg", "scale.max_carried_points", **orb_features) == [
+        "scale.corner_pose", "scale.max_depth_views", "scale.corner_min_angle_deg"]
+    assert unused("report_orb", "scale.max_carried_points", "scale.min_triangulation_angle_deg",
+                  **{"scale.mode": "relative", "scale.points": "features"}) == ["scale.max_carried_points"]
+    assert unused("report_orb", "scale.max_carried_points", "scale.corner_min_angle_deg",
+                  "scale.min_triangulation_angle_deg", **{"scale.mode": "relative"}) == ["scale.min_triangulation_angle_deg"]
+
+
+def test_the_run_folder_records_the_input_poses_and_time_stamps_it_read(tmp_path, capsys, monkeypatch):
+    """config.yaml named the input as typed and neither the ground truth the run was scored against nor its time
+    stamps (--poses, --poses-format, --timestamps, or the dataset's own files): both files now record them, resolved."""
+    seq = sample_path("kitti_vo", "06")
+    work = tmp_path / "work"
+    work.mkdir()
+    shutil.copy(seq / "poses.txt", work / "gt.txt")
+    (work / "stamps.txt").write_text("".join(f"{10 + 0.1 * k:.1f}\n" for k in range(8)))
+    monkeypatch.chdir(work)
+    code, _, err = _run(["vo", str(seq / "image_0"), "--kind", "images", "--calib", str(seq / "calib.txt"), "--poses",
+                         "gt.txt", "--timestamps", "stamps.txt", "--max-frames", "3", "--out", "run"], capsys)
+    assert code in (0, None), err
+    read = {"input": str((seq / "image_0").resolve()), "poses": str((work / "gt.txt").resolve()), "poses_format": "kitti",
+            "timestamps": str((work / "stamps.txt").resolve())}
+    config = yaml.safe_load((work / "run" / "config.yaml").read_text())
+    metrics = json.loads((work / "run" / "metrics.json").read_text())
+    assert {key: config[key] for key in read} == read and {key: metrics[key] for key in read} == read
+    code, _, err = _run(["vo", str(seq), "--max-frames", "3", "--out", "own"], capsys)
+    config = yaml.safe_load((work / "own" / "config.yaml").read_text())
+    assert code in (0, None) and {key: config[key] for key in read} == {
+        "input": str(seq.resolve()), "poses": f"the dataset's own {(seq / 'poses.txt').resolve()}", "poses_format": "kitti",
+        "timestamps": f"the dataset's own {(seq / 'times.txt').resolve()}"}, err
 
 
 def test_gt_scale_without_ground_truth_is_refused_before_self_calibration(tmp_path, capsys, caplog):

@@ -3,7 +3,9 @@ simulator (``simcam:street?...``)."""
 
 from __future__ import annotations
 
+import contextlib
 import math
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Optional
 
@@ -124,10 +126,12 @@ def vo_command(
         raise ConfigError(err.reason, source=option) from None
     for key, why in inert_settings(cfg, settings):
         stderr().print(f"note: --set {key} not used: {why}", soft_wrap=True, markup=False)
-    with named_by_option({"vo input kind": "--kind"}):  # (the library's name for it: "vo input kind: unknown input kind")
+    # (the library's names: "vo input kind: unknown input kind", "read it as kitti: poses_format='kitti'")
+    with named_by_option({"vo input kind": "--kind"}), _poses_format_named_by_option(poses):
         vo_input = open_vo_input(data, kind=kind, calib=calib, timestamps=timestamps, poses=poses,
                                  poses_format=poses_format, focal_factor=focal_factor)
     _check_out_beside_images(out, vo_input.images)
+    inputs = _files_read(data, vo_input, poses, poses_format, timestamps)  # (before --start/--max-frames wrap the images)
     numbers = getattr(vo_input.images, "frames", None)  # the input's own frame numbers (KITTI's file names), if any
     n_all = len(vo_input.images)
     # --start counts images; where the input's frame numbers are others (a KITTI folder from 000010.png) messages name
@@ -195,7 +199,7 @@ def vo_command(
             return int(numbers[start + k]) if numbers is not None else start + k
 
         result.diagnostics = [dataclasses.replace(d, frame=number(d.frame), ref_frame=number(d.ref_frame)) for d in result.diagnostics]
-    extra_config = {"input": str(data), "kind": vo_input.kind, "K_source": vo_input.K_source, "start": start,
+    extra_config = {**inputs, "kind": vo_input.kind, "K_source": vo_input.K_source, "start": start,
                     **({"start_frame": int(numbers[start])} if renumbered else {}),  # (--start is an image index)
                     "max_frames": max_frames, **({"frames_cut": frames_cut} if frames_cut else {})}
     if focal is not None:
@@ -203,7 +207,7 @@ def vo_command(
                                             "constrained": focal.constrained, "reason": focal.reason,
                                             "window_focals_px": list(focal.window_focals_px)}
     if result.n_frames > 1 and result.accepted_pairs == 0:
-        _fail_without_pairs(result, out, extra_config, str(data))
+        _fail_without_pairs(result, out, extra_config, str(data), inputs)
     if gt is not None and cfg.scale.mode != "gt":
         # into the GT's frame at the start frame (a later one when the first frames were unusable)
         result.trajectory = result.trajectory.transformed(T_left=gt.poses_se3[result.meta["start_frame"]])
@@ -215,7 +219,8 @@ def vo_command(
     if out is not None:  # the run folder before the table: a stdout that refuses it (> /dev/full) lost the whole run
         from lidarkit.vo.output import write_run
 
-        paths = write_run(result, out, ground_truth=gt, metrics={**metrics, **({"not_scored": not_scored} if not_scored else {})},
+        paths = write_run(result, out, ground_truth=gt,
+                          metrics={**metrics, **({"not_scored": not_scored} if not_scored else {}), **inputs},
                           extra_config=extra_config, gif_images=vo_input.images if gif else None,
                           frame_numbers=[int(numbers[start + k]) if numbers is not None else start + k
                                          for k in range(len(result.trajectory))])
@@ -260,6 +265,53 @@ def vo_command(
         console.print(f"wrote {len(paths)} files to {out}")
 
 
+@contextlib.contextmanager
+def _poses_format_named_by_option(poses: Optional[Path]) -> Iterator[None]:
+    """A --poses file in the other format advises the option that reads it, ``--poses-format tum``, not the image
+    folder's keyword (it said "--poses-format kitti (poses_format='kitti')")."""
+    try:
+        yield
+    except DataError as err:
+        from lidarkit.io.images import poses_format_hint
+
+        # (only the image folder's hint: a KITTI sequence's names a whole vo command beside the library's call)
+        fmt = next((f for f in ("kitti", "tum") if f"read it as {f}: {poses_format_hint(f)}" in err.reason), None)
+        if fmt is None or poses is None or err.source != str(poses):
+            raise
+        reason = err.reason.replace(f": {poses_format_hint(fmt)}", f": --poses-format {fmt}")
+        raise DataError(reason, source=err.source, location=err.location) from None
+
+
+def _files_read(data: Path, vo_input, poses: Optional[Path], poses_format: str, timestamps: Optional[Path]) -> dict:
+    """What a run read, for config.yaml and metrics.json: ``input`` (resolved), the ground-truth ``poses`` and their
+    ``poses_format``, the ``timestamps``; each a file given by its option, the dataset's own file or None (a run folder
+    named neither the poses it was scored against nor the stamps it was written with)."""
+    images = vo_input.images
+    has_poses, has_stamps = vo_input.ground_truth is not None, images.timestamps_s is not None
+    if vo_input.kind == "simcam":
+        own = "the simulator's own"
+        return {"input": str(data), "poses": own if has_poses else None, "poses_format": None,
+                "timestamps": own if has_stamps else None}
+    if vo_input.kind == "kitti":  # (the reader's paths: a relative --poses may have been found in the sequence folder)
+        poses_file, stamps_file, read_as = images.odometry.poses_path, images.odometry.times_path, "kitti"
+    elif vo_input.kind == "tum":
+        poses_file, stamps_file, read_as = images.groundtruth_path, images.rgb_list_path, "tum"
+    else:
+        poses_file, stamps_file, read_as = poses, timestamps, poses_format
+
+    def named(path: Path, given: Optional[Path]) -> str:
+        return str(Path(path).resolve()) if given is not None else f"the dataset's own {Path(path).resolve()}"
+
+    if not has_stamps:
+        stamps = None
+    elif stamps_file is None:  # an image folder stamped by its TUM poses
+        stamps = f"the stamps of the poses {Path(poses).resolve()}"
+    else:
+        stamps = named(stamps_file, timestamps)
+    return {"input": str(data.resolve()), "poses": named(poses_file, poses) if has_poses else None,
+            "poses_format": read_as if has_poses else None, "timestamps": stamps}
+
+
 def _check_out_beside_images(out: Optional[Path], images) -> None:
     """Refuse a run folder that is the folder of the input's images: the next run read its trajectory.png as a frame
     (a subfolder is not listed as images, so a run folder inside it is left alone)."""
@@ -295,16 +347,16 @@ def _scores(result, gt, scale_mode: str) -> tuple[dict, str | None]:
     return scores, None
 
 
-def _fail_without_pairs(result, out: Optional[Path], extra_config: dict, data: str) -> None:
-    """No frame pair accepted: write the run folder (diagnostics) when asked, then raise one clear error naming the
-    input ``data`` (not the run's internal trajectory name)."""
+def _fail_without_pairs(result, out: Optional[Path], extra_config: dict, data: str, inputs: dict) -> None:
+    """No frame pair accepted: write the run folder (diagnostics, and the files read, ``inputs``, in metrics.json)
+    when asked, then raise one clear error naming the input ``data`` (not the run's internal trajectory name)."""
     from lidarkit.vo.pipeline import TrackingFailedError
 
     where = ""
     if out is not None:
         from lidarkit.vo.output import write_run
 
-        write_run(result, out, extra_config=extra_config, plot=False)
+        write_run(result, out, metrics=inputs, extra_config=extra_config, plot=False)
         where = f"; per-frame reasons in {out / 'diagnostics.csv'}"
     try:
         result.check_tracking()

@@ -122,6 +122,12 @@ def _warn_stamps_apart(pose_stamps: np.ndarray, image_stamps: np.ndarray, poses:
                     "by order, one each, not by time", poses, k, float(apart[k]), half_frame)
 
 
+def poses_format_hint(fmt: str) -> str:
+    """How to read an image folder's pose file as ``fmt``, named by the reader's error for a file in the other format:
+    the keyword (a command that opens the folder names its own option instead)."""
+    return f"poses_format='{fmt}'"
+
+
 #: why a file shorter than the folder is refused though ``lidarkit vo --max-frames`` uses fewer images ("15 poses for
 #: 51 images" with --max-frames 10): rows pair with images by order, from the folder's first
 _ONE_PER_IMAGE = "(one per image of the folder, in order from its first: --start and --max-frames pick frames after pairing)"
@@ -164,7 +170,7 @@ class ImageFolder:
         if poses is not None:
             if poses_format not in ("kitti", "tum"):
                 raise ConfigError(f"unknown poses format {poses_format!r}; known: kitti, tum", source="poses_format")
-            gt = Trajectory.read(poses, poses_format, format_hint=lambda other: f"--poses-format {other} (poses_format='{other}')")
+            gt = Trajectory.read(poses, poses_format, format_hint=poses_format_hint)
             if len(gt) != n:
                 raise DataError(f"{len(gt)} poses for {n} images {_ONE_PER_IMAGE}", source=poses)
             if self._timestamps is not None and poses_format == "kitti":

@@ -307,9 +307,13 @@ def inert_settings(cfg: VOConfig, keys: Any) -> list[tuple[str, str]]:
     """``(setting, why)`` for the dotted settings among ``keys`` that ``cfg`` does not use (``--set
     scale.corner_pose=corners`` or ``--set matching.ratio=0.1`` left the default pipeline's poses byte-identical
     without a word, as did ``--no-sanity --set sanity.min_parallax_px=50`` or ``geometry.rotation_focal_ratio`` and
-    ``matching.klt_levels`` with descriptor matching)."""
+    ``matching.klt_levels`` with descriptor matching, ``scale.min_triangulation_angle_deg`` beside the corners' own
+    angle and ``geometry.threshold_px`` with LMedS alone)."""
     own = cfg.matching.method == "klt" and cfg.features.detector == "gftt"
     corner_path = cfg.scale.mode == "relative" and cfg.scale.points == "corners" and not own
+    # OpenCV's LMedS takes no threshold (it derives one from the median error): the setting then reaches only the
+    # fundamental-matrix fallback and the corners' epipolar filter
+    lmeds_only = set(cfg.geometry.estimators) == {"lmeds"}
     notes = []
     for key in keys:
         if str(key) in CHOICE_SETTINGS:
@@ -324,6 +328,9 @@ def inert_settings(cfg: VOConfig, keys: Any) -> list[tuple[str, str]]:
             notes.append((str(key), "sanity.enabled is false: the pose checks are off"))
         elif section == "geometry" and field in SANITY_GEOMETRY_SETTINGS and not cfg.sanity.enabled:
             notes.append((str(key), "sanity.enabled is false: the setting feeds only its pure-rotation check"))
+        elif str(key) == "geometry.threshold_px" and lmeds_only and not cfg.geometry.fundamental_fallback and not corner_path:
+            notes.append((str(key), "geometry.estimators is lmeds (it sets its own threshold from the median error), "
+                                    "geometry.fundamental_fallback is false and the relative scale tracks no corners"))
         elif section == "matching" and field in KLT_SETTINGS and cfg.matching.method != "klt" and not corner_path:
             notes.append((str(key), f"matching.method is {cfg.matching.method}: the setting acts with klt or with the "
                                     "relative scale's corners (scale.points corners)"))
@@ -333,4 +340,11 @@ def inert_settings(cfg: VOConfig, keys: Any) -> list[tuple[str, str]]:
             notes.append((str(key), f"scale mode {cfg.scale.mode}: the scale settings act with relative"))
         elif field in CORNER_PATH_SETTINGS and own:
             notes.append((str(key), "KLT on corners carries depth with its own tracks: no separate corner path"))
+        elif field in CORNER_PATH_SETTINGS and field != "points" and not corner_path:
+            notes.append((str(key), "scale.points is features: the pipeline's correspondences carry depth, no corners"))
+        elif field == "min_triangulation_angle_deg" and corner_path:
+            notes.append((str(key), "scale.points is corners: the corners use scale.corner_min_angle_deg"))
+        elif field == "max_carried_points" and cfg.matching.method != "klt" and not corner_path:
+            notes.append((str(key), f"matching.method is {cfg.matching.method}: descriptor matches keep every depth; the "
+                                    "limit acts on KLT tracks and on the relative scale's corners"))
     return notes
