@@ -4,8 +4,7 @@
 
 Runs a bench suite (one simulated street drive per seed; the job seed seeds the simulation) twice for kiss,
 then ``lidarkit.eval.compare`` per seed on APE and KITTI-free metrics, and writes ``results.md`` + ``results.json``
-with the per-(method) summaries (mean, std, median, 95 % CI of the mean: seeded bootstrap from 10 seeds, Student-t
-below) and the Wilcoxon verdicts.
+with the per-(method) summaries (mean, std, median, Student-t's 95 % CI of the mean) and the Wilcoxon verdicts.
 """
 
 from __future__ import annotations
@@ -95,7 +94,7 @@ def _run(args, work: Path) -> None:
 
 def summary_lines(summaries: dict) -> list[str]:
     """The Markdown table of the per-method summaries (method -> metric -> :class:`~lidarkit.eval.Summary`), headed
-    by the interval its CIs are (Student-t below 10 seeds: "bootstrap" was written whatever the seed count)."""
+    by the interval its CIs are (a table of results.json written before 2026-11-28 says "bootstrap": the rule then)."""
     from lidarkit.eval.statistics import BOOTSTRAP, ci_methods
 
     every = [s for per in summaries.values() for s in per.values()]

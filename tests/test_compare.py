@@ -196,7 +196,9 @@ def test_results_of_an_earlier_lidarkit_version_are_named_and_a_mix_of_versions_
         if job.seed == 5:  # this version has not run seed 5 yet
             result_path(out, record["key"]).unlink()
     result = compare(out, out, method_a="good", method_b="bad")
-    assert (result.n_pairs, result.note) == (5, f"12 result(s) in {out} of these jobs from an earlier lidarkit version left out")
+    not_run = "1 (dataset, seed) unit(s) of {}'s suite not run yet or unreadable (`lidarkit bench` resumes them)"
+    assert (result.n_pairs, result.note) == (5, f"{not_run.format('A')}; {not_run.format('B')}; 12 result(s) in {out} of "
+                                                "these jobs from an earlier lidarkit version left out")
     every = compare(out, out, method_a="good", method_b="bad", every_result=True)
     assert (every.n_pairs, every.note) == (6, f"the 6 paired results mix lidarkit versions (A: 5 of {code_version()}, 1 of 0.0.9; "
                                               f"B: the same); 10 result(s) in {out} of these jobs from an earlier lidarkit version left out")
@@ -958,3 +960,46 @@ def test_a_loop_of_symbolic_links_is_named_as_one(tmp_path, capsys):
     with pytest.raises(DataError) as exc:
         compare(run, tmp_path / "o2.json")
     assert str(exc.value) == f"{tmp_path / 'o2.json'}: cannot read it: a loop of symbolic links (a link that leads back to itself)"
+
+
+def test_a_diverged_drive_does_not_make_the_other_drive_s_seeds_one_measurement(tmp_path):
+    """B diverged to 3e4 on one drive: the tolerance of "the seeds change nothing" was 1e-9 of the largest value of
+    all units (3e-5), so the other drive's seeds, 1e-5 apart, counted as one unit: 2 units, p = 0.5. Each side's
+    seeds of a drive are one value at their own scale only: 6 seeds + the diverged drive, p = 0.0156, A better."""
+    def drives(job):
+        if job.dataset_name == "calm":
+            return {"ape_rmse_m": 0.05 + 2e-6 * job.seed + (2e-5 if job.method == "bad" else 0.0)}
+        return {"ape_rmse_m": 0.07 if job.method == "good" else 3e4}
+
+    _task("diverged_drive_test_task", drives)
+    out = _bench(tmp_path, "s", "seeds: 6\nexperiments:\n  - {task: diverged_drive_test_task, datasets: [{kind: synthetic, "
+                                "name: calm, variant: 1}, {kind: synthetic, name: wild, variant: 2}], methods: [good, bad]}\n")
+    result = compare(out, out, method_a="good", method_b="bad")
+    assert (result.pairing, result.n_pairs, result.n_ties) == ("unit", 7, 0)
+    assert result.p_value == pytest.approx(2.0 ** -6) and result.better == "a"
+    assert result.note == "the seeds of a dataset that gives each side one value whatever the seed count as one unit"
+
+
+def test_jobs_of_a_suite_not_run_yet_or_unreadable_are_not_units_only_in_the_other(tmp_path):
+    """B's jobs that never ran (or whose result file cannot be read) read "3 (dataset, seed) units only in A and 0 only
+    in B are left out": they are the suite's units still to run, worded as the report words them; once `lidarkit
+    bench` has resumed them every unit pairs."""
+    from lidarkit.bench import load_suite, run_suite
+
+    _task("not_run_test_task", _error)
+    out = _bench(tmp_path, "s", "seeds: 8\nexperiments:\n  - {task: not_run_test_task, dataset: {kind: synthetic}, methods: [good, bad]}\n")
+    bad = sorted((p for p in (out / "jobs").glob("*.json") if json.loads(p.read_text())["job"]["method"] == "bad"),
+                 key=lambda p: json.loads(p.read_text())["job"]["seed"])
+    bad[0].unlink()
+    bad[1].unlink()
+    bad[2].write_text("{")  # unreadable
+    note = "3 (dataset, seed) unit(s) of {}'s suite not run yet or unreadable (`lidarkit bench` resumes them)"
+    result = compare(out, out, method_a="good", method_b="bad")
+    assert (result.n_pairs, result.note) == (5, note.format("B"))
+    assert compare(out, out, method_a="bad", method_b="good").note == note.format("A")
+    full = _bench(tmp_path, "full", "seeds: 8\nexperiments:\n  - {task: not_run_test_task, dataset: {kind: synthetic}, methods: [bad]}\n")
+    across = compare(out, full, method_a="bad")
+    assert (across.n_pairs, across.n_ties, across.note) == (5, 5, note.format("A"))
+    run_suite(load_suite(tmp_path / "s.yaml"), out, executor="serial")  # resumes the three
+    assert (compare(out, out, method_a="good", method_b="bad").n_pairs,
+            compare(out, out, method_a="good", method_b="bad").note) == (8, "")

@@ -909,7 +909,7 @@ def _short_label(row: Row, table: TaskTable) -> str:
 def statistics_rows(table: TaskTable) -> tuple[list[str], list[list[str]]]:
     """Per (dataset, method): the dataset's headline metric's n, mean, std, median and 95 % CI of the mean over seeds
     (a ``headline metric`` column after the dataset where datasets have different ones), the header naming the
-    interval's method (Student-t below 10 seeds, the seeded bootstrap from 10)."""
+    interval's method (Student-t's)."""
     from lidarkit.eval.statistics import ci_methods
 
     headlines = headline_metrics(table)

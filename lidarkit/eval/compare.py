@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from lidarkit.errors import ConfigError, DataError, EvaluationError, LidarKitError
-from lidarkit.eval.statistics import DEFAULT_ALPHA, PairedComparison, check_number, paired_test, tie_tolerance
+from lidarkit.eval.statistics import DEFAULT_ALPHA, PairedComparison, check_number, paired_test, spread_is_round_off
 from lidarkit.trajectory import Trajectory
 
 if TYPE_CHECKING:
@@ -61,6 +61,7 @@ class BenchRuns:
     experiments: dict[str, set[str]] = field(default_factory=dict)  # pair key -> the experiments its results are of
     alignments: dict[str, dict[str, str]] = field(default_factory=dict)  # pair key -> metric -> alignment its job states
     failed: set[str] = field(default_factory=set)  # pair keys whose job failed
+    not_run: set[str] = field(default_factory=set)  # pair keys of the suite's jobs without a readable result (not run yet)
     instants: dict[str, str] = field(default_factory=dict)  # pair key -> sweep instant of the ground truth it was scored against
     records: list[dict[str, Any]] = field(default_factory=list, repr=False)  # the folder's latest records, read once
     unknown_tasks: dict[str, str] = field(default_factory=dict)  # task -> why its module (its metrics' meaning) is unknown here
@@ -178,7 +179,34 @@ def load_bench_runs(path: str | os.PathLike, method: str | None = None, every_re
             runs.higher_is_better.update(r.get("higher_is_better") or ())
             runs.speed_metrics.update(r.get("speed_metrics") or ())
     runs.failed -= set(runs.values)
+    runs.not_run = _not_run_units(suite_jobs, {r["key"] for r in latest}, chosen, latest, specs)
+    runs.not_run -= set(runs.values) | runs.failed
     return runs
+
+
+def _not_run_units(suite_jobs: dict[str, dict[str, Any]], held: set[str], label: str, latest: list[dict[str, Any]],
+                   specs: dict[str, dict[str, Any]]) -> set[str]:
+    """The pair keys of the suite's jobs of method ``label`` with no readable result among ``held`` keys (not run yet,
+    or a result file that cannot be read: the report's "not run yet"); their units were counted "only in B" when B had
+    them. A job's frames are made indices with a result of the same task, dataset and options, as its own would be."""
+    from lidarkit.bench.jobs import Job, canonical_json
+
+    out = set()
+    for key, spec in suite_jobs.items():
+        if key in held:
+            continue
+        try:
+            job = Job.from_spec(spec)
+            if job.method_label != label:
+                continue
+            dataset = _dataset_unit(job.dataset, specs)
+        except (TypeError, ValueError, AttributeError, LidarKitError):  # (a suite.json edited by hand: its report says so)
+            continue
+        alike = next((r for r in latest if r["job"].get("task") == job.task and r["job"].get("dataset") == job.dataset
+                      and r["job"].get("options") == job.options), {})
+        out.add(canonical_json({"task": job.task, "experiment": job.experiment, "dataset": dataset,
+                                "options": _options_unit(job.task, job.options, dataset, alike), "seed": job.seed}))
+    return out
 
 
 def _as_label(method: str) -> str:
@@ -623,12 +651,18 @@ def compare(
     if other_tasks:
         notes.append(f"{other_tasks}: {len(common)} paired")
     failed_a, failed_b = len(keys_b & side_a.failed), len(keys_a & side_b.failed)  # (read "only in A" when B failed there)
-    only_a, only_b = len(keys_a - keys_b) - failed_b, len(keys_b - keys_a) - failed_a
+    # (a job of A's suite not run yet, or whose result file cannot be read, read as a unit "only in B")
+    only_a = len(keys_a - keys_b) - failed_b - len(keys_a & side_b.not_run)
+    only_b = len(keys_b - keys_a) - failed_a - len(keys_b & side_a.not_run)
     if only_a or only_b:  # the pairs are those both have: say what was left out
         notes.append(f"{only_a} (dataset, seed) units only in A and {only_b} only in B are left out: {len(common)} paired")
     for n, side in ((failed_a, "A"), (failed_b, "B")):
         if n:
             notes.append(f"{n} (dataset, seed) unit(s) where {side}'s job failed are left out (lidarkit report lists why)")
+    for n, side in ((len(side_a.not_run), "A"), (len(side_b.not_run), "B")):  # (worded as the report words them)
+        if n:
+            notes.append(f"{n} (dataset, seed) unit(s) of {side}'s suite not run yet or unreadable "
+                         "(`lidarkit bench` resumes them)")
     notes += _mixed_versions(side_a, side_b, common)
     instants = [sorted({side.instants[k] for k in common if k in side.instants}) for side in (side_a, side_b)]
     if all(instants) and instants[0] != instants[1]:  # (said for run folders, not for bench pairs: kiss end, deskew=False mid)
@@ -736,9 +770,10 @@ def _declared_metrics(task: str, side_a: BenchRuns, side_b: BenchRuns) -> list[M
 
 
 def _of_tasks(side: BenchRuns, tasks: set[str]) -> BenchRuns:
-    """``side`` with the units (and failed units) of ``tasks`` only."""
+    """``side`` with the units (and failed and not run units) of ``tasks`` only."""
     return dataclasses.replace(side, values={k: v for k, v in side.values.items() if _task_of(k) in tasks},
-                               failed={k for k in side.failed if _task_of(k) in tasks})
+                               failed={k for k in side.failed if _task_of(k) in tasks},
+                               not_run={k for k in side.not_run if _task_of(k) in tasks})
 
 
 def _other_tasks_note(side_a: BenchRuns, side_b: BenchRuns, compared: set[str], metric: str) -> str:
@@ -842,7 +877,7 @@ def _seeds_vary(keys: list[str], side_a: BenchRuns, side_b: BenchRuns, metric: s
                 values = [side.values[k][name] for k in group]
                 if all(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) for v in values):
                     v = np.asarray(values, dtype=np.float64)
-                    varies = varies or len(v) > 1 and float(np.ptp(v)) > tie_tolerance(v, v)
+                    varies = varies or len(v) > 1 and not spread_is_round_off(v)
         out[dataset] = varies
     return out
 
@@ -859,8 +894,9 @@ def _one_unit_per_dataset(keys: list[str], va: np.ndarray, vb: np.ndarray,
         groups.setdefault(_dataset_of(key), []).append(i)
     if len(groups) < 2 or all(len(g) == 1 for g in groups.values()):
         return None
-    tol = tie_tolerance(va, vb)
-    fixed = [len(g) > 1 and np.ptp(va[g]) <= tol and np.ptp(vb[g]) <= tol and not (varies or {}).get(d, False)
+    # (each side's seeds of a dataset at their own scale: a drive that diverged on another dataset widened the tolerance
+    # of all, and seeds that differ became one measurement)
+    fixed = [len(g) > 1 and spread_is_round_off(va[g]) and spread_is_round_off(vb[g]) and not (varies or {}).get(d, False)
              for d, g in groups.items()]
     if not any(fixed):
         return None
@@ -941,7 +977,7 @@ def _by_experiment(side_a: BenchRuns, side_b: BenchRuns, experiment: str | None)
 
     def rekeyed(side: BenchRuns, name: str | None) -> BenchRuns:
         new, experiments = {}, {}
-        for key in sorted(set(side.values) | side.failed):
+        for key in sorted(set(side.values) | side.failed | side.not_run):
             unit = json.loads(key)
             if name is None or unit.get("experiment") == name:
                 new[key] = canonical_json({k: v for k, v in unit.items() if k != "experiment"})
@@ -958,7 +994,8 @@ def _by_experiment(side_a: BenchRuns, side_b: BenchRuns, experiment: str | None)
         values = kept(side.values)
         return dataclasses.replace(side, values=values, labels=kept(side.labels), versions=kept(side.versions),
                                    alignments=kept(side.alignments), instants=kept(side.instants),
-                                   failed={new[k] for k in side.failed if k in new} - set(values), experiments=experiments)
+                                   failed={new[k] for k in side.failed if k in new} - set(values), experiments=experiments,
+                                   not_run={new[k] for k in side.not_run if k in new} - set(values))
 
     return rekeyed(side_a, chosen[0]), rekeyed(side_b, chosen[1])
 
