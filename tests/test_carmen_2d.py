@@ -462,6 +462,10 @@ def test_odometry_with_log_odometry_as_initial_guess(carmen_logs, caplog):
         run(aces, "vanilla", frames="0:3", init="imu")
     with pytest.raises(ConfigError, match="own odometry"):
         run("sim:street?frames=3", "vanilla", init="odometry")
+    # a stateful variant without motion_guess: named, with the variants that take it ("this stateful variant" named none)
+    with pytest.raises(ConfigError, match=r"^init: init='odometry': pipeline is a stateful variant that keeps its own motion "
+                                          r"model \(no motion_guess\); kiss and the stateless variants take the odometry$"):
+        run(aces, "pipeline", params={"preset": "kiss_like"}, frames="0:3", init="odometry")
 
 
 def test_a_carmen_log_is_found_by_its_name_and_relations_none_in_a_spec(carmen_logs):

@@ -789,7 +789,13 @@ def _odometry_guess(sequence: ScanSequence, init: str, registration: Any, n_tota
     if init == "constant_velocity":
         return None
     if getattr(registration, "stateful", False) and not getattr(registration, "accepts_motion_guess", False):
-        raise ConfigError("init='odometry': this stateful variant keeps its own motion model (no motion_guess)", source="init")
+        from lidarkit.registration.registry import available_icp, get_icp_class
+
+        takers = [m for m in available_icp() if getattr(get_icp_class(m), "accepts_motion_guess", False)]
+        name = getattr(registration, "name", type(registration).__name__)
+        raise ConfigError(f"init='odometry': {name} is a stateful variant that keeps its own motion model (no motion_guess); "
+                          f"{', '.join(takers) or 'no stateful variant'} and the stateless variants take the odometry",
+                          source="init")
     odometry = getattr(sequence, "odometry", None)
     if odometry is None:
         raise ConfigError(f"init='odometry' needs a dataset with its own odometry (e.g. a CARMEN log); {dataset_name} has none", source="init")
