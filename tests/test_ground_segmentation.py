@@ -407,3 +407,26 @@ def test_thinned_ground_keeps_the_reason_of_its_solve(road_only_results):
     assert with_ground.reason.startswith(flagged + "solved with the ground included; degenerate geometry: ")
     assert thinned.reason == (flagged + "solved with 0.1 of the ground points added back; degenerate geometry: min/max eigenvalue "
                               f"{thinned.degeneracy.ratio:.2e} < 0.01")
+
+
+def test_thinned_ground_adds_back_the_share_it_was_given():
+    """fallback_ground_share took every round(1 / share)-th ground point: 0.7 added back all of them (its pose equal to
+    1.0's bit for bit), 0.4 and 0.6 half; the reason said the share given. The stride is fractional now."""
+    from lidarkit.registration.ground_filtered import thin_ground
+
+    ground = np.ones(10000, dtype=bool)
+    points = np.zeros((10000, 3))
+    for share in (0.1, 0.3, 0.4, 0.6, 0.7, 0.9, 1.0):
+        assert thin_ground(points, ground, share).mean() == pytest.approx(share, abs=1e-3), share
+    assert np.array_equal(np.flatnonzero(thin_ground(points, ground, 0.1)), np.arange(0, 10000, 10))  # (1/k: as before)
+
+
+def test_local_plane_range_is_horizontal_not_a_square_box():
+    """local_plane's max_range_m ("points farther (horizontally) are never ground") was a square box: a flat patch
+    at 30-42 m (x = y) was ground with max_range_m=30."""
+    grid = np.mgrid[-5:5:0.25, -5:5:0.25].reshape(2, -1).T
+    near = np.c_[grid, np.full(len(grid), -1.7)]
+    far = np.c_[grid + [30, 30], np.full(len(grid), -1.7)]
+    mask = get_ground_segmenter("local_plane", max_range_m=30).segment(np.vstack([near, far]))
+    horizontal = np.hypot(*np.vstack([near, far])[:, :2].T)
+    assert mask[: len(near)].all() and not mask[horizontal > 30].any()

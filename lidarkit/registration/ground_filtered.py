@@ -239,14 +239,15 @@ def ground_refinement(
 
 
 def thin_ground(points_xyz: np.ndarray, ground: np.ndarray, share: float, max_range_m: float | None = None) -> np.ndarray:
-    """``(N,)`` mask of an evenly spaced ``share`` of the ``ground`` points (every ``round(1 / share)``-th in scan
-    order, so every ring and direction keeps some), within ``max_range_m`` horizontally if given."""
+    """``(N,)`` mask of an evenly spaced ``share`` of the ``ground`` points (at a stride of ``1 / share`` in scan order,
+    fractional, so every ring and direction keeps some: a whole stride made 0.7 every point and 0.4 every other one),
+    within ``max_range_m`` horizontally if given."""
     pick = ground.copy()
     if max_range_m is not None:
         pick &= np.hypot(points_xyz[:, 0], points_xyz[:, 1]) <= max_range_m
     idx = np.flatnonzero(pick)
     out = np.zeros(len(ground), dtype=bool)
-    out[idx[:: max(1, int(round(1.0 / share)))]] = True
+    out[idx[np.floor(np.arange(0.0, len(idx), 1.0 / share)).astype(np.int64)]] = True
     return out
 
 

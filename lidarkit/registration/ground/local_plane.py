@@ -85,7 +85,8 @@ def local_plane_ground_mask(points_xyz: np.ndarray, config: LocalPlaneConfig) ->
     c = config
     pts = np.asarray(points_xyz, dtype=np.float64)
     mask = np.zeros(len(pts), dtype=bool)
-    use = np.flatnonzero((np.abs(pts[:, 0]) <= c.max_range_m) & (np.abs(pts[:, 1]) <= c.max_range_m) & np.isfinite(pts).all(axis=1))
+    # (horizontal range, as the setting says: a square box made ground of points up to 1.41 x max_range_m away)
+    use = np.flatnonzero((np.hypot(pts[:, 0], pts[:, 1]) <= c.max_range_m) & np.isfinite(pts).all(axis=1))
     if len(use) == 0:
         return mask
     p = pts[use]
