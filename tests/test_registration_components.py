@@ -568,3 +568,15 @@ def test_the_voxel_map_codes_follow_a_long_drive():
     d, i = voxel_map.block_nearest(probe, np.floor(probe / 0.05).astype(np.int64))
     np.testing.assert_allclose(voxel_map.points_xyz[i], world[:5])  # each probe's own point (1.7 mm away)
     assert d.max() < 0.002
+
+
+def test_a_component_mapping_without_spaces_after_colons_says_what_yaml_read():
+    """-p "kernel={name:huber,scale_m:0.5}": YAML reads each "key:value" as one key with no value, and the message said
+    the mapping needs a 'name' key, which the user had written. It says what YAML needs now."""
+    from lidarkit.cli.app import parse_params
+    from lidarkit.registration import get_icp
+
+    with pytest.raises(ConfigError, match=r"needs a 'name' key \(one of: .*\) \(YAML needs a space after ':': "
+                                          r"\{name: huber, scale_m: 0\.5\}\)$"):
+        get_icp("pipeline", **parse_params(["kernel={name:huber,scale_m:0.5}"]))
+    assert get_icp("pipeline", **parse_params(["kernel={name: huber, scale_m: 0.5}"])).config.kernel == {"name": "huber", "scale_m": 0.5}

@@ -198,7 +198,11 @@ def split_spec(kind: str, spec: ComponentSpec) -> tuple[str, dict[str, Any]]:
         params = dict(spec)
         name = params.pop("name", None)
         if not isinstance(name, str):
-            raise ConfigError(f"a {kind} given as a mapping needs a 'name' key (one of: {', '.join(available_components(kind))})", source=kind)
+            # ({name:huber} reads in YAML as the key "name:huber" with no value)
+            glued = [k for k, v in params.items() if v is None and isinstance(k, str) and ":" in k]
+            hint = f" (YAML needs a space after ':': {{{', '.join(k.replace(':', ': ', 1) for k in glued)}}})" if glued else ""
+            raise ConfigError(f"a {kind} given as a mapping needs a 'name' key (one of: {', '.join(available_components(kind))})"
+                              f"{hint}", source=kind)
         return name, params
     raise ConfigError(f"expected a component name or a mapping with 'name', got {type(spec).__name__}", source=kind)
 
