@@ -68,3 +68,68 @@ def test_the_logs_odometry_is_the_callers_own_copy(aces_head):
     import numpy as np
 
     np.testing.assert_array_equal(log.odometry.poses_se3, kept)
+
+
+def _with_stamps(source, target, stamps_by_scan: dict[int, str]):
+    """A copy of the log ``source`` with the ipc stamps of the given FLASER scans (0-based) replaced."""
+    lines, scan = [], -1
+    for line in source.read_text().splitlines():
+        tokens = line.split()
+        if tokens and tokens[0] == "FLASER":
+            scan += 1
+            if scan in stamps_by_scan:
+                tokens[int(tokens[1]) + 8] = stamps_by_scan[scan]
+                line = " ".join(tokens)
+        lines.append(line)
+    target.write_text("\n".join(lines) + "\n")
+    return target
+
+
+@pytest.mark.parametrize("scan, stamp", [(149, "0.0"), (2, "10.0")])
+def test_one_glitched_stamp_moves_alone_to_between_its_neighbours(aces_head, tmp_path, scan, stamp):
+    """ACES's 150th stamp set to 0.0 moved 34 stamps (27 correct ones by over 1 s, a 5.76 s gap made up at scan 149);
+    the 3rd set to 10.0 moved scans 0-2 from 70.29 s to 50.23 s: the least-squares fit pooled the glitch with them. Only
+    the glitch moves now, to halfway between its neighbours (by scan index)."""
+    import numpy as np
+
+    logged = CarmenLog(aces_head).timestamps_s
+    log = CarmenLog(_with_stamps(aces_head, tmp_path / "glitch.clf", {scan: stamp}))
+    others = np.arange(len(log)) != scan
+    np.testing.assert_array_equal(log.timestamps_s[others], logged[others])
+    assert log.timestamps_s[scan] == pytest.approx((logged[scan - 1] + logged[scan + 1]) / 2, abs=1e-9)
+    assert logged[scan - 1] < log.timestamps_s[scan] < logged[scan + 1]
+    assert (log.n_restamped, log.n_stamp_glitches) == (1, 1)
+    assert abs(log.timestamps_s[scan] - logged[scan]) < 0.05  # (the stamp before the glitch: 93.3996 s, 70.5213 s)
+    assert log.max_restamp_s == pytest.approx(log.timestamps_s[scan] - float(stamp))
+    assert log.reader_options["stamps_corrected"].endswith("1 of them far from the stamps around them, placed between their neighbours)")
+    np.testing.assert_array_equal(log.odometry.timestamps_s, log.timestamps_s)
+
+
+def test_glitches_in_a_run_and_at_the_end_are_placed_by_scan_index(aces_head, tmp_path):
+    """Three glitches in a row take the times between their good neighbours, a quarter of the gap apart; a glitch in
+    the first or the last scan (no neighbour beyond it) is one scan period from the scan next to it; no correct stamp
+    moves."""
+    import numpy as np
+
+    logged = CarmenLog(aces_head).timestamps_s
+    last = len(logged) - 1
+    glitches = {0: "5000.0", 100: "1.0", 101: "2.0", 102: "3.0", last: "0.5"}
+    log = CarmenLog(_with_stamps(aces_head, tmp_path / "glitches.clf", glitches))
+    bad = np.isin(np.arange(len(log)), list(glitches))
+    np.testing.assert_array_equal(log.timestamps_s[~bad], logged[~bad])
+    np.testing.assert_allclose(log.timestamps_s[100:103], logged[99] + (logged[103] - logged[99]) * np.array([1, 2, 3]) / 4, atol=1e-9)
+    period = (logged[1] - log.timestamps_s[0], log.timestamps_s[last] - logged[last - 1])
+    assert period[0] == pytest.approx(period[1]) and 0.1 < period[0] < 0.2  # (ACES: 0.156 s per scan)
+    assert (log.n_restamped, log.n_stamp_glitches) == (5, 5)
+
+
+def test_a_late_delivery_is_still_fitted_not_taken_for_a_glitch(aces_head, tmp_path):
+    """A stamp 0.5 s late (3 scan periods; Intel's delivery times stray up to 5) is delivery jitter: pooled with its
+    neighbours by the least-squares fit, as Intel's 2042 moved stamps are."""
+    import numpy as np
+
+    logged = CarmenLog(aces_head).timestamps_s
+    log = CarmenLog(_with_stamps(aces_head, tmp_path / "late.clf", {149: f"{logged[149] + 0.5:.6f}"}))
+    assert log.n_stamp_glitches == 0 and log.n_restamped > 1
+    assert (np.diff(log.timestamps_s) > 0).all() and log.timestamps_s[149] < logged[149] + 0.5
+    assert log.reader_options["stamps_corrected"].endswith("(they go back in file order)")

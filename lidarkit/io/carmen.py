@@ -48,12 +48,19 @@ LASER_MESSAGES = ("FLASER", "ROBOTLASER1", "RAWLASER1")
 #: Least step (s) between the stamps of consecutive scans once made increasing (:func:`_increasing_stamps`).
 MIN_STAMP_STEP_S = 1e-4
 
+#: Scans around a stamp whose median is its expected time (:func:`_glitched_stamps`): runs of up to 5 glitches are seen.
+STAMP_WINDOW = 11
+
+#: A stamp out of order by more than this many scan periods from the median of the stamps around it is a glitch, not
+#: a late delivery: Intel's delivery times stray up to 4.9 periods (0.97 s); an ACES stamp logged as 0.0 strays 600.
+GLITCH_PERIODS = 20.0
+
 #: FLASER beam spacing by number of beams (CARMEN's guess for the unconfigured old format); others: 180 deg / (n - 1).
 _FLASER_RESOLUTION_RAD = {180: np.pi / 180, 181: np.pi / 180, 360: np.pi / 360, 361: np.pi / 360, 400: np.pi / 720, 401: np.pi / 720}
 _FLASER_START_RAD = -np.pi / 2
 
 
-def _increasing_stamps(stamps_s: np.ndarray, min_step_s: float = MIN_STAMP_STEP_S) -> np.ndarray:
+def _isotonic_stamps(stamps_s: np.ndarray, min_step_s: float) -> np.ndarray:
     """``stamps_s`` made increasing (by at least ``min_step_s``) with the least squared change: the isotonic fit of
     ``t_i - i * min_step_s``, plus ``i * min_step_s``. Stamps that already increase by ``min_step_s`` stay as logged; a
     run that goes back is pooled to the times its neighbours allow, its scans spread ``min_step_s`` apart."""
@@ -63,6 +70,43 @@ def _increasing_stamps(stamps_s: np.ndarray, min_step_s: float = MIN_STAMP_STEP_
 
     ramp = min_step_s * np.arange(len(stamps_s))
     return isotonic_regression(stamps_s - ramp).x + ramp
+
+
+def _glitched_stamps(stamps_s: np.ndarray, suspects: np.ndarray) -> tuple[np.ndarray, float]:
+    """``(S,)`` bool: the ``suspects`` (stamps out of order) further than :data:`GLITCH_PERIODS` scan periods from the
+    median of the :data:`STAMP_WINDOW` stamps around them, and the scan period (s): the median time per scan over
+    windows of that many scans, which neither a glitch nor a burst of deliveries moves."""
+    n = len(stamps_s)
+    width = min(STAMP_WINDOW, n)
+    if width < 3 or not suspects.any():
+        return np.zeros(n, dtype=bool), 0.0
+    period = float(np.median((stamps_s[width - 1 :] - stamps_s[: n - width + 1]) / (width - 1)))
+    if not period > 0:  # (stamps that mostly go back have no period to measure a glitch by)
+        return np.zeros(n, dtype=bool), 0.0
+    local_median = np.median(np.lib.stride_tricks.sliding_window_view(stamps_s, width), axis=1)
+    window_of = np.clip(np.arange(n) - width // 2, 0, n - width)  # centred, held inside the log at its ends
+    return suspects & (np.abs(stamps_s - local_median[window_of]) > GLITCH_PERIODS * period), period
+
+
+def _increasing_stamps(stamps_s: np.ndarray, min_step_s: float = MIN_STAMP_STEP_S) -> tuple[np.ndarray, np.ndarray]:
+    """``(stamps, glitched)``: ``stamps_s`` made increasing by at least ``min_step_s``, and ``(S,)`` bool the stamps
+    found to be glitches. The least-squares fit (:func:`_isotonic_stamps`) suits delivery jitter, but pooled one
+    stamp logged as 0.0 with 33 correct ones (27 moved by over 1 s): glitches are first placed between their nearest
+    good neighbours by scan index (a scan period apart beyond the log's ends), then the rest is fitted as before."""
+    fitted = _isotonic_stamps(stamps_s, min_step_s)
+    glitched, period = _glitched_stamps(stamps_s, fitted != stamps_s)
+    if not glitched.any():
+        return fitted, glitched
+    index = np.arange(len(stamps_s))
+    good = np.flatnonzero(~glitched)
+    if not good.size:  # (no stamp to place them by)
+        return fitted, np.zeros_like(glitched)
+    repaired = stamps_s.copy()
+    repaired[glitched] = np.interp(index[glitched], good, stamps_s[good])
+    before, after = glitched & (index < good[0]), glitched & (index > good[-1])
+    repaired[before] = stamps_s[good[0]] - (good[0] - index[before]) * period
+    repaired[after] = stamps_s[good[-1]] + (index[after] - good[-1]) * period
+    return _isotonic_stamps(repaired, min_step_s), glitched
 
 
 def _open_text(path: Path) -> str:
@@ -377,7 +421,8 @@ class CarmenLog:
         self._max_range_given = max_range_m
         # scans in file order, the order their poses follow: Intel's stamps are delivery times that go back up to 0.9 s
         # at 631 lines (sorted by them, the robot jumped back and forth: 94 odometry steps > 0.3 m in 18 ms, none in
-        # file order); stamps that do are made increasing with the least change (see _increasing_stamps)
+        # file order); stamps that do are made increasing with the least change, a glitch (a stamp far from all around
+        # it) first put between its neighbours (see _increasing_stamps)
         raw = log.timestamps_s
         seen = np.argsort(raw, kind="stable")
         same = np.flatnonzero(np.diff(raw[seen]) == 0)
@@ -387,15 +432,21 @@ class CarmenLog:
                 f"two laser scans with the same timestamp {float(raw[second]):.6f} s (also line {int(log.lines[first])})",
                 source=self.path, location=f"line {int(log.lines[second])}",
             )
-        self._timestamps_s = _increasing_stamps(raw)
+        self._timestamps_s, glitched = _increasing_stamps(raw)
         restamped = self._timestamps_s != raw
         self.n_restamped = int(restamped.sum())
         """Scans whose logged stamp went back (or less than 0.1 ms forward) and was moved (0 on most logs)."""
+        self.n_stamp_glitches = int(glitched.sum())
+        """Of those, stamps out of order by far more than a late delivery (:data:`GLITCH_PERIODS` scan periods), each
+        placed between its neighbours by scan index instead of pulling them along (0 on the real logs)."""
         self.max_restamp_s = float(np.abs(self._timestamps_s - raw).max()) if len(raw) else 0.0
         if self.n_restamped:
+            glitches = (f" ({self.n_stamp_glitches} far from the stamps around them, at lines "
+                        f"{', '.join(str(int(n)) for n in log.lines[glitched][:5])}{', ...' if self.n_stamp_glitches > 5 else ''}: "
+                        "placed between their neighbours)" if self.n_stamp_glitches else "")
             log_.warning("%s: %d scan stamps go back in file order (delivery times): scans kept in file order, %d stamps "
-                         "moved by up to %.3f s to increase", self.path.name, int((np.diff(raw) <= 0).sum()), self.n_restamped,
-                         self.max_restamp_s)
+                         "moved by up to %.3f s to increase%s", self.path.name, int((np.diff(raw) <= 0).sum()), self.n_restamped,
+                         self.max_restamp_s, glitches)
         self._starts = log.offsets[:-1]
         self._lengths = np.diff(log.offsets)
         self._relations_path = self._find_relations(relations)
@@ -432,8 +483,10 @@ class CarmenLog:
             "relations": None if self._relations_path is None else str(self._relations_path.absolute()),
         }
         if self.n_restamped:
+            glitches = (f"; {self.n_stamp_glitches} of them far from the stamps around them, placed between their neighbours"
+                        if self.n_stamp_glitches else "")
             options["stamps_corrected"] = (f"{self.n_restamped} scan stamps moved by up to {self.max_restamp_s:.3f} s to increase "
-                                           "(they go back in file order)")
+                                           f"(they go back in file order{glitches})")
         return options
 
     # ---- ScanSequence ------------------------------------------------------------------------
