@@ -10,6 +10,7 @@ import pytest
 from conftest import cli_exit_code
 from lidarkit.errors import ConfigError, DataError, OutputError
 from lidarkit.io import available_datasets, detect_kind, open_dataset
+from lidarkit.io.base import sweep_length
 from lidarkit.sim.bag_export import export_bag
 from lidarkit.sim.lidar import SimulatedLidarSequence, export_kitti
 
@@ -554,3 +555,41 @@ def test_a_simulated_bag_gives_the_ground_truth_at_every_instant_as_the_simulato
         assert got.meta["retimed"] == f"the poses recorded at the sweep {instant} on /ground_truth/sweep_{instant}"
         np.testing.assert_allclose(bag.ground_truth_at_instant(instant, scans=[2, 4]).poses_se3, truth.poses_se3[[2, 4]], atol=1e-9)
     assert bag.ground_truth_topic == "/ground_truth"  # (the poses beside it are no second odometry topic to choose from)
+
+
+def test_a_one_sweep_bag_gives_its_recorded_ground_truth_at_every_instant(tmp_path):
+    """One sweep of 64 columns: its points span 63/64 of the 0.1 s period and no stamp spacing tells the rest, so the
+    mid and end instants fell 0.8 and 1.6 ms before the poses kept for them and were refused ("interpolating needs two
+    or more poses") though the bag holds them."""
+    sim = SimulatedLidarSequence(n_frames=1, n_beams=8, n_azimuths=64, seed=1)
+    bag = open_dataset("mcap", export_bag(sim, tmp_path / "one.mcap", "mcap"))
+    for instant in ("start", "mid", "end"):
+        got, truth = bag.ground_truth_at_instant(instant), sim.ground_truth_at(instant)
+        np.testing.assert_allclose(got.poses_se3, truth.poses_se3, atol=1e-9, err_msg=instant)
+        np.testing.assert_allclose(got.timestamps_s, truth.timestamps_s, atol=1e-6, err_msg=instant)
+        assert got.meta["retimed"] == f"the poses recorded at the sweep {instant} on /ground_truth/sweep_{instant}"
+    assert bag.sweep_duration_s == pytest.approx(sim.config.sweep_period_s, abs=1e-6)  # (one firing step past the last)
+
+
+@pytest.mark.parametrize("n_azimuths", [8, 9])
+def test_a_bag_of_few_columns_lasts_the_stamps_spacing(tmp_path, n_azimuths):
+    """8 columns span 7/8 of the period (12.5 % short, beyond the 10 % of a full sweep): the sweep was taken to last
+    its span and the mid and end ground truth was interpolated 6 and 12 ms early. The last column fires one firing
+    step before the next sweep's first, and that step is counted."""
+    sim = SimulatedLidarSequence(n_frames=3, n_beams=8, n_azimuths=n_azimuths, seed=1)
+    bag = open_dataset("mcap", export_bag(sim, tmp_path / "few.mcap", "mcap"))
+    assert bag.sweep_duration_s == pytest.approx(sim.config.sweep_period_s, abs=1e-9)
+    for instant in ("mid", "end"):
+        got, truth = bag.ground_truth_at_instant(instant), sim.ground_truth_at(instant)
+        np.testing.assert_allclose(got.timestamps_s, truth.timestamps_s, atol=1e-9, err_msg=instant)
+        np.testing.assert_allclose(got.poses_se3, truth.poses_se3, atol=1e-9, err_msg=instant)
+        assert got.meta["retimed"] == f"the poses recorded at the sweep {instant} on /ground_truth/sweep_{instant}"
+
+
+def test_sweep_length_counts_one_firing_step_only_near_the_spacing():
+    """8 columns 12.5 ms apart span 87.5 ms of a 0.1 s period: a full sweep; every other sweep kept (0.2 s apart) or no
+    step known stays the span."""
+    assert sweep_length(0.0875, 0.1, 0.0125) == 0.1
+    assert sweep_length(0.0875, 0.1) == 0.0875
+    assert sweep_length(0.0875, 0.2, 0.0125) == 0.0875
+    assert sweep_length(0.0999, 0.1, 1e-6) == 0.1

@@ -525,3 +525,13 @@ def test_a_run_over_snapshot_sweeps_says_there_is_nothing_to_deskew(tmp_path):
     timeless = run(export_kitti(SimulatedLidarSequence(point_times=False, **small), tmp_path / "timeless"), "kiss")
     assert timeless.metrics["effective"]["deskew"]["reason"].startswith("no per-point times found (looked for point_times/")
     assert any(w.startswith("deskew requested, no per-point times found") for w in timeless.metrics["warnings"])
+
+
+def test_poses_at_refuses_a_time_that_is_not_a_finite_number_naming_times_s():
+    """poses_at(np.array([np.nan])) gave a NaN pose, unsaid."""
+    seq = SimulatedLidarSequence(**SMALL)
+    for times, where in [(np.array([np.nan]), "time 0): time nan"), (np.array([0.05, np.inf]), "time 1): time inf")]:
+        with pytest.raises(DataError) as err:
+            seq.poses_at(times)
+        assert str(err.value) == f"times_s ({where} is not a finite number (s)"
+    assert np.isfinite(seq.poses_at(np.array([0.0, 0.05]))).all()

@@ -392,3 +392,27 @@ def test_an_exports_times_read_back_as_the_simulators_stamps(tmp_path):
     seq = SimulatedCameraSequence(n_frames=4, seed=1, frame_rate_hz=7.0, **{**SMALL, "width": 32, "height": 16})
     images = open_dataset("kitti", export_kitti_images(seq, tmp_path / "cam")).as_image_sequence()
     np.testing.assert_array_equal(images.timestamps_s, seq.timestamps_s)
+
+
+def test_cast_pixels_gives_sky_as_nan_without_a_warning():
+    """On flat ground the first frame looks straight down the street: the principal point's ray has zero world x and
+    z, its hit is at infinity (sky), and inf x 0 printed numpy's "invalid value encountered in multiply"."""
+    import warnings
+
+    seq = SimulatedCameraSequence(n_frames=2, seed=0, terrain_amplitude_m=0, width=64, height=32, fx=50, fy=50, cx=None, cy=None)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        points = seq.cast_pixels(0, np.array([[31.5, 15.5], [31.5, 31.0]]))
+    assert np.isnan(points[0]).all()
+    assert np.isfinite(points[1]).all() and points[1, 2] < seq.world_poses[0][2, 3] - 1.0  # the road below
+
+
+def test_cast_pixels_refuses_pixels_that_are_no_finite_pairs_naming_uv():
+    """Three numbers were numpy's bare "cannot reshape array" ValueError, a (2, 3) array was read as three pixels and a
+    NaN coordinate cast a NaN ray."""
+    seq = SimulatedCameraSequence(n_frames=2, **SMALL)
+    for uv, got in [(np.array([1.0, 2.0, 3.0]), "got shape (3,)"), (np.zeros((2, 3)), "got shape (2, 3)"),
+                    (np.array([[1.0, 2.0], [np.nan, 4.0]]), "row 1 is [nan, 4.0]"), ("ab", "got str")]:
+        with pytest.raises(DataError) as err:
+            seq.cast_pixels(0, uv)
+        assert str(err.value) == f"uv: takes (M, 2) finite pixel coordinates, {got}"

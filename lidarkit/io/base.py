@@ -37,13 +37,14 @@ def classify_instant(fraction: float, tol: float = 0.05) -> str | None:
 FULL_SWEEP_TOLERANCE = 0.1
 
 
-def sweep_length(span_s: float, spacing_s: float) -> float:
+def sweep_length(span_s: float, spacing_s: float, step_s: float = 0.0) -> float:
     """How long a sweep whose points span ``span_s`` lasts when sweeps are stamped ``spacing_s`` apart: the spacing
-    when the span is within :data:`FULL_SWEEP_TOLERANCE` of it (sweeps follow one another, one ending where the next
-    starts, though the last point fires a step before), else the span, first to last point, which kiss deskews over
-    (every other sweep of a recording kept: 0.1 s of points stamped 0.2 s apart; a sensor seeing part of its turn);
-    0 when the spacing is (stamps all equal: the sweeps cannot be placed)."""
-    if not spacing_s > 0 or abs(span_s - spacing_s) <= FULL_SWEEP_TOLERANCE * spacing_s:
+    when the span, or the span and one firing step ``step_s`` where the firings are known (the last column fires a
+    step before the next sweep's first: 8 columns span 7/8 of the turn), is within :data:`FULL_SWEEP_TOLERANCE` of it
+    (sweeps follow one another, one ending where the next starts), else the span, first to last point, which kiss
+    deskews over (every other sweep of a recording kept: 0.1 s of points stamped 0.2 s apart; a sensor seeing part of
+    its turn); 0 when the spacing is (stamps all equal: the sweeps cannot be placed)."""
+    if not spacing_s > 0 or min(abs(span_s - spacing_s), abs(span_s + step_s - spacing_s)) <= FULL_SWEEP_TOLERANCE * spacing_s:
         return spacing_s
     return span_s
 

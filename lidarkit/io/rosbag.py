@@ -362,9 +362,10 @@ class _BagScans:
         """The ground truth at the ``instant`` (start, mid or end) of every sweep (``scans``: of those only, e.g. a
         ``--frames`` selection within what the recording covers). A recording that keeps the poses at that instant
         (:func:`sweep_instant_topic`, e.g. ``/ground_truth/sweep_mid``, as the simulator's bags do) gives them as
-        recorded; otherwise the recorded odometry is interpolated (rotation slerped, position linear in time: off by
-        about ``a dt^2 / 8`` where the motion accelerates by ``a`` between poses ``dt`` apart, a size the note gives from
-        the poses' second differences), or continued at constant velocity for at most 1.5 recording intervals beyond
+        recorded (the one nearest each instant, within :data:`KEPT_INSTANT_SHARE` of a sweep); otherwise the recorded
+        odometry is interpolated (rotation slerped, position linear in time: off by about ``a dt^2 / 8`` where the
+        motion accelerates by ``a`` between poses ``dt`` apart, a size the note gives from the poses' second
+        differences), or continued at constant velocity for at most 1.5 recording intervals beyond
         the first or last pose (e.g. the start of sweep 0 when the poses are stamped at sweep ends). The instants are
         placed by the first scans' point times (where a sweep starts, how long it lasts: :attr:`sweep_duration_s`) and
         the scans' stamps; DataError when the scans carry no point times (or times on another clock than their stamps)
@@ -391,7 +392,9 @@ class _BagScans:
             after = np.clip(np.searchsorted(stamps, times), 0, len(stamps) - 1)
             before = np.maximum(after - 1, 0)
             nearest = np.where(np.abs(stamps[before] - times) <= np.abs(stamps[after] - times), before, after)
-            if np.all(np.abs(stamps[nearest] - times) <= max(1e-6 * sweep_s, 2e-9)):
+            # or, a little off, the pose kept for that very instant: the sweep's length from the points' span falls
+            # short of the period (a one-sweep recording: 0.098 s for 0.1, whose single pose cannot be interpolated)
+            if np.all(np.abs(stamps[nearest] - times) <= max(KEPT_INSTANT_SHARE * sweep_s, 2e-9)):
                 meta["retimed"] = f"the poses recorded at the sweep {instant} on {topic}"
                 return Trajectory(poses[nearest], times, name=name, meta=meta)
         if len(stamps) < 2 or not (np.diff(stamps) > 0).all():
@@ -498,8 +501,9 @@ class _BagScans:
 
     @property
     def sweep_duration_s(self) -> float | None:
-        """How long a sweep lasts, from its first point to the next sweep's (the stamps' spacing) or, when the points
-        span clearly less or more than that spacing, to its last point; None without point times on the stamps' clock."""
+        """How long a sweep lasts, from its first point to the next sweep's (the stamps' spacing; one firing step past
+        its last point for a recording of one sweep) or, when the points span clearly less or more than that spacing,
+        to its last point; None without point times on the stamps' clock."""
         timing = self._sweep_timing
         return None if timing is None or not timing[1] > 0 else timing[1]
 
@@ -509,14 +513,15 @@ class _BagScans:
         :data:`SWEEP_TIMING_SCANS` scans that carry them (where a sweep's first point fires after its stamp and how long
         its points span: medians, so that a recording begun mid-rotation, whose first message holds part of a sweep,
         does not place every sweep by that part; a driver's empty start-up cloud is passed over: it made the whole
-        recording one without point times) and the spacing of the stamps (:func:`sweep_length`: a recording keeping
-        every other sweep, or a sensor seeing part of its turn, lasts from first to last point, not the stamps'
-        spacing); 0 for the length when the stamps are all equal; None when none of the first
+        recording one without point times) and the spacing of the stamps (:func:`sweep_length`, given the step between
+        firings: a recording keeping every other sweep, or a sensor seeing part of its turn, lasts from first to last
+        point, not the stamps' spacing; a recording of one sweep, to one step past its last point); 0 for the length
+        when the stamps are all equal; None when none of the first
         :data:`SWEEP_TIMING_READ` scans carries point times, or they carry times on another clock than the stamps (a
         sweep more than a period from its stamp: :attr:`reader_warnings` says so, with the field and the offset).
         DataError when the sweeps span less than :data:`~lidarkit.io.pointcloud2.MIN_SWEEP_SHARE` of the stamps'
         spacing and under :data:`~lidarkit.io.pointcloud2.MIN_SWEEP_S`: times in microseconds read as nanoseconds."""
-        offsets, ends, spans = [], [], []
+        offsets, ends, spans, steps = [], [], [], []
         for k in range(min(self.n_scans, SWEEP_TIMING_READ)):
             decoded = self._decoded(k, all_missing_ok=True)
             if decoded.time_field is None and len(decoded.points_xyz):  # clouds without a time field: none will have one
@@ -531,12 +536,14 @@ class _BagScans:
                 offsets.append(lo - stamp)
                 ends.append(hi - stamp)
                 spans.append(hi - lo)
+                steps.append((hi - lo) / (len(np.unique(t)) - 1))  # between firings (columns sharing a time: few)
                 if len(spans) == SWEEP_TIMING_SCANS:
                     break
         if not offsets:
             return None
         stamps = self.timestamps_s
-        period = float(np.median(np.diff(stamps))) if len(stamps) > 1 else max(spans)
+        # one sweep alone: from its first point to one firing step past its last (where the next sweep would start)
+        period = float(np.median(np.diff(stamps))) if len(stamps) > 1 else max(spans) + steps[int(np.argmax(spans))]
         # a sweep lies around its stamp (from it, up to it, or across it); one a period or more away is timed by
         # another clock (GPS time against UTC stamps, seconds since the sensor booted): its instant cannot be placed
         first, last = float(np.median(offsets)), float(np.median(ends))
@@ -556,7 +563,7 @@ class _BagScans:
             check_sweep_span(span, period, what=f"per-point time field {', '.join(repr(f) for f in named)}", unit=unit,
                              over=f"the median over the first {len(spans)} scans", source=self.path,
                              hint="time_field=none reads the scans without point times")
-        return float(stamps[0] + first), sweep_length(span, period)
+        return float(stamps[0] + first), sweep_length(span, period, float(np.median(steps)))
 
 
 #: scans whose point times place the sweeps in the stamps (the median over them)
@@ -565,6 +572,8 @@ SWEEP_TIMING_SCANS = 5
 SWEEP_TIMING_READ = 3 * SWEEP_TIMING_SCANS
 #: most spread of the pose-minus-scan stamp offsets, in scan periods, for one pose per scan to be paired by count
 COUNT_PAIRING_SPREAD = 0.25
+#: how far (a share of the sweep) an instant may be from a pose recorded on its sweep_<instant> topic to be given it
+KEPT_INSTANT_SHARE = 0.05
 #: most scan periods between one part of a split ROS 1 recording and the next (further apart: separate recordings)
 SPLIT_GAP_PERIODS = 3
 #: most time (s) a part of a split ROS 1 recording may begin before the one before ends (messages of one instant)

@@ -622,8 +622,12 @@ class SimulatedLidarSequence:
         return np.where(t < ramp, v * ramp * (u**3 - 0.5 * u**4), v * ramp * 0.5 + v * (t - ramp))
 
     def poses_at(self, times_s: np.ndarray) -> np.ndarray:
-        """``(M, 4, 4)`` poses ``T_world_lidar`` at absolute times ``times_s`` (M,) (t = 0: start of sweep 0)."""
+        """``(M, 4, 4)`` poses ``T_world_lidar`` at absolute times ``times_s`` (M,) (t = 0: start of sweep 0); DataError
+        naming ``times_s`` for a time that is not a finite number (NaN gave NaN poses, unsaid)."""
         t = np.atleast_1d(np.asarray(times_s, dtype=np.float64))
+        if not np.isfinite(t).all():
+            k = int(np.flatnonzero(~np.isfinite(t))[0])
+            raise DataError(f"time {t.flat[k]} is not a finite number (s)", source="times_s", location=f"time {k}")
         xy, heading = self.path.at(self.distance_at(t))
         cfg = self.config
         # suspension: pitch, roll and heave oscillate (0.4..1.2 Hz, seeded) around the planar drive

@@ -640,9 +640,18 @@ class SimulatedCameraSequence:
 
     def pixel_directions(self, uv: np.ndarray) -> np.ndarray:
         """``(M, 3)`` float32 camera-frame ray directions ``K^-1 (u, v, 1)`` (z = 1) of pixel coordinates ``uv``
-        (M, 2); pixel centres sit at integer coordinates (OpenCV convention). The renderer casts exactly these."""
+        (M, 2); pixel centres sit at integer coordinates (OpenCV convention). The renderer casts exactly these.
+        DataError naming ``uv`` for any other shape or a non-finite coordinate (three numbers were numpy's reshape error)."""
         K = self.config.K
-        uv = np.asarray(uv, np.float64).reshape(-1, 2)
+        try:
+            uv = np.asarray(uv, np.float64)
+        except (TypeError, ValueError):
+            raise DataError(f"takes (M, 2) finite pixel coordinates, got {type(uv).__name__}", source="uv") from None
+        if uv.ndim != 2 or uv.shape[1] != 2:
+            raise DataError(f"takes (M, 2) finite pixel coordinates, got shape {uv.shape}", source="uv")
+        if not np.isfinite(uv).all():
+            row = int(np.flatnonzero(~np.isfinite(uv).all(axis=1))[0])
+            raise DataError(f"takes (M, 2) finite pixel coordinates, row {row} is {uv[row].tolist()}", source="uv")
         return np.c_[(uv[:, 0] - K[0, 2]) / K[0, 0], (uv[:, 1] - K[1, 2]) / K[1, 1], np.ones(len(uv))].astype(np.float32)
 
     def cast_pixels(self, index: int, uv: np.ndarray) -> np.ndarray:
@@ -654,8 +663,9 @@ class SimulatedCameraSequence:
         dirs = self.pixel_directions(uv) @ T[:3, :3].T.astype(np.float32)
         rays = np.c_[np.broadcast_to(T[:3, 3], dirs.shape), dirs].astype(np.float32)
         t_hit = self.scene.cast_rays(o3d.core.Tensor(rays), nthreads=self.config.threads)["t_hit"].numpy()
-        points = T[:3, 3] + t_hit[:, None].astype(np.float64) * dirs
-        points[~np.isfinite(t_hit)] = np.nan
+        hit = np.isfinite(t_hit)  # (a sky pixel's inf times a zero direction component warned of invalid values)
+        points = np.full((len(t_hit), 3), np.nan)
+        points[hit] = T[:3, 3] + t_hit[hit, None].astype(np.float64) * dirs[hit]
         return points
 
     def _ensure_textures(self, surfaces: np.ndarray) -> None:
