@@ -4,7 +4,7 @@
   that is a stream (``/dev/null``, ``/dev/stdout``, a FIFO) is written into once the output is complete, not replaced.
 - Run folders are all-or-nothing (:func:`run_folder`): written under a temporary hidden name and renamed into
   place only once every file is there, so a failed or killed run never leaves a folder that looks finished; into an
-  existing folder the files are moved one rename each with SIGINT / SIGTERM held until the last is in.
+  existing folder the files are moved one rename each with SIGINT / SIGTERM / SIGHUP held until the last is in.
 - Input paths that cannot be followed say why (:func:`resolved_path`, :func:`missing_reason`, :func:`stream_reason`): a loop
   of symbolic links or a link to a missing file is not "not found", a pipe is not "not a regular file".
 - Any ``OSError`` (a file where a folder is needed, a folder where a file is needed, read-only file system,
@@ -25,6 +25,7 @@ from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 from lidarkit.errors import DataError, OutputError
+from lidarkit.lifetime import STOP_SIGNALS
 
 try:  # advisory locks mark the temporary folders of outputs being written (POSIX)
     import fcntl
@@ -40,8 +41,9 @@ os.umask(_UMASK)  # read once at import: os.umask can only be read by setting it
 PARTIAL_MARK = ".partial-"  # temporary run folders: ``.<name>.partial-XXXX`` beside the final one
 _RANDOM_CHARS = 8  # tempfile's random part of a name
 _NAME_MAX = 255  # bytes in one name on the file systems lidarkit writes to (ext4, xfs, btrfs, tmpfs)
-#: the files that say a folder holds a finished run or export: moved into an existing folder last
-_FINISHING = ("config.yaml", "config.json", "sim.yaml", "manifest.json")
+#: the files that say a folder holds a finished run or export: moved into an existing folder last (an earlier run's
+#: first out of it); ``lidarkit compare`` takes a folder with a metrics.json for a finished run
+_FINISHING = ("config.yaml", "config.json", "sim.yaml", "manifest.json", "metrics.json")
 
 _REASONS = {
     errno.EEXIST: "a file is in the way (a folder is needed here)",
@@ -465,14 +467,14 @@ def run_folder(path: str | os.PathLike, replaces: Iterable[str] = (), exclusive:
 
 @contextlib.contextmanager
 def interrupts_deferred() -> Iterator[None]:
-    """SIGINT / SIGTERM received in the block take effect when it ends, through the handlers in force before it (the
-    CLI's: one line, exit 130 / 143). Main thread only (elsewhere the block runs as it is): a SIGTERM while an export's
-    files were moved into an existing folder left sim.yaml, poses.txt and 327 of its 1000 sweeps."""
+    """SIGINT / SIGTERM / SIGHUP received in the block take effect when it ends, through the handlers in force before it
+    (the CLI's: one line, exit 130 / 143 / 129). Main thread only (elsewhere the block runs as it is): a SIGTERM while
+    an export's files were moved into an existing folder left sim.yaml, poses.txt and 327 of its 1000 sweeps."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     received: list[int] = []
-    previous = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    previous = {s: signal.getsignal(s) for s in STOP_SIGNALS}
     for s, handler in previous.items():
         if handler is not signal.SIG_IGN:
             signal.signal(s, lambda signum, _frame: received.append(signum))
@@ -573,7 +575,7 @@ def _move_into_place(tmp: Path, path: Path, exclusive: bool = False, named: Path
                 raise
             if exclusive:
                 raise filled from None
-    finishing = [tmp / name for name in _FINISHING]  # last: a folder a kill cut off half-way lacks them
+    finishing = [tmp / name for name in _FINISHING]  # in last, the earlier ones out first: a folder cut off lacks them
     moves = [(src, path / src.relative_to(tmp)) for src in sorted(tmp.rglob("*"), key=lambda p: (p in finishing, p))]
     # everything in the way is found before the first file moves: a folder where a file goes (or a file where a folder
     # goes) found half-way left the folder half the earlier run's, half this one's
@@ -587,8 +589,18 @@ def _move_into_place(tmp: Path, path: Path, exclusive: bool = False, named: Path
     # shared folder, immutable) puts the earlier ones back (the folder was left half the earlier run's, half this one's)
     aside = tmp / ".replaced"
     done: list[tuple[Path, Path, Path | None]] = []
+    withdrawn: list[tuple[Path, Path]] = []  # (an earlier run's finishing file, where it is kept)
     src = tmp
     try:
+        # the earlier run's finishing files that this run replaces go aside before any file moves in: a folder a SIGKILL
+        # cut off half-way held the earlier config.yaml beside the new metrics.json and was compared as a finished run
+        for src in (p for p in finishing if p.exists()):
+            dst = path / src.name
+            if dst.exists() or dst.is_symlink():
+                aside.mkdir(exist_ok=True)
+                kept = aside / f"finishing-{len(withdrawn)}"
+                os.rename(dst, kept)
+                withdrawn.append((dst, kept))
         for src, dst in moves:
             if src.is_dir():
                 ensure_dir(dst)
@@ -612,6 +624,9 @@ def _move_into_place(tmp: Path, path: Path, exclusive: bool = False, named: Path
                 os.replace(into, moved)  # (this run's file back where it was written)
                 if kept is not None:
                     os.rename(kept, into)
+        for into, kept in reversed(withdrawn):
+            with contextlib.suppress(OSError):
+                os.rename(kept, into)
         raise OutputError(f"cannot replace it ({_reason(err)}): the folder is left as it was",
                           source=named / src.relative_to(tmp)) from err
 

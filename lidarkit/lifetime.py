@@ -1,15 +1,17 @@
-"""Process lifetime: worker processes die with the process that started them; SIGINT / SIGTERM end the CLI cleanly.
+"""Process lifetime: worker processes die with the process that started them; SIGINT / SIGTERM / SIGHUP end the CLI
+cleanly.
 
 Only the standard library is imported here: the CLI installs :func:`install_startup_handlers` before its heavy
 imports, and the fork server preloads this module.
 
-- :func:`init_worker` runs first in every pool worker: it ignores SIGINT (Ctrl-C reaches the whole process
-  group; only the parent decides what to do), asks Linux to SIGKILL the worker when its parent dies
-  (``PR_SET_PDEATHSIG``) and starts a watchdog thread that ends the worker once the lidarkit process that owns the
+- :func:`init_worker` runs first in every pool worker: it ignores SIGINT and SIGHUP (Ctrl-C and a closed terminal
+  reach the whole process group; only the parent decides what to do), asks Linux to SIGKILL the worker when its parent
+  dies (``PR_SET_PDEATHSIG``) and starts a watchdog thread that ends the worker once the lidarkit process that owns the
   pool is gone (the parent of a forkserver worker is the fork server, not lidarkit; and not every OS has prctl),
   killed-but-unreaped (a zombie) included.
-- :class:`Interrupted` is what SIGINT / SIGTERM become in the CLI (:func:`handle_signals`): a ``BaseException``
-  (so ``except Exception`` in job code does not swallow it) carrying the exit code 128 + signal number.
+- :class:`Interrupted` is what SIGINT / SIGTERM / SIGHUP become in the CLI (:func:`handle_signals`): a
+  ``BaseException`` (so ``except Exception`` in job code does not swallow it) carrying the exit code 128 + signal
+  number.
 """
 
 from __future__ import annotations
@@ -25,10 +27,15 @@ import time
 from collections.abc import Iterator
 
 WATCHDOG_PERIOD_S = 0.5
+#: the signals that stop a command through its cleanup: Ctrl-C, a kill, a hang-up (the terminal closed, SSH dropped:
+#: the process had died at once, exit 129, its pool's semaphores reported leaked and nothing said)
+STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
+#: the stop signals that reach a whole process group (Ctrl-C, a hang-up): children ignore them, the parent decides
+_GROUP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGHUP") if hasattr(signal, name))
 
 
 class Interrupted(BaseException):
-    """SIGINT or SIGTERM received; ``exit_code`` is 130 or 143."""
+    """SIGINT, SIGTERM or SIGHUP received; ``exit_code`` is 130, 143 or 129."""
 
     def __init__(self, signum: int):
         self.signum = signum
@@ -41,7 +48,7 @@ _received: list[int] = []
 
 
 def _raise_interrupted(signum: int, _frame) -> None:
-    for s in (signal.SIGINT, signal.SIGTERM):  # the cleanup that follows must not be interrupted in turn
+    for s in STOP_SIGNALS:  # the cleanup that follows must not be interrupted in turn
         signal.signal(s, signal.SIG_IGN)
     _received.append(signum)
     raise Interrupted(signum)
@@ -71,13 +78,15 @@ def _exit_at_startup(signum: int, _frame) -> None:
 
 
 def install_startup_handlers() -> None:
-    """SIGINT / SIGTERM before the command runs (while modules load): one line, exit 130 / 143, no traceback.
+    """SIGINT / SIGTERM / SIGHUP before the command runs (while modules load): one line, exit 130 / 143 / 129, no
+    traceback.
 
-    An ignored SIGINT stays ignored: it is a child process started to leave Ctrl-C to its parent (a Dask worker
-    re-imports this module as its ``__main__``; it exited on the Ctrl-C its cluster's start was to ride out)."""
+    An ignored SIGINT or SIGHUP stays ignored: it is a child process started to leave Ctrl-C to its parent (a Dask
+    worker re-imports this module as its ``__main__``; it exited on the Ctrl-C its cluster's start was to ride out), or
+    a command started with ``nohup`` to outlive its terminal."""
     if threading.current_thread() is threading.main_thread():
-        for s in (signal.SIGINT, signal.SIGTERM):
-            if s == signal.SIGINT and signal.getsignal(s) is signal.SIG_IGN:
+        for s in STOP_SIGNALS:
+            if s in _GROUP_SIGNALS and signal.getsignal(s) is signal.SIG_IGN:
                 continue
             signal.signal(s, _exit_at_startup)
 
@@ -91,11 +100,12 @@ def _quiet_bootstrap_hook(exc_type, exc, tb) -> None:
 
 
 def setup_fork_server() -> None:
-    """Run in the fork server (preloaded, before it saves the handlers its children get): children ignore SIGINT
-    from birth (Ctrl-C reaches the whole process group; the parent decides) and get the quiet bootstrap hook. The
-    server dies with the lidarkit process that started it (it also ends once that process and every worker are gone:
-    they hold its "alive" pipe)."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    """Run in the fork server (preloaded, before it saves the handlers its children get): children ignore SIGINT and
+    SIGHUP from birth (Ctrl-C and a hang-up reach the whole process group; the parent decides) and get the quiet
+    bootstrap hook. The server dies with the lidarkit process that started it (it also ends once that process and
+    every worker are gone: they hold its "alive" pipe)."""
+    for s in _GROUP_SIGNALS:
+        signal.signal(s, signal.SIG_IGN)
     sys.excepthook = _quiet_bootstrap_hook
     if _started_by_main_thread():
         _set_parent_death_signal()
@@ -114,13 +124,14 @@ def _started_by_main_thread() -> bool:
 
 @contextlib.contextmanager
 def handle_signals() -> Iterator[None]:
-    """Within the block SIGINT and SIGTERM raise :class:`Interrupted` (main thread only); handlers restored after. A
-    signal the process was started ignoring stays ignored, as at startup: a job started in the background (``cmd &`` in
-    a script), which a Ctrl-C at the terminal is to leave alone, was stopped by one arriving after its first seconds."""
+    """Within the block SIGINT, SIGTERM and SIGHUP raise :class:`Interrupted` (main thread only); handlers restored
+    after. A signal the process was started ignoring stays ignored, as at startup: a job started in the background
+    (``cmd &`` in a script), which a Ctrl-C at the terminal is to leave alone, was stopped by one arriving after its
+    first seconds (``nohup cmd``: a hang-up)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    previous = {s: signal.getsignal(s) for s in STOP_SIGNALS}
     _received.clear()
     for s, handler in previous.items():
         if handler is not signal.SIG_IGN:
@@ -188,7 +199,8 @@ def _watch(owner_pid: int, owner_exit: int | None) -> None:
 
 def init_worker(owner_pid: int) -> None:
     """Pool-worker initializer (see the module docstring)."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    for s in _GROUP_SIGNALS:
+        signal.signal(s, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     _set_parent_death_signal()
     owner_exit = _exit_notice(owner_pid)  # before the check below: an owner dying in between is noticed all the same
@@ -198,16 +210,18 @@ def init_worker(owner_pid: int) -> None:
 
 
 @contextlib.contextmanager
-def ignored_sigint() -> Iterator[None]:
-    """Ignore SIGINT while the block starts child processes: they inherit the ignored disposition through exec
-    (Python keeps it) and never see Ctrl-C. A Ctrl-C within the block itself is lost (an ignored signal is discarded,
-    blocked or not): a pool starts in well under a second, a local Dask cluster in a few; once the block has ended,
-    Ctrl-C stops the run as usual."""
+def children_shielded() -> Iterator[None]:
+    """Start child processes in the block shielded from what reaches the whole process group (Ctrl-C, a closed terminal:
+    the parent decides): SIGINT ignored, SIGINT and SIGHUP blocked, which they keep through exec. A Ctrl-C within the
+    block itself is lost (an ignored signal is discarded, blocked or not): a pool starts in well under a second, a local
+    Dask cluster in a few; once the block has ended, Ctrl-C stops the run as usual. SIGHUP keeps this process's handler
+    (another of its threads takes it, so it is not lost): unshielded, a hang-up killed the Dask workers and Python's
+    resource tracker under the parent's cleanup (a dozen tracebacks)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     can_block = hasattr(signal, "pthread_sigmask")
-    mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT}) if can_block else None
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, set(_GROUP_SIGNALS)) if can_block else None
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         yield

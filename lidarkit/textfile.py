@@ -11,12 +11,15 @@ from lidarkit.atomic import missing_reason, stream_reason
 from lidarkit.errors import DataError, LidarKitError
 
 
-def read_lines(path: str | os.PathLike) -> list[str]:
+def read_lines(path: str | os.PathLike, what: str = "file") -> list[str]:
     """All lines of a text file (a UTF-8 byte-order mark, as some editors save, left out); a missing or unreadable
-    file is a DataError naming it."""
+    file is a DataError naming it; ``what``: the kind of file expected, for the message about a folder given instead
+    ("not a regular file" did not say what was wrong)."""
     path = Path(path)
     try:
         if not path.is_file():
+            if path.is_dir():
+                raise DataError(f"is a folder, not a {what}", source=path)
             reason = missing_reason(path, "file not found") if not path.exists() else stream_reason(path)
             raise DataError(reason or "not a regular file", source=path)
         return path.read_text(encoding="utf-8-sig").splitlines()
@@ -32,17 +35,19 @@ def read_numeric_table(
     *,
     comment: str = "#",
     allow_nonfinite: bool = False,
+    what: str = "file",
 ) -> np.ndarray:
     """Rows of ``ncols`` numbers (space- or comma-separated) as an ``(N, ncols)`` float64 array.
 
     Blank lines and lines starting with ``comment`` are skipped. A row with another number of
     fields, a non-number or (unless allowed) NaN/inf raises DataError naming file and line.
-    ``ncols`` may be a tuple of accepted widths; the first row decides and all rows must agree.
+    ``ncols`` may be a tuple of accepted widths; the first row decides and all rows must agree. ``what``: as for
+    :func:`read_lines`.
     """
     accepted = (ncols,) if isinstance(ncols, int) else tuple(ncols)
     rows: list[list[float]] = []
     width: int | None = None
-    for lineno, raw in enumerate(read_lines(path), start=1):
+    for lineno, raw in enumerate(read_lines(path, what), start=1):
         line = raw.strip()
         if not line or line.startswith(comment):
             continue

@@ -5,8 +5,10 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+import numpy as np
 import pytest
 
+from conftest import cli_exit_code
 from lidarkit import atomic
 from lidarkit.cli import main
 from lidarkit.errors import ConfigError, DataError, LidarKitError, OutputError
@@ -541,3 +543,84 @@ def test_icp_and_bench_write_their_outputs_before_a_stdout_that_refuses_them(tmp
     done = run(["bench", tmp_path / "suite.yaml", "--out", tmp_path / "bench", "-e", "serial", "--no-progress"])
     assert (done.returncode, done.stderr.splitlines()[-1]) == (1, "error: stdout: cannot write: no space left on the device")
     assert {"report.md", "report.csv", "report.html"} <= {p.name for p in (tmp_path / "bench").iterdir()}
+
+
+_KILLED_MOVING_IN = """
+import os, signal, sys
+from pathlib import Path
+from lidarkit import atomic
+from lidarkit.run_files import RUN_FILES
+
+out, mode = Path(sys.argv[1]), sys.argv[2]
+real_replace, moved_in = os.replace, []
+
+def replace(src, dst, *args, **kwargs):  # the third file of the run moved in, then a SIGKILL (or a failure)
+    real_replace(src, dst, *args, **kwargs)
+    if Path(dst).parent == out:
+        moved_in.append(Path(dst).name)
+        if len(moved_in) == 3:
+            if mode == "kill":
+                os.kill(os.getpid(), signal.SIGKILL)
+            raise PermissionError(1, "Operation not permitted")
+
+os.replace = replace
+with atomic.run_folder(out, replaces=RUN_FILES) as tmp:
+    for name in ("ape.png", "config.yaml", "ground_truth_kitti.txt", "metrics.json", "poses_kitti.txt", "timing.csv"):
+        (tmp / name).write_text(f"kiss {name}\\n" if name != "config.yaml" else "method: kiss\\nlidarkit_version: x\\n")
+"""
+
+
+@pytest.mark.parametrize("mode", ["kill", "fail"])
+def test_a_run_cut_off_moving_into_an_earlier_runs_folder_lacks_the_earlier_config(tmp_path, mode):
+    """A SIGKILL after three of a kiss run's files had moved into a small_gicp run's folder left small_gicp's config.yaml
+    beside kiss's metrics.json and ground truth: a folder that looked finished, compared as one run. The earlier
+    config.yaml and metrics.json leave before the first file moves in (and the new ones come last), so the cut-off
+    folder has neither: a later run and `lidarkit compare` refuse it. A failure that can be caught still puts the
+    earlier run back whole."""
+    import subprocess
+    import sys
+
+    from lidarkit.run_files import RUN_FILES
+
+    out = tmp_path / "run"
+    with atomic.run_folder(out, replaces=RUN_FILES) as tmp:
+        for name in ("ape.png", "config.yaml", "ground_truth_kitti.txt", "metrics.json", "poses_kitti.txt", "timing.csv"):
+            (tmp / name).write_text(f"small_gicp {name}\n" if name != "config.yaml" else "method: small_gicp\nlidarkit_version: x\n")
+    earlier = {p.name: p.read_text() for p in out.iterdir()}
+    script = tmp_path / "killed_moving_in.py"
+    script.write_text(_KILLED_MOVING_IN)
+    done = subprocess.run([sys.executable, str(script), str(out), mode], capture_output=True, text=True, timeout=120)
+    if mode == "fail":
+        assert done.returncode == 1 and "cannot replace it (permission denied): the folder is left as it was" in done.stderr
+        assert {p.name: p.read_text() for p in out.iterdir()} == earlier
+        return
+    assert done.returncode == -9
+    now = {p.name: p.read_text() for p in out.iterdir()}
+    assert "config.yaml" not in now and "metrics.json" not in now  # (the earlier run's were left in place)
+    assert sorted(name for name in now if now[name].startswith("kiss")) == ["ape.png", "ground_truth_kitti.txt",
+                                                                           "poses_kitti.txt"]
+    with pytest.raises(OutputError, match="holds files named like a run's .* but no config.yaml written by lidarkit"):
+        atomic.check_target(out, "folder", files=RUN_FILES, replaces=RUN_FILES)
+    from lidarkit.eval.compare import load_odometry_run
+
+    with pytest.raises(DataError, match="no metrics.json: not a finished odometry run folder"):
+        load_odometry_run(out)  # (`lidarkit compare` scored the mixed folder)
+
+
+def test_a_folder_given_as_a_text_input_is_called_a_folder(tmp_path, capsys):
+    """`lidarkit eval gt.txt FOLDER` read "FOLDER: not a regular file", which did not say that a folder was given where a
+    file is read; the readers can name the kind of file they expected."""
+    from lidarkit.textfile import read_lines, read_numeric_table
+
+    gt, folder = tmp_path / "gt.txt", tmp_path / "results"
+    folder.mkdir()
+    rows = np.tile(np.eye(4)[:3].ravel(), (5, 1))
+    rows[:, 3] = np.arange(5.0)
+    np.savetxt(gt, rows)
+    assert cli_exit_code(["eval", str(gt), str(folder)]) == 1
+    assert capsys.readouterr().err == f"error: {folder}: is a folder, not a file\n"
+    with pytest.raises(DataError) as caught:
+        read_numeric_table(folder, 12, what="trajectory file")
+    assert str(caught.value) == f"{folder}: is a folder, not a trajectory file"
+    with pytest.raises(DataError, match="missing.txt: file not found$"):  # (other reasons as they were)
+        read_lines(tmp_path / "missing.txt")

@@ -123,3 +123,31 @@ def test_the_component_listing_names_preprocess_and_the_ranges_the_pipeline_pass
     crop = [line for line in lines[start:start + 3] if line.split(":")[0].endswith("_range_m")]
     assert crop == ["min_range_m: float = 0.0 — drop points at or closer than this (m); the pipeline passes its own",
                     "max_range_m: float = 100.0 — drop points at or beyond this (m); the pipeline passes its own"]
+
+
+def test_a_bad_init_is_refused_before_either_cloud_is_read(tmp_path, capsys):
+    """A scaled rotation or a 1e8 m translation as --init was refused only after both clouds were read (their warnings
+    printed first): with a source cloud that does not exist, the --init error comes first."""
+    scaled, far = np.eye(4), np.eye(4)
+    scaled[0, 0] = 2.0
+    far[0, 3] = 1e8
+    missing = tmp_path / "missing.npy"
+    for name, T, reason in (("scaled.txt", scaled, "the 3x3 block is not a rotation"),
+                            ("far.txt", far, "the translation has a coordinate of 1e+08 m, beyond 1e+07 m")):
+        np.savetxt(tmp_path / name, T)
+        assert cli_exit_code(["icp", str(missing), str(TARGET), "--init", str(tmp_path / name)]) == 1
+        err = " ".join(capsys.readouterr().err.split())
+        assert err.startswith(f"error: {tmp_path / name}: {reason}"), err
+    assert cli_exit_code(["icp", str(missing), str(TARGET), "--init", str(tmp_path)]) == 1  # a folder given for it
+    assert capsys.readouterr().err == f"error: {tmp_path}: is a folder, not a 4x4 pose file\n"
+
+
+def test_a_cloud_too_small_to_register_is_named_by_its_file(tmp_path, capsys):
+    """`lidarkit icp one.npy ok.npy` said "source cloud: needs at least 3 points, got 1" without the file."""
+    one, ok = tmp_path / "one.npy", tmp_path / "ok.npy"
+    np.save(one, np.array([[1.0, 2.0, 3.0]]))
+    np.save(ok, np.load(SOURCE)[::50])
+    for argv, role in (([one, ok], "source cloud"), ([ok, one], "target cloud")):
+        assert cli_exit_code(["icp", *map(str, argv)]) == 1
+        err = " ".join(capsys.readouterr().err.split())
+        assert err == f"error: {one} ({role}): needs at least 3 points, got 1", err

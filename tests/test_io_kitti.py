@@ -619,3 +619,17 @@ def test_a_pose_file_that_stops_early_scores_the_frames_it_covers(tmp_path, odo_
     with pytest.raises(DataError) as err:
         ds.ground_truth_of([2])
     assert str(err.value) == f"{poses}: 100 poses but scan 000198.bin is frame 198"
+
+
+def test_times_going_back_say_both_stamps(tmp_path, odo_root):
+    """A times.txt going back (0, 0.1, 0.05, ...) said "(line 3, frame 2): time stamps are not strictly increasing"
+    without the values; they are printed as the odometry runner prints them, a repeated stamp said so."""
+    seq = tmp_path / "seq"
+    shutil.copytree(odo_root / "sequences" / "00", seq)
+    n = len((seq / "times.txt").read_text().split())
+    for third, why in ((0.05, "0.05 s after 0.1 s of frame 1"), (0.1, "0.1 s repeats the stamp of frame 1")):
+        stamps = [0.0, 0.1, third] + [0.1 * i for i in range(3, n)]
+        (seq / "times.txt").write_text("".join(f"{t:g}\n" for t in stamps))
+        with pytest.raises(DataError) as caught:
+            KittiOdometry(seq).timestamps_s
+        assert str(caught.value) == f"{seq / 'times.txt'} (line 3, frame 2): time stamps are not strictly increasing: " + why

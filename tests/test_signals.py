@@ -342,3 +342,57 @@ def test_an_interrupted_command_ends_with_its_code_whatever_a_library_does_at_sh
     assert lines[-1].startswith("interrupted by SIGTERM: stopped"), err
     assert all(line.startswith("WARNING lidarkit.sim.lidar: ") for line in lines[:-1]), err
     assert not out.exists() and not [p for p in os.listdir(tmp_path) if p.startswith(".")]  # nothing half-written
+
+
+def test_a_hang_up_stops_bench_like_sigterm_and_its_workers_leave_it_to_the_parent(tmp_path):
+    """A closed terminal (or a dropped SSH session) sends SIGHUP to the bench's whole process group: it died at once,
+    exit 129 with no word, no cleanup, and Python's resource tracker reported leaked semaphores. It stops as on
+    SIGTERM now: one "interrupted by SIGHUP" line, exit 129, finished results kept and whole, nothing left running."""
+    import os
+    import subprocess
+    import time
+
+    suite, out = tmp_path / "suite.yaml", tmp_path / "out"
+    suite.write_text(textwrap.dedent(bench_kill.SUITE.format(n_jobs=4, job_s=1.0)))
+    env = {**os.environ, "PYTHONPATH": str(bench_kill.REPO) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    proc = subprocess.Popen(bench_kill.bench_cmd(suite, out, "process"), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True, env=env)
+    try:
+        deadline = time.monotonic() + 120
+        while not (out / "suite.json").exists() and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.02)
+        time.sleep(0.5)  # the first jobs running (4 jobs of 1 s on 2 workers)
+        assert proc.poll() is None, proc.communicate()
+        os.killpg(proc.pid, signal.SIGHUP)  # as the terminal's hang-up reaches the job's process group
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    deadline = time.monotonic() + 5
+    while bench_kill.session_processes(proc.pid) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert proc.returncode == 128 + signal.SIGHUP, err
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("interrupted by SIGHUP") and "run the same command again" in lines[0], err
+    assert bench_kill.session_processes(proc.pid) == []  # workers, fork server, resource tracker gone
+    assert bench_kill.check_results(out)[1] == 0
+
+
+def test_a_command_started_with_sighup_ignored_keeps_ignoring_it():
+    """``nohup lidarkit ...`` starts the command with SIGHUP ignored, to outlive its terminal: the CLI's handlers
+    leave it ignored (as an ignored SIGINT), while the command runs too."""
+    import subprocess
+
+    code = textwrap.dedent("""
+        import os, signal, sys
+        from lidarkit.lifetime import handle_signals, install_startup_handlers
+        install_startup_handlers()  # (what the CLI does first)
+        os.kill(os.getpid(), signal.SIGHUP)
+        with handle_signals():
+            os.kill(os.getpid(), signal.SIGHUP)
+        print("still running")
+    """)
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
+                          cwd=Path(__file__).resolve().parents[1],
+                          preexec_fn=lambda: signal.signal(signal.SIGHUP, signal.SIG_IGN))
+    assert (done.returncode, done.stdout.strip(), done.stderr) == (0, "still running", "")

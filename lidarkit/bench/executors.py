@@ -7,6 +7,7 @@ own: ``concurrent.futures.ProcessPoolExecutor`` and ``distributed`` do it.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import multiprocessing
 import os
@@ -16,7 +17,7 @@ from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
-from lidarkit.lifetime import ignored_sigint, init_worker, mark_abandoned
+from lidarkit.lifetime import children_shielded, init_worker, mark_abandoned
 from lidarkit.errors import ConfigError, LidarKitError
 
 log = logging.getLogger(__name__)
@@ -134,9 +135,10 @@ class ProcessExecutor:
 
 def pool_context(start_method: str | None = None, preload: tuple[str, ...] = ()) -> Any:
     """The multiprocessing context of lidarkit's process pools: forkserver on Linux (``preload`` loaded once in the
-    server, if it starts here), spawn elsewhere. The fork server (and Python's resource tracker) starts with SIGINT
-    ignored from birth: a Ctrl-C to the process group while they load would print their KeyboardInterrupt tracebacks;
-    workers inherit it."""
+    server, if it starts here), spawn elsewhere. The fork server (and Python's resource tracker) starts shielded from
+    SIGINT and SIGHUP (:func:`lidarkit.lifetime.children_shielded`): a Ctrl-C to the process group while they load
+    would print their KeyboardInterrupt tracebacks, a hang-up end them under the parent's cleanup; workers inherit
+    it."""
     if start_method is None:
         start_method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
     context = multiprocessing.get_context(start_method)
@@ -145,7 +147,7 @@ def pool_context(start_method: str | None = None, preload: tuple[str, ...] = ())
             context.set_forkserver_preload(list(preload))
         from multiprocessing import forkserver
 
-        with ignored_sigint():
+        with children_shielded():
             forkserver.ensure_running()
     return context
 
@@ -223,17 +225,31 @@ class DaskExecutor:
         self._level = self._quiet.level
         self._quiet.setLevel(logging.ERROR)  # a local cluster's INFO lines would only bury the progress bar
         os.environ.setdefault("DASK_LOGGING__DISTRIBUTED", "error")  # read by the worker processes at start
-        # Worker processes start with SIGINT ignored (an ignored signal stays ignored across exec, and Python
-        # keeps it so): Ctrl-C reaches the whole process group, and only this process decides how the cluster
-        # stops. A Ctrl-C in the few seconds the cluster takes to start is lost (see ignored_sigint).
-        with ignored_sigint():
+        # Worker processes start with SIGINT ignored and SIGINT / SIGHUP blocked (kept across exec): Ctrl-C and a
+        # hang-up reach the whole process group, and only this process decides how the cluster stops. A Ctrl-C in the
+        # few seconds the cluster takes to start is lost (see children_shielded).
+        with children_shielded(), self._quiet_if_cut_off():
             # no dashboard; the scheduler's own HTTP routes on a free local port (by default 8787: another cluster
-            # holding it printed distributed's 4-line "Port 8787 is already in use" warning)
+            # holding it printed distributed's 4-line "Port 8787 is already in use" warning). silence_logs is the level
+            # of the workers' own log handler: at ERROR, a worker outliving a killed or interrupted bench printed a
+            # 35-line "Failed to communicate with scheduler during heartbeat" traceback under its last line
             self.cluster = distributed.LocalCluster(
                 n_workers=local_dask_workers(self.workers, n_jobs), threads_per_worker=1, processes=True,
-                dashboard_address=None, scheduler_kwargs={"dashboard_address": "127.0.0.1:0"}, silence_logs=logging.ERROR,
+                dashboard_address=None, scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
+                silence_logs=logging.CRITICAL,
             )
             self.client = distributed.Client(self.cluster)
+
+    @contextlib.contextmanager
+    def _quiet_if_cut_off(self) -> Iterator[None]:
+        """A cluster start cut off (SIGTERM, a hang-up) goes on closing what it started in its own thread while this
+        process ends: its logging is silenced for good (it printed 15 INFO lines under the "interrupted by" line)."""
+        try:
+            yield
+        except BaseException:
+            self._level = logging.CRITICAL  # (what close() restores)
+            self._quiet.setLevel(logging.CRITICAL)
+            raise
 
     def run(self, fn: JobFn, items: list[Item]) -> Iterator[tuple[str, dict[str, Any]]]:
         if not items:

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import inspect
 import json
 import re
+from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Optional
 
@@ -29,7 +31,7 @@ def read_init_pose(path: Path) -> np.ndarray:
     did not)."""
     from lidarkit.textfile import is_number, read_lines, read_numeric_table
 
-    lines = [line.strip() for line in read_lines(path) if line.strip() and not line.strip().startswith("#")]
+    lines = [line.strip() for line in read_lines(path, "4x4 pose file") if line.strip() and not line.strip().startswith("#")]
     first = lines[0] if lines else ""
     wanted = "--init takes a 4x4 or 3x4 text matrix, or one row of 12 (KITTI) or 16 numbers"
     T = np.eye(4)
@@ -238,6 +240,22 @@ def _holds_an_icp_run(out: Path) -> bool:
     return isinstance(config, dict) and {"method", "params"} <= config.keys()
 
 
+@contextlib.contextmanager
+def clouds_named(paths: dict[str, Path]) -> Iterator[None]:
+    """An error the registration raises about a cloud by its role ("source cloud: needs at least 3 points, got 1") names
+    the file it was read from: ``paths`` maps each role to its file."""
+    from lidarkit.errors import LidarKitError
+
+    try:
+        yield
+    except LidarKitError as err:
+        path = paths.get(err.source or "")
+        if path is None:
+            raise
+        location = err.source if err.location is None else f"{err.source}, {err.location}"
+        raise type(err)(err.reason, source=path, location=location) from err
+
+
 def no_rmse_note(result: RegistrationResult) -> str:
     """What rmse.png says when ``result`` holds no RMSE: assess=False only where the result says it
     was not assessed, else its reason (a run without initial overlap read "assess=False" though vanilla is always assessed)."""
@@ -287,10 +305,11 @@ def icp(
     check_target(out, "folder", files=ICP)
     _refuse_others_files(out)
     registration = get_icp(method, **parse_params(param))
+    init_T = read_init_pose(init) if init is not None else None  # (a bad guess was refused after both clouds were read)
     source_xyz = read_point_file(source, drop_nonfinite=drop_nonfinite).points_xyz
     target_xyz = read_point_file(target, drop_nonfinite=drop_nonfinite).points_xyz
-    init_T = read_init_pose(init) if init is not None else None
-    result = registration.align(source_xyz, target_xyz, init_T=init_T)
+    with clouds_named({"source cloud": source, "target cloud": target}):
+        result = registration.align(source_xyz, target_xyz, init_T=init_T)
     if out is not None:  # (written before anything is printed: a stdout that refuses it lost the folder)
         from lidarkit.registration.plots import save_bev_before_after, save_rmse_history
 

@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from lidarkit.errors import ConfigError, DataError
+from lidarkit.errors import ConfigError, DataError, not_increasing
 from lidarkit.geometry import se3_inverse
 from lidarkit.io.base import INSTANT_FRACTION, Scan, checked_index, checked_indices, option_path
 from lidarkit.io.pointcloud2 import MAX_SWEEP_S, check_sweep_span, checked_point_times, point_times_seconds, time_unit_read
@@ -411,9 +411,11 @@ class KittiOdometry:
             return None
         times = read_numeric_table(self.times_path, 1)[:, 0]
         bad = np.flatnonzero(np.diff(times) <= 0)
-        if len(bad):
-            raise DataError("time stamps are not strictly increasing", source=self.times_path,
-                            location=file_line(self.times_path, f"frame {bad[0] + 1}"))
+        if len(bad):  # (the values said, as the runner says them: "not strictly increasing" alone sent one to look)
+            k = int(bad[0])
+            why = not_increasing(times[k + 1], times[k], f"frame {k}")
+            raise DataError(f"time stamps are not strictly increasing: {why}", source=self.times_path,
+                            location=file_line(self.times_path, f"frame {k + 1}"))
         return times
 
     @cached_property

@@ -169,6 +169,10 @@ class LandmarkData:
                 raise DataError(f"unknown record type {_shown(fields[0])} (expected ODOMETRY or SENSOR)", source=path, location=where)
         if not odometry:
             raise DataError("no ODOMETRY records (empty file)", source=path)
+        if not m_range:  # (a run on it went on without a word, its MSE worse than dead reckoning's)
+            dropped = f" ({n_dropped} dropped as negative ranges)" if n_dropped else ""
+            log.warning("%s: no SENSOR readings in its %d ODOMETRY steps%s: a filter weighing the landmarks it recorded "
+                        "(the protocol's default) only predicts from the odometry", path, len(odometry), dropped)
         self.odometry = np.asarray(odometry, dtype=np.float64).reshape(-1, 3)
         self.meas_step = np.asarray(m_step, dtype=np.int64)
         self.meas_landmark_id = np.asarray(m_id, dtype=np.int64)
