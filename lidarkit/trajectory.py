@@ -262,7 +262,7 @@ class Trajectory:
         users choose the format (:func:`default_format_hint`), named when the file is a TUM trajectory.
         """
         try:
-            rows = read_numeric_table(path, 12)
+            rows = read_numeric_table(path, 12, what="trajectory file")
         except DataError as err:  # a TUM file (8 numbers a row: time, x y z, qx qy qz qw) read as KITTI: say so
             if "expected 12 numbers, found 8" in err.reason and err.location == _first_data_line(path):  # (not a cut-off line)
                 raise DataError(err.reason + f" (a TUM trajectory? read it as tum: {format_hint('tum')})",
@@ -273,7 +273,7 @@ class Trajectory:
         times_path = None
         if isinstance(timestamps_s, (str, os.PathLike)):
             times_path = timestamps_s
-            timestamps_s = read_numeric_table(times_path, 1)[:, 0]
+            timestamps_s = read_numeric_table(times_path, 1, what="time stamps file")[:, 0]
             if len(timestamps_s) != len(poses):
                 raise DataError(f"{len(timestamps_s)} timestamps for {len(poses)} poses in {path}", source=times_path)
         elif timestamps_s is not None:
@@ -301,7 +301,7 @@ class Trajectory:
         truth of ``fr2/desk`` has one; more than half of them repeating is a DataError (stamps written with too few
         digits). Timestamps that go backwards are a DataError naming the line."""
         try:
-            rows = read_numeric_table(path, 8)
+            rows = read_numeric_table(path, 8, what="trajectory file")
         except DataError as err:  # a KITTI file (12 numbers a row, a 3x4 [R|t]) read as TUM: say so, as from_kitti does
             if "expected 8 numbers, found 12" in err.reason and err.location == _first_data_line(path):  # (not a cut-off line)
                 raise DataError(err.reason + f" (a KITTI trajectory? read it as kitti: {format_hint('kitti')})",

@@ -618,7 +618,7 @@ def test_a_folder_given_as_a_text_input_is_called_a_folder(tmp_path, capsys):
     rows[:, 3] = np.arange(5.0)
     np.savetxt(gt, rows)
     assert cli_exit_code(["eval", str(gt), str(folder)]) == 1
-    assert capsys.readouterr().err == f"error: {folder}: is a folder, not a file\n"
+    assert capsys.readouterr().err == f"error: {folder}: is a folder, not a trajectory file\n"
     with pytest.raises(DataError) as caught:
         read_numeric_table(folder, 12, what="trajectory file")
     assert str(caught.value) == f"{folder}: is a folder, not a trajectory file"

@@ -58,7 +58,7 @@ def read_tum_file_list(path: str | os.PathLike) -> tuple[np.ndarray, list[str]]:
     """Parse ``rgb.txt``/``depth.txt``: ``(timestamps_s (N,), relative file names)``; DataError on a bad line."""
     stamps: list[float] = []
     names: list[str] = []
-    for lineno, raw in enumerate(read_lines(path), start=1):
+    for lineno, raw in enumerate(read_lines(path, what="TUM file"), start=1):
         line = raw.strip()
         if not line or line.startswith("#"):
             continue
