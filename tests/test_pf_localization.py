@@ -483,7 +483,7 @@ def test_cli_options_that_would_change_nothing_are_refused(capsys):
         (["--kernel", "kalman", "--roughening", "0.5"], "--roughening: only acts with --kernel point"),
         (["-n", "50,100", "--snapshots", "0,10"], "--snapshots: only acts with one run"),
         (["--kld", "--init", "uniform", "--kld-max", "10000000000", "--kld-unconverged", "10000000000"], "--kld-max: must be <= 10000000"),
-        (["--kld", "--kld-bin", "0.5,-10"], "--kld-bin: both bin sizes must be > 0"),
+        (["--kld", "--kld-bin", "0.5,-10"], "--kld-bin: both bin sizes must be finite and >= 1e-09"),
     ):
         with pytest.raises(SystemExit) as exc:
             main(["pf", str(data), *args])
@@ -572,14 +572,15 @@ def test_odd_counts_steps_and_snapshots_are_refused(stachniss, capsys, tmp_path)
 def test_a_lost_run_gets_no_q_verdict_and_no_fit(stachniss):
     """50 particles from a uniform start lose track on 308 of 331 steps (6.3 m from dead reckoning): the verdict read its
     NIS as "Q too small by about 15x" and --fit-q settled on a range std of 5.2 m (q_fit_settled true); a KLD run lost
-    on 8 steps read "Q consistent". Their innovations are localization error, not Q."""
+    on 8 steps read "Q consistent". Their innovations are localization error, not Q. (The count starts where the filter
+    first passed the gate, step 5: 304 of those 327 steps are lost.)"""
     from lidarkit.pf.protocol import fit_q_recorded, run_recorded
 
     first, runs = fit_q_recorded(stachniss, 50, 0, init="uniform", warn_lost=False)
-    assert runs == [] and first.metrics["q_fit_settled"] is False
+    assert runs == [] and first.metrics["q_fit_settled"] is False and len(first.lost_steps) == 308
     assert first.metrics["q_verdict"] == {"status": "lost", "factor": None, "text": (
-        "no verdict on Q: the filter lost track on 308 of 331 steps, so the NIS (NIS mean 29.831, chi-square(2) expects 2.0) "
-        "reflects localization error, not Q; no Q fit")}
+        "no verdict on Q: the filter lost track on 304 of 327 steps from step 5, after it first converged, so the NIS "
+        "(NIS mean 29.954, chi-square(2) expects 2.0) reflects localization error, not Q; no Q fit")}
     kld = run_recorded(stachniss, 100, 0, init="uniform", kld=True, warn_lost=False)
     assert len(kld.lost_steps) == 8 and kld.metrics["q_verdict"]["status"] == "lost"
     assert localization_problem(3, 331) is None and localization_problem(4, 331) == "the filter lost track on 4 of 331 steps"
@@ -762,3 +763,64 @@ def test_a_study_config_records_every_particle_count_it_ran(tmp_path):
     assert recorded["pf"]["n_particles"] == [20, 30] == recorded["scenario"]["n_particles"]
     rows = yaml.safe_load((tmp_path / "study" / "study.json").read_text())["rows"]
     assert [row["n_particles"] for row in rows] == [20, 30]
+
+
+def test_a_uniform_start_still_converging_is_not_lost_track_for_the_q_verdict(stachniss, capsys):
+    """2000 particles from a uniform start fail the gate on steps 1-4 while the cloud converges (and on step 6), then
+    track (0.12 m from dead reckoning on average): the verdict said "no verdict on Q: the filter lost track on 5 of 331
+    steps" and --fit-q refused. The steps before the filter first passes the gate are its initial convergence: left out
+    of the lost count and of the NIS, and the output says so. A run that passes from its first step is as before, and so
+    is a known (Gaussian) start, which counts as converged from the start (failing the gate there, it has lost track)."""
+    from lidarkit.pf.protocol import fit_q_recorded, run_recorded
+
+    uniform = dict(init="uniform", q=(0.1, 0.05), q_as="std", warn_lost=False)
+    run = run_recorded(stachniss, 2000, 0, **uniform)
+    m = run.metrics
+    assert (run.lost_steps + 1).tolist() == [1, 2, 3, 4, 6]
+    assert m["q_verdict"]["status"] == "consistent" and 1.5 <= m["nis_mean"] <= 2.5
+    assert m["nis_from_step"] == 5 and m["n_readings_before_convergence"] == int(stachniss.step_offsets[4]) > 0
+    assert m["n_readings"] == stachniss.n_readings - m["n_readings_before_convergence"]
+    assert m["q_verdict"]["text"].startswith("Q consistent with the readings (NIS from step 5, after the filter first "
+                                             f"converged: NIS mean {m['nis_mean']:.3f}, chi-square(2) expects 2.0)")
+    first, runs = fit_q_recorded(stachniss, 2000, 0, **uniform)
+    assert first.metrics["q_verdict"]["status"] != "lost" and len(runs) >= 1  # (it refused: "no Q fit")
+    with pytest.raises(SystemExit) as exc:
+        main(["pf", str(shared_path("pf", "robot_mapping_stachniss")), "--recorded", "--init", "uniform", "-n", "2000",
+              "--q", "0.1,0.05", "--q-as", "std"])
+    assert exc.value.code in (0, None)
+    printed = " ".join(capsys.readouterr().out.split())
+    assert "NIS from step 5, after the filter first converged" in printed and "no verdict" not in printed
+    # the documented runs pass the gate from their first step: nothing is left out
+    tracked = run_recorded(stachniss, 1000, 0, warn_lost=False).metrics
+    assert (tracked["nis_from_step"], tracked["n_readings_before_convergence"], tracked["n_readings"]) == (1, 0, 1212)
+    assert tracked["q_verdict"]["text"].startswith("Q too large by about 5") and "converged" not in tracked["q_verdict"]["text"]
+    started_off = run_recorded(stachniss, 200, 0, init_mean=(1.0, 1.0, 0.1), init_std=(0.05, 0.05, 0.02), q=(0.1, 0.05),
+                               q_as="std", warn_lost=False)
+    assert started_off.lost_steps[0] == 0 and started_off.metrics["nis_from_step"] == 1
+    assert started_off.metrics["q_verdict"]["status"] == "lost"
+
+
+def test_kld_bins_whose_reciprocal_overflows_are_refused_by_the_config_and_the_cli(capsys):
+    """--kld-bin 1e-310,10: 1 / bin overflowed to inf (wrong bin counts), and from 1e-308 the spread was NaN. A bin below
+    1e-9 (m; degrees on the command line) is refused; at that bound the counts and the spread are still exact."""
+    for settings, line in ((dict(kld_bin_m=1e-310), "pf config kld_bin_m: must be >= 1e-09 m: the bin keys divide the poses "
+                                                    "by it, got 1e-310"),
+                           (dict(kld_bin_m=1e-308), "pf config kld_bin_m: must be >= 1e-09 m: the bin keys divide the poses "
+                                                    "by it, got 1e-308"),
+                           (dict(kld_bin_rad=1e-12), "pf config kld_bin_rad: must be >= 1.745e-11 rad (1e-09 deg): the bin "
+                                                     "keys divide the poses by it, got 1e-12")):
+        with pytest.raises(ConfigError) as err:
+            PFConfig(kld=True, **settings)
+        assert str(err.value) == line
+    smallest = PFConfig(kld=True, kld_bin_m=1e-9, kld_bin_rad=math.radians(1e-9))
+    states = np.random.default_rng(0).uniform(-10, 10, (3, 500))
+    bins, spread = bins_and_spread(states, np.full(500, 1 / 500), smallest.kld_bin_m, smallest.kld_bin_rad)
+    assert bins == _reference_bins(states, smallest.kld_bin_m, smallest.kld_bin_rad) == 500
+    assert spread == pytest.approx(np.hypot(states[0].std(), states[1].std()), rel=1e-6)
+    data = str(shared_path("pf", "burgard_particle_filter"))
+    for bins_given in ("1e-310,10", "0.5,1e-10", "0.5,inf"):
+        with pytest.raises(SystemExit) as exc:
+            main(["pf", data, "--kld", "--kld-bin", bins_given])
+        assert exc.value.code == 1
+        assert capsys.readouterr().err == (f"error: --kld-bin: both bin sizes must be finite and >= 1e-09 (metres, degrees), "
+                                           f"got {bins_given!r}\n")

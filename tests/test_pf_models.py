@@ -579,3 +579,31 @@ def test_every_count_setting_of_the_config_refuses_a_bool():
             assert str(err.value).startswith(f"pf config {name}: ") and str(err.value).endswith(f"got {value}")
             assert "\n" not in str(err.value)
     assert PFConfig(kld_min_n=3, kld_converged_steps=2).kld_min_n == 3  # an integer still is one
+
+
+@pytest.mark.parametrize("kernel", ["point", "kalman"])
+def test_initialize_uniform_refuses_bounds_that_are_no_finite_box_within_the_pose_bound(kernel):
+    """(0, inf, 0, 1) was taken (an estimate of inf; the Kalman kernels' NaN at the next update), (0, 1e30, 0, 1) gave an
+    estimate of 5.6e29; text, three values and a bare number were numpy's ValueError or TypeError."""
+    pf = make_filter(LANDMARKS, PFConfig(n_particles=50, kernel=kernel), 0)
+    for bounds in ((0, np.inf, 0, 1), (0, 1e30, 0, 1), (0, np.nan, 0, 1), (-2e6, 0, 0, 1), (1, 0, 0, 1), ("a", 1, 0, 1),
+                   (0, 1, 0), 5):
+        with pytest.raises(ConfigError) as err:
+            pf.initialize_uniform(bounds)
+        assert err.value.source == "initialize_uniform" and "\n" not in str(err.value), bounds
+        assert err.value.reason.startswith("bounds_xy must be 4 finite numbers (xmin, xmax, ymin, ymax) with each min "
+                                           "below its max and |value| <= 1e+06 m, got "), bounds
+    pf.initialize_uniform((-1e6, 1e6, 2, 3))  # the bound itself is a box
+    assert (np.abs(pf.particles[:, 0]) <= 1e6).all() and ((pf.particles[:, 1] >= 2) & (pf.particles[:, 1] <= 3)).all()
+    assert np.isfinite(pf.estimate()).all()
+
+
+def test_kalman_update_refuses_indices_without_readings_as_the_point_filter_does():
+    """KalmanParticleFilter.update([1], []) returned False in silence (it returned on the empty readings before checking
+    them) where the point filter says the counts differ; no readings and no indices is a step without readings in both."""
+    for kernel in ("point", "kalman"):
+        pf = make_filter(LANDMARKS, PFConfig(n_particles=20, kernel=kernel), 0)
+        with pytest.raises(DataError) as err:
+            pf.update([1], [])
+        assert str(err.value) == "update: 1 landmark indices for 0 readings", kernel
+        assert pf.update([], []) is False and pf.update([], np.zeros((0, 2))) is False and pf.n_updates == 0

@@ -258,7 +258,7 @@ def test_cli_metrics_json_is_strict_json_with_non_finite_values_as_null(tmp_path
     result = run_protocol(LandmarkData(sample_path("freiburg_pf")), 50, seed=0, with_ape_rpe=False)
     result.metrics["not_a_number"] = float("nan")
     result.metrics["per_step"] = np.array([1.5, np.inf, -np.inf])
-    _write(result, tmp_path, snap_steps=(), gif=False)
+    _write(result, tmp_path, snap_steps=())
     metrics = _strict_json((tmp_path / "metrics.json").read_text())
     assert metrics["metrics"]["not_a_number"] is None and metrics["metrics"]["per_step"] == [1.5, None, None]
     assert metrics["config"]["n_particles"] == 50
@@ -376,7 +376,7 @@ def test_default_snapshots_past_a_short_recording_are_dropped_silently(tmp_path,
             main(["pf", str(short), "-n", "30", "--out", str(tmp_path / "run")])
         assert exc.value.code in (0, None)
         assert [r.getMessage() for r in caplog.records if "snapshots" in r.getMessage()] == []
-        assert (tmp_path / "run" / "particles.png").stat().st_size > 0  # steps 0 and 10 drawn
+        assert (tmp_path / "run" / "particles.png").stat().st_size > 0  # steps 0, 10 and the last, 12, drawn
         with pytest.raises(SystemExit):
             main(["pf", str(short), "-n", "30", "--snapshots", "5,50", "--out", str(tmp_path / "given")])
     assert [r.getMessage() for r in caplog.records if "snapshots" in r.getMessage()] == [
@@ -757,3 +757,85 @@ def test_the_memory_estimate_counts_the_readings_a_step_weighs(stachniss, tmp_pa
         check_config_memory(PFConfig.make(n_particles=200_000, kernel="kalman"), data=stachniss)
     result = run_protocol(stachniss, 20_000, 0, with_ape_rpe=False)  # 20,000 x 320 B: accepted and run
     assert result.n_particles[0] == 20_000
+
+
+def test_an_interrupt_while_the_gif_is_drawn_keeps_the_run_folder_and_the_table(tmp_path):
+    """A Ctrl-C while animation.gif was drawn (30-50 s, after a run of 0.07 s) threw away the whole run folder and the
+    table (exit 130, no folder): the folder is written and the table printed first, the GIF on its own after them; an
+    interrupt while it is drawn leaves the folder whole without it, and says so."""
+    import signal
+    import subprocess
+    import sys
+    import textwrap
+
+    short = _first_steps(tmp_path, 15)
+    script = tmp_path / "interrupt_at_the_third_frame.py"
+    script.write_text(textwrap.dedent("""
+        import os, signal, sys
+        import matplotlib.animation
+        grab, frames = matplotlib.animation.PillowWriter.grab_frame, []
+        def grab_then_interrupt(self, **kwargs):  # a Ctrl-C while the GIF is drawn
+            grab(self, **kwargs)
+            frames.append(1)
+            if len(frames) == 3:
+                os.kill(os.getpid(), signal.SIGINT)
+        matplotlib.animation.PillowWriter.grab_frame = grab_then_interrupt
+        from lidarkit.cli import main
+        main(sys.argv[1:])
+    """))
+    out = tmp_path / "run"
+    done = subprocess.run([sys.executable, str(script), "pf", str(short), "-n", "50", "--out", str(out), "--gif"],
+                          capture_output=True, text=True, timeout=300,
+                          preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))  # (a background job ignores it)
+    assert done.returncode == 130, done.stderr
+    assert "position MSE from step 10 (mean)" in done.stdout
+    assert (f"interrupted by SIGINT while drawing animation.gif: {out} holds the whole run without it"
+            in " ".join(done.stderr.split())), done.stderr
+    assert sorted(p.name for p in out.iterdir()) == ["config.yaml", "dead_reckoning_tum.txt", "ground_truth_tum.txt",
+                                                     "metrics.json", "particles.png", "poses_kitti.txt", "poses_tum.txt",
+                                                     "trajectory.png"]
+    assert json.loads((out / "metrics.json").read_text())["n_steps"] == 15
+    assert len((out / "poses_kitti.txt").read_text().splitlines()) == 16
+
+
+def test_a_gif_and_the_default_snapshots_end_at_the_last_step_on_fixed_axes(tmp_path, monkeypatch):
+    """A 15-step recording's GIF had the frames 0, 2, ..., 14 and its particles.png the steps 0 and 10 only (the last
+    step was left out), and each GIF frame was scaled to its own cloud (the map jumped from frame to frame)."""
+    import matplotlib.animation
+    from PIL import Image
+
+    from lidarkit.pf import plots
+
+    short = _first_steps(tmp_path, 15)
+    grab, limits = matplotlib.animation.PillowWriter.grab_frame, []
+
+    def grab_and_record_the_axes(self, **kwargs):
+        limits.append((self.fig.axes[0].get_xlim(), self.fig.axes[0].get_ylim()))
+        return grab(self, **kwargs)
+
+    monkeypatch.setattr(matplotlib.animation.PillowWriter, "grab_frame", grab_and_record_the_axes)
+    with pytest.raises(SystemExit) as exc:
+        main(["pf", str(short), "-n", "50", "--out", str(tmp_path / "run"), "--gif"])
+    assert exc.value.code in (0, None)
+    assert Image.open(tmp_path / "run" / "animation.gif").n_frames == len(limits) == 9  # 0, 2, ..., 14 and 15
+    assert len(set(limits)) == 1  # one box for every frame
+    # the default snapshots are 0, 10 and the last step: three panels of 5 x 4.6 inches at 110 dpi (two: 1100 pixels)
+    assert Image.open(tmp_path / "run" / "particles.png").size == (1650, 506)
+    # the box holds every frame's particles and paths
+    result = run_protocol(LandmarkData(short), 50, 0, snapshot_steps=range(16), with_ape_rpe=False)
+    (x0, x1), (y0, y1) = plots.frame_limits(result)
+    drawn = np.concatenate([p[:, :2] for p, _ in result.snapshots.values()] + [result.ground_truth[:, :2], result.landmarks_xy])
+    assert (drawn[:, 0] > x0).all() and (drawn[:, 0] < x1).all() and (drawn[:, 1] > y0).all() and (drawn[:, 1] < y1).all()
+
+
+def test_estimators_that_are_no_estimator_names_are_refused_naming_estimators(stachniss):
+    """run_protocol(estimators=5) failed with Python's "Value after * must be an iterable", and ("mean", "median") only
+    once the filter had started, naming the config's "estimator"."""
+    from lidarkit.errors import ConfigError
+
+    for given in (5, ("mean", "median"), [None]):
+        with pytest.raises(ConfigError) as err:
+            run_protocol(stachniss, 20, 0, estimators=given, with_ape_rpe=False)
+        assert err.value.source == "estimators" and "\n" not in str(err.value)
+        assert err.value.reason == f"must be one of mean, best or an iterable of them, got {given!r}"
+    assert sorted(run_protocol(stachniss, 20, 0, estimators=iter(["best"]), with_ape_rpe=False).estimates) == ["best", "mean"]

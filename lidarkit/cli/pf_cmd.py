@@ -14,7 +14,7 @@ from rich.table import Table
 
 from lidarkit.cli.app import app, stderr, stdout
 from lidarkit.errors import ConfigError
-from lidarkit.pf.config import MAX_PARTICLES, PFConfig, q_problem
+from lidarkit.pf.config import MAX_PARTICLES, MIN_KLD_BIN, PFConfig, q_problem
 from lidarkit.run_files import RUN_FILES
 
 _D = PFConfig()
@@ -151,8 +151,9 @@ def pf_command(
     if fit_q and not recorded:
         raise ConfigError("needs --recorded", source="--fit-q")
     bin_m, bin_deg = _floats(kld_bin, 2, "--kld-bin")
-    if not (bin_m > 0 and bin_deg > 0):
-        raise ConfigError(f"both bin sizes must be > 0 (metres, degrees), got {kld_bin!r}", source="--kld-bin")
+    if not all(math.isfinite(v) and v >= MIN_KLD_BIN for v in (bin_m, bin_deg)):  # (1e-310: its reciprocal overflowed)
+        raise ConfigError(f"both bin sizes must be finite and >= {MIN_KLD_BIN:g} (metres, degrees), got {kld_bin!r}",
+                          source="--kld-bin")
     q_values = _floats(q, 2, "--q")
     problem = q_problem(q_values, PROTOCOLS.get(protocol, {}).get("q_as", q_as))  # (--protocol report reads Q as std)
     if problem:
@@ -179,12 +180,13 @@ def pf_command(
     data = open_dataset("landmarks", data_dir)  # loaded once: its warnings (negative range) appear once per command
     if kidnap_at is not None and kidnap_at > len(data):
         raise ConfigError(f"must be a step in 1..{len(data)} of the data, got {kidnap_at}", source="--kidnap-at")
-    if not _given(ctx, "snapshots"):  # the default steps past a short recording's end are dropped without a word
-        snapshot_steps = tuple(s for s in snapshot_steps if s <= len(data))
+    if not _given(ctx, "snapshots"):  # the default steps past a short recording's end are dropped without a word, and
+        # its last step is drawn (a 15-step recording showed steps 0 and 10 only)
+        snapshot_steps = tuple(sorted({s for s in snapshot_steps if s <= len(data)} | {len(data)}))
     elif min(snapshot_steps) > len(data):  # (the run went ahead and wrote no particles.png, exit 0)
         raise ConfigError(f"no snapshot step within 0..{len(data)} (the data's steps), got {snapshots!r}", source="--snapshots")
     # the filter plus the particle clouds kept for the figures (the run's steps are known now: a GIF keeps every other
-    # one); checked here to name the option, before the library checks it again naming the config field
+    # one and the last); checked here to name the option, before the library checks it again naming the config field
     n_snapshots = len(_kept_steps(snapshot_steps, gif, len(data), out))
     per_particle = filter_bytes_per_particle(cfg, most_readings_per_step(data, "recorded" if recorded else visible),
                                              len(data.landmarks.positions_xy))
@@ -222,9 +224,11 @@ def pf_command(
         result = run_protocol(data, counts[0], seed, config=cfg, estimators=tuple(dict.fromkeys((cfg.estimator, "mean", "best"))),
                               snapshot_steps=snap, on_step=on_step, **scenario)
     if out is not None:  # the run folder before the table: a stdout that refuses it (> /dev/full) lost the run
-        _write(result, out, snap_steps=snapshot_steps, gif=gif)
+        _write(result, out, snap_steps=snapshot_steps)
     _print(result)
     if out is not None:
+        if gif:  # after the table, into the finished folder: an interrupt while it is drawn loses the GIF alone
+            _write_gif(result, out)
         stderr().print(f"results written to {out}")
 
 
@@ -319,11 +323,11 @@ def _step_progress(cfg: PFConfig, n_steps: int, label: str, runs: int = 1):
 
 
 def _kept_steps(snap_steps: tuple[int, ...], gif: bool, n_steps: int, out: Path | None) -> tuple[int, ...]:
-    """Steps whose particle clouds a run keeps: those of the snapshot figure and, for ``--gif``, every other step; none
-    without a run folder (they are its figures only)."""
+    """Steps whose particle clouds a run keeps: those of the snapshot figure and, for ``--gif``, every other step and the
+    last (a 15-step recording's GIF ended at step 14); none without a run folder (they are its figures only)."""
     if out is None:
         return ()
-    kept = set(snap_steps) | (set(range(0, n_steps + 1, 2)) if gif else set())
+    kept = set(snap_steps) | ({*range(0, n_steps + 1, 2), n_steps} if gif else set())
     return tuple(sorted(s for s in kept if 0 <= s <= n_steps))
 
 
@@ -354,7 +358,7 @@ def _recorded(data, cfg: PFConfig, seed: int, fit_q: bool, out: Path | None, sna
         result.metrics["fit_q"] = [{"run": "given Q" if i == 0 else f"fit {i}", "q_cov": r.settings["q_cov"], "nis_mean": r.metrics["nis_mean"],
                                     "nis_fraction_below_chi2_95": r.metrics["nis_fraction_below_chi2_95"]} for i, r in enumerate([first, *runs])]
     if out is not None:  # the run folder before the tables: a stdout that refuses them (> /dev/full) lost the run
-        _write(result, out, snap_steps=snap_steps, gif=gif)
+        _write(result, out, snap_steps=snap_steps)
     if not fit_q:
         _print(result)
         stdout().print(result.metrics["q_verdict"]["text"])
@@ -372,6 +376,8 @@ def _recorded(data, cfg: PFConfig, seed: int, fit_q: bool, out: Path | None, sna
         if runs:
             stdout().print("after: " + last.metrics["q_verdict"]["text"])
     if out is not None:
+        if gif:
+            _write_gif(result, out)
         stderr().print(f"results written to {out}")
 
 
@@ -453,6 +459,10 @@ def _print(result) -> None:
         _row(table, "reading residual std at estimate (range m, bearing rad)", f"{r['range_m']:.3f}, {r['bearing_rad']:.3f}")
         d = m["estimate_vs_dead_reckoning_m"]
         _row(table, "estimate vs dead reckoning (mean / max) [m]", f"{d['mean']:.3f} / {d['max']:.3f}")
+        if m.get("n_readings_before_convergence"):  # (a uniform start's first steps were counted as lost track)
+            start = m["nis_from_step"]
+            table.caption = (f"NIS from step {start}, after the filter first converged: the {m['n_readings_before_convergence']} "
+                             f"readings of steps 1-{start - 1} are left out of the NIS and the lost count")
     if result.n_particles is not None and (result.config.kld or result.n_particles.min() != result.n_particles.max()):
         n = result.n_particles[1:]
         _row(table, "particles per step (mean / min / max)", f"{n.mean():.0f} / {n.min()} / {n.max()}")
@@ -477,14 +487,37 @@ def _print(result) -> None:
     stdout().print(table)
 
 
-def _write(result, out: Path, *, snap_steps: tuple[int, ...], gif: bool) -> None:
+def _write(result, out: Path, *, snap_steps: tuple[int, ...]) -> None:
+    """The run folder, all or nothing, without animation.gif (:func:`_write_gif` adds it once the folder is in place)."""
     from lidarkit import atomic
 
     with atomic.run_folder(out, replaces=RUN_FILES) as tmp:
-        _write_files(result, tmp, snap_steps=snap_steps, gif=gif)
+        _write_files(result, tmp, snap_steps=snap_steps)
 
 
-def _write_files(result, out: Path, *, snap_steps: tuple[int, ...], gif: bool) -> None:
+def _write_gif(result, out: Path) -> None:
+    """animation.gif into the finished run folder ``out``, on its own (atomically). Drawing it takes 30-50 s after a run
+    of 0.07 s: written with the other files, a Ctrl-C while it was drawn threw away the whole folder and the table; now
+    it leaves the folder whole, without the GIF, and says so (exit 130)."""
+    from lidarkit.lifetime import Interrupted, interrupt_handled
+    from lidarkit.pf import plots
+    from lidarkit.progress import progress_bar
+
+    bar, task = progress_bar(len(result.snapshots), "animation.gif")
+    try:
+        plots.animate(result, out / "animation.gif", on_frame=lambda: bar.advance(task))
+    except (KeyboardInterrupt, Interrupted) as stop:
+        interrupt_handled()
+        bar.stop()
+        what = stop if isinstance(stop, Interrupted) else "SIGINT"
+        stderr().print(f"interrupted by {what} while drawing animation.gif: {out} holds the whole run without it "
+                       "(run the command again with --gif for the animation)", soft_wrap=True)
+        raise typer.Exit(getattr(stop, "exit_code", 130)) from None
+    finally:
+        bar.stop()
+
+
+def _write_files(result, out: Path, *, snap_steps: tuple[int, ...]) -> None:
     from lidarkit import atomic
     from lidarkit.eval.report import write_json
     from lidarkit.pf import plots
@@ -511,11 +544,3 @@ def _write_files(result, out: Path, *, snap_steps: tuple[int, ...], gif: bool) -
         errors = {"position error": result.position_error_m()} if result.ground_truth is not None else None
         plots.plot_particle_count({"particles": result.n_particles}, out / "particles_per_step.png", errors_m=errors,
                                   mark_step=result.settings.get("kidnap_at_step"))
-    if gif:
-        from lidarkit.progress import progress_bar
-
-        bar, task = progress_bar(len(result.snapshots), "animation.gif")
-        try:
-            plots.animate(result, out / "animation.gif", on_frame=lambda: bar.advance(task))
-        finally:
-            bar.stop()

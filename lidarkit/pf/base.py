@@ -16,7 +16,7 @@ import numpy as np
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.params import is_integer
 from lidarkit.pf.augmented import LikelihoodAverages
-from lidarkit.pf.config import PFConfig
+from lidarkit.pf.config import MAX_POSE_SCALE, PFConfig
 from lidarkit.pf.kld import bins_and_spread, kld_sample_count, occupied_bins
 from lidarkit.pf.resampling import ess_of_normalized, get_resampler
 
@@ -68,6 +68,22 @@ def checked_odometry(odometry, source: str = "predict") -> np.ndarray:
     if not np.isfinite(u).all():
         raise DataError(f"non-finite odometry {u.tolist()}", source=source)
     return u
+
+
+def _checked_bounds(bounds_xy) -> tuple[float, float, float, float]:
+    """``bounds_xy`` as (xmin, xmax, ymin, ymax) floats: 4 finite numbers, each min below its max, within PFConfig's pose
+    bound (an infinite box gave an estimate of inf and NaN kernels, 1e30 one of 5.6e29; text and 3 values were numpy's
+    ValueError, a bare number a TypeError)."""
+    try:
+        b = np.asarray(bounds_xy, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        b = np.empty(0)
+    if (b.shape != (4,) or not np.isfinite(b).all() or not (b[0] < b[1] and b[2] < b[3])
+            or np.abs(b).max() > MAX_POSE_SCALE):
+        raise ConfigError(f"bounds_xy must be 4 finite numbers (xmin, xmax, ymin, ymax) with each min below its max and "
+                          f"|value| <= {MAX_POSE_SCALE:g} m, got {_listed(bounds_xy)}", source="initialize_uniform")
+    x0, x1, y0, y1 = b.tolist()
+    return x0, x1, y0, y1
 
 
 def _generator(rng) -> np.random.Generator:
@@ -188,7 +204,7 @@ class LandmarkFilterBase:
 
     def _uniform_draw(self, n: int, bounds_xy: tuple[float, float, float, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
         """``n`` poses ``(3, n)`` float64 uniform over the box and all headings, and the box size ``(3,)``."""
-        x0, x1, y0, y1 = (float(b) for b in (self.uniform_bounds() if bounds_xy is None else bounds_xy))
+        x0, x1, y0, y1 = self.uniform_bounds() if bounds_xy is None else _checked_bounds(bounds_xy)
         if not (x1 > x0 and y1 > y0):
             raise ConfigError(f"empty bounds {(x0, x1, y0, y1)!r}", source="initialize_uniform")
         u = self.rng.random((3, n))

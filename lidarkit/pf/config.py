@@ -26,6 +26,9 @@ MAX_POSE_SCALE = 1e6
 #: Most particles a filter may hold (n_particles and the KLD counts): ~3.2 GiB at the filter's ~320 bytes a particle;
 #: 3e9 failed in numpy's allocation (33.5 GiB), near 1e9 it would have been allocated.
 MAX_PARTICLES = 10_000_000
+#: Smallest KLD bin (m, and this many degrees as radians): the bin keys divide the poses by it; 1e-310 m overflowed its
+#: reciprocal to inf (wrong bin counts) and 1e-308 the squares of the spread (NaN). No belief has nanometre structure.
+MIN_KLD_BIN = 1e-9
 #: Largest roughening constant K (jitter std = K x spread x N^(-1/3); Gordon et al. use ~0.2).
 MAX_ROUGHENING = 10.0
 
@@ -167,6 +170,17 @@ class PFConfig(BaseModel):
             raise ValueError(f"must be finite and > 0, got {v}")
         return v
 
+    @field_validator("kld_bin_m", "kld_bin_rad")
+    @classmethod
+    def _bin_size(cls, v: float, info: ValidationInfo) -> float:
+        if info.field_name == "kld_bin_m":
+            smallest, unit = MIN_KLD_BIN, "m"
+        else:  # (the command line takes degrees)
+            smallest, unit = math.radians(MIN_KLD_BIN), f"rad ({MIN_KLD_BIN:g} deg)"
+        if not (v >= smallest and math.isfinite(1.0 / v)):
+            raise ValueError(f"must be >= {smallest:.4g} {unit}: the bin keys divide the poses by it, got {v:g}")
+        return v
+
     @field_validator("kld_min_n", "kld_max_n", "kld_unconverged_n", "kld_converged_steps")
     @classmethod
     def _positive_count(cls, v: int) -> int:
@@ -290,4 +304,4 @@ def _config_error(err: ValidationError) -> ConfigError:
     return ConfigError(msg, source=f"pf config {field}" if field else "pf config")
 
 
-__all__ = ["ESTIMATORS", "INITS", "LIKELIHOODS", "MAX_PARTICLES", "MAX_POSE_SCALE", "MAX_Q_VARIANCE", "MAX_ROUGHENING", "MIN_Q_VARIANCE", "PFConfig", "q_problem"]
+__all__ = ["ESTIMATORS", "INITS", "LIKELIHOODS", "MAX_PARTICLES", "MAX_POSE_SCALE", "MAX_Q_VARIANCE", "MAX_ROUGHENING", "MIN_KLD_BIN", "MIN_Q_VARIANCE", "PFConfig", "q_problem"]

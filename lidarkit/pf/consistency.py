@@ -26,7 +26,9 @@ Q_VARIANCE_BOUNDS = (1e-8, 1e4)  # search range of each fitted variance
 #: A run lost on more than this share of its steps says nothing about Q: its innovations are localization error.
 #: (50 particles from a uniform start: lost on 308 of 331 steps, read as "Q too small by 15x" and fitted to a range std
 #: of 5.2 m; the true residual std is ~0.1 m. The distance to dead reckoning is no test: on a log whose odometry drifts,
-#: a localized filter is far from it.)
+#: a localized filter is far from it.) The steps before the filter first passes the gate are its initial convergence
+#: (a uniform start), not lost track: they are left out of this share and of the NIS (2000 particles from a uniform start
+#: failed the gate on steps 1-4 and once after, and got no verdict for "5 of 331 steps").
 LOST_SHARE_MAX = 0.01
 
 
@@ -75,10 +77,12 @@ class QVerdict:
     text: str
 
 
-def localization_problem(n_lost: int, n_steps: int) -> str | None:
-    """Why a run's NIS cannot judge Q (it lost track, see LOST_SHARE_MAX), or None."""
+def localization_problem(n_lost: int, n_steps: int, from_step: int = 1) -> str | None:
+    """Why a run's NIS cannot judge Q (it lost track, see LOST_SHARE_MAX), or None; ``n_lost`` of the ``n_steps`` counted
+    from ``from_step``, the step the filter first converged at (1: from the start)."""
     if n_lost > LOST_SHARE_MAX * n_steps:
-        return f"the filter lost track on {n_lost} of {n_steps} steps"
+        after = f" from step {from_step}, after it first converged" if from_step > 1 else ""
+        return f"the filter lost track on {n_lost} of {n_steps} steps{after}"
     return None
 
 
@@ -86,14 +90,18 @@ def _times(k: float) -> str:
     return f"{k:.0f}x" if k >= 10 else f"{k:.1f}x"
 
 
-def q_verdict(nis_mean: float, q_cov: np.ndarray, q_fit: np.ndarray | None = None, lost: str | None = None) -> QVerdict:
+def q_verdict(nis_mean: float, q_cov: np.ndarray, q_fit: np.ndarray | None = None, lost: str | None = None,
+              nis_from_step: int | None = None) -> QVerdict:
     """Read the NIS mean (chi-square(2) expects 2) of a run with ``q_cov``; ``q_fit`` (ML, same run) is quoted if usable.
-    ``lost`` (see :func:`localization_problem`): no verdict, status "lost" and factor None."""
+    ``lost`` (see :func:`localization_problem`): no verdict, status "lost" and factor None. ``nis_from_step``: the NIS
+    leaves out the steps before it (the filter's initial convergence), and the text says so."""
     q = np.diag(np.asarray(q_cov, dtype=np.float64))
     detail = f"NIS mean {nis_mean:.3f}, chi-square(2) expects {NIS_EXPECTED_MEAN:.1f}"
-    if lost:
+    if lost:  # (its reason names the step the count starts at)
         return QVerdict("lost", None, nis_mean, f"no verdict on Q: {lost}, so the NIS ({detail}) reflects localization "
                                                  "error, not Q")
+    if nis_from_step is not None and nis_from_step > 1:
+        detail = f"NIS from step {nis_from_step}, after the filter first converged: {detail}"
     if q_fit is not None and not at_lower_bound(q_fit):
         f = np.diag(np.asarray(q_fit, dtype=np.float64))
         detail += f"; ML fit on these innovations: range variance {f[0]:.3g} (used {q[0]:.3g}), bearing variance {f[1]:.3g} (used {q[1]:.3g})"

@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from lidarkit.errors import ConfigError
-from lidarkit.pf.base import LandmarkFilterBase, checked_odometry, readings_array
+from lidarkit.pf.base import LandmarkFilterBase, checked_odometry
 from lidarkit.pf.config import PFConfig
 from lidarkit.pf.models import resolve_q, wrap_angle
 
@@ -92,9 +92,10 @@ class KalmanParticleFilter(LandmarkFilterBase):
 
         With ``innovation_gate`` > 0 a reading whose Mahalanobis distance exceeds it does not correct the kernel
         (K = 0: mean and covariance unchanged) but still enters the kernel's weight."""
-        if readings_array(z, "update").size == 0:
-            return False
+        # checked before an empty set returns (indices without readings returned False where the point filter refuses them)
         idx, z = self._checked_readings(landmark_index, z, check_index=check)
+        if len(z) == 0:
+            return False
         if self.config.likelihood == "nearest":
             k = int(np.argmin(z[:, 0])) if len(z) > 1 else 0
             z, idx = z[k : k + 1], idx[k : k + 1]

@@ -78,6 +78,20 @@ def _draw_particles(ax, result, step: int, max_arrows: int = 300) -> None:
     ax.set_title(f"step {step}")
 
 
+def frame_limits(result, margin: float = 0.05) -> tuple[tuple[float, float], tuple[float, float]]:
+    """``((xmin, xmax), (ymin, ymax))`` holding everything any frame of :func:`animate` draws (landmarks, paths, every
+    snapshot's particles), widened by ``margin`` of the span on each side."""
+    paths = [result.landmarks_xy, result.dead_reckoning[:, :2], *(e[:, :2] for e in result.estimates.values())]
+    if result.ground_truth is not None:
+        paths.append(result.ground_truth[:, :2])
+    paths += [particles[:, :2] for particles, _ in result.snapshots.values()]
+    xy = np.concatenate([np.asarray(p, dtype=np.float64) for p in paths])
+    xy = xy[np.isfinite(xy).all(axis=1)]
+    lo, hi = xy.min(axis=0), xy.max(axis=0)
+    pad = np.maximum(hi - lo, 1.0) * margin
+    return (float(lo[0] - pad[0]), float(hi[0] + pad[0])), (float(lo[1] - pad[1]), float(hi[1] + pad[1]))
+
+
 def animate(result, path: str | os.PathLike, fps: int = 10, on_frame: Callable[[], None] | None = None) -> Path:
     """GIF of the particle cloud over every recorded snapshot (matplotlib PillowWriter); ``on_frame``: called after
     each frame is drawn (progress)."""
@@ -90,11 +104,14 @@ def animate(result, path: str | os.PathLike, fps: int = 10, on_frame: Callable[[
     fig, ax = plt.subplots(figsize=(6, 5.5))
     writer = PillowWriter(fps=fps)
     path = Path(path)
+    (x0, x1), (y0, y1) = frame_limits(result)
     with atomic_path(path) as tmp:
         with writer.saving(fig, str(tmp), dpi=70):
             for step in steps:
                 ax.clear()
                 _draw_particles(ax, result, step)
+                ax.set_xlim(x0, x1)  # the same box every frame (rescaled to each frame's cloud, the map jumped)
+                ax.set_ylim(y0, y1)
                 writer.grab_frame()
                 if on_frame is not None:
                     on_frame()
@@ -167,4 +184,4 @@ def _save(fig, path: str | os.PathLike) -> Path:
     return Path(path)
 
 
-__all__ = ["animate", "plot_mse_vs_n", "plot_particle_count", "plot_snapshots", "plot_trajectory"]
+__all__ = ["animate", "frame_limits", "plot_mse_vs_n", "plot_particle_count", "plot_snapshots", "plot_trajectory"]

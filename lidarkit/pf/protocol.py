@@ -28,7 +28,7 @@ import numpy as np
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.params import is_integer, is_real_number
 from lidarkit.pf.base import check_landmark_index
-from lidarkit.pf.config import PFConfig
+from lidarkit.pf.config import ESTIMATORS, PFConfig
 from lidarkit.pf.consistency import Q_VARIANCE_BOUNDS, at_lower_bound, fit_q, localization_problem, q_verdict
 from lidarkit.pf.filter import ParticleFilter, check_config_type, make_filter, nis_values
 from lidarkit.pf.models import integrate_odometry, resolve_q, wrap_angle
@@ -463,6 +463,23 @@ def checked_snapshot_steps(snapshot_steps: Any) -> tuple:
         raise ConfigError(f"must be an iterable of step numbers, got {snapshot_steps!r:.60}", source="snapshot_steps") from None
 
 
+def checked_estimators(estimators: Any) -> tuple[str, ...]:
+    """``estimators`` (None, one name or an iterable of names) as a tuple of known names; anything else is a ConfigError
+    naming ``estimators`` (5 was "Value after * must be an iterable", "median" was named only once the run began)."""
+    if estimators is None:
+        return ()
+    if isinstance(estimators, str):  # (tuple("best") ran the estimators 'b', 'e', 's', 't')
+        estimators = (estimators,)
+    try:
+        names = tuple(estimators)
+    except TypeError:
+        names = None
+    if names is None or any(not isinstance(name, str) or name not in ESTIMATORS for name in names):
+        raise ConfigError(f"must be one of {', '.join(ESTIMATORS)} or an iterable of them, got {estimators!r:.60}",
+                          source="estimators")
+    return names
+
+
 def checked_seed(seed: Any) -> int:
     """``seed`` as the integer >= 0 a reproducible run needs (None would draw fresh entropy: refused)."""
     if not is_integer(seed) or seed < 0:
@@ -512,6 +529,8 @@ def run_protocol(
     overrides = {k: v for k, v in dict(likelihood=likelihood, estimator=estimator, resampler=resampler, q_as=q_as).items() if v is not None}
     cfg = _resolve_config(config, n_particles, {**overrides, **config_overrides}, "run_protocol")
     seed = checked_seed(seed)
+    # (without the config's estimator, the first one given stood in for it: the best particle's APE filed under "mean")
+    estimators = tuple(dict.fromkeys((*checked_estimators(estimators), cfg.estimator)))
     if not is_integer(mse_start) or mse_start < 0:  # (checked after the run)
         raise ConfigError(f"mse_start must be an integer step >= 0, got {mse_start!r}", source="mse_start")
     if len(data.odometry) < mse_start:  # (the whole filter ran first, then the MSE failed counting poses: "has 10" for 9 steps)
@@ -523,10 +542,6 @@ def run_protocol(
     q_cov = resolve_q(cfg.q, cfg.q_as)
     sim = simulate(data, np.random.default_rng(data_seq), q_cov, visible=visible, kidnap_at_step=kidnap_at_step, kidnap_offset=kidnap_offset)
     pf = make_filter(data.landmarks.positions_xy, cfg, np.random.default_rng(filter_seq))
-    if isinstance(estimators, str):  # (tuple("best") ran the estimators 'b', 'e', 's', 't')
-        estimators = (estimators,)
-    # (without the config's estimator, the first one given stood in for it: the best particle's APE filed under "mean")
-    estimators = tuple(dict.fromkeys((*(estimators or ()), cfg.estimator)))
     readings = sim.nearest if cfg.likelihood == "nearest" else sim.readings
     out = run_filter(pf, sim.odometry_noisy, readings, estimators=estimators, snapshot_steps=snapshot_steps, on_step=on_step)
     result = PFRunResult(
@@ -559,11 +574,15 @@ def run_protocol(
 
 
 def _warn_lost(result: PFRunResult, which: str = "") -> None:
-    """One warning if ``result`` lost track; ``which`` names the run among several (" with the given Q")."""
-    if len(result.lost_steps):
+    """One warning if ``result`` lost track; ``which`` names the run among several (" with the given Q"). A recorded run
+    counts from its first convergence (``metrics["nis_from_step"]``)."""
+    start = result.metrics.get("nis_from_step", 1) - 1
+    lost = _lost_from(result, start)
+    if len(lost):
+        after = f" from step {start + 1}, after it first converged" if start else ""
         log.warning(
-            "filter lost on %d of %d steps%s (first at step %d): even the best particle is beyond the chi-square 99.9%% gate",
-            len(result.lost_steps), result.n_steps, which, int(result.lost_steps[0]) + 1,
+            "filter lost on %d of %d steps%s%s (first at step %d): even the best particle is beyond the chi-square 99.9%% gate",
+            len(lost), result.n_steps - start, after, which, int(lost[0]) + 1,
         )
 
 
@@ -623,18 +642,43 @@ def run_recorded(
         **_filter_outputs(out, pf),
     )
     q_cov = resolve_q(cfg.q, cfg.q_as)
-    nis = nis_values(out["innovations"], out["innovation_spread"] + q_cov)
+    # the initial convergence (a uniform start failing the gate on its first steps) is no lost track: its readings are
+    # left out of the NIS, the fit and the lost count
+    start = first_converged_step(result)
+    skipped = int(readings.offsets[start])
+    innovations, spread = out["innovations"][skipped:], out["innovation_spread"][skipped:]
+    nis = nis_values(innovations, spread + q_cov)
     result.metrics = consistency_metrics(nis, result.estimate, dr, data, q_cov)
+    result.metrics["nis_from_step"] = start + 1
+    result.metrics["n_readings_before_convergence"] = skipped
     if len(nis) >= 2:
-        result.innovation_q_fit = fit_q(out["innovations"], out["innovation_spread"], q_cov)
-        lost = localization_problem(len(result.lost_steps), result.n_steps)
-        verdict = q_verdict(result.metrics["nis_mean"], q_cov, lost=lost)
+        result.innovation_q_fit = fit_q(innovations, spread, q_cov)
+        lost = localization_problem(len(_lost_from(result, start)), result.n_steps - start, from_step=start + 1)
+        verdict = q_verdict(result.metrics["nis_mean"], q_cov, lost=lost, nis_from_step=start + 1 if skipped else None)
         if not lost:  # (a lost run's fit is of localization error: 308 of 331 steps lost gave a range variance of 19.9 m^2)
             result.metrics["q_fit_one_round"] = _one_round_fit_record(result.innovation_q_fit)
         result.metrics["q_verdict"] = {"status": verdict.status, "factor": verdict.factor, "text": verdict.text}
     if warn_lost:
         _warn_lost(result)
     return result
+
+
+def first_converged_step(result: PFRunResult) -> int:
+    """Index ``t`` of the first step whose readings a filter from a uniform (global) start passed the chi-square 99.9 %
+    gate on (the pose after it is step ``t + 1``), the end of its initial convergence; 0 when it never passed (the whole
+    run counts) and for a known (Gaussian) start, which counts as converged from the start (as KLD's test counts it: a
+    tracking filter that fails the gate on its first steps, with a Q far too small, has lost track)."""
+    if result.config.init != "uniform":
+        return 0
+    passed = np.isfinite(result.max_loglik)  # a step with readings
+    passed[result.lost_steps] = False
+    first = np.flatnonzero(passed)
+    return int(first[0]) if len(first) else 0
+
+
+def _lost_from(result: PFRunResult, start: int) -> np.ndarray:
+    """The lost steps from index ``start`` on (``result``'s recorded-mode count: from its first convergence)."""
+    return result.lost_steps[result.lost_steps >= start]
 
 
 def _one_round_fit_record(q_fit: np.ndarray) -> dict[str, Any]:
@@ -767,9 +811,11 @@ __all__ = [
     "StepReadings",
     "check_config_memory",
     "check_filter_memory",
+    "checked_estimators",
     "checked_snapshot_steps",
     "consistency_metrics",
     "filter_bytes_per_particle",
+    "first_converged_step",
     "fit_q_recorded",
     "kidnap_offset_record",
     "most_readings_per_step",
