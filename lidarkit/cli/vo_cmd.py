@@ -3,9 +3,7 @@ simulator (``simcam:street?...``)."""
 
 from __future__ import annotations
 
-import contextlib
 import math
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Optional
 
@@ -127,9 +125,11 @@ def vo_command(
     for key, why in inert_settings(cfg, settings):
         stderr().print(f"note: --set {key} not used: {why}", soft_wrap=True, markup=False)
     # (the library's names: "vo input kind: unknown input kind", "read it as kitti: poses_format='kitti'")
-    with named_by_option({"vo input kind": "--kind"}), _poses_format_named_by_option(poses):
+    with named_by_option({"vo input kind": "--kind"}):
+        # (a --poses file in the other format advises the option, not the image folder's keyword)
         vo_input = open_vo_input(data, kind=kind, calib=calib, timestamps=timestamps, poses=poses,
-                                 poses_format=poses_format, focal_factor=focal_factor)
+                                 poses_format=poses_format, focal_factor=focal_factor,
+                                 format_hint=lambda fmt: f"--poses-format {fmt}")
     _check_out_beside_images(out, vo_input.images)
     inputs = _files_read(data, vo_input, poses, poses_format, timestamps)  # (before --start/--max-frames wrap the images)
     numbers = getattr(vo_input.images, "frames", None)  # the input's own frame numbers (KITTI's file names), if any
@@ -263,23 +263,6 @@ def vo_command(
                       "with --out)")
     if out is not None:
         console.print(f"wrote {len(paths)} files to {out}")
-
-
-@contextlib.contextmanager
-def _poses_format_named_by_option(poses: Optional[Path]) -> Iterator[None]:
-    """A --poses file in the other format advises the option that reads it, ``--poses-format tum``, not the image
-    folder's keyword (it said "--poses-format kitti (poses_format='kitti')")."""
-    try:
-        yield
-    except DataError as err:
-        from lidarkit.io.images import poses_format_hint
-
-        # (only the image folder's hint: a KITTI sequence's names a whole vo command beside the library's call)
-        fmt = next((f for f in ("kitti", "tum") if f"read it as {f}: {poses_format_hint(f)}" in err.reason), None)
-        if fmt is None or poses is None or err.source != str(poses):
-            raise
-        reason = err.reason.replace(f": {poses_format_hint(fmt)}", f": --poses-format {fmt}")
-        raise DataError(reason, source=err.source, location=err.location) from None
 
 
 def _files_read(data: Path, vo_input, poses: Optional[Path], poses_format: str, timestamps: Optional[Path]) -> dict:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 import os
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -144,7 +145,8 @@ class ImageFolder:
 
     def __init__(self, path: str | os.PathLike, *, timestamps: str | os.PathLike | np.ndarray | None = None,
                  calib: str | os.PathLike | np.ndarray | None = None, poses: str | os.PathLike | None = None,
-                 poses_format: str = "kitti", name: str | None = None):
+                 poses_format: str = "kitti", name: str | None = None,
+                 format_hint: Callable[[str], str] = poses_format_hint):
         folder = Path(path)
         if not folder.is_dir():
             raise DataError("image folder not found" if not folder.exists() else "not a folder", source=folder)
@@ -170,7 +172,7 @@ class ImageFolder:
         if poses is not None:
             if poses_format not in ("kitti", "tum"):
                 raise ConfigError(f"unknown poses format {poses_format!r}; known: kitti, tum", source="poses_format")
-            gt = Trajectory.read(poses, poses_format, format_hint=poses_format_hint)
+            gt = Trajectory.read(poses, poses_format, format_hint=format_hint)
             if len(gt) != n:
                 raise DataError(f"{len(gt)} poses for {n} images {_ONE_PER_IMAGE}", source=poses)
             if self._timestamps is not None and poses_format == "kitti":

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import logging
 import os
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -60,9 +61,12 @@ def _check_timestamps(timestamps_s: Any, path: str | os.PathLike) -> None:
 
 def open_vo_input(path: str | os.PathLike, *, kind: str = "auto", calib: str | os.PathLike | None = None,
                   timestamps: str | os.PathLike | None = None, poses: str | os.PathLike | None = None,
-                  poses_format: str = "kitti", focal_factor: float = DEFAULT_FOCAL_FACTOR) -> VOInput:
+                  poses_format: str = "kitti", focal_factor: float = DEFAULT_FOCAL_FACTOR,
+                  format_hint: Callable[[str], str] | None = None) -> VOInput:
     """Open ``path`` as an image sequence for VO. ``calib`` overrides the dataset's intrinsics; without either,
-    K is guessed as ``fx = fy = focal_factor * max(w, h)``, principal point at the centre (logged as a warning)."""
+    K is guessed as ``fx = fy = focal_factor * max(w, h)``, principal point at the centre (logged as a warning).
+    ``format_hint``: how a pose file in the other format is to be read, named for the caller (a command's option;
+    default the image folder's keyword)."""
     from lidarkit.errors import ConfigError
 
     if str(path).startswith("simcam:"):
@@ -115,7 +119,8 @@ def open_vo_input(path: str | os.PathLike, *, kind: str = "auto", calib: str | o
     else:
         from lidarkit.io.images import ImageFolder
 
-        images = ImageFolder(path, timestamps=timestamps, poses=poses, poses_format=poses_format)
+        hint = {} if format_hint is None else {"format_hint": format_hint}
+        images = ImageFolder(path, timestamps=timestamps, poses=poses, poses_format=poses_format, **hint)
         ground_truth = images.ground_truth
     if timestamps is not None:
         _check_timestamps(images.timestamps_s, timestamps)
