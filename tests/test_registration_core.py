@@ -1118,3 +1118,17 @@ def test_voxel_downsample_refuses_what_it_cannot_average():
     for size in ("0.5", None, float("inf"), True, 0):
         with pytest.raises(ConfigError, match=r"^voxel_size_m: voxel size must be a finite number > 0"):
             voxel_downsample(points, size)
+
+
+def test_voxel_downsample_says_when_finite_points_are_too_large_to_average():
+    """The finite-coordinates check summed the points: two points at 1e308 overflowed it (numpy's warning) and were
+    refused as "0 point(s) with NaN or infinite coordinates"; their centroid would overflow as well."""
+    import warnings
+
+    from lidarkit.errors import DataError
+    from lidarkit.registration.preprocess import voxel_downsample
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(DataError, match=r"^points: coordinates too large to average \(their sum overflows float64\)$"):
+            voxel_downsample(np.full((2, 3), 1e308), 1e300)

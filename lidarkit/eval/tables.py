@@ -70,8 +70,9 @@ class SegmentErrors:
     def from_drift(cls, drift: DriftResult, frame_period_s: float = KITTI_FRAME_PERIOD_S, *,
                    timestamps_s: np.ndarray | None = None) -> SegmentErrors:
         """From a :class:`DriftResult`; a segment's speed is its length over its duration: with ``timestamps_s``
-        (``(N,)``, those of the poses the drift was scored on) the time from its first to its last pose, as a count of
-        poses misses the frames association left out; without, the devkit's ``(last - first + 1) * frame_period_s``."""
+        (``(N,)``, those of the poses the drift was scored on) the time from its first to its last pose plus one
+        ``frame_period_s``, as the devkit counts a segment's frames (a count of poses misses the frames association
+        left out); without, the devkit's ``(last - first + 1) * frame_period_s``."""
         first = np.asarray(drift.segment_first_frame, dtype=np.int64)
         last = np.asarray(drift.segment_last_frame, dtype=np.int64)
         if timestamps_s is None:
@@ -81,7 +82,7 @@ class SegmentErrors:
             if last.size and stamps.size <= last.max():
                 raise EvaluationError(f"{stamps.size} stamps for segments that reach pose {int(last.max())}: give the "
                                       "stamps of the poses the drift was scored on", source="timestamps_s")
-            duration_s = stamps[last] - stamps[first]
+            duration_s = stamps[last] - stamps[first] + frame_period_s
         speed = drift.segment_length_m / np.maximum(duration_s, 1e-12)
         return cls(np.asarray(drift.segment_length_m, float), np.asarray(drift.segment_translation_pct, float),
                    np.asarray(drift.segment_rotation_deg_per_100m, float), speed, first)
@@ -317,6 +318,8 @@ def per_speed_table(grid: Grid, quantity: str = "translation_pct", bins_mps: Seq
 #: significant figures a value table shows of its smallest value (APE 0.013470 m printed 0.013 at 3 decimals, and
 #: 0.0081 and 0.0084 both printed 0.008, both bold)
 VALUE_SIGNIFICANT_FIGURES = 3
+#: values below this share of a table's largest are round-off, not sized for (every cell printed 15 decimals)
+ROUND_OFF_SHARE = 1e-9
 
 
 def decimals_for(values: np.ndarray, at_least: int, significant: int = VALUE_SIGNIFICANT_FIGURES) -> int:
@@ -324,6 +327,8 @@ def decimals_for(values: np.ndarray, at_least: int, significant: int = VALUE_SIG
     one count for the whole table, so that its columns line up."""
     magnitudes = np.abs(np.asarray(values, dtype=np.float64))
     magnitudes = magnitudes[np.isfinite(magnitudes) & (magnitudes > 0)]
+    if magnitudes.size:  # (round-off beside real values, a copy scored against itself at 3e-13, prints as 0)
+        magnitudes = magnitudes[magnitudes > ROUND_OFF_SHARE * magnitudes.max()]
     if not magnitudes.size:
         return at_least
     needed = significant - 1 - math.floor(math.log10(float(magnitudes.min())))

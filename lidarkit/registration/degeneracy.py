@@ -63,9 +63,10 @@ def surface_constraints(neighborhoods_xyz: np.ndarray, return_thickness: bool = 
 
 
 def _neighbourhood_means(neighborhoods_xyz: np.ndarray) -> np.ndarray:
-    """``(n, 1, 3)`` ``neighborhoods_xyz.mean(axis=1, keepdims=True)``, the same numbers (numpy reduces that middle axis
-    one neighbour after another, as this does) in a third of the time: the reduction's inner loop runs over 3
-    coordinates at a time, these additions over all n neighbourhoods."""
+    """``(n, 1, 3)`` ``neighborhoods_xyz.mean(axis=1, keepdims=True)`` of C-contiguous neighbourhoods (the gathers
+    ``surface[nbr]`` are), the same numbers (numpy reduces that middle axis one neighbour after another, as this does;
+    a transposed view it sums pairwise) in a third of the time: the reduction's inner loop runs over 3 coordinates at a
+    time, these additions over all n neighbourhoods."""
     k = neighborhoods_xyz.shape[1]
     if k == 0:
         return neighborhoods_xyz.mean(axis=1, keepdims=True)

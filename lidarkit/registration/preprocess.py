@@ -38,9 +38,12 @@ def voxel_downsample(points_xyz: np.ndarray, voxel_size_m: float) -> np.ndarray:
         raise DataError(f"expected an (N, 3) point array, got shape {pts.shape}", source="points")
     if len(pts) == 0:
         return pts.reshape(0, 3)
-    if not np.isfinite(pts.sum()):  # (one pass: a NaN or infinite coordinate makes the sum so)
-        raise DataError(f"{int(np.count_nonzero(~np.isfinite(pts).all(axis=1)))} point(s) with NaN or infinite coordinates",
-                        source="points")
+    with np.errstate(over="ignore"):
+        finite_sum = np.isfinite(pts.sum())  # (one pass on good data: a NaN or inf makes the sum so)
+    if not finite_sum:
+        n_bad = int(np.count_nonzero(~np.isfinite(pts).all(axis=1)))
+        raise DataError(f"{n_bad} point(s) with NaN or infinite coordinates" if n_bad else
+                        "coordinates too large to average (their sum overflows float64)", source="points")
     keys = np.floor(pts / voxel_size_m).astype(np.int64)
     keys -= np.array([keys[:, i].min() for i in range(3)])  # per column: an axis=0 reduction is ~20x slower
     span = np.array([keys[:, i].max() for i in range(3)]) + 1
