@@ -157,32 +157,20 @@ def test_segment_speeds_of_an_estimate_with_dropped_frames_are_those_of_the_driv
 def test_segment_speeds_of_a_reference_without_stamps_follow_the_estimates_stamps(tmp_path):
     """A KITTI ground truth without times and a TUM estimate at 5 Hz, paired by index: the speeds took 0.1 s a frame
     (just under 10 m/s for 1 m a frame) as only the reference's stamps were looked at; they are the estimate's."""
-    from lidarkit.cli import main
-
     straight(400).to_kitti(tmp_path / "ref.txt")
     Trajectory(straight(400, 1.03).poses_se3, 0.2 * np.arange(400)).to_tum(tmp_path / "est.tum")
-    with pytest.raises(SystemExit) as exc:
-        main(["eval", str(tmp_path / "ref.txt"), str(tmp_path / "est.tum"), "--est-format", "tum", "--align", "none",
-              "--tables", str(tmp_path / "t")])
-    assert exc.value.code in (0, None)
-    rows = (tmp_path / "t" / "kitti_translation_pct_per_speed.csv").read_text().splitlines()
+    rows = _per_speed_rows(tmp_path, "ref.txt", "est.tum", "--est-format", "tum")
     assert len(rows) == 2 and rows[1].startswith("0-5 m/s,"), rows  # 100 m in 101 frames of 0.2 s: 4.95 m/s
 
 
 def test_segment_speeds_of_associated_poses_with_gaps_follow_their_stamps(tmp_path):
     """A 12 m/s drive whose estimate lost 40 % of its frames at random, --associate: the speeds counted the associated
     poses at their median interval (0.1 s), ~1.65x too fast (20-25 m/s); they are the time between the stamps."""
-    from lidarkit.cli import main
-
     ref = straight(800, 1.2)  # 1.2 m a 0.1 s frame: 12 m/s
     keep = np.sort(np.random.default_rng(0).choice(800, 480, replace=False))
     ref.to_tum(tmp_path / "ref.txt")
     straight(800, 1.2 * 1.03)[keep].to_tum(tmp_path / "est.txt")
-    with pytest.raises(SystemExit) as exc:
-        main(["eval", str(tmp_path / "ref.txt"), str(tmp_path / "est.txt"), "-f", "tum", "--align", "none", "--associate",
-              "--tables", str(tmp_path / "t")])
-    assert exc.value.code in (0, None)
-    rows = (tmp_path / "t" / "kitti_translation_pct_per_speed.csv").read_text().splitlines()
+    rows = _per_speed_rows(tmp_path, "ref.txt", "est.txt", "-f", "tum", "--associate")
     assert len(rows) == 2 and rows[1].startswith("10-15 m/s,"), rows
 
 
@@ -256,17 +244,11 @@ def test_sim3_tables_name_the_scale_the_estimate_was_given(tmp_path):
 def test_speeds_of_the_tables_are_those_of_the_associated_poses(tmp_path):
     """An estimate at every other stamp of a denser reference, --associate: speeds were taken with the raw reference's
     frame period (0.1 s) over the associated poses (0.2 s apart), every speed doubled (24 m/s for a 12 m/s drive)."""
-    from lidarkit.cli import main
-
     ref = straight(800, 1.2)  # 1.2 m a 0.1 s frame: 12 m/s
     est = straight(800, 1.2 * 1.03)[np.arange(0, 800, 2)]
     ref.to_tum(tmp_path / "ref.txt")
     est.to_tum(tmp_path / "est.txt")
-    with pytest.raises(SystemExit) as exc:
-        main(["eval", str(tmp_path / "ref.txt"), str(tmp_path / "est.txt"), "-f", "tum", "--align", "none", "--associate",
-              "--tables", str(tmp_path / "t")])
-    assert exc.value.code in (0, None)
-    rows = (tmp_path / "t" / "kitti_translation_pct_per_speed.csv").read_text().splitlines()
+    rows = _per_speed_rows(tmp_path, "ref.txt", "est.txt", "-f", "tum", "--associate")
     assert len(rows) == 2 and rows[1].startswith("10-15 m/s,"), rows
 
 
@@ -335,3 +317,13 @@ def test_stamp_timed_segment_speeds_count_frames_as_the_devkit_does():
     timed = SegmentErrors.from_drift(drift, frame_period_s=0.1, timestamps_s=stamps).speed_mps
     counted = SegmentErrors.from_drift(drift, frame_period_s=0.1).speed_mps
     np.testing.assert_allclose(timed, counted, rtol=1e-9)
+
+
+def _per_speed_rows(tmp_path, ref: str, est: str, *options: str) -> list[str]:
+    """The CSV rows of the per-speed drift table `lidarkit eval REF EST --align none --tables` writes (the run exits 0)."""
+    from lidarkit.cli import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(["eval", str(tmp_path / ref), str(tmp_path / est), *options, "--align", "none", "--tables", str(tmp_path / "t")])
+    assert exc.value.code in (0, None)
+    return (tmp_path / "t" / "kitti_translation_pct_per_speed.csv").read_text().splitlines()
