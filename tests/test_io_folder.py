@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,7 +13,7 @@ from conftest import shared_path
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.io import open_dataset
 from lidarkit.io.base import ScanSequence
-from lidarkit.io.folder import ScanFolder, natural_key
+from lidarkit.io.folder import ScanFolder, natural_key, sorted_by_name
 from lidarkit.trajectory import Trajectory
 
 
@@ -145,6 +146,20 @@ def test_decimal_time_stamps_after_a_prefix_are_read_in_time_order(tmp_path, rng
         "scan_v1.2_3.bin", "scan_v1.2_10.bin", "scan_v1.3_1.bin"]
     assert sorted(["scan_1000.05.bin", "scan_1000.bin", "scan_999.95.bin"], key=natural_key) == [
         "scan_999.95.bin", "scan_1000.bin", "scan_1000.05.bin"]
+
+
+def test_dotted_counters_keep_counting_order(tmp_path, rng):
+    """run_2.10 after run_2.9: a fraction ending in 0 beside shorter ones is a counter (it came before 2.2)."""
+    names = [f"run_2.{i}" for i in range(1, 12)]
+    for i, name in enumerate(names):
+        np.save(tmp_path / f"{name}.npy", np.full((5, 4), float(i), np.float32) + rng.normal(size=(5, 4)).astype(np.float32))
+    ds = ScanFolder(tmp_path)
+    assert [p.stem for p in ds.scan_paths] == names
+    # stamps written without trailing zeros, or to a fixed width, still sort as decimals
+    assert [p.name for p in sorted_by_name([Path(f"s_{t}.npy") for t in ("1000.1", "1000.05", "1000.15", "1000.2")])] == [
+        "s_1000.05.npy", "s_1000.1.npy", "s_1000.15.npy", "s_1000.2.npy"]
+    assert [p.name for p in sorted_by_name([Path(f"s_{t}.npy") for t in ("1000.10", "1000.05", "1000.20")])] == [
+        "s_1000.05.npy", "s_1000.10.npy", "s_1000.20.npy"]
 
 
 def test_ply_round_trip_keeps_intensity(tmp_path, rng):

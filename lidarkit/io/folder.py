@@ -1,9 +1,10 @@
 """A folder of scan files (``.bin``, ``.pcd``, ``.ply``, ``.npy``) as a ``ScanSequence``.
 
 Files are ordered by natural sort of their names (``scan2`` before ``scan10``; decimal time stamps in names by
-their value, ``scan_1000.05`` before ``scan_1000.1``). An optional poses file (KITTI or TUM format, poses of the
-LiDAR in a world frame) must have exactly one pose per scan; optional timestamps (array or a text file with one
-number per line) likewise.
+their value, ``scan_1000.05`` before ``scan_1000.1``; dotted counters, ``run_2.9`` before ``run_2.10``, where a
+fraction ending in 0 beside fractions of other lengths shows that the numbers count). An optional poses file (KITTI
+or TUM format, poses of the LiDAR in a world frame) must have exactly one pose per scan; optional timestamps (array
+or a text file with one number per line) likewise.
 """
 
 from __future__ import annotations
@@ -43,6 +44,24 @@ def natural_key(name: str) -> tuple:
 def _number_key(number: str) -> tuple[int, int, str]:
     whole, _, fraction = number.partition(".")
     return 0, int(whole), fraction.rstrip("0")
+
+
+_DIGITS = re.compile(r"(\d+)")
+
+
+def _counter_key(name: str) -> tuple:
+    """Every run of digits an integer (``a_2.9`` < ``a_2.10``): the other reading of a dotted number."""
+    return tuple((0, int(part), "") if part.isdigit() else (1, 0, part.lower()) for part in _DIGITS.split(name) if part)
+
+
+def sorted_by_name(paths: list[Path]) -> list[Path]:
+    """Paths in ``natural_key`` order of their names, unless the dotted numbers in them count: a fraction ending in 0
+    (``run_2.10``) beside fractions of other lengths (``run_2.9``) is no time stamp (decimal stamps are written
+    either to a fixed number of digits or without trailing zeros), so every digit run is then an integer and
+    ``run_2.9`` comes before ``run_2.10``."""
+    fractions = {m.partition(".")[2] for p in paths for m in _NUMBER.findall(p.name) if "." in m}
+    counting = len({len(f) for f in fractions}) > 1 and any(f.endswith("0") for f in fractions)
+    return sorted(paths, key=lambda p: (_counter_key if counting else natural_key)(p.name))
 
 
 class ScanFolder:
@@ -85,9 +104,7 @@ class ScanFolder:
         broken = next((p for p in folder.iterdir() if p.suffix.lower() in wanted and p.is_symlink() and not p.exists()), None)
         if broken is not None:  # a scan that is not there: never skipped without a word
             raise DataError(f"a broken link (to {os.readlink(broken)})", source=broken)
-        self.scan_paths = sorted(
-            (p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in wanted), key=lambda p: natural_key(p.name)
-        )
+        self.scan_paths = sorted_by_name([p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in wanted])
         if not self.scan_paths:
             from lidarkit.io.kitti_raw import is_drive_folder
 
@@ -224,4 +241,4 @@ class ScanFolder:
         return read_point_file(self.scan_paths[index], frame=index, timestamp_s=ts, drop_nonfinite=self.drop_nonfinite)
 
 
-__all__ = ["ScanFolder", "natural_key"]
+__all__ = ["ScanFolder", "natural_key", "sorted_by_name"]

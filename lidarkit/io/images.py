@@ -18,7 +18,7 @@ import numpy as np
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.io import register_dataset
 from lidarkit.io.base import checked_index
-from lidarkit.io.folder import natural_key
+from lidarkit.io.folder import sorted_by_name
 from lidarkit.io.kitti import read_gray_image, read_kitti_calib
 from lidarkit.io.pointcloud2 import NANOSECONDS_AFTER
 from lidarkit.textfile import read_lines
@@ -153,8 +153,8 @@ class ImageFolder:
         self.path = folder
         self.name = name or folder.name
         # hidden files are no frames: macOS leaves a 4-byte AppleDouble "._000000.png" beside each image it copies
-        self.image_paths = sorted((p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file()
-                                   and not p.name.startswith(".")), key=lambda p: natural_key(p.name))
+        self.image_paths = sorted_by_name([p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file()
+                                           and not p.name.startswith(".")])
         if not self.image_paths:
             raise DataError(f"no images ({', '.join(IMAGE_SUFFIXES)})", source=folder)
         n = len(self.image_paths)

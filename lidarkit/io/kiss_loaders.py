@@ -562,7 +562,7 @@ class GenericScans(KissLoaderScans):
     def __init__(self, path: str | os.PathLike, drop_nonfinite: bool = False):
         from kiss_icp.datasets import supported_file_extensions
 
-        from lidarkit.io.folder import natural_key
+        from lidarkit.io.folder import natural_key, sorted_by_name
         from lidarkit.io.pointfile import POINT_FILE_SUFFIXES
 
         folder = Path(path)
@@ -589,7 +589,8 @@ class GenericScans(KissLoaderScans):
         if skipped:  # (then only logged: the run's warnings did not say it)
             self.reader_warnings.append(left_out)
         # in folder:PATH's order (natsort read time-stamp names 1000.1 before 1000.05: sweeps out of order, no word)
-        self.loader.scan_files = np.array(sorted(self.loader.scan_files, key=lambda f: natural_key(Path(f).name)), dtype=str)
+        self.loader.scan_files = np.array([str(f) for f in sorted_by_name([Path(f) for f in self.loader.scan_files])],
+                                          dtype=str)
         # the time field's type in the files (the loader hands every field over as float64: Ouster's uint32
         # nanoseconds were read as seconds, a 0.1 s sweep as one of 1e8 s)
         self.drop_nonfinite = drop_nonfinite
