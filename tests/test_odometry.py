@@ -666,9 +666,15 @@ def test_a_sequence_of_the_callers_own_needs_only_len_and_read_scan():
     class ArrayTruth(Seq):
         ground_truth = np.tile(np.eye(4), (3, 1, 1))
 
+    class ListPoints(Seq):
+        def read_scan(self, i):
+            return Scan(pts.tolist(), frame=i)
+
     assert len(run(Seq(), "vanilla", progress=False).trajectory) == 3
     with pytest.raises(ConfigError, match=r"dataset \(frame 0\): read_scan\(0\) returned a ndarray, not a lidarkit Scan"):
         run(Arrays(), "vanilla", progress=False)
+    with pytest.raises(ConfigError, match=r"read_scan\(0\) returned a Scan whose points_xyz is a list, not an \(N, 3\) numpy array"):
+        run(ListPoints(), "vanilla", progress=False)
     with pytest.raises(DataError, match=r"dataset \(frame 2\): cannot read the scan \(RuntimeError: disk on fire\)"):
         run(Failing(), "vanilla", progress=False)
     with pytest.raises(ConfigError, match="the dataset's ground truth is a ndarray, not a lidarkit Trajectory"):

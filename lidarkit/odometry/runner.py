@@ -80,8 +80,11 @@ def _read_nonempty_scan(sequence: ScanSequence, index: int) -> Scan:
         raise
     except (OSError, EOFError, LookupError, *_FRAME_ERRORS) as err:  # (a reader's dict without the frame: KeyError; a cut gzip)
         raise DataError(f"cannot read the scan ({type(err).__name__}: {err})") from err
-    if not isinstance(getattr(scan, "points_xyz", None), np.ndarray):
+    if not isinstance(scan, Scan) and not isinstance(getattr(scan, "points_xyz", None), np.ndarray):
         raise ConfigError(f"read_scan({index}) returned a {type(scan).__name__}, not a lidarkit Scan (Scan(points_xyz) wraps an (N, 3) array)")
+    if not isinstance(scan.points_xyz, np.ndarray):  # (a Scan of a list was called "a Scan, not a lidarkit Scan")
+        raise ConfigError(f"read_scan({index}) returned a Scan whose points_xyz is a {type(scan.points_xyz).__name__}, not "
+                          "an (N, 3) numpy array")
     if len(scan.points_xyz) == 0:  # named by its file and line where the reader gives them (a CARMEN log's blank scan
         # read "blank11 (frame 10): empty scan (0 points)"), else by the caller
         raise DataError("empty scan (0 points)" + _why_empty(sequence, index), source=scan.source or None,
