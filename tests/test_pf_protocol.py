@@ -839,3 +839,48 @@ def test_estimators_that_are_no_estimator_names_are_refused_naming_estimators(st
         assert err.value.source == "estimators" and "\n" not in str(err.value)
         assert err.value.reason == f"must be one of mean, best or an iterable of them, got {given!r}"
     assert sorted(run_protocol(stachniss, 20, 0, estimators=iter(["best"]), with_ape_rpe=False).estimates) == ["best", "mean"]
+
+
+def test_every_run_opens_a_dataset_path_and_refuses_anything_else(tmp_path):
+    """run_recorded and fit_q_recorded given a path failed "'str' object has no attribute 'meas_range_m'" (run_protocol
+    opened it): all three open a path (str or Path) as the LandmarkData there and refuse anything else in one line."""
+    from lidarkit.errors import ConfigError
+    from lidarkit.pf.protocol import fit_q_recorded
+
+    source = shared_path("pf", "robot_mapping_stachniss")
+    lines = (source / "sensor_data.dat").read_text().splitlines()
+    odometry = [i for i, line in enumerate(lines) if line.startswith("ODOMETRY")]
+    folder = tmp_path / "s30"
+    folder.mkdir()
+    (folder / "world.dat").write_text((source / "world.dat").read_text())
+    (folder / "sensor_data.dat").write_text("\n".join(lines[:odometry[30]]) + "\n")
+    opened = LandmarkData(folder)
+    recorded = run_recorded(opened, 50, seed=3).metrics["nis_mean"]
+    fitted = fit_q_recorded(opened, 50, seed=3, max_rounds=1)[1][-1].metrics["nis_mean"]
+    protocol = run_protocol(opened, 50, seed=3).metrics["mse_m2"]["mean"]
+    for path in (str(folder), folder):
+        run = run_recorded(path, 50, seed=3)
+        assert run.metrics["nis_mean"] == recorded and run.settings["data"] == str(folder.resolve())
+        assert fit_q_recorded(path, 50, seed=3, max_rounds=1)[1][-1].metrics["nis_mean"] == fitted
+        assert run_protocol(path, 50, seed=3).metrics["mse_m2"]["mean"] == protocol
+    for bad in (5, None, [opened]):
+        for run_on in (run_protocol, run_recorded, fit_q_recorded):
+            with pytest.raises(ConfigError) as refused:
+                run_on(bad, 50)
+            assert str(refused.value) == (f"data: data must be a LandmarkData or the path of a landmark dataset, got "
+                                          f"{type(bad).__name__} {bad!r:.60}"), run_on.__name__
+
+
+def test_wrap_angle_refuses_what_is_no_number_and_wraps_arrays_as_before():
+    """wrap_angle("a") raised numpy's UFuncTypeError and wrap_angle(None) a TypeError: a one-line ConfigError now;
+    numbers and arrays wrap to [-pi, pi) as before, float32 kept."""
+    from lidarkit.errors import ConfigError
+    from lidarkit.pf import wrap_angle
+
+    np.testing.assert_allclose(wrap_angle([4.0, -4.0, np.pi]), [4.0 - 2 * np.pi, 2 * np.pi - 4.0, -np.pi])
+    assert wrap_angle(np.zeros(3, dtype=np.float32)).dtype == np.float32
+    assert wrap_angle(7.0) == pytest.approx(7.0 - 2 * np.pi)
+    for bad, shown in (("a", "str 'a'"), (None, "NoneType None"), (["1", "x"], "list ['1', 'x']")):
+        with pytest.raises(ConfigError) as refused:
+            wrap_angle(bad)
+        assert str(refused.value) == f"angle_rad: angles must be numbers (rad), got {shown}"

@@ -529,3 +529,15 @@ def test_without_sanity_checks_features_and_matches_are_still_required(sim):
     always, _, when_enabled = row.partition("when enabled")
     assert "min_features" in always and "min_matches" in always
     assert "min_inliers" in when_enabled and "fundamental-matrix fallback" in when_enabled
+
+
+def test_a_grayscale_image_with_a_channel_axis_is_taken_as_grayscale(sim):
+    """(H, W, 1) frames (a single-channel image read with its channel axis) were each rejected as "not a grayscale
+    image (shape (480, 640, 1))"; they give the same poses as the (H, W) frames, mixed with them too."""
+    traj, K, images = sim
+    plain = MonoVO(_cfg(), K, traj).run(images)
+    with_axis = MonoVO(_cfg(), K, traj).run([image[:, :, None] for image in images])
+    mixed = MonoVO(_cfg(), K, traj).run([image[:, :, None] if i % 2 else image for i, image in enumerate(images)])
+    for result in (with_axis, mixed):
+        assert not result.rejected and result.meta["image_size_wh"] == [640, 480]
+        np.testing.assert_array_equal(result.trajectory.poses_se3, plain.trajectory.poses_se3)

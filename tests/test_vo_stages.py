@@ -626,3 +626,20 @@ def test_the_feature_budget_is_shared_over_the_grid_cells_as_documented():
     docs = (Path(__file__).resolve().parents[1] / "docs" / "visual_odometry.md").read_text()
     row = next(line for line in docs.splitlines() if line.startswith("| detector / descriptor |"))
     assert "ceil(budget / cells)" in row and "32 corners for a budget of 8 and 128 for 100" in row
+
+
+def test_check_pose_refuses_what_is_no_two_view_estimate():
+    """check_pose(None) raised AttributeError ('NoneType' object has no attribute 'fundamental_inliers'), a dict as the
+    config another: one-line ConfigErrors naming the argument; a real estimate is still judged."""
+    rng = np.random.default_rng(3)
+    x0, x1, K = _synthetic_correspondences(rng, t=np.array([0.2, -0.05, 1.0]))
+    cv2.setRNGSeed(1)
+    estimate = estimate_two_view(x0, x1, K)
+    assert estimate.ok and check_pose(estimate) is None and check_pose(estimate, SanityConfig()) is None
+    with pytest.raises(ConfigError) as refused:
+        check_pose(None)
+    assert str(refused.value) == ("estimate: estimate must be a TwoViewEstimate (lidarkit.vo.estimate_two_view), "
+                                  "got NoneType None")
+    with pytest.raises(ConfigError) as refused:
+        check_pose(estimate, {"enabled": False})
+    assert str(refused.value) == "cfg: cfg must be a SanityConfig or None, got dict {'enabled': False}"

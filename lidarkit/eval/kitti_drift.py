@@ -100,6 +100,9 @@ def drift_segments_possible(ref: Trajectory, lengths: tuple[float, ...] = KITTI_
                             path_along: Trajectory | None = None) -> bool:
     """Whether ``ref`` is long enough for at least one segment (its path must exceed the shortest length); its path
     measured along ``path_along`` as in :func:`kitti_drift`."""
+    if not isinstance(ref, Trajectory):  # (None failed len() with a TypeError)
+        raise ConfigError(f"ref must be a lidarkit Trajectory, got {type(ref).__name__} {ref!r:.60}", source="ref")
+    lengths = checked_lengths(lengths, "lengths")
     if len(ref) < 2:
         return False
     dist = path_distances_m(ref, path_along)

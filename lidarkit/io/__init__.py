@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from lidarkit.errors import ConfigError
+from lidarkit.plugins import checked_name, claim_name
 
 # kind -> "module:attribute" of the reader class, imported on first use
 _BUILTIN: dict[str, str] = {
@@ -53,9 +54,12 @@ def detected_files() -> str:
 
 
 def register_dataset(kind: str) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
-    """Class decorator registering a reader under ``kind``; the class is called as ``cls(path, **options)``."""
+    """Class decorator registering a reader under ``kind``; the class is called as ``cls(path, **options)`` (the naming
+    rule: :mod:`lidarkit.plugins`)."""
+    checked_name(kind, "a dataset kind", "register_dataset")
 
     def decorator(reader: Callable[..., Any]) -> Callable[..., Any]:
+        claim_name(_REGISTERED, kind, reader, f"register_dataset({kind!r})", _BUILTIN)
         _REGISTERED[kind] = reader
         return reader
 

@@ -14,9 +14,14 @@ TWO_PI = 2.0 * np.pi
 
 
 def wrap_angle(angle_rad: np.ndarray | float) -> np.ndarray | float:
-    """Wrap angles to [-pi, pi) (vectorized; keeps dtype)."""
+    """Wrap angles to [-pi, pi) (vectorized; keeps dtype). Not numbers: a ConfigError (numpy's own TypeError, caught
+    rather than a dtype check up front: this runs on every particle every step)."""
     a = np.asarray(angle_rad)
-    return a - TWO_PI * np.floor((a + np.pi) / TWO_PI)
+    try:
+        return a - TWO_PI * np.floor((a + np.pi) / TWO_PI)
+    except TypeError:  # (text: numpy's UFuncTypeError; None: a TypeError)
+        raise ConfigError(f"angles must be numbers (rad), got {type(angle_rad).__name__} {angle_rad!r:.60}",
+                          source="angle_rad") from None
 
 
 def _numbers(value, name: str, expected: str) -> np.ndarray:

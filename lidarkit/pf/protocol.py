@@ -21,7 +21,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -33,6 +33,9 @@ from lidarkit.pf.consistency import Q_VARIANCE_BOUNDS, at_lower_bound, fit_q, lo
 from lidarkit.pf.filter import ParticleFilter, check_config_type, make_filter, nis_values
 from lidarkit.pf.models import integrate_odometry, resolve_q, wrap_angle
 from lidarkit.trajectory import Trajectory
+
+if TYPE_CHECKING:
+    from lidarkit.io.landmarks import LandmarkData
 
 log = logging.getLogger(__name__)
 
@@ -487,6 +490,19 @@ def checked_seed(seed: Any) -> int:
     return int(seed)
 
 
+def landmark_data(data: Any) -> LandmarkData:
+    """``data`` as the LandmarkData a run reads: a path opens the dataset there; anything else is a ConfigError (a path
+    failed "'str' object has no attribute 'odometry'", or 'meas_range_m' in the recorded mode)."""
+    from lidarkit.io.landmarks import LandmarkData
+
+    if isinstance(data, (str, os.PathLike)):
+        return LandmarkData(data)
+    if not isinstance(data, LandmarkData):
+        raise ConfigError(f"data must be a LandmarkData or the path of a landmark dataset, got {type(data).__name__} "
+                          f"{data!r:.60}", source="data")
+    return data
+
+
 def run_protocol(
     data,
     n_particles: int | None = None,
@@ -508,7 +524,7 @@ def run_protocol(
     on_step: Callable[[int, int], None] | None = None,
     **config_overrides: Any,
 ) -> PFRunResult:
-    """Simulate the report's protocol on ``data`` (a LandmarkData) and run the filter once.
+    """Simulate the report's protocol on ``data`` (a LandmarkData or its path) and run the filter once.
 
     ``seed`` derives two independent streams: the simulated data (noisy odometry, readings) and the
     filter; so runs with the same seed and different N see the same data. Readings are simulated with
@@ -519,13 +535,7 @@ def run_protocol(
     ``kidnap_at_step`` / ``kidnap_offset``: teleport the simulated robot (see :func:`simulate`); the steps it took to
     recover are ``metrics["kidnap_recovery"]``.
     """
-    from lidarkit.io.landmarks import LandmarkData
-
-    if isinstance(data, (str, os.PathLike)):  # (a path failed "'str' object has no attribute 'odometry'")
-        data = LandmarkData(data)
-    if not isinstance(data, LandmarkData):
-        raise ConfigError(f"data must be a LandmarkData or the path of a landmark dataset, got {type(data).__name__} "
-                          f"{data!r:.60}", source="data")
+    data = landmark_data(data)
     overrides = {k: v for k, v in dict(likelihood=likelihood, estimator=estimator, resampler=resampler, q_as=q_as).items() if v is not None}
     cfg = _resolve_config(config, n_particles, {**overrides, **config_overrides}, "run_protocol")
     seed = checked_seed(seed)
@@ -614,7 +624,9 @@ def run_recorded(
     on_step: Callable[[int, int], None] | None = None,
     **config_overrides: Any,
 ) -> PFRunResult:
-    """Run on the data's own odometry and SENSOR readings; report NIS consistency and distance to dead reckoning."""
+    """Run on the data's own odometry and SENSOR readings (``data``: a LandmarkData or its path); report NIS
+    consistency and distance to dead reckoning."""
+    data = landmark_data(data)
     if len(data.meas_range_m) < 2:
         raise DataError(f"{len(data.meas_range_m)} SENSOR readings: the recorded mode needs at least 2 to judge Q by",
                         source=_sensor_source(data))
@@ -705,12 +717,12 @@ def _fitted_q_record(result: PFRunResult, n_fits: int) -> dict[str, Any] | None:
 def fit_q_recorded(data, n_particles: int | None = None, seed: int = 0, *, config: PFConfig | None = None,
                    max_rounds: int = 5, warn_lost: bool = True, on_step: Callable[[int, int], None] | None = None,
                    **config_overrides: Any) -> tuple[PFRunResult, list[PFRunResult]]:
-    """``--fit-q``: run on the recorded readings, take the ML Q of the innovations, run again with it; repeat
-    (the particle spread changes with Q) until the NIS mean is within [1.5, 2.5], the fit repeats itself, or
-    ``max_rounds`` re-runs. A first run that lost track is not fitted (no verdict on Q; a last run that did is not
-    settled). The last run's ``metrics["q_fit_settled"]`` says whether it got there (its verdict says so
-    when not). ``warn_lost``: warn if the run with the given Q or the last fit lost track, naming which (a discarded
-    round between them, often lost with its too small Q, says nothing).
+    """``--fit-q``: run on the recorded readings of ``data`` (a LandmarkData or its path), take the ML Q of the
+    innovations, run again with it; repeat (the particle spread changes with Q) until the NIS mean is within
+    [1.5, 2.5], the fit repeats itself, or ``max_rounds`` re-runs. A first run that lost track is not fitted (no verdict
+    on Q; a last run that did is not settled). The last run's ``metrics["q_fit_settled"]`` says whether it got there
+    (its verdict says so when not). ``warn_lost``: warn if the run with the given Q or the last fit lost track, naming
+    which (a discarded round between them, often lost with its too small Q, says nothing).
 
     Returns the first run and the re-runs (the last one is the answer; its config holds the fitted Q as variances, its
     ``metrics["q_fitted"]`` too, and it has no one-round fit of its own: a further round, never run, is no answer).
@@ -719,6 +731,7 @@ def fit_q_recorded(data, n_particles: int | None = None, seed: int = 0, *, confi
 
     if not is_integer(max_rounds) or max_rounds < 1:  # (0 fitted nothing)
         raise ConfigError(f"max_rounds must be an integer >= 1 (re-runs with a fitted Q), got {max_rounds!r}", source="max_rounds")
+    data = landmark_data(data)  # (a path is opened here once, not again for every re-run)
     first = run_recorded(data, n_particles, seed, config=config, warn_lost=False, on_step=on_step, **config_overrides)
     runs: list[PFRunResult] = []
     current = first
@@ -818,6 +831,7 @@ __all__ = [
     "first_converged_step",
     "fit_q_recorded",
     "kidnap_offset_record",
+    "landmark_data",
     "most_readings_per_step",
     "poses_to_trajectory",
     "run_filter",

@@ -17,6 +17,7 @@ import pydantic
 
 from lidarkit.errors import ConfigError, validation_problems
 from lidarkit.params import shown_default
+from lidarkit.plugins import checked_name, claim_name
 from lidarkit.registration.base import Registration, RegistrationConfig
 
 log = logging.getLogger(__name__)
@@ -32,9 +33,9 @@ _BROKEN: dict[str, str] = {}
 
 
 def register_icp(name: str) -> Callable[[type[Registration]], type[Registration]]:
-    """Class decorator: register a :class:`Registration` subclass under ``name`` (sets ``cls.name``)."""
-    if not isinstance(name, str) or not name.strip() or name != name.strip():  # (None broke available_icp's sorting)
-        raise ConfigError(f"a variant name must be a non-empty word, got {name!r}", source="register_icp")
+    """Class decorator: register a :class:`Registration` subclass under ``name`` (sets ``cls.name``; the naming rule:
+    :mod:`lidarkit.plugins`)."""
+    checked_name(name, "a variant name", "register_icp")
 
     def decorator(cls: type[Registration]) -> type[Registration]:
         if not (isinstance(cls, type) and issubclass(cls, Registration)):
@@ -43,9 +44,7 @@ def register_icp(name: str) -> Callable[[type[Registration]], type[Registration]
         if not (isinstance(config, type) and issubclass(config, RegistrationConfig)):
             raise ConfigError(f"{cls.__qualname__}.Config must derive from lidarkit.registration.RegistrationConfig (it carries the "
                               f"assessment and covariance settings every variant takes), got {config!r}", source=f"register_icp({name!r})")
-        existing = _VARIANTS.get(name)
-        if existing is not None and existing is not cls:
-            raise ConfigError(f"name already taken by {existing.__module__}.{existing.__qualname__}", source=f"register_icp({name!r})")
+        claim_name(_VARIANTS, name, cls, f"register_icp({name!r})")
         cls.name = name
         _VARIANTS[name] = cls
         return cls

@@ -382,7 +382,7 @@ class MonoVO:
     # ---- steps -----------------------------------------------------------------------------------------------
     @staticmethod
     def _load(read, index: int) -> tuple[np.ndarray | None, str]:
-        """The image as uint8 (H, W) or (None, reason)."""
+        """The image as uint8 (H, W) or (None, reason); a grayscale one may come as (H, W, 1)."""
         try:
             image = read(index)
         except DataError as err:
@@ -392,6 +392,8 @@ class MonoVO:
         if image is None:
             return None, "unreadable image (missing)"
         image = np.asarray(image)
+        if image.ndim == 3 and image.shape[2] == 1:  # (refused as "not a grayscale image")
+            image = image[:, :, 0]
         colour = image.ndim == 3 and image.shape[2] in (3, 4)
         if image.size == 0 or not (image.ndim == 2 or colour):
             return None, f"not a grayscale image (shape {image.shape})"

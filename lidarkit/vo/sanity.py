@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from lidarkit.errors import ConfigError
 from lidarkit.geometry import rotation_angle_deg
 from lidarkit.vo.config import SanityConfig
 from lidarkit.vo.two_view import TwoViewEstimate, few_inliers_parallax_reason
@@ -15,6 +16,11 @@ def check_pose(estimate: TwoViewEstimate, cfg: SanityConfig | None = None) -> st
 
     Pure rotation / standstill is caught twice: by the K-free homography test (:func:`rotation_homography_reason`),
     which holds with guessed or wrong intrinsics, and by the parallax left after removing the rotation with K."""
+    if not isinstance(estimate, TwoViewEstimate):  # (None failed on an attribute)
+        raise ConfigError(f"estimate must be a TwoViewEstimate (lidarkit.vo.estimate_two_view), got "
+                          f"{type(estimate).__name__} {estimate!r:.60}", source="estimate")
+    if cfg is not None and not isinstance(cfg, SanityConfig):
+        raise ConfigError(f"cfg must be a SanityConfig or None, got {type(cfg).__name__} {cfg!r:.60}", source="cfg")
     cfg = cfg or SanityConfig()
     if cfg.enabled and (reason := rotation_homography_reason(estimate, cfg)) is not None:
         return reason

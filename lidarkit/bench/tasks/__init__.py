@@ -15,6 +15,7 @@ from typing import Any, ClassVar
 
 from lidarkit.bench.jobs import Job
 from lidarkit.errors import ConfigError
+from lidarkit.plugins import checked_name, claim_name
 
 _BUILTIN: dict[str, str] = {
     "selftest": "lidarkit.bench.tasks.selftest:SelfTestTask",
@@ -105,13 +106,15 @@ class Task:
 
 
 def register_task(name: str) -> Callable[[type[Task]], type[Task]]:
-    """Class decorator registering a ``Task`` subclass under ``name``."""
+    """Class decorator registering a ``Task`` subclass under ``name`` (the naming rule: :mod:`lidarkit.plugins`)."""
+    checked_name(name, "a task name", "register_task")
 
     def decorator(cls: type[Task]) -> type[Task]:
         # (int was taken and failed "cannot set 'name' attribute of immutable type 'int'")
         if not (isinstance(cls, type) and issubclass(cls, Task)):
             what = f"the class {cls.__qualname__}" if isinstance(cls, type) else f"{type(cls).__name__} {cls!r}"
             raise ConfigError(f"decorates a subclass of lidarkit.bench.tasks.Task, got {what}", source=f"register_task({name!r})")
+        claim_name(_REGISTERED, name, cls, f"register_task({name!r})", _BUILTIN)
         cls.name = name
         _REGISTERED[name] = cls
         _INSTANCES.pop(name, None)

@@ -18,6 +18,7 @@ from pydantic import BaseModel, ConfigDict, model_validator
 
 from lidarkit.errors import ConfigError, RegistrationError, validation_problems
 from lidarkit.params import refuse_yes_no_numbers, shown_default
+from lidarkit.plugins import checked_name, claim_name
 
 log = logging.getLogger(__name__)
 
@@ -91,18 +92,16 @@ def _check_kind(kind: str) -> None:
 
 
 def register_component(kind: str, name: str) -> Callable[[type[Component]], type[Component]]:
-    """Class decorator: register a component class of ``kind`` under ``name`` (sets ``cls.name``)."""
+    """Class decorator: register a component class of ``kind`` under ``name`` (sets ``cls.name``; the naming rule:
+    :mod:`lidarkit.plugins`)."""
     _check_kind(kind)
+    checked_name(name, "a component name", f"register_component({kind!r})")
 
     def decorator(cls: type[Component]) -> type[Component]:
         base = _BASES.get(kind, Component)
         if not (isinstance(cls, type) and issubclass(cls, base)):
             raise ConfigError(f"{cls!r} is not a {base.__name__} subclass", source=f"register_component({kind!r}, {name!r})")
-        existing = _COMPONENTS[kind].get(name)
-        if existing is not None and existing is not cls:
-            raise ConfigError(
-                f"name already taken by {existing.__module__}.{existing.__qualname__}", source=f"register_component({kind!r}, {name!r})"
-            )
+        claim_name(_COMPONENTS[kind], name, cls, f"register_component({kind!r}, {name!r})")
         cls.name = name
         _COMPONENTS[kind][name] = cls
         return cls

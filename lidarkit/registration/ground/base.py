@@ -17,6 +17,7 @@ from pydantic import BaseModel, ConfigDict, model_validator
 from lidarkit.errors import ConfigError, DataError, validation_problems
 from lidarkit.geometry import as_points
 from lidarkit.params import refuse_yes_no_numbers, shown_default
+from lidarkit.plugins import checked_name, claim_name
 from lidarkit.registration import local_origin
 
 #: Mounting height of KITTI's Velodyne HDL-64E above the road (m).
@@ -84,13 +85,14 @@ _REGISTRY: dict[str, type[GroundSegmenter]] = {}
 
 
 def register_ground_segmenter(name: str) -> Callable[[type[GroundSegmenter]], type[GroundSegmenter]]:
-    """Class decorator: register a :class:`GroundSegmenter` subclass under ``name``."""
+    """Class decorator: register a :class:`GroundSegmenter` subclass under ``name`` (the naming rule:
+    :mod:`lidarkit.plugins`)."""
+    checked_name(name, "a ground segmenter name", "register_ground_segmenter")
 
     def decorator(cls: type[GroundSegmenter]) -> type[GroundSegmenter]:
         if not (isinstance(cls, type) and issubclass(cls, GroundSegmenter)):
             raise ConfigError(f"{cls!r} is not a GroundSegmenter subclass", source=f"register_ground_segmenter({name!r})")
-        if name in _REGISTRY and _REGISTRY[name] is not cls:
-            raise ConfigError(f"name already taken by {_REGISTRY[name].__qualname__}", source=f"register_ground_segmenter({name!r})")
+        claim_name(_REGISTRY, name, cls, f"register_ground_segmenter({name!r})")
         cls.name = name
         _REGISTRY[name] = cls
         return cls
