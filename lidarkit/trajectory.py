@@ -22,6 +22,8 @@ from lidarkit.textfile import data_line_numbers, file_line, read_numeric_table
 log = logging.getLogger(__name__)
 
 FORMATS = ("kitti", "tum")
+#: ``Trajectory.meta`` key of what a file's reader warned of (list of str), e.g. TUM poses left out for a repeated stamp
+READ_WARNINGS = "read_warnings"
 
 
 def default_format_hint(fmt: str) -> str:
@@ -52,6 +54,23 @@ def _check_rigid(poses: np.ndarray, source: str, item: str) -> None:
                       "if it is a file's rounding, write more digits (or, in Python, lidarkit.geometry.orthonormalize_se3 "
                       "the poses before making the Trajectory)")
         raise DataError(reason, source=source, location=f"{item} {k}")
+
+
+#: the largest time stamp a file may hold in seconds (1e11 s after 1970 is the year 5138): larger ones are nanoseconds or
+#: another unit read as seconds (a EuRoC file's 1.4e18 put every segment in "0-5 m/s" and associated 0.01 ns apart)
+MAX_STAMP_S = 1e11
+
+
+def _check_seconds(stamps: np.ndarray, path: str | os.PathLike) -> None:
+    """DataError naming the first of a file's ``(N,)`` stamps beyond :data:`MAX_STAMP_S`: no time in seconds."""
+    beyond = np.abs(stamps) > MAX_STAMP_S
+    if beyond.any():
+        k = int(np.argmax(beyond))
+        stamp = float(stamps[k])  # (as the file wrote it: 1403715524907143168, not the shortest repr ...143200)
+        text = f"{stamp:.0f}" if stamp.is_integer() else np.format_float_positional(stamp, trim="-")
+        raise DataError(f"time stamp {text} is beyond {MAX_STAMP_S:.0e} s (after the year 5000): they look like nanoseconds "
+                        "(or micro/milliseconds): write seconds, e.g. divide by 1e9", source=path,
+                        location=file_line(path, f"frame {k}"))
 
 
 def _rigid_argument(T: np.ndarray, name: str) -> np.ndarray:
@@ -274,6 +293,7 @@ class Trajectory:
         if isinstance(timestamps_s, (str, os.PathLike)):
             times_path = timestamps_s
             timestamps_s = read_numeric_table(times_path, 1, what="time stamps file")[:, 0]
+            _check_seconds(timestamps_s, times_path)
             if len(timestamps_s) != len(poses):
                 raise DataError(f"{len(timestamps_s)} timestamps for {len(poses)} poses in {path}", source=times_path)
         elif timestamps_s is not None:
@@ -297,9 +317,10 @@ class Trajectory:
                  format_hint: Callable[[str], str] = default_format_hint) -> Trajectory:
         """Read a TUM trajectory: ``timestamp tx ty tz qx qy qz qw`` per line, ``#`` comments.
 
-        A pose stamped like the one before it is left out (with a warning naming the lines): TUM RGB-D's own ground
-        truth of ``fr2/desk`` has one; more than half of them repeating is a DataError (stamps written with too few
-        digits). Timestamps that go backwards are a DataError naming the line."""
+        A pose stamped like the one before it is left out (with a warning naming the lines, also kept in
+        ``meta["read_warnings"]``): TUM RGB-D's own ground truth of ``fr2/desk`` has one; more than half of them
+        repeating is a DataError (stamps written with too few digits). Timestamps that go backwards, or beyond any time
+        in seconds (nanoseconds), are a DataError naming the line."""
         try:
             rows = read_numeric_table(path, 8, what="trajectory file")
         except DataError as err:  # a KITTI file (12 numbers a row, a 3x4 [R|t]) read as TUM: say so, as from_kitti does
@@ -307,6 +328,7 @@ class Trajectory:
                 raise DataError(err.reason + f" (a KITTI trajectory? read it as kitti: {format_hint('kitti')})",
                                 source=err.source, location=err.location) from None
             raise
+        _check_seconds(rows[:, 0], path)
         quat_xyzw = rows[:, 4:8]
         norms = np.linalg.norm(quat_xyzw, axis=1)
         if (np.abs(norms - 1.0) > 1e-2).any():
@@ -321,16 +343,20 @@ class Trajectory:
         if repeated.size > len(rows) / 2:  # no recorder's glitch: the file's stamps lost their digits (90 % left out, scored)
             raise DataError(f"{repeated.size} of {len(rows)} poses repeat the timestamp of the pose before them: were the "
                             "stamps written with too few decimals (TUM stamps need sub-millisecond digits)?", source=path)
+        read_warnings = []
         if repeated.size:
             numbers = data_line_numbers(path)  # (the file is read once for all the lines named)
             lines = ", ".join(f"line {numbers[k]}" for k in repeated[:5])
-            log.warning("%s: %d pose(s) repeat the timestamp of the pose before them (%s%s): each left out",
-                        path, repeated.size, lines, ", ..." if repeated.size > 5 else "")
+            read_warnings.append(f"{path}: {repeated.size} pose(s) repeat the timestamp of the pose before them "
+                                 f"({lines}{', ...' if repeated.size > 5 else ''}): each left out")
+            log.warning("%s", read_warnings[-1])
             rows = np.delete(rows, repeated, axis=0)
         poses = np.tile(np.eye(4), (len(rows), 1, 1))
         poses[:, :3, :3] = Rotation.from_quat(rows[:, 4:8]).as_matrix()
         poses[:, :3, 3] = rows[:, 1:4]
-        return cls(poses, rows[:, 0], Path(path).stem if name is None else name)
+        # what was left out travels with the poses (evaluate() files it beside the scores: the report read clean)
+        meta = {READ_WARNINGS: read_warnings} if read_warnings else {}
+        return cls(poses, rows[:, 0], Path(path).stem if name is None else name, meta)
 
     @classmethod
     def read(cls, path: str | os.PathLike, fmt: str = "kitti", *, format_hint: Callable[[str], str] = default_format_hint,

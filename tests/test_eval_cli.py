@@ -587,3 +587,74 @@ def test_a_bad_times_file_is_named_by_line_in_plain_words(tmp_path, capsys):
     assert code == 1 and err.strip() == f"error: {tmp_path / 'two.txt'} (line 2): expected 1 number, found 2"
     code, _, err = run_cli(["eval", str(kitti), str(kitti), "--ref-times", str(tmp_path / "back.txt"), "--align", "none"], capsys)
     assert code == 1 and err.strip().startswith(f"error: {tmp_path / 'back.txt'} (line 4, frame 2): ")
+
+
+def test_eval_refuses_nanosecond_stamps_in_one_line(tmp_path, capsys):
+    """fr1/xyz's ground truth and estimate with stamps in nanoseconds, --associate: read as seconds, the 0.01 s window was
+    0.01 ns (only identical stamps paired; here none) and the error asked whether both had the same clock. The file and
+    the unit are named now, in one line."""
+    for name in ("freiburg1_xyz-groundtruth.txt", "freiburg1_xyz-rgbdslam.txt"):
+        rows = np.loadtxt(shared_path("evo_testdata", name))
+        lines = [" ".join([str(round(row[0] * 1e9)), *(f"{v:.6f}" for v in row[1:])]) for row in rows]
+        (tmp_path / name).write_text("\n".join(lines) + "\n")
+    code, out, err = run_cli(["eval", str(tmp_path / "freiburg1_xyz-groundtruth.txt"), str(tmp_path / "freiburg1_xyz-rgbdslam.txt"),
+                              "-f", "tum", "--associate", "--json", str(tmp_path / "out.json")], capsys)
+    assert code == 1 and out == "" and err.count("\n") == 1, err
+    assert "freiburg1_xyz-groundtruth.txt (line 1, frame 0): time stamp 1305031098" in err
+    assert "they look like nanoseconds (or micro/milliseconds): write seconds, e.g. divide by 1e9" in err
+    assert not (tmp_path / "out.json").exists()
+
+
+def test_poses_a_reader_left_out_are_on_file_in_the_json_and_the_markdown(tmp_path, capsys):
+    """An estimate with a pose stamped like the one before it (evo's V1_02 has four): the reader left it out with a
+    warning on stderr only, and the --json's "warnings" read [] and the Markdown had no note, so a figure that differs
+    from evo's had nothing on file. The reader's warning is now among the evaluation's warnings."""
+    n = 40
+    poses = np.tile(np.eye(4), (n, 1, 1))
+    poses[:, :3, 3] = np.column_stack([0.5 * np.arange(n), np.sin(0.3 * np.arange(n)), 0.1 * np.cos(0.2 * np.arange(n))])
+    stamps = 0.1 * np.arange(n)
+    Trajectory(poses, stamps).to_tum(tmp_path / "ref.tum")
+    lines = Trajectory(poses, stamps).to_tum(tmp_path / "est.tum").read_text().splitlines()
+    repeat = lines[11].split()
+    lines[12] = " ".join([repeat[0], *lines[12].split()[1:]])  # pose 11 (line 13) repeats pose 10's stamp
+    (tmp_path / "est.tum").write_text("\n".join(lines) + "\n")
+    est = Trajectory.from_tum(tmp_path / "est.tum")
+    said = f"{tmp_path / 'est.tum'}: 1 pose(s) repeat the timestamp of the pose before them (line 13): each left out"
+    assert len(est) == n - 1 and est.meta["read_warnings"] == [said] and est[:5].meta["read_warnings"] == [said]
+    assert evaluate(Trajectory.from_tum(tmp_path / "ref.tum"), est, associate=True).warnings == (said,)
+    code, _, _ = run_cli(["eval", str(tmp_path / "ref.tum"), str(tmp_path / "est.tum"), "-f", "tum", "--associate",
+                          "--json", str(tmp_path / "out.json"), "--markdown", str(tmp_path / "out.md")], capsys)
+    assert code == 0
+    assert json.loads((tmp_path / "out.json").read_text())["warnings"] == [said]
+    assert f"Warning: {said}." in (tmp_path / "out.md").read_text()
+    # a file read clean leaves nothing on file
+    assert evaluate(Trajectory.from_tum(tmp_path / "ref.tum"), Trajectory.from_tum(tmp_path / "ref.tum")).warnings == ()
+
+
+def _wavy_kitti(path, n: int = 100, far: float | None = None):
+    """A 3-D wavy path of ``n`` poses 1 m apart along x written as KITTI; ``far``: pose 40's y coordinate."""
+    poses = np.tile(np.eye(4), (n, 1, 1))
+    poses[:, :3, 3] = np.column_stack([np.arange(n), np.sin(0.2 * np.arange(n)), 0.3 * np.cos(0.1 * np.arange(n))])
+    if far is not None:
+        poses[40, 1, 3] = far
+    return Trajectory(poses).to_kitti(path)
+
+
+def test_statistics_that_overflow_are_refused_and_large_ones_print_in_e_notation(tmp_path, capsys):
+    """An estimate with one coordinate of 1e300: numpy printed RuntimeWarnings over several lines, the table "–", the
+    JSON null, exit 0; now one line names the pair and the coordinate. One of 1e30 printed cells "49989998999799…"
+    (its 31 digits cut); such values print in e notation, ordinary ones as before."""
+    _wavy_kitti(tmp_path / "ref.txt")
+    _wavy_kitti(tmp_path / "huge.txt", far=1e300)
+    code, out, err = run_cli(["eval", str(tmp_path / "ref.txt"), str(tmp_path / "huge.txt"), "--json", str(tmp_path / "h.json")],
+                             capsys)
+    assert code == 1 and out == "" and err.count("\n") == 1, err
+    assert err.startswith("error: huge vs ref: RPE (translation) statistics are not finite (rmse inf, ")
+    assert err.rstrip().endswith("the largest coordinate is 1e+300 m (estimate, pose 40), too large to score in float64")
+    assert not (tmp_path / "h.json").exists()
+    _wavy_kitti(tmp_path / "big.txt", far=1e30)
+    code, out, _ = run_cli(["eval", str(tmp_path / "ref.txt"), str(tmp_path / "big.txt"), "--align", "none"], capsys)
+    assert code == 0 and "…" not in out
+    assert "│ max    │           1e+30 │" in out  # (was 1000000000000000019884624838656.0, cut to fit)
+    assert [report._fmt(v) for v in (0.0123456, 9999.94, 12345.678, 999999.94, 4.99899e29, -3.2e7)] == [
+        "0.012346", "9999.9", "12345.7", "999999.9", "4.999e+29", "-3.2e+07"]

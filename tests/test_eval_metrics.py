@@ -666,3 +666,27 @@ def test_results_given_numpy_scalars_are_json_safe_and_keep_the_warnings(tmp_pat
                    n_to_align=np.int64(80), associate=np.bool_(False))
     data = json.loads(json.dumps(relative.to_dict(False)))
     assert data["all_pairs"] is True and data["n_to_align"] == 80 and data["associated"] is False
+
+
+def test_ape_and_rpe_refuse_statistics_that_overflow_without_numpy_warnings():
+    """A coordinate of 1e300: the squares overflowed, numpy warned over several lines (overflow in dot and square,
+    invalid value in subtract) and APE/RPE returned rmse inf, std NaN as results. One EvaluationError names the pair
+    and the pose, and numpy stays quiet."""
+    import warnings
+
+    from lidarkit.eval import evaluate
+
+    n = 150  # (a path over 100 m: evaluate() computes the KITTI drift first)
+    poses = np.tile(np.eye(4), (n, 1, 1))
+    poses[:, :3, 3] = np.column_stack([np.arange(n), np.sin(0.2 * np.arange(n)), 0.3 * np.cos(0.1 * np.arange(n))])
+    far = poses.copy()
+    far[10, 2, 3] = -1e300  # (a drift segment starts there)
+    ref, est = Trajectory(poses, name="gt"), Trajectory(far, name="odo")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        for metric, kwargs in ((ape, {"align": "se3"}), (ape, {}), (rpe, {"delta": 1}), (evaluate, {})):
+            with pytest.raises(EvaluationError, match=r"^odo vs gt: (APE|RPE) \(translation\) statistics are not finite "
+                                                      r"\(rmse inf, .*\): the largest coordinate is 1e\+300 m \(estimate, "
+                                                      r"pose 10\), too large to score in float64$"):
+                metric(ref, est, **kwargs)
+        assert ape(ref, Trajectory(poses + 0.0)).rmse == 0.0  # (finite figures as before)

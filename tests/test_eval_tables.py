@@ -319,6 +319,32 @@ def test_stamp_timed_segment_speeds_count_frames_as_the_devkit_does():
     np.testing.assert_allclose(timed, counted, rtol=1e-9)
 
 
+def test_cli_times_a_segments_last_frame_by_the_median_stamp_interval(tmp_path):
+    """KITTI 00 at every 10th pose (1.04 s apart) with its times: `eval --tables` counted the last frame of a segment as
+    KITTI's 0.1 s, so 16 segments at 1.1412 % landed in the 10-15 m/s row where the 11 at 1.1344 % belong; one median
+    interval of the stamps is counted, as bench and docs/evaluation.md count it."""
+    from conftest import shared_path
+
+    from lidarkit.eval.tables import frame_period_s
+
+    every_10th = {}
+    for name in ("KITTI_00_gt.txt", "KITTI_00_ORB.txt", "KITTI_00_gt_times.txt"):
+        lines = shared_path("evo_testdata", name).read_text().splitlines()[::10]
+        every_10th[name] = tmp_path / name
+        every_10th[name].write_text("\n".join(lines) + "\n")
+    rows = _per_speed_rows(tmp_path, "KITTI_00_gt.txt", "KITTI_00_ORB.txt", "--ref-times", str(every_10th["KITTI_00_gt_times.txt"]))
+    by_speed = {row.split(",")[0]: float(row.split(",")[1]) for row in rows[1:]}
+    assert by_speed["10-15 m/s"] == pytest.approx(1.1344, abs=1e-4)  # (was 1.1412)
+    truth = Trajectory.from_kitti(every_10th["KITTI_00_gt.txt"], every_10th["KITTI_00_gt_times.txt"])
+    assert frame_period_s(truth) == pytest.approx(1.0369, abs=1e-3)
+    drift = kitti_drift(truth, Trajectory.from_kitti(every_10th["KITTI_00_ORB.txt"]))
+    as_bench = SegmentErrors.from_drift(drift, frame_period_s(truth), timestamps_s=truth.timestamps_s)
+    fast = (as_bench.speed_mps >= 10) & (as_bench.speed_mps < 15)
+    assert fast.sum() == 11 and by_speed["10-15 m/s"] == pytest.approx(as_bench.translation_pct[fast].mean(), rel=1e-12)
+    note = (tmp_path / "t" / "kitti_translation_pct_per_speed.md").read_text()
+    assert "stamp plus one median interval" in note
+
+
 def _per_speed_rows(tmp_path, ref: str, est: str, *options: str) -> list[str]:
     """The CSV rows of the per-speed drift table `lidarkit eval REF EST --align none --tables` writes (the run exits 0)."""
     from lidarkit.cli import main

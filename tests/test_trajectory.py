@@ -389,3 +389,31 @@ def test_an_empty_trajectory_is_not_written_since_no_reader_takes_the_file_back(
     one = Trajectory(make_se3(translation=[1.0, 2.0, 3.0])[None], [5.0])  # (one pose is written and read back)
     assert Trajectory.from_kitti(one.to_kitti(tmp_path / "one.kitti")).poses_se3[0, 2, 3] == 3.0
     assert Trajectory.from_tum(one.to_tum(tmp_path / "one.tum")).timestamps_s.tolist() == [5.0]
+
+
+def test_stamps_beyond_any_time_in_seconds_are_refused_where_files_are_read(tmp_path):
+    """A TUM file or a times file in nanoseconds (EuRoC's 1.4e18) was read as seconds without a word: the per-speed table
+    put every segment in "0-5 m/s" and --associate's 0.01 s window paired only identical stamps. Stamps beyond 1e11 s
+    (after the year 5000) are refused at their line; seconds since 1970 are read as before."""
+    n = 5
+    poses = np.tile(np.eye(4), (n, 1, 1))
+    poses[:, 0, 3] = np.arange(n)
+    seconds = 1403715529.1 + 0.1 * np.arange(n)
+    Trajectory(poses, seconds).to_tum(tmp_path / "seconds.tum")
+    np.testing.assert_allclose(Trajectory.from_tum(tmp_path / "seconds.tum").timestamps_s, seconds)
+    rows = np.loadtxt(tmp_path / "seconds.tum")
+    for unit, factor in (("ns", 10**9), ("us", 10**6), ("ms", 10**3)):
+        lines = ["# timestamp tx ty tz qx qy qz qw"]
+        lines += [" ".join([str(round(row[0] * factor)), *(f"{v:.9f}" for v in row[1:])]) for row in rows]
+        (tmp_path / f"{unit}.tum").write_text("\n".join(lines) + "\n")
+        first = lines[1].split()[0]
+        with pytest.raises(DataError, match=rf"^\S*{unit}.tum \(line 2, frame 0\): time stamp {first} is beyond 1e\+11 s "
+                                            r"\(after the year 5000\): they look like nanoseconds \(or micro/milliseconds\): "
+                                            r"write seconds, e.g. divide by 1e9$"):
+            Trajectory.from_tum(tmp_path / f"{unit}.tum")
+    Trajectory(poses).to_kitti(tmp_path / "poses.txt")
+    (tmp_path / "times.txt").write_text("0.0\n0.1\n0.2\n1403715529300000000\n0.4\n")
+    with pytest.raises(DataError, match=r"^\S*times.txt \(line 4, frame 3\): time stamp 1403715529300000000 is beyond 1e\+11 s"):
+        Trajectory.from_kitti(tmp_path / "poses.txt", tmp_path / "times.txt")
+    # (stamps given as an array are the caller's, in seconds: not a file's text)
+    assert Trajectory.from_kitti(tmp_path / "poses.txt", seconds).timestamps_s[0] == seconds[0]

@@ -404,12 +404,39 @@ def _title(metric, align: str, align_origin: bool, n: int) -> str:
     return f"{str(metric).replace(chr(10), ' ')} ({suffix})"
 
 
-def _stats(metric, source: str) -> dict[str, float]:
+def _stats(metric, source: str, what: str, ref: Trajectory, est: Trajectory) -> dict[str, float]:
+    """evo's statistics of ``metric``'s errors; an EvaluationError naming the pair when one is no finite number (a
+    coordinate of 1e300 overflowed: the table printed "–", the JSON null, with exit 0)."""
     errors = np.asarray(metric.error, dtype=float)
     if errors.size == 0:
         raise EvaluationError("no errors were computed (empty comparison)", source=source)
-    stats = metric.get_all_statistics()
-    return {name: float(stats[name]) for name in STAT_NAMES}
+    all_stats = metric.get_all_statistics()
+    stats = {name: float(all_stats[name]) for name in STAT_NAMES}
+    not_finite = [f"{name} {stats[name]:g}" for name in STAT_NAMES if not np.isfinite(stats[name])]
+    if not_finite:
+        raise EvaluationError(f"{what} statistics are not finite ({', '.join(not_finite)}): {_largest_coordinate(ref, est)}, "
+                              "too large to score in float64", source=source)
+    return stats
+
+
+def _largest_coordinate(ref: Trajectory, est: Trajectory) -> str:
+    """Where the largest position coordinate of the pair is: ``"the largest coordinate is 1e+300 m (estimate, pose 42)"``."""
+    sides = [(float(np.abs(t.positions_xyz).max()), side, t) for side, t in (("reference", ref), ("estimate", est)) if len(t)]
+    largest, side, trajectory = max(sides, key=lambda item: item[0])
+    pose = int(np.argmax(np.abs(trajectory.positions_xyz).max(axis=1)))
+    return f"the largest coordinate is {largest:.3g} m ({side}, pose {pose})"
+
+
+def _float_overflow_quiet(metric):
+    """Run ``metric`` with numpy's overflow and invalid-value warnings off: the statistics they leave non-finite are
+    refused in one line (:func:`_stats`), where numpy printed several lines of RuntimeWarning first."""
+
+    @functools.wraps(metric)
+    def quiet(*args, **kwargs):
+        with np.errstate(over="ignore", invalid="ignore"):
+            return metric(*args, **kwargs)
+
+    return quiet
 
 
 # ---- public API ------------------------------------------------------------------------------------
@@ -452,6 +479,7 @@ def _orthonormalized_if_evo_refuses(metric):
 
 
 @_orthonormalized_if_evo_refuses
+@_float_overflow_quiet
 def ape(
     ref: Trajectory,
     est: Trajectory,
@@ -485,7 +513,7 @@ def ape(
         metric.process_data((ref_evo, est_evo))
     except EvoException as err:
         raise EvaluationError(f"APE failed: {err}", source=source) from err
-    stats = _stats(metric, source)
+    stats = _stats(metric, source, f"APE ({relation})", ref, est)
     return APEResult(
         relation=relation,
         unit=metric.unit.value,
@@ -506,6 +534,7 @@ def ape(
 
 
 @_orthonormalized_if_evo_refuses
+@_float_overflow_quiet
 def rpe(
     ref: Trajectory,
     est: Trajectory,
@@ -625,7 +654,7 @@ def rpe(
                 metric.process_data((ref_evo, est_evo))
     except EvoException as err:
         raise EvaluationError(f"RPE failed: {err}", source=source) from err
-    stats = _stats(metric, source)
+    stats = _stats(metric, source, f"RPE ({relation})", ref, est)
     if relation == "point_distance_error_ratio":
         # evo drops the pairs over which the reference stands still (no ratio); the same test here keeps each error at
         # its pair (matching end indices kept a dropped pair whose end another pair shared; legacy pairs kept all)

@@ -30,7 +30,7 @@ from lidarkit.eval.kitti_drift import (
     path_distances_m,
 )
 from lidarkit.eval.pairing import association_warning, check_max_diff, pair_name, paired, stamps_disagree
-from lidarkit.trajectory import Trajectory
+from lidarkit.trajectory import READ_WARNINGS, Trajectory
 
 logger = logging.getLogger(__name__)
 
@@ -98,7 +98,8 @@ class Evaluation:
     drift: DriftResult | None
     drift_note: str = ""
     warnings: tuple[str, ...] = ()
-    """What the pairing warned of (few poses associated, or stamps paired by index that disagree), as logged."""
+    """What the files' readers (poses left out: ``Trajectory.meta["read_warnings"]``) and the pairing (few poses
+    associated, or stamps paired by index that disagree) warned of, as logged."""
 
     def __repr__(self) -> str:
         """One line of the headline figures (the generated one printed every field of every result: ~4900 characters)."""
@@ -164,7 +165,10 @@ def evaluate(ref: Trajectory, est: Trajectory, settings: EvaluationSettings | No
     if not s.drift:
         note = "not requested"
     elif drift_segments_possible(ref_paired, s.drift_lengths_m, path_along=whole_ref):
-        drift = kitti_drift(ref_paired, est_paired, s.drift_lengths_m, s.drift_step_frames, path_along=whole_ref)
+        # (quiet as APE and RPE are: a coordinate of 1e300 printed numpy's overflow warnings here before the RPE below
+        # refused the pair in one line)
+        with np.errstate(over="ignore", invalid="ignore"):
+            drift = kitti_drift(ref_paired, est_paired, s.drift_lengths_m, s.drift_step_frames, path_along=whole_ref)
     elif s.associate:
         note = (f"the associated poses span {scored_path_m:.1f} m of the {ref.length_m:.1f} m reference path, not longer "
                 f"than {min(s.drift_lengths_m):g} m")
@@ -187,8 +191,13 @@ def evaluate(ref: Trajectory, est: Trajectory, settings: EvaluationSettings | No
         rpe_rotation=_marked(rpe(ref_paired, est_paired, relation="rotation_angle_deg", pairs=translation.pairs, **rpe_kw), s.associate),
         drift=drift,
         drift_note=note,
-        warnings=(warned,) if warned else (),
+        warnings=tuple(dict.fromkeys([*_read_warnings(ref), *_read_warnings(est), *([warned] if warned else [])])),
     )
+
+
+def _read_warnings(trajectory: Trajectory) -> list[str]:
+    """What the reader of ``trajectory``'s file warned of (a scored trajectory with poses left out read clean)."""
+    return [str(w) for w in (trajectory.meta or {}).get(READ_WARNINGS, ())]
 
 
 def _marked(result, associated: bool):

@@ -15,10 +15,16 @@ from lidarkit.eval.evaluate import Evaluation
 STAT_COLUMNS = ("rmse", "mean", "median", "std", "min", "max")
 
 
+#: table cells at or beyond this size print in e notation (1e30 printed its 31 digits, cut to "49989998999799…")
+E_NOTATION_FROM = 1e6
+
+
 def _fmt(value: float | None, digits: int = 5) -> str:
+    """A table cell: ``digits`` significant figures, one decimal from 1e4 (12345.6), e notation from
+    :data:`E_NOTATION_FROM` (4.999e+29)."""
     if value is None or (isinstance(value, float) and not math.isfinite(value)):
         return "–"
-    return f"{value:.{digits}g}" if abs(value) < 1e4 else f"{value:.1f}"
+    return f"{value:.{digits}g}" if abs(value) < 1e4 or abs(value) >= E_NOTATION_FROM else f"{value:.1f}"
 
 
 def metric_rows(evaluation: Evaluation) -> tuple[list[str], list[list[str]]]:

@@ -310,8 +310,8 @@ def per_speed_table(grid: Grid, quantity: str = "translation_pct", bins_mps: Seq
         row_labels=[lab for lab, k in zip(labels, keep) if k], col_labels=methods, values=values[keep],
         digits=2 if quantity == "translation_pct" else 3, name=f"kitti_{quantity}_per_speed",
         note=f"Segments pooled over the sequences; a segment's speed is its length over its duration: the time from its "
-             f"first to its last pose's stamp, or without stamps its frames (first and last included) x the frame period "
-             f"(0.1 s, as the KITTI devkit).{left_out}",
+             f"first to its last pose's stamp plus one median interval (the devkit counts a segment's frames, first and "
+             f"last included), or without stamps its frames x the KITTI devkit's frame period (0.1 s).{left_out}",
     )
 
 
