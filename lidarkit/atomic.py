@@ -251,7 +251,10 @@ def save_figure(fig, path: str | os.PathLike, *, dpi: float | None = None) -> Pa
         LatexError = ()  # noqa: N806 (nothing to catch)
     with atomic_path(path) as tmp:
         try:
-            fig.savefig(tmp, format=fmt, dpi=dpi)
+            if fmt == "svgz":  # gzip names what it holds: matplotlib's named the hidden temporary file
+                _save_svgz(fig, tmp, f"{path.stem}.svg", dpi)
+            else:
+                fig.savefig(tmp, format=fmt, dpi=dpi)
         except (ValueError, RuntimeError) as err:  # matplotlib's own refusal of a format or size; a backend's
             # program that fails to start (pgf's TeX, found by the check but not runnable) raises RuntimeError
             raise OutputError(f"cannot write the plot: {' '.join(str(err).split())}", source=path) from err
@@ -265,6 +268,17 @@ def save_figure(fig, path: str | os.PathLike, *, dpi: float | None = None) -> Pa
             raise OutputError("cannot write the plot: LaTeX errored: the TeX program "
                               f"({_texsystem()}) exited before reading the figure", source=path) from err
     return path
+
+
+def _save_svgz(fig, tmp: Path, inner_name: str, dpi: float | None) -> None:
+    """The figure as gzipped SVG whose header names ``inner_name`` (what ``gunzip -N`` restores)."""
+    import gzip
+    import io
+
+    svg = io.BytesIO()
+    fig.savefig(svg, format="svg", dpi=dpi)
+    with open(tmp, "wb") as raw, gzip.GzipFile(filename=inner_name, mode="wb", fileobj=raw, mtime=0) as packed:
+        packed.write(svg.getvalue())
 
 
 def _texsystem() -> str:

@@ -624,3 +624,25 @@ def test_a_folder_given_as_a_text_input_is_called_a_folder(tmp_path, capsys):
     assert str(caught.value) == f"{folder}: is a folder, not a trajectory file"
     with pytest.raises(DataError, match="missing.txt: file not found$"):  # (other reasons as they were)
         read_lines(tmp_path / "missing.txt")
+
+
+def test_an_svgz_plot_names_its_svg_not_the_temporary_file(tmp_path):
+    """gzip's header named the hidden temporary file the plot was written to ("..out.681uyaa9.svgz"): gunzip -N
+    restored a hidden file; it names out.svg now, and the content is the figure's SVG."""
+    import gzip
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots()
+    ax.plot([0, 1], [0, 1])
+    target = atomic.save_figure(fig, tmp_path / "out.svgz")
+    plt.close(fig)
+    raw = target.read_bytes()
+    assert raw[:2] == b"\x1f\x8b" and raw[3] & 0x08  # gzip with a stored name
+    name = raw[10:raw.index(b"\0", 10)].decode()
+    assert name == "out.svg"
+    assert gzip.decompress(raw).lstrip().startswith(b"<?xml") and b"<svg" in gzip.decompress(raw)
+    assert [p.name for p in tmp_path.iterdir()] == ["out.svgz"]

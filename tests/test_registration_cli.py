@@ -235,6 +235,10 @@ def test_an_init_file_with_numpys_print_of_a_matrix_is_read(capsys, tmp_path):
     wrong.write_text(str(np.eye(3)) + "\n")
     for path in (printed, listed, three_by_four):
         np.testing.assert_array_equal(read_init_pose(path), T)
+    # numpy's repr, as a notebook shows it ("array([[" was counted as a fifth number: "found 5")
+    for name, matrix in (("repr", T), ("repr32", T.astype(np.float32))):
+        (tmp_path / f"{name}.txt").write_text(repr(matrix) + "\n")
+        np.testing.assert_array_equal(read_init_pose(tmp_path / f"{name}.txt"), T)
     target_xyz = np.random.default_rng(0).uniform(-10.0, 10.0, (2000, 3))
     source, target = tmp_path / "source.npy", tmp_path / "target.npy"
     np.save(target, target_xyz)

@@ -26,12 +26,15 @@ if TYPE_CHECKING:
 
 def read_init_pose(path: Path) -> np.ndarray:
     """A 4x4 pose from a text file: 4 (or 3) rows of 4 numbers, or one row of 12 (KITTI) or 16 numbers; numpy's print of
-    a matrix (``[[1. 0. 0. 0.5] ...]``) or a JSON list of rows is read without its brackets. A JSON file of anything
+    a matrix (``[[1. 0. 0. 0.5] ...]``, or its repr ``array([[...]])``) or a JSON list of rows is read without its brackets. A JSON file of anything
     else (a run's result.json) or a first line of words is said to be one ("expected 4 or 12 or 16 numbers, found 1"
     did not)."""
     from lidarkit.textfile import is_number, read_lines, read_numeric_table
 
     lines = [line.strip() for line in read_lines(path, "4x4 pose file") if line.strip() and not line.strip().startswith("#")]
+    shown = re.fullmatch(r"array\((.*?)(?:,\s*dtype=\w+)?\)", "\n".join(lines), re.DOTALL)
+    if shown:  # numpy's repr, as a notebook shows a matrix (its "array([[" was counted as a fifth number)
+        lines = [line.strip() for line in shown.group(1).splitlines() if line.strip()]
     first = lines[0] if lines else ""
     wanted = "--init takes a 4x4 or 3x4 text matrix, or one row of 12 (KITTI) or 16 numbers"
     T = np.eye(4)
