@@ -89,3 +89,36 @@ def test_rpes_per_selected_frame_of_selections_that_step_differently_have_no_mea
     with open(tmp_path / "tables" / "rpe_rmse_selected_frame.csv", newline="") as fh:
         label, mean = list(csv.reader(fh))[-1]
     assert label == "Mean" and float(mean) == pytest.approx((0.3972 + 0.3838) / 2, rel=1e-12)
+
+
+def test_a_dataset_without_an_ok_plain_kiss_row_says_why_it_has_no_comparison(tmp_path):
+    """kiss failed on every seed of one dataset, and ran with params only on another: neither said "no comparison"
+    (the docs promise one line per method and why), and kiss(deskew=False) was not taken for the reference."""
+    def write(method, seed, ape, name, params=None, status="ok"):
+        job = Job("odometry", "cv", name, KITTI, method, params or {}, seed=seed)
+        write_result(tmp_path, make_record(job, job.key("1"), "1", {
+            "status": status, "metrics": {"ape_rmse_m": ape} if status == "ok" else {}, "series": {}, "runtime_s": 0.1,
+            "error": None if status == "ok" else {"type": "RuntimeError", "message": "no scans", "traceback": ""},
+            "info": {"metric_alignment": METRIC_ALIGNMENT_BY_NAME}, "finished_utc": "2026-01-01T00:00:00.000+00:00"}))
+
+    for seed in range(2):
+        write("kiss", seed, None, "bag", status="failed")
+        write("small_gicp", seed, 0.3 + seed, "bag")
+        write("kiss", seed, 0.2 + seed, "k00", params={"deskew": False})
+        write("small_gicp", seed, 0.3 + seed, "k00")
+    report = build_report(tmp_path, plots=False)
+    assert report.publication.not_compared == [
+        "bag, kiss vs small_gicp: kiss has no ok result on this dataset",
+        "k00, kiss vs small_gicp: no plain kiss row (it ran as kiss(deskew=False))"]
+    md = (tmp_path / "report.md").read_text(encoding="utf-8")
+    assert "- no comparison: bag, kiss vs small_gicp: kiss has no ok result on this dataset\n" in md
+
+    # a dataset kiss did not run on, beside one it ran on; a suite that runs no kiss at all says nothing
+    records = [record(method, seed, {"ape_rmse_m": 0.5}, dataset=KITTI, name=name)
+               for seed in range(2) for method, name in (("kiss", "K00"), ("vanilla", "K00"), ("vanilla", "K01"))]
+    not_compared = []
+    reference_comparisons(records, not_compared=not_compared)
+    assert not_compared[-1] == "K01, kiss vs vanilla: kiss did not run on this dataset"
+    not_compared = []
+    reference_comparisons([r for r in records if r["job"]["method"] != "kiss"], not_compared=not_compared)
+    assert not_compared == []

@@ -1122,16 +1122,34 @@ def test_a_report_imports_the_module_of_a_custom_task_the_run_recorded(tmp_path,
         assert [p.filename for p in report.plots if p.filename.startswith("sweep_")] == sweep
         assert str(code) not in sys.path  # (the folder is searched for this import alone)
 
-        # the module is gone: one warning line, and the figure this report cannot draw is kept
+        # the module is gone: one warning line, and the sweep drawn as the results record it (the figure stayed in
+        # plots/ but was gone from report.md and report.html)
         fresh_process()
         (code / "lidarkit_report_module_task.py").unlink()
         importlib.invalidate_caches()
         caplog.clear()
         report = build_report(tmp_path / "out")
         warnings = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
-        assert warnings == ["task 'report_module_task': its module lidarkit_report_module_task cannot be imported here "
-                            "(ModuleNotFoundError: No module named 'lidarkit_report_module_task'); its metrics are shown "
-                            "as its results declare them and its sweep figures in plots/ are kept"]
+        gone = ("task 'report_module_task': its module lidarkit_report_module_task cannot be imported here "
+                "(ModuleNotFoundError: No module named 'lidarkit_report_module_task'); its metrics are shown as its "
+                "results declare them")
+        assert [r["sweep_plots"] for r in load_results(tmp_path / "out")] == [[["n_iterations", "error_m"]]] * 6
+        assert f"(plots/{sweep[0]})" in (tmp_path / "out" / "report.md").read_text(encoding="utf-8")
+        (plot,) = report.plots
+        assert plot.filename == sweep[0] and plot.title == "error [m] vs n_iterations — report_module_task"
+        assert plot.caption in (tmp_path / "out" / "report.html").read_text(encoding="utf-8")
+        assert warnings == [gone + " and its sweep figures drawn as its results record them"]
+
+        # results written before the sweeps were recorded: the figure this report cannot draw is kept
+        from lidarkit.bench.results import write_result
+
+        for record in load_results(tmp_path / "out"):
+            del record["sweep_plots"]
+            write_result(tmp_path / "out", record)
+        caplog.clear()
+        report = build_report(tmp_path / "out")
+        assert [r.getMessage() for r in caplog.records if r.levelname == "WARNING"] == [
+            gone + " and its sweep figures in plots/ are kept"]
         assert report.plots == [] and (tmp_path / "out" / "plots" / sweep[0]).is_file()
     finally:
         sys.modules.pop("lidarkit_report_module_task", None)

@@ -207,15 +207,25 @@ def reference_comparisons(records: list[dict[str, Any]], reference: str = REFERE
                     "ape_rmse_m": f"APE RMSE ({METRIC_ALIGNMENT_BY_NAME['ape_rmse_m']}) m"}
 
     per: dict[str, dict[str, dict[int, dict[str, Any]]]] = defaultdict(lambda: defaultdict(dict))
+    ran: dict[str, dict[str, str]] = defaultdict(dict)  # dataset -> method label -> its method, ok or not
     label = odometry_labels(records)
     for r in records:
-        if r.get("status") != "ok" or r["job"]["task"] != "odometry":
+        if r["job"]["task"] != "odometry":
             continue
         job = Job.from_spec(r["job"])
-        per[label[id(r)]][job.method_label][job.seed] = r
+        ran[label[id(r)]][job.method_label] = job.method
+        if r.get("status") == "ok":
+            per[label[id(r)]][job.method_label][job.seed] = r
     out = []
     for dataset, methods in per.items():
         if reference not in methods:
+            # (the dataset's comparisons were gone without a word; a suite that runs no reference at all is left be)
+            why = _no_reference_reason(reference, ran[dataset], ran)
+            # (without a plain reference row, its runs with params are the reference's, not methods compared with it)
+            others = [m for m in sorted(methods) if reference in ran[dataset] or ran[dataset][m] != reference]
+            for other in others if why and not_compared is not None else ():
+                log.info("no paired comparison %s vs %s on %s: %s", reference, other, dataset, why)
+                not_compared.append(f"{dataset}, {reference} vs {other}: {why}")
             continue
         ref = methods[reference]
         for label, runs in methods.items():
@@ -262,6 +272,20 @@ def reference_comparisons(records: list[dict[str, Any]], reference: str = REFERE
                 if not_compared is not None:
                     not_compared.append(f"{dataset}, {reference} vs {label}: {err}")
     return out
+
+
+def _no_reference_reason(reference: str, on_dataset: dict[str, str], every: dict[str, dict[str, str]]) -> str:
+    """Why a dataset has no ok run of the plain ``reference`` (``on_dataset``: its method labels -> their method;
+    ``every``: those of every dataset): its runs failed, it ran with params only (the comparison pairs the plain
+    method's row), or it did not run there; '' where the suite runs the reference nowhere."""
+    if reference in on_dataset:
+        return f"{reference} has no ok result on this dataset"
+    with_params = sorted(label for label, method in on_dataset.items() if method == reference)
+    if with_params:
+        return f"no plain {reference} row (it ran as {', '.join(with_params)})"
+    if any(method == reference for labels in every.values() for method in labels.values()):
+        return f"{reference} did not run on this dataset"
+    return ""
 
 
 def _no_comparison_reason(ref: dict[int, dict[str, Any]], runs: dict[int, dict[str, Any]], seeds: list[int],

@@ -438,6 +438,35 @@ def _capped(lines: dict[str, Any]) -> tuple[dict[str, Any], str]:
     return kept, note
 
 
+def rmse_histories(items: list[dict[str, Any]]) -> tuple[dict[str, tuple[list[float], int]], list[str]]:
+    """The RMSE history of the first pair of each method's first ok seed, by method label, with the iteration its first
+    value is at (0: the starting pose, as lidarkit's own loops record it, ``iterations + 1`` values), and the methods
+    whose history is the final RMSE alone (small_gicp, kiss, Open3D: drawn as one point at iteration 1, it read as an
+    ICP that stopped after one step); a method without any RMSE (not assessed) is in neither."""
+    from lidarkit.registration.assessment import FINAL_RMSE_ONLY_KEY
+
+    drawn: dict[str, tuple[list[float], int]] = {}
+    final_only: set[str] = set()
+    for r in sorted(items, key=lambda r: r["job"]["seed"]):
+        series = (r.get("series") or {}).get("rmse_history")
+        label = Job.from_spec(r["job"]).method_label
+        if r.get("status") != "ok" or not series or label in drawn or label in final_only:
+            continue
+        hist = series[0] if isinstance(series[0], list) else series  # (one history per pair: the first)
+        pairs = (r.get("info") or {}).get("pairs")
+        pair = pairs[0] if isinstance(pairs, list) and pairs and isinstance(pairs[0], dict) else {}
+        iterations = pair.get("iterations")  # (None: the library reports no count)
+        if not hist:
+            continue
+        if pair.get(FINAL_RMSE_ONLY_KEY) is True or (len(hist) == 1 and iterations != 0):
+            final_only.add(label)
+            continue
+        counted = isinstance(iterations, int) and not isinstance(iterations, bool)
+        values = [math.nan if v is None else float(v) for v in hist]  # (NaN is written as null)
+        drawn[label] = (values, 0 if counted and len(hist) == iterations + 1 else 1)
+    return dict(sorted(drawn.items())), sorted(final_only)
+
+
 def make_plots(records: list[dict[str, Any]]) -> list[Plot]:
     """Trajectory, error-over-time and RMSE-per-iteration plots per (task, experiment, dataset); sweep plots per task."""
     import matplotlib
@@ -488,21 +517,25 @@ def make_plots(records: list[dict[str, Any]]) -> list[Plot]:
             per_line = f" ({'; '.join(f'{m}: {n}' for m, n in line_notes.items())})" if line_notes else ""
             plots.append(Plot(f"Error over time — {where}", f"err_{_file_slug(where)}.png", _png(fig), task,
                               f"{ylabel} over time per method{per_line}: {experiment}, {dataset}.{left_out}"))
-        chosen, left_out = _first_ok_per_method(items, "rmse_history")
-        if chosen:
+        histories, final_only = rmse_histories(items)
+        histories, left_out = _capped(histories)
+        if histories:
             fig, ax = plt.subplots(figsize=(6, 3.2))
-            for label, r in chosen.items():
-                hist = r["series"]["rmse_history"]
-                if hist and isinstance(hist[0], list):  # one history per pair: plot the first
-                    hist = hist[0]
-                ax.plot(np.arange(1, len(hist) + 1), hist, marker=".", lw=1.2, label=label)
+            for label, (hist, first_x) in histories.items():
+                ax.plot(np.arange(first_x, first_x + len(hist)), hist, marker=".", lw=1.2, label=label)
             ax.set_xlabel("iteration")
             ax.set_ylabel("RMSE [m]")
             ax.set_yscale("log")
             ax.legend(fontsize=7)
             ax.set_title(f"ICP RMSE vs iteration: {where}", fontsize=9)
+            start = " iteration 0 is the starting pose;" if any(x == 0 for _, x in histories.values()) else ""
+            final = (f" Not drawn, their library reports the final RMSE alone: {', '.join(final_only)}."
+                     if final_only else "")
             plots.append(Plot(f"RMSE vs iteration — {where}", f"rmse_{_file_slug(where)}.png", _png(fig), task,
-                              f"Correspondence RMSE per ICP iteration (first pair, log scale): {experiment}, {dataset}.{left_out}"))
+                              f"Correspondence RMSE per ICP iteration (first pair, log scale;{start} first seed of each "
+                              f"method): {experiment}, {dataset}.{left_out}{final}"))
+        elif final_only:
+            log.info("no RMSE-per-iteration figure for %s: %s report the final RMSE alone", where, ", ".join(final_only))
     plots.extend(_sweep_plots(records))
     return plots
 
@@ -523,51 +556,114 @@ def error_axis_label(labels: dict[str, str]) -> tuple[str, dict[str, str]]:
     return "error" + (f" {units.pop()}" if len(units) == 1 and None not in units else ""), dict(labels)
 
 
-def _sweep_plots(records: list[dict[str, Any]]) -> list[Plot]:
-    import matplotlib.pyplot as plt
+def recorded_sweeps(records: list[dict[str, Any]]) -> tuple[tuple[str, str], ...]:
+    """The sweep plots the task declared as its results record them (``sweep_plots``: ``[param, metric]`` pairs), for
+    a task whose module cannot be loaded here (its figures stayed in plots/ but were gone from the report's pages)."""
+    sweeps: dict[tuple[str, str], None] = {}
+    for r in records:
+        pairs = r.get("sweep_plots")
+        for pair in pairs if isinstance(pairs, list) else ():
+            if isinstance(pair, (list, tuple)) and len(pair) == 2 and all(isinstance(x, str) for x in pair):
+                sweeps.setdefault((pair[0], pair[1]), None)
+    return tuple(sweeps)
 
+
+def _sweep_plots(records: list[dict[str, Any]]) -> list[Plot]:
     plots = []
     by_task: dict[str, list[dict[str, Any]]] = defaultdict(list)
     for r in records:
         by_task[r["job"]["task"]].append(r)
     for task, recs in sorted(by_task.items()):
         declared, sweeps = task_meta(task)
+        declared = declared or recorded_metrics(recs)
         label_of = {m.name: m.label for m in declared}
-        experiments = {r["job"]["experiment"] for r in recs}
-        for param, metric in sweeps:
-            # the metric's declared label, as the tables name it (the axis, title and caption read "mse_m2")
-            metric_label = label_alignment(MetricInfo(metric, label_of.get(metric, metric)), recs).label
-            lines: dict[str, dict[float, list[float]]] = defaultdict(lambda: defaultdict(list))
-            for r in recs:
-                p = r["job"]["params"]
-                value = r.get("metrics", {}).get(metric)
-                if r.get("status") != "ok" or param not in p or value is None:
-                    continue
-                others = {k: v for k, v in p.items() if k != param}
-                # one line per experiment, dataset and method (two experiments on one dataset were pooled into one)
-                where = f"{r['job']['experiment']} · " if len(experiments) > 1 else ""
-                label = f"{where}{r['job']['dataset_name']}: " + Job(task, "", "", {}, r["job"]["method"], others).method_label
-                lines[label][float(p[param])].append(float(value))
-            lines = {k: v for k, v in sorted(lines.items()) if len(v) >= 2}
-            if not lines:
-                continue
-            lines, left_out = _capped(lines)
-            fig, ax = plt.subplots(figsize=(6, 3.6))
-            for label, points in lines.items():
-                xs = sorted(points)
-                means = [float(np.mean(points[x])) for x in xs]
-                stds = [float(np.std(points[x], ddof=1)) if len(points[x]) > 1 else 0.0 for x in xs]
-                ax.errorbar(xs, means, yerr=stds, marker="o", capsize=3, lw=1.2, label=label)
-            ax.set_xlabel(param)
-            ax.set_ylabel(metric_label)
-            scale, scale_args, scale_note = sweep_x_scale([x for points in lines.values() for x in points])
-            ax.set_xscale(scale, **scale_args)
-            ax.legend(fontsize=7)
-            ax.set_title(f"{task}: {metric_label} vs {param} (mean ± std over seeds)", fontsize=9)
-            plots.append(Plot(f"{metric_label} vs {param} — {task}", f"sweep_{_file_slug(task + '_' + metric + '_' + param)}.png", _png(fig),
-                              task, f"{metric_label} against {param}: mean ± std over seeds, one line per experiment, dataset and "
-                              f"method{scale_note}.{left_out}"))
+        for param, metric in sweeps or recorded_sweeps(recs):
+            try:
+                plot = _sweep_plot(task, recs, param, metric, label_of)
+            except (TypeError, ValueError, OverflowError) as err:  # (a ValueError traceback ended the report)
+                raise DataError(f"its sweep of {metric} over parameter {param!r} cannot be drawn "
+                                f"({type(err).__name__}: {err})", source=f"task {task}") from err
+            if plot is not None:
+                plots.append(plot)
     return plots
+
+
+def _sweep_plot(task: str, recs: list[dict[str, Any]], param: str, metric: str, label_of: dict[str, str]) -> Plot | None:
+    """One sweep figure, ``metric`` against ``param`` (None: no line has two points). Values that are not all numbers
+    (a grid of text, a list, null) are categories on the x axis, numbers first by value, then the rest by their text:
+    read as numbers, ``mode: [fast, slow]`` ended the report with a ValueError."""
+    import matplotlib.pyplot as plt
+
+    experiments = {r["job"]["experiment"] for r in recs}
+    # the metric's declared label, as the tables name it (the axis, title and caption read "mse_m2")
+    metric_label = label_alignment(MetricInfo(metric, label_of.get(metric, metric)), recs).label
+    chosen = [r for r in recs if r.get("status") == "ok" and param in r["job"]["params"]
+              and r.get("metrics", {}).get(metric) is not None]
+    values = [r["job"]["params"][param] for r in chosen]
+    numeric = all(_sweep_number(v) is not None for v in values)
+    categories = {} if numeric else sweep_categories(values)
+    position = {key: float(k) for k, key in enumerate(categories)}
+    lines: dict[str, dict[float, list[float]]] = defaultdict(lambda: defaultdict(list))
+    for r, v in zip(chosen, values):
+        others = {k: x for k, x in r["job"]["params"].items() if k != param}
+        # one line per experiment, dataset and method (two experiments on one dataset were pooled into one)
+        where = f"{r['job']['experiment']} · " if len(experiments) > 1 else ""
+        label = f"{where}{r['job']['dataset_name']}: " + Job(task, "", "", {}, r["job"]["method"], others).method_label
+        x = _sweep_number(v) if numeric else position[canonical_json(v)]
+        lines[label][x].append(float(r["metrics"][metric]))
+    lines = {k: v for k, v in sorted(lines.items()) if len(v) >= 2}
+    if not lines:
+        return None
+    lines, left_out = _capped(lines)
+    fig, ax = plt.subplots(figsize=(6, 3.6))
+    for label, points in lines.items():
+        xs = sorted(points)
+        means = [float(np.mean(points[x])) for x in xs]
+        stds = [float(np.std(points[x], ddof=1)) if len(points[x]) > 1 else 0.0 for x in xs]
+        # (categories have no order a line between them could follow: points alone)
+        ax.errorbar(xs, means, yerr=stds, marker="o", capsize=3, lw=1.2, ls="-" if numeric else "none", label=label)
+    ax.set_xlabel(param)
+    ax.set_ylabel(metric_label)
+    if numeric:
+        scale, scale_args, scale_note = sweep_x_scale([x for points in lines.values() for x in points])
+        ax.set_xscale(scale, **scale_args)
+    else:
+        ax.set_xticks(list(position.values()), list(categories.values()))
+        ax.set_xlim(-0.5, len(categories) - 0.5)
+        scale_note = f"; the values of {param} as categories (numbers by value, then the rest by their text)"
+    ax.legend(fontsize=7)
+    ax.set_title(f"{task}: {metric_label} vs {param} (mean ± std over seeds)", fontsize=9)
+    return Plot(f"{metric_label} vs {param} — {task}", f"sweep_{_file_slug(task + '_' + metric + '_' + param)}.png", _png(fig),
+                task, f"{metric_label} against {param}: mean ± std over seeds, one line per experiment, dataset and "
+                f"method{scale_note}.{left_out}")
+
+
+def _sweep_number(value: Any) -> float | None:
+    """A sweep value as a position on a number axis: a number, or text that reads as a finite one ("60"); None for
+    anything else (text, a list, null, a bool: drawn as categories)."""
+    if isinstance(value, bool):
+        return None
+    if isinstance(value, (int, float)):
+        return float(value)
+    if isinstance(value, str):
+        try:
+            number = float(value)
+        except ValueError:
+            return None
+        return number if math.isfinite(number) else None
+    return None
+
+
+def sweep_categories(values: list[Any]) -> dict[str, str]:
+    """The x axis of a sweep over values that are not all numbers: each distinct value (by its JSON text) -> its tick
+    label, in axis order: numbers by value, then the rest by their text (a list or null by its JSON text)."""
+    def text(value: Any) -> str:
+        return value if isinstance(value, str) else canonical_json(value)
+
+    def order(value: Any) -> tuple[int, float, str]:
+        return _number_first(value if isinstance(value, (int, float)) and not isinstance(value, bool) else text(value))
+
+    return {canonical_json(v): text(v) for v in sorted(values, key=order)}
 
 
 def sweep_x_scale(xs: list[float]) -> tuple[str, dict[str, float], str]:
@@ -1119,10 +1215,17 @@ def build_report(
     unreadable = {k for k in missing if result_path(out_dir, k).exists()}  # (load_results logged why)
     n_left_out, n_earlier_version = left_out_counts(every_record, records, expected.values())
     unknown_tasks = import_task_modules(records + [{"job": spec} for spec in missing.values()], manifest)
+    sweeps_unknown = set()  # tasks whose results predate the record of their sweeps: their earlier figures are kept
     for task, why in unknown_tasks.items():
-        declared = recorded_metrics([r for r in records if r["job"]["task"] == task])
-        log.warning("task %r: %s; its metrics are shown %s and its sweep figures in plots/ are kept", task, why,
-                    "as its results declare them" if declared else "by name")
+        recs = [r for r in records if r["job"]["task"] == task]
+        declared = recorded_metrics(recs)
+        if not any(isinstance(r.get("sweep_plots"), list) for r in recs):
+            sweeps_unknown.add(task)
+            sweeps = " and its sweep figures in plots/ are kept"
+        else:
+            sweeps = " and its sweep figures drawn as its results record them" if recorded_sweeps(recs) else ""
+        log.warning("task %r: %s; its metrics are shown %s%s", task, why,
+                    "as its results declare them" if declared else "by name", sweeps)
     report = Report(out_dir=out_dir, tables=aggregate(records, list(missing.values())), n_records=len(records),
                     skipped=_skipped(manifest), n_expected=len(expected), n_left_out=n_left_out,
                     n_earlier_version=n_earlier_version, versions=version_counts(records),
@@ -1164,9 +1267,10 @@ def build_report(
     pub.boxplots = [(caption, out_dir / path.relative_to(tmp)) for caption, path in pub.boxplots]
     # an earlier report's figures and tables this one does not draw go (all figures with plots=False); only files of
     # the names a report writes (a figure a user put in plots/ is kept), as run folders remove an earlier run's; the
-    # sweep figures of a task whose module is not loaded here stay (this report could not draw them)
+    # sweep figures of a task whose module is not loaded here and whose results do not record its sweeps stay (this
+    # report could not draw them)
     drawn = {p.filename for p in report.plots} | {path.name for _, path in pub.boxplots}
-    undrawable = tuple(f"sweep_{_slug(task)[:72]}_" for task in unknown_tasks)
+    undrawable = tuple(f"sweep_{_slug(task)[:72]}_" for task in sweeps_unknown)
     for stale in (out_dir / "plots").glob("*.png"):
         if stale.name not in drawn and _OWN_FIGURE.fullmatch(stale.name) and not stale.name.startswith(undrawable):
             stale.unlink()

@@ -87,6 +87,8 @@ def execute_job(spec: dict[str, Any]) -> dict[str, Any]:
         # and their labels in the task's order (a list: results are written with sorted keys), so that a report without
         # the task heads its table with the task's first accuracy metric, not the first name in the alphabet
         record["metric_labels"] = [[m.name, m.label] for m in task.metrics]
+        # and its sweep plots ([param, metric] pairs), so that a report without the task still draws them
+        record["sweep_plots"] = [[str(param), str(metric)] for param, metric in task.sweep_plots]
         record["series"] = json_safe(output.series)
         record["info"] = json_safe(output.info)
     except Exception as err:  # a job's failure is data, not a crash of the suite

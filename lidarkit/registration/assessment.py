@@ -15,6 +15,9 @@ from lidarkit.registration.neighbors import NearestNeighbors
 
 #: ``RegistrationResult.extra`` key: the point (target frame, m) the covariance was computed around before it was moved
 COVARIANCE_ORIGIN_KEY = "covariance_origin_m"
+#: ``RegistrationResult.extra`` key, True where ``rmse_history`` holds the final RMSE alone (the library reports none per
+#: iteration): a reader that draws histories leaves such a result out rather than draw one point as a curve
+FINAL_RMSE_ONLY_KEY = "rmse_history_final_only"
 
 
 @dataclass(frozen=True)
@@ -48,23 +51,25 @@ class Assessment:
         extra: dict | None = None,
     ) -> RegistrationResult:
         """The variant's result for this pose: not converged below 3 correspondences, the reason naming why;
-        a converged result on degenerate geometry keeps ``converged`` but says so in ``reason``."""
+        a converged result on degenerate geometry keeps ``converged`` but says so in ``reason``. Without
+        ``rmse_history`` it is this pose's RMSE alone, and ``extra`` says so (:data:`FINAL_RMSE_ONLY_KEY`)."""
         if converged and self.n_correspondences < 3:
             converged = False
             reason = f"only {self.n_correspondences} correspondences within {self.inlier_distance_m:g} m"
         elif converged and self.degeneracy.degenerate:
             reason = f"degenerate geometry: min/max eigenvalue {self.degeneracy.ratio:.2e} < {self.degeneracy.threshold:g}"
+        final_only = rmse_history is None
         return RegistrationResult(
             T_target_source=T_target_source,
             converged=converged,
             iterations=iterations,
-            rmse_history=(self.rmse_m,) if rmse_history is None else rmse_history,
+            rmse_history=(self.rmse_m,) if final_only else rmse_history,
             n_correspondences=self.n_correspondences,
             runtime_s=0.0,
             fitness=self.fitness,
             degeneracy=self.degeneracy,
             reason=reason,
-            extra={**(extra or {}), **self.covariance_extra},
+            extra={**(extra or {}), **self.covariance_extra, **({FINAL_RMSE_ONLY_KEY: True} if final_only else {})},
             covariance=self.covariance,
             surface_step=self.surface_step,
         )
@@ -135,4 +140,4 @@ def assess_alignment(
     )
 
 
-__all__ = ["COVARIANCE_ORIGIN_KEY", "Assessment", "assess_alignment"]
+__all__ = ["COVARIANCE_ORIGIN_KEY", "FINAL_RMSE_ONLY_KEY", "Assessment", "assess_alignment"]
