@@ -134,6 +134,8 @@ def test_icp_pair_on_distorted_simulated_sweeps_is_scored_at_the_sweep_middle(tm
     assert errors["end"] > 3 * errors["mid"]
     kiss = execute_job(Job("icp_pair", "exp", "sim", spec, "kiss", {}, seed=0, options={"pairs": [[0, 1]]}).spec())
     assert any("deskew has no effect on a pair" in w for w in kiss["warnings"])
+    # each pair says whether its RMSE history is the final RMSE alone (the report draws no curve of it)
+    assert all(pair["rmse_history_final_only"] is True for pair in record["info"]["pairs"] + kiss["info"]["pairs"])
     # the simulator's KITTI-layout export of the same sweeps is scored there too (it read ~9x the error at the sweep end)
     from lidarkit.sim.lidar import export_kitti
 

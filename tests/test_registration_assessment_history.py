@@ -32,6 +32,8 @@ def test_a_history_of_the_final_rmse_alone_is_flagged_and_a_measured_one_is_not(
     source = transform_points(np.linalg.inv(T), target)
     gicp = get_icp("small_gicp").align(source, target)
     assert gicp.iterations >= 1 and len(gicp.rmse_history) == 1 and gicp.extra.get(FINAL_RMSE_ONLY_KEY) is True
+    o3d = get_icp("open3d_point_to_plane").align(source, target)  # (Open3D's inlier RMSE, passed on by lidarkit)
+    assert len(o3d.rmse_history) == 1 and o3d.extra.get(FINAL_RMSE_ONLY_KEY) is True
     vanilla = get_icp("vanilla").align(source, target)
     assert len(vanilla.rmse_history) == vanilla.iterations + 1 and FINAL_RMSE_ONLY_KEY not in vanilla.extra
 

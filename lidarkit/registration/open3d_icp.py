@@ -14,7 +14,7 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from lidarkit.geometry import transform_points
-from lidarkit.registration.assessment import assess_alignment
+from lidarkit.registration.assessment import FINAL_RMSE_ONLY_KEY, assess_alignment
 from lidarkit.registration.base import Registration, RegistrationConfig, RegistrationResult
 from lidarkit.registration.cloud_cache import CloudCache
 from lidarkit.registration.degeneracy import SurfaceIndex
@@ -132,7 +132,7 @@ class _Open3DBase(Registration):
                 converged=not no_pairs,
                 reason=f"Open3D fitness 0: no correspondence within {c.max_correspondence_distance_m} m" if no_pairs else "",
                 rmse_history=(float("nan") if no_pairs else float(out.inlier_rmse),),  # Open3D reports 0 for "no pairs"
-                extra={"iterations_reported": False, "open3d_fitness": float(out.fitness)},
+                extra={"iterations_reported": False, "open3d_fitness": float(out.fitness), FINAL_RMSE_ONLY_KEY: True},
             )
 
         return T, not no_pairs, assess

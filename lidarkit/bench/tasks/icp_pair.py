@@ -282,6 +282,8 @@ class IcpPairTask(Task):
                         "as they are", job.method)
         truth = None if T_gt_file is not None else pairs_truth(dataset, job.method)
         rows, histories = [], []
+        from lidarkit.registration.assessment import FINAL_RMSE_ONLY_KEY
+
         for target, source in _pairs(options, dataset):
             source_xyz, target_xyz, T_gt = _pair_data(dataset, target, source, T_gt_file, truth)
             init_T = None
@@ -299,6 +301,7 @@ class IcpPairTask(Task):
                 "final_rmse_m": float(result.rmse), "runtime_s": float(result.runtime_s),
                 "n_correspondences": int(result.n_correspondences),
                 "degenerate": bool(getattr(result.degeneracy, "degenerate", False)), "reason": result.reason,
+                FINAL_RMSE_ONLY_KEY: bool(result.extra.get(FINAL_RMSE_ONLY_KEY, False)),  # (no curve to draw)
             })
             histories.append([float(x) for x in result.rmse_history])
         if not rows:
