@@ -125,9 +125,10 @@ def test_one_seed_per_dataset_pairs_datasets_and_says_so(tmp_path, capsys):
     assert code == 0 and "(3 paired datasets, 0 ties)" in stdout
 
 
-def test_a_missing_metric_says_which_side_lacks_it_and_why(tmp_path):
+def test_units_missing_the_metric_are_left_out_naming_the_side_and_why(tmp_path):
     """"metric 'drift_translation_pct' missing for short, seed 0" named neither the side, nor how many units, nor that
-    KITTI drift needs 100 m of path, nor the metric that would compare."""
+    KITTI drift needs 100 m of path, nor the metric that would compare; such units are left out now, as the report
+    leaves out such seeds, and the note says all of it."""
     def drift(job):
         metrics = {"ape_rmse_m": 0.2 + 0.01 * job.seed, "drift_translation_pct": 1.0 + 0.1 * job.seed}
         if job.method == "stopper" and job.seed < 2:
@@ -137,10 +138,12 @@ def test_a_missing_metric_says_which_side_lacks_it_and_why(tmp_path):
     _task("drift_test_task", drift)
     out = _bench(tmp_path, "s", "seeds: 6\nexperiments:\n  - {task: drift_test_task, dataset: {kind: synthetic, name: short}, "
                  "methods: [walker, stopper]}\n")
-    with pytest.raises(EvaluationError) as exc:  # (the task's headline is ape_rmse_m: drift is asked for)
-        compare(out, out, method_a="walker", method_b="stopper", metric="drift_translation_pct")
-    assert str(exc.value) == ("compare: metric 'drift_translation_pct' missing in stopper for 2 of 6 units (short, seed 0; "
-                              "short, seed 1): KITTI drift needs 100 m of path; --metric ape_rmse_m compares every unit")
+    # (the task's headline is ape_rmse_m: drift is asked for)
+    result = compare(out, out, method_a="walker", method_b="stopper", metric="drift_translation_pct")
+    assert (result.n_pairs, result.n_ties) == (4, 4)
+    assert result.note == ("2 of 6 (dataset, seed) unit(s) left out: stopper has no value (null) of drift_translation_pct "
+                           "there (short, seed 0; short, seed 1): KITTI drift needs 100 m of path, --metric ape_rmse_m "
+                           "compares every unit")
 
 
 def test_failed_jobs_earlier_suites_baselines_and_one_folder_twice_are_said_plainly(tmp_path, caplog):
@@ -321,10 +324,10 @@ def test_two_experiments_of_one_task_are_not_pooled_as_seeds(tmp_path, capsys):
     with pytest.raises(ConfigError) as exc:
         compare(out, out, **pick, experiment="nope")
     assert str(exc.value) == f"{out}: no result of good in experiment 'nope'; it has results in: early, late"
-    with pytest.raises(EvaluationError) as exc:
-        compare(out, out, **{**pick, "metric": "drift_translation_pct"}, experiment="late")
-    assert str(exc.value) == ("compare: metric 'drift_translation_pct' missing in good and bad for 1 of 3 units (late: syn, "
-                              "seed 0): KITTI drift needs 100 m of path; --metric ape_rmse_m compares every unit")
+    late = compare(out, out, **{**pick, "metric": "drift_translation_pct"}, experiment="late")
+    assert (late.n_pairs, late.note) == (2, "1 of 3 (dataset, seed) unit(s) left out: good and bad have no value (null) "
+                                            "of drift_translation_pct there (late: syn, seed 0): KITTI drift needs 100 m of "
+                                            "path, --metric ape_rmse_m compares every unit")
     code, stdout, _ = run_cli(["compare", str(out), str(out), "--method-a", "good", "--method-b", "bad", "--metric", "ape_rmse_m",
                                "--experiment", "late"], capsys)
     assert code == 0 and "(3 paired seeds, 0 ties)" in stdout
@@ -334,9 +337,9 @@ def test_two_experiments_of_one_task_are_not_pooled_as_seeds(tmp_path, capsys):
     assert compare(a, b, metric="ape_rmse_m").n_pairs == 3
 
 
-def test_a_non_finite_metric_value_is_named_like_a_missing_one(tmp_path):
+def test_a_non_finite_metric_value_is_left_out_like_a_missing_one(tmp_path):
     """A NaN in one job result read "error: bad: 1 non-finite value(s) among 6", naming neither the metric nor the
-    seed, where a null named both."""
+    seed, where a null named both; its unit is left out and named, as a null's is."""
     _task("nan_test_task", _error)
     out = _bench(tmp_path, "s", "seeds: 6\nexperiments:\n  - {task: nan_test_task, dataset: {kind: synthetic, name: syn}, methods: [good, bad]}\n")
     path = next(p for p in (out / "jobs").glob("*.json")
@@ -344,9 +347,9 @@ def test_a_non_finite_metric_value_is_named_like_a_missing_one(tmp_path):
     record = json.loads(path.read_text())
     record["metrics"]["ape_rmse_m"] = float("nan")
     path.write_text(json.dumps(record))  # (json writes NaN, as a hand edit would)
-    with pytest.raises(EvaluationError) as exc:
-        compare(out, out, method_a="good", method_b="bad")
-    assert str(exc.value) == "compare: metric 'ape_rmse_m' missing (null or not finite) in bad for 1 of 6 units (syn, seed 3)"
+    result = compare(out, out, method_a="good", method_b="bad")
+    assert (result.n_pairs, result.note) == (5, "1 of 6 (dataset, seed) unit(s) left out: bad has no finite value (null, "
+                                                "NaN or infinite) of ape_rmse_m there (syn, seed 3)")
     for job in (out / "jobs").glob("*.json"):  # NaN in every result of bad: said so (it read "(null) ... reports none")
         record = json.loads(job.read_text())
         if record["job"]["method"] == "bad":
@@ -1003,3 +1006,84 @@ def test_jobs_of_a_suite_not_run_yet_or_unreadable_are_not_units_only_in_the_oth
     run_suite(load_suite(tmp_path / "s.yaml"), out, executor="serial")  # resumes the three
     assert (compare(out, out, method_a="good", method_b="bad").n_pairs,
             compare(out, out, method_a="good", method_b="bad").note) == (8, "")
+
+
+def test_task_options_and_dataset_specs_written_as_whole_floats_pair(tmp_path):
+    """`init_noise_m: 1` in one suite and `1.0` in another are one bench job (its key counts whole floats as ints), but
+    compare keyed the units by the options as written: "runs with different task options ... 1 in A, 1.0 in B". The
+    dataset spec and the suite's jobs not run yet count them alike too."""
+    _task("whole_float_test_task", _error)
+    suite = ("seeds: 6\nexperiments:\n  - {{task: whole_float_test_task, dataset: {{kind: synthetic, name: F, size_m: {size}}}, "
+             "options: {{noise_m: {noise}}}, methods: [{method}]}}\n")
+    a = _bench(tmp_path, "a", suite.format(size="2", noise="1", method="good"))
+    b = _bench(tmp_path, "b", suite.format(size="2.0", noise="1.0", method="bad"))
+    result = compare(a, b)
+    assert (result.n_pairs, result.better, result.note) == (6, "a", "")
+    next(p for p in (b / "jobs").glob("*.json") if json.loads(p.read_text())["job"]["seed"] == 5).unlink()
+    assert compare(a, b).note == ("1 (dataset, seed) unit(s) of B's suite not run yet or unreadable (`lidarkit bench` "
+                                  "resumes them)")
+
+
+def test_a_seed_without_the_metric_is_left_out_as_the_report_leaves_it(tmp_path):
+    """One seed of 7 whose APE is null: the report left it out with a note and compared the 6 others, compare refused:
+    "metric 'ape_rmse_m' missing in good for 1 of 7 units (syn, seed 3)". It leaves such units out and names them; with
+    too few left the test's own verdict or error says so, beside the note."""
+    _task("null_seed_test_task", lambda job: {**_error(job), **({"ape_rmse_m": None} if job.method == "good" and job.seed == 3 else {})})
+    out = _bench(tmp_path, "s", "seeds: 7\nexperiments:\n  - {task: null_seed_test_task, dataset: {kind: synthetic, name: syn}, methods: [good, bad]}\n")
+    result = compare(out, out, method_a="good", method_b="bad")
+    note = "{} of 7 (dataset, seed) unit(s) left out: good has no value (null) of ape_rmse_m there ({})"
+    assert (result.n_pairs, result.better, result.p_value) == (6, "a", pytest.approx(0.03125))
+    assert result.note == note.format(1, "syn, seed 3")
+    good = {json.loads(p.read_text())["job"]["seed"]: p for p in (out / "jobs").glob("*.json")
+            if json.loads(p.read_text())["job"]["method"] == "good"}
+    for seed in (0, 1, 2, 4):  # 2 units left: a test that cannot reach p < 0.05, said in its verdict
+        record = json.loads(good[seed].read_text())
+        record["metrics"]["ape_rmse_m"] = None
+        good[seed].write_text(json.dumps(record))
+    two = compare(out, out, method_a="good", method_b="bad")
+    assert (two.n_pairs, two.better) == (2, "")
+    assert two.note == note.format(5, "syn, seed 0; syn, seed 1; syn, seed 2; ... (5 in all)")
+    assert "at least 6 are needed to reach p < 0.05" in two.verdict()
+    record = json.loads(good[5].read_text())
+    record["metrics"]["ape_rmse_m"] = None
+    good[5].write_text(json.dumps(record))
+    with pytest.raises(EvaluationError) as exc:  # 1 unit left: no test, and why
+        compare(out, out, method_a="good", method_b="bad")
+    assert str(exc.value).startswith("ape_rmse_m: a paired test needs at least 2 matched seeds, got 1 (")
+    assert str(exc.value).endswith("; " + note.format(6, "syn, seed 0; syn, seed 1; syn, seed 2; ... (6 in all)"))
+
+
+@pytest.mark.parametrize("layout", ["kitti", "sim", "root", "scans", "images", "kitti_images"])
+def test_a_dataset_folder_is_named_as_one_with_the_command_that_makes_a_run(tmp_path, capsys, layout):
+    """`lidarkit compare RUN SIM_DRIVE` said "no metrics.json: not a finished odometry run folder" of the simulated
+    drive: a dataset folder is named as one, with its layout, and the command that makes a run of it."""
+    data = tmp_path / "data"
+    scans = {"kitti": data / "velodyne", "sim": data / "velodyne", "root": data / "sequences" / "00" / "velodyne",
+             "scans": data}.get(layout)
+    images = {"images": data, "kitti_images": data / "image_0"}.get(layout)
+    for folder, suffix in ((scans, ".bin"), (images, ".png")):
+        if folder is not None:
+            folder.mkdir(parents=True)
+            for k in range(3):
+                (folder / f"{k:06d}{suffix}").write_bytes(b"\0" * 16)
+    if layout in ("kitti", "sim"):
+        (data / "times.txt").write_text("0.0\n0.1\n0.2\n")
+    if layout == "sim":
+        (data / "sim.yaml").write_text("scene: street\n")
+    if layout == "kitti_images":
+        (data / "calib.txt").write_text("P0: 1 0 0 0 0 1 0 0 0 0 1 0\n")
+    held = {"kitti": "KITTI layout: velodyne/, times.txt",
+            "sim": "a simulated drive in KITTI layout: velodyne/, sim.yaml, times.txt",
+            "root": "a KITTI odometry root: sequences/", "scans": "3 .bin scan files", "images": "3 .png images",
+            "kitti_images": "KITTI layout: image_0/, calib.txt"}[layout]
+    then = ("an image sequence compares as bench results (a suite with a vo experiment over it: lidarkit bench)"
+            if "images" in layout else f"run lidarkit odometry {data} --out DIR first")
+    run = _straight_run(tmp_path / "run", np.full(5, 0.01))
+    for argv in ([str(run), str(data)], [str(data), str(run)]):
+        code, stdout, err = run_cli(["compare", *argv], capsys)
+        assert (code, stdout, err) == (1, "", f"error: {data}: a dataset folder ({held}): compare takes run folders; {then}\n")
+    (run / "metrics.json").unlink()  # a run cut off before its metrics, its plots beside its poses, is no image folder
+    for name in ("ape.png", "trajectory.png"):
+        (run / name).write_bytes(b"\0" * 16)
+    code, _, err = run_cli(["compare", str(run), str(run)], capsys)
+    assert (code, err) == (1, f"error: {run}: no metrics.json: not a finished odometry run folder\n")

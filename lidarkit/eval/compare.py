@@ -13,6 +13,7 @@ import math
 import os
 import re
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -230,7 +231,10 @@ def _options_unit(task: str, options: dict[str, Any], dataset: dict[str, Any], r
     """A job's task options as the data they select: the odometry ``frames`` as the dataset indices the run registered,
     written as one selection ("0:10" and "0:10:1" are one, and "all" and "0:30" over 30 sweeps: they read "runs with
     different task options"), as run folders are compared (:func:`_frames_of`); as written when the record does not
-    say which indices those are."""
+    say which indices those are. Whole floats count as ints (``init_noise_m: 1.0`` and ``1`` are one bench job)."""
+    from lidarkit.bench.jobs import whole_floats_as_ints
+
+    options = whole_floats_as_ints(options)
     if task != "odometry":
         return options
     frames = _selected_frames(options.get("frames"), dataset, record)
@@ -292,11 +296,12 @@ def _dataset_unit(spec: dict[str, Any], done: dict[str, dict[str, Any]]) -> dict
     out (a label, as its readers take it); a simulated lidar's settings with their defaults written out
     (``range_noise_std_m: 0.0`` in one suite only read "runs over different data" with the same labels on both sides);
     a KITTI root given with ``sequence:`` as the sequence folder its reader opens (``path: kitti_odometry, sequence: "00"``
-    is ``path: kitti_odometry/sequences/00``). A spec this lidarkit cannot resolve (data not here, a simulator setting
-    it does not know) is kept as written. ``done``: the specs resolved so far, by their text."""
-    from lidarkit.bench.jobs import canonical_json
+    is ``path: kitti_odometry/sequences/00``); whole floats as ints, as a bench job's key counts them (``n_frames: 30.0``
+    is ``30``). A spec this lidarkit cannot resolve (data not here, a simulator setting it does not know) is kept as
+    written. ``done``: the specs resolved so far, by their text."""
+    from lidarkit.bench.jobs import canonical_json, whole_floats_as_ints
 
-    written = {k: v for k, v in spec.items() if k != "name"}
+    written = whole_floats_as_ints({k: v for k, v in spec.items() if k != "name"})
     text = canonical_json(written)
     if text not in done:
         done[text] = written
@@ -626,15 +631,10 @@ def compare(
     keys_a, keys_b = set(side_a.values), set(side_b.values)
     common = [k for k in common if _task_of(k) in tasks_with]
     missing = [k for k in common if not has(k, metric)]
-    if missing:  # (it named neither the side nor the count, nor why KITTI drift is missing)
-        lacking = " and ".join(s.name for s in (side_a, side_b) if not all(_usable(s.values[k].get(metric)) for k in missing))
-        why = ": KITTI drift needs 100 m of path" if metric.startswith("drift_") else ""
-        ape = metric != "ape_rmse_m" and all(has(k, "ape_rmse_m") for k in common)
-        nan = any((v := s.values[k].get(metric)) is not None and not _usable(v) for s in (side_a, side_b) for k in missing)
-        what = "missing (null or not finite)" if nan else "missing"  # (a NaN read "1 non-finite value(s) among 8")
-        raise EvaluationError(f"metric {metric!r} {what} in {lacking} for {len(missing)} of {len(common)} units "
-                              f"({_few([side_a.labels[k] for k in missing])}){why}"
-                              + ("; --metric ape_rmse_m compares every unit" if ape else ""), source="compare")
+    # units without the metric on a side are left out and named, as the report leaves out such seeds (one null APE of 7
+    # seeds refused the comparison the report made); fewer than 2 left: the error says why
+    without_metric = _without_metric_note(missing, common, metric, (side_a, side_b), (name_a, name_b), has) if missing else ""
+    common = [k for k in common if has(k, metric)]
     _same_alignment(side_a, side_b, common, metric)
     from lidarkit.bench.tasks import higher_is_better  # (as the task that wrote the results declares it)
 
@@ -645,7 +645,7 @@ def compare(
     pairing, collapsed = "dataset" if one_each else "seed", _one_unit_per_dataset(common, va, vb, varies)
     if collapsed is not None:  # the seeds change nothing within a dataset: its seeds are one measurement
         va, vb, pairing = collapsed
-    notes = []
+    notes = [without_metric] if without_metric else []
     if pairing == "unit":  # (a fixed dataset beside seeded ones)
         notes.append("the seeds of a dataset that gives each side one value whatever the seed count as one unit")
     if other_tasks:
@@ -686,6 +686,21 @@ def compare(
         raise
     label = _metric_label(compared_task, metric, side_a, side_b, common)
     return dataclasses.replace(result, note="; ".join(notes), metric_label=label)
+
+
+def _without_metric_note(missing: list[str], common: list[str], metric: str, sides: tuple[BenchRuns, BenchRuns],
+                         names: tuple[str, str], has: Callable[[str, str], bool]) -> str:
+    """The note on the ``missing`` units of ``common`` left out for a side's null, NaN or infinite ``metric``: how many,
+    which side (by its ``names``), which units, and why KITTI drift may be missing or which metric every unit holds."""
+    lacking = [name for side, name in zip(sides, names) if not all(_usable(side.values[k].get(metric)) for k in missing)]
+    nan = any((v := side.values[k].get(metric)) is not None and not _usable(v) for side in sides for k in missing)
+    what = "no finite value (null, NaN or infinite)" if nan else "no value (null)"
+    hints = ["KITTI drift needs 100 m of path"] if metric.startswith("drift_") else []
+    if metric != "ape_rmse_m" and all(has(k, "ape_rmse_m") for k in common):
+        hints.append("--metric ape_rmse_m compares every unit")
+    verb = "has" if len(lacking) == 1 else "have"
+    return (f"{len(missing)} of {len(common)} (dataset, seed) unit(s) left out: {' and '.join(lacking)} {verb} {what} of "
+            f"{metric} there ({_few([sides[0].labels[k] for k in missing])})" + (f": {', '.join(hints)}" if hints else ""))
 
 
 def _default_metric(keys: list[str], side_a: BenchRuns, side_b: BenchRuns) -> str:
@@ -1066,7 +1081,48 @@ def _not_an_odometry_run(path: Path) -> str:
     if other:
         return (f"{'an' if other[0] in 'aeiou' else 'a'} {other} run folder: compare pairs odometry run folders, or bench "
                 "results folders (the seeds of a suite: lidarkit bench)")
+    layout, images = _dataset_layout(path)
+    if images:  # (odometry does not read images: a VO suite's bench results compare)
+        return (f"a dataset folder ({layout}): compare takes run folders; an image sequence compares as bench results "
+                "(a suite with a vo experiment over it: lidarkit bench)")
+    if layout:
+        return f"a dataset folder ({layout}): compare takes run folders; run lidarkit odometry {path} --out DIR first"
     return ""
+
+
+def _dataset_layout(path: Path) -> tuple[str, bool]:
+    """The dataset layout of the folder ``path`` by the files it holds (``"KITTI layout: velodyne/, times.txt"``,
+    ``"12 .bin scan files"``) and whether it holds images only (no input of ``lidarkit odometry``); ``("", False)`` for a
+    folder that may be a run (a dataset given to compare read "no metrics.json: not a finished odometry run folder"). A
+    folder holding a run's own files is never called a dataset: an odometry run cut off before its metrics has plots
+    (.png) beside its poses."""
+    from lidarkit.io.images import IMAGE_SUFFIXES
+    from lidarkit.io.pointfile import POINT_FILE_SUFFIXES
+
+    run_files = ("metrics.json", "config.yaml", "poses_kitti.txt", "poses_tum.txt", "ground_truth_kitti.txt", "timing.csv")
+    if any((path / name).exists() for name in run_files):
+        return "", False
+    folders = [name for name in ("velodyne", "image_0", "image_2") if (path / name).is_dir()]
+    files = [name for name in ("sim.yaml", "times.txt", "poses.txt", "calib.txt") if (path / name).is_file()]
+    held = ", ".join([f"{name}/" for name in folders] + files)
+    if folders:
+        what = "a simulated drive in KITTI layout" if "sim.yaml" in files else "KITTI layout"
+        return f"{what}: {held}", "velodyne" not in folders
+    if (path / "rgb.txt").is_file():
+        return "TUM RGB-D layout: rgb.txt", True
+    if (path / "sequences").is_dir():
+        scans = any((path / "sequences").glob("*/velodyne"))
+        return "a KITTI odometry root: sequences/", not scans and any((path / "sequences").glob("*/image_[02]"))
+    try:
+        counts = Counter(p.suffix.lower() for p in path.iterdir() if p.is_file() and not p.name.startswith("."))
+    except OSError:  # (an unreadable folder: said by the reader that needs it)
+        return "", False
+    for suffixes, what, images in ((POINT_FILE_SUFFIXES, "scan files", False), (IMAGE_SUFFIXES, "images", True)):
+        held_suffixes = sorted(suffix for suffix in counts if suffix in suffixes)
+        n = sum(counts[suffix] for suffix in held_suffixes)
+        if n >= 2:  # (one file beside others is no sequence)
+            return f"{n} {'/'.join(held_suffixes)} {what}", images
+    return "", False
 
 
 def _kind(side: Any) -> type | None:
