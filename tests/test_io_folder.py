@@ -404,3 +404,29 @@ def test_a_scan_folder_given_as_dot_is_named_after_itself(tmp_path, monkeypatch)
         np.save(folder / f"{i:06d}.npy", np.random.default_rng(i).normal(size=(100, 3)))
     monkeypatch.chdir(folder)
     assert ScanFolder(".").name == "drive_a"
+
+
+def test_points_dropped_as_nonfinite_are_said_once_in_the_runs_warnings(tmp_path):
+    """``folder:...?drop_nonfinite=true`` left NaN points out with a log line only: the run's metrics.json said nothing
+    (kiss-icp's generic loader does say it). The reader keeps one line, the first frame's, for the run's warnings."""
+    from lidarkit.odometry import run
+
+    folder = tmp_path / "scans"
+    folder.mkdir()
+    rng = np.random.default_rng(4)
+    cloud = rng.uniform(-20, 20, size=(400, 3)).astype(np.float32)
+    for k in range(4):
+        scan = cloud + np.float32(0.1 * k)
+        if k >= 2:
+            scan[7 + k] = np.nan
+        np.save(folder / f"{k:06d}.npy", scan)
+    said = (f"left out 1 of 400 points with NaN or infinite values in frame 2 ({folder / '000002.npy'}); in later frames "
+            "without another warning")
+    reader = ScanFolder(folder, drop_nonfinite=True)
+    assert [len(reader.read_scan(k).points_xyz) for k in range(4)] == [400, 400, 399, 399]
+    assert getattr(reader, "reader_warnings", None) == [said]
+    result = run(ScanFolder(folder, drop_nonfinite=True), "vanilla", out_dir=tmp_path / "run")
+    import json
+
+    assert said in json.loads((tmp_path / "run" / "metrics.json").read_text())["warnings"]
+    assert result.metrics["warnings"].count(said) == 1

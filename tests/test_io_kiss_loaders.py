@@ -454,3 +454,25 @@ def test_a_kiss_kind_without_drop_nonfinite_names_a_reader_that_has_it(tmp_path)
                                         r"kiss_kitti reader keeps every point \(kiss-icp's loader\): a reader of the files "
                                         r"themselves \(kitti:, folder:\) drops them with drop_nonfinite=true$"):
         open_dataset("kiss_kitti", tmp_path, sequence="00").read_scan(1)
+
+
+def test_ouster_meta_given_by_a_relative_name_is_looked_up_beside_the_pcap(tmp_path, monkeypatch):
+    """``meta=sensor.json`` named the json beside the pcap, as other readers' path options name files beside their
+    data; run from another folder it was refused as "not found". It is found there (what follows is the ouster-sdk
+    step), and a name found in neither place says both."""
+    from lidarkit.errors import LidarKitError
+    from lidarkit.io.kiss_loaders import OusterScans
+
+    recording = tmp_path / "drive"
+    recording.mkdir()
+    (recording / "run.pcap").write_bytes(b"\xd4\xc3\xb2\xa1")
+    (recording / "sensor.json").write_text("{}")
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    with pytest.raises(LidarKitError) as err:  # (without ouster-sdk: the ConfigError naming its pip line)
+        OusterScans(recording / "run.pcap", meta="sensor.json")
+    assert "metadata json not found" not in str(err.value)
+    with pytest.raises(DataError, match=re.escape(f"other.json: Ouster metadata json not found, neither from the working "
+                                                  f"directory nor beside the pcap in {recording}")):
+        OusterScans(recording / "run.pcap", meta="other.json")

@@ -457,9 +457,10 @@ def test_per_point_times_that_are_not_times_are_refused_as_in_a_bag(tmp_path):
     for values, message in (
         ((np.arange(n) % 16).astype(np.uint8), "per-point time array is a 8-bit integer: too small for times (drivers "
          f"write float seconds or 32/64-bit integer nanoseconds); {hint}"),
-        # absolute float32 times about a rounding step of float32 (128 s apart near 1.7e9 s)
-        ((1699999808.0 - 0.05 + np.linspace(0, 0.1, n)).astype(np.float32), "per-point time array spans 128 s within one "
-         f"scan (read as seconds; a sweep lasts at most 1 s): not the points' times ({hint})"),
+        # absolute float32 times about a rounding step of float32 (128 s apart near 1.7e9 s): float32 named as the reason
+        ((1699999808.0 - 0.05 + np.linspace(0, 0.1, n)).astype(np.float32), "per-point time array is float32 holding times "
+         "of 1.7e+09 s and more: float32 cannot hold absolute times (its steps are 128 s there; drivers write them as "
+         f"float64 or integer nanoseconds); {hint}"),
     ):
         np.save(target, values)
         with pytest.raises(DataError) as err:
@@ -633,3 +634,22 @@ def test_times_going_back_say_both_stamps(tmp_path, odo_root):
         with pytest.raises(DataError) as caught:
             KittiOdometry(seq).timestamps_s
         assert str(caught.value) == f"{seq / 'times.txt'} (line 3, frame 2): time stamps are not strictly increasing: " + why
+
+
+def test_points_dropped_as_nonfinite_are_kept_once_for_the_runs_warnings(tmp_path):
+    """The KITTI reader with drop_nonfinite=true logged the points it left out, and the run's metrics.json had no word
+    of them. One line, the first frame's, is kept in ``reader_warnings``, which the run records."""
+    from lidarkit.sim.lidar import SimulatedLidarSequence, export_kitti
+
+    folder = export_kitti(SimulatedLidarSequence(n_frames=3, n_beams=8, n_azimuths=90), tmp_path / "k")
+    for frame in (1, 2):
+        bin_path = folder / "velodyne" / f"{frame:06d}.bin"
+        points = np.fromfile(bin_path, dtype="<f4").reshape(-1, 4)
+        points[4:6, 1] = np.inf
+        points.tofile(bin_path)
+    n = len(np.fromfile(folder / "velodyne" / "000001.bin", dtype="<f4")) // 4
+    reader = KittiOdometry(folder, drop_nonfinite=True)
+    for k in range(3):
+        reader.read_scan(k)
+    assert getattr(reader, "reader_warnings", None) == [f"left out 2 of {n} points with NaN or infinite values in frame 1 "
+                                                         f"({folder / 'velodyne' / '000001.bin'}); in later frames without another warning"]

@@ -71,7 +71,8 @@ class ScanFolder:
     time stamps become ``timestamps_s`` unless ``timestamps`` is given); without ``poses`` it is a ConfigError (it
     would have no effect). ``suffixes`` restricts the file types read (a sequence, or text such as ``".npy,.bin"`` as a spec writes it); a folder mixing several types
     is read as one sequence in name order.
-    ``drop_nonfinite`` drops NaN/inf points with a logged warning instead of raising DataError.
+    ``drop_nonfinite`` drops NaN/inf points instead of raising DataError, said once in ``reader_warnings`` (a run's
+    metrics.json) as well as the log.
     """
 
     def __init__(
@@ -101,6 +102,9 @@ class ScanFolder:
         self.path = folder
         self.name = name or Path(os.path.abspath(folder)).name  # ("." was named '')
         self.drop_nonfinite = drop_nonfinite
+        #: what the reader left out (NaN or infinite points, under drop_nonfinite), for the run's warnings: once
+        self.reader_warnings: list[str] = []
+        self._nonfinite_said = False
         broken = next((p for p in folder.iterdir() if p.suffix.lower() in wanted and p.is_symlink() and not p.exists()), None)
         if broken is not None:  # a scan that is not there: never skipped without a word
             raise DataError(f"a broken link (to {os.readlink(broken)})", source=broken)
@@ -238,7 +242,13 @@ class ScanFolder:
         """The ``index``-th scan in name order (``Scan.frame`` = ``index``)."""
         index = checked_index(index, len(self), f"{self.name} ({self.path})")
         ts = None if self._timestamps_s is None else float(self._timestamps_s[index])
-        return read_point_file(self.scan_paths[index], frame=index, timestamp_s=ts, drop_nonfinite=self.drop_nonfinite)
+        dropped: list[str] = []
+        scan = read_point_file(self.scan_paths[index], frame=index, timestamp_s=ts, drop_nonfinite=self.drop_nonfinite,
+                               dropped=dropped)
+        if dropped and not self._nonfinite_said:
+            self._nonfinite_said = True
+            self.reader_warnings.append(f"{dropped[0]}; in later frames without another warning")
+        return scan
 
 
 __all__ = ["ScanFolder", "natural_key", "sorted_by_name"]

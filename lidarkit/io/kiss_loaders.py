@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from lidarkit.errors import ConfigError, DataError, not_increasing
-from lidarkit.io.base import Scan, checked_index, checked_indices
+from lidarkit.io.base import Scan, checked_index, checked_indices, option_path
 from lidarkit.geometry import _within_limits
 from lidarkit.io.rosbag import guarded_loader, require_modules
 from lidarkit.trajectory import Trajectory
@@ -309,8 +309,9 @@ class KissTumScans(KissLoaderScans):
 
 
 class OusterScans(KissLoaderScans):
-    """An Ouster ``.pcap`` with its sensor metadata ``.json`` (``meta``; default: the json beside it with the
-    longest common name prefix, as kiss-icp looks for it). Per-point times are the column fraction in [0, 1)."""
+    """An Ouster ``.pcap`` with its sensor metadata ``.json`` (``meta``, a relative one found from the working directory
+    or beside the pcap; default: the json beside it with the longest common name prefix, as kiss-icp looks for it).
+    Per-point times are the column fraction in [0, 1)."""
 
     loader_name = "ouster"
     requires = {"ouster.sdk": OUSTER_EXTRA}
@@ -319,8 +320,12 @@ class OusterScans(KissLoaderScans):
         pcap = Path(path)
         if not pcap.is_file():
             raise DataError("Ouster pcap not found (the ouster reader takes one .pcap file)", source=pcap)
-        if meta is not None and not Path(meta).is_file():
-            raise DataError("Ouster metadata json not found", source=meta)
+        if meta is not None:  # relative: from the working directory, else beside the pcap (as other readers' path options)
+            given, meta = meta, option_path(meta, pcap.parent)
+            if not meta.is_file():
+                raise DataError(f"Ouster metadata json not found, neither from the working directory nor beside the pcap in "
+                                f"{pcap.parent}", source=given)
+            meta = str(meta)
         if meta is None and not list(pcap.parent.glob("*.json")):
             raise DataError("no sensor metadata: an Ouster pcap needs the .json recorded with it (beside it, or meta=PATH)",
                             source=pcap, location="frame 0")

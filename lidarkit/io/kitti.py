@@ -161,7 +161,7 @@ class KittiOdometry:
     Options: ``velodyne_dir`` / ``image_dir`` replace ``sequences/NN/velodyne`` / ``image_0`` (e.g. a
     folder of extra frames used with this sequence's calib and poses), ``poses_file`` another pose
     file (e.g. ``poses_semantickitti.txt``), ``calib_file`` / ``times_file`` likewise;
-    ``drop_nonfinite`` drops NaN/inf points with a warning instead of raising.
+    ``drop_nonfinite`` drops NaN/inf points instead of raising, said once in ``reader_warnings`` (a run's metrics.json).
 
     ``vertical_correction``: rotate every point about the axis perpendicular to its azimuth by
     :data:`KITTI_VERTICAL_CORRECTION_DEG` (KITTI's HDL-64 calibration error, corrected exactly as kiss-icp's KITTI
@@ -196,6 +196,9 @@ class KittiOdometry:
         asked = None if sequence is None else str(sequence)
         self.sequence = "00" if asked is None else f"{int(asked):02d}" if asked.isdigit() else asked
         self.drop_nonfinite = drop_nonfinite
+        #: what the reader left out (NaN or infinite points, under drop_nonfinite), for the run's warnings: once
+        self.reader_warnings: list[str] = []
+        self._nonfinite_said = False
         root = Path(root)
         if not root.is_dir():
             raise DataError("dataset folder not found" if not root.exists() else "not a folder", source=root)
@@ -608,7 +611,11 @@ class KittiOdometry:
         frame = int(self.scan_frames[index])
         stamps = self._stamps_of(self.scan_frames[index:index + 1])
         ts = None if stamps is None else float(stamps[0])
-        scan = read_kitti_bin(self.scan_paths[index], frame=frame, timestamp_s=ts, drop_nonfinite=self.drop_nonfinite)
+        dropped: list[str] = []
+        scan = read_kitti_bin(self.scan_paths[index], frame=frame, timestamp_s=ts, drop_nonfinite=self.drop_nonfinite, dropped=dropped)
+        if dropped and not self._nonfinite_said:
+            self._nonfinite_said = True
+            self.reader_warnings.append(f"{dropped[0]}; in later frames without another warning")
         if ts is not None and self._simulator_pose_instant is not None:  # the simulator stamps sweeps at its pose instant
             scan = dataclasses.replace(scan, stamp_instant=self._simulator_pose_instant)
         if self._correct:

@@ -15,7 +15,7 @@ asked for):
   sweep end), ``t`` uint32 nanoseconds from the sweep start (Ouster drivers), ``timestamp(s)`` as either;
 * integer fields are nanoseconds; float fields are seconds, or nanoseconds when larger than 1e15;
 * values beyond 1e5 s are absolute time (``point_time_convention="absolute_s"``), otherwise relative to the
-  message stamp (``"relative_s"``);
+  message stamp (``"relative_s"``); a float32 field cannot hold absolute times (steps of 128 s at 1.7e9 s): refused;
 * a field whose values span more than :data:`MAX_SWEEP_S` in one message is not the points' times (e.g. an
   intensity named by ``time_field=``), nor is an 8- or 16-bit integer field (a ``ring``), nor one that neither follows
   the point order nor turns with the azimuth (an intensity within 1 s): a DataError, where it would have deskewed
@@ -186,6 +186,14 @@ def checked_point_times(raw: np.ndarray, xyz: np.ndarray, *, what: str, within: 
             f"{what} is a {8 * raw.dtype.itemsize}-bit integer: too small for times (drivers write "
             f"float seconds or 32/64-bit integer nanoseconds); {hint}", source=source, location=location,
         )
+    if raw.dtype.kind == "f" and raw.dtype.itemsize <= 4 and len(raw):
+        smallest = float(np.abs(raw).min())  # (every value absolute: relative nanoseconds start near 0)
+        if smallest > _ABSOLUTE_AFTER_S:  # (1.7e9 s in float32 steps of 128 s: a sweep read as "all equal" times)
+            raise DataError(
+                f"{what} is float32 holding times of {smallest:.4g} s and more: float32 cannot hold absolute times (its steps "
+                f"are {float(np.spacing(np.float32(smallest))):.3g} s there; drivers write them as float64 or integer "
+                f"nanoseconds); {hint}", source=source, location=location,
+            )
     times = point_times_seconds(raw)
     span = float(np.ptp(times)) if len(times) else 0.0
     if span > longest_s:

@@ -73,8 +73,11 @@ def finite_points(
     source: str | os.PathLike,
     frame: int | None = None,
     drop_nonfinite: bool = False,
+    dropped: list[str] | None = None,
 ) -> tuple[np.ndarray, np.ndarray | None]:
-    """Check ``(N, 3)`` points (and ``(N,)`` intensity) for NaN/inf; raise DataError or drop them with a warning."""
+    """Check ``(N, 3)`` points (and ``(N,)`` intensity) for NaN/inf; raise DataError or drop them with a warning, said
+    also in ``dropped`` (one line per scan) for a sequence reader's ``reader_warnings`` (a log line alone left a run's
+    metrics.json without a word)."""
     from lidarkit.geometry import check_magnitude
 
     if len(points_xyz) and _within_limits(points_xyz) and (intensity is None or bool(np.isfinite(intensity).all())):
@@ -94,6 +97,8 @@ def finite_points(
                 location=where,
             )
         log.warning("%s (%s): dropped %d of %d NaN/infinite points", source, where or "scan", n_bad, len(ok))
+        if dropped is not None:
+            dropped.append(f"left out {n_bad} of {len(ok)} points with NaN or infinite values in {where or 'the scan'} ({source})")
         points_xyz = points_xyz[ok]
         intensity = None if intensity is None else intensity[ok]
     if len(points_xyz) == 0:
@@ -143,11 +148,12 @@ def read_kitti_bin(
     frame: int | None = None,
     timestamp_s: float | None = None,
     drop_nonfinite: bool = False,
+    dropped: list[str] | None = None,
 ) -> Scan:
     """Read a KITTI Velodyne ``.bin`` (little-endian float32 ``x y z intensity`` records).
 
     A size that is not a multiple of 16 bytes is a truncated file (DataError), as is an empty one.
-    Points are returned as ``(N, 3)`` float64, intensity as ``(N,)`` float32.
+    Points are returned as ``(N, 3)`` float64, intensity as ``(N,)`` float32; points left out: :func:`finite_points`.
     """
     path = Path(path)
     size = _require_file(path, frame)
@@ -164,13 +170,15 @@ def read_kitti_bin(
         # same test on the strided x/y/z and intensity columns; anything else takes the full check below)
         points, intensity = data[:, :3], data[:, 3]
     else:
-        points, intensity = finite_points(data[:, :3], data[:, 3], source=path, frame=frame, drop_nonfinite=drop_nonfinite)
+        points, intensity = finite_points(data[:, :3], data[:, 3], source=path, frame=frame, drop_nonfinite=drop_nonfinite,
+                                          dropped=dropped)
     points, intensity = drop_origin_points(points, intensity, source=path, frame=frame)
     return Scan(points.astype(np.float64), np.ascontiguousarray(intensity), None, timestamp_s, frame or 0, str(path))
 
 
 def read_npy_scan(
-    path: str | os.PathLike, *, frame: int | None = None, timestamp_s: float | None = None, drop_nonfinite: bool = False
+    path: str | os.PathLike, *, frame: int | None = None, timestamp_s: float | None = None, drop_nonfinite: bool = False,
+    dropped: list[str] | None = None,
 ) -> Scan:
     """Read a ``.npy`` array of shape ``(N, 3)`` (x, y, z) or ``(N, 4)`` (x, y, z, intensity)."""
     path = Path(path)
@@ -187,14 +195,15 @@ def read_npy_scan(
         raise DataError("empty scan file (0 points)", source=path, location=_where(frame))
     intensity = data[:, 3].astype(np.float32) if data.shape[1] == 4 else None
     points, intensity = finite_points(
-        data[:, :3].astype(np.float64), intensity, source=path, frame=frame, drop_nonfinite=drop_nonfinite
+        data[:, :3].astype(np.float64), intensity, source=path, frame=frame, drop_nonfinite=drop_nonfinite, dropped=dropped
     )
     points, intensity = drop_origin_points(points, intensity, source=path, frame=frame)
     return Scan(points, intensity, None, timestamp_s, frame or 0, str(path))
 
 
 def read_open3d_scan(
-    path: str | os.PathLike, *, frame: int | None = None, timestamp_s: float | None = None, drop_nonfinite: bool = False
+    path: str | os.PathLike, *, frame: int | None = None, timestamp_s: float | None = None, drop_nonfinite: bool = False,
+    dropped: list[str] | None = None,
 ) -> Scan:
     """Read a ``.pcd`` or ``.ply`` with Open3D's tensor reader, keeping an ``intensity`` field if present.
 
@@ -207,7 +216,8 @@ def read_open3d_scan(
         header = check_pcd_counts(path, frame)
         if header.padded:  # (Open3D aborted the process on it)
             points, intensity = read_padded_pcd(path, header, frame)
-            points, intensity = finite_points(points, intensity, source=path, frame=frame, drop_nonfinite=drop_nonfinite)
+            points, intensity = finite_points(points, intensity, source=path, frame=frame, drop_nonfinite=drop_nonfinite,
+                                              dropped=dropped)
             points, intensity = drop_origin_points(points, intensity, source=path, frame=frame)
             return Scan(points, intensity, None, timestamp_s, frame or 0, str(path))
     elif path.suffix.lower() == ".ply":
@@ -227,7 +237,8 @@ def read_open3d_scan(
         if key in cloud.point:
             intensity = cloud.point[key].numpy().reshape(len(points), -1)[:, 0].astype(np.float32)
             break
-    points, intensity = finite_points(points, intensity, source=path, frame=frame, drop_nonfinite=drop_nonfinite)
+    points, intensity = finite_points(points, intensity, source=path, frame=frame, drop_nonfinite=drop_nonfinite,
+                                      dropped=dropped)
     points, intensity = drop_origin_points(points, intensity, source=path, frame=frame)
     return Scan(points, intensity, None, timestamp_s, frame or 0, str(path))
 
@@ -587,7 +598,8 @@ def point_file_fields(path: str | os.PathLike) -> list[str]:
 
 
 def read_point_file(
-    path: str | os.PathLike, *, frame: int | None = None, timestamp_s: float | None = None, drop_nonfinite: bool = False
+    path: str | os.PathLike, *, frame: int | None = None, timestamp_s: float | None = None, drop_nonfinite: bool = False,
+    dropped: list[str] | None = None,
 ) -> Scan:
     """Read any supported point file, chosen by suffix (``.bin``, ``.npy``, ``.pcd``, ``.ply``)."""
     path = Path(path)
@@ -601,7 +613,7 @@ def read_point_file(
             source=path,
             location=_where(frame),
         )
-    return readers[suffix](path, frame=frame, timestamp_s=timestamp_s, drop_nonfinite=drop_nonfinite)
+    return readers[suffix](path, frame=frame, timestamp_s=timestamp_s, drop_nonfinite=drop_nonfinite, dropped=dropped)
 
 
 __all__ = [

@@ -7,7 +7,8 @@ loaders open the files; lidarkit checks the topic first (kiss-icp prints and exi
 each message with :func:`lidarkit.io.pointcloud2.decode_pointcloud2`.
 
 Per scan: ``timestamp_s`` is the message header stamp; ``stamp_instant`` says which instant of the sweep that
-stamp is, read from the per-point times (relative times starting at 0: the sweep start; ending at 0: the end).
+stamp is, read from the per-point times (relative times starting at 0: the sweep start; ending at 0: the end); a stamp
+at no such instant (a driver stamping on receipt, after the sweep end) is placed by ``sweep_offset_s``.
 Ground truth: a ``nav_msgs/Odometry`` topic (``ground_truth_topic``; found automatically when there is one), read
 in header-stamp order, one pose per scan (by count when each pose lies as far from its scan as the others, also for a
 selection of scans; else the pose nearest the place in the sweep where the poses are stamped), expressed relative to
@@ -103,7 +104,9 @@ class _BagScans:
         self._timing_problem: str | None = None
         if not self.path.exists():
             raise DataError("bag not found", source=self.path)
-        # None (a spec's null) is the default, as for every option; "none" (or "") reads no point times
+        # None (a spec's null) is the default, as for every option; "none" (or "") reads no point times ("None", "NONE",
+        # "Auto": the same words in other cases, not field names)
+        time_field = _option_word(time_field, ("none", "auto"))
         self.time_field = "auto" if time_field is None else time_field
         self._time_fields_read: set[str] = set()  # the fields time_field resolved to in the messages decoded
         self._next = 0
@@ -118,6 +121,7 @@ class _BagScans:
         self._instant_poses: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # topic: what _poses_at_instant read
         clouds = sorted(t for t, m in topics.items() if m == POINTCLOUD2)
         listing = ", ".join(f"{t} ({m})" for t, m in sorted(topics.items())) or "none"
+        topic = _topic_named(topic, topics)
         if topic:
             if topic not in topics:
                 raise DataError(f"no topic {topic!r}; topics present: {listing}", source=self.path)
@@ -129,6 +133,7 @@ class _BagScans:
             raise DataError(f"several {POINTCLOUD2} topics ({', '.join(clouds)}): choose one with topic=...", source=self.path)
         self.topic = topic or clouds[0]
         odometry = sorted(t for t, m in topics.items() if m == ODOMETRY)
+        ground_truth_topic = _topic_named(_option_word(ground_truth_topic, ("none",)), topics)
         if ground_truth_topic == "none":  # no ground truth (None: the one odometry topic, if there is one)
             ground_truth_topic = ""
         if ground_truth_topic:
@@ -336,7 +341,10 @@ class _BagScans:
             # sweep before only where each sweep ends as the next starts (taken so without point times)
             timing = self._sweep_timing
             following = timing is None or timing[1] == period  # (sweep_length gives the stamps' spacing itself then)
-            target = scan_stamps + _pose_phase(gt_stamps, all_stamps, following)
+            # placed from where the sweeps start where the point times say (stamps lagging their sweeps by more than a
+            # period put the phase, taken modulo the period, a sweep or two off), else from the stamps
+            anchors = all_stamps + (timing[0] - all_stamps[0] if timing is not None and timing[1] > 0 else 0.0)
+            target = anchors[numbers] + _pose_phase(gt_stamps, anchors, following)
             pick = np.clip(np.searchsorted(gt_stamps, target), 1, len(gt_stamps) - 1)
             pick = np.where(np.abs(gt_stamps[pick - 1] - target) <= np.abs(gt_stamps[pick] - target), pick - 1, pick)
             twice = np.flatnonzero(np.diff(pick) == 0)
@@ -350,13 +358,32 @@ class _BagScans:
                          f"scans {a} and {b} are both nearest to the pose at {gt_stamps[pick[k]]:.3f} s")
                 raise DataError(f"{len(gt_stamps)} poses for {len(scan_stamps)} scans: {where}; one pose per scan needed (--frames can pick the scans it covers; ground_truth_topic=none runs without scores)", source=source)
             gt_stamps, gt_poses = gt_stamps[pick], gt_poses[pick]
-        off = np.abs(gt_stamps - scan_stamps)
-        if period > 0 and off.max() > 1.5 * period:  # one pose per scan by count, but not the scan's own time
-            k = int(np.flatnonzero(off > 1.5 * period)[0])
-            raise DataError(f"pose {k} is stamped {gt_stamps[k]:.3f} s, scan {int(numbers[k])} {scan_stamps[k]:.3f} s: {off[k]:.3f} s apart, more "
-                            f"than a sweep ({period:.3f} s); the odometry does not cover the scans one pose each (--frames can pick the scans it covers; ground_truth_topic=none runs without scores)", source=source)
+        self._check_poses_near_their_sweeps(gt_stamps, scan_stamps, numbers, period, source)
         meta = {"frame": f"as recorded on {self.ground_truth_topic}", "pose_instant": self._ground_truth_instant(gt_stamps, scan_stamps)}
         return Trajectory(gt_poses, gt_stamps, name=f"{self.path.name}{self.ground_truth_topic}", meta=meta)
+
+    def _check_poses_near_their_sweeps(self, gt_stamps: np.ndarray, scan_stamps: np.ndarray, numbers: np.ndarray, period: float,
+                                       source: str) -> None:
+        """DataError when a pose paired with a scan (``gt_stamps[j]`` with scan ``numbers[j]``, stamped ``scan_stamps[j]``)
+        is not that scan's time: more than a sweep outside the sweep where the point times place it, or, without them,
+        more than 1.5 periods from the scan's stamp. (Stamps lagging their sweeps by a driver's 150 ms latency refused
+        the odometry stamped at the sweep ends, paired one each by count, as "0.150 s apart, more than a sweep".)"""
+        if not period > 0:
+            return
+        timing = self._sweep_timing
+        apart = np.abs(gt_stamps - scan_stamps)
+        if timing is None or not timing[1] > 0:  # one pose per scan by count, but not the scan's own time
+            far, where = apart > 1.5 * period, ""
+        else:
+            starts = scan_stamps + (timing[0] - float(self.timestamps_s[0]))
+            ends = starts + timing[1]
+            far = np.maximum(starts - gt_stamps, gt_stamps - ends) > period
+            where = " outside the scan's sweep ({:.3f}-{:.3f} s by its point times)"
+        if far.any():
+            k = int(np.flatnonzero(far)[0])
+            where = where.format(starts[k], ends[k]) if where else ""
+            raise DataError(f"pose {k} is stamped {gt_stamps[k]:.3f} s, scan {int(numbers[k])} {scan_stamps[k]:.3f} s: {apart[k]:.3f} s "
+                            f"apart, more than a sweep ({period:.3f} s){where}; {NOT_COVERED}", source=source)
 
     def ground_truth_at_instant(self, instant: str, scans: np.ndarray | list[int] | None = None) -> Trajectory:
         """The ground truth at the ``instant`` (start, mid or end) of every sweep (``scans``: of those only, e.g. a
@@ -500,6 +527,14 @@ class _BagScans:
         return classify_instant((float(self.timestamps_s[0]) - timing[0]) / timing[1])
 
     @property
+    def sweep_offset_s(self) -> float | None:
+        """Seconds from a scan's header stamp to the start of its sweep (negative: the sweep starts before it), from the
+        first scans' point times; None without point times on the stamps' clock. It places each sweep where its stamp is
+        at no clear instant (a driver stamping on receipt, 30 ms after the sweep end, had its poses written 30-80 ms off)."""
+        timing = self._sweep_timing
+        return None if timing is None or not timing[1] > 0 else timing[0] - float(self.timestamps_s[0])
+
+    @property
     def sweep_duration_s(self) -> float | None:
         """How long a sweep lasts, from its first point to the next sweep's (the stamps' spacing; one firing step past
         its last point for a recording of one sweep) or, when the points span clearly less or more than that spacing,
@@ -518,7 +553,8 @@ class _BagScans:
         point, not the stamps' spacing; a recording of one sweep, to one step past its last point); 0 for the length
         when the stamps are all equal; None when none of the first
         :data:`SWEEP_TIMING_READ` scans carries point times, or they carry times on another clock than the stamps (a
-        sweep more than a period from its stamp: :attr:`reader_warnings` says so, with the field and the offset).
+        sweep more than :data:`CLOCK_GAP_S` and :data:`CLOCK_GAP_PERIODS` periods from its stamp, beyond a driver's
+        latency: :attr:`reader_warnings` says so, with the field and the offset).
         DataError when the sweeps span less than :data:`~lidarkit.io.pointcloud2.MIN_SWEEP_SHARE` of the stamps'
         spacing and under :data:`~lidarkit.io.pointcloud2.MIN_SWEEP_S`: times in microseconds read as nanoseconds."""
         offsets, ends, spans, steps = [], [], [], []
@@ -544,11 +580,12 @@ class _BagScans:
         stamps = self.timestamps_s
         # one sweep alone: from its first point to one firing step past its last (where the next sweep would start)
         period = float(np.median(np.diff(stamps))) if len(stamps) > 1 else max(spans) + steps[int(np.argmax(spans))]
-        # a sweep lies around its stamp (from it, up to it, or across it); one a period or more away is timed by
-        # another clock (GPS time against UTC stamps, seconds since the sensor booted): its instant cannot be placed
+        # a sweep lies around its stamp (from it, up to it, or across it, or up to a driver's latency from it: stamped
+        # on receipt, 120-150 ms after the sweep end, which read as another clock); one further away is timed by another
+        # clock (GPS time against UTC stamps, seconds since the sensor booted): its instant cannot be placed
         first, last = float(np.median(offsets)), float(np.median(ends))
         apart = first if first > 0 else last if last < 0 else 0.0
-        if abs(apart) > max(period, max(spans)):
+        if abs(apart) > max(CLOCK_GAP_S, CLOCK_GAP_PERIODS * period, max(spans)):
             fields = ", ".join(repr(f) for f in sorted(self._time_fields_read))
             self._timing_problem = (f"the point times (field {fields}) lie {abs(apart):.6g} s {'after' if apart > 0 else 'before'} "
                                     f"the header stamps (a median over the first scans; the stamps are {period:.4g} s apart): "
@@ -566,6 +603,14 @@ class _BagScans:
         return float(stamps[0] + first), sweep_length(span, period, float(np.median(steps)))
 
 
+#: least gap (s) between the header stamps and their sweeps' point times read as another clock (a driver's latency,
+#: stamping a sweep on receipt, is less), unless :data:`CLOCK_GAP_PERIODS` stamp periods are more
+CLOCK_GAP_S = 1.0
+#: least gap, in stamp periods, between the header stamps and their sweeps read as another clock
+CLOCK_GAP_PERIODS = 3
+#: what a refused pairing of the odometry with the scans can do instead
+NOT_COVERED = ("the odometry does not cover the scans one pose each (--frames can pick the scans it covers; "
+               "ground_truth_topic=none runs without scores)")
 #: scans whose point times place the sweeps in the stamps (the median over them)
 SWEEP_TIMING_SCANS = 5
 #: most scans read to find :data:`SWEEP_TIMING_SCANS` with point times (empty or timeless ones are passed over)
@@ -660,7 +705,8 @@ class RosbagScans(_BagScans):
 
     Options: ``topic`` (the PointCloud2 topic; needed when there are several), ``ground_truth_topic`` (a
     ``nav_msgs/Odometry`` topic; default: the only one, ``""`` or ``none``: none), ``time_field`` (``auto``, a field name or
-    ``none``); None (a spec's ``null``) is each option's default.
+    ``none``); None (a spec's ``null``) is each option's default. The words ``none``, ``null`` and ``auto`` are read in
+    any case; a topic named without its leading slash (``points``) is the bag's ``/points``.
     """
 
     kind = "rosbag"
@@ -865,6 +911,26 @@ class McapScans(_BagScans):
             return
         for k, item in enumerate(self.loader.read_ros2_messages(str(self.path), topics=[topic])):
             yield k, item.ros_msg
+
+
+def _option_word(value: Any, words: tuple[str, ...]) -> Any:
+    """``value`` as the option word it spells in any case (``None``, ``NONE``: ``none``, which was taken for a field or
+    topic name), ``null`` in any case None (the default, as a spec's ``null`` reads), else as given."""
+    if isinstance(value, str):
+        word = value.strip().lower()
+        if word == "null":
+            return None
+        if word in words:
+            return word
+    return value
+
+
+def _topic_named(given: Any, topics: dict[str, str]) -> Any:
+    """``given`` as the bag names the topic: ``points`` is ``/points`` (a ROS name without its leading slash is in the
+    root namespace; it was refused as "no topic 'points'" beside /points), else as given."""
+    if isinstance(given, str) and given and given != "none" and given not in topics and f"/{given.lstrip('/')}" in topics:
+        return f"/{given.lstrip('/')}"
+    return given
 
 
 def _ros2_type_name(name: str) -> str:

@@ -71,7 +71,8 @@ def run_instant(registration: Any, stamp_instant: str | None, has_point_times: n
 
 
 def stamps_at_instant(stamps_s: np.ndarray | None, scan: Scan | None, instant: str | None,
-                      all_stamps_s: np.ndarray | None = None, sweep_s: float | None = None) -> tuple[np.ndarray | None, str | None]:
+                      all_stamps_s: np.ndarray | None = None, sweep_s: float | None = None,
+                      sweep_offset_s: float | None = None) -> tuple[np.ndarray | None, str | None]:
     """``(the scans' stamps moved to the ``instant`` of their sweeps, note or None)``: the estimate's poses refer to
     ``instant`` (a deskewing variant's), its stamps to ``scan.stamp_instant``; stamped as they are, a pose written
     with its scan's stamp (``poses_tum.txt``) was paired with another instant's ground truth by anyone associating by
@@ -79,8 +80,16 @@ def stamps_at_instant(stamps_s: np.ndarray | None, scan: Scan | None, instant: s
     consecutive stamps of the whole sequence (``all_stamps_s``; not of a selection such as ``--frames 0:300:5``, which
     moved them by five sweeps) unless ``scan``, a whole sweep, spans clearly less or more (:func:`sweep_length`: a
     recording keeping every other sweep, 0.1 s of points stamped 0.2 s apart, was moved 0.2 s to the sweep end), else
-    the point times' span."""
+    the point times' span. Stamps at no clear instant of their sweeps are moved where the dataset places the sweeps:
+    ``sweep_offset_s`` after each stamp a sweep starts (a bag's ``sweep_offset_s``, e.g. -0.13 s for a driver stamping
+    on receipt, 30 ms after the sweep end), lasting ``sweep_s``; without it they are kept as they are."""
     stamp_at = None if scan is None else scan.stamp_instant
+    if stamps_s is not None and instant is not None and stamp_at is None and sweep_offset_s is not None and sweep_s:
+        shift = float(sweep_offset_s) + INSTANT_FRACTION[instant] * float(sweep_s)
+        side = "after" if sweep_offset_s <= 0 else "before"
+        return (np.asarray(stamps_s, dtype=np.float64) + shift,
+                f"stamped at the sweep {instant} (the scans' stamps, at no clear instant of the sweep, {abs(float(sweep_offset_s)):.4f} s "
+                f"{side} its start by the point times, moved by {shift:+.4f} s)")
     if stamps_s is None or instant is None or stamp_at is None or instant == stamp_at:
         return stamps_s, None
     stamps_s = np.asarray(stamps_s, dtype=np.float64)

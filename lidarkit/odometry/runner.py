@@ -643,7 +643,10 @@ def run(
     # (a bag knows how long its sweeps last from its first scans' point times: the first scan alone, part of a sweep when
     # the recording began mid-rotation, said nothing and the stamps' spacing was taken for it)
     sweep_s = getattr(sequence, "sweep_duration_s", None)
-    timestamps, stamp_note = stamps_at_instant(timestamps, first_scan, estimate_at, all_stamps, sweep_s=sweep_s)
+    # (and where a sweep starts against its stamp: a bag stamped on receipt, after the sweep end, at no clear instant)
+    sweep_offset_s = getattr(sequence, "sweep_offset_s", None)
+    timestamps, stamp_note = stamps_at_instant(timestamps, first_scan, estimate_at, all_stamps, sweep_s=sweep_s,
+                                               sweep_offset_s=sweep_offset_s)
     trajectory = Trajectory(poses, timestamps, name=f"{name} on {title}",
                             meta={"method": name, "dataset": dataset_name, **({"stamps": stamp_note} if stamp_note else {})})
     instant_note = unscored_note = None
@@ -694,7 +697,8 @@ def run(
     # moved to its own instant (against the estimate's, a half-sweep gap was named; skipped, a 2 s offset was not)
     kept_as_is = instant_note is not None and retimed is reference
     truth_at = (reference.meta or {}).get("pose_instant") if kept_as_is else None
-    at_truth = stamps_at_instant(scan_stamps, first_scan, truth_at, all_stamps, sweep_s=sweep_s)[0] if kept_as_is else timestamps
+    at_truth = (stamps_at_instant(scan_stamps, first_scan, truth_at, all_stamps, sweep_s=sweep_s, sweep_offset_s=sweep_offset_s)[0]
+                if kept_as_is else timestamps)
     apart = (_stamps_apart(reference, at_truth, all_stamps, numbers) if ground_truth is not None
              else _own_stamps_apart(reference, at_truth, all_stamps) if instant_note is None or kept_as_is else None)
     far = _far_float32_warning(far_float32, n)
