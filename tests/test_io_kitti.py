@@ -115,6 +115,16 @@ def test_ground_truth_at_checks_the_frame_numbers(odo_root):
     assert len(ds.ground_truth_at([4540], frame="camera")) == 1
 
 
+def test_relative_pose_backwards_and_to_itself(odo_root):
+    """relative_pose(9, 0), the truth of registering scan 0 onto scan 9 (a loop closure, a backward pass), was refused
+    as "timestamps are not strictly increasing"; (3, 3) too. Backwards is the inverse of forwards; to itself identity."""
+    ds = KittiOdometry(odo_root, "00")
+    forward = ds.relative_pose(0, 9)
+    np.testing.assert_allclose(ds.relative_pose(9, 0), se3_inverse(forward), atol=1e-12)
+    np.testing.assert_allclose(ds.relative_pose(3, 3), np.eye(4), atol=1e-15)
+    assert np.linalg.norm(forward[:3, 3]) > 5.0  # (the sequence moves between 0 and 9: not an identity passing by chance)
+
+
 def test_gt_lidar_motion_agrees_with_icp_on_the_scans(extra):
     """Independent check of the Tr direction: Open3D ICP on scans 94/95 reproduces the LiDAR-frame GT."""
     import open3d as o3d

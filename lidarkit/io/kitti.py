@@ -567,10 +567,13 @@ class KittiOdometry:
 
         This is the ``T_target_source`` a registration of scan b (source) onto scan a (target) should find.
         """
-        gt = self.ground_truth_at([frame_a, frame_b], frame=frame)
+        # looked up in increasing order (a trajectory's stamps increase: b before a, a loop closure or a backward
+        # registration, was "timestamps are not strictly increasing"), composed in the order asked
+        gt = self.ground_truth_at(sorted({frame_a, frame_b}), frame=frame)
         if gt is None:
             raise DataError("no ground-truth pose file for this sequence", source=self.sequence_dir)
-        return se3_inverse(gt.poses_se3[0]) @ gt.poses_se3[1]
+        pose = dict(zip(sorted({frame_a, frame_b}), gt.poses_se3))
+        return se3_inverse(pose[frame_a]) @ pose[frame_b]
 
     @property
     def ground_truth_camera(self) -> Trajectory | None:
