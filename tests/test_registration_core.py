@@ -896,6 +896,29 @@ def test_exact_search_over_a_full_scan_pair_is_refused_at_once():
         get_icp("knn", exact=True).align(src, dst)
 
 
+@pytest.mark.parametrize("method, params, option", [
+    ("vanilla", {"nn_backend": "brute"}, "vanilla nn_backend='brute'"), ("knn", {"nn_backend": "brute"}, "knn nn_backend='brute'"),
+    ("knn", {"exact": True}, "knn exact=true"),
+])
+def test_brute_force_over_a_pair_too_large_is_refused_naming_the_option_given(method, params, option):
+    """vanilla's nn_backend='brute' ran for minutes on the bundled KITTI pair where knn refused it, naming exact=true
+    though the user set nn_backend. Both refuse beyond MAX_BRUTE_FORCE_PAIRS before the first pass, naming the option;
+    so does the brute-force index itself, queried directly."""
+    from lidarkit.errors import RegistrationError
+    from lidarkit.registration.knn import MAX_BRUTE_FORCE_PAIRS
+    from lidarkit.registration.neighbors import NearestNeighbors
+    from lidarkit.samples import sample_path
+
+    pair = sample_path("kitti_pair")
+    src, dst = np.load(pair / "000095.npy")[:15000, :3], np.load(pair / "000094.npy")[:13400, :3]
+    assert MAX_BRUTE_FORCE_PAIRS < float(len(src)) * len(dst) < 1.01 * MAX_BRUTE_FORCE_PAIRS
+    with pytest.raises(RegistrationError, match=rf"^{re.escape(option)}: exact search over 15000 x 13400 points is too slow; "
+                                                 "set voxel_size_m to subsample"):
+        get_icp(method, max_iterations=1, coarse_stride=1, **params).align(src, dst)
+    with pytest.raises(RegistrationError, match=r"^nn_backend='brute': exact search over 15000 x 13400 points"):
+        NearestNeighbors(dst, backend="brute").query(src)
+
+
 def test_a_variant_whose_extra_is_missing_names_the_pip_line(monkeypatch):
     """Without small_gicp installed, '-m small_gicp' read as a typo ("unknown ICP method 'small_gicp'; available: ...")."""
     monkeypatch.delitem(registry_module._VARIANTS, "small_gicp", raising=False)

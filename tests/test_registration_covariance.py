@@ -901,6 +901,26 @@ def test_a_calibration_applies_only_to_the_configuration_it_was_learned_at(stree
     assert get_icp("pipeline", kernel="none").calibration_variant() is None
 
 
+def test_kiss_composition_keeps_kiss_entry_whatever_kiss_own_parameters(street_pair):
+    """A parameter kiss takes as its own (the adaptive threshold's start, points per voxel, map threads, neighbour
+    tracking, deskew off) leaves the pipeline kiss's composition: it gave kiss's pose bit for bit yet read "none
+    learned" with the closed form (28 mm x sigma where kiss's entry gives 60 mm). Another composition still does not
+    take the entry."""
+    source, target, _ = street_pair
+    kiss = get_icp("kiss", initial_threshold_m=3.0).align(source, target)
+    pipe = get_icp("pipeline", preset="kiss_like", threshold={"name": "adaptive", "initial_threshold_m": 3.0}).align(source, target)
+    np.testing.assert_allclose(pipe.T_target_source, kiss.T_target_source, atol=1e-9)
+    assert pipe.extra["covariance_calibration"] == "pipeline"
+    np.testing.assert_allclose(pipe.covariance, kiss.covariance, rtol=1e-6, atol=1e-15)
+    for params in ({"map": {"name": "voxel_hash", "max_points_per_voxel": 30}},
+                   {"map": {"name": "voxel_hash", "track_neighbors": False}}, {"map": {"name": "voxel_hash", "workers": 1}},
+                   {"deskew": {"name": "constant_velocity", "deskew": False}}):
+        assert get_icp("pipeline", preset="kiss_like", **params).calibration_variant() == "pipeline", params
+    other = get_icp("pipeline", map={"name": "voxel_hash", "search": "kdtree"}, map_voxel_factor=1.0)
+    assert other.calibration_variant() is None
+    assert other._calibration()[1] == ["map={'name': 'voxel_hash', 'search': 'kdtree'}", "map_voxel_factor=1.0"]
+
+
 def test_a_plane_based_entry_applies_only_near_the_gate_and_voxel_it_was_learned_at(street_pair):
     """small_gicp's entry (learned at a 1 m gate and 0.25 m voxels) applied at any: at a 3 m gate mean NEES 16.5 with 47 %
     inside the 95 % bound (its closed form 4.0 / 97 %), at 0.1 m voxels 12.0 / 63 %, and the note named the entry. Beyond

@@ -46,3 +46,21 @@ def test_a_sweep_outside_the_range_crop_is_a_one_line_error(method, tmp_path):
         init_T[:3, 3] = -FAR_OFFSET_M
         with pytest.raises(RegistrationError, match=r"^source cloud: only 0 points within \[0.3, 100\] m"):
             get_icp(method).align(source, target - FAR_OFFSET_M, init_T=init_T)
+
+
+@pytest.mark.parametrize("method", ["kiss", "genz", "pipeline"])
+def test_a_far_cloud_refused_by_the_range_crop_says_where_it_lies(method, tmp_path):
+    """kiss said "only 0 points within [0.0, 100.0] m of the sensor" and pipeline "only 0 points left after preprocessing"
+    for a cloud 1000 m off its sensor, neither saying the cloud was far; both now say where it lies and that scans come
+    in their sensor frame, as genz. A cloud in its sensor frame that the crop empties gets its distances, no such hint."""
+    if method not in available_icp():
+        pytest.skip(f"{method} not installed")
+    target, source = _far_scans(tmp_path)
+    far_hint = "m from the sensor, as a georeferenced or map-frame cloud does: give scans in their sensor frame"
+    with pytest.raises(RegistrationError, match=rf"^source cloud: only 0 points .*the cloud lies 1[67]\d\d\.\d-1[78]\d\d\.\d {far_hint}\)$"):
+        get_icp(method).align(source, target)
+    with pytest.raises(RegistrationError, match=rf"the cloud lies 1[67]\d\d\.\d-1[78]\d\d\.\d {far_hint}\): there is nothing to register$"):
+        get_icp(method).register_frame(target)
+    near = target - FAR_OFFSET_M
+    with pytest.raises(RegistrationError, match=r"^source cloud: only 0 points .*; the cloud lies \d\.\d-\d+\.\d m from the sensor\)$"):
+        get_icp(method, max_range_m=1.0, min_range_m=0.5).align(near, near)

@@ -34,6 +34,7 @@ from pydantic import Field, model_validator
 
 from lidarkit.errors import RegistrationError
 from lidarkit.geometry import as_points, is_rotation, orthonormalize_se3, transform_points
+from lidarkit.registration import local_origin
 from lidarkit.registration.assessment import assess_alignment
 from lidarkit.registration.base import (
     Registration, RegistrationConfig, RegistrationResult, as_point_times, check_init_T, check_point_times,
@@ -183,11 +184,9 @@ class GenzRegistration(Registration):
         """Which points genz-icp's range crop keeps, by their distance ``(N,)`` from the sensor."""
         return (range_m > self.config.min_range_m) & (range_m < self.config.max_range_m)
 
-    def _crop_text(self, range_m: np.ndarray) -> str:
+    def _crop_text(self, points_xyz: np.ndarray) -> str:
         """The range crop and where the cloud lies, for the error of a cloud it leaves (nearly) empty."""
-        c = self.config
-        return (f"[{c.min_range_m:g}, {c.max_range_m:g}] m of the sensor (min_range_m / max_range_m; the cloud lies "
-                f"{range_m.min():.1f}-{range_m.max():.1f} m from it)")
+        return local_origin.range_crop_text(self.config.min_range_m, self.config.max_range_m, points_xyz)
 
     def register_frame(self, points_xyz: np.ndarray, point_times_s: np.ndarray | None = None) -> np.ndarray:
         """Register one sweep; returns ``T_world_lidar`` (4x4; at mid-sweep when deskewed). A first sweep with no
@@ -201,7 +200,7 @@ class GenzRegistration(Registration):
         # nothing in range and nothing registered yet: genz-icp returns the identity as a pose (a 0 m path, no word)
         range_m = np.linalg.norm(frame, axis=1)
         if not self._in_range(range_m).any() and len(genz.local_map.point_cloud()) == 0:
-            raise RegistrationError(f"no point of the sweep lies within {self._crop_text(range_m)}: there is nothing to "
+            raise RegistrationError(f"no point of the sweep lies within {self._crop_text(frame)}: there is nothing to "
                                     "register", source=self.name)
         # the native call GenZICP.register_frame makes, without its visualiser-only frame conversions
         if times is not None:
@@ -223,10 +222,10 @@ class GenzRegistration(Registration):
         # clouds the range crop leaves (nearly) empty, as kiss words it: register_frame's error would name the sweep, and
         # a source cropped to nothing was assessed as "only 0 correspondences" on a pose thrown off by genz's empty frame
         source_range_m, target_range_m = np.linalg.norm(source_xyz, axis=1), np.linalg.norm(target_xyz, axis=1)
-        for name, range_m in (("source cloud", source_range_m), ("target cloud", target_range_m)):
+        for name, cloud, range_m in (("source cloud", source_xyz, source_range_m), ("target cloud", target_xyz, target_range_m)):
             n_kept = int(self._in_range(range_m).sum())
             if n_kept < 3:
-                raise RegistrationError(f"only {n_kept} points within {self._crop_text(range_m)}", source=name)
+                raise RegistrationError(f"only {n_kept} points within {self._crop_text(cloud)}", source=name)
         saved = self._genz, self._start
         try:
             self._genz, self._start = GenZICP(c.to_genz_config()), np.eye(4)
@@ -240,7 +239,7 @@ class GenzRegistration(Registration):
             self._genz, self._start = saved
         if len(map_points) < 3:
             raise RegistrationError(f"genz-icp kept only {len(map_points)} map points of the target within "
-                                    f"{self._crop_text(target_range_m)}", source="target cloud")
+                                    f"{self._crop_text(target_xyz)}", source="target cloud")
         T = T_rel @ init_T
         source = source_xyz[self._in_range(source_range_m)]
         source = source[:: max(1, len(source) // 20000)]

@@ -55,10 +55,9 @@ from lidarkit.registration.ground import (
     available_ground_segmenters,
     get_ground_segmenter,
 )
-from lidarkit.registration.neighbors import NearestNeighbors
 from lidarkit.registration.planar import is_2d_scan
 from lidarkit.registration.registry import register_icp
-from lidarkit.registration.vanilla import VanillaConfig, VanillaICP, prepare, staged_icp
+from lidarkit.registration.vanilla import VanillaConfig, VanillaICP, prepare, staged_icp, target_index
 
 log = logging.getLogger(__name__)
 
@@ -382,7 +381,7 @@ class GroundFilteredICP(VanillaICP):
             sweep = se3_fraction(init_T, self._sweeps_apart)
             clouds = [deskew_to_sweep_end(clouds[0], frac_src, sweep), deskew_to_sweep_end(clouds[1], frac_dst, sweep)]
         src, dst = prepare(clouds[0], clouds[1], c.voxel_size_m)
-        neighbors = NearestNeighbors(dst, backend=c.nn_backend, leafsize=c.leafsize, workers=c.workers)
+        neighbors = target_index(src, dst, c, self.name)
         result = staged_icp(src, dst, init_T, neighbors, c)
         if deskew and result.converged:  # once more with the source deskewed by the estimated motion
             src = prepare(deskew_to_sweep_end(raw_source, frac_src, se3_fraction(result.T_target_source, self._sweeps_apart)), clouds[1], c.voxel_size_m)[0]
@@ -420,7 +419,7 @@ class GroundFilteredICP(VanillaICP):
                 return dataclasses.replace(result, reason=reason, extra={**result.extra, **extra})
         if c.fallback == "with_ground":
             src, dst = prepare(source_xyz, target_xyz, c.voxel_size_m)
-            neighbors = NearestNeighbors(dst, backend=c.nn_backend, leafsize=c.leafsize, workers=c.workers)
+            neighbors = target_index(src, dst, c, self.name)
             result = staged_icp(src, dst, init_T, neighbors, c)
             reason = f"{why}; solved with the ground included" + (f"; {result.reason}" if result.reason else "")
             return dataclasses.replace(result, reason=reason, extra={**result.extra, **extra, "ground_refined": False})

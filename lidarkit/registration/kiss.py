@@ -23,6 +23,7 @@ from pydantic import Field, model_validator
 from lidarkit.errors import RegistrationError
 from lidarkit.geometry import as_points, is_rotation, orthonormalize_se3, se3_fraction, se3_inverse, se3_log
 from lidarkit.params import changed_fields
+from lidarkit.registration import local_origin
 from lidarkit.registration.assessment import assess_alignment
 from lidarkit.registration.base import (
     Registration, RegistrationConfig, RegistrationResult, check_init_T, check_point_times, check_sweeps_apart, finite_4x4,
@@ -209,8 +210,8 @@ class KissRegistration(Registration):
                 kiss.preprocessor = own
         if len(source) == 0 and kiss.local_map.empty():  # nothing registered yet and nothing to register with
             c = self.config
-            raise RegistrationError(f"no point of the sweep lies within [{c.min_range_m:g}, {c.max_range_m:g}] m of the sensor "
-                                    "(min_range_m / max_range_m): there is nothing to register", source="kiss")
+            within = local_origin.range_crop_text(c.min_range_m, c.max_range_m, frame)
+            raise RegistrationError(f"no point of the sweep lies within {within}: there is nothing to register", source="kiss")
         return np.array(kiss.last_pose, dtype=np.float64)
 
     def _register(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray):
@@ -225,9 +226,10 @@ class KissRegistration(Registration):
         no_times, identity = np.array([]), np.eye(4)
         target = crop.preprocess(np.ascontiguousarray(target_xyz), no_times, identity)
         source = crop.preprocess(np.ascontiguousarray(source_xyz), no_times, identity)
-        for name, cloud in (("source cloud", source), ("target cloud", target)):
+        for name, cloud, given in (("source cloud", source, source_xyz), ("target cloud", target, target_xyz)):
             if len(cloud) < 3:
-                raise RegistrationError(f"only {len(cloud)} points within [{c.min_range_m}, {c.max_range_m}] m of the sensor", source=name)
+                within = local_origin.range_crop_text(c.min_range_m, c.max_range_m, given)
+                raise RegistrationError(f"only {len(cloud)} points within {within}", source=name)
         voxel = c.resolved_voxel_size_m
         local_map = get_voxel_hash_map(kcfg)
         local_map.update(voxel_down_sample(target, voxel * 0.5), identity)

@@ -49,6 +49,24 @@ def sensor_proxy(points_xyz: np.ndarray, near_m: float = SENSOR_NEAR_M) -> np.nd
     return None if float(np.linalg.norm(centre)) <= near_m else centre
 
 
+def where_cloud_lies(points_xyz: np.ndarray) -> str:
+    """How far ``(N, 3)`` points lie from their frame's origin, where a range crop puts the sensor, for the error of a
+    cloud the crop leaves (nearly) empty; a cloud whose middle is far out (:func:`sensor_proxy`) is told to come in its
+    sensor frame (georeferenced, 5e6 m out, kiss said only "0 points within [0.0, 100.0] m of the sensor")."""
+    range_m = np.linalg.norm(np.asarray(points_xyz, dtype=np.float64), axis=1)
+    if len(range_m) == 0:
+        return "the cloud is empty"
+    text = f"the cloud lies {range_m.min():.1f}-{range_m.max():.1f} m from the sensor"
+    if sensor_proxy(points_xyz) is None:
+        return text
+    return text + ", as a georeferenced or map-frame cloud does: give scans in their sensor frame"
+
+
+def range_crop_text(min_range_m: float, max_range_m: float, points_xyz: np.ndarray) -> str:
+    """``[min, max] m of the sensor``, the options that set it and :func:`where_cloud_lies` for ``points_xyz``."""
+    return f"[{min_range_m:g}, {max_range_m:g}] m of the sensor (min_range_m / max_range_m; {where_cloud_lies(points_xyz)})"
+
+
 #: ``(target, source)`` sensor proxies of the clouds as the caller gave them to ``align`` (see :func:`use_sensors`)
 _SENSORS: contextvars.ContextVar[tuple[np.ndarray | None, np.ndarray | None] | None] = contextvars.ContextVar("cloud_sensors", default=None)
 
@@ -108,4 +126,5 @@ def given(points_xyz: np.ndarray, offset: np.ndarray | None) -> np.ndarray:
     return points_xyz if offset is None else points_xyz + offset
 
 
-__all__ = ["FAR_M", "SENSOR_NEAR_M", "given", "given_sensors", "into", "local_offset", "out_of", "sensor_proxy", "sensors_of", "shift", "use_sensors"]
+__all__ = ["FAR_M", "SENSOR_NEAR_M", "given", "given_sensors", "into", "local_offset", "out_of", "range_crop_text", "sensor_proxy", "sensors_of",
+           "shift", "use_sensors", "where_cloud_lies"]

@@ -17,9 +17,21 @@ from typing import Annotated
 import numpy as np
 from pydantic import AfterValidator
 
-from lidarkit.errors import ConfigError
+from lidarkit.errors import ConfigError, RegistrationError
 
 BACKENDS = ("auto", "scipy", "open3d", "brute")
+
+#: Refuse brute force beyond this many point pairs per pass (use voxel_size_m to subsample): one pass over 3.0e9 pairs
+#: (the bundled KITTI pair) took 41 s, and ICP makes 20-40 of them (it ran for 10 minutes and more).
+MAX_BRUTE_FORCE_PAIRS = 2e8
+
+
+def refuse_slow_brute_force(n_queries: int, n_targets: int, source: str) -> None:
+    """Refuse a brute-force search of ``n_queries`` points among ``n_targets`` beyond :data:`MAX_BRUTE_FORCE_PAIRS`;
+    ``source`` names the option that chose brute force (e.g. ``"vanilla nn_backend='brute'"``)."""
+    if float(n_queries) * n_targets > MAX_BRUTE_FORCE_PAIRS:
+        raise RegistrationError(f"exact search over {n_queries} x {n_targets} points is too slow; set voxel_size_m to "
+                                f"subsample (at most {MAX_BRUTE_FORCE_PAIRS:.0e} point pairs a pass)", source=source)
 
 
 def _scipy_workers(value: int) -> int:
@@ -42,7 +54,10 @@ def resolved_backend(backend: str) -> str:
 class NearestNeighbors:
     """Index over ``(M, 3)`` target points; :meth:`query` returns squared distances and indices."""
 
-    def __init__(self, target_xyz: np.ndarray, backend: str = "auto", leafsize: int = 16, workers: int = -1):
+    def __init__(self, target_xyz: np.ndarray, backend: str = "auto", leafsize: int = 16, workers: int = -1,
+                 source: str = "nn_backend='brute'"):
+        """``source``: what chose the backend, named when brute force refuses a query too large for it."""
+        self.source = source
         if backend not in BACKENDS:
             raise ConfigError(f"unknown nearest-neighbour backend {backend!r}; available: {', '.join(BACKENDS)}", source="nn_backend")
         self.target_xyz = np.asarray(target_xyz, dtype=np.float64)
@@ -78,6 +93,7 @@ class NearestNeighbors:
             idx_t, _ = self._nns.knn_search(o3c.Tensor((pts - self._center).astype(np.float32)), 1)
             idx = idx_t.numpy().reshape(-1).astype(np.int64, copy=False)
         else:
+            refuse_slow_brute_force(len(pts), len(self.target_xyz), self.source)
             idx = self._brute_indices(pts)
         diff = pts - self.target_xyz[idx]
         return np.einsum("ij,ij->i", diff, diff), idx
@@ -103,4 +119,4 @@ def _open3d_nns_available() -> bool:
     return True
 
 
-__all__ = ["BACKENDS", "NearestNeighbors"]
+__all__ = ["BACKENDS", "MAX_BRUTE_FORCE_PAIRS", "NearestNeighbors", "refuse_slow_brute_force"]

@@ -33,6 +33,7 @@ from scipy.spatial import cKDTree
 from lidarkit.errors import ConfigError, RegistrationError
 from lidarkit.geometry import as_points, orthonormalize_se3, se3_fraction, se3_inverse, transform_points
 from lidarkit.params import changed_fields
+from lidarkit.registration import local_origin
 from lidarkit.registration.assessment import assess_alignment
 from lidarkit.registration.base import (
     Degeneracy, Registration, RegistrationConfig, RegistrationResult, as_point_times, check_init_T, check_point_times,
@@ -226,6 +227,13 @@ def is_kiss_composition(config: PipelineConfig) -> bool:
     return composition(config) == composition(PipelineConfig(preset="kiss_like"))
 
 
+def composition_changes(config: PipelineConfig) -> list[str]:
+    """Where ``config``'s composition departs from kiss's (:func:`composition`), as ``"name=value"`` each: empty for
+    kiss's own, whatever the values of :data:`PARAMETERS_OUTSIDE_COMPOSITION` (kiss's own parameters)."""
+    mine, kiss = composition(config), composition(PipelineConfig(preset="kiss_like"))
+    return [f"{name}={getattr(config, name)}" for name in mine if mine[name] != kiss.get(name)]
+
+
 def _given(kind: str, spec: Spec, param: str) -> Any:
     """The value ``spec`` gives its component's ``param`` when other than the component's default, else None (a value
     equal to the default changes nothing, and a written config gives every parameter)."""
@@ -280,6 +288,16 @@ def _applied(step: Any, points_xyz: np.ndarray) -> np.ndarray:
     if not isinstance(out, np.ndarray) or out.ndim != 2 or out.shape[1] != 3:
         raise output_error(step, f"{type(out).__name__} of shape {np.shape(out)}, not (M, 3) points")
     return out
+
+
+def _steps_text(components: dict[str, Any]) -> str:
+    """The preprocess steps as a message names them: ``range_crop [0, 100] m``, ``no preprocess steps``."""
+    steps = []
+    for step in components["preprocess"]:
+        described = step.describe()
+        crop = [described.get("min_range_m"), described.get("max_range_m")]
+        steps.append(described.get("name", type(step).__name__) + (f" [{crop[0]:g}, {crop[1]:g}] m" if None not in crop else ""))
+    return ", ".join(steps) if steps else "no preprocess steps"
 
 
 def _pose(component: Any, T: Any, what: str) -> np.ndarray:
@@ -366,6 +384,16 @@ class PipelineRegistration(Registration):
         """Every component with its resolved parameters."""
         return describe_components(self._components)
 
+    def _calibration(self) -> tuple[str | None, list[str]]:
+        """kiss's entry wherever the composition is kiss's (:func:`is_kiss_composition`, the rule :attr:`reads_data_as`
+        follows): a parameter kiss takes as its own (an adaptive threshold starting at 3 m, 30 points per voxel, one
+        thread) gave kiss's pose bit for bit and kiss keeps its entry at any value, yet read "none learned" (28 mm x
+        sigma where kiss gives 60 mm)."""
+        learned, unlearned = super()._calibration()
+        if learned != "pipeline":  # (a plugin subclass under an entry of its own)
+            return learned, unlearned
+        return learned, composition_changes(self.config)
+
     # ------------------------------------------------------------------ sequence mode
     def reset(self, T_world_lidar_initial: np.ndarray | None = None) -> None:
         """Start a new sequence: empty map, zero velocity, first pose ``T_world_lidar_initial`` (identity), checked as
@@ -403,7 +431,8 @@ class PipelineRegistration(Registration):
         sigma, gate = _distances(threshold)
         if len(source) == 0 and c["map"].empty:  # (every frame returned the prediction: a 0 m path, no warning)
             raise RegistrationError("no point of the sweep is left after preprocessing (max_range_m / min_range_m, the "
-                                    "preprocess steps): there is nothing to register", source="pipeline")
+                                    f"preprocess steps; {local_origin.where_cloud_lies(raw)}): there is nothing to register",
+                                    source="pipeline")
         if c["map"].empty or len(source) == 0:
             T, info = guess, {"iterations": 0, "n_correspondences": 0, "rmse_history": ()}
         else:
@@ -505,12 +534,13 @@ class PipelineRegistration(Registration):
         """Pairwise: the map is built from the target alone; the threshold is its initial value (no motion seen)."""
         c = build_components(self.config)
         self._refuse_2d(source_xyz, target_xyz, c)
-        steps = c["preprocess"]
-        for step in steps:
+        given = {"source cloud": source_xyz, "target cloud": target_xyz}
+        for step in c["preprocess"]:
             source_xyz, target_xyz = _applied(step, source_xyz), _applied(step, target_xyz)
         for name, cloud in (("source cloud", source_xyz), ("target cloud", target_xyz)):
-            if len(cloud) < 3:
-                raise RegistrationError(f"only {len(cloud)} points left after preprocessing", source=name)
+            if len(cloud) < 3:  # (a far cloud: nothing within a range crop around the frame's origin)
+                raise RegistrationError(f"only {len(cloud)} points left after preprocessing ({_steps_text(c)}; "
+                                        f"{local_origin.where_cloud_lies(given[name])})", source=name)
         target_map, _ = self._voxelize(target_xyz)
         dense, source = self._voxelize(source_xyz)
         saved = self._components
@@ -543,6 +573,6 @@ class PipelineRegistration(Registration):
 
 __all__ = [
     "COMPOSITION_SETTINGS", "PARAMETERS_OUTSIDE_COMPOSITION", "PRESETS", "SHARED_SETTINGS", "PipelineConfig",
-    "PipelineRegistration", "build_components", "composition", "describe_components", "is_kiss_composition",
+    "PipelineRegistration", "build_components", "composition", "composition_changes", "describe_components", "is_kiss_composition",
     "unread_component_parameters", "unread_settings", "unscaled_kernel",
 ]

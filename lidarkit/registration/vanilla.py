@@ -16,7 +16,7 @@ from lidarkit.geometry import kabsch_umeyama, make_se3
 from lidarkit.params import changed_fields
 from lidarkit.registration.assessment import assess_alignment
 from lidarkit.registration.base import Degeneracy, Registration, RegistrationConfig, RegistrationResult
-from lidarkit.registration.neighbors import NearestNeighbors, ScipyWorkers, resolved_backend
+from lidarkit.registration.neighbors import NearestNeighbors, ScipyWorkers, refuse_slow_brute_force, resolved_backend
 from lidarkit.registration.planar import planar_kabsch
 from lidarkit.registration.preprocess import voxel_downsample
 from lidarkit.registration.registry import register_icp
@@ -152,6 +152,18 @@ def prepare(source_xyz: np.ndarray, target_xyz: np.ndarray, voxel_size_m: float 
     return voxel_downsample(source_xyz, voxel_size_m), voxel_downsample(target_xyz, voxel_size_m)
 
 
+def target_index(source_xyz: np.ndarray, target_xyz: np.ndarray, config: VanillaConfig, variant: str) -> NearestNeighbors:
+    """The nearest-neighbour index over ``target_xyz`` that ``config`` asks for; brute force (``nn_backend='brute'``,
+    knn's ``exact=true``) over a pair too large for it is refused before the first pass, naming the option (vanilla ran
+    for minutes on a full KITTI pair)."""
+    exact = bool(getattr(config, "exact", False))
+    backend = "brute" if exact else config.nn_backend
+    source = f"{variant} " + ("exact=true" if exact else f"nn_backend={backend!r}")
+    if backend == "brute":
+        refuse_slow_brute_force(len(source_xyz), len(target_xyz), source)
+    return NearestNeighbors(target_xyz, backend=backend, leafsize=config.leafsize, workers=config.workers, source=source)
+
+
 def staged_icp(
     source_xyz: np.ndarray,
     target_xyz: np.ndarray,
@@ -196,5 +208,4 @@ class VanillaICP(Registration):
     def _align(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray) -> RegistrationResult:
         c = self.config
         src, dst = prepare(source_xyz, target_xyz, c.voxel_size_m)
-        neighbors = NearestNeighbors(dst, backend=c.nn_backend, leafsize=c.leafsize, workers=c.workers)
-        return staged_icp(src, dst, init_T, neighbors, c)
+        return staged_icp(src, dst, init_T, target_index(src, dst, c, self.name), c)
