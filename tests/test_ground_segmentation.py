@@ -305,6 +305,20 @@ def test_ground_filtered_on_a_georeferenced_pair_removes_the_ground_and_refines_
         get_icp("ground_filtered", ground_method="height").align(source + offset, target + offset)
 
 
+def test_a_cloud_moved_by_whole_metres_is_segmented_on_its_own_frames_grid():
+    """A map-frame cloud was moved back by its unrounded median: local_plane's 1 m cells then cut the scene elsewhere
+    than in the sensor frame (ground_filtered's calibrated x/y sigmas 4.4 / 2.7 mm for 14.1 / 9.7 at 300 m out). Moved
+    back by whole metres, a cloud moved by whole metres gets the sensor frame's ground mask."""
+    from conftest import shared_path
+    from registration_helpers import kitti_pair
+
+    source, _, _ = kitti_pair(shared_path, 94, 95)
+    segmenter = get_ground_segmenter("local_plane")
+    at_origin = segmenter.segment(source)
+    for offset in (np.array([300.0, -200.0, 0.0]), np.array([500432.0, 4500217.0, 35.0])):
+        np.testing.assert_array_equal(segmenter.segment(source + offset), at_origin)
+
+
 def test_segmenter_numbers_refuse_yes_no_values_and_infinity(tmp_path, capsys):
     """``ground_params={sensor_height_m: yes}`` ran with a 1 m sensor height (pydantic read yes as 1), and ``.inf``
     passed ``gt=0``; ground_filtered's own ``sensor_height_m=yes`` was refused. The segmenters' numbers now refuse

@@ -68,7 +68,10 @@ class GroundSegmenter:
                     f"({', '.join(n for n, k in sorted(_REGISTRY.items()) if not k.heights_from_sensor)})",
                     source=f"ground segmenter {self.name!r}",
                 )
-            pts = pts - sensor
+            # by whole metres: a grid-based segmenter (local_plane's 1 m cells) then sees a cloud moved by whole metres
+            # on the grid it has in its own frame (moved by the unrounded median, 300 m out, ground_filtered's
+            # calibrated x/y sigmas came out 0.3x the sensor frame's)
+            pts = pts - np.round(sensor)
         mask = np.asarray(self._segment(pts), dtype=bool)
         if mask.shape != (len(pts),):
             raise DataError(f"segmenter returned a mask of shape {mask.shape} for {len(pts)} points", source=self.name)
