@@ -120,8 +120,8 @@ def test_relative_pose_backwards_and_to_itself(odo_root):
     as "timestamps are not strictly increasing"; (3, 3) too. Backwards is the inverse of forwards; to itself identity."""
     ds = KittiOdometry(odo_root, "00")
     forward = ds.relative_pose(0, 9)
-    np.testing.assert_allclose(ds.relative_pose(9, 0), se3_inverse(forward), atol=1e-12)
-    np.testing.assert_allclose(ds.relative_pose(3, 3), np.eye(4), atol=1e-15)
+    np.testing.assert_allclose(ds.relative_pose(9, 0), se3_inverse(forward), atol=1e-5)  # (rotations of 7 digits)
+    np.testing.assert_array_equal(ds.relative_pose(3, 3), np.eye(4))
     assert np.linalg.norm(forward[:3, 3]) > 5.0  # (the sequence moves between 0 and 9: not an identity passing by chance)
 
 

@@ -121,6 +121,21 @@ def test_scans_read_when_present(raw_copy):
         KittiRaw(raw_copy, DATE, DRIVE).ground_truth
 
 
+def test_points_dropped_as_nonfinite_are_kept_once_for_the_runs_warnings(raw_copy):
+    """drop_nonfinite=true logged the points it left out and the run's metrics.json had no word of them (as KITTI
+    odometry and scan folders had not): the first scan's line is kept once in reader_warnings."""
+    velo = _drive(raw_copy) / "velodyne_points" / "data"
+    velo.mkdir()
+    points = np.fromfile(shared_path("kitti_odometry", "sequences", "00", "velodyne", "000000.bin"), dtype="<f4").reshape(-1, 4)
+    points[7:10, 2] = np.nan
+    points.tofile(velo / "0000000000.bin")
+    ds = KittiRaw(raw_copy, DATE, int(DRIVE), drop_nonfinite=True)
+    assert len(ds.read_scan(0).points_xyz) == len(points) - 3
+    ds.read_scan(0)
+    assert ds.reader_warnings == [f"left out 3 of {len(points)} points with NaN or infinite values in frame 0 "
+                                  f"({velo / '0000000000.bin'}); in later frames without another warning"]
+
+
 # ---- errors -----------------------------------------------------------------------------------------------
 def test_missing_velodyne_is_a_clear_error(raw_root):
     ds = KittiRaw(raw_root, DATE, DRIVE)

@@ -19,7 +19,7 @@ import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.io.base import Scan, checked_index, option_path
-from lidarkit.io.pointfile import POINT_FILE_SUFFIXES, point_file_fields, read_point_file
+from lidarkit.io.pointfile import POINT_FILE_SUFFIXES, point_file_fields, read_point_file, said_once
 from lidarkit.textfile import data_line_numbers, read_numeric_table
 from lidarkit.trajectory import Trajectory
 
@@ -104,7 +104,6 @@ class ScanFolder:
         self.drop_nonfinite = drop_nonfinite
         #: what the reader left out (NaN or infinite points, under drop_nonfinite), for the run's warnings: once
         self.reader_warnings: list[str] = []
-        self._nonfinite_said = False
         broken = next((p for p in folder.iterdir() if p.suffix.lower() in wanted and p.is_symlink() and not p.exists()), None)
         if broken is not None:  # a scan that is not there: never skipped without a word
             raise DataError(f"a broken link (to {os.readlink(broken)})", source=broken)
@@ -245,9 +244,7 @@ class ScanFolder:
         dropped: list[str] = []
         scan = read_point_file(self.scan_paths[index], frame=index, timestamp_s=ts, drop_nonfinite=self.drop_nonfinite,
                                dropped=dropped)
-        if dropped and not self._nonfinite_said:
-            self._nonfinite_said = True
-            self.reader_warnings.append(f"{dropped[0]}; in later frames without another warning")
+        said_once(self.reader_warnings, dropped)
         return scan
 
 

@@ -36,7 +36,7 @@ from lidarkit.errors import ConfigError, DataError, not_increasing
 from lidarkit.geometry import se3_inverse
 from lidarkit.io.base import INSTANT_FRACTION, Scan, checked_index, checked_indices, option_path
 from lidarkit.io.pointcloud2 import MAX_SWEEP_S, check_sweep_span, checked_point_times, point_times_seconds, time_unit_read
-from lidarkit.io.pointfile import at_sensor_origin, load_npy, read_kitti_bin
+from lidarkit.io.pointfile import at_sensor_origin, load_npy, read_kitti_bin, said_once
 from lidarkit.textfile import file_line, is_number, read_lines, read_numeric_table
 from lidarkit.trajectory import Trajectory
 
@@ -198,7 +198,6 @@ class KittiOdometry:
         self.drop_nonfinite = drop_nonfinite
         #: what the reader left out (NaN or infinite points, under drop_nonfinite), for the run's warnings: once
         self.reader_warnings: list[str] = []
-        self._nonfinite_said = False
         root = Path(root)
         if not root.is_dir():
             raise DataError("dataset folder not found" if not root.exists() else "not a folder", source=root)
@@ -572,6 +571,8 @@ class KittiOdometry:
         gt = self.ground_truth_at(sorted({frame_a, frame_b}), frame=frame)
         if gt is None:
             raise DataError("no ground-truth pose file for this sequence", source=self.sequence_dir)
+        if frame_a == frame_b:  # (the stored rotations hold 7 digits: inverse times itself was 4e-7 from identity)
+            return np.eye(4)
         pose = dict(zip(sorted({frame_a, frame_b}), gt.poses_se3))
         return se3_inverse(pose[frame_a]) @ pose[frame_b]
 
@@ -616,9 +617,7 @@ class KittiOdometry:
         ts = None if stamps is None else float(stamps[0])
         dropped: list[str] = []
         scan = read_kitti_bin(self.scan_paths[index], frame=frame, timestamp_s=ts, drop_nonfinite=self.drop_nonfinite, dropped=dropped)
-        if dropped and not self._nonfinite_said:
-            self._nonfinite_said = True
-            self.reader_warnings.append(f"{dropped[0]}; in later frames without another warning")
+        said_once(self.reader_warnings, dropped)
         if ts is not None and self._simulator_pose_instant is not None:  # the simulator stamps sweeps at its pose instant
             scan = dataclasses.replace(scan, stamp_instant=self._simulator_pose_instant)
         if self._correct:

@@ -38,7 +38,7 @@ from lidarkit.io.base import INSTANT_FRACTION, Scan, checked_index, checked_indi
 from lidarkit.io.kitti import (
     CORRECTED_BY_DEFAULT, check_vertical_correction, correct_vertical_angle, correction_options, indexed_files, read_gray_image,
 )
-from lidarkit.io.pointfile import read_kitti_bin
+from lidarkit.io.pointfile import read_kitti_bin, said_once
 from lidarkit.textfile import file_line, read_lines, read_numeric_table
 from lidarkit.trajectory import Trajectory
 
@@ -126,6 +126,8 @@ class KittiRaw:
         self.drive_dir = self.calib_dir / f"{self.date}_drive_{self.drive}_{self.dataset}"
         self.name = f"kitti_raw_{self.date}_{self.drive}"
         self.drop_nonfinite = drop_nonfinite
+        #: what the reader left out (NaN or infinite points, under drop_nonfinite), for the run's warnings: once
+        self.reader_warnings: list[str] = []
         for folder in (base, self.calib_dir, self.drive_dir):
             if not folder.is_dir():
                 raise DataError("folder not found", source=folder)
@@ -310,7 +312,9 @@ class KittiRaw:
         frame = int(self.scan_frames[index])
         times = self.timestamps_s  # (a timestamps.txt that does not cover the scans is an error, not a missing stamp)
         ts = None if times is None else float(times[index])
-        scan = read_kitti_bin(self.scan_paths[index], frame=frame, timestamp_s=ts, drop_nonfinite=self.drop_nonfinite)
+        dropped: list[str] = []
+        scan = read_kitti_bin(self.scan_paths[index], frame=frame, timestamp_s=ts, drop_nonfinite=self.drop_nonfinite, dropped=dropped)
+        said_once(self.reader_warnings, dropped)
         if self._correct:
             scan = dataclasses.replace(scan, points_xyz=correct_vertical_angle(scan.points_xyz))
         fractions = sweep_fraction_from_azimuth(scan.points_xyz) if self.point_times == "azimuth" else None

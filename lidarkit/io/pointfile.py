@@ -107,6 +107,16 @@ def finite_points(
     return points_xyz, intensity
 
 
+
+def said_once(reader_warnings: list[str], dropped: list[str]) -> None:
+    """Keep the first scan's line of ``dropped`` (points a reader left out) in a sequence reader's ``reader_warnings``,
+    once per reader: a run's metrics.json says it without a line per frame."""
+    if dropped and not any(w.endswith(LATER_FRAMES) for w in reader_warnings):
+        reader_warnings.append(f"{dropped[0]}{LATER_FRAMES}")
+
+
+LATER_FRAMES = "; in later frames without another warning"
+
 def at_sensor_origin(points_xyz: np.ndarray) -> np.ndarray:
     """``(N,)`` bool: the points exactly at (0, 0, 0), where an organized cloud stores its missing returns."""
     return (points_xyz[:, 0] == 0) & (points_xyz[:, 1] == 0) & (points_xyz[:, 2] == 0)  # 10x faster than any(axis=1)
