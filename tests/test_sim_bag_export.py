@@ -132,3 +132,25 @@ def test_the_kitti_export_names_an_out_dir_that_is_no_path():
 
     with pytest.raises(ConfigError, match="out_dir: takes a path, got NoneType None"):
         export_kitti(SimulatedLidarSequence(n_frames=2, n_beams=8, n_azimuths=64), None)
+
+
+def test_a_bag_whose_returns_cover_part_of_the_turn_places_its_sweeps_by_the_kept_start_and_end_poses(tmp_path):
+    """With returns on part of the turn only, the points of a sweep spanned 0.0884 s of 0.1 from 5.2 ms after its
+    stamp: the bag reader took that for the sweep, put its end truth at 0.0936 s, up to 64 mm off, and scored the same
+    sweeps differently from their KITTI export (0.149 m against 0.195 m); the kept sweep_start / sweep_end poses say
+    where each sweep starts and ends."""
+    from lidarkit.io.rosbag import McapScans
+
+    sim = SimulatedLidarSequence(n_frames=4, scene="open", seed=0, n_beams=8, elevation_min_deg=-1.0, elevation_max_deg=3.0,
+                                 n_azimuths=1000, max_range_m=40.0, open_object_lateral_m=(5.0, 15.0))
+    spans = [float(np.ptp(sim.read_scan(i).point_times_s)) for i in range(2)]
+    assert max(spans) < 0.095  # (the returns do cover only part of the 0.1 s turn)
+    bag = McapScans(export_bag(sim, tmp_path / "part.mcap", "mcap"))
+    assert bag.sweep_offset_s == pytest.approx(0.0, abs=1e-9)
+    assert bag.sweep_duration_s == pytest.approx(0.1, abs=1e-9)
+    for instant in ("start", "mid", "end"):
+        truth = bag.ground_truth_at_instant(instant)
+        expected = sim.frame_times_s(instant)
+        np.testing.assert_allclose(truth.timestamps_s, expected, atol=1e-9)
+        np.testing.assert_allclose(truth.poses_se3[:, :3, 3], sim.poses_at(expected)[:, :3, 3], atol=1e-6)
+        assert truth.meta["retimed"] == f"the poses recorded at the sweep {instant} on /ground_truth/sweep_{instant}"

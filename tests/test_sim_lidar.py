@@ -535,3 +535,17 @@ def test_poses_at_refuses_a_time_that_is_not_a_finite_number_naming_times_s():
             seq.poses_at(times)
         assert str(err.value) == f"times_s ({where} is not a finite number (s)"
     assert np.isfinite(seq.poses_at(np.array([0.0, 0.05]))).all()
+
+
+def test_poses_at_refuses_times_that_are_not_a_1d_array_of_numbers_naming_times_s():
+    """poses_at(np.zeros((2, 2))) ended in a ValueError traceback, (3, 1) in an IndexError; text in a ValueError."""
+    seq = SimulatedLidarSequence(**SMALL)
+    for times, reason in [
+        (np.zeros((2, 2)), "takes one time or a 1-D array of times, got shape (2, 2)"),
+        (np.zeros((3, 1)), "takes one time or a 1-D array of times, got shape (3, 1)"),
+        ("x", "takes times in seconds (numbers), got str 'x'"),
+    ]:
+        with pytest.raises(DataError) as err:
+            seq.poses_at(times)
+        assert str(err.value) == f"times_s: {reason}"
+    assert seq.poses_at(0.05).shape == (1, 4, 4)

@@ -416,3 +416,17 @@ def test_cast_pixels_refuses_pixels_that_are_no_finite_pairs_naming_uv():
         with pytest.raises(DataError) as err:
             seq.cast_pixels(0, uv)
         assert str(err.value) == f"uv: takes (M, 2) finite pixel coordinates, {got}"
+
+
+def test_poses_at_refuses_times_that_are_not_a_1d_array_of_finite_numbers_naming_times_s():
+    """SimulatedCameraSequence.poses_at([np.nan]) gave NaN poses, unsaid; ('x') ended in a ValueError traceback."""
+    seq = SimulatedCameraSequence(n_frames=4, seed=0, **SMALL)
+    for times, message in [
+        ([np.nan], "times_s (time 0): time nan is not a finite number (s)"),
+        ("x", "times_s: takes times in seconds (numbers), got str 'x'"),
+        (np.zeros((2, 2)), "times_s: takes one time or a 1-D array of times, got shape (2, 2)"),
+    ]:
+        with pytest.raises(DataError) as err:
+            seq.poses_at(times)
+        assert str(err.value) == message
+    assert np.isfinite(seq.poses_at([0.0, 0.1])).all()

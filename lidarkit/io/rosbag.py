@@ -556,7 +556,9 @@ class _BagScans:
         sweep more than :data:`CLOCK_GAP_S` and :data:`CLOCK_GAP_PERIODS` periods from its stamp, beyond a driver's
         latency: :attr:`reader_warnings` says so, with the field and the offset).
         DataError when the sweeps span less than :data:`~lidarkit.io.pointcloud2.MIN_SWEEP_SHARE` of the stamps'
-        spacing and under :data:`~lidarkit.io.pointcloud2.MIN_SWEEP_S`: times in microseconds read as nanoseconds."""
+        spacing and under :data:`~lidarkit.io.pointcloud2.MIN_SWEEP_S`: times in microseconds read as nanoseconds.
+        A bag keeping the poses at every sweep's start and end gives the timing by their stamps where it disagrees with
+        the points' (:meth:`_kept_sweep_timing`)."""
         offsets, ends, spans, steps = [], [], [], []
         for k in range(min(self.n_scans, SWEEP_TIMING_READ)):
             decoded = self._decoded(k, all_missing_ok=True)
@@ -600,7 +602,37 @@ class _BagScans:
             check_sweep_span(span, period, what=f"per-point time field {', '.join(repr(f) for f in named)}", unit=unit,
                              over=f"the median over the first {len(spans)} scans", source=self.path,
                              hint="time_field=none reads the scans without point times")
-        return float(stamps[0] + first), sweep_length(span, period, float(np.median(steps)))
+        timing = float(stamps[0] + first), sweep_length(span, period, float(np.median(steps)))
+        kept = self._kept_sweep_timing(period)
+        # (the kept instants, stamped to the nanosecond, where they disagree with the points: else as the points say)
+        return kept if kept is not None and max(abs(kept[0] - timing[0]), abs(kept[1] - timing[1])) > 1e-6 else timing
+
+    def _kept_sweep_timing(self, period: float) -> tuple[float, float] | None:
+        """(absolute time sweep 0 starts, how long a sweep lasts) from the poses the recording keeps at every sweep's
+        start and end (:func:`sweep_instant_topic`, stamped at those instants, as the simulator's bags do): the
+        medians over the first :data:`SWEEP_TIMING_SCANS` scans of their start's offset from the stamp and their
+        end minus start. A sensor seeing part of its turn has points spanning less than its sweep (0.088 s of 0.1):
+        timed by them, a bag placed its truth up to 64 mm off where the same sweeps as a KITTI folder were scored from
+        the sweep itself. None without both topics, or when a kept start is not within a stamp period of its scan."""
+        if not self.ground_truth_topic or not period > 0:
+            return None
+        topics = [sweep_instant_topic(self.ground_truth_topic, instant) for instant in ("start", "end")]
+        if any(self._topics.get(topic) != POSE_STAMPED for topic in topics):
+            return None
+        start_stamps, end_stamps = (self._poses_at_instant(topic)[0] for topic in topics)
+        if not len(start_stamps) or not len(end_stamps):
+            return None
+        stamps = self.timestamps_s[:SWEEP_TIMING_SCANS]
+        after = np.clip(np.searchsorted(start_stamps, stamps), 0, len(start_stamps) - 1)
+        before = np.maximum(after - 1, 0)
+        starts = start_stamps[np.where(np.abs(start_stamps[before] - stamps) <= np.abs(start_stamps[after] - stamps), before, after)]
+        after = np.searchsorted(end_stamps, starts, side="right")
+        if np.any(np.abs(starts - stamps) > period) or np.any(after >= len(end_stamps)):
+            return None
+        lengths = end_stamps[after] - starts
+        if not np.all((lengths > 0) & (lengths <= 1.5 * period)):
+            return None
+        return float(self.timestamps_s[0] + np.median(starts - stamps)), float(np.median(lengths))
 
 
 #: least gap (s) between the header stamps and their sweeps' point times read as another clock (a driver's latency,

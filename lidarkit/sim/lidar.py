@@ -196,6 +196,23 @@ def check_argument(value: object, kind: type, name: str, what: str | None = None
         raise ConfigError(f"takes {what or 'a ' + kind.__name__}, got {type(value).__name__}{shown}", source=name)
 
 
+def checked_times(times_s: object) -> np.ndarray:
+    """``times_s`` as a 1-D float array, or one DataError naming ``times_s`` (a 2-D array, text or NaN ended in a
+    ValueError / IndexError traceback or in NaN poses)."""
+    try:
+        t = np.asarray(times_s, dtype=np.float64)
+    except (TypeError, ValueError):
+        shown = f" {times_s!r}" if len(repr(times_s)) <= 40 else ""
+        raise DataError(f"takes times in seconds (numbers), got {type(times_s).__name__}{shown}", source="times_s") from None
+    if t.ndim > 1:
+        raise DataError(f"takes one time or a 1-D array of times, got shape {t.shape}", source="times_s")
+    t = np.atleast_1d(t)
+    if not np.isfinite(t).all():
+        k = int(np.flatnonzero(~np.isfinite(t))[0])
+        raise DataError(f"time {t[k]} is not a finite number (s)", source="times_s", location=f"time {k}")
+    return t
+
+
 def checked_config(model: type[BaseModel], params: dict, source: str, options: dict[str, str] | None = None) -> BaseModel:
     """``model(**params)`` or one ConfigError naming ``source``: each problem by its field, or by the CLI option
     ``options`` maps it to (``{"n_frames": "--frames/-n"}``; a problem of one option alone is that option's error); the
@@ -623,11 +640,8 @@ class SimulatedLidarSequence:
 
     def poses_at(self, times_s: np.ndarray) -> np.ndarray:
         """``(M, 4, 4)`` poses ``T_world_lidar`` at absolute times ``times_s`` (M,) (t = 0: start of sweep 0); DataError
-        naming ``times_s`` for a time that is not a finite number (NaN gave NaN poses, unsaid)."""
-        t = np.atleast_1d(np.asarray(times_s, dtype=np.float64))
-        if not np.isfinite(t).all():
-            k = int(np.flatnonzero(~np.isfinite(t))[0])
-            raise DataError(f"time {t.flat[k]} is not a finite number (s)", source="times_s", location=f"time {k}")
+        naming ``times_s`` for times that are not a 1-D array of finite numbers (NaN gave NaN poses, unsaid)."""
+        t = checked_times(times_s)
         xy, heading = self.path.at(self.distance_at(t))
         cfg = self.config
         # suspension: pitch, roll and heave oscillate (0.4..1.2 Hz, seeded) around the planar drive

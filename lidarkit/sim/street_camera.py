@@ -37,8 +37,8 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validat
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.io.base import checked_index
 from lidarkit.params import changed_fields
-from lidarkit.sim.lidar import (PlanarPath, Terrain, check_argument, check_terrain_slope, checked_config, make_terrain,
-                                number_not_yes_or_no)
+from lidarkit.sim.lidar import (PlanarPath, Terrain, check_argument, check_terrain_slope, checked_config, checked_times,
+                                make_terrain, number_not_yes_or_no)
 from lidarkit.sim.textures import TextureAtlas, mip_levels, natural_texture
 from lidarkit.trajectory import Trajectory
 
@@ -574,9 +574,10 @@ class SimulatedCameraSequence:
 
     # ---- geometry ---------------------------------------------------------------------------------
     def poses_at(self, times_s: np.ndarray) -> np.ndarray:
-        """``(M, 4, 4)`` world poses ``T_world_cam`` at times ``times_s`` (s from the first frame)."""
+        """``(M, 4, 4)`` world poses ``T_world_cam`` at times ``times_s`` (s from the first frame); DataError naming
+        ``times_s`` for times that are not a 1-D array of finite numbers (NaN gave NaN poses, unsaid)."""
         cfg = self.config
-        t = np.atleast_1d(np.asarray(times_s, np.float64))
+        t = checked_times(times_s)
         s = np.interp(t, self._drive_t, self._drive_s)
         xy, heading = self.street.at(s)
         wave = np.sin(2 * np.pi * self._sway_freq_hz[:, None] * t[None, :] + self._sway_phase[:, None])
