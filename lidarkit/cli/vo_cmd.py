@@ -307,15 +307,15 @@ def _check_out_beside_images(out: Optional[Path], images) -> None:
 
 
 def _scores(result, gt, scale_mode: str) -> tuple[dict, str | None]:
-    """APE/RPE of the raw and smoothed estimate from the first estimated frame on (``({}, why)`` when they cannot be
-    computed: a run's poses are written all the same). Frames before it (unreadable at the start) only hold its pose:
-    scored, they raised the APE of a run with one bad first frame 67-fold."""
+    """APE/RPE of the raw and smoothed estimate from the first estimated frame on
+    (:func:`lidarkit.vo.evaluation.scored_from_frame`; ``({}, why)`` when they cannot be computed: a run's poses are
+    written all the same)."""
     from lidarkit.errors import EvaluationError
-    from lidarkit.vo.evaluation import evaluate_vo
+    from lidarkit.vo.evaluation import evaluate_vo, scored_from_frame
 
     if gt is None:
         return {}, None
-    first = int(result.meta.get("start_frame", 0))
+    first = scored_from_frame(result)
     if len(gt) - first < 3:
         return {}, f"{len(gt) - first} pose(s) from the first estimated frame on; APE and RPE need 3"
     tail = np.arange(first, len(gt))

@@ -32,9 +32,18 @@ class VOInput:
     kind: str
 
 
+def _sequence_folders(path: Path) -> list[str]:
+    """Names of the subfolders of ``path`` that hold an image_0/ (a KITTI ``sequences/`` folder's NN)."""
+    return sorted(p.name for p in path.glob("*") if (p / "image_0").is_dir())
+
+
 def detect_kind(path: Path) -> str:
-    """``kitti`` (folder with image_0/ or an image_0 folder beside calib.txt), ``tum`` (rgb.txt) or ``images``."""
-    if (path / "image_0").is_dir():
+    """``kitti`` (folder with image_0/, an image_0 folder beside calib.txt, a KITTI root with sequences/NN/image_0/ or
+    its sequences/ folder: the last two are opened or refused naming their sequences, not read as "no images"),
+    ``tum`` (rgb.txt) or ``images``."""
+    if (path / "image_0").is_dir() or _sequence_folders(path / "sequences"):
+        return "kitti"
+    if path.name == "sequences" and _sequence_folders(path):
         return "kitti"
     if path.name == "image_0" and (path.parent / "calib.txt").is_file():
         return "kitti"
@@ -97,7 +106,11 @@ def open_vo_input(path: str | os.PathLike, *, kind: str = "auto", calib: str | o
         from lidarkit.io.kitti import KittiOdometry
 
         root = path.parent if path.name == "image_0" else path
-        held = sorted(p.name for p in (root / "sequences").glob("*") if (p / "image_0").is_dir())
+        held = _sequence_folders(root / "sequences")
+        inside = [] if (root / "image_0").is_dir() or held else _sequence_folders(root)
+        if inside:  # (a root's sequences/ folder: read as images it said "no images")
+            raise ConfigError(f"a folder of KITTI sequences ({', '.join(inside)}): give one sequence's folder, "
+                              f"e.g. {root / inside[0]}", source=str(path))
         if not (root / "image_0").is_dir() and len(held) > 1:  # (sequence 00 of them ran without a word)
             raise ConfigError(f"a KITTI root with {len(held)} sequences ({', '.join(held)}): give one sequence's "
                               f"folder, e.g. {root / 'sequences' / held[0]}", source=str(path))

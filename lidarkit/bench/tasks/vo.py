@@ -7,11 +7,15 @@ images), ``align`` (``auto``: SE(3) for ground-truth scale, Sim(3) otherwise; or
 ``smoothed`` (score the Savitzky-Golay smoothed trajectory). Metrics come from ``lidarkit.vo.evaluation``;
 ``final_error_m`` is the last position's error after the row's alignment, as APE's (the CLI's final error is raw for
 ground-truth scale: in a table of methods with other scale modes, raw and aligned rows made the best method look 5x
-worse). Images are read into memory before the run, so frames/s is the pipeline's speed.
+worse). The scores start at the first estimated frame (``scored_from_frame`` in the job's info, as ``lidarkit vo``
+scores): unreadable first images only hold its pose. Images are read into memory before the run, so frames/s is the
+pipeline's speed.
 
-Datasets: ``kitti`` (its image sequence), ``tum``, and ``sim_camera``, the camera simulator as ``lidarkit vo`` opens
-``simcam:street?key=value`` (options: ``lidarkit.sim.street_camera.CameraSimConfig`` fields; its exact K and ground
-truth); a simulated drive without its own ``seed`` is seeded by the job's, as ``sim_lidar`` is for odometry.
+Datasets: ``kitti`` (its image sequence), ``tum`` (K from its ``K:`` option, else from the freiburg camera its folder
+name gives: a folder naming none is refused before any job runs), and ``sim_camera``, the camera simulator as
+``lidarkit vo`` opens ``simcam:street?key=value`` (options: ``lidarkit.sim.street_camera.CameraSimConfig`` fields; its
+exact K and ground truth); a simulated drive without its own ``seed`` is seeded by the job's, as ``sim_lidar`` is for
+odometry.
 """
 
 from __future__ import annotations
@@ -89,6 +93,12 @@ class VisualOdometryTask(Task):
             return
         check_reader_options(dataset)
         require_kitti_data(dataset, "images")
+        if dataset["kind"] == "tum" and dataset.get("K") is None:  # (every job failed: "MonoVO: intrinsics K are required")
+            from lidarkit.io.tum import tum_intrinsics_for
+
+            if tum_intrinsics_for(dataset["path"]) is None:
+                raise ConfigError(f"the TUM folder {dataset['path']} names no freiburg camera (freiburg1/2/3 or fr1/2/3) "
+                                  "to take the intrinsics of: give the dataset's K: option (3x3)", source="dataset")
 
     def run(self, job: Job) -> TaskOutput:
         vo = _vo_api()
@@ -115,27 +125,30 @@ class VisualOdometryTask(Task):
         }
         series: dict[str, Any] = {}
         if gt is not None:
-            from lidarkit.vo.evaluation import score_vo
+            from lidarkit.vo.evaluation import score_vo, scored_from_frame
 
-            scores = score_vo(est, gt, config.scale.mode, None if options.align == "auto" else options.align)
+            first = scored_from_frame(result)  # (the frames before it hold its pose: scored, APE 0.29 m, not 0.008)
+            tail = np.arange(first, len(gt))
+            scores = score_vo(est[tail], gt[tail], config.scale.mode, None if options.align == "auto" else options.align)
             align, ape = scores.metrics["align"], scores.ape
             metrics.update({k: scores.metrics[k] for k in ("ape_rmse_m", "rpe_trans_rmse_m")})
             metrics["final_error_m"] = scores.metrics["final_error_aligned_m"]  # (aligned as APE is, on every row)
             # camera frame: x right, z forward -> the ground plane is x-z
             ref_xz = np.asarray(ape.ref.positions_xyz)[:, [0, 2]]
             est_xz = np.asarray(ape.est_aligned.positions_xyz)[:, [0, 2]]
-            t = np.arange(len(ape.errors), dtype=float) if timestamps is None else timestamps[: len(ape.errors)] - timestamps[0]
+            frames = np.arange(first, first + len(ape.errors))
+            t = frames.astype(float) if timestamps is None else timestamps[frames] - timestamps[0]
             series = {
                 "trajectory_xy": {"ref": ref_xz.round(4).tolist(), "est": est_xz.round(4).tolist()},
                 "error_over_time": {"t": np.round(t, 4).tolist(), "error": np.round(ape.errors, 6).tolist(),
                                     "label": f"APE ({align} aligned) [m]", **({"t_label": "frame"} if timestamps is None else {})},
             }
-            info_align = align
+            info_align, scored = align, {"scored_from_frame": first}
         else:
-            info_align = None
+            info_align, scored = None, {}
         return TaskOutput(metrics=metrics, series=series,
                           info={"summary": summary, "align": info_align, "config": config.model_dump(mode="json"),
-                                "metric_alignment": _alignment_labels(info_align)})
+                                "metric_alignment": _alignment_labels(info_align), **scored})
 
 
 def camera_config(job: Job) -> Any:
