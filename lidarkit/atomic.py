@@ -371,11 +371,13 @@ def check_target(path: str | os.PathLike | None, kind: str = "file", files: Iter
 def refuse_dangling_link(path: str | os.PathLike, what: str = "folder") -> None:
     """OutputError when ``path``, or a folder above it, is a symbolic link to something missing: an output is never
     created where such a link points (a folder export to ``dangle -> /nonexistent/x`` made /nonexistent/x and its
-    parents), as bags are never written there; ``what``: the kind of output, for the message."""
+    parents), as bags are never written there; ``what``: the kind of output, for the message. A loop of links is
+    said as one (``ln -s loop loop`` was called a link to a missing file)."""
     path = Path(path)
     link = next((p for p in (path, *path.parents) if p.is_symlink() and not p.exists()), None)
     if link is not None:
-        raise OutputError(f"a symbolic link to a missing file is in the way (-> {os.readlink(link)}): remove it or name another "
+        kind = LINK_LOOP if missing_reason(link).endswith(LINK_LOOP) else "a symbolic link to a missing file"
+        raise OutputError(f"{kind} is in the way (-> {os.readlink(link)}): remove it or name another "
                           f"{what if link == path else 'folder'}", source=link)
 
 

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import logging
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -10,11 +12,22 @@ import numpy as np
 from lidarkit.atomic import missing_reason, stream_reason
 from lidarkit.errors import DataError, LidarKitError
 
+log = logging.getLogger(__name__)
 
-def read_lines(path: str | os.PathLike, what: str = "file") -> list[str]:
+#: other lines of the same kind a cut-off last line is compared with (fewer: no warning, too little to go by)
+CUT_CHECK_MIN_PEERS = 2
+_EXPONENT = re.compile(r"[eE][+-]?(\d*)$")
+
+
+def read_lines(path: str | os.PathLike, what: str = "file", *, warnings: list[str] | None = None,
+               check_cut: bool = True) -> list[str]:
     """All lines of a text file (a UTF-8 byte-order mark, as some editors save, left out); a missing or unreadable
     file is a DataError naming it; ``what``: the kind of file expected, for the message about a folder given instead
-    ("not a regular file" did not say what was wrong)."""
+    ("not a regular file" did not say what was wrong).
+
+    A last line without a line end whose last number looks cut against the other lines (:func:`cut_off_reason`) is
+    logged as a warning, also appended to ``warnings`` when given (a file cut inside its last number read silently:
+    a path's length four times the truth); ``check_cut=False`` for a file read again only to number its lines."""
     path = Path(path)
     try:
         if not path.is_file():
@@ -22,7 +35,15 @@ def read_lines(path: str | os.PathLike, what: str = "file") -> list[str]:
                 raise DataError(f"is a folder, not a {what}", source=path)
             reason = missing_reason(path, "file not found") if not path.exists() else stream_reason(path)
             raise DataError(reason or "not a regular file", source=path)
-        return path.read_text(encoding="utf-8-sig").splitlines()
+        text = path.read_text(encoding="utf-8-sig")
+        lines = text.splitlines()
+        if check_cut and text and not text.endswith(("\n", "\r")):
+            reason = cut_off_reason(lines)
+            if reason:
+                log.warning("%s: %s", path, reason)
+                if warnings is not None:
+                    warnings.append(f"{path}: {reason}")
+        return lines
     except OSError as err:  # (its own text repeats the path the message names already)
         raise DataError(f"cannot read it: {(err.strerror or type(err).__name__).lower()}", source=path) from err
     except UnicodeDecodeError as err:
@@ -36,18 +57,19 @@ def read_numeric_table(
     comment: str = "#",
     allow_nonfinite: bool = False,
     what: str = "file",
+    warnings: list[str] | None = None,
 ) -> np.ndarray:
     """Rows of ``ncols`` numbers (space- or comma-separated) as an ``(N, ncols)`` float64 array.
 
     Blank lines and lines starting with ``comment`` are skipped. A row with another number of
     fields, a non-number or (unless allowed) NaN/inf raises DataError naming file and line.
-    ``ncols`` may be a tuple of accepted widths; the first row decides and all rows must agree. ``what``: as for
-    :func:`read_lines`.
+    ``ncols`` may be a tuple of accepted widths; the first row decides and all rows must agree. ``what`` and
+    ``warnings`` (a cut-off last line): as for :func:`read_lines`.
     """
     accepted = (ncols,) if isinstance(ncols, int) else tuple(ncols)
     rows: list[list[float]] = []
     width: int | None = None
-    for lineno, raw in enumerate(read_lines(path, what), start=1):
+    for lineno, raw in enumerate(read_lines(path, what, warnings=warnings), start=1):
         line = raw.strip()
         if not line or line.startswith(comment):
             continue
@@ -74,6 +96,50 @@ def read_numeric_table(
     return np.asarray(rows, dtype=np.float64)
 
 
+def cut_off_reason(lines: list[str], comment: str = "#") -> str | None:
+    """Why the last of ``lines`` (a file's, which has no line end) looks cut inside its last number, or None.
+
+    It is compared with the other data lines of its kind (as many fields, the same leading word unless a number or a
+    ``key:`` label): cut when its last value is shorter than that column's on every other line while its other values
+    are not all shorter than theirs (a matrix's ``0 0 0 1`` row is no cut), or when every other line writes an
+    exponent of n digits there and it has none or fewer. Writers end such files with a newline; a hand-written file
+    without one is no reason to warn."""
+    last = lines[-1].strip() if lines else ""
+    if not last or last.startswith(comment):
+        return None
+    fields = _fields(last)
+    if not is_number(fields[-1]):
+        return None
+    kind = _kind(fields)
+    peers = [f for f in (_fields(raw) for raw in lines[:-1] if raw.strip() and not raw.strip().startswith(comment))
+             if len(f) == len(fields) and _kind(f) == kind]
+    if len(peers) < CUT_CHECK_MIN_PEERS:
+        return None
+    lengths = np.array([[len(value) for value in f] for f in peers])  # (peers, fields)
+    shortest = lengths.min(axis=0)
+    line = f"line {len(lines)} has no line end and its last value {fields[-1]}"
+    others_shorter = all(len(value) < least for value, least in zip(fields[:-1], shortest[:-1], strict=True))
+    if len(fields[-1]) < shortest[-1] and (len(fields) == 1 or not others_shorter):
+        return f"{line} is shorter than that column's on every other line: the file may be cut off"
+    exponents = {len(m.group(1)) if m else -1 for m in (_EXPONENT.search(f[-1]) for f in peers)}
+    if len(exponents) == 1 and (digits := exponents.pop()) > 0:
+        mine = _EXPONENT.search(fields[-1])
+        if mine is None or len(mine.group(1)) < digits:
+            return (f"{line} lacks the {digits}-digit exponent that column has on every other line: the file may be "
+                    "cut off")
+    return None
+
+
+def _fields(line: str) -> list[str]:
+    return line.replace(",", " ").split()
+
+
+def _kind(fields: list[str]) -> str | None:
+    """A record's leading word (``SENSOR``, ``ODOMETRY``); None for a number or a ``P0:`` label (calib lines)."""
+    head = fields[0]
+    return None if is_number(head) or head.endswith(":") else head.upper()
+
+
 def is_number(text: str) -> bool:
     """True if ``text`` parses as a float."""
     try:
@@ -86,7 +152,8 @@ def is_number(text: str) -> bool:
 def data_line_numbers(path: str | os.PathLike) -> list[int]:
     """The file line (from 1) of each row ``read_numeric_table`` reads from ``path`` (blank and ``#`` lines skipped
     as the reader skips them)."""
-    return [i for i, raw in enumerate(read_lines(path), start=1) if raw.strip() and not raw.strip().startswith("#")]
+    return [i for i, raw in enumerate(read_lines(path, check_cut=False), start=1)
+            if raw.strip() and not raw.strip().startswith("#")]
 
 
 def file_line(path: str | os.PathLike, location: str | None) -> str | None:

@@ -280,8 +280,9 @@ class Trajectory:
         anything ``np.asarray`` turns into ``(N,)`` seconds (array, list, tuple). ``format_hint``: how a caller's
         users choose the format (:func:`default_format_hint`), named when the file is a TUM trajectory.
         """
+        read_warnings: list[str] = []  # (a cut-off last line, kept in meta as from_tum keeps its own)
         try:
-            rows = read_numeric_table(path, 12, what="trajectory file")
+            rows = read_numeric_table(path, 12, what="trajectory file", warnings=read_warnings)
         except DataError as err:  # a TUM file (8 numbers a row: time, x y z, qx qy qz qw) read as KITTI: say so
             if "expected 12 numbers, found 8" in err.reason and err.location == _first_data_line(path):  # (not a cut-off line)
                 raise DataError(err.reason + f" (a TUM trajectory? read it as tum: {format_hint('tum')})",
@@ -292,7 +293,7 @@ class Trajectory:
         times_path = None
         if isinstance(timestamps_s, (str, os.PathLike)):
             times_path = timestamps_s
-            timestamps_s = read_numeric_table(times_path, 1, what="time stamps file")[:, 0]
+            timestamps_s = read_numeric_table(times_path, 1, what="time stamps file", warnings=read_warnings)[:, 0]
             _check_seconds(timestamps_s, times_path)
             if len(timestamps_s) != len(poses):
                 raise DataError(f"{len(timestamps_s)} timestamps for {len(poses)} poses in {path}", source=times_path)
@@ -306,7 +307,8 @@ class Trajectory:
         except DataError as err:  # name the file and its line, not the trajectory and frame
             raise DataError(err.reason, source=path, location=file_line(path, err.location)) from None
         try:
-            return cls(poses, timestamps_s, Path(path).stem if name is None else name)
+            return cls(poses, timestamps_s, Path(path).stem if name is None else name,
+                       {READ_WARNINGS: read_warnings} if read_warnings else {})
         except DataError as err:
             if times_path is not None and "timestamp" in err.reason:
                 raise DataError(err.reason, source=times_path, location=file_line(times_path, err.location)) from None
@@ -321,8 +323,9 @@ class Trajectory:
         ``meta["read_warnings"]``): TUM RGB-D's own ground truth of ``fr2/desk`` has one; more than half of them
         repeating is a DataError (stamps written with too few digits). Timestamps that go backwards, or beyond any time
         in seconds (nanoseconds), are a DataError naming the line."""
+        read_warnings: list[str] = []
         try:
-            rows = read_numeric_table(path, 8, what="trajectory file")
+            rows = read_numeric_table(path, 8, what="trajectory file", warnings=read_warnings)
         except DataError as err:  # a KITTI file (12 numbers a row, a 3x4 [R|t]) read as TUM: say so, as from_kitti does
             if "expected 8 numbers, found 12" in err.reason and err.location == _first_data_line(path):  # (not a cut-off line)
                 raise DataError(err.reason + f" (a KITTI trajectory? read it as kitti: {format_hint('kitti')})",
@@ -343,7 +346,6 @@ class Trajectory:
         if repeated.size > len(rows) / 2:  # no recorder's glitch: the file's stamps lost their digits (90 % left out, scored)
             raise DataError(f"{repeated.size} of {len(rows)} poses repeat the timestamp of the pose before them: were the "
                             "stamps written with too few decimals (TUM stamps need sub-millisecond digits)?", source=path)
-        read_warnings = []
         if repeated.size:
             numbers = data_line_numbers(path)  # (the file is read once for all the lines named)
             lines = ", ".join(f"line {numbers[k]}" for k in repeated[:5])

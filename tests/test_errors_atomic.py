@@ -646,3 +646,23 @@ def test_an_svgz_plot_names_its_svg_not_the_temporary_file(tmp_path):
     assert name == "out.svg"
     assert gzip.decompress(raw).lstrip().startswith(b"<?xml") and b"<svg" in gzip.decompress(raw)
     assert [p.name for p in tmp_path.iterdir()] == ["out.svgz"]
+
+
+def test_a_loop_of_links_in_the_way_of_an_output_is_called_a_loop(tmp_path, capsys):
+    """`lidarkit sim lidar -o loop` (ln -s loop loop) said "a symbolic link to a missing file is in the way (-> loop)":
+    a loop is said as one, the link named as given; a link to a missing file keeps its wording."""
+    loop = tmp_path / "loop"
+    loop.symlink_to("loop")
+    with pytest.raises(SystemExit) as exc:
+        main(["sim", "lidar", "-p", "n_beams=8", "-p", "n_azimuths=90", "--frames", "2", "--out", str(loop), "--no-progress"])
+    assert (exc.value.code, capsys.readouterr().err) == (
+        1, f"error: {loop}: {atomic.LINK_LOOP} is in the way (-> loop): remove it or name another folder\n")
+    with pytest.raises(OutputError) as caught:
+        atomic.refuse_dangling_link(loop / "run", "file")
+    assert str(caught.value) == f"{loop}: {atomic.LINK_LOOP} is in the way (-> loop): remove it or name another folder"
+    dangle = tmp_path / "dangle.bin"
+    dangle.symlink_to("nowhere.bin")
+    with pytest.raises(OutputError) as caught:
+        atomic.refuse_dangling_link(dangle, "file")
+    assert str(caught.value) == (f"{dangle}: a symbolic link to a missing file is in the way (-> nowhere.bin): remove it "
+                                 "or name another file")

@@ -739,8 +739,10 @@ def load_baseline(path: str | os.PathLike) -> Baseline:
     path = Path(path)
     if path.is_file():
         raise DataError("a file, not a baseline folder (give the folder `lidarkit baseline record --out` wrote)", source=path)
-    if not path.is_dir():
-        raise DataError("baseline folder does not exist", source=path)
+    if not path.is_dir():  # (a dangling link or a loop of links read "does not exist")
+        from lidarkit.atomic import missing_reason
+
+        raise DataError(missing_reason(path, "baseline folder does not exist"), source=path)
     manifest_path = path / MANIFEST
     if not manifest_path.is_file():
         raise DataError(f"no {MANIFEST}: not a baseline folder (write one with `lidarkit baseline record`)", source=path)

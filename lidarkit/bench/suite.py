@@ -7,9 +7,11 @@ before any job runs.
 
 from __future__ import annotations
 
+import errno
 import itertools
 import logging
 import math
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -155,7 +157,9 @@ def read_suite_file(path: str | Path) -> tuple[SuiteModel, _Locator]:
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
-        raise DataError("suite file not found", source=path) from None
+        from lidarkit.atomic import missing_reason
+
+        raise DataError(missing_reason(path, "suite file not found"), source=path) from None
     except (OSError, UnicodeDecodeError) as err:
         raise DataError(f"cannot read suite file: {err}", source=path) from None
     try:
@@ -311,11 +315,17 @@ def load_suite(path: str | Path, *, skip_unavailable: bool = False, only_tasks: 
     ``Suite.skipped``) instead of refused — what ``lidarkit demo`` does. ``only_tasks`` keeps only those tasks.
     A suite expanding to more than ``max_jobs`` jobs is refused before expansion.
     """
-    from lidarkit.atomic import resolved_path
+    from lidarkit.atomic import missing_reason, resolved_path
     from lidarkit.bench.results import path_argument
     from lidarkit.params import is_integer
 
-    path = resolved_path(path_argument(path, "path"), output=False)  # (a loop of links was a RuntimeError traceback)
+    given = path_argument(path, "path")
+    try:  # a missing file named as given (resolved first, a dangling link's target was named "not found")
+        os.stat(given)
+    except OSError as err:
+        if err.errno in (errno.ENOENT, errno.ELOOP):
+            raise DataError(missing_reason(given, "suite file not found"), source=given) from None
+    path = resolved_path(given, output=False)  # (a loop of links was a RuntimeError traceback)
     if not is_integer(max_jobs):  # ("2" failed comparing with the job count: "'>' not supported")
         raise ConfigError(f"must be an integer, got {type(max_jobs).__name__} {max_jobs!r}", source="max_jobs")
     if max_jobs < 1:

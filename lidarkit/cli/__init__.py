@@ -107,11 +107,29 @@ def _run_app(argv: list[str] | None) -> int:
     return code if isinstance(code, int) else 0  # (a command's typer.Exit(code); commands return nothing)
 
 
+def _exhausted(err: BaseException) -> str | None:
+    """The one line for a library that could not be loaded, or a thread that could not start, for want of memory or
+    threads (under `ulimit -v 600000` matplotlib's import failed with "libtiff...: failed to map segment from shared
+    object" in a 40-line traceback, and a pool's thread with "can't start new thread"); None for anything else."""
+    text = str(err)
+    if isinstance(err, ImportError) and ("failed to map segment" in text or "cannot allocate memory" in text.lower()):
+        return f"out of memory loading a library ({text}): free memory or raise the limit (ulimit -v)"
+    if isinstance(err, RuntimeError) and text == "can't start new thread":
+        return "cannot start a thread: out of memory, or at the limit of threads (ulimit -v, ulimit -u)"
+    return None
+
+
 def _command_path(args: list[str]) -> str:
-    """``lidarkit`` and the (sub)command names that lead ``args`` ("lidarkit pf"), for an error that names the command."""
+    """``lidarkit`` and the (sub)command names that lead ``args`` ("lidarkit pf"), for an error that names the command;
+    the first word alone when the command tree cannot be built (out of memory: the MemoryError's own line was a
+    second traceback)."""
     import typer
 
-    path, command = ["lidarkit"], typer.main.get_command(app)
+    try:
+        command = typer.main.get_command(app)
+    except MemoryError:
+        return " ".join(["lidarkit", *args[:1]]) if args and not args[0].startswith("-") else "lidarkit"
+    path = ["lidarkit"]
     for arg in args:
         sub = (getattr(command, "commands", None) or {}).get(arg)
         if sub is None:
@@ -141,8 +159,14 @@ def main(argv: list[str] | None = None) -> None:
         code = 1
     except MemoryError as err:  # (a 9,000,000-particle run under `ulimit -v` printed a 60-line traceback)
         command = _command_path(sys.argv[1:] if argv is None else list(argv))
-        print_error(LidarKitError(f"out of memory: {err or 'an allocation failed'} (ask for less, or free memory)",
+        print_error(LidarKitError(f"out of memory: {str(err) or 'an allocation failed'} (ask for less, or free memory)",
                                   source=command))
+        code = 1
+    except (ImportError, RuntimeError) as err:
+        reason = _exhausted(err)
+        if reason is None:  # a defect: shown with its traceback
+            raise
+        print_error(LidarKitError(reason, source=_command_path(sys.argv[1:] if argv is None else list(argv))))
         code = 1
     except OSError as err:
         if err.filename is None:  # not about a path the user gave: a defect, shown with its traceback

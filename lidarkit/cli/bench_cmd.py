@@ -201,6 +201,18 @@ def summary_table(report, max_metrics: int = 2) -> list[Table]:
     return tables
 
 
+def check_report_targets(out: Path) -> None:
+    """Refuse the report's files and folders under ``out`` before any job runs (a folder named report.html, a file
+    named tables, were found after every job had run)."""
+    from lidarkit.atomic import check_target
+    from lidarkit.bench.publication import TABLES_DIR
+
+    for name in ("report.html", "report.md", "report.csv"):
+        check_target(out / name, "file")
+    for folder in ("plots", TABLES_DIR):
+        check_target(out / folder, "folder")
+
+
 @app.command()
 def bench(
     suite_file: Path = typer.Argument(..., help="Suite YAML file (see docs/benchmarks.md)."),
@@ -251,10 +263,7 @@ def bench(
     out = out or Path("results") / suite_file.stem
     check_target(out, "folder")
     check_results_folder(out)  # (a dry run included)
-    # the report's paths too, before the jobs (a folder named report.html was found after every job had run)
-    for name in ("report.html", "report.md", "report.csv"):
-        check_target(out / name, "file")
-    check_target(out / "plots", "folder")
+    check_report_targets(out)
     if dry_run:
         from lidarkit.bench.results import is_finished
 

@@ -9,7 +9,7 @@ from typing import Optional
 import typer
 
 from lidarkit.cli.app import app, stderr, stdout
-from lidarkit.cli.bench_cmd import PROGRESS_HELP, print_run_summary, run_with_progress, summary_table
+from lidarkit.cli.bench_cmd import PROGRESS_HELP, check_report_targets, print_run_summary, run_with_progress, summary_table
 from lidarkit.errors import ConfigError
 
 
@@ -35,6 +35,9 @@ def demo_command(
     from lidarkit.atomic import check_target
 
     check_target(out_dir, "folder")  # (a file there failed later: "cannot write the results folder (File exists)")
+    check_report_targets(out_dir)  # (a file named tables failed once every job had run)
+    for name in ("eval", "eval/inputs"):  # (the evaluation's folders, written after the jobs)
+        check_target(out_dir / name, "folder")
     if quick and suite is not None:  # (--quick picks a bundled suite: with --suite it was ignored without a word)
         raise ConfigError("--quick selects the reduced bundled suite; with --suite FILE that file runs: give one of them",
                           source="--quick")
