@@ -41,6 +41,7 @@ class VOOptions(BaseModel):
 
 def _vo_api() -> Any:
     vo = import_module_for_task("vo", "lidarkit.vo")
+    import_module_for_task("vo", "lidarkit.vo.pipeline")  # (OpenCV: the package loads it on first use, past this check)
     for name in ("preset", "available_presets", "run_vo", "images_in_memory"):
         if not hasattr(vo, name):
             raise ConfigError(f"lidarkit.vo has no {name}() yet", source="task")
