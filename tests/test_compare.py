@@ -963,6 +963,17 @@ def test_a_loop_of_symbolic_links_is_named_as_one(tmp_path, capsys):
     with pytest.raises(DataError) as exc:
         compare(run, tmp_path / "o2.json")
     assert str(exc.value) == f"{tmp_path / 'o2.json'}: cannot read it: a loop of symbolic links (a link that leads back to itself)"
+    # a link to nothing is named as one ("does not exist"), by the CLI and by load_odometry_run
+    import importlib
+
+    compare_module = importlib.import_module("lidarkit.eval.compare")  # (lidarkit.eval.compare is also the function)
+
+    (tmp_path / "dang").symlink_to("nowhere")
+    code, stdout, err = run_cli(["compare", str(tmp_path / "dang"), str(run)], capsys)
+    assert (code, stdout, err) == (1, "", f"error: {tmp_path / 'dang'}: a symbolic link to a missing file (-> nowhere)\n")
+    with pytest.raises(DataError) as exc:
+        compare_module.load_odometry_run(tmp_path / "dang")
+    assert str(exc.value) == f"{tmp_path / 'dang'}: a symbolic link to a missing file (-> nowhere)"
 
 
 def test_a_diverged_drive_does_not_make_the_other_drive_s_seeds_one_measurement(tmp_path):

@@ -71,12 +71,13 @@ class BenchRuns:
 def load_odometry_run(path: str | os.PathLike) -> OdometryRun:
     """A run folder written by ``lidarkit odometry --out`` (``poses_kitti.txt``, ``ground_truth_kitti.txt``,
     ``metrics.json``); DataError naming what is missing."""
-    from lidarkit.atomic import resolved_path
+    from lidarkit.atomic import missing_reason, resolved_path
 
     path = Path(path)
     resolved_path(path, output=False)  # (a loop of symbolic links read "does not exist")
-    if not path.is_dir():
-        raise DataError("run folder does not exist", source=path)
+    if not path.is_dir():  # (a dangling link read "run folder does not exist")
+        raise DataError(missing_reason(path, "run folder does not exist") if not path.exists() else "run folder does not exist",
+                        source=path)
     refused = _not_an_odometry_run(path)
     if refused:  # ("no ground_truth_kitti.txt" for a pf run folder, which holds its ground truth as TUM; "no metrics.json"
         # for a pf study folder, read as an unfinished odometry run, and for an icp run or a bench folder's jobs/)
@@ -1141,12 +1142,12 @@ def _load(side: Any, method: str | None, every_result: bool = False) -> Odometry
         return side
     if not isinstance(side, (str, os.PathLike)):  # (None: a TypeError traceback)
         raise ConfigError(f"a run folder path is needed, got {side!r}", source="compare")
-    from lidarkit.atomic import resolved_path
+    from lidarkit.atomic import missing_reason, resolved_path
 
     path = Path(side)
     resolved_path(path, output=False)  # (a loop of symbolic links read "does not exist")
-    if not path.exists():
-        raise DataError("does not exist", source=path)
+    if not path.exists():  # (a dangling link read "does not exist")
+        raise DataError(missing_reason(path, "does not exist"), source=path)
     if not path.is_dir():  # (report.csv given: it read "run folder does not exist")
         raise DataError("is a file: compare takes an odometry run folder or a bench results folder", source=path)
     from lidarkit.bench.baseline import is_baseline_folder
