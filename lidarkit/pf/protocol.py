@@ -63,6 +63,9 @@ WORKSPACE_MIN_READINGS = 8  # the workspace is never allocated smaller (Particle
 KALMAN_BYTES_PER_PARTICLE = 640.0
 #: Memory per particle of each particle cloud a run keeps for its figures (bytes: an (N, 3) float64 copy).
 CLOUD_BYTES_PER_PARTICLE = 24.0
+#: The advice ``q_verdict`` ends a "too large" / "too small" verdict with; the runs of ``fit_q_recorded`` leave it out
+#: (``--fit-q`` printed "before: Q too large by about 56x (...); --fit-q estimates Q" above the fit's own table).
+FIT_Q_ADVICE = "; --fit-q estimates Q"
 
 
 @dataclass(frozen=True, eq=False)
@@ -218,6 +221,12 @@ class PFRunResult:
     @property
     def n_steps(self) -> int:
         return len(self.dead_reckoning) - 1
+
+    @property
+    def lost_after_convergence(self) -> np.ndarray:
+        """Indices of the lost steps from the run's first convergence on (:func:`first_converged_step`): a uniform
+        start's first steps are its convergence, not lost track (``lost_steps`` holds them all)."""
+        return _lost_from(self, first_converged_step(self))
 
     def position_error_m(self, which: str = "estimate") -> np.ndarray:
         """``(T+1,)`` distance between an estimate and the ground truth (protocol runs only)."""
@@ -584,10 +593,11 @@ def run_protocol(
 
 
 def _warn_lost(result: PFRunResult, which: str = "") -> None:
-    """One warning if ``result`` lost track; ``which`` names the run among several (" with the given Q"). A recorded run
-    counts from its first convergence (``metrics["nis_from_step"]``)."""
-    start = result.metrics.get("nis_from_step", 1) - 1
-    lost = _lost_from(result, start)
+    """One warning if ``result`` lost track; ``which`` names the run among several (" with the given Q"). Counted from
+    the run's first convergence (:func:`first_converged_step`), in the protocol as on recorded readings (a uniform
+    start's first step was "lost on 1 of 331 steps" in the protocol only)."""
+    start = first_converged_step(result)
+    lost = result.lost_after_convergence
     if len(lost):
         after = f" from step {start + 1}, after it first converged" if start else ""
         log.warning(
@@ -733,6 +743,8 @@ def fit_q_recorded(data, n_particles: int | None = None, seed: int = 0, *, confi
         raise ConfigError(f"max_rounds must be an integer >= 1 (re-runs with a fitted Q), got {max_rounds!r}", source="max_rounds")
     data = landmark_data(data)  # (a path is opened here once, not again for every re-run)
     first = run_recorded(data, n_particles, seed, config=config, warn_lost=False, on_step=on_step, **config_overrides)
+    if "q_verdict" in first.metrics:  # (the run with the given Q advised the fit being run: "before: ...; --fit-q estimates Q")
+        first.metrics["q_verdict"]["text"] = first.metrics["q_verdict"]["text"].replace(FIT_Q_ADVICE, "")
     runs: list[PFRunResult] = []
     current = first
     # a lost first run: its innovations are localization error, and a Q fitted to them only widens the cloud
@@ -766,7 +778,7 @@ def fit_q_recorded(data, n_particles: int | None = None, seed: int = 0, *, confi
         last.metrics["q_verdict"]["text"] += (f"; the fit stopped after {len(runs)} re-run(s)" if runs else "; no Q fit")
     elif not settled and "q_verdict" in last.metrics:  # said, and not "--fit-q estimates Q" after --fit-q has run
         history = " -> ".join(f"{r.metrics['nis_mean']:.3g}" for r in [first, *runs])
-        text = last.metrics["q_verdict"]["text"].replace("; --fit-q estimates Q", "")
+        text = last.metrics["q_verdict"]["text"].replace(FIT_Q_ADVICE, "")
         last.metrics["q_verdict"]["text"] = (f"{text}; the fit did not settle within [{lo:g}, {hi:g}] in {len(runs)} re-run(s) "
                                              f"(NIS mean {history}): Q is not all that the innovations say")
     return first, runs
