@@ -95,3 +95,14 @@ def test_a_protocol_run_from_a_uniform_start_counts_lost_steps_from_its_first_co
     lost = [r.message for r in caplog.records if "filter lost" in r.message]
     assert lost == [f"filter lost on {len(after)} of 330 steps from step 2, after it first converged (first at step "
                     f"{after[0] + 1}): even the best particle is beyond the chi-square 99.9% gate"]
+
+
+def test_a_study_counts_a_uniform_start_that_localizes_as_not_lost(stachniss):
+    """The study's "lost" column counted a seed whose one Kalman kernel failed the gate on step 1 only, while it
+    converged from a uniform start (last-step error 0.09 m): lost seeds count from the first convergence."""
+    from lidarkit.pf.study import run_study
+
+    (row,) = run_study(stachniss, [1], [0], kernel="kalman", innovation_gate=9.21, init="uniform")
+    assert row.lost_seeds == 0
+    (row,) = run_study(stachniss, [20], [0], init="uniform")  # (20 particles lose track after converging: still lost)
+    assert row.lost_seeds == 1

@@ -395,7 +395,7 @@ def _print_study(rows, cfg: PFConfig, protocol: str, kidnap_at: int | None, n_st
         table.add_column("recovered", justify="right")
     table.caption = (f"MSE: position, from step 10, over {len(seeds)} seeds (std ddof=0); mean N: particles per step; "
                      "localized: seeds with error < 0.5 m at >= 95% of the steps from 50 on; lost: seeds with a step beyond "
-                     "the chi-square 99.9% gate" + (f"; recovered: seeds back below 0.5 m for good within {RECOVERED_WITHIN_STEPS} "
+                     "the chi-square 99.9% gate after the first convergence" + (f"; recovered: seeds back below 0.5 m for good within {RECOVERED_WITHIN_STEPS} "
                                                     "steps of the kidnap" if kidnap_at is not None else ""))
     not_judged = sum(k is None for r in rows for k in r.recovered)
     if not_judged:  # (they counted as not recovered: a kidnap at the last step gave "0 / 3")
