@@ -444,3 +444,38 @@ def test_local_plane_range_is_horizontal_not_a_square_box():
     mask = get_ground_segmenter("local_plane", max_range_m=30).segment(np.vstack([near, far]))
     horizontal = np.hypot(*np.vstack([near, far])[:, :2].T)
     assert mask[: len(near)].all() and not mask[horizontal > 30].any()
+
+
+@pytest.mark.parametrize("params, refused", [
+    ({"cell_size_m": 0.001}, "needs about"),  # (numpy's own MemoryError from inside the library)
+    ({"cell_size_m": 0.05}, "300 envelope passes"),  # (103 s and 2.6 GB on one KITTI scan)
+    ({"window_m": 4e4}, "40000 envelope passes"),
+])
+def test_local_plane_refuses_a_grid_too_large_before_building_it(params, refused):
+    """The dense cell grid and its envelope passes grow as 1 / cell_size_m^3: a small cell or a long window is refused
+    in one line naming cell_size_m, max_range_m and window_m before anything is allocated."""
+    from lidarkit.samples import sample_path
+
+    scan = np.load(sample_path("kitti_pair") / "000094.npy").astype(np.float64)
+    with pytest.raises(ConfigError) as err:
+        get_ground_segmenter("local_plane", **params).segment(scan)
+    message = str(err.value)
+    assert "\n" not in message and refused in message
+    assert "local_plane" in message and all(name in message for name in ("cell_size_m", "max_range_m", "window_m"))
+
+
+def test_local_plane_keeps_fine_grids_within_the_cap():
+    """A KITTI scan at 0.1 m cells (about 1570 x 1010 cells, 150 passes: 2.4e8 updates, ~6 s) is still segmented."""
+    from lidarkit.registration.ground.local_plane import LocalPlaneConfig, check_grid_size
+
+    check_grid_size(1570, 1010, LocalPlaneConfig(cell_size_m=0.1))
+    with pytest.raises(ConfigError, match="cell updates"):
+        check_grid_size(3122, 2013, LocalPlaneConfig(cell_size_m=0.05))
+
+
+def test_ground_filtered_seed_is_described_as_the_numpy_draws_it_seeds():
+    """The ransac segmenter draws with numpy.random.default_rng(seed); the setting still spoke of Open3D's seed."""
+    from lidarkit.registration.ground_filtered import GroundFilteredConfig
+
+    description = GroundFilteredConfig.model_fields["seed"].description
+    assert description == "ransac method: seed of the numpy RANSAC draws" and "Open3D" not in description

@@ -133,7 +133,8 @@ def test_pairwise_rmse_and_fitness_are_over_the_same_pairs_as_kiss():
     assert pipe.n_correspondences == kiss.n_correspondences
     assert pipe.rmse_history[-1] == pytest.approx(kiss.rmse_history[-1], rel=1e-9)
     assert len(pipe.rmse_history) == pipe.iterations + 1 and pipe.rmse_history[-2] < 0.1  # the loop's own, then the final
-    stuck = get_icp("pipeline", map={"name": "voxel_hash", "voxel_size_m": 0.01}).align(source, target)
+    # (the sweep voxelized as by default, 0.5 m map points and 1.5 m registered points, into a map of 1 cm voxels)
+    stuck = get_icp("pipeline", voxel_size_m=0.01, map_voxel_factor=50, source_voxel_factor=3).align(source, target)
     assert stuck.T_target_source[0, 3] < 0.1 and stuck.rmse_history[-1] > 0.5  # far from the 0.47 m motion: it shows
 
 
@@ -334,6 +335,40 @@ def test_component_parameters_read_or_at_their_default_are_kept():
     for preset in PRESETS:  # every preset, written out in full, builds again
         described = get_icp("pipeline", preset=preset).describe()
         assert get_icp("pipeline", preset=preset, **described).describe() == described
+
+
+@pytest.mark.parametrize("params, given, shared", [
+    ({"map": {"name": "voxel_hash", "voxel_size_m": 0.5}}, "map voxel_hash voxel_size_m=0.5",
+     "voxel_size_m (1 = max_range_m / 100), read also by the sweep's voxelization"),
+    ({"map": {"name": "voxel_hash", "voxel_size_m": 0.5}, "voxel_size_m": 0.8}, "map voxel_hash voxel_size_m=0.5",
+     "voxel_size_m (0.8), read also by the sweep's voxelization"),
+    ({"preprocess": [{"name": "range_crop", "max_range_m": 50.0}]}, "preprocess range_crop max_range_m=50",
+     "max_range_m (100), read also by threshold adaptive, map voxel_hash, the voxel size"),
+    ({"threshold": {"name": "adaptive", "max_range_m": 50.0}}, "threshold adaptive max_range_m=50",
+     "max_range_m (100), read also by map voxel_hash, preprocess range_crop"),
+])
+def test_a_component_value_of_a_shared_setting_the_pipeline_also_reads_is_refused(params, given, shared):
+    """kiss_like with a 0.5 m voxel_hash map still voxelized each sweep at max_range_m / 100: over 6 KITTI scans it
+    matched kiss at neither 0.5 nor 1 m (9.5 / 10.2 mm apart), yet read the data as kiss and took kiss's covariance
+    entry. A range crop or threshold of its own beside the shared max_range_m split the same way."""
+    with pytest.raises(ConfigError) as err:
+        get_icp("pipeline", preset="kiss_like", **params)
+    message = str(err.value)
+    assert "\n" not in message
+    setting = given.split()[-1].split("=")[0]
+    assert f"{given} differs from the pipeline's {shared}" in message
+    assert f"set the pipeline's {setting}={given.split('=')[1]} instead" in message
+
+
+def test_a_component_value_of_a_shared_setting_is_kept_where_nothing_else_reads_the_shared_one():
+    """The same value as the pipeline's, a range crop's own min_range_m (no other stage reads min_range_m) and a map
+    voxel on clouds the pipeline does not voxelize build, each value where it was given."""
+    same = get_icp("pipeline", preset="kiss_like", voxel_size_m=0.5, map={"name": "voxel_hash", "voxel_size_m": 0.5})
+    assert same.describe()["map"]["voxel_size_m"] == 0.5 and same.reads_data_as == "kiss"
+    crop = get_icp("pipeline", preset="kiss_like", preprocess=[{"name": "range_crop", "min_range_m": 3.0}])
+    assert crop.describe()["preprocess"][0]["min_range_m"] == 3.0
+    unvoxelized = get_icp("pipeline", preset="vanilla_seq", map={"name": "voxel_hash", "voxel_size_m": 0.5})
+    assert unvoxelized.describe()["map"]["voxel_size_m"] == 0.5
 
 
 #: kiss's five components and voxelization written on top of vanilla_seq, and vanilla's written on top of kiss_like.

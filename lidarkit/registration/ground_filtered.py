@@ -105,7 +105,7 @@ class GroundFilteredConfig(VanillaConfig):
     )
     ransac_distance_m: float = Field(0.2, gt=0, description="ransac method: max point-plane distance of ground points (m)")
     ransac_iterations: int = Field(200, ge=1, description="ransac method: RANSAC iterations")
-    seed: int = Field(0, description="ransac method: Open3D random seed")
+    seed: int = Field(0, description="ransac method: seed of the numpy RANSAC draws")
     min_points_kept: int = Field(
         100, ge=3, description="fewer points left in either cloud after ground removal -> the frame is flagged and falls back"
     )

@@ -26,7 +26,17 @@ from __future__ import annotations
 import numpy as np
 from pydantic import Field
 
+from lidarkit.errors import ConfigError
 from lidarkit.registration.ground.base import GroundConfig, GroundSegmenter, register_ground_segmenter
+from lidarkit.resources import check_memory
+
+#: Peak memory per grid cell: the floors, the envelope and the plane-fit moments, sums and solves (~400 B measured on
+#: KITTI scans at 0.15-0.25 m cells).
+GRID_BYTES_PER_CELL = 500.0
+#: Most cell updates of the slope-limited envelope (cells x ceil(window_m / cell_size_m) passes) a cloud may take:
+#: ~1.8e7 a second were measured, so about half a minute (the default 1 m cells on a KITTI scan take 2.4e5; 0.05 m
+#: cells took 1.9e9, 103 s and 2.6 GB).
+MAX_ENVELOPE_CELL_UPDATES = 5e8
 
 
 class LocalPlaneConfig(GroundConfig):
@@ -80,6 +90,21 @@ def _cell_max(values: np.ndarray, cells: np.ndarray, n_cells: int) -> np.ndarray
     return out
 
 
+def check_grid_size(nx: int, ny: int, config: LocalPlaneConfig) -> None:
+    """Refuse a grid too large to build (memory) or to propagate the envelope over (work) before it is allocated: a
+    small ``cell_size_m`` squares the cell count (0.01 m ran numpy out of memory, 0.05 m took 103 s and 2.6 GB)."""
+    c = config
+    passes = int(np.ceil(c.window_m / c.cell_size_m))
+    grid = (f"a {nx} x {ny} cell grid (cell_size_m={c.cell_size_m:g} over the cloud within max_range_m={c.max_range_m:g})")
+    source = "ground segmenter 'local_plane' (cell_size_m / max_range_m / window_m)"
+    check_memory(GRID_BYTES_PER_CELL * nx * ny, grid, source)
+    updates = float(nx) * ny * passes
+    if updates > MAX_ENVELOPE_CELL_UPDATES:
+        raise ConfigError(f"{grid} with window_m={c.window_m:g} ({passes} envelope passes) is {updates:.2g} cell updates, "
+                          f"more than {MAX_ENVELOPE_CELL_UPDATES:.0e} (about half a minute): raise cell_size_m or lower "
+                          "max_range_m or window_m", source=source)
+
+
 def local_plane_ground_mask(points_xyz: np.ndarray, config: LocalPlaneConfig) -> np.ndarray:
     """``(N,)`` bool ground mask of an ``(N, 3)`` cloud (sensor frame, z roughly up); see the module docstring."""
     c = config
@@ -94,6 +119,7 @@ def local_plane_ground_mask(points_xyz: np.ndarray, config: LocalPlaneConfig) ->
     ij = np.floor(p[:, :2] / cell).astype(np.int64)
     ij -= ij.min(axis=0)
     nx, ny = (ij.max(axis=0) + 1).tolist()
+    check_grid_size(nx, ny, c)
     flat = ij[:, 0] * ny + ij[:, 1]
     n_cells = nx * ny
 
