@@ -1672,6 +1672,24 @@ def test_five_seeds_are_too_few_for_a_seed_comparison_and_a_verdict_that_cannot_
     assert six.better == "b" and comparison_rows([("drive", six)])[1][0][-1] == "small_gicp better"
 
 
+def test_seeds_that_change_nothing_are_not_told_to_be_more():
+    """3 seeds over a fixed recording (every seed the same value on each side) were told "a comparison over seeds
+    needs 6"; 6 seeds then made "one measurement repeated": more seeds cannot help, and the reason says so."""
+    from lidarkit.bench.jobs import Job
+    from lidarkit.bench.publication import reference_comparisons
+
+    records = []
+    for seed in range(3):
+        for method, ape in (("kiss", 0.5), ("small_gicp", 0.2)):
+            job = Job("odometry", "e", "bag", {"kind": "rosbag", "path": "/data/run.bag"}, method, seed=seed)
+            records.append({"status": "ok", "job": job.spec(), "metrics": {"ape_rmse_m": ape}, "series": {}})
+    not_compared = []
+    assert reference_comparisons(records, not_compared=not_compared) == []
+    assert not_compared == ["bag, kiss vs small_gicp: the 3 seeds gave each side one value (deterministic methods on fixed "
+                            "data): one measurement repeated, which more seeds do not change; more datasets or sequences "
+                            "make more measurements"]
+
+
 def test_the_report_says_how_many_seeds_a_comparison_over_seeds_needs(tmp_path):
     """A comparison over the KITTI segments of 2 seeds said "with 5 or more seeds the units are the seeds", while seeds
     are paired from min_units(0.05) = 6 on (5 give p = 0.0625 at best): the note names the count the report uses."""

@@ -17,7 +17,7 @@ import numpy as np
 
 from lidarkit.bench.jobs import Job
 from lidarkit.bench.results import dataset_labels, ground_truth_instant
-from lidarkit.eval.statistics import DEFAULT_ALPHA, min_units
+from lidarkit.eval.statistics import DEFAULT_ALPHA, min_units, spread_is_round_off
 from lidarkit.eval.tables import PubTable, SegmentErrors, publication_tables
 
 log = logging.getLogger(__name__)
@@ -300,7 +300,12 @@ def _no_comparison_reason(ref: dict[int, dict[str, Any]], runs: dict[int, dict[s
     if not any(m in side[s]["metrics"] for m in valued_of for side in (ref, runs) for s in seeds):
         relations = any("relation_trans_mean_m" in side[s]["metrics"] for side in (ref, runs) for s in seeds)
         return "no APE or KITTI drift on this dataset" + (" (relation ground truth only)" if relations else "")
-    valued = max(valued_of.values(), key=len)  # (the metric with a value on the most seeds; the first of equals)
+    metric = max(valued_of, key=lambda m: len(valued_of[m]))  # (the one with a value on the most seeds; the first of equals)
+    valued = valued_of[metric]
+    if len(valued) >= 2 and all(spread_is_round_off(np.array([side[s]["metrics"][metric] for s in valued], dtype=float))
+                                for side in (ref, runs)):  # (it advised 6 seeds, which then made "one measurement repeated")
+        return (f"the {len(valued)} seeds gave each side one value (deterministic methods on fixed data): one measurement "
+                "repeated, which more seeds do not change; more datasets or sequences make more measurements")
     without = sorted(set(seeds) - set(valued))
     counted = (f"{len(valued)} common seed(s) with a value (seed(s) {_seed_list(without)} without one on a side; {needs})"
                if without else f"{len(seeds)} common seed(s) ({needs})")
