@@ -541,6 +541,19 @@ def test_relations_and_trajectory_swapped_name_the_order(tmp_path, capsys):
         f"(lidarkit eval --relations {relations} {est})")
 
 
+def test_a_kitti_trajectory_scored_by_relations_is_told_the_times_it_needs(tmp_path, capsys):
+    """A run's poses_kitti.txt given to --relations was told "read it as kitti: --format kitti, ...", which failed next
+    ("the relations metric needs the estimate's timestamps"): the hint names --est-times and poses_tum.txt."""
+    relations = shared_path("carmen_2d", "aces.relations")
+    est = tmp_path / "poses_kitti.txt"
+    Trajectory(np.tile(np.eye(4), (3, 1, 1)), np.array([0.0, 1.0, 2.0])).to_kitti(est)
+    with pytest.raises(SystemExit) as exc:
+        main(["eval", "--relations", str(relations), str(est)])
+    err = capsys.readouterr().err.strip()
+    assert exc.value.code == 1 and err.endswith("(a KITTI trajectory? read it as kitti: --format kitti --est-times TIMES.txt "
+                                                "(the relations metric pairs poses by time), or a run folder's poses_tum.txt)")
+
+
 @pytest.mark.parametrize("position", ["REF", "EST", "--json", "--markdown", "--ref-times", "--tables", "--relations"])
 def test_a_loop_of_symbolic_links_is_one_line_naming_it(tmp_path, capsys, monkeypatch, position):
     """`ln -s loop loop` given as an input or an output printed a traceback (RuntimeError: Symlink loop, from

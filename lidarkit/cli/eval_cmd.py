@@ -80,6 +80,9 @@ def eval_command(
         if relations is None:  # one file of a KITTI/TUM pair in the other format: its own option reads it so
             side = "--ref-format" if path == ref else "--est-format"
             kwargs["format_hint"] = lambda other: f"{side} {other}, Trajectory.from_{other}"
+        else:  # (the hint "--format kitti" alone failed next: the relations metric pairs poses by time)
+            kwargs["format_hint"] = lambda other: (f"--format {other}" + (" --est-times TIMES.txt (the relations metric pairs "
+                                                   "poses by time), or a run folder's poses_tum.txt" if other == "kitti" else ""))
         try:
             return Trajectory.read(path, kind, **kwargs)
         except ConfigError as err:
