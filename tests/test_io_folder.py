@@ -430,3 +430,19 @@ def test_points_dropped_as_nonfinite_are_said_once_in_the_runs_warnings(tmp_path
 
     assert said in json.loads((tmp_path / "run" / "metrics.json").read_text())["warnings"]
     assert result.metrics["warnings"].count(said) == 1
+
+
+def test_a_ply_time_field_of_a_type_open3d_skips_is_not_said_to_be_read_by_generic(tmp_path):
+    """A folder of .ply scans whose time field ``t`` is a PLY uint (as Ouster writes nanoseconds) was said to be read
+    by generic:PATH, which reads nothing of it (Open3D skips uint, ushort, short and char properties); a float one is."""
+    for kind in ("uint", "float"):
+        header = (f"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+                  f"property {kind} t\nend_header\n")
+        (tmp_path / kind).mkdir()
+        (tmp_path / kind / "0.ply").write_text(header + "1 0 0 0\n0 1 0 5\n0 0 1 9\n")
+    skipped = ScanFolder(tmp_path / "uint")
+    assert skipped.unread_point_times == ("t", tmp_path / "uint" / "0.ply", False)
+    assert skipped.unread_point_time_type == "uint"
+    readable = ScanFolder(tmp_path / "float")
+    assert readable.unread_point_times == ("t", tmp_path / "float" / "0.ply", True)
+    assert readable.unread_point_time_type is None

@@ -476,3 +476,134 @@ def test_ouster_meta_given_by_a_relative_name_is_looked_up_beside_the_pcap(tmp_p
     with pytest.raises(DataError, match=re.escape(f"other.json: Ouster metadata json not found, neither from the working "
                                                   f"directory nor beside the pcap in {recording}")):
         OusterScans(recording / "run.pcap", meta="other.json")
+
+
+def _ply_scans(folder, time_type: str, n_scans: int = 3):
+    """``n_scans`` binary .ply scans of RING whose per-point time field ``t`` has the PLY type ``time_type`` (uint:
+    nanoseconds, float: seconds)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    stored = {"uint": "<u4", "float": "<f4"}[time_type]
+    record = np.zeros(len(RING), dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("t", stored)])
+    record["t"] = np.linspace(0, 99_000_000 if time_type == "uint" else 0.099, len(RING))
+    for k in range(n_scans):
+        record["x"], record["y"], record["z"] = (RING + [k, 0.0, 0.0]).T
+        header = (f"ply\nformat binary_little_endian 1.0\nelement vertex {len(RING)}\nproperty float x\nproperty float y\n"
+                  f"property float z\nproperty {time_type} t\nend_header\n")
+        (folder / f"{k}.ply").write_bytes(header.encode() + record.tobytes())
+    return [folder / f"{k}.ply" for k in range(n_scans)]
+
+
+def test_a_ply_time_field_of_a_type_open3d_skips_is_named_by_the_generic_reader(tmp_path):
+    """Open3D skips a .ply property of type uint (as ushort, short, char): generic: ran without deskew saying only "no
+    per-point times found". The reader names the field, its type and what to store instead."""
+    _ply_scans(tmp_path / "uint", "uint")
+    dataset = open_dataset("generic", tmp_path / "uint")
+    assert dataset.read_scan(0).point_times_s is None
+    assert dataset.reader_warnings == ["per-point times not read: the scans carry them in the 't' field, of PLY type uint "
+                                       "(e.g. 0.ply), which Open3D cannot read (kiss-icp's generic loader reads with it); "
+                                       "store them as float, double or int"]
+    _ply_scans(tmp_path / "float", "float")
+    readable = open_dataset("generic", tmp_path / "float")
+    assert readable.reader_warnings == []
+    np.testing.assert_allclose(readable.read_scan(0).point_times_s, np.linspace(0, 0.099, len(RING)), atol=1e-7)
+
+
+def _tum_folder(root, gt_stamps):
+    """A TUM RGB-D folder of 8 depth frames at 30 Hz (80 x 60, a slanted wall), with comment lines as TUM writes them,
+    and one ground-truth pose at each of ``gt_stamps``: x = 10 * (t - t0), the identity rotation."""
+    import open3d as o3d
+
+    (root / "depth").mkdir(parents=True)
+    (root / "rgb").mkdir()
+    rows, cols = np.mgrid[0:60, 0:80]
+    o3d.io.write_image(str(root / "rgb" / "0.png"), o3d.geometry.Image(np.zeros((60, 80, 3), np.uint8)))
+    stamps = 1305031099.665900 + np.arange(8) / 30
+    lines = ["# depth maps", "# file: 'x.bag'", "# timestamp filename"]
+    for k, stamp in enumerate(stamps):
+        depth = (5000 + 20 * cols + 10 * rows + 30 * ((rows // 10 + cols // 10 + k) % 2)).astype(np.uint16)  # 1 mm per unit / 5
+        o3d.io.write_image(str(root / "depth" / f"{stamp:.6f}.png"), o3d.geometry.Image(depth))
+        lines.append(f"{stamp:.6f} depth/{stamp:.6f}.png")
+    (root / "depth.txt").write_text("\n".join(lines) + "\n")
+    gt = ["# ground truth trajectory", "# file: 'x.bag'", "# timestamp tx ty tz qx qy qz qw"]
+    gt += [f"{t:.4f} {10 * (t - stamps[0]):.4f} 0 0 0 0 0 1" for t in gt_stamps]
+    (root / "groundtruth.txt").write_text("\n".join(gt) + "\n")
+    return stamps
+
+
+def test_kiss_tum_pairs_each_depth_frame_with_its_nearest_pose_and_names_a_gap(tmp_path):
+    """kiss-icp's TUM loader gave each depth frame the nearest pose at any distance and merged the frames sharing one:
+    a gap in groundtruth.txt refused the whole run ("6 ground-truth poses for 8 scans"). Frames pair with a pose within
+    0.02 s, as the tum reader pairs images; the first frame without one is named, and --frames scores the others."""
+    from lidarkit.odometry import run
+
+    t0 = 1305031099.665900
+    every = t0 - 0.5 + 0.01 * np.arange(120)
+    stamps = _tum_folder(tmp_path / "whole", every)
+    whole = open_dataset("kiss_tum", tmp_path / "whole")
+    np.testing.assert_allclose(whole.ground_truth.poses_se3, np.asarray(whole.loader.gt_poses), atol=1e-12)  # kiss-icp's
+    np.testing.assert_allclose(whole.ground_truth.timestamps_s, stamps)
+    gap = every[(every < t0 + 0.12) | (every > t0 + 0.19)]  # frames 4 (t0 + 0.133) and 5 (t0 + 0.167) without a pose
+    _tum_folder(tmp_path / "gap", gap)
+    dataset = open_dataset("kiss_tum", tmp_path / "gap")
+    with pytest.raises(DataError, match=r"groundtruth\.txt: 2 of 8 depth frames have no pose within 0\.02 s, the first: frame 4 "
+                                        r"at t=1305031099\.799233 s \(the nearest pose is 0\.023 s away\)"):
+        dataset.ground_truth
+    np.testing.assert_allclose(dataset.ground_truth_of([0, 1, 2]).poses_se3[:, 0, 3], [0.0, 0.3, 0.7], atol=0.011)
+    with pytest.raises(DataError, match=r"1 of 2 selected depth frames have no pose within 0\.02 s, the first: frame 5"):
+        dataset.ground_truth_of([5, 6])
+    result = run(dataset, "vanilla", frames="0:3")
+    np.testing.assert_allclose(result.ground_truth.poses_se3[:, 0, 3], [0.0, 0.3, 0.7], atol=0.011)
+
+
+def test_kiss_tum_comment_lines_give_no_python_warnings(tmp_path, caplog):
+    """numpy warned six lines about the comment lines of every TUM folder kiss-icp's loader opened: they are logged
+    at debug level, as what the loaders print."""
+    import warnings
+
+    _tum_folder(tmp_path, 1305031099.665900 + 0.01 * np.arange(-10, 40))
+    with warnings.catch_warnings(record=True) as shown, caplog.at_level(logging.DEBUG, logger="lidarkit.io.rosbag"):
+        warnings.simplefilter("always")
+        dataset = open_dataset("kiss_tum", tmp_path)
+    assert len(dataset) == 8
+    assert [str(w.message) for w in shown] == []
+    assert "tum loader warned: UserWarning: Input line 1 contained no data" in caplog.text
+
+
+def test_a_pose_file_kiss_icp_cannot_read_is_named_with_its_line(tmp_path):
+    """A ground-truth file the loader cannot read failed in numpy's words naming the folder ("not enough values to
+    unpack", "could not convert string 'timestamp'"); its rows are read first, naming the file and line."""
+    import open3d as o3d
+
+    apollo = tmp_path / "apollo"
+    (apollo / "pcds").mkdir(parents=True)
+    (apollo / "poses").mkdir()
+    for k in range(3):
+        o3d.t.io.write_point_cloud(str(apollo / "pcds" / f"{k + 1}.pcd"), o3d.t.geometry.PointCloud(o3d.core.Tensor(RING.astype(np.float32))))
+    rows = [f"{k + 1} {1537574000.6 + 0.1 * k:.6f} {k} 0 0 0 0 0 1" for k in range(3)]
+    rows[1] = rows[1][: rows[1].rindex(" ")]  # 8 numbers: no qw
+    (apollo / "poses" / "gt_poses.txt").write_text("\n".join(rows) + "\n")
+    with pytest.raises(DataError, match=r"gt_poses\.txt \(line 2\): expected 9 numbers, found 8$"):
+        open_dataset("apollo", apollo)
+
+    _mulran(tmp_path / "mulran", 3, 3)
+    pose_file = tmp_path / "mulran" / "global_pose.csv"
+    pose_file.write_text("timestamp,r11,r12,r13,x,r21,r22,r23,y,r31,r32,r33,z\n" + pose_file.read_text())
+    with pytest.raises(DataError, match=r"global_pose\.csv \(line 1\): not a number: 'timestamp'$"):
+        open_dataset("mulran", tmp_path / "mulran")
+
+    boreas = tmp_path / "boreas"
+    (boreas / "lidar").mkdir(parents=True)
+    (boreas / "applanix").mkdir()
+    for k in range(3):
+        np.zeros((10, 6), np.float32).tofile(boreas / "lidar" / f"{1606417230000000 + k * 100000}.bin")
+    header = "GPSTime,easting,northing,altitude,vel_east,vel_north,vel_up,roll,pitch,heading,angvel_z,angvel_y,angvel_x\n"
+    rows = [f"{1606417230.0 + 0.1 * k}" + ",0" * 12 for k in range(3)]
+    (boreas / "applanix" / "lidar_poses.csv").write_text(header + "\n".join([rows[0], rows[1][:-2], rows[2]]) + "\n")
+    with pytest.raises(DataError, match=r"lidar_poses\.csv \(line 3\): expected 13 numbers, found 12$"):
+        open_dataset("boreas", boreas)
+
+    helipr = tmp_path / "helipr"
+    _helipr_velodyne(helipr, [np.linspace(0, 0.1, len(RING))] * 2)
+    (helipr / "LiDAR_GT" / "global_Velodyne_gt.txt").write_text("1690000000000000000 0 0 0 0 0 0 1\n1690000000100000000 1 0 0 0 0 1\n")
+    with pytest.raises(DataError, match=r"global_Velodyne_gt\.txt \(line 2\): expected 8 numbers, found 7$"):
+        open_dataset("helipr", helipr, sequence="Velodyne")

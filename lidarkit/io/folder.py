@@ -19,7 +19,8 @@ import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.io.base import Scan, checked_index, option_path
-from lidarkit.io.pointfile import POINT_FILE_SUFFIXES, point_file_fields, read_point_file, said_once
+from lidarkit.io.pointfile import (POINT_FILE_SUFFIXES, open3d_skipped_type, point_file_fields, read_point_file,
+                                   said_once)
 from lidarkit.textfile import data_line_numbers, read_numeric_table
 from lidarkit.trajectory import Trajectory
 
@@ -222,11 +223,33 @@ class ScanFolder:
     def unread_point_times(self) -> tuple[str, Path, bool] | None:
         """(field, file, whether generic:PATH reads it): a per-point time field in the folder's first .pcd/.ply, which
         this reader leaves unread; None without one. For a deskew that found no times ("ScanFolder gives none" hid
-        them). generic:PATH refuses a .pcd whose padding fields repeat (Open3D, its reader, aborts on them)."""
+        them). generic:PATH refuses a .pcd whose padding fields repeat (Open3D, its reader, aborts on them) and reads
+        no field of a PLY type Open3D skips (:attr:`unread_point_time_type`)."""
+        found = self._time_field_in_first_file
+        if found is None:
+            return None
+        field, first, fields = found
+        return field, first, len(set(fields)) == len(fields) and open3d_skipped_type(first, field) is None
+
+    @property
+    def unread_point_time_type(self) -> str | None:
+        """The PLY type of the :attr:`unread_point_times` field when Open3D cannot read it (``uint``, ``ushort``...:
+        :data:`~lidarkit.io.pointfile.OPEN3D_SKIPPED_PLY_TYPES`), so that no reader gets the times until the files
+        store them as float, double or int; None otherwise."""
+        found = self._time_field_in_first_file
+        return None if found is None else open3d_skipped_type(found[1], found[0])
+
+    @cached_property
+    def _time_field_in_first_file(self) -> tuple[str, Path, list[str]] | None:
+        """(time field, file, all its fields) of the first .pcd/.ply: the first of :data:`GENERIC_TIME_FIELDS` that
+        Open3D reads, as kiss-icp's generic loader picks it, else the first present; None without one."""
         first = next((p for p in self.scan_paths if p.suffix.lower() in (".pcd", ".ply")), None)
         fields = [] if first is None else point_file_fields(first)
-        field = next((f for f in GENERIC_TIME_FIELDS if f in fields), None)
-        return None if field is None else (field, first, len(set(fields)) == len(fields))
+        present = [f for f in GENERIC_TIME_FIELDS if f in fields]
+        if not present:
+            return None
+        readable = [f for f in present if open3d_skipped_type(first, f) is None]
+        return (readable or present)[0], first, fields
 
     @property
     def timestamps_s(self) -> np.ndarray | None:

@@ -59,6 +59,8 @@ class KissLoaderScans:
     ground_truth_frame = "as kiss-icp's loader gives it"
     #: points with NaN / infinite coordinates left out (with a warning) instead of refused (the file readers' option)
     drop_nonfinite = False
+    #: numbers in each row of the ground-truth file of :meth:`_pose_file`
+    pose_columns = 0
 
     def __init__(self, path: str | os.PathLike, **loader_options: Any):
         self.path = Path(os.path.abspath(path))  # (nclt:. built its ground-truth file name from "." and found none)
@@ -75,21 +77,21 @@ class KissLoaderScans:
         self.name = f"{self.kind}:{getattr(self.loader, 'sequence_id', self.path.name)}"
         self._stamp_cache: tuple[np.ndarray | None] | None = None
 
-    def _pose_file(self) -> tuple[Path, int, list[Path]] | None:
-        """(ground-truth file, its header lines, the scan files it must give one pose each) for the loaders that pair
-        them by count; None: nothing to check before the loader is built."""
+    def _pose_file(self) -> tuple[Path, int, list[Path] | None] | None:
+        """(ground-truth file of :attr:`pose_columns` numbers a row, its header lines, the scan files it must give one
+        pose each or None where the loader pairs them by time); None: nothing to check before the loader is built."""
         return None
 
     def _check_pose_rows(self) -> None:
-        """One ground-truth row per scan, said before a loader that pairs them by count fails on it (an
-        AssertionError without a message, or numpy's broadcasting error)."""
+        """The ground-truth file's rows read as numbers, :attr:`pose_columns` each, and one row per scan where the
+        loader pairs them by count, said before the loader fails on it (numpy's words naming the folder, an
+        AssertionError without a message, or a broadcasting error)."""
         found = self._pose_file()
         if found is None or not found[0].is_file():
             return
         path, header, scans = found
-        with open(path, "rb") as f:
-            rows = sum(1 for line in f if line.strip()) - header
-        if rows != len(scans):
+        rows = len(_read_pose_table(path, self.pose_columns, header))
+        if scans is not None and rows != len(scans):
             raise DataError(f"{rows} ground-truth poses for {len(scans)} scans: one pose per scan needed", source=path)
 
     @property
@@ -296,16 +298,47 @@ class KissKittiRawScans(KissLoaderScans):
 
 
 class KissTumScans(KissLoaderScans):
-    """TUM RGB-D depth images as point clouds (kiss-icp's ``tum`` loader)."""
+    """TUM RGB-D depth images as point clouds (kiss-icp's ``tum`` loader). Ground truth: each depth frame's nearest
+    ``groundtruth.txt`` pose within ``max_dt_s``, as lidarkit's ``tum`` reader pairs its images (kiss-icp's loader
+    took the nearest pose at any distance and merged the frames sharing one: one gap refused the whole run)."""
 
     loader_name = "tum"
     point_time_convention = "relative_s"
+    #: the farthest (s) a depth frame's ground-truth pose may be stamped from it (lidarkit's tum reader's default)
+    max_dt_s = 0.02
 
     def __init__(self, path: str | os.PathLike):
         for needed in ("depth.txt", "groundtruth.txt", "rgb"):
             if not (Path(path) / needed).exists():
                 raise DataError(f"a TUM RGB-D sequence folder needs {needed}", source=path)
         super().__init__(path)
+
+    @property
+    def ground_truth(self) -> Trajectory | None:
+        return self.ground_truth_of(None)
+
+    def ground_truth_of(self, scans: np.ndarray | list[int] | None) -> Trajectory | None:
+        """:attr:`ground_truth` of the depth frames numbered ``scans`` only (None: all): the frames a gap in the ground
+        truth leaves out of its reach are named, and ``--frames`` can score the others."""
+        from lidarkit.io.tum import associate_nearest
+
+        stamps = self.timestamps_s
+        if stamps is None:
+            return super().ground_truth
+        path = self.path / "groundtruth.txt"
+        gt = Trajectory.from_tum(path)
+        numbers = np.arange(len(stamps)) if scans is None else checked_indices(scans, len(stamps), self.path, from_end=False)
+        nearest = associate_nearest(stamps[numbers], gt.timestamps_s, self.max_dt_s)
+        unpaired = np.flatnonzero(nearest < 0)
+        if len(unpaired):
+            first = int(numbers[unpaired[0]])
+            apart = float(np.min(np.abs(gt.timestamps_s - stamps[first])))
+            which = "depth frames" if len(numbers) == len(stamps) else "selected depth frames"
+            raise DataError(f"{len(unpaired)} of {len(numbers)} {which} have no pose within {self.max_dt_s} s, the first: "
+                            f"frame {first} at t={stamps[first]:.6f} s (the nearest pose is {apart:.3f} s away): one pose "
+                            "per scan needed (--frames can pick the frames it covers)", source=path)
+        return Trajectory(gt.poses_se3[nearest], stamps[numbers], name=f"{self.name}_gt",
+                          meta={"frame": self.ground_truth_frame, "pose_instant": None, "kiss_icp_loader": self.loader_name})
 
 
 class OusterScans(KissLoaderScans):
@@ -375,9 +408,13 @@ class MulranScans(KissLoaderScans):
     the last one for every scan past the end)."""
 
     loader_name = "mulran"
+    pose_columns = 13
 
     def __init__(self, path: str | os.PathLike):
         super().__init__(path)
+
+    def _pose_file(self) -> tuple[Path, int, list[Path] | None] | None:
+        return self.path / "global_pose.csv", 0, None  # (paired by time: more poses than scans)
 
     def _stamps(self) -> np.ndarray | None:
         return np.asarray(self.loader.scan_timestamps, dtype=np.float64) * 1e-9
@@ -389,7 +426,7 @@ class MulranScans(KissLoaderScans):
     def ground_truth_of(self, scans: np.ndarray | list[int] | None) -> Trajectory | None:
         """:attr:`ground_truth` of the scans numbered ``scans`` only (None: all): a recording whose ``global_pose.csv``
         covers part of its scans is scored on that part (``--frames``)."""
-        stamps_ns = np.loadtxt(self.path / "global_pose.csv", delimiter=",", usecols=0, ndmin=1)
+        stamps_ns = _read_pose_table(self.path / "global_pose.csv", self.pose_columns, 0)[:, 0]
         scans_ns = np.asarray(self.loader.scan_timestamps, dtype=np.float64)
         numbers = np.arange(len(scans_ns)) if scans is None else checked_indices(scans, len(scans_ns), self.path, from_end=False)
         picked = scans_ns[numbers]
@@ -458,6 +495,7 @@ class HeliprScans(KissLoaderScans):
     file names (nanoseconds)."""
 
     loader_name = "helipr"
+    pose_columns = 8
     SENSORS = ("Avia", "Aeva", "Ouster", "Velodyne")
 
     def __init__(self, path: str | os.PathLike, sequence: str = "Ouster"):
@@ -503,6 +541,7 @@ class BoreasScans(KissLoaderScans):
     (microseconds)."""
 
     loader_name = "boreas"
+    pose_columns = 13
 
     def __init__(self, path: str | os.PathLike):
         super().__init__(path)
@@ -521,6 +560,7 @@ class ApolloScans(KissLoaderScans):
     """Apollo-SouthBay (``pcds`` + ``poses/gt_poses.txt``), kiss-icp's ``apollo`` loader."""
 
     loader_name = "apollo"
+    pose_columns = 9
     point_time_convention = "relative_s"
 
     def __init__(self, path: str | os.PathLike):
@@ -601,6 +641,24 @@ class GenericScans(KissLoaderScans):
         self.drop_nonfinite = drop_nonfinite
         self._time_field = getattr(getattr(self.loader, "_read_point_cloud", None), "time_field", None)
         self._time_dtype = None if self._time_field is None else _field_dtype(Path(self.loader.scan_files[0]), self._time_field)
+        if self._time_field is None:
+            self._say_skipped_time_field(Path(self.loader.scan_files[0]))
+
+    def _say_skipped_time_field(self, first: Path) -> None:
+        """A time field the loader found no times in because Open3D skips its PLY type (uint, ushort...), said in the
+        run's warnings: the run went on without deskew saying only "no per-point times found"."""
+        from lidarkit.io.folder import GENERIC_TIME_FIELDS
+        from lidarkit.io.pointfile import open3d_skipped_type, point_file_fields
+
+        fields = point_file_fields(first)
+        field = next((f for f in GENERIC_TIME_FIELDS if f in fields), None)
+        kind = None if field is None else open3d_skipped_type(first, field)
+        if kind is None:
+            return
+        self.reader_warnings.append(f"per-point times not read: the scans carry them in the {field!r} field, of PLY type "
+                                    f"{kind} (e.g. {first.name}), which Open3D cannot read (kiss-icp's generic loader reads "
+                                    "with it); store them as float, double or int")
+        log.warning("%s: %s", self.path, self.reader_warnings[-1])
 
     def read_scan(self, index: int) -> Scan:
         files = self.loader.scan_files
@@ -619,6 +677,19 @@ class GenericScans(KissLoaderScans):
         check_sweep_span(float(np.ptp(times)), None, what=f"the {self._time_field!r} field", unit=time_unit_read(raw.dtype),
                          over="this scan", hint=hint, source=files[index], location=f"frame {index}")
         return dataclasses.replace(scan, point_times_s=times, point_time_convention=convention)
+
+
+def _read_pose_table(path: Path, ncols: int, header_lines: int) -> np.ndarray:
+    """``(N, ncols)`` rows of a ground-truth file after its ``header_lines`` (0 or 1: Boreas's column names), a bad row
+    a DataError naming the file and its line."""
+    from lidarkit.textfile import read_numeric_table
+
+    header = ""
+    if header_lines:
+        with open(path, encoding="utf-8-sig", errors="replace") as f:
+            header = f.readline().strip()
+    # (the header, the file's first line, is skipped as the loader skips it: as a comment line of its own text)
+    return read_numeric_table(path, ncols, **({"comment": header} if header else {}))
 
 
 def _field_dtype(path: Path, field: str) -> np.dtype | None:

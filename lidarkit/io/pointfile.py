@@ -586,7 +586,27 @@ def _check_ply_coordinates(path: Path, where: str | None, kinds: dict[str, str],
 def point_file_fields(path: str | os.PathLike) -> list[str]:
     """The per-point fields a ``.pcd`` (FIELDS) or ``.ply`` (vertex properties) header names, from its first 64 kB;
     empty for another file type or a header that cannot be read (the readers name what is wrong with it)."""
-    path = Path(path)
+    return [name for name, _ in _header_fields(Path(path))]
+
+
+#: PLY property types whose values Open3D's point-cloud reader skips ("unsupported datatype", on stdout), checked on
+#: Open3D 0.20: a per-point time field of one of these reaches no reader (uchar, uint8, uint16, int, float and double
+#: are read)
+OPEN3D_SKIPPED_PLY_TYPES = ("char", "int8", "short", "int16", "ushort", "uint", "uint32")
+
+
+def open3d_skipped_type(path: str | os.PathLike, field: str) -> str | None:
+    """The type of vertex property ``field`` of a ``.ply`` as its header writes it, when Open3D cannot read that type
+    (:data:`OPEN3D_SKIPPED_PLY_TYPES`); None otherwise, and for a ``.pcd`` (Open3D reads every PCD type)."""
+    if Path(path).suffix.lower() != ".ply":
+        return None
+    kind = dict(_header_fields(Path(path))).get(field)
+    return kind if kind in OPEN3D_SKIPPED_PLY_TYPES else None
+
+
+def _header_fields(path: Path) -> list[tuple[str, str]]:
+    """(name, type) of each per-point field in a ``.pcd`` / ``.ply`` header (a PCD's type is left empty; a PLY list's
+    is ``list``); empty for another file type or a header that cannot be read."""
     suffix = path.suffix.lower()
     if suffix not in (".pcd", ".ply"):
         return []
@@ -597,14 +617,14 @@ def point_file_fields(path: str | os.PathLike) -> list[str]:
         return []
     lines = [line.split() for line in head.decode("ascii", errors="replace").splitlines()]
     if suffix == ".pcd":
-        return next((words[1:] for words in lines if words and words[0].upper() == "FIELDS"), [])
-    names, in_vertex = [], False
+        return next(([(name, "") for name in words[1:]] for words in lines if words and words[0].upper() == "FIELDS"), [])
+    fields, in_vertex = [], False
     for words in lines:
         if words[:1] == ["element"]:
             in_vertex = words[1:2] == ["vertex"]
         elif words[:1] == ["property"] and in_vertex and len(words) > 2:
-            names.append(words[-1])
-    return names
+            fields.append((words[-1], words[1]))
+    return fields
 
 
 def read_point_file(
@@ -633,8 +653,10 @@ __all__ = [
     "check_ply_counts",
     "drop_origin_points",
     "finite_points",
+    "OPEN3D_SKIPPED_PLY_TYPES",
     "open3d_quiet",
     "open3d_reason",
+    "open3d_skipped_type",
     "PcdHeader",
     "point_file_fields",
     "read_kitti_bin",

@@ -27,6 +27,7 @@ import contextlib
 import io
 import logging
 import os
+import warnings
 from collections.abc import Iterator
 from functools import cached_property
 from pathlib import Path
@@ -71,14 +72,17 @@ def require_modules(modules: dict[str, str], kind: str) -> None:
 
 @contextlib.contextmanager
 def guarded_loader(kind: str, source: str, location: str | None = None) -> Iterator[None]:
-    """Run a kiss-icp loader call so that it can neither print to stdout nor end the process.
+    """Run a kiss-icp loader call so that it can neither print to stdout nor end the process, nor show Python warnings.
 
     kiss-icp's loaders print and call ``exit()`` on problems they find; lidarkit checks first, and anything left
-    becomes a DataError carrying what the loader printed.
+    becomes a DataError carrying what the loader printed. Its warnings (numpy's six lines on the comment lines of
+    every TUM folder) are logged at debug level, as what it prints; the caller's filters still decide which are
+    raised.
     """
     out = io.StringIO()
+    caught: list[warnings.WarningMessage] = []
     try:
-        with contextlib.redirect_stdout(out):
+        with contextlib.redirect_stdout(out), warnings.catch_warnings(record=True) as caught:
             yield
     except SystemExit:
         said = " ".join(out.getvalue().split()) or "no message"
@@ -88,6 +92,8 @@ def guarded_loader(kind: str, source: str, location: str | None = None) -> Itera
     finally:
         if out.getvalue().strip():
             log.debug("%s loader said: %s", kind, out.getvalue().strip())
+        for caught_warning in caught:
+            log.debug("%s loader warned: %s: %s", kind, caught_warning.category.__name__, caught_warning.message)
 
 
 class _BagScans:
