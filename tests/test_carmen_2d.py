@@ -352,6 +352,23 @@ def test_eval_cli_relations(tmp_path, carmen_logs, capsys):
     assert "--align, --plot do(es) not apply to the relations metric" in err and not plot.exists()
 
 
+def test_eval_cli_relations_prints_small_errors_with_their_figures(tmp_path, capsys):
+    """Errors of a few mm printed as 0.0000 (four decimals): squared translations of 3.6e-6 m², rotations of 4e-5 deg.
+    The cells carry five significant figures, as the APE/RPE tables do."""
+    est = tmp_path / "chain.tum"
+    est.write_text("90.239599 0 0 0 0 0 0 1\n"
+                   "90.719599 0.422833 -0.001278 0 0 0 0.008630 0.999963\n"
+                   "91.321399 0.639040 -0.011879 0 0 0 -0.193041 0.981191\n")
+    out_json = tmp_path / "rel.json"
+    assert cli_exit_code(["eval", "--relations", str(shared_path("carmen_2d", "aces.relations")), str(est),
+                          "--json", str(out_json)]) == 0
+    out = capsys.readouterr().out
+    import json
+
+    squared = json.loads(out_json.read_text())["translation_sq_m2"]["mean"]
+    assert 1e-6 < squared < 1e-5 and f"{squared:.5g}" in out and "0.0000 " not in out
+
+
 # ---- planar registration -----------------------------------------------------------------------------
 
 

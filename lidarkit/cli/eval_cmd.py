@@ -251,7 +251,7 @@ def _relations_report(est_traj, relations_path: Path, max_diff_s: float, json_ou
         ("rotational |e| (deg)", result.rotation_abs),
         ("rotational e^2 (deg^2)", result.rotation_sq),
     ):
-        table.add_row(label, *(f"{stats[k]:.4f}" for k in ("mean", "std", "max")))
+        table.add_row(label, *(report._fmt(stats[k]) for k in ("mean", "std", "max")))  # (".4f" printed 3.6e-6 m² as 0.0000)
     console = results_console([json_out])
     if json_out is not None:  # (before the table: a full disk on stdout lost it)
         report.write_json({**result.to_dict(), "relations_path": str(relations_path)}, json_out)
