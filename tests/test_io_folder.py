@@ -446,3 +446,25 @@ def test_a_ply_time_field_of_a_type_open3d_skips_is_not_said_to_be_read_by_gener
     readable = ScanFolder(tmp_path / "float")
     assert readable.unread_point_times == ("t", tmp_path / "float" / "0.ply", True)
     assert readable.unread_point_time_type is None
+
+
+def test_tum_stamps_far_from_timestamps_are_kept_in_the_reader_warnings_and_the_runs(tmp_path):
+    """The warning that a TUM ground truth's stamps lie far from ``timestamps=`` was only logged: the run's metrics.json
+    did not say its poses took other stamps. It is kept once in ``reader_warnings``, and so in the run's warnings."""
+    from lidarkit.odometry import run
+    from lidarkit.sim.lidar import SimulatedLidarSequence
+
+    sim = SimulatedLidarSequence(n_frames=4, n_beams=8, n_azimuths=180, seed=2)
+    scans = tmp_path / "scans"
+    scans.mkdir()
+    for k in range(len(sim)):
+        np.save(scans / f"{k:06d}.npy", sim.read_scan(k).points_xyz.astype(np.float32))
+    truth = sim.ground_truth
+    Trajectory(truth.poses_se3, truth.timestamps_s).to_tum(tmp_path / "poses.tum")
+    far = ScanFolder(scans, poses=tmp_path / "poses.tum", poses_format="tum", timestamps=truth.timestamps_s + 100.0)
+    said = (f"{tmp_path / 'poses.tum'}: pose 0 is stamped 100.000 s from its scan's time stamp (half a frame is 0.050 s); "
+            "poses and scans are paired by order, one each, and the poses take the stamps of timestamps=")
+    assert far.reader_warnings == [said]
+    assert run(far, "vanilla").metrics["warnings"].count(said) == 1
+    near = ScanFolder(scans, poses=tmp_path / "poses.tum", poses_format="tum", timestamps=truth.timestamps_s + 0.02)
+    assert near.reader_warnings == []

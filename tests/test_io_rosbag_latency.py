@@ -17,13 +17,14 @@ PERIOD_S = 0.1
 EPOCH_S = 1.7e9
 
 
-def _late_bag(path, sim, latency_s: float, absolute: bool, n_poses: int | None = None, poses=None):
+def _late_bag(path, sim, latency_s: float, absolute: bool, n_poses: int | None = None, poses=None, t0: float | None = None):
     """A ROS 1 bag of ``sim``'s sweeps, each stamped ``latency_s`` after its sweep end, its point times relative to
     the stamp (float32 ``time``) or ``absolute`` (float64 ``timestamp`` on the stamps' clock), with the odometry
-    stamped at the sweep ends (the first ``n_poses`` of them) or ``poses`` (``write_ros1_bag``'s odometry)."""
+    stamped at the sweep ends (the first ``n_poses`` of them) or ``poses`` (``write_ros1_bag``'s odometry); the clock
+    starts ``t0`` s before the first sweep (default: an epoch time if absolute, else 1000 s)."""
     from test_io_bad_bags import write_ros1_bag
 
-    t0 = EPOCH_S if absolute else 1000.0
+    t0 = t0 if t0 is not None else EPOCH_S if absolute else 1000.0
     field, code, dtype = ("timestamp", 8, "<f8") if absolute else ("time", 7, "<f4")
     clouds = []
     for k in range(len(sim)):
@@ -80,6 +81,26 @@ def test_stamps_lagging_their_sweeps_by_more_than_a_period_are_a_latency_not_ano
     part = open_dataset("rosbag", _late_bag(tmp_path / "part.bag", drive, latency_s, absolute=True, n_poses=6))
     np.testing.assert_allclose(part.ground_truth_of(range(6)).poses_se3, drive.ground_truth.poses_se3[:6], atol=1e-6)
     assert late.sweep_offset_s == pytest.approx(-PERIOD_S - latency_s, abs=1e-6)
+
+
+@pytest.mark.parametrize("latency_s", [0.0, 0.03])
+def test_absolute_point_times_on_a_simulators_clock_are_absolute_not_another_clock(tmp_path, drive, latency_s):
+    """Float64 ``timestamp`` point times on the stamps' clock, a simulator's starting near 0 (sim time: 100 s): below
+    1e5 s they were read as relative to the stamp, the sweeps 100 s after their stamps ("another clock?"), no stamp
+    instant, no ground truth re-timing (small_gicp's RPE 0.036 m where 0.009 is right). Read against the stamp, they are
+    absolute, and the bag reads and scores as the same sweeps on an epoch clock."""
+    sim_time = open_dataset("rosbag", _late_bag(tmp_path / "sim_time.bag", drive, latency_s, absolute=True, t0=100.0))
+    epoch = open_dataset("rosbag", _late_bag(tmp_path / "epoch.bag", drive, latency_s, absolute=True))
+    assert sim_time.read_scan(2).point_time_convention == "absolute_s"
+    assert sim_time.sweep_offset_s == pytest.approx(epoch.sweep_offset_s, abs=1e-6)
+    assert sim_time.sweep_offset_s == pytest.approx(-PERIOD_S - latency_s, abs=1e-6)
+    assert sim_time.stamp_instant == epoch.stamp_instant == ("end" if latency_s == 0.0 else None)
+    assert sim_time.ground_truth.meta["pose_instant"] == "end"
+    sim_run, epoch_run = run(sim_time, "vanilla"), run(epoch, "vanilla")
+    assert not any("another clock" in w for w in sim_time.reader_warnings + sim_run.metrics["warnings"])
+    rpe = [result.metrics["rpe_translation_m"]["stats"]["rmse"] for result in (sim_run, epoch_run)]
+    assert rpe[0] == pytest.approx(rpe[1], rel=1e-6)  # (the epoch clock holds point times to 0.24 us only)
+    np.testing.assert_allclose(sim_run.trajectory.timestamps_s - 100.0, epoch_run.trajectory.timestamps_s - EPOCH_S, atol=1e-6)
 
 
 def test_poses_a_sweep_away_from_point_timed_sweeps_are_refused(tmp_path, drive):

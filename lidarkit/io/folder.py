@@ -103,7 +103,8 @@ class ScanFolder:
         self.path = folder
         self.name = name or Path(os.path.abspath(folder)).name  # ("." was named '')
         self.drop_nonfinite = drop_nonfinite
-        #: what the reader left out (NaN or infinite points, under drop_nonfinite), for the run's warnings: once
+        #: what the reader left out (NaN or infinite points, under drop_nonfinite) or replaced (pose stamps far from
+        #: ``timestamps``), for the run's warnings: once each
         self.reader_warnings: list[str] = []
         broken = next((p for p in folder.iterdir() if p.suffix.lower() in wanted and p.is_symlink() and not p.exists()), None)
         if broken is not None:  # a scan that is not there: never skipped without a word
@@ -188,15 +189,19 @@ class ScanFolder:
 
     def _warn_stamps_apart(self, pose_stamps: np.ndarray) -> None:
         """A TUM file's own stamps give way to ``timestamps``: say so when they disagree by more than half a frame
-        (stamps 100 s apart were replaced without a word), as an image folder does."""
+        (stamps 100 s apart were replaced without a word), as an image folder does, in the log and, once, in
+        :attr:`reader_warnings` (a run's metrics.json: it was logged only)."""
         steps = np.diff(self._timestamps_s)
         half_frame = 0.5 * float(np.median(steps)) if len(steps) else 0.0
         apart = np.abs(pose_stamps - self._timestamps_s)
         k = int(np.argmax(apart))
         if half_frame > 0 and apart[k] > half_frame:
-            log.warning("%s: pose %d is stamped %.3f s from its scan's time stamp (half a frame is %.3f s); poses and "
-                        "scans are paired by order, one each, and the poses take the stamps of timestamps=",
-                        self.poses_path, k, float(apart[k]), half_frame)
+            message = (f"{self.poses_path}: pose {k} is stamped {float(apart[k]):.3f} s from its scan's time stamp (half a "
+                       f"frame is {half_frame:.3f} s); poses and scans are paired by order, one each, and the poses take "
+                       "the stamps of timestamps=")
+            if message not in self.reader_warnings:
+                self.reader_warnings.append(message)
+            log.warning("%s", message)
 
     def __len__(self) -> int:
         return len(self.scan_paths)

@@ -14,8 +14,12 @@ asked for):
 * ``time`` float32 seconds relative to the message stamp (Velodyne drivers; negative when the stamp is the
   sweep end), ``t`` uint32 nanoseconds from the sweep start (Ouster drivers), ``timestamp(s)`` as either;
 * integer fields are nanoseconds; float fields are seconds, or nanoseconds when larger than 1e15;
-* values beyond 1e5 s are absolute time (``point_time_convention="absolute_s"``), otherwise relative to the
-  message stamp (``"relative_s"``); a float32 field cannot hold absolute times (steps of 128 s at 1.7e9 s): refused;
+* values lying around the message stamp (within :data:`STAMP_LATENCY_S` of it) and more than two sweeps further
+  from 0 are absolute time on the stamp's clock (``point_time_convention="absolute_s"``) whatever their size (a
+  simulator's clock starts at 0: 100 s read as relative put every sweep 100 s after its stamp); where the stamp does not
+  decide (a stamp of 0 or near it, none given, values near neither), values beyond 1e5 s are absolute, the others
+  relative to the message stamp (``"relative_s"``); a float32 field cannot hold absolute times (steps of 128 s at
+  1.7e9 s): refused;
 * a field whose values span more than :data:`MAX_SWEEP_S` in one message is not the points' times (e.g. an
   intensity named by ``time_field=``), nor is an 8- or 16-bit integer field (a ``ring``), nor one that neither follows
   the point order nor turns with the azimuth (an intensity within 1 s): a DataError, where it would have deskewed
@@ -37,6 +41,9 @@ from lidarkit.io.pointfile import at_sensor_origin
 
 TIME_FIELDS = ("time", "t", "timestamp", "timestamps")
 _ABSOLUTE_AFTER_S = 1e5
+#: Most time (s) between a message stamp and the nearest of its points' absolute times: a driver stamping on receipt
+#: lags the sweep end by up to ~0.15 s (the bag reader reads sweeps further away as another clock)
+STAMP_LATENCY_S = 1.0
 #: Float time stamps above this are nanoseconds (seconds since 1970 stay below it for 30 million years)
 NANOSECONDS_AFTER = 1e15
 #: Longest plausible sweep (s): spinning LiDARs turn at 5-20 Hz, solid-state ones integrate ~0.1 s.
@@ -160,9 +167,11 @@ def decode_pointcloud2(msg: Any, *, source: str, location: str, time_field: str 
                 f"per-point time field {field!r} has {len(bad)} NaN or infinite values (first at point {first})",
                 source=source, location=location,
             )
+    header = getattr(msg, "header", None)
+    stamp_s = stamp_seconds(header.stamp) if header is not None and hasattr(header, "stamp") else None
     times, convention = checked_point_times(raw, xyz, what=f"per-point time field {field!r}", within="one message",
                                             hint="time_field= names the right field, none reads no times",
-                                            source=source, location=location)
+                                            source=source, location=location, stamp_s=stamp_s)
     return DecodedCloud(xyz, intensity, times, convention, field, n_at_origin, flat)
 
 
@@ -177,10 +186,11 @@ def _varying_time_field(present: list[str], cloud: np.ndarray, keep: np.ndarray 
 
 
 def checked_point_times(raw: np.ndarray, xyz: np.ndarray, *, what: str, within: str, hint: str, source: object,
-                        location: str, longest_s: float = MAX_SWEEP_S) -> tuple[np.ndarray, str]:
+                        location: str, longest_s: float = MAX_SWEEP_S, stamp_s: float | None = None) -> tuple[np.ndarray, str]:
     """``(times (N,) float64 seconds, convention)`` of finite per-point values ``raw`` (N,) of points ``xyz`` (N, 3), by
-    the rules of the module doc (a sweep lasting ``longest_s`` at most); a DataError naming ``what`` and saying ``hint``
-    when they cannot be the points' times (shared: the kitti reader's ``point_times/`` took ring numbers as times)."""
+    the rules of the module doc (a sweep lasting ``longest_s`` at most; ``stamp_s``: the scan's stamp, None when there is
+    none to read the values against); a DataError naming ``what`` and saying ``hint`` when they cannot be the points'
+    times (shared: the kitti reader's ``point_times/`` took ring numbers as times)."""
     if np.issubdtype(raw.dtype, np.integer) and raw.dtype.itemsize < 4:  # (ring numbers read as times deskewed by them)
         raise DataError(
             f"{what} is a {8 * raw.dtype.itemsize}-bit integer: too small for times (drivers write "
@@ -209,8 +219,26 @@ def checked_point_times(raw: np.ndarray, xyz: np.ndarray, *, what: str, within: 
             f"{len(times)} points and do not turn with the azimuth (an intensity or another per-point value): not the "
             f"points' times ({hint})", source=source, location=location,
         )
-    convention = "absolute_s" if len(times) and float(np.abs(times).max()) > _ABSOLUTE_AFTER_S else "relative_s"
-    return times, convention
+    return times, point_time_convention(times, stamp_s)
+
+
+def point_time_convention(times: np.ndarray, stamp_s: float | None = None) -> str:
+    """``"absolute_s"`` or ``"relative_s"`` for per-point times ``times`` (N,) in seconds of a scan stamped ``stamp_s``.
+
+    Read against the stamp: times around it (the sweep within :data:`STAMP_LATENCY_S`) that lie more than two sweeps
+    further from 0 are absolute on its clock, whatever their size (a simulator's 100 s were read as relative, placing
+    the sweeps 100 s after their stamps). Where both readings place the sweep near (a stamp within a couple of sweeps
+    of 0), or neither does, or no stamp is given, the size decides: beyond 1e5 s absolute, else relative.
+    """
+    if not len(times):
+        return "relative_s"
+    lo, hi = float(times.min()), float(times.max())
+    if stamp_s is not None and np.isfinite(stamp_s):
+        from_stamp = max(lo - stamp_s, stamp_s - hi, 0.0)  # the stamp to the sweep, its times read as absolute
+        from_zero = max(lo, -hi, 0.0)  # ... read as relative to the stamp
+        if from_stamp <= STAMP_LATENCY_S and from_zero > from_stamp + 2 * (hi - lo):
+            return "absolute_s"
+    return "absolute_s" if max(abs(lo), abs(hi)) > _ABSOLUTE_AFTER_S else "relative_s"
 
 
 def point_times_seconds(raw: np.ndarray) -> np.ndarray:
@@ -336,4 +364,5 @@ def _readable_time_fields(names: list[str], unreadable: dict[str, str], wanted: 
 
 
 __all__ = ["MAX_SWEEP_S", "MIN_SWEEP_S", "MIN_SWEEP_SHARE", "NANOSECONDS_AFTER", "TIME_FIELDS", "DecodedCloud", "check_sweep_span",
-           "checked_point_times", "decode_pointcloud2", "fields_dtype", "point_times_seconds", "stamp_seconds", "time_unit_read"]
+           "STAMP_LATENCY_S", "checked_point_times", "decode_pointcloud2", "fields_dtype", "point_time_convention",
+           "point_times_seconds", "stamp_seconds", "time_unit_read"]
