@@ -559,3 +559,44 @@ def test_bench_segment_speeds_are_timed_by_the_stamps_across_a_gap():
     result = SimpleNamespace(ground_truth=Trajectory(poses, stamps), trajectory=Trajectory(estimate, stamps))
     speeds = np.array(drift_segments(result)["speed_mps"])
     assert len(speeds) and np.all(speeds <= 10.0 + 1e-6) and np.median(speeds) == pytest.approx(10.0, rel=0.02), speeds
+
+
+def test_icp_pair_on_a_carmen_log_is_refused_at_load_without_opening_it(tmp_path):
+    """A CARMEN log has relations only: the suite loaded (and --dry-run passed), then every job failed "aces: icp_pair
+    needs ground-truth poses". It is refused at load, unopened (this "log" is not one), naming ground_truth_file; with
+    that option it loads."""
+    log = tmp_path / "aces.clf"
+    log.write_text("not a log\n")
+    path = write(tmp_path, f"""
+        datasets:
+          aces: {{kind: carmen, path: "{log}"}}
+        experiments:
+          - task: icp_pair
+            dataset: aces
+            options: {{pairs: [[0, 1]]}}
+            methods: [vanilla]
+        """)
+    with pytest.raises(ConfigError) as info:
+        load_suite(path)
+    assert str(info.value) == (
+        f"{path} (experiments[0].dataset, line 6): icp_pair scores against ground-truth poses and aces has none: give "
+        "the dataset its poses (a folder's `poses` option, a KITTI sequence's poses/NN.txt; a CARMEN log has relations "
+        "only), or one pair's motion as the task option ground_truth_file")
+    np.savetxt(tmp_path / "T.txt", np.eye(4))
+    path.write_text(path.read_text().replace("pairs: [[0, 1]]", "pairs: [[0, 1]], ground_truth_file: T.txt"))
+    assert len(load_suite(path).jobs) == 1
+
+
+def test_icp_pair_run_on_a_dataset_without_poses_names_ground_truth_file():
+    """The job's own refusal (a spec that skipped the load check) read "icp_pair needs ground-truth poses", saying not
+    what to give."""
+    from lidarkit.bench.tasks.icp_pair import _pair_data
+    from lidarkit.io import open_dataset
+
+    aces = open_dataset("carmen", shared_path("carmen_2d", "aces.clf.bz2"))
+    with pytest.raises(DataError) as info:
+        _pair_data(aces, 0, 1)
+    assert str(info.value) == (
+        "aces: icp_pair scores against ground-truth poses and aces has none: give the dataset its poses (a folder's "
+        "`poses` option, a KITTI sequence's poses/NN.txt; a CARMEN log has relations only), or one pair's motion as the "
+        "task option ground_truth_file")

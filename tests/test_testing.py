@@ -265,6 +265,33 @@ def test_pytest_plugin_fixture_in_a_user_test_run(tiny_baseline, tmp_path):
         assert "1 failed, 1 passed" in proc.stdout, (option, proc.stdout + proc.stderr)
 
 
+def test_load_lidarkit_baseline_reads_a_relative_folder_from_the_ini_file_or_where_pytest_runs(tiny_baseline, tmp_path):
+    """``load_lidarkit_baseline("baselines/b")`` resolved against pytest's rootdir, which moves with the paths pytest is
+    given: ``--lidarkit-baseline DIR`` (with a space, DIR read as a test path) moved it above the project, and
+    ``--rootdir`` anywhere; the same test loaded another folder. It reads from the ini file's folder, else (here) from
+    where pytest runs."""
+    import shutil
+
+    project = tmp_path / "project"
+    shutil.copytree(tiny_baseline.path, project / "baselines" / "b")
+    (project / "test_user.py").write_text(textwrap.dedent("""
+        def test_loads(load_lidarkit_baseline):
+            assert load_lidarkit_baseline("baselines/b").metrics("random_walk")["ape_rmse_m"] >= 0
+    """))
+    elsewhere = tmp_path / "elsewhere"
+    shutil.copytree(tiny_baseline.path, elsewhere)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])}
+    from importlib.metadata import entry_points
+
+    installed = any(ep.value == "lidarkit.testing.plugin" for ep in entry_points(group="pytest11"))
+    load = [] if installed else ["-p", "lidarkit.testing.plugin"]
+    pytest_argv = [sys.executable, "-m", "pytest", "-q", *load, "-p", "no:cacheprovider", "-W", "ignore"]
+    # no ini file: from where pytest runs (the rootdir is tmp_path, above the folder given with a space)
+    proc = subprocess.run([*pytest_argv, "--lidarkit-baseline", str(elsewhere)], cwd=project, env=env,
+                          capture_output=True, text=True, timeout=120)
+    assert "1 passed" in proc.stdout, proc.stdout + proc.stderr
+
+
 def test_compare_holds_a_difference_against_the_noise_a_baseline_measured(tiny_baseline, tmp_path, capsys):
     from lidarkit.bench.runner import run_suite
     from lidarkit.bench.suite import load_suite

@@ -164,8 +164,9 @@ def _sha256(path: Path) -> str:
 def dataset_files(spec: Mapping[str, Any]) -> list[Path]:
     """The files a dataset spec reads: every file under its path (a bag or MCAP file: itself; a ROS 2 bag, given as its
     folder or its ``metadata.yaml``: its folder's files), or under ``sequences/NN`` of a KITTI root given with
-    ``sequence: NN`` (not the other sequences); a KITTI sequence also its ``poses/NN.txt``; and the files of options
-    that name an existing path (a ``poses`` file kept elsewhere). DataError when the path does not exist."""
+    ``sequence: NN`` (not the other sequences); a KITTI sequence also its ``poses/NN.txt``; a CARMEN log the
+    ``.relations`` file found beside it; and the files of options that name an existing path (a ``poses`` file kept
+    elsewhere). DataError when the path does not exist."""
     from lidarkit.bench.datasets import PATHLESS_KINDS, dataset_options
 
     if spec.get("kind") in PATHLESS_KINDS:
@@ -176,6 +177,9 @@ def dataset_files(spec: Mapping[str, Any]) -> list[Path]:
         poses = root.parent.parent / "poses" / f"{root.name}.txt"
         if poses.is_file():
             files.append(poses)
+    companion = _companion_file(spec, root)
+    if companion is not None and companion not in files:
+        files.append(companion)
     seen = set(files)
     for value in dataset_options(dict(spec)).values():
         if isinstance(value, str) and os.path.isabs(value) and Path(value).exists():
@@ -183,6 +187,17 @@ def dataset_files(spec: Mapping[str, Any]) -> list[Path]:
             files += extra
             seen.update(extra)
     return files
+
+
+def _companion_file(spec: Mapping[str, Any], root: Path) -> Path | None:
+    """A file beside the dataset's path that its reader reads unasked: a CARMEN log's ``NAME.relations`` under
+    ``relations: auto`` (left unhashed, an edited one read as a regression of the method, a deleted one as its metric
+    missing)."""
+    if spec.get("kind") != "carmen" or spec.get("relations", "auto") != "auto":
+        return None
+    from lidarkit.io.carmen import relations_beside
+
+    return relations_beside(root)
 
 
 #: kinds whose reader opens a ROS 2 bag given as its ``metadata.yaml`` as the bag's folder
@@ -519,7 +534,20 @@ class Baseline:
             why = ("not an odometry job" if job["spec"].get("task") != "odometry"
                    else "its poses_kitti.txt is missing from the baseline folder: record it again")
             raise DataError(f"this pinned job has no trajectory ({why})", source=path)
-        return Trajectory.from_kitti(path, name=job["label"])
+        trajectory = Trajectory.from_kitti(path, name=job["label"])
+        problem = _damaged_trajectory(trajectory, job)
+        if problem:  # (a file cut short was returned as the pinned run, and a test held a result against it)
+            raise DataError(problem, source=path)
+        return trajectory
+
+
+def _damaged_trajectory(trajectory: Any, pinned: Mapping[str, Any]) -> str:
+    """Why a pinned trajectory does not match its job's pinned frame count (a file cut short), or ''."""
+    n_pinned = pinned["metrics"].get("n_frames")
+    if _finite_number(n_pinned) and len(trajectory) != n_pinned:
+        return (f"its pinned trajectory has {len(trajectory)} poses for the pinned {n_pinned:g} frames (damaged): record the "
+                "baseline again")
+    return ""
 
 
 def _pick_hint(found: list[dict[str, Any]]) -> str:
@@ -789,10 +817,17 @@ def _pinned_job_problem(job: Any) -> str:
         Job.from_spec(job["spec"])
     except (TypeError, ValueError, AttributeError) as err:
         return f"has a bad spec ({err})"
+    if not isinstance(job["label"], str) or not job["label"]:  # (5 was a TypeError traceback from Baseline.job)
+        return f"label is {job['label']!r}, not a method label"
     spec = job["spec"]
-    for key, kind in (("dataset", dict), ("params", dict), ("options", dict), ("method", str), ("task", str)):
+    for key, kind in (("dataset", dict), ("params", dict), ("options", dict), ("method", str), ("task", str),
+                      ("experiment", str), ("dataset_name", str)):
         if key in spec and not isinstance(spec[key], kind):  # (a string dataset failed later, an AttributeError traceback)
             return f"spec {key} is {spec[key]!r}, not a {'mapping' if kind is dict else 'string'}"
+    dataset = spec.get("dataset", {})
+    for key in ("kind", "path", "name"):  # (a path of 5 was a TypeError traceback where the check hashed its files)
+        if (key == "kind" or dataset.get(key) is not None) and (not isinstance(dataset.get(key), str) or not dataset[key]):
+            return f"spec dataset {key} is {dataset.get(key, '<absent>')!r}, not a string"
     if "seed" in spec and (not isinstance(spec["seed"], int) or isinstance(spec["seed"], bool)):  # (read as the job failing)
         return f"spec seed is {spec['seed']!r}, not an integer"
     if spec.get("seed", 0) < 0:  # (read as the job failing: "ValueError: expected non-negative integer")
@@ -805,6 +840,9 @@ def _pinned_job_problem(job: Any) -> str:
         return problem
     if not isinstance(job["checked"], list):
         return f"checked is {job['checked']!r}, not a list"
+    repeated = next((m for k, m in enumerate(job["checked"]) if m in job["checked"][:k]), None)
+    if repeated is not None:  # (its finding was reported twice)
+        return f"checks {repeated!r} twice"
     for metric in job["checked"]:
         for where in ("metrics", "bands"):
             value = job[where].get(metric) if isinstance(metric, str) else None
@@ -900,13 +938,24 @@ def _diff(prefix: str, old: Any, new: Any) -> list[str]:
             out += _diff(f"{prefix}.{key}" if prefix else str(key), old.get(key, "<absent>"), new.get(key, "<absent>"))
         return out
     if old != new and not (isinstance(old, float) and isinstance(new, float) and math.isclose(old, new, rel_tol=1e-12)):
-        return [f"{prefix}: {_short(old)} -> {_short(new)}"]
+        return [f"{prefix}: {' -> '.join(_shown_apart(old, new))}"]
     return []
 
 
 def _short(value: Any) -> str:
     text = json.dumps(value) if not isinstance(value, str) else value
     return text if len(text) <= 24 else text[:10] + "..." + text[-8:]
+
+
+def _shown_apart(old: Any, new: Any) -> tuple[str, str]:
+    """Two differing values as a finding shows them, told apart where they print alike: with their types (a number
+    stored as text read "kitti_step_frames: 10 -> 10"), or in full when cut short alike."""
+    old_text, new_text = _short(old), _short(new)
+    if old_text != new_text:
+        return old_text, new_text
+    if type(old) is not type(new):
+        return f"{old_text} ({type(old).__name__})", f"{new_text} ({type(new).__name__})"
+    return json.dumps(old), json.dumps(new)
 
 
 def parse_tolerances(items: list[str] | Mapping[str, float] | None) -> dict[str, float]:
@@ -1087,10 +1136,9 @@ def _trajectory_findings(
         then = Trajectory.from_kitti(path)
     except LidarKitError as err:
         return [Finding("failed", name, f"its pinned trajectory is not readable ({err}): record the baseline again")]
-    n_pinned = pinned["metrics"].get("n_frames")
-    if _finite_number(n_pinned) and len(then) != n_pinned:  # (a file cut short read as the method's regression)
-        return [Finding("failed", name, f"its pinned trajectory has {len(then)} poses for the pinned {n_pinned:g} frames "
-                                        "(damaged): record the baseline again")]
+    damaged = _damaged_trajectory(then, pinned)
+    if damaged:  # (a file cut short read as the method's regression)
+        return [Finding("failed", name, damaged)]
     if len(then) != len(run.trajectory):
         return [Finding("regression", name, f"trajectory has {len(run.trajectory)} poses, the pinned one {len(then)}")]
     d_m, d_deg = trajectory_difference(run.trajectory, then)

@@ -9,6 +9,7 @@ worker by :func:`dataset_path`.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Any
 
@@ -41,7 +42,8 @@ def sample_path(name: str) -> Path:
 
 
 def resolve_dataset(spec: dict[str, Any], base_dir: Path) -> dict[str, Any]:
-    """Return ``spec`` with its path checked and made absolute against ``base_dir`` (DataError if missing)."""
+    """Return ``spec`` with its path checked and made absolute against ``base_dir``, symbolic links kept (DataError if
+    missing)."""
     kind = spec.get("kind")
     if not isinstance(kind, str) or not kind:
         raise ConfigError("dataset needs a 'kind'", source="dataset")
@@ -58,9 +60,14 @@ def resolve_dataset(spec: dict[str, Any], base_dir: Path) -> dict[str, Any]:
         sample_path(path[len(SAMPLE_PREFIX):])  # raises DataError if absent
         resolved["path"] = path
         return resolved
-    full = (base_dir / Path(path).expanduser()).resolve()
-    if not full.exists():
-        raise DataError(f"dataset path does not exist: {full}", source="dataset")
+    # absolute, links not followed (as the CLI opens it): a CARMEN log linked into a folder with its own .relations is
+    # read with those, and a reader's files beside its path are looked up beside the link, not beside its target
+    full = Path(os.path.abspath(base_dir / Path(path).expanduser()))
+    if not full.exists():  # (a link to a missing file or a loop of links: which, as its target is not named now)
+        from lidarkit.atomic import missing_reason
+
+        why = missing_reason(full, "")
+        raise DataError(f"dataset path does not exist: {full}" + (f" ({why})" if why else ""), source="dataset")
     resolved["path"] = str(full)
     return resolved
 

@@ -373,6 +373,21 @@ def parse_log(path: str | os.PathLike, message: str = "auto") -> _Parsed:
     return parsed
 
 
+def log_name(path: str | os.PathLike) -> str:
+    """The log's name without its suffixes: ``aces.v2.clf.bz2`` is ``aces.v2`` (its aces.v2.relations went unfound)."""
+    stem = Path(path).name
+    for suffix in (".bz2", ".gz", ".xz", ".clf", ".log", ".txt"):
+        stem = stem[: -len(suffix)] if stem.lower().endswith(suffix) and len(stem) > len(suffix) else stem
+    return stem
+
+
+def relations_beside(path: str | os.PathLike) -> Path | None:
+    """The ``NAME.relations`` file beside the log at ``path`` that ``relations="auto"`` reads, or None: found without
+    opening the log (a baseline hashes it with the log's files)."""
+    candidate = Path(path).with_name(log_name(path) + ".relations")
+    return candidate if candidate.is_file() else None
+
+
 class CarmenLog:
     """A CARMEN log as a 2D :class:`~lidarkit.io.base.ScanSequence` with the log's odometry and relation ground truth.
 
@@ -403,11 +418,7 @@ class CarmenLog:
             raise ConfigError(f"max_range_m must be a finite number above min_range_m ({min_range_m}), got {max_range_m!r}",
                               source="carmen dataset options")
         self._log = parse_log(self.path, laser)
-        # the name without the log's suffixes: aces.v2.clf.bz2 is "aces.v2" (its aces.v2.relations went unfound)
-        stem = self.path.name
-        for suffix in (".bz2", ".gz", ".xz", ".clf", ".log", ".txt"):
-            stem = stem[: -len(suffix)] if stem.lower().endswith(suffix) and len(stem) > len(suffix) else stem
-        self.name = stem
+        self.name = log_name(self.path)
         self.laser = self._log.message
         self.min_range_m = float(min_range_m)
         log = self._log
@@ -459,8 +470,7 @@ class CarmenLog:
         if relations is None or (isinstance(relations, str) and relations.lower() == "none"):  # ("?relations=none")
             return None
         if isinstance(relations, str) and relations == "auto":
-            candidate = self.path.with_name(self.name + ".relations")
-            return candidate if candidate.is_file() else None
+            return relations_beside(self.path)
         path = option_path(relations, self.path.parent)  # (beside the log too, as the other readers' path options)
         if path.is_dir():  # (read "not found")
             raise DataError("a folder, not a relations file", source=path)

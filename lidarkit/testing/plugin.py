@@ -1,11 +1,14 @@
 """pytest plugin (entry point ``lidarkit`` in the ``pytest11`` group): baseline fixtures for users' test suites.
 
-- ``--lidarkit-baseline DIR`` (relative to the directory pytest runs in, as pytest's own path options) or the ini
-  option ``lidarkit_baseline`` (relative to the ini file's directory): the default baseline folder.
+- ``--lidarkit-baseline=DIR`` (relative to the directory pytest runs in, as pytest's own path options) or the ini
+  option ``lidarkit_baseline`` (relative to the ini file's directory): the default baseline folder. Written with a space,
+  pytest takes DIR for a test path when it looks for its ini file (before plugin options are known): its rootdir moves
+  and the project's pytest.ini can be left unread.
 - ``lidarkit_baseline``: that folder loaded as a :class:`lidarkit.bench.baseline.Baseline` (skips the test with
   a reason when none is configured; a folder that is missing or not a baseline errors each test using it with one
   line naming the folder and where it was set).
-- ``load_lidarkit_baseline``: a fixture whose value loads any baseline folder (relative paths from the rootdir);
+- ``load_lidarkit_baseline``: a fixture whose value loads any baseline folder (relative paths from the ini file's
+  folder, else from where pytest runs);
   outside pytest, ``lidarkit.testing.load_baseline``.
 """
 
@@ -25,12 +28,16 @@ def pytest_addoption(parser):
 
 @pytest.fixture(scope="session")
 def load_lidarkit_baseline(pytestconfig):
-    """``load(path)`` -> Baseline; relative paths resolve against the pytest rootdir."""
+    """``load(path)`` -> Baseline; a relative path from the ini file's folder, else from where pytest runs (not from
+    pytest's rootdir, which moves with the paths pytest is given: ``--lidarkit-baseline DIR`` with a space gives DIR as
+    one, and the same test loaded another folder)."""
     from lidarkit.bench.baseline import load_baseline
+
+    base = Path(pytestconfig.inipath).parent if pytestconfig.inipath else Path(pytestconfig.invocation_params.dir)
 
     def load(path):
         path = Path(path)
-        return load_baseline(path if path.is_absolute() else Path(pytestconfig.rootpath) / path)
+        return load_baseline(path if path.is_absolute() else base / path)
 
     return load
 

@@ -1,7 +1,8 @@
 """``icp_pair``: pairwise registration of chosen scan pairs against ground truth, any registered ICP variant.
 
 Datasets: every kind that gives LiDAR scans, as for odometry (:func:`lidarkit.bench.datasets.scan_kinds`); one without
-ground-truth poses (a bag without its odometry topic) needs ``ground_truth_file``.
+ground-truth poses (a bag without its odometry topic; a CARMEN log, which has relations only: refused at load) needs
+``ground_truth_file``.
 Options (per experiment): ``pairs`` — ``[[target, source], ...]`` (KITTI, kind ``kitti``: frame numbers, e.g.
 ``[[94, 95]]``, with ``ground_truth_file`` too; other kinds: scan indices; two different scans); default, and only
 without ``pairs``: the first ``max_pairs`` pairs of consecutive frame numbers (never across a gap in the files; fewer:
@@ -29,10 +30,21 @@ from lidarkit.bench.jobs import Job
 from lidarkit.bench.tasks import Metric, Task, TaskOutput, import_module_for_task
 from lidarkit.bench.tasks._datasets import (OPENED_AT_LOAD, check_reader_options, open_dataset_spec, options_model,
                                              scan_count_at_load, seeded_dataset)
-from lidarkit.bench.datasets import dataset_path, scan_kinds
+from lidarkit.bench.datasets import dataset_label, dataset_path, scan_kinds
 from lidarkit.errors import ConfigError, DataError, index_runs
 
 log = logging.getLogger(__name__)
+
+#: kinds whose reader never gives ground-truth poses (a CARMEN log: relations only): refused at suite load without
+#: opening them, unless a ``ground_truth_file`` gives the motion (every job failed when they ran, after --dry-run passed)
+KINDS_WITHOUT_POSES = frozenset({"carmen"})
+
+
+def no_poses_reason(name: str) -> str:
+    """Why a dataset without ground-truth poses cannot be scored, and what to give instead (at load and in a job)."""
+    return (f"icp_pair scores against ground-truth poses and {name} has none: give the dataset its poses (a folder's "
+            "`poses` option, a KITTI sequence's poses/NN.txt; a CARMEN log has relations only), or one pair's motion as "
+            "the task option ground_truth_file")
 
 
 class IcpPairOptions(BaseModel):
@@ -140,7 +152,7 @@ def _pair_data(dataset: Any, target: int, source: int, T_gt_file: np.ndarray | N
     gt = dataset.ground_truth if truth is None else truth
     name = getattr(dataset, "name", "dataset")
     if gt is None:
-        raise DataError("icp_pair needs ground-truth poses", source=name)
+        raise DataError(no_poses_reason(name), source=name)
     n = len(dataset)
     for idx in (target, source):
         if not 0 <= idx < n:
@@ -248,13 +260,12 @@ class IcpPairTask(Task):
                 read_T_target_source(path)
             except DataError as err:
                 raise ConfigError(f"ground_truth_file {err}", source="options") from None
+        elif dataset["kind"] in KINDS_WITHOUT_POSES:
+            raise ConfigError(no_poses_reason(dataset_label(dataset)), source="dataset")
         elif dataset["kind"] in OPENED_AT_LOAD:  # (opened anyway: a dataset without poses failed every job, exit 0)
             opened = open_dataset_spec(dataset)
             if len(opened) and opened.ground_truth is None:
-                name = getattr(opened, "name", "the dataset")
-                raise ConfigError(f"icp_pair scores against ground-truth poses and {name} has none: give the dataset its "
-                                  "poses (a folder's `poses` option, a KITTI sequence's poses/NN.txt), or one pair's "
-                                  "motion as the task option ground_truth_file", source="dataset")
+                raise ConfigError(no_poses_reason(getattr(opened, "name", "the dataset")), source="dataset")
         check_pairs(opts, dataset)
 
     def validate(self, method: str, params: dict[str, Any], dataset: dict[str, Any], options: dict[str, Any]) -> None:
