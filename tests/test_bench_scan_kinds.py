@@ -4,7 +4,9 @@ go with them: odometry of fewer than 2 scans, icp_pair's KITTI frame numbers bes
 from __future__ import annotations
 
 import hashlib
+import os
 import textwrap
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -106,7 +108,7 @@ def test_a_kiss_kitti_suite_hashes_its_sequence_not_the_whole_root(tmp_path):
         """)
     (job,) = load_suite(path).jobs
     files = dataset_files(job.dataset)
-    assert root.resolve() / "poses" / "00.txt" in files  # (files are named as resolved: the data may sit behind a link)
+    assert Path(os.path.abspath(root)) / "poses" / "00.txt" in files  # (named as the suite names the data, links kept)
     assert len([f for f in files if f.suffix == ".bin"]) == 10  # sequences/00/velodyne only
     assert not [f for f in files if "extra_frames" in f.parts]
 
