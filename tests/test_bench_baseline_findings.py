@@ -119,7 +119,12 @@ def test_the_baselines_suite_copy_records_again_with_relative_dataset_paths(tmp_
     assert copy.startswith(f"# the suite recorded from {(tmp_path / 'suite.yaml').resolve()}")
     again = json.loads((tmp_path / "bk" / "manifest.json").read_text())
     assert [job["spec"] for job in again["jobs"]] == [job["spec"] for job in first.jobs]
-    assert (tmp_path / "bk" / "suite.yaml").read_text() == copy  # (its paths absolute already: one header, no change)
+    # recorded again from its own copy: one header, naming the file this record read (it kept the first file's name,
+    # a different suite once the copy was edited), the rest unchanged (its paths absolute already)
+    again_text = (tmp_path / "bk" / "suite.yaml").read_text()
+    header = f"# the suite recorded from {(tmp_path / 'bk' / 'suite.yaml').resolve()}"
+    assert again_text.startswith(header) and again_text.count("# the suite recorded from") == 1
+    assert again_text.split("\n", 2)[2] == copy.split("\n", 2)[2]
 
 
 def test_a_job_failing_in_record_names_its_dataset_once_and_keeps_a_file_it_names(tmp_path):

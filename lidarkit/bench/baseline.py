@@ -683,6 +683,11 @@ def suite_copy_text(suite_path: str | os.PathLike) -> str:
 
     suite_path = atomic.resolved_path(suite_path, output=False)
     text = suite_path.read_text(encoding="utf-8")
+    header = "# the suite recorded from "
+    copied = text.startswith(header)  # a baseline's own copy recorded again: its header named the file copied first
+    if copied:
+        lines = text.splitlines(keepends=True)
+        text = "".join(lines[2:] if len(lines) > 1 and lines[1].startswith("# ") else lines[1:])
     try:
         root, data = yaml.compose(text), yaml.safe_load(text)
     except yaml.YAMLError:  # (load_suite read it: not reached)
@@ -698,15 +703,13 @@ def suite_copy_text(suite_path: str | os.PathLike) -> str:
             if (isinstance(value, str) and isinstance(resolved.get(key), str) and resolved[key] != value
                     and not Path(value).expanduser().is_absolute() and isinstance(value_node, yaml.ScalarNode)):
                 edits[value_node.start_mark.index] = (value_node.end_mark.index, json.dumps(resolved[key]))
-    if not edits:
+    if not edits and not copied:
         return text
     for start in sorted(edits, reverse=True):
         end, value = edits[start]
         text = text[:start] + value + text[end:]
-    header = "# the suite recorded from "
-    return text if text.startswith(header) else (
-        f"{header}{suite_path}, its relative dataset paths written as the baseline resolved them (from that\n"
-        "# file's folder), so that this copy records again from here\n" + text)
+    return (f"{header}{suite_path}, its relative dataset paths written as the baseline resolved them (from that\n"
+            "# file's folder), so that this copy records again from here\n" + text)
 
 
 def _dataset_entries(root: Any, data: Any) -> list[tuple[Any, dict[str, Any]]]:
