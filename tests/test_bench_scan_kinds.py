@@ -260,3 +260,20 @@ def test_icp_pair_noise_that_is_not_finite_is_refused_naming_the_option(tmp_path
     message = str(info.value)
     assert "(experiments[0].options, line 5)" in message and f"{option}: " in message
     assert "finite number" in message
+
+
+@pytest.mark.parametrize(("options", "named"), [("{pairs: [[true, 2]]}", "pairs"), ("{pairs: [[0, 1]], init_noise_m: yes}", "init_noise_m"),
+                                                ("{max_pairs: true}", "max_pairs"), ("{}", "no pair of scans")])
+def test_icp_pair_options_refuse_yes_no_values_and_a_dataset_without_a_pair(tmp_path, options, named):
+    """pairs [[true, 2]] registered frames 1 and 2, init_noise_m: yes perturbed by 1 m (YAML's booleans read as numbers);
+    a one-scan drive without pairs passed the suite and every job failed "no scan pair to register", exit 0."""
+    path = write(tmp_path, f"""
+        experiments:
+          - task: icp_pair
+            dataset: {{kind: sim_lidar, n_frames: {1 if options == "{}" else 3}}}
+            options: {options}
+            methods: [vanilla]
+        """)
+    with pytest.raises(ConfigError) as info:
+        load_suite(path)
+    assert "(experiments[0].options" in str(info.value) and named in str(info.value)

@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator
+from pydantic import BaseModel, ConfigDict, Field, StrictInt, ValidationInfo, field_validator
 
 from lidarkit.bench.jobs import Job
 from lidarkit.bench.tasks import Metric, Task, TaskOutput, import_module_for_task
@@ -49,12 +49,13 @@ def no_poses_reason(name: str) -> str:
 
 class IcpPairOptions(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
-    pairs: list[tuple[int, int]] | None = None
+    # strict numbers: YAML's yes/true was taken as 1 (init_noise_m: yes a 1 m noise, pairs [[true, 2]] frames 1 and 2)
+    pairs: list[tuple[StrictInt, StrictInt]] | None = None
     ground_truth_file: str | None = None
-    max_pairs: int = Field(1, ge=1)
+    max_pairs: StrictInt = Field(1, ge=1)
     # (.inf passed, and the suite was refused at its methods as "values must be plain numbers", naming no option)
-    init_noise_m: float = Field(0.0, ge=0.0, allow_inf_nan=False)
-    init_noise_deg: float = Field(0.0, ge=0.0, allow_inf_nan=False)
+    init_noise_m: float = Field(0.0, ge=0.0, allow_inf_nan=False, strict=True)
+    init_noise_deg: float = Field(0.0, ge=0.0, allow_inf_nan=False, strict=True)
 
     @field_validator("pairs")
     @classmethod
@@ -183,8 +184,12 @@ def check_pairs(options: IcpPairOptions, spec: dict[str, Any]) -> None:
     """Pairs naming a scan the dataset lacks are a ConfigError with the suite (each job failed "no scan for frame 95",
     exit 0); checked for the datasets whose length is known at suite load (:func:`scan_count_at_load`: those opened
     then, and simulated drives by their ``n_frames``; KITTI: frame numbers, else scan indices)."""
-    n_scans = scan_count_at_load(spec) if options.pairs else None
+    n_scans = scan_count_at_load(spec)
     if n_scans is None:
+        return
+    if not options.pairs:  # the default consecutive pairs: none in a one-scan dataset (each job failed, exit 0)
+        if n_scans < 2:
+            raise ConfigError(f"the dataset has {n_scans} scan(s): no pair of scans to register", source="options")
         return
     dataset = open_dataset_spec(spec) if spec["kind"] in OPENED_AT_LOAD else None
     if hasattr(dataset, "read_scan_by_frame"):
