@@ -811,3 +811,24 @@ def test_a_georeferenced_run_held_at_float32_names_its_first_frame_in_the_run_wa
         assert expected in warnings
         assert any(expected in r.getMessage() for r in caplog.records)
         assert not any(r.getMessage().startswith("scan: ") for r in caplog.records)
+
+
+def test_a_blank_run_name_falls_back_to_the_datasets(rng):
+    """``name=" "`` titled the run " " (the trajectory "oracle on  "), where ``name=""`` falls back to the dataset's."""
+    poses = _drive(3)
+    motions = se3_inverse(poses[:-1]) @ poses[1:]
+    for blank in ("", " ", "\t"):
+        result = run(MemorySequence(poses, _room_points(rng, 300)), OracleICP(motions), name=blank)
+        assert result.trajectory.name == "oracle on memory" and result.config["run"]["name"] == "memory"
+
+
+def test_the_nees_row_of_a_stepped_selection_is_over_one_selected_frame(capsys, monkeypatch):
+    """``--frames 0:7:2`` labelled the NEES row "NEES of 1-frame motions" beside "RPE 1 selected frame": its motions
+    span two sweeps each."""
+    monkeypatch.setenv("COLUMNS", "300")
+    sim = "sim:street?frames=7&beams=16&azimuths=360&seed=1"
+    assert cli_exit_code(["odometry", sim, "--frames", "0:7:2", "-m", "vanilla", "--no-progress"]) == 0
+    out = " ".join(capsys.readouterr().out.split())
+    assert "RPE 1 selected frame RMSE" in out and "NEES of motions over 1 selected frame (6 = calibrated)" in out
+    assert cli_exit_code(["odometry", sim, "--frames", "0:3", "-m", "vanilla", "--no-progress"]) == 0
+    assert "NEES of motions over 1 frame (6 = calibrated)" in " ".join(capsys.readouterr().out.split())

@@ -122,7 +122,8 @@ def test_per_point_times_that_are_all_equal_are_not_deskewed_with(exported, tmp_
     for method in ("kiss", "ground_filtered"):
         with pytest.raises(DataError) as err:
             run(seq, method, frames="0:4", strict=True)
-        assert str(err.value) == "street_seq (frame 0): deskew requested, its per-point times are all equal (nothing to deskew with)"
+        assert str(err.value) == (f"{seq / 'velodyne' / '000000.bin'} (frame 0): deskew requested, its per-point times are "
+                                  "all equal (nothing to deskew with)")  # (named by its file, as a frame's other errors)
     # kiss called directly with such times: no deskew rather than an aborted process
     scan = KittiOdometry(seq).read_scan(1)
     direct = get_icp("kiss")

@@ -90,3 +90,37 @@ def test_a_kitti_velodyne_dir_elsewhere_names_the_folders_searched_for_times():
     assert point_times_not_found(kitti) == (
         "no per-point times found (looked for point_times/, timestamps/, times/, point_timestamps/ beside velodyne/ in "
         f"{root / 'extra_frames' / '00'}, then in {root / 'sequences' / '00'})")
+
+
+def _uint_time_plys(folder, n_scans: int = 3) -> None:
+    """``n_scans`` small ASCII .ply scans with a PLY uint ``t`` field (nanoseconds, as Ouster writes them)."""
+    rng = np.random.default_rng(7)
+    folder.mkdir()
+    header = ("ply\nformat ascii 1.0\nelement vertex 200\nproperty float x\nproperty float y\nproperty float z\n"
+              "property uint t\nend_header\n")
+    for k in range(n_scans):
+        points = rng.uniform(-20.0, 20.0, size=(200, 3))
+        rows = "".join(f"{x:.4f} {y:.4f} {z:.4f} {t}\n" for (x, y, z), t in zip(points, range(0, 100_000_000, 500_000)))
+        (folder / f"{k}.ply").write_text(header + rows)
+
+
+def test_a_folder_whose_ply_times_open3d_skips_does_not_point_to_generic(tmp_path):
+    """A PLY uint time field was said to be read by generic:PATH, "which does, refuses these files (repeated _ padding
+    fields)": these files have no padding, and generic reads no times from them either (Open3D skips uint)."""
+    folder = tmp_path / "scans"
+    _uint_time_plys(folder)
+    assert point_times_not_found(open_dataset("folder", folder)) == (
+        "no per-point times read (folder: does not read per-point times; its scans carry them in the 't' field, e.g. "
+        "0.ply; a PLY uint property, which Open3D cannot read, so generic:PATH does not either: store the times as float, "
+        "double or int)")
+
+
+@pytest.mark.parametrize("method", ["pipeline", "kiss"])
+def test_the_strict_refusal_of_a_scan_without_times_names_its_file(tmp_path, method):
+    """``--strict`` on a folder named the folder ("scans (frame 0): deskew requested, ..."), where a frame's other
+    errors name the scan's file."""
+    folder = tmp_path / "scans"
+    _uint_time_plys(folder)
+    with pytest.raises(DataError) as err:
+        run(open_dataset("folder", folder), method, strict=True)
+    assert str(err.value).startswith(f"{folder / '0.ply'} (frame 0): deskew requested, no per-point times read")

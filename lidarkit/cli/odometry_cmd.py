@@ -127,6 +127,10 @@ def odometry(
         said = check["n_said_converged_but_bad"]
         table.add_row("  of which the variant called converged", "n/a (no verdict)" if said is None else str(said))
     table.add_row("estimated path (m)", f"{m['estimated_length_m']:.2f}")
+    from lidarkit.odometry.settings import skips_frames
+
+    # the relative scores' step: one selected frame where the selection skips frames (the RPE's and the NEES's)
+    step = "1 selected frame" if skips_frames(result.frames) else "1 frame"
     if "final_error" in m:
         table.add_row("ground truth", str(m["ground_truth"]))
         table.add_row("ground-truth instant / estimate instant", f"{effective.get('ground_truth_instant')} / {effective.get('estimate_instant')}")
@@ -137,7 +141,6 @@ def odometry(
         if "ape_translation_m" in m:
             table.add_row("APE translation RMSE, SE(3)-aligned (m)", m.get("ape_translation_se3_note") or _stat(m, "ape_translation_se3_m"))
             table.add_row("APE translation RMSE, unaligned, first pose anchored (m)", _stat(m, "ape_translation_m"))
-            step = "1 selected frame" if "selected" in str((m.get("rpe_translation_m") or {}).get("alignment")) else "1 frame"
             table.add_row(f"RPE {step} RMSE, alignment-free (m / deg)", f"{_stat(m, 'rpe_translation_m', '.4f')} / {_stat(m, 'rpe_rotation_deg', '.4f')}")
         drift = m.get("kitti_drift")
         if drift:
@@ -151,7 +154,7 @@ def odometry(
         table.add_row("propagated end position / heading 1-sigma (m / deg)", f"{cov['final_position_sigma_m']:.3f} / {cov['final_heading_sigma_deg']:.3f}")
         if "relative_nees_mean" in cov:
             left_out = cov.get("relative_nees_frames_left_out", 0)
-            table.add_row("NEES of 1-frame motions (6 = calibrated)", f"{cov['relative_nees_mean']:.2f} ({100 * cov['relative_inside_95']:.0f} % inside 95 %)"
+            table.add_row(f"NEES of motions over {step} (6 = calibrated)", f"{cov['relative_nees_mean']:.2f} ({100 * cov['relative_inside_95']:.0f} % inside 95 %)"
                           + (f"; {left_out} frames left out (no registration covariance)" if left_out else ""))
             z = cov.get("per_frame_bias_z")
             if z is not None:  # the share the mean frame error rebuilds says nothing unless that mean is a bias

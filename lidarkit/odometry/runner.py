@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from lidarkit.errors import ConfigError, DataError, EvaluationError, LidarKitError, RegistrationError, not_increasing
-from lidarkit.geometry import as_points, float32_far_message, orthonormalize_se3, se3_fraction, validated_points
+from lidarkit.geometry import as_points, float32_far_message, orthonormalize_se3, se3_fraction, se3_inverse, validated_points
 from lidarkit.io.base import Scan, ScanSequence
 from lidarkit.lifetime import raise_if_interrupted
 from lidarkit.odometry.covariance import motion_prior_frames, motion_prior_summary, propagate
@@ -150,6 +150,20 @@ def frame_namer(sequence: Any) -> Callable[[int], str]:
             return f"frame {idx}"
         return f"frame {idx}, {Path(paths[idx]).name}" if paths is not None else f"frame {idx}, recording frame {int(numbers[idx])}"
     return name
+
+
+def _restated_first_pose(registration: Any, dataset_name: str, where: str) -> np.ndarray | None:
+    """A stateful variant's first pose at the instant its other poses refer to, where the variant restates it once the
+    second frame is registered (pipeline deskewing to the sweep's start or middle: its first sweep, registered with no
+    motion known, is at its end), checked; None where the first pose stands."""
+    restated = getattr(registration, "restated_first_pose", None)
+    if restated is None:
+        return None
+    restated = np.asarray(restated, dtype=np.float64)
+    if restated.shape != (4, 4) or not np.isfinite(restated).all():
+        raise RegistrationError(f"restated_first_pose is not a finite 4x4 pose (shape {restated.shape})",
+                                source=dataset_name, location=where)
+    return restated
 
 
 def _calibration_of(registration: Any, name: str) -> str | None:
@@ -445,7 +459,7 @@ def run(
     dataset_name = str(getattr(sequence, "name", "dataset"))
     if name is not None and not isinstance(name, str):  # (a numpy string finished the run, then failed writing config.yaml)
         raise ConfigError(f"name must be a text, got {type(name).__name__} {name!r:.60}", source="name")
-    title = str(name) if name else dataset_name
+    title = str(name) if name and name.strip() else dataset_name  # (a blank name gave a blank title)
     name = method_name
     if callable(getattr(sequence, "configure_for_method", None)):  # e.g. KITTI's vertical-angle correction for kiss
         # (recorded below); a variant that stands for another (pipeline's kiss_like) gets that one's data. The caller's
@@ -528,6 +542,7 @@ def run(
     # registration as its source and once more as the next frame's target; an entry lives while its frame is in use
     validated: dict[int, np.ndarray] = {}
 
+    first_pose_note = None  # frame 0's pose restated at the instant of the others'
     flat_times: list[int] = []  # frames whose per-point times are all equal: nothing to deskew with (kiss-icp would
     # normalize them by their zero span and abort the process), so they are read as scans without per-point times
     far_float32: list[tuple[int, float]] = []  # (frame, reach m) of scans far from their origin held at float32 precision
@@ -564,6 +579,7 @@ def run(
                 voxelized = VoxelizedScans()  # used by the worker thread only, one frame after another
                 calibration, model = _stateful_covariance_settings(registration, name)
                 inflight = None  # frame k-1's after-the-fact task
+                anchor = None  # what moves the variant's poses to start at frame 0's restated pose
                 for k, (idx, payload, read_time, read_error) in enumerate(stream):
                     raise_if_interrupted()  # (a Ctrl-C a library swallowed while it loaded: the run stops here)
                     read_s[k] = read_time
@@ -599,6 +615,18 @@ def run(
                     register_s[k], n_points[k] = t2 - t1, len(points)
                     if inflight is not None:
                         inflight.result()
+                    if k == 1:  # (frame 0's work is done: its pose may change now)
+                        restated = _restated_first_pose(registration, dataset_name, name_frame(int(indices[0])))
+                        if restated is not None:
+                            anchor = se3_inverse(restated)  # the run starts at frame 0's restated pose
+                            poses[0] = anchor @ restated
+                            instant = getattr(registration, "deskew_instant", None)
+                            instant = {"mid": "middle", None: "reference instant"}.get(instant, instant)
+                            first_pose_note = (f"{name_frame(int(indices[0]))}: its pose, registered with no motion known "
+                                               f"at its sweep's end, moved back to the sweep's {instant} by "
+                                               f"{name_frame(int(idx))}'s motion at constant velocity")
+                    if anchor is not None:
+                        poses[k] = anchor @ poses[k]
                     inflight = worker.submit(functools.partial(
                         _stateful_after, k, int(idx), previous, scan, prepared, poses, checker, want_covariance, relative_cov,
                         min_eigenvalue, calibration, model, dataset_name, voxelized, name_frame(int(idx)),
@@ -709,7 +737,7 @@ def run(
     across = ("odometry" if odometry_poses is not None
               else "one sweep" if stateful and not getattr(registration, "accepts_sweeps_apart", False) else "constant velocity")
     warnings = reader_warnings + [w for w in (past_the_end, time_gap_warning(timestamps, numbers, across, indices, typical),
-                                              apart, far) if w] + warnings
+                                              apart, far, first_pose_note) if w] + warnings
     if stateful:  # (accepted, recorded in config.yaml as given, and without effect on the run)
         gates = [f for f in ("min_fitness", "min_correspondences") if f in getattr(config, "model_fields_set", ())]
         if gates:

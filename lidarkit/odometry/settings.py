@@ -116,7 +116,10 @@ def point_times_not_found(sequence: Any) -> str:
     unread = getattr(sequence, "unread_point_times", None)  # (a folder: read as "ScanFolder gives none")
     if unread:
         field, first, generic_reads = unread
-        other = (f"generic:{sequence.path} reads them" if generic_reads
+        skipped = getattr(sequence, "unread_point_time_type", None)  # a PLY property type Open3D skips (uint, ...)
+        other = (f"a PLY {skipped} property, which Open3D cannot read, so generic:PATH does not either: store the times "
+                 "as float, double or int" if skipped
+                 else f"generic:{sequence.path} reads them" if generic_reads
                  else "generic:PATH, which does, refuses these files (repeated _ padding fields)")
         return (f"no per-point times read (folder: does not read per-point times; its scans carry them in the {field!r} "
                 f"field, e.g. {Path(first).name}; {other})")
@@ -167,7 +170,9 @@ def require_point_times(scan: Any, sequence: Any, dataset_name: str, frame: int,
     if scan.point_times_s is None and not snapshot_sweeps(sequence):
         why = ("its per-point times are all equal (nothing to deskew with)" if frame in flat
                else point_times_not_found(sequence))
-        raise DataError(f"deskew requested, {why}", source=dataset_name, location=f"frame {frame}")
+        # named by the scan's file where the reader gives it, as a frame's other errors are (the folder named no file)
+        raise DataError(f"deskew requested, {why}", source=getattr(scan, "source", None) or dataset_name,
+                        location=f"frame {frame}")
 
 
 def reader_settings(sequence: Any) -> dict[str, Any]:

@@ -437,9 +437,16 @@ class PipelineRegistration(Registration):
         self.last_delta = np.eye(4)
         self._delta_sweeps = 1.0  # sweeps spanned by last_delta (the previous frame's sweeps_apart)
         self.last_frame: dict[str, Any] = {}
+        self._frames_registered = 0
+        self._first_pose = self.last_pose  # (the first frame's pose as registered, at its sweep's end)
+        #: the first frame's pose at the reference instant, known once the second frame gives the sweep's motion (a
+        #: run replaces the first pose returned, at the sweep's end, by it); None: the first pose returned is at it
+        self.restated_first_pose: np.ndarray | None = None
 
     def register_frame(self, points_xyz: np.ndarray, point_times_s: np.ndarray | None = None, sweeps_apart: float = 1.0) -> np.ndarray:
-        """Register one sweep into the map; returns ``T_world_lidar`` at the deskew reference instant. A component's
+        """Register one sweep into the map; returns ``T_world_lidar`` at the deskew reference instant (the first sweep's
+        at its end, no motion being known: :attr:`restated_first_pose` has it at the reference once the second sweep
+        is registered). A component's
         failure (a plugin kernel's NaN weights in scipy) is a RegistrationError naming the variant, as in ``align``.
         ``sweeps_apart``: sweeps since the previous frame (frames that skip scans): the deskew takes the motion between
         frames scaled to one sweep (taken whole, N sweeps apart deskewed N times too much); the prediction the previous
@@ -475,11 +482,20 @@ class PipelineRegistration(Registration):
         c["map"].update(map_points, T)
         self.last_delta = se3_inverse(self.last_pose) @ T
         self._delta_sweeps = sweeps_apart
+        if self._frames_registered == 0:
+            self._first_pose = T
         self.last_pose = T
         self.last_frame = {**info, "sigma_m": sigma, "source_points": len(source), "map_points": len(c["map"].points_xyz)}
-        # the pose at the reference instant (the deskew component may register at another one; undeskewed: as is)
-        return T.copy() if frame is raw else _pose(c["deskew"], c["deskew"].reported(T, se3_fraction(self.last_delta, sweeps_apart)),
-                                                   "reported pose")
+        self._frames_registered += 1
+        if frame is raw:  # undeskewed: the pose as registered
+            return T.copy()
+        sweep_motion = se3_fraction(self.last_delta, sweeps_apart)
+        if self._frames_registered == 2:  # the first frame, registered with no motion known, is at its sweep's end:
+            # its pose at the reference instant, from this frame's motion over one sweep (the caller replaces it)
+            first = _pose(c["deskew"], c["deskew"].first_reported(self._first_pose, sweep_motion), "restated first pose")
+            self.restated_first_pose = None if np.array_equal(first, self._first_pose) else first
+        # the pose at the reference instant (the deskew component may register at another one)
+        return _pose(c["deskew"], c["deskew"].reported(T, sweep_motion), "reported pose")
 
     # ------------------------------------------------------------------ stages
     def _refuse_2d(self, source_xyz: np.ndarray, target_xyz: np.ndarray, components: dict[str, Any] | None = None) -> None:
