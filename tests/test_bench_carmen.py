@@ -104,8 +104,16 @@ def test_a_run_without_out_dir_says_to_write_its_poses_for_the_relations(tmp_pat
     result = run(sequence, "vanilla", params=PARAMS, frames="0:3")
     relations = os.path.normpath(shared_path("carmen_2d", "aces.relations").absolute())
     assert result.metrics["ground_truth_note"] == (
-        "none: no scores here; the dataset has relation ground truth: run with --out DIR (out_dir=DIR), then "
+        "none: no scores here; the dataset has relation ground truth: score it in memory with "
+        "lidarkit.eval.relation_error(result.trajectory, dataset.relations), or run with --out DIR (out_dir=DIR), then "
         f"lidarkit eval --relations {relations} DIR/poses_tum.txt")
+    # the in-memory route the note names runs as written (a notebook user was sent to the CLI); 3 frames meet no relation
+    from lidarkit.errors import EvaluationError
+    from lidarkit.eval import relation_error
+
+    dataset = sequence
+    with pytest.raises(EvaluationError, match="no relation has estimated poses within 0.01 s of both its time stamps"):
+        relation_error(result.trajectory, dataset.relations)
 
 
 def test_a_baseline_pinned_before_init_existed_is_checked_under_its_default(tmp_path):

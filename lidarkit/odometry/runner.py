@@ -853,8 +853,9 @@ def _relations_note(sequence: ScanSequence, out_dir: str | os.PathLike | None,
     n_moved = int(getattr(sequence, "n_restamped", 0) or 0)
     if not n_moved:
         if out_dir is None:  # (it named a poses_tum.txt this run never wrote)
-            return (f"none: no scores here; the dataset has relation ground truth: run with --out DIR (out_dir=DIR), then "
-                    f"lidarkit eval --relations {relations} DIR/poses_tum.txt"), None
+            return (f"none: no scores here; the dataset has relation ground truth: score it in memory with "
+                    f"lidarkit.eval.relation_error(result.trajectory, dataset.relations), or run with --out DIR "
+                    f"(out_dir=DIR), then lidarkit eval --relations {relations} DIR/poses_tum.txt"), None
         return (f"none: no scores here; the dataset has relation ground truth: lidarkit eval --relations {relations} "
                 f"{Path(out_dir) / 'poses_tum.txt'}"), None
     from lidarkit.eval.relations import DEFAULT_MAX_TIME_DIFF_S, relation_error
