@@ -403,3 +403,19 @@ def test_a_kitti_run_of_vanilla_components_under_kiss_like_reads_the_points_as_s
     for name, params, corrected in (("vanilla on kiss_like", VANILLA_ON_KISS, False), ("kiss on vanilla_seq", KISS_ON_VANILLA, True)):
         result = run(f"kitti:{root}?sequence=00", "pipeline", params=params, frames="0:2")
         assert result.config["run"]["dataset_options"]["vertical_correction_applied"] is corrected, name
+
+
+def test_a_pose_register_frame_returns_is_the_callers_to_edit():
+    """The pose returned was the variant's own last_pose: moving it into a map frame in place (T[:3, 3] += 10) moved
+    the next frame by 10 m too (kiss returns a copy)."""
+    from lidarkit.sim.lidar import SimulatedLidarSequence
+
+    sim = SimulatedLidarSequence(scene="street", n_frames=3, n_beams=16, n_azimuths=360, seed=2)
+    scans = [sim.read_scan(k) for k in range(3)]
+    icp, untouched = get_icp("pipeline"), get_icp("pipeline")
+    for k, scan in enumerate(scans):
+        T = icp.register_frame(scan.points_xyz, scan.point_times_s)
+        expected = untouched.register_frame(scan.points_xyz, scan.point_times_s)
+        np.testing.assert_array_equal(T, expected)
+        assert T is not icp.last_pose
+        T[:3, 3] += 10.0  # the caller's own edit

@@ -494,8 +494,9 @@ class PipelineRegistration(Registration):
             # its pose at the reference instant, from this frame's motion over one sweep (the caller replaces it)
             first = _pose(c["deskew"], c["deskew"].first_reported(self._first_pose, sweep_motion), "restated first pose")
             self.restated_first_pose = None if np.array_equal(first, self._first_pose) else first
-        # the pose at the reference instant (the deskew component may register at another one)
-        return _pose(c["deskew"], c["deskew"].reported(T, sweep_motion), "reported pose")
+        # the pose at the reference instant (the deskew component may register at another one); a copy: a component
+        # that reports the pose as registered handed back last_pose itself, and a caller's edit moved every later frame
+        return _pose(c["deskew"], c["deskew"].reported(T, sweep_motion), "reported pose").copy()
 
     # ------------------------------------------------------------------ stages
     def _refuse_2d(self, source_xyz: np.ndarray, target_xyz: np.ndarray, components: dict[str, Any] | None = None) -> None:
