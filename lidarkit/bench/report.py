@@ -17,6 +17,8 @@ import math
 import re
 import warnings
 from collections import defaultdict
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -27,7 +29,7 @@ import numpy as np
 from lidarkit import atomic
 from lidarkit.bench.jobs import Job, canonical_json
 from lidarkit.bench.results import dataset_labels, ground_truth_instant, load_results, path_argument, result_path, results_folder
-from lidarkit.errors import DataError
+from lidarkit.errors import DataError, LidarKitError, OutputError
 from lidarkit.eval.report import markdown_table
 from lidarkit.eval.statistics import format_p, summarize
 
@@ -372,6 +374,30 @@ def _png(fig) -> bytes:
     return buf.getvalue()
 
 
+def _literal(text: Any) -> str:
+    """``text`` (a name from a suite or a record) as matplotlib draws it, letter for letter: two ``$`` in a dataset
+    name (``drive_$1_$2``) were read as math, and its parse error ended the report before any file was written."""
+    return str(text).replace("$", r"\$")
+
+
+@contextmanager
+def _figure(filename: str, size: tuple[float, float]) -> Iterator[tuple[Any, Any]]:
+    """A new figure and its axes; anything that fails while it is drawn becomes one OutputError naming the figure
+    (a traceback of 274 lines ended the report), and the figure is closed either way."""
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=size)
+    try:
+        yield fig, ax
+    except LidarKitError:
+        raise
+    except Exception as err:  # noqa: BLE001 - matplotlib's errors have no common base
+        why = " ".join(str(err).split())
+        raise OutputError(f"cannot be drawn ({type(err).__name__}: {why[:300]})", source=filename) from None
+    finally:
+        plt.close(fig)
+
+
 #: the names of the figures a report draws (``traj_<slug>_<digest>.png``, ..., ``segments_<quantity>.png``): the only
 #: files of plots/ an earlier report's clean-up removes
 _OWN_FIGURE = re.compile(r"(traj|err|rmse|sweep)_.*_[0-9a-f]{8}\.png|segments_(translation_pct|rotation_deg_per_100m)\.png")
@@ -468,11 +494,12 @@ def rmse_histories(items: list[dict[str, Any]]) -> tuple[dict[str, tuple[list[fl
 
 
 def make_plots(records: list[dict[str, Any]]) -> list[Plot]:
-    """Trajectory, error-over-time and RMSE-per-iteration plots per (task, experiment, dataset); sweep plots per task."""
+    """Trajectory, error-over-time and RMSE-per-iteration plots per (task, experiment, dataset); sweep plots per task.
+    Every text from a suite or a record is drawn as written (:func:`_literal`); a figure that cannot be drawn is an
+    OutputError naming it."""
     import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
     plots: list[Plot] = []
     groups: dict[tuple[str, str, str], list[dict[str, Any]]] = defaultdict(list)
@@ -483,55 +510,61 @@ def make_plots(records: list[dict[str, Any]]) -> list[Plot]:
         where = f"{task} · {experiment} · {dataset}"
         chosen, left_out = _first_ok_per_method(items, "trajectory_xy")
         if chosen:
-            fig, ax = plt.subplots(figsize=(6, 4.5))
-            refs, ref_of = _references(chosen)
-            for k, (ref_label, ref) in enumerate(refs.items()):
-                ax.plot(ref[:, 0], ref[:, 1], ("--", ":", "-.")[k % 3], color="k", lw=2, label=ref_label)
-            for label, r in chosen.items():
-                est = np.asarray(r["series"]["trajectory_xy"]["est"], dtype=float)
-                against = f" vs {ref_of[label]}" if len(refs) > 1 and label in ref_of else ""
-                ax.plot(est[:, 0], est[:, 1], lw=1.2, label=f"{label} (seed {r['job']['seed']}){against}")
-            ax.set_xlabel("x [m]")
-            ax.set_ylabel("y [m]")
-            ax.set_aspect("equal", adjustable="datalim")
-            ax.legend(fontsize=7)
-            ax.set_title(f"trajectories: {where}", fontsize=9)
-            plots.append(Plot(f"Trajectories — {where}", f"traj_{_file_slug(where)}.png", _png(fig), task,
+            filename = f"traj_{_file_slug(where)}.png"
+            with _figure(filename, (6, 4.5)) as (fig, ax):
+                refs, ref_of = _references(chosen)
+                for k, (ref_label, ref) in enumerate(refs.items()):
+                    ax.plot(ref[:, 0], ref[:, 1], ("--", ":", "-.")[k % 3], color="k", lw=2, label=_literal(ref_label))
+                for label, r in chosen.items():
+                    est = np.asarray(r["series"]["trajectory_xy"]["est"], dtype=float)
+                    against = f" vs {ref_of[label]}" if len(refs) > 1 and label in ref_of else ""
+                    ax.plot(est[:, 0], est[:, 1], lw=1.2, label=_literal(f"{label} (seed {r['job']['seed']}){against}"))
+                ax.set_xlabel("x [m]")
+                ax.set_ylabel("y [m]")
+                ax.set_aspect("equal", adjustable="datalim")
+                ax.legend(fontsize=7)
+                ax.set_title(_literal(f"trajectories: {where}"), fontsize=9)
+                png = _png(fig)
+            plots.append(Plot(f"Trajectories — {where}", filename, png, task,
                               f"Top view of the estimated trajectories (first seed of each method) against the "
                               f"reference of that seed and sweep instant (black): {experiment}, {dataset}.{left_out}"))
         chosen, left_out = _first_ok_per_method(items, "error_over_time")
         if chosen:
-            fig, ax = plt.subplots(figsize=(6, 3.2))
-            xlabel = "time [s]"
-            ylabel, line_notes = error_axis_label({label: r["series"]["error_over_time"].get("label", "error")
-                                                   for label, r in chosen.items()})
-            for label, r in chosen.items():
-                s = r["series"]["error_over_time"]
-                note = f" ({line_notes[label]})" if label in line_notes else ""
-                ax.plot(s["t"], s["error"], lw=1.2, label=label + note)
-                xlabel = s.get("t_label", xlabel)  # (a particle filter's steps were labelled seconds)
-            ax.set_xlabel(xlabel)
-            ax.set_ylabel(ylabel)
-            ax.legend(fontsize=7)
-            ax.set_title(f"error over time: {where}", fontsize=9)
+            filename = f"err_{_file_slug(where)}.png"
+            with _figure(filename, (6, 3.2)) as (fig, ax):
+                xlabel = "time [s]"
+                ylabel, line_notes = error_axis_label({label: r["series"]["error_over_time"].get("label", "error")
+                                                       for label, r in chosen.items()})
+                for label, r in chosen.items():
+                    s = r["series"]["error_over_time"]
+                    note = f" ({line_notes[label]})" if label in line_notes else ""
+                    ax.plot(s["t"], s["error"], lw=1.2, label=_literal(label + note))
+                    xlabel = s.get("t_label", xlabel)  # (a particle filter's steps were labelled seconds)
+                ax.set_xlabel(_literal(xlabel))
+                ax.set_ylabel(_literal(ylabel))
+                ax.legend(fontsize=7)
+                ax.set_title(_literal(f"error over time: {where}"), fontsize=9)
+                png = _png(fig)
             per_line = f" ({'; '.join(f'{m}: {n}' for m, n in line_notes.items())})" if line_notes else ""
-            plots.append(Plot(f"Error over time — {where}", f"err_{_file_slug(where)}.png", _png(fig), task,
+            plots.append(Plot(f"Error over time — {where}", filename, png, task,
                               f"{ylabel} over time per method{per_line}: {experiment}, {dataset}.{left_out}"))
         histories, final_only = rmse_histories(items)
         histories, left_out = _capped(histories)
         if histories:
-            fig, ax = plt.subplots(figsize=(6, 3.2))
-            for label, (hist, first_x) in histories.items():
-                ax.plot(np.arange(first_x, first_x + len(hist)), hist, marker=".", lw=1.2, label=label)
-            ax.set_xlabel("iteration")
-            ax.set_ylabel("RMSE [m]")
-            ax.set_yscale("log")
-            ax.legend(fontsize=7)
-            ax.set_title(f"ICP RMSE vs iteration: {where}", fontsize=9)
+            filename = f"rmse_{_file_slug(where)}.png"
+            with _figure(filename, (6, 3.2)) as (fig, ax):
+                for label, (hist, first_x) in histories.items():
+                    ax.plot(np.arange(first_x, first_x + len(hist)), hist, marker=".", lw=1.2, label=_literal(label))
+                ax.set_xlabel("iteration")
+                ax.set_ylabel("RMSE [m]")
+                ax.set_yscale("log")
+                ax.legend(fontsize=7)
+                ax.set_title(_literal(f"ICP RMSE vs iteration: {where}"), fontsize=9)
+                png = _png(fig)
             start = " iteration 0 is the starting pose;" if any(x == 0 for _, x in histories.values()) else ""
             final = (f" Not drawn, their library reports the final RMSE alone: {', '.join(final_only)}."
                      if final_only else "")
-            plots.append(Plot(f"RMSE vs iteration — {where}", f"rmse_{_file_slug(where)}.png", _png(fig), task,
+            plots.append(Plot(f"RMSE vs iteration — {where}", filename, png, task,
                               f"Correspondence RMSE per ICP iteration (first pair, log scale;{start} first seed of each "
                               f"method): {experiment}, {dataset}.{left_out}{final}"))
         elif final_only:
@@ -592,8 +625,6 @@ def _sweep_plot(task: str, recs: list[dict[str, Any]], param: str, metric: str, 
     """One sweep figure, ``metric`` against ``param`` (None: no line has two points). Values that are not all numbers
     (a grid of text, a list, null) are categories on the x axis, numbers first by value, then the rest by their text:
     read as numbers, ``mode: [fast, slow]`` ended the report with a ValueError."""
-    import matplotlib.pyplot as plt
-
     experiments = {r["job"]["experiment"] for r in recs}
     # the metric's declared label, as the tables name it (the axis, title and caption read "mse_m2")
     metric_label = label_alignment(MetricInfo(metric, label_of.get(metric, metric)), recs).label
@@ -615,25 +646,28 @@ def _sweep_plot(task: str, recs: list[dict[str, Any]], param: str, metric: str, 
     if not lines:
         return None
     lines, left_out = _capped(lines)
-    fig, ax = plt.subplots(figsize=(6, 3.6))
-    for label, points in lines.items():
-        xs = sorted(points)
-        means = [float(np.mean(points[x])) for x in xs]
-        stds = [float(np.std(points[x], ddof=1)) if len(points[x]) > 1 else 0.0 for x in xs]
-        # (categories have no order a line between them could follow: points alone)
-        ax.errorbar(xs, means, yerr=stds, marker="o", capsize=3, lw=1.2, ls="-" if numeric else "none", label=label)
-    ax.set_xlabel(param)
-    ax.set_ylabel(metric_label)
-    if numeric:
-        scale, scale_args, scale_note = sweep_x_scale([x for points in lines.values() for x in points])
-        ax.set_xscale(scale, **scale_args)
-    else:
-        ax.set_xticks(list(position.values()), list(categories.values()))
-        ax.set_xlim(-0.5, len(categories) - 0.5)
-        scale_note = f"; the values of {param} as categories (numbers by value, then the rest by their text)"
-    ax.legend(fontsize=7)
-    ax.set_title(f"{task}: {metric_label} vs {param} (mean ± std over seeds)", fontsize=9)
-    return Plot(f"{metric_label} vs {param} — {task}", f"sweep_{_file_slug(task + '_' + metric + '_' + param)}.png", _png(fig),
+    filename = f"sweep_{_file_slug(task + '_' + metric + '_' + param)}.png"
+    with _figure(filename, (6, 3.6)) as (fig, ax):
+        for label, points in lines.items():
+            xs = sorted(points)
+            means = [float(np.mean(points[x])) for x in xs]
+            stds = [float(np.std(points[x], ddof=1)) if len(points[x]) > 1 else 0.0 for x in xs]
+            # (categories have no order a line between them could follow: points alone)
+            ax.errorbar(xs, means, yerr=stds, marker="o", capsize=3, lw=1.2, ls="-" if numeric else "none",
+                        label=_literal(label))
+        ax.set_xlabel(_literal(param))
+        ax.set_ylabel(_literal(metric_label))
+        if numeric:
+            scale, scale_args, scale_note = sweep_x_scale([x for points in lines.values() for x in points])
+            ax.set_xscale(scale, **scale_args)
+        else:
+            ax.set_xticks(list(position.values()), [_literal(text) for text in categories.values()])
+            ax.set_xlim(-0.5, len(categories) - 0.5)
+            scale_note = f"; the values of {param} as categories (numbers by value, then the rest by their text)"
+        ax.legend(fontsize=7)
+        ax.set_title(_literal(f"{task}: {metric_label} vs {param} (mean ± std over seeds)"), fontsize=9)
+        png = _png(fig)
+    return Plot(f"{metric_label} vs {param} — {task}", filename, png,
                 task, f"{metric_label} against {param}: mean ± std over seeds, one line per experiment, dataset and "
                 f"method{scale_note}.{left_out}")
 
@@ -813,7 +847,9 @@ def _markdown(report: Report, title: str) -> str:
         notes = comparison_notes(pub.comparisons) + [f"no comparison: {line}" for line in pub.not_compared]
         out += [f"- {line}" for line in notes] + ([""] if notes else [])
     if report.plots:
-        out += ["## Plots", ""] + [f"![{p.title}](plots/{p.filename})" for p in report.plots] + [""]
+        # (each caption under its figure, as report.html has it: report.md had the titles alone)
+        out += ["## Plots", ""] + [f"![{p.title}](plots/{p.filename})\n\n{_italic(p.caption or p.title)}\n"
+                                   for p in report.plots]
     if report.skipped:
         out += ["## Experiments not run", ""] + [f"- {name}: {reason}" for name, reason in report.skipped] + [""]
     if report.not_run:
@@ -824,6 +860,14 @@ def _markdown(report: Report, title: str) -> str:
         out += ["## Failed jobs", ""] + [f"- `{f['key']}` {f['label']}: {f['error']}"
                                          for f in report.failures + report.rerun_failures] + [""]
     return "\n".join(out)
+
+
+def _italic(text: str) -> str:
+    """``text`` as one italic Markdown line; its own ``*``, ``$``, backslashes and ``_`` at a word's edge are escaped, so
+    that a name holding them neither ends the emphasis, nor starts another, nor is read as math."""
+    escaped = re.sub(r"([\\*$])", r"\\\1", text)
+    escaped = re.sub(r"(?<![A-Za-z0-9])_|_(?![A-Za-z0-9])", r"\\_", escaped)
+    return f"*{escaped}*"
 
 
 def _csv_number(x: Any) -> str:
@@ -1253,12 +1297,26 @@ def build_report(
 
     # figures, tables and texts are written aside and moved in together: a report that fails keeps the earlier one
     # whole (its texts stayed beside this one's new figures when tables/ could not be written)
+    # (which figures, why) when figures cannot be drawn: the tables and texts are written without them, then it is said
+    not_drawn: tuple[str, LidarKitError] | None = None
     with atomic.run_folder(out_dir) as tmp:
         if plots:
-            report.plots = make_plots(records)
+            try:
+                report.plots = make_plots(records)
+            except LidarKitError as err:
+                not_drawn = ("no figures", err)
             for p in report.plots:
                 atomic.write_bytes(tmp / "plots" / p.filename, p.png)
-        report.publication = build_publication(records, tmp, plots=plots)
+        try:
+            report.publication = build_publication(records, tmp, plots=plots and not_drawn is None)
+        except Exception as err:  # noqa: BLE001 - a box plot matplotlib cannot draw: the tables without it
+            if not plots or not_drawn is not None or isinstance(err, OutputError):
+                raise
+            report.publication = build_publication(records, tmp, plots=False)  # (its own error, if not a figure's)
+            not_drawn = ("no segment box plots", err if isinstance(err, LidarKitError) else OutputError(
+                f"they cannot be drawn ({type(err).__name__}: {' '.join(str(err).split())[:300]})"))
+        if not_drawn is not None:
+            report.warnings.insert(0, ("report", f"{not_drawn[0]}: {not_drawn[1]}"))
         for path, text in zip(texts, (_markdown(report, title), _csv(report), _html(report, title))):
             atomic.write_text(tmp / path.name, text)
     report.markdown_path, report.csv_path, report.html_path = texts
@@ -1275,6 +1333,10 @@ def build_report(
         if stale.name not in drawn and _OWN_FIGURE.fullmatch(stale.name) and not stale.name.startswith(undrawable):
             stale.unlink()
     remove_stale_tables(out_dir, pub)
+    if not_drawn is not None:
+        what, err = not_drawn
+        raise OutputError(f"{what} ({err}); report.md, report.csv and report.html are written without them",
+                          source=out_dir)
     return report
 
 

@@ -263,18 +263,32 @@ def _written_two_ways(a: Any, b: Any) -> bool:
     return canonical_json(_same_value(a, strings=True)) == canonical_json(_same_value(b, strings=True))
 
 
+def experiment_name(exp: Experiment, index: int) -> str:
+    """The name an experiment's jobs carry: its own, else its task and its index in the suite (``odometry_2``)."""
+    return exp.name or f"{exp.task}_{index}"
+
+
 def _refuse_duplicates(model: SuiteModel, locator: _Locator) -> None:
     """Duplicate experiment names, methods (same name and settings), datasets or seeds would run the same jobs
     twice: a ConfigError naming the file and line."""
     def fail(what: str, loc: tuple[Any, ...]) -> None:
         raise ConfigError(what, source=locator.path, location=locator.location(loc))
 
+    # on the names the jobs get: an explicit 'selftest_1' and the default name of experiments[1] merged their jobs
     names: dict[str, int] = {}
     for i, exp in enumerate(model.experiments):
-        if exp.name is not None:
-            if exp.name in names:
-                fail(f"duplicate experiment name {exp.name!r} (also experiments[{names[exp.name]}])", ("experiments", i, "name"))
-            names[exp.name] = i
+        name = experiment_name(exp, i)
+        first = names.setdefault(name, i)
+        if first == i:
+            continue
+        if exp.name is None:
+            fail(f"duplicate experiment name {name!r}: the default name of experiments[{i}] (its task and index) is the "
+                 f"name of experiments[{first}]; give experiments[{i}] a name of its own", ("experiments", i))
+        if model.experiments[first].name is None:
+            fail(f"duplicate experiment name {name!r} (also the default name of experiments[{first}], its task and "
+                 f"index): give one of them a name of its own", ("experiments", i, "name"))
+        fail(f"duplicate experiment name {name!r} (also experiments[{first}])", ("experiments", i, "name"))
+    for i, exp in enumerate(model.experiments):
         methods: dict[str, int] = {}
         for j, method in enumerate(exp.methods):
             m = MethodSpec(name=method) if isinstance(method, str) else method
@@ -345,7 +359,7 @@ def load_suite(path: str | Path, *, skip_unavailable: bool = False, only_tasks: 
     validated: set[str] = set()
     for i, exp in enumerate(model.experiments):
         exp_loc: tuple[Any, ...] = ("experiments", i)
-        exp_name = exp.name or f"{exp.task}_{i}"
+        exp_name = experiment_name(exp, i)
         if only_tasks is not None and exp.task not in only_tasks:
             skipped.append((exp_name, f"task {exp.task} not selected"))
             continue

@@ -18,7 +18,7 @@ import logging
 from typing import Any
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict
+from pydantic import BaseModel, ConfigDict, StrictInt, field_validator
 
 from lidarkit.bench.datasets import scan_kinds
 from lidarkit.bench.jobs import Job
@@ -55,8 +55,18 @@ def metric_alignment(frames: np.ndarray) -> dict[str, str]:
 
 class OdometryOptions(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
-    frames: str | list[int] | None = None
+    # strict: YAML's true was taken as frame 1 ([true, 2, 3] ran frames 1, 2, 3)
+    frames: str | list[StrictInt] | None = None
     init: str = "constant_velocity"
+
+    @field_validator("frames", mode="before")
+    @classmethod
+    def _indices_or_text(cls, frames: Any) -> Any:
+        """One reason for a list holding what is not an index (the union's two were "a valid string; a valid integer")."""
+        for value in frames if isinstance(frames, list) else ():
+            if isinstance(value, bool) or not isinstance(value, int):
+                raise ValueError(f"a list of frame indices holds {value!r}, not an integer (a slice is text: '0:10')")
+        return frames
 
 
 def _get(d: dict[str, Any] | None, *keys: str) -> float | None:

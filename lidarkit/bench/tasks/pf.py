@@ -11,7 +11,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, StrictInt
 
 from lidarkit.bench.jobs import Job
 from lidarkit.bench.tasks import Metric, Task, TaskOutput, import_module_for_task
@@ -24,7 +24,7 @@ METHODS = ("particle_filter",)
 class PFOptions(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
     visible: str = "recorded"
-    mse_start: int = Field(10, ge=0)
+    mse_start: StrictInt = Field(10, ge=0)  # (strict: YAML's true was step 1)
 
 
 def _pf_api() -> tuple[Any, Any]:

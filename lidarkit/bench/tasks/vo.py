@@ -20,21 +20,25 @@ odometry.
 
 from __future__ import annotations
 
+import logging
 from typing import Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, StrictInt
 
-from lidarkit.bench.datasets import dataset_options
+from lidarkit.bench.datasets import dataset_label, dataset_options
 from lidarkit.bench.jobs import Job
 from lidarkit.bench.tasks import Metric, Task, TaskOutput, import_module_for_task
-from lidarkit.bench.tasks._datasets import check_reader_options, open_dataset_spec, options_model, require_kitti_data
-from lidarkit.errors import ConfigError
+from lidarkit.bench.tasks._datasets import (OPENED_AT_LOAD, check_reader_options, open_dataset_spec, options_model,
+                                             require_kitti_data)
+from lidarkit.errors import ConfigError, EvaluationError
+
+log = logging.getLogger(__name__)
 
 
 class VOOptions(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
-    max_frames: int | None = Field(None, ge=2)
+    max_frames: StrictInt | None = Field(None, ge=2)  # (strict: YAML's true was read as the number 1)
     align: Literal["auto", "none", "se3", "sim3"] = "auto"
     smoothed: bool = False
 
@@ -73,7 +77,12 @@ class VisualOdometryTask(Task):
         vo = _vo_api()
         if method not in vo.available_presets():
             raise ConfigError(f"unknown VO method {method!r}; known presets: {', '.join(vo.available_presets())}", source="method")
-        _config(vo, method, params)
+        config = _config(vo, method, params)
+        if config.scale.mode == "gt" and _has_ground_truth(dataset) is False:  # (every job failed, exit 0)
+            given = "its params" if "scale.mode" in params else "the preset's default"
+            raise ConfigError(f"{method} scales each step by the ground truth (scale.mode gt, {given}) and the dataset "
+                              f"{dataset_label(dataset)} has no ground-truth poses: give the dataset its poses, or the "
+                              "method params {scale.mode: relative} (or none)", source="method")
 
     def available_methods(self) -> list[str] | None:
         return list(_vo_api().available_presets())
@@ -125,12 +134,10 @@ class VisualOdometryTask(Task):
             "n_frames": float(result.n_frames),
         }
         series: dict[str, Any] = {}
-        if gt is not None:
-            from lidarkit.vo.evaluation import score_vo, scored_from_frame
-
-            first = scored_from_frame(result)  # (the frames before it hold its pose: scored, APE 0.29 m, not 0.008)
-            tail = np.arange(first, len(gt))
-            scores = score_vo(est[tail], gt[tail], config.scale.mode, None if options.align == "auto" else options.align)
+        scores, unscored, first = _scores(result, est, gt, config.scale.mode, options.align)
+        if unscored is not None:  # (as `lidarkit vo` says it: the job is ok, its poses without an accuracy metric)
+            log.warning("%s on %s: %s; the job has no accuracy metric", job.method_label, job.dataset_name, unscored)
+        if scores is not None:
             align, ape = scores.metrics["align"], scores.ape
             metrics.update({k: scores.metrics[k] for k in ("ape_rmse_m", "rpe_trans_rmse_m")})
             metrics["final_error_m"] = scores.metrics["final_error_aligned_m"]  # (aligned as APE is, on every row)
@@ -146,10 +153,42 @@ class VisualOdometryTask(Task):
             }
             info_align, scored = align, {"scored_from_frame": first}
         else:
-            info_align, scored = None, {}
+            info_align, scored = None, {} if unscored is None else {"ground_truth_note": unscored}
         return TaskOutput(metrics=metrics, series=series,
                           info={"summary": summary, "align": info_align, "config": config.model_dump(mode="json"),
                                 "metric_alignment": _alignment_labels(info_align), **scored})
+
+
+def _scores(result: Any, est: Any, gt: Any, scale_mode: str, align: str) -> tuple[Any, str | None, int]:
+    """``(scores, None, first)`` of the estimate ``est`` from the first estimated frame on (``first``), as ``lidarkit vo``
+    scores it; ``(None, why, first)`` where they cannot be computed (fewer than 3 poses: ``max_frames: 2`` failed every
+    job with "se3 alignment needs at least 3 poses"; a ground truth that leaves the alignment undefined);
+    ``(None, None, 0)`` without ground truth."""
+    from lidarkit.vo.evaluation import score_vo, scored_from_frame
+
+    if gt is None:
+        return None, None, 0
+    first = scored_from_frame(result)  # (the frames before it hold its pose: scored, APE 0.29 m, not 0.008)
+    if len(gt) - first < 3:
+        return None, f"{len(gt) - first} pose(s) from the first estimated frame on; APE and RPE need 3", first
+    tail = np.arange(first, len(gt))
+    try:
+        return score_vo(est[tail], gt[tail], scale_mode, None if align == "auto" else align), None, first
+    except EvaluationError as err:
+        return None, err.reason, first
+
+
+def _has_ground_truth(dataset: dict[str, Any]) -> bool | None:
+    """Whether a dataset has ground-truth poses, for the kinds known at suite load (the simulator's are exact; a
+    reader of :data:`OPENED_AT_LOAD` is open already); None for the others, known when their jobs run."""
+    if dataset["kind"] == "sim_camera":
+        return True
+    if dataset["kind"] not in OPENED_AT_LOAD:
+        return None
+    sequence = open_dataset_spec(dataset)
+    if hasattr(sequence, "poses_path"):  # a KITTI sequence: its pose file (the images' poses are read when a job runs)
+        return sequence.poses_path is not None
+    return getattr(sequence, "ground_truth", None) is not None
 
 
 def camera_config(job: Job) -> Any:
