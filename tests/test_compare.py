@@ -1098,3 +1098,13 @@ def test_a_dataset_folder_is_named_as_one_with_the_command_that_makes_a_run(tmp_
         (run / name).write_bytes(b"\0" * 16)
     code, _, err = run_cli(["compare", str(run), str(run)], capsys)
     assert (code, err) == (1, f"error: {run}: no metrics.json: not a finished odometry run folder\n")
+
+
+def test_frames_of_a_stepped_run_are_named_as_typed():
+    """A run over 2:12:3 of a 12-sweep drive was named "2:14:3" (its stop past the drive's end)."""
+    import importlib
+
+    frames_text = importlib.import_module("lidarkit.eval.compare")._frames_text
+    assert frames_text((2, 5, 8, 11)) == "2:12:3"
+    assert frames_text(tuple(range(12))) == "0:12"
+    assert frames_text((0, 1, 4)) == "3 frames from 0 to 4"

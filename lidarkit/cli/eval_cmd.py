@@ -45,7 +45,7 @@ def eval_command(
     max_diff: float = typer.Option(_D.max_diff_s, help="Max. timestamp difference (s) for --associate."),
     drift: bool = typer.Option(_D.drift, help="KITTI drift (when the reference path is longer than 100 m)."),
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write all results as JSON here."),
-    plot: Optional[Path] = typer.Option(None, "--plot", help="Write a PNG: trajectories, APE/RPE over time, drift."),
+    plot: Optional[Path] = typer.Option(None, "--plot", help="Write a plot (format from the suffix: .png, .pdf, .svg, ...): trajectories, APE/RPE over time, drift."),
     markdown: Optional[Path] = typer.Option(None, "--markdown", help="Write a Markdown report here."),
     tables: Optional[Path] = typer.Option(
         None, "--tables", help="Write publication tables (KITTI drift per length/speed, APE/RPE) as .md/.csv/.tex "

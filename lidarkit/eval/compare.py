@@ -440,7 +440,8 @@ def _frames_text(frames: tuple[int, ...]) -> str:
     steps = np.unique(np.diff(np.asarray(frames)))
     if len(steps) == 1:
         step = int(steps[0])
-        return f"{frames[0]}:{frames[-1] + step}" + (f":{step}" if step != 1 else "")
+        # (the stop one past the last frame: frames[-1] + step named 2:14:3 for a run over 2:12:3 of a 12-sweep drive)
+        return f"{frames[0]}:{frames[-1] + 1}" + (f":{step}" if step != 1 else "")
     return f"{len(frames)} frames from {frames[0]} to {frames[-1]}"
 
 
