@@ -160,6 +160,9 @@ def test_dotted_counters_keep_counting_order(tmp_path, rng):
         "s_1000.05.npy", "s_1000.1.npy", "s_1000.15.npy", "s_1000.2.npy"]
     assert [p.name for p in sorted_by_name([Path(f"s_{t}.npy") for t in ("1000.10", "1000.05", "1000.20")])] == [
         "s_1000.05.npy", "s_1000.10.npy", "s_1000.20.npy"]
+    # Python's str() of a 20 Hz clock: 0.0, 0.05, 0.1, ... (the lone "0" fraction read the folder as counters)
+    stamps = [str(round(i * 0.05, 2)) for i in range(12)]
+    assert [p.stem for p in sorted_by_name([Path(f"{t}.npy") for t in reversed(stamps)])] == stamps
 
 
 def test_ply_round_trip_keeps_intensity(tmp_path, rng):

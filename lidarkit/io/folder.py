@@ -56,12 +56,13 @@ def _counter_key(name: str) -> tuple:
 
 
 def sorted_by_name(paths: list[Path]) -> list[Path]:
-    """Paths in ``natural_key`` order of their names, unless the dotted numbers in them count: a fraction ending in 0
-    (``run_2.10``) beside fractions of other lengths (``run_2.9``) is no time stamp (decimal stamps are written
-    either to a fixed number of digits or without trailing zeros), so every digit run is then an integer and
-    ``run_2.9`` comes before ``run_2.10``."""
+    """Paths in ``natural_key`` order of their names, unless the dotted numbers in them count: a fraction of two digits
+    or more ending in 0 (``run_2.10``) beside fractions of other lengths (``run_2.9``) is no time stamp (decimal stamps
+    are written either to a fixed number of digits or without trailing zeros, but for Python's ``0.0``), so every
+    digit run is then an integer and ``run_2.9`` comes before ``run_2.10``."""
     fractions = {m.partition(".")[2] for p in paths for m in _NUMBER.findall(p.name) if "." in m}
-    counting = len({len(f) for f in fractions}) > 1 and any(f.endswith("0") for f in fractions)
+    # (a lone "0" is Python's whole-number stamp, 0.0 beside 0.05: no counter; a 20 Hz folder was read 0.0, 0.1, 0.2, ...)
+    counting = len({len(f) for f in fractions}) > 1 and any(len(f) > 1 and f.endswith("0") for f in fractions)
     return sorted(paths, key=lambda p: (_counter_key if counting else natural_key)(p.name))
 
 
