@@ -109,6 +109,24 @@ def test_the_segment_box_plot_title_of_one_method_is_wrapped_inside_the_figure(t
     assert band[:, :4].min() == 1.0 and band[:, -4:].min() == 1.0
 
 
+def test_names_with_dollar_signs_are_drawn_as_written(tmp_path):
+    """A method label with two "$" (a text parameter, drive_$1_$2) was read as math: matplotlib's parse error ended the
+    box plot, and a file named so ended the evaluation plot."""
+    from conftest import shared_path
+
+    from lidarkit.eval import evaluate
+    from lidarkit.eval.plots import plot_evaluation, plot_segment_boxplots
+    from lidarkit.eval.tables import SegmentErrors
+
+    rng = np.random.default_rng(3)
+    segments = SegmentErrors(np.full(20, 100.0), rng.gamma(2.0, 0.4, 20), rng.gamma(2.0, 0.1, 20), np.full(20, 8.0))
+    assert plot_segment_boxplots({("00", "vanilla(tag=drive_$1_$2)"): segments, ("00", "kiss"): segments},
+                                 tmp_path / "box.png").exists()
+    ref = Trajectory.from_kitti(shared_path("evo_testdata", "KITTI_00_gt.txt"))[:200].with_name("gt_$1_$2")
+    est = ref.with_name("run_$^$")
+    assert plot_evaluation(evaluate(ref, est), tmp_path / "eval.png").exists()
+
+
 def test_the_drift_panel_legend_is_drawn_over_the_rotation_bars(tmp_path):
     """The rotation bars live on a twin axes drawn after the translation axes: the tallest bar (the longest length's,
     under the upper-right legend) was drawn over the legend. The legend's axes is now drawn last."""

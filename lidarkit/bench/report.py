@@ -375,9 +375,11 @@ def _png(fig) -> bytes:
 
 
 def _literal(text: Any) -> str:
-    """``text`` (a name from a suite or a record) as matplotlib draws it, letter for letter: two ``$`` in a dataset
-    name (``drive_$1_$2``) were read as math, and its parse error ended the report before any file was written."""
-    return str(text).replace("$", r"\$")
+    """``text`` (a name from a suite or a record) as matplotlib draws it (:func:`lidarkit.eval.plots.literal_text`): two
+    ``$`` in a dataset name (``drive_$1_$2``) ended the report before any file was written."""
+    from lidarkit.eval.plots import literal_text
+
+    return literal_text(text)
 
 
 @contextmanager

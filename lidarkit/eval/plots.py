@@ -21,6 +21,12 @@ PLANES = ("auto", "xy", "xz", "yz")
 _AXIS = {"x": 0, "y": 1, "z": 2}
 
 
+def literal_text(text: object) -> str:
+    """``text`` (a name from a file, a suite or a record) as matplotlib draws it, letter for letter: two ``$`` in it
+    (``drive_$1_$2``) were read as math, and its parse error ended the plot."""
+    return str(text).replace("$", r"\$")
+
+
 def _figure(width_in: float, height_in: float):
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
@@ -53,8 +59,8 @@ def choose_plane(ref: Trajectory, plane: str = "auto") -> str:
 def _draw_trajectories(ax, ref: Trajectory, est: Trajectory, plane: str, est_label: str) -> None:
     i, j = _AXIS[plane[0]], _AXIS[plane[1]]
     p_ref, p_est = ref.positions_xyz, est.positions_xyz
-    ax.plot(p_ref[:, i], p_ref[:, j], "--", color="0.3", lw=1.2, label=ref.name or "reference")
-    ax.plot(p_est[:, i], p_est[:, j], "-", color="tab:blue", lw=1.0, label=est_label)
+    ax.plot(p_ref[:, i], p_ref[:, j], "--", color="0.3", lw=1.2, label=literal_text(ref.name or "reference"))
+    ax.plot(p_est[:, i], p_est[:, j], "-", color="tab:blue", lw=1.0, label=literal_text(est_label))
     ax.plot(p_ref[:1, i], p_ref[:1, j], "ko", ms=4, label="start")
     ax.set_xlabel(f"{plane[0]} (m)")
     ax.set_ylabel(f"{plane[1]} (m)")
@@ -119,7 +125,7 @@ def plot_evaluation(evaluation: Evaluation, path: str | os.PathLike, *, plane: s
     scaled = transform is not None and transform.rescaled
     est_label = f"{evaluation.est_name or 'estimate'} ({alignment_label(ape_res.align)}" + (f", scale {transform.scale:.4g})" if scaled else ")")
     _draw_trajectories(axes[0, 0], ape_res.ref, ape_res.est_aligned, plane, est_label)
-    axes[0, 0].set_title(f"{evaluation.est_name} vs {evaluation.ref_name}", fontsize=9)
+    axes[0, 0].set_title(literal_text(f"{evaluation.est_name} vs {evaluation.ref_name}"), fontsize=9)
     _draw_errors(axes[0, 1], ape_res)
     _draw_errors(axes[1, 0], evaluation.rpe)
     _draw_drift(axes[1, 1], evaluation, scaled)
@@ -192,9 +198,9 @@ def plot_segment_boxplots(grid, path: str | os.PathLike, quantity: str = "transl
     fig = _figure(width_in, 3.6)
     ax = fig.add_subplot(1, 1, 1)
     ax.boxplot([d if d.size else [np.nan] for d in data], showfliers=True, flierprops={"markersize": 2})
-    ax.set_xticks(range(1, len(methods) + 1), methods, rotation=20, ha="right", fontsize=8)
+    ax.set_xticks(range(1, len(methods) + 1), [literal_text(m) for m in methods], rotation=20, ha="right", fontsize=8)
     ax.set_ylabel(QUANTITIES.get(quantity, quantity))
     title = f"per-segment KITTI {QUANTITIES.get(quantity, quantity)}: {segment_counts_text(grid)}"
-    ax.set_title(_wrapped(title, width_in, 9), fontsize=9)  # (cut at the edge of the 4 in figure of one method)
+    ax.set_title(literal_text(_wrapped(title, width_in, 9)), fontsize=9)  # (cut at the edge of the 4 in figure of one method)
     ax.grid(axis="y", alpha=0.3)
     return save_figure(fig, path)
