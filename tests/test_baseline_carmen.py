@@ -62,6 +62,24 @@ def test_a_changed_relations_file_beside_the_log_is_a_changed_protocol_not_a_reg
         and lines[0].endswith(" -> <absent>"), lines
 
 
+
+def test_a_carmen_baseline_recorded_before_the_relations_were_hashed_is_checked_with_a_note(tmp_path):
+    """A baseline pinned before the relations beside a log were hashed read "protocol changed: data.aces.relations:
+    <absent> -> ..." and its job was skipped: a note, and the job checked."""
+    import json
+
+    _aces_copy(tmp_path / "acescopy")
+    baseline = record(_write_suite(tmp_path, "acescopy/aces.clf.bz2"), tmp_path / "baseline", repeats=1)
+    manifest_path = baseline.path / "manifest.json"
+    manifest = json.loads(manifest_path.read_text())
+    del manifest["jobs"][0]["protocol"]["checksums"]["aces.relations"]
+    manifest_path.write_text(json.dumps(manifest))
+    result = check(baseline.path)
+    notes = [f.message for f in result.findings if f.kind == "note" and "aces.relations" in f.message]
+    assert notes and "recorded before lidarkit hashed it" in notes[0]
+    assert not [f for f in result.findings if f.kind == "protocol changed"] and result.measured, result.lines()
+
+
 def test_relations_none_or_given_elsewhere_does_not_pin_the_file_beside_the_log(tmp_path):
     """Only the file the reader reads is pinned: ``relations: none`` reads none; a relations file given by path is
     pinned as an option's file."""

@@ -49,6 +49,17 @@ def test_a_truncated_pinned_trajectory_is_refused_by_baseline_trajectory(pinned,
                                "the baseline again")
 
 
+
+def test_a_pinned_trajectory_cut_inside_its_last_number_is_damaged_not_the_methods_regression(pinned, tmp_path):
+    """A pinned poses file cut inside its last number (a copy cut short) read "regression: trajectory differs from the
+    pinned one by 2.831 m": lidarkit writes its files whole, so a cut one is the baseline's damage."""
+    folder = _edited_copy(pinned, tmp_path / "cut", lambda manifest: None)
+    poses = folder / "jobs" / pinned.jobs[0]["key"] / "poses_kitti.txt"
+    poses.write_text(poses.read_text().rstrip("\n")[:-5])
+    with pytest.raises(DataError, match=r"its pinned trajectory is damaged \(.*line 4 has no line end.*record the baseline again$"):
+        load_baseline(folder).trajectory("vanilla")
+
+
 @pytest.mark.parametrize("edit, problem", [
     (lambda m: m["jobs"][0].update(label=5), "label is 5, not a method label"),
     (lambda m: m["jobs"][0]["spec"]["dataset"].update(path=5), "spec dataset path is 5, not a string"),
