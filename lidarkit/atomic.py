@@ -24,7 +24,7 @@ import time
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
-from lidarkit.errors import DataError, OutputError
+from lidarkit.errors import ConfigError, DataError, OutputError
 from lidarkit.lifetime import STOP_SIGNALS
 
 try:  # advisory locks mark the temporary folders of outputs being written (POSIX)
@@ -164,22 +164,36 @@ def _is_stream(path: Path) -> bool:
 
 def write_text(path: str | os.PathLike, text: str) -> Path:
     """Write ``text`` to ``path`` atomically; return the path."""
-    return write_bytes(path, text.encode("utf-8"))
+    return write_bytes(path, _utf8(text, path, "write_text"))
 
 
 def write_bytes(path: str | os.PathLike, data: bytes) -> Path:
     """Write ``data`` to ``path`` atomically; return the path."""
+    try:  # bytes or any buffer (an array's memory); a str was a TypeError from the file's write
+        memoryview(data)
+    except TypeError:
+        hint = " (write_text writes a str)" if isinstance(data, str) else ""
+        raise ConfigError(f"write_bytes: data must be bytes, got {type(data).__name__}{hint}", source=path) from None
     with atomic_path(path) as tmp:
         _write_synced(tmp, data)
     return Path(path)
 
 
+def _utf8(text: str, path: str | os.PathLike, caller: str) -> bytes:
+    """``text`` encoded for writing, or a ConfigError naming its type (bytes had no ``encode``: an AttributeError)."""
+    if not isinstance(text, str):
+        hint = " (write_bytes writes bytes)" if isinstance(text, (bytes, bytearray, memoryview)) else ""
+        raise ConfigError(f"{caller}: text must be a str, got {type(text).__name__}{hint}", source=path)
+    return text.encode("utf-8")
+
+
 def write_texts(texts: dict[str | os.PathLike, str]) -> list[Path]:
     """Write files that belong together (a report's .md, .csv and .html): every one is written in full first, then
     each renamed into place, so a failure while writing any of them (a full disk) replaces none; return the paths."""
-    with paths_together(texts) as aside:
-        for path, text in texts.items():
-            _write_synced(aside[Path(path)], text.encode("utf-8"))
+    encoded = {path: _utf8(text, path, "write_texts") for path, text in texts.items()}  # all checked before any is written
+    with paths_together(encoded) as aside:
+        for path, data in encoded.items():
+            _write_synced(aside[Path(path)], data)
     return [Path(p) for p in texts]
 
 

@@ -666,3 +666,24 @@ def test_a_loop_of_links_in_the_way_of_an_output_is_called_a_loop(tmp_path, caps
         atomic.refuse_dangling_link(dangle, "file")
     assert str(caught.value) == (f"{dangle}: a symbolic link to a missing file is in the way (-> nowhere.bin): remove it "
                                  "or name another file")
+
+
+def test_atomic_writes_refuse_the_wrong_content_type_in_one_line(tmp_path):
+    """write_text(path, b"a") was an AttributeError (bytes have no encode), write_bytes(path, "a") a TypeError from
+    the file's write; each is a ConfigError naming the type, and nothing is written (write_texts checks every text first)."""
+    refusals = (
+        (lambda: atomic.write_text(tmp_path / "a.txt", b"a"),
+         f"{tmp_path / 'a.txt'}: write_text: text must be a str, got bytes (write_bytes writes bytes)"),
+        (lambda: atomic.write_bytes(tmp_path / "b.bin", "a"),
+         f"{tmp_path / 'b.bin'}: write_bytes: data must be bytes, got str (write_text writes a str)"),
+        (lambda: atomic.write_text(tmp_path / "c.txt", None), f"{tmp_path / 'c.txt'}: write_text: text must be a str, got NoneType"),
+        (lambda: atomic.write_texts({tmp_path / "d.md": "fine", tmp_path / "d.csv": 3}),
+         f"{tmp_path / 'd.csv'}: write_texts: text must be a str, got int"),
+    )
+    for call, message in refusals:
+        with pytest.raises(ConfigError) as err:
+            call()
+        assert str(err.value) == message
+    assert list(tmp_path.iterdir()) == []
+    atomic.write_bytes(tmp_path / "e.bin", bytearray(b"\x00\x01"))
+    assert (tmp_path / "e.bin").read_bytes() == b"\x00\x01"

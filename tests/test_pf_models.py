@@ -450,7 +450,7 @@ def test_particle_filter_arguments_of_the_wrong_kind_are_one_line_errors_naming_
          "predict: odometry must be numbers [r1, t, r2], got 'abc'"),
         (lambda: ParticleFilter(LANDMARKS, PFConfig.make(n_particles=10)).predict([1.0, 2.0]), DataError,
          "predict: odometry must be [r1, t, r2], got shape (2,)"),
-        (lambda: ParticleFilter("abc"), DataError, "landmarks: landmarks must be numbers, an (L, 2) array, got 'abc'"),
+        (lambda: ParticleFilter("abc"), DataError, "landmarks: landmarks must be numbers, an (L, 2) array or a LandmarkMap, got 'abc'"),
     ):
         with pytest.raises(error) as err:
             call()

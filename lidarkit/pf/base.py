@@ -14,6 +14,7 @@ import logging
 import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
+from lidarkit.io.landmarks import LandmarkMap
 from lidarkit.params import is_integer
 from lidarkit.pf.augmented import LikelihoodAverages
 from lidarkit.pf.config import MAX_POSE_SCALE, PFConfig
@@ -104,6 +105,16 @@ def _listed(value) -> str:
         return repr(value)
 
 
+def _shown_landmarks(value) -> str:
+    """Landmarks that are no numbers, for a one-line message: text and sequences as listed, any other object by its type."""
+    if isinstance(value, str):
+        return repr(value)
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return _listed(value)
+    hint = " (its .landmarks is the map)" if isinstance(getattr(value, "landmarks", None), LandmarkMap) else ""
+    return f"a {type(value).__name__}{hint}"
+
+
 def _reading(i: int, step_offsets: np.ndarray | None) -> str:
     """The words "reading i", with its step when the readings are grouped by step (rows ``step_offsets[t]:step_offsets[t+1]``)."""
     if step_offsets is None:
@@ -114,6 +125,9 @@ def _reading(i: int, step_offsets: np.ndarray | None) -> str:
 class LandmarkFilterBase:
     """Weighted set of ``N`` pose hypotheses ``(3, N)`` (``.states``; x_m, y_m, theta_rad) against an ``(L, 2)`` landmark map.
 
+    The map may be a reader's :class:`~lidarkit.io.landmarks.LandmarkMap`: its rows, in the world file's order, are the
+    landmark indices ``update`` takes (``LandmarkData.meas_landmark_index``), not its ids.
+
     Weights and log-weights are of ``self.dtype`` (set by :meth:`_setup`). Counters: ``n_updates``,
     ``n_resamples``, ``n_weight_resets`` (updates whose log-likelihoods were all non-finite: weights
     reset to uniform, logged).
@@ -122,17 +136,20 @@ class LandmarkFilterBase:
     unit_name = "particle"  # what one hypothesis is called in log messages
     skip_uniform_prior = True  # uniform weights: take ll as the new log-weights without adding the constant -log N
 
-    def __init__(self, landmarks_xy: np.ndarray, config: PFConfig | None = None, rng: np.random.Generator | int | None = 0) -> None:
+    def __init__(self, landmarks_xy: np.ndarray | LandmarkMap, config: PFConfig | None = None,
+                 rng: np.random.Generator | int | None = 0) -> None:
         if config is not None and not isinstance(config, PFConfig):  # (a dict: an AttributeError on n_particles)
             raise ConfigError(f"config must be a PFConfig (PFConfig(...) or PFConfig.make(...)), got {type(config).__name__}",
                               source=type(self).__name__)
         self.config = config if config is not None else self._default_config()
         self.rng = _generator(rng)
+        if isinstance(landmarks_xy, LandmarkMap):  # the world file's map: update() takes its rows (meas_landmark_index)
+            landmarks_xy = landmarks_xy.positions_xy
         try:
             lm = np.asarray(landmarks_xy, dtype=np.float64)
-        except (TypeError, ValueError):  # text, ragged rows
-            shown = repr(landmarks_xy) if isinstance(landmarks_xy, str) else _listed(landmarks_xy)
-            raise DataError(f"landmarks must be numbers, an (L, 2) array, got {shown}", source="landmarks") from None
+        except (TypeError, ValueError):  # text, ragged rows, an object (printed whole: a 9-line repr)
+            raise DataError(f"landmarks must be numbers, an (L, 2) array or a LandmarkMap, got {_shown_landmarks(landmarks_xy)}",
+                            source="landmarks") from None
         if lm.ndim != 2 or lm.shape[1] != 2 or len(lm) == 0 or not np.isfinite(lm).all():
             raise DataError(f"landmarks must be a finite (L, 2) array with L >= 1, got shape {lm.shape}", source="landmarks")
         self.landmarks_xy = lm

@@ -23,6 +23,11 @@ class CloudCache:
         self.size = size
         self._entries: list[tuple[tuple, np.ndarray | None, Any]] = []
 
+    def __getstate__(self) -> dict:
+        """Pickled and deep-copied empty: small_gicp's and Open3D's clouds cannot be pickled, and a key made of an array's
+        id and address means nothing in another process; the copy prepares its clouds again, to the same result."""
+        return {"size": self.size, "_entries": []}
+
     @staticmethod
     def _key(points: np.ndarray, settings: tuple) -> tuple:
         return (id(points), points.shape, points.dtype.str, points.ctypes.data, settings)

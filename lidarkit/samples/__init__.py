@@ -13,7 +13,7 @@ from importlib import resources
 from pathlib import Path
 
 from lidarkit import atomic
-from lidarkit.errors import DataError
+from lidarkit.errors import ConfigError, DataError
 
 __all__ = ["available_samples", "extract_sample", "path", "sample_path"]
 
@@ -22,21 +22,44 @@ def _root() -> Path:
     return Path(str(resources.files(__name__)))
 
 
-def sample_path(*parts: str) -> Path:
+def _relative(parts: tuple, example: str) -> Path:
+    """The sample named by ``parts`` (names or paths, each possibly slash-separated) as a path inside the samples."""
+    if not parts:
+        raise DataError(f"name a sample, e.g. {example}", source="samples")
+    for part in parts:  # (None was looked up as a sample named "None")
+        if not isinstance(part, (str, os.PathLike)):
+            raise ConfigError(f"sample names must be str or os.PathLike, got {type(part).__name__}", source="samples")
+    rel = Path(*[p for part in parts for p in os.fspath(part).split("/") if p])
+    if rel.is_absolute() or ".." in rel.parts:
+        raise DataError("sample names are relative paths inside lidarkit/samples", source=str(rel))
+    if not rel.parts:
+        raise DataError(f"name a sample, e.g. {example}", source="samples")
+    return rel
+
+
+def sample_path(*parts: str | os.PathLike) -> Path:
     """Path of a bundled sample file or folder, e.g. ``sample_path("evo_kitti00", "KITTI_00_gt.txt.gz")``.
 
     ``parts`` may also be one slash-separated string. A missing sample raises DataError naming it.
     """
-    if not parts:
-        raise DataError("name a sample, e.g. sample_path('evo_kitti00', 'KITTI_00_gt.txt.gz')", source="samples")
-    rel = Path(*[p for part in parts for p in str(part).split("/") if p])
-    if rel.is_absolute() or ".." in rel.parts:
-        raise DataError("sample names are relative paths inside lidarkit/samples", source=str(rel))
+    rel = _relative(parts, "sample_path('evo_kitti00', 'KITTI_00_gt.txt.gz')")
     full = _root() / rel
     if not full.exists():
-        known = ", ".join(available_samples()) or "none"
-        raise DataError(f"bundled sample not found (known: {known})", source=str(rel))
+        raise DataError(f"bundled sample not found ({_known_beside(rel)})", source=rel.as_posix())
     return full
+
+
+def _known_beside(rel: Path) -> str:
+    """What the samples hold where ``rel`` was looked for: its sample folder's entries, or the sample folders."""
+    folder = _root() / rel.parent
+    if len(rel.parts) > 1 and folder.is_dir():
+        return f"{rel.parent.as_posix()} holds: {_entries(folder)}"
+    return f"known: {', '.join(available_samples()) or 'none'}"
+
+
+def _entries(folder: Path) -> str:
+    """The names in ``folder``, sub-folders with a trailing slash."""
+    return ", ".join(sorted(p.name + ("/" if p.is_dir() else "") for p in folder.iterdir() if not p.name.startswith(("_", "."))))
 
 
 path = sample_path  # short alias: ``lidarkit.samples.path("evo_kitti00/KITTI_00_gt.txt.gz")``
@@ -48,20 +71,25 @@ def available_samples() -> list[str]:
     return sorted(p.name for p in root.iterdir() if p.is_dir() and not p.name.startswith(("_", ".")))
 
 
-def extract_sample(*parts: str, dest_dir: str | os.PathLike) -> Path:
+def extract_sample(*parts: str | os.PathLike, dest_dir: str | os.PathLike) -> Path:
     """Copy a bundled file into ``dest_dir`` as plain data and return the copy's path.
 
     ``extract_sample("evo_kitti00", "KITTI_00_gt.txt", dest_dir=d)`` finds ``KITTI_00_gt.txt`` or, if only
     the compressed ``KITTI_00_gt.txt.gz`` is bundled, decompresses it to ``d/KITTI_00_gt.txt`` (atomically).
     """
-    rel = "/".join(parts)
-    try:
-        src = sample_path(rel)
-        compressed = False
-    except DataError:
-        src = sample_path(rel + ".gz")
-        compressed = True
-    dest = Path(dest_dir) / Path(rel).name
+    if not isinstance(dest_dir, (str, os.PathLike)):  # (None was a TypeError from Path)
+        raise ConfigError(f"dest_dir must be a folder path (str or os.PathLike), got {type(dest_dir).__name__}",
+                          source="extract_sample")
+    rel = _relative(parts, "extract_sample('evo_kitti00', 'KITTI_00_gt.txt', dest_dir=...)")
+    src = _root() / rel
+    if src.is_dir():  # (it blamed the destination: "cannot write: is a folder")
+        raise DataError(f"a sample folder, not a file: name one of its files ({_entries(src)})", source=rel.as_posix())
+    compressed = not src.is_file()
+    if compressed:
+        src = src.with_name(src.name + ".gz")
+        if not src.is_file():  # named as asked, not by the .gz looked for too
+            raise DataError(f"bundled sample not found ({_known_beside(rel)})", source=rel.as_posix())
+    dest = Path(dest_dir) / rel.name
     with atomic.atomic_path(dest) as tmp:
         if compressed:
             with gzip.open(src, "rb") as fin, open(tmp, "wb") as fout:
