@@ -607,3 +607,29 @@ def test_a_pose_file_kiss_icp_cannot_read_is_named_with_its_line(tmp_path):
     (helipr / "LiDAR_GT" / "global_Velodyne_gt.txt").write_text("1690000000000000000 0 0 0 0 0 0 1\n1690000000100000000 1 0 0 0 0 1\n")
     with pytest.raises(DataError, match=r"global_Velodyne_gt\.txt \(line 2\): expected 8 numbers, found 7$"):
         open_dataset("helipr", helipr, sequence="Velodyne")
+
+
+def test_a_loader_read_in_another_thread_leaves_the_main_threads_warnings_alone(caplog):
+    """catch_warnings around each frame's loader call in the reading-ahead thread is process-wide: a warning of the
+    main thread meanwhile was taken as the loader's and only logged at debug level."""
+    import logging
+    import threading
+    import warnings
+
+    from lidarkit.io.rosbag import guarded_loader
+
+    inside, release = threading.Event(), threading.Event()
+
+    def read():
+        with guarded_loader("generic", "scans", location="frame 3"):
+            inside.set()
+            release.wait(5.0)
+
+    reader = threading.Thread(target=read)
+    with caplog.at_level(logging.DEBUG, logger="lidarkit.io.rosbag"):
+        reader.start()
+        assert inside.wait(5.0)
+        warnings.warn("the main thread's own warning", UserWarning, stacklevel=1)
+        release.set()
+        reader.join(5.0)
+    assert not [r for r in caplog.records if "the main thread's own warning" in r.getMessage()]

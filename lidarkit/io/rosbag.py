@@ -27,6 +27,7 @@ import contextlib
 import io
 import logging
 import os
+import threading
 import warnings
 from collections.abc import Iterator
 from functools import cached_property
@@ -81,8 +82,12 @@ def guarded_loader(kind: str, source: str, location: str | None = None) -> Itera
     """
     out = io.StringIO()
     caught: list[warnings.WarningMessage] = []
+    # warnings are caught in the main thread only (the loaders warn as they open): catch_warnings is process-wide, and
+    # from the reading-ahead thread it hid the main thread's warnings and, overlapping, left its hook in place
+    catching = warnings.catch_warnings(record=True) if threading.current_thread() is threading.main_thread() else None
     try:
-        with contextlib.redirect_stdout(out), warnings.catch_warnings(record=True) as caught:
+        with contextlib.redirect_stdout(out), (catching or contextlib.nullcontext()) as recorded:
+            caught = recorded if recorded is not None else caught
             yield
     except SystemExit:
         said = " ".join(out.getvalue().split()) or "no message"
