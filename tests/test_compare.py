@@ -1108,3 +1108,17 @@ def test_frames_of_a_stepped_run_are_named_as_typed():
     assert frames_text((2, 5, 8, 11)) == "2:12:3"
     assert frames_text(tuple(range(12))) == "0:12"
     assert frames_text((0, 1, 4)) == "3 frames from 0 to 4"
+
+
+def test_runs_over_a_slice_without_timing_csv_are_not_called_config_less(tmp_path, capsys):
+    """Two KITTI runs over frames 0:10 against two pose files, timing.csv gone: the refusal said both had "no readable
+    config.yaml" (a slice's frames needed the dataset's length, which a KITTI run does not record)."""
+    import yaml
+
+    for name, scale in (("a", 0.0), ("b", 0.05)):
+        run = _straight_run(tmp_path / name, np.full(9, scale))
+        run.joinpath("config.yaml").write_text(yaml.safe_dump({"run": {"dataset": "kitti_00", "dataset_config": None,
+                                                                        "frames": "0:10", "n_frames": 10}}))
+    (tmp_path / "b" / "ground_truth_kitti.txt").write_text((tmp_path / "b" / "poses_kitti.txt").read_text())
+    code, stdout, err = run_cli(["compare", str(tmp_path / "a"), str(tmp_path / "b")], capsys)
+    assert code == 1 and "runs over different data" in err and "config.yaml" not in err, err

@@ -410,7 +410,9 @@ def _frames_of(run: OdometryRun, given: dict[str, Any]) -> tuple[int, ...] | Non
         listed = tuple(i for i in selection if isinstance(i, int) and not isinstance(i, bool))
         return listed if len(listed) == len(selection) == n_poses else None
     settings = given.get("dataset_config") if isinstance(given.get("dataset_config"), dict) else {}
-    length = settings.get("n_frames", n_run if selection == "all" else None)
+    # a slice with bounds of its own ("0:10") needs no dataset length (a KITTI run without timing.csv was called one
+    # "with no readable config.yaml")
+    length = settings.get("n_frames", n_run if selection == "all" else _bounded_slice(selection) or None)
     if not isinstance(length, int) or isinstance(length, bool):
         return None
     try:
