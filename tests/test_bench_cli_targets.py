@@ -54,3 +54,36 @@ def test_a_suite_argument_that_is_a_dangling_link_is_named_as_given(tmp_path, ca
     assert capsys.readouterr().err == f"error: {dang}: a symbolic link to a missing file (-> nowhere)\n"
     assert cli_exit_code(["bench", str(tmp_path / "absent.yaml"), "--dry-run", "--out", str(tmp_path / "out")]) == 1
     assert capsys.readouterr().err == f"error: {tmp_path / 'absent.yaml'}: suite file not found\n"
+
+
+def test_a_suite_given_as_a_pipe_is_refused_naming_the_argument(tmp_path, capsys):
+    """`lidarkit bench <(cat suite.yaml)` followed /dev/fd/63 to "/proc/<pid>/fd/pipe:[...]: suite file not found"."""
+    import os
+
+    read_end, write_end = os.pipe()
+    try:
+        os.write(write_end, SUITE.encode())
+        piped = f"/dev/fd/{read_end}"
+        assert cli_exit_code(["bench", piped, "--dry-run", "--out", str(tmp_path / "out")]) == 1
+        assert capsys.readouterr().err == f"error: {piped}: a pipe (e.g. <(...)): save it to a file first\n"
+    finally:
+        os.close(read_end)
+        os.close(write_end)
+
+
+def test_a_point_file_given_as_a_pipe_is_refused_naming_the_argument(tmp_path, capsys):
+    """`lidarkit icp <(cat X.pcd) Y.pcd` read "/dev/fd/63: unsupported point file type ''"."""
+    import os
+
+    import numpy as np
+
+    target = tmp_path / "target.npy"
+    np.save(target, np.random.default_rng(0).normal(size=(100, 3)))
+    read_end, write_end = os.pipe()
+    try:
+        piped = f"/dev/fd/{read_end}"
+        assert cli_exit_code(["icp", piped, str(target)]) == 1
+        assert capsys.readouterr().err == f"error: {piped}: a pipe (e.g. <(...)): save it to a file first\n"
+    finally:
+        os.close(read_end)
+        os.close(write_end)

@@ -106,3 +106,132 @@ def test_a_landmark_sensor_file_cut_in_its_last_bearing_is_said(tmp_path, caplog
     with caplog.at_level(logging.WARNING, logger="lidarkit.textfile"):
         LandmarkData(tmp_path)
     assert caplog.records == []
+
+
+# ---- a cut file's warning in the run folders (it was logged only: a VO run scored APE 2.858 m said nothing) ----------
+
+
+def _cut_last_exponent(path) -> str:
+    """Cut ``path`` (rows of ``%e`` numbers) inside its last number's exponent, as a copy stopped early leaves it ("e-02"
+    -> "e-0": still a number); the warning the readers give for it (one, naming the file and line)."""
+    path.write_text(path.read_text().rstrip("\n")[:-1])
+    said: list[str] = []
+    read_numeric_table(path, (1, 12), warnings=said)
+    assert len(said) == 1 and said[0].startswith(f"{path}: line ") and said[0].endswith("the file may be cut off")
+    return said[0]
+
+
+def _kitti_lidar_sequence(tmp_path, n: int = 3):
+    """The first ``n`` scans of the shared KITTI sequence 00 with its calib, times and ground truth rows."""
+    import shutil
+
+    source = shared_path("kitti_odometry")
+    seq = tmp_path / "seq"
+    (seq / "velodyne").mkdir(parents=True)
+    for k in range(n):
+        shutil.copy(source / "sequences" / "00" / "velodyne" / f"{k:06d}.bin", seq / "velodyne")
+    shutil.copy(source / "sequences" / "00" / "calib.txt", seq / "calib.txt")
+    (seq / "times.txt").write_text("".join((source / "sequences" / "00" / "times.txt").read_text().splitlines(True)[:n]))
+    (seq / "poses.txt").write_text("".join((source / "poses" / "00.txt").read_text().splitlines(True)[:n]))
+    return seq
+
+
+def test_the_kitti_reader_keeps_a_cut_pose_or_times_file_in_its_reader_warnings(tmp_path):
+    """The poses and times.txt of a KITTI sequence cut inside their last number: said once each in reader_warnings, and
+    kept in the ground truth of the frames asked for (sliced, it lost them)."""
+    from lidarkit.io.kitti import KittiOdometry
+
+    seq = _kitti_lidar_sequence(tmp_path)
+    poses_cut, times_cut = _cut_last_exponent(seq / "poses.txt"), _cut_last_exponent(seq / "times.txt")
+    reader = KittiOdometry(seq)
+    gt = reader.ground_truth_at(reader.frames)
+    assert gt.meta[READ_WARNINGS] == [poses_cut]
+    reader.ground_truth_at()  # (read again: said once)
+    assert reader.reader_warnings == [poses_cut, times_cut]
+
+
+def test_an_odometry_run_on_a_cut_pose_file_records_it_in_metrics_json(tmp_path):
+    import json
+
+    from conftest import cli_exit_code
+
+    seq = _kitti_lidar_sequence(tmp_path)
+    expected = _cut_last_exponent(seq / "poses.txt")
+    out = tmp_path / "run"
+    assert cli_exit_code(["odometry", str(seq), "--method", "kiss", "--out", str(out), "--no-progress"]) == 0
+    assert json.loads((out / "metrics.json").read_text())["warnings"][:1] == [expected]
+
+
+def test_a_vo_run_on_a_cut_pose_file_records_it_in_metrics_json(tmp_path):
+    """KITTI 06's poses.txt cut inside its last number scored APE 2.858 m (0.0091 m whole) with nothing on file."""
+    import json
+    import shutil
+
+    from conftest import cli_exit_code
+
+    source = shared_path("kitti_images", "sequences", "06")
+    seq = tmp_path / "06"
+    (seq / "image_0").mkdir(parents=True)
+    n = 6
+    for k in range(n):
+        shutil.copy(source / "image_0" / f"{k:06d}.png", seq / "image_0")
+    shutil.copy(source / "calib.txt", seq / "calib.txt")
+    (seq / "poses.txt").write_text("".join((source / "poses.txt").read_text().splitlines(True)[:n]))
+    expected = _cut_last_exponent(seq / "poses.txt")
+    out = tmp_path / "run"
+    assert cli_exit_code(["vo", str(seq), "--out", str(out), "--no-progress"]) == 0
+    assert json.loads((out / "metrics.json").read_text())["warnings"] == [expected]
+
+
+def test_the_folder_and_image_folder_readers_keep_a_cut_file_in_their_reader_warnings(tmp_path):
+    """A scan folder's and an image folder's poses and time stamps cut inside their last number: in reader_warnings."""
+    import shutil
+
+    from lidarkit.io.folder import ScanFolder
+    from lidarkit.io.images import ImageFolder
+
+    seq = _kitti_lidar_sequence(tmp_path)
+    poses_cut, times_cut = _cut_last_exponent(seq / "poses.txt"), _cut_last_exponent(seq / "times.txt")
+    times = seq / "times.txt"
+    scans = ScanFolder(seq / "velodyne", poses=seq / "poses.txt", timestamps=times)
+    assert scans.reader_warnings == [times_cut, poses_cut]
+
+    source = shared_path("kitti_images", "sequences", "06", "image_0")
+    images = tmp_path / "images"
+    images.mkdir()
+    for k in range(3):
+        shutil.copy(source / f"{k:06d}.png", images)
+    folder = ImageFolder(images, poses=seq / "poses.txt", timestamps=times)
+    assert folder.reader_warnings == [times_cut, poses_cut]
+
+
+def test_a_pf_run_on_a_cut_recording_records_it_in_metrics_json(tmp_path):
+    import json
+
+    from conftest import cli_exit_code
+
+    source = shared_path("pf", "burgard_ekf")
+    (tmp_path / "world.dat").write_text((source / "world.dat").read_text())
+    text = (source / "sensor_data.dat").read_text()
+    bearing = text.rstrip("\n").splitlines()[-1].split()[-1]
+    sensor = tmp_path / "sensor_data.dat"
+    sensor.write_text(text.rstrip("\n")[: -(len(bearing) - 4)])
+    expected = (f"{sensor}: line {len(sensor.read_text().splitlines())} has no line end and its last value {bearing[:4]} "
+                "is shorter than that column's on every other line: the file may be cut off")
+    out = tmp_path / "run"
+    assert cli_exit_code(["pf", str(tmp_path), "--recorded", "--particles", "50", "--out", str(out)]) == 0
+    assert json.loads((out / "metrics.json").read_text())["warnings"] == [expected]
+
+
+def test_an_odometry_run_given_a_cut_ground_truth_records_it_in_metrics_json(tmp_path):
+    """A ground truth read from a cut file and given to run(ground_truth=...): its read warning in the run's metrics."""
+    import json
+
+    from lidarkit.io.folder import ScanFolder
+    from lidarkit.odometry import run
+
+    seq = _kitti_lidar_sequence(tmp_path)
+    expected = _cut_last_exponent(seq / "poses.txt")
+    truth = Trajectory.from_kitti(seq / "poses.txt")
+    run(ScanFolder(seq / "velodyne"), "kiss", ground_truth=truth, out_dir=tmp_path / "run")
+    assert json.loads((tmp_path / "run" / "metrics.json").read_text())["warnings"][:1] == [expected]

@@ -329,7 +329,7 @@ def load_suite(path: str | Path, *, skip_unavailable: bool = False, only_tasks: 
     ``Suite.skipped``) instead of refused — what ``lidarkit demo`` does. ``only_tasks`` keeps only those tasks.
     A suite expanding to more than ``max_jobs`` jobs is refused before expansion.
     """
-    from lidarkit.atomic import missing_reason, resolved_path
+    from lidarkit.atomic import missing_reason, resolved_path, stream_reason
     from lidarkit.bench.results import path_argument
     from lidarkit.params import is_integer
 
@@ -339,6 +339,9 @@ def load_suite(path: str | Path, *, skip_unavailable: bool = False, only_tasks: 
     except OSError as err:
         if err.errno in (errno.ENOENT, errno.ELOOP):
             raise DataError(missing_reason(given, "suite file not found"), source=given) from None
+    streamed = stream_reason(given)  # (<(cat suite.yaml) resolved to /proc/<pid>/fd/pipe:[...]: "suite file not found")
+    if streamed:
+        raise DataError(streamed, source=given)
     path = resolved_path(given, output=False)  # (a loop of links was a RuntimeError traceback)
     if not is_integer(max_jobs):  # ("2" failed comparing with the job count: "'>' not supported")
         raise ConfigError(f"must be an integer, got {type(max_jobs).__name__} {max_jobs!r}", source="max_jobs")

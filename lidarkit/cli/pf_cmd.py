@@ -214,7 +214,8 @@ def pf_command(
             bar.stop()
         if out is not None:  # the run folder before the table: a stdout that refuses it (> /dev/full) lost the run
             recorded = {**scenario, "kidnap_offset": kidnap_offset_record(scenario["kidnap_offset"]) if kidnap_at is not None else None}
-            _write_study(rows, cfg, protocol, {**recorded, **data_files(data), "n_particles": counts, "seeds": seed_list}, out)
+            _write_study(rows, cfg, protocol, {**recorded, **data_files(data), "n_particles": counts, "seeds": seed_list}, out,
+                         warnings=_read_warnings(data))
         _print_study(rows, cfg, protocol, kidnap_at, len(data))
         if out is not None:
             stderr().print(f"results written to {out}")
@@ -224,7 +225,7 @@ def pf_command(
         result = run_protocol(data, counts[0], seed, config=cfg, estimators=tuple(dict.fromkeys((cfg.estimator, "mean", "best"))),
                               snapshot_steps=snap, on_step=on_step, **scenario)
     if out is not None:  # the run folder before the table: a stdout that refuses it (> /dev/full) lost the run
-        _write(result, out, snap_steps=snapshot_steps)
+        _write(result, out, snap_steps=snapshot_steps, warnings=_read_warnings(data))
     _print(result)
     if out is not None:
         if gif:  # after the table, into the finished folder: an interrupt while it is drawn loses the GIF alone
@@ -358,7 +359,7 @@ def _recorded(data, cfg: PFConfig, seed: int, fit_q: bool, out: Path | None, sna
         result.metrics["fit_q"] = [{"run": "given Q" if i == 0 else f"fit {i}", "q_cov": r.settings["q_cov"], "nis_mean": r.metrics["nis_mean"],
                                     "nis_fraction_below_chi2_95": r.metrics["nis_fraction_below_chi2_95"]} for i, r in enumerate([first, *runs])]
     if out is not None:  # the run folder before the tables: a stdout that refuses them (> /dev/full) lost the run
-        _write(result, out, snap_steps=snap_steps)
+        _write(result, out, snap_steps=snap_steps, warnings=_read_warnings(data))
     if not fit_q:
         _print(result)
         stdout().print(result.metrics["q_verdict"]["text"])
@@ -413,14 +414,20 @@ def _print_study(rows, cfg: PFConfig, protocol: str, kidnap_at: int | None, n_st
     stdout().print(table)
 
 
-def _write_study(rows, cfg: PFConfig, protocol: str, scenario: dict, out: Path) -> None:
+def _read_warnings(data) -> list[str]:
+    """What the landmark reader warned of (a file cut inside its last number), for the run's ``warnings``: it was
+    logged only, and a run on a cut recording recorded nothing."""
+    return [str(w) for w in getattr(data, "reader_warnings", None) or ()]
+
+
+def _write_study(rows, cfg: PFConfig, protocol: str, scenario: dict, out: Path, *, warnings: list[str] = ()) -> None:
     from lidarkit import atomic
 
     with atomic.run_folder(out, replaces=RUN_FILES) as tmp:
-        _write_study_files(rows, cfg, protocol, scenario, tmp)
+        _write_study_files(rows, cfg, protocol, scenario, tmp, warnings=warnings)
 
 
-def _write_study_files(rows, cfg: PFConfig, protocol: str, scenario: dict, out: Path) -> None:
+def _write_study_files(rows, cfg: PFConfig, protocol: str, scenario: dict, out: Path, *, warnings: list[str] = ()) -> None:
     from lidarkit import atomic
     from lidarkit.eval.report import write_json
 
@@ -431,7 +438,8 @@ def _write_study_files(rows, cfg: PFConfig, protocol: str, scenario: dict, out: 
     atomic.write_text(out / "config.yaml", yaml.safe_dump({"lidarkit_version": code_version(), "pf": settings, "protocol": protocol,
                                                             "scenario": {k: (list(v) if isinstance(v, tuple) else v) for k, v in scenario.items()}},
                                                            sort_keys=False))
-    write_json({"protocol": protocol, "rows": [r.to_dict() for r in rows]}, out / "study.json")
+    write_json({"protocol": protocol, "rows": [r.to_dict() for r in rows], **({"warnings": list(warnings)} if warnings else {})},
+               out / "study.json")
 
 
 def _row(table: Table, label: str, value: str) -> None:
@@ -487,12 +495,13 @@ def _print(result) -> None:
     stdout().print(table)
 
 
-def _write(result, out: Path, *, snap_steps: tuple[int, ...]) -> None:
-    """The run folder, all or nothing, without animation.gif (:func:`_write_gif` adds it once the folder is in place)."""
+def _write(result, out: Path, *, snap_steps: tuple[int, ...], warnings: list[str] = ()) -> None:
+    """The run folder, all or nothing, without animation.gif (:func:`_write_gif` adds it once the folder is in place);
+    ``warnings``: what the readers warned of, in metrics.json."""
     from lidarkit import atomic
 
     with atomic.run_folder(out, replaces=RUN_FILES) as tmp:
-        _write_files(result, tmp, snap_steps=snap_steps)
+        _write_files(result, tmp, snap_steps=snap_steps, warnings=warnings)
 
 
 def _write_gif(result, out: Path) -> None:
@@ -517,7 +526,7 @@ def _write_gif(result, out: Path) -> None:
         bar.stop()
 
 
-def _write_files(result, out: Path, *, snap_steps: tuple[int, ...]) -> None:
+def _write_files(result, out: Path, *, snap_steps: tuple[int, ...], warnings: list[str] = ()) -> None:
     from lidarkit import atomic
     from lidarkit.eval.report import write_json
     from lidarkit.pf import plots
@@ -526,7 +535,7 @@ def _write_files(result, out: Path, *, snap_steps: tuple[int, ...]) -> None:
 
     atomic.write_text(out / "config.yaml", yaml.safe_dump({"lidarkit_version": code_version(), "pf": result.config.model_dump(mode="json"),
                                                             "run": result.settings}, sort_keys=False))
-    write_json(result.to_dict(), out / "metrics.json")
+    write_json({**result.to_dict(), **({"warnings": list(warnings)} if warnings else {})}, out / "metrics.json")
     est = result.trajectory("estimate")
     est.to_kitti(out / "poses_kitti.txt")
     est.to_tum(out / "poses_tum.txt")

@@ -206,6 +206,9 @@ def vo_command(
         extra_config["self_calibration"] = {"focal_px": focal.focal_px, "sigma_px": focal.sigma_px if focal.constrained else None,
                                             "constrained": focal.constrained, "reason": focal.reason,
                                             "window_focals_px": list(focal.window_focals_px)}
+    read_warnings = _read_warnings(vo_input)
+    if read_warnings:  # (a pose file cut inside its last number scored APE 2.858 m, and the run folder said nothing)
+        inputs = {**inputs, "warnings": read_warnings}
     if result.n_frames > 1 and result.accepted_pairs == 0:
         _fail_without_pairs(result, out, extra_config, str(data), inputs)
     if gt is not None and cfg.scale.mode != "gt":
@@ -293,6 +296,17 @@ def _files_read(data: Path, vo_input, poses: Optional[Path], poses_format: str, 
         stamps = named(stamps_file, timestamps)
     return {"input": str(data.resolve()), "poses": named(poses_file, poses) if has_poses else None,
             "poses_format": read_as if has_poses else None, "timestamps": stamps}
+
+
+def _read_warnings(vo_input) -> list[str]:
+    """What the input's readers warned of (a file cut inside its last number: poses, time stamps, calib), once each: the
+    reader's ``reader_warnings`` and the ground truth's ``meta["read_warnings"]``, for metrics.json's ``warnings``."""
+    from lidarkit.trajectory import READ_WARNINGS
+
+    images = getattr(vo_input.images, "images", vo_input.images)  # (--start / --max-frames wrap the reader)
+    gt = vo_input.ground_truth
+    said = [*(getattr(images, "reader_warnings", None) or ()), *((gt.meta or {}).get(READ_WARNINGS, ()) if gt is not None else ())]
+    return [str(w) for w in dict.fromkeys(said)]
 
 
 def _check_out_beside_images(out: Optional[Path], images) -> None:

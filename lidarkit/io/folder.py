@@ -22,7 +22,7 @@ from lidarkit.io.base import Scan, checked_index, option_path
 from lidarkit.io.pointfile import (POINT_FILE_SUFFIXES, open3d_skipped_type, point_file_fields, read_point_file,
                                    said_once)
 from lidarkit.textfile import data_line_numbers, read_numeric_table
-from lidarkit.trajectory import Trajectory
+from lidarkit.trajectory import READ_WARNINGS, Trajectory
 
 POSE_FORMATS = ("kitti", "tum")
 #: per-point time fields that kiss-icp's generic loader (generic:PATH) reads from .pcd/.ply files; this reader reads none
@@ -105,7 +105,7 @@ class ScanFolder:
         self.name = name or Path(os.path.abspath(folder)).name  # ("." was named '')
         self.drop_nonfinite = drop_nonfinite
         #: what the reader left out (NaN or infinite points, under drop_nonfinite) or replaced (pose stamps far from
-        #: ``timestamps``), for the run's warnings: once each
+        #: ``timestamps``) and files cut inside their last number (poses, timestamps), for the run's warnings: once each
         self.reader_warnings: list[str] = []
         broken = next((p for p in folder.iterdir() if p.suffix.lower() in wanted and p.is_symlink() and not p.exists()), None)
         if broken is not None:  # a scan that is not there: never skipped without a word
@@ -145,7 +145,9 @@ class ScanFolder:
             return None
         if isinstance(timestamps, (str, os.PathLike)):
             source = Path(timestamps)
-            values = read_numeric_table(source, 1)[:, 0]
+            read_warnings: list[str] = []
+            values = read_numeric_table(source, 1, what="time stamps file", warnings=read_warnings)[:, 0]
+            self._keep_read_warnings(read_warnings)
         else:
             source = "timestamps"
             values = np.asarray(timestamps, dtype=np.float64).reshape(-1)
@@ -162,6 +164,7 @@ class ScanFolder:
         if self.poses_path is None:
             return None
         gt = Trajectory.read(self.poses_path, self.poses_format, format_hint=lambda other: f"poses_format={other}")
+        self._keep_read_warnings(gt.meta.get(READ_WARNINGS, ()))
         if len(gt) != len(self.scan_paths):
             raise DataError(f"{len(gt)} poses for {len(self.scan_paths)} scans in {self.path}{self._repeats_left_out(len(gt))}",
                             source=self.poses_path)
@@ -172,6 +175,11 @@ class ScanFolder:
         elif gt.timestamps_s is not None:
             self._timestamps_s = gt.timestamps_s.copy()
         return gt.with_name(f"{self.name}_gt")
+
+    def _keep_read_warnings(self, read_warnings: list[str] | tuple[str, ...]) -> None:
+        """Keep what a file's reading warned of (a last line cut inside its number, a TUM stamp repeated) in
+        :attr:`reader_warnings`, once: it was logged only, and the run folder recorded nothing."""
+        self.reader_warnings.extend(w for w in dict.fromkeys(read_warnings) if w not in self.reader_warnings)
 
     def _repeats_left_out(self, n_read: int) -> str:
         """What a pose count short of the scans owes to poses left out for repeating the stamp before them (a 10-row

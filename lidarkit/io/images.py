@@ -22,7 +22,7 @@ from lidarkit.io.folder import sorted_by_name
 from lidarkit.io.kitti import read_gray_image, read_kitti_calib
 from lidarkit.io.pointcloud2 import NANOSECONDS_AFTER
 from lidarkit.textfile import read_lines
-from lidarkit.trajectory import Trajectory
+from lidarkit.trajectory import READ_WARNINGS, Trajectory
 
 log = logging.getLogger(__name__)
 
@@ -86,12 +86,13 @@ def _without_brackets(line: str) -> str:
     return line.replace("array(", " ").translate(str.maketrans("[]()", "    "))
 
 
-def read_image_timestamps(path: str | os.PathLike) -> np.ndarray:
+def read_image_timestamps(path: str | os.PathLike, *, warnings: list[str] | None = None) -> np.ndarray:
     """Timestamps in seconds: one number per line, or ``stamp name`` lines (TUM ``rgb.txt``, EuRoC ``data.csv``); first
     column used. NaN or infinity is refused at its line (it failed later as "not strictly increasing", blaming the next
-    line). Stamps above 1e15 are nanoseconds, converted with a logged warning (they were written out as seconds)."""
+    line). Stamps above 1e15 are nanoseconds, converted with a logged warning (they were written out as seconds).
+    ``warnings``: as for :func:`lidarkit.textfile.read_lines` (a file cut inside its last number)."""
     stamps = []
-    for lineno, raw in enumerate(read_lines(path), start=1):
+    for lineno, raw in enumerate(read_lines(path, warnings=warnings), start=1):
         line = raw.strip()
         if not line or line.startswith("#"):
             continue
@@ -158,9 +159,12 @@ class ImageFolder:
         if not self.image_paths:
             raise DataError(f"no images ({', '.join(IMAGE_SUFFIXES)})", source=folder)
         n = len(self.image_paths)
+        #: files cut inside their last number (time stamps, poses), for the run's warnings: once each (only logged,
+        #: a VO run scored against a cut pose file recorded nothing)
+        self.reader_warnings: list[str] = []
         self._timestamps = None
         if timestamps is not None:
-            stamps = (read_image_timestamps(timestamps) if isinstance(timestamps, (str, os.PathLike))
+            stamps = (read_image_timestamps(timestamps, warnings=self.reader_warnings) if isinstance(timestamps, (str, os.PathLike))
                       else np.asarray(timestamps, dtype=np.float64))
             if len(stamps) != n:
                 raise DataError(f"{len(stamps)} time stamps for {n} images {_ONE_PER_IMAGE}", source=str(timestamps)[:200])
@@ -173,6 +177,7 @@ class ImageFolder:
             if poses_format not in ("kitti", "tum"):
                 raise ConfigError(f"unknown poses format {poses_format!r}; known: kitti, tum", source="poses_format")
             gt = Trajectory.read(poses, poses_format, format_hint=format_hint)
+            self.reader_warnings.extend(w for w in gt.meta.get(READ_WARNINGS, ()) if w not in self.reader_warnings)
             if len(gt) != n:
                 raise DataError(f"{len(gt)} poses for {n} images {_ONE_PER_IMAGE}", source=poses)
             if self._timestamps is not None and poses_format == "kitti":

@@ -38,7 +38,7 @@ from lidarkit.io.base import INSTANT_FRACTION, Scan, checked_index, checked_indi
 from lidarkit.io.pointcloud2 import MAX_SWEEP_S, check_sweep_span, checked_point_times, point_times_seconds, time_unit_read
 from lidarkit.io.pointfile import at_sensor_origin, load_npy, read_kitti_bin, said_once
 from lidarkit.textfile import file_line, is_number, read_lines, read_numeric_table
-from lidarkit.trajectory import Trajectory
+from lidarkit.trajectory import READ_WARNINGS, Trajectory
 
 log = logging.getLogger(__name__)
 
@@ -62,16 +62,17 @@ CALIB_KEYS_IN_ORDER = ("P0", "P1", "P2", "P3", "Tr")  # meaning of bare (prefix-
 _TR_ALIASES = ("Tr", "Tr_velo_to_cam", "Tr_velo_cam")
 
 
-def read_kitti_calib(path: str | os.PathLike) -> dict[str, np.ndarray]:
+def read_kitti_calib(path: str | os.PathLike, *, warnings: list[str] | None = None) -> dict[str, np.ndarray]:
     """Parse a KITTI odometry ``calib.txt`` into ``{"P0".."P3": (3, 4), "Tr": (4, 4) T_cam0_velo}``.
 
     Accepts ``KEY: 12 numbers`` lines and the prefix-less variant (bare rows of 12 numbers taken as
     P0, P1, P2, P3, Tr in order). Other ``KEY:`` lines are kept as flat float arrays.
-    A line that is not 12 numbers for P0..P3/Tr raises DataError naming file and line.
+    A line that is not 12 numbers for P0..P3/Tr raises DataError naming file and line; ``warnings``: as for
+    :func:`lidarkit.textfile.read_lines` (a file cut inside its last number).
     """
     calib: dict[str, np.ndarray] = {}
     n_bare = 0
-    for lineno, raw in enumerate(read_lines(path), start=1):
+    for lineno, raw in enumerate(read_lines(path, warnings=warnings), start=1):
         line = raw.strip()
         if not line or line.startswith("#"):
             continue
@@ -196,7 +197,8 @@ class KittiOdometry:
         asked = None if sequence is None else str(sequence)
         self.sequence = "00" if asked is None else f"{int(asked):02d}" if asked.isdigit() else asked
         self.drop_nonfinite = drop_nonfinite
-        #: what the reader left out (NaN or infinite points, under drop_nonfinite), for the run's warnings: once
+        #: what the reader left out (NaN or infinite points, under drop_nonfinite) and files cut inside their last
+        #: number (poses, times, calib: read as cut), for the run's warnings: once each
         self.reader_warnings: list[str] = []
         root = Path(root)
         if not root.is_dir():
@@ -392,7 +394,15 @@ class KittiOdometry:
     @cached_property
     def calib(self) -> dict[str, np.ndarray]:
         """``P0..P3`` (3, 4) projection matrices and ``Tr`` (4, 4) = ``T_cam0_velo`` when present."""
-        return read_kitti_calib(self.calib_path)
+        read_warnings: list[str] = []
+        calib = read_kitti_calib(self.calib_path, warnings=read_warnings)
+        self._keep_read_warnings(read_warnings)
+        return calib
+
+    def _keep_read_warnings(self, read_warnings: list[str] | tuple[str, ...]) -> None:
+        """Keep what a file's reading warned of (a last line cut inside its number) in :attr:`reader_warnings`, once:
+        it was logged only, and a run scored against a cut pose file recorded nothing."""
+        self.reader_warnings.extend(w for w in dict.fromkeys(read_warnings) if w not in self.reader_warnings)
 
     @property
     def K(self) -> np.ndarray:
@@ -411,7 +421,9 @@ class KittiOdometry:
     def _times_all(self) -> np.ndarray | None:
         if not self.times_path.is_file():
             return None
-        times = read_numeric_table(self.times_path, 1)[:, 0]
+        read_warnings: list[str] = []
+        times = read_numeric_table(self.times_path, 1, what="time stamps file", warnings=read_warnings)[:, 0]
+        self._keep_read_warnings(read_warnings)
         bad = np.flatnonzero(np.diff(times) <= 0)
         if len(bad):  # (the values said, as the runner says them: "not strictly increasing" alone sent one to look)
             k = int(bad[0])
@@ -422,8 +434,10 @@ class KittiOdometry:
 
     @cached_property
     def _poses_camera_all(self) -> Trajectory:
-        return Trajectory.from_kitti(self.poses_path, name=f"{self.name}_gt",
-                                     format_hint=lambda other: self._other_format_hint(self.poses_path, other))
+        gt = Trajectory.from_kitti(self.poses_path, name=f"{self.name}_gt",
+                                   format_hint=lambda other: self._other_format_hint(self.poses_path, other))
+        self._keep_read_warnings(gt.meta.get(READ_WARNINGS, ()))
+        return gt
 
     def _other_format_hint(self, path: Path, fmt: str) -> str:
         """How to use the pose file ``path`` in ``fmt`` with this sequence, which reads KITTI rows only: its images as
@@ -485,16 +499,20 @@ class KittiOdometry:
             raise DataError(f"no ground truth at the sweep {instant}: the poses file named is not one of the simulator's "
                             "(poses.txt, poses_start/mid/end.txt), whose other instants are known", source=self.poses_path)
         gt = Trajectory.from_kitti(path, name=f"{self.name}_gt", format_hint=lambda other: self._other_format_hint(path, other))
+        self._keep_read_warnings(gt.meta.get(READ_WARNINGS, ()))
         gt = self._in_lidar_frame(self._rows(gt, self.frames, path))
         times = gt.timestamps_s
         if times is not None:  # times.txt is at poses.txt's instant: moved by the fraction of the period
             times = times + self._instant_shift_s(instant)
-        return Trajectory(gt.poses_se3, times, gt.name, meta={"pose_instant": instant, "retimed": f"the simulator's poses_{instant}.txt"})
+        kept = {READ_WARNINGS: gt.meta[READ_WARNINGS]} if READ_WARNINGS in gt.meta else {}
+        return Trajectory(gt.poses_se3, times, gt.name,
+                          meta={"pose_instant": instant, "retimed": f"the simulator's poses_{instant}.txt", **kept})
 
     def _rows(self, gt: Trajectory, frames: np.ndarray | list[int], source: Path) -> Trajectory:
-        """The poses of KITTI frame numbers ``frames`` of a whole-sequence pose file, with their times.txt stamps."""
+        """The poses of KITTI frame numbers ``frames`` of a whole-sequence pose file, with their times.txt stamps (and
+        its ``meta``: a cut-off last line read is said by the scores of what is held against it)."""
         frames = checked_indices(frames, len(gt), source, "frame", from_end=False)  # (1.5 read frame 1)
-        return Trajectory(gt.poses_se3[frames], self._stamps_of(frames), gt.name)
+        return Trajectory(gt.poses_se3[frames], self._stamps_of(frames), gt.name, dict(gt.meta))
 
     def _in_lidar_frame(self, gt: Trajectory) -> Trajectory:
         """Camera-frame poses ``P`` as LiDAR-frame poses ``Tr^-1 P Tr``."""
@@ -781,6 +799,11 @@ class KittiImages:
     @property
     def ground_truth(self) -> Trajectory | None:
         return self.odometry.ground_truth_at(self.frames, frame="camera")
+
+    @property
+    def reader_warnings(self) -> list[str]:
+        """The sequence reader's (files cut inside their last number: poses, times, calib), for a VO run's metrics."""
+        return self.odometry.reader_warnings
 
 
 def read_gray_image(path: str | os.PathLike, *, frame: int | None = None) -> np.ndarray:

@@ -41,12 +41,13 @@ class LandmarkMap:
     positions_xy: np.ndarray
 
 
-def read_world(path: str | os.PathLike) -> LandmarkMap:
-    """Parse ``world.dat``: one ``id x y`` per line, integer unique ids, finite coordinates."""
+def read_world(path: str | os.PathLike, *, warnings: list[str] | None = None) -> LandmarkMap:
+    """Parse ``world.dat``: one ``id x y`` per line, integer unique ids, finite coordinates; ``warnings``: as for
+    :func:`lidarkit.textfile.read_lines` (a file cut inside its last number)."""
     ids: list[int] = []
     xy: list[tuple[float, float]] = []
     seen: dict[int, int] = {}
-    for lineno, raw in enumerate(read_lines(path), start=1):
+    for lineno, raw in enumerate(read_lines(path, warnings=warnings), start=1):
         line = raw.strip()
         if not line or line.startswith("#"):
             continue
@@ -111,7 +112,10 @@ class LandmarkData:
         self.world_path = world_path
         self.sensor_path = sensor_path
         self.negative_range_policy = negative_range
-        self.landmarks = read_world(world_path)
+        #: files cut inside their last number (world, sensor data), for a run's metrics.json: once each (only logged,
+        #: a run on a cut recording recorded nothing)
+        self.reader_warnings: list[str] = []
+        self.landmarks = read_world(world_path, warnings=self.reader_warnings)
         self._read_sensor(sensor_path, negative_range)
 
     # ---- parsing ---------------------------------------------------------------------------------
@@ -124,7 +128,7 @@ class LandmarkData:
         m_bearing: list[float] = []
         m_line: list[int] = []
         n_dropped = 0
-        for lineno, raw in enumerate(read_lines(path), start=1):
+        for lineno, raw in enumerate(read_lines(path, warnings=self.reader_warnings), start=1):
             line = raw.strip()
             if not line or line.startswith("#"):
                 continue

@@ -32,7 +32,7 @@ from lidarkit.params import is_integer
 from lidarkit.registration.base import BACKEND_ERRORS, PendingAlignment, check_point_times
 from lidarkit.registration.covariance import widen_for_distortion
 from lidarkit.threads import Overlap
-from lidarkit.trajectory import Trajectory
+from lidarkit.trajectory import READ_WARNINGS, Trajectory
 
 log = logging.getLogger(__name__)
 
@@ -731,7 +731,9 @@ def run(
              else _own_stamps_apart(reference, at_truth, all_stamps) if instant_note is None or kept_as_is else None)
     far = _far_float32_warning(far_float32, n)
     # what the reader found and left out (files it does not read, scans without ground truth): only logged before
-    reader_warnings = [str(w) for w in getattr(sequence, "reader_warnings", None) or ()]
+    # and the ground truth's own reading (a pose file cut inside its last number, given as run(ground_truth=...))
+    truth_read = (reference.meta or {}).get(READ_WARNINGS, ()) if reference is not None else ()
+    reader_warnings = [str(w) for w in dict.fromkeys([*(getattr(sequence, "reader_warnings", None) or ()), *truth_read])]
     # the guess across a gap: the dataset's odometry, the motion before it at constant velocity, or (a stateful variant
     # whose own model predicts without the sweeps apart: genz) one sweep's motion
     across = ("odometry" if odometry_poses is not None
