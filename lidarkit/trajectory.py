@@ -61,7 +61,7 @@ def _check_rigid(poses: np.ndarray, source: str, item: str) -> None:
 MAX_STAMP_S = 1e11
 
 
-def _check_seconds(stamps: np.ndarray, path: str | os.PathLike) -> None:
+def check_seconds(stamps: np.ndarray, path: str | os.PathLike) -> None:
     """DataError naming the first of a file's ``(N,)`` stamps beyond :data:`MAX_STAMP_S`: no time in seconds."""
     beyond = np.abs(stamps) > MAX_STAMP_S
     if beyond.any():
@@ -294,7 +294,7 @@ class Trajectory:
         if isinstance(timestamps_s, (str, os.PathLike)):
             times_path = timestamps_s
             timestamps_s = read_numeric_table(times_path, 1, what="time stamps file", warnings=read_warnings)[:, 0]
-            _check_seconds(timestamps_s, times_path)
+            check_seconds(timestamps_s, times_path)
             if len(timestamps_s) != len(poses):
                 raise DataError(f"{len(timestamps_s)} timestamps for {len(poses)} poses in {path}", source=times_path)
         elif timestamps_s is not None:
@@ -331,7 +331,7 @@ class Trajectory:
                 raise DataError(err.reason + f" (a KITTI trajectory? read it as kitti: {format_hint('kitti')})",
                                 source=err.source, location=err.location) from None
             raise
-        _check_seconds(rows[:, 0], path)
+        check_seconds(rows[:, 0], path)
         quat_xyzw = rows[:, 4:8]
         norms = np.linalg.norm(quat_xyzw, axis=1)
         if (np.abs(norms - 1.0) > 1e-2).any():

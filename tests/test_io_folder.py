@@ -471,3 +471,14 @@ def test_tum_stamps_far_from_timestamps_are_kept_in_the_reader_warnings_and_the_
     assert run(far, "vanilla").metrics["warnings"].count(said) == 1
     near = ScanFolder(scans, poses=tmp_path / "poses.tum", poses_format="tum", timestamps=truth.timestamps_s + 0.02)
     assert near.reader_warnings == []
+
+
+def test_nanosecond_time_stamps_in_a_timestamps_file_are_refused_naming_it(tmp_path, rng):
+    """A timestamps file in nanoseconds ran: the run wrote poses_tum.txt stamped 1.4e18 s, which lidarkit eval then
+    refused; the reader refuses it as the trajectory readers do, naming the file and line."""
+    for k in range(3):
+        np.save(tmp_path / f"{k:06d}.npy", rng.normal(size=(50, 3)).astype(np.float32))
+    stamps = tmp_path.parent / f"{tmp_path.name}_ns.txt"
+    stamps.write_text("".join(f"{1403715524907143168 + k * 100000000}\n" for k in range(3)))
+    with pytest.raises(DataError, match=r"_ns\.txt \(line 1, frame 0\): time stamp 1403715524907143168 is beyond 1e\+11 s"):
+        ScanFolder(tmp_path, timestamps=stamps)

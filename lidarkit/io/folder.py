@@ -22,7 +22,7 @@ from lidarkit.io.base import Scan, checked_index, option_path
 from lidarkit.io.pointfile import (POINT_FILE_SUFFIXES, open3d_skipped_type, point_file_fields, read_point_file,
                                    said_once)
 from lidarkit.textfile import data_line_numbers, read_numeric_table
-from lidarkit.trajectory import READ_WARNINGS, Trajectory
+from lidarkit.trajectory import READ_WARNINGS, Trajectory, check_seconds
 
 POSE_FORMATS = ("kitti", "tum")
 #: per-point time fields that kiss-icp's generic loader (generic:PATH) reads from .pcd/.ply files; this reader reads none
@@ -148,6 +148,7 @@ class ScanFolder:
             read_warnings: list[str] = []
             values = read_numeric_table(source, 1, what="time stamps file", warnings=read_warnings)[:, 0]
             self._keep_read_warnings(read_warnings)
+            check_seconds(values, source)  # (nanoseconds ran, and the run's poses_tum.txt was refused by lidarkit eval)
         else:
             source = "timestamps"
             values = np.asarray(timestamps, dtype=np.float64).reshape(-1)
