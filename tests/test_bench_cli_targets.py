@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import pytest
 from conftest import cli_exit_code
 
 SUITE = """name: tiny
@@ -66,6 +67,12 @@ def test_a_suite_given_as_a_pipe_is_refused_naming_the_argument(tmp_path, capsys
         piped = f"/dev/fd/{read_end}"
         assert cli_exit_code(["bench", piped, "--dry-run", "--out", str(tmp_path / "out")]) == 1
         assert capsys.readouterr().err == f"error: {piped}: a pipe (e.g. <(...)): save it to a file first\n"
+        from lidarkit.bench.baseline import record  # (the library's record resolved it first: "suite file not found")
+        from lidarkit.errors import DataError
+
+        with pytest.raises(DataError) as info:
+            record(piped, tmp_path / "baseline")
+        assert str(info.value) == f"{piped}: a pipe (e.g. <(...)): save it to a file first"
     finally:
         os.close(read_end)
         os.close(write_end)

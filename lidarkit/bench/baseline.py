@@ -598,7 +598,11 @@ def record(
     if int(repeats) != repeats or repeats < 1:
         raise ConfigError(f"repeats must be a positive integer, got {repeats}", source="repeats")
     # (a loop of symbolic links: one line naming it, not a RuntimeError traceback)
-    suite_path = atomic.resolved_path(path_argument(suite_path, "suite_path"), output=False)
+    given = path_argument(suite_path, "suite_path")
+    streamed = atomic.stream_reason(given)  # (resolved first, <(cat suite.yaml) read "suite file not found")
+    if streamed:
+        raise DataError(streamed, source=given)
+    suite_path = atomic.resolved_path(given, output=False)
     suite = load_suite(suite_path)
     out = Path(out_dir)
     atomic.check_target(out, "folder")
