@@ -652,3 +652,15 @@ def test_one_diverged_seed_leaves_the_other_seeds_differences_ranked():
     # A's spread round-off)
     varied = paired_test(0.05 + 2e-6 * np.arange(6), np.full(6, 3e4), name_a="A", name_b="B")
     assert not varied.repeated and varied.better == "a" and varied.p_value == pytest.approx(0.03125)
+
+
+def test_a_boolean_among_values_is_refused_and_one_differing_unit_is_singular():
+    """summarize([1, True, 3]) counted True as 1 (numpy made an integer array of it); a verdict read "with 1 differing
+    seeds"."""
+    from lidarkit.eval.statistics import paired_test, summarize
+
+    with pytest.raises(ConfigError, match=r"values must be numbers, got \[1, True, 3\]"):
+        summarize([1, True, 3])
+    assert summarize(np.array([1, 2, 3])).n == 3  # (integer arrays stay numbers)
+    one = paired_test([0.5, 0.5, 0.5], [0.5, 0.5, 0.4], pairing="seed")
+    assert "with 1 differing seed the smallest p" in one.verdict()

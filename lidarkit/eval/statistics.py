@@ -34,7 +34,9 @@ def _finite(values: Any, source: str) -> np.ndarray:
         arr = np.asarray(values)
     except (TypeError, ValueError):  # (ragged nesting)
         arr = None
-    if arr is None or arr.dtype.kind not in "iuf":
+    # (True among numbers was counted as 1: numpy makes [1, True, 3] an integer array)
+    if arr is None or arr.dtype.kind not in "iuf" or (arr.dtype.kind in "iu" and not isinstance(values, np.ndarray)
+                                                     and any(isinstance(v, (bool, np.bool_)) for v in values)):
         raise ConfigError(f"values must be numbers, got {reprlib.repr(values)}", source=source)
     if arr.ndim != 1:
         raise ConfigError(f"values must be a flat sequence of numbers, got an array of shape {arr.shape}", source=source)
@@ -266,7 +268,8 @@ class PairedComparison:
         n_ranked = self.n_pairs - self.n_ties
         smallest_p = 2.0 ** (1 - n_ranked) if n_ranked > 0 else 1.0  # exact two-sided: every unit on one side
         if self.p_value >= self.alpha and smallest_p >= self.alpha and n_ranked > 0:
-            why += (f"; with {n_ranked} differing {self.pairing}s the smallest p this test can give is {smallest_p:.3g}: "
+            units = self.pairing + ("" if n_ranked == 1 else "s")  # ("with 1 differing seeds")
+            why += (f"; with {n_ranked} differing {units} the smallest p this test can give is {smallest_p:.3g}: "
                     f"at least {min_units(self.alpha)} are needed to reach p < {self.alpha:g}")
         if self.n_ties == self.n_pairs:
             why = "every paired difference is zero (within floating-point noise)"
