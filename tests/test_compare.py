@@ -1122,3 +1122,19 @@ def test_runs_over_a_slice_without_timing_csv_are_not_called_config_less(tmp_pat
     (tmp_path / "b" / "ground_truth_kitti.txt").write_text((tmp_path / "b" / "poses_kitti.txt").read_text())
     code, stdout, err = run_cli(["compare", str(tmp_path / "a"), str(tmp_path / "b")], capsys)
     assert code == 1 and "runs over different data" in err and "config.yaml" not in err, err
+
+
+def test_runs_over_two_pose_files_of_one_sequence_name_the_reader_option(tmp_path, capsys):
+    """Two KITTI runs against poses/00.txt and poses_semantickitti.txt were refused as "with other values" and nothing
+    more: config.yaml's dataset_options name the poses file each read."""
+    import yaml
+
+    for name, scale, poses in (("a", 0.0, "/data/poses/00.txt"), ("b", 0.05, "/data/00/poses_semantickitti.txt")):
+        run = _straight_run(tmp_path / name, np.full(9, scale))
+        run.joinpath("config.yaml").write_text(yaml.safe_dump({"run": {
+            "dataset": "kitti_00", "dataset_config": None, "frames": "0:10", "n_frames": 10,
+            "dataset_options": {"sequence": "00", "poses_path": poses}}}))
+    (tmp_path / "b" / "ground_truth_kitti.txt").write_text((tmp_path / "b" / "poses_kitti.txt").read_text())
+    code, stdout, err = run_cli(["compare", str(tmp_path / "a"), str(tmp_path / "b")], capsys)
+    assert code == 1 and ('with other values (their reader options differ in poses_path ("/data/poses/00.txt" in A, '
+                          '"/data/00/poses_semantickitti.txt" in B))') in err, err

@@ -353,11 +353,32 @@ def _same_ground_truth(a: OdometryRun, b: OdometryRun, names: tuple[str, str]) -
     why = (f"; {' and '.join(unknown)} {'has' if len(unknown) == 1 else 'have'} no readable config.yaml (a run cut off "
            "before it finished, or a folder made by hand): the dataset, frames and sweep instant it ran over are unknown"
            if unknown and len(ga) == len(gb) else "")
+    if differ == "":  # (two pose files of one KITTI sequence read "with other values" and nothing more)
+        differ = _reader_options_differ(a, b)
     raise EvaluationError(
         f"runs over different data: {a.path} has {len(ga)} ground-truth poses, {b.path} has {len(gb)}"
         + (" with other values" if len(ga) == len(gb) else "") + (f" ({differ})" if differ else "") + why,
         source="compare",
     )
+
+
+def _reader_options_differ(a: OdometryRun, b: OdometryRun) -> str:
+    """The reader options two runs' config.yaml record differently (``run.dataset_options``: the poses file a KITTI
+    reader read), as "their reader options differ in ...", or ''."""
+    import yaml
+
+    options = []
+    for run in (a, b):
+        try:
+            recorded = yaml.safe_load((run.path / "config.yaml").read_text(encoding="utf-8"))["run"]["dataset_options"]
+        except (OSError, yaml.YAMLError, KeyError, TypeError):
+            return ""
+        if not isinstance(recorded, dict):
+            return ""
+        options.append(recorded)
+    fields = sorted(k for k in options[0].keys() | options[1].keys() if options[0].get(k, ...) != options[1].get(k, ...))
+    shown = ", ".join(f"{k} ({_field_value(options[0], k)} in A, {_field_value(options[1], k)} in B)" for k in fields[:3])
+    return f"their reader options differ in {shown}" if fields else ""
 
 
 @dataclass(frozen=True)
