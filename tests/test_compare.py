@@ -1138,3 +1138,16 @@ def test_runs_over_two_pose_files_of_one_sequence_name_the_reader_option(tmp_pat
     code, stdout, err = run_cli(["compare", str(tmp_path / "a"), str(tmp_path / "b")], capsys)
     assert code == 1 and ('with other values (their reader options differ in poses_path ("/data/poses/00.txt" in A, '
                           '"/data/00/poses_semantickitti.txt" in B))') in err, err
+
+
+def test_a_kitti_velodyne_folder_is_told_to_run_its_sequence(tmp_path, capsys):
+    """compare SEQ/velodyne RUN advised "run lidarkit odometry SEQ/velodyne", a run without ground truth that compare
+    then refused: the advice names the sequence folder, whose poses score the run."""
+    sequence = tmp_path / "00"
+    (sequence / "velodyne").mkdir(parents=True)
+    for k in range(3):
+        np.zeros((4, 4), np.float32).tofile(sequence / "velodyne" / f"{k:06d}.bin")
+    (sequence / "times.txt").write_text("0\n0.1\n0.2\n")
+    run = _straight_run(tmp_path / "run", np.zeros(3))
+    code, stdout, err = run_cli(["compare", str(sequence / "velodyne"), str(run)], capsys)
+    assert code == 1 and err.strip().endswith(f"run lidarkit odometry {sequence} --out DIR first"), err

@@ -1111,7 +1111,10 @@ def _not_an_odometry_run(path: Path) -> str:
         return (f"a dataset folder ({layout}): compare takes run folders; an image sequence compares as bench results "
                 "(a suite with a vo experiment over it: lidarkit bench)")
     if layout:
-        return f"a dataset folder ({layout}): compare takes run folders; run lidarkit odometry {path} --out DIR first"
+        # a KITTI sequence's velodyne/ alone has no ground truth: its sequence folder has (the advice led to a run
+        # compare refused, "no ground_truth_kitti.txt")
+        sequence = path.parent if path.name == "velodyne" and _dataset_layout(path.parent)[0] else path
+        return f"a dataset folder ({layout}): compare takes run folders; run lidarkit odometry {sequence} --out DIR first"
     return ""
 
 
