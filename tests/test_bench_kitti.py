@@ -42,6 +42,11 @@ def test_bench_kitti_bad_root(tmp_path, capsys):
     with pytest.raises(SystemExit) as exc:
         main(["bench", "kitti", "--data", str(tmp_path), "--out", str(tmp_path / "o")])
     assert exc.value.code == 1 and "ground-truth poses" in capsys.readouterr().err
+    # a sequence name that is no folder is said to be none, beside the root's sequences with scans (0x read as one
+    # without scans)
+    with pytest.raises(DataError) as info:
+        kitti_sequences(tmp_path, ["0x"])
+    assert str(info.value).endswith("has velodyne/ scans and ground-truth poses (no folder 0x); with scans: 00")
 
 
 def test_bench_kitti_names_what_it_cannot_run_and_a_dry_run_writes_nothing(tmp_path, capsys):

@@ -47,9 +47,12 @@ def kitti_sequences(root: str | os.PathLike, wanted: Sequence[str]) -> list[str]
         has_gt = (root / "poses" / f"{seq}.txt").is_file() or (folder / "poses.txt").is_file()
         if (folder / "velodyne").is_dir() and has_gt:
             found.append(seq)
-    if not found:
-        raise DataError(f"none of the sequences {', '.join(wanted)} has velodyne/ scans and ground-truth poses",
-                        source=seq_dir)
+    if not found:  # (--sequences 0x read as a sequence without scans: the root's own sequences named)
+        held = sorted(p.name for p in seq_dir.iterdir() if p.is_dir() and (p / "velodyne").is_dir())
+        missing = [seq for seq in wanted if not (seq_dir / seq).is_dir()]
+        raise DataError(f"none of the sequences {', '.join(wanted)} has velodyne/ scans and ground-truth poses"
+                        + (f" (no folder {', '.join(missing)})" if missing else "")
+                        + f"; with scans: {', '.join(held) or 'none'}", source=seq_dir)
     return found
 
 
