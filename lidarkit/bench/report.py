@@ -522,7 +522,7 @@ def make_plots(records: list[dict[str, Any]]) -> list[Plot]:
                     against = f" vs {ref_of[label]}" if len(refs) > 1 and label in ref_of else ""
                     ax.plot(est[:, 0], est[:, 1], lw=1.2, label=_literal(f"{label} (seed {r['job']['seed']}){against}"))
                 ax.set_xlabel("x [m]")
-                ax.set_ylabel("y [m]")
+                ax.set_ylabel("z [m]" if task == "vo" else "y [m]")  # (a camera's ground plane is its x-z)
                 ax.set_aspect("equal", adjustable="datalim")
                 ax.legend(fontsize=7)
                 ax.set_title(_literal(f"trajectories: {where}"), fontsize=9)
