@@ -662,5 +662,7 @@ def test_a_boolean_among_values_is_refused_and_one_differing_unit_is_singular():
     with pytest.raises(ConfigError, match=r"values must be numbers, got \[1, True, 3\]"):
         summarize([1, True, 3])
     assert summarize(np.array([1, 2, 3])).n == 3  # (integer arrays stay numbers)
+    with pytest.raises(ConfigError, match=r"a flat sequence of numbers, got an array of shape \(\)"):
+        summarize(5)  # (one number: not iterated in search of booleans)
     one = paired_test([0.5, 0.5, 0.5], [0.5, 0.5, 0.4], pairing="seed")
     assert "with 1 differing seed the smallest p" in one.verdict()

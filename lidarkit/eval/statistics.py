@@ -35,8 +35,8 @@ def _finite(values: Any, source: str) -> np.ndarray:
     except (TypeError, ValueError):  # (ragged nesting)
         arr = None
     # (True among numbers was counted as 1: numpy makes [1, True, 3] an integer array)
-    if arr is None or arr.dtype.kind not in "iuf" or (arr.dtype.kind in "iu" and not isinstance(values, np.ndarray)
-                                                     and any(isinstance(v, (bool, np.bool_)) for v in values)):
+    if arr is None or arr.dtype.kind not in "iuf" or (arr.dtype.kind in "iu" and arr.ndim == 1 and not isinstance(
+            values, np.ndarray) and any(isinstance(v, (bool, np.bool_)) for v in values)):
         raise ConfigError(f"values must be numbers, got {reprlib.repr(values)}", source=source)
     if arr.ndim != 1:
         raise ConfigError(f"values must be a flat sequence of numbers, got an array of shape {arr.shape}", source=source)
