@@ -609,7 +609,7 @@ def test_a_pose_file_kiss_icp_cannot_read_is_named_with_its_line(tmp_path):
         open_dataset("helipr", helipr, sequence="Velodyne")
 
 
-def test_a_loader_read_in_another_thread_leaves_the_main_threads_warnings_alone(caplog):
+def test_a_loader_read_in_another_thread_leaves_the_main_threads_warnings_alone(caplog, recwarn):
     """catch_warnings around each frame's loader call in the reading-ahead thread is process-wide: a warning of the
     main thread meanwhile was taken as the loader's and only logged at debug level."""
     import logging
@@ -633,3 +633,4 @@ def test_a_loader_read_in_another_thread_leaves_the_main_threads_warnings_alone(
         release.set()
         reader.join(5.0)
     assert not [r for r in caplog.records if "the main thread's own warning" in r.getMessage()]
+    assert [str(w.message) for w in recwarn] == ["the main thread's own warning"]  # (shown to the main thread's filters)
