@@ -301,12 +301,10 @@ def _files_read(data: Path, vo_input, poses: Optional[Path], poses_format: str, 
 def _read_warnings(vo_input) -> list[str]:
     """What the input's readers warned of (a file cut inside its last number: poses, time stamps, calib), once each: the
     reader's ``reader_warnings`` and the ground truth's ``meta["read_warnings"]``, for metrics.json's ``warnings``."""
-    from lidarkit.trajectory import READ_WARNINGS
+    from lidarkit.io.base import read_warnings_of
 
     images = getattr(vo_input.images, "images", vo_input.images)  # (--start / --max-frames wrap the reader)
-    gt = vo_input.ground_truth
-    said = [*(getattr(images, "reader_warnings", None) or ()), *((gt.meta or {}).get(READ_WARNINGS, ()) if gt is not None else ())]
-    return [str(w) for w in dict.fromkeys(said)]
+    return read_warnings_of(images, vo_input.ground_truth)
 
 
 def _check_out_beside_images(out: Optional[Path], images) -> None:

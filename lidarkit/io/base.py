@@ -4,14 +4,15 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Literal, Protocol, runtime_checkable
+from typing import Any, Literal, Protocol, runtime_checkable
 
 import numpy as np
 
 from lidarkit.errors import DataError
 from lidarkit.params import is_integer
-from lidarkit.trajectory import Trajectory
+from lidarkit.trajectory import READ_WARNINGS, Trajectory
 
 
 #: How ``Scan.point_times_s`` is expressed: seconds from the sweep start (KITTI-layout ``point_times``, the
@@ -47,6 +48,19 @@ def sweep_length(span_s: float, spacing_s: float, step_s: float = 0.0) -> float:
     if not spacing_s > 0 or min(abs(span_s - spacing_s), abs(span_s + step_s - spacing_s)) <= FULL_SWEEP_TOLERANCE * spacing_s:
         return spacing_s
     return span_s
+
+
+def keep_once(kept: list[str], said: Iterable[str]) -> None:
+    """Append to ``kept`` (a reader's ``reader_warnings``) what ``said`` holds that it does not yet, in order, once:
+    a file's reading warned of it (a last line cut inside its number) and the run folder is to record it."""
+    kept.extend(w for w in dict.fromkeys(said) if w not in kept)
+
+
+def read_warnings_of(reader: Any, ground_truth: Any) -> list[str]:
+    """What a dataset's reading warned of, once each: its reader's ``reader_warnings``, then its ground truth's
+    ``meta["read_warnings"]`` (a pose file cut inside its last number), for a run's ``warnings``."""
+    truth = (getattr(ground_truth, "meta", None) or {}).get(READ_WARNINGS, ()) if ground_truth is not None else ()
+    return [str(w) for w in dict.fromkeys([*(getattr(reader, "reader_warnings", None) or ()), *truth])]
 
 
 def option_path(given: str | os.PathLike, *folders: Path) -> Path:

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
-from lidarkit.io.base import Scan, checked_index, option_path
+from lidarkit.io.base import Scan, checked_index, keep_once, option_path
 from lidarkit.io.pointfile import (POINT_FILE_SUFFIXES, open3d_skipped_type, point_file_fields, read_point_file,
                                    said_once)
 from lidarkit.textfile import data_line_numbers, read_numeric_table
@@ -147,7 +147,7 @@ class ScanFolder:
             source = Path(timestamps)
             read_warnings: list[str] = []
             values = read_numeric_table(source, 1, what="time stamps file", warnings=read_warnings)[:, 0]
-            self._keep_read_warnings(read_warnings)
+            keep_once(self.reader_warnings, read_warnings)
             check_seconds(values, source)  # (nanoseconds ran, and the run's poses_tum.txt was refused by lidarkit eval)
         else:
             source = "timestamps"
@@ -165,7 +165,7 @@ class ScanFolder:
         if self.poses_path is None:
             return None
         gt = Trajectory.read(self.poses_path, self.poses_format, format_hint=lambda other: f"poses_format={other}")
-        self._keep_read_warnings(gt.meta.get(READ_WARNINGS, ()))
+        keep_once(self.reader_warnings, gt.meta.get(READ_WARNINGS, ()))
         if len(gt) != len(self.scan_paths):
             raise DataError(f"{len(gt)} poses for {len(self.scan_paths)} scans in {self.path}{self._repeats_left_out(len(gt))}",
                             source=self.poses_path)
@@ -176,11 +176,6 @@ class ScanFolder:
         elif gt.timestamps_s is not None:
             self._timestamps_s = gt.timestamps_s.copy()
         return gt.with_name(f"{self.name}_gt")
-
-    def _keep_read_warnings(self, read_warnings: list[str] | tuple[str, ...]) -> None:
-        """Keep what a file's reading warned of (a last line cut inside its number, a TUM stamp repeated) in
-        :attr:`reader_warnings`, once: it was logged only, and the run folder recorded nothing."""
-        self.reader_warnings.extend(w for w in dict.fromkeys(read_warnings) if w not in self.reader_warnings)
 
     def _repeats_left_out(self, n_read: int) -> str:
         """What a pose count short of the scans owes to poses left out for repeating the stamp before them (a 10-row

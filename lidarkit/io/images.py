@@ -17,7 +17,7 @@ import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.io import register_dataset
-from lidarkit.io.base import checked_index
+from lidarkit.io.base import checked_index, keep_once
 from lidarkit.io.folder import sorted_by_name
 from lidarkit.io.kitti import read_gray_image, read_kitti_calib
 from lidarkit.io.pointcloud2 import NANOSECONDS_AFTER
@@ -177,7 +177,7 @@ class ImageFolder:
             if poses_format not in ("kitti", "tum"):
                 raise ConfigError(f"unknown poses format {poses_format!r}; known: kitti, tum", source="poses_format")
             gt = Trajectory.read(poses, poses_format, format_hint=format_hint)
-            self.reader_warnings.extend(w for w in gt.meta.get(READ_WARNINGS, ()) if w not in self.reader_warnings)
+            keep_once(self.reader_warnings, gt.meta.get(READ_WARNINGS, ()))
             if len(gt) != n:
                 raise DataError(f"{len(gt)} poses for {n} images {_ONE_PER_IMAGE}", source=poses)
             if self._timestamps is not None and poses_format == "kitti":

@@ -34,7 +34,7 @@ import numpy as np
 
 from lidarkit.errors import ConfigError, DataError, not_increasing
 from lidarkit.geometry import se3_inverse
-from lidarkit.io.base import INSTANT_FRACTION, Scan, checked_index, checked_indices, option_path
+from lidarkit.io.base import INSTANT_FRACTION, Scan, checked_index, checked_indices, keep_once, option_path
 from lidarkit.io.pointcloud2 import MAX_SWEEP_S, check_sweep_span, checked_point_times, point_times_seconds, time_unit_read
 from lidarkit.io.pointfile import at_sensor_origin, load_npy, read_kitti_bin, said_once
 from lidarkit.textfile import file_line, is_number, read_lines, read_numeric_table
@@ -396,13 +396,8 @@ class KittiOdometry:
         """``P0..P3`` (3, 4) projection matrices and ``Tr`` (4, 4) = ``T_cam0_velo`` when present."""
         read_warnings: list[str] = []
         calib = read_kitti_calib(self.calib_path, warnings=read_warnings)
-        self._keep_read_warnings(read_warnings)
+        keep_once(self.reader_warnings, read_warnings)
         return calib
-
-    def _keep_read_warnings(self, read_warnings: list[str] | tuple[str, ...]) -> None:
-        """Keep what a file's reading warned of (a last line cut inside its number) in :attr:`reader_warnings`, once:
-        it was logged only, and a run scored against a cut pose file recorded nothing."""
-        self.reader_warnings.extend(w for w in dict.fromkeys(read_warnings) if w not in self.reader_warnings)
 
     @property
     def K(self) -> np.ndarray:
@@ -423,7 +418,7 @@ class KittiOdometry:
             return None
         read_warnings: list[str] = []
         times = read_numeric_table(self.times_path, 1, what="time stamps file", warnings=read_warnings)[:, 0]
-        self._keep_read_warnings(read_warnings)
+        keep_once(self.reader_warnings, read_warnings)
         bad = np.flatnonzero(np.diff(times) <= 0)
         if len(bad):  # (the values said, as the runner says them: "not strictly increasing" alone sent one to look)
             k = int(bad[0])
@@ -436,7 +431,7 @@ class KittiOdometry:
     def _poses_camera_all(self) -> Trajectory:
         gt = Trajectory.from_kitti(self.poses_path, name=f"{self.name}_gt",
                                    format_hint=lambda other: self._other_format_hint(self.poses_path, other))
-        self._keep_read_warnings(gt.meta.get(READ_WARNINGS, ()))
+        keep_once(self.reader_warnings, gt.meta.get(READ_WARNINGS, ()))
         return gt
 
     def _other_format_hint(self, path: Path, fmt: str) -> str:
@@ -499,7 +494,7 @@ class KittiOdometry:
             raise DataError(f"no ground truth at the sweep {instant}: the poses file named is not one of the simulator's "
                             "(poses.txt, poses_start/mid/end.txt), whose other instants are known", source=self.poses_path)
         gt = Trajectory.from_kitti(path, name=f"{self.name}_gt", format_hint=lambda other: self._other_format_hint(path, other))
-        self._keep_read_warnings(gt.meta.get(READ_WARNINGS, ()))
+        keep_once(self.reader_warnings, gt.meta.get(READ_WARNINGS, ()))
         gt = self._in_lidar_frame(self._rows(gt, self.frames, path))
         times = gt.timestamps_s
         if times is not None:  # times.txt is at poses.txt's instant: moved by the fraction of the period

@@ -15,7 +15,7 @@ import numpy as np
 
 from lidarkit.errors import ConfigError, DataError, EvaluationError, LidarKitError, RegistrationError, not_increasing
 from lidarkit.geometry import as_points, float32_far_message, orthonormalize_se3, se3_fraction, se3_inverse, validated_points
-from lidarkit.io.base import Scan, ScanSequence
+from lidarkit.io.base import Scan, ScanSequence, read_warnings_of
 from lidarkit.lifetime import raise_if_interrupted
 from lidarkit.odometry.covariance import motion_prior_frames, motion_prior_summary, propagate
 from lidarkit.odometry.frame_check import FrameChecker, FrameCheckConfig
@@ -32,7 +32,7 @@ from lidarkit.params import is_integer
 from lidarkit.registration.base import BACKEND_ERRORS, PendingAlignment, check_point_times
 from lidarkit.registration.covariance import widen_for_distortion
 from lidarkit.threads import Overlap
-from lidarkit.trajectory import READ_WARNINGS, Trajectory
+from lidarkit.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
 
@@ -732,8 +732,7 @@ def run(
     far = _far_float32_warning(far_float32, n)
     # what the reader found and left out (files it does not read, scans without ground truth): only logged before
     # and the ground truth's own reading (a pose file cut inside its last number, given as run(ground_truth=...))
-    truth_read = (reference.meta or {}).get(READ_WARNINGS, ()) if reference is not None else ()
-    reader_warnings = [str(w) for w in dict.fromkeys([*(getattr(sequence, "reader_warnings", None) or ()), *truth_read])]
+    reader_warnings = read_warnings_of(sequence, reference)
     # the guess across a gap: the dataset's odometry, the motion before it at constant velocity, or (a stateful variant
     # whose own model predicts without the sweeps apart: genz) one sweep's motion
     across = ("odometry" if odometry_poses is not None
