@@ -376,9 +376,13 @@ def _reader_options_differ(a: OdometryRun, b: OdometryRun) -> str:
         if not isinstance(recorded, dict):
             return ""
         options.append(recorded)
-    fields = sorted(k for k in options[0].keys() | options[1].keys() if options[0].get(k, ...) != options[1].get(k, ...))
-    shown = ", ".join(f"{k} ({_field_value(options[0], k)} in A, {_field_value(options[1], k)} in B)" for k in fields[:3])
-    return f"their reader options differ in {shown}" if fields else ""
+    return f"their reader options differ in {_fields_apart(*options)}" if options[0] != options[1] else ""
+
+
+def _fields_apart(a: dict[str, Any], b: dict[str, Any]) -> str:
+    """The first three fields two recorded mappings hold differently, with both values: ``speed (10 in A, 20 in B)``."""
+    fields = sorted(k for k in a.keys() | b.keys() if a.get(k, ...) != b.get(k, ...))
+    return ", ".join(f"{k} ({_field_value(a, k)} in A, {_field_value(b, k)} in B)" for k in fields[:3])
 
 
 @dataclass(frozen=True)
@@ -448,9 +452,7 @@ def _how_data_differ(a: _RunData, b: _RunData) -> str:
     if a.dataset != b.dataset:
         return f"datasets {a.dataset} and {b.dataset}"
     if a.settings is not None and b.settings is not None and a.settings != b.settings:
-        fields = sorted(k for k in a.settings.keys() | b.settings.keys() if a.settings.get(k, ...) != b.settings.get(k, ...))
-        shown = ", ".join(f"{k} ({_field_value(a.settings, k)} in A, {_field_value(b.settings, k)} in B)" for k in fields[:3])
-        return f"their dataset settings differ in {shown}"
+        return f"their dataset settings differ in {_fields_apart(a.settings, b.settings)}"
     if a.frames != b.frames:
         return f"they ran other frames ({_frames_text(a.frames)} in A, {_frames_text(b.frames)} in B)"
     return ""
