@@ -323,14 +323,13 @@ def _scores(result, gt, scale_mode: str) -> tuple[dict, str | None]:
     (:func:`lidarkit.vo.evaluation.scored_from_frame`; ``({}, why)`` when they cannot be computed: a run's poses are
     written all the same)."""
     from lidarkit.errors import EvaluationError
-    from lidarkit.vo.evaluation import evaluate_vo, scored_from_frame
+    from lidarkit.vo.evaluation import evaluate_vo, scored_frames
 
     if gt is None:
         return {}, None
-    first = scored_from_frame(result)
-    if len(gt) - first < 3:
-        return {}, f"{len(gt) - first} pose(s) from the first estimated frame on; APE and RPE need 3"
-    tail = np.arange(first, len(gt))
+    first, tail, why = scored_frames(result, len(gt))
+    if tail is None:
+        return {}, why
     smoothed = result.smoothed()
     try:
         scores = {"raw": evaluate_vo(result.trajectory[tail], gt[tail], scale_mode),

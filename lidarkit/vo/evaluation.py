@@ -83,3 +83,12 @@ def scored_from_frame(result: Any) -> int:
     only hold its pose, and scored they raised the APE of a run with one bad first frame 67-fold (0.008 -> 0.29 m
     on KITTI 06), so the CLI and the bench score from here on."""
     return int(result.meta.get("start_frame", 0))
+
+
+def scored_frames(result: Any, n_truth: int) -> tuple[int, np.ndarray | None, str | None]:
+    """``(first, frames, why)``: the frames scored from the first estimated frame on (:func:`scored_from_frame`) of a
+    ground truth of ``n_truth`` poses, or None and why when they are too few to score (APE and RPE need 3)."""
+    first = scored_from_frame(result)
+    if n_truth - first < 3:
+        return first, None, f"{n_truth - first} pose(s) from the first estimated frame on; APE and RPE need 3"
+    return first, np.arange(first, n_truth), None

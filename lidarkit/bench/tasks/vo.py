@@ -164,14 +164,13 @@ def _scores(result: Any, est: Any, gt: Any, scale_mode: str, align: str) -> tupl
     scores it; ``(None, why, first)`` where they cannot be computed (fewer than 3 poses: ``max_frames: 2`` failed every
     job with "se3 alignment needs at least 3 poses"; a ground truth that leaves the alignment undefined);
     ``(None, None, 0)`` without ground truth."""
-    from lidarkit.vo.evaluation import score_vo, scored_from_frame
+    from lidarkit.vo.evaluation import score_vo, scored_frames
 
     if gt is None:
         return None, None, 0
-    first = scored_from_frame(result)  # (the frames before it hold its pose: scored, APE 0.29 m, not 0.008)
-    if len(gt) - first < 3:
-        return None, f"{len(gt) - first} pose(s) from the first estimated frame on; APE and RPE need 3", first
-    tail = np.arange(first, len(gt))
+    first, tail, why = scored_frames(result, len(gt))  # (the frames before it hold its pose: scored, APE 0.29 m, not 0.008)
+    if tail is None:
+        return None, why, first
     try:
         return score_vo(est[tail], gt[tail], scale_mode, None if align == "auto" else align), None, first
     except EvaluationError as err:
