@@ -235,3 +235,47 @@ def test_an_odometry_run_given_a_cut_ground_truth_records_it_in_metrics_json(tmp
     truth = Trajectory.from_kitti(seq / "poses.txt")
     run(ScanFolder(seq / "velodyne"), "kiss", ground_truth=truth, out_dir=tmp_path / "run")
     assert json.loads((tmp_path / "run" / "metrics.json").read_text())["warnings"][:1] == [expected]
+
+
+def test_a_tum_sequence_keeps_its_cut_ground_truth_in_its_reader_warnings(tmp_path):
+    """The poses a TUM sequence keeps per frame are a new trajectory: a groundtruth.txt cut inside its last number
+    (its quaternion still of unit norm to the check's tolerance) was said in the log only, not in the run's warnings."""
+    import cv2
+
+    from lidarkit.io.base import read_warnings_of
+    from lidarkit.io.tum import TumRGBD
+
+    seq = tmp_path / "rgbd_dataset_freiburg3_cut"
+    (seq / "rgb").mkdir(parents=True)
+    for k in range(4):
+        cv2.imwrite(str(seq / "rgb" / f"{k}.png"), np.full((48, 64), 40 * k, np.uint8))
+    (seq / "rgb.txt").write_text("".join(f"{100 + 0.1 * k:.6f} rgb/{k}.png\n" for k in range(4)))
+    rows = [f"{100 + 0.1 * k:.4f} {0.1234 * k:.4f} 0.5000 0.2500 0.0000 0.0000 0.0010 0.99999" for k in range(5)]
+    (seq / "groundtruth.txt").write_text("\n".join(rows)[:-2])  # the last qw 0.99999 cut to 0.999, no line end
+    tum = TumRGBD(seq)
+    warned = read_warnings_of(tum, tum.ground_truth)
+    assert len(warned) == 1 and warned[0].startswith(f"{seq / 'groundtruth.txt'}: line 5 ") and "cut off" in warned[0]
+
+
+def test_a_vo_run_given_a_cut_intrinsics_file_records_it_in_metrics_json(tmp_path):
+    """--calib read through a file cut inside its last number: in metrics.json's warnings with the reader's."""
+    import json
+    import shutil
+
+    from conftest import cli_exit_code
+
+    from lidarkit.io.kitti import read_kitti_calib
+
+    source = shared_path("kitti_images", "sequences", "06")
+    seq = tmp_path / "images"
+    seq.mkdir()
+    for k in range(6):
+        shutil.copy(source / "image_0" / f"{k:06d}.png", seq)
+    K = read_kitti_calib(source / "calib.txt")["P0"][:, :3]
+    calib = tmp_path / "K.txt"
+    calib.write_text("\n".join(" ".join(f"{v:.6f}" for v in row) for row in K)[:-5])  # 1.000000 cut to 1.0
+    out = tmp_path / "run"
+    assert cli_exit_code(["vo", str(seq), "--calib", str(calib), "--out", str(out), "--no-progress"]) == 0
+    warned = json.loads((out / "metrics.json").read_text())["warnings"]
+    assert [w for w in warned if str(calib) in w] == [f"{calib}: line 3 has no line end and its last value 1.0 is shorter "
+                                                      "than that column's on every other line: the file may be cut off"]

@@ -304,7 +304,7 @@ def _read_warnings(vo_input) -> list[str]:
     from lidarkit.io.base import read_warnings_of
 
     images = getattr(vo_input.images, "images", vo_input.images)  # (--start / --max-frames wrap the reader)
-    return read_warnings_of(images, vo_input.ground_truth)
+    return list(dict.fromkeys([*read_warnings_of(images, vo_input.ground_truth), *vo_input.read_warnings]))
 
 
 def _check_out_beside_images(out: Optional[Path], images) -> None:

@@ -34,17 +34,18 @@ INTRINSICS_FILES = ("9 numbers (K row-major, bare or after 'K:'), 4 (fx fy cx cy
                     "a KITTI raw calib_cam_to_cam.txt (P_rect_00)")
 
 
-def read_intrinsics(path: str | os.PathLike) -> np.ndarray:
+def read_intrinsics(path: str | os.PathLike, *, warnings: list[str] | None = None) -> np.ndarray:
     """``(3, 3)`` K from a text file holding 9 numbers (K row-major, bare or after ``K:``), 4 numbers (``fx fy cx cy``),
     12 unlabelled numbers in any line layout (a 3x4 projection matrix P row-major: K is its left 3x3; three rows of 4
     were read as KITTI calib.txt rows of 12 and refused), a KITTI odometry ``calib.txt`` (``P0: ...`` or bare rows of
     12 numbers: K is the left 3x3 of P0) or a KITTI raw ``calib_cam_to_cam.txt`` (the left 3x3 of ``P_rect_00``, the
     kitti_raw reader's K; it was read as an odometry calib.txt and refused at its ``calib_time`` line). A matrix
     printed by numpy (``[[fx, 0, cx], ...]``, with or without commas or ``array(...)``) is read without its brackets,
-    as ``--init`` reads one."""
+    as ``--init`` reads one. ``warnings``: as for :func:`lidarkit.textfile.read_lines` (a file cut inside its last
+    number)."""
     tokens: list[str] = []
     labels: dict[str, list[str]] = {}
-    for raw in read_lines(path):
+    for raw in read_lines(path, warnings=warnings):
         line = _without_brackets(raw.split("#")[0]).strip()
         if not line:
             continue

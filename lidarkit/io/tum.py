@@ -18,10 +18,10 @@ from pathlib import Path
 import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
-from lidarkit.io.base import checked_index
+from lidarkit.io.base import checked_index, keep_once
 from lidarkit.io.kitti import read_gray_image
 from lidarkit.textfile import read_lines
-from lidarkit.trajectory import Trajectory
+from lidarkit.trajectory import READ_WARNINGS, Trajectory
 
 log = logging.getLogger(__name__)
 
@@ -54,11 +54,12 @@ def tum_intrinsics_for(path: str | os.PathLike) -> np.ndarray | None:
     return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
 
 
-def read_tum_file_list(path: str | os.PathLike) -> tuple[np.ndarray, list[str]]:
-    """Parse ``rgb.txt``/``depth.txt``: ``(timestamps_s (N,), relative file names)``; DataError on a bad line."""
+def read_tum_file_list(path: str | os.PathLike, *, warnings: list[str] | None = None) -> tuple[np.ndarray, list[str]]:
+    """Parse ``rgb.txt``/``depth.txt``: ``(timestamps_s (N,), relative file names)``; DataError on a bad line;
+    ``warnings``: as for :func:`lidarkit.textfile.read_lines` (a file cut inside its last line)."""
     stamps: list[float] = []
     names: list[str] = []
-    for lineno, raw in enumerate(read_lines(path, what="TUM file"), start=1):
+    for lineno, raw in enumerate(read_lines(path, what="TUM file", warnings=warnings), start=1):
         line = raw.strip()
         if not line or line.startswith("#"):
             continue
@@ -121,7 +122,10 @@ class TumRGBD:
         self.name = Path(os.path.abspath(folder)).name  # ("." was named '')
         self.max_dt_s = float(max_dt_s)
         self.rgb_list_path = folder / rgb_list
-        stamps, names = read_tum_file_list(self.rgb_list_path)
+        #: files cut inside their last line (rgb.txt, groundtruth.txt), for the run's warnings: the poses kept per frame
+        #: are a new Trajectory, which does not carry the file's own ``meta["read_warnings"]``
+        self.reader_warnings: list[str] = []
+        stamps, names = read_tum_file_list(self.rgb_list_path, warnings=self.reader_warnings)
         paths = [folder / n for n in names]
 
         gt_path = None if groundtruth is None else folder / groundtruth
@@ -130,6 +134,7 @@ class TumRGBD:
         matched = np.ones(len(stamps), dtype=bool)
         if self.groundtruth_path is not None:
             gt = Trajectory.from_tum(self.groundtruth_path)
+            keep_once(self.reader_warnings, gt.meta.get(READ_WARNINGS, ()))
             nearest = associate_nearest(stamps, gt.timestamps_s, self.max_dt_s)
             matched = nearest >= 0
             if not matched.all():

@@ -6,7 +6,7 @@ from __future__ import annotations
 import logging
 import os
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +30,9 @@ class VOInput:
     K_source: str
     ground_truth: Trajectory | None
     kind: str
+    read_warnings: tuple[str, ...] = ()
+    """What reading inputs beside the images warned of (an intrinsics file cut inside its last number), for the run's
+    warnings with its reader's own."""
 
 
 def _sequence_folders(path: Path) -> list[str]:
@@ -137,10 +140,11 @@ def open_vo_input(path: str | os.PathLike, *, kind: str = "auto", calib: str | o
         ground_truth = images.ground_truth
     if timestamps is not None:
         _check_timestamps(images.timestamps_s, timestamps)
+    said: list[str] = []
     if calib is not None:
         from lidarkit.io.images import read_intrinsics
 
-        K, source = read_intrinsics(calib), f"file {calib}"
+        K, source = read_intrinsics(calib, warnings=said), f"file {calib}"
     elif images.K is not None:
         K, source = images.K, f"{kind} calibration"
     else:
@@ -150,7 +154,7 @@ def open_vo_input(path: str | os.PathLike, *, kind: str = "auto", calib: str | o
         K = K_from_image_size(w, h, focal_factor)
         source = f"guess: fx = fy = {focal_factor:g} * max({w}, {h}) = {K[0, 0]:.1f} px, principal point at centre"
         log.warning("no intrinsics given; %s", source)
-    return VOInput(images, validate_K(K, source=str(calib or path)), source, ground_truth, kind)
+    return VOInput(images, validate_K(K, source=str(calib or path)), source, ground_truth, kind, tuple(said))
 
 
 def _open_simcam(spec: str, kind: str, calib: str | os.PathLike | None, focal_factor: float) -> VOInput:
@@ -162,10 +166,11 @@ def _open_simcam(spec: str, kind: str, calib: str | os.PathLike | None, focal_fa
         raise ConfigError(f"a simcam: spec is read as kind auto (simulator K) or images (K unknown), not {kind!r}",
                           source="vo input kind")
     images = open_simcam(spec)
+    said: list[str] = []
     if calib is not None:
         from lidarkit.io.images import read_intrinsics
 
-        K, source = read_intrinsics(calib), f"file {calib}"
+        K, source = read_intrinsics(calib, warnings=said), f"file {calib}"
     elif kind == "auto":
         K, source = images.K, "simulator intrinsics (exact)"
     else:
@@ -173,7 +178,7 @@ def _open_simcam(spec: str, kind: str, calib: str | os.PathLike | None, focal_fa
         K = K_from_image_size(w, h, focal_factor)
         source = f"guess: fx = fy = {focal_factor:g} * max({w}, {h}) = {K[0, 0]:.1f} px, principal point at centre"
         log.warning("no intrinsics given; %s", source)
-    return VOInput(images, validate_K(K, source=str(calib or spec)), source, images.ground_truth, "simcam")
+    return VOInput(images, validate_K(K, source=str(calib or spec)), source, images.ground_truth, "simcam", tuple(said))
 
 
 class FrameRange:
@@ -217,7 +222,7 @@ def frame_range(vo_input: VOInput, start: int = 0, count: int | None = None) -> 
     if start == 0 and (count is None or count >= len(vo_input.images)):
         return vo_input
     images = FrameRange(vo_input.images, start, count)
-    return VOInput(images, vo_input.K, vo_input.K_source, images.ground_truth, vo_input.kind)
+    return replace(vo_input, images=images, ground_truth=images.ground_truth)
 
 
 def self_calibrate(vo_input: VOInput, config: Any = None, on_step: Any = None, workers: int | None = 1) -> tuple[VOInput, Any]:
@@ -235,4 +240,4 @@ def self_calibrate(vo_input: VOInput, config: Any = None, on_step: Any = None, w
         return vo_input, est
     K = vo_input.K.copy()
     K[0, 0] = K[1, 1] = est.focal_px
-    return VOInput(vo_input.images, K, est.describe(), vo_input.ground_truth, vo_input.kind), est
+    return replace(vo_input, K=K, K_source=est.describe()), est
