@@ -496,7 +496,10 @@ def test_absolute_per_point_times_say_so(tmp_path):
     scan = open_dataset("kitti", folder).read_scan(1)
     assert scan.point_time_convention == "absolute_s"
     np.testing.assert_allclose(scan.point_times_s - 1.7e9, 0.1 + relative, rtol=0, atol=1e-6)
-    assert open_dataset("kitti", folder).read_scan(0).point_time_convention == "relative_s"
+    # one convention per folder: frame 0 (0-0.1 s, stamped 0.1 s: its stamp cannot tell) is read as the folder's
+    assert open_dataset("kitti", folder).read_scan(0).point_time_convention == "absolute_s"
+    plain = export_kitti(SimulatedLidarSequence(n_frames=2, n_beams=8, n_azimuths=90), tmp_path / "plain")
+    assert open_dataset("kitti", plain).read_scan(0).point_time_convention == "relative_s"
 
 
 def test_point_times_of_points_left_out_are_left_out_too(tmp_path):

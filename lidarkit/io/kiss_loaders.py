@@ -672,7 +672,7 @@ class GenericScans(KissLoaderScans):
         raw = scan.point_times_s.astype(self._time_dtype)  # (exact: the loader's float64 of the file's values)
         hint = "folder:PATH reads the scans without per-point times"
         times, convention = checked_point_times(raw, scan.points_xyz, what=f"the {self._time_field!r} field", within="one scan",
-                                                hint=hint, source=files[index], location=f"frame {index}")
+                                                hint=hint, source=files[index], location=f"frame {index}", stamp_s=scan.timestamp_s)
         # (no stamps to compare with: a sweep under a millisecond is another unit, as microseconds read as nanoseconds)
         check_sweep_span(float(np.ptp(times)), None, what=f"the {self._time_field!r} field", unit=time_unit_read(raw.dtype),
                          over="this scan", hint=hint, source=files[index], location=f"frame {index}")

@@ -35,7 +35,8 @@ import numpy as np
 from lidarkit.errors import ConfigError, DataError, not_increasing
 from lidarkit.geometry import se3_inverse
 from lidarkit.io.base import INSTANT_FRACTION, Scan, checked_index, checked_indices, keep_once, option_path
-from lidarkit.io.pointcloud2 import MAX_SWEEP_S, check_sweep_span, checked_point_times, point_times_seconds, time_unit_read
+from lidarkit.io.pointcloud2 import (MAX_SWEEP_S, check_sweep_span, checked_point_times, point_times_seconds,
+                                     recording_time_convention, time_unit_read)
 from lidarkit.io.pointfile import at_sensor_origin, load_npy, read_kitti_bin, said_once
 from lidarkit.textfile import file_line, is_number, read_lines, read_numeric_table
 from lidarkit.trajectory import READ_WARNINGS, Trajectory
@@ -642,7 +643,8 @@ class KittiOdometry:
             return scan
         # a sweep lasts at most MAX_SWEEP_S, or the spacing of the scans when longer (the simulator at 0.5 Hz)
         longest_s = max(MAX_SWEEP_S, self._period_s or 0.0)
-        times, convention = self._read_point_times(times_path, self.scan_paths[index], scan, frame, longest_s)
+        times, convention = self._read_point_times(times_path, self.scan_paths[index], scan, frame, longest_s, ts,
+                                                   self._point_time_convention)
         self._check_point_time_unit()
         return dataclasses.replace(scan, point_times_s=times, point_time_convention=convention)
 
@@ -664,7 +666,32 @@ class KittiOdometry:
         """(median span in s, over how many frames, dtype or None when they differ) of the per-point times of the first
         :data:`POINT_TIME_SPAN_FRAMES` frames whose times differ (of the first three times as many files), None
         without such frames; a file that cannot be read is left to :meth:`read_scan` to name."""
-        spans, dtypes = [], set()
+        sweeps = self._first_point_times
+        if not sweeps:
+            return None
+        spans = [last - first for _, first, last, _ in sweeps]
+        dtypes = {dtype for *_, dtype in sweeps}
+        return float(np.median(spans)), len(spans), dtypes.pop() if len(dtypes) == 1 else None
+
+    @cached_property
+    def _point_time_convention(self) -> str | None:
+        """The one convention of the folder's per-point times, read from its first frames against times.txt
+        (:func:`~lidarkit.io.pointcloud2.recording_time_convention`), None without times.txt or such frames (each scan
+        is then read by its size). Per scan, absolute times of stamps starting at 0 s read as relative, 0.1-0.2 s off."""
+        if self._times_all is None:
+            return None
+        sweeps = [sweep for sweep in self._first_point_times if sweep[0] < len(self._times_all)]
+        if not sweeps:
+            return None
+        frames, firsts, lasts, _ = zip(*sweeps)
+        return recording_time_convention(self._times_all[list(frames)], np.array(firsts), np.array(lasts))
+
+    @cached_property
+    def _first_point_times(self) -> list[tuple[int, float, float, np.dtype]]:
+        """(frame, first and last point time in s, dtype) of the first :data:`POINT_TIME_SPAN_FRAMES` frames whose
+        per-point times differ (of the first three times as many files); a file that cannot be read is left to
+        :meth:`read_scan` to name."""
+        sweeps = []
         for frame in self.scan_frames[: 3 * POINT_TIME_SPAN_FRAMES]:
             path = self.point_times_dir / f"{int(frame):06d}.npy"
             try:
@@ -675,16 +702,17 @@ class KittiOdometry:
                 continue
             times = point_times_seconds(raw[np.isfinite(raw)])
             if len(times) > 1 and np.ptp(times) > 0:
-                spans.append(float(np.ptp(times)))
-                dtypes.add(raw.dtype)
-                if len(spans) == POINT_TIME_SPAN_FRAMES:
+                sweeps.append((int(frame), float(times.min()), float(times.max()), raw.dtype))
+                if len(sweeps) == POINT_TIME_SPAN_FRAMES:
                     break
-        return (float(np.median(spans)), len(spans), dtypes.pop() if len(dtypes) == 1 else None) if spans else None
+        return sweeps
 
     @staticmethod
-    def _read_point_times(times_path: Path, scan_path: Path, scan: Scan, frame: int, longest_s: float) -> tuple[np.ndarray, str]:
+    def _read_point_times(times_path: Path, scan_path: Path, scan: Scan, frame: int, longest_s: float, stamp_s: float | None,
+                          convention: str | None) -> tuple[np.ndarray, str]:
         """``(times (N,) float64 s, convention)`` of ``scan`` from ``times_path``, with the points dropped as non-finite
-        dropped too, judged as a bag's time field is (ring numbers or an intensity were deskewed by without a word)."""
+        dropped too, judged as a bag's time field is (ring numbers or an intensity were deskewed by without a word):
+        against the scan's stamp ``stamp_s`` (None: none), in the folder's ``convention`` (None: the scan's own)."""
         raw = load_npy(times_path, f"frame {frame}")
         if raw.ndim != 1 or not np.issubdtype(raw.dtype, np.number) or np.issubdtype(raw.dtype, np.complexfloating):
             raise DataError(f"expected a 1-D numeric array, got shape {raw.shape} dtype {raw.dtype}", source=times_path, location=f"frame {frame}")
@@ -703,7 +731,8 @@ class KittiOdometry:
         # integers are nanoseconds, as drivers write them (Ouster's uint32 't') and as the bag reader reads them
         return checked_point_times(raw, scan.points_xyz, what="per-point time array", within="one scan", longest_s=longest_s,
                                    hint=f"rename {times_path.parent.name}/ to read the scans without them",
-                                   source=times_path, location=f"frame {frame}")
+                                   source=times_path, location=f"frame {frame}", stamp_s=stamp_s, convention=convention,
+                                   convention_from=f"the first frames of {times_path.parent.name}/")
 
     def read_scan_by_frame(self, frame: int) -> Scan:
         """The scan of KITTI frame number ``frame`` (file ``{frame:06d}.bin``)."""

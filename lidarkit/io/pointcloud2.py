@@ -25,6 +25,11 @@ asked for):
   the point order nor turns with the azimuth (an intensity within 1 s): a DataError, where it would have deskewed
   every sweep by nonsense.
 
+A recording's scans share one convention, read from its first scans (:func:`recording_time_convention`: a simulator's
+clock starting at 0 leaves its first stamps too near 0 to decide, and their absolute times were read as relative, 0.1-0.2
+s off, while the later scans read as absolute); a scan whose own stamp reads its times the other way is a DataError
+naming it (read as the others, its sweep would be deskewed seconds away from its stamp).
+
 :func:`checked_point_times` applies the same rules to per-point times read from other files (the kitti reader's
 ``point_times/``).
 """
@@ -81,14 +86,17 @@ def stamp_seconds(stamp: Any) -> float:
 
 
 def decode_pointcloud2(msg: Any, *, source: str, location: str, time_field: str | None = "auto",
-                       all_missing_ok: bool = False) -> DecodedCloud:
+                       all_missing_ok: bool = False, convention: str | None = None,
+                       convention_from: str = "the first scans") -> DecodedCloud:
     """Points, intensity and per-point times of a PointCloud2 ``msg`` (any object with its fields).
 
     ``time_field``: ``"auto"`` (the first of :data:`TIME_FIELDS` whose values differ, the first present when none
     does), a field name, or None to ignore times. Missing returns (NaN, or exactly (0, 0, 0) as Ouster drivers
     write them) are left out with their times and intensities; a message of missing returns only is a DataError
     (it read "empty scan (0 points)" of 5554 points) unless ``all_missing_ok`` (a pass that only looks at the
-    times). Every problem raises DataError naming ``source`` (the file) and ``location`` (topic and message index).
+    times). ``convention``: the per-point time convention of the whole recording (None: this message's own), as
+    :func:`checked_point_times` takes it. Every problem raises DataError naming ``source`` (the file) and ``location``
+    (topic and message index).
     """
     names = [f.name for f in msg.fields]
     missing = [axis for axis in ("x", "y", "z") if axis not in names]
@@ -171,7 +179,8 @@ def decode_pointcloud2(msg: Any, *, source: str, location: str, time_field: str 
     stamp_s = stamp_seconds(header.stamp) if header is not None and hasattr(header, "stamp") else None
     times, convention = checked_point_times(raw, xyz, what=f"per-point time field {field!r}", within="one message",
                                             hint="time_field= names the right field, none reads no times",
-                                            source=source, location=location, stamp_s=stamp_s)
+                                            source=source, location=location, stamp_s=stamp_s, convention=convention,
+                                            convention_from=convention_from)
     return DecodedCloud(xyz, intensity, times, convention, field, n_at_origin, flat)
 
 
@@ -186,11 +195,14 @@ def _varying_time_field(present: list[str], cloud: np.ndarray, keep: np.ndarray 
 
 
 def checked_point_times(raw: np.ndarray, xyz: np.ndarray, *, what: str, within: str, hint: str, source: object,
-                        location: str, longest_s: float = MAX_SWEEP_S, stamp_s: float | None = None) -> tuple[np.ndarray, str]:
+                        location: str, longest_s: float = MAX_SWEEP_S, stamp_s: float | None = None,
+                        convention: str | None = None, convention_from: str = "the first scans") -> tuple[np.ndarray, str]:
     """``(times (N,) float64 seconds, convention)`` of finite per-point values ``raw`` (N,) of points ``xyz`` (N, 3), by
     the rules of the module doc (a sweep lasting ``longest_s`` at most; ``stamp_s``: the scan's stamp, None when there is
     none to read the values against); a DataError naming ``what`` and saying ``hint`` when they cannot be the points'
-    times (shared: the kitti reader's ``point_times/`` took ring numbers as times)."""
+    times (shared: the kitti reader's ``point_times/`` took ring numbers as times). ``convention``: the one the recording's
+    first scans decided (:func:`recording_time_convention`, said as ``convention_from``), given to every scan; a scan
+    whose stamp clearly reads its times the other way is a DataError (read alike, it was deskewed seconds off)."""
     if np.issubdtype(raw.dtype, np.integer) and raw.dtype.itemsize < 4:  # (ring numbers read as times deskewed by them)
         raise DataError(
             f"{what} is a {8 * raw.dtype.itemsize}-bit integer: too small for times (drivers write "
@@ -219,25 +231,98 @@ def checked_point_times(raw: np.ndarray, xyz: np.ndarray, *, what: str, within: 
             f"{len(times)} points and do not turn with the azimuth (an intensity or another per-point value): not the "
             f"points' times ({hint})", source=source, location=location,
         )
-    return times, point_time_convention(times, stamp_s)
+    if convention is None:
+        return times, point_time_convention(times, stamp_s)
+    if len(times) and stamp_s is not None and np.isfinite(stamp_s):
+        lo, hi = float(times.min()), float(times.max())
+        own = stamp_verdict(lo, hi, stamp_s)
+        if own is not None and own != convention:
+            off = _sweep_from_stamp(lo, hi, stamp_s, convention)
+            raise DataError(
+                f"{what} holds {_CONVENTION_WORDS[own]} ({lo:.6f} to {hi:.6f} s, stamp {stamp_s:.6f} s) where the convention "
+                f"read from {convention_from} is {_CONVENTION_WORDS[convention]}: read as those, this sweep lies {off:.6g} s "
+                f"from its stamp (--frames can leave the scan out)", source=source, location=location,
+            )
+    return times, convention
+
+
+_CONVENTION_WORDS = {"absolute_s": "absolute times on the stamps' clock", "relative_s": "times relative to the stamp"}
+
+
+def _sweep_from_stamp(first_s: float, last_s: float, stamp_s: float, convention: str) -> float:
+    """Seconds from ``stamp_s`` to the sweep whose point times run ``first_s`` to ``last_s`` read in ``convention`` (0:
+    the stamp lies within it)."""
+    if convention == "absolute_s":
+        return max(first_s - stamp_s, stamp_s - last_s, 0.0)
+    return max(first_s, -last_s, 0.0)
+
+
+def stamp_verdict(first_s: float, last_s: float, stamp_s: float) -> str | None:
+    """The convention the stamp ``stamp_s`` gives a sweep whose point times run ``first_s`` to ``last_s`` (s): the reading
+    that places it around the stamp (within :data:`STAMP_LATENCY_S`) where the other places it more than two sweeps
+    further; None when both readings place it near (a stamp within a couple of sweeps of 0) or neither does."""
+    sweep = last_s - first_s
+    as_absolute = _sweep_from_stamp(first_s, last_s, stamp_s, "absolute_s")
+    as_relative = _sweep_from_stamp(first_s, last_s, stamp_s, "relative_s")
+    if as_absolute <= STAMP_LATENCY_S and as_relative > as_absolute + 2 * sweep:
+        return "absolute_s"
+    if as_relative <= STAMP_LATENCY_S and as_absolute > as_relative + 2 * sweep:
+        return "relative_s"
+    return None
+
+
+def recording_time_convention(stamps_s: np.ndarray, firsts_s: np.ndarray, lasts_s: np.ndarray) -> str:
+    """The one convention of a recording's per-point times, from its first sweeps: sweep ``k`` stamped ``stamps_s[k]``
+    with times from ``firsts_s[k]`` to ``lasts_s[k]`` (s, as stored). Judged per scan, a simulator's clock starting at 0
+    read its first sweeps' absolute times as relative (their stamps within two sweeps of 0 decide nothing), 0.1-0.2 s
+    off, while the later ones read as absolute. So: the stamps' verdicts (:func:`stamp_verdict`; the more common one);
+    where none decides and both readings place every sweep near its stamp, the reading in which the sweeps keep their
+    place against their stamps (absolute times move with the stamps, relative ones do not); else the size (any value
+    beyond 1e5 s: absolute)."""
+    stamps_s, firsts_s, lasts_s = (np.asarray(a, dtype=np.float64) for a in (stamps_s, firsts_s, lasts_s))
+    if not len(stamps_s):
+        return "relative_s"
+    verdicts = [stamp_verdict(a, b, s) for a, b, s in zip(firsts_s, lasts_s, stamps_s) if np.isfinite(s)]
+    n_absolute, n_relative = verdicts.count("absolute_s"), verdicts.count("relative_s")
+    if n_absolute or n_relative:
+        if n_absolute != n_relative:
+            return "absolute_s" if n_absolute > n_relative else "relative_s"
+        return next(v for v in verdicts if v is not None)
+    near = [max(_sweep_from_stamp(a, b, s, "absolute_s"), _sweep_from_stamp(a, b, s, "relative_s")) <= STAMP_LATENCY_S
+            for a, b, s in zip(firsts_s, lasts_s, stamps_s)]
+    if len(stamps_s) > 1 and all(near) and np.isfinite(stamps_s).all():
+        mids = 0.5 * (firsts_s + lasts_s)
+        moving_absolute, moving_relative = _spread(mids - stamps_s), _spread(mids)
+        if moving_absolute < _KEEPS_PLACE * moving_relative:
+            return "absolute_s"
+        if moving_relative < _KEEPS_PLACE * moving_absolute:
+            return "relative_s"
+    return "absolute_s" if float(np.max(np.abs(np.concatenate([firsts_s, lasts_s])))) > _ABSOLUTE_AFTER_S else "relative_s"
+
+
+#: Most share of the other reading's spread of the sweeps against their stamps for one reading to keep them in place
+_KEEPS_PLACE = 0.25
+
+
+def _spread(values: np.ndarray) -> float:
+    """Median distance of ``values`` (n,) from their median (a first sweep begun mid-rotation does not count)."""
+    return float(np.median(np.abs(values - np.median(values))))
 
 
 def point_time_convention(times: np.ndarray, stamp_s: float | None = None) -> str:
     """``"absolute_s"`` or ``"relative_s"`` for per-point times ``times`` (N,) in seconds of a scan stamped ``stamp_s``.
 
-    Read against the stamp: times around it (the sweep within :data:`STAMP_LATENCY_S`) that lie more than two sweeps
-    further from 0 are absolute on its clock, whatever their size (a simulator's 100 s were read as relative, placing
+    Read against the stamp (:func:`stamp_verdict`): times around it (the sweep within :data:`STAMP_LATENCY_S`) that lie
+    more than two sweeps further from 0 are absolute on its clock, whatever their size (a simulator's 100 s were read as relative, placing
     the sweeps 100 s after their stamps). Where both readings place the sweep near (a stamp within a couple of sweeps
     of 0), or neither does, or no stamp is given, the size decides: beyond 1e5 s absolute, else relative.
     """
     if not len(times):
         return "relative_s"
     lo, hi = float(times.min()), float(times.max())
-    if stamp_s is not None and np.isfinite(stamp_s):
-        from_stamp = max(lo - stamp_s, stamp_s - hi, 0.0)  # the stamp to the sweep, its times read as absolute
-        from_zero = max(lo, -hi, 0.0)  # ... read as relative to the stamp
-        if from_stamp <= STAMP_LATENCY_S and from_zero > from_stamp + 2 * (hi - lo):
-            return "absolute_s"
+    verdict = stamp_verdict(lo, hi, stamp_s) if stamp_s is not None and np.isfinite(stamp_s) else None
+    if verdict is not None:
+        return verdict
     return "absolute_s" if max(abs(lo), abs(hi)) > _ABSOLUTE_AFTER_S else "relative_s"
 
 
@@ -365,4 +450,4 @@ def _readable_time_fields(names: list[str], unreadable: dict[str, str], wanted: 
 
 __all__ = ["MAX_SWEEP_S", "MIN_SWEEP_S", "MIN_SWEEP_SHARE", "NANOSECONDS_AFTER", "TIME_FIELDS", "DecodedCloud", "check_sweep_span",
            "STAMP_LATENCY_S", "checked_point_times", "decode_pointcloud2", "fields_dtype", "point_time_convention",
-           "point_times_seconds", "stamp_seconds", "time_unit_read"]
+           "point_times_seconds", "recording_time_convention", "stamp_verdict", "stamp_seconds", "time_unit_read"]

@@ -8,7 +8,9 @@ each message with :func:`lidarkit.io.pointcloud2.decode_pointcloud2`.
 
 Per scan: ``timestamp_s`` is the message header stamp; ``stamp_instant`` says which instant of the sweep that
 stamp is, read from the per-point times (relative times starting at 0: the sweep start; ending at 0: the end); a stamp
-at no such instant (a driver stamping on receipt, after the sweep end) is placed by ``sweep_offset_s``.
+at no such instant (a driver stamping on receipt, after the sweep end) is placed by ``sweep_offset_s``. The per-point
+times of every message are read in one convention (absolute or relative to the stamp), the topic's, read from its first
+scans (:func:`~lidarkit.io.pointcloud2.recording_time_convention`).
 Ground truth: a ``nav_msgs/Odometry`` topic (``ground_truth_topic``; found automatically when there is one), read
 in header-stamp order, one pose per scan (by count when each pose lies as far from its scan as the others, also for a
 selection of scans; else the pose nearest the place in the sweep where the poses are stamped), expressed relative to
@@ -39,7 +41,7 @@ import numpy as np
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.io.base import INSTANT_FRACTION, Scan, checked_index, checked_indices, classify_instant, sweep_length
 from lidarkit.io.pointcloud2 import (MAX_SWEEP_S, POINTFIELD_DTYPES, DecodedCloud, check_sweep_span, decode_pointcloud2,
-                                     stamp_seconds, time_unit_read)
+                                     recording_time_convention, stamp_seconds, time_unit_read)
 from lidarkit.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
@@ -254,9 +256,12 @@ class _BagScans:
         return Scan(decoded.points_xyz, decoded.intensity, decoded.point_times_s, stamp, index,
                     f"{self.path} {self._location(index)}", decoded.point_time_convention, instant)
 
-    def _decoded(self, index: int, all_missing_ok: bool = False) -> DecodedCloud:
+    def _decoded(self, index: int, all_missing_ok: bool = False, first_pass: bool = False) -> DecodedCloud:
         """Message ``index`` decoded (read in order; an earlier index restarts the stream), what it leaves out said once;
-        ``all_missing_ok``: a message of missing returns only decodes to no points (the sweep timing passes over it)."""
+        ``all_missing_ok``: a message of missing returns only decodes to no points (the sweep timing passes over it). Its
+        point times are read in the bag's convention (:attr:`_point_time_convention`); ``first_pass`` (the pass over the
+        first scans that decides it): in the one the message's own stamp gives, and nothing said (the scans read say it)."""
+        convention = None if first_pass else self._point_time_convention
         if self._stream is None or index < self._next:
             self._stream = self._read_all(self.topic)
             self._next = 0
@@ -279,11 +284,12 @@ class _BagScans:
             if k == 0:
                 self._cloud_frame = str(msg.header.frame_id)
         decoded = decode_pointcloud2(msg, source=str(self.path), location=self._location(index), time_field=self.time_field,
-                                     all_missing_ok=all_missing_ok)
+                                     all_missing_ok=all_missing_ok, convention=convention,
+                                     convention_from=f"the first scans on {self.topic}")
         self._time_fields_read.add(decoded.time_field or "none")
         if not self._cloud_field_types:
             self._cloud_field_types = {str(f.name): int(f.datatype) for f in msg.fields}
-        if not len(decoded.points_xyz):  # (said by the run when it reads the frame; --frames may leave it out)
+        if not len(decoded.points_xyz) or first_pass:  # (said by the run when it reads the frame; --frames may leave it out)
             return decoded
         if decoded.n_at_origin:
             self._warn_once("origin", f"left out {decoded.n_at_origin} of {int(msg.width) * int(msg.height)} points at (0, 0, 0) "
@@ -571,23 +577,13 @@ class _BagScans:
         A bag keeping the poses at every sweep's start and end gives the timing by their stamps where it disagrees with
         the points' (:meth:`_kept_sweep_timing`)."""
         offsets, ends, spans, steps = [], [], [], []
-        for k in range(min(self.n_scans, SWEEP_TIMING_READ)):
-            decoded = self._decoded(k, all_missing_ok=True)
-            if decoded.time_field is None and len(decoded.points_xyz):  # clouds without a time field: none will have one
-                break
-            times = decoded.point_times_s
-            if times is None or len(times) < 2:
-                continue
-            stamp = self._stamps[k]
-            t = times + (0.0 if decoded.point_time_convention == "absolute_s" else stamp)
+        for stamp, times in self._first_sweeps:
+            t = times + (0.0 if self._point_time_convention == "absolute_s" else stamp)
             lo, hi = float(t.min()), float(t.max())
-            if hi > lo:
-                offsets.append(lo - stamp)
-                ends.append(hi - stamp)
-                spans.append(hi - lo)
-                steps.append((hi - lo) / (len(np.unique(t)) - 1))  # between firings (columns sharing a time: few)
-                if len(spans) == SWEEP_TIMING_SCANS:
-                    break
+            offsets.append(lo - stamp)
+            ends.append(hi - stamp)
+            spans.append(hi - lo)
+            steps.append((hi - lo) / (len(np.unique(t)) - 1))  # between firings (columns sharing a time: few)
         if not offsets:
             return None
         stamps = self.timestamps_s
@@ -617,6 +613,39 @@ class _BagScans:
         kept = self._kept_sweep_timing(period)
         # (the kept instants, stamped to the nanosecond, where they disagree with the points: else as the points say)
         return kept if kept is not None and max(abs(kept[0] - timing[0]), abs(kept[1] - timing[1])) > 1e-6 else timing
+
+    @cached_property
+    def _first_sweeps(self) -> list[tuple[float, np.ndarray]]:
+        """(stamp, point times as stored) of the first :data:`SWEEP_TIMING_SCANS` scans whose times span a sweep, of the
+        first :data:`SWEEP_TIMING_READ` (a driver's empty start-up cloud is passed over); none when the clouds have no
+        time field; those before a message that cannot be read. The bag's point-time convention and its sweep timing are
+        read from them."""
+        sweeps: list[tuple[float, np.ndarray]] = []
+        for k in range(min(self.n_scans, SWEEP_TIMING_READ)):
+            try:
+                decoded = self._decoded(k, all_missing_ok=True, first_pass=True)
+            except DataError:  # (said when that scan is read: reading scan 0 refused message 1, which --frames left out)
+                break
+            if decoded.time_field is None and len(decoded.points_xyz):  # clouds without a time field: none will have one
+                break
+            times = decoded.point_times_s
+            if times is None or len(times) < 2 or not np.ptp(times) > 0:
+                continue
+            sweeps.append((self._stamps[k], times))
+            if len(sweeps) == SWEEP_TIMING_SCANS:
+                break
+        return sweeps
+
+    @cached_property
+    def _point_time_convention(self) -> str | None:
+        """The one convention of the bag's per-point times (:func:`~lidarkit.io.pointcloud2.recording_time_convention` of
+        :attr:`_first_sweeps`), None when they carry none (each message is then read by its own). Per message, the first
+        scans of a simulator's clock starting at 0 read their absolute times as relative, 0.1-0.2 s off."""
+        sweeps = self._first_sweeps
+        if not sweeps:
+            return None
+        return recording_time_convention(np.array([stamp for stamp, _ in sweeps]), np.array([t.min() for _, t in sweeps]),
+                                         np.array([t.max() for _, t in sweeps]))
 
     def _kept_sweep_timing(self, period: float) -> tuple[float, float] | None:
         """(absolute time sweep 0 starts, how long a sweep lasts) from the poses the recording keeps at every sweep's
