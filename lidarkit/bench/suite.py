@@ -17,11 +17,11 @@ from pathlib import Path
 from typing import Any
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, StrictInt, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from lidarkit.bench.datasets import SAMPLE_PREFIX, dataset_label, resolve_dataset, resolve_option_paths
 from lidarkit.bench.jobs import Job, canonical_json, distinct_labels
-from lidarkit.bench.tasks import get_task
+from lidarkit.bench.tasks import WholeInt, get_task
 from lidarkit.errors import ConfigError, DataError, LidarKitError
 
 log = logging.getLogger(__name__)
@@ -64,7 +64,7 @@ class Experiment(BaseModel):
     dataset: DatasetSpec | str | None = None
     datasets: list[DatasetSpec | str] | None = None
     methods: list[MethodSpec | str] = Field(min_length=1)
-    seeds: list[StrictInt] | StrictInt | None = None
+    seeds: list[WholeInt] | WholeInt | None = None
     options: dict[str, Any] = Field(default_factory=dict)
 
 
@@ -74,7 +74,7 @@ class SuiteModel(BaseModel):
     model_config = ConfigDict(extra="forbid")
     name: str = "suite"
     description: str = ""
-    seeds: list[StrictInt] | StrictInt = Field(default_factory=lambda: [0])
+    seeds: list[WholeInt] | WholeInt = Field(default_factory=lambda: [0])
     datasets: dict[str, DatasetSpec] = Field(default_factory=dict)
     experiments: list[Experiment] = Field(min_length=1)
 
@@ -376,8 +376,8 @@ def load_suite(path: str | Path, *, skip_unavailable: bool = False, only_tasks: 
                 continue
             raise locator.error(err, (*exp_loc, "task")) from None
 
-        options = dict(exp.options)
-        _check(locator, (*exp_loc, "options"), task.validate_options, options)
+        _check(locator, (*exp_loc, "options"), task.validate_options, dict(exp.options))
+        options = _options_as_read(task, exp.options)
         datasets = _experiment_datasets(exp, model, locator, exp_loc)
         resolved: list[dict[str, Any]] = []
         missing_sample = None
@@ -452,6 +452,14 @@ def load_suite(path: str | Path, *, skip_unavailable: bool = False, only_tasks: 
                         seen.add(key)
                         jobs.append(job)
     return Suite(name=model.name, path=path, jobs=jobs, description=model.description, skipped=skipped)
+
+
+def _options_as_read(task: Any, options: dict[str, Any]) -> dict[str, Any]:
+    """The experiment's ``options`` (validated) with each value as the task reads it (its ``resolved_options``), the
+    defaults it fills in left out: ``max_frames: 2.0`` is the integer 2 in the jobs, their results and keys, one job with
+    ``max_frames: 2``."""
+    resolved = task.resolved_options(dict(options))
+    return {key: resolved.get(key, value) for key, value in options.items()}
 
 
 def _check(locator: _Locator, loc: tuple[Any, ...], fn: Any, *args: Any, options_loc: tuple[Any, ...] | None = None) -> None:

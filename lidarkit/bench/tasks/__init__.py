@@ -11,9 +11,11 @@ import importlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Annotated, Any, ClassVar
 
-from lidarkit.bench.jobs import Job
+from pydantic import BeforeValidator, StrictInt
+
+from lidarkit.bench.jobs import Job, whole_floats_as_ints
 from lidarkit.errors import ConfigError
 from lidarkit.plugins import checked_name, claim_name
 
@@ -26,6 +28,10 @@ _BUILTIN: dict[str, str] = {
 }
 _REGISTERED: dict[str, type[Task]] = {}
 _INSTANCES: dict[str, Task] = {}
+
+#: an integer of a suite (a task option that counts, ``seeds``): a whole float is that integer (YAML's ``2.0`` was
+#: refused where a job key already read it as 2); a fraction, a boolean (YAML's ``true`` was read as 1) or text is not
+WholeInt = Annotated[StrictInt, BeforeValidator(whole_floats_as_ints)]
 
 
 @dataclass(frozen=True)
@@ -182,5 +188,5 @@ def import_module_for_task(task: str, module: str) -> Any:
         raise ConfigError(f"task {task!r} needs {module}, which is not available ({err})", source="task") from err
 
 
-__all__ = ["HIGHER_IS_BETTER", "Metric", "Task", "TaskOutput", "available_tasks", "get_task", "higher_is_better", "import_module_for_task",
+__all__ = ["HIGHER_IS_BETTER", "Metric", "Task", "TaskOutput", "WholeInt", "available_tasks", "get_task", "higher_is_better", "import_module_for_task",
            "register_task", "task_module"]

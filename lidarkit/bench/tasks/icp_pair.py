@@ -24,10 +24,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, StrictInt, ValidationInfo, field_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator
 
 from lidarkit.bench.jobs import Job
-from lidarkit.bench.tasks import Metric, Task, TaskOutput, import_module_for_task
+from lidarkit.bench.tasks import Metric, Task, TaskOutput, WholeInt, import_module_for_task
 from lidarkit.bench.tasks._datasets import (OPENED_AT_LOAD, check_reader_options, open_dataset_spec, options_model,
                                              scan_count_at_load, seeded_dataset)
 from lidarkit.bench.datasets import dataset_label, dataset_path, scan_kinds
@@ -50,9 +50,9 @@ def no_poses_reason(name: str) -> str:
 class IcpPairOptions(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
     # strict numbers: YAML's yes/true was taken as 1 (init_noise_m: yes a 1 m noise, pairs [[true, 2]] frames 1 and 2)
-    pairs: list[tuple[StrictInt, StrictInt]] | None = None
+    pairs: list[tuple[WholeInt, WholeInt]] | None = None
     ground_truth_file: str | None = None
-    max_pairs: StrictInt = Field(1, ge=1)
+    max_pairs: WholeInt = Field(1, ge=1)
     # (.inf passed, and the suite was refused at its methods as "values must be plain numbers", naming no option)
     init_noise_m: float = Field(0.0, ge=0.0, allow_inf_nan=False, strict=True)
     init_noise_deg: float = Field(0.0, ge=0.0, allow_inf_nan=False, strict=True)

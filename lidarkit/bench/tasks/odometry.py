@@ -18,11 +18,11 @@ import logging
 from typing import Any
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, StrictInt, field_validator
+from pydantic import BaseModel, ConfigDict, field_validator
 
 from lidarkit.bench.datasets import scan_kinds
-from lidarkit.bench.jobs import Job
-from lidarkit.bench.tasks import Metric, Task, TaskOutput, import_module_for_task
+from lidarkit.bench.jobs import Job, whole_floats_as_ints
+from lidarkit.bench.tasks import Metric, Task, TaskOutput, WholeInt, import_module_for_task
 from lidarkit.bench.tasks._datasets import (check_reader_options, open_dataset_spec, options_model, require_kitti_data,
                                              scan_count_at_load, seeded_dataset)
 from lidarkit.errors import ConfigError, DataError, EvaluationError
@@ -55,15 +55,19 @@ def metric_alignment(frames: np.ndarray) -> dict[str, str]:
 
 class OdometryOptions(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
-    # strict: YAML's true was taken as frame 1 ([true, 2, 3] ran frames 1, 2, 3)
-    frames: str | list[StrictInt] | None = None
+    # YAML's true was taken as frame 1 ([true, 2, 3] ran frames 1, 2, 3)
+    frames: str | list[WholeInt] | None = None
     init: str = "constant_velocity"
 
     @field_validator("frames", mode="before")
     @classmethod
     def _indices_or_text(cls, frames: Any) -> Any:
-        """One reason for a list holding what is not an index (the union's two were "a valid string; a valid integer")."""
-        for value in frames if isinstance(frames, list) else ():
+        """One reason for a list holding what is not an index (the union's two were "a valid string; a valid integer");
+        a whole float is its index, as :data:`WholeInt` reads it."""
+        if not isinstance(frames, list):
+            return frames
+        frames = whole_floats_as_ints(frames)
+        for value in frames:
             if isinstance(value, bool) or not isinstance(value, int):
                 raise ValueError(f"a list of frame indices holds {value!r}, not an integer (a slice is text: '0:10')")
         return frames
@@ -156,16 +160,16 @@ class OdometryTask(Task):
         return OdometryOptions(**options).model_dump(mode="json")
 
     def validate_options(self, options: dict[str, Any]) -> None:
-        options_model(OdometryOptions, options, "odometry")
+        given = options_model(OdometryOptions, options, "odometry")
         from lidarkit.odometry.runner import INIT_GUESSES
 
-        if options.get("init", "constant_velocity") not in INIT_GUESSES:
-            raise ConfigError(f"init: unknown initial guess {options['init']!r}; known: {', '.join(INIT_GUESSES)}",
+        if given.init not in INIT_GUESSES:
+            raise ConfigError(f"init: unknown initial guess {given.init!r}; known: {', '.join(INIT_GUESSES)}",
                               source="options")
-        if options.get("frames") is not None:  # its syntax, before anything runs (its range is the dataset's)
+        if given.frames is not None:  # its syntax, before anything runs (its range is the dataset's)
             from lidarkit.odometry.inputs import parse_frames
 
-            frames = options["frames"]
+            frames = given.frames
             if isinstance(frames, list):
                 # (a stand-in length named its own range: "must lie in 0..5" for [-2, 5] on 10 scans, "0..-1" for [-1])
                 negative = next((f for f in frames if isinstance(f, int) and f < 0), None)
@@ -179,8 +183,9 @@ class OdometryTask(Task):
     def validate_dataset(self, dataset: dict[str, Any], options: dict[str, Any]) -> None:
         check_reader_options(dataset)
         require_kitti_data(dataset, "scans")
-        check_frames(options.get("frames"), dataset)
-        if options.get("init") == "odometry" and not kind_gives_odometry(dataset["kind"]):
+        given = options_model(OdometryOptions, options, "odometry")
+        check_frames(given.frames, dataset)
+        if given.init == "odometry" and not kind_gives_odometry(dataset["kind"]):
             raise ConfigError(f"init: 'odometry' needs a dataset with its own odometry (e.g. a CARMEN log); kind "
                               f"{dataset['kind']!r} has none", source="options")
 

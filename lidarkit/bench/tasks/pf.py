@@ -11,10 +11,10 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, StrictInt
+from pydantic import BaseModel, ConfigDict, Field
 
 from lidarkit.bench.jobs import Job
-from lidarkit.bench.tasks import Metric, Task, TaskOutput, import_module_for_task
+from lidarkit.bench.tasks import Metric, Task, TaskOutput, WholeInt, import_module_for_task
 from lidarkit.bench.tasks._datasets import check_reader_options, open_dataset_spec, options_model
 from lidarkit.errors import ConfigError
 
@@ -24,7 +24,7 @@ METHODS = ("particle_filter",)
 class PFOptions(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
     visible: str = "recorded"
-    mse_start: StrictInt = Field(10, ge=0)  # (strict: YAML's true was step 1)
+    mse_start: WholeInt = Field(10, ge=0)  # (YAML's true was step 1)
 
 
 def _pf_api() -> tuple[Any, Any]:

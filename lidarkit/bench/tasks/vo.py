@@ -4,12 +4,13 @@ Methods are the VO presets (``lidarkit.vo.available_presets()``: ``lidarkit``, `
 params are dotted-path changes to the preset (``scale.mode: relative``, ``features.detector: orb``), validated
 by ``lidarkit.vo.preset``. The job seed becomes the config's ``seed``. Options: ``max_frames`` (first N
 images), ``align`` (``auto``: SE(3) for ground-truth scale, Sim(3) otherwise; or ``none``/``se3``/``sim3``),
-``smoothed`` (score the Savitzky-Golay smoothed trajectory). Metrics come from ``lidarkit.vo.evaluation``;
-``final_error_m`` is the last position's error after the row's alignment, as APE's (the CLI's final error is raw for
-ground-truth scale: in a table of methods with other scale modes, raw and aligned rows made the best method look 5x
-worse). The scores start at the first estimated frame (``scored_from_frame`` in the job's info, as ``lidarkit vo``
-scores): unreadable first images only hold its pose. Images are read into memory before the run, so frames/s is the
-pipeline's speed.
+``smoothed`` (score the Savitzky-Golay smoothed trajectory). Metrics come from ``lidarkit.vo.evaluation``; the RPE
+over 1 frame is labelled alignment-free for ``se3`` and ``none`` (a rigid alignment leaves it as it is), Sim(3)-aligned
+for ``sim3`` (its scale scales it); ``final_error_m`` is the last position's error after the row's alignment, as APE's
+(the CLI's final error is raw for ground-truth scale: in a table of methods with other scale modes, raw and aligned
+rows made the best method look 5x worse). The scores start at the first estimated frame (``scored_from_frame`` in the
+job's info, as ``lidarkit vo`` scores): unreadable first images only hold its pose. Images are read into memory before
+the run, so frames/s is the pipeline's speed.
 
 Datasets: ``kitti`` (its image sequence), ``tum`` (K from its ``K:`` option, else from the freiburg camera its folder
 name gives: a folder naming none is refused before any job runs), and ``sim_camera``, the camera simulator as
@@ -24,11 +25,11 @@ import logging
 from typing import Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, StrictInt
+from pydantic import BaseModel, ConfigDict, Field
 
 from lidarkit.bench.datasets import dataset_label, dataset_options
 from lidarkit.bench.jobs import Job
-from lidarkit.bench.tasks import Metric, Task, TaskOutput, import_module_for_task
+from lidarkit.bench.tasks import Metric, Task, TaskOutput, WholeInt, import_module_for_task
 from lidarkit.bench.tasks._datasets import (OPENED_AT_LOAD, check_reader_options, open_dataset_spec, options_model,
                                              require_kitti_data)
 from lidarkit.errors import ConfigError, EvaluationError
@@ -38,7 +39,7 @@ log = logging.getLogger(__name__)
 
 class VOOptions(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
-    max_frames: StrictInt | None = Field(None, ge=2)  # (strict: YAML's true was read as the number 1)
+    max_frames: WholeInt | None = Field(None, ge=2)  # (YAML's true was read as the number 1)
     align: Literal["auto", "none", "se3", "sim3"] = "auto"
     smoothed: bool = False
 
@@ -208,10 +209,15 @@ def _open_images(job: Job) -> Any:
 
 
 def _alignment_labels(align: str | None) -> dict[str, str]:
-    """Alignment of the APE / RPE metrics for the report labels ("Sim(3)-aligned", "unaligned")."""
+    """Alignment of the metrics for the report labels ("Sim(3)-aligned", "unaligned"). The RPE over 1 frame is
+    alignment-free under an SE(3) alignment or none (one rigid motion of every pose cancels in each relative pose), and
+    is labelled so, as the odometry task's is (it read "SE(3)-aligned" where ``lidarkit vo`` names no alignment); a
+    Sim(3) alignment's scale scales it."""
+    from lidarkit.bench.tasks.odometry import METRIC_ALIGNMENT_BY_NAME
     from lidarkit.eval.ape_rpe import alignment_label
 
     if align is None:
         return {}
     text = alignment_label(align)
-    return {"ape_rmse_m": text, "rpe_trans_rmse_m": text, "final_error_m": text}
+    rpe = METRIC_ALIGNMENT_BY_NAME["rpe_trans_rmse_m"] if align in ("none", "se3") else f"1 frame, {text}"
+    return {"ape_rmse_m": text, "rpe_trans_rmse_m": rpe, "final_error_m": text}
