@@ -61,6 +61,13 @@ def _check_rigid(poses: np.ndarray, source: str, item: str) -> None:
 MAX_STAMP_S = 1e11
 
 
+def stamp_text(seconds: float) -> str:
+    """A time stamp (s) for a message: the shortest decimal that reads back as the same float64, cut at the nanosecond
+    (``.9f`` printed 1700000000.05 as 1700000000.049999952, digits float64 does not hold; ``.6f`` printed two stamps
+    0.3 us apart as one). Pose files keep their own fixed digits (:meth:`Trajectory.to_tum`)."""
+    return np.format_float_positional(float(seconds), unique=True, precision=9, trim="-")
+
+
 def check_seconds(stamps: np.ndarray, path: str | os.PathLike) -> None:
     """DataError naming the first of a file's ``(N,)`` stamps beyond :data:`MAX_STAMP_S`: no time in seconds."""
     beyond = np.abs(stamps) > MAX_STAMP_S
@@ -137,7 +144,7 @@ class Trajectory:
         """One line (the generated one printed every pose: 7,200 characters for 20)."""
         t = self.timestamps_s
         # (TUM epoch stamps read "1.30503e+09-1.30503e+09 s": the span hidden)
-        stamps = "no stamps" if t is None or not len(self) else f"{t[0]:.6f}-{t[-1]:.6f} s ({t[-1] - t[0]:.4g} s)"
+        stamps = "no stamps" if t is None or not len(self) else f"{stamp_text(t[0])}-{stamp_text(t[-1])} s ({t[-1] - t[0]:.4g} s)"
         return f"Trajectory({self.name!r}, {len(self)} poses, {stamps}, path {self.length_m:.4g} m)"
 
     def __getitem__(self, index: slice | np.ndarray | list[int]) -> Trajectory:
@@ -243,13 +250,13 @@ class Trajectory:
             raise DataError(f"time {t[k]} is not a finite number", source=source, location=f"time {k}")
         if len(t) > 1 and not np.all(np.diff(t) > 0):  # (read "<name> (frame 1): timestamps are not strictly increasing")
             k = int(np.argmax(~(np.diff(t) > 0))) + 1
-            raise ConfigError(f"times_s must be strictly increasing: time {k} ({t[k]:.6f} s) is not after time {k - 1} "
-                              f"({t[k - 1]:.6f} s)", source="times_s")
+            raise ConfigError(f"times_s must be strictly increasing: time {k} ({stamp_text(t[k])} s) is not after time {k - 1} "
+                              f"({stamp_text(t[k - 1])} s)", source="times_s")
         outside = np.maximum(stamps[0] - t, t - stamps[-1])
         if len(t) and outside.max() > max_extrapolation_s:
             k = int(np.argmax(outside > max_extrapolation_s))
             raise DataError(
-                f"time {t[k]:.6f} s lies {outside[k]:.3f} s outside the stamps {stamps[0]:.6f}-{stamps[-1]:.6f} s "
+                f"time {stamp_text(t[k])} s lies {outside[k]:.3f} s outside the stamps {stamp_text(stamps[0])}-{stamp_text(stamps[-1])} s "
                 f"(at most {max_extrapolation_s:g} s is extrapolated)", source=source, location=f"time {k}",
             )
         if not len(t):
@@ -340,7 +347,7 @@ class Trajectory:
         step = np.diff(rows[:, 0])
         if (step < 0).any():
             k = int(np.argmax(step < 0)) + 1
-            raise DataError(f"timestamp {rows[k, 0]:.6f} is earlier than the one before it ({rows[k - 1, 0]:.6f})",
+            raise DataError(f"timestamp {stamp_text(rows[k, 0])} is earlier than the one before it ({stamp_text(rows[k - 1, 0])})",
                             source=path, location=file_line(path, f"frame {k}"))
         repeated = np.flatnonzero(step == 0) + 1
         if repeated.size > len(rows) / 2:  # no recorder's glitch: the file's stamps lost their digits (90 % left out, scored)

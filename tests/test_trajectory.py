@@ -144,7 +144,7 @@ def test_interpolated_poses_between_and_just_beyond_the_stamps():
     np.testing.assert_allclose(out.poses_se3, truth(times), atol=1e-12)
     np.testing.assert_array_equal(out.timestamps_s, times)
     assert out.meta == {"pose_instant": "end"} and out.name == "gt"
-    with pytest.raises(DataError, match=r"\(time 1\): time 0\.600000 s lies 0\.200 s outside the stamps"):
+    with pytest.raises(DataError, match=r"\(time 1\): time 0\.6 s lies 0\.200 s outside the stamps"):
         traj.interpolated(np.array([0.3, 0.6]), max_extrapolation_s=0.1)
     with pytest.raises(DataError, match=r"\(time 1\): time nan is not a finite number"):
         traj.interpolated(np.array([0.3, np.nan]))
@@ -161,7 +161,7 @@ def test_interpolation_times_and_bound_of_the_wrong_kind_are_named():
 
     traj = Trajectory(np.tile(np.eye(4), (3, 1, 1)), np.array([0.0, 1.0, 2.0]), name="gt")
     for times in ([1.0, 0.5], [0.5, 0.5]):
-        with pytest.raises(ConfigError, match=r"^times_s: times_s must be strictly increasing: time 1 \(0\.500000 s\) "
+        with pytest.raises(ConfigError, match=r"^times_s: times_s must be strictly increasing: time 1 \(0\.5 s\) "
                                               r"is not after time 0"):
             traj.interpolated(times)
     for bound in (None, "0.1", -1.0, True):
@@ -198,10 +198,10 @@ def test_reprs_are_one_line_and_an_empty_trajectory_has_no_distances():
                            f"degenerate, {int(stats.check_failed.sum())} failing the check, registration "
                            f"{stats.register_s[1:].mean():.3g} s a frame; to_csv() for every frame)")
     # (stamped at the sweep middles, where a non-deskewed estimate refers to: the scans' sweep-end stamps less 0.05 s)
-    assert repr(result.trajectory) == (f"Trajectory('vanilla on sim:street?seed=0', 4 poses, 0.050000-0.350000 s (0.3 s), "
+    assert repr(result.trajectory) == (f"Trajectory('vanilla on sim:street?seed=0', 4 poses, 0.05-0.35 s (0.3 s), "
                                        f"path {result.trajectory.length_m:.4g} m)")
     tum = Trajectory.from_tum(shared_path("evo_testdata", "freiburg1_xyz-groundtruth.txt"))
-    assert "3000 poses, 1305031098.665900-1305031128.755500 s (30.09 s)" in repr(tum)  # (read "1.30503e+09-1.30503e+09 s")
+    assert "3000 poses, 1305031098.6659-1305031128.7555 s (30.09 s)" in repr(tum)  # (read "1.30503e+09-1.30503e+09 s")
     with pytest.raises(ConfigError, match=r"T_left: T_left must be a 4x4 transform, got shape \(3, 3\)"):
         tum.transformed(np.eye(3))
     empty = Trajectory(np.zeros((0, 4, 4)))

@@ -16,7 +16,7 @@ from lidarkit.eval.statistics import DEFAULT_ALPHA, p_text
 
 @app.command("compare")
 def compare_command(
-    run_a: Path = typer.Argument(..., help="Odometry run folder (lidarkit odometry --out) or bench results folder."),
+    run_a: Path = typer.Argument(..., help="Odometry run folder (lidarkit odometry --out) or bench results folder (runs over a CARMEN log: its bench results only)."),
     run_b: Path = typer.Argument(..., help="The run to compare with (same kind and same data as RUN_A)."),
     metric: Optional[str] = typer.Option(
         None, help="Run folders: segment_translation_pct | segment_rotation_deg_per_100m | rpe_translation_m | "

@@ -1108,7 +1108,12 @@ def _not_an_odometry_run(path: Path) -> str:
     if other:
         return (f"{'an' if other[0] in 'aeiou' else 'a'} {other} run folder: compare pairs odometry run folders, or bench "
                 "results folders (the seeds of a suite: lidarkit bench)")
+    carmen = _carmen_run(path)
+    if carmen:
+        return carmen
     layout, images = _dataset_layout(path)
+    if "CARMEN log" in layout:  # (an odometry run of it is no run compare pairs either)
+        return f"a dataset folder ({layout}): compare takes run folders; {CARMEN_ADVICE}"
     if images:  # (odometry does not read images: a VO suite's bench results compare)
         return (f"a dataset folder ({layout}): compare takes run folders; an image sequence compares as bench results "
                 "(a suite with a vo experiment over it: lidarkit bench)")
@@ -1118,6 +1123,41 @@ def _not_an_odometry_run(path: Path) -> str:
         sequence = path.parent if path.name == "velodyne" and _dataset_layout(path.parent)[0] else path
         return f"a dataset folder ({layout}): compare takes run folders; run lidarkit odometry {sequence} --out DIR first"
     return ""
+
+
+#: what to run instead of comparing CARMEN odometry runs (their ground truth is relations, not poses to pair by)
+CARMEN_ADVICE = ("CARMEN runs are compared only as bench results: run a suite with an odometry experiment over the log "
+                 "(lidarkit bench SUITE, docs/benchmarks.md), then lidarkit compare RESULTS RESULTS --method-a A --method-b B")
+
+
+def _carmen_run(path: Path) -> str:
+    """Why the folder ``path`` is an odometry run over a CARMEN log that compare does not pair (its truth is the log's
+    relations, scored by the run, not ground-truth poses: it read "no ground_truth_kitti.txt"), else ''."""
+    import yaml
+
+    if (path / "ground_truth_kitti.txt").exists() or not (path / "config.yaml").is_file():
+        return ""
+    try:
+        options = (yaml.safe_load((path / "config.yaml").read_text(encoding="utf-8")) or {})["run"]["dataset_options"]
+    except (OSError, UnicodeDecodeError, yaml.YAMLError, KeyError, TypeError):
+        return ""
+    if not isinstance(options, dict) or options.get("kind") != "carmen":
+        return ""
+    log = Path(str(options.get("path") or "")).name or "?"
+    truth = "its ground truth: relations between scan times, no poses" if options.get("relations") else "no ground truth"
+    return (f"an odometry run over the CARMEN log {log} ({truth}): compare pairs run folders by their ground-truth "
+            f"poses; {CARMEN_ADVICE}")
+
+
+def _carmen_logs(path: Path) -> list[str]:
+    """The CARMEN logs (``.clf``, also compressed) in the folder ``path``, by name."""
+    from lidarkit.io import CARMEN_COMPRESSED
+
+    try:
+        names = sorted(p.name for p in path.iterdir() if p.is_file())
+    except OSError:
+        return []
+    return [n for n in names if n.lower().endswith(".clf") or any(n.lower().endswith(f".clf{s}") for s in CARMEN_COMPRESSED)]
 
 
 def _dataset_layout(path: Path) -> tuple[str, bool]:
@@ -1140,6 +1180,11 @@ def _dataset_layout(path: Path) -> tuple[str, bool]:
         return f"{what}: {held}", "velodyne" not in folders
     if (path / "rgb.txt").is_file():
         return "TUM RGB-D layout: rgb.txt", True
+    logs = _carmen_logs(path)
+    if logs:
+        relations = sorted(p.name for p in path.glob("*.relations") if p.is_file())
+        what = "a CARMEN log" if len(logs) == 1 else f"{len(logs)} CARMEN logs"
+        return f"{what}: {', '.join([*logs[:3], *relations[:3]])}", False
     if (path / "sequences").is_dir():
         scans = any((path / "sequences").glob("*/velodyne"))
         return "a KITTI odometry root: sequences/", not scans and any((path / "sequences").glob("*/image_[02]"))

@@ -39,7 +39,7 @@ from lidarkit.errors import ConfigError, DataError
 from lidarkit.io.base import Scan, checked_index, option_path
 from lidarkit.params import is_real_number
 from lidarkit.textfile import read_lines, read_numeric_table
-from lidarkit.trajectory import Trajectory
+from lidarkit.trajectory import Trajectory, stamp_text
 
 log_ = logging.getLogger(__name__)
 
@@ -187,7 +187,8 @@ class Relations:
 
     def __repr__(self) -> str:
         """One line (the generated one printed five arrays: ~600 characters)."""
-        span = f", {min(self.t1_s.min(), self.t2_s.min()):.6f}-{max(self.t1_s.max(), self.t2_s.max()):.6f} s" if len(self) else ""
+        span = (f", {stamp_text(min(self.t1_s.min(), self.t2_s.min()))}-{stamp_text(max(self.t1_s.max(), self.t2_s.max()))} s"
+                if len(self) else "")
         return f"Relations({self.source!r}, {len(self)} relations{span})"
 
     @classmethod
@@ -440,7 +441,7 @@ class CarmenLog:
         if same.size:
             first, second = sorted((int(seen[same[0]]), int(seen[same[0] + 1])))
             raise DataError(
-                f"two laser scans with the same timestamp {float(raw[second]):.6f} s (also line {int(log.lines[first])})",
+                f"two laser scans with the same timestamp {stamp_text(raw[second])} s (also line {int(log.lines[first])})",
                 source=self.path, location=f"line {int(log.lines[second])}",
             )
         self._timestamps_s, glitched = _increasing_stamps(raw)

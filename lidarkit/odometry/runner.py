@@ -765,7 +765,7 @@ def run(
     prior_reasons = motion_prior_frames(fallback, check.failed_fitness, sweeps)
     covariances = (relative_cov, propagate(poses, relative_cov, fell_back=np.logical_or.reduce(list(prior_reasons.values())),
                                            sweeps_apart=sweeps)) if want_covariance else None
-    relations_note, relation_scores = _relations_note(sequence, out_dir, trajectory) if reference is None else (None, None)
+    relations_note, relation_scores = _relations_note(sequence, trajectory) if reference is None else (None, None)
     config = {
         "method": name,
         "method_config": config_dict(getattr(registration, "config", None)),
@@ -840,40 +840,37 @@ def _odometry_guess(sequence: ScanSequence, init: str, registration: Any, n_tota
     return np.asarray(odometry.poses_se3, dtype=np.float64)
 
 
-def _relations_note(sequence: ScanSequence, out_dir: str | os.PathLike | None,
-                    trajectory: Trajectory) -> tuple[str | None, dict[str, Any] | None]:
+def _relations_note(sequence: ScanSequence, trajectory: Trajectory) -> tuple[str | None, dict[str, Any] | None]:
     """``(note, relation scores or None)`` of a run without ground truth over a log with relation ground truth (a
-    CARMEN log's ``.relations``; the ACES run said "none: no scores" with relations beside the log), or ``(None, None)``.
-    The note gives the ``lidarkit eval --relations`` command; a log whose stamps the reader moved (Intel: 2042) is scored
-    here instead, through the reader, whose relations move with the scans (that command matches the file's times as
-    logged: 364 of Intel's 499 relations, some on the wrong scan)."""
+    CARMEN log's ``.relations``), or ``(None, None)``. The run scores them itself with the bench's function
+    (:func:`lidarkit.eval.relations.relation_error` on the reader's relations, which carry its scan gap and move with
+    the stamps it moved: Intel's 2042), so a run folder holds the figures a bench job and ``lidarkit eval --relations``
+    give (the ACES run only named that command); the note says why when none is scored."""
     relations = (getattr(sequence, "reader_options", None) or {}).get("relations")
     if not relations:
         return None, None
-    relations = os.path.normpath(relations)  # (a dataset given as carmen:../shared/... printed its path with .. left in)
-    n_moved = int(getattr(sequence, "n_restamped", 0) or 0)
-    if not n_moved:
-        if out_dir is None:  # (it named a poses_tum.txt this run never wrote)
-            return (f"none: no scores here; the dataset has relation ground truth: score it in memory with "
-                    f"lidarkit.eval.relation_error(result.trajectory, dataset.relations), or run with --out DIR "
-                    f"(out_dir=DIR), then lidarkit eval --relations {relations} DIR/poses_tum.txt"), None
-        return (f"none: no scores here; the dataset has relation ground truth: lidarkit eval --relations {relations} "
-                f"{Path(out_dir) / 'poses_tum.txt'}"), None
     from lidarkit.eval.relations import DEFAULT_MAX_TIME_DIFF_S, relation_error
 
-    why = (f"the reader moved {n_moved} scan stamps and the relations' times with them (lidarkit eval --relations "
-           "matches the file's times as logged: not for this log)")
-    # the relations' times are scan stamps here, and the moved stamps lie 0.1 ms apart where they pooled: within the
-    # default 0.01 s a relation of a scan the estimate skips (--frames A:B:2) took a neighbour's pose (164 of 297)
-    gaps = np.diff(np.sort(np.asarray(sequence.timestamps_s, dtype=np.float64)))
-    gaps = gaps[gaps > 0]
-    tolerance = min(DEFAULT_MAX_TIME_DIFF_S, 0.5 * float(gaps.min())) if gaps.size else DEFAULT_MAX_TIME_DIFF_S
+    n_moved = int(getattr(sequence, "n_restamped", 0) or 0)
+    why = (f"; the reader moved {n_moved} scan stamps and the relations' times with them (lidarkit eval --relations "
+           "matches the file's times as logged: not for this log)" if n_moved else "")
+    ground_truth = getattr(sequence, "relations", None)
+    if ground_truth is None:  # (a reader that names a relations file but gives none to score)
+        return f"none: no scores here; the reader names relations ({os.path.normpath(relations)}) but gives none", None
+    # relations that know their log's scan gap keep the tolerance under half of it (relation_error); others are kept
+    # under half the run's own smallest gap: within the default 0.01 s a relation of a scan the estimate skips (--frames
+    # A:B:2) took a neighbour's pose (164 of 297 on Intel's pooled stamps, 0.1 ms apart)
+    tolerance = DEFAULT_MAX_TIME_DIFF_S
+    if getattr(ground_truth, "scan_gap_s", None) is None:
+        gaps = np.diff(np.sort(np.asarray(sequence.timestamps_s, dtype=np.float64)))
+        gaps = gaps[gaps > 0]
+        tolerance = min(DEFAULT_MAX_TIME_DIFF_S, 0.5 * float(gaps.min())) if gaps.size else DEFAULT_MAX_TIME_DIFF_S
     try:
-        scored = relation_error(trajectory, sequence.relations, max_time_diff_s=tolerance)
+        scored = relation_error(trajectory, ground_truth, max_time_diff_s=tolerance)
     except EvaluationError as err:
-        return f"none: no scores here; the relation ground truth scores nothing of this run ({err.reason}); {why}", None
+        return f"none: no scores here; the relation ground truth scores nothing of this run ({err.reason}){why}", None
     return (f"relations only, scored through the reader (metrics \"relations\"): {scored.n_used} of {scored.n_relations}, "
-            f"mean error {scored.translation_abs['mean']:.4f} m / {scored.rotation_abs['mean']:.4f} deg; {why}"), scored.to_dict()
+            f"mean error {scored.translation_abs['mean']:.4f} m / {scored.rotation_abs['mean']:.4f} deg{why}"), scored.to_dict()
 
 
 def _plain(meta: dict) -> dict:
