@@ -171,6 +171,8 @@ def test_library_inputs_are_checked_before_the_frames():
     for stamps in (np.arange(3.0), np.r_[0.0, np.nan, np.arange(2.0, len(images))], np.arange(len(images))[::-1] * 0.1):
         with pytest.raises(DataError, match="vo timestamps_s: .* time stamps for .* images, which must be finite and increasing"):
             vo.run(images, timestamps_s=stamps, on_frame=seen.append)
+    with pytest.raises(DataError, match=r"^vo timestamps_s: time stamps must be numbers in seconds \(could not convert"):
+        vo.run(images, timestamps_s=["a"] * len(images), on_frame=seen.append)  # (numpy's own ValueError)
     assert seen == []  # refused before the first frame
 
 

@@ -263,7 +263,10 @@ class MonoVO:
         if timestamps_s is None:
             timestamps_s = getattr(images, "timestamps_s", None)
         if timestamps_s is not None:  # checked before the frames (a wrong length failed after all of them)
-            stamps = np.asarray(timestamps_s, dtype=np.float64).reshape(-1)
+            try:
+                stamps = np.asarray(timestamps_s, dtype=np.float64).reshape(-1)
+            except (TypeError, ValueError) as err:  # (a list of text was numpy's own ValueError)
+                raise DataError(f"time stamps must be numbers in seconds ({err})", source="vo timestamps_s") from None
             if len(stamps) != n or not np.isfinite(stamps).all() or not (np.diff(stamps) > 0).all():
                 raise DataError(f"{len(stamps)} time stamps for {n} images, which must be finite and increasing",
                                 source="vo timestamps_s")
