@@ -33,6 +33,7 @@ def test_vo_on_bundled_kitti_sample_writes_run_folder(tmp_path, capsys):
                             "--set", "matching.klt_window_px=17"], capsys)
     assert code in (0, None)
     assert "frames" in stdout and "APE raw (SE(3)-aligned)" in stdout
+    assert "RPE raw 1 frame (alignment-free)" in stdout  # (an SE(3) alignment leaves relative poses as they are)
     for name in ("poses_kitti.txt", "poses_tum.txt", "poses_smoothed_kitti.txt", "poses_smoothed_tum.txt",
                  "diagnostics.csv", "config.yaml", "metrics.json", "trajectory.png", "features.gif"):
         assert (out / name).is_file(), name
@@ -964,6 +965,7 @@ def test_tum_poses_for_an_image_0_folder_name_the_kind_that_reads_it_as_images(t
     code, stdout, err = _run(["vo", str(seq / "image_0"), "--poses", str(tum), "--poses-format", "tum", "--kind", "images",
                               "--calib", str(seq / "calib.txt")], capsys)
     assert code in (0, None) and "APE raw (Sim(3)-aligned)" in stdout, err
+    assert "RPE raw 1 frame (Sim(3)-aligned)" in stdout  # (its scale scales every relative pose)
 
 
 def test_tum_poses_given_to_a_kitti_sequence_name_a_vo_command_that_reads_them(tmp_path, capsys):

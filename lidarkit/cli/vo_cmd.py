@@ -251,7 +251,9 @@ def vo_command(
         table.add_row("scored from frame", f"{metrics['scored_from_frame']} (the frames before it unreadable: not estimates)")
     for variant, m in ((v, metrics[v]) for v in ("raw", "smoothed") if v in metrics):
         table.add_row(f"APE {variant} ({alignment_label(m['align'])}) [m]", f"{m['ape_rmse_m']:.4f}")
-        table.add_row(f"RPE {variant} 1 frame [m / deg]",
+        # (one rigid motion of every pose cancels in each relative pose; a Sim(3) alignment's scale does not)
+        rpe_align = alignment_label(m["align"]) if m["align"] == "sim3" else "alignment-free"
+        table.add_row(f"RPE {variant} 1 frame ({rpe_align}) [m / deg]",
                       f"{m['rpe_trans_rmse_m']:.4f} / {m['rpe_rot_rmse_deg']:.4f}")
         # (gt scale: the raw distance of the last positions, both trajectories starting together; else after alignment)
         final_align = "unaligned" if cfg.scale.mode == "gt" else alignment_label(m["align"])
