@@ -155,7 +155,7 @@ def frame_namer(sequence: Any) -> Callable[[int], str]:
 def _restated_first_pose(registration: Any, dataset_name: str, where: str) -> np.ndarray | None:
     """A stateful variant's first pose at the instant its other poses refer to, where the variant restates it once the
     second frame is registered (pipeline deskewing to the sweep's start or middle: its first sweep, registered with no
-    motion known, is at its end), checked; None where the first pose stands."""
+    motion known, is taken at its end, as its second is), checked; None where the first pose stands."""
     restated = getattr(registration, "restated_first_pose", None)
     if restated is None:
         return None

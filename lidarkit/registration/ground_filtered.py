@@ -80,6 +80,12 @@ SOLVED_AS_VANILLA = {
 #: What the pose of the result being finished was solved as (:func:`pose_basis`), for :meth:`GroundFilteredICP._calibration`.
 _POSE_BASIS: contextvars.ContextVar[str | None] = contextvars.ContextVar("ground_filtered_pose_basis", default=None)
 
+#: The per-point times of the alignment under way, ``(source fractions, target fractions, sweeps_apart)`` (None: no
+#: deskew), handed from :meth:`GroundFilteredICP.align` to its ``_align`` through the base class's checks: per call and
+#: per thread (kept on the instance, two threads aligning on one instance read each other's and failed or drifted).
+_SWEEP_TIMES: contextvars.ContextVar[tuple[np.ndarray, np.ndarray, float] | None] = contextvars.ContextVar(
+    "ground_filtered_sweep_times", default=None)
+
 
 #: The legacy fields each ground method reads (field -> its parameter name in ground_params).
 LEGACY_FIELDS_READ = {
@@ -293,8 +299,6 @@ class GroundFilteredICP(VanillaICP):
     def __init__(self, config: GroundFilteredConfig | None = None, **params: Any):
         super().__init__(config, **params)
         self.segmenter = ground_segmenter(self.config)
-        self._fractions: tuple[np.ndarray | None, np.ndarray | None] = (None, None)
-        self._sweeps_apart = 1.0
         self._told_2d = False
 
     @property
@@ -313,12 +317,13 @@ class GroundFilteredICP(VanillaICP):
         if self.config.deskew and source_times_s is not None and target_times_s is not None:
             for k, (name, pts, times) in enumerate((("source", source_xyz, source_times_s), ("target", target_xyz, target_times_s))):
                 fractions[k] = sweep_fraction(check_point_times(times, len(pts), f"{name} times"))
-        self._fractions = (fractions[0], fractions[1]) if fractions[0] is not None and fractions[1] is not None else (None, None)
-        self._sweeps_apart = check_sweeps_apart(sweeps_apart)
+        sweeps_apart = check_sweeps_apart(sweeps_apart)
+        timed = fractions[0] is not None and fractions[1] is not None
+        token = _SWEEP_TIMES.set((fractions[0], fractions[1], sweeps_apart) if timed else None)
         try:
             return super().align(source_xyz, target_xyz, init_T)
         finally:
-            self._fractions, self._sweeps_apart = (None, None), 1.0
+            _SWEEP_TIMES.reset(token)
 
     def _align(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray) -> RegistrationResult:
         c = self.config
@@ -330,17 +335,17 @@ class GroundFilteredICP(VanillaICP):
             return dataclasses.replace(result, extra={**result.extra, "ground_removal": SKIPPED_2D_NOTE, "ground_method": c.ground_method,
                                                       "ground_refined": False})
         ground = [self.segmenter.segment(pts) for pts in (source_xyz, target_xyz)]
-        self._ground = ground
+        sweep_times = _SWEEP_TIMES.get()
         masks = [~g for g in ground]
         kept = {"source_points_kept": int(masks[0].sum()), "target_points_kept": int(masks[1].sum()), "ground_method": c.ground_method}
         fewest = min(kept["source_points_kept"], kept["target_points_kept"])
         if fewest < c.min_points_kept:
             why = f"{TOO_LITTLE_REASON}: {fewest} points (min_points_kept={c.min_points_kept}, {c.ground_method})"
-            return self._fallback(source_xyz, target_xyz, init_T, why, kept)
-        result = self._solve(source_xyz, target_xyz, init_T, masks)
+            return self._fallback(source_xyz, target_xyz, init_T, why, kept, ground, sweep_times)
+        result = self._solve(source_xyz, target_xyz, init_T, masks, ground, sweep_times)
         if c.fallback_on_degenerate and result.converged and _degenerate_after_refine(result.degeneracy, c.ground_refine and not c.planar):
             why = f"{TOO_LITTLE_REASON}: degenerate geometry (min/max eigenvalue {result.degeneracy.ratio:.1e}, {c.ground_method})"
-            return self._fallback(source_xyz, target_xyz, init_T, why, kept, result.degeneracy)
+            return self._fallback(source_xyz, target_xyz, init_T, why, kept, ground, sweep_times, result.degeneracy)
         return dataclasses.replace(result, extra={**result.extra, **kept})
 
     def _finish(self, result: RegistrationResult, runtime: float) -> RegistrationResult:
@@ -369,29 +374,32 @@ class GroundFilteredICP(VanillaICP):
             return learned, ["pose not ground-refined"]
         return learned, unlearned
 
-    def _solve(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray, masks: list[np.ndarray]) -> RegistrationResult:
-        """Staged ICP of the points ``masks`` keep (deskewed when per-point times came), then the ground refinement."""
+    def _solve(
+        self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray, masks: list[np.ndarray],
+        ground: list[np.ndarray], sweep_times: tuple[np.ndarray, np.ndarray, float] | None,
+    ) -> RegistrationResult:
+        """Staged ICP of the points ``masks`` keep (deskewed when ``sweep_times``, the clouds' sweep fractions and
+        ``sweeps_apart``, came), then the ground refinement on the ``ground`` points."""
         c = self.config
         clouds = [pts[m] for pts, m in zip((source_xyz, target_xyz), masks)]
-        frac_src, frac_dst = self._fractions
-        deskew = frac_src is not None and frac_dst is not None
+        deskew = sweep_times is not None
         if deskew:
-            frac_src, frac_dst = frac_src[masks[0]], frac_dst[masks[1]]
+            frac_src, frac_dst, sweeps_apart = sweep_times[0][masks[0]], sweep_times[1][masks[1]], sweep_times[2]
             raw_source = clouds[0]
-            sweep = se3_fraction(init_T, self._sweeps_apart)
+            sweep = se3_fraction(init_T, sweeps_apart)
             clouds = [deskew_to_sweep_end(clouds[0], frac_src, sweep), deskew_to_sweep_end(clouds[1], frac_dst, sweep)]
         src, dst = prepare(clouds[0], clouds[1], c.voxel_size_m)
         neighbors = target_index(src, dst, c, self.name)
         result = staged_icp(src, dst, init_T, neighbors, c)
         if deskew and result.converged:  # once more with the source deskewed by the estimated motion
-            src = prepare(deskew_to_sweep_end(raw_source, frac_src, se3_fraction(result.T_target_source, self._sweeps_apart)), clouds[1], c.voxel_size_m)[0]
+            src = prepare(deskew_to_sweep_end(raw_source, frac_src, se3_fraction(result.T_target_source, sweeps_apart)), clouds[1], c.voxel_size_m)[0]
             first = result
             result = staged_icp(src, dst, result.T_target_source, neighbors, c)
             result = dataclasses.replace(result, iterations=first.iterations + result.iterations, extra={**result.extra, "deskewed": True})
         if c.ground_refine and result.converged and not c.planar:  # planar: z, roll and pitch stay as in init_T
             # raw ground points: the sweep's motion mostly slides them along the ground, which a plane residual ignores,
             # and deskewing them with a motion that carries the last frame's tilt error would feed that error back
-            grounds = [pts[g] for pts, g in zip((source_xyz, target_xyz), self._ground)]
+            grounds = [pts[g] for pts, g in zip((source_xyz, target_xyz), ground)]
             # clouds far from their frame's origin (georeferenced, a map frame) are refined around the target's likely
             # sensor: the ground's range and the tilt's lever arms are the sensor's (about the far origin nothing lay
             # within range and the pose came back unrefined)
@@ -405,14 +413,15 @@ class GroundFilteredICP(VanillaICP):
         return dataclasses.replace(result, extra={**result.extra, "ground_refined": False})  # (its calibration: pose_basis)
 
     def _fallback(
-        self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray, why: str, kept: dict, degeneracy: Degeneracy | None = None
+        self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray, why: str, kept: dict, ground: list[np.ndarray],
+        sweep_times: tuple[np.ndarray, np.ndarray, float] | None, degeneracy: Degeneracy | None = None,
     ) -> RegistrationResult:
         c = self.config
         extra = {**kept, "ground_removal_flagged": True, "fallback": c.fallback}
         if c.fallback == "thinned_ground":
             masks = [~g | thin_ground(local_origin.shift(pts, local_origin.sensor_proxy(pts)), g, c.fallback_ground_share, c.fallback_ground_range_m)
-                     for pts, g in zip((source_xyz, target_xyz), self._ground)]  # (ranges from the likely sensor, see _solve)
-            result = self._solve(source_xyz, target_xyz, init_T, masks)
+                     for pts, g in zip((source_xyz, target_xyz), ground)]  # (ranges from the likely sensor, see _solve)
+            result = self._solve(source_xyz, target_xyz, init_T, masks, ground, sweep_times)
             if result.converged:  # (its own reason kept, as with_ground's: "degenerate geometry: ..." was dropped)
                 reason = f"{why}; solved with {c.fallback_ground_share:g} of the ground points added back" + (
                     f"; {result.reason}" if result.reason else "")

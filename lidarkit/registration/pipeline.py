@@ -446,7 +446,7 @@ class PipelineRegistration(Registration):
     def register_frame(self, points_xyz: np.ndarray, point_times_s: np.ndarray | None = None, sweeps_apart: float = 1.0) -> np.ndarray:
         """Register one sweep into the map; returns ``T_world_lidar`` at the deskew reference instant (the first sweep's
         at its end, no motion being known: :attr:`restated_first_pose` has it at the reference once the second sweep
-        is registered). A component's
+        is registered; the second, deskewed with no motion known too, is restated alike when returned). A component's
         failure (a plugin kernel's NaN weights in scipy) is a RegistrationError naming the variant, as in ``align``.
         ``sweeps_apart``: sweeps since the previous frame (frames that skip scans): the deskew takes the motion between
         frames scaled to one sweep (taken whole, N sweeps apart deskewed N times too much); the prediction the previous
@@ -477,7 +477,7 @@ class PipelineRegistration(Registration):
         if c["map"].empty or len(source) == 0:
             T, info = guess, {"iterations": 0, "n_correspondences": 0, "rmse_history": ()}
         else:
-            T, info = self._icp(source, map_points, guess, sigma, gate)
+            T, info = self._icp(c, source, map_points, guess, sigma, gate)
         threshold.update(se3_inverse(guess) @ T)
         c["map"].update(map_points, T)
         self.last_delta = se3_inverse(self.last_pose) @ T
@@ -490,13 +490,16 @@ class PipelineRegistration(Registration):
         if frame is raw:  # undeskewed: the pose as registered
             return T.copy()
         sweep_motion = se3_fraction(self.last_delta, sweeps_apart)
-        if self._frames_registered == 2:  # the first frame, registered with no motion known, is at its sweep's end:
-            # its pose at the reference instant, from this frame's motion over one sweep (the caller replaces it)
-            first = _pose(c["deskew"], c["deskew"].first_reported(self._first_pose, sweep_motion), "restated first pose")
+        motion = c["deskew"]
+        if self._frames_registered == 2:  # the first two sweeps, deskewed with no motion known (the identity), refer to
+            # one instant: both restated alike by this frame's motion over one sweep (the caller replaces the first);
+            # this frame reported as a deskewed one, the middle run's first step read 1.49 m for a true 1.00 m
+            first = _pose(motion, motion.first_reported(self._first_pose, sweep_motion), "restated first pose")
             self.restated_first_pose = None if np.array_equal(first, self._first_pose) else first
+            return _pose(motion, motion.first_reported(T, sweep_motion), "reported pose").copy()
         # the pose at the reference instant (the deskew component may register at another one); a copy: a component
         # that reports the pose as registered handed back last_pose itself, and a caller's edit moved every later frame
-        return _pose(c["deskew"], c["deskew"].reported(T, sweep_motion), "reported pose").copy()
+        return _pose(motion, motion.reported(T, sweep_motion), "reported pose").copy()
 
     # ------------------------------------------------------------------ stages
     def _refuse_2d(self, source_xyz: np.ndarray, target_xyz: np.ndarray, components: dict[str, Any] | None = None) -> None:
@@ -519,20 +522,20 @@ class PipelineRegistration(Registration):
         source = map_points if cfg.source_voxel_factor is None else first_per_voxel(map_points, cfg.source_voxel_factor * v, order, cfg.voxel_backend)
         return map_points, source
 
-    def _source_covariances(self, source: np.ndarray, dense: np.ndarray) -> np.ndarray | None:
-        residual = self._components["residual"]
+    def _source_covariances(self, residual: Any, source: np.ndarray, dense: np.ndarray) -> np.ndarray | None:
         if not residual.needs_covariances:
             return None
         _, cov = pca_geometry(dense, cKDTree(dense), source, self.config.source_covariance_neighbors)
         return plane_regularized(cov, getattr(residual.config, "epsilon", 1e-3))
 
     def _icp(
-        self, source: np.ndarray, dense: np.ndarray, guess: np.ndarray, sigma_m: float, max_distance_m: float
+        self, c: dict[str, Any], source: np.ndarray, dense: np.ndarray, guess: np.ndarray, sigma_m: float, max_distance_m: float
     ) -> tuple[np.ndarray, dict[str, Any]]:
-        """Gauss-Newton ICP of ``source`` (sensor frame) against the map from ``guess``; returns ``T_world_lidar``."""
-        c = self._components
+        """Gauss-Newton ICP of ``source`` (sensor frame) against the map of components ``c`` from ``guess``; returns
+        ``T_world_lidar``. ``c`` is passed, not read from the instance: a pairwise alignment runs on components of its
+        own, and two run from two threads on one instance read each other's map (poses 0.7 m off, reported converged)."""
         local_map, residual, kernel = c["map"], c["residual"], c["kernel"]
-        cov_local = self._source_covariances(source, dense)
+        cov_local = self._source_covariances(residual, source, dense)
         moved = transform_points(guess, source)
         T_icp = np.eye(4)
         history: list[float] = []
@@ -594,14 +597,9 @@ class PipelineRegistration(Registration):
                                         f"{local_origin.where_cloud_lies(given[name])})", source=name)
         target_map, _ = self._voxelize(target_xyz)
         dense, source = self._voxelize(source_xyz)
-        saved = self._components
-        self._components = c
-        try:
-            c["map"].update(target_map, np.eye(4))
-            threshold = c["threshold"]
-            T, info = self._icp(source, dense, init_T, *_distances(threshold))
-        finally:
-            self._components = saved
+        c["map"].update(target_map, np.eye(4))
+        threshold = c["threshold"]
+        T, info = self._icp(c, source, dense, init_T, *_distances(threshold))
         inlier = threshold.max_distance_m if np.isfinite(threshold.max_distance_m) else UNLIMITED_INLIER_DISTANCE_M
         assessment = assess_alignment(source, c["map"].points_xyz, T, inlier)
         result = assessment.to_result(
@@ -613,7 +611,7 @@ class PipelineRegistration(Registration):
             # ends with the RMSE at the final pose over the assessment's pairs (the fitness's, and kiss's RMSE): the loop's
             # own voxel-neighbourhood pairs alone read 0.012 m beside a fitness of 0.999 for a pose 0.46 m off
             rmse_history=(*info["rmse_history"], assessment.rmse_m),
-            extra={"threshold_sigma_m": threshold.sigma_m, "source_points": len(source), "components": self.describe()},
+            extra={"threshold_sigma_m": threshold.sigma_m, "source_points": len(source), "components": describe_components(c)},
         )
         if assessment.n_correspondences < 3:
             import dataclasses
