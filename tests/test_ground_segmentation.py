@@ -479,3 +479,16 @@ def test_ground_filtered_seed_is_described_as_the_numpy_draws_it_seeds():
 
     description = GroundFilteredConfig.model_fields["seed"].description
     assert description == "ransac method: seed of the numpy RANSAC draws" and "Open3D" not in description
+
+
+def test_ground_parameters_without_a_space_after_the_colon_say_what_yaml_read():
+    """ground_params={threshold_m:0.3} reads in YAML as the key "threshold_m:0.3" with no value: it was refused as an
+    extra input with no word of why, in ground_filtered's ground_params and in a ground_filter step's options alike."""
+    from lidarkit.cli.app import parse_params
+
+    hint = r"invalid parameters \(threshold_m:0\.3: Extra inputs are not permitted\) \(YAML needs a space after ':': \{threshold_m: 0\.3\}\); valid"
+    with pytest.raises(ConfigError, match=r"^ground segmenter 'local_plane': " + hint):
+        get_icp("ground_filtered", **parse_params(["ground_params={threshold_m:0.3}"]))
+    with pytest.raises(ConfigError, match=r"^ground segmenter 'local_plane': " + hint):
+        get_icp("pipeline", **parse_params(["preprocess=[{name: ground_filter, method: local_plane, options: {threshold_m:0.3}}]"]))
+    assert get_icp("ground_filtered", **parse_params(["ground_params={threshold_m: 0.3}"])).config.ground_params == {"threshold_m": 0.3}

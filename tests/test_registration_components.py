@@ -580,3 +580,20 @@ def test_a_component_mapping_without_spaces_after_colons_says_what_yaml_read():
                                           r"\{name: huber, scale_m: 0\.5\}\)$"):
         get_icp("pipeline", **parse_params(["kernel={name:huber,scale_m:0.5}"]))
     assert get_icp("pipeline", **parse_params(["kernel={name: huber, scale_m: 0.5}"])).config.kernel == {"name": "huber", "scale_m": 0.5}
+
+
+def test_a_component_parameter_without_a_space_after_its_colon_says_what_yaml_read():
+    """-p "kernel={name: huber, scale_m:0.3}": the name was read, and "scale_m:0.3" became a key with no value, refused
+    as an extra input with no word of why (the name key alone had the hint)."""
+    import yaml
+
+    from lidarkit.cli.app import parse_params
+
+    with pytest.raises(ConfigError, match=r"^kernel component 'huber': invalid parameters \(scale_m:0\.3: Extra inputs are not "
+                                          r"permitted\) \(YAML needs a space after ':': \{scale_m: 0\.3\}\); valid parameters: "):
+        get_icp("pipeline", **parse_params(["kernel={name: huber, scale_m:0.3}"]))
+    with pytest.raises(ConfigError, match=r"\(YAML needs a space after ':': \{max_iterations: 30\}\); valid parameters: "):
+        get_icp("vanilla", **yaml.safe_load("{max_iterations:30}"))  # (a variant's settings as a YAML mapping)
+    with pytest.raises(ConfigError, match=r"invalid parameters \(scale_m: .*\); valid parameters: ") as plain:
+        make_component("kernel", {"name": "huber", "scale_m": -1.0})
+    assert "YAML" not in str(plain.value)  # (a wrong value, not a glued key: no hint)

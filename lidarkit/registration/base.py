@@ -628,8 +628,11 @@ class Registration:
     overlap_assessment: ClassVar[bool] = True
 
     def __init__(self, config: RegistrationConfig | None = None, **params: Any):
-        if not self.name:  # a subclass used without @register_icp: its results and messages read method ''
-            self.name = type(self).__name__
+        from lidarkit.registration.registry import not_a_choice, recorded_name
+
+        # a class outside the registry by its own name, or ``Sub(vanilla)`` (its results and messages read method '';
+        # a subclass of vanilla read 'vanilla', and its run re-ran as vanilla)
+        self.name = recorded_name(type(self))
         if config is not None and params:
             raise ConfigError("pass either a config object or keyword parameters, not both", source=self.name)
         if config is not None and not isinstance(config, self.Config):  # (another variant's config, or a dict: an
@@ -637,6 +640,9 @@ class Registration:
             raise ConfigError(f"config must be a {self.Config.__name__}, got {type(config).__name__} (or pass the settings "
                               "as keyword parameters)", source=self.name)
         if config is None:
+            unhashable_choices = not_a_choice(self.Config, params)
+            if unhashable_choices:
+                raise ConfigError(f"invalid parameters ({unhashable_choices})", source=self.name)
             try:
                 config = self.Config(**params)
             except InvalidParameters as err:  # (named by the variant, as get_icp names it)
@@ -653,6 +659,15 @@ class Registration:
     def config(self) -> RegistrationConfig:
         """The resolved configuration (all defaults filled in)."""
         return self._config
+
+    @property
+    def reads_data_as(self) -> str | None:
+        """The variant a reader prepares the data for (on KITTI, kiss's and genz's vertical-angle correction) when it is
+        not :attr:`name`: for a subclass outside the registry (recorded as ``Sub(kiss)``), the registered variant it
+        derives from, which its name stood for before; None otherwise."""
+        from lidarkit.registration.registry import registered_ancestor
+
+        return None if self.name == type(self).name else registered_ancestor(type(self))
 
     def align(
         self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray | None = None

@@ -113,7 +113,7 @@ class PipelineConfig(RegistrationConfig):
     @model_validator(mode="before")
     @classmethod
     def _apply_preset(cls, data: Any) -> Any:
-        if isinstance(data, dict) and data.get("preset") in PRESETS:
+        if isinstance(data, dict) and isinstance(data.get("preset"), str) and data["preset"] in PRESETS:  # ([] was unhashable)
             return {**copy.deepcopy(PRESETS[data["preset"]]), **data}
         return data
 

@@ -11,6 +11,7 @@ import logging
 import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
+from lidarkit.geometry import as_points
 from lidarkit.params import is_real_number
 
 # ground segmentation lives in registration.ground; these names stay importable from here
@@ -72,16 +73,31 @@ def _voxel_groups(flat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def range_mask(points_xyz: np.ndarray, min_range_m: float = 0.0, max_range_m: float = np.inf) -> np.ndarray:
-    """Boolean ``(N,)`` mask of points whose distance to the sensor is in ``[min_range_m, max_range_m]``."""
-    if min_range_m < 0 or max_range_m <= min_range_m:
-        raise ConfigError(f"need 0 <= min_range_m < max_range_m, got {min_range_m}, {max_range_m}", source="range crop")
-    r = np.linalg.norm(np.asarray(points_xyz, dtype=np.float64), axis=1)
-    return (r >= min_range_m) & (r <= max_range_m)
+    """Boolean ``(N,)`` mask of points whose distance to the sensor is in ``[min_range_m, max_range_m]``.
+
+    ConfigError unless ``0 <= min_range_m < max_range_m`` with a finite minimum (a NaN bound emptied the cloud without
+    a word), DataError for points that are not ``(N, 3)`` finite numbers (an ``(N, 2)`` array was cropped in 2D)."""
+    _check_range(min_range_m, max_range_m)
+    return _within_range(as_points(points_xyz, "points"), min_range_m, max_range_m)
 
 
 def crop_range(points_xyz: np.ndarray, min_range_m: float = 0.0, max_range_m: float = np.inf) -> np.ndarray:
-    """Points whose distance to the sensor lies in ``[min_range_m, max_range_m]``."""
-    return np.asarray(points_xyz, dtype=np.float64)[range_mask(points_xyz, min_range_m, max_range_m)]
+    """Points whose distance to the sensor lies in ``[min_range_m, max_range_m]`` (checked as :func:`range_mask`)."""
+    _check_range(min_range_m, max_range_m)
+    pts = as_points(points_xyz, "points")
+    return pts[_within_range(pts, min_range_m, max_range_m)]
+
+
+def _check_range(min_range_m: float, max_range_m: float) -> None:
+    if not (is_real_number(min_range_m) and is_real_number(max_range_m) and np.isfinite(min_range_m)
+            and 0 <= min_range_m < max_range_m):  # (NaN fails every comparison)
+        shown = [repr(v.item() if isinstance(v, np.generic) else v) for v in (min_range_m, max_range_m)]
+        raise ConfigError(f"need 0 <= min_range_m < max_range_m (a finite minimum), got {shown[0]}, {shown[1]}", source="range crop")
+
+
+def _within_range(points_xyz: np.ndarray, min_range_m: float, max_range_m: float) -> np.ndarray:
+    r = np.linalg.norm(points_xyz, axis=1)
+    return (r >= min_range_m) & (r <= max_range_m)
 
 
 def remove_ground(points_xyz: np.ndarray, method: str = "height", **options: float) -> np.ndarray:

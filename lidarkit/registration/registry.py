@@ -8,6 +8,7 @@ loaded lazily the first time the registry is asked for names or for that variant
 from __future__ import annotations
 
 import logging
+import re
 from collections.abc import Callable
 from importlib.metadata import entry_points
 from types import UnionType
@@ -106,10 +107,44 @@ def missing_optional_variants() -> dict[str, str]:
     return {name: f"pip install 'lidarkit[{extra}]'" for name, (_, extra) in OPTIONAL_VARIANTS.items() if name not in _VARIANTS}
 
 
+def _same_class(a: type, b: type) -> bool:
+    """``a`` is ``b``, or a redefinition of it (a notebook cell run again: the registry holds the newer class)."""
+    return a is b or (a.__module__, a.__qualname__) == (b.__module__, b.__qualname__)
+
+
+def recorded_name(cls: type[Registration]) -> str:
+    """What results and runs of variant class ``cls`` record as their method: the name it is registered under; for a
+    class outside the registry, a name of its own that no registered variant holds, else ``ClassName(parent)`` naming
+    the variant it derives from. (A subclass inherits its parent's ``name``: a vanilla with another ``_align`` was
+    recorded as ``vanilla`` with vanilla's config, and re-running that config ran vanilla.)"""
+    own = vars(cls).get("name")
+    if not (own and own in _VARIANTS):
+        _load_plugins()  # (a plugin's class instantiated before its entry point was loaded: registered now)
+        own = vars(cls).get("name")
+    if own and (own not in _VARIANTS or _same_class(_VARIANTS[own], cls)):
+        return own
+    parent = next((str(vars(k)["name"]) for k in cls.__mro__[1:] if vars(k).get("name")), "")
+    return f"{cls.__name__}({parent})" if parent else cls.__name__
+
+
+def registered_ancestor(cls: type[Registration]) -> str | None:
+    """The name of the nearest registered variant in ``cls``'s bases (``cls`` itself included), None for none."""
+    for klass in cls.__mro__:
+        own = vars(klass).get("name")
+        if own and own in _VARIANTS and _same_class(_VARIANTS[own], klass):
+            return str(own)
+    return None
+
+
 def get_icp_class(name: str) -> type[Registration]:
     """The class registered as ``name``; unknown names raise ConfigError listing the known ones."""
     if name not in _VARIANTS:
         _load_plugins()
+    subclass = re.fullmatch(r"(\w+)\(([^()\s]+)\)", name) if isinstance(name, str) and name not in _VARIANTS else None
+    if subclass:  # (recorded_name's form: a run of such a class re-run from its config.yaml)
+        raise ConfigError(f"{name!r} is how runs record {subclass[1]}, a subclass of {subclass[2]} outside the registry: it "
+                          f"cannot be run by name until it is registered (@register_icp or a '{ENTRY_POINT_GROUP}' entry "
+                          "point)", source="method")
     if name in _BROKEN and name not in _VARIANTS:  # (a plugin named like a built-in: the built-in answers)
         raise ConfigError(f"this plugin is installed but could not be loaded: {_BROKEN[name]}", source=f"ICP plugin {name!r}")
     if name in OPTIONAL_VARIANTS and name not in _VARIANTS:  # (it read as a typo: "unknown ICP method 'small_gicp'")
@@ -149,17 +184,40 @@ def config_fields(name: str) -> dict[str, tuple[str, Any, str]]:
     return out
 
 
+def not_a_choice(config: type[RegistrationConfig], params: dict[str, Any]) -> str:
+    """``"preset: one of 'kiss_like' | 'vanilla_seq' | None, got list []"`` for the params of choice fields (``Literal``)
+    given a list or a mapping, else ``""``: checked before the config's own validators, which may look a choice up
+    (``preset=[]`` raised a bare "unhashable type: 'list'")."""
+    problems = []
+    for key, value in params.items():
+        info = config.model_fields.get(key)
+        if info is None or not isinstance(value, (list, dict, set)):
+            continue
+        annotation = info.annotation
+        choices = [annotation] + [a for a in get_args(annotation) if get_origin(annotation) in (Union, UnionType)]
+        if any(get_origin(a) is Literal for a in choices):
+            problems.append(f"{key}: one of {_type_name(annotation)}, got {type(value).__name__} {value!r:.60}")
+    return "; ".join(problems)
+
+
 def get_icp(name: str, **params: Any) -> Registration:
     """A configured instance of variant ``name``; bad or unknown params raise ConfigError listing valid ones."""
+    from lidarkit.registration.components.registry import glued_yaml_hint
+
     cls = get_icp_class(name)
     valid = ", ".join(f"{k}={shown_default(v[1])}" for k, v in config_fields(name).items()) or "(none)"
+    unhashable_choices = not_a_choice(cls.Config, params)
+    if unhashable_choices:
+        raise ConfigError(f"invalid parameters ({unhashable_choices}); valid parameters: {valid}", source=f"method {name!r}")
     try:
         config = cls.Config(**params)
     except pydantic.ValidationError as err:
         problems = validation_problems(err, unnamed="")
-        raise ConfigError(f"invalid parameters ({problems}); valid parameters: {valid}", source=f"method {name!r}") from None
+        raise ConfigError(f"invalid parameters ({problems}){glued_yaml_hint(params)}; valid parameters: {valid}",
+                          source=f"method {name!r}") from None
     except ValueError as err:
-        raise ConfigError(f"invalid parameters ({err}); valid parameters: {valid}", source=f"method {name!r}") from None
+        raise ConfigError(f"invalid parameters ({err}){glued_yaml_hint(params)}; valid parameters: {valid}",
+                          source=f"method {name!r}") from None
     return cls(config=config)
 
 

@@ -189,6 +189,14 @@ def component_fields(kind: str, name: str) -> dict[str, tuple[str, Any, str]]:
 ComponentSpec = str | Mapping[str, Any]
 
 
+def glued_yaml_hint(params: Mapping[Any, Any]) -> str:
+    """`` (YAML needs a space after ':': {scale_m: 0.3})`` for the keys of ``params`` that YAML read from ``key:value``
+    written without the space (``{scale_m:0.3}`` is the key ``"scale_m:0.3"`` with no value), else ``""``: the reason
+    an "Extra inputs are not permitted" alone did not give."""
+    glued = [k for k, v in params.items() if v is None and isinstance(k, str) and ":" in k]
+    return f" (YAML needs a space after ':': {{{', '.join(k.replace(':', ': ', 1) for k in glued)}}})" if glued else ""
+
+
 def split_spec(kind: str, spec: ComponentSpec) -> tuple[str, dict[str, Any]]:
     """``"huber"`` or ``{"name": "huber", "scale_m": 0.5}`` -> ``("huber", {"scale_m": 0.5})``."""
     if isinstance(spec, str):
@@ -197,11 +205,8 @@ def split_spec(kind: str, spec: ComponentSpec) -> tuple[str, dict[str, Any]]:
         params = dict(spec)
         name = params.pop("name", None)
         if not isinstance(name, str):
-            # ({name:huber} reads in YAML as the key "name:huber" with no value)
-            glued = [k for k, v in params.items() if v is None and isinstance(k, str) and ":" in k]
-            hint = f" (YAML needs a space after ':': {{{', '.join(k.replace(':', ': ', 1) for k in glued)}}})" if glued else ""
             raise ConfigError(f"a {kind} given as a mapping needs a 'name' key (one of: {', '.join(available_components(kind))})"
-                              f"{hint}", source=kind)
+                              f"{glued_yaml_hint(params)}", source=kind)
         return name, params
     raise ConfigError(f"expected a component name or a mapping with 'name', got {type(spec).__name__}", source=kind)
 
@@ -218,11 +223,11 @@ def make_component(kind: str, spec: ComponentSpec, **defaults: Any) -> Component
     try:
         config = cls.Config(**merged)
     except pydantic.ValidationError as err:
-        raise ConfigError(
-            f"invalid parameters ({validation_problems(err, unnamed='')}); valid parameters: {valid}", source=f"{kind} component {name!r}"
-        ) from None
+        raise ConfigError(f"invalid parameters ({validation_problems(err, unnamed='')}){glued_yaml_hint(params)}; valid parameters: "
+                          f"{valid}", source=f"{kind} component {name!r}") from None
     except ValueError as err:
-        raise ConfigError(f"invalid parameters ({err}); valid parameters: {valid}", source=f"{kind} component {name!r}") from None
+        raise ConfigError(f"invalid parameters ({err}){glued_yaml_hint(params)}; valid parameters: {valid}",
+                          source=f"{kind} component {name!r}") from None
     return cls(config=config)
 
 
@@ -236,6 +241,7 @@ __all__ = [
     "component_base",
     "component_fields",
     "get_component_class",
+    "glued_yaml_hint",
     "make_component",
     "output_error",
     "register_component",

@@ -129,13 +129,21 @@ def ground_config_fields(name: str) -> dict[str, tuple[str, Any, str]]:
     }
 
 
-def get_ground_segmenter(name: str, **params: Any) -> GroundSegmenter:
-    """A configured segmenter; bad or unknown params raise ConfigError listing the valid ones."""
+def ground_config(name: str, **params: Any) -> GroundConfig:
+    """Segmenter ``name``'s validated config; bad or unknown params raise ConfigError listing the valid ones (the one
+    check of the segmenters and of the mask functions that take the settings as arguments: ``ground_mask_by_plane(pts,
+    num_iterations=0)`` marked no ground without a word)."""
     cls = get_ground_segmenter_class(name)
     try:
-        config = cls.Config(**params)
+        return cls.Config(**params)
     except pydantic.ValidationError as err:
+        from lidarkit.registration.components.registry import glued_yaml_hint
+
         valid = ", ".join(f"{k}={shown_default(v[1])}" for k, v in ground_config_fields(name).items()) or "(none)"
-        raise ConfigError(f"invalid parameters ({validation_problems(err, unnamed='')}); valid parameters: {valid}",
-                          source=f"ground segmenter {name!r}") from None
-    return cls(config=config)
+        raise ConfigError(f"invalid parameters ({validation_problems(err, unnamed='')}){glued_yaml_hint(params)}; "
+                          f"valid parameters: {valid}", source=f"ground segmenter {name!r}") from None
+
+
+def get_ground_segmenter(name: str, **params: Any) -> GroundSegmenter:
+    """A configured segmenter; bad or unknown params raise ConfigError listing the valid ones."""
+    return get_ground_segmenter_class(name)(config=ground_config(name, **params))

@@ -8,8 +8,14 @@ from __future__ import annotations
 import numpy as np
 from pydantic import Field
 
-from lidarkit.errors import ConfigError
-from lidarkit.registration.ground.base import KITTI_SENSOR_HEIGHT_M, GroundConfig, GroundSegmenter, register_ground_segmenter
+from lidarkit.geometry import as_points
+from lidarkit.registration.ground.base import (
+    KITTI_SENSOR_HEIGHT_M,
+    GroundConfig,
+    GroundSegmenter,
+    ground_config,
+    register_ground_segmenter,
+)
 
 
 def ground_mask_by_height(
@@ -19,11 +25,15 @@ def ground_mask_by_height(
 
     The road is assumed flat at ``z = -sensor_height_m`` in the sensor frame. The defaults reproduce
     the report's rule "drop points more than 1 m below the LiDAR" for KITTI (1.73 m - 0.73 m = 1 m).
+    Settings are checked as the ``height`` segmenter checks them (a NaN threshold marked no ground), the points as
+    every segmenter's are (an ``(N, 2)`` array raised an IndexError).
     """
-    if sensor_height_m < 0:
-        raise ConfigError(f"sensor height must be >= 0, got {sensor_height_m}", source="sensor_height_m")
-    z = np.asarray(points_xyz, dtype=np.float64)[:, 2]
-    return z < -sensor_height_m + ground_threshold_m
+    config = ground_config("height", sensor_height_m=sensor_height_m, ground_threshold_m=ground_threshold_m)
+    return _below_ground_level(as_points(points_xyz, "points"), config)
+
+
+def _below_ground_level(points_xyz: np.ndarray, config: HeightConfig) -> np.ndarray:
+    return points_xyz[:, 2] < -config.sensor_height_m + config.ground_threshold_m
 
 
 class HeightConfig(GroundConfig):
@@ -38,4 +48,4 @@ class HeightSegmenter(GroundSegmenter):
     Config = HeightConfig
 
     def _segment(self, points_xyz: np.ndarray) -> np.ndarray:
-        return ground_mask_by_height(points_xyz, self.config.sensor_height_m, self.config.ground_threshold_m)
+        return _below_ground_level(points_xyz, self.config)

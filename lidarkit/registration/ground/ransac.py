@@ -10,13 +10,28 @@ import logging
 import numpy as np
 from pydantic import Field
 
-from lidarkit.registration.ground.base import KITTI_SENSOR_HEIGHT_M, GroundConfig, GroundSegmenter, register_ground_segmenter
+from lidarkit.geometry import as_points
+from lidarkit.registration.ground.base import (
+    KITTI_SENSOR_HEIGHT_M,
+    GroundConfig,
+    GroundSegmenter,
+    ground_config,
+    register_ground_segmenter,
+)
 
 log = logging.getLogger(__name__)
 
 
 #: candidate planes are scored on at most this many of the low points (the winner's inliers then on all of them)
 SCORE_POINTS = 4000
+
+
+class RansacConfig(GroundConfig):
+    distance_threshold_m: float = Field(0.2, gt=0, description="max point-plane distance of ground points (m)")
+    num_iterations: int = Field(200, ge=1, description="RANSAC iterations")
+    max_tilt_deg: float = Field(20.0, ge=0, le=90, description="a plane tilted more than this is not ground (nothing removed)")
+    sensor_height_m: float = Field(KITTI_SENSOR_HEIGHT_M, ge=0, description="the plane is fitted to points below half this height (m)")
+    seed: int = Field(0, ge=0, description="seed of the RANSAC draws")
 
 
 def ground_mask_by_plane(
@@ -34,15 +49,23 @@ def ground_mask_by_plane(
     best one's inliers among all low points are refitted by least squares. Open3D's ``segment_plane`` draws on worker
     threads and gave other planes in other processes under one seed (a ground-filtered pose moved by 2 mm between
     runs). A plane tilted more than ``max_tilt_deg`` from horizontal is rejected and no point is marked (logged), so a
-    wall is never removed as "ground".
+    wall is never removed as "ground". Settings are checked as the ``ransac`` segmenter checks them (``num_iterations=0``
+    or a negative distance marked no ground), the points as every segmenter's are.
     """
-    pts = np.asarray(points_xyz, dtype=np.float64)
-    low_pts = pts[pts[:, 2] < -0.5 * sensor_height_m]
+    config = ground_config("ransac", distance_threshold_m=distance_threshold_m, num_iterations=num_iterations,
+                           max_tilt_deg=max_tilt_deg, sensor_height_m=sensor_height_m, seed=seed)
+    return _plane_inliers(as_points(points_xyz, "points"), config)
+
+
+def _plane_inliers(pts: np.ndarray, config: RansacConfig) -> np.ndarray:
+    """:func:`ground_mask_by_plane` of points and settings already checked (the segmenter's own path)."""
+    distance_threshold_m, max_tilt_deg = config.distance_threshold_m, config.max_tilt_deg
+    low_pts = pts[pts[:, 2] < -0.5 * config.sensor_height_m]
     if len(low_pts) < 3:
         log.info("RANSAC ground: fewer than 3 points below the sensor, nothing removed")
         return np.zeros(len(pts), dtype=bool)
-    rng = np.random.default_rng(int(seed))
-    triples = low_pts[rng.integers(0, len(low_pts), size=(int(num_iterations), 3))]  # (I, 3, 3)
+    rng = np.random.default_rng(config.seed)
+    triples = low_pts[rng.integers(0, len(low_pts), size=(config.num_iterations, 3))]  # (I, 3, 3)
     normals = np.cross(triples[:, 1] - triples[:, 0], triples[:, 2] - triples[:, 0])
     length = np.linalg.norm(normals, axis=1)
     good = length > 1e-9  # three distinct, non-collinear points
@@ -66,14 +89,6 @@ def ground_mask_by_plane(
     return np.abs(pts @ normal + offset) <= distance_threshold_m
 
 
-class RansacConfig(GroundConfig):
-    distance_threshold_m: float = Field(0.2, gt=0, description="max point-plane distance of ground points (m)")
-    num_iterations: int = Field(200, ge=1, description="RANSAC iterations")
-    max_tilt_deg: float = Field(20.0, ge=0, le=90, description="a plane tilted more than this is not ground (nothing removed)")
-    sensor_height_m: float = Field(KITTI_SENSOR_HEIGHT_M, ge=0, description="the plane is fitted to points below half this height (m)")
-    seed: int = Field(0, ge=0, description="seed of the RANSAC draws")
-
-
 @register_ground_segmenter("ransac")
 class RansacSegmenter(GroundSegmenter):
     """One RANSAC plane fitted to the low points (seeded numpy draws, scored at once)."""
@@ -81,5 +96,4 @@ class RansacSegmenter(GroundSegmenter):
     Config = RansacConfig
 
     def _segment(self, points_xyz: np.ndarray) -> np.ndarray:
-        c = self.config
-        return ground_mask_by_plane(points_xyz, c.distance_threshold_m, c.num_iterations, c.max_tilt_deg, c.sensor_height_m, c.seed)
+        return _plane_inliers(points_xyz, self.config)
