@@ -298,9 +298,12 @@ def test_a_run_folder_against_a_bench_folder_of_several_methods_names_the_real_r
     _task("kinds_test_task", _error)
     bench = _bench(tmp_path, "s", "seeds: 2\nexperiments:\n  - {task: kinds_test_task, dataset: {kind: synthetic}, methods: [good, bad]}\n")
     folder = write_run(run(SimulatedLidarSequence(scene="street", n_frames=3, n_beams=16, n_azimuths=360), "kiss"), tmp_path / "run")
-    reason = "error: compare: compare an odometry run folder with another run folder, a bench folder with a bench folder\n"
-    for argv in ([str(folder), str(bench)], [str(bench), str(folder)], [str(bench), str(folder), "--method-a", "good"]):
-        assert run_cli(["compare", *argv], capsys) == (1, "", reason)
+    run_is, bench_is = f"{folder} (an odometry run folder)", f"{bench} (a bench results folder)"
+    # (it read "compare an odometry run folder with another run folder, a bench folder with a bench folder", naming neither)
+    for argv, a, b in (([str(folder), str(bench)], run_is, bench_is), ([str(bench), str(folder)], bench_is, run_is),
+                       ([str(bench), str(folder), "--method-a", "good"], bench_is, run_is)):
+        assert run_cli(["compare", *argv], capsys) == (1, "", f"error: compare: A is {a}, B is {b}: compare an odometry run "
+                                                              "folder with another run folder, bench results with bench results\n")
     with pytest.raises(ConfigError, match=r"2 methods in this folder; choose one of: bad, good$"):  # (bench with bench: still asked)
         compare(bench, bench)
 
@@ -612,7 +615,7 @@ def test_run_folders_over_the_same_frames_pair_whatever_their_selection_says(tmp
         compare(tmp_path / "all", tmp_path / "slower")
     assert str(exc.value) == (f"compare: runs over different data: {tmp_path / 'all'} has 8 ground-truth poses, "
                               f"{tmp_path / 'slower'} has 8 with other values (their dataset settings differ in speed_mps "
-                              "(10.0 in A, 5.0 in B))")
+                              "(10.0 in A, 5.0 in B); ground truth at the sweep end in A, mid in B)")
 
 
 def test_units_of_a_task_not_compared_are_not_counted_only_in_one_folder(tmp_path):
@@ -1151,3 +1154,26 @@ def test_a_kitti_velodyne_folder_is_told_to_run_its_sequence(tmp_path, capsys):
     run = _straight_run(tmp_path / "run", np.zeros(3))
     code, stdout, err = run_cli(["compare", str(sequence / "velodyne"), str(run)], capsys)
     assert code == 1 and err.strip().endswith(f"run lidarkit odometry {sequence} --out DIR first"), err
+
+
+def test_runs_over_two_exports_of_the_sweeps_name_their_ground_truth_instants(tmp_path, capsys):
+    """kiss over a rosbag1 export (poses at the sweep start, re-timed to the end) and small_gicp over an mcap export of
+    the same sweeps (re-timed mid-sweep) read "runs over different data: ... 9 with other values (datasets ...)": the
+    instants each was scored at were said on the same-dataset branch only."""
+    import yaml
+
+    for name, scale, dataset, instant in (("a", 0.0, "rosbag:run1.bag/points", "end"), ("b", 0.05, "mcap:sim.mcap/points", "mid")):
+        run = _straight_run(tmp_path / name, np.full(9, scale))
+        run.joinpath("config.yaml").write_text(yaml.safe_dump({"run": {"dataset": dataset, "dataset_config": None,
+                                                                        "frames": "0:10", "n_frames": 10}}))
+        run.joinpath("metrics.json").write_text(json.dumps({"method": name, "effective": {"ground_truth_instant": instant}}))
+    (tmp_path / "b" / "ground_truth_kitti.txt").write_text((tmp_path / "b" / "poses_kitti.txt").read_text())
+    code, _, err = run_cli(["compare", str(tmp_path / "a"), str(tmp_path / "b")], capsys)
+    assert code == 1 and err.endswith("with other values (datasets rosbag:run1.bag/points and mcap:sim.mcap/points; "
+                                      "ground truth at the sweep end in A, mid in B)\n"), err
+    # an instant a reader does not state is no sweep instant to name
+    metrics = json.loads((tmp_path / "b" / "metrics.json").read_text())
+    metrics["effective"]["ground_truth_instant"] = "not stated by the reader"
+    (tmp_path / "b" / "metrics.json").write_text(json.dumps(metrics))
+    code, _, err = run_cli(["compare", str(tmp_path / "a"), str(tmp_path / "b")], capsys)
+    assert code == 1 and err.endswith("(datasets rosbag:run1.bag/points and mcap:sim.mcap/points)\n"), err

@@ -43,11 +43,12 @@ from lidarkit.bench.tasks import higher_is_better
 from lidarkit.errors import ConfigError, DataError, LidarKitError, OutputError, RegistrationError
 from lidarkit.eval.statistics import RELATIVE_TIE_TOLERANCE, tie_tolerance
 from lidarkit.params import is_integer
+from lidarkit.run_files import BASELINE_MANIFEST
 
 log = logging.getLogger(__name__)
 
 SCHEMA = "lidarkit-baseline/1"
-MANIFEST = "manifest.json"
+MANIFEST = BASELINE_MANIFEST
 #: packages whose version is part of the protocol (lidarkit itself is what a check tests: noted, not a change); OpenCV
 #: is pinned apart, as ``opencv`` (see OPENCV_DISTRIBUTIONS)
 PROTOCOL_PACKAGES = ("kiss-icp", "open3d", "numpy", "scipy", "evo", "small_gicp")
@@ -557,18 +558,21 @@ def _damaged_trajectory(trajectory: Any, pinned: Mapping[str, Any]) -> str:
 
 def _pick_hint(found: list[dict[str, Any]]) -> str:
     """The keywords of :meth:`Baseline.job` that tell the ``found`` jobs apart, with their values: "pick one with
-    method= (kiss, small_gicp)", "... and seed= (0, 1)"."""
+    method= (kiss, small_gicp)", "... and seed= (0, 1)"; "... or experiment= (sim, bag)" where each alone does (it
+    read "and", as if both were needed)."""
     keywords = (("method", lambda j: j["label"]), ("dataset", lambda j: j["spec"]["dataset_name"]),
                 ("seed", lambda j: j["spec"].get("seed")), ("experiment", lambda j: j["spec"].get("experiment")),
                 ("task", lambda j: j["spec"].get("task")))
-    hints = []
+    hints, alone = [], []
     for keyword, value_of in keywords:
         values = list(dict.fromkeys(value_of(j) for j in found))
         if len(values) > 1:
             hints.append(f"{keyword}= ({', '.join(map(str, values))})")
+            if len(values) == len(found):  # one value per job: this keyword alone picks any of them
+                alone.append(hints[-1])
     if not hints:  # (alike in every keyword: a manifest edited by hand)
         return "pinned: " + ", ".join(job_name(j, found) for j in found)
-    return "pick one with " + " and ".join(hints)
+    return "pick one with " + (" or ".join(alone) if alone else " and ".join(hints))
 
 
 def job_name(pinned: Mapping[str, Any], jobs: list[dict[str, Any]]) -> str:
@@ -766,12 +770,6 @@ def _is_baseline_manifest(path: Path) -> bool:
     except (OSError, UnicodeDecodeError, ValueError):
         return False
     return isinstance(manifest, dict) and manifest.get("schema") == SCHEMA
-
-
-def is_baseline_folder(path: str | os.PathLike) -> bool:
-    """A folder ``record`` wrote (manifest.json, no suite.json): compare and report name it (its jobs/ read as a bench
-    folder's, "no readable job results")."""
-    return (Path(path) / MANIFEST).is_file() and not (Path(path) / "suite.json").exists()
 
 
 def load_baseline(path: str | os.PathLike) -> Baseline:

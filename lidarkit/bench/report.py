@@ -1231,7 +1231,7 @@ def build_report(
     folder's ``suite.json`` (the last suite run there: results an earlier suite left in the folder are counted as
     left out, and the suite's jobs without a result as not run); ``every_result``: every result in the folder.
     """
-    from lidarkit.bench.baseline import is_baseline_folder
+    from lidarkit.run_files import is_baseline_folder
 
     out_dir = path_argument(out_dir, "out_dir")
     if is_baseline_folder(out_dir):  # (read "no readable job results in jobs/")

@@ -154,6 +154,8 @@ class _Locator:
 def read_suite_file(path: str | Path) -> tuple[SuiteModel, _Locator]:
     """Parse and schema-check a suite file (no task validation yet)."""
     path = Path(path)
+    if path.is_dir():  # (it read "cannot read suite file: [Errno 21] Is a directory")
+        raise DataError(_folder_given(path), source=path)
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
@@ -174,6 +176,9 @@ def read_suite_file(path: str | Path) -> tuple[SuiteModel, _Locator]:
     _refuse_duplicate_keys(root, path)
     if not isinstance(raw, dict):
         raise ConfigError("a suite is a YAML mapping with an 'experiments' list", source=path)
+    record = _record_given(raw)
+    if record:  # (bench's suite.json read "unknown key 'jobs'; unknown key 'lidarkit_version' ...")
+        raise ConfigError(record, source=path)
     try:
         model = SuiteModel.model_validate(raw)
     except ValidationError as err:
@@ -194,6 +199,51 @@ def read_suite_file(path: str | Path) -> tuple[SuiteModel, _Locator]:
         more = f" (+{len(errors) - 3} more)" if len(errors) > 3 else ""
         raise ConfigError("; ".join(messages) + more, source=path, location=locator.location(tuple(first["loc"]))) from None
     return model, locator
+
+
+#: where a suite is described, named when something else is given as one
+_SUITE_DOCS = "a suite is a YAML file with an 'experiments' list (docs/benchmarks.md)"
+
+
+def _suite_file_of(results: Path) -> str:
+    """The suite file a bench results folder ran, as its suite.json records it; '' when it does not say."""
+    import json
+
+    try:
+        recorded = json.loads((results / "suite.json").read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError):
+        return ""
+    suite_file = recorded.get("suite_file") if isinstance(recorded, dict) else None
+    return suite_file if isinstance(suite_file, str) else ""
+
+
+def _folder_given(path: Path) -> str:
+    """Why the folder ``path`` is no suite file, naming what it is and, for lidarkit's own output, the file to give."""
+    from lidarkit.run_files import is_baseline_folder, is_bench_results_folder, output_folder_kind
+
+    if is_baseline_folder(path):
+        return f"a baseline folder (manifest.json), not a suite file: give its suite.yaml ({path / 'suite.yaml'})"
+    if is_bench_results_folder(path):
+        suite_file = _suite_file_of(path)
+        ran = f" ({suite_file})" if suite_file else ""
+        return (f"a bench results folder (jobs/, suite.json), not a suite file: give the suite file it ran{ran}; "
+                "its suite.json is bench's record of that run, not a suite")
+    kind = output_folder_kind(path)
+    return f"{kind or 'a folder'}, not a suite file: {_SUITE_DOCS}"
+
+
+def _record_given(raw: dict[str, Any]) -> str:
+    """Why the mapping ``raw`` is lidarkit's record of a run rather than a suite (bench's suite.json, a baseline's
+    manifest.json), naming the file to give; '' for anything else."""
+    if "experiments" in raw:
+        return ""
+    if str(raw.get("schema", "")).startswith("lidarkit-baseline/"):
+        return "a baseline's manifest.json, not a suite: give the suite.yaml beside it"
+    if "jobs" in raw and "lidarkit_version" in raw:
+        suite_file = raw.get("suite_file")
+        ran = f" ({suite_file})" if isinstance(suite_file, str) and suite_file else ""
+        return f"bench's record of the jobs it ran (a results folder's suite.json), not a suite: give the suite file it ran{ran}"
+    return ""
 
 
 def _refuse_duplicate_keys(node: yaml.Node | None, path: Path) -> None:

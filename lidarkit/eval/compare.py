@@ -355,6 +355,10 @@ def _same_ground_truth(a: OdometryRun, b: OdometryRun, names: tuple[str, str]) -
            if unknown and len(ga) == len(gb) else "")
     if differ == "":  # (two pose files of one KITTI sequence read "with other values" and nothing more)
         differ = _reader_options_differ(a, b)
+    if all(i in ("start", "mid", "end") for i in instants) and instants[0] != instants[1]:  # (said on the same-dataset
+        # branch only: two exports of the same sweeps, kiss at the end against small_gicp mid-sweep, read "with other
+        # values" and nothing more)
+        differ = "; ".join(t for t in (differ, f"ground truth at the sweep {instants[0]} in A, {instants[1]} in B") if t)
     raise EvaluationError(
         f"runs over different data: {a.path} has {len(ga)} ground-truth poses, {b.path} has {len(gb)}"
         + (" with other values" if len(ga) == len(gb) else "") + (f" ({differ})" if differ else "") + why,
@@ -563,15 +567,13 @@ def compare(
                               "picks a method, and every result)", source=name if method is not None else "every_result")
     kinds = (_kind(a), _kind(b))  # (checked first: "2 methods in this folder; choose one" hid the real reason)
     if None not in kinds and kinds[0] is not kinds[1]:
-        raise EvaluationError("compare an odometry run folder with another run folder, a bench folder with a bench folder",
-                              source="compare")
+        raise EvaluationError(_kinds_differ((a, b), kinds), source="compare")
     side_a = _load(a, method_a, every_result)
     same = (isinstance(side_a, BenchRuns) and isinstance(b, (str, os.PathLike))
             and resolved_path(b, output=False) == side_a.path.resolve())
     side_b = load_bench_runs(b, method_b, every_result, side_a.records) if same else _load(b, method_b, every_result)
     if type(side_a) is not type(side_b):
-        raise EvaluationError("compare an odometry run folder with another run folder, a bench folder with a bench folder",
-                              source="compare")
+        raise EvaluationError(_kinds_differ((a, b), (type(side_a), type(side_b))), source="compare")
     name_a, name_b = side_a.name, side_b.name
     if name_a == name_b:
         name_a, name_b = f"{name_a} (A)", f"{name_b} (B)"
@@ -713,6 +715,16 @@ def compare(
         raise
     label = _metric_label(compared_task, metric, side_a, side_b, common)
     return dataclasses.replace(result, note="; ".join(notes), metric_label=label)
+
+
+def _kinds_differ(given: tuple[Any, Any], kinds: tuple[type, type]) -> str:
+    """Which of the two sides is an odometry run and which bench results (it read "compare an odometry run folder with
+    another run folder, a bench folder with a bench folder", naming neither)."""
+    what = {OdometryRun: "an odometry run folder", BenchRuns: "a bench results folder"}
+    sides = [f"{side} ({what[kind]})" if isinstance(side, (str, os.PathLike)) else f"a loaded {kind.__name__}"
+             for side, kind in zip(given, kinds)]
+    return (f"A is {sides[0]}, B is {sides[1]}: compare an odometry run folder with another run folder, bench results "
+            "with bench results")
 
 
 def _without_metric_note(missing: list[str], common: list[str], metric: str, sides: tuple[BenchRuns, BenchRuns],
@@ -1088,14 +1100,11 @@ def _run_label(path: Path, method: str) -> str:
 
 def _other_run_kind(path: Path) -> str | None:
     """``"particle-filter"`` / ``"visual odometry"`` / ``"icp"`` for a run folder of ``lidarkit pf`` / ``lidarkit vo`` /
-    ``lidarkit icp`` (by the files only they write), else None."""
-    if (path / "dead_reckoning_tum.txt").is_file() or (path / "study.json").is_file():
-        return "particle-filter"
-    if (path / "poses_smoothed_kitti.txt").is_file() or (path / "diagnostics.csv").is_file():
-        return "visual odometry"
-    if (path / "result.json").is_file() and (path / "config.json").is_file() and not (path / "metrics.json").exists():
-        return "icp"
-    return None
+    ``lidarkit icp`` (:func:`lidarkit.run_files.run_kind`), else None."""
+    from lidarkit.run_files import run_kind
+
+    kind = run_kind(path)
+    return None if kind == "odometry" else kind
 
 
 def _not_an_odometry_run(path: Path) -> str:
@@ -1204,7 +1213,7 @@ def _kind(side: Any) -> type | None:
     """OdometryRun or BenchRuns: what ``side`` is, read before it is loaded; None when ``_load`` will refuse it."""
     if isinstance(side, (OdometryRun, BenchRuns)):
         return type(side)
-    from lidarkit.bench.baseline import is_baseline_folder
+    from lidarkit.run_files import is_baseline_folder
 
     if not isinstance(side, (str, os.PathLike)) or not Path(side).is_dir() or is_baseline_folder(side) or _not_an_odometry_run(Path(side)):
         return None
@@ -1224,7 +1233,7 @@ def _load(side: Any, method: str | None, every_result: bool = False) -> Odometry
         raise DataError(missing_reason(path, "does not exist"), source=path)
     if not path.is_dir():  # (report.csv given: it read "run folder does not exist")
         raise DataError("is a file: compare takes an odometry run folder or a bench results folder", source=path)
-    from lidarkit.bench.baseline import is_baseline_folder
+    from lidarkit.run_files import is_baseline_folder
 
     if is_baseline_folder(path):  # (read "no successful job results")
         raise DataError("a baseline folder (lidarkit baseline record): compare takes bench results folders or odometry run "

@@ -21,6 +21,7 @@ from lidarkit.errors import ConfigError, DataError
 from lidarkit.io.base import Scan, checked_index, keep_once, option_path
 from lidarkit.io.pointfile import (POINT_FILE_SUFFIXES, open3d_skipped_type, point_file_fields, read_point_file,
                                    said_once)
+from lidarkit.run_files import output_folder_kind
 from lidarkit.textfile import data_line_numbers, read_numeric_table
 from lidarkit.trajectory import READ_WARNINGS, Trajectory, check_seconds
 
@@ -93,6 +94,9 @@ class ScanFolder:
         folder = Path(path)
         if not folder.is_dir():
             raise DataError("scan folder not found" if not folder.exists() else "not a folder", source=folder)
+        output = output_folder_kind(folder)
+        if output:  # (it said only "no scan files")
+            raise DataError(f"{output}: lidarkit's output, not a scan sequence", source=folder)
         if poses_format is not None and poses_format not in POSE_FORMATS:
             raise ConfigError(f"unknown poses format {poses_format!r}; known: {', '.join(POSE_FORMATS)}", source="poses_format")
         if poses_format is not None and poses is None:  # (folder:scans?poses_format=tum ran without a word, and without poses)

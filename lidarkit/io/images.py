@@ -21,6 +21,7 @@ from lidarkit.io.base import checked_index, keep_once
 from lidarkit.io.folder import sorted_by_name
 from lidarkit.io.kitti import read_gray_image, read_kitti_calib
 from lidarkit.io.pointcloud2 import NANOSECONDS_AFTER
+from lidarkit.run_files import output_folder_kind
 from lidarkit.textfile import read_lines
 from lidarkit.trajectory import READ_WARNINGS, Trajectory
 
@@ -152,6 +153,9 @@ class ImageFolder:
         folder = Path(path)
         if not folder.is_dir():
             raise DataError("image folder not found" if not folder.exists() else "not a folder", source=folder)
+        output = output_folder_kind(folder)
+        if output:  # (a VO run read an odometry run's plots as camera images and failed on their sizes)
+            raise DataError(f"{output}: lidarkit's output, not an image sequence", source=folder)
         self.path = folder
         self.name = name or folder.name
         # hidden files are no frames: macOS leaves a 4-byte AppleDouble "._000000.png" beside each image it copies
