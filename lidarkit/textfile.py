@@ -74,6 +74,9 @@ def read_numeric_table(
         if not line or line.startswith(comment):
             continue
         fields = line.replace(",", " ").split()
+        # a date and time read "expected 1 number, found 2"; other lines of another count (a cut one) keep that message
+        if len(fields) not in ((width,) if width is not None else accepted):
+            _check_dates(fields, path, lineno)
         if width is None:
             if len(fields) not in accepted:
                 want = " or ".join(str(n) for n in accepted)
@@ -87,6 +90,7 @@ def read_numeric_table(
             values = [float(f) for f in fields]
         except ValueError:
             bad = next(f for f in fields if not is_number(f))
+            _check_dates([bad], path, lineno)
             raise DataError(f"not a number: {bad!r}", source=path, location=f"line {lineno}") from None
         if not allow_nonfinite and not all(np.isfinite(values)):
             raise DataError("NaN or infinite value", source=path, location=f"line {lineno}")
@@ -94,6 +98,19 @@ def read_numeric_table(
     if not rows:
         raise DataError("no data rows", source=path)
     return np.asarray(rows, dtype=np.float64)
+
+
+#: a date (2011-09-26) or a clock time (13:02:25.96) in a field
+_DATE_OR_TIME = re.compile(r"\d{4}-\d{1,2}-\d{1,2}|\d{1,2}:\d{2}")
+
+
+def _check_dates(fields: list[str], path: str | os.PathLike, lineno: int) -> None:
+    """DataError naming the first of a line's ``fields`` that is a date or clock time and no number: seconds are
+    wanted (KITTI raw's timestamps.txt given as a times file read "expected 1 number, found 2")."""
+    dated = next((f for f in fields if _DATE_OR_TIME.search(f) and not is_number(f)), None)
+    if dated is not None:
+        raise DataError(f"not a number: {dated!r} (date/time stamps: give seconds, e.g. read KITTI raw's timestamps.txt "
+                        "with lidarkit.io.kitti_raw.read_kitti_raw_timestamps)", source=path, location=f"line {lineno}")
 
 
 def cut_off_reason(lines: list[str], comment: str = "#") -> str | None:

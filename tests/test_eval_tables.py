@@ -304,6 +304,25 @@ def test_round_off_beside_real_values_does_not_size_a_tables_decimals():
     assert "| 00 | 0.612 | **0.000** |" in table.to_markdown()
 
 
+def test_a_copy_scored_against_itself_alone_in_its_table_prints_zero(tmp_path, capsys):
+    """KITTI 00's ground truth scored against itself: its round-off was the table's only value and printed as
+    0.000000000000035 m; float64 noise of positions (at most 1e-9) prints as 0 whatever else the table holds."""
+    from conftest import shared_path
+
+    assert "| 00 | 0.000 |" in value_table({("00", "copy"): 3.5e-14}, "APE", name="ape").to_markdown()
+    lines = shared_path("evo_testdata", "KITTI_00_gt.txt").read_text().splitlines()[:300]
+    (tmp_path / "gt.txt").write_text("\n".join(lines) + "\n")
+    with pytest.raises(SystemExit) as exc:
+        from lidarkit.cli import main
+
+        main(["eval", str(tmp_path / "gt.txt"), str(tmp_path / "gt.txt"), "--no-drift", "--tables", str(tmp_path / "t")])
+    assert exc.value.code in (0, None)
+    assert "| gt | 0.000 |" in (tmp_path / "t" / "ape_rmse.md").read_text()
+    assert "| gt | 0.0000 |" in (tmp_path / "t" / "rpe_rmse.md").read_text()
+    assert value_table({("00", "copy"): 4e-10}, "APE", name="ape").digits == 3
+    assert value_table({("00", "tiny"): 2e-9}, "APE", name="ape").digits == 11  # (above round-off: sized for)
+
+
 def test_stamp_timed_segment_speeds_count_frames_as_the_devkit_does():
     """Stamp-timed speeds (t[last] - t[first]) were one frame shorter than the devkit's (last - first + 1) periods:
     2.5 % apart on KITTI, moving segments across the 5 m/s bins. One period is added, as the devkit counts."""
@@ -353,3 +372,58 @@ def _per_speed_rows(tmp_path, ref: str, est: str, *options: str) -> list[str]:
         main(["eval", str(tmp_path / ref), str(tmp_path / est), *options, "--align", "none", "--tables", str(tmp_path / "t")])
     assert exc.value.code in (0, None)
     return (tmp_path / "t" / "kitti_translation_pct_per_speed.csv").read_text().splitlines()
+
+
+def test_estimate_stamped_with_frame_numbers_is_timed_as_the_devkit_under_a_ground_truth_without_times(tmp_path, capsys):
+    """KITTI 00 ORB written as TUM with stamps 0, 1, 2 (lidarkit vo's poses_tum.txt without times) against the ground
+    truth without times: its frame numbers were read as seconds, every segment fell into 0-5 m/s (10x too slow); the
+    frames take the devkit's 0.1 s, the rows of the same estimate in KITTI format, and the table says so."""
+    from conftest import shared_path
+
+    n_poses = 2000  # (KITTI 00's first 2000 frames: segments of 0-5, 5-10 and 10-15 m/s)
+    for name in ("KITTI_00_gt.txt", "KITTI_00_ORB.txt"):
+        lines = shared_path("evo_testdata", name).read_text().splitlines()[:n_poses]
+        (tmp_path / name).write_text("\n".join(lines) + "\n")
+    orb = Trajectory.from_kitti(tmp_path / "KITTI_00_ORB.txt")
+    Trajectory(orb.poses_se3, np.arange(n_poses, dtype=np.float64)).to_tum(tmp_path / "orb_frames.tum")
+    as_frames = _per_speed_rows(tmp_path, "KITTI_00_gt.txt", "orb_frames.tum", "--est-format", "tum")
+    devkit = per_speed_table({("00", "orb"): SegmentErrors.from_drift(kitti_drift(  # (0.1 s a frame, as KITTI files read)
+        Trajectory.from_kitti(tmp_path / "KITTI_00_gt.txt"), orb))})
+    assert devkit.row_labels == ["0-5 m/s", "5-10 m/s", "10-15 m/s"]
+    assert [row.split(",")[0] for row in as_frames[1:]] == devkit.row_labels  # (was 0-5 m/s only)
+    np.testing.assert_allclose([float(row.split(",")[1]) for row in as_frames[1:]], devkit.values[:, 0], rtol=1e-5)
+    note = "the estimate's stamps are frame numbers (0, 1, ...; lidarkit vo writes them without time stamps)"
+    assert note in capsys.readouterr().out.replace("\n", " ")
+    assert note in (tmp_path / "t" / "kitti_translation_pct_per_speed.md").read_text()
+
+
+def test_frame_numbers_with_a_gap_are_timed_at_the_devkit_period_and_seconds_are_left_as_they_are():
+    """Frame numbers 0-19, 21-50 (one frame left out) are 0.1 s a frame, the gap 0.2 s; stamps in seconds, or frame
+    numbers of a reference, are taken as given."""
+    from lidarkit.eval.tables import segment_clock
+
+    truth = straight(50)  # (stamps 0.1 s apart)
+    untimed = Trajectory(truth.poses_se3)
+    frames = np.r_[0:20, 21:51].astype(np.float64)
+    clock = segment_clock(untimed, Trajectory(truth.poses_se3, frames))
+    np.testing.assert_allclose(clock.timestamps_s, 0.1 * frames, rtol=1e-12)
+    assert clock.frame_period_s == pytest.approx(0.1) and "frame numbers (0, 1, ...;" in clock.note
+    counted = Trajectory(truth.poses_se3, np.arange(50.0))
+    for ref, est, used in ((untimed, truth, truth), (counted, truth, counted)):
+        clock = segment_clock(ref, est)
+        assert clock.note == "" and clock.frame_period_s == pytest.approx(np.median(np.diff(used.timestamps_s)))
+        np.testing.assert_array_equal(clock.timestamps_s, used.timestamps_s)
+
+
+def test_markdown_escapes_a_pipe_in_the_corner_and_column_labels_as_in_row_labels():
+    """Files o|x.txt and g|y.txt name a method and a sequence: the method's '|' split the header into one column more
+    than the rows have (the row label was escaped)."""
+    import re
+
+    table = value_table({("g|y", "o|x"): 2.1328, ("g|y", "kiss"): 1.5}, "APE", name="ape")
+    table.corner = "sequence|run"
+    lines = table.to_markdown().splitlines()
+    header, rule, row = lines[2], lines[3], lines[4]
+    assert header == "| sequence\\|run | o\\|x | kiss |" and row == "| g\\|y | 2.133 | **1.500** |"
+    unescaped = re.compile(r"(?<!\\)\|")
+    assert len(unescaped.findall(header)) == len(unescaped.findall(rule)) == len(unescaped.findall(row)) == 4

@@ -160,8 +160,8 @@ def eval_command(
     with contextlib.ExitStack() as stack:
         aside = stack.enter_context(atomic.paths_together(files))
         folder = stack.enter_context(atomic.run_folder(tables)) if tables is not None else None
-        written = _write_outputs(evaluation, ref, est, ref_traj, est_traj, aside, json_out, markdown, plot, folder, align,
-                                 delta, delta_unit)
+        written, clock_note = _write_outputs(evaluation, ref, est, ref_traj, est_traj, aside, json_out, markdown, plot,
+                                             folder, align, delta, delta_unit)
     if tables is not None:  # an earlier evaluation's tables (and box plot) this one does not hold
         from lidarkit.eval.tables import TABLE_FILES, remove_stale_tables
 
@@ -171,7 +171,7 @@ def eval_command(
         console.print(report.drift_table(evaluation))
     elif evaluation.drift_note:
         console.print(f"KITTI drift not computed: {evaluation.drift_note}")
-    for note in report.evaluation_notes(evaluation):
+    for note in [*report.evaluation_notes(evaluation), *([clock_note] if clock_note else [])]:
         console.print(f"note: {note}", soft_wrap=True, markup=False, highlight=False)
     for path in files:
         console.print(f"wrote {path}")
@@ -181,9 +181,9 @@ def eval_command(
 
 def _write_outputs(evaluation, ref: Path, est: Path, ref_traj, est_traj, aside: dict[Path, Path], json_out: Path | None,
                    markdown: Path | None, plot: Path | None, folder: Path | None, align: str, delta: float,
-                   delta_unit: str) -> list[Path]:
+                   delta_unit: str) -> tuple[list[Path], str]:
     """Each requested output written to its temporary path (``aside``) or into the tables' temporary ``folder``; the
-    names written there."""
+    names written there, and a note on how the tables' segments were timed ('' when by their stamps as they are)."""
     from lidarkit import atomic
     from lidarkit.eval import report
 
@@ -200,17 +200,20 @@ def _write_outputs(evaluation, ref: Path, est: Path, ref_traj, est_traj, aside: 
 
         plots.plot_evaluation(evaluation, aside[Path(plot)])
     written: list[Path] = []
+    clock_note = ""
     if folder is not None:
-        from lidarkit.eval.tables import SegmentErrors, frame_period_s, publication_tables, scored_timestamps_s
+        from lidarkit.eval.tables import SegmentErrors, publication_tables, segment_clock
 
         key = (ref_traj.name or ref.stem, est_traj.name or est.stem)
         # segment speeds from the stamps of the poses as paired: the reference's, else the estimate's (a KITTI ground
         # truth without times took 0.1 s a frame under a 5 Hz estimate; associated poses with gaps took the median one),
         # with one median interval of those stamps for the last frame, as bench times them (KITTI's 0.1 s at 1 Hz
-        # moved segments of KITTI 00 at every 10th pose into the 10-15 m/s row)
-        timed = next((t for t in (evaluation.ape.ref, evaluation.ape.est_aligned) if t.timestamps_s is not None), None)
-        stamps = scored_timestamps_s(evaluation.ape.ref, evaluation.ape.est_aligned)
-        segments = ({key: SegmentErrors.from_drift(evaluation.drift, frame_period_s(timed), timestamps_s=stamps)}
+        # moved segments of KITTI 00 at every 10th pose into the 10-15 m/s row); an estimate's frame numbers (lidarkit
+        # vo without times) under a ground truth without stamps are the devkit's 0.1 s frames (read as seconds, every
+        # segment was in 0-5 m/s)
+        clock = segment_clock(evaluation.ape.ref, evaluation.ape.est_aligned)
+        clock_note = clock.note if evaluation.drift is not None else ""
+        segments = ({key: SegmentErrors.from_drift(evaluation.drift, clock.frame_period_s, timestamps_s=clock.timestamps_s)}
                     if evaluation.drift is not None else None)
         from lidarkit.eval.ape_rpe import DELTA_UNITS, alignment_label
 
@@ -224,13 +227,13 @@ def _write_outputs(evaluation, ref: Path, est: Path, ref_traj, est_traj, aside: 
         # the pairs' choice too, as the printed table states it (all pairs and consecutive ones read the same title)
         chosen = ", all pairs" if evaluation.rpe.all_pairs else ", legacy pairs" if evaluation.rpe.legacy_pairs else ""
         pub = publication_tables(segments, {key: evaluation.ape.rmse}, {key: evaluation.rpe.rmse}, ape_alignment=aligned,
-                                 rpe_delta=per + chosen + scaled(evaluation.rpe))
+                                 rpe_delta=per + chosen + scaled(evaluation.rpe), clock_note=clock_note)
         written = pub.write(folder)
         if segments:
             from lidarkit.eval.plots import plot_segment_boxplots
 
             written.append(plot_segment_boxplots(segments, folder / _BOXPLOT_NAME))
-    return written
+    return written, clock_note
 
 
 def _relations_report(est_traj, relations_path: Path, max_diff_s: float, json_out: Path | None) -> None:

@@ -204,7 +204,7 @@ class RPEResult(_ErrorResult):
 def _relation(name: str, allowed: tuple[str, ...]):
     from evo.core.metrics import PoseRelation
 
-    if name not in allowed:
+    if not isinstance(name, str) or name not in allowed:  # (a list or an array raised TypeError: unhashable, ambiguous)
         raise ConfigError(f"unknown pose relation {name!r}; known: {', '.join(allowed)}", source="relation")
     return PoseRelation[RELATIONS[name]]
 
@@ -328,7 +328,7 @@ MAX_ANGLE_DELTA = {"degrees": 180.0, "radians": float(np.pi)}
 def checked_delta(delta: float, delta_unit: str) -> tuple[float, str]:
     """``(delta, evo's unit name)`` of an RPE delta; ConfigError naming ``delta`` or ``delta_unit`` otherwise (checked
     with the settings: 200 deg was refused by evo only after the KITTI drift had been computed)."""
-    if delta_unit not in DELTA_UNITS:
+    if not isinstance(delta_unit, str) or delta_unit not in DELTA_UNITS:  # (a list raised TypeError: unhashable)
         raise ConfigError(f"unknown delta unit {delta_unit!r}; known: {', '.join(DELTA_UNITS)}", source="delta_unit")
     unit = DELTA_UNITS[delta_unit]
     if not is_real_number(delta):  # (True read as a delta of 1; "10" was kept as text and broke the report's format)

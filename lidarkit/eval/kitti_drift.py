@@ -180,7 +180,8 @@ def kitti_drift(
     dist = path_distances_m(ref, whole_ref)
     path_m = ref.length_m if whole_ref is None else float(dist[-1] - dist[0])
     n = len(ref)
-    first = np.arange(0, n, step)
+    first = np.arange(0, n, min(step, max(n, 1)))  # (a step past the last frame starts at frame 0 only: 10**20 made
+    # numpy's arange an object array, an IndexError)
     seg_first, seg_last, seg_len = [], [], []
     for length in lengths_arr:
         last = np.searchsorted(dist, dist[first] + length, side="right")  # first frame with dist > start + L

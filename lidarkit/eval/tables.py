@@ -48,6 +48,48 @@ def scored_timestamps_s(*trajectories: Any) -> np.ndarray | None:
     return None
 
 
+def frame_numbers_as_seconds(stamps: np.ndarray | None) -> bool:
+    """Whether ``(N,)`` stamps are frame numbers written as seconds: whole numbers stepping by 1 (median), as ``lidarkit
+    vo`` stamps poses_tum.txt when its input has no times (read as seconds, KITTI's 0.1 s frames took 1 s each)."""
+    if stamps is None or len(stamps) < 2:
+        return False
+    stamps = np.asarray(stamps, dtype=np.float64)
+    steps = np.diff(stamps)
+    return bool(np.all(np.isfinite(stamps)) and np.all(stamps == np.round(stamps)) and np.all(steps > 0)
+                and np.median(steps) == 1.0)
+
+
+@dataclass(frozen=True)
+class SegmentClock:
+    """What times the KITTI segments of a pair: ``timestamps_s`` (``(N,)`` of the poses scored, or None), the
+    ``frame_period_s`` of a segment's last frame, and a ``note`` on how ('' when the stamps are taken as they are)."""
+
+    timestamps_s: np.ndarray | None
+    frame_period_s: float
+    note: str = ""
+
+
+def segment_clock(reference: Any, estimate: Any) -> SegmentClock:
+    """The clock of the segments of ``estimate`` scored against ``reference`` (paired poses): the reference's stamps,
+    else the estimate's; frame numbers as seconds in an estimate under a reference without stamps (KITTI ground
+    truth) are frames of the devkit's :data:`KITTI_FRAME_PERIOD_S` (read as seconds, every segment was in 0-5 m/s)."""
+    for trajectory in (reference, estimate):
+        stamps = scored_timestamps_s(trajectory)
+        if stamps is None:
+            continue
+        if trajectory is estimate and frame_numbers_as_seconds(stamps):
+            note = (f"the estimate's stamps are frame numbers ({stamps[0]:.0f}, {stamps[1]:.0f}, ...; lidarkit vo writes them "
+                    f"without time stamps) and the reference has none: segment speeds take the KITTI devkit's "
+                    f"{KITTI_FRAME_PERIOD_S:g} s per frame")
+            # every frame: the devkit's own count (stamps x 0.1 put some 100 m in 100 frames at 9.999... m/s, a row lower)
+            if np.all(np.diff(stamps) == 1):
+                return SegmentClock(None, KITTI_FRAME_PERIOD_S, note)
+            seconds = stamps * KITTI_FRAME_PERIOD_S
+            return SegmentClock(seconds, float(np.median(np.diff(seconds))), note)
+        return SegmentClock(stamps, frame_period_s(trajectory))
+    return SegmentClock(None, KITTI_FRAME_PERIOD_S)
+
+
 QUANTITIES = {
     "translation_pct": "translational drift (%)",
     "rotation_deg_per_100m": "rotational drift (deg/100 m)",
@@ -157,13 +199,15 @@ class PubTable:
         return "–" if not np.isfinite(x) else f"{x:.{self.digits}f}"
 
     def to_markdown(self) -> str:
+        """A pipe table; a ``|`` in a label is escaped (a method named ``o|x`` split its column in two)."""
         best = self.best_mask()
-        lines = [f"**{self.title}**", "", "| " + " | ".join([self.corner, *self.col_labels]) + " |",
+        esc = _markdown_escape
+        lines = [f"**{self.title}**", "", "| " + " | ".join([esc(self.corner), *map(esc, self.col_labels)]) + " |",
                  "|---|" + "---:|" * len(self.col_labels)]
         for i, label in enumerate(self.row_labels):
             cells = [f"**{self.cell(i, j)}**" if best[i, j] else self.cell(i, j) for j in range(len(self.col_labels))]
-            label = f"**{label}**" if i >= len(self.row_labels) - self.n_summary_rows else label
-            lines.append("| " + " | ".join([label.replace("|", "\\|"), *cells]) + " |")
+            label = f"**{esc(label)}**" if i >= len(self.row_labels) - self.n_summary_rows else esc(label)
+            lines.append("| " + " | ".join([label, *cells]) + " |")
         if self.note:
             lines += ["", self.note]
         return "\n".join(lines) + "\n"
@@ -205,6 +249,11 @@ class PubTable:
         return [atomic.write_text(out / f"{stem}.md", self.to_markdown()),
                 atomic.write_text(out / f"{stem}.csv", self.to_csv()),
                 atomic.write_text(out / f"{stem}.tex", self.to_latex())]
+
+
+def _markdown_escape(text: str) -> str:
+    """``text`` for a cell of a Markdown pipe table."""
+    return text.replace("|", "\\|")
 
 
 def _latex_escape(text: str) -> str:
@@ -287,9 +336,10 @@ def per_length_table(grid: Grid, quantity: str = "translation_pct", lengths_m: S
     )
 
 
-def per_speed_table(grid: Grid, quantity: str = "translation_pct", bins_mps: Sequence[float] = SPEED_BINS_MPS) -> PubTable:
+def per_speed_table(grid: Grid, quantity: str = "translation_pct", bins_mps: Sequence[float] = SPEED_BINS_MPS, *,
+                    clock_note: str = "") -> PubTable:
     """Segment speed bin x method table (the devkit's error-vs-speed curve as rows), pooled over the sequences every
-    method has segments on."""
+    method has segments on; ``clock_note``: how the segments were timed, if not by their stamps as they are."""
     _, methods = _axes(grid)
     common, left_out = _common_sequences(grid)
     edges = list(bins_mps)
@@ -311,7 +361,8 @@ def per_speed_table(grid: Grid, quantity: str = "translation_pct", bins_mps: Seq
         digits=2 if quantity == "translation_pct" else 3, name=f"kitti_{quantity}_per_speed",
         note=f"Segments pooled over the sequences; a segment's speed is its length over its duration: the time from its "
              f"first to its last pose's stamp plus one median interval (the devkit counts a segment's frames, first and "
-             f"last included), or without stamps its frames x the KITTI devkit's frame period (0.1 s).{left_out}",
+             f"last included), or without stamps its frames x the KITTI devkit's frame period (0.1 s).{left_out}"
+             + (f" Here {clock_note}." if clock_note else ""),
     )
 
 
@@ -320,13 +371,18 @@ def per_speed_table(grid: Grid, quantity: str = "translation_pct", bins_mps: Seq
 VALUE_SIGNIFICANT_FIGURES = 3
 #: values below this share of a table's largest are round-off, not sized for (every cell printed 15 decimals)
 ROUND_OFF_SHARE = 1e-9
+#: values at most this (in the table's unit: m, deg, %) are round-off whatever the others: float64 noise of positions
+#: (a copy scored against itself, alone in its table, printed APE 0.000000000000035 m)
+ROUND_OFF_ABS = 1e-9
 
 
-def decimals_for(values: np.ndarray, at_least: int, significant: int = VALUE_SIGNIFICANT_FIGURES) -> int:
-    """Decimals, at least ``at_least``, that show the smallest finite non-zero ``|value|`` with ``significant`` figures:
-    one count for the whole table, so that its columns line up."""
+def decimals_for(values: np.ndarray, at_least: int, significant: int = VALUE_SIGNIFICANT_FIGURES,
+                 round_off: float = ROUND_OFF_ABS) -> int:
+    """Decimals, at least ``at_least``, that show the smallest finite ``|value|`` above round-off (``round_off``, and
+    :data:`ROUND_OFF_SHARE` of the largest) with ``significant`` figures: one count for the whole table, so that its
+    columns line up."""
     magnitudes = np.abs(np.asarray(values, dtype=np.float64))
-    magnitudes = magnitudes[np.isfinite(magnitudes) & (magnitudes > 0)]
+    magnitudes = magnitudes[np.isfinite(magnitudes) & (magnitudes > round_off)]
     if magnitudes.size:  # (round-off beside real values, a copy scored against itself at 3e-13, prints as 0)
         magnitudes = magnitudes[magnitudes > ROUND_OFF_SHARE * magnitudes.max()]
     if not magnitudes.size:
@@ -400,16 +456,16 @@ class PublicationTables:
 
 def publication_tables(segments: Grid | None = None, ape_rmse_m: Mapping[tuple[str, str], float] | None = None,
                        rpe_rmse_m: Mapping[tuple[str, str], float] | None = None, *, ape_alignment: str = "SE(3)-aligned",
-                       rpe_delta: str = "1 frame") -> PublicationTables:
+                       rpe_delta: str = "1 frame", clock_note: str = "") -> PublicationTables:
     """Drift (translation, rotation), per-length, per-speed, APE and RPE tables from what is available; the APE and
     RPE titles state the alignment and the delta the values were computed with (one title for every kind read as
-    SE(3)-aligned APE and 1-frame RPE)."""
+    SE(3)-aligned APE and 1-frame RPE), the per-speed table's note ``clock_note`` (:attr:`SegmentClock.note`)."""
     out = PublicationTables()
     if segments:
         for q in QUANTITIES:
             out.tables.append(drift_table(segments, q))
         out.tables.append(per_length_table(segments))
-        out.tables.append(per_speed_table(segments))
+        out.tables.append(per_speed_table(segments, clock_note=clock_note))
     if ape_rmse_m:
         out.tables.append(value_table(ape_rmse_m, f"APE translation RMSE (m, {ape_alignment})", name="ape_rmse"))
     if rpe_rmse_m:
