@@ -22,11 +22,11 @@ def _cloud_bytes(n: int, times: np.ndarray | None = None) -> tuple[list[tuple[st
 
 
 def write_ros1_bag(path, clouds, *, extra_odometry: bool = False, topic: str = "/points", odometry=(), second_odometry: bool = False,
-                   received_from_ns: int = 10**12, child_frame: str = "lidar"):
+                   received_from_ns: int = 10**12, child_frame: str = "lidar", cloud_frames=None):
     """A ROS 1 bag with one PointCloud2 per ``(stamp_s, fields, point_step, data, width)`` in ``clouds`` and one
     nav_msgs/Odometry on /ground_truth (and /ground_truth2 with ``second_odometry``) per ``(stamp_s, xyz, quat_xyzw)``
-    in ``odometry`` (the pose of ``child_frame``; the clouds are in frame lidar), message k received ``received_from_ns``
-    + k x 0.1 s (the log order is the lists' order)."""
+    in ``odometry`` (the pose of ``child_frame``; cloud k is in frame ``cloud_frames[k]``, else lidar), message k received
+    ``received_from_ns`` + k x 0.1 s (the log order is the lists' order)."""
     from rosbags.rosbag1 import Writer
     from rosbags.typesys import Stores, get_typestore
 
@@ -37,7 +37,8 @@ def write_ros1_bag(path, clouds, *, extra_odometry: bool = False, topic: str = "
         conn = writer.add_connection(topic, pc2, typestore=store) if clouds else None
         for k, (stamp_s, fields, step, data, width) in enumerate(clouds):
             sec = int(np.floor(stamp_s))
-            header = T["std_msgs/msg/Header"](seq=k, stamp=T["builtin_interfaces/msg/Time"](sec=sec, nanosec=int(round((stamp_s - sec) * 1e9))), frame_id="lidar")
+            header = T["std_msgs/msg/Header"](seq=k, stamp=T["builtin_interfaces/msg/Time"](sec=sec, nanosec=int(round((stamp_s - sec) * 1e9))),
+                                             frame_id="lidar" if cloud_frames is None else cloud_frames[k])
             msg = T[pc2](header=header, height=1, width=width, is_bigendian=False, point_step=step, row_step=step * width,
                          fields=[T["sensor_msgs/msg/PointField"](name=n, offset=o, datatype=d, count=1) for n, o, d in fields],
                          data=np.frombuffer(data, dtype=np.uint8), is_dense=True)
@@ -197,6 +198,48 @@ def test_a_time_field_is_checked_against_the_point_order_and_the_azimuth(tmp_pat
             open_dataset("rosbag", bag, time_field="intensity").read_scan(k)
 
 
+def test_a_solid_state_sweep_stored_in_another_order_reads_its_times(tmp_path):
+    """A Livox-like sweep (a rosette over 70 x 70 degrees, 20000 points in 0.1 s) stored binned in space goes back at
+    every other point and sweeps no azimuth: its valid times were refused as "an intensity". Taken in the order of
+    their times, its points trace the scan pattern: the times are read; a uniform value on the same cloud is not."""
+    rng = np.random.default_rng(0)
+    n = 20000
+    times = np.sort(rng.uniform(0.0, 0.1, n))
+    azimuth, elevation = np.radians(35) * np.sin(2 * np.pi * 1000 * times), np.radians(35) * np.cos(2 * np.pi * 1370 * times)
+    range_m = rng.uniform(5.0, 30.0, n)
+    xyz = range_m[:, None] * np.c_[np.cos(elevation) * np.cos(azimuth), np.cos(elevation) * np.sin(azimuth), np.sin(elevation)]
+    binned = np.lexsort((np.floor(xyz[:, 1]), np.floor(xyz[:, 0])))
+    rec = np.zeros(n, dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("time", "<f4"), ("intensity", "<f4")])
+    fields = [("x", 0, F32), ("y", 4, F32), ("z", 8, F32), ("time", 12, F32), ("intensity", 16, F32)]
+    rec["x"], rec["y"], rec["z"] = xyz[binned].T
+    rec["time"], rec["intensity"] = times[binned], rng.uniform(0.0, 0.9, n)
+    bag = write_ros1_bag(tmp_path / "livox.bag", [(1000.0 + 0.1 * k, fields, 20, rec.tobytes(), n) for k in range(2)])
+    scan = open_dataset("rosbag", bag).read_scan(1)
+    np.testing.assert_array_equal(scan.point_times_s, rec["time"].astype(np.float64))
+    assert scan.stamp_instant == "start"
+    with pytest.raises(DataError, match=r"livox\.bag \(message 0 on /points\): per-point time field 'intensity' does not follow the "
+                                        r"sweep: its values go back \d+ times in 20000 points and do not turn with the azimuth "
+                                        r"nor trace a scan pattern in their order"):
+        open_dataset("rosbag", bag, time_field="intensity").read_scan(0)
+
+
+def test_clouds_of_two_frames_on_one_topic_are_refused(tmp_path):
+    """A front and a rear LiDAR alternating on /points (header.frame_id front, rear) were registered as one sensor's
+    sweeps (a 60.65 m path for a 3 m drive) without a word: the first message in another frame is a DataError naming
+    it, both frames and the topic, whichever pass reads it first. A leading "/" names the same frame."""
+    bag = write_ros1_bag(tmp_path / "two.bag", [good(k) for k in range(4)], cloud_frames=["front", "rear", "front", "rear"])
+    message = (r"two\.bag \(message 1 on /points\): header\.frame_id 'rear' where message 0 on /points is in 'front': the "
+               r"recording mixes sensors on one topic, and the reader reads one sensor per topic")
+    with pytest.raises(DataError, match=message):
+        open_dataset("rosbag", bag).read_scan(3)
+    with pytest.raises(DataError, match=message):
+        open_dataset("rosbag", bag).timestamps_s
+    with pytest.raises(DataError, match=message):
+        run(open_dataset("rosbag", bag), "kiss")
+    slashed = write_ros1_bag(tmp_path / "slash.bag", [good(k) for k in range(3)], cloud_frames=["lidar", "/lidar", "lidar"])
+    assert len(open_dataset("rosbag", slashed).timestamps_s) == 3
+
+
 def test_a_ring_number_named_as_time_field_is_refused(tmp_path):
     """time_field=ring (a uint16 beam number, 0-15) read as 0-15 ns of per-point times: kiss 'deskewed' every sweep by
     ring number; an 8- or 16-bit integer field cannot hold times, refused naming it."""
@@ -249,12 +292,41 @@ def test_time_going_backwards(tmp_path):
 
 
 def test_ouster_pcap_without_metadata(tmp_path):
+    """The metadata is looked for once the ouster-sdk is there (without it nothing reads: its pip line comes first)."""
+    import importlib.util
+
+    from lidarkit.errors import ConfigError
+    from lidarkit.io.kiss_loaders import ouster_metadata
+
     pcap = tmp_path / "drive.pcap"
     pcap.write_bytes(b"\xd4\xc3\xb2\xa1" + b"\0" * 60)  # a pcap header, no json beside it
-    with pytest.raises(DataError, match=r"drive\.pcap \(frame 0\): no sensor metadata: an Ouster pcap needs the \.json recorded with it"):
-        open_dataset("ouster", pcap)
+    missing = r"drive\.pcap \(frame 0\): no sensor metadata: an Ouster pcap needs the \.json recorded with it"
+    with pytest.raises(DataError, match=missing):
+        ouster_metadata(pcap, None)
     with pytest.raises(DataError, match=r"meta\.json: Ouster metadata json not found"):
-        open_dataset("ouster", pcap, meta=str(tmp_path / "meta.json"))
+        ouster_metadata(pcap, str(tmp_path / "meta.json"))
+    if importlib.util.find_spec("ouster") is None:
+        with pytest.raises(ConfigError, match=r"the ouster reader needs the Python package 'ouster': pip install 'lidarkit\[ouster\]'"):
+            open_dataset("ouster", pcap)
+    else:
+        with pytest.raises(DataError, match=missing):
+            open_dataset("ouster", pcap)
+
+
+@pytest.mark.parametrize("name, said", [
+    ("s.mcap", "an MCAP file, not an Ouster .pcap (the ouster reader takes a .pcap with its metadata .json): mcap:{path} reads it"),
+    ("s.bag", "a ROS bag, not an Ouster .pcap (the ouster reader takes a .pcap with its metadata .json): rosbag:{path} reads it"),
+    ("s.txt", "a file, not an Ouster .pcap (the ouster reader takes a .pcap with its metadata .json)"),
+])
+def test_another_recording_given_to_the_ouster_reader_is_named_by_what_it_is(tmp_path, name, said):
+    """ouster:s.mcap said "no sensor metadata: an Ouster pcap needs the .json" (or, with a json beside it, asked for the
+    ouster-sdk): a file that is not a .pcap is refused by what it is, with the reader that reads it."""
+    path = tmp_path / name
+    path.write_bytes(b"\x89MCAP0\r\n" if name.endswith(".mcap") else b"#ROSBAG V2.0\n")
+    (tmp_path / "sensor.json").write_text("{}")
+    with pytest.raises(DataError) as err:
+        open_dataset("ouster", path)
+    assert str(err.value) == f"{path}: " + said.format(path=path)
 
 
 def test_ground_truth_poses_that_cannot_stand_one_per_scan(tmp_path):
@@ -575,6 +647,19 @@ def test_a_message_of_missing_returns_only_says_so(tmp_path, how, what):
     assert str(err.value) == (f"{bag} (message 1 on /points): all 64 points are {what} (missing returns): no point left "
                               "(--frames can leave the frame out)")
     assert len(ds.read_scan(2).points_xyz) == 64
+
+
+def test_an_empty_message_mid_recording_says_how_to_leave_its_frame_out(tmp_path):
+    """An empty message mid-bag stopped the run with "empty scan (0 points)" alone, where a message of missing returns
+    only names --frames as the way past it: the empty one names it too, and --frames leaving it out runs."""
+    fields, step, _ = _cloud_bytes(64)
+    clouds = [good(0), good(1), (1000.2, fields, step, b"", 0), good(3)]
+    ds = open_dataset("rosbag", write_ros1_bag(tmp_path / "empty.bag", clouds))
+    with pytest.raises(DataError) as err:
+        run(ds, "kiss")
+    assert str(err.value) == (f"{tmp_path / 'empty.bag'} message 2 on /points (frame 2): empty scan (0 points) (--frames can "
+                              "leave the frame out)")
+    assert len(run(ds, "kiss", frames=[0, 1]).trajectory) == 2
 
 
 @pytest.mark.parametrize("first", ["empty", "all NaN", "one point"])

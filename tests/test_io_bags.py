@@ -238,9 +238,26 @@ def test_an_intensity_named_as_time_field_is_refused(exports):
     bag = exports[("rosbag1", "sqlite3")]
     with pytest.raises(DataError, match=r"run\.bag \(message 0 on /points\): per-point time field 'intensity' does not follow the "
                                         r"sweep: its values go back 808 times in 11368 points and do not turn with the azimuth "
-                                        r"\(an intensity or another per-point value\): not the points' times \(time_field= names"):
+                                        r"nor trace a scan pattern in their order \(an intensity or another per-point value\): not the points' times \(time_field= names"):
         open_dataset("rosbag", bag, time_field="intensity").read_scan(0)
     assert open_dataset("rosbag", bag, time_field="time").read_scan(0).point_times_s.max() == pytest.approx(0.1, abs=1e-3)
+
+
+def test_an_intensity_stored_in_another_order_is_still_refused(exports):
+    """Times that trace a scan pattern in their order are read (a solid-state sweep binned in space); an intensity
+    does not, whatever the order of the points: the simulator's (0.007-0.696) and KITTI's (real reflectances, the
+    first scan of sequence 00) binned in space are refused as before."""
+    from conftest import shared_path
+
+    from lidarkit.io.pointcloud2 import checked_point_times
+
+    scan = open_dataset("rosbag", exports[("rosbag1", "sqlite3")]).read_scan(0)
+    kitti = np.fromfile(shared_path("kitti_odometry", "sequences", "00", "velodyne", "000000.bin"), dtype=np.float32).reshape(-1, 4)
+    for xyz, intensity in ((scan.points_xyz, scan.intensity), (kitti[:, :3].astype(np.float64), kitti[:, 3])):
+        binned = np.lexsort((np.floor(xyz[:, 1]), np.floor(xyz[:, 0])))
+        with pytest.raises(DataError, match=r"^x \(m\): i does not follow the sweep: its values go back \d+ times in \d+ points "
+                                            r"and do not turn with the azimuth nor trace a scan pattern in their order"):
+            checked_point_times(intensity[binned], xyz[binned], what="i", within="m", hint="h", source="x", location="m")
 
 
 def test_odometry_over_bags_equals_the_kitti_export(exports, tmp_path):

@@ -461,7 +461,7 @@ def test_ouster_meta_given_by_a_relative_name_is_looked_up_beside_the_pcap(tmp_p
     data; run from another folder it was refused as "not found". It is found there (what follows is the ouster-sdk
     step), and a name found in neither place says both."""
     from lidarkit.errors import LidarKitError
-    from lidarkit.io.kiss_loaders import OusterScans
+    from lidarkit.io.kiss_loaders import OusterScans, ouster_metadata
 
     recording = tmp_path / "drive"
     recording.mkdir()
@@ -473,9 +473,10 @@ def test_ouster_meta_given_by_a_relative_name_is_looked_up_beside_the_pcap(tmp_p
     with pytest.raises(LidarKitError) as err:  # (without ouster-sdk: the ConfigError naming its pip line)
         OusterScans(recording / "run.pcap", meta="sensor.json")
     assert "metadata json not found" not in str(err.value)
+    assert ouster_metadata(recording / "run.pcap", "sensor.json") == str(recording / "sensor.json")
     with pytest.raises(DataError, match=re.escape(f"other.json: Ouster metadata json not found, neither from the working "
                                                   f"directory nor beside the pcap in {recording}")):
-        OusterScans(recording / "run.pcap", meta="other.json")
+        ouster_metadata(recording / "run.pcap", "other.json")
 
 
 def _ply_scans(folder, time_type: str, n_scans: int = 3):

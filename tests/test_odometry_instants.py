@@ -516,8 +516,28 @@ def test_ground_truth_at_no_clear_instant_that_cannot_be_re_timed_says_why(tmp_p
     assert gt.meta["pose_instant"] is None
     kept, note = like_with_like(gt, "end", sequence=bag, own_ground_truth=True, method="kiss")
     assert kept is gt
-    assert note == ("ground truth stamped at no clear instant of the sweep compared as it is with kiss's poses of the sweep end; "
-                    "re-timing it failed: /ground_truth: interpolating needs two or more poses with increasing stamps")
+    assert note == ("ground truth stamped at an instant of the sweep the reader does not state: compared as it is with kiss's "
+                    "poses of the sweep end; re-timing it failed: /ground_truth: interpolating needs two or more poses with "
+                    "increasing stamps")
+
+
+def test_a_kitti_folder_s_ground_truth_is_said_to_be_at_an_instant_the_reader_does_not_state():
+    """A KITTI-layout folder without the simulator's sim.yaml (its times.txt stamps are the sweep ends, which the
+    reader does not state) was said to be stamped "at no clear instant of the sweep": it is at an instant the reader
+    does not state, in the words of the runner's warning on such poses."""
+    from conftest import shared_path
+
+    from lidarkit.io import open_dataset
+    from lidarkit.odometry.instants import like_with_like
+
+    folder = open_dataset("kitti", shared_path("kitti_odometry"), sequence="00")
+    truth = folder.ground_truth
+    assert truth.meta.get("pose_instant") is None
+    kept, note = like_with_like(truth, "end", sequence=folder, own_ground_truth=True, method="kiss")
+    assert kept is truth
+    assert note == ("ground truth stamped at an instant of the sweep the reader does not state: compared as it is with kiss's "
+                    "poses of the sweep end; re-timing it failed: no ground truth at the sweep end (only the simulator's "
+                    "folders keep poses_end.txt)")
 
 
 def test_point_times_on_another_clock_than_the_stamps_are_said(tmp_path):

@@ -341,10 +341,17 @@ class KissTumScans(KissLoaderScans):
                           meta={"frame": self.ground_truth_frame, "pose_instant": None, "kiss_icp_loader": self.loader_name})
 
 
+#: suffix: (what the file is, the dataset kind that reads it) for recordings given to the ouster reader (an MCAP read
+#: "no sensor metadata: an Ouster pcap needs the .json")
+OTHER_RECORDINGS = {".mcap": ("an MCAP file", "mcap"), ".bag": ("a ROS bag", "rosbag")}
+
+
 class OusterScans(KissLoaderScans):
     """An Ouster ``.pcap`` with its sensor metadata ``.json`` (``meta``, a relative one found from the working directory
     or beside the pcap; default: the json beside it with the longest common name prefix, as kiss-icp looks for it).
-    Per-point times are the column fraction in [0, 1)."""
+    Per-point times are the column fraction in [0, 1). A file of another suffix is refused by what it is, and the
+    ouster-sdk is checked before the metadata (without it, an MCAP read "no sensor metadata: an Ouster pcap needs the
+    .json")."""
 
     loader_name = "ouster"
     requires = {"ouster.sdk": OUSTER_EXTRA}
@@ -353,16 +360,28 @@ class OusterScans(KissLoaderScans):
         pcap = Path(path)
         if not pcap.is_file():
             raise DataError("Ouster pcap not found (the ouster reader takes one .pcap file)", source=pcap)
-        if meta is not None:  # relative: from the working directory, else beside the pcap (as other readers' path options)
-            given, meta = meta, option_path(meta, pcap.parent)
-            if not meta.is_file():
-                raise DataError(f"Ouster metadata json not found, neither from the working directory nor beside the pcap in "
-                                f"{pcap.parent}", source=given)
-            meta = str(meta)
-        if meta is None and not list(pcap.parent.glob("*.json")):
-            raise DataError("no sensor metadata: an Ouster pcap needs the .json recorded with it (beside it, or meta=PATH)",
-                            source=pcap, location="frame 0")
-        super().__init__(pcap, meta=meta)  # then the ouster-sdk check (ConfigError with the pip line)
+        if pcap.suffix.lower() != ".pcap":
+            what, kind = OTHER_RECORDINGS.get(pcap.suffix.lower(), ("a file", None))
+            read_by = f": {kind}:{path} reads it" if kind else ""
+            raise DataError(f"{what}, not an Ouster .pcap (the ouster reader takes a .pcap with its metadata .json){read_by}",
+                            source=pcap)
+        require_modules(self.requires, self.kind)  # (before the metadata: without the package nothing reads)
+        super().__init__(pcap, meta=ouster_metadata(pcap, meta))
+
+
+def ouster_metadata(pcap: Path, meta: str | None) -> str | None:
+    """The sensor metadata json of ``pcap``: the one ``meta`` names (relative: from the working directory, else beside
+    the pcap, as other readers' path options), None for kiss-icp's own look-up beside it; DataError when there is none."""
+    if meta is not None:
+        found = option_path(meta, pcap.parent)
+        if not found.is_file():
+            raise DataError(f"Ouster metadata json not found, neither from the working directory nor beside the pcap in "
+                            f"{pcap.parent}", source=meta)
+        return str(found)
+    if not list(pcap.parent.glob("*.json")):
+        raise DataError("no sensor metadata: an Ouster pcap needs the .json recorded with it (beside it, or meta=PATH)",
+                        source=pcap, location="frame 0")
+    return None
 
 
 def nclt_points(path: str | os.PathLike) -> np.ndarray:
@@ -723,4 +742,5 @@ def _check_header(path: Path, frame: int | None) -> None:
 __all__ = [
     "KISS_KINDS", "ApolloScans", "BoreasScans", "GenericScans", "HeliprScans", "KissKittiRawScans", "KissKittiScans",
     "KissLoaderScans", "KissTumScans", "MulranScans", "NcltScans", "NewerCollegeScans", "NuScenesScans", "OusterScans",
+    "ouster_metadata",
 ]

@@ -22,8 +22,8 @@ asked for):
   1.7e9 s): refused;
 * a field whose values span more than :data:`MAX_SWEEP_S` in one message is not the points' times (e.g. an
   intensity named by ``time_field=``), nor is an 8- or 16-bit integer field (a ``ring``), nor one that neither follows
-  the point order nor turns with the azimuth (an intensity within 1 s): a DataError, where it would have deskewed
-  every sweep by nonsense.
+  the point order nor turns with the azimuth nor, in its order, traces a scan pattern (an intensity within 1 s): a
+  DataError, where it would have deskewed every sweep by nonsense.
 
 A recording's scans share one convention, read from its first scans (:func:`recording_time_convention`: a simulator's
 clock starting at 0 leaves its first stamps too near 0 to decide, and their absolute times were read as relative, 0.1-0.2
@@ -56,6 +56,10 @@ MAX_SWEEP_S = 1.0
 #: Largest share of steps along the point order where a sweep's times go back (one per row: 128 rows of 1024 is 0.1 %).
 _MAX_REVERSALS = 0.005
 _MIN_POINTS_TO_JUDGE = 100
+#: Most median step in direction between points of consecutive times, as a share of the median angle between two
+#: points of the cloud, for times to trace a scan pattern: a solid-state sweep binned in space steps 0.02 of it, an
+#: intensity (the simulator's, KITTI's) 0.3-1
+_SCAN_PATH_STEP_SHARE = 0.1
 #: Least share of the stamps' spacing a sweep's point times span: a sensor seeing a quarter of its turn spans 25 %,
 #: microseconds read as nanoseconds span 0.1 % (a 0.1 s sweep of 1e-4 s re-timed the ground truth by 50 us)
 MIN_SWEEP_SHARE = 0.01
@@ -228,8 +232,8 @@ def checked_point_times(raw: np.ndarray, xyz: np.ndarray, *, what: str, within: 
     if reversals is not None:
         raise DataError(
             f"{what} does not follow the sweep: its values go back {reversals} times in "
-            f"{len(times)} points and do not turn with the azimuth (an intensity or another per-point value): not the "
-            f"points' times ({hint})", source=source, location=location,
+            f"{len(times)} points and do not turn with the azimuth nor trace a scan pattern in their order (an intensity "
+            f"or another per-point value): not the points' times ({hint})", source=source, location=location,
         )
     if convention is None:
         return times, point_time_convention(times, stamp_s)
@@ -362,7 +366,8 @@ def _time_order_reversals(times: np.ndarray, xyz: np.ndarray) -> int | None:
 
     A sweep's times rise (or fall) along the firing order, going back only at each row of an organized cloud
     (:data:`_MAX_REVERSALS` of the steps at most), or turn with the azimuth of a spinning sensor (points
-    ``xyz`` (N, 3)); an intensity within 1 s does neither (it passed as times, deskewing every sweep by it).
+    ``xyz`` (N, 3)), or, taken in their order, trace the scan pattern of a solid-state one (:func:`_traces_scan_path`);
+    an intensity within 1 s does none of these (it passed as times, deskewing every sweep by it).
     """
     span = float(np.ptp(times)) if len(times) else 0.0
     if len(times) < _MIN_POINTS_TO_JUDGE or span == 0.0:
@@ -375,7 +380,32 @@ def _time_order_reversals(times: np.ndarray, xyz: np.ndarray) -> int | None:
     azimuth = np.arctan2(xyz[:, 1], xyz[:, 0])
     phase = 2 * np.pi * (times - times.min()) / span  # one turn per sweep, either way round
     turning = max(abs(np.exp(1j * (azimuth - phase)).mean()), abs(np.exp(1j * (azimuth + phase)).mean()))
-    return None if turning > 0.5 else int(reversals)
+    return None if turning > 0.5 or _traces_scan_path(times, xyz) else int(reversals)
+
+
+def _traces_scan_path(times: np.ndarray, xyz: np.ndarray) -> bool:
+    """Whether the points ``xyz`` (N, 3), taken in the order of ``times`` (N,), trace a scan pattern: each next time's
+    point a small step in direction from the one before. A solid-state sensor (Livox) sweeps no azimuth, and its points
+    stored in another order (binned in space) were refused as "an intensity"; an intensity's next value lies anywhere
+    in the field of view. Judged by direction (an intensity falling with range would trace a path in space) over
+    the distinct values, ties taken in a fixed random order (the stored order of equal values is a path of its own)."""
+    rng = np.random.default_rng(0)
+    shuffled = rng.permutation(len(times))
+    order = shuffled[np.argsort(times[shuffled], kind="stable")]
+    ordered_times = times[order]
+    order = order[np.r_[True, ordered_times[1:] != ordered_times[:-1]]]
+    if len(order) < _MIN_POINTS_TO_JUDGE:
+        return False
+    with np.errstate(invalid="ignore", divide="ignore"):
+        directions = np.nan_to_num(xyz / np.linalg.norm(xyz, axis=1, keepdims=True))
+    step_rad = np.median(_angles_between(directions[order[:-1]], directions[order[1:]]))
+    spread_rad = np.median(_angles_between(directions, directions[rng.permutation(len(directions))]))
+    return bool(spread_rad > 0 and step_rad <= _SCAN_PATH_STEP_SHARE * spread_rad)
+
+
+def _angles_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Angles (rad) between the unit vectors of rows of ``a`` and ``b`` (M, 3)."""
+    return np.arccos(np.clip(np.einsum("ij,ij->i", a, b), -1.0, 1.0))
 
 
 #: sensor_msgs/PointField datatype codes

@@ -6,6 +6,9 @@ standalone ``.mcap`` file (ROS 2 messages, or ROS 1 ones as an MCAP converted fr
 loaders open the files; lidarkit checks the topic first (kiss-icp prints and exits on a missing one) and decodes
 each message with :func:`lidarkit.io.pointcloud2.decode_pointcloud2`.
 
+A topic is one sensor's: a message in another ``header.frame_id`` than the first is a DataError (two sensors on one
+topic read as one made a 60 m path of a 3 m drive).
+
 Per scan: ``timestamp_s`` is the message header stamp; ``stamp_instant`` says which instant of the sweep that
 stamp is, read from the per-point times (relative times starting at 0: the sweep start; ending at 0: the end); a stamp
 at no such instant (a driver stamping on receipt, after the sweep end) is placed by ``sweep_offset_s``. The per-point
@@ -281,8 +284,11 @@ class _BagScans:
                 )
             self._last_stamp = (k, stamp)
             self._stamps[k] = stamp
-            if k == 0:
-                self._cloud_frame = str(msg.header.frame_id)
+            try:
+                self._check_cloud_frame(k, msg)
+            except DataError:  # (read again from the start: a pass that stopped here left the next read past the message)
+                self._stream = None
+                raise
         decoded = decode_pointcloud2(msg, source=str(self.path), location=self._location(index), time_field=self.time_field,
                                      all_missing_ok=all_missing_ok, convention=convention,
                                      convention_from=f"the first scans on {self.topic}")
@@ -299,6 +305,19 @@ class _BagScans:
             self._warn_once("flat_time", f"per-point time field {flat} holds one value for every point of {self._location(index)}: "
                                          f"the times are read from {decoded.time_field!r} (time_field= names the field to read)")
         return decoded
+
+    def _check_cloud_frame(self, k: int, msg: Any) -> None:
+        """Keep message 0's ``header.frame_id`` as the clouds' frame; DataError for a later message in another frame: two
+        sensors on one topic (a front and a rear LiDAR alternating on /points were registered as one sensor's sweeps,
+        a 60.65 m path for a 3 m drive, without a word). A leading "/" (ROS 1's global names) is no other frame."""
+        frame = str(msg.header.frame_id)
+        if k == 0 or self._cloud_frame is None:
+            self._cloud_frame = frame
+        elif frame.lstrip("/") != self._cloud_frame.lstrip("/"):
+            raise DataError(f"header.frame_id {frame!r} where message 0 on {self.topic} is in {self._cloud_frame!r}: the "
+                            f"recording mixes sensors on one topic, and the reader reads one sensor per topic (it has no "
+                            f"option to pick a frame: a bag with each sensor on its own topic reads with topic=...)",
+                            source=self.path, location=self._location(k))
 
     @property
     def timestamps_s(self) -> np.ndarray:
@@ -317,8 +336,7 @@ class _BagScans:
                                     source=self.path, location=self._location(k))
                 last = stamp
                 self._stamps[k] = stamp
-                if k == 0:
-                    self._cloud_frame = str(msg.header.frame_id)
+                self._check_cloud_frame(k, msg)
             if n_read != self.n_scans:
                 raise self._miscounted(n_read)
             if self.n_scans > 1 and not any(self._stamps.values()):  # (read "0 s after 0 s of frame 0: not increasing")

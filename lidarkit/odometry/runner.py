@@ -86,8 +86,10 @@ def _read_nonempty_scan(sequence: ScanSequence, index: int) -> Scan:
         raise ConfigError(f"read_scan({index}) returned a Scan whose points_xyz is a {type(scan.points_xyz).__name__}, not "
                           "an (N, 3) numpy array")
     if len(scan.points_xyz) == 0:  # named by its file and line where the reader gives them (a CARMEN log's blank scan
-        # read "blank11 (frame 10): empty scan (0 points)"), else by the caller
-        raise DataError("empty scan (0 points)" + _why_empty(sequence, index), source=scan.source or None,
+        # read "blank11 (frame 10): empty scan (0 points)"), else by the caller; the way past it where the reader tells
+        # no reason of its own (a bag's empty message mid-recording said none, as a message of missing returns only does)
+        why = _why_empty(sequence, index)
+        raise DataError("empty scan (0 points)" + (why or " (--frames can leave the frame out)"), source=scan.source or None,
                         location=f"frame {index}" if scan.source else None)
     return scan
 
