@@ -68,15 +68,18 @@ def stamp_text(seconds: float) -> str:
     return np.format_float_positional(float(seconds), unique=True, precision=9, trim="-")
 
 
-def check_seconds(stamps: np.ndarray, path: str | os.PathLike) -> None:
-    """DataError naming the first of a file's ``(N,)`` stamps beyond :data:`MAX_STAMP_S`: no time in seconds."""
+def check_seconds(stamps: np.ndarray, path: str | os.PathLike, *, nanoseconds_from: float | None = None) -> None:
+    """DataError naming the first of a file's ``(N,)`` stamps beyond :data:`MAX_STAMP_S`: no time in seconds.
+    ``nanoseconds_from``: the reader took stamps above it as nanoseconds, so the ones left are named milliseconds."""
     beyond = np.abs(stamps) > MAX_STAMP_S
     if beyond.any():
         k = int(np.argmax(beyond))
         stamp = float(stamps[k])  # (as the file wrote it: 1403715524907143168, not the shortest repr ...143200)
         text = f"{stamp:.0f}" if stamp.is_integer() else np.format_float_positional(stamp, trim="-")
-        raise DataError(f"time stamp {text} is beyond {MAX_STAMP_S:.0e} s (after the year 5000): they look like nanoseconds "
-                        "(or micro/milliseconds): write seconds, e.g. divide by 1e9", source=path,
+        unit = ("they look like nanoseconds (or micro/milliseconds): write seconds, e.g. divide by 1e9" if nanoseconds_from is None
+                else f"milliseconds? (stamps above {nanoseconds_from:.0e} are read as nanoseconds): write seconds, e.g. "
+                     "divide by 1e3")
+        raise DataError(f"time stamp {text} is beyond {MAX_STAMP_S:.0e} s (after the year 5000): {unit}", source=path,
                         location=file_line(path, f"frame {k}"))
 
 

@@ -291,6 +291,20 @@ def test_time_going_backwards(tmp_path):
         ds.timestamps_s
 
 
+def test_time_going_backwards_is_named_at_its_message_by_every_later_read(tmp_path):
+    """The pass over the first scans stopped at message 2 and left the stream past it: reading scan 4 then went on from
+    message 3, compared with message 1's stamp, and ran (or named a later message). Each read now names message 2."""
+    clouds = [good(0), good(1), (good(1)[0] - 0.05, *good(2)[1:]), good(3), good(4)]
+    bag = write_ros1_bag(tmp_path / "back.bag", clouds)
+    message = (r"back\.bag \(message 2 on /points\): time goes backwards: header stamp 1000\.050000000 s is before "
+               r"1000\.100000000 s of message 1")
+    ds = open_dataset("rosbag", bag)
+    for index in (4, 3, 4):
+        with pytest.raises(DataError, match=message):
+            ds.read_scan(index)
+    assert ds.read_scan(1).timestamp_s == pytest.approx(1000.1)  # (the messages before it read)
+
+
 def test_ouster_pcap_without_metadata(tmp_path):
     """The metadata is looked for once the ouster-sdk is there (without it nothing reads: its pip line comes first)."""
     import importlib.util

@@ -666,3 +666,37 @@ def test_points_dropped_as_nonfinite_are_kept_once_for_the_runs_warnings(tmp_pat
         reader.read_scan(k)
     assert getattr(reader, "reader_warnings", None) == [f"left out 2 of {n} points with NaN or infinite values in frame 1 "
                                                          f"({folder / 'velodyne' / '000001.bin'}); in later frames without another warning"]
+
+
+def test_time_stamps_in_nanoseconds_are_read_as_seconds_and_milliseconds_are_refused(tmp_path, odo_root, caplog):
+    """times.txt (or times_file=, what lidarkit vo --timestamps gives) in nanoseconds was read as seconds: a run wrote
+    1600000001038876928.0 to its poses_tum.txt, which lidarkit eval refused. Above 1e15 they are nanoseconds, converted
+    with a warning, as an image folder's stamps are; milliseconds are refused naming the file, line and unit."""
+    from lidarkit.vo.inputs import open_vo_input
+
+    seconds = 1.6e9 + 0.1 * np.arange(len((odo_root / "sequences" / "00" / "times.txt").read_text().split()))
+    ns_file, ms_file = tmp_path / "times_ns.txt", tmp_path / "times_ms.txt"
+    ns_file.write_text("".join(f"{round(t * 1e9)}\n" for t in seconds))
+    ms_file.write_text("".join(f"{t * 1e3:.3f}\n" for t in seconds))
+    seq = tmp_path / "seq"
+    shutil.copytree(odo_root / "sequences" / "00", seq)
+    refused = r"time stamp 1600000000000 is beyond 1e\+11 s \(after the year 5000\): milliseconds\? .*divide by 1e3$"
+    for given, unit in ((ns_file, "ns"), (ms_file, "ms")):
+        (seq / "times.txt").write_text(given.read_text())
+        for times_path, root, options in ((seq / "times.txt", seq, {}), (given, odo_root, {"times_file": given})):
+            if unit == "ms":
+                with pytest.raises(DataError, match=rf"{times_path.name} \(line 1, frame 0\): {refused}"):
+                    KittiOdometry(root, **options).timestamps_s
+                continue
+            with caplog.at_level(logging.WARNING, logger="lidarkit.io.base"):
+                ds = KittiOdometry(root, **options)
+                stamps = ds.timestamps_s
+            np.testing.assert_allclose(stamps, seconds[ds.frames], rtol=0, atol=1e-6)
+            assert f"{times_path}: time stamps above 1e+15 read as nanoseconds (the first is 1600000000.000000 s)" in caplog.text
+    # lidarkit vo --timestamps over a KITTI image sequence (sequence 01 has no times.txt of its own)
+    images = shared_path("kitti_images", "sequences", "01")
+    ns_file.write_text("".join(f"{round(t * 1e9)}\n" for t in seconds[:51]))
+    assert open_vo_input(images, kind="kitti", timestamps=ns_file).images.timestamps_s[1] == pytest.approx(1.6e9 + 0.1, abs=1e-6)
+    ms_file.write_text("".join(f"{t * 1e3:.3f}\n" for t in seconds[:51]))
+    with pytest.raises(DataError, match=rf"times_ms\.txt \(line 1, frame 0\): {refused}"):
+        open_vo_input(images, kind="kitti", timestamps=ms_file).images.timestamps_s

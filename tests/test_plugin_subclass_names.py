@@ -45,6 +45,19 @@ def test_the_calibration_note_names_the_unregistered_subclass_that_inherits_it()
     assert derived.extra["covariance_calibration"] == "vanilla's (inherited by Stretched(vanilla))"  # (read "vanilla")
 
 
+def test_the_distortion_floor_note_names_the_entry_an_unregistered_subclass_is_widened_by():
+    """The run's note named DISTORTION_SIGMA['Stretched(vanilla)'], an entry that does not exist: the frames were
+    widened by vanilla's, which the note now names."""
+    from lidarkit.registration.covariance import DISTORTION_SIGMA
+
+    street = SimulatedLidarSequence(scene="street", n_frames=3, seed=3, n_beams=16, n_azimuths=180)  # (point times)
+    result = run(street, Stretched(), progress=False)  # (registered without deskew)
+    note = result.config["run"]["covariance_distortion_floor"]
+    assert "Stretched(vanilla)" not in DISTORTION_SIGMA
+    assert note == ("2 frames: motion-distorted sweeps registered without deskew, frame covariance widened by "
+                    "DISTORTION_SIGMA['vanilla']")
+
+
 def test_registered_and_self_named_subclasses_keep_their_names_and_a_subclass_reads_data_as_its_parent(monkeypatch):
     class OwnName(VanillaICP):
         name = "own_vanilla"
@@ -81,3 +94,4 @@ def test_a_list_or_mapping_for_a_choice_is_a_config_error():
         get_icp("vanilla", nn_backend=["scipy"])
     assert get_icp("pipeline", preset="kiss_like").config.preset == "kiss_like"
     assert np.isfinite(get_icp("vanilla", nn_backend="scipy").config.max_iterations)
+

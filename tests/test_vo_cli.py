@@ -1072,6 +1072,19 @@ def test_nanosecond_time_stamps_are_read_as_nanoseconds_and_said(tmp_path, capsy
     assert f"{stamps}: time stamps above 1e+15 read as nanoseconds (the first is 1403636579.763556 s)" in said
 
 
+def test_millisecond_time_stamps_of_an_image_folder_are_refused_naming_the_unit(tmp_path):
+    """Stamps in milliseconds (1403636579763.555) were read as seconds, and the run's poses_tum.txt was refused by
+    lidarkit eval; the reader refuses them as a KITTI sequence's times.txt, naming the file, line and unit."""
+    from lidarkit.io.images import ImageFolder
+
+    stamps = tmp_path / "ms.txt"
+    stamps.write_text("# ms\n" + "".join(f"{1403636579763.555 + 100 * k:.3f}\n" for k in range(8)))
+    with pytest.raises(DataError, match=r"ms\.txt \(line 2, frame 0\): time stamp 1403636579763\.555 is beyond 1e\+11 s "
+                                        r"\(after the year 5000\): milliseconds\? \(stamps above 1e\+15 are read as nanoseconds\): "
+                                        r"write seconds, e\.g\. divide by 1e3$"):
+        ImageFolder(sample_path("kitti_vo", "06", "image_0"), timestamps=stamps)
+
+
 def test_images_read_in_memory_keep_an_unreadable_frames_reason(tmp_path):
     """A bench vo job reads its images first (images_in_memory): an unreadable file became None and its frame was
     rejected as "unreadable image (missing)" though the file was there; now the reader's reason is kept."""

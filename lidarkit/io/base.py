@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import os
 from dataclasses import dataclass
 from collections.abc import Iterable
@@ -12,7 +13,9 @@ import numpy as np
 
 from lidarkit.errors import DataError
 from lidarkit.params import is_integer
-from lidarkit.trajectory import READ_WARNINGS, Trajectory
+from lidarkit.trajectory import READ_WARNINGS, Trajectory, check_seconds
+
+log = logging.getLogger(__name__)
 
 
 #: How ``Scan.point_times_s`` is expressed: seconds from the sweep start (KITTI-layout ``point_times``, the
@@ -61,6 +64,22 @@ def read_warnings_of(reader: Any, ground_truth: Any) -> list[str]:
     ``meta["read_warnings"]`` (a pose file cut inside its last number), for a run's ``warnings``."""
     truth = (getattr(ground_truth, "meta", None) or {}).get(READ_WARNINGS, ()) if ground_truth is not None else ()
     return [str(w) for w in dict.fromkeys([*(getattr(reader, "reader_warnings", None) or ()), *truth])]
+
+
+def stamps_in_seconds(stamps: np.ndarray, path: str | os.PathLike) -> np.ndarray:
+    """A file's ``(N,)`` time stamps as ``(N,) float64`` seconds: above :data:`~lidarkit.io.pointcloud2.NANOSECONDS_AFTER`
+    they are nanoseconds (EuRoC's data.csv, a bag's export), converted with a logged warning; a stamp still beyond
+    :data:`~lidarkit.trajectory.MAX_STAMP_S` (milliseconds) is a DataError naming it, as lidarkit eval refuses it (a run
+    wrote 1.6e18 "s" to its poses_tum.txt)."""
+    from lidarkit.io.pointcloud2 import NANOSECONDS_AFTER  # (pointcloud2 imports this module through pointfile)
+
+    stamps_s = np.asarray(stamps, dtype=np.float64)
+    if len(stamps_s) and float(np.abs(stamps_s).max()) > NANOSECONDS_AFTER:
+        stamps_s = stamps_s * 1e-9
+        log.warning("%s: time stamps above %.0e read as nanoseconds (the first is %.6f s)", path, NANOSECONDS_AFTER,
+                    stamps_s[0])
+    check_seconds(stamps_s, path, nanoseconds_from=NANOSECONDS_AFTER)
+    return stamps_s
 
 
 def option_path(given: str | os.PathLike, *folders: Path) -> Path:

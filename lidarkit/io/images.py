@@ -17,10 +17,9 @@ import numpy as np
 
 from lidarkit.errors import ConfigError, DataError
 from lidarkit.io import register_dataset
-from lidarkit.io.base import checked_index, keep_once
+from lidarkit.io.base import checked_index, keep_once, stamps_in_seconds
 from lidarkit.io.folder import sorted_by_name
 from lidarkit.io.kitti import read_gray_image, read_kitti_calib
-from lidarkit.io.pointcloud2 import NANOSECONDS_AFTER
 from lidarkit.run_files import output_folder_kind
 from lidarkit.textfile import read_lines
 from lidarkit.trajectory import READ_WARNINGS, Trajectory
@@ -91,7 +90,8 @@ def _without_brackets(line: str) -> str:
 def read_image_timestamps(path: str | os.PathLike, *, warnings: list[str] | None = None) -> np.ndarray:
     """Timestamps in seconds: one number per line, or ``stamp name`` lines (TUM ``rgb.txt``, EuRoC ``data.csv``); first
     column used. NaN or infinity is refused at its line (it failed later as "not strictly increasing", blaming the next
-    line). Stamps above 1e15 are nanoseconds, converted with a logged warning (they were written out as seconds).
+    line). Stamps above 1e15 are nanoseconds, converted with a logged warning (they were written out as seconds); the
+    ones left beyond 1e11 s (milliseconds) are refused (:func:`~lidarkit.io.base.stamps_in_seconds`).
     ``warnings``: as for :func:`lidarkit.textfile.read_lines` (a file cut inside its last number)."""
     stamps = []
     for lineno, raw in enumerate(read_lines(path, warnings=warnings), start=1):
@@ -106,12 +106,7 @@ def read_image_timestamps(path: str | os.PathLike, *, warnings: list[str] | None
             raise DataError("NaN or infinite value", source=path, location=f"line {lineno}")
     if not stamps:
         raise DataError("no time stamps", source=path)
-    stamps_s = np.asarray(stamps, dtype=np.float64)
-    if float(np.abs(stamps_s).max()) > NANOSECONDS_AFTER:  # nanoseconds (EuRoC data.csv), as in a bag
-        stamps_s = stamps_s * 1e-9
-        log.warning("%s: time stamps above %.0e read as nanoseconds (the first is %.6f s)", path, NANOSECONDS_AFTER,
-                    stamps_s[0])
-    return stamps_s
+    return stamps_in_seconds(np.asarray(stamps, dtype=np.float64), path)
 
 
 def _warn_stamps_apart(pose_stamps: np.ndarray, image_stamps: np.ndarray, poses: Any) -> None:

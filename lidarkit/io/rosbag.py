@@ -278,6 +278,7 @@ class _BagScans:
             self._next += 1
             stamp = stamp_seconds(msg.header.stamp)
             if self._last_stamp is not None and stamp < self._last_stamp[1]:
+                self._stream = None  # (as for the frame below: a pass that stopped here left the next read past it)
                 raise DataError(
                     f"time goes backwards: header stamp {stamp:.9f} s is before {self._last_stamp[1]:.9f} s of message {self._last_stamp[0]}",
                     source=self.path, location=self._location(k),

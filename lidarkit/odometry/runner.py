@@ -797,7 +797,8 @@ def run(
             "covariance_distortion_floor": (
                 f"{len(widened)} frames: motion-distorted sweeps registered "
                 + ("with a constant-velocity deskew" if getattr(registration, "deskew_instant", None) else "without deskew")
-                + f", frame covariance widened by DISTORTION_SIGMA[{name!r}]" if widened else None
+                # (the entry applied: a subclass outside the registry, 'Frozen(vanilla)', is widened by vanilla's)
+                + f", frame covariance widened by DISTORTION_SIGMA[{_calibration_of(registration, name)!r}]" if widened else None
             ),
         },
     }
