@@ -635,3 +635,25 @@ def test_a_loader_read_in_another_thread_leaves_the_main_threads_warnings_alone(
         reader.join(5.0)
     assert not [r for r in caplog.records if "the main thread's own warning" in r.getMessage()]
     assert [str(w.message) for w in recwarn] == ["the main thread's own warning"]  # (shown to the main thread's filters)
+
+
+def test_kiss_kitti_reads_nanosecond_times_as_the_kitti_reader_does(tmp_path):
+    """A times.txt in nanoseconds was read as seconds by kiss_kitti (1.6e18 "s" written to poses_tum.txt) where the kitti
+    reader converts it: one rule for both."""
+    import shutil
+
+    from conftest import shared_path
+
+    seq = tmp_path / "sequences" / "00"
+    (seq / "velodyne").mkdir(parents=True)
+    for n in (0, 1):
+        shutil.copy(shared_path("kitti_odometry", "sequences", "00", "velodyne", f"{n:06d}.bin"), seq / "velodyne")
+    shutil.copy(shared_path("kitti_odometry", "sequences", "00", "calib.txt"), seq)
+    seconds = 1.6e9 + np.loadtxt(shared_path("kitti_odometry", "sequences", "00", "times.txt"))[:2]
+    (seq / "times.txt").write_text("".join(f"{int(round(t * 1e9))}\n" for t in seconds))
+    (tmp_path / "poses").mkdir()  # (kiss-icp's loader needs them)
+    rows = shared_path("kitti_odometry", "poses", "00.txt").read_text().splitlines()[:2]
+    (tmp_path / "poses" / "00.txt").write_text("\n".join(rows) + "\n")
+    np.testing.assert_allclose(open_dataset("kiss_kitti", tmp_path, sequence="00").timestamps_s, seconds, rtol=0, atol=1e-6)
+    np.testing.assert_array_equal(open_dataset("kiss_kitti", tmp_path, sequence="00").timestamps_s,
+                                  open_dataset("kitti", tmp_path).timestamps_s)

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from lidarkit.errors import ConfigError, DataError, not_increasing
-from lidarkit.io.base import Scan, checked_index, checked_indices, option_path
+from lidarkit.io.base import Scan, checked_index, checked_indices, option_path, stamps_in_seconds
 from lidarkit.geometry import _within_limits
 from lidarkit.io.rosbag import guarded_loader, require_modules
 from lidarkit.trajectory import Trajectory
@@ -265,7 +265,8 @@ class KissKittiScans(KissLoaderScans):
         path = self.path / "sequences" / f"{int(self.loader.sequence_id):02d}" / "times.txt"
         if not path.is_file():
             return None
-        times = read_numeric_table(path, 1)[:, 0]  # (a bad row is a DataError naming the file and line)
+        # (a bad row is a DataError naming the file and line; nanoseconds read as the kitti reader reads them)
+        times = stamps_in_seconds(read_numeric_table(path, 1)[:, 0], path)
         frames = self._frames
         return times[frames] if frames and max(frames) < len(times) else None
 
