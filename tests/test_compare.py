@@ -321,7 +321,8 @@ def test_two_experiments_of_one_task_are_not_pooled_as_seeds(tmp_path, capsys):
     with pytest.raises(ConfigError) as exc:
         compare(out, out, **pick)
     assert str(exc.value) == (f"{out}: good has results in 2 experiments of task experiments_test_task (early, late) over the "
-                              "same (dataset, seed) units, each its own: --experiment picks one")
+                              "same (dataset, seed) units, each its own (task options: start 10 in early, 100 in late): "
+                              "--experiment picks one")
     early = compare(out, out, **pick, experiment="early")
     assert (early.n_pairs, early.pairing, early.p_value, early.better, early.note) == (3, "seed", 0.25, "", "")
     with pytest.raises(ConfigError) as exc:
@@ -533,7 +534,8 @@ def test_one_experiment_named_apart_in_two_folders_pairs(tmp_path):
     with pytest.raises(ConfigError) as exc:  # (A's two experiments over one (dataset, seed) against themselves: not pooled)
         compare(a, a)
     assert str(exc.value) == (f"{a}: good has results in 2 experiments of task named_apart_test_task (pf_all, pf_rec) over "
-                              "the same (dataset, seed) units, each its own: --experiment picks one")
+                              "the same (dataset, seed) units, each its own (task options: visible \"all\" in pf_all, "
+                              "\"recorded\" in pf_rec): --experiment picks one")
 
 
 def _spec_task(name: str) -> None:
@@ -1177,3 +1179,64 @@ def test_runs_over_two_exports_of_the_sweeps_name_their_ground_truth_instants(tm
     (tmp_path / "b" / "metrics.json").write_text(json.dumps(metrics))
     code, _, err = run_cli(["compare", str(tmp_path / "a"), str(tmp_path / "b")], capsys)
     assert code == 1 and err.endswith("(datasets rosbag:run1.bag/points and mcap:sim.mcap/points)\n"), err
+
+
+def test_experiments_over_other_frames_or_pairs_are_pooled_and_the_same_data_is_refused_naming_the_option(tmp_path):
+    """Two odometry experiments over frames 0:4 and 4:8 of one drive (and icp_pair experiments over pairs [[0, 1]] and
+    [[2, 3]]) were refused: "has results in 2 experiments ... over the same (dataset, seed) units", and --experiment left
+    1 unit. The part of the dataset each ran is part of its unit now; experiments over the same part are still refused,
+    naming the option they differ in (the default first pair and ``pairs: [[0, 1]]`` are one part)."""
+    drive = "{kind: sim_lidar, scene: street, n_frames: 8, n_beams: 8, n_azimuths: 180, seed: 3, name: st}"
+    methods = "methods: [vanilla, {name: vanilla, params: {voxel_size_m: 2.0}}]"
+    pick = {"method_a": "vanilla", "method_b": "vanilla(voxel_size_m=2.0)"}
+    frames = _bench(tmp_path, "frames", "experiments:\n"
+                    f"  - {{name: a, task: odometry, dataset: {drive}, options: {{frames: '0:4'}}, {methods}}}\n"
+                    f"  - {{name: b, task: odometry, dataset: {drive}, options: {{frames: '4:8'}}, {methods}}}\n")
+    pooled = compare(frames, frames, **pick)
+    assert (pooled.n_pairs, pooled.metric) == (2, "ape_se3_rmse_m")
+    pairs = _bench(tmp_path, "pairs", "experiments:\n"
+                   f"  - {{name: p01, task: icp_pair, dataset: {drive}, options: {{pairs: [[0, 1]]}}, {methods}}}\n"
+                   f"  - {{name: p23, task: icp_pair, dataset: {drive}, options: {{pairs: [[2, 3]]}}, {methods}}}\n"
+                   f"  - {{name: first, task: icp_pair, dataset: {drive}, {methods}}}\n"
+                   f"  - {{name: noisy, task: icp_pair, dataset: {drive}, options: {{pairs: [[2, 3]], init_noise_m: 0.5}}, "
+                   f"{methods}}}\n")
+    with pytest.raises(ConfigError) as exc:
+        compare(pairs, pairs, **pick)
+    assert str(exc.value) == (f"{pairs}: vanilla has results in 4 experiments of task icp_pair (first, noisy, p01, p23) over "
+                              "the same (dataset, seed) units and pairs, each its own (task options: init_noise_m 0.5 in "
+                              "noisy, not written in p23; pairs not written in first, [[0, 1]] in p01): --experiment picks one")
+    apart = _bench(tmp_path, "apart", "experiments:\n"
+                   f"  - {{name: p01, task: icp_pair, dataset: {drive}, options: {{pairs: [[0, 1]]}}, {methods}}}\n"
+                   f"  - {{name: p23, task: icp_pair, dataset: {drive}, options: {{pairs: [[2, 3]]}}, {methods}}}\n"
+                   f"  - {{name: p45, task: icp_pair, dataset: {drive}, options: {{pairs: [[4, 5]]}}, {methods}}}\n")
+    assert compare(apart, apart, **pick).n_pairs == 3
+    twice = _bench(tmp_path, "twice", "experiments:\n"
+                   f"  - {{name: p01, task: icp_pair, dataset: {drive}, options: {{pairs: [[0, 1]]}}, {methods}}}\n"
+                   f"  - {{name: again, task: icp_pair, dataset: {drive}, options: {{pairs: [[0, 1]]}}, {methods}}}\n")
+    with pytest.raises(ConfigError) as exc:
+        compare(twice, twice, **pick)
+    assert str(exc.value).endswith("each its own (task options: again and p01 alike): --experiment picks one")
+
+
+def test_a_dataset_reached_through_a_symbolic_link_pairs_and_messages_keep_its_written_path(tmp_path):
+    """KITTI 00 given through a link to the KITTI root read "runs over different data ... their dataset specs differ in
+    path": specs pair with the links of their folders followed now; a path that differs is shown as written."""
+    from conftest import shared_path
+
+    root = shared_path("kitti_odometry")
+    (tmp_path / "linked").symlink_to(root, target_is_directory=True)
+    _spec_task("kitti_link_test_task")
+    suite = "seeds: 6\nexperiments:\n  - {{task: kitti_link_test_task, dataset: {{kind: kitti, path: {where}, sequence: '00', name: k00}}, methods: [{method}]}}\n"
+    a = _bench(tmp_path, "a", suite.format(where=root, method="good"))
+    b = _bench(tmp_path, "b", suite.format(where=tmp_path / "linked", method="bad"))
+    result = compare(a, b)
+    assert (result.n_pairs, result.better, result.note) == (6, "a", "")
+    other = tmp_path / "other"
+    (other / "sequences" / "00" / "velodyne").mkdir(parents=True)
+    (tmp_path / "elsewhere").symlink_to(other, target_is_directory=True)
+    c = _bench(tmp_path, "c", suite.replace(", sequence: '00'", "").format(where=tmp_path / "elsewhere" / "sequences" / "00",
+                                                                          method="bad"))
+    with pytest.raises(EvaluationError) as exc:
+        compare(b, c)
+    assert str(exc.value).endswith(f'their dataset specs differ in path ("{tmp_path}/linked/sequences/00" in A, '
+                                   f'"{tmp_path}/elsewhere/sequences/00" in B)')

@@ -32,6 +32,10 @@ if TYPE_CHECKING:
 #: metrics is compared on its first accuracy metric, the report's headline (odometry: the SE(3)-aligned APE)
 DEFAULT_BENCH_METRICS = ("ape_se3_rmse_m", "drift_translation_pct", "mse_m2", "ape_rmse_m", "translation_error_m")
 RUN_METRICS = ("segment_translation_pct", "segment_rotation_deg_per_100m", "rpe_translation_m", "rpe_rotation_deg")
+#: the task options that choose which part of a dataset a job runs over (odometry's frames, icp_pair's scan pairs): two
+#: experiments of a task that differ in them ran other units, pooled as experiments over other datasets are; options
+#: that change how a method runs over the same data (pf's mse_start, icp_pair's init_noise_m) are not seeds of one
+DATA_SELECTING_OPTIONS = {"odometry": ("frames",), "icp_pair": ("pairs", "max_pairs")}
 
 
 @dataclass
@@ -66,6 +70,8 @@ class BenchRuns:
     instants: dict[str, str] = field(default_factory=dict)  # pair key -> sweep instant of the ground truth it was scored against
     records: list[dict[str, Any]] = field(default_factory=list, repr=False)  # the folder's latest records, read once
     unknown_tasks: dict[str, str] = field(default_factory=dict)  # task -> why its module (its metrics' meaning) is unknown here
+    selections: dict[str, str] = field(default_factory=dict)  # pair key -> the part of its dataset it ran (frames, pairs)
+    written_paths: dict[str, str] = field(default_factory=dict)  # a dataset path as it pairs (links followed) -> as written
 
 
 def load_odometry_run(path: str | os.PathLike) -> OdometryRun:
@@ -164,10 +170,12 @@ def load_bench_runs(path: str | os.PathLike, method: str | None = None, every_re
     several = len({job.experiment for _, job in jobs}) > 1  # (labels name the experiment then)
     specs: dict[str, dict[str, Any]] = {}
     for r, job in jobs:
-        dataset = _dataset_unit(job.dataset, specs)
+        dataset = _dataset_unit(job.dataset, specs, runs.written_paths)
+        options = _options_unit(job.task, job.options, dataset, r)
         key = canonical_json({"task": job.task, "experiment": job.experiment, "dataset": dataset,
-                              "options": _options_unit(job.task, job.options, dataset, r), "seed": job.seed})
+                              "options": options, "seed": job.seed})
         runs.experiments[key] = {job.experiment}
+        runs.selections.setdefault(key, _data_selection(job.task, options, r))
         if r.get("status") != "ok":
             runs.failed.add(key)
         elif key not in runs.values:
@@ -292,14 +300,17 @@ def _as_selection(frames: np.ndarray) -> str | list[int]:
     return f"{int(frames[0])}:{int(frames[-1]) + step}" + (f":{step}" if step != 1 else "")
 
 
-def _dataset_unit(spec: dict[str, Any], done: dict[str, dict[str, Any]]) -> dict[str, Any]:
+def _dataset_unit(spec: dict[str, Any], done: dict[str, dict[str, Any]],
+                  written_paths: dict[str, str] | None = None) -> dict[str, Any]:
     """A job's dataset spec as the data it names, so that two suites that write one dataset apart pair: its ``name`` left
     out (a label, as its readers take it); a simulated lidar's settings with their defaults written out
     (``range_noise_std_m: 0.0`` in one suite only read "runs over different data" with the same labels on both sides);
     a KITTI root given with ``sequence:`` as the sequence folder its reader opens (``path: kitti_odometry, sequence: "00"``
     is ``path: kitti_odometry/sequences/00``); whole floats as ints, as a bench job's key counts them (``n_frames: 30.0``
-    is ``30``). A spec this lidarkit cannot resolve (data not here, a simulator setting it does not know) is kept as
-    written. ``done``: the specs resolved so far, by their text."""
+    is ``30``); a path through symbolic links as the folder it reaches (:func:`_linked_path`: the same KITTI data through a
+    link read "runs over different data"). A spec this lidarkit cannot resolve (data not here, a simulator setting it
+    does not know) is kept as written. ``done``: the specs resolved so far, by their text; ``written_paths``: filled
+    with each path as it pairs -> as written (with a KITTI root's sequence folder), for messages."""
     from lidarkit.bench.jobs import canonical_json, whole_floats_as_ints
 
     written = whole_floats_as_ints({k: v for k, v in spec.items() if k != "name"})
@@ -323,7 +334,23 @@ def _dataset_unit(spec: dict[str, Any], done: dict[str, dict[str, Any]]) -> dict
                 done[text] = {**{k: v for k, v in written.items() if k != "sequence"}, "path": str(folder)}
         except (LidarKitError, OSError):  # (compared as written)
             pass
+        shown = done[text]
+        done[text] = {k: _linked_path(v) for k, v in shown.items()}
+        if written_paths is not None:
+            for k, v in shown.items():
+                if done[text][k] != v:
+                    written_paths.setdefault(done[text][k], v)
     return done[text]
+
+
+def _linked_path(value: Any) -> Any:
+    """An absolute path of a dataset spec with the symbolic links of its folders followed, its own name kept (readers
+    look beside it: a CARMEN log's ``.relations``, a KITTI sequence folder's ``poses/`` two folders up, which a linked
+    file or sequence folder does not share with its target); any other value as it is."""
+    if not isinstance(value, str) or not os.path.isabs(value):
+        return value
+    folder, name = os.path.split(os.path.normpath(value))
+    return os.path.join(os.path.realpath(folder), name) if name else value
 
 
 def _few(labels: list[str], n: int = 3) -> str:
@@ -896,7 +923,10 @@ def _other_datasets(side_a: BenchRuns, side_b: BenchRuns) -> str:
             diffs = [[k for k in sorted(spec_a.keys() | spec_b.keys()) if spec_a.get(k, ...) != spec_b.get(k, ...)]
                      for spec_b in units_b[rest]]
             fields, spec_b = min(zip(diffs, units_b[rest]), key=lambda d: len(d[0]))
-            text = ", ".join(f"{k} ({_field_value(spec_a, k)} in A, {_field_value(spec_b, k)} in B)" for k in fields)
+            # (paths as each suite wrote them: they pair with their links followed)
+            shown_a, shown_b = ({k: side.written_paths.get(v, v) if isinstance(v, str) else v for k, v in spec.items()}
+                                for side, spec in ((side_a, spec_a), (side_b, spec_b)))
+            text = ", ".join(f"{k} ({_field_value(shown_a, k)} in A, {_field_value(shown_b, k)} in B)" for k in fields)
             if text not in shown:
                 shown.append(text)
     return f": their dataset specs differ in {'; '.join(shown[:3])}" if shown else ""
@@ -1048,6 +1078,7 @@ def _by_experiment(side_a: BenchRuns, side_b: BenchRuns, experiment: str | None)
         values = kept(side.values)
         return dataclasses.replace(side, values=values, labels=kept(side.labels), versions=kept(side.versions),
                                    alignments=kept(side.alignments), instants=kept(side.instants),
+                                   selections=kept(side.selections),
                                    failed={new[k] for k in side.failed if k in new} - set(values), experiments=experiments,
                                    not_run={new[k] for k in side.not_run if k in new} - set(values))
 
@@ -1055,20 +1086,58 @@ def _by_experiment(side_a: BenchRuns, side_b: BenchRuns, experiment: str | None)
 
 
 def _one_experiment(side_a: BenchRuns, side_b: BenchRuns, keys: list[str], task: str) -> None:
-    """ConfigError when the paired units ``keys`` of ``task`` hold one (dataset, seed) of a side from several of its
-    experiments: two pf experiments differing in ``mse_start`` only were paired as 6 seeds of one (p = 0.031, a
-    winner), over 3 seeds giving one APE each. Experiments over other datasets or seeds are pooled."""
-    by_data: dict[str, list[str]] = {}  # (task, dataset, seed) -> its units (of other options)
-    for key in keys:
-        unit = json.loads(key)
-        by_data.setdefault(json.dumps({k: v for k, v in unit.items() if k != "options"}, sort_keys=True), []).append(key)
+    """ConfigError when the paired units ``keys`` of ``task`` hold one (dataset, seed) and the same part of it (frames,
+    pairs: :data:`DATA_SELECTING_OPTIONS`) of a side from several of its experiments: two pf experiments differing in
+    ``mse_start`` only were paired as 6 seeds of one (p = 0.031, a winner), over 3 seeds giving one APE each; the error
+    names the options they differ in. Experiments over other datasets, seeds, frames or pairs are pooled (two odometry
+    experiments over frames 0:5 and 5:10 of one sequence were refused as "the same (dataset, seed) units")."""
     for side in (side_a, side_b):
-        shared = [k for group in by_data.values() for k in group
-                  if len(group) > 1 or len(side.experiments.get(k, ())) > 1]
-        names = sorted(set().union(*(side.experiments.get(k, set()) for k in shared)))
+        by_data: dict[str, list[str]] = {}  # (task, dataset, seed, data selected) -> its units (of other options)
+        for key in keys:
+            unit = {k: v for k, v in json.loads(key).items() if k != "options"}
+            selected = side.selections.get(key) or _data_selection(task, json.loads(key).get("options") or {}, {})
+            by_data.setdefault(json.dumps({**unit, "selected": selected}, sort_keys=True), []).append(key)
+        groups = [group for group in by_data.values() if len(group) > 1 or len(side.experiments.get(group[0], ())) > 1]
+        names = sorted(set().union(*(side.experiments.get(k, set()) for group in groups for k in group)))
         if len(names) > 1:
+            selecting = DATA_SELECTING_OPTIONS.get(task, ())
+            apart = sorted({item for group in groups for item in _options_apart(side, group)})
             raise ConfigError(f"{side.name} has results in {len(names)} experiments of task {task} ({', '.join(names)}) over "
-                              "the same (dataset, seed) units, each its own: --experiment picks one", source=side.path)
+                              f"the same (dataset, seed) units{f' and {selecting[0]}' if selecting else ''}, each its own "
+                              f"(task options: {'; '.join(apart[:3])}{'; ...' if len(apart) > 3 else ''}): --experiment "
+                              "picks one", source=side.path)
+
+
+def _data_selection(task: str, options: dict[str, Any], record: dict[str, Any]) -> str:
+    """The part of its dataset a unit ran, as text: icp_pair's scan pairs as its record lists them (``pairs: [[0, 1]]``
+    and the default first pair are one), else the task's data-selecting options as the unit key writes them (odometry's
+    frames made dataset indices by :func:`_options_unit`); '' for a task that selects no part."""
+    from lidarkit.bench.jobs import canonical_json
+
+    names = DATA_SELECTING_OPTIONS.get(task, ())
+    if not names:
+        return ""
+    rows = (record.get("info") or {}).get("pairs") if task == "icp_pair" else None
+    if isinstance(rows, list) and rows and all(isinstance(row, dict) for row in rows):
+        ran = [[row.get("target"), row.get("source")] for row in rows]
+        if all(isinstance(i, int) and not isinstance(i, bool) for pair in ran for i in pair):
+            return canonical_json({"pairs": ran})
+    return canonical_json({name: options.get(name) for name in names})
+
+
+def _options_apart(side: BenchRuns, keys: list[str]) -> list[str]:
+    """How the experiments of ``side`` that ran the units ``keys`` (one dataset, seed and part of it) differ: each task
+    option they write differently, ``mse_start 10 in early, 100 in late``, or ``early and late alike``."""
+    by_experiment: dict[str, dict[str, Any]] = {}
+    for key in keys:
+        for name in side.experiments.get(key, ()):
+            by_experiment[name] = json.loads(key).get("options") or {}
+    by_experiment = dict(sorted(by_experiment.items()))
+    fields = sorted({k for options in by_experiment.values() for k in options
+                     if len({_field_value(o, k) for o in by_experiment.values()}) > 1})
+    if not fields:
+        return [f"{' and '.join(by_experiment)} alike"]
+    return [f"{k} {', '.join(f'{_field_value(o, k)} in {name}' for name, o in by_experiment.items())}" for k in fields]
 
 
 def _with_measured_noise(noise: float, noise_from: str | os.PathLike | None, metric: str, task: str,
