@@ -149,3 +149,24 @@ def test_a_command_that_ends_well_still_exits_with_code_0(capsys):
     with pytest.raises(SystemExit) as exc:
         main(["version"])
     assert exc.value.code == 0 and capsys.readouterr().out.strip()
+
+
+def test_no_help_cuts_a_cell_with_an_ellipsis_at_80_columns(capsys, monkeypatch):
+    """At 80 columns the wide --x/--no-x pairs of odometry and vo left their help column too narrow: six cells ended in
+    '…' (``--no-pose-covaria…``, ``max_angular_accel…``, ``matching.klt_level…``); a long word now folds instead."""
+    import typer.rich_utils
+
+    monkeypatch.setenv("COLUMNS", "80")
+    monkeypatch.setattr(typer.rich_utils, "MAX_WIDTH", 80)  # (typer's own width override, read from TERMINAL_WIDTH)
+    pages = {}
+    for path in _command_paths():
+        assert cli_exit_code([*path, "--help"]) == 0, path
+        pages[" ".join(path)] = capsys.readouterr().out
+    assert {max(len(line) for line in text.splitlines()) for text in pages.values()} == {80}
+    assert [(path, line) for path, text in pages.items() for line in text.splitlines() if "…" in line] == []
+    assert "--no-pose-covariance" in pages["odometry"] and "--no-self-calibrate" in pages["vo"]
+    for path, start, word in (("odometry", "Threshold of the", "max_angular_accel_dps2=500"),
+                              ("vo", "Any config field", "matching.klt_levels=4")):
+        lines = pages[path].splitlines()
+        column = next(line.index(start) for line in lines if start in line)  # the help column: a folded word, rejoined
+        assert word in "".join(line[column:].rstrip("│ ") for line in lines), path

@@ -3,12 +3,18 @@
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
 import sys
 from collections.abc import Iterator, Mapping
 
 import typer
+import typer.core
+from rich.columns import Columns
 from rich.console import Console
+from rich.measure import Measurement
+from rich.table import Table
+from rich.text import Text
 
 
 app = typer.Typer(
@@ -18,6 +24,60 @@ app = typer.Typer(
     add_completion=False,
     pretty_exceptions_show_locals=False,
 )
+
+
+class _HelpTable(Table):
+    """typer's options table, whose cells fold a word too long for their column onto the next line: rich's default ends
+    it with an ellipsis, and at 80 columns the wide ``--x/--no-x`` pairs of odometry and vo left the help column too
+    narrow for ``pose_covariance.txt`` and cut ``--no-pose-covariance`` itself. The option names and types keep their
+    width while the help column has :attr:`HELP_MIN_WIDTH` beside them; on a narrower terminal they fold too."""
+
+    #: Narrowest help column (characters) beside option names kept whole (odometry's and vo's at 80 columns: 16).
+    HELP_MIN_WIDTH = 16
+
+    def add_row(self, *renderables, **kwargs) -> None:
+        while len(self.columns) < len(renderables):
+            self.add_column(overflow="fold")
+        super().add_row(*renderables, **kwargs)
+
+    def __rich_console__(self, console, options):
+        names = self.columns[:-1]  # (the last: the help)
+        widest = [max((Measurement.get(console, options, cell).maximum for cell in column.cells), default=0)
+                  for column in names]
+        padding = (len(self.columns) - 1) * (self.padding[1] + self.padding[3])  # (none outside the outer columns)
+        keep_whole = options.max_width - sum(widest) - padding >= self.HELP_MIN_WIDTH
+        for column in names:
+            column.no_wrap = keep_whole
+        yield from super().__rich_console__(console, options)
+
+
+class _HelpColumns(Columns):
+    """The help cell (text, default, "required"): its texts fold too; the cell lays them out in a grid of its own."""
+
+    def __init__(self, renderables=None, *args, **kwargs) -> None:
+        renderables = list(renderables or [])
+        for item in renderables:
+            if isinstance(item, Text) and item.overflow is None:
+                item.overflow = "fold"
+        super().__init__(renderables, *args, **kwargs)
+
+
+def _folding_help(format_help):
+    """``format_help`` of typer's commands and groups, drawing the help page with :class:`_HelpTable` and
+    :class:`_HelpColumns` (typer has no setting for it; its help module is imported on the first help page only)."""
+
+    @functools.wraps(format_help)
+    def format_help_folding(self, ctx, formatter):
+        from typer import rich_utils
+
+        rich_utils.Table, rich_utils.Columns = _HelpTable, _HelpColumns
+        return format_help(self, ctx, formatter)
+
+    return format_help_folding
+
+
+for _command_class in (typer.core.TyperCommand, typer.core.TyperGroup):
+    _command_class.format_help = _folding_help(_command_class.format_help)
 
 
 @contextlib.contextmanager

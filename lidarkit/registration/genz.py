@@ -21,6 +21,10 @@ Conventions:
   reads the pairs within 1 m and how far they lie off their target surface (:func:`wrong_minimum`). Unlike kiss, a
   lowered ``max_num_iterations`` is not checked: genz-icp exposes neither the source it registered (voxelized at a
   size it adapts and keeps between instances) nor its native map, so one more iteration from the pose cannot be taken.
+  That size lives in one variable per process, which every sweep registered anywhere updates: a pairwise pose moves
+  with the pair aligned before it (1-2 cm on a simulated street, up to 0.16 m on KITTI 00's first pairs), and
+  ``align`` from several threads gives poses within that spread (each call registers into an odometry of its own, its
+  two sweeps back to back under a lock).
 * 2D scans (all points at one z) are refused (ConfigError), as by the other point-to-plane variants: the planarity
   test and the normals of a scan's line-like neighbourhoods are undefined in 3D.
 """
@@ -28,6 +32,7 @@ Conventions:
 from __future__ import annotations
 
 import logging
+import threading
 
 import numpy as np
 from pydantic import Field, model_validator
@@ -67,6 +72,12 @@ GENZ_NEAR_M = 1.0
 GENZ_MIN_NEAR_SHARE = 0.93
 GENZ_ON_SURFACE_M = 0.2
 GENZ_MIN_ON_SURFACE_SHARE = 0.8
+#: Held while a pairwise alignment registers its target and source. genz-icp 0.3.2 adapts its voxel size in one
+#: variable per process, shared by every odometry and carried from each sweep to the next registered anywhere
+#: (``reset`` does not restore it): pairs aligned from several threads, their sweeps interleaved, registered each
+#: source at a size adapted to another pair's cloud. Held, each pair's two sweeps are registered back to back, as one
+#: at a time (its poses then still depend on the pair aligned before it: see the module notes).
+_GENZ_PAIR_LOCK = threading.Lock()
 #: Why genz refuses a 2D scan (it ran on one without a word).
 GENZ_2D_REASON = "its point-to-plane residuals on planar neighbourhoods need normals, undefined on a 2D scan"
 
@@ -191,9 +202,16 @@ class GenzRegistration(Registration):
     def register_frame(self, points_xyz: np.ndarray, point_times_s: np.ndarray | None = None) -> np.ndarray:
         """Register one sweep; returns ``T_world_lidar`` (4x4; at mid-sweep when deskewed). A first sweep with no
         point in the range crop is a RegistrationError, as in kiss and pipeline."""
+        return self._register_into(self.pipeline, self._start, points_xyz, point_times_s)
+
+    def _register_into(
+        self, genz, start: np.ndarray, points_xyz: np.ndarray, point_times_s: np.ndarray | None = None
+    ) -> np.ndarray:
+        """Register one sweep into the odometry ``genz`` started at ``start``; returns ``start @ T`` (see
+        :meth:`register_frame`). Both are passed, not read from the instance: ``align`` registers into an odometry of
+        its own (swapped into the instance, two threads aligning on one instance registered into each other's)."""
         from genz_icp.pybind import genz_icp_pybind
 
-        genz = self.pipeline
         frame = np.ascontiguousarray(as_points(points_xyz, "frame", min_points=1))
         refuse_2d(self.name, frame, frame, GENZ_2D_REASON)
         times = normalized_times(point_times_s, len(frame))
@@ -212,7 +230,7 @@ class GenzRegistration(Registration):
             log.warning("genz-icp returned a rotation that is not orthonormal to %g; re-orthonormalized", GENZ_ORTHONORMAL_TOL)
             T = orthonormalize_se3(T)
         genz.last_pose = T
-        return self._start @ T
+        return start @ T
 
     def _align(self, source_xyz: np.ndarray, target_xyz: np.ndarray, init_T: np.ndarray) -> RegistrationResult:
         from genz_icp.genz_icp import GenZICP
@@ -226,17 +244,13 @@ class GenzRegistration(Registration):
             n_kept = int(self._in_range(range_m).sum())
             if n_kept < 3:
                 raise RegistrationError(f"only {n_kept} points within {self._crop_text(cloud)}", source=name)
-        saved = self._genz, self._start
-        try:
-            self._genz, self._start = GenZICP(c.to_genz_config()), np.eye(4)
-            self.register_frame(target_xyz)
+        genz, moved = GenZICP(c.to_genz_config()), transform_points(init_T, source_xyz)
+        with _GENZ_PAIR_LOCK:
+            self._register_into(genz, np.eye(4), target_xyz)
             # the map of the target alone: after the source's frame it holds the source too, which then matches itself
             # (fitness 1 and "converged" for any cloud)
-            map_points = np.array(self._genz.local_map.point_cloud(), dtype=np.float64)
-            moved = transform_points(init_T, source_xyz)
-            T_rel = self.register_frame(moved)
-        finally:
-            self._genz, self._start = saved
+            map_points = np.array(genz.local_map.point_cloud(), dtype=np.float64)
+            T_rel = self._register_into(genz, np.eye(4), moved)
         if len(map_points) < 3:
             raise RegistrationError(f"genz-icp kept only {len(map_points)} map points of the target within "
                                     f"{self._crop_text(target_xyz)}", source="target cloud")
