@@ -820,8 +820,9 @@ def test_the_opencv_version_is_pinned_and_an_earlier_baseline_without_it_is_a_no
                               f"it): not compared; opencv is {pinned} now") in result.lines()
     manifest["environment"]["packages"]["opencv"] = "3.4.0"
     manifest_path.write_text(json.dumps(manifest))
-    result = check(two_walks.path)
-    assert not result.passed and result.lines() == [f"protocol changed: environment: packages.opencv: 3.4.0 -> {pinned}"]
+    result = check(two_walks.path)  # (random walks run on no OpenCV: another version voids only the jobs that do)
+    assert result.passed and result.lines() == [f"note: environment: packages.opencv: 3.4.0 -> {pinned} (no pinned job "
+                                                "runs on opencv: not compared)"]
 
 
 def test_a_vo_job_is_banded_on_its_own_scale_not_lidar_odometry_floors(tmp_path):

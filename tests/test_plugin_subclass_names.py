@@ -95,3 +95,20 @@ def test_a_list_or_mapping_for_a_choice_is_a_config_error():
     assert get_icp("pipeline", preset="kiss_like").config.preset == "kiss_like"
     assert np.isfinite(get_icp("vanilla", nn_backend="scipy").config.max_iterations)
 
+
+def test_a_label_with_parameters_given_as_the_method_says_how_to_write_that_method():
+    """``--method "vanilla(voxel_size_m=0.5)"`` (a report's row label) read as the record of a subclass "vanilla" of a
+    variant "voxel_size_m=0.5" outside the registry. A parent is a plain variant name; a label says it is one."""
+    with pytest.raises(ConfigError) as caught:
+        get_icp("vanilla(voxel_size_m=0.5)")
+    assert str(caught.value) == (
+        "method: 'vanilla(voxel_size_m=0.5)' is a label (the variant vanilla with its parameters), not a method name: "
+        "write the method as {name: vanilla, params: {voxel_size_m: 0.5}} (CLI: --method vanilla -p voxel_size_m=0.5)")
+    with pytest.raises(ConfigError) as caught:
+        get_icp("vanilla(max_iterations=5, voxel_size_m=0.5)")
+    assert str(caught.value) == (
+        "method: 'vanilla(max_iterations=5, voxel_size_m=0.5)' is a label (the variant vanilla with its parameters), not "
+        "a method name: write the method as {name: vanilla, params: {max_iterations: 5, voxel_size_m: 0.5}} (CLI: "
+        "--method vanilla -p max_iterations=5 -p voxel_size_m=0.5)")
+    with pytest.raises(ConfigError, match=r"^method: 'Sub\(vanilla\)' is how runs record Sub, a subclass of vanilla"):
+        get_icp("Sub(vanilla)")

@@ -4,12 +4,13 @@
 first run's trajectory and metrics, and measures the run-to-run spread (kiss-icp is not bit-reproducible
 across thread schedules) to set each metric's band. The manifest pins what makes a number reproducible:
 library versions, the method's resolved config, the task options with their defaults, checksums of the dataset files
-and of the files the task options name (a simulated dataset: its whole simulator config), the KITTI angle correction and
-deskew as the run applied them, the instant poses refer to, the frame-check thresholds (``n_bad_frames`` counts
+(of a KITTI sequence, those the job's task reads) and of the files the task options name (a simulated dataset: its
+whole simulator config), the KITTI angle correction and deskew as the run applied them, the instant poses refer to, the frame-check thresholds (``n_bad_frames`` counts
 under them), the evaluation settings and the platform.
 
 ``check(folder)`` re-runs the pinned jobs. A job whose protocol differs reports ``protocol changed: ...``
-(its numbers are not comparable, whatever they are); otherwise a metric outside its band on the worse side
+(its numbers are not comparable, whatever they are); a rerun that scored another number of frames is ``failed: ...``
+naming both counts; otherwise a metric outside its band on the worse side
 is ``regression: ...``; outside on the better side ``improved: ...`` (passes; re-record to tighten). A job with no
 accuracy metric (data without ground truth) is held on its trajectory: one differing from the pinned one by more than
 the band its repeats set is ``regression: ...``. A job that raises is ``failed: ...`` with its error, and the other jobs
@@ -52,9 +53,12 @@ MANIFEST = BASELINE_MANIFEST
 #: packages whose version is part of the protocol (lidarkit itself is what a check tests: noted, not a change); OpenCV
 #: is pinned apart, as ``opencv`` (see OPENCV_DISTRIBUTIONS)
 PROTOCOL_PACKAGES = ("kiss-icp", "open3d", "numpy", "scipy", "evo", "small_gicp")
-#: the distributions that install ``cv2`` (VO jobs, the camera simulator and image decoding run on it): the one installed
-#: gives the ``opencv`` version, whatever its name
+#: the distributions that install ``cv2`` (VO jobs, the camera simulator and image decoding run on it): the one that
+#: wrote the ``cv2`` folder gives the ``opencv`` version, whatever its name
 OPENCV_DISTRIBUTIONS = ("opencv-python", "opencv-python-headless", "opencv-contrib-python", "opencv-contrib-python-headless")
+#: packages only some jobs run on: another version voids those jobs only (see :func:`uses_package`); the others'
+#: changes void every job
+SCOPED_PACKAGES = ("opencv", "small_gicp")
 #: band = max(NOISE_FACTOR * run-to-run std, ABSOLUTE_FLOOR[metric], RELATIVE_FLOOR * |value|)
 NOISE_FACTOR = 4.0
 RELATIVE_FLOOR = 0.02
@@ -107,23 +111,67 @@ def environment() -> dict[str, Any]:
 
 
 def opencv_version() -> str | None:
-    """The version of the distribution that installs ``cv2`` (``4.10.0.84``); ``cv2.__version__`` when none of
-    OPENCV_DISTRIBUTIONS is installed, or several are (the last one installed wrote ``cv2``); None without OpenCV."""
-    from importlib.metadata import PackageNotFoundError, version
+    """The version of the distribution that wrote the ``cv2`` folder (``4.10.0.84``), read from its ``cv2/version.py``
+    without importing OpenCV (one distribution or several installed over each other: the last one's, as it is the
+    ``cv2`` that runs; the version of the one distribution installed or ``cv2.__version__`` were pinned by turns, and a
+    second distribution read as another OpenCV); ``cv2.__version__`` for a build without that file (from source); None
+    without OpenCV."""
+    import importlib.util
+    import re
 
-    found = []
-    for name in OPENCV_DISTRIBUTIONS:
+    try:
+        found = importlib.util.find_spec("cv2")
+    except (ImportError, ValueError):
+        found = None
+    if found is None:
+        return None
+    folders = list(found.submodule_search_locations or [])
+    for folder in folders:
         try:
-            found.append(version(name))
-        except PackageNotFoundError:
-            pass
-    if len(found) == 1:
-        return found[0]
+            text = (Path(folder) / "version.py").read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError):
+            continue
+        written = re.search(r"""^opencv_version\s*=\s*["']([^"']+)["']""", text, flags=re.MULTILINE)
+        if written:
+            return written[1]
     try:
         import cv2
     except ImportError:
         return None
     return str(cv2.__version__)
+
+
+def same_opencv(pinned: Any, now: Any) -> bool:
+    """Whether two pinned ``opencv`` versions name one OpenCV: equal, or one the other with its build number
+    (``4.10.0`` and ``4.10.0.84``: a baseline recorded when lidarkit read ``cv2.__version__`` with several
+    distributions installed)."""
+    if pinned == now:
+        return True
+    if not (isinstance(pinned, str) and isinstance(now, str)):
+        return False
+    return pinned.startswith(now + ".") or now.startswith(pinned + ".")
+
+
+def uses_package(package: str, spec: Mapping[str, Any]) -> bool:
+    """Whether the job of ``spec`` (``Job.spec()``) runs on ``package`` of :data:`SCOPED_PACKAGES`: OpenCV, a ``vo`` job
+    or one on the camera simulator; small_gicp, a ``small_gicp`` method (a variant derived from it too). Another
+    version of either voided every job (kiss on a simulated LiDAR: "protocol changed", FAILED, nothing run)."""
+    if package == "opencv":
+        dataset = spec.get("dataset") if isinstance(spec.get("dataset"), Mapping) else {}
+        return spec.get("task") == "vo" or dataset.get("kind") == "sim_camera"
+    if package == "small_gicp":
+        method = spec.get("method")
+        if method == "small_gicp":
+            return True
+        if spec.get("task") not in ("odometry", "icp_pair"):
+            return False
+        try:
+            from lidarkit.registration import get_icp_class
+
+            return any(vars(k).get("name") == "small_gicp" for k in get_icp_class(str(method)).__mro__)
+        except Exception:  # noqa: BLE001 - a method not known here: its run says so
+            return False
+    return True
 
 
 def evaluation_settings() -> dict[str, Any]:
@@ -162,16 +210,24 @@ def _sha256(path: Path) -> str:
     return digest.hexdigest()
 
 
-def dataset_files(spec: Mapping[str, Any]) -> list[Path]:
+def dataset_files(spec: Mapping[str, Any], task: str | None = None) -> list[Path]:
     """The files a dataset spec reads: every file under its path (a bag or MCAP file: itself; a ROS 2 bag, given as its
     folder or its ``metadata.yaml``: its folder's files), or under ``sequences/NN`` of a KITTI root given with
     ``sequence: NN`` (not the other sequences); a KITTI sequence also its ``poses/NN.txt``; a CARMEN log the
     ``.relations`` file found beside it; and the files of options that name an existing path (a ``poses`` file kept
-    elsewhere). DataError when the path does not exist."""
+    elsewhere). A KITTI-layout sequence read by ``task`` odometry, icp_pair or vo: only what that task's reader reads
+    (:func:`kitti_reads`). DataError when the path does not exist."""
     from lidarkit.bench.datasets import PATHLESS_KINDS, dataset_options
 
     if spec.get("kind") in PATHLESS_KINDS:
         return []
+    reads = kitti_reads(spec, task)
+    if reads is not None:
+        files: dict[Path, None] = {}  # (a poses file named twice, as the one in use and a simulator's: hashed once)
+        for path in reads[0]:
+            if path.exists():
+                files.update(dict.fromkeys(_files_under(path)))
+        return list(files)
     root = dataset_folder(spec)
     files = _files_under(root)
     if root.is_dir() and root.parent.name == "sequences":
@@ -188,6 +244,65 @@ def dataset_files(spec: Mapping[str, Any]) -> list[Path]:
             files += extra
             seen.update(extra)
     return files
+
+
+#: KITTI-layout kinds whose files a job hashes as its task reads them (:func:`kitti_reads`)
+KITTI_LAYOUT_KINDS = ("kitti", "kiss_kitti")
+#: tasks that read a KITTI sequence's scans, and those that read its images
+SCAN_TASKS = ("odometry", "icp_pair")
+IMAGE_TASKS = ("vo",)
+
+
+def kitti_reads(spec: Mapping[str, Any], task: str | None) -> tuple[list[Path], list[Path]] | None:
+    """What a job of ``task`` reads of a KITTI-layout sequence: (the folders and files it reads, hashed; the paths it
+    would read were they there, a point-time folder or a poses file, which a pinned file under them is still compared
+    on). Scans (odometry, icp_pair): ``velodyne/``, the point-time folder found, ``times.txt``, ``calib.txt``, the poses
+    file in use (and a simulator folder's ``sim.yaml`` and ``poses_<instant>.txt``); images (vo): the image folder in its
+    place. None for another kind or task: its whole folder is hashed (every image of a sequence was hashed for a LiDAR
+    job, GBs on a full KITTI sequence, and a camera folder added later read as changed data)."""
+    if spec.get("kind") not in KITTI_LAYOUT_KINDS or task not in SCAN_TASKS + IMAGE_TASKS:
+        return None
+    folder = Path(os.path.abspath(dataset_folder(spec)))
+    if not folder.is_dir():
+        return None
+    in_sequences = folder.parent.name == "sequences"
+    if spec.get("kind") == "kiss_kitti":  # (kiss-icp's loader: scans, calib, times and poses/NN.txt of the root)
+        reads = [folder / "velodyne", folder / "calib.txt", folder / "times.txt"]
+        return reads + ([folder.parent.parent / "poses" / f"{folder.name}.txt"] if in_sequences else []), []
+    from lidarkit.bench.tasks._datasets import open_dataset_spec
+    from lidarkit.io.base import INSTANT_FRACTION
+    from lidarkit.io.kitti import POINT_TIME_FOLDERS
+
+    reader = open_dataset_spec(dict(spec))
+    sequence = Path(os.path.abspath(reader.sequence_dir))
+    absolute = (lambda path: Path(os.path.abspath(path)))
+    reads = [absolute(reader.calib_path), absolute(reader.times_path), sequence / "sim.yaml",
+             *(sequence / f"poses_{instant}.txt" for instant in INSTANT_FRACTION)]
+    if reader.poses_path is not None:
+        reads.append(absolute(reader.poses_path))
+    could = []
+    if spec.get("poses_file") is None:  # (where the reader looks for poses: one added or removed since is compared)
+        could += [sequence / "poses.txt"] + ([sequence.parent.parent / "poses" / f"{reader.sequence}.txt"] if
+                                             sequence.parent.name == "sequences" else [])
+    if task in IMAGE_TASKS:
+        reads.append(absolute(reader.image_dir))
+    else:
+        reads.append(absolute(reader.velodyne_dir))
+        if reader.point_times_dir is not None:
+            reads.append(absolute(reader.point_times_dir))
+        could += [absolute(where) / name for where in reader.point_time_search_dirs for name in POINT_TIME_FOLDERS]
+    return reads, could
+
+
+def _whole_folder_covers(spec: Mapping[str, Any], path: Path) -> bool:
+    """Whether the whole-folder rule of :func:`dataset_files` (baselines recorded before :func:`kitti_reads`) hashed
+    ``path``: under the dataset's folder, its ``poses/NN.txt``, or under an absolute path an option names."""
+    from lidarkit.bench.datasets import dataset_options
+
+    folder = Path(os.path.abspath(dataset_folder(spec)))
+    covered = [folder] + ([folder.parent.parent / "poses" / f"{folder.name}.txt"] if folder.parent.name == "sequences" else [])
+    covered += [Path(os.path.abspath(v)) for v in dataset_options(dict(spec)).values() if isinstance(v, str) and os.path.isabs(v)]
+    return any(path == c or path.is_relative_to(c) for c in covered)
 
 
 def _companion_file(spec: Mapping[str, Any], root: Path) -> Path | None:
@@ -253,13 +368,52 @@ def _files_under(path: Path) -> list[Path]:
     return sorted(files)
 
 
-def dataset_checksums(spec: Mapping[str, Any], cache: dict[str, str] | None = None) -> dict[str, str]:
-    """``{relative file: sha256}`` of a dataset spec's files; a generated dataset gives its config's hash."""
+def dataset_checksums(spec: Mapping[str, Any], cache: dict[str, str] | None = None, task: str | None = None) -> dict[str, str]:
+    """``{relative file: sha256}`` of a dataset spec's files (those ``task`` reads: :func:`dataset_files`); a generated
+    dataset gives its config's hash."""
     from lidarkit.bench.datasets import PATHLESS_KINDS
 
     if spec.get("kind") in PATHLESS_KINDS:
         return {"<generated>": hashlib.sha256(canonical_json(dict(spec)).encode()).hexdigest()}
-    return _checksums(dataset_files(spec), _checksum_base(spec), cache)
+    return _checksums(dataset_files(spec, task), _checksum_base(spec), cache)
+
+
+def _pinned_file(spec: Mapping[str, Any], key: str) -> Path:
+    """The file a checksum key names (relative to :func:`_checksum_base`, or absolute)."""
+    return Path(key) if os.path.isabs(key) else Path(os.path.abspath(_checksum_base(spec))) / key
+
+
+def _files_read_apart(job: Job, pinned: dict[str, str], now: dict[str, str], name: str
+                      ) -> tuple[dict[str, str], dict[str, str], list[Finding]]:
+    """``pinned`` and ``now`` checksums cut to the files both rules of :func:`dataset_files` cover, for a KITTI-layout job
+    whose task's reads are known (:func:`kitti_reads`): a baseline recorded when the whole sequence folder was hashed
+    pinned camera images a LiDAR job never reads (not compared, said in a note), and none of a poses file kept outside
+    the folder (not compared either). Other jobs: unchanged, no note."""
+    reads = kitti_reads(job.dataset, job.task)
+    if reads is None:
+        return pinned, now, []
+    from lidarkit.bench.tasks import get_task
+
+    try:  # (a ground truth an icp_pair option names inside the folder: pinned with the folder's files before)
+        option_files = list(get_task(job.task).option_files(dict(job.dataset), dict(job.options)))
+    except LidarKitError:
+        option_files = []
+    covered = [Path(os.path.abspath(p)) for p in reads[0] + reads[1] + option_files]
+    read_now = (lambda key: any((path := _pinned_file(job.dataset, key)) == c or path.is_relative_to(c) for c in covered))
+    left_out = sorted(k for k in pinned if not read_now(k))
+    unpinned = [k for k in now if k not in pinned and not _whole_folder_covers(job.dataset, _pinned_file(job.dataset, k))]
+    notes = []
+    if left_out:
+        shown = ", ".join(left_out[:3]) + (f" and {len(left_out) - 3} more" if len(left_out) > 3 else "")
+        files = "file" if len(left_out) == 1 else "files"
+        notes.append(Finding("note", name, f"the baseline pinned {len(left_out)} {files} its {job.task} job does not read "
+                                           f"({shown}; recorded when lidarkit hashed the whole sequence folder): not compared"))
+    if unpinned:
+        notes.append(Finding("note", name, f"the baseline pinned no checksum of {', '.join(unpinned)} (recorded before "
+                                           "lidarkit hashed the files the job reads outside its folder): not compared; "
+                                           "record it again to pin them"))
+    return ({k: v for k, v in pinned.items() if k not in left_out}, {k: v for k, v in now.items() if k not in unpinned},
+            notes)
 
 
 def option_checksums(job: Job, cache: dict[str, str] | None = None) -> dict[str, str]:
@@ -372,7 +526,7 @@ def _job_name(job: Job) -> str:
 def _run_job(job: Job, checksum_cache: dict[str, str] | None) -> JobRun:
     from lidarkit.bench.tasks import get_task
 
-    protocol: dict[str, Any] = {"dataset": dict(job.dataset), "checksums": dataset_checksums(job.dataset, checksum_cache)}
+    protocol: dict[str, Any] = {"dataset": dict(job.dataset), "checksums": dataset_checksums(job.dataset, checksum_cache, job.task)}
     # the files its options name (a ground truth kept outside the dataset folder), those the dataset's hold apart
     option_files = option_checksums(job, checksum_cache)
     protocol["option_files"] = {k: v for k, v in option_files.items() if k not in protocol["checksums"]}
@@ -456,15 +610,28 @@ def _trajectory_band(trajectories: list[Any], source: str) -> dict[str, Any]:
 
 
 def checked_metrics(task: str, metrics: Mapping[str, Any]) -> list[str]:
-    """The accuracy metrics of ``task`` present in ``metrics`` (speed depends on the machine: never checked)."""
+    """The accuracy metrics of ``task`` present in ``metrics`` (speed depends on the machine, a diagnostic metric moves
+    with a setting while the accuracy holds: never checked; see :data:`lidarkit.bench.tasks.METRIC_KINDS`)."""
+    unchecked = unchecked_metrics(task)
     try:
-        from lidarkit.bench.tasks import get_task
+        from lidarkit.bench.tasks import CHECKED_KINDS, get_task
 
-        declared = [m.name for m in get_task(task).metrics if m.kind != "speed"]
+        declared = [m.name for m in get_task(task).metrics if m.kind in CHECKED_KINDS]
     except LidarKitError:
         declared = []
     names = [m for m in declared if _finite_number(metrics.get(m))]
-    return names or sorted(k for k, v in metrics.items() if _finite_number(v) and k not in ("hz", "n_frames"))
+    return names or sorted(k for k, v in metrics.items() if _finite_number(v) and k not in ("hz", "n_frames", *unchecked))
+
+
+def unchecked_metrics(task: str) -> dict[str, str]:
+    """``{metric: kind}`` of the metrics ``task`` declares of a kind a baseline does not check ({} for a task not known
+    here)."""
+    try:
+        from lidarkit.bench.tasks import CHECKED_KINDS, get_task
+
+        return {m.name: m.kind for m in get_task(task).metrics if m.kind not in CHECKED_KINDS}
+    except LidarKitError:
+        return {}
 
 
 def _finite_number(value: Any) -> bool:
@@ -597,6 +764,7 @@ def record(
     is replaced whole (its pinned jobs that this one does not pin are removed); a folder holding anything else (a
     bench results folder) is refused rather than merged into."""
     from lidarkit.bench.results import path_argument
+    from lidarkit.bench.runner import task_origin
     from lidarkit.bench.suite import load_suite
 
     if int(repeats) != repeats or repeats < 1:
@@ -643,10 +811,13 @@ def record(
             atomic.write_text(folder / "metrics.json", json.dumps(_jsonable(first.metrics), indent=1, sort_keys=True) + "\n")
             if first.trajectory is not None:
                 first.trajectory.to_kitti(folder / "poses_kitti.txt")
+            # a task registered in code: where its module is, as bench results keep it, for a check to import it
+            origin = task_origin(job.task)
             jobs.append({
                 "key": key, "label": job.method_label, "spec": job.spec(), "protocol": first.protocol,
                 "metrics": _jsonable(first.metrics), "checked": names, "noise_std": noise, "bands": bands,
                 "repeats": [_jsonable(run.metrics) for run in runs], **held_on,
+                **({"task_module": origin} if origin else {}),
             })
         atomic.write_text(tmp / "suite.yaml", suite_copy_text(suite_path))
         manifest = {"schema": SCHEMA, "created_utc": _utc(), "suite": suite.name, "repeats": int(repeats),
@@ -860,6 +1031,8 @@ def _pinned_job_problem(job: Any) -> str:
                 return f"checks {metric!r} but its {where[:-1]} is {value!r}, not a finite number"
         if job["bands"][metric] < 0:
             return f"band of {metric!r} is negative ({job['bands'][metric]!r})"
+    if "task_module" in job and not (isinstance(job["task_module"], dict) and isinstance(job["task_module"].get("module"), str)):
+        return f"task_module is {job['task_module']!r}, not a mapping naming a module"
     if "trajectory_band" in job:
         band = job["trajectory_band"]
         if not isinstance(band, dict):
@@ -968,6 +1141,42 @@ def _shown_apart(old: Any, new: Any) -> tuple[str, str]:
     return json.dumps(old), json.dumps(new)
 
 
+def _import_pinned_tasks(jobs: list[dict[str, Any]]) -> dict[str, str]:
+    """Import the module of each pinned task registered in code (``task_module``, as record pinned it); ``{task: why}``
+    of the tasks still unknown here."""
+    from lidarkit.bench.report import _import_task_module
+    from lidarkit.bench.tasks import available_tasks, get_task
+
+    origins: dict[str, Any] = {}
+    for job in jobs:
+        task = job["spec"].get("task", "")
+        origins[task] = origins.get(task) or job.get("task_module")
+    unknown = {}
+    for task, origin in origins.items():
+        if task in available_tasks():
+            continue
+        if not origin:
+            unknown[task] = (f"task {task!r} is not known here and the baseline names no module defining it (recorded "
+                             "before lidarkit pinned a task's module): import the module that registers it and call "
+                             "lidarkit.bench.baseline.check() from Python, or record the baseline again")
+            continue
+        if origin.get("module") == "__main__":  # (a script's own task: no process but that script's can import it)
+            unknown[task] = (f"task {task!r} was registered in the script that recorded the baseline "
+                             f"({origin.get('script') or '__main__'}): run check() from it, or define the task in a module")
+            continue
+        why = _import_task_module(task, origin)
+        if not why and task not in available_tasks():
+            why = f"its module {origin['module']} registers no task {task!r}"
+        if not why:
+            try:
+                get_task(task)
+            except Exception as err:  # noqa: BLE001 - a task class that fails to build: said for its jobs
+                why = f"{type(err).__name__}: {err}"
+        if why:
+            unknown[task] = f"task {task!r}: {why}"
+    return unknown
+
+
 def parse_tolerances(items: list[str] | Mapping[str, float] | None) -> dict[str, float]:
     """``["metric=band", ...]`` (absolute bands in the metric's unit) -> dict; ConfigError on a bad item."""
     if items is None:
@@ -1007,7 +1216,9 @@ def check(
     """
     baseline = load_baseline(path)
     bands_override = parse_tolerances(tolerances)
-    checked = sorted({m for job in baseline.jobs for m in job["checked"]})
+    unknown_tasks = _import_pinned_tasks(baseline.jobs)
+    checked = sorted({m for job in baseline.jobs for m in job["checked"]
+                      if m not in unchecked_metrics(job["spec"].get("task", ""))})
     if any("trajectory_band" in job for job in baseline.jobs):  # (jobs without ground truth: their trajectory's band)
         checked += list(TRAJECTORY_TOLERANCES)
     unknown = sorted(set(bands_override) - set(checked))
@@ -1024,10 +1235,24 @@ def check(
                         for name in unpinned]
     else:
         package_notes = []
-    env_changes = _diff("", {"packages": packages_then, "platform": env_then.get("platform")},
-                        {"packages": env_now["packages"], "platform": env_now["platform"]})
+    if isinstance(packages_then, dict) and same_opencv(packages_then.get("opencv"), env_now["packages"].get("opencv")):
+        packages_then = {**packages_then, "opencv": env_now["packages"].get("opencv")}  # (one OpenCV, read two ways)
+    # a package only some jobs run on voids those jobs only (see uses_package); the others' and the platform's, every job
+    scoped_then = {k: v for k, v in packages_then.items() if k in SCOPED_PACKAGES} if isinstance(packages_then, dict) else {}
+    scoped_now = {k: v for k, v in env_now["packages"].items() if k in SCOPED_PACKAGES}
+    scoped_changes = {package: _diff(f"packages.{package}", scoped_then.get(package, "<absent>"), scoped_now.get(package, "<absent>"))
+                      for package in SCOPED_PACKAGES}
+    scoped_changes = {package: lines for package, lines in scoped_changes.items() if lines}
+    unscoped = (lambda packages: {k: v for k, v in packages.items() if k not in SCOPED_PACKAGES}
+                if isinstance(packages, dict) else packages)
+    env_changes = _diff("", {"packages": unscoped(packages_then), "platform": env_then.get("platform")},
+                        {"packages": unscoped(env_now["packages"]), "platform": env_now["platform"]})
     for line in env_changes:
         result.findings.append(Finding("protocol changed", "environment", line))
+    for package, lines in scoped_changes.items():
+        if not any(uses_package(package, job["spec"]) for job in baseline.jobs):
+            result.findings += [Finding("note", "environment", f"{line} (no pinned job runs on {package}: not compared)")
+                                for line in lines]
     result.findings += package_notes
     if env_then.get("lidarkit") != env_now["lidarkit"]:
         result.findings.append(Finding("note", "environment", f"lidarkit {env_then.get('lidarkit')} -> {env_now['lidarkit']}"))
@@ -1040,12 +1265,17 @@ def check(
         name = job_name(pinned, baseline.jobs)
         if on_job is not None:
             on_job(job)
+        if job.task in unknown_tasks:  # (read "task: unknown task 'my_task'")
+            result.findings.append(Finding("failed", name, unknown_tasks[job.task]))
+            continue
         try:
-            checksums_now = dataset_checksums(job.dataset, cache)
+            checksums_now = dataset_checksums(job.dataset, cache, job.task)
+            pinned_checksums, checksums_now, read_notes = _files_read_apart(
+                job, dict(pinned["protocol"].get("checksums", {})), checksums_now, name)
         except (DataError, ConfigError) as err:
             result.findings.append(Finding("protocol changed", name, f"dataset not readable: {err}"))
             continue
-        pinned_checksums = dict(pinned["protocol"].get("checksums", {}))
+        result.findings += read_notes
         unpinned = [k for k in checksums_now if k.endswith(".relations") and k not in pinned_checksums
                     and job.dataset.get("kind") == "carmen"]
         if unpinned:  # (a CARMEN baseline recorded before the relations beside its log were hashed: not a change)
@@ -1060,10 +1290,14 @@ def check(
         if isinstance(pinned_option_files, dict):
             pinned_checksums.update(pinned_option_files)
             checksums_now = {**checksums_now, **option_files_now}
-        elif option_files_now:  # (a baseline recorded before lidarkit hashed them: not a change)
-            result.findings.append(Finding("note", name, "the baseline pinned no checksum of the files its task options "
-                                                          f"name ({', '.join(option_files_now)}; recorded before lidarkit "
-                                                          "hashed them): not compared; record it again to pin them"))
+        else:  # (a baseline recorded before lidarkit hashed them apart: one inside the dataset folder was pinned with
+            # its files, and is compared there; the others are not a change)
+            checksums_now.update({k: v for k, v in option_files_now.items() if k in pinned_checksums})
+            unpinned = [k for k in option_files_now if k not in pinned_checksums]
+            if unpinned:
+                result.findings.append(Finding("note", name, "the baseline pinned no checksum of the files its task options "
+                                                              f"name ({', '.join(unpinned)}; recorded before lidarkit "
+                                                              "hashed them): not compared; record it again to pin them"))
         data_changes = _diff("data", pinned_checksums, checksums_now)
         if data_changes:
             for line in data_changes[:10]:
@@ -1071,7 +1305,11 @@ def check(
             if len(data_changes) > 10:
                 result.findings.append(Finding("protocol changed", name, f"... {len(data_changes) - 10} more data files"))
             continue
-        if env_changes or eval_changes:
+        package_changes = [line for package, lines in scoped_changes.items() if uses_package(package, pinned["spec"])
+                           for line in lines]
+        for line in package_changes:  # (a package this job runs on: its numbers are not comparable; the others' are)
+            result.findings.append(Finding("protocol changed", name, line))
+        if env_changes or eval_changes or package_changes:
             continue  # numbers under another environment or evaluation are not comparable: do not spend the run
         try:
             _validate_pinned_options(job)
@@ -1110,7 +1348,17 @@ def check(
                 result.findings.append(Finding("note", name, line))
         if protocol_changes:
             continue
-        for metric in pinned["checked"]:
+        scored_apart = _scored_count_difference(baseline, pinned, run)
+        if scored_apart:  # (7 frames against 8 read as 14 "improved" lines)
+            result.findings.append(Finding("failed", name, scored_apart))
+            continue
+        dropped = {m: kind for m, kind in unchecked_metrics(pinned["spec"]["task"]).items() if m in pinned["checked"]}
+        if dropped:  # (a baseline recorded when the task declared them accuracy metrics)
+            kinds = ", ".join(sorted(set(dropped.values())))
+            result.findings.append(Finding("note", name, f"the baseline pinned {', '.join(dropped)} (recorded when "
+                                                          f"{pinned['spec']['task']} declared them accuracy metrics): "
+                                                          f"not checked any more ({kinds} metrics)"))
+        for metric in [m for m in pinned["checked"] if m not in dropped]:
             ref = float(pinned["metrics"][metric])
             band = bands_override.get(metric, float(pinned["bands"][metric]))
             value = run.metrics.get(metric)
@@ -1126,6 +1374,29 @@ def check(
             result.findings.append(Finding("regression" if worse else "improved", name, text))
         result.findings += _trajectory_findings(baseline, pinned, run, name, bands_override)
     return result
+
+
+def _scored_count_difference(baseline: Baseline, pinned: Mapping[str, Any], run: JobRun) -> str:
+    """Why the rerun's numbers were not scored over the pinned job's frames, or '': another ``n_frames`` (its
+    metrics are then of other frames, better or worse by that alone), or, where no count was pinned, a trajectory of
+    another length than the pinned ``poses_kitti.txt``."""
+    then, now = pinned["metrics"].get("n_frames"), run.metrics.get("n_frames")
+    if _finite_number(then) and _finite_number(now):
+        if float(then) != float(now):
+            return (f"scored {float(now):g} frames, the baseline {float(then):g} (n_frames): its metrics are of other "
+                    "frames and are not compared")
+        return ""
+    path = baseline.path / "jobs" / str(pinned["key"]) / "poses_kitti.txt"
+    if run.trajectory is None or _finite_number(then) or not path.is_file():
+        return ""
+    try:
+        n_then = sum(1 for line in path.read_text(encoding="utf-8").splitlines() if line.strip())
+    except (OSError, UnicodeDecodeError):
+        return ""  # (_trajectory_findings says why it cannot be read)
+    if n_then != len(run.trajectory):
+        return (f"its trajectory has {len(run.trajectory)} poses, the pinned one {n_then}: its metrics are of other frames "
+                "and are not compared")
+    return ""
 
 
 #: ``--tolerance`` names of a trajectory band (a job without ground truth): its position (m) and rotation (deg) parts

@@ -140,11 +140,16 @@ def get_icp_class(name: str) -> type[Registration]:
     """The class registered as ``name``; unknown names raise ConfigError listing the known ones."""
     if name not in _VARIANTS:
         _load_plugins()
-    subclass = re.fullmatch(r"(\w+)\(([^()\s]+)\)", name) if isinstance(name, str) and name not in _VARIANTS else None
+    unknown = isinstance(name, str) and name not in _VARIANTS
+    # (a parent is a plain variant name: "vanilla(voxel_size_m=0.5)" read as a subclass of "voxel_size_m=0.5")
+    subclass = re.fullmatch(r"(\w+)\((\w+)\)", name) if unknown else None
     if subclass:  # (recorded_name's form: a run of such a class re-run from its config.yaml)
         raise ConfigError(f"{name!r} is how runs record {subclass[1]}, a subclass of {subclass[2]} outside the registry: it "
                           f"cannot be run by name until it is registered (@register_icp or a '{ENTRY_POINT_GROUP}' entry "
                           "point)", source="method")
+    label = re.fullmatch(r"(\w+)\((\s*\w+\s*=.*)\)", name, flags=re.DOTALL) if unknown else None
+    if label:  # (a report's or a baseline's row label given as the method)
+        raise ConfigError(label_as_method_hint(name, label[1], label[2]), source="method")
     if name in _BROKEN and name not in _VARIANTS:  # (a plugin named like a built-in: the built-in answers)
         raise ConfigError(f"this plugin is installed but could not be loaded: {_BROKEN[name]}", source=f"ICP plugin {name!r}")
     if name in OPTIONAL_VARIANTS and name not in _VARIANTS:  # (it read as a typo: "unknown ICP method 'small_gicp'")
@@ -156,6 +161,29 @@ def get_icp_class(name: str) -> type[Registration]:
         also = f" (not installed: {', '.join(f'{m}, {pip}' for m, pip in missing.items())})" if missing else ""
         raise ConfigError(f"unknown ICP method {name!r}; available: {', '.join(available_icp())}{also}", source="method")
     return _VARIANTS[name]
+
+
+def label_as_method_hint(label: str, method: str, inner: str) -> str:
+    """Why the label ``method(k=v, ...)`` (how bench rows and runs name a method with its params) is not a method name,
+    and how to write that method: its name and its params apart."""
+    pairs = [part.strip().partition("=") for part in _top_level_split(inner)]
+    params = ", ".join(f"{k.strip()}: {v.strip()}" for k, _, v in pairs)
+    options = " ".join(f"-p {k.strip()}={v.strip()}" for k, _, v in pairs)
+    return (f"{label!r} is a label (the variant {method} with its parameters), not a method name: write the method as "
+            f"{{name: {method}, params: {{{params}}}}} (CLI: --method {method} {options})")
+
+
+def _top_level_split(text: str) -> list[str]:
+    """``text`` split at the commas outside brackets (``a=1, b=[1, 2]``: two parts)."""
+    parts, depth, start = [], 0, 0
+    for i, char in enumerate(text):
+        depth += char in "([{"
+        depth -= char in ")]}"
+        if char == "," and depth == 0:
+            parts.append(text[start:i])
+            start = i + 1
+    parts.append(text[start:])
+    return [part for part in parts if part.strip()]
 
 
 def _type_name(annotation: Any) -> str:

@@ -34,9 +34,17 @@ _INSTANCES: dict[str, Task] = {}
 WholeInt = Annotated[StrictInt, BeforeValidator(whole_floats_as_ints)]
 
 
+#: what a metric says, ``Metric.kind``: ``accuracy`` (how well: a baseline holds it in its band), ``speed`` (depends on
+#: the machine) and ``diagnostic`` (what the method did on its way, an ICP's iterations or final RMSE: another setting
+#: moves it while the accuracy stays in band). Reports show all three; baselines check accuracy metrics only.
+METRIC_KINDS = ("accuracy", "speed", "diagnostic")
+#: the kinds a baseline pins and checks
+CHECKED_KINDS = ("accuracy",)
+
+
 @dataclass(frozen=True)
 class Metric:
-    """A scalar a task reports; ``better`` is ``"lower"`` or ``"higher"``; ``kind`` is accuracy or speed."""
+    """A scalar a task reports; ``better`` is ``"lower"`` or ``"higher"``; ``kind`` one of :data:`METRIC_KINDS`."""
 
     name: str
     label: str
@@ -188,5 +196,5 @@ def import_module_for_task(task: str, module: str) -> Any:
         raise ConfigError(f"task {task!r} needs {module}, which is not available ({err})", source="task") from err
 
 
-__all__ = ["HIGHER_IS_BETTER", "Metric", "Task", "TaskOutput", "WholeInt", "available_tasks", "get_task", "higher_is_better", "import_module_for_task",
+__all__ = ["CHECKED_KINDS", "HIGHER_IS_BETTER", "METRIC_KINDS", "Metric", "Task", "TaskOutput", "WholeInt", "available_tasks", "get_task", "higher_is_better", "import_module_for_task",
            "register_task", "task_module"]
