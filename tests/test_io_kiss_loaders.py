@@ -657,3 +657,36 @@ def test_kiss_kitti_reads_nanosecond_times_as_the_kitti_reader_does(tmp_path):
     np.testing.assert_allclose(open_dataset("kiss_kitti", tmp_path, sequence="00").timestamps_s, seconds, rtol=0, atol=1e-6)
     np.testing.assert_array_equal(open_dataset("kiss_kitti", tmp_path, sequence="00").timestamps_s,
                                   open_dataset("kitti", tmp_path).timestamps_s)
+
+
+def test_an_empty_or_unreadable_scan_of_a_kiss_loader_is_named_by_its_file(tmp_path):
+    """generic: and apollo: named the folder and "frame 2" for an empty .bin, and called a garbage PCD (whose reading
+    error the loader swallowed) an "empty scan": the file is named, with the reason; scans are named by their file."""
+    import shutil
+
+    from conftest import shared_path
+
+    for n in range(4):
+        shutil.copy(shared_path("kitti_odometry", "sequences", "00", "velodyne", f"{n:06d}.bin"), tmp_path)
+    (tmp_path / "000002.bin").write_bytes(b"")
+    dataset = open_dataset("generic", tmp_path)
+    assert dataset.read_scan(1).source == str(tmp_path / "000001.bin")
+    with pytest.raises(DataError) as caught:
+        dataset.read_scan(2)
+    assert str(caught.value) == f"{tmp_path / '000002.bin'} (frame 2): empty scan file (0 bytes)"
+    apollo = tmp_path / "apollo"
+    (apollo / "pcds").mkdir(parents=True)
+    (apollo / "poses").mkdir()
+    points = np.fromfile(tmp_path / "000000.bin", dtype=np.float32).reshape(-1, 4)[::50, :3]
+    header = ("VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\n"
+              f"WIDTH {len(points)}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {len(points)}\nDATA binary\n")
+    for n in (1, 2, 3):  # (Apollo numbers its scans from 1.pcd)
+        (apollo / "pcds" / f"{n}.pcd").write_bytes(header.encode() + points.astype("<f4").tobytes())
+        with open(apollo / "poses" / "gt_poses.txt", "a") as poses:
+            poses.write(f"{n} {1500000000 + 0.1 * n:.6f} {float(n)} 0 0 0 0 0 1\n")
+    (apollo / "pcds" / "2.pcd").write_text("garbage\n")
+    dataset = open_dataset("apollo", apollo)
+    assert dataset.read_scan(0).source == str(apollo / "pcds" / "1.pcd")
+    with pytest.raises(DataError) as caught:
+        dataset.read_scan(1)
+    assert str(caught.value) == f"{apollo / 'pcds' / '2.pcd'} (frame 1): no points read: an empty or unreadable scan file"

@@ -125,6 +125,10 @@ class KissLoaderScans:
             item = self.loader[index]
         points, times = item if isinstance(item, tuple) else (item, None)
         points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        if not len(points) and source != self.path:  # (a garbage PCD read as "empty scan" naming the folder; loaders swallow why)
+            size = os.path.getsize(source) if os.path.isfile(source) else None
+            raise DataError("empty scan file (0 bytes)" if size == 0 else "no points read: an empty or unreadable scan file",
+                            source=source, location=f"frame {index}")
         times = None if times is None or np.size(times) == 0 else np.asarray(times, dtype=np.float64).ravel()
         if times is not None and len(times) != len(points):
             raise DataError(f"{len(times)} per-point times for {len(points)} points", source=source, location=f"frame {index}")
@@ -136,7 +140,8 @@ class KissLoaderScans:
             points, times = self._without_origin_points(points, times, source, index)
         stamps = self.timestamps_s
         stamp = None if stamps is None or index >= len(stamps) else float(stamps[index])
-        return Scan(points, None, times, stamp, index, f"{self.path} frame {index}", self.point_time_convention, None)
+        named = str(source) if source != self.path else f"{self.path} frame {index}"  # (the file, as other readers' scans)
+        return Scan(points, None, times, stamp, index, named, self.point_time_convention, None)
 
     def _scan_file(self, index: int) -> str | Path:
         """The file of scan ``index`` where the loader lists its scans (a message names the file, not the folder);
