@@ -334,6 +334,9 @@ def test_q_and_kidnap_offsets_that_overflow_float32_are_refused_up_front(stachni
     with pytest.raises(ConfigError, match=r"\|dx\|, \|dy\| <= 1e\+06 m and \|dtheta\| <= 2 pi"):
         kidnapped_ground_truth(stachniss.odometry, 150, (0.0, 1e30, 0.0))
     assert q_problem((1e6, 1e6), "std") is None
+    for offset in ("abc", {"dx_m": 1.0}, [1.0, [2.0, 3.0], 4.0]):  # (numpy's ValueError / TypeError escaped)
+        with pytest.raises(ConfigError, match=r"^kidnap_offset: kidnap offset must be 3 finite values \(dx_m, dy_m, dtheta_rad\)"):
+            run_protocol(stachniss, 10, 0, kidnap_at_step=5, kidnap_offset=offset, with_ape_rpe=False)
     far = run_protocol(stachniss, 50, 0, q=(1e12, 0.1), kidnap_at_step=150, kidnap_offset=(1e6, -1e6, -2 * np.pi),
                        with_ape_rpe=False, warn_lost=False)
     assert far.n_weight_resets == 0 and np.isfinite(far.metrics["mse_m2"]["mean"])

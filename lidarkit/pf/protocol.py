@@ -97,7 +97,10 @@ def kidnapped_ground_truth(odometry: np.ndarray, kidnap_at_step: int | None, kid
     if not is_integer(kidnap_at_step):  # (1.5 ran as step 1, "150" as 150)
         raise ConfigError(f"kidnap step must be an integer in 1..{T}, got {kidnap_at_step!r}", source="kidnap_at_step")
     k = int(kidnap_at_step)
-    offset = np.asarray(kidnap_offset, dtype=np.float64).reshape(-1)
+    try:
+        offset = np.asarray(kidnap_offset, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):  # (text, a mapping, ragged lists: numpy's own error escaped)
+        offset = np.full(0, np.nan)
     if not 1 <= k <= T:
         raise ConfigError(f"kidnap step must be in 1..{T}, got {k}", source="kidnap_at_step")
     if (offset.shape != (3,) or not np.isfinite(offset).all() or np.abs(offset[:2]).max() > MAX_KIDNAP_OFFSET_M
