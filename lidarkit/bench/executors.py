@@ -26,6 +26,8 @@ JobFn = Callable[[dict[str, Any]], dict[str, Any]]
 Item = tuple[str, dict[str, Any]]
 
 EXECUTORS = ("serial", "process", "dask")
+#: how long the dask executor tries to reach a scheduler at an address before it gives up
+CONNECT_TIMEOUT_S = 20
 
 
 def crash_outcome(error_type: str, message: str) -> dict[str, Any]:
@@ -214,8 +216,9 @@ class DaskExecutor:
         self._client_log.setLevel(logging.CRITICAL)
         if address:
             try:
-                self.client = distributed.Client(address, timeout="20s")
+                self.client = distributed.Client(address, timeout=f"{CONNECT_TIMEOUT_S}s")
             except (OSError, TimeoutError) as err:
+                self._client_log.setLevel(self._client_level)  # (no close() follows a failed start)
                 raise ConfigError(f"cannot connect to the Dask scheduler: {err}", source=address) from None
 
     def _start_local_cluster(self, n_jobs: int) -> None:

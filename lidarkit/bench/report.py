@@ -64,6 +64,7 @@ class Row:
     stats: dict[str, tuple[float, float, int]]  # metric -> (mean, std, n)
     summaries: dict[str, Any] = field(default_factory=dict)  # metric -> lidarkit.eval.Summary (median, 95 % CI)
     n_missing: int = 0  # seeds of the suite with no result yet (an interrupted run)
+    n_unreadable: int = 0  # of those, seeds whose result file is there but cannot be read
     alignment: dict[str, str] = field(default_factory=dict)  # metric -> the alignment its records state
     seeds: tuple[int, ...] = ()  # the seeds of its ok results (the ones its numbers are over)
     values: dict[str, dict[int, float]] = field(default_factory=dict, repr=False)  # metric -> seed -> its finite value
@@ -222,15 +223,20 @@ def _stats(values: list[float]) -> tuple[float, float, int]:
     return (float(arr.mean()), std, int(arr.size))
 
 
-def aggregate(records: list[dict[str, Any]], missing: list[dict[str, Any]] = ()) -> list[TaskTable]:
+def aggregate(records: list[dict[str, Any]], missing: list[dict[str, Any]] = (),
+              unreadable: list[dict[str, Any]] = ()) -> list[TaskTable]:
     """Group records per task and job (all but the seed); mean ± std (sample std) over seeds. ``missing``: specs of
-    the suite's jobs with no result (their rows say how many seeds were not run)."""
+    the suite's jobs with no result (their rows say how many seeds were not run); ``unreadable``: those of them whose
+    result file is there but cannot be read (said apart: they ran)."""
     missing_per_row: dict[str, int] = defaultdict(int)
+    unreadable_per_row: dict[str, int] = defaultdict(int)
     unrun: dict[str, dict[str, dict[str, Any]]] = defaultdict(dict)  # task -> row -> a record holding only the job
     for spec in missing:
         ident = canonical_json({k: v for k, v in spec.items() if k != "seed"})
         missing_per_row[ident] += 1
         unrun[spec["task"]][ident] = {"job": spec}
+    for spec in unreadable:
+        unreadable_per_row[canonical_json({k: v for k, v in spec.items() if k != "seed"})] += 1
     by_task: dict[str, list[dict[str, Any]]] = defaultdict(list)
     for r in records:
         by_task[r["job"]["task"]].append(r)
@@ -280,7 +286,8 @@ def aggregate(records: list[dict[str, Any]], missing: list[dict[str, Any]] = ())
                 per_seed[m.name] = {int(r["job"]["seed"]): float(v) for r, v in zip(ok, values)
                                     if v is not None and math.isfinite(v)}
             rows.append(Row(task, experiment, dataset, method, len(ok), len(items) - len(ok), stats, summaries,
-                            n_missing=missing_per_row.get(ident, 0), alignment=_stated_alignment(ok),
+                            n_missing=missing_per_row.get(ident, 0), n_unreadable=unreadable_per_row.get(ident, 0),
+                            alignment=_stated_alignment(ok),
                             seeds=tuple(sorted(int(r["job"]["seed"]) for r in ok)), values=per_seed,
                             n_rerun_failed=sum(bool(r.get("rerun_failed")) for r in ok),
                             versions=tuple(sorted({_version(r) for r in items}))))
@@ -983,7 +990,7 @@ def summary_rows(report: Report) -> tuple[list[str], list[list[str]]]:
                          _short_label(best, table) if len(tied) == 1 else
                          "tie: " + ", ".join(_short_label(r, table) for r in tied),
                          value + _seeds_note(best, ranked, common, metric.name),
-                         str(len({r.method for r in candidates}))])
+                         str(len({(r.experiment, r.method) for r in candidates}))])  # (rows: a method in 2 experiments is 2)
     return header, rows
 
 
@@ -1025,14 +1032,17 @@ def _n_no_value(row: Row, metric: str) -> int:
 
 
 def _failed_note(row: Row, metric: str, failures: bool = True) -> str:
-    """`` (3 of 5 failed)`` / `` (4 of 12 not run)`` / `` (2 of 3 no value)`` for a row some of whose seeds failed, have
-    no result yet or gave ``metric`` no finite value (its numbers are over the others), and `` (1 of 3 kept after a
-    failed rerun)`` for ok results a failed ``--force`` rerun left (it re-ran nothing they say), else '';
-    ``failures=False``: neither of those (a table whose ok/failed column says them; the seeds not run it does not)."""
+    """`` (3 of 5 failed)`` / `` (4 of 12 not run)`` / `` (1 of 3 unreadable)`` / `` (2 of 3 no value)`` for a row some
+    of whose seeds failed, have no result yet, a result file that cannot be read (they ran: it was "not run") or gave
+    ``metric`` no finite value (its numbers are over the others), and `` (1 of 3 kept after a failed rerun)`` for ok
+    results a failed ``--force`` rerun left (it re-ran nothing they say), else ''; ``failures=False``: neither of those
+    (a table whose ok/failed column says them; the seeds not run it does not)."""
     total = row.n_ok + row.n_failed + row.n_missing
     n_no_value = _n_no_value(row, metric)
+    n_not_run = row.n_missing - row.n_unreadable
     notes = ([f"{row.n_failed} of {total} failed"] * bool(failures and row.n_failed)
-             + [f"{row.n_missing} of {total} not run"] * bool(row.n_missing)
+             + [f"{n_not_run} of {total} not run"] * bool(n_not_run)
+             + [f"{row.n_unreadable} of {total} unreadable"] * bool(row.n_unreadable)
              + [f"{n_no_value} of {total} no value"] * bool(n_no_value)
              + [f"{row.n_rerun_failed} of {total} kept after a failed rerun"] * bool(failures and row.n_rerun_failed))
     return f" ({', '.join(notes)})" if notes else ""
@@ -1272,8 +1282,8 @@ def build_report(
             sweeps = " and its sweep figures drawn as its results record them" if recorded_sweeps(recs) else ""
         log.warning("task %r: %s; its metrics are shown %s%s", task, why,
                     "as its results declare them" if declared else "by name", sweeps)
-    report = Report(out_dir=out_dir, tables=aggregate(records, list(missing.values())), n_records=len(records),
-                    skipped=_skipped(manifest), n_expected=len(expected), n_left_out=n_left_out,
+    report = Report(out_dir=out_dir, tables=aggregate(records, list(missing.values()), [missing[k] for k in unreadable]),
+                    n_records=len(records), skipped=_skipped(manifest), n_expected=len(expected), n_left_out=n_left_out,
                     n_earlier_version=n_earlier_version, versions=version_counts(records),
                     not_run=[_label({"job": spec}) + (" (its result file cannot be read: see the log)" if k in unreadable else "")
                              for k, spec in missing.items()], n_unreadable=len(unreadable))

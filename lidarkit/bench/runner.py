@@ -84,13 +84,15 @@ def run_suite(
         todo = [(key, job) for key, job in keyed if force or not is_finished(out_dir, key)]
         summary = RunSummary(out_dir=out_dir, total=len(keyed), skipped=len(keyed) - len(todo))
         origins = {name: origin for name in sorted({job.task for job in suite.jobs}) if (origin := task_origin(name))}
-        _write_manifest(suite, out_dir, keyed, version, origins)
-        remove_stale_temp_files(out_dir)
-        if on_start is not None:
-            on_start(len(todo), summary.skipped)
-        if todo:
-            runner = make_executor(executor, workers=workers, address=address)
-            try:
+        # the executor first: a Dask scheduler that cannot be reached left the folder's suite.json replaced by the
+        # suite that never ran, and a report of the folder's finished results then failed
+        runner = make_executor(executor, workers=workers, address=address) if todo else None
+        try:
+            _write_manifest(suite, out_dir, keyed, version, origins)
+            remove_stale_temp_files(out_dir)
+            if on_start is not None:
+                on_start(len(todo), summary.skipped)
+            if runner is not None:
                 for key, outcome in runner.run(job_fn, [(key, _worker_spec(job)) for key, job in todo]):
                     job = by_key[key]
                     record = make_record(job, key, version, outcome)
@@ -109,7 +111,8 @@ def run_suite(
                         summary.failures.append((key, job_label(job), f"{err.get('type')}: {err.get('message')}{kept_note}"))
                     if on_result is not None:
                         on_result(job, record)
-            finally:
+        finally:
+            if runner is not None:
                 runner.close()
         summary.wall_s = time.perf_counter() - t0
         return summary

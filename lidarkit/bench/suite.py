@@ -19,8 +19,8 @@ from typing import Any
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
-from lidarkit.bench.datasets import SAMPLE_PREFIX, dataset_label, resolve_dataset, resolve_option_paths
-from lidarkit.bench.jobs import Job, canonical_json, distinct_labels
+from lidarkit.bench.datasets import SAMPLE_PREFIX, dataset_label, dataset_options, resolve_dataset, resolve_option_paths
+from lidarkit.bench.jobs import Job, canonical_json, distinct_labels, whole_floats_as_ints
 from lidarkit.bench.tasks import WholeInt, get_task
 from lidarkit.errors import ConfigError, DataError, LidarKitError
 
@@ -405,7 +405,7 @@ def load_suite(path: str | Path, *, skip_unavailable: bool = False, only_tasks: 
                           "the limit with --max-jobs)", source=path)
     base_dir = path.parent
     jobs: list[Job] = []
-    seen: set[str] = set()
+    seen: dict[str, tuple[int, int]] = {}  # job key -> (experiment, method) indices of the method that gave it first
     # a job's spec with its numbers written one way -> (experiment, method, params) of the jobs so far
     alike: dict[str, list[tuple[int, int, dict[str, Any]]]] = {}
     skipped: list[tuple[str, str]] = []
@@ -430,6 +430,7 @@ def load_suite(path: str | Path, *, skip_unavailable: bool = False, only_tasks: 
         options = _options_as_read(task, exp.options)
         datasets = _experiment_datasets(exp, model, locator, exp_loc)
         resolved: list[dict[str, Any]] = []
+        resolved_locs: list[tuple[Any, ...]] = []
         missing_sample = None
         for loc, spec in datasets:
             try:
@@ -448,10 +449,12 @@ def load_suite(path: str | Path, *, skip_unavailable: bool = False, only_tasks: 
             except LidarKitError as err:
                 raise locator.error(err, loc) from None
             resolved.append(spec)
+            resolved_locs.append(loc)
         if missing_sample is not None:
             skipped.append((exp_name, missing_sample))
             log.info("skipping experiment %s: %s", exp_name, missing_sample)
             continue
+        _refuse_datasets_written_two_ways(resolved, resolved_locs, locator)
 
         seeds = _seeds(exp.seeds if exp.seeds is not None else model.seeds)
         installed = task.available_methods() if skip_unavailable else None
@@ -496,12 +499,77 @@ def load_suite(path: str | Path, *, skip_unavailable: bool = False, only_tasks: 
                                 raise ConfigError(f"{job.method_label} runs the same job as experiments[{first_i}].methods"
                                                   f"[{first_j}] (a value written two ways, e.g. 1 and 1.0): give it once",
                                                   source=path, location=locator.location(m_loc))
-                        if key in seen:
-                            continue
+                        if key in seen:  # (it was left out without a word: params {x: 1} beside grid {x: [1, 2]})
+                            first_i, first_j = seen[key]
+                            raise ConfigError(f"{job.method_label} on {label} runs the same job as experiments[{first_i}]"
+                                              f".methods[{first_j}] (in params of one and a grid of the other, or in two "
+                                              "grids): give it once", source=path, location=locator.location(m_loc))
                         alike.setdefault(same, []).append((i, j, params))
-                        seen.add(key)
+                        seen[key] = (i, j)
                         jobs.append(job)
     return Suite(name=model.name, path=path, jobs=jobs, description=model.description, skipped=skipped)
+
+
+def _refuse_datasets_written_two_ways(specs: list[dict[str, Any]], locs: list[tuple[Any, ...]], locator: _Locator) -> None:
+    """ConfigError naming file and line for two datasets of an experiment that are one dataset written two ways
+    (``speed_mps: 10`` and ``10.0``, a default written out beside one left out): their jobs were merged into one without
+    a word, or ran twice under two labels."""
+    first: dict[str, int] = {}
+    for k, spec in enumerate(specs):
+        k0 = first.setdefault(_dataset_identity(spec), k)
+        if k0 != k:
+            a, b = specs[k0], spec
+            ways = [f"{key}: {a[key]!r} and {b[key]!r} are one value" if key in a and key in b
+                    else f"{key}: {a.get(key, b.get(key))!r} is its default"
+                    for key in sorted(set(a) | set(b)) if key not in a or key not in b or repr(a[key]) != repr(b[key])]
+            raise ConfigError(f"duplicate dataset (also {_loc_text(locs[k0][2:])}, written another way: {'; '.join(ways)}): "
+                              "give it once", source=locator.path, location=locator.location(locs[k]))
+
+
+def _dataset_identity(spec: dict[str, Any]) -> str:
+    """A resolved dataset spec as the data it opens: its settings as its kind reads them, whole floats as ints, those
+    equal to their default left out. A simulated drive's ``seed`` always counts: without one, the job's seed seeds it."""
+    as_read, defaults = _dataset_settings(spec)
+    kept = {key: as_read.get(key, value) for key, value in spec.items() if key == "seed" or key not in defaults}
+    try:
+        return canonical_json(whole_floats_as_ints(kept))
+    except (TypeError, ValueError):  # (a YAML date, .nan: refused with the jobs, naming the line)
+        return repr(sorted(kept.items(), key=str))
+
+
+def _dataset_settings(spec: dict[str, Any]) -> tuple[dict[str, Any], set[str]]:
+    """The options of ``spec`` as its kind reads them (a simulator's validated config; a reader's as written) and the
+    names of those equal to the kind's default (none where the kind cannot tell: ``synthetic``, a kind that fails to
+    load)."""
+    import inspect
+
+    options = dataset_options(spec)
+    try:
+        if spec["kind"] in ("sim_lidar", "sim_camera"):
+            if spec["kind"] == "sim_lidar":
+                from lidarkit.sim.lidar import LidarSimConfig as config_type, make_config
+            else:
+                from lidarkit.sim.street_camera import CameraSimConfig as config_type, make_camera_config as make_config
+            read, default = make_config(**options).model_dump(mode="json"), config_type().model_dump(mode="json")
+            read = {key: read[key] for key in options if key in read}
+            return read, {key for key in read if _one_plain_value(read[key], default[key])}
+        if spec["kind"] == "synthetic":
+            return options, set()
+        from lidarkit.io import get_reader
+
+        params = inspect.signature(get_reader(spec["kind"])).parameters
+    except (LidarKitError, TypeError, ValueError):
+        return options, set()
+    return options, {key for key in options if key in params and params[key].default is not inspect.Parameter.empty
+                     and _one_plain_value(options[key], params[key].default)}
+
+
+def _one_plain_value(a: Any, b: Any) -> bool:
+    """Whether ``a`` and ``b`` are one plain value, whole floats as ints (a value that is no plain JSON is no match)."""
+    try:
+        return canonical_json(whole_floats_as_ints(a)) == canonical_json(whole_floats_as_ints(b))
+    except (TypeError, ValueError):
+        return False
 
 
 def _options_as_read(task: Any, options: dict[str, Any]) -> dict[str, Any]:
