@@ -801,3 +801,20 @@ def test_a_progress_callback_that_is_not_a_function_is_refused_before_anything_i
             run_suite(suite, tmp_path / "out", executor="serial", **{name: value})
         assert str(info.value) == f"{name}: {message}"
         assert not (tmp_path / "out").exists()
+
+
+def test_a_full_disk_at_the_folder_lock_is_one_line(tmp_path, monkeypatch):
+    """The lock's pid written on a full disk raised OSError through the progress display (a page of traceback)."""
+    import errno
+
+    from lidarkit.bench import runner
+    from lidarkit.errors import OutputError
+
+    def full(*args):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(runner.os, "pwrite", full)  # (a disk that fills at the lock file's first byte)
+    out = tmp_path / "out"
+    with pytest.raises(OutputError) as caught:
+        run_suite(load_suite(suite_file(tmp_path, TINY)), out, executor="serial")
+    assert str(caught.value) == f"{out}: cannot write the results folder (No space left on device)"

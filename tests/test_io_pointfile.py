@@ -173,3 +173,14 @@ def test_files_open3d_reads_well_still_read(tmp_path, rng, capfd):
     assert o3d.t.io.write_point_cloud(str(compressed), o3d.t.io.read_point_cloud(str(real)), compressed=True)
     assert np.array_equal(read_point_file(compressed).points_xyz, read_point_file(real).points_xyz)
     assert capfd.readouterr().out == ""
+
+
+def test_a_missing_scan_without_its_suffix_is_called_missing(tmp_path):
+    """A path typed without its .bin, or a link to a missing file, read "unsupported point file type ''"."""
+    with pytest.raises(DataError) as caught:
+        read_point_file(tmp_path / "000000")
+    assert str(caught.value) == f"{tmp_path / '000000'}: scan file not found"
+    (tmp_path / "dang").symlink_to(tmp_path / "nothere")
+    with pytest.raises(DataError) as caught:
+        read_point_file(tmp_path / "dang")
+    assert str(caught.value) == f"{tmp_path / 'dang'}: a symbolic link to a missing file (-> {tmp_path / 'nothere'})"

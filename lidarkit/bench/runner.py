@@ -216,8 +216,11 @@ def folder_lock(out_dir: Path) -> Iterator[None]:
             holder = os.pread(fd, 32, 0).decode(errors="replace").strip() or "?"
             raise OutputError(f"another lidarkit bench is running in this folder (pid {holder}): wait for it to end or give "
                               "another --out", source=out_dir) from None
-        os.ftruncate(fd, 0)
-        os.pwrite(fd, str(os.getpid()).encode(), 0)
+        try:
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, str(os.getpid()).encode(), 0)
+        except OSError as err:  # (a full disk: a page of traceback)
+            raise OutputError(f"cannot write the results folder ({err.strerror or err})", source=out_dir) from None
         yield
     finally:
         os.close(fd)  # (closing the descriptor releases the lock)

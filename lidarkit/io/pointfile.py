@@ -637,11 +637,13 @@ def read_point_file(
     readers = {".bin": read_kitti_bin, ".npy": read_npy_scan, ".pcd": read_open3d_scan, ".ply": read_open3d_scan}
     if path.is_dir():  # (it read as "unsupported point file type ''")
         raise DataError(f"a folder, not a point file ({', '.join(POINT_FILE_SUFFIXES)})", source=path)
-    from lidarkit.atomic import stream_reason
+    from lidarkit.atomic import missing_reason, stream_reason
 
     streamed = stream_reason(path)  # (<(cat X.pcd)'s /dev/fd/63 has no suffix: "unsupported point file type ''")
     if streamed:
         raise DataError(streamed, source=path, location=_where(frame))
+    if suffix not in readers and not path.exists():  # (a typo without its .bin read "unsupported point file type ''")
+        raise DataError(missing_reason(path, "scan file not found"), source=path, location=_where(frame))
     if suffix not in readers:
         raise DataError(
             f"unsupported point file type {suffix!r}; supported: {', '.join(POINT_FILE_SUFFIXES)}",
