@@ -61,17 +61,25 @@ def output_folder_kind(path: str | os.PathLike) -> str:
     path = Path(path)
     if is_bench_results_folder(path):
         return "a bench results folder (jobs/, suite.json)"
-    if is_baseline_folder(path):
-        return f"a baseline folder ({BASELINE_MANIFEST})"
+    if is_baseline_folder(path) and ((path / "jobs").is_dir() or (path / "suite.yaml").is_file()):
+        return f"a baseline folder ({BASELINE_MANIFEST})"  # (a manifest.json alone is any sensor's or tool's)
     if path.name == "jobs" and is_bench_results_folder(path.parent):
         return "the jobs/ folder of bench results (beside suite.json)"
     kind = run_kind(path)
-    if kind is None:
+    if kind is None or not _written_together(path):
         return ""
     telling = ("metrics.json", "config.yaml", "study.json", "dead_reckoning_tum.txt", "diagnostics.csv", "result.json",
                "config.json")
     held = ", ".join(name for name in telling if (path / name).is_file())
     return f"{'an' if kind[0] in 'aeiou' else 'a'} {kind} run folder ({held})"
+
+
+def _written_together(path: Path) -> bool:
+    """Whether ``path`` holds files lidarkit writes together, not one name a user's own data may share (a scan folder
+    beside its sensor's manifest.json, images beside a diagnostics.csv were refused as lidarkit's output): three of a
+    run's files, or the pairs a particle-filter study and ``lidarkit icp`` write alone."""
+    held = {name for name in (*RUN_FILES, *ICP) if (path / name).is_file()}
+    return len(held) >= 3 or {"study.json", "config.yaml"} <= held or {"result.json", "config.json"} <= held
 
 
 __all__ = ["BASELINE_MANIFEST", "ICP", "ODOMETRY", "PF", "RUN_FILES", "VO", "is_baseline_folder",

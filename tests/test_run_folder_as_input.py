@@ -105,3 +105,24 @@ def test_an_image_folder_beside_other_files_is_still_read(tmp_path):
         cv2.imwrite(str(tmp_path / f"{i:06d}.png"), np.zeros((40, 60), np.uint8))
     (tmp_path / "config.yaml").write_text("camera: mine\n")
     assert len(ImageFolder(tmp_path)) == 2
+
+
+def test_a_users_folder_sharing_one_file_name_with_lidarkits_output_is_still_read(tmp_path):
+    """One common name (a sensor's manifest.json beside the scans, a diagnostics.csv beside the images) marked the folder
+    as lidarkit's output and refused it, with no way around: output is told by the files lidarkit writes together."""
+    import shutil
+
+    from conftest import shared_path
+
+    from lidarkit.io.folder import ScanFolder
+    from lidarkit.io.images import ImageFolder
+
+    scans, images = tmp_path / "scans", tmp_path / "images"
+    scans.mkdir()
+    images.mkdir()
+    for n in range(2):
+        shutil.copy(shared_path("kitti_odometry", "sequences", "00", "velodyne", f"{n:06d}.bin"), scans)
+        shutil.copy(shared_path("kitti_images", "sequences", "06", "image_0", f"{n:06d}.png"), images)
+    (scans / "manifest.json").write_text('{"sensor": "os1"}\n')
+    (images / "diagnostics.csv").write_text("frame,exposure\n0,1\n")
+    assert len(ScanFolder(scans)) == 2 and len(ImageFolder(images)) == 2
