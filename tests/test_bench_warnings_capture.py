@@ -69,3 +69,65 @@ def test_warnings_of_other_loggers_and_warnings_warn_are_stored_once_and_printed
     assert not any(word in printed.err + printed.out for word in ("looked odd", "third-party", "UserWarning"))
     assert not [r.getMessage() for r in caplog.records if r.name in ("my_lab.warning_task", "evo", "py.warnings")]
     assert after == before
+
+
+def test_overlapping_jobs_in_threads_each_keep_their_own_warnings_and_the_process_keeps_its_own(monkeypatch):
+    """A dask worker runs several jobs at once in threads: each job swapping the root handlers, one job took the other's
+    warnings and a capture stayed on the root logger for good. Two jobs overlap here (a barrier holds both inside their
+    capture); the main thread logs and warns meanwhile and its messages go where they went before."""
+    import threading
+
+    from lidarkit.bench.worker import _warnings_captured
+
+    class Collector(logging.Handler):
+        def __init__(self):
+            super().__init__(level=logging.WARNING)
+            self.messages = []
+
+        def emit(self, record):
+            self.messages.append(record.getMessage())
+
+    root = logging.getLogger()
+    process_handler = Collector()
+    shown_by_process = []
+    monkeypatch.setattr(warnings, "showwarning", lambda message, *_args, **_kw: shown_by_process.append(str(message)))
+    root.addHandler(process_handler)
+    try:
+        before = (root.handlers[:], root.level, logging.getLogger("lidarkit").propagate, warnings.showwarning,
+                  warnings.filters[:])
+        both_inside, both_warned, main_warned = threading.Barrier(3), threading.Barrier(3), threading.Barrier(3)
+        captured = {}
+
+        def job(name):
+            with _warnings_captured() as capture:
+                both_inside.wait(timeout=5)
+                logging.getLogger("my_lab.threaded_task").warning("from %s", name)
+                warnings.warn(f"warned by {name}")
+                both_warned.wait(timeout=5)
+                main_warned.wait(timeout=5)
+                if name == "B":  # B ends last: A's end must not take B's capture away
+                    logging.getLogger("my_lab.threaded_task").warning("%s again, after A ended", name)
+            captured[name] = capture.messages
+
+        threads = {name: threading.Thread(target=job, args=(name,)) for name in ("A", "B")}
+        for thread in threads.values():
+            thread.start()
+        both_inside.wait(timeout=5)
+        both_warned.wait(timeout=5)
+        logging.getLogger("my_lab.main").warning("from the main thread")
+        warnings.warn("warned by the main thread")
+        main_warned.wait(timeout=5)
+        threads["A"].join(timeout=5)
+        threads["B"].join(timeout=5)
+        after = (root.handlers[:], root.level, logging.getLogger("lidarkit").propagate, warnings.showwarning,
+                 warnings.filters[:])
+    finally:
+        root.removeHandler(process_handler)
+    for name in ("A", "B"):
+        assert captured[name][0] == f"WARNING my_lab.threaded_task: from {name}"
+        assert captured[name][1].startswith(f"WARNING py.warnings: UserWarning: warned by {name} (test_bench_warnings_capture.py:")
+    assert captured["A"][2:] == []
+    assert captured["B"][2:] == ["WARNING my_lab.threaded_task: B again, after A ended"]
+    assert process_handler.messages == ["from the main thread"]
+    assert shown_by_process == ["warned by the main thread"]
+    assert after == before
