@@ -415,6 +415,42 @@ def test_frame_numbers_with_a_gap_are_timed_at_the_devkit_period_and_seconds_are
         np.testing.assert_array_equal(clock.timestamps_s, used.timestamps_s)
 
 
+def _drive(n_poses: int, metres_per_pose: float) -> np.ndarray:
+    """``(n_poses, 4, 4)`` poses ``metres_per_pose`` apart along x, bending a little (a drift to score)."""
+    poses = np.tile(np.eye(4), (n_poses, 1, 1))
+    poses[:, 0, 3] = metres_per_pose * np.arange(n_poses)
+    poses[:, 1, 3] = 1e-4 * poses[:, 0, 3] ** 1.5
+    return poses
+
+
+def test_whole_second_stamps_since_1970_at_1_hz_are_seconds_not_frame_numbers(tmp_path, capsys):
+    """An estimate stamped 1700000000, 1700000001, ... (1 Hz) against a ground truth without times: whole numbers
+    stepping by 1, they were taken as frame numbers at 0.1 s, and 7 m/s segments fell into '>= 25 m/s'."""
+    n_poses = 40  # (7 m a pose at 1 Hz: some 6.5 m/s with the devkit's extra frame, segments of 100-200 m)
+    Trajectory(_drive(n_poses, 7.0)).to_kitti(tmp_path / "truth.txt")
+    Trajectory(_drive(n_poses, 7.07), 1.7e9 + np.arange(n_poses, dtype=np.float64)).to_tum(tmp_path / "est_1hz.tum")
+    rows = _per_speed_rows(tmp_path, "truth.txt", "est_1hz.tum", "--est-format", "tum")
+    assert [row.split(",")[0] for row in rows[1:]] == ["5-10 m/s"]  # (was '>= 25 m/s')
+    assert "frame numbers" not in (tmp_path / "t" / "kitti_translation_pct_per_speed.md").read_text()
+
+
+def test_every_other_frame_numbered_as_seconds_is_timed_at_two_devkit_periods(tmp_path, capsys):
+    """lidarkit odometry --frames 0:N:2 without stamps writes 0, 2, 4, ...: taken as seconds (2 s a pose) a 12 m/s
+    drive was in '0-5 m/s'; the frames are 0.1 s each, 0.2 s between poses."""
+    from lidarkit.eval.tables import segment_clock
+
+    n_poses = 80  # (every other frame of a drive at 1.2 m a frame: 2.4 m a pose, 0.2 s apart)
+    frames = 2.0 * np.arange(n_poses)
+    Trajectory(_drive(n_poses, 2.4)).to_kitti(tmp_path / "truth.txt")
+    Trajectory(_drive(n_poses, 2.42), frames).to_tum(tmp_path / "est_every_2nd.tum")
+    clock = segment_clock(Trajectory.from_kitti(tmp_path / "truth.txt"),
+                          Trajectory.from_tum(tmp_path / "est_every_2nd.tum"))
+    np.testing.assert_allclose(clock.timestamps_s, 0.1 * frames, rtol=1e-12)
+    assert clock.frame_period_s == pytest.approx(0.2) and "frame numbers (0, 2, ...;" in clock.note
+    rows = _per_speed_rows(tmp_path, "truth.txt", "est_every_2nd.tum", "--est-format", "tum")
+    assert [row.split(",")[0] for row in rows[1:]] == ["10-15 m/s"]  # (was '0-5 m/s')
+
+
 def test_markdown_escapes_a_pipe_in_the_corner_and_column_labels_as_in_row_labels():
     """Files o|x.txt and g|y.txt name a method and a sequence: the method's '|' split the header into one column more
     than the rows have (the row label was escaped)."""

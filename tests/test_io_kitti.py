@@ -700,3 +700,30 @@ def test_time_stamps_in_nanoseconds_are_read_as_seconds_and_milliseconds_are_ref
     ms_file.write_text("".join(f"{t * 1e3:.3f}\n" for t in seconds[:51]))
     with pytest.raises(DataError, match=rf"times_ms\.txt \(line 1, frame 0\): {refused}"):
         open_vo_input(images, kind="kitti", timestamps=ms_file).images.timestamps_s
+
+
+def test_time_stamps_in_microseconds_are_refused_not_read_as_nanoseconds(tmp_path, odo_root, caplog):
+    """times.txt in microseconds (1.7e15, above the 1e15 where nanoseconds start) was read as nanoseconds with only a
+    warning: frames 0.1 ms apart in January 1970. Seconds before 1973 or frames under 1 ms apart after the conversion
+    are refused naming the file, its line and the unit, for a KITTI sequence and for an image sequence's stamps."""
+    from lidarkit.vo.inputs import open_vo_input
+
+    n = len((odo_root / "sequences" / "00" / "times.txt").read_text().split())
+    seconds = 1.7e9 + 0.1 * np.arange(n)
+    us_file = tmp_path / "times_us.txt"
+    us_file.write_text("".join(f"{round(t * 1e6)}\n" for t in seconds))
+    refused = (r"times_us\.txt \(line 1, frame 0\): time stamp 1700000000000000 read as nanoseconds is 1\.7e\+06 s after "
+               r"1970, frames 0\.1 ms apart: microseconds\? write seconds, e\.g\. divide by 1e6$")
+    with caplog.at_level(logging.WARNING, logger="lidarkit.io.base"):
+        with pytest.raises(DataError, match=refused):
+            KittiOdometry(odo_root, times_file=us_file).timestamps_s
+    assert "read as nanoseconds (the first" not in caplog.text  # (refused, not converted with a warning)
+    images = shared_path("kitti_images", "sequences", "01")
+    us_file.write_text("".join(f"{round(t * 1e6)}\n" for t in seconds[:51]))
+    with pytest.raises(DataError, match=refused):
+        open_vo_input(images, kind="kitti", timestamps=us_file).images.timestamps_s
+    # nanoseconds of a recent drive at 100 Hz (10 ms apart) still convert, as EuRoC's data.csv does
+    ns_file = tmp_path / "times_ns.txt"
+    ns_file.write_text("".join(f"{round((1.7e9 + 0.01 * k) * 1e9)}\n" for k in range(n)))
+    np.testing.assert_allclose(KittiOdometry(odo_root, times_file=ns_file).timestamps_s,
+                               1.7e9 + 0.01 * np.arange(n)[KittiOdometry(odo_root).frames], rtol=0, atol=1e-6)

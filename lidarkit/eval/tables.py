@@ -48,15 +48,23 @@ def scored_timestamps_s(*trajectories: Any) -> np.ndarray | None:
     return None
 
 
+#: frame numbers start below this (stamps in seconds since 1970 start above 1e9, a frame count of a drive far below)
+FRAME_NUMBERS_BELOW = 1e6
+
+
 def frame_numbers_as_seconds(stamps: np.ndarray | None) -> bool:
-    """Whether ``(N,)`` stamps are frame numbers written as seconds: whole numbers stepping by 1 (median), as ``lidarkit
-    vo`` stamps poses_tum.txt when its input has no times (read as seconds, KITTI's 0.1 s frames took 1 s each)."""
+    """Whether ``(N,)`` stamps are frame numbers written as seconds: small (the first below
+    :data:`FRAME_NUMBERS_BELOW`, so 1 Hz stamps since 1970 are seconds) whole numbers stepping by a whole median step
+    (``--frames 0:N:2`` gives 0, 2, 4), as ``lidarkit vo`` and ``lidarkit odometry`` stamp poses_tum.txt when their
+    input has no times (read as seconds, KITTI's 0.1 s frames took 1 s each)."""
     if stamps is None or len(stamps) < 2:
         return False
     stamps = np.asarray(stamps, dtype=np.float64)
+    if not (np.all(np.isfinite(stamps)) and 0 <= stamps[0] < FRAME_NUMBERS_BELOW and np.all(stamps == np.round(stamps))):
+        return False
     steps = np.diff(stamps)
-    return bool(np.all(np.isfinite(stamps)) and np.all(stamps == np.round(stamps)) and np.all(steps > 0)
-                and np.median(steps) == 1.0)
+    median_step = float(np.median(steps))
+    return bool(np.all(steps > 0) and median_step >= 1 and median_step == round(median_step))
 
 
 @dataclass(frozen=True)
@@ -72,7 +80,8 @@ class SegmentClock:
 def segment_clock(reference: Any, estimate: Any) -> SegmentClock:
     """The clock of the segments of ``estimate`` scored against ``reference`` (paired poses): the reference's stamps,
     else the estimate's; frame numbers as seconds in an estimate under a reference without stamps (KITTI ground
-    truth) are frames of the devkit's :data:`KITTI_FRAME_PERIOD_S` (read as seconds, every segment was in 0-5 m/s)."""
+    truth) are frames of the devkit's :data:`KITTI_FRAME_PERIOD_S` (read as seconds, every segment was in 0-5 m/s),
+    every k-th frame k x that apart."""
     for trajectory in (reference, estimate):
         stamps = scored_timestamps_s(trajectory)
         if stamps is None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import math
 import os
 from dataclasses import dataclass
 from collections.abc import Iterable
@@ -13,6 +14,7 @@ import numpy as np
 
 from lidarkit.errors import DataError
 from lidarkit.params import is_integer
+from lidarkit.textfile import file_line
 from lidarkit.trajectory import READ_WARNINGS, Trajectory, check_seconds
 
 log = logging.getLogger(__name__)
@@ -66,16 +68,30 @@ def read_warnings_of(reader: Any, ground_truth: Any) -> list[str]:
     return [str(w) for w in dict.fromkeys([*(getattr(reader, "reader_warnings", None) or ()), *truth])]
 
 
+#: seconds since 1970 of nanosecond stamps are above this (after 1973); below, the file's unit is microseconds
+NANOSECOND_EPOCH_AFTER_S = 1e8
+#: frames of a dataset (scans, images) are at least this far apart; stamps read as nanoseconds closer are microseconds
+MIN_FRAME_SPACING_S = 1e-3
+
+
 def stamps_in_seconds(stamps: np.ndarray, path: str | os.PathLike) -> np.ndarray:
     """A file's ``(N,)`` time stamps as ``(N,) float64`` seconds: above :data:`~lidarkit.io.pointcloud2.NANOSECONDS_AFTER`
-    they are nanoseconds (EuRoC's data.csv, a bag's export), converted with a logged warning; a stamp still beyond
-    :data:`~lidarkit.trajectory.MAX_STAMP_S` (milliseconds) is a DataError naming it, as lidarkit eval refuses it (a run
+    they are nanoseconds (EuRoC's data.csv, a bag's export), converted with a logged warning, unless the seconds they
+    give are before 1973 or frames under 1 ms apart: microseconds (1.7e15), a DataError naming the file and unit, as is
+    a stamp still beyond :data:`~lidarkit.trajectory.MAX_STAMP_S` (milliseconds), as lidarkit eval refuses it (a run
     wrote 1.6e18 "s" to its poses_tum.txt)."""
     from lidarkit.io.pointcloud2 import NANOSECONDS_AFTER  # (pointcloud2 imports this module through pointfile)
 
     stamps_s = np.asarray(stamps, dtype=np.float64)
     if len(stamps_s) and float(np.abs(stamps_s).max()) > NANOSECONDS_AFTER:
-        stamps_s = stamps_s * 1e-9
+        as_ns = stamps_s * 1e-9
+        spacing_s = float(np.median(np.abs(np.diff(as_ns)))) if len(as_ns) > 1 else math.inf
+        if float(np.abs(as_ns).max()) < NANOSECOND_EPOCH_AFTER_S or 0 < spacing_s < MIN_FRAME_SPACING_S:
+            spacing = f", frames {spacing_s * 1e3:.3g} ms apart" if math.isfinite(spacing_s) else ""
+            raise DataError(f"time stamp {stamps_s[0]:.0f} read as nanoseconds is {as_ns[0]:.6g} s after 1970{spacing}: "
+                            "microseconds? write seconds, e.g. divide by 1e6", source=path,
+                            location=file_line(path, "frame 0"))
+        stamps_s = as_ns
         log.warning("%s: time stamps above %.0e read as nanoseconds (the first is %.6f s)", path, NANOSECONDS_AFTER,
                     stamps_s[0])
     check_seconds(stamps_s, path, nanoseconds_from=NANOSECONDS_AFTER)
