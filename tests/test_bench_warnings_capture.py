@@ -77,7 +77,7 @@ def test_overlapping_jobs_in_threads_each_keep_their_own_warnings_and_the_proces
     capture); the main thread logs and warns meanwhile and its messages go where they went before."""
     import threading
 
-    from lidarkit.bench.worker import _warnings_captured
+    from lidarkit.bench.job_warnings import warnings_captured
 
     class Collector(logging.Handler):
         def __init__(self):
@@ -99,7 +99,7 @@ def test_overlapping_jobs_in_threads_each_keep_their_own_warnings_and_the_proces
         captured = {}
 
         def job(name):
-            with _warnings_captured() as capture:
+            with warnings_captured() as capture:
                 both_inside.wait(timeout=5)
                 logging.getLogger("my_lab.threaded_task").warning("from %s", name)
                 warnings.warn(f"warned by {name}")
