@@ -550,6 +550,9 @@ def test_a_scan_and_a_bag_reader_print_as_one_line(exports):
     mcap = open_dataset("mcap", exports[("mcap", "sqlite3")], ground_truth_topic="none")
     assert repr(mcap) == f"McapScans('{mcap.path}', topic '/points', {N_FRAMES} scans, ground truth none)"
     assert repr(Scan(np.zeros((0, 3)))) == "Scan(frame 0, 0 points, no point times, no stamp)"
+    absolute = Scan(np.zeros((3, 3)), None, 1.7e9 + np.array([0.4, 0.45, 0.4997]), 1.7e9 + 0.5, 3, "x", "absolute_s")
+    assert repr(absolute) == ("Scan(frame 3, 3 points, point times absolute_s 1700000000.400000 s + 0.0997 s, stamp "
+                              "1700000000.500000 s, 'x')")  # (it printed 1.7e+09-1.7e+09 s)
     assert repr(Scan(np.zeros((2, 3)), point_times_s=np.array([0.0, 1.0]), point_time_convention="fraction")) == (
         "Scan(frame 0, 2 points, point times fraction 0-1, no stamp)")
 
