@@ -167,7 +167,7 @@ def test_an_empty_scan_of_a_log_names_its_line_and_why(tmp_path, capsys):
     assert _cli(["odometry", str(log), "-m", "vanilla", "-p", "planar=true", "--no-progress"]) == 1
     assert capsys.readouterr().err.strip().splitlines()[-1] == (
         f"error: {log}:{scans[10] + 1} (frame 10): empty scan (0 points): all 180 readings (0.00 m) lie outside the valid "
-        "range, above min_range_m 0 m and below the maximum range 50 m")
+        "range, above min_range_m 0 m and below the maximum range 50 m (--frames can leave the frame out)")
 
 
 def test_relations_whose_ends_meet_one_pose_are_left_out_and_counted(caplog):

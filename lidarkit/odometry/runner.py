@@ -88,8 +88,8 @@ def _read_nonempty_scan(sequence: ScanSequence, index: int) -> Scan:
     if len(scan.points_xyz) == 0:  # named by its file and line where the reader gives them (a CARMEN log's blank scan
         # read "blank11 (frame 10): empty scan (0 points)"), else by the caller; the way past it where the reader tells
         # no reason of its own (a bag's empty message mid-recording said none, as a message of missing returns only does)
-        why = _why_empty(sequence, index)
-        raise DataError("empty scan (0 points)" + (why or " (--frames can leave the frame out)"), source=scan.source or None,
+        why = _why_empty(sequence, index)  # (and the way past it, which a CARMEN log's reason did not give)
+        raise DataError(f"empty scan (0 points){why} (--frames can leave the frame out)", source=scan.source or None,
                         location=f"frame {index}" if scan.source else None)
     return scan
 
