@@ -392,7 +392,7 @@ def test_estimate_stamped_with_frame_numbers_is_timed_as_the_devkit_under_a_grou
     assert devkit.row_labels == ["0-5 m/s", "5-10 m/s", "10-15 m/s"]
     assert [row.split(",")[0] for row in as_frames[1:]] == devkit.row_labels  # (was 0-5 m/s only)
     np.testing.assert_allclose([float(row.split(",")[1]) for row in as_frames[1:]], devkit.values[:, 0], rtol=1e-5)
-    note = "the estimate's stamps are frame numbers (0, 1, ...; lidarkit vo writes them without time stamps)"
+    note = "the estimate's stamps are frame numbers (0, 1, ...; lidarkit vo and odometry write them without time stamps)"
     assert note in capsys.readouterr().out.replace("\n", " ")
     assert note in (tmp_path / "t" / "kitti_translation_pct_per_speed.md").read_text()
 

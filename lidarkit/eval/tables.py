@@ -87,7 +87,7 @@ def segment_clock(reference: Any, estimate: Any) -> SegmentClock:
         if stamps is None:
             continue
         if trajectory is estimate and frame_numbers_as_seconds(stamps):
-            note = (f"the estimate's stamps are frame numbers ({stamps[0]:.0f}, {stamps[1]:.0f}, ...; lidarkit vo writes them "
+            note = (f"the estimate's stamps are frame numbers ({stamps[0]:.0f}, {stamps[1]:.0f}, ...; lidarkit vo and odometry write them "
                     f"without time stamps) and the reference has none: segment speeds take the KITTI devkit's "
                     f"{KITTI_FRAME_PERIOD_S:g} s per frame")
             # every frame: the devkit's own count (stamps x 0.1 put some 100 m in 100 frames at 9.999... m/s, a row lower)
