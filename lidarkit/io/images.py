@@ -90,8 +90,9 @@ def _without_brackets(line: str) -> str:
 def read_image_timestamps(path: str | os.PathLike, *, warnings: list[str] | None = None) -> np.ndarray:
     """Timestamps in seconds: one number per line, or ``stamp name`` lines (TUM ``rgb.txt``, EuRoC ``data.csv``); first
     column used. NaN or infinity is refused at its line (it failed later as "not strictly increasing", blaming the next
-    line). Stamps above 1e15 are nanoseconds, converted with a logged warning (they were written out as seconds); the
-    ones left beyond 1e11 s (milliseconds) are refused (:func:`~lidarkit.io.base.stamps_in_seconds`).
+    line). Stamps above 1e15 are nanoseconds, converted with a logged warning (they were written out as seconds), unless
+    they then read as microseconds (before 1973, or frames under 1 ms apart); those and the ones beyond 1e11 s
+    (milliseconds) are refused (:func:`~lidarkit.io.base.stamps_in_seconds`).
     ``warnings``: as for :func:`lidarkit.textfile.read_lines` (a file cut inside its last number)."""
     stamps = []
     for lineno, raw in enumerate(read_lines(path, warnings=warnings), start=1):
