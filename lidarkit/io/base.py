@@ -157,11 +157,12 @@ class Scan:
         times = "no point times"
         if t is not None:
             unit = "" if self.point_time_convention == "fraction" else " s"
-            first, last = (float(np.min(t)), float(np.max(t))) if len(t) else (0.0, 0.0)
-            if self.point_time_convention == "absolute_s":  # (6 digits printed both ends of a sweep at 1.7e9 s as 1.7e+09)
-                span = f" {first:.6f} s + {last - first:.6g} s" if len(t) else ""
-            else:
-                span = f" {first:.6g}-{last:.6g}{unit}" if len(t) else ""
+            span = ""
+            if len(t):
+                first, last = float(np.min(t)), float(np.max(t))
+                # (6 digits printed both ends of a sweep at 1.7e9 s as 1.7e+09)
+                absolute = self.point_time_convention == "absolute_s"
+                span = f" {first:.6f} s + {last - first:.6g} s" if absolute else f" {first:.6g}-{last:.6g}{unit}"
             times = f"point times {self.point_time_convention}{span}"
         stamp = "no stamp" if self.timestamp_s is None else f"stamp {self.timestamp_s:.6f} s"
         if self.stamp_instant is not None:
